@@ -1,0 +1,1 @@
+"""hexapod/backends package."""

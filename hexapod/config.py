@@ -1,0 +1,99 @@
+"""TOML helpers shared by every package: strict keys, close-name suggestions."""
+
+from __future__ import annotations
+
+import difflib
+import math
+import tomllib
+from collections.abc import Iterable, Mapping
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from hexapod.exceptions import ConfigFileError
+
+
+def load_toml(path: str | Path) -> dict[str, Any]:
+    """Read a TOML file, turning I/O and syntax problems into :class:`ConfigFileError`.
+
+    Args:
+        path: File to read.
+
+    Returns:
+        The parsed table.
+    """
+    p = Path(path)
+    try:
+        with p.open("rb") as f:
+            return tomllib.load(f)
+    except FileNotFoundError:
+        raise ConfigFileError(str(p), "file not found") from None
+    except tomllib.TOMLDecodeError as exc:
+        raise ConfigFileError(str(p), f"not valid TOML: {exc}") from None
+    except OSError as exc:
+        raise ConfigFileError(str(p), f"cannot be read: {exc}") from None
+
+
+def suggest(name: str, candidates: Iterable[str]) -> str | None:
+    """Return the candidate closest to ``name``, if one is close enough."""
+    match = difflib.get_close_matches(name, list(candidates), n=1, cutoff=0.6)
+    return match[0] if match else None
+
+
+def check_keys(
+    table: Mapping[str, Any],
+    allowed: Iterable[str],
+    path: str,
+    prefix: str = "",
+    required: Iterable[str] = (),
+) -> None:
+    """Reject unknown keys (suggesting the close one) and missing required keys.
+
+    Args:
+        table: The table to check.
+        allowed: Every key the table may have.
+        path: File name, for the message.
+        prefix: Dotted name of the table, for the message.
+        required: Keys that must be present.
+    """
+    allowed = list(allowed)
+    for key in table:
+        if key not in allowed:
+            raise ConfigFileError(
+                path,
+                f"unknown key; expected one of {', '.join(sorted(allowed))}",
+                key=prefix + key,
+                suggestion=suggest(key, allowed),
+            )
+    for key in required:
+        if key not in table:
+            raise ConfigFileError(path, "missing required key", key=prefix + key)
+
+
+def get_number(table: Mapping[str, Any], key: str, path: str, prefix: str = "") -> float:
+    """Read a finite number from ``table[key]``."""
+    value = table[key]
+    if isinstance(value, bool) or not isinstance(value, int | float) or not math.isfinite(value):
+        raise ConfigFileError(path, f"expected a finite number, got {value!r}", key=prefix + key)
+    return float(value)
+
+
+def get_matrix(
+    table: Mapping[str, Any], key: str, shape: tuple[int, ...], path: str, prefix: str = ""
+) -> np.ndarray:
+    """Read a nested list of finite numbers of the given shape from ``table[key]``."""
+    value = table[key]
+    try:
+        arr = np.array(value, dtype=float)
+    except (TypeError, ValueError):
+        raise ConfigFileError(
+            path, f"expected an array of numbers of shape {shape}", key=prefix + key
+        ) from None
+    if arr.shape != shape:
+        raise ConfigFileError(
+            path, f"expected shape {shape}, got {arr.shape}", key=prefix + key
+        )
+    if not np.all(np.isfinite(arr)):
+        raise ConfigFileError(path, "contains NaN or inf", key=prefix + key)
+    return arr

@@ -1,0 +1,429 @@
+"""Forward kinematics: leg lengths -> platform pose.
+
+Two methods:
+
+- ``"pinocchio"`` (reference, baseline): Gauss-Newton on the loop-closure
+  residual of the closed-chain Pinocchio model (:mod:`hexapod.model`) with the
+  prismatic joints fixed at the given lengths.
+- ``"newton"`` (fast): Newton on the six length equations
+  ``|R eB_i + t - A_i| = q_i``, with the iterations compiled as one CasADi
+  function (``casadi.SX``; the PyPI ``pin`` wheel has no ``pinocchio.casadi``),
+  mapped over a batch.
+
+Both start from a guess (default: the home pose) and raise
+:class:`~hexapod.exceptions.ForwardKinematicsError` rather than return garbage.
+"""
+
+from __future__ import annotations
+
+import ctypes
+import hashlib
+import logging
+import os
+import platform
+import shutil
+import subprocess
+import tempfile
+from dataclasses import dataclass
+from functools import lru_cache
+from pathlib import Path
+from typing import Literal
+
+import casadi as ca
+import numpy as np
+import pinocchio as pin
+
+from hexapod.exceptions import ForwardKinematicsError, ShapeError, StrokeLimitError
+from hexapod.geometry import HexapodGeometry
+from hexapod.model import HexapodModel, build_model, constraint_residual_and_jacobian
+from hexapod.workspace import home_pose
+
+log = logging.getLogger(__name__)
+
+#: Newton iterations unrolled in one call of the compiled CasADi function.
+ITERATIONS_PER_CALL = 3
+
+Method = Literal["newton", "pinocchio"]
+
+
+@dataclass(frozen=True)
+class ForwardKinematicsResult:
+    """Result of one forward-kinematics solve.
+
+    Attributes:
+        rotation: (3, 3) platform orientation in the base frame.
+        translation: (3,) platform position in the base frame [m].
+        iterations: Newton / Gauss-Newton iterations made.
+        residual: Max absolute residual at the solution [m] (length
+            equations for ``newton``, loop closure for ``pinocchio``).
+        method: The method used.
+    """
+
+    rotation: np.ndarray
+    translation: np.ndarray
+    iterations: int
+    residual: float
+    method: str
+
+
+@dataclass(frozen=True)
+class BatchForwardKinematicsResult:
+    """Result of a batch of forward-kinematics solves (method ``newton``).
+
+    Attributes:
+        rotations: (N, 3, 3).
+        translations: (N, 3) [m].
+        residuals: (N,) max absolute length residual [m].
+        converged: (N,) whether the residual reached the tolerance.
+        iterations: Iterations made (the same for the whole batch).
+    """
+
+    rotations: np.ndarray
+    translations: np.ndarray
+    residuals: np.ndarray
+    converged: np.ndarray
+    iterations: int
+
+
+def _newton_expression() -> ca.Function:
+    """CasADi function of ``ITERATIONS_PER_CALL`` Newton steps on the length equations.
+
+    Input ``x`` (54): R (3x3, column-major), t (3), q (6), A (3x6 base points,
+    column-major, i.e. point after point), E (3x6 platform points).
+    Output ``y`` (18): R and t after the steps, and the residual
+    ``|R E_i + t - A_i| - q_i`` (6) there.
+
+    The unknowns are the translation and a rotation vector applied on the left
+    of R; each step solves ``J step = -(lengths - q)`` with the 6x6 inverse
+    Jacobian of the current estimate.
+    """
+    x = ca.SX.sym("x", 54)
+    R = ca.reshape(x[0:9], 3, 3)
+    t = x[9:12]
+    q = x[12:18]
+    A = ca.reshape(x[18:36], 3, 6)
+    E = ca.reshape(x[36:54], 3, 6)
+
+    def lengths_and_jacobian(R: ca.SX, t: ca.SX) -> tuple[ca.SX, ca.SX]:
+        rows, lens = [], []
+        for i in range(6):
+            p = R @ E[:, i]  # platform point relative to the platform origin
+            L = p + t - A[:, i]
+            n = ca.sqrt(ca.dot(L, L))
+            u = L / n
+            lens.append(n)
+            rows.append(ca.horzcat(u.T, ca.cross(p, u).T))
+        return ca.vertcat(*lens), ca.vertcat(*rows)
+
+    Rk, tk = R, t
+    for _ in range(ITERATIONS_PER_CALL):
+        lens, J = lengths_and_jacobian(Rk, tk)
+        step = -ca.solve(J, lens - q)
+        w = step[3:]
+        theta = ca.fmax(ca.sqrt(ca.dot(w, w)), 1e-12)
+        a = ca.sin(theta) / theta
+        b = 2 * ca.sin(theta / 2) ** 2 / theta**2
+        K = ca.skew(w)
+        Rk = (ca.SX.eye(3) + a * K + b * (K @ K)) @ Rk
+        tk = tk + step[:3]
+    lens, _ = lengths_and_jacobian(Rk, tk)
+    return ca.Function("hexapod_fk_newton", [x], [ca.vertcat(ca.reshape(Rk, 9, 1), tk, lens - q)])
+
+
+_BATCH_WRAPPER = r"""
+#include <stdlib.h>
+int hexapod_fk_newton_batch(const casadi_real* x, casadi_real* y, long long n) {
+  casadi_int sz_arg, sz_res, sz_iw, sz_w;
+  if (hexapod_fk_newton_work(&sz_arg, &sz_res, &sz_iw, &sz_w)) return 1;
+  const casadi_real** arg = malloc(sizeof(casadi_real*) * (sz_arg > 1 ? sz_arg : 1));
+  casadi_real** res = malloc(sizeof(casadi_real*) * (sz_res > 1 ? sz_res : 1));
+  casadi_int* iw = malloc(sizeof(casadi_int) * (sz_iw > 1 ? sz_iw : 1));
+  casadi_real* w = malloc(sizeof(casadi_real) * (sz_w > 1 ? sz_w : 1));
+  int flag = 0;
+  for (long long k = 0; k < n && !flag; ++k) {
+    arg[0] = x + 54 * k;
+    res[0] = y + 18 * k;
+    flag = hexapod_fk_newton(arg, res, iw, w, 0);
+  }
+  free(arg); free(res); free(iw); free(w);
+  return flag;
+}
+"""
+
+
+class _CompiledNewton:
+    """The Newton function, compiled to C by gcc when available (called through ctypes).
+
+    CasADi generates the C code; it is compiled once into a cache directory
+    (``$HEXAPOD_CACHE_DIR`` or ``~/.cache/hexapod-vs``) keyed by the code's hash.
+    Without a C compiler the CasADi virtual machine evaluates the same function
+    (slower, same results).
+    """
+
+    def __init__(self) -> None:
+        self.function = _newton_expression()
+        self.compiled = False
+        self._lib: ctypes.CDLL | None = None
+        try:
+            self._compile()
+        except (OSError, subprocess.SubprocessError) as exc:
+            log.warning("forward kinematics: C compilation unavailable (%s); using the CasADi "
+                        "virtual machine", exc)
+
+    def _compile(self) -> None:
+        cc = os.environ.get("CC", "cc")
+        if shutil.which(cc) is None:
+            raise OSError(f"no C compiler '{cc}'")
+        cache = Path(os.environ.get("HEXAPOD_CACHE_DIR",
+                                    Path.home() / ".cache" / "hexapod-vs"))
+        cache.mkdir(parents=True, exist_ok=True)
+        with tempfile.TemporaryDirectory() as tmp:
+            cwd = os.getcwd()
+            try:
+                os.chdir(tmp)
+                self.function.generate("fk.c")
+            finally:
+                os.chdir(cwd)
+            code = (Path(tmp) / "fk.c").read_text() + _BATCH_WRAPPER
+        digest = hashlib.sha256((code + platform.machine()).encode()).hexdigest()[:16]
+        lib_path = cache / f"hexapod_fk_{digest}.so"
+        if not lib_path.exists():
+            src = cache / f"hexapod_fk_{digest}.c"
+            src.write_text(code)
+            tmp_lib = cache / f"hexapod_fk_{digest}.{os.getpid()}.so"
+            subprocess.run([cc, "-O2", "-shared", "-fPIC", str(src), "-o", str(tmp_lib)],
+                           check=True, capture_output=True, timeout=120)
+            os.replace(tmp_lib, lib_path)
+        lib = ctypes.CDLL(str(lib_path))
+        single = lib.hexapod_fk_newton
+        single.argtypes = [ctypes.c_void_p] * 4 + [ctypes.c_int]
+        single.restype = ctypes.c_int
+        batch = lib.hexapod_fk_newton_batch
+        batch.argtypes = [ctypes.c_void_p, ctypes.c_void_p, ctypes.c_longlong]
+        batch.restype = ctypes.c_int
+        self._lib = lib
+        self._single = single
+        self._xbuf = np.zeros(54)
+        self._ybuf = np.zeros(18)
+        self._args = (ctypes.c_void_p * 1)(self._xbuf.ctypes.data)
+        self._res = (ctypes.c_void_p * 1)(self._ybuf.ctypes.data)
+        self._iw = np.zeros(64, dtype=np.int64)
+        self._w = np.zeros(4096)
+        self._call = (ctypes.addressof(self._args), ctypes.addressof(self._res),
+                      self._iw.ctypes.data, self._w.ctypes.data, 0)
+        n_arg, n_res, n_iw, n_w = (ctypes.c_longlong() for _ in range(4))
+        lib.hexapod_fk_newton_work(ctypes.byref(n_arg), ctypes.byref(n_res),
+                                   ctypes.byref(n_iw), ctypes.byref(n_w))
+        if n_arg.value > 1 or n_res.value > 1 or n_iw.value > 64 or n_w.value > 4096:
+            raise OSError("unexpected work sizes of the generated function")
+        self.compiled = True
+
+    def single(self, x: np.ndarray) -> np.ndarray:
+        """Evaluate the function on one input (54,) -> (18,) (a fresh array)."""
+        if self._lib is None:
+            return np.asarray(self.function(x)).ravel()
+        self._xbuf[:] = x
+        if self._single(*self._call):
+            raise ForwardKinematicsError("newton", float("nan"), 0, "compiled function failed")
+        return self._ybuf.copy()
+
+    def batch(self, x: np.ndarray) -> np.ndarray:
+        """Evaluate the function on rows of ``x`` (N, 54) -> (N, 18)."""
+        x = np.ascontiguousarray(x, dtype=float)
+        n = x.shape[0]
+        y = np.empty((n, 18))
+        if self._lib is not None:
+            if self._lib.hexapod_fk_newton_batch(x.ctypes.data, y.ctypes.data, n):
+                raise ForwardKinematicsError("newton", float("nan"), 0, "compiled function failed")
+            return y
+        for k in range(n):
+            y[k] = np.asarray(self.function(x[k])).ravel()
+        return y
+
+
+@lru_cache(maxsize=1)
+def _newton() -> _CompiledNewton:
+    return _CompiledNewton()
+
+
+def _pack(R: np.ndarray, t: np.ndarray, q: np.ndarray, A: np.ndarray, E: np.ndarray
+          ) -> np.ndarray:
+    """Pack batched inputs (N, ...) into rows of the CasADi input layout (N, 54)."""
+    n = q.shape[0]
+    return np.concatenate(
+        [np.swapaxes(R, -1, -2).reshape(n, 9), t.reshape(n, 3), q.reshape(n, 6),
+         np.broadcast_to(A, (n, 6, 3)).reshape(n, 18),
+         np.broadcast_to(E, (n, 6, 3)).reshape(n, 18)], axis=1)
+
+
+def _unpack(y: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    n = y.shape[0]
+    return np.swapaxes(y[:, :9].reshape(n, 3, 3), -1, -2), y[:, 9:12], y[:, 12:18]
+
+
+def _check_lengths(geometry: HexapodGeometry, lengths: np.ndarray, check_stroke: bool) -> None:
+    lo, hi = float(lengths.min()), float(lengths.max())
+    if not (np.isfinite(lo) and np.isfinite(hi)):
+        raise ShapeError("lengths", "finite leg lengths", lengths.tolist())
+    if check_stroke and (lo < geometry.q_min - 1e-12 or hi > geometry.q_max + 1e-12):
+        bad = np.argwhere((lengths < geometry.q_min - 1e-12) | (lengths > geometry.q_max + 1e-12))
+        if len(bad):
+            idx = tuple(bad[0])
+            raise StrokeLimitError(int(idx[-1]), float(lengths[idx]), geometry.q_min,
+                                   geometry.q_max)
+
+
+def _guess(geometry: HexapodGeometry, guess: tuple[np.ndarray, np.ndarray] | None
+           ) -> tuple[np.ndarray, np.ndarray]:
+    if guess is None:
+        return home_pose(geometry)
+    R, t = (np.asarray(x, dtype=float) for x in guess)
+    if R.shape != (3, 3) or t.shape != (3,):
+        raise ShapeError("guess", "(rotation (3, 3), translation (3,))", (R.shape, t.shape))
+    return R, t
+
+
+def forward_kinematics(
+    geometry: HexapodGeometry,
+    lengths: np.ndarray,
+    guess: tuple[np.ndarray, np.ndarray] | None = None,
+    method: Method = "newton",
+    tol: float = 1e-12,
+    max_iterations: int = 50,
+    check_stroke: bool = True,
+    model: HexapodModel | None = None,
+) -> ForwardKinematicsResult:
+    """Platform pose from leg lengths.
+
+    Args:
+        geometry: The robot.
+        lengths: (6,) leg lengths [m].
+        guess: Starting pose ``(rotation, translation)``; the home pose if None.
+        method: ``"newton"`` (fast, CasADi) or ``"pinocchio"`` (reference).
+        tol: Convergence threshold on the max absolute residual [m].
+        max_iterations: Iteration budget.
+        check_stroke: Refuse lengths outside the stroke.
+        model: A prebuilt :class:`HexapodModel` (``pinocchio`` method), built if None.
+
+    Returns:
+        The pose, iterations and residual.
+
+    Raises:
+        StrokeLimitError: A length is outside the stroke.
+        ForwardKinematicsError: No convergence within the budget, or a singular Jacobian.
+    """
+    q = np.asarray(lengths, dtype=float)
+    if q.shape != (6,):
+        raise ShapeError("lengths", "shape (6,)", q.shape)
+    _check_lengths(geometry, q, check_stroke)
+    R0, t0 = _guess(geometry, guess)
+    if method == "newton":
+        return _fk_newton(geometry, q, R0, t0, tol, max_iterations)
+    if method == "pinocchio":
+        return _fk_pinocchio(model or build_model(geometry), q, R0, t0, tol, max_iterations)
+    raise ValueError(f"unknown forward-kinematics method {method!r}; use 'newton' or 'pinocchio'")
+
+
+def _fk_newton(geometry: HexapodGeometry, q: np.ndarray, R: np.ndarray, t: np.ndarray,
+               tol: float, max_iterations: int) -> ForwardKinematicsResult:
+    newton = _newton()
+    x = np.empty(54)
+    x[0:9] = R.T.ravel()
+    x[9:12] = t
+    x[12:18] = q
+    x[18:36] = geometry.base_points.ravel()
+    x[36:54] = geometry.platform_points.ravel()
+    it = 0
+    res = np.inf
+    while it < max_iterations:
+        y = newton.single(x)
+        it += ITERATIONS_PER_CALL
+        res = float(np.abs(y[12:18]).max())
+        if not np.isfinite(res):
+            raise ForwardKinematicsError("newton", res, it, "singular Jacobian on the way")
+        if res < tol:
+            return ForwardKinematicsResult(y[0:9].reshape(3, 3).T, y[9:12], it, res, "newton")
+        x[:12] = y[:12]
+    raise ForwardKinematicsError("newton", res, it, "no convergence within the iteration budget")
+
+
+def forward_kinematics_batch(
+    geometry: HexapodGeometry,
+    lengths: np.ndarray,
+    rotations: np.ndarray | None = None,
+    translations: np.ndarray | None = None,
+    tol: float = 1e-12,
+    max_iterations: int = 30,
+    base_points: np.ndarray | None = None,
+    platform_points: np.ndarray | None = None,
+) -> BatchForwardKinematicsResult:
+    """Fast forward kinematics of a batch (the compiled CasADi Newton, looped in C).
+
+    Never raises for a non-converged item: check ``converged``.
+
+    Args:
+        geometry: The robot (strokes are not checked here).
+        lengths: (N, 6) leg lengths [m].
+        rotations: (N, 3, 3) guesses (home pose if None).
+        translations: (N, 3) guesses [m].
+        tol: Convergence threshold [m].
+        max_iterations: Iteration budget.
+        base_points: Optional (N, 6, 3) per-item base points (overrides the geometry's).
+        platform_points: Optional (N, 6, 3) per-item platform points.
+    """
+    q = np.asarray(lengths, dtype=float)
+    if q.ndim != 2 or q.shape[1] != 6:
+        raise ShapeError("lengths", "shape (N, 6)", q.shape)
+    n = q.shape[0]
+    if rotations is None or translations is None:
+        R0, t0 = home_pose(geometry)
+        rotations = np.broadcast_to(R0, (n, 3, 3))
+        translations = np.broadcast_to(t0, (n, 3))
+    A = geometry.base_points if base_points is None else np.asarray(base_points, float)
+    E = geometry.platform_points if platform_points is None else np.asarray(platform_points,
+                                                                             float)
+    x = _pack(np.asarray(rotations, float), np.asarray(translations, float), q, A, E)
+    newton = _newton()
+    it = 0
+    res = np.full(n, np.inf)
+    active = np.arange(n)
+    y_all = np.empty((n, 18))
+    y_all[:, :12] = x[:, :12]
+    y_all[:, 12:] = np.inf
+    while it < max_iterations and len(active):
+        y = newton.batch(x[active])
+        it += ITERATIONS_PER_CALL
+        y_all[active] = y
+        r = np.max(np.abs(y[:, 12:18]), axis=1)
+        res[active] = r
+        x[active, :12] = y[:, :12]
+        keep = np.isfinite(r) & (r >= tol)
+        active = active[keep]
+    rot, trans, _ = _unpack(y_all)
+    converged = np.isfinite(res) & (res < tol)
+    return BatchForwardKinematicsResult(rot, trans.copy(), res, converged, it)
+
+
+def _fk_pinocchio(hm: HexapodModel, q: np.ndarray, R: np.ndarray, t: np.ndarray,
+                  tol: float, max_iterations: int) -> ForwardKinematicsResult:
+    """Gauss-Newton on the loop-closure constraints with the prismatic joints fixed."""
+    model = hm.model
+    x = hm.configuration(R, t)
+    x[hm.prismatic_q_indices()] = q
+    free = np.setdiff1d(np.arange(model.nv), hm.prismatic_v_indices())
+    res = np.inf
+    for it in range(1, max_iterations + 1):
+        r, J = constraint_residual_and_jacobian(hm, x)
+        res = float(np.max(np.abs(r)))
+        if not np.isfinite(res):
+            raise ForwardKinematicsError("pinocchio", res, it, "non-finite residual")
+        if res < tol:
+            Rr, tr = hm.platform_pose(x)
+            return ForwardKinematicsResult(Rr, tr, it - 1, res, "pinocchio")
+        Jf = J[:, free]
+        dv_free, *_ = np.linalg.lstsq(Jf, -r, rcond=1e-12)
+        dv = np.zeros(model.nv)
+        dv[free] = dv_free
+        x = pin.integrate(model, x, dv)
+    raise ForwardKinematicsError("pinocchio", res, max_iterations,
+                                 "no convergence within the iteration budget")

@@ -1,0 +1,251 @@
+"""Geometry of a 6-6 Gough-Stewart platform.
+
+Conventions (``MATH.md`` section 1): the base frame ``b`` and the platform
+frame ``e``; ``base_points[i]`` is the centre ``A_i`` of the base joint of leg
+``i`` in ``b`` and ``platform_points[i]`` the centre ``eB_i`` of its platform
+joint in ``e``. Lengths are in metres inside the code and millimetres in files.
+"""
+
+from __future__ import annotations
+
+import itertools
+from dataclasses import dataclass, field
+from functools import cached_property
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import tomli_w
+
+from hexapod.config import check_keys, get_matrix, get_number, load_toml
+from hexapod.exceptions import ConfigFileError, GeometryError
+
+#: Minimum distance between two joints of the same plate [m].
+MIN_JOINT_SEPARATION = 1e-4
+
+
+def _validate_points(name: str, value: Any, source: str | None) -> np.ndarray:
+    try:
+        arr = np.array(value, dtype=float)
+    except (TypeError, ValueError):
+        raise GeometryError(name, "expected a 6x3 array of numbers", source) from None
+    if arr.shape != (6, 3):
+        raise GeometryError(name, f"expected shape (6, 3), got {arr.shape}", source)
+    bad = np.argwhere(~np.isfinite(arr))
+    if len(bad):
+        i, j = bad[0]
+        raise GeometryError(name, f"point {i} coordinate {j} is {arr[i, j]} (not finite)", source)
+    for i, j in itertools.combinations(range(6), 2):
+        d = float(np.linalg.norm(arr[i] - arr[j]))
+        if d < MIN_JOINT_SEPARATION:
+            raise GeometryError(
+                name, f"points {i} and {j} coincide (distance {d * 1e3:.4f} mm)", source
+            )
+    centred = arr - arr.mean(axis=0)
+    s = np.linalg.svd(centred, compute_uv=False)
+    if s[1] < 1e-6 * max(s[0], 1e-12):
+        raise GeometryError(name, "all six points are collinear", source)
+    return arr
+
+
+@dataclass(frozen=True)
+class HexapodGeometry:
+    """Geometry of a Gough-Stewart platform.
+
+    Attributes:
+        base_points: Base joint centres ``A_i`` in the base frame, (6, 3) [m].
+        platform_points: Platform joint centres ``eB_i`` in the platform frame, (6, 3) [m].
+        stroke: Leg length limits ``(q_min, q_max)`` [m].
+        leg_radius: Radius of the cylindrical legs [m].
+        max_speed: Leg speed limit [m/s].
+        name: A label.
+    """
+
+    base_points: np.ndarray
+    platform_points: np.ndarray
+    stroke: tuple[float, float]
+    leg_radius: float = 0.015
+    max_speed: float = 0.05
+    name: str = "hexapod"
+    source: str | None = field(default=None, compare=False, repr=False)
+
+    def __post_init__(self) -> None:
+        src = self.source
+        base = _validate_points("base_points", self.base_points, src)
+        plat = _validate_points("platform_points", self.platform_points, src)
+        try:
+            q_min, q_max = (float(x) for x in self.stroke)
+        except (TypeError, ValueError):
+            raise GeometryError(
+                "stroke", f"expected (q_min, q_max), got {self.stroke!r}", src
+            ) from None
+        if not (np.isfinite(q_min) and np.isfinite(q_max)):
+            raise GeometryError("stroke", f"not finite: ({q_min}, {q_max})", src)
+        if q_min <= 0:
+            raise GeometryError("stroke", f"q_min must be positive, got {q_min} m", src)
+        if q_min >= q_max:
+            raise GeometryError(
+                "stroke", f"q_min ({q_min} m) must be smaller than q_max ({q_max} m)", src
+            )
+        r = float(self.leg_radius)
+        if not np.isfinite(r) or r <= 0:
+            raise GeometryError("leg_radius", f"must be positive and finite, got {r}", src)
+        v = float(self.max_speed)
+        if not np.isfinite(v) or v <= 0:
+            raise GeometryError("max_speed", f"must be positive and finite, got {v}", src)
+        base.flags.writeable = False
+        plat.flags.writeable = False
+        object.__setattr__(self, "base_points", base)
+        object.__setattr__(self, "platform_points", plat)
+        object.__setattr__(self, "stroke", (q_min, q_max))
+        object.__setattr__(self, "leg_radius", r)
+        object.__setattr__(self, "max_speed", v)
+
+    def __eq__(self, other: object) -> bool:
+        if not isinstance(other, HexapodGeometry):
+            return NotImplemented
+        return (
+            np.array_equal(self.base_points, other.base_points)
+            and np.array_equal(self.platform_points, other.platform_points)
+            and self.stroke == other.stroke
+            and self.leg_radius == other.leg_radius
+            and self.max_speed == other.max_speed
+        )
+
+    __hash__ = None  # type: ignore[assignment]
+
+    @cached_property
+    def home_height(self) -> float:
+        """Height [m] of the home pose (platform parallel to the base, centred) where the
+        mean leg length is the middle of the stroke."""
+        from hexapod.workspace import home_height
+
+        return home_height(self)
+
+    @property
+    def q_min(self) -> float:
+        """Lower stroke limit [m]."""
+        return self.stroke[0]
+
+    @property
+    def q_max(self) -> float:
+        """Upper stroke limit [m]."""
+        return self.stroke[1]
+
+    @property
+    def q_mid(self) -> float:
+        """Middle of the stroke [m]."""
+        return 0.5 * (self.stroke[0] + self.stroke[1])
+
+    def replace(self, **changes: Any) -> HexapodGeometry:
+        """Return a copy with some fields changed (validated again)."""
+        kwargs = {
+            "base_points": self.base_points,
+            "platform_points": self.platform_points,
+            "stroke": self.stroke,
+            "leg_radius": self.leg_radius,
+            "max_speed": self.max_speed,
+            "name": self.name,
+        }
+        kwargs.update(changes)
+        return HexapodGeometry(**kwargs)
+
+    # ----------------------------------------------------------------- TOML
+    _KEYS = ("name", "base_points_mm", "platform_points_mm", "stroke_mm", "leg_radius_mm",
+             "max_speed_mm_s")
+
+    @classmethod
+    def from_dict(cls, table: dict[str, Any], path: str = "<dict>") -> HexapodGeometry:
+        """Build a geometry from a table in the file format (millimetres).
+
+        Args:
+            table: Keys ``base_points_mm`` (6x3), ``platform_points_mm`` (6x3),
+                ``stroke_mm`` ([min, max]), ``leg_radius_mm`` and optionally
+                ``name`` and ``max_speed_mm_s``.
+            path: Source name for error messages.
+        """
+        check_keys(
+            table,
+            cls._KEYS,
+            path,
+            required=("base_points_mm", "platform_points_mm", "stroke_mm", "leg_radius_mm"),
+        )
+        base = get_matrix(table, "base_points_mm", (6, 3), path) * 1e-3
+        plat = get_matrix(table, "platform_points_mm", (6, 3), path) * 1e-3
+        stroke = get_matrix(table, "stroke_mm", (2,), path) * 1e-3
+        radius = get_number(table, "leg_radius_mm", path) * 1e-3
+        speed = get_number(table, "max_speed_mm_s", path) * 1e-3 if "max_speed_mm_s" in table \
+            else 0.05
+        name = table.get("name", Path(path).stem)
+        if not isinstance(name, str):
+            raise ConfigFileError(path, f"expected a string, got {name!r}", key="name")
+        return cls(base, plat, (float(stroke[0]), float(stroke[1])), radius, speed, name,
+                   source=path)
+
+    @classmethod
+    def from_toml(cls, path: str | Path) -> HexapodGeometry:
+        """Load a geometry from a TOML file (lengths in millimetres).
+
+        Raises:
+            ConfigFileError: Missing file, bad TOML, missing or misspelt key.
+            GeometryError: A field has an invalid value.
+        """
+        return cls.from_dict(load_toml(path), str(path))
+
+    def to_dict(self) -> dict[str, Any]:
+        """The file representation (millimetres)."""
+        return {
+            "name": self.name,
+            "base_points_mm": (self.base_points * 1e3).round(9).tolist(),
+            "platform_points_mm": (self.platform_points * 1e3).round(9).tolist(),
+            "stroke_mm": [self.stroke[0] * 1e3, self.stroke[1] * 1e3],
+            "leg_radius_mm": self.leg_radius * 1e3,
+            "max_speed_mm_s": self.max_speed * 1e3,
+        }
+
+    def to_toml(self, path: str | Path) -> None:
+        """Save the geometry to a TOML file (lengths in millimetres)."""
+        Path(path).write_text(tomli_w.dumps(self.to_dict()))
+
+
+def circular_points(radius: float, angles: np.ndarray, z: float = 0.0) -> np.ndarray:
+    """Points on a horizontal circle: (len(angles), 3) [m]."""
+    a = np.asarray(angles, dtype=float)
+    return np.stack([radius * np.cos(a), radius * np.sin(a), np.full_like(a, z)], axis=-1)
+
+
+def deltalab(leg_radius: float = 0.015) -> HexapodGeometry:
+    """The DeltaLab "Table de Stewart" of the seeds (``MATH.md`` section 9).
+
+    Base radius 270 mm, alpha 4.25 deg; platform radius 195 mm, beta 5.885 deg;
+    strokes 345-485 mm; leg radius 15 mm by default.
+    """
+    alpha = np.deg2rad(4.25)
+    beta = np.deg2rad(5.885)
+    a_angles, b_angles = [], []
+    for k in range(3):
+        a_angles += [2 * k * np.pi / 3 + alpha, 2 * k * np.pi / 3 - alpha]
+        b_angles += [2 * k * np.pi / 3 + np.pi / 3 - beta, 2 * k * np.pi / 3 - np.pi / 3 + beta]
+    return HexapodGeometry(
+        base_points=circular_points(0.270, np.array(a_angles)),
+        platform_points=circular_points(0.195, np.array(b_angles)),
+        stroke=(0.345, 0.485),
+        leg_radius=leg_radius,
+        max_speed=0.05,
+        name="deltalab",
+    )
+
+
+def preset(name: str) -> HexapodGeometry:
+    """Return a geometry preset by name (``"deltalab"``)."""
+    presets = {"deltalab": deltalab}
+    if name not in presets:
+        from hexapod.config import suggest
+
+        hint = suggest(name, presets)
+        raise GeometryError(
+            "preset",
+            f"unknown preset '{name}'; available: {', '.join(presets)}"
+            + (f" (did you mean '{hint}'?)" if hint else ""),
+        )
+    return presets[name]()

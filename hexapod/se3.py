@@ -1,0 +1,134 @@
+"""Batched SE(3) helpers (numpy): exponential map, pose integration, pose errors.
+
+Twists follow ``MATH.md`` section 2: ``(v, w)`` expressed in a fixed frame and
+reduced at its origin, so that a point of the moving body has ``dP/dt = v + w x P``.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+
+def skew(x: np.ndarray) -> np.ndarray:
+    """Skew matrices ``[x]_x`` of vectors (..., 3) -> (..., 3, 3)."""
+    x = np.asarray(x, dtype=float)
+    z = np.zeros(x.shape[:-1])
+    return np.stack(
+        [
+            np.stack([z, -x[..., 2], x[..., 1]], axis=-1),
+            np.stack([x[..., 2], z, -x[..., 0]], axis=-1),
+            np.stack([-x[..., 1], x[..., 0], z], axis=-1),
+        ],
+        axis=-2,
+    )
+
+
+def exp_so3(w: np.ndarray) -> np.ndarray:
+    """Rotation matrices ``exp([w]_x)`` of rotation vectors (..., 3) [rad]."""
+    w = np.asarray(w, dtype=float)
+    theta = np.linalg.norm(w, axis=-1)[..., None, None]
+    K = skew(w)
+    small = theta < 1e-6
+    th = np.where(small, 1.0, theta)
+    a = np.where(small, 1.0 - theta**2 / 6.0, np.sin(th) / th)
+    b = np.where(small, 0.5 - theta**2 / 24.0, (1.0 - np.cos(th)) / th**2)
+    return np.eye(3) + a * K + b * (K @ K)
+
+
+def log_so3(R: np.ndarray) -> np.ndarray:
+    """Rotation vectors (..., 3) [rad] of rotation matrices (..., 3, 3)."""
+    R = np.asarray(R, dtype=float)
+    cos = np.clip((np.trace(R, axis1=-2, axis2=-1) - 1.0) / 2.0, -1.0, 1.0)
+    theta = np.arccos(cos)
+    v = np.stack(
+        [R[..., 2, 1] - R[..., 1, 2], R[..., 0, 2] - R[..., 2, 0], R[..., 1, 0] - R[..., 0, 1]],
+        axis=-1,
+    )
+    sin = np.sin(theta)
+    small = sin < 1e-6
+    factor = np.where(small, 0.5 + theta**2 / 12.0, theta / (2.0 * np.where(small, 1.0, sin)))
+    w = factor[..., None] * v
+    # Near pi: recover the axis from the symmetric part.
+    near_pi = (theta > np.pi - 1e-3)
+    if np.any(near_pi):
+        Rn = R[near_pi]
+        th = theta[near_pi]
+        B = (Rn + np.swapaxes(Rn, -1, -2)) / 2.0 - np.cos(th)[..., None, None] * np.eye(3)
+        idx = np.argmax(np.diagonal(B, axis1=-2, axis2=-1), axis=-1)
+        axis = B[np.arange(len(idx)), idx]
+        axis /= np.linalg.norm(axis, axis=-1, keepdims=True)
+        sign = np.sign(np.sum(axis * v[near_pi], axis=-1))
+        sign = np.where(sign == 0, 1.0, sign)
+        w[near_pi] = axis * (th * sign)[..., None]
+    return w
+
+
+def exp_se3(v: np.ndarray, w: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Exponential of twists ``(v, w)`` (..., 3) -> rotation (..., 3, 3), translation (..., 3)."""
+    v = np.asarray(v, dtype=float)
+    w = np.asarray(w, dtype=float)
+    theta = np.linalg.norm(w, axis=-1)[..., None, None]
+    K = skew(w)
+    small = theta < 1e-6
+    th = np.where(small, 1.0, theta)
+    b = np.where(small, 0.5 - theta**2 / 24.0, (1.0 - np.cos(th)) / th**2)
+    c = np.where(small, 1.0 / 6.0 - theta**2 / 120.0, (th - np.sin(th)) / th**3)
+    V = np.eye(3) + b * K + c * (K @ K)
+    return exp_so3(w), (V @ v[..., None])[..., 0]
+
+
+def integrate_pose(
+    rotation: np.ndarray, translation: np.ndarray, twist: np.ndarray, dt: float | np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """Move poses by a constant twist for ``dt`` (left multiplication by ``exp(twist dt)``).
+
+    Args:
+        rotation: (..., 3, 3) rotation of the body in the fixed frame.
+        translation: (..., 3) position of the body origin in the fixed frame [m].
+        twist: (..., 6) ``(v [m/s], w [rad/s])`` in the fixed frame, at its origin.
+        dt: Duration [s].
+
+    Returns:
+        The new rotation and translation.
+    """
+    dt_arr = np.asarray(dt, dtype=float)[..., None]
+    dR, dp = exp_se3(twist[..., :3] * dt_arr, twist[..., 3:] * dt_arr)
+    return dR @ rotation, (dR @ translation[..., None])[..., 0] + dp
+
+
+def pose_error(
+    rotation: np.ndarray, translation: np.ndarray, rotation_ref: np.ndarray,
+    translation_ref: np.ndarray,
+) -> tuple[np.ndarray, np.ndarray]:
+    """Position error [m] and rotation angle error [rad] between poses (batched)."""
+    dp = np.linalg.norm(np.asarray(translation) - np.asarray(translation_ref), axis=-1)
+    dR = np.swapaxes(rotation_ref, -1, -2) @ rotation
+    ang = np.linalg.norm(log_so3(dR), axis=-1)
+    return dp, ang
+
+
+def rotation_from_rpy(roll: float, pitch: float, yaw: float) -> np.ndarray:
+    """Rotation ``Rz(yaw) Ry(pitch) Rx(roll)`` [rad]."""
+    cr, sr = np.cos(roll), np.sin(roll)
+    cp, sp = np.cos(pitch), np.sin(pitch)
+    cy, sy = np.cos(yaw), np.sin(yaw)
+    Rx = np.array([[1, 0, 0], [0, cr, -sr], [0, sr, cr]])
+    Ry = np.array([[cp, 0, sp], [0, 1, 0], [-sp, 0, cp]])
+    Rz = np.array([[cy, -sy, 0], [sy, cy, 0], [0, 0, 1]])
+    return Rz @ Ry @ Rx
+
+
+def look_at(eye: np.ndarray, target: np.ndarray, up: np.ndarray) -> np.ndarray:
+    """Rotation of a camera frame (z forward, x right, y down) looking from eye to target.
+
+    Returns:
+        ``base_R_camera``: columns are the camera axes in the base frame.
+    """
+    z = np.asarray(target, float) - np.asarray(eye, float)
+    z /= np.linalg.norm(z)
+    x = np.cross(z, -np.asarray(up, float))
+    if np.linalg.norm(x) < 1e-9:
+        raise ValueError("look_at: up vector parallel to the viewing direction")
+    x /= np.linalg.norm(x)
+    y = np.cross(z, x)
+    return np.stack([x, y, z], axis=-1)

@@ -1,0 +1,144 @@
+"""Workspace of the hexapod: home pose, random poses inside the strokes, extremal configurations."""
+
+from __future__ import annotations
+
+import itertools
+from dataclasses import dataclass
+
+import numpy as np
+
+from hexapod.geometry import HexapodGeometry
+from hexapod.kinematics import inverse_kinematics
+from hexapod.se3 import exp_so3
+
+
+def home_height(geometry: HexapodGeometry) -> float:
+    """Height [m] where the platform, parallel to the base and centred, has its mean leg
+    length at the middle of the stroke (bisection; use ``geometry.home_height``, cached)."""
+    lo, hi = 1e-3, 4.0 * geometry.q_max
+    for _ in range(100):
+        mid = 0.5 * (lo + hi)
+        q = inverse_kinematics(geometry, np.eye(3), np.array([0.0, 0.0, mid]))
+        if q.mean() < geometry.q_mid:
+            lo = mid
+        else:
+            hi = mid
+    return 0.5 * (lo + hi)
+
+
+def home_pose(
+    geometry: HexapodGeometry, height: float | None = None
+) -> tuple[np.ndarray, np.ndarray]:
+    """Home pose: platform parallel to the base, centred, at ``height`` [m].
+
+    The default height makes the mean leg length equal to the middle of the stroke.
+    """
+    if height is None:
+        height = geometry.home_height
+    return np.eye(3), np.array([0.0, 0.0, float(height)])
+
+
+def sample_poses(
+    geometry: HexapodGeometry,
+    n: int,
+    rng: np.random.Generator | int | None = None,
+    max_translation: float = 0.08,
+    max_angle: float = np.deg2rad(15.0),
+    margin: float = 0.0,
+) -> tuple[np.ndarray, np.ndarray]:
+    """Uniform random poses whose leg lengths are inside the strokes (rejection sampling).
+
+    Positions are uniform in a box of half-width ``max_translation`` around the
+    home pose, orientations uniform in a ball of rotation vectors of radius
+    ``max_angle``; a pose is kept if every leg is within ``[q_min + margin,
+    q_max - margin]``.
+
+    Args:
+        geometry: The robot.
+        n: Number of poses.
+        rng: Generator or seed.
+        max_translation: Half-width of the position box [m].
+        max_angle: Maximal rotation from the home orientation [rad].
+        margin: Distance kept from the stroke limits [m].
+
+    Returns:
+        Rotations (n, 3, 3) and translations (n, 3) in the base frame.
+    """
+    rng = np.random.default_rng(rng)
+    _, t0 = home_pose(geometry)
+    Rs, ts = [], []
+    count = 0
+    attempts = 0
+    while count < n:
+        m = max(2 * (n - count), 16)
+        t = t0 + rng.uniform(-max_translation, max_translation, size=(m, 3))
+        d = rng.normal(size=(m, 3))
+        d /= np.linalg.norm(d, axis=1, keepdims=True)
+        ang = max_angle * rng.uniform(0, 1, size=m) ** (1 / 3)
+        R = exp_so3(d * ang[:, None])
+        q = inverse_kinematics(geometry, R, t)
+        ok = np.all((q >= geometry.q_min + margin) & (q <= geometry.q_max - margin), axis=1)
+        Rs.append(R[ok])
+        ts.append(t[ok])
+        count += int(ok.sum())
+        attempts += m
+        if attempts > 1000 * max(n, 1):
+            raise RuntimeError("sample_poses: the box hardly intersects the workspace")
+    return np.concatenate(Rs)[:n], np.concatenate(ts)[:n]
+
+
+@dataclass(frozen=True)
+class ExtremalConfigurations:
+    """The 64 configurations where every leg is at one of its stroke limits.
+
+    Attributes:
+        lengths: (64, 6) leg lengths [m].
+        reachable: (64,) whether forward kinematics found a pose.
+        rotations: (64, 3, 3) poses (NaN where unreachable).
+        translations: (64, 3) [m] (NaN where unreachable).
+    """
+
+    lengths: np.ndarray
+    reachable: np.ndarray
+    rotations: np.ndarray
+    translations: np.ndarray
+
+    @property
+    def unreachable_indices(self) -> list[int]:
+        """Indices of the configurations without a pose."""
+        return [int(i) for i in np.flatnonzero(~self.reachable)]
+
+
+def extremal_configurations(
+    geometry: HexapodGeometry, margin: float = 0.0
+) -> ExtremalConfigurations:
+    """Every leg at one of its stroke limits (64 combinations), with their poses.
+
+    The pose of each is found by forward kinematics from the home pose, through
+    a continuation path (lengths moved from mid-stroke in small steps) so that the
+    solution stays on the assembly mode of the home pose.
+
+    Args:
+        geometry: The robot.
+        margin: Distance from each limit [m] (e.g. to stay off the hard stops).
+    """
+    from hexapod.fk import forward_kinematics_batch
+
+    lo, hi = geometry.q_min + margin, geometry.q_max - margin
+    combos = np.array(list(itertools.product([0, 1], repeat=6)), dtype=float)
+    lengths = lo + combos * (hi - lo)
+    R0, t0 = home_pose(geometry)
+    q0 = inverse_kinematics(geometry, R0, t0)
+    n = len(lengths)
+    R = np.broadcast_to(R0, (n, 3, 3)).copy()
+    t = np.broadcast_to(t0, (n, 3)).copy()
+    ok = np.ones(n, dtype=bool)
+    for s in np.linspace(0.1, 1.0, 10):
+        target = q0 + s * (lengths - q0)
+        sol = forward_kinematics_batch(geometry, target, R, t)
+        ok &= sol.converged
+        R = np.where(sol.converged[:, None, None], sol.rotations, R)
+        t = np.where(sol.converged[:, None], sol.translations, t)
+    R[~ok] = np.nan
+    t[~ok] = np.nan
+    return ExtremalConfigurations(lengths, ok, R, t)
