@@ -1,0 +1,108 @@
+"""The robot backend interface (in the style of upkie's backends).
+
+A backend is where leg-velocity commands go: a simulated robot, or a real one
+through a serial link. Every backend clamps commands to the stroke and speed
+limits and reports the leg lengths a real robot's encoders would measure.
+"""
+
+from __future__ import annotations
+
+from abc import ABC, abstractmethod
+from dataclasses import dataclass, field
+from types import TracebackType
+
+import numpy as np
+
+
+@dataclass
+class BackendStep:
+    """What a backend returns after applying one command.
+
+    Attributes:
+        lengths: (6,) measured leg lengths after the step [m].
+        applied_velocities: (6,) the velocities actually applied after clamping [m/s].
+        clamped: (6,) bool, legs whose command was clamped (stroke or speed).
+        round_trip_s: Communication time spent in this step [s] (0 for a simulation).
+        missed_period: True when the step took longer than its period.
+        extras: Backend-specific diagnostics.
+    """
+
+    lengths: np.ndarray
+    applied_velocities: np.ndarray
+    clamped: np.ndarray
+    round_trip_s: float = 0.0
+    missed_period: bool = False
+    extras: dict[str, float] = field(default_factory=dict)
+
+
+class Backend(ABC):
+    """A robot that accepts leg-velocity commands at a fixed period."""
+
+    #: Stroke limits (q_min, q_max) [m].
+    stroke: tuple[float, float]
+    #: Leg speed limit [m/s].
+    max_speed: float
+
+    @abstractmethod
+    def reset(self, lengths: np.ndarray | None = None) -> np.ndarray:
+        """Bring the robot to ``lengths`` (if given) and return the measured lengths [m]."""
+
+    @abstractmethod
+    def step(self, velocities: np.ndarray, dt: float) -> BackendStep:
+        """Apply leg velocities [m/s] for ``dt`` [s] (after clamping) and measure."""
+
+    @abstractmethod
+    def measured_lengths(self) -> np.ndarray:
+        """The current measured leg lengths (6,) [m]."""
+
+    def halt(self) -> None:  # noqa: B027 - optional hook
+        """Stop every leg where it is (no-op for a simulation)."""
+
+    def close(self) -> None:  # noqa: B027 - optional hook
+        """Release the robot (halts it first where that means something)."""
+
+    def __enter__(self) -> Backend:
+        return self
+
+    def __exit__(
+        self,
+        exc_type: type[BaseException] | None,
+        exc: BaseException | None,
+        tb: TracebackType | None,
+    ) -> None:
+        try:
+            self.halt()
+        finally:
+            self.close()
+
+
+def clamp_velocities(
+    lengths: np.ndarray,
+    velocities: np.ndarray,
+    dt: float,
+    stroke: tuple[float, float],
+    max_speed: float,
+) -> tuple[np.ndarray, np.ndarray]:
+    """Clamp leg velocities to the speed limit and so that the stroke is never left.
+
+    Works on batches (..., 6). Non-finite commands become zero (and count as clamped).
+
+    Args:
+        lengths: Current leg lengths [m].
+        velocities: Commanded leg velocities [m/s].
+        dt: Period [s].
+        stroke: (q_min, q_max) [m].
+        max_speed: Speed limit [m/s].
+
+    Returns:
+        The applied velocities and a boolean mask of clamped legs.
+    """
+    v = np.asarray(velocities, dtype=float)
+    finite = np.isfinite(v)
+    v = np.where(finite, v, 0.0)
+    vc = np.clip(v, -max_speed, max_speed)
+    lo = (stroke[0] - lengths) / dt
+    hi = (stroke[1] - lengths) / dt
+    vc = np.minimum(np.maximum(vc, np.minimum(lo, 0.0)), np.maximum(hi, 0.0))
+    clamped = (~finite) | (np.abs(vc - v) > 1e-12)
+    return vc, clamped
