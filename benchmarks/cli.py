@@ -1,0 +1,284 @@
+"""``hexapod-bench``: list, run, report, perf, calibrate, viz, servo.
+
+Examples::
+
+    hexapod-bench list
+    hexapod-bench run quick --out runs/quick
+    hexapod-bench run tahri2009-convergence --out runs/tahri --workers 2
+    hexapod-bench run my-study.toml --out runs/mine --dask local --resume
+    hexapod-bench report runs/quick
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import logging
+import os
+import shlex
+import sys
+import time
+from pathlib import Path
+from typing import Any
+
+from benchmarks.exceptions import BenchmarkError
+from hexapod.exceptions import HexapodError
+
+log = logging.getLogger("hexapod-bench")
+
+
+def _console() -> Any:
+    from rich.console import Console
+
+    return Console()
+
+
+def cmd_list(args: argparse.Namespace) -> int:
+    """List built-in scenarios and registered controllers with their source package."""
+    from rich.table import Table
+
+    import controllers  # noqa: F401 - registers the built-ins
+    from benchmarks.scenario import builtin_scenarios, load_scenario
+    from controllers.base import registry
+
+    con = _console()
+    t = Table(title="Scenarios")
+    t.add_column("name")
+    t.add_column("trials", justify="right")
+    t.add_column("controllers")
+    t.add_column("description")
+    for name in builtin_scenarios():
+        sc = load_scenario(name)
+        points = len(sc.expand())
+        t.add_row(name, f"{sc.trials} x {points} pt" if points > 1 else str(sc.trials),
+                  ", ".join(c.label for c in sc.controllers), sc.description.split(". ")[0])
+    con.print(t)
+    t = Table(title="Controllers")
+    for col in ("name", "package", "version", "description"):
+        t.add_column(col)
+    for info in registry.info():
+        t.add_row(info.name, info.package, info.version, info.description)
+    con.print(t)
+    for err in registry.errors:
+        con.print(f"[red]plugin failed to load:[/red] {err}")
+    return 0
+
+
+def cmd_run(args: argparse.Namespace) -> int:
+    """Run studies and write results.jsonl and report.md."""
+    import controllers  # noqa: F401 - registers the built-ins
+    from benchmarks.report import META_FILE, write_report
+    from benchmarks.runner import completed_keys, plan, run_units
+    from benchmarks.scenario import load_scenario
+
+    out = Path(args.out)
+    ctrl_list = [c.strip() for c in args.controllers.split(",")] if args.controllers else None
+    scenarios = [load_scenario(s).with_overrides(args.trials, args.seed, ctrl_list)
+                 for s in args.scenarios]
+    for sc in scenarios:
+        _check_controllers(sc)
+    existing = (out / "results.jsonl").exists() and (out / "results.jsonl").stat().st_size > 0
+    if existing and not args.resume:
+        raise BenchmarkError(f"{out}: already holds results; use --resume to finish that run "
+                             "or choose another --out")
+    done = completed_keys(out) if args.resume else set()
+    backend = args.backend
+    if backend == "emulator":
+        backend = "emulator"
+    units = plan(scenarios, args.chunk, args.record, done, backend)
+    total = sum(len(u.trials) for u in units)
+    con = _console()
+    if done:
+        con.print(f"resuming: {len(done)} trials already done, {total} to go")
+    executor = "dask" if args.dask else ("process pool" if args.workers > 1 else "in-process")
+    meta_path = out / META_FILE
+    out.mkdir(parents=True, exist_ok=True)
+    meta: dict[str, Any] = {}
+    if meta_path.exists():
+        meta = json.loads(meta_path.read_text())
+    meta.update({
+        "command": "hexapod-bench " + " ".join(shlex.quote(a) for a in sys.argv[1:]),
+        "workers": args.workers, "executor": executor,
+        "scenarios": {**meta.get("scenarios", {}), **{
+            sc.name: {"description": sc.description, "reference": sc.reference,
+                      "source": sc.source} for sc in scenarios}},
+    })
+    meta_path.write_text(json.dumps(meta, indent=2))
+    if args.viz:
+        return _run_with_viz(scenarios, out, args)
+    t0 = time.perf_counter()
+    show = sys.stdout.isatty() and not args.no_progress
+    interrupted = False
+    try:
+        if show and total:
+            from rich.progress import (BarColumn, MofNCompleteColumn, Progress,
+                                       TimeElapsedColumn, TimeRemainingColumn)
+
+            with Progress("[progress.description]{task.description}", BarColumn(),
+                          MofNCompleteColumn(), TimeElapsedColumn(), TimeRemainingColumn(),
+                          console=con) as prog:
+                task = prog.add_task("trials", total=total)
+                run_units(units, out, args.workers, args.dask,
+                          progress=lambda u: prog.advance(task, len(u.trials)))
+        else:
+            run_units(units, out, args.workers, args.dask)
+    except KeyboardInterrupt:
+        interrupted = True
+        con.print(f"\n[yellow]interrupted[/yellow]: finished chunks are in {out}/results.jsonl;"
+                  f" finish with: hexapod-bench run {' '.join(args.scenarios)} --out {out} "
+                  "--resume")
+    wall = time.perf_counter() - t0
+    meta["wall_time_s"] = wall
+    meta_path.write_text(json.dumps(meta, indent=2))
+    report = write_report(out)
+    _print_summary(out, con)
+    con.print(f"{total} trials in {wall:.1f} s ({executor}, {args.workers} worker(s)); "
+              f"report: {report}")
+    return 130 if interrupted else 0
+
+
+def _check_controllers(sc: Any) -> None:
+    from controllers.base import registry
+
+    for spec in sc.controllers:
+        registry.factory(spec.name)  # raises UnknownControllerError with a suggestion
+
+
+def _run_with_viz(scenarios: list[Any], out: Path, args: argparse.Namespace) -> int:
+    """Run in-process with a live MeshCat view (loopback server)."""
+    from benchmarks.runner import ResultsWriter, execute, plan
+    from benchmarks.simulate import load_camera, load_geometry
+    from hexapod.visualize import HexapodViewer
+
+    con = _console()
+    sc0 = scenarios[0].expand()[0]
+    g = load_geometry(sc0)
+    cam = load_camera(sc0, g)
+    viewer = HexapodViewer(g)
+    viewer.show_camera(cam.camera_from_base.as_matrix(), cam.K, cam.width, cam.height,
+                       kind=cam.kind)
+    con.print(f"MeshCat viewer: {viewer.url()}")
+    import benchmarks.simulate as sim
+
+    original = sim.run_trials
+
+    def run_trials_viz(*a: Any, **k: Any) -> Any:
+        k["on_step"] = lambda trial, R, t, vis: viewer.display(R, t, vis)
+        return original(*a, **k)
+
+    sim.run_trials = run_trials_viz  # type: ignore[assignment]
+    writer = ResultsWriter(out)
+    try:
+        for unit in plan(scenarios, 1, args.record, set(), args.backend):
+            rows, records = execute(unit)
+            writer.write(rows, records)
+    finally:
+        sim.run_trials = original  # type: ignore[assignment]
+        writer.close()
+        viewer.close()
+    from benchmarks.report import write_report
+
+    write_report(out)
+    _print_summary(out, con)
+    return 0
+
+
+def _print_summary(out: Path, con: Any) -> None:
+    from rich.table import Table
+
+    from benchmarks.metrics import summarize
+    from benchmarks.report import TABLE_HEADER, summary_table_rows
+    from benchmarks.runner import read_results
+
+    summaries = summarize(read_results(out))
+    t = Table(title=f"Results ({out})")
+    for col in TABLE_HEADER:
+        t.add_column(col, justify="left" if col in ("scenario", "sweep", "controller",
+                                                    "backend") else "right")
+    for row in summary_table_rows(summaries):
+        t.add_row(*row)
+    con.print(t)
+
+
+def cmd_report(args: argparse.Namespace) -> int:
+    """Rebuild report.md from results.jsonl."""
+    from benchmarks.report import write_report
+
+    path = write_report(Path(args.dir))
+    _print_summary(Path(args.dir), _console())
+    print(f"report: {path}")
+    return 0
+
+
+def cmd_perf(args: argparse.Namespace) -> int:
+    """Performance figures (forward kinematics, controllers, vision, detection, serial)."""
+    from benchmarks import perf
+
+    argv = [args.what, "-n", str(args.n)]
+    return perf.main(argv)
+
+
+def build_parser() -> argparse.ArgumentParser:
+    """The argument parser of ``hexapod-bench``."""
+    p = argparse.ArgumentParser(prog="hexapod-bench", description=__doc__.split("\n")[0],
+                                formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument("-v", "--verbose", action="store_true", help="log at INFO level")
+    sub = p.add_subparsers(dest="command", required=True)
+
+    s = sub.add_parser("list", help="scenarios and controllers (with their source package)")
+    s.set_defaults(func=cmd_list)
+
+    s = sub.add_parser("run", help="run scenarios (built-in names or TOML paths)")
+    s.add_argument("scenarios", nargs="+", metavar="SCENARIO")
+    s.add_argument("--out", required=True, help="results directory")
+    s.add_argument("--trials", type=int, help="trials per sweep point and controller")
+    s.add_argument("--seed", type=int, help="override the scenario seed")
+    s.add_argument("--controllers", help="comma-separated names, labels or module:attr")
+    s.add_argument("--workers", type=int, default=1, help="processes (default 1)")
+    s.add_argument("--dask", metavar="ADDRESS", help="Dask scheduler address, or 'local'")
+    s.add_argument("--resume", action="store_true", help="finish an interrupted run")
+    s.add_argument("--chunk", type=int, default=25, help="trials per work unit")
+    s.add_argument("--record", type=int, default=2,
+                   help="keep the time series of the first K trials of each controller")
+    s.add_argument("--backend", default="sim",
+                   help="sim (default), emulator (a firmware emulator on a pty), or "
+                        "serial:URL")
+    s.add_argument("--viz", action="store_true", help="live MeshCat view (in-process)")
+    s.add_argument("--no-progress", action="store_true", help="no progress bar")
+    s.set_defaults(func=cmd_run)
+
+    s = sub.add_parser("report", help="rebuild DIR/report.md from DIR/results.jsonl")
+    s.add_argument("dir")
+    s.set_defaults(func=cmd_report)
+
+    s = sub.add_parser("perf", help="performance figures")
+    s.add_argument("what", choices=["fk"])
+    s.add_argument("-n", type=int, default=1000)
+    s.set_defaults(func=cmd_perf)
+    return p
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Entry point of ``hexapod-bench``."""
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    logging.basicConfig(level=logging.INFO if args.verbose else logging.WARNING,
+                        format="%(levelname)s %(name)s: %(message)s")
+    os.environ.setdefault("PYTHONWARNINGS", "ignore")
+    try:
+        return int(args.func(args))
+    except (BenchmarkError, HexapodError) as exc:
+        print(f"hexapod-bench: error: {exc}", file=sys.stderr)
+        return 2
+    except Exception as exc:
+        from controllers.exceptions import ControllerError
+        from vision.exceptions import VisionError
+
+        if isinstance(exc, ControllerError | VisionError):
+            print(f"hexapod-bench: error: {exc}", file=sys.stderr)
+            return 2
+        raise
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

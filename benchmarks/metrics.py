@@ -1,0 +1,111 @@
+"""Aggregate result rows into per-(scenario, sweep point, controller) figures."""
+
+from __future__ import annotations
+
+from collections import defaultdict
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+#: Row keys that are not sweep values.
+_NON_SWEEP = {
+    "scenario", "controller", "controller_name", "controller_package", "controller_version",
+    "trial", "point", "backend", "converged", "steps", "final_position_error_mm",
+    "final_orientation_error_deg", "stroke_violations", "step_time_us", "failure",
+    "rtt_median_ms", "rtt_p99_ms", "missed_periods",
+}
+
+
+def sweep_values(row: dict[str, Any]) -> dict[str, Any]:
+    """The sweep values of a row (keys like ``noise_amplitude_deg``)."""
+    return {k: v for k, v in row.items() if k not in _NON_SWEEP
+            and not k.startswith("calibration_")}
+
+
+@dataclass
+class Summary:
+    """Figures of one controller at one sweep point of one scenario."""
+
+    scenario: str
+    point: int
+    sweep: dict[str, Any]
+    controller: str
+    package: str | None
+    version: str | None
+    backend: str
+    trials: int
+    converged: int
+    crashed: int
+    position_median_mm: float
+    position_p95_mm: float
+    position_max_mm: float
+    orientation_median_deg: float
+    orientation_p95_deg: float
+    orientation_max_deg: float
+    steps_median: float
+    step_time_median_us: float
+    stroke_violations: int
+    rtt_median_ms: float
+    rtt_p99_ms: float
+    missed_periods: int
+    calibration_median_mm: float
+    calibration_max_mm: float
+
+    @property
+    def convergence_rate(self) -> float:
+        """Fraction of trials that converged."""
+        return self.converged / self.trials if self.trials else float("nan")
+
+
+def _stat(values: list[float], fn: str) -> float:
+    arr = np.array([v for v in values if v is not None and np.isfinite(v)], dtype=float)
+    if arr.size == 0:
+        return float("nan")
+    if fn == "median":
+        return float(np.median(arr))
+    if fn == "p95":
+        return float(np.percentile(arr, 95))
+    if fn == "p99":
+        return float(np.percentile(arr, 99))
+    return float(np.max(arr))
+
+
+def summarize(rows: list[dict[str, Any]]) -> list[Summary]:
+    """One :class:`Summary` per (scenario, sweep point, controller, backend), sorted."""
+    groups: dict[tuple[str, int, str, str], list[dict[str, Any]]] = defaultdict(list)
+    for r in rows:
+        groups[(r["scenario"], int(r.get("point", 0)), r["controller"],
+                r.get("backend", "sim"))].append(r)
+    out = []
+    for (scenario, point, controller, backend), rs in sorted(groups.items(),
+                                                             key=lambda kv: kv[0]):
+        pos = [r["final_position_error_mm"] for r in rs]
+        ori = [r["final_orientation_error_deg"] for r in rs]
+        conv = [r for r in rs if r["converged"]]
+        crashed = [r for r in rs if r["final_position_error_mm"] is None]
+        out.append(Summary(
+            scenario=scenario, point=point, sweep=sweep_values(rs[0]), controller=controller,
+            package=rs[0].get("controller_package"), version=rs[0].get("controller_version"),
+            backend=backend, trials=len(rs), converged=len(conv), crashed=len(crashed),
+            position_median_mm=_stat(pos, "median"), position_p95_mm=_stat(pos, "p95"),
+            position_max_mm=_stat(pos, "max"), orientation_median_deg=_stat(ori, "median"),
+            orientation_p95_deg=_stat(ori, "p95"), orientation_max_deg=_stat(ori, "max"),
+            steps_median=_stat([r["steps"] for r in conv], "median"),
+            step_time_median_us=_stat([r["step_time_us"] for r in rs], "median"),
+            stroke_violations=int(sum(r.get("stroke_violations") or 0 for r in rs)),
+            rtt_median_ms=_stat([r.get("rtt_median_ms") for r in rs], "median"),
+            rtt_p99_ms=_stat([r.get("rtt_p99_ms") for r in rs], "max"),
+            missed_periods=int(sum(r.get("missed_periods") or 0 for r in rs)),
+            calibration_median_mm=_stat([r.get("calibration_median_error_mm") for r in rs],
+                                        "median"),
+            calibration_max_mm=_stat([r.get("calibration_max_error_mm") for r in rs], "max"),
+        ))
+    return out
+
+
+def format_sweep(sweep: dict[str, Any]) -> str:
+    """``noise_amplitude_deg=0.05, calib_base_points_mm=1`` or ``-``."""
+    if not sweep:
+        return "-"
+    return ", ".join(f"{k}={v}" for k, v in sweep.items())

@@ -1,0 +1,206 @@
+"""Markdown report with plots, rebuilt from ``results.jsonl`` at any time."""
+
+from __future__ import annotations
+
+import json
+import logging
+from collections import defaultdict
+from datetime import UTC, datetime
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from benchmarks.metrics import Summary, format_sweep, summarize
+from benchmarks.runner import TRIALS_DIR, machine_info, read_results
+
+log = logging.getLogger(__name__)
+
+META_FILE = "run.json"
+
+
+def _fmt(x: float, digits: int = 3) -> str:
+    if x is None or not np.isfinite(x):
+        return "-"
+    if x != 0 and (abs(x) < 10 ** (-digits) or abs(x) >= 1e5):
+        return f"{x:.2e}"
+    return f"{x:.{digits}f}"
+
+
+def summary_table_rows(summaries: list[Summary]) -> list[list[str]]:
+    """Rows of the comparison table (shared by the terminal and the Markdown report)."""
+    rows = []
+    for s in summaries:
+        rows.append([
+            s.scenario, format_sweep(s.sweep), s.controller, s.backend,
+            f"{100 * s.convergence_rate:.1f}% ({s.converged}/{s.trials})",
+            _fmt(s.position_median_mm), _fmt(s.position_p95_mm), _fmt(s.position_max_mm),
+            _fmt(s.orientation_median_deg, 4), _fmt(s.orientation_max_deg, 4),
+            _fmt(s.steps_median, 0), _fmt(s.step_time_median_us, 1),
+            str(s.stroke_violations),
+        ])
+    return rows
+
+
+TABLE_HEADER = ["scenario", "sweep", "controller", "backend", "converged", "pos med mm",
+                "pos p95 mm", "pos max mm", "rot med deg", "rot max deg", "steps med",
+                "step us", "stroke viol."]
+
+
+def _md_table(header: list[str], rows: list[list[str]]) -> str:
+    out = ["| " + " | ".join(header) + " |", "|" + "---|" * len(header)]
+    out += ["| " + " | ".join(r) + " |" for r in rows]
+    return "\n".join(out)
+
+
+def _plot_time_series(out_dir: Path, scenario: str, point: int) -> str | None:
+    """Error norm and position error versus time of the recorded trial 0 of each controller."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    files = sorted((out_dir / TRIALS_DIR).glob(f"{scenario}__p{point}__*__00000.npz"))
+    if not files:
+        return None
+    fig, axes = plt.subplots(1, 2, figsize=(10, 3.5))
+    for f in files:
+        with np.load(f) as rec:
+            label = str(rec["controller"])
+            err = np.asarray(rec["error_norm"], float)
+            t = np.asarray(rec["t"], float)
+            ok = np.isfinite(err) & (err > 0)
+            axes[0].semilogy(t[ok], err[ok], label=label)
+            axes[1].semilogy(t, np.maximum(np.asarray(rec["position_error"]) * 1e3, 1e-6),
+                             label=label)
+    axes[0].set_title("feature error norm (trial 0)")
+    axes[0].set_xlabel("time [s]")
+    axes[1].set_title("position error [mm] (trial 0)")
+    axes[1].set_xlabel("time [s]")
+    for ax in axes:
+        ax.grid(True, which="both", alpha=0.3)
+        ax.legend(fontsize=7)
+    fig.tight_layout()
+    name = f"{scenario}_p{point}_timeseries.png"
+    fig.savefig(out_dir / name, dpi=90)
+    plt.close(fig)
+    return name
+
+
+def _plot_sweeps(out_dir: Path, scenario: str, summaries: list[Summary]) -> list[str]:
+    """Convergence rate and median/max final error versus each sweep axis."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    axes_keys = sorted({k for s in summaries for k in s.sweep})
+    names = []
+    for key in axes_keys:
+        values = sorted({s.sweep[key] for s in summaries if key in s.sweep})
+        if len(values) < 2:
+            continue
+        fig, (a0, a1) = plt.subplots(1, 2, figsize=(10, 3.5))
+        by_ctrl: dict[str, list[Summary]] = defaultdict(list)
+        for s in summaries:
+            by_ctrl[f"{s.controller} ({s.backend})" if s.backend != "sim" else s.controller
+                    ].append(s)
+        for ctrl, ss in by_ctrl.items():
+            ss = sorted(ss, key=lambda s: s.sweep.get(key, 0))
+            x = [s.sweep.get(key) for s in ss]
+            a0.plot(x, [100 * s.convergence_rate for s in ss], "o-", label=ctrl)
+            line, = a1.semilogy(x, [max(s.position_median_mm, 1e-6) for s in ss], "o-",
+                                label=f"{ctrl} median")
+            a1.semilogy(x, [max(s.position_max_mm, 1e-6) for s in ss], "x--",
+                        color=line.get_color(), label=f"{ctrl} max")
+        a0.set_ylabel("convergence [%]")
+        a1.set_ylabel("final position error [mm]")
+        for ax in (a0, a1):
+            ax.set_xlabel(key)
+            ax.grid(True, which="both", alpha=0.3)
+            ax.legend(fontsize=7)
+        fig.tight_layout()
+        name = f"{scenario}_sweep_{key}.png"
+        fig.savefig(out_dir / name, dpi=90)
+        plt.close(fig)
+        names.append(name)
+    return names
+
+
+def write_report(out_dir: Path) -> Path:
+    """Write ``DIR/report.md`` (and its PNG plots) from ``DIR/results.jsonl``."""
+    out_dir = Path(out_dir)
+    rows = read_results(out_dir)
+    summaries = summarize(rows)
+    meta: dict[str, Any] = {}
+    if (out_dir / META_FILE).exists():
+        meta = json.loads((out_dir / META_FILE).read_text())
+    info = machine_info()
+    lines = ["# Benchmark report", ""]
+    lines.append(f"Generated {datetime.now(UTC).strftime('%Y-%m-%d %H:%M UTC')} from "
+                 f"`{out_dir / 'results.jsonl'}` ({len(rows)} trials).")
+    if meta.get("command"):
+        lines.append(f"Command: `{meta['command']}`")
+    lines += ["", "## Machine and libraries", ""]
+    lines += [f"- {k}: {v}" for k, v in info.items()]
+    if meta.get("wall_time_s") is not None:
+        lines.append(f"- wall time of the last run: {meta['wall_time_s']:.1f} s "
+                     f"({meta.get('workers', 1)} worker(s), executor {meta.get('executor')})")
+    lines += ["", "## How to read this", "",
+              "Each row is one controller at one point of the scenario's sweep. *converged*: "
+              "trials whose true platform pose reached the position and orientation tolerances "
+              "of the scenario. Final errors are those of the TRUE pose against the TRUE goal, "
+              "over all trials (converged or not). *step us*: median time of one controller "
+              "`step`. *stroke viol.*: periods where a command would have driven a leg "
+              "beyond its stroke (the backend clamped it).", ""]
+    by_scenario: dict[str, list[Summary]] = defaultdict(list)
+    for s in summaries:
+        by_scenario[s.scenario].append(s)
+    scen_meta = meta.get("scenarios", {})
+    for name, ss in by_scenario.items():
+        lines += [f"## Scenario `{name}`", ""]
+        sm = scen_meta.get(name, {})
+        if sm.get("description"):
+            lines += [sm["description"], ""]
+        lines += [_md_table(TABLE_HEADER, summary_table_rows(ss)), ""]
+        if any(np.isfinite(s.rtt_median_ms) for s in ss):
+            lines += ["Serial link:", ""]
+            lines += [_md_table(["sweep", "controller", "backend", "RTT median ms",
+                                 "RTT p99 ms", "missed periods"],
+                                [[format_sweep(s.sweep), s.controller, s.backend,
+                                  _fmt(s.rtt_median_ms), _fmt(s.rtt_p99_ms),
+                                  str(s.missed_periods)] for s in ss]), ""]
+        if any(np.isfinite(s.calibration_median_mm) for s in ss):
+            lines += ["Calibration of the base points before control (error per point):", ""]
+            lines += [_md_table(["sweep", "controller", "median error mm", "max error mm"],
+                                [[format_sweep(s.sweep), s.controller,
+                                  _fmt(s.calibration_median_mm), _fmt(s.calibration_max_mm)]
+                                 for s in ss]), ""]
+        ref = sm.get("reference")
+        if ref:
+            lines += ["### The seed's figures beside ours", ""]
+            if "text" in ref:
+                lines += [str(ref["text"]), ""]
+            if "rows" in ref and "header" in ref:
+                lines += [_md_table([str(h) for h in ref["header"]],
+                                    [[str(c) for c in r] for r in ref["rows"]]), ""]
+        points = sorted({s.point for s in ss})
+        for p in points:
+            img = _plot_time_series(out_dir, name, p)
+            if img:
+                sweep = format_sweep(next(s.sweep for s in ss if s.point == p))
+                lines += [f"Error versus time, representative trial (sweep: {sweep}):", "",
+                          f"![time series]({img})", ""]
+        for img in _plot_sweeps(out_dir, name, ss):
+            lines += [f"![sweep]({img})", ""]
+    failures = [r for r in rows if r.get("failure") and not r["failure"].startswith("not conv")]
+    if failures:
+        lines += ["## Failures", ""]
+        counts: dict[str, int] = defaultdict(int)
+        for r in failures:
+            counts[f"{r['controller']}: {r['failure'][:160]}"] += 1
+        lines += [f"- {n} x {k}" for k, n in sorted(counts.items(), key=lambda kv: -kv[1])][:30]
+        lines.append("")
+    path = out_dir / "report.md"
+    path.write_text("\n".join(lines))
+    return path

@@ -1,0 +1,302 @@
+"""Run studies: chunks of trials sent to an executor, results streamed to disk, resumable.
+
+Every trial is seeded from (scenario seed, trial index), so results do not
+depend on the executor (in-process, process pool, Dask), the worker count or
+the chunking. Results stream to ``DIR/results.jsonl`` (one JSON object per
+trial, flushed as chunks complete); an interrupted run loses nothing already
+written and ``resume=True`` finishes it without redoing finished trials.
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+import os
+import platform
+import sys
+from collections.abc import Callable, Iterator
+from concurrent.futures import FIRST_COMPLETED, Future, ProcessPoolExecutor, wait
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from benchmarks.exceptions import ResultsError
+from benchmarks.scenario import Scenario
+
+log = logging.getLogger(__name__)
+
+RESULTS_FILE = "results.jsonl"
+TRIALS_DIR = "trials"
+
+
+@dataclass(frozen=True)
+class WorkUnit:
+    """A chunk of trials of one scenario point and one controller.
+
+    Attributes:
+        scenario: The expanded scenario (one sweep point).
+        point: Index of the sweep point within its scenario.
+        controller_index: Index into ``scenario.controllers``.
+        trials: Trial indices.
+        record_trials: Trials below this index keep their time series.
+        backend: Backend spec (``"sim"``, ``"emulator"`` or ``"serial:URL"``).
+    """
+
+    scenario: Scenario
+    point: int
+    controller_index: int
+    trials: tuple[int, ...]
+    record_trials: int = 2
+    backend: str = "sim"
+
+    @property
+    def controller(self) -> str:
+        """The controller label."""
+        return self.scenario.controllers[self.controller_index].label
+
+
+def trial_key(row: dict[str, Any]) -> tuple[str, int, str, int]:
+    """Identity of a result row: (scenario, sweep point, controller label, trial)."""
+    return (str(row["scenario"]), int(row.get("point", 0)), str(row["controller"]),
+            int(row["trial"]))
+
+
+def plan(scenarios: list[Scenario], chunk_size: int = 25, record_trials: int = 2,
+         done: set[tuple[str, int, str, int]] | None = None, backend: str = "sim"
+         ) -> list[WorkUnit]:
+    """Split studies into work units, leaving out trials already done."""
+    done = done or set()
+    units = []
+    for sc in scenarios:
+        for p, point in enumerate(sc.expand()):
+            for c, spec in enumerate(point.controllers):
+                todo = [k for k in range(point.trials)
+                        if (point.name, p, spec.label, k) not in done]
+                for a in range(0, len(todo), chunk_size):
+                    units.append(WorkUnit(point, p, c, tuple(todo[a:a + chunk_size]),
+                                          record_trials, backend))
+    return units
+
+
+def _backend_factory(spec: str) -> Callable[..., Any] | None:
+    if spec == "sim":
+        return None
+    from hexapod.backends.serial import backend_factory
+
+    return backend_factory(spec)  # type: ignore[no-any-return]
+
+
+def execute(unit: WorkUnit) -> tuple[list[dict[str, Any]], list[tuple[str, dict[str, Any]]]]:
+    """Run one work unit (in any process). Returns the rows and the recorded series."""
+    from benchmarks.calibrate import calibration_hook
+    from benchmarks.records import trial_record
+    from benchmarks.simulate import run_trials
+
+    sc = unit.scenario
+    results = run_trials(sc, unit.controller_index, list(unit.trials), unit.record_trials,
+                         backend_factory=_backend_factory(unit.backend),
+                         calibrate=calibration_hook(sc))
+    rows, records = [], []
+    for res in results:
+        row = dict(res.row)
+        row["point"] = unit.point
+        row["backend"] = unit.backend
+        rows.append(row)
+        if res.series is not None:
+            name = f"{sc.name}__p{unit.point}__{unit.controller}__{row['trial']:05d}.npz"
+            records.append((name, trial_record(sc, unit, row, res.series)))
+    return rows, records
+
+
+class ResultsWriter:
+    """Appends rows to ``results.jsonl`` (flushed and synced per chunk) and saves records."""
+
+    def __init__(self, out_dir: Path) -> None:
+        self.out_dir = out_dir
+        out_dir.mkdir(parents=True, exist_ok=True)
+        (out_dir / TRIALS_DIR).mkdir(exist_ok=True)
+        self.path = out_dir / RESULTS_FILE
+        _repair_tail(self.path)
+        self._f = self.path.open("a", encoding="utf-8")
+
+    def write(self, rows: list[dict[str, Any]], records: list[tuple[str, dict[str, Any]]]
+              ) -> None:
+        """Write one chunk's rows and records."""
+        for name, rec in records:
+            tmp = self.out_dir / TRIALS_DIR / (name + ".tmp.npz")
+            np.savez_compressed(tmp, **rec)
+            os.replace(tmp, self.out_dir / TRIALS_DIR / name)
+        for row in rows:
+            self._f.write(json.dumps(_jsonable(row), sort_keys=True) + "\n")
+        self._f.flush()
+        os.fsync(self._f.fileno())
+
+    def close(self) -> None:
+        """Close the file."""
+        self._f.close()
+
+
+def _jsonable(value: Any) -> Any:
+    if isinstance(value, dict):
+        return {k: _jsonable(v) for k, v in value.items()}
+    if isinstance(value, list | tuple):
+        return [_jsonable(v) for v in value]
+    if isinstance(value, np.generic):
+        return value.item()
+    if isinstance(value, float) and not np.isfinite(value):
+        return None
+    return value
+
+
+def _repair_tail(path: Path) -> None:
+    """Drop a partial last line left by a killed run."""
+    if not path.exists():
+        return
+    data = path.read_bytes()
+    if data and not data.endswith(b"\n"):
+        cut = data.rfind(b"\n") + 1
+        path.write_bytes(data[:cut])
+        log.warning("%s: dropped a partial last line from an interrupted run", path)
+
+
+def read_results(out_dir: Path) -> list[dict[str, Any]]:
+    """Read every row of ``DIR/results.jsonl``.
+
+    Raises:
+        ResultsError: No results file, or a corrupted line (named by number).
+    """
+    path = Path(out_dir) / RESULTS_FILE
+    if not path.exists():
+        raise ResultsError(str(path), "no results file (run 'hexapod-bench run' first)")
+    rows = []
+    lines = path.read_text(encoding="utf-8").splitlines()
+    for n, line in enumerate(lines, 1):
+        if not line.strip():
+            continue
+        try:
+            rows.append(json.loads(line))
+        except json.JSONDecodeError as exc:
+            if n == len(lines):  # partial last line of an interrupted run
+                log.warning("%s:%d: ignoring a partial last line", path, n)
+                continue
+            raise ResultsError(f"{path}:{n}", f"not valid JSON: {exc}") from None
+    return rows
+
+
+def _iter_inline(units: list[WorkUnit]) -> Iterator[tuple[WorkUnit, Any]]:
+    for u in units:
+        yield u, execute(u)
+
+
+def _iter_pool(units: list[WorkUnit], workers: int) -> Iterator[tuple[WorkUnit, Any]]:
+    import multiprocessing as mp
+
+    ctx = mp.get_context("fork" if sys.platform.startswith("linux") else "spawn")
+    with ProcessPoolExecutor(max_workers=workers, mp_context=ctx) as pool:
+        pending: dict[Future[Any], WorkUnit] = {}
+        queue = list(units)
+        try:
+            while queue or pending:
+                while queue and len(pending) < 2 * workers:
+                    u = queue.pop(0)
+                    pending[pool.submit(execute, u)] = u
+                finished, _ = wait(pending, return_when=FIRST_COMPLETED)
+                for fut in finished:
+                    u = pending.pop(fut)
+                    yield u, fut.result()
+        except BaseException:
+            for fut in pending:
+                fut.cancel()
+            pool.shutdown(wait=False, cancel_futures=True)
+            raise
+
+
+def _iter_dask(units: list[WorkUnit], address: str, workers: int
+               ) -> Iterator[tuple[WorkUnit, Any]]:
+    try:
+        from dask.distributed import Client, LocalCluster, as_completed
+    except ImportError as exc:
+        raise ResultsError("--dask", "Dask is not installed: pip install 'hexapod-vs[dask]'"
+                           ) from exc
+    cluster = None
+    if address == "local":
+        cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True,
+                               dashboard_address=None, host="127.0.0.1")
+        client = Client(cluster)
+    else:
+        client = Client(address)
+    try:
+        futures = {client.submit(execute, u, pure=False): u for u in units}
+        for fut in as_completed(futures):
+            yield futures[fut], fut.result()
+    finally:
+        client.close()
+        if cluster is not None:
+            cluster.close()
+
+
+def run_units(units: list[WorkUnit], out_dir: Path, workers: int = 1,
+              dask: str | None = None,
+              progress: Callable[[WorkUnit], None] | None = None) -> int:
+    """Execute work units and stream their results to ``out_dir``.
+
+    Args:
+        units: From :func:`plan`.
+        out_dir: Results directory.
+        workers: Processes (1: in-process).
+        dask: Dask scheduler address, or ``"local"`` for a local cluster.
+        progress: Called after each finished unit.
+
+    Returns:
+        Number of rows written.
+    """
+    writer = ResultsWriter(out_dir)
+    count = 0
+    try:
+        if dask:
+            it = _iter_dask(units, dask, workers)
+        elif workers > 1:
+            it = _iter_pool(units, workers)
+        else:
+            it = _iter_inline(units)
+        for unit, (rows, records) in it:
+            writer.write(rows, records)
+            count += len(rows)
+            if progress is not None:
+                progress(unit)
+    finally:
+        writer.close()
+    return count
+
+
+def completed_keys(out_dir: Path) -> set[tuple[str, int, str, int]]:
+    """Keys of the trials already in ``DIR/results.jsonl`` (empty if none)."""
+    path = Path(out_dir) / RESULTS_FILE
+    if not path.exists():
+        return set()
+    return {trial_key(r) for r in read_results(out_dir)}
+
+
+def machine_info() -> dict[str, str]:
+    """CPU, Python and library versions for the report."""
+    import importlib.metadata as md
+
+    cpu = platform.processor() or platform.machine()
+    try:
+        for line in Path("/proc/cpuinfo").read_text().splitlines():
+            if line.startswith("model name"):
+                cpu = line.split(":", 1)[1].strip()
+                break
+    except OSError:
+        pass
+    info = {"cpu": cpu, "cores": str(os.cpu_count()), "python": platform.python_version(),
+            "platform": platform.platform()}
+    for pkg in ("hexapod-vs", "pin", "casadi", "osqp", "numpy", "opencv-python-headless",
+                "meshcat", "pyserial", "dask"):
+        try:
+            info[pkg] = md.version(pkg)
+        except md.PackageNotFoundError:
+            info[pkg] = "not installed"
+    return info
