@@ -15,7 +15,8 @@ $(STAMP): pyproject.toml
 venv: $(STAMP)
 
 demo: $(STAMP)
-	$(BIN)/python -m benchmarks.demo
+	rm -rf runs/quick
+	$(BIN)/hexapod-bench run quick --out runs/quick --workers 2
 
 test: $(STAMP)
 	$(BIN)/python -m pytest -q
