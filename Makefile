@@ -9,7 +9,7 @@ STAMP := $(VENV)/.installed
 $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
 	$(BIN)/python -m pip install --upgrade pip
-	$(BIN)/python -m pip install -e '.[dev,dask]'
+	$(BIN)/python -m pip install -e '.[dev,dask]' --config-settings editable_mode=compat
 	touch $(STAMP)
 
 venv: $(STAMP)
