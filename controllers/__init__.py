@@ -1,1 +1,58 @@
-"""controllers package."""
+"""Controllers: turn observations into leg velocities behind one plugin interface.
+
+Built-in controllers are registered in :data:`controllers.base.registry` here:
+
+- ``leg-direction``: leg directions, ``u x u*`` (seeds 001/003);
+- ``leg-edge``: leg edges, pixel lines or normals (seeds 002/003);
+- ``leg-edge-qp``, ``leg-direction-qp``: the same features with the QP of
+  ``MATH.md`` section 6 (stroke and leg-speed limits, OSQP);
+- ``model-based``: forward kinematics of the nominal model + pose servoing;
+- ``joint-space``: leg lengths to the nominal inverse kinematics of the goal.
+"""
+
+from controllers.base import (
+    Command,
+    Controller,
+    ControllerContext,
+    Goal,
+    Observation,
+    Registry,
+    observation_problem,
+    registry,
+)
+from controllers.joint import JointSpaceController
+from controllers.leg_direction import LegDirectionController
+from controllers.leg_edge import LegEdgeController
+from controllers.model_based import ModelBasedController
+from controllers.qp import LegDirectionQPController, LegEdgeQPController
+
+#: The built-in controllers, by registry name.
+BUILTINS = {
+    "leg-direction": LegDirectionController,
+    "leg-edge": LegEdgeController,
+    "leg-edge-qp": LegEdgeQPController,
+    "leg-direction-qp": LegDirectionQPController,
+    "model-based": ModelBasedController,
+    "joint-space": JointSpaceController,
+}
+
+for _name, _factory in BUILTINS.items():
+    registry.register(_name, _factory)
+
+__all__ = [
+    "BUILTINS",
+    "Command",
+    "Controller",
+    "ControllerContext",
+    "Goal",
+    "JointSpaceController",
+    "LegDirectionController",
+    "LegDirectionQPController",
+    "LegEdgeController",
+    "LegEdgeQPController",
+    "ModelBasedController",
+    "Observation",
+    "Registry",
+    "observation_problem",
+    "registry",
+]

@@ -1,0 +1,68 @@
+"""Joint-space baseline: leg lengths servoed to the nominal inverse kinematics of the goal.
+
+``q_dot = -lambda (q - q*)`` with ``q* = goal.lengths`` (the desired pose through the
+nominal inverse kinematics). It needs no camera; its accuracy is that of the
+nominal model and of the joint offsets.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+
+import numpy as np
+
+from controllers.base import (
+    Command,
+    Controller,
+    ControllerContext,
+    Observation,
+    observation_problem,
+)
+from controllers.exceptions import ContextError
+from controllers.laws import Gain
+
+
+class JointSpaceController(Controller):
+    """Joint-space law ``q_dot = -lambda (q - q*)`` with ``q*`` the goal's nominal lengths.
+
+    Args:
+        gain: Constant gain ``lambda`` [1/s].
+        adaptive_gain: ``(lambda0, lambda_inf, lambda0')`` (overrides ``gain``),
+            with ``x = |q - q*|_inf`` [m].
+    """
+
+    name = "joint-space"
+    features = frozenset({"lengths"})
+
+    def __init__(self, gain: float = 1.0, adaptive_gain: Sequence[float] | None = None) -> None:
+        self.gain = Gain.from_options(self.name, gain, adaptive_gain)
+        self._q_star: np.ndarray | None = None
+
+    def reset(self, context: ControllerContext) -> None:
+        """Read ``goal.lengths``.
+
+        Raises:
+            ContextError: The goal has no valid lengths.
+        """
+        if context.goal.lengths is None:
+            raise ContextError(self.name, "goal.lengths", "missing")
+        qs = np.asarray(context.goal.lengths, dtype=float)
+        if qs.shape != (6,) or not np.all(np.isfinite(qs)):
+            raise ContextError(self.name, "goal.lengths", f"expected 6 finite values, got {qs}")
+        self._q_star = qs.copy()
+
+    def step(self, observation: Observation) -> Command:
+        """``q_dot = -lambda (q - q*)``."""
+        if self._q_star is None:
+            return Command.refuse(f"{self.name}: reset(context) was not called")
+        try:
+            problem = observation_problem(observation, self.features)
+        except (TypeError, ValueError) as exc:
+            problem = f"malformed observation: {exc}"
+        if problem is not None:
+            return Command.refuse(problem)
+        e = np.asarray(observation.lengths, dtype=float) - self._q_star
+        lam = self.gain(float(np.abs(e).max()))
+        return Command(-lam * e, error=e, error_norm=math.sqrt(float(e @ e)), rank=6,
+                       condition=1.0, features_used=6)

@@ -1,0 +1,387 @@
+"""Control-law machinery shared by the vision controllers (``MATH.md`` section 6).
+
+In the spirit of Pink's tasks: a feature (leg directions, leg edges) provides
+an error and an interaction matrix; the law that combines them (gain,
+pseudo-inverse or QP, missing features, diagnostics) is written once, here, in
+:class:`VisionLaw`.
+
+- :class:`Gain`: constant or adaptive gain
+  ``lambda(x) = (l0 - linf) exp(-l0' x / (l0 - linf)) + linf`` with ``x = |e|_inf``.
+- :func:`solve_least_squares`: ``L^+ e`` through the 6x6 normal matrix with a
+  singular-value threshold (rank) and an optional damping.
+- :class:`VisionLaw`: the classical law ``tau = -lambda L^+ e``,
+  ``q_dot = J_inv tau``, with the interaction matrix at the CURRENT, DESIRED or
+  MEAN features, feature selection by visibility with a rank check, and
+  dead-reckoning of the direction of hidden legs (needed by ``J_inv``).
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+from abc import abstractmethod
+from collections.abc import Sequence
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from controllers.base import (
+    Command,
+    Controller,
+    ControllerContext,
+    Observation,
+    observation_problem,
+)
+from controllers.exceptions import ContextError, OptionError
+from controllers.interaction import cross, direction_interaction
+
+log = logging.getLogger(__name__)
+
+#: Where the interaction matrix is evaluated (ViSP's CURRENT, DESIRED, MEAN).
+INTERACTIONS = ("current", "desired", "mean")
+
+
+# --------------------------------------------------------------------------- options
+def check_number(controller: str, option: str, value: Any, minimum: float = 0.0,
+                 strict: bool = True) -> float:
+    """Validate a finite number above ``minimum``.
+
+    Raises:
+        OptionError: Not a finite number, or out of range.
+    """
+    if isinstance(value, bool):
+        raise OptionError(controller, option, f"expected a number, got {value!r}")
+    try:
+        x = float(value)
+    except (TypeError, ValueError):
+        raise OptionError(controller, option, f"expected a number, got {value!r}") from None
+    if not math.isfinite(x):
+        raise OptionError(controller, option, f"must be finite, got {x}")
+    if (strict and x <= minimum) or (not strict and x < minimum):
+        raise OptionError(controller, option,
+                          f"must be {'>' if strict else '>='} {minimum}, got {x}")
+    return x
+
+
+def check_choice(controller: str, option: str, value: Any, choices: Sequence[str]) -> str:
+    """Validate a string option against its choices (suggesting the closest).
+
+    Raises:
+        OptionError: Not one of ``choices``.
+    """
+    from hexapod.config import suggest
+
+    if not isinstance(value, str) or value not in choices:
+        hint = suggest(str(value), choices)
+        raise OptionError(controller, option,
+                          f"expected one of {', '.join(choices)}, got {value!r}"
+                          + (f" (did you mean '{hint}'?)" if hint else ""))
+    return value
+
+
+@dataclass(frozen=True)
+class Gain:
+    """Constant or adaptive gain (ViSP's ``vpAdaptiveGain``), ``MATH.md`` section 6.
+
+    ``lambda(x) = (at_zero - at_infinity) exp(-slope_at_zero x / (at_zero - at_infinity))
+    + at_infinity`` with ``x = |e|_inf``; constant when ``at_zero == at_infinity``.
+
+    Attributes:
+        at_zero: ``lambda0``, gain for a vanishing error [1/s].
+        at_infinity: ``lambda_inf``, gain for a large error [1/s].
+        slope_at_zero: ``lambda0'``, slope of ``lambda(x)`` at ``x = 0`` (its
+            opposite) [1/s per unit of error].
+    """
+
+    at_zero: float
+    at_infinity: float
+    slope_at_zero: float = 0.0
+
+    @staticmethod
+    def constant(value: float) -> Gain:
+        """A constant gain [1/s]."""
+        return Gain(value, value, 0.0)
+
+    @property
+    def is_constant(self) -> bool:
+        """True when the gain does not depend on the error."""
+        return self.at_zero == self.at_infinity
+
+    def __call__(self, x: float) -> float:
+        """Gain [1/s] for the error size ``x = |e|_inf``."""
+        d = self.at_zero - self.at_infinity
+        if d == 0.0:
+            return self.at_zero
+        return d * math.exp(-self.slope_at_zero * x / d) + self.at_infinity
+
+    @staticmethod
+    def from_options(controller: str, gain: Any = 1.0,
+                     adaptive_gain: Sequence[float] | None = None) -> Gain:
+        """Build and validate a gain from the controller options.
+
+        Args:
+            controller: Controller name (for error messages).
+            gain: Constant gain [1/s] (> 0), used when ``adaptive_gain`` is None.
+            adaptive_gain: ``(lambda0, lambda_inf, lambda0')`` with
+                ``lambda0 >= lambda_inf > 0`` and ``lambda0' > 0``.
+
+        Raises:
+            OptionError: Naming the option at fault.
+        """
+        if adaptive_gain is None:
+            return Gain.constant(check_number(controller, "gain", gain))
+        try:
+            values = [float(x) for x in adaptive_gain]
+        except (TypeError, ValueError):
+            raise OptionError(controller, "adaptive_gain",
+                              f"expected (lambda0, lambda_inf, lambda0'), got {adaptive_gain!r}"
+                              ) from None
+        if len(values) != 3:
+            raise OptionError(controller, "adaptive_gain",
+                              f"expected 3 values (lambda0, lambda_inf, lambda0'), got "
+                              f"{len(values)}")
+        l0, linf, slope = values
+        if not all(math.isfinite(v) for v in values):
+            raise OptionError(controller, "adaptive_gain", f"values must be finite: {values}")
+        if not linf > 0:
+            raise OptionError(controller, "adaptive_gain", f"lambda_inf must be > 0, got {linf}")
+        if l0 < linf:
+            raise OptionError(controller, "adaptive_gain",
+                              f"lambda0 ({l0}) must be >= lambda_inf ({linf})")
+        if not slope > 0:
+            raise OptionError(controller, "adaptive_gain", f"lambda0' must be > 0, got {slope}")
+        return Gain(l0, linf, slope)
+
+
+# --------------------------------------------------------------------------- algebra
+def solve_least_squares(
+    L: np.ndarray, e: np.ndarray, threshold: float = 1e-6, damping: float = 0.0
+) -> tuple[np.ndarray, int, float]:
+    """``x = L^+ e`` (damped) through the eigen-decomposition of the 6x6 ``L^T L``.
+
+    Singular values ``s`` of ``L`` below ``threshold * s_max`` count as zero
+    (their directions are left out of ``x``); the others give
+    ``x = V diag(1 / (s^2 + damping^2)) V^T L^T e``. Cheaper than
+    :func:`numpy.linalg.pinv` on a 36x6 matrix and gives the rank and the
+    condition number on the way.
+
+    Args:
+        L: (m, 6).
+        e: (m,).
+        threshold: Relative singular-value threshold.
+        damping: Damping ``mu`` (0: plain pseudo-inverse).
+
+    Returns:
+        ``x`` (6,), the rank, and the condition number ``s_max / s_min`` (inf when singular).
+    """
+    N = L.T @ L
+    b = L.T @ e
+    w, V = np.linalg.eigh(N)
+    w_max = w[-1]
+    if not w_max > 0:
+        return np.zeros(L.shape[1]), 0, math.inf
+    keep = w > (threshold * threshold) * w_max
+    rank = int(np.count_nonzero(keep))
+    cond = math.sqrt(w_max / w[0]) if w[0] > 0 else math.inf
+    c = V.T @ b
+    if rank == len(w):
+        c /= w + damping * damping
+    else:
+        c = np.where(keep, c / np.where(keep, w + damping * damping, 1.0), 0.0)
+    return V @ c, rank, cond
+
+
+def inverse_jacobian_into(out: np.ndarray, base_points: np.ndarray,
+                          directions: np.ndarray) -> np.ndarray:
+    """Fill ``out`` (6, 6) with ``J_inv`` rows ``[u_i^T, (A_i x u_i)^T]`` (``MATH.md`` §3)."""
+    out[:, :3] = directions
+    out[:, 3:] = cross(base_points, directions)
+    return out
+
+
+def _unit_rows(x: np.ndarray) -> np.ndarray:
+    return x / np.sqrt(np.einsum("...k,...k->...", x, x))[..., None]
+
+
+# --------------------------------------------------------------------------- the law
+@dataclass
+class Stack:
+    """The features of one step, as stacked by a :class:`VisionLaw` subclass.
+
+    Attributes:
+        error: (m, 3) error blocks of every feature (unused rows may hold anything finite).
+        interaction: (m, 3, 6) interaction blocks.
+        used: (m,) bool, blocks used this step, or None when all are.
+        notes: Diagnostics to report.
+    """
+
+    error: np.ndarray
+    interaction: np.ndarray
+    used: np.ndarray | None
+    notes: list[str]
+
+
+class VisionLaw(Controller):
+    """Base of the image-based laws: ``tau = -lambda L^+ e``, ``q_dot = J_inv tau``.
+
+    Subclasses implement :meth:`_reset_features` (read the goal) and
+    :meth:`_stack` (error and interaction blocks, visibility, current leg
+    directions in ``self._directions``). :meth:`_solve` may be overridden (QP).
+
+    Args:
+        gain: Constant gain ``lambda`` [1/s].
+        adaptive_gain: ``(lambda0, lambda_inf, lambda0')`` (overrides ``gain``).
+        interaction: ``"current"``, ``"desired"`` or ``"mean"``.
+        threshold: Relative singular-value threshold: below ``threshold * s_max`` a
+            singular value counts as zero, and a stacked interaction matrix of rank
+            < 6 makes the law refuse to move.
+        damping: Damping ``mu`` of the pseudo-inverse ``(L^T L + mu^2 I)^-1 L^T``.
+    """
+
+    #: What a feature block is called in the notes ("legs", "edges").
+    unit = "features"
+
+    def __init__(self, gain: float = 1.0, adaptive_gain: Sequence[float] | None = None,
+                 interaction: str = "current", threshold: float = 1e-6,
+                 damping: float = 0.0) -> None:
+        self.gain = Gain.from_options(self.name, gain, adaptive_gain)
+        self.interaction = check_choice(self.name, "interaction", interaction, INTERACTIONS)
+        self.threshold = check_number(self.name, "threshold", threshold, 0.0, strict=False)
+        if self.threshold >= 1.0:
+            raise OptionError(self.name, "threshold", f"must be < 1, got {self.threshold}")
+        self.damping = check_number(self.name, "damping", damping, 0.0, strict=False)
+        self.context: ControllerContext | None = None
+        self._A = np.zeros((6, 3))
+        self._dt = 0.0
+        self._directions = np.full((6, 3), np.nan)  # current (or predicted) u_i
+        self._observed = np.zeros(6, dtype=bool)  # legs whose u_i was measured this step
+        self._J = np.zeros((6, 6))
+
+    # ----------------------------------------------------------------- reset
+    def reset(self, context: ControllerContext) -> None:
+        """Read the estimated base points, the period and the goal.
+
+        Raises:
+            ContextError: A field the law needs is missing or invalid.
+        """
+        A = np.asarray(context.base_points, dtype=float)
+        if A.shape != (6, 3) or not np.all(np.isfinite(A)):
+            raise ContextError(self.name, "base_points",
+                               f"expected 6x3 finite values, got shape {A.shape}")
+        dt = float(context.dt)
+        if not (math.isfinite(dt) and dt > 0):
+            raise ContextError(self.name, "dt", f"must be positive and finite, got {dt}")
+        self.context = context
+        self._A = A.copy()
+        self._dt = dt
+        self._directions = np.full((6, 3), np.nan)
+        self._observed = np.zeros(6, dtype=bool)
+        q_star = context.goal.lengths
+        self._q_star: np.ndarray | None = None
+        if q_star is not None:
+            qs = np.asarray(q_star, dtype=float)
+            if qs.shape != (6,) or not np.all(np.isfinite(qs)) or np.any(qs <= 0):
+                raise ContextError(self.name, "goal.lengths",
+                                   f"expected 6 positive finite lengths, got {qs}")
+            self._q_star = qs
+        self._reset_features(context)
+
+    @abstractmethod
+    def _reset_features(self, context: ControllerContext) -> None:
+        """Read and validate the desired features."""
+
+    @abstractmethod
+    def _stack(self, obs: Observation, q: np.ndarray) -> Stack | str:
+        """Error and interaction blocks, or the reason why none can be built.
+
+        Must also set ``self._directions`` (6, 3) (current leg directions, the
+        previous or predicted value for hidden legs) and ``self._observed``.
+        """
+
+    # ----------------------------------------------------------------- step
+    def _check(self, obs: Observation) -> str | None:
+        try:
+            return observation_problem(obs, self.features)
+        except (TypeError, ValueError) as exc:
+            return f"malformed observation: {exc}"
+
+    def step(self, observation: Observation) -> Command:
+        """One period: ``q_dot = J_inv (-lambda L^+ e)`` (never raises for bad measurements)."""
+        if self.context is None:
+            return Command.refuse(f"{self.name}: reset(context) was not called")
+        problem = self._check(observation)
+        if problem is not None:
+            return Command.refuse(problem)
+        q = np.asarray(observation.lengths, dtype=float)
+        if np.any(q <= 0):
+            return Command.refuse(f"lengths: non-positive leg length {float(q.min())} m")
+        st = self._stack(observation, q)
+        if isinstance(st, str):
+            return Command.refuse(st)
+        if st.used is None:
+            e = st.error.reshape(-1)
+            L = st.interaction.reshape(-1, 6)
+        else:
+            e = st.error[st.used].reshape(-1)
+            L = st.interaction[st.used].reshape(-1, 6)
+        error_norm = math.sqrt(float(e @ e))
+        if not (math.isfinite(error_norm) and np.all(np.isfinite(L))):
+            return Command.refuse("non-finite error or interaction matrix (degenerate features)",
+                                  e)
+        u = self._directions
+        unknown = np.flatnonzero(~np.isfinite(u[:, 0]))
+        if len(unknown):
+            return Command.refuse(f"direction of leg {int(unknown[0])} unknown: hidden since "
+                                  "reset, cannot build the inverse Jacobian", e)
+        J = inverse_jacobian_into(self._J, self._A, u)
+        lam = self.gain(float(np.abs(e).max()) if e.size else 0.0)
+        out = self._solve(L, e, lam, q, J)
+        tau, rank, cond, active, reason = out
+        if reason is not None or rank < 6:
+            if reason is None:
+                reason = (f"interaction matrix rank {rank} < 6 with {L.shape[0] // 3} "
+                          f"{self.unit} (condition {cond:.3g})")
+            return Command(np.zeros(6), error=e, error_norm=error_norm, rank=rank,
+                           condition=cond, features_used=L.shape[0], reason=reason,
+                           notes=st.notes, active_constraints=active)
+        qdot = self._finish(J @ tau)
+        if not np.all(np.isfinite(qdot)):
+            return Command.refuse("non-finite command (numerical failure)", e)
+        if not self._observed.all():
+            self._predict_hidden(q, tau)
+        return Command(qdot, twist=tau, error=e, error_norm=error_norm, rank=rank,
+                       condition=cond, features_used=L.shape[0], notes=st.notes,
+                       active_constraints=active)
+
+    def _solve(self, L: np.ndarray, e: np.ndarray, lam: float, q: np.ndarray, J: np.ndarray
+               ) -> tuple[np.ndarray, int, float, list[str], str | None]:
+        """The classical law: ``tau = -lambda L^+ e``.
+
+        Returns:
+            ``tau`` (6,), rank, condition, active constraints, refusal reason (or None).
+        """
+        x, rank, cond = solve_least_squares(L, e, self.threshold, self.damping)
+        x *= -lam
+        return x, rank, cond, [], None
+
+    def _finish(self, qdot: np.ndarray) -> np.ndarray:
+        """Last touch on the leg velocities (identity; the QP laws clip to their bounds)."""
+        return qdot
+
+    def _predict_hidden(self, q: np.ndarray, tau: np.ndarray) -> None:
+        """Dead-reckon the direction of legs not observed: ``u += dt M_i tau``."""
+        hidden = ~self._observed & np.isfinite(self._directions[:, 0])
+        if not hidden.any():
+            return
+        u = self._directions[hidden]
+        M = direction_interaction(self._A[hidden], u, q[hidden])
+        self._directions[hidden] = _unit_rows(u + self._dt * (M @ tau))
+
+    # ----------------------------------------------------------------- helpers
+    def _desired_lengths(self, q: np.ndarray) -> np.ndarray:
+        """``q*`` for the DESIRED/MEAN interaction: the goal lengths, else the measured ones."""
+        return q if self._q_star is None else self._q_star
+
+    def _usage_note(self, used: np.ndarray, total: int) -> str:
+        return f"using {int(np.count_nonzero(used))} of {total} {self.unit}"

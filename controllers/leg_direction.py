@@ -1,0 +1,89 @@
+"""Leg-direction visual servoing (seeds 001 and 003): ``e_i = u_i x u_i*``.
+
+``L_i = -[u_i*]_x M_i`` (``MATH.md`` section 6), stacked over the visible legs
+(18 x 6 with all six), ``tau = -lambda L^+ e``, ``q_dot = J_inv tau``.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+
+import numpy as np
+
+from controllers.base import ControllerContext, Observation
+from controllers.exceptions import ContextError
+from controllers.interaction import cross, direction_task
+from controllers.laws import Stack, VisionLaw
+
+
+class LegDirectionController(VisionLaw):
+    """Leg-direction law: error ``u x u*``, interaction ``-[u*]_x M`` (seeds 001/003).
+
+    Args:
+        gain: Constant gain ``lambda`` [1/s].
+        adaptive_gain: ``(lambda0, lambda_inf, lambda0')`` (overrides ``gain``).
+        interaction: ``"current"``, ``"desired"`` or ``"mean"``.
+        threshold: Relative singular-value threshold (rank test).
+        damping: Pseudo-inverse damping.
+    """
+
+    name = "leg-direction"
+    features = frozenset({"lengths", "directions"})
+    unit = "legs"
+
+    def __init__(self, gain: float = 1.0, adaptive_gain: Sequence[float] | None = None,
+                 interaction: str = "current", threshold: float = 1e-6,
+                 damping: float = 0.0) -> None:
+        super().__init__(gain, adaptive_gain, interaction, threshold, damping)
+        self._u_star = np.zeros((6, 3))
+        self._goal_visible = np.ones(6, dtype=bool)
+
+    def _reset_features(self, context: ControllerContext) -> None:
+        d = context.goal.directions
+        if d is None:
+            raise ContextError(self.name, "goal.directions", "missing")
+        us = np.asarray(d, dtype=float)
+        if us.shape != (6, 3):
+            raise ContextError(self.name, "goal.directions", f"expected shape (6, 3), got "
+                                                             f"{us.shape}")
+        vis = np.all(np.isfinite(us), axis=1)
+        if not vis.any():
+            raise ContextError(self.name, "goal.directions", "no finite desired direction")
+        us = np.where(vis[:, None], us, 0.0)
+        norms = np.linalg.norm(us[vis], axis=1)
+        if np.any(np.abs(norms - 1.0) > 1e-6):
+            raise ContextError(self.name, "goal.directions", f"not unit vectors: norms {norms}")
+        self._u_star = us
+        self._goal_visible = vis
+        # Fill value for hidden directions: the desired ones (keeps the arithmetic finite).
+        self._fill = np.where(vis[:, None], us, np.array([0.0, 0.0, 1.0]))
+
+    def _stack(self, obs: Observation, q: np.ndarray) -> Stack | str:
+        u_obs = np.asarray(obs.directions, dtype=float)
+        vis = np.asarray(obs.direction_visible, dtype=bool) & self._goal_visible
+        notes: list[str] = []
+        all_visible = bool(vis.all())
+        if all_visible:
+            u = u_obs
+            self._directions[:] = u_obs
+            self._observed[:] = True
+        else:
+            self._directions[vis] = u_obs[vis]
+            self._observed[:] = vis
+            u = np.where(vis[:, None], u_obs, self._fill)
+            notes.append(self._usage_note(vis, 6))
+            predicted = np.flatnonzero(~vis & np.isfinite(self._directions[:, 0]))
+            if len(predicted):
+                notes.append("predicted directions of hidden legs "
+                             + ", ".join(str(int(i)) for i in predicted))
+        us = self._u_star
+        A = self._A
+        e = cross(u, us)
+        if self.interaction == "current":
+            _, L = direction_task(u, us, A, q, error=False)
+        else:
+            _, L = direction_task(us, us, A, self._desired_lengths(q), error=False)
+            if self.interaction == "mean":
+                _, Lc = direction_task(u, us, A, q, error=False)
+                L = 0.5 * (L + Lc)
+        return Stack(e, L, None if all_visible else vis, notes)

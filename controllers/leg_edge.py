@@ -1,0 +1,215 @@
+"""Leg-edge visual servoing: seed 002 (pixel lines) and seed 003 (normals on the sphere).
+
+Features (``MATH.md`` section 6), two per leg, stacked over the visible edges
+(36 x 6 with all twelve):
+
+- perspective camera: unit image lines ``l`` in normalised pixel coordinates,
+  ``e = l x l*``, ``L = -[l*]_x J_l H M_i``;
+- unified camera (or ``edge_feature="normals"``): interpretation-plane normals
+  ``n``, ``e = n x n*``, ``L = -[n*]_x H M_i``.
+
+The leg direction used by ``H``, ``M_i`` and ``J_inv`` is rebuilt from the two
+edges of the leg, ``u = (n2 x n1) / |n2 x n1|`` (``vision/legs.py`` convention).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from typing import Any
+
+import numpy as np
+
+from controllers.base import ControllerContext, Observation
+from controllers.exceptions import ContextError
+from controllers.interaction import cross, edge_line_task, edge_normal_task
+from controllers.laws import Stack, VisionLaw, check_choice
+
+#: Values of the ``edge_feature`` option.
+EDGE_FEATURES = ("auto", "lines", "normals")
+
+
+def _unit(x: np.ndarray) -> np.ndarray:
+    return x / np.sqrt(np.einsum("...k,...k->...", x, x))[..., None]
+
+
+class LegEdgeController(VisionLaw):
+    """Leg-edge law: pixel lines (perspective camera) or normals (unified camera).
+
+    Args:
+        gain: Constant gain ``lambda`` [1/s].
+        adaptive_gain: ``(lambda0, lambda_inf, lambda0')`` (overrides ``gain``).
+        interaction: ``"current"``, ``"desired"`` or ``"mean"``.
+        threshold: Relative singular-value threshold (rank test).
+        damping: Pseudo-inverse damping.
+        edge_feature: ``"auto"`` (lines for a perspective camera, normals for a
+            unified one), ``"lines"`` or ``"normals"`` (force the normals).
+    """
+
+    name = "leg-edge"
+    features = frozenset({"lengths", "normals"})
+    unit = "edges"
+
+    def __init__(self, gain: float = 1.0, adaptive_gain: Sequence[float] | None = None,
+                 interaction: str = "current", threshold: float = 1e-6, damping: float = 0.0,
+                 edge_feature: str = "auto") -> None:
+        super().__init__(gain, adaptive_gain, interaction, threshold, damping)
+        self.edge_feature = check_choice(self.name, "edge_feature", edge_feature, EDGE_FEATURES)
+        if edge_feature == "lines":
+            self.features = frozenset({"lengths", "lines"})
+        self.use_lines = edge_feature == "lines"
+        self._K = np.eye(3)
+        self._K_inv_t = np.eye(3)
+        self._A2 = np.zeros((12, 3))
+
+    # ----------------------------------------------------------------- reset
+    def _reset_features(self, context: ControllerContext) -> None:
+        cam: Any = context.camera
+        kind = getattr(cam, "kind", None)
+        if self.edge_feature == "auto":
+            self.use_lines = kind == "perspective"
+        if self.use_lines:
+            if kind != "perspective" or getattr(cam, "line_matrix", None) is None:
+                raise ContextError(self.name, "camera",
+                                   f"pixel lines need a perspective camera with a line_matrix, "
+                                   f"got {kind!r}")
+            K = np.asarray(cam.line_matrix, dtype=float)
+            if K.shape != (3, 3) or not np.all(np.isfinite(K)) or abs(np.linalg.det(K)) < 1e-300:
+                raise ContextError(self.name, "camera.line_matrix", "not an invertible 3x3 matrix")
+            self._K = K
+            self._K_inv_t = np.linalg.inv(K).T
+        self.features = frozenset({"lengths", "lines" if self.use_lines else "normals"})
+        goal = context.goal
+        vis = np.ones((6, 2), dtype=bool)
+        if goal.edge_visible is not None:
+            gv = np.asarray(goal.edge_visible, dtype=bool)
+            if gv.shape != (6, 2):
+                raise ContextError(self.name, "goal.edge_visible",
+                                   f"expected shape (6, 2), got {gv.shape}")
+            vis &= gv
+        n_star = self._goal_array(goal.normals, "goal.normals")
+        if self.use_lines:
+            l_goal = self._goal_array(goal.lines, "goal.lines")
+            if l_goal is not None:
+                l_star = l_goal
+            elif n_star is not None:  # desired lines from desired normals (estimated camera)
+                l_star = _unit(n_star @ self._K_inv_t.T)
+            else:
+                raise ContextError(self.name, "goal.lines", "missing (and no goal.normals)")
+            vis &= np.all(np.isfinite(l_star), axis=-1)
+            self._l_star = np.where(vis[..., None], l_star, 0.0)
+            if n_star is None:
+                n_star = _unit(np.where(vis[..., None], l_star, np.array([0, 0, 1.0])) @ self._K)
+        if n_star is None:
+            raise ContextError(self.name, "goal.normals", "missing")
+        vis &= np.all(np.isfinite(n_star), axis=-1)
+        if not vis.any():
+            raise ContextError(self.name, "goal", "no visible desired edge")
+        n_star = np.where(vis[..., None], n_star, 0.0)
+        self._n_star = n_star
+        self._goal_visible = vis
+        # Desired directions (DESIRED / MEAN interaction): from the two desired edges,
+        # else from goal.directions.
+        us = _unit(cross(n_star[:, 1], n_star[:, 0])) if vis.all() else np.full((6, 3), np.nan)
+        if not vis.all():
+            both = vis.all(axis=1)
+            with np.errstate(invalid="ignore", divide="ignore"):
+                us[both] = _unit(cross(n_star[both, 1], n_star[both, 0]))
+        if goal.directions is not None and not vis.all():
+            gd = np.asarray(goal.directions, dtype=float)
+            if gd.shape == (6, 3):
+                missing = ~np.isfinite(us[:, 0]) & np.all(np.isfinite(gd), axis=1)
+                us[missing] = gd[missing]
+        if self.interaction != "current":
+            unknown = ~np.isfinite(us[:, 0])
+            if unknown.any():
+                # Without u* the desired interaction of that leg cannot be built.
+                self._goal_visible &= ~unknown[:, None]
+                if not self._goal_visible.any():
+                    raise ContextError(self.name, "goal", "no leg with a known desired direction")
+        self._u_star = np.where(np.isfinite(us), us, 0.0)
+        # Fill values for hidden edges (finite arithmetic): a perpendicular pair per leg.
+        fill = np.empty((6, 2, 3))
+        fill[:, 0] = np.where(vis[:, 0, None], n_star[:, 0], [1.0, 0.0, 0.0])
+        fill[:, 1] = np.where(vis[:, 1, None], n_star[:, 1], [0.0, 1.0, 0.0])
+        self._fill = fill
+        if self.use_lines:
+            self._l_fill = _unit(fill @ self._K_inv_t.T)
+        self._A2 = np.repeat(self._A, 2, axis=0)
+        self._desired_L: np.ndarray | None = None
+        if self.interaction != "current" and self._q_star is not None:
+            self._desired_L = self._desired_interaction(self._q_star)
+
+    def _goal_array(self, value: Any, field: str) -> np.ndarray | None:
+        if value is None:
+            return None
+        arr = np.asarray(value, dtype=float)
+        if arr.shape != (6, 2, 3):
+            raise ContextError(self.name, field, f"expected shape (6, 2, 3), got {arr.shape}")
+        return arr
+
+    # ----------------------------------------------------------------- step
+    def _desired_interaction(self, q_star: np.ndarray) -> np.ndarray:
+        q2 = np.repeat(q_star, 2)
+        u2 = np.repeat(self._u_star, 2, axis=0)
+        ns = self._n_star.reshape(12, 3)
+        if self.use_lines:
+            ls = self._l_star.reshape(12, 3)
+            return edge_line_task(ls, ls, ns, u2, self._A2, q2, self._K, self._K_inv_t)
+        return edge_normal_task(ns, ns, u2, self._A2, q2)
+
+    def _stack(self, obs: Observation, q: np.ndarray) -> Stack | str:
+        vis = np.asarray(obs.edge_visible, dtype=bool) & self._goal_visible
+        all_visible = bool(vis.all())
+        notes: list[str] = []
+        if self.use_lines:
+            feat = np.asarray(obs.lines, dtype=float)
+            if not all_visible:
+                feat = np.where(vis[..., None], feat, self._l_fill)
+            n = _unit(feat @ self._K)
+            star = self._l_star
+        else:
+            feat = np.asarray(obs.normals, dtype=float)
+            if not all_visible:
+                feat = np.where(vis[..., None], feat, self._fill)
+            n = feat
+            star = self._n_star
+        u_edges = _unit(cross(n[:, 1], n[:, 0]))
+        if all_visible:
+            self._directions[:] = u_edges
+            self._observed[:] = True
+            u = u_edges
+        else:
+            both = vis.all(axis=1)
+            self._directions[both] = u_edges[both]
+            self._observed[:] = both
+            # Single visible edges of a leg need its direction: the tracked one.
+            usable = vis & np.isfinite(self._directions[:, 0])[:, None]
+            dropped = int(np.count_nonzero(vis & ~usable))
+            vis = usable
+            u = np.where(np.isfinite(self._directions), self._directions, u_edges)
+            notes.append(self._usage_note(vis, 12))
+            predicted = np.flatnonzero(~both & np.isfinite(self._directions[:, 0]))
+            if len(predicted):
+                notes.append("predicted directions of partly hidden legs "
+                             + ", ".join(str(int(i)) for i in predicted))
+            if dropped:
+                notes.append(f"{dropped} visible edges dropped (leg direction never seen)")
+        e = cross(feat, star).reshape(12, 3)
+        if self.interaction == "current":
+            L = self._current_interaction(feat, n, u, q)
+        else:
+            L = (self._desired_L if self._desired_L is not None
+                 else self._desired_interaction(self._desired_lengths(q)))
+            if self.interaction == "mean":
+                L = 0.5 * (L + self._current_interaction(feat, n, u, q))
+        return Stack(e, L, None if all_visible else vis.reshape(12), notes)
+
+    def _current_interaction(self, feat: np.ndarray, n: np.ndarray, u: np.ndarray,
+                             q: np.ndarray) -> np.ndarray:
+        q2 = np.repeat(q, 2)
+        u2 = np.repeat(u, 2, axis=0)
+        n12 = n.reshape(12, 3)
+        if self.use_lines:
+            return edge_line_task(feat.reshape(12, 3), self._l_star.reshape(12, 3), n12, u2,
+                                  self._A2, q2, self._K, self._K_inv_t)
+        return edge_normal_task(n12, self._n_star.reshape(12, 3), u2, self._A2, q2)

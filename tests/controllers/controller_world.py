@@ -1,0 +1,87 @@
+"""A tiny perfect world for the controller tests: true pose -> observation, exact motion.
+
+Features are computed from the TRUE kinematics and camera (``legs_in_frame``,
+``vision.legs.leg_edges``, ``camera.normal_to_line``), never from the formulas
+of :mod:`controllers.interaction`.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from controllers.base import ControllerContext, Goal, Observation
+from hexapod.geometry import HexapodGeometry
+from hexapod.kinematics import LegState, legs_in_frame, twist_to_frame
+from hexapod.se3 import integrate_pose
+from hexapod.workspace import home_pose, sample_poses
+from vision.cameras import Camera, front_camera, omni_camera
+from vision.legs import leg_edges
+
+
+def make_camera(kind: str, geometry: HexapodGeometry) -> Camera:
+    """The front perspective camera or the omnidirectional one, placed for ``geometry``."""
+    return front_camera(geometry) if kind == "perspective" else omni_camera(geometry)
+
+
+@dataclass
+class World:
+    """Robot and camera, both perfectly known.
+
+    Attributes:
+        geometry: The robot.
+        camera: The camera (its ``camera_from_base`` places it).
+    """
+
+    geometry: HexapodGeometry
+    camera: Camera
+
+    @property
+    def kind(self) -> str:
+        return self.camera.kind
+
+    def legs(self, R: np.ndarray, t: np.ndarray) -> LegState:
+        """Legs in the camera frame for the platform pose (R, t) in the base frame."""
+        return legs_in_frame(self.geometry, R, t, self.camera.camera_from_base)
+
+    def features(self, R: np.ndarray, t: np.ndarray) -> dict[str, np.ndarray | None]:
+        """True lengths, directions, edge normals and (perspective) lines."""
+        legs = self.legs(R, t)
+        normals, exists = leg_edges(legs.base_points, legs.directions, self.geometry.leg_radius)
+        if not np.all(exists):
+            raise RuntimeError("test world: camera inside a leg cylinder")
+        lines = (self.camera.normal_to_line(normals)  # type: ignore[attr-defined]
+                 if self.kind == "perspective" else None)
+        return {"lengths": legs.lengths, "directions": legs.directions, "normals": normals,
+                "lines": lines, "base_points": legs.base_points}
+
+    def observation(self, R: np.ndarray, t: np.ndarray, time: float = 0.0) -> Observation:
+        f = self.features(R, t)
+        return Observation(time, f["lengths"], normals=f["normals"], lines=f["lines"],
+                           directions=f["directions"])
+
+    def goal(self, R: np.ndarray, t: np.ndarray) -> Goal:
+        f = self.features(R, t)
+        return Goal(normals=f["normals"], lines=f["lines"], directions=f["directions"],
+                    lengths=f["lengths"], rotation=R, translation=t)
+
+    def context(self, goal: Goal, dt: float, margin: float = 0.002) -> ControllerContext:
+        A = self.camera.camera_from_base.apply(self.geometry.base_points)
+        return ControllerContext(A, self.geometry, self.camera, dt, goal, stroke_margin=margin)
+
+    def move(self, R: np.ndarray, t: np.ndarray, twist_camera: np.ndarray, dt: float
+             ) -> tuple[np.ndarray, np.ndarray]:
+        """Move the platform by a twist given in the camera frame, exactly (SE(3) exponential)."""
+        twist_base = twist_to_frame(np.asarray(twist_camera, float),
+                                    self.camera.camera_from_base.inverse())
+        return integrate_pose(R, t, twist_base, dt)
+
+    def poses(self, n: int, rng: np.random.Generator, max_translation: float = 0.04,
+              max_angle: float = np.deg2rad(8.0), margin: float = 0.01
+              ) -> tuple[np.ndarray, np.ndarray]:
+        return sample_poses(self.geometry, n, rng=rng, max_translation=max_translation,
+                            max_angle=max_angle, margin=margin)
+
+    def home(self) -> tuple[np.ndarray, np.ndarray]:
+        return home_pose(self.geometry)
