@@ -210,12 +210,24 @@ def cmd_report(args: argparse.Namespace) -> int:
     return 0
 
 
-def cmd_perf(args: argparse.Namespace) -> int:
-    """Performance figures (forward kinematics, controllers, vision, detection, serial)."""
-    from benchmarks import perf
+#: ``hexapod-bench perf WHAT`` -> the module whose ``main(argv)`` prints the figure.
+PERF_MODULES = {
+    "fk": "benchmarks.perf",
+    "controllers": "benchmarks.controller_perf",
+    "vision": "benchmarks.vision_accuracy",
+    "detect": "benchmarks.detect_perf",
+    "serial": "benchmarks.serial_perf",
+    "calibration": "benchmarks.calibration_study",
+}
 
-    argv = [args.what, "-n", str(args.n)]
-    return perf.main(argv)
+
+def cmd_perf(args: argparse.Namespace) -> int:
+    """Performance and accuracy figures (medians of many runs, ratios to a baseline)."""
+    import importlib
+
+    module = importlib.import_module(PERF_MODULES[args.what])
+    argv = ["fk"] if args.what == "fk" else []
+    return int(module.main(argv + list(args.rest)))
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -251,9 +263,11 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("dir")
     s.set_defaults(func=cmd_report)
 
-    s = sub.add_parser("perf", help="performance figures")
-    s.add_argument("what", choices=["fk"])
-    s.add_argument("-n", type=int, default=1000)
+    s = sub.add_parser("perf", help="performance and accuracy figures",
+                       description="Extra arguments go to the figure's module (see --help "
+                                   "of e.g. python -m benchmarks.perf).")
+    s.add_argument("what", choices=sorted(PERF_MODULES))
+    s.add_argument("rest", nargs=argparse.REMAINDER, help="arguments for the figure")
     s.set_defaults(func=cmd_perf)
     return p
 

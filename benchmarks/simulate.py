@@ -34,7 +34,6 @@ from hexapod.se3 import exp_so3, pose_error
 from hexapod.workspace import sample_poses
 from vision.cameras import Camera, camera_preset
 from vision.legs import directions_from_edges, observe_legs
-from vision.noise import rotation_noise
 
 log = logging.getLogger(__name__)
 
@@ -215,6 +214,8 @@ class GeometricSensor:
         noise = self.sc.noise
         n = len(rngs)
         if apply_noise and noise.model == "rotation" and noise.amplitude_deg > 0:
+            from vision.noise import rotation_noise
+
             a = np.deg2rad(noise.amplitude_deg)
             for k in range(n):
                 normals[k] = rotation_noise(normals[k], a, rngs[k])

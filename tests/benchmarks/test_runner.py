@@ -1,0 +1,152 @@
+"""The runner: determinism across executors and chunkings, streaming, resume, failures."""
+
+from __future__ import annotations
+
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+
+from benchmarks.cli import main as cli_main
+from benchmarks.runner import plan, read_results, run_units
+from benchmarks.scenario import parse_scenario
+
+JOINTS = "tests.benchmarks.plugins:ProportionalJoints"
+CRASH = "tests.benchmarks.plugins:CrashOnSomeTrials"
+
+#: Fields that legitimately differ between runs (timings, executor).
+VOLATILE = {"step_time_us", "backend"}
+
+
+def _scenario(trials: int = 6, **extra: object) -> object:
+    table = {
+        "name": "runner-test", "seed": 3, "trials": trials,
+        "controllers": [JOINTS, "leg-edge"],
+        "noise": {"model": "rotation", "amplitude_deg": [0.0, 0.05]},
+        "calibration_error": {"base_points_mm": 0.5},
+        "task": {"max_steps": 150, "position_tolerance_mm": 0.5,
+                 "orientation_tolerance_deg": 0.05},
+    }
+    table.update(extra)
+    return parse_scenario(table, "runner-test.toml")
+
+
+def _stable(rows: list[dict]) -> list[dict]:
+    out = [{k: v for k, v in r.items() if k not in VOLATILE} for r in rows]
+    return sorted(out, key=lambda r: (r["point"], r["controller"], r["trial"]))
+
+
+def test_results_identical_across_executors_and_chunkings(tmp_path: Path) -> None:
+    sc = _scenario()
+    runs = {
+        "inline-chunk1": dict(chunk=1, workers=1, dask=None),
+        "inline-chunk4": dict(chunk=4, workers=1, dask=None),
+        "pool-2": dict(chunk=2, workers=2, dask=None),
+        "dask-local": dict(chunk=3, workers=2, dask="local"),
+    }
+    results = {}
+    for name, cfg in runs.items():
+        out = tmp_path / name
+        units = plan([sc], chunk_size=cfg["chunk"], record_trials=0)
+        n = run_units(units, out, workers=cfg["workers"], dask=cfg["dask"])
+        assert n == 2 * 2 * 6
+        results[name] = _stable(read_results(out))
+    reference = results["inline-chunk1"]
+    assert len(reference) == 24
+    assert any(r["converged"] for r in reference)
+    for name, rows in results.items():
+        assert rows == reference, f"{name} differs from the in-process run"
+
+
+def test_a_crashing_trial_is_recorded_and_the_run_goes_on(tmp_path: Path) -> None:
+    sc = _scenario(trials=6, controllers=[CRASH, JOINTS])
+    run_units(plan([sc], chunk_size=6, record_trials=0), tmp_path)
+    rows = read_results(tmp_path)
+    crash = [r for r in rows if r["controller"] == CRASH]
+    fine = [r for r in rows if r["controller"] == JOINTS]
+    failed = [r for r in crash if r["failure"] and "deliberate crash" in r["failure"]]
+    assert 0 < len(failed) < len(crash), "some (not all) trials of the crashing controller fail"
+    assert all(not r["converged"] for r in failed)
+    assert len(fine) == 12 and all(r["failure"] is None for r in fine if r["converged"])
+
+
+def test_resume_after_partial_run_redoes_nothing(tmp_path: Path) -> None:
+    sc = _scenario(trials=4)
+    full = tmp_path / "full"
+    run_units(plan([sc], chunk_size=2, record_trials=0), full)
+    part = tmp_path / "part"
+    units = plan([sc], chunk_size=2, record_trials=0)
+    run_units(units[: len(units) // 2], part)
+    first = read_results(part)
+    assert 0 < len(first) < 16
+    # a partial line from a killed writer is dropped, not fatal
+    with (part / "results.jsonl").open("a") as f:
+        f.write('{"scenario": "runner-test", "trunc')
+    from benchmarks.runner import completed_keys
+
+    todo = plan([sc], chunk_size=2, record_trials=0, done=completed_keys(part))
+    assert sum(len(u.trials) for u in todo) == 16 - len(first)
+    run_units(todo, part)
+    assert _stable(read_results(part)) == _stable(read_results(full))
+
+
+def test_cli_interrupted_run_resumes(tmp_path: Path) -> None:
+    scen = tmp_path / "long.toml"
+    scen.write_text(
+        'name = "long"\nseed = 5\ntrials = 40\ncontrollers = ["leg-edge"]\n'
+        '[task]\nmax_steps = 120\n[noise]\nmodel = "rotation"\namplitude_deg = 0.02\n')
+    out = tmp_path / "out"
+    cmd = [sys.executable, "-m", "benchmarks.cli", "run", str(scen), "--out", str(out),
+           "--chunk", "1", "--record", "0", "--no-progress"]
+    env = {**os.environ, "PYTHONPATH": str(Path(__file__).resolve().parents[2])}
+    proc = subprocess.Popen(cmd, env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE)
+    results = out / "results.jsonl"
+    deadline = time.monotonic() + 120
+    while time.monotonic() < deadline:
+        if results.exists() and len(results.read_text().splitlines()) >= 3:
+            break
+        time.sleep(0.05)
+    proc.send_signal(signal.SIGINT)
+    _, err = proc.communicate(timeout=60)
+    written = read_results(out)
+    assert 3 <= len(written) < 40, err.decode()[-2000:]
+    assert proc.returncode in (130, 0)
+    # without --resume the directory is protected
+    assert cli_main(["run", str(scen), "--out", str(out), "--no-progress"]) == 2
+    assert cli_main(["run", str(scen), "--out", str(out), "--resume", "--chunk", "5",
+                     "--record", "0", "--no-progress"]) == 0
+    rows = read_results(out)
+    keys = [(r["trial"]) for r in rows]
+    assert sorted(keys) == list(range(40)), "every trial exactly once"
+    assert (out / "report.md").exists()
+
+
+def test_results_rows_have_the_documented_fields(tmp_path: Path) -> None:
+    sc = _scenario(trials=2)
+    run_units(plan([sc], chunk_size=2, record_trials=1), tmp_path)
+    rows = read_results(tmp_path)
+    for key in ("scenario", "controller", "trial", "noise_amplitude_deg", "converged", "steps",
+                "final_position_error_mm", "final_orientation_error_deg", "stroke_violations",
+                "step_time_us", "failure", "controller_package", "controller_version"):
+        assert all(key in r for r in rows), key
+    assert json.loads((tmp_path / "results.jsonl").read_text().splitlines()[0])
+    assert list((tmp_path / "trials").glob("*.npz")), "trial 0 is recorded"
+
+
+@pytest.mark.parametrize("name", ["quick", "andreff2005-noise", "andreff2006-front-camera",
+                                  "tahri2009-convergence", "calibration-error-sweep"])
+def test_builtin_scenario_end_to_end(name: str, tmp_path: Path) -> None:
+    out = tmp_path / name
+    code = cli_main(["run", name, "--out", str(out), "--trials", "1", "--no-progress",
+                     "--record", "1"])
+    assert code == 0
+    rows = read_results(out)
+    assert rows and all(r["failure"] is None or "not converged" in r["failure"] for r in rows)
+    report = (out / "report.md").read_text()
+    assert f"Scenario `{name}`" in report
+    assert cli_main(["report", str(out)]) == 0
