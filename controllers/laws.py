@@ -254,9 +254,12 @@ class VisionLaw(Controller):
         self.context: ControllerContext | None = None
         self._A = np.zeros((6, 3))
         self._dt = 0.0
-        self._directions = np.full((6, 3), np.nan)  # current (or predicted) u_i
+        self._directions = np.full((6, 3), np.nan)  # measured (or dead-reckoned) u_i
+        self._u_now = np.full((6, 3), np.nan)  # u_i used by J_inv this step
         self._observed = np.zeros(6, dtype=bool)  # legs whose u_i was measured this step
         self._J = np.zeros((6, 6))
+        self._tau_prev = np.zeros(6)
+        self._q_prev = np.ones(6)
 
     # ----------------------------------------------------------------- reset
     def reset(self, context: ControllerContext) -> None:
@@ -277,6 +280,7 @@ class VisionLaw(Controller):
         self._dt = dt
         self._directions = np.full((6, 3), np.nan)
         self._observed = np.zeros(6, dtype=bool)
+        self._tau_prev = np.zeros(6)
         q_star = context.goal.lengths
         self._q_star: np.ndarray | None = None
         if q_star is not None:
@@ -295,8 +299,11 @@ class VisionLaw(Controller):
     def _stack(self, obs: Observation, q: np.ndarray) -> Stack | str:
         """Error and interaction blocks, or the reason why none can be built.
 
-        Must also set ``self._directions`` (6, 3) (current leg directions, the
-        previous or predicted value for hidden legs) and ``self._observed``.
+        Must also set ``self._directions`` (6, 3) (measured leg directions, the
+        dead-reckoned value for hidden legs, NaN if never seen), ``self._observed``
+        (legs measured this step) and ``self._u_now`` (the directions ``J_inv``
+        uses this step: ``self._directions``, or an approximation from the goal
+        for legs never seen; NaN when unknown).
         """
 
     # ----------------------------------------------------------------- step
@@ -312,11 +319,14 @@ class VisionLaw(Controller):
             return Command.refuse(f"{self.name}: reset(context) was not called")
         problem = self._check(observation)
         if problem is not None:
+            self._tau_prev[:] = 0.0  # no motion commanded
             return Command.refuse(problem)
         q = np.asarray(observation.lengths, dtype=float)
         if np.any(q <= 0):
+            self._tau_prev[:] = 0.0
             return Command.refuse(f"lengths: non-positive leg length {float(q.min())} m")
-        st = self._stack(observation, q)
+        st = self._stack(observation, q)  # uses _tau_prev to dead-reckon hidden legs
+        self._tau_prev[:] = 0.0  # until a command is actually sent
         if isinstance(st, str):
             return Command.refuse(st)
         if st.used is None:
@@ -329,11 +339,12 @@ class VisionLaw(Controller):
         if not (math.isfinite(error_norm) and np.all(np.isfinite(L))):
             return Command.refuse("non-finite error or interaction matrix (degenerate features)",
                                   e)
-        u = self._directions
+        u = self._u_now
         unknown = np.flatnonzero(~np.isfinite(u[:, 0]))
         if len(unknown):
-            return Command.refuse(f"direction of leg {int(unknown[0])} unknown: hidden since "
-                                  "reset, cannot build the inverse Jacobian", e)
+            return Command.refuse(f"direction of leg {int(unknown[0])} unknown (hidden since "
+                                  "reset, no desired direction): cannot build the inverse "
+                                  "Jacobian", e)
         J = inverse_jacobian_into(self._J, self._A, u)
         lam = self.gain(float(np.abs(e).max()) if e.size else 0.0)
         out = self._solve(L, e, lam, q, J)
@@ -348,8 +359,8 @@ class VisionLaw(Controller):
         qdot = self._finish(J @ tau)
         if not np.all(np.isfinite(qdot)):
             return Command.refuse("non-finite command (numerical failure)", e)
-        if not self._observed.all():
-            self._predict_hidden(q, tau)
+        self._tau_prev[:] = tau
+        self._q_prev[:] = q
         return Command(qdot, twist=tau, error=e, error_norm=error_norm, rank=rank,
                        condition=cond, features_used=L.shape[0], notes=st.notes,
                        active_constraints=active)
@@ -369,14 +380,18 @@ class VisionLaw(Controller):
         """Last touch on the leg velocities (identity; the QP laws clip to their bounds)."""
         return qdot
 
-    def _predict_hidden(self, q: np.ndarray, tau: np.ndarray) -> None:
-        """Dead-reckon the direction of legs not observed: ``u += dt M_i tau``."""
-        hidden = ~self._observed & np.isfinite(self._directions[:, 0])
-        if not hidden.any():
+    def _predict_hidden(self, hidden: np.ndarray) -> None:
+        """Dead-reckon the directions of hidden legs over the last period.
+
+        ``u += dt M_i(u, q_prev) tau_prev`` with the twist commanded at the previous
+        step (zero if the law refused). Call before overwriting the observed ones.
+        """
+        hidden = hidden & np.isfinite(self._directions[:, 0])
+        if not hidden.any() or not np.any(self._tau_prev):
             return
         u = self._directions[hidden]
-        M = direction_interaction(self._A[hidden], u, q[hidden])
-        self._directions[hidden] = _unit_rows(u + self._dt * (M @ tau))
+        M = direction_interaction(self._A[hidden], u, self._q_prev[hidden])
+        self._directions[hidden] = _unit_rows(u + self._dt * (M @ self._tau_prev))
 
     # ----------------------------------------------------------------- helpers
     def _desired_lengths(self, q: np.ndarray) -> np.ndarray:

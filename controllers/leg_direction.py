@@ -66,16 +66,26 @@ class LegDirectionController(VisionLaw):
         if all_visible:
             u = u_obs
             self._directions[:] = u_obs
+            self._u_now = u_obs
             self._observed[:] = True
         else:
+            self._predict_hidden(~vis)
             self._directions[vis] = u_obs[vis]
             self._observed[:] = vis
             u = np.where(vis[:, None], u_obs, self._fill)
             notes.append(self._usage_note(vis, 6))
-            predicted = np.flatnonzero(~vis & np.isfinite(self._directions[:, 0]))
+            known = np.isfinite(self._directions[:, 0])
+            # J_inv of a leg never seen: its desired direction (exact at the goal).
+            self._u_now = np.where(known[:, None], self._directions,
+                                   np.where(self._goal_visible[:, None], self._u_star, np.nan))
+            predicted = np.flatnonzero(~vis & known)
             if len(predicted):
                 notes.append("predicted directions of hidden legs "
                              + ", ".join(str(int(i)) for i in predicted))
+            approx = np.flatnonzero(~known & self._goal_visible)
+            if len(approx):
+                notes.append("desired direction used for never-seen legs "
+                             + ", ".join(str(int(i)) for i in approx))
         us = self._u_star
         A = self._A
         e = cross(u, us)

@@ -126,7 +126,8 @@ class LegEdgeController(VisionLaw):
                 self._goal_visible &= ~unknown[:, None]
                 if not self._goal_visible.any():
                     raise ContextError(self.name, "goal", "no leg with a known desired direction")
-        self._u_star = np.where(np.isfinite(us), us, 0.0)
+        self._u_star_known = us.copy()
+        self._u_star = np.where(np.isfinite(us), us, np.array([0.0, 0.0, 1.0]))
         # Fill values for hidden edges (finite arithmetic): a perpendicular pair per leg.
         fill = np.empty((6, 2, 3))
         fill[:, 0] = np.where(vis[:, 0, None], n_star[:, 0], [1.0, 0.0, 0.0])
@@ -177,23 +178,33 @@ class LegEdgeController(VisionLaw):
         if all_visible:
             self._directions[:] = u_edges
             self._observed[:] = True
-            u = u_edges
+            self._u_now = u = u_edges
         else:
             both = vis.all(axis=1)
+            self._predict_hidden(~both)
             self._directions[both] = u_edges[both]
             self._observed[:] = both
-            # Single visible edges of a leg need its direction: the tracked one.
-            usable = vis & np.isfinite(self._directions[:, 0])[:, None]
-            dropped = int(np.count_nonzero(vis & ~usable))
-            vis = usable
-            u = np.where(np.isfinite(self._directions), self._directions, u_edges)
+            known = np.isfinite(self._directions[:, 0])
+            # A leg never seen whole: its desired direction, projected on the plane of its
+            # visible edge if it has one (exact at the goal).
+            us = self._u_star
+            one = vis.any(axis=1) & ~both
+            n_vis = np.where(vis[:, 0, None], n[:, 0], n[:, 1])
+            proj = np.where(one[:, None], _unit(us - np.einsum("ik,ik->i", us, n_vis)[:, None]
+                                                * n_vis), us)
+            approx: np.ndarray = ~known & np.isfinite(self._u_star_known[:, 0])
+            u = np.where(known[:, None], self._directions,
+                         np.where(approx[:, None], proj, u_edges))
+            self._u_now = np.where((known | approx)[:, None], u, np.nan)
+            vis = vis & (known | approx)[:, None]
             notes.append(self._usage_note(vis, 12))
-            predicted = np.flatnonzero(~both & np.isfinite(self._directions[:, 0]))
+            predicted = np.flatnonzero(~both & known)
             if len(predicted):
                 notes.append("predicted directions of partly hidden legs "
                              + ", ".join(str(int(i)) for i in predicted))
-            if dropped:
-                notes.append(f"{dropped} visible edges dropped (leg direction never seen)")
+            if approx.any():
+                notes.append("desired direction used for never-seen legs "
+                             + ", ".join(str(int(i)) for i in np.flatnonzero(approx)))
         e = cross(feat, star).reshape(12, 3)
         if self.interaction == "current":
             L = self._current_interaction(feat, n, u, q)

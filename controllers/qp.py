@@ -99,7 +99,7 @@ class LimitQP:
                 self._solver = solver
             else:
                 self._solver.update(q=c, l=lower, u=upper, Px=Px, Ax=Ax)
-            res = self._solver.solve()
+            res = self._solver.solve(raise_error=False)
         except (ValueError, RuntimeError, osqp.OSQPException) as exc:
             self._solver = None
             return None, f"OSQP error: {exc}"

@@ -85,3 +85,58 @@ class World:
 
     def home(self) -> tuple[np.ndarray, np.ndarray]:
         return home_pose(self.geometry)
+
+
+@dataclass
+class Run:
+    """History of a closed loop.
+
+    Attributes:
+        error_norms: (k,) ``Command.error_norm`` per step.
+        position_errors: (k + 1,) distance of the platform origin to the goal [m].
+        lengths: (k + 1, 6) true leg lengths [m].
+        velocities: (k, 6) leg velocity commands [m/s].
+        commands: The commands.
+        poses: (R, t) before each command.
+    """
+
+    error_norms: np.ndarray
+    position_errors: np.ndarray
+    lengths: np.ndarray
+    velocities: np.ndarray
+    commands: list
+    poses: list
+
+
+def closed_loop(world: World, controller, start: tuple[np.ndarray, np.ndarray],  # type: ignore[no-untyped-def]
+                goal: tuple[np.ndarray, np.ndarray], dt: float, steps: int,
+                hide=None, stop_below: float = 0.0) -> Run:
+    """Perfect closed loop: observe the true pose, step, integrate the commanded twist exactly.
+
+    Args:
+        hide: Optional ``f(observation, k)`` that edits the observation (visibility).
+        stop_below: Stop once the position error is below this [m].
+    """
+    R, t = start
+    tg = goal[1]
+    norms, perr, lens, vels, cmds = [], [np.linalg.norm(t - tg)], [world.legs(R, t).lengths], [], []
+    poses = []
+    for k in range(steps):
+        poses.append((R, t))
+        obs = world.observation(R, t, k * dt)
+        if hide is not None:
+            hide(obs, k)
+        cmd = controller.step(obs)
+        if not cmd.ok:
+            raise AssertionError(f"step {k}: refused: {cmd.reason}")
+        cmds.append(cmd)
+        norms.append(cmd.error_norm)
+        vels.append(cmd.velocities)
+        if cmd.twist is None:
+            raise AssertionError("the controller gives no twist")
+        R, t = world.move(R, t, cmd.twist, dt)
+        perr.append(np.linalg.norm(t - tg))
+        lens.append(world.legs(R, t).lengths)
+        if perr[-1] < stop_below:
+            break
+    return Run(np.array(norms), np.array(perr), np.array(lens), np.array(vels), cmds, poses)
