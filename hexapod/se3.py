@@ -38,12 +38,14 @@ def exp_so3(w: np.ndarray) -> np.ndarray:
 def log_so3(R: np.ndarray) -> np.ndarray:
     """Rotation vectors (..., 3) [rad] of rotation matrices (..., 3, 3)."""
     R = np.asarray(R, dtype=float)
-    cos = np.clip((np.trace(R, axis1=-2, axis2=-1) - 1.0) / 2.0, -1.0, 1.0)
-    theta = np.arccos(cos)
+    cos = (np.trace(R, axis1=-2, axis2=-1) - 1.0) / 2.0
     v = np.stack(
         [R[..., 2, 1] - R[..., 1, 2], R[..., 0, 2] - R[..., 2, 0], R[..., 1, 0] - R[..., 0, 1]],
         axis=-1,
     )
+    # atan2(sin, cos) keeps full precision near 0 and pi, where arccos(cos) loses half
+    # the digits (|v| = 2 sin(theta)).
+    theta = np.arctan2(0.5 * np.linalg.norm(v, axis=-1), cos)
     sin = np.sin(theta)
     small = sin < 1e-6
     factor = np.where(small, 0.5 + theta**2 / 12.0, theta / (2.0 * np.where(small, 1.0, sin)))
@@ -126,7 +128,7 @@ def look_at(eye: np.ndarray, target: np.ndarray, up: np.ndarray) -> np.ndarray:
     """
     z = np.asarray(target, float) - np.asarray(eye, float)
     z /= np.linalg.norm(z)
-    x = np.cross(z, -np.asarray(up, float))
+    x = np.cross(z, np.asarray(up, float))  # right = forward x up (y = z x x points down)
     if np.linalg.norm(x) < 1e-9:
         raise ValueError("look_at: up vector parallel to the viewing direction")
     x /= np.linalg.norm(x)

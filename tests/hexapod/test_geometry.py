@@ -1,0 +1,217 @@
+"""Tests of hexapod.geometry: the reference robot, validation of every field, TOML I/O."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from hexapod import ConfigFileError, GeometryError, HexapodGeometry, deltalab, preset
+from hexapod.kinematics import inverse_kinematics
+
+
+def test_deltalab_matches_math_section_9(geometry: HexapodGeometry) -> None:
+    # Base radius 270 mm, platform radius 195 mm, all in the z = 0 plane.
+    np.testing.assert_allclose(np.linalg.norm(geometry.base_points, axis=1), 0.270, atol=1e-15)
+    np.testing.assert_allclose(np.linalg.norm(geometry.platform_points, axis=1), 0.195,
+                               atol=1e-15)
+    assert np.all(geometry.base_points[:, 2] == 0.0)
+    # A pair of base joints is 2 alpha = 8.5 deg apart around angle 0.
+    ang = np.rad2deg(np.arctan2(geometry.base_points[:, 1], geometry.base_points[:, 0]))
+    np.testing.assert_allclose(ang[:2], [4.25, -4.25], atol=1e-12)
+    pang = np.rad2deg(np.arctan2(geometry.platform_points[:, 1], geometry.platform_points[:, 0]))
+    np.testing.assert_allclose(pang[:2], [60 - 5.885, -60 + 5.885], atol=1e-12)
+    assert geometry.stroke == pytest.approx((0.345, 0.485))
+    assert geometry.leg_radius == 0.015
+    # Platform parallel at 0.36 m: every leg about 415.5 mm (middle of the stroke).
+    q = inverse_kinematics(geometry, np.eye(3), np.array([0.0, 0.0, 0.36]))
+    np.testing.assert_allclose(q, 0.4155, atol=5e-4)
+    assert np.ptp(q) < 1e-12
+    # Home height: mean leg length at mid-stroke.
+    q_home = inverse_kinematics(geometry, np.eye(3), np.array([0, 0, geometry.home_height]))
+    assert q_home.mean() == pytest.approx(geometry.q_mid, abs=1e-12)
+
+
+def test_preset_and_unknown_preset_suggests() -> None:
+    assert preset("deltalab") == deltalab()
+    with pytest.raises(GeometryError, match="did you mean 'deltalab'"):
+        preset("deltalb")
+
+
+def test_points_are_read_only(geometry: HexapodGeometry) -> None:
+    with pytest.raises(ValueError):
+        geometry.base_points[0, 0] = 1.0
+
+
+def _kwargs(geometry: HexapodGeometry) -> dict:
+    return {"base_points": geometry.base_points.copy(),
+            "platform_points": geometry.platform_points.copy(),
+            "stroke": geometry.stroke, "leg_radius": geometry.leg_radius}
+
+
+@pytest.mark.parametrize("field", ["base_points", "platform_points"])
+def test_wrong_shape(geometry: HexapodGeometry, field: str) -> None:
+    kw = _kwargs(geometry)
+    kw[field] = kw[field][:5]
+    with pytest.raises(GeometryError, match=r"\(5, 3\)") as exc:
+        HexapodGeometry(**kw)
+    assert exc.value.field == field
+    kw[field] = "not numbers"
+    with pytest.raises(GeometryError) as exc:
+        HexapodGeometry(**kw)
+    assert exc.value.field == field
+
+
+@pytest.mark.parametrize("bad", [np.nan, np.inf, -np.inf])
+@pytest.mark.parametrize("field", ["base_points", "platform_points"])
+def test_non_finite(geometry: HexapodGeometry, field: str, bad: float) -> None:
+    kw = _kwargs(geometry)
+    kw[field][3, 1] = bad
+    with pytest.raises(GeometryError, match="point 3 coordinate 1") as exc:
+        HexapodGeometry(**kw)
+    assert exc.value.field == field
+    assert "not finite" in exc.value.problem
+
+
+@pytest.mark.parametrize("stroke", [(0.4, 0.4), (0.5, 0.4), (-0.1, 0.4), (np.nan, 0.4),
+                                    (0.3, np.inf), (0.3,), "abc"])
+def test_bad_stroke(geometry: HexapodGeometry, stroke: object) -> None:
+    kw = _kwargs(geometry)
+    kw["stroke"] = stroke
+    with pytest.raises(GeometryError) as exc:
+        HexapodGeometry(**kw)
+    assert exc.value.field == "stroke"
+
+
+def test_q_min_equal_q_max_message(geometry: HexapodGeometry) -> None:
+    with pytest.raises(GeometryError, match="must be smaller than q_max"):
+        geometry.replace(stroke=(0.4, 0.4))
+
+
+@pytest.mark.parametrize("radius", [0.0, -0.01, np.nan, np.inf])
+def test_bad_radius(geometry: HexapodGeometry, radius: float) -> None:
+    with pytest.raises(GeometryError) as exc:
+        geometry.replace(leg_radius=radius)
+    assert exc.value.field == "leg_radius"
+
+
+@pytest.mark.parametrize("field", ["base_points", "platform_points"])
+def test_coincident_joints(geometry: HexapodGeometry, field: str) -> None:
+    pts = getattr(geometry, field).copy()
+    pts[4] = pts[1] + 1e-5
+    with pytest.raises(GeometryError, match="points 1 and 4 coincide") as exc:
+        geometry.replace(**{field: pts})
+    assert exc.value.field == field
+
+
+@pytest.mark.parametrize("field", ["base_points", "platform_points"])
+def test_collinear_joints(geometry: HexapodGeometry, field: str) -> None:
+    pts = np.outer(np.arange(6) * 0.05, [1.0, 2.0, 0.5]) + np.array([0.1, 0, 0])
+    with pytest.raises(GeometryError, match="collinear") as exc:
+        geometry.replace(**{field: pts})
+    assert exc.value.field == field
+
+
+def test_toml_round_trip(tmp_path: Path, other_geometry: HexapodGeometry) -> None:
+    for geo in (deltalab(), other_geometry, other_geometry.replace(max_speed=0.02)):
+        path = tmp_path / f"{geo.name}.toml"
+        geo.to_toml(path)
+        text = path.read_text()
+        assert "base_points_mm" in text and "leg_radius_mm" in text
+        back = HexapodGeometry.from_toml(path)
+        np.testing.assert_allclose(back.base_points, geo.base_points, atol=1e-12)
+        np.testing.assert_allclose(back.platform_points, geo.platform_points, atol=1e-12)
+        assert back.stroke == pytest.approx(geo.stroke, abs=1e-15)
+        assert back.leg_radius == pytest.approx(geo.leg_radius, abs=1e-15)
+        assert back.max_speed == pytest.approx(geo.max_speed, abs=1e-15)
+        assert back.name == geo.name
+        assert back.source == str(path)
+
+
+def test_toml_file_in_millimetres(tmp_path: Path) -> None:
+    path = tmp_path / "robot.toml"
+    geo = deltalab()
+    table = geo.to_dict()
+    assert table["stroke_mm"] == pytest.approx([345.0, 485.0])
+    assert table["leg_radius_mm"] == pytest.approx(15.0)
+    path.write_text(
+        "base_points_mm = " + str(table["base_points_mm"]) + "\n"
+        "platform_points_mm = " + str(table["platform_points_mm"]) + "\n"
+        "stroke_mm = [345, 485]\nleg_radius_mm = 15\n"
+    )
+    back = HexapodGeometry.from_toml(path)
+    assert back.name == "robot"  # default name: the file stem
+    assert back.max_speed == 0.05
+    np.testing.assert_allclose(back.base_points, geo.base_points, atol=1e-12)
+
+
+def _write(tmp_path: Path, table_text: str) -> Path:
+    path = tmp_path / "geo.toml"
+    path.write_text(table_text)
+    return path
+
+
+def _valid_lines() -> dict[str, str]:
+    t = deltalab().to_dict()
+    return {k: f"{k} = {v!r}".replace("'", '"') for k, v in t.items()}
+
+
+@pytest.mark.parametrize("key", ["base_points_mm", "platform_points_mm", "stroke_mm",
+                                 "leg_radius_mm"])
+def test_toml_missing_key(tmp_path: Path, key: str) -> None:
+    lines = _valid_lines()
+    del lines[key]
+    path = _write(tmp_path, "\n".join(lines.values()))
+    with pytest.raises(ConfigFileError, match="missing required key") as exc:
+        HexapodGeometry.from_toml(path)
+    assert exc.value.key == key
+    assert str(path) in str(exc.value)
+
+
+@pytest.mark.parametrize(("bad", "good"), [("leg_raduis_mm", "leg_radius_mm"),
+                                           ("stroke_m", "stroke_mm"),
+                                           ("base_point_mm", "base_points_mm")])
+def test_toml_misspelt_key_suggests(tmp_path: Path, bad: str, good: str) -> None:
+    lines = _valid_lines()
+    lines[good] = lines[good].replace(good, bad, 1)
+    path = _write(tmp_path, "\n".join(lines.values()))
+    with pytest.raises(ConfigFileError) as exc:
+        HexapodGeometry.from_toml(path)
+    assert exc.value.key == bad
+    assert exc.value.suggestion == good
+    assert f"did you mean '{good}'" in str(exc.value)
+
+
+def test_toml_missing_file(tmp_path: Path) -> None:
+    path = tmp_path / "nowhere.toml"
+    with pytest.raises(ConfigFileError, match="file not found") as exc:
+        HexapodGeometry.from_toml(path)
+    assert exc.value.path == str(path)
+
+
+def test_toml_bad_syntax(tmp_path: Path) -> None:
+    path = _write(tmp_path, "base_points_mm = [[1, 2, 3]\nstroke_mm = = 3\n")
+    with pytest.raises(ConfigFileError, match="not valid TOML"):
+        HexapodGeometry.from_toml(path)
+
+
+def test_toml_bad_values(tmp_path: Path) -> None:
+    lines = _valid_lines()
+    lines["stroke_mm"] = "stroke_mm = [345, 485, 500]"
+    with pytest.raises(ConfigFileError, match=r"expected shape \(2,\)") as exc:
+        HexapodGeometry.from_toml(_write(tmp_path, "\n".join(lines.values())))
+    assert exc.value.key == "stroke_mm"
+    lines = _valid_lines()
+    lines["leg_radius_mm"] = 'leg_radius_mm = "wide"'
+    with pytest.raises(ConfigFileError, match="finite number") as exc:
+        HexapodGeometry.from_toml(_write(tmp_path, "\n".join(lines.values())))
+    assert exc.value.key == "leg_radius_mm"
+    # A value that parses but makes an invalid geometry names the field and the file.
+    lines = _valid_lines()
+    lines["stroke_mm"] = "stroke_mm = [485, 345]"
+    path = _write(tmp_path, "\n".join(lines.values()))
+    with pytest.raises(GeometryError) as gexc:
+        HexapodGeometry.from_toml(path)
+    assert gexc.value.field == "stroke"
+    assert gexc.value.source == str(path)

@@ -1,0 +1,125 @@
+"""Tests of hexapod.se3 against independent computations (matrix exponential, Pinocchio)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pinocchio as pin
+import pytest
+from scipy.linalg import expm
+
+from hexapod.se3 import (
+    exp_se3,
+    exp_so3,
+    integrate_pose,
+    log_so3,
+    look_at,
+    pose_error,
+    rotation_from_rpy,
+    skew,
+)
+
+
+def _random_axes(rng: np.random.Generator, n: int) -> np.ndarray:
+    d = rng.normal(size=(n, 3))
+    return d / np.linalg.norm(d, axis=1, keepdims=True)
+
+
+def test_skew(rng: np.random.Generator) -> None:
+    x, y = rng.normal(size=(2, 10, 3))
+    np.testing.assert_allclose((skew(x) @ y[..., None])[..., 0], np.cross(x, y), atol=1e-15)
+    np.testing.assert_array_equal(skew(x), -np.swapaxes(skew(x), -1, -2))
+
+
+def test_exp_so3_matches_matrix_exponential(rng: np.random.Generator) -> None:
+    angles = np.r_[0.0, 1e-9, 1e-7, 1e-6, 2e-6, 1e-3, rng.uniform(0, np.pi, 30), np.pi]
+    w = _random_axes(rng, len(angles)) * angles[:, None]
+    R = exp_so3(w)
+    for k in range(len(w)):
+        np.testing.assert_allclose(R[k], expm(skew(w[k])), atol=1e-14)
+
+
+@pytest.mark.parametrize("delta", [0.0, 1e-12, 1e-9, 1e-7, 1e-5, 1e-4, 5e-4, 1e-3, 2e-3])
+def test_log_exp_round_trip_near_pi(rng: np.random.Generator, delta: float) -> None:
+    axes = _random_axes(rng, 50)
+    theta = np.pi - delta
+    w = axes * theta
+    back = log_so3(exp_so3(w))
+    assert np.linalg.norm(back, axis=1) == pytest.approx(np.full(50, theta), abs=1e-7)
+    # At exactly pi the sign of the axis is ambiguous; compare rotations and the axis line.
+    np.testing.assert_allclose(exp_so3(back), exp_so3(w), atol=1e-9)
+    if delta >= 1e-7:
+        np.testing.assert_allclose(back, w, atol=1e-6)
+
+
+def test_log_exp_round_trip(rng: np.random.Generator) -> None:
+    angles = np.r_[0.0, 1e-12, 1e-8, 1e-6, 1e-4, rng.uniform(0, np.pi - 0.01, 500)]
+    w = _random_axes(rng, len(angles)) * angles[:, None]
+    np.testing.assert_allclose(log_so3(exp_so3(w)), w, atol=1e-12)
+    # Batched over several axes.
+    np.testing.assert_allclose(log_so3(exp_so3(w[:500].reshape(5, 100, 3))),
+                               w[:500].reshape(5, 100, 3), atol=1e-12)
+
+
+def test_exp_se3_matches_matrix_exponential_and_pinocchio(rng: np.random.Generator) -> None:
+    for scale in (1e-8, 1e-5, 0.1, 1.0, 3.0):
+        v = rng.normal(size=3)
+        w = _random_axes(rng, 1)[0] * min(scale, 3.0)
+        R, p = exp_se3(v, w)
+        X = np.zeros((4, 4))
+        X[:3, :3] = skew(w)
+        X[:3, 3] = v
+        E = expm(X)
+        np.testing.assert_allclose(R, E[:3, :3], atol=1e-13)
+        np.testing.assert_allclose(p, E[:3, 3], atol=1e-13)
+        M = pin.exp6(pin.Motion(v, w))
+        np.testing.assert_allclose(R, M.rotation, atol=1e-13)
+        np.testing.assert_allclose(p, M.translation, atol=1e-13)
+
+
+def test_integrate_pose_left_multiplication(rng: np.random.Generator) -> None:
+    R = exp_so3(rng.normal(size=(20, 3)))
+    t = rng.normal(size=(20, 3))
+    tw = rng.normal(size=(20, 6))
+    dt = rng.uniform(0.01, 0.5, 20)
+    R1, t1 = integrate_pose(R, t, tw, dt)
+    for k in range(20):
+        M = pin.exp6(pin.Motion(tw[k, :3] * dt[k], tw[k, 3:] * dt[k])) * pin.SE3(R[k], t[k])
+        np.testing.assert_allclose(R1[k], M.rotation, atol=1e-13)
+        np.testing.assert_allclose(t1[k], M.translation, atol=1e-13)
+    # Points of the body move with dP/dt = v + w x P (MATH section 2).
+    P_body = rng.normal(size=3)
+    h = 1e-6
+    Rp, tp = integrate_pose(R[0], t[0], tw[0], h)
+    Rm, tm = integrate_pose(R[0], t[0], tw[0], -h)
+    P = R[0] @ P_body + t[0]
+    vel = ((Rp @ P_body + tp) - (Rm @ P_body + tm)) / (2 * h)
+    np.testing.assert_allclose(vel, tw[0, :3] + np.cross(tw[0, 3:], P), atol=1e-8)
+
+
+def test_pose_error(rng: np.random.Generator) -> None:
+    R = exp_so3(rng.normal(size=3))
+    t = rng.normal(size=3)
+    dp, da = pose_error(R, t, R, t)
+    assert dp == 0.0 and da == pytest.approx(0.0, abs=1e-7)
+    axis = _random_axes(rng, 1)[0]
+    dp, da = pose_error(R @ exp_so3(0.3 * axis), t + np.array([0.0, 0.004, 0.003]), R, t)
+    assert dp == pytest.approx(0.005, abs=1e-15) and da == pytest.approx(0.3, abs=1e-12)
+
+
+def test_rotation_from_rpy() -> None:
+    R = rotation_from_rpy(0.1, -0.2, 0.3)
+    np.testing.assert_allclose(
+        R, exp_so3(np.array([0, 0, 0.3])) @ exp_so3(np.array([0, -0.2, 0]))
+        @ exp_so3(np.array([0.1, 0, 0])), atol=1e-15)
+
+
+def test_look_at() -> None:
+    eye, target = np.array([0.7, 0.1, 0.3]), np.array([0.0, 0.0, 0.2])
+    R = look_at(eye, target, np.array([0.0, 0.0, 1.0]))
+    np.testing.assert_allclose(R.T @ R, np.eye(3), atol=1e-15)
+    assert np.linalg.det(R) == pytest.approx(1.0)
+    d = (target - eye) / np.linalg.norm(target - eye)
+    np.testing.assert_allclose(R[:, 2], d, atol=1e-15)  # z forward
+    assert R[2, 1] < 0  # image y points down (against "up")
+    with pytest.raises(ValueError, match="parallel"):
+        look_at(eye, eye + np.array([0, 0, 1.0]), np.array([0.0, 0.0, 1.0]))
