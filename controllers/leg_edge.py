@@ -180,7 +180,7 @@ class LegEdgeController(VisionLaw):
             self._observed[:] = True
             self._u_now = u = u_edges
         else:
-            both = vis.all(axis=1)
+            both: np.ndarray = np.all(vis, axis=1)
             self._predict_hidden(~both)
             self._directions[both] = u_edges[both]
             self._observed[:] = both
@@ -188,7 +188,7 @@ class LegEdgeController(VisionLaw):
             # A leg never seen whole: its desired direction, projected on the plane of its
             # visible edge if it has one (exact at the goal).
             us = self._u_star
-            one = vis.any(axis=1) & ~both
+            one: np.ndarray = np.any(vis, axis=1) & ~both
             n_vis = np.where(vis[:, 0, None], n[:, 0], n[:, 1])
             proj = np.where(one[:, None], _unit(us - np.einsum("ik,ik->i", us, n_vis)[:, None]
                                                 * n_vis), us)

@@ -47,11 +47,15 @@ class LimitQP:
         eps_abs: OSQP absolute tolerance.
         eps_rel: OSQP relative tolerance.
         max_iter: OSQP iteration budget.
+        active_tolerance: Distance to a bound [m/s] under which a constraint with a
+            multiplier of the right sign is taken as active by the refinement.
     """
 
-    def __init__(self, regularization: float = 1e-9, eps_abs: float = 1e-8,
-                 eps_rel: float = 1e-8, max_iter: int = 4000) -> None:
+    def __init__(self, regularization: float = 1e-12, eps_abs: float = 1e-6,
+                 eps_rel: float = 1e-6, max_iter: int = 4000,
+                 active_tolerance: float = 1e-6) -> None:
         self.regularization = regularization
+        self.active_tolerance = active_tolerance
         self.settings = {"verbose": False, "warm_starting": True, "polishing": False,
                          "eps_abs": eps_abs, "eps_rel": eps_rel, "max_iter": max_iter,
                          "check_termination": 10}
@@ -111,7 +115,48 @@ class LimitQP:
         if x.shape != (6,) or not np.all(np.isfinite(x)):
             self._solver = None
             return None, f"QP returned a non-finite solution (status '{res.info.status}')"
-        return x, str(res.info.status)
+        return self._refine(P, c, J, lower, upper, x, np.asarray(res.y, dtype=float)), \
+            str(res.info.status)
+
+    def _refine(self, P: np.ndarray, c: np.ndarray, J: np.ndarray, lower: np.ndarray,
+                upper: np.ndarray, x: np.ndarray, y: np.ndarray) -> np.ndarray:
+        """Solve the KKT system of the active set OSQP found (what OSQP's polishing does).
+
+        ADMM stops at a tolerance; with the active set fixed, the equality-constrained
+        problem is solved exactly (6 + k unknowns). Without active constraints this is
+        the classical ``-P^-1 c``. The refined point is kept only if it is feasible
+        and its multipliers have the right signs; otherwise OSQP's point is returned.
+        (OSQP's own polisher prints to stdout even with ``verbose=False``.)
+        """
+        Jx = J @ x
+        tol = self.active_tolerance
+        at_up = (Jx >= upper - tol) & (y > 0)
+        at_lo = (Jx <= lower + tol) & (y < 0)
+        act = at_up | at_lo
+        k = int(np.count_nonzero(act))
+        try:
+            if k == 0:
+                xr = np.linalg.solve(P, -c)
+                nu = np.zeros(0)
+            else:
+                Ja = J[act]
+                K = np.zeros((6 + k, 6 + k))
+                K[:6, :6] = P
+                K[:6, 6:] = Ja.T
+                K[6:, :6] = Ja
+                rhs = np.concatenate([-c, np.where(at_up, upper, lower)[act]])
+                sol = np.linalg.solve(K, rhs)
+                xr, nu = sol[:6], sol[6:]
+        except np.linalg.LinAlgError:
+            return x
+        Jr = J @ xr
+        slack = 1e-9 * (1.0 + np.abs(upper - lower))
+        feasible = bool(np.all(Jr <= upper + slack) and np.all(Jr >= lower - slack))
+        # Multipliers: >= 0 on upper bounds, <= 0 on lower bounds (OSQP's convention).
+        signs_ok = bool(np.all(nu[at_up[act]] >= -1e-12) and np.all(nu[at_lo[act]] <= 1e-12))
+        if feasible and signs_ok and np.all(np.isfinite(xr)):
+            return xr
+        return x
 
 
 class QPLaw(VisionLaw):
@@ -199,9 +244,9 @@ class LegEdgeQPController(QPLaw, LegEdgeController):
 
     def __init__(self, gain: float = 1.0, adaptive_gain: Sequence[float] | None = None,
                  interaction: str = "current", threshold: float = 1e-6, damping: float = 0.0,
-                 edge_feature: str = "auto", regularization: float = 1e-9,
+                 edge_feature: str = "auto", regularization: float = 1e-12,
                  stroke_margin: float | None = None, max_speed: float | None = None,
-                 eps_abs: float = 1e-8, eps_rel: float = 1e-8, max_iter: int = 4000) -> None:
+                 eps_abs: float = 1e-6, eps_rel: float = 1e-6, max_iter: int = 4000) -> None:
         LegEdgeController.__init__(self, gain, adaptive_gain, interaction, threshold, damping,
                                    edge_feature)
         if damping:
@@ -221,8 +266,8 @@ class LegDirectionQPController(QPLaw, LegDirectionController):
 
     def __init__(self, gain: float = 1.0, adaptive_gain: Sequence[float] | None = None,
                  interaction: str = "current", threshold: float = 1e-6, damping: float = 0.0,
-                 regularization: float = 1e-9, stroke_margin: float | None = None,
-                 max_speed: float | None = None, eps_abs: float = 1e-8, eps_rel: float = 1e-8,
+                 regularization: float = 1e-12, stroke_margin: float | None = None,
+                 max_speed: float | None = None, eps_abs: float = 1e-6, eps_rel: float = 1e-6,
                  max_iter: int = 4000) -> None:
         LegDirectionController.__init__(self, gain, adaptive_gain, interaction, threshold,
                                         damping)

@@ -12,6 +12,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from controllers.base import ControllerContext, Goal, Observation
+from hexapod.fk import forward_kinematics
 from hexapod.geometry import HexapodGeometry
 from hexapod.kinematics import LegState, legs_in_frame, twist_to_frame
 from hexapod.se3 import integrate_pose
@@ -110,12 +111,14 @@ class Run:
 
 def closed_loop(world: World, controller, start: tuple[np.ndarray, np.ndarray],  # type: ignore[no-untyped-def]
                 goal: tuple[np.ndarray, np.ndarray], dt: float, steps: int,
-                hide=None, stop_below: float = 0.0) -> Run:
+                hide=None, stop_below: float = 0.0, move_legs: bool = False) -> Run:
     """Perfect closed loop: observe the true pose, step, integrate the commanded twist exactly.
 
     Args:
         hide: Optional ``f(observation, k)`` that edits the observation (visibility).
         stop_below: Stop once the position error is below this [m].
+        move_legs: Integrate the leg velocities (``q += dt q_dot``) and find the pose
+            by forward kinematics, as a real robot does, instead of the twist.
     """
     R, t = start
     tg = goal[1]
@@ -132,9 +135,14 @@ def closed_loop(world: World, controller, start: tuple[np.ndarray, np.ndarray], 
         cmds.append(cmd)
         norms.append(cmd.error_norm)
         vels.append(cmd.velocities)
-        if cmd.twist is None:
-            raise AssertionError("the controller gives no twist")
-        R, t = world.move(R, t, cmd.twist, dt)
+        if move_legs:
+            q = world.legs(R, t).lengths + dt * cmd.velocities
+            sol = forward_kinematics(world.geometry, q, guess=(R, t), check_stroke=False)
+            R, t = sol.rotation, sol.translation
+        else:
+            if cmd.twist is None:
+                raise AssertionError("the controller gives no twist")
+            R, t = world.move(R, t, cmd.twist, dt)
         perr.append(np.linalg.norm(t - tg))
         lens.append(world.legs(R, t).lengths)
         if perr[-1] < stop_below:

@@ -1,0 +1,236 @@
+"""Checks generated over the registry: every registered controller (built-in or plugin).
+
+A plugin is registered from a temporary distribution's entry points (a
+``*.dist-info`` with ``entry_points.txt`` and ``METADATA`` on ``sys.path``), next
+to a broken one that must be reported without breaking the others.
+"""
+
+from __future__ import annotations
+
+import sys
+import textwrap
+from collections.abc import Iterator
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from controllers import BUILTINS, registry
+from controllers.base import ENTRY_POINT_GROUP, Command, Observation
+from controllers.exceptions import PluginLoadError, UnknownControllerError
+from tests.controllers.controller_world import World, make_camera
+
+PLUGIN = "test-saturated-joints"
+BROKEN = "test-broken"
+PLUGIN_DIST = "hexapod-test-plugin"
+PLUGIN_VERSION = "0.0.7"
+
+PLUGIN_SOURCE = '''
+"""A third-party controller, shipped by a test distribution."""
+import numpy as np
+from controllers.base import Command, Controller, observation_problem
+
+
+class SaturatedJoints(Controller):
+    """Joint-space law with leg-speed saturation (test plugin)."""
+
+    name = "test-saturated-joints"
+    features = frozenset({"lengths"})
+
+    def __init__(self, gain=1.0):
+        self.gain = gain
+
+    def reset(self, context):
+        self.q_star = np.asarray(context.goal.lengths, dtype=float)
+        self.vmax = context.max_speed
+
+    def step(self, observation):
+        problem = observation_problem(observation, self.features)
+        if problem:
+            return Command.refuse(problem)
+        e = np.asarray(observation.lengths) - self.q_star
+        v = np.clip(-self.gain * e, -self.vmax, self.vmax)
+        return Command(v, error=e, error_norm=float(np.linalg.norm(e)))
+'''
+
+
+def _write_distribution(root: Path) -> None:
+    (root / "hexapod_test_plugin.py").write_text(textwrap.dedent(PLUGIN_SOURCE))
+    (root / "hexapod_test_broken.py").write_text(
+        "raise ImportError('needs the package frobnicate, which is not installed')\n")
+    info = root / f"hexapod_test_plugin-{PLUGIN_VERSION}.dist-info"
+    info.mkdir()
+    (info / "METADATA").write_text(
+        f"Metadata-Version: 2.1\nName: {PLUGIN_DIST}\nVersion: {PLUGIN_VERSION}\n")
+    (info / "entry_points.txt").write_text(
+        f"[{ENTRY_POINT_GROUP}]\n"
+        f"{PLUGIN} = hexapod_test_plugin:SaturatedJoints\n"
+        f"{BROKEN} = hexapod_test_broken:Nope\n")
+
+
+@pytest.fixture(scope="module")
+def plugin_distribution(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Path]:
+    """Install the temporary distribution on sys.path and load the entry points."""
+    root = tmp_path_factory.mktemp("site")
+    _write_distribution(root)
+    saved = (dict(registry._factories), dict(registry._info), list(registry.errors))
+    sys.path.insert(0, str(root))
+    try:
+        registry.load_plugins(force=True)
+        yield root
+    finally:
+        sys.path.remove(str(root))
+        for mod in ("hexapod_test_plugin", "hexapod_test_broken"):
+            sys.modules.pop(mod, None)
+        registry._factories, registry._info = saved[0], saved[1]
+        registry.errors[:] = saved[2]
+
+
+#: Every controller the registry offers, plus the plugin of the temporary distribution.
+NAMES = [*registry.names(), PLUGIN]
+
+
+@pytest.fixture(params=["perspective", "unified"])
+def world(request: pytest.FixtureRequest, other_geometry) -> World:  # type: ignore[no-untyped-def]
+    return World(other_geometry, make_camera(request.param, other_geometry))
+
+
+def _poses(world: World) -> tuple[tuple, tuple]:
+    Rs, ts = world.poses(2, np.random.default_rng(31), margin=0.02)
+    return (Rs[0], ts[0]), (Rs[1], ts[1])
+
+
+def _controller(name: str, world: World, goal: tuple, plugin_distribution: Path):  # type: ignore[no-untyped-def]
+    ctrl = registry.create(name)
+    ctrl.reset(world.context(world.goal(*goal), 0.01))
+    return ctrl
+
+
+def _check_command(cmd: Command) -> None:
+    assert isinstance(cmd, Command)
+    v = np.asarray(cmd.velocities)
+    assert v.shape == (6,)
+    assert np.all(np.isfinite(v))
+    assert np.isfinite(cmd.error_norm)
+
+
+# ----------------------------------------------------------------------------- registry
+def test_builtins_are_registered() -> None:
+    assert set(BUILTINS) <= set(registry.names())
+    for info in registry.info():
+        if info.name in BUILTINS:
+            assert info.package == "hexapod-vs"
+            assert info.version not in ("", "unknown")
+            assert info.description
+
+
+def test_plugin_from_entry_points(plugin_distribution: Path) -> None:
+    assert PLUGIN in registry.names()
+    info = registry.source(PLUGIN)
+    assert (info.package, info.version) == (PLUGIN_DIST, PLUGIN_VERSION)
+    assert info.description.startswith("Joint-space law with leg-speed saturation")
+
+
+def test_broken_plugin_is_reported_and_others_work(plugin_distribution: Path) -> None:
+    errors = [e for e in registry.errors if e.name == BROKEN]
+    assert errors, registry.errors
+    assert errors[0].source == PLUGIN_DIST
+    assert "frobnicate" in errors[0].reason
+    assert BROKEN not in registry.names()
+    assert PLUGIN in registry.names()
+    assert "leg-edge" in registry.names()
+
+
+def test_unknown_name_suggests_the_closest() -> None:
+    with pytest.raises(UnknownControllerError) as info:
+        registry.create("leg-edgee")
+    assert info.value.suggestion == "leg-edge"
+    assert "did you mean 'leg-edge'" in str(info.value)
+    for name in BUILTINS:
+        assert name in str(info.value)
+
+
+def test_module_attr_spec() -> None:
+    ctrl = registry.create("controllers.joint:JointSpaceController", gain=3.0)
+    assert ctrl.name == "joint-space"
+    with pytest.raises(PluginLoadError):
+        registry.factory("controllers.joint:NoSuchController")
+
+
+def test_step_before_reset_refuses() -> None:
+    for name in BUILTINS:
+        cmd = registry.create(name).step(Observation(0.0, np.full(6, 0.4)))
+        assert not cmd.ok and "reset" in (cmd.reason or "")
+
+
+# ----------------------------------------------------------------------------- generated
+@pytest.mark.parametrize("name", NAMES)
+def test_shapes_and_motion(name: str, world: World, plugin_distribution: Path) -> None:
+    start, goal = _poses(world)
+    ctrl = _controller(name, world, goal, plugin_distribution)
+    assert ctrl.name == name
+    cmd = ctrl.step(world.observation(*start))
+    _check_command(cmd)
+    assert cmd.ok, cmd.reason
+    assert cmd.error_norm > 0
+    assert np.abs(cmd.velocities).max() > 0
+
+
+@pytest.mark.parametrize("name", NAMES)
+def test_zero_error_gives_zero_command(name: str, world: World,
+                                       plugin_distribution: Path) -> None:
+    _, goal = _poses(world)
+    ctrl = _controller(name, world, goal, plugin_distribution)
+    for _ in range(3):
+        cmd = ctrl.step(world.observation(*goal))
+        _check_command(cmd)
+        assert cmd.ok, cmd.reason
+        assert cmd.error_norm < 1e-9
+        np.testing.assert_allclose(cmd.velocities, 0.0, atol=1e-9)
+
+
+@pytest.mark.parametrize("field", ["lengths", "normals", "lines", "directions", "t"])
+@pytest.mark.parametrize("name", NAMES)
+def test_nan_observation_gives_zero_command_with_reason(
+        name: str, field: str, world: World, plugin_distribution: Path) -> None:
+    start, goal = _poses(world)
+    ctrl = _controller(name, world, goal, plugin_distribution)
+    obs = world.observation(*start)
+    if field == "t":
+        obs.t = float("nan")
+    else:
+        value = getattr(obs, field)
+        if value is None:  # the unified camera gives no lines: nothing to corrupt
+            value = world.observation(*start).normals
+        value = np.array(value, dtype=float)
+        value.flat[4] = np.nan
+        setattr(obs, field, value)
+    used = field in ctrl.features or field in ("lengths", "t")
+    cmd = ctrl.step(obs)
+    _check_command(cmd)
+    if used:
+        assert not cmd.ok
+        assert cmd.reason
+        assert np.array_equal(cmd.velocities, np.zeros(6))
+    else:  # a field the controller does not use must not stop it
+        assert cmd.ok, cmd.reason
+
+
+@pytest.mark.parametrize("name", NAMES)
+def test_malformed_observation_never_raises(name: str, world: World,
+                                            plugin_distribution: Path) -> None:
+    start, goal = _poses(world)
+    ctrl = _controller(name, world, goal, plugin_distribution)
+    good = world.observation(*start)
+    bad = [Observation(0.0, np.full(5, 0.4)),
+           Observation(0.0, good.lengths, normals=np.zeros((6, 3)), lines=np.zeros((6, 3)),
+                       directions=np.zeros((6, 2, 3))),
+           Observation(0.0, good.lengths, normals=np.full((6, 2, 3), np.inf),
+                       lines=np.full((6, 2, 3), np.inf), directions=np.full((6, 3), np.inf)),
+           Observation(0.0, good.lengths)]
+    for obs in bad:
+        cmd = ctrl.step(obs)
+        _check_command(cmd)
+        if obs.lengths.shape != (6,) or ctrl.features - {"lengths"}:
+            assert not cmd.ok and cmd.reason
+            assert np.array_equal(cmd.velocities, np.zeros(6))
