@@ -1,0 +1,377 @@
+"""Synthetic grayscale images of the legs of a Gough-Stewart platform (OpenCV).
+
+Each leg is a solid cylinder of radius ``geometry.leg_radius`` around the segment
+``A_i .. B_i`` (``MATH.md`` section 4). The image is drawn with the painter's
+algorithm: the objects (six legs and, optionally, the platform disc) are sorted by
+the distance of their centre to the projection centre and filled from the farthest
+to the nearest, with anti-aliased sub-pixel polygons (``cv2.fillPoly`` with
+``LINE_AA`` and 4 fractional bits).
+
+A leg is drawn as nested bands between pairs of generators of the cylinder (the
+outermost pair being the two limbs, i.e. the edges of ``MATH.md`` section 4) plus
+its two end discs. The bands carry a Lambertian shading for a light at the camera:
+the intensity at the generator of angle ``phi`` from the generator facing the camera
+is ``edge + (centre - edge) cos(phi)``, so the limbs (``phi = phi0``) are the
+darkest part of the leg. Each band is sampled along the leg at ``edge_samples``
+points, projected with the camera model: 2 points suffice for a perspective camera
+(straight lines), a unified camera images straight lines as conics, so its bands are
+sampled densely.
+
+Backgrounds: ``"plain"`` (uniform, bright, as in seed 003) or ``"cluttered"``
+(a seeded low-frequency texture plus random rectangles, discs and lines). The
+cluttered background stays brighter than the legs (levels >= ``clutter_min``) so
+that legs remain dark objects: the detectors of :mod:`vision.detect` rely on this
+polarity.
+
+After drawing, an optional Gaussian blur (optics, ``blur_px`` is the standard
+deviation [px]) and an additive Gaussian pixel noise (sensor, ``noise_std`` [grey
+levels]) are applied. The noise is drawn once into a bank from the renderer's
+generator and each frame uses a random window of it (saturating ``cv2.add`` /
+``cv2.subtract``), which keeps a 1024x780 frame at about a millisecond.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+from dataclasses import dataclass, replace
+from typing import Any
+
+import cv2
+import numpy as np
+
+from hexapod.geometry import HexapodGeometry
+from hexapod.kinematics import legs_in_frame
+from vision.cameras import Camera, PerspectiveCamera
+from vision.exceptions import VisionError
+
+logger = logging.getLogger(__name__)
+
+#: Fractional bits of the fixed-point vertices given to OpenCV (1/16 px).
+_SHIFT = 4
+_SCALE = float(1 << _SHIFT)
+
+BACKGROUNDS = ("plain", "cluttered")
+
+
+class RenderError(VisionError, ValueError):
+    """Invalid rendering settings or pose.
+
+    Attributes:
+        field: The offending setting.
+        problem: What is wrong with it.
+    """
+
+    def __init__(self, field: str, problem: str) -> None:
+        self.field = field
+        self.problem = problem
+        super().__init__(f"{field}: {problem}")
+
+
+@dataclass(frozen=True)
+class RenderStyle:
+    """How the legs are drawn.
+
+    Attributes:
+        background: ``"plain"`` or ``"cluttered"``.
+        background_level: Grey level of the plain background [0-255].
+        clutter_min: Darkest grey level of the cluttered background.
+        clutter_seed: Seed of the cluttered background (it is static, like a scene).
+        leg_edge_level: Grey level of the legs at their limbs.
+        leg_centre_level: Grey level of the legs along the generator facing the camera.
+        shading_bands: Number of nested bands used for the shading (>= 1).
+        platform: Draw the platform disc.
+        platform_level: Grey level of the platform disc.
+        platform_radius: Radius of the platform disc [m]; default: the largest
+            distance of a platform joint from the platform origin (as
+            :func:`vision.legs.observe_legs`).
+        blur_px: Standard deviation of the Gaussian blur [px] (0: none).
+        noise_std: Standard deviation of the additive pixel noise [grey levels].
+        edge_samples: Points per generator along a leg; default 2 for a perspective
+            camera, 24 for a unified one.
+        cap_samples: Points on each end disc of a leg.
+        aa_compensation_px: Inward offset of every polygon [px]. OpenCV's
+            anti-aliased ``fillPoly`` draws a shape about 0.7 px too large on each
+            side (measured: 0.67 to 0.83 px depending on the edge direction, mean
+            0.72, at the 50 % grey level); the offset puts the 50 % level of the
+            rendered edges on the true edges within about 0.1 px.
+    """
+
+    background: str = "plain"
+    background_level: int = 230
+    clutter_min: int = 120
+    clutter_seed: int = 0
+    leg_edge_level: int = 35
+    leg_centre_level: int = 95
+    shading_bands: int = 4
+    platform: bool = True
+    platform_level: int = 160
+    platform_radius: float | None = None
+    blur_px: float = 0.0
+    noise_std: float = 0.0
+    edge_samples: int | None = None
+    cap_samples: int = 16
+    aa_compensation_px: float = 0.72
+
+    def __post_init__(self) -> None:
+        if self.background not in BACKGROUNDS:
+            raise RenderError("background", f"expected one of {BACKGROUNDS}, got "
+                                            f"{self.background!r}")
+        for name in ("background_level", "clutter_min", "leg_edge_level", "leg_centre_level",
+                     "platform_level"):
+            v = getattr(self, name)
+            if not 0 <= v <= 255:
+                raise RenderError(name, f"expected a grey level in [0, 255], got {v}")
+        if self.shading_bands < 1:
+            raise RenderError("shading_bands", f"must be >= 1, got {self.shading_bands}")
+        if not (math.isfinite(self.blur_px) and self.blur_px >= 0):
+            raise RenderError("blur_px", f"must be finite and >= 0, got {self.blur_px}")
+        if not (math.isfinite(self.noise_std) and self.noise_std >= 0):
+            raise RenderError("noise_std", f"must be finite and >= 0, got {self.noise_std}")
+        if self.edge_samples is not None and self.edge_samples < 2:
+            raise RenderError("edge_samples", f"must be >= 2, got {self.edge_samples}")
+        if self.cap_samples < 3:
+            raise RenderError("cap_samples", f"must be >= 3, got {self.cap_samples}")
+
+
+def make_background(
+    width: int, height: int, style: RenderStyle
+) -> np.ndarray:
+    """The static background image (height, width) uint8 of a style."""
+    if style.background == "plain":
+        return np.full((height, width), style.background_level, np.uint8)
+    rng = np.random.default_rng(style.clutter_seed)
+    lo = float(style.clutter_min)
+    small = rng.uniform(lo + 20, 250, size=(max(height // 64, 2), max(width // 64, 2)))
+    img = cv2.resize(small.astype(np.float32), (width, height), interpolation=cv2.INTER_CUBIC)
+    img = np.clip(img, lo, 255).astype(np.uint8)
+    n = 40
+    for _ in range(n):
+        kind = rng.integers(3)
+        level = int(rng.uniform(lo, 255))
+        x, y = int(rng.uniform(0, width)), int(rng.uniform(0, height))
+        size = int(rng.uniform(0.02, 0.15) * max(width, height))
+        if kind == 0:
+            x2 = x + int(rng.uniform(-size, size))
+            y2 = y + int(rng.uniform(-size, size))
+            cv2.rectangle(img, (x, y), (x2, y2), level, -1)
+        elif kind == 1:
+            cv2.circle(img, (x, y), size // 2, level, -1, cv2.LINE_AA)
+        else:
+            ang = rng.uniform(0, np.pi)
+            x2, y2 = int(x + 3 * size * np.cos(ang)), int(y + 3 * size * np.sin(ang))
+            cv2.line(img, (x, y), (x2, y2), level, int(rng.integers(1, 6)), cv2.LINE_AA)
+    return img
+
+
+class Renderer:
+    """Renders the legs of a robot seen by a camera.
+
+    Args:
+        camera: The camera (its ``camera_from_base`` places it in the base frame).
+        geometry: The robot (leg radius ``geometry.leg_radius``).
+        style: How to draw (default :class:`RenderStyle`).
+        rng: Generator (or seed) of the pixel noise.
+
+    Example:
+        >>> r = Renderer(front_camera(), deltalab(), RenderStyle(blur_px=0.8))
+        >>> image = r.render(*home_pose(deltalab()))
+    """
+
+    def __init__(
+        self,
+        camera: Camera,
+        geometry: HexapodGeometry,
+        style: RenderStyle | None = None,
+        rng: np.random.Generator | int | None = None,
+    ) -> None:
+        self.camera = camera
+        self.geometry = geometry
+        self.style = RenderStyle() if style is None else style
+        self.rng = np.random.default_rng(rng)
+        self.background = make_background(camera.width, camera.height, self.style)
+        n_edge = self.style.edge_samples
+        if n_edge is None:
+            n_edge = 2 if isinstance(camera, PerspectiveCamera) else 24
+        self._s = np.linspace(0.0, 1.0, n_edge)
+        nb = self.style.shading_bands
+        # Band k spans |phi| in [phi0 * f[k+1], phi0 * f[k]]; f[0] = 1 is the limb.
+        self._band_fractions = 1.0 - np.arange(nb) / nb
+        mid = 1.0 - (np.arange(nb) + 0.5) / nb
+        e, c = self.style.leg_edge_level, self.style.leg_centre_level
+        # Level of band k: shading at the middle of its angular range (phi0 ~ 90 deg
+        # for thin legs, so cos(phi) ~ cos(90 deg * mid)); band 0 holds the limbs.
+        lv = e + (c - e) * np.cos(0.5 * np.pi * mid)
+        lv[0] = e
+        self._levels = [round(x) for x in lv]
+        psi = np.linspace(0.0, 2.0 * np.pi, self.style.cap_samples, endpoint=False)
+        self._cap_cs = np.stack([np.cos(psi), np.sin(psi)], axis=-1)
+        rho = self.style.platform_radius
+        if rho is None:
+            rho = float(np.max(np.linalg.norm(geometry.platform_points, axis=1)))
+        self._platform_radius = float(rho)
+        psi = np.linspace(0.0, 2.0 * np.pi, 64, endpoint=False)
+        self._disc_cs = np.stack([np.cos(psi), np.sin(psi)], axis=-1)
+        self._noise_pos: np.ndarray | None = None
+        self._noise_neg: np.ndarray | None = None
+
+    def with_style(self, **changes: Any) -> Renderer:
+        """A renderer with some style fields changed (same camera, geometry, generator)."""
+        return Renderer(self.camera, self.geometry, replace(self.style, **changes), self.rng)
+
+    # ------------------------------------------------------------------ drawing
+    def _shrink(self, pix: np.ndarray) -> np.ndarray:
+        """Offset polygons (..., V, 2) inwards by ``aa_compensation_px`` (mitred)."""
+        d = self.style.aa_compensation_px
+        if d == 0:
+            return pix
+        e = np.roll(pix, -1, axis=-2) - pix  # edge k: vertex k -> k+1
+        area = np.sum(pix[..., 0] * np.roll(pix[..., 1], -1, -1)
+                      - np.roll(pix[..., 0], -1, -1) * pix[..., 1], axis=-1)
+        sgn = np.where(area >= 0, 1.0, -1.0)[..., None, None]
+        with np.errstate(invalid="ignore", divide="ignore"):
+            # Outward unit normal of each edge (for a counter-clockwise polygon in a
+            # y-down image, area > 0 means clockwise on screen: the sign handles both).
+            nrm = sgn * np.stack([e[..., 1], -e[..., 0]], -1)
+            nrm /= np.linalg.norm(nrm, axis=-1, keepdims=True)
+        nrm = np.nan_to_num(nrm)
+        prev = np.roll(nrm, 1, axis=-2)
+        den = np.maximum(1.0 + np.sum(prev * nrm, -1, keepdims=True), 0.3)
+        return pix - d * (prev + nrm) / den
+
+    def _to_fixed(self, pix: np.ndarray) -> np.ndarray:
+        # Keep coordinates in a range OpenCV's fixed-point arithmetic accepts.
+        lim = 8.0 * max(self.camera.width, self.camera.height)
+        pix = np.clip(np.nan_to_num(pix, nan=0.0), -lim, lim)
+        return np.round(pix * _SCALE).astype(np.int32)
+
+    def _leg_polygons(
+        self, A: np.ndarray, u: np.ndarray, q: np.ndarray
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """Fixed-point polygons of the six legs, all projected at once.
+
+        Returns:
+            ``bands`` (6, nb, 2 Ns, 2) int32, ``caps`` (6, 2, C, 2) int32, ``ok_bands``
+            (6, nb) and ``ok_caps`` (6, 2) (every vertex imaged).
+        """
+        r = self.geometry.leg_radius
+        h = np.cross(A, u)
+        hn = np.linalg.norm(h, axis=-1)
+        exists = hn > r
+        hn_safe = np.where(exists, hn, 1.0)
+        h_hat = h / hn_safe[:, None]
+        w = np.cross(u, h_hat)
+        phi0 = np.arccos(np.clip(r / hn_safe, -1.0, 1.0))  # limb angle from -w
+        phi = phi0[:, None] * self._band_fractions[None, :]  # (6, nb)
+        c, s_ = np.cos(phi)[..., None], np.sin(phi)[..., None]
+        m_left = -c * w[:, None, :] + s_ * h_hat[:, None, :]
+        m_right = -c * w[:, None, :] - s_ * h_hat[:, None, :]
+        axis = A[:, None, :] + (self._s[None, :, None] * q[:, None, None]) * u[:, None, :]
+        left = axis[:, None] + r * m_left[:, :, None, :]
+        right = axis[:, None] + r * m_right[:, :, None, :]
+        bands = np.concatenate([left, right[:, :, ::-1]], axis=2)
+        ends = np.stack([A, A + q[:, None] * u], axis=1)  # (6, 2, 3)
+        ring = (self._cap_cs[None, :, :1] * h_hat[:, None, :]
+                + self._cap_cs[None, :, 1:] * w[:, None, :])  # (6, C, 3)
+        caps = ends[:, :, None, :] + r * ring[:, None, :, :]
+        nb, nv = bands.shape[1], bands.shape[2]
+        pts = np.concatenate([bands.reshape(6, -1, 3), caps.reshape(6, -1, 3)], axis=1)
+        pix, _ = self.camera.project(pts)
+        fin = np.isfinite(pix).all(axis=-1)
+        nbv = nb * nv
+        pb = self._shrink(pix[:, :nbv].reshape(6, nb, nv, 2)).reshape(6, nbv, 2)
+        pc = self._shrink(pix[:, nbv:].reshape(6, 2, -1, 2)).reshape(6, -1, 2)
+        fixed = self._to_fixed(np.concatenate([pb, pc], axis=1))
+        ok_bands = fin[:, :nbv].reshape(6, nb, nv).all(-1) & exists[:, None]
+        ok_caps = fin[:, nbv:].reshape(6, 2, -1).all(-1) & exists[:, None]
+        return (fixed[:, :nbv].reshape(6, nb, nv, 2), fixed[:, nbv:].reshape(6, 2, -1, 2),
+                ok_bands, ok_caps)
+
+    def _draw_leg(self, img: np.ndarray, i: int, bands: np.ndarray, caps: np.ndarray,
+                  ok_bands: np.ndarray, ok_caps: np.ndarray) -> None:
+        # End discs and the outer band (the silhouette) at the edge level, then the
+        # inner bands, lighter towards the generator facing the camera.
+        polys = [caps[i, k] for k in range(2) if ok_caps[i, k]]
+        if ok_bands[i, 0]:
+            polys.append(bands[i, 0])
+        if polys:
+            cv2.fillPoly(img, polys, self._levels[0], cv2.LINE_AA, _SHIFT)
+        for k in range(1, bands.shape[1]):
+            if ok_bands[i, k]:
+                cv2.fillPoly(img, [bands[i, k]], self._levels[k], cv2.LINE_AA, _SHIFT)
+
+    def _draw_platform(self, img: np.ndarray, centre: np.ndarray, R_cam: np.ndarray) -> None:
+        rho = self._platform_radius
+        pts = centre + rho * (self._disc_cs[:, :1] * R_cam[:, 0] + self._disc_cs[:, 1:]
+                              * R_cam[:, 1])
+        pix, _ = self.camera.project(pts)
+        if np.all(np.isfinite(pix)):
+            cv2.fillPoly(img, [self._to_fixed(self._shrink(pix))], self.style.platform_level,
+                         cv2.LINE_AA, _SHIFT)
+
+    def _noise_bank(self, size: int) -> tuple[np.ndarray, np.ndarray]:
+        if self._noise_pos is None or self._noise_pos.size < 2 * size:
+            noise = np.rint(self.rng.normal(0.0, self.style.noise_std, size=2 * size))
+            noise = np.clip(noise, -255, 255)
+            self._noise_pos = np.clip(noise, 0, 255).astype(np.uint8)
+            self._noise_neg = np.clip(-noise, 0, 255).astype(np.uint8)
+        neg = self._noise_neg
+        if neg is None:  # set together with _noise_pos
+            raise RenderError("noise_std", "noise bank not initialised")
+        return self._noise_pos, neg
+
+    def render(self, rotation: np.ndarray, translation: np.ndarray) -> np.ndarray:
+        """Render one frame.
+
+        Args:
+            rotation: (3, 3) platform orientation in the base frame.
+            translation: (3,) platform position in the base frame [m].
+
+        Returns:
+            (height, width) uint8 image.
+        """
+        R = np.asarray(rotation, float)
+        t = np.asarray(translation, float)
+        if R.shape != (3, 3) or t.shape != (3,):
+            raise RenderError("pose", f"expected rotation (3, 3) and translation (3,), got "
+                                      f"{R.shape} and {t.shape}")
+        if not (np.all(np.isfinite(R)) and np.all(np.isfinite(t))):
+            raise RenderError("pose", "contains NaN or inf")
+        T = self.camera.camera_from_base
+        legs = legs_in_frame(self.geometry, R, t, T)
+        A, u, q = legs.base_points, legs.directions, legs.lengths
+        img = self.background.copy()
+        depth = np.linalg.norm(A + 0.5 * q[:, None] * u, axis=1)
+        items: list[tuple[float, int]] = [(float(depth[i]), i) for i in range(6)]
+        centre = T.apply(t)
+        if self.style.platform:
+            items.append((float(np.linalg.norm(centre)), -1))
+        polys = self._leg_polygons(A, u, q)
+        for _, i in sorted(items, reverse=True):
+            if i < 0:
+                self._draw_platform(img, centre, T.rotation @ R)
+            else:
+                self._draw_leg(img, i, *polys)
+        if self.style.blur_px > 0:
+            k = 2 * math.ceil(3.0 * self.style.blur_px) + 1
+            cv2.GaussianBlur(img, (k, k), self.style.blur_px, dst=img)
+        if self.style.noise_std > 0:
+            n = img.size
+            pos, neg = self._noise_bank(n)
+            off = int(self.rng.integers(0, pos.size - n + 1))
+            shape = img.shape
+            cv2.add(img, pos[off:off + n].reshape(shape), dst=img)
+            cv2.subtract(img, neg[off:off + n].reshape(shape), dst=img)
+        return img
+
+
+def render_legs(
+    camera: Camera,
+    geometry: HexapodGeometry,
+    rotation: np.ndarray,
+    translation: np.ndarray,
+    style: RenderStyle | None = None,
+    rng: np.random.Generator | int | None = None,
+) -> np.ndarray:
+    """One-shot rendering (builds a :class:`Renderer`; reuse one for many frames)."""
+    return Renderer(camera, geometry, style, rng).render(rotation, translation)
