@@ -7,6 +7,8 @@ evidence that explains them (field, problem, source file).
 
 from __future__ import annotations
 
+from typing import Any
+
 from hexapod.exceptions import HexapodError
 
 
@@ -33,3 +35,32 @@ class CameraError(VisionError, ValueError):
 
 class EstimationError(VisionError, ValueError):
     """An estimation cannot run on its input (wrong shapes, too few points)."""
+
+
+class CalibrationError(VisionError, ValueError):
+    """The calibration observations cannot determine a base point (``MATH.md`` section 7).
+
+    Attributes:
+        leg: Index of the leg (0-based), None when the problem is not one leg's.
+        problem: What is wrong.
+        singular_values: Singular values of the leg's stacked system, largest first
+            (None when not computed).
+        equations: Number of equations (visible edges) of the leg.
+        configurations: Number of configurations where the leg has a visible edge.
+    """
+
+    def __init__(
+        self,
+        leg: int | None,
+        problem: str,
+        singular_values: Any = None,
+        equations: int | None = None,
+        configurations: int | None = None,
+    ) -> None:
+        self.leg = leg
+        self.problem = problem
+        self.singular_values = singular_values
+        self.equations = equations
+        self.configurations = configurations
+        where = f"leg {leg}: " if leg is not None else ""
+        super().__init__(f"calibration: {where}{problem}")
