@@ -64,3 +64,47 @@ class CalibrationError(VisionError, ValueError):
         self.configurations = configurations
         where = f"leg {leg}: " if leg is not None else ""
         super().__init__(f"calibration: {where}{problem}")
+
+
+class SourceError(VisionError):
+    """A camera source (device, video file) cannot deliver frames.
+
+    Attributes:
+        source: The device index or file path.
+        problem: What went wrong.
+    """
+
+    def __init__(self, source: object, problem: str) -> None:
+        self.source = source
+        self.problem = problem
+        super().__init__(f"camera source {source!r}: {problem}")
+
+
+class SourceOpenError(SourceError):
+    """The device or file cannot be opened (missing, unreadable, not a video)."""
+
+
+class SourceClosedError(SourceError):
+    """Reading from a source that is closed, or a device that stopped answering."""
+
+
+class FrameError(SourceError):
+    """A frame is unusable: empty, wrong size or wrong type.
+
+    Attributes:
+        index: Index of the frame in the stream.
+        expected: Expected (width, height), if relevant.
+        got: What was received (shape), if relevant.
+    """
+
+    def __init__(self, source: object, problem: str, index: int = -1,
+                 expected: tuple[int, int] | None = None,
+                 got: tuple[int, ...] | None = None) -> None:
+        self.index = index
+        self.expected = expected
+        self.got = got
+        super().__init__(source, f"frame {index}: {problem}")
+
+
+class VideoWriteError(SourceError):
+    """A video file cannot be written (codec unavailable, bad path, wrong frame)."""
