@@ -36,7 +36,9 @@ __all__ = [
     "direction_interaction",
     "direction_task",
     "edge_interaction",
+    "edge_line_factors",
     "edge_line_task",
+    "edge_normal_factors",
     "edge_normal_task",
     "edge_rank_one",
     "inverse_jacobian",
@@ -205,8 +207,21 @@ def edge_normal_task(
     Returns:
         ``L`` (k, 3, 6); the error ``n x n*`` is computed by the caller.
     """
+    a, g = edge_normal_factors(normals, desired, directions, base_points, lengths)
+    return a[:, :, None] * g[:, None, :]
+
+
+def edge_normal_factors(
+    normals: np.ndarray, desired: np.ndarray, directions: np.ndarray, base_points: np.ndarray,
+    lengths: np.ndarray,
+) -> tuple[np.ndarray, np.ndarray]:
+    """Rank-one factors of :func:`edge_normal_task`: ``L_ij = a g^T``, ``a = n* x z``.
+
+    Returns:
+        ``a`` (k, 3) and ``g`` (k, 6).
+    """
     z, g = edge_rank_one(normals, directions, base_points, lengths)
-    return cross(desired, z)[:, :, None] * g[:, None, :]
+    return cross(desired, z), g
 
 
 def edge_line_task(
@@ -229,11 +244,31 @@ def edge_line_task(
     Returns:
         ``L`` (k, 3, 6).
     """
+    a, g = edge_line_factors(lines, desired_lines, normals, directions, base_points, lengths,
+                             line_matrix, line_matrix_inv_t)
+    return a[:, :, None] * g[:, None, :]
+
+
+def edge_line_factors(
+    lines: np.ndarray, desired_lines: np.ndarray, normals: np.ndarray, directions: np.ndarray,
+    base_points: np.ndarray, lengths: np.ndarray, line_matrix: np.ndarray,
+    line_matrix_inv_t: np.ndarray | None = None, line_scale: np.ndarray | None = None,
+) -> tuple[np.ndarray, np.ndarray]:
+    """Rank-one factors of :func:`edge_line_task`: ``L_ij = a g^T``, ``a = l* x J_l z``.
+
+    Args:
+        line_scale: ``|K^T l|`` (k,) if already computed.
+
+    Returns:
+        ``a`` (k, 3) and ``g`` (k, 6).
+    """
     Kit = np.linalg.inv(line_matrix).T if line_matrix_inv_t is None else line_matrix_inv_t
     z, g = edge_rank_one(normals, directions, base_points, lengths)
     l = lines
-    scale = np.sqrt(_dot(l @ line_matrix, l @ line_matrix))
+    if line_scale is None:
+        lK = l @ line_matrix
+        line_scale = np.sqrt(_dot(lK, lK))
     y = z @ Kit.T
     y -= l * _dot(l, y)[:, None]
-    y *= scale[:, None]
-    return cross(desired_lines, y)[:, :, None] * g[:, None, :]
+    y *= line_scale[:, None]
+    return cross(desired_lines, y), g

@@ -38,6 +38,10 @@ from controllers.interaction import cross, direction_interaction
 
 log = logging.getLogger(__name__)
 
+#: Feature fields checked by the fast path: name, shape, visibility mask.
+_FAST_FIELDS = (("normals", (6, 2, 3), "edge_visible"), ("lines", (6, 2, 3), "edge_visible"),
+                ("directions", (6, 3), "direction_visible"))
+
 #: Where the interaction matrix is evaluated (ViSP's CURRENT, DESIRED, MEAN).
 INTERACTIONS = ("current", "desired", "mean")
 
@@ -175,12 +179,16 @@ def solve_least_squares(
     Returns:
         ``x`` (6,), the rank, and the condition number ``s_max / s_min`` (inf when singular).
     """
-    N = L.T @ L
-    b = L.T @ e
+    return solve_normal(L.T @ L, L.T @ e, threshold, damping)
+
+
+def solve_normal(N: np.ndarray, b: np.ndarray, threshold: float = 1e-6, damping: float = 0.0
+                 ) -> tuple[np.ndarray, int, float]:
+    """:func:`solve_least_squares` from the normal equations ``N = L^T L``, ``b = L^T e``."""
     w, V = np.linalg.eigh(N)
     w_max = w[-1]
     if not w_max > 0:
-        return np.zeros(L.shape[1]), 0, math.inf
+        return np.zeros(len(b)), 0, math.inf
     keep = w > (threshold * threshold) * w_max
     rank = int(np.count_nonzero(keep))
     cond = math.sqrt(w_max / w[0]) if w[0] > 0 else math.inf
@@ -209,17 +217,42 @@ def _unit_rows(x: np.ndarray) -> np.ndarray:
 class Stack:
     """The features of one step, as stacked by a :class:`VisionLaw` subclass.
 
+    The interaction blocks are given either densely (``interaction``, (m, 3, 6)) or,
+    when each block is rank one ``L_k = a_k g_k^T`` (the edge features), by their
+    factors ``a`` (m, 3) and ``g`` (m, 6): the law then forms ``L^T L`` and
+    ``L^T e`` without building the 36 x 6 matrix.
+
     Attributes:
         error: (m, 3) error blocks of every feature (unused rows may hold anything finite).
-        interaction: (m, 3, 6) interaction blocks.
+        interaction: (m, 3, 6) interaction blocks, or None with ``a``, ``g``.
         used: (m,) bool, blocks used this step, or None when all are.
         notes: Diagnostics to report.
+        a: (m, 3) left factors of rank-one blocks.
+        g: (m, 6) right factors of rank-one blocks.
     """
 
     error: np.ndarray
-    interaction: np.ndarray
+    interaction: np.ndarray | None
     used: np.ndarray | None
     notes: list[str]
+    a: np.ndarray | None = None
+    g: np.ndarray | None = None
+
+    def normal_equations(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """The used error ``e`` (k,), ``L^T L`` (6, 6) and ``L^T e`` (6,)."""
+        used = self.used
+        err = self.error if used is None else self.error[used]
+        if self.interaction is not None:
+            L = (self.interaction if used is None else self.interaction[used]).reshape(-1, 6)
+            e = err.reshape(-1)
+            return e, L.T @ L, L.T @ e
+        if self.a is None or self.g is None:
+            raise ValueError("Stack: give the interaction blocks or their rank-one factors")
+        a = self.a if used is None else self.a[used]
+        g = self.g if used is None else self.g[used]
+        w = np.einsum("ij,ij->i", a, a)
+        c = np.einsum("ij,ij->i", a, err)
+        return err.reshape(-1), (g.T * w) @ g, g.T @ c
 
 
 class VisionLaw(Controller):
@@ -308,6 +341,23 @@ class VisionLaw(Controller):
 
     # ----------------------------------------------------------------- step
     def _check(self, obs: Observation) -> str | None:
+        # Fast path (the common case): right shapes, everything visible and finite.
+        try:
+            q = obs.lengths
+            if (type(q) is np.ndarray and q.shape == (6,) and math.isfinite(obs.t)
+                    and math.isfinite(q.sum())):
+                for name, shape, mask in _FAST_FIELDS:
+                    if name not in self.features:
+                        continue
+                    arr = getattr(obs, name)
+                    if not (type(arr) is np.ndarray and arr.shape == shape
+                            and arr.dtype == np.float64 and math.isfinite(arr.sum())
+                            and getattr(obs, mask).all()):
+                        break
+                else:
+                    return None
+        except (TypeError, ValueError, AttributeError):
+            pass
         try:
             return observation_problem(obs, self.features)
         except (TypeError, ValueError) as exc:
@@ -329,14 +379,10 @@ class VisionLaw(Controller):
         self._tau_prev[:] = 0.0  # until a command is actually sent
         if isinstance(st, str):
             return Command.refuse(st)
-        if st.used is None:
-            e = st.error.reshape(-1)
-            L = st.interaction.reshape(-1, 6)
-        else:
-            e = st.error[st.used].reshape(-1)
-            L = st.interaction[st.used].reshape(-1, 6)
+        e, N, b = st.normal_equations()
+        rows = e.shape[0]
         error_norm = math.sqrt(float(e @ e))
-        if not (math.isfinite(error_norm) and np.all(np.isfinite(L))):
+        if not (math.isfinite(error_norm) and math.isfinite(float(N.sum()))):
             return Command.refuse("non-finite error or interaction matrix (degenerate features)",
                                   e)
         u = self._u_now
@@ -347,14 +393,14 @@ class VisionLaw(Controller):
                                   "Jacobian", e)
         J = inverse_jacobian_into(self._J, self._A, u)
         lam = self.gain(float(np.abs(e).max()) if e.size else 0.0)
-        out = self._solve(L, e, lam, q, J)
+        out = self._solve(N, b, lam, q, J)
         tau, rank, cond, active, reason = out
         if reason is not None or rank < 6:
             if reason is None:
-                reason = (f"interaction matrix rank {rank} < 6 with {L.shape[0] // 3} "
+                reason = (f"interaction matrix rank {rank} < 6 with {rows // 3} "
                           f"{self.unit} (condition {cond:.3g})")
             return Command(np.zeros(6), error=e, error_norm=error_norm, rank=rank,
-                           condition=cond, features_used=L.shape[0], reason=reason,
+                           condition=cond, features_used=rows, reason=reason,
                            notes=st.notes, active_constraints=active)
         qdot = self._finish(J @ tau)
         if not np.all(np.isfinite(qdot)):
@@ -362,17 +408,17 @@ class VisionLaw(Controller):
         self._tau_prev[:] = tau
         self._q_prev[:] = q
         return Command(qdot, twist=tau, error=e, error_norm=error_norm, rank=rank,
-                       condition=cond, features_used=L.shape[0], notes=st.notes,
+                       condition=cond, features_used=rows, notes=st.notes,
                        active_constraints=active)
 
-    def _solve(self, L: np.ndarray, e: np.ndarray, lam: float, q: np.ndarray, J: np.ndarray
+    def _solve(self, N: np.ndarray, b: np.ndarray, lam: float, q: np.ndarray, J: np.ndarray
                ) -> tuple[np.ndarray, int, float, list[str], str | None]:
-        """The classical law: ``tau = -lambda L^+ e``.
+        """The classical law: ``tau = -lambda L^+ e`` from ``N = L^T L`` and ``b = L^T e``.
 
         Returns:
             ``tau`` (6,), rank, condition, active constraints, refusal reason (or None).
         """
-        x, rank, cond = solve_least_squares(L, e, self.threshold, self.damping)
+        x, rank, cond = solve_normal(N, b, self.threshold, self.damping)
         x *= -lam
         return x, rank, cond, [], None
 

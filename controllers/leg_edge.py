@@ -21,7 +21,13 @@ import numpy as np
 
 from controllers.base import ControllerContext, Observation
 from controllers.exceptions import ContextError
-from controllers.interaction import cross, edge_line_task, edge_normal_task
+from controllers.interaction import (
+    cross,
+    edge_line_factors,
+    edge_line_task,
+    edge_normal_factors,
+    edge_normal_task,
+)
 from controllers.laws import Stack, VisionLaw, check_choice
 
 #: Values of the ``edge_feature`` option.
@@ -206,21 +212,24 @@ class LegEdgeController(VisionLaw):
                 notes.append("desired direction used for never-seen legs "
                              + ", ".join(str(int(i)) for i in np.flatnonzero(approx)))
         e = cross(feat, star).reshape(12, 3)
+        used = None if all_visible else vis.reshape(12)
         if self.interaction == "current":
-            L = self._current_interaction(feat, n, u, q)
+            a, g = self._current_factors(feat, n, u, q)
+            return Stack(e, None, used, notes, a=a, g=g)
         else:
             L = (self._desired_L if self._desired_L is not None
                  else self._desired_interaction(self._desired_lengths(q)))
             if self.interaction == "mean":
-                L = 0.5 * (L + self._current_interaction(feat, n, u, q))
-        return Stack(e, L, None if all_visible else vis.reshape(12), notes)
+                a, g = self._current_factors(feat, n, u, q)
+                L = 0.5 * (L + a[:, :, None] * g[:, None, :])
+        return Stack(e, L, used, notes)
 
-    def _current_interaction(self, feat: np.ndarray, n: np.ndarray, u: np.ndarray,
-                             q: np.ndarray) -> np.ndarray:
+    def _current_factors(self, feat: np.ndarray, n: np.ndarray, u: np.ndarray,
+                         q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         q2 = np.repeat(q, 2)
         u2 = np.repeat(u, 2, axis=0)
         n12 = n.reshape(12, 3)
         if self.use_lines:
-            return edge_line_task(feat.reshape(12, 3), self._l_star.reshape(12, 3), n12, u2,
-                                  self._A2, q2, self._K, self._K_inv_t)
-        return edge_normal_task(n12, self._n_star.reshape(12, 3), u2, self._A2, q2)
+            return edge_line_factors(feat.reshape(12, 3), self._l_star.reshape(12, 3), n12, u2,
+                                     self._A2, q2, self._K, self._K_inv_t)
+        return edge_normal_factors(n12, self._n_star.reshape(12, 3), u2, self._A2, q2)

@@ -67,13 +67,13 @@ class LimitQP:
         """Forget the previous problem (the next solve sets OSQP up again)."""
         self._solver = None
 
-    def solve(self, L: np.ndarray, e: np.ndarray, lam: float, J: np.ndarray,
+    def solve(self, N: np.ndarray, b: np.ndarray, lam: float, J: np.ndarray,
               lower: np.ndarray, upper: np.ndarray) -> tuple[np.ndarray | None, str]:
         """Solve for ``tau``.
 
         Args:
-            L: (m, 6) stacked interaction matrix.
-            e: (m,) stacked error.
+            N: (6, 6) ``L^T L`` of the stacked interaction matrix ``L``.
+            b: (6,) ``L^T e`` with the stacked error ``e``.
             lam: Gain [1/s].
             J: (6, 6) inverse Jacobian.
             lower: (6,) lower bounds on ``J tau`` [m/s].
@@ -82,11 +82,9 @@ class LimitQP:
         Returns:
             ``tau`` (None on failure) and the OSQP status (or the failure reason).
         """
-        P = L.T @ L
-        P += self._eye_eps
+        P = N + self._eye_eps
         P *= 2.0
-        c = L.T @ e
-        c *= 2.0 * lam
+        c = (2.0 * lam) * b
         if not (np.all(np.isfinite(P)) and np.all(np.isfinite(c)) and np.all(np.isfinite(J))
                 and np.all(np.isfinite(lower)) and np.all(np.isfinite(upper))):
             return None, "non-finite QP data"
@@ -196,9 +194,9 @@ class QPLaw(VisionLaw):
         self._vmax = float(context.max_speed if self.max_speed is None else self.max_speed)
         self.qp.reset()
 
-    def _solve(self, L: np.ndarray, e: np.ndarray, lam: float, q: np.ndarray, J: np.ndarray
+    def _solve(self, N: np.ndarray, b: np.ndarray, lam: float, q: np.ndarray, J: np.ndarray
                ) -> tuple[np.ndarray, int, float, list[str], str | None]:
-        w = np.linalg.eigvalsh(L.T @ L)
+        w = np.linalg.eigvalsh(N)
         w_max = float(w[-1])
         rank = int(np.count_nonzero(w > (self.threshold ** 2) * w_max)) if w_max > 0 else 0
         cond = math.sqrt(w_max / w[0]) if w[0] > 0 else math.inf
@@ -210,7 +208,7 @@ class QPLaw(VisionLaw):
         stroke_hi = (self._q_hi - q) * inv_dt
         lo = np.clip(stroke_lo, -vmax, vmax, out=self._lower)
         hi = np.clip(stroke_hi, -vmax, vmax, out=self._upper)
-        tau, status = self.qp.solve(L, e, lam, J, lo, hi)
+        tau, status = self.qp.solve(N, b, lam, J, lo, hi)
         if tau is None:
             return np.zeros(6), rank, cond, [], status
         qdot = J @ tau
