@@ -11,19 +11,34 @@ from vision.cameras import (
     omni_camera,
 )
 from vision.exceptions import CameraError, EstimationError, VisionError
-from vision.legs import directions_from_edges, leg_edges
+from vision.legs import (
+    EdgePoints,
+    LegObservation,
+    directions_from_edges,
+    edge_points,
+    leg_edges,
+    limb_points,
+    observation_edge_points,
+    observe_legs,
+)
 
 __all__ = [
     "Camera",
     "CameraError",
+    "EdgePoints",
     "EstimationError",
+    "LegObservation",
     "PerspectiveCamera",
     "UnifiedCamera",
     "VisionError",
     "camera_preset",
     "directions_from_edges",
+    "edge_points",
     "front_camera",
     "leg_edges",
+    "limb_points",
     "load_camera",
+    "observation_edge_points",
+    "observe_legs",
     "omni_camera",
 ]

@@ -639,24 +639,45 @@ def _pose_looking_at(eye: np.ndarray, target: np.ndarray, up: np.ndarray) -> Tra
     return Transform(base_R_cam, np.asarray(eye, float)).inverse()
 
 
-#: Front camera placement (base frame, metres): projection centre and aim point.
-FRONT_EYE = np.array([0.70, 0.0, 0.25])
-FRONT_TARGET = np.array([0.0, 0.0, 0.20])
+#: Front camera placement for the reference robot: horizontal distance from the base
+#: centre [m], azimuth from the base x axis [deg], height of the projection centre
+#: [m] and height of the aim point on the base z axis [m].
+FRONT_DISTANCE = 0.80
+FRONT_AZIMUTH_DEG = 30.0
+FRONT_EYE_HEIGHT = 0.0
+FRONT_TARGET_HEIGHT = 0.265
 
 
 def front_camera(geometry: HexapodGeometry | None = None) -> PerspectiveCamera:
     """The front perspective camera of seed 002 (``MATH.md`` section 9).
 
-    4.8 mm lens on a 1024x780 sensor with 4.65 um pixels (``f = 4.8 / 0.00465 =
-    1032.26 px``), principal point at the image centre, no skew. Placed about
-    0.7 m in front of the base centre (along the base x axis) and looking at the
-    legs; the geometry (default: the reference robot) scales the placement.
+    Intrinsics: 4.8 mm lens on a 1024x780 sensor with 4.65 um square pixels
+    (``f = 4.8 / 0.00465 = 1032.26 px``, horizontal field of view 53 deg),
+    principal point at the image centre ``(511.5, 389.5)``, no skew.
+
+    Placement (reference robot): projection centre 0.80 m from the base centre,
+    horizontally, at azimuth 30 deg (between the base joint pair at 0 deg and the
+    platform joint pair at 60 deg) and at the height of the base joints, aimed at
+    the point of the base axis 0.265 m high, image rows vertical. The seed says
+    "about 0.7 m"; at 0.70 m the nearest legs (0.45 m tall, 0.45 m away) cannot fit
+    in the 780-pixel height with this lens, at 0.80 m every leg stays entirely inside
+    the image over the workspace of :func:`hexapod.sample_poses` (at least 2 pixels
+    of margin on 4,000 random poses, checked by the tests). From there, legs hide
+    one another in part of the workspace (about 17 % of the random poses have at
+    least one hidden edge), as in the seed. For another geometry the placement is
+    scaled by the base radius (distance) and the home height (aim point).
     """
     geo = deltalab() if geometry is None else geometry
     scale = float(np.max(np.linalg.norm(geo.base_points[:, :2], axis=1))) / 0.270
+    zscale = geo.home_height / 0.3594098
+    zbase = float(np.mean(geo.base_points[:, 2]))
     f = FRONT_FOCAL_LENGTH / FRONT_PIXEL_SIZE
     K = _intrinsics(f, 1024, 780)
-    pose = _pose_looking_at(FRONT_EYE * scale, FRONT_TARGET * scale, np.array([0.0, 0.0, 1.0]))
+    a = np.deg2rad(FRONT_AZIMUTH_DEG)
+    d = FRONT_DISTANCE * scale
+    eye = np.array([d * np.cos(a), d * np.sin(a), zbase + FRONT_EYE_HEIGHT * zscale])
+    target = np.array([0.0, 0.0, zbase + FRONT_TARGET_HEIGHT * zscale])
+    pose = _pose_looking_at(eye, target, np.array([0.0, 0.0, 1.0]))
     return PerspectiveCamera(K, 1024, 780, pose, name="front")
 
 
@@ -668,13 +689,22 @@ def omni_camera(geometry: HexapodGeometry | None = None) -> UnifiedCamera:
     """The omnidirectional camera of seed 003 (``MATH.md`` section 9).
 
     Parabolic mirror with an orthographic lens (``xi = 1``), 640x480 image,
-    principal point at the image centre, at the base centre with its axis along
-    the base z axis (looking up at the platform). Camera x = base x, y = base y.
+    generalised focal length 200 px, principal point at the image centre
+    ``(319.5, 239.5)``; the mirror (sphere) centre is at the centre of the base
+    joint circle, its axis along the base z axis (looking up at the platform),
+    camera x = base x, camera y = base y.
+
+    With this focal length a point at the height of the base joints is imaged on
+    the circle of radius 200 px and every leg of the reference robot crosses the
+    whole annulus of diameters 184 to 370 px over the workspace (its base end is
+    beyond 193 px, its platform end within 89 px of the image centre), as in
+    seed 003; no leg hides another one enough to lose an edge.
     """
     geo = deltalab() if geometry is None else geometry
-    del geo
+    centre = np.array([*np.mean(geo.base_points[:, :2], axis=0),
+                       float(np.mean(geo.base_points[:, 2]))])
     K = _intrinsics(OMNI_FOCAL, 640, 480)
-    return UnifiedCamera(K, 1.0, 640, 480, Transform.identity(), name="omni")
+    return UnifiedCamera(K, 1.0, 640, 480, Transform(np.eye(3), -centre), name="omni")
 
 
 _PRESETS = {"front": front_camera, "omni": omni_camera}

@@ -15,7 +15,14 @@ whole project (simulation, estimation and control).
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+from typing import Any, NamedTuple
+
 import numpy as np
+
+from hexapod.geometry import HexapodGeometry
+from hexapod.kinematics import legs_in_frame
+from vision.cameras import Camera, PerspectiveCamera
 
 
 def leg_edges(
@@ -56,3 +63,367 @@ def directions_from_edges(normals: np.ndarray) -> np.ndarray:
     n = np.asarray(normals, dtype=float)
     d = np.cross(n[..., 1, :], n[..., 0, :])
     return d / np.linalg.norm(d, axis=-1, keepdims=True)
+
+
+# ============================================================================
+# Observation of the legs by a camera: edges, image lines, visibility.
+# ============================================================================
+
+#: Default number of points sampled along each edge to decide its visibility.
+DEFAULT_VISIBILITY_SAMPLES = 16
+#: Default fraction of visible samples for an edge to count as observed.
+DEFAULT_MIN_VISIBLE_FRACTION = 0.5
+
+
+@dataclass(frozen=True)
+class LegObservation:
+    """What a camera sees of the six legs, batched over leading axes ``(...)``.
+
+    Every vector is in the camera frame. Edge ``j`` of leg ``i`` is the limb
+    (apparent contour) of the leg cylinder on the interpretation plane of normal
+    ``normals[..., i, j, :]``: the 3D segment ``A_i + r n_ij + s q_i u_i``,
+    ``s`` in ``[0, 1]``.
+
+    Visibility rule: the edge is sampled at ``n_samples`` points ``s = (k + 1/2) /
+    n_samples``; a sample is visible when it is imaged (in front of the camera /
+    inside the mirror's field of view, and inside the image) and the segment from
+    the projection centre to it crosses neither another leg (a solid finite
+    cylinder of radius ``r`` between ``A_j`` and ``B_j``) nor the platform disc.
+    An edge is observed (``edge_visible``) when its edges exist (camera outside
+    the cylinder) and at least ``min_visible_fraction`` of its samples are visible.
+
+    Attributes:
+        base_points: (..., 6, 3) ``A_i`` [m].
+        directions: (..., 6, 3) unit ``u_i``.
+        lengths: (..., 6) ``q_i`` [m].
+        normals: (..., 6, 2, 3) edge normals (convention of :func:`leg_edges`); NaN
+            where the edges do not exist. Given for hidden edges too: mask them
+            with ``edge_visible``.
+        exists: (..., 6) False where the camera is inside the leg cylinder.
+        edge_visible: (..., 6, 2) the edge is observed.
+        visible_fraction: (..., 6, 2) fraction of visible samples.
+        lines: (..., 6, 2, 3) unit lines in normalised pixel coordinates
+            (:meth:`PerspectiveCamera.normal_to_line`), None for other cameras.
+        segments: (..., 6, 2, 2, 2) pixels of the two ends (``s = 0``: base end,
+            ``s = 1``: platform end) of each edge segment; NaN where not imaged.
+            (For a unified camera the image of the edge is an arc of the conic
+            between these ends.)
+        visible_interval: (..., 6, 2, 2) ``s`` of the first and last visible samples
+            (NaN when none is visible).
+        platform_centre: (..., 3) centre of the platform disc [m].
+        platform_normal: (..., 3) unit normal of the platform disc.
+        platform_radius: Radius of the platform disc [m].
+        radius: Leg radius [m].
+    """
+
+    base_points: np.ndarray
+    directions: np.ndarray
+    lengths: np.ndarray
+    normals: np.ndarray
+    exists: np.ndarray
+    edge_visible: np.ndarray
+    visible_fraction: np.ndarray
+    lines: np.ndarray | None
+    segments: np.ndarray
+    visible_interval: np.ndarray
+    platform_centre: np.ndarray
+    platform_normal: np.ndarray
+    platform_radius: float
+    radius: float
+
+    @property
+    def direction_visible(self) -> np.ndarray:
+        """(..., 6) both edges of the leg are observed (its direction is measurable)."""
+        return np.all(self.edge_visible, axis=-1)
+
+    @property
+    def batch_shape(self) -> tuple[int, ...]:
+        """Leading batch shape ``(...)``."""
+        return tuple(self.lengths.shape[:-1])
+
+
+def limb_points(
+    base_points: np.ndarray,
+    directions: np.ndarray,
+    radius: float | np.ndarray,
+    lengths: np.ndarray,
+    normals: np.ndarray,
+    s: np.ndarray,
+) -> np.ndarray:
+    """Points ``A_i + r n_ij + s q_i u_i`` on the edges (limbs) of the legs.
+
+    Args:
+        base_points: (..., 6, 3).
+        directions: (..., 6, 3).
+        radius: Leg radius [m].
+        lengths: (..., 6).
+        normals: (..., 6, 2, 3) edge normals.
+        s: Fractions of the leg length, broadcastable to (..., 6, 2, N).
+
+    Returns:
+        (..., 6, 2, N, 3) camera-frame points [m].
+    """
+    A = np.asarray(base_points, float)[..., :, None, None, :]
+    u = np.asarray(directions, float)[..., :, None, None, :]
+    q = np.asarray(lengths, float)[..., :, None, None, None]
+    n = np.asarray(normals, float)[..., None, :]
+    s = np.asarray(s, float)[..., None]
+    r = np.asarray(radius, float)
+    if r.ndim:
+        r = r[..., None, None, None]
+    return A + r * n + (s * q) * u
+
+
+def occluded_by_legs(
+    points: np.ndarray,
+    base_points: np.ndarray,
+    directions: np.ndarray,
+    lengths: np.ndarray,
+    radius: float,
+    exclude_own: bool = True,
+) -> np.ndarray:
+    """Whether the segments from the projection centre to points cross a leg.
+
+    Each leg is a solid finite cylinder of radius ``r`` around the segment
+    ``A_j .. A_j + q_j u_j``. The intersection of the open segment ``s' P``,
+    ``s'`` in ``(0, 1)``, with it is the intersection of three intervals of ``s'``:
+    inside the infinite cylinder (a quadratic), between the two end planes, and
+    ``(0, 1)``.
+
+    Args:
+        points: (..., 6, 2, N, 3) points of the edges of leg ``i`` (camera frame).
+        base_points, directions, lengths: the legs, (..., 6, 3), (..., 6, 3), (..., 6).
+        radius: Leg radius [m].
+        exclude_own: Skip leg ``i`` for the points of leg ``i`` (its limbs are
+            tangent to it, never hidden by it).
+
+    Returns:
+        (..., 6, 2, N) bool.
+    """
+    P = np.asarray(points, float)[..., None, :]  # (..., 6i, 2, N, 1, 3)
+    lead = P.shape[:-5]
+    A = np.broadcast_to(base_points, (*lead, 6, 3)).reshape(*lead, 1, 1, 1, 6, 3)
+    u = np.broadcast_to(directions, (*lead, 6, 3)).reshape(*lead, 1, 1, 1, 6, 3)
+    q = np.broadcast_to(lengths, (*lead, 6)).reshape(*lead, 1, 1, 1, 6)
+    Pu = np.sum(P * u, axis=-1)  # (..., 6i, 2, N, 6j)
+    Au = np.sum(A * u, axis=-1)  # (..., 1, 1, 1, 6j)
+    Pp = P - Pu[..., None] * u
+    Ap = A - Au[..., None] * u
+    a = np.sum(Pp * Pp, axis=-1)
+    b = -2.0 * np.sum(Pp * Ap, axis=-1)
+    c = np.sum(Ap * Ap, axis=-1) - radius * radius
+    disc = b * b - 4.0 * a * c
+    with np.errstate(invalid="ignore", divide="ignore"):
+        sq = np.sqrt(np.where(disc > 0, disc, 0.0))
+        a_safe = np.where(a > 0, a, 1.0)
+        s1 = (-b - sq) / (2.0 * a_safe)
+        s2 = (-b + sq) / (2.0 * a_safe)
+        # Ray parallel to the axis (a == 0): inside for every s' iff c < 0.
+        par = a <= 1e-300
+        s1 = np.where(par, np.where(c < 0, -np.inf, np.inf), s1)
+        s2 = np.where(par, np.where(c < 0, np.inf, -np.inf), s2)
+        hit_cyl = (disc > 0) | par
+        # Axial interval: 0 <= s' Pu - Au <= q.
+        Pu_safe = np.where(Pu != 0, Pu, 1.0)
+        t0 = Au / Pu_safe
+        t1 = (Au + q) / Pu_safe
+        lo_ax = np.where(Pu > 0, t0, t1)
+        hi_ax = np.where(Pu > 0, t1, t0)
+        flat = Pu == 0
+        inside_ax = (-Au >= 0) & (-Au <= q)
+        lo_ax = np.where(flat, np.where(inside_ax, -np.inf, np.inf), lo_ax)
+        hi_ax = np.where(flat, np.where(inside_ax, np.inf, -np.inf), hi_ax)
+    lo = np.maximum(np.maximum(s1, lo_ax), 0.0)
+    hi = np.minimum(np.minimum(s2, hi_ax), 1.0 - 1e-9)
+    hit = hit_cyl & (lo < hi)
+    if exclude_own:
+        hit &= ~np.eye(6, dtype=bool)[:, None, None, :]
+    return np.any(hit, axis=-1)
+
+
+def occluded_by_disc(
+    points: np.ndarray, centre: np.ndarray, normal: np.ndarray, disc_radius: float
+) -> np.ndarray:
+    """Whether the segments from the projection centre to points cross a disc.
+
+    Args:
+        points: (..., 6, 2, N, 3) camera-frame points.
+        centre: (..., 3) disc centre; normal: (..., 3) unit disc normal.
+        disc_radius: [m].
+
+    Returns:
+        (..., 6, 2, N) bool.
+    """
+    P = np.asarray(points, float)
+    c = np.asarray(centre, float)[..., None, None, None, :]
+    nd = np.asarray(normal, float)[..., None, None, None, :]
+    den = np.sum(nd * P, axis=-1)
+    num = np.sum(nd * c, axis=-1)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        s = num / np.where(den != 0, den, np.nan)
+    X = s[..., None] * P
+    d2 = np.sum((X - c) ** 2, axis=-1)
+    with np.errstate(invalid="ignore"):
+        return (s > 0) & (s < 1.0 - 1e-9) & (d2 <= disc_radius**2)
+
+
+def observe_legs(
+    camera: Camera,
+    geometry: HexapodGeometry,
+    rotation: np.ndarray,
+    translation: np.ndarray,
+    min_visible_fraction: float = DEFAULT_MIN_VISIBLE_FRACTION,
+    n_samples: int = DEFAULT_VISIBILITY_SAMPLES,
+    platform_radius: float | None = None,
+    occlusion: bool = True,
+) -> LegObservation:
+    """Simulate what a camera sees of the legs at platform poses (batched, vectorised).
+
+    Args:
+        camera: The camera (its ``camera_from_base`` places it).
+        geometry: The robot (leg radius ``geometry.leg_radius``).
+        rotation: (..., 3, 3) platform orientation in the base frame.
+        translation: (..., 3) platform position in the base frame [m].
+        min_visible_fraction: Fraction of visible samples (in ``(0, 1]``) for an edge
+            to be observed (see :class:`LegObservation`).
+        n_samples: Samples per edge for the visibility test.
+        platform_radius: Radius of the platform disc [m]; default: the largest
+            distance of a platform joint from the platform origin.
+        occlusion: Test occlusions by the legs and the platform (True), or only
+            existence and the image bounds (False).
+
+    Returns:
+        A :class:`LegObservation`.
+    """
+    if not 0.0 < min_visible_fraction <= 1.0:
+        raise ValueError(f"min_visible_fraction must be in (0, 1], got {min_visible_fraction}")
+    if n_samples < 1:
+        raise ValueError(f"n_samples must be >= 1, got {n_samples}")
+    T = camera.camera_from_base
+    legs = legs_in_frame(geometry, rotation, translation, T)
+    A, u, q = legs.base_points, legs.directions, legs.lengths
+    r = geometry.leg_radius
+    normals, exists = leg_edges(A, u, r)
+    R = np.asarray(rotation, float)
+    centre = T.apply(np.asarray(translation, float))
+    disc_normal = T.rotate(R[..., :, 2])
+    rho = (
+        float(np.max(np.linalg.norm(geometry.platform_points, axis=1)))
+        if platform_radius is None
+        else float(platform_radius)
+    )
+    s = (np.arange(n_samples) + 0.5) / n_samples
+    P = limb_points(A, u, r, q, normals, s)
+    _, imaged = camera.project(P)
+    vis = imaged & exists[..., None, None]
+    if occlusion:
+        vis &= ~occluded_by_legs(P, A, u, q, r)
+        vis &= ~occluded_by_disc(P, centre, disc_normal, rho)
+    frac = vis.mean(axis=-1)
+    edge_visible = exists[..., None] & (frac >= min_visible_fraction - 1e-12)
+    with np.errstate(invalid="ignore"):
+        s_first = np.where(vis.any(-1), s[np.argmax(vis, axis=-1)], np.nan)
+        s_last = np.where(vis.any(-1), s[n_samples - 1 - np.argmax(vis[..., ::-1], axis=-1)],
+                          np.nan)
+    ends = limb_points(A, u, r, q, normals, np.array([0.0, 1.0]))
+    segments, _ = camera.project(ends)
+    lines = camera.normal_to_line(normals) if isinstance(camera, PerspectiveCamera) else None
+    return LegObservation(
+        base_points=A,
+        directions=u,
+        lengths=q,
+        normals=normals,
+        exists=exists,
+        edge_visible=edge_visible,
+        visible_fraction=frac,
+        lines=lines,
+        segments=segments,
+        visible_interval=np.stack([s_first, s_last], axis=-1),
+        platform_centre=centre,
+        platform_normal=disc_normal,
+        platform_radius=rho,
+        radius=float(r),
+    )
+
+
+class EdgePoints(NamedTuple):
+    """Pixels sampled along the edges: ``pixels`` (..., 6, 2, N, 2) and ``visible``
+    (..., 6, 2, N) (imaged, inside the image, not occluded when tested)."""
+
+    pixels: np.ndarray
+    visible: np.ndarray
+
+
+def edge_points(
+    camera: Camera,
+    base_points: np.ndarray,
+    directions: np.ndarray,
+    radius: float,
+    lengths: np.ndarray,
+    n_points: int,
+    normals: np.ndarray | None = None,
+    span: tuple[Any, Any] = (0.0, 1.0),
+    occlusion: bool = True,
+    platform: tuple[np.ndarray, np.ndarray, float] | None = None,
+) -> EdgePoints:
+    """Pixels of points sampled along each edge (for estimation and noise studies).
+
+    Points are at ``s = s0 + (s1 - s0) k / (n_points - 1)``, ``k = 0..n_points-1``
+    (the middle of the span when ``n_points = 1``), on the limb ``A_i + r n_ij +
+    s q_i u_i``.
+
+    Args:
+        camera: The camera.
+        base_points, directions, lengths: (..., 6, 3), (..., 6, 3), (..., 6), camera frame.
+        radius: Leg radius [m].
+        n_points: Points per edge.
+        normals: (..., 6, 2, 3) edge normals; computed with :func:`leg_edges` if None.
+        span: ``(s0, s1)``, fractions of the leg length, each a scalar or broadcastable
+            to (..., 6, 2) (e.g. ``obs.visible_interval[..., 0]`` and ``[..., 1]``).
+        occlusion: Mark points hidden by the other legs (and the platform disc, if
+            ``platform`` is given) as not visible.
+        platform: ``(centre (..., 3), normal (..., 3), radius)`` of the platform disc in
+            the camera frame (``obs.platform_centre, obs.platform_normal,
+            obs.platform_radius``).
+
+    Returns:
+        :class:`EdgePoints` ``(pixels, visible)``; pixels NaN where not imaged.
+    """
+    if n_points < 1:
+        raise ValueError(f"n_points must be >= 1, got {n_points}")
+    A = np.asarray(base_points, float)
+    u = np.asarray(directions, float)
+    q = np.asarray(lengths, float)
+    if normals is None:
+        normals, _ = leg_edges(A, u, radius)
+    normals = np.asarray(normals, float)
+    exists = np.all(np.isfinite(normals), axis=(-2, -1))
+    s0 = np.asarray(span[0], float)[..., None]
+    s1 = np.asarray(span[1], float)[..., None]
+    k = np.linspace(0.0, 1.0, n_points) if n_points > 1 else np.array([0.5])
+    s = s0 + (s1 - s0) * k
+    P = limb_points(A, u, radius, q, normals, s)
+    pix, vis = camera.project(P)
+    vis = vis & exists[..., None, None] & np.isfinite(s)
+    if occlusion:
+        vis &= ~occluded_by_legs(P, A, u, q, radius)
+        if platform is not None:
+            vis &= ~occluded_by_disc(P, platform[0], platform[1], float(platform[2]))
+    return EdgePoints(pix, vis)
+
+
+def observation_edge_points(
+    camera: Camera, obs: LegObservation, n_points: int, visible_part: bool = True
+) -> EdgePoints:
+    """:func:`edge_points` on an observation: ``n_points`` per edge, spread over the
+    visible interval of the edge (``visible_part``) or the whole edge, with the
+    occlusions of the observation (legs and platform)."""
+    if visible_part:
+        span = (obs.visible_interval[..., 0], obs.visible_interval[..., 1])
+    else:
+        span = (0.0, 1.0)
+    return edge_points(
+        camera, obs.base_points, obs.directions, obs.radius, obs.lengths, n_points,
+        normals=obs.normals, span=span, occlusion=True,
+        platform=(obs.platform_centre, obs.platform_normal, obs.platform_radius),
+    )
