@@ -50,7 +50,8 @@ def cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     """Cross product along the last axis (faster than :func:`numpy.cross` on small arrays)."""
     a0, a1, a2 = a[..., 0], a[..., 1], a[..., 2]
     b0, b1, b2 = b[..., 0], b[..., 1], b[..., 2]
-    out = np.empty(np.broadcast_shapes(a.shape, b.shape))
+    shape = a.shape if a.shape == b.shape else np.broadcast_shapes(a.shape, b.shape)
+    out = np.empty(shape)
     out[..., 0] = a1 * b2 - a2 * b1
     out[..., 1] = a2 * b0 - a0 * b2
     out[..., 2] = a0 * b1 - a1 * b0
@@ -163,7 +164,7 @@ def edge_rank_one(normals: np.ndarray, directions: np.ndarray, base_points: np.n
 
 def direction_task(
     directions: np.ndarray, desired: np.ndarray, base_points: np.ndarray, lengths: np.ndarray,
-    error: bool = True,
+    error: bool = True, desired_skew: np.ndarray | None = None,
 ) -> tuple[np.ndarray | None, np.ndarray]:
     """Leg-direction task: ``e_i = u_i x u_i*``, ``L_i = -[u_i*]_x M_i``.
 
@@ -174,6 +175,7 @@ def direction_task(
         base_points: (k, 3) ``A_i`` [m].
         lengths: (k,) leg lengths where ``M_i`` is evaluated [m].
         error: Compute ``u x u*`` with ``u = directions`` (False: return None).
+        desired_skew: ``[u_i*]_x`` (k, 3, 3) if precomputed.
 
     Returns:
         ``e`` (k, 3) (or None) and ``L`` (k, 3, 6).
@@ -181,13 +183,13 @@ def direction_task(
     u, us = directions, desired
     k = u.shape[0]
     # C = -(1/q) [u*]_x P(u) = -(1/q) ([u*]_x - (u* x u) u^T)
-    C = skew(us)
+    C = skew(us) if desired_skew is None else desired_skew.copy()
     C -= cross(us, u)[:, :, None] * u[:, None, :]
     C *= (-1.0 / lengths)[:, None, None]
     B = base_points + lengths[:, None] * u
     L = np.empty((k, 3, 6))
     L[:, :, :3] = C
-    L[:, :, 3:] = cross(B[:, None, :], C)  # rows of -C [B]_x are B x c_k
+    L[:, :, 3:] = cross(np.broadcast_to(B[:, None, :], C.shape), C)  # rows of -C[B]_x: B x c_k
     return (cross(u, us) if error else None), L
 
 

@@ -14,6 +14,7 @@ from controllers.base import ControllerContext, Observation
 from controllers.exceptions import ContextError
 from controllers.interaction import cross, direction_task
 from controllers.laws import Stack, VisionLaw
+from hexapod.se3 import skew
 
 
 class LegDirectionController(VisionLaw):
@@ -54,6 +55,7 @@ class LegDirectionController(VisionLaw):
         if np.any(np.abs(norms - 1.0) > 1e-6):
             raise ContextError(self.name, "goal.directions", f"not unit vectors: norms {norms}")
         self._u_star = us
+        self._u_star_skew = skew(us)
         self._goal_visible = vis
         # Fill value for hidden directions: the desired ones (keeps the arithmetic finite).
         self._fill = np.where(vis[:, None], us, np.array([0.0, 0.0, 1.0]))
@@ -90,7 +92,7 @@ class LegDirectionController(VisionLaw):
         A = self._A
         e = cross(u, us)
         if self.interaction == "current":
-            _, L = direction_task(u, us, A, q, error=False)
+            _, L = direction_task(u, us, A, q, error=False, desired_skew=self._u_star_skew)
         else:
             _, L = direction_task(us, us, A, self._desired_lengths(q), error=False)
             if self.interaction == "mean":
