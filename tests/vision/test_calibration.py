@@ -427,3 +427,16 @@ def test_calibrate_in_world(geometry: HexapodGeometry, rng: np.random.Generator)
     assert 0.01 < s2["max_error_mm"] < 20
     with pytest.raises(ValueError, match="noise_deg"):
         calibrate_in_world(geometry, cam, cal, SimpleNamespace(model="pixel"), rng)
+
+
+def test_calibration_study_command(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    from benchmarks.calibration_study import main
+
+    out = tmp_path / "study.json"
+    assert main(["--repeats", "3", "--json", str(out)]) == 0
+    printed = capsys.readouterr().out
+    assert "seed: max 1.4 mm, median < 1 mm" in printed
+    table = json.loads(out.read_text())
+    assert [r["noise_deg"] for r in table["results"]] == [0.01, 0.05, 0.1]
+    assert all(r["repetitions"] == 3 for r in table["results"])
+    assert table["results"][0]["max_error_mm"] < table["results"][2]["max_error_mm"]
