@@ -567,29 +567,34 @@ class PerspectiveTracker:
         d = np.sum(lines[:, :, None, :2] * pix, -1) + lines[:, :, None, 2]
         return pix - d[..., None] * lines[:, :, None, :2]
 
-    def detect(self, image: np.ndarray, prediction: LegPrediction) -> EdgeDetection:
+    def detect(
+        self, image: np.ndarray, prediction: LegPrediction,
+        search_px: float | None = None, refine_px: float | None = None,
+    ) -> EdgeDetection:
         """Find the twelve edges near their prediction.
 
         Args:
             image: (height, width) uint8 grey image (BGR is converted).
             prediction: Predicted legs in the estimated camera frame.
+            search_px: Overrides the search half-length of this call [px].
+            refine_px: Overrides the second-pass half-length of this call [px].
 
         Returns:
             An :class:`EdgeDetection` (``expected_points = n_samples``).
         """
         image = _check_image(image, self.camera)
+        search = self.search_px if search_px is None else float(search_px)
+        refine = self.refine_px if refine_px is None else float(refine_px)
         seg = self.predicted_segments(prediction)
         lines = _pixel_lines(self.camera, prediction.normals)
-        det = self._pass(image, seg, lines, prediction, self.search_px)
-        if self.refine_px > 0:
+        det = self._pass(image, seg, lines, prediction, search)
+        if refine > 0:
             ok = det.edge_visible
             l2 = np.where(ok[..., None], _pixel_lines(self.camera, det.normals), lines)
             d = np.sum(l2[:, :, None, :2] * seg, -1) + l2[:, :, None, 2]
             seg2 = seg - d[..., None] * l2[:, :, None, :2]
             pred2 = prediction.with_normals(det.normals)
-            det2 = self._pass(image, seg2, l2, pred2, np.where(ok, self.refine_px,
-                                                                self.search_px))
-            det = det2
+            det = self._pass(image, seg2, l2, pred2, np.where(ok, refine, search))
         return det
 
     def _pass(

@@ -1,0 +1,110 @@
+"""Rendering of the legs: image content, edges at the true limbs, noise, clutter, speed."""
+
+from __future__ import annotations
+
+import time
+
+import numpy as np
+import pytest
+
+from hexapod.workspace import home_pose, sample_poses
+from vision.cameras import front_camera, omni_camera
+from vision.legs import edge_points, observe_legs
+from vision.render import Renderer, RenderError, RenderStyle, render_legs
+
+
+@pytest.mark.parametrize("make_camera", [front_camera, omni_camera])
+def test_legs_are_dark_on_the_plain_background(geometry, make_camera):
+    cam = make_camera(geometry)
+    R, t = home_pose(geometry)
+    img = render_legs(cam, geometry, R, t, RenderStyle(platform=False))
+    assert img.shape == (cam.height, cam.width) and img.dtype == np.uint8
+    obs = observe_legs(cam, geometry, R, t)
+    # Points on the leg axes (middle third) are dark, the image corners are background.
+    s = np.linspace(0.35, 0.65, 9)
+    P = obs.base_points[:, None, :] + (s[None, :, None] * obs.lengths[:, None, None]) \
+        * obs.directions[:, None, :]
+    pix, vis = cam.project(P)
+    px = np.round(pix[vis]).astype(int)
+    assert px.shape[0] > 20
+    assert np.all(img[px[:, 1], px[:, 0]] < 110)
+    assert img[0, 0] == 230 and img[-1, -1] == 230
+
+
+@pytest.mark.parametrize("make_camera", [front_camera, omni_camera])
+def test_rendered_edges_lie_on_the_true_limbs(geometry, make_camera):
+    """The 50 % grey level across each limb is within 0.3 px of the true limb."""
+    cam = make_camera(geometry)
+    R, t = home_pose(geometry)
+    img = render_legs(cam, geometry, R, t, RenderStyle(shading_bands=1, platform=False))
+    obs = observe_legs(cam, geometry, R, t)
+    ep = edge_points(cam, obs.base_points, obs.directions, obs.radius, obs.lengths, 12,
+                     normals=obs.normals, span=(0.3, 0.7))
+    import cv2
+
+    errors = []
+    for i in range(6):
+        for j in range(2):
+            n = obs.normals[i, j]
+            for p, v in zip(ep.pixels[i, j], ep.visible[i, j], strict=True):
+                if not v:
+                    continue
+                # Image direction of the normal of the edge: gradient of n.lift(p).
+                e = 1e-3
+                g = np.array([n @ cam.lift(p + [e, 0]) - n @ cam.lift(p - [e, 0]),
+                              n @ cam.lift(p + [0, e]) - n @ cam.lift(p - [0, e])])
+                g /= np.linalg.norm(g)  # points outwards (n.X > 0 outside the leg)
+                s = np.linspace(-3, 3, 601)
+                q = (p[None] + s[:, None] * g[None]).astype(np.float32)
+                prof = cv2.remap(img.astype(np.float32), q[:, :1].T.copy(), q[:, 1:].T.copy(),
+                                 cv2.INTER_LINEAR)[0]
+                level = 0.5 * (35.0 + 230.0)
+                k = np.argmax(prof > level)
+                errors.append(s[k])
+    errors = np.abs(np.array(errors))
+    assert errors.size > 60
+    p95 = np.percentile(errors, 95)
+    assert np.median(errors) < 0.15 and p95 < 0.4, (np.median(errors), p95)
+
+
+def test_noise_and_determinism(geometry):
+    cam = omni_camera(geometry)
+    R, t = home_pose(geometry)
+    a = Renderer(cam, geometry, RenderStyle(noise_std=4.0), rng=5).render(R, t)
+    b = Renderer(cam, geometry, RenderStyle(noise_std=4.0), rng=5).render(R, t)
+    c = Renderer(cam, geometry, RenderStyle(noise_std=4.0), rng=6).render(R, t)
+    assert np.array_equal(a, b) and not np.array_equal(a, c)
+    patch = a[:40, :40].astype(float)  # plain background
+    assert 3.0 < patch.std() < 5.0 and abs(patch.mean() - 230) < 1.0
+
+
+def test_cluttered_background_is_textured_and_brighter_than_legs(geometry):
+    cam = front_camera(geometry)
+    r = Renderer(cam, geometry, RenderStyle(background="cluttered", platform=False))
+    bg = r.background
+    assert bg.std() > 10 and bg.min() >= r.style.clutter_min
+    img = r.render(*home_pose(geometry))
+    assert not np.array_equal(img, bg) and img.min() < 60
+
+
+def test_render_is_fast(geometry, rng):
+    Rs, ts = sample_poses(geometry, 20, rng)
+    for cam in (front_camera(geometry), omni_camera(geometry)):
+        r = Renderer(cam, geometry, RenderStyle(blur_px=0.8, noise_std=2.0), rng=1)
+        r.render(Rs[0], ts[0])
+        times = []
+        for k in range(20):
+            t0 = time.perf_counter()
+            r.render(Rs[k], ts[k])
+            times.append(time.perf_counter() - t0)
+        assert np.median(times) < 0.03  # generous for a loaded CI machine (a few ms here)
+
+
+def test_invalid_settings_raise(geometry):
+    with pytest.raises(RenderError, match="background"):
+        RenderStyle(background="stripes")
+    with pytest.raises(RenderError, match="blur_px"):
+        RenderStyle(blur_px=-1)
+    r = Renderer(front_camera(geometry), geometry)
+    with pytest.raises(RenderError, match="pose"):
+        r.render(np.eye(3), np.array([0.0, np.nan, 0.3]))
