@@ -1,0 +1,149 @@
+"""Image noise models (``MATH.md`` section 8), all batched and seeded.
+
+- :func:`rotation_noise`: the noise of the seeds on reconstructed unit vectors
+  (edge normals or leg directions): each vector is rotated by a random rotation
+  whose axis is uniform on the unit sphere and whose angle is uniform in
+  ``[0, a]``. (The angle between a vector and its perturbed copy is then at most
+  ``a``, and smaller when the axis is close to the vector.)
+- :func:`pixel_noise`: isotropic Gaussian noise on pixels of sampled edge points.
+- :func:`add_outliers`: a fraction of the points replaced by gross errors.
+- :func:`drop_edges`: edges missed by the detector, at random.
+
+Every function takes a :class:`numpy.random.Generator` (or a seed) and works on
+arrays with any leading batch shape.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from hexapod.se3 import exp_so3
+
+
+def _rng(rng: np.random.Generator | int | None) -> np.random.Generator:
+    return rng if isinstance(rng, np.random.Generator) else np.random.default_rng(rng)
+
+
+def random_unit_vectors(
+    shape: tuple[int, ...] | int, rng: np.random.Generator | int | None
+) -> np.ndarray:
+    """Unit vectors uniform on the sphere, shape ``(*shape, 3)``."""
+    shape = (shape,) if isinstance(shape, int) else tuple(shape)
+    g = _rng(rng)
+    v = g.normal(size=(*shape, 3))
+    n = np.linalg.norm(v, axis=-1, keepdims=True)
+    # A zero draw has probability zero; guard anyway.
+    bad = n[..., 0] < 1e-12
+    if np.any(bad):
+        v[bad] = [0.0, 0.0, 1.0]
+        n[bad] = 1.0
+    return v / n
+
+
+def random_rotations(
+    shape: tuple[int, ...] | int,
+    max_angle_rad: float | np.ndarray,
+    rng: np.random.Generator | int | None,
+) -> np.ndarray:
+    """Random rotations: axis uniform on the sphere, angle uniform in ``[0, a]``.
+
+    Args:
+        shape: Batch shape.
+        max_angle_rad: ``a`` [rad], a scalar or broadcastable to ``shape``.
+        rng: Generator or seed.
+
+    Returns:
+        (*shape, 3, 3) rotation matrices.
+    """
+    shape = (shape,) if isinstance(shape, int) else tuple(shape)
+    g = _rng(rng)
+    a = np.asarray(max_angle_rad, dtype=float)
+    if np.any(a < 0) or not np.all(np.isfinite(a)):
+        raise ValueError(f"max_angle_rad must be finite and >= 0, got {max_angle_rad}")
+    axis = random_unit_vectors(shape, g)
+    angle = g.uniform(0.0, 1.0, size=shape) * a
+    return exp_so3(axis * angle[..., None])
+
+
+def rotation_noise(
+    vectors: np.ndarray,
+    max_angle_rad: float | np.ndarray,
+    rng: np.random.Generator | int | None,
+    mask: np.ndarray | None = None,
+) -> np.ndarray:
+    """Rotate each vector (..., 3) by its own random rotation (seed noise model).
+
+    Args:
+        vectors: (..., 3) unit vectors (normals (..., 6, 2, 3) or directions (..., 6, 3)).
+        max_angle_rad: Maximal rotation angle ``a`` [rad] (0.05 deg ~ 1 px at the ends
+            of a 300-pixel segment).
+        rng: Generator or seed.
+        mask: Optional (...) bool, perturb only where True.
+
+    Returns:
+        The perturbed vectors (same norms); NaN stays NaN.
+    """
+    v = np.asarray(vectors, dtype=float)
+    if v.shape[-1:] != (3,):
+        raise ValueError(f"vectors: expected shape (..., 3), got {v.shape}")
+    R = random_rotations(v.shape[:-1], max_angle_rad, rng)
+    out = np.einsum("...ij,...j->...i", R, v)
+    if mask is not None:
+        out = np.where(np.asarray(mask, bool)[..., None], out, v)
+    return out
+
+
+def pixel_noise(
+    pixels: np.ndarray, sigma_px: float, rng: np.random.Generator | int | None
+) -> np.ndarray:
+    """Add isotropic Gaussian noise of standard deviation ``sigma_px`` to pixels (..., 2)."""
+    p = np.asarray(pixels, dtype=float)
+    if sigma_px < 0 or not np.isfinite(sigma_px):
+        raise ValueError(f"sigma_px must be finite and >= 0, got {sigma_px}")
+    return p + _rng(rng).normal(scale=sigma_px, size=p.shape)
+
+
+def add_outliers(
+    pixels: np.ndarray,
+    fraction: float,
+    rng: np.random.Generator | int | None,
+    width: int | None = None,
+    height: int | None = None,
+    spread_px: float = 20.0,
+) -> tuple[np.ndarray, np.ndarray]:
+    """Replace a random fraction of points (..., 2) by gross errors.
+
+    Each point is an outlier independently with probability ``fraction``. An
+    outlier is drawn uniformly in the image ``[-0.5, width - 0.5] x [-0.5,
+    height - 0.5]`` when ``width`` and ``height`` are given, else displaced from its
+    true position by a vector uniform in the disc of radius ``spread_px``.
+
+    Returns:
+        The new pixels and the (...) bool mask of the outliers.
+    """
+    if not 0.0 <= fraction <= 1.0:
+        raise ValueError(f"fraction must be in [0, 1], got {fraction}")
+    g = _rng(rng)
+    p = np.asarray(pixels, dtype=float)
+    shape = p.shape[:-1]
+    is_out = g.random(size=shape) < fraction
+    if width is not None and height is not None:
+        repl = np.stack(
+            [g.uniform(-0.5, width - 0.5, size=shape), g.uniform(-0.5, height - 0.5, size=shape)],
+            axis=-1,
+        )
+    else:
+        ang = g.uniform(0.0, 2 * np.pi, size=shape)
+        rad = spread_px * np.sqrt(g.uniform(0.0, 1.0, size=shape))
+        repl = p + np.stack([rad * np.cos(ang), rad * np.sin(ang)], axis=-1)
+    return np.where(is_out[..., None], repl, p), is_out
+
+
+def drop_edges(
+    mask: np.ndarray, probability: float, rng: np.random.Generator | int | None
+) -> np.ndarray:
+    """Drop each observed edge independently with ``probability``: ``mask & keep``."""
+    if not 0.0 <= probability <= 1.0:
+        raise ValueError(f"probability must be in [0, 1], got {probability}")
+    m = np.asarray(mask, dtype=bool)
+    return m & (_rng(rng).random(size=m.shape) >= probability)
