@@ -9,7 +9,7 @@ on "each of the components of each attachment point").
 Run::
 
     python -m benchmarks.calibration_study [--repeats 100] [--camera front|omni]
-        [--visibility] [--method lstsq|irls] [--seed 1] [--json out.json]
+        [--eye X Y Z] [--visibility] [--method lstsq|irls] [--seed 1] [--json out.json]
 """
 
 from __future__ import annotations
@@ -24,6 +24,8 @@ from typing import Any
 import numpy as np
 
 from hexapod.geometry import deltalab
+from hexapod.kinematics import Transform
+from hexapod.se3 import look_at
 from vision.calibration import StudyResult, calibration_study
 from vision.cameras import camera_preset
 
@@ -34,10 +36,19 @@ SEED_MEDIAN_BOUND_MM = {0.05: 1.0}
 
 
 def run_study(noise_levels: Sequence[float], repeats: int, seed: int, camera_name: str,
-              visibility: bool, method: str) -> list[StudyResult]:
-    """One :func:`calibration_study` per noise level (independent seeded generators)."""
+              visibility: bool, method: str, eye: Sequence[float] | None = None
+              ) -> list[StudyResult]:
+    """One :func:`calibration_study` per noise level (independent seeded generators).
+
+    ``eye`` (base frame [m]) replaces the preset's placement by a camera there looking
+    at the point (0, 0, 0.2 m) of the base axis, image rows vertical.
+    """
     geometry = deltalab()
     camera = camera_preset(camera_name, geometry)
+    if eye is not None:
+        e = np.asarray(eye, dtype=float)
+        base_R_cam = look_at(e, np.array([0.0, 0.0, 0.2]), np.array([0.0, 0.0, 1.0]))
+        camera = camera.replace(camera_from_base=Transform(base_R_cam, e).inverse())
     target: Any = camera if visibility else camera.camera_from_base
     return [calibration_study(geometry, target, a, repeats,
                               rng=np.random.default_rng([seed, k]),
@@ -80,6 +91,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     parser.add_argument("--camera", default="front", help="camera preset (front, omni)")
     parser.add_argument("--visibility", action="store_true",
                         help="hide edges outside the image or occluded (the seed used every edge)")
+    parser.add_argument("--eye", type=float, nargs=3, default=None, metavar=("X", "Y", "Z"),
+                        help="place the camera here [m, base frame], looking at (0, 0, 0.2)")
     parser.add_argument("--method", choices=["lstsq", "irls"], default="lstsq")
     parser.add_argument("--seed", type=int, default=1)
     parser.add_argument("--json", type=Path, default=None, help="write the figures here")
@@ -87,13 +100,14 @@ def main(argv: Sequence[str] | None = None) -> int:
     if args.repeats < 1:
         parser.error("--repeats must be >= 1")
     results = run_study(args.noise, args.repeats, args.seed, args.camera, args.visibility,
-                        args.method)
-    print(f"Calibration of the base points (seed 001), camera '{args.camera}'"
+                        args.method, args.eye)
+    where = f" at {args.eye} m" if args.eye else " (preset placement)"
+    print(f"Calibration of the base points (seed 001), camera '{args.camera}'{where}"
           f"{' with visibility' if args.visibility else ''}, 64 extremal configurations")
     print(format_table(results))
     if args.json is not None:
         args.json.write_text(json.dumps({"camera": args.camera, "visibility": args.visibility,
-                                         "seed": args.seed,
+                                         "seed": args.seed, "eye": args.eye,
                                          "results": [r.to_dict() for r in results]}, indent=2))
     return 0
 
