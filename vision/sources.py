@@ -19,6 +19,7 @@ levels). Both are available in ``opencv-python-headless``.
 
 from __future__ import annotations
 
+import contextlib
 import logging
 import time
 from abc import ABC, abstractmethod
@@ -211,7 +212,8 @@ class VideoSource(FrameSource):
         self.on_bad_frame = on_bad_frame
         self.max_failures = int(max_failures)
         self.is_device = isinstance(source, int | np.integer) and not isinstance(source, bool)
-        self.source: int | str = int(source) if self.is_device else str(source)
+        self.source: int | str = (int(source) if isinstance(source, int | np.integer)
+                                  and self.is_device else str(source))
         if not self.is_device and not Path(str(source)).is_file():
             raise SourceOpenError(self.source, "no such file")
         try:
@@ -290,10 +292,8 @@ class VideoSource(FrameSource):
 
     def close(self) -> None:
         if not self.closed:
-            try:
+            with contextlib.suppress(cv2.error):
                 self._cap.release()
-            except cv2.error:  # pragma: no cover - release never fails in practice
-                pass
         super().close()
 
 
@@ -362,8 +362,9 @@ class VideoRecorder:
         self.width, self.height = int(width), int(height)
         if not self.path.parent.is_dir():
             raise VideoWriteError(str(path), "the directory does not exist")
-        self._writer: cv2.VideoWriter | None = cv2.VideoWriter(str(self.path), cv2.VideoWriter_fourcc(*codec),
-                                       float(fps), (self.width, self.height), isColor=False)
+        fourcc = cv2.VideoWriter.fourcc(*codec)
+        self._writer: cv2.VideoWriter | None = cv2.VideoWriter(
+            str(self.path), fourcc, float(fps), (self.width, self.height), isColor=False)
         if not self._writer.isOpened():
             raise VideoWriteError(str(path), f"OpenCV cannot write codec {codec!r} here")
         self.frames_written = 0
