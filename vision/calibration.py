@@ -36,8 +36,8 @@ import numpy as np
 from hexapod.exceptions import ConfigFileError, ShapeError
 from hexapod.geometry import HexapodGeometry
 from hexapod.kinematics import Transform, legs_in_frame
-from hexapod.se3 import exp_so3
 from hexapod.workspace import extremal_configurations, sample_poses
+from vision import noise as vision_noise
 from vision.exceptions import CalibrationError
 from vision.legs import leg_edges
 
@@ -253,20 +253,16 @@ def rotation_noise(amplitude_deg: float) -> NoiseFunction:
     """The rotation noise of the seeds (``MATH.md`` section 8) as a noise function.
 
     Each unit vector is rotated about an axis uniform on the sphere by an angle
-    uniform in ``[0, amplitude]``.
+    uniform in ``[0, amplitude]`` (:func:`vision.noise.rotation_noise`).
 
     Args:
         amplitude_deg: Maximal rotation angle [deg].
     """
+
     amplitude = np.deg2rad(float(amplitude_deg))
 
     def apply(normals: np.ndarray, rng: np.random.Generator) -> np.ndarray:
-        n = np.asarray(normals, dtype=float)
-        axis = rng.normal(size=n.shape)
-        axis /= np.linalg.norm(axis, axis=-1, keepdims=True)
-        angle = rng.uniform(0.0, amplitude, size=n.shape[:-1])
-        R = exp_so3(axis * angle[..., None])
-        return np.einsum("...ij,...j->...i", R, n)
+        return vision_noise.rotation_noise(normals, amplitude, rng)
 
     return apply
 
