@@ -51,8 +51,9 @@ def test_rendered_edges_lie_on_the_true_limbs(geometry, make_camera):
                     continue
                 # Image direction of the normal of the edge: gradient of n.lift(p).
                 e = 1e-3
-                g = np.array([n @ cam.lift(p + [e, 0]) - n @ cam.lift(p - [e, 0]),
-                              n @ cam.lift(p + [0, e]) - n @ cam.lift(p - [0, e])])
+                dx, dy = np.array([e, 0.0]), np.array([0.0, e])
+                g = np.array([n @ cam.lift(p + dx) - n @ cam.lift(p - dx),
+                              n @ cam.lift(p + dy) - n @ cam.lift(p - dy)])
                 g /= np.linalg.norm(g)  # points outwards (n.X > 0 outside the leg)
                 s = np.linspace(-3, 3, 601)
                 q = (p[None] + s[:, None] * g[None]).astype(np.float32)

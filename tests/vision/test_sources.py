@@ -41,10 +41,7 @@ def test_recorded_video_gives_the_same_features(tmp_path, geometry, rng, make_ca
     poses = sample_poses(geometry, 6, rng)
     path = tmp_path / "legs.avi"
     frames = _record(path, r, poses)
-    if cam.kind == "unified":
-        det = OmniDetector(cam)
-    else:
-        det = PerspectiveTracker(cam)
+    det = OmniDetector(cam) if cam.kind == "unified" else PerspectiveTracker(cam)
     cam.to_toml(tmp_path / "cam.toml")
     with VideoSource.from_toml(path, tmp_path / "cam.toml") as src:
         assert src.frame_count == 6
