@@ -17,10 +17,12 @@ def geometry() -> HexapodGeometry:
 
 @pytest.fixture
 def other_geometry() -> HexapodGeometry:
-    """A robot that is not the reference one: irregular joints, off-plane points."""
+    """A robot that is not the reference one: other radii and angles, irregular joints,
+    off-plane points (inverse Jacobian condition number about 13 at home)."""
     rng = np.random.default_rng(1234)
-    a = np.array([10, 50, 130, 170, 250, 290], dtype=float)
-    b = np.array([40, 80, 160, 200, 280, 320], dtype=float)
+    al, be = 12.0, 10.0  # a 6-6 platform like the reference one, other radii and angles
+    a = np.array([al, -al, 120 + al, 120 - al, 240 + al, 240 - al])
+    b = np.array([60 - be, -60 + be, 180 - be, 60 + be, 300 - be, 180 + be])
     base = circular_points(0.31, np.deg2rad(a + rng.uniform(-3, 3, 6)))
     base[:, 2] = rng.uniform(-0.01, 0.01, 6)
     plat = circular_points(0.17, np.deg2rad(b + rng.uniform(-3, 3, 6)))
