@@ -1,0 +1,136 @@
+"""Noise models: distributions checked statistically (KS tests), seeding, batching."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from scipy import stats
+from scipy.spatial.transform import Rotation
+
+from vision.noise import (
+    add_outliers,
+    drop_edges,
+    pixel_noise,
+    random_rotations,
+    random_unit_vectors,
+    rotation_noise,
+)
+
+
+def _angle_axis(R: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    rv = Rotation.from_matrix(R.reshape(-1, 3, 3)).as_rotvec()
+    ang = np.linalg.norm(rv, axis=1)
+    return ang, rv / ang[:, None]
+
+
+def test_random_rotations_distribution() -> None:
+    a = np.deg2rad(5.0)
+    R = random_rotations((40, 50), a, np.random.default_rng(3))
+    assert R.shape == (40, 50, 3, 3)
+    assert np.allclose(R @ np.swapaxes(R, -1, -2), np.eye(3), atol=1e-12)
+    assert np.allclose(np.linalg.det(R), 1.0)
+    ang, axis = _angle_axis(R)
+    # Angle uniform in [0, a].
+    assert ang.max() <= a + 1e-12
+    assert stats.kstest(ang, stats.uniform(0, a).cdf).pvalue > 1e-3
+    # Axis uniform on the sphere: each coordinate uniform in [-1, 1] (Archimedes),
+    # azimuth uniform in [-pi, pi].
+    for k in range(3):
+        assert stats.kstest(axis[:, k], stats.uniform(-1, 2).cdf).pvalue > 1e-3
+    az = np.arctan2(axis[:, 1], axis[:, 0])
+    assert stats.kstest(az, stats.uniform(-np.pi, 2 * np.pi).cdf).pvalue > 1e-3
+    # A distribution that is not the right one is rejected (the test has power).
+    assert stats.kstest(ang, stats.uniform(0, 0.9 * a).cdf).pvalue < 1e-3
+
+
+def test_rotation_noise_matches_independent_construction() -> None:
+    """Deviation angle of a perturbed vector, against rotations built by SciPy from
+    independently drawn axes and angles (two-sample KS)."""
+    a = np.deg2rad(0.05)
+    rng = np.random.default_rng(5)
+    v = random_unit_vectors(5000, rng)
+    w = rotation_noise(v, a, rng)
+    assert np.allclose(np.linalg.norm(w, axis=-1), 1.0, atol=1e-12)
+    dev = np.arctan2(np.linalg.norm(np.cross(v, w), axis=-1), np.sum(v * w, -1))
+    assert dev.max() <= a * (1 + 1e-9)
+
+    rng2 = np.random.default_rng(77)
+    axis = rng2.normal(size=(5000, 3))
+    axis /= np.linalg.norm(axis, axis=1, keepdims=True)
+    ang = rng2.uniform(0, a, 5000)
+    w2 = Rotation.from_rotvec(axis * ang[:, None]).apply(v)
+    dev2 = np.arctan2(np.linalg.norm(np.cross(v, w2), axis=-1), np.sum(v * w2, -1))
+    assert stats.ks_2samp(dev, dev2).pvalue > 1e-3
+    # The mean deviation is below a / 2 (axes close to the vector move it little).
+    assert dev.mean() < 0.5 * a
+
+
+def test_rotation_noise_shapes_seeds_and_mask() -> None:
+    n = random_unit_vectors((3, 6, 2), 1)
+    a = np.deg2rad(1.0)
+    w1 = rotation_noise(n, a, np.random.default_rng(9))
+    w2 = rotation_noise(n, a, np.random.default_rng(9))
+    assert w1.shape == n.shape and np.array_equal(w1, w2)
+    assert not np.array_equal(w1, rotation_noise(n, a, np.random.default_rng(10)))
+    assert np.allclose(rotation_noise(n, 0.0, 1), n, atol=1e-15)
+    mask = np.zeros((3, 6, 2), bool)
+    mask[1] = True
+    w = rotation_noise(n, a, 2, mask=mask)
+    assert np.array_equal(w[0], n[0]) and not np.allclose(w[1], n[1], atol=1e-9)
+    nan = n.copy()
+    nan[0, 0, 0] = np.nan
+    assert np.all(np.isnan(rotation_noise(nan, a, 3)[0, 0, 0]))
+    with pytest.raises(ValueError):
+        random_rotations(3, -1.0, 1)
+    with pytest.raises(ValueError):
+        rotation_noise(np.ones((4, 2)), a, 1)
+
+
+def test_pixel_noise_statistics() -> None:
+    p = np.zeros((200, 6, 2, 20, 2))
+    q = pixel_noise(p, 0.5, np.random.default_rng(0))
+    d = (q - p).reshape(-1, 2)
+    assert q.shape == p.shape
+    assert abs(d.mean()) < 0.01
+    assert d.std() == pytest.approx(0.5, rel=0.01)
+    # Gaussian, independent coordinates.
+    assert stats.kstest(d[:5000, 0], stats.norm(0, 0.5).cdf).pvalue > 1e-3
+    assert abs(np.corrcoef(d[:, 0], d[:, 1])[0, 1]) < 0.01
+    assert np.array_equal(pixel_noise(p, 0.5, 4), pixel_noise(p, 0.5, 4))
+    assert np.array_equal(pixel_noise(p, 0.0, 4), p)
+    with pytest.raises(ValueError):
+        pixel_noise(p, -1.0, 0)
+
+
+def test_outliers() -> None:
+    rng = np.random.default_rng(1)
+    p = rng.uniform(0, 600, size=(100, 12, 20, 2))
+    q, out = add_outliers(p, 0.1, np.random.default_rng(2), width=640, height=480)
+    assert out.shape == p.shape[:-1]
+    assert out.mean() == pytest.approx(0.1, abs=0.01)
+    assert np.array_equal(q[~out], p[~out])
+    qo = q[out]
+    assert np.all(qo >= -0.5) and np.all(qo[:, 0] <= 639.5) and np.all(qo[:, 1] <= 479.5)
+    assert stats.kstest(qo[:, 0], stats.uniform(-0.5, 640).cdf).pvalue > 1e-3
+    # Local outliers: within spread_px of the true point.
+    q2, out2 = add_outliers(p, 0.3, 3, spread_px=15.0)
+    dist = np.linalg.norm(q2 - p, axis=-1)
+    assert np.all(dist[out2] <= 15.0) and np.all(dist[~out2] == 0)
+    assert stats.kstest(dist[out2] / 15.0, lambda x: np.clip(x, 0, 1) ** 2).pvalue > 1e-3
+    none, m = add_outliers(p, 0.0, 4)
+    assert not m.any() and np.array_equal(none, p)
+    with pytest.raises(ValueError):
+        add_outliers(p, 1.5, 0)
+
+
+def test_drop_edges() -> None:
+    mask = np.random.default_rng(0).random((500, 6, 2)) < 0.8
+    kept = drop_edges(mask, 0.25, np.random.default_rng(1))
+    assert kept.shape == mask.shape
+    assert not np.any(kept & ~mask)  # never adds an edge
+    assert kept.sum() / mask.sum() == pytest.approx(0.75, abs=0.02)
+    assert np.array_equal(drop_edges(mask, 0.0, 2), mask)
+    assert not drop_edges(mask, 1.0, 2).any()
+    assert np.array_equal(drop_edges(mask, 0.3, 5), drop_edges(mask, 0.3, 5))
+    with pytest.raises(ValueError):
+        drop_edges(mask, -0.1, 0)
