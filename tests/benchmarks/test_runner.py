@@ -26,7 +26,7 @@ VOLATILE = {"step_time_us", "backend"}
 def _scenario(trials: int = 6, **extra: object) -> object:
     table = {
         "name": "runner-test", "seed": 3, "trials": trials,
-        "controllers": [JOINTS, "leg-edge"],
+        "controllers": [{"name": JOINTS, "gain": 5.0}, {"name": "leg-edge", "gain": 5.0}],
         "noise": {"model": "rotation", "amplitude_deg": [0.0, 0.05]},
         "calibration_error": {"base_points_mm": 0.5},
         "task": {"max_steps": 150, "position_tolerance_mm": 0.5,
@@ -64,7 +64,8 @@ def test_results_identical_across_executors_and_chunkings(tmp_path: Path) -> Non
 
 
 def test_a_crashing_trial_is_recorded_and_the_run_goes_on(tmp_path: Path) -> None:
-    sc = _scenario(trials=6, controllers=[CRASH, JOINTS])
+    sc = _scenario(trials=6, controllers=[{"name": CRASH, "gain": 5.0},
+                                          {"name": JOINTS, "gain": 5.0}])
     run_units(plan([sc], chunk_size=6, record_trials=0), tmp_path)
     rows = read_results(tmp_path)
     crash = [r for r in rows if r["controller"] == CRASH]
