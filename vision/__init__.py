@@ -10,6 +10,13 @@ from vision.cameras import (
     load_camera,
     omni_camera,
 )
+from vision.estimate import (
+    NormalFit,
+    angle_between,
+    direction_from_normals,
+    fit_normal,
+    fit_normal_conic,
+)
 from vision.exceptions import CameraError, EstimationError, VisionError
 from vision.legs import (
     EdgePoints,
@@ -21,6 +28,14 @@ from vision.legs import (
     observation_edge_points,
     observe_legs,
 )
+from vision.noise import (
+    add_outliers,
+    drop_edges,
+    pixel_noise,
+    random_rotations,
+    random_unit_vectors,
+    rotation_noise,
+)
 
 __all__ = [
     "Camera",
@@ -28,12 +43,19 @@ __all__ = [
     "EdgePoints",
     "EstimationError",
     "LegObservation",
+    "NormalFit",
     "PerspectiveCamera",
     "UnifiedCamera",
     "VisionError",
+    "add_outliers",
+    "angle_between",
     "camera_preset",
+    "direction_from_normals",
     "directions_from_edges",
+    "drop_edges",
     "edge_points",
+    "fit_normal",
+    "fit_normal_conic",
     "front_camera",
     "leg_edges",
     "limb_points",
@@ -41,4 +63,8 @@ __all__ = [
     "observation_edge_points",
     "observe_legs",
     "omni_camera",
+    "pixel_noise",
+    "random_rotations",
+    "random_unit_vectors",
+    "rotation_noise",
 ]

@@ -418,6 +418,7 @@ def observation_edge_points(
     """:func:`edge_points` on an observation: ``n_points`` per edge, spread over the
     visible interval of the edge (``visible_part``) or the whole edge, with the
     occlusions of the observation (legs and platform)."""
+    span: tuple[Any, Any]
     if visible_part:
         span = (obs.visible_interval[..., 0], obs.visible_interval[..., 1])
     else:

@@ -195,3 +195,16 @@ def test_perspective_line_fit_is_the_conic_alternative(geometry) -> None:
     b = fit_normal_conic(cam, noisy, weights=vis, reference=obs.normals).normal
     e = angle_between(a, obs.normals)[ok]
     assert np.median(angle_between(a, b)[ok]) < 0.2 * np.median(e)
+
+
+def test_accuracy_benchmark_runs(capsys, tmp_path) -> None:
+    from benchmarks.vision_accuracy import accuracy_figures, main
+
+    assert main(["--poses", "8", "--figure", str(tmp_path / "edges.png")]) == 0
+    out = capsys.readouterr().out
+    assert "front" in out and "omni" in out and "median [deg]" in out
+    assert (tmp_path / "edges.png").stat().st_size > 10_000
+    figs = {(f.camera, f.fit, f.feature): f for f in accuracy_figures(20, 20, 0.5, 1)}
+    assert len(figs) == 8
+    assert figs[("front", "svd", "normal")].median_deg < 0.1
+    assert figs[("omni", "svd", "normal")].median_deg < 0.3
