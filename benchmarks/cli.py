@@ -73,7 +73,8 @@ def cmd_run(args: argparse.Namespace) -> int:
 
     out = Path(args.out)
     ctrl_list = [c.strip() for c in args.controllers.split(",")] if args.controllers else None
-    scenarios = [load_scenario(s).with_overrides(args.trials, args.seed, ctrl_list)
+    scenarios = [load_scenario(s).with_overrides(args.trials, args.seed, ctrl_list,
+                                                 args.max_steps)
                  for s in args.scenarios]
     for sc in scenarios:
         _check_controllers(sc)
@@ -245,6 +246,7 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--out", required=True, help="results directory")
     s.add_argument("--trials", type=int, help="trials per sweep point and controller")
     s.add_argument("--seed", type=int, help="override the scenario seed")
+    s.add_argument("--max-steps", type=int, help="override the step budget of each trial")
     s.add_argument("--controllers", help="comma-separated names, labels or module:attr")
     s.add_argument("--workers", type=int, default=1, help="processes (default 1)")
     s.add_argument("--dask", metavar="ADDRESS", help="Dask scheduler address, or 'local'")

@@ -197,9 +197,14 @@ class Scenario:
         return points
 
     def with_overrides(self, trials: int | None = None, seed: int | None = None,
-                       controllers: list[str] | None = None) -> Scenario:
+                       controllers: list[str] | None = None, max_steps: int | None = None
+                       ) -> Scenario:
         """Apply command-line overrides."""
         sc = self
+        if max_steps is not None:
+            if max_steps < 1:
+                raise ScenarioError(self.source, f"--max-steps must be >= 1, got {max_steps}")
+            sc = replace(sc, task=replace(sc.task, max_steps=max_steps))
         if trials is not None:
             if trials < 1:
                 raise ScenarioError(self.source, f"--trials must be >= 1, got {trials}")

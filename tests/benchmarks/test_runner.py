@@ -144,7 +144,7 @@ def test_results_rows_have_the_documented_fields(tmp_path: Path) -> None:
 def test_builtin_scenario_end_to_end(name: str, tmp_path: Path) -> None:
     out = tmp_path / name
     code = cli_main(["run", name, "--out", str(out), "--trials", "1", "--no-progress",
-                     "--record", "1"])
+                     "--record", "1", "--max-steps", "120"])
     assert code == 0
     rows = read_results(out)
     assert rows and all(r["failure"] is None or "not converged" in r["failure"] for r in rows)
