@@ -16,23 +16,16 @@ Both start from a guess (default: the home pose) and raise
 
 from __future__ import annotations
 
-import ctypes
-import hashlib
 import logging
-import os
-import platform
-import shutil
-import subprocess
-import tempfile
 from dataclasses import dataclass
 from functools import lru_cache
-from pathlib import Path
 from typing import Literal
 
 import casadi as ca
 import numpy as np
 import pinocchio as pin
 
+from hexapod.compiled import CompiledFunction
 from hexapod.exceptions import ForwardKinematicsError, ShapeError, StrokeLimitError
 from hexapod.geometry import HexapodGeometry
 from hexapod.model import HexapodModel, build_model, constraint_residual_and_jacobian
@@ -130,120 +123,10 @@ def _newton_expression() -> ca.Function:
     return ca.Function("hexapod_fk_newton", [x], [ca.vertcat(ca.reshape(Rk, 9, 1), tk, lens - q)])
 
 
-_BATCH_WRAPPER = r"""
-#include <stdlib.h>
-int hexapod_fk_newton_batch(const casadi_real* x, casadi_real* y, long long n) {
-  casadi_int sz_arg, sz_res, sz_iw, sz_w;
-  if (hexapod_fk_newton_work(&sz_arg, &sz_res, &sz_iw, &sz_w)) return 1;
-  const casadi_real** arg = malloc(sizeof(casadi_real*) * (sz_arg > 1 ? sz_arg : 1));
-  casadi_real** res = malloc(sizeof(casadi_real*) * (sz_res > 1 ? sz_res : 1));
-  casadi_int* iw = malloc(sizeof(casadi_int) * (sz_iw > 1 ? sz_iw : 1));
-  casadi_real* w = malloc(sizeof(casadi_real) * (sz_w > 1 ? sz_w : 1));
-  int flag = 0;
-  for (long long k = 0; k < n && !flag; ++k) {
-    arg[0] = x + 54 * k;
-    res[0] = y + 18 * k;
-    flag = hexapod_fk_newton(arg, res, iw, w, 0);
-  }
-  free(arg); free(res); free(iw); free(w);
-  return flag;
-}
-"""
-
-
-class _CompiledNewton:
-    """The Newton function, compiled to C by gcc when available (called through ctypes).
-
-    CasADi generates the C code; it is compiled once into a cache directory
-    (``$HEXAPOD_CACHE_DIR`` or ``~/.cache/hexapod-vs``) keyed by the code's hash.
-    Without a C compiler the CasADi virtual machine evaluates the same function
-    (slower, same results).
-    """
-
-    def __init__(self) -> None:
-        self.function = _newton_expression()
-        self.compiled = False
-        self._lib: ctypes.CDLL | None = None
-        try:
-            self._compile()
-        except (OSError, subprocess.SubprocessError) as exc:
-            log.warning("forward kinematics: C compilation unavailable (%s); using the CasADi "
-                        "virtual machine", exc)
-
-    def _compile(self) -> None:
-        cc = os.environ.get("CC", "cc")
-        if shutil.which(cc) is None:
-            raise OSError(f"no C compiler '{cc}'")
-        cache = Path(os.environ.get("HEXAPOD_CACHE_DIR",
-                                    Path.home() / ".cache" / "hexapod-vs"))
-        cache.mkdir(parents=True, exist_ok=True)
-        with tempfile.TemporaryDirectory() as tmp:
-            cwd = os.getcwd()
-            try:
-                os.chdir(tmp)
-                self.function.generate("fk.c")
-            finally:
-                os.chdir(cwd)
-            code = (Path(tmp) / "fk.c").read_text() + _BATCH_WRAPPER
-        digest = hashlib.sha256((code + platform.machine()).encode()).hexdigest()[:16]
-        lib_path = cache / f"hexapod_fk_{digest}.so"
-        if not lib_path.exists():
-            src = cache / f"hexapod_fk_{digest}.c"
-            src.write_text(code)
-            tmp_lib = cache / f"hexapod_fk_{digest}.{os.getpid()}.so"
-            subprocess.run([cc, "-O2", "-shared", "-fPIC", str(src), "-o", str(tmp_lib)],
-                           check=True, capture_output=True, timeout=120)
-            os.replace(tmp_lib, lib_path)
-        lib = ctypes.CDLL(str(lib_path))
-        single = lib.hexapod_fk_newton
-        single.argtypes = [ctypes.c_void_p] * 4 + [ctypes.c_int]
-        single.restype = ctypes.c_int
-        batch = lib.hexapod_fk_newton_batch
-        batch.argtypes = [ctypes.c_void_p, ctypes.c_void_p, ctypes.c_longlong]
-        batch.restype = ctypes.c_int
-        self._lib = lib
-        self._single = single
-        self._xbuf = np.zeros(54)
-        self._ybuf = np.zeros(18)
-        self._args = (ctypes.c_void_p * 1)(self._xbuf.ctypes.data)
-        self._res = (ctypes.c_void_p * 1)(self._ybuf.ctypes.data)
-        self._iw = np.zeros(64, dtype=np.int64)
-        self._w = np.zeros(4096)
-        self._call = (ctypes.addressof(self._args), ctypes.addressof(self._res),
-                      self._iw.ctypes.data, self._w.ctypes.data, 0)
-        n_arg, n_res, n_iw, n_w = (ctypes.c_longlong() for _ in range(4))
-        lib.hexapod_fk_newton_work(ctypes.byref(n_arg), ctypes.byref(n_res),
-                                   ctypes.byref(n_iw), ctypes.byref(n_w))
-        if n_arg.value > 1 or n_res.value > 1 or n_iw.value > 64 or n_w.value > 4096:
-            raise OSError("unexpected work sizes of the generated function")
-        self.compiled = True
-
-    def single(self, x: np.ndarray) -> np.ndarray:
-        """Evaluate the function on one input (54,) -> (18,) (a fresh array)."""
-        if self._lib is None:
-            return np.asarray(self.function(x)).ravel()
-        self._xbuf[:] = x
-        if self._single(*self._call):
-            raise ForwardKinematicsError("newton", float("nan"), 0, "compiled function failed")
-        return self._ybuf.copy()
-
-    def batch(self, x: np.ndarray) -> np.ndarray:
-        """Evaluate the function on rows of ``x`` (N, 54) -> (N, 18)."""
-        x = np.ascontiguousarray(x, dtype=float)
-        n = x.shape[0]
-        y = np.empty((n, 18))
-        if self._lib is not None:
-            if self._lib.hexapod_fk_newton_batch(x.ctypes.data, y.ctypes.data, n):
-                raise ForwardKinematicsError("newton", float("nan"), 0, "compiled function failed")
-            return y
-        for k in range(n):
-            y[k] = np.asarray(self.function(x[k])).ravel()
-        return y
-
-
 @lru_cache(maxsize=1)
-def _newton() -> _CompiledNewton:
-    return _CompiledNewton()
+def _newton() -> CompiledFunction:
+    """The Newton steps compiled to C (see :mod:`hexapod.compiled`)."""
+    return CompiledFunction(_newton_expression())
 
 
 def _pack(R: np.ndarray, t: np.ndarray, q: np.ndarray, A: np.ndarray, E: np.ndarray
