@@ -326,8 +326,8 @@ class Camera(ABC):
             d["xi"] = float(self.xi)
         rv = np.rad2deg(log_so3(self.camera_from_base.rotation))
         d["camera_from_base"] = {
-            "translation_mm": (self.camera_from_base.translation * 1e3).tolist(),
-            "rotation_vector_deg": rv.tolist(),
+            "translation_mm": ((self.camera_from_base.translation * 1e3).round(9) + 0.0).tolist(),
+            "rotation_vector_deg": (rv.round(12) + 0.0).tolist(),
         }
         return d
 
@@ -591,34 +591,21 @@ class UnifiedCamera(Camera):
 
         Returns:
             (..., 3, 3) symmetric conics ``C`` in pixels, ``[u, v, 1] C [u, v, 1]^T = 0``,
-            ``C ∝ K^-T Ω K^-1`` (``MATH.md`` section 5) scaled to unit Frobenius norm
-            with a positive factor (so ``C`` is defined up to the sign of ``n``... it is
-            even in ``n``). Includes the other half of the great circle (the conic
-            is the image of the whole circle).
+            ``C ∝ K^-T Ω K^-1`` (``MATH.md`` section 5), scaled to unit Frobenius norm by
+            a positive factor. ``C`` is even in ``n`` (both orientations of a plane give
+            the same conic) and is the image of the whole great circle, of which a
+            leg edge is an arc. For ``xi = 0`` it is the double line ``l l^T``.
         """
-        n = _as_points(n, "n")
-        k = 1.0 - self.xi**2
-        x2 = self.xi**2
-        nx, ny, nz = n[..., 0], n[..., 1], n[..., 2]
-        W = np.stack(
-            [
-                np.stack([k * nx * nx - x2 * nz * nz, k * nx * ny, nx * nz], axis=-1),
-                np.stack([k * nx * ny, k * ny * ny - x2 * nz * nz, ny * nz], axis=-1),
-                np.stack([nx * nz, ny * nz, nz * nz], axis=-1),
-            ],
-            axis=-2,
-        )
+        W = self._omega(_as_points(n, "n"))
         Ki = np.linalg.inv(self.K)
         C = Ki.T @ W @ Ki
         return C / np.linalg.norm(C, axis=(-2, -1), keepdims=True)
 
-    def normal_to_normalised_conic(self, n: np.ndarray) -> np.ndarray:
-        """The conic Ω (..., 3, 3) in normalised coordinates ``m`` (unit Frobenius norm)."""
-        n = _as_points(n, "n")
+    def _omega(self, n: np.ndarray) -> np.ndarray:
         k = 1.0 - self.xi**2
         x2 = self.xi**2
         nx, ny, nz = n[..., 0], n[..., 1], n[..., 2]
-        W = np.stack(
+        return np.stack(
             [
                 np.stack([k * nx * nx - x2 * nz * nz, k * nx * ny, nx * nz], axis=-1),
                 np.stack([k * nx * ny, k * ny * ny - x2 * nz * nz, ny * nz], axis=-1),
@@ -626,6 +613,10 @@ class UnifiedCamera(Camera):
             ],
             axis=-2,
         )
+
+    def normal_to_normalised_conic(self, n: np.ndarray) -> np.ndarray:
+        """The conic Ω (..., 3, 3) in normalised coordinates ``m`` (unit Frobenius norm)."""
+        W = self._omega(_as_points(n, "n"))
         return W / np.linalg.norm(W, axis=(-2, -1), keepdims=True)
 
 
@@ -701,8 +692,7 @@ def omni_camera(geometry: HexapodGeometry | None = None) -> UnifiedCamera:
     seed 003; no leg hides another one enough to lose an edge.
     """
     geo = deltalab() if geometry is None else geometry
-    centre = np.array([*np.mean(geo.base_points[:, :2], axis=0),
-                       float(np.mean(geo.base_points[:, 2]))])
+    centre = np.mean(geo.base_points, axis=0).round(12) + 0.0
     K = _intrinsics(OMNI_FOCAL, 640, 480)
     return UnifiedCamera(K, 1.0, 640, 480, Transform(np.eye(3), -centre), name="omni")
 

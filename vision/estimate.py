@@ -22,7 +22,10 @@ sign), in order of priority:
    measurement, or a simulated normal);
 2. ``base_point`` given: ``n . A <= 0``, the convention of :func:`vision.leg_edges`
    (``n . A = -r`` for the edges of a leg of base point ``A``); an approximate
-   ``A`` (calibrated or CAD) is enough;
+   ``A`` (calibrated or CAD) is enough. The plane passes at ``r`` from ``A``, so
+   the rule is reliable while the angular error of the fit (plus the error on
+   ``A`` seen from the camera) stays below ``asin(r / |A|)`` (about 1 deg for the
+   front camera, 3 deg for the omnidirectional one with a 15 mm leg radius);
 3. otherwise the order of the points: ``(X_first x X_last) . n >= 0`` for the first
    and last valid points. (Points ordered from the base end to the platform end
    give edge 0 of :func:`vision.leg_edges` its own orientation and edge 1 the

@@ -401,3 +401,14 @@ def test_line_matrix_is_the_normalisation_of_K() -> None:
     assert np.allclose(norm[:, :2] / norm[:, 2:], [[-0.5, -390 / 1024], [0.5, 390 / 1024],
                                                    [0.0, 0.0]])
     assert np.allclose(cam.pixels_to_line_coordinates(pix), norm[:, :2] / norm[:, 2:])
+
+
+def test_packaged_preset_files_match_the_presets() -> None:
+    data = Path(__file__).resolve().parents[2] / "vision" / "data"
+    for name, factory in (("front", front_camera), ("omni", omni_camera)):
+        cam = Camera.from_toml(data / f"{name}.toml")
+        ref = factory()
+        assert type(cam) is type(ref) and cam.name == name
+        assert np.allclose(cam.K, ref.K) and cam.xi == ref.xi
+        assert np.allclose(cam.camera_from_base.as_matrix(), ref.camera_from_base.as_matrix(),
+                           atol=1e-12)
