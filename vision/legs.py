@@ -317,7 +317,9 @@ def observe_legs(
     _, imaged = camera.project(P)
     vis = imaged & exists[..., None, None]
     if occlusion:
-        vis &= ~occluded_by_legs(P, A, u, q, r)
+        from vision.occlusion import occluded_by_legs_compiled
+
+        vis &= ~occluded_by_legs_compiled(P, A, u, q, r)
         vis &= ~occluded_by_disc(P, centre, disc_normal, rho)
     frac = vis.mean(axis=-1)
     edge_visible = exists[..., None] & (frac >= min_visible_fraction - 1e-12)
