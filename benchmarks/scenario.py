@@ -218,7 +218,7 @@ class Scenario:
         return sc
 
 
-_TOP = ("name", "description", "seed", "trials", "controllers", "robot", "camera", "sensor",
+_TOP = ("name", "description", "seed", "trials", "controllers", "controller_options", "robot", "camera", "sensor",
         "noise", "calibration_error", "calibration", "task", "reference")
 
 
@@ -358,6 +358,11 @@ def parse_scenario(table: dict[str, Any], path: str = "<dict>") -> Scenario:
         else:
             raise ScenarioError(path, f"expected a name or a table, got {item!r}",
                                 key=f"controllers[{k}]")
+    defaults = table.get("controller_options", {})
+    if not isinstance(defaults, dict):
+        raise ScenarioError(path, "expected a table of options given to every controller",
+                            key="controller_options")
+    specs = [ControllerSpec(sp.name, sp.label, {**defaults, **sp.options}) for sp in specs]
     labels = [s.label for s in specs]
     dup = {x for x in labels if labels.count(x) > 1}
     if dup:
