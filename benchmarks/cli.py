@@ -30,7 +30,8 @@ log = logging.getLogger("hexapod-bench")
 def _console() -> Any:
     from rich.console import Console
 
-    return Console()
+    # a pipe or a CI log gets the whole table, not an 80-column squeeze
+    return Console() if sys.stdout.isatty() else Console(width=200)
 
 
 def cmd_list(args: argparse.Namespace) -> int:

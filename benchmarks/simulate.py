@@ -458,6 +458,7 @@ def _run_group(sc: Scenario, controller_index: int, group: list[TrialSetup],
     active = np.ones(n, dtype=bool)
     steps = np.zeros(n, dtype=int)
     settled = np.zeros(n, dtype=int)
+    last_bad = np.full(n, -1)
     converged = np.zeros(n, dtype=bool)
     violations = np.zeros(n, dtype=int)
     refused = np.zeros(n, dtype=int)
@@ -479,6 +480,7 @@ def _run_group(sc: Scenario, controller_index: int, group: list[TrialSetup],
         dp, da = pose_error(R[idx], t[idx], R_goal[idx], t_goal[idx])
         ok = (dp < pos_tol) & (da < ori_tol)
         settled[idx] = np.where(ok, settled[idx] + 1, 0)
+        last_bad[idx[~ok]] = step
         if sc.task.fixed_duration:
             done = np.full(len(idx), step == sc.task.max_steps)
             converged[idx] = ok
@@ -571,9 +573,10 @@ def _run_group(sc: Scenario, controller_index: int, group: list[TrialSetup],
         fail = failure[k]
         if fail is None and not converged[k]:
             fail = f"not converged within {sc.task.max_steps} steps"
+        settle = int(last_bad[k] + 1) if sc.task.fixed_duration else int(steps[k])
         row.update({
             "converged": bool(converged[k]),
-            "steps": int(steps[k]),
+            "steps": settle,
             "final_position_error_mm": float(dp[k] * 1e3),
             "final_orientation_error_deg": float(np.rad2deg(da[k])),
             "stroke_violations": int(violations[k]),
