@@ -113,8 +113,13 @@ def cmd_run(args: argparse.Namespace) -> int:
     interrupted = False
     try:
         if show and total:
-            from rich.progress import (BarColumn, MofNCompleteColumn, Progress,
-                                       TimeElapsedColumn, TimeRemainingColumn)
+            from rich.progress import (
+                BarColumn,
+                MofNCompleteColumn,
+                Progress,
+                TimeElapsedColumn,
+                TimeRemainingColumn,
+            )
 
             with Progress("[progress.description]{task.description}", BarColumn(),
                           MofNCompleteColumn(), TimeElapsedColumn(), TimeRemainingColumn(),
@@ -148,9 +153,10 @@ def _check_controllers(sc: Any) -> None:
 
 def _run_with_viz(scenarios: list[Any], out: Path, args: argparse.Namespace) -> int:
     """Run in-process with a live MeshCat view (loopback server)."""
+    from hexapod.visualize import HexapodViewer
+
     from benchmarks.runner import ResultsWriter, execute, plan
     from benchmarks.simulate import load_camera, load_geometry
-    from hexapod.visualize import HexapodViewer
 
     con = _console()
     sc0 = scenarios[0].expand()[0]

@@ -152,7 +152,9 @@ def write_report(out_dir: Path) -> Path:
               "Each row is one controller at one point of the scenario's sweep. *converged*: "
               "trials whose true platform pose reached the position and orientation tolerances "
               "of the scenario. Final errors are those of the TRUE pose against the TRUE goal, "
-              "over all trials (converged or not). *steps med*: median number of control periods to converge (for fixed-duration tasks: after which the error stayed within the tolerances). *step us*: median time of one controller "
+              "over all trials (converged or not). *steps med*: median number of control "
+              "periods to converge (for fixed-duration tasks: after which the error stayed "
+              "within the tolerances). *step us*: median time of one controller "
               "`step`. *stroke viol.*: periods where a command would have driven a leg "
               "beyond its stroke (the backend clamped it).", ""]
     by_scenario: dict[str, list[Summary]] = defaultdict(list)

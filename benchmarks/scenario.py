@@ -218,8 +218,8 @@ class Scenario:
         return sc
 
 
-_TOP = ("name", "description", "seed", "trials", "controllers", "controller_options", "robot", "camera", "sensor",
-        "noise", "calibration_error", "calibration", "task", "reference")
+_TOP = ("name", "description", "seed", "trials", "controllers", "controller_options", "robot",
+        "camera", "sensor", "noise", "calibration_error", "calibration", "task", "reference")
 
 
 def _section(table: dict[str, Any], key: str, path: str) -> dict[str, Any]:

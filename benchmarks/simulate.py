@@ -227,8 +227,12 @@ class GeometricSensor:
         normals = np.where(visible[..., None], normals, np.nan)
         lines = None
         if self.perspective:
-            lines = w.camera.normal_to_line(normals)
-            normals = self.est.line_to_normal(lines)
+            if noise.model == "pixel" and apply_noise:
+                # fitted with the estimated camera already; the image line is the true one
+                lines = self.est.normal_to_line(normals)
+            else:
+                lines = w.camera.normal_to_line(normals)
+                normals = self.est.line_to_normal(lines)
         both = visible.all(axis=-1)
         with np.errstate(invalid="ignore"):
             directions = directions_from_edges(normals)
@@ -238,36 +242,33 @@ class GeometricSensor:
 
     def _pixel_noise(self, lo: Any, normals: np.ndarray, visible: np.ndarray,
                      rngs: list[np.random.Generator]) -> tuple[np.ndarray, np.ndarray]:
-        from vision.estimate import fit_normal
-        from vision.noise import add_outliers, pixel_noise
+        from vision.pixel_measure import normals_from_noisy_pixels
 
         noise = self.sc.noise
-        cam = self.world.camera
-        m = max(int(noise.points_per_edge), 2)
-        s = np.linspace(0.0, 1.0, m)
         out = normals.copy()
-        for k in range(len(rngs)):
-            seg = lo.segments[k]  # (6, 2, 2, 2) pixel end points
-            for i in range(6):
-                for j in range(2):
-                    if not visible[k, i, j]:
-                        continue
-                    # points along the interpretation plane between the segment's ends
-                    rays = cam.lift(seg[i, j])
-                    d = rays[0][None, :] * (1 - s)[:, None] + rays[1][None, :] * s[:, None]
-                    px, ok = cam.project(d)
-                    px = px[ok]
-                    px = pixel_noise(px, noise.pixel_sigma_px, rngs[k])
-                    if noise.outlier_fraction > 0:
-                        px = add_outliers(px, noise.outlier_fraction, rngs[k],
-                                          width=cam.width, height=cam.height)
-                    if len(px) < 2:
-                        visible[k, i, j] = False
-                        continue
-                    fit = fit_normal(self.est, px)
-                    nn = np.asarray(fit.normal, float)
-                    out[k, i, j] = nn if nn @ normals[k, i, j] >= 0 else -nn
-        return out, visible
+        vis = visible.copy()
+        for k in range(len(rngs)):  # one generator per trial: results do not depend on batching
+            sub = _take(lo, k)
+            n_k, v_k = normals_from_noisy_pixels(self.world.camera, self.est, sub,
+                                                 noise.pixel_sigma_px,
+                                                 max(int(noise.points_per_edge), 2), rngs[k],
+                                                 noise.outlier_fraction)
+            out[k] = n_k
+            vis[k] = v_k
+        return out, vis
+
+
+def _take(lo: Any, k: int) -> Any:
+    """Item ``k`` of a batched :class:`vision.legs.LegObservation`."""
+    from dataclasses import fields as dc_fields
+    from dataclasses import replace as dc_replace
+
+    changes = {}
+    for f in dc_fields(lo):
+        value = getattr(lo, f.name)
+        if isinstance(value, np.ndarray) and value.ndim >= 1:
+            changes[f.name] = value[k]
+    return dc_replace(lo, **changes)
 
 
 @dataclass

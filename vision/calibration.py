@@ -351,6 +351,32 @@ def collect_observations(
     return CalibrationData(normals, visible, lengths)
 
 
+def collect_pixel_observations(
+    geometry: HexapodGeometry,
+    camera: Any,
+    configurations: ConfigurationsSpec,
+    sigma_px: float,
+    points_per_edge: int,
+    rng: np.random.Generator | int | None = None,
+    outlier_fraction: float = 0.0,
+) -> CalibrationData:
+    """Like :func:`collect_observations` with pixel noise on points along each edge.
+
+    Each visible edge is measured by fitting its normal to ``points_per_edge``
+    pixels with Gaussian noise ``sigma_px`` (see :mod:`vision.pixel_measure`).
+    """
+    from vision.legs import observe_legs
+    from vision.pixel_measure import normals_from_noisy_pixels
+
+    gen = np.random.default_rng(rng)
+    R, t = configuration_poses(geometry, configurations, gen)
+    obs = observe_legs(camera, geometry, R, t)
+    normals, visible = normals_from_noisy_pixels(camera, camera, obs, sigma_px,
+                                                 max(int(points_per_edge), 2), gen,
+                                                 outlier_fraction)
+    return CalibrationData(normals, visible, obs.lengths)
+
+
 # ============================================================================
 # Solving
 # ============================================================================
@@ -877,21 +903,19 @@ def calibrate_in_world(
         (``median_error_mm``, ``max_error_mm`` against the truth,
         ``min_singular_ratio``, ``outliers``, ``configurations``).
 
-    Raises:
-        ValueError: The pixel noise model without ``[calibration] noise_deg``
-            (calibration from pixel noise is not implemented yet).
+    With the pixel noise model (and no ``noise_deg``) the calibration images get
+    the same pixel noise as the control images (:func:`collect_pixel_observations`).
     """
     amplitude = calibration.noise_deg
-    if amplitude is None:
-        if noise.model == "rotation":
-            amplitude = noise.amplitude_deg
-        elif noise.model == "none":
-            amplitude = 0.0
-        else:
-            raise ValueError(f"calibration: noise model {noise.model!r} is not supported for "
-                             "calibration images; set [calibration] noise_deg")
-    model = rotation_noise(float(amplitude)) if amplitude else None
-    data = collect_observations(geometry, camera, calibration.configurations, model, rng)
+    if amplitude is None and noise.model == "pixel":
+        data = collect_pixel_observations(geometry, camera, calibration.configurations,
+                                          noise.pixel_sigma_px, noise.points_per_edge, rng,
+                                          getattr(noise, "outlier_fraction", 0.0))
+    else:
+        if amplitude is None:
+            amplitude = noise.amplitude_deg if noise.model == "rotation" else 0.0
+        model = rotation_noise(float(amplitude)) if amplitude else None
+        data = collect_observations(geometry, camera, calibration.configurations, model, rng)
     res = calibrate_base_points(data, geometry.leg_radius, calibration.solver)
     truth = camera.camera_from_base.apply(geometry.base_points)
     err = point_errors(res.base_points, truth) * 1e3

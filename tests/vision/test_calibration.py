@@ -425,8 +425,10 @@ def test_calibrate_in_world(geometry: HexapodGeometry, rng: np.random.Generator)
     noisy_cal = SimpleNamespace(configurations="random:40", solver="lstsq", noise_deg=0.05)
     _, s2 = calibrate_in_world(geometry, cam, noisy_cal, SimpleNamespace(model="none"), rng)
     assert 0.01 < s2["max_error_mm"] < 20
-    with pytest.raises(ValueError, match="noise_deg"):
-        calibrate_in_world(geometry, cam, cal, SimpleNamespace(model="pixel"), rng)
+    pixel = SimpleNamespace(model="pixel", pixel_sigma_px=0.5, points_per_edge=20,
+                            outlier_fraction=0.0)
+    _, s3 = calibrate_in_world(geometry, cam, cal, pixel, rng)
+    assert 1e-4 < s3["max_error_mm"] < 20
 
 
 def test_calibration_study_command(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
