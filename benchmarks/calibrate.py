@@ -1,12 +1,31 @@
-"""Calibrate-then-control: the scenario option ``[calibration] method = "linear"``."""
+"""Calibration of the base points from leg observations (MATH.md section 7), in studies.
+
+- ``[calibration] method = "linear"``: every trial calibrates in its own (true)
+  world first, with the scenario's noise, and its controllers get the estimates.
+- ``[calibration] method = "file"`` (or ``hexapod-bench run --calibration FILE``):
+  the controllers get the base points of a file written by ``hexapod-bench
+  calibrate`` (or by a user from a real calibration).
+- ``hexapod-bench calibrate SCENARIO --out DIR``: repeated calibrations in the
+  scenario's worlds, ``DIR/calibration.json`` (estimates, errors against the
+  truth, residuals, conditioning) and ``DIR/calibrated.toml`` (the parameter file).
+"""
 
 from __future__ import annotations
 
+import json
+import logging
 from collections.abc import Callable
+from dataclasses import replace
+from pathlib import Path
+from typing import Any
 
 import numpy as np
+import tomli_w
 
 from benchmarks.scenario import Scenario
+from hexapod.config import check_keys, get_matrix, load_toml
+
+log = logging.getLogger(__name__)
 
 CalibrationHook = Callable[..., tuple[np.ndarray, dict[str, float]]]
 
@@ -15,12 +34,141 @@ def calibration_hook(sc: Scenario) -> CalibrationHook | None:
     """The per-trial calibration function of a scenario, or None when it does not calibrate."""
     if sc.calibration.method == "none":
         return None
-    from benchmarks.simulate import World
+    if sc.calibration.method == "file":
+        points = load_calibrated_base_points(str(sc.calibration.file))
 
-    def calibrate(world: World, rng: np.random.Generator) -> tuple[np.ndarray,
-                                                                  dict[str, float]]:
+        def from_file(world: Any, rng: np.random.Generator) -> tuple[np.ndarray,
+                                                                    dict[str, float]]:
+            truth = world.camera.camera_from_base.apply(world.geometry.base_points)
+            err = np.linalg.norm(points - truth, axis=1) * 1e3
+            return points.copy(), {"median_error_mm": float(np.median(err)),
+                                   "max_error_mm": float(np.max(err))}
+
+        return from_file
+
+    def calibrate(world: Any, rng: np.random.Generator) -> tuple[np.ndarray,
+                                                                dict[str, float]]:
         from vision.calibration import calibrate_in_world
 
         return calibrate_in_world(world.geometry, world.camera, sc.calibration, sc.noise, rng)
 
     return calibrate
+
+
+def load_calibrated_base_points(path: str | Path) -> np.ndarray:
+    """Base points (6, 3) in the camera frame [m] from a ``calibrated.toml`` file.
+
+    Raises:
+        ConfigFileError: Missing file, bad TOML, missing or misspelt key, bad shape.
+    """
+    table = load_toml(path)
+    check_keys(table, ("base_points_camera_mm", "camera_from_base", "scale", "leg_radius_mm",
+                       "source"), str(path), required=("base_points_camera_mm",))
+    return get_matrix(table, "base_points_camera_mm", (6, 3), str(path)) * 1e-3
+
+
+def run_calibration(sc: Scenario, out: Path, configurations: str | None = None,
+                    repeat: int = 1, solver: str | None = None,
+                    correct_scale: bool = False) -> dict[str, Any]:
+    """Repeat the calibration in the scenario's worlds; write calibration.json and calibrated.toml.
+
+    Repetition k uses the world of trial k (its calibration-error draw) and the
+    scenario's noise; each sweep point of the scenario is calibrated separately.
+
+    Returns:
+        The content of ``calibration.json``.
+    """
+    from benchmarks.simulate import load_camera, load_geometry, make_trial, trial_rng
+    from vision.calibration import (
+        calibrate,
+        collect_observations,
+        collect_pixel_observations,
+        error_summary,
+        rotation_noise,
+    )
+
+    out.mkdir(parents=True, exist_ok=True)
+    nominal = load_geometry(sc)
+    camera = load_camera(sc, nominal)
+    cal_cfg = sc.calibration
+    if configurations is not None:
+        cal_cfg = replace(cal_cfg, configurations=configurations)
+    if solver is not None:
+        cal_cfg = replace(cal_cfg, solver=solver)
+    points_out = []
+    first_result = None
+    all_diffs = []
+    for p, point in enumerate(sc.expand()):
+        diffs, results = [], []
+        for k in range(repeat):
+            setup = make_trial(point, k, nominal, camera)
+            world = setup.world
+            rng = trial_rng(point.seed, k, 3)
+            noise = point.noise
+            if cal_cfg.noise_deg is None and noise.model == "pixel":
+                data = collect_pixel_observations(world.geometry, world.camera,
+                                                  cal_cfg.configurations, noise.pixel_sigma_px,
+                                                  noise.points_per_edge, rng,
+                                                  noise.outlier_fraction)
+            else:
+                amp = cal_cfg.noise_deg if cal_cfg.noise_deg is not None else (
+                    noise.amplitude_deg if noise.model == "rotation" else 0.0)
+                data = collect_observations(world.geometry, world.camera,
+                                            cal_cfg.configurations,
+                                            rotation_noise(amp) if amp else None, rng)
+            res = calibrate(data, nominal.leg_radius, nominal.base_points,
+                            method=cal_cfg.solver,  # type: ignore[arg-type]
+                            correct_scale=correct_scale)
+            truth = world.camera.camera_from_base.apply(world.geometry.base_points)
+            diffs.append(res.base_points - truth)
+            results.append(res)
+        summary = error_summary(np.array(diffs), np.zeros((6, 3)))
+        lin = results[0].linear
+        points_out.append({
+            "point": p, "sweep": point.sweep, **summary,
+            "min_singular_ratio": float(min(r.linear.singular_value_ratio.min()
+                                            for r in results)),
+            "residual_rms_mm": (np.median([r.linear.residual_rms for r in results], axis=0)
+                                * 1e3).tolist(),
+            "configurations": int(lin.configurations.max()) if np.ndim(lin.configurations)
+            else int(lin.configurations),
+            "first_repetition": results[0].to_dict(),
+        })
+        all_diffs += diffs
+        if first_result is None:
+            first_result = results[0]
+    overall = error_summary(np.array(all_diffs), np.zeros((6, 3)))
+    doc = {
+        "scenario": sc.name,
+        "configurations": cal_cfg.configurations,
+        "solver": cal_cfg.solver,
+        "repetitions": repeat,
+        "median_error_mm": overall["median_error_mm"],
+        "max_error_mm": overall["max_error_mm"],
+        "max_component_error_mm": overall["max_component_error_mm"],
+        "points": points_out,
+    }
+    (out / "calibration.json").write_text(json.dumps(doc, indent=1))
+    if first_result is None:  # a scenario always has at least one sweep point
+        raise RuntimeError("no calibration was run")
+    write_calibrated_file(out / "calibrated.toml", first_result, source=f"{sc.name} "
+                          f"(repetition 0, sweep point 0, {cal_cfg.configurations})")
+    return doc
+
+
+def write_calibrated_file(path: Path, result: Any, source: str) -> None:
+    """Write the calibrated parameters (millimetres, degrees) read by ``run --calibration``."""
+    from hexapod.se3 import log_so3
+
+    T = result.camera_from_base
+    table = {
+        "source": source,
+        "base_points_camera_mm": (result.base_points * 1e3).round(6).tolist(),
+        "camera_from_base": {
+            "translation_mm": (T.translation * 1e3).round(6).tolist(),
+            "rotation_vector_deg": np.rad2deg(log_so3(T.rotation)).round(9).tolist(),
+        },
+        "scale": float(result.scale),
+        "leg_radius_mm": float(result.radius * 1e3),
+    }
+    path.write_text(tomli_w.dumps(table))

@@ -75,7 +75,7 @@ def cmd_run(args: argparse.Namespace) -> int:
     out = Path(args.out)
     ctrl_list = [c.strip() for c in args.controllers.split(",")] if args.controllers else None
     scenarios = [load_scenario(s).with_overrides(args.trials, args.seed, ctrl_list,
-                                                 args.max_steps)
+                                                 args.max_steps, args.calibration)
                  for s in args.scenarios]
     for sc in scenarios:
         _check_controllers(sc)
@@ -208,6 +208,37 @@ def _print_summary(out: Path, con: Any) -> None:
     con.print(t)
 
 
+def cmd_calibrate(args: argparse.Namespace) -> int:
+    """Calibrate the base points in a scenario's worlds (calibration.json, calibrated.toml)."""
+    from rich.table import Table
+
+    from benchmarks.calibrate import run_calibration
+    from benchmarks.metrics import format_sweep
+    from benchmarks.scenario import load_scenario
+
+    sc = load_scenario(args.scenario).with_overrides(seed=args.seed)
+    out = Path(args.out)
+    t0 = time.perf_counter()
+    doc = run_calibration(sc, out, args.configurations, args.repeat, args.solver,
+                          args.correct_scale)
+    con = _console()
+    t = Table(title=f"Base-point calibration ({sc.name}, {doc['configurations']}, "
+                    f"{doc['solver']}, {args.repeat} repetition(s))")
+    for col in ("sweep", "median error mm", "max error mm", "max component mm",
+                "worst point median mm", "min singular ratio"):
+        t.add_column(col, justify="left" if col == "sweep" else "right")
+    for p in doc["points"]:
+        t.add_row(format_sweep({k.replace(".", "_"): v for k, v in p["sweep"].items()}),
+                  f"{p['median_error_mm']:.3f}", f"{p['max_error_mm']:.3f}",
+                  f"{p['max_component_error_mm']:.3f}",
+                  f"{max(p['per_point_median_mm']):.3f}", f"{p['min_singular_ratio']:.4f}")
+    con.print(t)
+    con.print(f"{time.perf_counter() - t0:.1f} s; wrote {out / 'calibration.json'} and "
+              f"{out / 'calibrated.toml'} (use: hexapod-bench run ... --calibration "
+              f"{out / 'calibrated.toml'})")
+    return 0
+
+
 def cmd_report(args: argparse.Namespace) -> int:
     """Rebuild report.md from results.jsonl."""
     from benchmarks.report import write_report
@@ -254,6 +285,8 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--trials", type=int, help="trials per sweep point and controller")
     s.add_argument("--seed", type=int, help="override the scenario seed")
     s.add_argument("--max-steps", type=int, help="override the step budget of each trial")
+    s.add_argument("--calibration", metavar="FILE",
+                   help="controllers use the base points of this calibrated.toml")
     s.add_argument("--controllers", help="comma-separated names, labels or module:attr")
     s.add_argument("--workers", type=int, default=1, help="processes (default 1)")
     s.add_argument("--dask", metavar="ADDRESS", help="Dask scheduler address, or 'local'")
@@ -267,6 +300,17 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--viz", action="store_true", help="live MeshCat view (in-process)")
     s.add_argument("--no-progress", action="store_true", help="no progress bar")
     s.set_defaults(func=cmd_run)
+
+    s = sub.add_parser("calibrate", help="calibrate the base points from leg observations")
+    s.add_argument("scenario", metavar="SCENARIO")
+    s.add_argument("--out", required=True, help="output directory")
+    s.add_argument("--configurations", help="extremal (default) or random:N")
+    s.add_argument("--repeat", type=int, default=1, help="repetitions (new noise each)")
+    s.add_argument("--solver", choices=["lstsq", "irls"], help="default: the scenario's")
+    s.add_argument("--correct-scale", action="store_true",
+                   help="divide the estimates by the measured scale (uncertain leg radius)")
+    s.add_argument("--seed", type=int)
+    s.set_defaults(func=cmd_calibrate)
 
     s = sub.add_parser("report", help="rebuild DIR/report.md from DIR/results.jsonl")
     s.add_argument("dir")

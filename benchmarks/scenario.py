@@ -93,13 +93,17 @@ class CalibrationConfig:
     """Optional linear calibration of the base points before control (MATH.md section 7).
 
     Attributes:
-        method: ``"none"`` (controllers get nominal values) or ``"linear"``.
+        method: ``"none"`` (controllers get nominal values), ``"linear"`` (calibrate
+            in the simulated world first) or ``"file"`` (base points from a file
+            written by ``hexapod-bench calibrate``).
+        file: The calibrated parameter file (method ``"file"``).
         configurations: ``"extremal"`` or ``"random:N"``.
         solver: ``"lstsq"`` or ``"irls"``.
         noise_deg: Rotation noise on the calibration images [deg] (None: as [noise]).
     """
 
     method: str = "none"
+    file: str | None = None
     configurations: str = "extremal"
     solver: str = "irls"
     noise_deg: float | None = None
@@ -197,10 +201,15 @@ class Scenario:
         return points
 
     def with_overrides(self, trials: int | None = None, seed: int | None = None,
-                       controllers: list[str] | None = None, max_steps: int | None = None
-                       ) -> Scenario:
+                       controllers: list[str] | None = None, max_steps: int | None = None,
+                       calibration_file: str | None = None) -> Scenario:
         """Apply command-line overrides."""
         sc = self
+        if calibration_file is not None:
+            if not Path(calibration_file).exists():
+                raise ScenarioError(calibration_file, "calibration file not found")
+            sc = replace(sc, calibration=replace(sc.calibration, method="file",
+                                                 file=str(calibration_file)))
         if max_steps is not None:
             if max_steps < 1:
                 raise ScenarioError(self.source, f"--max-steps must be >= 1, got {max_steps}")
@@ -291,8 +300,9 @@ def _parse_dataclass(cls: type, table: dict[str, Any], path: str, section: str,
                                 f"({', '.join(sweepable) or 'none here'})", key=dotted)
         elif kind is tuple:
             raise ScenarioError(path, "expected a list of numbers", key=dotted)
-        elif f.name == "noise_deg" and value is not None:
-            kwargs[key] = _typed(value, float, path, dotted)
+        elif f.name in ("noise_deg", "file") and value is not None:
+            kind = float if f.name == "noise_deg" else str
+            kwargs[key] = _typed(value, kind, path, dotted)
         else:
             kwargs[key] = _typed(value, kind, path, dotted, choices.get(key, ()))
             _check_nonneg(kwargs[key], key, nonnegative, path, dotted)
@@ -422,8 +432,12 @@ def parse_scenario(table: dict[str, Any], path: str = "<dict>") -> Scenario:
                                "calibration_error", CALIBRATION_ERROR_KEYS, None, sweep,
                                nonnegative=CALIBRATION_ERROR_KEYS)
     cal = _parse_dataclass(CalibrationConfig, _section(table, "calibration", path), path,
-                           "calibration", (), {"method": ("none", "linear"),
+                           "calibration", (), {"method": ("none", "linear", "file"),
                                                "solver": ("lstsq", "irls")})
+    if cal.method == "file":
+        if not cal.file:
+            raise ScenarioError(path, "method 'file' needs a 'file'", key="calibration.file")
+        cal = replace(cal, file=str(base_dir / cal.file))
     if not (cal.configurations == "extremal" or cal.configurations.startswith("random:")):
         raise ScenarioError(path, "expected 'extremal' or 'random:N'",
                             key="calibration.configurations")
