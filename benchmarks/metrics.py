@@ -13,7 +13,7 @@ _NON_SWEEP = {
     "scenario", "controller", "controller_name", "controller_package", "controller_version",
     "trial", "point", "backend", "converged", "steps", "final_position_error_mm",
     "final_orientation_error_deg", "stroke_violations", "step_time_us", "failure",
-    "rtt_median_ms", "rtt_p99_ms", "missed_periods",
+    "rtt_median_ms", "rtt_p99_ms", "missed_periods", "detect_time_ms",
 }
 
 
@@ -51,6 +51,7 @@ class Summary:
     missed_periods: int
     calibration_median_mm: float
     calibration_max_mm: float
+    detect_time_median_ms: float = float("nan")
 
     @property
     def convergence_rate(self) -> float:
@@ -100,6 +101,7 @@ def summarize(rows: list[dict[str, Any]]) -> list[Summary]:
             calibration_median_mm=_stat([r.get("calibration_median_error_mm") for r in rs],
                                         "median"),
             calibration_max_mm=_stat([r.get("calibration_max_error_mm") for r in rs], "max"),
+            detect_time_median_ms=_stat([r.get("detect_time_ms") for r in rs], "median"),
         ))
     return out
 

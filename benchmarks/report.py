@@ -174,6 +174,11 @@ def write_report(out_dir: Path) -> Path:
                                 [[format_sweep(s.sweep), s.controller, s.backend,
                                   _fmt(s.rtt_median_ms), _fmt(s.rtt_p99_ms),
                                   str(s.missed_periods)] for s in ss]), ""]
+        if any(np.isfinite(s.detect_time_median_ms) for s in ss):
+            lines += ["Images in the loop (render, detect, estimate at every step):", ""]
+            lines += [_md_table(["sweep", "controller", "detection median ms per frame"],
+                                [[format_sweep(s.sweep), s.controller,
+                                  _fmt(s.detect_time_median_ms)] for s in ss]), ""]
         if any(np.isfinite(s.calibration_median_mm) for s in ss):
             lines += ["Calibration of the base points before control (error per point):", ""]
             lines += [_md_table(["sweep", "controller", "median error mm", "max error mm"],

@@ -110,6 +110,21 @@ class CalibrationConfig:
 
 
 @dataclass(frozen=True)
+class ImageConfig:
+    """Rendering settings of the image sensor (``[sensor] kind = "image"``).
+
+    Attributes:
+        background: ``"plain"`` (seed 003) or ``"cluttered"``.
+        blur_px: Gaussian blur [px].
+        noise_std: Pixel noise standard deviation [grey levels].
+    """
+
+    background: str = "plain"
+    blur_px: float = 0.8
+    noise_std: float = 2.0
+
+
+@dataclass(frozen=True)
 class TaskConfig:
     """What each trial must do.
 
@@ -177,6 +192,7 @@ class Scenario:
     camera_preset: str | None = "front"
     camera_file: str | None = None
     sensor: str = "geometric"
+    image: ImageConfig = ImageConfig()
     noise: NoiseConfig = NoiseConfig()
     calibration_error: CalibrationErrorConfig = CalibrationErrorConfig()
     calibration: CalibrationConfig = CalibrationConfig()
@@ -415,13 +431,12 @@ def parse_scenario(table: dict[str, Any], path: str = "<dict>") -> Scenario:
     elif "preset" in camera:
         camera_preset = _typed(camera["preset"], str, path, "camera.preset", ("front", "omni"))
 
-    sensor_t = _section(table, "sensor", path)
-    for key in sensor_t:
-        if key != "kind":
-            raise ScenarioError(path, "unknown key; expected kind", key=f"sensor.{key}",
-                                suggestion=suggest(key, ("kind",)))
-    sensor = _typed(sensor_t.get("kind", "geometric"), str, path, "sensor.kind",
+    sensor_t = dict(_section(table, "sensor", path))
+    sensor = _typed(sensor_t.pop("kind", "geometric"), str, path, "sensor.kind",
                     ("geometric", "image"))
+    image = _parse_dataclass(ImageConfig, sensor_t, path, "sensor", (),
+                             {"background": ("plain", "cluttered")},
+                             nonnegative=("blur_px", "noise_std"))
 
     sweep: dict[str, list[Any]] = {}
     noise = _parse_dataclass(NoiseConfig, _section(table, "noise", path), path, "noise",
@@ -460,7 +475,7 @@ def parse_scenario(table: dict[str, Any], path: str = "<dict>") -> Scenario:
     return Scenario(
         name=name, description=description, seed=seed, trials=trials,
         controllers=tuple(specs), robot_preset=robot_preset, robot_geometry=robot_geometry,
-        dt=dt, camera_preset=camera_preset, camera_file=camera_file, sensor=sensor,
+        dt=dt, camera_preset=camera_preset, camera_file=camera_file, sensor=sensor, image=image,
         noise=noise, calibration_error=cal_err, calibration=cal, task=task,
         reference=reference, sweep_axes=sweep, source=path,
     )

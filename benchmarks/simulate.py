@@ -300,9 +300,11 @@ def _make_sensor(sc: Scenario, setup: TrialSetup) -> Any:
     if sc.sensor == "image":
         from vision.image_sensor import ImageSensor
 
-        return _ImageSensorAdapter(ImageSensor(setup.world.camera, setup.estimated_camera,
-                                               setup.world.geometry,
-                                               rng=trial_rng(sc.seed, setup.trial, 4)))
+        return _ImageSensorAdapter(ImageSensor(
+            setup.world.camera, setup.estimated_camera, setup.world.geometry,
+            rng=trial_rng(sc.seed, setup.trial, 4), background=sc.image.background,
+            blur_px=sc.image.blur_px, noise_std=sc.image.noise_std,
+            estimated_geometry=setup.nominal_geometry))
     return GeometricSensor(sc, setup.world, setup.estimated_camera)
 
 
@@ -312,13 +314,20 @@ class _ImageSensorAdapter:
     def __init__(self, sensor: Any) -> None:
         self.sensor = sensor
         self.detect_times: list[float] = []
+        self._previous: dict[int, np.ndarray] = {}  # last normals per trial (tracking)
 
     def measure(self, rotations: np.ndarray, translations: np.ndarray,
                 rngs: list[np.random.Generator], apply_noise: bool = True
                 ) -> dict[str, np.ndarray | None]:
         out: dict[str, list[Any]] = {"normals": [], "lines": [], "edge_visible": []}
         for k in range(len(rotations)):
-            m = self.sensor.measure(rotations[k], translations[k])
+            key = id(rngs[k])
+            prev = self._previous.get(key) if apply_noise else None
+            m = self.sensor.measure(rotations[k], translations[k], predicted_normals=prev)
+            if apply_noise and np.all(np.asarray(m.edge_visible)):
+                self._previous[key] = np.asarray(m.normals)
+            else:
+                self._previous.pop(key, None)
             self.detect_times.append(float(m.detect_time_s))
             out["normals"].append(m.normals)
             out["lines"].append(m.lines)
@@ -584,6 +593,9 @@ def _run_group(sc: Scenario, controller_index: int, group: list[TrialSetup],
             "step_time_us": float(np.median(step_times[k]) * 1e6) if step_times[k] else None,
             "failure": None if converged[k] else fail,
         })
+        times = getattr(sensor, "detect_times", None)
+        if times:
+            row["detect_time_ms"] = float(np.median(times) * 1e3)
         if rtts[k]:
             arr = np.array(rtts[k]) * 1e3
             row["rtt_median_ms"] = float(np.median(arr))
