@@ -117,3 +117,117 @@ class ShapeError(HexapodError, ValueError):
 
 class BackendError(HexapodError):
     """A robot backend failed (communication, protocol or robot error)."""
+
+
+class SerialLinkError(BackendError):
+    """The serial link to a robot controller failed (port, timeout, disconnection).
+
+    Attributes:
+        url: The port (device path or pyserial URL).
+        problem: What went wrong.
+        command: The command being exchanged, if any.
+    """
+
+    def __init__(self, url: str, problem: str, command: str | None = None) -> None:
+        self.url = url
+        self.problem = problem
+        self.command = command
+        during = f" during '{command}'" if command else ""
+        super().__init__(f"{url}: {problem}{during}")
+
+
+class SerialTimeoutError(SerialLinkError):
+    """The robot controller did not answer within the timeout (a silent device).
+
+    Attributes:
+        timeout: The time waited for the reply [s].
+        received: The bytes received before the timeout (an incomplete line).
+    """
+
+    def __init__(self, url: str, command: str, timeout: float, received: bytes = b"") -> None:
+        self.timeout = timeout
+        self.received = received
+        got = f", received {received!r}" if received else ", nothing received"
+        super().__init__(url, f"no reply within {timeout * 1e3:.1f} ms{got}", command)
+
+
+class SerialDisconnectedError(SerialLinkError):
+    """The port went away (cable pulled, emulator or socket closed)."""
+
+
+class ProtocolError(BackendError):
+    """A line that does not follow the serial protocol (garbled, unparsable, unexpected).
+
+    Attributes:
+        line: The offending line, as received.
+        problem: What is wrong with it.
+        command: The command it answered, if known.
+    """
+
+    def __init__(self, line: bytes | str, problem: str, command: str | None = None) -> None:
+        self.line = line
+        self.problem = problem
+        self.command = command
+        after = f" (reply to '{command}')" if command else ""
+        super().__init__(f"{problem}: {line!r}{after}")
+
+
+class ChecksumError(ProtocolError):
+    """A line whose ``*HH`` checksum is missing or wrong.
+
+    Attributes:
+        expected: The checksum of the payload (two upper-case hex digits), if any payload.
+        got: The checksum the line carries (None when missing).
+    """
+
+    def __init__(
+        self, line: bytes | str, expected: str | None, got: str | None, command: str | None = None
+    ) -> None:
+        self.expected = expected
+        self.got = got
+        problem = (
+            "missing checksum" if got is None else f"bad checksum {got!r} (expected {expected!r})"
+        )
+        super().__init__(line, problem, command)
+
+
+class RobotFaultError(BackendError):
+    """The robot controller answered ``ERR <code> <text>``.
+
+    Attributes:
+        code: The protocol error code (see :class:`hexapod.backends.protocol.ErrorCode`).
+        text: The controller's text.
+        command: The command that was refused, if known.
+    """
+
+    def __init__(self, code: int, text: str, command: str | None = None) -> None:
+        self.code = int(code)
+        self.text = text
+        self.command = command
+        after = f" in reply to '{command}'" if command else ""
+        super().__init__(f"robot error {self.code} ({text}){after}")
+
+
+class CommandRejectedError(RobotFaultError):
+    """The controller rejected a command it could not read (syntax 1, unknown 2, checksum 3)."""
+
+
+class ServoOffError(RobotFaultError):
+    """A motion command while the servo is off (code 5)."""
+
+
+class OutsideStrokeError(RobotFaultError):
+    """A setpoint outside the stroke (code 7): nothing moved."""
+
+
+class SpeedRangeError(RobotFaultError):
+    """A speed limit out of range (code 8)."""
+
+
+class HaltedError(RobotFaultError):
+    """The robot was halted by a command (code 10)."""
+
+
+class WatchdogError(RobotFaultError):
+    """The controller's watchdog tripped (code 20): no valid MOV within its period; the
+    robot holds its position and refuses MOV until the host reads ``ERR?``."""

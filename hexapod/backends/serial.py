@@ -1,0 +1,589 @@
+"""The real robot behind the :class:`~hexapod.backends.base.Backend` interface, over pyserial.
+
+:class:`SerialRobot` speaks the protocol of :mod:`hexapod.backends.protocol`
+(``docs/serial-protocol.md``) to a controller board through
+``serial.serial_for_url``: a device path (``/dev/ttyUSB0``), a ``socket://`` URL or
+the pseudo-terminal of the emulator (:mod:`hexapod.backends.emulator`). The same
+code drives the emulator and a real board.
+
+One :meth:`SerialRobot.step` is one control period: send ``MOV`` with the setpoints
+``q + v dt`` (clamped to the stroke and speed limits), wait for the end of the
+period (a :class:`RateLimiter`), read ``POS?``. Every reply is checked; a garbled
+exchange (bad checksum, unparsable or unexpected reply, ``ERR 3``) is retried a
+bounded number of times; a timeout, a disconnection or an unrecoverable error
+halts the robot (``HLT``) when the link still works and raises a typed
+:class:`~hexapod.exceptions.BackendError`. Leaving a ``with`` block, or Ctrl-C
+during an exchange, halts the robot and closes the port.
+"""
+
+from __future__ import annotations
+
+import logging
+import time
+from collections.abc import Callable
+from types import TracebackType
+from typing import Any, TypeVar
+
+import numpy as np
+import serial  # pyserial (absolute import: this module is hexapod.backends.serial)
+
+from hexapod.backends import protocol
+from hexapod.backends.base import Backend, BackendStep, clamp_velocities
+from hexapod.exceptions import (
+    BackendError,
+    CommandRejectedError,
+    ProtocolError,
+    RobotFaultError,
+    SerialDisconnectedError,
+    SerialLinkError,
+    SerialTimeoutError,
+    ShapeError,
+    StrokeLimitError,
+    WatchdogError,
+)
+
+logger = logging.getLogger(__name__)
+
+__all__ = ["RateLimiter", "SerialRobot", "open_emulated_robot"]
+
+T = TypeVar("T")
+
+
+class RateLimiter:
+    """Regulate a loop at a fixed period (the idiom of upkie's ``loop_rate_limiters``).
+
+    Call :meth:`sleep` once per iteration: it sleeps until the next tick. A late
+    iteration does not sleep, counts as missed and restarts the schedule from now
+    (no burst of catch-up iterations).
+
+    Args:
+        period: Loop period [s].
+        name: Name for the log messages.
+        warn: Log a warning when an iteration is late by more than 10 % of the period.
+
+    Attributes:
+        period: Loop period [s].
+        slack: Time left before the tick at the last :meth:`sleep` [s] (negative: late).
+        missed: Number of late iterations.
+        iterations: Number of calls to :meth:`sleep`.
+    """
+
+    def __init__(self, period: float, name: str = "rate limiter", warn: bool = False,
+                 clock: Callable[[], float] = time.perf_counter) -> None:
+        if not (np.isfinite(period) and period > 0):
+            raise BackendError(f"{name}: period must be positive, got {period} s")
+        self.period = float(period)
+        self.name = name
+        self.warn = warn
+        self._clock = clock
+        self.next_tick = clock() + self.period
+        self.slack = 0.0
+        self.missed = 0
+        self.iterations = 0
+
+    @property
+    def frequency(self) -> float:
+        """Loop frequency [Hz]."""
+        return 1.0 / self.period
+
+    def remaining(self) -> float:
+        """Time left until the next tick [s] (negative when late)."""
+        return self.next_tick - self._clock()
+
+    def sleep(self) -> float:
+        """Sleep until the next tick; returns the slack [s] (negative: the tick was missed)."""
+        self.iterations += 1
+        self.slack = self.next_tick - self._clock()
+        if self.slack > 0:
+            time.sleep(self.slack)
+            self.next_tick += self.period
+        else:
+            self.missed += 1
+            if self.warn and self.slack < -0.1 * self.period:
+                logger.warning("%s is late by %.1f ms", self.name, -self.slack * 1e3)
+            self.next_tick = self._clock() + self.period
+        return self.slack
+
+
+class SerialRobot(Backend):
+    """A robot controller board over a serial link (or the emulator).
+
+    On open: ``*IDN?``, ``LIM?`` (stroke and speed limit), ``ERR?`` (clears a stale
+    error), ``WDT``, ``SVO 1``, ``POS?``.
+
+    Args:
+        url: Device path, ``socket://127.0.0.1:PORT`` or any pyserial URL.
+        baudrate: Baud rate (115200 by the protocol).
+        timeout: Time to wait for each reply [s].
+        watchdog: Watchdog period to set on the board [s] (20 to 1000 ms).
+        retries: How many times a garbled exchange is sent again before giving up.
+        timeout_retries: How many times an exchange that timed out is sent again
+            (0 by default: a silent device is an error).
+        rearm_watchdog: When a MOV is refused because the watchdog tripped while the
+            host was idle longer than the watchdog period (e.g. between :meth:`reset`
+            and the first :meth:`step`), clear it with ``ERR?`` and send the MOV again.
+            If False, or if the host was not idle that long, raise :class:`WatchdogError`.
+        on_close: Called once after the port is closed (e.g. to stop an emulator).
+
+    Attributes:
+        identity: The board's ``*IDN?`` text.
+        stroke: (q_min, q_max) [m], from ``LIM?``.
+        max_speed: Leg speed limit [m/s], from ``LIM?``.
+        exchanges: Round-trip times of every successful exchange [s] (for statistics).
+    """
+
+    def __init__(
+        self,
+        url: str,
+        *,
+        baudrate: int = protocol.BAUDRATE,
+        timeout: float = 0.2,
+        watchdog: float = 0.1,
+        retries: int = 3,
+        timeout_retries: int = 0,
+        rearm_watchdog: bool = True,
+        on_close: Callable[[], None] | None = None,
+    ) -> None:
+        ms = watchdog * 1e3
+        if not protocol.WATCHDOG_MIN_MS <= round(ms) <= protocol.WATCHDOG_MAX_MS:
+            raise BackendError(f"watchdog must be 20 to 1000 ms, got {ms:g} ms")
+        if timeout <= 0 or retries < 0 or timeout_retries < 0:
+            raise BackendError("timeout must be positive and retries >= 0")
+        self.url = url
+        self.timeout = float(timeout)
+        self.watchdog = round(ms) / 1e3
+        self.retries = int(retries)
+        self.timeout_retries = int(timeout_retries)
+        self.rearm_watchdog = rearm_watchdog
+        self._on_close = on_close
+        self._buf = bytearray()
+        self._rate: RateLimiter | None = None
+        #: The emulator this robot started (see :func:`open_emulated_robot`), if any.
+        self.emulator: Any = None
+        self._last_mov = -np.inf
+        self._closed = False
+        self.exchanges: list[float] = []
+        self.retried = 0
+        self.watchdog_rearms = 0
+        try:
+            self._port = serial.serial_for_url(url, baudrate=baudrate, timeout=self.timeout,
+                                               write_timeout=self.timeout)
+        except (serial.SerialException, OSError, ValueError) as exc:
+            self._closed = True
+            if on_close is not None:
+                on_close()
+            raise SerialLinkError(url, f"cannot open the port: {exc}") from exc
+        try:
+            self._port.reset_input_buffer()
+            self.identity = protocol.parse_idn(self._exchange("*IDN?"))
+            limits = protocol.parse_lim(self._exchange("LIM?"))
+            self.stroke = limits.stroke
+            self.max_speed = limits.max_speed
+            code, text = self._read_error()
+            if code:
+                logger.info("%s: cleared a pending error %d (%s)", url, code, text)
+            protocol.parse_ok(self._exchange(protocol.wdt(self.watchdog)), "WDT")
+            protocol.parse_ok(self._exchange("SVO 1"), "SVO 1")
+            self._last_mov = time.perf_counter()
+            self._q = protocol.parse_pos(self._exchange("POS?"))
+        except BaseException:
+            self._shutdown(halt=True)
+            raise
+        logger.info("%s: connected to '%s', stroke [%.3f, %.3f] mm, %.3f mm/s", url,
+                    self.identity, self.stroke[0] * 1e3, self.stroke[1] * 1e3,
+                    self.max_speed * 1e3)
+
+    # ------------------------------------------------------------------ link
+    @property
+    def is_open(self) -> bool:
+        """The port is open."""
+        return not self._closed
+
+    def _write(self, payload: str, line: bytes | None = None) -> None:
+        try:
+            self._port.write(protocol.frame(payload) if line is None else line)
+        except serial.SerialTimeoutException as exc:
+            raise SerialTimeoutError(self.url, payload, self.timeout) from exc
+        except (serial.SerialException, OSError) as exc:
+            raise SerialDisconnectedError(self.url, f"write failed: {exc}", payload) from exc
+
+    def _read_line(self, command: str, deadline: float) -> bytes:
+        """Read one line (up to ``\\n``) before ``deadline`` (perf_counter time) [s]."""
+        while True:
+            nl = self._buf.find(b"\n")
+            if nl >= 0:
+                line = bytes(self._buf[: nl + 1])
+                del self._buf[: nl + 1]
+                return line
+            if len(self._buf) > protocol.MAX_LINE:
+                junk = bytes(self._buf)
+                self._buf.clear()
+                raise ProtocolError(junk, "line too long", command)
+            if time.perf_counter() >= deadline:
+                got = bytes(self._buf)
+                self._buf.clear()
+                raise SerialTimeoutError(self.url, command, self.timeout, got)
+            try:
+                chunk = self._port.read(max(1, self._port.in_waiting))
+            except (serial.SerialException, OSError) as exc:
+                raise SerialDisconnectedError(self.url, f"read failed: {exc}", command) from exc
+            self._buf += chunk
+
+    def _flush_input(self) -> None:
+        self._buf.clear()
+        try:
+            self._port.reset_input_buffer()
+        except (serial.SerialException, OSError) as exc:
+            raise SerialDisconnectedError(self.url, f"flush failed: {exc}") from exc
+
+    def _exchange(self, payload: str) -> str:
+        """Send one command and return the checked payload of its reply.
+
+        Retries on a garbled exchange (bad checksum, ``ERR 3``, a reply that is not
+        printable ASCII or does not answer this command: see :meth:`_checked`).
+        """
+        if self._closed:
+            raise SerialLinkError(self.url, "the port is closed", payload)
+        framed = protocol.frame(payload)
+        garbled = timeouts = 0
+        while True:
+            t0 = time.perf_counter()
+            try:
+                self._write(payload, framed)
+                line = self._read_line(payload, t0 + self.timeout)
+                reply = protocol.unframe(line, payload)
+                if reply.startswith("ERR 3 ") and not payload.startswith("ERR?"):
+                    # our command was garbled on the way: it had no effect, send it again
+                    raise protocol.fault(*protocol.parse_err(reply, payload), payload)
+                self.exchanges.append(time.perf_counter() - t0)
+                return reply
+            except (ProtocolError, CommandRejectedError) as exc:
+                garbled += 1
+                if garbled > self.retries:
+                    raise
+                logger.warning("%s: garbled exchange (%s), retry %d/%d", self.url, exc,
+                               garbled, self.retries)
+            except SerialTimeoutError as exc:
+                timeouts += 1
+                if timeouts > self.timeout_retries:
+                    raise
+                logger.warning("%s: %s, retry %d/%d", self.url, exc, timeouts,
+                               self.timeout_retries)
+            self.retried += 1
+            self._flush_input()
+
+    def _checked(self, payload: str, parse: Callable[[str], T]) -> T:
+        """Exchange and parse, retrying when the reply is well framed but unexpected
+        (a stale or corrupted line that passed the checksum)."""
+        attempts = 0
+        while True:
+            reply = self._exchange(payload)
+            try:
+                return parse(reply)
+            except RobotFaultError:
+                raise
+            except ProtocolError as exc:
+                attempts += 1
+                if attempts > self.retries:
+                    raise
+                logger.warning("%s: unexpected reply (%s), retry %d/%d", self.url, exc,
+                               attempts, self.retries)
+                self.retried += 1
+                self._flush_input()
+
+    def _guarded(self, action: Callable[[], T]) -> T:
+        """Run an exchange; on any failure halt the robot if the link allows, then raise.
+
+        A disconnection closes the port; Ctrl-C halts and closes the port.
+        """
+        try:
+            return action()
+        except SerialDisconnectedError:
+            self._shutdown(halt=False)
+            raise
+        except KeyboardInterrupt:
+            self._shutdown(halt=True)
+            raise
+        except (SerialLinkError, ProtocolError, RobotFaultError):
+            self._try_halt()
+            raise
+
+    def command(self, payload: str) -> str:
+        """Send any command (payload without checksum) and return the reply payload.
+
+        For diagnostics and tests; a reply ``ERR`` is returned, not raised.
+        """
+        return self._guarded(lambda: self._exchange(payload))
+
+    # ------------------------------------------------------------------ queries
+    def status(self) -> protocol.Status:
+        """The board's status (``STA?``)."""
+        return self._guarded(lambda: self._checked("STA?", protocol.parse_sta))
+
+    def _read_error(self) -> tuple[int, str]:
+        # A garbled ERR? is answered "ERR 3 checksum" without clearing anything: the
+        # board then holds error 3 (or the latched watchdog), so read once more.
+        code, text = self._checked("ERR?", protocol.parse_err)
+        for _ in range(self.retries):
+            if code != protocol.ErrorCode.CHECKSUM:
+                break
+            code2, text2 = self._checked("ERR?", protocol.parse_err)
+            if code2 == protocol.ErrorCode.NONE:
+                break
+            code, text = code2, text2
+        return code, text
+
+    def read_error(self) -> tuple[int, str]:
+        """Read and clear the board's pending error (``ERR?``): (code, text)."""
+        return self._guarded(self._read_error)
+
+    def measured_lengths(self) -> np.ndarray:
+        """Read the leg lengths (``POS?``) (6,) [m]."""
+        self._q = self._guarded(lambda: self._checked("POS?", protocol.parse_pos))
+        return self._q.copy()
+
+    def set_speed(self, speed: float) -> None:
+        """Set the leg speed limit (``VEL``) [m/s]."""
+        def go() -> float:
+            self._checked(protocol.vel(speed), lambda r: protocol.parse_ok(r, "VEL"))
+            return self._checked("LIM?", protocol.parse_lim).max_speed
+
+        self.max_speed = self._guarded(go)
+
+    # ------------------------------------------------------------------ motion
+    def _send_mov(self, setpoints: np.ndarray) -> None:
+        payload = protocol.mov(setpoints)
+        try:
+            self._checked(payload, lambda r: protocol.parse_ok(r, "MOV"))
+        except WatchdogError as exc:
+            idle = time.perf_counter() - self._last_mov
+            if not self.rearm_watchdog or idle <= self.watchdog:
+                raise
+            code, text = self._read_error()
+            self.watchdog_rearms += 1
+            logger.info("%s: watchdog tripped while idle %.0f ms (%s); cleared (%d %s)",
+                        self.url, idle * 1e3, exc.text, code, text)
+            self._checked(payload, lambda r: protocol.parse_ok(r, "MOV"))
+        self._last_mov = time.perf_counter()
+
+    def _check_lengths(self, lengths: np.ndarray) -> np.ndarray:
+        q = np.asarray(lengths, dtype=float)
+        if q.shape != (6,) or not np.all(np.isfinite(q)):
+            raise ShapeError("lengths", "6 finite leg lengths [m]", q)
+        for i, x in enumerate(q):
+            if not self.stroke[0] - 1e-9 <= x <= self.stroke[1] + 1e-9:
+                raise StrokeLimitError(i, float(x), *self.stroke)
+        return np.clip(q, *self.stroke)
+
+    def move(self, lengths: np.ndarray, wait: bool = True, tolerance: float = 2e-6,
+             timeout: float | None = None) -> np.ndarray:
+        """Move to absolute leg lengths [m] and (if ``wait``) until the legs stop.
+
+        While waiting, the MOV is sent again at a fraction of the watchdog period, so
+        the watchdog does not trip.
+
+        Args:
+            lengths: (6,) setpoints [m], inside the stroke.
+            wait: Wait until the board reports ``moving=0``.
+            tolerance: Largest accepted distance to the setpoint at the end [m].
+            timeout: Longest wait [s] (default: the longest leg travel at the speed
+                limit, times 2, plus 1 s).
+
+        Returns:
+            The measured lengths [m].
+        """
+        target = self._check_lengths(lengths)
+
+        def go() -> np.ndarray:
+            if not self._checked("STA?", protocol.parse_sta).servo:
+                protocol.parse_ok(self._exchange("SVO 1"), "SVO 1")
+            self._send_mov(target)
+            if not wait:
+                return self._q.copy()
+            q = self._checked("POS?", protocol.parse_pos)
+            limit = timeout if timeout is not None else (
+                2.0 * float(np.max(np.abs(target - q))) / self.max_speed + 1.0)
+            deadline = time.perf_counter() + limit
+            poll = min(0.02, self.watchdog / 3)
+            while True:
+                st = self._checked("STA?", protocol.parse_sta)
+                q = self._checked("POS?", protocol.parse_pos)
+                if not st.moving:
+                    break
+                if time.perf_counter() > deadline:
+                    raise BackendError(f"{self.url}: the legs did not reach their setpoints "
+                                       f"within {limit:.1f} s (at {np.round(q * 1e3, 3)} mm)")
+                time.sleep(poll)
+                self._send_mov(target)  # keep the watchdog fed
+            if np.max(np.abs(q - target)) > tolerance:
+                raise BackendError(f"{self.url}: legs stopped at {np.round(q * 1e3, 3)} mm, "
+                                   f"away from {np.round(target * 1e3, 3)} mm")
+            return q
+
+        self._q = self._guarded(go)
+        self._rate = None
+        return self._q.copy()
+
+    def reset(self, lengths: np.ndarray | None = None) -> np.ndarray:
+        """Clear a pending error, move to ``lengths`` [m] (if given), return the measured lengths.
+
+        Raises:
+            StrokeLimitError: A length is outside the stroke (nothing is sent).
+        """
+        if lengths is not None:
+            self._check_lengths(lengths)
+        code, text = self.read_error()
+        if code:
+            logger.info("%s: reset cleared error %d (%s)", self.url, code, text)
+        self._rate = None
+        if lengths is None:
+            return self.measured_lengths()
+        return self.move(lengths)
+
+    def step(self, velocities: np.ndarray, dt: float) -> BackendStep:
+        """One control period: MOV to ``q + v dt`` (clamped), wait for the period, POS?.
+
+        The period is kept by a :class:`RateLimiter` across calls: call ``step`` again
+        within ``dt`` of its return to keep the rate.
+
+        Args:
+            velocities: (6,) leg velocities [m/s].
+            dt: Control period [s].
+
+        Returns:
+            The measured lengths at the end of the period, the applied velocities, the
+            clamped legs, the time spent communicating (``round_trip_s``) and whether the
+            period was missed. ``extras``: ``mov_rtt_s``, ``pos_rtt_s``, ``slack_s``,
+            ``retries``.
+        """
+        v = np.asarray(velocities, dtype=float)
+        if v.shape != (6,):
+            raise ShapeError("velocities", "shape (6,)", v.shape)
+        if not (np.isfinite(dt) and dt > 0):
+            raise BackendError(f"dt must be positive, got {dt} s")
+        if self._rate is None or self._rate.period != dt:
+            self._rate = RateLimiter(dt, name=f"SerialRobot({self.url})")
+        rate = self._rate
+        q = self._q
+        vc, clamped = clamp_velocities(q, v, dt, self.stroke, self.max_speed)
+        setpoints = np.clip(q + vc * dt, *self.stroke)
+        retried = self.retried
+
+        def period() -> tuple[float, float, float]:
+            t0 = time.perf_counter()
+            self._send_mov(setpoints)
+            t1 = time.perf_counter()
+            if rate.iterations == 0:  # the first period starts with its MOV
+                rate.next_tick = t0 + dt
+            slack = rate.sleep()
+            t2 = time.perf_counter()
+            self._q = self._checked("POS?", protocol.parse_pos)
+            return t1 - t0, time.perf_counter() - t2, slack
+
+        mov_rtt, pos_rtt, slack = self._guarded(period)
+        return BackendStep(
+            lengths=self._q.copy(),
+            applied_velocities=vc,
+            clamped=clamped,
+            round_trip_s=mov_rtt + pos_rtt,
+            missed_period=slack < 0,
+            extras={"mov_rtt_s": mov_rtt, "pos_rtt_s": pos_rtt, "slack_s": slack,
+                    "retries": float(self.retried - retried)},
+        )
+
+    # ------------------------------------------------------------------ stopping
+    def _try_halt(self) -> bool:
+        """Send HLT once, ignoring a stale reply; True if the board acknowledged it."""
+        if self._closed:
+            return False
+        try:
+            self._flush_input()
+            self._write("HLT")
+            deadline = time.perf_counter() + self.timeout
+            for _ in range(4):
+                try:
+                    if protocol.unframe(self._read_line("HLT", deadline), "HLT") == "OK":
+                        return True
+                except ProtocolError:
+                    continue
+        except (SerialLinkError, ProtocolError) as exc:
+            logger.warning("%s: could not halt the robot: %s", self.url, exc)
+        return False
+
+    def halt(self) -> None:
+        """Stop every leg where it is (``HLT``); never raises if the link is dead."""
+        if not self._try_halt() and not self._closed:
+            logger.warning("%s: HLT not acknowledged", self.url)
+
+    def _shutdown(self, halt: bool) -> None:
+        if halt:
+            self._try_halt()
+        if self._closed:
+            return
+        self._closed = True
+        try:
+            self._port.close()
+        except (serial.SerialException, OSError) as exc:
+            logger.warning("%s: close failed: %s", self.url, exc)
+        if self._on_close is not None:
+            self._on_close()
+
+    def close(self) -> None:
+        """Halt the robot (if the link works) and close the port. Idempotent."""
+        self._shutdown(halt=True)
+
+    def __exit__(
+        self,
+        exc_type: type[BaseException] | None,
+        exc: BaseException | None,
+        tb: TracebackType | None,
+    ) -> None:
+        self._shutdown(halt=True)
+
+    def stats(self) -> dict[str, Any]:
+        """Round-trip statistics of the exchanges so far: count, median and p99 [s]."""
+        rtt = np.array(self.exchanges)
+        if rtt.size == 0:
+            return {"exchanges": 0}
+        return {"exchanges": int(rtt.size), "median_s": float(np.median(rtt)),
+                "p99_s": float(np.percentile(rtt, 99)), "max_s": float(rtt.max()),
+                "retries": self.retried, "watchdog_rearms": self.watchdog_rearms}
+
+
+def open_emulated_robot(
+    geometry: Any,
+    lengths: np.ndarray | None = None,
+    *,
+    faults: Any = None,
+    lag: float = 0.0,
+    line_rate: float = 0.0,
+    transport: str = "pty",
+    **robot_options: Any,
+) -> SerialRobot:
+    """Start an emulator (pty, in a thread) for a geometry and connect a :class:`SerialRobot`.
+
+    Closing the robot stops the emulator.
+
+    Args:
+        geometry: A :class:`~hexapod.geometry.HexapodGeometry` (stroke, speed limit).
+        lengths: Initial leg lengths [m] (mid-stroke if None).
+        faults: A :class:`~hexapod.backends.emulator.FaultConfig` (none if None).
+        lag: First-order lag of the emulated legs [s].
+        line_rate: Emulated line rate [baud] (0: instantaneous).
+        transport: ``"pty"`` or ``"tcp"`` (loopback).
+        robot_options: Keyword arguments of :class:`SerialRobot`.
+
+    Returns:
+        The connected robot; ``robot.emulator`` is the running emulator.
+    """
+    from hexapod.backends.emulator import BoardConfig, Emulator
+
+    emu = Emulator(BoardConfig.from_geometry(geometry, lengths, lag=lag), faults,
+                   transport=transport, line_rate=line_rate).start()
+    try:
+        robot = SerialRobot(emu.url, on_close=emu.stop, **robot_options)
+    except BaseException:
+        emu.stop()
+        raise
+    robot.emulator = emu
+    return robot
