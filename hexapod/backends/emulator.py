@@ -52,6 +52,8 @@ __all__ = ["Board", "BoardConfig", "Emulator", "FaultConfig", "main"]
 
 #: A leg within this distance of its setpoint has arrived [m] (half the protocol resolution).
 ARRIVED = 0.5e-6
+#: Time left to the host to read the last reply before a disconnection fault [s].
+DISCONNECT_GRACE = 0.02
 #: Tolerance of the stroke check [m] (setpoints are read with 1 um resolution).
 STROKE_TOL = 1e-9
 
@@ -407,6 +409,7 @@ class _FaultState:
     rng: random.Random = field(default_factory=lambda: random.Random(0))
     commands: int = 0
     disconnect_pending: bool = False
+    disconnect_at: float = math.inf
 
 
 def _check_loopback(host: str, allow_remote: bool) -> None:
@@ -598,6 +601,8 @@ class Emulator:
             self.board.advance(now)
             trip = self.board.trip_time()
         timeout = 0.05
+        if self._faults.disconnect_pending:
+            timeout = 0.005
         if self._replies:
             timeout = min(timeout, self._replies[0].due - now)
         if trip is not None:
@@ -626,8 +631,13 @@ class Emulator:
             self._inbuf += data
             self._process_input()
         self._send_due()
-        if self._faults.disconnect_pending and not self._replies:
-            self._faults.disconnect_pending = False
+        fs = self._faults
+        if fs.disconnect_pending and not self._replies and fs.disconnect_at == math.inf:
+            # let the host read the last reply: closing a pty master discards unread data
+            fs.disconnect_at = time.monotonic() + DISCONNECT_GRACE
+        if fs.disconnect_pending and time.monotonic() >= fs.disconnect_at:
+            fs.disconnect_pending = False
+            fs.disconnect_at = math.inf
             self.disconnections += 1
             logger.info("emulator: disconnecting (fault injection)")
             return self._drop_connection("fault injection")
@@ -680,6 +690,8 @@ class Emulator:
     def _command(self, line: bytes) -> None:
         fs = self._faults
         f = fs.config
+        if fs.disconnect_pending:
+            return  # the cable is being pulled
         if f.garble_rate and fs.rng.random() < f.garble_rate:
             line = self._garble(line, fs.rng)
         with self._lock:

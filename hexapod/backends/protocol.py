@@ -92,7 +92,7 @@ def checksum(payload: str | bytes) -> str:
         payload: The text before ``*`` (ASCII).
 
     Returns:
-        For example ``checksum("POS?") == "2D"``.
+        For example ``checksum("POS?") == "73"`` (0x50 ^ 0x4F ^ 0x53 ^ 0x3F).
     """
     data = payload.encode("ascii") if isinstance(payload, str) else payload
     x = 0
