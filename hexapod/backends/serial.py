@@ -272,14 +272,14 @@ class SerialRobot(Backend):
             self.retried += 1
             self._flush_input()
 
-    def _checked(self, payload: str, parse: Callable[[str], T]) -> T:
+    def _checked(self, payload: str, parse: Callable[[str, str], T]) -> T:
         """Exchange and parse, retrying when the reply is well framed but unexpected
         (a stale or corrupted line that passed the checksum)."""
         attempts = 0
         while True:
             reply = self._exchange(payload)
             try:
-                return parse(reply)
+                return parse(reply, payload)
             except RobotFaultError:
                 raise
             except ProtocolError as exc:
@@ -345,7 +345,7 @@ class SerialRobot(Backend):
     def set_speed(self, speed: float) -> None:
         """Set the leg speed limit (``VEL``) [m/s]."""
         def go() -> float:
-            self._checked(protocol.vel(speed), lambda r: protocol.parse_ok(r, "VEL"))
+            self._checked(protocol.vel(speed), protocol.parse_ok)
             return self._checked("LIM?", protocol.parse_lim).max_speed
 
         self.max_speed = self._guarded(go)
@@ -354,7 +354,7 @@ class SerialRobot(Backend):
     def _send_mov(self, setpoints: np.ndarray) -> None:
         payload = protocol.mov(setpoints)
         try:
-            self._checked(payload, lambda r: protocol.parse_ok(r, "MOV"))
+            self._checked(payload, protocol.parse_ok)
         except WatchdogError as exc:
             idle = time.perf_counter() - self._last_mov
             if not self.rearm_watchdog or idle <= self.watchdog:
@@ -363,7 +363,7 @@ class SerialRobot(Backend):
             self.watchdog_rearms += 1
             logger.info("%s: watchdog tripped while idle %.0f ms (%s); cleared (%d %s)",
                         self.url, idle * 1e3, exc.text, code, text)
-            self._checked(payload, lambda r: protocol.parse_ok(r, "MOV"))
+            self._checked(payload, protocol.parse_ok)
         self._last_mov = time.perf_counter()
 
     def _check_lengths(self, lengths: np.ndarray) -> np.ndarray:
@@ -531,6 +531,9 @@ class SerialRobot(Backend):
     def close(self) -> None:
         """Halt the robot (if the link works) and close the port. Idempotent."""
         self._shutdown(halt=True)
+
+    def __enter__(self) -> SerialRobot:
+        return self
 
     def __exit__(
         self,

@@ -1,0 +1,353 @@
+"""SerialRobot through the emulator on a real pseudo-terminal (real pyserial, no mocks).
+
+Opening, reset, clamped streaming at the control period, error mapping, retries on
+garbled exchanges, halting on a timeout / disconnection / Ctrl-C / leaving ``with``,
+and a closed-loop joint-space run that ends where the simulated robot ends.
+"""
+
+from __future__ import annotations
+
+import signal
+import threading
+import time
+from collections.abc import Iterator
+
+import numpy as np
+import pytest
+
+from hexapod import HexapodGeometry, deltalab
+from hexapod.backends import Backend, SimulatedRobot, clamp_velocities, protocol
+from hexapod.backends.emulator import BoardConfig, Emulator, FaultConfig
+from hexapod.backends.serial import RateLimiter, SerialRobot, open_emulated_robot
+from hexapod.exceptions import (
+    ChecksumError,
+    OutsideStrokeError,
+    ProtocolError,
+    SerialDisconnectedError,
+    SerialLinkError,
+    SerialTimeoutError,
+    ServoOffError,
+    StrokeLimitError,
+    WatchdogError,
+)
+
+DT = 0.02
+Q0 = np.array([0.40, 0.405, 0.41, 0.415, 0.42, 0.425])
+
+
+@pytest.fixture
+def emulator(geometry: HexapodGeometry) -> Iterator[Emulator]:
+    emu = Emulator(BoardConfig.from_geometry(geometry, Q0)).start()
+    yield emu
+    emu.stop()
+
+
+@pytest.fixture
+def robot(emulator: Emulator) -> Iterator[SerialRobot]:
+    r = SerialRobot(emulator.device, timeout=0.2, watchdog=0.1)
+    yield r
+    r.close()
+
+
+def test_open_reads_identity_and_limits_from_the_board(other_geometry: HexapodGeometry) -> None:
+    emu = Emulator(BoardConfig.from_geometry(other_geometry)).start()
+    try:
+        with SerialRobot(emu.device, watchdog=0.25) as r:
+            assert isinstance(r, Backend)
+            assert r.identity == "hexapod-emulator 0.1.0 other"
+            assert r.stroke == other_geometry.stroke == (0.38, 0.56)
+            assert r.max_speed == other_geometry.max_speed
+            st = emu.status()
+            assert st.servo and not st.watchdog and st.error == 0
+            assert emu.board.watchdog == 0.25
+            np.testing.assert_allclose(r.measured_lengths(), other_geometry.q_mid, atol=1e-9)
+        assert not r.is_open
+    finally:
+        emu.stop()
+
+
+def test_open_clears_a_stale_error(emulator: Emulator) -> None:
+    with SerialRobot(emulator.device) as r:
+        r.command("BOGUS")
+    with SerialRobot(emulator.device) as r:
+        assert r.read_error() == (0, "none")
+
+
+def test_open_failure_is_a_link_error(tmp_path: object) -> None:
+    with pytest.raises(SerialLinkError, match="cannot open"):
+        SerialRobot("/dev/does-not-exist-hexapod")
+
+
+def test_reset_moves_to_the_lengths(robot: SerialRobot, emulator: Emulator) -> None:
+    target = np.array([0.41, 0.39, 0.41, 0.40, 0.405, 0.4])
+    t0 = time.perf_counter()
+    q = robot.reset(target)
+    elapsed = time.perf_counter() - t0
+    np.testing.assert_allclose(q, target, atol=1e-9)
+    np.testing.assert_allclose(emulator.true_lengths(), target, atol=1e-9)
+    assert not emulator.status().moving
+    # 25 mm at 50 mm/s: the move takes real time, and the watchdog (100 ms) did not trip
+    assert elapsed >= 0.025 / 0.05 - 0.01
+    assert emulator.status().error == 0
+    np.testing.assert_allclose(robot.reset(), target, atol=1e-9)
+
+
+def test_reset_outside_the_stroke_sends_nothing(robot: SerialRobot, emulator: Emulator) -> None:
+    before = emulator.board.commands
+    bad = Q0.copy()
+    bad[3] = 0.49
+    with pytest.raises(StrokeLimitError) as info:
+        robot.reset(bad)
+    assert info.value.leg == 3 and info.value.upper == 0.485
+    assert emulator.board.commands == before
+
+
+def test_step_streams_clamped_setpoints(geometry: HexapodGeometry) -> None:
+    start = np.array([0.4845, 0.3455, 0.40, 0.40, 0.40, 0.40])
+    with open_emulated_robot(geometry, start) as robot:
+        check_clamped_step(robot, robot.emulator, start)
+
+
+def check_clamped_step(robot: SerialRobot, emulator: Emulator, start: np.ndarray) -> None:
+    q = robot.reset(start)
+    v = np.array([0.049, -0.049, 0.2, -0.01, np.nan, 0.0])  # stroke, stroke, speed, -, NaN
+    expected_v, expected_clamped = clamp_velocities(q, v, DT, robot.stroke, robot.max_speed)
+    st = robot.step(v, DT)
+    np.testing.assert_allclose(st.applied_velocities, expected_v)
+    np.testing.assert_array_equal(st.clamped, expected_clamped)
+    assert st.clamped.tolist() == [True, True, True, False, True, False]
+    np.testing.assert_allclose(st.lengths, np.clip(q + expected_v * DT, *robot.stroke),
+                               atol=1.5e-6)
+    assert st.lengths[0] == 0.485 and st.lengths[1] == 0.345
+    assert emulator.status().error == 0  # never an ERR 7
+    assert 0 < st.round_trip_s < DT
+    assert st.extras["mov_rtt_s"] + st.extras["pos_rtt_s"] == pytest.approx(st.round_trip_s)
+
+
+def test_step_keeps_the_period(robot: SerialRobot) -> None:
+    q = robot.reset(Q0)
+    t0 = time.perf_counter()
+    n, missed = 25, 0
+    for _ in range(n):
+        st = robot.step(np.full(6, 0.01), DT)
+        missed += st.missed_period
+    elapsed = time.perf_counter() - t0
+    assert elapsed == pytest.approx(n * DT, abs=0.5 * DT)
+    assert missed <= 2
+    np.testing.assert_allclose(st.lengths, q + n * 0.01 * DT, atol=5e-6)
+    # a caller late by more than a period misses it
+    time.sleep(1.5 * DT)
+    assert robot.step(np.zeros(6), DT).missed_period
+
+
+def test_rate_limiter() -> None:
+    rate = RateLimiter(0.01)
+    t0 = time.perf_counter()
+    for _ in range(10):
+        rate.sleep()
+    assert time.perf_counter() - t0 == pytest.approx(0.1, abs=0.01)
+    assert rate.missed == 0 and rate.frequency == pytest.approx(100.0)
+    time.sleep(0.03)
+    assert rate.sleep() < 0 and rate.missed == 1
+    assert 0.0 < rate.remaining() <= 0.01  # restarted from now: no burst of catch-up ticks
+
+
+# ----------------------------------------------------------------------------- errors
+def test_servo_off_is_mapped_and_halts(robot: SerialRobot, emulator: Emulator) -> None:
+    robot.reset(Q0)
+    assert robot.command("SVO 0") == "OK"
+    with pytest.raises(ServoOffError) as info:
+        robot.step(np.full(6, 0.01), DT)
+    assert info.value.code == 5 and str(info.value.command).startswith("MOV ")
+    assert emulator.board.last_command == "HLT"
+    assert robot.read_error()[0] == 10
+
+
+def test_outside_stroke_reply_is_mapped(robot: SerialRobot) -> None:
+    with pytest.raises(OutsideStrokeError) as info:
+        robot._guarded(lambda: robot._checked("MOV 400 400 400 400 400 999",
+                                              protocol.parse_ok))
+    assert info.value.code == 7 and "l6=999" in info.value.text
+
+
+def test_watchdog_trip_while_idle_is_rearmed(robot: SerialRobot, emulator: Emulator) -> None:
+    q = robot.reset(Q0)
+    time.sleep(0.15)  # idle longer than the 100 ms watchdog
+    assert emulator.status().watchdog
+    st = robot.step(np.full(6, 0.01), DT)
+    assert robot.watchdog_rearms == 1
+    np.testing.assert_allclose(st.lengths, q + 0.01 * DT, atol=2e-6)
+
+
+def test_watchdog_trip_raises_without_rearm(emulator: Emulator) -> None:
+    with SerialRobot(emulator.device, watchdog=0.05, rearm_watchdog=False) as r:
+        r.reset(Q0)
+        time.sleep(0.1)
+        with pytest.raises(WatchdogError) as info:
+            r.step(np.full(6, 0.01), DT)
+        assert info.value.code == 20 and str(info.value.command).startswith("MOV ")
+        assert emulator.board.last_command == "HLT"  # halted after the error
+        assert r.read_error()[0] == 20  # the latched watchdog is reported first, then cleared
+        assert r.read_error()[0] == 0
+
+
+def test_watchdog_not_explained_by_idle_raises(emulator: Emulator) -> None:
+    # a link slower than the watchdog: the MOVs arrive late although the host is on time
+    with SerialRobot(emulator.device, watchdog=0.02, timeout=0.5) as r:
+        r.reset(Q0)
+        emulator.set_faults(FaultConfig(latency=0.03))
+        with pytest.raises(WatchdogError):
+            for _ in range(5):
+                r.step(np.zeros(6), DT)
+
+
+# ----------------------------------------------------------------------------- faults
+def test_survives_garbled_exchanges(geometry: HexapodGeometry) -> None:
+    goal = Q0 + np.array([0.003, -0.002, 0.001, 0.0, -0.003, 0.002])
+    sim = SimulatedRobot(geometry, Q0)
+    with open_emulated_robot(geometry, Q0, faults=FaultConfig(garble_rate=0.15, seed=11),
+                             retries=8) as r:
+        q = r.measured_lengths()
+        q_sim = sim.measured_lengths()
+        for _ in range(40):
+            q = r.step(5.0 * (goal - q), DT).lengths
+            q_sim = sim.step(5.0 * (goal - q_sim), DT).lengths
+        assert r.retried > 5
+        np.testing.assert_allclose(q, q_sim, atol=1e-5)
+        np.testing.assert_allclose(r.emulator.true_lengths(), q, atol=1e-9)
+
+
+def test_gives_up_after_bounded_retries(robot: SerialRobot, emulator: Emulator) -> None:
+    robot.reset(Q0)
+    emulator.set_faults(FaultConfig(garble_rate=1.0, seed=2))
+    t0 = time.perf_counter()
+    with pytest.raises(ProtocolError):
+        robot.step(np.zeros(6), DT)
+    assert time.perf_counter() - t0 < 0.5
+    # 1 + 3 retries of the MOV, then one HLT attempt
+    assert emulator.board.commands >= 5
+    emulator.set_faults(FaultConfig())
+    robot.reset(Q0)  # the link is fine again: usable
+    assert robot.step(np.zeros(6), DT).lengths.shape == (6,)
+
+
+def test_checksum_error_carries_its_evidence(robot: SerialRobot, emulator: Emulator) -> None:
+    emulator.set_faults(FaultConfig(garble_rate=1.0, seed=5))
+    with pytest.raises(ProtocolError) as info:
+        robot.measured_lengths()
+    err = info.value
+    assert err.command == "POS?"
+    if isinstance(err, ChecksumError):
+        assert err.expected != err.got
+
+
+def test_silent_device_times_out_and_halts(robot: SerialRobot, emulator: Emulator) -> None:
+    robot.reset(Q0)
+    robot.move(Q0 + 0.02, wait=False)
+    emulator.set_faults(FaultConfig(silent_after=0))
+    t0 = time.perf_counter()
+    with pytest.raises(SerialTimeoutError) as info:
+        robot.step(np.full(6, 0.01), DT)
+    assert time.perf_counter() - t0 < 1.0
+    assert info.value.timeout == 0.2 and str(info.value.command).startswith("MOV ")
+    assert emulator.board.last_command == "HLT"  # the board heard the HLT
+    assert not emulator.status().moving
+
+
+def test_disconnect_raises_and_closes(robot: SerialRobot, emulator: Emulator) -> None:
+    robot.reset(Q0)
+    emulator.set_faults(FaultConfig(disconnect_after=3))
+    with pytest.raises(SerialDisconnectedError):
+        for _ in range(5):
+            robot.step(np.zeros(6), DT)
+    assert not robot.is_open
+    with pytest.raises(SerialLinkError, match="closed"):
+        robot.measured_lengths()
+    robot.close()  # idempotent
+
+
+def test_dropped_reply_is_retried_when_asked(emulator: Emulator) -> None:
+    with SerialRobot(emulator.device, timeout=0.05, timeout_retries=3) as r:
+        r.reset(Q0)
+        emulator.set_faults(FaultConfig(drop_rate=0.3, seed=1))
+        for _ in range(10):
+            r.step(np.zeros(6), DT)
+        assert r.retried > 0
+
+
+# ----------------------------------------------------------------------------- halting
+def test_leaving_with_halts_and_closes(emulator: Emulator) -> None:
+    target = Q0 + 0.03  # 600 ms of travel
+    with pytest.raises(RuntimeError, match="boom"), SerialRobot(emulator.device) as r:
+        r.move(target, wait=False)
+        time.sleep(0.05)
+        raise RuntimeError("boom")
+    assert not r.is_open
+    assert emulator.board.last_command == "HLT"
+    st = emulator.status()
+    assert not st.moving and st.error == 10
+    assert np.all(emulator.true_lengths() < target - 0.02)
+
+
+def test_ctrl_c_during_an_exchange_halts_and_closes(emulator: Emulator) -> None:
+    main = threading.main_thread().ident
+    assert threading.current_thread().ident == main
+    r = SerialRobot(emulator.device, timeout=1.0)
+    r.move(Q0 + 0.03, wait=False)
+    emulator.set_faults(FaultConfig(latency=0.3))
+    assert main is not None
+    timer = threading.Timer(0.05, signal.pthread_kill, (main, signal.SIGINT))
+    timer.start()
+    t0 = time.perf_counter()
+    try:
+        with pytest.raises(KeyboardInterrupt):
+            r.step(np.zeros(6), DT)
+    finally:
+        timer.join()
+    assert time.perf_counter() - t0 < 0.3 + 1.5  # HLT waited for its (late) reply at most
+    assert not r.is_open
+    assert emulator.board.last_command == "HLT"
+    assert not emulator.status().moving
+
+
+# ----------------------------------------------------------------------------- closed loop
+def test_closed_loop_reaches_the_same_lengths_as_the_simulated_robot(
+        geometry: HexapodGeometry) -> None:
+    goal = np.array([0.4075, 0.3995, 0.416, 0.409, 0.4135, 0.431])
+    k, n = 5.0, 100
+
+    def run(backend: Backend) -> np.ndarray:
+        q = backend.reset(Q0)
+        path = []
+        for _ in range(n):
+            st = backend.step(k * (goal - q), DT)
+            q = st.lengths
+            path.append(q)
+        return np.array(path)
+
+    sim = run(SimulatedRobot(geometry, Q0))
+    with open_emulated_robot(geometry, Q0) as robot:
+        real = run(robot)
+        missed = robot.stats()
+    np.testing.assert_allclose(real, sim, atol=2e-4)           # the same trajectory
+    np.testing.assert_allclose(real[-1], sim[-1], atol=1e-5)   # the same final lengths
+    np.testing.assert_allclose(real[-1], goal, atol=1e-5)
+    assert missed["exchanges"] >= 2 * n
+
+
+def test_tcp_backend(geometry: HexapodGeometry) -> None:
+    with open_emulated_robot(geometry, Q0, transport="tcp") as r:
+        assert r.url.startswith("socket://127.0.0.1:")
+        q = r.measured_lengths()
+        for _ in range(5):
+            st = r.step(np.full(6, 0.01), DT)
+        np.testing.assert_allclose(st.lengths, q + 5 * 0.01 * DT, atol=5e-6)
+    assert not r.emulator.running
+
+
+def test_emulator_stops_with_the_robot() -> None:
+    r = open_emulated_robot(deltalab())
+    emu = r.emulator
+    assert emu.running
+    r.close()
+    assert not emu.running
