@@ -84,9 +84,10 @@ def cmd_run(args: argparse.Namespace) -> int:
         raise BenchmarkError(f"{out}: already holds results; use --resume to finish that run "
                              "or choose another --out")
     done = completed_keys(out) if args.resume else set()
+    from benchmarks.runner import backend_factory
+
     backend = args.backend
-    if backend == "emulator":
-        backend = "emulator"
+    backend_factory(backend)  # validates the spec before any work
     units = plan(scenarios, args.chunk, args.record, done, backend)
     total = sum(len(u.trials) for u in units)
     con = _console()

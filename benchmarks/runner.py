@@ -80,12 +80,40 @@ def plan(scenarios: list[Scenario], chunk_size: int = 25, record_trials: int = 2
     return units
 
 
-def _backend_factory(spec: str) -> Callable[..., Any] | None:
+def backend_factory(spec: str) -> Callable[..., Any] | None:
+    """Build the per-trial backend factory of a ``--backend`` spec.
+
+    ``"sim"``: None (exact integration in the simulator, vectorised);
+    ``"emulator"``: a firmware emulator on a pseudo-terminal per trial, driven
+    through :class:`~hexapod.backends.serial.SerialRobot` in real time;
+    ``"serial:URL"``: a real board (or an emulator started by hand) at ``URL``.
+
+    Raises:
+        ResultsError: An unknown spec.
+    """
     if spec == "sim":
         return None
-    from hexapod.backends.serial import backend_factory
+    if spec == "emulator":
+        from hexapod.backends.serial import open_emulated_robot
 
-    return backend_factory(spec)  # type: ignore[no-any-return]
+        def emulated(geometry: Any, lengths: np.ndarray) -> Any:
+            robot = open_emulated_robot(geometry, lengths)
+            robot.reset(lengths)
+            return robot
+
+        return emulated
+    if spec.startswith("serial:") and len(spec) > len("serial:"):
+        url = spec[len("serial:"):]
+        from hexapod.backends.serial import SerialRobot
+
+        def connected(geometry: Any, lengths: np.ndarray) -> Any:
+            robot = SerialRobot(url)
+            robot.reset(lengths)
+            return robot
+
+        return connected
+    raise ResultsError("--backend", f"unknown backend {spec!r}; use sim, emulator or "
+                       "serial:URL (a device path or socket://HOST:PORT)")
 
 
 def execute(unit: WorkUnit) -> tuple[list[dict[str, Any]], list[tuple[str, dict[str, Any]]]]:
@@ -96,7 +124,7 @@ def execute(unit: WorkUnit) -> tuple[list[dict[str, Any]], list[tuple[str, dict[
 
     sc = unit.scenario
     results = run_trials(sc, unit.controller_index, list(unit.trials), unit.record_trials,
-                         backend_factory=_backend_factory(unit.backend),
+                         backend_factory=backend_factory(unit.backend),
                          calibrate=calibration_hook(sc))
     rows, records = [], []
     for res in results:

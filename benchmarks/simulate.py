@@ -385,9 +385,10 @@ def run_trials(
     single = [s for s in setups if not (s.shared and backend_factory is None)]
     groups = ([shared] if shared else []) + [[s] for s in single]
     for group in groups:
+        opened: list[Backend] = []
         try:
             for res in _run_group(sc, controller_index, group, record_trials, backend_factory,
-                                  on_step):
+                                  on_step, opened):
                 results[res.row["trial"]] = res
         except Exception as exc:
             if len(group) == 1:
@@ -395,13 +396,29 @@ def run_trials(
                                                                    exc))
             else:  # isolate the failing trial(s): run them one by one
                 for s in group:
+                    single_opened: list[Backend] = []
                     try:
                         res = _run_group(sc, controller_index, [s], record_trials,
-                                         backend_factory, on_step)[0]
+                                         backend_factory, on_step, single_opened)[0]
                     except Exception as exc2:
                         res = TrialResult(_failure_row(sc, spec, s.trial, exc2))
+                    finally:
+                        _close_all(single_opened)
                     results[s.trial] = res
+        finally:
+            _close_all(opened)
     return [results[k] for k in trials]
+
+
+def _close_all(backends: list[Backend]) -> None:
+    """Halt and close backends, whatever happened (a robot is never left moving)."""
+    for b in backends:
+        try:
+            b.halt()
+        except Exception as exc:  # already failing: report and go on closing
+            log.warning("halting a backend failed: %s", exc)
+        finally:
+            b.close()
 
 
 def _base_row(sc: Scenario, spec: Any, trial: int) -> dict[str, Any]:
@@ -439,7 +456,10 @@ def _run_group(sc: Scenario, controller_index: int, group: list[TrialSetup],
                record_trials: int,
                backend_factory: Callable[[HexapodGeometry, np.ndarray], Backend] | None,
                on_step: Callable[[int, np.ndarray, np.ndarray, np.ndarray], None] | None,
-               ) -> list[TrialResult]:
+               opened: list[Backend] | None = None) -> list[TrialResult]:
+    """Run trials sharing one world in lockstep (backends it opens go to ``opened``)."""
+    if opened is None:
+        opened = []
     spec = sc.controllers[controller_index]
     n = len(group)
     world = group[0].world
@@ -456,7 +476,10 @@ def _run_group(sc: Scenario, controller_index: int, group: list[TrialSetup],
     rngs = [trial_rng(sc.seed, s.trial, 1) for s in group]
     backends = None
     if backend_factory is not None:
-        backends = [backend_factory(g, s.start_lengths + world.joint_offsets) for s in group]
+        backends = []
+        for s in group:
+            backends.append(backend_factory(g, s.start_lengths + world.joint_offsets))
+            opened.append(backends[-1])
     q = np.array([s.start_lengths for s in group])
     R = np.array([s.start_rotation for s in group])
     t = np.array([s.start_translation for s in group])
@@ -573,9 +596,6 @@ def _run_group(sc: Scenario, controller_index: int, group: list[TrialSetup],
         okk = run[~bad]
         R[okk] = sol.rotations[~bad]
         t[okk] = sol.translations[~bad]
-    if backends is not None:
-        for b in backends:
-            b.close()
     dp, da = pose_error(R, t, R_goal, t_goal)
     out = []
     for k, s in enumerate(group):
