@@ -28,6 +28,7 @@ import random
 import select
 import signal
 import socket
+import subprocess
 import sys
 import threading
 import time
@@ -48,7 +49,7 @@ from hexapod.geometry import HexapodGeometry
 
 logger = logging.getLogger(__name__)
 
-__all__ = ["Board", "BoardConfig", "Emulator", "FaultConfig", "main"]
+__all__ = ["Board", "BoardConfig", "Emulator", "EmulatorProcess", "FaultConfig", "main"]
 
 #: A leg within this distance of its setpoint has arrived [m] (half the protocol resolution).
 ARRIVED = 0.5e-6
@@ -774,6 +775,92 @@ class Emulator:
         self._stopped.set()
 
 
+# ============================================================================ in a process
+def config_to_args(config: BoardConfig, faults: FaultConfig | None = None) -> list[str]:
+    """Command-line options of ``hexapod-emulator`` that describe a board and its faults."""
+    c = config
+    args = ["--stroke", protocol.format_mm(c.stroke[0]), protocol.format_mm(c.stroke[1]),
+            "--speed", protocol.format_mm(c.max_speed), "--lag", repr(c.lag),
+            "--watchdog", str(round(c.watchdog * 1e3)), "--identity", c.identity]
+    if c.lengths is not None:
+        args += ["--lengths", *(protocol.format_mm(x) for x in c.lengths)]
+    if faults is not None:
+        f = faults
+        args += ["--latency", repr(f.latency * 1e3), "--jitter", repr(f.jitter * 1e3),
+                 "--drop", repr(f.drop_rate), "--garble", repr(f.garble_rate),
+                 "--seed", str(f.seed)]
+        if f.silent_after is not None:
+            args += ["--silent-after", str(f.silent_after)]
+        if f.disconnect_after is not None:
+            args += ["--disconnect-after", str(f.disconnect_after)]
+    return args
+
+
+class EmulatorProcess:
+    """``hexapod-emulator`` in a child process (its own interpreter, so its timing does
+    not share the host's GIL), started with ``python -m hexapod.backends.emulator``.
+
+    Args:
+        config: The board (default board if None).
+        faults: Faults to inject.
+        transport: ``"pty"`` or ``"tcp"`` (loopback, any free port).
+        line_rate: Emulated line rate [baud] (0: instantaneous).
+        startup_timeout: Longest wait for the device line [s].
+
+    Attributes:
+        url: The device path or ``socket://`` URL printed by the emulator.
+    """
+
+    def __init__(self, config: BoardConfig | None = None, faults: FaultConfig | None = None,
+                 *, transport: str = "pty", line_rate: float = 0.0,
+                 startup_timeout: float = 30.0) -> None:
+        where = ["--pty"] if transport == "pty" else ["--tcp", "127.0.0.1:0"]
+        args = [sys.executable, "-m", "hexapod.backends.emulator", *where,
+                *config_to_args(config or BoardConfig(), faults), "--line-rate", repr(line_rate)]
+        self.proc = subprocess.Popen(args, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                                     text=True)
+        if self.proc.stdout is None:
+            raise BackendError("hexapod-emulator: no stdout")
+        ready, _, _ = select.select([self.proc.stdout], [], [], startup_timeout)
+        line = self.proc.stdout.readline().strip() if ready else ""
+        if not line:
+            self.stop()
+            err = self.proc.stderr.read() if self.proc.stderr is not None else ""
+            raise BackendError(f"hexapod-emulator did not start: {err.strip()[-500:]}")
+        self.url = line
+        self.device = line
+
+    @property
+    def running(self) -> bool:
+        """The process is alive."""
+        return self.proc.poll() is None
+
+    def stop(self, timeout: float = 5.0) -> int | None:
+        """Terminate the process (SIGTERM, then SIGKILL) and return its exit status."""
+        if self.proc.poll() is None:
+            self.proc.terminate()
+            try:
+                self.proc.wait(timeout)
+            except subprocess.TimeoutExpired:
+                self.proc.kill()
+                self.proc.wait()
+        for stream in (self.proc.stdout, self.proc.stderr):
+            if stream is not None:
+                stream.close()
+        return self.proc.returncode
+
+    def __enter__(self) -> EmulatorProcess:
+        return self
+
+    def __exit__(
+        self,
+        exc_type: type[BaseException] | None,
+        exc: BaseException | None,
+        tb: TracebackType | None,
+    ) -> None:
+        self.stop()
+
+
 # ============================================================================ command line
 def _parse_tcp(text: str) -> tuple[str, int]:
     host, sep, port = text.rpartition(":")
@@ -817,6 +904,7 @@ def build_parser() -> argparse.ArgumentParser:
                             "(default: mid-stroke)")
     robot.add_argument("--lag", type=float, default=0.0, metavar="S",
                        help="first-order lag time constant of each leg [s] (default 0)")
+    robot.add_argument("--identity", help="the *IDN? text (default: emulator and geometry name)")
     robot.add_argument("--watchdog", type=int, default=protocol.WATCHDOG_DEFAULT_MS,
                        metavar="MS", help="initial watchdog period [ms] (default 100)")
     faults = p.add_argument_group("fault injection (seeded)")
@@ -854,7 +942,7 @@ def config_from_args(args: argparse.Namespace) -> tuple[BoardConfig, FaultConfig
         lengths = tuple(np.broadcast_to(np.array(args.lengths) / 1e3, (6,)).tolist())
     board = BoardConfig(stroke=stroke, max_speed=speed, lengths=lengths, lag=args.lag,
                         watchdog=args.watchdog / 1e3,
-                        identity=f"hexapod-emulator 0.1.0 {geometry.name}")
+                        identity=args.identity or f"hexapod-emulator 0.1.0 {geometry.name}")
     faults = FaultConfig(latency=args.latency / 1e3, jitter=args.jitter / 1e3,
                          drop_rate=args.drop, garble_rate=args.garble,
                          silent_after=args.silent_after, disconnect_after=args.disconnect_after,

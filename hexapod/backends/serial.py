@@ -561,9 +561,10 @@ def open_emulated_robot(
     lag: float = 0.0,
     line_rate: float = 0.0,
     transport: str = "pty",
+    process: bool = False,
     **robot_options: Any,
 ) -> SerialRobot:
-    """Start an emulator (pty, in a thread) for a geometry and connect a :class:`SerialRobot`.
+    """Start an emulator for a geometry and connect a :class:`SerialRobot` to it.
 
     Closing the robot stops the emulator.
 
@@ -574,17 +575,29 @@ def open_emulated_robot(
         lag: First-order lag of the emulated legs [s].
         line_rate: Emulated line rate [baud] (0: instantaneous).
         transport: ``"pty"`` or ``"tcp"`` (loopback).
+        process: Run the emulator in a child process (``hexapod-emulator``: its timing
+            does not share this interpreter) instead of a thread of this one.
         robot_options: Keyword arguments of :class:`SerialRobot`.
 
     Returns:
-        The connected robot; ``robot.emulator`` is the running emulator.
+        The connected robot; ``robot.emulator`` is the running
+        :class:`~hexapod.backends.emulator.Emulator` (or
+        :class:`~hexapod.backends.emulator.EmulatorProcess`).
     """
-    from hexapod.backends.emulator import BoardConfig, Emulator
+    from hexapod.backends.emulator import BoardConfig, Emulator, EmulatorProcess
 
-    emu = Emulator(BoardConfig.from_geometry(geometry, lengths, lag=lag), faults,
-                   transport=transport, line_rate=line_rate).start()
+    config = BoardConfig.from_geometry(geometry, lengths, lag=lag)
+    emu: Emulator | EmulatorProcess
+    if process:
+        emu = EmulatorProcess(config, faults, transport=transport, line_rate=line_rate)
+    else:
+        emu = Emulator(config, faults, transport=transport, line_rate=line_rate).start()
+
+    def stop_emulator() -> None:
+        emu.stop()
+
     try:
-        robot = SerialRobot(emu.url, on_close=emu.stop, **robot_options)
+        robot = SerialRobot(emu.url, on_close=stop_emulator, **robot_options)
     except BaseException:
         emu.stop()
         raise

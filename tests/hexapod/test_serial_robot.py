@@ -351,3 +351,17 @@ def test_emulator_stops_with_the_robot() -> None:
     assert emu.running
     r.close()
     assert not emu.running
+
+
+def test_emulator_in_a_child_process(geometry: HexapodGeometry) -> None:
+    faults = FaultConfig(latency=0.002, seed=3)
+    with open_emulated_robot(geometry, Q0, faults=faults, process=True, lag=0.001) as r:
+        proc = r.emulator
+        assert proc.running and r.url.startswith("/dev/")
+        np.testing.assert_allclose(r.measured_lengths(), Q0, atol=1e-9)
+        q = Q0
+        for _ in range(5):
+            q = r.step(np.full(6, 0.01), DT).lengths
+        assert min(r.exchanges) >= 0.002
+        np.testing.assert_allclose(q, Q0 + 5 * 0.01 * DT, atol=5e-6)
+    assert not proc.running and proc.proc.returncode == 0
