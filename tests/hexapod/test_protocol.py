@@ -165,3 +165,26 @@ def test_error_reply_raises_typed_fault(code: int, cls: type[RobotFaultError]) -
     # the same on any query that expects another keyword
     with pytest.raises(cls):
         protocol.parse_pos(f"ERR {code} x")
+
+
+def test_documented_exchanges_have_correct_checksums() -> None:
+    """Every example line of docs/serial-protocol.md is well framed, except the commands
+    the board answers with ``ERR 3 checksum`` (the doc's examples of bad lines; an
+    ``ERR?`` answered 3 is reporting an earlier one)."""
+    from pathlib import Path
+
+    doc = Path(__file__).resolve().parents[2] / "docs" / "serial-protocol.md"
+    lines = [ln for ln in doc.read_text().splitlines() if ln.startswith(("> ", "< "))]
+    pairs = list(zip(lines[::2], lines[1::2], strict=True))
+    assert len(pairs) >= 30
+    bad = 0
+    for cmd, reply in pairs:
+        assert cmd.startswith("> ") and reply.startswith("< ")
+        payload = protocol.unframe(reply[2:] + "\n")
+        if payload == "ERR 3 checksum" and not cmd.startswith("> ERR?*"):
+            bad += 1
+            with pytest.raises(ChecksumError):
+                protocol.unframe(cmd[2:] + "\n")
+        else:
+            protocol.unframe(cmd[2:] + "\n")
+    assert bad == 2
