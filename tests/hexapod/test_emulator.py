@@ -498,3 +498,19 @@ def test_cli_refuses_remote_address() -> None:
     assert proc.returncode == 2
     assert out == ""
     assert "non-loopback" in err
+
+
+def test_line_rate_emulates_the_transmission_time() -> None:
+    cfg = BoardConfig(stroke=STROKE, max_speed=SPEED, lengths=Q0)
+    with Emulator(cfg, line_rate=9600) as emu:
+        lk = Link(emu.device)
+        try:
+            cmd = protocol.frame("POS?")
+            t0 = time.perf_counter()
+            reply = lk.raw(cmd)
+            rtt = time.perf_counter() - t0
+            # 8 + 53 bytes of 10 bits at 9600 baud: 63.5 ms
+            assert rtt >= 10 * (len(cmd) + len(reply)) / 9600
+            assert rtt < 0.2
+        finally:
+            lk.close()
