@@ -59,7 +59,7 @@ class Summary:
         return self.converged / self.trials if self.trials else float("nan")
 
 
-def _stat(values: list[float], fn: str) -> float:
+def _stat(values: list[Any], fn: str) -> float:
     arr = np.array([v for v in values if v is not None and np.isfinite(v)], dtype=float)
     if arr.size == 0:
         return float("nan")

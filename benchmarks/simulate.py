@@ -200,12 +200,12 @@ class GeometricSensor:
     def __init__(self, sc: Scenario, world: World, estimated_camera: Camera) -> None:
         self.sc = sc
         self.world = world
-        self.est = estimated_camera
+        self.est: Any = estimated_camera  # a PerspectiveCamera when ``perspective``
         self.perspective = world.camera.kind == "perspective"
 
     def measure(self, rotations: np.ndarray, translations: np.ndarray,
                 rngs: list[np.random.Generator], apply_noise: bool = True
-                ) -> dict[str, np.ndarray | None]:
+                ) -> dict[str, Any]:
         """Batched measurement at true poses (N, 3, 3), (N, 3); one generator per item."""
         w = self.world
         lo = observe_legs(w.camera, w.geometry, rotations, translations)
@@ -231,9 +231,10 @@ class GeometricSensor:
                 # fitted with the estimated camera already; the image line is the true one
                 lines = self.est.normal_to_line(normals)
             else:
-                lines = w.camera.normal_to_line(normals)
+                true_camera: Any = w.camera
+                lines = true_camera.normal_to_line(normals)
                 normals = self.est.line_to_normal(lines)
-        both = visible.all(axis=-1)
+        both = np.asarray(visible.all(axis=-1))
         with np.errstate(invalid="ignore"):
             directions = directions_from_edges(normals)
         directions = np.where(both[..., None], directions, np.nan)
@@ -318,7 +319,7 @@ class _ImageSensorAdapter:
 
     def measure(self, rotations: np.ndarray, translations: np.ndarray,
                 rngs: list[np.random.Generator], apply_noise: bool = True
-                ) -> dict[str, np.ndarray | None]:
+                ) -> dict[str, Any]:
         out: dict[str, list[Any]] = {"normals": [], "lines": [], "edge_visible": []}
         for k in range(len(rotations)):
             key = id(rngs[k])
@@ -334,7 +335,7 @@ class _ImageSensorAdapter:
             out["edge_visible"].append(m.edge_visible)
         normals = np.array(out["normals"], float)
         visible = np.array(out["edge_visible"], bool)
-        both = visible.all(axis=-1)
+        both = np.asarray(visible.all(axis=-1))
         with np.errstate(invalid="ignore"):
             directions = directions_from_edges(normals)
         lines = None if out["lines"][0] is None else np.array(out["lines"], float)
@@ -598,34 +599,34 @@ def _run_group(sc: Scenario, controller_index: int, group: list[TrialSetup],
         t[okk] = sol.translations[~bad]
     dp, da = pose_error(R, t, R_goal, t_goal)
     out = []
-    for k, s in enumerate(group):
+    for m, s in enumerate(group):
         row = _base_row(sc, spec, s.trial)
-        fail = failure[k]
-        if fail is None and not converged[k]:
+        fail = failure[m]
+        if fail is None and not converged[m]:
             fail = f"not converged within {sc.task.max_steps} steps"
-        settle = int(last_bad[k] + 1) if sc.task.fixed_duration else int(steps[k])
+        settle = int(last_bad[m] + 1) if sc.task.fixed_duration else int(steps[m])
         row.update({
-            "converged": bool(converged[k]),
+            "converged": bool(converged[m]),
             "steps": settle,
-            "final_position_error_mm": float(dp[k] * 1e3),
-            "final_orientation_error_deg": float(np.rad2deg(da[k])),
-            "stroke_violations": int(violations[k]),
-            "step_time_us": float(np.median(step_times[k]) * 1e6) if step_times[k] else None,
-            "failure": None if converged[k] else fail,
+            "final_position_error_mm": float(dp[m] * 1e3),
+            "final_orientation_error_deg": float(np.rad2deg(da[m])),
+            "stroke_violations": int(violations[m]),
+            "step_time_us": float(np.median(step_times[m]) * 1e6) if step_times[m] else None,
+            "failure": None if converged[m] else fail,
         })
         times = getattr(sensor, "detect_times", None)
         if times:
             row["detect_time_ms"] = float(np.median(times) * 1e3)
-        if rtts[k]:
-            arr = np.array(rtts[k]) * 1e3
+        if rtts[m]:
+            arr = np.array(rtts[m]) * 1e3
             row["rtt_median_ms"] = float(np.median(arr))
             row["rtt_p99_ms"] = float(np.percentile(arr, 99))
-            row["missed_periods"] = int(missed[k])
+            row["missed_periods"] = int(missed[m])
         for key, value in s.calibration.items():
             row[f"calibration_{key}"] = value
         ser_out = None
-        if recording[k]:
-            ser_out = {key: np.array(v) for key, v in series[k].items()}
+        if recording[m]:
+            ser_out = {key: np.array(v) for key, v in series[m].items()}
             ser_out["goal_rotation"] = s.goal_rotation
             ser_out["goal_translation"] = s.goal_translation
         out.append(TrialResult(row, ser_out))

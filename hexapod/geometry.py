@@ -139,7 +139,7 @@ class HexapodGeometry:
 
     def replace(self, **changes: Any) -> HexapodGeometry:
         """Return a copy with some fields changed (validated again)."""
-        kwargs = {
+        kwargs: dict[str, Any] = {
             "base_points": self.base_points,
             "platform_points": self.platform_points,
             "stroke": self.stroke,
