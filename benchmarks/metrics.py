@@ -14,6 +14,7 @@ _NON_SWEEP = {
     "trial", "point", "backend", "converged", "steps", "final_position_error_mm",
     "final_orientation_error_deg", "stroke_violations", "step_time_us", "failure",
     "rtt_median_ms", "rtt_p99_ms", "missed_periods", "detect_time_ms",
+    "tail_position_error_mm", "tail_orientation_error_deg",
 }
 
 
@@ -52,6 +53,8 @@ class Summary:
     calibration_median_mm: float
     calibration_max_mm: float
     detect_time_median_ms: float = float("nan")
+    tail_position_median_mm: float = float("nan")
+    tail_position_max_mm: float = float("nan")
 
     @property
     def convergence_rate(self) -> float:
@@ -102,6 +105,9 @@ def summarize(rows: list[dict[str, Any]]) -> list[Summary]:
                                         "median"),
             calibration_max_mm=_stat([r.get("calibration_max_error_mm") for r in rs], "max"),
             detect_time_median_ms=_stat([r.get("detect_time_ms") for r in rs], "median"),
+            tail_position_median_mm=_stat([r.get("tail_position_error_mm") for r in rs],
+                                          "median"),
+            tail_position_max_mm=_stat([r.get("tail_position_error_mm") for r in rs], "max"),
         ))
     return out
 

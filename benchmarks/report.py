@@ -174,6 +174,14 @@ def write_report(out_dir: Path) -> Path:
                                 [[format_sweep(s.sweep), s.controller, s.backend,
                                   _fmt(s.rtt_median_ms), _fmt(s.rtt_p99_ms),
                                   str(s.missed_periods)] for s in ss]), ""]
+        if any(np.isfinite(s.tail_position_median_mm) for s in ss):
+            lines += ["Convergence tail (median of the position error over the last 20 % of "
+                      "each fixed-duration trial, as the seeds read their tails):", ""]
+            lines += [_md_table(["sweep", "controller", "tail median mm (median over trials)",
+                                 "tail median mm (max over trials)"],
+                                [[format_sweep(s.sweep), s.controller,
+                                  _fmt(s.tail_position_median_mm), _fmt(s.tail_position_max_mm)]
+                                 for s in ss]), ""]
         if any(np.isfinite(s.detect_time_median_ms) for s in ss):
             lines += ["Images in the loop (render, detect, estimate at every step):", ""]
             lines += [_md_table(["sweep", "controller", "detection median ms per frame"],

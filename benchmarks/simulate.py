@@ -493,6 +493,9 @@ def _run_group(sc: Scenario, controller_index: int, group: list[TrialSetup],
     steps = np.zeros(n, dtype=int)
     settled = np.zeros(n, dtype=int)
     last_bad = np.full(n, -1)
+    tail_start = sc.task.max_steps - max(1, sc.task.max_steps // 5)
+    tail_pos: list[list[float]] = [[] for _ in range(n)]
+    tail_ori: list[list[float]] = [[] for _ in range(n)]
     converged = np.zeros(n, dtype=bool)
     violations = np.zeros(n, dtype=int)
     refused = np.zeros(n, dtype=int)
@@ -515,6 +518,10 @@ def _run_group(sc: Scenario, controller_index: int, group: list[TrialSetup],
         ok = (dp < pos_tol) & (da < ori_tol)
         settled[idx] = np.where(ok, settled[idx] + 1, 0)
         last_bad[idx[~ok]] = step
+        if sc.task.fixed_duration and step > tail_start:
+            for j, k in enumerate(idx):
+                tail_pos[k].append(float(dp[j]))
+                tail_ori[k].append(float(da[j]))
         if sc.task.fixed_duration:
             done = np.full(len(idx), step == sc.task.max_steps)
             converged[idx] = ok
@@ -614,6 +621,10 @@ def _run_group(sc: Scenario, controller_index: int, group: list[TrialSetup],
             "step_time_us": float(np.median(step_times[m]) * 1e6) if step_times[m] else None,
             "failure": None if converged[m] else fail,
         })
+        if tail_pos[m]:
+            # the seeds' "median positioning error of the convergence tail": the last 20 %
+            row["tail_position_error_mm"] = float(np.median(tail_pos[m]) * 1e3)
+            row["tail_orientation_error_deg"] = float(np.rad2deg(np.median(tail_ori[m])))
         times = getattr(sensor, "detect_times", None)
         if times:
             row["detect_time_ms"] = float(np.median(times) * 1e3)
