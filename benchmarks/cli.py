@@ -154,10 +154,9 @@ def _check_controllers(sc: Any) -> None:
 
 def _run_with_viz(scenarios: list[Any], out: Path, args: argparse.Namespace) -> int:
     """Run in-process with a live MeshCat view (loopback server)."""
-    from hexapod.visualize import HexapodViewer
-
     from benchmarks.runner import ResultsWriter, execute, plan
     from benchmarks.simulate import load_camera, load_geometry
+    from hexapod.visualize import HexapodViewer
 
     con = _console()
     sc0 = scenarios[0].expand()[0]
@@ -240,6 +239,71 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
     return 0
 
 
+def find_record(out: Path, trial: int, controller: str | None = None,
+                scenario: str | None = None, point: int | None = None) -> Path:
+    """The recorded trial file of a run directory matching the selection.
+
+    Raises:
+        BenchmarkError: No such record (listing what is there), or an ambiguous selection.
+    """
+    folder = out / "trials"
+    files = sorted(folder.glob("*.npz")) if folder.exists() else []
+    if not files:
+        raise BenchmarkError(f"{out}: no recorded trial (run with --record K to keep the "
+                             "time series of the first K trials)")
+    matches = []
+    for f in files:
+        parts = f.stem.split("__")
+        if len(parts) != 4:
+            continue
+        sc, pt, ctrl, k = parts
+        if int(k) != trial or (controller and ctrl != controller) or (
+                scenario and sc != scenario) or (point is not None and pt != f"p{point}"):
+            continue
+        matches.append(f)
+    if not matches:
+        available = sorted({f.stem for f in files})[:20]
+        raise BenchmarkError(f"{out}: no recorded trial {trial}"
+                             + (f" of '{controller}'" if controller else "")
+                             + f"; recorded: {', '.join(available)}")
+    if len(matches) > 1:
+        raise BenchmarkError(f"{out}: {len(matches)} records match ("
+                             + ", ".join(m.stem for m in matches[:8])
+                             + "); choose with --controller, --scenario or --point")
+    return matches[0]
+
+
+def cmd_viz(args: argparse.Namespace) -> int:
+    """Replay a recorded trial: live in MeshCat, or as a self-contained HTML file + curves."""
+    from hexapod.visualize import HexapodViewer, load_trial, plot_trial, replay_html
+
+    out = Path(args.dir)
+    path = find_record(out, args.trial, args.controller, args.scenario, args.point)
+    record = load_trial(path)
+    if args.html:
+        html = replay_html(record, args.html, frame=args.still)
+        png = plot_trial(record, Path(args.html).with_suffix(".png"))
+        print(f"{record.title}: wrote {html} (open it in a browser, no network needed) "
+              f"and {png}")
+        return 0
+    a = record.arrays
+    with HexapodViewer(record.geometry) as viewer:
+        viewer.show_camera(a["camera_from_base"], a["camera_K"], int(a["camera_size"][0]),
+                           int(a["camera_size"][1]), str(a["camera_kind"]))
+        viewer.show_goal(a["goal_rotation"], a["goal_translation"])
+        print(f"{record.title}: MeshCat viewer at {viewer.url()} (Ctrl-C to stop)")
+        dt = float(a["t"][1] - a["t"][0]) if record.frames > 1 else 0.02
+        try:
+            for k in range(record.frames):
+                viewer.display(a["rotations"][k], a["translations"][k], a["edge_visible"][k],
+                               force=True)
+                time.sleep(dt)
+            time.sleep(args.hold)
+        except KeyboardInterrupt:
+            pass
+    return 0
+
+
 def cmd_report(args: argparse.Namespace) -> int:
     """Rebuild report.md from results.jsonl."""
     from benchmarks.report import write_report
@@ -312,6 +376,19 @@ def build_parser() -> argparse.ArgumentParser:
                    help="divide the estimates by the measured scale (uncertain leg radius)")
     s.add_argument("--seed", type=int)
     s.set_defaults(func=cmd_calibrate)
+
+    s = sub.add_parser("viz", help="replay a recorded trial (MeshCat, or --html FILE)")
+    s.add_argument("dir", help="a run directory")
+    s.add_argument("--trial", type=int, default=0)
+    s.add_argument("--controller", help="controller label")
+    s.add_argument("--scenario", help="scenario name (when the run has several)")
+    s.add_argument("--point", type=int, help="sweep point index")
+    s.add_argument("--html", help="write a self-contained HTML animation (+ a PNG of the "
+                                  "curves beside it) instead of the live view")
+    s.add_argument("--still", type=int, help="with --html: a still of this period")
+    s.add_argument("--hold", type=float, default=5.0,
+                   help="live view: seconds to keep the server after the replay")
+    s.set_defaults(func=cmd_viz)
 
     s = sub.add_parser("report", help="rebuild DIR/report.md from DIR/results.jsonl")
     s.add_argument("dir")

@@ -70,3 +70,13 @@ def test_bad_calibration_file(tmp_path: Path) -> None:
     scen = _scenario(tmp_path)
     assert cli_main(["run", str(scen), "--out", str(tmp_path / "x"), "--calibration",
                      str(tmp_path / "missing.toml")]) == 2
+
+
+def test_viz_replays_a_recorded_trial_to_html(tmp_path: Path) -> None:
+    scen = _scenario(tmp_path)
+    out = tmp_path / "run"
+    assert cli_main(["run", str(scen), "--out", str(out), "--no-progress", "--record", "1"]) == 0
+    html = tmp_path / "trial0.html"
+    assert cli_main(["viz", str(out), "--trial", "0", "--html", str(html)]) == 0
+    assert html.stat().st_size > 10_000 and html.with_suffix(".png").exists()
+    assert cli_main(["viz", str(out), "--trial", "7", "--html", str(html)]) == 2
