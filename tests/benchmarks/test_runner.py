@@ -140,7 +140,8 @@ def test_results_rows_have_the_documented_fields(tmp_path: Path) -> None:
 
 
 @pytest.mark.parametrize("name", ["quick", "andreff2005-noise", "andreff2006-front-camera",
-                                  "andreff2006-images",
+                                  "andreff2006-images", "andreff2005-noise-omni",
+                                  "andreff2005-pixel-noise",
                                   "tahri2009-convergence", "calibration-error-sweep"])
 def test_builtin_scenario_end_to_end(name: str, tmp_path: Path) -> None:
     out = tmp_path / name
