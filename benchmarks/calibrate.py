@@ -156,6 +156,38 @@ def run_calibration(sc: Scenario, out: Path, configurations: str | None = None,
     return doc
 
 
+def calibrate_from_file(sc: Scenario, observations: Path, out: Path, solver: str | None = None,
+                        correct_scale: bool = False) -> dict[str, Any]:
+    """Calibrate from observations a user measured (e.g. with a real camera).
+
+    Args:
+        sc: The scenario gives the nominal robot (leg radius, CAD base points).
+        observations: A ``.json`` or ``.npz`` file of edge normals (camera frame) and
+            leg lengths (see :meth:`vision.calibration.CalibrationData.from_dict`).
+        out: Output directory (``calibration.json``, ``calibrated.toml``).
+        solver: ``"lstsq"`` or ``"irls"`` (default: the scenario's).
+        correct_scale: Divide the estimates by the measured scale.
+
+    Returns:
+        The content of ``calibration.json`` (no error against a truth: there is none).
+    """
+    from benchmarks.simulate import load_geometry
+    from vision.calibration import CalibrationData, calibrate
+
+    out.mkdir(parents=True, exist_ok=True)
+    nominal = load_geometry(sc)
+    data = CalibrationData.load(observations)
+    res = calibrate(data, nominal.leg_radius, nominal.base_points,
+                    method=(solver or sc.calibration.solver),  # type: ignore[arg-type]
+                    correct_scale=correct_scale)
+    doc = {"scenario": sc.name, "observations": str(observations),
+           "configurations": int(data.n_configurations),
+           "solver": solver or sc.calibration.solver, "result": res.to_dict()}
+    (out / "calibration.json").write_text(json.dumps(doc, indent=1))
+    write_calibrated_file(out / "calibrated.toml", res, source=str(observations))
+    return doc
+
+
 def write_calibrated_file(path: Path, result: Any, source: str) -> None:
     """Write the calibrated parameters (millimetres, degrees) read by ``run --calibration``."""
     from hexapod.se3 import log_so3

@@ -218,6 +218,16 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
 
     sc = load_scenario(args.scenario).with_overrides(seed=args.seed)
     out = Path(args.out)
+    if args.observations:
+        from benchmarks.calibrate import calibrate_from_file
+
+        doc = calibrate_from_file(sc, Path(args.observations), out, args.solver,
+                                  args.correct_scale)
+        res = doc["result"]
+        print(f"calibrated {doc['configurations']} configurations from {args.observations}: "
+              f"rigid-fit RMS {res['fit_rms_mm']:.3f} mm, scale {res['scale']:.5f}; wrote "
+              f"{out / 'calibration.json'} and {out / 'calibrated.toml'}")
+        return 0
     t0 = time.perf_counter()
     doc = run_calibration(sc, out, args.configurations, args.repeat, args.solver,
                           args.correct_scale)
@@ -375,6 +385,9 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--correct-scale", action="store_true",
                    help="divide the estimates by the measured scale (uncertain leg radius)")
     s.add_argument("--seed", type=int)
+    s.add_argument("--observations", metavar="FILE",
+                   help="calibrate from measured edge normals and leg lengths (.json/.npz) "
+                        "instead of simulating the scenario's world")
     s.set_defaults(func=cmd_calibrate)
 
     s = sub.add_parser("viz", help="replay a recorded trial (MeshCat, or --html FILE)")

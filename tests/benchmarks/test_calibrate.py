@@ -80,3 +80,23 @@ def test_viz_replays_a_recorded_trial_to_html(tmp_path: Path) -> None:
     assert cli_main(["viz", str(out), "--trial", "0", "--html", str(html)]) == 0
     assert html.stat().st_size > 10_000 and html.with_suffix(".png").exists()
     assert cli_main(["viz", str(out), "--trial", "7", "--html", str(html)]) == 2
+
+
+def test_calibrate_from_a_user_observation_file(tmp_path: Path) -> None:
+    from hexapod import deltalab
+    from vision.calibration import collect_observations
+
+    cam = front_camera()
+    data = collect_observations(deltalab(), cam, "random:30", None, 5)
+    obs = tmp_path / "observations.json"
+    data.save(obs)
+    out = tmp_path / "out"
+    assert cli_main(["calibrate", str(_scenario(tmp_path)), "--out", str(out),
+                     "--observations", str(obs)]) == 0
+    points = load_calibrated_base_points(out / "calibrated.toml")
+    truth = cam.camera_from_base.apply(deltalab().base_points)
+    np.testing.assert_allclose(points, truth, atol=1e-8)
+    broken = tmp_path / "broken.json"
+    broken.write_text(obs.read_text().replace('"lengths_mm"', '"length_mm"'))
+    assert cli_main(["calibrate", str(_scenario(tmp_path)), "--out", str(out),
+                     "--observations", str(broken)]) == 2
