@@ -314,6 +314,7 @@ class VisionLaw(Controller):
         self._directions = np.full((6, 3), np.nan)
         self._observed = np.zeros(6, dtype=bool)
         self._tau_prev = np.zeros(6)
+        self._model_pose: tuple[np.ndarray, np.ndarray] | None = None
         q_star = context.goal.lengths
         self._q_star: np.ndarray | None = None
         if q_star is not None:
@@ -388,9 +389,16 @@ class VisionLaw(Controller):
         u = self._u_now
         unknown = np.flatnonzero(~np.isfinite(u[:, 0]))
         if len(unknown):
-            return Command.refuse(f"direction of leg {int(unknown[0])} unknown (hidden since "
-                                  "reset, no desired direction): cannot build the inverse "
-                                  "Jacobian", e)
+            model = self._model_directions(q)
+            if model is None:
+                return Command.refuse(f"direction of leg {int(unknown[0])} unknown (hidden "
+                                      "since reset, no desired direction, no nominal model "
+                                      "prediction): cannot build the inverse Jacobian", e)
+            u = u.copy()
+            u[unknown] = model[unknown]
+            st.notes.append("nominal-model directions (forward kinematics of the measured "
+                            "lengths) for never-seen legs "
+                            + ", ".join(str(int(i)) for i in unknown))
         J = inverse_jacobian_into(self._J, self._A, u)
         lam = self.gain(float(np.abs(e).max()) if e.size else 0.0)
         out = self._solve(N, b, lam, q, J)
@@ -410,6 +418,32 @@ class VisionLaw(Controller):
         return Command(qdot, twist=tau, error=e, error_norm=error_norm, rank=rank,
                        condition=cond, features_used=rows, notes=st.notes,
                        active_constraints=active)
+
+    def _model_directions(self, q: np.ndarray) -> np.ndarray | None:
+        """Leg directions (6, 3) in the camera frame predicted by the nominal model.
+
+        Forward kinematics of the measured lengths with the nominal geometry, seen
+        through the estimated ``camera_from_base``. Used only where a leg has never
+        been observed and the goal image does not show it either: the inverse
+        Jacobian needs every direction, and an approximate one only slows the
+        convergence (the error itself never involves the model). None when the
+        context has no camera pose or the forward kinematics fails.
+        """
+        ctx = self.context
+        pose = getattr(getattr(ctx, "camera", None), "camera_from_base", None)
+        if ctx is None or pose is None:
+            return None
+        from hexapod.exceptions import HexapodError
+        from hexapod.fk import forward_kinematics
+        from hexapod.kinematics import legs_in_frame
+
+        try:
+            sol = forward_kinematics(ctx.geometry, q, guess=getattr(self, "_model_pose", None),
+                                     check_stroke=False)
+        except HexapodError:
+            return None
+        self._model_pose = (sol.rotation, sol.translation)
+        return legs_in_frame(ctx.geometry, sol.rotation, sol.translation, pose).directions
 
     def _solve(self, N: np.ndarray, b: np.ndarray, lam: float, q: np.ndarray, J: np.ndarray
                ) -> tuple[np.ndarray, int, float, list[str], str | None]:

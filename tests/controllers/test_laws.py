@@ -225,11 +225,19 @@ def test_hidden_leg_direction_for_the_inverse_jacobian(world: World) -> None:
     cmd = ctrl.step(obs)
     assert cmd.ok, cmd.reason
     assert "predicted directions of hidden legs 5" in cmd.notes
-    # Never seen and no desired direction: no inverse Jacobian, no motion.
+    # Never seen and no desired direction: the nominal model predicts it (FK of q).
     g = world.goal(*goal)
     g.directions = g.directions.copy()
     g.directions[5] = np.nan
     ctrl.reset(world.context(g, 0.01))
+    cmd = ctrl.step(obs)
+    assert cmd.ok, cmd.reason
+    assert any(n.startswith("nominal-model directions") and n.endswith("legs 5")
+               for n in cmd.notes), cmd.notes
+    # ... and without a camera pose there is no prediction: no inverse Jacobian, no motion.
+    ctx = world.context(g, 0.01)
+    ctx.camera = None
+    ctrl.reset(ctx)
     cmd = ctrl.step(obs)
     assert not cmd.ok and "leg 5" in (cmd.reason or "")
     assert np.array_equal(cmd.velocities, np.zeros(6))
