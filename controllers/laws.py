@@ -229,6 +229,8 @@ class Stack:
         notes: Diagnostics to report.
         a: (m, 3) left factors of rank-one blocks.
         g: (m, 6) right factors of rank-one blocks.
+        N: ``L^T L`` (6, 6) when already computed (with ``b``; every block used).
+        b: ``L^T e`` (6,) when already computed.
     """
 
     error: np.ndarray
@@ -237,9 +239,13 @@ class Stack:
     notes: list[str]
     a: np.ndarray | None = None
     g: np.ndarray | None = None
+    N: np.ndarray | None = None
+    b: np.ndarray | None = None
 
     def normal_equations(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """The used error ``e`` (k,), ``L^T L`` (6, 6) and ``L^T e`` (6,)."""
+        if self.N is not None and self.b is not None:  # computed by a compiled kernel
+            return self.error.reshape(-1), self.N, self.b
         used = self.used
         err = self.error if used is None else self.error[used]
         if self.interaction is not None:
