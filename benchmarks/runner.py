@@ -152,10 +152,10 @@ class ResultsWriter:
     def write(self, rows: list[dict[str, Any]], records: list[tuple[str, dict[str, Any]]]
               ) -> None:
         """Write one chunk's rows and records."""
+        from hexapod.visualize import save_trial
+
         for name, rec in records:
-            tmp = self.out_dir / TRIALS_DIR / (name + ".tmp.npz")
-            np.savez_compressed(tmp, **rec)
-            os.replace(tmp, self.out_dir / TRIALS_DIR / name)
+            save_trial(self.out_dir / TRIALS_DIR / name, **rec)
         for row in rows:
             self._f.write(json.dumps(_jsonable(row), sort_keys=True) + "\n")
         self._f.flush()

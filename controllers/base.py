@@ -343,3 +343,12 @@ def observation_problem(obs: Observation, features: frozenset[str]) -> str | Non
         if len(bad_idx):
             return f"{name}: visible feature {tuple(int(x) for x in bad_idx[0])} is not finite"
     return None
+
+
+def usable_observation_problem(obs: Observation, features: frozenset[str]) -> str | None:
+    """:func:`observation_problem`, with a malformed observation (wrong types) reported as
+    a reason too: what every controller's ``step`` checks before computing."""
+    try:
+        return observation_problem(obs, features)
+    except (TypeError, ValueError) as exc:
+        return f"malformed observation: {exc}"

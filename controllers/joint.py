@@ -17,7 +17,7 @@ from controllers.base import (
     Controller,
     ControllerContext,
     Observation,
-    observation_problem,
+    usable_observation_problem,
 )
 from controllers.exceptions import ContextError
 from controllers.laws import Gain
@@ -56,10 +56,7 @@ class JointSpaceController(Controller):
         """``q_dot = -lambda (q - q*)``."""
         if self._q_star is None:
             return Command.refuse(f"{self.name}: reset(context) was not called")
-        try:
-            problem = observation_problem(observation, self.features)
-        except (TypeError, ValueError) as exc:
-            problem = f"malformed observation: {exc}"
+        problem = usable_observation_problem(observation, self.features)
         if problem is not None:
             return Command.refuse(problem)
         e = np.asarray(observation.lengths, dtype=float) - self._q_star

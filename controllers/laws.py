@@ -31,7 +31,7 @@ from controllers.base import (
     Controller,
     ControllerContext,
     Observation,
-    observation_problem,
+    usable_observation_problem,
 )
 from controllers.exceptions import ContextError, OptionError
 from controllers.interaction import cross, direction_interaction
@@ -365,10 +365,7 @@ class VisionLaw(Controller):
                     return None
         except (TypeError, ValueError, AttributeError):
             pass
-        try:
-            return observation_problem(obs, self.features)
-        except (TypeError, ValueError) as exc:
-            return f"malformed observation: {exc}"
+        return usable_observation_problem(obs, self.features)
 
     def step(self, observation: Observation) -> Command:
         """One period: ``q_dot = J_inv (-lambda L^+ e)`` (never raises for bad measurements)."""

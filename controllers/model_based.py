@@ -24,7 +24,7 @@ from controllers.base import (
     Controller,
     ControllerContext,
     Observation,
-    observation_problem,
+    usable_observation_problem,
 )
 from controllers.exceptions import ContextError
 from controllers.interaction import cross
@@ -99,10 +99,7 @@ class ModelBasedController(Controller):
         """Forward kinematics, pose error, twist, ``q_dot = J_inv(nominal) tau``."""
         if self.context is None:
             return Command.refuse(f"{self.name}: reset(context) was not called")
-        try:
-            problem = observation_problem(observation, self.features)
-        except (TypeError, ValueError) as exc:
-            problem = f"malformed observation: {exc}"
+        problem = usable_observation_problem(observation, self.features)
         if problem is not None:
             return Command.refuse(problem)
         q = np.asarray(observation.lengths, dtype=float)

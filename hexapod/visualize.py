@@ -19,6 +19,7 @@ controllers: records and camera drawings take plain arrays.
 from __future__ import annotations
 
 import logging
+import os
 import time
 from dataclasses import dataclass
 from pathlib import Path
@@ -108,13 +109,19 @@ class TrialRecord:
 
 
 def save_trial(path: str | Path, **arrays: Any) -> Path:
-    """Save a trial record (compressed ``.npz``), checking its keys first."""
+    """Save a trial record (compressed ``.npz``), checking its keys first.
+
+    The file is written beside its final name and renamed, so that an interrupted
+    run never leaves a truncated record.
+    """
     missing = [k for k in RECORD_KEYS if k not in arrays]
     if missing:
         raise RecordError(str(path), f"missing keys {missing}")
     p = Path(path)
+    tmp = p.with_name(p.name + f".{os.getpid()}.tmp.npz")
     data: dict[str, Any] = {k: np.asarray(v) for k, v in arrays.items()}
-    np.savez_compressed(p, **data)
+    np.savez_compressed(tmp, **data)
+    os.replace(tmp, p)
     return p
 
 
