@@ -92,13 +92,16 @@ class CompiledFunction:
         code += _BATCH_WRAPPER.format(name=self.name, n_in=self.n_in, n_out=self.n_out)
         digest = hashlib.sha256((code + platform.machine()).encode()).hexdigest()[:16]
         lib_path = cache / f"{self.name}_{digest}.so"
-        if not lib_path.exists():
-            src = cache / f"{self.name}_{digest}.c"
+        if not lib_path.exists():  # processes compiling at once each use their own files
+            src = cache / f"{self.name}_{digest}.{os.getpid()}.c"
             src.write_text(code)
             tmp_lib = cache / f"{self.name}_{digest}.{os.getpid()}.so"
-            subprocess.run([cc, "-O2", "-shared", "-fPIC", str(src), "-o", str(tmp_lib)],
-                           check=True, capture_output=True, timeout=300)
-            os.replace(tmp_lib, lib_path)
+            try:
+                subprocess.run([cc, "-O2", "-shared", "-fPIC", str(src), "-o", str(tmp_lib)],
+                               check=True, capture_output=True, timeout=300)
+                os.replace(tmp_lib, lib_path)
+            finally:
+                src.unlink(missing_ok=True)
         lib = ctypes.CDLL(str(lib_path))
         n_arg, n_res, n_iw, n_w = (ctypes.c_longlong() for _ in range(4))
         getattr(lib, f"{self.name}_work")(ctypes.byref(n_arg), ctypes.byref(n_res),
