@@ -231,3 +231,36 @@ class HaltedError(RobotFaultError):
 class WatchdogError(RobotFaultError):
     """The controller's watchdog tripped (code 20): no valid MOV within its period; the
     robot holds its position and refuses MOV until the host reads ``ERR?``."""
+
+
+class RecordError(HexapodError, ValueError):
+    """A trial record (``.npz``) is missing, unreadable, lacks a key or has a bad shape.
+
+    Attributes:
+        path: The file (``"<memory>"`` for arrays not read from a file).
+        key: The missing or malformed key (None for the file itself).
+        problem: What is wrong.
+    """
+
+    def __init__(self, path: str, problem: str, key: str | None = None) -> None:
+        self.path = path
+        self.key = key
+        self.problem = problem
+        super().__init__(f"{path}: " + (f"key '{key}': " if key else "") + problem)
+
+
+class ViewerError(HexapodError):
+    """The MeshCat server could not be started or reached within its timeout.
+
+    Attributes:
+        url: The ZeroMQ address tried (None when starting a server).
+        timeout: How long it was waited for [s].
+        problem: What happened.
+    """
+
+    def __init__(self, problem: str, url: str | None = None, timeout: float = 0.0) -> None:
+        self.url = url
+        self.timeout = timeout
+        self.problem = problem
+        where = f"MeshCat server {url}" if url else "MeshCat server"
+        super().__init__(f"{where}: {problem} (waited {timeout:g} s)")
