@@ -1,32 +1,40 @@
-"""MeshCat viewer: records, HTML export, and a real headless browser looking at it."""
+"""MeshCat viewer: records, drawings, live view, HTML export seen by a real headless browser."""
 
 from __future__ import annotations
 
+import contextlib
+import os
 import re
 import shutil
+import signal
 import subprocess
+import time
 from pathlib import Path
 
 import numpy as np
 import pytest
 
-from hexapod import HexapodGeometry, inverse_kinematics, sample_poses
-from hexapod.se3 import exp_so3, log_so3
+from hexapod import HexapodGeometry
 from hexapod.visualize import (
-    RECORD_KEYS,
+    RECORD_SHAPES,
     HexapodViewer,
     RecordError,
+    TrialRecord,
+    _edge_planes,
+    _frustum_segments,
     load_trial,
-    plot_trial,
     replay_html,
     replay_trial,
     save_trial,
+    synthetic_record,
 )
 
+#: Debian's Chromium as root, headless, software WebGL, no network of its own.
 BROWSER_FLAGS = ["--headless", "--no-sandbox", "--disable-gpu", "--disable-quic",
                  "--no-first-run", "--disable-background-networking",
                  "--disable-component-update", "--disable-sync", "--window-size=800,600",
-                 "--use-angle=swiftshader", "--enable-unsafe-swiftshader"]
+                 "--use-angle=swiftshader", "--enable-unsafe-swiftshader",
+                 "--hide-scrollbars"]
 
 
 def _browser() -> str:
@@ -38,112 +46,238 @@ def _browser() -> str:
                          "the viewer test must run, not skip")
 
 
-def _screenshot(html: Path, png: Path, budget_ms: int, tmp: Path) -> np.ndarray:
+def _screenshot(url: str, png: Path, tmp: Path, budget_ms: int = 3000) -> np.ndarray:
+    """Screenshot of a page by headless Chromium, as RGB ints; no browser process survives."""
     import cv2
 
-    cmd = [_browser(), *BROWSER_FLAGS, f"--user-data-dir={tmp / ('profile' + png.stem)}",
-           f"--virtual-time-budget={budget_ms}", f"--screenshot={png}", html.as_uri()]
-    subprocess.run(cmd, check=True, timeout=120, capture_output=True)
+    cmd = [_browser(), *BROWSER_FLAGS, f"--user-data-dir={tmp / ('profile-' + png.stem)}",
+           f"--virtual-time-budget={budget_ms}", f"--screenshot={png}", url]
+    proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                            start_new_session=True)
+    try:
+        _, err = proc.communicate(timeout=90)
+    finally:
+        with contextlib.suppress(ProcessLookupError):  # the renderer and GPU children too
+            os.killpg(proc.pid, signal.SIGKILL)
+        proc.wait()
+    assert proc.returncode == 0, f"chromium failed ({proc.returncode}): {err[-2000:]!r}"
     image = cv2.imread(str(png))
-    assert image is not None, f"the browser wrote no screenshot {png}"
+    assert image is not None, f"the browser wrote no screenshot {png}: {err[-2000:]!r}"
     return image[:, :, ::-1].astype(int)  # RGB
 
 
-def _fractions(rgb: np.ndarray) -> tuple[float, float]:
+# colours of hexapod.model / hexapod.visualize as rendered (lit): hue families
+def _orange(rgb: np.ndarray) -> np.ndarray:   # PLATFORM_COLOR (0.95, 0.55, 0.10)
     r, g, b = rgb[..., 0], rgb[..., 1], rgb[..., 2]
-    orange = (r > 170) & (g > 70) & (g < 175) & (b < 90)          # platform
-    blue = (b > 140) & (r < 90) & (g < 140) & (b - r > 90)         # leg bodies
-    return float(orange.mean()), float(blue.mean())
+    return (r > 150) & (g > 60) & (g < 0.8 * r) & (b < 0.45 * g)
+
+
+def _blue(rgb: np.ndarray) -> np.ndarray:     # LEG_BODY_COLOR (0.15, 0.35, 0.85)
+    r, g, b = rgb[..., 0], rgb[..., 1], rgb[..., 2]
+    return (b > 120) & (b - r > 80) & (b - g > 40)
+
+
+def _red(rgb: np.ndarray) -> np.ndarray:      # HIDDEN_LEG_COLOR (0.85, 0.10, 0.10)
+    r, g, b = rgb[..., 0], rgb[..., 1], rgb[..., 2]
+    return (r > 120) & (g < 0.35 * r) & (b < 0.35 * r)
 
 
 @pytest.fixture
-def record_path(tmp_path: Path, geometry: HexapodGeometry) -> Path:
-    """A synthetic trial: the platform moves from one pose to another over 2 s."""
-    R, t = sample_poses(geometry, 2, rng=3, max_translation=0.06, max_angle=0.2)
-    n = 101
-    s = np.linspace(0.0, 1.0, n)
-    w = log_so3(R[1] @ R[0].T)
-    rot = np.array([exp_so3(w * x) @ R[0] for x in s])
-    trans = t[0] + s[:, None] * (t[1] - t[0])
-    vis = np.ones((n, 6, 2), dtype=bool)
-    vis[40:60, 3, 1] = False
-    arrays = {
-        "t": s * 2.0, "lengths": inverse_kinematics(geometry, rot, trans), "rotations": rot,
-        "translations": trans, "edge_visible": vis, "error_norm": np.exp(-3 * s),
-        "position_error": np.linalg.norm(trans - t[1], axis=1),
-        "orientation_error": np.linalg.norm(log_so3(np.swapaxes(rot, 1, 2) @ R[1]), axis=-1),
-        "velocities": np.zeros((n, 6)), "goal_rotation": R[1], "goal_translation": t[1],
-        "camera_from_base": np.array([[0, -1, 0, 0], [0, 0, -1, 0.3], [1, 0, 0, 0.8],
-                                      [0, 0, 0, 1.0]]),
-        "camera_kind": np.array("perspective"),
-        "camera_K": np.array([[1000.0, 0, 512], [0, 1000, 390], [0, 0, 1]]),
-        "camera_size": np.array([1024, 780]), "camera_xi": np.array(0.0),
-        "base_points": geometry.base_points, "platform_points": geometry.platform_points,
-        "stroke": np.array(geometry.stroke), "leg_radius": np.array(geometry.leg_radius),
-        "scenario": np.array("synthetic"), "controller": np.array("none"),
-        "trial": np.array(0),
-    }
-    return save_trial(tmp_path / "trial.npz", **arrays)
+def record(geometry: HexapodGeometry) -> TrialRecord:
+    """2 s, 101 periods; leg 3 has an edge hidden from 0.8 s to 1.2 s."""
+    return synthetic_record(geometry)
 
 
-def test_record_round_trip_and_errors(record_path: Path, tmp_path: Path) -> None:
-    rec = load_trial(record_path)
-    assert rec.frames == 101 and "synthetic" in rec.title
-    with pytest.raises(RecordError, match="no such"):
+# ----------------------------------------------------------------------------- records
+
+
+def test_record_round_trip(record: TrialRecord, tmp_path: Path) -> None:
+    path = save_trial(tmp_path / "trial.npz", **record.arrays)
+    assert not list(tmp_path.glob("*.tmp.npz")), "the temporary file was not renamed"
+    back = load_trial(path)
+    assert back.frames == 101 and back.title == "synthetic / none / trial 0"
+    assert back.path == str(path) and back.camera_kind == "perspective"
+    for key in RECORD_SHAPES:
+        np.testing.assert_array_equal(back[key], record[key], err_msg=key)
+    assert back.geometry.leg_radius == record.geometry.leg_radius
+    # the motion is what inverse kinematics says, inside the strokes
+    q_min, q_max = record["stroke"]
+    assert np.all((record["lengths"] > q_min) & (record["lengths"] < q_max))
+
+
+def test_record_errors_name_the_file_and_the_key(record: TrialRecord, tmp_path: Path) -> None:
+    with pytest.raises(RecordError, match="no such trial record"):
         load_trial(tmp_path / "missing.npz")
-    with np.load(record_path) as data:
-        arrays = {k: data[k] for k in data.files if k != "goal_rotation"}
-    np.savez(tmp_path / "bad.npz", **arrays)
-    with pytest.raises(RecordError) as info:
+    (tmp_path / "junk.npz").write_bytes(b"not a zip")
+    with pytest.raises(RecordError, match=r"junk\.npz.*not a readable"):
+        load_trial(tmp_path / "junk.npz")
+
+    arrays = {k: v for k, v in record.arrays.items() if k != "goal_rotation"}
+    np.savez(tmp_path / "bad.npz", **arrays)  # type: ignore[arg-type]
+    with pytest.raises(RecordError, match=r"bad\.npz: key 'goal_rotation': missing") as info:
         load_trial(tmp_path / "bad.npz")
-    assert info.value.key == "goal_rotation"
+    assert info.value.key == "goal_rotation" and info.value.path.endswith("bad.npz")
+
+    short = dict(record.arrays, lengths=record["lengths"][:-1])
+    np.savez(tmp_path / "short.npz", **short)  # type: ignore[arg-type]
+    with pytest.raises(RecordError, match=r"'lengths': expected shape \(101, 6\)"):
+        load_trial(tmp_path / "short.npz")
+    with pytest.raises(RecordError, match="camera_kind"):
+        TrialRecord(dict(record.arrays, camera_kind=np.array("fisheye")))
     with pytest.raises(RecordError, match="missing keys"):
         save_trial(tmp_path / "x.npz", t=np.zeros(3))
-    assert set(RECORD_KEYS) <= set(np.load(record_path).files)
+    assert not (tmp_path / "x.npz").exists()
 
 
-def test_html_is_self_contained(record_path: Path, tmp_path: Path) -> None:
-    html = replay_html(load_trial(record_path), tmp_path / "replay.html").read_text()
-    assert len(html) > 10_000
-    remote = re.findall(r"<(?:script|link)[^>]+(?:src|href)=[\"']https?://", html)
-    assert not remote, f"the page loads remote resources: {remote[:3]}"
+# ----------------------------------------------------------------------------- drawings
 
 
-def test_replay_in_a_real_browser(record_path: Path, tmp_path: Path) -> None:
-    html, png = replay_trial(record_path, tmp_path / "replay.html")
-    assert png.exists() and png.stat().st_size > 10_000  # the matplotlib companion
-    early = _screenshot(html, tmp_path / "early.png", 300, tmp_path)
-    late = _screenshot(html, tmp_path / "late.png", 2500, tmp_path)
-    for image in (early, late):
-        orange, blue = _fractions(image)
-        assert 0.004 < orange < 0.3, f"platform colour fraction {orange:.4f}"
-        assert 0.005 < blue < 0.3, f"leg colour fraction {blue:.4f}"
-    # the platform moved between the two frames: the images differ, mostly near it
-    changed = np.any(np.abs(early - late) > 30, axis=-1)
-    assert changed.mean() > 0.003, "two frames of the animation look the same"
-    rows = np.flatnonzero(changed.any(axis=1))
-    plat_rows = np.flatnonzero(_platform_mask(early).any(axis=1))
-    assert rows.min() <= plat_rows.max() and rows.max() >= plat_rows.min()
+def test_frustum_corners_project_to_the_image_corners(record: TrialRecord) -> None:
+    T, K = record["camera_from_base"], record["camera_K"]
+    w, h = record["camera_size"]
+    segs = _frustum_segments(T, K, record["camera_size"], "perspective").T  # (2N, 3)
+    cam = segs @ T[:3, :3].T + T[:3, 3]
+    apex = cam[0]
+    np.testing.assert_allclose(apex, 0.0, atol=1e-12)  # the rays start at the centre
+    tips = cam[1:8:2]                                   # the four corner rays
+    uv = tips @ K.T
+    uv = uv[:, :2] / uv[:, 2:]
+    np.testing.assert_allclose(uv, [[0, 0], [w, 0], [w, h], [0, h]], atol=1e-9)
+    assert np.all(tips[:, 2] > 0), "the frustum points along +z (optical axis)"
+    wide = _frustum_segments(T, K, record["camera_size"], "unified").T
+    rays = wide[1:24:2] @ T[:3, :3].T + T[:3, 3]
+    angles = np.arccos(rays[:, 2] / np.linalg.norm(rays, axis=1))
+    np.testing.assert_allclose(angles, np.deg2rad(75.0))
 
 
-def _platform_mask(rgb: np.ndarray) -> np.ndarray:
-    r, g, b = rgb[..., 0], rgb[..., 1], rgb[..., 2]
-    return (r > 170) & (g > 70) & (g < 175) & (b < 90)
+def test_edge_planes_are_tangent_to_the_legs(record: TrialRecord) -> None:
+    g = record.geometry
+    R, t = record["rotations"][0], record["translations"][0]
+    T = record["camera_from_base"]
+    centre = -T[:3, :3].T @ T[:3, 3]
+    tris = _edge_planes(g, R, t, centre)
+    A = g.base_points
+    B = t + g.platform_points @ R.T
+    for i in range(6):
+        u = (B[i] - A[i]) / np.linalg.norm(B[i] - A[i])
+        normals = []
+        for j in range(2):
+            c, p0, p1 = tris[i, j]
+            np.testing.assert_allclose(c, centre)
+            n = np.cross(p0 - c, p1 - c)
+            n /= np.linalg.norm(n)
+            normals.append(n)
+            assert abs(n @ u) < 1e-9  # the plane is parallel to the leg axis
+            assert abs(abs(n @ (A[i] - c)) - g.leg_radius) < 1e-9  # at distance r: tangent
+        assert abs(normals[0] @ normals[1]) < 1 - 1e-6  # two different edges
 
 
-def test_live_viewer_is_rate_limited_and_closes(geometry: HexapodGeometry,
-                                                tmp_path: Path) -> None:
-    viewer = HexapodViewer(geometry)
+# ----------------------------------------------------------------------------- live view
+
+
+def _listening_addresses(pid: int) -> list[str]:
+    """Local addresses of the TCP sockets a process listens on (from /proc)."""
+    inodes = set()
+    for fd in Path(f"/proc/{pid}/fd").iterdir():
+        with np.errstate(all="ignore"):
+            try:
+                target = os.readlink(fd)
+            except OSError:
+                continue
+        if target.startswith("socket:["):
+            inodes.add(target[8:-1])
+    found = []
+    for table in ("/proc/net/tcp", "/proc/net/tcp6"):
+        for line in Path(table).read_text().splitlines()[1:]:
+            cols = line.split()
+            if cols[3] == "0A" and cols[9] in inodes:  # LISTEN
+                found.append(cols[1].split(":")[0])
+    return found
+
+
+def test_live_viewer_loopback_non_blocking_and_closed(record: TrialRecord) -> None:
+    viewer = HexapodViewer(record.geometry)
+    server = viewer.server_process
+    assert server is not None
     try:
-        assert viewer.url().startswith("http://127.0.0.1")
-        R, t = sample_poses(geometry, 1, rng=1)
-        assert viewer.display(R[0], t[0], force=True)
-        assert not viewer.display(R[0], t[0]), "a second update within 1/30 s is skipped"
-        hidden = np.ones((6, 2), dtype=bool)
-        hidden[2] = False
-        assert viewer.display(R[0], t[0], hidden, force=True)
-        plot_trial  # noqa: B018 - imported for the companion plot (tested above)
+        assert viewer.url().startswith("http://127.0.0.1:")
+        addresses = _listening_addresses(server.pid)
+        assert len(addresses) >= 2, f"web and ZeroMQ sockets expected: {addresses}"
+        loopback = {"0100007F", "00000000000000000000000001000000"}
+        assert set(addresses) <= loopback, f"the server listens beyond loopback: {addresses}"
+
+        viewer.show_camera(record["camera_from_base"], record["camera_K"], 640, 480,
+                           kind="unified")
+        viewer.show_goal(record["goal_rotation"], record["goal_translation"])
+        viewer.show_edge_planes(record["rotations"][0], record["translations"][0],
+                                record["edge_visible"][0])
+        start = time.perf_counter()
+        assert viewer.display(record["rotations"][0], record["translations"][0], force=True)
+        forced = time.perf_counter() - start
+        drawn = viewer.updates
+        costs = []
+        for k in np.arange(100) // 2:  # a 1 kHz loop for 0.1 s, nobody watching
+            start = time.perf_counter()
+            assert viewer.display(record["rotations"][k], record["translations"][k],
+                                  record["edge_visible"][k])
+            costs.append(time.perf_counter() - start)
+            time.sleep(0.001)
+        assert viewer.flush(timeout=ZMQ_WAIT)
+        live = viewer.updates - drawn
+        assert 1 <= live <= 8, f"{live} updates in ~0.1 s: not rate-limited to 30 Hz"
+        assert np.median(costs) < 0.2e-3 < forced, (
+            f"display() costs {np.median(costs) * 1e3:.3f} ms (a drawn pose "
+            f"{forced * 1e3:.2f} ms): it must not wait for the server")
+        assert viewer._hidden[3], "the last pose (period 49) hides an edge of leg 3: red"
     finally:
         viewer.close()
-    server = getattr(viewer.viewer.window, "server_proc", None)
-    assert server is None or server.poll() is not None, "the MeshCat server is still running"
+    assert server.poll() is not None, "the MeshCat server is still running"
+    assert not viewer._sender.is_alive()
+    assert not viewer.display(record["rotations"][0], record["translations"][0])
+
+
+ZMQ_WAIT = 5.0
+
+
+# ----------------------------------------------------------------------------- export
+
+
+def test_html_is_self_contained(record: TrialRecord, tmp_path: Path) -> None:
+    html = replay_html(record, tmp_path / "replay.html").read_text()
+    assert len(html) > 100_000  # the viewer's JavaScript is inlined
+    remote = re.findall(r"<(?:script|link|img|iframe)[^>]+(?:src|href)=[\"']?(?:https?:)?//",
+                        html, flags=re.IGNORECASE)
+    assert not remote, f"the page loads remote resources: {remote[:3]}"
+    fetched = re.findall(r"fetch\(\s*[\"']([^\"']{0,12})", html)
+    assert fetched and all(u.startswith("data:") for u in fetched), set(fetched)
+    assert "viewer.animator.seek" in html  # page.html#t=... opens paused at t
+
+
+def test_replay_in_a_real_browser(record: TrialRecord, tmp_path: Path) -> None:
+    npz = save_trial(tmp_path / "trial.npz", **record.arrays)
+    html, png = replay_trial(npz, tmp_path / "replay.html")
+    import cv2
+
+    curves = cv2.imread(str(png))
+    assert png == tmp_path / "replay.png" and curves is not None
+    assert curves.shape[1] > 1000 and curves.std() > 10  # the matplotlib companion
+
+    shots = {t: _screenshot(f"{html.as_uri()}#t={t}", tmp_path / f"t{t}.png", tmp_path)
+             for t in (0.0, 1.0, 2.0)}
+    for t, image in shots.items():
+        orange, blue = _orange(image).mean(), _blue(image).mean()
+        assert 0.005 < orange < 0.25, f"t={t}: platform colour fraction {orange:.4f}"
+        assert 0.003 < blue < 0.2, f"t={t}: leg colour fraction {blue:.4f}"
+        assert 0.2 < blue / orange < 2.0, f"t={t}: legs/platform {blue / orange:.2f}"
+    # leg 3 has an edge hidden at 1 s only: it is drawn red then, blue before
+    assert _red(shots[1.0]).mean() > 0.001, "the hidden leg is not red at t = 1 s"
+    assert _red(shots[0.0]).mean() < 0.0002, "a red leg at t = 0 (every edge visible)"
+    # the platform moved between 0 s and 2 s: the images differ, and around the platform
+    early, late = shots[0.0], shots[2.0]
+    changed = np.any(np.abs(early - late) > 40, axis=-1)
+    assert changed.mean() > 0.003, "two frames of the animation look the same"
+    platform = _orange(early) | _orange(late)
+    ys, xs = np.nonzero(platform)
+    box = np.zeros_like(changed)
+    box[ys.min():ys.max() + 1, xs.min():xs.max() + 1] = True
+    assert (changed & box).sum() > 0.5 * changed.sum(), "the change is not where the platform is"
