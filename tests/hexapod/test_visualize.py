@@ -16,6 +16,7 @@ import pytest
 
 from hexapod import HexapodGeometry
 from hexapod.visualize import (
+    LIVE_PERIOD,
     RECORD_SHAPES,
     HexapodViewer,
     RecordError,
@@ -216,15 +217,18 @@ def test_live_viewer_loopback_non_blocking_and_closed(record: TrialRecord) -> No
         forced = time.perf_counter() - start
         drawn = viewer.updates
         costs = []
+        began = time.perf_counter()
         for k in np.arange(100) // 2:  # a 1 kHz loop for 0.1 s, nobody watching
             start = time.perf_counter()
             assert viewer.display(record["rotations"][k], record["translations"][k],
                                   record["edge_visible"][k])
             costs.append(time.perf_counter() - start)
             time.sleep(0.001)
+        elapsed = time.perf_counter() - began
         assert viewer.flush(timeout=ZMQ_WAIT)
         live = viewer.updates - drawn
-        assert 1 <= live <= 8, f"{live} updates in ~0.1 s: not rate-limited to 30 Hz"
+        most = elapsed / LIVE_PERIOD + 2  # the last pose is drawn at flush
+        assert 1 <= live <= most, f"{live} updates in {elapsed:.3f} s: not rate-limited"
         assert np.median(costs) < 0.2e-3 < forced, (
             f"display() costs {np.median(costs) * 1e3:.3f} ms (a drawn pose "
             f"{forced * 1e3:.2f} ms): it must not wait for the server")
