@@ -494,9 +494,9 @@ class PeriodStatus:
     def line(self) -> str:
         """The status line (mm and ms)."""
         fe = f"{self.feature_error:.2e}" if math.isfinite(self.feature_error) else "   --   "
-        s = (f"step {self.step:6d}  t {self.t:7.2f} s  feature error {fe}  "
-             f"max|q-q*| {self.leg_error * 1e3:8.3f} mm  edges {self.visible_edges:2d}  "
-             f"RTT {self.rtt * 1e3:5.2f} ms  missed {self.missed_total}  "
+        s = (f"step {self.step:6d} {self.t:7.2f} s | feature err {fe} | "
+             f"max|q-q*| {self.leg_error * 1e3:7.3f} mm | edges {self.visible_edges:2d} | "
+             f"RTT {self.rtt * 1e3:5.2f} ms | missed {self.missed_total} | "
              f"lost {self.lost_total}")
         if self.reason:
             s += f"  [{self.reason}]"
@@ -712,18 +712,22 @@ class StatusLine:
         if self._live is not None:
             if now - self._last_print >= 0.05 or status.reason != self._last_reason:
                 style = "yellow" if status.reason else ""
-                self._live.update(self._text(status.line(), style=style), refresh=True)
+                self._live.update(self._line(status, style), refresh=True)
                 self._last_print = now
         elif (now - self._last_print >= self.period_s or status.reason != self._last_reason):
             print(status.line(), file=self.stream, flush=True)
             self._last_print = now
         self._last_reason = status.reason
 
+    def _line(self, status: PeriodStatus, style: str = "") -> Any:
+        # one terminal line: cropped to the width, never wrapped
+        return self._text(status.line(), style=style, no_wrap=True, overflow="ellipsis")
+
     def final(self, status: PeriodStatus | None) -> None:
         """Show the last period and release the terminal line."""
         if self._live is not None:
             if status is not None:
-                self._live.update(self._text(status.line()), refresh=True)
+                self._live.update(self._line(status), refresh=True)
             self._live.stop()
             self._live = None
         elif status is not None:
@@ -903,7 +907,12 @@ def run(args: argparse.Namespace) -> int:
     # everything the user gave is checked before the robot is touched
     goal_file = load_goal(args.goal, geometry)
     goal = goal_features(goal_file, camera, geometry)
-    controller = registry.create(args.controller, **parse_options(args.option))
+    options = parse_options(args.option)
+    try:
+        controller = registry.create(args.controller, **options)
+    except TypeError as exc:  # an option the factory does not take
+        raise BenchmarkError(f"--controller {args.controller}: bad option in "
+                             f"{sorted(options)}: {exc}") from None
     base_points = (load_calibrated_base_points(args.calibration) if args.calibration
                    else camera.camera_from_base.apply(geometry.base_points))
     controller.reset(ControllerContext(base_points=base_points, geometry=geometry,
@@ -924,6 +933,7 @@ def run(args: argparse.Namespace) -> int:
                 status(s)
                 if logf is not None:
                     logf.write(json.dumps(s.to_json()) + "\n")
+                    logf.flush()  # readable live (tail -f), and complete after a crash
 
             on_pose = None
             if viewer is not None:

@@ -1,56 +1,182 @@
-"""hexapod-bench servo: the real loop against the firmware emulator and a rendered camera."""
+"""hexapod-bench servo (benchmarks.servo): the real loop against the firmware emulator on a
+pseudo-terminal and a rendered camera (real rendering and edge detection, no mocks)."""
 
 from __future__ import annotations
 
 import json
+import os
+import signal
+import subprocess
+import sys
+import time
 from pathlib import Path
 
+import numpy as np
 import pytest
 
-from benchmarks.cli import main as cli_main
+from benchmarks import servo
+
+# a reachable goal 2 to 3 mm from the emulator's initial (mid-stroke, 415 mm) lengths
+GOAL_MM = [417.5, 412.5, 417.0, 413.0, 417.5, 412.5]
+FAST = ["-o", "gain=3", "--tolerance-mm", "0.5", "--max-steps", "150"]
+# a port that cannot be opened: an error about it would mean the robot was contacted
+NO_ROBOT = "serial:/nonexistent/hexapod-port"
 
 
-def _goal(tmp_path: Path, text: str) -> Path:
-    path = tmp_path / "goal.toml"
+def _goal(tmp_path: Path, text: str, name: str = "goal.toml") -> Path:
+    path = tmp_path / name
     path.write_text(text)
     return path
 
 
-def test_servo_converges_through_the_emulator(tmp_path: Path,
-                                              capsys: pytest.CaptureFixture[str]) -> None:
-    goal = _goal(tmp_path, "lengths_mm = [420.0, 411.0, 419.0, 412.0, 418.0, 410.0]\n")
+def _mm(values: list[float]) -> str:
+    return "[" + ", ".join(f"{x:.3f}" for x in values) + "]"
+
+
+def test_converges_through_the_emulator_with_a_log(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    goal = _goal(tmp_path, f"lengths_mm = {_mm(GOAL_MM)}\n")
     log = tmp_path / "servo.jsonl"
-    code = cli_main(["servo", "--backend", "emulator", "--camera", "sim", "--controller",
-                     "leg-edge", "--goal", str(goal), "--max-steps", "250", "--log", str(log),
-                     "--start-mm", "415", "415", "415", "415", "415", "415"])
+    code = servo.main(["--backend", "emulator", "--camera", "sim", "--controller", "leg-edge",
+                       "--goal", str(goal), "--log", str(log), *FAST])
     out = capsys.readouterr().out
     assert code == 0, out[-2000:]
     assert "converged after" in out
+    steps = int(out.split("converged after ")[1].split()[0])
     lines = [json.loads(x) for x in log.read_text().splitlines()]
-    assert 10 < len(lines) < 250
-    assert lines[-1]["max_leg_error_mm"] < 0.5
-    assert lines[0]["max_leg_error_mm"] > 3.0, "the goal was a few millimetres away"
+    assert len(lines) == steps, "one log line per period"
+    assert [r["step"] for r in lines] == list(range(steps))
+    assert lines[0]["leg_error_mm"] > 2.0, "the goal was a few millimetres away"
+    assert all(r["leg_error_mm"] <= 0.5 for r in lines[-servo.DEFAULT_SETTLE:])
+    assert lines[-1]["feature_error"] < lines[0]["feature_error"] / 10
+    assert all(r["visible_edges"] == 12 and r["reason"] is None for r in lines)
+    assert all(r["rtt_ms"] > 0 for r in lines)
+    # plain status lines (stdout is not a terminal): periodic, not one per period
+    assert 1 <= out.count("max|q-q*|") < steps
 
 
-@pytest.mark.parametrize(("text", "fragment"), [
-    ("length_mm = [415.0, 415.0, 415.0, 415.0, 415.0, 415.0]\n", "lengths_mm"),
-    ("lengths_mm = [415.0, 415.0, 415.0]\n", "shape"),
-    ("lengths_mm = [415.0, 415.0, 415.0, 415.0, 415.0, 600.0]\n", "leg 5"),
+def test_teach_then_servo_to_the_taught_features(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    goal = tmp_path / "taught.toml"
+    code = servo.main(["--backend", "emulator", "--goal", str(goal), "--teach",
+                       "--start-mm", *[str(x) for x in GOAL_MM]])
+    assert code == 0, capsys.readouterr()
+    taught = servo.load_goal(goal, servo._geometry("deltalab"))
+    assert np.allclose(taught.lengths * 1e3, GOAL_MM, atol=1e-3)
+    assert taught.features is not None and taught.features.visible_count == 12
+    assert (tmp_path / "taught.features.npz").is_file()
+    # never overwrites a taught goal
+    assert servo.main(["--backend", "emulator", "--goal", str(goal), "--teach"]) == 2
+    assert "already exists" in capsys.readouterr().err
+    code = servo.main(["--backend", "emulator", "--goal", str(goal), *FAST])
+    out = capsys.readouterr().out
+    assert code == 0, out[-2000:]
+    assert "converged after" in out
+
+
+def test_lost_frames_are_counted_and_command_zero() -> None:
+    import controllers  # noqa: F401 - registers the built-ins
+    from controllers.base import ControllerContext, registry
+    from hexapod.geometry import deltalab
+    from vision.cameras import front_camera
+
+    g = deltalab()
+    cam = front_camera(g)
+    goal = servo.goal_features(servo.ServoGoal(np.array(GOAL_MM) * 1e-3, None, "<test>"),
+                               cam, g)
+    ctrl = registry.create("leg-edge", gain=3.0)
+    ctrl.reset(ControllerContext(cam.camera_from_base.apply(g.base_points), g, cam, 0.02, goal))
+    sensor = servo.SimCamera(cam, g, drop_every=4)
+    seen: list[servo.PeriodStatus] = []
+    from hexapod.backends.serial import open_emulated_robot
+
+    with open_emulated_robot(g) as robot:
+        res = servo.servo_loop(robot, sensor, ctrl, goal, g, 0.02, max_steps=12,
+                               on_period=seen.append)
+    assert res.outcome == "max-steps" and res.steps == 12
+    lost = [s for s in seen if s.lost_frame]
+    assert [s.step for s in lost] == [3, 7, 11]
+    assert res.lost_frames == 3 and seen[-1].lost_total == 3
+    assert all(s.reason == "lost camera frame" and not np.any(s.velocities) for s in lost)
+    assert all(np.any(s.velocities) for s in seen if not s.lost_frame)
+    assert "3 lost frames" in res.summary()
+
+
+@pytest.mark.parametrize(("text", "fragments"), [
+    (f"length_mm = {_mm(GOAL_MM)}\n", ["'length_mm'", "did you mean 'lengths_mm'"]),
+    ("name = 'x'\n", ["'lengths_mm'", "missing required key"]),
+    ("lengths_mm = [415.0, 415.0, 415.0]\n", ["'lengths_mm'", "shape (6,)"]),
+    ("lengths_mm = [415.0, 415.0, 415.0, 415.0, 415.0, 600.0]\n",
+     ["'lengths_mm'", "leg 6", "600.000 mm is outside the stroke"]),
+    (f"lengths_mm = {_mm(GOAL_MM)}\nfeatures = 'missing.npz'\n",
+     ["'features'", "missing.npz not found"]),
+    ("lengths_mm = [\n", ["not valid TOML"]),
 ])
-def test_bad_goal_files_are_refused_before_the_robot_moves(
-        tmp_path: Path, capsys: pytest.CaptureFixture[str], text: str, fragment: str) -> None:
+def test_bad_goal_files_are_refused_before_the_robot_is_contacted(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str], text: str,
+        fragments: list[str]) -> None:
     goal = _goal(tmp_path, text)
-    code = cli_main(["servo", "--backend", "emulator", "--controller", "leg-edge", "--goal",
-                     str(goal)])
+    code = servo.main(["--backend", NO_ROBOT, "--goal", str(goal)])
     err = capsys.readouterr().err
     assert code == 2
-    assert str(goal) in err and fragment in err
+    assert str(goal) in err
+    for fragment in fragments:
+        assert fragment in err, err
+    assert "nonexistent" not in err, "the goal must be checked before the port is opened"
 
 
-def test_unknown_controller_suggests_the_closest(tmp_path: Path,
-                                                 capsys: pytest.CaptureFixture[str]) -> None:
-    goal = _goal(tmp_path, "lengths_mm = [415.0, 415.0, 415.0, 415.0, 415.0, 415.0]\n")
-    code = cli_main(["servo", "--backend", "emulator", "--controller", "leg-edg", "--goal",
-                     str(goal)])
+def test_unknown_controller_suggests_the_closest(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    goal = _goal(tmp_path, f"lengths_mm = {_mm(GOAL_MM)}\n")
+    code = servo.main(["--backend", NO_ROBOT, "--controller", "leg-edg", "--goal", str(goal)])
+    err = capsys.readouterr().err
     assert code == 2
-    assert "did you mean 'leg-edge'" in capsys.readouterr().err
+    assert "unknown controller 'leg-edg'" in err and "did you mean 'leg-edge'" in err
+
+
+@pytest.mark.parametrize(("extra", "fragment"), [
+    (["--camera", "webcam"], "--camera: expected sim, video:PATH or device:N"),
+    (["--camera", "video:/nonexistent.avi"], "no such file"),
+    (["--backend", "tcp:1234"], "--backend: expected emulator or serial:URL"),
+    (["--dt", "0"], "--dt must be a positive period"),
+    (["-o", "gain"], "expected KEY=VALUE"),
+    (["-o", "gian=2"], "gian"),
+    (["--start-mm", "415", "415", "415", "415", "415", "900"], "--start-mm: leg 6"),
+])
+def test_bad_options_exit_2(tmp_path: Path, capsys: pytest.CaptureFixture[str],
+                            extra: list[str], fragment: str) -> None:
+    goal = _goal(tmp_path, f"lengths_mm = {_mm(GOAL_MM)}\n")
+    argv = ["--backend", "emulator", "--goal", str(goal), *extra]
+    assert servo.main(argv) == 2
+    assert fragment in capsys.readouterr().err
+
+
+def test_parse_options() -> None:
+    assert servo.parse_options(["gain=2", "interaction=desired", "adaptive_gain=[4, 0.4, 30]"]
+                               ) == {"gain": 2, "interaction": "desired",
+                                     "adaptive_gain": [4, 0.4, 30]}
+
+
+def test_ctrl_c_halts_and_exits_130(tmp_path: Path) -> None:
+    """A real SIGINT to a real process: the loop stops, the robot is halted, exit 130."""
+    goal = _goal(tmp_path, f"lengths_mm = {_mm(GOAL_MM)}\n")
+    log = tmp_path / "servo.jsonl"
+    env = {**os.environ, "PYTHONUNBUFFERED": "1"}
+    proc = subprocess.Popen([sys.executable, "-m", "benchmarks.servo", "--backend", "emulator",
+                             "--goal", str(goal), "--log", str(log), "-o", "gain=0.2"],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                            cwd=Path(__file__).resolve().parents[2], env=env)
+    try:
+        deadline = time.monotonic() + 30
+        while time.monotonic() < deadline and (
+                not log.exists() or len(log.read_text().splitlines()) < 10):
+            assert proc.poll() is None, proc.communicate()
+            time.sleep(0.05)
+        proc.send_signal(signal.SIGINT)
+        out, err = proc.communicate(timeout=20)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+    assert proc.returncode == 130, (out, err)
+    assert "interrupted after" in out and "the robot was halted" in out
+    assert "Traceback" not in err
