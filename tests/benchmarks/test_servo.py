@@ -180,3 +180,33 @@ def test_ctrl_c_halts_and_exits_130(tmp_path: Path) -> None:
     assert proc.returncode == 130, (out, err)
     assert "interrupted after" in out and "the robot was halted" in out
     assert "Traceback" not in err
+
+
+def test_video_camera_detects_the_legs_and_stops_at_the_end_of_the_file(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """--camera video:PATH through OpenCV: frames rendered at the start pose, then the end."""
+    from hexapod.fk import forward_kinematics
+    from hexapod.geometry import deltalab
+    from vision.cameras import front_camera
+    from vision.render import Renderer
+    from vision.sources import VideoRecorder
+
+    g = deltalab()
+    cam = front_camera(g)
+    sol = forward_kinematics(g, np.full(6, np.mean(g.stroke)))
+    image = Renderer(cam, g).render(sol.rotation, sol.translation)
+    video = tmp_path / "start.avi"
+    with VideoRecorder.for_camera(video, cam) as rec:
+        for _ in range(8):
+            rec.write(image)
+    goal = _goal(tmp_path, f"lengths_mm = {_mm(GOAL_MM)}\n")
+    log = tmp_path / "servo.jsonl"
+    code = servo.main(["--backend", "emulator", "--camera", f"video:{video}", "--goal",
+                       str(goal), "--log", str(log), "--max-steps", "50"])
+    out = capsys.readouterr().out
+    assert code == 1, out
+    assert "camera ended after 8 periods" in out
+    lines = [json.loads(x) for x in log.read_text().splitlines()]
+    assert len(lines) == 8
+    assert all(r["visible_edges"] == 12 and r["reason"] is None for r in lines)
+    assert np.any(lines[0]["velocities_mm_s"])
