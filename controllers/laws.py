@@ -35,6 +35,7 @@ from controllers.base import (
 )
 from controllers.exceptions import ContextError, OptionError
 from controllers.interaction import cross, direction_interaction
+from controllers.law_kernel import LawKernel, LawResult
 
 log = logging.getLogger(__name__)
 
@@ -185,6 +186,14 @@ def solve_least_squares(
 def solve_normal(N: np.ndarray, b: np.ndarray, threshold: float = 1e-6, damping: float = 0.0
                  ) -> tuple[np.ndarray, int, float]:
     """:func:`solve_least_squares` from the normal equations ``N = L^T L``, ``b = L^T e``."""
+    return solve_normal_damped(N, b, threshold, damping * damping)
+
+
+def solve_normal_damped(N: np.ndarray, b: np.ndarray, threshold: float, damping2: float
+                        ) -> tuple[np.ndarray, int, float]:
+    """:func:`solve_normal` with the squared damping ``mu^2`` given directly (or the
+    regularization ``eps`` of the QP laws): ``sum_j (v_j^T b) / (w_j + damping2) v_j``
+    over the eigenvalues ``w_j > threshold^2 w_max``."""
     w, V = np.linalg.eigh(N)
     w_max = w[-1]
     if not w_max > 0:
@@ -194,9 +203,9 @@ def solve_normal(N: np.ndarray, b: np.ndarray, threshold: float = 1e-6, damping:
     cond = math.sqrt(w_max / w[0]) if w[0] > 0 else math.inf
     c = V.T @ b
     if rank == len(w):
-        c /= w + damping * damping
+        c /= w + damping2
     else:
-        c = np.where(keep, c / np.where(keep, w + damping * damping, 1.0), 0.0)
+        c = np.where(keep, c / np.where(keep, w + damping2, 1.0), 0.0)
     return V @ c, rank, cond
 
 
@@ -299,6 +308,9 @@ class VisionLaw(Controller):
         self._J = np.zeros((6, 6))
         self._tau_prev = np.zeros(6)
         self._q_prev = np.ones(6)
+        #: Compiled core of the common case (:mod:`controllers.law_kernel`), set by the
+        #: subclass in :meth:`_reset_features`; None: numpy path only.
+        self._kernel: LawKernel | None = None
 
     # ----------------------------------------------------------------- reset
     def reset(self, context: ControllerContext) -> None:
@@ -329,7 +341,17 @@ class VisionLaw(Controller):
                 raise ContextError(self.name, "goal.lengths",
                                    f"expected 6 positive finite lengths, got {qs}")
             self._q_star = qs
+        self._kernel = None
         self._reset_features(context)
+        if self._kernel is not None:
+            g = self.gain
+            self._kernel.set("gain", (g.at_zero, g.at_infinity, g.slope_at_zero))
+            self._kernel.set("threshold2", self.threshold * self.threshold)
+            self._kernel.set("damping2", self._damping2())
+
+    def _damping2(self) -> float:
+        """``mu^2`` added to the eigenvalues of ``L^T L`` by the solve."""
+        return self.damping * self.damping
 
     @abstractmethod
     def _reset_features(self, context: ControllerContext) -> None:
@@ -376,9 +398,11 @@ class VisionLaw(Controller):
             self._tau_prev[:] = 0.0  # no motion commanded
             return Command.refuse(problem)
         q = np.asarray(observation.lengths, dtype=float)
-        if np.any(q <= 0):
+        if q.min() <= 0:
             self._tau_prev[:] = 0.0
             return Command.refuse(f"lengths: non-positive leg length {float(q.min())} m")
+        if self._kernel is not None and self._load_kernel(observation, q):
+            return self._step_compiled(self._kernel, q)
         st = self._stack(observation, q)  # uses _tau_prev to dead-reckon hidden legs
         self._tau_prev[:] = 0.0  # until a command is actually sent
         if isinstance(st, str):
@@ -404,23 +428,58 @@ class VisionLaw(Controller):
                             + ", ".join(str(int(i)) for i in unknown))
         J = inverse_jacobian_into(self._J, self._A, u)
         lam = self.gain(float(np.abs(e).max()) if e.size else 0.0)
-        out = self._solve(N, b, lam, q, J)
-        tau, rank, cond, active, reason = out
+        return self._command(self._solve(N, b, lam, q, J, None), J, e, error_norm, rows, q,
+                             st.notes)
+
+    def _step_compiled(self, kernel: LawKernel, q: np.ndarray) -> Command:
+        """The common case in one call of the compiled core (same result as the numpy path).
+
+        The subclass has written the measured features into the kernel's inputs
+        (:meth:`_load_kernel`).
+        """
+        r = kernel.evaluate()
+        self._tau_prev[:] = 0.0  # until a command is actually sent
+        self._directions[:] = r.directions
+        self._observed[:] = True
+        self._u_now = r.directions
+        e = r.error
+        if not (math.isfinite(r.error_norm) and math.isfinite(r.n_sum)):
+            return Command.refuse("non-finite error or interaction matrix (degenerate features)",
+                                  e)
+        return self._command(self._solve(r.N, r.b, r.gain, q, r.J, r), r.J, e, r.error_norm,
+                             e.shape[0], q, [])
+
+    def _command(self, solved: tuple[np.ndarray, int, float, list[str], str | None,
+                                     np.ndarray | None],
+                 J: np.ndarray, e: np.ndarray, error_norm: float, rows: int, q: np.ndarray,
+                 notes: list[str]) -> Command:
+        """The command (or the refusal) from the output of :meth:`_solve`."""
+        tau, rank, cond, active, reason, qdot = solved
         if reason is not None or rank < 6:
             if reason is None:
                 reason = (f"interaction matrix rank {rank} < 6 with {rows // 3} "
                           f"{self.unit} (condition {cond:.3g})")
             return Command(np.zeros(6), error=e, error_norm=error_norm, rank=rank,
                            condition=cond, features_used=rows, reason=reason,
-                           notes=st.notes, active_constraints=active)
-        qdot = self._finish(J @ tau)
-        if not np.all(np.isfinite(qdot)):
-            return Command.refuse("non-finite command (numerical failure)", e)
+                           notes=notes, active_constraints=active)
+        if qdot is None:
+            qdot = self._finish(J @ tau)
+            if not np.all(np.isfinite(qdot)):
+                return Command.refuse("non-finite command (numerical failure)", e)
         self._tau_prev[:] = tau
         self._q_prev[:] = q
         return Command(qdot, twist=tau, error=e, error_norm=error_norm, rank=rank,
-                       condition=cond, features_used=rows, notes=st.notes,
+                       condition=cond, features_used=rows, notes=notes,
                        active_constraints=active)
+
+    def _load_kernel(self, obs: Observation, q: np.ndarray) -> bool:
+        """Write the measured features and lengths into ``self._kernel`` when the
+        compiled core applies (every feature visible, CURRENT interaction).
+
+        Returns:
+            False to take the numpy path.
+        """
+        return False
 
     def _model_directions(self, q: np.ndarray) -> np.ndarray | None:
         """Leg directions (6, 3) in the camera frame predicted by the nominal model.
@@ -448,16 +507,31 @@ class VisionLaw(Controller):
         self._model_pose = (sol.rotation, sol.translation)
         return legs_in_frame(ctx.geometry, sol.rotation, sol.translation, pose).directions
 
-    def _solve(self, N: np.ndarray, b: np.ndarray, lam: float, q: np.ndarray, J: np.ndarray
-               ) -> tuple[np.ndarray, int, float, list[str], str | None]:
+    def _solve(self, N: np.ndarray, b: np.ndarray, lam: float, q: np.ndarray, J: np.ndarray,
+               pre: LawResult | None) -> tuple[np.ndarray, int, float, list[str], str | None,
+                                               np.ndarray | None]:
         """The classical law: ``tau = -lambda L^+ e`` from ``N = L^T L`` and ``b = L^T e``.
 
+        Args:
+            N: (6, 6) ``L^T L``.
+            b: (6,) ``L^T e``.
+            lam: Gain [1/s].
+            q: (6,) measured lengths [m].
+            J: (6, 6) inverse Jacobian (``self._J`` on the numpy path).
+            pre: The compiled core's result (classical solution, rank, condition,
+                ``q_dot``), or None on the numpy path.
+
         Returns:
-            ``tau`` (6,), rank, condition, active constraints, refusal reason (or None).
+            ``tau`` (6,), rank, condition, active constraints, refusal reason (or None),
+            and the final ``q_dot`` (6,) when already computed and checked finite (None:
+            ``_finish(J tau)`` is computed and checked by the caller).
         """
+        if pre is not None:
+            qdot = self._finish(pre.qdot) if pre.qdot_finite else None
+            return pre.tau, pre.rank, pre.condition, [], None, qdot
         x, rank, cond = solve_normal(N, b, self.threshold, self.damping)
         x *= -lam
-        return x, rank, cond, [], None
+        return x, rank, cond, [], None, None
 
     def _finish(self, qdot: np.ndarray) -> np.ndarray:
         """Last touch on the leg velocities (identity; the QP laws clip to their bounds)."""

@@ -13,6 +13,7 @@ import numpy as np
 from controllers.base import ControllerContext, Observation
 from controllers.exceptions import ContextError
 from controllers.interaction import cross, direction_task
+from controllers.law_kernel import direction_kernel
 from controllers.laws import Stack, VisionLaw
 from hexapod.se3 import skew
 
@@ -26,6 +27,8 @@ class LegDirectionController(VisionLaw):
         interaction: ``"current"``, ``"desired"`` or ``"mean"``.
         threshold: Relative singular-value threshold (rank test).
         damping: Pseudo-inverse damping.
+        compiled: Use the compiled core (:mod:`controllers.law_kernel`) when every
+            direction is visible with the CURRENT interaction (same result, faster).
     """
 
     name = "leg-direction"
@@ -34,8 +37,9 @@ class LegDirectionController(VisionLaw):
 
     def __init__(self, gain: float = 1.0, adaptive_gain: Sequence[float] | None = None,
                  interaction: str = "current", threshold: float = 1e-6,
-                 damping: float = 0.0) -> None:
+                 damping: float = 0.0, compiled: bool = True) -> None:
         super().__init__(gain, adaptive_gain, interaction, threshold, damping)
+        self.compiled = bool(compiled)
         self._u_star = np.zeros((6, 3))
         self._goal_visible = np.ones(6, dtype=bool)
 
@@ -59,6 +63,21 @@ class LegDirectionController(VisionLaw):
         self._goal_visible = vis
         # Fill value for hidden directions: the desired ones (keeps the arithmetic finite).
         self._fill = np.where(vis[:, None], us, np.array([0.0, 0.0, 1.0]))
+        if self.compiled and self.interaction == "current" and vis.all():
+            kernel = direction_kernel()
+            kernel.set("desired", us)
+            kernel.set("base_points", self._A)
+            self._kernel = kernel
+            self._k_features = kernel.inputs["features"].reshape(6, 3)
+            self._k_lengths = kernel.inputs["lengths"]
+
+    def _load_kernel(self, obs: Observation, q: np.ndarray) -> bool:
+        vis = obs.direction_visible
+        if not (vis.all() if type(vis) is np.ndarray else np.all(np.asarray(vis, dtype=bool))):
+            return False
+        self._k_features[...] = obs.directions
+        self._k_lengths[...] = q
+        return True
 
     def _stack(self, obs: Observation, q: np.ndarray) -> Stack | str:
         u_obs = np.asarray(obs.directions, dtype=float)

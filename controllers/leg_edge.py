@@ -20,7 +20,6 @@ from typing import Any
 import numpy as np
 
 from controllers.base import ControllerContext, Observation
-from controllers.edge_kernel import N_IN, edge_kernel, pack
 from controllers.exceptions import ContextError
 from controllers.interaction import (
     cross,
@@ -29,6 +28,7 @@ from controllers.interaction import (
     edge_normal_factors,
     edge_normal_task,
 )
+from controllers.law_kernel import edge_law_kernel
 from controllers.laws import Stack, VisionLaw, check_choice
 
 #: Values of the ``edge_feature`` option.
@@ -50,7 +50,7 @@ class LegEdgeController(VisionLaw):
         damping: Pseudo-inverse damping.
         edge_feature: ``"auto"`` (lines for a perspective camera, normals for a
             unified one), ``"lines"`` or ``"normals"`` (force the normals).
-        compiled: Use the compiled kernel (:mod:`controllers.edge_kernel`) when every
+        compiled: Use the compiled core (:mod:`controllers.law_kernel`) when every
             edge is visible with the CURRENT interaction (same result, faster).
     """
 
@@ -63,7 +63,6 @@ class LegEdgeController(VisionLaw):
                  edge_feature: str = "auto", compiled: bool = True) -> None:
         super().__init__(gain, adaptive_gain, interaction, threshold, damping)
         self.compiled = bool(compiled)
-        self._x = np.empty(N_IN)
         self.edge_feature = check_choice(self.name, "edge_feature", edge_feature, EDGE_FEATURES)
         if edge_feature == "lines":
             self.features = frozenset({"lengths", "lines"})
@@ -147,8 +146,15 @@ class LegEdgeController(VisionLaw):
         if self.use_lines:
             self._l_fill = _unit(fill @ self._K_inv_t.T)
         self._A2 = np.repeat(self._A, 2, axis=0)
-        if self.compiled:
-            self._kernel = edge_kernel(self.use_lines)
+        if self.compiled and self.interaction == "current" and vis.all():
+            kernel = edge_law_kernel(self.use_lines)
+            kernel.set("desired", self._l_star if self.use_lines else self._n_star)
+            kernel.set("K", self._K)
+            kernel.set("K_inv", self._K_inv_t.T)
+            kernel.set("base_points", self._A)
+            self._kernel = kernel
+            self._k_features = kernel.inputs["features"].reshape(6, 2, 3)
+            self._k_lengths = kernel.inputs["lengths"]
         self._desired_L: np.ndarray | None = None
         if self.interaction != "current" and self._q_star is not None:
             self._desired_L = self._desired_interaction(self._q_star)
@@ -175,8 +181,6 @@ class LegEdgeController(VisionLaw):
         vis = np.asarray(obs.edge_visible, dtype=bool) & self._goal_visible
         all_visible = bool(vis.all())
         notes: list[str] = []
-        if all_visible and self.interaction == "current" and self.compiled:
-            return self._stack_compiled(obs, q)
         if self.use_lines:
             feat = np.asarray(obs.lines, dtype=float)
             if not all_visible:
@@ -233,19 +237,13 @@ class LegEdgeController(VisionLaw):
                 L = 0.5 * (L + a[:, :, None] * g[:, None, :])
         return Stack(e, L, used, notes)
 
-    def _stack_compiled(self, obs: Observation, q: np.ndarray) -> Stack:
-        """All edges visible, CURRENT interaction: one call of the compiled kernel."""
-        feat = obs.lines if self.use_lines else obs.normals
-        star = self._l_star if self.use_lines else self._n_star
-        x = pack(np.asarray(feat, dtype=float), star, self._K, self._K_inv_t.T, self._A, q,
-                 self._x)
-        y = self._kernel.single(x)
-        u = y[78:96].reshape(6, 3)
-        self._directions[:] = u
-        self._observed[:] = True
-        self._u_now = u
-        return Stack(y[0:36].reshape(12, 3), None, None, [], N=y[36:72].reshape(6, 6),
-                     b=y[72:78])
+    def _load_kernel(self, obs: Observation, q: np.ndarray) -> bool:
+        vis = obs.edge_visible
+        if not (vis.all() if type(vis) is np.ndarray else np.all(np.asarray(vis, dtype=bool))):
+            return False
+        self._k_features[...] = obs.lines if self.use_lines else obs.normals
+        self._k_lengths[...] = q
+        return True
 
     def _current_factors(self, feat: np.ndarray, n: np.ndarray, u: np.ndarray,
                          q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

@@ -25,7 +25,8 @@ import scipy.sparse as sp
 
 from controllers.base import ControllerContext
 from controllers.exceptions import OptionError
-from controllers.laws import VisionLaw, check_number
+from controllers.law_kernel import LawResult
+from controllers.laws import VisionLaw, check_number, solve_normal_damped
 from controllers.leg_direction import LegDirectionController
 from controllers.leg_edge import LegEdgeController
 
@@ -37,6 +38,10 @@ _TRI_COLS = np.array([j for j in range(6) for _ in range(j + 1)])
 _TRI_PTR = np.concatenate([[0], np.cumsum(np.arange(1, 7))])
 _FULL_ROWS = np.tile(np.arange(6), 6)
 _FULL_PTR = np.arange(0, 37, 6)
+#: Default OSQP settings of the QP laws: ``(eps_abs, eps_rel, max_iter)``.
+_OSQP_DEFAULTS = (1e-6, 1e-6, 4000)
+#: What :class:`LimitQP` uses of OSQP's compiled solver object (else the public API).
+_EXT_API = ("update_data_vec", "update_data_mat", "solve", "info", "solution")
 
 
 class LimitQP:
@@ -60,15 +65,42 @@ class LimitQP:
                          "eps_abs": eps_abs, "eps_rel": eps_rel, "max_iter": max_iter,
                          "check_termination": 10}
         self._solver: Any = None
+        self._ext: Any = None
         self._P = np.zeros((6, 6))
         self._eye_eps = regularization * np.eye(6)
 
     def reset(self) -> None:
-        """Forget the previous problem (the next solve sets OSQP up again)."""
+        """Forget the previous problem and set OSQP up again, on placeholder values.
+
+        The sparsity (upper triangle of ``P``, dense ``A``) is all a setup fixes;
+        every :meth:`solve` then only updates the values (``P``, ``A``, ``q``, ``l``,
+        ``u``) and warm-starts, and a step that needs no QP (see
+        :meth:`QPLaw._solve`) costs nothing here.
+        """
         self._solver = None
+        try:
+            self._setup(np.eye(6)[_TRI_ROWS, _TRI_COLS], np.zeros(6), np.eye(6).reshape(-1),
+                        -np.ones(6), np.ones(6))
+        except (ValueError, RuntimeError, osqp.OSQPException) as exc:  # set up again later
+            log.warning("OSQP setup failed: %s", exc)
+            self._solver = None
+
+    def _setup(self, Px: np.ndarray, c: np.ndarray, Ax: np.ndarray, lower: np.ndarray,
+               upper: np.ndarray) -> None:
+        solver = osqp.OSQP()
+        solver.setup(sp.csc_matrix((Px, _TRI_ROWS, _TRI_PTR), shape=(6, 6)), c,
+                     sp.csc_matrix((Ax.copy(), _FULL_ROWS, _FULL_PTR), shape=(6, 6)),
+                     lower, upper, **self.settings)
+        self._solver = solver
+        # The compiled solver object under the Python wrapper, when it has the expected
+        # methods: updating and solving through it skips the wrapper's bookkeeping
+        # (kept for derivatives, unused here), about 15 us per solve.
+        ext = getattr(solver, "_solver", None)
+        self._ext = ext if all(hasattr(ext, a) for a in _EXT_API) else None
 
     def solve(self, N: np.ndarray, b: np.ndarray, lam: float, J: np.ndarray,
-              lower: np.ndarray, upper: np.ndarray) -> tuple[np.ndarray | None, str]:
+              lower: np.ndarray, upper: np.ndarray, unconstrained: np.ndarray | None = None
+              ) -> tuple[np.ndarray | None, str]:
         """Solve for ``tau``.
 
         Args:
@@ -78,6 +110,8 @@ class LimitQP:
             J: (6, 6) inverse Jacobian.
             lower: (6,) lower bounds on ``J tau`` [m/s].
             upper: (6,) upper bounds on ``J tau`` [m/s].
+            unconstrained: The unconstrained optimum ``-lambda (N + eps I)^-1 b`` if
+                known (used when OSQP finds no active constraint).
 
         Returns:
             ``tau`` (None on failure) and the OSQP status (or the failure reason).
@@ -85,58 +119,70 @@ class LimitQP:
         P = N + self._eye_eps
         P *= 2.0
         c = (2.0 * lam) * b
-        if not (np.all(np.isfinite(P)) and np.all(np.isfinite(c)) and np.all(np.isfinite(J))
+        # A finite sum means finite entries (inf or NaN anywhere makes it non-finite);
+        # the exact test runs only when the sum is not finite.
+        if not math.isfinite(P.sum() + c.sum() + J.sum() + lower.sum() + upper.sum()) and not (
+                np.all(np.isfinite(P)) and np.all(np.isfinite(c)) and np.all(np.isfinite(J))
                 and np.all(np.isfinite(lower)) and np.all(np.isfinite(upper))):
             return None, "non-finite QP data"
-        if np.any(lower > upper):
+        if (lower > upper).any():
             return None, "empty stroke window (lower bound above upper bound)"
         Px = P[_TRI_ROWS, _TRI_COLS]
         Ax = J.T.reshape(-1)
         try:
             if self._solver is None:
-                solver = osqp.OSQP()
-                solver.setup(sp.csc_matrix((Px, _TRI_ROWS, _TRI_PTR), shape=(6, 6)), c,
-                             sp.csc_matrix((Ax.copy(), _FULL_ROWS, _FULL_PTR), shape=(6, 6)),
-                             lower, upper, **self.settings)
-                self._solver = solver
+                self._setup(Px, c, Ax, lower, upper)
+                ext = self._ext
             else:
-                self._solver.update(q=c, l=lower, u=upper, Px=Px, Ax=Ax)
-            res = self._solver.solve(raise_error=False)
+                ext = self._ext
+                if ext is None:
+                    self._solver.update(q=c, l=lower, u=upper, Px=Px, Ax=Ax)
+                else:
+                    ext.update_data_vec(q=c, l=lower, u=upper)
+                    ext.update_data_mat(P_x=Px, P_i=None, A_x=Ax, A_i=None)
+            if ext is None:
+                res = self._solver.solve(raise_error=False)
+                info, sol = res.info, res
+            else:
+                ext.solve()
+                info, sol = ext.info, ext.solution
         except (ValueError, RuntimeError, osqp.OSQPException) as exc:
             self._solver = None
             return None, f"OSQP error: {exc}"
-        status = res.info.status_val
+        status = info.status_val
         if status not in (osqp.SolverStatus.OSQP_SOLVED, osqp.SolverStatus.OSQP_SOLVED_INACCURATE):
             self._solver = None  # do not warm-start from a failed solve
-            return None, f"QP not solved: OSQP status '{res.info.status}'"
-        x = np.asarray(res.x, dtype=float)
-        if x.shape != (6,) or not np.all(np.isfinite(x)):
+            return None, f"QP not solved: OSQP status '{info.status}'"
+        x = np.array(sol.x, dtype=float)
+        if x.shape != (6,) or not math.isfinite(x.sum()):
             self._solver = None
-            return None, f"QP returned a non-finite solution (status '{res.info.status}')"
-        return self._refine(P, c, J, lower, upper, x, np.asarray(res.y, dtype=float)), \
-            str(res.info.status)
+            return None, f"QP returned a non-finite solution (status '{info.status}')"
+        return self._refine(P, c, J, lower, upper, x, np.array(sol.y, dtype=float),
+                            unconstrained), str(info.status)
 
     def _refine(self, P: np.ndarray, c: np.ndarray, J: np.ndarray, lower: np.ndarray,
-                upper: np.ndarray, x: np.ndarray, y: np.ndarray) -> np.ndarray:
+                upper: np.ndarray, x: np.ndarray, y: np.ndarray,
+                unconstrained: np.ndarray | None = None) -> np.ndarray:
         """Solve the KKT system of the active set OSQP found (what OSQP's polishing does).
 
         ADMM stops at a tolerance; with the active set fixed, the equality-constrained
         problem is solved exactly (6 + k unknowns). Without active constraints this is
-        the classical ``-P^-1 c``. The refined point is kept only if it is feasible
-        and its multipliers have the right signs; otherwise OSQP's point is returned.
-        (OSQP's own polisher prints to stdout even with ``verbose=False``.)
+        the classical ``-P^-1 c`` (``unconstrained`` when the caller has it). The
+        refined point is kept only if it is feasible and its multipliers have the
+        right signs; otherwise OSQP's point is returned. (OSQP's own polisher prints
+        to stdout even with ``verbose=False``.)
         """
         Jx = J @ x
         tol = self.active_tolerance
         at_up = (Jx >= upper - tol) & (y > 0)
         at_lo = (Jx <= lower + tol) & (y < 0)
         act = at_up | at_lo
-        k = int(np.count_nonzero(act))
         try:
-            if k == 0:
-                xr = np.linalg.solve(P, -c)
-                nu = np.zeros(0)
+            if not act.any():
+                xr = np.linalg.solve(P, -c) if unconstrained is None else unconstrained
+                signs_ok = True
             else:
+                k = int(np.count_nonzero(act))
                 Ja = J[act]
                 K = np.zeros((6 + k, 6 + k))
                 K[:6, :6] = P
@@ -145,14 +191,15 @@ class LimitQP:
                 rhs = np.concatenate([-c, np.where(at_up, upper, lower)[act]])
                 sol = np.linalg.solve(K, rhs)
                 xr, nu = sol[:6], sol[6:]
+                # Multipliers: >= 0 on upper bounds, <= 0 on lower bounds (OSQP's convention).
+                signs_ok = bool(np.all(nu[at_up[act]] >= -1e-12)
+                                and np.all(nu[at_lo[act]] <= 1e-12))
         except np.linalg.LinAlgError:
             return x
         Jr = J @ xr
         slack = 1e-9 * (1.0 + np.abs(upper - lower))
-        feasible = bool(np.all(Jr <= upper + slack) and np.all(Jr >= lower - slack))
-        # Multipliers: >= 0 on upper bounds, <= 0 on lower bounds (OSQP's convention).
-        signs_ok = bool(np.all(nu[at_up[act]] >= -1e-12) and np.all(nu[at_lo[act]] <= 1e-12))
-        if feasible and signs_ok and np.all(np.isfinite(xr)):
+        feasible = bool((Jr - slack <= upper).all() and (Jr + slack >= lower).all())
+        if feasible and signs_ok and math.isfinite(xr.sum()):
             return xr
         return x
 
@@ -165,7 +212,10 @@ class QPLaw(VisionLaw):
 
     def _init_qp(self, regularization: float, stroke_margin: float | None,
                  max_speed: float | None, eps_abs: float, eps_rel: float,
-                 max_iter: int) -> None:
+                 max_iter: int, shortcut: bool | None = None) -> None:
+        if shortcut is None:  # auto: OSQP always runs when its settings were chosen
+            shortcut = (eps_abs, eps_rel, max_iter) == _OSQP_DEFAULTS
+        self.shortcut = bool(shortcut)
         reg = check_number(self.name, "regularization", regularization, 0.0, strict=False)
         self.stroke_margin = (None if stroke_margin is None else
                               check_number(self.name, "stroke_margin", stroke_margin, 0.0,
@@ -194,25 +244,46 @@ class QPLaw(VisionLaw):
         self._vmax = float(context.max_speed if self.max_speed is None else self.max_speed)
         self.qp.reset()
 
-    def _solve(self, N: np.ndarray, b: np.ndarray, lam: float, q: np.ndarray, J: np.ndarray
-               ) -> tuple[np.ndarray, int, float, list[str], str | None]:
-        w = np.linalg.eigvalsh(N)
-        w_max = float(w[-1])
-        rank = int(np.count_nonzero(w > (self.threshold ** 2) * w_max)) if w_max > 0 else 0
-        cond = math.sqrt(w_max / w[0]) if w[0] > 0 else math.inf
+    def _damping2(self) -> float:
+        """The compiled core solves ``(L^T L + eps I) tau = -lambda L^T e``: the
+        unconstrained optimum of the QP objective."""
+        return self.qp.regularization
+
+    def _solve(self, N: np.ndarray, b: np.ndarray, lam: float, q: np.ndarray, J: np.ndarray,
+               pre: LawResult | None) -> tuple[np.ndarray, int, float, list[str], str | None,
+                                               np.ndarray | None]:
+        """The QP, or its unconstrained optimum when that satisfies every bound.
+
+        The objective is strictly convex, so when the unconstrained minimiser
+        ``-lambda (L^T L + eps I)^-1 L^T e`` (the classical command for ``eps -> 0``)
+        satisfies every bound it is the QP optimum: it is returned, with the
+        diagnostics of a solve without active constraint, and OSQP is not called.
+        It must clear every bound by twice the tolerance under which the
+        diagnostics call a constraint active (``1e-6 q_dot_max``); otherwise OSQP
+        solves the QP (and its active set is refined exactly, :meth:`LimitQP._refine`).
+        """
+        if pre is not None:
+            rank, cond, tau, qdot = pre.rank, pre.condition, pre.tau, pre.qdot
+        else:
+            x, rank, cond = solve_normal_damped(N, b, self.threshold, self.qp.regularization)
+            tau = x * -lam
+            qdot = J @ tau
         if rank < 6:
-            return np.zeros(6), rank, cond, [], None
+            return np.zeros(6), rank, cond, [], None, None
         inv_dt = 1.0 / self._dt
         vmax = self._vmax
         stroke_lo = (self._q_lo - q) * inv_dt
         stroke_hi = (self._q_hi - q) * inv_dt
         lo = np.clip(stroke_lo, -vmax, vmax, out=self._lower)
         hi = np.clip(stroke_hi, -vmax, vmax, out=self._upper)
-        tau, status = self.qp.solve(N, b, lam, J, lo, hi)
-        if tau is None:
-            return np.zeros(6), rank, cond, [], status
-        qdot = J @ tau
         tol = 1e-6 * vmax
+        if self.shortcut and (qdot - lo).min() > 2.0 * tol and (hi - qdot).min() > 2.0 * tol:
+            return tau, rank, cond, [], None, qdot  # NaN fails the comparisons
+        solved, status = self.qp.solve(N, b, lam, J, lo, hi, tau)
+        if solved is None:
+            return np.zeros(6), rank, cond, [], status, None
+        tau = solved
+        qdot = J @ tau
         active: list[str] = []
         at_hi = np.flatnonzero(qdot >= hi - tol)
         at_lo = np.flatnonzero(qdot <= lo + tol)
@@ -222,7 +293,7 @@ class QPLaw(VisionLaw):
             active.append(f"leg {int(i)} {'lower stroke' if stroke_lo[i] > -vmax else 'speed'}")
         if status != "solved":
             active.append(f"OSQP status '{status}'")
-        return tau, rank, cond, active, None
+        return tau, rank, cond, active, None, None
 
     def _finish(self, qdot: np.ndarray) -> np.ndarray:
         """Clip the tolerance-sized violations of the bounds left by the solver."""
@@ -235,7 +306,9 @@ class LegEdgeQPController(QPLaw, LegEdgeController):
 
     Takes the options of :class:`~controllers.leg_edge.LegEdgeController` and the
     QP options ``regularization``, ``stroke_margin`` [m], ``max_speed`` [m/s],
-    ``eps_abs``, ``eps_rel``, ``max_iter``.
+    ``eps_abs``, ``eps_rel``, ``max_iter``, and ``shortcut`` (skip OSQP when the
+    unconstrained optimum satisfies every bound, see :meth:`QPLaw._solve`; default:
+    only with the default OSQP settings, so that chosen settings always take effect).
     """
 
     name = "leg-edge-qp"
@@ -244,12 +317,14 @@ class LegEdgeQPController(QPLaw, LegEdgeController):
                  interaction: str = "current", threshold: float = 1e-6, damping: float = 0.0,
                  edge_feature: str = "auto", regularization: float = 1e-12,
                  stroke_margin: float | None = None, max_speed: float | None = None,
-                 eps_abs: float = 1e-6, eps_rel: float = 1e-6, max_iter: int = 4000) -> None:
+                 eps_abs: float = 1e-6, eps_rel: float = 1e-6, max_iter: int = 4000,
+                 shortcut: bool | None = None, compiled: bool = True) -> None:
         LegEdgeController.__init__(self, gain, adaptive_gain, interaction, threshold, damping,
-                                   edge_feature)
+                                   edge_feature, compiled)
         if damping:
             raise OptionError(self.name, "damping", "use 'regularization' with the QP law")
-        self._init_qp(regularization, stroke_margin, max_speed, eps_abs, eps_rel, max_iter)
+        self._init_qp(regularization, stroke_margin, max_speed, eps_abs, eps_rel, max_iter,
+                      shortcut)
 
 
 class LegDirectionQPController(QPLaw, LegDirectionController):
@@ -257,7 +332,9 @@ class LegDirectionQPController(QPLaw, LegDirectionController):
 
     Takes the options of :class:`~controllers.leg_direction.LegDirectionController`
     and the QP options ``regularization``, ``stroke_margin`` [m], ``max_speed``
-    [m/s], ``eps_abs``, ``eps_rel``, ``max_iter``.
+    [m/s], ``eps_abs``, ``eps_rel``, ``max_iter``, and ``shortcut`` (skip OSQP when
+    the unconstrained optimum satisfies every bound, see :meth:`QPLaw._solve`;
+    default: only with the default OSQP settings).
     """
 
     name = "leg-direction-qp"
@@ -266,9 +343,10 @@ class LegDirectionQPController(QPLaw, LegDirectionController):
                  interaction: str = "current", threshold: float = 1e-6, damping: float = 0.0,
                  regularization: float = 1e-12, stroke_margin: float | None = None,
                  max_speed: float | None = None, eps_abs: float = 1e-6, eps_rel: float = 1e-6,
-                 max_iter: int = 4000) -> None:
+                 max_iter: int = 4000, shortcut: bool | None = None, compiled: bool = True) -> None:
         LegDirectionController.__init__(self, gain, adaptive_gain, interaction, threshold,
-                                        damping)
+                                        damping, compiled)
         if damping:
             raise OptionError(self.name, "damping", "use 'regularization' with the QP law")
-        self._init_qp(regularization, stroke_margin, max_speed, eps_abs, eps_rel, max_iter)
+        self._init_qp(regularization, stroke_margin, max_speed, eps_abs, eps_rel, max_iter,
+                      shortcut)

@@ -1,0 +1,340 @@
+"""The per-step numeric core of the vision laws, compiled to C (one call per step).
+
+A ``step`` of a vision law is a few hundred floating-point operations spread
+over some sixty numpy calls; on this scale the cost is the calls, not the
+arithmetic. The core of the common case (every feature visible, CURRENT
+interaction) is therefore written once as a CasADi SX expression, generated
+to C, compiled by the system C compiler and called through :mod:`ctypes` on
+preallocated buffers by :class:`hexapod.compiled.CompiledFunction` (the
+technique of :mod:`hexapod.fk`; the CasADi virtual machine evaluates the same
+expression when there is no compiler). One call, a few microseconds, computes:
+
+- the feature part (one per feature kind): the stacked error ``e`` and the
+  normal equations ``N = L^T L``, ``b = L^T e`` (``MATH.md`` section 6), and the
+  leg directions the inverse Jacobian needs;
+- the law part, shared by every feature kind (:func:`law_tail`): the adaptive
+  gain ``lambda(|e|_inf)``; the eigen-decomposition of the 6 x 6 ``N`` by a fixed
+  number of cyclic Jacobi sweeps (unrolled: exact to rounding for a symmetric
+  6 x 6 matrix), hence the rank (eigenvalues above ``threshold^2 w_max``), the
+  condition number ``sqrt(w_max / w_min)`` and the thresholded, damped
+  pseudo-inverse solution ``tau = -lambda sum_j (v_j^T b) / (w_j + d2) v_j`` of
+  :func:`controllers.laws.solve_normal`; the inverse Jacobian ``J_inv``
+  (``MATH.md`` section 3) and ``q_dot = J_inv tau``; and the finiteness checks
+  of :meth:`controllers.laws.VisionLaw.step` (error norm, sum of ``N``, a
+  ``q_dot`` check that is 0 exactly when every entry is finite).
+
+The other cases (hidden features, DESIRED / MEAN interaction) keep the numpy
+path of :mod:`controllers.laws`; both paths are tested equal
+(``tests/controllers/test_law_kernel.py``).
+
+Input: the feature block (see :data:`DIRECTION_INPUTS`, :data:`EDGE_INPUTS`),
+then the law parameters :data:`LAW_INPUTS`. Output: the feature error, then
+:data:`LAW_OUTPUTS`, then the leg directions (18).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+from functools import lru_cache
+
+import casadi as ca
+import numpy as np
+
+from hexapod.compiled import CompiledFunction
+
+#: Cyclic Jacobi sweeps of the 6 x 6 eigen-decomposition (quadratic convergence:
+#: 5 to 6 reach double precision on the matrices of the laws; 8 leave a margin).
+JACOBI_SWEEPS = 8
+
+#: Law parameters after the feature block: gain ``(lambda0, lambda_inf, lambda0')``,
+#: squared threshold, squared damping (or the QP regularization).
+LAW_INPUTS = (("gain", 3), ("threshold2", 1), ("damping2", 1))
+#: Direction-law feature block: measured ``u`` (6 x 3), desired ``u*``, ``A`` (6 x 3), ``q``.
+DIRECTION_INPUTS = (("features", 18), ("desired", 18), ("base_points", 18), ("lengths", 6))
+#: Edge-law feature block: features (12 x 3 lines or normals), desired, ``K``, ``K^-1``
+#: (row-major; identities for normals), ``A`` (6 x 3), ``q``.
+EDGE_INPUTS = (("features", 36), ("desired", 36), ("K", 9), ("K_inv", 9), ("base_points", 18),
+               ("lengths", 6))
+#: After the error: ``|e|``, sum of ``N``, rank, condition, gain, ``tau`` (6), ``q_dot`` (6),
+#: finiteness check of ``q_dot``, ``N`` (36, row-major), ``b`` (6), ``J_inv`` (36).
+LAW_OUTPUTS = (("error_norm", 1), ("n_sum", 1), ("rank", 1), ("condition", 1), ("gain", 1),
+               ("tau", 6), ("qdot", 6), ("qdot_check", 1), ("N", 36), ("b", 6), ("J", 36))
+
+
+def _offsets(fields: Sequence[tuple[str, int]], start: int = 0) -> dict[str, slice]:
+    out: dict[str, slice] = {}
+    k = start
+    for name, size in fields:
+        out[name] = slice(k, k + size)
+        k += size
+    return out
+
+
+# --------------------------------------------------------------------------- expressions
+def _unit(v: ca.SX) -> ca.SX:
+    return v / ca.sqrt(ca.dot(v, v))
+
+
+def _skew(v: ca.SX) -> ca.SX:
+    return ca.vertcat(ca.horzcat(0, -v[2], v[1]), ca.horzcat(v[2], 0, -v[0]),
+                      ca.horzcat(-v[1], v[0], 0))
+
+
+def jacobi_eigen(N: ca.SX, sweeps: int = JACOBI_SWEEPS) -> tuple[list[ca.SX], list[list[ca.SX]]]:
+    """Eigenvalues and eigenvectors of a symmetric 6 x 6 SX matrix (cyclic Jacobi, unrolled).
+
+    Each rotation zeroes ``a_pq`` (Golub and Van Loan, ``sym.schur2``); a rotation
+    whose ``a_pq`` is already zero is skipped without dividing by it.
+
+    Returns:
+        The eigenvalues ``w`` (6, unsorted) and ``V`` as rows ``V[k][j]`` (column
+        ``j`` is the eigenvector of ``w[j]``).
+    """
+    n = N.shape[0]
+    a = [[N[i, j] for j in range(n)] for i in range(n)]
+    V: list[list[ca.SX]] = [[ca.SX(1.0 if i == j else 0.0) for j in range(n)] for i in range(n)]
+    for _ in range(sweeps):
+        for p in range(n - 1):
+            for q in range(p + 1, n):
+                apq = a[p][q]
+                zero = apq == 0
+                theta = (a[q][q] - a[p][p]) / (2.0 * ca.if_else(zero, 1.0, apq))
+                t = ca.if_else(theta >= 0, 1.0, -1.0) / (ca.fabs(theta)
+                                                         + ca.sqrt(1.0 + theta * theta))
+                t = ca.if_else(zero, 0.0, t)
+                c = 1.0 / ca.sqrt(1.0 + t * t)
+                s = t * c
+                app = a[p][p] - t * apq
+                aqq = a[q][q] + t * apq
+                for k in range(n):
+                    if k in (p, q):
+                        continue
+                    akp, akq = a[k][p], a[k][q]
+                    a[k][p] = a[p][k] = c * akp - s * akq
+                    a[k][q] = a[q][k] = s * akp + c * akq
+                a[p][p], a[q][q] = app, aqq
+                a[p][q] = a[q][p] = ca.SX(0.0)
+                for k in range(n):
+                    vkp, vkq = V[k][p], V[k][q]
+                    V[k][p] = c * vkp - s * vkq
+                    V[k][q] = s * vkp + c * vkq
+    return [a[i][i] for i in range(n)], V
+
+
+def law_tail(e: ca.SX, N: ca.SX, b: ca.SX, directions: list[ca.SX], base_points: list[ca.SX],
+             params: ca.SX) -> list[ca.SX]:
+    """The law part shared by every feature kind (see the module docstring).
+
+    Args:
+        e: Stacked error (m, 1).
+        N: ``L^T L`` (6, 6).
+        b: ``L^T e`` (6, 1).
+        directions: Six (3, 1) leg directions for ``J_inv``.
+        base_points: Six (3, 1) ``A_i`` [m].
+        params: The :data:`LAW_INPUTS` (5, 1).
+
+    Returns:
+        The :data:`LAW_OUTPUTS`, in order.
+    """
+    l0, linf, slope, thr2, d2 = (params[k] for k in range(5))
+    # Gain (controllers.laws.Gain.__call__) at x = |e|_inf.
+    x = ca.mmax(ca.fabs(e))
+    d = l0 - linf
+    lam = ca.if_else(d == 0, l0, d * ca.exp(((-slope) * x) / ca.if_else(d == 0, 1.0, d)) + linf)
+    # Thresholded, damped pseudo-inverse from the eigen-decomposition (solve_normal).
+    w, V = jacobi_eigen(N)
+    w_max = w[0]
+    w_min = w[0]
+    for j in range(1, 6):
+        w_max = ca.fmax(w_max, w[j])
+        w_min = ca.fmin(w_min, w[j])
+    positive = w_max > 0
+    keep = [ca.logic_and(positive, w[j] > thr2 * w_max) for j in range(6)]
+    rank = ca.SX(0.0)
+    for kept in keep:
+        rank = rank + ca.if_else(kept, 1.0, 0.0)
+    cond = ca.if_else(ca.logic_and(positive, w_min > 0),
+                      ca.sqrt(w_max / ca.if_else(w_min > 0, w_min, 1.0)), ca.inf)
+    sol = [ca.SX(0.0) for _ in range(6)]
+    for j in range(6):
+        cj = ca.SX(0.0)
+        for k in range(6):
+            cj = cj + V[k][j] * b[k]
+        cj = ca.if_else(keep[j], cj / ca.if_else(keep[j], w[j] + d2, 1.0), 0.0)
+        for k in range(6):
+            sol[k] = sol[k] + V[k][j] * cj
+    tau = ca.vertcat(*sol) * (-lam)
+    # Inverse Jacobian rows [u_i^T, (A_i x u_i)^T] and q_dot = J_inv tau.
+    J = ca.vertcat(*[ca.horzcat(u.T, ca.cross(A, u).T)
+                     for u, A in zip(directions, base_points, strict=True)])
+    qdot = J @ tau
+    return [ca.sqrt(ca.dot(e, e)), ca.sum1(ca.reshape(N, 36, 1)), rank, cond, lam, tau, qdot,
+            ca.sum1(qdot - qdot), ca.reshape(N.T, 36, 1), b, ca.reshape(J.T, 36, 1)]
+
+
+def _direction_function() -> ca.Function:
+    """Leg-direction law: ``e_i = u_i x u_i*``, ``L_i = -[u_i*]_x M_i`` (``MATH.md`` §3, §6)."""
+    n_feat = sum(s for _, s in DIRECTION_INPUTS)
+    x = ca.SX.sym("x", n_feat + sum(s for _, s in LAW_INPUTS))
+    sl = _offsets(DIRECTION_INPUTS)
+    u = [x[sl["features"]][3 * i:3 * i + 3] for i in range(6)]
+    us = [x[sl["desired"]][3 * i:3 * i + 3] for i in range(6)]
+    A = [x[sl["base_points"]][3 * i:3 * i + 3] for i in range(6)]
+    q = [x[sl["lengths"]][i] for i in range(6)]
+    errors = []
+    N = ca.SX.zeros(6, 6)
+    b = ca.SX.zeros(6, 1)
+    for i in range(6):
+        ei = ca.cross(u[i], us[i])
+        P = ca.SX.eye(3) - u[i] @ u[i].T
+        C = -(_skew(us[i]) @ P) / q[i]
+        B = A[i] + q[i] * u[i]
+        L = ca.horzcat(C, -(C @ _skew(B)))
+        N += L.T @ L
+        b += L.T @ ei
+        errors.append(ei)
+    e = ca.vertcat(*errors)
+    tail = law_tail(e, N, b, u, A, x[n_feat:])
+    return ca.Function("hexapod_direction_law", [x], [ca.vertcat(e, *tail, *u)])
+
+
+def _edge_function(use_lines: bool) -> ca.Function:
+    """Leg-edge law on pixel lines or normals (rank-one blocks, ``controllers.interaction``)."""
+    n_feat = sum(s for _, s in EDGE_INPUTS)
+    x = ca.SX.sym("x", n_feat + sum(s for _, s in LAW_INPUTS))
+    sl = _offsets(EDGE_INPUTS)
+    feat = [x[sl["features"]][3 * k:3 * k + 3] for k in range(12)]
+    star = [x[sl["desired"]][3 * k:3 * k + 3] for k in range(12)]
+    Kt = ca.reshape(x[sl["K"]], 3, 3)  # column-major read of a row-major K: K^T
+    Kinv_t = ca.reshape(x[sl["K_inv"]], 3, 3)  # (K^-1)^T
+    A = [x[sl["base_points"]][3 * i:3 * i + 3] for i in range(6)]
+    q = [x[sl["lengths"]][i] for i in range(6)]
+    n = [_unit(Kt @ f) if use_lines else f for f in feat]
+    u = [_unit(ca.cross(n[2 * i + 1], n[2 * i])) for i in range(6)]
+    errors = [ca.cross(feat[k], star[k]) for k in range(12)]
+    N = ca.SX.zeros(6, 6)
+    b = ca.SX.zeros(6, 1)
+    for k in range(12):
+        i = k // 2
+        nk, ui, Ai, qi = n[k], u[i], A[i], q[i]
+        w = ca.cross(ui, nk)
+        z = ui - w * (ca.dot(Ai, ui) / ca.dot(Ai, w))
+        r = nk - ca.dot(nk, ui) * ui
+        B = Ai + qi * ui
+        g = ca.vertcat(r / qi, ca.cross(B, r) / qi)
+        if use_lines:
+            lk = feat[k]
+            y = Kinv_t @ z
+            y = y - lk * ca.dot(lk, y)
+            y = y * ca.sqrt(ca.dot(Kt @ lk, Kt @ lk))
+            a = ca.cross(star[k], y)
+        else:
+            a = ca.cross(star[k], z)
+        N += ca.dot(a, a) * (g @ g.T)
+        b += ca.dot(a, errors[k]) * g
+    e = ca.vertcat(*errors)
+    tail = law_tail(e, N, b, u, A, x[n_feat:])
+    name = "hexapod_edge_law_lines_v2" if use_lines else "hexapod_edge_law_normals_v2"
+    return ca.Function(name, [x], [ca.vertcat(e, *tail, *u)])
+
+
+# --------------------------------------------------------------------------- runtime
+@dataclass
+class LawResult:
+    """One evaluation of a law kernel (fresh arrays, safe to keep in a command).
+
+    Attributes:
+        error: (m,) stacked error.
+        error_norm: ``|e|``.
+        n_sum: Sum of the entries of ``N`` (finiteness check).
+        rank: Rank of ``L`` (eigenvalues of ``N`` above ``threshold^2 w_max``).
+        condition: ``sqrt(w_max / w_min)`` (inf when singular).
+        gain: ``lambda`` [1/s].
+        tau: (6,) classical twist ``-lambda L^+ e``.
+        qdot: (6,) ``J_inv tau`` [m/s].
+        qdot_finite: Every entry of ``qdot`` is finite.
+        N: (6, 6) ``L^T L``.
+        b: (6,) ``L^T e``.
+        J: (6, 6) inverse Jacobian.
+        directions: (6, 3) leg directions used by ``J``.
+    """
+
+    error: np.ndarray
+    error_norm: float
+    n_sum: float
+    rank: int
+    condition: float
+    gain: float
+    tau: np.ndarray
+    qdot: np.ndarray
+    qdot_finite: bool
+    N: np.ndarray
+    b: np.ndarray
+    J: np.ndarray
+    directions: np.ndarray
+
+
+class LawKernel:
+    """A compiled law core with a preallocated input vector.
+
+    Constant inputs (desired features, base points, gain, ...) are written once
+    with :meth:`set`; each step writes the measured features and lengths into
+    the views of :attr:`inputs` and calls :meth:`evaluate`.
+
+    Args:
+        function: The compiled core.
+        feature_inputs: The feature block layout.
+        n_error: Size of the stacked error.
+    """
+
+    def __init__(self, function: CompiledFunction, feature_inputs: Sequence[tuple[str, int]],
+                 n_error: int) -> None:
+        self.function = function
+        n_feat = sum(s for _, s in feature_inputs)
+        self._x = np.zeros(function.n_in)
+        self._slices = {**_offsets(feature_inputs), **_offsets(LAW_INPUTS, n_feat)}
+        #: Views of the input vector by name (write into them).
+        self.inputs = {k: self._x[s] for k, s in self._slices.items()}
+        self._out = _offsets((("error", n_error), *LAW_OUTPUTS, ("directions", 18)))
+
+    @property
+    def compiled(self) -> bool:
+        """True when the C code is used (False: CasADi virtual machine)."""
+        return self.function.compiled
+
+    def set(self, name: str, value: np.ndarray | float | Sequence[float]) -> None:
+        """Write an input (any shape with the right number of values)."""
+        self.inputs[name][:] = np.asarray(value, dtype=float).reshape(-1)
+
+    def evaluate(self) -> LawResult:
+        """One call of the core on the current inputs."""
+        y = self.function.single(self._x)
+        o = self._out
+        return LawResult(
+            error=y[o["error"]], error_norm=float(y[o["error_norm"].start]),
+            n_sum=float(y[o["n_sum"].start]), rank=int(y[o["rank"].start]),
+            condition=float(y[o["condition"].start]), gain=float(y[o["gain"].start]),
+            tau=y[o["tau"]], qdot=y[o["qdot"]], qdot_finite=y[o["qdot_check"].start] == 0.0,
+            N=y[o["N"]].reshape(6, 6), b=y[o["b"]], J=y[o["J"]].reshape(6, 6),
+            directions=y[o["directions"]].reshape(6, 3))
+
+
+@lru_cache(maxsize=1)
+def _direction_compiled() -> CompiledFunction:
+    return CompiledFunction(_direction_function())
+
+
+@lru_cache(maxsize=2)
+def _edge_compiled(use_lines: bool) -> CompiledFunction:
+    return CompiledFunction(_edge_function(use_lines))
+
+
+def direction_kernel() -> LawKernel:
+    """A kernel of the leg-direction law (its own input buffer; shared compiled code)."""
+    return LawKernel(_direction_compiled(), DIRECTION_INPUTS, 18)
+
+
+def edge_law_kernel(use_lines: bool) -> LawKernel:
+    """A kernel of the leg-edge law on pixel lines (True) or normals (False)."""
+    return LawKernel(_edge_compiled(use_lines), EDGE_INPUTS, 36)
