@@ -1,0 +1,172 @@
+"""The compiled law core gives the numpy path's commands; the QP shortcut gives OSQP's."""
+
+from __future__ import annotations
+
+from typing import Any
+
+import casadi as ca
+import numpy as np
+import pytest
+
+from controllers import registry
+from controllers.law_kernel import LawKernel, _direction_function, jacobi_eigen
+from controllers.laws import solve_normal_damped
+from controllers.qp import LimitQP
+from hexapod.compiled import CompiledFunction
+from tests.controllers.controller_world import World, make_camera
+
+LAWS = ["leg-direction", "leg-edge", "leg-direction-qp", "leg-edge-qp"]
+OPTIONS: list[dict[str, Any]] = [{}, {"adaptive_gain": (4.0, 0.5, 30.0)}, {"damping": 0.05}]
+
+
+@pytest.fixture(params=["perspective", "unified"])
+def world(request: pytest.FixtureRequest, other_geometry) -> World:  # type: ignore[no-untyped-def]
+    return World(other_geometry, make_camera(request.param, other_geometry))
+
+
+def _same(a: Any, b: Any, scale: float = 1.0) -> None:
+    assert a.ok and b.ok, (a.reason, b.reason)
+    np.testing.assert_allclose(a.velocities, b.velocities, rtol=1e-9, atol=1e-12 * scale)
+    np.testing.assert_allclose(a.twist, b.twist, rtol=1e-9, atol=1e-12 * scale)
+    np.testing.assert_allclose(a.error, b.error, rtol=1e-12, atol=1e-15)
+    assert a.error_norm == pytest.approx(b.error_norm, rel=1e-12)
+    assert a.rank == b.rank == 6
+    np.testing.assert_allclose(a.condition, b.condition, rtol=1e-8)
+    assert a.features_used == b.features_used
+    assert a.active_constraints == b.active_constraints
+    assert a.notes == b.notes
+
+
+@pytest.mark.parametrize(("name", "options"), [(n, o) for n in LAWS for o in OPTIONS
+                                               if not ("qp" in n and "damping" in o)])
+def test_compiled_core_equals_numpy(world: World, name: str, options: dict[str, Any],
+                                    rng: np.random.Generator) -> None:
+    Rs, ts = world.poses(8, rng, max_translation=0.02, max_angle=np.deg2rad(4), margin=0.03)
+    ctx = world.context(world.goal(Rs[0], ts[0]), 0.02)
+    fast = registry.create(name, compiled=True, **options)
+    slow = registry.create(name, compiled=False, **options)
+    fast.reset(ctx)
+    slow.reset(ctx)
+    assert fast._kernel is not None and slow._kernel is None  # type: ignore[attr-defined]
+    for R, t in zip(Rs[1:], ts[1:], strict=True):
+        obs = world.observation(R, t)
+        _same(fast.step(obs), slow.step(obs))
+        np.testing.assert_allclose(fast._directions, slow._directions,  # type: ignore[attr-defined]
+                                   rtol=0, atol=1e-14)
+
+
+@pytest.mark.parametrize("name", LAWS)
+def test_hidden_features_and_other_interactions_take_the_numpy_path(world: World,
+                                                                    name: str) -> None:
+    Rs, ts = world.poses(2, np.random.default_rng(5), margin=0.03)
+    ctx = world.context(world.goal(Rs[0], ts[0]), 0.02)
+    law = registry.create(name, interaction="mean")
+    law.reset(ctx)
+    assert law._kernel is None  # type: ignore[attr-defined]
+    law = registry.create(name)
+    law.reset(ctx)
+    calls = []
+    kernel = law._kernel  # type: ignore[attr-defined]
+    real = kernel.evaluate
+    kernel.evaluate = lambda: calls.append(1) or real()
+    obs = world.observation(Rs[1], ts[1])
+    assert law.step(obs).ok and len(calls) == 1
+    obs.edge_visible = np.ones((6, 2), dtype=bool)
+    obs.edge_visible[2, 0] = False
+    obs.direction_visible = np.ones(6, dtype=bool)
+    obs.direction_visible[2] = False
+    cmd = law.step(obs)
+    assert cmd.ok and len(calls) == 1
+    assert any(n.startswith("using") for n in cmd.notes)
+
+
+def test_jacobi_eigen_solve_equals_lapack(rng: np.random.Generator) -> None:
+    """Rank, condition and thresholded solution of the core = solve_normal_damped's."""
+    Ns = ca.SX.sym("N", 6, 6)
+    w, V = jacobi_eigen(Ns)
+    f = ca.Function("eig", [Ns], [ca.vertcat(*w), ca.vertcat(*[ca.horzcat(*r) for r in V])])
+    for trial in range(200):
+        L = rng.normal(size=(36, 6)) * np.logspace(0, rng.uniform(0, 5), 6)
+        if trial % 4 == 0:  # rank 5
+            L[:, 5] = 2.0 * L[:, 4]
+        N = L.T @ L
+        b = L.T @ rng.normal(size=36)
+        wj, Vj = (np.asarray(v, dtype=float) for v in f(N))
+        wj = wj.ravel()
+        np.testing.assert_allclose(np.sort(wj), np.linalg.eigvalsh(N), rtol=0,
+                                   atol=1e-14 * np.abs(N).max())
+        np.testing.assert_allclose(Vj.T @ Vj, np.eye(6), atol=1e-13)
+        keep = wj > 1e-12 * wj.max()
+        x = Vj @ np.where(keep, (Vj.T @ b) / np.where(keep, wj, 1.0), 0.0)
+        xr, rank, _ = solve_normal_damped(N, b, 1e-6, 0.0)
+        assert rank == int(keep.sum()) == (5 if trial % 4 == 0 else 6)
+        # Both are backward stable: they agree to rounding times the condition number.
+        kept_cond = wj.max() / wj[keep].min()
+        np.testing.assert_allclose(x, xr, rtol=0, atol=1e-14 * kept_cond * np.abs(xr).max())
+
+
+def test_virtual_machine_fallback_equals_c(monkeypatch: pytest.MonkeyPatch,
+                                           rng: np.random.Generator) -> None:
+    """Without a C compiler the CasADi VM evaluates the same core."""
+    c_kernel = LawKernel(CompiledFunction(_direction_function()),
+                         [("features", 18), ("desired", 18), ("base_points", 18),
+                          ("lengths", 6)], 18)
+    monkeypatch.setenv("CC", "/nonexistent/cc")
+    vm_kernel = LawKernel(CompiledFunction(_direction_function()),
+                          [("features", 18), ("desired", 18), ("base_points", 18),
+                           ("lengths", 6)], 18)
+    assert c_kernel.compiled and not vm_kernel.compiled
+    u = rng.normal(size=(6, 3))
+    u /= np.linalg.norm(u, axis=1, keepdims=True)
+    us = u + 0.05 * rng.normal(size=(6, 3))
+    us /= np.linalg.norm(us, axis=1, keepdims=True)
+    for k in (c_kernel, vm_kernel):
+        k.set("features", u)
+        k.set("desired", us)
+        k.set("base_points", rng.normal(size=(6, 3)) if k is c_kernel else c_kernel.inputs[
+            "base_points"])
+        k.set("lengths", np.full(6, 0.3))
+        k.set("gain", (1.0, 1.0, 0.0))
+        k.set("threshold2", 1e-12)
+    a, b = c_kernel.evaluate(), vm_kernel.evaluate()
+    np.testing.assert_allclose(a.qdot, b.qdot, rtol=1e-12, atol=1e-15)
+    assert a.rank == b.rank and a.condition == pytest.approx(b.condition, rel=1e-12)
+
+
+@pytest.mark.parametrize("name", ["leg-direction-qp", "leg-edge-qp"])
+def test_qp_shortcut_equals_the_osqp_solution(world: World, name: str,
+                                              rng: np.random.Generator,
+                                              monkeypatch: pytest.MonkeyPatch) -> None:
+    """Away from the limits the unconstrained optimum is returned without calling OSQP,
+    and it is the command OSQP (with the active-set refinement) gives."""
+    Rs, ts = world.poses(8, rng, max_translation=0.02, max_angle=np.deg2rad(4), margin=0.03)
+    ctx = world.context(world.goal(Rs[0], ts[0]), 0.02)
+    short = registry.create(name, gain=0.5)
+    full = registry.create(name, gain=0.5, shortcut=False)
+    short.reset(ctx)
+    full.reset(ctx)
+    calls: list[str] = []
+    real = LimitQP.solve
+
+    def counting(self: LimitQP, *args: Any, **kwargs: Any) -> Any:
+        calls.append("short" if self is short.qp else "full")  # type: ignore[attr-defined]
+        return real(self, *args, **kwargs)
+
+    monkeypatch.setattr(LimitQP, "solve", counting)
+    for R, t in zip(Rs[1:], ts[1:], strict=True):
+        obs = world.observation(R, t)
+        a, b = short.step(obs), full.step(obs)
+        assert a.ok and b.ok and a.active_constraints == b.active_constraints == []
+        scale = np.abs(b.velocities).max()
+        np.testing.assert_allclose(a.velocities, b.velocities, rtol=0, atol=1e-9 * scale)
+        np.testing.assert_allclose(a.twist, b.twist, rtol=0, atol=1e-9 * np.abs(b.twist).max())
+        assert a.rank == b.rank and a.condition == pytest.approx(b.condition, rel=1e-9)
+        assert a.error_norm == b.error_norm
+    assert calls.count("full") == len(Rs) - 1 and "short" not in calls
+
+
+def test_qp_shortcut_off_with_chosen_osqp_settings() -> None:
+    assert registry.create("leg-edge-qp").shortcut  # type: ignore[attr-defined]
+    assert not registry.create("leg-edge-qp", max_iter=10).shortcut  # type: ignore[attr-defined]
+    assert registry.create("leg-edge-qp", max_iter=10,  # type: ignore[attr-defined]
+                           shortcut=True).shortcut
