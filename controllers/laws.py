@@ -47,6 +47,33 @@ _FAST_FIELDS = (("normals", (6, 2, 3), "edge_visible"), ("lines", (6, 2, 3), "ed
 INTERACTIONS = ("current", "desired", "mean")
 
 
+# --------------------------------------------------------------------------- observations
+def check_observation(obs: Observation, features: frozenset[str]) -> str | None:
+    """:func:`controllers.base.usable_observation_problem`, with a fast path.
+
+    The common case (float arrays of the right shapes, everything visible and
+    finite) is recognised with a few calls: a finite sum means finite entries. Any
+    other observation gets the full check and its reason.
+    """
+    try:
+        q = obs.lengths
+        if (type(q) is np.ndarray and q.shape == (6,) and math.isfinite(obs.t)
+                and math.isfinite(q.sum())):
+            for name, shape, mask in _FAST_FIELDS:
+                if name not in features:
+                    continue
+                arr = getattr(obs, name)
+                if not (type(arr) is np.ndarray and arr.shape == shape
+                        and arr.dtype == np.float64 and math.isfinite(arr.sum())
+                        and getattr(obs, mask).all()):
+                    break
+            else:
+                return None
+    except (TypeError, ValueError, AttributeError):
+        pass
+    return usable_observation_problem(obs, features)
+
+
 # --------------------------------------------------------------------------- options
 def check_number(controller: str, option: str, value: Any, minimum: float = 0.0,
                  strict: bool = True) -> float:
@@ -370,24 +397,7 @@ class VisionLaw(Controller):
 
     # ----------------------------------------------------------------- step
     def _check(self, obs: Observation) -> str | None:
-        # Fast path (the common case): right shapes, everything visible and finite.
-        try:
-            q = obs.lengths
-            if (type(q) is np.ndarray and q.shape == (6,) and math.isfinite(obs.t)
-                    and math.isfinite(q.sum())):
-                for name, shape, mask in _FAST_FIELDS:
-                    if name not in self.features:
-                        continue
-                    arr = getattr(obs, name)
-                    if not (type(arr) is np.ndarray and arr.shape == shape
-                            and arr.dtype == np.float64 and math.isfinite(arr.sum())
-                            and getattr(obs, mask).all()):
-                        break
-                else:
-                    return None
-        except (TypeError, ValueError, AttributeError):
-            pass
-        return usable_observation_problem(obs, self.features)
+        return check_observation(obs, self.features)
 
     def step(self, observation: Observation) -> Command:
         """One period: ``q_dot = J_inv (-lambda L^+ e)`` (never raises for bad measurements)."""
