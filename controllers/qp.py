@@ -17,8 +17,10 @@ from __future__ import annotations
 import logging
 import math
 from collections.abc import Sequence
+from functools import lru_cache
 from typing import Any
 
+import casadi as ca
 import numpy as np
 import osqp
 import scipy.sparse as sp
@@ -29,6 +31,7 @@ from controllers.law_kernel import LawResult
 from controllers.laws import VisionLaw, check_number, solve_normal_damped
 from controllers.leg_direction import LegDirectionController
 from controllers.leg_edge import LegEdgeController
+from hexapod.compiled import CompiledFunction
 
 log = logging.getLogger(__name__)
 
@@ -68,6 +71,7 @@ class LimitQP:
         self._ext: Any = None
         self._P = np.zeros((6, 6))
         self._eye_eps = regularization * np.eye(6)
+        self._refine_in = np.zeros(103)
 
     def reset(self) -> None:
         """Forget the previous problem and set OSQP up again, on placeholder values.
@@ -99,8 +103,7 @@ class LimitQP:
         self._ext = ext if all(hasattr(ext, a) for a in _EXT_API) else None
 
     def solve(self, N: np.ndarray, b: np.ndarray, lam: float, J: np.ndarray,
-              lower: np.ndarray, upper: np.ndarray, unconstrained: np.ndarray | None = None
-              ) -> tuple[np.ndarray | None, str]:
+              lower: np.ndarray, upper: np.ndarray) -> tuple[np.ndarray | None, str]:
         """Solve for ``tau``.
 
         Args:
@@ -110,8 +113,6 @@ class LimitQP:
             J: (6, 6) inverse Jacobian.
             lower: (6,) lower bounds on ``J tau`` [m/s].
             upper: (6,) upper bounds on ``J tau`` [m/s].
-            unconstrained: The unconstrained optimum ``-lambda (N + eps I)^-1 b`` if
-                known (used when OSQP finds no active constraint).
 
         Returns:
             ``tau`` (None on failure) and the OSQP status (or the failure reason).
@@ -157,51 +158,120 @@ class LimitQP:
         if x.shape != (6,) or not math.isfinite(x.sum()):
             self._solver = None
             return None, f"QP returned a non-finite solution (status '{info.status}')"
-        return self._refine(P, c, J, lower, upper, x, np.array(sol.y, dtype=float),
-                            unconstrained), str(info.status)
+        return self._refine(P, c, J, lower, upper, x, np.array(sol.y, dtype=float)), \
+            str(info.status)
 
     def _refine(self, P: np.ndarray, c: np.ndarray, J: np.ndarray, lower: np.ndarray,
-                upper: np.ndarray, x: np.ndarray, y: np.ndarray,
-                unconstrained: np.ndarray | None = None) -> np.ndarray:
+                upper: np.ndarray, x: np.ndarray, y: np.ndarray) -> np.ndarray:
         """Solve the KKT system of the active set OSQP found (what OSQP's polishing does).
 
         ADMM stops at a tolerance; with the active set fixed, the equality-constrained
-        problem is solved exactly (6 + k unknowns). Without active constraints this is
-        the classical ``-P^-1 c`` (``unconstrained`` when the caller has it). The
-        refined point is kept only if it is feasible and its multipliers have the
-        right signs; otherwise OSQP's point is returned. (OSQP's own polisher prints
-        to stdout even with ``verbose=False``.)
+        problem is solved exactly. Without active constraints this is the classical
+        ``-P^-1 c``. The refined point is kept only if it is feasible and its
+        multipliers have the right signs; otherwise OSQP's point is returned. (OSQP's
+        own polisher prints to stdout even with ``verbose=False``.) One call of the
+        compiled :func:`refine_kernel`.
         """
-        Jx = J @ x
-        tol = self.active_tolerance
-        at_up = (Jx >= upper - tol) & (y > 0)
-        at_lo = (Jx <= lower + tol) & (y < 0)
-        act = at_up | at_lo
-        try:
-            if not act.any():
-                xr = np.linalg.solve(P, -c) if unconstrained is None else unconstrained
-                signs_ok = True
-            else:
-                k = int(np.count_nonzero(act))
-                Ja = J[act]
-                K = np.zeros((6 + k, 6 + k))
-                K[:6, :6] = P
-                K[:6, 6:] = Ja.T
-                K[6:, :6] = Ja
-                rhs = np.concatenate([-c, np.where(at_up, upper, lower)[act]])
-                sol = np.linalg.solve(K, rhs)
-                xr, nu = sol[:6], sol[6:]
-                # Multipliers: >= 0 on upper bounds, <= 0 on lower bounds (OSQP's convention).
-                signs_ok = bool(np.all(nu[at_up[act]] >= -1e-12)
-                                and np.all(nu[at_lo[act]] <= 1e-12))
-        except np.linalg.LinAlgError:
-            return x
-        Jr = J @ xr
-        slack = 1e-9 * (1.0 + np.abs(upper - lower))
-        feasible = bool((Jr - slack <= upper).all() and (Jr + slack >= lower).all())
-        if feasible and signs_ok and math.isfinite(xr.sum()):
-            return xr
-        return x
+        buf = self._refine_in
+        buf[0:36] = P.reshape(36)
+        buf[36:42] = c
+        buf[42:78] = J.reshape(36)
+        buf[78:84] = lower
+        buf[84:90] = upper
+        buf[90:96] = x
+        buf[96:102] = y
+        buf[102] = self.active_tolerance
+        out = refine_kernel().single(buf)
+        return out[:6] if out[6] == 1.0 else x
+
+
+def _cholesky_solve(M: list[list[ca.SX]], rhs: list[ca.SX]) -> list[ca.SX]:
+    """``M^-1 rhs`` for a symmetric positive definite 6 x 6 ``M`` (unrolled Cholesky;
+    NaN when ``M`` is not positive definite)."""
+    n = len(rhs)
+    L: list[list[ca.SX]] = [[ca.SX(0.0)] * n for _ in range(n)]
+    for j in range(n):
+        d = M[j][j]
+        for k in range(j):
+            d = d - L[j][k] * L[j][k]
+        L[j][j] = ca.sqrt(d)
+        for i in range(j + 1, n):
+            v = M[i][j]
+            for k in range(j):
+                v = v - L[i][k] * L[j][k]
+            L[i][j] = v / L[j][j]
+    z: list[ca.SX] = []
+    for i in range(n):
+        v = rhs[i]
+        for k in range(i):
+            v = v - L[i][k] * z[k]
+        z.append(v / L[i][i])
+    sol: list[ca.SX] = [ca.SX(0.0)] * n
+    for i in reversed(range(n)):
+        v = z[i]
+        for k in range(i + 1, n):
+            v = v - L[k][i] * sol[k]
+        sol[i] = v / L[i][i]
+    return sol
+
+
+def _refine_function() -> ca.Function:
+    """:meth:`LimitQP._refine` as one expression.
+
+    Input (103): ``P`` (6 x 6), ``c``, ``J`` (6 x 6, row-major), lower, upper, OSQP's
+    ``x`` and ``y``, the active tolerance. Output (7): the refined ``x`` and 1 when it
+    is accepted (feasible, multipliers of the right signs, finite), else 0.
+
+    With the active rows ``a`` (mask ``m``), the KKT system ``P x + J_a^T nu = -c``,
+    ``J_a x = bound_a`` is solved by its Schur complement: ``S = J P^-1 J^T`` with the
+    inactive rows and columns replaced by the identity and their right-hand side by
+    zero (so their ``nu`` is 0), ``nu = S^-1 (-(bound + J P^-1 c))`` on the active
+    rows, ``x = -P^-1 (c + J^T nu)``.
+    """
+    v = ca.SX.sym("v", 103)
+    P = [[v[6 * i + j] for j in range(6)] for i in range(6)]
+    c = [v[36 + i] for i in range(6)]
+    J = [[v[42 + 6 * i + j] for j in range(6)] for i in range(6)]
+    lo = [v[78 + i] for i in range(6)]
+    hi = [v[84 + i] for i in range(6)]
+    x = [v[90 + i] for i in range(6)]
+    y = [v[96 + i] for i in range(6)]
+    tol = v[102]
+    Jx = [sum((J[i][k] * x[k] for k in range(1, 6)), J[i][0] * x[0]) for i in range(6)]
+    at_up = [ca.logic_and(Jx[i] >= hi[i] - tol, y[i] > 0) for i in range(6)]
+    at_lo = [ca.logic_and(Jx[i] <= lo[i] + tol, y[i] < 0) for i in range(6)]
+    m = [ca.if_else(ca.logic_or(at_up[i], at_lo[i]), 1.0, 0.0) for i in range(6)]
+    bound = [ca.if_else(at_up[i], hi[i], lo[i]) for i in range(6)]
+    # P^-1 J^T (columns) and P^-1 c.
+    PiJt = [_cholesky_solve(P, [J[i][k] for k in range(6)]) for i in range(6)]  # P^-1 J_i
+    Pic = _cholesky_solve(P, c)
+    S = [[ca.SX(0.0)] * 6 for _ in range(6)]
+    for i in range(6):
+        for j in range(6):
+            sij = sum((J[i][k] * PiJt[j][k] for k in range(1, 6)), J[i][0] * PiJt[j][0])
+            S[i][j] = m[i] * m[j] * sij + (1.0 - m[i] if i == j else 0.0)
+    JPic = [sum((J[i][k] * Pic[k] for k in range(1, 6)), J[i][0] * Pic[0]) for i in range(6)]
+    rhs = [-m[i] * (bound[i] + JPic[i]) for i in range(6)]
+    nu = _cholesky_solve(S, rhs)
+    xr = [-(Pic[k] + sum((PiJt[i][k] * nu[i] for i in range(1, 6)), PiJt[0][k] * nu[0]))
+          for k in range(6)]
+    ok = ca.SX(1.0)
+    for i in range(6):
+        Jr = sum((J[i][k] * xr[k] for k in range(1, 6)), J[i][0] * xr[0])
+        slack = 1e-9 * (1.0 + ca.fabs(hi[i] - lo[i]))
+        ok = ca.logic_and(ok, ca.logic_and(Jr - slack <= hi[i], Jr + slack >= lo[i]))
+        # Multipliers: >= 0 on upper bounds, <= 0 on lower bounds (OSQP's convention).
+        ok = ca.logic_and(ok, ca.logic_or(ca.logic_not(at_up[i]), nu[i] >= -1e-12))
+        ok = ca.logic_and(ok, ca.logic_or(ca.logic_not(at_lo[i]), nu[i] <= 1e-12))
+        ok = ca.logic_and(ok, xr[i] - xr[i] == 0)  # finite
+    out = ca.vertcat(*xr, ca.if_else(ok, 1.0, 0.0))
+    return ca.Function("hexapod_qp_refine", [v], [out])
+
+
+@lru_cache(maxsize=1)
+def refine_kernel() -> CompiledFunction:
+    """The compiled active-set refinement of :class:`LimitQP`."""
+    return CompiledFunction(_refine_function())
 
 
 class QPLaw(VisionLaw):
@@ -279,7 +349,7 @@ class QPLaw(VisionLaw):
         tol = 1e-6 * vmax
         if self.shortcut and (qdot - lo).min() > 2.0 * tol and (hi - qdot).min() > 2.0 * tol:
             return tau, rank, cond, [], None, qdot  # NaN fails the comparisons
-        solved, status = self.qp.solve(N, b, lam, J, lo, hi, tau)
+        solved, status = self.qp.solve(N, b, lam, J, lo, hi)
         if solved is None:
             return np.zeros(6), rank, cond, [], status, None
         tau = solved

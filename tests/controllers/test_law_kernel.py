@@ -196,3 +196,58 @@ def test_compiled_pose_servo_equals_numpy(world: World, rng: np.random.Generator
         assert a.error_norm == pytest.approx(b.error_norm, rel=1e-12)
         assert a.condition == pytest.approx(b.condition, rel=1e-9)
         assert a.notes == b.notes and a.rank == b.rank == 6
+
+
+def _numpy_refine(P: np.ndarray, c: np.ndarray, J: np.ndarray, lower: np.ndarray,
+                  upper: np.ndarray, x: np.ndarray, y: np.ndarray, tol: float) -> np.ndarray:
+    """The active-set refinement as written in numpy before it was compiled (reference)."""
+    Jx = J @ x
+    at_up = (Jx >= upper - tol) & (y > 0)
+    at_lo = (Jx <= lower + tol) & (y < 0)
+    act = at_up | at_lo
+    k = int(np.count_nonzero(act))
+    try:
+        if k == 0:
+            xr, nu = np.linalg.solve(P, -c), np.zeros(0)
+        else:
+            Ja = J[act]
+            K = np.zeros((6 + k, 6 + k))
+            K[:6, :6] = P
+            K[:6, 6:] = Ja.T
+            K[6:, :6] = Ja
+            sol = np.linalg.solve(K, np.concatenate([-c, np.where(at_up, upper, lower)[act]]))
+            xr, nu = sol[:6], sol[6:]
+    except np.linalg.LinAlgError:
+        return x
+    Jr = J @ xr
+    slack = 1e-9 * (1.0 + np.abs(upper - lower))
+    feasible = bool(np.all(Jr <= upper + slack) and np.all(Jr >= lower - slack))
+    signs_ok = bool(np.all(nu[at_up[act]] >= -1e-12) and np.all(nu[at_lo[act]] <= 1e-12))
+    return xr if feasible and signs_ok and np.all(np.isfinite(xr)) else x
+
+
+def test_compiled_refinement_equals_numpy(rng: np.random.Generator) -> None:
+    """Over OSQP solutions with 0 to 6 active bounds, the compiled KKT refinement
+    returns what the numpy one returns."""
+    qp = LimitQP()
+    n_active = set()
+    for _ in range(150):
+        L = rng.normal(size=(36, 6))
+        N = L.T @ L
+        b = L.T @ rng.normal(size=36)
+        J = rng.normal(size=(6, 6))
+        free = np.linalg.solve(N, -b)
+        Jf = J @ free
+        width = np.abs(Jf).max() * rng.uniform(0.2, 1.5)
+        lower, upper = -np.full(6, width), np.full(6, width)
+        tau, status = qp.solve(N, b, 1.0, J, lower, upper)
+        assert tau is not None, status
+        P = 2.0 * (N + qp.regularization * np.eye(6))
+        c = 2.0 * b
+        y = np.array(qp._solver.solution.y if qp._ext is None else qp._ext.solution.y)
+        x = np.array(qp._solver.solution.x if qp._ext is None else qp._ext.solution.x)
+        ref = _numpy_refine(P, c, J, lower, upper, x, y, qp.active_tolerance)
+        out = qp._refine(P, c, J, lower, upper, x, y)
+        np.testing.assert_allclose(out, ref, rtol=1e-9, atol=1e-12 * np.abs(ref).max())
+        n_active.add(int(np.count_nonzero(np.abs(J @ out) >= width - 1e-9)))
+    assert {0, 1, 2} <= n_active
