@@ -13,6 +13,15 @@ pseudo-inverse or QP, missing features, diagnostics) is written once, here, in
   ``q_dot = J_inv tau``, with the interaction matrix at the CURRENT, DESIRED or
   MEAN features, feature selection by visibility with a rank check, and
   dead-reckoning of the direction of hidden legs (needed by ``J_inv``).
+
+Speed: ``step`` is called millions of times by the benchmarks, and its cost is the
+number of numpy calls, not the arithmetic. In the common case (every feature
+visible, CURRENT interaction) a law hands the measured features to its compiled
+core (:mod:`controllers.law_kernel`, CasADi generated to C, one ctypes call of a
+few microseconds: error, ``L^T L``, ``L^T e``, gain, eigen-solve with rank and
+condition, ``J_inv``, ``q_dot``) and :meth:`VisionLaw._step_compiled` only wraps the
+result in a :class:`~controllers.base.Command`. Every other case runs the numpy
+path below, which is the reference the compiled core is tested against.
 """
 
 from __future__ import annotations

@@ -1,7 +1,9 @@
 """Leg-direction visual servoing (seeds 001 and 003): ``e_i = u_i x u_i*``.
 
 ``L_i = -[u_i*]_x M_i`` (``MATH.md`` section 6), stacked over the visible legs
-(18 x 6 with all six), ``tau = -lambda L^+ e``, ``q_dot = J_inv tau``.
+(18 x 6 with all six), ``tau = -lambda L^+ e``, ``q_dot = J_inv tau``. With every
+direction visible and the CURRENT interaction, one call of the compiled core
+(:func:`controllers.law_kernel.direction_kernel`) computes the step.
 """
 
 from __future__ import annotations

@@ -10,6 +10,9 @@ Features (``MATH.md`` section 6), two per leg, stacked over the visible edges
 
 The leg direction used by ``H``, ``M_i`` and ``J_inv`` is rebuilt from the two
 edges of the leg, ``u = (n2 x n1) / |n2 x n1|`` (``vision/legs.py`` convention).
+
+With every edge visible and the CURRENT interaction, one call of the compiled
+core (:func:`controllers.law_kernel.edge_law_kernel`) computes the step.
 """
 
 from __future__ import annotations

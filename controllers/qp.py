@@ -10,6 +10,19 @@ limit, so the problem stays feasible even when a leg starts inside the margin).
 Solved with OSQP (1.x API), warm-started from the previous step. Away from the
 limits (and with ``eps -> 0``) the solution is the classical ``-lambda L^+ e``; at
 a limit the platform slides along it instead of one leg being saturated.
+
+Speed (the cost of a step is its number of Python and numpy calls):
+
+- when the unconstrained optimum (from the compiled law core,
+  :mod:`controllers.law_kernel`, solved with ``eps`` as the damping) clears every
+  bound, it is the QP optimum and OSQP is not called (:meth:`QPLaw._solve`;
+  default OSQP settings only, so that chosen settings always take effect);
+- OSQP is set up once per :meth:`QPLaw.reset` and each solve only updates the
+  values of ``P``, ``A``, ``q``, ``l``, ``u``, through OSQP's compiled solver object
+  when it has the expected methods (the Python wrapper's bookkeeping, kept for
+  derivatives, costs some 15 microseconds per solve);
+- the exact active-set refinement after OSQP is one compiled call
+  (:func:`refine_kernel`), tested equal to the numpy KKT solve.
 """
 
 from __future__ import annotations
@@ -344,8 +357,9 @@ class QPLaw(VisionLaw):
         vmax = self._vmax
         stroke_lo = (self._q_lo - q) * inv_dt
         stroke_hi = (self._q_hi - q) * inv_dt
-        lo = np.clip(stroke_lo, -vmax, vmax, out=self._lower)
-        hi = np.clip(stroke_hi, -vmax, vmax, out=self._upper)
+        # np.clip, without its Python wrapper (a few microseconds each).
+        lo = np.minimum(np.maximum(stroke_lo, -vmax, out=self._lower), vmax, out=self._lower)
+        hi = np.minimum(np.maximum(stroke_hi, -vmax, out=self._upper), vmax, out=self._upper)
         tol = 1e-6 * vmax
         if self.shortcut and (qdot - lo).min() > 2.0 * tol and (hi - qdot).min() > 2.0 * tol:
             return tau, rank, cond, [], None, qdot  # NaN fails the comparisons
@@ -367,7 +381,7 @@ class QPLaw(VisionLaw):
 
     def _finish(self, qdot: np.ndarray) -> np.ndarray:
         """Clip the tolerance-sized violations of the bounds left by the solver."""
-        return np.clip(qdot, self._lower, self._upper)
+        return np.minimum(np.maximum(qdot, self._lower), self._upper)  # np.clip, faster
 
 
 
