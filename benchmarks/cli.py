@@ -390,12 +390,13 @@ def build_parser() -> argparse.ArgumentParser:
                         "instead of simulating the scenario's world")
     s.set_defaults(func=cmd_calibrate)
 
-    from benchmarks import servo_loop
+    from benchmarks import servo
 
     s = sub.add_parser("servo", help="run one controller on a robot (serial link or emulator) "
-                                     "with a camera, until convergence or Ctrl-C")
-    servo_loop.add_arguments(s)
-    s.set_defaults(func=servo_loop.run)
+                                     "with a camera, until convergence or Ctrl-C; --teach "
+                                     "records a goal")
+    servo.add_arguments(s)
+    s.set_defaults(func=servo.run)
 
     s = sub.add_parser("viz", help="replay a recorded trial (MeshCat, or --html FILE)")
     s.add_argument("dir", help="a run directory")
