@@ -172,6 +172,9 @@ class Scenario:
         camera_preset: ``"front"`` or ``"omni"`` (or None when ``camera_file`` is set).
         camera_file: Path to a camera TOML file.
         sensor: ``"geometric"`` or ``"image"``.
+        teach_frames: Measurements of the goal averaged into the desired features
+            (:func:`vision.estimate.average_normals`), as a user teaching the goal
+            averages a burst of frames.
         noise: Noise settings.
         calibration_error: Calibration error settings.
         calibration: Calibration procedure settings.
@@ -192,6 +195,7 @@ class Scenario:
     camera_preset: str | None = "front"
     camera_file: str | None = None
     sensor: str = "geometric"
+    teach_frames: int = 1
     image: ImageConfig = ImageConfig()
     noise: NoiseConfig = NoiseConfig()
     calibration_error: CalibrationErrorConfig = CalibrationErrorConfig()
@@ -432,8 +436,17 @@ def parse_scenario(table: dict[str, Any], path: str = "<dict>") -> Scenario:
         camera_preset = _typed(camera["preset"], str, path, "camera.preset", ("front", "omni"))
 
     sensor_t = dict(_section(table, "sensor", path))
+    sensor_keys = ("kind", "teach_frames", *(f.name for f in fields(ImageConfig)))
+    for key in sensor_t:
+        if key not in sensor_keys:
+            raise ScenarioError(path, f"unknown key; expected one of {', '.join(sensor_keys)}",
+                                key=f"sensor.{key}", suggestion=suggest(key, sensor_keys))
     sensor = _typed(sensor_t.pop("kind", "geometric"), str, path, "sensor.kind",
                     ("geometric", "image"))
+    teach_frames = _typed(sensor_t.pop("teach_frames", 1), int, path, "sensor.teach_frames")
+    if teach_frames < 1:
+        raise ScenarioError(path, f"must be >= 1 (frames of the goal averaged), got "
+                            f"{teach_frames}", key="sensor.teach_frames")
     image = _parse_dataclass(ImageConfig, sensor_t, path, "sensor", (),
                              {"background": ("plain", "cluttered")},
                              nonnegative=("blur_px", "noise_std"))
@@ -475,7 +488,8 @@ def parse_scenario(table: dict[str, Any], path: str = "<dict>") -> Scenario:
     return Scenario(
         name=name, description=description, seed=seed, trials=trials,
         controllers=tuple(specs), robot_preset=robot_preset, robot_geometry=robot_geometry,
-        dt=dt, camera_preset=camera_preset, camera_file=camera_file, sensor=sensor, image=image,
+        dt=dt, camera_preset=camera_preset, camera_file=camera_file, sensor=sensor,
+        teach_frames=teach_frames, image=image,
         noise=noise, calibration_error=cal_err, calibration=cal, task=task,
         reference=reference, sweep_axes=sweep, source=path,
     )

@@ -23,7 +23,8 @@ the robot, ``lengths_mm = [6 values]``; the desired features are then predicted
 from the nominal model at the forward kinematics of those lengths, seen by the
 (estimated) camera. ``features = "goal.npz"`` (written by ``--teach``) gives the
 features measured at the goal instead, which a real camera needs (the model's
-prediction carries the calibration errors).
+prediction carries the calibration errors); ``--teach`` averages them over a burst of
+``--teach-frames`` frames of the still robot.
 
 SI units inside (metres, seconds); millimetres at the user's edges (goal file,
 status line, log).
@@ -58,6 +59,8 @@ GOAL_KEYS = ("lengths_mm", "features", "name")
 DEFAULT_SETTLE = 5
 #: Default feature-error tolerance (norm of the stacked normal differences) [-].
 DEFAULT_FEATURE_TOLERANCE = 2e-3
+#: Default number of frames averaged by ``--teach`` (a burst of 0.2 s at 50 Hz).
+DEFAULT_TEACH_FRAMES = 10
 #: Plain status lines (stdout not a terminal) are printed every this many seconds.
 PLAIN_STATUS_PERIOD_S = 1.0
 #: Exit codes of :func:`run`.
@@ -102,6 +105,41 @@ class ServoGoal:
     features: Features | None
     source: str
     name: str = ""
+
+
+def average_features(frames: list[Features], max_deviation: float | None = None
+                     ) -> Features:
+    """The features of a burst of frames of a still scene, averaged (``--teach``).
+
+    Each edge normal is the renormalised sum of its sign-aligned unit normals over the
+    frames where the edge was found (:func:`vision.estimate.average_normals`); a frame
+    farther than ``max_deviation`` [rad] from the median of the frames does not count
+    for that edge, and an edge kept in fewer than half of the frames is reported
+    missing.
+
+    Raises:
+        BenchmarkError: No frame.
+    """
+    from vision.estimate import average_normals
+
+    if not frames:
+        raise BenchmarkError("no frame to average")
+    normals, visible = average_normals(np.array([f.normals for f in frames], float),
+                                       np.array([f.edge_visible for f in frames], bool),
+                                       max_deviation=max_deviation)
+    return Features(normals, visible)
+
+
+def teach_tolerance(sensor: Any) -> float | None:
+    """The largest deviation of a frame from the median of a taught burst [rad]: the
+    detector's inlier distance (``outlier_px``) seen from the camera
+    (:func:`vision.estimate.radians_per_pixel`); None if the sensor has no detector."""
+    from vision.estimate import radians_per_pixel
+
+    detector = getattr(getattr(sensor, "sensor", sensor), "detector", None)
+    if detector is None or not hasattr(detector, "outlier_px"):
+        return None
+    return float(detector.outlier_px) * radians_per_pixel(sensor_camera(sensor))
 
 
 def _load_features(path: Path, goal_file: str) -> Features:
@@ -763,6 +801,10 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--teach", action="store_true",
                    help="do not move: record the current lengths and image features as the "
                         "goal (writes --goal and its .features.npz)")
+    p.add_argument("--teach-frames", type=int, default=DEFAULT_TEACH_FRAMES, metavar="N",
+                   help=f"--teach: average the edge normals of N frames (default "
+                        f"{DEFAULT_TEACH_FRAMES}; the pixel noise of the taught features "
+                        f"drops as 1/sqrt(N))")
     p.add_argument("--camera-file", default="front",
                    help="camera model: a camera TOML file (intrinsics and camera_from_base) "
                         "or a preset (front, omni); default front")
@@ -826,6 +868,8 @@ def _check_args(args: argparse.Namespace) -> None:
         raise BenchmarkError("--tolerance-mm and --feature-tolerance must be positive")
     if args.settle < 1:
         raise BenchmarkError(f"--settle must be >= 1, got {args.settle}")
+    if args.teach_frames < 1:
+        raise BenchmarkError(f"--teach-frames must be >= 1, got {args.teach_frames}")
 
 
 @contextlib.contextmanager
@@ -860,20 +904,28 @@ def _teach(args: argparse.Namespace, geometry: HexapodGeometry, camera: Any,
         raise BenchmarkError(f"{path}: already exists; delete it or choose another --goal "
                              "(--teach never overwrites a goal)")
     sensor = open_camera(args.camera, camera, geometry, args.seed)
+    frames: list[Features] = []
     try:
         with open_backend(args.backend, geometry, start) as robot:
             q = np.asarray(robot.measured_lengths(), float)
         sol = forward_kinematics(geometry, q, check_stroke=False)
-        feats = sensor.measure(sol.rotation, sol.translation)
+        for _ in range(args.teach_frames):  # the robot does not move: a burst of frames
+            f = sensor.measure(sol.rotation, sol.translation)
+            if f is not None:
+                frames.append(f)
+            elif getattr(sensor, "ended", False):
+                break
     finally:
         sensor.close()
-    if feats is None:
+    if not frames:
         raise BenchmarkError(f"--teach: the camera {args.camera} gave no frame")
+    feats = average_features(frames, teach_tolerance(sensor))
     if feats.visible_count == 0:
-        raise BenchmarkError(f"--teach: no leg edge found in the image of {args.camera}")
+        raise BenchmarkError(f"--teach: no leg edge found in the images of {args.camera}")
     npz = save_goal(path, q, feats)
     status.message(f"taught {path} (lengths {np.round(q * 1e3, 3).tolist()} mm, "
-                   f"{feats.visible_count} of 12 edges) and {npz}")
+                   f"{feats.visible_count} of 12 edges, normals averaged over {len(frames)} "
+                   f"of {args.teach_frames} frames) and {npz}")
     return 0
 
 

@@ -241,6 +241,26 @@ class GeometricSensor:
         return {"normals": normals, "lines": lines, "directions": directions,
                 "edge_visible": visible, "direction_visible": both}
 
+    def measure_goal(self, rotation: np.ndarray, translation: np.ndarray,
+                     rng: np.random.Generator, frames: int = 1, apply_noise: bool = True
+                     ) -> dict[str, Any]:
+        """The desired features: ``frames`` measurements at one true pose, averaged.
+
+        Args:
+            rotation: (3, 3) true goal orientation (base frame).
+            translation: (3,) true goal position (base frame) [m].
+            rng: Generator of the noise of the goal measurements.
+            frames: Measurements averaged (:func:`vision.estimate.average_normals`).
+            apply_noise: Whether the scenario's noise applies (``[noise] on_goal``).
+
+        Returns:
+            The batched measurement dictionary of :meth:`measure`, batch of one.
+        """
+        R = np.repeat(np.asarray(rotation, float)[None], frames, axis=0)
+        t = np.repeat(np.asarray(translation, float)[None], frames, axis=0)
+        m = self.measure(R, t, [rng] * frames, apply_noise=apply_noise)
+        return _average_frames(m, self.est if self.perspective else None)
+
     def _pixel_noise(self, lo: Any, normals: np.ndarray, visible: np.ndarray,
                      rngs: list[np.random.Generator]) -> tuple[np.ndarray, np.ndarray]:
         from vision.pixel_measure import normals_from_noisy_pixels
@@ -272,6 +292,34 @@ def _take(lo: Any, k: int) -> Any:
     return dc_replace(lo, **changes)
 
 
+def _average_frames(m: dict[str, Any], perspective_camera: Any | None,
+                    max_deviation: float | None = None) -> dict[str, Any]:
+    """Average K measurements of one static pose (leading axis K) into a batch of one.
+
+    Normals: :func:`vision.estimate.average_normals` (frames farther than
+    ``max_deviation`` [rad] from the median do not count; an edge kept in fewer than
+    half of the frames is missing); lines: the averaged normals seen by the estimated
+    perspective camera (``perspective_camera``, None for a unified camera). One frame
+    is returned unchanged.
+    """
+    from vision.estimate import average_normals
+
+    if len(m["normals"]) == 1:
+        return m
+    normals, visible = average_normals(m["normals"], m["edge_visible"],
+                                       max_deviation=max_deviation)
+    lines = None
+    if perspective_camera is not None:
+        with np.errstate(invalid="ignore"):
+            lines = perspective_camera.normal_to_line(normals)[None]
+    both = np.asarray(visible.all(axis=-1))
+    with np.errstate(invalid="ignore"):
+        directions = directions_from_edges(normals)
+    return {"normals": normals[None], "lines": lines,
+            "directions": np.where(both[..., None], directions, np.nan)[None],
+            "edge_visible": visible[None], "direction_visible": both[None]}
+
+
 @dataclass
 class TrialResult:
     """Outcome of one trial (one row of ``results.jsonl``) and its time series."""
@@ -280,10 +328,26 @@ class TrialResult:
     series: dict[str, np.ndarray] | None = None
 
 
-def _goal(sensor: GeometricSensor | Any, setup: TrialSetup, sc: Scenario) -> Goal:
+def trial_goal(sensor: GeometricSensor | Any, setup: TrialSetup, sc: Scenario) -> Goal:
+    """What the controllers are told about the goal of a trial.
+
+    The desired features are taught by showing: the sensor measures the TRUE goal pose
+    ``sc.teach_frames`` times (with the scenario's noise when ``[noise] on_goal``; an
+    image sensor renders and detects each frame) and the normals are averaged
+    (:func:`vision.estimate.average_normals`). The pose and its nominal inverse
+    kinematics are for the model-based and joint-space baselines.
+
+    Args:
+        sensor: The trial's sensor (:func:`make_sensor`).
+        setup: The trial.
+        sc: The scenario (``teach_frames``, ``noise.on_goal``).
+
+    Returns:
+        The :class:`~controllers.base.Goal`.
+    """
     rng = trial_rng(sc.seed, setup.trial, 2)
-    m = sensor.measure(setup.goal_rotation[None], setup.goal_translation[None], [rng],
-                       apply_noise=sc.noise.on_goal)
+    m = sensor.measure_goal(setup.goal_rotation, setup.goal_translation, rng,
+                            frames=sc.teach_frames, apply_noise=sc.noise.on_goal)
     nominal_lengths = inverse_kinematics(setup.nominal_geometry, setup.goal_rotation,
                                          setup.goal_translation)
     return Goal(
@@ -297,7 +361,10 @@ def _goal(sensor: GeometricSensor | Any, setup: TrialSetup, sc: Scenario) -> Goa
     )
 
 
-def _make_sensor(sc: Scenario, setup: TrialSetup) -> Any:
+def make_sensor(sc: Scenario, setup: TrialSetup) -> Any:
+    """The sensor of a trial: a :class:`GeometricSensor`, or rendered images through
+    :class:`vision.image_sensor.ImageSensor` (``[sensor] kind = "image"``; pixel noise
+    from the trial's stream 4)."""
     if sc.sensor == "image":
         from vision.image_sensor import ImageSensor
 
@@ -310,12 +377,53 @@ def _make_sensor(sc: Scenario, setup: TrialSetup) -> Any:
 
 
 class _ImageSensorAdapter:
-    """Adapts :class:`vision.image_sensor.ImageSensor` to the batched sensor interface."""
+    """Adapts :class:`vision.image_sensor.ImageSensor` to the batched sensor interface.
+
+    During a run each trial's detector is seeded with that trial's last measurement
+    when every edge was found (tracking), keyed by the trial's sensor generator (alive
+    for the whole run). The goal frames are detected from the model's prediction and
+    never seed the tracking.
+    """
 
     def __init__(self, sensor: Any) -> None:
         self.sensor = sensor
         self.detect_times: list[float] = []
         self._previous: dict[int, np.ndarray] = {}  # last normals per trial (tracking)
+
+    def measure_goal(self, rotation: np.ndarray, translation: np.ndarray,
+                     rng: np.random.Generator, frames: int = 1, apply_noise: bool = True
+                     ) -> dict[str, Any]:
+        """``frames`` rendered images of the goal pose, each detected from the model's
+        prediction (wide search, then refine), their normals averaged. A frame whose
+        edge is farther from the median of the frames than the detector's inlier
+        distance (``outlier_px``, turned into an angle by
+        :func:`vision.estimate.radians_per_pixel`) does not count for that edge: the
+        detector locked onto something else in that frame.
+
+        ``rng`` and ``apply_noise`` are unused: the pixel noise is the renderer's.
+        """
+        from vision.estimate import radians_per_pixel
+
+        normals, visible = [], []
+        for _ in range(frames):
+            m = self.sensor.measure(rotation, translation)
+            normals.append(np.asarray(m.normals, float))
+            visible.append(np.asarray(m.edge_visible, bool))
+        n = np.array(normals)
+        vis = np.array(visible)
+        est = self.sensor.estimated_camera
+        lines = None
+        if est.kind == "perspective":
+            with np.errstate(invalid="ignore"):
+                lines = est.normal_to_line(n)
+        both = np.asarray(vis.all(axis=-1))
+        with np.errstate(invalid="ignore"):
+            directions = directions_from_edges(n)
+        m_all = {"normals": n, "lines": lines,
+                 "directions": np.where(both[..., None], directions, np.nan),
+                 "edge_visible": vis, "direction_visible": both}
+        tolerance = self.sensor.detector.outlier_px * radians_per_pixel(est)
+        return _average_frames(m_all, est if est.kind == "perspective" else None, tolerance)
 
     def measure(self, rotations: np.ndarray, translations: np.ndarray,
                 rngs: list[np.random.Generator], apply_noise: bool = True
@@ -353,6 +461,7 @@ def run_trials(
     calibrate: Callable[[World, np.random.Generator], tuple[np.ndarray, dict[str, float]]]
     | None = None,
     on_step: Callable[[int, np.ndarray, np.ndarray, np.ndarray], None] | None = None,
+    sensor_factory: Callable[[Scenario, TrialSetup], Any] | None = None,
 ) -> list[TrialResult]:
     """Run trials of one scenario point with one controller.
 
@@ -368,6 +477,9 @@ def run_trials(
             start lengths (default: exact integration of the clamped command).
         calibrate: Optional calibration run per trial (returns estimated base points).
         on_step: Callback ``(trial, rotation, translation, edge_visible)`` for a live view.
+        sensor_factory: Builds the sensor of a group of trials from the scenario and its
+            first trial (default :func:`make_sensor`; studies swap sensors with it). The
+            sensor has ``measure`` and ``measure_goal`` like :class:`GeometricSensor`.
 
     Returns:
         One :class:`TrialResult` per trial, in the order of ``trials``.
@@ -389,7 +501,7 @@ def run_trials(
         opened: list[Backend] = []
         try:
             for res in _run_group(sc, controller_index, group, record_trials, backend_factory,
-                                  on_step, opened):
+                                  on_step, opened, sensor_factory):
                 results[res.row["trial"]] = res
         except Exception as exc:
             if len(group) == 1:
@@ -400,7 +512,8 @@ def run_trials(
                     single_opened: list[Backend] = []
                     try:
                         res = _run_group(sc, controller_index, [s], record_trials,
-                                         backend_factory, on_step, single_opened)[0]
+                                         backend_factory, on_step, single_opened,
+                                         sensor_factory)[0]
                     except Exception as exc2:
                         res = TrialResult(_failure_row(sc, spec, s.trial, exc2))
                     finally:
@@ -457,7 +570,9 @@ def _run_group(sc: Scenario, controller_index: int, group: list[TrialSetup],
                record_trials: int,
                backend_factory: Callable[[HexapodGeometry, np.ndarray], Backend] | None,
                on_step: Callable[[int, np.ndarray, np.ndarray, np.ndarray], None] | None,
-               opened: list[Backend] | None = None) -> list[TrialResult]:
+               opened: list[Backend] | None = None,
+               sensor_factory: Callable[[Scenario, TrialSetup], Any] | None = None
+               ) -> list[TrialResult]:
     """Run trials sharing one world in lockstep (backends it opens go to ``opened``)."""
     if opened is None:
         opened = []
@@ -465,11 +580,11 @@ def _run_group(sc: Scenario, controller_index: int, group: list[TrialSetup],
     n = len(group)
     world = group[0].world
     g = world.geometry
-    sensor = _make_sensor(sc, group[0])
+    sensor = (sensor_factory or make_sensor)(sc, group[0])
     controllers = []
     for s in group:
         ctrl = registry.create(spec.name, **spec.options)
-        goal = _goal(sensor, s, sc)
+        goal = trial_goal(sensor, s, sc)
         ctx = ControllerContext(base_points=s.base_points, geometry=s.nominal_geometry,
                                 camera=s.estimated_camera, dt=sc.dt, goal=goal)
         ctrl.reset(ctx)

@@ -13,9 +13,11 @@ from vision.cameras import (
 from vision.estimate import (
     NormalFit,
     angle_between,
+    average_normals,
     direction_from_normals,
     fit_normal,
     fit_normal_conic,
+    radians_per_pixel,
 )
 from vision.exceptions import CameraError, EstimationError, VisionError
 from vision.legs import (
@@ -49,6 +51,7 @@ __all__ = [
     "VisionError",
     "add_outliers",
     "angle_between",
+    "average_normals",
     "camera_preset",
     "direction_from_normals",
     "directions_from_edges",
@@ -64,6 +67,7 @@ __all__ = [
     "observe_legs",
     "omni_camera",
     "pixel_noise",
+    "radians_per_pixel",
     "random_rotations",
     "random_unit_vectors",
     "rotation_noise",

@@ -34,6 +34,7 @@ sign), in order of priority:
 
 from __future__ import annotations
 
+import warnings
 from typing import NamedTuple
 
 import numpy as np
@@ -230,3 +231,86 @@ def angle_between(a: np.ndarray, b: np.ndarray, oriented: bool = True) -> np.nda
     if not oriented:
         d = np.abs(d)
     return np.arctan2(c, d)
+
+
+def average_normals(
+    normals: np.ndarray, visible: np.ndarray, min_fraction: float = 0.5,
+    max_deviation: float | None = None,
+) -> tuple[np.ndarray, np.ndarray]:
+    """Average the edge normals measured in K frames of the same (static) scene.
+
+    What a user teaching a goal does with a burst of frames: every edge normal is the
+    renormalised sum of its unit normals over the frames where the edge was seen, each
+    first given the sign of the first of them (a plane's normal is defined up to
+    sign; the detectors orient them consistently, this makes the sum safe anyway).
+    Independent pixel noise then drops as ``1 / sqrt(K)``; a bias of the detector
+    that is the same in every frame does not.
+
+    A detector can lock onto the wrong edge in some frames (another leg's edge tens of
+    pixels away); one such frame would pull the sum. With ``max_deviation``, a frame
+    whose normal is farther than that from the per-edge median of the frames
+    (component-wise median of the sign-aligned normals, renormalised) counts as not
+    seeing the edge.
+
+    Args:
+        normals: (K, ..., 3) unit normals of K frames; NaN (or anything) where the edge
+            was not seen.
+        visible: (K, ...) bool, the edge was seen in that frame.
+        min_fraction: An edge seen (and kept) in fewer than this fraction of the K
+            frames is reported missing, in ``[0, 1]`` (default: at least half).
+        max_deviation: Largest angle between a frame's normal and the median normal
+            [rad] (None: keep every frame); e.g. the detector's inlier distance in
+            pixels times :func:`radians_per_pixel`.
+
+    Returns:
+        ``normals`` (..., 3), the averaged unit normals (NaN where missing), and
+        ``visible`` (...) bool.
+
+    Raises:
+        EstimationError: Shapes that do not match, no frame, ``min_fraction`` outside
+            ``[0, 1]`` or a negative ``max_deviation``.
+    """
+    n = np.asarray(normals, dtype=float)
+    vis = np.asarray(visible, dtype=bool)
+    if n.ndim < 2 or n.shape[-1] != 3 or vis.shape != n.shape[:-1]:
+        raise EstimationError(f"normals (K, ..., 3) and visible (K, ...) expected, got "
+                              f"{n.shape} and {vis.shape}")
+    k = n.shape[0]
+    if k < 1:
+        raise EstimationError("average_normals: no frame")
+    if not 0.0 <= min_fraction <= 1.0:
+        raise EstimationError(f"min_fraction must be in [0, 1], got {min_fraction}")
+    if max_deviation is not None and not max_deviation >= 0.0:
+        raise EstimationError(f"max_deviation must be >= 0 rad, got {max_deviation}")
+    vis = vis & np.all(np.isfinite(n), axis=-1)
+    n = np.where(vis[..., None], n, 0.0)
+    # sign reference: the first frame in which each edge was seen
+    first = np.argmax(vis, axis=0)
+    ref = np.take_along_axis(n, first[None, ..., None], axis=0)[0]
+    n = n * np.where(np.sum(n * ref, axis=-1) < 0, -1.0, 1.0)[..., None]
+    if max_deviation is not None:
+        with warnings.catch_warnings():  # edges never seen: all-NaN medians
+            warnings.simplefilter("ignore", RuntimeWarning)
+            med = np.nanmedian(np.where(vis[..., None], n, np.nan), axis=0)
+        with np.errstate(invalid="ignore", divide="ignore"):
+            med = med / np.linalg.norm(med, axis=-1, keepdims=True)
+            dev = angle_between(n, med)
+        vis &= dev <= max_deviation
+    total = np.sum(np.where(vis[..., None], n, 0.0), axis=0)
+    count = np.sum(vis, axis=0)
+    norm = np.linalg.norm(total, axis=-1)
+    seen = (count >= min_fraction * k) & (count > 0) & (norm > 0)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        mean = total / norm[..., None]
+    return np.where(seen[..., None], mean, np.nan), seen
+
+
+def radians_per_pixel(camera: Camera) -> float:
+    """Angle of the viewing ray per pixel of image motion at the principal point [rad].
+
+    ``(1 + xi) / f`` with ``f`` the mean focal length [px]: ``1 / f`` for a perspective
+    camera, ``2 / f`` for a parabolic mirror (``xi = 1``). Away from the principal
+    point a pixel subtends a smaller angle, so a pixel distance turned into an angle
+    with this factor is an upper bound there.
+    """
+    return (1.0 + float(camera.xi)) / (0.5 * (float(camera.fx) + float(camera.fy)))

@@ -51,6 +51,11 @@ def test_sweep_expands_to_cartesian_product() -> None:
         ({"name": "t"}, "controllers", "missing"),
         ({**MINIMAL, "camera": {"preset": "fisheye"}}, "camera.preset", "front"),
         ({**MINIMAL, "controllers": ["a", "a"]}, "controllers", "duplicate"),
+        ({**MINIMAL, "sensor": {"teach_frames": 0}}, "sensor.teach_frames", ">= 1"),
+        ({**MINIMAL, "sensor": {"kind": "image", "teach_frames": 2.5}}, "sensor.teach_frames",
+         "integer"),
+        ({**MINIMAL, "sensor": {"teach_frames": [1, 10]}}, "sensor.teach_frames", "integer"),
+        ({**MINIMAL, "sensor": {"blur": 1.0}}, "sensor.blur", "blur_px"),
     ],
 )
 def test_invalid_scenarios_name_the_key(table: dict, key: str, fragment: str) -> None:
@@ -67,6 +72,16 @@ def test_typo_suggests_the_close_key() -> None:
         parse_scenario({**MINIMAL, "task": {"max_step": 10}}, "s.toml")
     assert info.value.suggestion == "max_steps"
     assert "did you mean 'max_steps'" in str(info.value)
+
+
+def test_teach_frames() -> None:
+    assert parse_scenario(MINIMAL).teach_frames == 1
+    sc = parse_scenario({**MINIMAL, "sensor": {"kind": "image", "teach_frames": 10}})
+    assert sc.sensor == "image" and sc.teach_frames == 10
+    with pytest.raises(ScenarioError) as info:
+        parse_scenario({**MINIMAL, "sensor": {"teach_frame": 10}}, "s.toml")
+    assert info.value.key == "sensor.teach_frame"
+    assert "did you mean 'teach_frames'" in str(info.value)
 
 
 def test_scenario_file_errors(tmp_path: Path) -> None:

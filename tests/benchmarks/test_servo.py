@@ -74,6 +74,71 @@ def test_teach_then_servo_to_the_taught_features(
     assert "converged after" in out
 
 
+def test_teach_averages_a_burst_of_frames_through_the_cli(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """``hexapod-bench servo --teach --teach-frames N``: the entry point of the docs."""
+    from benchmarks.cli import main as cli_main
+
+    goal = tmp_path / "taught.toml"
+    code = cli_main(["servo", "--backend", "emulator", "--goal", str(goal), "--teach",
+                     "--teach-frames", "4", "--start-mm", *[str(x) for x in GOAL_MM]])
+    out = capsys.readouterr().out
+    assert code == 0, out
+    assert "normals averaged over 4 of 4 frames" in out
+    taught = servo.load_goal(goal, servo._geometry("deltalab"))
+    assert taught.features is not None and taught.features.visible_count == 12
+
+
+def test_teach_averaging_reduces_the_spread_of_the_taught_normals() -> None:
+    """The teach path (rendered camera, edges tracked from frame to frame): over repeated
+    teachings at one pose, the spread of the taught normals about the truth drops as
+    1/sqrt(N) for N averaged frames (bound 1.5/sqrt(N): the spread is estimated from a
+    few teachings). (Their mean error to the truth is the detector's bias, which
+    averaging does not remove.)"""
+    from hexapod.fk import forward_kinematics
+    from hexapod.geometry import deltalab
+    from vision.cameras import front_camera
+    from vision.legs import observe_legs
+
+    g = deltalab()
+    cam = front_camera(g)
+    sol = forward_kinematics(g, np.array(GOAL_MM) * 1e-3)
+    truth = observe_legs(cam, g, sol.rotation, sol.translation).normals
+    sensor = servo.SimCamera(cam, g, seed=5)
+    # the detector's inlier distance (1 px) seen from the camera
+    assert servo.teach_tolerance(sensor) == pytest.approx(
+        sensor.sensor.detector.outlier_px / cam.fx, rel=0.01)
+    frames, teachings = 9, 10
+    single, burst = [], []
+    for _ in range(teachings):
+        sensor.previous = None  # each teaching starts from the model's prediction
+        shots = [sensor.measure(sol.rotation, sol.translation) for _ in range(frames)]
+        assert all(f is not None and f.visible_count == 12 for f in shots)
+        single.append(shots[0].normals)  # type: ignore[union-attr]
+        burst.append(servo.average_features(  # as --teach does
+            shots, servo.teach_tolerance(sensor)).normals)  # type: ignore[arg-type]
+    dev1 = np.array(single) - truth
+    devk = np.array(burst) - truth
+    spread1 = np.sqrt(np.mean(np.sum(np.var(dev1, axis=0, ddof=1), axis=-1)))
+    spreadk = np.sqrt(np.mean(np.sum(np.var(devk, axis=0, ddof=1), axis=-1)))
+    assert spreadk < 1.5 / np.sqrt(frames) * spread1, (spreadk, spread1)
+
+
+def test_average_features_drops_edges_seen_in_fewer_than_half_of_the_frames() -> None:
+    n = np.tile(np.array([0.0, 0.0, 1.0]), (6, 2, 1))
+    seen = np.ones((6, 2), bool)
+    rare = seen.copy()
+    rare[0, 0] = False
+    frames = [servo.Features(n, seen), servo.Features(np.where(rare[..., None], -n, np.nan),
+                                                      rare), servo.Features(n, rare)]
+    avg = servo.average_features(frames)
+    assert not avg.edge_visible[0, 0] and np.all(np.isnan(avg.normals[0, 0]))
+    assert avg.visible_count == 11
+    assert np.allclose(avg.normals[avg.edge_visible], [0.0, 0.0, 1.0])
+    with pytest.raises(servo.BenchmarkError, match="no frame"):
+        servo.average_features([])
+
+
 def test_lost_frames_are_counted_and_command_zero() -> None:
     import controllers  # noqa: F401 - registers the built-ins
     from controllers.base import ControllerContext, registry
@@ -142,6 +207,7 @@ def test_unknown_controller_suggests_the_closest(
     (["-o", "gain"], "expected KEY=VALUE"),
     (["-o", "gian=2"], "gian"),
     (["--start-mm", "415", "415", "415", "415", "415", "900"], "--start-mm: leg 6"),
+    (["--teach", "--teach-frames", "0"], "--teach-frames must be >= 1, got 0"),
 ])
 def test_bad_options_exit_2(tmp_path: Path, capsys: pytest.CaptureFixture[str],
                             extra: list[str], fragment: str) -> None:
@@ -210,3 +276,10 @@ def test_video_camera_detects_the_legs_and_stops_at_the_end_of_the_file(
     assert len(lines) == 8
     assert all(r["visible_edges"] == 12 and r["reason"] is None for r in lines)
     assert np.any(lines[0]["velocities_mm_s"])
+    # teaching from the same file: the burst stops at its end
+    taught = tmp_path / "taught.toml"
+    code = servo.main(["--backend", "emulator", "--camera", f"video:{video}", "--goal",
+                       str(taught), "--teach", "--teach-frames", "20"])
+    out = capsys.readouterr().out
+    assert code == 0, out
+    assert "normals averaged over 8 of 20 frames" in out

@@ -10,9 +10,11 @@ from vision.cameras import PerspectiveCamera, UnifiedCamera, front_camera, omni_
 from vision.estimate import (
     NormalFit,
     angle_between,
+    average_normals,
     direction_from_normals,
     fit_normal,
     fit_normal_conic,
+    radians_per_pixel,
 )
 from vision.exceptions import EstimationError
 from vision.legs import observation_edge_points, observe_legs
@@ -208,3 +210,103 @@ def test_accuracy_benchmark_runs(capsys, tmp_path) -> None:
     assert len(figs) == 8
     assert figs[("front", "svd", "normal")].median_deg < 0.1
     assert figs[("omni", "svd", "normal")].median_deg < 0.3
+
+
+def test_average_normals_aligns_signs_and_renormalises(rng: np.random.Generator) -> None:
+    """K noisy copies of each normal, some with the opposite sign: the average is the
+    unit normal of the first frame's sign, and its error drops as 1/sqrt(K)."""
+    from vision.noise import rotation_noise
+
+    truth = rng.standard_normal((6, 2, 3))
+    truth /= np.linalg.norm(truth, axis=-1, keepdims=True)
+    frames = 16
+    noisy = np.array([rotation_noise(truth, np.deg2rad(1.0), rng) for _ in range(frames)])
+    flips = np.where(rng.uniform(size=(frames, 6, 2, 1)) < 0.5, -1.0, 1.0)
+    flips[0] = 1.0
+    mean, vis = average_normals(noisy * flips, np.ones((frames, 6, 2), bool))
+    assert vis.all()
+    assert np.allclose(np.linalg.norm(mean, axis=-1), 1.0)
+    assert np.all(np.sum(mean * truth, axis=-1) > 0), "signs of the first frame"
+    err_one = np.sqrt(np.mean(angle_between(noisy, truth) ** 2))
+    err_mean = np.sqrt(np.mean(angle_between(mean, truth) ** 2))
+    # independent noise: 1/sqrt(K), with a margin for 12 edges only
+    assert err_mean < 1.5 / np.sqrt(frames) * err_one
+
+
+def test_average_normals_uses_the_frames_where_an_edge_is_seen(rng: np.random.Generator
+                                                               ) -> None:
+    truth = rng.standard_normal((6, 2, 3))
+    truth /= np.linalg.norm(truth, axis=-1, keepdims=True)
+    frames = 4
+    normals = np.repeat(truth[None], frames, axis=0)
+    visible = np.ones((frames, 6, 2), bool)
+    visible[:2, 0, 0] = False  # seen in exactly half of the frames: kept
+    visible[:3, 1, 1] = False  # seen in one frame of four: missing
+    visible[:, 2, 0] = False  # never seen
+    visible[0, 3, 1] = False  # missing in the first frame: its sign from the second
+    normals[~visible] = np.nan
+    normals[2, 3, 1] *= -1.0
+    mean, vis = average_normals(normals, visible)
+    expected = np.ones((6, 2), bool)
+    expected[1, 1] = expected[2, 0] = False
+    assert np.array_equal(vis, expected)
+    assert np.all(np.isnan(mean[~expected]))
+    assert np.allclose(mean[0, 0], truth[0, 0])
+    assert np.allclose(mean[3, 1], truth[3, 1])
+    assert np.allclose(mean[expected], truth[expected])
+    # a single frame is returned as it is
+    one, vis_one = average_normals(normals[1:2], visible[1:2])
+    assert np.array_equal(vis_one, visible[1])
+    assert np.allclose(one[vis_one], truth[vis_one])
+
+
+@pytest.mark.parametrize(("normals", "visible", "kwargs", "fragment"), [
+    (np.zeros((3, 6, 2, 3)), np.ones((3, 6, 2), bool), {"min_fraction": 1.5}, "min_fraction"),
+    (np.zeros((3, 6, 2, 3)), np.ones((3, 6), bool), {}, "expected"),
+    (np.zeros((3, 6, 2, 2)), np.ones((3, 6, 2), bool), {}, "expected"),
+    (np.zeros((0, 6, 2, 3)), np.ones((0, 6, 2), bool), {}, "no frame"),
+])
+def test_average_normals_rejects_bad_input(normals, visible, kwargs, fragment) -> None:
+    with pytest.raises(EstimationError, match=fragment):
+        average_normals(normals, visible, **kwargs)
+
+
+def test_average_normals_ignores_frames_far_from_the_median(rng: np.random.Generator) -> None:
+    """A frame where the detector took another edge (4 deg away) pulls the plain average;
+    with ``max_deviation`` it does not count. An edge split half and half between two
+    detections has no majority: it is missing."""
+    from vision.noise import rotation_noise
+
+    truth = rng.standard_normal((6, 2, 3))
+    truth /= np.linalg.norm(truth, axis=-1, keepdims=True)
+    frames = 10
+    noise = np.deg2rad(0.01)
+    n = np.array([rotation_noise(truth, noise, rng) for _ in range(frames)])
+    side = np.cross(truth, rng.standard_normal(3))
+    side /= np.linalg.norm(side, axis=-1, keepdims=True)
+    wrong = np.cos(np.deg2rad(4.0)) * truth + np.sin(np.deg2rad(4.0)) * side
+    n[3, 0, 0] = wrong[0, 0]  # one wrong frame
+    n[:5, 1, 0] = wrong[1, 0]  # half of the frames wrong
+    vis = np.ones((frames, 6, 2), bool)
+    tolerance = np.deg2rad(0.5)
+    plain, _ = average_normals(n, vis)
+    robust, seen = average_normals(n, vis, max_deviation=tolerance)
+    assert angle_between(plain[0, 0], truth[0, 0]) > 2 * noise
+    assert angle_between(robust[0, 0], truth[0, 0]) < noise
+    assert not seen[1, 0] and np.all(np.isnan(robust[1, 0]))
+    others = np.ones((6, 2), bool)
+    others[1, 0] = False
+    assert np.all(seen[others])
+    assert np.allclose(robust[others & ~np.eye(6, 2, dtype=bool)],
+                       plain[others & ~np.eye(6, 2, dtype=bool)])
+    with pytest.raises(EstimationError, match="max_deviation"):
+        average_normals(n, vis, max_deviation=-1.0)
+
+
+def test_radians_per_pixel(geometry) -> None:
+    """A pixel next to the principal point subtends (1 + xi) / f radians."""
+    for cam in (front_camera(geometry), omni_camera(geometry)):
+        px = np.array([[cam.cx, cam.cy], [cam.cx + 1.0, cam.cy]])
+        rays = cam.lift(px)
+        measured = float(angle_between(rays[0], rays[1]))
+        assert radians_per_pixel(cam) == pytest.approx(measured, rel=1e-3)

@@ -79,3 +79,38 @@ def test_predicted_normals_are_used(geometry, rng):
 def test_mismatched_cameras_raise(geometry):
     with pytest.raises(ValueError, match="kind"):
         ImageSensor(front_camera(geometry), omni_camera(geometry), geometry)
+
+
+def test_averaged_teaching_reduces_the_spread_of_the_taught_normals(geometry, rng):
+    """Teaching a goal from a burst of K rendered frames (normals averaged by
+    ``average_normals``) instead of one: over repeated teachings at the same pose, the
+    spread of the taught normals about the truth (``observe_legs``) drops as
+    ``1/sqrt(K)`` for independent pixel noise (bound: 1.5 times that, for the sampling
+    error of the spread estimated from a few teachings), and their error to the truth
+    (detector bias plus noise) does not grow."""
+    from vision.estimate import average_normals
+
+    cam = front_camera(geometry)
+    sensor = ImageSensor(cam, cam, geometry, rng, blur_px=0.8, noise_std=6.0)
+    R, t = sample_poses(geometry, 1, rng)
+    truth = observe_legs(cam, geometry, R[0], t[0])
+    frames, teachings = 9, 10
+    single, burst = [], []
+    for _ in range(teachings):
+        single.append(sensor.measure(R[0], t[0]).normals)
+        ms = [sensor.measure(R[0], t[0]) for _ in range(frames)]
+        n, vis = average_normals(np.array([m.normals for m in ms]),
+                                 np.array([m.edge_visible for m in ms]))
+        assert np.all(vis == np.all([m.edge_visible for m in ms], axis=0))
+        burst.append(n)
+    seen = truth.edge_visible & np.all(np.isfinite(np.array(single + burst)), axis=(0, -1))
+    assert seen.sum() >= 10
+    dev1 = (np.array(single) - truth.normals)[:, seen]  # (teachings, edges, 3) [rad]
+    devk = (np.array(burst) - truth.normals)[:, seen]
+    spread1 = np.sqrt(np.mean(np.sum(np.var(dev1, axis=0, ddof=1), axis=-1)))
+    spreadk = np.sqrt(np.mean(np.sum(np.var(devk, axis=0, ddof=1), axis=-1)))
+    assert spread1 > 0
+    assert spreadk < 1.5 / np.sqrt(frames) * spread1, (spreadk, spread1)
+    rms1 = np.sqrt(np.mean(np.sum(dev1**2, axis=-1)))
+    rmsk = np.sqrt(np.mean(np.sum(devk**2, axis=-1)))
+    assert rmsk <= rms1

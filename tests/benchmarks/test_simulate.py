@@ -1,0 +1,98 @@
+"""The closed-loop simulator's goal: desired features taught from one or several frames."""
+
+from __future__ import annotations
+
+from dataclasses import replace
+
+import numpy as np
+
+from benchmarks.scenario import parse_scenario
+from benchmarks.simulate import (
+    load_camera,
+    load_geometry,
+    make_sensor,
+    make_trial,
+    trial_goal,
+    trial_rng,
+)
+from vision.estimate import angle_between
+from vision.legs import observe_legs
+
+
+def _scenario(**extra: object):
+    table = {
+        "name": "goal-test", "seed": 11, "trials": 1, "controllers": ["leg-edge"],
+        "task": {"kind": "fixed", "start_mm": [375.0] * 6,
+                 "goal_mm": [375.0, 375.0, 475.0, 375.0, 375.0, 475.0]},
+    }
+    table.update(extra)
+    return parse_scenario(table, "goal-test.toml")
+
+
+def _goal_errors(sc, trials: range) -> np.ndarray:
+    """Angles [rad] between the taught normals and the true ones, over the trials."""
+    nominal = load_geometry(sc)
+    camera = load_camera(sc, nominal)
+    errors = []
+    for k in trials:
+        setup = make_trial(sc, k, nominal, camera)
+        goal = trial_goal(make_sensor(sc, setup), setup, sc)
+        truth = observe_legs(setup.world.camera, setup.world.geometry, setup.goal_rotation,
+                             setup.goal_translation)
+        assert goal.edge_visible is not None and goal.normals is not None
+        seen = goal.edge_visible & truth.edge_visible
+        assert seen.sum() >= 10
+        errors.append(angle_between(goal.normals[seen], truth.normals[seen]))
+    return np.concatenate(errors)
+
+
+def test_teach_frames_average_the_noisy_goal_measurements() -> None:
+    """Rotation noise on the goal: averaging K measurements divides the error of the
+    taught normals by about sqrt(K) (bound: 1.5 / sqrt(K), sampling margin)."""
+    noisy = _scenario(noise={"model": "rotation", "amplitude_deg": 0.1})
+    frames = 16
+    one = _goal_errors(noisy, range(8))
+    many = _goal_errors(replace(noisy, teach_frames=frames), range(8))
+    rms_one = np.sqrt(np.mean(one**2))
+    rms_many = np.sqrt(np.mean(many**2))
+    assert rms_one > 0
+    assert rms_many < 1.5 / np.sqrt(frames) * rms_one, (rms_many, rms_one)
+
+
+def test_one_teach_frame_is_the_single_measurement() -> None:
+    """teach_frames = 1 (the default) keeps the goal of a single measurement, drawn from
+    the trial's goal stream: earlier results are unchanged."""
+    sc = _scenario(noise={"model": "rotation", "amplitude_deg": 0.1})
+    assert sc.teach_frames == 1
+    nominal = load_geometry(sc)
+    camera = load_camera(sc, nominal)
+    setup = make_trial(sc, 2, nominal, camera)
+    sensor = make_sensor(sc, setup)
+    goal = trial_goal(sensor, setup, sc)
+    m = sensor.measure(setup.goal_rotation[None], setup.goal_translation[None],
+                       [trial_rng(sc.seed, 2, 2)])
+    assert np.array_equal(goal.normals, m["normals"][0])
+    assert np.array_equal(goal.lines, m["lines"][0])
+
+
+def test_image_goal_frames_are_averaged_and_never_seed_the_tracking() -> None:
+    """Rendered goal: the taught normals are the average of the goal frames, and the
+    first measurement of the run is detected from the model's prediction at the start
+    pose (wide search), not tracked from the goal's edges (which the start pose, 100 mm
+    of leg travel away, does not show where the goal did)."""
+    sc = _scenario(sensor={"kind": "image", "teach_frames": 3})
+    nominal = load_geometry(sc)
+    camera = load_camera(sc, nominal)
+    setup = make_trial(sc, 0, nominal, camera)
+    sensor = make_sensor(sc, setup)
+    rng = trial_rng(sc.seed, 0, 1)
+    goal = trial_goal(sensor, setup, sc)
+    assert goal.edge_visible is not None and goal.edge_visible.sum() >= 10
+    truth_goal = observe_legs(camera, nominal, setup.goal_rotation, setup.goal_translation)
+    err = angle_between(goal.normals[goal.edge_visible], truth_goal.normals[goal.edge_visible])
+    assert np.degrees(err).max() < 0.1  # the accuracy bound of tests/vision/test_image_sensor.py
+    m = sensor.measure(setup.start_rotation[None], setup.start_translation[None], [rng])
+    truth = observe_legs(camera, nominal, setup.start_rotation, setup.start_translation)
+    assert m["edge_visible"][0].sum() >= truth.edge_visible.sum() - 1
+    seen = m["edge_visible"][0] & truth.edge_visible
+    assert np.degrees(angle_between(m["normals"][0][seen], truth.normals[seen])).max() < 0.1
