@@ -25,6 +25,7 @@ import numpy as np
 
 from hexapod import deltalab
 from hexapod.workspace import sample_poses
+from vision import kernels
 from vision.cameras import Camera, front_camera, omni_camera
 from vision.detect import LegPrediction, OmniDetector, PerspectiveTracker, draw_detection
 from vision.legs import observe_legs
@@ -44,7 +45,7 @@ def _run(cam: Camera, frames: int, style: RenderStyle, seed: int,
     det_o = OmniDetector(cam) if omni else None
     det_p = None if omni else PerspectiveTracker(cam)
     auto = det_o.default_prediction(geo) if det_o is not None else None
-    render_t, detect_t, errs = [], [], []
+    render_t, detect_t, numpy_t, errs = [], [], [], []
     missed = invented = truth = 0
     for k in range(frames):
         t0 = time.perf_counter()
@@ -52,16 +53,20 @@ def _run(cam: Camera, frames: int, style: RenderStyle, seed: int,
         render_t.append(time.perf_counter() - t0)
         obs = observe_legs(cam, geo, Rs[k], ts[k])
         pred = auto if omni else LegPrediction.from_pose(cam, geo, Rs[k], ts[k] + 0.003)
-        best = np.inf
-        for _ in range(repeats):
-            t0 = time.perf_counter()
-            if det_o is not None:
-                d = det_o.detect(img, pred)
-            else:
-                assert det_p is not None and pred is not None
-                d = det_p.detect(img, pred)
-            best = min(best, time.perf_counter() - t0)
-        detect_t.append(best)
+        for compiled, times in ((True, detect_t), (False, numpy_t)):
+            best = np.inf
+            for _ in range(repeats):
+                t0 = time.perf_counter()
+                if det_o is not None:
+                    d = det_o.detect(img, pred, use_compiled=compiled)
+                else:
+                    assert det_p is not None and pred is not None
+                    d = det_p.detect(img, pred, use_compiled=compiled)
+                best = min(best, time.perf_counter() - t0)
+            times.append(best)
+            if compiled:
+                d_compiled = d
+        d = d_compiled
         e = np.degrees(np.arccos(np.clip(np.sum(d.normals * obs.normals, -1), -1.0, 1.0)))
         errs.append(e[d.edge_visible])
         truth += int(obs.edge_visible.sum())
@@ -76,6 +81,8 @@ def _run(cam: Camera, frames: int, style: RenderStyle, seed: int,
         "render_ms": 1e3 * float(np.median(render_t)),
         "detect_ms": 1e3 * float(np.median(detect_t)),
         "detect_p95_ms": 1e3 * float(np.percentile(detect_t, 95)),
+        "numpy_ms": 1e3 * float(np.median(numpy_t)),
+        "speedup": float(np.median(np.array(numpy_t) / np.array(detect_t))),
         "median_deg": float(np.median(e)),
         "p95_deg": float(np.percentile(e, 95)),
         "max_deg": float(np.max(e)),
@@ -104,16 +111,19 @@ def main(argv: Sequence[str] | None = None) -> int:
     out = sys.stdout
     out.write(f"# Leg-edge detection benchmark ({args.frames} frames per camera, background "
               f"{args.background}, blur {args.blur} px, noise {args.noise} grey levels)\n")
+    out.write(f"# detection: {'compiled (vision.kernels)' if kernels.available() else 'numpy'}"
+              f"; the numpy reference is timed on the same frames\n")
     out.write(f"# {platform.processor() or platform.machine()}, Python "
               f"{platform.python_version()}, numpy {np.__version__}, OpenCV {cv2.__version__}\n")
     header = ("camera", "size", "render ms", "detect ms (median)", "detect ms (p95)",
-              "goal ms", "err median deg", "err p95 deg", "err max deg", "edges",
-              "missed", "invented")
+              "goal ms", "numpy ms (median)", "numpy / compiled", "err median deg",
+              "err p95 deg", "err max deg", "edges", "missed", "invented")
     out.write("| " + " | ".join(header) + " |\n|" + "---|" * len(header) + "\n")
     for name, cam in (("omni", omni_camera()), ("front", front_camera())):
         r = _run(cam, args.frames, style, args.seed, args.pictures, args.repeats)
         out.write(f"| {name} | {cam.width}x{cam.height} | {r['render_ms']:.2f} | "
                   f"{r['detect_ms']:.3f} | {r['detect_p95_ms']:.3f} | {GOALS_MS[name]} | "
+                  f"{r['numpy_ms']:.3f} | {r['speedup']:.1f}x | "
                   f"{r['median_deg']:.4f} | {r['p95_deg']:.4f} | {r['max_deg']:.4f} | "
                   f"{int(r['edges'])}/{int(r['truth_visible'])} | {int(r['missed'])} | "
                   f"{int(r['invented'])} |\n")

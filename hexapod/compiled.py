@@ -53,6 +53,52 @@ class CompilationError(OSError):
     """The C code of a CasADi function could not be compiled or loaded."""
 
 
+def cache_dir() -> Path:
+    """Where compiled libraries are kept: ``$HEXAPOD_CACHE_DIR`` or ``~/.cache/hexapod-vs``."""
+    return Path(os.environ.get("HEXAPOD_CACHE_DIR", Path.home() / ".cache" / "hexapod-vs"))
+
+
+def build_shared_library(name: str, code: str, flags: tuple[str, ...] = ("-O2",)) -> Path:
+    """Compile C source to a shared library once, cached under the hash of the source.
+
+    The library is written to :func:`cache_dir` as ``{name}_{hash}.so``; processes that
+    compile the same code at once each use their own temporary files and the last
+    atomic rename wins (the results are identical).
+
+    Args:
+        name: A C identifier-like name for the files.
+        code: The complete C translation unit.
+        flags: Compiler flags (``-shared -fPIC`` are added).
+
+    Returns:
+        The path of the shared library.
+
+    Raises:
+        CompilationError: No compiler (``$CC``, default ``cc``).
+        subprocess.CalledProcessError: The compiler failed (its stderr is attached).
+    """
+    cc = os.environ.get("CC", "cc")
+    if shutil.which(cc) is None:
+        raise CompilationError(f"no C compiler '{cc}'")
+    cache = cache_dir()
+    cache.mkdir(parents=True, exist_ok=True)
+    key = code + platform.machine() + " ".join(flags)
+    digest = hashlib.sha256(key.encode()).hexdigest()[:16]
+    lib_path = cache / f"{name}_{digest}.so"
+    if not lib_path.exists():
+        src = cache / f"{name}_{digest}.{os.getpid()}.c"
+        src.write_text(code)
+        tmp_lib = cache / f"{name}_{digest}.{os.getpid()}.so"
+        try:
+            subprocess.run([cc, *flags, "-shared", "-fPIC", str(src), "-o", str(tmp_lib)],
+                           check=True, capture_output=True, timeout=300)
+            os.replace(tmp_lib, lib_path)
+        finally:
+            src.unlink(missing_ok=True)
+            tmp_lib.unlink(missing_ok=True)
+    return lib_path
+
+
 class CompiledFunction:
     """A CasADi function of one vector, compiled to C (CasADi VM fallback).
 
@@ -76,11 +122,6 @@ class CompiledFunction:
                         self.name, exc)
 
     def _compile(self) -> None:
-        cc = os.environ.get("CC", "cc")
-        if shutil.which(cc) is None:
-            raise CompilationError(f"no C compiler '{cc}'")
-        cache = Path(os.environ.get("HEXAPOD_CACHE_DIR", Path.home() / ".cache" / "hexapod-vs"))
-        cache.mkdir(parents=True, exist_ok=True)
         with tempfile.TemporaryDirectory() as tmp:
             cwd = os.getcwd()
             try:
@@ -90,18 +131,7 @@ class CompiledFunction:
                 os.chdir(cwd)
             code = (Path(tmp) / f"{self.name}.c").read_text()
         code += _BATCH_WRAPPER.format(name=self.name, n_in=self.n_in, n_out=self.n_out)
-        digest = hashlib.sha256((code + platform.machine()).encode()).hexdigest()[:16]
-        lib_path = cache / f"{self.name}_{digest}.so"
-        if not lib_path.exists():  # processes compiling at once each use their own files
-            src = cache / f"{self.name}_{digest}.{os.getpid()}.c"
-            src.write_text(code)
-            tmp_lib = cache / f"{self.name}_{digest}.{os.getpid()}.so"
-            try:
-                subprocess.run([cc, "-O2", "-shared", "-fPIC", str(src), "-o", str(tmp_lib)],
-                               check=True, capture_output=True, timeout=300)
-                os.replace(tmp_lib, lib_path)
-            finally:
-                src.unlink(missing_ok=True)
+        lib_path = build_shared_library(self.name, code)
         lib = ctypes.CDLL(str(lib_path))
         n_arg, n_res, n_iw, n_w = (ctypes.c_longlong() for _ in range(4))
         getattr(lib, f"{self.name}_work")(ctypes.byref(n_arg), ctypes.byref(n_res),

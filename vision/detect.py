@@ -47,6 +47,7 @@ from __future__ import annotations
 import logging
 import math
 from dataclasses import dataclass
+from typing import Any
 
 import cv2
 import numpy as np
@@ -196,14 +197,16 @@ def fit_normals(
         weights: (..., N) non-negative weights.
 
     Returns:
-        ``normals`` (..., 3) (arbitrary sign) and ``abs_residuals`` (..., N) = ``|n.X|``.
+        ``normals`` (..., 3) (arbitrary sign) and ``abs_residuals`` (..., N) = ``|n.X|``
+        for every finite ray, weighted or not (a point rejected earlier keeps its true
+        residual, so that a robust loop does not re-admit it); 0 for non-finite rays.
     """
     X = np.where(weights[..., None] > 0, rays, 0.0)
     Xw = X * weights[..., None]
     M = np.einsum("...ni,...nj->...ij", Xw, X)
     _, vecs = np.linalg.eigh(M)
     n = vecs[..., :, 0]
-    res = np.abs(np.einsum("...ni,...i->...n", X, n))
+    res = np.abs(np.einsum("...ni,...i->...n", np.nan_to_num(rays), n))
     return n, res
 
 
@@ -221,35 +224,65 @@ def _robust_fit(
     min_points: int,
     max_rms_px: float,
     iterations: int = 2,
+    use_compiled: bool = True,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """Fit, reject points farther than ``outlier_px`` from the fit, refit.
 
+    Per edge: the weights start at ``valid``; up to ``iterations + 1`` times the
+    weighted points are fitted (an edge with fewer than 2 of them gets no normal
+    and stops), every valid point gets its residual [px] and the new weights are
+    the valid points within ``outlier_px``; an edge stops when its weights no
+    longer change. The RMS is that of the final inliers' residuals to the last fit.
+    The compiled core (:func:`vision.kernels.fit_planes`) computes the same.
+
+    Args:
+        rays: (..., N, 3) unit rays (finite where valid).
+        valid: (..., N) bool.
+        px_per_rad: Pixels per radian of residual, scalar or (..., N).
+        predicted: (..., 3) predicted normals (orientation; an edge without a finite
+            prediction is missing).
+        outlier_px: Inlier distance [px].
+        min_points: Minimal number of inliers of a visible edge.
+        max_rms_px: Largest RMS residual of a visible edge [px].
+        iterations: Refits after the first fit.
+        use_compiled: Use the compiled core when it is available.
+
     Returns:
-        ``normals`` (6, 2, 3) oriented like ``predicted`` (NaN if missing),
-        ``visible`` (6, 2), ``n_points`` (6, 2), ``rms_px`` (6, 2), ``inliers``
-        (6, 2, N).
+        ``normals`` (..., 3) oriented like ``predicted`` (NaN if missing),
+        ``visible`` (...), ``n_points`` (...), ``rms_px`` (...), ``inliers``
+        (..., N).
     """
-    w = valid.astype(float)
+    from vision import kernels
+
+    if use_compiled and kernels.available():
+        return kernels.fit_planes(rays, valid, px_per_rad, predicted, outlier_px,
+                                  min_points, max_rms_px, iterations)
+    w = np.asarray(valid, bool).copy()
+    ppr = np.broadcast_to(np.asarray(px_per_rad, float), w.shape)
     n = np.full((*rays.shape[:-2], 3), np.nan)
-    res_px = np.zeros(valid.shape)
+    res_px = np.zeros(w.shape)
+    fitted = np.zeros(w.shape[:-1], bool)
+    active = np.ones(w.shape[:-1], bool)
     for _ in range(iterations + 1):
-        cnt = w.sum(-1)
-        if not np.any(cnt >= 2):
+        active &= w.sum(-1) >= 2
+        if not np.any(active):
             break
-        n, res = fit_normals(rays, w)
-        res_px = res * px_per_rad
-        new_w = (valid & (res_px <= outlier_px)).astype(float)
-        if np.array_equal(new_w, w):
-            break
+        n_fit, res = fit_normals(rays, w.astype(float))
+        rp = res * ppr
+        n = np.where(active[..., None], n_fit, n)
+        res_px = np.where(active[..., None], rp, res_px)
+        fitted |= active
+        new_w = np.where(active[..., None], valid & (rp <= outlier_px), w)
+        active &= np.any(new_w != w, axis=-1)
         w = new_w
-    inl = w > 0
-    cnt = inl.sum(-1)
+    cnt = w.sum(-1)
     with np.errstate(invalid="ignore", divide="ignore"):
-        rms = np.sqrt(np.sum(np.where(inl, res_px**2, 0.0), -1) / np.maximum(cnt, 1))
-    visible = (cnt >= min_points) & (rms <= max_rms_px) & np.all(np.isfinite(predicted), -1)
+        rms = np.sqrt(np.sum(np.where(w, res_px**2, 0.0), -1) / np.maximum(cnt, 1))
+    visible = (fitted & (cnt >= min_points) & (rms <= max_rms_px)
+               & np.all(np.isfinite(predicted), -1))
     n = _orient(n, predicted)
     n = np.where(visible[..., None], n, np.nan)
-    return n, visible, cnt, np.where(visible, rms, np.nan), inl & visible[..., None]
+    return n, visible, cnt, np.where(visible, rms, np.nan), w & visible[..., None]
 
 
 # ============================================================================
@@ -332,6 +365,7 @@ class OmniDetector:
         self._geometry: HexapodGeometry | None = None
         self._ref_key: LegPrediction | None = None
         self._ref: tuple[np.ndarray, ...] = ()
+        self._kernel: Any = None  # vision.kernels.OmniKernel, built on first use
 
     def default_prediction(self, geometry: HexapodGeometry) -> LegPrediction:
         """The legs at the home pose (the automatic mode's association reference)."""
@@ -401,7 +435,7 @@ class OmniDetector:
 
     def detect(
         self, image: np.ndarray, prediction: LegPrediction | None = None,
-        geometry: HexapodGeometry | None = None,
+        geometry: HexapodGeometry | None = None, use_compiled: bool = True,
     ) -> EdgeDetection:
         """Detect the twelve leg edges.
 
@@ -411,15 +445,56 @@ class OmniDetector:
                 home pose of ``geometry``. Derived data are cached while the same
                 prediction object is passed.
             geometry: The robot, needed when ``prediction`` is None.
+            use_compiled: Use the compiled scan and fit (:mod:`vision.kernels`) when
+                they are available; False runs the numpy reference (same results).
 
         Returns:
             An :class:`EdgeDetection` (``expected_points = n_circles``).
         """
+        from vision import kernels
+
         if prediction is None:
             if geometry is None:
                 raise DetectionError("prediction", "give a prediction or the geometry")
             prediction = self.default_prediction(geometry)
         image = _check_image(image, self.camera)
+        refs = self._reference(prediction)
+        compiled = use_compiled and kernels.available()
+        C = self.n_circles
+        if compiled:
+            if self._kernel is None:
+                self._kernel = kernels.OmniKernel(
+                    self._idx, self._base, self._fx, self._fy, self._W, self.radii,
+                    self._z, self._px_per_rad, (self.camera.cx, self.camera.cy))
+            if self._isotropic:
+                normals, vis, cnt, rms, pts = self._kernel.detect(
+                    image, refs, prediction.normals, self.min_contrast,
+                    self.width_tolerance, self.outlier_px, self.min_points,
+                    self.max_rms_px, iterations=1)
+                return EdgeDetection(normals, vis, cnt, rms, pts, C)
+            pts_a = self._kernel.scan(image, refs, self.min_contrast, self.width_tolerance)
+        else:
+            pts_a = self._scan(image, refs)
+        valid = np.isfinite(pts_a)
+        a = np.where(valid, pts_a, 0.0)
+        r = self.radii
+        px = self.camera.cx + r * np.cos(a)
+        py = self.camera.cy + r * np.sin(a)
+        if self._isotropic:
+            z = self._z
+            rho = np.sqrt(np.maximum(1.0 - z * z, 0.0))
+            rays = np.stack([rho * np.cos(a), rho * np.sin(a), np.broadcast_to(z, a.shape)], -1)
+        else:
+            rays = self.camera.lift(np.stack([px, py], -1))
+        normals, vis, cnt, rms, inl = _robust_fit(
+            rays, valid, self._px_per_rad, prediction.normals, self.outlier_px,
+            self.min_points, self.max_rms_px, iterations=1, use_compiled=compiled)
+        pts = np.where(inl[..., None], np.stack([px, py], -1), np.nan)
+        return EdgeDetection(normals, vis, cnt, rms, pts, C)
+
+    def _scan(self, image: np.ndarray, refs: tuple[np.ndarray, ...]) -> np.ndarray:
+        """The numpy circle scan: azimuths (6, 2, C) of the edge points [rad] (NaN
+        where none), the reference of the compiled ``omni_scan``."""
         flat = np.ravel(image)
         sig = flat[self._idx]
         C, N = sig.shape
@@ -437,7 +512,7 @@ class OmniDetector:
         is_start = step[c_t, j_t] > 0
         c_s, j_s = c_t[is_start], j_t[is_start]
         c_e, j_e = c_t[~is_start], j_t[~is_start]
-        axis_ref, gate_ref, width_ref, e1_first_ref = self._reference(prediction)
+        axis_ref, gate_ref, width_ref, e1_first_ref = refs
         pts_a = np.full((6, 2, C), np.nan)  # azimuth of each edge point [rad]
         if c_s.size:
             # Pair each band start with the next end on the same circle (wrapping).
@@ -478,22 +553,7 @@ class OmniDetector:
                 first1 = e1_first_ref[leg_k, c_k]
                 pts_a[leg_k, 0, c_k] = np.where(first1, a_start, a_end)
                 pts_a[leg_k, 1, c_k] = np.where(first1, a_end, a_start)
-        valid = np.isfinite(pts_a)
-        a = np.where(valid, pts_a, 0.0)
-        r = self.radii
-        px = self.camera.cx + r * np.cos(a)
-        py = self.camera.cy + r * np.sin(a)
-        if self._isotropic:
-            z = self._z
-            rho = np.sqrt(np.maximum(1.0 - z * z, 0.0))
-            rays = np.stack([rho * np.cos(a), rho * np.sin(a), np.broadcast_to(z, a.shape)], -1)
-        else:
-            rays = self.camera.lift(np.stack([px, py], -1))
-        normals, vis, cnt, rms, inl = _robust_fit(
-            rays, valid, self._px_per_rad, prediction.normals, self.outlier_px,
-            self.min_points, self.max_rms_px, iterations=1)
-        pts = np.where(inl[..., None], np.stack([px, py], -1), np.nan)
-        return EdgeDetection(normals, vis, cnt, rms, pts, C)
+        return pts_a
 
 
 def _wrap(a: np.ndarray) -> np.ndarray:
@@ -570,6 +630,7 @@ class PerspectiveTracker:
     def detect(
         self, image: np.ndarray, prediction: LegPrediction,
         search_px: float | None = None, refine_px: float | None = None,
+        use_compiled: bool = True,
     ) -> EdgeDetection:
         """Find the twelve edges near their prediction.
 
@@ -578,6 +639,8 @@ class PerspectiveTracker:
             prediction: Predicted legs in the estimated camera frame.
             search_px: Overrides the search half-length of this call [px].
             refine_px: Overrides the second-pass half-length of this call [px].
+            use_compiled: Use the compiled robust fit (:mod:`vision.kernels`) when it
+                is available; False runs the numpy reference (same results).
 
         Returns:
             An :class:`EdgeDetection` (``expected_points = n_samples``).
@@ -587,19 +650,20 @@ class PerspectiveTracker:
         refine = self.refine_px if refine_px is None else float(refine_px)
         seg = self.predicted_segments(prediction)
         lines = _pixel_lines(self.camera, prediction.normals)
-        det = self._pass(image, seg, lines, prediction, search)
+        det = self._pass(image, seg, lines, prediction, search, use_compiled)
         if refine > 0:
             ok = det.edge_visible
             l2 = np.where(ok[..., None], _pixel_lines(self.camera, det.normals), lines)
             d = np.sum(l2[:, :, None, :2] * seg, -1) + l2[:, :, None, 2]
             seg2 = seg - d[..., None] * l2[:, :, None, :2]
             pred2 = prediction.with_normals(det.normals)
-            det = self._pass(image, seg2, l2, pred2, np.where(ok, refine, search))
+            det = self._pass(image, seg2, l2, pred2, np.where(ok, refine, search),
+                             use_compiled)
         return det
 
     def _pass(
         self, image: np.ndarray, seg: np.ndarray, lines: np.ndarray,
-        prediction: LegPrediction, search: float | np.ndarray,
+        prediction: LegPrediction, search: float | np.ndarray, use_compiled: bool = True,
     ) -> EdgeDetection:
         M = self.n_samples
         m = self.end_margin
@@ -662,7 +726,7 @@ class PerspectiveTracker:
         rays = self._lift(np.where(valid[..., None], pts, 0.0))
         normals, vis, cnt, rms, inl = _robust_fit(
             rays, valid, self._px_per_rad(pts), prediction.normals, self.outlier_px,
-            self.min_points, self.max_rms_px)
+            self.min_points, self.max_rms_px, use_compiled=use_compiled)
         return EdgeDetection(normals, vis, cnt, rms, np.where(inl[..., None], pts, np.nan), M)
 
     def _lift(self, pix: np.ndarray) -> np.ndarray:

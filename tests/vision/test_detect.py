@@ -176,3 +176,30 @@ def test_fit_normals_recovers_a_plane(rng):
     m, res = fit_normals(X, w)
     assert abs(abs(m @ n) - 1) < 1e-12
     assert np.all(res[w > 0] < 1e-12)
+    # the zero-weight point keeps its true residual (a robust loop must not re-admit it)
+    assert res[3] == pytest.approx(abs(n[0]), abs=1e-12)
+
+
+@pytest.mark.parametrize("iterations", [1, 2])
+def test_robust_fit_rejects_outliers_for_good(rng, iterations):
+    """17 points of a plane (0.1 px noise) and 3 points 5 px off: the fit, the inlier
+    count and the RMS are those of the 17, whatever the number of refits (a rejected
+    point used to come back with a zero residual at the next refit)."""
+    from vision.detect import _robust_fit
+
+    normal = np.array([0.0, 0.0, 1.0])
+    a = rng.uniform(0.0, 1.0, 20)
+    px_per_rad = 1000.0
+    rays = np.stack([np.cos(a), np.sin(a), rng.normal(0.0, 0.1 / px_per_rad, 20)], -1)
+    rays[:3, 2] = 5.0 / px_per_rad
+    rays /= np.linalg.norm(rays, axis=-1, keepdims=True)
+    batch = np.broadcast_to(rays, (6, 2, 20, 3)).copy()
+    valid = np.ones((6, 2, 20), bool)
+    predicted = np.broadcast_to(normal, (6, 2, 3))
+    n, vis, cnt, rms, inl = _robust_fit(batch, valid, px_per_rad, predicted, 1.0, 5, 1.0,
+                                        iterations=iterations)
+    assert vis.all() and np.all(cnt == 17)
+    assert not inl[..., :3].any() and inl[..., 3:].all()
+    clean, _ = fit_normals(rays[3:], np.ones(17))
+    assert np.allclose(np.abs(n @ clean), 1.0, atol=1e-12)
+    assert np.all(rms < 0.3)  # the 0.1 px noise, not the 5 px outliers

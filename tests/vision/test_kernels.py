@@ -1,0 +1,135 @@
+"""The compiled detector cores (vision/kernels.py) compute what the numpy path computes."""
+
+from __future__ import annotations
+
+import logging
+
+import numpy as np
+import pytest
+
+from hexapod.workspace import sample_poses
+from vision import kernels
+from vision.cameras import front_camera, omni_camera
+from vision.detect import LegPrediction, OmniDetector, PerspectiveTracker, _robust_fit
+from vision.render import Renderer, RenderStyle
+
+
+def test_the_kernels_compile_here() -> None:
+    """CI has a C compiler: the compiled path must be the one measured and tested."""
+    assert kernels.available()
+
+
+def _same_detection(a, b) -> None:
+    assert np.array_equal(a.edge_visible, b.edge_visible)
+    assert np.array_equal(a.n_points, b.n_points)
+    m = a.edge_visible
+    assert np.allclose(a.normals[m], b.normals[m], rtol=0, atol=1e-12)
+    assert np.all(np.isnan(a.normals[~m])) and np.all(np.isnan(b.normals[~m]))
+    assert np.allclose(a.residual[m], b.residual[m], rtol=0, atol=1e-9)
+    assert np.array_equal(np.isnan(a.points), np.isnan(b.points))
+    assert np.allclose(a.points, b.points, rtol=0, atol=1e-9, equal_nan=True)
+
+
+@pytest.mark.parametrize("background", ["plain", "cluttered"])
+def test_compiled_omni_detection_equals_numpy(geometry, rng, background) -> None:
+    """Frame by frame, on noisy rendered images (and on clutter, where the scan finds
+    spurious bands, rejects and misses edges): same edges, same points, same normals."""
+    cam = omni_camera(geometry)
+    style = RenderStyle(background=background, blur_px=0.8, noise_std=4.0)
+    r = Renderer(cam, geometry, style, rng=rng)
+    det = OmniDetector(cam)
+    assert det._isotropic
+    Rs, ts = sample_poses(geometry, 25, rng)
+    missing = 0
+    for k in range(25):
+        img = r.render(Rs[k], ts[k])
+        pred = LegPrediction.from_pose(cam, geometry, Rs[k], ts[k]) if k % 2 else None
+        a = det.detect(img, pred, geometry=geometry, use_compiled=True)
+        b = det.detect(img, pred, geometry=geometry, use_compiled=False)
+        _same_detection(a, b)
+        missing += int((~a.edge_visible).sum())
+    if background == "cluttered":
+        assert missing > 0  # the comparison covered rejected edges too
+
+
+def test_compiled_scan_of_an_anisotropic_camera_equals_numpy(geometry, rng) -> None:
+    """fx != fy: the compiled scan, then the camera's own lift, then the compiled fit."""
+    cam0 = omni_camera(geometry)
+    K = cam0.K.copy()
+    K[1, 1] *= 1.03
+    cam = cam0.replace(K=K)
+    det = OmniDetector(cam)
+    assert not det._isotropic
+    r = Renderer(cam, geometry, RenderStyle(blur_px=0.8, noise_std=3.0), rng=rng)
+    Rs, ts = sample_poses(geometry, 10, rng)
+    for k in range(10):
+        img = r.render(Rs[k], ts[k])
+        a = det.detect(img, geometry=geometry, use_compiled=True)
+        b = det.detect(img, geometry=geometry, use_compiled=False)
+        _same_detection(a, b)
+        assert a.edge_visible.sum() >= 10
+
+
+def test_compiled_fit_equals_numpy_on_tracker_inputs(geometry, rng) -> None:
+    """The perspective tracker's fits (three fits, outliers from occlusions and a
+    corrupted band of the image) through both paths."""
+    cam = front_camera(geometry)
+    r = Renderer(cam, geometry, RenderStyle(blur_px=0.8, noise_std=3.0), rng=rng)
+    tr = PerspectiveTracker(cam)
+    Rs, ts = sample_poses(geometry, 15, rng)
+    for k in range(15):
+        img = r.render(Rs[k], ts[k])
+        img[300:310] = 255 - img[300:310]  # a stripe of wrong edges
+        pred = LegPrediction.from_pose(cam, geometry, Rs[k], ts[k] + 0.002)
+        a = tr.detect(img, pred)
+        # the same inputs through the numpy fit
+        from unittest import mock
+
+        with mock.patch.object(kernels, "available", return_value=False):
+            b = tr.detect(img, pred)
+        _same_detection(a, b)
+
+
+def test_fit_kernel_degenerate_edges(rng) -> None:
+    """Edges with 0, 1 or 2 points, all-invalid rays, NaN predictions: same outputs."""
+    rays = rng.standard_normal((6, 2, 8, 3))
+    rays /= np.linalg.norm(rays, axis=-1, keepdims=True)
+    valid = rng.uniform(size=(6, 2, 8)) < 0.7
+    valid[0, 0] = False
+    valid[0, 1] = False
+    valid[0, 1, 3] = True
+    valid[1, 0] = False
+    valid[1, 0, :2] = True
+    pred = rng.standard_normal((6, 2, 3))
+    pred[2, 1] = np.nan
+    args = (rays, valid, 50.0, pred, 5.0, 2, 100.0, 2)
+    a = _robust_fit(*args, use_compiled=True)
+    b = _robust_fit(*args, use_compiled=False)
+    for x, y in zip(a, b, strict=True):
+        assert x.shape == y.shape
+        assert np.allclose(x, y, rtol=0, atol=1e-12, equal_nan=True)
+    assert not a[1][0, 0] and not a[1][0, 1] and a[2][0, 1] == 1
+    assert not a[1][2, 1]
+
+
+def test_without_a_compiler_the_numpy_path_runs(monkeypatch, caplog, geometry, rng) -> None:
+    """No compiler: a warning once, then the numpy path (same detection)."""
+    cam = omni_camera(geometry)
+    Rs, ts = sample_poses(geometry, 1, rng)
+    img = Renderer(cam, geometry, RenderStyle(blur_px=0.8), rng=rng).render(Rs[0], ts[0])
+    reference = OmniDetector(cam).detect(img, geometry=geometry)
+    monkeypatch.setattr(kernels, "_lib", None)
+    monkeypatch.setattr(kernels, "_tried", False)
+    monkeypatch.setenv("CC", "no-such-compiler-xyz")
+    with caplog.at_level(logging.WARNING, logger="vision.kernels"):
+        assert not kernels.available()
+        assert not kernels.available()
+    assert sum("C compilation unavailable" in r.message for r in caplog.records) == 1
+    _same_detection(OmniDetector(cam).detect(img, geometry=geometry), reference)
+
+
+def test_no_compile_environment_variable(monkeypatch) -> None:
+    monkeypatch.setattr(kernels, "_lib", None)
+    monkeypatch.setattr(kernels, "_tried", False)
+    monkeypatch.setenv("HEXAPOD_NO_COMPILE", "1")
+    assert not kernels.available()

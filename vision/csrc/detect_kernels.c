@@ -1,0 +1,315 @@
+/*
+ * Compiled cores of the leg-edge detectors (vision/detect.py), called through ctypes
+ * by vision/kernels.py. Each function computes exactly what the numpy path of
+ * vision/detect.py computes (same decisions, same arithmetic order; compiled with
+ * -ffp-contract=off so that no multiply-add is fused), and the tests check that the
+ * two agree. All arrays are C-contiguous; sizes are given explicitly.
+ *
+ *   omni_scan   seed 003's circle scan: polar sampling, threshold at mid-range,
+ *               dark bands, association to the predicted legs, sub-sample edges.
+ *   fit_planes  robust batched plane fit through the origin (smallest eigenvector of
+ *               the scatter matrix, outlier rejection, refit), oriented like the
+ *               prediction.
+ *   omni_detect both, for a camera with fx = fy and no skew (the rays of a circle
+ *               share their elevation): one call per frame.
+ */
+#include <math.h>
+#include <stdint.h>
+#include <stdlib.h>
+
+#define PI_ 3.141592653589793
+#define TWO_PI_ (2.0 * PI_)
+
+/* numpy's remainder (floor modulo, sign of the divisor). */
+static double py_mod(double a, double b) {
+  double m = fmod(a, b);
+  if (m != 0.0) {
+    if ((b < 0) != (m < 0)) m += b;
+  } else {
+    m = copysign(0.0, b);
+  }
+  return m;
+}
+
+/* (a + pi) % (2 pi) - pi, as vision.detect._wrap. */
+static double wrap_angle(double a) { return py_mod(a + PI_, TWO_PI_) - PI_; }
+
+static int64_t imod(int64_t a, int64_t n) {
+  int64_t m = a % n;
+  return m < 0 ? m + n : m;
+}
+
+static double bilinear(const uint8_t *img, const int64_t *base, const double *fx,
+                       const double *fy, int64_t W, int64_t k) {
+  int64_t b = base[k];
+  double x = fx[k], y = fy[k];
+  double v00 = img[b], v01 = img[b + 1], v10 = img[b + W], v11 = img[b + W + 1];
+  return (1 - y) * ((1 - x) * v00 + x * v01) + y * ((1 - x) * v10 + x * v11);
+}
+
+static double crossing(const uint8_t *img, const int64_t *base, const double *fx,
+                       const double *fy, int64_t W, int64_t row, int64_t N, int64_t j,
+                       double thr) {
+  double v0 = bilinear(img, base, fx, fy, W, row + imod(j - 1, N));
+  double v1 = bilinear(img, base, fx, fy, W, row + j);
+  double f = (thr - v0) / (v1 - v0);
+  if (isnan(f)) {
+    f = 0.5;
+  } else if (f < 0.0) {
+    f = 0.0;
+  } else if (f > 1.0) {
+    f = 1.0;
+  }
+  return ((double)(j - 1) + f) * (TWO_PI_ / (double)N);
+}
+
+/*
+ * img: (H*W) uint8. idx: (C*N) nearest-pixel flat indices. base, fx, fy: (C*N)
+ * bilinear data. axis_ref, gate_ref, width_ref: (6*C); e1_first: (6*C) 0/1.
+ * pts_a: (6*2*C) out, azimuth [rad] of each edge point, NaN where none.
+ * Returns 0, or 1 if out of memory.
+ */
+int omni_scan(const uint8_t *img, const int64_t *idx, const int64_t *base, const double *fx,
+              const double *fy, int64_t W, int64_t C, int64_t N, const double *axis_ref,
+              const double *gate_ref, const double *width_ref, const uint8_t *e1_first,
+              double min_contrast, double width_tol, double *pts_a) {
+  uint8_t *sig = malloc((size_t)N);
+  int64_t *starts = malloc(sizeof(int64_t) * (size_t)N);
+  int64_t *ends = malloc(sizeof(int64_t) * (size_t)N);
+  if (!sig || !starts || !ends) {
+    free(sig); free(starts); free(ends);
+    return 1;
+  }
+  for (int64_t k = 0; k < 6 * 2 * C; ++k) pts_a[k] = NAN;
+  const double step_a = TWO_PI_ / (double)N;
+  for (int64_t c = 0; c < C; ++c) {
+    const int64_t row = c * N;
+    uint8_t lo = 255, hi = 0;
+    for (int64_t j = 0; j < N; ++j) {
+      uint8_t s = img[idx[row + j]];
+      sig[j] = s;
+      if (s < lo) lo = s;
+      if (s > hi) hi = s;
+    }
+    double thr = 0.5 * ((double)lo + (double)hi);
+    uint8_t thr_i = (uint8_t)(((unsigned)lo + (unsigned)hi + 1u) / 2u);
+    if ((double)hi - (double)lo < min_contrast) continue; /* flat circle: no band */
+    int64_t ns = 0, ne = 0;
+    int prev = sig[N - 1] < thr_i;
+    for (int64_t j = 0; j < N; ++j) {
+      int d = sig[j] < thr_i;
+      if (d && !prev) starts[ns++] = j;
+      if (!d && prev) ends[ne++] = j;
+      prev = d;
+    }
+    if (ns == 0 || ne == 0) continue;
+    double best_d[6];
+    int64_t best_s[6], best_e[6];
+    for (int l = 0; l < 6; ++l) best_s[l] = -1;
+    int64_t e_ptr = 0;
+    for (int64_t b = 0; b < ns; ++b) {
+      int64_t js = starts[b];
+      while (e_ptr < ne && ends[e_ptr] < js) ++e_ptr;
+      int64_t je = e_ptr < ne ? ends[e_ptr] : ends[0];
+      int64_t span = imod(je - js, N);
+      double a_c = ((double)js + 0.5 * (double)span) * step_a;
+      double width = (double)span * step_a;
+      int leg = 0;
+      double dbest = INFINITY;
+      for (int l = 0; l < 6; ++l) {
+        double d = fabs(wrap_angle(a_c - axis_ref[l * C + c]));
+        if (l == 0 || d < dbest) {
+          dbest = d;
+          leg = l;
+        }
+      }
+      double w_ref = width_ref[leg * C + c];
+      int ok = (dbest < gate_ref[leg * C + c]) && (width < width_tol * w_ref + step_a) &&
+               (width > w_ref / width_tol - step_a);
+      if (ok && (best_s[leg] < 0 || dbest < best_d[leg])) {
+        best_d[leg] = dbest;
+        best_s[leg] = js;
+        best_e[leg] = je;
+      }
+    }
+    for (int l = 0; l < 6; ++l) {
+      if (best_s[l] < 0) continue;
+      double a_start = crossing(img, base, fx, fy, W, row, N, best_s[l], thr);
+      double a_end = crossing(img, base, fx, fy, W, row, N, best_e[l], thr);
+      int first1 = e1_first[l * C + c] != 0;
+      pts_a[(l * 2 + 0) * C + c] = first1 ? a_start : a_end;
+      pts_a[(l * 2 + 1) * C + c] = first1 ? a_end : a_start;
+    }
+  }
+  free(sig); free(starts); free(ends);
+  return 0;
+}
+
+/* Eigenvector of the smallest eigenvalue of a symmetric 3x3 matrix (cyclic Jacobi). */
+static void smallest_eigenvector(const double M[9], double out[3]) {
+  double a[3][3], v[3][3] = {{1, 0, 0}, {0, 1, 0}, {0, 0, 1}};
+  for (int i = 0; i < 3; ++i)
+    for (int j = 0; j < 3; ++j) a[i][j] = M[3 * i + j];
+  for (int sweep = 0; sweep < 50; ++sweep) {
+    double off = fabs(a[0][1]) + fabs(a[0][2]) + fabs(a[1][2]);
+    double scale = fabs(a[0][0]) + fabs(a[1][1]) + fabs(a[2][2]);
+    if (off == 0.0 || off <= 1e-300 || off < 1e-18 * scale) break;
+    for (int p = 0; p < 2; ++p) {
+      for (int q = p + 1; q < 3; ++q) {
+        if (a[p][q] == 0.0) continue;
+        double theta = (a[q][q] - a[p][p]) / (2.0 * a[p][q]);
+        double t = (theta >= 0 ? 1.0 : -1.0) / (fabs(theta) + sqrt(theta * theta + 1.0));
+        double c = 1.0 / sqrt(t * t + 1.0), s = t * c;
+        for (int k = 0; k < 3; ++k) { /* A <- A J */
+          double akp = a[k][p], akq = a[k][q];
+          a[k][p] = c * akp - s * akq;
+          a[k][q] = s * akp + c * akq;
+        }
+        for (int k = 0; k < 3; ++k) { /* A <- J^T A */
+          double apk = a[p][k], aqk = a[q][k];
+          a[p][k] = c * apk - s * aqk;
+          a[q][k] = s * apk + c * aqk;
+        }
+        for (int k = 0; k < 3; ++k) { /* V <- V J */
+          double vkp = v[k][p], vkq = v[k][q];
+          v[k][p] = c * vkp - s * vkq;
+          v[k][q] = s * vkp + c * vkq;
+        }
+      }
+    }
+  }
+  int m = 0;
+  for (int i = 1; i < 3; ++i)
+    if (a[i][i] < a[m][m]) m = i;
+  double nrm = sqrt(v[0][m] * v[0][m] + v[1][m] * v[1][m] + v[2][m] * v[2][m]);
+  for (int k = 0; k < 3; ++k) out[k] = v[k][m] / nrm;
+}
+
+/*
+ * Robust plane fit of E edges of up to N rays each (vision.detect._robust_fit).
+ * rays: (E*N*3) unit rays (anything where not valid); valid: (E*N) 0/1;
+ * px_per_rad: (E*N); predicted: (E*3). Out: normals (E*3, NaN where not visible),
+ * visible (E), count (E), rms (E, NaN where not visible), inliers (E*N).
+ *
+ * Per edge: w = valid; up to iterations + 1 times: fit the weighted points (at
+ * least 2, else the edge keeps no normal and stops), residuals of every valid ray
+ * [px], new weights = valid and residual <= outlier_px; stop when unchanged.
+ */
+void fit_planes(const double *rays, const uint8_t *valid, const double *px_per_rad,
+                const double *predicted, int64_t E, int64_t N, double outlier_px,
+                int64_t min_points, double max_rms_px, int64_t iterations, double *normals,
+                uint8_t *visible, int64_t *count, double *rms, uint8_t *inliers) {
+  for (int64_t e = 0; e < E; ++e) {
+    const double *X = rays + e * N * 3;
+    const uint8_t *val = valid + e * N;
+    const double *ppr = px_per_rad + e * N;
+    uint8_t *w = inliers + e * N;
+    double n[3] = {NAN, NAN, NAN};
+    int64_t cnt = 0;
+    for (int64_t k = 0; k < N; ++k) {
+      w[k] = val[k] ? 1 : 0;
+      cnt += w[k];
+    }
+    int fitted = 0;
+    double ss = 0.0;
+    for (int64_t it = 0; it <= iterations; ++it) {
+      if (cnt < 2) break;
+      double M[9] = {0, 0, 0, 0, 0, 0, 0, 0, 0};
+      for (int64_t k = 0; k < N; ++k) {
+        if (!w[k]) continue;
+        const double *x = X + 3 * k;
+        for (int i = 0; i < 3; ++i)
+          for (int j = 0; j < 3; ++j) M[3 * i + j] += x[i] * x[j];
+      }
+      smallest_eigenvector(M, n);
+      fitted = 1;
+      int changed = 0;
+      int64_t new_cnt = 0;
+      ss = 0.0;
+      for (int64_t k = 0; k < N; ++k) {
+        uint8_t nw = 0;
+        double r_px = 0.0;
+        if (val[k]) {
+          const double *x = X + 3 * k;
+          r_px = fabs(x[0] * n[0] + x[1] * n[1] + x[2] * n[2]) * ppr[k];
+          nw = r_px <= outlier_px;
+        }
+        if (nw != w[k]) changed = 1;
+        w[k] = nw;
+        new_cnt += nw;
+        if (nw) ss += r_px * r_px;
+      }
+      /* rms over the new weights with the residuals of this fit (as numpy) */
+      cnt = new_cnt;
+      if (!changed) break;
+    }
+    const double *pr = predicted + 3 * e;
+    int pred_ok = isfinite(pr[0]) && isfinite(pr[1]) && isfinite(pr[2]);
+    double r = sqrt(ss / (double)(cnt > 1 ? cnt : 1));
+    int vis = fitted && cnt >= min_points && r <= max_rms_px && pred_ok;
+    count[e] = cnt;
+    visible[e] = (uint8_t)vis;
+    rms[e] = vis ? r : NAN;
+    double s = n[0] * pr[0] + n[1] * pr[1] + n[2] * pr[2];
+    double sg = s < 0 ? -1.0 : 1.0;
+    for (int i = 0; i < 3; ++i) normals[3 * e + i] = vis ? sg * n[i] : NAN;
+    if (!vis)
+      for (int64_t k = 0; k < N; ++k) w[k] = 0;
+  }
+}
+
+/*
+ * The whole omnidirectional detection of one frame (OmniDetector.detect with an
+ * isotropic camera): omni_scan, then the ray of each edge point on its circle
+ * (elevation z[c], azimuth a), then fit_planes, then the inlier pixels.
+ * radii, z, ppr_circle: (C). predicted: (12*3).
+ * Work: pts_a (12*C), rays (12*C*3), valid (12*C), ppr (12*C).
+ * Out: normals (12*3), visible (12), count (12), rms (12), inliers (12*C),
+ * points (12*C*2, NaN where not an inlier).
+ */
+int omni_detect(const uint8_t *img, const int64_t *idx, const int64_t *base, const double *fx,
+                const double *fy, int64_t W, int64_t C, int64_t N, const double *axis_ref,
+                const double *gate_ref, const double *width_ref, const uint8_t *e1_first,
+                double min_contrast, double width_tol, const double *radii, const double *z,
+                const double *ppr_circle, double cx, double cy, const double *predicted,
+                double outlier_px, int64_t min_points, double max_rms_px, int64_t iterations,
+                double *pts_a, double *rays, uint8_t *valid, double *ppr, double *normals,
+                uint8_t *visible, int64_t *count, double *rms, uint8_t *inliers,
+                double *points) {
+  if (omni_scan(img, idx, base, fx, fy, W, C, N, axis_ref, gate_ref, width_ref, e1_first,
+                min_contrast, width_tol, pts_a))
+    return 1;
+  for (int64_t e = 0; e < 12; ++e) {
+    for (int64_t c = 0; c < C; ++c) {
+      int64_t k = e * C + c;
+      double a = pts_a[k];
+      int ok = !isnan(a) && !isinf(a);
+      valid[k] = (uint8_t)ok;
+      if (!ok) a = 0.0;
+      double zc = z[c];
+      double q = 1.0 - zc * zc;
+      double rho = sqrt(q > 0.0 ? q : 0.0);
+      double ca = cos(a), sa = sin(a);
+      rays[3 * k + 0] = rho * ca;
+      rays[3 * k + 1] = rho * sa;
+      rays[3 * k + 2] = zc;
+      ppr[k] = ppr_circle[c];
+      pts_a[k] = a; /* reused below for the pixels */
+    }
+  }
+  fit_planes(rays, valid, ppr, predicted, 12, C, outlier_px, min_points, max_rms_px,
+             iterations, normals, visible, count, rms, inliers);
+  for (int64_t e = 0; e < 12; ++e) {
+    for (int64_t c = 0; c < C; ++c) {
+      int64_t k = e * C + c;
+      if (inliers[k]) {
+        points[2 * k + 0] = cx + radii[c] * cos(pts_a[k]);
+        points[2 * k + 1] = cy + radii[c] * sin(pts_a[k]);
+      } else {
+        points[2 * k + 0] = NAN;
+        points[2 * k + 1] = NAN;
+      }
+    }
+  }
+  return 0;
+}

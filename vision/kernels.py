@@ -1,0 +1,209 @@
+"""Compiled cores of the leg-edge detectors (``vision/csrc/detect_kernels.c``).
+
+The circle scan of :class:`vision.detect.OmniDetector` and the robust plane fit
+shared by both detectors are written once in numpy (the reference, in
+:mod:`vision.detect`) and once in C. The C source ships with the package; it is
+compiled on first use by the system C compiler through
+:func:`hexapod.compiled.build_shared_library` (cached under the hash of the
+source) and called through :mod:`ctypes`. It computes the same decisions with the
+same arithmetic (``-ffp-contract=off``: no fused multiply-add), which the tests
+check frame by frame; only the 3x3 eigen-solve differs (Jacobi instead of LAPACK,
+equal to about 1e-15).
+
+Without a compiler, or with ``HEXAPOD_NO_COMPILE=1`` in the environment, the
+numpy path runs (same results, a few times slower) and a warning is logged once.
+"""
+
+from __future__ import annotations
+
+import ctypes
+import logging
+import os
+import subprocess
+from importlib import resources
+
+import numpy as np
+
+from hexapod.compiled import CompilationError, build_shared_library
+
+log = logging.getLogger(__name__)
+
+#: Compiler flags: optimised, and no fused multiply-add (the numpy path rounds each
+#: product; a contracted a*b+c would differ in the last bit).
+FLAGS = ("-O2", "-ffp-contract=off")
+
+_P = ctypes.c_void_p
+_I = ctypes.c_int64
+_D = ctypes.c_double
+
+_lib: ctypes.CDLL | None = None
+_tried = False
+
+
+def _load() -> ctypes.CDLL | None:
+    global _lib, _tried
+    if _tried:
+        return _lib
+    _tried = True
+    if os.environ.get("HEXAPOD_NO_COMPILE", "") not in ("", "0"):
+        log.info("HEXAPOD_NO_COMPILE is set: the detectors use their numpy path")
+        return None
+    code = resources.files("vision").joinpath("csrc/detect_kernels.c").read_text()
+    try:
+        lib = ctypes.CDLL(str(build_shared_library("detect_kernels", code, FLAGS)))
+    except (OSError, subprocess.SubprocessError, CompilationError) as exc:
+        detail = getattr(exc, "stderr", b"") or b""
+        log.warning("detector kernels: C compilation unavailable (%s %s); using numpy",
+                    exc, detail.decode(errors="replace")[:500])
+        return None
+    lib.omni_scan.argtypes = [_P] * 5 + [_I] * 3 + [_P] * 4 + [_D, _D, _P]
+    lib.omni_scan.restype = ctypes.c_int
+    lib.fit_planes.argtypes = [_P] * 4 + [_I, _I, _D, _I, _D, _I] + [_P] * 5
+    lib.fit_planes.restype = None
+    lib.omni_detect.argtypes = ([_P] * 5 + [_I] * 3 + [_P] * 4 + [_D, _D] + [_P] * 3
+                                + [_D, _D, _P, _D, _I, _D, _I] + [_P] * 10)
+    lib.omni_detect.restype = ctypes.c_int
+    _lib = lib
+    return lib
+
+
+def available() -> bool:
+    """Whether the compiled cores are loaded (compiles them on the first call)."""
+    return _load() is not None
+
+
+def _c(a: np.ndarray, dtype: type) -> np.ndarray:
+    return np.ascontiguousarray(a, dtype=dtype)
+
+
+class OmniKernel:
+    """The compiled omnidirectional detection for one circle layout.
+
+    The constant arrays are converted once and their addresses cached; the
+    association references are converted once per prediction (the detector caches
+    them per prediction object), so a frame costs one C call.
+
+    Args:
+        idx: (C, N) nearest-pixel flat indices of the samples.
+        base: (C, N) flat index of the top-left pixel of each bilinear sample.
+        fx: (C, N) horizontal bilinear weights.
+        fy: (C, N) vertical bilinear weights.
+        width: Image width [px].
+        radii: (C,) circle radii [px].
+        z: (C,) elevation (z of the unit ray) of each circle (isotropic camera).
+        px_per_rad: (C,) pixels per radian across each circle.
+        centre: (cx, cy) principal point [px].
+    """
+
+    def __init__(self, idx: np.ndarray, base: np.ndarray, fx: np.ndarray, fy: np.ndarray,
+                 width: int, radii: np.ndarray, z: np.ndarray, px_per_rad: np.ndarray,
+                 centre: tuple[float, float]) -> None:
+        lib = _load()
+        if lib is None:
+            raise CompilationError("the detector kernels are not compiled")
+        self._lib = lib
+        self._keep = [_c(idx, np.int64), _c(base, np.int64), _c(fx, np.float64),
+                      _c(fy, np.float64), _c(radii, np.float64), _c(z, np.float64),
+                      _c(px_per_rad, np.float64)]
+        C, N = self._keep[0].shape
+        self.C = int(C)
+        ptr = [a.ctypes.data for a in self._keep]
+        self._layout = (*ptr[:4], int(width), int(C), int(N))
+        self._circles = (*ptr[4:], float(centre[0]), float(centre[1]))
+        self._pts_a = np.empty((6, 2, C))
+        self._rays = np.empty((6, 2, C, 3))
+        self._valid = np.empty((6, 2, C), np.uint8)
+        self._ppr = np.empty((6, 2, C))
+        self._pred = np.empty((6, 2, 3))
+        self._normals = np.empty((6, 2, 3))
+        self._visible = np.empty((6, 2), np.uint8)
+        self._count = np.empty((6, 2), np.int64)
+        self._rms = np.empty((6, 2))
+        self._inliers = np.empty((6, 2, C), np.uint8)
+        self._points = np.empty((6, 2, C, 2))
+        self._buffers = tuple(a.ctypes.data for a in (
+            self._pts_a, self._rays, self._valid, self._ppr, self._normals, self._visible,
+            self._count, self._rms, self._inliers, self._points))
+        self._pred_ptr = self._pred.ctypes.data
+        self._ref_key: tuple[np.ndarray, ...] | None = None
+        self._ref_arrays: list[np.ndarray] = []
+        self._ref_ptrs: tuple[int, ...] = ()
+
+    def _refs(self, refs: tuple[np.ndarray, ...]) -> tuple[int, ...]:
+        if refs is not self._ref_key:
+            self._ref_arrays = [_c(refs[0], np.float64), _c(refs[1], np.float64),
+                                _c(refs[2], np.float64), _c(refs[3], np.uint8)]
+            self._ref_ptrs = tuple(a.ctypes.data for a in self._ref_arrays)
+            self._ref_key = refs
+        return self._ref_ptrs
+
+    def scan(self, image: np.ndarray, refs: tuple[np.ndarray, ...], min_contrast: float,
+             width_tolerance: float) -> np.ndarray:
+        """Azimuths (6, 2, C) of the edge points [rad], NaN where none (a fresh array):
+        the compiled :meth:`vision.detect.OmniDetector._scan`.
+
+        Args:
+            image: (H, W) uint8 image of the layout's size (checked by the caller).
+            refs: ``(axis, gate, width, e1_first)``, each (6, C), as returned by
+                :meth:`vision.detect.OmniDetector._reference`.
+            min_contrast: Minimal grey-level range of a circle.
+            width_tolerance: Band width tolerance factor.
+        """
+        img = _c(image, np.uint8)
+        if self._lib.omni_scan(img.ctypes.data, *self._layout, *self._refs(refs),
+                               float(min_contrast), float(width_tolerance),
+                               self._pts_a.ctypes.data):
+            raise MemoryError("omni_scan: out of memory")
+        return self._pts_a.copy()
+
+    def detect(self, image: np.ndarray, refs: tuple[np.ndarray, ...], predicted: np.ndarray,
+               min_contrast: float, width_tolerance: float, outlier_px: float,
+               min_points: int, max_rms_px: float, iterations: int,
+               ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """One frame, isotropic camera: scan, rays, robust fit, inlier pixels.
+
+        Returns:
+            Fresh arrays ``normals`` (6, 2, 3), ``visible`` (6, 2), ``count`` (6, 2),
+            ``rms`` (6, 2) and ``points`` (6, 2, C, 2), as
+            :meth:`vision.detect.OmniDetector.detect` with ``use_compiled=False``.
+        """
+        img = _c(image, np.uint8)
+        self._pred[...] = predicted
+        if self._lib.omni_detect(img.ctypes.data, *self._layout, *self._refs(refs),
+                                 float(min_contrast), float(width_tolerance), *self._circles,
+                                 self._pred_ptr, float(outlier_px), int(min_points),
+                                 float(max_rms_px), int(iterations), *self._buffers):
+            raise MemoryError("omni_detect: out of memory")
+        return (self._normals.copy(), self._visible.astype(bool), self._count.copy(),
+                self._rms.copy(), self._points.copy())
+
+
+def fit_planes(
+    rays: np.ndarray, valid: np.ndarray, px_per_rad: np.ndarray | float,
+    predicted: np.ndarray, outlier_px: float, min_points: int, max_rms_px: float,
+    iterations: int,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """The compiled :func:`vision.detect._robust_fit` (same arguments and results)."""
+    lib = _load()
+    if lib is None:
+        raise CompilationError("the detector kernels are not compiled")
+    lead = valid.shape[:-1]
+    N = valid.shape[-1]
+    E = int(np.prod(lead, dtype=np.int64))
+    X = _c(np.broadcast_to(rays, (*valid.shape, 3)), np.float64)
+    v = _c(valid, np.uint8)
+    ppr = _c(np.broadcast_to(np.asarray(px_per_rad, float), valid.shape), np.float64)
+    pred = _c(np.broadcast_to(predicted, (*lead, 3)), np.float64)
+    normals = np.empty((*lead, 3))
+    visible = np.empty(lead, np.uint8)
+    count = np.empty(lead, np.int64)
+    rms = np.empty(lead)
+    inliers = np.empty(valid.shape, np.uint8)
+    lib.fit_planes(X.ctypes.data, v.ctypes.data, ppr.ctypes.data, pred.ctypes.data, E, N,
+                   float(outlier_px), int(min_points), float(max_rms_px), int(iterations),
+                   normals.ctypes.data, visible.ctypes.data, count.ctypes.data,
+                   rms.ctypes.data, inliers.ctypes.data)
+    return normals, visible.view(bool), count, rms, inliers.view(bool)
+
+
+__all__ = ["FLAGS", "OmniKernel", "available", "fit_planes"]
