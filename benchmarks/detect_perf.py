@@ -45,7 +45,10 @@ def _run(cam: Camera, frames: int, style: RenderStyle, seed: int,
     det_o = OmniDetector(cam) if omni else None
     det_p = None if omni else PerspectiveTracker(cam)
     auto = det_o.default_prediction(geo) if det_o is not None else None
-    render_t, detect_t, numpy_t, errs = [], [], [], []
+    render_t: list[float] = []
+    detect_t: list[float] = []
+    numpy_t: list[float] = []
+    errs: list[np.ndarray] = []
     missed = invented = truth = 0
     for k in range(frames):
         t0 = time.perf_counter()

@@ -21,6 +21,7 @@ import logging
 import os
 import subprocess
 from importlib import resources
+from typing import Any
 
 import numpy as np
 
@@ -32,9 +33,9 @@ log = logging.getLogger(__name__)
 #: product; a contracted a*b+c would differ in the last bit).
 FLAGS = ("-O2", "-ffp-contract=off")
 
-_P = ctypes.c_void_p
-_I = ctypes.c_int64
-_D = ctypes.c_double
+_P: Any = ctypes.c_void_p
+_I: Any = ctypes.c_int64
+_D: Any = ctypes.c_double
 
 _lib: ctypes.CDLL | None = None
 _tried = False
