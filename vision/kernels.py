@@ -1,17 +1,24 @@
-"""Compiled cores of the leg-edge detectors (``vision/csrc/detect_kernels.c``).
+"""Compiled cores of the image pipeline (``vision/csrc/*.c``).
 
-The circle scan of :class:`vision.detect.OmniDetector` and the robust plane fit
-shared by both detectors are written once in numpy (the reference, in
-:mod:`vision.detect`) and once in C. The C source ships with the package; it is
-compiled on first use by the system C compiler through
-:func:`hexapod.compiled.build_shared_library` (cached under the hash of the
-source) and called through :mod:`ctypes`. It computes the same decisions with the
-same arithmetic (``-ffp-contract=off``: no fused multiply-add), which the tests
-check frame by frame; only the 3x3 eigen-solve differs (Jacobi instead of LAPACK,
-equal to about 1e-15).
+- Detectors (``detect_kernels.c``): the circle scan of
+  :class:`vision.detect.OmniDetector` and the robust plane fit shared by both
+  detectors are written once in numpy (the reference, in :mod:`vision.detect`) and
+  once in C, with the same decisions and the same arithmetic (``-ffp-contract=off``:
+  no fused multiply-add), which the tests check frame by frame; only the 3x3
+  eigen-solve differs (Jacobi instead of LAPACK, equal to about 1e-15).
+- Renderer (``render_kernels.c``): exact-coverage polygon filling
+  (:class:`PolygonFiller`): a pixel's value is blended by the exact area of its
+  unit square inside the shape, so that a rendered edge has no bias whatever its
+  direction and sub-pixel position. The tests check the coverage against an
+  independent polygon clipping.
 
-Without a compiler, or with ``HEXAPOD_NO_COMPILE=1`` in the environment, the
-numpy path runs (same results, a few times slower) and a warning is logged once.
+The sources ship with the package; they are compiled on first use by the system C
+compiler through :func:`hexapod.compiled.build_shared_library` (cached under the
+hash of the source) and called through :mod:`ctypes`. Without a compiler, or with
+``HEXAPOD_NO_COMPILE=1`` in the environment, the detectors run their numpy path
+(same results, a few times slower), the renderer falls back to OpenCV's
+anti-aliased polygons (edges biased by up to about 0.1 px, see
+:class:`vision.render.RenderStyle`), and a warning is logged once.
 """
 
 from __future__ import annotations
@@ -37,6 +44,9 @@ _P: Any = ctypes.c_void_p
 _I: Any = ctypes.c_int64
 _D: Any = ctypes.c_double
 
+#: The C sources, in the order they are concatenated into one library.
+SOURCES = ("detect_kernels.c", "render_kernels.c")
+
 _lib: ctypes.CDLL | None = None
 _tried = False
 
@@ -49,13 +59,15 @@ def _load() -> ctypes.CDLL | None:
     if os.environ.get("HEXAPOD_NO_COMPILE", "") not in ("", "0"):
         log.info("HEXAPOD_NO_COMPILE is set: the detectors use their numpy path")
         return None
-    code = resources.files("vision").joinpath("csrc/detect_kernels.c").read_text()
+    src = resources.files("vision").joinpath("csrc")
+    code = "\n".join(src.joinpath(name).read_text() for name in SOURCES)
     try:
-        lib = ctypes.CDLL(str(build_shared_library("detect_kernels", code, FLAGS)))
+        lib = ctypes.CDLL(str(build_shared_library("vision_kernels", code, FLAGS)))
     except (OSError, subprocess.SubprocessError, CompilationError) as exc:
         detail = getattr(exc, "stderr", b"") or b""
-        log.warning("detector kernels: C compilation unavailable (%s %s); using numpy",
-                    exc, detail.decode(errors="replace")[:500])
+        log.warning("vision kernels: C compilation unavailable (%s %s); the detectors use "
+                    "numpy, the renderer OpenCV's anti-aliased polygons", exc,
+                    detail.decode(errors="replace")[:500])
         return None
     lib.omni_scan.argtypes = [_P] * 5 + [_I] * 3 + [_P] * 4 + [_D, _D, _P]
     lib.omni_scan.restype = ctypes.c_int
@@ -64,6 +76,8 @@ def _load() -> ctypes.CDLL | None:
     lib.omni_detect.argtypes = ([_P] * 5 + [_I] * 3 + [_P] * 4 + [_D, _D] + [_P] * 3
                                 + [_D, _D, _P, _D, _I, _D, _I] + [_P] * 10)
     lib.omni_detect.restype = ctypes.c_int
+    lib.fill_shapes.argtypes = [_P, _P, _I, _I, _P, _P, _P, _P, _I, _P, _P, _P, _P, _P]
+    lib.fill_shapes.restype = ctypes.c_int
     _lib = lib
     return lib
 
@@ -207,4 +221,82 @@ def fit_planes(
     return normals, visible.view(bool), count, rms, inliers.view(bool)
 
 
-__all__ = ["FLAGS", "OmniKernel", "available", "fit_planes"]
+class PolygonFiller:
+    """Exact-coverage filling of polygons into (H, W) images (the renderer's core).
+
+    A shape is one or more polygons (V, 2) in pixel coordinates (integers at pixel
+    centres) filled together (nonzero rule, each polygon oriented to positive area);
+    shapes are drawn in order, each blended by its coverage:
+    ``v <- round(v + (level - v) * coverage)``. The coverage of one polygon is exact;
+    where two polygons of one shape overlap, it is exact on pixels that one of them
+    covers fully, and the sum of their coverages (capped at 1) on pixels that both
+    cover only partially (in the renderer: a few pixels at the ends of each leg, where
+    an end disc meets the leg's outline).
+
+    Args:
+        width: Image width [px].
+        height: Image height [px].
+
+    Raises:
+        CompilationError: The kernels are not compiled (see :func:`available`).
+    """
+
+    def __init__(self, width: int, height: int) -> None:
+        lib = _load()
+        if lib is None:
+            raise CompilationError("the vision kernels are not compiled")
+        self._lib = lib
+        self.width, self.height = int(width), int(height)
+        self._acc = np.zeros((self.height, self.width + 2))
+        self._lo = np.empty(self.height, np.int64)
+        self._hi = np.empty(self.height, np.int64)
+        self._rx = np.empty((self.height, 16), np.int64)
+        self._rn = np.empty(self.height, np.int64)
+        self._work = tuple(a.ctypes.data for a in (self._acc, self._lo, self._hi, self._rx,
+                                                   self._rn))
+
+    def _call(self, img: int | None, cov: int | None,
+              shapes: list[tuple[list[np.ndarray], float]]) -> None:
+        polys = [np.asarray(c, float).reshape(-1, 2) for sh, _ in shapes for c in sh]
+        sizes = [sum(1 for c in sh if len(c) >= 3) for sh, _ in shapes]
+        polys = [c for c in polys if len(c) >= 3]
+        if not polys:
+            return
+        xy = np.ascontiguousarray(np.concatenate(polys, axis=0), dtype=np.float64)
+        counts = np.array([len(c) for c in polys], np.int64)
+        per_shape = np.array(sizes, np.int64)
+        levels = np.array([lv for _, lv in shapes], np.float64)
+        if self._lib.fill_shapes(img, cov, self.width, self.height, xy.ctypes.data,
+                                 counts.ctypes.data, per_shape.ctypes.data,
+                                 levels.ctypes.data, len(shapes), *self._work):
+            raise ValueError("fill_shapes: a vertex is not finite (nothing drawn)")
+
+    def draw(self, image: np.ndarray, shapes: list[tuple[list[np.ndarray], float]]) -> None:
+        """Draw shapes in order into ``image`` (in place), in one call.
+
+        Args:
+            image: (H, W) C-contiguous uint8 image.
+            shapes: ``(polygons, level)`` pairs: polygons (V, 2) [px] filled as one
+                shape (fewer than 3 vertices: skipped) at a grey level [0-255].
+
+        Raises:
+            ValueError: Wrong image, or a non-finite vertex (nothing is drawn).
+        """
+        if (image.shape != (self.height, self.width) or image.dtype != np.uint8
+                or not image.flags.c_contiguous):
+            raise ValueError(f"expected a C-contiguous uint8 image of shape "
+                             f"{(self.height, self.width)}, got {image.dtype} {image.shape}")
+        self._call(image.ctypes.data, None, shapes)
+
+    def fill(self, image: np.ndarray, contours: list[np.ndarray], level: float) -> None:
+        """Blend one shape into ``image`` (see :meth:`draw`)."""
+        self.draw(image, [(contours, level)])
+
+    def coverage(self, contours: list[np.ndarray]) -> np.ndarray:
+        """(H, W) float coverage of one shape in [0, 1] (exact pixel-square areas)."""
+        cov = np.zeros((self.height, self.width))
+        self._call(None, cov.ctypes.data, [(contours, 1.0)])
+        return cov
+
+
+__all__ = ["FLAGS", "SOURCES", "OmniKernel", "PolygonFiller", "available", "fit_planes"]

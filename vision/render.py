@@ -4,8 +4,14 @@ Each leg is a solid cylinder of radius ``geometry.leg_radius`` around the segmen
 ``A_i .. B_i`` (``MATH.md`` section 4). The image is drawn with the painter's
 algorithm: the objects (six legs and, optionally, the platform disc) are sorted by
 the distance of their centre to the projection centre and filled from the farthest
-to the nearest, with anti-aliased sub-pixel polygons (``cv2.fillPoly`` with
-``LINE_AA`` and 4 fractional bits).
+to the nearest. Each polygon is blended into the image by its exact coverage of
+every pixel (the area of the pixel's unit square inside it, i.e. the box filter of
+an ideal sensor pixel; :class:`vision.kernels.PolygonFiller`, compiled C), so a
+rendered edge has its 50 % level on the true edge whatever its direction and
+sub-pixel position. Without a C compiler the renderer falls back to OpenCV's
+anti-aliased polygons (``cv2.fillPoly`` with ``LINE_AA`` and 4 fractional bits,
+shrunk by ``aa_compensation_px``), whose edges are off by up to about 0.1 px
+depending on direction and sub-pixel position.
 
 A leg is drawn as nested bands between pairs of generators of the cylinder (the
 outermost pair being the two limbs, i.e. the edges of ``MATH.md`` section 4) plus
@@ -90,11 +96,12 @@ class RenderStyle:
         edge_samples: Points per generator along a leg; default 2 for a perspective
             camera, 24 for a unified one.
         cap_samples: Points on each end disc of a leg.
-        aa_compensation_px: Inward offset of every polygon [px]. OpenCV's
-            anti-aliased ``fillPoly`` draws a shape about 0.7 px too large on each
-            side (measured: 0.67 to 0.83 px depending on the edge direction, mean
-            0.72, at the 50 % grey level); the offset puts the 50 % level of the
-            rendered edges on the true edges within about 0.1 px.
+        aa_compensation_px: Fallback renderer only (no C compiler): inward offset
+            of every polygon [px]. OpenCV's anti-aliased ``fillPoly`` draws a shape
+            about 0.7 px too large on each side (measured: 0.67 to 0.83 px depending
+            on the edge direction, mean 0.72, at the 50 % grey level); the offset
+            puts the 50 % level of the rendered edges on the true edges within about
+            0.1 px. The exact-coverage renderer needs no offset.
     """
 
     background: str = "plain"
@@ -172,6 +179,8 @@ class Renderer:
         geometry: The robot (leg radius ``geometry.leg_radius``).
         style: How to draw (default :class:`RenderStyle`).
         rng: Generator (or seed) of the pixel noise.
+        use_compiled: Fill by exact coverage (compiled C) when available; False
+            uses OpenCV's anti-aliased polygons (the fallback).
 
     Example:
         >>> r = Renderer(front_camera(), deltalab(), RenderStyle(blur_px=0.8))
@@ -184,6 +193,7 @@ class Renderer:
         geometry: HexapodGeometry,
         style: RenderStyle | None = None,
         rng: np.random.Generator | int | None = None,
+        use_compiled: bool = True,
     ) -> None:
         self.camera = camera
         self.geometry = geometry
@@ -214,10 +224,21 @@ class Renderer:
         self._disc_cs = np.stack([np.cos(psi), np.sin(psi)], axis=-1)
         self._noise_pos: np.ndarray | None = None
         self._noise_neg: np.ndarray | None = None
+        from vision import kernels
+
+        self._filler = (kernels.PolygonFiller(camera.width, camera.height)
+                        if use_compiled and kernels.available() else None)
+
+    @property
+    def exact(self) -> bool:
+        """Whether polygons are filled by their exact pixel coverage (compiled C);
+        False: OpenCV's anti-aliased polygons (fallback)."""
+        return self._filler is not None
 
     def with_style(self, **changes: Any) -> Renderer:
         """A renderer with some style fields changed (same camera, geometry, generator)."""
-        return Renderer(self.camera, self.geometry, replace(self.style, **changes), self.rng)
+        return Renderer(self.camera, self.geometry, replace(self.style, **changes), self.rng,
+                        use_compiled=self.exact)
 
     # ------------------------------------------------------------------ drawing
     def _shrink(self, pix: np.ndarray) -> np.ndarray:
@@ -248,11 +269,12 @@ class Renderer:
     def _leg_polygons(
         self, A: np.ndarray, u: np.ndarray, q: np.ndarray
     ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-        """Fixed-point polygons of the six legs, all projected at once.
+        """Pixel polygons of the six legs, all projected at once.
 
         Returns:
-            ``bands`` (6, nb, 2 Ns, 2) int32, ``caps`` (6, 2, C, 2) int32, ``ok_bands``
-            (6, nb) and ``ok_caps`` (6, 2) (every vertex imaged).
+            ``bands`` (6, nb, 2 Ns, 2), ``caps`` (6, 2, C, 2) [px] (for the fallback:
+            shrunk by ``aa_compensation_px``, int32 fixed point), ``ok_bands`` (6, nb)
+            and ``ok_caps`` (6, 2) (every vertex imaged).
         """
         r = self.geometry.leg_radius
         h = np.cross(A, u)
@@ -279,35 +301,47 @@ class Renderer:
         pix, _ = self.camera.project(pts)
         fin = np.isfinite(pix).all(axis=-1)
         nbv = nb * nv
-        pb = self._shrink(pix[:, :nbv].reshape(6, nb, nv, 2)).reshape(6, nbv, 2)
-        pc = self._shrink(pix[:, nbv:].reshape(6, 2, -1, 2)).reshape(6, -1, 2)
-        fixed = self._to_fixed(np.concatenate([pb, pc], axis=1))
         ok_bands = fin[:, :nbv].reshape(6, nb, nv).all(-1) & exists[:, None]
         ok_caps = fin[:, nbv:].reshape(6, 2, -1).all(-1) & exists[:, None]
-        return (fixed[:, :nbv].reshape(6, nb, nv, 2), fixed[:, nbv:].reshape(6, 2, -1, 2),
-                ok_bands, ok_caps)
+        pb, pc = pix[:, :nbv].reshape(6, nb, nv, 2), pix[:, nbv:].reshape(6, 2, -1, 2)
+        if self._filler is None:  # fallback: shrunk fixed-point polygons, all at once
+            pb, pc = self._to_fixed(self._shrink(pb)), self._to_fixed(self._shrink(pc))
+        return pb, pc, ok_bands, ok_caps
 
-    def _draw_leg(self, img: np.ndarray, i: int, bands: np.ndarray, caps: np.ndarray,
-                  ok_bands: np.ndarray, ok_caps: np.ndarray) -> None:
-        # End discs and the outer band (the silhouette) at the edge level, then the
-        # inner bands, lighter towards the generator facing the camera.
-        polys = [caps[i, k] for k in range(2) if ok_caps[i, k]]
+    def _leg_shapes(self, i: int, bands: np.ndarray, caps: np.ndarray,
+                    ok_bands: np.ndarray, ok_caps: np.ndarray
+                    ) -> list[tuple[list[np.ndarray], int]]:
+        """The shapes of leg i: its end discs and outer band (the silhouette) at the
+        edge level, then the inner bands, lighter towards the generator facing the
+        camera."""
+        outer = [caps[i, k] for k in range(2) if ok_caps[i, k]]
         if ok_bands[i, 0]:
-            polys.append(bands[i, 0])
-        if polys:
-            cv2.fillPoly(img, polys, self._levels[0], cv2.LINE_AA, _SHIFT)
-        for k in range(1, bands.shape[1]):
-            if ok_bands[i, k]:
-                cv2.fillPoly(img, [bands[i, k]], self._levels[k], cv2.LINE_AA, _SHIFT)
+            outer.append(bands[i, 0])
+        shapes = [(outer, self._levels[0])] if outer else []
+        shapes += [([bands[i, k]], self._levels[k]) for k in range(1, bands.shape[1])
+                   if ok_bands[i, k]]
+        return shapes
 
-    def _draw_platform(self, img: np.ndarray, centre: np.ndarray, R_cam: np.ndarray) -> None:
+    def _platform_shape(self, centre: np.ndarray, R_cam: np.ndarray
+                        ) -> list[tuple[list[np.ndarray], int]]:
         rho = self._platform_radius
         pts = centre + rho * (self._disc_cs[:, :1] * R_cam[:, 0] + self._disc_cs[:, 1:]
                               * R_cam[:, 1])
         pix, _ = self.camera.project(pts)
-        if np.all(np.isfinite(pix)):
-            cv2.fillPoly(img, [self._to_fixed(self._shrink(pix))], self.style.platform_level,
-                         cv2.LINE_AA, _SHIFT)
+        if not np.all(np.isfinite(pix)):
+            return []
+        if self._filler is None:
+            pix = self._to_fixed(self._shrink(pix))
+        return [([pix], self.style.platform_level)]
+
+    def _draw(self, img: np.ndarray, shapes: list[tuple[list[np.ndarray], int]]) -> None:
+        """Draw shapes in order: exact coverage in one compiled call, or the fallback
+        (each polygon shrunk by ``aa_compensation_px``, OpenCV ``LINE_AA``)."""
+        if self._filler is not None:
+            self._filler.draw(img, [(polys, float(level)) for polys, level in shapes])
+            return
+        for polys, level in shapes:  # already shrunk and in fixed point
+            cv2.fillPoly(img, polys, level, cv2.LINE_AA, _SHIFT)
 
     def _noise_bank(self, size: int) -> tuple[np.ndarray, np.ndarray]:
         if self._noise_pos is None or self._noise_pos.size < 2 * size:
@@ -347,11 +381,13 @@ class Renderer:
         if self.style.platform:
             items.append((float(np.linalg.norm(centre)), -1))
         polys = self._leg_polygons(A, u, q)
+        shapes: list[tuple[list[np.ndarray], int]] = []
         for _, i in sorted(items, reverse=True):
             if i < 0:
-                self._draw_platform(img, centre, T.rotation @ R)
+                shapes += self._platform_shape(centre, T.rotation @ R)
             else:
-                self._draw_leg(img, i, *polys)
+                shapes += self._leg_shapes(i, *polys)
+        self._draw(img, shapes)
         if self.style.blur_px > 0:
             k = 2 * math.ceil(3.0 * self.style.blur_px) + 1
             cv2.GaussianBlur(img, (k, k), self.style.blur_px, dst=img)
