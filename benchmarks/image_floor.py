@@ -12,9 +12,9 @@ variants that remove or change one factor at a time, and prints one row per vari
   (``exact-goal``), for the current images only (``exact-current``), or both
   (``exact-both``);
 - no pixel noise, no calibration error, other blur or noise levels;
-- the legs drawn at 4x the resolution and area-averaged down (``supersampled``): a
-  pixel then integrates the light it receives, as a real sensor does, where OpenCV's
-  anti-aliased polygons put an edge up to about 0.1 px off depending on its
+- the fallback renderer (``opencv-render``: OpenCV's anti-aliased polygons, what runs
+  without a C compiler, and what the project used before the exact-coverage
+  renderer), whose edges are up to about 0.1 px off depending on their direction and
   sub-pixel position.
 
 Columns: trials within the scenario's tolerances at the end (``conv``) and by the
@@ -34,7 +34,6 @@ from collections.abc import Callable
 from dataclasses import dataclass, replace
 from typing import Any
 
-import cv2
 import numpy as np
 
 from benchmarks.scenario import Scenario, load_scenario
@@ -46,44 +45,7 @@ from benchmarks.simulate import (
     run_trials,
 )
 from hexapod.se3 import log_so3
-from vision.cameras import Camera
-from vision.render import Renderer, RenderStyle
-
-#: Sub-pixel resolution of the supersampled renderer (pixels per image pixel and axis).
-SUPERSAMPLING = 4
-
-
-class SupersampledRenderer(Renderer):
-    """Draws the legs at ``factor`` times the resolution without blur or noise, averages
-    each block of ``factor x factor`` pixels into one (``cv2.INTER_AREA``), then blurs
-    and adds the pixel noise at the image resolution (same generator and noise bank as
-    :class:`vision.render.Renderer`)."""
-
-    def __init__(self, camera: Camera, geometry: Any, style: RenderStyle | None = None,
-                 rng: np.random.Generator | int | None = None,
-                 factor: int = SUPERSAMPLING) -> None:
-        super().__init__(camera, geometry, style, rng)
-        K = camera.K.copy()
-        K[:2, :2] *= factor
-        # pixel centre k of the image is the centre of the block factor*k .. factor*k+f-1
-        K[:2, 2] = factor * K[:2, 2] + 0.5 * (factor - 1)
-        fine = camera.replace(K=K, width=camera.width * factor, height=camera.height * factor)
-        self.fine = Renderer(fine, geometry, replace(self.style, blur_px=0.0, noise_std=0.0))
-
-    def render(self, rotation: np.ndarray, translation: np.ndarray) -> np.ndarray:
-        """One frame (see the class docstring)."""
-        img = cv2.resize(self.fine.render(rotation, translation),
-                         (self.camera.width, self.camera.height), interpolation=cv2.INTER_AREA)
-        if self.style.blur_px > 0:
-            k = 2 * math.ceil(3.0 * self.style.blur_px) + 1
-            cv2.GaussianBlur(img, (k, k), self.style.blur_px, dst=img)
-        if self.style.noise_std > 0:
-            n = img.size
-            pos, neg = self._noise_bank(n)
-            off = int(self.rng.integers(0, pos.size - n + 1))
-            cv2.add(img, pos[off:off + n].reshape(img.shape), dst=img)
-            cv2.subtract(img, neg[off:off + n].reshape(img.shape), dst=img)
-        return img
+from vision.render import Renderer
 
 
 class _Mixed:
@@ -122,11 +84,11 @@ def _exact_current(sc: Scenario, setup: TrialSetup) -> Any:
     return _Mixed(_exact(sc, setup), make_sensor(sc, setup))
 
 
-def _supersampled(sc: Scenario, setup: TrialSetup) -> Any:
+def _opencv_render(sc: Scenario, setup: TrialSetup) -> Any:
     sensor = make_sensor(sc, setup)
     image = sensor.sensor
-    image.renderer = SupersampledRenderer(image.true_camera, image.geometry,
-                                          image.renderer.style, image.renderer.rng)
+    image.renderer = Renderer(image.true_camera, image.geometry, image.renderer.style,
+                              image.renderer.rng, use_compiled=False)
     return sensor
 
 
@@ -173,11 +135,10 @@ VARIANTS: dict[str, Variant] = {
     "noise-6": Variant("pixel noise 6 grey levels", _image(noise_std=6.0)),
     "noise-6-teach-30": Variant("pixel noise 6, goal: 30 frames",
                                 lambda sc: _teach(30)(_image(noise_std=6.0)(sc))),
-    "supersampled": Variant("supersampled rendering", _same, _supersampled),
-    "supersampled-teach-10": Variant("supersampled, goal: 10 frames", _teach(10),
-                                     _supersampled),
-    "supersampled-no-noise": Variant("supersampled, no pixel noise", _image(noise_std=0.0),
-                                     _supersampled),
+    "opencv-render": Variant("OpenCV anti-aliased rendering (fallback)", _same,
+                             _opencv_render),
+    "opencv-render-no-noise": Variant("OpenCV rendering, no pixel noise",
+                                      _image(noise_std=0.0), _opencv_render),
 }
 
 

@@ -612,6 +612,7 @@ class PerspectiveTracker:
         self.max_rms_px = float(max_rms_px)
         self._Kinv = np.linalg.inv(camera.K)
         self._f = 0.5 * (camera.fx + camera.fy)
+        self._kernel: Any = None  # vision.kernels.TrackKernel, built on first use
 
     # ----------------------------------------------------------------- geometry
     def predicted_segments(self, prediction: LegPrediction) -> np.ndarray:
@@ -665,6 +666,13 @@ class PerspectiveTracker:
         self, image: np.ndarray, seg: np.ndarray, lines: np.ndarray,
         prediction: LegPrediction, search: float | np.ndarray, use_compiled: bool = True,
     ) -> EdgeDetection:
+        """One search pass: profiles along the normals of the predicted edges, the
+        strongest gradient of the right polarity on each, occlusion gate, Theil-Sen
+        line, robust plane fit. The compiled core (:class:`vision.kernels.TrackKernel`)
+        computes the same as :meth:`_profile_offsets`, :meth:`_contested`,
+        :func:`_theil_sen_inliers` and :func:`_robust_fit` below."""
+        from vision import kernels
+
         M = self.n_samples
         m = self.end_margin
         t = m + (1 - 2 * m) * (np.arange(M) + 0.5) / M  # (M,)
@@ -678,56 +686,66 @@ class PerspectiveTracker:
         out = nrm * np.where(sgn == 0, 1.0, sgn)[..., None]
         search_arr = np.broadcast_to(np.asarray(search, float), (6, 2))
         R = math.ceil(float(np.max(search_arr)))
-        offs = np.arange(-R, R + 1, dtype=float)
-        offs_e = np.clip(offs[None, None, :], -search_arr[..., None] - 1, search_arr[..., None] + 1)
-        Q = P[:, :, :, None, :] + offs_e[:, :, None, :, None] * out[:, :, None, None, :]
-        finite = np.all(np.isfinite(Q), axis=(-2, -1))
-        Qf = np.nan_to_num(Q, nan=-10.0).astype(np.float32)
-        prof = cv2.remap(image, Qf[..., 0].reshape(-1, 2 * R + 1),
-                         Qf[..., 1].reshape(-1, 2 * R + 1), cv2.INTER_LINEAR,
-                         borderMode=cv2.BORDER_CONSTANT, borderValue=0)
-        prof = prof.reshape(6, 2, M, 2 * R + 1).astype(np.float32)
-        grad = 0.5 * (prof[..., 2:] - prof[..., :-2])  # at offsets[1:-1], outward: + = to bright
-        g_off = offs[1:-1]
-        inside = np.abs(g_off)[None, None, None, :] <= search_arr[..., None, None]
-        # Also require the whole profile to be inside the image.
-        in_img = ((Q[..., 0] >= 0) & (Q[..., 0] <= self.camera.width - 1)
-                  & (Q[..., 1] >= 0) & (Q[..., 1] <= self.camera.height - 1))
-        g = np.where(inside & in_img[..., 1:-1], grad, -1e6)
-        L = g.shape[-1]
-        gf = g.reshape(-1, L)
-        k = np.argmax(gf, axis=-1)
-        rows = np.arange(gf.shape[0])
-        km = np.clip(k, 1, L - 2)
-        gk = gf[rows, k]
-        gm, g0, gp = gf[rows, km - 1], gf[rows, km], gf[rows, km + 1]
-        den = gm - 2 * g0 + gp
-        with np.errstate(invalid="ignore", divide="ignore"):
-            frac = np.where((den < 0) & (den > -1e5), 0.5 * (gm - gp) / den, 0.0)
-        frac = np.clip(frac, -0.5, 0.5).reshape(k.shape)
-        k, km, gk = (x.reshape(6, 2, M) for x in (k, km, gk))
-        frac = frac.reshape(6, 2, M)
-        offset = g_off[km] + frac  # along `out`
-        valid = finite & (gk >= self.min_contrast) & (k == km)
+        if use_compiled and kernels.available():
+            if self._kernel is None:
+                self._kernel = kernels.TrackKernel(self.camera.width, self.camera.height, M)
+            normals, vis, cnt, rms, pts = self._kernel.track(
+                image, P, out, search_arr, R, t, seg, lines, prediction.normals,
+                self.occlusion_margin_px, self.min_contrast, self.outlier_px, self._Kinv,
+                self._f, (self.camera.cx, self.camera.cy), self.min_points, self.max_rms_px,
+                iterations=2)
+            return EdgeDetection(normals, vis, cnt, rms, pts, M)
+        offset, valid = self._profile_offsets(image, P, out, search_arr, R)
         valid &= ~self._contested(P, seg, lines)
-        # Robust line through (t, offset): Theil-Sen, then residual test.
-        off_v = np.where(valid, offset, np.nan)
-        ti = t[None, None, :, None]
-        tj = t[None, None, None, :]
-        with np.errstate(invalid="ignore", divide="ignore"):
-            slopes = (off_v[..., :, None] - off_v[..., None, :]) / (ti - tj)
-        iu = np.triu_indices(M, 1)
-        b = _nan_median(slopes[..., iu[0], iu[1]])
-        a = _nan_median(off_v - b[..., None] * t)
-        with np.errstate(invalid="ignore"):
-            valid &= np.abs(off_v - (a[..., None] + b[..., None] * t)) <= 2.0 * self.outlier_px
+        valid &= _theil_sen_inliers(offset, valid, t, 2.0 * self.outlier_px)
         pts = P + offset[..., None] * out[:, :, None, :]
         pts = np.where(valid[..., None], pts, np.nan)
         rays = self._lift(np.where(valid[..., None], pts, 0.0))
         normals, vis, cnt, rms, inl = _robust_fit(
             rays, valid, self._px_per_rad(pts), prediction.normals, self.outlier_px,
-            self.min_points, self.max_rms_px, use_compiled=use_compiled)
+            self.min_points, self.max_rms_px, use_compiled=False)
         return EdgeDetection(normals, vis, cnt, rms, np.where(inl[..., None], pts, np.nan), M)
+
+    def _profile_offsets(
+        self, image: np.ndarray, P: np.ndarray, out: np.ndarray, search: np.ndarray, R: int,
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """Edge offset along ``out`` of every sample [px] and whether it is valid.
+
+        The profile through sample ``P`` is read at the integer offsets ``-R .. R``
+        along ``out`` (exact bilinear interpolation, 0 outside the image); its central
+        difference at the offsets ``o`` with ``|o| <= search`` whose point lies in the
+        image is the gradient towards the outside (bright). The strongest one (the
+        first on ties) is refined by a parabola through it and its neighbours (no
+        refinement when a neighbour is not a candidate); it is valid if at least
+        ``min_contrast`` and not at ``o = +-(R - 1)``.
+        """
+        offs = np.arange(-R, R + 1, dtype=float)
+        Q = P[:, :, :, None, :] + offs[None, None, None, :, None] * out[:, :, None, None, :]
+        finite = np.all(np.isfinite(Q), axis=(-2, -1))
+        prof = _bilinear_zero(image, Q[..., 0], Q[..., 1])
+        grad = 0.5 * (prof[..., 2:] - prof[..., :-2])  # at offs[1:-1]; + = towards bright
+        g_off = offs[1:-1]
+        candidate = np.abs(g_off)[None, None, None, :] <= search[..., None, None]
+        Qg = Q[..., 1:-1, :]
+        in_img = ((Qg[..., 0] >= 0) & (Qg[..., 0] <= self.camera.width - 1)
+                  & (Qg[..., 1] >= 0) & (Qg[..., 1] <= self.camera.height - 1))
+        g = np.where(candidate & in_img, grad, _NO_GRADIENT)
+        L = g.shape[-1]
+        k = np.argmax(g, axis=-1)
+        km = np.clip(k, 1, max(L - 2, 1))
+        gk = np.take_along_axis(g, k[..., None], -1)[..., 0]
+        if L >= 3:
+            gm, g0, gp = (np.take_along_axis(g, (km + d)[..., None], -1)[..., 0]
+                          for d in (-1, 0, 1))
+        else:
+            gm = g0 = gp = np.zeros(k.shape)
+        den = gm - 2 * g0 + gp
+        with np.errstate(invalid="ignore", divide="ignore"):
+            frac = np.where((den < 0) & (den > -1e5), 0.5 * (gm - gp) / den, 0.0)
+        frac = np.clip(frac, -0.5, 0.5)
+        offset = g_off[km] + frac if L >= 1 else np.zeros(k.shape)
+        valid = finite & (gk >= self.min_contrast) & (k == km) & (L >= 3)
+        return offset, valid
 
     def _lift(self, pix: np.ndarray) -> np.ndarray:
         h = np.concatenate([pix, np.ones((*pix.shape[:-1], 1))], -1) @ self._Kinv.T
@@ -763,6 +781,45 @@ class PerspectiveTracker:
         hit = between & along & np.isfinite(tt)
         hit &= ~np.eye(6, dtype=bool)[:, None, None, :]
         return np.any(hit, axis=-1)
+
+
+#: Gradient value of a profile position that is not a candidate (numpy and C).
+_NO_GRADIENT = -1e6
+
+
+def _bilinear_zero(image: np.ndarray, x: np.ndarray, y: np.ndarray) -> np.ndarray:
+    """Bilinear interpolation of a grey image at (x, y) [px] (float64), 0 where the point
+    is outside ``[0, W-1] x [0, H-1]`` or not finite."""
+    H, W = image.shape
+    with np.errstate(invalid="ignore"):
+        inside = (x >= 0) & (x <= W - 1) & (y >= 0) & (y <= H - 1)
+    xc = np.where(inside, x, 0.0)
+    yc = np.where(inside, y, 0.0)
+    x0 = np.minimum(np.floor(xc), W - 2).astype(np.intp)
+    y0 = np.minimum(np.floor(yc), H - 2).astype(np.intp)
+    fx, fy = xc - x0, yc - y0
+    flat = image.ravel()
+    i00 = y0 * W + x0
+    v00, v01 = flat[i00].astype(float), flat[i00 + 1].astype(float)
+    v10, v11 = flat[i00 + W].astype(float), flat[i00 + W + 1].astype(float)
+    v = (1 - fy) * ((1 - fx) * v00 + fx * v01) + fy * ((1 - fx) * v10 + fx * v11)
+    return np.where(inside, v, 0.0)
+
+
+def _theil_sen_inliers(offset: np.ndarray, valid: np.ndarray, t: np.ndarray,
+                       tolerance: float) -> np.ndarray:
+    """The valid samples within ``tolerance`` of the Theil-Sen line through
+    ``(t, offset)`` of each edge: slope = lower median of the pairwise slopes, intercept
+    = lower median of ``offset - slope t`` (no line, no inlier, with fewer than 2)."""
+    M = t.size
+    off_v = np.where(valid, offset, np.nan)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        slopes = (off_v[..., :, None] - off_v[..., None, :]) / (t[:, None] - t[None, :])
+    iu = np.triu_indices(M, 1)
+    b = _nan_median(slopes[..., iu[0], iu[1]])
+    a = _nan_median(off_v - b[..., None] * t)
+    with np.errstate(invalid="ignore"):
+        return valid & (np.abs(off_v - (a[..., None] + b[..., None] * t)) <= tolerance)
 
 
 def _nan_median(x: np.ndarray) -> np.ndarray:

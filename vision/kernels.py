@@ -76,6 +76,9 @@ def _load() -> ctypes.CDLL | None:
     lib.omni_detect.argtypes = ([_P] * 5 + [_I] * 3 + [_P] * 4 + [_D, _D] + [_P] * 3
                                 + [_D, _D, _P, _D, _I, _D, _I] + [_P] * 10)
     lib.omni_detect.restype = ctypes.c_int
+    lib.track_pass.argtypes = ([_P, _I, _I, _P, _P, _P, _I, _I, _P, _P, _P, _D, _D, _D, _P, _D,
+                                _D, _D, _P, _I, _D, _I] + [_P] * 12)
+    lib.track_pass.restype = ctypes.c_int
     lib.fill_shapes.argtypes = [_P, _P, _I, _I, _P, _P, _P, _P, _I, _P, _P, _P, _P, _P]
     lib.fill_shapes.restype = ctypes.c_int
     _lib = lib
@@ -193,6 +196,70 @@ class OmniKernel:
                 self._rms.copy(), self._points.copy())
 
 
+class TrackKernel:
+    """The compiled search pass of :class:`vision.detect.PerspectiveTracker`.
+
+    Args:
+        width: Image width [px].
+        height: Image height [px].
+        n_samples: Samples per edge.
+    """
+
+    def __init__(self, width: int, height: int, n_samples: int) -> None:
+        lib = _load()
+        if lib is None:
+            raise CompilationError("the vision kernels are not compiled")
+        self._lib = lib
+        self.width, self.height, self.M = int(width), int(height), int(n_samples)
+        M = self.M
+        self._offset = np.empty((12, M))
+        self._valid = np.empty((12, M), np.uint8)
+        self._rays = np.empty((12, M, 3))
+        self._ppr = np.empty((12, M))
+        self._pairs = np.empty(max(M * (M - 1) // 2, M))
+        self._normals = np.empty((6, 2, 3))
+        self._visible = np.empty((6, 2), np.uint8)
+        self._count = np.empty((6, 2), np.int64)
+        self._rms = np.empty((6, 2))
+        self._inliers = np.empty((6, 2, M), np.uint8)
+        self._points = np.empty((6, 2, M, 2))
+        self._prof = np.empty(3)
+        self._out_ptrs = tuple(a.ctypes.data for a in (
+            self._normals, self._visible, self._count, self._rms, self._inliers,
+            self._points))
+
+    def track(self, image: np.ndarray, P: np.ndarray, out: np.ndarray, search: np.ndarray,
+              R: int, t: np.ndarray, seg: np.ndarray, lines: np.ndarray,
+              predicted: np.ndarray, margin: float, min_contrast: float, outlier_px: float,
+              Kinv: np.ndarray, f: float, centre: tuple[float, float], min_points: int,
+              max_rms_px: float, iterations: int,
+              ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """One pass (arguments as in :meth:`vision.detect.PerspectiveTracker._pass`).
+
+        Returns:
+            Fresh ``normals`` (6, 2, 3), ``visible`` (6, 2), ``count`` (6, 2), ``rms``
+            (6, 2) and ``points`` (6, 2, M, 2).
+        """
+        if image.shape != (self.height, self.width) or image.dtype != np.uint8:
+            raise ValueError(f"expected a uint8 image of shape {(self.height, self.width)}")
+        img = _c(image, np.uint8)
+        if self._prof.size < 2 * R + 1:
+            self._prof = np.empty(2 * R + 1)
+        arrays = [_c(P, np.float64), _c(out, np.float64), _c(search, np.float64),
+                  _c(t, np.float64), _c(seg, np.float64), _c(lines, np.float64),
+                  _c(Kinv, np.float64), _c(predicted, np.float64)]
+        Pp, op, sp, tp, segp, lp, kp, prp = (a.ctypes.data for a in arrays)
+        self._lib.track_pass(
+            img.ctypes.data, self.width, self.height, Pp, op, sp, int(R), self.M, tp, segp,
+            lp, float(margin), float(min_contrast), float(outlier_px), kp, float(f),
+            float(centre[0]), float(centre[1]), prp, int(min_points), float(max_rms_px),
+            int(iterations), self._offset.ctypes.data, self._valid.ctypes.data,
+            self._rays.ctypes.data, self._ppr.ctypes.data, self._prof.ctypes.data,
+            self._pairs.ctypes.data, *self._out_ptrs)
+        return (self._normals.copy(), self._visible.astype(bool), self._count.copy(),
+                self._rms.copy(), self._points.copy())
+
+
 def fit_planes(
     rays: np.ndarray, valid: np.ndarray, px_per_rad: np.ndarray | float,
     predicted: np.ndarray, outlier_px: float, min_points: int, max_rms_px: float,
@@ -299,4 +366,5 @@ class PolygonFiller:
         return cov
 
 
-__all__ = ["FLAGS", "SOURCES", "OmniKernel", "PolygonFiller", "available", "fit_planes"]
+__all__ = ["FLAGS", "SOURCES", "OmniKernel", "PolygonFiller", "TrackKernel", "available",
+           "fit_planes"]

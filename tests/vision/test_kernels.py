@@ -70,24 +70,41 @@ def test_compiled_scan_of_an_anisotropic_camera_equals_numpy(geometry, rng) -> N
         assert a.edge_visible.sum() >= 10
 
 
-def test_compiled_fit_equals_numpy_on_tracker_inputs(geometry, rng) -> None:
-    """The perspective tracker's fits (three fits, outliers from occlusions and a
-    corrupted band of the image) through both paths."""
-    cam = front_camera(geometry)
-    r = Renderer(cam, geometry, RenderStyle(blur_px=0.8, noise_std=3.0), rng=rng)
-    tr = PerspectiveTracker(cam)
-    Rs, ts = sample_poses(geometry, 15, rng)
-    for k in range(15):
-        img = r.render(Rs[k], ts[k])
-        img[300:310] = 255 - img[300:310]  # a stripe of wrong edges
-        pred = LegPrediction.from_pose(cam, geometry, Rs[k], ts[k] + 0.002)
-        a = tr.detect(img, pred)
-        # the same inputs through the numpy fit
-        from unittest import mock
+@pytest.mark.parametrize("background", ["plain", "cluttered"])
+def test_compiled_tracker_pass_equals_numpy(geometry, rng, background) -> None:
+    """The perspective tracker through both paths (profiles, gradient peak, occlusion
+    gate, Theil-Sen, three fits): tracking passes, a wide search then a refinement with
+    per-edge half-lengths, a stripe of wrong edges, predictions off by several pixels
+    and running out of the image, an edge without prediction."""
+    from unittest import mock
 
-        with mock.patch.object(kernels, "available", return_value=False):
-            b = tr.detect(img, pred)
-        _same_detection(a, b)
+    cam = front_camera(geometry)
+    style = RenderStyle(background=background, blur_px=0.8, noise_std=3.0)
+    r = Renderer(cam, geometry, style, rng=rng)
+    tr = PerspectiveTracker(cam)
+    Rs, ts = sample_poses(geometry, 12, rng)
+    compared = 0
+    for k in range(12):
+        img = r.render(Rs[k], ts[k])
+        if k % 3 == 0:
+            img[300:310] = 255 - img[300:310]  # a stripe of wrong edges
+        pred = LegPrediction.from_pose(cam, geometry, Rs[k], ts[k] + rng.normal(0, 0.004, 3))
+        if k == 5:
+            n = pred.normals.copy()
+            n[2, 1] = np.nan
+            pred = LegPrediction(pred.base_points, pred.directions, pred.lengths, n,
+                                 pred.radius)
+        if k == 7:  # shifted so that samples and profiles leave the image
+            pred = LegPrediction.from_pose(cam, geometry, Rs[k], ts[k] + [0.0, 0.25, 0.0])
+        for search, refine in ((None, None), (40.0, 4.0), (3.0, 0.0)):
+            a = tr.detect(img, pred, search, refine)
+            with mock.patch.object(kernels, "available", return_value=False):
+                b = tr.detect(img, pred, search, refine)
+            _same_detection(a, b)
+            compared += int(a.edge_visible.sum())
+        if k == 5:
+            assert not a.edge_visible[2, 1]
+    assert compared > 300
 
 
 def test_fit_kernel_degenerate_edges(rng) -> None:

@@ -313,3 +313,199 @@ int omni_detect(const uint8_t *img, const int64_t *idx, const int64_t *base, con
   }
   return 0;
 }
+
+/* ------------------------------------------------------------------------------ */
+/* Perspective tracker: one search pass (PerspectiveTracker._pass).                 */
+/* ------------------------------------------------------------------------------ */
+#define NO_GRADIENT (-1e6)
+
+/* Bilinear interpolation, 0 outside [0, W-1] x [0, H-1] (vision.detect._bilinear_zero). */
+static double bilinear_zero(const uint8_t *img, int64_t W, int64_t H, double x, double y) {
+  if (!(x >= 0 && x <= (double)(W - 1) && y >= 0 && y <= (double)(H - 1))) return 0.0;
+  double fx0 = floor(x), fy0 = floor(y);
+  if (fx0 > (double)(W - 2)) fx0 = (double)(W - 2);
+  if (fy0 > (double)(H - 2)) fy0 = (double)(H - 2);
+  int64_t x0 = (int64_t)fx0, y0 = (int64_t)fy0;
+  double fx = x - (double)x0, fy = y - (double)y0;
+  const uint8_t *p = img + y0 * W + x0;
+  double v00 = p[0], v01 = p[1], v10 = p[W], v11 = p[W + 1];
+  return (1 - fy) * ((1 - fx) * v00 + fx * v01) + fy * ((1 - fx) * v10 + fx * v11);
+}
+
+/* The element of rank (n - 1) / 2 of v (the lower median; v is reordered):
+ * quickselect with the median of three as pivot (the value equals that of a sort). */
+static double lower_median(double *v, int64_t n) {
+  int64_t lo = 0, hi = n - 1, k = (n - 1) / 2;
+  while (hi > lo) {
+    int64_t mid = lo + (hi - lo) / 2;
+    double a = v[lo], b = v[mid], c = v[hi];
+    double pivot = a < b ? (b < c ? b : (a < c ? c : a)) : (a < c ? a : (b < c ? c : b));
+    int64_t i = lo, j = hi;
+    while (i <= j) {
+      while (v[i] < pivot) ++i;
+      while (v[j] > pivot) --j;
+      if (i <= j) {
+        double tmp = v[i];
+        v[i] = v[j];
+        v[j] = tmp;
+        ++i;
+        --j;
+      }
+    }
+    if (k <= j) {
+      hi = j;
+    } else if (k >= i) {
+      lo = i;
+    } else {
+      return v[k];
+    }
+  }
+  return v[k];
+}
+
+static double sgn(double x) { return (double)((x > 0) - (x < 0)); }
+
+/*
+ * P: (12*M*2) samples; out: (12*2) outward unit normals; search: (12); R: profile
+ * half-length; t: (M) sample positions along the segments; seg: (6*2*2*2) predicted
+ * segments; lines: (6*2*3) pixel lines with unit (a, b); margin: occlusion margin [px];
+ * Kinv: (9) row-major inverse intrinsics; f, cx, cy: mean focal length and principal
+ * point [px]; predicted: (12*3) normals.
+ * Work: offset (12*M), valid (12*M), rays (12*M*3), ppr (12*M), prof (2R+1),
+ * pairs (M*(M-1)/2). Out: as fit_planes, and points (12*M*2; NaN where not inlier).
+ */
+int track_pass(const uint8_t *img, int64_t W, int64_t H, const double *P, const double *out,
+               const double *search, int64_t R, int64_t M, const double *t, const double *seg,
+               const double *lines, double margin, double min_contrast, double outlier_px,
+               const double *Kinv, double f, double cx, double cy, const double *predicted,
+               int64_t min_points, double max_rms_px, int64_t iterations, double *offset,
+               uint8_t *valid, double *rays, double *ppr, double *prof, double *pairs,
+               double *normals, uint8_t *visible, int64_t *count, double *rms,
+               uint8_t *inliers, double *points) {
+  const int64_t L0 = 2 * R + 1, L = 2 * R - 1;
+  /* leg bands for the occlusion gate */
+  double s1[6], c0[6][2], axu[6][2], alen[6];
+  for (int k = 0; k < 6; ++k) {
+    const double *l1 = lines + (k * 2 + 0) * 3, *l2 = lines + (k * 2 + 1) * 3;
+    s1[k] = sgn(l1[0] * l2[0] + l1[1] * l2[1]);
+    for (int d = 0; d < 2; ++d) {
+      /* seg[k, e, end, d]: centre of the two edges' end points */
+      double a0 = 0.5 * (seg[((k * 2 + 0) * 2 + 0) * 2 + d] + seg[((k * 2 + 1) * 2 + 0) * 2 + d]);
+      double a1 = 0.5 * (seg[((k * 2 + 0) * 2 + 1) * 2 + d] + seg[((k * 2 + 1) * 2 + 1) * 2 + d]);
+      c0[k][d] = a0;
+      axu[k][d] = a1 - a0;
+    }
+    alen[k] = sqrt(axu[k][0] * axu[k][0] + axu[k][1] * axu[k][1]);
+    axu[k][0] /= alen[k];
+    axu[k][1] /= alen[k];
+  }
+  for (int64_t e = 0; e < 12; ++e) {
+    const int64_t leg = e / 2;
+    const double ox = out[2 * e], oy = out[2 * e + 1];
+    const double s_e = search[e];
+    for (int64_t m = 0; m < M; ++m) {
+      const int64_t idx = e * M + m;
+      const double px = P[2 * idx], py = P[2 * idx + 1];
+      valid[idx] = 0;
+      offset[idx] = 0.0;
+      int finite = 1;
+      for (int64_t j = 0; j < L0; ++j) {
+        double o = (double)(j - R);
+        double x = px + o * ox, y = py + o * oy;
+        if (!isfinite(x) || !isfinite(y)) finite = 0;
+        prof[j] = bilinear_zero(img, W, H, x, y);
+      }
+      /* gradient candidates at offsets o = -(R-1) .. R-1 (index k = 0 .. L-1) */
+      int64_t kbest = 0;
+      double gbest = 0.0;
+      for (int64_t k = 0; k < L; ++k) {
+        double g = NO_GRADIENT;
+        double o = (double)(k + 1 - R);
+        double x = px + o * ox, y = py + o * oy;
+        int in_img = x >= 0 && x <= (double)(W - 1) && y >= 0 && y <= (double)(H - 1);
+        if (fabs(o) <= s_e && in_img) g = 0.5 * (prof[k + 2] - prof[k]);
+        if (k == 0 || g > gbest) {
+          gbest = g;
+          kbest = k;
+        }
+      }
+      if (L < 3 || !finite || kbest < 1 || kbest > L - 2 || !(gbest >= min_contrast)) continue;
+      double gv[3];
+      for (int d = -1; d <= 1; ++d) {
+        int64_t k = kbest + d;
+        double o = (double)(k + 1 - R);
+        double x = px + o * ox, y = py + o * oy;
+        int in_img = x >= 0 && x <= (double)(W - 1) && y >= 0 && y <= (double)(H - 1);
+        gv[d + 1] = (fabs(o) <= s_e && in_img) ? 0.5 * (prof[k + 2] - prof[k]) : NO_GRADIENT;
+      }
+      double den = gv[0] - 2 * gv[1] + gv[2];
+      double frac = 0.0;
+      if (den < 0 && den > -1e5) frac = 0.5 * (gv[0] - gv[2]) / den;
+      if (frac < -0.5) frac = -0.5;
+      if (frac > 0.5) frac = 0.5;
+      /* occlusion gate: inside (or within the margin of) another leg's band */
+      int contested = 0;
+      for (int k = 0; k < 6 && !contested; ++k) {
+        if (k == leg) continue;
+        const double *l1 = lines + (k * 2 + 0) * 3, *l2 = lines + (k * 2 + 1) * 3;
+        double d1 = px * l1[0] + py * l1[1] + l1[2];
+        double d2 = px * l2[0] + py * l2[1] + l2[2];
+        int between = (d1 * d2 * s1[k] <= 0) || fabs(d1) < margin || fabs(d2) < margin;
+        double tt = (px - c0[k][0]) * axu[k][0] + (py - c0[k][1]) * axu[k][1];
+        int along = tt >= -margin && tt <= alen[k] + margin;
+        if (between && along && isfinite(tt)) contested = 1;
+      }
+      if (contested) continue;
+      offset[idx] = (double)(kbest + 1 - R) + frac;
+      valid[idx] = 1;
+    }
+    /* Theil-Sen line through (t, offset), then residual test */
+    const double *off = offset + e * M;
+    uint8_t *val = valid + e * M;
+    int64_t np_ = 0;
+    for (int64_t i = 0; i < M; ++i)
+      for (int64_t j = i + 1; j < M; ++j)
+        if (val[i] && val[j]) pairs[np_++] = (off[i] - off[j]) / (t[i] - t[j]);
+    if (np_ == 0) {
+      for (int64_t i = 0; i < M; ++i) val[i] = 0;
+    } else {
+      double b = lower_median(pairs, np_);
+      int64_t nr = 0;
+      for (int64_t i = 0; i < M; ++i)
+        if (val[i]) pairs[nr++] = off[i] - b * t[i];
+      double a = lower_median(pairs, nr);
+      for (int64_t i = 0; i < M; ++i)
+        if (val[i] && !(fabs(off[i] - (a + b * t[i])) <= 2.0 * outlier_px)) val[i] = 0;
+    }
+    /* points, rays, pixels per radian */
+    for (int64_t m = 0; m < M; ++m) {
+      const int64_t idx = e * M + m;
+      double u = 0.0, v = 0.0;
+      if (valid[idx]) {
+        u = P[2 * idx] + offset[idx] * ox;
+        v = P[2 * idx + 1] + offset[idx] * oy;
+      }
+      points[2 * idx] = u;
+      points[2 * idx + 1] = v;
+      double h0 = u * Kinv[0] + v * Kinv[1] + Kinv[2];
+      double h1 = u * Kinv[3] + v * Kinv[4] + Kinv[5];
+      double h2 = u * Kinv[6] + v * Kinv[7] + Kinv[8];
+      double nh = sqrt(h0 * h0 + h1 * h1 + h2 * h2);
+      rays[3 * idx] = h0 / nh;
+      rays[3 * idx + 1] = h1 / nh;
+      rays[3 * idx + 2] = h2 / nh;
+      double dx = valid[idx] ? u - cx : 0.0, dy = valid[idx] ? v - cy : 0.0;
+      double rho2 = (dx * dx + dy * dy) / (f * f);
+      ppr[idx] = f * sqrt(1.0 + rho2);
+    }
+  }
+  fit_planes(rays, valid, ppr, predicted, 12, M, outlier_px, min_points, max_rms_px,
+             iterations, normals, visible, count, rms, inliers);
+  for (int64_t k = 0; k < 12 * M; ++k) {
+    if (!inliers[k]) {
+      points[2 * k] = NAN;
+      points[2 * k + 1] = NAN;
+    }
+  }
+  return 0;
+}
