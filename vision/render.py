@@ -4,8 +4,11 @@ Each leg is a solid cylinder of radius ``geometry.leg_radius`` around the segmen
 ``A_i .. B_i`` (``MATH.md`` section 4). The image is drawn with the painter's
 algorithm: the objects (six legs and, optionally, the platform disc) are sorted by
 the distance of their centre to the projection centre and filled from the farthest
-to the nearest. Each polygon is blended into the image by its exact coverage of
-every pixel (the area of the pixel's unit square inside it, i.e. the box filter of
+to the nearest (the order of the true depths wherever two legs overlap in the image,
+checked per pixel by ray casting on random poses), the platform disc first or last
+depending on the side of its plane the camera is on (:meth:`Renderer.draw_order`).
+Each polygon is blended into the image by its exact coverage of every pixel (the
+area of the pixel's unit square inside it, i.e. the box filter of
 an ideal sensor pixel; :class:`vision.kernels.PolygonFiller`, compiled C), so a
 rendered edge has its 50 % level on the true edge whatever its direction and
 sub-pixel position. Without a C compiler the renderer falls back to OpenCV's
@@ -354,6 +357,35 @@ class Renderer:
             raise RenderError("noise_std", "noise bank not initialised")
         return self._noise_pos, neg
 
+    def draw_order(self, rotation: np.ndarray, translation: np.ndarray) -> list[int]:
+        """The objects in the order they are drawn (farthest first): leg indices 0-5,
+        and -1 for the platform disc (when the style draws it).
+
+        Args:
+            rotation: (3, 3) platform orientation in the base frame.
+            translation: (3,) platform position in the base frame [m].
+        """
+        T = self.camera.camera_from_base
+        legs = legs_in_frame(self.geometry, np.asarray(rotation, float),
+                             np.asarray(translation, float), T)
+        return self._order(legs.base_points, legs.directions, legs.lengths,
+                           T.apply(np.asarray(translation, float)),
+                           T.rotation @ np.asarray(rotation, float))
+
+    def _order(self, A: np.ndarray, u: np.ndarray, q: np.ndarray, centre: np.ndarray,
+               R_cam: np.ndarray) -> list[int]:
+        depth = np.linalg.norm(A + 0.5 * q[:, None] * u, axis=1)
+        items: list[tuple[float, int]] = [(float(depth[i]), i) for i in range(6)]
+        if self.style.platform:
+            # Every leg lies on the base side of the platform plane (it touches it at
+            # its joint on the rim): the disc hides every leg from a camera on the
+            # other side, and none from a camera on the base side.
+            normal = R_cam[:, 2]
+            camera_side = float(-centre @ normal)
+            base_side = float(np.mean(A, axis=0) @ normal - centre @ normal)
+            items.append((-np.inf if camera_side * base_side < 0 else np.inf, -1))
+        return [i for _, i in sorted(items, reverse=True)]
+
     def render(self, rotation: np.ndarray, translation: np.ndarray) -> np.ndarray:
         """Render one frame.
 
@@ -375,14 +407,10 @@ class Renderer:
         legs = legs_in_frame(self.geometry, R, t, T)
         A, u, q = legs.base_points, legs.directions, legs.lengths
         img = self.background.copy()
-        depth = np.linalg.norm(A + 0.5 * q[:, None] * u, axis=1)
-        items: list[tuple[float, int]] = [(float(depth[i]), i) for i in range(6)]
         centre = T.apply(t)
-        if self.style.platform:
-            items.append((float(np.linalg.norm(centre)), -1))
         polys = self._leg_polygons(A, u, q)
         shapes: list[tuple[list[np.ndarray], int]] = []
-        for _, i in sorted(items, reverse=True):
+        for i in self._order(A, u, q, centre, T.rotation @ R):
             if i < 0:
                 shapes += self._platform_shape(centre, T.rotation @ R)
             else:
