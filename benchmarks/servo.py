@@ -258,12 +258,13 @@ class FeatureSensor(Protocol):
 
 
 class _TrackingMixin:
-    """Keeps the last normals when every edge was found, to seed the next detection."""
+    """Keeps the last normals (NaN where an edge was not found) to seed the next
+    detection (:meth:`vision.detect.PerspectiveTracker.track`)."""
 
     previous: np.ndarray | None = None
 
     def _remember(self, f: Features) -> Features:
-        self.previous = np.asarray(f.normals) if bool(np.all(f.edge_visible)) else None
+        self.previous = np.asarray(f.normals) if bool(np.any(f.edge_visible)) else None
         return f
 
 
@@ -341,13 +342,7 @@ class VideoCamera(_TrackingMixin):
             self.lost_frames += 1
             return None
         pred = LegPrediction.from_pose(self.camera, self.geometry, rotation, translation)
-        if self.previous is not None:
-            pred = pred.with_normals(self.previous)
-            det = self.detector.detect(frame.image, pred)
-        elif hasattr(self.detector, "search_px"):  # perspective: wide search, then refine
-            det = self.detector.detect(frame.image, pred, 40.0, 4.0)
-        else:
-            det = self.detector.detect(frame.image, pred)
+        det = self.detector.track(frame.image, pred, self.previous)
         return self._remember(Features(np.asarray(det.normals, float),
                                        np.asarray(det.edge_visible, bool)))
 

@@ -379,10 +379,10 @@ def make_sensor(sc: Scenario, setup: TrialSetup) -> Any:
 class _ImageSensorAdapter:
     """Adapts :class:`vision.image_sensor.ImageSensor` to the batched sensor interface.
 
-    During a run each trial's detector is seeded with that trial's last measurement
-    when every edge was found (tracking), keyed by the trial's sensor generator (alive
-    for the whole run). The goal frames are detected from the model's prediction and
-    never seed the tracking.
+    During a run each trial's detector tracks the edges found in that trial's last
+    measurement (the others come from the aligned model prediction), keyed by the
+    trial's sensor generator (alive for the whole run). The goal frames are detected
+    from the model's prediction and never seed the tracking.
     """
 
     def __init__(self, sensor: Any) -> None:
@@ -433,8 +433,8 @@ class _ImageSensorAdapter:
             key = id(rngs[k])
             prev = self._previous.get(key) if apply_noise else None
             m = self.sensor.measure(rotations[k], translations[k], predicted_normals=prev)
-            if apply_noise and np.all(np.asarray(m.edge_visible)):
-                self._previous[key] = np.asarray(m.normals)
+            if apply_noise and np.any(np.asarray(m.edge_visible)):
+                self._previous[key] = np.asarray(m.normals)  # NaN where not found
             else:
                 self._previous.pop(key, None)
             self.detect_times.append(float(m.detect_time_s))

@@ -433,6 +433,18 @@ class OmniDetector:
         v10, v11 = flat[b + W].astype(float), flat[b + W + 1].astype(float)
         return (1 - fy) * ((1 - fx) * v00 + fx * v01) + fy * ((1 - fx) * v10 + fx * v11)
 
+    def track(
+        self, image: np.ndarray, prediction: LegPrediction,
+        previous: np.ndarray | None = None, align_px: float = 0.0, refine_px: float = 0.0,
+    ) -> EdgeDetection:
+        """Detect the edges of one frame of a sequence (same call as
+        :meth:`PerspectiveTracker.track`): the scan is global; the normals found in
+        the previous frame (finite rows of ``previous``) replace the model's in the
+        association reference. ``align_px`` and ``refine_px`` are not used."""
+        if previous is not None:
+            prediction = prediction.with_normals(np.asarray(previous, float))
+        return self.detect(image, prediction)
+
     def detect(
         self, image: np.ndarray, prediction: LegPrediction | None = None,
         geometry: HexapodGeometry | None = None, use_compiled: bool = True,
@@ -674,16 +686,7 @@ class PerspectiveTracker:
         from vision import kernels
 
         M = self.n_samples
-        m = self.end_margin
-        t = m + (1 - 2 * m) * (np.arange(M) + 0.5) / M  # (M,)
-        p0, p1 = seg[:, :, 0, :], seg[:, :, 1, :]
-        P = p0[:, :, None, :] + t[None, None, :, None] * (p1 - p0)[:, :, None, :]  # (6,2,M,2)
-        nrm = lines[..., :2]  # unit (a, b): the line normal in pixels
-        # Outward direction: away from the other edge of the same leg.
-        other = lines[:, ::-1]
-        side = np.sum(other[:, :, None, :2] * P, -1) + other[:, :, None, 2]  # (6,2,M)
-        sgn = np.sign(np.sum(side, -1) * np.sum(nrm * other[..., :2], -1))  # (6, 2)
-        out = nrm * np.where(sgn == 0, 1.0, sgn)[..., None]
+        t, P, out = self._samples(seg, lines)
         search_arr = np.broadcast_to(np.asarray(search, float), (6, 2))
         R = math.ceil(float(np.max(search_arr)))
         if use_compiled and kernels.available():
@@ -705,6 +708,116 @@ class PerspectiveTracker:
             rays, valid, self._px_per_rad(pts), prediction.normals, self.outlier_px,
             self.min_points, self.max_rms_px, use_compiled=False)
         return EdgeDetection(normals, vis, cnt, rms, np.where(inl[..., None], pts, np.nan), M)
+
+    def _samples(self, seg: np.ndarray, lines: np.ndarray
+                 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Positions ``t`` (M,) along the segments, sample points ``P`` (6, 2, M, 2) [px]
+        and the outward unit normals ``out`` (6, 2, 2) (away from the leg's other edge)."""
+        M = self.n_samples
+        m = self.end_margin
+        t = m + (1 - 2 * m) * (np.arange(M) + 0.5) / M  # (M,)
+        p0, p1 = seg[:, :, 0, :], seg[:, :, 1, :]
+        P = p0[:, :, None, :] + t[None, None, :, None] * (p1 - p0)[:, :, None, :]  # (6,2,M,2)
+        nrm = lines[..., :2]  # unit (a, b): the line normal in pixels
+        other = lines[:, ::-1]
+        side = np.sum(other[:, :, None, :2] * P, -1) + other[:, :, None, 2]  # (6,2,M)
+        sgn = np.sign(np.sum(side, -1) * np.sum(nrm * other[..., :2], -1))  # (6, 2)
+        out = nrm * np.where(sgn == 0, 1.0, sgn)[..., None]
+        return t, P, out
+
+    def track(
+        self, image: np.ndarray, prediction: LegPrediction,
+        previous: np.ndarray | None = None, align_px: float = 40.0, refine_px: float = 4.0,
+    ) -> EdgeDetection:
+        """Detect the edges of one frame of a sequence (the policy of every caller).
+
+        Edges found in the previous frame (finite rows of ``previous``) are searched
+        around their last position (``search_px``); if any edge was not found, the
+        model prediction is first aligned with the image (:meth:`align`, translations
+        up to ``align_px``) and gives the others. A second pass of ``refine_px``
+        around the first fit ends every frame, so that the final samples depend on
+        the detected lines, not on the history of predictions (the goal image and the
+        images near it are measured alike).
+
+        Args:
+            image: (height, width) uint8 grey image (BGR is converted).
+            prediction: The model's prediction (e.g. at the pose of the measured leg
+                lengths) in the estimated camera frame.
+            previous: (6, 2, 3) normals of the previous frame, NaN where not found
+                (None: first frame).
+            align_px: Largest translation of the alignment [px] (0: no alignment).
+            refine_px: Half-length of the final pass [px] (0: none).
+
+        Returns:
+            An :class:`EdgeDetection`.
+        """
+        tracked = np.zeros((6, 2), bool)
+        if previous is not None:
+            prev = np.asarray(previous, float)
+            if prev.shape != (6, 2, 3):
+                raise DetectionError("previous", f"expected shape (6, 2, 3), got {prev.shape}")
+            tracked = np.all(np.isfinite(prev), axis=-1)
+        base = prediction
+        if not tracked.all() and align_px > 0:
+            _, base = self.align(image, prediction, align_px)
+        if tracked.any():
+            base = base.with_normals(np.where(tracked[..., None], prev, np.nan))
+        return self.detect(image, base, self.search_px, refine_px)
+
+    def align(
+        self, image: np.ndarray, prediction: LegPrediction, max_shift_px: float = 40.0,
+    ) -> tuple[np.ndarray, LegPrediction]:
+        """The image translation that best aligns the predicted edges with the image.
+
+        A calibration error (camera pose, intrinsics) moves the whole image of the
+        robot by about the same amount, often more than the tracker's search window:
+        a per-edge search then picks whatever strong edge of the right polarity is
+        nearest, possibly another leg's limb. Instead, every edge's gradient response
+        towards the bright outside (positive part, summed over its samples outside
+        the other legs' predicted bands) is read as a function of the offset along
+        its normal, and the one translation ``(dx, dy)`` maximising the total
+        response of the twelve edges (integer pixels within ``max_shift_px``) is
+        kept: an edge of another leg in one window cannot outvote the others.
+
+        Args:
+            image: (height, width) uint8 grey image.
+            prediction: Predicted legs in the estimated camera frame.
+            max_shift_px: Largest translation tried in each axis [px].
+
+        Returns:
+            ``shift`` (2,) [px] and the prediction with its edges moved by it.
+        """
+        image = _check_image(image, self.camera)
+        if not max_shift_px >= 1:
+            raise DetectionError("max_shift_px", f"must be >= 1, got {max_shift_px}")
+        seg = self.predicted_segments(prediction)
+        lines = _pixel_lines(self.camera, prediction.normals)
+        _, P, out = self._samples(seg, lines)
+        R = math.ceil(float(max_shift_px)) + 1
+        offs = np.arange(-R, R + 1, dtype=float)
+        Q = P[:, :, :, None, :] + offs[None, None, None, :, None] * out[:, :, None, None, :]
+        prof = _bilinear_zero(image, Q[..., 0], Q[..., 1])
+        grad = np.maximum(0.5 * (prof[..., 2:] - prof[..., :-2]), 0.0)  # offs[1:-1]
+        use = np.all(np.isfinite(P), -1) & ~self._contested(P, seg, lines)
+        G = np.sum(np.where(use[..., None], grad, 0.0), axis=2)  # (6, 2, 2R - 1)
+        G = np.where(np.all(np.isfinite(out), -1)[..., None], G, 0.0)
+        d = np.arange(-(R - 1), R, dtype=float)
+        d = d[np.abs(d) <= max_shift_px]
+        DX, DY = np.meshgrid(d, d, indexing="ij")
+        o = DX.ravel()[:, None, None] * out[..., 0] + DY.ravel()[:, None, None] * out[..., 1]
+        o = np.nan_to_num(o, nan=0.0) + (R - 1)  # index into G (S, 6, 2)
+        k0 = np.clip(np.floor(o).astype(np.intp), 0, G.shape[-1] - 2)
+        w = np.clip(o - k0, 0.0, 1.0)
+        ii, jj = np.meshgrid(np.arange(6), np.arange(2), indexing="ij")
+        score = np.sum((1 - w) * G[ii, jj, k0] + w * G[ii, jj, k0 + 1], axis=(1, 2))
+        best = int(np.argmax(score))
+        shift = np.array([DX.ravel()[best], DY.ravel()[best]])
+        moved = lines.copy()
+        moved[..., 2] -= moved[..., 0] * shift[0] + moved[..., 1] * shift[1]
+        with np.errstate(invalid="ignore", divide="ignore"):
+            n = moved @ self.camera.K
+            n /= np.linalg.norm(n, axis=-1, keepdims=True)
+        return shift, prediction.with_normals(n)
 
     def _profile_offsets(
         self, image: np.ndarray, P: np.ndarray, out: np.ndarray, search: np.ndarray, R: int,

@@ -5,15 +5,16 @@ the normals use the *estimated* camera (intrinsics and pose): the measured norma
 are what a real system would compute from the same pixels, so calibration errors
 of the camera reach the features exactly as they would on the robot.
 
-Prediction used by the detectors (association of features to legs, edge order and,
-for the perspective tracker, where to search): in this order,
-
-1. ``predicted_normals`` given to :meth:`ImageSensor.measure` (in the estimated
-   camera frame; e.g. the previous measurement);
-2. the model at the pose being measured, seen by the estimated camera: what the
-   forward kinematics of the encoder readings gives with the calibrated model.
-
-The perspective tracker then searches ``+-search_px`` around the prediction.
+Detection (:meth:`vision.detect.PerspectiveTracker.track`, the policy shared with
+the servo loop's cameras): the model at the pose being measured, seen by the
+estimated camera, is what the forward kinematics of the encoder readings gives with
+the calibrated model. Edges found in the previous frame (``predicted_normals``,
+NaN where not found) are searched ``+-search_px`` around their last position; when
+some edge was not found, the model prediction is first aligned with the image (one
+translation up to ``align_px``, which absorbs the image offset of the calibration
+error); a final pass of ``refine_px`` ends every frame. The omnidirectional
+detector scans the whole image and uses the prediction only to associate bands
+with legs.
 """
 
 from __future__ import annotations
@@ -81,12 +82,12 @@ class ImageSensor:
         estimated_geometry: The robot model used for predictions (default: ``geometry``).
         style: Full rendering style (overrides ``background``, ``blur_px`` and
             ``noise_std`` when given).
-        search_px: Search half-length of the perspective tracker when the caller
-            gives predicted normals (tracking) [px].
-        wide_search_px: Search half-length when the prediction comes from the model
-            (first pass; a second pass of ``refine_px`` follows) [px]. It must cover
-            the image error of the calibrated model.
-        refine_px: Second-pass half-length after a wide search [px].
+        search_px: Search half-length of the perspective tracker around the
+            previous detection or the aligned prediction [px].
+        align_px: Largest image translation between the model prediction and the
+            image tried by the alignment [px]. It must cover the image error of the
+            calibrated model.
+        refine_px: Half-length of the final pass [px].
     """
 
     def __init__(
@@ -101,7 +102,7 @@ class ImageSensor:
         estimated_geometry: HexapodGeometry | None = None,
         style: RenderStyle | None = None,
         search_px: float = 12.0,
-        wide_search_px: float = 40.0,
+        align_px: float = 40.0,
         refine_px: float = 4.0,
     ) -> None:
         if true_camera.kind != estimated_camera.kind:
@@ -123,7 +124,7 @@ class ImageSensor:
         else:
             self.detector = OmniDetector(estimated_camera)
         self.search_px = float(search_px)
-        self.wide_search_px = float(wide_search_px)
+        self.align_px = float(align_px)
         self.refine_px = float(refine_px)
         self.last_image: np.ndarray | None = None
 
@@ -147,8 +148,8 @@ class ImageSensor:
         Args:
             rotation: (3, 3) true platform orientation in the base frame.
             translation: (3,) true platform position in the base frame [m].
-            predicted_normals: (6, 2, 3) predicted normals in the estimated camera
-                frame (optional).
+            predicted_normals: (6, 2, 3) normals found in the previous frame, in the
+                estimated camera frame, NaN where not found (None: first frame).
 
         Returns:
             An :class:`ImageMeasurement`.
@@ -156,14 +157,9 @@ class ImageSensor:
         t0 = time.perf_counter()
         image = self.renderer.render(rotation, translation)
         t1 = time.perf_counter()
-        pred = self.predict(rotation, translation, predicted_normals)
-        if isinstance(self.detector, PerspectiveTracker):
-            if predicted_normals is None:
-                det = self.detector.detect(image, pred, self.wide_search_px, self.refine_px)
-            else:
-                det = self.detector.detect(image, pred, self.search_px, 0.0)
-        else:
-            det = self.detector.detect(image, pred)
+        pred = self.predict(rotation, translation)
+        det = self.detector.track(image, pred, predicted_normals, self.align_px,
+                                  self.refine_px)
         lines = None
         if isinstance(self.estimated_camera, PerspectiveCamera):
             with np.errstate(invalid="ignore"):
