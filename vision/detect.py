@@ -15,11 +15,17 @@ edges of a leg apart and to associate image features with legs.
 
 **Omnidirectional** (:class:`OmniDetector`, seed 003 section III-A): the image is
 sampled along ``n_circles`` circles centred on the principal point with diameters
-from ``d_min`` to ``d_max`` (one ``cv2.remap`` with maps computed once), each 1D
-signal is thresholded at the middle of its range, and the transitions of the binary
-signal (the peaks of its derivative) are located with sub-sample accuracy by
-linear interpolation of the grey level at the threshold. Every leg crosses every
-circle as a dark band: its start and end are the two edges. Bands are associated to
+from ``d_min`` to ``d_max`` (nearest pixels, indices computed once), each 1D signal
+is thresholded half-way between its darkest sample and its median (the background:
+the legs cover a small part of every circle, a bright object may set its maximum),
+and every leg crosses every circle as a dark band whose start and end are the two
+edges. Each edge is then located with sub-sample accuracy as the strongest gradient
+of its polarity near the transition (central differences of the bilinearly
+interpolated signal, refined by a parabola), which does not depend on the grey
+levels on either side (on a cluttered background the local level differs from the
+circle's). An edge whose points lie farther than ``max_rms_px`` (RMS) from their
+plane is reported missing; a straight dark object running along a leg can still
+bias an edge within that tolerance (``docs/results.md``). Bands are associated to
 legs by the angle where the predicted leg axis crosses the circle (the nearest
 predicted leg wins, within half the distance to the next predicted leg); a band
 whose width is far from the predicted width (two legs merged, clutter) is dropped.
@@ -28,18 +34,27 @@ used (the legs stay near their base joints' azimuth, which the calibration gives
 
 **Perspective** (:class:`PerspectiveTracker`, the moving-edges idea of ViSP):
 ``n_samples`` points are placed along each predicted edge segment; from each, a 1D
-profile is read along the normal of the predicted line over ``+-search_px`` (one
-``cv2.remap`` for all 12 edges) and the strongest grey-level gradient of the right
-polarity (dark leg inside, brighter background outside) is kept if stronger than
-``min_contrast``. Samples that fall inside another leg's predicted band (where a
-leg may hide the edge, or be hidden by it against a dark background) are not used.
-A robust line (Theil-Sen on the offsets from the predicted line, then a residual
-test) rejects the points of the remaining occluders and clutter, and the normal is
-the least-squares fit of the inliers. Initialisation: from the caller's prediction
-(e.g. the model at the pose given by the encoders, or the previous detection); a
-wide ``search_px`` followed by a narrow second pass absorbs a poor first
-prediction (see ``refine_px``). There is no prediction-free (Hough/LSD) initial
-detection.
+profile is read along the normal of the predicted line over ``+-search_px`` (exact
+bilinear interpolation) and the strongest grey-level gradient of the right polarity
+(dark leg inside, brighter background outside) is kept if stronger than
+``min_contrast``, refined by a parabola. Samples that fall inside another leg's
+predicted band (where a leg may hide the edge, or be hidden by it against a dark
+background) are not used. A robust line (Theil-Sen on the offsets from the
+predicted line, then a residual test) rejects the points of the remaining occluders
+and clutter, and the normal is the robust least-squares fit of the inliers.
+
+Initialisation and tracking (:meth:`PerspectiveTracker.track`, the policy of the
+simulator's image sensor and of the servo loop's cameras): edges found in the
+previous frame are searched around their last position; for the others, the model
+prediction (the pose of the measured leg lengths, seen by the estimated camera) is
+first aligned with the image by one translation (:meth:`PerspectiveTracker.align`:
+the consensus of the twelve edges' gradient responses), which absorbs the image
+offset of the calibration error (tens of pixels) without locking an edge onto
+another leg's limb; a final narrow pass ends every frame. There is no
+prediction-free (Hough/LSD) detection: the encoders always give the prediction.
+
+Both detectors run compiled cores (:mod:`vision.kernels`) that compute the same as
+the numpy code here, which stays as the reference and the fallback.
 """
 
 from __future__ import annotations
@@ -315,7 +330,7 @@ class OmniDetector:
         n_angles: int = 1024,
         min_points: int = 5,
         outlier_px: float = 1.5,
-        max_rms_px: float = 1.0,
+        max_rms_px: float = 0.5,
         width_tolerance: float = 1.8,
         min_contrast: float = 40.0,
     ) -> None:
@@ -511,10 +526,11 @@ class OmniDetector:
         sig = flat[self._idx]
         C, N = sig.shape
         lo = sig.min(axis=1)
-        hi = sig.max(axis=1)
-        thr = 0.5 * (lo.astype(float) + hi)
-        thr_i = ((lo.astype(np.uint16) + hi + 1) // 2).astype(np.uint8)
-        thr_i[(hi.astype(float) - lo) < self.min_contrast] = 0  # flat circle: no band
+        # The background level of a circle is its (lower) median: the legs cover a
+        # small part of every circle, while its maximum may be a bright object.
+        bg = np.partition(sig, (N - 1) // 2, axis=1)[:, (N - 1) // 2]
+        thr_i = ((lo.astype(np.uint16) + bg + 1) // 2).astype(np.uint8)
+        thr_i[(bg.astype(float) - lo) < self.min_contrast] = 0  # flat circle: no band
         dark = (sig < thr_i[:, None]).view(np.int8)
         # Transitions: +1 = first dark sample of a band, -1 = first bright after it.
         step = np.empty_like(dark)
@@ -550,16 +566,24 @@ class OmniDetector:
                 ks = key[order]
                 keep = order[np.concatenate([[True], ks[1:] != ks[:-1]])]
                 c_k, leg_k, js, jek = c_k[keep], leg_k[keep], js[keep], jek[keep]
-                # Sub-sample threshold crossings from bilinear samples at j-1 and j.
+                # Sub-sample edges: the strongest gradient of the edge's polarity
+                # (falling at a band start, rising at its end) among the central
+                # differences at samples j-2 .. j+1 of the bilinear signal, refined
+                # by a parabola through it and its neighbours.
                 cc = np.concatenate([c_k, c_k])
                 jj = np.concatenate([js, jek])
-                v0 = self._bilinear(flat, cc, (jj - 1) % N)
-                v1 = self._bilinear(flat, cc, jj)
-                t = thr[cc]
+                sign = np.concatenate([np.full(js.size, -1.0), np.full(jek.size, 1.0)])
+                b = np.stack([self._bilinear(flat, cc, (jj + o) % N) for o in range(-3, 3)],
+                             axis=-1)
+                g = 0.5 * (b[:, 2:] - b[:, :-2]) * sign[:, None]  # at samples j-2 .. j+1
+                rows = np.arange(jj.size)
+                kk = np.clip(np.argmax(g, axis=1), 1, 2)
+                gm, g0, gp = g[rows, kk - 1], g[rows, kk], g[rows, kk + 1]
+                den = gm - 2 * g0 + gp
                 with np.errstate(invalid="ignore", divide="ignore"):
-                    frac = np.clip((t - v0) / (v1 - v0), 0.0, 1.0)
-                frac = np.nan_to_num(frac, nan=0.5)
-                ang = (jj - 1 + frac) * (2 * np.pi / N)
+                    frac = np.where(den < 0, 0.5 * (gm - gp) / den, 0.0)
+                frac = np.clip(frac, -0.5, 0.5)
+                ang = (jj - 2 + kk + frac) * (2 * np.pi / N)
                 n_k = c_k.size
                 a_start, a_end = ang[:n_k], ang[n_k:]
                 first1 = e1_first_ref[leg_k, c_k]

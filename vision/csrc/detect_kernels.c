@@ -5,8 +5,9 @@
  * -ffp-contract=off so that no multiply-add is fused), and the tests check that the
  * two agree. All arrays are C-contiguous; sizes are given explicitly.
  *
- *   omni_scan   seed 003's circle scan: polar sampling, threshold at mid-range,
- *               dark bands, association to the predicted legs, sub-sample edges.
+ *   omni_scan   seed 003's circle scan: polar sampling, threshold half-way to the
+ *               median, dark bands, association to the predicted legs, sub-sample
+ *               edges at the gradient peaks.
  *   fit_planes  robust batched plane fit through the origin (smallest eigenvector of
  *               the scatter matrix, outlier rejection, refit), oriented like the
  *               prediction.
@@ -47,20 +48,28 @@ static double bilinear(const uint8_t *img, const int64_t *base, const double *fx
   return (1 - y) * ((1 - x) * v00 + x * v01) + y * ((1 - x) * v10 + x * v11);
 }
 
-static double crossing(const uint8_t *img, const int64_t *base, const double *fx,
-                       const double *fy, int64_t W, int64_t row, int64_t N, int64_t j,
-                       double thr) {
-  double v0 = bilinear(img, base, fx, fy, W, row + imod(j - 1, N));
-  double v1 = bilinear(img, base, fx, fy, W, row + j);
-  double f = (thr - v0) / (v1 - v0);
-  if (isnan(f)) {
-    f = 0.5;
-  } else if (f < 0.0) {
-    f = 0.0;
-  } else if (f > 1.0) {
-    f = 1.0;
-  }
-  return ((double)(j - 1) + f) * (TWO_PI_ / (double)N);
+/* Azimuth [rad] of the edge at the transition at sample j of a circle: the strongest
+ * gradient of polarity `sign` (-1: falling, band start; +1: rising, band end) among
+ * the central differences at samples j-2 .. j+1 of the bilinear signal, refined by a
+ * parabola (vision.detect.OmniDetector._scan). */
+static double edge_azimuth(const uint8_t *img, const int64_t *base, const double *fx,
+                           const double *fy, int64_t W, int64_t row, int64_t N, int64_t j,
+                           double sign) {
+  double b[6], g[4];
+  for (int o = 0; o < 6; ++o) b[o] = bilinear(img, base, fx, fy, W, row + imod(j + o - 3, N));
+  for (int m = 0; m < 4; ++m) g[m] = 0.5 * (b[m + 2] - b[m]) * sign;
+  int k = 0;
+  for (int m = 1; m < 4; ++m)
+    if (g[m] > g[k]) k = m;
+  if (k < 1) k = 1;
+  if (k > 2) k = 2;
+  double gm = g[k - 1], g0 = g[k], gp = g[k + 1];
+  double den = gm - 2 * g0 + gp;
+  double frac = 0.0;
+  if (den < 0) frac = 0.5 * (gm - gp) / den;
+  if (frac < -0.5) frac = -0.5;
+  if (frac > 0.5) frac = 0.5;
+  return ((double)(j - 2 + k) + frac) * (TWO_PI_ / (double)N);
 }
 
 /*
@@ -84,16 +93,26 @@ int omni_scan(const uint8_t *img, const int64_t *idx, const int64_t *base, const
   const double step_a = TWO_PI_ / (double)N;
   for (int64_t c = 0; c < C; ++c) {
     const int64_t row = c * N;
-    uint8_t lo = 255, hi = 0;
+    uint8_t lo = 255;
+    int64_t hist[256] = {0};
     for (int64_t j = 0; j < N; ++j) {
       uint8_t s = img[idx[row + j]];
       sig[j] = s;
       if (s < lo) lo = s;
-      if (s > hi) hi = s;
+      ++hist[s];
     }
-    double thr = 0.5 * ((double)lo + (double)hi);
-    uint8_t thr_i = (uint8_t)(((unsigned)lo + (unsigned)hi + 1u) / 2u);
-    if ((double)hi - (double)lo < min_contrast) continue; /* flat circle: no band */
+    /* background: the lower median, sample of rank (N - 1) / 2 */
+    int64_t rank = (N - 1) / 2, acc = 0;
+    unsigned bg = 0;
+    for (unsigned v = 0; v < 256; ++v) {
+      acc += hist[v];
+      if (acc > rank) {
+        bg = v;
+        break;
+      }
+    }
+    uint8_t thr_i = (uint8_t)(((unsigned)lo + bg + 1u) / 2u);
+    if ((double)bg - (double)lo < min_contrast) continue; /* flat circle: no band */
     int64_t ns = 0, ne = 0;
     int prev = sig[N - 1] < thr_i;
     for (int64_t j = 0; j < N; ++j) {
@@ -134,8 +153,8 @@ int omni_scan(const uint8_t *img, const int64_t *idx, const int64_t *base, const
     }
     for (int l = 0; l < 6; ++l) {
       if (best_s[l] < 0) continue;
-      double a_start = crossing(img, base, fx, fy, W, row, N, best_s[l], thr);
-      double a_end = crossing(img, base, fx, fy, W, row, N, best_e[l], thr);
+      double a_start = edge_azimuth(img, base, fx, fy, W, row, N, best_s[l], -1.0);
+      double a_end = edge_azimuth(img, base, fx, fy, W, row, N, best_e[l], 1.0);
       int first1 = e1_first[l * C + c] != 0;
       pts_a[(l * 2 + 0) * C + c] = first1 ? a_start : a_end;
       pts_a[(l * 2 + 1) * C + c] = first1 ? a_end : a_start;
