@@ -142,7 +142,8 @@ def test_results_rows_have_the_documented_fields(tmp_path: Path) -> None:
 @pytest.mark.parametrize("name", ["quick", "andreff2005-noise", "andreff2006-front-camera",
                                   "andreff2006-images", "andreff2005-noise-omni",
                                   "andreff2005-pixel-noise",
-                                  "tahri2009-convergence", "calibration-error-sweep"])
+                                  "tahri2009-convergence", "tahri2009-images",
+                                  "calibration-error-sweep"])
 def test_builtin_scenario_end_to_end(name: str, tmp_path: Path) -> None:
     out = tmp_path / name
     code = cli_main(["run", name, "--out", str(out), "--trials", "1", "--no-progress",
