@@ -77,7 +77,8 @@ def _run(cam: Camera, frames: int, style: RenderStyle, seed: int,
         invented += int((d.edge_visible & (obs.visible_fraction < 0.25)).sum())
         if pictures is not None and k == 0:
             pictures.mkdir(parents=True, exist_ok=True)
-            name = "detect-omni.png" if omni else "detect-front.png"
+            suffix = "" if style.background == "plain" else f"-{style.background}"
+            name = f"detect-{'omni' if omni else 'front'}{suffix}.png"
             cv2.imwrite(str(pictures / name), draw_detection(img, cam, d))
     e = np.concatenate(errs) if errs else np.array([np.nan])
     return {
@@ -108,7 +109,8 @@ def main(argv: Sequence[str] | None = None) -> int:
                    help="detections per frame, the fastest is kept (timer noise)")
     p.add_argument("--seed", type=int, default=2026)
     p.add_argument("--pictures", type=Path, default=None,
-                   help="write detect-omni.png / detect-front.png of the first frame here")
+                   help="write detect-omni.png / detect-front.png of the first frame here "
+                        "(-cluttered before .png on a cluttered background)")
     args = p.parse_args(argv)
     style = RenderStyle(background=args.background, blur_px=args.blur, noise_std=args.noise)
     out = sys.stdout
