@@ -790,6 +790,7 @@ class PerspectiveTracker:
 
     def align(
         self, image: np.ndarray, prediction: LegPrediction, max_shift_px: float = 40.0,
+        use_compiled: bool = True,
     ) -> tuple[np.ndarray, LegPrediction]:
         """The image translation that best aligns the predicted edges with the image.
 
@@ -807,10 +808,14 @@ class PerspectiveTracker:
             image: (height, width) uint8 grey image.
             prediction: Predicted legs in the estimated camera frame.
             max_shift_px: Largest translation tried in each axis [px].
+            use_compiled: Use the compiled core (:func:`vision.kernels.align_shift`)
+                when it is available; False runs the numpy reference (same shift).
 
         Returns:
             ``shift`` (2,) [px] and the prediction with its edges moved by it.
         """
+        from vision import kernels
+
         image = _check_image(image, self.camera)
         if not max_shift_px >= 1:
             raise DetectionError("max_shift_px", f"must be >= 1, got {max_shift_px}")
@@ -818,6 +823,21 @@ class PerspectiveTracker:
         lines = _pixel_lines(self.camera, prediction.normals)
         _, P, out = self._samples(seg, lines)
         R = math.ceil(float(max_shift_px)) + 1
+        if use_compiled and kernels.available():
+            shift = kernels.align_shift(image, P, out, seg, lines, self.occlusion_margin_px,
+                                        R, float(max_shift_px))
+        else:
+            shift = self._align_numpy(image, P, out, seg, lines, R, float(max_shift_px))
+        moved = lines.copy()
+        moved[..., 2] -= moved[..., 0] * shift[0] + moved[..., 1] * shift[1]
+        with np.errstate(invalid="ignore", divide="ignore"):
+            n = moved @ self.camera.K
+            n /= np.linalg.norm(n, axis=-1, keepdims=True)
+        return shift, prediction.with_normals(n)
+
+    def _align_numpy(self, image: np.ndarray, P: np.ndarray, out: np.ndarray, seg: np.ndarray,
+                     lines: np.ndarray, R: int, max_shift_px: float) -> np.ndarray:
+        """The numpy reference of the alignment's shift (see :meth:`align`)."""
         offs = np.arange(-R, R + 1, dtype=float)
         Q = P[:, :, :, None, :] + offs[None, None, None, :, None] * out[:, :, None, None, :]
         prof = _bilinear_zero(image, Q[..., 0], Q[..., 1])
@@ -835,13 +855,7 @@ class PerspectiveTracker:
         ii, jj = np.meshgrid(np.arange(6), np.arange(2), indexing="ij")
         score = np.sum((1 - w) * G[ii, jj, k0] + w * G[ii, jj, k0 + 1], axis=(1, 2))
         best = int(np.argmax(score))
-        shift = np.array([DX.ravel()[best], DY.ravel()[best]])
-        moved = lines.copy()
-        moved[..., 2] -= moved[..., 0] * shift[0] + moved[..., 1] * shift[1]
-        with np.errstate(invalid="ignore", divide="ignore"):
-            n = moved @ self.camera.K
-            n /= np.linalg.norm(n, axis=-1, keepdims=True)
-        return shift, prediction.with_normals(n)
+        return np.array([DX.ravel()[best], DY.ravel()[best]])
 
     def _profile_offsets(
         self, image: np.ndarray, P: np.ndarray, out: np.ndarray, search: np.ndarray, R: int,

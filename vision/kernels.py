@@ -79,6 +79,8 @@ def _load() -> ctypes.CDLL | None:
     lib.track_pass.argtypes = ([_P, _I, _I, _P, _P, _P, _I, _I, _P, _P, _P, _D, _D, _D, _P, _D,
                                 _D, _D, _P, _I, _D, _I] + [_P] * 12)
     lib.track_pass.restype = ctypes.c_int
+    lib.align_shift.argtypes = [_P, _I, _I, _P, _P, _P, _P, _D, _I, _I, _D, _P, _P, _P, _P]
+    lib.align_shift.restype = None
     lib.fill_shapes.argtypes = [_P, _P, _I, _I, _P, _P, _P, _P, _I, _P, _P, _P, _P, _P]
     lib.fill_shapes.restype = ctypes.c_int
     _lib = lib
@@ -260,6 +262,28 @@ class TrackKernel:
                 self._rms.copy(), self._points.copy())
 
 
+def align_shift(image: np.ndarray, P: np.ndarray, out: np.ndarray, seg: np.ndarray,
+                lines: np.ndarray, margin: float, R: int, max_shift: float) -> np.ndarray:
+    """The compiled core of :meth:`vision.detect.PerspectiveTracker.align`: the image
+    translation (2,) [px] (arguments as there; ``R = ceil(max_shift) + 1``)."""
+    lib = _load()
+    if lib is None:
+        raise CompilationError("the vision kernels are not compiled")
+    img = _c(image, np.uint8)
+    H, W = img.shape
+    Pc, oc, sc, lc = (_c(a, np.float64) for a in (P, out, seg, lines))
+    M = Pc.shape[2]
+    L = 2 * int(R) - 1
+    G = np.empty(12 * max(L, 1))
+    prof = np.empty(2 * int(R) + 1)
+    d = np.empty(max(L, 1))
+    shift = np.zeros(2)
+    lib.align_shift(img.ctypes.data, W, H, Pc.ctypes.data, oc.ctypes.data, sc.ctypes.data,
+                    lc.ctypes.data, float(margin), int(M), int(R), float(max_shift),
+                    G.ctypes.data, prof.ctypes.data, d.ctypes.data, shift.ctypes.data)
+    return shift
+
+
 def fit_planes(
     rays: np.ndarray, valid: np.ndarray, px_per_rad: np.ndarray | float,
     predicted: np.ndarray, outlier_px: float, min_points: int, max_rms_px: float,
@@ -366,5 +390,5 @@ class PolygonFiller:
         return cov
 
 
-__all__ = ["FLAGS", "SOURCES", "OmniKernel", "PolygonFiller", "TrackKernel", "available",
-           "fit_planes"]
+__all__ = ["FLAGS", "SOURCES", "OmniKernel", "PolygonFiller", "TrackKernel", "align_shift",
+           "available", "fit_planes"]

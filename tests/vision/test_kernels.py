@@ -230,3 +230,24 @@ def test_polygon_union_and_blending(rng) -> None:
     assert np.array_equal(img, before)
     with pytest.raises(ValueError, match="uint8"):
         f.fill(img.astype(float), [a], 0.0)
+
+
+@pytest.mark.parametrize("background", ["plain", "cluttered"])
+def test_compiled_alignment_equals_numpy(geometry, rng, background) -> None:
+    """The alignment's shift through both paths, for predictions of the platform
+    displaced by up to 30 mm sideways (tens of pixels; some beyond the 12.5 px
+    range), on noisy frames."""
+    cam = front_camera(geometry)
+    r = Renderer(cam, geometry, RenderStyle(background=background, blur_px=0.8,
+                                            noise_std=3.0), rng=rng)
+    tr = PerspectiveTracker(cam)
+    Rs, ts = sample_poses(geometry, 10, rng)
+    for k in range(10):
+        img = r.render(Rs[k], ts[k])
+        offset = np.array([*rng.uniform(-0.03, 0.03, 2), 0.0])  # platform moved [m]
+        pred = LegPrediction.from_pose(cam, geometry, Rs[k], ts[k] + offset)
+        for max_shift in (40.0, 12.5):
+            a, pa = tr.align(img, pred, max_shift, use_compiled=True)
+            b, pb = tr.align(img, pred, max_shift, use_compiled=False)
+            assert np.array_equal(a, b), (k, max_shift, a, b)
+            assert np.allclose(pa.normals, pb.normals, atol=1e-12, equal_nan=True)

@@ -384,6 +384,45 @@ static double lower_median(double *v, int64_t n) {
 
 static double sgn(double x) { return (double)((x > 0) - (x < 0)); }
 
+/* The image bands of the six legs, for the occlusion gate. */
+typedef struct {
+  double s1[6], c0[6][2], axu[6][2], alen[6];
+} Bands;
+
+static void leg_bands(const double *seg, const double *lines, Bands *b) {
+  for (int k = 0; k < 6; ++k) {
+    const double *l1 = lines + (k * 2 + 0) * 3, *l2 = lines + (k * 2 + 1) * 3;
+    b->s1[k] = sgn(l1[0] * l2[0] + l1[1] * l2[1]);
+    for (int d = 0; d < 2; ++d) {
+      /* seg[k, e, end, d]: centre of the two edges' end points */
+      double a0 = 0.5 * (seg[((k * 2 + 0) * 2 + 0) * 2 + d] + seg[((k * 2 + 1) * 2 + 0) * 2 + d]);
+      double a1 = 0.5 * (seg[((k * 2 + 0) * 2 + 1) * 2 + d] + seg[((k * 2 + 1) * 2 + 1) * 2 + d]);
+      b->c0[k][d] = a0;
+      b->axu[k][d] = a1 - a0;
+    }
+    b->alen[k] = sqrt(b->axu[k][0] * b->axu[k][0] + b->axu[k][1] * b->axu[k][1]);
+    b->axu[k][0] /= b->alen[k];
+    b->axu[k][1] /= b->alen[k];
+  }
+}
+
+/* Whether pixel (px, py) lies inside, or within `margin` of, the band of a leg other
+ * than `leg` (vision.detect.PerspectiveTracker._contested). */
+static int in_other_band(const Bands *b, const double *lines, int64_t leg, double px, double py,
+                         double margin) {
+  for (int k = 0; k < 6; ++k) {
+    if (k == leg) continue;
+    const double *l1 = lines + (k * 2 + 0) * 3, *l2 = lines + (k * 2 + 1) * 3;
+    double d1 = px * l1[0] + py * l1[1] + l1[2];
+    double d2 = px * l2[0] + py * l2[1] + l2[2];
+    int between = (d1 * d2 * b->s1[k] <= 0) || fabs(d1) < margin || fabs(d2) < margin;
+    double tt = (px - b->c0[k][0]) * b->axu[k][0] + (py - b->c0[k][1]) * b->axu[k][1];
+    int along = tt >= -margin && tt <= b->alen[k] + margin;
+    if (between && along && isfinite(tt)) return 1;
+  }
+  return 0;
+}
+
 /*
  * P: (12*M*2) samples; out: (12*2) outward unit normals; search: (12); R: profile
  * half-length; t: (M) sample positions along the segments; seg: (6*2*2*2) predicted
@@ -402,22 +441,8 @@ int track_pass(const uint8_t *img, int64_t W, int64_t H, const double *P, const 
                double *normals, uint8_t *visible, int64_t *count, double *rms,
                uint8_t *inliers, double *points) {
   const int64_t L0 = 2 * R + 1, L = 2 * R - 1;
-  /* leg bands for the occlusion gate */
-  double s1[6], c0[6][2], axu[6][2], alen[6];
-  for (int k = 0; k < 6; ++k) {
-    const double *l1 = lines + (k * 2 + 0) * 3, *l2 = lines + (k * 2 + 1) * 3;
-    s1[k] = sgn(l1[0] * l2[0] + l1[1] * l2[1]);
-    for (int d = 0; d < 2; ++d) {
-      /* seg[k, e, end, d]: centre of the two edges' end points */
-      double a0 = 0.5 * (seg[((k * 2 + 0) * 2 + 0) * 2 + d] + seg[((k * 2 + 1) * 2 + 0) * 2 + d]);
-      double a1 = 0.5 * (seg[((k * 2 + 0) * 2 + 1) * 2 + d] + seg[((k * 2 + 1) * 2 + 1) * 2 + d]);
-      c0[k][d] = a0;
-      axu[k][d] = a1 - a0;
-    }
-    alen[k] = sqrt(axu[k][0] * axu[k][0] + axu[k][1] * axu[k][1]);
-    axu[k][0] /= alen[k];
-    axu[k][1] /= alen[k];
-  }
+  Bands bands;
+  leg_bands(seg, lines, &bands);
   for (int64_t e = 0; e < 12; ++e) {
     const int64_t leg = e / 2;
     const double ox = out[2 * e], oy = out[2 * e + 1];
@@ -463,17 +488,7 @@ int track_pass(const uint8_t *img, int64_t W, int64_t H, const double *P, const 
       if (frac < -0.5) frac = -0.5;
       if (frac > 0.5) frac = 0.5;
       /* occlusion gate: inside (or within the margin of) another leg's band */
-      int contested = 0;
-      for (int k = 0; k < 6 && !contested; ++k) {
-        if (k == leg) continue;
-        const double *l1 = lines + (k * 2 + 0) * 3, *l2 = lines + (k * 2 + 1) * 3;
-        double d1 = px * l1[0] + py * l1[1] + l1[2];
-        double d2 = px * l2[0] + py * l2[1] + l2[2];
-        int between = (d1 * d2 * s1[k] <= 0) || fabs(d1) < margin || fabs(d2) < margin;
-        double tt = (px - c0[k][0]) * axu[k][0] + (py - c0[k][1]) * axu[k][1];
-        int along = tt >= -margin && tt <= alen[k] + margin;
-        if (between && along && isfinite(tt)) contested = 1;
-      }
+      int contested = in_other_band(&bands, lines, leg, px, py, margin);
       if (contested) continue;
       offset[idx] = (double)(kbest + 1 - R) + frac;
       valid[idx] = 1;
@@ -527,4 +542,69 @@ int track_pass(const uint8_t *img, int64_t W, int64_t H, const double *P, const 
     }
   }
   return 0;
+}
+
+/*
+ * The image translation aligning the predicted edges with the image
+ * (PerspectiveTracker.align). P: (12*M*2) samples on the predicted edges; out:
+ * (12*2) outward normals; seg, lines: the prediction (occlusion gate); R =
+ * ceil(max_shift) + 1. Work: G (12*(2R-1)), prof (2R+1), d (2R-1). Out: shift (2).
+ */
+void align_shift(const uint8_t *img, int64_t W, int64_t H, const double *P, const double *out,
+                 const double *seg, const double *lines, double margin, int64_t M, int64_t R,
+                 double max_shift, double *G, double *prof, double *d, double *shift) {
+  const int64_t L0 = 2 * R + 1, L = 2 * R - 1;
+  Bands bands;
+  leg_bands(seg, lines, &bands);
+  for (int64_t k = 0; k < 12 * L; ++k) G[k] = 0.0;
+  for (int64_t e = 0; e < 12; ++e) {
+    const double ox = out[2 * e], oy = out[2 * e + 1];
+    double *Ge = G + e * L;
+    for (int64_t m = 0; m < M; ++m) {
+      const int64_t idx = e * M + m;
+      const double px = P[2 * idx], py = P[2 * idx + 1];
+      if (!(isfinite(px) && isfinite(py))) continue;
+      if (in_other_band(&bands, lines, e / 2, px, py, margin)) continue;
+      for (int64_t j = 0; j < L0; ++j) {
+        double o = (double)(j - R);
+        prof[j] = bilinear_zero(img, W, H, px + o * ox, py + o * oy);
+      }
+      for (int64_t k = 0; k < L; ++k) {
+        double g = 0.5 * (prof[k + 2] - prof[k]);
+        Ge[k] += g > 0.0 ? g : 0.0;
+      }
+    }
+    if (!(isfinite(ox) && isfinite(oy)))
+      for (int64_t k = 0; k < L; ++k) Ge[k] = 0.0;
+  }
+  int64_t nd = 0;
+  for (int64_t k = -(R - 1); k < R; ++k)
+    if (fabs((double)k) <= max_shift) d[nd++] = (double)k;
+  double best = -INFINITY, bx = 0.0, by = 0.0;
+  for (int64_t a = 0; a < nd; ++a) {
+    for (int64_t b = 0; b < nd; ++b) {
+      double dx = d[a], dy = d[b], score = 0.0;
+      for (int64_t e = 0; e < 12; ++e) {
+        double ox = out[2 * e], oy = out[2 * e + 1];
+        double o = dx * ox + dy * oy;
+        if (isnan(o)) o = 0.0;
+        o += (double)(R - 1);
+        double fk = floor(o);
+        if (fk < 0.0) fk = 0.0;
+        if (fk > (double)(L - 2)) fk = (double)(L - 2);
+        int64_t k0 = (int64_t)fk;
+        double w = o - (double)k0;
+        if (w < 0.0) w = 0.0;
+        if (w > 1.0) w = 1.0;
+        score += (1 - w) * G[e * L + k0] + w * G[e * L + k0 + 1];
+      }
+      if (score > best) {
+        best = score;
+        bx = dx;
+        by = dy;
+      }
+    }
+  }
+  shift[0] = bx;
+  shift[1] = by;
 }
