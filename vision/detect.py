@@ -409,6 +409,11 @@ class OmniDetector:
                 ok = (s >= 0) & (s <= length[..., None]) & (z * Z >= 0)
                 best = np.where(ok & np.isnan(best), s, best)
             P = P0 + best[..., None] * d
+        if self.camera.K[0, 1] == 0:
+            # The unified projection scales (X, Y) by a positive factor, then K by
+            # (fx, fy): the image azimuth about the principal point is that of
+            # (fx X, fy Y) (NaN where no crossing).
+            return np.arctan2(self.camera.fy * P[..., 1], self.camera.fx * P[..., 0])
         pix, _ = self.camera.project(P)
         return np.arctan2(pix[..., 1] - self.camera.cy, pix[..., 0] - self.camera.cx)
 
