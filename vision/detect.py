@@ -835,7 +835,7 @@ class PerspectiveTracker:
             shift = self._align_numpy(image, P, out, seg, lines, R, float(max_shift_px))
         moved = lines.copy()
         moved[..., 2] -= moved[..., 0] * shift[0] + moved[..., 1] * shift[1]
-        with np.errstate(invalid="ignore", divide="ignore"):
+        with np.errstate(invalid="ignore", divide="ignore"):  # any camera with xi = 0
             n = moved @ self.camera.K
             n /= np.linalg.norm(n, axis=-1, keepdims=True)
         return shift, prediction.with_normals(n)
@@ -843,10 +843,8 @@ class PerspectiveTracker:
     def _align_numpy(self, image: np.ndarray, P: np.ndarray, out: np.ndarray, seg: np.ndarray,
                      lines: np.ndarray, R: int, max_shift_px: float) -> np.ndarray:
         """The numpy reference of the alignment's shift (see :meth:`align`)."""
-        offs = np.arange(-R, R + 1, dtype=float)
-        Q = P[:, :, :, None, :] + offs[None, None, None, :, None] * out[:, :, None, None, :]
-        prof = _bilinear_zero(image, Q[..., 0], Q[..., 1])
-        grad = np.maximum(0.5 * (prof[..., 2:] - prof[..., :-2]), 0.0)  # offs[1:-1]
+        _, grad = _gradient_profiles(image, P, out, R)
+        grad = np.maximum(grad, 0.0)
         use = np.all(np.isfinite(P), -1) & ~self._contested(P, seg, lines)
         G = np.sum(np.where(use[..., None], grad, 0.0), axis=2)  # (6, 2, 2R - 1)
         G = np.where(np.all(np.isfinite(out), -1)[..., None], G, 0.0)
@@ -875,12 +873,9 @@ class PerspectiveTracker:
         refinement when a neighbour is not a candidate); it is valid if at least
         ``min_contrast`` and not at ``o = +-(R - 1)``.
         """
-        offs = np.arange(-R, R + 1, dtype=float)
-        Q = P[:, :, :, None, :] + offs[None, None, None, :, None] * out[:, :, None, None, :]
+        Q, grad = _gradient_profiles(image, P, out, R)
         finite = np.all(np.isfinite(Q), axis=(-2, -1))
-        prof = _bilinear_zero(image, Q[..., 0], Q[..., 1])
-        grad = 0.5 * (prof[..., 2:] - prof[..., :-2])  # at offs[1:-1]; + = towards bright
-        g_off = offs[1:-1]
+        g_off = np.arange(-(R - 1), R, dtype=float)
         candidate = np.abs(g_off)[None, None, None, :] <= search[..., None, None]
         Qg = Q[..., 1:-1, :]
         in_img = ((Qg[..., 0] >= 0) & (Qg[..., 0] <= self.camera.width - 1)
@@ -960,6 +955,18 @@ def _bilinear_zero(image: np.ndarray, x: np.ndarray, y: np.ndarray) -> np.ndarra
     v10, v11 = flat[i00 + W].astype(float), flat[i00 + W + 1].astype(float)
     v = (1 - fy) * ((1 - fx) * v00 + fx * v01) + fy * ((1 - fx) * v10 + fx * v11)
     return np.where(inside, v, 0.0)
+
+
+def _gradient_profiles(image: np.ndarray, P: np.ndarray, out: np.ndarray, R: int
+                       ) -> tuple[np.ndarray, np.ndarray]:
+    """Profiles through the samples ``P`` (..., M, 2) along ``out`` (..., 2): the points
+    ``Q`` (..., M, 2R + 1, 2) at the integer offsets ``-R .. R`` [px] and the central
+    differences (..., M, 2R - 1) of the bilinear signal at the offsets ``-(R-1) .. R-1``
+    (positive towards the bright side of an edge whose outside is along ``out``)."""
+    offs = np.arange(-R, R + 1, dtype=float)
+    Q = P[..., :, None, :] + offs[:, None] * out[..., None, None, :]
+    prof = _bilinear_zero(image, Q[..., 0], Q[..., 1])
+    return Q, 0.5 * (prof[..., 2:] - prof[..., :-2])
 
 
 def _theil_sen_inliers(offset: np.ndarray, valid: np.ndarray, t: np.ndarray,

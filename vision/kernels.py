@@ -96,6 +96,25 @@ def _c(a: np.ndarray, dtype: type) -> np.ndarray:
     return np.ascontiguousarray(a, dtype=dtype)
 
 
+class _FitOutputs:
+    """Preallocated outputs of one compiled detection (fit_planes and the points)."""
+
+    def __init__(self, n_points: int) -> None:
+        self.normals = np.empty((6, 2, 3))
+        self.visible = np.empty((6, 2), np.uint8)
+        self.count = np.empty((6, 2), np.int64)
+        self.rms = np.empty((6, 2))
+        self.inliers = np.empty((6, 2, n_points), np.uint8)
+        self.points = np.empty((6, 2, n_points, 2))
+        self.pointers = tuple(a.ctypes.data for a in (
+            self.normals, self.visible, self.count, self.rms, self.inliers, self.points))
+
+    def result(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """Fresh copies: normals, visible (bool), count, rms, points."""
+        return (self.normals.copy(), self.visible.astype(bool), self.count.copy(),
+                self.rms.copy(), self.points.copy())
+
+
 class OmniKernel:
     """The compiled omnidirectional detection for one circle layout.
 
@@ -135,15 +154,9 @@ class OmniKernel:
         self._valid = np.empty((6, 2, C), np.uint8)
         self._ppr = np.empty((6, 2, C))
         self._pred = np.empty((6, 2, 3))
-        self._normals = np.empty((6, 2, 3))
-        self._visible = np.empty((6, 2), np.uint8)
-        self._count = np.empty((6, 2), np.int64)
-        self._rms = np.empty((6, 2))
-        self._inliers = np.empty((6, 2, C), np.uint8)
-        self._points = np.empty((6, 2, C, 2))
-        self._buffers = tuple(a.ctypes.data for a in (
-            self._pts_a, self._rays, self._valid, self._ppr, self._normals, self._visible,
-            self._count, self._rms, self._inliers, self._points))
+        self._out = _FitOutputs(int(C))
+        self._buffers = (*(a.ctypes.data for a in (self._pts_a, self._rays, self._valid,
+                                                   self._ppr)), *self._out.pointers)
         self._pred_ptr = self._pred.ctypes.data
         self._ref_key: tuple[np.ndarray, ...] | None = None
         self._ref_arrays: list[np.ndarray] = []
@@ -194,8 +207,7 @@ class OmniKernel:
                                  self._pred_ptr, float(outlier_px), int(min_points),
                                  float(max_rms_px), int(iterations), *self._buffers):
             raise MemoryError("omni_detect: out of memory")
-        return (self._normals.copy(), self._visible.astype(bool), self._count.copy(),
-                self._rms.copy(), self._points.copy())
+        return self._out.result()
 
 
 class TrackKernel:
@@ -219,16 +231,8 @@ class TrackKernel:
         self._rays = np.empty((12, M, 3))
         self._ppr = np.empty((12, M))
         self._pairs = np.empty(max(M * (M - 1) // 2, M))
-        self._normals = np.empty((6, 2, 3))
-        self._visible = np.empty((6, 2), np.uint8)
-        self._count = np.empty((6, 2), np.int64)
-        self._rms = np.empty((6, 2))
-        self._inliers = np.empty((6, 2, M), np.uint8)
-        self._points = np.empty((6, 2, M, 2))
         self._prof = np.empty(3)
-        self._out_ptrs = tuple(a.ctypes.data for a in (
-            self._normals, self._visible, self._count, self._rms, self._inliers,
-            self._points))
+        self._out = _FitOutputs(M)
 
     def track(self, image: np.ndarray, P: np.ndarray, out: np.ndarray, search: np.ndarray,
               R: int, t: np.ndarray, seg: np.ndarray, lines: np.ndarray,
@@ -257,9 +261,8 @@ class TrackKernel:
             float(centre[0]), float(centre[1]), prp, int(min_points), float(max_rms_px),
             int(iterations), self._offset.ctypes.data, self._valid.ctypes.data,
             self._rays.ctypes.data, self._ppr.ctypes.data, self._prof.ctypes.data,
-            self._pairs.ctypes.data, *self._out_ptrs)
-        return (self._normals.copy(), self._visible.astype(bool), self._count.copy(),
-                self._rms.copy(), self._points.copy())
+            self._pairs.ctypes.data, *self._out.pointers)
+        return self._out.result()
 
 
 def align_shift(image: np.ndarray, P: np.ndarray, out: np.ndarray, seg: np.ndarray,
