@@ -4,7 +4,7 @@ VENV := .venv
 BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed
 
-.PHONY: demo test lint venv clean
+.PHONY: demo test lint venv clean browser
 
 $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
@@ -18,7 +18,11 @@ demo: $(STAMP)
 	rm -rf runs/quick
 	$(BIN)/hexapod-bench run quick --out runs/quick --workers 2
 
-test: $(STAMP)
+# the viewer test drives a real headless browser: found, installed, or a clear message
+browser:
+	@bash tests/ensure_browser.sh
+
+test: $(STAMP) browser
 	$(BIN)/python -m pytest -q
 	$(BIN)/ruff check hexapod vision controllers benchmarks tests
 	$(BIN)/mypy

@@ -39,12 +39,16 @@ BROWSER_FLAGS = ["--headless", "--no-sandbox", "--disable-gpu", "--disable-quic"
 
 
 def _browser() -> str:
-    for name in ("chromium", "chromium-browser", "google-chrome"):
+    """``$HEXAPOD_BROWSER``, else Debian's chromium-headless-shell or chromium."""
+    if os.environ.get("HEXAPOD_BROWSER"):
+        return os.environ["HEXAPOD_BROWSER"]
+    for name in ("chromium-headless-shell", "chromium", "chromium-browser", "google-chrome"):
         path = shutil.which(name)
         if path:
             return path
-    raise AssertionError("no headless browser: install Debian's chromium (.ci/run does); "
-                         "the viewer test must run, not skip")
+    raise AssertionError("no headless browser: install Debian's chromium-headless-shell or "
+                         "chromium ('make test' does when it may); the viewer test must run, "
+                         "not skip")
 
 
 def _screenshot(url: str, png: Path, tmp: Path, budget_ms: int = 3000) -> np.ndarray:
