@@ -68,8 +68,7 @@ def cmd_list(args: argparse.Namespace) -> int:
 def cmd_run(args: argparse.Namespace) -> int:
     """Run studies and write results.jsonl and report.md."""
     import controllers  # noqa: F401 - registers the built-ins
-    from benchmarks.report import META_FILE, write_report
-    from benchmarks.runner import completed_keys, plan, run_units
+    from benchmarks.runner import run_lock
     from benchmarks.scenario import load_scenario
 
     out = Path(args.out)
@@ -79,23 +78,29 @@ def cmd_run(args: argparse.Namespace) -> int:
                  for s in args.scenarios]
     for sc in scenarios:
         _check_controllers(sc)
+    from benchmarks.runner import backend_factory
+
+    backend_factory(args.backend)  # validates the spec before any work
+    with run_lock(out):  # one run per results directory, from the check to the report
+        return _run_locked(scenarios, out, args)
+
+
+def _run_locked(scenarios: list[Any], out: Path, args: argparse.Namespace) -> int:
+    from benchmarks.report import META_FILE, write_report
+    from benchmarks.runner import completed_keys, plan, run_units
+
     existing = (out / "results.jsonl").exists() and (out / "results.jsonl").stat().st_size > 0
     if existing and not args.resume:
         raise BenchmarkError(f"{out}: already holds results; use --resume to finish that run "
                              "or choose another --out")
     done = completed_keys(out) if args.resume else set()
-    from benchmarks.runner import backend_factory
-
-    backend = args.backend
-    backend_factory(backend)  # validates the spec before any work
-    units = plan(scenarios, args.chunk, args.record, done, backend)
+    units = plan(scenarios, args.chunk, args.record, done, args.backend)
     total = sum(len(u.trials) for u in units)
     con = _console()
     if done:
         con.print(f"resuming: {len(done)} trials already done, {total} to go")
     executor = "dask" if args.dask else ("process pool" if args.workers > 1 else "in-process")
     meta_path = out / META_FILE
-    out.mkdir(parents=True, exist_ok=True)
     meta: dict[str, Any] = {}
     if meta_path.exists():
         meta = json.loads(meta_path.read_text())
@@ -112,6 +117,12 @@ def cmd_run(args: argparse.Namespace) -> int:
     t0 = time.perf_counter()
     show = sys.stdout.isatty() and not args.no_progress
     interrupted = False
+    written = 0
+
+    def advance(unit: Any) -> None:
+        nonlocal written
+        written += len(unit.trials)
+
     try:
         if show and total:
             from rich.progress import (
@@ -126,22 +137,27 @@ def cmd_run(args: argparse.Namespace) -> int:
                           MofNCompleteColumn(), TimeElapsedColumn(), TimeRemainingColumn(),
                           console=con) as prog:
                 task = prog.add_task("trials", total=total)
-                run_units(units, out, args.workers, args.dask,
-                          progress=lambda u: prog.advance(task, len(u.trials)))
+
+                def advance_bar(unit: Any) -> None:
+                    advance(unit)
+                    prog.advance(task, len(unit.trials))
+
+                run_units(units, out, args.workers, args.dask, progress=advance_bar)
         else:
-            run_units(units, out, args.workers, args.dask)
+            run_units(units, out, args.workers, args.dask, progress=advance)
     except KeyboardInterrupt:
         interrupted = True
-        con.print(f"\n[yellow]interrupted[/yellow]: finished chunks are in {out}/results.jsonl;"
-                  f" finish with: hexapod-bench run {' '.join(args.scenarios)} --out {out} "
-                  "--resume")
+        con.print(f"\n[yellow]interrupted[/yellow]: {written} of {total} trials written to "
+                  f"{out}/results.jsonl; finish with: hexapod-bench run "
+                  f"{' '.join(args.scenarios)} --out {out} --resume")
     wall = time.perf_counter() - t0
     meta["wall_time_s"] = wall
     meta_path.write_text(json.dumps(meta, indent=2))
     report = write_report(out)
     _print_summary(out, con)
-    con.print(f"{total} trials in {wall:.1f} s ({executor}, {args.workers} worker(s)); "
-              f"report: {report}")
+    done_text = f"{written} of {total} trials" if written != total else f"{total} trials"
+    con.print(f"{done_text} in {wall:.1f} s ({executor}, {args.workers} worker(s))"
+              f"{' before the interruption' if interrupted else ''}; report: {report}")
     return 130 if interrupted else 0
 
 
@@ -195,10 +211,14 @@ def _print_summary(out: Path, con: Any) -> None:
     from rich.table import Table
 
     from benchmarks.metrics import summarize
-    from benchmarks.report import TABLE_HEADER, summary_table_rows
-    from benchmarks.runner import read_results
+    from benchmarks.report import TABLE_HEADER, duplicate_note, summary_table_rows
+    from benchmarks.runner import deduplicate, read_results
 
-    summaries = summarize(read_results(out))
+    rows, dropped, conflicting = deduplicate(read_results(out))
+    if dropped:
+        con.print(f"[yellow]warning[/yellow]: {out / 'results.jsonl'}: "
+                  f"{duplicate_note(dropped, conflicting)}")
+    summaries = summarize(rows)
     t = Table(title=f"Results ({out})")
     for col in TABLE_HEADER:
         t.add_column(col, justify="left" if col in ("scenario", "sweep", "controller",

@@ -25,3 +25,21 @@ class ResultsError(BenchmarkError):
         self.path = path
         self.problem = problem
         super().__init__(f"{path}: {problem}")
+
+
+class DirectoryLockedError(ResultsError):
+    """Another run holds the results directory (one run writes into a directory at a time).
+
+    Attributes:
+        path: The results directory.
+        pid: Process id of the run that holds it (None if it could not be read).
+        holder: What that run wrote into the lock file (its command and start time).
+    """
+
+    def __init__(self, path: str, pid: int | None, holder: str) -> None:
+        self.pid = pid
+        self.holder = holder
+        who = f"PID {pid}" if pid is not None else "an unknown process"
+        super().__init__(path, f"another hexapod-bench run ({who}: {holder or '?'}) is "
+                         "writing into this directory; wait for it to finish (or stop it), "
+                         "or choose another --out")

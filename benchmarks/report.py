@@ -12,7 +12,7 @@ from typing import Any
 import numpy as np
 
 from benchmarks.metrics import Summary, format_sweep, summarize
-from benchmarks.runner import TRIALS_DIR, machine_info, read_results
+from benchmarks.runner import TRIALS_DIR, deduplicate, machine_info, read_results
 
 log = logging.getLogger(__name__)
 
@@ -129,10 +129,21 @@ def _plot_sweeps(out_dir: Path, scenario: str, summaries: list[Summary]) -> list
     return names
 
 
+def duplicate_note(dropped: int, conflicting: int) -> str:
+    """What the report and the CLI say of duplicate trial rows."""
+    text = (f"{dropped} duplicate row(s) ignored (several rows for one trial: two runs wrote "
+            "into this directory); the first row of each trial is kept")
+    if conflicting:
+        text += f"; {conflicting} of them disagree with the kept row on the outcome"
+    return text
+
+
 def write_report(out_dir: Path) -> Path:
     """Write ``DIR/report.md`` (and its PNG plots) from ``DIR/results.jsonl``."""
     out_dir = Path(out_dir)
-    rows = read_results(out_dir)
+    rows, dropped, conflicting = deduplicate(read_results(out_dir))
+    if dropped:
+        log.warning("%s: %s", out_dir / "results.jsonl", duplicate_note(dropped, conflicting))
     summaries = summarize(rows)
     meta: dict[str, Any] = {}
     if (out_dir / META_FILE).exists():
@@ -143,6 +154,8 @@ def write_report(out_dir: Path) -> Path:
                  f"`{out_dir / 'results.jsonl'}` ({len(rows)} trials).")
     if meta.get("command"):
         lines.append(f"Command: `{meta['command']}`")
+    if dropped:
+        lines += ["", f"**Duplicate rows**: {duplicate_note(dropped, conflicting)}"]
     lines += ["", "## Machine and libraries", ""]
     lines += [f"- {k}: {v}" for k, v in info.items()]
     if meta.get("wall_time_s") is not None:

@@ -9,11 +9,15 @@ written and ``resume=True`` finishes it without redoing finished trials.
 
 from __future__ import annotations
 
+import contextlib
+import fcntl
 import json
 import logging
 import os
 import platform
+import shlex
 import sys
+import time
 from collections.abc import Callable, Iterator
 from concurrent.futures import FIRST_COMPLETED, Future, ProcessPoolExecutor, wait
 from dataclasses import dataclass
@@ -22,13 +26,67 @@ from typing import Any
 
 import numpy as np
 
-from benchmarks.exceptions import ResultsError
+from benchmarks.exceptions import DirectoryLockedError, ResultsError
 from benchmarks.scenario import Scenario
 
 log = logging.getLogger(__name__)
 
 RESULTS_FILE = "results.jsonl"
 TRIALS_DIR = "trials"
+LOCK_FILE = ".lock"
+
+#: Results directories this process holds: resolved path -> (lock file, hold count).
+_HELD: dict[Path, tuple[Any, int]] = {}
+
+
+@contextlib.contextmanager
+def run_lock(out_dir: Path) -> Iterator[None]:
+    """Hold the exclusive lock of a results directory for the duration of a run.
+
+    The lock is an ``flock`` on ``DIR/.lock`` (released by the kernel when the
+    process ends, however it ends), which also holds the holder's PID and
+    command. It is re-entrant within one process (the CLI holds it for the
+    whole run, :func:`run_units` takes it again).
+
+    Raises:
+        DirectoryLockedError: Another process holds it (naming its PID).
+    """
+    out_dir = Path(out_dir)
+    out_dir.mkdir(parents=True, exist_ok=True)
+    key = out_dir.resolve()
+    if key in _HELD:
+        f, n = _HELD[key]
+        _HELD[key] = (f, n + 1)
+        try:
+            yield
+        finally:
+            f, n = _HELD[key]
+            _HELD[key] = (f, n - 1)
+        return
+    f = (out_dir / LOCK_FILE).open("a+", encoding="utf-8")
+    try:
+        fcntl.flock(f.fileno(), fcntl.LOCK_EX | fcntl.LOCK_NB)
+    except BlockingIOError:
+        f.seek(0)
+        text = f.read().strip()
+        f.close()
+        pid_text, _, holder = text.partition(" ")
+        pid = int(pid_text) if pid_text.isdigit() else None
+        raise DirectoryLockedError(str(out_dir), pid, holder) from None
+    f.seek(0)
+    f.truncate()
+    command = " ".join(shlex.quote(a) for a in sys.argv) or "python"
+    f.write(f"{os.getpid()} {command} (since {time.strftime('%Y-%m-%d %H:%M:%S')})\n")
+    f.flush()
+    _HELD[key] = (f, 1)
+    try:
+        yield
+    finally:
+        f, n = _HELD.pop(key)
+        with contextlib.suppress(OSError):
+            f.seek(0)
+            f.truncate()
+        f.close()  # closing the descriptor releases the flock
 
 
 @dataclass(frozen=True)
@@ -279,7 +337,16 @@ def run_units(units: list[WorkUnit], out_dir: Path, workers: int = 1,
 
     Returns:
         Number of rows written.
+
+    Raises:
+        DirectoryLockedError: Another process is writing into ``out_dir``.
     """
+    with run_lock(out_dir):
+        return _run_units(units, out_dir, workers, dask, progress)
+
+
+def _run_units(units: list[WorkUnit], out_dir: Path, workers: int, dask: str | None,
+               progress: Callable[[WorkUnit], None] | None) -> int:
     writer = ResultsWriter(out_dir)
     count = 0
     try:
@@ -297,6 +364,46 @@ def run_units(units: list[WorkUnit], out_dir: Path, workers: int = 1,
     finally:
         writer.close()
     return count
+
+
+def deduplicate(rows: list[dict[str, Any]]) -> tuple[list[dict[str, Any]], int, int]:
+    """Keep the first row of every trial key (:func:`trial_key`).
+
+    Two runs writing into one directory (before the directory lock existed, or
+    files concatenated by hand) leave several rows for one trial.
+
+    Returns:
+        The rows without duplicates (file order), the number of rows dropped, and
+        how many of those disagree with the kept row on the outcome (convergence or
+        final errors, to 1e-9).
+    """
+    kept: dict[tuple[str, int, str, int], dict[str, Any]] = {}
+    out: list[dict[str, Any]] = []
+    dropped = conflicting = 0
+    for row in rows:
+        key = trial_key(row)
+        first = kept.get(key)
+        if first is None:
+            kept[key] = row
+            out.append(row)
+            continue
+        dropped += 1
+        if not _same_outcome(first, row):
+            conflicting += 1
+    return out, dropped, conflicting
+
+
+def _same_outcome(a: dict[str, Any], b: dict[str, Any]) -> bool:
+    if a.get("converged") != b.get("converged"):
+        return False
+    for k in ("final_position_error_mm", "final_orientation_error_deg"):
+        x, y = a.get(k), b.get(k)
+        if x is None or y is None:
+            if x is not y:
+                return False
+        elif abs(float(x) - float(y)) > 1e-9:
+            return False
+    return True
 
 
 def completed_keys(out_dir: Path) -> set[tuple[str, int, str, int]]:

@@ -1,0 +1,39 @@
+"""The detection benchmark's bookkeeping: found edges are counted among the visible ones."""
+
+from __future__ import annotations
+
+import io
+import re
+from contextlib import redirect_stdout
+
+import numpy as np
+
+from benchmarks.detect_perf import EdgeCounts, main
+
+
+def test_a_detected_partly_hidden_edge_is_not_counted_as_found() -> None:
+    truth = np.ones((6, 2), bool)
+    truth[2, 1] = False                      # hidden for the truth...
+    fraction = np.ones((6, 2))
+    fraction[2, 1] = 0.6                     # ...but 60 % of it in view
+    fraction[4, 0] = 0.1
+    truth[4, 0] = False                      # nothing of it to see
+    detected = np.ones((6, 2), bool)         # the detector reports all twelve
+    detected[0, 0] = False                   # and misses one visible edge
+    c = EdgeCounts()
+    c.add(truth, fraction, detected)
+    assert (c.truth, c.found, c.missed, c.partly_hidden, c.invented) == (10, 9, 1, 1, 1)
+
+
+def test_benchmark_table_never_finds_more_than_the_truth() -> None:
+    buf = io.StringIO()
+    with redirect_stdout(buf):
+        assert main(["--frames", "60", "--repeats", "1"]) == 0
+    rows = [line for line in buf.getvalue().splitlines() if line.startswith("| omni")
+            or line.startswith("| front")]
+    assert len(rows) == 2
+    for line in rows:
+        cells = [c.strip() for c in line.strip("|").split("|")]
+        found, visible = map(int, re.fullmatch(r"(\d+)/(\d+)", cells[11]).groups())
+        missed = int(cells[12])
+        assert found <= visible and found + missed == visible, line
