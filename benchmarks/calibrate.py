@@ -118,7 +118,9 @@ def run_calibration(sc: Scenario, out: Path, configurations: str | None = None,
                                             rotation_noise(amp) if amp else None, rng)
             res = calibrate(data, nominal.leg_radius, nominal.base_points,
                             method=cal_cfg.solver,  # type: ignore[arg-type]
-                            correct_scale=correct_scale)
+                            correct_scale=correct_scale,
+                            min_singular_ratio=cal_cfg.min_singular_ratio,
+                            warn_singular_ratio=cal_cfg.warn_singular_ratio)
             truth = world.camera.camera_from_base.apply(world.geometry.base_points)
             diffs.append(res.base_points - truth)
             results.append(res)
@@ -128,6 +130,8 @@ def run_calibration(sc: Scenario, out: Path, configurations: str | None = None,
             "point": p, "sweep": point.sweep, **summary,
             "min_singular_ratio": float(min(r.linear.singular_value_ratio.min()
                                             for r in results)),
+            "ill_conditioned_legs": sorted({leg for r in results
+                                            for leg in r.linear.ill_conditioned_legs}),
             "residual_rms_mm": (np.median([r.linear.residual_rms for r in results], axis=0)
                                 * 1e3).tolist(),
             "configurations": int(lin.configurations.max()) if np.ndim(lin.configurations)
@@ -142,6 +146,8 @@ def run_calibration(sc: Scenario, out: Path, configurations: str | None = None,
         "scenario": sc.name,
         "configurations": cal_cfg.configurations,
         "solver": cal_cfg.solver,
+        "warn_singular_ratio": cal_cfg.warn_singular_ratio,
+        "min_singular_ratio": cal_cfg.min_singular_ratio,
         "repetitions": repeat,
         "median_error_mm": overall["median_error_mm"],
         "max_error_mm": overall["max_error_mm"],
@@ -179,7 +185,9 @@ def calibrate_from_file(sc: Scenario, observations: Path, out: Path, solver: str
     data = CalibrationData.load(observations)
     res = calibrate(data, nominal.leg_radius, nominal.base_points,
                     method=(solver or sc.calibration.solver),  # type: ignore[arg-type]
-                    correct_scale=correct_scale)
+                    correct_scale=correct_scale,
+                    min_singular_ratio=sc.calibration.min_singular_ratio,
+                    warn_singular_ratio=sc.calibration.warn_singular_ratio)
     doc = {"scenario": sc.name, "observations": str(observations),
            "configurations": int(data.n_configurations),
            "solver": solver or sc.calibration.solver, "result": res.to_dict()}

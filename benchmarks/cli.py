@@ -69,7 +69,7 @@ def cmd_run(args: argparse.Namespace) -> int:
     """Run studies and write results.jsonl and report.md."""
     import controllers  # noqa: F401 - registers the built-ins
     from benchmarks.runner import run_lock
-    from benchmarks.scenario import load_scenario
+    from benchmarks.scenario import check_controllers, load_scenario
 
     out = Path(args.out)
     ctrl_list = [c.strip() for c in args.controllers.split(",")] if args.controllers else None
@@ -77,7 +77,7 @@ def cmd_run(args: argparse.Namespace) -> int:
                                                  args.max_steps, args.calibration)
                  for s in args.scenarios]
     for sc in scenarios:
-        _check_controllers(sc)
+        check_controllers(sc)
     from benchmarks.runner import backend_factory
 
     backend_factory(args.backend)  # validates the spec before any work
@@ -161,13 +161,6 @@ def _run_locked(scenarios: list[Any], out: Path, args: argparse.Namespace) -> in
     return 130 if interrupted else 0
 
 
-def _check_controllers(sc: Any) -> None:
-    from controllers.base import registry
-
-    for spec in sc.controllers:
-        registry.factory(spec.name)  # raises UnknownControllerError with a suggestion
-
-
 def _run_with_viz(scenarios: list[Any], out: Path, args: argparse.Namespace) -> int:
     """Run in-process with a live MeshCat view (loopback server)."""
     from benchmarks.runner import ResultsWriter, execute, plan
@@ -237,6 +230,7 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
     from benchmarks.scenario import load_scenario
 
     sc = load_scenario(args.scenario).with_overrides(seed=args.seed)
+    sc = _with_ratio_options(sc, args)
     out = Path(args.out)
     if args.observations:
         from benchmarks.calibrate import calibrate_from_file
@@ -247,6 +241,12 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
         print(f"calibrated {doc['configurations']} configurations from {args.observations}: "
               f"rigid-fit RMS {res['fit_rms_mm']:.3f} mm, scale {res['scale']:.5f}; wrote "
               f"{out / 'calibration.json'} and {out / 'calibrated.toml'}")
+        lin = res["linear"]
+        for leg in lin["ill_conditioned_legs"]:
+            print(f"warning: leg {leg} is ill-conditioned (singular-value ratio "
+                  f"{lin['singular_value_ratio'][leg]:.2e} < {lin['warn_singular_ratio']:.2e}): "
+                  "its base point is poorly determined; add configurations that show this "
+                  "leg at other inclinations")
         return 0
     t0 = time.perf_counter()
     doc = run_calibration(sc, out, args.configurations, args.repeat, args.solver,
@@ -255,18 +255,41 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
     t = Table(title=f"Base-point calibration ({sc.name}, {doc['configurations']}, "
                     f"{doc['solver']}, {args.repeat} repetition(s))")
     for col in ("sweep", "median error mm", "max error mm", "max component mm",
-                "worst point median mm", "min singular ratio"):
+                "worst point median mm", "min singular ratio", "ill-conditioned legs"):
         t.add_column(col, justify="left" if col == "sweep" else "right")
     for p in doc["points"]:
         t.add_row(format_sweep({k.replace(".", "_"): v for k, v in p["sweep"].items()}),
                   f"{p['median_error_mm']:.3f}", f"{p['max_error_mm']:.3f}",
                   f"{p['max_component_error_mm']:.3f}",
-                  f"{max(p['per_point_median_mm']):.3f}", f"{p['min_singular_ratio']:.4f}")
+                  f"{max(p['per_point_median_mm']):.3f}", f"{p['min_singular_ratio']:.4f}",
+                  ", ".join(str(leg) for leg in p["ill_conditioned_legs"]) or "-")
     con.print(t)
     con.print(f"{time.perf_counter() - t0:.1f} s; wrote {out / 'calibration.json'} and "
               f"{out / 'calibrated.toml'} (use: hexapod-bench run ... --calibration "
               f"{out / 'calibrated.toml'})")
     return 0
+
+
+def _with_ratio_options(sc: Any, args: argparse.Namespace) -> Any:
+    """Apply ``--warn-ratio`` / ``--min-ratio`` to the scenario's ``[calibration]``."""
+    from dataclasses import replace
+
+    from benchmarks.scenario import check_range
+
+    cal = sc.calibration
+    for option, field in (("warn_ratio", "warn_singular_ratio"),
+                          ("min_ratio", "min_singular_ratio")):
+        value = getattr(args, option)
+        if value is not None:
+            try:
+                check_range(value, f"calibration.{field}", f"--{option.replace('_', '-')}")
+            except BenchmarkError as exc:
+                raise BenchmarkError(f"--{option.replace('_', '-')}: {exc}") from None
+            cal = replace(cal, **{field: value})
+    if cal.min_singular_ratio > cal.warn_singular_ratio:
+        raise BenchmarkError(f"the hard limit ({cal.min_singular_ratio}) must not exceed the "
+                             f"warning ratio ({cal.warn_singular_ratio})")
+    return replace(sc, calibration=cal)
 
 
 def find_record(out: Path, trial: int, controller: str | None = None,
@@ -405,6 +428,11 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--correct-scale", action="store_true",
                    help="divide the estimates by the measured scale (uncertain leg radius)")
     s.add_argument("--seed", type=int)
+    s.add_argument("--warn-ratio", type=float, metavar="R",
+                   help="warn when a leg's singular-value ratio is below R (default: the "
+                        "scenario's [calibration] warn_singular_ratio, 0.005)")
+    s.add_argument("--min-ratio", type=float, metavar="R",
+                   help="refuse below R (default: [calibration] min_singular_ratio, 0.0015)")
     s.add_argument("--observations", metavar="FILE",
                    help="calibrate from measured edge normals and leg lengths (.json/.npz) "
                         "instead of simulating the scenario's world")

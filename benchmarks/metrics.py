@@ -53,6 +53,9 @@ class Summary:
     calibration_median_mm: float
     calibration_max_mm: float
     detect_time_median_ms: float = float("nan")
+    calibration_min_ratio: float = float("nan")
+    calibration_ill_conditioned: int = 0
+    calibration_refused: int = 0
     tail_position_median_mm: float = float("nan")
     tail_position_max_mm: float = float("nan")
 
@@ -105,6 +108,15 @@ def summarize(rows: list[dict[str, Any]]) -> list[Summary]:
                                         "median"),
             calibration_max_mm=_stat([r.get("calibration_max_error_mm") for r in rs], "max"),
             detect_time_median_ms=_stat([r.get("detect_time_ms") for r in rs], "median"),
+            calibration_min_ratio=-_stat([-(r["calibration_min_singular_ratio"])
+                                          for r in rs
+                                          if r.get("calibration_min_singular_ratio")
+                                          is not None], "max"),
+            calibration_ill_conditioned=sum(1 for r in rs
+                                            if (r.get("calibration_ill_conditioned_legs")
+                                                or 0) > 0),
+            calibration_refused=sum(1 for r in rs if str(r.get("failure") or "").startswith(
+                "CalibrationError")),
             tail_position_median_mm=_stat([r.get("tail_position_error_mm") for r in rs],
                                           "median"),
             tail_position_max_mm=_stat([r.get("tail_position_error_mm") for r in rs], "max"),

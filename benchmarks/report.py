@@ -200,11 +200,18 @@ def write_report(out_dir: Path) -> Path:
             lines += [_md_table(["sweep", "controller", "detection median ms per frame"],
                                 [[format_sweep(s.sweep), s.controller,
                                   _fmt(s.detect_time_median_ms)] for s in ss]), ""]
-        if any(np.isfinite(s.calibration_median_mm) for s in ss):
-            lines += ["Calibration of the base points before control (error per point):", ""]
-            lines += [_md_table(["sweep", "controller", "median error mm", "max error mm"],
+        if any(np.isfinite(s.calibration_median_mm) or s.calibration_refused for s in ss):
+            lines += ["Calibration of the base points before control (error per point; "
+                      "*ill-conditioned*: trials whose calibration warned that a leg's system "
+                      "was below the warning ratio; *refused*: trials whose calibration "
+                      "refused a leg below the hard limit, which then did not run):", ""]
+            lines += [_md_table(["sweep", "controller", "median error mm", "max error mm",
+                                 "min singular ratio", "ill-conditioned", "refused"],
                                 [[format_sweep(s.sweep), s.controller,
-                                  _fmt(s.calibration_median_mm), _fmt(s.calibration_max_mm)]
+                                  _fmt(s.calibration_median_mm), _fmt(s.calibration_max_mm),
+                                  _fmt(s.calibration_min_ratio, 4),
+                                  f"{s.calibration_ill_conditioned}/{s.trials}",
+                                  f"{s.calibration_refused}/{s.trials}"]
                                  for s in ss]), ""]
         ref = sm.get("reference")
         if ref:

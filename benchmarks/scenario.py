@@ -19,6 +19,7 @@ from typing import Any
 from benchmarks.exceptions import ScenarioError
 from hexapod.config import load_toml, suggest
 from hexapod.exceptions import ConfigFileError
+from vision.calibration import MIN_SINGULAR_RATIO, WARN_SINGULAR_RATIO
 
 #: Keys of [noise] and [calibration_error] that may be swept (given as lists).
 NOISE_KEYS = ("amplitude_deg", "pixel_sigma_px", "points_per_edge", "outlier_fraction",
@@ -26,6 +27,60 @@ NOISE_KEYS = ("amplitude_deg", "pixel_sigma_px", "points_per_edge", "outlier_fra
 CALIBRATION_ERROR_KEYS = ("scale", "base_points_mm", "platform_points_mm", "joint_offsets_mm",
                           "camera_pose_mm", "camera_pose_deg", "intrinsics_percent",
                           "leg_radius_percent")
+
+
+#: Allowed range of every numeric key: ``(low, high, low_inclusive, high_inclusive)``.
+#: A value that parses but cannot describe a study (a negative seed, a 1e308 mm error,
+#: a 1e9 deg noise) is refused when the file is loaded, naming the key and the range.
+RANGES: dict[str, tuple[float, float, bool, bool]] = {
+    "seed": (0, 2**63 - 1, True, True),
+    "trials": (1, 10_000_000, True, True),
+    "robot.dt": (0.0, 1.0, False, True),
+    "sensor.teach_frames": (1, 1000, True, True),
+    "sensor.blur_px": (0.0, 20.0, True, True),
+    "sensor.noise_std": (0.0, 255.0, True, True),
+    "noise.amplitude_deg": (0.0, 90.0, True, True),
+    "noise.pixel_sigma_px": (0.0, 100.0, True, True),
+    "noise.points_per_edge": (2, 10_000, True, True),
+    "noise.outlier_fraction": (0.0, 1.0, True, False),
+    "noise.dropout_probability": (0.0, 1.0, True, True),
+    "calibration_error.scale": (0.0, 100.0, True, True),
+    "calibration_error.base_points_mm": (0.0, 100.0, True, True),
+    "calibration_error.platform_points_mm": (0.0, 100.0, True, True),
+    "calibration_error.joint_offsets_mm": (0.0, 100.0, True, True),
+    "calibration_error.camera_pose_mm": (0.0, 1000.0, True, True),
+    "calibration_error.camera_pose_deg": (0.0, 45.0, True, True),
+    "calibration_error.intrinsics_percent": (0.0, 50.0, True, True),
+    "calibration_error.leg_radius_percent": (0.0, 50.0, True, True),
+    "calibration.noise_deg": (0.0, 90.0, True, True),
+    "calibration.warn_singular_ratio": (0.0, 1.0, True, False),
+    "calibration.min_singular_ratio": (0.0, 1.0, True, False),
+    "task.max_steps": (1, 10_000_000, True, True),
+    "task.position_tolerance_mm": (0.0, 1000.0, False, True),
+    "task.orientation_tolerance_deg": (0.0, 180.0, False, True),
+    "task.margin_mm": (0.0, 1000.0, True, True),
+    "task.max_translation_mm": (0.0, 10_000.0, True, True),
+    "task.max_angle_deg": (0.0, 90.0, True, True),
+    "task.settle_steps": (1, 10_000_000, True, True),
+}
+#: The calibration-error keys in millimetres or degrees whose standard deviation, times
+#: ``scale``, must stay within the range of the key itself (the effective error).
+_SCALED = tuple(k for k in CALIBRATION_ERROR_KEYS if k != "scale")
+
+
+def check_range(value: Any, key: str, path: str) -> None:
+    """Refuse a number outside :data:`RANGES` (``key`` is the dotted key).
+
+    Raises:
+        ScenarioError: Naming the file, the key, the value and the allowed range.
+    """
+    if key not in RANGES or isinstance(value, bool) or not isinstance(value, int | float):
+        return
+    lo, hi, lo_in, hi_in = RANGES[key]
+    ok = (value >= lo if lo_in else value > lo) and (value <= hi if hi_in else value < hi)
+    if not ok:
+        interval = f"{'[' if lo_in else '('}{lo:g}, {hi:g}{']' if hi_in else ')'}"
+        raise ScenarioError(path, f"{value!r} is out of the allowed range {interval}", key=key)
 
 
 @dataclass(frozen=True)
@@ -100,6 +155,11 @@ class CalibrationConfig:
         configurations: ``"extremal"`` or ``"random:N"``.
         solver: ``"lstsq"`` or ``"irls"``.
         noise_deg: Rotation noise on the calibration images [deg] (None: as [noise]).
+        warn_singular_ratio: A leg whose system's smallest/largest singular value is
+            below this is ill-conditioned: logged, and the trial is marked
+            (``calibration_ill_conditioned_legs`` in its row).
+        min_singular_ratio: Below this the calibration refuses (the trial fails with a
+            ``CalibrationError`` naming the leg and the ratio).
     """
 
     method: str = "none"
@@ -107,6 +167,8 @@ class CalibrationConfig:
     configurations: str = "extremal"
     solver: str = "irls"
     noise_deg: float | None = None
+    warn_singular_ratio: float = WARN_SINGULAR_RATIO
+    min_singular_ratio: float = MIN_SINGULAR_RATIO
 
 
 @dataclass(frozen=True)
@@ -231,20 +293,27 @@ class Scenario:
             sc = replace(sc, calibration=replace(sc.calibration, method="file",
                                                  file=str(calibration_file)))
         if max_steps is not None:
-            if max_steps < 1:
-                raise ScenarioError(self.source, f"--max-steps must be >= 1, got {max_steps}")
+            _check_option(max_steps, "task.max_steps", "--max-steps")
             sc = replace(sc, task=replace(sc.task, max_steps=max_steps))
         if trials is not None:
-            if trials < 1:
-                raise ScenarioError(self.source, f"--trials must be >= 1, got {trials}")
+            _check_option(trials, "trials", "--trials")
             sc = replace(sc, trials=trials)
         if seed is not None:
+            _check_option(seed, "seed", "--seed")
             sc = replace(sc, seed=seed)
         if controllers:
             by_label = {c.label: c for c in sc.controllers}
             sc = replace(sc, controllers=tuple(by_label.get(c, ControllerSpec(c, c))
                                                for c in controllers))
         return sc
+
+
+def _check_option(value: Any, key: str, option: str) -> None:
+    """:func:`check_range` for a command-line override (named by its option)."""
+    try:
+        check_range(value, key, option)
+    except ScenarioError as exc:
+        raise ScenarioError(option, exc.problem) from None
 
 
 _TOP = ("name", "description", "seed", "trials", "controllers", "controller_options", "robot",
@@ -287,8 +356,7 @@ def _typed(value: Any, kind: type, path: str, key: str, choices: tuple[str, ...]
 
 def _parse_dataclass(cls: type, table: dict[str, Any], path: str, section: str,
                      sweepable: tuple[str, ...] = (), choices: dict[str, tuple[str, ...]]
-                     | None = None, sweep: dict[str, list[Any]] | None = None,
-                     nonnegative: tuple[str, ...] = ()) -> Any:
+                     | None = None, sweep: dict[str, list[Any]] | None = None) -> Any:
     choices = choices or {}
     names = {f.name: f for f in fields(cls)}
     for key in table:
@@ -305,7 +373,7 @@ def _parse_dataclass(cls: type, table: dict[str, Any], path: str, section: str,
                 raise ScenarioError(path, "an empty list cannot be a sweep axis", key=dotted)
             values = [_typed(v, kind, path, dotted, choices.get(key, ())) for v in value]
             for v in values:
-                _check_nonneg(v, key, nonnegative, path, dotted)
+                check_range(v, dotted, path)
             if sweep is None:
                 raise ScenarioError(path, "this key cannot be swept", key=dotted)
             sweep[dotted] = values
@@ -323,16 +391,11 @@ def _parse_dataclass(cls: type, table: dict[str, Any], path: str, section: str,
         elif f.name in ("noise_deg", "file") and value is not None:
             kind = float if f.name == "noise_deg" else str
             kwargs[key] = _typed(value, kind, path, dotted)
+            check_range(kwargs[key], dotted, path)
         else:
             kwargs[key] = _typed(value, kind, path, dotted, choices.get(key, ()))
-            _check_nonneg(kwargs[key], key, nonnegative, path, dotted)
+            check_range(kwargs[key], dotted, path)
     return cls(**kwargs)
-
-
-def _check_nonneg(value: Any, key: str, nonnegative: tuple[str, ...], path: str,
-                  dotted: str) -> None:
-    if key in nonnegative and isinstance(value, int | float) and value < 0:
-        raise ScenarioError(path, f"must be >= 0, got {value}", key=dotted)
 
 
 def _base_type(annotation: Any) -> type:
@@ -364,9 +427,9 @@ def parse_scenario(table: dict[str, Any], path: str = "<dict>") -> Scenario:
     name = _typed(table["name"], str, path, "name")
     description = _typed(table.get("description", ""), str, path, "description")
     seed = _typed(table.get("seed", 1), int, path, "seed")
+    check_range(seed, "seed", path)
     trials = _typed(table.get("trials", 10), int, path, "trials")
-    if trials < 1:
-        raise ScenarioError(path, f"must be >= 1, got {trials}", key="trials")
+    check_range(trials, "trials", path)
     raw_controllers = table.get("controllers")
     if raw_controllers is None:
         raise ScenarioError(path, "missing required key (a list of controller names)",
@@ -416,8 +479,7 @@ def parse_scenario(table: dict[str, Any], path: str = "<dict>") -> Scenario:
     elif "preset" in robot:
         robot_preset = _typed(robot["preset"], str, path, "robot.preset", ("deltalab",))
     dt = _typed(robot.get("dt", 0.02), float, path, "robot.dt")
-    if not 0 < dt <= 1.0:
-        raise ScenarioError(path, f"must be in (0, 1] s, got {dt}", key="robot.dt")
+    check_range(dt, "robot.dt", path)
 
     camera = _section(table, "camera", path)
     for key in camera:
@@ -444,21 +506,17 @@ def parse_scenario(table: dict[str, Any], path: str = "<dict>") -> Scenario:
     sensor = _typed(sensor_t.pop("kind", "geometric"), str, path, "sensor.kind",
                     ("geometric", "image"))
     teach_frames = _typed(sensor_t.pop("teach_frames", 1), int, path, "sensor.teach_frames")
-    if teach_frames < 1:
-        raise ScenarioError(path, f"must be >= 1 (frames of the goal averaged), got "
-                            f"{teach_frames}", key="sensor.teach_frames")
+    check_range(teach_frames, "sensor.teach_frames", path)
     image = _parse_dataclass(ImageConfig, sensor_t, path, "sensor", (),
-                             {"background": ("plain", "cluttered")},
-                             nonnegative=("blur_px", "noise_std"))
+                             {"background": ("plain", "cluttered")})
 
     sweep: dict[str, list[Any]] = {}
     noise = _parse_dataclass(NoiseConfig, _section(table, "noise", path), path, "noise",
-                             NOISE_KEYS, {"model": ("none", "rotation", "pixel")}, sweep,
-                             nonnegative=NOISE_KEYS)
+                             NOISE_KEYS, {"model": ("none", "rotation", "pixel")}, sweep)
     cal_err = _parse_dataclass(CalibrationErrorConfig,
                                _section(table, "calibration_error", path), path,
-                               "calibration_error", CALIBRATION_ERROR_KEYS, None, sweep,
-                               nonnegative=CALIBRATION_ERROR_KEYS)
+                               "calibration_error", CALIBRATION_ERROR_KEYS, None, sweep)
+    _check_scaled_errors(cal_err, sweep, path)
     cal = _parse_dataclass(CalibrationConfig, _section(table, "calibration", path), path,
                            "calibration", (), {"method": ("none", "linear", "file"),
                                                "solver": ("lstsq", "irls")})
@@ -466,22 +524,18 @@ def parse_scenario(table: dict[str, Any], path: str = "<dict>") -> Scenario:
         if not cal.file:
             raise ScenarioError(path, "method 'file' needs a 'file'", key="calibration.file")
         cal = replace(cal, file=str(base_dir / cal.file))
-    if not (cal.configurations == "extremal" or cal.configurations.startswith("random:")):
-        raise ScenarioError(path, "expected 'extremal' or 'random:N'",
-                            key="calibration.configurations")
+    _check_configurations(cal.configurations, path)
+    if cal.min_singular_ratio > cal.warn_singular_ratio:
+        raise ScenarioError(path, f"{cal.min_singular_ratio} exceeds warn_singular_ratio "
+                            f"({cal.warn_singular_ratio}): the hard limit must be below the "
+                            "warning", key="calibration.min_singular_ratio")
     task = _parse_dataclass(TaskConfig, _section(table, "task", path), path, "task", (),
-                            {"kind": ("random-pairs", "fixed")},
-                            nonnegative=("margin_mm", "max_translation_mm", "max_angle_deg"))
+                            {"kind": ("random-pairs", "fixed")})
+    if task.settle_steps > task.max_steps:
+        raise ScenarioError(path, f"{task.settle_steps} exceeds task.max_steps "
+                            f"({task.max_steps})", key="task.settle_steps")
     if task.kind == "fixed":
-        for key in ("start_mm", "goal_mm"):
-            value = getattr(task, key)
-            if value is None or len(value) != 6:
-                raise ScenarioError(path, "a fixed task needs 6 leg lengths [mm]",
-                                    key=f"task.{key}")
-    if task.max_steps < 1:
-        raise ScenarioError(path, "must be >= 1", key="task.max_steps")
-    if task.position_tolerance_mm <= 0 or task.orientation_tolerance_deg <= 0:
-        raise ScenarioError(path, "tolerances must be positive", key="task")
+        _check_fixed_task(task, robot_preset, robot_geometry, path)
     reference = table.get("reference", {})
     if not isinstance(reference, dict):
         raise ScenarioError(path, "expected a table", key="reference")
@@ -493,6 +547,83 @@ def parse_scenario(table: dict[str, Any], path: str = "<dict>") -> Scenario:
         noise=noise, calibration_error=cal_err, calibration=cal, task=task,
         reference=reference, sweep_axes=sweep, source=path,
     )
+
+
+def _check_scaled_errors(cal_err: CalibrationErrorConfig, sweep: dict[str, list[Any]],
+                         path: str) -> None:
+    """Each calibration error times the largest ``scale`` stays within its key's range."""
+    scales = sweep.get("calibration_error.scale", [cal_err.scale])
+    for key in _SCALED:
+        values = sweep.get(f"calibration_error.{key}", [getattr(cal_err, key)])
+        worst = max(values) * max(scales)
+        hi = RANGES[f"calibration_error.{key}"][1]
+        if worst > hi:
+            raise ScenarioError(path, f"times scale {max(scales):g} gives a standard "
+                                f"deviation of {worst:g}, beyond the allowed {hi:g}",
+                                key=f"calibration_error.{key}")
+
+
+def _check_configurations(value: str, path: str) -> None:
+    """``extremal`` or ``random:N`` with an integer N >= 2."""
+    key = "calibration.configurations"
+    if value == "extremal":
+        return
+    if not value.startswith("random:"):
+        raise ScenarioError(path, f"expected 'extremal' or 'random:N', got {value!r}", key=key)
+    count = value.split(":", 1)[1]
+    if not count.isdigit() or not 2 <= int(count) <= 100_000:
+        raise ScenarioError(path, f"expected 'random:N' with an integer N in [2, 100000], got "
+                            f"{value!r}", key=key)
+
+
+def _check_fixed_task(task: TaskConfig, preset: str | None, geometry_file: str | None,
+                      path: str) -> None:
+    """A fixed task has 6 leg lengths per end, inside the nominal strokes."""
+    from hexapod.geometry import HexapodGeometry
+    from hexapod.geometry import preset as geometry_preset
+
+    for key in ("start_mm", "goal_mm"):
+        value = getattr(task, key)
+        if value is None or len(value) != 6:
+            raise ScenarioError(path, "a fixed task needs 6 leg lengths [mm]", key=f"task.{key}")
+    try:
+        geometry = (HexapodGeometry.from_toml(geometry_file) if geometry_file is not None
+                    else geometry_preset(preset or "deltalab"))
+    except ConfigFileError as exc:
+        raise ScenarioError(exc.path, exc.problem, exc.key, exc.suggestion) from None
+    lo, hi = (1e3 * x for x in geometry.stroke)
+    for key in ("start_mm", "goal_mm"):
+        for leg, q in enumerate(getattr(task, key)):
+            if not lo <= q <= hi:
+                raise ScenarioError(path, f"leg {leg}: {q:g} mm is outside the stroke "
+                                    f"[{lo:g}, {hi:g}] mm", key=f"task.{key}")
+
+
+def check_controllers(sc: Scenario) -> None:
+    """Resolve every controller of a scenario and build it with its options once.
+
+    A misspelt name or an option a controller refuses (a NaN gain, an unknown
+    option) is reported before any trial runs, instead of failing every trial.
+
+    Raises:
+        UnknownControllerError: A name no controller is registered under (with the close one).
+        PluginLoadError: A ``module:attr`` that cannot be imported.
+        ScenarioError: An option the controller refuses, naming the controller and option.
+    """
+    import controllers  # noqa: F401 - registers the built-ins
+    from controllers.base import registry
+    from controllers.exceptions import OptionError
+
+    for k, spec in enumerate(sc.controllers):
+        registry.factory(spec.name)
+        try:
+            registry.create(spec.name, **spec.options)
+        except OptionError as exc:
+            raise ScenarioError(sc.source, f"{spec.name}: {exc.problem}",
+                                key=f"controllers[{k}].{exc.option}") from None
+        except TypeError as exc:  # an option the factory does not take
+            raise ScenarioError(sc.source, f"{spec.name}: {exc}",
+                                key=f"controllers[{k}]") from None
 
 
 def builtin_scenarios() -> dict[str, Path]:

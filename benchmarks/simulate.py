@@ -28,11 +28,13 @@ from benchmarks.scenario import Scenario
 from controllers.base import Command, ControllerContext, Goal, Observation, registry
 from hexapod import HexapodGeometry, Transform, forward_kinematics_batch
 from hexapod.backends.base import Backend, clamp_velocities
+from hexapod.exceptions import HexapodError
 from hexapod.geometry import preset as geometry_preset
 from hexapod.kinematics import inverse_kinematics
 from hexapod.se3 import exp_so3, pose_error
 from hexapod.workspace import sample_poses
 from vision.cameras import Camera, camera_preset
+from vision.exceptions import VisionError
 from vision.legs import directions_from_edges, observe_legs
 
 log = logging.getLogger(__name__)
@@ -561,8 +563,11 @@ def _failure_row(sc: Scenario, spec: Any, trial: int, exc: BaseException) -> dic
         "final_orientation_error_deg": None, "stroke_violations": 0, "step_time_us": None,
         "failure": f"{type(exc).__name__}: {exc}",
     })
-    log.warning("trial %s/%s/%d failed: %s\n%s", sc.name, spec.label, trial, exc,
-                traceback.format_exc())
+    if isinstance(exc, HexapodError | VisionError):  # the user's data: the message says it
+        log.warning("trial %s/%s/%d failed: %s", sc.name, spec.label, trial, exc)
+    else:
+        log.warning("trial %s/%s/%d failed: %s\n%s", sc.name, spec.label, trial, exc,
+                    traceback.format_exc())
     return row
 
 

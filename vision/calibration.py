@@ -52,8 +52,18 @@ HUBER_K = 1.345
 TUKEY_C = 4.685
 #: Floor of the robust scale [m] (noise-free data have residuals of ~1e-17 m).
 MIN_SCALE = 1e-12
-#: Default relative conditioning below which a point is declared undetermined.
-MIN_SINGULAR_RATIO = 1e-6
+#: Conditioning of a leg's system (smallest over largest singular value of its stacked
+#: normals) below which the calibration warns: the point is poorly determined along one
+#: direction (the viewing ray) and the noise is amplified about 1 / ratio times. The
+#: weakest leg of the reference cases (reference robot, 15 mm legs, 64 extremal
+#: configurations) has 0.0144 with the front camera and 0.054 with the omnidirectional
+#: one; the default warns at a third of the former.
+WARN_SINGULAR_RATIO = 5e-3
+#: Conditioning below which the calibration refuses (:class:`CalibrationError`): ten
+#: times weaker than the weakest reference case, i.e. ten times its noise amplification
+#: (with 30 mm legs and the front camera, leg 4 has 0.0010, and its point came out up to
+#: 75 mm wrong at 0.05 deg of noise).
+MIN_SINGULAR_RATIO = 1.5e-3
 #: Tolerance on the norm of the normals read from a file.
 UNIT_TOLERANCE = 1e-6
 
@@ -407,6 +417,7 @@ class BaseCalibration:
         method: ``"lstsq"`` or ``"irls"``.
         weight: The weight function (IRLS).
         radius: Leg radius used [m].
+        warn_singular_ratio: The conditioning below which a leg counts as ill-conditioned.
     """
 
     base_points: np.ndarray
@@ -421,6 +432,13 @@ class BaseCalibration:
     method: str
     weight: str
     radius: float
+    warn_singular_ratio: float = WARN_SINGULAR_RATIO
+
+    @property
+    def ill_conditioned_legs(self) -> list[int]:
+        """Legs whose singular-value ratio is below :attr:`warn_singular_ratio`."""
+        return [int(i) for i in np.flatnonzero(self.singular_value_ratio
+                                               < self.warn_singular_ratio)]
 
     @property
     def smallest_singular_value(self) -> np.ndarray:
@@ -448,6 +466,8 @@ class BaseCalibration:
             "residual_rms_mm": (self.residual_rms * 1e3).tolist(),
             "smallest_singular_value": self.smallest_singular_value.tolist(),
             "singular_value_ratio": self.singular_value_ratio.tolist(),
+            "warn_singular_ratio": self.warn_singular_ratio,
+            "ill_conditioned_legs": self.ill_conditioned_legs,
             "singular_values": self.singular_values.tolist(),
             "equations": self.equations.tolist(),
             "configurations": self.configurations.tolist(),
@@ -506,6 +526,7 @@ def calibrate_base_points(
     min_singular_ratio: float = MIN_SINGULAR_RATIO,
     max_iterations: int = 50,
     tol: float = 1e-12,
+    warn_singular_ratio: float = WARN_SINGULAR_RATIO,
 ) -> BaseCalibration:
     """Estimate the base points in the camera frame from leg-edge observations.
 
@@ -531,17 +552,21 @@ def calibrate_base_points(
         weight: ``"tukey"`` or ``"huber"`` (IRLS).
         threshold: Fixed robust threshold [m]; None for the MAD-based one.
         min_singular_ratio: A leg whose stacked system has smallest/largest singular
-            value below this is declared undetermined.
+            value below this is refused (default :data:`MIN_SINGULAR_RATIO`).
         max_iterations: IRLS iteration budget per phase.
         tol: IRLS stop on the step norm [m].
+        warn_singular_ratio: A leg below this ratio is logged as ill-conditioned (a
+            warning) and listed by :meth:`BaseCalibration.ill_conditioned_legs`
+            (default :data:`WARN_SINGULAR_RATIO`).
 
     Returns:
         The :class:`BaseCalibration`.
 
     Raises:
         CalibrationError: A leg is seen in fewer than 2 configurations, or its system
-            is (nearly) rank deficient (e.g. all its directions nearly parallel).
-        ValueError: Unknown method or weight, non-positive radius.
+            is too ill-conditioned (ratio below ``min_singular_ratio``: e.g. its
+            directions nearly parallel, or only seen where its edges hardly turn).
+        ValueError: Unknown method or weight, non-positive radius, bad thresholds.
     """
     if method not in ("lstsq", "irls"):
         raise ValueError(f"method: expected 'lstsq' or 'irls', got {method!r}")
@@ -552,6 +577,7 @@ def calibrate_base_points(
         raise ValueError(f"radius: must be positive and finite, got {radius!r} m")
     if threshold is not None and not threshold > 0:
         raise ValueError(f"threshold: must be positive, got {threshold!r} m")
+    check_conditioning_thresholds(min_singular_ratio, warn_singular_ratio)
     n_conf = data.n_configurations
     points = np.empty((6, 3))
     residuals = np.full((n_conf, 6, 2), np.nan)
@@ -578,11 +604,17 @@ def calibrate_base_points(
         svals[leg] = s
         if s[2] < min_singular_ratio * s[0]:
             raise CalibrationError(
-                leg, f"the {n_cfg[leg]} configurations do not determine the point: the "
-                f"stacked system is rank deficient (singular values {s[0]:.3e}, {s[1]:.3e}, "
-                f"{s[2]:.3e}; ratio {s[2] / s[0]:.2e} < {min_singular_ratio:.0e}); the leg "
-                "directions are (nearly) parallel", singular_values=s,
+                leg, f"ill-conditioned (singular-value ratio {s[2] / s[0]:.2e} < "
+                f"{min_singular_ratio:.2e}, the hard limit): its {n_cfg[leg]} configurations "
+                f"do not determine the point (singular values {s[0]:.3e}, {s[1]:.3e}, "
+                f"{s[2]:.3e}); add configurations where this leg is seen at other "
+                "inclinations", singular_values=s,
                 equations=int(n_eq[leg]), configurations=int(n_cfg[leg]))
+        if s[2] < warn_singular_ratio * s[0]:
+            log.warning("calibration: leg %d is ill-conditioned (singular-value ratio %.2e < "
+                        "%.2e): its base point is poorly determined along one direction and "
+                        "the noise is amplified about %.0f times", leg, s[2] / s[0],
+                        warn_singular_ratio, s[0] / max(s[2], 1e-300))
         b = np.full(len(N), -r)
         x = np.linalg.lstsq(N, b, rcond=None)[0]
         w = np.ones(len(N))
@@ -595,7 +627,22 @@ def calibrate_base_points(
         residuals[:, leg, :][vis] = N @ x - b
         weights[:, leg, :][vis] = w
     return BaseCalibration(points, residuals, weights, outliers, svals, n_eq, n_cfg,
-                           thresholds, iterations, method, weight, r)
+                           thresholds, iterations, method, weight, r, warn_singular_ratio)
+
+
+def check_conditioning_thresholds(min_singular_ratio: float, warn_singular_ratio: float) -> None:
+    """Check ``0 <= min_singular_ratio <= warn_singular_ratio < 1``.
+
+    Raises:
+        ValueError: Naming the threshold and its value.
+    """
+    for name, value in (("min_singular_ratio", min_singular_ratio),
+                        ("warn_singular_ratio", warn_singular_ratio)):
+        if not (isinstance(value, int | float) and np.isfinite(value) and 0 <= value < 1):
+            raise ValueError(f"{name}: must be in [0, 1), got {value!r}")
+    if min_singular_ratio > warn_singular_ratio:
+        raise ValueError(f"min_singular_ratio ({min_singular_ratio}) must not exceed "
+                         f"warn_singular_ratio ({warn_singular_ratio})")
 
 
 # ============================================================================
@@ -728,6 +775,7 @@ def calibrate(
     threshold: float | None = None,
     correct_scale: bool = False,
     min_singular_ratio: float = MIN_SINGULAR_RATIO,
+    warn_singular_ratio: float = WARN_SINGULAR_RATIO,
 ) -> CalibrationResult:
     """Linear calibration, optional scale correction and rigid fit of the CAD base.
 
@@ -735,14 +783,16 @@ def calibrate(
         data: The observations.
         radius: Nominal leg radius [m].
         cad_base_points: (6, 3) CAD base points in the base frame [m].
-        method, weight, threshold, min_singular_ratio: See :func:`calibrate_base_points`.
+        method, weight, threshold, min_singular_ratio, warn_singular_ratio: See
+            :func:`calibrate_base_points`.
         correct_scale: Divide the estimates by :func:`scale_correction` (use it when
             the leg radius is uncertain; with the right radius it only adds noise).
 
     Returns:
         The :class:`CalibrationResult`.
     """
-    lin = calibrate_base_points(data, radius, method, weight, threshold, min_singular_ratio)
+    lin = calibrate_base_points(data, radius, method, weight, threshold, min_singular_ratio,
+                                warn_singular_ratio=warn_singular_ratio)
     cad = np.asarray(cad_base_points, dtype=float)
     s = scale_correction(lin.base_points, cad)
     points = lin.base_points / s if correct_scale else lin.base_points
@@ -901,7 +951,12 @@ def calibrate_in_world(
     Returns:
         The estimated base points (6, 3) in the true camera frame [m], and a summary
         (``median_error_mm``, ``max_error_mm`` against the truth,
-        ``min_singular_ratio``, ``outliers``, ``configurations``).
+        ``min_singular_ratio``, ``ill_conditioned_legs`` (how many legs are below the
+        warning threshold ``calibration.warn_singular_ratio``), ``outliers``,
+        ``configurations``).
+
+    Raises:
+        CalibrationError: A leg below ``calibration.min_singular_ratio`` (or never seen).
 
     With the pixel noise model (and no ``noise_deg``) the calibration images get
     the same pixel noise as the control images (:func:`collect_pixel_observations`).
@@ -916,13 +971,17 @@ def calibrate_in_world(
             amplitude = noise.amplitude_deg if noise.model == "rotation" else 0.0
         model = rotation_noise(float(amplitude)) if amplitude else None
         data = collect_observations(geometry, camera, calibration.configurations, model, rng)
-    res = calibrate_base_points(data, geometry.leg_radius, calibration.solver)
+    res = calibrate_base_points(
+        data, geometry.leg_radius, calibration.solver,
+        min_singular_ratio=getattr(calibration, "min_singular_ratio", MIN_SINGULAR_RATIO),
+        warn_singular_ratio=getattr(calibration, "warn_singular_ratio", WARN_SINGULAR_RATIO))
     truth = camera.camera_from_base.apply(geometry.base_points)
     err = point_errors(res.base_points, truth) * 1e3
     return res.base_points, {
         "median_error_mm": float(np.median(err)),
         "max_error_mm": float(np.max(err)),
         "min_singular_ratio": float(res.singular_value_ratio.min()),
+        "ill_conditioned_legs": float(len(res.ill_conditioned_legs)),
         "outliers": float(res.outliers.sum()),
         "configurations": float(data.n_configurations),
     }

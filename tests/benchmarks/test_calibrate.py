@@ -100,3 +100,44 @@ def test_calibrate_from_a_user_observation_file(tmp_path: Path) -> None:
     broken.write_text(obs.read_text().replace('"lengths_mm"', '"length_mm"'))
     assert cli_main(["calibrate", str(_scenario(tmp_path)), "--out", str(out),
                      "--observations", str(broken)]) == 2
+
+
+def test_ill_conditioned_calibration_is_refused_or_marked(tmp_path: Path,
+                                                         caplog: pytest.LogCaptureFixture
+                                                         ) -> None:
+    """30 mm legs seen by the front camera: leg 4's system has a singular-value ratio of
+    about 1e-3 (hard limit 1.5e-3): every trial is refused, naming the leg and the ratio,
+    and nothing is servoed. With the reference robot and a warning threshold above its
+    weakest leg (0.0144), the trials run and are marked."""
+    from hexapod import deltalab
+
+    deltalab().replace(leg_radius=0.030).to_toml(tmp_path / "legs30.toml")
+    study = tmp_path / "legs30.toml.study"
+    common = ('seed = 7\ntrials = 3\ncontrollers = ["leg-edge"]\n[noise]\nmodel = "rotation"\n'
+              'amplitude_deg = 0.05\n[task]\nmax_steps = 30\nfixed_duration = true\n')
+    study.write_text('name = "legs30"\n' + common + '[robot]\ngeometry = "legs30.toml"\n'
+                     '[calibration]\nmethod = "linear"\nsolver = "lstsq"\n')
+    out = tmp_path / "refused"
+    assert cli_main(["run", str(study), "--out", str(out), "--no-progress"]) == 0
+    rows = read_results(out)
+    assert len(rows) == 3
+    for r in rows:
+        assert r["failure"].startswith("CalibrationError: calibration: leg 4: ill-conditioned "
+                                       "(singular-value ratio 1."), r["failure"]
+        assert "< 1.50e-03, the hard limit" in r["failure"]
+        assert r["steps"] == 0 and r["final_position_error_mm"] is None
+    report = (out / "report.md").read_text()
+    assert "| 0/3 | 3/3 |" in report, "the calibration table counts the refused trials"
+
+    warned = tmp_path / "warned.toml"
+    warned.write_text('name = "warned"\n' + common + '[calibration]\nmethod = "linear"\n'
+                      'solver = "lstsq"\nwarn_singular_ratio = 0.02\n')
+    out = tmp_path / "warned"
+    with caplog.at_level("WARNING", logger="vision.calibration"):
+        assert cli_main(["run", str(warned), "--out", str(out), "--no-progress"]) == 0
+    assert any("is ill-conditioned (singular-value ratio 1.4" in m for m in caplog.messages)
+    rows = read_results(out)
+    assert all(r["failure"] is None or r["failure"].startswith("not conv") for r in rows)
+    assert all(r["calibration_ill_conditioned_legs"] >= 1 for r in rows)
+    assert all(0.014 < r["calibration_min_singular_ratio"] < 0.02 for r in rows)
+    assert "| 3/3 | 0/3 |" in (out / "report.md").read_text()

@@ -42,16 +42,37 @@ def test_sweep_expands_to_cartesian_product() -> None:
         ({**MINIMAL, "noise": {"model": "gaussian"}}, "noise.model", "rotation"),
         ({**MINIMAL, "robot": {"dt": -0.1}}, "robot.dt", "(0, 1]"),
         ({**MINIMAL, "robot": {"dt": "fast"}}, "robot.dt", "number"),
-        ({**MINIMAL, "trials": 0}, "trials", ">= 1"),
+        ({**MINIMAL, "trials": 0}, "trials", "out of the allowed range [1, 1e+07]"),
         ({**MINIMAL, "task": {"kind": "fixed", "start_mm": [375.0] * 5,
                               "goal_mm": [375.0] * 6}}, "task.start_mm", "6 leg lengths"),
         ({**MINIMAL, "calibration_error": {"base_points_mm": -1.0}},
-         "calibration_error.base_points_mm", ">= 0"),
+         "calibration_error.base_points_mm", "out of the allowed range [0, 100]"),
         ({**MINIMAL, "task": {"max_steps": [1, 2]}}, "task.max_steps", "sweepable"),
         ({"name": "t"}, "controllers", "missing"),
         ({**MINIMAL, "camera": {"preset": "fisheye"}}, "camera.preset", "front"),
         ({**MINIMAL, "controllers": ["a", "a"]}, "controllers", "duplicate"),
-        ({**MINIMAL, "sensor": {"teach_frames": 0}}, "sensor.teach_frames", ">= 1"),
+        ({**MINIMAL, "sensor": {"teach_frames": 0}}, "sensor.teach_frames", "[1, 1000]"),
+        # values that parse but cannot run (found by mutating the built-in scenarios)
+        ({**MINIMAL, "seed": -1}, "seed", "-1 is out of the allowed range [0,"),
+        ({**MINIMAL, "calibration_error": {"platform_points_mm": 1e308}},
+         "calibration_error.platform_points_mm", "1e+308 is out of the allowed range"),
+        ({**MINIMAL, "calibration_error": {"scale": [1.0, 50.0], "base_points_mm": 3.0}},
+         "calibration_error.base_points_mm", "times scale 50 gives a standard deviation of 150"),
+        ({**MINIMAL, "noise": {"model": "rotation", "amplitude_deg": 1e9}},
+         "noise.amplitude_deg", "1000000000.0 is out of the allowed range [0, 90]"),
+        ({**MINIMAL, "noise": {"model": "rotation", "amplitude_deg": [0.0, 100.0]}},
+         "noise.amplitude_deg", "100.0 is out of the allowed range [0, 90]"),
+        ({**MINIMAL, "noise": {"dropout_probability": 1.5}}, "noise.dropout_probability",
+         "[0, 1]"),
+        ({**MINIMAL, "task": {"max_steps": 10, "settle_steps": 20}}, "task.settle_steps",
+         "exceeds task.max_steps"),
+        ({**MINIMAL, "task": {"kind": "fixed", "start_mm": [375.0] * 6,
+                              "goal_mm": [375.0] * 5 + [9000.0]}}, "task.goal_mm",
+         "leg 5: 9000 mm is outside the stroke"),
+        ({**MINIMAL, "calibration": {"configurations": "random:1"}},
+         "calibration.configurations", "integer N in [2, 100000]"),
+        ({**MINIMAL, "calibration": {"min_singular_ratio": 0.1}},
+         "calibration.min_singular_ratio", "must be below the warning"),
         ({**MINIMAL, "sensor": {"kind": "image", "teach_frames": 2.5}}, "sensor.teach_frames",
          "integer"),
         ({**MINIMAL, "sensor": {"teach_frames": [1, 10]}}, "sensor.teach_frames", "integer"),
@@ -99,3 +120,25 @@ def test_overrides() -> None:
     assert [c.name for c in sc.controllers] == ["leg-edge"]
     with pytest.raises(ScenarioError):
         sc.with_overrides(trials=0)
+
+
+def test_controller_options_are_checked_when_the_study_is_loaded(tmp_path: Path) -> None:
+    from benchmarks.cli import main
+    from benchmarks.scenario import check_controllers
+
+    table = {**MINIMAL, "controllers": ["leg-direction",
+                                        {"name": "leg-edge", "adaptive_gain": [float("nan"),
+                                                                              1.0, 1.0]}]}
+    with pytest.raises(ScenarioError) as info:
+        check_controllers(parse_scenario(table, "study.toml"))
+    assert info.value.key == "controllers[1].adaptive_gain"
+    assert "finite" in str(info.value)
+    with pytest.raises(ScenarioError) as info:
+        check_controllers(parse_scenario({**MINIMAL, "controllers": [
+            {"name": "leg-edge", "gian": 2.0}]}, "study.toml"))
+    assert info.value.key == "controllers[0]" and "gian" in str(info.value)
+    study = tmp_path / "nan.toml"
+    study.write_text('name = "t"\ncontrollers = [{name = "leg-edge", gain = nan}]\n')
+    out = tmp_path / "out"
+    assert main(["run", str(study), "--out", str(out), "--no-progress"]) == 2
+    assert not (out / "results.jsonl").exists(), "nothing ran"
