@@ -1,4 +1,4 @@
-"""Calibration of the base points from leg observations (MATH.md section 7), in studies.
+"""Calibration of the base points from leg observations (docs/math.md section 7), in studies.
 
 - ``[calibration] method = "linear"``: every trial calibrates in its own (true)
   world first, with the scenario's noise, and its controllers get the estimates.

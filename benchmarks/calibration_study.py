@@ -1,4 +1,4 @@
-"""Reproduce the calibration study of seed 001 (``MATH.md`` sections 7 and 10).
+"""Reproduce the calibration study of seed 001 (``docs/math.md`` sections 7 and 10).
 
 100 repetitions of the linear calibration of the base points on the 64 extremal
 configurations, at 0.01 / 0.05 / 0.1 deg of rotation noise on every edge normal,

@@ -145,7 +145,7 @@ class CalibrationErrorConfig:
 
 @dataclass(frozen=True)
 class CalibrationConfig:
-    """Optional linear calibration of the base points before control (MATH.md section 7).
+    """Optional linear calibration of the base points before control (docs/math.md section 7).
 
     Attributes:
         method: ``"none"`` (controllers get nominal values), ``"linear"`` (calibrate

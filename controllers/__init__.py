@@ -5,7 +5,7 @@ Built-in controllers are registered in :data:`controllers.base.registry` here:
 - ``leg-direction``: leg directions, ``u x u*`` (seeds 001/003);
 - ``leg-edge``: leg edges, pixel lines or normals (seeds 002/003);
 - ``leg-edge-qp``, ``leg-direction-qp``: the same features with the QP of
-  ``MATH.md`` section 6 (stroke and leg-speed limits, OSQP);
+  ``docs/math.md`` section 6 (stroke and leg-speed limits, OSQP);
 - ``model-based``: forward kinematics of the nominal model + pose servoing;
 - ``joint-space``: leg lengths to the nominal inverse kinematics of the goal.
 """

@@ -1,11 +1,11 @@
-"""Interaction matrices of the leg features (``MATH.md`` sections 3, 4, 5, 6).
+"""Interaction matrices of the leg features (``docs/math.md`` sections 3, 4, 5, 6).
 
 One implementation shared by every controller. Twists ``tau = (v, w)`` are
-expressed in the camera frame and reduced at its origin (``MATH.md`` section 2).
+expressed in the camera frame and reduced at its origin (``docs/math.md`` section 2).
 
 Two forms are given:
 
-- the explicit matrices of ``MATH.md`` (:func:`direction_interaction` ``M_i``,
+- the explicit matrices of ``docs/math.md`` (:func:`direction_interaction` ``M_i``,
   :func:`edge_interaction` ``H``, :func:`line_jacobian` ``J_l``), batched over
   leading axes, for tests and for readers;
 - the task blocks used by the control laws (:func:`direction_task`,
@@ -66,7 +66,7 @@ def _dot(a: np.ndarray, b: np.ndarray) -> np.ndarray:
 def direction_interaction(
     base_points: np.ndarray, directions: np.ndarray, lengths: np.ndarray
 ) -> np.ndarray:
-    """Leg-direction interaction matrices ``u_dot_i = M_i tau`` (``MATH.md`` section 3).
+    """Leg-direction interaction matrices ``u_dot_i = M_i tau`` (``docs/math.md`` section 3).
 
     ``M_i = (1/q_i) P(u_i) [I3, -[A_i + q_i u_i]_x]``.
 
@@ -89,7 +89,7 @@ def direction_interaction(
 
 def edge_interaction(normals: np.ndarray, directions: np.ndarray,
                      base_points: np.ndarray) -> np.ndarray:
-    """Edge interaction matrices ``n_dot = H(n, u, A) u_dot`` (``MATH.md`` section 4).
+    """Edge interaction matrices ``n_dot = H(n, u, A) u_dot`` (``docs/math.md`` section 4).
 
     ``H = -(I3 - (u x n) A^T / (A^T (u x n))) u n^T``.
 
@@ -111,7 +111,7 @@ def edge_interaction(normals: np.ndarray, directions: np.ndarray,
 
 
 def line_jacobian(lines: np.ndarray, line_matrix: np.ndarray) -> np.ndarray:
-    """Pixel-line Jacobian ``l_dot = J_l n_dot`` (``MATH.md`` section 5).
+    """Pixel-line Jacobian ``l_dot = J_l n_dot`` (``docs/math.md`` section 5).
 
     ``J_l = |K^T l| (I3 - l l^T) K^-T`` for ``l = K^-T n / |K^-T n|``.
 
@@ -197,7 +197,7 @@ def edge_normal_task(
     normals: np.ndarray, desired: np.ndarray, directions: np.ndarray, base_points: np.ndarray,
     lengths: np.ndarray,
 ) -> np.ndarray:
-    """Edge task on the sphere: ``L_ij = -[n_ij*]_x H(n, u, A) M_i`` (``MATH.md`` section 6).
+    """Edge task on the sphere: ``L_ij = -[n_ij*]_x H(n, u, A) M_i`` (``docs/math.md`` section 6).
 
     Args:
         normals: (k, 3) normals where ``H`` is evaluated.
@@ -231,7 +231,7 @@ def edge_line_task(
     base_points: np.ndarray, lengths: np.ndarray, line_matrix: np.ndarray,
     line_matrix_inv_t: np.ndarray | None = None,
 ) -> np.ndarray:
-    """Edge task on pixel lines: ``L_ij = -[l_ij*]_x J_l H M_i`` (``MATH.md`` section 6).
+    """Edge task on pixel lines: ``L_ij = -[l_ij*]_x J_l H M_i`` (``docs/math.md`` section 6).
 
     Args:
         lines: (k, 3) unit lines where ``J_l`` is evaluated.

@@ -10,7 +10,7 @@ technique of :mod:`hexapod.fk`; the CasADi virtual machine evaluates the same
 expression when there is no compiler). One call, a few microseconds, computes:
 
 - the feature part (one per feature kind): the stacked error ``e`` and the
-  normal equations ``N = L^T L``, ``b = L^T e`` (``MATH.md`` section 6), and the
+  normal equations ``N = L^T L``, ``b = L^T e`` (``docs/math.md`` section 6), and the
   leg directions the inverse Jacobian needs;
 - the law part, shared by every feature kind (:func:`law_tail`): the adaptive
   gain ``lambda(|e|_inf)``; the eigen-decomposition of the 6 x 6 ``N`` by a fixed
@@ -19,7 +19,7 @@ expression when there is no compiler). One call, a few microseconds, computes:
   condition number ``sqrt(w_max / w_min)`` and the thresholded, damped
   pseudo-inverse solution ``tau = -lambda sum_j (v_j^T b) / (w_j + d2) v_j`` of
   :func:`controllers.laws.solve_normal`; the inverse Jacobian ``J_inv``
-  (``MATH.md`` section 3) and ``q_dot = J_inv tau``; and the finiteness checks
+  (``docs/math.md`` section 3) and ``q_dot = J_inv tau``; and the finiteness checks
   of :meth:`controllers.laws.VisionLaw.step` (error norm, sum of ``N``, a
   ``q_dot`` check that is 0 exactly when every entry is finite).
 
@@ -174,7 +174,7 @@ def law_tail(e: ca.SX, N: ca.SX, b: ca.SX, directions: list[ca.SX], base_points:
 
 
 def _direction_function() -> ca.Function:
-    """Leg-direction law: ``e_i = u_i x u_i*``, ``L_i = -[u_i*]_x M_i`` (``MATH.md`` §3, §6)."""
+    """Leg-direction law: ``e_i = u_i x u_i*``, ``L_i = -[u_i*]_x M_i`` (docs/math.md §3, §6)."""
     n_feat = sum(s for _, s in DIRECTION_INPUTS)
     x = ca.SX.sym("x", n_feat + sum(s for _, s in LAW_INPUTS))
     sl = _offsets(DIRECTION_INPUTS)

@@ -1,4 +1,4 @@
-"""Control-law machinery shared by the vision controllers (``MATH.md`` section 6).
+"""Control-law machinery shared by the vision controllers (``docs/math.md`` section 6).
 
 In the spirit of Pink's tasks: a feature (leg directions, leg edges) provides
 an error and an interaction matrix; the law that combines them (gain,
@@ -123,7 +123,7 @@ def check_choice(controller: str, option: str, value: Any, choices: Sequence[str
 
 @dataclass(frozen=True)
 class Gain:
-    """Constant or adaptive gain (ViSP's ``vpAdaptiveGain``), ``MATH.md`` section 6.
+    """Constant or adaptive gain (ViSP's ``vpAdaptiveGain``), ``docs/math.md`` section 6.
 
     ``lambda(x) = (at_zero - at_infinity) exp(-slope_at_zero x / (at_zero - at_infinity))
     + at_infinity`` with ``x = |e|_inf``; constant when ``at_zero == at_infinity``.
@@ -247,7 +247,7 @@ def solve_normal_damped(N: np.ndarray, b: np.ndarray, threshold: float, damping2
 
 def inverse_jacobian_into(out: np.ndarray, base_points: np.ndarray,
                           directions: np.ndarray) -> np.ndarray:
-    """Fill ``out`` (6, 6) with ``J_inv`` rows ``[u_i^T, (A_i x u_i)^T]`` (``MATH.md`` §3)."""
+    """Fill ``out`` (6, 6) with ``J_inv`` rows ``[u_i^T, (A_i x u_i)^T]`` (``docs/math.md`` §3)."""
     out[:, :3] = directions
     out[:, 3:] = cross(base_points, directions)
     return out

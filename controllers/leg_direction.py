@@ -1,6 +1,6 @@
 """Leg-direction visual servoing (seeds 001 and 003): ``e_i = u_i x u_i*``.
 
-``L_i = -[u_i*]_x M_i`` (``MATH.md`` section 6), stacked over the visible legs
+``L_i = -[u_i*]_x M_i`` (``docs/math.md`` section 6), stacked over the visible legs
 (18 x 6 with all six), ``tau = -lambda L^+ e``, ``q_dot = J_inv tau``. With every
 direction visible and the CURRENT interaction, one call of the compiled core
 (:func:`controllers.law_kernel.direction_kernel`) computes the step.

@@ -1,6 +1,6 @@
 """Leg-edge visual servoing: seed 002 (pixel lines) and seed 003 (normals on the sphere).
 
-Features (``MATH.md`` section 6), two per leg, stacked over the visible edges
+Features (``docs/math.md`` section 6), two per leg, stacked over the visible edges
 (36 x 6 with all twelve):
 
 - perspective camera: unit image lines ``l`` in normalised pixel coordinates,

@@ -1,4 +1,4 @@
-"""Model-based baseline (what the seeds argue against), ``MATH.md`` section 6.
+"""Model-based baseline (what the seeds argue against), ``docs/math.md`` section 6.
 
 Read the leg lengths, solve the forward kinematics with the NOMINAL geometry
 (fast Newton, warm-started with the previous pose), servo that pose to the

@@ -1,4 +1,4 @@
-"""QP variants of the vision laws with stroke and leg-speed limits (``MATH.md`` section 6).
+"""QP variants of the vision laws with stroke and leg-speed limits (``docs/math.md`` section 6).
 
 Choose the twist ``tau`` minimising ``|L tau + lambda e|^2 + eps |tau|^2`` subject to
 

@@ -1,6 +1,6 @@
 """Geometry of a 6-6 Gough-Stewart platform.
 
-Conventions (``MATH.md`` section 1): the base frame ``b`` and the platform
+Conventions (``docs/math.md`` section 1): the base frame ``b`` and the platform
 frame ``e``; ``base_points[i]`` is the centre ``A_i`` of the base joint of leg
 ``i`` in ``b`` and ``platform_points[i]`` the centre ``eB_i`` of its platform
 joint in ``e``. Lengths are in metres inside the code and millimetres in files.
@@ -215,7 +215,7 @@ def circular_points(radius: float, angles: np.ndarray, z: float = 0.0) -> np.nda
 
 
 def deltalab(leg_radius: float = 0.015) -> HexapodGeometry:
-    """The DeltaLab "Table de Stewart" of the seeds (``MATH.md`` section 9).
+    """The DeltaLab "Table de Stewart" of the seeds (``docs/math.md`` section 9).
 
     Base radius 270 mm, alpha 4.25 deg; platform radius 195 mm, beta 5.885 deg;
     strokes 345-485 mm; leg radius 15 mm by default.

@@ -1,6 +1,6 @@
 """Closed-form kinematics of the Gough-Stewart platform, batched over leading axes.
 
-``MATH.md`` sections 1-3: ``q_i u_i = R eB_i + t - A_i``; the inverse Jacobian
+``docs/math.md`` sections 1-3: ``q_i u_i = R eB_i + t - A_i``; the inverse Jacobian
 row ``i`` is ``[u_i^T, (A_i x u_i)^T]`` for a twist expressed in the frame of the
 points and reduced at its origin. Functions here accept poses of the platform
 frame ``e`` in the base frame ``b`` and, optionally, a fixed transform
@@ -116,7 +116,7 @@ def leg_directions(
 
 
 def inverse_jacobian(base_points: np.ndarray, directions: np.ndarray) -> np.ndarray:
-    """Inverse Jacobian ``q_dot = J_inv tau`` (``MATH.md`` section 3).
+    """Inverse Jacobian ``q_dot = J_inv tau`` (``docs/math.md`` section 3).
 
     Frame-agnostic: ``base_points`` and ``directions`` in any frame fixed to the
     base; the twist ``tau = (v, w)`` is then expressed in that frame, at its origin.

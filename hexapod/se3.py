@@ -1,6 +1,6 @@
 """Batched SE(3) helpers (numpy): exponential map, pose integration, pose errors.
 
-Twists follow ``MATH.md`` section 2: ``(v, w)`` expressed in a fixed frame and
+Twists follow ``docs/math.md`` section 2: ``(v, w)`` expressed in a fixed frame and
 reduced at its origin, so that a point of the moving body has ``dP/dt = v + w x P``.
 """
 

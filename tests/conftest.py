@@ -11,7 +11,7 @@ from hexapod.geometry import circular_points
 
 @pytest.fixture
 def geometry() -> HexapodGeometry:
-    """The reference robot of MATH.md section 9."""
+    """The reference robot of docs/math.md section 9."""
     return deltalab()
 
 

@@ -1,5 +1,5 @@
 """Vision: cameras (perspective, unified), cylindrical legs as image features, noise,
-estimation of interpretation-plane normals (``MATH.md`` sections 4, 5 and 8)."""
+estimation of interpretation-plane normals (``docs/math.md`` sections 4, 5 and 8)."""
 
 from vision.cameras import (
     Camera,

@@ -1,4 +1,4 @@
-"""Linear calibration of the base points from images of the legs (``MATH.md`` section 7).
+"""Linear calibration of the base points from images of the legs (``docs/math.md`` section 7).
 
 Each measured edge normal ``n`` of leg ``i`` satisfies ``n.A_i = -r`` (section 4),
 whatever the platform pose. Stacking the visible edges of leg ``i`` over N
@@ -260,7 +260,7 @@ def _none_to_nan(x: Any, depth: int) -> Any:
 
 
 def rotation_noise(amplitude_deg: float) -> NoiseFunction:
-    """The rotation noise of the seeds (``MATH.md`` section 8) as a noise function.
+    """The rotation noise of the seeds (``docs/math.md`` section 8) as a noise function.
 
     Each unit vector is rotated about an axis uniform on the sphere by an angle
     uniform in ``[0, amplitude]`` (:func:`vision.noise.rotation_noise`).
@@ -699,7 +699,7 @@ def rigid_fit(
 
 
 def scale_correction(estimated: np.ndarray, cad: np.ndarray) -> float:
-    """Scale of the estimates relative to the CAD (``MATH.md`` section 7).
+    """Scale of the estimates relative to the CAD (``docs/math.md`` section 7).
 
     ``s = mean_{j != k} |A_j - A_k| / |bA_j - bA_k|``. A relative error on the leg
     radius used in the linear system scales every estimate by the same factor about

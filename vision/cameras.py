@@ -1,6 +1,6 @@
 """Camera models: perspective (pinhole) and unified central (Geyer-Daniilidis / Mei).
 
-Conventions (``MATH.md`` section 5):
+Conventions (``docs/math.md`` section 5):
 
 - Camera frame: x right, y down, z forward (perspective) or along the mirror axis
   (unified). For the unified model the camera frame is the mirror (sphere) frame.
@@ -248,7 +248,7 @@ class Camera(ABC):
         """Back-project pixels (..., 2) to unit vectors (..., 3) in the camera frame.
 
         Perspective: the normalised ray ``K^-1 p / |K^-1 p|``. Unified: the point of
-        the unit sphere (``MATH.md`` section 5). NaN where the pixel has no
+        the unit sphere (``docs/math.md`` section 5). NaN where the pixel has no
         pre-image (outside the mirror's field of view, ``xi > 1`` only).
         """
         return self._lift_normalised(self.pixels_to_normalised(pixels))
@@ -510,7 +510,7 @@ class PerspectiveCamera(Camera):
 
 
 class UnifiedCamera(Camera):
-    """Unified central camera (Geyer-Daniilidis / Mei), ``MATH.md`` section 5.
+    """Unified central camera (Geyer-Daniilidis / Mei), ``docs/math.md`` section 5.
 
     ``X_s = X / |X|``, ``m = (X_s,x, X_s,y) / (X_s,z + xi)``, ``p = K m``.
     A point is imaged when ``X_s,z > -min(xi, 1/xi)`` (``X_s,z > 0`` for ``xi = 0``):
@@ -591,7 +591,7 @@ class UnifiedCamera(Camera):
 
         Returns:
             (..., 3, 3) symmetric conics ``C`` in pixels, ``[u, v, 1] C [u, v, 1]^T = 0``,
-            ``C ∝ K^-T Ω K^-1`` (``MATH.md`` section 5), scaled to unit Frobenius norm by
+            ``C ∝ K^-T Ω K^-1`` (``docs/math.md`` section 5), scaled to unit Frobenius norm by
             a positive factor. ``C`` is even in ``n`` (both orientations of a plane give
             the same conic) and is the image of the whole great circle, of which a
             leg edge is an arc. For ``xi = 0`` it is the double line ``l l^T``.
@@ -640,7 +640,7 @@ FRONT_TARGET_HEIGHT = 0.265
 
 
 def front_camera(geometry: HexapodGeometry | None = None) -> PerspectiveCamera:
-    """The front perspective camera of seed 002 (``MATH.md`` section 9).
+    """The front perspective camera of seed 002 (``docs/math.md`` section 9).
 
     Intrinsics: 4.8 mm lens on a 1024x780 sensor with 4.65 um square pixels
     (``f = 4.8 / 0.00465 = 1032.26 px``, horizontal field of view 53 deg),
@@ -677,7 +677,7 @@ OMNI_FOCAL = 200.0
 
 
 def omni_camera(geometry: HexapodGeometry | None = None) -> UnifiedCamera:
-    """The omnidirectional camera of seed 003 (``MATH.md`` section 9).
+    """The omnidirectional camera of seed 003 (``docs/math.md`` section 9).
 
     Parabolic mirror with an orthographic lens (``xi = 1``), 640x480 image,
     generalised focal length 200 px, principal point at the image centre

@@ -1,7 +1,7 @@
 """Leg-edge detection in images, for the unified (omnidirectional) and the perspective camera.
 
 Both detectors output a :class:`EdgeDetection`: for each leg ``i`` and edge ``j``
-the interpretation-plane normal ``n_ij`` (``MATH.md`` sections 4 and 5, fitted from
+the interpretation-plane normal ``n_ij`` (``docs/math.md`` sections 4 and 5, fitted from
 the edge pixels lifted with the *given* camera model, i.e. the estimated one), the
 number of points and the fit residual, and whether the edge was found. A missing
 edge is reported as missing (``edge_visible`` False, NaN normal), never invented.
@@ -200,7 +200,7 @@ def _check_image(image: np.ndarray, camera: Camera) -> np.ndarray:
 def fit_normals(
     rays: np.ndarray, weights: np.ndarray
 ) -> tuple[np.ndarray, np.ndarray]:
-    """Batched weighted plane fit through the origin (``MATH.md`` section 5).
+    """Batched weighted plane fit through the origin (``docs/math.md`` section 5).
 
     The normal minimising ``sum w (n . X)^2`` is the eigenvector of the smallest
     eigenvalue of ``sum w X X^T`` (the smallest right singular vector of the

@@ -3,7 +3,7 @@
 Two estimators of the normal ``n`` of the plane through the projection centre
 that contains a 3D line (a leg edge), from pixels of its image:
 
-- :func:`fit_normal` (``MATH.md`` section 5, the method of the project): lift
+- :func:`fit_normal` (``docs/math.md`` section 5, the method of the project): lift
   every pixel to a unit vector (the normalised ray of a perspective camera, the
   point of the unit sphere of the unified model), then ``n`` minimises
   ``sum w_k (n^T X_k)^2`` under ``|n| = 1``: the right singular vector of the
@@ -168,7 +168,7 @@ def fit_normal_conic(
     Unified camera (``xi > 0``), exactly seed 003 eqs. (4)-(6): in normalised
     coordinates ``m = (x, y) = K^-1 p`` the image of the edge is the conic
     ``b0 x² + b1 y² + 2 b2 xy + 2 b3 x + 2 b4 y + 1 = 0`` with ``b_k = α_k / α_5``
-    (``MATH.md`` section 5, ``α_3 = nx nz``, ``α_4 = ny nz``, ``α_5 = nz²``); the
+    (``docs/math.md`` section 5, ``α_3 = nx nz``, ``α_4 = ny nz``, ``α_5 = nz²``); the
     five ``b_k`` are fitted by linear least squares and ``n = (b3, b4, 1) /
     |(b3, b4, 1)|``. Needs 5 points. Degenerate when the optical axis lies in (or
     near) the interpretation plane (``nz -> 0``), which is the usual situation of a

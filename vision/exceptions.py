@@ -38,7 +38,7 @@ class EstimationError(VisionError, ValueError):
 
 
 class CalibrationError(VisionError, ValueError):
-    """The calibration observations cannot determine a base point (``MATH.md`` section 7).
+    """The calibration observations cannot determine a base point (``docs/math.md`` section 7).
 
     Attributes:
         leg: Index of the leg (0-based), None when the problem is not one leg's.

@@ -1,4 +1,4 @@
-"""Cylindrical legs as image features (``MATH.md`` section 4).
+"""Cylindrical legs as image features (``docs/math.md`` section 4).
 
 Leg ``i`` is a cylinder of radius ``r`` whose axis passes through ``A_i`` with
 unit direction ``u_i`` (both in the camera frame). Its two apparent edges define

@@ -1,4 +1,4 @@
-"""Image noise models (``MATH.md`` section 8), all batched and seeded.
+"""Image noise models (``docs/math.md`` section 8), all batched and seeded.
 
 - :func:`rotation_noise`: the noise of the seeds on reconstructed unit vectors
   (edge normals or leg directions): each vector is rotated by a random rotation

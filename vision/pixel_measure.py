@@ -3,7 +3,7 @@
 Points are sampled along the visible part of each edge (limb) of each leg,
 projected by the TRUE camera, perturbed by Gaussian pixel noise (and optional
 outliers), lifted with the ESTIMATED camera and fitted by the minimal SVD fit of
-:func:`vision.estimate.fit_normal` (MATH.md section 5). This is what a real
+:func:`vision.estimate.fit_normal` (docs/math.md section 5). This is what a real
 detector followed by the estimator gives, without rendering images.
 """
 

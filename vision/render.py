@@ -1,7 +1,7 @@
 """Synthetic grayscale images of the legs of a Gough-Stewart platform (OpenCV).
 
 Each leg is a solid cylinder of radius ``geometry.leg_radius`` around the segment
-``A_i .. B_i`` (``MATH.md`` section 4). The image is drawn with the painter's
+``A_i .. B_i`` (``docs/math.md`` section 4). The image is drawn with the painter's
 algorithm: the objects (six legs and, optionally, the platform disc) are sorted by
 the distance of their centre to the projection centre and filled from the farthest
 to the nearest (the order of the true depths wherever two legs overlap in the image,
@@ -17,7 +17,7 @@ shrunk by ``aa_compensation_px``), whose edges are off by up to about 0.1 px
 depending on direction and sub-pixel position.
 
 A leg is drawn as nested bands between pairs of generators of the cylinder (the
-outermost pair being the two limbs, i.e. the edges of ``MATH.md`` section 4) plus
+outermost pair being the two limbs, i.e. the edges of ``docs/math.md`` section 4) plus
 its two end discs. The bands carry a Lambertian shading for a light at the camera:
 the intensity at the generator of angle ``phi`` from the generator facing the camera
 is ``edge + (centre - edge) cos(phi)``, so the limbs (``phi = phi0``) are the
