@@ -4,7 +4,7 @@ VENV := .venv
 BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed
 
-.PHONY: demo test lint venv clean browser
+.PHONY: demo test lint docs venv clean browser
 
 $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
@@ -30,6 +30,9 @@ test: $(STAMP) browser
 lint: $(STAMP)
 	$(BIN)/ruff check hexapod vision controllers benchmarks tests
 	$(BIN)/mypy
+
+docs: $(STAMP)
+	$(BIN)/sphinx-build -W --keep-going -b html docs/api docs/_build/html
 
 clean:
 	rm -rf $(VENV) build *.egg-info

@@ -45,17 +45,14 @@ from vision.legs import directions_from_edges
 
 
 class NormalFit(NamedTuple):
-    """Result of a normal fit.
+    """Result of a normal fit."""
 
-    Attributes:
-        normal: (..., 3) unit normals; NaN where too few points were valid.
-        residual: (...) weighted RMS of ``n . X_k`` over the lifted points (sine of
-            the angular distance of the rays to the plane; radians for small values).
-        n_points: (...) number of valid points used.
-    """
-
+    #: (..., 3) unit normals; NaN where too few points were valid.
     normal: np.ndarray
+    #: (...) weighted RMS of ``n . X_k`` over the lifted points (sine of
+    #: the angular distance of the rays to the plane; radians for small values).
     residual: np.ndarray
+    #: (...) number of valid points used.
     n_points: np.ndarray
 
 

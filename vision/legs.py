@@ -248,7 +248,8 @@ def occluded_by_disc(
 
     Args:
         points: (..., 6, 2, N, 3) camera-frame points.
-        centre: (..., 3) disc centre; normal: (..., 3) unit disc normal.
+        centre: (..., 3) disc centre.
+        normal: (..., 3) unit disc normal.
         disc_radius: [m].
 
     Returns:
