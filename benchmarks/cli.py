@@ -60,8 +60,18 @@ def cmd_list(args: argparse.Namespace) -> int:
     for info in registry.info():
         t.add_row(info.name, info.package, info.version, info.description)
     con.print(t)
+    from hexapod.backends.registry import backends
+
+    t = Table(title="Backends (--backend NAME[:ARGS])")
+    for col in ("name", "package", "version", "description"):
+        t.add_column(col)
+    for binfo in backends.info():
+        t.add_row(binfo.name, binfo.package, binfo.version, binfo.description)
+    con.print(t)
     for err in registry.errors:
         con.print(f"[red]plugin failed to load:[/red] {err}")
+    for berr in backends.errors:
+        con.print(f"[red]backend plugin failed to load:[/red] {berr}")
     return 0
 
 
@@ -413,8 +423,9 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--record", type=int, default=2,
                    help="keep the time series of the first K trials of each controller")
     s.add_argument("--backend", default="sim",
-                   help="sim (default), emulator (a firmware emulator on a pty), or "
-                        "serial:URL")
+                   help="sim (default, vectorised), emulator (a firmware emulator on a pty), "
+                        "serial:URL, a plugin's NAME[:ARGS] or module:attr[:ARGS] "
+                        "(docs/backends.md)")
     s.add_argument("--viz", action="store_true", help="live MeshCat view (in-process)")
     s.add_argument("--no-progress", action="store_true", help="no progress bar")
     s.set_defaults(func=cmd_run)

@@ -141,37 +141,25 @@ def plan(scenarios: list[Scenario], chunk_size: int = 25, record_trials: int = 2
 def backend_factory(spec: str) -> Callable[..., Any] | None:
     """Build the per-trial backend factory of a ``--backend`` spec.
 
-    ``"sim"``: None (exact integration in the simulator, vectorised);
-    ``"emulator"``: a firmware emulator on a pseudo-terminal per trial, driven
-    through :class:`~hexapod.backends.serial.SerialRobot` in real time;
-    ``"serial:URL"``: a real board (or an emulator started by hand) at ``URL``.
+    ``"sim"``: None (exact integration in the simulator, vectorised over trials).
+    Anything else is a spec of :mod:`hexapod.backends.registry` (``emulator``,
+    ``serial:URL``, a plugin's ``NAME[:ARGS]`` or ``module:attr[:ARGS]``): every trial
+    opens its backend at the trial's start lengths and closes it at the end.
 
     Raises:
-        ResultsError: An unknown spec.
+        UnknownBackendError: An unknown name (with the close one).
+        BackendPluginError: A ``module:attr`` that cannot be imported or is no backend.
     """
     if spec == "sim":
         return None
-    if spec == "emulator":
-        from hexapod.backends.serial import open_emulated_robot
+    from hexapod.backends.registry import backends
 
-        def emulated(geometry: Any, lengths: np.ndarray) -> Any:
-            robot = open_emulated_robot(geometry, lengths)
-            robot.reset(lengths)
-            return robot
+    backends.check(spec)
 
-        return emulated
-    if spec.startswith("serial:") and len(spec) > len("serial:"):
-        url = spec[len("serial:"):]
-        from hexapod.backends.serial import SerialRobot
+    def factory(geometry: Any, lengths: np.ndarray) -> Any:
+        return backends.open(spec, geometry, lengths)
 
-        def connected(geometry: Any, lengths: np.ndarray) -> Any:
-            robot = SerialRobot(url)
-            robot.reset(lengths)
-            return robot
-
-        return connected
-    raise ResultsError("--backend", f"unknown backend {spec!r}; use sim, emulator or "
-                       "serial:URL (a device path or socket://HOST:PORT)")
+    return factory
 
 
 def execute(unit: WorkUnit) -> tuple[list[dict[str, Any]], list[tuple[str, dict[str, Any]]]]:

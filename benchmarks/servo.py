@@ -376,31 +376,34 @@ def open_camera(spec: str, camera: Any, geometry: HexapodGeometry,
 
 def open_backend(spec: str, geometry: HexapodGeometry,
                  start: np.ndarray | None = None) -> Any:
-    """Connect the robot of a ``--backend`` spec: ``emulator`` or ``serial:URL``.
+    """Connect the robot of a ``--backend`` spec (:mod:`hexapod.backends.registry`).
 
     Args:
-        spec: The spec.
+        spec: ``emulator``, ``serial:URL``, a plugin's ``NAME[:ARGS]`` or
+            ``module:attr[:ARGS]``.
         geometry: The nominal robot (the emulator's stroke and speed limit).
         start: Emulator only: initial leg lengths [m] (mid-stroke if None).
 
     Returns:
-        A connected :class:`~hexapod.backends.serial.SerialRobot` (a context manager
-        that halts the robot and closes the port).
+        A connected backend (a context manager that halts the robot and closes it).
 
     Raises:
-        BenchmarkError: Unknown spec, or ``start`` given for a real robot.
+        BenchmarkError: ``start`` given for a real robot.
+        UnknownBackendError, BackendPluginError: A bad spec.
         SerialLinkError: The port cannot be opened or the board does not answer.
     """
-    from hexapod.backends.serial import SerialRobot, open_emulated_robot
+    from hexapod.backends.registry import backends
 
-    if spec == "emulator":
-        return open_emulated_robot(geometry, start)
-    if spec.startswith("serial:") and len(spec) > len("serial:"):
-        if start is not None:
-            raise BenchmarkError("--start-mm only applies to --backend emulator (a real "
-                                 "robot starts where it is)")
-        return SerialRobot(spec[len("serial:"):])
-    raise BenchmarkError(f"--backend: expected emulator or serial:URL, got {spec!r}")
+    name = backends.check(spec)
+    if start is not None and name not in SIMULATED_BACKENDS:
+        raise BenchmarkError(f"--start-mm only applies to a simulated robot "
+                             f"({', '.join(SIMULATED_BACKENDS)}): a real robot starts where "
+                             "it is")
+    return backends.open(spec, geometry, start)
+
+
+#: Backends whose robot is simulated: ``--start-mm`` sets where it starts.
+SIMULATED_BACKENDS = ("emulator", "sim")
 
 
 # ============================================================================
@@ -780,8 +783,9 @@ class StatusLine:
 def add_arguments(p: argparse.ArgumentParser) -> None:
     """Add the options of ``hexapod-bench servo`` to a parser."""
     p.add_argument("--backend", required=True,
-                   help="emulator (a firmware emulator on a pseudo-terminal) or serial:URL "
-                        "(a device path, socket://127.0.0.1:PORT, ...)")
+                   help="emulator (a firmware emulator on a pseudo-terminal), serial:URL "
+                        "(a device path, socket://127.0.0.1:PORT, ...), sim, a plugin's "
+                        "NAME[:ARGS] or module:attr[:ARGS] (docs/backends.md)")
     p.add_argument("--camera", default="sim",
                    help="sim (render the legs at the pose of the measured lengths), "
                         "video:PATH or device:N (default sim)")
@@ -937,6 +941,9 @@ def run(args: argparse.Namespace) -> int:
     from vision.cameras import load_camera
 
     _check_args(args)
+    from hexapod.backends.registry import backends
+
+    backends.check(args.backend)  # a bad spec is reported before anything is opened
     geometry = _geometry(args.geometry)
     camera = load_camera(args.camera_file, geometry)
     start = None if args.start_mm is None else np.asarray(args.start_mm, float) * 1e-3

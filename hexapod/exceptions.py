@@ -119,6 +119,43 @@ class BackendError(HexapodError):
     """A robot backend failed (communication, protocol or robot error)."""
 
 
+class UnknownBackendError(BackendError, KeyError):
+    """No backend is registered under this name.
+
+    Attributes:
+        name: The name asked for.
+        available: The registered names.
+        suggestion: The close registered name, if any.
+    """
+
+    def __init__(self, name: str, available: list[str], suggestion: str | None = None) -> None:
+        self.name = name
+        self.available = sorted(available)
+        self.suggestion = suggestion
+        hint = f" (did you mean '{suggestion}'?)" if suggestion else ""
+        super().__init__(f"--backend: unknown backend {name!r}{hint}; registered: "
+                         f"{', '.join(self.available)}; or name a class as module:attr[:ARGS]")
+
+    def __str__(self) -> str:  # KeyError would quote the message
+        return str(self.args[0])
+
+
+class BackendPluginError(BackendError):
+    """A backend plugin could not be loaded, or does not build a :class:`Backend`.
+
+    Attributes:
+        spec: The backend name or ``module:attr`` spec.
+        source: Where it comes from (a distribution, or "command line").
+        problem: What is wrong.
+    """
+
+    def __init__(self, spec: str, source: str, problem: str) -> None:
+        self.spec = spec
+        self.source = source
+        self.problem = problem
+        super().__init__(f"backend {spec!r} ({source}): {problem}")
+
+
 class SerialLinkError(BackendError):
     """The serial link to a robot controller failed (port, timeout, disconnection).
 

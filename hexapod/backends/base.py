@@ -13,6 +13,8 @@ from types import TracebackType
 
 import numpy as np
 
+from hexapod.geometry import HexapodGeometry
+
 
 @dataclass
 class BackendStep:
@@ -36,12 +38,44 @@ class BackendStep:
 
 
 class Backend(ABC):
-    """A robot that accepts leg-velocity commands at a fixed period."""
+    """A robot that accepts leg-velocity commands at a fixed period.
+
+    A backend of your own (another robot controller) subclasses this class,
+    implements :meth:`reset`, :meth:`step` and :meth:`measured_lengths` (and
+    :meth:`halt` / :meth:`close` where they mean something), and is named on the
+    command line as ``--backend my_package.module:MyRobot[:ARGS]`` or registered
+    under the entry-point group ``hexapod.backends`` (``docs/backends.md``).
+    """
 
     #: Stroke limits (q_min, q_max) [m].
     stroke: tuple[float, float]
     #: Leg speed limit [m/s].
     max_speed: float
+    #: What the robot says it is (shown by the servo loop).
+    identity: str = ""
+
+    @classmethod
+    def open(cls, args: str, geometry: HexapodGeometry, start: np.ndarray | None = None
+             ) -> Backend:
+        """Open this backend for ``--backend NAME[:ARGS]``.
+
+        The default builds ``cls(geometry)`` (``cls(geometry, args)`` when ARGS are
+        given), then moves to ``start`` with :meth:`reset` when it is given, closing
+        the backend if that fails. Override it when the backend needs more.
+
+        Args:
+            args: The text after the name in the spec ('' when none).
+            geometry: The nominal robot (stroke, speed limit, kinematics).
+            start: Leg lengths [m] to start from (None: where the robot is).
+        """
+        robot = cls(geometry, args) if args else cls(geometry)  # type: ignore[call-arg]
+        if start is not None:
+            try:
+                robot.reset(start)
+            except BaseException:
+                robot.close()
+                raise
+        return robot
 
     @abstractmethod
     def reset(self, lengths: np.ndarray | None = None) -> np.ndarray:

@@ -202,7 +202,8 @@ def test_unknown_controller_suggests_the_closest(
 @pytest.mark.parametrize(("extra", "fragment"), [
     (["--camera", "webcam"], "--camera: expected sim, video:PATH or device:N"),
     (["--camera", "video:/nonexistent.avi"], "no such file"),
-    (["--backend", "tcp:1234"], "--backend: expected emulator or serial:URL"),
+    (["--backend", "tcp:1234"], "--backend: unknown backend 'tcp:1234'"),
+    (["--backend", "serial"], "needs arguments: serial:URL"),
     (["--dt", "0"], "--dt must be a positive period"),
     (["-o", "gain"], "expected KEY=VALUE"),
     (["-o", "gian=2"], "gian"),

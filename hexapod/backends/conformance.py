@@ -1,0 +1,141 @@
+"""Check a backend against the simulated robot: the test a backend of your own should pass.
+
+:func:`check_backend` drives a backend and :class:`~hexapod.backends.sim.SimulatedRobot`
+with the same commands and compares what they measure, period by period:
+
+1. a smooth motion well inside the limits (the measured lengths must agree within
+   ``tolerance``: a backend with lag or quantisation needs a looser one);
+2. a command beyond the speed limit (the backend must clamp it: no leg may move
+   faster than the limit, and the step must report the leg clamped);
+3. a push into a stroke end (no measured length may leave the stroke);
+4. a NaN command (no leg may move, the step reports it clamped);
+5. ``halt()`` then ``close()`` (must not raise).
+
+Use it in your own test suite::
+
+    from hexapod.backends.conformance import check_backend
+
+    def test_my_robot_behaves_like_the_simulator():
+        report = check_backend(lambda g, q: MyRobot.open("", g, q), deltalab())
+        assert report.ok, report.problems
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from hexapod.backends.base import Backend
+from hexapod.backends.sim import SimulatedRobot
+from hexapod.geometry import HexapodGeometry
+
+#: ``(geometry, start lengths) -> an opened backend`` (its ``reset`` already done).
+BackendFactory = Callable[[HexapodGeometry, np.ndarray], Backend]
+
+
+@dataclass
+class ConformanceReport:
+    """What :func:`check_backend` found.
+
+    Attributes:
+        periods: Periods driven.
+        max_deviation: Largest absolute difference between the measured and the simulated lengths
+            over the smooth motion [m].
+        problems: One line per failed check (empty when the backend conforms).
+    """
+
+    periods: int = 0
+    max_deviation: float = 0.0
+    problems: list[str] = field(default_factory=list)
+
+    @property
+    def ok(self) -> bool:
+        """True when every check passed."""
+        return not self.problems
+
+
+def check_backend(factory: BackendFactory, geometry: HexapodGeometry, dt: float = 0.02,
+                  tolerance: float = 1e-9, periods: int = 25) -> ConformanceReport:
+    """Drive a backend and the simulated robot with the same commands and compare.
+
+    Args:
+        factory: Opens the backend under test at given start lengths.
+        geometry: The robot (stroke and speed limit of both).
+        dt: Control period [s].
+        tolerance: Allowed absolute difference between the measured and the simulated
+            lengths during the smooth motion [m].
+        periods: Periods of the smooth motion.
+
+    Returns:
+        The :class:`ConformanceReport` (the backend is closed whatever happened).
+    """
+    report = ConformanceReport()
+    q0 = np.full(6, geometry.q_mid)
+    lo, hi = geometry.stroke
+    vmax = geometry.max_speed
+    robot = factory(geometry, q0)
+    sim = SimulatedRobot(geometry, q0)
+    try:
+        q = np.asarray(robot.measured_lengths(), float)
+        if not np.allclose(q, q0, atol=max(tolerance, 1e-12)):
+            report.problems.append(f"start: measured {np.round(q * 1e3, 4).tolist()} mm, "
+                                   f"expected {np.round(q0 * 1e3, 4).tolist()} mm")
+        # 1. smooth motion inside the limits
+        phases = np.arange(6) * np.pi / 3
+        for k in range(periods):
+            v = 0.4 * vmax * np.sin(2 * np.pi * k / periods + phases)
+            got = robot.step(v, dt)
+            want = sim.step(v, dt)
+            dev = float(np.max(np.abs(np.asarray(got.lengths) - want.lengths)))
+            report.max_deviation = max(report.max_deviation, dev)
+            report.periods += 1
+            if dev > tolerance:
+                leg = int(np.argmax(np.abs(np.asarray(got.lengths) - want.lengths)))
+                report.problems.append(f"smooth motion, period {k}: leg {leg} measured "
+                                       f"{got.lengths[leg] * 1e3:.6f} mm, the simulator "
+                                       f"{want.lengths[leg] * 1e3:.6f} mm")
+                break
+        # 2. beyond the speed limit
+        q_before = np.asarray(robot.measured_lengths(), float)
+        got = robot.step(np.full(6, 10 * vmax), dt)
+        report.periods += 1
+        moved = np.abs(np.asarray(got.lengths) - q_before)
+        if np.any(moved > vmax * dt * (1 + 1e-6) + tolerance):
+            report.problems.append(f"speed limit: a leg moved {moved.max() * 1e3:.4f} mm in "
+                                   f"one period, the limit allows {vmax * dt * 1e3:.4f} mm")
+        if not np.all(np.asarray(got.clamped, bool)):
+            report.problems.append("speed limit: a command 10x the limit was not reported "
+                                   "clamped")
+        # 3. into the upper stroke end
+        for _ in range(int(np.ceil((hi - lo) / (vmax * dt))) + 2):
+            got = robot.step(np.full(6, vmax), dt)
+            report.periods += 1
+            q = np.asarray(got.lengths, float)
+            if np.any(q > hi + 1e-9 + tolerance) or np.any(q < lo - 1e-9 - tolerance):
+                report.problems.append(f"stroke: measured {np.round(q * 1e3, 4).tolist()} mm "
+                                       f"outside [{lo * 1e3:g}, {hi * 1e3:g}] mm")
+                break
+        # 4. a NaN command moves nothing
+        q_before = np.asarray(robot.measured_lengths(), float)
+        v = np.full(6, -0.5 * vmax)
+        v[2] = np.nan
+        got = robot.step(v, dt)
+        report.periods += 1
+        if abs(float(got.lengths[2]) - q_before[2]) > tolerance:
+            report.problems.append("NaN command: leg 2 moved "
+                                   f"{(got.lengths[2] - q_before[2]) * 1e3:.4f} mm")
+        if not bool(np.asarray(got.clamped, bool)[2]):
+            report.problems.append("NaN command: leg 2 was not reported clamped")
+        # 5. halt
+        try:
+            robot.halt()
+        except Exception as exc:
+            report.problems.append(f"halt() raised {type(exc).__name__}: {exc}")
+    finally:
+        try:
+            robot.close()
+        except Exception as exc:
+            report.problems.append(f"close() raised {type(exc).__name__}: {exc}")
+    return report

@@ -1,0 +1,265 @@
+"""Backends by name: built-ins, entry-point plugins and ``module:attr`` specs.
+
+A ``--backend`` spec is ``NAME[:ARGS]`` or ``module:attr[:ARGS]``:
+
+- ``NAME`` is a registered backend (``hexapod-bench list`` shows them): the
+  built-ins ``sim``, ``emulator`` and ``serial`` (``serial:URL``), and every
+  entry point of the group ``hexapod.backends``::
+
+      [project.entry-points."hexapod.backends"]
+      my-robot = "my_package.robot:MyRobot"
+
+- ``module:attr`` names a backend class (or an opener function) directly,
+  without packaging: ``--backend my_package.robot:MyRobot:192.168.0.7``.
+
+``ARGS`` is the rest of the spec, passed as one string to the backend (an
+address, a port, ``key=value`` pairs: the backend decides).
+
+What a spec names is either a :class:`~hexapod.backends.base.Backend` subclass,
+opened with its classmethod :meth:`~hexapod.backends.base.Backend.open`, or a
+function with the same signature ``(args, geometry, start) -> Backend``.
+"""
+
+from __future__ import annotations
+
+import importlib
+import importlib.metadata as metadata
+import logging
+from collections.abc import Callable
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from hexapod.backends.base import Backend
+from hexapod.config import suggest
+from hexapod.exceptions import BackendPluginError, UnknownBackendError
+from hexapod.geometry import HexapodGeometry
+
+log = logging.getLogger(__name__)
+
+ENTRY_POINT_GROUP = "hexapod.backends"
+
+#: ``(args, geometry, start) -> Backend``: what a spec resolves to.
+BackendOpener = Callable[[str, HexapodGeometry, np.ndarray | None], Backend]
+
+
+@dataclass(frozen=True)
+class BackendInfo:
+    """A registered backend and where it comes from.
+
+    Attributes:
+        name: Registry name.
+        package: Distribution that provides it.
+        version: Version of that distribution.
+        description: First line of its docstring.
+    """
+
+    name: str
+    package: str
+    version: str
+    description: str
+
+
+def _open_emulator(args: str, geometry: HexapodGeometry, start: np.ndarray | None) -> Backend:
+    """A firmware emulator on a pseudo-terminal, driven through the serial backend."""
+    from hexapod.backends.serial import open_emulated_robot
+
+    if args:
+        raise BackendPluginError("emulator", "hexapod-vs", f"takes no arguments, got {args!r}")
+    robot = open_emulated_robot(geometry, start)
+    if start is not None:
+        try:
+            robot.reset(start)  # clears the link state as for a real board
+        except BaseException:
+            robot.close()
+            raise
+    return robot
+
+
+def _open_sim(args: str, geometry: HexapodGeometry, start: np.ndarray | None) -> Backend:
+    """An ideal simulated robot (leg lengths integrate the clamped commands)."""
+    from hexapod.backends.sim import SimulatedRobot
+
+    if args:
+        raise BackendPluginError("sim", "hexapod-vs", f"takes no arguments, got {args!r}")
+    return SimulatedRobot(geometry, start)
+
+
+def _open_serial(args: str, geometry: HexapodGeometry, start: np.ndarray | None) -> Backend:
+    """A robot controller board speaking the project's serial protocol (serial:URL)."""
+    from hexapod.backends.serial import SerialRobot
+
+    if not args:
+        raise BackendPluginError("serial", "hexapod-vs", "needs a URL: serial:/dev/ttyUSB0 or "
+                                 "serial:socket://HOST:PORT")
+    robot = SerialRobot(args)
+    if start is not None:
+        try:
+            robot.reset(start)
+        except BaseException:
+            robot.close()
+            raise
+    return robot
+
+
+class BackendRegistry:
+    """Backends by name (built-ins, then the ``hexapod.backends`` entry points, lazily)."""
+
+    def __init__(self) -> None:
+        self._openers: dict[str, BackendOpener] = {}
+        self._info: dict[str, BackendInfo] = {}
+        self._needs_args: dict[str, str] = {}
+        self.errors: list[BackendPluginError] = []
+        self._plugins_loaded = False
+
+    def register(self, name: str, target: type[Backend] | BackendOpener,
+                 package: str = "hexapod-vs", version: str | None = None,
+                 needs_args: str | None = None) -> None:
+        """Register a backend class or opener function under ``name``.
+
+        Args:
+            name: Registry name.
+            target: A :class:`Backend` subclass or an opener ``(args, geometry, start)``.
+            package: Distribution that provides it.
+            version: Its version (looked up when None).
+            needs_args: What ARGS it needs (a spec without them is refused early).
+        """
+        opener = _opener(name, target, package)
+        if needs_args:
+            self._needs_args[name] = needs_args
+        doc = (getattr(target, "__doc__", None) or "").strip().splitlines()
+        self._openers[name] = opener
+        self._info[name] = BackendInfo(name, package, version or _version(package),
+                                       doc[0] if doc else "")
+
+    def load_plugins(self) -> None:
+        """Load the entry points of the ``hexapod.backends`` group (once)."""
+        if self._plugins_loaded:
+            return
+        self._plugins_loaded = True
+        for ep in metadata.entry_points(group=ENTRY_POINT_GROUP):
+            dist = ep.dist.name if ep.dist is not None else "unknown"
+            try:
+                target = ep.load()
+                self.register(ep.name, target, dist,
+                              ep.dist.version if ep.dist is not None else "unknown")
+            except Exception as exc:  # a broken plugin must not break the others
+                err = exc if isinstance(exc, BackendPluginError) else BackendPluginError(
+                    ep.name, dist, f"{type(exc).__name__}: {exc}")
+                log.warning("%s", err)
+                self.errors.append(err)
+
+    def info(self) -> list[BackendInfo]:
+        """Every registered backend with its package and version, by name."""
+        self.load_plugins()
+        return [self._info[n] for n in sorted(self._info)]
+
+    def names(self) -> list[str]:
+        """Registered names."""
+        self.load_plugins()
+        return sorted(self._openers)
+
+    def resolve(self, spec: str) -> tuple[str, BackendOpener, str]:
+        """Split a spec into (name, opener, args).
+
+        Raises:
+            UnknownBackendError: Neither a registered name nor ``module:attr``.
+            BackendPluginError: ``module:attr`` that cannot be imported or is not a backend.
+        """
+        self.load_plugins()
+        if not isinstance(spec, str) or not spec.strip():
+            raise UnknownBackendError(str(spec), list(self._openers))
+        head, _, rest = spec.partition(":")
+        if head in self._openers:
+            return head, self._openers[head], rest
+        if "." in head or rest:
+            attr, _, args = rest.partition(":")
+            if not attr:
+                raise UnknownBackendError(spec, list(self._openers),
+                                          suggest(head, self._openers))
+            try:
+                obj: Any = importlib.import_module(head)
+                for part in attr.split("."):
+                    obj = getattr(obj, part)
+            except ModuleNotFoundError as exc:
+                if exc.name == head and "." not in head:  # a typo more likely than a module
+                    raise UnknownBackendError(spec, list(self._openers),
+                                              suggest(head, self._openers)) from None
+                raise BackendPluginError(f"{head}:{attr}", "command line",
+                                         f"{type(exc).__name__}: {exc}") from None
+            except (ImportError, AttributeError) as exc:
+                raise BackendPluginError(f"{head}:{attr}", "command line",
+                                         f"{type(exc).__name__}: {exc}") from None
+            return f"{head}:{attr}", _opener(f"{head}:{attr}", obj, "command line"), args
+        raise UnknownBackendError(spec, list(self._openers), suggest(head, self._openers))
+
+    def check(self, spec: str) -> str:
+        """Validate a spec before any work (resolves it); returns its name.
+
+        Raises:
+            UnknownBackendError, BackendPluginError: A bad spec, or a backend that needs
+                arguments given none (``serial`` without its URL).
+        """
+        name, _, args = self.resolve(spec)
+        if name in self._needs_args and not args:
+            raise BackendPluginError(name, self._info[name].package,
+                                     f"needs arguments: {self._needs_args[name]}")
+        return name
+
+    def open(self, spec: str, geometry: HexapodGeometry,
+             start: np.ndarray | None = None) -> Backend:
+        """Open the backend of a spec.
+
+        Args:
+            spec: ``NAME[:ARGS]`` or ``module:attr[:ARGS]``.
+            geometry: The nominal robot (stroke, speed limit, kinematics).
+            start: Leg lengths [m] to start from: a simulated robot starts there, a real
+                one moves there (None: where it is).
+
+        Raises:
+            UnknownBackendError, BackendPluginError: A bad spec or plugin.
+            BackendError: The backend's own failure (connection, robot).
+        """
+        name = self.check(spec)
+        _, opener, args = self.resolve(spec)
+        robot = opener(args, geometry, start)
+        if not isinstance(robot, Backend):
+            for attr in ("reset", "step", "measured_lengths", "halt", "close"):
+                if not callable(getattr(robot, attr, None)):
+                    raise BackendPluginError(name, "opener",
+                                             f"returned {type(robot).__name__} without "
+                                             f"{attr}()")
+        return robot
+
+
+def _opener(name: str, target: Any, package: str) -> BackendOpener:
+    if isinstance(target, type):
+        if not issubclass(target, Backend):
+            raise BackendPluginError(name, package, f"{target.__name__} is not a subclass of "
+                                     "hexapod.backends.base.Backend")
+        return target.open
+    if not callable(target):
+        raise BackendPluginError(name, package, f"{target!r} is not callable")
+    return target  # type: ignore[no-any-return]
+
+
+def _version(package: str) -> str:
+    try:
+        return metadata.version(package)
+    except metadata.PackageNotFoundError:
+        return "unknown"
+
+
+#: The process-wide backend registry.
+backends = BackendRegistry()
+backends.register("sim", _open_sim)
+backends.register("emulator", _open_emulator)
+backends.register("serial", _open_serial,
+                  needs_args="serial:URL, e.g. serial:/dev/ttyUSB0 or serial:socket://HOST:PORT")
+
+
+def open_backend(spec: str, geometry: HexapodGeometry,
+                 start: np.ndarray | None = None) -> Backend:
+    """Open a backend from a ``--backend`` spec (:meth:`BackendRegistry.open`)."""
+    return backends.open(spec, geometry, start)
