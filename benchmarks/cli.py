@@ -39,7 +39,7 @@ def cmd_list(args: argparse.Namespace) -> int:
     from rich.table import Table
 
     import controllers  # noqa: F401 - registers the built-ins
-    from benchmarks.scenario import builtin_scenarios, load_scenario
+    from benchmarks.study.scenario import builtin_scenarios, load_scenario
     from controllers.base import registry
 
     con = _console()
@@ -78,8 +78,8 @@ def cmd_list(args: argparse.Namespace) -> int:
 def cmd_run(args: argparse.Namespace) -> int:
     """Run studies and write results.jsonl and report.md."""
     import controllers  # noqa: F401 - registers the built-ins
-    from benchmarks.runner import run_lock
-    from benchmarks.scenario import check_controllers, load_scenario
+    from benchmarks.study.runner import run_lock
+    from benchmarks.study.scenario import check_controllers, load_scenario
 
     out = Path(args.out)
     ctrl_list = [c.strip() for c in args.controllers.split(",")] if args.controllers else None
@@ -88,7 +88,7 @@ def cmd_run(args: argparse.Namespace) -> int:
                  for s in args.scenarios]
     for sc in scenarios:
         check_controllers(sc)
-    from benchmarks.runner import backend_factory
+    from benchmarks.study.runner import backend_factory
 
     backend_factory(args.backend)  # validates the spec before any work
     with run_lock(out):  # one run per results directory, from the check to the report
@@ -96,8 +96,8 @@ def cmd_run(args: argparse.Namespace) -> int:
 
 
 def _run_locked(scenarios: list[Any], out: Path, args: argparse.Namespace) -> int:
-    from benchmarks.report import META_FILE, write_report
-    from benchmarks.runner import completed_keys, plan, run_units
+    from benchmarks.study.report import META_FILE, write_report
+    from benchmarks.study.runner import completed_keys, plan, run_units
 
     existing = (out / "results.jsonl").exists() and (out / "results.jsonl").stat().st_size > 0
     if existing and not args.resume:
@@ -173,8 +173,8 @@ def _run_locked(scenarios: list[Any], out: Path, args: argparse.Namespace) -> in
 
 def _run_with_viz(scenarios: list[Any], out: Path, args: argparse.Namespace) -> int:
     """Run in-process with a live MeshCat view (loopback server)."""
-    from benchmarks.runner import ResultsWriter, execute, plan
-    from benchmarks.simulate import load_camera, load_geometry
+    from benchmarks.sim import load_camera, load_geometry
+    from benchmarks.study.runner import ResultsWriter, execute, plan
     from hexapod.visualize import HexapodViewer
 
     con = _console()
@@ -185,25 +185,19 @@ def _run_with_viz(scenarios: list[Any], out: Path, args: argparse.Namespace) -> 
     viewer.show_camera(cam.camera_from_base.as_matrix(), cam.K, cam.width, cam.height,
                        kind=cam.kind)
     con.print(f"MeshCat viewer: {viewer.url()}")
-    import benchmarks.simulate as sim
 
-    original = sim.run_trials
+    def on_step(trial: int, R: Any, t: Any, vis: Any) -> None:
+        viewer.display(R, t, vis)
 
-    def run_trials_viz(*a: Any, **k: Any) -> Any:
-        k["on_step"] = lambda trial, R, t, vis: viewer.display(R, t, vis)
-        return original(*a, **k)
-
-    sim.run_trials = run_trials_viz  # type: ignore[assignment]
     writer = ResultsWriter(out)
     try:
         for unit in plan(scenarios, 1, args.record, set(), args.backend):
-            rows, records = execute(unit)
+            rows, records = execute(unit, on_step=on_step)
             writer.write(rows, records)
     finally:
-        sim.run_trials = original  # type: ignore[assignment]
         writer.close()
         viewer.close()
-    from benchmarks.report import write_report
+    from benchmarks.study.report import write_report
 
     write_report(out)
     _print_summary(out, con)
@@ -213,9 +207,9 @@ def _run_with_viz(scenarios: list[Any], out: Path, args: argparse.Namespace) -> 
 def _print_summary(out: Path, con: Any) -> None:
     from rich.table import Table
 
-    from benchmarks.metrics import summarize
-    from benchmarks.report import TABLE_HEADER, duplicate_note, summary_table_rows
-    from benchmarks.runner import deduplicate, read_results
+    from benchmarks.study.metrics import summarize
+    from benchmarks.study.report import TABLE_HEADER, duplicate_note, summary_table_rows
+    from benchmarks.study.runner import deduplicate, read_results
 
     rows, dropped, conflicting = deduplicate(read_results(out))
     if dropped:
@@ -235,15 +229,15 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
     """Calibrate the base points in a scenario's worlds (calibration.json, calibrated.toml)."""
     from rich.table import Table
 
-    from benchmarks.calibrate import run_calibration
-    from benchmarks.metrics import format_sweep
-    from benchmarks.scenario import load_scenario
+    from benchmarks.study.calibration import run_calibration
+    from benchmarks.study.metrics import format_sweep
+    from benchmarks.study.scenario import load_scenario
 
     sc = load_scenario(args.scenario).with_overrides(seed=args.seed)
     sc = _with_ratio_options(sc, args)
     out = Path(args.out)
     if args.observations:
-        from benchmarks.calibrate import calibrate_from_file
+        from benchmarks.study.calibration import calibrate_from_file
 
         doc = calibrate_from_file(sc, Path(args.observations), out, args.solver,
                                   args.correct_scale)
@@ -284,7 +278,7 @@ def _with_ratio_options(sc: Any, args: argparse.Namespace) -> Any:
     """Apply ``--warn-ratio`` / ``--min-ratio`` to the scenario's ``[calibration]``."""
     from dataclasses import replace
 
-    from benchmarks.scenario import check_range
+    from benchmarks.study.scenario import check_range
 
     cal = sc.calibration
     for option, field in (("warn_ratio", "warn_singular_ratio"),
@@ -369,7 +363,7 @@ def cmd_viz(args: argparse.Namespace) -> int:
 
 def cmd_report(args: argparse.Namespace) -> int:
     """Rebuild report.md from results.jsonl."""
-    from benchmarks.report import write_report
+    from benchmarks.study.report import write_report
 
     path = write_report(Path(args.dir))
     _print_summary(Path(args.dir), _console())
@@ -379,12 +373,12 @@ def cmd_report(args: argparse.Namespace) -> int:
 
 #: ``hexapod-bench perf WHAT`` -> the module whose ``main(argv)`` prints the figure.
 PERF_MODULES = {
-    "fk": "benchmarks.perf",
-    "controllers": "benchmarks.controller_perf",
-    "vision": "benchmarks.vision_accuracy",
-    "detect": "benchmarks.detect_perf",
-    "serial": "benchmarks.serial_perf",
-    "calibration": "benchmarks.calibration_study",
+    "fk": "benchmarks.perf.fk",
+    "controllers": "benchmarks.perf.controllers",
+    "vision": "benchmarks.perf.vision",
+    "detect": "benchmarks.perf.detect",
+    "serial": "benchmarks.perf.serial",
+    "calibration": "benchmarks.perf.calibration",
 }
 
 
@@ -449,7 +443,7 @@ def build_parser() -> argparse.ArgumentParser:
                         "instead of simulating the scenario's world")
     s.set_defaults(func=cmd_calibrate)
 
-    from benchmarks import servo
+    from benchmarks.robot import servo
 
     s = sub.add_parser("servo", help="run one controller on a robot (serial link or emulator) "
                                      "with a camera, until convergence or Ctrl-C; --teach "
@@ -476,7 +470,7 @@ def build_parser() -> argparse.ArgumentParser:
 
     s = sub.add_parser("perf", help="performance and accuracy figures",
                        description="Extra arguments go to the figure's module (see --help "
-                                   "of e.g. python -m benchmarks.perf).")
+                                   "of e.g. python -m benchmarks.perf.fk).")
     s.add_argument("what", choices=sorted(PERF_MODULES))
     s.add_argument("rest", nargs=argparse.REMAINDER, help="arguments for the figure")
     s.set_defaults(func=cmd_perf)

@@ -84,6 +84,13 @@ class SourceOpenError(SourceError):
     """The device or file cannot be opened (missing, unreadable, not a video)."""
 
 
+class SourceSpecError(SourceError, ValueError):
+    """A camera spec (``--camera sim|video:PATH|device:N``) that names no source."""
+
+    def __str__(self) -> str:
+        return f"--camera {self.source}: {self.problem}"
+
+
 class SourceClosedError(SourceError):
     """Reading from a source that is closed, or a device that stopped answering."""
 

@@ -131,7 +131,7 @@ def test_a_plugin_backend_runs_a_trial(site: Path, tmp_path: Path) -> None:
            "--no-progress"]
     proc = subprocess.run(cmd, env=env, capture_output=True, text=True, timeout=300)
     assert proc.returncode == 0, proc.stderr[-3000:]
-    from benchmarks.runner import read_results
+    from benchmarks.study.runner import read_results
 
     rows = read_results(out)
     assert len(rows) == 1 and rows[0]["backend"] == "lagging:0.005"

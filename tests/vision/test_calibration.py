@@ -432,7 +432,7 @@ def test_calibrate_in_world(geometry: HexapodGeometry, rng: np.random.Generator)
 
 
 def test_calibration_study_command(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
-    from benchmarks.calibration_study import main
+    from benchmarks.perf.calibration import main
 
     out = tmp_path / "study.json"
     assert main(["--repeats", "3", "--json", str(out)]) == 0

@@ -200,7 +200,7 @@ def test_perspective_line_fit_is_the_conic_alternative(geometry) -> None:
 
 
 def test_accuracy_benchmark_runs(capsys, tmp_path) -> None:
-    from benchmarks.vision_accuracy import accuracy_figures, main
+    from benchmarks.perf.vision import accuracy_figures, main
 
     assert main(["--poses", "8", "--figure", str(tmp_path / "edges.png")]) == 0
     out = capsys.readouterr().out

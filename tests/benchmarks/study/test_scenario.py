@@ -7,7 +7,7 @@ from pathlib import Path
 import pytest
 
 from benchmarks.exceptions import ScenarioError
-from benchmarks.scenario import builtin_scenarios, load_scenario, parse_scenario
+from benchmarks.study.scenario import builtin_scenarios, load_scenario, parse_scenario
 
 MINIMAL = {"name": "t", "controllers": ["leg-edge"]}
 
@@ -124,7 +124,7 @@ def test_overrides() -> None:
 
 def test_controller_options_are_checked_when_the_study_is_loaded(tmp_path: Path) -> None:
     from benchmarks.cli import main
-    from benchmarks.scenario import check_controllers
+    from benchmarks.study.scenario import check_controllers
 
     table = {**MINIMAL, "controllers": ["leg-direction",
                                         {"name": "leg-edge", "adaptive_gain": [float("nan"),

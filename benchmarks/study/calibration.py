@@ -22,7 +22,7 @@ from typing import Any
 import numpy as np
 import tomli_w
 
-from benchmarks.scenario import Scenario
+from benchmarks.study.scenario import Scenario
 from hexapod.config import check_keys, get_matrix, load_toml
 
 log = logging.getLogger(__name__)
@@ -78,7 +78,7 @@ def run_calibration(sc: Scenario, out: Path, configurations: str | None = None,
     Returns:
         The content of ``calibration.json``.
     """
-    from benchmarks.simulate import load_camera, load_geometry, make_trial, trial_rng
+    from benchmarks.sim import load_camera, load_geometry, make_trial, trial_rng
     from vision.calibration import (
         calibrate,
         collect_observations,
@@ -177,7 +177,7 @@ def calibrate_from_file(sc: Scenario, observations: Path, out: Path, solver: str
     Returns:
         The content of ``calibration.json`` (no error against a truth: there is none).
     """
-    from benchmarks.simulate import load_geometry
+    from benchmarks.sim import load_geometry
     from vision.calibration import CalibrationData, calibrate
 
     out.mkdir(parents=True, exist_ok=True)

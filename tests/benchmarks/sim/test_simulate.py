@@ -6,8 +6,7 @@ from dataclasses import replace
 
 import numpy as np
 
-from benchmarks.scenario import parse_scenario
-from benchmarks.simulate import (
+from benchmarks.sim import (
     load_camera,
     load_geometry,
     make_sensor,
@@ -15,6 +14,7 @@ from benchmarks.simulate import (
     trial_goal,
     trial_rng,
 )
+from benchmarks.study.scenario import parse_scenario
 from vision.estimate import angle_between
 from vision.legs import observe_legs
 
@@ -106,7 +106,7 @@ def test_goal_image_under_calibration_error_keeps_every_edge() -> None:
     alignment of the whole prediction, then 12 px and 4 px passes) finds all twelve,
     each within 0.5 px of the true edge. A goal with missing edges let the edge law
     drift to 1 deg in that trial."""
-    from benchmarks.scenario import load_scenario
+    from benchmarks.study.scenario import load_scenario
     from vision.legs import edge_points
 
     sc = load_scenario("andreff2006-images")
@@ -137,8 +137,8 @@ def test_edge_law_converges_from_rendered_images_on_the_seed_002_task() -> None:
     every period, the goal taught from 10 images. The leg-edge law reaches the
     scenario's tolerances (0.5 mm, 0.05 deg) and stays there; the leg-direction law
     does not (seed 002's observation on its real robot)."""
-    from benchmarks.scenario import load_scenario
-    from benchmarks.simulate import run_trials
+    from benchmarks.sim import run_trials
+    from benchmarks.study.scenario import load_scenario
 
     sc = load_scenario("andreff2006-images")
     sc = replace(sc, task=replace(sc.task, max_steps=300))

@@ -27,7 +27,7 @@ from typing import Any
 import numpy as np
 
 from benchmarks.exceptions import DirectoryLockedError, ResultsError
-from benchmarks.scenario import Scenario
+from benchmarks.study.scenario import Scenario
 
 log = logging.getLogger(__name__)
 
@@ -162,16 +162,23 @@ def backend_factory(spec: str) -> Callable[..., Any] | None:
     return factory
 
 
-def execute(unit: WorkUnit) -> tuple[list[dict[str, Any]], list[tuple[str, dict[str, Any]]]]:
-    """Run one work unit (in any process). Returns the rows and the recorded series."""
-    from benchmarks.calibrate import calibration_hook
-    from benchmarks.records import trial_record
-    from benchmarks.simulate import run_trials
+def execute(unit: WorkUnit, on_step: Callable[..., None] | None = None
+            ) -> tuple[list[dict[str, Any]], list[tuple[str, dict[str, Any]]]]:
+    """Run one work unit (in any process). Returns the rows and the recorded series.
+
+    Args:
+        unit: The work unit.
+        on_step: Optional ``(trial, rotation, translation, edge_visible)`` callback at
+            every period (the live viewer; in-process only).
+    """
+    from benchmarks.sim import run_trials
+    from benchmarks.study.calibration import calibration_hook
+    from benchmarks.study.records import trial_record
 
     sc = unit.scenario
     results = run_trials(sc, unit.controller_index, list(unit.trials), unit.record_trials,
                          backend_factory=backend_factory(unit.backend),
-                         calibrate=calibration_hook(sc))
+                         calibrate=calibration_hook(sc), on_step=on_step)
     rows, records = [], []
     for res in results:
         row = dict(res.row)

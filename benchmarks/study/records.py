@@ -9,11 +9,11 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from benchmarks.scenario import Scenario
-from benchmarks.simulate import load_camera, load_geometry
+from benchmarks.sim import load_camera, load_geometry
+from benchmarks.study.scenario import Scenario
 
 if TYPE_CHECKING:
-    from benchmarks.runner import WorkUnit
+    from benchmarks.study.runner import WorkUnit
 
 
 def trial_record(sc: Scenario, unit: WorkUnit, row: dict[str, Any],

@@ -1,6 +1,6 @@
 """Accuracy of edge-normal and leg-direction estimates from noisy edge pixels.
 
-``python -m benchmarks.vision_accuracy`` (options: ``--poses``, ``--points``,
+``python -m benchmarks.perf.vision`` (options: ``--poses``, ``--points``,
 ``--sigma``, ``--seed``): for the front perspective camera and the
 omnidirectional camera of the seeds, at random poses of the reference robot,
 sample ``--points`` pixels along the visible part of every observed edge, add
@@ -165,7 +165,7 @@ def edges_figure(path: str, seed: int = 0) -> None:
 
 def main(argv: list[str] | None = None) -> int:
     """Print the accuracy table."""
-    parser = argparse.ArgumentParser(prog="python -m benchmarks.vision_accuracy",
+    parser = argparse.ArgumentParser(prog="python -m benchmarks.perf.vision",
                                      description=__doc__.splitlines()[0])
     parser.add_argument("--poses", type=int, default=300, help="random poses (default 300)")
     parser.add_argument("--points", type=int, default=20, help="points per edge (default 20)")

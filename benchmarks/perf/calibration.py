@@ -8,7 +8,7 @@ on "each of the components of each attachment point").
 
 Run::
 
-    python -m benchmarks.calibration_study [--repeats 100] [--camera front|omni]
+    python -m benchmarks.perf.calibration [--repeats 100] [--camera front|omni]
         [--eye X Y Z] [--visibility] [--method lstsq|irls] [--seed 1] [--json out.json]
 """
 
@@ -83,7 +83,7 @@ def format_table(results: Sequence[StudyResult]) -> str:
 
 def main(argv: Sequence[str] | None = None) -> int:
     """Command-line entry point; prints the table and optionally writes JSON."""
-    parser = argparse.ArgumentParser(prog="python -m benchmarks.calibration_study",
+    parser = argparse.ArgumentParser(prog="python -m benchmarks.perf.calibration",
                                      description=__doc__.split("\n\n")[0] if __doc__ else None)
     parser.add_argument("--repeats", type=int, default=100)
     parser.add_argument("--noise", type=float, nargs="+", default=[0.01, 0.05, 0.1],

@@ -1,4 +1,4 @@
-"""Performance figures (``python -m benchmarks.perf fk``, also ``hexapod-bench perf``).
+"""Performance figures (``python -m benchmarks.perf.fk fk``, also ``hexapod-bench perf``).
 
 Timings are medians over many calls, with the ratio to the baseline measured in
 the same run (the machines are shared and noisy).
@@ -89,8 +89,8 @@ def format_fk(figures: list[FkFigure]) -> str:
 
 
 def main(argv: list[str] | None = None) -> int:
-    """Entry point of ``python -m benchmarks.perf``."""
-    parser = argparse.ArgumentParser(prog="python -m benchmarks.perf")
+    """Entry point of ``python -m benchmarks.perf.fk``."""
+    parser = argparse.ArgumentParser(prog="python -m benchmarks.perf.fk")
     parser.add_argument("what", choices=["fk"], help="which figure")
     parser.add_argument("-n", type=int, default=1000, help="number of random poses")
     parser.add_argument("--seed", type=int, default=0)

@@ -1,6 +1,6 @@
 """Where the final error of a vision law servoing from rendered images comes from.
 
-``python -m benchmarks.image_floor`` (options: ``--scenario``, ``--controller``,
+``python -m benchmarks.perf.image_floor`` (options: ``--scenario``, ``--controller``,
 ``--trials``, ``--variants``): runs the scenario (default ``andreff2006-images``, the
 seed-002 task from rendered images) for one controller (default ``leg-edge``) under
 variants that remove or change one factor at a time, and prints one row per variant:
@@ -36,14 +36,14 @@ from typing import Any
 
 import numpy as np
 
-from benchmarks.scenario import Scenario, load_scenario
-from benchmarks.simulate import (
+from benchmarks.sim import (
     GeometricSensor,
     TrialResult,
     TrialSetup,
     make_sensor,
     run_trials,
 )
+from benchmarks.study.scenario import Scenario, load_scenario
 from hexapod.se3 import log_so3
 from vision.render import Renderer
 
@@ -217,7 +217,7 @@ def format_rows(rows: list[FloorRow]) -> str:
 
 def main(argv: list[str] | None = None) -> int:
     """Command line (see the module docstring)."""
-    p = argparse.ArgumentParser(prog="python -m benchmarks.image_floor",
+    p = argparse.ArgumentParser(prog="python -m benchmarks.perf.image_floor",
                                 description=__doc__.split("\n")[0])
     p.add_argument("--scenario", default="andreff2006-images")
     p.add_argument("--controller", default="leg-edge", help="label in the scenario")

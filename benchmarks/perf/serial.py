@@ -1,4 +1,4 @@
-"""Round-trip time and loop rate through the serial link (``python -m benchmarks.serial_perf``).
+"""Round-trip time and loop rate through the serial link (``python -m benchmarks.perf.serial``).
 
 A :class:`~hexapod.backends.serial.SerialRobot` drives the emulated controller board
 (``hexapod-emulator`` on a pseudo-terminal, in a child process by default) for a
@@ -115,8 +115,8 @@ def format_table(rows: list[LinkFigures]) -> str:
 
 
 def build_parser() -> argparse.ArgumentParser:
-    """Options of ``python -m benchmarks.serial_perf``."""
-    p = argparse.ArgumentParser(prog="python -m benchmarks.serial_perf", description=__doc__,
+    """Options of ``python -m benchmarks.perf.serial``."""
+    p = argparse.ArgumentParser(prog="python -m benchmarks.perf.serial", description=__doc__,
                                 formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--periods", type=int, default=500, help="control periods (default 500)")
     p.add_argument("--dt", type=float, default=0.02, help="control period [s] (default 0.02)")

@@ -7,7 +7,7 @@ the twelve edges and compares the normals with the truth of
 initialisation (home-pose association reference); the perspective tracker gets the
 model prediction at a pose 3 mm off in each axis (tracking between frames).
 
-Run: ``python -m benchmarks.detect_perf [--frames N] [--background plain|cluttered]
+Run: ``python -m benchmarks.perf.detect [--frames N] [--background plain|cluttered]
 [--pictures DIR]``.
 """
 
@@ -135,7 +135,7 @@ def _run(cam: Camera, frames: int, style: RenderStyle, seed: int,
 
 def main(argv: Sequence[str] | None = None) -> int:
     """Command-line entry point; returns the exit status."""
-    p = argparse.ArgumentParser(prog="python -m benchmarks.detect_perf",
+    p = argparse.ArgumentParser(prog="python -m benchmarks.perf.detect",
                                 description=__doc__.splitlines()[0])
     p.add_argument("--frames", type=int, default=200, help="random poses per camera")
     p.add_argument("--background", choices=("plain", "cluttered"), default="plain")

@@ -8,9 +8,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from benchmarks.calibrate import load_calibrated_base_points
 from benchmarks.cli import main as cli_main
-from benchmarks.runner import read_results
+from benchmarks.study.calibration import load_calibrated_base_points
+from benchmarks.study.runner import read_results
 from hexapod.exceptions import ConfigFileError
 from vision.cameras import front_camera
 

@@ -1,4 +1,4 @@
-"""hexapod-bench servo (benchmarks.servo): the real loop against the firmware emulator on a
+"""hexapod-bench servo (benchmarks.robot.servo): the real loop against the firmware emulator on a
 pseudo-terminal and a rendered camera (real rendering and edge detection, no mocks)."""
 
 from __future__ import annotations
@@ -14,7 +14,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from benchmarks import servo
+from benchmarks.robot import servo
 
 # a reachable goal 2 to 3 mm from the emulator's initial (mid-stroke, 415 mm) lengths
 GOAL_MM = [417.5, 412.5, 417.0, 413.0, 417.5, 412.5]
@@ -200,7 +200,7 @@ def test_unknown_controller_suggests_the_closest(
 
 
 @pytest.mark.parametrize(("extra", "fragment"), [
-    (["--camera", "webcam"], "--camera: expected sim, video:PATH or device:N"),
+    (["--camera", "webcam"], "--camera webcam: expected sim, video:PATH or device:N"),
     (["--camera", "video:/nonexistent.avi"], "no such file"),
     (["--backend", "tcp:1234"], "--backend: unknown backend 'tcp:1234'"),
     (["--backend", "serial"], "needs arguments: serial:URL"),
@@ -229,10 +229,11 @@ def test_ctrl_c_halts_and_exits_130(tmp_path: Path) -> None:
     goal = _goal(tmp_path, f"lengths_mm = {_mm(GOAL_MM)}\n")
     log = tmp_path / "servo.jsonl"
     env = {**os.environ, "PYTHONUNBUFFERED": "1"}
-    proc = subprocess.Popen([sys.executable, "-m", "benchmarks.servo", "--backend", "emulator",
+    proc = subprocess.Popen([sys.executable, "-m", "benchmarks.robot.servo", "--backend",
+                             "emulator",
                              "--goal", str(goal), "--log", str(log), "-o", "gain=0.2"],
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
-                            cwd=Path(__file__).resolve().parents[2], env=env)
+                            cwd=Path(__file__).resolve().parents[3], env=env)
     try:
         deadline = time.monotonic() + 30
         while time.monotonic() < deadline and (

@@ -11,8 +11,8 @@ from typing import Any
 
 import numpy as np
 
-from benchmarks.metrics import Summary, format_sweep, summarize
-from benchmarks.runner import TRIALS_DIR, deduplicate, machine_info, read_results
+from benchmarks.study.metrics import Summary, format_sweep, summarize
+from benchmarks.study.runner import TRIALS_DIR, deduplicate, machine_info, read_results
 
 log = logging.getLogger(__name__)
 

@@ -1,12 +1,12 @@
-"""The study of the final error from rendered images (benchmarks.image_floor)."""
+"""The study of the final error from rendered images (benchmarks.perf.image_floor)."""
 
 from __future__ import annotations
 
 import numpy as np
 import pytest
 
-from benchmarks import image_floor
-from benchmarks.scenario import load_scenario
+from benchmarks.perf import image_floor
+from benchmarks.study.scenario import load_scenario
 from hexapod.fk import forward_kinematics
 from hexapod.geometry import deltalab
 from vision.cameras import front_camera

@@ -8,7 +8,7 @@ from contextlib import redirect_stdout
 
 import numpy as np
 
-from benchmarks.detect_perf import EdgeCounts, main
+from benchmarks.perf.detect import EdgeCounts, main
 
 
 def test_a_detected_partly_hidden_edge_is_not_counted_as_found() -> None:

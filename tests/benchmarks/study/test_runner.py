@@ -13,8 +13,8 @@ from pathlib import Path
 import pytest
 
 from benchmarks.cli import main as cli_main
-from benchmarks.runner import plan, read_results, run_units
-from benchmarks.scenario import parse_scenario
+from benchmarks.study.runner import plan, read_results, run_units
+from benchmarks.study.scenario import parse_scenario
 
 JOINTS = "tests.benchmarks.plugins:ProportionalJoints"
 CRASH = "tests.benchmarks.plugins:CrashOnSomeTrials"
@@ -88,7 +88,7 @@ def test_resume_after_partial_run_redoes_nothing(tmp_path: Path) -> None:
     # a partial line from a killed writer is dropped, not fatal
     with (part / "results.jsonl").open("a") as f:
         f.write('{"scenario": "runner-test", "trunc')
-    from benchmarks.runner import completed_keys
+    from benchmarks.study.runner import completed_keys
 
     todo = plan([sc], chunk_size=2, record_trials=0, done=completed_keys(part))
     assert sum(len(u.trials) for u in todo) == 16 - len(first)
@@ -104,7 +104,7 @@ def test_cli_interrupted_run_resumes(tmp_path: Path) -> None:
     out = tmp_path / "out"
     cmd = [sys.executable, "-m", "benchmarks.cli", "run", str(scen), "--out", str(out),
            "--chunk", "1", "--record", "0", "--no-progress"]
-    env = {**os.environ, "PYTHONPATH": str(Path(__file__).resolve().parents[2])}
+    env = {**os.environ, "PYTHONPATH": str(Path(__file__).resolve().parents[3])}
     proc = subprocess.Popen(cmd, env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE)
     results = out / "results.jsonl"
     deadline = time.monotonic() + 120
@@ -167,7 +167,7 @@ def test_a_second_run_on_a_locked_directory_is_refused(tmp_path: Path) -> None:
         'name = "long"\nseed = 5\ntrials = 200\ncontrollers = ["leg-edge"]\n'
         '[task]\nmax_steps = 200\n')
     out = tmp_path / "out"
-    env = {**os.environ, "PYTHONPATH": str(Path(__file__).resolve().parents[2])}
+    env = {**os.environ, "PYTHONPATH": str(Path(__file__).resolve().parents[3])}
     run = [sys.executable, "-m", "benchmarks.cli", "run", str(scen), "--out", str(out),
            "--chunk", "1", "--record", "0", "--no-progress"]
     first = subprocess.Popen(run, env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE)

@@ -1,4 +1,4 @@
-"""Time per ``step`` of every registered controller (``python -m benchmarks.controller_perf``).
+"""Time per ``step`` of every registered controller (``python -m benchmarks.perf.controllers``).
 
 Each controller is reset on the reference robot with its camera (front perspective
 camera, or the omnidirectional one with ``--camera omni``), then stepped on a
@@ -122,7 +122,7 @@ def format_timings(timings: list[StepTiming], camera: str) -> str:
 
 def main(argv: list[str] | None = None) -> int:
     """Print the median time per ``step`` of each registered controller."""
-    parser = argparse.ArgumentParser(prog="python -m benchmarks.controller_perf",
+    parser = argparse.ArgumentParser(prog="python -m benchmarks.perf.controllers",
                                      description=__doc__.splitlines()[0] if __doc__ else None)
     parser.add_argument("names", nargs="*", help="controllers (default: every registered one)")
     parser.add_argument("--steps", type=int, default=5000, help="steps per controller")

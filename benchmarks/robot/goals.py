@@ -1,0 +1,241 @@
+"""Goals of the real servo loop: goal files (TOML, ``docs/servo.md``), the features taught at
+the goal (``--teach``: a burst of frames averaged) and the desired features predicted from
+the nominal model; the feature error the loop's convergence test reads."""
+
+from __future__ import annotations
+
+import logging
+import math
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from benchmarks.exceptions import BenchmarkError
+from hexapod.config import check_keys, get_matrix, load_toml
+from hexapod.exceptions import ConfigFileError, ForwardKinematicsError
+from hexapod.geometry import HexapodGeometry
+from vision.feature_cameras import Features, sensor_camera
+
+log = logging.getLogger(__name__)
+
+#: Keys a goal file may have.
+GOAL_KEYS = ("lengths_mm", "features", "name")
+#: Default number of frames averaged by ``--teach`` (a burst of 0.2 s at 50 Hz).
+DEFAULT_TEACH_FRAMES = 10
+
+
+@dataclass(frozen=True)
+class ServoGoal:
+    """A taught goal.
+
+    Attributes:
+        lengths: (6,) goal leg lengths [m].
+        features: The features recorded at the goal (``--teach``), or None to predict
+            them from the nominal model.
+        source: The goal file.
+        name: Optional label from the file.
+    """
+
+    lengths: np.ndarray
+    features: Features | None
+    source: str
+    name: str = ""
+
+
+def average_features(frames: list[Features], max_deviation: float | None = None
+                     ) -> Features:
+    """The features of a burst of frames of a still scene, averaged (``--teach``).
+
+    Each edge normal is the renormalised sum of its sign-aligned unit normals over the
+    frames where the edge was found (:func:`vision.estimate.average_normals`); a frame
+    farther than ``max_deviation`` [rad] from the median of the frames does not count
+    for that edge, and an edge kept in fewer than half of the frames is reported
+    missing.
+
+    Raises:
+        BenchmarkError: No frame.
+    """
+    from vision.estimate import average_normals
+
+    if not frames:
+        raise BenchmarkError("no frame to average")
+    normals, visible = average_normals(np.array([f.normals for f in frames], float),
+                                       np.array([f.edge_visible for f in frames], bool),
+                                       max_deviation=max_deviation)
+    return Features(normals, visible)
+
+
+def teach_tolerance(sensor: Any) -> float | None:
+    """The largest deviation of a frame from the median of a taught burst [rad]: the
+    detector's inlier distance (``outlier_px``) seen from the camera
+    (:func:`vision.estimate.radians_per_pixel`); None if the sensor has no detector."""
+    from vision.estimate import radians_per_pixel
+
+    detector = getattr(getattr(sensor, "sensor", sensor), "detector", None)
+    if detector is None or not hasattr(detector, "outlier_px"):
+        return None
+    return float(detector.outlier_px) * radians_per_pixel(sensor_camera(sensor))
+
+
+def _load_features(path: Path, goal_file: str) -> Features:
+    """Read recorded goal features (``normals`` (6, 2, 3), ``edge_visible`` (6, 2)).
+
+    Raises:
+        ConfigFileError: Missing or unreadable file, missing array or bad shape.
+    """
+    if not path.is_file():
+        raise ConfigFileError(goal_file, f"features file {path} not found", key="features")
+    try:
+        with np.load(path) as data:
+            arrays = {k: np.asarray(data[k]) for k in data.files}
+    except (OSError, ValueError) as exc:
+        raise ConfigFileError(goal_file, f"features file {path} cannot be read: {exc}",
+                              key="features") from None
+    for name, shape in (("normals", (6, 2, 3)), ("edge_visible", (6, 2))):
+        if name not in arrays:
+            raise ConfigFileError(goal_file, f"features file {path} has no array '{name}' "
+                                             f"(has: {', '.join(sorted(arrays)) or 'none'})",
+                                  key="features")
+        if arrays[name].shape != shape:
+            raise ConfigFileError(goal_file, f"features file {path}: '{name}' has shape "
+                                             f"{arrays[name].shape}, expected {shape}",
+                                  key="features")
+    visible = arrays["edge_visible"].astype(bool)
+    normals = arrays["normals"].astype(float)
+    if not np.all(np.isfinite(normals[visible])):
+        raise ConfigFileError(goal_file, f"features file {path}: a visible normal is not "
+                                         "finite", key="features")
+    if not visible.any():
+        raise ConfigFileError(goal_file, f"features file {path}: no edge was seen at the goal",
+                              key="features")
+    return Features(np.where(visible[..., None], normals, np.nan), visible)
+
+
+def load_goal(path: str | Path, geometry: HexapodGeometry) -> ServoGoal:
+    """Read a goal file and check it against the stroke (nothing is sent to the robot).
+
+    Args:
+        path: The goal TOML file (``lengths_mm``, optional ``features`` and ``name``).
+        geometry: The nominal robot (its stroke).
+
+    Returns:
+        The goal, lengths in metres.
+
+    Raises:
+        ConfigFileError: Missing file, bad TOML, missing or misspelt key, wrong count,
+            a length outside the stroke (named by leg), or a bad features file. The
+            message names the file and the key.
+    """
+    src = str(path)
+    table = load_toml(path)
+    check_keys(table, GOAL_KEYS, src, required=("lengths_mm",))
+    q = get_matrix(table, "lengths_mm", (6,), src) * 1e-3
+    q_min, q_max = geometry.stroke
+    for i, x in enumerate(q):
+        if not q_min <= x <= q_max:
+            raise ConfigFileError(src, f"leg {i + 1}: {x * 1e3:.3f} mm is outside the stroke "
+                                       f"[{q_min * 1e3:.3f}, {q_max * 1e3:.3f}] mm",
+                                  key="lengths_mm")
+    name = table.get("name", "")
+    if not isinstance(name, str):
+        raise ConfigFileError(src, f"expected a string, got {name!r}", key="name")
+    features = None
+    if "features" in table:
+        ref = table["features"]
+        if not isinstance(ref, str) or not ref:
+            raise ConfigFileError(src, f"expected a file name (.npz), got {ref!r}",
+                                  key="features")
+        fpath = Path(ref) if Path(ref).is_absolute() else Path(path).parent / ref
+        features = _load_features(fpath, src)
+    return ServoGoal(q, features, src, name)
+
+
+def save_goal(path: str | Path, lengths: np.ndarray, features: Features,
+              name: str = "") -> Path:
+    """Write a taught goal: ``path`` (TOML) and its features beside it (``.npz``).
+
+    Args:
+        path: The goal TOML file to create.
+        lengths: (6,) measured leg lengths at the goal [m].
+        features: The features measured at the goal.
+        name: Optional label.
+
+    Returns:
+        The path of the features file.
+    """
+    import tomli_w
+
+    p = Path(path)
+    npz = p.with_suffix(".features.npz")
+    np.savez(npz, normals=np.asarray(features.normals, float),
+             edge_visible=np.asarray(features.edge_visible, bool))
+    doc: dict[str, Any] = {"lengths_mm": [round(float(x) * 1e3, 4) for x in lengths],
+                           "features": npz.name}
+    if name:
+        doc["name"] = name
+    p.write_text("# taught by hexapod-bench servo --teach\n" + tomli_w.dumps(doc))
+    return npz
+
+
+def feature_directions(f: Features) -> tuple[np.ndarray, np.ndarray]:
+    from vision.legs import directions_from_edges
+
+    both = np.all(f.edge_visible, axis=-1)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        u = directions_from_edges(np.where(f.edge_visible[..., None], f.normals, np.nan))
+    return np.where(both[:, None], u, np.nan), both
+
+
+def feature_lines(camera: Any, normals: np.ndarray) -> np.ndarray | None:
+    if getattr(camera, "kind", "") != "perspective":
+        return None
+    with np.errstate(invalid="ignore", divide="ignore"):
+        return np.asarray(camera.normal_to_line(normals), float)
+
+
+def goal_features(goal: ServoGoal, camera: Any, geometry: HexapodGeometry) -> Any:
+    """The controller's :class:`~controllers.base.Goal` of a taught goal.
+
+    The platform pose is the forward kinematics of the goal lengths in the nominal
+    model; the desired features are the recorded ones if the goal file has some,
+    else what the (estimated) camera sees of the nominal model at that pose.
+
+    Raises:
+        BenchmarkError: No pose for these lengths, or no edge visible at the goal.
+    """
+    from controllers.base import Goal
+    from hexapod.fk import forward_kinematics
+    from vision.legs import observe_legs
+
+    try:
+        sol = forward_kinematics(geometry, goal.lengths)
+    except ForwardKinematicsError as exc:
+        raise BenchmarkError(f"{goal.source}: key 'lengths_mm': no platform pose for these "
+                             f"lengths in the nominal model ({exc})") from None
+    feats = goal.features
+    if feats is None:
+        seen = observe_legs(camera, geometry, sol.rotation, sol.translation)
+        visible = np.asarray(seen.edge_visible, bool)
+        feats = Features(np.where(visible[..., None], np.asarray(seen.normals, float), np.nan),
+                         visible)
+    if feats.visible_count == 0:
+        raise BenchmarkError(f"{goal.source}: the camera sees no leg edge at the goal")
+    directions, _ = feature_directions(feats)
+    return Goal(normals=feats.normals, lines=feature_lines(camera, feats.normals),
+                directions=directions, lengths=goal.lengths.copy(), rotation=sol.rotation,
+                translation=sol.translation, edge_visible=feats.edge_visible)
+
+
+def feature_error(measured: Features, desired_normals: np.ndarray,
+                  desired_visible: np.ndarray) -> float:
+    """Norm of the stacked normal differences over the edges seen in both [-].
+
+    NaN when no edge is seen in both.
+    """
+    both = measured.edge_visible & desired_visible
+    if not both.any():
+        return math.nan
+    d = measured.normals[both] - desired_normals[both]
+    return float(np.linalg.norm(d))

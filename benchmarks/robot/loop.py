@@ -1,0 +1,323 @@
+"""The real servo loop (:func:`servo_loop`): the pose predicted from the measured lengths,
+the camera's features, the controller's command, the backend's period; its status (one
+rewritten line on a terminal) and its result."""
+
+from __future__ import annotations
+
+import logging
+import math
+import sys
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from typing import IO, Any
+
+import numpy as np
+
+from benchmarks.exceptions import BenchmarkError
+from benchmarks.robot.goals import feature_directions, feature_error, feature_lines
+from hexapod.exceptions import ForwardKinematicsError
+from hexapod.geometry import HexapodGeometry
+from vision.feature_cameras import FeatureSensor, sensor_camera
+
+log = logging.getLogger(__name__)
+
+#: Default number of consecutive converged periods before the loop stops.
+DEFAULT_SETTLE = 5
+#: Default feature-error tolerance (norm of the stacked normal differences) [-].
+DEFAULT_FEATURE_TOLERANCE = 2e-3
+#: Plain status lines (stdout not a terminal) are printed every this many seconds.
+PLAIN_STATUS_PERIOD_S = 1.0
+
+
+@dataclass
+class PeriodStatus:
+    """One period of the loop (what the status line and the log show).
+
+    Attributes:
+        step: Period index (from 0).
+        t: Loop time at the start of the period [s].
+        lengths: (6,) lengths measured at the end of the period [m].
+        leg_error: max |q - q*| at the end of the period [m].
+        feature_error: Feature error of this period's image (NaN for a lost frame).
+        controller_error: The controller's own error norm (NaN if not run).
+        velocities: (6,) commanded leg velocities [m/s] (zeros when refused).
+        visible_edges: Edges found in this period's image.
+        reason: Why the command is zero (refusal, lost frame), or None.
+        lost_frame: The camera gave no image this period.
+        rtt: Time spent communicating with the robot [s].
+        missed: This period was late.
+        missed_total: Late periods so far.
+        lost_total: Lost frames so far.
+        refused_total: Refused commands so far.
+    """
+
+    step: int
+    t: float
+    lengths: np.ndarray
+    leg_error: float
+    feature_error: float
+    controller_error: float
+    velocities: np.ndarray
+    visible_edges: int
+    reason: str | None
+    lost_frame: bool
+    rtt: float
+    missed: bool
+    missed_total: int
+    lost_total: int
+    refused_total: int
+
+    def to_json(self) -> dict[str, Any]:
+        """A log line (lengths in mm, velocities in mm/s, times in ms; NaN as null)."""
+        def num(x: float, scale: float = 1.0) -> float | None:
+            return float(x) * scale if math.isfinite(x) else None
+
+        return {"step": self.step, "t_s": round(self.t, 6),
+                "lengths_mm": [round(float(x) * 1e3, 4) for x in self.lengths],
+                "leg_error_mm": num(self.leg_error, 1e3),
+                "feature_error": num(self.feature_error),
+                "controller_error": num(self.controller_error),
+                "velocities_mm_s": [round(float(x) * 1e3, 4) for x in self.velocities],
+                "visible_edges": self.visible_edges, "reason": self.reason,
+                "lost_frame": self.lost_frame, "rtt_ms": num(self.rtt, 1e3),
+                "missed": self.missed}
+
+    def line(self) -> str:
+        """The status line (mm and ms)."""
+        fe = f"{self.feature_error:.2e}" if math.isfinite(self.feature_error) else "   --   "
+        s = (f"step {self.step:6d} {self.t:7.2f} s | feature err {fe} | "
+             f"max|q-q*| {self.leg_error * 1e3:7.3f} mm | edges {self.visible_edges:2d} | "
+             f"RTT {self.rtt * 1e3:5.2f} ms | missed {self.missed_total} | "
+             f"lost {self.lost_total}")
+        if self.reason:
+            s += f"  [{self.reason}]"
+        return s
+
+
+@dataclass
+class ServoResult:
+    """Outcome of :func:`servo_loop`.
+
+    Attributes:
+        outcome: ``"converged"``, ``"max-steps"``, ``"interrupted"`` or ``"camera ended"``.
+        steps: Periods run.
+        wall_s: Wall time of the loop [s].
+        rtts: Round-trip time of each period [s].
+        missed: Late periods.
+        lost_frames: Lost camera frames.
+        refused: Periods with a refused command.
+        last: The last period's status, if any.
+    """
+
+    outcome: str
+    steps: int
+    wall_s: float
+    rtts: list[float] = field(default_factory=list)
+    missed: int = 0
+    lost_frames: int = 0
+    refused: int = 0
+    last: PeriodStatus | None = None
+
+    @property
+    def converged(self) -> bool:
+        """The loop stopped at convergence."""
+        return self.outcome == "converged"
+
+    @property
+    def rate_hz(self) -> float:
+        """Achieved loop rate [Hz]."""
+        return self.steps / self.wall_s if self.wall_s > 0 else math.nan
+
+    def summary(self) -> str:
+        """One line for the user (mm, ms, Hz)."""
+        rt = np.array(self.rtts) * 1e3 if self.rtts else np.array([math.nan])
+        s = (f"{self.outcome} after {self.steps} periods ({self.wall_s:.2f} s, "
+             f"{self.rate_hz:.1f} Hz): {self.missed} missed periods, {self.lost_frames} lost "
+             f"frames, {self.refused} refused commands; RTT median {np.median(rt):.2f} ms, "
+             f"p99 {np.percentile(rt, 99):.2f} ms")
+        if self.last is not None:
+            s += (f"; final max|q-q*| {self.last.leg_error * 1e3:.3f} mm, feature error "
+                  f"{self.last.feature_error:.2e}")
+        return s
+
+
+def servo_loop(
+    robot: Any,
+    sensor: FeatureSensor,
+    controller: Any,
+    goal: Any,
+    geometry: HexapodGeometry,
+    dt: float,
+    max_steps: int | None = None,
+    tolerance: float = 1e-4,
+    feature_tolerance: float = DEFAULT_FEATURE_TOLERANCE,
+    settle: int = DEFAULT_SETTLE,
+    on_period: Callable[[PeriodStatus], None] | None = None,
+    on_pose: Callable[[np.ndarray, np.ndarray, np.ndarray | None], None] | None = None,
+) -> ServoResult:
+    """Run a reset controller on a connected robot until convergence, ``max_steps`` or Ctrl-C.
+
+    The caller halts the robot (use it as a context manager); Ctrl-C is caught here
+    and reported as the outcome ``"interrupted"``.
+
+    Args:
+        robot: A connected backend (``measured_lengths()``, ``step(v, dt)``).
+        sensor: The camera.
+        controller: A controller already reset with its context.
+        goal: The controller's :class:`~controllers.base.Goal` (lengths, normals).
+        geometry: The nominal robot (forward kinematics).
+        dt: Control period [s].
+        max_steps: Period budget (None: until convergence or Ctrl-C).
+        tolerance: Convergence threshold on max |q - q*| [m].
+        feature_tolerance: Convergence threshold on the feature error [-].
+        settle: Consecutive periods within both tolerances to stop.
+        on_period: Called after every period (status line, log).
+        on_pose: Called with the predicted pose and edge visibility (viewer).
+
+    Returns:
+        The outcome and the link statistics.
+    """
+    from controllers.base import Observation
+    from hexapod.fk import forward_kinematics
+
+    q_goal = np.asarray(goal.lengths, float)
+    n_goal = np.asarray(goal.normals, float)
+    vis_goal = np.asarray(goal.edge_visible, bool)
+    cam = sensor_camera(sensor)
+    res = ServoResult("max-steps", 0, 0.0)
+    settled = 0
+    guess: tuple[np.ndarray, np.ndarray] | None = None
+    t0 = time.perf_counter()
+    step = 0
+    try:
+        q = np.asarray(robot.measured_lengths(), float)
+        while max_steps is None or step < max_steps:
+            try:
+                sol = forward_kinematics(geometry, q, guess=guess, check_stroke=False)
+                guess = (sol.rotation, sol.translation)
+            except ForwardKinematicsError as exc:
+                if guess is None:
+                    raise BenchmarkError(f"no platform pose for the measured lengths "
+                                         f"{np.round(q * 1e3, 3)} mm: {exc}") from None
+                log.warning("forward kinematics failed (%s); keeping the last pose", exc)
+            rotation, translation = guess
+            feats = sensor.measure(rotation, translation)
+            reason: str | None = None
+            ctrl_err = math.nan
+            if feats is None:
+                v = np.zeros(6)
+                reason = "lost camera frame"
+                f_err = math.nan
+                if getattr(sensor, "ended", False):
+                    res.outcome = "camera ended"
+                    break
+            else:
+                f_err = feature_error(feats, n_goal, vis_goal)
+                directions, both = feature_directions(feats)
+                obs = Observation(
+                    t=step * dt, lengths=q.copy(), normals=feats.normals,
+                    lines=feature_lines(cam, feats.normals),
+                    directions=directions, edge_visible=feats.edge_visible,
+                    direction_visible=both)
+                cmd = controller.step(obs)
+                v = np.asarray(cmd.velocities, float)
+                ctrl_err = float(cmd.error_norm)
+                reason = cmd.reason
+                if reason is None and (v.shape != (6,) or not np.all(np.isfinite(v))):
+                    reason = f"invalid command {v!r}"
+                if reason is not None:
+                    v = np.zeros(6)
+                    res.refused += 1
+            if on_pose is not None:
+                on_pose(rotation, translation, None if feats is None else feats.edge_visible)
+            bs = robot.step(v, dt)
+            q = np.asarray(bs.lengths, float)
+            res.rtts.append(float(bs.round_trip_s))
+            res.missed += int(bs.missed_period)
+            leg_err = float(np.max(np.abs(q - q_goal)))
+            ok = (leg_err <= tolerance and math.isfinite(f_err) and f_err <= feature_tolerance)
+            settled = settled + 1 if ok else 0
+            res.lost_frames = sensor.lost_frames
+            status = PeriodStatus(
+                step=step, t=time.perf_counter() - t0, lengths=q, leg_error=leg_err,
+                feature_error=f_err, controller_error=ctrl_err, velocities=v,
+                visible_edges=0 if feats is None else feats.visible_count, reason=reason,
+                lost_frame=feats is None, rtt=float(bs.round_trip_s),
+                missed=bool(bs.missed_period), missed_total=res.missed,
+                lost_total=res.lost_frames, refused_total=res.refused)
+            res.last = status
+            step += 1
+            if on_period is not None:
+                on_period(status)
+            if settled >= settle:
+                res.outcome = "converged"
+                break
+    except KeyboardInterrupt:
+        res.outcome = "interrupted"
+    res.steps = step
+    res.wall_s = time.perf_counter() - t0
+    res.lost_frames = sensor.lost_frames
+    return res
+
+
+class StatusLine:
+    """The live status: one rewritten line on a terminal (rich), plain lines otherwise.
+
+    Args:
+        stream: Where to write (default stdout).
+        period_s: Plain mode: at most one line every ``period_s`` [s] (the first
+            period and the refusals' changes are always shown).
+    """
+
+    def __init__(self, stream: IO[str] | None = None,
+                 period_s: float = PLAIN_STATUS_PERIOD_S) -> None:
+        self.stream = sys.stdout if stream is None else stream
+        self.tty = bool(getattr(self.stream, "isatty", lambda: False)())
+        self.period_s = float(period_s)
+        self._last_print = -math.inf
+        self._last_reason: str | None = None
+        self._live: Any = None
+        if self.tty:
+            from rich.console import Console
+            from rich.live import Live
+            from rich.text import Text
+
+            self._text = Text
+            self._live = Live(Text(""), console=Console(file=self.stream),
+                              auto_refresh=False, transient=False)
+            self._live.start()
+
+    def __call__(self, status: PeriodStatus) -> None:
+        """Show one period."""
+        now = time.perf_counter()
+        if self._live is not None:
+            if now - self._last_print >= 0.05 or status.reason != self._last_reason:
+                style = "yellow" if status.reason else ""
+                self._live.update(self._line(status, style), refresh=True)
+                self._last_print = now
+        elif (now - self._last_print >= self.period_s or status.reason != self._last_reason):
+            print(status.line(), file=self.stream, flush=True)
+            self._last_print = now
+        self._last_reason = status.reason
+
+    def _line(self, status: PeriodStatus, style: str = "") -> Any:
+        # one terminal line: cropped to the width, never wrapped
+        return self._text(status.line(), style=style, no_wrap=True, overflow="ellipsis")
+
+    def final(self, status: PeriodStatus | None) -> None:
+        """Show the last period and release the terminal line."""
+        if self._live is not None:
+            if status is not None:
+                self._live.update(self._line(status), refresh=True)
+            self._live.stop()
+            self._live = None
+        elif status is not None:
+            print(status.line(), file=self.stream, flush=True)
+
+    def message(self, text: str) -> None:
+        """A line of its own."""
+        if self._live is not None:
+            self._live.console.print(text, markup=False, highlight=False)
+        else:
+            print(text, file=self.stream, flush=True)

@@ -1,0 +1,403 @@
+"""The real servo loop: one controller, a robot over its serial link, a camera.
+
+``hexapod-bench servo --backend serial:URL|emulator --camera sim|video:PATH|device:N
+--controller NAME --goal FILE`` runs one controller at the control period until the
+robot converges, ``--max-steps`` or Ctrl-C, and always halts the robot (the
+backend's context manager sends ``HLT`` and closes the port, whatever happens).
+
+Each period:
+
+1. the lengths measured by the board at the end of the previous period give the
+   predicted platform pose (forward kinematics of the nominal model);
+2. the camera gives an image (``--camera sim`` renders the legs at that pose, so the
+   whole loop can be tried against the emulator); the edge detector, seeded by the
+   prediction (and by the last measured normals when every edge was found), gives
+   the edge normals;
+3. the controller turns the :class:`~controllers.base.Observation` into leg
+   velocities; a refused command (``Command.reason``) or a lost frame commands zero;
+4. the backend streams the setpoints (``MOV``), waits for the end of the period
+   and reads the lengths back (``POS?``).
+
+The goal file (TOML, see ``docs/servo.md``) holds the goal configuration taught on
+the robot, ``lengths_mm = [6 values]``; the desired features are then predicted
+from the nominal model at the forward kinematics of those lengths, seen by the
+(estimated) camera. ``features = "goal.npz"`` (written by ``--teach``) gives the
+features measured at the goal instead, which a real camera needs (the model's
+prediction carries the calibration errors); ``--teach`` averages them over a burst of
+``--teach-frames`` frames of the still robot.
+
+SI units inside (metres, seconds); millimetres at the user's edges (goal file,
+status line, log).
+"""
+
+from __future__ import annotations
+
+import argparse
+import contextlib
+import json
+import logging
+import math
+import sys
+from collections.abc import Iterator
+from pathlib import Path
+from typing import IO, Any
+
+import numpy as np
+
+from benchmarks.exceptions import BenchmarkError
+from benchmarks.robot.goals import (
+    DEFAULT_TEACH_FRAMES,
+    GOAL_KEYS,
+    ServoGoal,
+    average_features,
+    feature_error,
+    goal_features,
+    load_goal,
+    save_goal,
+    teach_tolerance,
+)
+from benchmarks.robot.loop import (
+    DEFAULT_FEATURE_TOLERANCE,
+    DEFAULT_SETTLE,
+    PeriodStatus,
+    ServoResult,
+    StatusLine,
+    servo_loop,
+)
+from hexapod.geometry import HexapodGeometry
+from vision.feature_cameras import (
+    Features,
+    FeatureSensor,
+    SimCamera,
+    VideoCamera,
+    open_camera,
+    sensor_camera,
+)
+
+__all__ = [
+    "DEFAULT_FEATURE_TOLERANCE",
+    "DEFAULT_SETTLE",
+    "DEFAULT_TEACH_FRAMES",
+    "EXIT_CONVERGED",
+    "EXIT_INTERRUPTED",
+    "EXIT_NOT_CONVERGED",
+    "GOAL_KEYS",
+    "SIMULATED_BACKENDS",
+    "FeatureSensor",
+    "Features",
+    "PeriodStatus",
+    "ServoGoal",
+    "ServoResult",
+    "SimCamera",
+    "StatusLine",
+    "VideoCamera",
+    "add_arguments",
+    "average_features",
+    "build_parser",
+    "feature_error",
+    "goal_features",
+    "load_goal",
+    "main",
+    "open_backend",
+    "open_camera",
+    "parse_options",
+    "run",
+    "save_goal",
+    "sensor_camera",
+    "servo_loop",
+    "teach_tolerance",
+]
+
+log = logging.getLogger(__name__)
+
+#: Exit codes of :func:`run`.
+EXIT_CONVERGED, EXIT_NOT_CONVERGED, EXIT_INTERRUPTED = 0, 1, 130
+
+
+def open_backend(spec: str, geometry: HexapodGeometry,
+                 start: np.ndarray | None = None) -> Any:
+    """Connect the robot of a ``--backend`` spec (:mod:`hexapod.backends.registry`).
+
+    Args:
+        spec: ``emulator``, ``serial:URL``, a plugin's ``NAME[:ARGS]`` or
+            ``module:attr[:ARGS]``.
+        geometry: The nominal robot (the emulator's stroke and speed limit).
+        start: Emulator only: initial leg lengths [m] (mid-stroke if None).
+
+    Returns:
+        A connected backend (a context manager that halts the robot and closes it).
+
+    Raises:
+        BenchmarkError: ``start`` given for a real robot.
+        UnknownBackendError, BackendPluginError: A bad spec.
+        SerialLinkError: The port cannot be opened or the board does not answer.
+    """
+    from hexapod.backends.registry import backends
+
+    name = backends.check(spec)
+    if start is not None and name not in SIMULATED_BACKENDS:
+        raise BenchmarkError(f"--start-mm only applies to a simulated robot "
+                             f"({', '.join(SIMULATED_BACKENDS)}): a real robot starts where "
+                             "it is")
+    return backends.open(spec, geometry, start)
+
+
+#: Backends whose robot is simulated: ``--start-mm`` sets where it starts.
+SIMULATED_BACKENDS = ("emulator", "sim")
+
+
+def add_arguments(p: argparse.ArgumentParser) -> None:
+    """Add the options of ``hexapod-bench servo`` to a parser."""
+    p.add_argument("--backend", required=True,
+                   help="emulator (a firmware emulator on a pseudo-terminal), serial:URL "
+                        "(a device path, socket://127.0.0.1:PORT, ...), sim, a plugin's "
+                        "NAME[:ARGS] or module:attr[:ARGS] (docs/backends.md)")
+    p.add_argument("--camera", default="sim",
+                   help="sim (render the legs at the pose of the measured lengths), "
+                        "video:PATH or device:N (default sim)")
+    p.add_argument("--controller", default="leg-edge",
+                   help="controller: registry name or module:attr (default leg-edge)")
+    p.add_argument("-o", "--option", action="append", default=[], metavar="KEY=VALUE",
+                   help="controller option (repeatable; VALUE is a TOML value or a word), "
+                        "e.g. -o gain=2")
+    p.add_argument("--goal", required=True,
+                   help="goal TOML file: lengths_mm = [6 values] (and optionally features = "
+                        "'goal.npz'); with --teach, the file to write")
+    p.add_argument("--teach", action="store_true",
+                   help="do not move: record the current lengths and image features as the "
+                        "goal (writes --goal and its .features.npz)")
+    p.add_argument("--teach-frames", type=int, default=DEFAULT_TEACH_FRAMES, metavar="N",
+                   help=f"--teach: average the edge normals of N frames (default "
+                        f"{DEFAULT_TEACH_FRAMES}; the pixel noise of the taught features "
+                        f"drops as 1/sqrt(N))")
+    p.add_argument("--camera-file", default="front",
+                   help="camera model: a camera TOML file (intrinsics and camera_from_base) "
+                        "or a preset (front, omni); default front")
+    p.add_argument("--geometry", default="deltalab",
+                   help="nominal robot: a geometry TOML file or a preset (default deltalab)")
+    p.add_argument("--calibration", metavar="FILE",
+                   help="calibrated.toml: the controller uses these base points (camera "
+                        "frame) instead of the nominal ones")
+    p.add_argument("--dt", type=float, default=0.02, help="control period [s] (default 0.02)")
+    p.add_argument("--max-steps", type=int,
+                   help="stop after N periods (default: until convergence or Ctrl-C)")
+    p.add_argument("--tolerance-mm", type=float, default=0.1,
+                   help="converged when max |q - q*| <= this [mm] (default 0.1) ...")
+    p.add_argument("--feature-tolerance", type=float, default=DEFAULT_FEATURE_TOLERANCE,
+                   help=f"... and the feature error <= this (default "
+                        f"{DEFAULT_FEATURE_TOLERANCE}) ...")
+    p.add_argument("--settle", type=int, default=DEFAULT_SETTLE,
+                   help=f"... for this many periods (default {DEFAULT_SETTLE})")
+    p.add_argument("--start-mm", type=float, nargs=6, metavar="L",
+                   help="emulator only: initial leg lengths [mm] (default mid-stroke)")
+    p.add_argument("--seed", type=int, default=0, help="pixel noise of --camera sim")
+    p.add_argument("--log", metavar="FILE.jsonl", help="write one JSON line per period")
+    p.add_argument("--viz", action="store_true", help="live MeshCat view (loopback server)")
+
+
+def _geometry(spec: str) -> HexapodGeometry:
+    from hexapod.geometry import preset
+
+    if spec.endswith(".toml") or Path(spec).is_file():
+        return HexapodGeometry.from_toml(spec)
+    return preset(spec)
+
+
+def parse_options(items: list[str]) -> dict[str, Any]:
+    """Controller options from ``KEY=VALUE`` strings (VALUE read as TOML, else a string).
+
+    Raises:
+        BenchmarkError: An item without ``=`` or with an empty key.
+    """
+    import tomllib
+
+    options: dict[str, Any] = {}
+    for item in items:
+        key, sep, text = item.partition("=")
+        key = key.strip()
+        if not sep or not key:
+            raise BenchmarkError(f"--option {item!r}: expected KEY=VALUE (e.g. gain=2)")
+        try:
+            options[key] = tomllib.loads(f"v = {text.strip()}")["v"]
+        except tomllib.TOMLDecodeError:
+            options[key] = text.strip()
+    return options
+
+
+def _check_args(args: argparse.Namespace) -> None:
+    if not (math.isfinite(args.dt) and args.dt > 0):
+        raise BenchmarkError(f"--dt must be a positive period in seconds, got {args.dt}")
+    if args.max_steps is not None and args.max_steps < 1:
+        raise BenchmarkError(f"--max-steps must be >= 1, got {args.max_steps}")
+    if not args.tolerance_mm > 0 or not args.feature_tolerance > 0:
+        raise BenchmarkError("--tolerance-mm and --feature-tolerance must be positive")
+    if args.settle < 1:
+        raise BenchmarkError(f"--settle must be >= 1, got {args.settle}")
+    if args.teach_frames < 1:
+        raise BenchmarkError(f"--teach-frames must be >= 1, got {args.teach_frames}")
+
+
+@contextlib.contextmanager
+def _viewer(enabled: bool, geometry: HexapodGeometry, camera: Any, goal: Any
+            ) -> Iterator[Any]:
+    if not enabled:
+        yield None
+        return
+    try:
+        from hexapod.visualize import HexapodViewer
+    except ImportError as exc:
+        raise BenchmarkError(f"--viz needs the MeshCat viewer (hexapod.visualize), which "
+                             f"cannot be imported: {exc}") from None
+    viewer = HexapodViewer(geometry)
+    try:
+        viewer.show_camera(camera.camera_from_base.as_matrix(), camera.K, camera.width,
+                           camera.height, camera.kind)
+        if goal is not None:
+            viewer.show_goal(goal.rotation, goal.translation)
+        print(f"MeshCat viewer: {viewer.url()}", flush=True)
+        yield viewer
+    finally:
+        viewer.close()
+
+
+def _teach(args: argparse.Namespace, geometry: HexapodGeometry, camera: Any,
+           start: np.ndarray | None, status: StatusLine) -> int:
+    from hexapod.fk import forward_kinematics
+
+    path = Path(args.goal)
+    if path.exists():
+        raise BenchmarkError(f"{path}: already exists; delete it or choose another --goal "
+                             "(--teach never overwrites a goal)")
+    sensor = open_camera(args.camera, camera, geometry, args.seed)
+    frames: list[Features] = []
+    try:
+        with open_backend(args.backend, geometry, start) as robot:
+            q = np.asarray(robot.measured_lengths(), float)
+        sol = forward_kinematics(geometry, q, check_stroke=False)
+        for _ in range(args.teach_frames):  # the robot does not move: a burst of frames
+            f = sensor.measure(sol.rotation, sol.translation)
+            if f is not None:
+                frames.append(f)
+            elif getattr(sensor, "ended", False):
+                break
+    finally:
+        sensor.close()
+    if not frames:
+        raise BenchmarkError(f"--teach: the camera {args.camera} gave no frame")
+    feats = average_features(frames, teach_tolerance(sensor))
+    if feats.visible_count == 0:
+        raise BenchmarkError(f"--teach: no leg edge found in the images of {args.camera}")
+    npz = save_goal(path, q, feats)
+    status.message(f"taught {path} (lengths {np.round(q * 1e3, 3).tolist()} mm, "
+                   f"{feats.visible_count} of 12 edges, normals averaged over {len(frames)} "
+                   f"of {args.teach_frames} frames) and {npz}")
+    return 0
+
+
+def run(args: argparse.Namespace) -> int:
+    """``hexapod-bench servo``: the loop (or ``--teach``); returns the exit code.
+
+    Exit codes: 0 converged (or taught), 1 stopped at ``--max-steps`` or at the end of
+    a video, 130 interrupted by Ctrl-C. Bad inputs raise (the CLI maps them to 2)
+    before the robot is touched.
+    """
+    import controllers  # noqa: F401 - registers the built-ins
+    from benchmarks.study.calibration import load_calibrated_base_points
+    from controllers.base import ControllerContext, registry
+    from vision.cameras import load_camera
+
+    _check_args(args)
+    from hexapod.backends.registry import backends
+
+    backends.check(args.backend)  # a bad spec is reported before anything is opened
+    geometry = _geometry(args.geometry)
+    camera = load_camera(args.camera_file, geometry)
+    start = None if args.start_mm is None else np.asarray(args.start_mm, float) * 1e-3
+    if start is not None:
+        bad = [i + 1 for i, x in enumerate(start)
+               if not geometry.stroke[0] <= x <= geometry.stroke[1]]
+        if bad:
+            raise BenchmarkError(f"--start-mm: leg {bad[0]} is outside the stroke "
+                                 f"[{geometry.stroke[0] * 1e3:.3f}, "
+                                 f"{geometry.stroke[1] * 1e3:.3f}] mm")
+    status = StatusLine()
+    if args.teach:
+        return _teach(args, geometry, camera, start, status)
+
+    # everything the user gave is checked before the robot is touched
+    goal_file = load_goal(args.goal, geometry)
+    goal = goal_features(goal_file, camera, geometry)
+    options = parse_options(args.option)
+    try:
+        controller = registry.create(args.controller, **options)
+    except TypeError as exc:  # an option the factory does not take
+        raise BenchmarkError(f"--controller {args.controller}: bad option in "
+                             f"{sorted(options)}: {exc}") from None
+    base_points = (load_calibrated_base_points(args.calibration) if args.calibration
+                   else camera.camera_from_base.apply(geometry.base_points))
+    controller.reset(ControllerContext(base_points=base_points, geometry=geometry,
+                                       camera=camera, dt=args.dt, goal=goal))
+    sensor = open_camera(args.camera, camera, geometry, args.seed)
+    logf: IO[str] | None = None
+    result: ServoResult | None = None
+    try:
+        if args.log:
+            logf = Path(args.log).open("w")  # noqa: SIM115 - closed in finally
+        with _viewer(args.viz, geometry, camera, goal) as viewer, \
+                open_backend(args.backend, geometry, start) as robot:
+            status.message(f"servo: {args.controller} on {args.backend} ({robot.identity}), "
+                           f"camera {args.camera}, goal {goal_file.source}, dt "
+                           f"{args.dt * 1e3:g} ms; Ctrl-C halts the robot")
+
+            def on_period(s: PeriodStatus) -> None:
+                status(s)
+                if logf is not None:
+                    logf.write(json.dumps(s.to_json()) + "\n")
+                    logf.flush()  # readable live (tail -f), and complete after a crash
+
+            on_pose = None
+            if viewer is not None:
+                def on_pose(R: np.ndarray, t: np.ndarray, vis: np.ndarray | None) -> None:
+                    viewer.display(R, t, vis)
+
+            result = servo_loop(robot, sensor, controller, goal, geometry, args.dt,
+                                args.max_steps, args.tolerance_mm * 1e-3,
+                                args.feature_tolerance, args.settle, on_period, on_pose)
+    finally:
+        status.final(result.last if result is not None else None)
+        sensor.close()
+        if logf is not None:
+            logf.close()
+    status.message(result.summary() + ("; the robot was halted" if result.outcome
+                                       == "interrupted" else ""))
+    if result.outcome == "converged":
+        return EXIT_CONVERGED
+    if result.outcome == "interrupted":
+        return EXIT_INTERRUPTED
+    return EXIT_NOT_CONVERGED
+
+
+def build_parser() -> argparse.ArgumentParser:
+    """A stand-alone parser (``python -m benchmarks.robot.servo``)."""
+    p = argparse.ArgumentParser(prog="hexapod-bench servo", description=__doc__.split("\n")[0])
+    add_arguments(p)
+    return p
+
+
+def main(argv: list[str] | None = None) -> int:
+    """``python -m benchmarks.robot.servo ...``: :func:`run`, the CLI's error handling (exit 2)."""
+    from controllers.exceptions import ControllerError
+    from hexapod.exceptions import HexapodError
+    from vision.exceptions import VisionError
+
+    args = build_parser().parse_args(argv)
+    logging.basicConfig(level=logging.WARNING, format="%(levelname)s %(name)s: %(message)s")
+    try:
+        return run(args)
+    except (BenchmarkError, HexapodError, ControllerError, VisionError) as exc:
+        print(f"hexapod-bench servo: error: {exc}", file=sys.stderr)
+        return 2
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

@@ -1,0 +1,20 @@
+"""The simulated closed loop: the truth of each trial (:mod:`benchmarks.sim.world`), what
+the camera gives (:mod:`benchmarks.sim.sensors`) and the stepper that runs trials in
+lockstep (:mod:`benchmarks.sim.stepper`)."""
+
+from benchmarks.sim.sensors import GeometricSensor, make_sensor, trial_goal
+from benchmarks.sim.stepper import MAX_REFUSED_STEPS, TrialResult, run_trials
+from benchmarks.sim.world import (
+    TrialSetup,
+    World,
+    load_camera,
+    load_geometry,
+    make_trial,
+    trial_rng,
+)
+
+__all__ = [
+    "MAX_REFUSED_STEPS", "GeometricSensor", "TrialResult", "TrialSetup", "World",
+    "load_camera", "load_geometry", "make_sensor", "make_trial", "run_trials", "trial_goal",
+    "trial_rng",
+]

@@ -1,0 +1,277 @@
+"""What the camera gives in a simulated trial: geometric features with the scenario's
+noise (:class:`GeometricSensor`), or rendered images through the detector, and the
+desired features taught at the goal (:func:`trial_goal`)."""
+
+from __future__ import annotations
+
+import logging
+from typing import Any
+
+import numpy as np
+
+from benchmarks.sim.world import TrialSetup, World, trial_rng
+from benchmarks.study.scenario import Scenario
+from controllers.base import Goal
+from hexapod.kinematics import inverse_kinematics
+from vision.cameras import Camera
+from vision.legs import directions_from_edges, observe_legs
+
+log = logging.getLogger(__name__)
+
+
+class GeometricSensor:
+    """Features from the true geometry plus the scenario's noise model.
+
+    Rotation noise perturbs each true edge normal; the perspective image lines
+    follow from the noisy normals through the TRUE camera, and the normals the
+    controller receives are recomputed from those lines with the ESTIMATED
+    intrinsics (so an intrinsics error reaches the controller as it would).
+    Pixel noise samples points along each visible edge, perturbs them and fits
+    the normal on the points lifted with the estimated camera.
+    """
+
+    def __init__(self, sc: Scenario, world: World, estimated_camera: Camera) -> None:
+        self.sc = sc
+        self.world = world
+        self.est: Any = estimated_camera  # a PerspectiveCamera when ``perspective``
+        self.perspective = world.camera.kind == "perspective"
+
+    def measure(self, rotations: np.ndarray, translations: np.ndarray,
+                rngs: list[np.random.Generator], apply_noise: bool = True
+                ) -> dict[str, Any]:
+        """Batched measurement at true poses (N, 3, 3), (N, 3); one generator per item."""
+        w = self.world
+        lo = observe_legs(w.camera, w.geometry, rotations, translations)
+        normals = np.array(lo.normals, dtype=float)
+        visible = np.array(lo.edge_visible, dtype=bool)
+        noise = self.sc.noise
+        n = len(rngs)
+        if apply_noise and noise.model == "rotation" and noise.amplitude_deg > 0:
+            from vision.noise import rotation_noise
+
+            a = np.deg2rad(noise.amplitude_deg)
+            for k in range(n):
+                normals[k] = rotation_noise(normals[k], a, rngs[k])
+        elif apply_noise and noise.model == "pixel":
+            normals, visible = self._pixel_noise(lo, normals, visible, rngs)
+        if apply_noise and noise.dropout_probability > 0:
+            for k in range(n):
+                visible[k] &= rngs[k].uniform(size=(6, 2)) >= noise.dropout_probability
+        normals = np.where(visible[..., None], normals, np.nan)
+        lines = None
+        if self.perspective:
+            if noise.model == "pixel" and apply_noise:
+                # fitted with the estimated camera already; the image line is the true one
+                lines = self.est.normal_to_line(normals)
+            else:
+                true_camera: Any = w.camera
+                lines = true_camera.normal_to_line(normals)
+                normals = self.est.line_to_normal(lines)
+        both = np.asarray(visible.all(axis=-1))
+        with np.errstate(invalid="ignore"):
+            directions = directions_from_edges(normals)
+        directions = np.where(both[..., None], directions, np.nan)
+        return {"normals": normals, "lines": lines, "directions": directions,
+                "edge_visible": visible, "direction_visible": both}
+
+    def measure_goal(self, rotation: np.ndarray, translation: np.ndarray,
+                     rng: np.random.Generator, frames: int = 1, apply_noise: bool = True
+                     ) -> dict[str, Any]:
+        """The desired features: ``frames`` measurements at one true pose, averaged.
+
+        Args:
+            rotation: (3, 3) true goal orientation (base frame).
+            translation: (3,) true goal position (base frame) [m].
+            rng: Generator of the noise of the goal measurements.
+            frames: Measurements averaged (:func:`vision.estimate.average_normals`).
+            apply_noise: Whether the scenario's noise applies (``[noise] on_goal``).
+
+        Returns:
+            The batched measurement dictionary of :meth:`measure`, batch of one.
+        """
+        R = np.repeat(np.asarray(rotation, float)[None], frames, axis=0)
+        t = np.repeat(np.asarray(translation, float)[None], frames, axis=0)
+        m = self.measure(R, t, [rng] * frames, apply_noise=apply_noise)
+        return _average_frames(m, self.est if self.perspective else None)
+
+    def _pixel_noise(self, lo: Any, normals: np.ndarray, visible: np.ndarray,
+                     rngs: list[np.random.Generator]) -> tuple[np.ndarray, np.ndarray]:
+        from vision.pixel_measure import normals_from_noisy_pixels
+
+        noise = self.sc.noise
+        out = normals.copy()
+        vis = visible.copy()
+        for k in range(len(rngs)):  # one generator per trial: results do not depend on batching
+            sub = _take(lo, k)
+            n_k, v_k = normals_from_noisy_pixels(self.world.camera, self.est, sub,
+                                                 noise.pixel_sigma_px,
+                                                 max(int(noise.points_per_edge), 2), rngs[k],
+                                                 noise.outlier_fraction)
+            out[k] = n_k
+            vis[k] = v_k
+        return out, vis
+
+
+def _take(lo: Any, k: int) -> Any:
+    """Item ``k`` of a batched :class:`vision.legs.LegObservation`."""
+    from dataclasses import fields as dc_fields
+    from dataclasses import replace as dc_replace
+
+    changes = {}
+    for f in dc_fields(lo):
+        value = getattr(lo, f.name)
+        if isinstance(value, np.ndarray) and value.ndim >= 1:
+            changes[f.name] = value[k]
+    return dc_replace(lo, **changes)
+
+
+def _average_frames(m: dict[str, Any], perspective_camera: Any | None,
+                    max_deviation: float | None = None) -> dict[str, Any]:
+    """Average K measurements of one static pose (leading axis K) into a batch of one.
+
+    Normals: :func:`vision.estimate.average_normals` (frames farther than
+    ``max_deviation`` [rad] from the median do not count; an edge kept in fewer than
+    half of the frames is missing); lines: the averaged normals seen by the estimated
+    perspective camera (``perspective_camera``, None for a unified camera). One frame
+    is returned unchanged.
+    """
+    from vision.estimate import average_normals
+
+    if len(m["normals"]) == 1:
+        return m
+    normals, visible = average_normals(m["normals"], m["edge_visible"],
+                                       max_deviation=max_deviation)
+    lines = None
+    if perspective_camera is not None:
+        with np.errstate(invalid="ignore"):
+            lines = perspective_camera.normal_to_line(normals)[None]
+    both = np.asarray(visible.all(axis=-1))
+    with np.errstate(invalid="ignore"):
+        directions = directions_from_edges(normals)
+    return {"normals": normals[None], "lines": lines,
+            "directions": np.where(both[..., None], directions, np.nan)[None],
+            "edge_visible": visible[None], "direction_visible": both[None]}
+
+
+def trial_goal(sensor: GeometricSensor | Any, setup: TrialSetup, sc: Scenario) -> Goal:
+    """What the controllers are told about the goal of a trial.
+
+    The desired features are taught by showing: the sensor measures the TRUE goal pose
+    ``sc.teach_frames`` times (with the scenario's noise when ``[noise] on_goal``; an
+    image sensor renders and detects each frame) and the normals are averaged
+    (:func:`vision.estimate.average_normals`). The pose and its nominal inverse
+    kinematics are for the model-based and joint-space baselines.
+
+    Args:
+        sensor: The trial's sensor (:func:`make_sensor`).
+        setup: The trial.
+        sc: The scenario (``teach_frames``, ``noise.on_goal``).
+
+    Returns:
+        The :class:`~controllers.base.Goal`.
+    """
+    rng = trial_rng(sc.seed, setup.trial, 2)
+    m = sensor.measure_goal(setup.goal_rotation, setup.goal_translation, rng,
+                            frames=sc.teach_frames, apply_noise=sc.noise.on_goal)
+    nominal_lengths = inverse_kinematics(setup.nominal_geometry, setup.goal_rotation,
+                                         setup.goal_translation)
+    return Goal(
+        normals=m["normals"][0],
+        lines=None if m["lines"] is None else m["lines"][0],
+        directions=m["directions"][0],
+        lengths=nominal_lengths,
+        rotation=setup.goal_rotation,
+        translation=setup.goal_translation,
+        edge_visible=m["edge_visible"][0],
+    )
+
+
+def make_sensor(sc: Scenario, setup: TrialSetup) -> Any:
+    """The sensor of a trial: a :class:`GeometricSensor`, or rendered images through
+    :class:`vision.image_sensor.ImageSensor` (``[sensor] kind = "image"``; pixel noise
+    from the trial's stream 4)."""
+    if sc.sensor == "image":
+        from vision.image_sensor import ImageSensor
+
+        return _ImageSensorAdapter(ImageSensor(
+            setup.world.camera, setup.estimated_camera, setup.world.geometry,
+            rng=trial_rng(sc.seed, setup.trial, 4), background=sc.image.background,
+            blur_px=sc.image.blur_px, noise_std=sc.image.noise_std,
+            estimated_geometry=setup.nominal_geometry))
+    return GeometricSensor(sc, setup.world, setup.estimated_camera)
+
+
+class _ImageSensorAdapter:
+    """Adapts :class:`vision.image_sensor.ImageSensor` to the batched sensor interface.
+
+    During a run each trial's detector tracks the edges found in that trial's last
+    measurement (the others come from the aligned model prediction), keyed by the
+    trial's sensor generator (alive for the whole run). The goal frames are detected
+    from the model's prediction and never seed the tracking.
+    """
+
+    def __init__(self, sensor: Any) -> None:
+        self.sensor = sensor
+        self.detect_times: list[float] = []
+        self._previous: dict[int, np.ndarray] = {}  # last normals per trial (tracking)
+
+    def measure_goal(self, rotation: np.ndarray, translation: np.ndarray,
+                     rng: np.random.Generator, frames: int = 1, apply_noise: bool = True
+                     ) -> dict[str, Any]:
+        """``frames`` rendered images of the goal pose, each detected from the model's
+        prediction (wide search, then refine), their normals averaged. A frame whose
+        edge is farther from the median of the frames than the detector's inlier
+        distance (``outlier_px``, turned into an angle by
+        :func:`vision.estimate.radians_per_pixel`) does not count for that edge: the
+        detector locked onto something else in that frame.
+
+        ``rng`` and ``apply_noise`` are unused: the pixel noise is the renderer's.
+        """
+        from vision.estimate import radians_per_pixel
+
+        normals, visible = [], []
+        for _ in range(frames):
+            m = self.sensor.measure(rotation, translation)
+            normals.append(np.asarray(m.normals, float))
+            visible.append(np.asarray(m.edge_visible, bool))
+        n = np.array(normals)
+        vis = np.array(visible)
+        est = self.sensor.estimated_camera
+        lines = None
+        if est.kind == "perspective":
+            with np.errstate(invalid="ignore"):
+                lines = est.normal_to_line(n)
+        both = np.asarray(vis.all(axis=-1))
+        with np.errstate(invalid="ignore"):
+            directions = directions_from_edges(n)
+        m_all = {"normals": n, "lines": lines,
+                 "directions": np.where(both[..., None], directions, np.nan),
+                 "edge_visible": vis, "direction_visible": both}
+        tolerance = self.sensor.detector.outlier_px * radians_per_pixel(est)
+        return _average_frames(m_all, est if est.kind == "perspective" else None, tolerance)
+
+    def measure(self, rotations: np.ndarray, translations: np.ndarray,
+                rngs: list[np.random.Generator], apply_noise: bool = True
+                ) -> dict[str, Any]:
+        out: dict[str, list[Any]] = {"normals": [], "lines": [], "edge_visible": []}
+        for k in range(len(rotations)):
+            key = id(rngs[k])
+            prev = self._previous.get(key) if apply_noise else None
+            m = self.sensor.measure(rotations[k], translations[k], predicted_normals=prev)
+            if apply_noise and np.any(np.asarray(m.edge_visible)):
+                self._previous[key] = np.asarray(m.normals)  # NaN where not found
+            else:
+                self._previous.pop(key, None)
+            self.detect_times.append(float(m.detect_time_s))
+            out["normals"].append(m.normals)
+            out["lines"].append(m.lines)
+            out["edge_visible"].append(m.edge_visible)
+        normals = np.array(out["normals"], float)
+        visible = np.array(out["edge_visible"], bool)
+        both = np.asarray(visible.all(axis=-1))
+        with np.errstate(invalid="ignore"):
+            directions = directions_from_edges(normals)
+        lines = None if out["lines"][0] is None else np.array(out["lines"], float)
+        return {"normals": normals, "lines": lines,
+                "directions": np.where(both[..., None], directions, np.nan),
+                "edge_visible": visible, "direction_visible": both}

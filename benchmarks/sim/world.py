@@ -1,0 +1,167 @@
+"""The truth of a trial: its world (true robot, camera, encoder offsets), drawn from the
+scenario's calibration-error model and the trial's seed, its start and goal poses, and
+the nominal parameters the controllers are told."""
+
+from __future__ import annotations
+
+import logging
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from benchmarks.study.scenario import Scenario
+from hexapod import HexapodGeometry, Transform, forward_kinematics_batch
+from hexapod.geometry import preset as geometry_preset
+from hexapod.kinematics import inverse_kinematics
+from hexapod.se3 import exp_so3
+from hexapod.workspace import sample_poses
+from vision.cameras import Camera, camera_preset
+
+log = logging.getLogger(__name__)
+
+
+def load_geometry(scenario: Scenario) -> HexapodGeometry:
+    """The nominal geometry of a scenario."""
+    if scenario.robot_geometry is not None:
+        return HexapodGeometry.from_toml(scenario.robot_geometry)
+    return geometry_preset(scenario.robot_preset or "deltalab")
+
+
+def load_camera(scenario: Scenario, geometry: HexapodGeometry) -> Camera:
+    """The nominal camera of a scenario."""
+    if scenario.camera_file is not None:
+        from vision.cameras import load_camera as _load
+
+        return _load(scenario.camera_file)
+    return camera_preset(scenario.camera_preset or "front", geometry)
+
+
+@dataclass
+class World:
+    """The truth of one trial (never shown to the controller).
+
+    Attributes:
+        geometry: True geometry.
+        camera: True camera (intrinsics and pose).
+        joint_offsets: (6,) encoder offsets [m]: measured = true + offset.
+    """
+
+    geometry: HexapodGeometry
+    camera: Camera
+    joint_offsets: np.ndarray
+
+    @property
+    def shared_key(self) -> tuple[int, int] | None:
+        """Identity of a world shared by several trials (None when it is trial-specific)."""
+        return None
+
+
+@dataclass
+class TrialSetup:
+    """Everything one trial needs, drawn from its seed.
+
+    Attributes:
+        trial: Trial index.
+        world: The truth.
+        nominal_geometry: What the user believes the robot is.
+        estimated_camera: What the user believes the camera is.
+        base_points: (6, 3) estimated base points in the camera frame [m].
+        start_rotation, start_translation: True start pose (base frame).
+        goal_rotation, goal_translation: True goal pose (base frame).
+        start_lengths: (6,) true start leg lengths [m].
+        shared: True when the world is the nominal one (trials can be batched).
+        calibration: Calibration summary when the scenario calibrates first.
+    """
+
+    trial: int
+    world: World
+    nominal_geometry: HexapodGeometry
+    estimated_camera: Camera
+    base_points: np.ndarray
+    start_rotation: np.ndarray
+    start_translation: np.ndarray
+    goal_rotation: np.ndarray
+    goal_translation: np.ndarray
+    start_lengths: np.ndarray
+    shared: bool
+    calibration: dict[str, float] = field(default_factory=dict)
+
+
+def trial_rng(seed: int, trial: int, stream: int) -> np.random.Generator:
+    """The random stream ``stream`` of trial ``trial`` (0: world, 1: sensor, 2: goal image)."""
+    return np.random.default_rng([int(seed), int(trial), int(stream)])
+
+
+def _perturb_camera(camera: Camera, z_rot: np.ndarray, z_pos: np.ndarray, z_k: np.ndarray,
+                    ce: Any) -> Camera:
+    T = camera.camera_from_base
+    dR = exp_so3(np.deg2rad(ce.camera_pose_deg) * z_rot)
+    dp = 1e-3 * ce.camera_pose_mm * z_pos
+    new_T = Transform(dR @ T.rotation, dR @ T.translation + dp)
+    K = camera.K.copy()
+    s = 1e-2 * ce.intrinsics_percent
+    K[0, 0] *= 1 + s * z_k[0]
+    K[1, 1] *= 1 + s * z_k[1]
+    K[0, 2] *= 1 + s * z_k[2]
+    K[1, 2] *= 1 + s * z_k[3]
+    return camera.replace(K=K, camera_from_base=new_T)
+
+
+def make_trial(sc: Scenario, trial: int, nominal: HexapodGeometry, camera: Camera,
+               calibrate: Callable[[World, np.random.Generator], tuple[np.ndarray,
+                                                                       dict[str, float]]]
+               | None = None) -> TrialSetup:
+    """Draw the truth, start and goal of one trial from ``(seed, trial)``.
+
+    The standard-normal draws are made in a fixed order whatever the scenario's
+    error magnitudes, so trials are paired across the points of a sweep.
+    """
+    rng = trial_rng(sc.seed, trial, 0)
+    z_base = rng.standard_normal((6, 3))
+    z_plat = rng.standard_normal((6, 3))
+    z_off = rng.standard_normal(6)
+    z_rot = rng.standard_normal(3)
+    z_pos = rng.standard_normal(3)
+    z_k = rng.standard_normal(4)
+    z_r = rng.standard_normal()
+    ce = sc.calibration_error
+    ce = type(ce)(**{k: (getattr(ce, k) * ce.scale if k != "scale" else 1.0)
+                     for k in ce.__dataclass_fields__})
+    shared = all(getattr(ce, k) == 0.0 for k in ce.__dataclass_fields__ if k != "scale")
+    if shared:
+        true_geometry, true_camera, offsets = nominal, camera, np.zeros(6)
+    else:
+        true_geometry = nominal.replace(
+            base_points=nominal.base_points + 1e-3 * ce.base_points_mm * z_base,
+            platform_points=nominal.platform_points + 1e-3 * ce.platform_points_mm * z_plat,
+            leg_radius=nominal.leg_radius * (1 + 1e-2 * ce.leg_radius_percent * z_r),
+        )
+        true_camera = _perturb_camera(camera, z_rot, z_pos, z_k, ce)
+        offsets = 1e-3 * ce.joint_offsets_mm * z_off
+    world = World(true_geometry, true_camera, offsets)
+
+    task = sc.task
+    if task.kind == "fixed":
+        q_start = np.asarray(task.start_mm, float) * 1e-3
+        q_goal = np.asarray(task.goal_mm, float) * 1e-3
+        sol = forward_kinematics_batch(true_geometry, np.stack([q_start, q_goal]))
+        if not np.all(sol.converged):
+            raise ValueError(f"{sc.source}: task start/goal leg lengths have no pose")
+        R_s, R_g = sol.rotations
+        t_s, t_g = sol.translations
+    else:
+        R, t = sample_poses(true_geometry, 2, rng=rng,
+                            max_translation=1e-3 * task.max_translation_mm,
+                            max_angle=np.deg2rad(task.max_angle_deg),
+                            margin=1e-3 * task.margin_mm)
+        R_s, R_g = R
+        t_s, t_g = t
+    q_s = inverse_kinematics(true_geometry, R_s, t_s)
+    base_points = camera.camera_from_base.apply(nominal.base_points)
+    calibration: dict[str, float] = {}
+    if calibrate is not None:
+        base_points, calibration = calibrate(world, trial_rng(sc.seed, trial, 3))
+    return TrialSetup(trial, world, nominal, camera, base_points, R_s, t_s, R_g, t_g, q_s,
+                      shared, calibration)

@@ -1,0 +1,306 @@
+"""The scenario model: what a study is (robot, camera, sensor, noise, calibration error,
+calibration, task, controllers), the allowed range of every number, and the sweep."""
+
+from __future__ import annotations
+
+import itertools
+from dataclasses import dataclass, field, replace
+from pathlib import Path
+from typing import Any
+
+from benchmarks.exceptions import ScenarioError
+from vision.calibration import MIN_SINGULAR_RATIO, WARN_SINGULAR_RATIO
+
+#: Keys of [noise] and [calibration_error] that may be swept (given as lists).
+NOISE_KEYS = ("amplitude_deg", "pixel_sigma_px", "points_per_edge", "outlier_fraction",
+              "dropout_probability")
+CALIBRATION_ERROR_KEYS = ("scale", "base_points_mm", "platform_points_mm", "joint_offsets_mm",
+                          "camera_pose_mm", "camera_pose_deg", "intrinsics_percent",
+                          "leg_radius_percent")
+
+
+#: Allowed range of every numeric key: ``(low, high, low_inclusive, high_inclusive)``.
+#: A value that parses but cannot describe a study (a negative seed, a 1e308 mm error,
+#: a 1e9 deg noise) is refused when the file is loaded, naming the key and the range.
+RANGES: dict[str, tuple[float, float, bool, bool]] = {
+    "seed": (0, 2**63 - 1, True, True),
+    "trials": (1, 10_000_000, True, True),
+    "robot.dt": (0.0, 1.0, False, True),
+    "sensor.teach_frames": (1, 1000, True, True),
+    "sensor.blur_px": (0.0, 20.0, True, True),
+    "sensor.noise_std": (0.0, 255.0, True, True),
+    "noise.amplitude_deg": (0.0, 90.0, True, True),
+    "noise.pixel_sigma_px": (0.0, 100.0, True, True),
+    "noise.points_per_edge": (2, 10_000, True, True),
+    "noise.outlier_fraction": (0.0, 1.0, True, False),
+    "noise.dropout_probability": (0.0, 1.0, True, True),
+    "calibration_error.scale": (0.0, 100.0, True, True),
+    "calibration_error.base_points_mm": (0.0, 100.0, True, True),
+    "calibration_error.platform_points_mm": (0.0, 100.0, True, True),
+    "calibration_error.joint_offsets_mm": (0.0, 100.0, True, True),
+    "calibration_error.camera_pose_mm": (0.0, 1000.0, True, True),
+    "calibration_error.camera_pose_deg": (0.0, 45.0, True, True),
+    "calibration_error.intrinsics_percent": (0.0, 50.0, True, True),
+    "calibration_error.leg_radius_percent": (0.0, 50.0, True, True),
+    "calibration.noise_deg": (0.0, 90.0, True, True),
+    "calibration.warn_singular_ratio": (0.0, 1.0, True, False),
+    "calibration.min_singular_ratio": (0.0, 1.0, True, False),
+    "task.max_steps": (1, 10_000_000, True, True),
+    "task.position_tolerance_mm": (0.0, 1000.0, False, True),
+    "task.orientation_tolerance_deg": (0.0, 180.0, False, True),
+    "task.margin_mm": (0.0, 1000.0, True, True),
+    "task.max_translation_mm": (0.0, 10_000.0, True, True),
+    "task.max_angle_deg": (0.0, 90.0, True, True),
+    "task.settle_steps": (1, 10_000_000, True, True),
+}
+#: The calibration-error keys in millimetres or degrees whose standard deviation, times
+#: ``scale``, must stay within the range of the key itself (the effective error).
+_SCALED = tuple(k for k in CALIBRATION_ERROR_KEYS if k != "scale")
+
+
+def check_range(value: Any, key: str, path: str) -> None:
+    """Refuse a number outside :data:`RANGES` (``key`` is the dotted key).
+
+    Raises:
+        ScenarioError: Naming the file, the key, the value and the allowed range.
+    """
+    if key not in RANGES or isinstance(value, bool) or not isinstance(value, int | float):
+        return
+    lo, hi, lo_in, hi_in = RANGES[key]
+    ok = (value >= lo if lo_in else value > lo) and (value <= hi if hi_in else value < hi)
+    if not ok:
+        interval = f"{'[' if lo_in else '('}{lo:g}, {hi:g}{']' if hi_in else ')'}"
+        raise ScenarioError(path, f"{value!r} is out of the allowed range {interval}", key=key)
+
+
+@dataclass(frozen=True)
+class ControllerSpec:
+    """A controller of a study: registry name (or ``module:attr``), label, options."""
+
+    name: str
+    label: str
+    options: dict[str, Any] = field(default_factory=dict)
+
+
+@dataclass(frozen=True)
+class NoiseConfig:
+    """Measurement noise.
+
+    Attributes:
+        model: ``"none"``, ``"rotation"`` (random rotation of each edge normal,
+            angle uniform in [0, amplitude]) or ``"pixel"`` (Gaussian noise on
+            points sampled along each edge, then the normal fit).
+        amplitude_deg: Rotation-noise amplitude [deg].
+        pixel_sigma_px: Pixel-noise standard deviation [px].
+        points_per_edge: Points sampled per edge (pixel model).
+        outlier_fraction: Fraction of outlier points (pixel model).
+        dropout_probability: Probability that an edge is missed at a step.
+        on_goal: Whether the desired features (taken from the goal image) are noisy too.
+    """
+
+    model: str = "none"
+    amplitude_deg: float = 0.0
+    pixel_sigma_px: float = 0.0
+    points_per_edge: int = 20
+    outlier_fraction: float = 0.0
+    dropout_probability: float = 0.0
+    on_goal: bool = True
+
+
+@dataclass(frozen=True)
+class CalibrationErrorConfig:
+    """Truth minus what the controllers are told (standard deviations).
+
+    Attributes:
+        base_points_mm: Per-coordinate std of the base points [mm].
+        platform_points_mm: Per-coordinate std of the platform points [mm].
+        joint_offsets_mm: Std of the encoder offsets [mm].
+        camera_pose_mm: Per-axis std of the camera position [mm].
+        camera_pose_deg: Std of the camera orientation error angle per axis [deg].
+        intrinsics_percent: Relative std of focal lengths and principal point [%].
+        leg_radius_percent: Relative std of the leg radius [%].
+        scale: Multiplies every standard deviation above (sweep it to grow all
+            errors together).
+    """
+
+    scale: float = 1.0
+    base_points_mm: float = 0.0
+    platform_points_mm: float = 0.0
+    joint_offsets_mm: float = 0.0
+    camera_pose_mm: float = 0.0
+    camera_pose_deg: float = 0.0
+    intrinsics_percent: float = 0.0
+    leg_radius_percent: float = 0.0
+
+
+@dataclass(frozen=True)
+class CalibrationConfig:
+    """Optional linear calibration of the base points before control (docs/math.md section 7).
+
+    Attributes:
+        method: ``"none"`` (controllers get nominal values), ``"linear"`` (calibrate
+            in the simulated world first) or ``"file"`` (base points from a file
+            written by ``hexapod-bench calibrate``).
+        file: The calibrated parameter file (method ``"file"``).
+        configurations: ``"extremal"`` or ``"random:N"``.
+        solver: ``"lstsq"`` or ``"irls"``.
+        noise_deg: Rotation noise on the calibration images [deg] (None: as [noise]).
+        warn_singular_ratio: A leg whose system's smallest/largest singular value is
+            below this is ill-conditioned: logged, and the trial is marked
+            (``calibration_ill_conditioned_legs`` in its row).
+        min_singular_ratio: Below this the calibration refuses (the trial fails with a
+            ``CalibrationError`` naming the leg and the ratio).
+    """
+
+    method: str = "none"
+    file: str | None = None
+    configurations: str = "extremal"
+    solver: str = "irls"
+    noise_deg: float | None = None
+    warn_singular_ratio: float = WARN_SINGULAR_RATIO
+    min_singular_ratio: float = MIN_SINGULAR_RATIO
+
+
+@dataclass(frozen=True)
+class ImageConfig:
+    """Rendering settings of the image sensor (``[sensor] kind = "image"``).
+
+    Attributes:
+        background: ``"plain"`` (seed 003) or ``"cluttered"``.
+        blur_px: Gaussian blur [px].
+        noise_std: Pixel noise standard deviation [grey levels].
+    """
+
+    background: str = "plain"
+    blur_px: float = 0.8
+    noise_std: float = 2.0
+
+
+@dataclass(frozen=True)
+class TaskConfig:
+    """What each trial must do.
+
+    Attributes:
+        kind: ``"random-pairs"`` (start and goal drawn inside the strokes) or ``"fixed"``.
+        start_mm: Start leg lengths (fixed task) [mm].
+        goal_mm: Goal leg lengths (fixed task) [mm].
+        max_steps: Step budget.
+        position_tolerance_mm: Convergence threshold on the platform position [mm].
+        orientation_tolerance_deg: Convergence threshold on the orientation [deg].
+        margin_mm: Random poses keep this distance from the stroke limits [mm].
+        max_translation_mm: Half-width of the random position box [mm].
+        max_angle_deg: Maximal random rotation [deg].
+        settle_steps: Steps the tolerances must hold to count as converged.
+        fixed_duration: Run every trial for ``max_steps`` (noise studies: the final
+            error is the error at the end; converged means within tolerance then).
+    """
+
+    kind: str = "random-pairs"
+    start_mm: tuple[float, ...] | None = None
+    goal_mm: tuple[float, ...] | None = None
+    max_steps: int = 1000
+    position_tolerance_mm: float = 0.1
+    orientation_tolerance_deg: float = 0.01
+    margin_mm: float = 5.0
+    max_translation_mm: float = 60.0
+    max_angle_deg: float = 10.0
+    settle_steps: int = 1
+    fixed_duration: bool = False
+
+
+@dataclass(frozen=True)
+class Scenario:
+    """A validated scenario (one point of its sweep once expanded).
+
+    Attributes:
+        name: Study name.
+        description: What it shows (and which seed it reproduces).
+        seed: Every trial is seeded from (seed, trial index).
+        trials: Trials per sweep point and controller.
+        controllers: Controllers to compare.
+        robot_preset: Geometry preset name (or None when ``robot_geometry`` is set).
+        robot_geometry: Path to a geometry TOML file.
+        dt: Control period [s].
+        camera_preset: ``"front"`` or ``"omni"`` (or None when ``camera_file`` is set).
+        camera_file: Path to a camera TOML file.
+        sensor: ``"geometric"`` or ``"image"``.
+        teach_frames: Measurements of the goal averaged into the desired features
+            (:func:`vision.estimate.average_normals`), as a user teaching the goal
+            averages a burst of frames.
+        noise: Noise settings.
+        calibration_error: Calibration error settings.
+        calibration: Calibration procedure settings.
+        task: Task settings.
+        reference: Figures of the reproduced seed (free-form table for the report).
+        sweep: The swept keys of this point, e.g. ``{"noise.amplitude_deg": 0.05}``.
+        source: File it was read from.
+    """
+
+    name: str
+    description: str = ""
+    seed: int = 1
+    trials: int = 10
+    controllers: tuple[ControllerSpec, ...] = ()
+    robot_preset: str | None = "deltalab"
+    robot_geometry: str | None = None
+    dt: float = 0.02
+    camera_preset: str | None = "front"
+    camera_file: str | None = None
+    sensor: str = "geometric"
+    teach_frames: int = 1
+    image: ImageConfig = ImageConfig()
+    noise: NoiseConfig = NoiseConfig()
+    calibration_error: CalibrationErrorConfig = CalibrationErrorConfig()
+    calibration: CalibrationConfig = CalibrationConfig()
+    task: TaskConfig = TaskConfig()
+    reference: dict[str, Any] = field(default_factory=dict)
+    sweep: dict[str, Any] = field(default_factory=dict)
+    sweep_axes: dict[str, list[Any]] = field(default_factory=dict)
+    source: str = "<dict>"
+
+    def expand(self) -> list[Scenario]:
+        """One scenario per point of the sweep (Cartesian product of the swept keys)."""
+        if not self.sweep_axes:
+            return [self]
+        keys = list(self.sweep_axes)
+        points = []
+        for values in itertools.product(*(self.sweep_axes[k] for k in keys)):
+            sc = self
+            for key, value in zip(keys, values, strict=True):
+                section, name = key.split(".")
+                sc = replace(sc, **{section: replace(getattr(sc, section), **{name: value})})
+            points.append(replace(sc, sweep=dict(zip(keys, values, strict=True))))
+        return points
+
+    def with_overrides(self, trials: int | None = None, seed: int | None = None,
+                       controllers: list[str] | None = None, max_steps: int | None = None,
+                       calibration_file: str | None = None) -> Scenario:
+        """Apply command-line overrides."""
+        sc = self
+        if calibration_file is not None:
+            if not Path(calibration_file).exists():
+                raise ScenarioError(calibration_file, "calibration file not found")
+            sc = replace(sc, calibration=replace(sc.calibration, method="file",
+                                                 file=str(calibration_file)))
+        if max_steps is not None:
+            _check_option(max_steps, "task.max_steps", "--max-steps")
+            sc = replace(sc, task=replace(sc.task, max_steps=max_steps))
+        if trials is not None:
+            _check_option(trials, "trials", "--trials")
+            sc = replace(sc, trials=trials)
+        if seed is not None:
+            _check_option(seed, "seed", "--seed")
+            sc = replace(sc, seed=seed)
+        if controllers:
+            by_label = {c.label: c for c in sc.controllers}
+            sc = replace(sc, controllers=tuple(by_label.get(c, ControllerSpec(c, c))
+                                               for c in controllers))
+        return sc
+
+
+def _check_option(value: Any, key: str, option: str) -> None:
+    """:func:`check_range` for a command-line override (named by its option)."""
+    try:
+        check_range(value, key, option)
+    except ScenarioError as exc:
+        raise ScenarioError(option, exc.problem) from None
