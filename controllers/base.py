@@ -164,12 +164,87 @@ class Command:
                        error_norm=float(np.linalg.norm(err)))
 
 
+@dataclass
+class ObservationBatch:
+    """Observations of several trials at one period: :class:`Observation` fields with a
+    leading trial axis (n, ...), for :meth:`Controller.step_batch`.
+
+    Attributes:
+        trials: (n,) indices of the trials, into the contexts given to ``reset_batch``.
+        t: (n,) times [s].
+        lengths: (n, 6) measured leg lengths [m].
+        normals: (n, 6, 2, 3) or None.
+        lines: (n, 6, 2, 3) or None.
+        directions: (n, 6, 3) or None.
+        edge_visible: (n, 6, 2) bool.
+        direction_visible: (n, 6) bool.
+    """
+
+    trials: np.ndarray
+    t: np.ndarray
+    lengths: np.ndarray
+    normals: np.ndarray | None
+    lines: np.ndarray | None
+    directions: np.ndarray | None
+    edge_visible: np.ndarray
+    direction_visible: np.ndarray
+
+    def __len__(self) -> int:
+        return len(self.trials)
+
+    def item(self, k: int) -> Observation:
+        """The observation of row ``k`` (views of the batch arrays)."""
+        return Observation(
+            t=float(self.t[k]), lengths=self.lengths[k],
+            normals=None if self.normals is None else self.normals[k],
+            lines=None if self.lines is None else self.lines[k],
+            directions=None if self.directions is None else self.directions[k],
+            edge_visible=self.edge_visible[k], direction_visible=self.direction_visible[k])
+
+
+@dataclass
+class CommandBatch:
+    """The commands of :meth:`Controller.step_batch`, one row per observation row.
+
+    Attributes:
+        velocities: (n, 6) leg velocities [m/s] (zeros where refused; never NaN).
+        error_norm: (n,) norm of each task error.
+        reasons: (n,) why a command is zero (None where it is valid).
+    """
+
+    velocities: np.ndarray
+    error_norm: np.ndarray
+    reasons: list[str | None]
+
+    @property
+    def ok(self) -> np.ndarray:
+        """(n,) True where the controller produced a movement command."""
+        return np.array([r is None for r in self.reasons], dtype=bool)
+
+    @staticmethod
+    def from_commands(commands: list[Command]) -> CommandBatch:
+        """Stack per-trial :class:`Command` objects."""
+        n = len(commands)
+        v = np.zeros((n, 6))
+        norms = np.zeros(n)
+        for k, c in enumerate(commands):
+            v[k] = c.velocities
+            norms[k] = c.error_norm
+        return CommandBatch(v, norms, [c.reason for c in commands])
+
+
 class Controller(ABC):
     """A controller: ``reset(context)`` once, then ``step(observation)`` every period.
 
     Subclasses set ``name`` and ``features`` (subset of :data:`FEATURES`) and
     implement :meth:`reset` and :meth:`step`. A class is its own factory: its
     constructor takes the options as keyword arguments.
+
+    A controller may also step many trials at once (the study engine calls it when
+    it can): ``reset_batch(contexts)`` prepares one trial per context and
+    ``step_batch(observations)`` (an :class:`ObservationBatch`) returns a
+    :class:`CommandBatch`. Both are optional; without them the engine builds one
+    controller per trial and calls ``step`` in a loop (``docs/plugins.md``).
     """
 
     #: Registry name.

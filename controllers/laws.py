@@ -30,8 +30,6 @@ import logging
 import math
 from abc import abstractmethod
 from collections.abc import Sequence
-from dataclasses import dataclass
-from typing import Any
 
 import numpy as np
 
@@ -40,270 +38,31 @@ from controllers.base import (
     Controller,
     ControllerContext,
     Observation,
-    usable_observation_problem,
 )
 from controllers.exceptions import ContextError, OptionError
-from controllers.interaction import cross, direction_interaction
+from controllers.interaction import direction_interaction
 from controllers.law_kernel import LawKernel, LawResult
+from controllers.law_tools import (
+    INTERACTIONS,
+    Gain,
+    Stack,
+    _unit_rows,
+    check_choice,
+    check_number,
+    check_observation,
+    inverse_jacobian_into,
+    solve_least_squares,
+    solve_normal,
+    solve_normal_damped,
+)
+
+__all__ = [
+    "INTERACTIONS", "Gain", "Stack", "VisionLaw", "check_choice", "check_number",
+    "check_observation", "inverse_jacobian_into", "solve_least_squares", "solve_normal",
+    "solve_normal_damped",
+]
 
 log = logging.getLogger(__name__)
-
-#: Feature fields checked by the fast path: name, shape, visibility mask.
-_FAST_FIELDS = (("normals", (6, 2, 3), "edge_visible"), ("lines", (6, 2, 3), "edge_visible"),
-                ("directions", (6, 3), "direction_visible"))
-
-#: Where the interaction matrix is evaluated (ViSP's CURRENT, DESIRED, MEAN).
-INTERACTIONS = ("current", "desired", "mean")
-
-
-# --------------------------------------------------------------------------- observations
-def check_observation(obs: Observation, features: frozenset[str]) -> str | None:
-    """:func:`controllers.base.usable_observation_problem`, with a fast path.
-
-    The common case (float arrays of the right shapes, everything visible and
-    finite) is recognised with a few calls: a finite sum means finite entries. Any
-    other observation gets the full check and its reason.
-    """
-    try:
-        q = obs.lengths
-        if (type(q) is np.ndarray and q.shape == (6,) and math.isfinite(obs.t)
-                and math.isfinite(q.sum())):
-            for name, shape, mask in _FAST_FIELDS:
-                if name not in features:
-                    continue
-                arr = getattr(obs, name)
-                if not (type(arr) is np.ndarray and arr.shape == shape
-                        and arr.dtype == np.float64 and math.isfinite(arr.sum())
-                        and getattr(obs, mask).all()):
-                    break
-            else:
-                return None
-    except (TypeError, ValueError, AttributeError):
-        pass
-    return usable_observation_problem(obs, features)
-
-
-# --------------------------------------------------------------------------- options
-def check_number(controller: str, option: str, value: Any, minimum: float = 0.0,
-                 strict: bool = True) -> float:
-    """Validate a finite number above ``minimum``.
-
-    Raises:
-        OptionError: Not a finite number, or out of range.
-    """
-    if isinstance(value, bool):
-        raise OptionError(controller, option, f"expected a number, got {value!r}")
-    try:
-        x = float(value)
-    except (TypeError, ValueError):
-        raise OptionError(controller, option, f"expected a number, got {value!r}") from None
-    if not math.isfinite(x):
-        raise OptionError(controller, option, f"must be finite, got {x}")
-    if (strict and x <= minimum) or (not strict and x < minimum):
-        raise OptionError(controller, option,
-                          f"must be {'>' if strict else '>='} {minimum}, got {x}")
-    return x
-
-
-def check_choice(controller: str, option: str, value: Any, choices: Sequence[str]) -> str:
-    """Validate a string option against its choices (suggesting the closest).
-
-    Raises:
-        OptionError: Not one of ``choices``.
-    """
-    from hexapod.config import suggest
-
-    if not isinstance(value, str) or value not in choices:
-        hint = suggest(str(value), choices)
-        raise OptionError(controller, option,
-                          f"expected one of {', '.join(choices)}, got {value!r}"
-                          + (f" (did you mean '{hint}'?)" if hint else ""))
-    return value
-
-
-@dataclass(frozen=True)
-class Gain:
-    """Constant or adaptive gain (ViSP's ``vpAdaptiveGain``), ``docs/math.md`` section 6.
-
-    ``lambda(x) = (at_zero - at_infinity) exp(-slope_at_zero x / (at_zero - at_infinity))
-    + at_infinity`` with ``x = |e|_inf``; constant when ``at_zero == at_infinity``.
-
-    Attributes:
-        at_zero: ``lambda0``, gain for a vanishing error [1/s].
-        at_infinity: ``lambda_inf``, gain for a large error [1/s].
-        slope_at_zero: ``lambda0'``, slope of ``lambda(x)`` at ``x = 0`` (its
-            opposite) [1/s per unit of error].
-    """
-
-    at_zero: float
-    at_infinity: float
-    slope_at_zero: float = 0.0
-
-    @staticmethod
-    def constant(value: float) -> Gain:
-        """A constant gain [1/s]."""
-        return Gain(value, value, 0.0)
-
-    @property
-    def is_constant(self) -> bool:
-        """True when the gain does not depend on the error."""
-        return self.at_zero == self.at_infinity
-
-    def __call__(self, x: float) -> float:
-        """Gain [1/s] for the error size ``x = |e|_inf``."""
-        d = self.at_zero - self.at_infinity
-        if d == 0.0:
-            return self.at_zero
-        return d * math.exp(-self.slope_at_zero * x / d) + self.at_infinity
-
-    @staticmethod
-    def from_options(controller: str, gain: Any = 1.0,
-                     adaptive_gain: Sequence[float] | None = None) -> Gain:
-        """Build and validate a gain from the controller options.
-
-        Args:
-            controller: Controller name (for error messages).
-            gain: Constant gain [1/s] (> 0), used when ``adaptive_gain`` is None.
-            adaptive_gain: ``(lambda0, lambda_inf, lambda0')`` with
-                ``lambda0 >= lambda_inf > 0`` and ``lambda0' > 0``.
-
-        Raises:
-            OptionError: Naming the option at fault.
-        """
-        if adaptive_gain is None:
-            return Gain.constant(check_number(controller, "gain", gain))
-        try:
-            values = [float(x) for x in adaptive_gain]
-        except (TypeError, ValueError):
-            raise OptionError(controller, "adaptive_gain",
-                              f"expected (lambda0, lambda_inf, lambda0'), got {adaptive_gain!r}"
-                              ) from None
-        if len(values) != 3:
-            raise OptionError(controller, "adaptive_gain",
-                              f"expected 3 values (lambda0, lambda_inf, lambda0'), got "
-                              f"{len(values)}")
-        l0, linf, slope = values
-        if not all(math.isfinite(v) for v in values):
-            raise OptionError(controller, "adaptive_gain", f"values must be finite: {values}")
-        if not linf > 0:
-            raise OptionError(controller, "adaptive_gain", f"lambda_inf must be > 0, got {linf}")
-        if l0 < linf:
-            raise OptionError(controller, "adaptive_gain",
-                              f"lambda0 ({l0}) must be >= lambda_inf ({linf})")
-        if not slope > 0:
-            raise OptionError(controller, "adaptive_gain", f"lambda0' must be > 0, got {slope}")
-        return Gain(l0, linf, slope)
-
-
-# --------------------------------------------------------------------------- algebra
-def solve_least_squares(
-    L: np.ndarray, e: np.ndarray, threshold: float = 1e-6, damping: float = 0.0
-) -> tuple[np.ndarray, int, float]:
-    """``x = L^+ e`` (damped) through the eigen-decomposition of the 6x6 ``L^T L``.
-
-    Singular values ``s`` of ``L`` below ``threshold * s_max`` count as zero
-    (their directions are left out of ``x``); the others give
-    ``x = V diag(1 / (s^2 + damping^2)) V^T L^T e``. Cheaper than
-    :func:`numpy.linalg.pinv` on a 36x6 matrix and gives the rank and the
-    condition number on the way.
-
-    Args:
-        L: (m, 6).
-        e: (m,).
-        threshold: Relative singular-value threshold.
-        damping: Damping ``mu`` (0: plain pseudo-inverse).
-
-    Returns:
-        ``x`` (6,), the rank, and the condition number ``s_max / s_min`` (inf when singular).
-    """
-    return solve_normal(L.T @ L, L.T @ e, threshold, damping)
-
-
-def solve_normal(N: np.ndarray, b: np.ndarray, threshold: float = 1e-6, damping: float = 0.0
-                 ) -> tuple[np.ndarray, int, float]:
-    """:func:`solve_least_squares` from the normal equations ``N = L^T L``, ``b = L^T e``."""
-    return solve_normal_damped(N, b, threshold, damping * damping)
-
-
-def solve_normal_damped(N: np.ndarray, b: np.ndarray, threshold: float, damping2: float
-                        ) -> tuple[np.ndarray, int, float]:
-    """:func:`solve_normal` with the squared damping ``mu^2`` given directly (or the
-    regularization ``eps`` of the QP laws): ``sum_j (v_j^T b) / (w_j + damping2) v_j``
-    over the eigenvalues ``w_j > threshold^2 w_max``."""
-    w, V = np.linalg.eigh(N)
-    w_max = w[-1]
-    if not w_max > 0:
-        return np.zeros(len(b)), 0, math.inf
-    keep = w > (threshold * threshold) * w_max
-    rank = int(np.count_nonzero(keep))
-    cond = math.sqrt(w_max / w[0]) if w[0] > 0 else math.inf
-    c = V.T @ b
-    if rank == len(w):
-        c /= w + damping2
-    else:
-        c = np.where(keep, c / np.where(keep, w + damping2, 1.0), 0.0)
-    return V @ c, rank, cond
-
-
-def inverse_jacobian_into(out: np.ndarray, base_points: np.ndarray,
-                          directions: np.ndarray) -> np.ndarray:
-    """Fill ``out`` (6, 6) with ``J_inv`` rows ``[u_i^T, (A_i x u_i)^T]`` (``docs/math.md`` §3)."""
-    out[:, :3] = directions
-    out[:, 3:] = cross(base_points, directions)
-    return out
-
-
-def _unit_rows(x: np.ndarray) -> np.ndarray:
-    return x / np.sqrt(np.einsum("...k,...k->...", x, x))[..., None]
-
-
-# --------------------------------------------------------------------------- the law
-@dataclass
-class Stack:
-    """The features of one step, as stacked by a :class:`VisionLaw` subclass.
-
-    The interaction blocks are given either densely (``interaction``, (m, 3, 6)) or,
-    when each block is rank one ``L_k = a_k g_k^T`` (the edge features), by their
-    factors ``a`` (m, 3) and ``g`` (m, 6): the law then forms ``L^T L`` and
-    ``L^T e`` without building the 36 x 6 matrix.
-
-    Attributes:
-        error: (m, 3) error blocks of every feature (unused rows may hold anything finite).
-        interaction: (m, 3, 6) interaction blocks, or None with ``a``, ``g``.
-        used: (m,) bool, blocks used this step, or None when all are.
-        notes: Diagnostics to report.
-        a: (m, 3) left factors of rank-one blocks.
-        g: (m, 6) right factors of rank-one blocks.
-        N: ``L^T L`` (6, 6) when already computed (with ``b``; every block used).
-        b: ``L^T e`` (6,) when already computed.
-    """
-
-    error: np.ndarray
-    interaction: np.ndarray | None
-    used: np.ndarray | None
-    notes: list[str]
-    a: np.ndarray | None = None
-    g: np.ndarray | None = None
-    N: np.ndarray | None = None
-    b: np.ndarray | None = None
-
-    def normal_equations(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """The used error ``e`` (k,), ``L^T L`` (6, 6) and ``L^T e`` (6,)."""
-        if self.N is not None and self.b is not None:  # computed by a compiled kernel
-            return self.error.reshape(-1), self.N, self.b
-        used = self.used
-        err = self.error if used is None else self.error[used]
-        if self.interaction is not None:
-            L = (self.interaction if used is None else self.interaction[used]).reshape(-1, 6)
-            e = err.reshape(-1)
-            return e, L.T @ L, L.T @ e
-        if self.a is None or self.g is None:
-            raise ValueError("Stack: give the interaction blocks or their rank-one factors")
-        a = self.a if used is None else self.a[used]
-        g = self.g if used is None else self.g[used]
-        w = np.einsum("ij,ij->i", a, a)
-        c = np.einsum("ij,ij->i", a, err)
-        return err.reshape(-1), (g.T * w) @ g, g.T @ c
 
 
 class VisionLaw(Controller):

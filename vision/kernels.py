@@ -45,7 +45,7 @@ _I: Any = ctypes.c_int64
 _D: Any = ctypes.c_double
 
 #: The C sources, in the order they are concatenated into one library.
-SOURCES = ("detect_kernels.c", "render_kernels.c")
+SOURCES = ("detect_kernels.c", "render_kernels.c", "observe_kernels.c")
 
 _lib: ctypes.CDLL | None = None
 _tried = False
@@ -83,6 +83,8 @@ def _load() -> ctypes.CDLL | None:
     lib.align_shift.restype = None
     lib.fill_shapes.argtypes = [_P, _P, _I, _I, _P, _P, _P, _P, _I, _P, _P, _P, _P, _P]
     lib.fill_shapes.restype = ctypes.c_int
+    lib.hexapod_observe_batch.argtypes = [_P, _P, _I, _D, _D, _I, _I, _D, _I]
+    lib.hexapod_observe_batch.restype = ctypes.c_int
     _lib = lib
     return lib
 

@@ -278,7 +278,83 @@ def observe_legs(
     platform_radius: float | None = None,
     occlusion: bool = True,
 ) -> LegObservation:
-    """Simulate what a camera sees of the legs at platform poses (batched, vectorised).
+    """Simulate what a camera sees of the legs at platform poses (batched).
+
+    The compiled core (:func:`vision.fast_observe.observe_batch`) computes the legs,
+    edges and visibility when it is available; :func:`observe_legs_numpy` is the
+    numpy reference (same arguments, same results, tested equal).
+
+    Args:
+        camera: The camera (its ``camera_from_base`` places it).
+        geometry: The robot (leg radius ``geometry.leg_radius``).
+        rotation: (..., 3, 3) platform orientation in the base frame.
+        translation: (..., 3) platform position in the base frame [m].
+        min_visible_fraction: Fraction of visible samples (in ``(0, 1]``) for an edge
+            to be observed (see :class:`LegObservation`).
+        n_samples: Samples per edge for the visibility test.
+        platform_radius: Radius of the platform disc [m]; default: the largest
+            distance of a platform joint from the platform origin.
+        occlusion: Test occlusions by the legs and the platform (True), or only
+            existence and the image bounds (False).
+
+    Returns:
+        A :class:`LegObservation`.
+    """
+    from vision import fast_observe
+
+    if not 0.0 < min_visible_fraction <= 1.0:
+        raise ValueError(f"min_visible_fraction must be in (0, 1], got {min_visible_fraction}")
+    if n_samples < 1:
+        raise ValueError(f"n_samples must be >= 1, got {n_samples}")
+    if not fast_observe.compiled() or getattr(camera, "kind", None) not in ("perspective",
+                                                                          "unified"):
+        return observe_legs_numpy(camera, geometry, rotation, translation,
+                                  min_visible_fraction, n_samples, platform_radius, occlusion)
+    R = np.asarray(rotation, float)
+    t = np.asarray(translation, float)
+    lead = R.shape[:-2]
+    if t.shape != (*lead, 3):
+        from hexapod.exceptions import ShapeError
+
+        raise ShapeError("translation", f"shape {(*lead, 3)}", t.shape)
+    params = fast_observe.WorldParams.from_worlds([geometry], [camera])
+    if platform_radius is not None:
+        params.platform_radius[:] = float(platform_radius)
+    n = int(np.prod(lead, dtype=int))
+    obs = fast_observe.observe_batch(params, R.reshape(n, 3, 3), t.reshape(n, 3),
+                                     np.zeros(n, dtype=int), n_samples, min_visible_fraction,
+                                     occlusion)
+    r = geometry.leg_radius
+    A = obs.base_points.reshape(*lead, 6, 3)
+    u = obs.directions.reshape(*lead, 6, 3)
+    q = obs.lengths.reshape(*lead, 6)
+    normals = obs.normals.reshape(*lead, 6, 2, 3)
+    ends = limb_points(A, u, r, q, normals, np.array([0.0, 1.0]))
+    segments, _ = camera.project(ends)
+    lines = camera.normal_to_line(normals) if isinstance(camera, PerspectiveCamera) else None
+    return LegObservation(
+        base_points=A, directions=u, lengths=q, normals=normals,
+        exists=obs.exists.reshape(*lead, 6),
+        edge_visible=obs.edge_visible.reshape(*lead, 6, 2),
+        visible_fraction=obs.visible_fraction.reshape(*lead, 6, 2),
+        lines=lines, segments=segments,
+        visible_interval=obs.visible_interval.reshape(*lead, 6, 2, 2),
+        platform_centre=obs.platform_centre.reshape(*lead, 3),
+        platform_normal=obs.platform_normal.reshape(*lead, 3),
+        platform_radius=float(params.platform_radius[0]), radius=float(r))
+
+
+def observe_legs_numpy(
+    camera: Camera,
+    geometry: HexapodGeometry,
+    rotation: np.ndarray,
+    translation: np.ndarray,
+    min_visible_fraction: float = DEFAULT_MIN_VISIBLE_FRACTION,
+    n_samples: int = DEFAULT_VISIBILITY_SAMPLES,
+    platform_radius: float | None = None,
+    occlusion: bool = True,
+) -> LegObservation:
+    """The numpy reference of :func:`observe_legs` (batched, vectorised).
 
     Args:
         camera: The camera (its ``camera_from_base`` places it).

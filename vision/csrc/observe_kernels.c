@@ -1,0 +1,224 @@
+/* Observation of the legs by a camera, a batch of worlds in one call.
+ *
+ * The C version of vision.legs.observe_legs (the numpy reference): for each item,
+ * its own robot (base and platform joint centres, leg radius, platform disc radius),
+ * its own camera (pose, intrinsics, unified-model xi, OpenCV distortion) and its own
+ * platform pose; the edges of the six cylindrical legs, and the visibility of each edge
+ * sampled at n_samples points (imaged inside the image, not hidden by another leg's
+ * solid finite cylinder nor by the platform disc).
+ *
+ * Leg-leg occlusion is tested point by point as in vision.occlusion (three intervals of
+ * the ray parameter), after an exact culling: the rays from the projection centre to
+ * the points of one edge lie in that edge's interpretation plane, so a leg whose
+ * cylinder lies entirely on one side of the plane (both axis ends farther than the
+ * radius) hides none of them.
+ *
+ * Layout of one item's parameters (doubles), see vision/fast_observe.py:
+ *   R (9, row-major) t (3): platform pose in the base frame
+ *   A (18): base joint centres, base frame; E (18): platform joint centres, platform frame
+ *   r, rho: leg radius, platform disc radius
+ *   Rc (9, row-major) tc (3): camera_from_base
+ *   fx, s, cx, fy, cy, xi, k1, k2, p1, p2, k3, r2max (12): intrinsics, distortion, and the
+ *   largest undistorted r^2 the distortion is trusted to (0: no limit)
+ * = 77 doubles.
+ * Outputs of one item: normals (36), exists (6), fraction (12), visible (12, 0/1),
+ * A_cam (18), u (18), q (6), interval (24: s_first, s_last per edge), centre (3),
+ * disc normal (3) = 138 doubles.
+ */
+#include <math.h>
+#include <stddef.h>
+
+#define OBS_N_IN 77
+#define OBS_N_OUT 138
+
+static void mat_vec(const double *M, const double *x, double *y) {
+  y[0] = M[0] * x[0] + M[1] * x[1] + M[2] * x[2];
+  y[1] = M[3] * x[0] + M[4] * x[1] + M[5] * x[2];
+  y[2] = M[6] * x[0] + M[7] * x[1] + M[8] * x[2];
+}
+
+static double dot3(const double *a, const double *b) {
+  return a[0] * b[0] + a[1] * b[1] + a[2] * b[2];
+}
+
+static void cross3(const double *a, const double *b, double *c) {
+  c[0] = a[1] * b[2] - a[2] * b[1];
+  c[1] = a[2] * b[0] - a[0] * b[2];
+  c[2] = a[0] * b[1] - a[1] * b[0];
+}
+
+/* Whether a camera-frame point projects inside the image (vision.cameras.Camera.project). */
+static int imaged(const double *X, const double *cam, int unified, double width,
+                  double height) {
+  double fx = cam[0], sk = cam[1], cx = cam[2], fy = cam[3], cy = cam[4], xi = cam[5];
+  double z, rho;
+  if (!unified || xi == 0.0) {
+    z = X[2];
+    if (!(z > 0.0)) return 0;
+  } else {
+    double cos_limit = xi < 1.0 / xi ? xi : 1.0 / xi;
+    rho = sqrt(X[0] * X[0] + X[1] * X[1] + X[2] * X[2]);
+    if (!(X[2] > -cos_limit * rho && rho > 0.0)) return 0;
+    z = X[2] + xi * rho;
+  }
+  double x = X[0] / z, y = X[1] / z;
+  double k1 = cam[6], k2 = cam[7], p1 = cam[8], p2 = cam[9], k3 = cam[10], r2max = cam[11];
+  if (k1 != 0.0 || k2 != 0.0 || p1 != 0.0 || p2 != 0.0 || k3 != 0.0) {
+    double r2 = x * x + y * y;
+    if (r2max > 0.0 && !(r2 <= r2max)) return 0;
+    double radial = 1.0 + k1 * r2 + k2 * r2 * r2 + k3 * r2 * r2 * r2;
+    double xd = x * radial + 2.0 * p1 * x * y + p2 * (r2 + 2.0 * x * x);
+    double yd = y * radial + p1 * (r2 + 2.0 * y * y) + 2.0 * p2 * x * y;
+    x = xd;
+    y = yd;
+  }
+  double u = fx * x + sk * y + cx, v = fy * y + cy;
+  return u >= -0.5 && u <= width - 0.5 && v >= -0.5 && v <= height - 0.5;
+}
+
+/* Whether the open segment from the origin to P crosses leg j (vision.occlusion). */
+static int hits_leg(const double *P, const double *A, const double *u, double q, double r) {
+  double Pu = dot3(P, u), Au = dot3(A, u);
+  double Pp[3] = {P[0] - Pu * u[0], P[1] - Pu * u[1], P[2] - Pu * u[2]};
+  double Ap[3] = {A[0] - Au * u[0], A[1] - Au * u[1], A[2] - Au * u[2]};
+  double a = dot3(Pp, Pp), b = -2.0 * dot3(Pp, Ap), c = dot3(Ap, Ap) - r * r;
+  double disc = b * b - 4.0 * a * c;
+  double sq = sqrt(disc > 0.0 ? disc : 0.0);
+  int par = a <= 1e-300;
+  double a_safe = a > 0.0 ? a : 1.0;
+  double s1, s2;
+  if (par) {
+    s1 = c < 0.0 ? -INFINITY : INFINITY;
+    s2 = c < 0.0 ? INFINITY : -INFINITY;
+  } else {
+    s1 = (-b - sq) / (2.0 * a_safe);
+    s2 = (-b + sq) / (2.0 * a_safe);
+  }
+  int hit_cyl = disc > 0.0 || par;
+  double lo_ax, hi_ax;
+  if (Pu == 0.0) {
+    int inside = (-Au >= 0.0) && (-Au <= q);
+    lo_ax = inside ? -INFINITY : INFINITY;
+    hi_ax = inside ? INFINITY : -INFINITY;
+  } else {
+    double t0 = Au / Pu, t1 = (Au + q) / Pu;
+    lo_ax = Pu > 0.0 ? t0 : t1;
+    hi_ax = Pu > 0.0 ? t1 : t0;
+  }
+  double lo = fmax(fmax(s1, lo_ax), 0.0);
+  double hi = fmin(fmin(s2, hi_ax), 1.0 - 1e-9);
+  return hit_cyl && lo < hi;
+}
+
+/* Whether the open segment from the origin to P crosses the platform disc. */
+static int hits_disc(const double *P, const double *c, const double *nd, double rho) {
+  double den = dot3(nd, P), num = dot3(nd, c);
+  if (den == 0.0) return 0;
+  double s = num / den;
+  if (!(s > 0.0 && s < 1.0 - 1e-9)) return 0;
+  double d[3] = {s * P[0] - c[0], s * P[1] - c[1], s * P[2] - c[2]};
+  return dot3(d, d) <= rho * rho;
+}
+
+int hexapod_observe_batch(const double *params, double *out, long long n, double width,
+                          double height, long long unified, long long n_samples,
+                          double min_fraction, long long occlusion) {
+  for (long long item = 0; item < n; ++item) {
+    const double *p = params + OBS_N_IN * item;
+    double *o = out + OBS_N_OUT * item;
+    const double *R = p, *t = p + 9, *Ab = p + 12, *E = p + 30;
+    double r = p[48], rho_disc = p[49];
+    const double *Rc = p + 50, *tc = p + 59, *cam = p + 62;
+    double *normals = o, *exists = o + 36, *frac = o + 42, *vis = o + 54, *Ac = o + 66;
+    double *uc = o + 84, *qc = o + 102, *interval = o + 108, *centre = o + 132;
+    double *dnormal = o + 135;
+    /* legs in the camera frame */
+    for (int i = 0; i < 6; ++i) {
+      double B[3], L[3], Lc[3];
+      mat_vec(R, E + 3 * i, B);
+      for (int k = 0; k < 3; ++k) L[k] = B[k] + t[k] - Ab[3 * i + k];
+      double q = sqrt(L[0] * L[0] + L[1] * L[1] + L[2] * L[2]);
+      for (int k = 0; k < 3; ++k) L[k] /= q;
+      mat_vec(Rc, L, Lc);
+      mat_vec(Rc, Ab + 3 * i, Ac + 3 * i);
+      for (int k = 0; k < 3; ++k) {
+        Ac[3 * i + k] += tc[k];
+        uc[3 * i + k] = Lc[k];
+      }
+      qc[i] = q;
+    }
+    mat_vec(Rc, t, centre);
+    for (int k = 0; k < 3; ++k) centre[k] += tc[k];
+    double ez[3] = {R[2], R[5], R[8]}; /* third column of R */
+    mat_vec(Rc, ez, dnormal);
+    /* edges */
+    for (int i = 0; i < 6; ++i) {
+      double *A = Ac + 3 * i, *u = uc + 3 * i, h[3], w[3];
+      cross3(A, u, h);
+      double hn = sqrt(dot3(h, h));
+      exists[i] = hn > r ? 1.0 : 0.0;
+      if (!(hn > r)) {
+        for (int k = 0; k < 6; ++k) normals[6 * i + k] = NAN;
+        continue;
+      }
+      double hh[3] = {h[0] / hn, h[1] / hn, h[2] / hn};
+      cross3(u, hh, w);
+      double s = r / hn;
+      double cc = 1.0 - s * s;
+      cc = sqrt(cc > 0.0 ? cc : 0.0);
+      for (int k = 0; k < 3; ++k) {
+        normals[6 * i + k] = cc * hh[k] - s * w[k];
+        normals[6 * i + 3 + k] = -cc * hh[k] - s * w[k];
+      }
+    }
+    /* visibility of the samples */
+    for (int i = 0; i < 6; ++i) {
+      for (int j = 0; j < 2; ++j) {
+        int e = 2 * i + j;
+        double *nrm = normals + 6 * i + 3 * j;
+        interval[2 * e] = NAN;
+        interval[2 * e + 1] = NAN;
+        if (exists[i] == 0.0) {
+          frac[e] = 0.0;
+          vis[e] = 0.0;
+          continue;
+        }
+        int cull[6];
+        for (int l = 0; l < 6; ++l) {
+          cull[l] = 1;
+          if (l == i || !occlusion) continue;
+          double d0 = dot3(nrm, Ac + 3 * l);
+          double end[3];
+          for (int k = 0; k < 3; ++k) end[k] = Ac[3 * l + k] + qc[l] * uc[3 * l + k];
+          double d1 = dot3(nrm, end);
+          cull[l] = (d0 > r && d1 > r) || (d0 < -r && d1 < -r);
+        }
+        int count = 0, first = -1, last = -1;
+        for (long long k = 0; k < n_samples; ++k) {
+          double sk = (k + 0.5) / (double)n_samples;
+          double P[3];
+          for (int m = 0; m < 3; ++m)
+            P[m] = Ac[3 * i + m] + r * nrm[m] + (sk * qc[i]) * uc[3 * i + m];
+          int ok = imaged(P, cam, (int)unified, width, height);
+          if (ok && occlusion) {
+            for (int l = 0; l < 6 && ok; ++l)
+              if (!cull[l] && hits_leg(P, Ac + 3 * l, uc + 3 * l, qc[l], r)) ok = 0;
+            if (ok && hits_disc(P, centre, dnormal, rho_disc)) ok = 0;
+          }
+          if (ok) {
+            ++count;
+            if (first < 0) first = (int)k;
+            last = (int)k;
+          }
+        }
+        frac[e] = count / (double)n_samples;
+        vis[e] = frac[e] >= min_fraction - 1e-12 ? 1.0 : 0.0;
+        if (count) {
+          interval[2 * e] = (first + 0.5) / (double)n_samples;
+          interval[2 * e + 1] = (last + 0.5) / (double)n_samples;
+        }
+      }
+    }
+  }
+  return 0;
+}

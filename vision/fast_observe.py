@@ -1,0 +1,221 @@
+"""Observation of the legs compiled to C, for a batch of worlds in one call.
+
+:func:`observe_batch` is :func:`vision.legs.observe_legs` (the numpy reference) for
+items that each have their own robot, camera and platform pose: the study engine
+steps thousands of trials with calibration errors (a true world per trial) at once.
+The C core (``vision/csrc/observe_kernels.c``) computes the legs in the camera frame,
+the edge normals and the visibility of each edge's samples (imaged inside the image,
+not hidden by another leg or by the platform disc), with the same decisions as the
+numpy reference; the tests check them equal. Without a compiler it falls back to the
+numpy reference, item by item.
+"""
+
+from __future__ import annotations
+
+import logging
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from hexapod.geometry import HexapodGeometry
+from vision import kernels
+
+log = logging.getLogger(__name__)
+
+#: Doubles per item: parameters and outputs (see the C source).
+N_IN, N_OUT = 77, 138
+#: Camera parameters per item: fx, skew, cx, fy, cy, xi, k1, k2, p1, p2, k3, r2max.
+N_CAMERA = 12
+
+
+def camera_vector(camera: Any) -> np.ndarray:
+    """The 12 camera parameters of the C core (intrinsics, xi, distortion, trusted r^2)."""
+    K = np.asarray(camera.K, float)
+    dist = getattr(camera, "distortion", None)
+    d = np.zeros(5)
+    if dist is not None:
+        dv = np.asarray(dist, float).reshape(-1)
+        d[:len(dv)] = dv
+    r2max = float(getattr(camera, "max_undistorted_r2", 0.0) or 0.0)
+    return np.array([K[0, 0], K[0, 1], K[0, 2], K[1, 1], K[1, 2], float(camera.xi), *d,
+                     r2max])
+
+
+@dataclass
+class WorldParams:
+    """Per-item parameters of a batch of worlds (what :func:`observe_batch` needs).
+
+    Attributes:
+        base_points: (N, 6, 3) base joint centres, base frame [m].
+        platform_points: (N, 6, 3) platform joint centres, platform frame [m].
+        leg_radius: (N,) [m].
+        platform_radius: (N,) radius of the platform disc [m].
+        camera_rotation: (N, 3, 3) rotation of ``camera_from_base``.
+        camera_translation: (N, 3) translation of ``camera_from_base`` [m].
+        camera: (N, 12) :func:`camera_vector` of each item's camera.
+        unified: Whether the cameras are unified (else perspective).
+        width, height: Image size [px] (the same for every item).
+    """
+
+    base_points: np.ndarray
+    platform_points: np.ndarray
+    leg_radius: np.ndarray
+    platform_radius: np.ndarray
+    camera_rotation: np.ndarray
+    camera_translation: np.ndarray
+    camera: np.ndarray
+    unified: bool
+    width: int
+    height: int
+
+    @classmethod
+    def from_worlds(cls, geometries: list[HexapodGeometry], cameras: list[Any]) -> WorldParams:
+        """One item per (geometry, camera) pair; the platform disc radius is the largest
+        distance of a platform joint from the platform origin (as in ``observe_legs``)."""
+        kinds = {c.kind for c in cameras}
+        sizes = {(int(c.width), int(c.height)) for c in cameras}
+        if len(kinds) != 1 or len(sizes) != 1:
+            raise ValueError(f"one camera kind and size per batch, got {kinds} and {sizes}")
+        (width, height), = sizes
+        return cls(
+            base_points=np.array([g.base_points for g in geometries], float),
+            platform_points=np.array([g.platform_points for g in geometries], float),
+            leg_radius=np.array([g.leg_radius for g in geometries], float),
+            platform_radius=np.array([float(np.max(np.linalg.norm(g.platform_points, axis=1)))
+                                      for g in geometries]),
+            camera_rotation=np.array([c.camera_from_base.rotation for c in cameras], float),
+            camera_translation=np.array([c.camera_from_base.translation for c in cameras],
+                                        float),
+            camera=np.array([camera_vector(c) for c in cameras]),
+            unified=kinds.pop() == "unified", width=width, height=height)
+
+    def pack(self, rotations: np.ndarray, translations: np.ndarray,
+             items: np.ndarray | None = None) -> np.ndarray:
+        """The (n, 77) parameter rows of the C core for poses of items ``items``."""
+        idx = np.arange(len(self.leg_radius)) if items is None else np.asarray(items)
+        n = len(idx)
+        rows = np.empty((n, N_IN))
+        rows[:, 0:9] = np.asarray(rotations, float).reshape(n, 9)
+        rows[:, 9:12] = translations
+        rows[:, 12:30] = self.base_points[idx].reshape(n, 18)
+        rows[:, 30:48] = self.platform_points[idx].reshape(n, 18)
+        rows[:, 48] = self.leg_radius[idx]
+        rows[:, 49] = self.platform_radius[idx]
+        rows[:, 50:59] = self.camera_rotation[idx].reshape(n, 9)
+        rows[:, 59:62] = self.camera_translation[idx]
+        rows[:, 62:74] = self.camera[idx]
+        return rows
+
+
+@dataclass
+class BatchObservation:
+    """What :func:`observe_batch` returns, (n, ...) arrays in each item's camera frame.
+
+    Attributes:
+        normals: (n, 6, 2, 3) edge normals (NaN where the edges do not exist).
+        exists: (n, 6) the projection centre is outside the leg cylinder.
+        visible_fraction: (n, 6, 2) fraction of the visible samples of each edge.
+        edge_visible: (n, 6, 2) the edge is observed.
+        base_points: (n, 6, 3) ``A_i`` [m].
+        directions: (n, 6, 3) ``u_i``.
+        lengths: (n, 6) ``q_i`` [m].
+        visible_interval: (n, 6, 2, 2) first and last visible sample (NaN: none).
+        platform_centre: (n, 3) [m]; platform_normal: (n, 3).
+    """
+
+    normals: np.ndarray
+    exists: np.ndarray
+    visible_fraction: np.ndarray
+    edge_visible: np.ndarray
+    base_points: np.ndarray
+    directions: np.ndarray
+    lengths: np.ndarray
+    visible_interval: np.ndarray
+    platform_centre: np.ndarray
+    platform_normal: np.ndarray
+
+
+def compiled() -> bool:
+    """Whether the C core is available (compiles the vision kernels on first call)."""
+    return kernels.available()
+
+
+def observe_batch(params: WorldParams, rotations: np.ndarray, translations: np.ndarray,
+                  items: np.ndarray | None = None, n_samples: int = 16,
+                  min_fraction: float = 0.5, occlusion: bool = True) -> BatchObservation:
+    """Observe the legs of items ``items`` at their platform poses.
+
+    Args:
+        params: The worlds.
+        rotations: (n, 3, 3) platform orientations in the base frames.
+        translations: (n, 3) platform positions [m].
+        items: (n,) indices of the items (all, in order, when None).
+        n_samples: Samples per edge for the visibility test.
+        min_fraction: Fraction of visible samples for an edge to be observed.
+        occlusion: Test the occlusions by the legs and the platform disc.
+
+    Returns:
+        The :class:`BatchObservation`.
+    """
+    rows = params.pack(rotations, translations, items)
+    n = rows.shape[0]
+    lib = kernels._load()
+    if lib is None:
+        return _observe_numpy(params, rows, n_samples, min_fraction, occlusion)
+    out = np.empty((n, N_OUT))
+    lib.hexapod_observe_batch(rows.ctypes.data, out.ctypes.data, n, float(params.width),
+                              float(params.height), int(params.unified), int(n_samples),
+                              float(min_fraction), int(occlusion))
+    return _unpack(out)
+
+
+def _unpack(out: np.ndarray) -> BatchObservation:
+    n = out.shape[0]
+    return BatchObservation(
+        normals=out[:, 0:36].reshape(n, 6, 2, 3),
+        exists=out[:, 36:42] > 0.5,
+        visible_fraction=out[:, 42:54].reshape(n, 6, 2),
+        edge_visible=out[:, 54:66].reshape(n, 6, 2) > 0.5,
+        base_points=out[:, 66:84].reshape(n, 6, 3),
+        directions=out[:, 84:102].reshape(n, 6, 3),
+        lengths=out[:, 102:108],
+        visible_interval=out[:, 108:132].reshape(n, 6, 2, 2),
+        platform_centre=out[:, 132:135],
+        platform_normal=out[:, 135:138])
+
+
+def _observe_numpy(params: WorldParams, rows: np.ndarray, n_samples: int,
+                   min_fraction: float, occlusion: bool) -> BatchObservation:
+    """The numpy reference, item by item (no compiler)."""
+    from hexapod.kinematics import Transform
+    from vision.legs import observe_legs_numpy
+
+    out = []
+    for row in rows:
+        geometry = HexapodGeometry(base_points=row[12:30].reshape(6, 3),
+                                   platform_points=row[30:48].reshape(6, 3),
+                                   stroke=(1e-3, 1e3), leg_radius=float(row[48]))
+        cam = _camera_from_row(row, Transform(row[50:59].reshape(3, 3), row[59:62]),
+                               params)
+        lo = observe_legs_numpy(cam, geometry, row[0:9].reshape(3, 3), row[9:12],
+                                min_fraction, n_samples, float(row[49]), occlusion)
+        out.append(np.concatenate([
+            lo.normals.reshape(36), lo.exists.astype(float), lo.visible_fraction.reshape(12),
+            lo.edge_visible.reshape(12).astype(float), lo.base_points.reshape(18),
+            lo.directions.reshape(18), lo.lengths, lo.visible_interval.reshape(24),
+            lo.platform_centre, lo.platform_normal]))
+    return _unpack(np.array(out).reshape(len(rows), N_OUT))
+
+
+def _camera_from_row(row: np.ndarray, pose: Any, params: WorldParams) -> Any:
+    from vision.cameras import PerspectiveCamera, UnifiedCamera
+
+    c = row[62:74]
+    K = np.array([[c[0], c[1], c[2]], [0.0, c[3], c[4]], [0.0, 0.0, 1.0]])
+    extra: dict[str, Any] = {}
+    if np.any(c[6:11]):
+        extra["distortion"] = c[6:11] if not params.unified else c[6:10]
+    if params.unified:
+        return UnifiedCamera(K, float(c[5]), params.width, params.height, pose, **extra)
+    return PerspectiveCamera(K, params.width, params.height, pose, **extra)
