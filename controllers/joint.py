@@ -14,9 +14,11 @@ import numpy as np
 
 from controllers.base import (
     Command,
+    CommandBatch,
     Controller,
     ControllerContext,
     Observation,
+    ObservationBatch,
     usable_observation_problem,
 )
 from controllers.exceptions import ContextError
@@ -63,3 +65,37 @@ class JointSpaceController(Controller):
         lam = self.gain(float(np.abs(e).max()))
         return Command(-lam * e, error=e, error_norm=math.sqrt(float(e @ e)), rank=6,
                        condition=1.0, features_used=6)
+
+    def reset_batch(self, contexts: Sequence[ControllerContext]) -> None:
+        """Read ``goal.lengths`` of every trial (as :meth:`reset`)."""
+        stars = []
+        for ctx in contexts:
+            self.reset(ctx)
+            assert self._q_star is not None
+            stars.append(self._q_star)
+        self._b_q_star = np.array(stars).reshape(len(stars), 6)
+
+    def step_batch(self, observations: ObservationBatch) -> CommandBatch:
+        """``q_dot = -lambda (q - q*)`` for every row (a row with non-finite lengths or
+        time is refused, as by :meth:`step`)."""
+        obs = observations
+        n = len(obs)
+        q = np.asarray(obs.lengths, dtype=float)
+        e = q - self._b_q_star[np.asarray(obs.trials, dtype=int)]
+        velocities = np.zeros((n, 6))
+        norms = np.zeros(n)
+        reasons: list[str | None] = [None] * n
+        good = np.isfinite(q).all(axis=1) & np.isfinite(np.asarray(obs.t, dtype=float))
+        x = np.abs(e).max(axis=1)
+        for k in range(n):
+            if not good[k]:
+                cmd = self._refusal(obs, k)
+                norms[k], reasons[k] = cmd.error_norm, cmd.reason
+                continue
+            velocities[k] = -self.gain(float(x[k])) * e[k]
+            norms[k] = math.sqrt(float(e[k] @ e[k]))
+        return CommandBatch(velocities, norms, reasons)
+
+    def _refusal(self, obs: ObservationBatch, k: int) -> Command:
+        problem = usable_observation_problem(obs.item(k), self.features)
+        return Command.refuse(problem or "invalid observation")

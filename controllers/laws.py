@@ -41,6 +41,7 @@ from controllers.base import (
 )
 from controllers.exceptions import ContextError, OptionError
 from controllers.interaction import direction_interaction
+from controllers.law_batch import BatchedLaw
 from controllers.law_kernel import LawKernel, LawResult
 from controllers.law_tools import (
     INTERACTIONS,
@@ -65,7 +66,7 @@ __all__ = [
 log = logging.getLogger(__name__)
 
 
-class VisionLaw(Controller):
+class VisionLaw(BatchedLaw, Controller):
     """Base of the image-based laws: ``tau = -lambda L^+ e``, ``q_dot = J_inv tau``.
 
     Subclasses implement :meth:`_reset_features` (read the goal) and

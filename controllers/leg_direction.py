@@ -12,7 +12,7 @@ from collections.abc import Sequence
 
 import numpy as np
 
-from controllers.base import ControllerContext, Observation
+from controllers.base import ControllerContext, Observation, ObservationBatch
 from controllers.exceptions import ContextError
 from controllers.interaction import cross, direction_task
 from controllers.law_kernel import direction_kernel
@@ -72,6 +72,14 @@ class LegDirectionController(VisionLaw):
             self._kernel = kernel
             self._k_features = kernel.inputs["features"].reshape(6, 3)
             self._k_lengths = kernel.inputs["lengths"]
+
+    def _batch_features(self, obs: ObservationBatch) -> tuple[np.ndarray | None,
+                                                               np.ndarray | None]:
+        if obs.directions is None:
+            return None, None
+        n = len(obs)
+        vis = np.all(np.asarray(obs.direction_visible, dtype=bool).reshape(n, 6), axis=1)
+        return np.asarray(obs.directions, dtype=float).reshape(n, 18), vis
 
     def _load_kernel(self, obs: Observation, q: np.ndarray) -> bool:
         vis = obs.direction_visible

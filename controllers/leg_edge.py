@@ -22,7 +22,7 @@ from typing import Any
 
 import numpy as np
 
-from controllers.base import ControllerContext, Observation
+from controllers.base import ControllerContext, Observation, ObservationBatch
 from controllers.exceptions import ContextError
 from controllers.interaction import (
     cross,
@@ -239,6 +239,18 @@ class LegEdgeController(VisionLaw):
                 a, g = self._current_factors(feat, n, u, q)
                 L = 0.5 * (L + a[:, :, None] * g[:, None, :])
         return Stack(e, L, used, notes)
+
+    def _batch_features(self, obs: ObservationBatch) -> tuple[np.ndarray | None,
+                                                               np.ndarray | None]:
+        uses = {t.use_lines for t in self._trials}
+        if len(uses) != 1:
+            return None, None
+        arr = obs.lines if uses.pop() else obs.normals
+        if arr is None:
+            return None, None
+        n = len(obs)
+        vis = np.all(np.asarray(obs.edge_visible, dtype=bool).reshape(n, 12), axis=1)
+        return np.asarray(arr, dtype=float).reshape(n, 36), vis
 
     def _load_kernel(self, obs: Observation, q: np.ndarray) -> bool:
         vis = obs.edge_visible

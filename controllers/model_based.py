@@ -29,14 +29,21 @@ from typing import Any
 import casadi as ca
 import numpy as np
 
-from controllers.base import Command, Controller, ControllerContext, Observation
+from controllers.base import (
+    Command,
+    CommandBatch,
+    Controller,
+    ControllerContext,
+    Observation,
+    ObservationBatch,
+)
 from controllers.exceptions import ContextError
 from controllers.interaction import cross
 from controllers.law_kernel import jacobi_eigen
 from controllers.laws import Gain, check_number, check_observation
 from hexapod.compiled import CompiledFunction
 from hexapod.exceptions import HexapodError
-from hexapod.fk import forward_kinematics
+from hexapod.fk import forward_kinematics, forward_kinematics_batch
 from hexapod.kinematics import Transform, twist_to_frame
 from hexapod.se3 import log_so3
 from hexapod.workspace import home_pose
@@ -232,3 +239,69 @@ class ModelBasedController(Controller):
                  if self._camera_from_base is not None else None)
         return Command(qdot, twist=twist, error=e, error_norm=math.sqrt(float(e @ e)), rank=6,
                        condition=float(np.linalg.cond(J)), features_used=6, notes=notes)
+
+    # ------------------------------------------------------------------ batch
+    def reset_batch(self, contexts: Sequence[ControllerContext]) -> None:
+        """One instance per context (copies of this un-reset controller), reset with it."""
+        import copy
+
+        template = copy.deepcopy(self)
+        self._trials: list[ModelBasedController] = []
+        for ctx in contexts:
+            inst = copy.deepcopy(template)
+            inst.reset(ctx)
+            self._trials.append(inst)
+        trials = self._trials
+        self._b_R = np.array([t._R for t in trials])
+        self._b_t = np.array([t._t for t in trials])
+        self._b_A = np.array([t._A for t in trials])
+        self._b_E = np.array([t._E for t in trials])
+        self._b_geometry = trials[0].context.geometry if trials and trials[0].context else None
+        self._b_X = np.array([t._x for t in trials]) if trials else np.zeros((0, 75))
+        self._b_kernel = bool(trials) and all(t._kernel is not None for t in trials)
+
+    def step_batch(self, observations: ObservationBatch) -> CommandBatch:
+        """Forward kinematics of every row in one batch (warm-started per trial), the
+        compiled pose servo in one C loop; rows the batch cannot finish exactly (failed
+        forward kinematics, a half-turn error, a non-finite command) are stepped by
+        their own instance from their previous state."""
+        obs = observations
+        n = len(obs)
+        trials = np.asarray(obs.trials, dtype=int)
+        velocities = np.zeros((n, 6))
+        norms = np.zeros(n)
+        reasons: list[str | None] = [None] * n
+        slow = np.ones(n, dtype=bool)
+        q = np.asarray(obs.lengths, dtype=float)
+        with np.errstate(invalid="ignore"):
+            fast = (np.isfinite(q).all(axis=1) & np.isfinite(np.asarray(obs.t, dtype=float)))
+        rows = np.flatnonzero(fast) if self._b_kernel else np.zeros(0, dtype=int)
+        if len(rows) and self._b_geometry is not None:
+            tr = trials[rows]
+            sol = forward_kinematics_batch(self._b_geometry, q[rows], self._b_R[tr],
+                                           self._b_t[tr], tol=self.fk_tolerance,
+                                           max_iterations=self.fk_max_iterations,
+                                           base_points=self._b_A[tr],
+                                           platform_points=self._b_E[tr])
+            X = self._b_X[tr]
+            X[:, 0:9] = sol.rotations.reshape(-1, 9)
+            X[:, 9:12] = sol.translations
+            Y = pose_servo_kernel().batch(X)
+            ok = (sol.converged & (Y[:, _AT["near_pi"]] == 0.0)
+                  & (Y[:, _AT["check"]] == 0.0))
+            acc = np.flatnonzero(ok)
+            self._b_R[tr[acc]] = sol.rotations[acc]
+            self._b_t[tr[acc]] = sol.translations[acc]
+            velocities[rows[acc]] = Y[acc][:, _OUT["qdot"]]
+            norms[rows[acc]] = Y[acc, _AT["norm"]]
+            slow[rows[acc]] = False
+        for k in np.flatnonzero(slow):
+            t = int(trials[k])
+            inst = self._trials[t]
+            inst._R, inst._t = self._b_R[t].copy(), self._b_t[t].copy()
+            cmd = inst.step(obs.item(int(k)))
+            self._b_R[t], self._b_t[t] = inst._R, inst._t
+            velocities[k] = cmd.velocities
+            norms[k] = cmd.error_norm
+            reasons[k] = cmd.reason
+        return CommandBatch(velocities, norms, reasons)

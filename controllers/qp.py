@@ -327,6 +327,26 @@ class QPLaw(VisionLaw):
         self._vmax = float(context.max_speed if self.max_speed is None else self.max_speed)
         self.qp.reset()
 
+    def _batch_reset_extra(self) -> None:
+        trials = self._trials
+        self._b_lo = np.array([t._q_lo for t in trials])[:, None]
+        self._b_hi = np.array([t._q_hi for t in trials])[:, None]
+        self._b_inv_dt = np.array([1.0 / t._dt for t in trials])[:, None]
+        self._b_vmax = np.array([t._vmax for t in trials])[:, None]
+        self._b_shortcut = np.array([t.shortcut for t in trials], dtype=bool)
+
+    def _batch_accept(self, trials: np.ndarray, q: np.ndarray, qdot: np.ndarray
+                      ) -> np.ndarray:
+        """Rows whose unconstrained optimum clears every bound (as :meth:`_solve`)."""
+        vmax = self._b_vmax[trials]
+        inv_dt = self._b_inv_dt[trials]
+        lo = np.minimum(np.maximum((self._b_lo[trials] - q) * inv_dt, -vmax), vmax)
+        hi = np.minimum(np.maximum((self._b_hi[trials] - q) * inv_dt, -vmax), vmax)
+        tol2 = 2.0 * (1e-6 * vmax[:, 0])
+        with np.errstate(invalid="ignore"):
+            return (self._b_shortcut[trials] & ((qdot - lo).min(axis=1) > tol2)
+                    & ((hi - qdot).min(axis=1) > tol2))
+
     def _damping2(self) -> float:
         """The compiled core solves ``(L^T L + eps I) tau = -lambda L^T e``: the
         unconstrained optimum of the QP objective."""

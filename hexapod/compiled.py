@@ -155,6 +155,10 @@ class CompiledFunction:
         self._lib = lib
         self.compiled = True
 
+    def __deepcopy__(self, memo: dict[int, object]) -> CompiledFunction:
+        """Shared, not copied: the compiled code is immutable (callers copy inputs)."""
+        return self
+
     def single(self, x: np.ndarray) -> np.ndarray:
         """Evaluate on one input (n_in,) -> a fresh (n_out,) array."""
         if self._lib is None:

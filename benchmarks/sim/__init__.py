@@ -2,8 +2,9 @@
 the camera gives (:mod:`benchmarks.sim.sensors`) and the stepper that runs trials in
 lockstep (:mod:`benchmarks.sim.stepper`)."""
 
+from benchmarks.sim.book import MAX_REFUSED_STEPS, TrialResult
 from benchmarks.sim.sensors import GeometricSensor, make_sensor, trial_goal
-from benchmarks.sim.stepper import MAX_REFUSED_STEPS, TrialResult, run_trials
+from benchmarks.sim.stepper import run_trials
 from benchmarks.sim.world import (
     TrialSetup,
     World,

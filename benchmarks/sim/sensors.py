@@ -5,6 +5,7 @@ desired features taught at the goal (:func:`trial_goal`)."""
 from __future__ import annotations
 
 import logging
+from collections.abc import Callable
 from typing import Any
 
 import numpy as np
@@ -42,37 +43,9 @@ class GeometricSensor:
         """Batched measurement at true poses (N, 3, 3), (N, 3); one generator per item."""
         w = self.world
         lo = observe_legs(w.camera, w.geometry, rotations, translations)
-        normals = np.array(lo.normals, dtype=float)
-        visible = np.array(lo.edge_visible, dtype=bool)
-        noise = self.sc.noise
-        n = len(rngs)
-        if apply_noise and noise.model == "rotation" and noise.amplitude_deg > 0:
-            from vision.noise import rotation_noise
-
-            a = np.deg2rad(noise.amplitude_deg)
-            for k in range(n):
-                normals[k] = rotation_noise(normals[k], a, rngs[k])
-        elif apply_noise and noise.model == "pixel":
-            normals, visible = self._pixel_noise(lo, normals, visible, rngs)
-        if apply_noise and noise.dropout_probability > 0:
-            for k in range(n):
-                visible[k] &= rngs[k].uniform(size=(6, 2)) >= noise.dropout_probability
-        normals = np.where(visible[..., None], normals, np.nan)
-        lines = None
-        if self.perspective:
-            if noise.model == "pixel" and apply_noise:
-                # fitted with the estimated camera already; the image line is the true one
-                lines = self.est.normal_to_line(normals)
-            else:
-                true_camera: Any = w.camera
-                lines = true_camera.normal_to_line(normals)
-                normals = self.est.line_to_normal(lines)
-        both = np.asarray(visible.all(axis=-1))
-        with np.errstate(invalid="ignore"):
-            directions = directions_from_edges(normals)
-        directions = np.where(both[..., None], directions, np.nan)
-        return {"normals": normals, "lines": lines, "directions": directions,
-                "edge_visible": visible, "direction_visible": both}
+        return noisy_features(self.sc, lo.normals, lo.edge_visible, rngs, apply_noise,
+                              self.est, [(np.arange(len(rngs)), w.camera)],
+                              lambda k: (_take(lo, k), w.camera))
 
     def measure_goal(self, rotation: np.ndarray, translation: np.ndarray,
                      rng: np.random.Generator, frames: int = 1, apply_noise: bool = True
@@ -94,22 +67,71 @@ class GeometricSensor:
         m = self.measure(R, t, [rng] * frames, apply_noise=apply_noise)
         return _average_frames(m, self.est if self.perspective else None)
 
-    def _pixel_noise(self, lo: Any, normals: np.ndarray, visible: np.ndarray,
-                     rngs: list[np.random.Generator]) -> tuple[np.ndarray, np.ndarray]:
+
+def noisy_features(sc: Scenario, normals: np.ndarray, visible: np.ndarray,
+                   rngs: list[np.random.Generator], apply_noise: bool, estimated: Any,
+                   cameras: list[tuple[np.ndarray, Any]],
+                   item: Callable[[int], tuple[Any, Any]]) -> dict[str, Any]:
+    """The scenario's noise on true edges, and the features the controllers receive.
+
+    Rotation noise perturbs each true edge normal; the perspective image lines follow
+    from the noisy normals through the TRUE camera, and the normals the controller
+    receives are recomputed from those lines with the ESTIMATED intrinsics. Pixel noise
+    fits each normal on noisy edge points lifted with the estimated camera. Every row
+    draws from its own generator, so a row's features do not depend on the others.
+
+    Args:
+        sc: The scenario (its ``[noise]``).
+        normals: (n, 6, 2, 3) true edge normals; visible: (n, 6, 2).
+        rngs: One generator per row.
+        apply_noise: Whether the noise applies.
+        estimated: The estimated camera (the same for every row).
+        cameras: ``(rows, true camera)`` groups covering every row.
+        item: Row -> (its :class:`vision.legs.LegObservation`, its true camera), for the
+            pixel noise.
+
+    Returns:
+        ``normals``, ``lines`` (None for a unified camera), ``directions``,
+        ``edge_visible``, ``direction_visible``.
+    """
+    normals = np.array(normals, dtype=float)
+    visible = np.array(visible, dtype=bool)
+    noise = sc.noise
+    n = len(rngs)
+    if apply_noise and noise.model == "rotation" and noise.amplitude_deg > 0:
+        from vision.noise import rotation_noise
+
+        a = np.deg2rad(noise.amplitude_deg)
+        for k in range(n):
+            normals[k] = rotation_noise(normals[k], a, rngs[k])
+    elif apply_noise and noise.model == "pixel":
         from vision.pixel_measure import normals_from_noisy_pixels
 
-        noise = self.sc.noise
-        out = normals.copy()
-        vis = visible.copy()
-        for k in range(len(rngs)):  # one generator per trial: results do not depend on batching
-            sub = _take(lo, k)
-            n_k, v_k = normals_from_noisy_pixels(self.world.camera, self.est, sub,
-                                                 noise.pixel_sigma_px,
-                                                 max(int(noise.points_per_edge), 2), rngs[k],
-                                                 noise.outlier_fraction)
-            out[k] = n_k
-            vis[k] = v_k
-        return out, vis
+        for k in range(n):  # one generator per trial: results do not depend on batching
+            lo_k, cam_k = item(k)
+            normals[k], visible[k] = normals_from_noisy_pixels(
+                cam_k, estimated, lo_k, noise.pixel_sigma_px,
+                max(int(noise.points_per_edge), 2), rngs[k], noise.outlier_fraction)
+    if apply_noise and noise.dropout_probability > 0:
+        for k in range(n):
+            visible[k] &= rngs[k].uniform(size=(6, 2)) >= noise.dropout_probability
+    normals = np.where(visible[..., None], normals, np.nan)
+    lines = None
+    if estimated.kind == "perspective":
+        if noise.model == "pixel" and apply_noise:
+            # fitted with the estimated camera already; the image line is the true one
+            lines = estimated.normal_to_line(normals)
+        else:
+            lines = np.empty_like(normals)
+            for rows, cam in cameras:
+                lines[rows] = cam.normal_to_line(normals[rows])
+            normals = estimated.line_to_normal(lines)
+    both = np.asarray(visible.all(axis=-1))
+    with np.errstate(invalid="ignore"):
+        directions = directions_from_edges(normals)
+    directions = np.where(both[..., None], directions, np.nan)
+    return {"normals": normals, "lines": lines, "directions": directions,
+            "edge_visible": visible, "direction_visible": both}
 
 
 def _take(lo: Any, k: int) -> Any:

@@ -17,13 +17,12 @@ from __future__ import annotations
 
 import logging
 import time
-import traceback
 from collections.abc import Callable
-from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
 
+from benchmarks.sim.book import Book, TrialResult, failure_row
 from benchmarks.sim.sensors import make_sensor, trial_goal
 from benchmarks.sim.world import (
     TrialSetup,
@@ -37,23 +36,9 @@ from benchmarks.study.scenario import Scenario
 from controllers.base import Command, ControllerContext, Observation, registry
 from hexapod import HexapodGeometry, forward_kinematics_batch
 from hexapod.backends.base import Backend, clamp_velocities
-from hexapod.exceptions import HexapodError
 from hexapod.se3 import pose_error
-from vision.exceptions import VisionError
 
 log = logging.getLogger(__name__)
-
-
-#: Consecutive refused steps after which a trial is declared failed.
-MAX_REFUSED_STEPS = 25
-
-
-@dataclass
-class TrialResult:
-    """Outcome of one trial (one row of ``results.jsonl``) and its time series."""
-
-    row: dict[str, Any]
-    series: dict[str, np.ndarray] | None = None
 
 
 def run_trials(
@@ -97,7 +82,7 @@ def run_trials(
         try:
             setups.append(make_trial(sc, k, nominal, camera, calibrate))
         except Exception as exc:  # a crash in one trial is that trial's failure
-            results[k] = TrialResult(_failure_row(sc, spec, k, exc))
+            results[k] = TrialResult(failure_row(sc, spec, k, exc))
     shared = [s for s in setups if s.shared and backend_factory is None]
     single = [s for s in setups if not (s.shared and backend_factory is None)]
     groups = ([shared] if shared else []) + [[s] for s in single]
@@ -109,7 +94,7 @@ def run_trials(
                 results[res.row["trial"]] = res
         except Exception as exc:
             if len(group) == 1:
-                results[group[0].trial] = TrialResult(_failure_row(sc, spec, group[0].trial,
+                results[group[0].trial] = TrialResult(failure_row(sc, spec, group[0].trial,
                                                                    exc))
             else:  # isolate the failing trial(s): run them one by one
                 for s in group:
@@ -119,7 +104,7 @@ def run_trials(
                                          backend_factory, on_step, single_opened,
                                          sensor_factory)[0]
                     except Exception as exc2:
-                        res = TrialResult(_failure_row(sc, spec, s.trial, exc2))
+                        res = TrialResult(failure_row(sc, spec, s.trial, exc2))
                     finally:
                         _close_all(single_opened)
                     results[s.trial] = res
@@ -139,40 +124,6 @@ def _close_all(backends: list[Backend]) -> None:
             b.close()
 
 
-def _base_row(sc: Scenario, spec: Any, trial: int) -> dict[str, Any]:
-    info = None
-    try:
-        info = registry.source(spec.name)
-    except Exception:  # reported as the trial failure below
-        info = None
-    row: dict[str, Any] = {
-        "scenario": sc.name,
-        "controller": spec.label,
-        "controller_name": spec.name,
-        "controller_package": info.package if info else None,
-        "controller_version": info.version if info else None,
-        "trial": int(trial),
-    }
-    for key, value in sc.sweep.items():
-        row[key.replace(".", "_").replace("calibration_error_", "calib_")] = value
-    return row
-
-
-def _failure_row(sc: Scenario, spec: Any, trial: int, exc: BaseException) -> dict[str, Any]:
-    row = _base_row(sc, spec, trial)
-    row.update({
-        "converged": False, "steps": 0, "final_position_error_mm": None,
-        "final_orientation_error_deg": None, "stroke_violations": 0, "step_time_us": None,
-        "failure": f"{type(exc).__name__}: {exc}",
-    })
-    if isinstance(exc, HexapodError | VisionError):  # the user's data: the message says it
-        log.warning("trial %s/%s/%d failed: %s", sc.name, spec.label, trial, exc)
-    else:
-        log.warning("trial %s/%s/%d failed: %s\n%s", sc.name, spec.label, trial, exc,
-                    traceback.format_exc())
-    return row
-
-
 def _run_group(sc: Scenario, controller_index: int, group: list[TrialSetup],
                record_trials: int,
                backend_factory: Callable[[HexapodGeometry, np.ndarray], Backend] | None,
@@ -180,21 +131,18 @@ def _run_group(sc: Scenario, controller_index: int, group: list[TrialSetup],
                opened: list[Backend] | None = None,
                sensor_factory: Callable[[Scenario, TrialSetup], Any] | None = None
                ) -> list[TrialResult]:
-    """Run trials sharing one world in lockstep (backends it opens go to ``opened``)."""
+    """Run trials sharing one world in lockstep, one controller object per trial (the
+    per-trial path; backends it opens go to ``opened``)."""
     if opened is None:
         opened = []
     spec = sc.controllers[controller_index]
-    n = len(group)
     world = group[0].world
     g = world.geometry
     sensor = (sensor_factory or make_sensor)(sc, group[0])
     controllers = []
     for s in group:
         ctrl = registry.create(spec.name, **spec.options)
-        goal = trial_goal(sensor, s, sc)
-        ctx = ControllerContext(base_points=s.base_points, geometry=s.nominal_geometry,
-                                camera=s.estimated_camera, dt=sc.dt, goal=goal)
-        ctrl.reset(ctx)
+        ctrl.reset(trial_context(sc, s, trial_goal(sensor, s, sc)))
         controllers.append(ctrl)
     rngs = [trial_rng(sc.seed, s.trial, 1) for s in group]
     backends = None
@@ -209,49 +157,14 @@ def _run_group(sc: Scenario, controller_index: int, group: list[TrialSetup],
     R_goal = np.array([s.goal_rotation for s in group])
     t_goal = np.array([s.goal_translation for s in group])
     offsets = world.joint_offsets
-    pos_tol = 1e-3 * sc.task.position_tolerance_mm
-    ori_tol = np.deg2rad(sc.task.orientation_tolerance_deg)
-    active = np.ones(n, dtype=bool)
-    steps = np.zeros(n, dtype=int)
-    settled = np.zeros(n, dtype=int)
-    last_bad = np.full(n, -1)
-    tail_start = sc.task.max_steps - max(1, sc.task.max_steps // 5)
-    tail_pos: list[list[float]] = [[] for _ in range(n)]
-    tail_ori: list[list[float]] = [[] for _ in range(n)]
-    converged = np.zeros(n, dtype=bool)
-    violations = np.zeros(n, dtype=int)
-    refused = np.zeros(n, dtype=int)
-    failure: list[str | None] = [None] * n
-    step_times: list[list[float]] = [[] for _ in range(n)]
-    rtts: list[list[float]] = [[] for _ in range(n)]
-    missed = np.zeros(n, dtype=int)
-    recording = [s.trial < record_trials for s in group]
-    series: list[dict[str, list[Any]]] = [
-        {k: [] for k in ("t", "lengths", "rotations", "translations", "edge_visible",
-                         "error_norm", "position_error", "orientation_error", "velocities")}
-        if rec else {} for rec in recording
-    ]
+    book = Book.new(sc, group, record_trials)
     dt = sc.dt
     for step in range(sc.task.max_steps + 1):
-        idx = np.flatnonzero(active)
+        idx = np.flatnonzero(book.active)
         if len(idx) == 0:
             break
         dp, da = pose_error(R[idx], t[idx], R_goal[idx], t_goal[idx])
-        ok = (dp < pos_tol) & (da < ori_tol)
-        settled[idx] = np.where(ok, settled[idx] + 1, 0)
-        last_bad[idx[~ok]] = step
-        if sc.task.fixed_duration and step > tail_start:
-            for j, k in enumerate(idx):
-                tail_pos[k].append(float(dp[j]))
-                tail_ori[k].append(float(da[j]))
-        if sc.task.fixed_duration:
-            done = np.full(len(idx), step == sc.task.max_steps)
-            converged[idx] = ok
-        else:
-            done = settled[idx] >= sc.task.settle_steps
-            converged[idx[done]] = True
-            if step == sc.task.max_steps:
-                done[:] = True
+        done = book.check(sc, step, idx, dp, da)
         meas = sensor.measure(R[idx], t[idx], [rngs[k] for k in idx])
         if on_step is not None:
             for j, k in enumerate(idx):
@@ -270,43 +183,23 @@ def _run_group(sc: Scenario, controller_index: int, group: list[TrialSetup],
             if not done[j]:
                 t0 = time.perf_counter()
                 cmd = controllers[k].step(obs)
-                step_times[k].append(time.perf_counter() - t0)
-                vel = np.asarray(cmd.velocities, dtype=float)
-                if vel.shape != (6,) or not np.all(np.isfinite(vel)):
-                    failure[k] = f"controller returned an invalid command {vel!r}"
+                book.step_times[k].append(time.perf_counter() - t0)
+                if book.command(int(k), cmd.velocities, cmd.reason):
                     done[j] = True
                 else:
-                    v_cmd[j] = vel
-                if cmd.reason is not None:
-                    refused[k] += 1
-                    if refused[k] >= MAX_REFUSED_STEPS:
-                        failure[k] = f"controller refused to move: {cmd.reason}"
-                        done[j] = True
-                else:
-                    refused[k] = 0
-            if recording[k]:
-                ser = series[k]
-                ser["t"].append(step * dt)
-                ser["lengths"].append(q[k].copy())
-                ser["rotations"].append(R[k].copy())
-                ser["translations"].append(t[k].copy())
-                ser["edge_visible"].append(meas["edge_visible"][j].copy())
-                ser["error_norm"].append(cmd.error_norm if cmd is not None else np.nan)
-                ser["position_error"].append(dp[j])
-                ser["orientation_error"].append(da[j])
-                ser["velocities"].append(v_cmd[j].copy())
+                    v_cmd[j] = cmd.velocities
+            if book.recording[k]:
+                book.record(int(k), step * dt, q[k], R[k], t[k], meas["edge_visible"][j],
+                            cmd.error_norm if cmd is not None else np.nan, dp[j], da[j],
+                            v_cmd[j])
         finished = idx[done]
-        active[finished] = False
-        for k in finished:
-            steps[k] = step
+        book.active[finished] = False
+        book.steps[finished] = step
         run = idx[~done]
         if len(run) == 0:
             continue
         v_run = v_cmd[~done]
-        # a stroke violation: the (speed-limited) command would leave the stroke this period
-        q_next = q[run] + np.clip(v_run, -g.max_speed, g.max_speed) * dt
-        violations[run] += np.any((q_next < g.stroke[0] - 1e-9) | (q_next > g.stroke[1] + 1e-9),
-                                  axis=1)
+        book.violations[run] += stroke_violations(q[run], v_run, dt, g.stroke, g.max_speed)
         if backends is None:
             vc, _ = clamp_velocities(q[run], v_run, dt, g.stroke, g.max_speed)
             q[run] = np.clip(q[run] + vc * dt, *g.stroke)
@@ -314,53 +207,29 @@ def _run_group(sc: Scenario, controller_index: int, group: list[TrialSetup],
             for j, k in enumerate(run):
                 bs = backends[k].step(v_run[j], dt)
                 q[k] = bs.lengths - offsets
-                rtts[k].append(bs.round_trip_s)
-                missed[k] += int(bs.missed_period)
+                book.rtts[k].append(bs.round_trip_s)
+                book.missed[k] += int(bs.missed_period)
         sol = forward_kinematics_batch(g, q[run], R[run], t[run])
         bad = ~sol.converged
         if np.any(bad):
             for k in run[bad]:
-                failure[k] = "forward kinematics of the true robot failed (singularity?)"
-                active[k] = False
-                steps[k] = step + 1
+                book.failure[k] = "forward kinematics of the true robot failed (singularity?)"
+                book.active[k] = False
+                book.steps[k] = step + 1
         okk = run[~bad]
         R[okk] = sol.rotations[~bad]
         t[okk] = sol.translations[~bad]
-    dp, da = pose_error(R, t, R_goal, t_goal)
-    out = []
-    for m, s in enumerate(group):
-        row = _base_row(sc, spec, s.trial)
-        fail = failure[m]
-        if fail is None and not converged[m]:
-            fail = f"not converged within {sc.task.max_steps} steps"
-        settle = int(last_bad[m] + 1) if sc.task.fixed_duration else int(steps[m])
-        row.update({
-            "converged": bool(converged[m]),
-            "steps": settle,
-            "final_position_error_mm": float(dp[m] * 1e3),
-            "final_orientation_error_deg": float(np.rad2deg(da[m])),
-            "stroke_violations": int(violations[m]),
-            "step_time_us": float(np.median(step_times[m]) * 1e6) if step_times[m] else None,
-            "failure": None if converged[m] else fail,
-        })
-        if tail_pos[m]:
-            # the seeds' "median positioning error of the convergence tail": the last 20 %
-            row["tail_position_error_mm"] = float(np.median(tail_pos[m]) * 1e3)
-            row["tail_orientation_error_deg"] = float(np.rad2deg(np.median(tail_ori[m])))
-        times = getattr(sensor, "detect_times", None)
-        if times:
-            row["detect_time_ms"] = float(np.median(times) * 1e3)
-        if rtts[m]:
-            arr = np.array(rtts[m]) * 1e3
-            row["rtt_median_ms"] = float(np.median(arr))
-            row["rtt_p99_ms"] = float(np.percentile(arr, 99))
-            row["missed_periods"] = int(missed[m])
-        for key, value in s.calibration.items():
-            row[f"calibration_{key}"] = value
-        ser_out = None
-        if recording[m]:
-            ser_out = {key: np.array(v) for key, v in series[m].items()}
-            ser_out["goal_rotation"] = s.goal_rotation
-            ser_out["goal_translation"] = s.goal_translation
-        out.append(TrialResult(row, ser_out))
-    return out
+    return book.results(sc, spec, group, R, t, getattr(sensor, "detect_times", None))
+
+
+def trial_context(sc: Scenario, setup: TrialSetup, goal: Any) -> ControllerContext:
+    """What the controllers of a trial are told: the estimated parameters and the goal."""
+    return ControllerContext(base_points=setup.base_points, geometry=setup.nominal_geometry,
+                             camera=setup.estimated_camera, dt=sc.dt, goal=goal)
+
+
+def stroke_violations(q: np.ndarray, v: np.ndarray, dt: float,
+                      stroke: tuple[float, float], max_speed: float) -> np.ndarray:
+    """(n,) 1 where the (speed-limited) command would leave the stroke this period."""
+    q_next = q + np.clip(v, -max_speed, max_speed) * dt
+    return np.any((q_next < stroke[0] - 1e-9) | (q_next > stroke[1] + 1e-9), axis=1)

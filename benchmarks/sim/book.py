@@ -1,0 +1,213 @@
+"""The bookkeeping of a group of trials stepped together, shared by both engines: the
+convergence test of every period, the failures, timings and recorded series, and the
+result rows (one row of ``results.jsonl`` per trial)."""
+
+from __future__ import annotations
+
+import logging
+import traceback
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from benchmarks.sim.world import TrialSetup
+from benchmarks.study.scenario import Scenario
+from controllers.base import registry
+from hexapod.exceptions import HexapodError
+from hexapod.se3 import pose_error
+from vision.exceptions import VisionError
+
+log = logging.getLogger(__name__)
+
+#: Consecutive refused steps after which a trial is declared failed.
+MAX_REFUSED_STEPS = 25
+#: The recorded time series of a trial.
+SERIES_KEYS = ("t", "lengths", "rotations", "translations", "edge_visible", "error_norm",
+               "position_error", "orientation_error", "velocities")
+
+
+@dataclass
+class TrialResult:
+    """Outcome of one trial (one row of ``results.jsonl``) and its time series."""
+
+    row: dict[str, Any]
+    series: dict[str, np.ndarray] | None = None
+
+
+@dataclass
+class Book:
+    """Per-trial bookkeeping arrays of a group of ``n`` trials (index = row of the group)."""
+
+    n: int
+    pos_tol: float
+    ori_tol: float
+    tail_start: int
+    active: np.ndarray
+    steps: np.ndarray
+    settled: np.ndarray
+    last_bad: np.ndarray
+    converged: np.ndarray
+    violations: np.ndarray
+    refused: np.ndarray
+    missed: np.ndarray
+    recording: list[bool]
+    failure: list[str | None] = field(default_factory=list)
+    tail_pos: list[list[float]] = field(default_factory=list)
+    tail_ori: list[list[float]] = field(default_factory=list)
+    step_times: list[list[float]] = field(default_factory=list)
+    rtts: list[list[float]] = field(default_factory=list)
+    series: list[dict[str, list[Any]]] = field(default_factory=list)
+
+    @classmethod
+    def new(cls, sc: Scenario, group: list[TrialSetup], record_trials: int) -> Book:
+        """Fresh bookkeeping of a group."""
+        n = len(group)
+        recording = [s.trial < record_trials for s in group]
+        return cls(
+            n=n, pos_tol=1e-3 * sc.task.position_tolerance_mm,
+            ori_tol=float(np.deg2rad(sc.task.orientation_tolerance_deg)),
+            tail_start=sc.task.max_steps - max(1, sc.task.max_steps // 5),
+            active=np.ones(n, dtype=bool), steps=np.zeros(n, dtype=int),
+            settled=np.zeros(n, dtype=int), last_bad=np.full(n, -1),
+            converged=np.zeros(n, dtype=bool), violations=np.zeros(n, dtype=int),
+            refused=np.zeros(n, dtype=int), missed=np.zeros(n, dtype=int),
+            recording=recording, failure=[None] * n,
+            tail_pos=[[] for _ in range(n)], tail_ori=[[] for _ in range(n)],
+            step_times=[[] for _ in range(n)], rtts=[[] for _ in range(n)],
+            series=[{k: [] for k in SERIES_KEYS} if rec else {} for rec in recording])
+
+    def check(self, sc: Scenario, step: int, idx: np.ndarray, dp: np.ndarray,
+              da: np.ndarray) -> np.ndarray:
+        """The convergence test of one period for the active rows ``idx`` (pose errors
+        ``dp`` [m], ``da`` [rad]); returns which of them are done."""
+        ok = (dp < self.pos_tol) & (da < self.ori_tol)
+        self.settled[idx] = np.where(ok, self.settled[idx] + 1, 0)
+        self.last_bad[idx[~ok]] = step
+        if sc.task.fixed_duration and step > self.tail_start:
+            for j, k in enumerate(idx):
+                self.tail_pos[k].append(float(dp[j]))
+                self.tail_ori[k].append(float(da[j]))
+        if sc.task.fixed_duration:
+            done = np.full(len(idx), step == sc.task.max_steps)
+            self.converged[idx] = ok
+        else:
+            done = self.settled[idx] >= sc.task.settle_steps
+            self.converged[idx[done]] = True
+            if step == sc.task.max_steps:
+                done[:] = True
+        return done
+
+    def command(self, k: int, velocities: np.ndarray, reason: str | None) -> bool:
+        """Account one command of row ``k``; returns True when the trial fails with it
+        (an invalid command, or too many refusals in a row)."""
+        vel = np.asarray(velocities, dtype=float)
+        failed = False
+        if vel.shape != (6,) or not np.all(np.isfinite(vel)):
+            self.failure[k] = f"controller returned an invalid command {vel!r}"
+            failed = True
+        if reason is not None:
+            self.refused[k] += 1
+            if self.refused[k] >= MAX_REFUSED_STEPS:
+                self.failure[k] = f"controller refused to move: {reason}"
+                failed = True
+        else:
+            self.refused[k] = 0
+        return failed
+
+    def record(self, k: int, t: float, q: np.ndarray, R: np.ndarray, tr: np.ndarray,
+               visible: np.ndarray, error_norm: float, dp: float, da: float,
+               velocities: np.ndarray) -> None:
+        """Append one period to row ``k``'s series."""
+        ser = self.series[k]
+        ser["t"].append(t)
+        ser["lengths"].append(q.copy())
+        ser["rotations"].append(R.copy())
+        ser["translations"].append(tr.copy())
+        ser["edge_visible"].append(np.array(visible, copy=True))
+        ser["error_norm"].append(error_norm)
+        ser["position_error"].append(dp)
+        ser["orientation_error"].append(da)
+        ser["velocities"].append(velocities.copy())
+
+    def results(self, sc: Scenario, spec: Any, group: list[TrialSetup], R: np.ndarray,
+                t: np.ndarray, detect_times: list[float] | None = None) -> list[TrialResult]:
+        """The result rows (and recorded series) of the group at the final poses."""
+        R_goal = np.array([s.goal_rotation for s in group])
+        t_goal = np.array([s.goal_translation for s in group])
+        dp, da = pose_error(R, t, R_goal, t_goal)
+        out = []
+        for m, s in enumerate(group):
+            row = base_row(sc, spec, s.trial)
+            fail = self.failure[m]
+            conv = bool(self.converged[m])
+            if fail is None and not conv:
+                fail = f"not converged within {sc.task.max_steps} steps"
+            settle = int(self.last_bad[m] + 1) if sc.task.fixed_duration else int(self.steps[m])
+            times = self.step_times[m]
+            row.update({
+                "converged": conv,
+                "steps": settle,
+                "final_position_error_mm": float(dp[m] * 1e3),
+                "final_orientation_error_deg": float(np.rad2deg(da[m])),
+                "stroke_violations": int(self.violations[m]),
+                "step_time_us": float(np.median(times) * 1e6) if times else None,
+                "failure": None if conv else fail,
+            })
+            if self.tail_pos[m]:
+                # the seeds' "median positioning error of the convergence tail": the last 20 %
+                row["tail_position_error_mm"] = float(np.median(self.tail_pos[m]) * 1e3)
+                row["tail_orientation_error_deg"] = float(np.rad2deg(np.median(
+                    self.tail_ori[m])))
+            if detect_times:
+                row["detect_time_ms"] = float(np.median(detect_times) * 1e3)
+            if self.rtts[m]:
+                arr = np.array(self.rtts[m]) * 1e3
+                row["rtt_median_ms"] = float(np.median(arr))
+                row["rtt_p99_ms"] = float(np.percentile(arr, 99))
+                row["missed_periods"] = int(self.missed[m])
+            for key, value in s.calibration.items():
+                row[f"calibration_{key}"] = value
+            ser_out = None
+            if self.recording[m]:
+                ser_out = {key: np.array(v) for key, v in self.series[m].items()}
+                ser_out["goal_rotation"] = s.goal_rotation
+                ser_out["goal_translation"] = s.goal_translation
+            out.append(TrialResult(row, ser_out))
+        return out
+
+
+def base_row(sc: Scenario, spec: Any, trial: int) -> dict[str, Any]:
+    """The identity of a result row: scenario, controller (with its package), trial, sweep."""
+    info = None
+    try:
+        info = registry.source(spec.name)
+    except Exception:  # reported as the trial failure below
+        info = None
+    row: dict[str, Any] = {
+        "scenario": sc.name,
+        "controller": spec.label,
+        "controller_name": spec.name,
+        "controller_package": info.package if info else None,
+        "controller_version": info.version if info else None,
+        "trial": int(trial),
+    }
+    for key, value in sc.sweep.items():
+        row[key.replace(".", "_").replace("calibration_error_", "calib_")] = value
+    return row
+
+
+def failure_row(sc: Scenario, spec: Any, trial: int, exc: BaseException) -> dict[str, Any]:
+    """The row of a trial that crashed (the crash is the trial's failure)."""
+    row = base_row(sc, spec, trial)
+    row.update({
+        "converged": False, "steps": 0, "final_position_error_mm": None,
+        "final_orientation_error_deg": None, "stroke_violations": 0, "step_time_us": None,
+        "failure": f"{type(exc).__name__}: {exc}",
+    })
+    if isinstance(exc, HexapodError | VisionError):  # the user's data: the message says it
+        log.warning("trial %s/%s/%d failed: %s", sc.name, spec.label, trial, exc)
+    else:
+        log.warning("trial %s/%s/%d failed: %s\n%s", sc.name, spec.label, trial, exc,
+                    traceback.format_exc())
+    return row
