@@ -95,6 +95,16 @@ def cmd_run(args: argparse.Namespace) -> int:
         return _run_locked(scenarios, out, args)
 
 
+def auto_chunk(scenarios: list[Any], workers: int, backend: str) -> int:
+    """Trials per work unit: large enough for the batched engine to step many trials as
+    arrays, small enough to keep every worker busy and the results streaming (results do
+    not depend on it)."""
+    if backend != "sim":
+        return 25
+    most = max((sc.trials for sc in scenarios), default=1)
+    return int(min(1000, max(25, -(-most // (4 * max(1, workers))))))
+
+
 def _run_locked(scenarios: list[Any], out: Path, args: argparse.Namespace) -> int:
     from benchmarks.study.report import META_FILE, write_report
     from benchmarks.study.runner import completed_keys, plan, run_units
@@ -104,7 +114,10 @@ def _run_locked(scenarios: list[Any], out: Path, args: argparse.Namespace) -> in
         raise BenchmarkError(f"{out}: already holds results; use --resume to finish that run "
                              "or choose another --out")
     done = completed_keys(out) if args.resume else set()
-    units = plan(scenarios, args.chunk, args.record, done, args.backend)
+    chunk = args.chunk or auto_chunk(scenarios, args.workers, args.backend)
+    if chunk < 1:
+        raise BenchmarkError(f"--chunk must be >= 1, got {chunk}")
+    units = plan(scenarios, chunk, args.record, done, args.backend)
     total = sum(len(u.trials) for u in units)
     con = _console()
     if done:
@@ -413,7 +426,9 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--workers", type=int, default=1, help="processes (default 1)")
     s.add_argument("--dask", metavar="ADDRESS", help="Dask scheduler address, or 'local'")
     s.add_argument("--resume", action="store_true", help="finish an interrupted run")
-    s.add_argument("--chunk", type=int, default=25, help="trials per work unit")
+    s.add_argument("--chunk", type=int, default=None,
+                   help="trials per work unit (default: a quarter of a worker's share of "
+                        "the largest study, between 25 and 1000; 25 with a real-time backend)")
     s.add_argument("--record", type=int, default=2,
                    help="keep the time series of the first K trials of each controller")
     s.add_argument("--backend", default="sim",

@@ -46,6 +46,8 @@ from hexapod.compiled import CompiledFunction
 #: Cyclic Jacobi sweeps of the 6 x 6 eigen-decomposition (quadratic convergence:
 #: 5 to 6 reach double precision on the matrices of the laws; 8 leave a margin).
 JACOBI_SWEEPS = 8
+#: Sweeps of the laws' eigenvalues (rank and condition only; see :func:`law_tail`).
+LAW_SWEEPS = 6
 
 #: Law parameters after the feature block: gain ``(lambda0, lambda_inf, lambda0')``,
 #: squared threshold, squared damping (or the QP regularization).
@@ -72,6 +74,36 @@ def _offsets(fields: Sequence[tuple[str, int]], start: int = 0) -> dict[str, sli
 
 
 # --------------------------------------------------------------------------- expressions
+def cholesky_solve(M: list[list[ca.SX]], rhs: list[ca.SX]) -> list[ca.SX]:
+    """``M^-1 rhs`` for a symmetric positive definite 6 x 6 ``M`` (unrolled Cholesky;
+    NaN when ``M`` is not positive definite)."""
+    n = len(rhs)
+    L: list[list[ca.SX]] = [[ca.SX(0.0)] * n for _ in range(n)]
+    for j in range(n):
+        d = M[j][j]
+        for k in range(j):
+            d = d - L[j][k] * L[j][k]
+        L[j][j] = ca.sqrt(d)
+        for i in range(j + 1, n):
+            v = M[i][j]
+            for k in range(j):
+                v = v - L[i][k] * L[j][k]
+            L[i][j] = v / L[j][j]
+    z: list[ca.SX] = []
+    for i in range(n):
+        v = rhs[i]
+        for k in range(i):
+            v = v - L[i][k] * z[k]
+        z.append(v / L[i][i])
+    sol: list[ca.SX] = [ca.SX(0.0)] * n
+    for i in reversed(range(n)):
+        v = z[i]
+        for k in range(i + 1, n):
+            v = v - L[k][i] * sol[k]
+        sol[i] = v / L[i][i]
+    return sol
+
+
 def _unit(v: ca.SX) -> ca.SX:
     return v / ca.sqrt(ca.dot(v, v))
 
@@ -81,11 +113,18 @@ def _skew(v: ca.SX) -> ca.SX:
                       ca.horzcat(-v[1], v[0], 0))
 
 
-def jacobi_eigen(N: ca.SX, sweeps: int = JACOBI_SWEEPS) -> tuple[list[ca.SX], list[list[ca.SX]]]:
+def jacobi_eigen(N: ca.SX, sweeps: int = JACOBI_SWEEPS, vectors: bool = True
+                 ) -> tuple[list[ca.SX], list[list[ca.SX]]]:
     """Eigenvalues and eigenvectors of a symmetric 6 x 6 SX matrix (cyclic Jacobi, unrolled).
 
     Each rotation zeroes ``a_pq`` (Golub and Van Loan, ``sym.schur2``); a rotation
     whose ``a_pq`` is already zero is skipped without dividing by it.
+
+    Args:
+        N: The matrix.
+        sweeps: Cyclic sweeps (unrolled).
+        vectors: Accumulate the eigenvectors (False: the identity is returned for
+            ``V``, and the expression is about a third smaller).
 
     Returns:
         The eigenvalues ``w`` (6, unsorted) and ``V`` as rows ``V[k][j]`` (column
@@ -115,6 +154,8 @@ def jacobi_eigen(N: ca.SX, sweeps: int = JACOBI_SWEEPS) -> tuple[list[ca.SX], li
                     a[k][q] = a[q][k] = s * akp + c * akq
                 a[p][p], a[q][q] = app, aqq
                 a[p][q] = a[q][p] = ca.SX(0.0)
+                if not vectors:
+                    continue
                 for k in range(n):
                     vkp, vkq = V[k][p], V[k][q]
                     V[k][p] = c * vkp - s * vkq
@@ -142,8 +183,11 @@ def law_tail(e: ca.SX, N: ca.SX, b: ca.SX, directions: list[ca.SX], base_points:
     x = ca.mmax(ca.fabs(e))
     d = l0 - linf
     lam = ca.if_else(d == 0, l0, d * ca.exp(((-slope) * x) / ca.if_else(d == 0, 1.0, d)) + linf)
-    # Thresholded, damped pseudo-inverse from the eigen-decomposition (solve_normal).
-    w, V = jacobi_eigen(N)
+    # Rank and condition from the eigenvalues (solve_normal's threshold). The command
+    # is needed only at full rank (the laws refuse below it), where the thresholded,
+    # damped pseudo-inverse sum_j (v_j^T b) / (w_j + d2) v_j is (N + d2 I)^-1 b: a
+    # Cholesky solve, without the eigenvectors.
+    w, _ = jacobi_eigen(N, LAW_SWEEPS, vectors=False)
     w_max = w[0]
     w_min = w[0]
     for j in range(1, 6):
@@ -156,15 +200,11 @@ def law_tail(e: ca.SX, N: ca.SX, b: ca.SX, directions: list[ca.SX], base_points:
         rank = rank + ca.if_else(kept, 1.0, 0.0)
     cond = ca.if_else(ca.logic_and(positive, w_min > 0),
                       ca.sqrt(w_max / ca.if_else(w_min > 0, w_min, 1.0)), ca.inf)
-    sol = [ca.SX(0.0) for _ in range(6)]
-    for j in range(6):
-        cj = ca.SX(0.0)
-        for k in range(6):
-            cj = cj + V[k][j] * b[k]
-        cj = ca.if_else(keep[j], cj / ca.if_else(keep[j], w[j] + d2, 1.0), 0.0)
-        for k in range(6):
-            sol[k] = sol[k] + V[k][j] * cj
-    tau = ca.vertcat(*sol) * (-lam)
+    full = rank == 6.0
+    M = [[ca.if_else(full, N[i, j] + (d2 if i == j else 0.0), 1.0 if i == j else 0.0)
+          for j in range(6)] for i in range(6)]
+    sol = cholesky_solve(M, [b[i] for i in range(6)])
+    tau = ca.vertcat(*[ca.if_else(full, x, 0.0) for x in sol]) * (-lam)
     # Inverse Jacobian rows [u_i^T, (A_i x u_i)^T] and q_dot = J_inv tau.
     J = ca.vertcat(*[ca.horzcat(u.T, ca.cross(A, u).T)
                      for u, A in zip(directions, base_points, strict=True)])

@@ -240,12 +240,17 @@ class LegEdgeController(VisionLaw):
                 L = 0.5 * (L + a[:, :, None] * g[:, None, :])
         return Stack(e, L, used, notes)
 
+    def _batch_reset_extra(self) -> None:
+        super()._batch_reset_extra()
+        uses = {t.use_lines for t in self._trials}
+        self._batch_uses_lines: bool | None = uses.pop() if len(uses) == 1 else None
+
     def _batch_features(self, obs: ObservationBatch) -> tuple[np.ndarray | None,
                                                                np.ndarray | None]:
-        uses = {t.use_lines for t in self._trials}
-        if len(uses) != 1:
+        uses = self._batch_uses_lines
+        if uses is None:
             return None, None
-        arr = obs.lines if uses.pop() else obs.normals
+        arr = obs.lines if uses else obs.normals
         if arr is None:
             return None, None
         n = len(obs)

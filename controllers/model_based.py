@@ -93,7 +93,7 @@ def _pose_servo_function() -> ca.Function:
         rows.append(ca.horzcat(u.T, ca.cross(A, u).T))
     J = ca.vertcat(*rows)
     qdot = J @ tau
-    wj, _ = jacobi_eigen(J.T @ J)
+    wj, _ = jacobi_eigen(J.T @ J, vectors=False)
     w_max, w_min = wj[0], wj[0]
     for k in range(1, 6):
         w_max = ca.fmax(w_max, wj[k])

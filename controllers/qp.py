@@ -40,7 +40,7 @@ import scipy.sparse as sp
 
 from controllers.base import ControllerContext
 from controllers.exceptions import OptionError
-from controllers.law_kernel import LawResult
+from controllers.law_kernel import LawResult, cholesky_solve
 from controllers.laws import VisionLaw, check_number, solve_normal_damped
 from controllers.leg_direction import LegDirectionController
 from controllers.leg_edge import LegEdgeController
@@ -198,36 +198,6 @@ class LimitQP:
         return out[:6] if out[6] == 1.0 else x
 
 
-def _cholesky_solve(M: list[list[ca.SX]], rhs: list[ca.SX]) -> list[ca.SX]:
-    """``M^-1 rhs`` for a symmetric positive definite 6 x 6 ``M`` (unrolled Cholesky;
-    NaN when ``M`` is not positive definite)."""
-    n = len(rhs)
-    L: list[list[ca.SX]] = [[ca.SX(0.0)] * n for _ in range(n)]
-    for j in range(n):
-        d = M[j][j]
-        for k in range(j):
-            d = d - L[j][k] * L[j][k]
-        L[j][j] = ca.sqrt(d)
-        for i in range(j + 1, n):
-            v = M[i][j]
-            for k in range(j):
-                v = v - L[i][k] * L[j][k]
-            L[i][j] = v / L[j][j]
-    z: list[ca.SX] = []
-    for i in range(n):
-        v = rhs[i]
-        for k in range(i):
-            v = v - L[i][k] * z[k]
-        z.append(v / L[i][i])
-    sol: list[ca.SX] = [ca.SX(0.0)] * n
-    for i in reversed(range(n)):
-        v = z[i]
-        for k in range(i + 1, n):
-            v = v - L[k][i] * sol[k]
-        sol[i] = v / L[i][i]
-    return sol
-
-
 def _refine_function() -> ca.Function:
     """:meth:`LimitQP._refine` as one expression.
 
@@ -256,8 +226,8 @@ def _refine_function() -> ca.Function:
     m = [ca.if_else(ca.logic_or(at_up[i], at_lo[i]), 1.0, 0.0) for i in range(6)]
     bound = [ca.if_else(at_up[i], hi[i], lo[i]) for i in range(6)]
     # P^-1 J^T (columns) and P^-1 c.
-    PiJt = [_cholesky_solve(P, [J[i][k] for k in range(6)]) for i in range(6)]  # P^-1 J_i
-    Pic = _cholesky_solve(P, c)
+    PiJt = [cholesky_solve(P, [J[i][k] for k in range(6)]) for i in range(6)]  # P^-1 J_i
+    Pic = cholesky_solve(P, c)
     S = [[ca.SX(0.0)] * 6 for _ in range(6)]
     for i in range(6):
         for j in range(6):
@@ -265,7 +235,7 @@ def _refine_function() -> ca.Function:
             S[i][j] = m[i] * m[j] * sij + (1.0 - m[i] if i == j else 0.0)
     JPic = [sum((J[i][k] * Pic[k] for k in range(1, 6)), J[i][0] * Pic[0]) for i in range(6)]
     rhs = [-m[i] * (bound[i] + JPic[i]) for i in range(6)]
-    nu = _cholesky_solve(S, rhs)
+    nu = cholesky_solve(S, rhs)
     xr = [-(Pic[k] + sum((PiJt[i][k] * nu[i] for i in range(1, 6)), PiJt[0][k] * nu[0]))
           for k in range(6)]
     ok = ca.SX(1.0)
@@ -328,6 +298,7 @@ class QPLaw(VisionLaw):
         self.qp.reset()
 
     def _batch_reset_extra(self) -> None:
+        super()._batch_reset_extra()
         trials = self._trials
         self._b_lo = np.array([t._q_lo for t in trials])[:, None]
         self._b_hi = np.array([t._q_hi for t in trials])[:, None]

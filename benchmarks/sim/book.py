@@ -115,6 +115,22 @@ class Book:
             self.refused[k] = 0
         return failed
 
+    def commands(self, rows: np.ndarray, velocities: np.ndarray, reasons: list[str | None]
+                 ) -> np.ndarray:
+        """:meth:`command` for many rows at once; returns the (n,) mask of failed rows."""
+        rows = np.asarray(rows, dtype=int)
+        v = np.asarray(velocities, dtype=float)
+        invalid = ~np.isfinite(v).all(axis=1)
+        refused = np.array([r is not None for r in reasons], dtype=bool)
+        self.refused[rows[~refused]] = 0
+        self.refused[rows[refused]] += 1
+        too_many = refused & (self.refused[rows] >= MAX_REFUSED_STEPS)
+        for j in np.flatnonzero(invalid & ~too_many):
+            self.failure[rows[j]] = f"controller returned an invalid command {v[j]!r}"
+        for j in np.flatnonzero(too_many):
+            self.failure[rows[j]] = f"controller refused to move: {reasons[j]}"
+        return invalid | too_many
+
     def record(self, k: int, t: float, q: np.ndarray, R: np.ndarray, tr: np.ndarray,
                visible: np.ndarray, error_norm: float, dp: float, da: float,
                velocities: np.ndarray) -> None:

@@ -40,6 +40,9 @@ from hexapod.se3 import pose_error
 
 log = logging.getLogger(__name__)
 
+#: The engines of :func:`run_trials`.
+ENGINES = ("batched", "per-trial")
+
 
 def run_trials(
     sc: Scenario,
@@ -51,11 +54,15 @@ def run_trials(
     | None = None,
     on_step: Callable[[int, np.ndarray, np.ndarray, np.ndarray], None] | None = None,
     sensor_factory: Callable[[Scenario, TrialSetup], Any] | None = None,
+    engine: str = "batched",
 ) -> list[TrialResult]:
     """Run trials of one scenario point with one controller.
 
-    Trials whose world is the nominal one are stepped together (vectorised);
-    the others one by one. A crash in a trial is recorded as its failure.
+    With the geometric sensor and the simulated backend, every trial goes through the
+    batched engine (:mod:`benchmarks.sim.engine`, ``engine="batched"``). Otherwise, or
+    with ``engine="per-trial"``, trials whose world is the nominal one are stepped
+    together with one controller object per trial, the others one by one. A crash in a
+    trial is recorded as its failure. Both engines give the same rows.
 
     Args:
         sc: An expanded scenario (one sweep point).
@@ -69,6 +76,7 @@ def run_trials(
         sensor_factory: Builds the sensor of a group of trials from the scenario and its
             first trial (default :func:`make_sensor`; studies swap sensors with it). The
             sensor has ``measure`` and ``measure_goal`` like :class:`GeometricSensor`.
+        engine: ``"batched"`` (default) or ``"per-trial"``.
 
     Returns:
         One :class:`TrialResult` per trial, in the order of ``trials``.
@@ -83,6 +91,15 @@ def run_trials(
             setups.append(make_trial(sc, k, nominal, camera, calibrate))
         except Exception as exc:  # a crash in one trial is that trial's failure
             results[k] = TrialResult(failure_row(sc, spec, k, exc))
+    if engine not in ENGINES:
+        raise ValueError(f"engine: expected one of {', '.join(ENGINES)}, got {engine!r}")
+    if (engine == "batched" and backend_factory is None and sensor_factory is None
+            and sc.sensor == "geometric"):
+        from benchmarks.sim.engine import run_batch
+
+        for res in run_batch(sc, controller_index, setups, record_trials, on_step):
+            results[res.row["trial"]] = res
+        return [results[k] for k in trials]
     shared = [s for s in setups if s.shared and backend_factory is None]
     single = [s for s in setups if not (s.shared and backend_factory is None)]
     groups = ([shared] if shared else []) + [[s] for s in single]

@@ -8,10 +8,12 @@
  * solid finite cylinder nor by the platform disc).
  *
  * Leg-leg occlusion is tested point by point as in vision.occlusion (three intervals of
- * the ray parameter), after an exact culling: the rays from the projection centre to
- * the points of one edge lie in that edge's interpretation plane, so a leg whose
- * cylinder lies entirely on one side of the plane (both axis ends farther than the
- * radius) hides none of them.
+ * the ray parameter), after an exact culling: the segments from the projection centre to
+ * the samples of one edge fill a triangle (the centre, the first and the last sample) of
+ * that edge's interpretation plane, so a leg whose cylinder lies entirely outside one of
+ * the four half-spaces bounding that triangle (the plane itself on either side, the two
+ * planes through the centre and the end samples, the plane through the edge; both axis
+ * ends farther than the radius outside it) hides none of them.
  *
  * Layout of one item's parameters (doubles), see vision/fast_observe.py:
  *   R (9, row-major) t (3): platform pose in the base frame
@@ -184,15 +186,47 @@ int hexapod_observe_batch(const double *params, double *out, long long n, double
           continue;
         }
         int cull[6];
+        double P0[3], P1[3], m0[3], m1[3], m2[3], dl[3];
+        double s0 = 0.5 / (double)n_samples, s1 = (n_samples - 0.5) / (double)n_samples;
+        for (int m = 0; m < 3; ++m) {
+          P0[m] = Ac[3 * i + m] + r * nrm[m] + (s0 * qc[i]) * uc[3 * i + m];
+          P1[m] = Ac[3 * i + m] + r * nrm[m] + (s1 * qc[i]) * uc[3 * i + m];
+          dl[m] = P1[m] - P0[m];
+        }
+        cross3(nrm, P0, m0);
+        cross3(nrm, P1, m1);
+        cross3(nrm, dl, m2);
+        double l0 = sqrt(dot3(m0, m0)), l1 = sqrt(dot3(m1, m1)), l2 = sqrt(dot3(m2, m2));
+        int planes = l0 > 0.0 && l1 > 0.0 && l2 > 0.0;
+        if (planes) {
+          double f0 = dot3(m0, P1) < 0.0 ? -1.0 / l0 : 1.0 / l0;
+          double f1 = dot3(m1, P0) < 0.0 ? -1.0 / l1 : 1.0 / l1;
+          double f2 = dot3(m2, P0) > 0.0 ? -1.0 / l2 : 1.0 / l2;
+          for (int m = 0; m < 3; ++m) {
+            m0[m] *= f0;
+            m1[m] *= f1;
+            m2[m] *= f2;
+          }
+        }
         for (int l = 0; l < 6; ++l) {
           cull[l] = 1;
           if (l == i || !occlusion) continue;
-          double d0 = dot3(nrm, Ac + 3 * l);
           double end[3];
           for (int k = 0; k < 3; ++k) end[k] = Ac[3 * l + k] + qc[l] * uc[3 * l + k];
-          double d1 = dot3(nrm, end);
+          const double *a = Ac + 3 * l;
+          double d0 = dot3(nrm, a), d1 = dot3(nrm, end);
           cull[l] = (d0 > r && d1 > r) || (d0 < -r && d1 < -r);
+          if (cull[l] || !planes) continue;
+          cull[l] = (dot3(m0, a) < -r && dot3(m0, end) < -r) ||
+                    (dot3(m1, a) < -r && dot3(m1, end) < -r) ||
+                    (dot3(m2, a) - dot3(m2, P0) < -r && dot3(m2, end) - dot3(m2, P0) < -r);
         }
+        /* the platform disc can hide a sample only if its plane separates the sample
+           from the centre: not when the centre and both end samples are on one side */
+        double c_side = -dot3(dnormal, centre);
+        double e0 = dot3(dnormal, P0) + c_side, e1 = dot3(dnormal, P1) + c_side;
+        int disc_test = !((c_side > 0.0 && e0 > 0.0 && e1 > 0.0) ||
+                          (c_side < 0.0 && e0 < 0.0 && e1 < 0.0));
         int count = 0, first = -1, last = -1;
         for (long long k = 0; k < n_samples; ++k) {
           double sk = (k + 0.5) / (double)n_samples;
@@ -203,7 +237,7 @@ int hexapod_observe_batch(const double *params, double *out, long long n, double
           if (ok && occlusion) {
             for (int l = 0; l < 6 && ok; ++l)
               if (!cull[l] && hits_leg(P, Ac + 3 * l, uc + 3 * l, qc[l], r)) ok = 0;
-            if (ok && hits_disc(P, centre, dnormal, rho_disc)) ok = 0;
+            if (ok && disc_test && hits_disc(P, centre, dnormal, rho_disc)) ok = 0;
           }
           if (ok) {
             ++count;
