@@ -23,14 +23,18 @@ log = logging.getLogger(__name__)
 
 
 def load_geometry(scenario: Scenario) -> HexapodGeometry:
-    """The nominal geometry of a scenario."""
+    """The nominal geometry of a scenario (the data read when it was loaded, if any)."""
+    if scenario.geometry_data is not None:
+        return scenario.geometry_data  # type: ignore[no-any-return]
     if scenario.robot_geometry is not None:
         return HexapodGeometry.from_toml(scenario.robot_geometry)
     return geometry_preset(scenario.robot_preset or "deltalab")
 
 
 def load_camera(scenario: Scenario, geometry: HexapodGeometry) -> Camera:
-    """The nominal camera of a scenario."""
+    """The nominal camera of a scenario (the data read when it was loaded, if any)."""
+    if scenario.camera_data is not None:
+        return scenario.camera_data  # type: ignore[no-any-return]
     if scenario.camera_file is not None:
         from vision.cameras import load_camera as _load
 

@@ -35,7 +35,8 @@ def calibration_hook(sc: Scenario) -> CalibrationHook | None:
     if sc.calibration.method == "none":
         return None
     if sc.calibration.method == "file":
-        points = load_calibrated_base_points(str(sc.calibration.file))
+        points = (np.asarray(sc.calibration_points, float) if sc.calibration_points is not None
+                  else load_calibrated_base_points(str(sc.calibration.file)))
 
         def from_file(world: Any, rng: np.random.Generator) -> tuple[np.ndarray,
                                                                     dict[str, float]]:

@@ -257,8 +257,9 @@ def parse_scenario(table: dict[str, Any], path: str = "<dict>") -> Scenario:
     if task.settle_steps > task.max_steps:
         raise ScenarioError(path, f"{task.settle_steps} exceeds task.max_steps "
                             f"({task.max_steps})", key="task.settle_steps")
+    geometry_data, camera_data, points = _read_files(robot_geometry, camera_file, cal)
     if task.kind == "fixed":
-        _check_fixed_task(task, robot_preset, robot_geometry, path)
+        _check_fixed_task(task, robot_preset, geometry_data, path)
     reference = table.get("reference", {})
     if not isinstance(reference, dict):
         raise ScenarioError(path, "expected a table", key="reference")
@@ -268,8 +269,30 @@ def parse_scenario(table: dict[str, Any], path: str = "<dict>") -> Scenario:
         dt=dt, camera_preset=camera_preset, camera_file=camera_file, sensor=sensor,
         teach_frames=teach_frames, image=image,
         noise=noise, calibration_error=cal_err, calibration=cal, task=task,
-        reference=reference, sweep_axes=sweep, source=path,
+        reference=reference, sweep_axes=sweep, source=path, geometry_data=geometry_data,
+        camera_data=camera_data, calibration_points=points,
     )
+
+
+def _read_files(geometry_file: str | None, camera_file: str | None, cal: CalibrationConfig
+                ) -> tuple[Any, Any, Any]:
+    """Read the files a scenario names, once (see :class:`Scenario`).
+
+    Raises:
+        ScenarioError: A file missing or invalid, naming it and the key at fault.
+    """
+    from benchmarks.study.calibration import load_calibrated_base_points
+    from hexapod.geometry import HexapodGeometry
+    from vision.cameras import load_camera
+
+    try:
+        geometry = None if geometry_file is None else HexapodGeometry.from_toml(geometry_file)
+        camera = None if camera_file is None else load_camera(camera_file)
+        points = (load_calibrated_base_points(cal.file)
+                  if cal.method == "file" and cal.file else None)
+    except ConfigFileError as exc:
+        raise ScenarioError(exc.path, exc.problem, exc.key, exc.suggestion) from None
+    return geometry, camera, points
 
 
 def _check_scaled_errors(cal_err: CalibrationErrorConfig, sweep: dict[str, list[Any]],
@@ -299,21 +322,17 @@ def _check_configurations(value: str, path: str) -> None:
                             f"{value!r}", key=key)
 
 
-def _check_fixed_task(task: TaskConfig, preset: str | None, geometry_file: str | None,
+def _check_fixed_task(task: TaskConfig, preset: str | None, geometry: Any,
                       path: str) -> None:
     """A fixed task has 6 leg lengths per end, inside the nominal strokes."""
-    from hexapod.geometry import HexapodGeometry
     from hexapod.geometry import preset as geometry_preset
 
     for key in ("start_mm", "goal_mm"):
         value = getattr(task, key)
         if value is None or len(value) != 6:
             raise ScenarioError(path, "a fixed task needs 6 leg lengths [mm]", key=f"task.{key}")
-    try:
-        geometry = (HexapodGeometry.from_toml(geometry_file) if geometry_file is not None
-                    else geometry_preset(preset or "deltalab"))
-    except ConfigFileError as exc:
-        raise ScenarioError(exc.path, exc.problem, exc.key, exc.suggestion) from None
+    if geometry is None:
+        geometry = geometry_preset(preset or "deltalab")
     lo, hi = (1e3 * x for x in geometry.stroke)
     for key in ("start_mm", "goal_mm"):
         for leg, q in enumerate(getattr(task, key)):

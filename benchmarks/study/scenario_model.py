@@ -9,6 +9,7 @@ from pathlib import Path
 from typing import Any
 
 from benchmarks.exceptions import ScenarioError
+from hexapod.exceptions import ConfigFileError
 from vision.calibration import MIN_SINGULAR_RATIO, WARN_SINGULAR_RATIO
 
 #: Keys of [noise] and [calibration_error] that may be swept (given as lists).
@@ -234,6 +235,13 @@ class Scenario:
         reference: Figures of the reproduced seed (free-form table for the report).
         sweep: The swept keys of this point, e.g. ``{"noise.amplitude_deg": 0.05}``.
         source: File it was read from.
+        geometry_data: The robot read from ``robot_geometry`` when the scenario was loaded.
+        camera_data: The camera read from ``camera_file`` when the scenario was loaded.
+        calibration_points: (6, 3) base points [m] read from ``calibration.file``.
+
+    The files a scenario names are read once, where it is loaded (the client): work
+    units carry their data to the workers, which need not see the files (a Dask
+    cluster whose workers do not share the client's filesystem).
     """
 
     name: str
@@ -257,6 +265,9 @@ class Scenario:
     sweep: dict[str, Any] = field(default_factory=dict)
     sweep_axes: dict[str, list[Any]] = field(default_factory=dict)
     source: str = "<dict>"
+    geometry_data: Any = None
+    camera_data: Any = None
+    calibration_points: Any = None
 
     def expand(self) -> list[Scenario]:
         """One scenario per point of the sweep (Cartesian product of the swept keys)."""
@@ -280,8 +291,15 @@ class Scenario:
         if calibration_file is not None:
             if not Path(calibration_file).exists():
                 raise ScenarioError(calibration_file, "calibration file not found")
+            from benchmarks.study.calibration import load_calibrated_base_points
+
+            try:
+                points = load_calibrated_base_points(calibration_file)
+            except ConfigFileError as exc:
+                raise ScenarioError(exc.path, exc.problem, exc.key, exc.suggestion) from None
             sc = replace(sc, calibration=replace(sc.calibration, method="file",
-                                                 file=str(calibration_file)))
+                                                 file=str(calibration_file)),
+                         calibration_points=points)
         if max_steps is not None:
             _check_option(max_steps, "task.max_steps", "--max-steps")
             sc = replace(sc, task=replace(sc.task, max_steps=max_steps))
