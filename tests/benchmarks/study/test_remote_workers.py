@@ -36,7 +36,8 @@ def _write_study(folder: Path) -> Path:
     robot.to_toml(folder / "robot.toml")
     front_camera(robot).to_toml(folder / "camera.toml")
     study = folder / "my.toml"
-    study.write_text('name = "mine"\nseed = 3\ntrials = 4\ncontrollers = [{name = "leg-edge", gain = 5.0}]\n'
+    study.write_text('name = "mine"\nseed = 3\ntrials = 4\n'
+                     'controllers = [{name = "leg-edge", gain = 5.0}]\n'
                      '[robot]\ngeometry = "robot.toml"\n[camera]\nfile = "camera.toml"\n'
                      '[task]\nmax_steps = 200\nposition_tolerance_mm = 0.5\n'
                      'orientation_tolerance_deg = 0.05\n')
@@ -51,7 +52,7 @@ def test_a_worker_that_cannot_see_the_files_runs_the_study(tmp_path: Path) -> No
     assert not study.exists()
     # without the data the work unit carries, the files would be needed (and are gone)
     bare = replace(sc, geometry_data=None, camera_data=None)
-    with pytest.raises(ConfigFileError, match="robot.toml: file not found"):
+    with pytest.raises(ConfigFileError, match=r"robot\.toml: file not found"):
         run_trials(bare, 0, [0])
 
     elsewhere = tmp_path / "elsewhere"
