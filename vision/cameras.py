@@ -18,7 +18,6 @@ The perspective camera is the unified one with ``xi = 0``; ``UnifiedCamera`` wit
 
 from __future__ import annotations
 
-import math
 from abc import ABC, abstractmethod
 from pathlib import Path
 from typing import Any, ClassVar
@@ -26,110 +25,19 @@ from typing import Any, ClassVar
 import numpy as np
 import tomli_w
 
-from hexapod.config import check_keys, get_matrix, get_number, load_toml, suggest
-from hexapod.exceptions import ConfigFileError
-from hexapod.geometry import HexapodGeometry, deltalab
+from hexapod.config import load_toml, suggest
 from hexapod.kinematics import Transform
-from hexapod.se3 import exp_so3, log_so3, look_at
+from vision.camera_checks import (
+    as_pixels,
+    as_points,
+    check_K,
+    check_pose,
+    check_size,
+    check_xi,
+    unit,
+)
+from vision.camera_files import CAMERA_KEYS, POSE_KEYS, camera_table, read_camera_table
 from vision.exceptions import CameraError
-
-#: Pixel size assumed for the front camera preset [m] (a 1/3" 1024x768-class CCD,
-#: e.g. Sony ICX204: 4.65 um square pixels).
-FRONT_PIXEL_SIZE = 4.65e-6
-#: Focal length of the front camera lens [m] (seed 002).
-FRONT_FOCAL_LENGTH = 4.8e-3
-
-#: Tolerance on the orthonormality of a rotation matrix.
-_ROT_TOL = 1e-6
-
-
-# --------------------------------------------------------------------- validation
-def _validate_K(K: Any, source: str | None) -> np.ndarray:
-    try:
-        arr = np.array(K, dtype=float)
-    except (TypeError, ValueError):
-        raise CameraError("K", "expected a 3x3 array of numbers", source) from None
-    if arr.shape != (3, 3):
-        raise CameraError("K", f"expected shape (3, 3), got {arr.shape}", source)
-    if not np.all(np.isfinite(arr)):
-        raise CameraError("K", "contains NaN or inf", source)
-    if arr[1, 0] != 0 or arr[2, 0] != 0 or arr[2, 1] != 0 or arr[2, 2] != 1:
-        raise CameraError(
-            "K", f"expected [[fx, s, cx], [0, fy, cy], [0, 0, 1]], got {arr.tolist()}", source
-        )
-    if arr[0, 0] <= 0 or arr[1, 1] <= 0:
-        raise CameraError(
-            "K", f"focal lengths must be positive, got fx={arr[0, 0]}, fy={arr[1, 1]}", source
-        )
-    arr.flags.writeable = False
-    return arr
-
-
-def _validate_size(name: str, value: Any, source: str | None) -> int:
-    if isinstance(value, bool) or not isinstance(value, int | np.integer | float):
-        raise CameraError(name, f"expected a positive integer, got {value!r}", source)
-    if isinstance(value, float) and (not math.isfinite(value) or value != int(value)):
-        raise CameraError(name, f"expected a positive integer, got {value!r}", source)
-    if int(value) <= 0:
-        raise CameraError(name, f"must be positive, got {value}", source)
-    return int(value)
-
-
-def _validate_xi(xi: Any, source: str | None) -> float:
-    try:
-        x = float(xi)
-    except (TypeError, ValueError):
-        raise CameraError("xi", f"expected a number, got {xi!r}", source) from None
-    if not math.isfinite(x) or x < 0:
-        raise CameraError("xi", f"must be finite and >= 0, got {x}", source)
-    return x
-
-
-def _validate_pose(pose: Any, source: str | None) -> Transform:
-    if not isinstance(pose, Transform):
-        raise CameraError(
-            "camera_from_base", f"expected a hexapod.Transform, got {type(pose).__name__}", source
-        )
-    R = np.array(pose.rotation, dtype=float)
-    t = np.array(pose.translation, dtype=float)
-    if R.shape != (3, 3) or t.shape != (3,):
-        raise CameraError(
-            "camera_from_base",
-            f"expected rotation (3, 3) and translation (3,), got {R.shape} and {t.shape}",
-            source,
-        )
-    if not (np.all(np.isfinite(R)) and np.all(np.isfinite(t))):
-        raise CameraError("camera_from_base", "contains NaN or inf", source)
-    err = float(np.abs(R.T @ R - np.eye(3)).max())
-    if err > _ROT_TOL or np.linalg.det(R) <= 0:
-        raise CameraError(
-            "camera_from_base",
-            f"rotation is not a proper rotation matrix (|R^T R - I| = {err:.2e}, "
-            f"det = {np.linalg.det(R):.6f})",
-            source,
-        )
-    R.flags.writeable = False
-    t.flags.writeable = False
-    return Transform(R, t)
-
-
-def _as_points(points: Any, name: str = "points") -> np.ndarray:
-    X = np.asarray(points, dtype=float)
-    if X.shape[-1:] != (3,):
-        raise CameraError(name, f"expected shape (..., 3), got {X.shape}")
-    return X
-
-
-def _as_pixels(pixels: Any) -> np.ndarray:
-    p = np.asarray(pixels, dtype=float)
-    if p.shape[-1:] != (2,):
-        raise CameraError("pixels", f"expected shape (..., 2), got {p.shape}")
-    return p
-
-
-def _unit(x: np.ndarray) -> np.ndarray:
-    with np.errstate(invalid="ignore", divide="ignore"):
-        return x / np.linalg.norm(x, axis=-1, keepdims=True)
 
 
 # --------------------------------------------------------------------- cameras
@@ -194,7 +102,7 @@ class Camera(ABC):
 
     def in_image(self, pixels: np.ndarray) -> np.ndarray:
         """True where pixels (..., 2) are inside ``[-0.5, w - 0.5] x [-0.5, h - 0.5]``."""
-        p = _as_pixels(pixels)
+        p = as_pixels(pixels)
         with np.errstate(invalid="ignore"):
             return (
                 (p[..., 0] >= -0.5)
@@ -223,7 +131,7 @@ class Camera(ABC):
             behind the camera / not imaged by the model (pixels NaN there) or
             projects outside the image (pixels still given).
         """
-        X = _as_points(points)
+        X = as_points(points)
         m, valid = self._normalised(X)
         K = self.K
         u = K[0, 0] * m[..., 0] + K[0, 1] * m[..., 1] + K[0, 2]
@@ -234,11 +142,11 @@ class Camera(ABC):
 
     def project_base(self, points_base: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Like :meth:`project` for points (..., 3) given in the robot base frame."""
-        return self.project(self.camera_from_base.apply(_as_points(points_base)))
+        return self.project(self.camera_from_base.apply(as_points(points_base)))
 
     def pixels_to_normalised(self, pixels: np.ndarray) -> np.ndarray:
         """Normalised image coordinates ``m = K^-1 p`` (..., 2) of pixels (..., 2)."""
-        p = _as_pixels(pixels)
+        p = as_pixels(pixels)
         K = self.K
         y = (p[..., 1] - K[1, 2]) / K[1, 1]
         x = (p[..., 0] - K[0, 2] - K[0, 1] * y) / K[0, 0]
@@ -305,31 +213,12 @@ class Camera(ABC):
             f"fx={self.fx:.3f}, fy={self.fy:.3f}, cx={self.cx:.3f}, cy={self.cy:.3f}{xi})"
         )
 
-    _KEYS = ("kind", "name", "width_px", "height_px", "fx_px", "fy_px", "cx_px", "cy_px",
-             "skew_px", "xi", "camera_from_base")
-    _POSE_KEYS = ("translation_mm", "rotation_vector_deg", "rotation_matrix")
+    _KEYS = CAMERA_KEYS
+    _POSE_KEYS = POSE_KEYS
 
     def to_dict(self) -> dict[str, Any]:
-        """The file representation (pixels, millimetres, degrees)."""
-        d: dict[str, Any] = {
-            "kind": self.kind,
-            "name": self.name,
-            "width_px": self.width,
-            "height_px": self.height,
-            "fx_px": float(self.K[0, 0]),
-            "fy_px": float(self.K[1, 1]),
-            "cx_px": float(self.K[0, 2]),
-            "cy_px": float(self.K[1, 2]),
-            "skew_px": float(self.K[0, 1]),
-        }
-        if self.kind == "unified":
-            d["xi"] = float(self.xi)
-        rv = np.rad2deg(log_so3(self.camera_from_base.rotation))
-        d["camera_from_base"] = {
-            "translation_mm": ((self.camera_from_base.translation * 1e3).round(9) + 0.0).tolist(),
-            "rotation_vector_deg": (rv.round(12) + 0.0).tolist(),
-        }
-        return d
+        """The file representation (pixels, millimetres, degrees; :mod:`vision.camera_files`)."""
+        return camera_table(self)
 
     def to_toml(self, path: str | Path) -> None:
         """Save the camera to a TOML file.
@@ -351,68 +240,13 @@ class Camera(ABC):
         Called on :class:`Camera` the ``kind`` key chooses the model; called on a
         subclass, ``kind`` must match it (or be absent).
         """
-        check_keys(table, cls._KEYS, path,
-                   required=("width_px", "height_px", "fx_px", "fy_px", "cx_px", "cy_px"))
-        kinds = {"perspective": PerspectiveCamera, "unified": UnifiedCamera}
-        kind = table.get("kind", getattr(cls, "kind", None))
-        if kind is None:
-            raise ConfigFileError(path, "missing required key", key="kind")
-        if kind not in kinds:
-            hint = suggest(str(kind), kinds)
-            raise ConfigFileError(path, f"unknown camera kind {kind!r}; expected one of "
-                                  f"{', '.join(kinds)}", key="kind", suggestion=hint)
-        target = kinds[kind]
-        if cls is not Camera and target is not cls:
-            raise ConfigFileError(path, f"kind {kind!r} cannot be loaded as {cls.__name__}",
-                                  key="kind")
-        for key in ("width_px", "height_px"):
-            v = table[key]
-            if isinstance(v, bool) or not isinstance(v, int) or v <= 0:
-                raise ConfigFileError(path, f"expected a positive integer, got {v!r}", key=key)
-        f = {k: get_number(table, k, path) for k in ("fx_px", "fy_px", "cx_px", "cy_px")}
-        skew = get_number(table, "skew_px", path) if "skew_px" in table else 0.0
-        for k in ("fx_px", "fy_px"):
-            if f[k] <= 0:
-                raise ConfigFileError(path, f"focal length must be positive, got {f[k]}", key=k)
-        K = np.array([[f["fx_px"], skew, f["cx_px"]], [0.0, f["fy_px"], f["cy_px"]],
-                      [0.0, 0.0, 1.0]])
-        if target is UnifiedCamera:
-            if "xi" not in table:
-                raise ConfigFileError(path, "missing required key (unified camera)", key="xi")
-            xi = get_number(table, "xi", path)
-            if xi < 0:
-                raise ConfigFileError(path, f"must be >= 0, got {xi}", key="xi")
-        elif "xi" in table:
-            xi = get_number(table, "xi", path)
-            if xi != 0:
-                raise ConfigFileError(
-                    path, f"a perspective camera has xi = 0, got {xi} (use kind = 'unified')",
-                    key="xi")
-        pose_table = table.get("camera_from_base", {})
-        if not isinstance(pose_table, dict):
-            raise ConfigFileError(path, "expected a table", key="camera_from_base")
-        pre = "camera_from_base."
-        check_keys(pose_table, cls._POSE_KEYS, path, prefix=pre)
-        t = (get_matrix(pose_table, "translation_mm", (3,), path, pre) * 1e-3
-             if "translation_mm" in pose_table else np.zeros(3))
-        if "rotation_vector_deg" in pose_table and "rotation_matrix" in pose_table:
-            raise ConfigFileError(path, "give rotation_vector_deg or rotation_matrix, not both",
-                                  key="camera_from_base")
-        if "rotation_matrix" in pose_table:
-            R = get_matrix(pose_table, "rotation_matrix", (3, 3), path, pre)
-        elif "rotation_vector_deg" in pose_table:
-            R = exp_so3(np.deg2rad(get_matrix(pose_table, "rotation_vector_deg", (3,), path, pre)))
-        else:
-            R = np.eye(3)
-        name = table.get("name", Path(path).stem)
-        if not isinstance(name, str):
-            raise ConfigFileError(path, f"expected a string, got {name!r}", key="name")
-        pose = Transform(R, t)
-        if target is UnifiedCamera:
-            return UnifiedCamera(K, xi, table["width_px"], table["height_px"], pose, name=name,
-                                 source=path)
-        return PerspectiveCamera(K, table["width_px"], table["height_px"], pose, name=name,
-                                 source=path)
+        model = None if cls is Camera else (cls.kind, cls.__name__)
+        f = read_camera_table(table, path, model)
+        if f.kind == "unified":
+            return UnifiedCamera(f.K, f.xi, f.width, f.height, f.camera_from_base, name=f.name,
+                                 source=f.source)
+        return PerspectiveCamera(f.K, f.width, f.height, f.camera_from_base, name=f.name,
+                                 source=f.source)
 
     @classmethod
     def from_toml(cls, path: str | Path) -> Camera:
@@ -448,11 +282,11 @@ class PerspectiveCamera(Camera):
         source: str | None = None,
     ) -> None:
         self.source = source
-        self.K = _validate_K(K, source)
-        self.width = _validate_size("width", width, source)
-        self.height = _validate_size("height", height, source)
+        self.K = check_K(K, source)
+        self.width = check_size("width", width, source)
+        self.height = check_size("height", height, source)
         self.xi = 0.0
-        self.camera_from_base = _validate_pose(
+        self.camera_from_base = check_pose(
             Transform.identity() if camera_from_base is None else camera_from_base, source
         )
         self.name = str(name)
@@ -477,34 +311,34 @@ class PerspectiveCamera(Camera):
 
     def _lift_normalised(self, m: np.ndarray) -> np.ndarray:
         mh = np.concatenate([m, np.ones((*m.shape[:-1], 1))], axis=-1)
-        return _unit(mh)
+        return unit(mh)
 
     def normal_to_line(self, n: np.ndarray) -> np.ndarray:
         """Interpretation-plane normals (..., 3) -> unit lines (..., 3) in normalised
         pixel coordinates: ``l = Kt^-T n / |Kt^-T n|`` with ``Kt = line_matrix``
         (positive scale, so the sign follows ``n``)."""
-        n = _as_points(n, "n")
-        return _unit(n @ self._line_matrix_inv_T.T)
+        n = as_points(n, "n")
+        return unit(n @ self._line_matrix_inv_T.T)
 
     def line_to_normal(self, l: np.ndarray) -> np.ndarray:
         """Inverse of :meth:`normal_to_line`: ``n = Kt^T l / |Kt^T l|``."""
-        l = _as_points(l, "l")
-        return _unit(l @ self.line_matrix)
+        l = as_points(l, "l")
+        return unit(l @ self.line_matrix)
 
     def normal_to_pixel_line(self, n: np.ndarray) -> np.ndarray:
         """Unit line (..., 3) in raw pixel coordinates (``l^T [u, v, 1] = 0``),
         ``l = K^-T n / |K^-T n|``."""
-        n = _as_points(n, "n")
-        return _unit(n @ np.linalg.inv(self.K))
+        n = as_points(n, "n")
+        return unit(n @ np.linalg.inv(self.K))
 
     def pixel_line_to_normal(self, l: np.ndarray) -> np.ndarray:
         """Inverse of :meth:`normal_to_pixel_line`: ``n = K^T l / |K^T l|``."""
-        l = _as_points(l, "l")
-        return _unit(l @ self.K)
+        l = as_points(l, "l")
+        return unit(l @ self.K)
 
     def pixels_to_line_coordinates(self, pixels: np.ndarray) -> np.ndarray:
         """Pixels (..., 2) -> normalised pixel coordinates (..., 2) used by the lines."""
-        p = _as_pixels(pixels)
+        p = as_pixels(pixels)
         return np.stack([(p[..., 0] - 0.5 * self.width) / self.width,
                          (p[..., 1] - 0.5 * self.height) / self.width], axis=-1)
 
@@ -539,11 +373,11 @@ class UnifiedCamera(Camera):
         source: str | None = None,
     ) -> None:
         self.source = source
-        self.K = _validate_K(K, source)
-        self.xi = _validate_xi(xi, source)
-        self.width = _validate_size("width", width, source)
-        self.height = _validate_size("height", height, source)
-        self.camera_from_base = _validate_pose(
+        self.K = check_K(K, source)
+        self.xi = check_xi(xi, source)
+        self.width = check_size("width", width, source)
+        self.height = check_size("height", height, source)
+        self.camera_from_base = check_pose(
             Transform.identity() if camera_from_base is None else camera_from_base, source
         )
         self.name = str(name)
@@ -576,7 +410,7 @@ class UnifiedCamera(Camera):
     def _lift_normalised(self, m: np.ndarray) -> np.ndarray:
         if self.xi == 0:
             mh = np.concatenate([m, np.ones((*m.shape[:-1], 1))], axis=-1)
-            return _unit(mh)
+            return unit(mh)
         xi = self.xi
         r2 = np.sum(m * m, axis=-1)
         with np.errstate(invalid="ignore"):
@@ -596,7 +430,7 @@ class UnifiedCamera(Camera):
             the same conic) and is the image of the whole great circle, of which a
             leg edge is an arc. For ``xi = 0`` it is the double line ``l l^T``.
         """
-        W = self._omega(_as_points(n, "n"))
+        W = self._omega(as_points(n, "n"))
         Ki = np.linalg.inv(self.K)
         C = Ki.T @ W @ Ki
         return C / np.linalg.norm(C, axis=(-2, -1), keepdims=True)
@@ -616,111 +450,40 @@ class UnifiedCamera(Camera):
 
     def normal_to_normalised_conic(self, n: np.ndarray) -> np.ndarray:
         """The conic Ω (..., 3, 3) in normalised coordinates ``m`` (unit Frobenius norm)."""
-        W = self._omega(_as_points(n, "n"))
+        W = self._omega(as_points(n, "n"))
         return W / np.linalg.norm(W, axis=(-2, -1), keepdims=True)
 
 
-# --------------------------------------------------------------------- presets
-def _intrinsics(f: float, width: int, height: int) -> np.ndarray:
-    return np.array([[f, 0.0, (width - 1) / 2.0], [0.0, f, (height - 1) / 2.0], [0.0, 0.0, 1.0]])
+# Re-exported so that ``from vision.cameras import X`` keeps working for every public
+# name of the former single module. Imported last: the presets build cameras with the
+# classes above (``vision/__init__.py`` imports this module before any other).
+from vision.camera_presets import (  # noqa: E402
+    FRONT_AZIMUTH_DEG,
+    FRONT_DISTANCE,
+    FRONT_EYE_HEIGHT,
+    FRONT_FOCAL_LENGTH,
+    FRONT_PIXEL_SIZE,
+    FRONT_TARGET_HEIGHT,
+    OMNI_FOCAL,
+    camera_preset,
+    front_camera,
+    load_camera,
+    omni_camera,
+)
 
-
-def _pose_looking_at(eye: np.ndarray, target: np.ndarray, up: np.ndarray) -> Transform:
-    base_R_cam = look_at(eye, target, up)
-    return Transform(base_R_cam, np.asarray(eye, float)).inverse()
-
-
-#: Front camera placement for the reference robot: horizontal distance from the base
-#: centre [m], azimuth from the base x axis [deg], height of the projection centre
-#: [m] and height of the aim point on the base z axis [m].
-FRONT_DISTANCE = 0.80
-FRONT_AZIMUTH_DEG = 30.0
-FRONT_EYE_HEIGHT = 0.0
-FRONT_TARGET_HEIGHT = 0.265
-
-
-def front_camera(geometry: HexapodGeometry | None = None) -> PerspectiveCamera:
-    """The front perspective camera of seed 002 (``docs/math.md`` section 9).
-
-    Intrinsics: 4.8 mm lens on a 1024x780 sensor with 4.65 um square pixels
-    (``f = 4.8 / 0.00465 = 1032.26 px``, horizontal field of view 53 deg),
-    principal point at the image centre ``(511.5, 389.5)``, no skew.
-
-    Placement (reference robot): projection centre 0.80 m from the base centre,
-    horizontally, at azimuth 30 deg (between the base joint pair at 0 deg and the
-    platform joint pair at 60 deg) and at the height of the base joints, aimed at
-    the point of the base axis 0.265 m high, image rows vertical. The seed says
-    "about 0.7 m"; at 0.70 m the nearest legs (0.45 m tall, 0.45 m away) cannot fit
-    in the 780-pixel height with this lens, at 0.80 m every leg stays entirely inside
-    the image over the workspace of :func:`hexapod.sample_poses` (at least 2 pixels
-    of margin on 4,000 random poses, checked by the tests). From there, legs hide
-    one another in part of the workspace (about 17 % of the random poses have at
-    least one hidden edge), as in the seed. For another geometry the placement is
-    scaled by the base radius (distance) and the home height (aim point).
-    """
-    geo = deltalab() if geometry is None else geometry
-    scale = float(np.max(np.linalg.norm(geo.base_points[:, :2], axis=1))) / 0.270
-    zscale = geo.home_height / 0.3594098
-    zbase = float(np.mean(geo.base_points[:, 2]))
-    f = FRONT_FOCAL_LENGTH / FRONT_PIXEL_SIZE
-    K = _intrinsics(f, 1024, 780)
-    a = np.deg2rad(FRONT_AZIMUTH_DEG)
-    d = FRONT_DISTANCE * scale
-    eye = np.array([d * np.cos(a), d * np.sin(a), zbase + FRONT_EYE_HEIGHT * zscale])
-    target = np.array([0.0, 0.0, zbase + FRONT_TARGET_HEIGHT * zscale])
-    pose = _pose_looking_at(eye, target, np.array([0.0, 0.0, 1.0]))
-    return PerspectiveCamera(K, 1024, 780, pose, name="front")
-
-
-#: Generalised focal length of the omnidirectional preset [px].
-OMNI_FOCAL = 200.0
-
-
-def omni_camera(geometry: HexapodGeometry | None = None) -> UnifiedCamera:
-    """The omnidirectional camera of seed 003 (``docs/math.md`` section 9).
-
-    Parabolic mirror with an orthographic lens (``xi = 1``), 640x480 image,
-    generalised focal length 200 px, principal point at the image centre
-    ``(319.5, 239.5)``; the mirror (sphere) centre is at the centre of the base
-    joint circle, its axis along the base z axis (looking up at the platform),
-    camera x = base x, camera y = base y.
-
-    With this focal length a point at the height of the base joints is imaged on
-    the circle of radius 200 px and every leg of the reference robot crosses the
-    whole annulus of diameters 184 to 370 px over the workspace (its base end is
-    beyond 193 px, its platform end within 89 px of the image centre), as in
-    seed 003; no leg hides another one enough to lose an edge.
-    """
-    geo = deltalab() if geometry is None else geometry
-    centre = np.mean(geo.base_points, axis=0).round(12) + 0.0
-    K = _intrinsics(OMNI_FOCAL, 640, 480)
-    return UnifiedCamera(K, 1.0, 640, 480, Transform(np.eye(3), -centre), name="omni")
-
-
-_PRESETS = {"front": front_camera, "omni": omni_camera}
-
-
-def camera_preset(name: str, geometry: HexapodGeometry | None = None) -> Camera:
-    """A camera preset by name: ``"front"`` (perspective) or ``"omni"`` (unified).
-
-    Raises:
-        CameraError: Unknown name (with the close valid name, if any).
-    """
-    if name not in _PRESETS:
-        hint = suggest(name, _PRESETS)
-        raise CameraError(
-            "preset",
-            f"unknown camera preset '{name}'; available: {', '.join(_PRESETS)}"
-            + (f" (did you mean '{hint}'?)" if hint else ""),
-        )
-    return _PRESETS[name](geometry)
-
-
-def load_camera(path_or_name: str | Path, geometry: HexapodGeometry | None = None) -> Camera:
-    """A preset name (``"front"``, ``"omni"``) or a TOML file path."""
-    s = str(path_or_name)
-    if s in _PRESETS:
-        return camera_preset(s, geometry)
-    if s.endswith(".toml") or Path(s).exists():
-        return Camera.from_toml(s)
-    return camera_preset(s, geometry)
+__all__ = [
+    "FRONT_AZIMUTH_DEG",
+    "FRONT_DISTANCE",
+    "FRONT_EYE_HEIGHT",
+    "FRONT_FOCAL_LENGTH",
+    "FRONT_PIXEL_SIZE",
+    "FRONT_TARGET_HEIGHT",
+    "OMNI_FOCAL",
+    "Camera",
+    "PerspectiveCamera",
+    "UnifiedCamera",
+    "camera_preset",
+    "front_camera",
+    "load_camera",
+    "omni_camera",
+]

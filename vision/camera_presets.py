@@ -1,0 +1,126 @@
+"""Camera presets of the seeds: the front perspective camera and the omnidirectional one
+(``docs/math.md`` section 9), and :func:`load_camera` (a preset name or a file)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from hexapod.config import suggest
+from hexapod.geometry import HexapodGeometry, deltalab
+from hexapod.kinematics import Transform
+from hexapod.se3 import look_at
+from vision.cameras import Camera, PerspectiveCamera, UnifiedCamera
+from vision.exceptions import CameraError
+
+#: Pixel size assumed for the front camera preset [m] (a 1/3" 1024x768-class CCD,
+#: e.g. Sony ICX204: 4.65 um square pixels).
+FRONT_PIXEL_SIZE = 4.65e-6
+#: Focal length of the front camera lens [m] (seed 002).
+FRONT_FOCAL_LENGTH = 4.8e-3
+
+
+def _intrinsics(f: float, width: int, height: int) -> np.ndarray:
+    return np.array([[f, 0.0, (width - 1) / 2.0], [0.0, f, (height - 1) / 2.0], [0.0, 0.0, 1.0]])
+
+
+def _pose_looking_at(eye: np.ndarray, target: np.ndarray, up: np.ndarray) -> Transform:
+    base_R_cam = look_at(eye, target, up)
+    return Transform(base_R_cam, np.asarray(eye, float)).inverse()
+
+
+#: Front camera placement for the reference robot: horizontal distance from the base
+#: centre [m], azimuth from the base x axis [deg], height of the projection centre
+#: [m] and height of the aim point on the base z axis [m].
+FRONT_DISTANCE = 0.80
+FRONT_AZIMUTH_DEG = 30.0
+FRONT_EYE_HEIGHT = 0.0
+FRONT_TARGET_HEIGHT = 0.265
+
+
+def front_camera(geometry: HexapodGeometry | None = None) -> PerspectiveCamera:
+    """The front perspective camera of seed 002 (``docs/math.md`` section 9).
+
+    Intrinsics: 4.8 mm lens on a 1024x780 sensor with 4.65 um square pixels
+    (``f = 4.8 / 0.00465 = 1032.26 px``, horizontal field of view 53 deg),
+    principal point at the image centre ``(511.5, 389.5)``, no skew.
+
+    Placement (reference robot): projection centre 0.80 m from the base centre,
+    horizontally, at azimuth 30 deg (between the base joint pair at 0 deg and the
+    platform joint pair at 60 deg) and at the height of the base joints, aimed at
+    the point of the base axis 0.265 m high, image rows vertical. The seed says
+    "about 0.7 m"; at 0.70 m the nearest legs (0.45 m tall, 0.45 m away) cannot fit
+    in the 780-pixel height with this lens, at 0.80 m every leg stays entirely inside
+    the image over the workspace of :func:`hexapod.sample_poses` (at least 2 pixels
+    of margin on 4,000 random poses, checked by the tests). From there, legs hide
+    one another in part of the workspace (about 17 % of the random poses have at
+    least one hidden edge), as in the seed. For another geometry the placement is
+    scaled by the base radius (distance) and the home height (aim point).
+    """
+    geo = deltalab() if geometry is None else geometry
+    scale = float(np.max(np.linalg.norm(geo.base_points[:, :2], axis=1))) / 0.270
+    zscale = geo.home_height / 0.3594098
+    zbase = float(np.mean(geo.base_points[:, 2]))
+    f = FRONT_FOCAL_LENGTH / FRONT_PIXEL_SIZE
+    K = _intrinsics(f, 1024, 780)
+    a = np.deg2rad(FRONT_AZIMUTH_DEG)
+    d = FRONT_DISTANCE * scale
+    eye = np.array([d * np.cos(a), d * np.sin(a), zbase + FRONT_EYE_HEIGHT * zscale])
+    target = np.array([0.0, 0.0, zbase + FRONT_TARGET_HEIGHT * zscale])
+    pose = _pose_looking_at(eye, target, np.array([0.0, 0.0, 1.0]))
+    return PerspectiveCamera(K, 1024, 780, pose, name="front")
+
+
+#: Generalised focal length of the omnidirectional preset [px].
+OMNI_FOCAL = 200.0
+
+
+def omni_camera(geometry: HexapodGeometry | None = None) -> UnifiedCamera:
+    """The omnidirectional camera of seed 003 (``docs/math.md`` section 9).
+
+    Parabolic mirror with an orthographic lens (``xi = 1``), 640x480 image,
+    generalised focal length 200 px, principal point at the image centre
+    ``(319.5, 239.5)``; the mirror (sphere) centre is at the centre of the base
+    joint circle, its axis along the base z axis (looking up at the platform),
+    camera x = base x, camera y = base y.
+
+    With this focal length a point at the height of the base joints is imaged on
+    the circle of radius 200 px and every leg of the reference robot crosses the
+    whole annulus of diameters 184 to 370 px over the workspace (its base end is
+    beyond 193 px, its platform end within 89 px of the image centre), as in
+    seed 003; no leg hides another one enough to lose an edge.
+    """
+    geo = deltalab() if geometry is None else geometry
+    centre = np.mean(geo.base_points, axis=0).round(12) + 0.0
+    K = _intrinsics(OMNI_FOCAL, 640, 480)
+    return UnifiedCamera(K, 1.0, 640, 480, Transform(np.eye(3), -centre), name="omni")
+
+
+_PRESETS = {"front": front_camera, "omni": omni_camera}
+
+
+def camera_preset(name: str, geometry: HexapodGeometry | None = None) -> Camera:
+    """A camera preset by name: ``"front"`` (perspective) or ``"omni"`` (unified).
+
+    Raises:
+        CameraError: Unknown name (with the close valid name, if any).
+    """
+    if name not in _PRESETS:
+        hint = suggest(name, _PRESETS)
+        raise CameraError(
+            "preset",
+            f"unknown camera preset '{name}'; available: {', '.join(_PRESETS)}"
+            + (f" (did you mean '{hint}'?)" if hint else ""),
+        )
+    return _PRESETS[name](geometry)
+
+
+def load_camera(path_or_name: str | Path, geometry: HexapodGeometry | None = None) -> Camera:
+    """A preset name (``"front"``, ``"omni"``) or a TOML file path."""
+    s = str(path_or_name)
+    if s in _PRESETS:
+        return camera_preset(s, geometry)
+    if s.endswith(".toml") or Path(s).exists():
+        return Camera.from_toml(s)
+    return camera_preset(s, geometry)
