@@ -19,7 +19,7 @@ from vision.estimate import (
     fit_normal_conic,
     radians_per_pixel,
 )
-from vision.exceptions import CameraError, EstimationError, VisionError
+from vision.exceptions import CameraError, DistortionError, EstimationError, VisionError
 from vision.legs import (
     EdgePoints,
     LegObservation,
@@ -42,6 +42,7 @@ from vision.noise import (
 __all__ = [
     "Camera",
     "CameraError",
+    "DistortionError",
     "EdgePoints",
     "EstimationError",
     "LegObservation",

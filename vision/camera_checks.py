@@ -100,11 +100,11 @@ def as_points(points: Any, name: str = "points") -> np.ndarray:
     return X
 
 
-def as_pixels(pixels: Any) -> np.ndarray:
+def as_pixels(pixels: Any, name: str = "pixels") -> np.ndarray:
     """Pixels (..., 2) as a float array."""
     p = np.asarray(pixels, dtype=float)
     if p.shape[-1:] != (2,):
-        raise CameraError("pixels", f"expected shape (..., 2), got {p.shape}")
+        raise CameraError(name, f"expected shape (..., 2), got {p.shape}")
     return p
 
 

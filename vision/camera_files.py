@@ -6,7 +6,9 @@ itself, so this module does not depend on them.
 
 Format: ``kind`` (``"perspective"``/``"unified"``), ``name``, ``width_px``,
 ``height_px``, ``fx_px``, ``fy_px``, ``cx_px``, ``cy_px``, ``skew_px``, ``xi``
-(unified only) and a table ``[camera_from_base]`` with ``translation_mm`` and
+(unified only), ``distortion`` (OpenCV's coefficients: ``[k1, k2, p1, p2, k3]`` for a
+perspective camera, 4 or 5 numbers; ``[k1, k2, p1, p2]`` for a unified one; absent for
+an ideal lens) and a table ``[camera_from_base]`` with ``translation_mm`` and
 ``rotation_vector_deg`` (axis times angle, degrees) or ``rotation_matrix``, such that
 ``p_camera = R p_base + t``.
 """
@@ -29,11 +31,13 @@ if TYPE_CHECKING:
 
 #: Keys of a camera table.
 CAMERA_KEYS = ("kind", "name", "width_px", "height_px", "fx_px", "fy_px", "cx_px", "cy_px",
-               "skew_px", "xi", "camera_from_base")
+               "skew_px", "xi", "distortion", "camera_from_base")
 #: Keys of its ``[camera_from_base]`` table.
 POSE_KEYS = ("translation_mm", "rotation_vector_deg", "rotation_matrix")
 #: The camera kinds (models) a file may name.
 KINDS = ("perspective", "unified")
+#: Accepted lengths of the ``distortion`` list of each kind.
+DISTORTION_LENGTHS = {"perspective": (4, 5), "unified": (4,)}
 
 
 @dataclass(frozen=True)
@@ -49,6 +53,7 @@ class CameraFields:
         camera_from_base: Pose w.r.t. the robot base.
         name: A label (the file's stem by default).
         source: The file.
+        distortion: OpenCV's distortion coefficients (None: an ideal lens).
     """
 
     kind: str
@@ -59,6 +64,7 @@ class CameraFields:
     camera_from_base: Transform
     name: str
     source: str
+    distortion: np.ndarray | None = None
 
 
 def camera_table(camera: Camera) -> dict[str, Any]:
@@ -76,6 +82,8 @@ def camera_table(camera: Camera) -> dict[str, Any]:
     }
     if camera.kind == "unified":
         d["xi"] = float(camera.xi)
+    if camera.is_distorted:
+        d["distortion"] = [float(c) for c in camera.distortion]
     d["camera_from_base"] = pose_table(camera.camera_from_base)
     return d
 
@@ -162,8 +170,32 @@ def read_camera_table(table: dict[str, Any], path: str = "<dict>",
             raise ConfigFileError(
                 path, f"a perspective camera has xi = 0, got {xi} (use kind = 'unified')",
                 key="xi")
+    distortion = (read_distortion(table["distortion"], DISTORTION_LENGTHS[kind], path,
+                                  "distortion") if "distortion" in table else None)
     pose = read_pose_table(table, path)
     name = table.get("name", Path(path).stem)
     if not isinstance(name, str):
         raise ConfigFileError(path, f"expected a string, got {name!r}", key="name")
-    return CameraFields(kind, K, xi, table["width_px"], table["height_px"], pose, name, path)
+    return CameraFields(kind, K, xi, table["width_px"], table["height_px"], pose, name, path,
+                        distortion)
+
+
+def read_distortion(value: Any, lengths: tuple[int, ...], path: str, key: str) -> np.ndarray:
+    """A distortion vector of one of the ``lengths`` (finite numbers).
+
+    Raises:
+        ConfigFileError: Not a flat list of that many finite numbers (naming ``key``).
+    """
+    names = "k1, k2, p1, p2, k3"
+    want = " or ".join(str(n) for n in lengths)
+    try:
+        arr = np.array(value, dtype=float)
+    except (TypeError, ValueError):
+        raise ConfigFileError(path, f"expected {want} numbers ({names}), got {value!r}",
+                              key=key) from None
+    if arr.ndim != 1 or arr.shape[0] not in lengths:
+        raise ConfigFileError(path, f"expected {want} numbers ({names}), got shape "
+                              f"{arr.shape}", key=key)
+    if not np.all(np.isfinite(arr)):
+        raise ConfigFileError(path, f"contains NaN or inf: {arr.tolist()}", key=key)
+    return arr
