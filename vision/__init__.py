@@ -8,7 +8,9 @@ from vision.cameras import (
     camera_preset,
     front_camera,
     load_camera,
+    load_opencv_camera,
     omni_camera,
+    save_opencv_camera,
 )
 from vision.estimate import (
     NormalFit,
@@ -64,6 +66,7 @@ __all__ = [
     "leg_edges",
     "limb_points",
     "load_camera",
+    "load_opencv_camera",
     "observation_edge_points",
     "observe_legs",
     "omni_camera",
@@ -72,4 +75,5 @@ __all__ = [
     "random_rotations",
     "random_unit_vectors",
     "rotation_noise",
+    "save_opencv_camera",
 ]

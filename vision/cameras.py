@@ -272,7 +272,9 @@ from vision.camera_presets import (  # noqa: E402
     camera_preset,
     front_camera,
     load_camera,
+    load_opencv_camera,
     omni_camera,
+    save_opencv_camera,
 )
 
 __all__ = [
@@ -289,5 +291,7 @@ __all__ = [
     "camera_preset",
     "front_camera",
     "load_camera",
+    "load_opencv_camera",
     "omni_camera",
+    "save_opencv_camera",
 ]

@@ -18,6 +18,7 @@ from vision.cameras import Camera, PerspectiveCamera, UnifiedCamera
 from vision.distortion import RadialTangential
 from vision.estimate import fit_normal, fit_normal_conic
 from vision.exceptions import CameraError, DistortionError
+from vision.projection import domain_radius
 
 W, H = 640, 480
 
@@ -202,7 +203,11 @@ def _fd(f, x: np.ndarray, h: float) -> np.ndarray:
 def test_jacobians_match_finite_differences(cam: Camera, rng: np.random.Generator) -> None:
     pix = rng.uniform([0, 0], [W - 1, H - 1], size=(300, 2))
     rays = cam.lift(pix)
-    ok = np.all(np.isfinite(rays), axis=-1)
+    # Away from the edge of the mirror's field (xi > 1), where the lift has a square-root
+    # singularity that finite differences do not resolve.
+    radius = np.linalg.norm(cam.pixels_to_normalised(pix), axis=-1)
+    ok = np.all(np.isfinite(rays), axis=-1) & (radius < 0.98 * domain_radius(cam.xi))
+    assert ok.sum() > 100
     pix, rays = pix[ok], rays[ok]
     X = rays * rng.uniform(0.5, 3.0, size=(len(rays), 1))
     # d pixel / d point [px/m]
