@@ -89,7 +89,8 @@ class Camera(ABC):
 
     @property
     def K_inv(self) -> np.ndarray:
-        """Inverse intrinsics."""
+        """Inverse intrinsics: pixels to *distorted* normalised coordinates (the
+        distortion-aware path is :meth:`pixels_to_normalised`)."""
         return np.linalg.inv(self.K)
 
     @property
