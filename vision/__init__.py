@@ -8,7 +8,9 @@ from vision.cameras import (
     camera_preset,
     front_camera,
     load_camera,
+    load_opencv_camera,
     omni_camera,
+    save_opencv_camera,
 )
 from vision.estimate import (
     NormalFit,
@@ -19,7 +21,7 @@ from vision.estimate import (
     fit_normal_conic,
     radians_per_pixel,
 )
-from vision.exceptions import CameraError, EstimationError, VisionError
+from vision.exceptions import CameraError, DistortionError, EstimationError, VisionError
 from vision.legs import (
     EdgePoints,
     LegObservation,
@@ -42,6 +44,7 @@ from vision.noise import (
 __all__ = [
     "Camera",
     "CameraError",
+    "DistortionError",
     "EdgePoints",
     "EstimationError",
     "LegObservation",
@@ -63,6 +66,7 @@ __all__ = [
     "leg_edges",
     "limb_points",
     "load_camera",
+    "load_opencv_camera",
     "observation_edge_points",
     "observe_legs",
     "omni_camera",
@@ -71,4 +75,5 @@ __all__ = [
     "random_rotations",
     "random_unit_vectors",
     "rotation_noise",
+    "save_opencv_camera",
 ]

@@ -163,7 +163,8 @@ def fit_normal_conic(
     """Normal from an algebraic fit of the image curve (seed 003's alternative).
 
     Unified camera (``xi > 0``), exactly seed 003 eqs. (4)-(6): in normalised
-    coordinates ``m = (x, y) = K^-1 p`` the image of the edge is the conic
+    coordinates ``m = (x, y) = K^-1 p`` (the lens distortion removed first,
+    :meth:`Camera.pixels_to_normalised`) the image of the edge is the conic
     ``b0 x² + b1 y² + 2 b2 xy + 2 b3 x + 2 b4 y + 1 = 0`` with ``b_k = α_k / α_5``
     (``docs/math.md`` section 5, ``α_3 = nx nz``, ``α_4 = ny nz``, ``α_5 = nz²``); the
     five ``b_k`` are fitted by linear least squares and ``n = (b3, b4, 1) /
@@ -173,7 +174,8 @@ def fit_normal_conic(
 
     Perspective camera (or ``xi = 0``, where the image is a straight line and a
     conic fit is degenerate): the line fit in normalised pixel coordinates
-    ``((u - w/2)/w, (v - h/2)/w, 1)``, then ``n = Kt^T l`` (seed 002). Needs 2 points.
+    ``((u - w/2)/w, (v - h/2)/w, 1)`` of the ideal (undistorted) image, then
+    ``n = Kt^T l`` (seed 002). Needs 2 points.
 
     Arguments and result as :func:`fit_normal` (``residual`` is measured on the
     lifted points, so both fits are comparable).
@@ -306,8 +308,10 @@ def radians_per_pixel(camera: Camera) -> float:
     """Angle of the viewing ray per pixel of image motion at the principal point [rad].
 
     ``(1 + xi) / f`` with ``f`` the mean focal length [px]: ``1 / f`` for a perspective
-    camera, ``2 / f`` for a parabolic mirror (``xi = 1``). Away from the principal
-    point a pixel subtends a smaller angle, so a pixel distance turned into an angle
-    with this factor is an upper bound there.
+    camera, ``2 / f`` for a parabolic mirror (``xi = 1``); the lens distortion does not
+    change it (its Jacobian is the identity at the principal point). Away from the
+    principal point an ideal lens's pixel subtends a smaller angle, so a pixel distance
+    turned into an angle with this factor is an upper bound there (not necessarily
+    with a barrel distortion, which compresses the border).
     """
     return (1.0 + float(camera.xi)) / (0.5 * (float(camera.fx) + float(camera.fy)))

@@ -33,6 +33,43 @@ class CameraError(VisionError, ValueError):
         super().__init__(f"{where}{field}: {problem}")
 
 
+class DistortionError(CameraError):
+    """Lens distortion coefficients whose mapping folds inside the image.
+
+    The distortion map (normalised undistorted -> distorted coordinates) is then not
+    one-to-one over the image: two directions give the same pixel, and pixels near the
+    fold cannot be lifted. The evidence is the point of the fold (the curve where the
+    Jacobian determinant of the map vanishes) that lies deepest inside the image.
+
+    Attributes:
+        coefficients: The coefficients, OpenCV's order ``(k1, k2, p1, p2[, k3])``.
+        radius_undistorted: Radius of the fold point before distortion [normalised
+            units, ``|(X/Z, Y/Z)|`` for a perspective camera].
+        radius_normalised: Its radius after distortion, ``|K^-1 p|`` [normalised units].
+        radius_px: Its distance from the principal point [px].
+        pixel: Its pixel ``(u, v)``.
+    """
+
+    def __init__(self, coefficients: Any, radius_undistorted: float, radius_normalised: float,
+                 radius_px: float, pixel: tuple[float, float],
+                 source: str | None = None) -> None:
+        self.coefficients = tuple(float(c) for c in coefficients)
+        self.radius_undistorted = float(radius_undistorted)
+        self.radius_normalised = float(radius_normalised)
+        self.radius_px = float(radius_px)
+        self.pixel = (float(pixel[0]), float(pixel[1]))
+        coeffs = ", ".join(f"{c:.6g}" for c in self.coefficients)
+        super().__init__(
+            "distortion",
+            f"coefficients ({coeffs}) fold inside the image: the mapping is not one-to-one "
+            f"(its Jacobian determinant vanishes) at normalised radius "
+            f"{self.radius_normalised:.6g} (undistorted {self.radius_undistorted:.6g}), "
+            f"{self.radius_px:.1f} px from the principal point, at pixel "
+            f"({self.pixel[0]:.1f}, {self.pixel[1]:.1f})",
+            source,
+        )
+
+
 class EstimationError(VisionError, ValueError):
     """An estimation cannot run on its input (wrong shapes, too few points)."""
 

@@ -102,10 +102,13 @@ class LegObservation:
         exists: (..., 6) False where the camera is inside the leg cylinder.
         edge_visible: (..., 6, 2) the edge is observed.
         visible_fraction: (..., 6, 2) fraction of visible samples.
-        lines: (..., 6, 2, 3) unit lines in normalised pixel coordinates
-            (:meth:`PerspectiveCamera.normal_to_line`), None for other cameras.
+        lines: (..., 6, 2, 3) unit lines in normalised pixel coordinates of the ideal
+            (undistorted) image (:meth:`PerspectiveCamera.normal_to_line`), None for
+            other cameras.
         segments: (..., 6, 2, 2, 2) pixels of the two ends (``s = 0``: base end,
-            ``s = 1``: platform end) of each edge segment; NaN where not imaged.
+            ``s = 1``: platform end) of each edge segment, in the raw (distorted)
+            image; NaN where not imaged. (With lens distortion the image of the edge
+            between them is a curve.)
             (For a unified camera the image of the edge is an arc of the conic
             between these ends.)
         visible_interval: (..., 6, 2, 2) ``s`` of the first and last visible samples

@@ -412,3 +412,19 @@ def test_packaged_preset_files_match_the_presets() -> None:
         assert np.allclose(cam.K, ref.K) and cam.xi == ref.xi
         assert np.allclose(cam.camera_from_base.as_matrix(), ref.camera_from_base.as_matrix(),
                            atol=1e-12)
+
+
+def test_every_former_public_name_still_imports_from_vision_cameras() -> None:
+    """``vision.cameras`` was split (checks, file format, presets): its public names stay."""
+    import vision.camera_presets as presets
+    import vision.cameras as cameras
+
+    names = ("Camera", "PerspectiveCamera", "UnifiedCamera", "camera_preset", "front_camera",
+             "omni_camera", "load_camera", "FRONT_PIXEL_SIZE", "FRONT_FOCAL_LENGTH",
+             "FRONT_DISTANCE", "FRONT_AZIMUTH_DEG", "FRONT_EYE_HEIGHT", "FRONT_TARGET_HEIGHT",
+             "OMNI_FOCAL")
+    missing = [n for n in names if not hasattr(cameras, n)]
+    assert not missing
+    assert set(names) <= set(cameras.__all__)
+    assert cameras.front_camera is presets.front_camera
+    assert cameras.FRONT_DISTANCE == presets.FRONT_DISTANCE == 0.80

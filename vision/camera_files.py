@@ -1,0 +1,261 @@
+"""The camera file format (TOML): a camera as a table of pixels, millimetres, degrees.
+
+This module turns a table into the fields of a camera (:class:`CameraFields`) and a
+camera into a table; the models (:mod:`vision.cameras`) build and validate the camera
+itself, so this module does not depend on them.
+
+Format: ``kind`` (``"perspective"``/``"unified"``), ``name``, ``width_px``,
+``height_px``, ``fx_px``, ``fy_px``, ``cx_px``, ``cy_px``, ``skew_px``, ``xi``
+(unified only), ``distortion`` (OpenCV's coefficients: ``[k1, k2, p1, p2, k3]`` for a
+perspective camera, 4 or 5 numbers; ``[k1, k2, p1, p2]`` for a unified one; absent for
+an ideal lens) and a table ``[camera_from_base]`` with ``translation_mm`` and
+``rotation_vector_deg`` (axis times angle, degrees) or ``rotation_matrix``, such that
+``p_camera = R p_base + t``.
+
+Instead of the intrinsic keys, ``opencv = "calib.yml"`` names an OpenCV calibration
+file (:mod:`vision.opencv_files`; the path is relative to the TOML file): the camera
+matrix, the distortion, ``xi`` and the image size come from it, the pose from the
+``[camera_from_base]`` table; ``width_px`` and ``height_px`` may give the image size
+when the OpenCV file does not (``omni_calibration.cpp``), and ``kind`` may be given
+(it must then agree with the file: ``xi`` present means ``"unified"``).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+
+from hexapod.config import check_keys, get_matrix, get_number, suggest
+from hexapod.exceptions import ConfigFileError
+from hexapod.kinematics import Transform
+from hexapod.se3 import exp_so3, log_so3
+from vision.opencv_files import calibration_size, read_opencv_calibration
+
+if TYPE_CHECKING:
+    from vision.cameras import Camera
+
+#: Keys of a camera table.
+CAMERA_KEYS = ("kind", "name", "width_px", "height_px", "fx_px", "fy_px", "cx_px", "cy_px",
+               "skew_px", "xi", "distortion", "camera_from_base")
+#: Keys of a camera table that takes its intrinsics from an OpenCV file.
+OPENCV_TABLE_KEYS = ("kind", "name", "opencv", "width_px", "height_px", "camera_from_base")
+#: Keys of its ``[camera_from_base]`` table.
+POSE_KEYS = ("translation_mm", "rotation_vector_deg", "rotation_matrix")
+#: The camera kinds (models) a file may name.
+KINDS = ("perspective", "unified")
+#: Accepted lengths of the ``distortion`` list of each kind.
+DISTORTION_LENGTHS = {"perspective": (4, 5), "unified": (4,)}
+
+
+@dataclass(frozen=True)
+class CameraFields:
+    """The constructor arguments of a camera read from a file (not validated yet).
+
+    Attributes:
+        kind: ``"perspective"`` or ``"unified"``.
+        K: (3, 3) intrinsics [px].
+        xi: Mirror parameter (0 for a perspective camera).
+        width: Image width [px].
+        height: Image height [px].
+        camera_from_base: Pose w.r.t. the robot base.
+        name: A label (the file's stem by default).
+        source: The file.
+        distortion: OpenCV's distortion coefficients (None: an ideal lens).
+    """
+
+    kind: str
+    K: np.ndarray
+    xi: float
+    width: int
+    height: int
+    camera_from_base: Transform
+    name: str
+    source: str
+    distortion: np.ndarray | None = None
+
+
+def camera_table(camera: Camera) -> dict[str, Any]:
+    """The file representation of a camera (pixels, millimetres, degrees)."""
+    d: dict[str, Any] = {
+        "kind": camera.kind,
+        "name": camera.name,
+        "width_px": camera.width,
+        "height_px": camera.height,
+        "fx_px": float(camera.K[0, 0]),
+        "fy_px": float(camera.K[1, 1]),
+        "cx_px": float(camera.K[0, 2]),
+        "cy_px": float(camera.K[1, 2]),
+        "skew_px": float(camera.K[0, 1]),
+    }
+    if camera.kind == "unified":
+        d["xi"] = float(camera.xi)
+    if camera.is_distorted:
+        d["distortion"] = [float(c) for c in camera.distortion]
+    d["camera_from_base"] = pose_table(camera.camera_from_base)
+    return d
+
+
+def pose_table(pose: Transform) -> dict[str, Any]:
+    """``[camera_from_base]``: ``translation_mm`` and ``rotation_vector_deg``."""
+    rv = np.rad2deg(log_so3(pose.rotation))
+    return {
+        "translation_mm": ((pose.translation * 1e3).round(9) + 0.0).tolist(),
+        "rotation_vector_deg": (rv.round(12) + 0.0).tolist(),
+    }
+
+
+def read_pose_table(table: dict[str, Any], path: str) -> Transform:
+    """The pose of a ``[camera_from_base]`` table (identity when absent).
+
+    The rotation is given either as ``rotation_vector_deg`` or as a 3x3
+    ``rotation_matrix`` (not both); the translation as ``translation_mm``.
+    """
+    pose = table.get("camera_from_base", {})
+    if not isinstance(pose, dict):
+        raise ConfigFileError(path, "expected a table", key="camera_from_base")
+    pre = "camera_from_base."
+    check_keys(pose, POSE_KEYS, path, prefix=pre)
+    t = (get_matrix(pose, "translation_mm", (3,), path, pre) * 1e-3
+         if "translation_mm" in pose else np.zeros(3))
+    if "rotation_vector_deg" in pose and "rotation_matrix" in pose:
+        raise ConfigFileError(path, "give rotation_vector_deg or rotation_matrix, not both",
+                              key="camera_from_base")
+    if "rotation_matrix" in pose:
+        R = get_matrix(pose, "rotation_matrix", (3, 3), path, pre)
+    elif "rotation_vector_deg" in pose:
+        R = exp_so3(np.deg2rad(get_matrix(pose, "rotation_vector_deg", (3,), path, pre)))
+    else:
+        R = np.eye(3)
+    return Transform(R, t)
+
+
+def read_camera_table(table: dict[str, Any], path: str = "<dict>",
+                      model: tuple[str, str] | None = None) -> CameraFields:
+    """The fields of a camera table (see the module docstring for the format).
+
+    Args:
+        table: The parsed TOML table.
+        path: The file, for the error messages.
+        model: ``(kind, class name)`` when a specific model is being loaded: the
+            table's ``kind`` defaults to it and must match it.
+
+    Raises:
+        ConfigFileError: Missing, misspelt or unknown key, bad value (naming the key).
+    """
+    if "opencv" in table:
+        return _read_opencv_table(table, path, model)
+    check_keys(table, CAMERA_KEYS, path,
+               required=("width_px", "height_px", "fx_px", "fy_px", "cx_px", "cy_px"))
+    kind = _kind(table, path, model, None)
+    for key in ("width_px", "height_px"):
+        _positive_int(table, key, path)
+    f = {k: get_number(table, k, path) for k in ("fx_px", "fy_px", "cx_px", "cy_px")}
+    skew = get_number(table, "skew_px", path) if "skew_px" in table else 0.0
+    for k in ("fx_px", "fy_px"):
+        if f[k] <= 0:
+            raise ConfigFileError(path, f"focal length must be positive, got {f[k]}", key=k)
+    K = np.array([[f["fx_px"], skew, f["cx_px"]], [0.0, f["fy_px"], f["cy_px"]],
+                  [0.0, 0.0, 1.0]])
+    xi = 0.0
+    if kind == "unified":
+        if "xi" not in table:
+            raise ConfigFileError(path, "missing required key (unified camera)", key="xi")
+        xi = get_number(table, "xi", path)
+        if xi < 0:
+            raise ConfigFileError(path, f"must be >= 0, got {xi}", key="xi")
+    elif "xi" in table:
+        xi = get_number(table, "xi", path)
+        if xi != 0:
+            raise ConfigFileError(
+                path, f"a perspective camera has xi = 0, got {xi} (use kind = 'unified')",
+                key="xi")
+    distortion = (read_distortion(table["distortion"], DISTORTION_LENGTHS[kind], path,
+                                  "distortion") if "distortion" in table else None)
+    pose = read_pose_table(table, path)
+    name = table.get("name", Path(path).stem)
+    if not isinstance(name, str):
+        raise ConfigFileError(path, f"expected a string, got {name!r}", key="name")
+    return CameraFields(kind, K, xi, table["width_px"], table["height_px"], pose, name, path,
+                        distortion)
+
+
+def read_distortion(value: Any, lengths: tuple[int, ...], path: str, key: str) -> np.ndarray:
+    """A distortion vector of one of the ``lengths`` (finite numbers).
+
+    Raises:
+        ConfigFileError: Not a flat list of that many finite numbers (naming ``key``).
+    """
+    names = "k1, k2, p1, p2, k3"
+    want = " or ".join(str(n) for n in lengths)
+    try:
+        arr = np.array(value, dtype=float)
+    except (TypeError, ValueError):
+        raise ConfigFileError(path, f"expected {want} numbers ({names}), got {value!r}",
+                              key=key) from None
+    if arr.ndim != 1 or arr.shape[0] not in lengths:
+        raise ConfigFileError(path, f"expected {want} numbers ({names}), got shape "
+                              f"{arr.shape}", key=key)
+    if not np.all(np.isfinite(arr)):
+        raise ConfigFileError(path, f"contains NaN or inf: {arr.tolist()}", key=key)
+    return arr
+
+
+def _positive_int(table: dict[str, Any], key: str, path: str) -> int:
+    v = table[key]
+    if isinstance(v, bool) or not isinstance(v, int) or v <= 0:
+        raise ConfigFileError(path, f"expected a positive integer, got {v!r}", key=key)
+    return v
+
+
+def _kind(table: dict[str, Any], path: str, model: tuple[str, str] | None,
+          default: str | None) -> str:
+    """The table's ``kind`` (or the default): known, and the model's if one is loaded."""
+    if default is None and model is not None:
+        default = model[0]
+    kind = table.get("kind", default)
+    if kind is None:
+        raise ConfigFileError(path, "missing required key", key="kind")
+    if kind not in KINDS:
+        hint = suggest(str(kind), KINDS)
+        raise ConfigFileError(path, f"unknown camera kind {kind!r}; expected one of "
+                              f"{', '.join(KINDS)}", key="kind", suggestion=hint)
+    if model is not None and kind != model[0]:
+        raise ConfigFileError(path, f"kind {kind!r} cannot be loaded as {model[1]}", key="kind")
+    return str(kind)
+
+
+def _read_opencv_table(table: dict[str, Any], path: str,
+                       model: tuple[str, str] | None) -> CameraFields:
+    """A camera table whose intrinsics come from the OpenCV file named by ``opencv``."""
+    for key in CAMERA_KEYS:
+        if key in table and key not in OPENCV_TABLE_KEYS:
+            raise ConfigFileError(path, f"the intrinsics come from the OpenCV file "
+                                        f"{table['opencv']!r}: remove this key", key=key)
+    check_keys(table, OPENCV_TABLE_KEYS, path)
+    ref = table["opencv"]
+    if not isinstance(ref, str) or not ref:
+        raise ConfigFileError(path, f"expected the path of an OpenCV calibration file, got "
+                                    f"{ref!r}", key="opencv")
+    cal_path = Path(ref) if Path(ref).is_absolute() else Path(path).parent / ref
+    cal = read_opencv_calibration(cal_path)
+    file_kind = "perspective" if cal.xi is None else "unified"
+    kind = _kind(table, path, model, file_kind)
+    if kind != file_kind:
+        raise ConfigFileError(path, f"kind {kind!r} but {cal_path} is a {file_kind} "
+                                    f"calibration ({'no ' if cal.xi is None else ''}xi)",
+                              key="kind")
+    given = None
+    if "width_px" in table or "height_px" in table:
+        for key in ("width_px", "height_px"):
+            if key not in table:
+                raise ConfigFileError(path, "missing (give width_px and height_px)", key=key)
+        given = (_positive_int(table, "width_px", path), _positive_int(table, "height_px", path))
+    width, height = calibration_size(cal, given, f"width_px and height_px in {path}")
+    name = table.get("name", Path(path).stem)
+    if not isinstance(name, str):
+        raise ConfigFileError(path, f"expected a string, got {name!r}", key="name")
+    return CameraFields(kind, cal.K, 0.0 if cal.xi is None else cal.xi, width, height,
+                        read_pose_table(table, path), name, str(cal_path), cal.distortion)
