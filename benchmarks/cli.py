@@ -392,6 +392,7 @@ PERF_MODULES = {
     "detect": "benchmarks.perf.detect",
     "serial": "benchmarks.perf.serial",
     "calibration": "benchmarks.perf.calibration",
+    "study": "benchmarks.perf.study",
 }
 
 

@@ -25,21 +25,29 @@ log = logging.getLogger(__name__)
 
 #: Doubles per item: parameters and outputs (see the C source).
 N_IN, N_OUT = 77, 138
-#: Camera parameters per item: fx, skew, cx, fy, cy, xi, k1, k2, p1, p2, k3, r2max.
+#: Camera parameters per item: fx, skew, cx, fy, cy, xi, k1, k2, p1, p2, k3, fold radius.
 N_CAMERA = 12
 
 
 def camera_vector(camera: Any) -> np.ndarray:
-    """The 12 camera parameters of the C core (intrinsics, xi, distortion, trusted r^2)."""
+    """The 12 camera parameters of the C core (intrinsics, xi, distortion, fold radius)."""
     K = np.asarray(camera.K, float)
-    dist = getattr(camera, "distortion", None)
     d = np.zeros(5)
-    if dist is not None:
-        dv = np.asarray(dist, float).reshape(-1)
-        d[:len(dv)] = dv
-    r2max = float(getattr(camera, "max_undistorted_r2", 0.0) or 0.0)
-    return np.array([K[0, 0], K[0, 1], K[0, 2], K[1, 1], K[1, 2], float(camera.xi), *d,
-                     r2max])
+    fold = 0.0
+    if getattr(camera, "is_distorted", False):
+        d[:] = camera.lens.coefficients
+        r = float(camera.lens.fold_free_radius(np.array([1.0, 0.0])))
+        fold = r if np.isfinite(r) else 0.0
+    return np.array([K[0, 0], K[0, 1], K[0, 2], K[1, 1], K[1, 2], float(camera.xi), *d, fold])
+
+
+def supported(camera: Any) -> bool:
+    """Whether the C core reproduces this camera's :meth:`project` exactly: no distortion,
+    or a radial one (its fold radius is the same in every direction)."""
+    if not getattr(camera, "is_distorted", False):
+        return True
+    p1, p2 = camera.lens.coefficients[2:4]
+    return bool(p1 == 0.0 and p2 == 0.0)
 
 
 @dataclass
@@ -56,6 +64,8 @@ class WorldParams:
         camera: (N, 12) :func:`camera_vector` of each item's camera.
         unified: Whether the cameras are unified (else perspective).
         width, height: Image size [px] (the same for every item).
+        compiled: Whether the C core reproduces every item's camera (:func:`supported`);
+            else :func:`observe_batch` runs the numpy reference item by item.
     """
 
     base_points: np.ndarray
@@ -68,6 +78,9 @@ class WorldParams:
     unified: bool
     width: int
     height: int
+    compiled: bool = True
+    geometries: list[Any] | None = None
+    cameras: list[Any] | None = None
 
     @classmethod
     def from_worlds(cls, geometries: list[HexapodGeometry], cameras: list[Any]) -> WorldParams:
@@ -88,7 +101,9 @@ class WorldParams:
             camera_translation=np.array([c.camera_from_base.translation for c in cameras],
                                         float),
             camera=np.array([camera_vector(c) for c in cameras]),
-            unified=kinds.pop() == "unified", width=width, height=height)
+            unified=kinds.pop() == "unified", width=width, height=height,
+            compiled=all(supported(c) for c in cameras), geometries=list(geometries),
+            cameras=list(cameras))
 
     def pack(self, rotations: np.ndarray, translations: np.ndarray,
              items: np.ndarray | None = None) -> np.ndarray:
@@ -161,8 +176,9 @@ def observe_batch(params: WorldParams, rotations: np.ndarray, translations: np.n
     rows = params.pack(rotations, translations, items)
     n = rows.shape[0]
     lib = kernels._load()
-    if lib is None:
-        return _observe_numpy(params, rows, n_samples, min_fraction, occlusion)
+    if lib is None or not params.compiled:
+        idx = np.arange(len(params.leg_radius)) if items is None else np.asarray(items)
+        return _observe_numpy(params, rows, idx, n_samples, min_fraction, occlusion)
     out = np.empty((n, N_OUT))
     lib.hexapod_observe_batch(rows.ctypes.data, out.ctypes.data, n, float(params.width),
                               float(params.height), int(params.unified), int(n_samples),
@@ -185,37 +201,20 @@ def _unpack(out: np.ndarray) -> BatchObservation:
         platform_normal=out[:, 135:138])
 
 
-def _observe_numpy(params: WorldParams, rows: np.ndarray, n_samples: int,
+def _observe_numpy(params: WorldParams, rows: np.ndarray, items: np.ndarray, n_samples: int,
                    min_fraction: float, occlusion: bool) -> BatchObservation:
-    """The numpy reference, item by item (no compiler)."""
-    from hexapod.kinematics import Transform
+    """The numpy reference, item by item (no compiler, or a camera the core cannot do)."""
     from vision.legs import observe_legs_numpy
 
+    if params.geometries is None or params.cameras is None:
+        raise ValueError("WorldParams without its geometries and cameras (use from_worlds)")
     out = []
-    for row in rows:
-        geometry = HexapodGeometry(base_points=row[12:30].reshape(6, 3),
-                                   platform_points=row[30:48].reshape(6, 3),
-                                   stroke=(1e-3, 1e3), leg_radius=float(row[48]))
-        cam = _camera_from_row(row, Transform(row[50:59].reshape(3, 3), row[59:62]),
-                               params)
-        lo = observe_legs_numpy(cam, geometry, row[0:9].reshape(3, 3), row[9:12],
-                                min_fraction, n_samples, float(row[49]), occlusion)
+    for row, k in zip(rows, items, strict=True):
+        lo = observe_legs_numpy(params.cameras[k], params.geometries[k], row[0:9].reshape(3, 3),
+                                row[9:12], min_fraction, n_samples, float(row[49]), occlusion)
         out.append(np.concatenate([
             lo.normals.reshape(36), lo.exists.astype(float), lo.visible_fraction.reshape(12),
             lo.edge_visible.reshape(12).astype(float), lo.base_points.reshape(18),
             lo.directions.reshape(18), lo.lengths, lo.visible_interval.reshape(24),
             lo.platform_centre, lo.platform_normal]))
     return _unpack(np.array(out).reshape(len(rows), N_OUT))
-
-
-def _camera_from_row(row: np.ndarray, pose: Any, params: WorldParams) -> Any:
-    from vision.cameras import PerspectiveCamera, UnifiedCamera
-
-    c = row[62:74]
-    K = np.array([[c[0], c[1], c[2]], [0.0, c[3], c[4]], [0.0, 0.0, 1.0]])
-    extra: dict[str, Any] = {}
-    if np.any(c[6:11]):
-        extra["distortion"] = c[6:11] if not params.unified else c[6:10]
-    if params.unified:
-        return UnifiedCamera(K, float(c[5]), params.width, params.height, pose, **extra)
-    return PerspectiveCamera(K, params.width, params.height, pose, **extra)

@@ -309,8 +309,8 @@ def observe_legs(
         raise ValueError(f"min_visible_fraction must be in (0, 1], got {min_visible_fraction}")
     if n_samples < 1:
         raise ValueError(f"n_samples must be >= 1, got {n_samples}")
-    if not fast_observe.compiled() or getattr(camera, "kind", None) not in ("perspective",
-                                                                          "unified"):
+    if (not fast_observe.compiled() or getattr(camera, "kind", None) not in (
+            "perspective", "unified") or not fast_observe.supported(camera)):
         return observe_legs_numpy(camera, geometry, rotation, translation,
                                   min_visible_fraction, n_samples, platform_radius, occlusion)
     R = np.asarray(rotation, float)

@@ -78,3 +78,25 @@ def test_observe_legs_uses_the_core_and_matches(kind: str) -> None:
     b = observe_legs_numpy(cam, g, R, t, n_samples=5, min_visible_fraction=0.9,
                            occlusion=False)
     assert np.array_equal(a.edge_visible, b.edge_visible)
+
+
+@pytest.mark.parametrize(("kind", "coefficients"), [
+    ("front", (-0.28, 0.08, 0.0, 0.0, -0.01)),
+    ("omni", (-0.1, 0.02, 0.0, 0.0)),
+    ("front", (-0.2, 0.05, 0.002, -0.001, 0.0)),   # tangential: the numpy reference runs
+])
+def test_distorted_cameras_equal_the_numpy_reference(kind: str,
+                                                     coefficients: tuple[float, ...]) -> None:
+    g = deltalab()
+    cam = (front_camera(g) if kind == "front" else omni_camera(g)).replace(
+        distortion=coefficients)
+    assert fast_observe.supported(cam) == (coefficients[2:4] == (0.0, 0.0))
+    R, t = sample_poses(g, 300, rng=5)
+    a = observe_legs(cam, g, R, t)
+    b = observe_legs_numpy(cam, g, R, t)
+    assert np.array_equal(a.edge_visible, b.edge_visible)
+    np.testing.assert_array_equal(a.visible_fraction, b.visible_fraction)
+    np.testing.assert_allclose(a.segments, b.segments, rtol=0, atol=1e-9)
+    undistorted = observe_legs_numpy(cam.replace(distortion=None), g, R, t)
+    shift = np.nanmax(np.abs(undistorted.segments - b.segments))
+    assert shift > 5.0, "the lens moves the edges by pixels (an ignored lens would show)"

@@ -20,8 +20,10 @@
  *   A (18): base joint centres, base frame; E (18): platform joint centres, platform frame
  *   r, rho: leg radius, platform disc radius
  *   Rc (9, row-major) tc (3): camera_from_base
- *   fx, s, cx, fy, cy, xi, k1, k2, p1, p2, k3, r2max (12): intrinsics, distortion, and the
- *   largest undistorted r^2 the distortion is trusted to (0: no limit)
+ *   fx, s, cx, fy, cy, xi, k1, k2, p1, p2, k3, rfold (12): intrinsics, OpenCV distortion
+ *   (vision.distortion.RadialTangential), and the undistorted radius below which the
+ *   distortion does not fold (0: no fold; radial distortion only: a fold radius that
+ *   depends on the direction is not handled here, vision/fast_observe.py checks it)
  * = 77 doubles.
  * Outputs of one item: normals (36), exists (6), fraction (12), visible (12, 0/1),
  * A_cam (18), u (18), q (6), interval (24: s_first, s_last per edge), centre (3),
@@ -64,13 +66,15 @@ static int imaged(const double *X, const double *cam, int unified, double width,
     z = X[2] + xi * rho;
   }
   double x = X[0] / z, y = X[1] / z;
-  double k1 = cam[6], k2 = cam[7], p1 = cam[8], p2 = cam[9], k3 = cam[10], r2max = cam[11];
+  double k1 = cam[6], k2 = cam[7], p1 = cam[8], p2 = cam[9], k3 = cam[10], rfold = cam[11];
   if (k1 != 0.0 || k2 != 0.0 || p1 != 0.0 || p2 != 0.0 || k3 != 0.0) {
+    /* vision.distortion.RadialTangential.apply, operation for operation */
     double r2 = x * x + y * y;
-    if (r2max > 0.0 && !(r2 <= r2max)) return 0;
-    double radial = 1.0 + k1 * r2 + k2 * r2 * r2 + k3 * r2 * r2 * r2;
-    double xd = x * radial + 2.0 * p1 * x * y + p2 * (r2 + 2.0 * x * x);
-    double yd = y * radial + p1 * (r2 + 2.0 * y * y) + 2.0 * p2 * x * y;
+    if (rfold > 0.0 && !(sqrt(r2) < rfold)) return 0;
+    double L = 1.0 + r2 * (k1 + r2 * (k2 + r2 * k3));
+    double xy2 = 2.0 * x * y;
+    double xd = x * L + p1 * xy2 + p2 * (r2 + 2.0 * x * x);
+    double yd = y * L + p1 * (r2 + 2.0 * y * y) + p2 * xy2;
     x = xd;
     y = yd;
   }

@@ -1,0 +1,77 @@
+"""The batched engine gives the rows of the per-trial path, on every built-in scenario that
+it runs (geometric sensor), whatever the controller: built-in ones step as arrays, a plugin
+without ``step_batch`` goes through a per-trial loop in the same study."""
+
+from __future__ import annotations
+
+from dataclasses import replace
+from typing import Any
+
+import numpy as np
+import pytest
+
+from benchmarks.sim import run_trials
+from benchmarks.study.calibration import calibration_hook
+from benchmarks.study.scenario import ControllerSpec, builtin_scenarios, load_scenario
+from controllers.batch import PerTrialLoop, batch_controller
+from tests.benchmarks.plugins import ProportionalJoints
+
+#: Fields that legitimately differ between the two paths (the controller's timing).
+VOLATILE = {"step_time_us"}
+GEOMETRIC = [name for name in builtin_scenarios()
+             if load_scenario(name).sensor == "geometric"]
+PLUGIN = "tests.benchmarks.plugins:ProportionalJoints"
+
+
+def _rows(sc: Any, engine: str, trials: int) -> list[dict[str, Any]]:
+    out = []
+    for p, point in enumerate(sc.expand()):
+        for c in range(len(point.controllers)):
+            for res in run_trials(point, c, list(range(trials)), record_trials=1,
+                                  calibrate=calibration_hook(point), engine=engine):
+                row = {k: v for k, v in res.row.items() if k not in VOLATILE}
+                row["point"] = p
+                out.append(row)
+                if res.series is not None:
+                    row["series"] = res.series
+    return out
+
+
+def _compare(a: list[dict[str, Any]], b: list[dict[str, Any]]) -> None:
+    assert len(a) == len(b)
+    for x, y in zip(a, b, strict=True):
+        sx, sy = x.pop("series", None), y.pop("series", None)
+        assert x.keys() == y.keys(), (x, y)
+        for key in x:
+            if isinstance(x[key], float) and isinstance(y[key], float):
+                assert abs(x[key] - y[key]) <= 1e-9 * max(1.0, abs(x[key])), (key, x, y)
+            else:
+                assert x[key] == y[key], (key, x, y)
+        assert (sx is None) == (sy is None)
+        if sx is not None:
+            for key in sx:
+                np.testing.assert_allclose(np.asarray(sx[key], float),
+                                           np.asarray(sy[key], float), rtol=0, atol=1e-12,
+                                           err_msg=key)
+
+
+@pytest.mark.parametrize("name", GEOMETRIC)
+def test_batched_rows_equal_the_per_trial_rows(name: str) -> None:
+    """Every built-in scenario with the geometric sensor (2 trials per controller and sweep
+    point, 60 periods): the same rows, final errors to 1e-9 mm, the same convergence and
+    steps, the same recorded series."""
+    sc = load_scenario(name).with_overrides(trials=2, max_steps=60)
+    _compare(_rows(sc, "per-trial", 2), _rows(sc, "batched", 2))
+
+
+def test_a_plugin_without_step_batch_runs_in_the_same_study() -> None:
+    sc = load_scenario("quick").with_overrides(trials=3, max_steps=200)
+    sc = replace(sc, controllers=(ControllerSpec(PLUGIN, PLUGIN, {"gain": 4.0}),
+                                  ControllerSpec("leg-edge", "leg-edge", {"gain": 4.0})))
+    assert isinstance(batch_controller(PLUGIN, {}), PerTrialLoop)
+    assert not hasattr(ProportionalJoints, "step_batch")
+    batched, per_trial = _rows(sc, "batched", 3), _rows(sc, "per-trial", 3)
+    _compare(per_trial, batched)
+    plugin_rows = [r for r in batched if r["controller"] == PLUGIN]
+    assert len(plugin_rows) == 3 and all(r["failure"] is None or "not conv" in r["failure"]
+                                         for r in plugin_rows)
