@@ -29,6 +29,7 @@ import sys
 from collections.abc import Sequence
 from pathlib import Path
 from types import FrameType, TracebackType
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -42,6 +43,9 @@ from hexapod.backends.emulator_server import (
 )
 from hexapod.exceptions import BackendError
 from hexapod.geometry import HexapodGeometry
+
+if TYPE_CHECKING:
+    from hexapod.backends.gcs_emulator import GcsConfig
 
 logger = logging.getLogger(__name__)
 
@@ -91,6 +95,8 @@ class EmulatorProcess:
         transport: ``"pty"`` or ``"tcp"`` (loopback, any free port).
         line_rate: Emulated line rate [baud] (0: instantaneous).
         startup_timeout: Longest wait for the device line [s].
+        options: ``hexapod-emulator`` options that replace those of ``config`` and
+            ``faults`` (e.g. ``["--gcs", "--geometry", "robot.toml"]``).
 
     Attributes:
         url: The device path or ``socket://`` URL printed by the emulator.
@@ -98,10 +104,12 @@ class EmulatorProcess:
 
     def __init__(self, config: BoardConfig | None = None, faults: FaultConfig | None = None,
                  *, transport: str = "pty", line_rate: float = 0.0,
-                 startup_timeout: float = 30.0) -> None:
+                 startup_timeout: float = 30.0, options: Sequence[str] | None = None) -> None:
         where = ["--pty"] if transport == "pty" else ["--tcp", "127.0.0.1:0"]
-        args = [sys.executable, "-m", "hexapod.backends.emulator", *where,
-                *config_to_args(config or BoardConfig(), faults), "--line-rate", repr(line_rate)]
+        described = (list(options) if options is not None
+                     else config_to_args(config or BoardConfig(), faults))
+        args = [sys.executable, "-m", "hexapod.backends.emulator", *where, *described,
+                "--line-rate", repr(line_rate)]
         self.proc = subprocess.Popen(args, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
                                      text=True)
         if self.proc.stdout is None:
@@ -166,9 +174,10 @@ def build_parser() -> argparse.ArgumentParser:
     """The ``hexapod-emulator`` argument parser."""
     p = argparse.ArgumentParser(
         prog="hexapod-emulator",
-        description="Emulate the hexapod's controller board (docs/serial-protocol.md) on a "
+        description="Emulate the hexapod's controller board (docs/serial-protocol.md), or "
+                    "with --gcs a PI GCS hexapod controller (docs/backends.md), on a "
                     "pseudo-terminal or a loopback TCP port. Prints the device path (or "
-                    "socket URL) as the first line on stdout, then serves until Ctrl-C.",
+                    "URL) as the first line on stdout, then serves until Ctrl-C.",
     )
     where = p.add_mutually_exclusive_group(required=True)
     where.add_argument("--pty", action="store_true", help="serve on a new pseudo-terminal")
@@ -187,11 +196,31 @@ def build_parser() -> argparse.ArgumentParser:
     robot.add_argument("--lengths", type=float, nargs="+", metavar="MM",
                        help="initial leg lengths [mm]: one for all legs or six "
                             "(default: mid-stroke)")
-    robot.add_argument("--lag", type=float, default=0.0, metavar="S",
-                       help="first-order lag time constant of each leg [s] (default 0)")
+    robot.add_argument("--lag", type=float, metavar="S",
+                       help="first-order lag time constant of each leg [s] (default 0; "
+                            "not with --gcs)")
     robot.add_argument("--identity", help="the *IDN? text (default: emulator and geometry name)")
-    robot.add_argument("--watchdog", type=int, default=protocol.WATCHDOG_DEFAULT_MS,
-                       metavar="MS", help="initial watchdog period [ms] (default 100)")
+    robot.add_argument("--watchdog", type=int, metavar="MS",
+                       help=f"initial watchdog period [ms] (default "
+                            f"{protocol.WATCHDOG_DEFAULT_MS}; not with --gcs)")
+    gcs = p.add_argument_group("PI GCS hexapod controller (--gcs)")
+    gcs.add_argument("--gcs", action="store_true",
+                     help="emulate a GCS hexapod controller (C-887 family): MOV/POS?/VMO?/"
+                          "VLS/HLT/STP/ERR?/SPI/ONT?/*IDN? in X Y Z [mm] U V W [deg]; the "
+                          "geometry is the TRUE robot; prints tcp://HOST:PORT or "
+                          "serial:/dev/pts/N")
+    gcs.add_argument("--pose", type=float, nargs=6, metavar=("X", "Y", "Z", "U", "V", "W"),
+                     help="initial pose [mm, deg] (default: the zero position, or --lengths)")
+    gcs.add_argument("--pivot", type=float, nargs=3, metavar=("R", "S", "T"),
+                     default=(0.0, 0.0, 0.0), help="pivot point in the platform frame [mm]")
+    gcs.add_argument("--velocity", type=float, default=10.0, metavar="MM_S",
+                     help="initial system velocity VLS [mm/s and deg/s] (default 10)")
+    gcs.add_argument("--max-velocity", type=float, default=500.0, metavar="MM_S",
+                     help="largest VLS accepted [mm/s and deg/s] (default 500)")
+    gcs.add_argument("--rotation-order", default="moving-xyz",
+                     choices=["moving-xyz", "fixed-xyz"],
+                     help="U, V, W: Rx(U) Ry(V) Rz(W) about moving axes (default) or "
+                          "Rz(W) Ry(V) Rx(U) about fixed axes")
     faults = p.add_argument_group("fault injection (seeded)")
     faults.add_argument("--latency", type=float, default=0.0, metavar="MS",
                         help="delay added to every reply [ms]")
@@ -214,29 +243,63 @@ def build_parser() -> argparse.ArgumentParser:
     return p
 
 
-def config_from_args(args: argparse.Namespace) -> tuple[BoardConfig, FaultConfig]:
-    """The board and faults described by parsed command-line arguments."""
+def _faults_from_args(args: argparse.Namespace) -> FaultConfig:
+    return FaultConfig(latency=args.latency / 1e3, jitter=args.jitter / 1e3,
+                       drop_rate=args.drop, garble_rate=args.garble,
+                       silent_after=args.silent_after, disconnect_after=args.disconnect_after,
+                       seed=args.seed)
+
+
+def _robot_from_args(args: argparse.Namespace
+                     ) -> tuple[HexapodGeometry, tuple[float, ...] | None]:
     geometry = _load_geometry(args.geometry)
-    stroke = geometry.stroke if args.stroke is None else (args.stroke[0] / 1e3,
-                                                          args.stroke[1] / 1e3)
-    speed = geometry.max_speed if args.speed is None else args.speed / 1e3
+    if args.stroke is not None:
+        geometry = geometry.replace(stroke=(args.stroke[0] / 1e3, args.stroke[1] / 1e3))
+    if args.speed is not None:
+        geometry = geometry.replace(max_speed=args.speed / 1e3)
     lengths = None
     if args.lengths is not None:
         if len(args.lengths) not in (1, 6):
             raise BackendError(f"--lengths takes 1 or 6 values, got {len(args.lengths)}")
         lengths = tuple(np.broadcast_to(np.array(args.lengths) / 1e3, (6,)).tolist())
-    board = BoardConfig(stroke=stroke, max_speed=speed, lengths=lengths, lag=args.lag,
-                        watchdog=args.watchdog / 1e3,
+    return geometry, lengths
+
+
+def config_from_args(args: argparse.Namespace) -> tuple[BoardConfig, FaultConfig]:
+    """The board and faults described by parsed command-line arguments."""
+    geometry, lengths = _robot_from_args(args)
+    watchdog = protocol.WATCHDOG_DEFAULT_MS if args.watchdog is None else args.watchdog
+    board = BoardConfig(stroke=geometry.stroke, max_speed=geometry.max_speed, lengths=lengths,
+                        lag=0.0 if args.lag is None else args.lag, watchdog=watchdog / 1e3,
                         identity=args.identity or f"hexapod-emulator 0.1.0 {geometry.name}")
-    faults = FaultConfig(latency=args.latency / 1e3, jitter=args.jitter / 1e3,
-                         drop_rate=args.drop, garble_rate=args.garble,
-                         silent_after=args.silent_after, disconnect_after=args.disconnect_after,
-                         seed=args.seed)
-    return board, faults
+    return board, _faults_from_args(args)
+
+
+def gcs_config_from_args(args: argparse.Namespace) -> tuple[GcsConfig, FaultConfig]:
+    """The GCS hexapod (``--gcs``) and faults described by parsed command-line arguments."""
+    from hexapod.backends.gcs_emulator import GcsConfig
+
+    for name in ("lag", "watchdog"):
+        if getattr(args, name) is not None:
+            raise BackendError(f"--{name} is an option of the serial board, not of --gcs")
+    if args.pose is not None and args.lengths is not None:
+        raise BackendError("--pose and --lengths both give the initial pose: choose one")
+    geometry, lengths = _robot_from_args(args)
+    coords = None
+    if args.pose is not None:
+        p = np.asarray(args.pose, float)
+        coords = (*(p[:3] * 1e-3).tolist(), *np.deg2rad(p[3:]).tolist())
+    extra = {"identity": args.identity} if args.identity else {}
+    config = GcsConfig(geometry, lengths=lengths, coords=coords,
+                       pivot=tuple(np.asarray(args.pivot, float) * 1e-3),
+                       rotation_order=args.rotation_order, velocity=args.velocity / 1e3,
+                       max_velocity=args.max_velocity / 1e3, **extra)
+    return config, _faults_from_args(args)
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    """Console script ``hexapod-emulator``: serve a board until Ctrl-C or SIGTERM.
+    """Console script ``hexapod-emulator``: serve a board (or, with ``--gcs``, a GCS hexapod
+    controller) until Ctrl-C or SIGTERM.
 
     Returns:
         The exit status (0 on a normal stop, 2 on a bad option).
@@ -245,13 +308,20 @@ def main(argv: Sequence[str] | None = None) -> int:
     args = parser.parse_args(argv)
     logging.basicConfig(level=args.log_level, stream=sys.stderr,
                         format="%(asctime)s %(name)s %(levelname)s: %(message)s")
+    transport = "pty" if args.tcp is None else "tcp"
+    host, port = ("127.0.0.1", 0) if args.tcp is None else args.tcp
+    emu: EmulatorServer[Any]
     try:
-        board, faults = config_from_args(args)
-        if args.tcp is not None:
-            emu = Emulator(board, faults, transport="tcp", host=args.tcp[0], port=args.tcp[1],
-                           allow_remote=args.allow_remote, line_rate=args.line_rate)
+        if args.gcs:
+            from hexapod.backends.gcs_emulator import GcsEmulator
+
+            gcs, faults = gcs_config_from_args(args)
+            emu = GcsEmulator(gcs, faults, transport=transport, host=host, port=port,
+                              allow_remote=args.allow_remote, line_rate=args.line_rate)
         else:
-            emu = Emulator(board, faults, transport="pty", line_rate=args.line_rate)
+            board, faults = config_from_args(args)
+            emu = Emulator(board, faults, transport=transport, host=host, port=port,
+                           allow_remote=args.allow_remote, line_rate=args.line_rate)
         emu.open()
     except (BackendError, OSError, ValueError) as exc:
         print(f"hexapod-emulator: error: {exc}", file=sys.stderr)
