@@ -211,6 +211,9 @@ def build_parser() -> argparse.ArgumentParser:
                           "serial:/dev/pts/N")
     gcs.add_argument("--pose", type=float, nargs=6, metavar=("X", "Y", "Z", "U", "V", "W"),
                      help="initial pose [mm, deg] (default: the zero position, or --lengths)")
+    gcs.add_argument("--zero-height", type=float, metavar="MM",
+                     help="height of the platform frame at the zero position [mm] "
+                          "(default: the geometry's home height)")
     gcs.add_argument("--pivot", type=float, nargs=3, metavar=("R", "S", "T"),
                      default=(0.0, 0.0, 0.0), help="pivot point in the platform frame [mm]")
     gcs.add_argument("--velocity", type=float, default=10.0, metavar="MM_S",
@@ -293,6 +296,7 @@ def gcs_config_from_args(args: argparse.Namespace) -> tuple[GcsConfig, FaultConf
     config = GcsConfig(geometry, lengths=lengths, coords=coords,
                        pivot=tuple(np.asarray(args.pivot, float) * 1e-3),
                        rotation_order=args.rotation_order, velocity=args.velocity / 1e3,
+                       zero_height=None if args.zero_height is None else args.zero_height / 1e3,
                        max_velocity=args.max_velocity / 1e3, **extra)
     return config, _faults_from_args(args)
 

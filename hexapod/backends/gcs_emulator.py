@@ -326,7 +326,7 @@ class GcsController:
 
     def _spi(self, args: list[str], now: float) -> str:
         values = gp.parse_axis_values(args, gp.PIVOT_AXES)
-        if self.moving or np.any(np.abs(self._coords[3:]) > 1e-12):
+        if self.moving or np.any(np.abs(self._coords[3:]) > 1e-9):  # below 1 micro-degree
             raise CommandSyntaxError(GcsError.SET_PIVOT_NOT_POSSIBLE, "U, V, W not all 0")
         pivot = self.convention.pivot.copy()
         for i, axis in enumerate(gp.PIVOT_AXES):
@@ -419,3 +419,4 @@ class GcsEmulator(EmulatorServer[GcsController]):
         """The last commands received (oldest first)."""
         with self._lock:
             return list(self.board.history)
+
