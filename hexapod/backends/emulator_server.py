@@ -411,6 +411,7 @@ class EmulatorServer(Generic[D]):
             reply = self.board.handle_line(line, time.monotonic())
         fs.commands += 1
         data = self.board.frame(reply)
+        logger.debug("emulator: received %r, answers %r", line, data)
         if data:  # a command with a reply (GCS answers only queries)
             if f.silent_after is not None and fs.commands > f.silent_after:
                 return

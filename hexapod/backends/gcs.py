@@ -32,6 +32,7 @@ from __future__ import annotations
 import logging
 import math
 import time
+from collections import deque
 from collections.abc import Callable
 from typing import Any, TypeVar
 
@@ -78,7 +79,7 @@ class GcsHexapod(Backend):
     Attributes:
         identity: The controller's ``*IDN?`` answer.
         velocity: The system velocity set (``VLS``) [m/s].
-        exchanges: Round-trip times of every exchange [s].
+        exchanges: Round-trip times of the last 100 000 exchanges [s].
         vmo_checks: ``VMO?`` asked; ``vmo_refusals``: answered 0 (the robot held).
     """
 
@@ -94,7 +95,7 @@ class GcsHexapod(Backend):
         self._on_close = on_close
         self._closed = False
         self._rate: RateLimiter | None = None
-        self.exchanges: list[float] = []
+        self.exchanges: deque[float] = deque(maxlen=100_000)
         self.vmo_checks = self.vmo_refusals = 0
         #: The last exchanges' text (``>`` sent, ``<`` received), for a transcript.
         self.transcript: list[str] | None = None

@@ -58,6 +58,13 @@ def robot(emulator: GcsEmulator, geometry: HexapodGeometry) -> Iterator[GcsHexap
     r.close()
 
 
+def _settled(r: GcsHexapod) -> np.ndarray:
+    """The measured lengths once the platform stands still (no timing race)."""
+    while r.emulator.moving():
+        time.sleep(0.005)
+    return r.measured_lengths()
+
+
 def _moving_after(emu: GcsEmulator, wait: float = 0.1) -> bool:
     c0 = emu.coords()
     time.sleep(wait)
@@ -98,8 +105,8 @@ def test_pivot_option_sets_spi(geometry: HexapodGeometry) -> None:
         assert np.allclose(r.emulator.board.convention.pivot, [0.0, 0.01, 0.03])
         assert np.allclose(r.convention.pivot, [0.0, 0.01, 0.03])
         for k in range(5):
-            bs = r.step(_wiggle(k), DT)
-        assert np.allclose(bs.lengths, r.emulator.true_lengths(), atol=1e-8)
+            r.step(_wiggle(k), DT)
+        assert np.allclose(_settled(r), r.emulator.true_lengths(), atol=1e-8)
     finally:
         r.close()
 
@@ -109,16 +116,17 @@ def test_one_period_is_mov_err_then_pos_err(robot: GcsHexapod, emulator: GcsEmul
     robot.transcript = []
     n = len(emulator.history())
     v = np.array([0.01, -0.01, 0.005, 0.0, -0.005, 0.01])
-    bs = robot.step(v, DT)
+    dt = 0.05  # the motion (10 ms) ends 40 ms before POS?, even on a loaded machine
+    bs = robot.step(v, dt)
     sent = emulator.history()[n:]
     assert [c.split()[0] for c in sent] == ["MOV", "ERR?", "POS?", "ERR?"]
     assert sent[0].split()[1::2] == list(gp.AXES)
     assert robot.transcript[:2] == [f"> {sent[0]}", "> ERR?"]
     assert robot.transcript[2] == "< 0"
-    assert np.allclose(bs.lengths, Q0 + v * DT, atol=1e-8)  # the nominal IK of POS?
+    assert np.allclose(bs.lengths, Q0 + v * dt, atol=1e-8)  # the nominal IK of POS?
     assert np.allclose(bs.lengths, emulator.true_lengths(), atol=1e-8)
     assert np.array_equal(bs.applied_velocities, v) and not bs.clamped.any()
-    assert 0 < bs.round_trip_s < DT and not bs.missed_period
+    assert 0 < bs.round_trip_s < dt and not bs.missed_period
     assert bs.extras["vmo_rtt_s"] == 0.0  # far from the stroke ends: no VMO?
 
 
@@ -126,7 +134,7 @@ def test_steps_keep_the_period(robot: GcsHexapod) -> None:
     t0 = time.perf_counter()
     for k in range(20):
         robot.step(_wiggle(k), DT)
-    assert 20 * DT * 0.95 < time.perf_counter() - t0 < 20 * DT + 0.1
+    assert 20 * DT * 0.95 < time.perf_counter() - t0 < 20 * DT + 0.5
 
 
 def test_the_controller_realises_the_pose_with_its_own_model(geometry: HexapodGeometry
@@ -136,20 +144,23 @@ def test_the_controller_realises_the_pose_with_its_own_model(geometry: HexapodGe
     r = open_emulated_gcs(true, Q0, nominal=geometry)
     try:
         for k in range(10):
-            bs = r.step(_wiggle(k), DT)
+            r.step(_wiggle(k), DT)
+        q = _settled(r)
         conv = PoseConvention.for_geometry(geometry)
         # the pose the controller reports, in the NOMINAL model's legs: what controllers see
         nominal_legs = inverse_kinematics(geometry, *conv.pose(r.emulator.coords()))
-        assert np.allclose(bs.lengths, nominal_legs, atol=1e-8)
+        assert np.allclose(q, nominal_legs, atol=1e-8)
         # the legs the robot really has differ by its calibration (about a millimetre)
-        assert 1e-4 < np.max(np.abs(bs.lengths - r.emulator.true_lengths())) < 5e-3
+        assert 1e-4 < np.max(np.abs(q - r.emulator.true_lengths())) < 5e-3
     finally:
         r.close()
 
 
 def test_conformance_against_the_simulator(geometry: HexapodGeometry) -> None:
+    # 50 ms periods: a period's motion (0.4 of the speed limit) ends 30 ms before POS?,
+    # so that a loaded machine's scheduling stalls do not show as a lagging platform
     report = check_backend(lambda g, q: open_backend("gcs-emulator", g, q), geometry,
-                           dt=DT, tolerance=1e-7)
+                           dt=0.05, tolerance=1e-7)
     assert report.ok, report.problems
     assert report.max_deviation < 1e-7  # POS? carries 1 nm and 1 micro-degree
 
@@ -302,8 +313,8 @@ def test_over_a_serial_link(geometry: HexapodGeometry) -> None:
     try:
         assert r.url.startswith("serial:/dev/")
         for k in range(5):
-            bs = r.step(_wiggle(k), DT)
-        assert np.allclose(bs.lengths, r.emulator.true_lengths(), atol=1e-8)
+            r.step(_wiggle(k), DT)
+        assert np.allclose(_settled(r), r.emulator.true_lengths(), atol=1e-8)
     finally:
         r.close()
     with pytest.raises(GcsLinkError, match="cannot open"):
