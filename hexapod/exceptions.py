@@ -270,6 +270,74 @@ class WatchdogError(RobotFaultError):
     robot holds its position and refuses MOV until the host reads ``ERR?``."""
 
 
+class GcsLinkError(BackendError):
+    """The link to a PI GCS controller failed (connection, timeout, disconnection).
+
+    Attributes:
+        url: The controller's address (``tcp://HOST:PORT`` or a pyserial URL).
+        problem: What went wrong.
+        command: The command being exchanged, if any.
+    """
+
+    def __init__(self, url: str, problem: str, command: str | None = None) -> None:
+        self.url = url
+        self.problem = problem
+        self.command = command
+        during = f" during '{command}'" if command else ""
+        super().__init__(f"GCS controller {url}: {problem}{during}")
+
+
+class GcsTimeoutError(GcsLinkError):
+    """A GCS controller did not answer a query within the timeout.
+
+    Attributes:
+        timeout: The time waited for the answer [s].
+        received: The bytes received before the timeout (an incomplete answer).
+    """
+
+    def __init__(self, url: str, command: str, timeout: float, received: bytes = b"") -> None:
+        self.timeout = timeout
+        self.received = received
+        got = f", received {received!r}" if received else ", nothing received"
+        super().__init__(url, f"no answer within {timeout * 1e3:.1f} ms{got}", command)
+
+
+class GcsDisconnectedError(GcsLinkError):
+    """The connection to a GCS controller was closed (socket closed, port gone)."""
+
+
+class GcsReplyError(ProtocolError):
+    """A GCS controller's answer that does not parse as the answer to the command sent."""
+
+
+class GcsControllerError(RobotFaultError):
+    """A GCS controller reported an error: ``ERR?`` answered a non-zero code.
+
+    Attributes:
+        code: The official GCS error number (``ERR?``).
+        text: PI's text for that number (:data:`hexapod.backends.gcs_protocol.ERROR_TEXT`).
+        command: The command after which ``ERR?`` reported it.
+        url: The controller's address.
+    """
+
+    def __init__(self, code: int, text: str, command: str | None = None,
+                 url: str | None = None) -> None:
+        super().__init__(code, text, command)
+        self.url = url
+        where = f"GCS controller {url}: " if url else "GCS controller: "
+        after = f" after '{command}'" if command else ""
+        self.args = (f"{where}error {self.code} ({text}){after}",)
+
+
+class GcsOutOfLimitsError(GcsControllerError):
+    """GCS error 7 (position out of limits): the target pose is not reachable by the
+    controller's own model; the controller refused it and nothing moved."""
+
+
+class GcsStoppedError(GcsControllerError):
+    """GCS error 10: the controller was stopped by command (``HLT``, ``STP``)."""
+
+
 class RecordError(HexapodError, ValueError):
     """A trial record (``.npz``) is missing, unreadable, lacks a key or has a bad shape.
 

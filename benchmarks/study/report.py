@@ -181,7 +181,7 @@ def write_report(out_dir: Path) -> Path:
             lines += [sm["description"], ""]
         lines += [_md_table(TABLE_HEADER, summary_table_rows(ss)), ""]
         if any(np.isfinite(s.rtt_median_ms) for s in ss):
-            lines += ["Serial link:", ""]
+            lines += ["Robot link (communication time per period):", ""]
             lines += [_md_table(["sweep", "controller", "backend", "RTT median ms",
                                  "RTT p99 ms", "missed periods"],
                                 [[format_sweep(s.sweep), s.controller, s.backend,

@@ -3,7 +3,8 @@
 A ``--backend`` spec is ``NAME[:ARGS]`` or ``module:attr[:ARGS]``:
 
 - ``NAME`` is a registered backend (``hexapod-bench list`` shows them): the
-  built-ins ``sim``, ``emulator`` and ``serial`` (``serial:URL``), and every
+  built-ins ``sim``, ``emulator``, ``serial`` (``serial:URL``), ``gcs``
+  (``gcs:tcp://HOST:PORT``, a PI GCS hexapod controller) and ``gcs-emulator``, and every
   entry point of the group ``hexapod.backends``::
 
       [project.entry-points."hexapod.backends"]
@@ -100,6 +101,22 @@ def _open_serial(args: str, geometry: HexapodGeometry, start: np.ndarray | None)
         except BaseException:
             robot.close()
             raise
+    return robot
+
+
+def _open_gcs(args: str, geometry: HexapodGeometry, start: np.ndarray | None) -> Backend:
+    """A hexapod behind a PI GCS controller (gcs:tcp://HOST:PORT or gcs:serial:URL)."""
+    from hexapod.backends.gcs import GcsHexapod
+
+    return GcsHexapod.open(args, geometry, start)
+
+
+def _open_gcs_emulator(args: str, geometry: HexapodGeometry,
+                       start: np.ndarray | None) -> Backend:
+    """An emulated PI GCS hexapod on loopback TCP, driven through the gcs backend."""
+    from hexapod.backends.gcs_emulated import open_from_spec
+
+    robot: Backend = open_from_spec(args, geometry, start)
     return robot
 
 
@@ -257,6 +274,10 @@ backends.register("sim", _open_sim)
 backends.register("emulator", _open_emulator)
 backends.register("serial", _open_serial,
                   needs_args="serial:URL, e.g. serial:/dev/ttyUSB0 or serial:socket://HOST:PORT")
+backends.register("gcs", _open_gcs,
+                  needs_args="gcs:tcp://HOST:PORT or gcs:serial:URL (a PI GCS hexapod "
+                             "controller), e.g. gcs:tcp://192.168.0.10:50000")
+backends.register("gcs-emulator", _open_gcs_emulator)
 
 
 def open_backend(spec: str, geometry: HexapodGeometry,
