@@ -143,7 +143,7 @@ def open_backend(spec: str, geometry: HexapodGeometry,
 
 
 #: Backends whose robot is simulated: ``--start-mm`` sets where it starts.
-SIMULATED_BACKENDS = ("emulator", "sim")
+SIMULATED_BACKENDS = ("emulator", "gcs-emulator", "sim")
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:

@@ -67,7 +67,7 @@ def test_ctrl_c_on_servo_halts_the_platform(controller: str, tmp_path: Path) -> 
     # VLS 0.1 mm/s: the platform lags its targets, so it would still be moving after the
     # process exits if nothing halted it
     spec = f"gcs:tcp://{controller}?velocity=0.1"
-    proc = subprocess.Popen([sys.executable, "-m", "benchmarks.servo", "--backend", spec,
+    proc = subprocess.Popen([sys.executable, "-m", "benchmarks.robot.servo", "--backend", spec,
                              "--goal", str(goal), "--log", str(log), "-o", "gain=3"],
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
                             cwd=ROOT, env=ENV)
