@@ -101,8 +101,10 @@ def auto_chunk(scenarios: list[Any], workers: int, backend: str) -> int:
     not depend on it)."""
     if backend != "sim":
         return 25
-    most = max((sc.trials for sc in scenarios), default=1)
-    return int(min(1000, max(25, -(-most // (4 * max(1, workers))))))
+    trials = max((sc.trials for sc in scenarios), default=1)
+    groups = sum(len(sc.expand()) * len(sc.controllers) for sc in scenarios)
+    share = -(-trials * groups // (4 * max(1, workers)))  # 4 units per worker at least
+    return int(min(1000, trials, max(25, share)))
 
 
 def _run_locked(scenarios: list[Any], out: Path, args: argparse.Namespace) -> int:
@@ -429,7 +431,8 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--resume", action="store_true", help="finish an interrupted run")
     s.add_argument("--chunk", type=int, default=None,
                    help="trials per work unit (default: a quarter of a worker's share of "
-                        "the largest study, between 25 and 1000; 25 with a real-time backend)")
+                        "the trials, between 25 and 1000, at most a sweep point's trials; 25 "
+                        "with a real-time backend)")
     s.add_argument("--record", type=int, default=2,
                    help="keep the time series of the first K trials of each controller")
     s.add_argument("--backend", default="sim",

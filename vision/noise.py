@@ -93,6 +93,46 @@ def rotation_noise(
     return out
 
 
+def rotation_noise_batch(
+    vectors: np.ndarray,
+    max_angle_rad: float,
+    rngs: list[np.random.Generator],
+) -> np.ndarray:
+    """:func:`rotation_noise` of ``vectors[k]`` with ``rngs[k]``, for every k at once.
+
+    Each row draws exactly what :func:`rotation_noise` draws from its generator (its
+    axes, then its angles), so a row's result does not depend on the other rows; the
+    arithmetic is then done for all rows together.
+
+    Args:
+        vectors: (n, ..., 3) unit vectors.
+        max_angle_rad: Maximal rotation angle ``a`` [rad].
+        rngs: n generators.
+
+    Returns:
+        (n, ..., 3) perturbed vectors.
+    """
+    v = np.asarray(vectors, dtype=float)
+    if v.shape[-1:] != (3,) or v.shape[0] != len(rngs):
+        raise ValueError(f"vectors: expected shape ({len(rngs)}, ..., 3), got {v.shape}")
+    a = float(max_angle_rad)
+    if a < 0 or not np.isfinite(a):
+        raise ValueError(f"max_angle_rad must be finite and >= 0, got {max_angle_rad}")
+    shape = v.shape[1:-1]
+    axes = np.empty((len(rngs), *shape, 3))
+    fractions = np.empty((len(rngs), *shape))
+    for k, g in enumerate(rngs):
+        axes[k] = g.normal(size=(*shape, 3))
+        fractions[k] = g.uniform(0.0, 1.0, size=shape)
+    n = np.linalg.norm(axes, axis=-1, keepdims=True)
+    bad = n[..., 0] < 1e-12
+    if np.any(bad):
+        axes[bad] = [0.0, 0.0, 1.0]
+        n[bad] = 1.0
+    R = exp_so3((axes / n) * (fractions * a)[..., None])
+    return np.einsum("...ij,...j->...i", R, v)
+
+
 def pixel_noise(
     pixels: np.ndarray, sigma_px: float, rng: np.random.Generator | int | None
 ) -> np.ndarray:

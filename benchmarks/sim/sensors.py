@@ -99,11 +99,9 @@ def noisy_features(sc: Scenario, normals: np.ndarray, visible: np.ndarray,
     noise = sc.noise
     n = len(rngs)
     if apply_noise and noise.model == "rotation" and noise.amplitude_deg > 0:
-        from vision.noise import rotation_noise
+        from vision.noise import rotation_noise_batch
 
-        a = np.deg2rad(noise.amplitude_deg)
-        for k in range(n):
-            normals[k] = rotation_noise(normals[k], a, rngs[k])
+        normals = rotation_noise_batch(normals, np.deg2rad(noise.amplitude_deg), rngs)
     elif apply_noise and noise.model == "pixel":
         from vision.pixel_measure import normals_from_noisy_pixels
 

@@ -11,8 +11,9 @@ from typing import Any
 
 import numpy as np
 
+from benchmarks.study import plots
 from benchmarks.study.metrics import Summary, format_sweep, summarize
-from benchmarks.study.runner import TRIALS_DIR, deduplicate, machine_info, read_results
+from benchmarks.study.runner import deduplicate, machine_info, read_results
 
 log = logging.getLogger(__name__)
 
@@ -53,80 +54,6 @@ def _md_table(header: list[str], rows: list[list[str]]) -> str:
     out = ["| " + " | ".join(header) + " |", "|" + "---|" * len(header)]
     out += ["| " + " | ".join(r) + " |" for r in rows]
     return "\n".join(out)
-
-
-def _plot_time_series(out_dir: Path, scenario: str, point: int) -> str | None:
-    """Error norm and position error versus time of the recorded trial 0 of each controller."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    files = sorted((out_dir / TRIALS_DIR).glob(f"{scenario}__p{point}__*__00000.npz"))
-    if not files:
-        return None
-    fig, axes = plt.subplots(1, 2, figsize=(10, 3.5))
-    for f in files:
-        with np.load(f) as rec:
-            label = str(rec["controller"])
-            err = np.asarray(rec["error_norm"], float)
-            t = np.asarray(rec["t"], float)
-            ok = np.isfinite(err) & (err > 0)
-            axes[0].semilogy(t[ok], err[ok], label=label)
-            axes[1].semilogy(t, np.maximum(np.asarray(rec["position_error"]) * 1e3, 1e-6),
-                             label=label)
-    axes[0].set_title("feature error norm (trial 0)")
-    axes[0].set_xlabel("time [s]")
-    axes[1].set_title("position error [mm] (trial 0)")
-    axes[1].set_xlabel("time [s]")
-    for ax in axes:
-        ax.grid(True, which="both", alpha=0.3)
-        ax.legend(fontsize=7)
-    fig.tight_layout()
-    name = f"{scenario}_p{point}_timeseries.png"
-    fig.savefig(out_dir / name, dpi=90)
-    plt.close(fig)
-    return name
-
-
-def _plot_sweeps(out_dir: Path, scenario: str, summaries: list[Summary]) -> list[str]:
-    """Convergence rate and median/max final error versus each sweep axis."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    axes_keys = sorted({k for s in summaries for k in s.sweep})
-    names = []
-    for key in axes_keys:
-        values = sorted({s.sweep[key] for s in summaries if key in s.sweep})
-        if len(values) < 2:
-            continue
-        fig, (a0, a1) = plt.subplots(1, 2, figsize=(10, 3.5))
-        by_ctrl: dict[str, list[Summary]] = defaultdict(list)
-        for s in summaries:
-            by_ctrl[f"{s.controller} ({s.backend})" if s.backend != "sim" else s.controller
-                    ].append(s)
-        for ctrl, ss in by_ctrl.items():
-            ss = sorted(ss, key=lambda s: s.sweep.get(key, 0))
-            x = [s.sweep.get(key) for s in ss]
-            a0.plot(x, [100 * s.convergence_rate for s in ss], "o-", label=ctrl)
-            line, = a1.semilogy(x, [max(s.position_median_mm, 1e-6) for s in ss], "o-",
-                                label=f"{ctrl} median")
-            a1.semilogy(x, [max(s.position_max_mm, 1e-6) for s in ss], "x--",
-                        color=line.get_color(), label=f"{ctrl} max")
-        a0.set_ylabel("convergence [%]")
-        a1.set_ylabel("final position error [mm]")
-        for ax in (a0, a1):
-            ax.set_xlabel(key)
-            ax.grid(True, which="both", alpha=0.3)
-            ax.legend(fontsize=7)
-        fig.tight_layout()
-        name = f"{scenario}_sweep_{key}.png"
-        fig.savefig(out_dir / name, dpi=90)
-        plt.close(fig)
-        names.append(name)
-    return names
 
 
 def duplicate_note(dropped: int, conflicting: int) -> str:
@@ -222,14 +149,24 @@ def write_report(out_dir: Path) -> Path:
                 lines += [_md_table([str(h) for h in ref["header"]],
                                     [[str(c) for c in r] for r in ref["rows"]]), ""]
         points = sorted({s.point for s in ss})
-        for p in points:
-            img = _plot_time_series(out_dir, name, p)
+        for p in plots.representative(points):
+            img = plots.time_series(out_dir, name, p)
             if img:
                 sweep = format_sweep(next(s.sweep for s in ss if s.point == p))
                 lines += [f"Error versus time, representative trial (sweep: {sweep}):", "",
                           f"![time series]({img})", ""]
-        for img in _plot_sweeps(out_dir, name, ss):
+        for img in plots.sweeps(out_dir, name, ss):
             lines += [f"![sweep]({img})", ""]
+        heat = plots.heat_maps(out_dir, name, ss)
+        if heat:
+            lines += ["Convergence map (two swept axes): convergence rate and median final "
+                      "position error at every point, one panel per controller:", "",
+                      f"![convergence map]({heat})", ""]
+        cdf = plots.error_cdf(out_dir, name, [r for r in rows if r["scenario"] == name])
+        if cdf:
+            lines += ["Distribution of the final position errors per controller (empirical "
+                      "CDF, every trial" + (", all sweep points pooled" if len(points) > 1
+                                            else "") + "):", "", f"![error CDF]({cdf})", ""]
     failures = [r for r in rows if r.get("failure") and not r["failure"].startswith("not conv")]
     if failures:
         lines += ["## Failures", ""]
