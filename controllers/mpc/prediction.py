@@ -160,7 +160,8 @@ def sx_features(kind: str, us: list[ca.SX], A: list[ca.SX], r: ca.SX | float,
     out = []
     for Ai, ui in zip(A, us, strict=True):
         for n in sx_edge_normals(Ai, ui, r):
-            out.append(sx_unit(line_inv_t @ n) if kind == "lines" else n)
+            out.append(sx_unit(line_inv_t @ n) if line_inv_t is not None and kind == "lines"
+                       else n)
     return out
 
 

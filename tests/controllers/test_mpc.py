@@ -160,3 +160,222 @@ def test_local_model_error_grows_with_the_horizon(camera: str, kind: str, other_
         assert 30 < err[10] / err[1] < 200, err  # ~ k^2 = 100
         ratio = errs[0.5][1:] / err[1:]  # second order in the displacement
         np.testing.assert_allclose(ratio, 0.25, atol=0.03)
+
+
+# ----------------------------------------------------------------------------- controllers
+def _pose(rotvec: list[float], t: list[float]) -> tuple[np.ndarray, np.ndarray]:
+    from hexapod.se3 import exp_so3
+
+    return exp_so3(np.array(rotvec)), np.array(t)
+
+
+def _mpc(name: str, world: World, goal: tuple[np.ndarray, np.ndarray], **options):  # type: ignore[no-untyped-def]
+    from controllers import registry
+
+    ctrl = registry.create(name, **options)
+    ctrl.reset(world.context(world.goal(*goal), DT))
+    return ctrl
+
+
+def _classical(world: World, goal: tuple[np.ndarray, np.ndarray], kind: str, gain: float):  # type: ignore[no-untyped-def]
+    from controllers import registry
+
+    name = "leg-direction" if kind == "directions" else "leg-edge"
+    opts = {} if kind == "directions" else {"edge_feature": "normals" if kind == "normals"
+                                             else "auto"}
+    ctrl = registry.create(name, gain=gain, **opts)
+    ctrl.reset(world.context(world.goal(*goal), DT))
+    return ctrl
+
+
+MPC_KINDS = [("perspective", "lines", "leg-edge-mpc"), ("unified", "normals", "leg-edge-mpc"),
+             ("unified", "directions", "leg-direction-mpc")]
+
+
+@pytest.mark.parametrize(("camera", "kind", "name"), MPC_KINDS)
+def test_unconstrained_mpc_step_equals_the_classical_law(camera: str, kind: str, name: str,  # type: ignore[no-untyped-def]
+                                                         other_geometry) -> None:
+    """No active constraint: the local model's first move is the classical ``-lambda L^+ e``
+    for horizon 1 (and, with the exponential reference, for any horizon); the global
+    model's first Gauss-Newton iterate is the same step (its Jacobian is ``L`` in a
+    perfect world), and its converged solution differs only at second order."""
+    world = _world(camera, other_geometry)
+    Rs, ts = world.poses(2, np.random.default_rng(3), max_translation=0.01,
+                         max_angle=np.deg2rad(1.0), margin=0.02)
+    start, goal = (Rs[0], ts[0]), (Rs[1], ts[1])
+    obs = world.observation(*start)
+    ref = _classical(world, goal, kind, 1.0).step(obs)
+    scale = np.abs(ref.twist).max()
+    common = {"gain": 1.0, "effort_weight": 0.0, "regularization": 1e-16}
+    for options in ({"horizon": 1}, {"horizon": 10},
+                    {"horizon": 1, "model": "global", "tolerance": 1e9},
+                    {"horizon": 1, "model": "global"}):
+        ctrl = _mpc(name, world, goal, **common, **options)
+        cmd = ctrl.step(obs)
+        assert cmd.ok and not cmd.active_constraints, (options, cmd.notes)
+        assert ctrl.stats.fallbacks == 0
+        err = np.abs(cmd.twist - ref.twist).max() / scale
+        converged_global = options.get("model") == "global" and "tolerance" not in options
+        assert err < (2e-2 if converged_global else 1e-8), (options, err)
+        if converged_global:
+            assert err > 1e-8  # it is a different (nonlinear) solution
+        np.testing.assert_allclose(cmd.error, ref.error, atol=1e-15)
+
+
+def test_qp_data_match_finite_differences(other_geometry) -> None:  # type: ignore[no-untyped-def]
+    """The condensed QP (global model, tilt and visibility rows) is the Gauss-Newton model
+    of the cost and the linearisation of the constraints: ``2 g`` is the gradient of the
+    cost and ``C`` the Jacobian of the constraint values (stage rows), by central
+    differences at a random ``U``."""
+    world = _world("perspective", other_geometry)
+    Rs, ts = world.poses(2, np.random.default_rng(4), margin=0.02)
+    ctrl = _mpc("leg-edge-mpc", world, (Rs[1], ts[1]), model="global", horizon=4,
+                visibility=True, max_tilt_deg=10.0, max_iter=1, accept_unconverged=True)
+    ctrl.step(world.observation(Rs[0], ts[0]))
+    spec = ctrl._spec
+    o = ctrl._out.slices
+    sl = ctrl._lay.slices["U"]
+    vec = ctrl._vec.copy()
+    U = _twists(np.random.default_rng(8), 4).reshape(-1)
+    vec[sl] = U
+
+    def kernel(u: np.ndarray) -> np.ndarray:
+        v = vec.copy()
+        v[sl] = u
+        return ctrl._kernel.single(v)
+
+    out = kernel(U)
+    n, m = 24, spec.rows
+    g, C, vals = out[o["g"]], out[o["C"]].reshape(m, n), out[o["values"]]
+    stage = spec.horizon * spec.stage_rows
+    h = 1e-6
+    for j in range(n):
+        du = np.zeros(n)
+        du[j] = h
+        op, om = kernel(U + du), kernel(U - du)
+        grad = (op[o["cost"]][0] - om[o["cost"]][0]) / (2 * h)
+        assert abs(grad - 2 * g[j]) <= 1e-6 * max(1.0, abs(grad)), (j, grad, 2 * g[j])
+        col = (op[o["values"]] - om[o["values"]]) / (2 * h)
+        np.testing.assert_allclose(C[:stage, j], col[:stage], rtol=1e-5,
+                                   atol=1e-6 * (1 + np.abs(col[:stage]).max()))
+    assert np.all(np.isfinite(vals))
+
+
+def test_closed_loop_keeps_the_strokes(geometry) -> None:  # type: ignore[no-untyped-def]
+    """A large motion (omni camera, reference robot) during which the classical edge law
+    leaves the stroke (by about 10 mm); both predictive models keep every leg inside."""
+    world = _world("unified", geometry)
+    start = _pose([-0.032641, 0.008591, 0.205547], [0.018641, 0.149962, 0.334149])
+    goal = _pose([-0.032927, -0.108506, -0.068374], [0.010904, -0.073369, 0.367773])
+    q_min, q_max = geometry.stroke
+    law = _classical(world, goal, "normals", 1.0)
+    law.gain = type(law.gain)(5.0, 1.0, 30.0)
+    from tests.controllers.controller_world import closed_loop
+
+    run = closed_loop(world, law, start, goal, DT, 120)
+    assert run.lengths.max() > q_max + 5e-3 or run.lengths.min() < q_min - 5e-3
+    for model in ("local", "global"):
+        ctrl = _mpc("leg-edge-mpc", world, goal, adaptive_gain=[5.0, 1.0, 30.0], model=model)
+        run = closed_loop(world, ctrl, start, goal, DT, 120)
+        assert run.lengths.max() <= q_max and run.lengths.min() >= q_min, model
+        assert run.position_errors[-1] < 0.2 * run.position_errors[0], model
+
+
+def _edge_end_pixels(world: World, R: np.ndarray, t: np.ndarray) -> np.ndarray:
+    from vision.legs import limb_points
+
+    legs = world.legs(R, t)
+    normals = world.features(R, t)["normals"]
+    ends = limb_points(legs.base_points, legs.directions, world.geometry.leg_radius,
+                       legs.lengths, normals, np.array([0.0, 1.0]))
+    pix, _ = world.camera.project(ends)
+    return pix
+
+
+def _outside_by(world: World, pix: np.ndarray) -> float:
+    """How far [px] the farthest edge end is outside the image (negative: inside)."""
+    w, h = world.camera.width, world.camera.height
+    return float(max((-0.5 - pix[..., 0]).max(), (pix[..., 0] - (w - 0.5)).max(),
+                     (-0.5 - pix[..., 1]).max(), (pix[..., 1] - (h - 0.5)).max()))
+
+
+def test_visibility_constraint_keeps_the_edges_in_the_image(geometry) -> None:  # type: ignore[no-untyped-def]
+    """Front camera with its principal point raised by 140 px (the platform ends of the legs
+    near the top border): the classical edge law takes an edge out of the image on this
+    pair; with the visibility constraint (5 px) every predicted edge stays inside."""
+    from tests.controllers.controller_world import closed_loop
+
+    cam = make_camera("perspective", geometry)
+    K = np.array(cam.K)
+    K[1, 2] -= 140.0
+    world = World(geometry, cam.replace(K=K))
+    start = _pose([-0.005459649, 0.020545822, 0.275008258], [0.028631272, 0.065541538, 0.34616185])
+    goal = _pose([0.194095963, 0.008621488, -0.04159774], [0.006205513, -0.087198891, 0.354949135])
+    assert _outside_by(world, _edge_end_pixels(world, *start)) < -6
+    assert _outside_by(world, _edge_end_pixels(world, *goal)) < -6
+    run = closed_loop(world, _classical(world, goal, "lines", 2.0), start, goal, DT, 150)
+    assert max(_outside_by(world, _edge_end_pixels(world, R, t)) for R, t in run.poses) > 0
+    for model in ("local", "global"):
+        ctrl = _mpc("leg-edge-mpc", world, goal, gain=2.0, model=model, visibility=True,
+                    visibility_margin=5.0)
+        run = closed_loop(world, ctrl, start, goal, DT, 150)
+        worst = max(_outside_by(world, _edge_end_pixels(world, R, t)) for R, t in run.poses)
+        # The local model's constraint is linearised: allow it a pixel of slack.
+        assert worst <= -5.0 + (1.0 if model == "local" else 1e-6), (model, worst)
+        assert run.position_errors[-1] < 0.1 * run.position_errors[0], model
+
+
+@pytest.mark.parametrize("name", ["leg-edge-mpc", "leg-direction-mpc"])
+def test_failed_solve_falls_back_with_the_reason(name: str, other_geometry) -> None:  # type: ignore[no-untyped-def]
+    from controllers import registry
+
+    world = _world("unified", other_geometry)
+    Rs, ts = world.poses(2, np.random.default_rng(6), margin=0.02)
+    obs = world.observation(Rs[0], ts[0])
+    ctrl = _mpc(name, world, (Rs[1], ts[1]), max_iter=0)
+    cmd = ctrl.step(obs)
+    assert cmd.ok
+    assert any("mpc fallback: iteration limit 0" in n for n in cmd.notes), cmd.notes
+    assert any("mpc fallback" in a for a in cmd.active_constraints)
+    assert ctrl.stats.fallbacks == 1
+    qp = registry.create(name.replace("-mpc", "-qp"))
+    qp.reset(world.context(world.goal(Rs[1], ts[1]), DT))
+    np.testing.assert_allclose(cmd.velocities, qp.step(obs).velocities, rtol=1e-12, atol=1e-15)
+    slow = _mpc(name, world, (Rs[1], ts[1]), model="global", time_limit=1e-9)
+    cmd = slow.step(obs)
+    assert any("time limit" in n for n in cmd.notes), cmd.notes
+
+
+@pytest.mark.parametrize("name", ["leg-edge-mpc", "leg-direction-mpc"])
+def test_nan_observation_is_refused_with_the_reason(name: str, other_geometry) -> None:  # type: ignore[no-untyped-def]
+    world = _world("unified", other_geometry)
+    Rs, ts = world.poses(2, np.random.default_rng(6), margin=0.02)
+    ctrl = _mpc(name, world, (Rs[1], ts[1]), model="global")
+    for field in ("lengths", "normals" if name == "leg-edge-mpc" else "directions"):
+        obs = world.observation(Rs[0], ts[0])
+        value = np.array(getattr(obs, field), dtype=float)
+        value.flat[2] = np.nan
+        setattr(obs, field, value)
+        cmd = ctrl.step(obs)
+        assert not cmd.ok and field in (cmd.reason or ""), cmd.reason
+        assert np.array_equal(cmd.velocities, np.zeros(6))
+    assert ctrl.stats.steps == 0  # refused before the solver
+
+
+def test_warm_start_saves_iterations(other_geometry) -> None:  # type: ignore[no-untyped-def]
+    """The global SQP restarted from the shifted previous solution needs fewer iterations
+    than from zero over the same closed loop."""
+    from tests.controllers.controller_world import closed_loop
+
+    world = _world("unified", other_geometry)
+    Rs, ts = world.poses(2, np.random.default_rng(9), margin=0.02)
+    iters = {}
+    for warm in (True, False):
+        ctrl = _mpc("leg-edge-mpc", world, (Rs[1], ts[1]), model="global", gain=3.0,
+                    tolerance=1e-6, max_iter=20)
+        if not warm:
+            ctrl._shift = lambda U: np.zeros_like(U)
+        closed_loop(world, ctrl, (Rs[0], ts[0]), (Rs[1], ts[1]), DT, 20)
+        assert ctrl.stats.fallbacks == 0
+        iters[warm] = ctrl.stats.total_sqp_iterations
+    assert iters[True] < 0.9 * iters[False], iters  # measured: 93 vs 118
