@@ -31,9 +31,16 @@ from controllers.base import Command, Controller, ControllerContext, Observation
 from controllers.exceptions import OptionError
 from controllers.laws import check_choice, check_number, inverse_jacobian_into
 from controllers.mpc.prediction import feature_count, fit_pose
-from controllers.mpc.problem import ProblemSpec, problem_kernel
-from controllers.mpc.solver import QPResult, SolveStats, compiled_qp, run_sqp
+from controllers.mpc.problem import ProblemSpec, VirtualMachineKernel, problem_kernel
+from controllers.mpc.solver import (
+    SCREENED_VISIBILITY_ROWS,
+    QPResult,
+    SolveStats,
+    compiled_qp,
+    run_sqp,
+)
 from controllers.qp import LegDirectionQPController, LegEdgeQPController
+from hexapod.compiled import CompiledFunction
 
 log = logging.getLogger(__name__)
 
@@ -72,6 +79,11 @@ class MPCLaw(Controller):
         time_limit: Solve time after which the step falls back [s], or None.
         regularization: Added to the diagonal of the QP Hessian.
         threshold: Singular-value threshold of the fallback law.
+        compiled: Generate the QP-data kernel and DAQP to C (built once per problem
+            structure, a few seconds, cached on disk); False: CasADi virtual machine and
+            ``casadi.conic`` (same results, several times slower per step, nothing to
+            build).
+        law_options: Further options of the fallback QP law (e.g. ``edge_feature``).
     """
 
     #: The one-step QP law of the same features (fallback).
@@ -88,7 +100,7 @@ class MPCLaw(Controller):
                  tolerance: float = 1e-3, accept_unconverged: bool = True,
                  time_limit: float | None = None,
                  regularization: float = 1e-10, threshold: float = 1e-6,
-                 **law_options: Any) -> None:
+                 compiled: bool = True, **law_options: Any) -> None:
         name = self.name
         if isinstance(horizon, bool) or not isinstance(horizon, int) or horizon < 1:
             raise OptionError(name, "horizon", f"expected an integer >= 1, got {horizon!r}")
@@ -118,6 +130,7 @@ class MPCLaw(Controller):
         if self.max_tilt is not None and self.max_tilt >= math.pi / 2:
             raise OptionError(name, "max_tilt_deg", f"must be < 90, got {max_tilt_deg}")
         self.max_iter = max_iter
+        self.compiled = bool(compiled)
         self.accept_unconverged = bool(accept_unconverged)
         self.tolerance = check_number(name, "tolerance", tolerance)
         self.time_limit = (None if time_limit is None else
@@ -126,7 +139,7 @@ class MPCLaw(Controller):
         self.law: Any = self.law_class(gain=gain, adaptive_gain=adaptive_gain,
                                          interaction=interaction, threshold=threshold,
                                          stroke_margin=stroke_margin, max_speed=max_speed,
-                                         **law_options)
+                                         compiled=self.compiled, **law_options)
         self.features = self.law.features
         self.context: ControllerContext | None = None
         self.stats = SolveStats()
@@ -152,8 +165,15 @@ class MPCLaw(Controller):
             log.info("%s: visibility constraint ignored (needs a perspective camera)", self.name)
         self._spec = ProblemSpec(self._kind, self.model, self.horizon, self.max_tilt is not None,
                                  visibility)
-        self._kernel = problem_kernel(self._spec)
-        self._qp = compiled_qp(6 * self.horizon, self._spec.rows)
+        self._kernel: CompiledFunction | VirtualMachineKernel
+        if self.compiled:
+            self._kernel = problem_kernel(self._spec)
+            if self._spec.visibility:  # the screened QP (see solver.solve_screened), built now
+                compiled_qp(6 * self.horizon, self._spec.rows - self.horizon * 48
+                            + SCREENED_VISIBILITY_ROWS)
+            compiled_qp(6 * self.horizon, self._spec.rows)
+        else:
+            self._kernel = VirtualMachineKernel(self._spec)
         self._lay = self._spec.input_layout()
         self._out = self._spec.output_layout()
         self._rows = self._spec.row_names()
@@ -318,7 +338,7 @@ class MPCLaw(Controller):
             vec[sl["b"]] = b
             vec[sl["e0sq"]] = float(e @ e)
         U, converged, status, last, it, qp_iters = run_sqp(
-            self._kernel, self._qp, self._vec, self._lay.slices["U"], self._out.slices, spec,
+            self._kernel, self.compiled, self._vec, self._lay.slices["U"], self._out.slices, spec,
             self._U.copy(), self.max_iter, self.tolerance, self.time_limit)
         self.stats.steps += 1
         self.stats.sqp_iterations = it

@@ -59,6 +59,7 @@ from functools import lru_cache
 from typing import Any
 
 import casadi as ca
+import numpy as np
 
 from controllers.mpc.prediction import (
     feature_count,
@@ -368,3 +369,15 @@ def _kernel_function(spec: ProblemSpec) -> ca.Function:
 def problem_kernel(spec: ProblemSpec) -> CompiledFunction:
     """The compiled QP-data kernel of a problem structure (cached per process and on disk)."""
     return CompiledFunction(_kernel_function(spec))
+
+
+class VirtualMachineKernel:
+    """The same kernel evaluated by the CasADi virtual machine (no C compilation: slower
+    per call, nothing to build; option ``compiled = False``)."""
+
+    def __init__(self, spec: ProblemSpec) -> None:
+        self.function = _kernel_function(spec)
+
+    def single(self, x: np.ndarray) -> np.ndarray:
+        """Evaluate on one input vector."""
+        return np.asarray(self.function(x), dtype=float).ravel()

@@ -4,7 +4,10 @@
   optimum of the strictly convex QP whenever it satisfies every row: the common case
   away from the limits), else DAQP (dual active set, shipped with CasADi), generated
   to C by CasADi and called through :mod:`ctypes` (:class:`CompiledQP`), or through
-  ``casadi.conic`` when no C compiler is available (:func:`solve_qp`).
+  ``casadi.conic`` when no C compiler is available (:func:`solve_qp`). With the
+  visibility rows, a smaller QP keeps only the visibility rows closest to their
+  bounds and is accepted when its solution satisfies every row
+  (:func:`solve_screened`).
 - SQP (:func:`run_sqp`): Gauss-Newton QPs from the compiled kernel of
   :mod:`controllers.mpc.problem`, a backtracking line search on the L1 merit, a
   convergence test on the first move, an iteration limit and an optional time limit.
@@ -27,7 +30,7 @@ from pathlib import Path
 import casadi as ca
 import numpy as np
 
-from controllers.mpc.problem import ProblemSpec
+from controllers.mpc.problem import ProblemSpec, VirtualMachineKernel
 from hexapod.compiled import CompiledFunction, build_shared_library
 
 log = logging.getLogger(__name__)
@@ -159,17 +162,18 @@ class CompiledQP:
         self._fn = fn
         self._lib = lib
 
-    def solve(self, out: np.ndarray, o: dict[str, slice]) -> QPResult:
-        """Solve the QP of a kernel output (``H``, ``g``, ``C``, ``lba``, ``uba`` slices)."""
+    def solve(self, H: np.ndarray, g: np.ndarray, C: np.ndarray, lba: np.ndarray,
+              uba: np.ndarray) -> QPResult:
+        """Solve ``min 1/2 d^T H d + g^T d`` s.t. ``lba <= C d <= uba`` (sizes of this solver)."""
         n, m = self.n, self.m
         x = self.x
-        x[:n * n] = out[o["H"]]
-        x[n * n:n * n + n] = out[o["g"]]
+        x[:n * n] = H.reshape(-1)
+        x[n * n:n * n + n] = g
         k = n * n + n
-        x[k:k + m * n] = out[o["C"]]
+        x[k:k + m * n] = C.reshape(-1)
         k += m * n
-        x[k:k + m] = out[o["lba"]]
-        x[k + m:k + 2 * m] = out[o["uba"]]
+        x[k:k + m] = lba
+        x[k + m:k + 2 * m] = uba
         if self._fn(*self._call):
             return QPResult(None, "QP not solved: DAQP did not reach an optimal solution", 0,
                             None)
@@ -226,15 +230,61 @@ def unconstrained(H: np.ndarray, g: np.ndarray, C: np.ndarray, lba: np.ndarray,
     return None
 
 
+def solve_screened(H: np.ndarray, g: np.ndarray, C: np.ndarray, lba: np.ndarray,
+                   uba: np.ndarray, spec: ProblemSpec, compiled: bool) -> QPResult:
+    """The QP, with the visibility rows screened when there are many of them.
+
+    DAQP's cost grows with the number of rows (``6 N (7 + 48)`` with visibility). The
+    visibility rows are first reduced to the :data:`SCREENED_VISIBILITY_ROWS` with the
+    smallest slack at ``d = 0``; if the solution of that smaller QP satisfies every
+    row, it is the optimum of the full QP (same objective, larger feasible set);
+    otherwise the full QP is solved.
+    """
+    m = len(lba)
+    keep = screened_rows(spec, lba, uba)
+    if keep is not None:
+        qp = compiled_qp(len(g), len(keep)) if compiled else None
+        Cr = C[keep]
+        res = (qp.solve(H, g, Cr, lba[keep], uba[keep]) if qp is not None
+               else solve_qp(H, g, Cr, lba[keep], uba[keep]))
+        if res.step is not None and res.multipliers is not None:
+            v = C @ res.step
+            tol = 1e-9 * (1.0 + np.abs(v))
+            if (v >= lba - tol).all() and (v <= uba + tol).all():
+                lam = np.zeros(m)
+                lam[keep] = res.multipliers
+                return QPResult(res.step, res.status + " (screened rows)", res.iterations, lam)
+    qp = compiled_qp(len(g), m) if compiled else None
+    return qp.solve(H, g, C, lba, uba) if qp is not None else solve_qp(H, g, C, lba, uba)
+
+
+#: Visibility rows kept by :func:`solve_screened` (the others are checked afterwards).
+SCREENED_VISIBILITY_ROWS = 48
+
+
+def screened_rows(spec: ProblemSpec, lba: np.ndarray, uba: np.ndarray) -> np.ndarray | None:
+    """Indices of the rows of the screened QP (None: no screening for this structure)."""
+    if not spec.visibility:
+        return None
+    sr = spec.stage_rows
+    N = spec.horizon
+    idx = np.arange(N * sr).reshape(N, sr)
+    vis = idx[:, sr - 48:].reshape(-1)
+    other = np.concatenate([idx[:, :sr - 48].reshape(-1), np.arange(N * sr, len(lba))])
+    slack = np.minimum(uba[vis], -lba[vis])
+    best = vis[np.argpartition(slack, SCREENED_VISIBILITY_ROWS)[:SCREENED_VISIBILITY_ROWS]]
+    return np.sort(np.concatenate([other, best]))
+
+
 def merit(out: np.ndarray, o: dict[str, slice], mu: float) -> tuple[float, float]:
     """L1 merit ``cost + mu * violation`` and the violation at the point of a kernel output."""
     viol = float(np.maximum(out[o["lba"]], 0.0).sum() + np.maximum(-out[o["uba"]], 0.0).sum())
     return float(out[o["cost"]][0]) + mu * viol, viol
 
 
-def run_sqp(kernel: CompiledFunction, qp: CompiledQP | None, vec: np.ndarray, u_slice: slice,
-            o: dict[str, slice], spec: ProblemSpec, U: np.ndarray, max_iter: int,
-            tolerance: float, time_limit: float | None
+def run_sqp(kernel: CompiledFunction | VirtualMachineKernel, compiled: bool, vec: np.ndarray,
+            u_slice: slice, o: dict[str, slice], spec: ProblemSpec, U: np.ndarray,
+            max_iter: int, tolerance: float, time_limit: float | None
             ) -> tuple[np.ndarray, bool, str, QPResult | None, int, int]:
     """Gauss-Newton SQP from ``U`` (the warm start) with a backtracking line search on
     the L1 merit ``cost + mu * violation`` (global model; the local model is one QP).
@@ -246,7 +296,7 @@ def run_sqp(kernel: CompiledFunction, qp: CompiledQP | None, vec: np.ndarray, u_
 
     Args:
         kernel: The compiled QP-data kernel.
-        qp: The compiled DAQP of this size, or None (``casadi.conic``).
+        compiled: Use DAQP generated to C (else ``casadi.conic``).
         vec: The kernel input, filled but for ``U`` (modified).
         u_slice: Where ``U`` goes in ``vec``.
         o: The output layout's slices.
@@ -279,7 +329,7 @@ def run_sqp(kernel: CompiledFunction, qp: CompiledQP | None, vec: np.ndarray, u_
         lba, uba = out[o["lba"]], out[o["uba"]]
         res = unconstrained(H, g, C, lba, uba)
         if res is None:
-            res = qp.solve(out, o) if qp is not None else solve_qp(H, g, C, lba, uba)
+            res = solve_screened(H, g, C, lba, uba, spec, compiled)
         qp_iters += res.iterations
         last = res
         if res.step is None or res.multipliers is None:

@@ -206,7 +206,8 @@ def test_unconstrained_mpc_step_equals_the_classical_law(camera: str, kind: str,
     obs = world.observation(*start)
     ref = _classical(world, goal, kind, 1.0).step(obs)
     scale = np.abs(ref.twist).max()
-    common = {"gain": 1.0, "effort_weight": 0.0, "regularization": 1e-16}
+    # The virtual machine (compiled=False): twelve problem structures, nothing to build.
+    common = {"gain": 1.0, "effort_weight": 0.0, "regularization": 1e-16, "compiled": False}
     for options in ({"horizon": 1}, {"horizon": 10},
                     {"horizon": 1, "model": "global", "tolerance": 1e9},
                     {"horizon": 1, "model": "global"}):
@@ -230,7 +231,8 @@ def test_qp_data_match_finite_differences(other_geometry) -> None:  # type: igno
     world = _world("perspective", other_geometry)
     Rs, ts = world.poses(2, np.random.default_rng(4), margin=0.02)
     ctrl = _mpc("leg-edge-mpc", world, (Rs[1], ts[1]), model="global", horizon=4,
-                visibility=True, max_tilt_deg=10.0, max_iter=1, accept_unconverged=True)
+                visibility=True, max_tilt_deg=10.0, max_iter=1, accept_unconverged=True,
+                compiled=False)
     ctrl.step(world.observation(Rs[0], ts[0]))
     spec = ctrl._spec
     o = ctrl._out.slices
@@ -341,7 +343,7 @@ def test_failed_solve_falls_back_with_the_reason(name: str, other_geometry) -> N
     qp = registry.create(name.replace("-mpc", "-qp"))
     qp.reset(world.context(world.goal(Rs[1], ts[1]), DT))
     np.testing.assert_allclose(cmd.velocities, qp.step(obs).velocities, rtol=1e-12, atol=1e-15)
-    slow = _mpc(name, world, (Rs[1], ts[1]), model="global", time_limit=1e-9)
+    slow = _mpc(name, world, (Rs[1], ts[1]), model="global", time_limit=1e-9, compiled=False)
     cmd = slow.step(obs)
     assert any("time limit" in n for n in cmd.notes), cmd.notes
 
@@ -350,7 +352,7 @@ def test_failed_solve_falls_back_with_the_reason(name: str, other_geometry) -> N
 def test_nan_observation_is_refused_with_the_reason(name: str, other_geometry) -> None:  # type: ignore[no-untyped-def]
     world = _world("unified", other_geometry)
     Rs, ts = world.poses(2, np.random.default_rng(6), margin=0.02)
-    ctrl = _mpc(name, world, (Rs[1], ts[1]), model="global")
+    ctrl = _mpc(name, world, (Rs[1], ts[1]), model="global", compiled=False)
     for field in ("lengths", "normals" if name == "leg-edge-mpc" else "directions"):
         obs = world.observation(Rs[0], ts[0])
         value = np.array(getattr(obs, field), dtype=float)
@@ -379,3 +381,16 @@ def test_warm_start_saves_iterations(other_geometry) -> None:  # type: ignore[no
         assert ctrl.stats.fallbacks == 0
         iters[warm] = ctrl.stats.total_sqp_iterations
     assert iters[True] < 0.9 * iters[False], iters  # measured: 93 vs 118
+
+
+def test_compiled_and_virtual_machine_agree(geometry) -> None:  # type: ignore[no-untyped-def]
+    """The C kernel and DAQP (screened visibility rows) give the command of the CasADi
+    virtual machine and ``casadi.conic`` (full QP)."""
+    world = _world("perspective", geometry)
+    Rs, ts = world.poses(2, np.random.default_rng(12), max_translation=0.06, margin=0.005)
+    obs = world.observation(Rs[0], ts[0])
+    cmds = [_mpc("leg-edge-mpc", world, (Rs[1], ts[1]), model="global", visibility=True,
+                 compiled=compiled).step(obs) for compiled in (True, False)]
+    assert all(c.ok and "fallback" not in c.notes[-1] for c in cmds)
+    assert cmds[0].active_constraints  # a constrained step (speed limits at least)
+    np.testing.assert_allclose(cmds[0].twist, cmds[1].twist, rtol=1e-9, atol=1e-12)
