@@ -31,7 +31,7 @@ import casadi as ca
 import numpy as np
 
 from controllers.mpc.problem import ProblemSpec, VirtualMachineKernel
-from hexapod.compiled import CompiledFunction, build_shared_library
+from hexapod.compiled import CompilationError, CompiledFunction, build_shared_library
 
 log = logging.getLogger(__name__)
 
@@ -318,7 +318,10 @@ def run_sqp(kernel: CompiledFunction | VirtualMachineKernel, compiled: bool, vec
     if max_iter == 0:
         return U, False, status, None, 0, 0
     vec[u_slice] = U
-    out = kernel.single(vec)
+    try:
+        out = kernel.single(vec)
+    except (CompilationError, RuntimeError) as exc:
+        return U, False, f"QP data kernel failed: {exc}", None, 0, 0
     mu = 0.0
     for it in range(1, max_iter + 1):
         if not math.isfinite(float(out.sum())):
@@ -346,7 +349,10 @@ def run_sqp(kernel: CompiledFunction | VirtualMachineKernel, compiled: bool, vec
         alpha = 1.0
         for _ in range(6):
             vec[u_slice] = U + alpha * d
-            out_try = kernel.single(vec)
+            try:
+                out_try = kernel.single(vec)
+            except (CompilationError, RuntimeError) as exc:
+                return U, False, f"QP data kernel failed: {exc}", last, it, qp_iters
             value, _ = merit(out_try, o, mu)
             if value <= merit0 + 1e-4 * alpha * min(slope, 0.0) or not math.isfinite(merit0):
                 break

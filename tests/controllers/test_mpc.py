@@ -394,3 +394,26 @@ def test_compiled_and_virtual_machine_agree(geometry) -> None:  # type: ignore[n
     assert all(c.ok and "fallback" not in c.notes[-1] for c in cmds)
     assert cmds[0].active_constraints  # a constrained step (speed limits at least)
     np.testing.assert_allclose(cmds[0].twist, cmds[1].twist, rtol=1e-9, atol=1e-12)
+
+
+@pytest.mark.parametrize(("camera", "kind", "name"), MPC_KINDS)
+def test_global_model_at_the_goal_and_on_malformed_observations(camera: str, kind: str,  # type: ignore[no-untyped-def]
+                                                                name: str, other_geometry) -> None:
+    """The registry checks (tests/controllers/test_registry.py) run the default (local)
+    model; the global model also gives an exact zero at the goal and never raises."""
+    from controllers.base import Observation
+
+    world = _world(camera, other_geometry)
+    Rs, ts = world.poses(2, np.random.default_rng(14), margin=0.02)
+    ctrl = _mpc(name, world, (Rs[1], ts[1]), model="global", compiled=False)
+    for _ in range(2):
+        cmd = ctrl.step(world.observation(Rs[1], ts[1]))
+        assert cmd.ok and cmd.error_norm < 1e-9, cmd.reason
+        np.testing.assert_allclose(cmd.velocities, 0.0, atol=1e-9)
+    good = world.observation(Rs[0], ts[0])
+    for obs in (Observation(0.0, np.full(5, 0.4)), Observation(0.0, good.lengths),
+                Observation(0.0, good.lengths, normals=np.zeros((6, 3)),
+                            directions=np.zeros((6, 2, 3)), lines=np.zeros((6, 3)))):
+        cmd = ctrl.step(obs)
+        assert not cmd.ok and cmd.reason
+        assert np.array_equal(cmd.velocities, np.zeros(6))
