@@ -292,7 +292,8 @@ def run_sqp(kernel: CompiledFunction | VirtualMachineKernel, compiled: bool, vec
     Converged when the step of the first move (the only one applied) satisfies
     ``|delta tau_0|_inf <= tolerance * max(|tau_0|_inf, 1e-3)``: the later moves of a
     flat, saturated horizon may still be moving, and are warm-started at the next
-    period.
+    period. The last allowed iteration takes the full QP step, so that an unconverged
+    result still satisfies the linearised constraints of its last QP.
 
     Args:
         kernel: The compiled QP-data kernel.
@@ -343,6 +344,9 @@ def run_sqp(kernel: CompiledFunction | VirtualMachineKernel, compiled: bool, vec
                                                             1e-3):
             return U + d, True, f"converged in {it} SQP iteration{'s' if it > 1 else ''}", \
                 last, it, qp_iters
+        status = f"not converged in {it} SQP iterations (last step {size:.2g})"
+        if it == max_iter:  # stop on a QP solution: the linearised rows hold there
+            return U + d, False, status, last, it, qp_iters
         mu = max(mu, 1.1 * float(np.abs(res.multipliers).max()) + 1e-9)
         merit0, viol0 = merit(out, o, mu)
         slope = float(g @ d) - mu * viol0  # directional derivative of the merit
@@ -359,7 +363,6 @@ def run_sqp(kernel: CompiledFunction | VirtualMachineKernel, compiled: bool, vec
             alpha *= 0.5
         U = U + alpha * d
         out = out_try
-        status = f"not converged in {it} SQP iterations (last step {size:.2g})"
         if time_limit is not None and time.perf_counter() - t_start > time_limit:
             return U, False, f"time limit {time_limit} s exceeded after {it} SQP iterations", \
                 last, it, qp_iters

@@ -417,3 +417,26 @@ def test_global_model_at_the_goal_and_on_malformed_observations(camera: str, kin
         cmd = ctrl.step(obs)
         assert not cmd.ok and cmd.reason
         assert np.array_equal(cmd.velocities, np.zeros(6))
+
+
+def test_tilt_bound_is_kept(geometry) -> None:  # type: ignore[no-untyped-def]
+    """Goal tilted by 8 deg, bound 4 deg: the classical law tilts the platform to 8 deg,
+    the predictive laws stop at the bound (global: exactly at the predicted stages;
+    local: a linearised bound, within 0.1 deg)."""
+    from hexapod.se3 import rotation_from_rpy
+    from tests.controllers.controller_world import closed_loop
+
+    world = _world("unified", geometry)
+    R0, t0 = world.home()
+    goal = (rotation_from_rpy(np.deg2rad(8.0), 0.0, 0.0), t0 + np.array([0.01, 0.0, 0.0]))
+
+    def tilt(run) -> float:  # type: ignore[no-untyped-def]
+        return float(max(np.degrees(np.arccos(np.clip(R[2, 2], -1, 1))) for R, _ in run.poses))
+
+    run = closed_loop(world, _classical(world, goal, "normals", 2.0), (R0, t0), goal, DT, 150)
+    assert tilt(run) > 7.5
+    for model, tol in (("global", 1e-6), ("local", 0.1)):
+        ctrl = _mpc("leg-edge-mpc", world, goal, gain=2.0, model=model, max_tilt_deg=4.0)
+        run = closed_loop(world, ctrl, (R0, t0), goal, DT, 150)
+        assert 3.5 < tilt(run) <= 4.0 + tol, (model, tilt(run))
+        assert any("tilt" in a for c in run.commands for a in c.active_constraints)
