@@ -30,7 +30,7 @@ import numpy as np
 from controllers.base import Command, Controller, ControllerContext, Observation
 from controllers.exceptions import OptionError
 from controllers.laws import check_choice, check_number, inverse_jacobian_into
-from controllers.mpc.prediction import feature_count, fit_pose
+from controllers.mpc.prediction import fit_pose
 from controllers.mpc.problem import ProblemSpec, VirtualMachineKernel, problem_kernel
 from controllers.mpc.solver import (
     SCREENED_VISIBILITY_ROWS,
@@ -207,9 +207,9 @@ class MPCLaw(Controller):
             self._vec[sl["box"]] = (-0.5 + m, cam.width - 0.5 - m, -0.5 + m,
                                     cam.height - 0.5 - m)
         self._star = self._desired_features()
-        self._nf = feature_count(self._kind)
         self._U = np.zeros(6 * self.horizon)
-        self._pose: tuple[np.ndarray, np.ndarray] | None = None
+        #: Last reconstructed platform pose ``(R, t)`` in the camera frame (diagnostic).
+        self.pose: tuple[np.ndarray, np.ndarray] | None = None
         self.stats = SolveStats()
 
     def _feature_kind(self) -> str:
@@ -395,7 +395,7 @@ class MPCLaw(Controller):
         R, t = fit_pose(B, geo.platform_points, known.astype(float))
         if not (np.all(np.isfinite(R)) and np.all(np.isfinite(t))):
             return "pose reconstruction failed (non-finite)"
-        self._pose = (R, t)
+        self.pose = (R, t)
         return R, t
 
     def _model_features(self, R: np.ndarray, t: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
