@@ -6,6 +6,9 @@ Built-in controllers are registered in :data:`controllers.base.registry` here:
 - ``leg-edge``: leg edges, pixel lines or normals (seeds 002/003);
 - ``leg-edge-qp``, ``leg-direction-qp``: the same features with the QP of
   ``docs/math.md`` section 6 (stroke and leg-speed limits, OSQP);
+- ``leg-edge-mpc``, ``leg-direction-mpc``: visual predictive control over a
+  horizon (local or global prediction model, strokes, speeds, visibility and
+  tilt constraints; CasADi, DAQP), falling back to the QP laws;
 - ``model-based``: forward kinematics of the nominal model + pose servoing;
 - ``joint-space``: leg lengths to the nominal inverse kinematics of the goal.
 """
@@ -24,6 +27,7 @@ from controllers.joint import JointSpaceController
 from controllers.leg_direction import LegDirectionController
 from controllers.leg_edge import LegEdgeController
 from controllers.model_based import ModelBasedController
+from controllers.mpc import LegDirectionMPCController, LegEdgeMPCController
 from controllers.qp import LegDirectionQPController, LegEdgeQPController
 
 #: The built-in controllers, by registry name.
@@ -32,6 +36,8 @@ BUILTINS = {
     "leg-edge": LegEdgeController,
     "leg-edge-qp": LegEdgeQPController,
     "leg-direction-qp": LegDirectionQPController,
+    "leg-edge-mpc": LegEdgeMPCController,
+    "leg-direction-mpc": LegDirectionMPCController,
     "model-based": ModelBasedController,
     "joint-space": JointSpaceController,
 }
@@ -47,8 +53,10 @@ __all__ = [
     "Goal",
     "JointSpaceController",
     "LegDirectionController",
+    "LegDirectionMPCController",
     "LegDirectionQPController",
     "LegEdgeController",
+    "LegEdgeMPCController",
     "LegEdgeQPController",
     "ModelBasedController",
     "Observation",

@@ -3,8 +3,13 @@
 Each controller is reset on the reference robot with its camera (front perspective
 camera, or the omnidirectional one with ``--camera omni``), then stepped on a
 fixed set of precomputed observations (random poses near a goal, all features
-visible); the median time per step is printed in microseconds with the ratio to
-``joint-space`` measured in the same run (the machines are shared and noisy).
+visible); the median and 95th-percentile times per step are printed in
+microseconds with the ratio to ``joint-space`` measured in the same run (the
+machines are shared and noisy). For the predictive controllers (``*-mpc``) the
+table adds the mean SQP iterations per step, the steps that applied an unconverged
+iterate and the fallbacks to the QP law. A controller may be given options as
+``NAME+key=value+...`` (e.g. ``leg-edge-mpc+model=global+horizon=5``); by default
+the global-model variants of the predictive controllers are timed too.
 """
 
 from __future__ import annotations
@@ -14,6 +19,7 @@ import statistics
 import sys
 import time
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 
@@ -23,9 +29,12 @@ from hexapod import deltalab, legs_in_frame, sample_poses
 from vision.cameras import Camera, front_camera, omni_camera
 from vision.legs import leg_edges
 
-#: Budgets of the issue [us]: direction and edge laws, QP law.
+#: Budgets of the issue [us]: direction and edge laws, QP law, predictive laws (N = 10).
 BUDGET_US = {"leg-direction": 100.0, "leg-edge": 100.0, "leg-edge-qp": 300.0,
-             "leg-direction-qp": 300.0}
+             "leg-direction-qp": 300.0, "leg-edge-mpc": 2000.0, "leg-direction-mpc": 2000.0,
+             "leg-edge-mpc+model=global": 2000.0, "leg-direction-mpc+model=global": 2000.0}
+#: Variants timed by default besides the registered names.
+DEFAULT_VARIANTS = ("leg-edge-mpc+model=global", "leg-direction-mpc+model=global")
 
 
 @dataclass
@@ -38,6 +47,9 @@ class StepTiming:
         p95_us: 95th percentile [us].
         ratio: ``median_us`` over the joint-space median of the same run.
         refused: Steps that returned a zero command (should be 0).
+        iterations: Mean SQP iterations per step (predictive controllers; else NaN).
+        unconverged: Steps that applied an unconverged SQP iterate (predictive).
+        fallbacks: Steps that fell back to the QP law (predictive; else 0).
     """
 
     name: str
@@ -45,6 +57,28 @@ class StepTiming:
     p95_us: float
     ratio: float
     refused: int
+    iterations: float = float("nan")
+    unconverged: int = 0
+    fallbacks: int = 0
+
+
+def parse_variant(spec: str) -> tuple[str, dict[str, object]]:
+    """``NAME+key=value+...`` -> the registry name and its options (numbers parsed)."""
+    name, *pairs = spec.split("+")
+    options: dict[str, object] = {}
+    for pair in pairs:
+        key, _, text = pair.partition("=")
+        value: object = text
+        for cast in (int, float):
+            try:
+                value = cast(text)
+                break
+            except ValueError:
+                continue
+        if text in ("true", "false"):
+            value = text == "true"
+        options[key] = value
+    return name, options
 
 
 def _observation(camera: Camera, geometry, R: np.ndarray, t: np.ndarray, time_s: float  # type: ignore[no-untyped-def]
@@ -75,12 +109,13 @@ def time_controllers(names: list[str] | None = None, steps: int = 5000, camera: 
     observations = [_observation(cam, geo, R, t, 0.02 * k)[0]
                     for k, (R, t) in enumerate(zip(Rs[1:], ts[1:], strict=True))]
     base = cam.camera_from_base.apply(geo.base_points)
-    names = list(names or registry.names())
+    names = list(names or [*registry.names(), *DEFAULT_VARIANTS])
     if "joint-space" not in names:
         names.append("joint-space")
     controllers = {}
     for name in names:
-        ctrl = registry.create(name)
+        base_name, options = parse_variant(name)
+        ctrl = registry.create(base_name, **options)
         ctrl.reset(ControllerContext(base, geo, cam, 0.02, goal))
         controllers[name] = ctrl
     samples: dict[str, list[float]] = {n: [] for n in names}
@@ -103,20 +138,28 @@ def time_controllers(names: list[str] | None = None, steps: int = 5000, camera: 
     for name in names:
         us = np.array(samples[name]) * 1e6
         med = float(np.median(us))
-        result.append(StepTiming(name, med, float(np.percentile(us, 95)), med / ref,
-                                 refused[name]))
+        timing = StepTiming(name, med, float(np.percentile(us, 95)), med / ref, refused[name])
+        stats: Any = getattr(controllers[name], "stats", None)
+        if stats is not None and stats.steps:
+            timing.iterations = stats.total_sqp_iterations / stats.steps
+            timing.unconverged = stats.unconverged
+            timing.fallbacks = stats.fallbacks
+        result.append(timing)
     return result
 
 
 def format_timings(timings: list[StepTiming], camera: str) -> str:
     """A plain-text table."""
     lines = [f"controller step time, reference robot, {camera} camera, all features visible",
-             f"{'controller':<20} {'median us':>10} {'p95 us':>9} {'x joint':>8} "
-             f"{'budget us':>10} {'refused':>8}"]
+             f"{'controller':<32} {'median us':>10} {'p95 us':>9} {'x joint':>8} "
+             f"{'budget us':>10} {'refused':>8} {'SQP it':>7} {'unconv':>7} {'fallback':>8}"]
     for t in timings:
         budget = BUDGET_US.get(t.name)
-        lines.append(f"{t.name:<20} {t.median_us:>10.1f} {t.p95_us:>9.1f} {t.ratio:>8.1f} "
-                     f"{'' if budget is None else f'{budget:.0f}':>10} {t.refused:>8}")
+        mpc = t.iterations == t.iterations  # not NaN
+        lines.append(f"{t.name:<32} {t.median_us:>10.1f} {t.p95_us:>9.1f} {t.ratio:>8.1f} "
+                     f"{'' if budget is None else f'{budget:.0f}':>10} {t.refused:>8} "
+                     f"{f'{t.iterations:.2f}' if mpc else '':>7} "
+                     f"{t.unconverged if mpc else '':>7} {t.fallbacks if mpc else '':>8}")
     return "\n".join(lines)
 
 
@@ -124,7 +167,9 @@ def main(argv: list[str] | None = None) -> int:
     """Print the median time per ``step`` of each registered controller."""
     parser = argparse.ArgumentParser(prog="python -m benchmarks.perf.controllers",
                                      description=__doc__.splitlines()[0] if __doc__ else None)
-    parser.add_argument("names", nargs="*", help="controllers (default: every registered one)")
+    parser.add_argument("names", nargs="*",
+                        help="controllers, optionally NAME+key=value+... (default: every "
+                             "registered one and the global-model predictive variants)")
     parser.add_argument("--steps", type=int, default=5000, help="steps per controller")
     parser.add_argument("--camera", choices=("front", "omni"), default="front")
     parser.add_argument("--seed", type=int, default=0)

@@ -1,0 +1,27 @@
+"""Visual predictive control (Allibert, Courtial & Chaumette, IEEE T-RO 2010) in CasADi.
+
+- :mod:`controllers.mpc.prediction`: the local and global prediction models;
+- :mod:`controllers.mpc.problem`: the condensed Gauss-Newton QP (single shooting),
+  its data computed by one compiled C function;
+- :mod:`controllers.mpc.solver`: the QP (unconstrained shortcut, DAQP generated to
+  C) and the SQP iterations (line search, convergence, limits);
+- :mod:`controllers.mpc.controller`: ``leg-edge-mpc`` and ``leg-direction-mpc``
+  (receding horizon, warm start, fallback to the one-step QP law).
+"""
+
+from controllers.mpc.controller import (
+    LegDirectionMPCController,
+    LegEdgeMPCController,
+    MPCLaw,
+    SolveStats,
+)
+from controllers.mpc.prediction import GlobalModel, LocalModel
+
+__all__ = [
+    "GlobalModel",
+    "LegDirectionMPCController",
+    "LegEdgeMPCController",
+    "LocalModel",
+    "MPCLaw",
+    "SolveStats",
+]

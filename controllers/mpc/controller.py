@@ -1,0 +1,472 @@
+"""Visual predictive controllers ``leg-edge-mpc`` and ``leg-direction-mpc``.
+
+Each step (receding horizon): read the features like the one-step QP law of the
+same features (:mod:`controllers.qp`, which this controller holds and falls back
+to), reconstruct the platform pose when the global model is used
+(:mod:`controllers.mpc.prediction`), solve the predictive problem of
+:mod:`controllers.mpc.problem` by Gauss-Newton SQP (:mod:`controllers.mpc.solver`:
+compiled QP data, DAQP),
+warm-started from the previous solution shifted by one period, and apply the first
+move ``q_dot = J_inv tau_0``.
+
+Every solve is checked: a QP that DAQP does not solve, an SQP that does not
+converge within ``max_iter`` iterations (``max_iter = 0`` never solves), a solve
+that exceeds ``time_limit``, or a non-finite or out-of-bounds first move makes the
+step fall back to the QP law; the command then says so in ``notes`` and
+``active_constraints`` (``"mpc fallback: <reason>"``), and :attr:`MPCLaw.stats`
+counts it. Observations with NaN are refused with the reason, like the other laws.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+import time
+from collections.abc import Sequence
+from typing import Any
+
+import numpy as np
+
+from controllers.base import Command, Controller, ControllerContext, Observation
+from controllers.exceptions import OptionError
+from controllers.laws import check_choice, check_number, inverse_jacobian_into
+from controllers.mpc.prediction import fit_pose
+from controllers.mpc.problem import ProblemSpec, VirtualMachineKernel, problem_kernel
+from controllers.mpc.solver import (
+    SCREENED_VISIBILITY_ROWS,
+    QPResult,
+    SolveStats,
+    compiled_qp,
+    run_sqp,
+)
+from controllers.qp import LegDirectionQPController, LegEdgeQPController
+from hexapod.compiled import CompiledFunction
+
+log = logging.getLogger(__name__)
+
+#: Prediction models.
+MODELS = ("local", "global")
+#: Reference trajectories of the error: ``(1 - lambda dt)^k e_0`` or zero.
+REFERENCES = ("exponential", "zero")
+
+
+class MPCLaw(Controller):
+    """Base of the predictive controllers (see the module docstring for the options).
+
+    Args:
+        horizon: Number of periods ``N`` predicted (>= 1).
+        model: ``"local"`` (interaction matrix, linear propagation) or ``"global"``
+            (pose reconstruction, SE(3) integration, camera model).
+        gain: Gain ``lambda`` [1/s] of the reference trajectory ``(1 - lambda dt)^k e_0``.
+        adaptive_gain: ``(lambda0, lambda_inf, lambda0')`` (overrides ``gain``).
+        interaction: Interaction matrix of the local model: ``"current"``, ``"desired"``
+            or ``"mean"``.
+        reference: ``"exponential"`` or ``"zero"`` (regulate the error to zero).
+        error_weight: Weight of the error of the stages 1..N-1.
+        terminal_weight: Weight of the error of stage N.
+        effort_weight: Weight of the leg velocities ``|J_inv tau_k|^2`` [s^2/m^2].
+        stroke_margin: Distance kept from the stroke limits [m] (default: the context's).
+        max_speed: Leg speed limit [m/s] (default: the geometry's).
+        visibility: Keep every predicted edge inside the image (perspective camera).
+        visibility_margin: Margin of the visibility constraint [px].
+        max_tilt_deg: Bound on the platform tilt w.r.t. the base [deg], or None.
+        max_iter: SQP iteration limit (0: never solves, every step falls back).
+        accept_unconverged: Apply the last iterate when the SQP stops at ``max_iter``
+            with every QP solved (real-time iteration: the iterations continue over the
+            next periods from the shifted warm start); False: fall back instead.
+        tolerance: SQP convergence on the first move:
+            ``|delta tau_0|_inf <= tolerance * max(|tau_0|_inf, 1e-3)`` [m/s, rad/s].
+        time_limit: Solve time after which the step falls back [s], or None.
+        regularization: Added to the diagonal of the QP Hessian.
+        threshold: Singular-value threshold of the fallback law.
+        compiled: Generate the QP-data kernel and DAQP to C (built once per problem
+            structure, a few seconds, cached on disk); False: CasADi virtual machine and
+            ``casadi.conic`` (same results, several times slower per step, nothing to
+            build).
+        law_options: Further options of the fallback QP law (e.g. ``edge_feature``).
+    """
+
+    #: The one-step QP law of the same features (fallback).
+    law_class: type[Any] = LegEdgeQPController
+    unit = "features"
+
+    def __init__(self, horizon: int = 10, model: str = "local", gain: float = 1.0,
+                 adaptive_gain: Sequence[float] | None = None, interaction: str = "current",
+                 reference: str = "exponential", error_weight: float = 1.0,
+                 terminal_weight: float = 1.0, effort_weight: float = 1e-4,
+                 stroke_margin: float | None = None, max_speed: float | None = None,
+                 visibility: bool = False, visibility_margin: float = 5.0,
+                 max_tilt_deg: float | None = None, max_iter: int = 5,
+                 tolerance: float = 1e-3, accept_unconverged: bool = True,
+                 time_limit: float | None = None,
+                 regularization: float = 1e-10, threshold: float = 1e-6,
+                 compiled: bool = True, **law_options: Any) -> None:
+        name = self.name
+        if isinstance(horizon, bool) or not isinstance(horizon, int) or horizon < 1:
+            raise OptionError(name, "horizon", f"expected an integer >= 1, got {horizon!r}")
+        if horizon > 50:
+            raise OptionError(name, "horizon", f"at most 50 periods, got {horizon}")
+        if isinstance(max_iter, bool) or not isinstance(max_iter, int) or max_iter < 0:
+            raise OptionError(name, "max_iter", f"expected an integer >= 0, got {max_iter!r}")
+        self.horizon = horizon
+        self.model = check_choice(name, "model", model, MODELS)
+        self.reference = check_choice(name, "reference", reference, REFERENCES)
+        self.error_weight = check_number(name, "error_weight", error_weight, 0.0, strict=False)
+        self.terminal_weight = check_number(name, "terminal_weight", terminal_weight, 0.0,
+                                            strict=False)
+        if self.error_weight == 0 and self.terminal_weight == 0:
+            raise OptionError(name, "error_weight", "error and terminal weights are both 0")
+        self.effort_weight = check_number(name, "effort_weight", effort_weight, 0.0,
+                                          strict=False)
+        self.regularization = check_number(name, "regularization", regularization, 0.0,
+                                           strict=False)
+        if self.effort_weight == 0 and self.regularization == 0:
+            raise OptionError(name, "regularization", "must be > 0 when effort_weight is 0")
+        self.visibility = bool(visibility)
+        self.visibility_margin = check_number(name, "visibility_margin", visibility_margin,
+                                              0.0, strict=False)
+        self.max_tilt = (None if max_tilt_deg is None else math.radians(
+            check_number(name, "max_tilt_deg", max_tilt_deg)))
+        if self.max_tilt is not None and self.max_tilt >= math.pi / 2:
+            raise OptionError(name, "max_tilt_deg", f"must be < 90, got {max_tilt_deg}")
+        self.max_iter = max_iter
+        self.compiled = bool(compiled)
+        self.accept_unconverged = bool(accept_unconverged)
+        self.tolerance = check_number(name, "tolerance", tolerance)
+        self.time_limit = (None if time_limit is None else
+                           check_number(name, "time_limit", time_limit))
+        #: The fallback law (its private state is read: features, limits, dead reckoning).
+        self.law: Any = self.law_class(gain=gain, adaptive_gain=adaptive_gain,
+                                         interaction=interaction, threshold=threshold,
+                                         stroke_margin=stroke_margin, max_speed=max_speed,
+                                         compiled=self.compiled, **law_options)
+        self.features = self.law.features
+        self.context: ControllerContext | None = None
+        self.stats = SolveStats()
+        self._spec: ProblemSpec | None = None
+        self._U = np.zeros(6 * horizon)
+
+    # ----------------------------------------------------------------- reset
+    def reset(self, context: ControllerContext) -> None:
+        """Reset the fallback law (limits, goal), build or load the compiled problem.
+
+        Raises:
+            ContextError: A field the controller needs is missing or invalid.
+            OptionError: An option does not fit the context (e.g. no stroke left).
+        """
+        law = self.law
+        law.reset(context)
+        self.features = law.features
+        self.context = context
+        self._kind = self._feature_kind()
+        cam: Any = context.camera
+        visibility = self.visibility and getattr(cam, "kind", None) == "perspective"
+        if self.visibility and not visibility:
+            log.info("%s: visibility constraint ignored (needs a perspective camera)", self.name)
+        self._spec = ProblemSpec(self._kind, self.model, self.horizon, self.max_tilt is not None,
+                                 visibility)
+        self._kernel: CompiledFunction | VirtualMachineKernel
+        if self.compiled:
+            self._kernel = problem_kernel(self._spec)
+            if self._spec.visibility:  # the screened QP (see solver.solve_screened), built now
+                compiled_qp(6 * self.horizon, self._spec.rows - self.horizon * 48
+                            + SCREENED_VISIBILITY_ROWS)
+            compiled_qp(6 * self.horizon, self._spec.rows)
+        else:
+            self._kernel = VirtualMachineKernel(self._spec)
+        self._lay = self._spec.input_layout()
+        self._out = self._spec.output_layout()
+        self._rows = self._spec.row_names()
+        self._vec = np.zeros(self._lay.size)
+        sl = self._lay.slices
+        geo = context.geometry
+        A = law._A
+        self._vec[sl["dt"]] = law._dt
+        self._vec[sl["A"]] = A.reshape(-1)
+        self._vec[sl["E"]] = np.asarray(geo.platform_points, dtype=float).reshape(-1)
+        self._vec[sl["r"]] = geo.leg_radius
+        self._vec[sl["reg"]] = self.regularization
+        self._vec[sl["effort"]] = self.effort_weight
+        self._vec[sl["qlo"]] = law._q_lo
+        self._vec[sl["qhi"]] = law._q_hi
+        self._vec[sl["vmax"]] = law._vmax
+        w = np.full(self.horizon, self.error_weight)
+        w[-1] = self.terminal_weight
+        self._vec[sl["w"]] = w
+        if "Kit" in self._lay:
+            Kit = np.linalg.inv(law._K).T if self._kind == "lines" else np.eye(3)
+            self._vec[sl["Kit"]] = Kit.reshape(-1)
+        if self._spec.tilt:
+            R_cb, _ = fit_pose(A, geo.base_points)  # base orientation seen from the estimates
+            self._vec[sl["zb"]] = R_cb[:, 2]
+            self._vec[sl["cosmax"]] = math.cos(float(self.max_tilt or 0.0))
+        if visibility:
+            K = np.asarray(cam.K, dtype=float)
+            m = self.visibility_margin
+            self._vec[sl["K"]] = K.reshape(-1)
+            self._vec[sl["box"]] = (-0.5 + m, cam.width - 0.5 - m, -0.5 + m,
+                                    cam.height - 0.5 - m)
+        self._star = self._desired_features()
+        self._U = np.zeros(6 * self.horizon)
+        #: Last reconstructed platform pose ``(R, t)`` in the camera frame (diagnostic).
+        self.pose: tuple[np.ndarray, np.ndarray] | None = None
+        self.stats = SolveStats()
+
+    def _feature_kind(self) -> str:
+        return "directions"
+
+    def _desired_features(self) -> np.ndarray:
+        """Desired features (nf, 3) of the fallback law (zeros where unknown)."""
+        return np.asarray(self.law._u_star, dtype=float)
+
+    def _measured(self, obs: Observation) -> tuple[np.ndarray, np.ndarray]:
+        """Measured features (nf, 3) and their use mask (nf,)."""
+        vis = np.asarray(obs.direction_visible, dtype=bool) & self.law._goal_visible
+        return np.asarray(obs.directions, dtype=float), vis
+
+    # ----------------------------------------------------------------- step
+    def step(self, observation: Observation) -> Command:
+        """One receding-horizon step (never raises for bad measurements)."""
+        law = self.law
+        if self.context is None:
+            return Command.refuse(f"{self.name}: reset(context) was not called")
+        problem = law._check(observation)
+        if problem is not None:
+            law._tau_prev[:] = 0.0
+            self._U[:] = 0.0
+            return Command.refuse(problem)
+        q = np.asarray(observation.lengths, dtype=float)
+        if q.min() <= 0:
+            law._tau_prev[:] = 0.0
+            return Command.refuse(f"lengths: non-positive leg length {float(q.min())} m")
+        data = self._features(observation, q)
+        if isinstance(data, str):
+            return self._fallback(observation, data)
+        e, N, b, J, notes = data
+        t_start = time.perf_counter()
+        solved = self._solve(observation, q, e, N, b, J)
+        if isinstance(solved, str):
+            return self._fallback(observation, solved)
+        tau, qdot, active, status = solved
+        if self.time_limit is not None and time.perf_counter() - t_start > self.time_limit:
+            return self._fallback(observation, f"time limit {self.time_limit} s exceeded "
+                                               f"({status})")
+        w, _ = np.linalg.eigh(N)
+        rank = int(np.count_nonzero(w > (law.threshold ** 2) * max(w[-1], 0.0)))
+        cond = math.sqrt(w[-1] / w[0]) if w[0] > 0 else math.inf
+        law._tau_prev[:] = tau
+        law._q_prev[:] = q
+        notes = [*notes, f"mpc {self.model} N={self.horizon}: {status}"]
+        return Command(qdot, twist=tau, error=e, error_norm=float(np.sqrt(e @ e)), rank=rank,
+                       condition=cond, features_used=e.shape[0], notes=notes,
+                       active_constraints=active)
+
+    def _features(self, obs: Observation, q: np.ndarray
+                  ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, list[str]] | str:
+        """Error, ``L^T L``, ``L^T e``, ``J_inv`` and notes, as the fallback law computes them."""
+        law = self.law
+        if law._kernel is not None and law._load_kernel(obs, q):
+            r = law._kernel.evaluate()
+            law._tau_prev[:] = 0.0
+            law._directions[:] = r.directions
+            law._observed[:] = True
+            law._u_now = r.directions
+            if not (math.isfinite(r.error_norm) and math.isfinite(r.n_sum)):
+                return "non-finite error or interaction matrix (degenerate features)"
+            return r.error, r.N, r.b, r.J, []
+        st = law._stack(obs, q)
+        law._tau_prev[:] = 0.0
+        if isinstance(st, str):
+            return st
+        e, N, b = st.normal_equations()
+        if not (math.isfinite(float(e @ e)) and math.isfinite(float(N.sum()))):
+            return "non-finite error or interaction matrix (degenerate features)"
+        u = law._u_now
+        unknown = ~np.isfinite(u[:, 0])
+        if unknown.any():
+            model = law._model_directions(q)
+            if model is None:
+                return (f"direction of leg {int(np.flatnonzero(unknown)[0])} unknown: cannot "
+                        "build the inverse Jacobian")
+            u = np.where(unknown[:, None], model, u)
+            law._u_now = u
+        J = inverse_jacobian_into(np.zeros((6, 6)), law._A, u)
+        return e, N, b, J, list(st.notes)
+
+    def _solve(self, obs: Observation, q: np.ndarray, e: np.ndarray, N: np.ndarray,
+               b: np.ndarray, J: np.ndarray
+               ) -> tuple[np.ndarray, np.ndarray, list[str], str] | str:
+        """Fill the kernel input, run the SQP iterations, check the first move."""
+        law = self.law
+        spec = self._spec
+        assert spec is not None
+        sl = self._lay.slices
+        vec = self._vec
+        dt = law._dt
+        lam = law.gain(float(np.abs(e).max()) if e.size else 0.0)
+        if self.reference == "exponential":
+            ratio = max(0.0, 1.0 - lam * dt)
+            vec[sl["ref"]] = ratio ** np.arange(1, self.horizon + 1)
+        else:
+            vec[sl["ref"]] = 0.0
+        vec[sl["J0"]] = J.reshape(-1)
+        vec[sl["q0"]] = q
+        inv_dt = 1.0 / dt
+        vmax = law._vmax
+        lo1 = np.clip((law._q_lo - q) * inv_dt, -vmax, vmax)
+        hi1 = np.clip((law._q_hi - q) * inv_dt, -vmax, vmax)
+        vec[sl["lo1"]] = lo1
+        vec[sl["hi1"]] = hi1
+        fitted = self._fit(q)
+        if isinstance(fitted, str):
+            return fitted
+        R0, t0 = fitted
+        vec[sl["R0"]] = R0.reshape(-1)
+        vec[sl["t0"]] = t0
+        if spec.model == "global":
+            feats, use = self._measured(obs)
+            star = self._star
+            feats = np.where(use[:, None], feats, star)
+            model_f, model_q = self._model_features(R0, t0)
+            vec[sl["star"]] = star.reshape(-1)
+            vec[sl["offset"]] = np.where(use[:, None], feats - model_f, 0.0).reshape(-1)
+            vec[sl["wf"]] = use
+            vec[sl["e0"]] = np.where(use[:, None], np.cross(feats, star), 0.0).reshape(-1)
+            vec[sl["qoff"]] = q - model_q
+        else:
+            vec[sl["N"]] = N.reshape(-1)
+            vec[sl["b"]] = b
+            vec[sl["e0sq"]] = float(e @ e)
+        U, converged, status, last, it, qp_iters = run_sqp(
+            self._kernel, self.compiled, self._vec, self._lay.slices["U"], self._out.slices, spec,
+            self._U.copy(), self.max_iter, self.tolerance, self.time_limit)
+        self.stats.steps += 1
+        self.stats.sqp_iterations = it
+        self.stats.total_sqp_iterations += self.stats.sqp_iterations
+        self.stats.qp_iterations = qp_iters
+        self.stats.last_status = status
+        if last is None or last.step is None or not (
+                converged or (self.accept_unconverged and status.startswith("not converged"))):
+            return status
+        if not converged:
+            self.stats.unconverged += 1
+        tau = U[:6].copy()
+        qdot = J @ tau
+        tol = 1e-6 * vmax
+        if not np.all(np.isfinite(qdot)):
+            return "non-finite first move"
+        if (qdot < lo1 - tol).any() or (qdot > hi1 + tol).any():
+            return "first move outside the stroke/speed window"
+        qdot = np.minimum(np.maximum(qdot, lo1), hi1)
+        self._U = self._shift(U)
+        return tau, qdot, self._active(last), status
+
+    @staticmethod
+    def _shift(U: np.ndarray) -> np.ndarray:
+        """The warm start of the next period: the moves shifted by one, the last repeated."""
+        return np.concatenate([U[6:], U[-6:]])
+
+    def _active(self, res: QPResult) -> list[str]:
+        """Names of the rows at a bound with a non-zero multiplier (first few)."""
+        lam = res.multipliers
+        if lam is None:
+            return []
+        idx = np.flatnonzero(np.abs(lam) > 1e-12)
+        names = [self._rows[i] for i in idx[:8]]
+        if len(idx) > 8:
+            names.append(f"... {len(idx) - 8} more")
+        return names
+
+    def _fit(self, q: np.ndarray) -> tuple[np.ndarray, np.ndarray] | str:
+        """Platform pose in the camera frame from ``B_i = A_i + q_i u_i`` (legs whose
+        direction is known this step; at least three)."""
+        law = self.law
+        u = law._u_now
+        known = np.isfinite(u[:, 0]) & law._observed
+        if known.sum() < 3:
+            known = np.isfinite(u[:, 0])
+        if known.sum() < 3:
+            return "fewer than three leg directions known: cannot reconstruct the pose"
+        B = np.where(known[:, None], law._A + q[:, None] * np.where(known[:, None], u, 0.0),
+                     0.0)
+        geo = self.context.geometry if self.context is not None else None
+        if geo is None:
+            return "no context"
+        R, t = fit_pose(B, geo.platform_points, known.astype(float))
+        if not (np.all(np.isfinite(R)) and np.all(np.isfinite(t))):
+            return "pose reconstruction failed (non-finite)"
+        self.pose = (R, t)
+        return R, t
+
+    def _model_features(self, R: np.ndarray, t: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Features (nf, 3) and lengths (6,) of the model at the fitted pose."""
+        from vision.legs import leg_edges
+
+        law = self.law
+        geo = self.context.geometry if self.context is not None else None
+        assert geo is not None
+        d = geo.platform_points @ R.T + t - law._A
+        qm = np.sqrt(np.einsum("ij,ij->i", d, d))
+        u = d / qm[:, None]
+        if self._kind == "directions":
+            return u, qm
+        n, _ = leg_edges(law._A, u, geo.leg_radius)
+        if self._kind == "lines":
+            n = n @ np.linalg.inv(law._K)  # rows: (K^-T n)^T
+            n = n / np.linalg.norm(n, axis=-1, keepdims=True)
+        return n.reshape(12, 3), qm
+
+    def _fallback(self, obs: Observation, reason: str) -> Command:
+        """The QP law's command, carrying the reason."""
+        self.stats.fallbacks += 1
+        self.stats.reasons[reason] = self.stats.reasons.get(reason, 0) + 1
+        self._U[:] = 0.0
+        log.debug("%s: falling back to %s: %s", self.name, self.law.name, reason)
+        cmd = self.law.step(obs)
+        cmd.notes = [*cmd.notes, f"mpc fallback: {reason}"]
+        cmd.active_constraints = [*cmd.active_constraints, f"mpc fallback: {reason}"]
+        return cmd
+
+
+class LegEdgeMPCController(MPCLaw):
+    """Visual predictive control on leg edges (lines or normals), local or global model.
+
+    Takes the options of :class:`MPCLaw` and ``edge_feature`` (``"auto"``, ``"lines"``,
+    ``"normals"``) of :class:`~controllers.leg_edge.LegEdgeController`.
+    """
+
+    name = "leg-edge-mpc"
+    features = frozenset({"lengths", "normals"})
+    law_class = LegEdgeQPController
+    unit = "edges"
+
+    def _feature_kind(self) -> str:
+        law = self.law
+        assert isinstance(law, LegEdgeQPController)
+        return "lines" if law.use_lines else "normals"
+
+    def _desired_features(self) -> np.ndarray:
+        law = self.law
+        assert isinstance(law, LegEdgeQPController)
+        star = law._l_star if law.use_lines else law._n_star
+        return np.asarray(star, dtype=float).reshape(12, 3)
+
+    def _measured(self, obs: Observation) -> tuple[np.ndarray, np.ndarray]:
+        law = self.law
+        assert isinstance(law, LegEdgeQPController)
+        vis = (np.asarray(obs.edge_visible, dtype=bool) & law._goal_visible).reshape(12)
+        feats = obs.lines if law.use_lines else obs.normals
+        return np.asarray(feats, dtype=float).reshape(12, 3), vis
+
+
+class LegDirectionMPCController(MPCLaw):
+    """Visual predictive control on leg directions, local or global model.
+
+    Takes the options of :class:`MPCLaw`.
+    """
+
+    name = "leg-direction-mpc"
+    features = frozenset({"lengths", "directions"})
+    law_class = LegDirectionQPController
+    unit = "legs"
+

@@ -1,0 +1,383 @@
+"""The predictive problem: a condensed Gauss-Newton QP per SQP iteration, compiled to C.
+
+Decision: the platform twists ``U = (tau_0, ..., tau_{N-1})`` (camera frame,
+``docs/math.md`` section 2), held during one period each; the legs receive
+``q_dot = J_inv tau_0`` (section 3). **Single shooting**: the predicted states are
+functions of ``U`` only, so the NLP has ``6 N`` variables and no equality
+constraint. The state is a pose (or a twist displacement) that a pure integrator
+propagates: nothing unstable to stabilise by multiple shooting, and the condensed
+problem suits a dense active-set QP solver.
+
+Cost, over the stages ``k = 1..N`` (stage weight ``w_k``, the last one the terminal
+weight):
+
+``sum_k w_k |W_f (e_k - rho_k e_0)|^2 + effort sum_k |J_inv,0 tau_k|^2``
+
+with the stacked feature error ``e_k`` (section 6; hidden features have weight 0),
+the measured error ``e_0`` and the reference factors ``rho_k = (1 - lambda dt)^k``:
+the error is asked to decrease as the classical law ``e_dot = -lambda e`` would make
+it (Allibert et al.'s reference trajectory). Without active constraint, with the
+local model and ``effort -> 0``, the first move is exactly ``-lambda L^+ e`` for any
+horizon (each ``s_k`` minimises its own term); the MPC differs from the classical law
+only where it predicts a limit.
+
+Constraints, at every predicted stage (values relaxed to the current value when the
+robot is already beyond a bound, so that ``U = 0`` stays feasible):
+
+- strokes ``q_min + margin <= q_k <= q_max - margin`` (lengths corrected by the
+  measured-minus-model offset at ``k = 0``);
+- leg speeds ``|J_inv,0 tau_k| <= q_dot_max`` with the inverse Jacobian of the
+  measured directions (exactly what the first move applies; for the later moves an
+  approximation that keeps these rows linear), the first row merged with the
+  first-period stroke window, as in :mod:`controllers.qp`;
+- optional platform tilt (angle between the platform and base normals);
+- optional visibility (perspective camera): both ends ``A + r n``, ``B + r n`` of
+  every edge segment stay inside the image with a margin [px] (a straight segment
+  is inside the image when its ends are).
+
+Each SQP iteration linearises the stage values ``v_k(x_k)`` with respect to a left
+pose perturbation ``xi = (v, w)`` (6 columns, by CasADi AD) and carries it to ``U``
+with the sensitivities ``D_k = d xi_k / d U``: ``D_{k+1} = Ad(E_k) D_k + [0 .. B_k ..]``
+with ``E_k = exp(dt tau_k)``, ``Ad(E) = [[R, [p]_x R], [0, R]]`` and ``B_k`` the left
+Jacobian of the step. The Gauss-Newton Hessian ``sum_k D_k^T (G_k^T W G_k) D_k``
+then costs ``O(N^2)`` 6 x 6 products instead of the ``O(N^2 m)`` of a full residual
+Jacobian. The local model is the same with ``Ad = I``, ``B_k = dt I`` and ``G_k``
+frozen (one QP is its exact solution).
+
+Everything above is one CasADi SX function generated to C and compiled
+(:class:`hexapod.compiled.CompiledFunction`): one call per SQP iteration returns
+the QP data; :mod:`controllers.mpc.solver` solves the QP (``6 N`` variables, dense)
+and runs the SQP iterations.
+"""
+
+from __future__ import annotations
+
+import logging
+from collections.abc import Sequence
+from dataclasses import dataclass
+from functools import lru_cache
+from typing import Any
+
+import casadi as ca
+import numpy as np
+
+from controllers.mpc.prediction import (
+    feature_count,
+    sx_edge_normals,
+    sx_exp_se3,
+    sx_features,
+    sx_legs,
+    sx_limb_ends,
+    sx_pixel,
+    sx_skew,
+)
+from hexapod.compiled import CompiledFunction
+
+log = logging.getLogger(__name__)
+
+#: Upper bound used for one-sided rows (the tilt cosine never exceeds 1).
+_BIG = 1e20
+
+
+class Layout:
+    """Named slices of a packed vector."""
+
+    def __init__(self, fields: Sequence[tuple[str, int]]) -> None:
+        self.slices: dict[str, slice] = {}
+        k = 0
+        for name, size in fields:
+            self.slices[name] = slice(k, k + size)
+            k += size
+        self.size = k
+
+    def __contains__(self, name: str) -> bool:
+        return name in self.slices
+
+    def split(self, v: Any) -> dict[str, Any]:
+        """The SX pieces of ``v``."""
+        return {n: v[s] for n, s in self.slices.items()}
+
+
+@dataclass(frozen=True)
+class ProblemSpec:
+    """The structure of one problem (what the compiled kernel depends on).
+
+    Attributes:
+        kind: Feature kind (``"lines"``, ``"normals"``, ``"directions"``).
+        model: ``"local"`` or ``"global"``.
+        horizon: ``N`` periods.
+        tilt: Whether the tilt rows exist.
+        visibility: Whether the image-bound rows exist (perspective camera).
+    """
+
+    kind: str
+    model: str
+    horizon: int
+    tilt: bool
+    visibility: bool
+
+    @property
+    def stage_rows(self) -> int:
+        """Constraint rows of one stage: strokes, tilt, visibility (both ends of 12 edges)."""
+        return 6 + (1 if self.tilt else 0) + (48 if self.visibility else 0)
+
+    @property
+    def rows(self) -> int:
+        """All constraint rows: stages, then the speed rows of every move."""
+        return self.horizon * (self.stage_rows + 6)
+
+    def input_layout(self) -> Layout:
+        """Layout of the kernel input (see :func:`_kernel_function`)."""
+        nf = feature_count(self.kind)
+        N = self.horizon
+        fields: list[tuple[str, int]] = [
+            ("U", 6 * N), ("dt", 1), ("ref", N), ("w", N), ("effort", 1), ("reg", 1),
+            ("J0", 36), ("q0", 6), ("qlo", 1), ("qhi", 1), ("vmax", 1), ("lo1", 6),
+            ("hi1", 6), ("R0", 9), ("t0", 3), ("A", 18), ("E", 18), ("r", 1)]
+        if self.model == "global":
+            fields += [("Kit", 9), ("star", 3 * nf), ("offset", 3 * nf), ("wf", nf),
+                       ("e0", 3 * nf), ("qoff", 6)]
+        else:
+            fields += [("N", 36), ("b", 6), ("e0sq", 1)]
+        if self.tilt:
+            fields += [("zb", 3), ("cosmax", 1)]
+        if self.visibility:
+            fields += [("K", 9), ("box", 4)]
+        return Layout(fields)
+
+    def output_layout(self) -> Layout:
+        """Layout of the kernel output: cost, ``H`` (row-major), ``g``, ``C`` (row-major),
+        row bounds of ``delta U``, and the first-move leg velocities ``J_0 tau_0``."""
+        n = 6 * self.horizon
+        m = self.rows
+        return Layout([("cost", 1), ("H", n * n), ("g", n), ("C", m * n), ("lba", m),
+                       ("uba", m), ("values", m)])
+
+    def row_names(self) -> list[str]:
+        """A name per constraint row (for ``Command.active_constraints``)."""
+        names: list[str] = []
+        for k in range(1, self.horizon + 1):
+            names += [f"stroke leg {i} (stage {k})" for i in range(6)]
+            if self.tilt:
+                names.append(f"tilt (stage {k})")
+            if self.visibility:
+                names += [f"visibility leg {i} edge {j} {end} {ax} (stage {k})"
+                          for i in range(6) for j in range(2) for end in ("base", "platform")
+                          for ax in ("u", "v")]
+        for k in range(self.horizon):
+            names += [f"speed leg {i} (move {k})" for i in range(6)]
+        return names
+
+
+def _mat(v: Any, rows: int, cols: int) -> Any:
+    """Row-major reshape."""
+    return ca.reshape(v, cols, rows).T
+
+
+def _pose_function(spec: ProblemSpec) -> ca.Function:
+    """Stage values at a pose and their Jacobian w.r.t. a left pose perturbation ``xi``.
+
+    Inputs: ``R`` (3, 3), ``t`` (3), the parameter vector ``p`` (the kernel input).
+    Outputs: residual ``e - 0`` (3 nf, global model; empty otherwise), its Jacobian
+    (3 nf, 6), the constraint values (stage rows) and their Jacobian (rows, 6), and
+    ``J_inv`` (6, 6) at the pose.
+    """
+    lay = spec.input_layout()
+    p = ca.SX.sym("p", lay.size)
+    P = lay.split(p)
+    R = ca.SX.sym("R", 3, 3)
+    t = ca.SX.sym("t", 3)
+    xi = ca.SX.sym("xi", 6)
+    w = xi[3:]
+    Rp = (ca.SX.eye(3) + sx_skew(w)) @ R
+    tp = t + xi[:3] + ca.cross(w, t)
+    A = [P["A"][3 * i:3 * i + 3] for i in range(6)]
+    E = [P["E"][3 * i:3 * i + 3] for i in range(6)]
+    r = P["r"]
+    q, u, B = sx_legs(Rp, tp, A, E)
+    values = []
+    if spec.model == "global":
+        values += [qi + P["qoff"][i] for i, qi in enumerate(q)]
+    else:
+        values += q  # replaced by the measured lengths and J_0 in the local model
+    if spec.tilt:
+        values.append(ca.dot(P["zb"], Rp[:, 2]))
+    if spec.visibility:
+        K = _mat(P["K"], 3, 3)
+        for i in range(6):
+            for n in sx_edge_normals(A[i], u[i], r):
+                for X in sx_limb_ends(A[i], B[i], n, r):
+                    values.append(sx_pixel(X, K))
+    vals = ca.vertcat(*values)
+    outs_res: list[ca.SX] = []
+    if spec.model == "global":
+        Kit = _mat(P["Kit"], 3, 3)
+        feats = sx_features(spec.kind, u, A, r, Kit)
+        star = P["star"]
+        off = P["offset"]
+        res = ca.vertcat(*[ca.cross(f + off[3 * j:3 * j + 3], star[3 * j:3 * j + 3])
+                           for j, f in enumerate(feats)])
+        outs_res = [res, ca.jacobian(res, xi)]
+    else:
+        outs_res = [ca.SX(0, 1), ca.SX(0, 6)]
+    Jv = ca.jacobian(vals, xi)
+    Jinv = ca.vertcat(*[ca.horzcat(u[i].T, ca.cross(A[i], u[i]).T) for i in range(6)])
+    outs = [*outs_res, vals, Jv, Jinv]
+    zero = ca.DM.zeros(6)
+    outs = [ca.substitute(o, xi, zero) for o in outs]
+    return ca.Function("mpc_pose", [R, t, p], outs)
+
+
+def _step_jacobian() -> ca.Function:
+    """``(dR, dp)`` of one step, ``B = d xi / d tau`` (6, 6) (the left perturbation of
+    ``exp(dt tau)`` caused by a change of ``tau``, in twist coordinates) and the adjoint
+    ``Ad(E) = [[dR, [dp]_x dR], [0, dR]]`` of the step for twists ``(v, w)``."""
+    tau = ca.SX.sym("tau", 6)
+    dt = ca.SX.sym("dt")
+    dR, dp = sx_exp_se3(dt * tau[:3], dt * tau[3:])
+    JR = ca.jacobian(ca.vec(dR), tau)
+    Jp = ca.jacobian(dp, tau)
+    cols = []
+    for j in range(6):
+        Om = ca.reshape(JR[:, j], 3, 3) @ dR.T
+        wj = ca.vertcat(Om[2, 1] - Om[1, 2], Om[0, 2] - Om[2, 0], Om[1, 0] - Om[0, 1]) / 2
+        vj = Jp[:, j] - ca.cross(wj, dp)
+        cols.append(ca.vertcat(vj, wj))
+    Ad = ca.vertcat(ca.horzcat(dR, sx_skew(dp) @ dR), ca.horzcat(ca.SX.zeros(3, 3), dR))
+    return ca.Function("mpc_step", [tau, dt], [dR, dp, ca.horzcat(*cols), Ad])
+
+
+def _kernel_function(spec: ProblemSpec) -> ca.Function:
+    """The QP data of one SQP iteration as one MX function calling the SX stage functions.
+
+    Input: the packed vector of :meth:`ProblemSpec.input_layout`. Output: the packed
+    vector of :meth:`ProblemSpec.output_layout`; the QP is
+    ``min 1/2 d^T H d + g^T d`` s.t. ``lba <= C d <= uba`` in ``d = delta U``.
+    """
+    lay = spec.input_layout()
+    v: Any = ca.MX.sym("v", lay.size)
+    P = lay.split(v)
+    N = spec.horizon
+    dt = P["dt"]
+    U = [P["U"][6 * k:6 * k + 6] for k in range(N)]
+    J0 = _mat(P["J0"], 6, 6)
+    pose_f: Any = _pose_function(spec)
+    step_f: Any = _step_jacobian()
+    R0 = _mat(P["R0"], 3, 3)
+    t0 = P["t0"]
+    # Current values (stage 0) for the relaxation of the bounds.
+    _, _, vals0, G0, _ = pose_f(R0, t0, v)
+    if spec.model == "local":
+        vals0 = ca.vertcat(P["q0"], vals0[6:])
+        G0 = ca.vertcat(J0, G0[6:, :])
+    Hb: list[list[Any]] = [[ca.MX.zeros(6, 6) for _ in range(N)] for _ in range(N)]
+    gb: list[Any] = [ca.MX.zeros(6, 1) for _ in range(N)]
+    cost: Any = ca.MX(0)
+    rows_c: list[Any] = []
+    vals_c: list[Any] = []
+    lo_c: list[Any] = []
+    hi_c: list[Any] = []
+    sr = spec.stage_rows
+    stroke_lo = ca.repmat(P["qlo"], 6, 1)
+    stroke_hi = ca.repmat(P["qhi"], 6, 1)
+    lo_stage: list[Any] = [stroke_lo]
+    hi_stage: list[Any] = [stroke_hi]
+    if spec.tilt:
+        lo_stage.append(P["cosmax"])
+        hi_stage.append(ca.MX(_BIG))
+    if spec.visibility:
+        box = P["box"]
+        lo_stage.append(ca.repmat(ca.vertcat(box[0], box[2]), 24, 1))
+        hi_stage.append(ca.repmat(ca.vertcat(box[1], box[3]), 24, 1))
+    lo_s = ca.fmin(ca.vertcat(*lo_stage), vals0)
+    hi_s = ca.fmax(ca.vertcat(*hi_stage), vals0)
+    if spec.model == "global":
+        e0 = P["e0"]
+        wrow = ca.vertcat(*[ca.repmat(P["wf"][j], 3, 1) for j in range(feature_count(spec.kind))])
+        R, t = R0, t0
+        D: list[Any] = []
+        for k in range(1, N + 1):
+            dR, dp, Bk, Ad = step_f(U[k - 1], dt)
+            D = [Ad @ Dj for Dj in D] + [Bk]
+            R, t = dR @ R, dR @ t + dp
+            res, Gr, vals, Gv, _ = pose_f(R, t, v)
+            wk = P["w"][k - 1]
+            rk = res - P["ref"][k - 1] * e0
+            Wr = wrow * rk
+            cost += wk * ca.dot(rk, Wr)
+            M = wk * (Gr.T @ (Gr * ca.repmat(wrow, 1, 6)))
+            m = wk * (Gr.T @ Wr)
+            MD = [M @ Dj for Dj in D]
+            for i in range(k):
+                gb[i] += D[i].T @ m
+                for j in range(i, k):
+                    Hb[i][j] += D[i].T @ MD[j]
+            rows_c.append(ca.horzcat(*[Gv @ Dj for Dj in D], ca.MX.zeros(sr, 6 * (N - k))))
+            vals_c.append(vals)
+            lo_c.append(lo_s)
+            hi_c.append(hi_s)
+    else:
+        Nm = _mat(P["N"], 6, 6)
+        b = P["b"]
+        s: Any = ca.MX.zeros(6, 1)
+        for k in range(1, N + 1):
+            s = s + dt * U[k - 1]
+            wk = P["w"][k - 1]
+            one_r = 1 - P["ref"][k - 1]
+            Ns = Nm @ s
+            cost += wk * (P["e0sq"] * one_r * one_r + 2 * one_r * ca.dot(b, s) + ca.dot(s, Ns))
+            m = wk * (Ns + one_r * b)
+            for i in range(k):
+                gb[i] += dt * m
+                for j in range(i, k):
+                    Hb[i][j] += (dt * dt * wk) * Nm
+            vals_c.append(vals0 + G0 @ s)
+            rows_c.append(ca.horzcat(*([dt * G0] * k), ca.MX.zeros(sr, 6 * (N - k))))
+            lo_c.append(lo_s)
+            hi_c.append(hi_s)
+    # Speed rows: J_inv,0 tau_k, the first one with the first-period stroke window.
+    vmax = P["vmax"]
+    for k in range(N):
+        vals_c.append(J0 @ U[k])
+        rows_c.append(ca.horzcat(ca.MX.zeros(6, 6 * k), J0, ca.MX.zeros(6, 6 * (N - k - 1))))
+        if k == 0:
+            lo_c.append(P["lo1"])
+            hi_c.append(P["hi1"])
+        else:
+            lo_c.append(-ca.repmat(vmax, 6, 1))
+            hi_c.append(ca.repmat(vmax, 6, 1))
+    # Effort on the leg velocities of the current inverse Jacobian, regularization.
+    JtJ = P["effort"] * (J0.T @ J0) + P["reg"] * ca.MX.eye(6)
+    for k in range(N):
+        Hb[k][k] += JtJ
+        gb[k] += JtJ @ U[k]
+        cost += P["effort"] * ca.sumsqr(J0 @ U[k])
+    H = ca.blockcat([[Hb[i][j] if j >= i else Hb[j][i].T for j in range(N)]
+                     for i in range(N)])
+    C = ca.vertcat(*rows_c)
+    vals_all = ca.vertcat(*vals_c)
+    lba = ca.vertcat(*lo_c) - vals_all
+    uba = ca.vertcat(*hi_c) - vals_all
+    out = ca.densify(ca.vertcat(cost, ca.vec(H.T), ca.vertcat(*gb), ca.vec(C.T), lba, uba,
+                                   vals_all))
+    name = f"hexapod_mpc_{spec.kind}_{spec.model}_{N}{'_t' if spec.tilt else ''}" \
+           f"{'_v' if spec.visibility else ''}"
+    return ca.Function(name, [v], [out])
+
+
+@lru_cache(maxsize=32)
+def problem_kernel(spec: ProblemSpec) -> CompiledFunction:
+    """The compiled QP-data kernel of a problem structure (cached per process and on disk)."""
+    return CompiledFunction(_kernel_function(spec))
+
+
+class VirtualMachineKernel:
+    """The same kernel evaluated by the CasADi virtual machine (no C compilation: slower
+    per call, nothing to build; option ``compiled = False``)."""
+
+    def __init__(self, spec: ProblemSpec) -> None:
+        self.function = _kernel_function(spec)
+
+    def single(self, x: np.ndarray) -> np.ndarray:
+        """Evaluate on one input vector."""
+        return np.asarray(self.function(x), dtype=float).ravel()

@@ -1,0 +1,369 @@
+"""Solving the predictive problem: QP solvers and the Gauss-Newton SQP iterations.
+
+- QP (dense, ``6 N`` variables): first the unconstrained minimiser ``-H^-1 g`` (the
+  optimum of the strictly convex QP whenever it satisfies every row: the common case
+  away from the limits), else DAQP (dual active set, shipped with CasADi), generated
+  to C by CasADi and called through :mod:`ctypes` (:class:`CompiledQP`), or through
+  ``casadi.conic`` when no C compiler is available (:func:`solve_qp`). With the
+  visibility rows, a smaller QP keeps only the visibility rows closest to their
+  bounds and is accepted when its solution satisfies every row
+  (:func:`solve_screened`).
+- SQP (:func:`run_sqp`): Gauss-Newton QPs from the compiled kernel of
+  :mod:`controllers.mpc.problem`, a backtracking line search on the L1 merit, a
+  convergence test on the first move, an iteration limit and an optional time limit.
+  Every QP status is checked; the caller decides what a failure means.
+"""
+
+from __future__ import annotations
+
+import ctypes
+import logging
+import math
+import os
+import subprocess
+import tempfile
+import time
+from dataclasses import dataclass, field
+from functools import lru_cache
+from pathlib import Path
+
+import casadi as ca
+import numpy as np
+
+from controllers.mpc.problem import ProblemSpec, VirtualMachineKernel
+from hexapod.compiled import CompilationError, CompiledFunction, build_shared_library
+
+log = logging.getLogger(__name__)
+
+
+@dataclass
+class SolveStats:
+    """Counters of the solves since the last reset.
+
+    Attributes:
+        steps: Steps that reached the solver.
+        fallbacks: Steps that fell back to the QP law.
+        unconverged: Steps that applied an unconverged SQP iterate (``accept_unconverged``).
+        sqp_iterations: SQP iterations of the last solve.
+        qp_iterations: DAQP iterations of the last solve (summed over its SQP iterations).
+        total_sqp_iterations: Sum over the steps.
+        last_status: Status of the last solve.
+        reasons: Fallback reasons and how often each occurred.
+    """
+
+    steps: int = 0
+    fallbacks: int = 0
+    unconverged: int = 0
+    sqp_iterations: int = 0
+    qp_iterations: int = 0
+    total_sqp_iterations: int = 0
+    last_status: str = ""
+    reasons: dict[str, int] = field(default_factory=dict)
+
+
+@dataclass
+class QPResult:
+    """One QP solve.
+
+    Attributes:
+        step: (6 N,) ``delta U``, or None on failure.
+        status: The solver's return status (text).
+        iterations: Active-set iterations.
+        multipliers: (rows,) multipliers of the rows (sign: >0 at an upper bound).
+    """
+
+    step: np.ndarray | None
+    status: str
+    iterations: int
+    multipliers: np.ndarray | None
+
+
+@lru_cache(maxsize=32)
+def qp_solver(variables: int, rows: int) -> ca.Function:
+    """DAQP through ``casadi.conic`` for a dense QP of this size (status checked by the caller)."""
+    return ca.conic("hexapod_mpc_qp", "daqp",
+                    {"h": ca.Sparsity.dense(variables, variables),
+                     "a": ca.Sparsity.dense(rows, variables)},
+                    {"error_on_fail": False})
+
+
+def _casadi_dir() -> Path:
+    return Path(ca.__file__).resolve().parent
+
+
+class CompiledQP:
+    """DAQP generated to C by CasADi and called through :mod:`ctypes` on one packed buffer.
+
+    The Python interface of ``casadi.conic`` costs several hundred microseconds per
+    call on these sizes (argument conversion and checks) for a solve of about a
+    hundred; the generated solver is called on preallocated buffers instead. It
+    links against the DAQP library shipped in the CasADi wheel (``libdaqp.so``,
+    loaded with global symbols before the generated library). Input: ``H`` (n x n),
+    ``g``, ``C`` (m x n, row-major), ``lba``, ``uba``; output: ``x``, the row
+    multipliers, the optimal value. A call that returns non-zero is a solve that DAQP
+    did not finish as optimal (infeasible, iteration limit, ...).
+
+    Raises:
+        OSError: No compiler, or the DAQP library or headers are missing (the caller
+            uses the ``casadi.conic`` path instead).
+    """
+
+    def __init__(self, variables: int, rows: int) -> None:
+        n, m = variables, rows
+        self.n, self.m = n, m
+        self.n_in = n * n + n + m * n + 2 * m
+        self.n_out = n + m + 1
+        vin = ca.MX.sym("v", self.n_in)
+        k = 0
+        parts = []
+        for size in (n * n, n, m * n, m, m):
+            parts.append(vin[k:k + size])
+            k += size
+        H = ca.reshape(parts[0], n, n)
+        C = ca.reshape(parts[2], n, m).T
+        sol = qp_solver(n, m)(h=H, g=parts[1], a=C, lba=parts[3], uba=parts[4])
+        f = ca.Function(f"hexapod_mpc_daqp_{n}_{m}", [vin],
+                        [ca.vertcat(sol["x"], sol["lam_a"], sol["cost"])])
+        self.name = f.name()
+        lib_daqp = _casadi_dir() / "libdaqp.so"
+        include = _casadi_dir() / "include"
+        if not lib_daqp.exists() or not (include / "daqp" / "api.h").exists():
+            raise OSError(f"DAQP library or headers not found in {_casadi_dir()}")
+        with tempfile.TemporaryDirectory() as tmp:
+            cwd = os.getcwd()
+            try:
+                os.chdir(tmp)
+                f.generate(f"{self.name}.c")
+            finally:
+                os.chdir(cwd)
+            code = (Path(tmp) / f"{self.name}.c").read_text()
+        path = build_shared_library(self.name, code, ("-O2", f"-I{include}"))
+        self._daqp = ctypes.CDLL(str(lib_daqp), mode=ctypes.RTLD_GLOBAL)
+        lib = ctypes.CDLL(str(path))
+        n_arg, n_res, n_iw, n_w = (ctypes.c_longlong() for _ in range(4))
+        getattr(lib, f"{self.name}_work")(ctypes.byref(n_arg), ctypes.byref(n_res),
+                                          ctypes.byref(n_iw), ctypes.byref(n_w))
+        fn = getattr(lib, self.name)
+        fn.argtypes = [ctypes.c_void_p] * 4 + [ctypes.c_int]
+        fn.restype = ctypes.c_int
+        self.x = np.zeros(self.n_in)
+        self.y = np.zeros(self.n_out)
+        self._args = (ctypes.c_void_p * max(n_arg.value, 1))(self.x.ctypes.data)
+        self._res = (ctypes.c_void_p * max(n_res.value, 1))(self.y.ctypes.data)
+        self._iw = np.zeros(max(n_iw.value, 1), dtype=np.int64)
+        self._w = np.zeros(max(n_w.value, 1))
+        self._call = (ctypes.addressof(self._args), ctypes.addressof(self._res),
+                      self._iw.ctypes.data, self._w.ctypes.data, 0)
+        alloc = getattr(lib, f"{self.name}_alloc_mem", None)
+        init = getattr(lib, f"{self.name}_init_mem", None)
+        if alloc is not None and init is not None:  # memory slot 0 of the generated solver
+            alloc.restype = ctypes.c_int
+            init(alloc())
+        self._fn = fn
+        self._lib = lib
+
+    def solve(self, H: np.ndarray, g: np.ndarray, C: np.ndarray, lba: np.ndarray,
+              uba: np.ndarray) -> QPResult:
+        """Solve ``min 1/2 d^T H d + g^T d`` s.t. ``lba <= C d <= uba`` (sizes of this solver)."""
+        n, m = self.n, self.m
+        x = self.x
+        x[:n * n] = H.reshape(-1)
+        x[n * n:n * n + n] = g
+        k = n * n + n
+        x[k:k + m * n] = C.reshape(-1)
+        k += m * n
+        x[k:k + m] = lba
+        x[k + m:k + 2 * m] = uba
+        if self._fn(*self._call):
+            return QPResult(None, "QP not solved: DAQP did not reach an optimal solution", 0,
+                            None)
+        y = self.y
+        step = y[:n].copy()
+        if not math.isfinite(float(step.sum())):
+            return QPResult(None, "QP returned a non-finite solution", 0, None)
+        return QPResult(step, "optimal", 0, y[n:n + m].copy())
+
+
+@lru_cache(maxsize=32)
+def compiled_qp(variables: int, rows: int) -> CompiledQP | None:
+    """The compiled DAQP of this size, or None when it cannot be built (logged once)."""
+    try:
+        return CompiledQP(variables, rows)
+    except (OSError, subprocess.SubprocessError, RuntimeError) as exc:
+        log.warning("compiled DAQP unavailable (%s); using casadi.conic (slower)", exc)
+        return None
+
+
+
+
+def solve_qp(H: np.ndarray, g: np.ndarray, C: np.ndarray, lba: np.ndarray,
+             uba: np.ndarray) -> QPResult:
+    """Solve ``min 1/2 d^T H d + g^T d`` s.t. ``lba <= C d <= uba`` with DAQP."""
+    n = len(g)
+    solver = qp_solver(n, len(lba))
+    try:
+        out = solver(h=H, g=g, a=C, lba=lba, uba=uba)
+    except RuntimeError as exc:  # casadi reports solver errors as RuntimeError
+        return QPResult(None, f"QP solver error: {exc}", 0, None)
+    stats = solver.stats()
+    status = str(stats.get("return_status", "unknown"))
+    iters = max(int(stats.get("iter_count", 0) or 0), 0)  # DAQP through casadi: -1 (unknown)
+    if not stats.get("success", False):
+        return QPResult(None, f"QP not solved: DAQP status {status}", iters, None)
+    x = np.asarray(out["x"], dtype=float).reshape(-1)
+    if not np.all(np.isfinite(x)):
+        return QPResult(None, "QP returned a non-finite solution", iters, None)
+    return QPResult(x, status, iters, np.asarray(out["lam_a"], dtype=float).reshape(-1))
+
+
+def unconstrained(H: np.ndarray, g: np.ndarray, C: np.ndarray, lba: np.ndarray,
+                   uba: np.ndarray) -> QPResult | None:
+    """The unconstrained minimiser ``-H^-1 g`` when it satisfies every row (then it is the
+    optimum of the strictly convex QP and the QP solver is not called), else None."""
+    try:
+        x = -np.linalg.solve(H, g)
+    except np.linalg.LinAlgError:
+        return None
+    v = C @ x
+    if (v >= lba).all() and (v <= uba).all() and math.isfinite(float(x.sum())):
+        return QPResult(x, "unconstrained optimum", 0, np.zeros(len(lba)))
+    return None
+
+
+def solve_screened(H: np.ndarray, g: np.ndarray, C: np.ndarray, lba: np.ndarray,
+                   uba: np.ndarray, spec: ProblemSpec, compiled: bool) -> QPResult:
+    """The QP, with the visibility rows screened when there are many of them.
+
+    DAQP's cost grows with the number of rows (``6 N (7 + 48)`` with visibility). The
+    visibility rows are first reduced to the :data:`SCREENED_VISIBILITY_ROWS` with the
+    smallest slack at ``d = 0``; if the solution of that smaller QP satisfies every
+    row, it is the optimum of the full QP (same objective, larger feasible set);
+    otherwise the full QP is solved.
+    """
+    m = len(lba)
+    keep = screened_rows(spec, lba, uba)
+    if keep is not None:
+        qp = compiled_qp(len(g), len(keep)) if compiled else None
+        Cr = C[keep]
+        res = (qp.solve(H, g, Cr, lba[keep], uba[keep]) if qp is not None
+               else solve_qp(H, g, Cr, lba[keep], uba[keep]))
+        if res.step is not None and res.multipliers is not None:
+            v = C @ res.step
+            tol = 1e-9 * (1.0 + np.abs(v))
+            if (v >= lba - tol).all() and (v <= uba + tol).all():
+                lam = np.zeros(m)
+                lam[keep] = res.multipliers
+                return QPResult(res.step, res.status + " (screened rows)", res.iterations, lam)
+    qp = compiled_qp(len(g), m) if compiled else None
+    return qp.solve(H, g, C, lba, uba) if qp is not None else solve_qp(H, g, C, lba, uba)
+
+
+#: Visibility rows kept by :func:`solve_screened` (the others are checked afterwards).
+SCREENED_VISIBILITY_ROWS = 48
+
+
+def screened_rows(spec: ProblemSpec, lba: np.ndarray, uba: np.ndarray) -> np.ndarray | None:
+    """Indices of the rows of the screened QP (None: no screening for this structure)."""
+    if not spec.visibility:
+        return None
+    sr = spec.stage_rows
+    N = spec.horizon
+    idx = np.arange(N * sr).reshape(N, sr)
+    vis = idx[:, sr - 48:].reshape(-1)
+    other = np.concatenate([idx[:, :sr - 48].reshape(-1), np.arange(N * sr, len(lba))])
+    slack = np.minimum(uba[vis], -lba[vis])
+    best = vis[np.argpartition(slack, SCREENED_VISIBILITY_ROWS)[:SCREENED_VISIBILITY_ROWS]]
+    return np.sort(np.concatenate([other, best]))
+
+
+def merit(out: np.ndarray, o: dict[str, slice], mu: float) -> tuple[float, float]:
+    """L1 merit ``cost + mu * violation`` and the violation at the point of a kernel output."""
+    viol = float(np.maximum(out[o["lba"]], 0.0).sum() + np.maximum(-out[o["uba"]], 0.0).sum())
+    return float(out[o["cost"]][0]) + mu * viol, viol
+
+
+def run_sqp(kernel: CompiledFunction | VirtualMachineKernel, compiled: bool, vec: np.ndarray,
+            u_slice: slice, o: dict[str, slice], spec: ProblemSpec, U: np.ndarray,
+            max_iter: int, tolerance: float, time_limit: float | None
+            ) -> tuple[np.ndarray, bool, str, QPResult | None, int, int]:
+    """Gauss-Newton SQP from ``U`` (the warm start) with a backtracking line search on
+    the L1 merit ``cost + mu * violation`` (global model; the local model is one QP).
+
+    Converged when the step of the first move (the only one applied) satisfies
+    ``|delta tau_0|_inf <= tolerance * max(|tau_0|_inf, 1e-3)``: the later moves of a
+    flat, saturated horizon may still be moving, and are warm-started at the next
+    period. The last allowed iteration takes the full QP step, so that an unconverged
+    result still satisfies the linearised constraints of its last QP.
+
+    Args:
+        kernel: The compiled QP-data kernel.
+        compiled: Use DAQP generated to C (else ``casadi.conic``).
+        vec: The kernel input, filled but for ``U`` (modified).
+        u_slice: Where ``U`` goes in ``vec``.
+        o: The output layout's slices.
+        spec: The problem structure.
+        U: (6 N,) the starting point [m/s, rad/s].
+        max_iter: Iteration limit (0: no QP is solved).
+        tolerance: Relative tolerance on the first move.
+        time_limit: Seconds after which the iterations stop, or None.
+
+    Returns:
+        ``U``, converged, status text, the last QP result, SQP and QP iterations.
+    """
+    n = 6 * spec.horizon
+    m = spec.rows
+    status = "iteration limit 0: no QP solved"
+    qp_iters = 0
+    last: QPResult | None = None
+    t_start = time.perf_counter()
+    if max_iter == 0:
+        return U, False, status, None, 0, 0
+    vec[u_slice] = U
+    try:
+        out = kernel.single(vec)
+    except (CompilationError, RuntimeError) as exc:
+        return U, False, f"QP data kernel failed: {exc}", None, 0, 0
+    mu = 0.0
+    for it in range(1, max_iter + 1):
+        if not math.isfinite(float(out.sum())):
+            return U, False, "non-finite QP data (prediction failed)", last, it, qp_iters
+        g = out[o["g"]]
+        H = out[o["H"]].reshape(n, n)
+        C = out[o["C"]].reshape(m, n)
+        lba, uba = out[o["lba"]], out[o["uba"]]
+        res = unconstrained(H, g, C, lba, uba)
+        if res is None:
+            res = solve_screened(H, g, C, lba, uba, spec, compiled)
+        qp_iters += res.iterations
+        last = res
+        if res.step is None or res.multipliers is None:
+            return U, False, res.status, last, it, qp_iters
+        d = res.step
+        size = float(np.abs(d[:6]).max())
+        if spec.model == "local" or size <= tolerance * max(float(np.abs(U[:6] + d[:6]).max()),
+                                                            1e-3):
+            return U + d, True, f"converged in {it} SQP iteration{'s' if it > 1 else ''}", \
+                last, it, qp_iters
+        status = f"not converged in {it} SQP iterations (last step {size:.2g})"
+        if it == max_iter:  # stop on a QP solution: the linearised rows hold there
+            return U + d, False, status, last, it, qp_iters
+        mu = max(mu, 1.1 * float(np.abs(res.multipliers).max()) + 1e-9)
+        merit0, viol0 = merit(out, o, mu)
+        slope = float(g @ d) - mu * viol0  # directional derivative of the merit
+        alpha = 1.0
+        for _ in range(6):
+            vec[u_slice] = U + alpha * d
+            try:
+                out_try = kernel.single(vec)
+            except (CompilationError, RuntimeError) as exc:
+                return U, False, f"QP data kernel failed: {exc}", last, it, qp_iters
+            value, _ = merit(out_try, o, mu)
+            if value <= merit0 + 1e-4 * alpha * min(slope, 0.0) or not math.isfinite(merit0):
+                break
+            alpha *= 0.5
+        U = U + alpha * d
+        out = out_try
+        if time_limit is not None and time.perf_counter() - t_start > time_limit:
+            return U, False, f"time limit {time_limit} s exceeded after {it} SQP iterations", \
+                last, it, qp_iters
+    return U, False, status, last, max_iter, qp_iters
