@@ -119,7 +119,7 @@ def _run_locked(scenarios: list[Any], out: Path, args: argparse.Namespace) -> in
     chunk = args.chunk or auto_chunk(scenarios, args.workers, args.backend)
     if chunk < 1:
         raise BenchmarkError(f"--chunk must be >= 1, got {chunk}")
-    units = plan(scenarios, chunk, args.record, done, args.backend)
+    units = plan(scenarios, chunk, args.record, done, args.backend, args.engine)
     total = sum(len(u.trials) for u in units)
     con = _console()
     if done:
@@ -439,6 +439,9 @@ def build_parser() -> argparse.ArgumentParser:
                    help="sim (default, vectorised), emulator (a firmware emulator on a pty), "
                         "serial:URL, a plugin's NAME[:ARGS] or module:attr[:ARGS] "
                         "(docs/backends.md)")
+    s.add_argument("--engine", choices=("batched", "per-trial"), default="batched",
+                   help="batched (default: every trial of a work unit as arrays) or per-trial "
+                        "(one controller object per trial; same results, slower)")
     s.add_argument("--viz", action="store_true", help="live MeshCat view (in-process)")
     s.add_argument("--no-progress", action="store_true", help="no progress bar")
     s.set_defaults(func=cmd_run)

@@ -55,7 +55,8 @@ class WorkUnit:
         controller_index: Index into ``scenario.controllers``.
         trials: Trial indices.
         record_trials: Trials below this index keep their time series.
-        backend: Backend spec (``"sim"``, ``"emulator"`` or ``"serial:URL"``).
+        backend: Backend spec (``"sim"``, ``"emulator"``, ``"serial:URL"``, a plugin's).
+        engine: ``"batched"`` (default) or ``"per-trial"`` (:func:`benchmarks.sim.run_trials`).
     """
 
     scenario: Scenario
@@ -64,6 +65,7 @@ class WorkUnit:
     trials: tuple[int, ...]
     record_trials: int = 2
     backend: str = "sim"
+    engine: str = "batched"
 
     @property
     def controller(self) -> str:
@@ -71,8 +73,8 @@ class WorkUnit:
         return self.scenario.controllers[self.controller_index].label
 
 def plan(scenarios: list[Scenario], chunk_size: int = 25, record_trials: int = 2,
-         done: set[tuple[str, int, str, int]] | None = None, backend: str = "sim"
-         ) -> list[WorkUnit]:
+         done: set[tuple[str, int, str, int]] | None = None, backend: str = "sim",
+         engine: str = "batched") -> list[WorkUnit]:
     """Split studies into work units, leaving out trials already done."""
     done = done or set()
     units = []
@@ -83,7 +85,7 @@ def plan(scenarios: list[Scenario], chunk_size: int = 25, record_trials: int = 2
                         if (point.name, p, spec.label, k) not in done]
                 for a in range(0, len(todo), chunk_size):
                     units.append(WorkUnit(point, p, c, tuple(todo[a:a + chunk_size]),
-                                          record_trials, backend))
+                                          record_trials, backend, engine))
     return units
 
 
@@ -127,7 +129,7 @@ def execute(unit: WorkUnit, on_step: Callable[..., None] | None = None
     sc = unit.scenario
     results = run_trials(sc, unit.controller_index, list(unit.trials), unit.record_trials,
                          backend_factory=backend_factory(unit.backend),
-                         calibrate=calibration_hook(sc), on_step=on_step)
+                         calibrate=calibration_hook(sc), on_step=on_step, engine=unit.engine)
     rows, records = [], []
     for res in results:
         row = dict(res.row)
