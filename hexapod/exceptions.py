@@ -9,6 +9,8 @@ from __future__ import annotations
 
 from typing import Any
 
+import numpy as np
+
 
 class HexapodError(Exception):
     """Base class of every error raised by :mod:`hexapod`."""
@@ -97,6 +99,34 @@ class ForwardKinematicsError(HexapodError):
             f"forward kinematics ({method}) failed after {iterations} iterations: "
             f"{reason} (residual {residual:.3e} m)"
         )
+
+
+class WorkspaceError(HexapodError, RuntimeError):
+    """Random poses asked of a region that (nearly) misses the robot's workspace.
+
+    Attributes:
+        robot: The robot's name.
+        found: Poses found inside the strokes.
+        attempts: Poses drawn.
+        max_translation: Half-width of the translation box [m].
+        max_angle: Largest rotation [rad].
+        margin: Distance kept from the stroke limits [m].
+    """
+
+    def __init__(self, robot: str, found: int, attempts: int, max_translation: float,
+                 max_angle: float, margin: float) -> None:
+        self.robot = robot
+        self.found = found
+        self.attempts = attempts
+        self.max_translation = max_translation
+        self.max_angle = max_angle
+        self.margin = margin
+        super().__init__(
+            f"{robot}: only {found} of {attempts} random poses (translations within "
+            f"{max_translation * 1e3:g} mm of the home pose, rotations up to "
+            f"{np.degrees(max_angle):g} deg) keep every leg {margin * 1e3:g} mm inside its "
+            "stroke: the box hardly intersects the workspace (a robot far from the nominal "
+            "one, or a box too large)")
 
 
 class ShapeError(HexapodError, ValueError):

@@ -7,6 +7,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from hexapod.exceptions import WorkspaceError
 from hexapod.geometry import HexapodGeometry
 from hexapod.kinematics import inverse_kinematics
 from hexapod.se3 import exp_so3
@@ -83,7 +84,8 @@ def sample_poses(
         count += int(ok.sum())
         attempts += m
         if attempts > 1000 * max(n, 1):
-            raise RuntimeError("sample_poses: the box hardly intersects the workspace")
+            raise WorkspaceError(geometry.name, count, attempts, max_translation, max_angle,
+                                 margin)
     return np.concatenate(Rs)[:n], np.concatenate(ts)[:n]
 
 

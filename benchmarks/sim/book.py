@@ -51,6 +51,7 @@ class Book:
     violations: np.ndarray
     refused: np.ndarray
     missed: np.ndarray
+    hidden: np.ndarray
     recording: list[bool]
     failure: list[str | None] = field(default_factory=list)
     tail_pos: list[list[float]] = field(default_factory=list)
@@ -72,7 +73,7 @@ class Book:
             settled=np.zeros(n, dtype=int), last_bad=np.full(n, -1),
             converged=np.zeros(n, dtype=bool), violations=np.zeros(n, dtype=int),
             refused=np.zeros(n, dtype=int), missed=np.zeros(n, dtype=int),
-            recording=recording, failure=[None] * n,
+            hidden=np.zeros(n, dtype=int), recording=recording, failure=[None] * n,
             tail_pos=[[] for _ in range(n)], tail_ori=[[] for _ in range(n)],
             step_times=[[] for _ in range(n)], rtts=[[] for _ in range(n)],
             series=[{k: [] for k in SERIES_KEYS} if rec else {} for rec in recording])
@@ -97,6 +98,11 @@ class Book:
             if step == sc.task.max_steps:
                 done[:] = True
         return done
+
+    def seen(self, idx: np.ndarray, edge_visible: np.ndarray) -> None:
+        """Count the periods where the rows ``idx`` measured fewer than their 12 edges."""
+        self.hidden[idx] += ~np.asarray(edge_visible, dtype=bool).reshape(len(idx), -1).all(
+            axis=1)
 
     def command(self, k: int, velocities: np.ndarray, reason: str | None) -> bool:
         """Account one command of row ``k``; returns True when the trial fails with it
@@ -167,6 +173,7 @@ class Book:
                 "final_position_error_mm": float(dp[m] * 1e3),
                 "final_orientation_error_deg": float(np.rad2deg(da[m])),
                 "stroke_violations": int(self.violations[m]),
+                "hidden_edge_periods": int(self.hidden[m]),
                 "step_time_us": float(np.median(times) * 1e6) if times else None,
                 "failure": None if conv else fail,
             })

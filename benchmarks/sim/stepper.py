@@ -183,6 +183,7 @@ def _run_group(sc: Scenario, controller_index: int, group: list[TrialSetup],
         dp, da = pose_error(R[idx], t[idx], R_goal[idx], t_goal[idx])
         done = book.check(sc, step, idx, dp, da)
         meas = sensor.measure(R[idx], t[idx], [rngs[k] for k in idx])
+        book.seen(idx, meas["edge_visible"])
         if on_step is not None:
             for j, k in enumerate(idx):
                 on_step(group[k].trial, R[k], t[k], meas["edge_visible"][j])

@@ -14,7 +14,7 @@ _NON_SWEEP = {
     "trial", "point", "backend", "converged", "steps", "final_position_error_mm",
     "final_orientation_error_deg", "stroke_violations", "step_time_us", "failure",
     "rtt_median_ms", "rtt_p99_ms", "missed_periods", "detect_time_ms",
-    "tail_position_error_mm", "tail_orientation_error_deg",
+    "tail_position_error_mm", "tail_orientation_error_deg", "hidden_edge_periods",
 }
 
 
@@ -53,6 +53,8 @@ class Summary:
     calibration_median_mm: float
     calibration_max_mm: float
     detect_time_median_ms: float = float("nan")
+    hidden_edge_periods: int = 0
+    hidden_edge_trials: int = 0
     calibration_min_ratio: float = float("nan")
     calibration_ill_conditioned: int = 0
     calibration_refused: int = 0
@@ -108,6 +110,8 @@ def summarize(rows: list[dict[str, Any]]) -> list[Summary]:
                                         "median"),
             calibration_max_mm=_stat([r.get("calibration_max_error_mm") for r in rs], "max"),
             detect_time_median_ms=_stat([r.get("detect_time_ms") for r in rs], "median"),
+            hidden_edge_periods=int(sum(r.get("hidden_edge_periods") or 0 for r in rs)),
+            hidden_edge_trials=sum(1 for r in rs if (r.get("hidden_edge_periods") or 0) > 0),
             calibration_min_ratio=-_stat([-(r["calibration_min_singular_ratio"])
                                           for r in rs
                                           if r.get("calibration_min_singular_ratio")

@@ -114,6 +114,14 @@ def write_report(out_dir: Path) -> Path:
                                 [[format_sweep(s.sweep), s.controller, s.backend,
                                   _fmt(s.rtt_median_ms), _fmt(s.rtt_p99_ms),
                                   str(s.missed_periods)] for s in ss]), ""]
+        if any(s.hidden_edge_periods for s in ss):
+            lines += ["Visibility (periods where the camera saw fewer than the 12 edges, summed "
+                      "over the trials; trials with at least one such period):", ""]
+            lines += [_md_table(["sweep", "controller", "hidden-edge periods",
+                                 "trials with a hidden edge"],
+                                [[format_sweep(s.sweep), s.controller,
+                                  str(s.hidden_edge_periods),
+                                  f"{s.hidden_edge_trials}/{s.trials}"] for s in ss]), ""]
         if any(np.isfinite(s.tail_position_median_mm) for s in ss):
             lines += ["Convergence tail (median of the position error over the last 20 % of "
                       "each fixed-duration trial, as the seeds read their tails):", ""]

@@ -15,6 +15,7 @@ from hexapod import (
     inverse_kinematics,
     sample_poses,
 )
+from hexapod.exceptions import WorkspaceError
 from hexapod.se3 import log_so3
 
 
@@ -61,7 +62,7 @@ def test_sample_poses_seeded(geometry: HexapodGeometry) -> None:
 
 
 def test_sample_poses_impossible_box(geometry: HexapodGeometry) -> None:
-    with pytest.raises(RuntimeError, match="hardly intersects"):
+    with pytest.raises(WorkspaceError, match="hardly intersects"):
         sample_poses(geometry, 5, rng=1, margin=0.08)  # margins leave an empty stroke
 
 

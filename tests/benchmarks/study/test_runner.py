@@ -14,7 +14,7 @@ import pytest
 
 from benchmarks.cli import main as cli_main
 from benchmarks.study.runner import plan, read_results, run_units
-from benchmarks.study.scenario import parse_scenario
+from benchmarks.study.scenario import builtin_scenarios, parse_scenario
 
 JOINTS = "tests.benchmarks.plugins:ProportionalJoints"
 CRASH = "tests.benchmarks.plugins:CrashOnSomeTrials"
@@ -137,17 +137,14 @@ def test_results_rows_have_the_documented_fields(tmp_path: Path) -> None:
     rows = read_results(tmp_path)
     for key in ("scenario", "controller", "trial", "noise_amplitude_deg", "converged", "steps",
                 "final_position_error_mm", "final_orientation_error_deg", "stroke_violations",
-                "step_time_us", "failure", "controller_package", "controller_version"):
+                "step_time_us", "failure", "controller_package", "controller_version",
+                "hidden_edge_periods"):
         assert all(key in r for r in rows), key
     assert json.loads((tmp_path / "results.jsonl").read_text().splitlines()[0])
     assert list((tmp_path / "trials").glob("*.npz")), "trial 0 is recorded"
 
 
-@pytest.mark.parametrize("name", ["quick", "andreff2005-noise", "andreff2006-front-camera",
-                                  "andreff2006-images", "andreff2005-noise-omni",
-                                  "andreff2005-pixel-noise",
-                                  "tahri2009-convergence", "tahri2009-images",
-                                  "calibration-error-sweep"])
+@pytest.mark.parametrize("name", sorted(builtin_scenarios()))
 def test_builtin_scenario_end_to_end(name: str, tmp_path: Path) -> None:
     out = tmp_path / name
     code = cli_main(["run", name, "--out", str(out), "--trials", "1", "--no-progress",
