@@ -1,0 +1,336 @@
+"""The study commands of ``hexapod-bench``: ``run`` (locked results directory, progress,
+honest summary, live viewer), ``report``, ``calibrate`` and ``viz``."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import shlex
+import sys
+import time
+from pathlib import Path
+from typing import Any
+
+from benchmarks.exceptions import BenchmarkError
+
+
+def _console() -> Any:
+    """A rich console: the terminal's width, or 200 columns for a pipe or a CI log."""
+    from rich.console import Console
+
+    # a pipe or a CI log gets the whole table, not an 80-column squeeze
+    return Console() if sys.stdout.isatty() else Console(width=200)
+
+
+def cmd_run(args: argparse.Namespace) -> int:
+    """Run studies and write results.jsonl and report.md."""
+    import controllers  # noqa: F401 - registers the built-ins
+    from benchmarks.study.runner import run_lock
+    from benchmarks.study.scenario import check_controllers, load_scenario
+
+    out = Path(args.out)
+    ctrl_list = [c.strip() for c in args.controllers.split(",")] if args.controllers else None
+    scenarios = [load_scenario(s).with_overrides(args.trials, args.seed, ctrl_list,
+                                                 args.max_steps, args.calibration)
+                 for s in args.scenarios]
+    for sc in scenarios:
+        check_controllers(sc)
+    from benchmarks.study.runner import backend_factory
+
+    backend_factory(args.backend)  # validates the spec before any work
+    with run_lock(out):  # one run per results directory, from the check to the report
+        return _run_locked(scenarios, out, args)
+
+
+def auto_chunk(scenarios: list[Any], workers: int, backend: str) -> int:
+    """Trials per work unit: large enough for the batched engine to step many trials as
+    arrays, small enough to keep every worker busy and the results streaming (results do
+    not depend on it)."""
+    if backend != "sim":
+        return 25
+    trials = max((sc.trials for sc in scenarios), default=1)
+    groups = sum(len(sc.expand()) * len(sc.controllers) for sc in scenarios)
+    share = -(-trials * groups // (4 * max(1, workers)))  # 4 units per worker at least
+    return int(min(1000, trials, max(25, share)))
+
+
+def _run_locked(scenarios: list[Any], out: Path, args: argparse.Namespace) -> int:
+    from benchmarks.study.report import META_FILE, write_report
+    from benchmarks.study.runner import completed_keys, plan, run_units
+
+    existing = (out / "results.jsonl").exists() and (out / "results.jsonl").stat().st_size > 0
+    if existing and not args.resume:
+        raise BenchmarkError(f"{out}: already holds results; use --resume to finish that run "
+                             "or choose another --out")
+    done = completed_keys(out) if args.resume else set()
+    chunk = args.chunk or auto_chunk(scenarios, args.workers, args.backend)
+    if chunk < 1:
+        raise BenchmarkError(f"--chunk must be >= 1, got {chunk}")
+    units = plan(scenarios, chunk, args.record, done, args.backend, args.engine)
+    total = sum(len(u.trials) for u in units)
+    con = _console()
+    if done:
+        con.print(f"resuming: {len(done)} trials already done, {total} to go")
+    executor = "dask" if args.dask else ("process pool" if args.workers > 1 else "in-process")
+    meta_path = out / META_FILE
+    meta: dict[str, Any] = {}
+    if meta_path.exists():
+        meta = json.loads(meta_path.read_text())
+    meta.update({
+        "command": "hexapod-bench " + " ".join(shlex.quote(a) for a in sys.argv[1:]),
+        "workers": args.workers, "executor": executor,
+        "scenarios": {**meta.get("scenarios", {}), **{
+            sc.name: {"description": sc.description, "reference": sc.reference,
+                      "source": sc.source} for sc in scenarios}},
+    })
+    meta_path.write_text(json.dumps(meta, indent=2))
+    if args.viz:
+        return _run_with_viz(scenarios, out, args)
+    t0 = time.perf_counter()
+    show = sys.stdout.isatty() and not args.no_progress
+    interrupted = False
+    written = 0
+
+    def advance(unit: Any) -> None:
+        nonlocal written
+        written += len(unit.trials)
+
+    try:
+        if show and total:
+            from rich.progress import (
+                BarColumn,
+                MofNCompleteColumn,
+                Progress,
+                TimeElapsedColumn,
+                TimeRemainingColumn,
+            )
+
+            with Progress("[progress.description]{task.description}", BarColumn(),
+                          MofNCompleteColumn(), TimeElapsedColumn(), TimeRemainingColumn(),
+                          console=con) as prog:
+                task = prog.add_task("trials", total=total)
+
+                def advance_bar(unit: Any) -> None:
+                    advance(unit)
+                    prog.advance(task, len(unit.trials))
+
+                run_units(units, out, args.workers, args.dask, progress=advance_bar)
+        else:
+            run_units(units, out, args.workers, args.dask, progress=advance)
+    except KeyboardInterrupt:
+        interrupted = True
+        con.print(f"\n[yellow]interrupted[/yellow]: {written} of {total} trials written to "
+                  f"{out}/results.jsonl; finish with: hexapod-bench run "
+                  f"{' '.join(args.scenarios)} --out {out} --resume")
+    wall = time.perf_counter() - t0
+    meta["wall_time_s"] = wall
+    meta_path.write_text(json.dumps(meta, indent=2))
+    report = write_report(out)
+    _print_summary(out, con)
+    done_text = f"{written} of {total} trials" if written != total else f"{total} trials"
+    con.print(f"{done_text} in {wall:.1f} s ({executor}, {args.workers} worker(s))"
+              f"{' before the interruption' if interrupted else ''}; report: {report}")
+    return 130 if interrupted else 0
+
+
+def _run_with_viz(scenarios: list[Any], out: Path, args: argparse.Namespace) -> int:
+    """Run in-process with a live MeshCat view (loopback server)."""
+    from benchmarks.sim import load_camera, load_geometry
+    from benchmarks.study.runner import ResultsWriter, execute, plan
+    from hexapod.visualize import HexapodViewer
+
+    con = _console()
+    sc0 = scenarios[0].expand()[0]
+    g = load_geometry(sc0)
+    cam = load_camera(sc0, g)
+    viewer = HexapodViewer(g)
+    viewer.show_camera(cam.camera_from_base.as_matrix(), cam.K, cam.width, cam.height,
+                       kind=cam.kind)
+    con.print(f"MeshCat viewer: {viewer.url()}")
+
+    def on_step(trial: int, R: Any, t: Any, vis: Any) -> None:
+        viewer.display(R, t, vis)
+
+    writer = ResultsWriter(out)
+    try:
+        for unit in plan(scenarios, 1, args.record, set(), args.backend):
+            rows, records = execute(unit, on_step=on_step)
+            writer.write(rows, records)
+    finally:
+        writer.close()
+        viewer.close()
+    from benchmarks.study.report import write_report
+
+    write_report(out)
+    _print_summary(out, con)
+    return 0
+
+
+def _print_summary(out: Path, con: Any) -> None:
+    from rich.table import Table
+
+    from benchmarks.study.metrics import summarize
+    from benchmarks.study.report import TABLE_HEADER, duplicate_note, summary_table_rows
+    from benchmarks.study.runner import deduplicate, read_results
+
+    rows, dropped, conflicting = deduplicate(read_results(out))
+    if dropped:
+        con.print(f"[yellow]warning[/yellow]: {out / 'results.jsonl'}: "
+                  f"{duplicate_note(dropped, conflicting)}")
+    summaries = summarize(rows)
+    t = Table(title=f"Results ({out})")
+    for col in TABLE_HEADER:
+        t.add_column(col, justify="left" if col in ("scenario", "sweep", "controller",
+                                                    "backend") else "right")
+    for row in summary_table_rows(summaries):
+        t.add_row(*row)
+    con.print(t)
+
+
+def cmd_calibrate(args: argparse.Namespace) -> int:
+    """Calibrate the base points in a scenario's worlds (calibration.json, calibrated.toml)."""
+    from rich.table import Table
+
+    from benchmarks.study.calibration import run_calibration
+    from benchmarks.study.metrics import format_sweep
+    from benchmarks.study.scenario import load_scenario
+
+    sc = load_scenario(args.scenario).with_overrides(seed=args.seed)
+    sc = _with_ratio_options(sc, args)
+    out = Path(args.out)
+    if args.observations:
+        from benchmarks.study.calibration import calibrate_from_file
+
+        doc = calibrate_from_file(sc, Path(args.observations), out, args.solver,
+                                  args.correct_scale)
+        res = doc["result"]
+        print(f"calibrated {doc['configurations']} configurations from {args.observations}: "
+              f"rigid-fit RMS {res['fit_rms_mm']:.3f} mm, scale {res['scale']:.5f}; wrote "
+              f"{out / 'calibration.json'} and {out / 'calibrated.toml'}")
+        lin = res["linear"]
+        for leg in lin["ill_conditioned_legs"]:
+            print(f"warning: leg {leg} is ill-conditioned (singular-value ratio "
+                  f"{lin['singular_value_ratio'][leg]:.2e} < {lin['warn_singular_ratio']:.2e}): "
+                  "its base point is poorly determined; add configurations that show this "
+                  "leg at other inclinations")
+        return 0
+    t0 = time.perf_counter()
+    doc = run_calibration(sc, out, args.configurations, args.repeat, args.solver,
+                          args.correct_scale)
+    con = _console()
+    t = Table(title=f"Base-point calibration ({sc.name}, {doc['configurations']}, "
+                    f"{doc['solver']}, {args.repeat} repetition(s))")
+    for col in ("sweep", "median error mm", "max error mm", "max component mm",
+                "worst point median mm", "min singular ratio", "ill-conditioned legs"):
+        t.add_column(col, justify="left" if col == "sweep" else "right")
+    for p in doc["points"]:
+        t.add_row(format_sweep({k.replace(".", "_"): v for k, v in p["sweep"].items()}),
+                  f"{p['median_error_mm']:.3f}", f"{p['max_error_mm']:.3f}",
+                  f"{p['max_component_error_mm']:.3f}",
+                  f"{max(p['per_point_median_mm']):.3f}", f"{p['min_singular_ratio']:.4f}",
+                  ", ".join(str(leg) for leg in p["ill_conditioned_legs"]) or "-")
+    con.print(t)
+    con.print(f"{time.perf_counter() - t0:.1f} s; wrote {out / 'calibration.json'} and "
+              f"{out / 'calibrated.toml'} (use: hexapod-bench run ... --calibration "
+              f"{out / 'calibrated.toml'})")
+    return 0
+
+
+def _with_ratio_options(sc: Any, args: argparse.Namespace) -> Any:
+    """Apply ``--warn-ratio`` / ``--min-ratio`` to the scenario's ``[calibration]``."""
+    from dataclasses import replace
+
+    from benchmarks.study.scenario import check_range
+
+    cal = sc.calibration
+    for option, field in (("warn_ratio", "warn_singular_ratio"),
+                          ("min_ratio", "min_singular_ratio")):
+        value = getattr(args, option)
+        if value is not None:
+            try:
+                check_range(value, f"calibration.{field}", f"--{option.replace('_', '-')}")
+            except BenchmarkError as exc:
+                raise BenchmarkError(f"--{option.replace('_', '-')}: {exc}") from None
+            cal = replace(cal, **{field: value})
+    if cal.min_singular_ratio > cal.warn_singular_ratio:
+        raise BenchmarkError(f"the hard limit ({cal.min_singular_ratio}) must not exceed the "
+                             f"warning ratio ({cal.warn_singular_ratio})")
+    return replace(sc, calibration=cal)
+
+
+def find_record(out: Path, trial: int, controller: str | None = None,
+                scenario: str | None = None, point: int | None = None) -> Path:
+    """The recorded trial file of a run directory matching the selection.
+
+    Raises:
+        BenchmarkError: No such record (listing what is there), or an ambiguous selection.
+    """
+    folder = out / "trials"
+    files = sorted(folder.glob("*.npz")) if folder.exists() else []
+    if not files:
+        raise BenchmarkError(f"{out}: no recorded trial (run with --record K to keep the "
+                             "time series of the first K trials)")
+    matches = []
+    for f in files:
+        parts = f.stem.split("__")
+        if len(parts) != 4:
+            continue
+        sc, pt, ctrl, k = parts
+        if int(k) != trial or (controller and ctrl != controller) or (
+                scenario and sc != scenario) or (point is not None and pt != f"p{point}"):
+            continue
+        matches.append(f)
+    if not matches:
+        available = sorted({f.stem for f in files})[:20]
+        raise BenchmarkError(f"{out}: no recorded trial {trial}"
+                             + (f" of '{controller}'" if controller else "")
+                             + f"; recorded: {', '.join(available)}")
+    if len(matches) > 1:
+        raise BenchmarkError(f"{out}: {len(matches)} records match ("
+                             + ", ".join(m.stem for m in matches[:8])
+                             + "); choose with --controller, --scenario or --point")
+    return matches[0]
+
+
+def cmd_viz(args: argparse.Namespace) -> int:
+    """Replay a recorded trial: live in MeshCat, or as a self-contained HTML file + curves."""
+    from hexapod.visualize import HexapodViewer, load_trial, plot_trial, replay_html
+
+    out = Path(args.dir)
+    path = find_record(out, args.trial, args.controller, args.scenario, args.point)
+    record = load_trial(path)
+    if args.html:
+        html = replay_html(record, args.html, frame=args.still)
+        png = plot_trial(record, Path(args.html).with_suffix(".png"))
+        print(f"{record.title}: wrote {html} (open it in a browser, no network needed) "
+              f"and {png}")
+        return 0
+    a = record.arrays
+    with HexapodViewer(record.geometry) as viewer:
+        viewer.show_camera(a["camera_from_base"], a["camera_K"], int(a["camera_size"][0]),
+                           int(a["camera_size"][1]), str(a["camera_kind"]))
+        viewer.show_goal(a["goal_rotation"], a["goal_translation"])
+        print(f"{record.title}: MeshCat viewer at {viewer.url()} (Ctrl-C to stop)")
+        dt = float(a["t"][1] - a["t"][0]) if record.frames > 1 else 0.02
+        try:
+            for k in range(record.frames):
+                viewer.display(a["rotations"][k], a["translations"][k], a["edge_visible"][k],
+                               force=True)
+                time.sleep(dt)
+            time.sleep(args.hold)
+        except KeyboardInterrupt:
+            pass
+    return 0
+
+
+def cmd_report(args: argparse.Namespace) -> int:
+    """Rebuild report.md from results.jsonl."""
+    from benchmarks.study.report import write_report
+
+    path = write_report(Path(args.dir))
+    _print_summary(Path(args.dir), _console())
+    print(f"report: {path}")
+    return 0
+
+
+#: ``hexapod-bench perf WHAT`` -> the module whose ``main(argv)`` prints the figure.
