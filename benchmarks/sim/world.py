@@ -131,9 +131,11 @@ def make_trial(sc: Scenario, trial: int, nominal: HexapodGeometry, camera: Camer
     z_k = rng.standard_normal(4)
     z_r = rng.standard_normal()
     ce = sc.calibration_error
-    ce = type(ce)(**{k: (getattr(ce, k) * ce.scale if k != "scale" else 1.0)
+    ce = type(ce)(**{k: (getattr(ce, k) * ce.scale
+                         if k not in ("scale", "distortion_percent") else getattr(ce, k))
                      for k in ce.__dataclass_fields__})
-    shared = all(getattr(ce, k) == 0.0 for k in ce.__dataclass_fields__ if k != "scale")
+    shared = all(getattr(ce, k) == 0.0 for k in ce.__dataclass_fields__
+                 if k not in ("scale", "distortion_percent"))
     if shared:
         true_geometry, true_camera, offsets = nominal, camera, np.zeros(6)
     else:
@@ -167,5 +169,14 @@ def make_trial(sc: Scenario, trial: int, nominal: HexapodGeometry, camera: Camer
     calibration: dict[str, float] = {}
     if calibrate is not None:
         base_points, calibration = calibrate(world, trial_rng(sc.seed, trial, 3))
-    return TrialSetup(trial, world, nominal, camera, base_points, R_s, t_s, R_g, t_g, q_s,
-                      shared, calibration)
+    return TrialSetup(trial, world, nominal, estimated_camera(camera, ce.distortion_percent),
+                      base_points, R_s, t_s, R_g, t_g, q_s, shared, calibration)
+
+
+def estimated_camera(camera: Camera, distortion_percent: float) -> Camera:
+    """The camera model the user has: the nominal camera, whose lens distortion is
+    missed by ``distortion_percent`` [%] (100: a model without distortion)."""
+    if distortion_percent == 0.0 or not getattr(camera, "is_distorted", False):
+        return camera
+    d = np.asarray(camera.distortion, float) * (1.0 - 1e-2 * distortion_percent)
+    return camera.replace(distortion=None if not np.any(d) else d)

@@ -205,18 +205,36 @@ def parse_scenario(table: dict[str, Any], path: str = "<dict>") -> Scenario:
     check_range(dt, "robot.dt", path)
 
     camera = _section(table, "camera", path)
+    camera_keys = ("preset", "file", "opencv", "pose", "camera_from_base", "width_px",
+                   "height_px")
     for key in camera:
-        if key not in ("preset", "file"):
-            raise ScenarioError(path, "unknown key; expected one of preset, file",
-                                key=f"camera.{key}",
-                                suggestion=suggest(key, ("preset", "file")))
-    if "preset" in camera and "file" in camera:
-        raise ScenarioError(path, "give either 'preset' or 'file', not both", key="camera")
+        if key not in camera_keys:
+            raise ScenarioError(path, f"unknown key; expected one of {', '.join(camera_keys)}",
+                                key=f"camera.{key}", suggestion=suggest(key, camera_keys))
+    given = [k for k in ("preset", "file", "opencv") if k in camera]
+    if len(given) > 1:
+        raise ScenarioError(path, f"give one of 'preset', 'file' or 'opencv', not "
+                            f"{' and '.join(given)}", key="camera")
+    for key in ("pose", "camera_from_base", "width_px", "height_px"):
+        if key in camera and "opencv" not in camera:
+            raise ScenarioError(path, "only with 'opencv' (a preset or a camera file gives "
+                                "its own pose and size)", key=f"camera.{key}")
+    if "pose" in camera and "camera_from_base" in camera:
+        raise ScenarioError(path, "give 'pose' (a preset's placement) or a "
+                            "[camera.camera_from_base] table, not both", key="camera")
     camera_file = None
     camera_preset: str | None = "front"
+    opencv: dict[str, Any] | None = None
     if "file" in camera:
         camera_file = str(base_dir / _typed(camera["file"], str, path, "camera.file"))
         camera_preset = None
+    elif "opencv" in camera:
+        camera_file = str(base_dir / _typed(camera["opencv"], str, path, "camera.opencv"))
+        camera_preset = None
+        opencv = {k: camera[k] for k in ("pose", "camera_from_base", "width_px", "height_px")
+                  if k in camera}
+        if "pose" in opencv:
+            _typed(opencv["pose"], str, path, "camera.pose", ("front", "omni"))
     elif "preset" in camera:
         camera_preset = _typed(camera["preset"], str, path, "camera.preset", ("front", "omni"))
 
@@ -257,7 +275,8 @@ def parse_scenario(table: dict[str, Any], path: str = "<dict>") -> Scenario:
     if task.settle_steps > task.max_steps:
         raise ScenarioError(path, f"{task.settle_steps} exceeds task.max_steps "
                             f"({task.max_steps})", key="task.settle_steps")
-    geometry_data, camera_data, points = _read_files(robot_geometry, camera_file, cal)
+    geometry_data, camera_data, points = _read_files(robot_geometry, camera_file, cal, opencv,
+                                                     robot_preset, path)
     if task.kind == "fixed":
         _check_fixed_task(task, robot_preset, geometry_data, path)
     reference = table.get("reference", {})
@@ -274,24 +293,50 @@ def parse_scenario(table: dict[str, Any], path: str = "<dict>") -> Scenario:
     )
 
 
-def _read_files(geometry_file: str | None, camera_file: str | None, cal: CalibrationConfig
+def _read_files(geometry_file: str | None, camera_file: str | None, cal: CalibrationConfig,
+                opencv: dict[str, Any] | None, robot_preset: str | None, path: str
                 ) -> tuple[Any, Any, Any]:
     """Read the files a scenario names, once (see :class:`Scenario`).
+
+    Args:
+        geometry_file, camera_file: The robot and camera files (None: presets).
+        cal: The calibration settings (``file`` with method ``"file"``).
+        opencv: For an OpenCV calibration file: ``pose`` (a preset's placement) or
+            ``camera_from_base`` (a table as in camera files), ``width_px``/``height_px``.
+        robot_preset: The robot preset (a preset placement scales with the robot).
+        path: The scenario file (errors).
 
     Raises:
         ScenarioError: A file missing or invalid, naming it and the key at fault.
     """
     from benchmarks.study.calibration import load_calibrated_base_points
     from hexapod.geometry import HexapodGeometry
-    from vision.cameras import load_camera
+    from hexapod.geometry import preset as geometry_preset
+    from vision.camera_files import read_pose_table
+    from vision.cameras import camera_preset, load_camera
+    from vision.exceptions import CameraError
 
     try:
         geometry = None if geometry_file is None else HexapodGeometry.from_toml(geometry_file)
-        camera = None if camera_file is None else load_camera(camera_file)
+        camera = None
+        if camera_file is not None and opencv is not None:
+            robot = geometry or geometry_preset(robot_preset or "deltalab")
+            pose = (camera_preset(opencv["pose"], robot).camera_from_base if "pose" in opencv
+                    else read_pose_table({"camera_from_base": opencv.get("camera_from_base",
+                                                                         {})}, path))
+            size = None
+            if "width_px" in opencv or "height_px" in opencv:
+                size = (_typed(opencv.get("width_px"), int, path, "camera.width_px"),
+                        _typed(opencv.get("height_px"), int, path, "camera.height_px"))
+            camera = load_camera(camera_file, camera_from_base=pose, image_size=size)
+        elif camera_file is not None:
+            camera = load_camera(camera_file)
         points = (load_calibrated_base_points(cal.file)
                   if cal.method == "file" and cal.file else None)
     except ConfigFileError as exc:
         raise ScenarioError(exc.path, exc.problem, exc.key, exc.suggestion) from None
+    except CameraError as exc:
+        raise ScenarioError(camera_file or path, str(exc), key="camera") from None
     return geometry, camera, points
 
 

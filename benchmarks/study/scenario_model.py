@@ -17,7 +17,7 @@ NOISE_KEYS = ("amplitude_deg", "pixel_sigma_px", "points_per_edge", "outlier_fra
               "dropout_probability")
 CALIBRATION_ERROR_KEYS = ("scale", "base_points_mm", "platform_points_mm", "joint_offsets_mm",
                           "camera_pose_mm", "camera_pose_deg", "intrinsics_percent",
-                          "leg_radius_percent")
+                          "leg_radius_percent", "distortion_percent")
 
 
 #: Allowed range of every numeric key: ``(low, high, low_inclusive, high_inclusive)``.
@@ -43,6 +43,7 @@ RANGES: dict[str, tuple[float, float, bool, bool]] = {
     "calibration_error.camera_pose_deg": (0.0, 45.0, True, True),
     "calibration_error.intrinsics_percent": (0.0, 50.0, True, True),
     "calibration_error.leg_radius_percent": (0.0, 50.0, True, True),
+    "calibration_error.distortion_percent": (0.0, 100.0, True, True),
     "calibration.noise_deg": (0.0, 90.0, True, True),
     "calibration.warn_singular_ratio": (0.0, 1.0, True, False),
     "calibration.min_singular_ratio": (0.0, 1.0, True, False),
@@ -56,7 +57,7 @@ RANGES: dict[str, tuple[float, float, bool, bool]] = {
 }
 #: The calibration-error keys in millimetres or degrees whose standard deviation, times
 #: ``scale``, must stay within the range of the key itself (the effective error).
-_SCALED = tuple(k for k in CALIBRATION_ERROR_KEYS if k != "scale")
+_SCALED = tuple(k for k in CALIBRATION_ERROR_KEYS if k not in ("scale", "distortion_percent"))
 
 
 def check_range(value: Any, key: str, path: str) -> None:
@@ -120,6 +121,10 @@ class CalibrationErrorConfig:
         camera_pose_deg: Std of the camera orientation error angle per axis [deg].
         intrinsics_percent: Relative std of focal lengths and principal point [%].
         leg_radius_percent: Relative std of the leg radius [%].
+        distortion_percent: How much of the lens distortion the camera model misses
+            [%]: its coefficients are the true ones times ``1 - distortion_percent /
+            100`` (100: a model that ignores the distortion, what a pipeline without
+            distortion support assumes). Not random, not multiplied by ``scale``.
         scale: Multiplies every standard deviation above (sweep it to grow all
             errors together).
     """
@@ -132,6 +137,7 @@ class CalibrationErrorConfig:
     camera_pose_deg: float = 0.0
     intrinsics_percent: float = 0.0
     leg_radius_percent: float = 0.0
+    distortion_percent: float = 0.0
 
 
 @dataclass(frozen=True)

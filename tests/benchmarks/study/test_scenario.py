@@ -142,3 +142,73 @@ def test_controller_options_are_checked_when_the_study_is_loaded(tmp_path: Path)
     out = tmp_path / "out"
     assert main(["run", str(study), "--out", str(out), "--no-progress"]) == 2
     assert not (out / "results.jsonl").exists(), "nothing ran"
+
+
+def test_camera_from_an_opencv_calibration_file(tmp_path: Path) -> None:
+    """[camera] opencv = "cal.yml" with the pose of the front preset (or a pose table):
+    the intrinsics and the lens come from the file, read when the scenario is loaded."""
+    import numpy as np
+
+    from benchmarks.sim import load_camera as scenario_camera
+    from benchmarks.sim import run_trials
+    from hexapod import deltalab
+    from vision.cameras import front_camera, save_opencv_camera
+
+    lens = front_camera(deltalab()).replace(distortion=(-0.28, 0.09, 0.0, 0.0, -0.012))
+    save_opencv_camera(lens, tmp_path / "cal.yml")
+    study = tmp_path / "s.toml"
+    study.write_text('name = "lens"\ntrials = 1\ncontrollers = [{name = "leg-edge", gain = 4.0}]'
+                     '\n[camera]\nopencv = "cal.yml"\npose = "front"\n'
+                     '[task]\nmax_steps = 150\nposition_tolerance_mm = 0.5\n'
+                     'orientation_tolerance_deg = 0.05\n')
+    sc = load_scenario(study)
+    cam = scenario_camera(sc, deltalab())
+    np.testing.assert_allclose(cam.distortion, lens.distortion)
+    np.testing.assert_allclose(cam.K, lens.K)
+    np.testing.assert_allclose(cam.camera_from_base.as_matrix(),
+                               lens.camera_from_base.as_matrix(), atol=1e-12)
+    row = run_trials(sc, 0, [0])[0].row
+    assert row["converged"], row
+    # a pose table instead of the preset, and the errors
+    study.write_text('name = "lens"\ncontrollers = ["leg-edge"]\n[camera]\nopencv = "cal.yml"\n'
+                     '[camera.camera_from_base]\ntranslation_mm = [0, 0, 800]\n')
+    assert load_scenario(study).camera_data.camera_from_base.translation[2] == 0.8
+    for body, key, fragment in (
+            ('opencv = "cal.yml"\npreset = "front"', "camera", "not preset and opencv"),
+            ('preset = "front"\npose = "front"', "camera.pose", "only with 'opencv'"),
+            ('opencv = "missing.yml"', None, "missing.yml"),
+            ('opencv = "cal.yml"\npose = "side"', "camera.pose", "front, omni")):
+        study.write_text(f'name = "x"\ncontrollers = ["leg-edge"]\n[camera]\n{body}\n')
+        with pytest.raises(ScenarioError) as info:
+            load_scenario(study)
+        if key is not None:
+            assert info.value.key == key, str(info.value)
+        assert fragment in str(info.value).replace("'preset' and 'opencv'", "preset and opencv")
+
+
+def test_a_camera_model_that_misses_the_distortion(tmp_path: Path) -> None:
+    """calibration_error.distortion_percent: the model's coefficients are the true ones
+    times 1 - p/100 (100: a model without distortion); the true camera keeps its lens."""
+    import numpy as np
+
+    from benchmarks.sim import load_camera as scenario_camera
+    from benchmarks.sim import load_geometry, make_trial
+    from hexapod import deltalab
+    from vision.cameras import front_camera
+
+    lens = front_camera(deltalab()).replace(distortion=(-0.28, 0.09, 0.0, 0.0, -0.012))
+    lens.to_toml(tmp_path / "lens.toml")
+    study = tmp_path / "s.toml"
+    study.write_text('name = "lens"\ncontrollers = ["leg-edge"]\n[camera]\nfile = "lens.toml"\n'
+                     '[calibration_error]\ndistortion_percent = [0.0, 50.0, 100.0]\n')
+    points = load_scenario(study).expand()
+    assert [p.sweep["calibration_error.distortion_percent"] for p in points] == [0, 50, 100]
+    for p, factor in zip(points, (1.0, 0.5, 0.0), strict=True):
+        nominal = load_geometry(p)
+        setup = make_trial(p, 0, nominal, scenario_camera(p, nominal))
+        np.testing.assert_allclose(setup.world.camera.distortion, lens.distortion)
+        np.testing.assert_allclose(setup.estimated_camera.distortion,
+                                   np.asarray(lens.distortion) * factor)
+        assert setup.shared, "a lens-model error alone keeps the true world nominal"
+    with pytest.raises(ScenarioError, match="out of the allowed range"):
+        parse_scenario({**MINIMAL, "calibration_error": {"distortion_percent": 150.0}})
