@@ -271,6 +271,13 @@ def occluded_by_disc(
         return (s > 0) & (s < 1.0 - 1e-9) & (d2 <= disc_radius**2)
 
 
+def _check_sampling(min_visible_fraction: float, n_samples: int) -> None:
+    if not 0.0 < min_visible_fraction <= 1.0:
+        raise ValueError(f"min_visible_fraction must be in (0, 1], got {min_visible_fraction}")
+    if n_samples < 1:
+        raise ValueError(f"n_samples must be >= 1, got {n_samples}")
+
+
 def observe_legs(
     camera: Camera,
     geometry: HexapodGeometry,
@@ -305,10 +312,7 @@ def observe_legs(
     """
     from vision import fast_observe
 
-    if not 0.0 < min_visible_fraction <= 1.0:
-        raise ValueError(f"min_visible_fraction must be in (0, 1], got {min_visible_fraction}")
-    if n_samples < 1:
-        raise ValueError(f"n_samples must be >= 1, got {n_samples}")
+    _check_sampling(min_visible_fraction, n_samples)
     if (not fast_observe.compiled() or getattr(camera, "kind", None) not in (
             "perspective", "unified") or not fast_observe.supported(camera)):
         return observe_legs_numpy(camera, geometry, rotation, translation,
@@ -357,28 +361,8 @@ def observe_legs_numpy(
     platform_radius: float | None = None,
     occlusion: bool = True,
 ) -> LegObservation:
-    """The numpy reference of :func:`observe_legs` (batched, vectorised).
-
-    Args:
-        camera: The camera (its ``camera_from_base`` places it).
-        geometry: The robot (leg radius ``geometry.leg_radius``).
-        rotation: (..., 3, 3) platform orientation in the base frame.
-        translation: (..., 3) platform position in the base frame [m].
-        min_visible_fraction: Fraction of visible samples (in ``(0, 1]``) for an edge
-            to be observed (see :class:`LegObservation`).
-        n_samples: Samples per edge for the visibility test.
-        platform_radius: Radius of the platform disc [m]; default: the largest
-            distance of a platform joint from the platform origin.
-        occlusion: Test occlusions by the legs and the platform (True), or only
-            existence and the image bounds (False).
-
-    Returns:
-        A :class:`LegObservation`.
-    """
-    if not 0.0 < min_visible_fraction <= 1.0:
-        raise ValueError(f"min_visible_fraction must be in (0, 1], got {min_visible_fraction}")
-    if n_samples < 1:
-        raise ValueError(f"n_samples must be >= 1, got {n_samples}")
+    """The numpy reference of :func:`observe_legs` (same arguments, same result)."""
+    _check_sampling(min_visible_fraction, n_samples)
     T = camera.camera_from_base
     legs = legs_in_frame(geometry, rotation, translation, T)
     A, u, q = legs.base_points, legs.directions, legs.lengths

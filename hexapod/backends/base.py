@@ -10,6 +10,7 @@ from __future__ import annotations
 from abc import ABC, abstractmethod
 from dataclasses import dataclass, field
 from types import TracebackType
+from typing import TypeVar
 
 import numpy as np
 
@@ -35,6 +36,9 @@ class BackendStep:
     round_trip_s: float = 0.0
     missed_period: bool = False
     extras: dict[str, float] = field(default_factory=dict)
+
+
+BackendT = TypeVar("BackendT", bound="Backend")
 
 
 class Backend(ABC):
@@ -69,13 +73,7 @@ class Backend(ABC):
             start: Leg lengths [m] to start from (None: where the robot is).
         """
         robot = cls(geometry, args) if args else cls(geometry)  # type: ignore[call-arg]
-        if start is not None:
-            try:
-                robot.reset(start)
-            except BaseException:
-                robot.close()
-                raise
-        return robot
+        return started(robot, start)
 
     @abstractmethod
     def reset(self, lengths: np.ndarray | None = None) -> np.ndarray:
@@ -108,6 +106,25 @@ class Backend(ABC):
             self.halt()
         finally:
             self.close()
+
+
+def started(robot: BackendT, start: np.ndarray | None) -> BackendT:
+    """``robot`` moved to ``start`` with ``reset`` (nothing when None); closed if that fails.
+
+    Args:
+        robot: A just-opened backend.
+        start: Leg lengths [m] to start from, or None (where the robot is).
+
+    Returns:
+        The robot.
+    """
+    if start is not None:
+        try:
+            robot.reset(start)
+        except BaseException:
+            robot.close()
+            raise
+    return robot
 
 
 def clamp_velocities(

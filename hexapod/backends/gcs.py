@@ -39,7 +39,7 @@ from typing import Any, TypeVar
 import numpy as np
 
 from hexapod.backends import gcs_protocol as gp
-from hexapod.backends.base import Backend, BackendStep, clamp_velocities
+from hexapod.backends.base import Backend, BackendStep, clamp_velocities, started
 from hexapod.backends.gcs_config import GcsOptions, platform_velocity
 from hexapod.backends.gcs_link import Transport, open_transport
 from hexapod.backends.gcs_pose import PoseConvention, from_wire, to_wire
@@ -422,10 +422,4 @@ class GcsHexapod(Backend):
                                      "gcs:tcp://HOST:PORT or gcs:serial:URL")
         url, options = GcsOptions.parse(args)
         robot = cls(url, geometry, options)
-        if start is not None:
-            try:
-                robot.reset(start)
-            except BaseException:
-                robot.close()
-                raise
-        return robot
+        return started(robot, start)

@@ -10,6 +10,7 @@ from typing import Any
 
 import numpy as np
 
+from hexapod.backends.base import started
 from hexapod.backends.emulator_server import FaultConfig
 from hexapod.backends.gcs_emulator import GcsConfig, GcsEmulator
 from hexapod.exceptions import BackendError
@@ -148,10 +149,4 @@ def open_from_spec(args: str, geometry: HexapodGeometry, start: np.ndarray | Non
     _, options = GcsOptions.parse("?" + "&".join(backend_items))
     robot = open_emulated_gcs(geometry, start, faults=FaultConfig(**faults) if faults else None,
                               process=process, options=options)
-    if start is not None:
-        try:
-            robot.reset(start)
-        except BaseException:
-            robot.close()
-            raise
-    return robot
+    return started(robot, start)

@@ -32,7 +32,7 @@ from typing import Any
 
 import numpy as np
 
-from hexapod.backends.base import Backend
+from hexapod.backends.base import Backend, started
 from hexapod.config import suggest
 from hexapod.exceptions import BackendPluginError, UnknownBackendError
 from hexapod.geometry import HexapodGeometry
@@ -69,13 +69,7 @@ def _open_emulator(args: str, geometry: HexapodGeometry, start: np.ndarray | Non
     if args:
         raise BackendPluginError("emulator", "hexapod-vs", f"takes no arguments, got {args!r}")
     robot = open_emulated_robot(geometry, start)
-    if start is not None:
-        try:
-            robot.reset(start)  # clears the link state as for a real board
-        except BaseException:
-            robot.close()
-            raise
-    return robot
+    return started(robot, start)
 
 
 def _open_sim(args: str, geometry: HexapodGeometry, start: np.ndarray | None) -> Backend:
@@ -95,13 +89,7 @@ def _open_serial(args: str, geometry: HexapodGeometry, start: np.ndarray | None)
         raise BackendPluginError("serial", "hexapod-vs", "needs a URL: serial:/dev/ttyUSB0 or "
                                  "serial:socket://HOST:PORT")
     robot = SerialRobot(args)
-    if start is not None:
-        try:
-            robot.reset(start)
-        except BaseException:
-            robot.close()
-            raise
-    return robot
+    return started(robot, start)
 
 
 def _open_gcs(args: str, geometry: HexapodGeometry, start: np.ndarray | None) -> Backend:
