@@ -294,7 +294,7 @@ def fit_planes(
     predicted: np.ndarray, outlier_px: float, min_points: int, max_rms_px: float,
     iterations: int,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """The compiled :func:`vision.detect._robust_fit` (same arguments and results)."""
+    """The compiled :func:`vision.detect.common._robust_fit` (same arguments and results)."""
     lib = _load()
     if lib is None:
         raise CompilationError("the detector kernels are not compiled")

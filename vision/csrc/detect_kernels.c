@@ -1,7 +1,7 @@
 /*
- * Compiled cores of the leg-edge detectors (vision/detect.py), called through ctypes
- * by vision/kernels.py. Each function computes exactly what the numpy path of
- * vision/detect.py computes (same decisions, same arithmetic order; compiled with
+ * Compiled cores of the leg-edge detectors (the vision/detect/ package), called
+ * through ctypes by vision/kernels.py. Each function computes exactly what the numpy
+ * path of vision/detect/ computes (same decisions, same arithmetic order; compiled with
  * -ffp-contract=off so that no multiply-add is fused), and the tests check that the
  * two agree. All arrays are C-contiguous; sizes are given explicitly.
  *
@@ -32,7 +32,7 @@ static double py_mod(double a, double b) {
   return m;
 }
 
-/* (a + pi) % (2 pi) - pi, as vision.detect._wrap. */
+/* (a + pi) % (2 pi) - pi, as vision.detect.omni._wrap. */
 static double wrap_angle(double a) { return py_mod(a + PI_, TWO_PI_) - PI_; }
 
 static int64_t imod(int64_t a, int64_t n) {
@@ -205,7 +205,7 @@ static void smallest_eigenvector(const double M[9], double out[3]) {
 }
 
 /*
- * Robust plane fit of E edges of up to N rays each (vision.detect._robust_fit).
+ * Robust plane fit of E edges of up to N rays each (vision.detect.common._robust_fit).
  * rays: (E*N*3) unit rays (anything where not valid); valid: (E*N) 0/1;
  * px_per_rad: (E*N); predicted: (E*3). Out: normals (E*3, NaN where not visible),
  * visible (E), count (E), rms (E, NaN where not visible), inliers (E*N).
@@ -338,7 +338,7 @@ int omni_detect(const uint8_t *img, const int64_t *idx, const int64_t *base, con
 /* ------------------------------------------------------------------------------ */
 #define NO_GRADIENT (-1e6)
 
-/* Bilinear interpolation, 0 outside [0, W-1] x [0, H-1] (vision.detect._bilinear_zero). */
+/* Bilinear interpolation, 0 outside [0, W-1] x [0, H-1] (vision.detect.profiles._bilinear_zero). */
 static double bilinear_zero(const uint8_t *img, int64_t W, int64_t H, double x, double y) {
   if (!(x >= 0 && x <= (double)(W - 1) && y >= 0 && y <= (double)(H - 1))) return 0.0;
   double fx0 = floor(x), fy0 = floor(y);
