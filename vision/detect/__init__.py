@@ -53,13 +53,29 @@ offset of the calibration error (tens of pixels) without locking an edge onto
 another leg's limb; a final narrow pass ends every frame. There is no
 prediction-free (Hough/LSD) detection: the encoders always give the prediction.
 
+**Lens distortion** (``camera.is_distorted``; an ideal lens runs exactly the code
+above). The tracker's predictions are curves: the samples are the projections of
+3D points of the predicted limbs, each searched along the image normal of its curve
+(from :meth:`Camera.project_jacobian`), the occlusion gate works in the ideal
+image where the legs' bands are straight, the Theil-Sen line runs on the offsets
+from the curve, the edge points are lifted through the distortion before the fit
+and the alignment translates the curved prediction
+(:mod:`vision.detect.curves`). The omnidirectional scan stays in pixel space; the
+rays of a circle keep a common elevation under a radial distortion (isotropic
+``K``), so that case keeps the one-call compiled path with the circles' elevations
+and pixels per radian computed through the lens; decentring terms (or an
+anisotropic ``K``) break the rotational symmetry: the association reference is then
+projected with the camera model and the rays of the edge points are interpolated
+between the lifted rays of the circle's samples.
+
 Both detectors run compiled cores (:mod:`vision.kernels`) that compute the same as
 the numpy code of this package, which stays as the reference and the fallback.
 
 Modules: :mod:`vision.detect.common` (prediction, result, robust plane fit),
 :mod:`vision.detect.omni` (:class:`OmniDetector`), :mod:`vision.detect.tracker`
-(:class:`PerspectiveTracker`), :mod:`vision.detect.profiles` (the tracker's 1D
-profiles and Theil-Sen line), :mod:`vision.detect.draw` (:func:`draw_detection`).
+(:class:`PerspectiveTracker`), :mod:`vision.detect.curves` (the tracker's curved
+predictions through a distorted lens), :mod:`vision.detect.profiles` (the tracker's
+1D profiles and Theil-Sen line), :mod:`vision.detect.draw` (:func:`draw_detection`).
 """
 
 from vision.detect.common import EdgeDetection, LegPrediction, fit_normals

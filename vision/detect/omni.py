@@ -16,9 +16,20 @@ from vision.detect.common import (
 )
 from vision.exceptions import DetectionError
 
+#: Points per segment of the model-based association reference
+#: (:meth:`OmniDetector._model_crossings`).
+CROSSING_SAMPLES = 65
+
 
 class OmniDetector:
     """Automatic leg-edge detector for a unified camera looking along the legs.
+
+    The circles are scanned in pixel space, whatever the lens. Through a distorted
+    lens the circles' elevations, the rays of the edge points and the pixels per
+    radian (along the circles, across the edges) come from the camera model with the
+    distortion; without the image's rotational symmetry (decentring terms, or an
+    anisotropic ``K``) the association reference is projected with the camera model
+    too (see :mod:`vision.detect`).
 
     Args:
         camera: The (estimated) unified camera: its principal point centres the
@@ -88,8 +99,26 @@ class OmniDetector:
         d_ang = np.arccos(np.clip(np.sum(r_in * r_out, -1), -1.0, 1.0))
         self._px_per_rad = 1.0 / d_ang  # (n_circles,)
         # Exact lift of a point at (circle k, fractional sample position) is the
-        # rotation of the circle's ray only for fx = fy and no skew.
-        self._isotropic = bool(camera.K[0, 1] == 0 and camera.fx == camera.fy)
+        # rotation of the circle's ray only for fx = fy, no skew and a lens without
+        # decentring terms (a radial distortion keeps the image rotationally symmetric).
+        self._isotropic = bool(camera.K[0, 1] == 0 and camera.fx == camera.fy
+                               and not np.any(camera.lens.coefficients[2:4]))
+        # Through a distorted lens: the residuals are scaled by the pixels per radian
+        # along the circle (across a leg's edge, which crosses the circles nearly
+        # radially; a distorted image is not conformal), per sample, and without the
+        # rotational symmetry the association reference and the rays of the edge points
+        # come from the camera model (_model_crossings, _table_rays).
+        self._model = bool(camera.is_distorted and not self._isotropic)
+        self._ppr_table: np.ndarray | None = None
+        if camera.is_distorted:
+            h = 0.5 / self.radii[:, None]  # half a pixel along the circle [rad]
+            ends = [np.stack([cx + self.radii[:, None] * np.cos(self.angles + e),
+                              cy + self.radii[:, None] * np.sin(self.angles + e)], -1)
+                    for e in (-h, h)]
+            a_lo, a_hi = camera.lift(ends[0]), camera.lift(ends[1])
+            table = 1.0 / np.arccos(np.clip(np.sum(a_lo * a_hi, -1), -1.0, 1.0))
+            self._ppr_table = table  # (n_circles, n_angles)
+            self._px_per_rad = np.mean(table, axis=1)
         self._default: LegPrediction | None = None
         self._geometry: HexapodGeometry | None = None
         self._ref_key: LegPrediction | None = None
@@ -107,6 +136,8 @@ class OmniDetector:
     def _crossings(self, P0: np.ndarray, d: np.ndarray, length: np.ndarray) -> np.ndarray:
         """Azimuth [rad] where the segments ``P0 + s d`` (s in [0, length]) cross the
         cone of each circle: (..., n_circles), NaN if they do not."""
+        if self._model:
+            return self._model_crossings(P0, d, length)
         Z = self._z
         P0 = P0[..., None, :]
         d = d[..., None, :]
@@ -130,6 +161,51 @@ class OmniDetector:
             return np.arctan2(self.camera.fy * P[..., 1], self.camera.fx * P[..., 0])
         pix, _ = self.camera.project(P)
         return np.arctan2(pix[..., 1] - self.camera.cy, pix[..., 0] - self.camera.cx)
+
+    def _model_crossings(self, P0: np.ndarray, d: np.ndarray, length: np.ndarray
+                         ) -> np.ndarray:
+        """:meth:`_crossings` from the camera model (an image without rotational
+        symmetry): each segment is projected at :data:`CROSSING_SAMPLES` points and the
+        azimuth of its first crossing of each circle is interpolated linearly between
+        the two projected points around it (NaN if it does not cross)."""
+        s = np.linspace(0.0, 1.0, CROSSING_SAMPLES)
+        X = (P0[..., None, :]
+             + (s[:, None] * np.asarray(length)[..., None, None]) * d[..., None, :])
+        pix, _ = self.camera.project(X)  # (..., S, 2)
+        rel = pix - np.array([self.camera.cx, self.camera.cy])
+        diff = np.hypot(rel[..., 0], rel[..., 1])[..., None, :] - self.radii[:, None]
+        with np.errstate(invalid="ignore", divide="ignore"):
+            cross = diff[..., :-1] * diff[..., 1:] <= 0  # False where NaN
+            k = np.argmax(cross, axis=-1)[..., None]
+            d0 = np.take_along_axis(diff, k, -1)[..., 0]
+            d1 = np.take_along_axis(diff, k + 1, -1)[..., 0]
+            f = np.where(d0 != d1, d0 / (d0 - d1), 0.0)
+            r0 = np.take_along_axis(rel[..., None, :, :], k[..., None], -2)[..., 0, :]
+            r1 = np.take_along_axis(rel[..., None, :, :], k[..., None] + 1, -2)[..., 0, :]
+            p = r0 + f[..., None] * (r1 - r0)
+            az = np.arctan2(p[..., 1], p[..., 0])
+        return np.where(np.any(cross, axis=-1), az, np.nan)
+
+    def _table_rays(self, a: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Rays (..., 3) of edge points at azimuths ``a`` (6, 2, C) [rad] on the circles,
+        and their pixels per radian (6, 2, C): the lifted rays of the circle's two
+        neighbouring samples (``camera.lift``, distortion removed) interpolated
+        linearly and normalised (the samples are about a pixel apart: the point lies
+        within 0.001 px of the chord, the lift is smooth) and the nearest sample's
+        entry of the table of pixels per radian."""
+        N = self.n_angles
+        pos = a * (N / (2.0 * np.pi))
+        j0 = np.floor(pos)
+        f = (pos - j0)[..., None]
+        j0 = j0.astype(np.intp) % N
+        j1 = (j0 + 1) % N
+        c = np.arange(self.n_circles)
+        X = (1.0 - f) * self._rays[c, j0] + f * self._rays[c, j1]
+        X /= np.linalg.norm(X, axis=-1, keepdims=True)
+        table = self._ppr_table if self._ppr_table is not None else np.broadcast_to(
+            self._px_per_rad[:, None], (self.n_circles, N))
+        near = np.where(f[..., 0] < 0.5, j0, j1)
+        return X, table[c, near]
 
     def _reference(self, prediction: LegPrediction) -> tuple[np.ndarray, ...]:
         """Per (leg, circle): predicted axis azimuth, association gate, predicted band
@@ -226,14 +302,17 @@ class OmniDetector:
         r = self.radii
         px = self.camera.cx + r * np.cos(a)
         py = self.camera.cy + r * np.sin(a)
+        ppr: np.ndarray = self._px_per_rad
         if self._isotropic:
             z = self._z
             rho = np.sqrt(np.maximum(1.0 - z * z, 0.0))
             rays = np.stack([rho * np.cos(a), rho * np.sin(a), np.broadcast_to(z, a.shape)], -1)
+        elif self._model:
+            rays, ppr = self._table_rays(a)
         else:
             rays = self.camera.lift(np.stack([px, py], -1))
         normals, vis, cnt, rms, inl = _robust_fit(
-            rays, valid, self._px_per_rad, prediction.normals, self.outlier_px,
+            rays, valid, ppr, prediction.normals, self.outlier_px,
             self.min_points, self.max_rms_px, iterations=1, use_compiled=compiled)
         pts = np.where(inl[..., None], np.stack([px, py], -1), np.nan)
         return EdgeDetection(normals, vis, cnt, rms, pts, C)

@@ -32,12 +32,14 @@ def _bilinear_zero(image: np.ndarray, x: np.ndarray, y: np.ndarray) -> np.ndarra
 
 def _gradient_profiles(image: np.ndarray, P: np.ndarray, out: np.ndarray, R: int
                        ) -> tuple[np.ndarray, np.ndarray]:
-    """Profiles through the samples ``P`` (..., M, 2) along ``out`` (..., 2): the points
-    ``Q`` (..., M, 2R + 1, 2) at the integer offsets ``-R .. R`` [px] and the central
-    differences (..., M, 2R - 1) of the bilinear signal at the offsets ``-(R-1) .. R-1``
-    (positive towards the bright side of an edge whose outside is along ``out``)."""
+    """Profiles through the samples ``P`` (..., M, 2) along ``out`` (..., 2) (one
+    direction per edge) or (..., M, 2) (one per sample): the points ``Q`` (..., M,
+    2R + 1, 2) at the integer offsets ``-R .. R`` [px] and the central differences
+    (..., M, 2R - 1) of the bilinear signal at the offsets ``-(R-1) .. R-1`` (positive
+    towards the bright side of an edge whose outside is along ``out``)."""
     offs = np.arange(-R, R + 1, dtype=float)
-    Q = P[..., :, None, :] + offs[:, None] * out[..., None, None, :]
+    o = out[..., :, None, :] if out.ndim == P.ndim else out[..., None, None, :]
+    Q = P[..., :, None, :] + offs[:, None] * o
     prof = _bilinear_zero(image, Q[..., 0], Q[..., 1])
     return Q, 0.5 * (prof[..., 2:] - prof[..., :-2])
 

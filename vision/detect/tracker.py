@@ -12,8 +12,11 @@ from vision.detect.common import (
     EdgeDetection,
     LegPrediction,
     _check_image,
+    _orient,
     _robust_fit,
+    fit_normals,
 )
+from vision.detect.curves import curved_samples, lift_near, pixels_per_radian
 from vision.detect.profiles import (
     _NO_GRADIENT,
     _gradient_profiles,
@@ -25,6 +28,11 @@ from vision.exceptions import DetectionError
 
 class PerspectiveTracker:
     """Tracker of the two edges of each leg in a perspective image.
+
+    Through a distorted lens (``camera.is_distorted``) the predicted edges are curves
+    (:mod:`vision.detect.curves`): samples on the projected limbs, searched along the
+    curves' normals, lifted through the distortion; an ideal lens keeps the straight
+    segments.
 
     Args:
         camera: The (estimated) perspective camera (lifts the edge pixels).
@@ -109,6 +117,13 @@ class PerspectiveTracker:
         image = _check_image(image, self.camera)
         search = self.search_px if search_px is None else float(search_px)
         refine = self.refine_px if refine_px is None else float(refine_px)
+        if self.camera.is_distorted:
+            det = self._curved_pass(image, prediction, search, use_compiled)
+            if refine > 0:
+                ok = det.edge_visible
+                det = self._curved_pass(image, prediction.with_normals(det.normals),
+                                        np.where(ok, refine, search), use_compiled)
+            return det
         seg = self.predicted_segments(prediction)
         lines = _pixel_lines(self.camera, prediction.normals)
         det = self._pass(image, seg, lines, prediction, search, use_compiled)
@@ -157,13 +172,55 @@ class PerspectiveTracker:
             self.min_points, self.max_rms_px, use_compiled=False)
         return EdgeDetection(normals, vis, cnt, rms, np.where(inl[..., None], pts, np.nan), M)
 
+    def _positions(self) -> np.ndarray:
+        """(M,) positions of the samples along the edges (fractions, ends left out)."""
+        M = self.n_samples
+        m = self.end_margin
+        return np.asarray(m + (1 - 2 * m) * (np.arange(M) + 0.5) / M)
+
+    def _curved_pass(
+        self, image: np.ndarray, prediction: LegPrediction, search: float | np.ndarray,
+        use_compiled: bool = True,
+    ) -> EdgeDetection:
+        """:meth:`_pass` through a distorted lens: samples on the predicted curves,
+        profiles along the curves' normals, occlusion gate in the ideal image
+        (:func:`vision.detect.curves.curved_samples`), Theil-Sen on the offsets, the
+        edge points lifted through the distortion (:func:`vision.detect.curves.lift_near`)
+        with their own pixels per radian, robust plane fit. The compiled path
+        (:meth:`vision.kernels.TrackKernel.points`, :func:`vision.kernels.fit_planes`)
+        computes the same as the numpy one; the lift is shared."""
+        from vision import kernels
+
+        M = self.n_samples
+        t = self._positions()
+        cs = curved_samples(self.camera, prediction, t, self.occlusion_margin_px)
+        search_arr = np.broadcast_to(np.asarray(search, float), (6, 2))
+        R = math.ceil(float(np.max(search_arr)))
+        compiled = use_compiled and kernels.available()
+        if compiled:
+            if self._kernel is None:
+                self._kernel = kernels.TrackKernel(self.camera.width, self.camera.height, M)
+            offset, valid = self._kernel.points(
+                image, cs.P, cs.out, search_arr, R, t, cs.gate, cs.seg, cs.lines, cs.margin,
+                self.min_contrast, self.outlier_px)
+        else:
+            offset, valid = self._profile_offsets(image, cs.P, cs.out, search_arr, R)
+            valid &= ~self._contested(cs.gate, cs.seg, cs.lines, cs.margin)
+            valid &= _theil_sen_inliers(offset, valid, t, 2.0 * self.outlier_px)
+        pts = np.where(valid[..., None], cs.P + offset[..., None] * cs.out, np.nan)
+        rays, m = lift_near(self.camera, pts, cs.m)
+        rays = np.where(valid[..., None], rays, 0.0)
+        ppr = pixels_per_radian(self.camera, m, prediction.normals)
+        normals, vis, cnt, rms, inl = _robust_fit(
+            rays, valid, ppr, prediction.normals, self.outlier_px, self.min_points,
+            self.max_rms_px, use_compiled=compiled)
+        return EdgeDetection(normals, vis, cnt, rms, np.where(inl[..., None], pts, np.nan), M)
+
     def _samples(self, seg: np.ndarray, lines: np.ndarray
                  ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Positions ``t`` (M,) along the segments, sample points ``P`` (6, 2, M, 2) [px]
         and the outward unit normals ``out`` (6, 2, 2) (away from the leg's other edge)."""
-        M = self.n_samples
-        m = self.end_margin
-        t = m + (1 - 2 * m) * (np.arange(M) + 0.5) / M  # (M,)
+        t = self._positions()
         p0, p1 = seg[:, :, 0, :], seg[:, :, 1, :]
         P = p0[:, :, None, :] + t[None, None, :, None] * (p1 - p0)[:, :, None, :]  # (6,2,M,2)
         nrm = lines[..., :2]  # unit (a, b): the line normal in pixels
@@ -243,6 +300,8 @@ class PerspectiveTracker:
         image = _check_image(image, self.camera)
         if not max_shift_px >= 1:
             raise DetectionError("max_shift_px", f"must be >= 1, got {max_shift_px}")
+        if self.camera.is_distorted:
+            return self._curved_align(image, prediction, float(max_shift_px), use_compiled)
         seg = self.predicted_segments(prediction)
         lines = _pixel_lines(self.camera, prediction.normals)
         _, P, out = self._samples(seg, lines)
@@ -259,12 +318,46 @@ class PerspectiveTracker:
             n /= np.linalg.norm(n, axis=-1, keepdims=True)
         return shift, prediction.with_normals(n)
 
+    def _curved_align(self, image: np.ndarray, prediction: LegPrediction, max_shift_px: float,
+                      use_compiled: bool) -> tuple[np.ndarray, LegPrediction]:
+        """:meth:`align` through a distorted lens. The samples lie on the predicted
+        curves and the occlusion gate works in the ideal image (as in
+        :meth:`_curved_pass`); each edge's profiles are read along one direction, the
+        mean of its curve's normals (a translation ``s`` then moves the edge by
+        ``s . out`` along them, up to ``|s|`` times the turn of the curve's normal
+        from the mean, a few degrees), and the translation maximising the summed
+        response is kept as for an ideal lens. The moved prediction: the plane of each
+        edge fitted to its samples moved by the translation and lifted through the
+        distortion."""
+        from vision import kernels
+
+        cs = curved_samples(self.camera, prediction, self._positions(),
+                            self.occlusion_margin_px)
+        out = cs.edge_out
+        R = math.ceil(max_shift_px) + 1
+        if use_compiled and kernels.available():
+            shift = kernels.align_shift(image, cs.P, out, cs.seg, cs.lines, cs.margin, R,
+                                        max_shift_px, gate=cs.gate)
+        else:
+            shift = self._align_numpy(image, cs.P, out, cs.seg, cs.lines, R, max_shift_px,
+                                      gate=cs.gate, margin=cs.margin)
+        rays, _ = lift_near(self.camera, cs.P + shift, cs.m)
+        ok = np.all(np.isfinite(rays), axis=-1)
+        n, _ = fit_normals(np.where(ok[..., None], rays, 0.0), ok.astype(float))
+        n = np.where((ok.sum(-1) >= 2)[..., None], _orient(n, prediction.normals), np.nan)
+        return shift, prediction.with_normals(n)
+
     def _align_numpy(self, image: np.ndarray, P: np.ndarray, out: np.ndarray, seg: np.ndarray,
-                     lines: np.ndarray, R: int, max_shift_px: float) -> np.ndarray:
-        """The numpy reference of the alignment's shift (see :meth:`align`)."""
+                     lines: np.ndarray, R: int, max_shift_px: float,
+                     gate: np.ndarray | None = None, margin: np.ndarray | None = None,
+                     ) -> np.ndarray:
+        """The numpy reference of the alignment's shift (see :meth:`align`; ``gate`` and
+        ``margin``: the occlusion gate's coordinates and margins, default ``P`` and
+        ``occlusion_margin_px``)."""
         _, grad = _gradient_profiles(image, P, out, R)
         grad = np.maximum(grad, 0.0)
-        use = np.all(np.isfinite(P), -1) & ~self._contested(P, seg, lines)
+        use = np.all(np.isfinite(P), -1) & ~self._contested(
+            P if gate is None else gate, seg, lines, margin)
         G = np.sum(np.where(use[..., None], grad, 0.0), axis=2)  # (6, 2, 2R - 1)
         G = np.where(np.all(np.isfinite(out), -1)[..., None], G, 0.0)
         d = np.arange(-(R - 1), R, dtype=float)
@@ -330,9 +423,11 @@ class PerspectiveTracker:
         rho2 = np.sum(d * d, -1) / self._f**2
         return self._f * np.sqrt(1.0 + rho2)
 
-    def _contested(self, P: np.ndarray, seg: np.ndarray, lines: np.ndarray) -> np.ndarray:
-        """(6, 2, M): samples inside (or within the margin of) another leg's band."""
-        mg = self.occlusion_margin_px
+    def _contested(self, P: np.ndarray, seg: np.ndarray, lines: np.ndarray,
+                   margin: np.ndarray | None = None) -> np.ndarray:
+        """(6, 2, M): samples inside (or within the margin of) another leg's band
+        (``margin`` (6, 2, M) per sample [px], default ``occlusion_margin_px``)."""
+        mg: Any = self.occlusion_margin_px if margin is None else margin[..., None]
         # Signed distances of every sample to both edge lines of every leg k.
         d = (np.einsum("ijmx,kex->ijmke", P, lines[..., :2]) + lines[None, None, None, :, :, 2])
         # Inside leg k: on opposite sides of its two lines (the band between them).
