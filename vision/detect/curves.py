@@ -63,10 +63,11 @@ class CurvedSamples:
     def edge_out(self) -> np.ndarray:
         """(6, 2, 2) one outward direction per edge: the mean of the samples' normals,
         normalised (NaN where no sample is imaged)."""
+        fin = np.all(np.isfinite(self.out), axis=-1, keepdims=True)
+        o = np.sum(np.where(fin, self.out, 0.0), axis=2)
         with np.errstate(invalid="ignore", divide="ignore"):
-            o = np.nanmean(self.out, axis=2) if np.isfinite(self.out).any() else np.full(
-                (6, 2, 2), np.nan)
-            return o / np.linalg.norm(o, axis=-1, keepdims=True)
+            o /= np.linalg.norm(o, axis=-1, keepdims=True)
+        return np.where(np.any(fin, axis=2), o, np.nan)
 
 
 def _lens(c: np.ndarray, x: np.ndarray, y: np.ndarray) -> tuple[np.ndarray, ...]:
