@@ -321,3 +321,20 @@ def test_edge_order_orientation_and_drawing_through_the_lens(geometry, make_came
     assert np.all(np.sum(u * obs.directions, -1) > 0.99)
     out = draw_detection(img, cam, d)
     assert out.shape == (cam.height, cam.width, 3)
+
+
+def test_predicted_segments_end_on_the_curves(geometry):
+    """Through a distorted lens the predicted segments' ends lie on the predicted curves
+    (the curves' samples at t = 0 and 1), not on the ideal image's lines (several
+    pixels away from them)."""
+    cam = _front(geometry)
+    tr = PerspectiveTracker(cam)
+    pred = LegPrediction.from_pose(cam, geometry)
+    seg = tr.predicted_segments(pred)
+    ends = curved_samples(cam, pred, np.array([0.0, 1.0]), 3.0).P
+    assert np.abs(seg - ends).max() < 1e-9
+    from vision.detect import _pixel_lines
+
+    lines = _pixel_lines(cam, pred.normals)  # the ideal image's lines K^-T n
+    d = np.sum(lines[:, :, None, :2] * seg, -1) + lines[:, :, None, 2]
+    assert np.abs(d).max() > 1.0

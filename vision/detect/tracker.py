@@ -85,12 +85,17 @@ class PerspectiveTracker:
     # ----------------------------------------------------------------- geometry
     def predicted_segments(self, prediction: LegPrediction) -> np.ndarray:
         """(6, 2, 2, 2) pixel end points of the predicted edges: the projections of the
-        limb end points ``A + r n + s q u`` (s = 0, 1), moved onto the predicted line."""
+        limb end points ``A + r n + s q u`` (s = 0, 1), moved onto the predicted line
+        (through a distorted lens, where the edge is a curve: the end points moved onto
+        the plane of ``n`` in 3D, then projected, so that they lie on the curve)."""
         A, u, q, r, n = (prediction.base_points, prediction.directions, prediction.lengths,
                          prediction.radius, prediction.normals)
         s = np.array([0.0, 1.0])
         P = (A[:, None, None, :] + r * n[:, :, None, :]
              + (s[None, None, :, None] * q[:, None, None, None]) * u[:, None, None, :])
+        if self.camera.is_distorted:
+            P = P - np.sum(P * n[:, :, None, :], -1, keepdims=True) * n[:, :, None, :]
+            return np.asarray(self.camera.project(P)[0])
         pix, _ = self.camera.project(P)
         lines = _pixel_lines(self.camera, n)  # (6, 2, 3), (a, b) unit
         d = np.sum(lines[:, :, None, :2] * pix, -1) + lines[:, :, None, 2]
