@@ -87,6 +87,22 @@ def front_camera(geometry: HexapodGeometry | None = None) -> PerspectiveCamera:
 #: Generalised focal length of the omnidirectional preset [px].
 OMNI_FOCAL = 200.0
 
+#: A typical calibrated distortion of the front camera's 4.8 mm lens, OpenCV's
+#: ``(k1, k2, p1, p2, k3)``: a strong barrel (``k1 = -0.28``: the image corners are
+#: about 87 px nearer the centre than through an ideal lens), small decentring terms;
+#: no fold inside (or near) the image (the Jacobian determinant of the distortion is
+#: still 0.6 at the corners). For the tests and
+#: benchmarks of the distorted image pipeline:
+#: ``front_camera().replace(distortion=FRONT_DISTORTION)``.
+FRONT_DISTORTION = (-0.28, 0.09, 5e-4, -3e-4, -0.012)
+
+#: A mild Mei distortion of the omnidirectional preset, ``cv::omnidir``'s
+#: ``(k1, k2, p1, p2)`` (the decentring terms break the rotational symmetry of the
+#: image about the principal point; no fold: the radial derivative of the
+#: distortion stays above 0.76):
+#: ``omni_camera().replace(distortion=OMNI_DISTORTION)``.
+OMNI_DISTORTION = (-0.08, 0.012, 4e-4, -2e-4)
+
 
 def omni_camera(geometry: HexapodGeometry | None = None) -> UnifiedCamera:
     """The omnidirectional camera of seed 003 (``docs/math.md`` section 9).

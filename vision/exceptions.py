@@ -70,6 +70,34 @@ class DistortionError(CameraError):
         )
 
 
+class DetectionError(VisionError, ValueError):
+    """A detector cannot run on its input (wrong image size or type, bad settings).
+
+    Attributes:
+        field: The offending input or setting.
+        problem: What is wrong with it.
+    """
+
+    def __init__(self, field: str, problem: str) -> None:
+        self.field = field
+        self.problem = problem
+        super().__init__(f"{field}: {problem}")
+
+
+class RenderError(VisionError, ValueError):
+    """Invalid rendering settings or pose.
+
+    Attributes:
+        field: The offending setting.
+        problem: What is wrong with it.
+    """
+
+    def __init__(self, field: str, problem: str) -> None:
+        self.field = field
+        self.problem = problem
+        super().__init__(f"{field}: {problem}")
+
+
 class EstimationError(VisionError, ValueError):
     """An estimation cannot run on its input (wrong shapes, too few points)."""
 

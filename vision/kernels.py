@@ -1,11 +1,16 @@
 """Compiled cores of the image pipeline (``vision/csrc/*.c``).
 
 - Detectors (``detect_kernels.c``): the circle scan of
-  :class:`vision.detect.OmniDetector` and the robust plane fit shared by both
+  :class:`vision.detect.OmniDetector`, the search pass and the alignment of
+  :class:`vision.detect.PerspectiveTracker` and the robust plane fit shared by both
   detectors are written once in numpy (the reference, in :mod:`vision.detect`) and
   once in C, with the same decisions and the same arithmetic (``-ffp-contract=off``:
   no fused multiply-add), which the tests check frame by frame; only the 3x3
-  eigen-solve differs (Jacobi instead of LAPACK, equal to about 1e-15).
+  eigen-solve differs (Jacobi instead of LAPACK, equal to about 1e-15). The
+  tracker's search takes one direction per sample (the normal of a curved
+  prediction through a distorted lens) and gate coordinates of its own (the ideal
+  image); the lift through the distortion stays in numpy, shared by both paths
+  (:func:`vision.detect.curves.lift_near`).
 - Renderer (``render_kernels.c``): exact-coverage polygon filling
   (:class:`PolygonFiller`): a pixel's value is blended by the exact area of its
   unit square inside the shape, so that a rendered edge has no bias whatever its
@@ -76,10 +81,13 @@ def _load() -> ctypes.CDLL | None:
     lib.omni_detect.argtypes = ([_P] * 5 + [_I] * 3 + [_P] * 4 + [_D, _D] + [_P] * 3
                                 + [_D, _D, _P, _D, _I, _D, _I] + [_P] * 10)
     lib.omni_detect.restype = ctypes.c_int
-    lib.track_pass.argtypes = ([_P, _I, _I, _P, _P, _P, _I, _I, _P, _P, _P, _D, _D, _D, _P, _D,
-                                _D, _D, _P, _I, _D, _I] + [_P] * 12)
+    lib.track_points.argtypes = ([_P, _I, _I, _P, _P, _P, _I, _I] + [_P] * 5
+                                 + [_D, _D] + [_P] * 5)
+    lib.track_points.restype = None
+    lib.track_pass.argtypes = ([_P, _I, _I, _P, _P, _P, _I, _I] + [_P] * 5
+                               + [_D, _D, _P, _D, _D, _D, _P, _I, _D, _I] + [_P] * 12)
     lib.track_pass.restype = ctypes.c_int
-    lib.align_shift.argtypes = [_P, _I, _I, _P, _P, _P, _P, _D, _I, _I, _D, _P, _P, _P, _P]
+    lib.align_shift.argtypes = [_P, _I, _I] + [_P] * 6 + [_I, _I, _D] + [_P] * 4
     lib.align_shift.restype = None
     lib.fill_shapes.argtypes = [_P, _P, _I, _I, _P, _P, _P, _P, _I, _P, _P, _P, _P, _P]
     lib.fill_shapes.restype = ctypes.c_int
@@ -236,41 +244,84 @@ class TrackKernel:
         self._prof = np.empty(3)
         self._out = _FitOutputs(M)
 
+    def _check(self, image: np.ndarray, R: int) -> np.ndarray:
+        if image.shape != (self.height, self.width) or image.dtype != np.uint8:
+            raise ValueError(f"expected a uint8 image of shape {(self.height, self.width)}")
+        if self._prof.size < 2 * R + 1:
+            self._prof = np.empty(2 * R + 1)
+        return _c(image, np.uint8)
+
+    def _gate_arrays(self, P: np.ndarray, out: np.ndarray, search: np.ndarray,
+                     t: np.ndarray, gate: np.ndarray | None, seg: np.ndarray,
+                     lines: np.ndarray, margin: np.ndarray | float) -> list[np.ndarray]:
+        """Contiguous copies of the per-sample inputs (out, gate and margin broadcast to
+        every sample)."""
+        M = self.M
+        Pc = _c(P, np.float64)
+        return [Pc, _c(np.broadcast_to(np.asarray(out, float).reshape(6, 2, -1, 2),
+                                       (6, 2, M, 2)), np.float64),
+                _c(search, np.float64), _c(t, np.float64),
+                Pc if gate is None else _c(gate, np.float64), _c(seg, np.float64),
+                _c(lines, np.float64),
+                _c(np.broadcast_to(np.asarray(margin, float), (6, 2, M)), np.float64)]
+
     def track(self, image: np.ndarray, P: np.ndarray, out: np.ndarray, search: np.ndarray,
               R: int, t: np.ndarray, seg: np.ndarray, lines: np.ndarray,
               predicted: np.ndarray, margin: float, min_contrast: float, outlier_px: float,
               Kinv: np.ndarray, f: float, centre: tuple[float, float], min_points: int,
               max_rms_px: float, iterations: int,
               ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-        """One pass (arguments as in :meth:`vision.detect.PerspectiveTracker._pass`).
+        """One pass of an ideal lens (arguments as in
+        :meth:`vision.detect.PerspectiveTracker._pass`; ``out`` (6, 2, 2) per edge).
 
         Returns:
             Fresh ``normals`` (6, 2, 3), ``visible`` (6, 2), ``count`` (6, 2), ``rms``
             (6, 2) and ``points`` (6, 2, M, 2).
         """
-        if image.shape != (self.height, self.width) or image.dtype != np.uint8:
-            raise ValueError(f"expected a uint8 image of shape {(self.height, self.width)}")
-        img = _c(image, np.uint8)
-        if self._prof.size < 2 * R + 1:
-            self._prof = np.empty(2 * R + 1)
-        arrays = [_c(P, np.float64), _c(out, np.float64), _c(search, np.float64),
-                  _c(t, np.float64), _c(seg, np.float64), _c(lines, np.float64),
-                  _c(Kinv, np.float64), _c(predicted, np.float64)]
-        Pp, op, sp, tp, segp, lp, kp, prp = (a.ctypes.data for a in arrays)
+        img = self._check(image, R)
+        arrays = self._gate_arrays(P, out[:, :, None, :], search, t, None, seg, lines, margin)
+        arrays += [_c(Kinv, np.float64), _c(predicted, np.float64)]
+        Pp, op, sp, tp, gp, segp, lp, mp, kp, prp = (a.ctypes.data for a in arrays)
         self._lib.track_pass(
-            img.ctypes.data, self.width, self.height, Pp, op, sp, int(R), self.M, tp, segp,
-            lp, float(margin), float(min_contrast), float(outlier_px), kp, float(f),
+            img.ctypes.data, self.width, self.height, Pp, op, sp, int(R), self.M, tp, gp, segp,
+            lp, mp, float(min_contrast), float(outlier_px), kp, float(f),
             float(centre[0]), float(centre[1]), prp, int(min_points), float(max_rms_px),
             int(iterations), self._offset.ctypes.data, self._valid.ctypes.data,
             self._rays.ctypes.data, self._ppr.ctypes.data, self._prof.ctypes.data,
             self._pairs.ctypes.data, *self._out.pointers)
         return self._out.result()
 
+    def points(self, image: np.ndarray, P: np.ndarray, out: np.ndarray, search: np.ndarray,
+               R: int, t: np.ndarray, gate: np.ndarray, seg: np.ndarray, lines: np.ndarray,
+               margin: np.ndarray, min_contrast: float, outlier_px: float,
+               ) -> tuple[np.ndarray, np.ndarray]:
+        """The edge points of one pass before the fit (profiles along the per-sample
+        normals ``out`` (6, 2, M, 2), gradient peak, occlusion gate on ``gate``
+        (6, 2, M, 2) with ``seg``, ``lines`` and the per-sample ``margin`` (6, 2, M),
+        Theil-Sen): the compiled :meth:`vision.detect.PerspectiveTracker._edge_offsets`.
+
+        Returns:
+            Fresh ``offset`` (6, 2, M) [px] along ``out`` and ``valid`` (6, 2, M).
+        """
+        img = self._check(image, R)
+        arrays = self._gate_arrays(P, out, search, t, gate, seg, lines, margin)
+        Pp, op, sp, tp, gp, segp, lp, mp = (a.ctypes.data for a in arrays)
+        self._lib.track_points(
+            img.ctypes.data, self.width, self.height, Pp, op, sp, int(R), self.M, tp, gp, segp,
+            lp, mp, float(min_contrast), float(outlier_px), self._offset.ctypes.data,
+            self._valid.ctypes.data, self._prof.ctypes.data, self._pairs.ctypes.data,
+            self._out.points.ctypes.data)
+        M = self.M
+        return self._offset.reshape(6, 2, M).copy(), self._valid.reshape(6, 2, M).astype(bool)
+
 
 def align_shift(image: np.ndarray, P: np.ndarray, out: np.ndarray, seg: np.ndarray,
-                lines: np.ndarray, margin: float, R: int, max_shift: float) -> np.ndarray:
+                lines: np.ndarray, margin: np.ndarray | float, R: int, max_shift: float,
+                gate: np.ndarray | None = None) -> np.ndarray:
     """The compiled core of :meth:`vision.detect.PerspectiveTracker.align`: the image
-    translation (2,) [px] (arguments as there; ``R = ceil(max_shift) + 1``)."""
+    translation (2,) [px] (arguments as there; ``R = ceil(max_shift) + 1``; ``out``
+    (6, 2, 2) per edge; ``gate`` (6, 2, M, 2): the samples in the occlusion gate's
+    coordinates, default ``P``; ``margin`` scalar or (6, 2, M))."""
     lib = _load()
     if lib is None:
         raise CompilationError("the vision kernels are not compiled")
@@ -278,14 +329,17 @@ def align_shift(image: np.ndarray, P: np.ndarray, out: np.ndarray, seg: np.ndarr
     H, W = img.shape
     Pc, oc, sc, lc = (_c(a, np.float64) for a in (P, out, seg, lines))
     M = Pc.shape[2]
+    gc = Pc if gate is None else _c(gate, np.float64)
+    mc = _c(np.broadcast_to(np.asarray(margin, float), (6, 2, M)), np.float64)
     L = 2 * int(R) - 1
     G = np.empty(12 * max(L, 1))
     prof = np.empty(2 * int(R) + 1)
     d = np.empty(max(L, 1))
     shift = np.zeros(2)
-    lib.align_shift(img.ctypes.data, W, H, Pc.ctypes.data, oc.ctypes.data, sc.ctypes.data,
-                    lc.ctypes.data, float(margin), int(M), int(R), float(max_shift),
-                    G.ctypes.data, prof.ctypes.data, d.ctypes.data, shift.ctypes.data)
+    lib.align_shift(img.ctypes.data, W, H, Pc.ctypes.data, oc.ctypes.data, gc.ctypes.data,
+                    sc.ctypes.data, lc.ctypes.data, mc.ctypes.data, int(M), int(R),
+                    float(max_shift), G.ctypes.data, prof.ctypes.data, d.ctypes.data,
+                    shift.ctypes.data)
     return shift
 
 
@@ -294,7 +348,7 @@ def fit_planes(
     predicted: np.ndarray, outlier_px: float, min_points: int, max_rms_px: float,
     iterations: int,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """The compiled :func:`vision.detect._robust_fit` (same arguments and results)."""
+    """The compiled :func:`vision.detect.common._robust_fit` (same arguments and results)."""
     lib = _load()
     if lib is None:
         raise CompilationError("the detector kernels are not compiled")

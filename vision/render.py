@@ -24,7 +24,12 @@ is ``edge + (centre - edge) cos(phi)``, so the limbs (``phi = phi0``) are the
 darkest part of the leg. Each band is sampled along the leg at ``edge_samples``
 points, projected with the camera model: 2 points suffice for a perspective camera
 (straight lines), a unified camera images straight lines as conics, so its bands are
-sampled densely.
+sampled densely. Through a distorted lens (``camera.is_distorted``) the image of each
+generator is a curve: it is drawn as an adaptive polyline whose vertices are true
+projections of points of the generator, refined until every chord is within
+``curve_tolerance_px`` of the curve (:mod:`vision.render_curves`), so the exact
+coverage keeps the drawn limbs within hundredths of a pixel of the true curved limbs;
+an ideal lens is drawn exactly as before (same polygons, same pixels).
 
 Backgrounds: ``"plain"`` (uniform, bright, as in seed 003) or ``"cluttered"``
 (a seeded low-frequency texture plus random rectangles, discs and lines). The
@@ -43,7 +48,7 @@ from __future__ import annotations
 
 import logging
 import math
-from dataclasses import dataclass, replace
+from dataclasses import replace
 from typing import Any
 
 import cv2
@@ -52,126 +57,15 @@ import numpy as np
 from hexapod.geometry import HexapodGeometry
 from hexapod.kinematics import legs_in_frame
 from vision.cameras import Camera, PerspectiveCamera
-from vision.exceptions import VisionError
+from vision.exceptions import RenderError
+from vision.render_curves import projected_polylines
+from vision.render_style import BACKGROUNDS, RenderStyle, make_background
 
 logger = logging.getLogger(__name__)
 
 #: Fractional bits of the fixed-point vertices given to OpenCV (1/16 px).
 _SHIFT = 4
 _SCALE = float(1 << _SHIFT)
-
-BACKGROUNDS = ("plain", "cluttered")
-
-
-class RenderError(VisionError, ValueError):
-    """Invalid rendering settings or pose.
-
-    Attributes:
-        field: The offending setting.
-        problem: What is wrong with it.
-    """
-
-    def __init__(self, field: str, problem: str) -> None:
-        self.field = field
-        self.problem = problem
-        super().__init__(f"{field}: {problem}")
-
-
-@dataclass(frozen=True)
-class RenderStyle:
-    """How the legs are drawn.
-
-    Attributes:
-        background: ``"plain"`` or ``"cluttered"``.
-        background_level: Grey level of the plain background [0-255].
-        clutter_min: Darkest grey level of the cluttered background.
-        clutter_seed: Seed of the cluttered background (it is static, like a scene).
-        leg_edge_level: Grey level of the legs at their limbs.
-        leg_centre_level: Grey level of the legs along the generator facing the camera.
-        shading_bands: Number of nested bands used for the shading (>= 1).
-        platform: Draw the platform disc.
-        platform_level: Grey level of the platform disc.
-        platform_radius: Radius of the platform disc [m]; default: the largest
-            distance of a platform joint from the platform origin (as
-            :func:`vision.legs.observe_legs`).
-        blur_px: Standard deviation of the Gaussian blur [px] (0: none).
-        noise_std: Standard deviation of the additive pixel noise [grey levels].
-        edge_samples: Points per generator along a leg; default 2 for a perspective
-            camera, 24 for a unified one.
-        cap_samples: Points on each end disc of a leg.
-        aa_compensation_px: Fallback renderer only (no C compiler): inward offset
-            of every polygon [px]. OpenCV's anti-aliased ``fillPoly`` draws a shape
-            about 0.7 px too large on each side (measured: 0.67 to 0.83 px depending
-            on the edge direction, mean 0.72, at the 50 % grey level); the offset
-            puts the 50 % level of the rendered edges on the true edges within about
-            0.1 px. The exact-coverage renderer needs no offset.
-    """
-
-    background: str = "plain"
-    background_level: int = 230
-    clutter_min: int = 120
-    clutter_seed: int = 0
-    leg_edge_level: int = 35
-    leg_centre_level: int = 95
-    shading_bands: int = 4
-    platform: bool = True
-    platform_level: int = 160
-    platform_radius: float | None = None
-    blur_px: float = 0.0
-    noise_std: float = 0.0
-    edge_samples: int | None = None
-    cap_samples: int = 16
-    aa_compensation_px: float = 0.72
-
-    def __post_init__(self) -> None:
-        if self.background not in BACKGROUNDS:
-            raise RenderError("background", f"expected one of {BACKGROUNDS}, got "
-                                            f"{self.background!r}")
-        for name in ("background_level", "clutter_min", "leg_edge_level", "leg_centre_level",
-                     "platform_level"):
-            v = getattr(self, name)
-            if not 0 <= v <= 255:
-                raise RenderError(name, f"expected a grey level in [0, 255], got {v}")
-        if self.shading_bands < 1:
-            raise RenderError("shading_bands", f"must be >= 1, got {self.shading_bands}")
-        if not (math.isfinite(self.blur_px) and self.blur_px >= 0):
-            raise RenderError("blur_px", f"must be finite and >= 0, got {self.blur_px}")
-        if not (math.isfinite(self.noise_std) and self.noise_std >= 0):
-            raise RenderError("noise_std", f"must be finite and >= 0, got {self.noise_std}")
-        if self.edge_samples is not None and self.edge_samples < 2:
-            raise RenderError("edge_samples", f"must be >= 2, got {self.edge_samples}")
-        if self.cap_samples < 3:
-            raise RenderError("cap_samples", f"must be >= 3, got {self.cap_samples}")
-
-
-def make_background(
-    width: int, height: int, style: RenderStyle
-) -> np.ndarray:
-    """The static background image (height, width) uint8 of a style."""
-    if style.background == "plain":
-        return np.full((height, width), style.background_level, np.uint8)
-    rng = np.random.default_rng(style.clutter_seed)
-    lo = float(style.clutter_min)
-    small = rng.uniform(lo + 20, 250, size=(max(height // 64, 2), max(width // 64, 2)))
-    img = cv2.resize(small.astype(np.float32), (width, height), interpolation=cv2.INTER_CUBIC)
-    img = np.clip(img, lo, 255).astype(np.uint8)
-    n = 40
-    for _ in range(n):
-        kind = rng.integers(3)
-        level = int(rng.uniform(lo, 255))
-        x, y = int(rng.uniform(0, width)), int(rng.uniform(0, height))
-        size = int(rng.uniform(0.02, 0.15) * max(width, height))
-        if kind == 0:
-            x2 = x + int(rng.uniform(-size, size))
-            y2 = y + int(rng.uniform(-size, size))
-            cv2.rectangle(img, (x, y), (x2, y2), level, -1)
-        elif kind == 1:
-            cv2.circle(img, (x, y), size // 2, level, -1, cv2.LINE_AA)
-        else:
-            ang = rng.uniform(0, np.pi)
-            x2, y2 = int(x + 3 * size * np.cos(ang)), int(y + 3 * size * np.sin(ang))
-            cv2.line(img, (x, y), (x2, y2), level, int(rng.integers(1, 6)), cv2.LINE_AA)
-    return img
 
 
 class Renderer:
@@ -225,6 +119,7 @@ class Renderer:
         self._platform_radius = float(rho)
         psi = np.linspace(0.0, 2.0 * np.pi, 64, endpoint=False)
         self._disc_cs = np.stack([np.cos(psi), np.sin(psi)], axis=-1)
+        self._left_sizes: list[int] = []  # vertices of limb 1 in the last curved polygons
         self._noise_pos: np.ndarray | None = None
         self._noise_neg: np.ndarray | None = None
         from vision import kernels
@@ -270,15 +165,20 @@ class Renderer:
         return np.round(pix * _SCALE).astype(np.int32)
 
     def _leg_polygons(
-        self, A: np.ndarray, u: np.ndarray, q: np.ndarray
-    ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        self, A: np.ndarray, u: np.ndarray, q: np.ndarray, exact: bool | None = None,
+    ) -> tuple[Any, np.ndarray, np.ndarray, np.ndarray]:
         """Pixel polygons of the six legs, all projected at once.
 
         Returns:
-            ``bands`` (6, nb, 2 Ns, 2), ``caps`` (6, 2, C, 2) [px] (for the fallback:
-            shrunk by ``aa_compensation_px``, int32 fixed point), ``ok_bands`` (6, nb)
-            and ``ok_caps`` (6, 2) (every vertex imaged).
+            ``bands`` (6, nb, 2 Ns, 2) (a distorted camera: nested lists ``[i][k]`` of
+            polygons (V, 2), see :meth:`_curved_leg_polygons`), ``caps`` (6, 2, C, 2)
+            [px] (for the fallback: shrunk by ``aa_compensation_px``, int32 fixed
+            point), ``ok_bands`` (6, nb) and ``ok_caps`` (6, 2) (every vertex imaged).
+            Band 0 is the silhouette: its first half runs along limb 1 (edge normal
+            ``n1``, from the base end), its second half back along limb 2.
+            ``exact``: the polygons of the exact renderer (default: of this renderer).
         """
+        exact = self._filler is not None if exact is None else exact
         r = self.geometry.leg_radius
         h = np.cross(A, u)
         hn = np.linalg.norm(h, axis=-1)
@@ -291,14 +191,16 @@ class Renderer:
         c, s_ = np.cos(phi)[..., None], np.sin(phi)[..., None]
         m_left = -c * w[:, None, :] + s_ * h_hat[:, None, :]
         m_right = -c * w[:, None, :] - s_ * h_hat[:, None, :]
-        axis = A[:, None, :] + (self._s[None, :, None] * q[:, None, None]) * u[:, None, :]
-        left = axis[:, None] + r * m_left[:, :, None, :]
-        right = axis[:, None] + r * m_right[:, :, None, :]
-        bands = np.concatenate([left, right[:, :, ::-1]], axis=2)
         ends = np.stack([A, A + q[:, None] * u], axis=1)  # (6, 2, 3)
         ring = (self._cap_cs[None, :, :1] * h_hat[:, None, :]
                 + self._cap_cs[None, :, 1:] * w[:, None, :])  # (6, C, 3)
         caps = ends[:, :, None, :] + r * ring[:, None, :, :]
+        if self.camera.is_distorted:
+            return self._curved_leg_polygons(A, u, q, m_left, m_right, caps, exists, exact)
+        axis = A[:, None, :] + (self._s[None, :, None] * q[:, None, None]) * u[:, None, :]
+        left = axis[:, None] + r * m_left[:, :, None, :]
+        right = axis[:, None] + r * m_right[:, :, None, :]
+        bands = np.concatenate([left, right[:, :, ::-1]], axis=2)
         nb, nv = bands.shape[1], bands.shape[2]
         pts = np.concatenate([bands.reshape(6, -1, 3), caps.reshape(6, -1, 3)], axis=1)
         pix, _ = self.camera.project(pts)
@@ -307,11 +209,73 @@ class Renderer:
         ok_bands = fin[:, :nbv].reshape(6, nb, nv).all(-1) & exists[:, None]
         ok_caps = fin[:, nbv:].reshape(6, 2, -1).all(-1) & exists[:, None]
         pb, pc = pix[:, :nbv].reshape(6, nb, nv, 2), pix[:, nbv:].reshape(6, 2, -1, 2)
-        if self._filler is None:  # fallback: shrunk fixed-point polygons, all at once
+        if not exact:  # fallback: shrunk fixed-point polygons, all at once
             pb, pc = self._to_fixed(self._shrink(pb)), self._to_fixed(self._shrink(pc))
         return pb, pc, ok_bands, ok_caps
 
-    def _leg_shapes(self, i: int, bands: np.ndarray, caps: np.ndarray,
+    def _curved_leg_polygons(
+        self, A: np.ndarray, u: np.ndarray, q: np.ndarray, m_left: np.ndarray,
+        m_right: np.ndarray, caps: np.ndarray, exists: np.ndarray, exact: bool,
+    ) -> tuple[list[list[np.ndarray]], np.ndarray, np.ndarray, np.ndarray]:
+        """:meth:`_leg_polygons` through a distorted lens: each generator of a band (a
+        3D segment) is drawn as an adaptive polyline within ``curve_tolerance_px`` of
+        its curved image (:func:`vision.render_curves.projected_polylines`), starting
+        from ``edge_samples`` points (at least 5); ``bands[i][k]`` is a polygon of its
+        own length. The end discs are projected at their ``cap_samples`` points."""
+        r = self.geometry.leg_radius
+        nb = m_left.shape[1]
+        gen = np.stack([m_left, m_right], axis=2)  # (6, nb, 2, 3)
+        starts = A[:, None, None, :] + r * gen
+        stops = starts + (q[:, None] * u)[:, None, None, :]
+        s0 = self._s if self._s.size >= 5 else np.linspace(0.0, 1.0, 5)
+        lines = projected_polylines(self.camera, starts.reshape(-1, 3), stops.reshape(-1, 3),
+                                    s0, self.style.curve_tolerance_px)
+        bands: list[list[np.ndarray]] = []
+        ok_bands = np.zeros((6, nb), bool)
+        self._left_sizes = [lines[i * nb * 2].shape[0] for i in range(6)]  # limb 1 of band 0
+        for i in range(6):
+            row = []
+            for k in range(nb):
+                left, right = lines[(i * nb + k) * 2], lines[(i * nb + k) * 2 + 1]
+                poly = np.concatenate([left, right[::-1]], axis=0)
+                ok_bands[i, k] = bool(exists[i] and np.all(np.isfinite(poly)))
+                row.append(poly)
+            bands.append(row)
+        pc, _ = self.camera.project(caps)
+        ok_caps = np.isfinite(pc).all(-1).all(-1) & exists[:, None]
+        if not exact:  # fallback: each polygon shrunk, in fixed point
+            bands = [[self._to_fixed(self._shrink(b)) for b in row] for row in bands]
+            pc = self._to_fixed(self._shrink(pc))
+        return bands, pc, ok_bands, ok_caps
+
+    def limb_polylines(self, rotation: np.ndarray, translation: np.ndarray
+                       ) -> list[list[np.ndarray | None]]:
+        """The limbs as the exact renderer draws them, before any occlusion.
+
+        Args:
+            rotation: (3, 3) platform orientation in the base frame.
+            translation: (3,) platform position in the base frame [m].
+
+        Returns:
+            ``limbs[i][j]`` (V, 2) [px]: the side of leg ``i``'s silhouette polygon along
+            edge ``j`` (the limb on the plane of normal ``n_j`` of
+            :func:`vision.legs.leg_edges`), from the base end to the platform end; None
+            where the silhouette is not drawn (camera inside the leg, a point not imaged).
+        """
+        T = self.camera.camera_from_base
+        legs = legs_in_frame(self.geometry, np.asarray(rotation, float),
+                             np.asarray(translation, float), T)
+        bands, _, ok, _ = self._leg_polygons(legs.base_points, legs.directions, legs.lengths,
+                                             exact=True)
+        out: list[list[np.ndarray | None]] = []
+        for i in range(6):
+            poly = np.asarray(bands[i][0])
+            n_left = self._left_sizes[i] if self.camera.is_distorted else poly.shape[0] // 2
+            out.append([poly[:n_left] if ok[i, 0] else None,
+                        poly[n_left:][::-1] if ok[i, 0] else None])
+        return out
+
+    def _leg_shapes(self, i: int, bands: Any, caps: np.ndarray,
                     ok_bands: np.ndarray, ok_caps: np.ndarray
                     ) -> list[tuple[list[np.ndarray], int]]:
         """The shapes of leg i: its end discs and outer band (the silhouette) at the
@@ -319,9 +283,9 @@ class Renderer:
         camera."""
         outer = [caps[i, k] for k in range(2) if ok_caps[i, k]]
         if ok_bands[i, 0]:
-            outer.append(bands[i, 0])
+            outer.append(bands[i][0])
         shapes = [(outer, self._levels[0])] if outer else []
-        shapes += [([bands[i, k]], self._levels[k]) for k in range(1, bands.shape[1])
+        shapes += [([bands[i][k]], self._levels[k]) for k in range(1, ok_bands.shape[1])
                    if ok_bands[i, k]]
         return shapes
 
@@ -439,3 +403,7 @@ def render_legs(
 ) -> np.ndarray:
     """One-shot rendering (builds a :class:`Renderer`; reuse one for many frames)."""
     return Renderer(camera, geometry, style, rng).render(rotation, translation)
+
+
+__all__ = ["BACKGROUNDS", "RenderError", "RenderStyle", "Renderer", "make_background",
+           "render_legs"]

@@ -7,8 +7,15 @@ the twelve edges and compares the normals with the truth of
 initialisation (home-pose association reference); the perspective tracker gets the
 model prediction at a pose 3 mm off in each axis (tracking between frames).
 
+With ``--distortion`` each camera also runs through a distorted lens, on the same
+poses: the front camera with the 4.8 mm lens's distortion
+(:data:`vision.cameras.FRONT_DISTORTION`, k1 = -0.28) and the omnidirectional one
+with a mild Mei distortion (:data:`vision.cameras.OMNI_DISTORTION`, k1 = -0.08);
+the frames are rendered through the lens (curved limbs) and the detectors use the
+distorted camera model. The ``lens`` column tells the rows apart.
+
 Run: ``python -m benchmarks.perf.detect [--frames N] [--background plain|cluttered]
-[--pictures DIR]``.
+[--distortion] [--pictures DIR]``.
 """
 
 from __future__ import annotations
@@ -27,7 +34,13 @@ import numpy as np
 from hexapod import deltalab
 from hexapod.workspace import sample_poses
 from vision import kernels
-from vision.cameras import Camera, front_camera, omni_camera
+from vision.cameras import (
+    FRONT_DISTORTION,
+    OMNI_DISTORTION,
+    Camera,
+    front_camera,
+    omni_camera,
+)
 from vision.detect import LegPrediction, OmniDetector, PerspectiveTracker, draw_detection
 from vision.legs import observe_legs
 from vision.render import Renderer, RenderStyle
@@ -113,6 +126,7 @@ def _run(cam: Camera, frames: int, style: RenderStyle, seed: int,
         if pictures is not None and k == 0:
             pictures.mkdir(parents=True, exist_ok=True)
             suffix = "" if style.background == "plain" else f"-{style.background}"
+            suffix += "-distorted" if cam.is_distorted else ""
             name = f"detect-{'omni' if omni else 'front'}{suffix}.png"
             cv2.imwrite(str(pictures / name), draw_detection(img, cam, d))
     e = np.concatenate(errs) if errs else np.array([np.nan])
@@ -144,9 +158,13 @@ def main(argv: Sequence[str] | None = None) -> int:
     p.add_argument("--repeats", type=int, default=3,
                    help="detections per frame, the fastest is kept (timer noise)")
     p.add_argument("--seed", type=int, default=2026)
+    p.add_argument("--distortion", action="store_true",
+                   help="also run each camera through a distorted lens (same poses)")
     p.add_argument("--pictures", type=Path, default=None,
                    help="write detect-omni.png / detect-front.png of the first frame here "
-                        "(-cluttered before .png on a cluttered background)")
+                        "(-cluttered before .png on a cluttered background; with "
+                        "--distortion also detect-omni-distorted.png and "
+                        "detect-front-distorted.png)")
     args = p.parse_args(argv)
     style = RenderStyle(background=args.background, blur_px=args.blur, noise_std=args.noise)
     out = sys.stdout
@@ -156,20 +174,36 @@ def main(argv: Sequence[str] | None = None) -> int:
               f"; the numpy reference is timed on the same frames\n")
     out.write(f"# {platform.processor() or platform.machine()}, Python "
               f"{platform.python_version()}, numpy {np.__version__}, OpenCV {cv2.__version__}\n")
+    if args.distortion:
+        out.write(f"# lenses: front distorted {_coefficients(FRONT_DISTORTION)} (k1, k2, p1, "
+                  f"p2, k3), omni distorted {_coefficients(OMNI_DISTORTION)} (Mei: k1, k2, "
+                  f"p1, p2); same poses for both lenses\n")
     header = ("camera", "size", "render ms", "detect ms (median)", "detect ms (p95)",
               "goal ms", "numpy ms (median)", "numpy / compiled", "err median deg",
               "err p95 deg", "err max deg", "found/visible", "missed", "partly hidden found",
-              "invented")
+              "invented", "lens")
     out.write("| " + " | ".join(header) + " |\n|" + "---|" * len(header) + "\n")
-    for name, cam in (("omni", omni_camera()), ("front", front_camera())):
+    cameras: list[tuple[str, Camera]] = []
+    presets: list[tuple[str, Camera, tuple[float, ...]]] = [
+        ("omni", omni_camera(), OMNI_DISTORTION), ("front", front_camera(), FRONT_DISTORTION)]
+    for name, ideal, distortion in presets:
+        cameras.append((name, ideal))
+        if args.distortion:
+            cameras.append((name, ideal.replace(distortion=distortion)))
+    for name, cam in cameras:
         r = _run(cam, args.frames, style, args.seed, args.pictures, args.repeats)
+        lens = "distorted" if cam.is_distorted else "ideal"
         out.write(f"| {name} | {cam.width}x{cam.height} | {r['render_ms']:.2f} | "
                   f"{r['detect_ms']:.3f} | {r['detect_p95_ms']:.3f} | {GOALS_MS[name]} | "
                   f"{r['numpy_ms']:.3f} | {r['speedup']:.1f}x | "
                   f"{r['median_deg']:.4f} | {r['p95_deg']:.4f} | {r['max_deg']:.4f} | "
                   f"{int(r['found'])}/{int(r['truth_visible'])} | {int(r['missed'])} | "
-                  f"{int(r['partly_hidden'])} | {int(r['invented'])} |\n")
+                  f"{int(r['partly_hidden'])} | {int(r['invented'])} | {lens} |\n")
     return 0
+
+
+def _coefficients(c: Sequence[float]) -> str:
+    return "(" + ", ".join(f"{v:g}" for v in c) + ")"
 
 
 if __name__ == "__main__":

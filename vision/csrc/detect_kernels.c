@@ -1,7 +1,7 @@
 /*
- * Compiled cores of the leg-edge detectors (vision/detect.py), called through ctypes
- * by vision/kernels.py. Each function computes exactly what the numpy path of
- * vision/detect.py computes (same decisions, same arithmetic order; compiled with
+ * Compiled cores of the leg-edge detectors (the vision/detect/ package), called
+ * through ctypes by vision/kernels.py. Each function computes exactly what the numpy
+ * path of vision/detect/ computes (same decisions, same arithmetic order; compiled with
  * -ffp-contract=off so that no multiply-add is fused), and the tests check that the
  * two agree. All arrays are C-contiguous; sizes are given explicitly.
  *
@@ -13,6 +13,9 @@
  *               prediction.
  *   omni_detect both, for a camera with fx = fy and no skew (the rays of a circle
  *               share their elevation): one call per frame.
+ *   track_points, track_pass, align_shift  the perspective tracker's search pass (the
+ *               edge points; with the rays and the fit for an ideal lens) and its
+ *               alignment.
  */
 #include <math.h>
 #include <stdint.h>
@@ -32,7 +35,7 @@ static double py_mod(double a, double b) {
   return m;
 }
 
-/* (a + pi) % (2 pi) - pi, as vision.detect._wrap. */
+/* (a + pi) % (2 pi) - pi, as vision.detect.omni._wrap. */
 static double wrap_angle(double a) { return py_mod(a + PI_, TWO_PI_) - PI_; }
 
 static int64_t imod(int64_t a, int64_t n) {
@@ -205,7 +208,7 @@ static void smallest_eigenvector(const double M[9], double out[3]) {
 }
 
 /*
- * Robust plane fit of E edges of up to N rays each (vision.detect._robust_fit).
+ * Robust plane fit of E edges of up to N rays each (vision.detect.common._robust_fit).
  * rays: (E*N*3) unit rays (anything where not valid); valid: (E*N) 0/1;
  * px_per_rad: (E*N); predicted: (E*3). Out: normals (E*3, NaN where not visible),
  * visible (E), count (E), rms (E, NaN where not visible), inliers (E*N).
@@ -338,7 +341,7 @@ int omni_detect(const uint8_t *img, const int64_t *idx, const int64_t *base, con
 /* ------------------------------------------------------------------------------ */
 #define NO_GRADIENT (-1e6)
 
-/* Bilinear interpolation, 0 outside [0, W-1] x [0, H-1] (vision.detect._bilinear_zero). */
+/* Bilinear interpolation, 0 outside [0, W-1] x [0, H-1] (vision.detect.profiles._bilinear_zero). */
 static double bilinear_zero(const uint8_t *img, int64_t W, int64_t H, double x, double y) {
   if (!(x >= 0 && x <= (double)(W - 1) && y >= 0 && y <= (double)(H - 1))) return 0.0;
   double fx0 = floor(x), fy0 = floor(y);
@@ -424,32 +427,32 @@ static int in_other_band(const Bands *b, const double *lines, int64_t leg, doubl
 }
 
 /*
- * P: (12*M*2) samples; out: (12*2) outward unit normals; search: (12); R: profile
- * half-length; t: (M) sample positions along the segments; seg: (6*2*2*2) predicted
- * segments; lines: (6*2*3) pixel lines with unit (a, b); margin: occlusion margin [px];
- * Kinv: (9) row-major inverse intrinsics; f, cx, cy: mean focal length and principal
- * point [px]; predicted: (12*3) normals.
- * Work: offset (12*M), valid (12*M), rays (12*M*3), ppr (12*M), prof (2R+1),
- * pairs (M*(M-1)/2). Out: as fit_planes, and points (12*M*2; NaN where not inlier).
+ * The edge points of one search pass (PerspectiveTracker._pass up to the plane fit).
+ * P: (12*M*2) samples; out: (12*M*2) outward unit normals of each sample (the same for
+ * every sample of a straight edge, the normal of the curve at each sample through a
+ * distorted lens); search: (12); R: profile half-length; t: (M) sample positions along
+ * the edges; gate: (12*M*2) the samples in the coordinates of the occlusion gate (P
+ * itself, or the ideal image's pixels through a distorted lens); seg: (6*2*2*2)
+ * predicted segments and lines: (6*2*3) pixel lines with unit (a, b), both in the
+ * gate's coordinates; margin: (12*M) occlusion margin of each sample [gate px].
+ * Work: prof (2R+1), pairs (M*(M-1)/2). Out: offset (12*M) along out [px], valid
+ * (12*M), points (12*M*2) P + offset out (0 where not valid).
  */
-int track_pass(const uint8_t *img, int64_t W, int64_t H, const double *P, const double *out,
-               const double *search, int64_t R, int64_t M, const double *t, const double *seg,
-               const double *lines, double margin, double min_contrast, double outlier_px,
-               const double *Kinv, double f, double cx, double cy, const double *predicted,
-               int64_t min_points, double max_rms_px, int64_t iterations, double *offset,
-               uint8_t *valid, double *rays, double *ppr, double *prof, double *pairs,
-               double *normals, uint8_t *visible, int64_t *count, double *rms,
-               uint8_t *inliers, double *points) {
+void track_points(const uint8_t *img, int64_t W, int64_t H, const double *P, const double *out,
+                  const double *search, int64_t R, int64_t M, const double *t,
+                  const double *gate, const double *seg, const double *lines,
+                  const double *margin, double min_contrast, double outlier_px, double *offset,
+                  uint8_t *valid, double *prof, double *pairs, double *points) {
   const int64_t L0 = 2 * R + 1, L = 2 * R - 1;
   Bands bands;
   leg_bands(seg, lines, &bands);
   for (int64_t e = 0; e < 12; ++e) {
     const int64_t leg = e / 2;
-    const double ox = out[2 * e], oy = out[2 * e + 1];
     const double s_e = search[e];
     for (int64_t m = 0; m < M; ++m) {
       const int64_t idx = e * M + m;
       const double px = P[2 * idx], py = P[2 * idx + 1];
+      const double ox = out[2 * idx], oy = out[2 * idx + 1];
       valid[idx] = 0;
       offset[idx] = 0.0;
       int finite = 1;
@@ -488,8 +491,8 @@ int track_pass(const uint8_t *img, int64_t W, int64_t H, const double *P, const 
       if (frac < -0.5) frac = -0.5;
       if (frac > 0.5) frac = 0.5;
       /* occlusion gate: inside (or within the margin of) another leg's band */
-      int contested = in_other_band(&bands, lines, leg, px, py, margin);
-      if (contested) continue;
+      if (in_other_band(&bands, lines, leg, gate[2 * idx], gate[2 * idx + 1], margin[idx]))
+        continue;
       offset[idx] = (double)(kbest + 1 - R) + frac;
       valid[idx] = 1;
     }
@@ -511,27 +514,48 @@ int track_pass(const uint8_t *img, int64_t W, int64_t H, const double *P, const 
       for (int64_t i = 0; i < M; ++i)
         if (val[i] && !(fabs(off[i] - (a + b * t[i])) <= 2.0 * outlier_px)) val[i] = 0;
     }
-    /* points, rays, pixels per radian */
     for (int64_t m = 0; m < M; ++m) {
       const int64_t idx = e * M + m;
       double u = 0.0, v = 0.0;
       if (valid[idx]) {
-        u = P[2 * idx] + offset[idx] * ox;
-        v = P[2 * idx + 1] + offset[idx] * oy;
+        u = P[2 * idx] + offset[idx] * out[2 * idx];
+        v = P[2 * idx + 1] + offset[idx] * out[2 * idx + 1];
       }
       points[2 * idx] = u;
       points[2 * idx + 1] = v;
-      double h0 = u * Kinv[0] + v * Kinv[1] + Kinv[2];
-      double h1 = u * Kinv[3] + v * Kinv[4] + Kinv[5];
-      double h2 = u * Kinv[6] + v * Kinv[7] + Kinv[8];
-      double nh = sqrt(h0 * h0 + h1 * h1 + h2 * h2);
-      rays[3 * idx] = h0 / nh;
-      rays[3 * idx + 1] = h1 / nh;
-      rays[3 * idx + 2] = h2 / nh;
-      double dx = valid[idx] ? u - cx : 0.0, dy = valid[idx] ? v - cy : 0.0;
-      double rho2 = (dx * dx + dy * dy) / (f * f);
-      ppr[idx] = f * sqrt(1.0 + rho2);
     }
+  }
+}
+
+/*
+ * One whole search pass of an ideal lens: track_points, then the rays of the points
+ * (Kinv: (9) row-major inverse intrinsics), their pixels per radian (f, cx, cy: mean
+ * focal length and principal point [px]), fit_planes (predicted: (12*3) normals).
+ * Work: rays (12*M*3), ppr (12*M). Out: as fit_planes, and points (12*M*2; NaN where
+ * not an inlier).
+ */
+int track_pass(const uint8_t *img, int64_t W, int64_t H, const double *P, const double *out,
+               const double *search, int64_t R, int64_t M, const double *t, const double *gate,
+               const double *seg, const double *lines, const double *margin,
+               double min_contrast, double outlier_px, const double *Kinv, double f, double cx,
+               double cy, const double *predicted, int64_t min_points, double max_rms_px,
+               int64_t iterations, double *offset, uint8_t *valid, double *rays, double *ppr,
+               double *prof, double *pairs, double *normals, uint8_t *visible,
+               int64_t *count, double *rms, uint8_t *inliers, double *points) {
+  track_points(img, W, H, P, out, search, R, M, t, gate, seg, lines, margin, min_contrast,
+               outlier_px, offset, valid, prof, pairs, points);
+  for (int64_t idx = 0; idx < 12 * M; ++idx) {
+    double u = points[2 * idx], v = points[2 * idx + 1];
+    double h0 = u * Kinv[0] + v * Kinv[1] + Kinv[2];
+    double h1 = u * Kinv[3] + v * Kinv[4] + Kinv[5];
+    double h2 = u * Kinv[6] + v * Kinv[7] + Kinv[8];
+    double nh = sqrt(h0 * h0 + h1 * h1 + h2 * h2);
+    rays[3 * idx] = h0 / nh;
+    rays[3 * idx + 1] = h1 / nh;
+    rays[3 * idx + 2] = h2 / nh;
+    double dx = valid[idx] ? u - cx : 0.0, dy = valid[idx] ? v - cy : 0.0;
+    double rho2 = (dx * dx + dy * dy) / (f * f);
+    ppr[idx] = f * sqrt(1.0 + rho2);
   }
   fit_planes(rays, valid, ppr, predicted, 12, M, outlier_px, min_points, max_rms_px,
              iterations, normals, visible, count, rms, inliers);
@@ -547,12 +571,14 @@ int track_pass(const uint8_t *img, int64_t W, int64_t H, const double *P, const 
 /*
  * The image translation aligning the predicted edges with the image
  * (PerspectiveTracker.align). P: (12*M*2) samples on the predicted edges; out:
- * (12*2) outward normals; seg, lines: the prediction (occlusion gate); R =
- * ceil(max_shift) + 1. Work: G (12*(2R-1)), prof (2R+1), d (2R-1). Out: shift (2).
+ * (12*2) outward normals (the profiles' direction: one per edge); gate, seg, lines,
+ * margin: the occlusion gate (as track_points); R = ceil(max_shift) + 1. Work: G
+ * (12*(2R-1)), prof (2R+1), d (2R-1). Out: shift (2).
  */
 void align_shift(const uint8_t *img, int64_t W, int64_t H, const double *P, const double *out,
-                 const double *seg, const double *lines, double margin, int64_t M, int64_t R,
-                 double max_shift, double *G, double *prof, double *d, double *shift) {
+                 const double *gate, const double *seg, const double *lines,
+                 const double *margin, int64_t M, int64_t R, double max_shift, double *G,
+                 double *prof, double *d, double *shift) {
   const int64_t L0 = 2 * R + 1, L = 2 * R - 1;
   Bands bands;
   leg_bands(seg, lines, &bands);
@@ -564,7 +590,8 @@ void align_shift(const uint8_t *img, int64_t W, int64_t H, const double *P, cons
       const int64_t idx = e * M + m;
       const double px = P[2 * idx], py = P[2 * idx + 1];
       if (!(isfinite(px) && isfinite(py))) continue;
-      if (in_other_band(&bands, lines, e / 2, px, py, margin)) continue;
+      if (in_other_band(&bands, lines, e / 2, gate[2 * idx], gate[2 * idx + 1], margin[idx]))
+        continue;
       for (int64_t j = 0; j < L0; ++j) {
         double o = (double)(j - R);
         prof[j] = bilinear_zero(img, W, H, px + o * ox, py + o * oy);

@@ -37,3 +37,27 @@ def test_benchmark_table_never_finds_more_than_the_truth() -> None:
         found, visible = map(int, re.fullmatch(r"(\d+)/(\d+)", cells[11]).groups())
         missed = int(cells[12])
         assert found <= visible and found + missed == visible, line
+
+
+def test_distortion_rows_beside_the_ideal_ones(tmp_path) -> None:
+    """``--distortion``: each camera twice, ideal then distorted (the ``lens`` column, the
+    last), the same poses (same number of visible edges for the omnidirectional camera,
+    which sees every edge), detections as good as through the ideal lens (median error
+    within 1.5 times), and the pictures of the distorted frames."""
+    buf = io.StringIO()
+    with redirect_stdout(buf):
+        assert main(["--frames", "8", "--repeats", "1", "--distortion",
+                     "--pictures", str(tmp_path)]) == 0
+    rows = [[c.strip() for c in line.strip("|").split("|")]
+            for line in buf.getvalue().splitlines()
+            if line.startswith("| omni") or line.startswith("| front")]
+    assert [(r[0], r[-1]) for r in rows] == [("omni", "ideal"), ("omni", "distorted"),
+                                             ("front", "ideal"), ("front", "distorted")]
+    assert rows[0][11] == rows[1][11] == "96/96"
+    for ideal, distorted in (rows[0:2], rows[2:4]):
+        assert float(distorted[8]) < 1.5 * float(ideal[8]), (ideal, distorted)
+        found, visible = map(int, re.fullmatch(r"(\d+)/(\d+)", distorted[11]).groups())
+        assert found + int(distorted[12]) == visible and int(distorted[14]) == 0
+    names = sorted(p.name for p in tmp_path.iterdir())
+    assert names == ["detect-front-distorted.png", "detect-front.png",
+                     "detect-omni-distorted.png", "detect-omni.png"]
