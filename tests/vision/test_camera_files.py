@@ -24,22 +24,31 @@ D_OMNI = np.array([-0.051, 0.012, 0.0011, -0.0006])
 XI = 0.92
 POSE = Transform(exp_so3(np.array([0.3, -0.2, 1.1])), np.array([0.12, -0.05, 0.8]))
 
+#: OpenCV 5 writes YAML 1.2 by default and YAML 1.0 on request; OpenCV 4 writes YAML 1.0.
+_YAML_1_0 = getattr(cv2, "FILE_STORAGE_FORMAT_YAML_1_0", None)
 #: (extension, FileStorage flags, first line the file must start with).
 FORMATS = {
     "yaml-1.2": (".yml", 0, "%YAML 1.2"),
-    "yaml-1.0": (".yaml", cv2.FILE_STORAGE_FORMAT_YAML_1_0, "%YAML:1.0"),
+    "yaml-1.0": (".yaml", _YAML_1_0 or 0, "%YAML:1.0"),
     "xml": (".xml", 0, "<?xml"),
     "json": (".json", 0, "{"),
 }
 
 
 def _write(path: Path, entries: dict[str, Any], flags: int = 0) -> Path:
-    """A FileStorage file as OpenCV's samples write it (``fs << key << value``)."""
+    """A FileStorage file as OpenCV's samples write it (``fs << key << value``).
+
+    An OpenCV 4 (which writes only YAML 1.0) gives the YAML 1.2 file the header OpenCV 5
+    writes; the body is the same.
+    """
     fs = cv2.FileStorage(str(path), cv2.FILE_STORAGE_WRITE | flags)
     assert fs.isOpened()
     for key, value in entries.items():
         fs.write(key, value)
     fs.release()
+    text = path.read_text()
+    if _YAML_1_0 is None and path.suffix == ".yml" and text.startswith("%YAML:1.0"):
+        path.write_text("%YAML 1.2" + text[len("%YAML:1.0"):])
     return path
 
 
