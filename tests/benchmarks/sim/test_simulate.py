@@ -150,3 +150,26 @@ def test_edge_law_converges_from_rendered_images_on_the_seed_002_task() -> None:
     assert edge["final_orientation_error_deg"] < 0.05
     assert not direction["converged"]
     assert direction["final_position_error_mm"] > 5 * edge["final_position_error_mm"]
+
+
+def test_taught_goal_matches_what_tracking_finds_at_the_goal() -> None:
+    """The goal frames are tracked from one another (as servo --teach does), so at the
+    goal pose the run's tracked measurement gives the taught normals: trial 3 of the
+    distorted image task with the intrinsics error, without pixel noise, every edge
+    within 0.005 deg (detecting every goal frame afresh left 0.014 deg, which held the
+    edge law 0.3 mm from the goal)."""
+    from benchmarks.study.scenario import load_scenario
+
+    sc = load_scenario("andreff2006-images-distorted").expand()[0]
+    assert sc.sweep["calibration_error.intrinsics_percent"] == 1.0
+    sc = replace(sc, image=replace(sc.image, noise_std=0.0))
+    nominal = load_geometry(sc)
+    setup = make_trial(sc, 3, nominal, load_camera(sc, nominal))
+    sensor = make_sensor(sc, setup)
+    goal = trial_goal(sensor, setup, sc)
+    m = sensor.sensor.measure(setup.goal_rotation, setup.goal_translation,
+                              predicted_normals=goal.normals)
+    seen = goal.edge_visible & np.asarray(m.edge_visible)
+    assert seen.sum() == 12
+    diff = np.degrees(angle_between(np.asarray(m.normals)[seen], goal.normals[seen]))
+    assert diff.max() < 0.005, diff.max()
