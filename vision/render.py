@@ -308,7 +308,7 @@ class Renderer:
             self._filler.draw(img, [(polys, float(level)) for polys, level in shapes])
             return
         for polys, level in shapes:  # already shrunk and in fixed point
-            cv2.fillPoly(img, polys, level, cv2.LINE_AA, _SHIFT)
+            cv2.fillPoly(img, polys, (float(level),), cv2.LINE_AA, _SHIFT)
 
     def _noise_bank(self, size: int) -> tuple[np.ndarray, np.ndarray]:
         if self._noise_pos is None or self._noise_pos.size < 2 * size:

@@ -116,12 +116,12 @@ def make_background(
         if kind == 0:
             x2 = x + int(rng.uniform(-size, size))
             y2 = y + int(rng.uniform(-size, size))
-            cv2.rectangle(img, (x, y), (x2, y2), level, -1)
+            cv2.rectangle(img, (x, y), (x2, y2), (level,), -1)
         elif kind == 1:
-            cv2.circle(img, (x, y), size // 2, level, -1, cv2.LINE_AA)
+            cv2.circle(img, (x, y), size // 2, (level,), -1, cv2.LINE_AA)
         else:
             ang = rng.uniform(0, np.pi)
             x2, y2 = int(x + 3 * size * np.cos(ang)), int(y + 3 * size * np.sin(ang))
-            cv2.line(img, (x, y), (x2, y2), level, int(rng.integers(1, 6)), cv2.LINE_AA)
+            cv2.line(img, (x, y), (x2, y2), (level,), int(rng.integers(1, 6)), cv2.LINE_AA)
     return img
 
