@@ -171,8 +171,12 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                         f"{DEFAULT_TEACH_FRAMES}; the pixel noise of the taught features "
                         f"drops as 1/sqrt(N))")
     p.add_argument("--camera-file", default="front",
-                   help="camera model: a camera TOML file (intrinsics and camera_from_base) "
-                        "or a preset (front, omni); default front")
+                   help="camera model: a camera TOML file (intrinsics or opencv = FILE, and "
+                        "camera_from_base), an OpenCV calibration file (.yml, .yaml, .xml, "
+                        ".json; with --camera-pose) or a preset (front, omni); default front")
+    p.add_argument("--camera-pose", metavar="PRESET|TOML",
+                   help="with an OpenCV calibration file: the camera's pose, a preset's "
+                        "placement (front, omni) or a camera TOML file's camera_from_base")
     p.add_argument("--geometry", default="deltalab",
                    help="nominal robot: a geometry TOML file or a preset (default deltalab)")
     p.add_argument("--calibration", metavar="FILE",
@@ -201,6 +205,28 @@ def _geometry(spec: str) -> HexapodGeometry:
     if spec.endswith(".toml") or Path(spec).is_file():
         return HexapodGeometry.from_toml(spec)
     return preset(spec)
+
+
+def _camera(spec: str, pose_spec: str | None, geometry: HexapodGeometry) -> Any:
+    """The camera of ``--camera-file`` (and ``--camera-pose`` for an OpenCV file).
+
+    Raises:
+        BenchmarkError: An OpenCV file without a pose, or a pose for another camera.
+    """
+    from vision.cameras import load_camera
+    from vision.opencv_files import is_opencv_file
+
+    if not is_opencv_file(spec):
+        if pose_spec is not None:
+            raise BenchmarkError("--camera-pose: only with an OpenCV calibration file (a "
+                                 f"preset or a camera TOML file gives its own pose: {spec})")
+        return load_camera(spec, geometry)
+    if pose_spec is None:
+        raise BenchmarkError(f"--camera-file {spec}: an OpenCV calibration file has no pose; "
+                             "give --camera-pose front|omni or a camera TOML file whose "
+                             "[camera_from_base] places it")
+    pose = load_camera(pose_spec, geometry).camera_from_base
+    return load_camera(spec, camera_from_base=pose)
 
 
 def parse_options(items: list[str]) -> dict[str, Any]:
@@ -311,7 +337,7 @@ def run(args: argparse.Namespace) -> int:
 
     backends.check(args.backend)  # a bad spec is reported before anything is opened
     geometry = _geometry(args.geometry)
-    camera = load_camera(args.camera_file, geometry)
+    camera = _camera(args.camera_file, args.camera_pose, geometry)
     start = None if args.start_mm is None else np.asarray(args.start_mm, float) * 1e-3
     if start is not None:
         bad = [i + 1 for i, x in enumerate(start)

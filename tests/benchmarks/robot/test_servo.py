@@ -285,3 +285,26 @@ def test_video_camera_detects_the_legs_and_stops_at_the_end_of_the_file(
     out = capsys.readouterr().out
     assert code == 0, out
     assert "normals averaged over 8 of 20 frames" in out
+
+
+def test_servo_through_an_opencv_calibration_file(tmp_path: Path,
+                                                   capsys: pytest.CaptureFixture[str]) -> None:
+    """--camera-file cal.yml (a distorted lens written by cv2.FileStorage) with
+    --camera-pose front: the simulated camera renders through that lens and the loop
+    converges; without the pose, a clear error before the robot is touched."""
+    from hexapod.geometry import deltalab
+    from vision.camera_presets import FRONT_DISTORTION
+    from vision.cameras import front_camera, save_opencv_camera
+
+    save_opencv_camera(front_camera(deltalab()).replace(distortion=FRONT_DISTORTION),
+                       tmp_path / "cal.yml")
+    goal = _goal(tmp_path, f"lengths_mm = {_mm(GOAL_MM)}\n")
+    argv = ["--backend", "emulator", "--camera", "sim", "--controller", "leg-edge",
+            "--goal", str(goal), "--camera-file", str(tmp_path / "cal.yml"), *FAST]
+    assert servo.main(argv) == 2
+    assert "has no pose; give --camera-pose" in capsys.readouterr().err
+    assert servo.main([*argv, "--camera-pose", "front"]) == 0, capsys.readouterr().out[-2000:]
+    assert "converged after" in capsys.readouterr().out
+    assert servo.main(["--backend", "emulator", "--goal", str(goal), "--camera-pose",
+                       "front"]) == 2
+    assert "--camera-pose: only with an OpenCV calibration file" in capsys.readouterr().err
