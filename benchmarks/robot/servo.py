@@ -330,7 +330,6 @@ def run(args: argparse.Namespace) -> int:
     import controllers  # noqa: F401 - registers the built-ins
     from benchmarks.study.calibration import load_calibrated_base_points
     from controllers.base import ControllerContext, registry
-    from vision.cameras import load_camera
 
     _check_args(args)
     from hexapod.backends.registry import backends
