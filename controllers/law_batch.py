@@ -27,6 +27,26 @@ from controllers.base import CommandBatch, ControllerContext, ObservationBatch
 STATE = ("_directions", "_observed", "_u_now", "_tau_prev", "_q_prev")
 
 
+#: Attribute values an instance may share with its copies (never changed in place).
+_SHARED = (int, float, bool, str, bytes, frozenset, tuple, type(None))
+
+
+def fresh_copy(template: Any) -> Any:
+    """A copy of an un-reset controller, independent of it for everything ``reset`` and
+    ``step`` change: its arrays copied, its immutable values and frozen dataclasses
+    shared, anything else deep-copied (``copy.deepcopy`` of the whole object costs
+    about ten times as much, mostly in its generic recursion)."""
+    inst = copy.copy(template)
+    d = inst.__dict__
+    for k, v in d.items():
+        if isinstance(v, np.ndarray):
+            d[k] = v.copy()
+        elif not (isinstance(v, _SHARED) or getattr(getattr(v, "__dataclass_params__", None),
+                                                     "frozen", False)):
+            d[k] = copy.deepcopy(v)
+    return inst
+
+
 class BatchedLaw:
     """Mixin of :class:`~controllers.laws.VisionLaw`: ``reset_batch`` and ``step_batch``."""
 
@@ -61,7 +81,7 @@ class BatchedLaw:
         template = copy.deepcopy(self)
         self._trials = []
         for ctx in contexts:
-            inst = copy.deepcopy(template)
+            inst = fresh_copy(template)
             inst.reset(ctx)
             self._trials.append(inst)
         trials = self._trials
@@ -74,7 +94,7 @@ class BatchedLaw:
         self._fn = None
         if self._has_kernel.any():
             first = next(k for k in kernels if k is not None)
-            self._fn = first.function
+            self._fn = first.lean_function
             self._slices = first._slices
             self._outs = first._out
             self._X = np.zeros((n, first.function.n_in))
@@ -120,25 +140,24 @@ class BatchedLaw:
         X[:, self._slices["lengths"]] = q
         Y = self._fn.batch(X)
         o = self._outs
-        error_norm = Y[:, o["error_norm"].start]
-        n_sum = Y[:, o["n_sum"].start]
-        rank = Y[:, o["rank"].start]
-        qdot = Y[:, o["qdot"]]
         with np.errstate(invalid="ignore"):
-            ok = (np.isfinite(error_norm) & np.isfinite(n_sum) & (rank >= 6)
-                  & (Y[:, o["qdot_check"].start] == 0.0))
-        ok &= self._batch_accept(trials, q, qdot)
-        acc = np.flatnonzero(ok)
-        tr = trials[acc]
-        directions = Y[acc][:, o["directions"]].reshape(-1, 6, 3)
+            ok = (np.isfinite(Y[:, o["error_norm"].start]) & np.isfinite(Y[:, o["n_sum"].start])
+                  & (Y[:, o["rank"].start] >= 6) & (Y[:, o["qdot_check"].start] == 0.0))
+        ok &= self._batch_accept(trials, q, Y[:, o["qdot"]])
+        if ok.all():  # the common case: no row copies
+            Ya, tr, qa, ra = Y, trials, q, rows
+        else:
+            acc = np.flatnonzero(ok)
+            Ya, tr, qa, ra = Y[acc], trials[acc], q[acc], rows[acc]
+        directions = Ya[:, o["directions"]].reshape(-1, 6, 3)
         st = self._state
         st["_directions"][tr] = directions
         st["_observed"][tr] = True
         st["_u_now"][tr] = directions
-        st["_tau_prev"][tr] = Y[acc][:, o["tau"]]
-        st["_q_prev"][tr] = q[acc]
-        velocities[rows[acc]] = qdot[acc]
-        norms[rows[acc]] = error_norm[acc]
+        st["_tau_prev"][tr] = Ya[:, o["tau"]]
+        st["_q_prev"][tr] = qa
+        velocities[ra] = Ya[:, o["qdot"]]
+        norms[ra] = Ya[:, o["error_norm"].start]
         return ok
 
     def _step_one(self, trial: int, obs: ObservationBatch, k: int) -> Any:

@@ -34,7 +34,7 @@ then the law parameters :data:`LAW_INPUTS`. Output: the feature error, then
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from functools import lru_cache
 
@@ -65,6 +65,11 @@ LAW_OUTPUTS = (("error_norm", 1), ("n_sum", 1), ("rank", 1), ("condition", 1), (
 
 
 def _offsets(fields: Sequence[tuple[str, int]], start: int = 0) -> dict[str, slice]:
+    return dict(_offsets_cached(tuple(fields), start))
+
+
+@lru_cache(maxsize=32)
+def _offsets_cached(fields: tuple[tuple[str, int], ...], start: int) -> dict[str, slice]:
     out: dict[str, slice] = {}
     k = start
     for name, size in fields:
@@ -163,8 +168,35 @@ def jacobi_eigen(N: ca.SX, sweeps: int = JACOBI_SWEEPS, vectors: bool = True
     return [a[i][i] for i in range(n)], V
 
 
+def full_rank_certificate(N: ca.SX, thr2: ca.SX) -> ca.SX:
+    """1 when ``N`` is certainly of full rank for the eigenvalue threshold, else 0.
+
+    The certificate of the lean cores (:func:`law_tail` with ``lean``): the Cholesky
+    pivots of ``N - c I`` with ``c = (2 thr2 + 1e-10) |N|_F`` are all positive. As
+    ``|N|_F >= w_max``, this proves ``w_min > c >= thr2 w_max`` with a margin of a
+    factor two (and of ``1e-10 |N|_F`` against rounding), i.e. the rank the exact
+    eigenvalues give is 6. A 0 says nothing: the caller computes the exact rank.
+    """
+    fro = ca.sqrt(ca.sum1(ca.reshape(N * N, 36, 1)))
+    c = (2.0 * thr2 + 1e-10) * fro
+    L: list[list[ca.SX]] = [[ca.SX(0.0)] * 6 for _ in range(6)]
+    ok = fro > 0
+    for j in range(6):
+        d = N[j, j] - c
+        for k in range(j):
+            d = d - L[j][k] * L[j][k]
+        ok = ca.logic_and(ok, d > 0)
+        L[j][j] = ca.sqrt(ca.if_else(d > 0, d, 1.0))
+        for i in range(j + 1, 6):
+            v = N[i, j]
+            for k in range(j):
+                v = v - L[i][k] * L[j][k]
+            L[i][j] = v / L[j][j]
+    return ca.if_else(ok, 1.0, 0.0)
+
+
 def law_tail(e: ca.SX, N: ca.SX, b: ca.SX, directions: list[ca.SX], base_points: list[ca.SX],
-             params: ca.SX) -> list[ca.SX]:
+             params: ca.SX, lean: bool = False) -> list[ca.SX]:
     """The law part shared by every feature kind (see the module docstring).
 
     Args:
@@ -174,6 +206,10 @@ def law_tail(e: ca.SX, N: ca.SX, b: ca.SX, directions: list[ca.SX], base_points:
         directions: Six (3, 1) leg directions for ``J_inv``.
         base_points: Six (3, 1) ``A_i`` [m].
         params: The :data:`LAW_INPUTS` (5, 1).
+        lean: The core of the batched laws: no eigenvalues; the rank output is 6 when
+            :func:`full_rank_certificate` proves full rank (then every output equals
+            the full core's to the last bit) and 0 otherwise (the caller steps that
+            row with the full core); the condition output is NaN.
 
     Returns:
         The :data:`LAW_OUTPUTS`, in order.
@@ -183,24 +219,29 @@ def law_tail(e: ca.SX, N: ca.SX, b: ca.SX, directions: list[ca.SX], base_points:
     x = ca.mmax(ca.fabs(e))
     d = l0 - linf
     lam = ca.if_else(d == 0, l0, d * ca.exp(((-slope) * x) / ca.if_else(d == 0, 1.0, d)) + linf)
-    # Rank and condition from the eigenvalues (solve_normal's threshold). The command
-    # is needed only at full rank (the laws refuse below it), where the thresholded,
-    # damped pseudo-inverse sum_j (v_j^T b) / (w_j + d2) v_j is (N + d2 I)^-1 b: a
-    # Cholesky solve, without the eigenvectors.
-    w, _ = jacobi_eigen(N, LAW_SWEEPS, vectors=False)
-    w_max = w[0]
-    w_min = w[0]
-    for j in range(1, 6):
-        w_max = ca.fmax(w_max, w[j])
-        w_min = ca.fmin(w_min, w[j])
-    positive = w_max > 0
-    keep = [ca.logic_and(positive, w[j] > thr2 * w_max) for j in range(6)]
-    rank = ca.SX(0.0)
-    for kept in keep:
-        rank = rank + ca.if_else(kept, 1.0, 0.0)
-    cond = ca.if_else(ca.logic_and(positive, w_min > 0),
-                      ca.sqrt(w_max / ca.if_else(w_min > 0, w_min, 1.0)), ca.inf)
-    full = rank == 6.0
+    if lean:
+        full = full_rank_certificate(N, thr2) == 1.0
+        rank = ca.if_else(full, 6.0, 0.0)
+        cond = ca.SX(float("nan"))
+    else:
+        # Rank and condition from the eigenvalues (solve_normal's threshold). The
+        # command is needed only at full rank (the laws refuse below it), where the
+        # thresholded, damped pseudo-inverse sum_j (v_j^T b) / (w_j + d2) v_j is
+        # (N + d2 I)^-1 b: a Cholesky solve, without the eigenvectors.
+        w, _ = jacobi_eigen(N, LAW_SWEEPS, vectors=False)
+        w_max = w[0]
+        w_min = w[0]
+        for j in range(1, 6):
+            w_max = ca.fmax(w_max, w[j])
+            w_min = ca.fmin(w_min, w[j])
+        positive = w_max > 0
+        keep = [ca.logic_and(positive, w[j] > thr2 * w_max) for j in range(6)]
+        rank = ca.SX(0.0)
+        for kept in keep:
+            rank = rank + ca.if_else(kept, 1.0, 0.0)
+        cond = ca.if_else(ca.logic_and(positive, w_min > 0),
+                          ca.sqrt(w_max / ca.if_else(w_min > 0, w_min, 1.0)), ca.inf)
+        full = rank == 6.0
     M = [[ca.if_else(full, N[i, j] + (d2 if i == j else 0.0), 1.0 if i == j else 0.0)
           for j in range(6)] for i in range(6)]
     sol = cholesky_solve(M, [b[i] for i in range(6)])
@@ -213,7 +254,7 @@ def law_tail(e: ca.SX, N: ca.SX, b: ca.SX, directions: list[ca.SX], base_points:
             ca.sum1(qdot - qdot), ca.reshape(N.T, 36, 1), b, ca.reshape(J.T, 36, 1)]
 
 
-def _direction_function() -> ca.Function:
+def _direction_function(lean: bool = False) -> ca.Function:
     """Leg-direction law: ``e_i = u_i x u_i*``, ``L_i = -[u_i*]_x M_i`` (docs/math.md §3, §6)."""
     n_feat = sum(s for _, s in DIRECTION_INPUTS)
     x = ca.SX.sym("x", n_feat + sum(s for _, s in LAW_INPUTS))
@@ -235,11 +276,12 @@ def _direction_function() -> ca.Function:
         b += L.T @ ei
         errors.append(ei)
     e = ca.vertcat(*errors)
-    tail = law_tail(e, N, b, u, A, x[n_feat:])
-    return ca.Function("hexapod_direction_law", [x], [ca.vertcat(e, *tail, *u)])
+    tail = law_tail(e, N, b, u, A, x[n_feat:], lean)
+    name = "hexapod_direction_law" + ("_lean" if lean else "")
+    return ca.Function(name, [x], [ca.vertcat(e, *tail, *u)])
 
 
-def _edge_function(use_lines: bool) -> ca.Function:
+def _edge_function(use_lines: bool, lean: bool = False) -> ca.Function:
     """Leg-edge law on pixel lines or normals (rank-one blocks, ``controllers.interaction``)."""
     n_feat = sum(s for _, s in EDGE_INPUTS)
     x = ca.SX.sym("x", n_feat + sum(s for _, s in LAW_INPUTS))
@@ -274,8 +316,9 @@ def _edge_function(use_lines: bool) -> ca.Function:
         N += ca.dot(a, a) * (g @ g.T)
         b += ca.dot(a, errors[k]) * g
     e = ca.vertcat(*errors)
-    tail = law_tail(e, N, b, u, A, x[n_feat:])
+    tail = law_tail(e, N, b, u, A, x[n_feat:], lean)
     name = "hexapod_edge_law_lines_v2" if use_lines else "hexapod_edge_law_normals_v2"
+    name += "_lean" if lean else ""
     return ca.Function(name, [x], [ca.vertcat(e, *tail, *u)])
 
 
@@ -326,17 +369,25 @@ class LawKernel:
         function: The compiled core.
         feature_inputs: The feature block layout.
         n_error: Size of the stacked error.
+        lean: Builds the lean core of the same law (same inputs and outputs; see
+            :func:`law_tail`), compiled on first use by :attr:`lean_function`.
     """
 
     def __init__(self, function: CompiledFunction, feature_inputs: Sequence[tuple[str, int]],
-                 n_error: int) -> None:
+                 n_error: int, lean: Callable[[], CompiledFunction] | None = None) -> None:
         self.function = function
+        self._lean = lean
         n_feat = sum(s for _, s in feature_inputs)
         self._x = np.zeros(function.n_in)
         self._slices = {**_offsets(feature_inputs), **_offsets(LAW_INPUTS, n_feat)}
         #: Views of the input vector by name (write into them).
         self.inputs = {k: self._x[s] for k, s in self._slices.items()}
         self._out = _offsets((("error", n_error), *LAW_OUTPUTS, ("directions", 18)))
+
+    @property
+    def lean_function(self) -> CompiledFunction:
+        """The lean core (the batched laws' one; :attr:`function` without a lean one)."""
+        return self.function if self._lean is None else self._lean()
 
     @property
     def compiled(self) -> bool:
@@ -360,21 +411,23 @@ class LawKernel:
             directions=y[o["directions"]].reshape(6, 3))
 
 
-@lru_cache(maxsize=1)
-def _direction_compiled() -> CompiledFunction:
-    return CompiledFunction(_direction_function())
-
-
 @lru_cache(maxsize=2)
-def _edge_compiled(use_lines: bool) -> CompiledFunction:
-    return CompiledFunction(_edge_function(use_lines))
+def _direction_compiled(lean: bool = False) -> CompiledFunction:
+    return CompiledFunction(_direction_function(lean))
+
+
+@lru_cache(maxsize=4)
+def _edge_compiled(use_lines: bool, lean: bool = False) -> CompiledFunction:
+    return CompiledFunction(_edge_function(use_lines, lean))
 
 
 def direction_kernel() -> LawKernel:
     """A kernel of the leg-direction law (its own input buffer; shared compiled code)."""
-    return LawKernel(_direction_compiled(), DIRECTION_INPUTS, 18)
+    return LawKernel(_direction_compiled(), DIRECTION_INPUTS, 18,
+                     lambda: _direction_compiled(True))
 
 
 def edge_law_kernel(use_lines: bool) -> LawKernel:
     """A kernel of the leg-edge law on pixel lines (True) or normals (False)."""
-    return LawKernel(_edge_compiled(use_lines), EDGE_INPUTS, 36)
+    return LawKernel(_edge_compiled(use_lines), EDGE_INPUTS, 36,
+                     lambda: _edge_compiled(use_lines, True))

@@ -66,10 +66,16 @@ def sample_poses(
         Rotations (n, 3, 3) and translations (n, 3) in the base frame.
     """
     rng = np.random.default_rng(rng)
+    return _sample_rounds(geometry, n, rng, max_translation, max_angle, margin, [], [], 0, 0)
+
+
+def _sample_rounds(geometry: HexapodGeometry, n: int, rng: np.random.Generator,
+                   max_translation: float, max_angle: float, margin: float,
+                   Rs: list[np.ndarray], ts: list[np.ndarray], count: int, attempts: int
+                   ) -> tuple[np.ndarray, np.ndarray]:
+    """The rounds of :func:`sample_poses` from a state (the poses kept so far, their
+    count and the candidates drawn)."""
     _, t0 = home_pose(geometry)
-    Rs, ts = [], []
-    count = 0
-    attempts = 0
     while count < n:
         m = max(2 * (n - count), 16)
         t = t0 + rng.uniform(-max_translation, max_translation, size=(m, 3))
@@ -87,6 +93,68 @@ def sample_poses(
             raise WorkspaceError(geometry.name, count, attempts, max_translation, max_angle,
                                  margin)
     return np.concatenate(Rs)[:n], np.concatenate(ts)[:n]
+
+
+def sample_poses_many(
+    geometries: list[HexapodGeometry],
+    n: int,
+    rngs: list[np.random.Generator],
+    max_translation: float = 0.08,
+    max_angle: float = np.deg2rad(15.0),
+    margin: float = 0.0,
+) -> list[tuple[np.ndarray, np.ndarray] | WorkspaceError]:
+    """:func:`sample_poses` for many generators at once, each with its robot.
+
+    The same poses, to the last bit, as ``sample_poses(geometries[k], n, rngs[k], ...)``
+    for each ``k`` in turn: each generator makes the same draws in the same order; the
+    first round of candidates of every generator is evaluated in one batch (the
+    arithmetic is elementwise), and a generator whose first round keeps fewer than
+    ``n`` poses goes on alone.
+
+    Args:
+        geometries: One robot per generator.
+        n: Poses per generator.
+        rngs: The generators (advanced as by :func:`sample_poses`).
+        max_translation, max_angle, margin: As :func:`sample_poses`.
+
+    Returns:
+        Per generator, ``(rotations (n, 3, 3), translations (n, 3))``, or the
+        :class:`~hexapod.exceptions.WorkspaceError` that :func:`sample_poses` raises.
+    """
+    k = len(rngs)
+    if len(geometries) != k:
+        raise ValueError(f"{len(geometries)} geometries for {k} generators")
+    m = max(2 * n, 16)
+    t = np.empty((k, m, 3))
+    d = np.empty((k, m, 3))
+    u = np.empty((k, m))
+    for j, (g, rng) in enumerate(zip(geometries, rngs, strict=True)):
+        _, t0 = home_pose(g)
+        t[j] = t0 + rng.uniform(-max_translation, max_translation, size=(m, 3))
+        d[j] = rng.normal(size=(m, 3))
+        u[j] = rng.uniform(0, 1, size=m)
+    d /= np.linalg.norm(d, axis=-1, keepdims=True)
+    R = exp_so3(d * (max_angle * u ** (1 / 3))[..., None])
+    ok = np.empty((k, m), dtype=bool)
+    groups: dict[int, list[int]] = {}
+    for j, g in enumerate(geometries):
+        groups.setdefault(id(g), []).append(j)
+    for idx in groups.values():
+        g = geometries[idx[0]]
+        q = inverse_kinematics(g, R[idx], t[idx])
+        ok[idx] = np.all((q >= g.q_min + margin) & (q <= g.q_max - margin), axis=-1)
+    out: list[tuple[np.ndarray, np.ndarray] | WorkspaceError] = []
+    for j in range(k):
+        if n <= 0:
+            out.append((np.empty((0, 3, 3)), np.empty((0, 3))))
+            continue
+        try:
+            out.append(_sample_rounds(geometries[j], n, rngs[j], max_translation, max_angle,
+                                      margin, [R[j][ok[j]]], [t[j][ok[j]]],
+                                      int(ok[j].sum()), m))
+        except WorkspaceError as exc:
+            out.append(exc)
+    return out
 
 
 @dataclass(frozen=True)

@@ -91,18 +91,26 @@ class WorldParams:
         if len(kinds) != 1 or len(sizes) != 1:
             raise ValueError(f"one camera kind and size per batch, got {kinds} and {sizes}")
         (width, height), = sizes
+        # the arrays of each distinct robot and camera, then one row per item (a study
+        # without calibration error has one world for all its trials)
+        g_ids: dict[int, int] = {}
+        g_idx = np.array([g_ids.setdefault(id(g), len(g_ids)) for g in geometries], dtype=int)
+        c_ids: dict[int, int] = {}
+        c_idx = np.array([c_ids.setdefault(id(c), len(c_ids)) for c in cameras], dtype=int)
+        geos = list({id(g): g for g in geometries}.values())
+        cams = list({id(c): c for c in cameras}.values())
         return cls(
-            base_points=np.array([g.base_points for g in geometries], float),
-            platform_points=np.array([g.platform_points for g in geometries], float),
-            leg_radius=np.array([g.leg_radius for g in geometries], float),
+            base_points=np.array([g.base_points for g in geos], float)[g_idx],
+            platform_points=np.array([g.platform_points for g in geos], float)[g_idx],
+            leg_radius=np.array([g.leg_radius for g in geos], float)[g_idx],
             platform_radius=np.array([float(np.max(np.linalg.norm(g.platform_points, axis=1)))
-                                      for g in geometries]),
-            camera_rotation=np.array([c.camera_from_base.rotation for c in cameras], float),
-            camera_translation=np.array([c.camera_from_base.translation for c in cameras],
-                                        float),
-            camera=np.array([camera_vector(c) for c in cameras]),
+                                      for g in geos])[g_idx],
+            camera_rotation=np.array([c.camera_from_base.rotation for c in cams], float)[c_idx],
+            camera_translation=np.array([c.camera_from_base.translation for c in cams],
+                                        float)[c_idx],
+            camera=np.array([camera_vector(c) for c in cams])[c_idx],
             unified=kinds.pop() == "unified", width=width, height=height,
-            compiled=all(supported(c) for c in cameras), geometries=list(geometries),
+            compiled=all(supported(c) for c in cams), geometries=list(geometries),
             cameras=list(cameras))
 
     def pack(self, rotations: np.ndarray, translations: np.ndarray,
@@ -184,6 +192,38 @@ def observe_batch(params: WorldParams, rotations: np.ndarray, translations: np.n
                               float(params.height), int(params.unified), int(n_samples),
                               float(min_fraction), int(occlusion))
     return _unpack(out)
+
+
+def segments_certainly_imaged(camera: Any, segments: np.ndarray) -> np.ndarray:
+    """The compiled core's shortcut: segments it proves wholly inside the image.
+
+    An edge whose samples all lie on a segment proved inside skips the projection of
+    every sample (exact: without distortion, the image of a segment in front of a
+    perspective camera is the segment of the images of its ends; with the unified
+    model, its largest angle to the axis is at an end, see the C source).
+
+    Args:
+        camera: A camera (:class:`~vision.cameras.Camera` or
+            :class:`~vision.cameras.UnifiedCamera`).
+        segments: (n, 2, 3) segment ends in the camera frame [m].
+
+    Returns:
+        (n,) True where every point of the segment projects inside the image; False
+        says nothing.
+
+    Raises:
+        RuntimeError: The C core is not available.
+    """
+    lib = kernels._load()
+    if lib is None:
+        raise RuntimeError("the vision kernels are not compiled (no C compiler?)")
+    seg = np.ascontiguousarray(segments, dtype=float).reshape(-1, 6)
+    out = np.empty(seg.shape[0])
+    cam = np.ascontiguousarray(camera_vector(camera))
+    lib.hexapod_segments_imaged(seg.ctypes.data, seg.shape[0], cam.ctypes.data,
+                                int(camera.kind == "unified"), float(camera.width),
+                                float(camera.height), out.ctypes.data)
+    return out == 1.0
 
 
 def _unpack(out: np.ndarray) -> BatchObservation:

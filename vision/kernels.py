@@ -93,6 +93,8 @@ def _load() -> ctypes.CDLL | None:
     lib.fill_shapes.restype = ctypes.c_int
     lib.hexapod_observe_batch.argtypes = [_P, _P, _I, _D, _D, _I, _I, _D, _I]
     lib.hexapod_observe_batch.restype = ctypes.c_int
+    lib.hexapod_segments_imaged.argtypes = [_P, _I, _P, _I, _D, _D, _P]
+    lib.hexapod_segments_imaged.restype = None
     _lib = lib
     return lib
 

@@ -11,11 +11,12 @@ from benchmarks.sim.world import (
     load_camera,
     load_geometry,
     make_trial,
+    make_trials,
     trial_rng,
 )
 
 __all__ = [
     "MAX_REFUSED_STEPS", "GeometricSensor", "TrialResult", "TrialSetup", "World",
-    "load_camera", "load_geometry", "make_sensor", "make_trial", "run_trials", "trial_goal",
-    "trial_rng",
+    "load_camera", "load_geometry", "make_sensor", "make_trial", "make_trials", "run_trials",
+    "trial_goal", "trial_rng",
 ]

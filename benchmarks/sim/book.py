@@ -5,6 +5,7 @@ result rows (one row of ``results.jsonl`` per trial)."""
 from __future__ import annotations
 
 import logging
+import statistics
 import traceback
 from dataclasses import dataclass, field
 from typing import Any
@@ -127,7 +128,7 @@ class Book:
         rows = np.asarray(rows, dtype=int)
         v = np.asarray(velocities, dtype=float)
         invalid = ~np.isfinite(v).all(axis=1)
-        refused = np.array([r is not None for r in reasons], dtype=bool)
+        refused = np.fromiter((r is not None for r in reasons), dtype=bool, count=len(rows))
         self.refused[rows[~refused]] = 0
         self.refused[rows[refused]] += 1
         too_many = refused & (self.refused[rows] >= MAX_REFUSED_STEPS)
@@ -159,8 +160,10 @@ class Book:
         t_goal = np.array([s.goal_translation for s in group])
         dp, da = pose_error(R, t, R_goal, t_goal)
         out = []
+        base = base_row(sc, spec, 0)
         for m, s in enumerate(group):
-            row = base_row(sc, spec, s.trial)
+            row = dict(base)
+            row["trial"] = int(s.trial)
             fail = self.failure[m]
             conv = bool(self.converged[m])
             if fail is None and not conv:
@@ -174,7 +177,7 @@ class Book:
                 "final_orientation_error_deg": float(np.rad2deg(da[m])),
                 "stroke_violations": int(self.violations[m]),
                 "hidden_edge_periods": int(self.hidden[m]),
-                "step_time_us": float(np.median(times) * 1e6) if times else None,
+                "step_time_us": float(statistics.median(times) * 1e6) if times else None,
                 "failure": None if conv else fail,
             })
             if self.tail_pos[m]:
@@ -232,5 +235,5 @@ def failure_row(sc: Scenario, spec: Any, trial: int, exc: BaseException) -> dict
         log.warning("trial %s/%s/%d failed: %s", sc.name, spec.label, trial, exc)
     else:
         log.warning("trial %s/%s/%d failed: %s\n%s", sc.name, spec.label, trial, exc,
-                    traceback.format_exc())
+                    "".join(traceback.format_exception(exc)))
     return row

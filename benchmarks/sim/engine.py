@@ -27,13 +27,13 @@ from __future__ import annotations
 
 import logging
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from typing import Any
 
 import numpy as np
 
 from benchmarks.sim.book import Book, TrialResult, failure_row
-from benchmarks.sim.sensors import GeometricSensor, noisy_features, trial_goal
+from benchmarks.sim.sensors import GeometricSensor, draws_noise, noisy_features, trial_goal
 from benchmarks.sim.world import TrialSetup, trial_rng
 from benchmarks.study.scenario import Scenario
 from controllers.base import Goal, ObservationBatch
@@ -70,8 +70,9 @@ class BatchSensor:
                               reversed(list(enumerate(self._camera_group)))}
 
     def measure(self, rotations: np.ndarray, translations: np.ndarray, items: np.ndarray,
-                rngs: list[np.random.Generator], apply_noise: bool = True) -> dict[str, Any]:
-        """Features of the trials ``items`` at their true poses (one generator each)."""
+                rngs: Sequence[Any], apply_noise: bool = True) -> dict[str, Any]:
+        """Features of the trials ``items`` at their true poses (one generator each, see
+        :func:`rows_generators`)."""
         obs = observe_batch(self.params, rotations, translations, items)
         groups = self._camera_group[items]
         cameras = [(np.flatnonzero(groups == g), self._group_camera[int(g)])
@@ -84,6 +85,15 @@ class BatchSensor:
 
         return noisy_features(self.sc, obs.normals, obs.edge_visible, rngs, apply_noise,
                               self.estimated, cameras, item)
+
+
+def rows_generators(sc: Scenario, setups: list[TrialSetup], stream: int, apply_noise: bool
+                    ) -> list[Any]:
+    """The trials' random streams ``stream`` for the sensor, or Nones when the scenario's
+    noise draws nothing (:func:`benchmarks.sim.sensors.draws_noise`)."""
+    if not draws_noise(sc, apply_noise):
+        return [None] * len(setups)
+    return [trial_rng(sc.seed, s.trial, stream) for s in setups]
 
 
 def _leg_observation(obs: Any, k: int, radius: float, platform_radius: float
@@ -154,7 +164,7 @@ def _goals(sc: Scenario, setups: list[TrialSetup], failed: dict[int, TrialResult
             R = np.array([s.goal_rotation for s in setups])
             t = np.array([s.goal_translation for s in setups])
             items = np.arange(len(setups))
-            m = sensor.measure(R, t, items, [trial_rng(sc.seed, s.trial, 2) for s in setups],
+            m = sensor.measure(R, t, items, rows_generators(sc, setups, 2, sc.noise.on_goal),
                                apply_noise=sc.noise.on_goal)
             for k, s in enumerate(setups):
                 goals[k] = Goal(
@@ -185,7 +195,7 @@ def _run(sc: Scenario, spec: Any, group: list[TrialSetup], contexts: list[Any],
     controller = batch_controller(spec.name, spec.options, batched)
     controller.reset_batch(contexts)
     sensor = BatchSensor(sc, group)
-    rngs = [trial_rng(sc.seed, s.trial, 1) for s in group]
+    rngs = rows_generators(sc, group, 1, True)
     q = np.array([s.start_lengths for s in group])
     R = np.array([s.start_rotation for s in group])
     t = np.array([s.start_translation for s in group])

@@ -5,7 +5,7 @@ desired features taught at the goal (:func:`trial_goal`)."""
 from __future__ import annotations
 
 import logging
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from typing import Any
 
 import numpy as np
@@ -68,8 +68,16 @@ class GeometricSensor:
         return _average_frames(m, self.est if self.perspective else None)
 
 
+def draws_noise(sc: Scenario, apply_noise: bool) -> bool:
+    """Whether :func:`noisy_features` draws from the rows' generators (without noise, the
+    batched engine does not create them: ten microseconds each)."""
+    noise = sc.noise
+    return apply_noise and ((noise.model == "rotation" and noise.amplitude_deg > 0)
+                            or noise.model == "pixel" or noise.dropout_probability > 0)
+
+
 def noisy_features(sc: Scenario, normals: np.ndarray, visible: np.ndarray,
-                   rngs: list[np.random.Generator], apply_noise: bool, estimated: Any,
+                   rngs: Sequence[Any], apply_noise: bool, estimated: Any,
                    cameras: list[tuple[np.ndarray, Any]],
                    item: Callable[[int], tuple[Any, Any]]) -> dict[str, Any]:
     """The scenario's noise on true edges, and the features the controllers receive.
@@ -83,7 +91,7 @@ def noisy_features(sc: Scenario, normals: np.ndarray, visible: np.ndarray,
     Args:
         sc: The scenario (its ``[noise]``).
         normals: (n, 6, 2, 3) true edge normals; visible: (n, 6, 2).
-        rngs: One generator per row.
+        rngs: One generator per row (anything when :func:`draws_noise` is False).
         apply_noise: Whether the noise applies.
         estimated: The estimated camera (the same for every row).
         cameras: ``(rows, true camera)`` groups covering every row.
@@ -101,7 +109,7 @@ def noisy_features(sc: Scenario, normals: np.ndarray, visible: np.ndarray,
     if apply_noise and noise.model == "rotation" and noise.amplitude_deg > 0:
         from vision.noise import rotation_noise_batch
 
-        normals = rotation_noise_batch(normals, np.deg2rad(noise.amplitude_deg), rngs)
+        normals = rotation_noise_batch(normals, np.deg2rad(noise.amplitude_deg), list(rngs))
     elif apply_noise and noise.model == "pixel":
         from vision.pixel_measure import normals_from_noisy_pixels
 

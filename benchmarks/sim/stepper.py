@@ -29,7 +29,7 @@ from benchmarks.sim.world import (
     World,
     load_camera,
     load_geometry,
-    make_trial,
+    make_trials,
     trial_rng,
 )
 from benchmarks.study.scenario import Scenario
@@ -86,11 +86,12 @@ def run_trials(
     camera = load_camera(sc, nominal)
     results: dict[int, TrialResult] = {}
     setups: list[TrialSetup] = []
-    for k in trials:
-        try:
-            setups.append(make_trial(sc, k, nominal, camera, calibrate))
-        except Exception as exc:  # a crash in one trial is that trial's failure
-            results[k] = TrialResult(failure_row(sc, spec, k, exc))
+    for k, made in zip(trials, make_trials(sc, list(trials), nominal, camera, calibrate),
+                       strict=True):
+        if isinstance(made, Exception):  # a crash in one trial is that trial's failure
+            results[k] = TrialResult(failure_row(sc, spec, k, made))
+        else:
+            setups.append(made)
     if engine not in ENGINES:
         raise ValueError(f"engine: expected one of {', '.join(ENGINES)}, got {engine!r}")
     if (engine == "batched" and backend_factory is None and sensor_factory is None

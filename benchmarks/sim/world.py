@@ -16,7 +16,7 @@ from hexapod import HexapodGeometry, Transform, forward_kinematics_batch
 from hexapod.geometry import preset as geometry_preset
 from hexapod.kinematics import inverse_kinematics
 from hexapod.se3 import exp_so3
-from hexapod.workspace import sample_poses
+from hexapod.workspace import sample_poses_many
 from vision.cameras import Camera, camera_preset
 
 log = logging.getLogger(__name__)
@@ -122,6 +122,72 @@ def make_trial(sc: Scenario, trial: int, nominal: HexapodGeometry, camera: Camer
     The standard-normal draws are made in a fixed order whatever the scenario's
     error magnitudes, so trials are paired across the points of a sweep.
     """
+    out = make_trials(sc, [trial], nominal, camera, calibrate)[0]
+    if isinstance(out, BaseException):
+        raise out
+    return out
+
+
+def make_trials(sc: Scenario, trials: list[int], nominal: HexapodGeometry, camera: Camera,
+                calibrate: Callable[[World, np.random.Generator], tuple[np.ndarray,
+                                                                        dict[str, float]]]
+                | None = None) -> list[TrialSetup | Exception]:
+    """:func:`make_trial` for many trials: the same setups, to the last bit, the random
+    poses of all of them drawn in one batch (:func:`hexapod.workspace.sample_poses_many`).
+
+    Returns:
+        Per trial, its setup or the exception that :func:`make_trial` raises for it
+        (that trial's failure).
+    """
+    drawn: list[tuple[np.random.Generator, World, Any, bool] | Exception] = []
+    for trial in trials:
+        try:
+            drawn.append(_draw_world(sc, trial, nominal, camera))
+        except Exception as exc:  # that trial's failure
+            drawn.append(exc)
+    ok = [k for k, d in enumerate(drawn) if not isinstance(d, Exception)]
+    poses: dict[int, Any] = {}
+    task = sc.task
+    if task.kind != "fixed" and ok:
+        many = sample_poses_many(
+            [drawn[k][1].geometry for k in ok],  # type: ignore[index]
+            2, [drawn[k][0] for k in ok],  # type: ignore[index]
+            max_translation=1e-3 * task.max_translation_mm,
+            max_angle=np.deg2rad(task.max_angle_deg), margin=1e-3 * task.margin_mm)
+        poses = dict(zip(ok, many, strict=True))
+    base_points = camera.camera_from_base.apply(nominal.base_points)
+    out: list[TrialSetup | Exception] = []
+    for k, trial in enumerate(trials):
+        d = drawn[k]
+        if isinstance(d, Exception):
+            out.append(d)
+            continue
+        _, world, ce, shared = d
+        try:
+            if task.kind == "fixed":
+                pose = _fixed_poses(sc, world.geometry)
+            else:
+                pose = poses[k]
+                if isinstance(pose, Exception):
+                    raise pose
+            (R_s, R_g), (t_s, t_g) = pose
+            q_s = inverse_kinematics(world.geometry, R_s, t_s)
+            points = base_points.copy()
+            calibration: dict[str, float] = {}
+            if calibrate is not None:
+                points, calibration = calibrate(world, trial_rng(sc.seed, trial, 3))
+            out.append(TrialSetup(trial, world, nominal,
+                                  estimated_camera(camera, ce.distortion_percent), points,
+                                  R_s, t_s, R_g, t_g, q_s, shared, calibration))
+        except Exception as exc:  # that trial's failure
+            out.append(exc)
+    return out
+
+
+def _draw_world(sc: Scenario, trial: int, nominal: HexapodGeometry, camera: Camera
+                ) -> tuple[np.random.Generator, World, Any, bool]:
+    """The trial's generator (after the world's draws), its world, the scaled
+    calibration error and whether the world is the nominal one."""
     rng = trial_rng(sc.seed, trial, 0)
     z_base = rng.standard_normal((6, 3))
     z_plat = rng.standard_normal((6, 3))
@@ -146,31 +212,19 @@ def make_trial(sc: Scenario, trial: int, nominal: HexapodGeometry, camera: Camer
         )
         true_camera = _perturb_camera(camera, z_rot, z_pos, z_k, ce)
         offsets = 1e-3 * ce.joint_offsets_mm * z_off
-    world = World(true_geometry, true_camera, offsets)
+    return rng, World(true_geometry, true_camera, offsets), ce, shared
 
+
+def _fixed_poses(sc: Scenario, geometry: HexapodGeometry
+                 ) -> tuple[np.ndarray, np.ndarray]:
+    """Start and goal poses (2, 3, 3), (2, 3) of a fixed task (its leg lengths)."""
     task = sc.task
-    if task.kind == "fixed":
-        q_start = np.asarray(task.start_mm, float) * 1e-3
-        q_goal = np.asarray(task.goal_mm, float) * 1e-3
-        sol = forward_kinematics_batch(true_geometry, np.stack([q_start, q_goal]))
-        if not np.all(sol.converged):
-            raise ValueError(f"{sc.source}: task start/goal leg lengths have no pose")
-        R_s, R_g = sol.rotations
-        t_s, t_g = sol.translations
-    else:
-        R, t = sample_poses(true_geometry, 2, rng=rng,
-                            max_translation=1e-3 * task.max_translation_mm,
-                            max_angle=np.deg2rad(task.max_angle_deg),
-                            margin=1e-3 * task.margin_mm)
-        R_s, R_g = R
-        t_s, t_g = t
-    q_s = inverse_kinematics(true_geometry, R_s, t_s)
-    base_points = camera.camera_from_base.apply(nominal.base_points)
-    calibration: dict[str, float] = {}
-    if calibrate is not None:
-        base_points, calibration = calibrate(world, trial_rng(sc.seed, trial, 3))
-    return TrialSetup(trial, world, nominal, estimated_camera(camera, ce.distortion_percent),
-                      base_points, R_s, t_s, R_g, t_g, q_s, shared, calibration)
+    q_start = np.asarray(task.start_mm, float) * 1e-3
+    q_goal = np.asarray(task.goal_mm, float) * 1e-3
+    sol = forward_kinematics_batch(geometry, np.stack([q_start, q_goal]))
+    if not np.all(sol.converged):
+        raise ValueError(f"{sc.source}: task start/goal leg lengths have no pose")
+    return sol.rotations, sol.translations
 
 
 def estimated_camera(camera: Camera, distortion_percent: float) -> Camera:

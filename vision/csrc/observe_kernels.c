@@ -82,6 +82,69 @@ static int imaged(const double *X, const double *cam, int unified, double width,
   return u >= -0.5 && u <= width - 0.5 && v >= -0.5 && v <= height - 0.5;
 }
 
+/* Whether every point of the segment P0-P1 is certainly imaged (then so are the samples
+ * between them, without projecting each). Only without distortion:
+ * - perspective, both ends in front (z > 0): the image of the segment is the segment
+ *   between the images of its ends, and the image rectangle is convex: both ends inside
+ *   (by 1e-6 px) suffice;
+ * - unified: the projection is radially symmetric and its normalised radius
+ *   sin(theta) / (cos(theta) + xi) grows with the angle theta to the axis wherever the
+ *   model is valid (cos(theta) > -min(xi, 1/xi)). Along the segment, the direction runs
+ *   over an arc (shorter than half a turn) of a great circle, on which cos(theta) is a
+ *   sinusoid: it has at most one critical point there, and its minimum is at an end
+ *   unless the derivative is negative at the start and positive at the end (the sign
+ *   of d/ds (z / |P|) is that of d_z |P|^2 - z (P . d), d = P1 - P0). Then both ends
+ *   valid and within the largest centred disc that the intrinsics map inside the image
+ *   (radius: the distance of the principal point to the nearest border over the largest
+ *   singular value of [[fx, s], [0, fy]], less 1e-9 relative) suffice.
+ * 0 says nothing (the caller tests every sample). */
+static int all_imaged(const double *P0, const double *P1, const double *cam, int unified,
+                      double width, double height) {
+  double fx = cam[0], sk = cam[1], cx = cam[2], fy = cam[3], cy = cam[4], xi = cam[5];
+  const double *P[2] = {P0, P1};
+  if (cam[6] != 0.0 || cam[7] != 0.0 || cam[8] != 0.0 || cam[9] != 0.0 || cam[10] != 0.0)
+    return 0;
+  if (!unified || xi == 0.0) {
+    for (int k = 0; k < 2; ++k) {
+      if (!(P[k][2] > 0.0)) return 0;
+      double x = P[k][0] / P[k][2], y = P[k][1] / P[k][2];
+      double u = fx * x + sk * y + cx, v = fy * y + cy;
+      if (!(u >= -0.5 + 1e-6 && u <= width - 0.5 - 1e-6 && v >= -0.5 + 1e-6 &&
+            v <= height - 0.5 - 1e-6))
+        return 0;
+    }
+    return 1;
+  }
+  if (!(xi > 0.0)) return 0;
+  double border = fmin(fmin(cx + 0.5, width - 0.5 - cx), fmin(cy + 0.5, height - 0.5 - cy));
+  if (!(border > 0.0)) return 0;
+  double T = fx * fx + sk * sk + fy * fy, D = fx * fy;
+  double disc = T * T - 4.0 * D * D;
+  double smax = sqrt(0.5 * (T + sqrt(disc > 0.0 ? disc : 0.0)));
+  double r_in = border / smax * (1.0 - 1e-9);
+  double cos_limit = xi < 1.0 / xi ? xi : 1.0 / xi;
+  double d[3] = {P1[0] - P0[0], P1[1] - P0[1], P1[2] - P0[2]}, slope[2];
+  for (int k = 0; k < 2; ++k) {
+    double rho2 = dot3(P[k], P[k]), rho = sqrt(rho2);
+    if (!(rho > 0.0 && P[k][2] > -cos_limit * rho)) return 0;
+    double z = P[k][2] + xi * rho;
+    double rn = sqrt(P[k][0] * P[k][0] + P[k][1] * P[k][1]) / z;
+    if (!(rn <= r_in)) return 0;
+    slope[k] = d[2] * rho2 - P[k][2] * dot3(P[k], d);
+  }
+  return !(slope[0] < 0.0 && slope[1] > 0.0) && !isnan(slope[0]) && !isnan(slope[1]);
+}
+
+/* all_imaged for a batch of camera-frame segments (n x 6 doubles: P0, P1), one camera;
+ * the test entry of the shortcut (vision.fast_observe.segments_certainly_imaged). */
+void hexapod_segments_imaged(const double *segments, long long n, const double *cam,
+                             long long unified, double width, double height,
+                             double *out) {
+  for (long long k = 0; k < n; ++k)
+    out[k] = all_imaged(segments + 6 * k, segments + 6 * k + 3, cam, (int)unified, width,
+                        height);
+}
+
 /* Whether the open segment from the origin to P crosses leg j (vision.occlusion). */
 static int hits_leg(const double *P, const double *A, const double *u, double q, double r) {
   double Pu = dot3(P, u), Au = dot3(A, u);
@@ -231,13 +294,23 @@ int hexapod_observe_batch(const double *params, double *out, long long n, double
         double e0 = dot3(dnormal, P0) + c_side, e1 = dot3(dnormal, P1) + c_side;
         int disc_test = !((c_side > 0.0 && e0 > 0.0 && e1 > 0.0) ||
                           (c_side < 0.0 && e0 < 0.0 && e1 < 0.0));
+        int inside = all_imaged(P0, P1, cam, (int)unified, width, height);
+        int tests = !inside || (occlusion && disc_test);
+        for (int l = 0; l < 6 && !tests; ++l) tests = occlusion && !cull[l];
+        if (!tests) { /* every sample imaged, none can be hidden */
+          frac[e] = 1.0;
+          vis[e] = 1.0 >= min_fraction - 1e-12 ? 1.0 : 0.0;
+          interval[2 * e] = 0.5 / (double)n_samples;
+          interval[2 * e + 1] = (n_samples - 0.5) / (double)n_samples;
+          continue;
+        }
         int count = 0, first = -1, last = -1;
         for (long long k = 0; k < n_samples; ++k) {
           double sk = (k + 0.5) / (double)n_samples;
           double P[3];
           for (int m = 0; m < 3; ++m)
             P[m] = Ac[3 * i + m] + r * nrm[m] + (sk * qc[i]) * uc[3 * i + m];
-          int ok = imaged(P, cam, (int)unified, width, height);
+          int ok = inside || imaged(P, cam, (int)unified, width, height);
           if (ok && occlusion) {
             for (int l = 0; l < 6 && ok; ++l)
               if (!cull[l] && hits_leg(P, Ac + 3 * l, uc + 3 * l, qc[l], r)) ok = 0;
