@@ -9,7 +9,12 @@ import numpy as np
 import pytest
 
 from controllers import registry
-from controllers.law_kernel import LawKernel, _direction_function, jacobi_eigen
+from controllers.law_kernel import (
+    LawKernel,
+    _direction_function,
+    full_rank_certificate,
+    jacobi_eigen,
+)
 from controllers.laws import solve_normal_damped
 from controllers.qp import LimitQP
 from hexapod.compiled import CompiledFunction
@@ -103,6 +108,72 @@ def test_jacobi_eigen_solve_equals_lapack(rng: np.random.Generator) -> None:
         # Both are backward stable: they agree to rounding times the condition number.
         kept_cond = wj.max() / wj[keep].min()
         np.testing.assert_allclose(x, xr, rtol=0, atol=1e-14 * kept_cond * np.abs(xr).max())
+
+
+@pytest.mark.parametrize("threshold", [1e-6, 1e-3, 0.1])
+def test_full_rank_certificate_is_sound_and_tight(threshold: float,
+                                                  rng: np.random.Generator) -> None:
+    """The lean cores' certificate: never full rank where the eigenvalues say otherwise
+    (w_min <= threshold^2 w_max), and always given above its margin (w_min / w_max >
+    sqrt(6) (2 threshold^2 + 1e-10): |N|_F <= sqrt(6) w_max)."""
+    Ns = ca.SX.sym("N", 6, 6)
+    t2 = ca.SX.sym("t2")
+    cert = ca.Function("cert", [Ns, t2], [full_rank_certificate(Ns, t2)])
+    thr2 = threshold * threshold
+    margin = np.sqrt(6.0) * (2.0 * thr2 + 1e-10)
+    ratios = 10.0 ** rng.uniform(np.log10(thr2) - 6, 0.0, 3000)
+    ratios[:300] = thr2 * (1.0 + rng.uniform(-1e-3, 1e-3, 300))  # at the threshold
+    ratios[300:330] = 0.0  # singular
+    certified = 0
+    for r in ratios:
+        Q, _ = np.linalg.qr(rng.normal(size=(6, 6)))
+        w = np.sort(np.concatenate([[1.0, r], 10.0 ** rng.uniform(np.log10(max(r, 1e-300)),
+                                                                   0.0, 4)]))
+        N = (Q * (w * 10.0 ** rng.uniform(-6, 6))) @ Q.T
+        N = 0.5 * (N + N.T)
+        ok = float(cert(N, thr2)) == 1.0
+        e = np.linalg.eigvalsh(N)
+        if ok:
+            assert e[0] > thr2 * e[-1], (r, e)
+            certified += 1
+        if r > 1.01 * margin:
+            assert ok, (r, margin)
+    assert certified >= (ratios > 1.01 * margin).sum() > 300
+
+
+@pytest.mark.parametrize("name", ["leg-direction", "leg-edge", "leg-edge-qp"])
+def test_lean_core_equals_the_full_core_where_it_certifies(world: World, name: str,
+                                                           rng: np.random.Generator) -> None:
+    """The batched laws' lean core: same error, twist and command, to the last bit, as
+    the per-trial core wherever it certifies full rank; rank 0 (the row goes to the
+    per-trial core) elsewhere, here on a leg-direction row made rank-deficient."""
+    Rs, ts = world.poses(12, rng, max_translation=0.02, max_angle=np.deg2rad(4), margin=0.03)
+    law = registry.create(name)
+    law.reset(world.context(world.goal(Rs[0], ts[0]), 0.02))
+    kernel = law._kernel  # type: ignore[attr-defined]
+    assert kernel is not None and kernel.lean_function is not kernel.function
+    o = kernel._out
+    rows = []
+    for R, t in zip(Rs[1:], ts[1:], strict=True):
+        assert law._load_kernel(world.observation(R, t), np.ones(6))  # type: ignore[attr-defined]
+        kernel.set("lengths", world.observation(R, t).lengths)
+        rows.append(kernel._x.copy())
+    X = np.array(rows)
+    full, lean = kernel.function.batch(X), kernel.lean_function.batch(X)
+    assert np.all(full[:, o["rank"].start] == 6) and np.all(lean[:, o["rank"].start] == 6)
+    for key in ("error", "error_norm", "tau", "qdot", "qdot_check", "directions"):
+        assert np.array_equal(full[:, o[key]], lean[:, o[key]]), key
+    # a threshold that no row passes (0.99: condition numbers below 1.01): no certificate
+    X[:, kernel._slices["threshold2"]] = 0.99 ** 2
+    full, lean = kernel.function.batch(X), kernel.lean_function.batch(X)
+    assert np.all(full[:, o["rank"].start] < 6) and np.all(lean[:, o["rank"].start] == 0)
+    if name == "leg-direction":  # every measured direction equal to the desired one's
+        bad = X[:1].copy()     # mirror: a rank-deficient interaction matrix
+        bad[0, kernel._slices["features"]] = 0.0
+        bad[0, kernel._slices["features"].start + 2::3] = 1.0
+        bad[0, kernel._slices["desired"]] = bad[0, kernel._slices["features"]]
+        f, g = kernel.function.batch(bad)[0], kernel.lean_function.batch(bad)[0]
+        assert f[o["rank"].start] < 6 and g[o["rank"].start] == 0
 
 
 def test_virtual_machine_fallback_equals_c(monkeypatch: pytest.MonkeyPatch,
