@@ -131,7 +131,7 @@ class CompiledFunction:
                 os.chdir(cwd)
             code = (Path(tmp) / f"{self.name}.c").read_text()
         code += _BATCH_WRAPPER.format(name=self.name, n_in=self.n_in, n_out=self.n_out)
-        lib_path = build_shared_library(self.name, code)
+        lib_path = build_shared_library(self.name, code, ("-O2", "-fno-math-errno"))
         lib = ctypes.CDLL(str(lib_path))
         n_arg, n_res, n_iw, n_w = (ctypes.c_longlong() for _ in range(4))
         getattr(lib, f"{self.name}_work")(ctypes.byref(n_arg), ctypes.byref(n_res),

@@ -128,8 +128,11 @@ def sample_poses_many(
     t = np.empty((k, m, 3))
     d = np.empty((k, m, 3))
     u = np.empty((k, m))
+    homes: dict[int, np.ndarray] = {}
     for j, (g, rng) in enumerate(zip(geometries, rngs, strict=True)):
-        _, t0 = home_pose(g)
+        t0 = homes.get(id(g))
+        if t0 is None:
+            t0 = homes[id(g)] = home_pose(g)[1]
         t[j] = t0 + rng.uniform(-max_translation, max_translation, size=(m, 3))
         d[j] = rng.normal(size=(m, 3))
         u[j] = rng.uniform(0, 1, size=m)
@@ -144,14 +147,18 @@ def sample_poses_many(
         q = inverse_kinematics(g, R[idx], t[idx])
         ok[idx] = np.all((q >= g.q_min + margin) & (q <= g.q_max - margin), axis=-1)
     out: list[tuple[np.ndarray, np.ndarray] | WorkspaceError] = []
+    counts = ok.sum(axis=1)
     for j in range(k):
         if n <= 0:
             out.append((np.empty((0, 3, 3)), np.empty((0, 3))))
             continue
+        kept = np.flatnonzero(ok[j])
+        if counts[j] >= n:  # the first round sufficed
+            out.append((R[j, kept[:n]], t[j, kept[:n]]))
+            continue
         try:
             out.append(_sample_rounds(geometries[j], n, rngs[j], max_translation, max_angle,
-                                      margin, [R[j][ok[j]]], [t[j][ok[j]]],
-                                      int(ok[j].sum()), m))
+                                      margin, [R[j, kept]], [t[j, kept]], int(counts[j]), m))
         except WorkspaceError as exc:
             out.append(exc)
     return out

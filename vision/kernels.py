@@ -43,7 +43,7 @@ log = logging.getLogger(__name__)
 
 #: Compiler flags: optimised, and no fused multiply-add (the numpy path rounds each
 #: product; a contracted a*b+c would differ in the last bit).
-FLAGS = ("-O2", "-ffp-contract=off")
+FLAGS = ("-O2", "-ffp-contract=off", "-fno-math-errno")
 
 _P: Any = ctypes.c_void_p
 _I: Any = ctypes.c_int64

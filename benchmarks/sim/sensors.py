@@ -121,7 +121,9 @@ def noisy_features(sc: Scenario, normals: np.ndarray, visible: np.ndarray,
     if apply_noise and noise.dropout_probability > 0:
         for k in range(n):
             visible[k] &= rngs[k].uniform(size=(6, 2)) >= noise.dropout_probability
-    normals = np.where(visible[..., None], normals, np.nan)
+    all_visible = bool(visible.all())
+    if not all_visible:
+        normals = np.where(visible[..., None], normals, np.nan)
     lines = None
     if estimated.kind == "perspective":
         if noise.model == "pixel" and apply_noise:
@@ -135,7 +137,8 @@ def noisy_features(sc: Scenario, normals: np.ndarray, visible: np.ndarray,
     both = np.asarray(visible.all(axis=-1))
     with np.errstate(invalid="ignore"):
         directions = directions_from_edges(normals)
-    directions = np.where(both[..., None], directions, np.nan)
+    if not all_visible:
+        directions = np.where(both[..., None], directions, np.nan)
     return {"normals": normals, "lines": lines, "directions": directions,
             "edge_visible": visible, "direction_visible": both}
 

@@ -139,10 +139,11 @@ def make_trials(sc: Scenario, trials: list[int], nominal: HexapodGeometry, camer
         Per trial, its setup or the exception that :func:`make_trial` raises for it
         (that trial's failure).
     """
+    ce, shared = _scaled_error(sc)
     drawn: list[tuple[np.random.Generator, World, Any, bool] | Exception] = []
     for trial in trials:
         try:
-            drawn.append(_draw_world(sc, trial, nominal, camera))
+            drawn.append(_draw_world(sc, trial, nominal, camera, ce, shared))
         except Exception as exc:  # that trial's failure
             drawn.append(exc)
     ok = [k for k, d in enumerate(drawn) if not isinstance(d, Exception)]
@@ -156,6 +157,7 @@ def make_trials(sc: Scenario, trials: list[int], nominal: HexapodGeometry, camer
             max_angle=np.deg2rad(task.max_angle_deg), margin=1e-3 * task.margin_mm)
         poses = dict(zip(ok, many, strict=True))
     base_points = camera.camera_from_base.apply(nominal.base_points)
+    start_lengths = _start_lengths(drawn, poses)
     out: list[TrialSetup | Exception] = []
     for k, trial in enumerate(trials):
         d = drawn[k]
@@ -171,7 +173,8 @@ def make_trials(sc: Scenario, trials: list[int], nominal: HexapodGeometry, camer
                 if isinstance(pose, Exception):
                     raise pose
             (R_s, R_g), (t_s, t_g) = pose
-            q_s = inverse_kinematics(world.geometry, R_s, t_s)
+            q_s = (start_lengths[k] if k in start_lengths
+                   else inverse_kinematics(world.geometry, R_s, t_s))
             points = base_points.copy()
             calibration: dict[str, float] = {}
             if calibrate is not None:
@@ -184,24 +187,43 @@ def make_trials(sc: Scenario, trials: list[int], nominal: HexapodGeometry, camer
     return out
 
 
-def _draw_world(sc: Scenario, trial: int, nominal: HexapodGeometry, camera: Camera
-                ) -> tuple[np.random.Generator, World, Any, bool]:
-    """The trial's generator (after the world's draws), its world, the scaled
-    calibration error and whether the world is the nominal one."""
-    rng = trial_rng(sc.seed, trial, 0)
-    z_base = rng.standard_normal((6, 3))
-    z_plat = rng.standard_normal((6, 3))
-    z_off = rng.standard_normal(6)
-    z_rot = rng.standard_normal(3)
-    z_pos = rng.standard_normal(3)
-    z_k = rng.standard_normal(4)
-    z_r = rng.standard_normal()
+def _start_lengths(drawn: list[Any], poses: dict[int, Any]) -> dict[int, np.ndarray]:
+    """The true start leg lengths of the trials with random poses, one batch per robot
+    (the same bits as one call per trial: the arithmetic is elementwise)."""
+    groups: dict[int, list[int]] = {}
+    for k, pose in poses.items():
+        if not isinstance(pose, Exception):
+            groups.setdefault(id(drawn[k][1].geometry), []).append(k)
+    out: dict[int, np.ndarray] = {}
+    for ks in groups.values():
+        q = inverse_kinematics(drawn[ks[0]][1].geometry, np.array([poses[k][0][0] for k in ks]),
+                               np.array([poses[k][1][0] for k in ks]))
+        out.update(zip(ks, q, strict=True))
+    return out
+
+
+def _scaled_error(sc: Scenario) -> tuple[Any, bool]:
+    """The scenario's calibration error at its scale, and whether it is zero (every
+    trial then shares the nominal world)."""
     ce = sc.calibration_error
     ce = type(ce)(**{k: (getattr(ce, k) * ce.scale
                          if k not in ("scale", "distortion_percent") else getattr(ce, k))
                      for k in ce.__dataclass_fields__})
     shared = all(getattr(ce, k) == 0.0 for k in ce.__dataclass_fields__
-                 if k not in ("scale", "distortion_percent"))
+                  if k not in ("scale", "distortion_percent"))
+    return ce, shared
+
+
+def _draw_world(sc: Scenario, trial: int, nominal: HexapodGeometry, camera: Camera, ce: Any,
+                shared: bool) -> tuple[np.random.Generator, World, Any, bool]:
+    """The trial's generator (after the world's draws), its world, the scaled
+    calibration error ``ce`` and whether the world is the nominal one (``shared``)."""
+    rng = trial_rng(sc.seed, trial, 0)
+    # 53 standard normals in one call: the same stream as one call per block
+    z = rng.standard_normal(53)
+    z_base = z[0:18].reshape(6, 3)
+    z_plat = z[18:36].reshape(6, 3)
+    z_off, z_rot, z_pos, z_k, z_r = z[36:42], z[42:45], z[45:48], z[48:52], z[52]
     if shared:
         true_geometry, true_camera, offsets = nominal, camera, np.zeros(6)
     else:

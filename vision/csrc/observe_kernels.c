@@ -98,38 +98,60 @@ static int imaged(const double *X, const double *cam, int unified, double width,
  *   (radius: the distance of the principal point to the nearest border over the largest
  *   singular value of [[fx, s], [0, fy]], less 1e-9 relative) suffice.
  * 0 says nothing (the caller tests every sample). */
-static int all_imaged(const double *P0, const double *P1, const double *cam, int unified,
-                      double width, double height) {
-  double fx = cam[0], sk = cam[1], cx = cam[2], fy = cam[3], cy = cam[4], xi = cam[5];
-  const double *P[2] = {P0, P1};
+typedef struct {
+  int mode; /* 0: no shortcut (a distortion, or no room), 1: perspective, 2: unified */
+  double fx, sk, cx, fy, cy, xi, umin, umax, vmin, vmax, r_in2, cos_limit;
+} ImageBox;
+
+/* What all_imaged needs of a camera, computed once per item. */
+static void image_box(const double *cam, int unified, double width, double height,
+                      ImageBox *b) {
+  b->fx = cam[0]; b->sk = cam[1]; b->cx = cam[2]; b->fy = cam[3]; b->cy = cam[4];
+  b->xi = cam[5];
+  b->mode = 0;
   if (cam[6] != 0.0 || cam[7] != 0.0 || cam[8] != 0.0 || cam[9] != 0.0 || cam[10] != 0.0)
-    return 0;
-  if (!unified || xi == 0.0) {
+    return;
+  if (!unified || b->xi == 0.0) {
+    b->umin = -0.5 + 1e-6; b->umax = width - 0.5 - 1e-6;
+    b->vmin = -0.5 + 1e-6; b->vmax = height - 0.5 - 1e-6;
+    b->mode = 1;
+    return;
+  }
+  if (!(b->xi > 0.0)) return;
+  double border = fmin(fmin(b->cx + 0.5, width - 0.5 - b->cx),
+                       fmin(b->cy + 0.5, height - 0.5 - b->cy));
+  if (!(border > 0.0)) return;
+  double T = b->fx * b->fx + b->sk * b->sk + b->fy * b->fy, D = b->fx * b->fy;
+  double disc = T * T - 4.0 * D * D;
+  double smax = sqrt(0.5 * (T + sqrt(disc > 0.0 ? disc : 0.0)));
+  double r_in = border / smax * (1.0 - 1e-9);
+  b->r_in2 = r_in * r_in;
+  b->cos_limit = b->xi < 1.0 / b->xi ? b->xi : 1.0 / b->xi;
+  b->mode = 2;
+}
+
+/* The test above (ends compared without dividing: both sides multiplied by the positive
+ * depth; the margins of the box cover the rounding). */
+static int all_imaged(const double *P0, const double *P1, const ImageBox *b) {
+  const double *P[2] = {P0, P1};
+  if (b->mode == 0) return 0;
+  if (b->mode == 1) {
     for (int k = 0; k < 2; ++k) {
-      if (!(P[k][2] > 0.0)) return 0;
-      double x = P[k][0] / P[k][2], y = P[k][1] / P[k][2];
-      double u = fx * x + sk * y + cx, v = fy * y + cy;
-      if (!(u >= -0.5 + 1e-6 && u <= width - 0.5 - 1e-6 && v >= -0.5 + 1e-6 &&
-            v <= height - 0.5 - 1e-6))
+      double Z = P[k][2];
+      if (!(Z > 0.0)) return 0;
+      double U = b->fx * P[k][0] + b->sk * P[k][1] + b->cx * Z;
+      double V = b->fy * P[k][1] + b->cy * Z;
+      if (!(U >= b->umin * Z && U <= b->umax * Z && V >= b->vmin * Z && V <= b->vmax * Z))
         return 0;
     }
     return 1;
   }
-  if (!(xi > 0.0)) return 0;
-  double border = fmin(fmin(cx + 0.5, width - 0.5 - cx), fmin(cy + 0.5, height - 0.5 - cy));
-  if (!(border > 0.0)) return 0;
-  double T = fx * fx + sk * sk + fy * fy, D = fx * fy;
-  double disc = T * T - 4.0 * D * D;
-  double smax = sqrt(0.5 * (T + sqrt(disc > 0.0 ? disc : 0.0)));
-  double r_in = border / smax * (1.0 - 1e-9);
-  double cos_limit = xi < 1.0 / xi ? xi : 1.0 / xi;
   double d[3] = {P1[0] - P0[0], P1[1] - P0[1], P1[2] - P0[2]}, slope[2];
   for (int k = 0; k < 2; ++k) {
     double rho2 = dot3(P[k], P[k]), rho = sqrt(rho2);
-    if (!(rho > 0.0 && P[k][2] > -cos_limit * rho)) return 0;
-    double z = P[k][2] + xi * rho;
-    double rn = sqrt(P[k][0] * P[k][0] + P[k][1] * P[k][1]) / z;
-    if (!(rn <= r_in)) return 0;
+    if (!(rho > 0.0 && P[k][2] > -b->cos_limit * rho)) return 0;
+    double z = P[k][2] + b->xi * rho; /* > 0 there */
+    if (!(P[k][0] * P[k][0] + P[k][1] * P[k][1] <= b->r_in2 * (z * z))) return 0;
     slope[k] = d[2] * rho2 - P[k][2] * dot3(P[k], d);
   }
   return !(slope[0] < 0.0 && slope[1] > 0.0) && !isnan(slope[0]) && !isnan(slope[1]);
@@ -140,9 +162,10 @@ static int all_imaged(const double *P0, const double *P1, const double *cam, int
 void hexapod_segments_imaged(const double *segments, long long n, const double *cam,
                              long long unified, double width, double height,
                              double *out) {
+  ImageBox box;
+  image_box(cam, (int)unified, width, height, &box);
   for (long long k = 0; k < n; ++k)
-    out[k] = all_imaged(segments + 6 * k, segments + 6 * k + 3, cam, (int)unified, width,
-                        height);
+    out[k] = all_imaged(segments + 6 * k, segments + 6 * k + 3, &box);
 }
 
 /* Whether the open segment from the origin to P crosses leg j (vision.occlusion). */
@@ -216,6 +239,11 @@ int hexapod_observe_batch(const double *params, double *out, long long n, double
       }
       qc[i] = q;
     }
+    double ends[18]; /* far ends A_i + q_i u_i */
+    for (int i = 0; i < 6; ++i)
+      for (int k = 0; k < 3; ++k) ends[3 * i + k] = Ac[3 * i + k] + qc[i] * uc[3 * i + k];
+    ImageBox box;
+    image_box(cam, (int)unified, width, height, &box);
     mat_vec(Rc, t, centre);
     for (int k = 0; k < 3; ++k) centre[k] += tc[k];
     double ez[3] = {R[2], R[5], R[8]}; /* third column of R */
@@ -252,41 +280,47 @@ int hexapod_observe_batch(const double *params, double *out, long long n, double
           vis[e] = 0.0;
           continue;
         }
-        int cull[6];
-        double P0[3], P1[3], m0[3], m1[3], m2[3], dl[3];
+        int cull[6], need_planes = 0;
+        double P0[3], P1[3];
         double s0 = 0.5 / (double)n_samples, s1 = (n_samples - 0.5) / (double)n_samples;
         for (int m = 0; m < 3; ++m) {
           P0[m] = Ac[3 * i + m] + r * nrm[m] + (s0 * qc[i]) * uc[3 * i + m];
           P1[m] = Ac[3 * i + m] + r * nrm[m] + (s1 * qc[i]) * uc[3 * i + m];
-          dl[m] = P1[m] - P0[m];
         }
-        cross3(nrm, P0, m0);
-        cross3(nrm, P1, m1);
-        cross3(nrm, dl, m2);
-        double l0 = sqrt(dot3(m0, m0)), l1 = sqrt(dot3(m1, m1)), l2 = sqrt(dot3(m2, m2));
-        int planes = l0 > 0.0 && l1 > 0.0 && l2 > 0.0;
-        if (planes) {
-          double f0 = dot3(m0, P1) < 0.0 ? -1.0 / l0 : 1.0 / l0;
-          double f1 = dot3(m1, P0) < 0.0 ? -1.0 / l1 : 1.0 / l1;
-          double f2 = dot3(m2, P0) > 0.0 ? -1.0 / l2 : 1.0 / l2;
-          for (int m = 0; m < 3; ++m) {
-            m0[m] *= f0;
-            m1[m] *= f1;
-            m2[m] *= f2;
-          }
-        }
+        /* first culling: leg l wholly on one side of this edge's interpretation plane */
         for (int l = 0; l < 6; ++l) {
           cull[l] = 1;
           if (l == i || !occlusion) continue;
-          double end[3];
-          for (int k = 0; k < 3; ++k) end[k] = Ac[3 * l + k] + qc[l] * uc[3 * l + k];
-          const double *a = Ac + 3 * l;
-          double d0 = dot3(nrm, a), d1 = dot3(nrm, end);
+          double d0 = dot3(nrm, Ac + 3 * l), d1 = dot3(nrm, ends + 3 * l);
           cull[l] = (d0 > r && d1 > r) || (d0 < -r && d1 < -r);
-          if (cull[l] || !planes) continue;
-          cull[l] = (dot3(m0, a) < -r && dot3(m0, end) < -r) ||
-                    (dot3(m1, a) < -r && dot3(m1, end) < -r) ||
-                    (dot3(m2, a) - dot3(m2, P0) < -r && dot3(m2, end) - dot3(m2, P0) < -r);
+          need_planes |= !cull[l];
+        }
+        /* second culling, only for the legs the first one kept: the three other planes
+           of the triangle (the centre, the first and the last sample) */
+        if (need_planes) {
+          double m0[3], m1[3], m2[3], dl[3];
+          for (int m = 0; m < 3; ++m) dl[m] = P1[m] - P0[m];
+          cross3(nrm, P0, m0);
+          cross3(nrm, P1, m1);
+          cross3(nrm, dl, m2);
+          double l0 = sqrt(dot3(m0, m0)), l1 = sqrt(dot3(m1, m1)), l2 = sqrt(dot3(m2, m2));
+          if (l0 > 0.0 && l1 > 0.0 && l2 > 0.0) {
+            double f0 = dot3(m0, P1) < 0.0 ? -1.0 / l0 : 1.0 / l0;
+            double f1 = dot3(m1, P0) < 0.0 ? -1.0 / l1 : 1.0 / l1;
+            double f2 = dot3(m2, P0) > 0.0 ? -1.0 / l2 : 1.0 / l2;
+            for (int m = 0; m < 3; ++m) {
+              m0[m] *= f0;
+              m1[m] *= f1;
+              m2[m] *= f2;
+            }
+            for (int l = 0; l < 6; ++l) {
+              if (cull[l]) continue;
+              const double *a = Ac + 3 * l, *end = ends + 3 * l;
+              cull[l] = (dot3(m0, a) < -r && dot3(m0, end) < -r) ||
+                        (dot3(m1, a) < -r && dot3(m1, end) < -r) ||
+                        (dot3(m2, a) - dot3(m2, P0) < -r && dot3(m2, end) - dot3(m2, P0) < -r);
+            }
+          }
         }
         /* the platform disc can hide a sample only if its plane separates the sample
            from the centre: not when the centre and both end samples are on one side */
@@ -294,7 +328,7 @@ int hexapod_observe_batch(const double *params, double *out, long long n, double
         double e0 = dot3(dnormal, P0) + c_side, e1 = dot3(dnormal, P1) + c_side;
         int disc_test = !((c_side > 0.0 && e0 > 0.0 && e1 > 0.0) ||
                           (c_side < 0.0 && e0 < 0.0 && e1 < 0.0));
-        int inside = all_imaged(P0, P1, cam, (int)unified, width, height);
+        int inside = all_imaged(P0, P1, &box);
         int tests = !inside || (occlusion && disc_test);
         for (int l = 0; l < 6 && !tests; ++l) tests = occlusion && !cull[l];
         if (!tests) { /* every sample imaged, none can be hidden */
