@@ -16,7 +16,7 @@ results are those of the per-trial loop to the last bit (tested).
 from __future__ import annotations
 
 import copy
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from typing import Any
 
 import numpy as np
@@ -29,22 +29,48 @@ STATE = ("_directions", "_observed", "_u_now", "_tau_prev", "_q_prev")
 
 #: Attribute values an instance may share with its copies (never changed in place).
 _SHARED = (int, float, bool, str, bytes, frozenset, tuple, type(None))
+#: The batch state of a controller (not copied into its per-trial instances): these
+#: names, and any name that starts with ``_b_`` or ``_batch``.
+BATCH_ATTRIBUTES = frozenset({"_trials", "_state", "_X", "_has_kernel", "_fn", "_slices",
+                              "_outs"})
+
+
+def _batch_attribute(name: str) -> bool:
+    return name in BATCH_ATTRIBUTES or name.startswith(("_b_", "_batch"))
 
 
 def fresh_copy(template: Any) -> Any:
-    """A copy of an un-reset controller, independent of it for everything ``reset`` and
-    ``step`` change: its arrays copied, its immutable values and frozen dataclasses
-    shared, anything else deep-copied (``copy.deepcopy`` of the whole object costs
-    about ten times as much, mostly in its generic recursion)."""
-    inst = copy.copy(template)
-    d = inst.__dict__
-    for k, v in d.items():
-        if isinstance(v, np.ndarray):
-            d[k] = v.copy()
-        elif not (isinstance(v, _SHARED) or getattr(getattr(v, "__dataclass_params__", None),
-                                                     "frozen", False)):
-            d[k] = copy.deepcopy(v)
-    return inst
+    """A copy of a controller for one trial, independent of it for everything ``reset``
+    and ``step`` change: its arrays copied, its immutable values and frozen dataclasses
+    shared, anything else deep-copied, and its batch state left out
+    (:data:`BATCH_ATTRIBUTES`: a controller reset as a batch before would otherwise
+    copy every trial of that batch into each new one). ``copy.deepcopy`` of the whole
+    object costs about ten times as much, mostly in its generic recursion."""
+    return copier(template)()
+
+
+def copier(template: Any) -> Callable[[], Any]:
+    """:func:`fresh_copy` of ``template``, as a function to call once per trial (the
+    attributes are sorted once)."""
+    base = copy.copy(template)
+    d = base.__dict__
+    for k in [k for k in d if _batch_attribute(k)]:
+        del d[k]
+    arrays = [k for k, v in d.items() if isinstance(v, np.ndarray)]
+    deep = [k for k, v in d.items()
+            if not (isinstance(v, (np.ndarray, *_SHARED))
+                    or getattr(getattr(v, "__dataclass_params__", None), "frozen", False))]
+
+    def make() -> Any:
+        inst = copy.copy(base)
+        di = inst.__dict__
+        for k in arrays:
+            di[k] = di[k].copy()
+        for k in deep:
+            di[k] = copy.deepcopy(di[k])
+        return inst
+
+    return make
 
 
 class BatchedLaw:
@@ -78,10 +104,10 @@ class BatchedLaw:
         Raises:
             ContextError: A context the law cannot use (as :meth:`reset`).
         """
-        template = copy.deepcopy(self)
+        make = copier(fresh_copy(self))
         self._trials = []
         for ctx in contexts:
-            inst = fresh_copy(template)
+            inst = make()
             inst.reset(ctx)
             self._trials.append(inst)
         trials = self._trials

@@ -254,6 +254,18 @@ def law_tail(e: ca.SX, N: ca.SX, b: ca.SX, directions: list[ca.SX], base_points:
             ca.sum1(qdot - qdot), ca.reshape(N.T, 36, 1), b, ca.reshape(J.T, 36, 1)]
 
 
+def _upper_zeros() -> list[list[ca.SX]]:
+    """The upper triangle of a 6 x 6 accumulator (``N = L^T L`` is symmetric: each sum is
+    built once)."""
+    return [[ca.SX(0.0) for _ in range(6)] for _ in range(6)]
+
+
+def _symmetric(upper: list[list[ca.SX]]) -> ca.SX:
+    """The symmetric 6 x 6 matrix of an upper triangle."""
+    return ca.vertcat(*[ca.horzcat(*[upper[min(i, j)][max(i, j)] for j in range(6)])
+                        for i in range(6)])
+
+
 def _direction_function(lean: bool = False) -> ca.Function:
     """Leg-direction law: ``e_i = u_i x u_i*``, ``L_i = -[u_i*]_x M_i`` (docs/math.md §3, §6)."""
     n_feat = sum(s for _, s in DIRECTION_INPUTS)
@@ -264,17 +276,20 @@ def _direction_function(lean: bool = False) -> ca.Function:
     A = [x[sl["base_points"]][3 * i:3 * i + 3] for i in range(6)]
     q = [x[sl["lengths"]][i] for i in range(6)]
     errors = []
-    N = ca.SX.zeros(6, 6)
+    Nu = _upper_zeros()
     b = ca.SX.zeros(6, 1)
     for i in range(6):
         ei = ca.cross(u[i], us[i])
         P = ca.SX.eye(3) - u[i] @ u[i].T
-        C = -(_skew(us[i]) @ P) / q[i]
+        C = -(_skew(us[i]) @ P) * (1.0 / q[i])  # one division per leg
         B = A[i] + q[i] * u[i]
         L = ca.horzcat(C, -(C @ _skew(B)))
-        N += L.T @ L
+        for row in range(6):
+            for col in range(row, 6):
+                Nu[row][col] = Nu[row][col] + ca.dot(L[:, row], L[:, col])
         b += L.T @ ei
         errors.append(ei)
+    N = _symmetric(Nu)
     e = ca.vertcat(*errors)
     tail = law_tail(e, N, b, u, A, x[n_feat:], lean)
     name = "hexapod_direction_law" + ("_lean" if lean else "")
@@ -295,8 +310,9 @@ def _edge_function(use_lines: bool, lean: bool = False) -> ca.Function:
     n = [_unit(Kt @ f) if use_lines else f for f in feat]
     u = [_unit(ca.cross(n[2 * i + 1], n[2 * i])) for i in range(6)]
     errors = [ca.cross(feat[k], star[k]) for k in range(12)]
-    N = ca.SX.zeros(6, 6)
+    Nu = _upper_zeros()
     b = ca.SX.zeros(6, 1)
+    inv_q = [1.0 / qi for qi in q]  # one division per leg
     for k in range(12):
         i = k // 2
         nk, ui, Ai, qi = n[k], u[i], A[i], q[i]
@@ -304,7 +320,7 @@ def _edge_function(use_lines: bool, lean: bool = False) -> ca.Function:
         z = ui - w * (ca.dot(Ai, ui) / ca.dot(Ai, w))
         r = nk - ca.dot(nk, ui) * ui
         B = Ai + qi * ui
-        g = ca.vertcat(r / qi, ca.cross(B, r) / qi)
+        g = ca.vertcat(r * inv_q[i], ca.cross(B, r) * inv_q[i])
         if use_lines:
             lk = feat[k]
             y = Kinv_t @ z
@@ -313,8 +329,12 @@ def _edge_function(use_lines: bool, lean: bool = False) -> ca.Function:
             a = ca.cross(star[k], y)
         else:
             a = ca.cross(star[k], z)
-        N += ca.dot(a, a) * (g @ g.T)
+        weight = ca.dot(a, a)
+        for row in range(6):
+            for col in range(row, 6):
+                Nu[row][col] = Nu[row][col] + weight * (g[row] * g[col])
         b += ca.dot(a, errors[k]) * g
+    N = _symmetric(Nu)
     e = ca.vertcat(*errors)
     tail = law_tail(e, N, b, u, A, x[n_feat:], lean)
     name = "hexapod_edge_law_lines_v2" if use_lines else "hexapod_edge_law_normals_v2"

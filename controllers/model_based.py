@@ -243,12 +243,12 @@ class ModelBasedController(Controller):
     # ------------------------------------------------------------------ batch
     def reset_batch(self, contexts: Sequence[ControllerContext]) -> None:
         """One instance per context (copies of this un-reset controller), reset with it."""
-        import copy
+        from controllers.law_batch import copier, fresh_copy
 
-        template = copy.deepcopy(self)
+        make = copier(fresh_copy(self))
         self._trials: list[ModelBasedController] = []
         for ctx in contexts:
-            inst = copy.deepcopy(template)
+            inst = make()
             inst.reset(ctx)
             self._trials.append(inst)
         trials = self._trials

@@ -265,7 +265,24 @@ def forward_kinematics_batch(
     A = geometry.base_points if base_points is None else np.asarray(base_points, float)
     E = geometry.platform_points if platform_points is None else np.asarray(platform_points,
                                                                              float)
-    x = _pack(np.asarray(rotations, float), np.asarray(translations, float), q, A, E)
+    x = pack_rows(np.asarray(rotations, float), np.asarray(translations, float), q, A, E)
+    return solve_rows(x, tol, max_iterations)
+
+
+def pack_rows(R: np.ndarray, t: np.ndarray, q: np.ndarray, A: np.ndarray, E: np.ndarray
+              ) -> np.ndarray:
+    """The (N, 54) input rows of :func:`solve_rows`: guesses ``R`` (N, 3, 3) and ``t``
+    (N, 3) [m], lengths ``q`` (N, 6) [m], base and platform points ``A``, ``E`` ((6, 3)
+    or (N, 6, 3)) [m]. A caller that solves the same robots again and again packs once
+    and rewrites the first 18 columns (``R`` transposed, ``t``, ``q``)."""
+    return _pack(R, t, q, A, E)
+
+
+def solve_rows(x: np.ndarray, tol: float = 1e-12, max_iterations: int = 30
+               ) -> BatchForwardKinematicsResult:
+    """:func:`forward_kinematics_batch` on packed rows (:func:`pack_rows`; changed in
+    place)."""
+    n = x.shape[0]
     newton = _newton()
     it = 0
     res = np.full(n, np.inf)
@@ -274,7 +291,7 @@ def forward_kinematics_batch(
     y_all[:, :12] = x[:, :12]
     y_all[:, 12:] = np.inf
     while it < max_iterations and len(active):
-        y = newton.batch(x[active])
+        y = newton.batch(x if len(active) == n else x[active])
         it += ITERATIONS_PER_CALL
         y_all[active] = y
         r = np.max(np.abs(y[:, 12:18]), axis=1)

@@ -13,7 +13,7 @@ numpy reference, item by item.
 from __future__ import annotations
 
 import logging
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
@@ -81,6 +81,8 @@ class WorldParams:
     compiled: bool = True
     geometries: list[Any] | None = None
     cameras: list[Any] | None = None
+    #: (N, 77) the rows of :meth:`pack` without the poses (built on first use).
+    constant_rows: np.ndarray | None = field(default=None, repr=False)
 
     @classmethod
     def from_worlds(cls, geometries: list[HexapodGeometry], cameras: list[Any]) -> WorldParams:
@@ -118,16 +120,20 @@ class WorldParams:
         """The (n, 77) parameter rows of the C core for poses of items ``items``."""
         idx = np.arange(len(self.leg_radius)) if items is None else np.asarray(items)
         n = len(idx)
-        rows = np.empty((n, N_IN))
+        if self.constant_rows is None:  # the columns that do not depend on the pose
+            m = len(self.leg_radius)
+            c = np.zeros((m, N_IN))
+            c[:, 12:30] = self.base_points.reshape(m, 18)
+            c[:, 30:48] = self.platform_points.reshape(m, 18)
+            c[:, 48] = self.leg_radius
+            c[:, 49] = self.platform_radius
+            c[:, 50:59] = self.camera_rotation.reshape(m, 9)
+            c[:, 59:62] = self.camera_translation
+            c[:, 62:74] = self.camera
+            self.constant_rows = c
+        rows = self.constant_rows[idx]
         rows[:, 0:9] = np.asarray(rotations, float).reshape(n, 9)
         rows[:, 9:12] = translations
-        rows[:, 12:30] = self.base_points[idx].reshape(n, 18)
-        rows[:, 30:48] = self.platform_points[idx].reshape(n, 18)
-        rows[:, 48] = self.leg_radius[idx]
-        rows[:, 49] = self.platform_radius[idx]
-        rows[:, 50:59] = self.camera_rotation[idx].reshape(n, 9)
-        rows[:, 59:62] = self.camera_translation[idx]
-        rows[:, 62:74] = self.camera[idx]
         return rows
 
 

@@ -38,8 +38,8 @@ from benchmarks.sim.world import TrialSetup, trial_rng
 from benchmarks.study.scenario import Scenario
 from controllers.base import Goal, ObservationBatch
 from controllers.batch import batch_controller
-from hexapod import forward_kinematics_batch
 from hexapod.backends.base import clamp_velocities
+from hexapod.fk import pack_rows, solve_rows
 from hexapod.kinematics import inverse_kinematics
 from hexapod.se3 import pose_error
 from vision.fast_observe import WorldParams, observe_batch
@@ -196,6 +196,7 @@ def _run(sc: Scenario, spec: Any, group: list[TrialSetup], contexts: list[Any],
     controller.reset_batch(contexts)
     sensor = BatchSensor(sc, group)
     rngs = rows_generators(sc, group, 1, True)
+    noisy = draws_noise(sc, True)
     q = np.array([s.start_lengths for s in group])
     R = np.array([s.start_rotation for s in group])
     t = np.array([s.start_translation for s in group])
@@ -211,36 +212,37 @@ def _run(sc: Scenario, spec: Any, group: list[TrialSetup], contexts: list[Any],
     batch_times: list[float] = []  # controller time per row of each step [s]
     stepped = np.zeros(len(group), dtype=int)  # steps each trial was commanded (0, 1, ...)
     dt = sc.dt
-    fk_geometry = group[0].world.geometry
+    fk_rows = pack_rows(R, t, q, A, E)
     for step in range(sc.task.max_steps + 1):
         idx = np.flatnonzero(book.active)
         if len(idx) == 0:
             break
-        dp, da = pose_error(R[idx], t[idx], R_goal[idx], t_goal[idx])
+        R_i, t_i = R[idx], t[idx]
+        dp, da = pose_error(R_i, t_i, R_goal[idx], t_goal[idx])
         done = book.check(sc, step, idx, dp, da)
-        meas = sensor.measure(R[idx], t[idx], idx, [rngs[k] for k in idx])
+        meas = sensor.measure(R_i, t_i, idx, [rngs[k] for k in idx] if noisy
+                              else [None] * len(idx))
         book.seen(idx, meas["edge_visible"])
         if on_step is not None:
             for j, k in enumerate(idx):
                 on_step(group[k].trial, R[k], t[k], meas["edge_visible"][j])
-        rows = np.flatnonzero(~done)
+        every = not done.any()  # the common case: no row copies
+        rows = np.arange(len(idx)) if every else np.flatnonzero(~done)
         v_cmd = np.zeros((len(idx), 6))
         norms = np.full(len(idx), np.nan)
         if len(rows):
+            tr = idx if every else idx[rows]
             obs = ObservationBatch(
-                trials=idx[rows], t=np.full(len(rows), step * dt),
-                lengths=q[idx[rows]] + offsets[idx[rows]],
-                normals=meas["normals"][rows],
-                lines=None if meas["lines"] is None else meas["lines"][rows],
-                directions=meas["directions"][rows],
-                edge_visible=meas["edge_visible"][rows],
-                direction_visible=meas["direction_visible"][rows])
+                trials=tr, t=np.full(len(rows), step * dt), lengths=q[tr] + offsets[tr],
+                **{key: (meas[key] if every or meas[key] is None else meas[key][rows])
+                   for key in ("normals", "lines", "directions", "edge_visible",
+                               "direction_visible")})
             t0 = time.perf_counter()
             cmds = controller.step_batch(obs)
             batch_times.append((time.perf_counter() - t0) / len(rows))
-            stepped[idx[rows]] += 1
+            stepped[tr] += 1
             norms[rows] = cmds.error_norm
-            failed = book.commands(idx[rows], cmds.velocities, cmds.reasons)
+            failed = book.commands(tr, cmds.velocities, cmds.reasons)
             done[rows[failed]] = True
             ok = rows[~failed]
             v_cmd[ok] = cmds.velocities[~failed]
@@ -259,8 +261,11 @@ def _run(sc: Scenario, spec: Any, group: list[TrialSetup], contexts: list[Any],
         book.violations[run] += stroke_violations(q_run, v_run, dt, stroke, vmax)
         vc, _ = clamp_velocities(q_run, v_run, dt, stroke, vmax)
         q[run] = np.clip(q_run + vc * dt, *stroke)
-        sol = forward_kinematics_batch(fk_geometry, q[run], R[run], t[run],
-                                       base_points=A[run], platform_points=E[run])
+        x = fk_rows[run]  # the robots' points packed once; the guesses and lengths now
+        x[:, 0:9] = np.swapaxes(R[run], -1, -2).reshape(-1, 9)
+        x[:, 9:12] = t[run]
+        x[:, 12:18] = q[run]
+        sol = solve_rows(x)
         bad = ~sol.converged
         if np.any(bad):
             for b in run[bad].tolist():
