@@ -10,6 +10,10 @@ in CPU time of this process (``time.process_time``: other processes on a shared
 machine disturb it less than the wall clock). The rows of both engines are checked
 equal on the way.
 
+The default batch is one work unit of ``hexapod-bench run NAME --workers 2`` (the batched
+engine's per-period overhead is shared by the trials of a unit, so a smaller batch costs
+more per trial-step).
+
 Run: ``hexapod-bench perf study [--scenario NAME] [--trials N] [--repeats K]``.
 """
 
@@ -19,7 +23,8 @@ import argparse
 import platform
 import sys
 import time
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
+from typing import Any
 
 import numpy as np
 
@@ -39,6 +44,71 @@ def _run(sc: object, controller: int, trials: int, engine: str) -> tuple[float, 
     return time.process_time() - t0, time.perf_counter() - w0, [r.row for r in res]
 
 
+#: The stages of the batched engine timed by ``--breakdown``: (label, module, attribute).
+STAGES = (
+    ("trial set-up: worlds and poses", "benchmarks.sim.stepper", "make_trials"),
+    ("trial set-up: goals", "benchmarks.sim.engine", "_goals"),
+    ("trial set-up: controller reset", "controllers.batch", "batch_controller"),
+    ("observation (C)", "benchmarks.sim.engine", "observe_batch"),
+    ("features and noise", "benchmarks.sim.engine", "noisy_features"),
+    ("convergence test (pose errors)", "benchmarks.sim.engine", "pose_error"),
+    ("controller step_batch", "benchmarks.sim.engine", "_step_batch"),
+    ("forward kinematics (C)", "benchmarks.sim.engine", "solve_rows"),
+)
+
+
+def _breakdown(sc: object, controller: int, trials: int) -> tuple[int, float, dict[str, float]]:
+    """One batched run with process-time wrappers around the engine's stages: the
+    trial-steps, the total CPU time and the time of each stage [s] (exclusive: a stage
+    called inside another, the observation of the goals, counts for itself only)."""
+    import importlib
+
+    from benchmarks.sim import engine
+
+    spent: dict[str, float] = dict.fromkeys([label for label, _, _ in STAGES], 0.0)
+    saved: list[tuple[object, str, object]] = []
+
+    inner: list[float] = []  # time of the timed stages called by the running one
+
+    def timed(label: str, f: Callable[..., object]) -> Callable[..., object]:
+        def call(*args: object, **kwargs: object) -> object:
+            t0 = time.process_time()
+            inner.append(0.0)
+            try:
+                return f(*args, **kwargs)
+            finally:
+                elapsed = time.process_time() - t0
+                spent[label] += elapsed - inner.pop()  # exclusive of the nested stages
+                if inner:
+                    inner[-1] += elapsed
+        return call
+
+    def reset_timed(f: Callable[..., object]) -> Callable[..., object]:
+        def make(*args: object, **kwargs: object) -> object:
+            ctl = f(*args, **kwargs)
+            ctl.reset_batch = timed(STAGES[2][0], ctl.reset_batch)  # type: ignore[attr-defined]
+            ctl.step_batch = timed(STAGES[6][0], ctl.step_batch)  # type: ignore[attr-defined]
+            return ctl
+        return make
+
+    for label, module, attr in STAGES:
+        if attr == "_step_batch":
+            continue
+        mod = importlib.import_module(module)
+        if module == "controllers.batch":
+            mod = engine  # the engine's own reference to batch_controller
+        saved.append((mod, attr, getattr(mod, attr)))
+        setattr(mod, attr, reset_timed(getattr(mod, attr)) if attr == "batch_controller"
+                else timed(label, getattr(mod, attr)))
+    try:
+        cpu, _, rows = _run(sc, controller, trials, "batched")
+    finally:
+        for owner, name, f in reversed(saved):
+            setattr(owner, name, f)
+    steps = sum(int(r["steps"]) + 1 for r in rows)
+    return steps, cpu, spent
+
+
 def _same(a: list[dict], b: list[dict]) -> bool:
     keys = ("trial", "converged", "steps", "final_position_error_mm", "failure")
     return all(all(x[k] == y[k] for k in keys) for x, y in zip(a, b, strict=True))
@@ -52,14 +122,24 @@ def main(argv: Sequence[str] | None = None) -> int:
     p = argparse.ArgumentParser(prog="hexapod-bench perf study",
                                 description=__doc__.splitlines()[0])
     p.add_argument("--scenario", default="tahri2009-convergence")
-    p.add_argument("--trials", type=int, default=300, help="trials per controller")
+    p.add_argument("--trials", type=int, default=None,
+                   help="trials per controller (default: the work-unit size of "
+                        "'hexapod-bench run SCENARIO --workers 2', capped at 1000)")
     p.add_argument("--repeats", type=int, default=3, help="runs of each engine (median)")
+    p.add_argument("--breakdown", action="store_true",
+                   help="also time the batched engine's stages (one more run per controller)")
     args = p.parse_args(argv)
-    sc = load_scenario(args.scenario).with_overrides(trials=args.trials).expand()[0]
+    from benchmarks.study.commands import auto_chunk
+
+    scenario = load_scenario(args.scenario)
+    trials = auto_chunk([scenario], 2, "sim") if args.trials is None else args.trials
+    if trials < 1 or args.repeats < 1:
+        p.error("--trials and --repeats must be >= 1")
+    sc = scenario.with_overrides(trials=trials).expand()[0]
     out = sys.stdout
-    out.write(f"# Study engine: {args.scenario} (first sweep point), {args.trials} trials per "
-              f"controller, median of {args.repeats} runs per engine (CPU time of this "
-              "process, set-up included)\n")
+    out.write(f"# Study engine: {args.scenario} (first sweep point), {trials} trials per "
+              f"controller in one batch (a work unit of the run), median of {args.repeats} "
+              "runs per engine (CPU time of this process, trial set-up included)\n")
     out.write(f"# {platform.processor() or platform.machine()}, Python "
               f"{platform.python_version()}, numpy {np.__version__}\n")
     header = ("controller", "trial-steps", "per-trial us/step", "batched us/step",
@@ -70,7 +150,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         rows: dict[str, list[dict]] = {}
         for _ in range(args.repeats):
             for engine in ("per-trial", "batched"):
-                cpu, _wall, rows[engine] = _run(sc, c, args.trials, engine)
+                cpu, _wall, rows[engine] = _run(sc, c, trials, engine)
                 times[engine].append(cpu)
         steps = sum(int(r["steps"]) + 1 for r in rows["batched"])
         per = 1e6 * float(np.median(times["per-trial"])) / steps
@@ -78,7 +158,29 @@ def main(argv: Sequence[str] | None = None) -> int:
         out.write(f"| {spec.label} | {steps} | {per:.1f} | {bat:.1f} | {per / bat:.1f}x | "
                   f"{GOAL_US:g} | {'yes' if _same(rows['per-trial'], rows['batched']) else 'NO'}"
                   " |\n")
+    if args.breakdown:
+        _print_breakdown(out, sc, trials)
     return 0
+
+
+def _print_breakdown(out: Any, sc: Any, trials: int) -> None:
+    """The stages of one batched run per controller, in us per trial-step."""
+    labels = [label for label, _, _ in STAGES]
+    cols = []
+    for c in range(len(sc.controllers)):
+        steps, cpu, spent = _breakdown(sc, c, trials)
+        cols.append((steps, cpu, spent))
+    out.write("\n# Where the time goes (one batched run, CPU time of the stages; the set-up "
+              "is per trial, spread over its trial-steps) [us per trial-step]\n")
+    out.write("| stage | " + " | ".join(spec.label for spec in sc.controllers) + " |\n|"
+              + "---|" * (1 + len(cols)) + "\n")
+    for label in labels:
+        out.write(f"| {label} | " + " | ".join(f"{1e6 * sp[label] / st:.2f}"
+                                             for st, _, sp in cols) + " |\n")
+    out.write("| other (the engine's numpy bookkeeping, rows) | " + " | ".join(
+        f"{1e6 * (cpu - sum(sp.values())) / st:.2f}" for st, cpu, sp in cols) + " |\n")
+    out.write("| total | " + " | ".join(f"{1e6 * cpu / st:.2f}" for st, cpu, _ in cols)
+              + " |\n")
 
 
 if __name__ == "__main__":

@@ -128,7 +128,7 @@ class Book:
         rows = np.asarray(rows, dtype=int)
         v = np.asarray(velocities, dtype=float)
         invalid = ~np.isfinite(v).all(axis=1)
-        if not any(r is not None for r in reasons) and not invalid.any():  # the common case
+        if reasons.count(None) == len(reasons) and not invalid.any():  # the common case
             self.refused[rows] = 0
             return invalid
         refused = np.fromiter((r is not None for r in reasons), dtype=bool, count=len(rows))

@@ -1,0 +1,42 @@
+"""``hexapod-bench perf study``: both engines on the same trials, in one table, with their
+rows compared."""
+
+from __future__ import annotations
+
+import pytest
+
+from benchmarks.perf import study
+
+
+def test_the_table_has_both_engines_and_equal_rows(capsys: pytest.CaptureFixture[str]) -> None:
+    assert study.main(["--trials", "6", "--repeats", "1"]) == 0
+    out = capsys.readouterr().out
+    assert "6 trials per controller in one batch" in out
+    rows = [line.split("|")[1:-1] for line in out.splitlines()
+            if line.startswith("| leg-")]
+    assert [r[0].strip() for r in rows] == ["leg-direction", "leg-edge"]
+    for r in rows:
+        steps, per_trial, batched = int(r[1]), float(r[2]), float(r[3])
+        assert steps > 6 and per_trial > 0 and batched > 0
+        assert r[-1].strip() == "yes"
+
+
+def test_bad_options_are_refused(capsys: pytest.CaptureFixture[str]) -> None:
+    with pytest.raises(SystemExit):
+        study.main(["--trials", "0"])
+    assert "--trials and --repeats must be >= 1" in capsys.readouterr().err
+
+
+def test_the_breakdown_accounts_for_the_whole_run(capsys: pytest.CaptureFixture[str]) -> None:
+    assert study.main(["--trials", "4", "--repeats", "1", "--breakdown"]) == 0
+    out = capsys.readouterr().out
+    table = out.split("# Where the time goes")[1]
+    rows = {line.split("|")[1].strip(): [float(x) for x in line.split("|")[2:-1]]
+            for line in table.splitlines() if line.startswith("| ") and "stage" not in line}
+    assert set(rows) == {label for label, _, _ in study.STAGES} | {
+        "other (the engine's numpy bookkeeping, rows)", "total"}
+    for c in range(2):
+        parts = sum(v[c] for k, v in rows.items() if k != "total")
+        assert parts == pytest.approx(rows["total"][c], abs=0.02 * len(rows))
+        assert all(v[c] >= 0 for k, v in rows.items() if not k.startswith("other"))
+        assert rows["controller step_batch"][c] > 0 and rows["observation (C)"][c] > 0
