@@ -21,14 +21,13 @@ from hexapod.visualize import (
     HexapodViewer,
     RecordError,
     TrialRecord,
-    _edge_planes,
-    _frustum_segments,
     load_trial,
     replay_html,
     replay_trial,
     save_trial,
     synthetic_record,
 )
+from hexapod.visualize.drawings import edge_planes, frustum_segments
 
 #: Debian's Chromium as root, headless, software WebGL, no network of its own.
 BROWSER_FLAGS = ["--headless", "--no-sandbox", "--disable-gpu", "--disable-quic",
@@ -140,7 +139,7 @@ def test_record_errors_name_the_file_and_the_key(record: TrialRecord, tmp_path: 
 def test_frustum_corners_project_to_the_image_corners(record: TrialRecord) -> None:
     T, K = record["camera_from_base"], record["camera_K"]
     w, h = record["camera_size"]
-    segs = _frustum_segments(T, K, record["camera_size"], "perspective").T  # (2N, 3)
+    segs = frustum_segments(T, K, record["camera_size"], "perspective").T  # (2N, 3)
     cam = segs @ T[:3, :3].T + T[:3, 3]
     apex = cam[0]
     np.testing.assert_allclose(apex, 0.0, atol=1e-12)  # the rays start at the centre
@@ -149,7 +148,7 @@ def test_frustum_corners_project_to_the_image_corners(record: TrialRecord) -> No
     uv = uv[:, :2] / uv[:, 2:]
     np.testing.assert_allclose(uv, [[0, 0], [w, 0], [w, h], [0, h]], atol=1e-9)
     assert np.all(tips[:, 2] > 0), "the frustum points along +z (optical axis)"
-    wide = _frustum_segments(T, K, record["camera_size"], "unified").T
+    wide = frustum_segments(T, K, record["camera_size"], "unified").T
     rays = wide[1:24:2] @ T[:3, :3].T + T[:3, 3]
     angles = np.arccos(rays[:, 2] / np.linalg.norm(rays, axis=1))
     np.testing.assert_allclose(angles, np.deg2rad(75.0))
@@ -160,7 +159,7 @@ def test_edge_planes_are_tangent_to_the_legs(record: TrialRecord) -> None:
     R, t = record["rotations"][0], record["translations"][0]
     T = record["camera_from_base"]
     centre = -T[:3, :3].T @ T[:3, 3]
-    tris = _edge_planes(g, R, t, centre)
+    tris = edge_planes(g, R, t, centre)
     A = g.base_points
     B = t + g.platform_points @ R.T
     for i in range(6):
