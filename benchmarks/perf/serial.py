@@ -29,7 +29,8 @@ import numpy as np
 
 from hexapod import deltalab
 from hexapod.backends.emulator import FaultConfig
-from hexapod.backends.serial import SerialRobot, open_emulated_robot
+from hexapod.backends.serial import SerialRobot
+from hexapod.backends.serial_emulated import open_emulated_robot
 
 
 @dataclass

@@ -43,7 +43,7 @@ from hexapod.backends.base import Backend, BackendStep, clamp_velocities, starte
 from hexapod.backends.gcs_config import GcsOptions, platform_velocity
 from hexapod.backends.gcs_link import Transport, open_transport
 from hexapod.backends.gcs_pose import PoseConvention, from_wire, to_wire
-from hexapod.backends.serial import RateLimiter
+from hexapod.backends.rate import RateLimiter
 from hexapod.exceptions import (
     BackendError,
     BackendPluginError,
@@ -303,7 +303,7 @@ class GcsHexapod(Backend):
 
     def step(self, velocities: np.ndarray, dt: float) -> BackendStep:
         """One control period: ``MOV`` to the pose of ``q + v dt`` (clamped), wait for
-        the end of the period (a :class:`~hexapod.backends.serial.RateLimiter`), ``POS?``.
+        the end of the period (a :class:`~hexapod.backends.rate.RateLimiter`), ``POS?``.
 
         Returns:
             The measured lengths, the applied velocities (zero when ``VMO?`` refused the

@@ -64,7 +64,7 @@ class BackendInfo:
 
 def _open_emulator(args: str, geometry: HexapodGeometry, start: np.ndarray | None) -> Backend:
     """A firmware emulator on a pseudo-terminal, driven through the serial backend."""
-    from hexapod.backends.serial import open_emulated_robot
+    from hexapod.backends.serial_emulated import open_emulated_robot
 
     if args:
         raise BackendPluginError("emulator", "hexapod-vs", f"takes no arguments, got {args!r}")

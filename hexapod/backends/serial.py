@@ -8,7 +8,7 @@ code drives the emulator and a real board.
 
 One :meth:`SerialRobot.step` is one control period: send ``MOV`` with the setpoints
 ``q + v dt`` (clamped to the stroke and speed limits), wait for the end of the
-period (a :class:`RateLimiter`), read ``POS?``. Every reply is checked; a garbled
+period (a :class:`~hexapod.backends.rate.RateLimiter`), read ``POS?``. Every reply is checked; a garbled
 exchange (bad checksum, unparsable or unexpected reply, ``ERR 3``) is retried a
 bounded number of times; a timeout, a disconnection or an unrecoverable error
 halts the robot (``HLT``) when the link still works and raises a typed
@@ -29,6 +29,7 @@ import serial  # pyserial (absolute import: this module is hexapod.backends.seri
 
 from hexapod.backends import protocol
 from hexapod.backends.base import Backend, BackendStep, clamp_velocities
+from hexapod.backends.rate import RateLimiter
 from hexapod.exceptions import (
     BackendError,
     CommandRejectedError,
@@ -44,65 +45,9 @@ from hexapod.exceptions import (
 
 logger = logging.getLogger(__name__)
 
-__all__ = ["RateLimiter", "SerialRobot", "open_emulated_robot"]
+__all__ = ["SerialRobot"]
 
 T = TypeVar("T")
-
-
-class RateLimiter:
-    """Regulate a loop at a fixed period (the idiom of upkie's ``loop_rate_limiters``).
-
-    Call :meth:`sleep` once per iteration: it sleeps until the next tick. A late
-    iteration does not sleep, counts as missed and restarts the schedule from now
-    (no burst of catch-up iterations).
-
-    Args:
-        period: Loop period [s].
-        name: Name for the log messages.
-        warn: Log a warning when an iteration is late by more than 10 % of the period.
-
-    Attributes:
-        period: Loop period [s].
-        slack: Time left before the tick at the last :meth:`sleep` [s] (negative: late).
-        missed: Number of late iterations.
-        iterations: Number of calls to :meth:`sleep`.
-    """
-
-    def __init__(self, period: float, name: str = "rate limiter", warn: bool = False,
-                 clock: Callable[[], float] = time.perf_counter) -> None:
-        if not (np.isfinite(period) and period > 0):
-            raise BackendError(f"{name}: period must be positive, got {period} s")
-        self.period = float(period)
-        self.name = name
-        self.warn = warn
-        self._clock = clock
-        self.next_tick = clock() + self.period
-        self.slack = 0.0
-        self.missed = 0
-        self.iterations = 0
-
-    @property
-    def frequency(self) -> float:
-        """Loop frequency [Hz]."""
-        return 1.0 / self.period
-
-    def remaining(self) -> float:
-        """Time left until the next tick [s] (negative when late)."""
-        return self.next_tick - self._clock()
-
-    def sleep(self) -> float:
-        """Sleep until the next tick; returns the slack [s] (negative: the tick was missed)."""
-        self.iterations += 1
-        self.slack = self.next_tick - self._clock()
-        if self.slack > 0:
-            time.sleep(self.slack)
-            self.next_tick += self.period
-        else:
-            self.missed += 1
-            if self.warn and self.slack < -0.1 * self.period:
-                logger.warning("%s is late by %.1f ms", self.name, -self.slack * 1e3)
-            self.next_tick = self._clock() + self.period
-        return self.slack
 
 
 class SerialRobot(Backend):
@@ -158,7 +103,7 @@ class SerialRobot(Backend):
         self._on_close = on_close
         self._buf = bytearray()
         self._rate: RateLimiter | None = None
-        #: The emulator this robot started (see :func:`open_emulated_robot`), if any.
+        #: The emulator this robot started (see :func:`~hexapod.backends.serial_emulated.open_emulated_robot`), if any.
         self.emulator: Any = None
         self._last_mov = -np.inf
         self._closed = False
@@ -551,55 +496,3 @@ class SerialRobot(Backend):
         return {"exchanges": int(rtt.size), "median_s": float(np.median(rtt)),
                 "p99_s": float(np.percentile(rtt, 99)), "max_s": float(rtt.max()),
                 "retries": self.retried, "watchdog_rearms": self.watchdog_rearms}
-
-
-def open_emulated_robot(
-    geometry: Any,
-    lengths: np.ndarray | None = None,
-    *,
-    faults: Any = None,
-    lag: float = 0.0,
-    line_rate: float = 0.0,
-    transport: str = "pty",
-    process: bool = False,
-    **robot_options: Any,
-) -> SerialRobot:
-    """Start an emulator for a geometry and connect a :class:`SerialRobot` to it.
-
-    Closing the robot stops the emulator.
-
-    Args:
-        geometry: A :class:`~hexapod.geometry.HexapodGeometry` (stroke, speed limit).
-        lengths: Initial leg lengths [m] (mid-stroke if None).
-        faults: A :class:`~hexapod.backends.emulator.FaultConfig` (none if None).
-        lag: First-order lag of the emulated legs [s].
-        line_rate: Emulated line rate [baud] (0: instantaneous).
-        transport: ``"pty"`` or ``"tcp"`` (loopback).
-        process: Run the emulator in a child process (``hexapod-emulator``: its timing
-            does not share this interpreter) instead of a thread of this one.
-        robot_options: Keyword arguments of :class:`SerialRobot`.
-
-    Returns:
-        The connected robot; ``robot.emulator`` is the running
-        :class:`~hexapod.backends.emulator.Emulator` (or
-        :class:`~hexapod.backends.emulator.EmulatorProcess`).
-    """
-    from hexapod.backends.emulator import BoardConfig, Emulator, EmulatorProcess
-
-    config = BoardConfig.from_geometry(geometry, lengths, lag=lag)
-    emu: Emulator | EmulatorProcess
-    if process:
-        emu = EmulatorProcess(config, faults, transport=transport, line_rate=line_rate)
-    else:
-        emu = Emulator(config, faults, transport=transport, line_rate=line_rate).start()
-
-    def stop_emulator() -> None:
-        emu.stop()
-
-    try:
-        robot = SerialRobot(emu.url, on_close=stop_emulator, **robot_options)
-    except BaseException:
-        emu.stop()
-        raise
-    robot.emulator = emu
-    return robot

@@ -18,7 +18,9 @@ import pytest
 from hexapod import HexapodGeometry, deltalab
 from hexapod.backends import Backend, SimulatedRobot, clamp_velocities, protocol
 from hexapod.backends.emulator import BoardConfig, Emulator, FaultConfig
-from hexapod.backends.serial import RateLimiter, SerialRobot, open_emulated_robot
+from hexapod.backends.rate import RateLimiter
+from hexapod.backends.serial import SerialRobot
+from hexapod.backends.serial_emulated import open_emulated_robot
 from hexapod.exceptions import (
     ChecksumError,
     OutsideStrokeError,

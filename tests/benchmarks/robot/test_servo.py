@@ -153,7 +153,7 @@ def test_lost_frames_are_counted_and_command_zero() -> None:
     ctrl.reset(ControllerContext(cam.camera_from_base.apply(g.base_points), g, cam, 0.02, goal))
     sensor = servo.SimCamera(cam, g, drop_every=4)
     seen: list[servo.PeriodStatus] = []
-    from hexapod.backends.serial import open_emulated_robot
+    from hexapod.backends.serial_emulated import open_emulated_robot
 
     with open_emulated_robot(g) as robot:
         res = servo.servo_loop(robot, sensor, ctrl, goal, g, 0.02, max_steps=12,

@@ -1,0 +1,71 @@
+"""A loop at a fixed period: the pacing of the real-robot backends' control periods."""
+
+from __future__ import annotations
+
+import logging
+import time
+from collections.abc import Callable
+
+import numpy as np
+
+from hexapod.exceptions import BackendError
+
+logger = logging.getLogger(__name__)
+
+__all__ = ["RateLimiter"]
+
+
+class RateLimiter:
+    """Regulate a loop at a fixed period (the idiom of upkie's ``loop_rate_limiters``).
+
+    Call :meth:`sleep` once per iteration: it sleeps until the next tick. A late
+    iteration does not sleep, counts as missed and restarts the schedule from now
+    (no burst of catch-up iterations).
+
+    Args:
+        period: Loop period [s].
+        name: Name for the log messages.
+        warn: Log a warning when an iteration is late by more than 10 % of the period.
+
+    Attributes:
+        period: Loop period [s].
+        slack: Time left before the tick at the last :meth:`sleep` [s] (negative: late).
+        missed: Number of late iterations.
+        iterations: Number of calls to :meth:`sleep`.
+    """
+
+    def __init__(self, period: float, name: str = "rate limiter", warn: bool = False,
+                 clock: Callable[[], float] = time.perf_counter) -> None:
+        if not (np.isfinite(period) and period > 0):
+            raise BackendError(f"{name}: period must be positive, got {period} s")
+        self.period = float(period)
+        self.name = name
+        self.warn = warn
+        self._clock = clock
+        self.next_tick = clock() + self.period
+        self.slack = 0.0
+        self.missed = 0
+        self.iterations = 0
+
+    @property
+    def frequency(self) -> float:
+        """Loop frequency [Hz]."""
+        return 1.0 / self.period
+
+    def remaining(self) -> float:
+        """Time left until the next tick [s] (negative when late)."""
+        return self.next_tick - self._clock()
+
+    def sleep(self) -> float:
+        """Sleep until the next tick; returns the slack [s] (negative: the tick was missed)."""
+        self.iterations += 1
+        self.slack = self.next_tick - self._clock()
+        if self.slack > 0:
+            time.sleep(self.slack)
+            self.next_tick += self.period
+        else:
+            self.missed += 1
+            if self.warn and self.slack < -0.1 * self.period:
+                logger.warning("%s is late by %.1f ms", self.name, -self.slack * 1e3)
+            self.next_tick = self._clock() + self.period
+        return self.slack
