@@ -7,13 +7,13 @@ the pseudo-terminal of the emulator (:mod:`hexapod.backends.emulator`). The same
 code drives the emulator and a real board.
 
 One :meth:`SerialRobot.step` is one control period: send ``MOV`` with the setpoints
-``q + v dt`` (clamped to the stroke and speed limits), wait for the end of the
-period (a :class:`~hexapod.backends.rate.RateLimiter`), read ``POS?``. Every reply is checked; a garbled
-exchange (bad checksum, unparsable or unexpected reply, ``ERR 3``) is retried a
-bounded number of times; a timeout, a disconnection or an unrecoverable error
-halts the robot (``HLT``) when the link still works and raises a typed
-:class:`~hexapod.exceptions.BackendError`. Leaving a ``with`` block, or Ctrl-C
-during an exchange, halts the robot and closes the port.
+``q + v dt`` (clamped to the stroke and speed limits), wait for the end of the period
+(a :class:`~hexapod.backends.rate.RateLimiter`), read ``POS?``. Every reply is
+checked; a garbled exchange (bad checksum, unparsable or unexpected reply, ``ERR 3``)
+is retried a bounded number of times; a timeout, a disconnection or an unrecoverable
+error halts the robot (``HLT``) when the link still works and raises a typed
+:class:`~hexapod.exceptions.BackendError`. Leaving a ``with`` block, or Ctrl-C during
+an exchange, halts the robot and closes the port.
 """
 
 from __future__ import annotations
@@ -103,7 +103,8 @@ class SerialRobot(Backend):
         self._on_close = on_close
         self._buf = bytearray()
         self._rate: RateLimiter | None = None
-        #: The emulator this robot started (see :func:`~hexapod.backends.serial_emulated.open_emulated_robot`), if any.
+        #: The emulator this robot started, if any (see
+        #: :func:`~hexapod.backends.serial_emulated.open_emulated_robot`).
         self.emulator: Any = None
         self._last_mov = -np.inf
         self._closed = False
