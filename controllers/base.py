@@ -222,15 +222,23 @@ class CommandBatch:
         return np.array([r is None for r in self.reasons], dtype=bool)
 
     @staticmethod
+    def zeros(n: int) -> CommandBatch:
+        """``n`` rows of zero velocities, zero norms and no reasons, to be filled."""
+        return CommandBatch(np.zeros((n, 6)), np.zeros(n), [None] * n)
+
+    def put(self, k: int, command: Command) -> None:
+        """Set row ``k`` to a per-trial :class:`Command`."""
+        self.velocities[k] = command.velocities
+        self.error_norm[k] = command.error_norm
+        self.reasons[k] = command.reason
+
+    @staticmethod
     def from_commands(commands: list[Command]) -> CommandBatch:
         """Stack per-trial :class:`Command` objects."""
-        n = len(commands)
-        v = np.zeros((n, 6))
-        norms = np.zeros(n)
+        out = CommandBatch.zeros(len(commands))
         for k, c in enumerate(commands):
-            v[k] = c.velocities
-            norms[k] = c.error_norm
-        return CommandBatch(v, norms, [c.reason for c in commands])
+            out.put(k, c)
+        return out
 
 
 class Controller(ABC):

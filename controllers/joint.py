@@ -82,19 +82,16 @@ class JointSpaceController(Controller):
         n = len(obs)
         q = np.asarray(obs.lengths, dtype=float)
         e = q - self._b_q_star[np.asarray(obs.trials, dtype=int)]
-        velocities = np.zeros((n, 6))
-        norms = np.zeros(n)
-        reasons: list[str | None] = [None] * n
+        out = CommandBatch.zeros(n)
         good = np.isfinite(q).all(axis=1) & np.isfinite(np.asarray(obs.t, dtype=float))
         x = np.abs(e).max(axis=1)
         for k in range(n):
             if not good[k]:
-                cmd = self._refusal(obs, k)
-                norms[k], reasons[k] = cmd.error_norm, cmd.reason
+                out.put(k, self._refusal(obs, k))
                 continue
-            velocities[k] = -self.gain(float(x[k])) * e[k]
-            norms[k] = math.sqrt(float(e[k] @ e[k]))
-        return CommandBatch(velocities, norms, reasons)
+            out.velocities[k] = -self.gain(float(x[k])) * e[k]
+            out.error_norm[k] = math.sqrt(float(e[k] @ e[k]))
+        return out
 
     def _refusal(self, obs: ObservationBatch, k: int) -> Command:
         problem = usable_observation_problem(obs.item(k), self.features)

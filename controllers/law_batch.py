@@ -135,9 +135,7 @@ class BatchedLaw:
         obs = observations
         n = len(obs)
         trials = np.asarray(obs.trials, dtype=int)
-        velocities = np.zeros((n, 6))
-        norms = np.zeros(n)
-        reasons: list[str | None] = [None] * n
+        out = CommandBatch.zeros(n)
         slow = np.ones(n, dtype=bool)
         feats, visible = self._batch_features(obs) if self._fn is not None else (None, None)
         if feats is not None and visible is not None:
@@ -148,14 +146,12 @@ class BatchedLaw:
                         & np.isfinite(np.asarray(obs.t, dtype=float)))
             rows = np.flatnonzero(fast)
             if len(rows):
-                done = self._fast(rows, trials[rows], feats[rows], q[rows], velocities, norms)
+                done = self._fast(rows, trials[rows], feats[rows], q[rows], out.velocities,
+                                  out.error_norm)
                 slow[rows[done]] = False
         for k in np.flatnonzero(slow):
-            cmd = self._step_one(int(trials[k]), obs, int(k))
-            velocities[k] = cmd.velocities
-            norms[k] = cmd.error_norm
-            reasons[k] = cmd.reason
-        return CommandBatch(velocities, norms, reasons)
+            out.put(int(k), self._step_one(int(trials[k]), obs, int(k)))
+        return out
 
     def _fast(self, rows: np.ndarray, trials: np.ndarray, feats: np.ndarray, q: np.ndarray,
               velocities: np.ndarray, norms: np.ndarray) -> np.ndarray:

@@ -268,9 +268,7 @@ class ModelBasedController(Controller):
         obs = observations
         n = len(obs)
         trials = np.asarray(obs.trials, dtype=int)
-        velocities = np.zeros((n, 6))
-        norms = np.zeros(n)
-        reasons: list[str | None] = [None] * n
+        out = CommandBatch.zeros(n)
         slow = np.ones(n, dtype=bool)
         q = np.asarray(obs.lengths, dtype=float)
         with np.errstate(invalid="ignore"):
@@ -292,16 +290,13 @@ class ModelBasedController(Controller):
             acc = np.flatnonzero(ok)
             self._b_R[tr[acc]] = sol.rotations[acc]
             self._b_t[tr[acc]] = sol.translations[acc]
-            velocities[rows[acc]] = Y[acc][:, _OUT["qdot"]]
-            norms[rows[acc]] = Y[acc, _AT["norm"]]
+            out.velocities[rows[acc]] = Y[acc][:, _OUT["qdot"]]
+            out.error_norm[rows[acc]] = Y[acc, _AT["norm"]]
             slow[rows[acc]] = False
         for k in np.flatnonzero(slow):
             t = int(trials[k])
             inst = self._trials[t]
             inst._R, inst._t = self._b_R[t].copy(), self._b_t[t].copy()
-            cmd = inst.step(obs.item(int(k)))
+            out.put(int(k), inst.step(obs.item(int(k))))
             self._b_R[t], self._b_t[t] = inst._R, inst._t
-            velocities[k] = cmd.velocities
-            norms[k] = cmd.error_norm
-            reasons[k] = cmd.reason
-        return CommandBatch(velocities, norms, reasons)
+        return out

@@ -186,21 +186,38 @@ class BackendPluginError(BackendError):
         super().__init__(f"backend {spec!r} ({source}): {problem}")
 
 
-class SerialLinkError(BackendError):
-    """The serial link to a robot controller failed (port, timeout, disconnection).
+class LinkError(BackendError):
+    """The link to a robot controller failed (connection, port, timeout, disconnection).
 
     Attributes:
-        url: The port (device path or pyserial URL).
+        url: The controller's address (device path, pyserial URL or ``tcp://HOST:PORT``).
         problem: What went wrong.
         command: The command being exchanged, if any.
     """
+
+    #: How the message names the controller, before its address.
+    device = ""
 
     def __init__(self, url: str, problem: str, command: str | None = None) -> None:
         self.url = url
         self.problem = problem
         self.command = command
         during = f" during '{command}'" if command else ""
-        super().__init__(f"{url}: {problem}{during}")
+        super().__init__(f"{self.device}{url}: {problem}{during}")
+
+
+def _silence(answer: str, timeout: float, received: bytes) -> str:
+    """The problem of a timeout: no ``answer`` within ``timeout`` [s], and what came."""
+    got = f", received {received!r}" if received else ", nothing received"
+    return f"no {answer} within {timeout * 1e3:.1f} ms{got}"
+
+
+class SerialLinkError(LinkError):
+    """The serial link to a robot controller failed (port, timeout, disconnection).
+
+    Attributes:
+        url: The port (device path or pyserial URL).
+    """
 
 
 class SerialTimeoutError(SerialLinkError):
@@ -214,8 +231,7 @@ class SerialTimeoutError(SerialLinkError):
     def __init__(self, url: str, command: str, timeout: float, received: bytes = b"") -> None:
         self.timeout = timeout
         self.received = received
-        got = f", received {received!r}" if received else ", nothing received"
-        super().__init__(url, f"no reply within {timeout * 1e3:.1f} ms{got}", command)
+        super().__init__(url, _silence("reply", timeout, received), command)
 
 
 class SerialDisconnectedError(SerialLinkError):
@@ -300,21 +316,14 @@ class WatchdogError(RobotFaultError):
     robot holds its position and refuses MOV until the host reads ``ERR?``."""
 
 
-class GcsLinkError(BackendError):
+class GcsLinkError(LinkError):
     """The link to a PI GCS controller failed (connection, timeout, disconnection).
 
     Attributes:
         url: The controller's address (``tcp://HOST:PORT`` or a pyserial URL).
-        problem: What went wrong.
-        command: The command being exchanged, if any.
     """
 
-    def __init__(self, url: str, problem: str, command: str | None = None) -> None:
-        self.url = url
-        self.problem = problem
-        self.command = command
-        during = f" during '{command}'" if command else ""
-        super().__init__(f"GCS controller {url}: {problem}{during}")
+    device = "GCS controller "
 
 
 class GcsTimeoutError(GcsLinkError):
@@ -328,8 +337,7 @@ class GcsTimeoutError(GcsLinkError):
     def __init__(self, url: str, command: str, timeout: float, received: bytes = b"") -> None:
         self.timeout = timeout
         self.received = received
-        got = f", received {received!r}" if received else ", nothing received"
-        super().__init__(url, f"no answer within {timeout * 1e3:.1f} ms{got}", command)
+        super().__init__(url, _silence("answer", timeout, received), command)
 
 
 class GcsDisconnectedError(GcsLinkError):

@@ -14,6 +14,7 @@ from typing import TypeVar
 
 import numpy as np
 
+from hexapod.exceptions import BackendError, ShapeError
 from hexapod.geometry import HexapodGeometry
 
 
@@ -125,6 +126,21 @@ def started(robot: BackendT, start: np.ndarray | None) -> BackendT:
             robot.close()
             raise
     return robot
+
+
+def step_command(velocities: np.ndarray, dt: float) -> np.ndarray:
+    """A period's command checked: (6,) leg velocities [m/s] and a positive period [s].
+
+    Raises:
+        ShapeError: ``velocities`` is not of shape (6,).
+        BackendError: ``dt`` is not a positive number.
+    """
+    v = np.asarray(velocities, dtype=float)
+    if v.shape != (6,):
+        raise ShapeError("velocities", "shape (6,)", v.shape)
+    if not (np.isfinite(dt) and dt > 0):
+        raise BackendError(f"dt must be positive, got {dt} s")
+    return v
 
 
 def clamp_velocities(

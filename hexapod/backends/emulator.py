@@ -74,14 +74,7 @@ def config_to_args(config: BoardConfig, faults: FaultConfig | None = None) -> li
     if c.lengths is not None:
         args += ["--lengths", *(protocol.format_mm(x) for x in c.lengths)]
     if faults is not None:
-        f = faults
-        args += ["--latency", repr(f.latency * 1e3), "--jitter", repr(f.jitter * 1e3),
-                 "--drop", repr(f.drop_rate), "--garble", repr(f.garble_rate),
-                 "--seed", str(f.seed)]
-        if f.silent_after is not None:
-            args += ["--silent-after", str(f.silent_after)]
-        if f.disconnect_after is not None:
-            args += ["--disconnect-after", str(f.disconnect_after)]
+        args += faults.to_args()
     return args
 
 

@@ -362,14 +362,8 @@ class Emulator(EmulatorServer[Board]):
 
     Args:
         config: The board (DeltaLab strokes and speed, mid-stroke, if None).
-        faults: Faults to inject (none if None).
-        transport: ``"pty"`` or ``"tcp"``.
-        host: TCP address to listen on (loopback only unless ``allow_remote``).
-        port: TCP port (0: any free port, see :attr:`url`).
-        allow_remote: Allow a non-loopback ``host``.
-        line_rate: If positive, emulate the transmission time of the lines at this baud
-            rate (10 bits a byte): each reply is delayed by the time it takes the command
-            and the reply to cross the link [baud]. 0: instantaneous.
+        faults, transport, host, port, allow_remote, line_rate: As for
+            :class:`~hexapod.backends.emulator_server.EmulatorServer`.
 
     Example:
         >>> with Emulator(BoardConfig.from_geometry(deltalab())).start() as emu:

@@ -118,6 +118,17 @@ class FaultConfig:
             if value is not None and value < 0:
                 raise BackendError(f"fault {name} must be >= 0 commands, got {value}")
 
+    def to_args(self) -> list[str]:
+        """The ``hexapod-emulator`` options that inject these faults (milliseconds)."""
+        args = ["--latency", repr(self.latency * 1e3), "--jitter", repr(self.jitter * 1e3),
+                "--drop", repr(self.drop_rate), "--garble", repr(self.garble_rate),
+                "--seed", str(self.seed)]
+        if self.silent_after is not None:
+            args += ["--silent-after", str(self.silent_after)]
+        if self.disconnect_after is not None:
+            args += ["--disconnect-after", str(self.disconnect_after)]
+        return args
+
 
 
 

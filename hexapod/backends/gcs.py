@@ -39,7 +39,13 @@ from typing import Any, TypeVar
 import numpy as np
 
 from hexapod.backends import gcs_protocol as gp
-from hexapod.backends.base import Backend, BackendStep, clamp_velocities, started
+from hexapod.backends.base import (
+    Backend,
+    BackendStep,
+    clamp_velocities,
+    started,
+    step_command,
+)
 from hexapod.backends.gcs_config import GcsOptions, platform_velocity
 from hexapod.backends.gcs_link import Transport, open_transport
 from hexapod.backends.gcs_pose import PoseConvention, from_wire, to_wire
@@ -311,14 +317,8 @@ class GcsHexapod(Backend):
             (``round_trip_s``) and whether the period was missed. ``extras``:
             ``mov_rtt_s``, ``pos_rtt_s``, ``vmo_rtt_s``, ``slack_s``, ``vmo_refused``.
         """
-        v = np.asarray(velocities, dtype=float)
-        if v.shape != (6,):
-            raise ShapeError("velocities", "shape (6,)", v.shape)
-        if not (np.isfinite(dt) and dt > 0):
-            raise BackendError(f"dt must be positive, got {dt} s")
-        if self._rate is None or self._rate.period != dt:
-            self._rate = RateLimiter(dt, name=f"GcsHexapod({self.url})")
-        rate = self._rate
+        v = step_command(velocities, dt)
+        rate = self._rate = RateLimiter.keeping(self._rate, dt, f"GcsHexapod({self.url})")
         vc, clamped = clamp_velocities(self._q, v, dt, self.stroke, self.max_speed)
         target_q = np.clip(self._q + vc * dt, *self.stroke)
 
@@ -335,9 +335,7 @@ class GcsHexapod(Backend):
             else:
                 self.vmo_refusals += 1
             t3 = time.perf_counter()
-            if rate.iterations == 0:  # the first period starts with its MOV
-                rate.next_tick = t0 + dt
-            slack = rate.sleep()
+            slack = rate.sleep_after(t0)  # the first period starts with its MOV
             t4 = time.perf_counter()
             self._read_pose()
             vmo_rtt = t2 - t1 if check else 0.0

@@ -36,14 +36,7 @@ def gcs_config_to_args(config: GcsConfig, geometry_file: str,
         p = np.asarray(c.coords)
         args += ["--pose", *(repr(x) for x in (*(p[:3] * 1e3), *np.rad2deg(p[3:])))]
     if faults is not None:
-        f = faults
-        args += ["--latency", repr(f.latency * 1e3), "--jitter", repr(f.jitter * 1e3),
-                 "--drop", repr(f.drop_rate), "--garble", repr(f.garble_rate),
-                 "--seed", str(f.seed)]
-        if f.silent_after is not None:
-            args += ["--silent-after", str(f.silent_after)]
-        if f.disconnect_after is not None:
-            args += ["--disconnect-after", str(f.disconnect_after)]
+        args += faults.to_args()
     return args
 
 

@@ -56,6 +56,21 @@ class RateLimiter:
         """Time left until the next tick [s] (negative when late)."""
         return self.next_tick - self._clock()
 
+    @classmethod
+    def keeping(cls, limiter: RateLimiter | None, period: float, name: str) -> RateLimiter:
+        """``limiter`` if it keeps ``period`` [s], else a new limiter of that period (the
+        period of a robot's loop may change from one run to the next)."""
+        if limiter is not None and limiter.period == period:
+            return limiter
+        return cls(period, name=name)
+
+    def sleep_after(self, start: float) -> float:
+        """:meth:`sleep`; the first iteration's tick is one period after ``start`` (the
+        clock time at which the period's command was sent)."""
+        if self.iterations == 0:
+            self.next_tick = start + self.period
+        return self.sleep()
+
     def sleep(self) -> float:
         """Sleep until the next tick; returns the slack [s] (negative: the tick was missed)."""
         self.iterations += 1

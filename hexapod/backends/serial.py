@@ -28,7 +28,7 @@ import numpy as np
 import serial  # pyserial (absolute import: this module is hexapod.backends.serial)
 
 from hexapod.backends import protocol
-from hexapod.backends.base import Backend, BackendStep, clamp_velocities
+from hexapod.backends.base import Backend, BackendStep, clamp_velocities, step_command
 from hexapod.backends.rate import RateLimiter
 from hexapod.exceptions import (
     BackendError,
@@ -402,14 +402,8 @@ class SerialRobot(Backend):
             period was missed. ``extras``: ``mov_rtt_s``, ``pos_rtt_s``, ``slack_s``,
             ``retries``.
         """
-        v = np.asarray(velocities, dtype=float)
-        if v.shape != (6,):
-            raise ShapeError("velocities", "shape (6,)", v.shape)
-        if not (np.isfinite(dt) and dt > 0):
-            raise BackendError(f"dt must be positive, got {dt} s")
-        if self._rate is None or self._rate.period != dt:
-            self._rate = RateLimiter(dt, name=f"SerialRobot({self.url})")
-        rate = self._rate
+        v = step_command(velocities, dt)
+        rate = self._rate = RateLimiter.keeping(self._rate, dt, f"SerialRobot({self.url})")
         q = self._q
         vc, clamped = clamp_velocities(q, v, dt, self.stroke, self.max_speed)
         setpoints = np.clip(q + vc * dt, *self.stroke)
@@ -419,9 +413,7 @@ class SerialRobot(Backend):
             t0 = time.perf_counter()
             self._send_mov(setpoints)
             t1 = time.perf_counter()
-            if rate.iterations == 0:  # the first period starts with its MOV
-                rate.next_tick = t0 + dt
-            slack = rate.sleep()
+            slack = rate.sleep_after(t0)  # the first period starts with its MOV
             t2 = time.perf_counter()
             self._q = self._checked("POS?", protocol.parse_pos)
             return t1 - t0, time.perf_counter() - t2, slack
