@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from hexapod.workspace import home_pose, sample_poses
-from vision.cameras import front_camera, omni_camera
+from vision.cameras import FRONT_DISTORTION, OMNI_DISTORTION, front_camera, omni_camera
 from vision.detect import (
     DetectionError,
     LegPrediction,
@@ -151,10 +151,19 @@ def test_nothing_is_invented_in_an_empty_image(geometry, make_camera):
     assert np.all(d.quality == 0)
 
 
-@pytest.mark.parametrize("make_camera", [front_camera, omni_camera])
+def _front_lens(geometry):
+    return front_camera(geometry).replace(distortion=FRONT_DISTORTION)
+
+
+def _omni_lens(geometry):
+    return omni_camera(geometry).replace(distortion=OMNI_DISTORTION)
+
+
+@pytest.mark.parametrize("make_camera", [front_camera, omni_camera, _front_lens, _omni_lens])
 def test_edge_order_and_orientation_follow_legs_convention(geometry, make_camera):
     """n1 and n2 come in the order and with the signs of vision.legs.leg_edges (the
-    leg direction u = n2 x n1 / |.| points from the base to the platform)."""
+    leg direction u = n2 x n1 / |.| points from the base to the platform), with an
+    ideal lens and through a distorting one."""
     cam = make_camera(geometry)
     R, t = home_pose(geometry)
     img = Renderer(cam, geometry, STYLE, rng=2).render(R, t)

@@ -8,17 +8,15 @@ keeps its rotational symmetry: the detector's one-call compiled path).
 
 from __future__ import annotations
 
-from unittest import mock
-
 import numpy as np
 import pytest
 
 from hexapod import Transform
 from hexapod.se3 import exp_so3
-from hexapod.workspace import home_pose, sample_poses
-from vision import kernels
+from hexapod.workspace import sample_poses
+from tests.vision.detection_checks import same_detection
 from vision.cameras import FRONT_DISTORTION, OMNI_DISTORTION, front_camera, omni_camera
-from vision.detect import LegPrediction, OmniDetector, PerspectiveTracker, draw_detection
+from vision.detect import LegPrediction, OmniDetector, PerspectiveTracker
 from vision.detect.curves import curved_samples, lift_near, pixels_per_radian
 from vision.legs import edge_points, limb_points, observe_legs
 from vision.render import Renderer, RenderStyle
@@ -38,16 +36,6 @@ def _omni(geometry, distortion=OMNI_DISTORTION):
 
 def _angles_deg(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     return np.degrees(np.arccos(np.clip(np.sum(a * b, -1), -1.0, 1.0)))
-
-
-def _same_detection(a, b) -> None:
-    assert np.array_equal(a.edge_visible, b.edge_visible)
-    assert np.array_equal(a.n_points, b.n_points)
-    m = a.edge_visible
-    assert np.allclose(a.normals[m], b.normals[m], rtol=0, atol=1e-12)
-    assert np.all(np.isnan(a.normals[~m])) and np.all(np.isnan(b.normals[~m]))
-    assert np.allclose(a.residual[m], b.residual[m], rtol=0, atol=1e-9)
-    assert np.allclose(a.points, b.points, rtol=0, atol=1e-9, equal_nan=True)
 
 
 # ----------------------------------------------------------------- curved samples
@@ -254,41 +242,6 @@ def test_curved_alignment_recovers_the_image_offset(geometry, rng, background):
 
 
 # ----------------------------------------------------------------- compiled == numpy
-@pytest.mark.parametrize("background", ["plain", "cluttered"])
-def test_compiled_curved_tracker_equals_numpy(geometry, rng, background):
-    """The curved tracker's pass through both paths (profiles along the curves' normals,
-    occlusion gate in the ideal image, Theil-Sen, fits): a wide search then a
-    refinement, a stripe of wrong edges, predictions off by several pixels and running
-    out of the image, an edge without prediction."""
-    cam = _front(geometry)
-    r = Renderer(cam, geometry, RenderStyle(background=background, blur_px=0.8,
-                                            noise_std=3.0), rng=rng)
-    tr = PerspectiveTracker(cam)
-    Rs, ts = sample_poses(geometry, 8, rng)
-    compared = 0
-    for k in range(8):
-        img = r.render(Rs[k], ts[k])
-        if k % 3 == 0:
-            img[300:310] = 255 - img[300:310]
-        pred = LegPrediction.from_pose(cam, geometry, Rs[k], ts[k] + rng.normal(0, 0.004, 3))
-        if k == 5:
-            n = pred.normals.copy()
-            n[2, 1] = np.nan
-            pred = LegPrediction(pred.base_points, pred.directions, pred.lengths, n,
-                                 pred.radius)
-        if k == 7:
-            pred = LegPrediction.from_pose(cam, geometry, Rs[k], ts[k] + [0.0, 0.25, 0.0])
-        for search, refine in ((None, None), (40.0, 4.0), (3.0, 0.0)):
-            a = tr.detect(img, pred, search, refine)
-            with mock.patch.object(kernels, "available", return_value=False):
-                b = tr.detect(img, pred, search, refine)
-            _same_detection(a, b)
-            compared += int(a.edge_visible.sum())
-        if k == 5:
-            assert not a.edge_visible[2, 1]
-    assert compared > 150
-
-
 @pytest.mark.parametrize("distortion", [OMNI_DISTORTION, OMNI_RADIAL])
 def test_compiled_omni_detection_on_distorted_frames_equals_numpy(geometry, rng, distortion):
     cam = _omni(geometry, distortion)
@@ -301,28 +254,10 @@ def test_compiled_omni_detection_on_distorted_frames_equals_numpy(geometry, rng,
         pred = LegPrediction.from_pose(cam, geometry, Rs[k], ts[k]) if k % 2 else None
         a = det.detect(img, pred, geometry=geometry, use_compiled=True)
         b = det.detect(img, pred, geometry=geometry, use_compiled=False)
-        _same_detection(a, b)
+        same_detection(a, b)
 
 
 # ----------------------------------------------------------------- conventions
-@pytest.mark.parametrize("make_camera", [_front, _omni])
-def test_edge_order_orientation_and_drawing_through_the_lens(geometry, make_camera):
-    cam = make_camera(geometry)
-    R, t = home_pose(geometry)
-    img = Renderer(cam, geometry, STYLE, rng=2).render(R, t)
-    pred = LegPrediction.from_pose(cam, geometry, R, t)
-    det = OmniDetector(cam) if cam.kind == "unified" else PerspectiveTracker(cam)
-    d = det.detect(img, pred)
-    obs = observe_legs(cam, geometry, R, t)
-    assert d.edge_visible.all()
-    assert np.all(np.sum(d.normals * obs.normals, -1) > 0.999)
-    u = np.cross(d.normals[:, 1], d.normals[:, 0])
-    u /= np.linalg.norm(u, axis=-1, keepdims=True)
-    assert np.all(np.sum(u * obs.directions, -1) > 0.99)
-    out = draw_detection(img, cam, d)
-    assert out.shape == (cam.height, cam.width, 3)
-
-
 def test_predicted_segments_end_on_the_curves(geometry):
     """Through a distorted lens the predicted segments' ends lie on the predicted curves
     (the curves' samples at t = 0 and 1), not on the ideal image's lines (several

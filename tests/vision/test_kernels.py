@@ -8,8 +8,9 @@ import numpy as np
 import pytest
 
 from hexapod.workspace import sample_poses
+from tests.vision.detection_checks import same_detection
 from vision import kernels
-from vision.cameras import front_camera, omni_camera
+from vision.cameras import FRONT_DISTORTION, front_camera, omni_camera
 from vision.detect import LegPrediction, OmniDetector, PerspectiveTracker, _robust_fit
 from vision.render import Renderer, RenderStyle
 
@@ -17,17 +18,6 @@ from vision.render import Renderer, RenderStyle
 def test_the_kernels_compile_here() -> None:
     """CI has a C compiler: the compiled path must be the one measured and tested."""
     assert kernels.available()
-
-
-def _same_detection(a, b) -> None:
-    assert np.array_equal(a.edge_visible, b.edge_visible)
-    assert np.array_equal(a.n_points, b.n_points)
-    m = a.edge_visible
-    assert np.allclose(a.normals[m], b.normals[m], rtol=0, atol=1e-12)
-    assert np.all(np.isnan(a.normals[~m])) and np.all(np.isnan(b.normals[~m]))
-    assert np.allclose(a.residual[m], b.residual[m], rtol=0, atol=1e-9)
-    assert np.array_equal(np.isnan(a.points), np.isnan(b.points))
-    assert np.allclose(a.points, b.points, rtol=0, atol=1e-9, equal_nan=True)
 
 
 @pytest.mark.parametrize("background", ["plain", "cluttered"])
@@ -46,7 +36,7 @@ def test_compiled_omni_detection_equals_numpy(geometry, rng, background) -> None
         pred = LegPrediction.from_pose(cam, geometry, Rs[k], ts[k]) if k % 2 else None
         a = det.detect(img, pred, geometry=geometry, use_compiled=True)
         b = det.detect(img, pred, geometry=geometry, use_compiled=False)
-        _same_detection(a, b)
+        same_detection(a, b)
         missing += int((~a.edge_visible).sum())
     if background == "cluttered":
         assert missing > 0  # the comparison covered rejected edges too
@@ -66,25 +56,30 @@ def test_compiled_scan_of_an_anisotropic_camera_equals_numpy(geometry, rng) -> N
         img = r.render(Rs[k], ts[k])
         a = det.detect(img, geometry=geometry, use_compiled=True)
         b = det.detect(img, geometry=geometry, use_compiled=False)
-        _same_detection(a, b)
+        same_detection(a, b)
         assert a.edge_visible.sum() >= 10
 
 
+@pytest.mark.parametrize(("lens", "poses", "least"), [(None, 12, 300),
+                                                     (FRONT_DISTORTION, 8, 150)])
 @pytest.mark.parametrize("background", ["plain", "cluttered"])
-def test_compiled_tracker_pass_equals_numpy(geometry, rng, background) -> None:
+def test_compiled_tracker_pass_equals_numpy(geometry, rng, background, lens, poses,
+                                            least) -> None:
     """The perspective tracker through both paths (profiles, gradient peak, occlusion
     gate, Theil-Sen, three fits): tracking passes, a wide search then a refinement with
     per-edge half-lengths, a stripe of wrong edges, predictions off by several pixels
-    and running out of the image, an edge without prediction."""
+    and running out of the image, an edge without prediction; with an ideal lens and
+    through a distorting one (profiles along the curves' normals, the occlusion gate in
+    the ideal image)."""
     from unittest import mock
 
-    cam = front_camera(geometry)
+    cam = front_camera(geometry).replace(distortion=lens)
     style = RenderStyle(background=background, blur_px=0.8, noise_std=3.0)
     r = Renderer(cam, geometry, style, rng=rng)
     tr = PerspectiveTracker(cam)
-    Rs, ts = sample_poses(geometry, 12, rng)
+    Rs, ts = sample_poses(geometry, poses, rng)
     compared = 0
-    for k in range(12):
+    for k in range(poses):
         img = r.render(Rs[k], ts[k])
         if k % 3 == 0:
             img[300:310] = 255 - img[300:310]  # a stripe of wrong edges
@@ -100,11 +95,11 @@ def test_compiled_tracker_pass_equals_numpy(geometry, rng, background) -> None:
             a = tr.detect(img, pred, search, refine)
             with mock.patch.object(kernels, "available", return_value=False):
                 b = tr.detect(img, pred, search, refine)
-            _same_detection(a, b)
+            same_detection(a, b)
             compared += int(a.edge_visible.sum())
         if k == 5:
             assert not a.edge_visible[2, 1]
-    assert compared > 300
+    assert compared > least
 
 
 def test_fit_kernel_degenerate_edges(rng) -> None:
@@ -142,7 +137,7 @@ def test_without_a_compiler_the_numpy_path_runs(monkeypatch, caplog, geometry, r
         assert not kernels.available()
         assert not kernels.available()
     assert sum("C compilation unavailable" in r.message for r in caplog.records) == 1
-    _same_detection(OmniDetector(cam).detect(img, geometry=geometry), reference)
+    same_detection(OmniDetector(cam).detect(img, geometry=geometry), reference)
 
 
 def test_no_compile_environment_variable(monkeypatch) -> None:

@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from hexapod.workspace import home_pose, sample_poses
+from hexapod.workspace import sample_poses
 from vision.cameras import FRONT_DISTORTION, OMNI_DISTORTION, front_camera, omni_camera
 from vision.legs import limb_points, observe_legs
 from vision.render import Renderer, RenderError, RenderStyle
@@ -126,49 +126,6 @@ def test_row_coverage_across_a_curved_limb_is_the_true_limb_position(geometry, r
     e = np.abs(np.array(errors))
     assert e.size > 300
     assert e.max() < 0.02 and np.median(e) < 0.005, (e.max(), np.median(e))
-
-
-@pytest.mark.parametrize("exact", [True, False])
-@pytest.mark.parametrize("make_camera", [_front, _omni])
-def test_rendered_distorted_edges_lie_on_the_true_limbs(geometry, make_camera, exact):
-    """The 50 % grey level across each limb, read along the image normal of the curve
-    (gradient of ``n . lift(p)``, the lift removing the distortion), is near the true
-    limb: the bounds of tests/vision/test_render.py for undistorted cameras (median
-    0.15 px, 95th percentile 0.4 px; exact renderer 0.07 / 0.12 px)."""
-    import cv2
-
-    from vision.legs import edge_points
-
-    cam = make_camera(geometry)
-    R, t = home_pose(geometry)
-    img = Renderer(cam, geometry, RenderStyle(shading_bands=1, platform=False),
-                   use_compiled=exact).render(R, t)
-    obs = observe_legs(cam, geometry, R, t)
-    ep = edge_points(cam, obs.base_points, obs.directions, obs.radius, obs.lengths, 12,
-                     normals=obs.normals, span=(0.3, 0.7))
-    errors = []
-    for i in range(6):
-        for j in range(2):
-            n = obs.normals[i, j]
-            for p, v in zip(ep.pixels[i, j], ep.visible[i, j], strict=True):
-                if not v:
-                    continue
-                e = 1e-3
-                dx, dy = np.array([e, 0.0]), np.array([0.0, e])
-                g = np.array([n @ cam.lift(p + dx) - n @ cam.lift(p - dx),
-                              n @ cam.lift(p + dy) - n @ cam.lift(p - dy)])
-                g /= np.linalg.norm(g)
-                s = np.linspace(-3, 3, 601)
-                q = (p[None] + s[:, None] * g[None]).astype(np.float32)
-                prof = cv2.remap(img.astype(np.float32), q[:, :1].T.copy(), q[:, 1:].T.copy(),
-                                 cv2.INTER_LINEAR)[0]
-                errors.append(s[np.argmax(prof > 0.5 * (35.0 + 230.0))])
-    errors = np.abs(np.array(errors))
-    assert errors.size > 60
-    p95 = np.percentile(errors, 95)
-    assert np.median(errors) < 0.15 and p95 < 0.4, (np.median(errors), p95)
-    if exact:
-        assert np.median(errors) < 0.07 and p95 < 0.12, (np.median(errors), p95)
 
 
 def test_an_ideal_lens_is_drawn_as_before(geometry, rng):
