@@ -10,7 +10,6 @@ from __future__ import annotations
 
 import json
 import os
-import signal
 import socket
 import subprocess
 import sys
@@ -21,6 +20,7 @@ from pathlib import Path
 import pytest
 
 from hexapod.backends import gcs_protocol as gp
+from tests.benchmarks.robot.interrupt import interrupt_servo
 
 ROOT = Path(__file__).resolve().parents[2]
 ENV = {**os.environ, "PYTHONUNBUFFERED": "1"}
@@ -67,22 +67,9 @@ def test_ctrl_c_on_servo_halts_the_platform(controller: str, tmp_path: Path) -> 
     # VLS 0.1 mm/s: the platform lags its targets, so it would still be moving after the
     # process exits if nothing halted it
     spec = f"gcs:tcp://{controller}?velocity=0.1"
-    proc = subprocess.Popen([sys.executable, "-m", "benchmarks.robot.servo", "--backend", spec,
-                             "--goal", str(goal), "--log", str(log), "-o", "gain=3"],
-                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
-                            cwd=ROOT, env=ENV)
-    try:
-        deadline = time.monotonic() + 60
-        while time.monotonic() < deadline and (
-                not log.exists() or len(log.read_text().splitlines()) < 10):
-            assert proc.poll() is None, proc.communicate()
-            time.sleep(0.05)
-        proc.send_signal(signal.SIGINT)
-        out, err = proc.communicate(timeout=20)
-    finally:
-        if proc.poll() is None:
-            proc.kill()
-    assert proc.returncode == 130, (out, err)
+    code, out, err = interrupt_servo(
+        ["--backend", spec, "--goal", str(goal), "-o", "gain=3"], log, ROOT, ENV, 60)
+    assert code == 130, (out, err)
     assert "interrupted after" in out and "the robot was halted" in out
     assert "Traceback" not in err
     rows = [json.loads(x) for x in log.read_text().splitlines()]

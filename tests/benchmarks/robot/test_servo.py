@@ -5,16 +5,13 @@ from __future__ import annotations
 
 import json
 import os
-import signal
-import subprocess
-import sys
-import time
 from pathlib import Path
 
 import numpy as np
 import pytest
 
 from benchmarks.robot import servo
+from tests.benchmarks.robot.interrupt import interrupt_servo
 
 # a reachable goal 2 to 3 mm from the emulator's initial (mid-stroke, 415 mm) lengths
 GOAL_MM = [417.5, 412.5, 417.0, 413.0, 417.5, 412.5]
@@ -229,23 +226,10 @@ def test_ctrl_c_halts_and_exits_130(tmp_path: Path) -> None:
     goal = _goal(tmp_path, f"lengths_mm = {_mm(GOAL_MM)}\n")
     log = tmp_path / "servo.jsonl"
     env = {**os.environ, "PYTHONUNBUFFERED": "1"}
-    proc = subprocess.Popen([sys.executable, "-m", "benchmarks.robot.servo", "--backend",
-                             "emulator",
-                             "--goal", str(goal), "--log", str(log), "-o", "gain=0.2"],
-                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
-                            cwd=Path(__file__).resolve().parents[3], env=env)
-    try:
-        deadline = time.monotonic() + 30
-        while time.monotonic() < deadline and (
-                not log.exists() or len(log.read_text().splitlines()) < 10):
-            assert proc.poll() is None, proc.communicate()
-            time.sleep(0.05)
-        proc.send_signal(signal.SIGINT)
-        out, err = proc.communicate(timeout=20)
-    finally:
-        if proc.poll() is None:
-            proc.kill()
-    assert proc.returncode == 130, (out, err)
+    code, out, err = interrupt_servo(
+        ["--backend", "emulator", "--goal", str(goal), "-o", "gain=0.2"], log,
+        Path(__file__).resolve().parents[3], env, 30)
+    assert code == 130, (out, err)
     assert "interrupted after" in out and "the robot was halted" in out
     assert "Traceback" not in err
 
