@@ -38,12 +38,15 @@ Layout, imports one way (each module imports only those above it):
 """
 
 from vision.cameras.base import Camera
+from vision.cameras.double_sphere import DoubleSphereCamera
+from vision.cameras.eucm import ExtendedUnifiedCamera
 from vision.cameras.factory import (
     load_camera,
     load_opencv_camera,
     read_camera,
     save_opencv_camera,
 )
+from vision.cameras.fisheye import FisheyeCamera
 from vision.cameras.perspective import PerspectiveCamera
 from vision.cameras.presets import (
     FRONT_AZIMUTH_DEG,
@@ -72,6 +75,9 @@ __all__ = [
     "OMNI_DISTORTION",
     "OMNI_FOCAL",
     "Camera",
+    "DoubleSphereCamera",
+    "ExtendedUnifiedCamera",
+    "FisheyeCamera",
     "PerspectiveCamera",
     "UnifiedCamera",
     "camera_preset",

@@ -21,12 +21,9 @@ from hexapod.config import load_toml, suggest
 from hexapod.kinematics import Transform
 from vision.cameras import projection
 from vision.cameras.checks import as_pixels, as_points
-from vision.cameras.distortion import (
-    RadialTangential,
-    check_no_fold_in_image,
-    parse_coefficients,
-)
+from vision.cameras.distortion import RadialTangential, parse_coefficients
 from vision.cameras.fields import CameraFields
+from vision.cameras.lens import Lens, check_no_fold_in_image
 from vision.exceptions import CameraError
 
 #: ``(table, path, model) -> camera`` and ``camera -> table``: the camera file format,
@@ -54,7 +51,8 @@ class Camera(ABC):
         distortion: Read-only lens distortion coefficients in OpenCV's order,
             ``(k1, k2, p1, p2, k3)`` (perspective) or ``(k1, k2, p1, p2)`` (unified);
             zeros for an ideal lens.
-        lens: The distortion map (:class:`vision.cameras.distortion.RadialTangential`).
+        lens: The distortion map (:class:`vision.cameras.lens.Lens`: OpenCV's
+            radial-tangential model, its full model, or a radial fisheye model).
         camera_from_base: Pose of the camera w.r.t. the robot base,
             ``p_camera = R p_base + t``.
         name: A label.
@@ -68,7 +66,7 @@ class Camera(ABC):
     height: int
     xi: float
     distortion: np.ndarray
-    lens: RadialTangential
+    lens: Lens
     camera_from_base: Transform
     name: str
     source: str | None
@@ -88,13 +86,25 @@ class Camera(ABC):
 
     def _set_lens(self, distortion: Any) -> None:
         """Validate the distortion; refuse one that folds inside the image."""
-        coeffs = parse_coefficients(distortion, self.distortion_lengths, self.source)
-        self.lens = RadialTangential(coeffs)
-        d = coeffs[: max(self.distortion_lengths)].copy()
+        self.lens, d = self._make_lens(distortion)
         d.flags.writeable = False
         self.distortion = d
         check_no_fold_in_image(self.lens, self.K, self.width, self.height,
                                projection.domain_radius(self.xi), self.source)
+
+    def _make_lens(self, distortion: Any) -> tuple[Lens, np.ndarray]:
+        """The lens map of the distortion coefficients and the coefficients kept
+        (OpenCV's radial-tangential model; other models override)."""
+        coeffs = parse_coefficients(distortion, self.distortion_lengths, self.source)
+        return RadialTangential(coeffs), coeffs[: max(self.distortion_lengths)].copy()
+
+    def lens_scaled(self, factor: float) -> Camera:
+        """The camera with its distortion coefficients times ``factor`` (0: the ideal
+        lens), e.g. the model of a user who misses part of the lens."""
+        if factor == 1.0 or not self.is_distorted:
+            return self
+        d = np.asarray(self.distortion, float) * factor
+        return self.replace(distortion=None if not np.any(d) else d)
 
     # ------------------------------------------------------------- derived
     @property
