@@ -215,21 +215,29 @@ def parse_scenario(table: dict[str, Any], path: str = "<dict>") -> Scenario:
     if len(given) > 1:
         raise ScenarioError(path, f"give one of 'preset', 'file' or 'opencv', not "
                             f"{' and '.join(given)}", key="camera")
+    from vision.cameras.files.opencv import is_opencv_file
+
+    # 'opencv', or 'file' naming a calibration file (OpenCV, ROS camera_info, Kalibr).
+    calibration = "opencv" if "opencv" in camera else (
+        "file" if isinstance(camera.get("file"), str) and is_opencv_file(camera["file"])
+        else None)
     for key in ("pose", "camera_from_base", "width_px", "height_px"):
-        if key in camera and "opencv" not in camera:
-            raise ScenarioError(path, "only with 'opencv' (a preset or a camera file gives "
-                                "its own pose and size)", key=f"camera.{key}")
+        if key in camera and calibration is None:
+            raise ScenarioError(path, "only with 'opencv' or a calibration 'file' (a preset "
+                                "or a camera TOML file gives its own pose and size)",
+                                key=f"camera.{key}")
     if "pose" in camera and "camera_from_base" in camera:
         raise ScenarioError(path, "give 'pose' (a preset's placement) or a "
                             "[camera.camera_from_base] table, not both", key="camera")
     camera_file = None
     camera_preset: str | None = "front"
     opencv: dict[str, Any] | None = None
-    if "file" in camera:
+    if "file" in camera and calibration is None:
         camera_file = str(base_dir / _typed(camera["file"], str, path, "camera.file"))
         camera_preset = None
-    elif "opencv" in camera:
-        camera_file = str(base_dir / _typed(camera["opencv"], str, path, "camera.opencv"))
+    elif calibration is not None:
+        camera_file = str(base_dir / _typed(camera[calibration], str, path,
+                                            f"camera.{calibration}"))
         camera_preset = None
         opencv = {k: camera[k] for k in ("pose", "camera_from_base", "width_px", "height_px")
                   if k in camera}

@@ -19,7 +19,7 @@ LAYERS = {
     "perspective": 4, "unified": 4,
     "fisheye": 5, "double_sphere": 5, "eucm": 5,
     "presets": 6,
-    "files": 6, "files.project": 6, "files.opencv": 6,
+    "files": 6, "files.project": 6, "files.opencv": 6, "files.ros": 6, "files.kalibr": 6,
     "factory": 7,
     "": 8,
 }
