@@ -242,9 +242,10 @@ def parse_scenario(table: dict[str, Any], path: str = "<dict>") -> Scenario:
         opencv = {k: camera[k] for k in ("pose", "camera_from_base", "width_px", "height_px")
                   if k in camera}
         if "pose" in opencv:
-            _typed(opencv["pose"], str, path, "camera.pose", ("front", "omni"))
+            _typed(opencv["pose"], str, path, "camera.pose", ("front", "omni", "fisheye"))
     elif "preset" in camera:
-        camera_preset = _typed(camera["preset"], str, path, "camera.preset", ("front", "omni"))
+        camera_preset = _typed(camera["preset"], str, path, "camera.preset",
+                               ("front", "omni", "fisheye"))
 
     sensor_t = dict(_section(table, "sensor", path))
     sensor_keys = ("kind", "teach_frames", *(f.name for f in fields(ImageConfig)))

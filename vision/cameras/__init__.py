@@ -69,6 +69,7 @@ from vision.cameras.presets import (
     OMNI_DISTORTION,
     OMNI_FOCAL,
     camera_preset,
+    fisheye_camera,
     front_camera,
     omni_camera,
 )
@@ -92,6 +93,7 @@ __all__ = [
     "UnifiedCamera",
     "camera_from_calibration",
     "camera_preset",
+    "fisheye_camera",
     "front_camera",
     "load_camera",
     "load_opencv_camera",

@@ -59,6 +59,10 @@ class Camera(ABC):
     """
 
     kind: ClassVar[str]
+    #: ``"perspective"`` (a pinhole, possibly through a lens: the edges are lines of
+    #: the ideal image, the tracker detects them) or ``"unified"`` (conics, the
+    #: omnidirectional circle scan): the part of the pipeline the model uses.
+    family: ClassVar[str]
     #: Accepted lengths of the distortion vector.
     distortion_lengths: ClassVar[tuple[int, ...]]
     K: np.ndarray

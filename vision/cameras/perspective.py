@@ -63,6 +63,7 @@ class PerspectiveCamera(Camera):
     """
 
     kind: ClassVar[str] = "perspective"
+    family: ClassVar[str] = "perspective"
     distortion_lengths: ClassVar[tuple[int, ...]] = OPENCV_LENGTHS
 
     def __init__(

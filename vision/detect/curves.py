@@ -70,22 +70,6 @@ class CurvedSamples:
         return np.where(np.any(fin, axis=2), o, np.nan)
 
 
-def _lens(c: np.ndarray, x: np.ndarray, y: np.ndarray) -> tuple[np.ndarray, ...]:
-    """The distortion ``(x_d, y_d)`` at ``(x, y)`` and its (symmetric) Jacobian
-    ``(j11, j12, j22)``: :class:`vision.cameras.distortion.RadialTangential` without stacking."""
-    k1, k2, p1, p2, k3 = (float(v) for v in c)
-    r2 = x * x + y * y
-    L = 1.0 + r2 * (k1 + r2 * (k2 + r2 * k3))
-    M = 2.0 * k1 + r2 * (4.0 * k2 + 6.0 * k3 * r2)
-    xy2 = 2.0 * x * y
-    xd = x * L + p1 * xy2 + p2 * (r2 + 2.0 * x * x)
-    yd = y * L + p1 * (r2 + 2.0 * y * y) + p2 * xy2
-    j11 = L + x * x * M + 2.0 * p1 * y + 6.0 * p2 * x
-    j12 = x * y * M + 2.0 * p1 * x + 2.0 * p2 * y
-    j22 = L + y * y * M + 6.0 * p1 * y + 2.0 * p2 * x
-    return xd, yd, j11, j12, j22
-
-
 def _min_singular(a: np.ndarray, b: np.ndarray, c: np.ndarray, d: np.ndarray) -> np.ndarray:
     """Smallest singular value of the 2x2 matrices ``[[a, b], [c, d]]``."""
     s = a * a + b * b + c * c + d * d
@@ -119,7 +103,7 @@ def curved_samples(camera: Camera, prediction: LegPrediction, t: np.ndarray,
     with np.errstate(invalid="ignore", divide="ignore"):
         iz = np.where(Z > 0, 1.0 / Z, np.nan)
     x, y = X[..., 0] * iz, X[..., 1] * iz
-    xd, yd, j11, j12, j22 = _lens(camera.lens.coefficients, x, y)
+    xd, yd, j11, j12, j21, j22 = camera.lens.parts(x, y)
     K = camera.K
     fx, sk, cx, fy, cy = K[0, 0], K[0, 1], K[0, 2], K[1, 1], K[1, 2]
     P = np.stack([fx * xd + sk * yd + cx, fy * yd + cy], -1)
@@ -129,7 +113,7 @@ def curved_samples(camera: Camera, prediction: LegPrediction, t: np.ndarray,
         """Pixel derivative (du, dv) of the projection along the 3D direction v (6, 2, 3)."""
         a = (v[:, :, None, 0] - x * v[:, :, None, 2]) * iz
         b = (v[:, :, None, 1] - y * v[:, :, None, 2]) * iz
-        e, f = j11 * a + j12 * b, j12 * a + j22 * b
+        e, f = j11 * a + j12 * b, j21 * a + j22 * b
         return fx * e + sk * f, fy * f
 
     tu, tv = image_direction(d)
@@ -142,9 +126,9 @@ def curved_samples(camera: Camera, prediction: LegPrediction, t: np.ndarray,
     m = np.stack([x, y], -1)
     gate = np.stack([fx * x + sk * y + cx, fy * y + cy], -1)
     # The ideal-to-raw pixel map K2 Jd K2^-1 and its smallest magnification.
-    a11 = j11 + sk * j12 / fx
+    a11 = j11 + sk * j21 / fx
     a12 = (fx * j12 + sk * j22 - a11 * sk) / fy
-    a21 = fy * j12 / fx
+    a21 = fy * j21 / fx
     a22 = j22 - a21 * sk / fy
     with np.errstate(invalid="ignore", divide="ignore"):
         margin = margin_px / _min_singular(a11, a12, a21, a22)
@@ -177,18 +161,18 @@ def lift_near(camera: Camera, pixels: np.ndarray, m0: np.ndarray
     ok0 = np.isfinite(m0).all(-1)
     x = np.where(ok0, m0[..., 0], ux)
     y = np.where(ok0, m0[..., 1], uy)
-    c = camera.lens.coefficients
+    lens = camera.lens
     with np.errstate(invalid="ignore", divide="ignore", over="ignore"):
         for _ in range(LIFT_ITERATIONS):
-            xd, yd, j11, j12, j22 = _lens(c, x, y)
+            xd, yd, j11, j12, j21, j22 = lens.parts(x, y)
             fx_, fy_ = xd - ux, yd - uy
-            det = j11 * j22 - j12 * j12
+            det = j11 * j22 - j12 * j21
             sx = (j22 * fx_ - j12 * fy_) / det
-            sy = (j11 * fy_ - j12 * fx_) / det
+            sy = (j11 * fy_ - j21 * fx_) / det
             x, y = x - sx, y - sy
             if not (np.any(np.abs(sx) > 1e-15) or np.any(np.abs(sy) > 1e-15)):
                 break
-        xd, yd = _lens(c, x, y)[:2]
+        xd, yd = lens.parts(x, y)[:2]
         res = np.hypot(xd - ux, yd - uy)
     m = np.stack([x, y], -1)
     finite = np.isfinite(md).all(-1)
@@ -219,11 +203,11 @@ def pixels_per_radian(camera: Camera, m: np.ndarray, normals: np.ndarray) -> np.
     # Gradient of n . X_s w.r.t. m, then through the inverse distortion and K.
     g0 = (nn[..., 0] - ns * x / h) / h
     g1 = (nn[..., 1] - ns * y / h) / h
-    _, _, j11, j12, j22 = _lens(camera.lens.coefficients, x, y)
+    _, _, j11, j12, j21, j22 = camera.lens.parts(x, y)
     K = camera.K
     with np.errstate(invalid="ignore", divide="ignore"):
-        det = j11 * j22 - j12 * j12
-        d0 = (g0 * j22 - g1 * j12) / det
+        det = j11 * j22 - j12 * j21
+        d0 = (g0 * j22 - g1 * j21) / det
         d1 = (g1 * j11 - g0 * j12) / det
         p0 = d0 / K[0, 0]
         p1 = (d1 - p0 * K[0, 1]) / K[1, 1]
