@@ -11,8 +11,12 @@ With ``--distortion`` each camera also runs through a distorted lens, on the sam
 poses: the front camera with the 4.8 mm lens's distortion
 (:data:`vision.cameras.FRONT_DISTORTION`, k1 = -0.28) and the omnidirectional one
 with a mild Mei distortion (:data:`vision.cameras.OMNI_DISTORTION`, k1 = -0.08);
-the frames are rendered through the lens (curved limbs) and the detectors use the
-distorted camera model. The ``lens`` column tells the rows apart.
+the front camera also through the other lens models (:func:`lens_models`: OpenCV's
+full model, a Kannala-Brandt fisheye, a double sphere and an extended unified lens,
+with the front camera's K and pose). The frames are rendered through the lens
+(curved limbs) and the detectors use the camera model with the lens. The ``lens``
+column tells the rows apart; ``vs ideal`` is the detection time over the same
+camera's ideal-lens time (goal of the lens models: 2x at most).
 
 Run: ``python -m benchmarks.perf.detect [--frames N] [--background plain|cluttered]
 [--distortion] [--pictures DIR]``.
@@ -38,15 +42,28 @@ from vision.cameras import (
     FRONT_DISTORTION,
     OMNI_DISTORTION,
     Camera,
+    DoubleSphereCamera,
+    ExtendedUnifiedCamera,
+    FisheyeCamera,
+    PerspectiveCamera,
     front_camera,
     omni_camera,
 )
+from vision.cameras.presets import FISHEYE_DISTORTION
 from vision.detect import LegPrediction, OmniDetector, PerspectiveTracker, draw_detection
 from vision.legs import observe_legs
 from vision.render import Renderer, RenderStyle
 
 #: Goals of the issue [ms per frame].
 GOALS_MS = {"omni": 0.3, "front": 2.0}
+
+#: OpenCV's full model of :func:`lens_models`: the 4.8 mm lens's five coefficients plus
+#: rational, thin-prism and tilt terms.
+FULL_DISTORTION = (-0.28, 0.09, 5e-4, -3e-4, -0.012, 0.02, 0.004, 0.0, 2e-4, -1e-4, 3e-4,
+                   1e-4, 0.002, -0.001)
+#: The double sphere and extended unified lenses of :func:`lens_models`.
+DS_LENS = (-0.15, 0.57)
+EUCM_LENS = (0.6, 1.1)
 
 #: Below this visible fraction a reported edge is invented (nothing of it to see).
 INVENTED_FRACTION = 0.25
@@ -85,13 +102,30 @@ class EdgeCounts:
         self.partly_hidden += int((extra & (visible_fraction >= INVENTED_FRACTION)).sum())
 
 
+def lens_models(front: PerspectiveCamera) -> list[tuple[str, Camera]]:
+    """The front camera through the other lens models, labelled: OpenCV's full model
+    (:data:`FULL_DISTORTION`), the fisheye (Kannala-Brandt, the fisheye preset's
+    coefficients), the double sphere (:data:`DS_LENS`, its focal lengths times
+    ``1 + xi`` so that the centre of the image is magnified as by the front camera)
+    and the extended unified model (:data:`EUCM_LENS`)."""
+    xi = DS_LENS[0]
+    Kd = front.K.copy()
+    Kd[:2, :2] *= 1.0 + xi
+    Kd[0, 1] = 0.0
+    pose, w, h = front.camera_from_base, front.width, front.height
+    return [("opencv-full", front.replace(distortion=FULL_DISTORTION)),
+            ("fisheye", FisheyeCamera(front.K, w, h, pose, distortion=FISHEYE_DISTORTION)),
+            ("double-sphere", DoubleSphereCamera(Kd, w, h, pose, distortion=DS_LENS)),
+            ("eucm", ExtendedUnifiedCamera(front.K, w, h, pose, distortion=EUCM_LENS))]
+
+
 def _run(cam: Camera, frames: int, style: RenderStyle, seed: int,
-         pictures: Path | None, repeats: int) -> dict[str, float]:
+         pictures: Path | None, repeats: int, lens: str = "ideal") -> dict[str, float]:
     geo = deltalab()
     rng = np.random.default_rng(seed)
     Rs, ts = sample_poses(geo, frames, rng)
     renderer = Renderer(cam, geo, style, rng=rng)
-    omni = cam.kind == "unified"
+    omni = cam.family == "unified"
     det_o = OmniDetector(cam) if omni else None
     det_p = None if omni else PerspectiveTracker(cam)
     auto = det_o.default_prediction(geo) if det_o is not None else None
@@ -126,7 +160,7 @@ def _run(cam: Camera, frames: int, style: RenderStyle, seed: int,
         if pictures is not None and k == 0:
             pictures.mkdir(parents=True, exist_ok=True)
             suffix = "" if style.background == "plain" else f"-{style.background}"
-            suffix += "-distorted" if cam.is_distorted else ""
+            suffix += "" if lens == "ideal" else f"-{lens}"
             name = f"detect-{'omni' if omni else 'front'}{suffix}.png"
             cv2.imwrite(str(pictures / name), draw_detection(img, cam, d))
     e = np.concatenate(errs) if errs else np.array([np.nan])
@@ -163,8 +197,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     p.add_argument("--pictures", type=Path, default=None,
                    help="write detect-omni.png / detect-front.png of the first frame here "
                         "(-cluttered before .png on a cluttered background; with "
-                        "--distortion also detect-omni-distorted.png and "
-                        "detect-front-distorted.png)")
+                        "--distortion also detect-omni-distorted.png, "
+                        "detect-front-distorted.png and detect-front-LENS.png of the other "
+                        "lens models)")
     args = p.parse_args(argv)
     style = RenderStyle(background=args.background, blur_px=args.blur, noise_std=args.noise)
     out = sys.stdout
@@ -177,28 +212,36 @@ def main(argv: Sequence[str] | None = None) -> int:
     if args.distortion:
         out.write(f"# lenses: front distorted {_coefficients(FRONT_DISTORTION)} (k1, k2, p1, "
                   f"p2, k3), omni distorted {_coefficients(OMNI_DISTORTION)} (Mei: k1, k2, "
-                  f"p1, p2); same poses for both lenses\n")
+                  f"p1, p2); front also through opencv-full {_coefficients(FULL_DISTORTION)}, "
+                  f"fisheye {_coefficients(FISHEYE_DISTORTION)} (k1..k4), double-sphere "
+                  f"{_coefficients(DS_LENS)} (xi, alpha), eucm {_coefficients(EUCM_LENS)} "
+                  f"(alpha, beta); same poses for every lens\n")
     header = ("camera", "size", "render ms", "detect ms (median)", "detect ms (p95)",
               "goal ms", "numpy ms (median)", "numpy / compiled", "err median deg",
               "err p95 deg", "err max deg", "found/visible", "missed", "partly hidden found",
-              "invented", "lens")
+              "invented", "lens", "vs ideal")
     out.write("| " + " | ".join(header) + " |\n|" + "---|" * len(header) + "\n")
-    cameras: list[tuple[str, Camera]] = []
+    cameras: list[tuple[str, str, Camera]] = []
+    front = front_camera()
     presets: list[tuple[str, Camera, tuple[float, ...]]] = [
-        ("omni", omni_camera(), OMNI_DISTORTION), ("front", front_camera(), FRONT_DISTORTION)]
+        ("omni", omni_camera(), OMNI_DISTORTION), ("front", front, FRONT_DISTORTION)]
     for name, ideal, distortion in presets:
-        cameras.append((name, ideal))
+        cameras.append((name, "ideal", ideal))
         if args.distortion:
-            cameras.append((name, ideal.replace(distortion=distortion)))
-    for name, cam in cameras:
-        r = _run(cam, args.frames, style, args.seed, args.pictures, args.repeats)
-        lens = "distorted" if cam.is_distorted else "ideal"
+            cameras.append((name, "distorted", ideal.replace(distortion=distortion)))
+    if args.distortion:
+        cameras += [("front", label, cam) for label, cam in lens_models(front)]
+    ideal_ms: dict[str, float] = {}
+    for name, lens, cam in cameras:
+        r = _run(cam, args.frames, style, args.seed, args.pictures, args.repeats, lens)
+        ideal_ms.setdefault(name, r["detect_ms"])
         out.write(f"| {name} | {cam.width}x{cam.height} | {r['render_ms']:.2f} | "
                   f"{r['detect_ms']:.3f} | {r['detect_p95_ms']:.3f} | {GOALS_MS[name]} | "
                   f"{r['numpy_ms']:.3f} | {r['speedup']:.1f}x | "
                   f"{r['median_deg']:.4f} | {r['p95_deg']:.4f} | {r['max_deg']:.4f} | "
                   f"{int(r['found'])}/{int(r['truth_visible'])} | {int(r['missed'])} | "
-                  f"{int(r['partly_hidden'])} | {int(r['invented'])} | {lens} |\n")
+                  f"{int(r['partly_hidden'])} | {int(r['invented'])} | {lens} | "
+                  f"{r['detect_ms'] / ideal_ms[name]:.2f}x |\n")
     return 0
 
 
