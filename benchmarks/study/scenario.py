@@ -288,6 +288,7 @@ def parse_scenario(table: dict[str, Any], path: str = "<dict>") -> Scenario:
                                                      robot_preset, path)
     if task.kind == "fixed":
         _check_fixed_task(task, robot_preset, geometry_data, path)
+    _check_lens_error(camera_data, cal_err, sweep, path)
     reference = table.get("reference", {})
     if not isinstance(reference, dict):
         raise ScenarioError(path, "expected a table", key="reference")
@@ -347,6 +348,22 @@ def _read_files(geometry_file: str | None, camera_file: str | None, cal: Calibra
     except CameraError as exc:
         raise ScenarioError(camera_file or path, str(exc), key="camera") from None
     return geometry, camera, points
+
+
+def _check_lens_error(camera: Any, cal_err: CalibrationErrorConfig,
+                      sweep: dict[str, list[Any]], path: str) -> None:
+    """Each ``distortion_percent`` is one the camera file's lens model has (a fisheye,
+    double sphere or extended unified lens: 0 or 100 only)."""
+    if camera is None:
+        return
+    from vision.exceptions import CameraError
+
+    key = "calibration_error.distortion_percent"
+    for value in sweep.get(key, [cal_err.distortion_percent]):
+        try:
+            camera.lens_scaled(1.0 - 1e-2 * float(value))
+        except CameraError as exc:
+            raise ScenarioError(path, f"{value}: {exc}", key=key) from None
 
 
 def _check_scaled_errors(cal_err: CalibrationErrorConfig, sweep: dict[str, list[Any]],

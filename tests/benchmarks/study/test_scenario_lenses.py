@@ -53,3 +53,13 @@ def test_camera_file_takes_a_kalibr_chain_with_a_pose(tmp_path: Path) -> None:
     with pytest.raises(ScenarioError, match="only with 'opencv' or a calibration 'file'") as e:
         load_scenario(study)
     assert e.value.key == "camera.pose"
+
+
+def test_a_fisheye_lens_is_modelled_or_ignored_not_in_part(tmp_path: Path) -> None:
+    fisheye_camera().to_toml(tmp_path / "cam.toml")
+    study = tmp_path / "s.toml"
+    study.write_text('name = "x"\ncontrollers = ["leg-edge"]\n[camera]\nfile = "cam.toml"\n'
+                     "[calibration_error]\ndistortion_percent = [0.0, 50.0]\n")
+    with pytest.raises(ScenarioError, match="not in part") as info:
+        load_scenario(study)
+    assert info.value.key == "calibration_error.distortion_percent"
