@@ -18,8 +18,11 @@ with the front camera's K and pose). The frames are rendered through the lens
 column tells the rows apart; ``vs ideal`` is the detection time over the same
 camera's ideal-lens time (goal of the lens models: 2x at most).
 
+``--rounds N`` also times the detection of every camera round by round, the cameras
+interleaved, so that the ratios to the ideal lens hold when the machine's load changes.
+
 Run: ``python -m benchmarks.perf.detect [--frames N] [--background plain|cluttered]
-[--distortion] [--pictures DIR]``.
+[--distortion] [--rounds N] [--pictures DIR]``.
 """
 
 from __future__ import annotations
@@ -181,6 +184,39 @@ def _run(cam: Camera, frames: int, style: RenderStyle, seed: int,
     }
 
 
+def interleaved_times(cameras: list[tuple[str, str, Camera]], frames: int, rounds: int,
+                      style: RenderStyle, seed: int) -> list[tuple[float, float]]:
+    """Detection time of each camera measured round by round, the cameras interleaved
+    (so that a change of the machine's load hits them alike): ``frames`` rendered
+    frames per camera (the same poses), every round detecting all of them with each
+    camera in turn. Returns per camera the fastest and the median round [ms per
+    frame]."""
+    geo = deltalab()
+    Rs, ts = sample_poses(geo, frames, np.random.default_rng(seed))
+    work: list[tuple[OmniDetector | PerspectiveTracker, list[np.ndarray],
+                     list[LegPrediction]]] = []
+    for _, _, cam in cameras:
+        renderer = Renderer(cam, geo, style, rng=np.random.default_rng(seed))
+        imgs = [renderer.render(Rs[k], ts[k]) for k in range(frames)]
+        det: OmniDetector | PerspectiveTracker
+        if cam.family == "unified":
+            det = OmniDetector(cam)
+            preds = [det.default_prediction(geo)] * frames
+        else:
+            det = PerspectiveTracker(cam)
+            preds = [LegPrediction.from_pose(cam, geo, Rs[k], ts[k] + 0.003)
+                     for k in range(frames)]
+        work.append((det, imgs, preds))
+    times: list[list[float]] = [[] for _ in cameras]
+    for _ in range(rounds):
+        for c, (det, imgs, preds) in enumerate(work):
+            t0 = time.perf_counter()
+            for k in range(frames):
+                det.detect(imgs[k], preds[k])
+            times[c].append(1e3 * (time.perf_counter() - t0) / frames)
+    return [(float(np.min(t)), float(np.median(t))) for t in times]
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     """Command-line entry point; returns the exit status."""
     p = argparse.ArgumentParser(prog="python -m benchmarks.perf.detect",
@@ -194,6 +230,10 @@ def main(argv: Sequence[str] | None = None) -> int:
     p.add_argument("--seed", type=int, default=2026)
     p.add_argument("--distortion", action="store_true",
                    help="also run each camera through a distorted lens (same poses)")
+    p.add_argument("--rounds", type=int, default=0,
+                   help="also time the detection of every camera round by round, the "
+                        "cameras interleaved (N rounds of 10 frames each): the ratios to "
+                        "the ideal lens under a changing machine load")
     p.add_argument("--pictures", type=Path, default=None,
                    help="write detect-omni.png / detect-front.png of the first frame here "
                         "(-cluttered before .png on a cluttered background; with "
@@ -242,6 +282,17 @@ def main(argv: Sequence[str] | None = None) -> int:
                   f"{int(r['found'])}/{int(r['truth_visible'])} | {int(r['missed'])} | "
                   f"{int(r['partly_hidden'])} | {int(r['invented'])} | {lens} | "
                   f"{r['detect_ms'] / ideal_ms[name]:.2f}x |\n")
+    if args.rounds > 0:
+        out.write(f"\n# interleaved: {args.rounds} rounds of 10 frames per camera, the "
+                  "cameras in turn in each round\n| camera | lens | fastest round ms | vs "
+                  "ideal (fastest) | median round ms | vs ideal (median) |\n"
+                  "|---|---|---|---|---|---|\n")
+        rounds = interleaved_times(cameras, 10, args.rounds, style, args.seed)
+        base: dict[str, tuple[float, float]] = {}
+        for (name, lens, _), (fast, med) in zip(cameras, rounds, strict=True):
+            b = base.setdefault(name, (fast, med))
+            out.write(f"| {name} | {lens} | {fast:.3f} | {fast / b[0]:.2f}x | {med:.3f} | "
+                      f"{med / b[1]:.2f}x |\n")
     return 0
 
 

@@ -70,3 +70,17 @@ def test_distortion_rows_beside_the_ideal_ones(tmp_path) -> None:
                      "detect-front-eucm.png", "detect-front-fisheye.png",
                      "detect-front-opencv-full.png", "detect-front.png",
                      "detect-omni-distorted.png", "detect-omni.png"]
+
+
+def test_interleaved_rounds_give_ratios_to_the_ideal_lens() -> None:
+    """``--rounds``: a second table, one row per camera, the ideal rows at 1.00x and each
+    ratio the row's time over its camera's ideal-lens time."""
+    buf = io.StringIO()
+    with redirect_stdout(buf):
+        assert main(["--frames", "2", "--repeats", "1", "--rounds", "2"]) == 0
+    text = buf.getvalue().split("# interleaved")[1]
+    rows = [[c.strip() for c in line.strip("|").split("|")] for line in text.splitlines()
+            if line.startswith("| omni") or line.startswith("| front")]
+    assert [(r[0], r[1]) for r in rows] == [("omni", "ideal"), ("front", "ideal")]
+    for r in rows:
+        assert r[3] == r[5] == "1.00x" and float(r[2]) > 0 and float(r[4]) >= float(r[2])
