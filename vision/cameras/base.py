@@ -43,14 +43,17 @@ class Camera(ABC):
     """Common base of the camera models.
 
     Attributes:
-        kind: ``"perspective"`` or ``"unified"``.
+        kind: The model: ``"perspective"``, ``"unified"``, ``"fisheye"``,
+            ``"double_sphere"`` or ``"eucm"``.
         K: (3, 3) intrinsics [px] (read-only array).
         width: Image width [px].
         height: Image height [px].
         xi: Mirror parameter of the unified model (0 for the perspective camera).
-        distortion: Read-only lens distortion coefficients in OpenCV's order,
-            ``(k1, k2, p1, p2, k3)`` (perspective) or ``(k1, k2, p1, p2)`` (unified);
-            zeros for an ideal lens.
+        distortion: Read-only lens parameters in the model's order: OpenCV's
+            ``(k1, k2, p1, p2, k3[, k4..k6[, s1..s4[, tau_x, tau_y]]])`` (perspective),
+            ``(k1, k2, p1, p2)`` (unified), ``(k1, k2, k3, k4)`` (fisheye), ``(xi,
+            alpha)`` (double sphere), ``(alpha, beta)`` (extended unified); zeros for
+            an ideal lens.
         lens: The distortion map (:class:`vision.cameras.lens.Lens`: OpenCV's
             radial-tangential model, its full model, or a radial fisheye model).
         camera_from_base: Pose of the camera w.r.t. the robot base,
@@ -357,10 +360,11 @@ class Camera(ABC):
     def to_toml(self, path: str | Path) -> None:
         """Save the camera to a TOML file.
 
-        Format: ``kind`` (``"perspective"``/``"unified"``), ``name``, ``width_px``,
-        ``height_px``, ``fx_px``, ``fy_px``, ``cx_px``, ``cy_px``, ``skew_px``, ``xi``
-        (unified only) and a table ``[camera_from_base]`` with ``translation_mm`` and
-        ``rotation_vector_deg`` (axis times angle, degrees) such that
+        Format (:mod:`vision.cameras.files.project`): ``kind`` (the model), ``name``,
+        ``width_px``, ``height_px``, ``fx_px``, ``fy_px``, ``cx_px``, ``cy_px``,
+        ``skew_px``, ``xi`` (unified only), ``distortion`` (the lens parameters, absent
+        for an ideal lens) and a table ``[camera_from_base]`` with ``translation_mm``
+        and ``rotation_vector_deg`` (axis times angle, degrees) such that
         ``p_camera = R p_base + t``.
         """
         Path(path).write_text(tomli_w.dumps(self.to_dict()))
