@@ -135,13 +135,19 @@ class ReferenceDynamics:
         return self._classical(R, v, a)
 
     def forward_lcaba(self, R: np.ndarray, t: np.ndarray, twist: np.ndarray,
-                      forces: np.ndarray, mu: float = 1e-6, iterations: int = 100
+                      forces: np.ndarray, mu: float = 1e-3, iterations: int = 50
                       ) -> np.ndarray:
-        """Platform acceleration (6,) from ``pin.lcaba`` (for comparison only: see
-        ``docs/dynamics.md`` for how far it agrees)."""
+        """Platform acceleration (6,) from ``pin.lcaba``, for comparison only.
+
+        ``lcaba`` is a proximal (regularised) solver: on this model, with ``mu = 1e-3``
+        and 10 or more iterations it agrees with :meth:`forward` to about 1e-11
+        (relative); with ``mu = 1e-6`` (its docstring's "typical value") it stalls near
+        1e-8, with ``mu = 1e-9`` near 1e-5, with ``mu = 1e-12`` it is off by 1e-2 and
+        with ``mu = 0`` it returns NaN (``docs/dynamics.md``). It runs on its own
+        ``Data`` and constraint datas: a ``constraintDynamics`` given the constraint
+        datas an ``lcaba`` call has used returns accelerations off by about 1e-3.
+        """
         q, v, _ = self.state(R, t, twist)
-        # Its own Data: computeJointMinimalOrdering reorders the elimination and a
-        # constraintDynamics on the same Data afterwards returns wrong accelerations.
         data = self.model.createData()
         datas = pin.StdVec_RigidConstraintData()
         for cm in self.constraints:
