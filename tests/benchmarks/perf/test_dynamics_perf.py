@@ -26,3 +26,12 @@ def test_wired_in_the_cli(capsys: pytest.CaptureFixture[str]) -> None:
     assert cli_main(["perf", "dynamics", "-n", "10", "--repeats", "1"]) == 0
     out = capsys.readouterr().out
     assert "pinocchio constraintDynamics" in out and "DynamicModel.forward_batch" in out
+
+
+def test_energy_drift_table_shrinks_with_the_step() -> None:
+    rows = dynamics.energy_drift(steps=(2e-2, 1e-2), n=2)
+    (dt1, drift1, ortho1), (dt2, drift2, ortho2) = rows
+    assert (dt1, dt2) == (2e-2, 1e-2)
+    assert drift2 < drift1 < 1e-8       # RK4: fourth order, tiny at these steps
+    assert max(ortho1, ortho2) < 1e-8
+    assert "classical RK4" in dynamics.format_energy(rows)
