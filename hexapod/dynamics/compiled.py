@@ -175,42 +175,49 @@ def _expressions() -> tuple[ca.SX, dict[str, ca.SX]]:
 
 
 @lru_cache(maxsize=1)
-def _functions() -> dict[str, CompiledFunction]:
-    """The compiled functions: ``forward`` (acceleration, 6), ``inverse`` (leg forces,
-    their residual ``K^T f - (M acc + h)`` and ``M acc + h``: 18), ``terms``
-    (:data:`TERMS`) and ``forward_drives`` (:data:`DRIVES_ROW` inputs, 18 outputs)."""
-    x, e = _expressions()
+def _cached_expressions() -> tuple[ca.SX, dict[str, ca.SX]]:
+    return _expressions()
+
+
+def _build(name: str) -> ca.Function:
+    """The CasADi function ``name``: ``forward`` (acceleration, 6), ``inverse`` (leg
+    forces, their residual ``K^T f - (M acc + h)`` and ``M acc + h``: 18), ``terms``
+    (:data:`TERMS`) or ``forward_drives`` (:data:`DRIVES_ROW` inputs, 18 outputs)."""
+    x, e = _cached_expressions()
     M, h, K = e["M"], e["h"], e["K"]
     u = x[18:24]
-    forward = ca.cse(_ldl_solve(M, K.T @ u - h))
-    rhs = M @ u + h
-    f = ca.solve(K.T, rhs)
-    # the residual exposes a singular K (the solve returns finite garbage there)
-    inverse = ca.cse(ca.vertcat(f, K.T @ f - rhs, rhs))
-    terms = ca.cse(ca.vertcat(ca.reshape(M, 36, 1), h, ca.reshape(K, 36, 1), e["kinetic"],
-                              e["potential"], e["q_dot"], e["leg_bias"]))
-    # Leg-space masses: a (moves with the leg, e.g. reflected rotor inertia) and b (an
-    # implicit velocity-dependent force, -dt d(force)/d(q_dot), without the bias term).
-    extra = ca.SX.sym("legs", 12)
-    a, b = extra[0:6], extra[6:12]
-    leg_bias = e["leg_bias"]
-    M_eff = M + K.T @ ca.diag(a + b) @ K
-    acc = _ldl_solve(M_eff, K.T @ (u - a * leg_bias) - h)
-    drives = ca.cse(ca.vertcat(acc, e["q_dot"], K @ acc + leg_bias))
-    return {
-        "forward": CompiledFunction(ca.Function("hexapod_dyn_forward", [x], [forward])),
-        "inverse": CompiledFunction(ca.Function("hexapod_dyn_inverse", [x], [inverse])),
-        "terms": CompiledFunction(ca.Function("hexapod_dyn_terms", [x], [terms])),
-        "forward_drives": CompiledFunction(ca.Function(
-            "hexapod_dyn_forward_drives", [ca.vertcat(x, extra)], [drives])),
-    }
+    if name == "forward":
+        return ca.Function("hexapod_dyn_forward", [x], [ca.cse(_ldl_solve(M, K.T @ u - h))])
+    if name == "inverse":
+        rhs = M @ u + h
+        f = ca.solve(K.T, rhs)
+        # the residual exposes a singular K (the solve returns finite garbage there)
+        return ca.Function("hexapod_dyn_inverse", [x],
+                           [ca.cse(ca.vertcat(f, K.T @ f - rhs, rhs))])
+    if name == "terms":
+        return ca.Function("hexapod_dyn_terms", [x], [ca.cse(ca.vertcat(
+            ca.reshape(M, 36, 1), h, ca.reshape(K, 36, 1), e["kinetic"], e["potential"],
+            e["q_dot"], e["leg_bias"]))])
+    if name == "forward_drives":
+        # Leg-space masses: a (moves with the leg, e.g. reflected rotor inertia) and b
+        # (an implicit velocity-dependent force, -dt d(force)/d(q_dot), without the bias).
+        extra = ca.SX.sym("legs", 12)
+        a, b = extra[0:6], extra[6:12]
+        leg_bias = e["leg_bias"]
+        M_eff = M + K.T @ ca.diag(a + b) @ K
+        acc = _ldl_solve(M_eff, K.T @ (u - a * leg_bias) - h)
+        return ca.Function("hexapod_dyn_forward_drives", [ca.vertcat(x, extra)],
+                           [ca.cse(ca.vertcat(acc, e["q_dot"], K @ acc + leg_bias))])
+    raise ValueError(f"unknown compiled dynamics function {name!r}; expected one of "
+                     "forward, inverse, terms, forward_drives")
 
 
+@lru_cache(maxsize=8)
 def compiled(name: str) -> CompiledFunction:
     """One of the compiled functions (``"forward"``, ``"inverse"``, ``"terms"``,
-    ``"forward_drives"``), built and compiled on first use (cached on disk by
-    :mod:`hexapod.compiled`)."""
-    return _functions()[name]
+    ``"forward_drives"``), built and compiled on first use (the C library is cached
+    on disk by :mod:`hexapod.compiled`)."""
+    return CompiledFunction(_build(name))
 
 
 def pack(R: np.ndarray, t: np.ndarray, twist: np.ndarray, u: np.ndarray,
