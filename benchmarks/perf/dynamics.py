@@ -12,7 +12,9 @@ leg forces of about 30 N):
 - ``compiled batch``: the compiled C function looped in C over a batch, per state;
 - ``compiled forward_drives batch``: the same with the drives' leg-space masses (zero
   here) and the leg rates and accelerations as outputs;
-- ``DynamicModel.forward_batch``: the same with the packing of the rows, the input
+- ``compiled inverse batch``: the inverse dynamics (leg forces from constraintDynamics'
+  accelerations; its error column compares the forces with those given);
+- ``DynamicModel.forward_batch``: the forward batch with the packing of the rows, the input
   checks and the finiteness check, per state.
 
 Times are medians over many runs (``--repeats``); the accuracy columns give the largest
@@ -161,6 +163,17 @@ def dynamics_figures(n: int = 1000, repeats: int = 30, seed: int = 0,
     us = float(np.median(times)) * 1e6
     figures.append(DynamicsFigure(f"compiled forward_drives batch of {n}", us, base_us / us,
                                   _relative(acc_drives, acc_ref)))
+    inverse_rows = rows.copy()
+    inverse_rows[:, 18:24] = acc_ref
+    inverse = dyn_compiled.compiled("inverse")
+    times = []
+    for _ in range(repeats):
+        t0 = time.perf_counter()
+        f_back = inverse.batch(inverse_rows)[:, :6]
+        times.append((time.perf_counter() - t0) / n)
+    us = float(np.median(times)) * 1e6
+    figures.append(DynamicsFigure(f"compiled inverse batch of {n} (forces)", us,
+                                  base_us / us, _relative(f_back, forces)))
     times = []
     for _ in range(repeats):
         t0 = time.perf_counter()
