@@ -106,6 +106,18 @@ def _leg(A: ca.SX, B: ca.SX, B_dot: ca.SX, c_B: ca.SX, leg: ca.SX
     return u, beta, m_r, y, potential, q_dot, bias
 
 
+def _symmetric_outer(a: ca.SX, k: ca.SX) -> ca.SX:
+    """``a k^T`` for ``a`` parallel to ``k``, from its upper triangle (21 products)."""
+    n = k.shape[0]
+    out = ca.SX.zeros(n, n)
+    for i in range(n):
+        for j in range(i, n):
+            out[i, j] = a[i] * k[j]
+            if j != i:
+                out[j, i] = out[i, j]
+    return out
+
+
 def _ldl_solve(M: ca.SX, b: ca.SX) -> ca.SX:
     """``M^-1 b`` for a symmetric positive-definite ``M`` by an unrolled LDL^T."""
     n = M.shape[0]
@@ -153,8 +165,10 @@ def _expressions() -> tuple[ca.SX, dict[str, ca.SX]]:
     potential = -m_p * ca.dot(gravity, t + rc)
     # The legs, through their platform joints: B_dot = Jb tau, B_ddot = Jb tau_dot + c_B,
     # Jb = [I, -[b]x], c_B = w x (w x b); Jb^T M_leg Jb = beta Jb^T Jb + (m_r - beta) k k^T
-    # with k = Jb^T u the leg's row of K.
+    # with k = Jb^T u the leg's row of K, and Jb^T Jb = [[I, -[b]x], [[b]x, |b|^2 I - b b^T]]
+    # summed over the legs as sum(beta), sum(beta b) and sum(beta (|b|^2 I - b b^T)).
     k_rows, q_dots, biases = [], [], []
+    s0, s1, s2 = ca.SX(0), ca.SX.zeros(3), ca.SX.zeros(3, 3)
     for i in range(6):
         b = R @ E[:, i]
         c_B = ca.cross(w, ca.cross(w, b))
@@ -163,11 +177,14 @@ def _expressions() -> tuple[ca.SX, dict[str, ca.SX]]:
         q_dots.append(q_dot)
         biases.append(bias)
         k = ca.vertcat(u, ca.cross(b, u))
-        Jb = ca.horzcat(ca.SX.eye(3), -_skew(b))
-        M += beta * (Jb.T @ Jb) + (m_r - beta) * (k @ k.T)
+        s0 += beta
+        s1 += beta * b
+        s2 += beta * (ca.dot(b, b) * ca.SX.eye(3) - b @ b.T)
+        M += _symmetric_outer((m_r - beta) * k, k)
         h += ca.vertcat(y, ca.cross(b, y))
         potential += v_leg
         k_rows.append(k.T)
+    M += ca.vertcat(ca.horzcat(s0 * ca.SX.eye(3), -_skew(s1)), ca.horzcat(_skew(s1), s2))
     K = ca.vertcat(*k_rows)
     kinetic = 0.5 * ca.dot(tau, M @ tau)
     return x, {"M": M, "h": h, "K": K, "kinetic": kinetic, "potential": potential,
