@@ -11,6 +11,10 @@
   prediction through a distorted lens) and gate coordinates of its own (the ideal
   image); the lift through the distortion stays in numpy, shared by both paths
   (:func:`vision.detect.curves.lift_near`).
+- Lens maps (``lens_kernels.c``): OpenCV's 14-coefficient distortion and its
+  Jacobian (:func:`opencv_lens_parts`), the arithmetic of
+  :meth:`vision.cameras.distortion_full.OpenCVLens.parts_numpy` operation by operation
+  (the tests check them equal); the tracker evaluates it four times per pass.
 - Renderer (``render_kernels.c``): exact-coverage polygon filling
   (:class:`PolygonFiller`): a pixel's value is blended by the exact area of its
   unit square inside the shape, so that a rendered edge has no bias whatever its
@@ -50,7 +54,7 @@ _I: Any = ctypes.c_int64
 _D: Any = ctypes.c_double
 
 #: The C sources, in the order they are concatenated into one library.
-SOURCES = ("detect_kernels.c", "render_kernels.c", "observe_kernels.c")
+SOURCES = ("detect_kernels.c", "render_kernels.c", "observe_kernels.c", "lens_kernels.c")
 
 _lib: ctypes.CDLL | None = None
 _tried = False
@@ -95,6 +99,8 @@ def _load() -> ctypes.CDLL | None:
     lib.hexapod_observe_batch.restype = ctypes.c_int
     lib.hexapod_segments_imaged.argtypes = [_P, _I, _P, _I, _D, _D, _P]
     lib.hexapod_segments_imaged.restype = None
+    lib.opencv_lens_parts.argtypes = [_P, _P, _I, _P, _P, _I, _P]
+    lib.opencv_lens_parts.restype = None
     _lib = lib
     return lib
 
@@ -345,6 +351,26 @@ def align_shift(image: np.ndarray, P: np.ndarray, out: np.ndarray, seg: np.ndarr
     return shift
 
 
+def opencv_lens_parts(x: np.ndarray, y: np.ndarray, coefficients: np.ndarray,
+                      tilt: np.ndarray, tilted: bool) -> tuple[np.ndarray, ...] | None:
+    """The compiled :meth:`vision.cameras.distortion_full.OpenCVLens.parts_numpy`:
+    ``(x_d, y_d, j11, j12, j21, j22)`` at ``(x, y)`` (same shape), or None when the
+    kernels are not compiled. ``coefficients`` (14,), ``tilt`` (3, 3), ``tilted``: a
+    tilt angle is nonzero."""
+    lib = _load()
+    if lib is None:
+        return None
+    xb, yb = np.broadcast_arrays(np.asarray(x, dtype=np.float64),
+                                 np.asarray(y, dtype=np.float64))
+    xc, yc = _c(xb, np.float64), _c(yb, np.float64)
+    n = xc.size
+    c, T = _c(coefficients, np.float64), _c(tilt, np.float64)
+    out = np.empty((6, *xb.shape))
+    lib.opencv_lens_parts(xc.ctypes.data, yc.ctypes.data, int(n), c.ctypes.data,
+                          T.ctypes.data, int(bool(tilted)), out.ctypes.data)
+    return tuple(out)
+
+
 def fit_planes(
     rays: np.ndarray, valid: np.ndarray, px_per_rad: np.ndarray | float,
     predicted: np.ndarray, outlier_px: float, min_points: int, max_rms_px: float,
@@ -452,4 +478,4 @@ class PolygonFiller:
 
 
 __all__ = ["FLAGS", "SOURCES", "OmniKernel", "PolygonFiller", "TrackKernel", "align_shift",
-           "available", "fit_planes"]
+           "available", "fit_planes", "opencv_lens_parts"]

@@ -246,3 +246,56 @@ def test_compiled_alignment_equals_numpy(geometry, rng, background) -> None:
             b, pb = tr.align(img, pred, max_shift, use_compiled=False)
             assert np.array_equal(a, b), (k, max_shift, a, b)
             assert np.allclose(pa.normals, pb.normals, atol=1e-12, equal_nan=True)
+
+
+#: OpenCV coefficient sets of the compiled lens map: rational (8), thin prism (12),
+#: tilted (14, as in ``hexapod-bench perf detect``), and a strong tilt.
+_OPENCV_SETS = [
+    (-0.28, 0.09, 5e-4, -3e-4, -0.012, 0.02, 0.004, 0.0),
+    (-0.28, 0.09, 5e-4, -3e-4, -0.012, 0.02, 0.004, 0.001, 2e-4, -1e-4, 3e-4, 1e-4),
+    (-0.28, 0.09, 5e-4, -3e-4, -0.012, 0.02, 0.004, 0.0, 2e-4, -1e-4, 3e-4, 1e-4, 0.002,
+     -0.001),
+    (0.1, -0.05, 1e-3, 2e-3, 0.01, 0.3, -0.02, 0.005, 1e-3, 0.0, -2e-3, 5e-4, 0.3, -0.2),
+]
+
+
+@pytest.mark.parametrize("coefficients", _OPENCV_SETS)
+def test_compiled_opencv_lens_equals_numpy(rng, coefficients) -> None:
+    """The compiled OpenCV lens map and Jacobian are the numpy reference's bit for bit
+    (same operations, no fused multiply-add), also far beyond the fold, on NaN and
+    infinite coordinates and on a scalar point."""
+    from vision.cameras.distortion_full import OpenCVLens
+
+    lens = OpenCVLens(coefficients)
+    x = rng.uniform(-3.0, 3.0, (6, 2, 23))
+    y = rng.uniform(-3.0, 3.0, (6, 2, 23))
+    x[0, 0, :3] = np.nan, 0.0, np.inf
+    y[0, 0, :3] = 0.1, 0.0, 0.2
+    compiled = kernels.opencv_lens_parts(x, y, lens.coefficients, lens.tilt,
+                                         bool(np.any(lens.coefficients[12:])))
+    assert compiled is not None
+    with np.errstate(all="ignore"):
+        reference = lens.parts_numpy(x, y)
+        via_parts = lens.parts(x, y)
+    for a, b, c in zip(compiled, reference, via_parts, strict=True):
+        assert a.shape == x.shape
+        np.testing.assert_array_equal(a, b)
+        np.testing.assert_array_equal(c, b)
+    scalar = lens.parts(0.3, -0.2)
+    for a, b in zip(scalar, lens.parts_numpy(0.3, -0.2), strict=True):
+        assert np.ndim(a) == 0 and a == b
+
+
+def test_opencv_lens_without_the_kernels_uses_numpy(monkeypatch, rng) -> None:
+    """Without the compiled cores the OpenCV lens map runs its numpy reference."""
+    from vision.cameras.distortion_full import OpenCVLens
+
+    lens = OpenCVLens(_OPENCV_SETS[2])
+    x, y = rng.uniform(-0.8, 0.8, (2, 40))
+    expected = lens.parts(x, y)
+    monkeypatch.setattr(kernels, "_lib", None)
+    monkeypatch.setattr(kernels, "_tried", False)
+    monkeypatch.setenv("HEXAPOD_NO_COMPILE", "1")
+    assert kernels.opencv_lens_parts(x, y, lens.coefficients, lens.tilt, True) is None
+    for a, b in zip(lens.parts(x, y), expected, strict=True):
+        np.testing.assert_array_equal(a, b)

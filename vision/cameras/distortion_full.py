@@ -136,7 +136,17 @@ class OpenCVLens(Lens):
         return xu, yu, a11, a12, a21, a22
 
     def parts(self, x: np.ndarray, y: np.ndarray) -> tuple[np.ndarray, ...]:
-        """The map and its Jacobian ``(x_d, y_d, j11, j12, j21, j22)`` at ``(x, y)``."""
+        """The map and its Jacobian ``(x_d, y_d, j11, j12, j21, j22)`` at ``(x, y)``:
+        the compiled core (:func:`vision.kernels.opencv_lens_parts`, the same arithmetic)
+        when it is available, :meth:`parts_numpy` otherwise."""
+        from vision import kernels
+
+        tilted = not (self.coefficients[12] == 0 and self.coefficients[13] == 0)
+        got = kernels.opencv_lens_parts(x, y, self.coefficients, self.tilt, tilted)
+        return got if got is not None else self.parts_numpy(x, y)
+
+    def parts_numpy(self, x: np.ndarray, y: np.ndarray) -> tuple[np.ndarray, ...]:
+        """:meth:`parts` in numpy (the reference of the compiled core)."""
         xu, yu, a11, a12, a21, a22 = self._untilted(x, y)
         T = self.tilt
         if self.coefficients[12] == 0 and self.coefficients[13] == 0:
