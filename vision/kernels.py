@@ -11,10 +11,11 @@
   prediction through a distorted lens) and gate coordinates of its own (the ideal
   image); the lift through the distortion stays in numpy, shared by both paths
   (:func:`vision.detect.curves.lift_near`).
-- Lens maps (``lens_kernels.c``): OpenCV's 14-coefficient distortion and its
-  Jacobian (:func:`opencv_lens_parts`), the arithmetic of
-  :meth:`vision.cameras.distortion_full.OpenCVLens.parts_numpy` operation by operation
-  (the tests check them equal); the tracker evaluates it four times per pass.
+- Lens maps (``lens_kernels.c``): the map and Jacobian of OpenCV's 14- and
+  5-coefficient distortions, the Kannala-Brandt fisheye, the double sphere and the
+  extended unified model (:func:`lens_parts`), the arithmetic of their numpy
+  ``parts_numpy`` operation by operation (the tests check them equal); the tracker
+  evaluates the lens four times per pass through a distorted lens.
 - Renderer (``render_kernels.c``): exact-coverage polygon filling
   (:class:`PolygonFiller`): a pixel's value is blended by the exact area of its
   unit square inside the shape, so that a rendered edge has no bias whatever its
@@ -99,8 +100,8 @@ def _load() -> ctypes.CDLL | None:
     lib.hexapod_observe_batch.restype = ctypes.c_int
     lib.hexapod_segments_imaged.argtypes = [_P, _I, _P, _I, _D, _D, _P]
     lib.hexapod_segments_imaged.restype = None
-    lib.opencv_lens_parts.argtypes = [_P, _P, _I, _P, _P, _I, _P]
-    lib.opencv_lens_parts.restype = None
+    lib.lens_parts.argtypes = [_I, _P, _P, _I, _P, _P, _I, _P]
+    lib.lens_parts.restype = None
     _lib = lib
     return lib
 
@@ -351,23 +352,29 @@ def align_shift(image: np.ndarray, P: np.ndarray, out: np.ndarray, seg: np.ndarr
     return shift
 
 
-def opencv_lens_parts(x: np.ndarray, y: np.ndarray, coefficients: np.ndarray,
-                      tilt: np.ndarray, tilted: bool) -> tuple[np.ndarray, ...] | None:
-    """The compiled :meth:`vision.cameras.distortion_full.OpenCVLens.parts_numpy`:
-    ``(x_d, y_d, j11, j12, j21, j22)`` at ``(x, y)`` (same shape), or None when the
-    kernels are not compiled. ``coefficients`` (14,), ``tilt`` (3, 3), ``tilted``: a
-    tilt angle is nonzero."""
+#: The lens maps of :func:`lens_parts`, by kind.
+LENS_KINDS = {"opencv-full": 0, "radial-tangential": 1, "kannala-brandt": 2,
+              "double-sphere": 3, "extended-unified": 4}
+
+
+def lens_parts(kind: str, x: np.ndarray, y: np.ndarray, coefficients: np.ndarray,
+               tilt: np.ndarray | None = None, tilted: bool = False
+               ) -> tuple[np.ndarray, ...] | None:
+    """The compiled ``parts_numpy`` of a lens map (:data:`LENS_KINDS`): ``(x_d, y_d,
+    j11, j12, j21, j22)`` at ``(x, y)`` (broadcast shape), or None when the kernels are
+    not compiled. ``coefficients``: the lens's, in its order; ``tilt`` (3, 3) and
+    ``tilted`` (a tilt angle is nonzero): OpenCV's full model only."""
     lib = _load()
     if lib is None:
         return None
     xb, yb = np.broadcast_arrays(np.asarray(x, dtype=np.float64),
                                  np.asarray(y, dtype=np.float64))
     xc, yc = _c(xb, np.float64), _c(yb, np.float64)
-    n = xc.size
-    c, T = _c(coefficients, np.float64), _c(tilt, np.float64)
+    c = _c(coefficients, np.float64)
+    T = _c(np.eye(3) if tilt is None else tilt, np.float64)
     out = np.empty((6, *xb.shape))
-    lib.opencv_lens_parts(xc.ctypes.data, yc.ctypes.data, int(n), c.ctypes.data,
-                          T.ctypes.data, int(bool(tilted)), out.ctypes.data)
+    lib.lens_parts(LENS_KINDS[kind], xc.ctypes.data, yc.ctypes.data, int(xc.size),
+                   c.ctypes.data, T.ctypes.data, int(bool(tilted)), out.ctypes.data)
     return tuple(out)
 
 
@@ -477,5 +484,5 @@ class PolygonFiller:
         return cov
 
 
-__all__ = ["FLAGS", "SOURCES", "OmniKernel", "PolygonFiller", "TrackKernel", "align_shift",
-           "available", "fit_planes", "opencv_lens_parts"]
+__all__ = ["FLAGS", "LENS_KINDS", "SOURCES", "OmniKernel", "PolygonFiller", "TrackKernel",
+           "align_shift", "available", "fit_planes", "lens_parts"]

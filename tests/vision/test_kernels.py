@@ -248,54 +248,65 @@ def test_compiled_alignment_equals_numpy(geometry, rng, background) -> None:
             assert np.allclose(pa.normals, pb.normals, atol=1e-12, equal_nan=True)
 
 
-#: OpenCV coefficient sets of the compiled lens map: rational (8), thin prism (12),
-#: tilted (14, as in ``hexapod-bench perf detect``), and a strong tilt.
-_OPENCV_SETS = [
-    (-0.28, 0.09, 5e-4, -3e-4, -0.012, 0.02, 0.004, 0.0),
-    (-0.28, 0.09, 5e-4, -3e-4, -0.012, 0.02, 0.004, 0.001, 2e-4, -1e-4, 3e-4, 1e-4),
-    (-0.28, 0.09, 5e-4, -3e-4, -0.012, 0.02, 0.004, 0.0, 2e-4, -1e-4, 3e-4, 1e-4, 0.002,
-     -0.001),
-    (0.1, -0.05, 1e-3, 2e-3, 0.01, 0.3, -0.02, 0.005, 1e-3, 0.0, -2e-3, 5e-4, 0.3, -0.2),
-]
 
-
-@pytest.mark.parametrize("coefficients", _OPENCV_SETS)
-def test_compiled_opencv_lens_equals_numpy(rng, coefficients) -> None:
-    """The compiled OpenCV lens map and Jacobian are the numpy reference's bit for bit
-    (same operations, no fused multiply-add), also far beyond the fold, on NaN and
-    infinite coordinates and on a scalar point."""
+def _lenses() -> list[tuple[str, object]]:
+    """Every lens map of the compiled core, with coefficients of a real lens and
+    stronger ones: OpenCV's full model (rational 8, thin prism 12, tilted 14 as in
+    ``hexapod-bench perf detect``, a strong tilt), its five coefficients, the fisheye,
+    the double sphere and the extended unified lens."""
+    from vision.cameras import FRONT_DISTORTION
+    from vision.cameras.distortion import RadialTangential
     from vision.cameras.distortion_full import OpenCVLens
+    from vision.cameras.presets import FISHEYE_DISTORTION
+    from vision.cameras.radial import DoubleSphere, ExtendedUnified, KannalaBrandt
 
-    lens = OpenCVLens(coefficients)
+    full = (-0.28, 0.09, 5e-4, -3e-4, -0.012, 0.02, 0.004, 0.0, 2e-4, -1e-4, 3e-4, 1e-4,
+            0.002, -0.001)
+    return [("opencv-8", OpenCVLens(full[:8])), ("opencv-12", OpenCVLens(full[:12])),
+            ("opencv-14", OpenCVLens(full)),
+            ("opencv-tilt", OpenCVLens((0.1, -0.05, 1e-3, 2e-3, 0.01, 0.3, -0.02, 0.005,
+                                        1e-3, 0.0, -2e-3, 5e-4, 0.3, -0.2))),
+            ("radtan", RadialTangential(FRONT_DISTORTION)),
+            ("radtan-4", RadialTangential((-0.08, 0.012, 4e-4, -2e-4))),
+            ("fisheye", KannalaBrandt(FISHEYE_DISTORTION)),
+            ("fisheye-strong", KannalaBrandt((0.3, -0.1, 0.05, -0.01))),
+            ("double-sphere", DoubleSphere((-0.15, 0.57))),
+            ("double-sphere-2", DoubleSphere((0.6, 0.3))),
+            ("eucm", ExtendedUnified((0.6, 1.1))), ("eucm-2", ExtendedUnified((1.0, 0.4)))]
+
+
+@pytest.mark.parametrize("label, lens", _lenses(), ids=[n for n, _ in _lenses()])
+def test_compiled_lens_maps_equal_numpy(rng, label, lens) -> None:
+    """The compiled lens map and Jacobian of every model equal its numpy reference bit
+    for bit (same operations, no fused multiply-add), also far beyond the fold, at the
+    centre, below the fisheye's small-radius limit, on NaN and infinite coordinates
+    and on a scalar point."""
+    assert type(lens).parts is not type(lens).parts_numpy
     x = rng.uniform(-3.0, 3.0, (6, 2, 23))
     y = rng.uniform(-3.0, 3.0, (6, 2, 23))
-    x[0, 0, :3] = np.nan, 0.0, np.inf
-    y[0, 0, :3] = 0.1, 0.0, 0.2
-    compiled = kernels.opencv_lens_parts(x, y, lens.coefficients, lens.tilt,
-                                         bool(np.any(lens.coefficients[12:])))
-    assert compiled is not None
+    x[0, 0, :5] = np.nan, 0.0, np.inf, 3e-9, 1e-12
+    y[0, 0, :5] = 0.1, 0.0, 0.2, -2e-9, 0.0
+    x[1] *= 0.2  # inside the image of a real lens
+    y[1] *= 0.2
     with np.errstate(all="ignore"):
         reference = lens.parts_numpy(x, y)
-        via_parts = lens.parts(x, y)
-    for a, b, c in zip(compiled, reference, via_parts, strict=True):
+        compiled = lens.parts(x, y)
+    for a, b in zip(compiled, reference, strict=True):
         assert a.shape == x.shape
         np.testing.assert_array_equal(a, b)
-        np.testing.assert_array_equal(c, b)
-    scalar = lens.parts(0.3, -0.2)
-    for a, b in zip(scalar, lens.parts_numpy(0.3, -0.2), strict=True):
+    for a, b in zip(lens.parts(0.3, -0.2), lens.parts_numpy(0.3, -0.2), strict=True):
         assert np.ndim(a) == 0 and a == b
 
 
-def test_opencv_lens_without_the_kernels_uses_numpy(monkeypatch, rng) -> None:
-    """Without the compiled cores the OpenCV lens map runs its numpy reference."""
-    from vision.cameras.distortion_full import OpenCVLens
-
-    lens = OpenCVLens(_OPENCV_SETS[2])
+@pytest.mark.parametrize("label, lens", _lenses()[2:7:2], ids=["opencv-14", "radtan",
+                                                                "fisheye"])
+def test_lens_maps_without_the_kernels_use_numpy(monkeypatch, rng, label, lens) -> None:
+    """Without the compiled cores a lens map runs its numpy reference."""
     x, y = rng.uniform(-0.8, 0.8, (2, 40))
-    expected = lens.parts(x, y)
+    expected = lens.parts_numpy(x, y)
     monkeypatch.setattr(kernels, "_lib", None)
     monkeypatch.setattr(kernels, "_tried", False)
     monkeypatch.setenv("HEXAPOD_NO_COMPILE", "1")
-    assert kernels.opencv_lens_parts(x, y, lens.coefficients, lens.tilt, True) is None
+    assert kernels.lens_parts("opencv-full", x, y, np.zeros(14)) is None
     for a, b in zip(lens.parts(x, y), expected, strict=True):
         np.testing.assert_array_equal(a, b)

@@ -103,7 +103,16 @@ class RadialTangential(Lens):
 
     def parts(self, x: np.ndarray, y: np.ndarray) -> tuple[np.ndarray, ...]:
         """:meth:`apply` and :meth:`jacobian` without stacking: ``(x_d, y_d, j11, j12,
-        j21, j22)`` (the Jacobian is symmetric: ``j21`` is ``j12``)."""
+        j21, j22)`` (the Jacobian is symmetric: ``j21`` equals ``j12``): the compiled
+        core (:func:`vision.kernels.lens_parts`, the same arithmetic) when it is
+        available, :meth:`parts_numpy` otherwise."""
+        from vision import kernels
+
+        got = kernels.lens_parts("radial-tangential", x, y, self.coefficients)
+        return got if got is not None else self.parts_numpy(x, y)
+
+    def parts_numpy(self, x: np.ndarray, y: np.ndarray) -> tuple[np.ndarray, ...]:
+        """:meth:`parts` in numpy (the reference of the compiled core)."""
         k1, k2, p1, p2, k3 = (float(v) for v in self.coefficients)
         r2 = x * x + y * y
         L = 1.0 + r2 * (k1 + r2 * (k2 + r2 * k3))

@@ -137,12 +137,12 @@ class OpenCVLens(Lens):
 
     def parts(self, x: np.ndarray, y: np.ndarray) -> tuple[np.ndarray, ...]:
         """The map and its Jacobian ``(x_d, y_d, j11, j12, j21, j22)`` at ``(x, y)``:
-        the compiled core (:func:`vision.kernels.opencv_lens_parts`, the same arithmetic)
+        the compiled core (:func:`vision.kernels.lens_parts`, the same arithmetic)
         when it is available, :meth:`parts_numpy` otherwise."""
         from vision import kernels
 
         tilted = not (self.coefficients[12] == 0 and self.coefficients[13] == 0)
-        got = kernels.opencv_lens_parts(x, y, self.coefficients, self.tilt, tilted)
+        got = kernels.lens_parts("opencv-full", x, y, self.coefficients, self.tilt, tilted)
         return got if got is not None else self.parts_numpy(x, y)
 
     def parts_numpy(self, x: np.ndarray, y: np.ndarray) -> tuple[np.ndarray, ...]:

@@ -99,8 +99,23 @@ class RadialLens(Lens):
         f, _ = self._factor(np.hypot(m[..., 0], m[..., 1]))
         return m * f[..., None]
 
+    #: The compiled core's name of the model (:data:`vision.kernels.LENS_KINDS`).
+    kernel_kind: str | None = None
+
     def parts(self, x: np.ndarray, y: np.ndarray) -> tuple[np.ndarray, ...]:
-        """The map and its (symmetric) Jacobian ``f I + (f'/r) m m^T`` as arrays."""
+        """The map and its (symmetric) Jacobian ``f I + (f'/r) m m^T`` as arrays: the
+        compiled core (:func:`vision.kernels.lens_parts`, the same arithmetic) when it
+        is available, :meth:`parts_numpy` otherwise."""
+        if self.kernel_kind is not None:
+            from vision import kernels
+
+            got = kernels.lens_parts(self.kernel_kind, x, y, self.coefficients)
+            if got is not None:
+                return got
+        return self.parts_numpy(x, y)
+
+    def parts_numpy(self, x: np.ndarray, y: np.ndarray) -> tuple[np.ndarray, ...]:
+        """:meth:`parts` in numpy (the reference of the compiled core)."""
         f, h = self._factor(np.hypot(x, y))
         j12 = h * x * y
         return x * f, y * f, f + h * x * x, j12, j12, f + h * y * y
@@ -197,6 +212,7 @@ def _fold_angle(model: type[RadialLens], coefficients: tuple[float, ...]) -> flo
 class KannalaBrandt(RadialLens):
     """OpenCV's fisheye model (``cv2.fisheye``), ``(k1, k2, k3, k4)``."""
 
+    kernel_kind = "kannala-brandt"
     names = ("k1", "k2", "k3", "k4")
 
     @property
@@ -233,6 +249,7 @@ class KannalaBrandt(RadialLens):
 class DoubleSphere(RadialLens):
     """The double sphere model, ``(xi, alpha)`` (Usenko et al. 2018; Kalibr ``ds``)."""
 
+    kernel_kind = "double-sphere"
     names = ("xi", "alpha")
 
     def _check(self, c: np.ndarray, source: str | None) -> None:
@@ -269,6 +286,7 @@ class ExtendedUnified(RadialLens):
     """The extended unified model, ``(alpha, beta)`` (Khomutenko et al. 2016; Kalibr
     ``eucm``)."""
 
+    kernel_kind = "extended-unified"
     names = ("alpha", "beta")
 
     @property
