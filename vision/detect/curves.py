@@ -113,15 +113,13 @@ def curved_samples(camera: Camera, prediction: LegPrediction, t: np.ndarray,
     P = np.stack([fx * xd + sk * yd + cx, fy * yd + cy], -1)
     d = u[:, None, :] - np.sum(u[:, None, :] * n, -1, keepdims=True) * n  # in the plane
 
-    def image_direction(v: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Pixel derivative (du, dv) of the projection along the 3D direction v (6, 2, 3)."""
-        a = (v[:, :, None, 0] - x * v[:, :, None, 2]) * iz
-        b = (v[:, :, None, 1] - y * v[:, :, None, 2]) * iz
-        e, f = j11 * a + j12 * b, j21 * a + j22 * b
-        return fx * e + sk * f, fy * f
-
-    tu, tv = image_direction(d)
-    ru, rv = image_direction(n)
+    # Pixel derivatives (du, dv) of the projection along the 3D directions d (the
+    # tangent) and n (outwards), both at once (v: (2, 6, 2, 1, 3)).
+    v = np.stack([d, n])[:, :, :, None, :]
+    a = (v[..., 0] - x * v[..., 2]) * iz
+    b = (v[..., 1] - y * v[..., 2]) * iz
+    e, f = j11 * a + j12 * b, j21 * a + j22 * b
+    (tu, ru), (tv, rv) = fx * e + sk * f, fy * f
     with np.errstate(invalid="ignore", divide="ignore"):
         norm = np.hypot(tu, tv)
         nu, nv = -tv / norm, tu / norm
@@ -181,11 +179,14 @@ def lift_near_parts(camera: Camera, pixels: np.ndarray, m0: np.ndarray,
         Rays (..., 3), ``m`` (..., 2) and ``(j11, j12, j21, j22)`` at ``m`` (None where
         a point needed the camera's safeguarded solver: recompute them).
     """
-    md = camera.pixels_to_distorted(pixels)
-    ux, uy = md[..., 0], md[..., 1]
-    ok0 = np.isfinite(m0).all(-1)
-    x = np.where(ok0, m0[..., 0], ux)
-    y = np.where(ok0, m0[..., 1], uy)
+    pixels = np.asarray(pixels, dtype=float)
+    K = camera.K  # m_d = K^-1 p (Camera.pixels_to_distorted, without stacking)
+    uy = (pixels[..., 1] - K[1, 2]) / K[1, 1]
+    ux = (pixels[..., 0] - K[0, 2] - K[0, 1] * uy) / K[0, 0]
+    m0x, m0y = m0[..., 0], m0[..., 1]
+    ok0 = np.isfinite(m0x) & np.isfinite(m0y)
+    x = np.where(ok0, m0x, ux)
+    y = np.where(ok0, m0y, uy)
     lens = camera.lens
     tol = 1e-15 * np.maximum(1.0, np.hypot(ux, uy))
     jac = None
@@ -212,13 +213,12 @@ def lift_near_parts(camera: Camera, pixels: np.ndarray, m0: np.ndarray,
             xd, yd, j11, j12, j21, j22 = lens.parts(x, y)
             res = np.hypot(xd - ux, yd - uy)
             jac = (j11, j12, j21, j22)
-    m = np.stack([x, y], -1)
-    finite = np.isfinite(md).all(-1)
+    finite = np.isfinite(ux) & np.isfinite(uy)
+    m = np.stack([np.where(finite, x, np.nan), np.where(finite, y, np.nan)], -1)
     bad = finite & ~(res <= tol)
     if np.any(bad):
-        m[bad] = camera.undistort(md[bad])
+        m[bad] = camera.undistort(np.stack([ux[bad], uy[bad]], -1))
         jac = None
-    m = np.where(finite[..., None], m, np.nan)
     return projection.lift(m, 0.0), m, jac
 
 
