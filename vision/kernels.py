@@ -357,6 +357,10 @@ LENS_KINDS = {"opencv-full": 0, "radial-tangential": 1, "kannala-brandt": 2,
               "double-sphere": 3, "extended-unified": 4}
 
 
+_EYE3 = np.eye(3)
+_EYE3.flags.writeable = False
+
+
 def lens_parts(kind: str, x: np.ndarray, y: np.ndarray, coefficients: np.ndarray,
                tilt: np.ndarray | None = None, tilted: bool = False
                ) -> tuple[np.ndarray, ...] | None:
@@ -367,11 +371,12 @@ def lens_parts(kind: str, x: np.ndarray, y: np.ndarray, coefficients: np.ndarray
     lib = _load()
     if lib is None:
         return None
-    xb, yb = np.broadcast_arrays(np.asarray(x, dtype=np.float64),
-                                 np.asarray(y, dtype=np.float64))
+    xb, yb = np.asarray(x, dtype=np.float64), np.asarray(y, dtype=np.float64)
+    if xb.shape != yb.shape:
+        xb, yb = np.broadcast_arrays(xb, yb)
     xc, yc = _c(xb, np.float64), _c(yb, np.float64)
     c = _c(coefficients, np.float64)
-    T = _c(np.eye(3) if tilt is None else tilt, np.float64)
+    T = _EYE3 if tilt is None else _c(tilt, np.float64)
     out = np.empty((6, *xb.shape))
     lib.lens_parts(LENS_KINDS[kind], xc.ctypes.data, yc.ctypes.data, int(xc.size),
                    c.ctypes.data, T.ctypes.data, int(bool(tilted)), out.ctypes.data)
