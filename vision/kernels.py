@@ -9,7 +9,8 @@
   eigen-solve differs (Jacobi instead of LAPACK, equal to about 1e-15). The
   tracker's search takes one direction per sample (the normal of a curved
   prediction through a distorted lens) and gate coordinates of its own (the ideal
-  image); the lift through the distortion stays in numpy, shared by both paths
+  image); the lift through the distortion stays in numpy (its lens evaluations
+  through :func:`lens_parts`), shared by both paths
   (:func:`vision.detect.curves.lift_near`).
 - Lens maps (``lens_kernels.c``): the map and Jacobian of OpenCV's 14- and
   5-coefficient distortions, the Kannala-Brandt fisheye, the double sphere and the
