@@ -103,6 +103,10 @@ class ControllerContext:
         dt: Control period [s].
         goal: The desired features / pose.
         stroke_margin: Distance kept from the stroke limits by limit-aware laws [m].
+        reference: A trajectory task's reference (a
+            :class:`hexapod.trajectory.PoseTrajectory` in the base frame: pose, twist and
+            acceleration at any time), or None for a fixed goal
+            (:mod:`controllers.tracking`).
     """
 
     base_points: np.ndarray
@@ -111,6 +115,7 @@ class ControllerContext:
     dt: float
     goal: Goal
     stroke_margin: float = 0.002
+    reference: Any = None
 
     @property
     def stroke(self) -> tuple[float, float]:

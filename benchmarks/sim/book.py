@@ -60,12 +60,17 @@ class Book:
     step_times: list[list[float]] = field(default_factory=list)
     rtts: list[list[float]] = field(default_factory=list)
     series: list[dict[str, list[Any]]] = field(default_factory=list)
+    tracker: Any = None  # the tracking metrics of a trajectory task
 
     @classmethod
     def new(cls, sc: Scenario, group: list[TrialSetup], record_trials: int) -> Book:
         """Fresh bookkeeping of a group."""
+        from benchmarks.sim.tracking import tracker_for
+
         n = len(group)
         recording = [s.trial < record_trials for s in group]
+        pos_tol = 1e-3 * sc.task.position_tolerance_mm
+        ori_tol = float(np.deg2rad(sc.task.orientation_tolerance_deg))
         return cls(
             n=n, pos_tol=1e-3 * sc.task.position_tolerance_mm,
             ori_tol=float(np.deg2rad(sc.task.orientation_tolerance_deg)),
@@ -77,13 +82,16 @@ class Book:
             hidden=np.zeros(n, dtype=int), recording=recording, failure=[None] * n,
             tail_pos=[[] for _ in range(n)], tail_ori=[[] for _ in range(n)],
             step_times=[[] for _ in range(n)], rtts=[[] for _ in range(n)],
-            series=[{k: [] for k in SERIES_KEYS} if rec else {} for rec in recording])
+            series=[{k: [] for k in SERIES_KEYS} if rec else {} for rec in recording],
+            tracker=tracker_for(sc, group, pos_tol, ori_tol))
 
     def check(self, sc: Scenario, step: int, idx: np.ndarray, dp: np.ndarray,
               da: np.ndarray) -> np.ndarray:
         """The convergence test of one period for the active rows ``idx`` (pose errors
         ``dp`` [m], ``da`` [rad]); returns which of them are done."""
         ok = (dp < self.pos_tol) & (da < self.ori_tol)
+        if self.tracker is not None:
+            self.tracker.add(step, idx, dp, da)
         self.settled[idx] = np.where(ok, self.settled[idx] + 1, 0)
         self.last_bad[idx[~ok]] = step
         if sc.task.fixed_duration and step > self.tail_start:
@@ -195,6 +203,8 @@ class Book:
                 row["rtt_median_ms"] = float(np.median(arr))
                 row["rtt_p99_ms"] = float(np.percentile(arr, 99))
                 row["missed_periods"] = int(self.missed[m])
+            if self.tracker is not None:
+                row.update(self.tracker.row(m))
             for key, value in s.calibration.items():
                 row[f"calibration_{key}"] = value
             ser_out = None

@@ -33,11 +33,11 @@ from typing import Any
 import numpy as np
 
 from benchmarks.sim.book import Book, TrialResult, failure_row
+from benchmarks.sim.reference import Targets, task_batch_controller
 from benchmarks.sim.sensors import GeometricSensor, draws_noise, noisy_features, trial_goal
 from benchmarks.sim.world import TrialSetup, trial_rng
 from benchmarks.study.scenario import Scenario
 from controllers.base import Goal, ObservationBatch
-from controllers.batch import batch_controller
 from hexapod.backends.base import clamp_velocities
 from hexapod.fk import pack_rows, solve_rows
 from hexapod.kinematics import inverse_kinematics
@@ -192,7 +192,7 @@ def _run(sc: Scenario, spec: Any, group: list[TrialSetup], contexts: list[Any],
          batched: bool) -> list[TrialResult]:
     from benchmarks.sim.stepper import stroke_violations
 
-    controller = batch_controller(spec.name, spec.options, batched)
+    controller = task_batch_controller(sc, spec, batched)
     controller.reset_batch(contexts)
     sensor = BatchSensor(sc, group)
     rngs = rows_generators(sc, group, 1, True)
@@ -200,8 +200,7 @@ def _run(sc: Scenario, spec: Any, group: list[TrialSetup], contexts: list[Any],
     q = np.array([s.start_lengths for s in group])
     R = np.array([s.start_rotation for s in group])
     t = np.array([s.start_translation for s in group])
-    R_goal = np.array([s.goal_rotation for s in group])
-    t_goal = np.array([s.goal_translation for s in group])
+    targets = Targets(sc, group)
     offsets = np.array([s.world.joint_offsets for s in group])
     A = sensor.params.base_points
     E = sensor.params.platform_points
@@ -218,7 +217,7 @@ def _run(sc: Scenario, spec: Any, group: list[TrialSetup], contexts: list[Any],
         if len(idx) == 0:
             break
         R_i, t_i = R[idx], t[idx]
-        dp, da = pose_error(R_i, t_i, R_goal[idx], t_goal[idx])
+        dp, da = pose_error(R_i, t_i, *targets(step, idx))
         done = book.check(sc, step, idx, dp, da)
         meas = sensor.measure(R_i, t_i, idx, [rngs[k] for k in idx] if noisy
                               else [None] * len(idx))

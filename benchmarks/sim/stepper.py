@@ -23,6 +23,7 @@ from typing import Any
 import numpy as np
 
 from benchmarks.sim.book import Book, TrialResult, failure_row
+from benchmarks.sim.reference import Targets, task_controller
 from benchmarks.sim.sensors import make_sensor, trial_goal
 from benchmarks.sim.world import (
     TrialSetup,
@@ -33,7 +34,7 @@ from benchmarks.sim.world import (
     trial_rng,
 )
 from benchmarks.study.scenario import Scenario
-from controllers.base import Command, ControllerContext, Observation, registry
+from controllers.base import Command, ControllerContext, Observation
 from hexapod import HexapodGeometry, forward_kinematics_batch
 from hexapod.backends.base import Backend, clamp_velocities
 from hexapod.se3 import pose_error
@@ -159,7 +160,7 @@ def _run_group(sc: Scenario, controller_index: int, group: list[TrialSetup],
     sensor = (sensor_factory or make_sensor)(sc, group[0])
     controllers = []
     for s in group:
-        ctrl = registry.create(spec.name, **spec.options)
+        ctrl = task_controller(sc, spec)
         ctrl.reset(trial_context(sc, s, trial_goal(sensor, s, sc)))
         controllers.append(ctrl)
     rngs = [trial_rng(sc.seed, s.trial, 1) for s in group]
@@ -172,8 +173,7 @@ def _run_group(sc: Scenario, controller_index: int, group: list[TrialSetup],
     q = np.array([s.start_lengths for s in group])
     R = np.array([s.start_rotation for s in group])
     t = np.array([s.start_translation for s in group])
-    R_goal = np.array([s.goal_rotation for s in group])
-    t_goal = np.array([s.goal_translation for s in group])
+    targets = Targets(sc, group)
     offsets = world.joint_offsets
     book = Book.new(sc, group, record_trials)
     dt = sc.dt
@@ -181,7 +181,7 @@ def _run_group(sc: Scenario, controller_index: int, group: list[TrialSetup],
         idx = np.flatnonzero(book.active)
         if len(idx) == 0:
             break
-        dp, da = pose_error(R[idx], t[idx], R_goal[idx], t_goal[idx])
+        dp, da = pose_error(R[idx], t[idx], *targets(step, idx))
         done = book.check(sc, step, idx, dp, da)
         meas = sensor.measure(R[idx], t[idx], [rngs[k] for k in idx])
         book.seen(idx, meas["edge_visible"])
@@ -243,8 +243,11 @@ def _run_group(sc: Scenario, controller_index: int, group: list[TrialSetup],
 
 def trial_context(sc: Scenario, setup: TrialSetup, goal: Any) -> ControllerContext:
     """What the controllers of a trial are told: the estimated parameters and the goal."""
+    from benchmarks.sim.reference import trial_reference
+
     return ControllerContext(base_points=setup.base_points, geometry=setup.nominal_geometry,
-                             camera=setup.estimated_camera, dt=sc.dt, goal=goal)
+                             camera=setup.estimated_camera, dt=sc.dt, goal=goal,
+                             reference=trial_reference(sc, setup))
 
 
 def stroke_violations(q: np.ndarray, v: np.ndarray, dt: float,

@@ -173,6 +173,10 @@ def make_trials(sc: Scenario, trials: list[int], nominal: HexapodGeometry, camer
                 if isinstance(pose, Exception):
                     raise pose
             (R_s, R_g), (t_s, t_g) = pose
+            if task.kind == "trajectory":  # a closed curve ends where it started
+                from benchmarks.sim.reference import trajectory_end
+
+                R_g, t_g = trajectory_end(task, R_s, t_s, R_g, t_g)
             q_s = (start_lengths[k] if k in start_lengths
                    else inverse_kinematics(world.geometry, R_s, t_s))
             points = base_points.copy()

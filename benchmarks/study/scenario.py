@@ -20,6 +20,7 @@ from benchmarks.study.scenario_model import (
     CALIBRATION_ERROR_KEYS,
     NOISE_KEYS,
     RANGES,
+    TASK_KEYS,
     CalibrationConfig,
     CalibrationErrorConfig,
     ControllerSpec,
@@ -31,6 +32,7 @@ from benchmarks.study.scenario_model import (
 )
 from hexapod.config import load_toml, suggest
 from hexapod.exceptions import ConfigFileError
+from hexapod.trajectory import PLANES, PROFILES, SHAPES
 
 __all__ = [
     "CALIBRATION_ERROR_KEYS", "NOISE_KEYS", "RANGES", "CalibrationConfig",
@@ -270,8 +272,11 @@ def parse_scenario(table: dict[str, Any], path: str = "<dict>") -> Scenario:
         raise ScenarioError(path, f"{cal.min_singular_ratio} exceeds warn_singular_ratio "
                             f"({cal.warn_singular_ratio}): the hard limit must be below the "
                             "warning", key="calibration.min_singular_ratio")
-    task = _parse_dataclass(TaskConfig, _section(table, "task", path), path, "task", (),
-                            {"kind": ("random-pairs", "fixed")})
+    task = _parse_dataclass(TaskConfig, _section(table, "task", path), path, "task", TASK_KEYS,
+                            {"kind": ("random-pairs", "fixed", "trajectory"),
+                             "shape": SHAPES, "profile": PROFILES, "plane": tuple(PLANES)},
+                            sweep)
+    task = _check_trajectory_task(task, sweep, path)
     if task.settle_steps > task.max_steps:
         raise ScenarioError(path, f"{task.settle_steps} exceeds task.max_steps "
                             f"({task.max_steps})", key="task.settle_steps")
@@ -352,6 +357,18 @@ def _check_scaled_errors(cal_err: CalibrationErrorConfig, sweep: dict[str, list[
             raise ScenarioError(path, f"times scale {max(scales):g} gives a standard "
                                 f"deviation of {worst:g}, beyond the allowed {hi:g}",
                                 key=f"calibration_error.{key}")
+
+
+def _check_trajectory_task(task: TaskConfig, sweep: dict[str, list[Any]], path: str
+                           ) -> TaskConfig:
+    """A trajectory task runs for ``max_steps`` (``fixed_duration``); its keys swept only
+    in a trajectory task."""
+    if task.kind == "trajectory":
+        return replace(task, fixed_duration=True)
+    for key in TASK_KEYS:
+        if f"task.{key}" in sweep:
+            raise ScenarioError(path, "only a trajectory task sweeps it", key=f"task.{key}")
+    return task
 
 
 def _check_configurations(value: str, path: str) -> None:

@@ -54,7 +54,15 @@ RANGES: dict[str, tuple[float, float, bool, bool]] = {
     "task.max_translation_mm": (0.0, 10_000.0, True, True),
     "task.max_angle_deg": (0.0, 90.0, True, True),
     "task.settle_steps": (1, 10_000_000, True, True),
+    "task.speed_mm_s": (0.0, 10_000.0, False, True),
+    "task.acceleration_mm_s2": (0.0, 1_000_000.0, False, True),
+    "task.angular_speed_deg_s": (0.0, 10_000.0, False, True),
+    "task.angular_acceleration_deg_s2": (0.0, 1_000_000.0, False, True),
+    "task.radius_mm": (0.0, 1000.0, False, True),
+    "task.laps": (1, 1000, True, True),
 }
+#: Keys of [task] that may be swept (trajectory tasks).
+TASK_KEYS = ("speed_mm_s", "acceleration_mm_s2")
 #: The calibration-error keys in millimetres or degrees whose standard deviation, times
 #: ``scale``, must stay within the range of the key itself (the effective error).
 _SCALED = tuple(k for k in CALIBRATION_ERROR_KEYS if k not in ("scale", "distortion_percent"))
@@ -188,7 +196,9 @@ class TaskConfig:
     """What each trial must do.
 
     Attributes:
-        kind: ``"random-pairs"`` (start and goal drawn inside the strokes) or ``"fixed"``.
+        kind: ``"random-pairs"`` (start and goal drawn inside the strokes), ``"fixed"``
+            or ``"trajectory"`` (track a reference from a random start: the trial runs
+            ``max_steps``, as ``fixed_duration``).
         start_mm: Start leg lengths (fixed task) [mm].
         goal_mm: Goal leg lengths (fixed task) [mm].
         max_steps: Step budget.
@@ -200,6 +210,19 @@ class TaskConfig:
         settle_steps: Steps the tolerances must hold to count as converged.
         fixed_duration: Run every trial for ``max_steps`` (noise studies: the final
             error is the error at the end; converged means within tolerance then).
+        shape: Trajectory task: ``"line"`` (start to goal), ``"circle"`` or
+            ``"lemniscate"`` (through the start, ``laps`` times); see
+            :mod:`hexapod.trajectory`.
+        profile: Trajectory timing law: ``"quintic"`` or ``"trapezoidal"``.
+        speed_mm_s: Largest platform speed along the trajectory [mm/s].
+        acceleration_mm_s2: Largest tangential acceleration [mm/s^2].
+        angular_speed_deg_s: Largest angular speed of a line [deg/s].
+        angular_acceleration_deg_s2: Largest angular acceleration of a line [deg/s^2].
+        radius_mm: Radius of the circle, half-width of the lemniscate [mm].
+        laps: Turns of a closed curve.
+        plane: Plane of a closed curve in the base frame: ``"xy"``, ``"xz"``, ``"yz"``.
+        feed_forward: Add the reference's nominal leg-length rate to the velocity
+            commands (:mod:`controllers.tracking`); false: feedback only.
     """
 
     kind: str = "random-pairs"
@@ -213,6 +236,16 @@ class TaskConfig:
     max_angle_deg: float = 10.0
     settle_steps: int = 1
     fixed_duration: bool = False
+    shape: str = "line"
+    profile: str = "quintic"
+    speed_mm_s: float = 50.0
+    acceleration_mm_s2: float = 500.0
+    angular_speed_deg_s: float = 10.0
+    angular_acceleration_deg_s2: float = 50.0
+    radius_mm: float = 20.0
+    laps: int = 1
+    plane: str = "xy"
+    feed_forward: bool = True
 
 
 @dataclass(frozen=True)
