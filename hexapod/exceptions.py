@@ -80,6 +80,17 @@ class StrokeLimitError(HexapodError, ValueError):
         )
 
 
+class InertiaError(GeometryError):
+    """An ``[inertia]`` value of a robot is physically impossible (negative mass,
+    inertia not positive definite or violating the triangle inequality, centre of mass
+    outside the leg). ``field`` is the dotted key, e.g. ``"inertia.body_mass"``."""
+
+
+class DriveError(GeometryError):
+    """A ``[drives]`` value of a robot is invalid; ``field`` is the dotted key, e.g.
+    ``"drives.force_limit"``, and the message names the leg."""
+
+
 class ForwardKinematicsError(HexapodError):
     """The forward kinematics did not converge.
 

@@ -149,6 +149,14 @@ class Book:
             self.failure[rows[j]] = f"controller refused to move: {reasons[j]}"
         return invalid | too_many
 
+    def world_failures(self, failed: dict[int, str], step: int) -> None:
+        """End the rows whose true world failed during period ``step`` (a plant's
+        :meth:`~benchmarks.sim.plant.Plant.advance`), each with its reason."""
+        for k, reason in failed.items():
+            self.failure[k] = reason
+            self.active[k] = False
+            self.steps[k] = step + 1
+
     def record(self, k: int, t: float, q: np.ndarray, R: np.ndarray, tr: np.ndarray,
                visible: np.ndarray, error_norm: float, dp: float, da: float,
                velocities: np.ndarray) -> None:

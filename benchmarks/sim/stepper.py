@@ -23,6 +23,7 @@ from typing import Any
 import numpy as np
 
 from benchmarks.sim.book import Book, TrialResult, failure_row
+from benchmarks.sim.plant import FK_FAILURE, KinematicPlant, make_plant
 from benchmarks.sim.reference import Targets, task_controller
 from benchmarks.sim.sensors import make_sensor, trial_goal
 from benchmarks.sim.world import (
@@ -35,8 +36,8 @@ from benchmarks.sim.world import (
 )
 from benchmarks.study.scenario import Scenario
 from controllers.base import Command, ControllerContext, Observation
-from hexapod import HexapodGeometry, forward_kinematics_batch
-from hexapod.backends.base import Backend, clamp_velocities
+from hexapod import HexapodGeometry
+from hexapod.backends.base import Backend
 from hexapod.se3 import pose_error
 
 log = logging.getLogger(__name__)
@@ -177,6 +178,9 @@ def _run_group(sc: Scenario, controller_index: int, group: list[TrialSetup],
     offsets = world.joint_offsets
     book = Book.new(sc, group, record_trials)
     dt = sc.dt
+    poses = KinematicPlant(q, R, t, g.base_points, g.platform_points, g.stroke, g.max_speed)
+    plant = poses if backends is not None else make_plant(sc, group, q, R, t,
+                                                          g.base_points, g.platform_points)
     for step in range(sc.task.max_steps + 1):
         idx = np.flatnonzero(book.active)
         if len(idx) == 0:
@@ -189,9 +193,10 @@ def _run_group(sc: Scenario, controller_index: int, group: list[TrialSetup],
             for j, k in enumerate(idx):
                 on_step(group[k].trial, R[k], t[k], meas["edge_visible"][j])
         v_cmd = np.zeros((len(idx), 6))
+        lengths = plant.measured_lengths(idx, offsets)
         for j, k in enumerate(idx):
             obs = Observation(
-                t=step * dt, lengths=q[k] + offsets,
+                t=step * dt, lengths=lengths[j],
                 normals=meas["normals"][j],
                 lines=None if meas["lines"] is None else meas["lines"][j],
                 directions=meas["directions"][j],
@@ -220,24 +225,15 @@ def _run_group(sc: Scenario, controller_index: int, group: list[TrialSetup],
         v_run = v_cmd[~done]
         book.violations[run] += stroke_violations(q[run], v_run, dt, g.stroke, g.max_speed)
         if backends is None:
-            vc, _ = clamp_velocities(q[run], v_run, dt, g.stroke, g.max_speed)
-            q[run] = np.clip(q[run] + vc * dt, *g.stroke)
-        else:
-            for j, k in enumerate(run):
-                bs = backends[k].step(v_run[j], dt)
-                q[k] = bs.lengths - offsets
-                book.rtts[k].append(bs.round_trip_s)
-                book.missed[k] += int(bs.missed_period)
-        sol = forward_kinematics_batch(g, q[run], R[run], t[run])
-        bad = ~sol.converged
-        if np.any(bad):
-            for k in run[bad]:
-                book.failure[k] = "forward kinematics of the true robot failed (singularity?)"
-                book.active[k] = False
-                book.steps[k] = step + 1
-        okk = run[~bad]
-        R[okk] = sol.rotations[~bad]
-        t[okk] = sol.translations[~bad]
+            book.world_failures(plant.advance(run, v_run, dt), step)
+            continue
+        for j, k in enumerate(run):
+            bs = backends[k].step(v_run[j], dt)
+            q[k] = bs.lengths - offsets
+            book.rtts[k].append(bs.round_trip_s)
+            book.missed[k] += int(bs.missed_period)
+        bad = poses.solve_poses(run)  # the backends moved the legs: the poses follow
+        book.world_failures(dict.fromkeys(run[bad].tolist(), FK_FAILURE), step)
     return book.results(sc, spec, group, R, t, getattr(sensor, "detect_times", None))
 
 

@@ -1,0 +1,86 @@
+"""Scenario keys of the dynamic world: ``[robot] world``/``physics_dt`` and the inertial
+calibration errors; errors name the file and the key; the draws of the other errors
+are unchanged by the new ones."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from benchmarks.exceptions import ScenarioError
+from benchmarks.sim import load_camera, load_geometry, make_trial
+from benchmarks.study.scenario import builtin_scenarios, load_scenario, parse_scenario
+
+MINIMAL = {"name": "t", "controllers": ["leg-edge"]}
+
+
+def test_the_kinematic_world_is_the_default_of_every_builtin_but_the_dynamic_ones() -> None:
+    for name in builtin_scenarios():
+        sc = load_scenario(name)
+        assert sc.world == ("dynamic" if "dynamic" in name else "kinematic"), name
+        assert sc.physics_dt == 0.001
+
+
+def test_world_and_physics_dt_are_read() -> None:
+    sc = parse_scenario({**MINIMAL, "robot": {"world": "dynamic", "physics_dt": 0.0005,
+                                              "dt": 0.01}})
+    assert (sc.world, sc.physics_dt, sc.dt) == ("dynamic", 0.0005, 0.01)
+
+
+@pytest.mark.parametrize(
+    ("robot", "key", "fragment"),
+    [
+        ({"world": "dynamical"}, "robot.world", "dynamic"),
+        ({"world": 1}, "robot.world", "expected a string"),
+        ({"physics_dt": 0.0}, "robot.physics_dt", "out of the allowed range"),
+        ({"physics_dt": "1ms"}, "robot.physics_dt", "expected a number"),
+        ({"physics_dt": 0.03}, "robot.physics_dt", "longer than the control period"),
+        ({"physics_dt": 0.003}, "robot.physics_dt", "not a whole number of physics steps"),
+        ({"physic_dt": 0.001}, "robot.physic_dt", "physics_dt"),
+    ],
+)
+def test_bad_world_keys_name_the_file_and_key(robot: dict, key: str, fragment: str) -> None:
+    with pytest.raises(ScenarioError) as info:
+        parse_scenario({**MINIMAL, "robot": robot}, "world.toml")
+    text = str(info.value)
+    assert "world.toml" in text and key in text and fragment in text, text
+
+
+@pytest.mark.parametrize("key", ["mass_percent", "inertia_percent"])
+def test_inertial_errors_are_checked(key: str) -> None:
+    with pytest.raises(ScenarioError) as info:
+        parse_scenario({**MINIMAL, "calibration_error": {key: -1.0}}, "err.toml")
+    assert f"calibration_error.{key}" in str(info.value) and "err.toml" in str(info.value)
+    with pytest.raises(ScenarioError, match="beyond the allowed 50"):
+        parse_scenario({**MINIMAL, "calibration_error": {key: 30.0, "scale": [1.0, 2.0]}})
+    sc = parse_scenario({**MINIMAL, "calibration_error": {key: [0.0, 10.0]}})
+    assert [getattr(p.calibration_error, key) for p in sc.expand()] == [0.0, 10.0]
+
+
+def test_the_true_robot_gets_the_inertial_error_and_the_controllers_the_file() -> None:
+    """20 % mass and inertia errors: every trial's true masses differ from the robot
+    file's, by factors whose log has about the stated spread; the nominal geometry (what
+    the controller context gets) keeps the file's; the other draws (poses, base points)
+    are those without the inertial error."""
+    base = {**MINIMAL, "calibration_error": {"base_points_mm": 1.0}}
+    with_err = {**MINIMAL, "calibration_error": {"base_points_mm": 1.0, "mass_percent": 20.0,
+                                                 "inertia_percent": 20.0}}
+    factors = []
+    for table in (base, with_err):
+        sc = parse_scenario(table)
+        nominal = load_geometry(sc)
+        camera = load_camera(sc, nominal)
+        setups = [make_trial(sc, k, nominal, camera) for k in range(40)]
+        factors.append(setups)
+    plain, drawn = factors
+    masses = []
+    for a, b in zip(plain, drawn, strict=True):
+        np.testing.assert_array_equal(a.start_rotation, b.start_rotation)
+        np.testing.assert_array_equal(a.world.geometry.base_points, b.world.geometry.base_points)
+        assert b.nominal_geometry.inertia == a.nominal_geometry.inertia
+        ti, ni = b.world.geometry.inertia, a.world.geometry.inertia
+        assert ti.platform_mass != ni.platform_mass
+        masses.append([ti.platform_mass / ni.platform_mass, ti.rod_mass / ni.rod_mass,
+                       ti.platform_inertia[0] / ni.platform_inertia[0]])
+    spread = np.std(np.log(masses), axis=0)
+    assert np.all((spread > 0.12) & (spread < 0.3)), spread
