@@ -57,6 +57,9 @@ class Observation:
         edge_visible: (6, 2) bool, which edges were observed.
         direction_visible: (6,) bool, which directions were observed.
         quality: Optional per-edge quality (e.g. fit residual), (6, 2).
+        image_t: Capture time of the image the features come from [s] (None: taken at
+            ``t``); older than ``t`` by the camera's latency and frame period
+            (:mod:`benchmarks.sim.clock`).
     """
 
     t: float
@@ -67,6 +70,7 @@ class Observation:
     edge_visible: np.ndarray = field(default_factory=lambda: np.ones((6, 2), dtype=bool))
     direction_visible: np.ndarray = field(default_factory=lambda: np.ones(6, dtype=bool))
     quality: np.ndarray | None = None
+    image_t: float | None = None
 
 
 @dataclass
@@ -183,6 +187,7 @@ class ObservationBatch:
         directions: (n, 6, 3) or None.
         edge_visible: (n, 6, 2) bool.
         direction_visible: (n, 6) bool.
+        image_t: (n,) capture times of the images [s], or None (taken at ``t``).
     """
 
     trials: np.ndarray
@@ -193,6 +198,7 @@ class ObservationBatch:
     directions: np.ndarray | None
     edge_visible: np.ndarray
     direction_visible: np.ndarray
+    image_t: np.ndarray | None = None
 
     def __len__(self) -> int:
         return len(self.trials)
@@ -204,7 +210,8 @@ class ObservationBatch:
             normals=None if self.normals is None else self.normals[k],
             lines=None if self.lines is None else self.lines[k],
             directions=None if self.directions is None else self.directions[k],
-            edge_visible=self.edge_visible[k], direction_visible=self.direction_visible[k])
+            edge_visible=self.edge_visible[k], direction_visible=self.direction_visible[k],
+            image_t=None if self.image_t is None else float(self.image_t[k]))
 
 
 @dataclass

@@ -33,6 +33,7 @@ from typing import Any
 import numpy as np
 
 from benchmarks.sim.book import Book, TrialResult, failure_row
+from benchmarks.sim.clock import clocked_measure, make_clock
 from benchmarks.sim.plant import make_plant
 from benchmarks.sim.reference import Targets, task_batch_controller
 from benchmarks.sim.sensors import GeometricSensor, draws_noise, noisy_features, trial_goal
@@ -211,6 +212,12 @@ def _run(sc: Scenario, spec: Any, group: list[TrialSetup], contexts: list[Any],
     stepped = np.zeros(len(group), dtype=int)  # steps each trial was commanded (0, 1, ...)
     dt = sc.dt
     plant = make_plant(sc, group, q, R, t, A, E)
+    clock = make_clock(sc, group, q, R, t, A, E)
+
+    def measure(rows: np.ndarray, R_r: np.ndarray, t_r: np.ndarray) -> dict[str, Any]:
+        return sensor.measure(R_r, t_r, rows, [rngs[k] for k in rows] if noisy
+                              else [None] * len(rows))
+
     for step in range(sc.task.max_steps + 1):
         idx = np.flatnonzero(book.active)
         if len(idx) == 0:
@@ -218,8 +225,7 @@ def _run(sc: Scenario, spec: Any, group: list[TrialSetup], contexts: list[Any],
         R_i, t_i = R[idx], t[idx]
         dp, da = pose_error(R_i, t_i, *targets(step, idx))
         done = book.check(sc, step, idx, dp, da)
-        meas = sensor.measure(R_i, t_i, idx, [rngs[k] for k in idx] if noisy
-                              else [None] * len(idx))
+        meas = clocked_measure(clock, step, idx, (R, t), measure)
         book.seen(idx, meas["edge_visible"])
         if on_step is not None:
             for j, k in enumerate(idx):
@@ -235,7 +241,7 @@ def _run(sc: Scenario, spec: Any, group: list[TrialSetup], contexts: list[Any],
                 lengths=plant.measured_lengths(tr, offsets[tr]),
                 **{key: (meas[key] if every or meas[key] is None else meas[key][rows])
                    for key in ("normals", "lines", "directions", "edge_visible",
-                               "direction_visible")})
+                               "direction_visible", "image_t")})
             t0 = time.perf_counter()
             cmds = controller.step_batch(obs)
             batch_times.append((time.perf_counter() - t0) / len(rows))

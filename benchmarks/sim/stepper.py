@@ -23,6 +23,7 @@ from typing import Any
 import numpy as np
 
 from benchmarks.sim.book import Book, TrialResult, failure_row
+from benchmarks.sim.clock import clocked_measure, make_clock
 from benchmarks.sim.plant import FK_FAILURE, KinematicPlant, make_plant
 from benchmarks.sim.reference import Targets, task_controller
 from benchmarks.sim.sensors import make_sensor, trial_goal
@@ -181,13 +182,18 @@ def _run_group(sc: Scenario, controller_index: int, group: list[TrialSetup],
     poses = KinematicPlant(q, R, t, g.base_points, g.platform_points, g.stroke, g.max_speed)
     plant = poses if backends is not None else make_plant(sc, group, q, R, t,
                                                           g.base_points, g.platform_points)
+    clock = make_clock(sc, group, q, R, t, g.base_points, g.platform_points)
+
+    def measure(rows: np.ndarray, R_r: np.ndarray, t_r: np.ndarray) -> dict[str, Any]:
+        return sensor.measure(R_r, t_r, [rngs[k] for k in rows])  # type: ignore[no-any-return]
+
     for step in range(sc.task.max_steps + 1):
         idx = np.flatnonzero(book.active)
         if len(idx) == 0:
             break
         dp, da = pose_error(R[idx], t[idx], *targets(step, idx))
         done = book.check(sc, step, idx, dp, da)
-        meas = sensor.measure(R[idx], t[idx], [rngs[k] for k in idx])
+        meas = clocked_measure(clock, step, idx, (R, t), measure)
         book.seen(idx, meas["edge_visible"])
         if on_step is not None:
             for j, k in enumerate(idx):
@@ -202,6 +208,7 @@ def _run_group(sc: Scenario, controller_index: int, group: list[TrialSetup],
                 directions=meas["directions"][j],
                 edge_visible=meas["edge_visible"][j],
                 direction_visible=meas["direction_visible"][j],
+                image_t=None if meas["image_t"] is None else float(meas["image_t"][j]),
             )
             cmd: Command | None = None
             if not done[j]:

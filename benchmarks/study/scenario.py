@@ -18,12 +18,14 @@ from benchmarks.exceptions import ScenarioError
 from benchmarks.study.scenario_model import (
     _SCALED,
     CALIBRATION_ERROR_KEYS,
+    CLOCK_KEYS,
     NOISE_KEYS,
     RANGES,
     TASK_KEYS,
     WORLDS,
     CalibrationConfig,
     CalibrationErrorConfig,
+    ClockConfig,
     ControllerSpec,
     ImageConfig,
     NoiseConfig,
@@ -43,7 +45,8 @@ __all__ = [
 ]
 
 _TOP = ("name", "description", "seed", "trials", "controllers", "controller_options", "robot",
-        "camera", "sensor", "noise", "calibration_error", "calibration", "task", "reference")
+        "camera", "sensor", "noise", "calibration_error", "calibration", "task", "reference",
+        "clock")
 
 
 def _section(table: dict[str, Any], key: str, path: str) -> dict[str, Any]:
@@ -279,6 +282,8 @@ def parse_scenario(table: dict[str, Any], path: str = "<dict>") -> Scenario:
                              "shape": SHAPES, "profile": PROFILES, "plane": tuple(PLANES)},
                             sweep)
     task = _check_trajectory_task(task, sweep, path)
+    clock = _parse_dataclass(ClockConfig, _section(table, "clock", path), path, "clock",
+                             CLOCK_KEYS, None, sweep)
     if task.settle_steps > task.max_steps:
         raise ScenarioError(path, f"{task.settle_steps} exceeds task.max_steps "
                             f"({task.max_steps})", key="task.settle_steps")
@@ -295,7 +300,7 @@ def parse_scenario(table: dict[str, Any], path: str = "<dict>") -> Scenario:
         dt=dt, camera_preset=camera_preset, camera_file=camera_file, sensor=sensor,
         world=world, physics_dt=physics_dt,
         teach_frames=teach_frames, image=image,
-        noise=noise, calibration_error=cal_err, calibration=cal, task=task,
+        noise=noise, calibration_error=cal_err, calibration=cal, task=task, clock=clock,
         reference=reference, sweep_axes=sweep, source=path, geometry_data=geometry_data,
         camera_data=camera_data, calibration_points=points,
     )

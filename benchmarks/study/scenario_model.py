@@ -66,7 +66,13 @@ RANGES: dict[str, tuple[float, float, bool, bool]] = {
     "task.angular_acceleration_deg_s2": (0.0, 1_000_000.0, False, True),
     "task.radius_mm": (0.0, 1000.0, False, True),
     "task.laps": (1, 1000, True, True),
+    "clock.frame_rate_hz": (0.0, 100_000.0, True, True),
+    "clock.latency_ms": (0.0, 10_000.0, True, True),
+    "clock.latency_frames": (0.0, 1000.0, True, True),
+    "clock.jitter_ms": (0.0, 1000.0, True, True),
 }
+#: Keys of [clock] (the camera's clock), every one sweepable.
+CLOCK_KEYS = ("frame_rate_hz", "latency_ms", "latency_frames", "jitter_ms")
 #: Keys of [task] that may be swept (trajectory tasks).
 TASK_KEYS = ("speed_mm_s", "acceleration_mm_s2")
 #: The calibration-error keys in millimetres or degrees whose standard deviation, times
@@ -204,6 +210,25 @@ class ImageConfig:
 
 
 @dataclass(frozen=True)
+class ClockConfig:
+    """The camera's clock (:mod:`benchmarks.sim.clock`); the defaults: a camera triggered
+    at every control instant whose image arrives at once.
+
+    Attributes:
+        frame_rate_hz: Frames per second (0: one frame per control period, at its instant).
+        latency_ms: Delay from capture to delivery [ms].
+        latency_frames: Further delay, in frame periods (control periods at rate 0).
+        jitter_ms: Standard deviation of the capture times around their nominal grid
+            [ms] (clipped to 0.45 frame).
+    """
+
+    frame_rate_hz: float = 0.0
+    latency_ms: float = 0.0
+    latency_frames: float = 0.0
+    jitter_ms: float = 0.0
+
+
+@dataclass(frozen=True)
 class TaskConfig:
     """What each trial must do.
 
@@ -286,6 +311,7 @@ class Scenario:
         calibration_error: Calibration error settings.
         calibration: Calibration procedure settings.
         task: Task settings.
+        clock: The camera's clock (frame rate, latency, jitter).
         reference: Figures of the reproduced seed (free-form table for the report).
         sweep: The swept keys of this point, e.g. ``{"noise.amplitude_deg": 0.05}``.
         source: File it was read from.
@@ -317,6 +343,7 @@ class Scenario:
     calibration_error: CalibrationErrorConfig = CalibrationErrorConfig()
     calibration: CalibrationConfig = CalibrationConfig()
     task: TaskConfig = TaskConfig()
+    clock: ClockConfig = ClockConfig()
     reference: dict[str, Any] = field(default_factory=dict)
     sweep: dict[str, Any] = field(default_factory=dict)
     sweep_axes: dict[str, list[Any]] = field(default_factory=dict)
