@@ -62,6 +62,7 @@ class LatencyCompensated(Controller):
         self._times: deque[float] = deque(maxlen=HISTORY)
         self._lengths: deque[np.ndarray] = deque(maxlen=HISTORY)
         self._guess: tuple[np.ndarray, np.ndarray] | None = None
+        self._params: Any = None  # the model's packed observation parameters
 
     def reset(self, context: ControllerContext) -> None:
         """Reset the law; forget the encoder history."""
@@ -71,6 +72,7 @@ class LatencyCompensated(Controller):
         self._times.clear()
         self._lengths.clear()
         self._guess = None
+        self._params = None
 
     def retarget(self, goal: Goal) -> None:
         """A new goal for the law (a trajectory task); the encoder history stays."""
@@ -113,10 +115,30 @@ class LatencyCompensated(Controller):
         frac = (time - times[j]) / (times[j + 1] - times[j])
         return a + frac * (b - a)  # type: ignore[no-any-return]
 
+    def _model_normals(self, R: np.ndarray, t: np.ndarray) -> np.ndarray:
+        """(n, 6, 2, 3) edge normals the estimated camera sees of the nominal robot at
+        poses ``R`` (n, 3, 3), ``t`` (n, 3): the compiled observation with the model's
+        parameters packed once, else :func:`vision.legs.observe_legs`."""
+        from vision import fast_observe
+        from vision.legs import observe_legs
+
+        ctx = self.context
+        assert ctx is not None
+        if self._params is None:
+            camera = ctx.camera
+            fast = (fast_observe.compiled() and getattr(camera, "kind", None) in (
+                "perspective", "unified") and fast_observe.supported(camera))
+            self._params = (fast_observe.WorldParams.from_worlds([ctx.geometry], [camera])
+                            if fast else False)
+        if self._params is False:
+            return observe_legs(ctx.camera, ctx.geometry, R, t).normals  # type: ignore[no-any-return]
+        obs = fast_observe.observe_batch(self._params, R, t, np.zeros(len(R), dtype=int))
+        return obs.normals  # type: ignore[no-any-return]
+
     def _predict(self, obs: Observation, image_t: float) -> tuple[Observation, str | None]:
         """The observation with its features moved from ``image_t`` to ``obs.t``."""
         from hexapod.fk import forward_kinematics_batch
-        from vision.legs import directions_from_edges, observe_legs
+        from vision.legs import directions_from_edges
 
         ctx = self.context
         assert ctx is not None
@@ -132,8 +154,8 @@ class LatencyCompensated(Controller):
         if not np.all(sol.converged):
             return obs, "latency not compensated: nominal forward kinematics failed"
         self._guess = (sol.rotations[1].copy(), sol.translations[1].copy())
-        model = observe_legs(camera, ctx.geometry, sol.rotations, sol.translations)
-        delta = model.normals[1] - model.normals[0]
+        model_normals = self._model_normals(sol.rotations, sol.translations)
+        delta = model_normals[1] - model_normals[0]
         delta_ok = np.all(np.isfinite(delta), axis=-1)
         seen = np.asarray(obs.normals, dtype=float)
         with np.errstate(invalid="ignore"):

@@ -14,6 +14,7 @@ import numpy as np
 from benchmarks.study import plots
 from benchmarks.study.metrics import Summary, format_sweep, summarize
 from benchmarks.study.runner import deduplicate, machine_info, read_results
+from benchmarks.study.tracking_report import tracking_section
 
 log = logging.getLogger(__name__)
 
@@ -157,6 +158,8 @@ def write_report(out_dir: Path) -> Path:
                 lines += [_md_table([str(h) for h in ref["header"]],
                                     [[str(c) for c in r] for r in ref["rows"]]), ""]
         points = sorted({s.point for s in ss})
+        lines += tracking_section(out_dir, name, [r for r in rows if r["scenario"] == name],
+                                  plots.representative(points))
         for p in plots.representative(points):
             img = plots.time_series(out_dir, name, p)
             if img:
