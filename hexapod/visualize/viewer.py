@@ -375,9 +375,9 @@ class HexapodViewer:
                 for g_id, name in enumerate(names):
                     frame[name].set_transform(vdata.oMg[g_id].homogeneous)
                 if rods is not None:
-                    for i in range(6):
-                        frame[f"{self.root}/leg{i}_rod/<object>"].set_property(
-                            "material.color", "color", rods[k, i, :3].tolist())
+                    for leg in range(6):
+                        frame[f"{self.root}/leg{leg}_rod/<object>"].set_property(
+                            "material.color", "color", rods[k, leg, :3].tolist())
                 for i in ever_hidden:
                     for part, normal in (("body", LEG_BODY_COLOR), ("rod", LEG_ROD_COLOR)):
                         if rods is not None and part == "rod":
