@@ -141,6 +141,13 @@ def advance_compiled(robots: Any, rows: np.ndarray, setpoints: np.ndarray, h: fl
                      steps: int) -> np.ndarray:
     """:meth:`hexapod.dynamics.robots.DynamicRobots.advance` in C; returns the (n,) mask
     of rows whose state is not finite after the period (left unchanged)."""
+    y = period_function(steps).batch(pack_period(robots, rows, setpoints, h))
+    return unpack_period(robots, rows, y, steps)
+
+
+def pack_period(robots: Any, rows: np.ndarray, setpoints: np.ndarray, h: float
+                ) -> np.ndarray:
+    """The input rows (n, :data:`WIDTH`) of the period function for ``rows``."""
     n = len(rows)
     d = robots.drives
     x = np.empty((n, WIDTH))
@@ -162,7 +169,14 @@ def advance_compiled(robots: Any, rows: np.ndarray, setpoints: np.ndarray, h: fl
     for key, arr in (("saturated_time", robots.saturated_time), ("track_sq", robots.track_sq),
                      ("track_max", robots.track_max), ("force_max", robots.force_max)):
         x[:, L[key].start] = arr[rows]
-    y = period_function(steps).batch(x)
+    return x
+
+
+def unpack_period(robots: Any, rows: np.ndarray, y: np.ndarray, steps: int) -> np.ndarray:
+    """Store the period function's output rows ``y`` into ``robots``; returns the (n,)
+    mask of rows whose state is not finite (left unchanged)."""
+    L = LAYOUT
+    d = robots.drives
     bad = ~np.all(np.isfinite(y[:, :L["setpoint"].start]), axis=1)
     ok, y = rows[~bad], y[~bad]
     m = len(ok)
