@@ -198,7 +198,7 @@ def build_parser() -> argparse.ArgumentParser:
     robot.add_argument("--dynamics", action="store_true",
                        help="the axes move as the robot with mass and drives (the geometry's "
                             "[inertia] and [drives], velocity mode under a position loop: "
-                            "lag, force limit, friction, gravity); serial board only")
+                            "lag, force limit, friction, gravity)")
     robot.add_argument("--physics-dt", type=float, default=1.0, metavar="MS",
                        help="physics step of --dynamics [ms] (default 1)")
     robot.add_argument("--identity", help="the *IDN? text (default: emulator and geometry name)")
@@ -289,9 +289,6 @@ def gcs_config_from_args(args: argparse.Namespace) -> tuple[GcsConfig, FaultConf
     for name in ("lag", "watchdog"):
         if getattr(args, name) is not None:
             raise BackendError(f"--{name} is an option of the serial board, not of --gcs")
-    if args.dynamics:
-        raise BackendError("--dynamics is an option of the serial board; the GCS emulator "
-                           "moves its platform kinematically")
     if args.pose is not None and args.lengths is not None:
         raise BackendError("--pose and --lengths both give the initial pose: choose one")
     geometry, lengths = _robot_from_args(args)
@@ -304,7 +301,8 @@ def gcs_config_from_args(args: argparse.Namespace) -> tuple[GcsConfig, FaultConf
                        pivot=tuple(np.asarray(args.pivot, float) * 1e-3),
                        rotation_order=args.rotation_order, velocity=args.velocity / 1e3,
                        zero_height=None if args.zero_height is None else args.zero_height / 1e3,
-                       max_velocity=args.max_velocity / 1e3, **extra)
+                       max_velocity=args.max_velocity / 1e3, dynamics=args.dynamics,
+                       physics_dt=args.physics_dt / 1e3, **extra)
     return config, _faults_from_args(args)
 
 

@@ -148,8 +148,6 @@ class Board:
             from hexapod.backends.emulator_dynamics import DynamicAxes
 
             self._axes = DynamicAxes(config.dynamics, self.lengths, config.physics_dt)
-            self.lengths = self._axes.lengths.copy()
-            self.setpoints = self.lengths.copy()
 
     # ---------------------------------------------------------------- physics
     @property

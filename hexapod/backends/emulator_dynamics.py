@@ -64,6 +64,8 @@ class DynamicAxes:
         self._carry = 0.0
         self._rows = np.array([0])
         self.lengths = self.robots.lengths(self._rows)[0]
+        self._resting = True
+        self._rest = np.array(lengths, dtype=float)
 
     def leg_velocities(self) -> np.ndarray:
         """The legs' velocities now (6,) [m/s]."""
@@ -71,15 +73,41 @@ class DynamicAxes:
         _, _, K, _, _ = r.model.terms_batch(r.R, r.t, r.twist, **r.rows(self._rows))
         return K[0] @ r.twist[0]  # type: ignore[no-any-return]
 
-    def move(self, setpoints: np.ndarray, speed: float, dt: float) -> np.ndarray:
-        """Integrate ``dt`` [s] with the position setpoints (6,) [m] held, the position
-        loop's velocity limited to ``speed`` [m/s]; returns the leg lengths (6,) [m]."""
+    def steps_for(self, dt: float) -> int:
+        """The whole physics steps in ``dt`` [s] plus the remainder carried so far (the
+        new remainder is carried on)."""
         elapsed = min(dt, MAX_CATCH_UP) + self._carry
         steps = int(elapsed / self.h)
         self._carry = elapsed - steps * self.h
-        for _ in range(steps):
-            v = np.clip(self.gain * (setpoints - self.lengths), -speed, speed)
-            if self.robots.advance(self._rows, v[None], self.h, 1).any():
-                raise BackendError("the dynamic robot diverged (a non-finite state)")
-            self.lengths = self.robots.lengths(self._rows)[0]
+        return steps
+
+    def step(self, setpoints: np.ndarray, speed: float) -> None:
+        """One physics step towards the position setpoints (6,) [m], the position loop's
+        velocity limited to ``speed`` [m/s]. Until the first setpoint away from where it
+        started, the robot is at rest in equilibrium (drives holding gravity) and the
+        step is skipped (it would move it by round-off only): an idle emulator costs
+        nothing."""
+        if self._resting:
+            if np.array_equal(setpoints, self._rest):
+                return
+            self._resting = False
+        v = np.clip(self.gain * (setpoints - self.lengths), -speed, speed)
+        if self.robots.advance(self._rows, v[None], self.h, 1).any():
+            raise BackendError("the dynamic robot diverged (a non-finite state)")
+        self.lengths = self.robots.lengths(self._rows)[0]
+
+    def move(self, setpoints: np.ndarray, speed: float, dt: float) -> np.ndarray:
+        """Integrate ``dt`` [s] with the position setpoints (6,) [m] held, the position
+        loop's velocity limited to ``speed`` [m/s]; returns the leg lengths (6,) [m]."""
+        for _ in range(self.steps_for(dt)):
+            self.step(setpoints, speed)
         return self.lengths.copy()
+
+    def pose(self) -> tuple[np.ndarray, np.ndarray]:
+        """The platform's true pose now: rotation (3, 3), position (3,) [m]."""
+        return self.robots.R[0].copy(), self.robots.t[0].copy()
+
+    @property
+    def settled(self) -> bool:
+        """Every leg slower than 1 um/s."""
+        return bool(np.all(np.abs(self.leg_velocities()) <= 1e-6))

@@ -126,6 +126,64 @@ def test_the_console_script_takes_dynamics() -> None:
     finally:
         proc.terminate()
         proc.wait(10)
-    bad = subprocess.run([sys.executable, "-m", "hexapod.backends.emulator", "--pty", "--gcs",
-                          "--dynamics"], capture_output=True, text=True, timeout=60)
-    assert bad.returncode == 2 and "--dynamics" in bad.stderr
+    bad = subprocess.run([sys.executable, "-m", "hexapod.backends.emulator", "--pty",
+                          "--dynamics", "--physics-dt", "50"], capture_output=True, text=True,
+                         timeout=60)
+    assert bad.returncode == 2 and "physics_dt" in bad.stderr
+
+
+# ----------------------------------------------------------------------------- GCS
+
+
+def _gcs(dynamics: bool):
+    from hexapod.backends.gcs_emulator import GcsConfig, GcsController
+
+    ctrl = GcsController(GcsConfig(deltalab(), velocity=0.02, dynamics=dynamics), 0.0)
+    ctrl.handle_line(b"MOV Z 2\n", 0.0)  # 2 mm up at 20 mm/s: 0.1 s on the line
+    return ctrl
+
+
+def test_the_gcs_platform_follows_its_line_through_the_dynamic_robot() -> None:
+    """The commanded straight line becomes the legs' position setpoints: the true pose
+    lags it, POS? answers the true pose, ONT? says 0 until the legs have arrived and
+    stopped, then the platform rests at the target (within 2 um)."""
+    kin, dyn = _gcs(False), _gcs(True)
+    for c in (kin, dyn):
+        c.advance(0.05)
+    assert kin.coords[2] == pytest.approx(0.001, abs=1e-9)  # half-way on the line
+    z = dyn.coords[2]
+    assert 0.0002 < z < 0.00099, z
+    answer = dyn.handle_line(b"POS? Z\n", 0.05)
+    assert float(answer.split("=")[1]) == pytest.approx(z * 1e3, abs=1e-6)
+    dyn.advance(0.2)
+    assert dyn.handle_line(b"ONT? Z\n", 0.2).strip() == "Z=0"
+    dyn.advance(5.0)  # the integral action hunts against friction: settled after ~4 s
+    assert dyn.coords[2] == pytest.approx(0.002, abs=2e-6)
+    assert np.abs(dyn.coords[[0, 1, 3, 4, 5]]).max() < 1e-5
+    assert dyn.handle_line(b"ONT? Z\n", 5.0).strip() == "Z=1"
+
+
+def test_the_gcs_console_script_takes_dynamics() -> None:
+    import socket
+
+    proc = subprocess.Popen([sys.executable, "-m", "hexapod.backends.emulator", "--gcs",
+                             "--tcp", "127.0.0.1:0", "--dynamics"], stdout=subprocess.PIPE,
+                            stderr=subprocess.PIPE, text=True)
+    try:
+        assert proc.stdout is not None
+        url = proc.stdout.readline().strip()
+        host, _, port = url.removeprefix("tcp://").rpartition(":")
+        sock = socket.create_connection((host, int(port)), timeout=5.0)
+        sock.sendall(b"MOV Z 1\n")
+        time.sleep(0.03)
+        sock.sendall(b"POS? Z\n")
+        early = float(sock.recv(256).decode().split("=")[1])
+        assert 0.0 < early < 1.0, early  # on its way, behind the line (1 mm at 10 mm/s)
+        time.sleep(0.6)
+        sock.sendall(b"POS? Z\n")
+        late = float(sock.recv(256).decode().split("=")[1])
+        assert late == pytest.approx(1.0, abs=0.02)
+        sock.close()
+    finally:
+        proc.terminate()
+        proc.wait(10)
