@@ -10,6 +10,8 @@ leg forces of about 30 N):
 - ``pinocchio lcaba``: one call of ``pin.lcaba`` (mu = 1e-3, 50 iterations);
 - ``compiled single``: the compiled C function on one state;
 - ``compiled batch``: the compiled C function looped in C over a batch, per state;
+- ``compiled forward_drives batch``: the same with the drives' leg-space masses (zero
+  here) and the leg rates and accelerations as outputs;
 - ``DynamicModel.forward_batch``: the same with the packing of the rows, the input
   checks and the finiteness check, per state.
 
@@ -127,6 +129,16 @@ def dynamics_figures(n: int = 1000, repeats: int = 30, seed: int = 0) -> list[Dy
     us = float(np.median(times)) * 1e6
     figures.append(DynamicsFigure(f"compiled batch of {n}", us, base_us / us,
                                   _relative(acc_batch, acc_ref)))
+    drive_rows = np.concatenate([rows, np.zeros((n, 12))], axis=1)
+    drives = dyn_compiled.compiled("forward_drives")
+    times = []
+    for _ in range(repeats):
+        t0 = time.perf_counter()
+        acc_drives = drives.batch(drive_rows)[:, :6]
+        times.append((time.perf_counter() - t0) / n)
+    us = float(np.median(times)) * 1e6
+    figures.append(DynamicsFigure(f"compiled forward_drives batch of {n}", us, base_us / us,
+                                  _relative(acc_drives, acc_ref)))
     times = []
     for _ in range(repeats):
         t0 = time.perf_counter()
@@ -202,10 +214,10 @@ def format_dynamics(figures: list[DynamicsFigure], n: int) -> str:
         f"forward dynamics of the closed chain, reference robot, {n} random states "
         f"({'compiled C' if compiled else 'CasADi VM (no C compiler)'}); goal: compiled "
         f"batch below {GOAL_US:g} us/state",
-        f"{'method':<36} {'median us/state':>16} {'speed-up':>9} {'max rel err':>12}",
+        f"{'method':<40} {'median us/state':>16} {'speed-up':>9} {'max rel err':>12}",
     ]
     for f in figures:
-        lines.append(f"{f.method:<36} {f.median_us:>16.3f} {f.speedup:>8.1f}x "
+        lines.append(f"{f.method:<40} {f.median_us:>16.3f} {f.speedup:>8.1f}x "
                      f"{f.max_relative_error:>12.1e}")
     return "\n".join(lines)
 
@@ -222,6 +234,8 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--energy", action="store_true",
                         help="also the energy drift of free motion over 1 s (RK4)")
     args = parser.parse_args(argv)
+    if min(args.n, args.repeats) < 1:
+        parser.error("-n and --repeats must be >= 1")
     print(format_dynamics(dynamics_figures(args.n, args.repeats, args.seed), args.n))
     if args.energy:
         print()

@@ -23,6 +23,17 @@ Row layout of every function's input (79 numbers): ``R`` (9, column-major), ``t`
 (3), ``tau`` (6), ``u`` (6: leg forces [N] for ``forward``, the acceleration for
 ``inverse``, unused by ``terms``), ``A`` (18, base points one after the other),
 ``E`` (18, platform points), and the 19 inertial parameters of :func:`parameter_row`.
+
+``forward_drives`` takes 12 more numbers per row, two leg-space masses per leg [kg],
+and solves
+
+    (M + K^T diag(a + b) K) tau_dot = K^T (f - a * K_dot tau) - h
+
+for the drives' layer: ``a`` moves with the leg (the reflected rotor inertia: a force
+``a q_ddot`` with ``q_ddot = K tau_dot + K_dot tau``), ``b = -dt d(f)/d(q_dot)`` takes
+a velocity-dependent leg force implicitly over a step ``dt`` (backward Euler on the
+velocity: ``f(q_dot + dt q_ddot) ~ f + (d f / d q_dot) dt K tau_dot``). It returns
+``tau_dot``, ``q_dot`` and ``q_ddot`` (18).
 """
 
 from __future__ import annotations
@@ -40,8 +51,12 @@ ROW = 79
 #: Number of inertial parameters in a row.
 N_PARAMETERS = 19
 #: Layout of the ``terms`` output: M (36, column-major), h (6), K (36, column-major),
-#: kinetic energy (1), potential energy (1).
-TERMS = 80
+#: kinetic energy (1), potential energy (1), leg rates ``q_dot`` (6), leg acceleration
+#: bias ``K_dot tau`` (6).
+TERMS = 92
+#: Length of an input row of ``forward_drives``: a row, then the legs' added masses
+#: ``a`` (6) and implicit masses ``b`` (6) [kg].
+DRIVES_ROW = ROW + 12
 
 
 def parameter_row(inertia: InertiaParameters) -> np.ndarray:
@@ -61,14 +76,16 @@ def _skew(w: ca.SX) -> ca.SX:
 
 
 def _leg(A: ca.SX, B: ca.SX, B_dot: ca.SX, c_B: ca.SX, leg: ca.SX
-         ) -> tuple[ca.SX, ca.SX, ca.SX, ca.SX, ca.SX]:
+         ) -> tuple[ca.SX, ca.SX, ca.SX, ca.SX, ca.SX, ca.SX, ca.SX]:
     """One leg seen from its platform joint ``B`` (``docs/math.md`` section 11).
 
     The force the platform applies at ``B`` to move the leg is
     ``M_leg B_ddot + n_leg`` with ``M_leg = m_r u u^T + (J / q^2) P(u)``,
     ``J = m_b d_b^2 + m_r (q - d_r)^2 + i_b + i_r`` (Kane's equations of the body and
-    the rod, spin left at zero). Returns ``(u, beta = J / q^2, m_r, y, potential)`` with
-    ``y = M_leg c_B + n_leg`` for ``B_ddot = Jb tau_dot + c_B``.
+    the rod, spin left at zero). Returns ``(u, beta = J / q^2, m_r, y, potential, q_dot,
+    bias)`` with ``y = M_leg c_B + n_leg`` for ``B_ddot = Jb tau_dot + c_B`` and
+    ``bias = u . c_B + q |u_dot|^2`` the leg acceleration at zero ``tau_dot``
+    (``q_ddot = u . B_ddot + q |u_dot|^2``).
     """
     m_b, d_b, i_b, m_r, d_r, i_r = (leg[k] for k in range(6))
     gravity = leg[6:9]
@@ -85,7 +102,8 @@ def _leg(A: ca.SX, B: ca.SX, B_dot: ca.SX, c_B: ca.SX, leg: ca.SX
              - m_r * g_u * u - ((m_b * d_b + m_r * (q - d_r)) / q) * (gravity - g_u * u))
     y = beta * c_B + (m_r - beta) * ca.dot(u, c_B) * u + n_leg
     potential = -m_b * ca.dot(gravity, A + d_b * u) - m_r * ca.dot(gravity, B - d_r * u)
-    return u, beta, m_r, y, potential
+    bias = ca.dot(u, c_B) + q * ca.dot(u_dot, u_dot)
+    return u, beta, m_r, y, potential, q_dot, bias
 
 
 def _ldl_solve(M: ca.SX, b: ca.SX) -> ca.SX:
@@ -136,12 +154,14 @@ def _expressions() -> tuple[ca.SX, dict[str, ca.SX]]:
     # The legs, through their platform joints: B_dot = Jb tau, B_ddot = Jb tau_dot + c_B,
     # Jb = [I, -[b]x], c_B = w x (w x b); Jb^T M_leg Jb = beta Jb^T Jb + (m_r - beta) k k^T
     # with k = Jb^T u the leg's row of K.
-    k_rows = []
+    k_rows, q_dots, biases = [], [], []
     for i in range(6):
         b = R @ E[:, i]
         c_B = ca.cross(w, ca.cross(w, b))
-        u, beta, m_r, y, v_leg = _leg(A[:, i], b + t, v + ca.cross(w, b), c_B,
-                                      leg_parameters)
+        u, beta, m_r, y, v_leg, q_dot, bias = _leg(A[:, i], b + t, v + ca.cross(w, b), c_B,
+                                                   leg_parameters)
+        q_dots.append(q_dot)
+        biases.append(bias)
         k = ca.vertcat(u, ca.cross(b, u))
         Jb = ca.horzcat(ca.SX.eye(3), -_skew(b))
         M += beta * (Jb.T @ Jb) + (m_r - beta) * (k @ k.T)
@@ -150,14 +170,15 @@ def _expressions() -> tuple[ca.SX, dict[str, ca.SX]]:
         k_rows.append(k.T)
     K = ca.vertcat(*k_rows)
     kinetic = 0.5 * ca.dot(tau, M @ tau)
-    return x, {"M": M, "h": h, "K": K, "kinetic": kinetic, "potential": potential}
+    return x, {"M": M, "h": h, "K": K, "kinetic": kinetic, "potential": potential,
+               "q_dot": ca.vertcat(*q_dots), "leg_bias": ca.vertcat(*biases)}
 
 
 @lru_cache(maxsize=1)
 def _functions() -> dict[str, CompiledFunction]:
-    """The three compiled functions: ``forward`` (acceleration, 6), ``inverse`` (leg
-    forces, their residual ``K^T f - (M acc + h)`` and ``M acc + h``: 18) and ``terms``
-    (:data:`TERMS`)."""
+    """The compiled functions: ``forward`` (acceleration, 6), ``inverse`` (leg forces,
+    their residual ``K^T f - (M acc + h)`` and ``M acc + h``: 18), ``terms``
+    (:data:`TERMS`) and ``forward_drives`` (:data:`DRIVES_ROW` inputs, 18 outputs)."""
     x, e = _expressions()
     M, h, K = e["M"], e["h"], e["K"]
     u = x[18:24]
@@ -167,17 +188,28 @@ def _functions() -> dict[str, CompiledFunction]:
     # the residual exposes a singular K (the solve returns finite garbage there)
     inverse = ca.cse(ca.vertcat(f, K.T @ f - rhs, rhs))
     terms = ca.cse(ca.vertcat(ca.reshape(M, 36, 1), h, ca.reshape(K, 36, 1), e["kinetic"],
-                              e["potential"]))
+                              e["potential"], e["q_dot"], e["leg_bias"]))
+    # Leg-space masses: a (moves with the leg, e.g. reflected rotor inertia) and b (an
+    # implicit velocity-dependent force, -dt d(force)/d(q_dot), without the bias term).
+    extra = ca.SX.sym("legs", 12)
+    a, b = extra[0:6], extra[6:12]
+    leg_bias = e["leg_bias"]
+    M_eff = M + K.T @ ca.diag(a + b) @ K
+    acc = _ldl_solve(M_eff, K.T @ (u - a * leg_bias) - h)
+    drives = ca.cse(ca.vertcat(acc, e["q_dot"], K @ acc + leg_bias))
     return {
         "forward": CompiledFunction(ca.Function("hexapod_dyn_forward", [x], [forward])),
         "inverse": CompiledFunction(ca.Function("hexapod_dyn_inverse", [x], [inverse])),
         "terms": CompiledFunction(ca.Function("hexapod_dyn_terms", [x], [terms])),
+        "forward_drives": CompiledFunction(ca.Function(
+            "hexapod_dyn_forward_drives", [ca.vertcat(x, extra)], [drives])),
     }
 
 
 def compiled(name: str) -> CompiledFunction:
-    """One of the compiled functions (``"forward"``, ``"inverse"``, ``"terms"``), built
-    and compiled on first use (cached on disk by :mod:`hexapod.compiled`)."""
+    """One of the compiled functions (``"forward"``, ``"inverse"``, ``"terms"``,
+    ``"forward_drives"``), built and compiled on first use (cached on disk by
+    :mod:`hexapod.compiled`)."""
     return _functions()[name]
 
 

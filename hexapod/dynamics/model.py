@@ -163,6 +163,52 @@ class DynamicModel:
         K = np.swapaxes(y[:, 42:78].reshape(n, 6, 6), -1, -2)
         return M, y[:, 36:42], K, y[:, 78], y[:, 79]
 
+    def legs_batch(self, R: np.ndarray, t: np.ndarray, twist: np.ndarray,
+                   **overrides: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Leg rates ``q_dot = K twist`` (N, 6) [m/s] and the leg accelerations at zero
+        platform acceleration ``K_dot twist`` (N, 6) [m/s^2] (compiled method), so that
+        ``q_ddot = K acc + K_dot twist``."""
+        n = np.shape(t)[0]
+        y = _c.compiled("terms").batch(self.rows(R, t, twist, np.zeros((n, 6)), **overrides))
+        y = self._checked(y, "terms")
+        return y[:, 80:86], y[:, 86:92]
+
+    def forward_drives_batch(self, R: np.ndarray, t: np.ndarray, twist: np.ndarray,
+                             forces: np.ndarray, added_mass: np.ndarray,
+                             implicit_mass: np.ndarray | None = None,
+                             **overrides: np.ndarray
+                             ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Forward dynamics with leg-space masses, for the drives' layer (compiled).
+
+        Solves ``(M + K^T diag(a + b) K) acc = K^T (f - a K_dot twist) - h``
+        (:mod:`hexapod.dynamics.compiled`).
+
+        Args:
+            R, t, twist: The states, as :meth:`forward_batch`.
+            forces: (N, 6) net leg forces [N] (the drives' force minus friction).
+            added_mass: ``a``, (6,) or (N, 6) mass moving with each leg's length [kg]
+                (the reflected rotor inertia).
+            implicit_mass: ``b``, (6,) or (N, 6) ``-dt d(forces)/d(q_dot)`` [kg]: a
+                velocity-dependent force taken implicitly over a step ``dt``; zero if
+                None.
+            overrides: ``base_points``, ``platform_points``, ``parameters`` (:meth:`rows`).
+
+        Returns:
+            The platform acceleration (N, 6), the leg rates ``q_dot`` (N, 6) [m/s] and
+            the leg accelerations ``q_ddot = K acc + K_dot twist`` (N, 6) [m/s^2].
+        """
+        if self._reference is not None:
+            raise ValueError("forward_drives_batch is computed by the compiled model only "
+                             "(DynamicModel(geometry) without method='pinocchio')")
+        rows = self.rows(R, t, twist, forces, **overrides)
+        n = rows.shape[0]
+        a = _array("added_mass", np.broadcast_to(added_mass, (n, 6)), (6,))
+        b = np.zeros((n, 6)) if implicit_mass is None else _array(
+            "implicit_mass", np.broadcast_to(implicit_mass, (n, 6)), (6,))
+        y = _c.compiled("forward_drives").batch(np.concatenate([rows, a, b], axis=1))
+        y = self._checked(y, "forward_drives")
+        return y[:, 0:6], y[:, 6:12], y[:, 12:18]
+
     def mass_matrix_batch(self, R: np.ndarray, t: np.ndarray) -> np.ndarray:
         """:meth:`mass_matrix` over a leading axis -> (N, 6, 6)."""
         if self._reference is not None:

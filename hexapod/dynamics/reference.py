@@ -41,12 +41,18 @@ class ReferenceDynamics:
 
     Args:
         geometry: The robot (masses and gravity from ``geometry.inertia``).
+        armature: (6,) mass added to each prismatic joint [kg] (Pinocchio's
+            ``model.armature``: a reflected rotor inertia); none if None.
     """
 
-    def __init__(self, geometry: HexapodGeometry) -> None:
+    def __init__(self, geometry: HexapodGeometry, armature: np.ndarray | None = None
+                 ) -> None:
         self.geometry = geometry
         self.hm = build_model(geometry)
         model = self.hm.model.copy()
+        if armature is not None:
+            for j, a in zip(self.hm.prismatic_joints, armature, strict=True):
+                model.armature[model.joints[j].idx_v] = float(a)
         ff = self.hm.platform_joint
         self.b_frames = [
             model.addFrame(pin.Frame(f"B{i}", ff, 0,

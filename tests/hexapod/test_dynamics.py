@@ -259,3 +259,53 @@ def test_bad_input_is_refused(geometry: HexapodGeometry, rng: np.random.Generato
     # Every leg through one platform point: no force balances a torque about it.
     with pytest.raises(DynamicsError, match="state 0"):
         dyn.inverse_batch(R, t, twist, forces, platform_points=np.zeros((2, 6, 3)))
+
+
+def test_added_leg_mass_equals_pinocchio_armature(other_geometry: HexapodGeometry,
+                                                  rng: np.random.Generator) -> None:
+    """A mass moving with each leg's length (reflected rotor inertia) is Pinocchio's
+    armature on the prismatic joints."""
+    g = _lopsided(other_geometry)
+    a = np.array([2.5, 1.0, 3.0, 0.5, 2.0, 4.0])
+    ref = ReferenceDynamics(g, armature=a)
+    R, t, twist, forces = _states(g, 6, rng)
+    acc, _, _ = DynamicModel(g).forward_drives_batch(R, t, twist, forces, a)
+    for k in range(6):
+        expected = ref.forward(R[k], t[k], twist[k], forces[k])
+        assert _rel(acc[k], expected) < 1e-9
+        assert _rel(acc[k], DynamicModel(g).forward(R[k], t[k], twist[k], forces[k])) > 1e-3
+
+
+def test_leg_rates_and_bias_are_derivatives_of_leg_lengths(geometry: HexapodGeometry,
+                                                           rng: np.random.Generator) -> None:
+    """Under a constant twist (acc = 0), q(s) = IK(exp(s w) R, t + s v): its first and
+    second derivatives are q_dot and K_dot twist."""
+    dyn = DynamicModel(geometry)
+    R, t, twist, _ = _states(geometry, 3, rng)
+    q_dot, bias = dyn.legs_batch(R, t, twist)
+    h = 1e-4
+    for k in range(3):
+        def q(s: float, k: int = k) -> np.ndarray:
+            return inverse_kinematics(geometry, exp_so3(s * twist[k, 3:]) @ R[k],
+                                      t[k] + s * twist[k, :3])
+        np.testing.assert_allclose(q_dot[k], (q(h) - q(-h)) / (2 * h), rtol=1e-6, atol=1e-10)
+        np.testing.assert_allclose(bias[k], (q(h) - 2 * q(0.0) + q(-h)) / h**2, rtol=1e-4,
+                                   atol=1e-7)
+        assert np.abs(bias[k]).max() > 1e-3
+
+
+def test_implicit_mass_takes_a_damping_force_implicitly(geometry: HexapodGeometry,
+                                                        rng: np.random.Generator) -> None:
+    """With b = c dt, the acceleration is the fixed point of the damping force taken at
+    the end-of-step leg rates: f = f0 - c (q_dot + dt K acc)."""
+    dyn = DynamicModel(geometry)
+    R, t, twist, f0 = _states(geometry, 4, rng)
+    a, c, dt = np.full(6, 2.5), np.full(6, 400.0), 1e-3
+    q_dot, bias = dyn.legs_batch(R, t, twist)
+    acc, q_dot2, q_ddot = dyn.forward_drives_batch(R, t, twist, f0 - c * q_dot, a, c * dt)
+    np.testing.assert_array_equal(q_dot2, q_dot)
+    end_forces = f0 - c * (q_dot + dt * (q_ddot - bias))
+    again, _, _ = dyn.forward_drives_batch(R, t, twist, end_forces, a)
+    np.testing.assert_allclose(again, acc, rtol=1e-10, atol=1e-10 * np.abs(acc).max())
+    explicit, _, _ = dyn.forward_drives_batch(R, t, twist, f0 - c * q_dot, a)
+    assert np.abs(explicit - acc).max() > 1e-3 * np.abs(acc).max()
