@@ -113,3 +113,30 @@ def test_the_legs_follow_their_velocity_setpoints() -> None:
     np.testing.assert_allclose(deficit, expected, rtol=0.1)
     _, _, K, _, _ = r.model.terms_batch(r.R, r.t, r.twist, **r.rows(rows))
     np.testing.assert_allclose(np.einsum("nij,nj->ni", K, r.twist), 0.01, rtol=0.02)
+
+
+def test_the_step_equals_the_compiled_models_drive_layer() -> None:
+    """A second formulation of one step: the acceleration of the numpy step (its twist
+    change over h) equals DynamicModel.forward_drives_batch with the rotor inertia as the
+    added mass and the drives' implicit slope as ``-h df/dq_dot`` (its own bias K_dot
+    twist from CasADi's directional derivative, ours written out: leg_bias)."""
+    n = 8
+    r, _, _ = _robots(n, force_limit=60.0)
+    rows = np.arange(n)
+    rng = np.random.default_rng(9)
+    r.twist[:] = rng.normal(0.0, [0.02, 0.02, 0.02, 0.1, 0.1, 0.1], (n, 6))
+    sp = rng.uniform(-0.05, 0.05, (n, 6))
+    h = 1e-3
+    R, t, tw = r.R.copy(), r.t.copy(), r.twist.copy()
+    integral = r.drives.integral.copy()
+    qd, bias = r.model.legs_batch(R, t, tw, **r.rows(rows))
+    f = r.drives.forces(rows, sp, qd, h)
+    r.drives.integral[:] = integral  # forces() advanced it: the step starts from the same
+    acc, _, _ = r.model.forward_drives_batch(R, t, tw, f.motor - f.friction, r.rotor,
+                                             -h * f.slope, **r.rows(rows))
+    q, u, arm = legs(R, t, r.A, r.E)
+    from hexapod.dynamics.robots import leg_bias
+
+    np.testing.assert_allclose(leg_bias(tw, q, u, arm), bias, rtol=1e-9, atol=1e-12)
+    r.step_reference(rows, sp, h)
+    np.testing.assert_allclose((r.twist - tw) / h, acc, rtol=1e-7, atol=1e-9)
