@@ -108,3 +108,18 @@ def test_a_dynamic_run_records_and_reports_its_drives(tmp_path) -> None:
     assert 0 < np.abs(forces).max() <= max(r["max_leg_force_n"] for r in rows)
     report = (out / "report.md").read_text()
     assert "Drives (dynamic world" in report and "max leg force N" in report
+
+
+def test_run_world_overrides_the_scenarios_world(tmp_path) -> None:
+    """``run quick --world dynamic`` runs quick in the dynamic world (its rows carry the
+    drive figures), ``--world kinematic`` runs quick-dynamic without them."""
+    from benchmarks.cli import main as cli_main
+    from benchmarks.study.results import read_results
+
+    for name, world, has in (("quick", "dynamic", True), ("quick-dynamic", "kinematic", False)):
+        out = tmp_path / name
+        assert cli_main(["run", name, "--world", world, "--out", str(out), "--trials", "1",
+                         "--controllers", "leg-edge", "--no-progress", "--record", "0",
+                         "--max-steps", "20"]) == 0
+        rows = read_results(out)
+        assert rows and all(("max_leg_force_n" in r) == has for r in rows)
