@@ -91,6 +91,22 @@ class DriveError(GeometryError):
     ``"drives.force_limit"``, and the message names the leg."""
 
 
+class DynamicsError(HexapodError, ValueError):
+    """The dynamics have no finite answer at a state (a singular pose: the legs cannot
+    hold or move the platform, or a singular mass matrix).
+
+    Attributes:
+        what: The computation (``"forward"``, ``"inverse"``, ``"terms"``).
+        item: Index of the first offending state in the batch.
+    """
+
+    def __init__(self, what: str, item: int) -> None:
+        self.what = what
+        self.item = item
+        super().__init__(f"dynamics ({what}): no finite result at state {item} of the batch "
+                         "(singular pose or mass matrix)")
+
+
 class ForwardKinematicsError(HexapodError):
     """The forward kinematics did not converge.
 

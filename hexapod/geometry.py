@@ -108,11 +108,14 @@ class HexapodGeometry:
         object.__setattr__(self, "stroke", (q_min, q_max))
         object.__setattr__(self, "leg_radius", r)
         object.__setattr__(self, "max_speed", v)
-        inertia = self.inertia if self.inertia is not None else self.default_inertia()
+        defaulted = self.inertia is None
+        inertia = self.default_inertia() if defaulted else self.inertia
         if not isinstance(inertia, InertiaParameters):
             raise GeometryError("inertia", f"expected InertiaParameters, got {inertia!r}", src)
-        inertia.check_legs(q_min, src)
+        if not defaulted:
+            inertia.check_legs(q_min, src)
         object.__setattr__(self, "inertia", inertia)
+        object.__setattr__(self, "_inertia_defaulted", defaulted)
         drives = self.drives if self.drives is not None else DriveParameters.default()
         if not isinstance(drives, DriveParameters):
             raise GeometryError("drives", f"expected DriveParameters, got {drives!r}", src)
@@ -174,7 +177,7 @@ class HexapodGeometry:
             "leg_radius": self.leg_radius,
             "max_speed": self.max_speed,
             "name": self.name,
-            "inertia": None if self.inertia == self.default_inertia() else self.inertia,
+            "inertia": None if getattr(self, "_inertia_defaulted", False) else self.inertia,
             "drives": self.drives,
         }
         kwargs.update(changes)

@@ -7,6 +7,7 @@ from __future__ import annotations
 import logging
 import statistics
 import traceback
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -172,9 +173,17 @@ class Book:
         ser["orientation_error"].append(da)
         ser["velocities"].append(velocities.copy())
 
+    def record_more(self, k: int, values: dict[str, np.ndarray]) -> None:
+        """Append a plant's extra values of one period to row ``k``'s series
+        (:meth:`benchmarks.sim.plant.Plant.series`)."""
+        for key, value in values.items():
+            self.series[k].setdefault(key, []).append(value)
+
     def results(self, sc: Scenario, spec: Any, group: list[TrialSetup], R: np.ndarray,
-                t: np.ndarray, detect_times: list[float] | None = None) -> list[TrialResult]:
-        """The result rows (and recorded series) of the group at the final poses."""
+                t: np.ndarray, detect_times: list[float] | None = None,
+                figures: Callable[[int], dict[str, Any]] | None = None) -> list[TrialResult]:
+        """The result rows (and recorded series) of the group at the final poses
+        (``figures``: a plant's extra figures of row ``m``)."""
         R_goal = np.array([s.goal_rotation for s in group])
         t_goal = np.array([s.goal_translation for s in group])
         dp, da = pose_error(R, t, R_goal, t_goal)
@@ -213,6 +222,8 @@ class Book:
                 row["missed_periods"] = int(self.missed[m])
             if self.tracker is not None:
                 row.update(self.tracker.row(m))
+            if figures is not None:
+                row.update(figures(m))
             for key, value in s.calibration.items():
                 row[f"calibration_{key}"] = value
             ser_out = None

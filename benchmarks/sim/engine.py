@@ -255,6 +255,7 @@ def _run(sc: Scenario, spec: Any, group: list[TrialSetup], contexts: list[Any],
             r = int(idx[j])
             book.record(r, step * dt, q[r], R[r], t[r], meas["edge_visible"][j], norms[j],
                         dp[j], da[j], v_cmd[j])
+            book.record_more(r, plant.series(r))
         finished = idx[done]
         book.active[finished] = False
         book.steps[finished] = step
@@ -267,4 +268,4 @@ def _run(sc: Scenario, spec: Any, group: list[TrialSetup], contexts: list[Any],
     times = np.array(batch_times)
     for m in range(len(group)):  # a trial is commanded from step 0 until it is done
         book.step_times[m] = times[:stepped[m]].tolist()
-    return book.results(sc, spec, group, R, t)
+    return book.results(sc, spec, group, R, t, figures=plant.row_figures)

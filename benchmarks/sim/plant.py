@@ -58,8 +58,9 @@ class Plant(Protocol):
         """Extra figures of one trial for its result row (none in the kinematic world)."""
         ...
 
-    def series(self, rows: np.ndarray) -> dict[str, np.ndarray]:
-        """Extra per-period series of ``rows`` to record (none in the kinematic world)."""
+    def series(self, row: int) -> dict[str, np.ndarray]:
+        """Extra values of one trial this period, for its recorded series (none in the
+        kinematic world)."""
         ...
 
 
@@ -116,7 +117,7 @@ class KinematicPlant:
         """See :meth:`Plant.row_figures`: nothing."""
         return {}
 
-    def series(self, rows: np.ndarray) -> dict[str, np.ndarray]:
+    def series(self, row: int) -> dict[str, np.ndarray]:
         """See :meth:`Plant.series`: nothing."""
         return {}
 
@@ -132,4 +133,8 @@ def make_plant(sc: Any, group: list[Any], q: np.ndarray, R: np.ndarray, t: np.nd
         base_points, platform_points: The true robots' points, (6, 3) or (N, 6, 3) [m].
     """
     g = group[0].world.geometry
+    if getattr(sc, "world", "kinematic") == "dynamic":
+        from benchmarks.sim.dynamic_plant import DynamicPlant
+
+        return DynamicPlant(sc, group, q, R, t, base_points, platform_points)
     return KinematicPlant(q, R, t, base_points, platform_points, g.stroke, g.max_speed)

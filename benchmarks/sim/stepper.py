@@ -22,6 +22,7 @@ from typing import Any
 
 import numpy as np
 
+from benchmarks.exceptions import ScenarioError
 from benchmarks.sim.book import Book, TrialResult, failure_row
 from benchmarks.sim.clock import clocked_measure, make_clock
 from benchmarks.sim.plant import FK_FAILURE, KinematicPlant, make_plant
@@ -95,6 +96,10 @@ def run_trials(
             results[k] = TrialResult(failure_row(sc, spec, k, made))
         else:
             setups.append(made)
+    if getattr(sc, "world", "kinematic") == "dynamic" and backend_factory is not None:
+        raise ScenarioError(sc.source, "the dynamic world simulates the robot: it runs with "
+                            "the simulated backend only (a robot or an emulator is its own "
+                            "world; the emulators take --dynamics)", key="robot.world")
     if engine not in ENGINES:
         raise ValueError(f"engine: expected one of {', '.join(ENGINES)}, got {engine!r}")
     if (engine == "batched" and backend_factory is None and sensor_factory is None
@@ -223,6 +228,7 @@ def _run_group(sc: Scenario, controller_index: int, group: list[TrialSetup],
                 book.record(int(k), step * dt, q[k], R[k], t[k], meas["edge_visible"][j],
                             cmd.error_norm if cmd is not None else np.nan, dp[j], da[j],
                             v_cmd[j])
+                book.record_more(int(k), plant.series(int(k)))
         finished = idx[done]
         book.active[finished] = False
         book.steps[finished] = step
@@ -241,7 +247,8 @@ def _run_group(sc: Scenario, controller_index: int, group: list[TrialSetup],
             book.missed[k] += int(bs.missed_period)
         bad = poses.solve_poses(run)  # the backends moved the legs: the poses follow
         book.world_failures(dict.fromkeys(run[bad].tolist(), FK_FAILURE), step)
-    return book.results(sc, spec, group, R, t, getattr(sensor, "detect_times", None))
+    return book.results(sc, spec, group, R, t, getattr(sensor, "detect_times", None),
+                        plant.row_figures)
 
 
 def trial_context(sc: Scenario, setup: TrialSetup, goal: Any) -> ControllerContext:

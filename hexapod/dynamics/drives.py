@@ -20,6 +20,7 @@ DeltaLab legs (140 mm stroke, 50 mm/s), not a datasheet:
 from __future__ import annotations
 
 from dataclasses import dataclass, fields
+from functools import lru_cache
 from typing import Any
 
 import numpy as np
@@ -101,7 +102,11 @@ class DriveParameters:
 
     @classmethod
     def default(cls) -> DriveParameters:
-        """The assumed defaults (module docstring)."""
+        """The assumed defaults (module docstring); the same (immutable) object."""
+        return _default()
+
+    @classmethod
+    def _make_default(cls) -> DriveParameters:
         return cls(force_limit=np.full(6, 200.0), rotor_inertia=np.full(6, 2.5),
                    viscous=np.full(6, 50.0), coulomb=np.full(6, 5.0),
                    encoder_resolution=np.full(6, 1e-6), mode="velocity",
@@ -110,6 +115,8 @@ class DriveParameters:
     def __eq__(self, other: object) -> bool:
         if not isinstance(other, DriveParameters):
             return NotImplemented
+        if self is other:
+            return True
         return self.mode == other.mode and all(
             np.array_equal(getattr(self, k), getattr(other, k)) for k in _NUMERIC)
 
@@ -166,3 +173,8 @@ class DriveParameters:
             else:
                 out[key] = value.tolist()
         return out
+
+
+@lru_cache(maxsize=1)
+def _default() -> DriveParameters:
+    return DriveParameters._make_default()

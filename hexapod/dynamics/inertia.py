@@ -27,6 +27,7 @@ For the DeltaLab preset this gives ``body_com = rod_com = 0.15525`` m.
 from __future__ import annotations
 
 from dataclasses import dataclass, fields
+from functools import lru_cache
 from typing import Any
 
 import numpy as np
@@ -172,6 +173,8 @@ class InertiaParameters:
     def __eq__(self, other: object) -> bool:
         if not isinstance(other, InertiaParameters):
             return NotImplemented
+        if self is other:
+            return True
         return all(np.array_equal(getattr(self, k), getattr(other, k)) for k in self.KEYS)
 
     __hash__ = None  # type: ignore[assignment]
@@ -185,28 +188,44 @@ class InertiaParameters:
     @classmethod
     def default(cls, platform_radius: float, leg_radius: float, q_min: float
                 ) -> InertiaParameters:
-        """The assumed defaults (module docstring), sized on the robot.
+        """The assumed defaults (module docstring), sized on the robot; the same
+        (immutable) object for the same sizes.
 
         Args:
             platform_radius: Radius of the platform disc [m].
             leg_radius: Radius of the legs [m].
             q_min: Shortest leg length [m].
         """
+        return _default(float(platform_radius), float(leg_radius), float(q_min))
+
+    @classmethod
+    def _make_default(cls, platform_radius: float, leg_radius: float, q_min: float
+                      ) -> InertiaParameters:
+        """The defaults, built without the checks of ``__post_init__`` (valid by
+        construction, tested; every robot of a study with its own leg radius makes
+        one)."""
         thickness = 0.01
         m_p = 2.0
         lateral = m_p * (3 * platform_radius**2 + thickness**2) / 12
         length = 0.9 * q_min
-        return cls(
-            platform_mass=m_p,
-            platform_com=np.zeros(3),
-            platform_inertia=np.array([lateral, lateral, m_p * platform_radius**2 / 2,
-                                       0.0, 0.0, 0.0]),
-            body_mass=0.5, body_com=length / 2,
-            body_inertia=np.array(cylinder_inertia(0.5, leg_radius, length)),
-            rod_mass=0.2, rod_com=length / 2,
-            rod_inertia=np.array(cylinder_inertia(0.2, 0.6 * leg_radius, length)),
-            gravity=np.array([0.0, 0.0, -STANDARD_GRAVITY]),
-        )
+        values: dict[str, Any] = {
+            "platform_mass": m_p,
+            "platform_com": np.zeros(3),
+            "platform_inertia": np.array([lateral, lateral, m_p * platform_radius**2 / 2,
+                                          0.0, 0.0, 0.0]),
+            "body_mass": 0.5, "body_com": length / 2,
+            "body_inertia": np.array(cylinder_inertia(0.5, leg_radius, length)),
+            "rod_mass": 0.2, "rod_com": length / 2,
+            "rod_inertia": np.array(cylinder_inertia(0.2, 0.6 * leg_radius, length)),
+            "gravity": np.array([0.0, 0.0, -STANDARD_GRAVITY]),
+            "source": None,
+        }
+        obj = cls.__new__(cls)
+        for key, value in values.items():
+            if isinstance(value, np.ndarray):
+                value.flags.writeable = False
+            object.__setattr__(obj, key, value)
+        return obj
 
     def massless(self) -> InertiaParameters:
         """The same platform with massless legs (the textbook case)."""
@@ -244,6 +263,11 @@ class InertiaParameters:
             value = getattr(self, key)
             out[key] = value.tolist() if isinstance(value, np.ndarray) else float(value)
         return out
+
+
+@lru_cache(maxsize=256)
+def _default(platform_radius: float, leg_radius: float, q_min: float) -> InertiaParameters:
+    return InertiaParameters._make_default(platform_radius, leg_radius, q_min)
 
 
 def _check_tensor(key: str, tensor: np.ndarray, source: str | None) -> None:

@@ -82,6 +82,19 @@ def test_replace_resizes_default_inertia_but_keeps_given() -> None:
     assert given.replace(leg_radius=0.02).inertia.body_com == 0.1
 
 
+@pytest.mark.parametrize(("platform_radius", "leg_radius", "q_min"),
+                         [(0.195, 0.015, 0.345), (0.05, 0.03, 0.1), (1.0, 0.002, 2.0)])
+def test_defaults_pass_every_check(platform_radius: float, leg_radius: float,
+                                   q_min: float) -> None:
+    """The defaults are built without the checks: they must pass them."""
+    default = InertiaParameters.default(platform_radius, leg_radius, q_min)
+    assert default.replace() == default  # replace() validates again
+    default.check_legs(q_min)
+    assert InertiaParameters.default(platform_radius, leg_radius, q_min) is default
+    with pytest.raises(ValueError):
+        default.platform_com[0] = 1.0  # read-only, shared
+
+
 def test_massless_legs_are_accepted() -> None:
     g = deltalab()
     massless = g.replace(inertia=g.inertia.massless())

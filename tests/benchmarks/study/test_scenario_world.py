@@ -84,3 +84,42 @@ def test_the_true_robot_gets_the_inertial_error_and_the_controllers_the_file() -
                        ti.platform_inertia[0] / ni.platform_inertia[0]])
     spread = np.std(np.log(masses), axis=0)
     assert np.all((spread > 0.12) & (spread < 0.3)), spread
+
+
+def test_a_dynamic_run_records_and_reports_its_drives(tmp_path) -> None:
+    """quick-dynamic through the CLI: every row has the drive figures, the recorded trial
+    its leg forces, and the report a drives table (the figures are not sweep values)."""
+    from benchmarks.cli import main as cli_main
+    from benchmarks.study.metrics import sweep_values
+    from benchmarks.study.results import read_results
+
+    out = tmp_path / "qd"
+    assert cli_main(["run", "quick-dynamic", "--out", str(out), "--trials", "2",
+                     "--controllers", "leg-edge", "--no-progress", "--record", "1",
+                     "--max-steps", "60"]) == 0
+    rows = read_results(out)
+    for key in ("max_leg_force_n", "saturation_time_s", "drive_tracking_rms_mm_s",
+                "drive_tracking_max_mm_s"):
+        assert all(isinstance(r[key], float) and r[key] >= 0 for r in rows), key
+    assert all(sweep_values(r) == {} for r in rows)
+    forces = np.load(next((out / "trials").glob("*.npz")))["leg_forces"]
+    assert forces.shape == (61, 6) and np.all(np.isfinite(forces))
+    # sampled at the ends of the periods: within the largest force over every physics step
+    assert 0 < np.abs(forces).max() <= max(r["max_leg_force_n"] for r in rows)
+    report = (out / "report.md").read_text()
+    assert "Drives (dynamic world" in report and "max leg force N" in report
+
+
+def test_run_world_overrides_the_scenarios_world(tmp_path) -> None:
+    """``run quick --world dynamic`` runs quick in the dynamic world (its rows carry the
+    drive figures), ``--world kinematic`` runs quick-dynamic without them."""
+    from benchmarks.cli import main as cli_main
+    from benchmarks.study.results import read_results
+
+    for name, world, has in (("quick", "dynamic", True), ("quick-dynamic", "kinematic", False)):
+        out = tmp_path / name
+        assert cli_main(["run", name, "--world", world, "--out", str(out), "--trials", "1",
+                         "--controllers", "leg-edge", "--no-progress", "--record", "0",
+                         "--max-steps", "20"]) == 0
+        rows = read_results(out)
+        assert rows and all(("max_leg_force_n" in r) == has for r in rows)
