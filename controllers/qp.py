@@ -30,6 +30,7 @@ from __future__ import annotations
 import logging
 import math
 from collections.abc import Sequence
+from dataclasses import dataclass
 from functools import lru_cache
 from typing import Any
 
@@ -257,6 +258,44 @@ def refine_kernel() -> CompiledFunction:
     return CompiledFunction(_refine_function())
 
 
+@dataclass(frozen=True)
+class StrokeWindow:
+    """The limits of the QP laws for one trial (``docs/math.md`` section 6).
+
+    Attributes:
+        lower: Lowest leg length allowed, ``q_min + margin`` [m].
+        upper: Highest leg length allowed, ``q_max - margin`` [m].
+        max_speed: Leg speed limit [m/s].
+        dt: Control period [s].
+    """
+
+    lower: float
+    upper: float
+    max_speed: float
+    dt: float
+
+
+def velocity_bounds(q: np.ndarray, lower: Any, upper: Any, max_speed: Any, inv_dt: Any
+                    ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """The bounds on the leg velocities ``J_inv tau`` of one period (one definition for
+    the QP law, its batched rows and the predictive controller's first move).
+
+    Reaching ``lower``/``upper`` within the period, each clipped to the speed limit so
+    that the window is never empty. Works on one trial (scalars, ``q`` (6,)) and on a
+    batch (``(n, 1)`` columns, ``q`` (n, 6)).
+
+    Returns:
+        The stroke rates ``(lower - q) / dt`` and ``(upper - q) / dt`` [m/s], and the
+        bounds ``lo``, ``hi`` [m/s].
+    """
+    stroke_lo = (lower - q) * inv_dt
+    stroke_hi = (upper - q) * inv_dt
+    # np.clip, without its Python wrapper (a few microseconds each).
+    lo = np.minimum(np.maximum(stroke_lo, -max_speed), max_speed)
+    hi = np.minimum(np.maximum(stroke_hi, -max_speed), max_speed)
+    return stroke_lo, stroke_hi, lo, hi
+
+
 class QPLaw(VisionLaw):
     """Mixin of the QP laws: replaces the pseudo-inverse of :class:`VisionLaw` by :class:`LimitQP`.
 
@@ -292,27 +331,27 @@ class QPLaw(VisionLaw):
         if q_max - margin <= q_min + margin:
             raise OptionError(self.name, "stroke_margin",
                               f"{margin} m leaves no stroke in [{q_min}, {q_max}] m")
-        self._q_lo = q_min + margin
-        self._q_hi = q_max - margin
-        self._vmax = float(context.max_speed if self.max_speed is None else self.max_speed)
+        #: This trial's limits.
+        self.window = StrokeWindow(q_min + margin, q_max - margin,
+                                   float(context.max_speed if self.max_speed is None
+                                         else self.max_speed), self._dt)
         self.qp.reset()
 
     def _batch_reset_extra(self) -> None:
         super()._batch_reset_extra()
-        trials = self._trials
-        self._b_lo = np.array([t._q_lo for t in trials])[:, None]
-        self._b_hi = np.array([t._q_hi for t in trials])[:, None]
-        self._b_inv_dt = np.array([1.0 / t._dt for t in trials])[:, None]
-        self._b_vmax = np.array([t._vmax for t in trials])[:, None]
-        self._b_shortcut = np.array([t.shortcut for t in trials], dtype=bool)
+        windows = [t.window for t in self._trials]
+        self._b_lo = np.array([w.lower for w in windows])[:, None]
+        self._b_hi = np.array([w.upper for w in windows])[:, None]
+        self._b_inv_dt = np.array([1.0 / w.dt for w in windows])[:, None]
+        self._b_vmax = np.array([w.max_speed for w in windows])[:, None]
+        self._b_shortcut = np.array([t.shortcut for t in self._trials], dtype=bool)
 
     def _batch_accept(self, trials: np.ndarray, q: np.ndarray, qdot: np.ndarray
                       ) -> np.ndarray:
         """Rows whose unconstrained optimum clears every bound (as :meth:`_solve`)."""
         vmax = self._b_vmax[trials]
-        inv_dt = self._b_inv_dt[trials]
-        lo = np.minimum(np.maximum((self._b_lo[trials] - q) * inv_dt, -vmax), vmax)
-        hi = np.minimum(np.maximum((self._b_hi[trials] - q) * inv_dt, -vmax), vmax)
+        _, _, lo, hi = velocity_bounds(q, self._b_lo[trials], self._b_hi[trials], vmax,
+                                       self._b_inv_dt[trials])
         tol2 = 2.0 * (1e-6 * vmax[:, 0])
         with np.errstate(invalid="ignore"):
             return (self._b_shortcut[trials] & ((qdot - lo).min(axis=1) > tol2)
@@ -344,13 +383,10 @@ class QPLaw(VisionLaw):
             qdot = J @ tau
         if rank < 6:
             return np.zeros(6), rank, cond, [], None, None
-        inv_dt = 1.0 / self._dt
-        vmax = self._vmax
-        stroke_lo = (self._q_lo - q) * inv_dt
-        stroke_hi = (self._q_hi - q) * inv_dt
-        # np.clip, without its Python wrapper (a few microseconds each).
-        lo = np.minimum(np.maximum(stroke_lo, -vmax, out=self._lower), vmax, out=self._lower)
-        hi = np.minimum(np.maximum(stroke_hi, -vmax, out=self._upper), vmax, out=self._upper)
+        w = self.window
+        vmax = w.max_speed
+        stroke_lo, stroke_hi, lo, hi = velocity_bounds(q, w.lower, w.upper, vmax, 1.0 / w.dt)
+        self._lower, self._upper = lo, hi  # for _finish
         tol = 1e-6 * vmax
         if self.shortcut and (qdot - lo).min() > 2.0 * tol and (hi - qdot).min() > 2.0 * tol:
             return tau, rank, cond, [], None, qdot  # NaN fails the comparisons
