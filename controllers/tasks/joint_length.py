@@ -1,0 +1,57 @@
+"""Joint-length task: ``e_i = q_i - q_i*``, ``L_i = [u_i^T, (A_i x u_i)^T]`` (the rows of
+the inverse Jacobian, ``docs/math.md`` section 3), one row per leg."""
+
+from __future__ import annotations
+
+from functools import lru_cache
+
+import casadi as ca
+import numpy as np
+
+from controllers.interaction import cross
+from controllers.tasks.base import (
+    Task,
+    TaskState,
+    evaluate_blocks,
+    leg_rates,
+    second_order_function,
+)
+
+
+@lru_cache(maxsize=1)
+def _second_order() -> ca.Function:
+    # state (u, q), parameters (A, q*)
+    return second_order_function(
+        "joint_length_second_order", 4, 4,
+        lambda s, p: s[3] - p[3],
+        lambda s, p, tau: ca.vertcat(*leg_rates(s[:3], p[:3], s[3], tau)))
+
+
+class JointLengthTask(Task):
+    """The six leg lengths towards their desired values.
+
+    Args:
+        desired: (6,) or (n, 6) desired lengths ``q*`` [m].
+    """
+
+    name = "joint-lengths"
+    block = 1
+
+    def __init__(self, desired: np.ndarray) -> None:
+        self.desired = np.asarray(desired, dtype=float)
+
+    def error(self, state: TaskState) -> np.ndarray:
+        return state.lengths - self.desired
+
+    def jacobian(self, state: TaskState) -> np.ndarray:
+        u = state.directions
+        return np.concatenate([u, cross(state.base_points, u)], axis=-1)
+
+    def jacobian_dot_twist(self, state: TaskState, twist: np.ndarray) -> np.ndarray:
+        n = len(state)
+        s = np.concatenate([state.directions, state.lengths[..., None]], axis=-1)
+        star = np.broadcast_to(self.desired, (n, 6))[..., None]
+        p = np.concatenate([state.base_points, star], axis=-1)
+        tau = np.repeat(np.asarray(twist, dtype=float).reshape(n, 6), 6, axis=0)
+        return evaluate_blocks(_second_order(), s.reshape(-1, 4), p.reshape(-1, 4),
+                               tau).reshape(n, 6)
