@@ -26,6 +26,7 @@ import numpy as np
 from controllers.base import CommandBatch, ControllerContext, ObservationBatch
 from controllers.estimators import LegDirectionEstimate
 from controllers.options import RemembersOptions
+from controllers.solvers.base import Solver
 
 
 class BatchedLaw(RemembersOptions):
@@ -33,6 +34,7 @@ class BatchedLaw(RemembersOptions):
 
     _kernel: Any
     estimate: LegDirectionEstimate
+    solver: Solver
 
     def reset(self, context: ControllerContext) -> None:  # provided by VisionLaw
         raise NotImplementedError
@@ -43,14 +45,9 @@ class BatchedLaw(RemembersOptions):
         of rows whose features are all visible. (None, None): no compiled core."""
         return None, None
 
-    def _batch_accept(self, trials: np.ndarray, q: np.ndarray, qdot: np.ndarray
-                      ) -> np.ndarray:
-        """(n,) rows whose compiled result is the command as is (the QP laws check their
-        bounds here)."""
-        return np.ones(len(trials), dtype=bool)
-
     def _batch_reset_extra(self) -> None:
-        """Per-trial constants of subclasses (the QP bounds)."""
+        """Per-trial constants of subclasses (the solver's are gathered by
+        :meth:`~controllers.solvers.base.Solver.batch_reset`)."""
 
     # ------------------------------------------------------------------ reset
     def reset_batch(self, contexts: Sequence[ControllerContext]) -> None:
@@ -82,6 +79,7 @@ class BatchedLaw(RemembersOptions):
             for k, kern in enumerate(kernels):
                 if kern is not None:
                     self._X[k] = kern.input_vector
+        self.solver.batch_reset([t.solver for t in trials])
         self._batch_reset_extra()
 
     # ------------------------------------------------------------------ step
@@ -120,7 +118,7 @@ class BatchedLaw(RemembersOptions):
         with np.errstate(invalid="ignore"):
             ok = (np.isfinite(Y[:, o["error_norm"].start]) & np.isfinite(Y[:, o["n_sum"].start])
                   & (Y[:, o["rank"].start] >= 6) & (Y[:, o["qdot_check"].start] == 0.0))
-        ok &= self._batch_accept(trials, q, Y[:, o["qdot"]])
+        ok &= self.solver.batch_accept(trials, q, Y[:, o["qdot"]])
         if ok.all():  # the common case: no row copies
             Ya, tr, qa, ra = Y, trials, q, rows
         else:

@@ -56,6 +56,8 @@ from controllers.law_tools import (
     solve_normal,
     solve_normal_damped,
 )
+from controllers.solvers.base import Solver
+from controllers.solvers.pseudo_inverse import DampedPseudoInverse
 
 __all__ = [
     "INTERACTIONS", "Gain", "Stack", "VisionLaw", "check_choice", "check_number",
@@ -98,7 +100,8 @@ class VisionLaw(BatchedLaw, Controller):
 
     Subclasses implement :meth:`_reset_features` (read the goal) and
     :meth:`_stack` (error and interaction blocks, visibility, current leg
-    directions in ``self._directions``). :meth:`_solve` may be overridden (QP).
+    directions in the estimate). The solver (:attr:`solver`, the damped pseudo-inverse by
+    default) turns the tasks into a twist: the QP laws set the limit QP there.
 
     Args:
         gain: Constant gain ``lambda`` [1/s].
@@ -122,6 +125,8 @@ class VisionLaw(BatchedLaw, Controller):
         if self.threshold >= 1.0:
             raise OptionError(self.name, "threshold", f"must be < 1, got {self.threshold}")
         self.damping = check_number(self.name, "damping", damping, 0.0, strict=False)
+        #: What turns the tasks into a twist (the QP laws put the limit QP here).
+        self.solver: Solver = DampedPseudoInverse(self.threshold, self.damping)
         self.context: ControllerContext | None = None
         self._A = np.zeros((6, 3))
         self._dt = 0.0
@@ -165,11 +170,12 @@ class VisionLaw(BatchedLaw, Controller):
             self._q_star = qs
         self._kernel = None
         self._reset_features(context)
+        self.solver.reset(context, self.name, dt)
         if self._kernel is not None:
             g = self.gain
             self._kernel.set("gain", (g.at_zero, g.at_infinity, g.slope_at_zero))
             self._kernel.set("threshold2", self.threshold * self.threshold)
-            self._kernel.set("damping2", self._damping2())
+            self._kernel.set("damping2", self.solver.damping2)
 
     @property
     def base_points(self) -> np.ndarray:
@@ -189,10 +195,6 @@ class VisionLaw(BatchedLaw, Controller):
         """(nf, 3) the measured features of an observation and (nf,) which are usable
         (observed now and in the goal)."""
         raise NotImplementedError
-
-    def _damping2(self) -> float:
-        """``mu^2`` added to the eigenvalues of ``L^T L`` by the solve."""
-        return self.damping * self.damping
 
     @abstractmethod
     def _reset_features(self, context: ControllerContext) -> None:
@@ -288,14 +290,15 @@ class VisionLaw(BatchedLaw, Controller):
         if isinstance(ts, Command):
             return ts
         J, e = ts.inverse_jacobian, ts.error
-        return self._command(self._solve(ts.normal, ts.gradient, ts.gain, q, J, ts.compiled),
+        return self._command(self.solver.solve(ts.normal, ts.gradient, ts.gain, q, J,
+                                               ts.compiled),
                              J, e, ts.error_norm, e.shape[0], q, ts.notes)
 
     def _command(self, solved: tuple[np.ndarray, int, float, list[str], str | None,
                                      np.ndarray | None],
                  J: np.ndarray, e: np.ndarray, error_norm: float, rows: int, q: np.ndarray,
                  notes: list[str]) -> Command:
-        """The command (or the refusal) from the output of :meth:`_solve`."""
+        """The command (or the refusal) from the solver's output."""
         tau, rank, cond, active, reason, qdot = solved
         if reason is not None or rank < 6:
             if reason is None:
@@ -305,7 +308,7 @@ class VisionLaw(BatchedLaw, Controller):
                            condition=cond, features_used=rows, reason=reason,
                            notes=notes, active_constraints=active)
         if qdot is None:
-            qdot = self._finish(J @ tau)
+            qdot = self.solver.finish(J @ tau)
             if not np.all(np.isfinite(qdot)):
                 return Command.refuse("non-finite command (numerical failure)", e)
         self.estimate.commanded(tau, q)
@@ -348,36 +351,6 @@ class VisionLaw(BatchedLaw, Controller):
             return None
         self.model_pose = PoseEstimate(sol.rotation, sol.translation)
         return legs_in_frame(ctx.geometry, sol.rotation, sol.translation, pose).directions
-
-    def _solve(self, N: np.ndarray, b: np.ndarray, lam: float, q: np.ndarray, J: np.ndarray,
-               pre: LawResult | None) -> tuple[np.ndarray, int, float, list[str], str | None,
-                                               np.ndarray | None]:
-        """The classical law: ``tau = -lambda L^+ e`` from ``N = L^T L`` and ``b = L^T e``.
-
-        Args:
-            N: (6, 6) ``L^T L``.
-            b: (6,) ``L^T e``.
-            lam: Gain [1/s].
-            q: (6,) measured lengths [m].
-            J: (6, 6) inverse Jacobian (``self._J`` on the numpy path).
-            pre: The compiled core's result (classical solution, rank, condition,
-                ``q_dot``), or None on the numpy path.
-
-        Returns:
-            ``tau`` (6,), rank, condition, active constraints, refusal reason (or None),
-            and the final ``q_dot`` (6,) when already computed and checked finite (None:
-            ``_finish(J tau)`` is computed and checked by the caller).
-        """
-        if pre is not None:
-            qdot = self._finish(pre.qdot) if pre.qdot_finite else None
-            return pre.tau, pre.rank, pre.condition, [], None, qdot
-        x, rank, cond = solve_normal(N, b, self.threshold, self.damping)
-        x *= -lam
-        return x, rank, cond, [], None, None
-
-    def _finish(self, qdot: np.ndarray) -> np.ndarray:
-        """Last touch on the leg velocities (identity; the QP laws clip to their bounds)."""
-        return qdot
 
     # ----------------------------------------------------------------- helpers
     def _desired_lengths(self, q: np.ndarray) -> np.ndarray:

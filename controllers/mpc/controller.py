@@ -183,7 +183,7 @@ class MPCLaw(Controller):
         sl = self._lay.slices
         geo = context.geometry
         A = law.base_points
-        window = law.window
+        window = law.solver.window
         self._vec[sl["dt"]] = window.dt
         self._vec[sl["A"]] = A.reshape(-1)
         self._vec[sl["E"]] = np.asarray(geo.platform_points, dtype=float).reshape(-1)
@@ -259,7 +259,7 @@ class MPCLaw(Controller):
         assert spec is not None
         sl = self._lay.slices
         vec = self._vec
-        window = law.window
+        window = law.solver.window
         dt = window.dt
         lam = law.gain(float(np.abs(e).max()) if e.size else 0.0)
         if self.reference == "exponential":

@@ -220,7 +220,7 @@ def test_qp_shortcut_equals_the_osqp_solution(world: World, name: str,
     real = LimitQP.solve
 
     def counting(self: LimitQP, *args: Any, **kwargs: Any) -> Any:
-        calls.append("short" if self is short.qp else "full")  # type: ignore[attr-defined]
+        calls.append("short" if self is short.solver.qp else "full")  # type: ignore[attr-defined]
         return real(self, *args, **kwargs)
 
     monkeypatch.setattr(LimitQP, "solve", counting)
@@ -237,10 +237,10 @@ def test_qp_shortcut_equals_the_osqp_solution(world: World, name: str,
 
 
 def test_qp_shortcut_off_with_chosen_osqp_settings() -> None:
-    assert registry.create("leg-edge-qp").shortcut  # type: ignore[attr-defined]
-    assert not registry.create("leg-edge-qp", max_iter=10).shortcut  # type: ignore[attr-defined]
+    assert registry.create("leg-edge-qp").solver.shortcut  # type: ignore[attr-defined]
+    assert not registry.create("leg-edge-qp", max_iter=10).solver.shortcut  # type: ignore[attr-defined]
     assert registry.create("leg-edge-qp", max_iter=10,  # type: ignore[attr-defined]
-                           shortcut=True).shortcut
+                           shortcut=True).solver.shortcut
 
 
 @pytest.mark.parametrize("turn", [0.0, np.pi - 1e-4])
