@@ -122,6 +122,32 @@ def second_order_function(name: str, n_state: int, n_param: int,
     return ca.Function(name, [s, p, tau], [ca.jtimes(edot, s, sdot)])
 
 
+def leg_second_order(name: str, n_param: int, error: Callable[[ca.SX, ca.SX], ca.SX]
+                     ) -> ca.Function:
+    """:func:`second_order_function` of a per-leg feature: state ``(u, q)`` (4), parameters
+    ``(A, ...)`` (``n_param``, the base point first), the leg moved by :func:`leg_rates`."""
+    return second_order_function(
+        name, 4, n_param, error,
+        lambda s, p, tau: ca.vertcat(*leg_rates(s[:3], p[:3], s[3], tau)))
+
+
+def evaluate_legs(function: ca.Function, state: TaskState, params: np.ndarray,
+                  twist: np.ndarray) -> np.ndarray:
+    """A :func:`leg_second_order` function over every leg of every row: (n, 6, out).
+
+    Args:
+        function: The per-leg function.
+        state: The rows' state (directions and lengths).
+        params: (n, 6, n_param) the per-leg parameters.
+        twist: (n, 6) the rows' twists.
+    """
+    n = len(state)
+    s = np.concatenate([state.directions, state.lengths[..., None]], axis=-1)
+    tau = np.repeat(np.asarray(twist, dtype=float).reshape(n, 6), 6, axis=0)
+    out = evaluate_blocks(function, s.reshape(-1, 4), params.reshape(n * 6, -1), tau)
+    return out.reshape(n, 6, -1)
+
+
 def evaluate_blocks(function: ca.Function, s: np.ndarray, p: np.ndarray, tau: np.ndarray
                     ) -> np.ndarray:
     """Evaluate a block function over rows (k, ...) -> (k, out) (CasADi ``map``)."""
@@ -137,5 +163,5 @@ def unit(x: np.ndarray) -> np.ndarray:
     return x / np.sqrt(np.einsum("...k,...k->...", x, x))[..., None]
 
 
-__all__ = ["Task", "TaskState", "cross", "evaluate_blocks", "leg_rates",
-           "second_order_function", "unit"]
+__all__ = ["Task", "TaskState", "cross", "evaluate_blocks", "evaluate_legs", "leg_rates",
+           "leg_second_order", "second_order_function", "unit"]

@@ -9,22 +9,13 @@ import casadi as ca
 import numpy as np
 
 from controllers.interaction import cross
-from controllers.tasks.base import (
-    Task,
-    TaskState,
-    evaluate_blocks,
-    leg_rates,
-    second_order_function,
-)
+from controllers.tasks.base import Task, TaskState, evaluate_legs, leg_second_order
 
 
 @lru_cache(maxsize=1)
 def _second_order() -> ca.Function:
-    # state (u, q), parameters (A, q*)
-    return second_order_function(
-        "joint_length_second_order", 4, 4,
-        lambda s, p: s[3] - p[3],
-        lambda s, p, tau: ca.vertcat(*leg_rates(s[:3], p[:3], s[3], tau)))
+    # parameters (A, q*)
+    return leg_second_order("joint_length_second_order", 4, lambda s, p: s[3] - p[3])
 
 
 class JointLengthTask(Task):
@@ -49,9 +40,6 @@ class JointLengthTask(Task):
 
     def jacobian_dot_twist(self, state: TaskState, twist: np.ndarray) -> np.ndarray:
         n = len(state)
-        s = np.concatenate([state.directions, state.lengths[..., None]], axis=-1)
         star = np.broadcast_to(self.desired, (n, 6))[..., None]
         p = np.concatenate([state.base_points, star], axis=-1)
-        tau = np.repeat(np.asarray(twist, dtype=float).reshape(n, 6), 6, axis=0)
-        return evaluate_blocks(_second_order(), s.reshape(-1, 4), p.reshape(-1, 4),
-                               tau).reshape(n, 6)
+        return evaluate_legs(_second_order(), state, p, twist).reshape(n, 6)

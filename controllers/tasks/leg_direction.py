@@ -9,22 +9,14 @@ import casadi as ca
 import numpy as np
 
 from controllers.interaction import cross, direction_task
-from controllers.tasks.base import (
-    Task,
-    TaskState,
-    evaluate_blocks,
-    leg_rates,
-    second_order_function,
-)
+from controllers.tasks.base import Task, TaskState, evaluate_legs, leg_second_order
 
 
 @lru_cache(maxsize=1)
 def _second_order() -> ca.Function:
-    # state (u, q), parameters (A, u*)
-    return second_order_function(
-        "leg_direction_second_order", 4, 6,
-        lambda s, p: ca.cross(s[:3], p[3:6]),
-        lambda s, p, tau: ca.vertcat(*leg_rates(s[:3], p[:3], s[3], tau)))
+    # parameters (A, u*)
+    return leg_second_order("leg_direction_second_order", 6,
+                            lambda s, p: ca.cross(s[:3], p[3:6]))
 
 
 class LegDirectionTask(Task):
@@ -56,8 +48,5 @@ class LegDirectionTask(Task):
 
     def jacobian_dot_twist(self, state: TaskState, twist: np.ndarray) -> np.ndarray:
         n = len(state)
-        s = np.concatenate([state.directions, state.lengths[..., None]], axis=-1)
         p = np.concatenate([state.base_points, self._star(n)], axis=-1)
-        tau = np.repeat(np.asarray(twist, dtype=float).reshape(n, 6), 6, axis=0)
-        return evaluate_blocks(_second_order(), s.reshape(-1, 4), p.reshape(-1, 6),
-                               tau).reshape(n, 18)
+        return evaluate_legs(_second_order(), state, p, twist).reshape(n, 18)

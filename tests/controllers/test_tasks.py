@@ -5,6 +5,8 @@ normals of the cylinders), never a copy of the formulas."""
 
 from __future__ import annotations
 
+from collections.abc import Callable
+
 import numpy as np
 import pytest
 
@@ -43,10 +45,18 @@ def _world(geometry: HexapodGeometry, rng: np.random.Generator
     return A, np.asarray(geometry.platform_points, float), R, t, twist
 
 
-def _state(geometry: HexapodGeometry, A: np.ndarray, E: np.ndarray, R: np.ndarray,
-           t: np.ndarray, twist: np.ndarray, dt: float) -> TaskState:
-    Rm, tm = integrate_pose(R, t, twist, dt)
-    return TaskState.at_pose(A, E, Rm, tm, geometry.leg_radius)
+def _setup(kind: str, geometry: HexapodGeometry, rng: np.random.Generator
+           ) -> tuple[Task, Callable[[float], TaskState], np.ndarray]:
+    """A task, the exact state after moving each pose by its twist for ``dt`` [s], and the
+    twists."""
+    A, E, R, t, twist = _world(geometry, rng)
+    task = _tasks(geometry, A, E, rng)[kind]
+
+    def at(dt: float) -> TaskState:
+        Rm, tm = integrate_pose(R, t, twist, dt)
+        return TaskState.at_pose(A, E, Rm, tm, geometry.leg_radius)
+
+    return task, at, twist
 
 
 def _tasks(geometry: HexapodGeometry, A: np.ndarray, E: np.ndarray, rng: np.random.Generator
@@ -76,11 +86,10 @@ KINDS = ["directions", "normals", "lines", "lengths", "pose"]
 @pytest.mark.parametrize("kind", KINDS)
 def test_jacobian_is_the_derivative_of_the_error_along_the_twist(
         kind: str, geometry: HexapodGeometry, rng: np.random.Generator) -> None:
-    A, E, R, t, twist = _world(geometry, rng)
-    task = _tasks(geometry, A, E, rng)[kind]
-    s0 = _state(geometry, A, E, R, t, twist, 0.0)
-    ep = task.error(_state(geometry, A, E, R, t, twist, H))
-    em = task.error(_state(geometry, A, E, R, t, twist, -H))
+    task, at, twist = _setup(kind, geometry, rng)
+    s0 = at(0.0)
+    ep = task.error(at(H))
+    em = task.error(at(-H))
     numeric = (ep - em) / (2 * H)
     L = task.jacobian(s0)
     assert L.shape == (*numeric.shape, 6)
@@ -93,13 +102,11 @@ def test_jacobian_is_the_derivative_of_the_error_along_the_twist(
 @pytest.mark.parametrize("kind", KINDS)
 def test_second_order_term_is_the_derivative_of_the_jacobian_along_the_motion(
         kind: str, geometry: HexapodGeometry, rng: np.random.Generator) -> None:
-    A, E, R, t, twist = _world(geometry, rng)
-    task = _tasks(geometry, A, E, rng)[kind]
-    s0 = _state(geometry, A, E, R, t, twist, 0.0)
+    task, at, twist = _setup(kind, geometry, rng)
+    s0 = at(0.0)
 
     def rate(dt: float) -> np.ndarray:
-        return np.einsum("nij,nj->ni", task.jacobian(_state(geometry, A, E, R, t, twist, dt)),
-                         twist)
+        return np.einsum("nij,nj->ni", task.jacobian(at(dt)), twist)
 
     numeric = (rate(H) - rate(-H)) / (2 * H)
     analytic = task.jacobian_dot_twist(s0, twist)
@@ -108,7 +115,7 @@ def test_second_order_term_is_the_derivative_of_the_jacobian_along_the_motion(
     assert scale > 1e-4
     np.testing.assert_allclose(analytic, numeric, rtol=0, atol=1e-6 * max(scale, 1.0))
     # and the second difference of the error itself (e_ddot = L_dot tau at constant tau)
-    e = [task.error(_state(geometry, A, E, R, t, twist, dt)) for dt in (-1e-4, 0.0, 1e-4)]
+    e = [task.error(at(dt)) for dt in (-1e-4, 0.0, 1e-4)]
     second = (e[2] - 2 * e[1] + e[0]) / 1e-8
     np.testing.assert_allclose(analytic, second, rtol=0, atol=1e-3 * max(scale, 1.0))
 
