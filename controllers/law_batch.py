@@ -56,11 +56,7 @@ class BatchedLaw(RemembersOptions):
         Raises:
             ContextError: A context the law cannot use (as :meth:`reset`).
         """
-        self._trials: list[Any] = []
-        for ctx in contexts:
-            inst = self.clone()
-            inst.reset(ctx)
-            self._trials.append(inst)
+        self._trials: list[Any] = self.clones_reset(contexts)
         trials = self._trials
         n = len(trials)
         #: The estimates of every trial (the instances' estimates are its rows).

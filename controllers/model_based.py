@@ -248,11 +248,7 @@ class ModelBasedController(RemembersOptions, Controller):
     def reset_batch(self, contexts: Sequence[ControllerContext]) -> None:
         """One instance per context (built with this controller's options), reset with it;
         their pose estimates are the rows of one batch estimate."""
-        self._trials: list[ModelBasedController] = []
-        for ctx in contexts:
-            inst = self.clone()
-            inst.reset(ctx)
-            self._trials.append(inst)
+        self._trials: list[ModelBasedController] = self.clones_reset(contexts)
         trials = self._trials
         #: The forward-kinematics warm starts of every trial (the instances' rows).
         self.batch_estimate = PoseEstimate.of(

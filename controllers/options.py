@@ -7,6 +7,7 @@ instance, never copied from it (a copy would carry whatever state it holds).
 
 from __future__ import annotations
 
+from collections.abc import Iterable
 from typing import Any, TypeVar
 
 T = TypeVar("T", bound="RemembersOptions")
@@ -31,3 +32,12 @@ class RemembersOptions:
         """A new instance with the same options, not reset."""
         args, kwargs = self._options
         return type(self)(*args, **kwargs)
+
+    def clones_reset(self: T, contexts: Iterable[Any]) -> list[T]:
+        """One :meth:`clone` per context, reset with it (the trials of a batch)."""
+        out = []
+        for ctx in contexts:
+            inst = self.clone()
+            inst.reset(ctx)  # type: ignore[attr-defined]
+            out.append(inst)
+        return out
