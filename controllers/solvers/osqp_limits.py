@@ -70,7 +70,7 @@ class LimitQP:
         The sparsity (upper triangle of ``P``, dense ``A``) is all a setup fixes;
         every :meth:`solve` then only updates the values (``P``, ``A``, ``q``, ``l``,
         ``u``) and warm-starts, and a step that needs no QP (see
-        :meth:`QPLaw._solve`) costs nothing here.
+        :meth:`~controllers.solvers.limit_qp.LimitQPSolver.solve`) costs nothing here.
         """
         self._solver = None
         try:
