@@ -13,9 +13,16 @@ Built-in controllers are registered in :data:`controllers.base.registry` here:
 - ``joint-space``: leg lengths to the nominal inverse kinematics of the goal;
 - ``latency-compensated``: any of them (``law``) fed the image features predicted over
   the image's delay with the nominal model (:mod:`controllers.latency`).
+
+The vision laws are (task, solver) pairs: the features are tasks
+(:mod:`controllers.tasks`), the pseudo-inverse and the limit QP are solvers
+(:mod:`controllers.solvers`), and what a law carries between periods is an estimator
+dataclass (:mod:`controllers.estimators`). A controller says what it commands
+(:class:`Actuation`: leg velocities, or leg forces).
 """
 
 from controllers.base import (
+    Actuation,
     Command,
     Controller,
     ControllerContext,
@@ -51,6 +58,7 @@ for _name, _factory in BUILTINS.items():
 
 __all__ = [
     "BUILTINS",
+    "Actuation",
     "Command",
     "Controller",
     "ControllerContext",

@@ -33,6 +33,7 @@ from typing import Any
 import numpy as np
 
 from controllers.base import Command, Controller, ControllerContext, Goal, Observation
+from controllers.batch import actuation_of
 from controllers.tracking import retarget
 
 log = logging.getLogger(__name__)
@@ -58,6 +59,7 @@ class LatencyCompensated(Controller):
         self.law_name = str(law)
         self.law = registry.create(self.law_name, **options)
         self.features = frozenset(getattr(self.law, "features", frozenset())) | {"lengths"}
+        self.actuation = actuation_of(self.law)
         self.context: ControllerContext | None = None
         self._times: deque[float] = deque(maxlen=HISTORY)
         self._lengths: deque[np.ndarray] = deque(maxlen=HISTORY)
@@ -84,7 +86,8 @@ class LatencyCompensated(Controller):
     def step(self, observation: Observation) -> Command:
         """The law's command on the predicted features."""
         if self.context is None:
-            return Command.refuse(f"{self.name}: reset(context) was not called")
+            return Command.refuse(f"{self.name}: reset(context) was not called",
+                                  actuation=self.actuation)
         q = np.asarray(observation.lengths, dtype=float)
         t = float(observation.t)
         if q.shape == (6,) and np.all(np.isfinite(q)) and math.isfinite(t):

@@ -18,8 +18,9 @@ built for a fixed goal:
 - the controller is retargeted to that goal every period (its ``retarget(goal)`` when it
   has one, else ``reset`` with the new goal: the law's state, such as the dead-reckoned
   directions of hidden legs, starts afresh);
-- a velocity command gets the feed-forward ``(q*(t_{k+1}) - q*(t_k)) / dt``, the nominal
-  leg lengths' change over the coming period. For a vision law it is the feature-rate
+- a velocity command (not a force command) gets the feed-forward
+  ``(q*(t_{k+1}) - q*(t_k)) / dt``, the nominal leg lengths' change over the coming
+  period. For a vision law it is the feature-rate
   term ``L^+ ds*/dt`` written in joint space: with the nominal model exact, a robot on
   the reference stays on it (tested in the kinematic world).
 
@@ -35,7 +36,15 @@ from typing import Any
 
 import numpy as np
 
-from controllers.base import Command, Controller, ControllerContext, Goal, Observation
+from controllers.base import (
+    Actuation,
+    Command,
+    Controller,
+    ControllerContext,
+    Goal,
+    Observation,
+)
+from controllers.batch import actuation_of
 from controllers.exceptions import ContextError
 
 log = logging.getLogger(__name__)
@@ -124,6 +133,7 @@ class TrackingController(Controller):
         self.inner = inner
         self.name = str(getattr(inner, "name", "controller"))
         self.features = frozenset(getattr(inner, "features", frozenset({"lengths"})))
+        self.actuation = actuation_of(inner)
         self.feed_forward = bool(feed_forward)
         self._contexts: list[ControllerContext] = []
         self._q_rate = np.zeros((0, 6))
@@ -182,6 +192,6 @@ class TrackingController(Controller):
             retarget(self.inner, self._contexts[k])
             self._k = k
         cmd: Command = self.inner.step(observation)
-        if self.feed_forward and cmd.reason is None:
+        if self.feed_forward and cmd.reason is None and cmd.actuation is Actuation.VELOCITY:
             cmd.velocities = np.asarray(cmd.velocities, dtype=float) + self._q_rate[k]
         return cmd

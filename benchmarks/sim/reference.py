@@ -85,8 +85,11 @@ def task_controller(sc: Scenario, spec: Any) -> Any:
 def task_batch_controller(sc: Scenario, spec: Any, batched: bool) -> Any:
     """The batch interface of :func:`task_controller` (a trajectory task steps its
     tracking controllers one per trial, :class:`controllers.batch.PerTrialLoop`)."""
-    from controllers.batch import PerTrialLoop, batch_controller
+    from controllers.batch import PerTrialLoop, actuation_of, batch_controller
 
     if sc.task.kind != "trajectory":
         return batch_controller(spec.name, spec.options, batched)
-    return PerTrialLoop(lambda: task_controller(sc, spec))
+    first = [task_controller(sc, spec)]
+    actuation = actuation_of(first[0])
+    return PerTrialLoop(lambda: first.pop() if first else task_controller(sc, spec),
+                        actuation)
