@@ -14,6 +14,7 @@ import numpy as np
 
 from benchmarks.sim.world import TrialSetup
 from benchmarks.study.scenario import Scenario, TaskConfig
+from controllers.batch import PerTrialLoop, actuation_of, batch_controller
 from hexapod.trajectory import PoseTrajectory
 
 
@@ -85,8 +86,6 @@ def task_controller(sc: Scenario, spec: Any) -> Any:
 def task_batch_controller(sc: Scenario, spec: Any, batched: bool) -> Any:
     """The batch interface of :func:`task_controller` (a trajectory task steps its
     tracking controllers one per trial, :class:`controllers.batch.PerTrialLoop`)."""
-    from controllers.batch import PerTrialLoop, actuation_of, batch_controller
-
     if sc.task.kind != "trajectory":
         return batch_controller(spec.name, spec.options, batched)
     first = [task_controller(sc, spec)]
