@@ -12,11 +12,17 @@ leg forces of about 30 N):
 - ``compiled batch``: the compiled C function looped in C over a batch, per state;
 - ``compiled forward_drives batch``: the same with the drives' leg-space masses (zero
   here) and the leg rates and accelerations as outputs;
-- ``DynamicModel.forward_batch``: the same with the packing of the rows, the input
+- ``compiled inverse batch``: the inverse dynamics (leg forces from constraintDynamics'
+  accelerations; its error column compares the forces with those given);
+- ``DynamicModel.forward_batch``: the forward batch with the packing of the rows, the input
   checks and the finiteness check, per state.
 
 Times are medians over many runs (``--repeats``); the accuracy columns give the largest
 relative difference of each method's platform acceleration from constraintDynamics.
+
+``--mujoco`` adds MuJoCo's ``mj_forward`` on the same closed chain (six ``connect``
+equality constraints, :mod:`benchmarks.perf.dynamics_mujoco`) when ``mujoco`` is
+installed (it is not a dependency of the project).
 
 ``--energy`` adds the energy drift of free motion (no gravity, no force) over one
 second, integrated with classical RK4 (``R`` as nine numbers, ``R_dot = [w]x R``,
@@ -62,7 +68,8 @@ def _relative(a: np.ndarray, ref: np.ndarray) -> float:
     return float(np.max(np.linalg.norm(a - ref, axis=1) / np.linalg.norm(ref, axis=1)))
 
 
-def dynamics_figures(n: int = 1000, repeats: int = 30, seed: int = 0) -> list[DynamicsFigure]:
+def dynamics_figures(n: int = 1000, repeats: int = 30, seed: int = 0,
+                     mujoco: bool = False) -> list[DynamicsFigure]:
     """Time every method on the same ``n`` random states (module docstring)."""
     g = deltalab()
     rng = np.random.default_rng(seed)
@@ -107,6 +114,23 @@ def dynamics_figures(n: int = 1000, repeats: int = 30, seed: int = 0) -> list[Dy
     figures.append(DynamicsFigure("pinocchio lcaba (mu 1e-3)", us, base_us / us,
                                   _relative(acc_l, acc_ref)))
 
+    if mujoco:
+        from benchmarks.perf.dynamics_mujoco import MujocoHexapod
+
+        mj = MujocoHexapod(g)
+        acc_mj = np.empty((n, 6))
+        times = []
+        for _ in range(max(1, repeats // 10)):
+            for k, (q, v) in enumerate(states):
+                mj.set_state(q, v, R[k], twist[k], forces[k])
+                t0 = time.perf_counter()
+                mj.forward()
+                times.append(time.perf_counter() - t0)
+                acc_mj[k] = mj.platform_acceleration(R[k])
+        us = float(np.median(times)) * 1e6
+        figures.append(DynamicsFigure("mujoco mj_forward (soft constraints)", us,
+                                      base_us / us, _relative(acc_mj, acc_ref)))
+
     # Compiled: one state per call, a batch in C, and through DynamicModel.
     dyn = DynamicModel(g)
     rows = dyn.rows(R, t, twist, forces)
@@ -139,6 +163,17 @@ def dynamics_figures(n: int = 1000, repeats: int = 30, seed: int = 0) -> list[Dy
     us = float(np.median(times)) * 1e6
     figures.append(DynamicsFigure(f"compiled forward_drives batch of {n}", us, base_us / us,
                                   _relative(acc_drives, acc_ref)))
+    inverse_rows = rows.copy()
+    inverse_rows[:, 18:24] = acc_ref
+    inverse = dyn_compiled.compiled("inverse")
+    times = []
+    for _ in range(repeats):
+        t0 = time.perf_counter()
+        f_back = inverse.batch(inverse_rows)[:, :6]
+        times.append((time.perf_counter() - t0) / n)
+    us = float(np.median(times)) * 1e6
+    figures.append(DynamicsFigure(f"compiled inverse batch of {n} (forces)", us,
+                                  base_us / us, _relative(f_back, forces)))
     times = []
     for _ in range(repeats):
         t0 = time.perf_counter()
@@ -231,12 +266,21 @@ def main(argv: list[str] | None = None) -> int:
                         help="timed runs of the batch (a tenth of it for the per-call "
                              "methods, over all states)")
     parser.add_argument("--seed", type=int, default=0)
+    parser.add_argument("--mujoco", action="store_true",
+                        help="also MuJoCo's mj_forward on the same chain (needs mujoco)")
     parser.add_argument("--energy", action="store_true",
                         help="also the energy drift of free motion over 1 s (RK4)")
     args = parser.parse_args(argv)
     if min(args.n, args.repeats) < 1:
         parser.error("-n and --repeats must be >= 1")
-    print(format_dynamics(dynamics_figures(args.n, args.repeats, args.seed), args.n))
+    if args.mujoco:
+        import importlib.util
+
+        if importlib.util.find_spec("mujoco") is None:
+            parser.error("--mujoco needs MuJoCo (pip install mujoco); it is not a "
+                         "dependency of the project")
+    print(format_dynamics(dynamics_figures(args.n, args.repeats, args.seed, args.mujoco),
+                          args.n))
     if args.energy:
         print()
         print(format_energy(energy_drift(seed=args.seed)))

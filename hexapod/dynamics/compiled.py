@@ -106,6 +106,18 @@ def _leg(A: ca.SX, B: ca.SX, B_dot: ca.SX, c_B: ca.SX, leg: ca.SX
     return u, beta, m_r, y, potential, q_dot, bias
 
 
+def _symmetric_outer(a: ca.SX, k: ca.SX) -> ca.SX:
+    """``a k^T`` for ``a`` parallel to ``k``, from its upper triangle (21 products)."""
+    n = k.shape[0]
+    out = ca.SX.zeros(n, n)
+    for i in range(n):
+        for j in range(i, n):
+            out[i, j] = a[i] * k[j]
+            if j != i:
+                out[j, i] = out[i, j]
+    return out
+
+
 def _ldl_solve(M: ca.SX, b: ca.SX) -> ca.SX:
     """``M^-1 b`` for a symmetric positive-definite ``M`` by an unrolled LDL^T."""
     n = M.shape[0]
@@ -153,8 +165,10 @@ def _expressions() -> tuple[ca.SX, dict[str, ca.SX]]:
     potential = -m_p * ca.dot(gravity, t + rc)
     # The legs, through their platform joints: B_dot = Jb tau, B_ddot = Jb tau_dot + c_B,
     # Jb = [I, -[b]x], c_B = w x (w x b); Jb^T M_leg Jb = beta Jb^T Jb + (m_r - beta) k k^T
-    # with k = Jb^T u the leg's row of K.
+    # with k = Jb^T u the leg's row of K, and Jb^T Jb = [[I, -[b]x], [[b]x, |b|^2 I - b b^T]]
+    # summed over the legs as sum(beta), sum(beta b) and sum(beta (|b|^2 I - b b^T)).
     k_rows, q_dots, biases = [], [], []
+    s0, s1, s2 = ca.SX(0), ca.SX.zeros(3), ca.SX.zeros(3, 3)
     for i in range(6):
         b = R @ E[:, i]
         c_B = ca.cross(w, ca.cross(w, b))
@@ -163,11 +177,14 @@ def _expressions() -> tuple[ca.SX, dict[str, ca.SX]]:
         q_dots.append(q_dot)
         biases.append(bias)
         k = ca.vertcat(u, ca.cross(b, u))
-        Jb = ca.horzcat(ca.SX.eye(3), -_skew(b))
-        M += beta * (Jb.T @ Jb) + (m_r - beta) * (k @ k.T)
+        s0 += beta
+        s1 += beta * b
+        s2 += beta * (ca.dot(b, b) * ca.SX.eye(3) - b @ b.T)
+        M += _symmetric_outer((m_r - beta) * k, k)
         h += ca.vertcat(y, ca.cross(b, y))
         potential += v_leg
         k_rows.append(k.T)
+    M += ca.vertcat(ca.horzcat(s0 * ca.SX.eye(3), -_skew(s1)), ca.horzcat(_skew(s1), s2))
     K = ca.vertcat(*k_rows)
     kinetic = 0.5 * ca.dot(tau, M @ tau)
     return x, {"M": M, "h": h, "K": K, "kinetic": kinetic, "potential": potential,
@@ -175,42 +192,49 @@ def _expressions() -> tuple[ca.SX, dict[str, ca.SX]]:
 
 
 @lru_cache(maxsize=1)
-def _functions() -> dict[str, CompiledFunction]:
-    """The compiled functions: ``forward`` (acceleration, 6), ``inverse`` (leg forces,
-    their residual ``K^T f - (M acc + h)`` and ``M acc + h``: 18), ``terms``
-    (:data:`TERMS`) and ``forward_drives`` (:data:`DRIVES_ROW` inputs, 18 outputs)."""
-    x, e = _expressions()
+def _cached_expressions() -> tuple[ca.SX, dict[str, ca.SX]]:
+    return _expressions()
+
+
+def _build(name: str) -> ca.Function:
+    """The CasADi function ``name``: ``forward`` (acceleration, 6), ``inverse`` (leg
+    forces, their residual ``K^T f - (M acc + h)`` and ``M acc + h``: 18), ``terms``
+    (:data:`TERMS`) or ``forward_drives`` (:data:`DRIVES_ROW` inputs, 18 outputs)."""
+    x, e = _cached_expressions()
     M, h, K = e["M"], e["h"], e["K"]
     u = x[18:24]
-    forward = ca.cse(_ldl_solve(M, K.T @ u - h))
-    rhs = M @ u + h
-    f = ca.solve(K.T, rhs)
-    # the residual exposes a singular K (the solve returns finite garbage there)
-    inverse = ca.cse(ca.vertcat(f, K.T @ f - rhs, rhs))
-    terms = ca.cse(ca.vertcat(ca.reshape(M, 36, 1), h, ca.reshape(K, 36, 1), e["kinetic"],
-                              e["potential"], e["q_dot"], e["leg_bias"]))
-    # Leg-space masses: a (moves with the leg, e.g. reflected rotor inertia) and b (an
-    # implicit velocity-dependent force, -dt d(force)/d(q_dot), without the bias term).
-    extra = ca.SX.sym("legs", 12)
-    a, b = extra[0:6], extra[6:12]
-    leg_bias = e["leg_bias"]
-    M_eff = M + K.T @ ca.diag(a + b) @ K
-    acc = _ldl_solve(M_eff, K.T @ (u - a * leg_bias) - h)
-    drives = ca.cse(ca.vertcat(acc, e["q_dot"], K @ acc + leg_bias))
-    return {
-        "forward": CompiledFunction(ca.Function("hexapod_dyn_forward", [x], [forward])),
-        "inverse": CompiledFunction(ca.Function("hexapod_dyn_inverse", [x], [inverse])),
-        "terms": CompiledFunction(ca.Function("hexapod_dyn_terms", [x], [terms])),
-        "forward_drives": CompiledFunction(ca.Function(
-            "hexapod_dyn_forward_drives", [ca.vertcat(x, extra)], [drives])),
-    }
+    if name == "forward":
+        return ca.Function("hexapod_dyn_forward", [x], [ca.cse(_ldl_solve(M, K.T @ u - h))])
+    if name == "inverse":
+        rhs = M @ u + h
+        f = ca.solve(K.T, rhs)
+        # the residual exposes a singular K (the solve returns finite garbage there)
+        return ca.Function("hexapod_dyn_inverse", [x],
+                           [ca.cse(ca.vertcat(f, K.T @ f - rhs, rhs))])
+    if name == "terms":
+        return ca.Function("hexapod_dyn_terms", [x], [ca.cse(ca.vertcat(
+            ca.reshape(M, 36, 1), h, ca.reshape(K, 36, 1), e["kinetic"], e["potential"],
+            e["q_dot"], e["leg_bias"]))])
+    if name == "forward_drives":
+        # Leg-space masses: a (moves with the leg, e.g. reflected rotor inertia) and b
+        # (an implicit velocity-dependent force, -dt d(force)/d(q_dot), without the bias).
+        extra = ca.SX.sym("legs", 12)
+        a, b = extra[0:6], extra[6:12]
+        leg_bias = e["leg_bias"]
+        M_eff = M + K.T @ ca.diag(a + b) @ K
+        acc = _ldl_solve(M_eff, K.T @ (u - a * leg_bias) - h)
+        return ca.Function("hexapod_dyn_forward_drives", [ca.vertcat(x, extra)],
+                           [ca.cse(ca.vertcat(acc, e["q_dot"], K @ acc + leg_bias))])
+    raise ValueError(f"unknown compiled dynamics function {name!r}; expected one of "
+                     "forward, inverse, terms, forward_drives")
 
 
+@lru_cache(maxsize=8)
 def compiled(name: str) -> CompiledFunction:
     """One of the compiled functions (``"forward"``, ``"inverse"``, ``"terms"``,
-    ``"forward_drives"``), built and compiled on first use (cached on disk by
-    :mod:`hexapod.compiled`)."""
-    return _functions()[name]
+    ``"forward_drives"``), built and compiled on first use (the C library is cached
+    on disk by :mod:`hexapod.compiled`)."""
+    return CompiledFunction(_build(name))
 
 
 def pack(R: np.ndarray, t: np.ndarray, twist: np.ndarray, u: np.ndarray,

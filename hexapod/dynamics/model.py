@@ -77,7 +77,8 @@ class DynamicModel:
         if self._reference is not None:
             R, t, twist, forces = self._one(R, t, twist, forces, "forces")
             return self._checked(self._reference.forward(R, t, twist, forces), "forward")
-        return self.forward_batch(R[None], t[None], twist[None], forces[None])[0]
+        return self.forward_batch(*(np.asarray(x, dtype=float)[None]
+                                    for x in (R, t, twist, forces)))[0]
 
     def inverse(self, R: np.ndarray, t: np.ndarray, twist: np.ndarray, acc: np.ndarray
                 ) -> np.ndarray:
@@ -85,21 +86,23 @@ class DynamicModel:
         if self._reference is not None:
             R, t, twist, acc = self._one(R, t, twist, acc, "acc")
             return self._checked(self._reference.inverse(R, t, twist, acc), "inverse")
-        return self.inverse_batch(R[None], t[None], twist[None], acc[None])[0]
+        return self.inverse_batch(*(np.asarray(x, dtype=float)[None]
+                                    for x in (R, t, twist, acc)))[0]
 
     def mass_matrix(self, R: np.ndarray, t: np.ndarray) -> np.ndarray:
         """(6, 6) mass matrix: the kinetic energy is ``twist^T M twist / 2`` [J]."""
         if self._reference is not None:
             R, t, _, _ = self._one(R, t, np.zeros(6), np.zeros(6), "acc")
             return self._reference.mass_matrix(R, t)
-        return self.mass_matrix_batch(R[None], t[None])[0]
+        return self.mass_matrix_batch(*(np.asarray(x, dtype=float)[None] for x in (R, t)))[0]
 
     def energy(self, R: np.ndarray, t: np.ndarray, twist: np.ndarray) -> float:
         """Kinetic plus potential energy [J] (potential zero at the base origin)."""
         if self._reference is not None:
             R, t, twist, _ = self._one(R, t, twist, np.zeros(6), "acc")
             return self._reference.energy(R, t, twist)
-        return float(self.energy_batch(R[None], t[None], twist[None])[0])
+        return float(self.energy_batch(*(np.asarray(x, dtype=float)[None]
+                                         for x in (R, t, twist)))[0])
 
     # ------------------------------------------------------------ batches
     def rows(self, R: np.ndarray, t: np.ndarray, twist: np.ndarray, u: np.ndarray,
@@ -149,7 +152,7 @@ class DynamicModel:
     def terms_batch(self, R: np.ndarray, t: np.ndarray, twist: np.ndarray,
                     **overrides: np.ndarray
                     ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-        """The equation's terms over a leading axis (compiled method).
+        """The equation's terms over a leading axis (always the compiled model).
 
         Returns:
             ``M`` (N, 6, 6), ``h`` (N, 6) (velocity and gravity terms [N, N m]),
@@ -166,7 +169,8 @@ class DynamicModel:
     def legs_batch(self, R: np.ndarray, t: np.ndarray, twist: np.ndarray,
                    **overrides: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Leg rates ``q_dot = K twist`` (N, 6) [m/s] and the leg accelerations at zero
-        platform acceleration ``K_dot twist`` (N, 6) [m/s^2] (compiled method), so that
+        platform acceleration ``K_dot twist`` (N, 6) [m/s^2] (always the compiled model),
+        so that
         ``q_ddot = K acc + K_dot twist``."""
         n = np.shape(t)[0]
         y = _c.compiled("terms").batch(self.rows(R, t, twist, np.zeros((n, 6)), **overrides))

@@ -35,3 +35,30 @@ def test_energy_drift_table_shrinks_with_the_step() -> None:
     assert drift2 < drift1 < 1e-8       # RK4: fourth order, tiny at these steps
     assert max(ortho1, ortho2) < 1e-8
     assert "classical RK4" in dynamics.format_energy(rows)
+
+
+def test_mujoco_is_optional_and_said_so(monkeypatch: pytest.MonkeyPatch,
+                                        capsys: pytest.CaptureFixture[str]) -> None:
+    import importlib.util
+
+    monkeypatch.setattr(importlib.util, "find_spec", lambda name: None)
+    with pytest.raises(SystemExit):
+        dynamics.main(["--mujoco", "-n", "2", "--repeats", "1"])
+    assert "--mujoco needs MuJoCo (pip install mujoco)" in capsys.readouterr().err
+
+
+def test_mujoco_model_mirrors_the_chain() -> None:
+    """The MJCF (built without MuJoCo): six legs, six loop constraints, the masses."""
+    import xml.etree.ElementTree as ET
+
+    from benchmarks.perf.dynamics_mujoco import mjcf
+    from hexapod import deltalab
+
+    g = deltalab()
+    root = ET.fromstring(mjcf(g))
+    assert len(root.findall("./equality/connect")) == 6
+    joints = [j.get("type") for j in root.iter("joint")]
+    assert joints.count("ball") == 6 and joints.count("slide") == 6
+    masses = sorted(float(i.get("mass", 0)) for i in root.iter("inertial"))
+    assert masses == sorted([g.inertia.platform_mass] + [g.inertia.body_mass] * 6
+                            + [g.inertia.rod_mass] * 6)
