@@ -294,6 +294,22 @@ def test_servo_through_an_opencv_calibration_file(tmp_path: Path,
     assert "--camera-pose: only with an OpenCV calibration file" in capsys.readouterr().err
 
 
+def test_servo_through_a_kalibr_fisheye(tmp_path: Path,
+                                        capsys: pytest.CaptureFixture[str]) -> None:
+    """--camera-file camchain.yaml (Kalibr pinhole-equi, the fisheye preset's lens) with
+    --camera-pose fisheye: rendered and tracked through the fisheye, the loop converges."""
+    from hexapod.geometry import deltalab
+    from vision.cameras import fisheye_camera, save_kalibr_camera
+
+    save_kalibr_camera(fisheye_camera(deltalab()), tmp_path / "camchain.yaml")
+    goal = _goal(tmp_path, f"lengths_mm = {_mm(GOAL_MM)}\n")
+    argv = ["--backend", "emulator", "--camera", "sim", "--controller", "leg-edge",
+            "--goal", str(goal), "--camera-file", str(tmp_path / "camchain.yaml"),
+            "--camera-pose", "fisheye", *FAST]
+    assert servo.main(argv) == 0, capsys.readouterr().out[-2000:]
+    assert "converged after" in capsys.readouterr().out
+
+
 def test_the_serial_board_refuses_a_force_controller_before_moving() -> None:
     """A force command reaches neither the serial protocol nor the emulated board: the
     servo loop refuses the controller first, naming it and what the robot applies."""
