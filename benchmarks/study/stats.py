@@ -8,9 +8,9 @@ controllers are compared on paired data:
   :data:`RESAMPLES` resamples unless told otherwise);
 - convergence of two controllers on the same trials: McNemar's exact test, the
   two-sided binomial test on the discordant pairs;
-- paired continuous metrics (final error, steps): Wilcoxon's signed-rank test
-  (``scipy.stats.wilcoxon``), and the median of the paired differences with a seeded
-  percentile-bootstrap interval;
+- paired continuous metrics (final error, steps): Wilcoxon's signed-rank test (as
+  ``scipy.stats.wilcoxon`` computes it), and the median of the paired differences
+  with a seeded percentile-bootstrap interval;
 - several comparisons at once: Holm's step-down correction.
 
 References: E. B. Wilson, "Probable inference, the law of succession, and statistical
@@ -21,8 +21,12 @@ B. Efron and R. Tibshirani, "An Introduction to the Bootstrap", 1993.
 
 from __future__ import annotations
 
+import itertools
+import math
 from collections.abc import Sequence
 from dataclasses import dataclass
+from fractions import Fraction
+from statistics import NormalDist
 
 import numpy as np
 
@@ -32,8 +36,6 @@ LEVEL = 0.95
 SEED = 0
 #: Bootstrap resamples (recorded in the report).
 RESAMPLES = 2000
-#: Resampled values held in memory at once (a chunk of resamples).
-_CHUNK_VALUES = 2_000_000
 
 
 @dataclass(frozen=True)
@@ -81,9 +83,7 @@ def wilson_interval(k: int, n: int, level: float = LEVEL) -> tuple[float, float]
         raise ValueError(f"successes k={k} must lie in [0, n={n}]")
     if n == 0:
         return float("nan"), float("nan")
-    from scipy.stats import norm
-
-    z = float(norm.ppf(0.5 + level / 2))
+    z = NormalDist().inv_cdf(0.5 + level / 2)
     p = k / n
     denom = 1 + z * z / n
     centre = (p + z * z / (2 * n)) / denom
@@ -104,9 +104,19 @@ def bootstrap_quantiles(values: Sequence[float] | np.ndarray, quantiles: Sequenc
     """Percentile-bootstrap intervals of quantiles of a sample (one resampling for all).
 
     Each resample draws ``n`` values with replacement; its quantile is that of
-    ``numpy.quantile`` (linear interpolation, as the report's medians and p95). The
-    interval is the ``(1 - level) / 2`` and ``(1 + level) / 2`` quantiles of the
-    resampled statistic. Missing and non-finite values are left out.
+    ``numpy.quantile`` (linear interpolation between two order statistics, as the
+    report's medians and p95). The interval is the ``(1 - level) / 2`` and
+    ``(1 + level) / 2`` quantiles of the resampled statistic. Missing and non-finite
+    values are left out.
+
+    A resample's quantile only needs a few of its order statistics, so they are drawn
+    directly instead of the ``n`` values: a draw with replacement is
+    ``floor(n * U)`` with ``U`` uniform, ``floor`` keeps the order, and the ``k``-th
+    smallest of ``n`` uniforms is ``Beta(k, n + 1 - k)``; given it, the ``k'``-th
+    (``k' > k``) is it plus ``(1 - it) * Beta(k' - k, n + 1 - k')``. The statistic
+    then has exactly the distribution of explicit resampling, at a cost independent
+    of ``n`` (``tests/benchmarks/study/test_stats.py`` checks it against explicit
+    resampling and ``scipy.stats.bootstrap``).
 
     Args:
         values: The sample.
@@ -126,44 +136,45 @@ def bootstrap_quantiles(values: Sequence[float] | np.ndarray, quantiles: Sequenc
         return [(float(x[0]), float(x[0])) for _ in quantiles]
     rng = np.random.default_rng(seed)
     pos = [q * (n - 1) for q in quantiles]
-    kth = sorted({min(int(np.floor(p)) + d, n - 1) for p in pos for d in (0, 1)})
-    stats = np.empty((resamples, len(quantiles)))
-    chunk = max(1, _CHUNK_VALUES // n)
-    for start in range(0, resamples, chunk):
-        m = min(chunk, resamples - start)
-        idx = rng.integers(0, n, size=(m, n))
-        # x is sorted, so the order statistics of a resample are x at the order
-        # statistics of its indices: a partition instead of a sort
-        part = np.partition(idx, kth, axis=1)
-        for j, p in enumerate(pos):
-            lo = int(np.floor(p))
-            hi = min(lo + 1, n - 1)
-            frac = p - lo
-            a, b = x[part[:, lo]], x[part[:, hi]]
-            stats[start:start + m, j] = a + frac * (b - a)
+    # 1-based ranks of the order statistics needed, increasing
+    ranks = sorted({min(int(np.floor(p)) + d, n - 1) + 1 for p in pos for d in (0, 1)})
+    u = np.zeros(resamples)
+    order: dict[int, np.ndarray] = {}
+    prev = 0
+    for k in ranks:
+        u = u + (1.0 - u) * rng.beta(k - prev, n + 1 - k, size=resamples)
+        order[k] = np.minimum((n * u).astype(np.int64), n - 1)
+        prev = k
     tail = 100 * (1 - level) / 2
     out = []
-    for j in range(len(quantiles)):
-        low, high = np.percentile(stats[:, j], [tail, 100 - tail])
+    for p in pos:
+        lo = int(np.floor(p))
+        hi = min(lo + 1, n - 1)
+        a, b = x[order[lo + 1]], x[order[hi + 1]]
+        stat = a + (p - lo) * (b - a)
+        low, high = np.percentile(stat, [tail, 100 - tail])
         out.append((float(low), float(high)))
     return out
 
 
-def bootstrap_mean(values: Sequence[float] | np.ndarray, resamples: int = RESAMPLES,
-                   seed: int = SEED, level: float = LEVEL) -> tuple[float, float]:
-    """Percentile-bootstrap interval of the mean of a sample (non-finite values left out)."""
-    x = _finite(values)
-    n = x.size
+def bootstrap_rate_difference(only_a: int, only_b: int, n: int, resamples: int = RESAMPLES,
+                              seed: int = SEED, level: float = LEVEL) -> tuple[float, float]:
+    """Percentile-bootstrap interval of the difference of two paired success rates.
+
+    A resample of the ``n`` pairs holds multinomial counts of the pairs where only
+    ``a`` succeeded, only ``b``, or both or neither; the difference is
+    ``(only_a - only_b) / n``.
+    """
     if n == 0:
         return float("nan"), float("nan")
+    if only_a + only_b == 0:
+        return 0.0, 0.0
     rng = np.random.default_rng(seed)
-    means = np.empty(resamples)
-    chunk = max(1, _CHUNK_VALUES // n)
-    for start in range(0, resamples, chunk):
-        m = min(chunk, resamples - start)
-        means[start:start + m] = x[rng.integers(0, n, size=(m, n))].mean(axis=1)
+    counts = rng.multinomial(n, [only_a / n, only_b / n, 1 - (only_a + only_b) / n],
+                             size=resamples)
+    diff = (counts[:, 0] - counts[:, 1]) / n
     tail = 100 * (1 - level) / 2
-    low, high = np.percentile(means, [tail, 100 - tail])
+    low, high = np.percentile(diff, [tail, 100 - tail])
     return float(low), float(high)
 
 
@@ -204,16 +215,10 @@ def mcnemar_exact(a: Sequence[bool] | np.ndarray, b: Sequence[bool] | np.ndarray
     only_a = int(np.sum(x & ~y))
     only_b = int(np.sum(~x & y))
     m = only_a + only_b
-    if m == 0:
-        p = 1.0
-    else:
-        from scipy.stats import binom
-
-        p = min(1.0, 2.0 * float(binom.cdf(min(only_a, only_b), m, 0.5)))
-    d = x.astype(float) - y.astype(float)
-    low, high = (0.0, 0.0) if m == 0 else bootstrap_mean(d, resamples, seed, level)
-    return TestResult("mcnemar-exact", int(x.size), float(only_a), p,
-                      float(d.mean()) if d.size else float("nan"), low, high,
+    p = _binomial_two_sided_half(min(only_a, only_b), m)
+    low, high = bootstrap_rate_difference(only_a, only_b, int(x.size), resamples, seed, level)
+    diff = (only_a - only_b) / x.size if x.size else float("nan")
+    return TestResult("mcnemar-exact", int(x.size), float(only_a), p, diff, low, high,
                       (only_a, only_b))
 
 
@@ -233,25 +238,89 @@ def median_difference(a: Sequence[float] | np.ndarray, b: Sequence[float] | np.n
     return float(np.median(d)), low, high
 
 
+def _binomial_two_sided_half(k: int, m: int) -> float:
+    """Two-sided p-value of ``k <= m / 2`` successes in ``m`` fair draws, in exact
+    integer arithmetic: ``min(1, 2 * sum_{i <= k} C(m, i) / 2^m)``."""
+    if m == 0:
+        return 1.0
+    term, total = 1, 1
+    for i in range(1, k + 1):
+        term = term * (m - i + 1) // i
+        total += term
+    return min(1.0, float(Fraction(2 * total, 2 ** m)))
+
+
+def _average_ranks(a: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Ranks (1-based, ties get their average rank) and the size of every tie group."""
+    order = np.argsort(a, kind="mergesort")
+    s = a[order]
+    starts = np.flatnonzero(np.r_[True, s[1:] != s[:-1]])
+    sizes = np.diff(np.r_[starts, s.size])
+    avg = starts + (sizes + 1) / 2.0
+    ranks = np.empty(a.size)
+    ranks[order] = np.repeat(avg, sizes)
+    return ranks, sizes
+
+
+def _signed_rank_exact(ranks: np.ndarray, r_plus: float) -> float:
+    """Two-sided p-value of the positive rank sum under random signs, by enumerating the
+    distribution (integer ranks: subset-sum counts; tied half ranks: all sign vectors)."""
+    n = ranks.size
+    if np.all(ranks == np.round(ranks)):
+        total = int(ranks.sum())
+        counts = np.zeros(total + 1)
+        counts[0] = 1.0
+        for r in ranks.astype(int):
+            counts[r:] = counts[r:] + counts[:total + 1 - r].copy()
+        prob = counts / counts.sum()
+        le = float(prob[:int(np.ceil(r_plus)) + 1].sum())
+        ge = float(prob[int(np.floor(r_plus)):].sum())
+    else:
+        sums = np.array([float(np.dot(ranks, signs))
+                         for signs in itertools.product((0, 1), repeat=n)])
+        le = float(np.mean(sums <= r_plus + 1e-9))
+        ge = float(np.mean(sums >= r_plus - 1e-9))
+    return min(1.0, 2.0 * min(le, ge))
+
+
 def wilcoxon_signed_rank(a: Sequence[float] | np.ndarray, b: Sequence[float] | np.ndarray,
                          resamples: int = RESAMPLES, seed: int = SEED, level: float = LEVEL
                          ) -> TestResult:
-    """Wilcoxon's signed-rank test of paired values, two-sided (``scipy.stats.wilcoxon``,
-    zero differences dropped), with the median paired difference and its interval.
+    """Wilcoxon's signed-rank test of paired values, two-sided, with the median paired
+    difference and its interval.
 
-    Pairs with a missing value are left out. Identical samples (every difference zero)
-    give ``p = 1``.
+    Zero differences are dropped (Wilcoxon's method), tied ranks averaged. The p-value
+    is exact for small samples (at most 50 pairs without ties or zeros; at most 13
+    pairs otherwise) and from the normal approximation with the tie
+    correction and no continuity correction beyond: the choices of
+    ``scipy.stats.wilcoxon`` with its defaults, which the tests compare against (the
+    module does its own arithmetic to keep ``scipy.stats``, 1-3 s to import, out of
+    ``hexapod-bench compare``). Pairs with a missing value are left out; identical
+    samples give ``p = 1``.
+
+    Returns:
+        The test; ``statistic`` is the smaller of the positive and negative rank sums.
     """
     x, y = _pairs(a, b)
     med, low, high = median_difference(x, y, resamples, seed, level)
     d = x - y
-    if not np.any(d != 0):
+    nz = d[d != 0]
+    count = nz.size
+    if count == 0:
         return TestResult("wilcoxon", int(d.size), 0.0, 1.0, med, low, high)
-    from scipy.stats import wilcoxon
-
-    res = wilcoxon(x, y)
-    return TestResult("wilcoxon", int(d.size), float(res.statistic), float(res.pvalue),
-                      med, low, high)
+    ranks, ties = _average_ranks(np.abs(nz))
+    r_plus = float(ranks[nz > 0].sum())
+    r_minus = float(ranks[nz < 0].sum())
+    has_ties = bool(np.any(ties > 1))
+    small = d.size <= 50 and not has_ties and count == d.size
+    if small or d.size <= 13:  # exact (enumeration of the sign vectors with ties, zeros)
+        p = _signed_rank_exact(ranks, r_plus)
+    else:
+        mean = count * (count + 1) / 4.0
+        var = (count * (count + 1) * (2 * count + 1) - np.sum(ties ** 3 - ties) / 2) / 24.0
+        z = (r_plus - mean) / math.sqrt(var) if var > 0 else 0.0
+        p = min(1.0, math.erfc(abs(z) / math.sqrt(2)))
+    return TestResult("wilcoxon", int(d.size), min(r_plus, r_minus), p, med, low, high)
 
 
 def holm(p_values: Sequence[float]) -> list[float]:
