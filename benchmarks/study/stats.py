@@ -349,4 +349,15 @@ def format_rate(k: int, n: int, level: float = LEVEL) -> str:
     if n == 0:
         return "-"
     low, high = wilson_interval(k, n, level)
-    return f"{100 * k / n:.1f} % [{100 * low:.1f}, {100 * high:.1f}]"
+    return f"{100 * k / n:.1f} % [{_percent(low)}, {_percent(high)}]"
+
+
+def _percent(x: float) -> str:
+    """A bound in percent with one decimal, or as many (up to 3) as keep a bound that is
+    not 0 or 100 % from printing as one (10000 of 10000: ``[99.96, 100.0]``)."""
+    for digits in (1, 2, 3):
+        text = f"{100 * x:.{digits}f}"
+        if (0 < x < 1) and float(text) in (0.0, 100.0):
+            continue
+        return text
+    return f"{100 * x:.3f}"

@@ -32,6 +32,10 @@ def test_format_rate_cell() -> None:
     ci = sps.binomtest(94, 100).proportion_ci(method="wilson")
     assert stats.format_rate(94, 100) == f"94.0 % [{100 * ci.low:.1f}, {100 * ci.high:.1f}]"
     assert stats.format_rate(0, 0) == "-"
+    # a bound that is not 100 % does not print as 100.0
+    low = sps.binomtest(10000, 10000).proportion_ci(method="wilson").low
+    assert stats.format_rate(10000, 10000) == f"100.0 % [{100 * low:.2f}, 100.0]"
+    assert stats.format_rate(10000, 10000) == "100.0 % [99.96, 100.0]"
 
 
 def _explicit_bootstrap(x: np.ndarray, q: float, resamples: int, seed: int
