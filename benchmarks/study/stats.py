@@ -52,7 +52,12 @@ class TestResult:
             paired differences.
         low: Lower end of the difference's bootstrap interval.
         high: Upper end of the difference's bootstrap interval.
-        discordant: McNemar: (only ``a`` succeeded, only ``b`` succeeded).
+        discordant: McNemar: (only ``a`` succeeded, only ``b`` succeeded); Wilcoxon:
+            (pairs with ``a > b``, pairs with ``a < b``).
+        direction: +1 when ``a`` tends to exceed ``b`` (more successes; a larger
+            positive rank sum), -1 the other way, 0 for a tie: the side the test's
+            evidence points to, which the median difference can hide (steps: a median
+            difference of 0 with most of the non-zero differences on one side).
     """
 
     test: str
@@ -63,6 +68,7 @@ class TestResult:
     low: float
     high: float
     discordant: tuple[int, int] | None = None
+    direction: int = 0
 
 
 def wilson_interval(k: int, n: int, level: float = LEVEL) -> tuple[float, float]:
@@ -219,7 +225,7 @@ def mcnemar_exact(a: Sequence[bool] | np.ndarray, b: Sequence[bool] | np.ndarray
     low, high = bootstrap_rate_difference(only_a, only_b, int(x.size), resamples, seed, level)
     diff = (only_a - only_b) / x.size if x.size else float("nan")
     return TestResult("mcnemar-exact", int(x.size), float(only_a), p, diff, low, high,
-                      (only_a, only_b))
+                      (only_a, only_b), int(np.sign(only_a - only_b)))
 
 
 def median_difference(a: Sequence[float] | np.ndarray, b: Sequence[float] | np.ndarray,
@@ -320,7 +326,8 @@ def wilcoxon_signed_rank(a: Sequence[float] | np.ndarray, b: Sequence[float] | n
         var = (count * (count + 1) * (2 * count + 1) - np.sum(ties ** 3 - ties) / 2) / 24.0
         z = (r_plus - mean) / math.sqrt(var) if var > 0 else 0.0
         p = min(1.0, math.erfc(abs(z) / math.sqrt(2)))
-    return TestResult("wilcoxon", int(d.size), min(r_plus, r_minus), p, med, low, high)
+    return TestResult("wilcoxon", int(d.size), min(r_plus, r_minus), p, med, low, high,
+                      (int(np.sum(nz > 0)), int(np.sum(nz < 0))), int(np.sign(r_plus - r_minus)))
 
 
 def holm(p_values: Sequence[float]) -> list[float]:
