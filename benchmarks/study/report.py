@@ -11,7 +11,7 @@ from typing import Any
 
 import numpy as np
 
-from benchmarks.study import intervals, plots
+from benchmarks.study import intervals, plots, profiles
 from benchmarks.study.metrics import Summary, format_sweep, summarize
 from benchmarks.study.runner import deduplicate, machine_info, read_results
 
@@ -166,6 +166,10 @@ def write_report(out_dir: Path) -> Path:
             lines += ["Convergence map (two swept axes): convergence rate and median final "
                       "position error at every point, one panel per controller:", "",
                       f"![convergence map]({heat})", ""]
+        prof = profiles.plot_profiles(out_dir, name, [r for r in rows if r["scenario"] == name])
+        if prof:
+            lines += [profiles.profile_note(len({s.controller for s in ss})), "",
+                      f"![performance profiles]({prof})", ""]
         cdf = plots.error_cdf(out_dir, name, [r for r in rows if r["scenario"] == name])
         if cdf:
             lines += ["Distribution of the final position errors per controller (empirical "
