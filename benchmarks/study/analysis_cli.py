@@ -124,6 +124,40 @@ def cmd_compare(args: argparse.Namespace) -> int:
     return status
 
 
+def cmd_reproduce(args: argparse.Namespace) -> int:
+    """Run the studies behind the papers' figures; paper and framework side by side."""
+    from rich.table import Table
+
+    from benchmarks.study.commands import _console
+    from benchmarks.study.reproduce import interval_text, markdown, reproduce
+
+    con = _console()
+    t0 = time.perf_counter()
+    results = reproduce(args.which, Path(args.out), args.quick, args.workers,
+                        say=lambda text: con.print(text, highlight=False))
+    t = Table(title=f"Papers and framework ({args.which}"
+                    f"{', --quick' if args.quick else ''})")
+    for col in ("paper", "where", "quantity", "paper's figure", "framework",
+                "95 % interval", "n", "verdict"):
+        t.add_column(col, justify="right" if col == "n" else "left")
+    for r in results:
+        f = r.figure
+        t.add_row(f.seed, f.where, f.quantity, f.paper, r.framework, interval_text(r),
+                  str(r.n), r.verdict)
+    con.print(t)
+    outside = [r for r in results if r.why]
+    for r in outside:
+        con.print(f"- {r.figure.seed} {r.figure.where}, {r.figure.quantity}: {r.why}",
+                  highlight=False)
+    within = sum(r.verdict.startswith("within") for r in results)
+    con.print(f"{within} of {len(results)} figures within the paper's; "
+              f"{time.perf_counter() - t0:.0f} s; studies in {args.out}", highlight=False)
+    if args.markdown:
+        Path(args.markdown).write_text(markdown(results) + "\n")
+        con.print(f"wrote {args.markdown}")
+    return 0
+
+
 def add_analysis_commands(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
     """Register ``export``, ``compare`` and ``reproduce`` on the CLI's sub-parsers."""
     s = sub.add_parser("export", help="write a run's trials as a table (Parquet)")
@@ -151,3 +185,17 @@ def add_analysis_commands(sub: argparse._SubParsersAction) -> None:  # type: ign
     s.add_argument("--check", action="store_true",
                    help="two runs: exit 1 on a regression or a row that differs")
     s.set_defaults(func=cmd_compare)
+
+    s = sub.add_parser("reproduce", help="run the studies behind the papers' figures and set "
+                                         "paper and framework side by side")
+    s.add_argument("which", nargs="?", default="all",
+                   choices=("seed000", "seed001", "seed002", "seed003", "all"))
+    s.add_argument("--quick", action="store_true",
+                   help="fewer trials (30 per noise level for seed 001, 1000 pairs for seed "
+                        "003, 30 calibrations): minutes instead of tens of minutes")
+    s.add_argument("--out", default="runs/reproduce",
+                   help="where the studies' results go (default runs/reproduce; a study "
+                        "already there is finished or reused, not redone)")
+    s.add_argument("--workers", type=int, default=1, help="processes (default 1)")
+    s.add_argument("--markdown", metavar="FILE", help="also write the table as Markdown")
+    s.set_defaults(func=cmd_reproduce)
