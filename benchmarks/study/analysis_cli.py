@@ -40,6 +40,7 @@ def _fmt_diff(c: Any) -> str:
 
 def print_comparisons(comparisons: list[Any], title: str) -> None:
     """The comparison table, then the significant differences in plain words."""
+    from rich.markup import escape
     from rich.table import Table
 
     from benchmarks.study.commands import _console
@@ -51,16 +52,17 @@ def print_comparisons(comparisons: list[Any], title: str) -> None:
                 "a - b [95 % CI]", "test", "p", "p Holm", "verdict"):
         t.add_column(col, justify="right" if col in ("n", "p", "p Holm") else "left")
     for c in comparisons:
-        t.add_row(c.scenario, c.sweep, c.a, c.b, c.metric, str(c.n), _fmt_value(c, c.a_value),
-                  _fmt_value(c, c.b_value), _fmt_diff(c), c.test, f"{c.p_value:.3g}",
-                  f"{c.p_holm:.3g}", "-" if c.better is None else f"{c.better} better")
+        cells = [c.scenario, c.sweep, c.a, c.b, c.metric, str(c.n), _fmt_value(c, c.a_value),
+                 _fmt_value(c, c.b_value), _fmt_diff(c), c.test, f"{c.p_value:.3g}",
+                 f"{c.p_holm:.3g}", "-" if c.better is None else f"{c.better} better"]
+        t.add_row(*(escape(x) for x in cells))  # sweeps and intervals hold brackets
     con.print(t)
     significant = [c for c in comparisons if c.better is not None]
     con.print(f"Significant at {100 * ALPHA:.0f} % after Holm's correction "
               f"({len(significant)} of {len(comparisons)} comparisons):")
     for c in significant:
         where = f"{c.scenario}" + (f" [{c.sweep}]" if c.sweep != "-" else "")
-        con.print(f"- {where}: {c.verdict}")
+        con.print(f"- {where}: {c.verdict}", markup=False, highlight=False)
     if not significant:
         con.print("- none: no difference between these controllers is significant")
 
@@ -126,6 +128,7 @@ def cmd_compare(args: argparse.Namespace) -> int:
 
 def cmd_reproduce(args: argparse.Namespace) -> int:
     """Run the studies behind the papers' figures; paper and framework side by side."""
+    from rich.markup import escape
     from rich.table import Table
 
     from benchmarks.study.commands import _console
@@ -134,7 +137,7 @@ def cmd_reproduce(args: argparse.Namespace) -> int:
     con = _console()
     t0 = time.perf_counter()
     results = reproduce(args.which, Path(args.out), args.quick, args.workers,
-                        say=lambda text: con.print(text, highlight=False))
+                        say=lambda text: con.print(text, markup=False, highlight=False))
     t = Table(title=f"Papers and framework ({args.which}"
                     f"{', --quick' if args.quick else ''})")
     for col in ("paper", "where", "quantity", "paper's figure", "framework",
@@ -142,13 +145,13 @@ def cmd_reproduce(args: argparse.Namespace) -> int:
         t.add_column(col, justify="right" if col == "n" else "left")
     for r in results:
         f = r.figure
-        t.add_row(f.seed, f.where, f.quantity, f.paper, r.framework, interval_text(r),
-                  str(r.n), r.verdict)
+        t.add_row(*(escape(x) for x in (f.seed, f.where, f.quantity, f.paper, r.framework,
+                                         interval_text(r), str(r.n), r.verdict)))
     con.print(t)
     outside = [r for r in results if r.why]
     for r in outside:
         con.print(f"- {r.figure.seed} {r.figure.where}, {r.figure.quantity}: {r.why}",
-                  highlight=False)
+                  markup=False, highlight=False)
     within = sum(r.verdict.startswith("within") for r in results)
     con.print(f"{within} of {len(results)} figures within the paper's; "
               f"{time.perf_counter() - t0:.0f} s; studies in {args.out}", highlight=False)
