@@ -6,7 +6,9 @@ Verdict rules (stated in docs/reproduction.md):
 - ``equal``: *within* when the framework's 95 % interval (or, for a maximum, its
   value) meets the paper's number widened by half a unit of its last printed digit
   (the paper's "0.6 mm" is anything in [0.55, 0.65]); *outside (higher / lower)*
-  otherwise, with the reason.
+  otherwise, with the reason. A paper's figure read from one trial (one calibration)
+  is set against the central 95 % of the framework's single trials instead of the
+  interval of their median: that is the spread a single draw has.
 - ``below``: *within* when the interval's upper end is below the paper's bound.
 - ``better``: *within* when the paired test (Wilcoxon on the errors, McNemar on the
   convergence) finds the paper's winner better at 5 %, Holm-corrected over the paired
@@ -161,19 +163,20 @@ def measure(fig: Figure, d: Path, frames: dict[Path, Any]) -> Result:
         k, n = int(rows["converged"].sum()), len(rows)
         lo, hi = stats.wilson_interval(k, n)
         return Result(fig, f"{100 * k / n:.1f} % ({k}/{n})", k / n, (lo, hi), n)
-    if kind == "tailmax":
-        x = _tail_max(d, rows, fig.controller)
-        (lo, hi), = stats.bootstrap_quantiles(x, [0.5])
-        v = float(np.median(x))
-        return Result(fig, f"{v:.3g} mm", v, (lo, hi), x.size)
-    if kind in ("median", "max"):
-        x = rows[column].to_numpy(dtype=float)
-        x = x[np.isfinite(x)]
+    if kind in ("median", "max", "tailmax"):
+        if kind == "tailmax":
+            x = _tail_max(d, rows, fig.controller)
+        else:
+            x = rows[column].to_numpy(dtype=float)
+            x = x[np.isfinite(x)]
         if kind == "max":
             v = float(x.max())
             return Result(fig, f"{v:.3g} mm", v, None, x.size)
-        (lo, hi), = stats.bootstrap_quantiles(x, [0.5])
         v = float(np.median(x))
+        if fig.single:  # one trial in the paper: the range of single trials
+            lo, hi = (float(q) for q in np.percentile(x, [2.5, 97.5]))
+        else:
+            (lo, hi), = stats.bootstrap_quantiles(x, [0.5])
         return Result(fig, f"{v:.3g} mm", v, (lo, hi), x.size)
     # paired: controller against other on the same trials
     other = _rows(df, fig, fig.other).set_index("trial")
@@ -272,6 +275,8 @@ def interval_text(r: Result) -> str:
         return f"difference [{100 * lo:+.0f}, {100 * hi:+.0f}] points"
     if r.figure.relation == "better":
         return f"paired difference [{lo:+.3g}, {hi:+.3g}] mm"
+    if r.figure.single:
+        return f"[{lo:.3g}, {hi:.3g}] mm (95 % of single trials)"
     return f"[{lo:.3g}, {hi:.3g}] mm"
 
 

@@ -92,3 +92,25 @@ def test_seed001_tail_statistics_from_the_records(tmp_path: Path,
     text = md.read_text()
     assert text.count("| seed001 |") == 13
     assert "max error on any coordinate of any base point" in text
+
+
+def test_single_trial_figures_use_the_range_of_single_trials(tmp_path: Path) -> None:
+    from benchmarks.study import stats
+    from benchmarks.study.reproduce import measure
+    from tests.benchmarks.study.helpers_rows import make_rows, write_run
+
+    rng = np.random.default_rng(3)
+    x = rng.lognormal(0, 0.5, 100)
+    rows = make_rows("leg-direction", x, np.ones(100, bool), np.full(100, 80),
+                     scenario="andreff2005-noise", sweep={"noise_amplitude_deg": 0.05})
+    d = write_run(tmp_path / "run", rows)
+    base = dict(seed="seed001", where="s", quantity="q", paper="1.4 mm", value=1.4,
+                relation="equal", study="run:andreff2005-noise",
+                measure="median:final_position_error_mm",
+                sweep={"noise_amplitude_deg": 0.05}, controller="leg-direction")
+    one = measure(Figure(**base, single=True), d, {})
+    many = measure(Figure(**base), d, {})
+    assert one.value == many.value == pytest.approx(np.median(x))
+    assert one.interval == pytest.approx(tuple(np.percentile(x, [2.5, 97.5])))
+    assert many.interval == pytest.approx(stats.bootstrap_quantiles(x, [0.5])[0])
+    assert one.interval[1] - one.interval[0] > 3 * (many.interval[1] - many.interval[0])
