@@ -81,10 +81,11 @@ _CAD = ("the paper measures its real DeltaLab robot against the CAD model, so it
         "holds the robot's manufacturing and assembly deviations and the camera's own "
         "calibration error; the simulation's truth is its model, and what it measures is "
         "the image-noise part alone (0.5 px on 20 points per edge)")
-_DEPTH = ("the front camera determines the base points' depth along its viewing rays "
-          "poorly (smallest to largest singular value of a leg's system 0.015, the noise "
-          "amplified about 70 times in that direction); the paper's camera pose and leg "
-          "radius, which set that ratio, are not given")
+_DEPTH = ("how well a calibration determines the base points depends on the camera pose "
+          "and the leg radius, which the paper does not give; here the front camera sees "
+          "the points' depth along its viewing rays poorly (smallest to largest singular "
+          "value of a leg's system 0.015: the noise is amplified about 70 times in that "
+          "direction)")
 _MAX = ("a maximum over trials, no interval; the paper's count of trials behind its "
         "maximum is not given")
 _TAIL = ("the paper reads the tail of the one trial per noise level of its Figure 4; the "
@@ -105,8 +106,8 @@ FIGURES: list[Figure] = [
            "noise: converges (to 0)", "converges", 1.0, "equal",
            "run:andreff2006-front-camera", "rate:converged", {"noise_amplitude_deg": 0.0},
            "leg-edge"),
-    Figure("seed001", "sec. 5.2", "calibration at 0.05 deg, 100 repetitions: median error "
-           "of each base point (worst point)", "< 1 mm", 1.0, "below",
+    Figure("seed001", "sec. 5.2", "calibration at 0.05 deg, repeated (the paper: 100 times): "
+           "median error of each base point, the worst point", "< 1 mm", 1.0, "below",
            "calibrate:andreff2005-noise", "worst_point_median", {"noise_amplitude_deg": 0.05},
            why_outside=_DEPTH),
 ]
