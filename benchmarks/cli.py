@@ -1,4 +1,4 @@
-"""``hexapod-bench``: list, run, report, perf, calibrate, viz, servo.
+"""``hexapod-bench``: list, run, report, compare, export, reproduce, perf, calibrate, viz, servo.
 
 Examples::
 
@@ -7,6 +7,9 @@ Examples::
     hexapod-bench run tahri2009-convergence --out runs/tahri --workers 2
     hexapod-bench run my-study.toml --out runs/mine --dask local --resume
     hexapod-bench report runs/quick
+    hexapod-bench compare runs/tahri
+    hexapod-bench export runs/tahri --parquet tahri.parquet
+    hexapod-bench reproduce seed001 --quick
 """
 
 from __future__ import annotations
@@ -73,6 +76,7 @@ PERF_MODULES = {
     "calibration": "benchmarks.perf.calibration",
     "study": "benchmarks.perf.study",
     "dynamics": "benchmarks.perf.dynamics",
+    "dynamic-world": "benchmarks.perf.dynamic_world",
 }
 
 
@@ -117,6 +121,8 @@ def build_parser() -> argparse.ArgumentParser:
                    help="sim (default, vectorised), emulator (a firmware emulator on a pty), "
                         "serial:URL, a plugin's NAME[:ARGS] or module:attr[:ARGS] "
                         "(docs/backends.md)")
+    s.add_argument("--world", choices=("kinematic", "dynamic"),
+                   help="override the scenarios' [robot] world (docs/dynamic-world.md)")
     s.add_argument("--engine", choices=("batched", "per-trial"), default="batched",
                    help="batched (default: every trial of a work unit as arrays) or per-trial "
                         "(one controller object per trial; same results, slower)")
@@ -174,6 +180,10 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("what", choices=sorted(PERF_MODULES))
     s.add_argument("rest", nargs=argparse.REMAINDER, help="arguments for the figure")
     s.set_defaults(func=cmd_perf)
+
+    from benchmarks.study.analysis_cli import add_analysis_commands
+
+    add_analysis_commands(sub)  # export, compare, reproduce
     return p
 
 

@@ -1,9 +1,10 @@
 """The real servo loop: one controller, a robot over its serial link, a camera.
 
-``hexapod-bench servo --backend serial:URL|emulator --camera sim|video:PATH|device:N
---controller NAME --goal FILE`` runs one controller at the control period until the
-robot converges, ``--max-steps`` or Ctrl-C, and always halts the robot (the
-backend's context manager sends ``HLT`` and closes the port, whatever happens).
+``hexapod-bench servo --backend serial:URL|emulator|gcs:tcp://HOST:PORT|NAME[:ARGS]
+--camera sim|video:PATH|device:N --controller NAME --goal FILE`` runs one controller at
+the control period until the robot converges, ``--max-steps`` or Ctrl-C, and always
+halts the robot (the backend's context manager sends ``HLT`` and closes the port,
+whatever happens).
 
 Each period:
 

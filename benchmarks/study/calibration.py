@@ -43,7 +43,9 @@ def calibration_hook(sc: Scenario) -> CalibrationHook | None:
             truth = world.camera.camera_from_base.apply(world.geometry.base_points)
             err = np.linalg.norm(points - truth, axis=1) * 1e3
             return points.copy(), {"median_error_mm": float(np.median(err)),
-                                   "max_error_mm": float(np.max(err))}
+                                   "max_error_mm": float(np.max(err)),
+                                   "max_component_error_mm":
+                                       float(np.max(np.abs(points - truth))) * 1e3}
 
         return from_file
 

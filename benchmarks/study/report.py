@@ -11,9 +11,10 @@ from typing import Any
 
 import numpy as np
 
-from benchmarks.study import plots
+from benchmarks.study import intervals, plots, profiles
 from benchmarks.study.metrics import Summary, format_sweep, summarize
 from benchmarks.study.runner import deduplicate, machine_info, read_results
+from benchmarks.study.tracking_report import tracking_section
 
 log = logging.getLogger(__name__)
 
@@ -96,7 +97,8 @@ def write_report(out_dir: Path) -> Path:
               "periods to converge (for fixed-duration tasks: after which the error stayed "
               "within the tolerances). *step us*: median time of one controller "
               "`step`. *stroke viol.*: periods where a command would have driven a leg "
-              "beyond its stroke (the backend clamped it).", ""]
+              "beyond its stroke (the backend clamped it).", "", intervals.method_note(), ""]
+    groups = intervals.group_rows(rows)
     by_scenario: dict[str, list[Summary]] = defaultdict(list)
     for s in summaries:
         by_scenario[s.scenario].append(s)
@@ -106,7 +108,8 @@ def write_report(out_dir: Path) -> Path:
         sm = scen_meta.get(name, {})
         if sm.get("description"):
             lines += [sm["description"], ""]
-        lines += [_md_table(TABLE_HEADER, summary_table_rows(ss)), ""]
+        lines += [_md_table(TABLE_HEADER, intervals.summary_rows_with_intervals(ss, groups)),
+                  ""]
         if any(np.isfinite(s.rtt_median_ms) for s in ss):
             lines += ["Robot link (communication time per period):", ""]
             lines += [_md_table(["sweep", "controller", "backend", "RTT median ms",
@@ -114,6 +117,8 @@ def write_report(out_dir: Path) -> Path:
                                 [[format_sweep(s.sweep), s.controller, s.backend,
                                   _fmt(s.rtt_median_ms), _fmt(s.rtt_p99_ms),
                                   str(s.missed_periods)] for s in ss]), ""]
+        if any(np.isfinite(s.leg_force_max_n) for s in ss):
+            lines += drive_section(ss)
         if any(s.hidden_edge_periods for s in ss):
             lines += ["Visibility (periods where the camera saw fewer than the 12 edges, summed "
                       "over the trials; trials with at least one such period):", ""]
@@ -127,27 +132,21 @@ def write_report(out_dir: Path) -> Path:
                       "each fixed-duration trial, as the seeds read their tails):", ""]
             lines += [_md_table(["sweep", "controller", "tail median mm (median over trials)",
                                  "tail median mm (max over trials)"],
-                                [[format_sweep(s.sweep), s.controller,
-                                  _fmt(s.tail_position_median_mm), _fmt(s.tail_position_max_mm)]
-                                 for s in ss]), ""]
+                                intervals.tail_rows(ss, groups)), ""]
         if any(np.isfinite(s.detect_time_median_ms) for s in ss):
             lines += ["Images in the loop (render, detect, estimate at every step):", ""]
             lines += [_md_table(["sweep", "controller", "detection median ms per frame"],
                                 [[format_sweep(s.sweep), s.controller,
                                   _fmt(s.detect_time_median_ms)] for s in ss]), ""]
         if any(np.isfinite(s.calibration_median_mm) or s.calibration_refused for s in ss):
-            lines += ["Calibration of the base points before control (error per point; "
+            lines += ["Calibration of the base points before control (error per point: the "
+                      "norm, and seed 001's measure, the largest error on any coordinate of "
+                      "any point; "
                       "*ill-conditioned*: trials whose calibration warned that a leg's system "
                       "was below the warning ratio; *refused*: trials whose calibration "
                       "refused a leg below the hard limit, which then did not run):", ""]
-            lines += [_md_table(["sweep", "controller", "median error mm", "max error mm",
-                                 "min singular ratio", "ill-conditioned", "refused"],
-                                [[format_sweep(s.sweep), s.controller,
-                                  _fmt(s.calibration_median_mm), _fmt(s.calibration_max_mm),
-                                  _fmt(s.calibration_min_ratio, 4),
-                                  f"{s.calibration_ill_conditioned}/{s.trials}",
-                                  f"{s.calibration_refused}/{s.trials}"]
-                                 for s in ss]), ""]
+            lines += [_md_table(intervals.CALIBRATION_HEADER,
+                                intervals.calibration_rows(ss, groups)), ""]
         ref = sm.get("reference")
         if ref:
             lines += ["### The seed's figures beside ours", ""]
@@ -157,6 +156,8 @@ def write_report(out_dir: Path) -> Path:
                 lines += [_md_table([str(h) for h in ref["header"]],
                                     [[str(c) for c in r] for r in ref["rows"]]), ""]
         points = sorted({s.point for s in ss})
+        lines += tracking_section(out_dir, name, [r for r in rows if r["scenario"] == name],
+                                  plots.representative(points))
         for p in plots.representative(points):
             img = plots.time_series(out_dir, name, p)
             if img:
@@ -170,6 +171,10 @@ def write_report(out_dir: Path) -> Path:
             lines += ["Convergence map (two swept axes): convergence rate and median final "
                       "position error at every point, one panel per controller:", "",
                       f"![convergence map]({heat})", ""]
+        prof = profiles.plot_profiles(out_dir, name, [r for r in rows if r["scenario"] == name])
+        if prof:
+            lines += [profiles.profile_note(len({s.controller for s in ss})), "",
+                      f"![performance profiles]({prof})", ""]
         cdf = plots.error_cdf(out_dir, name, [r for r in rows if r["scenario"] == name])
         if cdf:
             lines += ["Distribution of the final position errors per controller (empirical "
@@ -186,3 +191,17 @@ def write_report(out_dir: Path) -> Path:
     path = out_dir / "report.md"
     path.write_text("\n".join(lines))
     return path
+
+
+def drive_section(ss: list[Summary]) -> list[str]:
+    """The dynamic world's drives: leg forces, saturation and tracking (markdown lines)."""
+    return ["Drives (dynamic world: the drives' forces on the legs, the time any drive spent "
+            "at its force limit, the drive tracking error = velocity setpoint minus realised "
+            "leg velocity, over every physics step):", "",
+            _md_table(["sweep", "controller", "max leg force N", "saturation s (median)",
+                       "trials saturated", "tracking RMS mm/s (median)",
+                       "tracking max mm/s"],
+                      [[format_sweep(s.sweep), s.controller, _fmt(s.leg_force_max_n, 1),
+                        _fmt(s.saturation_time_median_s, 3), f"{s.saturated_trials}/{s.trials}",
+                        _fmt(s.tracking_rms_median_mm_s, 3), _fmt(s.tracking_max_mm_s, 1)]
+                       for s in ss]), ""]

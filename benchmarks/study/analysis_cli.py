@@ -1,0 +1,204 @@
+"""The analysis commands of ``hexapod-bench``: ``export``, ``compare``, ``reproduce``.
+
+They read run directories written by ``hexapod-bench run`` (``reproduce`` runs the
+built-in scenarios first).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import time
+from pathlib import Path
+from typing import Any
+
+
+def cmd_export(args: argparse.Namespace) -> int:
+    """Write a run's trials as a Parquet table (one row per trial)."""
+    from benchmarks.study.table import export_parquet
+
+    path, n = export_parquet(Path(args.dir), Path(args.parquet))
+    print(f"wrote {n} trials of {args.dir} to {path} (read it back with "
+          f"pandas.read_parquet('{path}'))")
+    return 0
+
+
+def _fmt_value(c: Any, v: float) -> str:
+    if v is None or v != v:
+        return "-"
+    return f"{100 * v:.1f} %" if c.metric == "converged" else f"{v:.4g}"
+
+
+def _fmt_diff(c: Any) -> str:
+    lo, hi = c.interval
+    if c.difference != c.difference:
+        return "-"
+    if c.metric == "converged":
+        return f"{100 * c.difference:+.1f} [{100 * lo:+.1f}, {100 * hi:+.1f}] pts"
+    return f"{c.difference:+.3g} [{lo:+.3g}, {hi:+.3g}]"
+
+
+def print_comparisons(comparisons: list[Any], title: str) -> None:
+    """The comparison table, then the significant differences in plain words."""
+    from rich.markup import escape
+    from rich.table import Table
+
+    from benchmarks.study.commands import _console
+    from benchmarks.study.compare import ALPHA
+
+    con = _console()
+    t = Table(title=title)
+    for col in ("scenario", "sweep", "a", "b", "metric", "n", "a", "b",
+                "a - b [95 % CI]", "test", "p", "p Holm", "verdict"):
+        t.add_column(col, justify="right" if col in ("n", "p", "p Holm") else "left")
+    for c in comparisons:
+        cells = [c.scenario, c.sweep, c.a, c.b, c.metric, str(c.n), _fmt_value(c, c.a_value),
+                 _fmt_value(c, c.b_value), _fmt_diff(c), c.test, f"{c.p_value:.3g}",
+                 f"{c.p_holm:.3g}", "-" if c.better is None else f"{c.better} better"]
+        t.add_row(*(escape(x) for x in cells))  # sweeps and intervals hold brackets
+    con.print(t)
+    significant = [c for c in comparisons if c.better is not None]
+    con.print(f"Significant at {100 * ALPHA:.0f} % after Holm's correction "
+              f"({len(significant)} of {len(comparisons)} comparisons):")
+    for c in significant:
+        where = f"{c.scenario}" + (f" [{c.sweep}]" if c.sweep != "-" else "")
+        con.print(f"- {where}: {c.verdict}", markup=False, highlight=False)
+    if not significant:
+        con.print("- none: no difference between these controllers is significant")
+
+
+def cmd_compare(args: argparse.Namespace) -> int:
+    """Paired tests between the controllers of a run, or between two runs."""
+    from benchmarks.study.compare import DEFAULT_METRICS, compare_controllers, compare_runs
+    from benchmarks.study.table import load
+
+    t0 = time.perf_counter()
+    metrics = tuple(args.metric) if args.metric else DEFAULT_METRICS
+    status = 0
+    if len(args.dirs) == 1:
+        df = load(args.dirs[0])
+        comparisons = compare_controllers(df, args.baseline, metrics)
+        print_comparisons(comparisons, f"Paired comparisons ({args.dirs[0]}, "
+                                       f"{len(df)} trials)")
+        extra: list[dict[str, Any]] = []
+    elif len(args.dirs) == 2:
+        if args.baseline:
+            from benchmarks.exceptions import BenchmarkError
+
+            raise BenchmarkError("--baseline compares the controllers of one run; with two "
+                                 "runs every controller is compared with itself")
+        dir_a, dir_b = args.dirs
+        comparisons, different, matched = compare_runs(load(dir_a), load(dir_b), "A", "B",
+                                                       metrics)
+        print_comparisons(comparisons, f"Run B ({dir_b}) against run A ({dir_a}), "
+                                       f"{matched} matched trials")
+        regressions = [c for c in comparisons if c.verdict.startswith("REGRESSION")]
+        print(f"Regressions (B significantly worse than A): {len(regressions)}")
+        for c in regressions:
+            print(f"- {c.scenario} [{c.sweep}] {c.verdict}")
+        n_rows = different[["scenario", "point", "controller", "trial"]].drop_duplicates()
+        print(f"Determinism check: {len(n_rows)} of {matched} matched trials differ between "
+              "the runs" + (" (listed below; with the same code, seeds and libraries they "
+                            "should be identical)" if len(n_rows) else " (identical outcomes)"))
+        for _, r in different.head(args.list).iterrows():
+            print(f"  {r['scenario']} point {r['point']} {r['controller']} trial "
+                  f"{r['trial']}: {r['column']} A={r['a']} B={r['b']}")
+        if len(different) > args.list:
+            print(f"  ... {len(different) - args.list} more (--list N shows more; --json "
+                  "FILE has them all)")
+        extra = [{"a": f"B:{dir_b}", "b": f"A:{dir_a}", "metric": "rows",
+                  "test": "determinism", "n": matched, "statistic": len(n_rows),
+                  "p_value": None, "p_holm": None,
+                  "difference": len(n_rows) / matched if matched else None,
+                  "interval": None,
+                  "rows": json.loads(different.to_json(orient="records"))}]
+        if args.check and (regressions or len(n_rows)):
+            status = 1
+    else:
+        from benchmarks.exceptions import BenchmarkError
+
+        raise BenchmarkError(f"compare takes one run directory or two, got {len(args.dirs)}")
+    if args.json:
+        Path(args.json).write_text(json.dumps([c.to_json() for c in comparisons] + extra,
+                                              indent=1))
+        print(f"wrote {len(comparisons) + len(extra)} comparison(s) to {args.json}")
+    print(f"({time.perf_counter() - t0:.2f} s)")
+    return status
+
+
+def cmd_reproduce(args: argparse.Namespace) -> int:
+    """Run the studies behind the papers' figures; paper and framework side by side."""
+    from rich.markup import escape
+    from rich.table import Table
+
+    from benchmarks.study.commands import _console
+    from benchmarks.study.reproduce import interval_text, markdown, reproduce
+
+    con = _console()
+    t0 = time.perf_counter()
+    results = reproduce(args.which, Path(args.out), args.quick, args.workers,
+                        say=lambda text: con.print(text, markup=False, highlight=False))
+    t = Table(title=f"Papers and framework ({args.which}"
+                    f"{', --quick' if args.quick else ''})")
+    for col in ("paper", "where", "quantity", "paper's figure", "framework",
+                "95 % interval", "n", "verdict"):
+        t.add_column(col, justify="right" if col == "n" else "left")
+    for r in results:
+        f = r.figure
+        t.add_row(*(escape(x) for x in (f.seed, f.where, f.quantity, f.paper, r.framework,
+                                         interval_text(r), str(r.n), r.verdict)))
+    con.print(t)
+    outside = [r for r in results if r.why]
+    for r in outside:
+        con.print(f"- {r.figure.seed} {r.figure.where}, {r.figure.quantity}: {r.why}",
+                  markup=False, highlight=False)
+    within = sum(r.verdict.startswith("within") for r in results)
+    con.print(f"{within} of {len(results)} figures within the paper's; "
+              f"{time.perf_counter() - t0:.0f} s; studies in {args.out}", highlight=False)
+    if args.markdown:
+        Path(args.markdown).write_text(markdown(results) + "\n")
+        con.print(f"wrote {args.markdown}")
+    return 0
+
+
+def add_analysis_commands(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
+    """Register ``export``, ``compare`` and ``reproduce`` on the CLI's sub-parsers."""
+    s = sub.add_parser("export", help="write a run's trials as a table (Parquet)")
+    s.add_argument("dir", help="a run directory")
+    s.add_argument("--parquet", required=True, metavar="FILE", help="output Parquet file")
+    s.set_defaults(func=cmd_export)
+
+    s = sub.add_parser("compare", help="paired tests between the controllers of a run, or "
+                                       "between two runs of the same scenarios",
+                       description="DIR: every pair of controllers (or each against "
+                                   "--baseline) on the trials both ran: McNemar's exact test "
+                                   "on convergence, Wilcoxon's signed-rank test on final "
+                                   "error and steps, median paired difference with its "
+                                   "bootstrap interval, Holm's correction. DIR_A DIR_B: the "
+                                   "same trials of two runs matched; regressions and rows "
+                                   "that differ listed.")
+    s.add_argument("dirs", nargs="+", metavar="DIR", help="one run directory, or two (A B)")
+    s.add_argument("--baseline", metavar="NAME", help="compare each controller with this one")
+    s.add_argument("--metric", action="append", metavar="NAME",
+                   help="converged, final_error, orientation_error, steps or a numeric "
+                        "column (repeatable; default: converged, final_error, steps)")
+    s.add_argument("--json", metavar="FILE", help="write the comparisons as JSON")
+    s.add_argument("--list", type=int, default=20, metavar="N",
+                   help="two runs: rows that differ to print (default 20)")
+    s.add_argument("--check", action="store_true",
+                   help="two runs: exit 1 on a regression or a row that differs")
+    s.set_defaults(func=cmd_compare)
+
+    s = sub.add_parser("reproduce", help="run the studies behind the papers' figures and set "
+                                         "paper and framework side by side")
+    s.add_argument("which", nargs="?", default="all",
+                   choices=("seed000", "seed001", "seed002", "seed003", "all"))
+    s.add_argument("--quick", action="store_true",
+                   help="fewer trials (30 per noise level for seed 001, 1000 pairs for seed "
+                        "003, 30 calibrations): minutes instead of tens of minutes")
+    s.add_argument("--out", default="runs/reproduce",
+                   help="where the studies' results go (default runs/reproduce; a study "
+                        "already there is finished or reused, not redone)")
+    s.add_argument("--workers", type=int, default=1, help="processes (default 1)")
+    s.add_argument("--markdown", metavar="FILE", help="also write the table as Markdown")
+    s.set_defaults(func=cmd_reproduce)

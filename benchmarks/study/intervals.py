@@ -1,0 +1,121 @@
+"""Table cells with their 95 % intervals for the Markdown report.
+
+Rates get the Wilson score interval, medians and 95th percentiles a seeded percentile
+bootstrap (:mod:`benchmarks.study.stats`); a maximum gets none (no interval says
+anything about the largest of n draws without a model of the tail).
+"""
+
+from __future__ import annotations
+
+from collections import defaultdict
+from typing import Any
+
+import numpy as np
+
+from benchmarks.study import stats
+from benchmarks.study.metrics import Summary, format_sweep
+
+GroupKey = tuple[str, int, str, str]
+
+
+def _fmt(x: float | None, digits: int = 3) -> str:
+    if x is None or not np.isfinite(x):
+        return "-"
+    if x != 0 and (abs(x) < 10 ** (-digits) or abs(x) >= 1e5):
+        return f"{x:.2e}"
+    return f"{x:.{digits}f}"
+
+
+def group_rows(rows: list[dict[str, Any]]) -> dict[GroupKey, list[dict[str, Any]]]:
+    """Rows by (scenario, sweep point, controller, backend), the groups of
+    :func:`benchmarks.study.metrics.summarize`."""
+    groups: dict[GroupKey, list[dict[str, Any]]] = defaultdict(list)
+    for r in rows:
+        groups[(r["scenario"], int(r.get("point", 0)), r["controller"],
+                r.get("backend", "sim"))].append(r)
+    return groups
+
+
+def with_interval(value: float, interval: tuple[float, float], digits: int = 3) -> str:
+    """``0.049 [0.047, 0.051]`` (``-`` for a missing value)."""
+    if value is None or not np.isfinite(value):
+        return "-"
+    low, high = interval
+    if not (np.isfinite(low) and np.isfinite(high)):
+        return _fmt(value, digits)
+    return f"{_fmt(value, digits)} [{_fmt(low, digits)}, {_fmt(high, digits)}]"
+
+
+def quantile_cells(values: list[Any], quantiles: list[float], digits: int = 3) -> list[str]:
+    """Quantiles of the finite values with their bootstrap intervals (one resampling)."""
+    arr = np.array([v for v in values if v is not None and np.isfinite(v)], dtype=float)
+    if arr.size == 0:
+        return ["-" for _ in quantiles]
+    ivs = stats.bootstrap_quantiles(arr, quantiles)
+    return [with_interval(float(np.quantile(arr, q)), iv, digits)
+            for q, iv in zip(quantiles, ivs, strict=True)]
+
+
+def summary_rows_with_intervals(summaries: list[Summary],
+                                groups: dict[GroupKey, list[dict[str, Any]]]
+                                ) -> list[list[str]]:
+    """The rows of the report's main table (columns of
+    :data:`benchmarks.study.report.TABLE_HEADER`), with intervals."""
+    out = []
+    for s in summaries:
+        rs = groups[(s.scenario, s.point, s.controller, s.backend)]
+        pos_med, pos_p95 = quantile_cells([r["final_position_error_mm"] for r in rs],
+                                          [0.5, 0.95])
+        rot_med, = quantile_cells([r["final_orientation_error_deg"] for r in rs], [0.5], 4)
+        steps, = quantile_cells([r["steps"] for r in rs if r["converged"]], [0.5], 0)
+        out.append([
+            s.scenario, format_sweep(s.sweep), s.controller, s.backend,
+            stats.format_rate(s.converged, s.trials), pos_med, pos_p95,
+            _fmt(s.position_max_mm), rot_med, _fmt(s.orientation_max_deg, 4), steps,
+            _fmt(s.step_time_median_us, 1), str(s.stroke_violations),
+        ])
+    return out
+
+
+def tail_rows(summaries: list[Summary], groups: dict[GroupKey, list[dict[str, Any]]]
+              ) -> list[list[str]]:
+    """Rows of the convergence-tail table: median over trials with its interval, max."""
+    out = []
+    for s in summaries:
+        rs = groups[(s.scenario, s.point, s.controller, s.backend)]
+        med, = quantile_cells([r.get("tail_position_error_mm") for r in rs], [0.5])
+        out.append([format_sweep(s.sweep), s.controller, med, _fmt(s.tail_position_max_mm)])
+    return out
+
+
+def calibration_rows(summaries: list[Summary], groups: dict[GroupKey, list[dict[str, Any]]]
+                     ) -> list[list[str]]:
+    """Rows of the calibration table: the per-point norm (median with its interval, max)
+    and seed 001's measure, the largest error on any coordinate of any base point."""
+    out = []
+    for s in summaries:
+        rs = groups[(s.scenario, s.point, s.controller, s.backend)]
+        med, = quantile_cells([r.get("calibration_median_error_mm") for r in rs], [0.5])
+        comp = [r.get("calibration_max_component_error_mm") for r in rs]
+        comp_f = [c for c in comp if c is not None and np.isfinite(c)]
+        out.append([format_sweep(s.sweep), s.controller, med, _fmt(s.calibration_max_mm),
+                    _fmt(max(comp_f)) if comp_f else "-",
+                    _fmt(s.calibration_min_ratio, 4),
+                    f"{s.calibration_ill_conditioned}/{s.trials}",
+                    f"{s.calibration_refused}/{s.trials}"])
+    return out
+
+
+CALIBRATION_HEADER = ["sweep", "controller", "median error mm (per point)",
+                      "max error mm (per point)", "max coordinate error mm (seed 001)",
+                      "min singular ratio", "ill-conditioned", "refused"]
+
+
+def method_note() -> str:
+    """How the report's intervals are computed (seed and resamples included)."""
+    return (f"Intervals are {100 * stats.LEVEL:.0f} % confidence intervals: Wilson score "
+            "intervals (no continuity correction) for the convergence rates, percentile "
+            f"bootstrap intervals for the medians and 95th percentiles ({stats.RESAMPLES} "
+            f"resamples, seed {stats.SEED}, over the trials of the row); maxima have none. "
+            "`hexapod-bench compare DIR` tests the differences between controllers on "
+            "the trials they share.")

@@ -1,0 +1,142 @@
+"""hexapod-bench compare: paired tests within a run and between two runs."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from benchmarks.cli import main as cli_main
+from benchmarks.exceptions import BenchmarkError
+from benchmarks.study import load
+from benchmarks.study.compare import compare_controllers, compare_runs
+from tests.benchmarks.study.helpers_rows import two_controllers, write_run
+
+#: Two leg-edge laws on the same trials, the second with a fifth of the gain: made
+#: slower on purpose. No noise, so both reach the goal.
+SCENARIO = """
+name = "compare-test"
+seed = 7
+trials = 12
+controllers = ["leg-edge",
+               {name = "leg-edge", label = "edge-slow", adaptive_gain = [1.0, 0.2, 6.0]}]
+
+[controller_options]
+adaptive_gain = [5.0, 1.0, 30.0]
+
+[robot]
+preset = "deltalab"
+dt = 0.02
+
+[camera]
+preset = "front"
+
+[noise]
+model = "none"
+
+[task]
+kind = "random-pairs"
+max_steps = 1500
+position_tolerance_mm = 0.5
+orientation_tolerance_deg = 0.05
+"""
+
+REQUIRED = {"a", "b", "metric", "test", "n", "statistic", "p_value", "p_holm", "difference",
+            "interval"}
+
+
+@pytest.fixture(scope="module")
+def two_real_runs(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, Path]:
+    tmp = tmp_path_factory.mktemp("cmp")
+    scen = tmp / "compare-test.toml"
+    scen.write_text(SCENARIO)
+    dirs = []
+    for name in ("a", "b"):
+        out = tmp / name
+        assert cli_main(["run", str(scen), "--out", str(out), "--no-progress",
+                         "--record", "0"]) == 0
+        dirs.append(out)
+    return dirs[0], dirs[1]
+
+
+def test_identical_runs_no_difference_no_determinism_failure(
+        two_real_runs: tuple[Path, Path], tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    a, b = two_real_runs
+    js = tmp_path / "c.json"
+    assert cli_main(["compare", str(a), str(b), "--json", str(js), "--check"]) == 0
+    out = capsys.readouterr().out
+    assert "Regressions (B significantly worse than A): 0" in out
+    assert "Determinism check: 0 of 24 matched trials differ" in out
+    doc = json.loads(js.read_text())
+    assert all(set(d) >= REQUIRED for d in doc)
+    tests = [d for d in doc if d["test"] != "determinism"]
+    assert {d["metric"] for d in tests} == {"converged", "final_error", "steps"}
+    assert all(d["p_value"] == 1.0 and d["difference"] == 0 for d in tests)
+    det = next(d for d in doc if d["test"] == "determinism")
+    assert det["statistic"] == 0 and det["n"] == 24
+
+
+def test_slower_controller_is_found(two_real_runs: tuple[Path, Path],
+                                    capsys: pytest.CaptureFixture[str]) -> None:
+    a, _ = two_real_runs
+    df = load(a)
+    res = {c.metric: c for c in compare_controllers(df)}
+    steps = res["steps"]
+    assert (steps.a, steps.b) == ("edge-slow", "leg-edge")
+    slow = df[df.controller == "edge-slow"].set_index("trial")
+    fast = df[df.controller == "leg-edge"].set_index("trial")
+    assert bool(slow.converged.all() and fast.converged.all())
+    d = (slow.steps - fast.steps).to_numpy()
+    assert np.all(d > 0)  # slower in every trial...
+    assert steps.p_value == pytest.approx(2 * 0.5 ** 12)  # ...so the exact p is 2 / 2^12
+    assert steps.better == "leg-edge"
+    assert steps.difference == np.median(d)
+    assert steps.interval[0] > 0
+    assert cli_main(["compare", str(a), "--baseline", "leg-edge"]) == 0
+    out = capsys.readouterr().out
+    assert "steps: leg-edge is better than edge-slow" in out
+
+
+def test_worse_controller_found_between_runs(tmp_path: Path) -> None:
+    """Run B's controller fails 15 more trials of 200 and has 30 % larger errors."""
+    good = [r for r in two_controllers(200) if r["controller"] == "good"]
+    worse = [dict(r, controller="good") for r in two_controllers(200, worse_by=1.3,
+                                                                  worse_fails=15)
+             if r["controller"] == "bad"]
+    a = write_run(tmp_path / "a", good)
+    b = write_run(tmp_path / "b", worse)
+    comps, different, matched = compare_runs(load(a), load(b))
+    by = {c.metric: c for c in comps}
+    assert matched == 200
+    assert by["converged"].verdict.startswith("REGRESSION")
+    assert by["converged"].p_value == pytest.approx(2 * 0.5 ** 15)
+    assert by["final_error"].verdict.startswith("REGRESSION")
+    assert by["final_error"].difference > 0
+    assert set(different["column"]) >= {"converged", "final_position_error_mm"}
+    assert cli_main(["compare", str(a), str(b), "--check"]) == 1
+
+
+def test_within_run_holm_and_no_false_alarm(tmp_path: Path) -> None:
+    rows = two_controllers(300, worse_by=1.0)  # identical controllers
+    rng = np.random.default_rng(2)
+    for r in rows:  # a third with independent noise only
+        if r["controller"] == "bad":
+            r["final_position_error_mm"] *= float(rng.uniform(0.999, 1.001))
+    comps = compare_controllers(load(write_run(tmp_path / "r", rows)))
+    assert all(c.better is None for c in comps)
+    assert all(c.p_holm >= c.p_value for c in comps)
+
+
+def test_compare_errors(tmp_path: Path) -> None:
+    rows = [r for r in two_controllers(10) if r["controller"] == "good"]
+    df = load(write_run(tmp_path / "one", rows))
+    with pytest.raises(BenchmarkError, match="one controller"):
+        compare_controllers(df)
+    df2 = load(write_run(tmp_path / "two", two_controllers(10)))
+    with pytest.raises(BenchmarkError, match=r"--baseline 'nope'.*bad, good"):
+        compare_controllers(df2, baseline="nope")
+    with pytest.raises(BenchmarkError, match="--metric 'bogus'"):
+        compare_controllers(df2, metrics=("bogus",))

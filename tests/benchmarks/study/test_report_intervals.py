@@ -1,0 +1,47 @@
+"""The report's tables carry intervals computed as the statistics module says."""
+
+from __future__ import annotations
+
+import re
+from pathlib import Path
+
+import numpy as np
+from scipy import stats as sps
+
+from benchmarks.study import stats
+from benchmarks.study.report import write_report
+from tests.benchmarks.study.helpers_rows import make_rows, write_run
+
+
+def test_report_cells_have_intervals(tmp_path: Path) -> None:
+    rng = np.random.default_rng(1)
+    err = rng.lognormal(-2, 0.4, 100)
+    conv = np.arange(100) >= 6  # 94 of 100
+    steps = rng.integers(60, 120, 100)
+    rows = make_rows("leg-edge", err, conv, steps)
+    for r, c in zip(rows, rng.uniform(0.1, 2.0, 100), strict=True):
+        r["calibration_median_error_mm"] = float(c) / 3
+        r["calibration_max_error_mm"] = float(c)
+        r["calibration_max_component_error_mm"] = float(c) * 0.9
+    out = write_run(tmp_path / "run", rows)
+    text = write_report(out).read_text()
+    row = next(line for line in text.splitlines() if line.startswith("| synthetic |"))
+    cells = [c.strip() for c in row.strip("|").split("|")]
+    ci = sps.binomtest(94, 100).proportion_ci(method="wilson")
+    assert cells[4] == f"94.0 % [{100 * ci.low:.1f}, {100 * ci.high:.1f}]"
+    med, lo, hi = map(float, re.match(r"([\d.]+) \[([\d.]+), ([\d.]+)\]", cells[5]).groups())
+    assert med == round(float(np.median(err)), 3)
+    (blo, bhi), = stats.bootstrap_quantiles(err, [0.5])
+    assert (lo, hi) == (round(blo, 3), round(bhi, 3))
+    assert lo < med < hi
+    steps_cell = re.match(r"(\d+) \[(\d+), (\d+)\]", cells[10])
+    assert steps_cell is not None
+    assert abs(float(steps_cell.group(1)) - np.median(steps[conv])) <= 0.5
+    assert f"{stats.RESAMPLES} resamples, seed {stats.SEED}" in text
+    assert "Wilson" in text
+    # the calibration table gives seed 001's measure beside the per-point norm
+    cal = next(line for line in text.splitlines() if "max coordinate error mm" in line)
+    assert "median error mm (per point)" in cal
+    cal_row = text.splitlines()[text.splitlines().index(cal) + 2]
+    comp = float(cal_row.strip("|").split("|")[4])
+    assert comp == round(max(r["calibration_max_component_error_mm"] for r in rows), 3)
