@@ -106,6 +106,10 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--workers", type=int, default=1, help="processes (default 1)")
     s.add_argument("--dask", metavar="ADDRESS", help="Dask scheduler address, or 'local'")
     s.add_argument("--resume", action="store_true", help="finish an interrupted run")
+    s.add_argument("--overwrite", action="store_true",
+                   help="write into a directory that holds files other than a run's (files "
+                        "of the same names, e.g. report.md, are replaced; results are never "
+                        "discarded: a directory with results needs --resume)")
     s.add_argument("--chunk", type=int, default=None,
                    help="trials per work unit (default: a quarter of a worker's share of "
                         "the trials, between 25 and 1000, at most a sweep point's trials; 25 "
@@ -137,6 +141,9 @@ def build_parser() -> argparse.ArgumentParser:
                         "scenario's [calibration] warn_singular_ratio, 0.005)")
     s.add_argument("--min-ratio", type=float, metavar="R",
                    help="refuse below R (default: [calibration] min_singular_ratio, 0.0015)")
+    s.add_argument("--overwrite", action="store_true",
+                   help="replace the calibration.json and calibrated.toml of --out, or write "
+                        "into a directory that holds other files")
     s.add_argument("--observations", metavar="FILE",
                    help="calibrate from measured edge normals and leg lengths (.json/.npz) "
                         "instead of simulating the scenario's world")
@@ -159,12 +166,17 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--html", help="write a self-contained HTML animation (+ a PNG of the "
                                   "curves beside it) instead of the live view")
     s.add_argument("--still", type=int, help="with --html: a still of this period")
+    s.add_argument("--overwrite", action="store_true",
+                   help="with --html: replace the file (and the PNG beside it) even if "
+                        "hexapod-bench did not write it")
     s.add_argument("--hold", type=float, default=5.0,
                    help="live view: seconds to keep the server after the replay")
     s.set_defaults(func=cmd_viz)
 
     s = sub.add_parser("report", help="rebuild DIR/report.md from DIR/results.jsonl")
     s.add_argument("dir")
+    s.add_argument("--overwrite", action="store_true",
+                   help="replace DIR/report.md even if hexapod-bench did not write it")
     s.set_defaults(func=cmd_report)
 
     s = sub.add_parser("perf", help="performance and accuracy figures",

@@ -32,6 +32,7 @@ import cv2
 import numpy as np
 
 from hexapod import deltalab
+from hexapod.outputs import check_replace, mark_png
 from hexapod.workspace import sample_poses
 from vision import kernels
 from vision.cameras import (
@@ -85,6 +86,13 @@ class EdgeCounts:
         self.partly_hidden += int((extra & (visible_fraction >= INVENTED_FRACTION)).sum())
 
 
+def picture_name(cam: Camera, style: RenderStyle) -> str:
+    """``detect-omni.png``, ``detect-front-cluttered-distorted.png``..."""
+    suffix = "" if style.background == "plain" else f"-{style.background}"
+    suffix += "-distorted" if cam.is_distorted else ""
+    return f"detect-{'omni' if cam.kind == 'unified' else 'front'}{suffix}.png"
+
+
 def _run(cam: Camera, frames: int, style: RenderStyle, seed: int,
          pictures: Path | None, repeats: int) -> dict[str, float]:
     geo = deltalab()
@@ -125,10 +133,9 @@ def _run(cam: Camera, frames: int, style: RenderStyle, seed: int,
         counts.add(obs.edge_visible, obs.visible_fraction, d.edge_visible)
         if pictures is not None and k == 0:
             pictures.mkdir(parents=True, exist_ok=True)
-            suffix = "" if style.background == "plain" else f"-{style.background}"
-            suffix += "-distorted" if cam.is_distorted else ""
-            name = f"detect-{'omni' if omni else 'front'}{suffix}.png"
-            cv2.imwrite(str(pictures / name), draw_detection(img, cam, d))
+            ok, png = cv2.imencode(".png", draw_detection(img, cam, d))
+            if ok:
+                (pictures / picture_name(cam, style)).write_bytes(mark_png(png.tobytes()))
     e = np.concatenate(errs) if errs else np.array([np.nan])
     return {
         "render_ms": 1e3 * float(np.median(render_t)),
@@ -165,6 +172,8 @@ def main(argv: Sequence[str] | None = None) -> int:
                         "(-cluttered before .png on a cluttered background; with "
                         "--distortion also detect-omni-distorted.png and "
                         "detect-front-distorted.png)")
+    p.add_argument("--overwrite", action="store_true",
+                   help="replace pictures of those names that hexapod-bench did not write")
     args = p.parse_args(argv)
     style = RenderStyle(background=args.background, blur_px=args.blur, noise_std=args.noise)
     out = sys.stdout
@@ -190,6 +199,9 @@ def main(argv: Sequence[str] | None = None) -> int:
         cameras.append((name, ideal))
         if args.distortion:
             cameras.append((name, ideal.replace(distortion=distortion)))
+    if args.pictures is not None:  # refused before any work, never half-way
+        for _, cam in cameras:
+            check_replace(args.pictures / picture_name(cam, style), args.overwrite)
     for name, cam in cameras:
         r = _run(cam, args.frames, style, args.seed, args.pictures, args.repeats)
         lens = "distorted" if cam.is_distorted else "ideal"

@@ -65,6 +65,7 @@ from benchmarks.robot.loop import (
     servo_loop,
 )
 from hexapod.geometry import HexapodGeometry
+from hexapod.outputs import check_replace
 from vision.feature_cameras import (
     Features,
     FeatureSensor,
@@ -286,14 +287,25 @@ def _viewer(enabled: bool, geometry: HexapodGeometry, camera: Any, goal: Any
         viewer.close()
 
 
+def _is_servo_log(path: Path) -> bool:
+    """A log ``servo --log`` wrote: its first line is a period (``step``, ``t_s``)."""
+    try:
+        with path.open(encoding="utf-8") as f:
+            first = json.loads(f.readline())
+    except (OSError, ValueError):
+        return False
+    return isinstance(first, dict) and {"step", "t_s"} <= set(first)
+
+
 def _teach(args: argparse.Namespace, geometry: HexapodGeometry, camera: Any,
            start: np.ndarray | None, status: StatusLine) -> int:
     from hexapod.fk import forward_kinematics
 
     path = Path(args.goal)
-    if path.exists():
-        raise BenchmarkError(f"{path}: already exists; delete it or choose another --goal "
-                             "(--teach never overwrites a goal)")
+    for taught in (path, path.with_suffix(".features.npz")):
+        if taught.exists():
+            raise BenchmarkError(f"{taught}: already exists; delete it or choose another "
+                                 "--goal (--teach never overwrites a goal or its features)")
     sensor = open_camera(args.camera, camera, geometry, args.seed)
     frames: list[Features] = []
     try:
@@ -350,6 +362,8 @@ def run(args: argparse.Namespace) -> int:
         return _teach(args, geometry, camera, start, status)
 
     # everything the user gave is checked before the robot is touched
+    if args.log:
+        check_replace(args.log, ours=_is_servo_log, how="choose another --log, or delete it")
     goal_file = load_goal(args.goal, geometry)
     goal = goal_features(goal_file, camera, geometry)
     options = parse_options(args.option)

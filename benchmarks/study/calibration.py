@@ -24,6 +24,7 @@ import tomli_w
 
 from benchmarks.study.scenario import Scenario
 from hexapod.config import check_keys, get_matrix, load_toml
+from hexapod.outputs import GENERATOR, TEXT_MARKER
 
 log = logging.getLogger(__name__)
 
@@ -70,7 +71,7 @@ def load_calibrated_base_points(path: str | Path) -> np.ndarray:
 
 def run_calibration(sc: Scenario, out: Path, configurations: str | None = None,
                     repeat: int = 1, solver: str | None = None,
-                    correct_scale: bool = False) -> dict[str, Any]:
+                    correct_scale: bool = False, overwrite: bool = False) -> dict[str, Any]:
     """Repeat the calibration in the scenario's worlds; write calibration.json and calibrated.toml.
 
     Repetition k uses the world of trial k (its calibration-error draw) and the
@@ -78,8 +79,13 @@ def run_calibration(sc: Scenario, out: Path, configurations: str | None = None,
 
     Returns:
         The content of ``calibration.json``.
+
+    Raises:
+        OutputError: ``out`` holds other files or a calibration already (and not
+            ``overwrite``); nothing is written.
     """
     from benchmarks.sim import load_camera, load_geometry, make_trial, trial_rng
+    from benchmarks.study.outdir import check_calibration_directory
     from vision.calibration import (
         calibrate,
         collect_observations,
@@ -88,7 +94,7 @@ def run_calibration(sc: Scenario, out: Path, configurations: str | None = None,
         rotation_noise,
     )
 
-    out.mkdir(parents=True, exist_ok=True)
+    check_calibration_directory(out, overwrite)
     nominal = load_geometry(sc)
     camera = load_camera(sc, nominal)
     cal_cfg = sc.calibration
@@ -144,6 +150,7 @@ def run_calibration(sc: Scenario, out: Path, configurations: str | None = None,
             first_result = results[0]
     overall = error_summary(np.array(all_diffs), np.zeros((6, 3)))
     doc = {
+        "generator": GENERATOR,
         "scenario": sc.name,
         "configurations": cal_cfg.configurations,
         "solver": cal_cfg.solver,
@@ -155,6 +162,7 @@ def run_calibration(sc: Scenario, out: Path, configurations: str | None = None,
         "max_component_error_mm": overall["max_component_error_mm"],
         "points": points_out,
     }
+    out.mkdir(parents=True, exist_ok=True)
     (out / "calibration.json").write_text(json.dumps(doc, indent=1))
     if first_result is None:  # a scenario always has at least one sweep point
         raise RuntimeError("no calibration was run")
@@ -164,7 +172,7 @@ def run_calibration(sc: Scenario, out: Path, configurations: str | None = None,
 
 
 def calibrate_from_file(sc: Scenario, observations: Path, out: Path, solver: str | None = None,
-                        correct_scale: bool = False) -> dict[str, Any]:
+                        correct_scale: bool = False, overwrite: bool = False) -> dict[str, Any]:
     """Calibrate from observations a user measured (e.g. with a real camera).
 
     Args:
@@ -174,14 +182,20 @@ def calibrate_from_file(sc: Scenario, observations: Path, out: Path, solver: str
         out: Output directory (``calibration.json``, ``calibrated.toml``).
         solver: ``"lstsq"`` or ``"irls"`` (default: the scenario's).
         correct_scale: Divide the estimates by the measured scale.
+        overwrite: Replace a calibration in ``out``, or write among other files.
 
     Returns:
         The content of ``calibration.json`` (no error against a truth: there is none).
+
+    Raises:
+        OutputError: ``out`` holds other files or a calibration already (and not
+            ``overwrite``); nothing is written.
     """
     from benchmarks.sim import load_geometry
+    from benchmarks.study.outdir import check_calibration_directory
     from vision.calibration import CalibrationData, calibrate
 
-    out.mkdir(parents=True, exist_ok=True)
+    check_calibration_directory(out, overwrite)
     nominal = load_geometry(sc)
     data = CalibrationData.load(observations)
     res = calibrate(data, nominal.leg_radius, nominal.base_points,
@@ -189,7 +203,8 @@ def calibrate_from_file(sc: Scenario, observations: Path, out: Path, solver: str
                     correct_scale=correct_scale,
                     min_singular_ratio=sc.calibration.min_singular_ratio,
                     warn_singular_ratio=sc.calibration.warn_singular_ratio)
-    doc = {"scenario": sc.name, "observations": str(observations),
+    out.mkdir(parents=True, exist_ok=True)
+    doc = {"generator": GENERATOR, "scenario": sc.name, "observations": str(observations),
            "configurations": int(data.n_configurations),
            "solver": solver or sc.calibration.solver, "result": res.to_dict()}
     (out / "calibration.json").write_text(json.dumps(doc, indent=1))
@@ -212,4 +227,4 @@ def write_calibrated_file(path: Path, result: Any, source: str) -> None:
         "scale": float(result.scale),
         "leg_radius_mm": float(result.radius * 1e3),
     }
-    path.write_text(tomli_w.dumps(table))
+    path.write_text(f"# {TEXT_MARKER} (hexapod-bench calibrate)\n" + tomli_w.dumps(table))

@@ -38,6 +38,9 @@ def cmd_run(args: argparse.Namespace) -> int:
     from benchmarks.study.runner import backend_factory
 
     backend_factory(args.backend)  # validates the spec before any work
+    from benchmarks.study.outdir import check_run_directory
+
+    check_run_directory(out, getattr(args, "overwrite", False))  # before the lock file
     with run_lock(out):  # one run per results directory, from the check to the report
         return _run_locked(scenarios, out, args)
 
@@ -125,7 +128,7 @@ def _run_locked(scenarios: list[Any], out: Path, args: argparse.Namespace) -> in
     wall = time.perf_counter() - t0
     meta["wall_time_s"] = wall
     meta_path.write_text(json.dumps(meta, indent=2))
-    report = write_report(out)
+    report = write_report(out, getattr(args, "overwrite", False))
     _print_summary(out, con)
     done_text = f"{written} of {total} trials" if written != total else f"{total} trials"
     con.print(f"{done_text} in {wall:.1f} s ({executor}, {args.workers} worker(s))"
@@ -161,7 +164,7 @@ def _run_with_viz(scenarios: list[Any], out: Path, args: argparse.Namespace) -> 
         viewer.close()
     from benchmarks.study.report import write_report
 
-    write_report(out)
+    write_report(out, getattr(args, "overwrite", False))
     _print_summary(out, con)
     return 0
 
@@ -202,7 +205,7 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
         from benchmarks.study.calibration import calibrate_from_file
 
         doc = calibrate_from_file(sc, Path(args.observations), out, args.solver,
-                                  args.correct_scale)
+                                  args.correct_scale, overwrite=args.overwrite)
         res = doc["result"]
         print(f"calibrated {doc['configurations']} configurations from {args.observations}: "
               f"rigid-fit RMS {res['fit_rms_mm']:.3f} mm, scale {res['scale']:.5f}; wrote "
@@ -216,7 +219,7 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
         return 0
     t0 = time.perf_counter()
     doc = run_calibration(sc, out, args.configurations, args.repeat, args.solver,
-                          args.correct_scale)
+                          args.correct_scale, overwrite=args.overwrite)
     con = _console()
     t = Table(title=f"Base-point calibration ({sc.name}, {doc['configurations']}, "
                     f"{doc['solver']}, {args.repeat} repetition(s))")
@@ -298,10 +301,20 @@ def cmd_viz(args: argparse.Namespace) -> int:
 
     out = Path(args.dir)
     path = find_record(out, args.trial, args.controller, args.scenario, args.point)
+    if args.html:
+        from hexapod.outputs import check_replace
+
+        html_path, png_path = Path(args.html), Path(args.html).with_suffix(".png")
+        if html_path == png_path:
+            raise BenchmarkError(f"--html {args.html}: the curves go beside it as "
+                                 f"{png_path.name}; give the page an .html name")
+        overwrite = getattr(args, "overwrite", False)
+        check_replace(html_path, overwrite)
+        check_replace(png_path, overwrite)
     record = load_trial(path)
     if args.html:
-        html = replay_html(record, args.html, frame=args.still)
-        png = plot_trial(record, Path(args.html).with_suffix(".png"))
+        html = replay_html(record, html_path, frame=args.still)
+        png = plot_trial(record, png_path)
         print(f"{record.title}: wrote {html} (open it in a browser, no network needed) "
               f"and {png}")
         return 0
@@ -327,7 +340,7 @@ def cmd_report(args: argparse.Namespace) -> int:
     """Rebuild report.md from results.jsonl."""
     from benchmarks.study.report import write_report
 
-    path = write_report(Path(args.dir))
+    path = write_report(Path(args.dir), getattr(args, "overwrite", False))
     _print_summary(Path(args.dir), _console())
     print(f"report: {path}")
     return 0

@@ -12,6 +12,7 @@ import numpy as np
 
 from benchmarks.study.metrics import Summary
 from benchmarks.study.results import TRIALS_DIR
+from hexapod.outputs import PNG_METADATA, inside
 
 #: Sweep points whose recorded trial gets an error-versus-time figure, at most.
 MAX_TIME_SERIES = 4
@@ -59,7 +60,7 @@ def time_series(out_dir: Path, scenario: str, point: int) -> str | None:
         ax.legend(fontsize=7)
     fig.tight_layout()
     name = f"{scenario}_p{point}_timeseries.png"
-    fig.savefig(out_dir / name, dpi=90)
+    fig.savefig(inside(out_dir, name), dpi=90, metadata=PNG_METADATA)
     plt.close(fig)
     return name
 
@@ -97,7 +98,7 @@ def sweeps(out_dir: Path, scenario: str, summaries: list[Summary]) -> list[str]:
         ax.legend(fontsize=7)
     fig.tight_layout()
     name = f"{scenario}_sweep_{key}.png"
-    fig.savefig(out_dir / name, dpi=90)
+    fig.savefig(inside(out_dir, name), dpi=90, metadata=PNG_METADATA)
     plt.close(fig)
     return [name]
 
@@ -160,7 +161,7 @@ def heat_maps(out_dir: Path, scenario: str, summaries: list[Summary]) -> str | N
             fig.colorbar(im, ax=ax, fraction=0.046)
     fig.tight_layout()
     name = f"{scenario}_map.png"
-    fig.savefig(out_dir / name, dpi=90)
+    fig.savefig(inside(out_dir, name), dpi=90, metadata=PNG_METADATA)
     plt.close(fig)
     return name
 
@@ -193,6 +194,6 @@ def error_cdf(out_dir: Path, scenario: str, rows: list[dict[str, Any]]) -> str |
     ax.legend(fontsize=7)
     fig.tight_layout()
     name = f"{scenario}_error_cdf.png"
-    fig.savefig(out_dir / name, dpi=90)
+    fig.savefig(inside(out_dir, name), dpi=90, metadata=PNG_METADATA)
     plt.close(fig)
     return name

@@ -14,6 +14,7 @@ import numpy as np
 from benchmarks.study import plots
 from benchmarks.study.metrics import Summary, format_sweep, summarize
 from benchmarks.study.runner import deduplicate, machine_info, read_results
+from hexapod.outputs import TEXT_MARKER
 
 log = logging.getLogger(__name__)
 
@@ -65,10 +66,18 @@ def duplicate_note(dropped: int, conflicting: int) -> str:
     return text
 
 
-def write_report(out_dir: Path) -> Path:
-    """Write ``DIR/report.md`` (and its PNG plots) from ``DIR/results.jsonl``."""
+def write_report(out_dir: Path, overwrite: bool = False) -> Path:
+    """Write ``DIR/report.md`` (and its PNG plots) from ``DIR/results.jsonl``.
+
+    Raises:
+        OutputError: ``DIR/report.md`` is a file the project did not write (and not
+            ``overwrite``).
+    """
+    from benchmarks.study.outdir import check_report_file
+
     out_dir = Path(out_dir)
     rows, dropped, conflicting = deduplicate(read_results(out_dir))
+    check_report_file(out_dir, overwrite)
     if dropped:
         log.warning("%s: %s", out_dir / "results.jsonl", duplicate_note(dropped, conflicting))
     summaries = summarize(rows)
@@ -76,7 +85,7 @@ def write_report(out_dir: Path) -> Path:
     if (out_dir / META_FILE).exists():
         meta = json.loads((out_dir / META_FILE).read_text())
     info = machine_info()
-    lines = ["# Benchmark report", ""]
+    lines = ["# Benchmark report", "", f"<!-- {TEXT_MARKER}: hexapod-bench report -->", ""]
     lines.append(f"Generated {datetime.now(UTC).strftime('%Y-%m-%d %H:%M UTC')} from "
                  f"`{out_dir / 'results.jsonl'}` ({len(rows)} trials).")
     if meta.get("command"):

@@ -316,6 +316,15 @@ class Scenario:
             _check_option(seed, "seed", "--seed")
             sc = replace(sc, seed=seed)
         if controllers:
+            from hexapod.exceptions import UnsafeNameError
+            from hexapod.outputs import check_name
+
+            for c in controllers:
+                try:
+                    check_name(c, "controller")
+                except UnsafeNameError as exc:
+                    raise ScenarioError("--controllers", f"{exc.value!r}: {exc.problem}"
+                                        ) from None
             by_label = {c.label: c for c in sc.controllers}
             sc = replace(sc, controllers=tuple(by_label.get(c, ControllerSpec(c, c))
                                                for c in controllers))
