@@ -101,7 +101,12 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--seed", type=int, help="override the scenario seed")
     s.add_argument("--max-steps", type=int, help="override the step budget of each trial")
     s.add_argument("--calibration", metavar="FILE",
-                   help="controllers use the base points of this calibrated.toml")
+                   help="controllers use the base points of this calibrated.toml (the "
+                        "vision laws and the predictive ones; model-based and joint-space "
+                        "ignore them); refused if made with another robot or camera")
+    s.add_argument("--allow-foreign-calibration", action="store_true",
+                   help="use a calibration file made with another robot or camera anyway "
+                        "(warned)")
     s.add_argument("--controllers", help="comma-separated names, labels or module:attr")
     s.add_argument("--workers", type=int, default=1, help="processes (default 1)")
     s.add_argument("--dask", metavar="ADDRESS", help="Dask scheduler address, or 'local'")

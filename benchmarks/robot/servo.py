@@ -183,6 +183,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--calibration", metavar="FILE",
                    help="calibrated.toml: the controller uses these base points (camera "
                         "frame) instead of the nominal ones")
+    p.add_argument("--allow-foreign-calibration", action="store_true",
+                   help="use a --calibration made with another robot or camera (warned)")
     p.add_argument("--dt", type=float, default=0.02, help="control period [s] (default 0.02)")
     p.add_argument("--max-steps", type=int,
                    help="stop after N periods (default: until convergence or Ctrl-C)")
@@ -340,7 +342,8 @@ def run(args: argparse.Namespace) -> int:
     before the robot is touched.
     """
     import controllers  # noqa: F401 - registers the built-ins
-    from benchmarks.study.calibration import load_calibrated_base_points
+    from benchmarks.study.calibration import read_calibrated_file
+    from benchmarks.study.provenance import check_calibration
     from controllers.base import ControllerContext, registry
 
     _check_args(args)
@@ -372,8 +375,14 @@ def run(args: argparse.Namespace) -> int:
     except TypeError as exc:  # an option the factory does not take
         raise BenchmarkError(f"--controller {args.controller}: bad option in "
                              f"{sorted(options)}: {exc}") from None
-    base_points = (load_calibrated_base_points(args.calibration) if args.calibration
-                   else camera.camera_from_base.apply(geometry.base_points))
+    base_points = camera.camera_from_base.apply(geometry.base_points)
+    if args.calibration:
+        base_points, recorded = read_calibrated_file(args.calibration)
+        for text in check_calibration(args.calibration, base_points, recorded,
+                                      Path(args.geometry).name, geometry,
+                                      Path(args.camera_file).name, camera,
+                                      getattr(args, "allow_foreign_calibration", False)):
+            print(f"warning: {text}", file=sys.stderr)
     controller.reset(ControllerContext(base_points=base_points, geometry=geometry,
                                        camera=camera, dt=args.dt, goal=goal))
     sensor = open_camera(args.camera, camera, geometry, args.seed)

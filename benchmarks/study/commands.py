@@ -33,8 +33,16 @@ def cmd_run(args: argparse.Namespace) -> int:
     scenarios = [load_scenario(s).with_overrides(args.trials, args.seed, ctrl_list,
                                                  args.max_steps, args.calibration)
                  for s in args.scenarios]
+    from benchmarks.study.provenance import check_scenario_calibration
+
+    warnings: list[str] = []
     for sc in scenarios:
         check_controllers(sc)
+        warnings += check_scenario_calibration(sc, getattr(args, "allow_foreign_calibration",
+                                                           False))
+    for text in warnings:
+        print(f"warning: {text}", file=sys.stderr)
+    args.calibration_warnings = warnings
     from benchmarks.study.runner import backend_factory
 
     backend_factory(args.backend)  # validates the spec before any work
@@ -82,6 +90,7 @@ def _run_locked(scenarios: list[Any], out: Path, args: argparse.Namespace) -> in
     meta.update({
         "command": "hexapod-bench " + " ".join(shlex.quote(a) for a in sys.argv[1:]),
         "workers": args.workers, "executor": executor,
+        "warnings": getattr(args, "calibration_warnings", []),
         "scenarios": {**meta.get("scenarios", {}), **{
             sc.name: {"description": sc.description, "reference": sc.reference,
                       "source": sc.source} for sc in scenarios}},
@@ -210,6 +219,7 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
         print(f"calibrated {doc['configurations']} configurations from {args.observations}: "
               f"rigid-fit RMS {res['fit_rms_mm']:.3f} mm, scale {res['scale']:.5f}; wrote "
               f"{out / 'calibration.json'} and {out / 'calibrated.toml'}")
+        _print_far_from_nominal(doc, out)
         lin = res["linear"]
         for leg in lin["ill_conditioned_legs"]:
             print(f"warning: leg {leg} is ill-conditioned (singular-value ratio "
@@ -233,10 +243,21 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
                   f"{max(p['per_point_median_mm']):.3f}", f"{p['min_singular_ratio']:.4f}",
                   ", ".join(str(leg) for leg in p["ill_conditioned_legs"]) or "-")
     con.print(t)
+    _print_far_from_nominal(doc["points"][0], out)
     con.print(f"{time.perf_counter() - t0:.1f} s; wrote {out / 'calibration.json'} and "
               f"{out / 'calibrated.toml'} (use: hexapod-bench run ... --calibration "
               f"{out / 'calibrated.toml'})")
     return 0
+
+
+def _print_far_from_nominal(part: dict[str, Any], out: Path) -> None:
+    """Flag the base points of calibrated.toml far from the nominal ones (stderr)."""
+    from benchmarks.study.provenance import far_message
+
+    text = far_message(str(out / "calibrated.toml"), part["distance_from_nominal_mm"],
+                       part["far_from_nominal_threshold_mm"])
+    if text:
+        print(f"warning: {text}", file=sys.stderr)
 
 
 def _with_ratio_options(sc: Any, args: argparse.Namespace) -> Any:

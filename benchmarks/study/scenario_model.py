@@ -157,6 +157,8 @@ class CalibrationConfig:
             (``calibration_ill_conditioned_legs`` in its row).
         min_singular_ratio: Below this the calibration refuses (the trial fails with a
             ``CalibrationError`` naming the leg and the ratio).
+        allow_foreign: Method ``"file"``: use a file made with another robot or camera
+            (warned loudly) instead of refusing it.
     """
 
     method: str = "none"
@@ -166,6 +168,7 @@ class CalibrationConfig:
     noise_deg: float | None = None
     warn_singular_ratio: float = WARN_SINGULAR_RATIO
     min_singular_ratio: float = MIN_SINGULAR_RATIO
+    allow_foreign: bool = False
 
 
 @dataclass(frozen=True)
