@@ -119,8 +119,11 @@ def build_parser() -> argparse.ArgumentParser:
                    help="trials per work unit (default: a quarter of a worker's share of "
                         "the trials, between 25 and 1000, at most a sweep point's trials; 25 "
                         "with a real-time backend)")
-    s.add_argument("--record", type=int, default=2,
-                   help="keep the time series of the first K trials of each controller")
+    s.add_argument("--record", type=int, default=2, metavar="K",
+                   help="keep the time series of trials 0 to K-1 of each controller at each "
+                        "sweep point in DIR/trials/ (default 2: trials 0 and 1; the others "
+                        "keep only their row in results.jsonl); 'viz' replays them, the "
+                        "report plots trial 0")
     s.add_argument("--backend", default="sim",
                    help="sim (default, vectorised), emulator (a firmware emulator on a pty), "
                         "serial:URL, a plugin's NAME[:ARGS] or module:attr[:ARGS] "

@@ -95,6 +95,7 @@ def _run_locked(scenarios: list[Any], out: Path, args: argparse.Namespace) -> in
             sc.name: {"description": sc.description, "reference": sc.reference,
                       "source": sc.source} for sc in scenarios}},
     })
+    _keep_inputs(out, scenarios, meta, args)
     meta_path.write_text(json.dumps(meta, indent=2))
     if args.viz:
         return _run_with_viz(scenarios, out, args)
@@ -143,6 +144,22 @@ def _run_locked(scenarios: list[Any], out: Path, args: argparse.Namespace) -> in
     con.print(f"{done_text} in {wall:.1f} s ({executor}, {args.workers} worker(s))"
               f"{' before the interruption' if interrupted else ''}; report: {report}")
     return 130 if interrupted else 0
+
+
+def _keep_inputs(out: Path, scenarios: list[Any], meta: dict[str, Any],
+                 args: argparse.Namespace) -> None:
+    """Copy each scenario and its files into ``out/inputs/`` and record its settings and
+    the ``--record`` count in ``meta`` (see :mod:`benchmarks.study.inputs`)."""
+    from benchmarks.study.inputs import copy_inputs, settings
+
+    meta["record"] = args.record
+    for sc in scenarios:
+        kept = copy_inputs(out, sc, getattr(args, "allow_foreign_calibration", False))
+        if kept.get("changed"):
+            print(f"warning: {sc.source} differs from the copy this run started with "
+                  f"({out / kept['folder'] / 'source.toml'}, kept): the resumed trials use "
+                  "the file as it is now", file=sys.stderr)
+        meta["scenarios"][sc.name].update(inputs=kept, settings=settings(sc))
 
 
 def _run_with_viz(scenarios: list[Any], out: Path, args: argparse.Namespace) -> int:
@@ -292,8 +309,11 @@ def find_record(out: Path, trial: int, controller: str | None = None,
     folder = out / "trials"
     files = sorted(folder.glob("*.npz")) if folder.exists() else []
     if not files:
-        raise BenchmarkError(f"{out}: no recorded trial (run with --record K to keep the "
-                             "time series of the first K trials)")
+        recorded = _recorded_count(out)
+        why = " (the run used --record 0)" if recorded == 0 else ""
+        raise BenchmarkError(f"{out}: no recorded trial{why}; rerun into a new --out with "
+                             "--record K to keep the time series of trials 0 to K-1 of each "
+                             "controller")
     matches = []
     for f in files:
         parts = f.stem.split("__")
@@ -306,14 +326,29 @@ def find_record(out: Path, trial: int, controller: str | None = None,
         matches.append(f)
     if not matches:
         available = sorted({f.stem for f in files})[:20]
+        recorded = _recorded_count(out)
+        hint = ""
+        if recorded is not None and trial >= recorded:
+            hint = (f"; the run kept the time series of trials 0 to {recorded - 1} only "
+                    f"(--record {recorded}): rerun into a new --out with --record "
+                    f"{trial + 1} to keep trial {trial}")
         raise BenchmarkError(f"{out}: no recorded trial {trial}"
                              + (f" of '{controller}'" if controller else "")
-                             + f"; recorded: {', '.join(available)}")
+                             + f"{hint}; recorded: {', '.join(available)}")
     if len(matches) > 1:
         raise BenchmarkError(f"{out}: {len(matches)} records match ("
                              + ", ".join(m.stem for m in matches[:8])
                              + "); choose with --controller, --scenario or --point")
     return matches[0]
+
+
+def _recorded_count(out: Path) -> int | None:
+    """The ``--record`` of the run (``run.json``), None when unknown."""
+    try:
+        value = json.loads((out / "run.json").read_text()).get("record")
+    except (OSError, ValueError):
+        return None
+    return value if isinstance(value, int) else None
 
 
 def cmd_viz(args: argparse.Namespace) -> int:

@@ -66,6 +66,20 @@ def duplicate_note(dropped: int, conflicting: int) -> str:
     return text
 
 
+def settings_lines(scenario_meta: dict[str, Any], out_dir: Path) -> list[str]:
+    """The report's list of the settings that define a scenario's run (from ``run.json``)."""
+    found = scenario_meta.get("settings")
+    if not found:
+        return []
+    lines = ["Settings:", ""] + [f"- {k}: {v}" for k, v in found.items()]
+    folder = (scenario_meta.get("inputs") or {}).get("folder")
+    if folder:
+        lines.append(f"- files: the scenario and every file it names are kept in `{folder}/` "
+                     f"(rerun: `hexapod-bench run {out_dir / folder}/scenario.toml --out "
+                     "NEW_DIR`)")
+    return [*lines, ""]
+
+
 def write_report(out_dir: Path, overwrite: bool = False) -> Path:
     """Write ``DIR/report.md`` (and its PNG plots) from ``DIR/results.jsonl``.
 
@@ -92,6 +106,8 @@ def write_report(out_dir: Path, overwrite: bool = False) -> Path:
         lines.append(f"Command: `{meta['command']}`")
     if dropped:
         lines += ["", f"**Duplicate rows**: {duplicate_note(dropped, conflicting)}"]
+    if meta.get("warnings"):
+        lines += ["", "**Warnings of the run**:", ""] + [f"- {w}" for w in meta["warnings"]]
     lines += ["", "## Machine and libraries", ""]
     lines += [f"- {k}: {v}" for k, v in info.items()]
     if meta.get("wall_time_s") is not None:
@@ -115,6 +131,7 @@ def write_report(out_dir: Path, overwrite: bool = False) -> Path:
         sm = scen_meta.get(name, {})
         if sm.get("description"):
             lines += [sm["description"], ""]
+        lines += settings_lines(sm, out_dir)
         lines += [_md_table(TABLE_HEADER, summary_table_rows(ss)), ""]
         if any(np.isfinite(s.rtt_median_ms) for s in ss):
             lines += ["Robot link (communication time per period):", ""]
