@@ -107,14 +107,36 @@ def inside(directory: str | Path, *parts: str) -> Path:
     return path
 
 
+#: The schema metadata that marks the project's Parquet files
+#: (``table.replace_schema_metadata(PARQUET_METADATA)`` before writing; it is in the
+#: footer: :func:`written_by_project` asks pyarrow).
+PARQUET_METADATA = {b"generator": GENERATOR.encode()}
+
+
 def written_by_project(path: str | Path) -> bool:
-    """Whether a file carries the project's marker (see :data:`GENERATOR`)."""
+    """Whether a file carries the project's marker (see :data:`GENERATOR`): in its first
+    64 KiB, or for a ``.parquet`` file in its schema metadata (:data:`PARQUET_METADATA`)."""
+    p = Path(path)
     try:
-        with Path(path).open("rb") as f:
+        with p.open("rb") as f:
             head = f.read(_HEAD)
     except OSError:
         return False
-    return any(mark in head for mark in _MARKS)
+    if any(mark in head for mark in _MARKS):
+        return True
+    if p.suffix == ".parquet" and head.startswith(b"PAR1"):
+        return _parquet_is_ours(p)
+    return False
+
+
+def _parquet_is_ours(path: Path) -> bool:
+    try:
+        import pyarrow.parquet as pq
+
+        meta = pq.read_schema(path).metadata or {}
+    except Exception:  # no pyarrow, or not a readable Parquet file: not ours
+        return False
+    return bool(meta.get(b"generator") == PARQUET_METADATA[b"generator"])
 
 
 def _describe(path: Path) -> str:

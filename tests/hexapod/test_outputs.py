@@ -121,3 +121,20 @@ def test_check_output_dir_lists_what_is_there(tmp_path: Path) -> None:
     with pytest.raises(OutputError, match="is a file, not a directory"):
         check_output_dir(f, lambda e: True, "run directory")
     assert sorted(os.listdir(d))[:2] == ["f0.txt", "f1.txt"]
+
+
+def test_parquet_files_are_recognised_by_their_schema_metadata(tmp_path: Path) -> None:
+    import pyarrow as pa
+    import pyarrow.parquet as pq
+
+    from hexapod.outputs import PARQUET_METADATA
+
+    table = pa.table({"trial": [0, 1], "error_mm": [0.1, 0.2]})
+    theirs, ours = tmp_path / "theirs.parquet", tmp_path / "ours.parquet"
+    pq.write_table(table, theirs)
+    pq.write_table(table.replace_schema_metadata(PARQUET_METADATA), ours)
+    assert not written_by_project(theirs)
+    assert written_by_project(ours)
+    check_replace(ours)
+    with pytest.raises(OutputError, match="not written by hexapod-vs"):
+        check_replace(theirs)
