@@ -255,3 +255,14 @@ def test_viz_html_replaces_its_own_page_but_not_a_users_file(
     assert cli_main(["viz", str(out), "--html", str(notes), "--overwrite"]) == 0
     assert cli_main(["viz", str(out), "--html", str(tmp_path / "x.png")]) == 2
     assert "give the page an .html name" in capsys.readouterr().err
+
+
+def test_a_name_with_a_colon_stays_a_local_figure_in_the_report(
+        tmp_path: Path) -> None:
+    out = tmp_path / "run"
+    assert cli_main(["run", str(_scenario(tmp_path, name="lab:a")), "--out", str(out),
+                     "--no-progress"]) == 0
+    assert (out / "lab:a_error_cdf.png").is_file()
+    report = (out / "report.md").read_text()
+    assert "![error CDF](./lab:a_error_cdf.png)" in report, "not a URL scheme 'lab:'"
+    assert "](lab:a" not in report
