@@ -266,3 +266,24 @@ def test_a_name_with_a_colon_stays_a_local_figure_in_the_report(
     report = (out / "report.md").read_text()
     assert "![error CDF](./lab:a_error_cdf.png)" in report, "not a URL scheme 'lab:'"
     assert "](lab:a" not in report
+
+
+def test_perf_outputs_replace_their_own_files_only(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    figure, figures = tmp_path / "edges.png", tmp_path / "cal.json"
+    vision = ["perf", "vision", "--poses", "3", "--figure", str(figure)]
+    calibration = ["perf", "calibration", "--repeats", "1", "--noise", "0.01", "--json",
+                   str(figures)]
+    for _ in range(2):  # a fresh file, then its own
+        assert cli_main(vision) == 0
+        assert cli_main(calibration) == 0
+    assert json.loads(figures.read_text())["generator"] == "hexapod-vs"
+    capsys.readouterr()
+    figure.write_bytes(b"\x89PNG\r\n\x1a\n a photo")
+    figures.write_text('{"mine": 1}')
+    assert cli_main(vision) == 2
+    assert cli_main(calibration) == 2
+    err = capsys.readouterr().err
+    assert f"{figure}: already exists" in err and f"{figures}: already exists" in err
+    assert figures.read_text() == '{"mine": 1}'
+    assert cli_main([*calibration, "--overwrite"]) == 0
