@@ -159,5 +159,19 @@ def check_scenario_calibration(sc: Any, allow_foreign: bool = False) -> list[str
 
     points, recorded = read_calibrated_file(sc.calibration.file)
     robot, geometry, cam, camera = scenario_setup(sc)
-    return check_calibration(str(sc.calibration.file), points, recorded, robot, geometry, cam,
-                             camera, allow_foreign or sc.calibration.allow_foreign)
+    warnings = check_calibration(str(sc.calibration.file), points, recorded, robot, geometry,
+                                 cam, camera, allow_foreign or sc.calibration.allow_foreign)
+    drawn = [key for key in _SHIFTS_BASE_POINTS
+             if any(sc.calibration_error.scale * v for v in sc.sweep_axes.get(
+                 f"calibration_error.{key}", [getattr(sc.calibration_error, key)]))]
+    if drawn:
+        warnings.append(
+            f"{sc.calibration.file}: scenario '{sc.name}' draws a calibration error per trial "
+            f"({', '.join(drawn)}): every trial is another robot, and this one file gives "
+            "them all the same base points; to calibrate each trial in its own world, use "
+            "[calibration] method = \"linear\" (docs/calibration.md, 'Two loops')")
+    return warnings
+
+
+#: Calibration errors that move the true base points in the camera frame.
+_SHIFTS_BASE_POINTS = ("base_points_mm", "camera_pose_mm", "camera_pose_deg")

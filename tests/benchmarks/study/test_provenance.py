@@ -210,3 +210,17 @@ def test_servo_refuses_a_foreign_calibration_before_the_robot_is_contacted(
     assert code == 2
     assert "made with the robot 'deltalab'" in err and "not this robot 'my-hexapod.toml'" in err
     assert "nonexistent" not in err
+
+
+def test_a_file_in_a_study_that_draws_calibration_errors_is_questioned(
+        calibrated: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    scen = _scenario(tmp_path, "drawn",
+                     calibration="[calibration_error]\ncamera_pose_deg = [0.0, 0.2]\n")
+    out = tmp_path / "run"
+    assert cli_main(["run", str(scen), "--out", str(out), "--no-progress",
+                     "--calibration", str(calibrated)]) == 0
+    text = (f"warning: {calibrated}: scenario 'drawn' draws a calibration error per trial "
+            "(camera_pose_deg): every trial is another robot")
+    assert text in capsys.readouterr().err
+    assert any("method = \"linear\"" in w
+               for w in json.loads((out / "run.json").read_text())["warnings"])
