@@ -46,3 +46,20 @@ def unconverged_reason(task: Any, position_mm: float, orientation_deg: float) ->
         return f"not converged: {' and '.join(outside)} after {task.max_steps} steps"
     return (f"not converged within {task.max_steps} steps: within the tolerances at the end "
             f"but not for {task.settle_steps} consecutive periods")
+
+
+def outside_counts(rows: list[dict[str, Any]]) -> dict[str, dict[str, int]]:
+    """Per controller label, how many unconverged trials ended outside the position
+    tolerance only, the rotation tolerance only, both, or within them but unsettled
+    (read from the ``failure`` texts of :func:`unconverged_reason`)."""
+    out: dict[str, dict[str, int]] = {}
+    for r in rows:
+        text = r.get("failure") or ""
+        if not text.startswith("not converged"):
+            continue
+        pos, rot = "position " in text, "rotation " in text
+        kind = ("position and rotation" if pos and rot else "position" if pos
+                else "rotation" if rot else "within, not settled")
+        counts = out.setdefault(str(r["controller"]), {})
+        counts[kind] = counts.get(kind, 0) + 1
+    return out

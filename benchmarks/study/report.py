@@ -209,6 +209,24 @@ def write_report(out_dir: Path, overwrite: bool = False) -> Path:
             counts[f"{r['controller']}: {r['failure'][:160]}"] += 1
         lines += [f"- {n} x {k}" for k, n in sorted(counts.items(), key=lambda kv: -kv[1])][:30]
         lines.append("")
+    lines += unconverged_lines(rows)
     path = out_dir / "report.md"
     path.write_text("\n".join(lines))
     return path
+
+
+def unconverged_lines(rows: list[dict[str, Any]]) -> list[str]:
+    """The report's count of the trials that ended outside the tolerances, by cause."""
+    from benchmarks.sim.tolerance import outside_counts
+
+    counts = outside_counts(rows)
+    if not counts:
+        return []
+    kinds = ["position", "rotation", "position and rotation", "within, not settled"]
+    return ["## Trials that ended outside the tolerances", "",
+            "Trials that did not converge, by what was outside the tolerances at their end "
+            "(each row's `failure` in results.jsonl gives the values, e.g. `not converged: "
+            "rotation 0.0565 deg > 0.05 deg after 800 steps`):", "",
+            _md_table(["controller", *kinds],
+                      [[c, *(str(n.get(k, 0)) for k in kinds)] for c, n in counts.items()]),
+            ""]

@@ -125,6 +125,14 @@ def test_fixed_duration_failures_in_the_results_are_in_the_users_terms(
         if "rotation" in text:
             shown = float(text.split("rotation ")[1].split(" deg")[0])
             assert shown == pytest.approx(r["final_orientation_error_deg"], rel=5e-3)
+    report = (out / "report.md").read_text()
+    assert "## Trials that ended outside the tolerances" in report
+    for label in ("leg-edge", "joints"):
+        mine = [r["failure"] for r in failed if r["controller"] == label]
+        both = sum("position" in t and "rotation" in t for t in mine)
+        rot = sum("rotation" in t for t in mine) - both
+        pos = sum("position" in t for t in mine) - both
+        assert f"| {label} | {pos} | {rot} | {both} | 0 |" in report
 
 
 def test_run_help_says_what_record_keeps(capsys: pytest.CaptureFixture[str]) -> None:
