@@ -72,6 +72,7 @@ PERF_MODULES = {
     "serial": "benchmarks.perf.serial",
     "calibration": "benchmarks.perf.calibration",
     "study": "benchmarks.perf.study",
+    "dynamics": "benchmarks.perf.dynamics",
 }
 
 
