@@ -53,7 +53,7 @@ STAGES = (
     ("features and noise", "benchmarks.sim.engine", "noisy_features"),
     ("convergence test (pose errors)", "benchmarks.sim.engine", "pose_error"),
     ("controller step_batch", "benchmarks.sim.engine", "_step_batch"),
-    ("forward kinematics (C)", "benchmarks.sim.engine", "solve_rows"),
+    ("forward kinematics (C)", "benchmarks.sim.plant", "solve_rows"),
 )
 
 

@@ -7,6 +7,7 @@ from __future__ import annotations
 import logging
 import statistics
 import traceback
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -142,6 +143,14 @@ class Book:
             self.failure[rows[j]] = f"controller refused to move: {reasons[j]}"
         return invalid | too_many
 
+    def world_failures(self, failed: dict[int, str], step: int) -> None:
+        """End the rows whose true world failed during period ``step`` (a plant's
+        :meth:`~benchmarks.sim.plant.Plant.advance`), each with its reason."""
+        for k, reason in failed.items():
+            self.failure[k] = reason
+            self.active[k] = False
+            self.steps[k] = step + 1
+
     def record(self, k: int, t: float, q: np.ndarray, R: np.ndarray, tr: np.ndarray,
                visible: np.ndarray, error_norm: float, dp: float, da: float,
                velocities: np.ndarray) -> None:
@@ -157,9 +166,17 @@ class Book:
         ser["orientation_error"].append(da)
         ser["velocities"].append(velocities.copy())
 
+    def record_more(self, k: int, values: dict[str, np.ndarray]) -> None:
+        """Append a plant's extra values of one period to row ``k``'s series
+        (:meth:`benchmarks.sim.plant.Plant.series`)."""
+        for key, value in values.items():
+            self.series[k].setdefault(key, []).append(value)
+
     def results(self, sc: Scenario, spec: Any, group: list[TrialSetup], R: np.ndarray,
-                t: np.ndarray, detect_times: list[float] | None = None) -> list[TrialResult]:
-        """The result rows (and recorded series) of the group at the final poses."""
+                t: np.ndarray, detect_times: list[float] | None = None,
+                figures: Callable[[int], dict[str, Any]] | None = None) -> list[TrialResult]:
+        """The result rows (and recorded series) of the group at the final poses
+        (``figures``: a plant's extra figures of row ``m``)."""
         R_goal = np.array([s.goal_rotation for s in group])
         t_goal = np.array([s.goal_translation for s in group])
         dp, da = pose_error(R, t, R_goal, t_goal)
@@ -197,6 +214,8 @@ class Book:
                 row["rtt_median_ms"] = float(np.median(arr))
                 row["rtt_p99_ms"] = float(np.percentile(arr, 99))
                 row["missed_periods"] = int(self.missed[m])
+            if figures is not None:
+                row.update(figures(m))
             for key, value in s.calibration.items():
                 row[f"calibration_{key}"] = value
             ser_out = None

@@ -34,13 +34,12 @@ import numpy as np
 
 from benchmarks.sim.actuation import require_actuation, require_batch
 from benchmarks.sim.book import Book, TrialResult, failure_row
+from benchmarks.sim.plant import make_plant
 from benchmarks.sim.sensors import GeometricSensor, draws_noise, noisy_features, trial_goal
 from benchmarks.sim.world import TrialSetup, trial_rng
 from benchmarks.study.scenario import Scenario
 from controllers.base import Goal, ObservationBatch
 from controllers.batch import batch_controller
-from hexapod.backends.base import clamp_velocities
-from hexapod.fk import pack_rows, solve_rows
 from hexapod.kinematics import inverse_kinematics
 from hexapod.se3 import pose_error
 from vision.fast_observe import WorldParams, observe_batch
@@ -214,7 +213,7 @@ def _run(sc: Scenario, spec: Any, group: list[TrialSetup], contexts: list[Any],
     batch_times: list[float] = []  # controller time per row of each step [s]
     stepped = np.zeros(len(group), dtype=int)  # steps each trial was commanded (0, 1, ...)
     dt = sc.dt
-    fk_rows = pack_rows(R, t, q, A, E)
+    plant = make_plant(sc, group, q, R, t, A, E)
     for step in range(sc.task.max_steps + 1):
         idx = np.flatnonzero(book.active)
         if len(idx) == 0:
@@ -235,7 +234,8 @@ def _run(sc: Scenario, spec: Any, group: list[TrialSetup], contexts: list[Any],
         if len(rows):
             tr = idx if every else idx[rows]
             obs = ObservationBatch(
-                trials=tr, t=np.full(len(rows), step * dt), lengths=q[tr] + offsets[tr],
+                trials=tr, t=np.full(len(rows), step * dt),
+                lengths=plant.measured_lengths(tr, offsets[tr]),
                 **{key: (meas[key] if every or meas[key] is None else meas[key][rows])
                    for key in ("normals", "lines", "directions", "edge_visible",
                                "direction_visible")})
@@ -253,6 +253,7 @@ def _run(sc: Scenario, spec: Any, group: list[TrialSetup], contexts: list[Any],
             r = int(idx[j])
             book.record(r, step * dt, q[r], R[r], t[r], meas["edge_visible"][j], norms[j],
                         dp[j], da[j], v_cmd[j])
+            book.record_more(r, plant.series(r))
         finished = idx[done]
         book.active[finished] = False
         book.steps[finished] = step
@@ -260,25 +261,9 @@ def _run(sc: Scenario, spec: Any, group: list[TrialSetup], contexts: list[Any],
         if len(run) == 0:
             continue
         v_run = v_cmd[~done]
-        q_run = q[run]
-        book.violations[run] += stroke_violations(q_run, v_run, dt, stroke, vmax)
-        vc, _ = clamp_velocities(q_run, v_run, dt, stroke, vmax)
-        q[run] = np.clip(q_run + vc * dt, *stroke)
-        x = fk_rows[run]  # the robots' points packed once; the guesses and lengths now
-        x[:, 0:9] = np.swapaxes(R[run], -1, -2).reshape(-1, 9)
-        x[:, 9:12] = t[run]
-        x[:, 12:18] = q[run]
-        sol = solve_rows(x)
-        bad = ~sol.converged
-        if np.any(bad):
-            for b in run[bad].tolist():
-                book.failure[b] = "forward kinematics of the true robot failed (singularity?)"
-                book.active[b] = False
-                book.steps[b] = step + 1
-        okk = run[~bad]
-        R[okk] = sol.rotations[~bad]
-        t[okk] = sol.translations[~bad]
+        book.violations[run] += stroke_violations(q[run], v_run, dt, stroke, vmax)
+        book.world_failures(plant.advance(run, v_run, dt), step)
     times = np.array(batch_times)
     for m in range(len(group)):  # a trial is commanded from step 0 until it is done
         book.step_times[m] = times[:stepped[m]].tolist()
-    return book.results(sc, spec, group, R, t)
+    return book.results(sc, spec, group, R, t, figures=plant.row_figures)

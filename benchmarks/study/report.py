@@ -140,6 +140,8 @@ def write_report(out_dir: Path, overwrite: bool = False) -> Path:
                                 [[format_sweep(s.sweep), s.controller, s.backend,
                                   _fmt(s.rtt_median_ms), _fmt(s.rtt_p99_ms),
                                   str(s.missed_periods)] for s in ss]), ""]
+        if any(np.isfinite(s.leg_force_max_n) for s in ss):
+            lines += drive_section(ss)
         if any(s.hidden_edge_periods for s in ss):
             lines += ["Visibility (periods where the camera saw fewer than the 12 edges, summed "
                       "over the trials; trials with at least one such period):", ""]
@@ -230,3 +232,17 @@ def unconverged_lines(rows: list[dict[str, Any]]) -> list[str]:
             _md_table(["controller", *kinds],
                       [[c, *(str(n.get(k, 0)) for k in kinds)] for c, n in counts.items()]),
             ""]
+
+
+def drive_section(ss: list[Summary]) -> list[str]:
+    """The dynamic world's drives: leg forces, saturation and tracking (markdown lines)."""
+    return ["Drives (dynamic world: the drives' forces on the legs, the time any drive spent "
+            "at its force limit, the drive tracking error = velocity setpoint minus realised "
+            "leg velocity, over every physics step):", "",
+            _md_table(["sweep", "controller", "max leg force N", "saturation s (median)",
+                       "trials saturated", "tracking RMS mm/s (median)",
+                       "tracking max mm/s"],
+                      [[format_sweep(s.sweep), s.controller, _fmt(s.leg_force_max_n, 1),
+                        _fmt(s.saturation_time_median_s, 3), f"{s.saturated_trials}/{s.trials}",
+                        _fmt(s.tracking_rms_median_mm_s, 3), _fmt(s.tracking_max_mm_s, 1)]
+                       for s in ss]), ""]

@@ -20,6 +20,7 @@ from benchmarks.study.scenario_model import (
     CALIBRATION_ERROR_KEYS,
     NOISE_KEYS,
     RANGES,
+    WORLDS,
     CalibrationConfig,
     CalibrationErrorConfig,
     ControllerSpec,
@@ -190,11 +191,11 @@ def parse_scenario(table: dict[str, Any], path: str = "<dict>") -> Scenario:
                             "a distinct 'label'", key="controllers")
 
     robot = _section(table, "robot", path)
+    robot_keys = ("preset", "geometry", "dt", "world", "physics_dt")
     for key in robot:
-        if key not in ("preset", "geometry", "dt"):
-            raise ScenarioError(path, "unknown key; expected one of preset, geometry, dt",
-                                key=f"robot.{key}",
-                                suggestion=suggest(key, ("preset", "geometry", "dt")))
+        if key not in robot_keys:
+            raise ScenarioError(path, f"unknown key; expected one of {', '.join(robot_keys)}",
+                                key=f"robot.{key}", suggestion=suggest(key, robot_keys))
     if "preset" in robot and "geometry" in robot:
         raise ScenarioError(path, "give either 'preset' or 'geometry', not both", key="robot")
     base_dir = Path(path).parent if path != "<dict>" else Path.cwd()
@@ -207,6 +208,7 @@ def parse_scenario(table: dict[str, Any], path: str = "<dict>") -> Scenario:
         robot_preset = _typed(robot["preset"], str, path, "robot.preset", ("deltalab",))
     dt = _typed(robot.get("dt", 0.02), float, path, "robot.dt")
     check_range(dt, "robot.dt", path)
+    world, physics_dt = _parse_world(robot, dt, path)
 
     camera = _section(table, "camera", path)
     camera_keys = ("preset", "file", "opencv", "pose", "camera_from_base", "width_px",
@@ -300,6 +302,7 @@ def parse_scenario(table: dict[str, Any], path: str = "<dict>") -> Scenario:
         name=name, description=description, seed=seed, trials=trials,
         controllers=tuple(specs), robot_preset=robot_preset, robot_geometry=robot_geometry,
         dt=dt, camera_preset=camera_preset, camera_file=camera_file, sensor=sensor,
+        world=world, physics_dt=physics_dt,
         teach_frames=teach_frames, image=image,
         noise=noise, calibration_error=cal_err, calibration=cal, task=task,
         reference=reference, sweep_axes=sweep, source=path, geometry_data=geometry_data,
@@ -316,6 +319,22 @@ def _checked_name(value: str, what: str, path: str, key: str) -> str:
         return check_name(value, what)
     except UnsafeNameError as exc:
         raise ScenarioError(path, f"{exc.value!r}: {exc.problem}", key=key) from None
+
+
+def _parse_world(robot: dict[str, Any], dt: float, path: str) -> tuple[str, float]:
+    """``[robot] world`` and ``physics_dt`` (a divisor of the control period ``dt``)."""
+    world = _typed(robot.get("world", "kinematic"), str, path, "robot.world", WORLDS)
+    physics_dt = _typed(robot.get("physics_dt", 0.001), float, path, "robot.physics_dt")
+    check_range(physics_dt, "robot.physics_dt", path)
+    if physics_dt > dt * (1 + 1e-9):
+        raise ScenarioError(path, f"{physics_dt:g} s is longer than the control period "
+                            f"robot.dt ({dt:g} s)", key="robot.physics_dt")
+    steps = round(dt / physics_dt)
+    if abs(steps * physics_dt - dt) > 1e-9 * dt:
+        raise ScenarioError(path, f"the control period robot.dt ({dt:g} s) is not a whole "
+                            f"number of physics steps of {physics_dt:g} s",
+                            key="robot.physics_dt")
+    return world, physics_dt
 
 
 def _read_files(geometry_file: str | None, camera_file: str | None, cal: CalibrationConfig,

@@ -17,7 +17,10 @@ NOISE_KEYS = ("amplitude_deg", "pixel_sigma_px", "points_per_edge", "outlier_fra
               "dropout_probability")
 CALIBRATION_ERROR_KEYS = ("scale", "base_points_mm", "platform_points_mm", "joint_offsets_mm",
                           "camera_pose_mm", "camera_pose_deg", "intrinsics_percent",
-                          "leg_radius_percent", "distortion_percent")
+                          "leg_radius_percent", "distortion_percent", "mass_percent",
+                          "inertia_percent")
+#: The worlds a study runs in (``[robot] world``).
+WORLDS = ("kinematic", "dynamic")
 
 
 #: Allowed range of every numeric key: ``(low, high, low_inclusive, high_inclusive)``.
@@ -27,6 +30,7 @@ RANGES: dict[str, tuple[float, float, bool, bool]] = {
     "seed": (0, 2**63 - 1, True, True),
     "trials": (1, 10_000_000, True, True),
     "robot.dt": (0.0, 1.0, False, True),
+    "robot.physics_dt": (1e-6, 0.1, True, True),
     "sensor.teach_frames": (1, 1000, True, True),
     "sensor.blur_px": (0.0, 20.0, True, True),
     "sensor.noise_std": (0.0, 255.0, True, True),
@@ -44,6 +48,8 @@ RANGES: dict[str, tuple[float, float, bool, bool]] = {
     "calibration_error.intrinsics_percent": (0.0, 50.0, True, True),
     "calibration_error.leg_radius_percent": (0.0, 50.0, True, True),
     "calibration_error.distortion_percent": (0.0, 100.0, True, True),
+    "calibration_error.mass_percent": (0.0, 50.0, True, True),
+    "calibration_error.inertia_percent": (0.0, 50.0, True, True),
     "calibration.noise_deg": (0.0, 90.0, True, True),
     "calibration.warn_singular_ratio": (0.0, 1.0, True, False),
     "calibration.min_singular_ratio": (0.0, 1.0, True, False),
@@ -125,6 +131,10 @@ class CalibrationErrorConfig:
             [%]: its coefficients are the true ones times ``1 - distortion_percent /
             100`` (100: a model that ignores the distortion, what a pipeline without
             distortion support assumes). Not random, not multiplied by ``scale``.
+        mass_percent: Relative std of the platform's and the legs' masses [%] (the
+            dynamic world's true robot; the controllers are told the robot file's).
+        inertia_percent: Relative std of their rotational inertias [%]. Each body's
+            factor is ``exp(s z)`` (always positive, about ``1 + s z`` for small ``s``).
         scale: Multiplies every standard deviation above (sweep it to grow all
             errors together).
     """
@@ -138,6 +148,8 @@ class CalibrationErrorConfig:
     intrinsics_percent: float = 0.0
     leg_radius_percent: float = 0.0
     distortion_percent: float = 0.0
+    mass_percent: float = 0.0
+    inertia_percent: float = 0.0
 
 
 @dataclass(frozen=True)
@@ -231,6 +243,9 @@ class Scenario:
         robot_preset: Geometry preset name (or None when ``robot_geometry`` is set).
         robot_geometry: Path to a geometry TOML file.
         dt: Control period [s].
+        world: ``"kinematic"`` (the massless ideal robot, the default) or ``"dynamic"``
+            (the true robot's dynamics and drives, ``docs/dynamic-world.md``).
+        physics_dt: Physics step of the dynamic world [s] (``dt`` is a multiple of it).
         camera_preset: ``"front"`` or ``"omni"`` (or None when ``camera_file`` is set).
         camera_file: Path to a camera TOML file.
         sensor: ``"geometric"`` or ``"image"``.
@@ -261,6 +276,8 @@ class Scenario:
     robot_preset: str | None = "deltalab"
     robot_geometry: str | None = None
     dt: float = 0.02
+    world: str = "kinematic"
+    physics_dt: float = 0.001
     camera_preset: str | None = "front"
     camera_file: str | None = None
     sensor: str = "geometric"
