@@ -43,3 +43,8 @@ class DirectoryLockedError(ResultsError):
         super().__init__(path, f"another hexapod-bench run ({who}: {holder or '?'}) is "
                          "writing into this directory; wait for it to finish (or stop it), "
                          "or choose another --out")
+
+
+class ForeignCalibrationError(ScenarioError):
+    """A calibration file was made with another robot or camera than the one it is used
+    with (its ``[made_with]`` table names both and their fingerprints)."""

@@ -13,6 +13,7 @@ from typing import Any
 
 import numpy as np
 
+from benchmarks.sim.tolerance import unconverged_reason
 from benchmarks.sim.world import TrialSetup
 from benchmarks.study.scenario import Scenario
 from controllers.base import registry
@@ -195,7 +196,8 @@ class Book:
             fail = self.failure[m]
             conv = bool(self.converged[m])
             if fail is None and not conv:
-                fail = f"not converged within {sc.task.max_steps} steps"
+                fail = unconverged_reason(sc.task, float(dp[m] * 1e3),
+                                          float(np.rad2deg(da[m])))
             settle = int(self.last_bad[m] + 1) if sc.task.fixed_duration else int(self.steps[m])
             times = self.step_times[m]
             row.update({

@@ -153,7 +153,8 @@ def parse_scenario(table: dict[str, Any], path: str = "<dict>") -> Scenario:
                                 key=key, suggestion=suggest(key, _TOP))
     if "name" not in table:
         raise ScenarioError(path, "missing required key", key="name")
-    name = _typed(table["name"], str, path, "name")
+    name = _checked_name(_typed(table["name"], str, path, "name"), "scenario name", path,
+                         "name")
     description = _typed(table.get("description", ""), str, path, "description")
     seed = _typed(table.get("seed", 1), int, path, "seed")
     check_range(seed, "seed", path)
@@ -185,6 +186,9 @@ def parse_scenario(table: dict[str, Any], path: str = "<dict>") -> Scenario:
         raise ScenarioError(path, "expected a table of options given to every controller",
                             key="controller_options")
     specs = [ControllerSpec(sp.name, sp.label, {**defaults, **sp.options}) for sp in specs]
+    for k, sp in enumerate(specs):
+        _checked_name(sp.name, "controller name", path, f"controllers[{k}]")
+        _checked_name(sp.label, "controller label", path, f"controllers[{k}].label")
     labels = [s.label for s in specs]
     dup = {x for x in labels if labels.count(x) > 1}
     if dup:
@@ -314,6 +318,17 @@ def parse_scenario(table: dict[str, Any], path: str = "<dict>") -> Scenario:
         reference=reference, sweep_axes=sweep, source=path, geometry_data=geometry_data,
         camera_data=camera_data, calibration_points=points,
     )
+
+
+def _checked_name(value: str, what: str, path: str, key: str) -> str:
+    """:func:`hexapod.outputs.check_name` as a :class:`ScenarioError` naming the file and key."""
+    from hexapod.exceptions import UnsafeNameError
+    from hexapod.outputs import check_name
+
+    try:
+        return check_name(value, what)
+    except UnsafeNameError as exc:
+        raise ScenarioError(path, f"{exc.value!r}: {exc.problem}", key=key) from None
 
 
 def _parse_world(robot: dict[str, Any], dt: float, path: str) -> tuple[str, float]:

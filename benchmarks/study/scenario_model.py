@@ -183,6 +183,8 @@ class CalibrationConfig:
             (``calibration_ill_conditioned_legs`` in its row).
         min_singular_ratio: Below this the calibration refuses (the trial fails with a
             ``CalibrationError`` naming the leg and the ratio).
+        allow_foreign: Method ``"file"``: use a file made with another robot or camera
+            (warned loudly) instead of refusing it.
     """
 
     method: str = "none"
@@ -192,6 +194,7 @@ class CalibrationConfig:
     noise_deg: float | None = None
     warn_singular_ratio: float = WARN_SINGULAR_RATIO
     min_singular_ratio: float = MIN_SINGULAR_RATIO
+    allow_foreign: bool = False
 
 
 @dataclass(frozen=True)
@@ -393,6 +396,15 @@ class Scenario:
             _check_option(seed, "seed", "--seed")
             sc = replace(sc, seed=seed)
         if controllers:
+            from hexapod.exceptions import UnsafeNameError
+            from hexapod.outputs import check_name
+
+            for c in controllers:
+                try:
+                    check_name(c, "controller")
+                except UnsafeNameError as exc:
+                    raise ScenarioError("--controllers", f"{exc.value!r}: {exc.problem}"
+                                        ) from None
             by_label = {c.label: c for c in sc.controllers}
             sc = replace(sc, controllers=tuple(by_label.get(c, ControllerSpec(c, c))
                                                for c in controllers))
