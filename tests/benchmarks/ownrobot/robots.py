@@ -3,10 +3,14 @@
 
 from __future__ import annotations
 
+import os
+import subprocess
+import sys
 from pathlib import Path
 
 import numpy as np
 
+from controllers.base import Command, Controller, ControllerContext, Observation
 from hexapod.geometry import HexapodGeometry, circular_points
 
 
@@ -52,3 +56,28 @@ cy_px = 389.5
 translation_mm = [0.0, 0.0, -2000.0]
 rotation_vector_deg = [0.0, 0.0, 0.0]
 """
+
+
+class AlwaysCrash(Controller):
+    """A controller whose ``step`` always raises (a bug in a plugin)."""
+
+    name = "test-always-crash"
+    features = frozenset({"lengths"})
+
+    def reset(self, context: ControllerContext) -> None:
+        """Nothing to prepare."""
+
+    def step(self, observation: Observation) -> Command:
+        """Raise (deliberately)."""
+        raise RuntimeError("deliberate bug for the test")
+
+
+CRASH = "tests.benchmarks.ownrobot.robots:AlwaysCrash"
+
+
+def run_cli(*args: str, cwd: Path | None = None) -> subprocess.CompletedProcess[str]:
+    """``hexapod-bench ARGS`` in a fresh process (its own logging configuration)."""
+    root = Path(__file__).resolve().parents[3]
+    env = {**os.environ, "PYTHONPATH": str(root)}
+    return subprocess.run([sys.executable, "-m", "benchmarks.cli", *args], capture_output=True,
+                          text=True, env=env, cwd=cwd or root, timeout=240, check=False)
