@@ -64,3 +64,27 @@ def test_empty_workspace_is_refused(tmp_path: Path, capsys: pytest.CaptureFixtur
     code, stdout, stderr = _run([str(study), "--out", str(out), "--no-check"], capsys)
     assert code == 1
     assert "2 of 2 trials failed" in stdout and "every trial failed" in stderr
+
+
+def test_unreachable_fixed_goal_is_refused(tmp_path: Path,
+                                           capsys: pytest.CaptureFixture[str]) -> None:
+    """Legs 0 and 1: base joints 61 mm apart, platform joints 324 mm apart, so
+    q_0 <= 324 + q_1 + 61 mm (triangle inequality): q_0 = 990 mm with q_1 = 260 mm has no
+    pose, although every length is inside the stroke [250, 1000] mm."""
+    g = own_robot(stroke=(0.250, 1.000))
+    g.to_toml(tmp_path / "robot.toml")
+    import numpy as np
+
+    d_base = np.linalg.norm(g.base_points[0] - g.base_points[1]) * 1e3
+    d_plat = np.linalg.norm(g.platform_points[0] - g.platform_points[1]) * 1e3
+    assert 990 > d_base + d_plat + 260
+    study = write_study(tmp_path)
+    study.write_text(study.read_text().replace(
+        "[task]\n", '[task]\nkind = "fixed"\nstart_mm = [460, 460, 460, 460, 460, 460]\n'
+                    "goal_mm = [990, 260, 600, 600, 600, 600]\n"))
+    code, stdout, stderr = _run([str(study), "--out", str(tmp_path / "o")], capsys)
+    assert code == 2
+    assert stderr.startswith(f"hexapod-bench: error: {study}: the setup cannot run, every "
+                             "trial would fail: task.goal_mm: no platform pose near the home "
+                             "pose has these six leg lengths (the goal is unreachable)")
+    assert "start_mm" not in stderr  # the start (home) is reachable
