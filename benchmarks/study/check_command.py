@@ -162,8 +162,9 @@ def examine(setup: Setup) -> SetupReport:
     if partial:  # the camera's problems spoil the controllers that need it, not the study
         report.problems = [
             Problem(p.severity, f"{p.text} (the trials of {', '.join(setup.needs_camera or ())}"
-                                " would fail; the other controllers do not need the camera)")
-            if "camera" in p.text else p for p in report.problems]
+                                " would fail; the other controllers do not need the camera)",
+                    p.topic)
+            if p.topic == "camera" else p for p in report.problems]
     report.problems[:0] = setup.problems
     return report
 
@@ -247,18 +248,28 @@ def write_picture(setup: Setup, report: SetupReport, path: Path) -> Path:
     import cv2
 
     from hexapod.workspace import home_pose
+    from vision.legs import limb_points, observe_legs
     from vision.render import render_legs
 
-    img = cv2.cvtColor(render_legs(setup.camera, setup.geometry, *home_pose(setup.geometry),
-                                   rng=0), cv2.COLOR_GRAY2BGR)
+    home = home_pose(setup.geometry)
+    img = cv2.cvtColor(render_legs(setup.camera, setup.geometry, *home, rng=0),
+                       cv2.COLOR_GRAY2BGR)
+    obs = observe_legs(setup.camera, setup.geometry, *home)
+    # each edge as a polyline of its projected points (a curve through a distorting lens
+    # or an omnidirectional camera)
+    s = np.linspace(0.0, 1.0, 33)
+    points = limb_points(obs.base_points, obs.directions, obs.radius, obs.lengths,
+                         obs.normals, s)
+    pixels, _ = setup.camera.project(points)
     for i in range(6):
         for j in range(2):
-            p = report.home_pixels[i, j]
-            if not np.all(np.isfinite(p)):
+            line = pixels[i, j]
+            line = line[np.all(np.isfinite(line), axis=-1)]
+            if len(line) < 2:
                 continue
             colour = (0, 200, 0) if report.home_visible[i, j] else (0, 0, 230)
-            a, b = (tuple(round(float(c)) for c in p[k]) for k in range(2))
-            cv2.line(img, a, b, colour, 2, cv2.LINE_AA)
+            cv2.polylines(img, [np.round(line).astype(np.int32)], False, colour, 2,
+                          cv2.LINE_AA)
         ends = report.home_pixels[i, :, 0]
         if np.all(np.isfinite(ends)):
             x, y = (round(float(c)) for c in ends.mean(axis=0))

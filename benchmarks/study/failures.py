@@ -39,13 +39,18 @@ def user_message(exc: BaseException) -> str:
                 f"the home pose) keep every leg {exc.margin * 1e3:g} mm inside its stroke; "
                 "change stroke_mm in the robot file, or [task] max_translation_mm, "
                 "max_angle_deg or margin_mm in the scenario")
-    if isinstance(exc, ContextError) and exc.field.startswith("goal") and (
-            "visible" in exc.problem or "finite desired direction" in exc.problem
-            or "known desired direction" in exc.problem):
-        return ("the camera sees no leg edge at the goal pose, so there is "
-                "no desired image to servo to; move the camera ([camera] in the scenario, "
-                "or [camera_from_base] in the camera file) so that it sees the legs "
-                "(hexapod-bench check shows what it sees)")
+    if isinstance(exc, ContextError) and exc.field.startswith("goal"):
+        if "desired direction" in exc.problem:
+            seen = ("the camera sees both edges of no leg at the goal pose (a leg's direction "
+                    "needs both)")
+        elif "visible desired edge" in exc.problem:
+            seen = "the camera sees no leg edge at the goal pose"
+        else:
+            seen = ""
+        if seen:
+            return (f"{seen}, so there is no desired image to servo to; move the camera "
+                    "([camera] in the scenario, or [camera_from_base] in the camera file) so "
+                    "that it sees the legs (hexapod-bench check shows what it sees)")
     if isinstance(exc, HexapodError | VisionError | ControllerError):
         return str(exc)
     return f"{type(exc).__name__}: {exc}"

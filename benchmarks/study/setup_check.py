@@ -40,10 +40,13 @@ class Problem:
     Attributes:
         severity: ``"error"`` (every trial would fail the same way) or ``"warning"``.
         text: What is wrong, in plain words, with the key to change.
+        topic: ``"camera"`` (what the camera sees: only the controllers that use the
+            camera suffer), or ``"robot"`` (the workspace, the task).
     """
 
     severity: str
     text: str
+    topic: str = "robot"
 
 
 @dataclass(frozen=True)
@@ -273,20 +276,21 @@ def _camera_problems(report: SetupReport, camera: Any, home_obs: Any, needs_came
             why = (f"the legs project outside the {camera.width}x{camera.height} image or "
                    "hide one another")
         out.append(Problem(severity, f"the camera sees no leg edge at the home pose: {why}; "
-                           f"change {where.camera}"))
+                           f"change {where.camera}", "camera"))
     elif report.poses_blind >= 1.0:
         out.append(Problem(severity, "the camera sees no leg edge at any reachable pose of "
-                           f"the task box; change {where.camera}"))
+                           f"the task box; change {where.camera}", "camera"))
     elif report.poses_blind > 0:
         out.append(Problem("warning", f"the camera sees no leg edge at "
                            f"{100 * report.poses_blind:.1f} % of the reachable poses; trials "
-                           f"with such a goal fail; change {where.camera}, or {where.task}"))
+                           f"with such a goal fail; change {where.camera}, or {where.task}",
+                           "camera"))
     if n_home and report.edge_ratio < SINGULAR_RATIO:
         out.append(Problem("warning", (
             f"the {n_home} edges seen at home do not determine the six degrees of freedom "
             f"of the platform (edge interaction singular: smallest/largest singular value "
             f"{report.edge_ratio:.1e}); leg-edge control will drift; change {where.camera} "
-            "so that it sees more legs")))
+            "so that it sees more legs"), "camera"))
     return out
 
 
