@@ -17,7 +17,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from vision.camera_base import Camera
+from vision.cameras.base import Camera
 
 #: Default largest distance [px] between the image of a segment's 3D midpoint and
 #: the chord it replaces.

@@ -214,7 +214,7 @@ def _camera(spec: str, pose_spec: str | None, geometry: HexapodGeometry) -> Any:
         BenchmarkError: An OpenCV file without a pose, or a pose for another camera.
     """
     from vision.cameras import load_camera
-    from vision.opencv_files import is_opencv_file
+    from vision.cameras.files.opencv import is_opencv_file
 
     if not is_opencv_file(spec):
         if pose_spec is not None:

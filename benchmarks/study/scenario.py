@@ -319,8 +319,8 @@ def _read_files(geometry_file: str | None, camera_file: str | None, cal: Calibra
     from benchmarks.study.calibration import load_calibrated_base_points
     from hexapod.geometry import HexapodGeometry
     from hexapod.geometry import preset as geometry_preset
-    from vision.camera_files import read_pose_table
     from vision.cameras import camera_preset, load_camera
+    from vision.cameras.files.project import read_pose_table
     from vision.exceptions import CameraError
 
     try:

@@ -416,8 +416,8 @@ def test_packaged_preset_files_match_the_presets() -> None:
 
 def test_every_former_public_name_still_imports_from_vision_cameras() -> None:
     """``vision.cameras`` was split (checks, file format, presets): its public names stay."""
-    import vision.camera_presets as presets
     import vision.cameras as cameras
+    import vision.cameras.presets as presets
 
     names = ("Camera", "PerspectiveCamera", "UnifiedCamera", "camera_preset", "front_camera",
              "omni_camera", "load_camera", "FRONT_PIXEL_SIZE", "FRONT_FOCAL_LENGTH",

@@ -1,6 +1,6 @@
 """Leg-edge detection on rendered frames through distorted lenses (known truth).
 
-The cameras are the presets with the distortions of vision.camera_presets
+The cameras are the presets with the distortions of vision.cameras.presets
 (FRONT_DISTORTION: k1 = -0.28, a 4.8 mm lens; OMNI_DISTORTION: a mild Mei distortion
 with decentring terms) and a radial-only Mei distortion (the omnidirectional image
 keeps its rotational symmetry: the detector's one-call compiled path).

@@ -15,10 +15,10 @@ import pytest
 from hexapod import Transform
 from hexapod.se3 import exp_so3
 from vision.cameras import Camera, PerspectiveCamera, UnifiedCamera
-from vision.distortion import RadialTangential
+from vision.cameras.distortion import RadialTangential
+from vision.cameras.projection import domain_radius
 from vision.estimate import fit_normal, fit_normal_conic
 from vision.exceptions import CameraError, DistortionError
-from vision.projection import domain_radius
 
 W, H = 640, 480
 

@@ -27,8 +27,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from vision import projection
-from vision.camera_base import Camera
+from vision.cameras import projection
+from vision.cameras.base import Camera
 from vision.detect.common import LegPrediction
 from vision.detect.profiles import _pixel_lines
 
@@ -72,7 +72,7 @@ class CurvedSamples:
 
 def _lens(c: np.ndarray, x: np.ndarray, y: np.ndarray) -> tuple[np.ndarray, ...]:
     """The distortion ``(x_d, y_d)`` at ``(x, y)`` and its (symmetric) Jacobian
-    ``(j11, j12, j22)``: :class:`vision.distortion.RadialTangential` without stacking."""
+    ``(j11, j12, j22)``: :class:`vision.cameras.distortion.RadialTangential` without stacking."""
     k1, k2, p1, p2, k3 = (float(v) for v in c)
     r2 = x * x + y * y
     L = 1.0 + r2 * (k1 + r2 * (k2 + r2 * k3))

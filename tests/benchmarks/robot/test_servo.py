@@ -277,8 +277,8 @@ def test_servo_through_an_opencv_calibration_file(tmp_path: Path,
     --camera-pose front: the simulated camera renders through that lens and the loop
     converges; without the pose, a clear error before the robot is touched."""
     from hexapod.geometry import deltalab
-    from vision.camera_presets import FRONT_DISTORTION
     from vision.cameras import front_camera, save_opencv_camera
+    from vision.cameras.presets import FRONT_DISTORTION
 
     save_opencv_camera(front_camera(deltalab()).replace(distortion=FRONT_DISTORTION),
                        tmp_path / "cal.yml")

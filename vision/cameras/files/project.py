@@ -13,7 +13,8 @@ an ideal lens) and a table ``[camera_from_base]`` with ``translation_mm`` and
 ``p_camera = R p_base + t``.
 
 Instead of the intrinsic keys, ``opencv = "calib.yml"`` names an OpenCV calibration
-file (:mod:`vision.opencv_files`; the path is relative to the TOML file): the camera
+file (:mod:`vision.cameras.files.opencv`; the path is relative to the TOML file; read by
+:mod:`vision.cameras.factory`, this module reads no other file): the camera
 matrix, the distortion, ``xi`` and the image size come from it, the pose from the
 ``[camera_from_base]`` table; ``width_px`` and ``height_px`` may give the image size
 when the OpenCV file does not (``omni_calibration.cpp``), and ``kind`` may be given
@@ -22,7 +23,6 @@ when the OpenCV file does not (``omni_calibration.cpp``), and ``kind`` may be gi
 
 from __future__ import annotations
 
-from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -32,10 +32,10 @@ from hexapod.config import check_keys, get_matrix, get_number, suggest
 from hexapod.exceptions import ConfigFileError
 from hexapod.kinematics import Transform
 from hexapod.se3 import exp_so3, log_so3
-from vision.opencv_files import calibration_size, read_opencv_calibration
+from vision.cameras.fields import CameraFields
 
 if TYPE_CHECKING:
-    from vision.cameras import Camera
+    from vision.cameras.base import Camera
 
 #: Keys of a camera table.
 CAMERA_KEYS = ("kind", "name", "width_px", "height_px", "fx_px", "fy_px", "cx_px", "cy_px",
@@ -48,33 +48,6 @@ POSE_KEYS = ("translation_mm", "rotation_vector_deg", "rotation_matrix")
 KINDS = ("perspective", "unified")
 #: Accepted lengths of the ``distortion`` list of each kind.
 DISTORTION_LENGTHS = {"perspective": (4, 5), "unified": (4,)}
-
-
-@dataclass(frozen=True)
-class CameraFields:
-    """The constructor arguments of a camera read from a file (not validated yet).
-
-    Attributes:
-        kind: ``"perspective"`` or ``"unified"``.
-        K: (3, 3) intrinsics [px].
-        xi: Mirror parameter (0 for a perspective camera).
-        width: Image width [px].
-        height: Image height [px].
-        camera_from_base: Pose w.r.t. the robot base.
-        name: A label (the file's stem by default).
-        source: The file.
-        distortion: OpenCV's distortion coefficients (None: an ideal lens).
-    """
-
-    kind: str
-    K: np.ndarray
-    xi: float
-    width: int
-    height: int
-    camera_from_base: Transform
-    name: str
-    source: str
-    distortion: np.ndarray | None = None
 
 
 def camera_table(camera: Camera) -> dict[str, Any]:
@@ -145,13 +118,11 @@ def read_camera_table(table: dict[str, Any], path: str = "<dict>",
     Raises:
         ConfigFileError: Missing, misspelt or unknown key, bad value (naming the key).
     """
-    if "opencv" in table:
-        return _read_opencv_table(table, path, model)
     check_keys(table, CAMERA_KEYS, path,
                required=("width_px", "height_px", "fx_px", "fy_px", "cx_px", "cy_px"))
-    kind = _kind(table, path, model, None)
+    kind = read_kind(table, path, model, None)
     for key in ("width_px", "height_px"):
-        _positive_int(table, key, path)
+        positive_int(table, key, path)
     f = {k: get_number(table, k, path) for k in ("fx_px", "fy_px", "cx_px", "cy_px")}
     skew = get_number(table, "skew_px", path) if "skew_px" in table else 0.0
     for k in ("fx_px", "fy_px"):
@@ -203,14 +174,14 @@ def read_distortion(value: Any, lengths: tuple[int, ...], path: str, key: str) -
     return arr
 
 
-def _positive_int(table: dict[str, Any], key: str, path: str) -> int:
+def positive_int(table: dict[str, Any], key: str, path: str) -> int:
     v = table[key]
     if isinstance(v, bool) or not isinstance(v, int) or v <= 0:
         raise ConfigFileError(path, f"expected a positive integer, got {v!r}", key=key)
     return v
 
 
-def _kind(table: dict[str, Any], path: str, model: tuple[str, str] | None,
+def read_kind(table: dict[str, Any], path: str, model: tuple[str, str] | None,
           default: str | None) -> str:
     """The table's ``kind`` (or the default): known, and the model's if one is loaded."""
     if default is None and model is not None:
@@ -225,37 +196,3 @@ def _kind(table: dict[str, Any], path: str, model: tuple[str, str] | None,
     if model is not None and kind != model[0]:
         raise ConfigFileError(path, f"kind {kind!r} cannot be loaded as {model[1]}", key="kind")
     return str(kind)
-
-
-def _read_opencv_table(table: dict[str, Any], path: str,
-                       model: tuple[str, str] | None) -> CameraFields:
-    """A camera table whose intrinsics come from the OpenCV file named by ``opencv``."""
-    for key in CAMERA_KEYS:
-        if key in table and key not in OPENCV_TABLE_KEYS:
-            raise ConfigFileError(path, f"the intrinsics come from the OpenCV file "
-                                        f"{table['opencv']!r}: remove this key", key=key)
-    check_keys(table, OPENCV_TABLE_KEYS, path)
-    ref = table["opencv"]
-    if not isinstance(ref, str) or not ref:
-        raise ConfigFileError(path, f"expected the path of an OpenCV calibration file, got "
-                                    f"{ref!r}", key="opencv")
-    cal_path = Path(ref) if Path(ref).is_absolute() else Path(path).parent / ref
-    cal = read_opencv_calibration(cal_path)
-    file_kind = "perspective" if cal.xi is None else "unified"
-    kind = _kind(table, path, model, file_kind)
-    if kind != file_kind:
-        raise ConfigFileError(path, f"kind {kind!r} but {cal_path} is a {file_kind} "
-                                    f"calibration ({'no ' if cal.xi is None else ''}xi)",
-                              key="kind")
-    given = None
-    if "width_px" in table or "height_px" in table:
-        for key in ("width_px", "height_px"):
-            if key not in table:
-                raise ConfigFileError(path, "missing (give width_px and height_px)", key=key)
-        given = (_positive_int(table, "width_px", path), _positive_int(table, "height_px", path))
-    width, height = calibration_size(cal, given, f"width_px and height_px in {path}")
-    name = table.get("name", Path(path).stem)
-    if not isinstance(name, str):
-        raise ConfigFileError(path, f"expected a string, got {name!r}", key="name")
-    return CameraFields(kind, cal.K, 0.0 if cal.xi is None else cal.xi, width, height,
-                        read_pose_table(table, path), name, str(cal_path), cal.distortion)

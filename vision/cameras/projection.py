@@ -5,14 +5,14 @@ The unified model (Geyer-Daniilidis / Mei) with mirror parameter ``xi``: a point
 of the camera frame is imaged through the unit sphere, ``X_s = X / |X|``, then
 ``m = (X_s,x, X_s,y) / (X_s,z + xi)``; ``xi = 0`` is the pinhole ``m = (X/Z, Y/Z)``
 (computed by the same expressions, bit for bit). Lens distortion
-(:mod:`vision.distortion`) and the intrinsics ``K`` act after these functions.
+(:mod:`vision.cameras.distortion`) and the intrinsics ``K`` act after these functions.
 """
 
 from __future__ import annotations
 
 import numpy as np
 
-from vision.camera_checks import unit
+from vision.cameras.checks import unit
 
 
 def cos_limit(xi: float) -> float:

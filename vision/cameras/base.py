@@ -1,11 +1,16 @@
 """The common base of the camera models (:class:`Camera`): pixels, distortion, lifting,
-Jacobians, copies and the file format; the models themselves are in
-:mod:`vision.cameras` (conventions there and in ``docs/math.md`` section 5).
+Jacobians, copies; the models themselves are one module each in :mod:`vision.cameras`
+(conventions there and in ``docs/math.md`` section 5).
+
+The base reads and writes no file: :meth:`Camera.from_dict` and :meth:`Camera.to_dict`
+go through the table reader and writer that :mod:`vision.cameras.factory` installs
+(:func:`install_table_io`), so that no model imports the file readers.
 """
 
 from __future__ import annotations
 
 from abc import ABC, abstractmethod
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any, ClassVar
 
@@ -14,17 +19,27 @@ import tomli_w
 
 from hexapod.config import load_toml, suggest
 from hexapod.kinematics import Transform
-from vision import projection
-from vision.camera_checks import as_pixels, as_points
-from vision.camera_files import (
-    CAMERA_KEYS,
-    POSE_KEYS,
-    CameraFields,
-    camera_table,
-    read_camera_table,
+from vision.cameras import projection
+from vision.cameras.checks import as_pixels, as_points
+from vision.cameras.distortion import (
+    RadialTangential,
+    check_no_fold_in_image,
+    parse_coefficients,
 )
-from vision.distortion import RadialTangential, check_no_fold_in_image, parse_coefficients
+from vision.cameras.fields import CameraFields
 from vision.exceptions import CameraError
+
+#: ``(table, path, model) -> camera`` and ``camera -> table``: the camera file format,
+#: installed by :mod:`vision.cameras.factory` (:func:`install_table_io`).
+TableReader = Callable[[dict[str, Any], str, "type[Camera] | None"], "Camera"]
+TableWriter = Callable[["Camera"], dict[str, Any]]
+_table_io: dict[str, Any] = {}
+
+
+def install_table_io(reader: TableReader, writer: TableWriter) -> None:
+    """Install the camera file format (called once by :mod:`vision.cameras.factory`)."""
+    _table_io["read"] = reader
+    _table_io["write"] = writer
 
 
 class Camera(ABC):
@@ -39,7 +54,7 @@ class Camera(ABC):
         distortion: Read-only lens distortion coefficients in OpenCV's order,
             ``(k1, k2, p1, p2, k3)`` (perspective) or ``(k1, k2, p1, p2)`` (unified);
             zeros for an ideal lens.
-        lens: The distortion map (:class:`vision.distortion.RadialTangential`).
+        lens: The distortion map (:class:`vision.cameras.distortion.RadialTangential`).
         camera_from_base: Pose of the camera w.r.t. the robot base,
             ``p_camera = R p_base + t``.
         name: A label.
@@ -320,12 +335,10 @@ class Camera(ABC):
             f"fx={self.fx:.3f}, fy={self.fy:.3f}, cx={self.cx:.3f}, cy={self.cy:.3f}{xi}{dist})"
         )
 
-    _KEYS = CAMERA_KEYS
-    _POSE_KEYS = POSE_KEYS
-
     def to_dict(self) -> dict[str, Any]:
-        """The file representation (pixels, millimetres, degrees; :mod:`vision.camera_files`)."""
-        return camera_table(self)
+        """The file representation (pixels, millimetres, degrees;
+        :mod:`vision.cameras.files.project`)."""
+        return dict(_table_io["write"](self))
 
     def to_toml(self, path: str | Path) -> None:
         """Save the camera to a TOML file.
@@ -347,9 +360,8 @@ class Camera(ABC):
         Called on :class:`Camera` the ``kind`` key chooses the model; called on a
         subclass, ``kind`` must match it (or be absent).
         """
-        model = None if cls is Camera else (cls.kind, cls.__name__)
-        f = read_camera_table(table, path, model)
-        return Camera.models[f.kind]._from_fields(f)
+        camera: Camera = _table_io["read"](table, path, None if cls is Camera else cls)
+        return camera
 
     @classmethod
     def from_toml(cls, path: str | Path) -> Camera:

@@ -1,30 +1,18 @@
 """Camera presets of the seeds: the front perspective camera and the omnidirectional one
-(``docs/math.md`` section 9); :func:`load_camera` (a preset name, a TOML file or an
-OpenCV calibration file) and the OpenCV calibration files of a camera."""
+(``docs/math.md`` section 9), by name (:func:`camera_preset`)."""
 
 from __future__ import annotations
-
-import logging
-from pathlib import Path
 
 import numpy as np
 
 from hexapod.config import suggest
-from hexapod.exceptions import ConfigFileError
 from hexapod.geometry import HexapodGeometry, deltalab
 from hexapod.kinematics import Transform
 from hexapod.se3 import look_at
-from vision.cameras import Camera, PerspectiveCamera, UnifiedCamera
+from vision.cameras.base import Camera
+from vision.cameras.perspective import PerspectiveCamera
+from vision.cameras.unified import UnifiedCamera
 from vision.exceptions import CameraError
-from vision.opencv_files import (
-    OPENCV_EXTENSIONS,
-    calibration_size,
-    is_opencv_file,
-    read_opencv_calibration,
-    write_opencv_calibration,
-)
-
-log = logging.getLogger(__name__)
 
 #: Pixel size assumed for the front camera preset [m] (a 1/3" 1024x768-class CCD,
 #: e.g. Sony ICX204: 4.65 um square pixels).
@@ -125,7 +113,7 @@ def omni_camera(geometry: HexapodGeometry | None = None) -> UnifiedCamera:
     return UnifiedCamera(K, 1.0, 640, 480, Transform(np.eye(3), -centre), name="omni")
 
 
-_PRESETS = {"front": front_camera, "omni": omni_camera}
+PRESETS = {"front": front_camera, "omni": omni_camera}
 
 
 def camera_preset(name: str, geometry: HexapodGeometry | None = None) -> Camera:
@@ -134,101 +122,11 @@ def camera_preset(name: str, geometry: HexapodGeometry | None = None) -> Camera:
     Raises:
         CameraError: Unknown name (with the close valid name, if any).
     """
-    if name not in _PRESETS:
-        hint = suggest(name, _PRESETS)
+    if name not in PRESETS:
+        hint = suggest(name, PRESETS)
         raise CameraError(
             "preset",
-            f"unknown camera preset '{name}'; available: {', '.join(_PRESETS)}"
+            f"unknown camera preset '{name}'; available: {', '.join(PRESETS)}"
             + (f" (did you mean '{hint}'?)" if hint else ""),
         )
-    return _PRESETS[name](geometry)
-
-
-def load_camera(path_or_name: str | Path, geometry: HexapodGeometry | None = None,
-                camera_from_base: Transform | None = None,
-                image_size: tuple[int, int] | None = None) -> Camera:
-    """A camera preset, a camera TOML file or an OpenCV calibration file.
-
-    Args:
-        path_or_name: A preset name (``"front"``, ``"omni"``), a TOML file
-            (:meth:`Camera.to_toml`'s format; an existing file without extension is
-            read as TOML) or an OpenCV calibration file (``.yml``, ``.yaml``, ``.xml``,
-            ``.json``: :func:`load_opencv_camera`).
-        geometry: The robot, for the presets (their placement scales with it).
-        camera_from_base: The pose of an OpenCV file's camera (identity by default);
-            presets and TOML files give their own pose.
-        image_size: ``(width, height)`` [px] of an OpenCV file that does not give it.
-
-    Raises:
-        CameraError: Unknown preset (with the close name), or a pose or image size
-            given for a preset or a TOML file.
-        ConfigFileError: Unknown extension, missing file, bad key or value.
-        DistortionError: The distortion folds inside the image.
-    """
-    s = str(path_or_name)
-    p = Path(s)
-    if is_opencv_file(p):
-        return load_opencv_camera(p, camera_from_base, image_size)
-    for arg, value in (("camera_from_base", camera_from_base), ("image_size", image_size)):
-        if value is not None:
-            raise CameraError(arg, f"only for an OpenCV calibration file: {s!r} gives it")
-    if s in _PRESETS:
-        return camera_preset(s, geometry)
-    if p.suffix.lower() == ".toml" or (p.suffix == "" and p.is_file()):
-        return Camera.from_toml(p)
-    if p.suffix:
-        raise ConfigFileError(s, f"unknown extension {p.suffix!r} for a camera file; "
-                                 f"expected .toml or one of OpenCV's "
-                                 f"{', '.join(OPENCV_EXTENSIONS)}")
-    return camera_preset(s, geometry)
-
-
-def load_opencv_camera(path: str | Path, camera_from_base: Transform | None = None,
-                       image_size: tuple[int, int] | None = None,
-                       name: str | None = None) -> Camera:
-    """The camera of an OpenCV calibration file (:mod:`vision.opencv_files`).
-
-    ``camera_matrix`` and ``distortion_coefficients`` (or ``D``) give the intrinsics,
-    ``xi`` makes it a :class:`UnifiedCamera` (Mei's model of ``cv::omnidir``),
-    ``image_width`` and ``image_height`` the image size.
-
-    Args:
-        path: The file (``.yml``, ``.yaml``, ``.xml``, ``.json``).
-        camera_from_base: Its pose w.r.t. the robot base (not in the file; identity by
-            default).
-        image_size: ``(width, height)`` [px] when the file does not give it.
-        name: A label (the file's stem by default).
-
-    Raises:
-        ConfigFileError: Unknown extension, missing file, missing key, value of the
-            wrong shape or type (naming the file and the key).
-        DistortionError: The distortion folds inside the image.
-    """
-    cal = read_opencv_calibration(path)
-    width, height = calibration_size(cal, image_size, "image_size")
-    pose = Transform.identity() if camera_from_base is None else camera_from_base
-    label = Path(path).stem if name is None else name
-    if cal.xi is None:
-        return PerspectiveCamera(cal.K, width, height, pose, name=label, source=cal.source,
-                                 distortion=cal.distortion)
-    return UnifiedCamera(cal.K, cal.xi, width, height, pose, name=label, source=cal.source,
-                         distortion=cal.distortion)
-
-
-def save_opencv_camera(camera: Camera, path: str | Path) -> None:
-    """Write the intrinsics of a camera as an OpenCV calibration file (``cv2.FileStorage``;
-    YAML, XML or JSON after the extension), as OpenCV's calibration samples do.
-
-    Keys ``image_width``, ``image_height``, ``camera_matrix``, ``distortion_coefficients``
-    and, for a unified camera, ``xi``. The pose is not written (OpenCV's files have
-    none). ``cv2.projectPoints`` ignores the skew ``K[0, 1]`` of a perspective camera
-    (``cv::omnidir`` uses it): a nonzero one is written, with a warning in the log.
-
-    Raises:
-        ConfigFileError: Unknown extension or the file cannot be written.
-    """
-    if camera.kind == "perspective" and camera.K[0, 1] != 0:
-        log.warning("%s: the skew K[0, 1] = %g is written, but cv2.projectPoints ignores it",
-                    path, camera.K[0, 1])
-    write_opencv_calibration(path, camera.K, camera.distortion, camera.width, camera.height,
-                             camera.xi if camera.kind == "unified" else None)
+    return PRESETS[name](geometry)

@@ -1,0 +1,143 @@
+"""The perspective (pinhole) camera with OpenCV's lens distortion (``cv2.projectPoints``).
+
+Conventions (``docs/math.md`` section 5, and :mod:`vision.cameras`):
+
+- Camera frame: x right, y down, z forward.
+- Pixel coordinates follow OpenCV: ``(u, v)`` with ``u`` along the image columns
+  and ``v`` along the rows; the centre of the pixel in column ``i`` and row ``j``
+  is at ``(i, j)``, so the image covers ``[-0.5, width - 0.5] x [-0.5, height - 0.5]``.
+- ``K = [[fx, s, cx], [0, fy, cy], [0, 0, 1]]`` maps the distorted normalised point
+  ``m_d = D(m)`` to the pixel ``p = K m_d``; ``m = (X/Z, Y/Z)``, ``D`` the lens distortion
+  (:mod:`vision.cameras.distortion`). The *ideal image* is the one of ``K m`` (no
+  distortion): the lines of the leg edges are defined on it.
+- ``PerspectiveCamera`` projects as ``cv2.projectPoints`` (which ignores the skew
+  ``K[0, 1]``: equal when it is 0, as ``cv2.calibrateCamera`` gives).
+"""
+
+from __future__ import annotations
+
+from typing import Any, ClassVar
+
+import numpy as np
+
+from hexapod.kinematics import Transform
+from vision.cameras import projection
+from vision.cameras.base import Camera
+from vision.cameras.checks import as_pixels, as_points, check_K, check_pose, check_size, unit
+from vision.cameras.fields import CameraFields
+
+
+class PerspectiveCamera(Camera):
+    """Pinhole camera ``p ~ K D(X/Z, Y/Z)``, OpenCV's model (``cv2.projectPoints``).
+
+    Args:
+        K: (3, 3) intrinsics [px].
+        width: Image width [px].
+        height: Image height [px].
+        camera_from_base: Pose w.r.t. the robot base (identity by default).
+        name: A label.
+        source: File the camera was read from (for the messages).
+        distortion: OpenCV's coefficients ``(k1, k2, p1, p2[, k3])`` (4 or 5 numbers;
+            None or zeros: an ideal lens), applied to ``(X/Z, Y/Z)``.
+
+    Raises:
+        CameraError: A field is invalid.
+        DistortionError: The distortion folds inside the image.
+
+    The line features (:meth:`normal_to_line`, :attr:`line_matrix`,
+    :meth:`pixels_to_line_coordinates`) are those of the ideal image ``K (X/Z, Y/Z)``;
+    :meth:`normal_to_pixel_line` and :meth:`pixel_line_to_normal`, which relate
+    straight lines of the raw image, refuse a distorted camera.
+    """
+
+    kind: ClassVar[str] = "perspective"
+    distortion_lengths: ClassVar[tuple[int, ...]] = (4, 5)
+
+    def __init__(
+        self,
+        K: np.ndarray,
+        width: int,
+        height: int,
+        camera_from_base: Transform | None = None,
+        name: str = "perspective",
+        source: str | None = None,
+        distortion: Any = None,
+    ) -> None:
+        self.source = source
+        self.K = check_K(K, source)
+        self.width = check_size("width", width, source)
+        self.height = check_size("height", height, source)
+        self.xi = 0.0
+        self.camera_from_base = check_pose(
+            Transform.identity() if camera_from_base is None else camera_from_base, source
+        )
+        self.name = str(name)
+        self._set_lens(distortion)
+        w, h = float(self.width), float(self.height)
+        N = np.array([[1.0 / w, 0.0, -0.5], [0.0, 1.0 / w, -0.5 * h / w], [0.0, 0.0, 1.0]])
+        lm = N @ self.K
+        lm.flags.writeable = False
+        self.line_matrix = lm
+        self._line_matrix_inv_T = np.linalg.inv(lm).T
+
+    @property
+    def normalisation(self) -> np.ndarray:
+        """``N``: pixels -> normalised pixel coordinates ``((u - w/2)/w, (v - h/2)/w)``."""
+        return self.line_matrix @ np.linalg.inv(self.K)
+
+    @classmethod
+    def _from_fields(cls, f: CameraFields) -> PerspectiveCamera:
+        return cls(f.K, f.width, f.height, f.camera_from_base, name=f.name, source=f.source,
+                   distortion=f.distortion)
+
+    def _normalised(self, X: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        return projection.normalised(X, 0.0)
+
+    def _lift_normalised(self, m: np.ndarray) -> np.ndarray:
+        return projection.lift(m, 0.0)
+
+    def normal_to_line(self, n: np.ndarray) -> np.ndarray:
+        """Interpretation-plane normals (..., 3) -> unit lines (..., 3) in normalised
+        pixel coordinates of the ideal image: ``l = Kt^-T n / |Kt^-T n|`` with
+        ``Kt = line_matrix`` (positive scale, so the sign follows ``n``)."""
+        n = as_points(n, "n")
+        return unit(n @ self._line_matrix_inv_T.T)
+
+    def line_to_normal(self, l: np.ndarray) -> np.ndarray:
+        """Inverse of :meth:`normal_to_line`: ``n = Kt^T l / |Kt^T l|``."""
+        l = as_points(l, "l")
+        return unit(l @ self.line_matrix)
+
+    def normal_to_pixel_line(self, n: np.ndarray) -> np.ndarray:
+        """Unit line (..., 3) in raw pixel coordinates (``l^T [u, v, 1] = 0``),
+        ``l = K^-T n / |K^-T n|``.
+
+        Raises:
+            CameraError: The camera is distorted (the image of a line is a curve).
+        """
+        self._refuse_distortion("normal_to_pixel_line")
+        n = as_points(n, "n")
+        return unit(n @ np.linalg.inv(self.K))
+
+    def pixel_line_to_normal(self, l: np.ndarray) -> np.ndarray:
+        """Inverse of :meth:`normal_to_pixel_line`: ``n = K^T l / |K^T l|``.
+
+        Raises:
+            CameraError: The camera is distorted (the image of a line is a curve).
+        """
+        self._refuse_distortion("pixel_line_to_normal")
+        l = as_points(l, "l")
+        return unit(l @ self.K)
+
+    def pixels_to_line_coordinates(self, pixels: np.ndarray) -> np.ndarray:
+        """Pixels (..., 2) -> normalised pixel coordinates (..., 2) used by the lines:
+        ``((u - w/2)/w, (v - h/2)/w)`` of the ideal pixel ``(u, v) = K m`` (the pixel
+        itself for an ideal lens; the distortion removed otherwise)."""
+        p = as_pixels(pixels)
+        if self.is_distorted:
+            m = self.pixels_to_normalised(p)
+            K = self.K
+            p = np.stack([K[0, 0] * m[..., 0] + K[0, 1] * m[..., 1] + K[0, 2],
+                          K[1, 1] * m[..., 1] + K[1, 2]], axis=-1)
+        return np.stack([(p[..., 0] - 0.5 * self.width) / self.width,
+                         (p[..., 1] - 0.5 * self.height) / self.width], axis=-1)
