@@ -118,7 +118,7 @@ def load_setup(text: str) -> Setup:
     from benchmarks.study.scenario import builtin_scenarios, load_scenario
     from hexapod.config import load_toml
     from vision.cameras import camera_preset, load_camera
-    from vision.opencv_files import OPENCV_EXTENSIONS
+    from vision.cameras.files.opencv import OPENCV_EXTENSIONS
 
     path = Path(text)
     if text in builtin_scenarios() or not path.exists():

@@ -14,7 +14,7 @@ from hexapod.geometry import deltalab
 from hexapod.kinematics import inverse_kinematics
 from hexapod.workspace import home_pose
 from tests.benchmarks.ownrobot.robots import BLIND_CAMERA, own_robot, write_study
-from vision.camera_presets import front_camera
+from vision.cameras import front_camera
 from vision.legs import observe_legs
 
 

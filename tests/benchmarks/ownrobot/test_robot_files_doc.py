@@ -13,8 +13,7 @@ import pytest
 from benchmarks.cli import main
 from hexapod.geometry import HexapodGeometry
 from hexapod.se3 import log_so3
-from vision.camera_presets import camera_preset
-from vision.cameras import load_camera
+from vision.cameras import camera_preset, load_camera
 
 PAGE = Path(__file__).resolve().parents[3] / "docs" / "robot-files.md"
 
