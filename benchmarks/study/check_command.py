@@ -25,22 +25,6 @@ from hexapod.geometry import HexapodGeometry
 CANNOT_RUN = 1
 
 
-class SetupError(BenchmarkError):
-    """A study whose every trial would fail the same way, refused before its first trial.
-
-    Attributes:
-        source: The scenario file.
-        problems: The errors found (:class:`~benchmarks.study.setup_check.Problem`).
-    """
-
-    def __init__(self, source: str, problems: list[Problem]) -> None:
-        self.source = source
-        self.problems = problems
-        text = "; ".join(p.text for p in problems)
-        super().__init__(f"{source}: the setup cannot run, every trial would fail: {text} "
-                         f"(hexapod-bench check {source} shows the details)")
-
-
 @dataclass
 class Setup:
     """What ``check`` examines: a robot, a camera, a task box, and where they come from.

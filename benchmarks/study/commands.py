@@ -50,7 +50,8 @@ def cmd_run(args: argparse.Namespace) -> int:
 def _preflight(scenarios: list[Any]) -> None:
     """The checks of ``hexapod-bench check`` before the first trial: warnings printed, a
     setup where every trial would fail the same way refused (:class:`SetupError`)."""
-    from benchmarks.study.check_command import SetupError, preflight
+    from benchmarks.exceptions import SetupError
+    from benchmarks.study.check_command import preflight
 
     for sc in scenarios:
         problems = preflight(sc)
