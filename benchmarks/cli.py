@@ -175,7 +175,9 @@ def build_parser() -> argparse.ArgumentParser:
                                    "name, a robot geometry file or a camera file) and print "
                                    "the home pose and leg lengths, the reachable workspace, "
                                    "what the camera sees, the conditioning at home and the "
-                                   "problems with the key to change (docs/robot-files.md).")
+                                   "problems with the key to change (docs/robot-files.md). Exit "
+                                   "code 0: the setup can run; 1: every trial would fail; "
+                                   "2: a file is invalid.")
     s.add_argument("file", metavar="FILE")
     s.add_argument("--picture", metavar="PNG",
                    help="write an image of the robot at home seen by the camera (edges "
