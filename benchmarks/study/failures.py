@@ -133,8 +133,10 @@ class RepeatedWarnings(logging.Filter):
     """Let the first warning of each distinct cause through, count the repeats.
 
     The cause of a record is its ``cause`` attribute (``extra={"cause": ...}``) when it
-    has one, else its logger and message template (so "leg 3 is ill-conditioned" and "leg
-    4 is ill-conditioned" are one cause). Records below WARNING pass untouched.
+    has one, else its logger, message template and integer arguments: the integers name
+    what is at fault (a leg, a count), the other values are measurements, so "leg 3 is
+    ill-conditioned (ratio 0.011)" in every sweep point is one cause and leg 4 another.
+    A record seen by several handlers is counted once. Records below WARNING pass.
     """
 
     def __init__(self) -> None:
@@ -142,13 +144,27 @@ class RepeatedWarnings(logging.Filter):
         self.counts: Counter[tuple[str, str]] = Counter()
         self.first: dict[tuple[str, str], str] = {}
         self.summarised: set[tuple[str, str]] = set()
+        self._last: tuple[logging.LogRecord, bool] | None = None
 
     def filter(self, record: logging.LogRecord) -> bool:
         """Whether to emit the record (the first of its cause)."""
         if record.levelno < logging.WARNING:
             return True
+        if self._last is not None and self._last[0] is record:  # another handler: same answer
+            return self._last[1]
+        emit = self._count(record)
+        self._last = (record, emit)
+        return emit
+
+    def _count(self, record: logging.LogRecord) -> bool:
+        """Count a record once; True for the first of its cause."""
         cause = getattr(record, "cause", None)
-        key = (record.name, str(cause or record.msg))
+        if cause:
+            key = (record.name, str(cause))
+        else:
+            args = record.args if isinstance(record.args, tuple) else ()
+            ints = [a for a in args if isinstance(a, int) and not isinstance(a, bool)]
+            key = (record.name, f"{record.msg} {ints}")
         if cause:  # a trial failure: the failure summary counts it
             self.summarised.add(key)
         self.counts[key] += 1

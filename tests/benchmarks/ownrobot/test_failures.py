@@ -84,14 +84,40 @@ def test_repeated_warnings_pass_once_and_are_counted(caplog: pytest.LogCaptureFi
     caplog.handler.addFilter(filt)
     try:
         with caplog.at_level(logging.INFO):
-            for leg in range(6):
-                for _ in range(10):
-                    log.warning("calibration: leg %d is ill-conditioned", leg)
+            for point in range(10):  # the same warnings at every point of a sweep
+                for leg in (3, 4):
+                    log.warning("calibration: leg %d is ill-conditioned (ratio %.3f)", leg,
+                                0.011 + 1e-4 * point)
             log.info("an info line passes")
             log.info("an info line passes")
     finally:
         caplog.handler.removeFilter(filt)
     messages = [r.getMessage() for r in caplog.records]
-    assert messages == ["calibration: leg 0 is ill-conditioned", "an info line passes",
-                        "an info line passes"]
-    assert filt.repeats() == ["59 more warning(s) like: calibration: leg 0 is ill-conditioned"]
+    assert messages == ["calibration: leg 3 is ill-conditioned (ratio 0.011)",
+                        "calibration: leg 4 is ill-conditioned (ratio 0.011)",
+                        "an info line passes", "an info line passes"]
+    assert filt.repeats() == [
+        "9 more warning(s) like: calibration: leg 3 is ill-conditioned (ratio 0.011)",
+        "9 more warning(s) like: calibration: leg 4 is ill-conditioned (ratio 0.011)"]
+
+
+def test_repeated_warnings_on_several_handlers_count_each_record_once() -> None:
+    log = logging.getLogger("tests.repeated.two")
+    log.propagate = False
+    filt = RepeatedWarnings()
+    seen: list[list[str]] = [[], []]
+    handlers = []
+    for k in range(2):
+        h = logging.Handler()
+        h.emit = lambda record, k=k: seen[k].append(record.getMessage())  # type: ignore
+        h.addFilter(filt)
+        log.addHandler(h)
+        handlers.append(h)
+    try:
+        for _ in range(5):
+            log.warning("the same warning")
+    finally:
+        for h in handlers:
+            log.removeHandler(h)
+    assert seen == [["the same warning"], ["the same warning"]]
+    assert filt.repeats() == ["4 more warning(s) like: the same warning"]
