@@ -73,6 +73,7 @@ PERF_MODULES = {
     "serial": "benchmarks.perf.serial",
     "calibration": "benchmarks.perf.calibration",
     "study": "benchmarks.perf.study",
+    "dynamics": "benchmarks.perf.dynamics",
 }
 
 

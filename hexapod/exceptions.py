@@ -80,6 +80,33 @@ class StrokeLimitError(HexapodError, ValueError):
         )
 
 
+class InertiaError(GeometryError):
+    """An ``[inertia]`` value of a robot is physically impossible (negative mass,
+    inertia not positive definite or violating the triangle inequality, centre of mass
+    outside the leg). ``field`` is the dotted key, e.g. ``"inertia.body_mass"``."""
+
+
+class DriveError(GeometryError):
+    """A ``[drives]`` value of a robot is invalid; ``field`` is the dotted key, e.g.
+    ``"drives.force_limit"``, and the message names the leg."""
+
+
+class DynamicsError(HexapodError, ValueError):
+    """The dynamics have no finite answer at a state (a singular pose: the legs cannot
+    hold or move the platform, or a singular mass matrix).
+
+    Attributes:
+        what: The computation (``"forward"``, ``"inverse"``, ``"terms"``).
+        item: Index of the first offending state in the batch.
+    """
+
+    def __init__(self, what: str, item: int) -> None:
+        self.what = what
+        self.item = item
+        super().__init__(f"dynamics ({what}): no finite result at state {item} of the batch "
+                         "(singular pose or mass matrix)")
+
+
 class ForwardKinematicsError(HexapodError):
     """The forward kinematics did not converge.
 

@@ -18,6 +18,8 @@ import numpy as np
 import tomli_w
 
 from hexapod.config import check_keys, get_matrix, get_number, load_toml
+from hexapod.dynamics.drives import DriveParameters
+from hexapod.dynamics.inertia import InertiaParameters
 from hexapod.exceptions import ConfigFileError, GeometryError
 
 #: Minimum distance between two joints of the same plate [m].
@@ -59,6 +61,10 @@ class HexapodGeometry:
         leg_radius: Radius of the cylindrical legs [m].
         max_speed: Leg speed limit [m/s].
         name: A label.
+        inertia: Masses and inertias (the ``[inertia]`` table); None gives the assumed
+            defaults sized on this robot (:meth:`InertiaParameters.default`).
+        drives: Drives and encoders (the ``[drives]`` table); None gives the assumed
+            defaults (:meth:`DriveParameters.default`).
     """
 
     base_points: np.ndarray
@@ -68,6 +74,8 @@ class HexapodGeometry:
     max_speed: float = 0.05
     name: str = "hexapod"
     source: str | None = field(default=None, compare=False, repr=False)
+    inertia: InertiaParameters = None  # type: ignore[assignment]  # None: the default
+    drives: DriveParameters = None  # type: ignore[assignment]  # None: the default
 
     def __post_init__(self) -> None:
         src = self.source
@@ -100,6 +108,24 @@ class HexapodGeometry:
         object.__setattr__(self, "stroke", (q_min, q_max))
         object.__setattr__(self, "leg_radius", r)
         object.__setattr__(self, "max_speed", v)
+        defaulted = self.inertia is None
+        inertia = self.default_inertia() if defaulted else self.inertia
+        if not isinstance(inertia, InertiaParameters):
+            raise GeometryError("inertia", f"expected InertiaParameters, got {inertia!r}", src)
+        if not defaulted:
+            inertia.check_legs(q_min, src)
+        object.__setattr__(self, "inertia", inertia)
+        object.__setattr__(self, "_inertia_defaulted", defaulted)
+        drives = self.drives if self.drives is not None else DriveParameters.default()
+        if not isinstance(drives, DriveParameters):
+            raise GeometryError("drives", f"expected DriveParameters, got {drives!r}", src)
+        object.__setattr__(self, "drives", drives)
+
+    def default_inertia(self) -> InertiaParameters:
+        """The assumed inertial parameters sized on this robot (platform radius, leg
+        radius, shortest leg length): :meth:`InertiaParameters.default`."""
+        radius = float(np.max(np.linalg.norm(np.asarray(self.platform_points)[:, :2], axis=1)))
+        return InertiaParameters.default(radius, float(self.leg_radius), float(self.stroke[0]))
 
     def __eq__(self, other: object) -> bool:
         if not isinstance(other, HexapodGeometry):
@@ -110,6 +136,8 @@ class HexapodGeometry:
             and self.stroke == other.stroke
             and self.leg_radius == other.leg_radius
             and self.max_speed == other.max_speed
+            and self.inertia == other.inertia
+            and self.drives == other.drives
         )
 
     __hash__ = None  # type: ignore[assignment]
@@ -138,7 +166,10 @@ class HexapodGeometry:
         return 0.5 * (self.stroke[0] + self.stroke[1])
 
     def replace(self, **changes: Any) -> HexapodGeometry:
-        """Return a copy with some fields changed (validated again)."""
+        """Return a copy with some fields changed (validated again).
+
+        Default inertial parameters follow the changed robot (they are sized on it);
+        parameters given explicitly are kept."""
         kwargs: dict[str, Any] = {
             "base_points": self.base_points,
             "platform_points": self.platform_points,
@@ -146,13 +177,15 @@ class HexapodGeometry:
             "leg_radius": self.leg_radius,
             "max_speed": self.max_speed,
             "name": self.name,
+            "inertia": None if getattr(self, "_inertia_defaulted", False) else self.inertia,
+            "drives": self.drives,
         }
         kwargs.update(changes)
         return HexapodGeometry(**kwargs)
 
     # ----------------------------------------------------------------- TOML
     _KEYS = ("name", "base_points_mm", "platform_points_mm", "stroke_mm", "leg_radius_mm",
-             "max_speed_mm_s")
+             "max_speed_mm_s", "inertia", "drives")
 
     @classmethod
     def from_dict(cls, table: dict[str, Any], path: str = "<dict>") -> HexapodGeometry:
@@ -161,7 +194,8 @@ class HexapodGeometry:
         Args:
             table: Keys ``base_points_mm`` (6x3), ``platform_points_mm`` (6x3),
                 ``stroke_mm`` ([min, max]), ``leg_radius_mm`` and optionally
-                ``name`` and ``max_speed_mm_s``.
+                ``name`` and ``max_speed_mm_s``; tables ``inertia`` and ``drives`` in SI
+                units (``docs/dynamics.md``), keys absent from them keep their defaults.
             path: Source name for error messages.
         """
         check_keys(
@@ -181,11 +215,20 @@ class HexapodGeometry:
             raise ConfigFileError(path, f"expected a string, got {name!r}", key="name")
         _check_file_values(table, path)
         try:
-            return cls(base, plat, (float(stroke[0]), float(stroke[1])), radius, speed, name,
-                       source=path)
+            geometry = cls(base, plat, (float(stroke[0]), float(stroke[1])), radius, speed,
+                           name, source=path)
         except GeometryError as exc:  # name the key as written in the file
             raise GeometryError(_FILE_KEYS.get(exc.field, exc.field), exc.problem,
                                 path) from None
+        tables: dict[str, Any] = {}
+        if "inertia" in table:
+            tables["inertia"] = InertiaParameters.from_dict(table["inertia"], path,
+                                                            geometry.default_inertia())
+        if "drives" in table:
+            tables["drives"] = DriveParameters.from_dict(table["drives"], path)
+        if not tables:
+            return geometry
+        return cls(base, plat, geometry.stroke, radius, speed, name, source=path, **tables)
 
     @classmethod
     def from_toml(cls, path: str | Path) -> HexapodGeometry:
@@ -197,9 +240,14 @@ class HexapodGeometry:
         """
         return cls.from_dict(load_toml(path), str(path))
 
-    def to_dict(self) -> dict[str, Any]:
-        """The file representation (millimetres)."""
-        return {
+    def to_dict(self, dynamics: bool = False) -> dict[str, Any]:
+        """The file representation (millimetres; the tables in SI units).
+
+        Args:
+            dynamics: Always include the ``inertia`` and ``drives`` tables; by default
+                each is included only when it differs from its default.
+        """
+        out = {
             "name": self.name,
             "base_points_mm": (self.base_points * 1e3).round(9).tolist(),
             "platform_points_mm": (self.platform_points * 1e3).round(9).tolist(),
@@ -207,10 +255,16 @@ class HexapodGeometry:
             "leg_radius_mm": self.leg_radius * 1e3,
             "max_speed_mm_s": self.max_speed * 1e3,
         }
+        if dynamics or self.inertia != self.default_inertia():
+            out["inertia"] = self.inertia.to_dict()
+        if dynamics or self.drives != DriveParameters.default():
+            out["drives"] = self.drives.to_dict()
+        return out
 
     def to_toml(self, path: str | Path) -> None:
-        """Save the geometry to a TOML file (lengths in millimetres)."""
-        Path(path).write_text(tomli_w.dumps(self.to_dict()))
+        """Save the geometry to a TOML file (lengths in millimetres), with its
+        ``[inertia]`` and ``[drives]`` tables written out in full."""
+        Path(path).write_text(tomli_w.dumps(self.to_dict(dynamics=True)))
 
 
 #: The file key of each field (errors name the key as written in the file).

@@ -144,8 +144,23 @@ def constraint_residual_and_jacobian(
     return res, J
 
 
+def _leg_inertia(mass: float, moments: np.ndarray, com_z: float) -> pin.Inertia:
+    """Spatial inertia of an axisymmetric leg part in its joint frame (leg along z).
+
+    Args:
+        mass: [kg] (0: massless, the zero inertia).
+        moments: ``(transverse, axial)`` about the centre of mass [kg m^2].
+        com_z: Centre of mass on the joint's z axis [m].
+    """
+    transverse, axial = (float(x) for x in moments)
+    return pin.Inertia(float(mass), np.array([0.0, 0.0, com_z]),
+                       np.diag([transverse, transverse, axial]))
+
+
 def build_model(geometry: HexapodGeometry, home_height: float | None = None) -> HexapodModel:
     """Build the closed-chain Pinocchio model of a hexapod.
+
+    Masses, inertias and gravity come from ``geometry.inertia``.
 
     Args:
         geometry: The robot.
@@ -173,10 +188,12 @@ def build_model(geometry: HexapodGeometry, home_height: float | None = None) -> 
     base_geom.meshColor = BASE_COLOR
     visual.addGeometryObject(base_geom)
 
+    inertia = geometry.inertia
+    model.gravity = pin.Motion(np.asarray(inertia.gravity, dtype=float), np.zeros(3))
     ff = model.addJoint(0, pin.JointModelFreeFlyer(), pin.SE3.Identity(), "platform_freeflyer")
-    mass = 2.0
     model.appendBodyToJoint(
-        ff, pin.Inertia.FromCylinder(mass, plat_radius, thickness), pin.SE3.Identity()
+        ff, pin.Inertia(inertia.platform_mass, np.asarray(inertia.platform_com, dtype=float),
+                        inertia.platform_tensor), pin.SE3.Identity()
     )
     model.addBodyFrame("platform", ff, pin.SE3.Identity(), model.addJointFrame(ff, 0))
     plat_geom = pin.GeometryObject(
@@ -194,13 +211,13 @@ def build_model(geometry: HexapodGeometry, home_height: float | None = None) -> 
         home_rots.append(R0)
         js = model.addJoint(0, pin.JointModelSpherical(), pin.SE3(R0, geometry.base_points[i]),
                             f"leg{i}_spherical")
-        model.appendBodyToJoint(js, pin.Inertia.FromCylinder(0.5, r, body_len),
-                                pin.SE3(np.eye(3), np.array([0, 0, body_len / 2])))
+        model.appendBodyToJoint(js, _leg_inertia(inertia.body_mass, inertia.body_inertia,
+                                                 inertia.body_com), pin.SE3.Identity())
         jp = model.addJoint(js, pin.JointModelPZ(), pin.SE3.Identity(), f"leg{i}_prismatic")
         model.lowerPositionLimit[model.joints[jp].idx_q] = geometry.q_min
         model.upperPositionLimit[model.joints[jp].idx_q] = geometry.q_max
-        model.appendBodyToJoint(jp, pin.Inertia.FromCylinder(0.2, 0.6 * r, body_len),
-                                pin.SE3(np.eye(3), np.array([0, 0, -body_len / 2])))
+        model.appendBodyToJoint(jp, _leg_inertia(inertia.rod_mass, inertia.rod_inertia,
+                                                 -inertia.rod_com), pin.SE3.Identity())
         model.addJointFrame(js, 0)
         model.addBodyFrame(f"leg{i}_tip", jp, pin.SE3.Identity(), model.addJointFrame(jp, 0))
         spherical.append(js)

@@ -1,0 +1,263 @@
+"""Compiled dynamics of the mechanism in the platform's coordinates (CasADi -> C).
+
+The coordinates are the platform pose ``(R, t)`` and twist ``tau = (v, w)`` of
+``docs/math.md`` section 11 (``v = dt/dt``, ``w`` the angular velocity, both in the
+base frame). Every rigid body ``k`` (the platform, the six leg bodies, the six rods)
+has a centre-of-mass velocity and an angular velocity linear in the twist,
+``(v_k, w_k) = J_k(x) tau``, with the legs' motion from the platform's as in
+:mod:`hexapod.fk` (``q_dot_i = u_i . B_dot_i``, ``u_dot_i = (B_dot_i - q_dot_i u_i) / q_i``,
+a leg's angular velocity ``u_i x u_dot_i``: its spin about its own axis is left at
+zero, it does not move the platform, and then its axial inertia drops out of every
+equation). Kane's equations (virtual power) give
+
+    M(x) tau_dot + h(x, tau) = K(x)^T f,
+    M = sum_k J_k^T diag(m_k, I_k) J_k,
+    h = sum_k J_k^T [m_k (J_dot_k tau - g); I_k (J_dot_k tau)_w + w_k x I_k w_k],
+
+with ``K`` the 6x6 matrix ``q_dot = K tau`` (rows ``[u_i^T, (R eB_i x u_i)^T]``) and
+``J_dot_k tau`` the directional derivative of ``J_k(x) tau`` along the motion
+(``casadi.jtimes``). One SX expression per function, generated to C by
+:mod:`hexapod.compiled` and looped over a batch in C.
+
+Row layout of every function's input (79 numbers): ``R`` (9, column-major), ``t``
+(3), ``tau`` (6), ``u`` (6: leg forces [N] for ``forward``, the acceleration for
+``inverse``, unused by ``terms``), ``A`` (18, base points one after the other),
+``E`` (18, platform points), and the 19 inertial parameters of :func:`parameter_row`.
+
+``forward_drives`` takes 12 more numbers per row, two leg-space masses per leg [kg],
+and solves
+
+    (M + K^T diag(a + b) K) tau_dot = K^T (f - a * K_dot tau) - h
+
+for the drives' layer: ``a`` moves with the leg (the reflected rotor inertia: a force
+``a q_ddot`` with ``q_ddot = K tau_dot + K_dot tau``), ``b = -dt d(f)/d(q_dot)`` takes
+a velocity-dependent leg force implicitly over a step ``dt`` (backward Euler on the
+velocity: ``f(q_dot + dt q_ddot) ~ f + (d f / d q_dot) dt K tau_dot``). It returns
+``tau_dot``, ``q_dot`` and ``q_ddot`` (18).
+"""
+
+from __future__ import annotations
+
+from functools import lru_cache
+
+import casadi as ca
+import numpy as np
+
+from hexapod.compiled import CompiledFunction
+from hexapod.dynamics.inertia import InertiaParameters
+
+#: Length of an input row.
+ROW = 79
+#: Number of inertial parameters in a row.
+N_PARAMETERS = 19
+#: Layout of the ``terms`` output: M (36, column-major), h (6), K (36, column-major),
+#: kinetic energy (1), potential energy (1), leg rates ``q_dot`` (6), leg acceleration
+#: bias ``K_dot tau`` (6).
+TERMS = 92
+#: Length of an input row of ``forward_drives``: a row, then the legs' added masses
+#: ``a`` (6) and implicit masses ``b`` (6) [kg].
+DRIVES_ROW = ROW + 12
+
+
+def parameter_row(inertia: InertiaParameters) -> np.ndarray:
+    """The 19 inertial parameters of an input row: platform mass, centre of mass (3),
+    inertia ``[ixx, iyy, izz, ixy, ixz, iyz]`` (6); body mass, ``body_com``, transverse
+    inertia; rod mass, ``rod_com``, transverse inertia; gravity (3). The axial inertias
+    do not enter (module docstring)."""
+    return np.concatenate([
+        [inertia.platform_mass], inertia.platform_com, inertia.platform_inertia,
+        [inertia.body_mass, inertia.body_com, inertia.body_inertia[0]],
+        [inertia.rod_mass, inertia.rod_com, inertia.rod_inertia[0]], inertia.gravity])
+
+
+def _skew(w: ca.SX) -> ca.SX:
+    return ca.vertcat(ca.horzcat(0, -w[2], w[1]), ca.horzcat(w[2], 0, -w[0]),
+                      ca.horzcat(-w[1], w[0], 0))
+
+
+def _leg(A: ca.SX, B: ca.SX, B_dot: ca.SX, c_B: ca.SX, leg: ca.SX
+         ) -> tuple[ca.SX, ca.SX, ca.SX, ca.SX, ca.SX, ca.SX, ca.SX]:
+    """One leg seen from its platform joint ``B`` (``docs/math.md`` section 11).
+
+    The force the platform applies at ``B`` to move the leg is
+    ``M_leg B_ddot + n_leg`` with ``M_leg = m_r u u^T + (J / q^2) P(u)``,
+    ``J = m_b d_b^2 + m_r (q - d_r)^2 + i_b + i_r`` (Kane's equations of the body and
+    the rod, spin left at zero). Returns ``(u, beta = J / q^2, m_r, y, potential, q_dot,
+    bias)`` with ``y = M_leg c_B + n_leg`` for ``B_ddot = Jb tau_dot + c_B`` and
+    ``bias = u . c_B + q |u_dot|^2`` the leg acceleration at zero ``tau_dot``
+    (``q_ddot = u . B_ddot + q |u_dot|^2``).
+    """
+    m_b, d_b, i_b, m_r, d_r, i_r = (leg[k] for k in range(6))
+    gravity = leg[6:9]
+    L = B - A
+    q = ca.sqrt(ca.dot(L, L))
+    u = L / q
+    q_dot = ca.dot(u, B_dot)
+    u_dot = (B_dot - q_dot * u) / q
+    J = m_b * d_b**2 + m_r * (q - d_r) ** 2 + i_b + i_r
+    beta = J / q**2
+    g_u = ca.dot(gravity, u)
+    n_leg = (m_r * d_r * ca.dot(u_dot, u_dot) * u
+             + (2 * q_dot / q**2) * (m_r * d_r * (q - d_r) - m_b * d_b**2 - i_b - i_r) * u_dot
+             - m_r * g_u * u - ((m_b * d_b + m_r * (q - d_r)) / q) * (gravity - g_u * u))
+    y = beta * c_B + (m_r - beta) * ca.dot(u, c_B) * u + n_leg
+    potential = -m_b * ca.dot(gravity, A + d_b * u) - m_r * ca.dot(gravity, B - d_r * u)
+    bias = ca.dot(u, c_B) + q * ca.dot(u_dot, u_dot)
+    return u, beta, m_r, y, potential, q_dot, bias
+
+
+def _symmetric_outer(a: ca.SX, k: ca.SX) -> ca.SX:
+    """``a k^T`` for ``a`` parallel to ``k``, from its upper triangle (21 products)."""
+    n = k.shape[0]
+    out = ca.SX.zeros(n, n)
+    for i in range(n):
+        for j in range(i, n):
+            out[i, j] = a[i] * k[j]
+            if j != i:
+                out[j, i] = out[i, j]
+    return out
+
+
+def _ldl_solve(M: ca.SX, b: ca.SX) -> ca.SX:
+    """``M^-1 b`` for a symmetric positive-definite ``M`` by an unrolled LDL^T."""
+    n = M.shape[0]
+    L = [[ca.SX(0)] * n for _ in range(n)]
+    D = [ca.SX(0)] * n
+    for j in range(n):
+        D[j] = M[j, j] - sum((L[j][k] * L[j][k] * D[k] for k in range(j)), ca.SX(0))
+        for i in range(j + 1, n):
+            L[i][j] = (M[i, j] - sum((L[i][k] * L[j][k] * D[k] for k in range(j)),
+                                     ca.SX(0))) / D[j]
+    y = [ca.SX(0)] * n
+    for i in range(n):
+        y[i] = b[i] - sum((L[i][k] * y[k] for k in range(i)), ca.SX(0))
+    z = [y[i] / D[i] for i in range(n)]
+    out = [ca.SX(0)] * n
+    for i in reversed(range(n)):
+        out[i] = z[i] - sum((L[k][i] * out[k] for k in range(i + 1, n)), ca.SX(0))
+    return ca.vertcat(*out)
+
+
+def _expressions() -> tuple[ca.SX, dict[str, ca.SX]]:
+    """The symbolic input row and the dynamics' terms as SX expressions of it."""
+    x = ca.SX.sym("x", ROW)
+    R = ca.reshape(x[0:9], 3, 3)
+    t = x[9:12]
+    tau = x[12:18]
+    v, w = tau[0:3], tau[3:6]
+    A = ca.reshape(x[24:42], 3, 6)
+    E = ca.reshape(x[42:60], 3, 6)
+    p = x[60:79]
+    m_p, c_p = p[0], p[1:4]
+    ixx, iyy, izz, ixy, ixz, iyz = (p[k] for k in range(4, 10))
+    I_p = ca.vertcat(ca.horzcat(ixx, ixy, ixz), ca.horzcat(ixy, iyy, iyz),
+                     ca.horzcat(ixz, iyz, izz))
+    gravity = p[16:19]
+    leg_parameters = p[10:19]
+
+    # The platform: CoM velocity v + w x R c_p, angular velocity w.
+    rc = R @ c_p
+    I_w = R @ I_p @ R.T
+    Jv = ca.jacobian(v + ca.cross(w, rc), tau)
+    Jw = ca.jacobian(w, tau)
+    M = m_p * (Jv.T @ Jv) + Jw.T @ I_w @ Jw
+    h = Jv.T @ (m_p * (ca.cross(w, ca.cross(w, rc)) - gravity)) + Jw.T @ ca.cross(w, I_w @ w)
+    potential = -m_p * ca.dot(gravity, t + rc)
+    # The legs, through their platform joints: B_dot = Jb tau, B_ddot = Jb tau_dot + c_B,
+    # Jb = [I, -[b]x], c_B = w x (w x b); Jb^T M_leg Jb = beta Jb^T Jb + (m_r - beta) k k^T
+    # with k = Jb^T u the leg's row of K, and Jb^T Jb = [[I, -[b]x], [[b]x, |b|^2 I - b b^T]]
+    # summed over the legs as sum(beta), sum(beta b) and sum(beta (|b|^2 I - b b^T)).
+    k_rows, q_dots, biases = [], [], []
+    s0, s1, s2 = ca.SX(0), ca.SX.zeros(3), ca.SX.zeros(3, 3)
+    for i in range(6):
+        b = R @ E[:, i]
+        c_B = ca.cross(w, ca.cross(w, b))
+        u, beta, m_r, y, v_leg, q_dot, bias = _leg(A[:, i], b + t, v + ca.cross(w, b), c_B,
+                                                   leg_parameters)
+        q_dots.append(q_dot)
+        biases.append(bias)
+        k = ca.vertcat(u, ca.cross(b, u))
+        s0 += beta
+        s1 += beta * b
+        s2 += beta * (ca.dot(b, b) * ca.SX.eye(3) - b @ b.T)
+        M += _symmetric_outer((m_r - beta) * k, k)
+        h += ca.vertcat(y, ca.cross(b, y))
+        potential += v_leg
+        k_rows.append(k.T)
+    M += ca.vertcat(ca.horzcat(s0 * ca.SX.eye(3), -_skew(s1)), ca.horzcat(_skew(s1), s2))
+    K = ca.vertcat(*k_rows)
+    kinetic = 0.5 * ca.dot(tau, M @ tau)
+    return x, {"M": M, "h": h, "K": K, "kinetic": kinetic, "potential": potential,
+               "q_dot": ca.vertcat(*q_dots), "leg_bias": ca.vertcat(*biases)}
+
+
+@lru_cache(maxsize=1)
+def _cached_expressions() -> tuple[ca.SX, dict[str, ca.SX]]:
+    return _expressions()
+
+
+def _build(name: str) -> ca.Function:
+    """The CasADi function ``name``: ``forward`` (acceleration, 6), ``inverse`` (leg
+    forces, their residual ``K^T f - (M acc + h)`` and ``M acc + h``: 18), ``terms``
+    (:data:`TERMS`) or ``forward_drives`` (:data:`DRIVES_ROW` inputs, 18 outputs)."""
+    x, e = _cached_expressions()
+    M, h, K = e["M"], e["h"], e["K"]
+    u = x[18:24]
+    if name == "forward":
+        return ca.Function("hexapod_dyn_forward", [x], [ca.cse(_ldl_solve(M, K.T @ u - h))])
+    if name == "inverse":
+        rhs = M @ u + h
+        f = ca.solve(K.T, rhs)
+        # the residual exposes a singular K (the solve returns finite garbage there)
+        return ca.Function("hexapod_dyn_inverse", [x],
+                           [ca.cse(ca.vertcat(f, K.T @ f - rhs, rhs))])
+    if name == "terms":
+        return ca.Function("hexapod_dyn_terms", [x], [ca.cse(ca.vertcat(
+            ca.reshape(M, 36, 1), h, ca.reshape(K, 36, 1), e["kinetic"], e["potential"],
+            e["q_dot"], e["leg_bias"]))])
+    if name == "forward_drives":
+        # Leg-space masses: a (moves with the leg, e.g. reflected rotor inertia) and b
+        # (an implicit velocity-dependent force, -dt d(force)/d(q_dot), without the bias).
+        extra = ca.SX.sym("legs", 12)
+        a, b = extra[0:6], extra[6:12]
+        leg_bias = e["leg_bias"]
+        M_eff = M + K.T @ ca.diag(a + b) @ K
+        acc = _ldl_solve(M_eff, K.T @ (u - a * leg_bias) - h)
+        return ca.Function("hexapod_dyn_forward_drives", [ca.vertcat(x, extra)],
+                           [ca.cse(ca.vertcat(acc, e["q_dot"], K @ acc + leg_bias))])
+    raise ValueError(f"unknown compiled dynamics function {name!r}; expected one of "
+                     "forward, inverse, terms, forward_drives")
+
+
+@lru_cache(maxsize=8)
+def compiled(name: str) -> CompiledFunction:
+    """One of the compiled functions (``"forward"``, ``"inverse"``, ``"terms"``,
+    ``"forward_drives"``), built and compiled on first use (the C library is cached
+    on disk by :mod:`hexapod.compiled`)."""
+    return CompiledFunction(_build(name))
+
+
+def pack(R: np.ndarray, t: np.ndarray, twist: np.ndarray, u: np.ndarray,
+         base_points: np.ndarray, platform_points: np.ndarray, parameters: np.ndarray
+         ) -> np.ndarray:
+    """Input rows (N, 79) of a batch.
+
+    Args:
+        R: (N, 3, 3) platform orientations.
+        t: (N, 3) platform positions [m].
+        twist: (N, 6) twists ``(v, w)`` [m/s, rad/s].
+        u: (N, 6) leg forces [N] or platform accelerations [m/s^2, rad/s^2].
+        base_points: (6, 3) or (N, 6, 3) ``A_i`` [m].
+        platform_points: (6, 3) or (N, 6, 3) ``eB_i`` [m].
+        parameters: (19,) or (N, 19) rows of :func:`parameter_row`.
+    """
+    n = t.shape[0]
+    rows = np.empty((n, ROW))
+    rows[:, 0:9] = np.swapaxes(R, -1, -2).reshape(n, 9)
+    rows[:, 9:12] = t
+    rows[:, 12:18] = twist
+    rows[:, 18:24] = u
+    rows[:, 24:42] = np.broadcast_to(base_points, (n, 6, 3)).reshape(n, 18)
+    rows[:, 42:60] = np.broadcast_to(platform_points, (n, 6, 3)).reshape(n, 18)
+    rows[:, 60:79] = np.broadcast_to(parameters, (n, N_PARAMETERS))
+    return rows
