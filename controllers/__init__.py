@@ -11,9 +11,16 @@ Built-in controllers are registered in :data:`controllers.base.registry` here:
   tilt constraints; CasADi, DAQP), falling back to the QP laws;
 - ``model-based``: forward kinematics of the nominal model + pose servoing;
 - ``joint-space``: leg lengths to the nominal inverse kinematics of the goal.
+
+The vision laws are (task, solver) pairs: the features are tasks
+(:mod:`controllers.tasks`), the pseudo-inverse and the limit QP are solvers
+(:mod:`controllers.solvers`), and what a law carries between periods is an estimator
+dataclass (:mod:`controllers.estimators`). A controller says what it commands
+(:class:`Actuation`: leg velocities, or leg forces).
 """
 
 from controllers.base import (
+    Actuation,
     Command,
     Controller,
     ControllerContext,
@@ -47,6 +54,7 @@ for _name, _factory in BUILTINS.items():
 
 __all__ = [
     "BUILTINS",
+    "Actuation",
     "Command",
     "Controller",
     "ControllerContext",

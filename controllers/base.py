@@ -28,6 +28,7 @@ from typing import Any
 import numpy as np
 
 from controllers.exceptions import PluginLoadError, UnknownControllerError
+from hexapod.actuation import Actuation
 from hexapod.config import suggest
 from hexapod.geometry import HexapodGeometry
 
@@ -57,6 +58,8 @@ class Observation:
         edge_visible: (6, 2) bool, which edges were observed.
         direction_visible: (6,) bool, which directions were observed.
         quality: Optional per-edge quality (e.g. fit residual), (6, 2).
+        q_dot: (6,) measured leg velocities [m/s], or None when the robot gives none
+            (a kinematic world does not; force laws need them).
     """
 
     t: float
@@ -67,6 +70,7 @@ class Observation:
     edge_visible: np.ndarray = field(default_factory=lambda: np.ones((6, 2), dtype=bool))
     direction_visible: np.ndarray = field(default_factory=lambda: np.ones(6, dtype=bool))
     quality: np.ndarray | None = None
+    q_dot: np.ndarray | None = None
 
 
 @dataclass
@@ -127,8 +131,13 @@ class ControllerContext:
 class Command:
     """A controller's output for one step, with its diagnostics.
 
+    What it commands is :attr:`actuation`: leg velocities (the default; ``velocities``)
+    or leg forces (``forces``, with ``velocities`` zeros); build a force command with
+    :meth:`of_forces`. :attr:`values` is the command of its kind.
+
     Attributes:
-        velocities: (6,) leg velocity command [m/s]; zeros when the controller refuses.
+        velocities: (6,) leg velocity command [m/s]; zeros when the controller refuses
+            or commands forces.
         twist: (6,) platform twist ``(v, w)`` in the camera frame, if the law computes one.
         error: The stacked task error.
         error_norm: Its Euclidean norm.
@@ -138,6 +147,9 @@ class Command:
         active_constraints: Names of the active constraints (QP laws).
         reason: Why the command is zero (None when the command is valid).
         notes: Other diagnostics (e.g. "using 10 of 12 edges").
+        actuation: What the command sets (:class:`~hexapod.actuation.Actuation`).
+        forces: (6,) leg force command [N] of a force command (zeros when refused),
+            else None.
     """
 
     velocities: np.ndarray
@@ -150,18 +162,35 @@ class Command:
     active_constraints: list[str] = field(default_factory=list)
     reason: str | None = None
     notes: list[str] = field(default_factory=list)
+    actuation: Actuation = Actuation.VELOCITY
+    forces: np.ndarray | None = None
 
     @property
     def ok(self) -> bool:
         """True when the controller produced a movement command."""
         return self.reason is None
 
+    @property
+    def values(self) -> np.ndarray:
+        """(6,) the command of its kind: velocities [m/s] or forces [N]."""
+        if self.actuation is Actuation.FORCE:
+            return np.zeros(6) if self.forces is None else self.forces
+        return self.velocities
+
     @staticmethod
-    def refuse(reason: str, error: np.ndarray | None = None) -> Command:
+    def of_forces(forces: np.ndarray, **diagnostics: Any) -> Command:
+        """A leg-force command [N] (``velocities`` zeros), with its diagnostics."""
+        return Command(np.zeros(6), actuation=Actuation.FORCE,
+                       forces=np.asarray(forces, dtype=float), **diagnostics)
+
+    @staticmethod
+    def refuse(reason: str, error: np.ndarray | None = None,
+               actuation: Actuation = Actuation.VELOCITY) -> Command:
         """A zero command with its reason (never NaN)."""
         err = np.zeros(0) if error is None else np.nan_to_num(error)
         return Command(np.zeros(6), reason=reason, error=err,
-                       error_norm=float(np.linalg.norm(err)))
+                       error_norm=float(np.linalg.norm(err)), actuation=actuation,
+                       forces=np.zeros(6) if actuation is Actuation.FORCE else None)
 
 
 @dataclass
@@ -178,6 +207,7 @@ class ObservationBatch:
         directions: (n, 6, 3) or None.
         edge_visible: (n, 6, 2) bool.
         direction_visible: (n, 6) bool.
+        q_dot: (n, 6) measured leg velocities [m/s], or None.
     """
 
     trials: np.ndarray
@@ -188,6 +218,7 @@ class ObservationBatch:
     directions: np.ndarray | None
     edge_visible: np.ndarray
     direction_visible: np.ndarray
+    q_dot: np.ndarray | None = None
 
     def __len__(self) -> int:
         return len(self.trials)
@@ -199,7 +230,8 @@ class ObservationBatch:
             normals=None if self.normals is None else self.normals[k],
             lines=None if self.lines is None else self.lines[k],
             directions=None if self.directions is None else self.directions[k],
-            edge_visible=self.edge_visible[k], direction_visible=self.direction_visible[k])
+            edge_visible=self.edge_visible[k], direction_visible=self.direction_visible[k],
+            q_dot=None if self.q_dot is None else self.q_dot[k])
 
 
 @dataclass
@@ -207,14 +239,26 @@ class CommandBatch:
     """The commands of :meth:`Controller.step_batch`, one row per observation row.
 
     Attributes:
-        velocities: (n, 6) leg velocities [m/s] (zeros where refused; never NaN).
+        velocities: (n, 6) leg velocities [m/s] (zeros where refused or for forces;
+            never NaN).
         error_norm: (n,) norm of each task error.
         reasons: (n,) why a command is zero (None where it is valid).
+        actuation: What every row commands (one kind per batch).
+        forces: (n, 6) leg forces [N] of a force batch (zeros where refused), else None.
     """
 
     velocities: np.ndarray
     error_norm: np.ndarray
     reasons: list[str | None]
+    actuation: Actuation = Actuation.VELOCITY
+    forces: np.ndarray | None = None
+
+    @property
+    def values(self) -> np.ndarray:
+        """(n, 6) the commands of their kind: velocities [m/s] or forces [N]."""
+        if self.actuation is Actuation.FORCE:
+            return np.zeros_like(self.velocities) if self.forces is None else self.forces
+        return self.velocities
 
     @property
     def ok(self) -> np.ndarray:
@@ -222,20 +266,33 @@ class CommandBatch:
         return np.array([r is None for r in self.reasons], dtype=bool)
 
     @staticmethod
-    def zeros(n: int) -> CommandBatch:
-        """``n`` rows of zero velocities, zero norms and no reasons, to be filled."""
-        return CommandBatch(np.zeros((n, 6)), np.zeros(n), [None] * n)
+    def zeros(n: int, actuation: Actuation = Actuation.VELOCITY) -> CommandBatch:
+        """``n`` rows of zero commands, zero norms and no reasons, to be filled."""
+        forces = np.zeros((n, 6)) if actuation is Actuation.FORCE else None
+        return CommandBatch(np.zeros((n, 6)), np.zeros(n), [None] * n, actuation, forces)
 
     def put(self, k: int, command: Command) -> None:
-        """Set row ``k`` to a per-trial :class:`Command`."""
+        """Set row ``k`` to a per-trial :class:`Command` (of the batch's actuation).
+
+        Raises:
+            ActuationError: The command is of another kind than the batch.
+        """
+        if command.actuation is not self.actuation:
+            from hexapod.actuation import check_actuation
+
+            check_actuation(command.actuation, (self.actuation,),
+                            f"a batch of {self.actuation.quantity}", "row " + str(k))
         self.velocities[k] = command.velocities
+        if self.forces is not None:
+            self.forces[k] = command.values
         self.error_norm[k] = command.error_norm
         self.reasons[k] = command.reason
 
     @staticmethod
     def from_commands(commands: list[Command]) -> CommandBatch:
-        """Stack per-trial :class:`Command` objects."""
-        out = CommandBatch.zeros(len(commands))
+        """Stack per-trial :class:`Command` objects (all of one actuation)."""
+        kind = commands[0].actuation if commands else Actuation.VELOCITY
+        out = CommandBatch.zeros(len(commands), kind)
         for k, c in enumerate(commands):
             out.put(k, c)
         return out
@@ -244,8 +301,10 @@ class CommandBatch:
 class Controller(ABC):
     """A controller: ``reset(context)`` once, then ``step(observation)`` every period.
 
-    Subclasses set ``name`` and ``features`` (subset of :data:`FEATURES`) and
-    implement :meth:`reset` and :meth:`step`. A class is its own factory: its
+    Subclasses set ``name`` and ``features`` (subset of :data:`FEATURES`), say what
+    they command in ``actuation`` (leg velocities unless set to
+    :attr:`~hexapod.actuation.Actuation.FORCE`) and implement :meth:`reset` and
+    :meth:`step`. A class is its own factory: its
     constructor takes the options as keyword arguments.
 
     A controller may also step many trials at once (the study engine calls it when
@@ -259,6 +318,8 @@ class Controller(ABC):
     name: str = "controller"
     #: Observation fields the controller needs.
     features: frozenset[str] = frozenset({"lengths"})
+    #: What the commands set: leg velocities [m/s] (default) or leg forces [N].
+    actuation: Actuation = Actuation.VELOCITY
 
     @abstractmethod
     def reset(self, context: ControllerContext) -> None:

@@ -14,6 +14,7 @@ from collections.abc import Callable, Sequence
 from typing import Any
 
 from controllers.base import (
+    Actuation,
     Command,
     CommandBatch,
     Controller,
@@ -23,6 +24,13 @@ from controllers.base import (
 )
 
 log = logging.getLogger(__name__)
+
+
+def actuation_of(controller: Any) -> Actuation:
+    """What a controller object (or a batch wrapper of one) declares it commands: its
+    ``actuation`` attribute, leg velocities when it has none (plugins written before
+    typed actuation)."""
+    return Actuation(getattr(controller, "actuation", Actuation.VELOCITY))
 
 
 def supports_batch(controller: Any) -> bool:
@@ -38,8 +46,11 @@ class PerTrialLoop:
         factory: Builds a fresh controller (with its options).
     """
 
-    def __init__(self, factory: Callable[[], Any]) -> None:
+    def __init__(self, factory: Callable[[], Any],
+                 actuation: Actuation = Actuation.VELOCITY) -> None:
         self.factory = factory
+        #: What the wrapped controllers command.
+        self.actuation = actuation
         self.controllers: list[Any] = []
         #: The last :class:`Command` of each row of the last step (diagnostics).
         self.last_commands: list[Command] = []
@@ -80,4 +91,4 @@ def batch_controller(name: str, options: dict[str, Any], batched: bool = True) -
     def factory() -> Controller:
         return first.pop() if first else registry.create(name, **options)
 
-    return PerTrialLoop(factory)
+    return PerTrialLoop(factory, actuation_of(ctrl))

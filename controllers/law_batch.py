@@ -1,83 +1,40 @@
 """The vision laws over many trials at once (``reset_batch`` / ``step_batch``).
 
-Each trial keeps its own controller instance (the per-trial object, reset with the
-trial's context), so that every case keeps exactly the per-trial behaviour. What
-changes is the common case (every feature visible and finite, the CURRENT
-interaction, a full-rank interaction matrix): there, the rows of all such trials go
-through the law's compiled core in one C loop (:meth:`hexapod.compiled.CompiledFunction.batch`,
-the same code as the per-trial :meth:`~controllers.laws.VisionLaw._step_compiled`),
-and the per-trial state (measured directions, last twist, last lengths) is kept in
-arrays. Any other row (a hidden or non-finite feature, a refusal, a QP whose
-unconstrained optimum leaves a bound, a law without a compiled core) is stepped by
-its own instance, whose state is loaded from the arrays before and saved after. The
-results are those of the per-trial loop to the last bit (tested).
+Each trial keeps its own instance of the law (built with the batch's options and reset
+with the trial's context), so that every case keeps exactly the per-trial behaviour;
+what the law carries between periods is one batch
+:class:`~controllers.estimators.LegDirectionEstimate` whose rows are the instances'
+estimates (views: a trial stepped by its instance and the same trial stepped in the
+batch write the same memory). What changes is the common case (every feature visible
+and finite, the CURRENT interaction, a full-rank interaction matrix): there, the rows
+of all such trials go through the law's compiled core in one C loop
+(:meth:`hexapod.compiled.CompiledFunction.batch`, the same code as the per-trial
+:meth:`~controllers.laws.VisionLaw.tasks`), and the estimate is updated by the
+same methods as the per-trial step. Any other row (a hidden or non-finite feature, a
+refusal, a QP whose unconstrained optimum leaves a bound, a law without a compiled
+core) is stepped by its own instance. The results are those of the per-trial loop to
+the last bit (tested).
 """
 
 from __future__ import annotations
 
-import copy
-from collections.abc import Callable, Sequence
+from collections.abc import Sequence
 from typing import Any
 
 import numpy as np
 
 from controllers.base import CommandBatch, ControllerContext, ObservationBatch
-
-#: Per-trial state of a vision law carried across steps (see ``VisionLaw``).
-STATE = ("_directions", "_observed", "_u_now", "_tau_prev", "_q_prev")
-
-
-#: Attribute values an instance may share with its copies (never changed in place).
-_SHARED = (int, float, bool, str, bytes, frozenset, tuple, type(None))
-#: The batch state of a controller (not copied into its per-trial instances): these
-#: names, and any name that starts with ``_b_`` or ``_batch``.
-BATCH_ATTRIBUTES = frozenset({"_trials", "_state", "_X", "_has_kernel", "_fn", "_slices",
-                              "_outs"})
+from controllers.estimators import LegDirectionEstimate
+from controllers.options import RemembersOptions
+from controllers.solvers.base import Solver
 
 
-def _batch_attribute(name: str) -> bool:
-    return name in BATCH_ATTRIBUTES or name.startswith(("_b_", "_batch"))
-
-
-def fresh_copy(template: Any) -> Any:
-    """A copy of a controller for one trial, independent of it for everything ``reset``
-    and ``step`` change: its arrays copied, its immutable values and frozen dataclasses
-    shared, anything else deep-copied, and its batch state left out
-    (:data:`BATCH_ATTRIBUTES`: a controller reset as a batch before would otherwise
-    copy every trial of that batch into each new one). ``copy.deepcopy`` of the whole
-    object costs about ten times as much, mostly in its generic recursion."""
-    return copier(template)()
-
-
-def copier(template: Any) -> Callable[[], Any]:
-    """:func:`fresh_copy` of ``template``, as a function to call once per trial (the
-    attributes are sorted once)."""
-    base = copy.copy(template)
-    d = base.__dict__
-    for k in [k for k in d if _batch_attribute(k)]:
-        del d[k]
-    arrays = [k for k, v in d.items() if isinstance(v, np.ndarray)]
-    deep = [k for k, v in d.items()
-            if not (isinstance(v, (np.ndarray, *_SHARED))
-                    or getattr(getattr(v, "__dataclass_params__", None), "frozen", False))]
-
-    def make() -> Any:
-        inst = copy.copy(base)
-        di = inst.__dict__
-        for k in arrays:
-            di[k] = di[k].copy()
-        for k in deep:
-            di[k] = copy.deepcopy(di[k])
-        return inst
-
-    return make
-
-
-class BatchedLaw:
+class BatchedLaw(RemembersOptions):
     """Mixin of :class:`~controllers.laws.VisionLaw`: ``reset_batch`` and ``step_batch``."""
 
     _kernel: Any
-    _trials: list[Any]
+    estimate: LegDirectionEstimate
+    solver: Solver
 
     def reset(self, context: ControllerContext) -> None:  # provided by VisionLaw
         raise NotImplementedError
@@ -88,45 +45,37 @@ class BatchedLaw:
         of rows whose features are all visible. (None, None): no compiled core."""
         return None, None
 
-    def _batch_accept(self, trials: np.ndarray, q: np.ndarray, qdot: np.ndarray
-                      ) -> np.ndarray:
-        """(n,) rows whose compiled result is the command as is (the QP laws check their
-        bounds here)."""
-        return np.ones(len(trials), dtype=bool)
-
     def _batch_reset_extra(self) -> None:
-        """Per-trial constants of subclasses (the QP bounds)."""
+        """Per-trial constants of subclasses (the solver's are gathered by
+        :meth:`~controllers.solvers.base.Solver.batch_reset`)."""
 
     # ------------------------------------------------------------------ reset
     def reset_batch(self, contexts: Sequence[ControllerContext]) -> None:
-        """One instance per context (copies of this un-reset controller), reset with it.
+        """One instance per context (built with this controller's options), reset with it.
 
         Raises:
             ContextError: A context the law cannot use (as :meth:`reset`).
         """
-        make = copier(fresh_copy(self))
-        self._trials = []
-        for ctx in contexts:
-            inst = make()
-            inst.reset(ctx)
-            self._trials.append(inst)
+        self._trials: list[Any] = self.clones_reset(contexts)
         trials = self._trials
         n = len(trials)
-        self._state = {a: np.array([np.array(getattr(t, a), dtype=float) for t in trials])
-                       for a in STATE}
-        self._state["_observed"] = self._state["_observed"].astype(bool)
+        #: The estimates of every trial (the instances' estimates are its rows).
+        self.batch_estimate = LegDirectionEstimate.fresh(n)
+        for k, inst in enumerate(trials):
+            inst.estimate = self.batch_estimate.row(k)
         kernels = [t._kernel for t in trials]
         self._has_kernel = np.array([k is not None for k in kernels], dtype=bool)
         self._fn = None
         if self._has_kernel.any():
             first = next(k for k in kernels if k is not None)
             self._fn = first.lean_function
-            self._slices = first._slices
-            self._outs = first._out
+            self._slices = first.slices
+            self._outs = first.outputs
             self._X = np.zeros((n, first.function.n_in))
             for k, kern in enumerate(kernels):
                 if kern is not None:
-                    self._X[k] = kern._x
+                    self._X[k] = kern.input_vector
+        self.solver.batch_reset([t.solver for t in trials])
         self._batch_reset_extra()
 
     # ------------------------------------------------------------------ step
@@ -150,7 +99,7 @@ class BatchedLaw:
                                   out.error_norm)
                 slow[rows[done]] = False
         for k in np.flatnonzero(slow):
-            out.put(int(k), self._step_one(int(trials[k]), obs, int(k)))
+            out.put(int(k), self._trials[int(trials[k])].step(obs.item(int(k))))
         return out
 
     def _fast(self, rows: np.ndarray, trials: np.ndarray, feats: np.ndarray, q: np.ndarray,
@@ -165,30 +114,15 @@ class BatchedLaw:
         with np.errstate(invalid="ignore"):
             ok = (np.isfinite(Y[:, o["error_norm"].start]) & np.isfinite(Y[:, o["n_sum"].start])
                   & (Y[:, o["rank"].start] >= 6) & (Y[:, o["qdot_check"].start] == 0.0))
-        ok &= self._batch_accept(trials, q, Y[:, o["qdot"]])
+        ok &= self.solver.batch_accept(trials, q, Y[:, o["qdot"]])
         if ok.all():  # the common case: no row copies
             Ya, tr, qa, ra = Y, trials, q, rows
         else:
             acc = np.flatnonzero(ok)
             Ya, tr, qa, ra = Y[acc], trials[acc], q[acc], rows[acc]
-        directions = Ya[:, o["directions"]].reshape(-1, 6, 3)
-        st = self._state
-        st["_directions"][tr] = directions
-        st["_observed"][tr] = True
-        st["_u_now"][tr] = directions
-        st["_tau_prev"][tr] = Ya[:, o["tau"]]
-        st["_q_prev"][tr] = qa
+        est = self.batch_estimate
+        est.measured_all(Ya[:, o["directions"]].reshape(-1, 6, 3), tr)
+        est.commanded(Ya[:, o["tau"]], qa, tr)
         velocities[ra] = Ya[:, o["qdot"]]
         norms[ra] = Ya[:, o["error_norm"].start]
         return ok
-
-    def _step_one(self, trial: int, obs: ObservationBatch, k: int) -> Any:
-        """Step one trial with its own instance (state loaded, stepped, saved)."""
-        inst = self._trials[trial]
-        st = self._state
-        for a in STATE:
-            setattr(inst, a, st[a][trial].copy())
-        cmd = inst.step(obs.item(k))
-        for a in STATE:
-            st[a][trial] = getattr(inst, a)
-        return cmd

@@ -398,11 +398,14 @@ class LawKernel:
         self.function = function
         self._lean = lean
         n_feat = sum(s for _, s in feature_inputs)
-        self._x = np.zeros(function.n_in)
-        self._slices = {**_offsets(feature_inputs), **_offsets(LAW_INPUTS, n_feat)}
+        #: The input vector (constants set once, features and lengths each step).
+        self.input_vector = np.zeros(function.n_in)
+        #: Where each named input lies in :attr:`input_vector`.
+        self.slices = {**_offsets(feature_inputs), **_offsets(LAW_INPUTS, n_feat)}
         #: Views of the input vector by name (write into them).
-        self.inputs = {k: self._x[s] for k, s in self._slices.items()}
-        self._out = _offsets((("error", n_error), *LAW_OUTPUTS, ("directions", 18)))
+        self.inputs = {k: self.input_vector[s] for k, s in self.slices.items()}
+        #: Where each named output lies in the output vector.
+        self.outputs = _offsets((("error", n_error), *LAW_OUTPUTS, ("directions", 18)))
 
     @property
     def lean_function(self) -> CompiledFunction:
@@ -420,8 +423,8 @@ class LawKernel:
 
     def evaluate(self) -> LawResult:
         """One call of the core on the current inputs."""
-        y = self.function.single(self._x)
-        o = self._out
+        y = self.function.single(self.input_vector)
+        o = self.outputs
         return LawResult(
             error=y[o["error"]], error_norm=float(y[o["error_norm"].start]),
             n_sum=float(y[o["n_sum"].start]), rank=int(y[o["rank"].start]),

@@ -19,7 +19,7 @@ number of numpy calls, not the arithmetic. In the common case (every feature
 visible, CURRENT interaction) a law hands the measured features to its compiled
 core (:mod:`controllers.law_kernel`, CasADi generated to C, one ctypes call of a
 few microseconds: error, ``L^T L``, ``L^T e``, gain, eigen-solve with rank and
-condition, ``J_inv``, ``q_dot``) and :meth:`VisionLaw._step_compiled` only wraps the
+condition, ``J_inv``, ``q_dot``) and :meth:`VisionLaw.tasks` only wraps the
 result in a :class:`~controllers.base.Command`. Every other case runs the numpy
 path below, which is the reference the compiled core is tested against.
 """
@@ -30,6 +30,7 @@ import logging
 import math
 from abc import abstractmethod
 from collections.abc import Sequence
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -39,15 +40,14 @@ from controllers.base import (
     ControllerContext,
     Observation,
 )
+from controllers.estimators import LegDirectionEstimate, PoseEstimate
 from controllers.exceptions import ContextError, OptionError
-from controllers.interaction import direction_interaction
 from controllers.law_batch import BatchedLaw
 from controllers.law_kernel import LawKernel, LawResult
 from controllers.law_tools import (
     INTERACTIONS,
     Gain,
     Stack,
-    _unit_rows,
     check_choice,
     check_number,
     check_observation,
@@ -56,6 +56,8 @@ from controllers.law_tools import (
     solve_normal,
     solve_normal_damped,
 )
+from controllers.solvers.base import Solver
+from controllers.solvers.pseudo_inverse import DampedPseudoInverse
 
 __all__ = [
     "INTERACTIONS", "Gain", "Stack", "VisionLaw", "check_choice", "check_number",
@@ -66,12 +68,40 @@ __all__ = [
 log = logging.getLogger(__name__)
 
 
+@dataclass(slots=True)
+class TaskStep:
+    """The stacked tasks of one period, as a solver takes them (:meth:`VisionLaw.tasks`).
+
+    Attributes:
+        error: (m,) stacked error ``e`` of the used features.
+        error_norm: ``|e|``.
+        normal: (6, 6) ``L^T L`` of the stacked interaction matrix ``L``.
+        gradient: (6,) ``L^T e``.
+        gain: ``lambda(|e|_inf)`` [1/s].
+        inverse_jacobian: (6, 6) ``J_inv`` (rows ``[u_i^T, (A_i x u_i)^T]``), at the
+            directions of ``estimate.in_use``.
+        notes: Diagnostics (features used, predicted or approximated directions).
+        compiled: The compiled core's full result (its classical solution, rank,
+            condition) when it computed the period, else None.
+    """
+
+    error: np.ndarray
+    error_norm: float
+    normal: np.ndarray
+    gradient: np.ndarray
+    gain: float
+    inverse_jacobian: np.ndarray
+    notes: list[str]
+    compiled: LawResult | None
+
+
 class VisionLaw(BatchedLaw, Controller):
     """Base of the image-based laws: ``tau = -lambda L^+ e``, ``q_dot = J_inv tau``.
 
     Subclasses implement :meth:`_reset_features` (read the goal) and
     :meth:`_stack` (error and interaction blocks, visibility, current leg
-    directions in ``self._directions``). :meth:`_solve` may be overridden (QP).
+    directions in the estimate). The solver (:attr:`solver`, the damped pseudo-inverse by
+    default) turns the tasks into a twist: the QP laws set the limit QP there.
 
     Args:
         gain: Constant gain ``lambda`` [1/s].
@@ -95,15 +125,18 @@ class VisionLaw(BatchedLaw, Controller):
         if self.threshold >= 1.0:
             raise OptionError(self.name, "threshold", f"must be < 1, got {self.threshold}")
         self.damping = check_number(self.name, "damping", damping, 0.0, strict=False)
+        #: What turns the tasks into a twist (the QP laws put the limit QP here).
+        self.solver: Solver = DampedPseudoInverse(self.threshold, self.damping)
         self.context: ControllerContext | None = None
         self._A = np.zeros((6, 3))
         self._dt = 0.0
-        self._directions = np.full((6, 3), np.nan)  # measured (or dead-reckoned) u_i
-        self._u_now = np.full((6, 3), np.nan)  # u_i used by J_inv this step
-        self._observed = np.zeros(6, dtype=bool)  # legs whose u_i was measured this step
+        #: The leg directions known between periods (a row of the batch's estimate when
+        #: stepped in a batch).
+        self.estimate = LegDirectionEstimate.fresh()
+        #: Last nominal-model pose (warm start of the forward kinematics that predicts
+        #: the directions of never-seen legs), None before the first.
+        self.model_pose: PoseEstimate | None = None
         self._J = np.zeros((6, 6))
-        self._tau_prev = np.zeros(6)
-        self._q_prev = np.ones(6)
         #: Compiled core of the common case (:mod:`controllers.law_kernel`), set by the
         #: subclass in :meth:`_reset_features`; None: numpy path only.
         self._kernel: LawKernel | None = None
@@ -125,10 +158,8 @@ class VisionLaw(BatchedLaw, Controller):
         self.context = context
         self._A = A.copy()
         self._dt = dt
-        self._directions = np.full((6, 3), np.nan)
-        self._observed = np.zeros(6, dtype=bool)
-        self._tau_prev = np.zeros(6)
-        self._model_pose: tuple[np.ndarray, np.ndarray] | None = None
+        self.estimate = LegDirectionEstimate.fresh()
+        self.model_pose = None
         q_star = context.goal.lengths
         self._q_star: np.ndarray | None = None
         if q_star is not None:
@@ -139,15 +170,31 @@ class VisionLaw(BatchedLaw, Controller):
             self._q_star = qs
         self._kernel = None
         self._reset_features(context)
+        self.solver.reset(context, self.name, dt)
         if self._kernel is not None:
             g = self.gain
             self._kernel.set("gain", (g.at_zero, g.at_infinity, g.slope_at_zero))
             self._kernel.set("threshold2", self.threshold * self.threshold)
-            self._kernel.set("damping2", self._damping2())
+            self._kernel.set("damping2", self.solver.damping2)
 
-    def _damping2(self) -> float:
-        """``mu^2`` added to the eigenvalues of ``L^T L`` by the solve."""
-        return self.damping * self.damping
+    @property
+    def base_points(self) -> np.ndarray:
+        """(6, 3) the estimated base points ``A_i`` in the camera frame [m] (after reset)."""
+        return self._A
+
+    @property
+    def dt(self) -> float:
+        """Control period [s] (after reset)."""
+        return self._dt
+
+    def desired_features(self) -> np.ndarray:
+        """(nf, 3) the desired features, one row per feature (zeros where unknown)."""
+        raise NotImplementedError
+
+    def measured_features(self, obs: Observation) -> tuple[np.ndarray, np.ndarray]:
+        """(nf, 3) the measured features of an observation and (nf,) which are usable
+        (observed now and in the goal)."""
+        raise NotImplementedError
 
     @abstractmethod
     def _reset_features(self, context: ControllerContext) -> None:
@@ -157,42 +204,64 @@ class VisionLaw(BatchedLaw, Controller):
     def _stack(self, obs: Observation, q: np.ndarray) -> Stack | str:
         """Error and interaction blocks, or the reason why none can be built.
 
-        Must also set ``self._directions`` (6, 3) (measured leg directions, the
-        dead-reckoned value for hidden legs, NaN if never seen), ``self._observed``
-        (legs measured this step) and ``self._u_now`` (the directions ``J_inv``
-        uses this step: ``self._directions``, or an approximation from the goal
-        for legs never seen; NaN when unknown).
+        Must also update ``self.estimate`` (:class:`LegDirectionEstimate`): the
+        measured leg directions (dead-reckoned for hidden legs, NaN if never seen),
+        the legs measured this step, and the directions ``J_inv`` uses this step
+        (or an approximation from the goal for legs never seen; NaN when unknown).
         """
 
     # ----------------------------------------------------------------- step
     def _check(self, obs: Observation) -> str | None:
         return check_observation(obs, self.features)
 
-    def step(self, observation: Observation) -> Command:
-        """One period: ``q_dot = J_inv (-lambda L^+ e)`` (never raises for bad measurements)."""
-        if self.context is None:
-            return Command.refuse(f"{self.name}: reset(context) was not called")
+    def checked_lengths(self, observation: Observation) -> np.ndarray | Command:
+        """The measured lengths (6,) [m], or the refusal of an unusable observation (then
+        nothing is commanded this period: the estimate's twist is zeroed)."""
         problem = self._check(observation)
         if problem is not None:
-            self._tau_prev[:] = 0.0  # no motion commanded
+            self.estimate.halted()  # no motion commanded
             return Command.refuse(problem)
         q = np.asarray(observation.lengths, dtype=float)
         if q.min() <= 0:
-            self._tau_prev[:] = 0.0
+            self.estimate.halted()
             return Command.refuse(f"lengths: non-positive leg length {float(q.min())} m")
-        if self._kernel is not None and self._load_kernel(observation, q):
-            return self._step_compiled(self._kernel, q)
-        st = self._stack(observation, q)  # uses _tau_prev to dead-reckon hidden legs
-        self._tau_prev[:] = 0.0  # until a command is actually sent
+        return q
+
+    def tasks(self, observation: Observation, q: np.ndarray) -> TaskStep | Command:
+        """This period's tasks for a solver, or the refusal of why none can be built.
+
+        The part of a step every solver shares (the pseudo-inverse of :meth:`step`, the
+        limit QP, the predictive controller): the features of a usable observation
+        (:meth:`checked_lengths`) go through the compiled core when it applies
+        (:meth:`_load_kernel`), else through :meth:`_stack`; the estimate is updated
+        (measured and dead-reckoned directions, nothing commanded yet), and the inverse
+        Jacobian is built, with the nominal model's directions for legs never seen
+        (then written to ``estimate.in_use``).
+
+        Args:
+            observation: The observation.
+            q: Its lengths from :meth:`checked_lengths` [m].
+        """
+        est = self.estimate
+        kernel = self._kernel
+        if kernel is not None and self._load_kernel(observation, q):
+            r = kernel.evaluate()
+            est.halted()  # until a command is actually sent
+            est.measured_all(r.directions)
+            if not (math.isfinite(r.error_norm) and math.isfinite(r.n_sum)):
+                return Command.refuse("non-finite error or interaction matrix (degenerate "
+                                      "features)", r.error)
+            return TaskStep(r.error, r.error_norm, r.N, r.b, r.gain, r.J, [], r)
+        st = self._stack(observation, q)  # dead-reckons hidden legs with the last twist
+        est.halted()  # until a command is actually sent
         if isinstance(st, str):
             return Command.refuse(st)
         e, N, b = st.normal_equations()
-        rows = e.shape[0]
         error_norm = math.sqrt(float(e @ e))
         if not (math.isfinite(error_norm) and math.isfinite(float(N.sum()))):
             return Command.refuse("non-finite error or interaction matrix (degenerate features)",
                                   e)
-        u = self._u_now
+        u = est.in_use
         unknown = np.flatnonzero(~np.isfinite(u[:, 0]))
         if len(unknown):
             model = self._model_directions(q)
@@ -202,37 +271,34 @@ class VisionLaw(BatchedLaw, Controller):
                                       "prediction): cannot build the inverse Jacobian", e)
             u = u.copy()
             u[unknown] = model[unknown]
+            est.in_use[:] = u
             st.notes.append("nominal-model directions (forward kinematics of the measured "
                             "lengths) for never-seen legs "
                             + ", ".join(str(int(i)) for i in unknown))
         J = inverse_jacobian_into(self._J, self._A, u)
         lam = self.gain(float(np.abs(e).max()) if e.size else 0.0)
-        return self._command(self._solve(N, b, lam, q, J, None), J, e, error_norm, rows, q,
-                             st.notes)
+        return TaskStep(e, error_norm, N, b, lam, J, st.notes, None)
 
-    def _step_compiled(self, kernel: LawKernel, q: np.ndarray) -> Command:
-        """The common case in one call of the compiled core (same result as the numpy path).
-
-        The subclass has written the measured features into the kernel's inputs
-        (:meth:`_load_kernel`).
-        """
-        r = kernel.evaluate()
-        self._tau_prev[:] = 0.0  # until a command is actually sent
-        self._directions[:] = r.directions
-        self._observed[:] = True
-        self._u_now = r.directions
-        e = r.error
-        if not (math.isfinite(r.error_norm) and math.isfinite(r.n_sum)):
-            return Command.refuse("non-finite error or interaction matrix (degenerate features)",
-                                  e)
-        return self._command(self._solve(r.N, r.b, r.gain, q, r.J, r), r.J, e, r.error_norm,
-                             e.shape[0], q, [])
+    def step(self, observation: Observation) -> Command:
+        """One period: ``q_dot = J_inv (-lambda L^+ e)`` (never raises for bad measurements)."""
+        if self.context is None:
+            return Command.refuse(f"{self.name}: reset(context) was not called")
+        q = self.checked_lengths(observation)
+        if isinstance(q, Command):
+            return q
+        ts = self.tasks(observation, q)
+        if isinstance(ts, Command):
+            return ts
+        J, e = ts.inverse_jacobian, ts.error
+        return self._command(self.solver.solve(ts.normal, ts.gradient, ts.gain, q, J,
+                                               ts.compiled),
+                             J, e, ts.error_norm, e.shape[0], q, ts.notes)
 
     def _command(self, solved: tuple[np.ndarray, int, float, list[str], str | None,
                                      np.ndarray | None],
                  J: np.ndarray, e: np.ndarray, error_norm: float, rows: int, q: np.ndarray,
                  notes: list[str]) -> Command:
-        """The command (or the refusal) from the output of :meth:`_solve`."""
+        """The command (or the refusal) from the solver's output."""
         tau, rank, cond, active, reason, qdot = solved
         if reason is not None or rank < 6:
             if reason is None:
@@ -242,11 +308,10 @@ class VisionLaw(BatchedLaw, Controller):
                            condition=cond, features_used=rows, reason=reason,
                            notes=notes, active_constraints=active)
         if qdot is None:
-            qdot = self._finish(J @ tau)
+            qdot = self.solver.finish(J @ tau)
             if not np.all(np.isfinite(qdot)):
                 return Command.refuse("non-finite command (numerical failure)", e)
-        self._tau_prev[:] = tau
-        self._q_prev[:] = q
+        self.estimate.commanded(tau, q)
         return Command(qdot, twist=tau, error=e, error_norm=error_norm, rank=rank,
                        condition=cond, features_used=rows, notes=notes,
                        active_constraints=active)
@@ -279,55 +344,13 @@ class VisionLaw(BatchedLaw, Controller):
         from hexapod.kinematics import legs_in_frame
 
         try:
-            sol = forward_kinematics(ctx.geometry, q, guess=getattr(self, "_model_pose", None),
-                                     check_stroke=False)
+            sol = forward_kinematics(ctx.geometry, q, check_stroke=False,
+                                     guess=None if self.model_pose is None
+                                     else self.model_pose.pose)
         except HexapodError:
             return None
-        self._model_pose = (sol.rotation, sol.translation)
+        self.model_pose = PoseEstimate(sol.rotation, sol.translation)
         return legs_in_frame(ctx.geometry, sol.rotation, sol.translation, pose).directions
-
-    def _solve(self, N: np.ndarray, b: np.ndarray, lam: float, q: np.ndarray, J: np.ndarray,
-               pre: LawResult | None) -> tuple[np.ndarray, int, float, list[str], str | None,
-                                               np.ndarray | None]:
-        """The classical law: ``tau = -lambda L^+ e`` from ``N = L^T L`` and ``b = L^T e``.
-
-        Args:
-            N: (6, 6) ``L^T L``.
-            b: (6,) ``L^T e``.
-            lam: Gain [1/s].
-            q: (6,) measured lengths [m].
-            J: (6, 6) inverse Jacobian (``self._J`` on the numpy path).
-            pre: The compiled core's result (classical solution, rank, condition,
-                ``q_dot``), or None on the numpy path.
-
-        Returns:
-            ``tau`` (6,), rank, condition, active constraints, refusal reason (or None),
-            and the final ``q_dot`` (6,) when already computed and checked finite (None:
-            ``_finish(J tau)`` is computed and checked by the caller).
-        """
-        if pre is not None:
-            qdot = self._finish(pre.qdot) if pre.qdot_finite else None
-            return pre.tau, pre.rank, pre.condition, [], None, qdot
-        x, rank, cond = solve_normal(N, b, self.threshold, self.damping)
-        x *= -lam
-        return x, rank, cond, [], None, None
-
-    def _finish(self, qdot: np.ndarray) -> np.ndarray:
-        """Last touch on the leg velocities (identity; the QP laws clip to their bounds)."""
-        return qdot
-
-    def _predict_hidden(self, hidden: np.ndarray) -> None:
-        """Dead-reckon the directions of hidden legs over the last period.
-
-        ``u += dt M_i(u, q_prev) tau_prev`` with the twist commanded at the previous
-        step (zero if the law refused). Call before overwriting the observed ones.
-        """
-        hidden = hidden & np.isfinite(self._directions[:, 0])
-        if not hidden.any() or not np.any(self._tau_prev):
-            return
-        u = self._directions[hidden]
-        M = direction_interaction(self._A[hidden], u, self._q_prev[hidden])
-        self._directions[hidden] = _unit_rows(u + self._dt * (M @ self._tau_prev))
 
     # ----------------------------------------------------------------- helpers
     def _desired_lengths(self, q: np.ndarray) -> np.ndarray:

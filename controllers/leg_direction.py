@@ -73,6 +73,15 @@ class LegDirectionController(VisionLaw):
             self._k_features = kernel.inputs["features"].reshape(6, 3)
             self._k_lengths = kernel.inputs["lengths"]
 
+    def desired_features(self) -> np.ndarray:
+        """(6, 3) the desired leg directions (zeros where unknown)."""
+        return np.asarray(self._u_star, dtype=float)
+
+    def measured_features(self, obs: Observation) -> tuple[np.ndarray, np.ndarray]:
+        """(6, 3) measured leg directions and (6,) which are usable."""
+        vis = np.asarray(obs.direction_visible, dtype=bool) & self._goal_visible
+        return np.asarray(obs.directions, dtype=float), vis
+
     def _batch_features(self, obs: ObservationBatch) -> tuple[np.ndarray | None,
                                                                np.ndarray | None]:
         if obs.directions is None:
@@ -94,21 +103,21 @@ class LegDirectionController(VisionLaw):
         vis = np.asarray(obs.direction_visible, dtype=bool) & self._goal_visible
         notes: list[str] = []
         all_visible = bool(vis.all())
+        est = self.estimate
         if all_visible:
             u = u_obs
-            self._directions[:] = u_obs
-            self._u_now = u_obs
-            self._observed[:] = True
+            est.measured_all(u_obs)
         else:
-            self._predict_hidden(~vis)
-            self._directions[vis] = u_obs[vis]
-            self._observed[:] = vis
+            est.predict_hidden(~vis, self._A, self._dt)
+            est.directions[vis] = u_obs[vis]
+            est.observed[:] = vis
             u = np.where(vis[:, None], u_obs, self._fill)
             notes.append(self._usage_note(vis, 6))
-            known = np.isfinite(self._directions[:, 0])
+            known = np.isfinite(est.directions[:, 0])
             # J_inv of a leg never seen: its desired direction (exact at the goal).
-            self._u_now = np.where(known[:, None], self._directions,
-                                   np.where(self._goal_visible[:, None], self._u_star, np.nan))
+            est.in_use[:] = np.where(known[:, None], est.directions,
+                                     np.where(self._goal_visible[:, None], self._u_star,
+                                              np.nan))
             predicted = np.flatnonzero(~vis & known)
             if len(predicted):
                 notes.append("predicted directions of hidden legs "

@@ -197,16 +197,16 @@ class LegEdgeController(VisionLaw):
             n = feat
             star = self._n_star
         u_edges = _unit(cross(n[:, 1], n[:, 0]))
+        est = self.estimate
         if all_visible:
-            self._directions[:] = u_edges
-            self._observed[:] = True
-            self._u_now = u = u_edges
+            est.measured_all(u_edges)
+            u = u_edges
         else:
             both: np.ndarray = np.all(vis, axis=1)
-            self._predict_hidden(~both)
-            self._directions[both] = u_edges[both]
-            self._observed[:] = both
-            known = np.isfinite(self._directions[:, 0])
+            est.predict_hidden(~both, self._A, self._dt)
+            est.directions[both] = u_edges[both]
+            est.observed[:] = both
+            known = np.isfinite(est.directions[:, 0])
             # A leg never seen whole: its desired direction, projected on the plane of its
             # visible edge if it has one (exact at the goal).
             us = self._u_star
@@ -215,9 +215,9 @@ class LegEdgeController(VisionLaw):
             proj = np.where(one[:, None], _unit(us - np.einsum("ik,ik->i", us, n_vis)[:, None]
                                                 * n_vis), us)
             approx: np.ndarray = ~known & np.isfinite(self._u_star_known[:, 0])
-            u = np.where(known[:, None], self._directions,
+            u = np.where(known[:, None], est.directions,
                          np.where(approx[:, None], proj, u_edges))
-            self._u_now = np.where((known | approx)[:, None], u, np.nan)
+            est.in_use[:] = np.where((known | approx)[:, None], u, np.nan)
             vis = vis & (known | approx)[:, None]
             notes.append(self._usage_note(vis, 12))
             predicted = np.flatnonzero(~both & known)
@@ -239,6 +239,22 @@ class LegEdgeController(VisionLaw):
                 a, g = self._current_factors(feat, n, u, q)
                 L = 0.5 * (L + a[:, :, None] * g[:, None, :])
         return Stack(e, L, used, notes)
+
+    @property
+    def line_matrix(self) -> np.ndarray:
+        """(3, 3) the matrix mapping normals to image lines (identity for normals)."""
+        return self._K
+
+    def desired_features(self) -> np.ndarray:
+        """(12, 3) the desired lines or normals (zeros where unknown)."""
+        star = self._l_star if self.use_lines else self._n_star
+        return np.asarray(star, dtype=float).reshape(12, 3)
+
+    def measured_features(self, obs: Observation) -> tuple[np.ndarray, np.ndarray]:
+        """(12, 3) measured lines or normals and (12,) which are usable."""
+        vis = (np.asarray(obs.edge_visible, dtype=bool) & self._goal_visible).reshape(12)
+        feats = obs.lines if self.use_lines else obs.normals
+        return np.asarray(feats, dtype=float).reshape(12, 3), vis
 
     def _batch_reset_extra(self) -> None:
         super()._batch_reset_extra()

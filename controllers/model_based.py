@@ -37,10 +37,12 @@ from controllers.base import (
     Observation,
     ObservationBatch,
 )
+from controllers.estimators import PoseEstimate
 from controllers.exceptions import ContextError
 from controllers.interaction import cross
 from controllers.law_kernel import jacobi_eigen
 from controllers.laws import Gain, check_number, check_observation
+from controllers.options import RemembersOptions
 from hexapod.compiled import CompiledFunction
 from hexapod.exceptions import HexapodError
 from hexapod.fk import forward_kinematics, forward_kinematics_batch
@@ -112,7 +114,7 @@ def pose_servo_kernel() -> CompiledFunction:
     return CompiledFunction(_pose_servo_function())
 
 
-class ModelBasedController(Controller):
+class ModelBasedController(RemembersOptions, Controller):
     """Forward kinematics of the measured lengths (nominal geometry) + pose servoing.
 
     Args:
@@ -169,7 +171,8 @@ class ModelBasedController(Controller):
             raise ContextError(self.name, "goal", "needs rotation and translation (or lengths)")
         self.context = context
         self._R_star, self._t_star = R.copy(), t.copy()
-        self._R, self._t = home_pose(geo)
+        #: The last pose of the forward kinematics (its next warm start).
+        self.estimate = PoseEstimate.of(*home_pose(geo))
         self._A = np.asarray(geo.base_points, dtype=float)
         self._E = np.asarray(geo.platform_points, dtype=float)
         cam: Any = context.camera
@@ -195,16 +198,17 @@ class ModelBasedController(Controller):
         if problem is not None:
             return Command.refuse(problem)
         q = np.asarray(observation.lengths, dtype=float)
+        est = self.estimate
         try:
-            sol = forward_kinematics(self.context.geometry, q, guess=(self._R, self._t),
+            sol = forward_kinematics(self.context.geometry, q, guess=est.pose,
                                      method="newton", tol=self.fk_tolerance,
                                      max_iterations=self.fk_max_iterations, check_stroke=False)
         except HexapodError as exc:
             # The next step starts again from the home pose.
-            self._R, self._t = home_pose(self.context.geometry)
+            est.set(*home_pose(self.context.geometry))
             return Command.refuse(f"forward kinematics failed: {exc}")
         R, t = sol.rotation, sol.translation
-        self._R, self._t = R, t
+        est.set(R, t)
         notes = [f"forward kinematics: {sol.iterations} iterations"]
         if self._kernel is not None:
             x = self._x
@@ -242,18 +246,16 @@ class ModelBasedController(Controller):
 
     # ------------------------------------------------------------------ batch
     def reset_batch(self, contexts: Sequence[ControllerContext]) -> None:
-        """One instance per context (copies of this un-reset controller), reset with it."""
-        from controllers.law_batch import copier, fresh_copy
-
-        make = copier(fresh_copy(self))
-        self._trials: list[ModelBasedController] = []
-        for ctx in contexts:
-            inst = make()
-            inst.reset(ctx)
-            self._trials.append(inst)
+        """One instance per context (built with this controller's options), reset with it;
+        their pose estimates are the rows of one batch estimate."""
+        self._trials: list[ModelBasedController] = self.clones_reset(contexts)
         trials = self._trials
-        self._b_R = np.array([t._R for t in trials])
-        self._b_t = np.array([t._t for t in trials])
+        #: The forward-kinematics warm starts of every trial (the instances' rows).
+        self.batch_estimate = PoseEstimate.of(
+            np.array([t.estimate.rotation for t in trials]).reshape(-1, 3, 3),
+            np.array([t.estimate.translation for t in trials]).reshape(-1, 3))
+        for k, inst in enumerate(trials):
+            inst.estimate = self.batch_estimate.row(k)
         self._b_A = np.array([t._A for t in trials])
         self._b_E = np.array([t._E for t in trials])
         self._b_geometry = trials[0].context.geometry if trials and trials[0].context else None
@@ -276,8 +278,9 @@ class ModelBasedController(Controller):
         rows = np.flatnonzero(fast) if self._b_kernel else np.zeros(0, dtype=int)
         if len(rows) and self._b_geometry is not None:
             tr = trials[rows]
-            sol = forward_kinematics_batch(self._b_geometry, q[rows], self._b_R[tr],
-                                           self._b_t[tr], tol=self.fk_tolerance,
+            est = self.batch_estimate
+            sol = forward_kinematics_batch(self._b_geometry, q[rows], est.rotation[tr],
+                                           est.translation[tr], tol=self.fk_tolerance,
                                            max_iterations=self.fk_max_iterations,
                                            base_points=self._b_A[tr],
                                            platform_points=self._b_E[tr])
@@ -288,15 +291,10 @@ class ModelBasedController(Controller):
             ok = (sol.converged & (Y[:, _AT["near_pi"]] == 0.0)
                   & (Y[:, _AT["check"]] == 0.0))
             acc = np.flatnonzero(ok)
-            self._b_R[tr[acc]] = sol.rotations[acc]
-            self._b_t[tr[acc]] = sol.translations[acc]
+            est.set(sol.rotations[acc], sol.translations[acc], tr[acc])
             out.velocities[rows[acc]] = Y[acc][:, _OUT["qdot"]]
             out.error_norm[rows[acc]] = Y[acc, _AT["norm"]]
             slow[rows[acc]] = False
         for k in np.flatnonzero(slow):
-            t = int(trials[k])
-            inst = self._trials[t]
-            inst._R, inst._t = self._b_R[t].copy(), self._b_t[t].copy()
-            out.put(int(k), inst.step(obs.item(int(k))))
-            self._b_R[t], self._b_t[t] = inst._R, inst._t
+            out.put(int(k), self._trials[int(trials[k])].step(obs.item(int(k))))
         return out

@@ -176,6 +176,32 @@ class BackendError(HexapodError):
     """A robot backend failed (communication, protocol or robot error)."""
 
 
+class ActuationError(BackendError, ValueError):
+    """A command of a kind (leg velocities or forces) that its receiver cannot apply.
+
+    Attributes:
+        controller: The controller (name or label) that commands it.
+        actuation: What it commands (``"velocity"`` or ``"force"``).
+        accepted: What the receiver applies.
+        receiver: The world, backend or board that refuses it.
+    """
+
+    def __init__(self, controller: str, actuation: str, accepted: tuple[Any, ...],
+                 receiver: str, problem: str | None = None, quantity: str | None = None,
+                 accepted_quantities: list[str] | None = None) -> None:
+        self.controller = controller
+        self.actuation = actuation
+        self.accepted = accepted
+        self.receiver = receiver
+        if problem is None:
+            what = quantity or actuation
+            can = " or ".join(accepted_quantities or [str(a) for a in accepted])
+            problem = (f"controller '{controller}' commands {what}, but {receiver} applies "
+                       f"only {can} (a command is never converted from one kind to the "
+                       f"other)")
+        super().__init__(problem)
+
+
 class UnknownBackendError(BackendError, KeyError):
     """No backend is registered under this name.
 

@@ -1,8 +1,12 @@
-"""Vision: cameras (perspective, unified), cylindrical legs as image features, noise,
-estimation of interpretation-plane normals (``docs/math.md`` sections 4, 5 and 8)."""
+"""Vision: cameras (perspective, unified, fisheye, double sphere, extended unified),
+cylindrical legs as image features, noise, estimation of interpretation-plane normals
+(``docs/math.md`` sections 4, 5 and 8)."""
 
 from vision.cameras import (
     Camera,
+    DoubleSphereCamera,
+    ExtendedUnifiedCamera,
+    FisheyeCamera,
     PerspectiveCamera,
     UnifiedCamera,
     camera_preset,
@@ -45,8 +49,11 @@ __all__ = [
     "Camera",
     "CameraError",
     "DistortionError",
+    "DoubleSphereCamera",
     "EdgePoints",
     "EstimationError",
+    "ExtendedUnifiedCamera",
+    "FisheyeCamera",
     "LegObservation",
     "NormalFit",
     "PerspectiveCamera",

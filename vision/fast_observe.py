@@ -20,6 +20,7 @@ import numpy as np
 
 from hexapod.geometry import HexapodGeometry
 from vision import kernels
+from vision.cameras.distortion import RadialTangential
 
 log = logging.getLogger(__name__)
 
@@ -34,7 +35,7 @@ def camera_vector(camera: Any) -> np.ndarray:
     K = np.asarray(camera.K, float)
     d = np.zeros(5)
     fold = 0.0
-    if getattr(camera, "is_distorted", False):
+    if getattr(camera, "is_distorted", False) and supported(camera):
         d[:] = camera.lens.coefficients
         r = float(camera.lens.fold_free_radius(np.array([1.0, 0.0])))
         fold = r if np.isfinite(r) else 0.0
@@ -43,11 +44,12 @@ def camera_vector(camera: Any) -> np.ndarray:
 
 def supported(camera: Any) -> bool:
     """Whether the C core reproduces this camera's :meth:`project` exactly: no distortion,
-    or a radial one (its fold radius is the same in every direction)."""
+    or OpenCV's radial one (five coefficients without decentring terms: its fold radius
+    is the same in every direction). Other lenses (OpenCV's full model, the fisheye,
+    double sphere and extended unified models) go through the numpy reference."""
     if not getattr(camera, "is_distorted", False):
         return True
-    p1, p2 = camera.lens.coefficients[2:4]
-    return bool(p1 == 0.0 and p2 == 0.0)
+    return type(camera.lens) is RadialTangential and bool(camera.lens.is_radial)
 
 
 @dataclass

@@ -118,7 +118,7 @@ class VideoCamera(_TrackingMixin):
         self.camera = camera
         self.geometry = geometry
         self.source = VideoSource(source, camera)
-        self.detector: Any = (PerspectiveTracker(camera) if camera.kind == "perspective"
+        self.detector: Any = (PerspectiveTracker(camera) if camera.family == "perspective"
                               else OmniDetector(camera))
         self.lost_frames = 0
         self.ended = False

@@ -105,7 +105,7 @@ class ImageSensor:
         align_px: float = 40.0,
         refine_px: float = 4.0,
     ) -> None:
-        if true_camera.kind != estimated_camera.kind:
+        if true_camera.family != estimated_camera.family:
             raise ValueError(f"true and estimated cameras differ in kind: {true_camera.kind} "
                              f"vs {estimated_camera.kind}")
         if (true_camera.width, true_camera.height) != (estimated_camera.width,

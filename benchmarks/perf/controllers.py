@@ -85,7 +85,7 @@ def _observation(camera: Camera, geometry, R: np.ndarray, t: np.ndarray, time_s:
                  ) -> tuple[Observation, Goal]:
     legs = legs_in_frame(geometry, R, t, camera.camera_from_base)
     normals, _ = leg_edges(legs.base_points, legs.directions, geometry.leg_radius)
-    lines = camera.normal_to_line(normals) if camera.kind == "perspective" else None  # type: ignore[attr-defined]
+    lines = camera.normal_to_line(normals) if camera.family == "perspective" else None  # type: ignore[attr-defined]
     obs = Observation(time_s, legs.lengths, normals=normals, lines=lines,
                       directions=legs.directions)
     goal = Goal(normals=normals, lines=lines, directions=legs.directions, lengths=legs.lengths,

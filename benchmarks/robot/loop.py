@@ -179,6 +179,8 @@ def servo_loop(
         The outcome and the link statistics.
     """
     from controllers.base import Observation
+    from controllers.batch import actuation_of
+    from hexapod.actuation import check_actuation
     from hexapod.fk import forward_kinematics
 
     q_goal = np.asarray(goal.lengths, float)
@@ -190,6 +192,9 @@ def servo_loop(
     guess: tuple[np.ndarray, np.ndarray] | None = None
     t0 = time.perf_counter()
     step = 0
+    name = getattr(controller, "name", "controller")
+    declared = check_actuation(actuation_of(controller), robot.actuations,
+                               f"the robot {robot.identity or type(robot).__name__!r}", name)
     try:
         q = np.asarray(robot.measured_lengths(), float)
         while max_steps is None or step < max_steps:
@@ -205,6 +210,7 @@ def servo_loop(
             feats = sensor.measure(rotation, translation)
             reason: str | None = None
             ctrl_err = math.nan
+            actuation = declared
             if feats is None:
                 v = np.zeros(6)
                 reason = "lost camera frame"
@@ -221,7 +227,8 @@ def servo_loop(
                     directions=directions, edge_visible=feats.edge_visible,
                     direction_visible=both)
                 cmd = controller.step(obs)
-                v = np.asarray(cmd.velocities, float)
+                v = np.asarray(cmd.values, float)
+                actuation = cmd.actuation
                 ctrl_err = float(cmd.error_norm)
                 reason = cmd.reason
                 if reason is None and (v.shape != (6,) or not np.all(np.isfinite(v))):
@@ -231,7 +238,7 @@ def servo_loop(
                     res.refused += 1
             if on_pose is not None:
                 on_pose(rotation, translation, None if feats is None else feats.edge_visible)
-            bs = robot.step(v, dt)
+            bs = robot.apply(v, actuation, dt, name)
             q = np.asarray(bs.lengths, float)
             res.rtts.append(float(bs.round_trip_s))
             res.missed += int(bs.missed_period)

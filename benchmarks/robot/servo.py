@@ -172,11 +172,13 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                         f"drops as 1/sqrt(N))")
     p.add_argument("--camera-file", default="front",
                    help="camera model: a camera TOML file (intrinsics or opencv = FILE, and "
-                        "camera_from_base), an OpenCV calibration file (.yml, .yaml, .xml, "
-                        ".json; with --camera-pose) or a preset (front, omni); default front")
+                        "camera_from_base), a calibration file (OpenCV FileStorage, fisheye "
+                        "included; ROS camera_info; Kalibr camchain: .yml, .yaml, .xml, "
+                        ".json; with --camera-pose) or a preset (front, omni, fisheye); "
+                        "default front")
     p.add_argument("--camera-pose", metavar="PRESET|TOML",
-                   help="with an OpenCV calibration file: the camera's pose, a preset's "
-                        "placement (front, omni) or a camera TOML file's camera_from_base")
+                   help="with a calibration file: the camera's pose, a preset's placement "
+                        "(front, omni, fisheye) or a camera TOML file's camera_from_base")
     p.add_argument("--geometry", default="deltalab",
                    help="nominal robot: a geometry TOML file or a preset (default deltalab)")
     p.add_argument("--calibration", metavar="FILE",

@@ -32,6 +32,7 @@ from typing import Any
 
 import numpy as np
 
+from benchmarks.sim.actuation import require_actuation, require_batch
 from benchmarks.sim.book import Book, TrialResult, failure_row
 from benchmarks.sim.sensors import GeometricSensor, draws_noise, noisy_features, trial_goal
 from benchmarks.sim.world import TrialSetup, trial_rng
@@ -193,6 +194,7 @@ def _run(sc: Scenario, spec: Any, group: list[TrialSetup], contexts: list[Any],
     from benchmarks.sim.stepper import stroke_violations
 
     controller = batch_controller(spec.name, spec.options, batched)
+    actuation = require_actuation(controller, spec.label)
     controller.reset_batch(contexts)
     sensor = BatchSensor(sc, group)
     rngs = rows_generators(sc, group, 1, True)
@@ -240,6 +242,7 @@ def _run(sc: Scenario, spec: Any, group: list[TrialSetup], contexts: list[Any],
             t0 = time.perf_counter()
             cmds = controller.step_batch(obs)
             batch_times.append((time.perf_counter() - t0) / len(rows))
+            require_batch(cmds, actuation, spec.label)
             stepped[tr] += 1
             norms[rows] = cmds.error_norm
             failed = book.commands(tr, cmds.velocities, cmds.reasons)

@@ -35,7 +35,7 @@ class GeometricSensor:
         self.sc = sc
         self.world = world
         self.est: Any = estimated_camera  # a PerspectiveCamera when ``perspective``
-        self.perspective = world.camera.kind == "perspective"
+        self.perspective = world.camera.family == "perspective"
 
     def measure(self, rotations: np.ndarray, translations: np.ndarray,
                 rngs: list[np.random.Generator], apply_noise: bool = True
@@ -125,7 +125,7 @@ def noisy_features(sc: Scenario, normals: np.ndarray, visible: np.ndarray,
     if not all_visible:
         normals = np.where(visible[..., None], normals, np.nan)
     lines = None
-    if estimated.kind == "perspective":
+    if estimated.family == "perspective":
         if noise.model == "pixel" and apply_noise:
             # fitted with the estimated camera already; the image line is the true one
             lines = estimated.normal_to_line(normals)
@@ -277,7 +277,7 @@ class _ImageSensorAdapter:
         vis = np.array(visible)
         est = self.sensor.estimated_camera
         lines = None
-        if est.kind == "perspective":
+        if est.family == "perspective":
             with np.errstate(invalid="ignore"):
                 lines = est.normal_to_line(n)
         both = np.asarray(vis.all(axis=-1))
@@ -287,7 +287,7 @@ class _ImageSensorAdapter:
                  "directions": np.where(both[..., None], directions, np.nan),
                  "edge_visible": vis, "direction_visible": both}
         tolerance = self.sensor.detector.outlier_px * radians_per_pixel(est)
-        return _average_frames(m_all, est if est.kind == "perspective" else None, tolerance)
+        return _average_frames(m_all, est if est.family == "perspective" else None, tolerance)
 
     def measure(self, rotations: np.ndarray, translations: np.ndarray,
                 rngs: list[np.random.Generator], apply_noise: bool = True

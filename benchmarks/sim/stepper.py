@@ -22,6 +22,7 @@ from typing import Any
 
 import numpy as np
 
+from benchmarks.sim.actuation import KINEMATIC_WORLD, require_actuation
 from benchmarks.sim.book import Book, TrialResult, failure_row
 from benchmarks.sim.sensors import make_sensor, trial_goal
 from benchmarks.sim.world import (
@@ -35,6 +36,7 @@ from benchmarks.sim.world import (
 from benchmarks.study.scenario import Scenario
 from controllers.base import Command, ControllerContext, Observation, registry
 from hexapod import HexapodGeometry, forward_kinematics_batch
+from hexapod.actuation import Actuation
 from hexapod.backends.base import Backend, clamp_velocities
 from hexapod.se3 import pose_error
 
@@ -160,6 +162,8 @@ def _run_group(sc: Scenario, controller_index: int, group: list[TrialSetup],
     controllers = []
     for s in group:
         ctrl = registry.create(spec.name, **spec.options)
+        if backend_factory is None:  # a backend says itself what it applies (Backend.apply)
+            require_actuation(ctrl, spec.label)
         ctrl.reset(trial_context(sc, s, trial_goal(sensor, s, sc)))
         controllers.append(ctrl)
     rngs = [trial_rng(sc.seed, s.trial, 1) for s in group]
@@ -175,6 +179,7 @@ def _run_group(sc: Scenario, controller_index: int, group: list[TrialSetup],
     R_goal = np.array([s.goal_rotation for s in group])
     t_goal = np.array([s.goal_translation for s in group])
     offsets = world.joint_offsets
+    kinds = [Actuation.VELOCITY] * len(group)  # what each trial's last command set
     book = Book.new(sc, group, record_trials)
     dt = sc.dt
     for step in range(sc.task.max_steps + 1):
@@ -203,10 +208,13 @@ def _run_group(sc: Scenario, controller_index: int, group: list[TrialSetup],
                 t0 = time.perf_counter()
                 cmd = controllers[k].step(obs)
                 book.step_times[k].append(time.perf_counter() - t0)
-                if book.command(int(k), cmd.velocities, cmd.reason):
+                if backends is None and cmd.actuation not in KINEMATIC_WORLD:
+                    require_actuation(cmd, spec.label)
+                kinds[k] = cmd.actuation
+                if book.command(int(k), cmd.values, cmd.reason):
                     done[j] = True
                 else:
-                    v_cmd[j] = cmd.velocities
+                    v_cmd[j] = cmd.values
             if book.recording[k]:
                 book.record(int(k), step * dt, q[k], R[k], t[k], meas["edge_visible"][j],
                             cmd.error_norm if cmd is not None else np.nan, dp[j], da[j],
@@ -224,7 +232,7 @@ def _run_group(sc: Scenario, controller_index: int, group: list[TrialSetup],
             q[run] = np.clip(q[run] + vc * dt, *g.stroke)
         else:
             for j, k in enumerate(run):
-                bs = backends[k].step(v_run[j], dt)
+                bs = backends[k].apply(v_run[j], kinds[k], dt, spec.label)
                 q[k] = bs.lengths - offsets
                 book.rtts[k].append(bs.round_trip_s)
                 book.missed[k] += int(bs.missed_period)

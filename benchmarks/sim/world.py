@@ -254,5 +254,4 @@ def estimated_camera(camera: Camera, distortion_percent: float) -> Camera:
     missed by ``distortion_percent`` [%] (100: a model without distortion)."""
     if distortion_percent == 0.0 or not getattr(camera, "is_distorted", False):
         return camera
-    d = np.asarray(camera.distortion, float) * (1.0 - 1e-2 * distortion_percent)
-    return camera.replace(distortion=None if not np.any(d) else d)
+    return camera.lens_scaled(1.0 - 1e-2 * distortion_percent)

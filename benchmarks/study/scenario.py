@@ -220,30 +220,39 @@ def parse_scenario(table: dict[str, Any], path: str = "<dict>") -> Scenario:
     if len(given) > 1:
         raise ScenarioError(path, f"give one of 'preset', 'file' or 'opencv', not "
                             f"{' and '.join(given)}", key="camera")
+    from vision.cameras.files.opencv import is_opencv_file
+
+    # 'opencv', or 'file' naming a calibration file (OpenCV, ROS camera_info, Kalibr).
+    calibration = "opencv" if "opencv" in camera else (
+        "file" if isinstance(camera.get("file"), str) and is_opencv_file(camera["file"])
+        else None)
     for key in ("pose", "camera_from_base", "width_px", "height_px"):
-        if key in camera and "opencv" not in camera:
-            raise ScenarioError(path, "only with 'opencv' (a preset or a camera file gives "
-                                "its own pose and size)", key=f"camera.{key}")
+        if key in camera and calibration is None:
+            raise ScenarioError(path, "only with 'opencv' or a calibration 'file' (a preset "
+                                "or a camera TOML file gives its own pose and size)",
+                                key=f"camera.{key}")
     if "pose" in camera and "camera_from_base" in camera:
         raise ScenarioError(path, "give 'pose' (a preset's placement) or a "
                             "[camera.camera_from_base] table, not both", key="camera")
     camera_file = None
     camera_preset: str | None = "front"
     opencv: dict[str, Any] | None = None
-    if "file" in camera:
+    if "file" in camera and calibration is None:
         camera_file = referenced_file(base_dir, _typed(camera["file"], str, path, "camera.file"),
                                       "camera.file", path)
         camera_preset = None
-    elif "opencv" in camera:
-        camera_file = referenced_file(base_dir, _typed(camera["opencv"], str, path,
-                                                     "camera.opencv"), "camera.opencv", path)
+    elif calibration is not None:
+        camera_file = referenced_file(base_dir, _typed(camera[calibration], str, path,
+                                                       f"camera.{calibration}"),
+                                      f"camera.{calibration}", path)
         camera_preset = None
         opencv = {k: camera[k] for k in ("pose", "camera_from_base", "width_px", "height_px")
                   if k in camera}
         if "pose" in opencv:
-            _typed(opencv["pose"], str, path, "camera.pose", ("front", "omni"))
+            _typed(opencv["pose"], str, path, "camera.pose", ("front", "omni", "fisheye"))
     elif "preset" in camera:
-        camera_preset = _typed(camera["preset"], str, path, "camera.preset", ("front", "omni"))
+        camera_preset = _typed(camera["preset"], str, path, "camera.preset",
+                               ("front", "omni", "fisheye"))
 
     sensor_t = dict(_section(table, "sensor", path))
     sensor_keys = ("kind", "teach_frames", *(f.name for f in fields(ImageConfig)))
@@ -286,6 +295,7 @@ def parse_scenario(table: dict[str, Any], path: str = "<dict>") -> Scenario:
                                                      robot_preset, path)
     if task.kind == "fixed":
         _check_fixed_task(task, robot_preset, geometry_data, path)
+    _check_lens_error(camera_data, cal_err, sweep, path)
     reference = table.get("reference", {})
     if not isinstance(reference, dict):
         raise ScenarioError(path, "expected a table", key="reference")
@@ -345,6 +355,22 @@ def _read_files(geometry_file: str | None, camera_file: str | None, cal: Calibra
     except CameraError as exc:
         raise ScenarioError(camera_file or path, str(exc), key="camera") from None
     return geometry, camera, points
+
+
+def _check_lens_error(camera: Any, cal_err: CalibrationErrorConfig,
+                      sweep: dict[str, list[Any]], path: str) -> None:
+    """Each ``distortion_percent`` is one the camera file's lens model has (a fisheye,
+    double sphere or extended unified lens: 0 or 100 only)."""
+    if camera is None:
+        return
+    from vision.exceptions import CameraError
+
+    key = "calibration_error.distortion_percent"
+    for value in sweep.get(key, [cal_err.distortion_percent]):
+        try:
+            camera.lens_scaled(1.0 - 1e-2 * float(value))
+        except CameraError as exc:
+            raise ScenarioError(path, f"{value}: {exc}", key=key) from None
 
 
 def _check_scaled_errors(cal_err: CalibrationErrorConfig, sweep: dict[str, list[Any]],

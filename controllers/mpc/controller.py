@@ -29,7 +29,7 @@ import numpy as np
 
 from controllers.base import Command, Controller, ControllerContext, Observation
 from controllers.exceptions import OptionError
-from controllers.laws import check_choice, check_number, inverse_jacobian_into
+from controllers.laws import check_choice, check_number
 from controllers.mpc.prediction import fit_pose
 from controllers.mpc.problem import ProblemSpec, VirtualMachineKernel, problem_kernel
 from controllers.mpc.solver import (
@@ -39,7 +39,7 @@ from controllers.mpc.solver import (
     compiled_qp,
     run_sqp,
 )
-from controllers.qp import LegDirectionQPController, LegEdgeQPController
+from controllers.qp import LegDirectionQPController, LegEdgeQPController, velocity_bounds
 from hexapod.compiled import CompiledFunction
 
 log = logging.getLogger(__name__)
@@ -135,7 +135,9 @@ class MPCLaw(Controller):
         self.tolerance = check_number(name, "tolerance", tolerance)
         self.time_limit = (None if time_limit is None else
                            check_number(name, "time_limit", time_limit))
-        #: The fallback law (its private state is read: features, limits, dead reckoning).
+        #: The one-step QP law of the same features: it builds the tasks of each period
+        #: (:meth:`~controllers.laws.VisionLaw.tasks`), holds the estimate and the
+        #: limits, and is the fallback.
         self.law: Any = self.law_class(gain=gain, adaptive_gain=adaptive_gain,
                                          interaction=interaction, threshold=threshold,
                                          stroke_margin=stroke_margin, max_speed=max_speed,
@@ -180,21 +182,22 @@ class MPCLaw(Controller):
         self._vec = np.zeros(self._lay.size)
         sl = self._lay.slices
         geo = context.geometry
-        A = law._A
-        self._vec[sl["dt"]] = law._dt
+        A = law.base_points
+        window = law.solver.window
+        self._vec[sl["dt"]] = window.dt
         self._vec[sl["A"]] = A.reshape(-1)
         self._vec[sl["E"]] = np.asarray(geo.platform_points, dtype=float).reshape(-1)
         self._vec[sl["r"]] = geo.leg_radius
         self._vec[sl["reg"]] = self.regularization
         self._vec[sl["effort"]] = self.effort_weight
-        self._vec[sl["qlo"]] = law._q_lo
-        self._vec[sl["qhi"]] = law._q_hi
-        self._vec[sl["vmax"]] = law._vmax
+        self._vec[sl["qlo"]] = window.lower
+        self._vec[sl["qhi"]] = window.upper
+        self._vec[sl["vmax"]] = window.max_speed
         w = np.full(self.horizon, self.error_weight)
         w[-1] = self.terminal_weight
         self._vec[sl["w"]] = w
         if "Kit" in self._lay:
-            Kit = np.linalg.inv(law._K).T if self._kind == "lines" else np.eye(3)
+            Kit = np.linalg.inv(law.line_matrix).T if self._kind == "lines" else np.eye(3)
             self._vec[sl["Kit"]] = Kit.reshape(-1)
         if self._spec.tilt:
             R_cb, _ = fit_pose(A, geo.base_points)  # base orientation seen from the estimates
@@ -206,7 +209,7 @@ class MPCLaw(Controller):
             self._vec[sl["K"]] = K.reshape(-1)
             self._vec[sl["box"]] = (-0.5 + m, cam.width - 0.5 - m, -0.5 + m,
                                     cam.height - 0.5 - m)
-        self._star = self._desired_features()
+        self._star = law.desired_features()
         self._U = np.zeros(6 * self.horizon)
         #: Last reconstructed platform pose ``(R, t)`` in the camera frame (diagnostic).
         self.pose: tuple[np.ndarray, np.ndarray] | None = None
@@ -215,34 +218,21 @@ class MPCLaw(Controller):
     def _feature_kind(self) -> str:
         return "directions"
 
-    def _desired_features(self) -> np.ndarray:
-        """Desired features (nf, 3) of the fallback law (zeros where unknown)."""
-        return np.asarray(self.law._u_star, dtype=float)
-
-    def _measured(self, obs: Observation) -> tuple[np.ndarray, np.ndarray]:
-        """Measured features (nf, 3) and their use mask (nf,)."""
-        vis = np.asarray(obs.direction_visible, dtype=bool) & self.law._goal_visible
-        return np.asarray(obs.directions, dtype=float), vis
-
     # ----------------------------------------------------------------- step
     def step(self, observation: Observation) -> Command:
         """One receding-horizon step (never raises for bad measurements)."""
         law = self.law
         if self.context is None:
             return Command.refuse(f"{self.name}: reset(context) was not called")
-        problem = law._check(observation)
-        if problem is not None:
-            law._tau_prev[:] = 0.0
-            self._U[:] = 0.0
-            return Command.refuse(problem)
-        q = np.asarray(observation.lengths, dtype=float)
-        if q.min() <= 0:
-            law._tau_prev[:] = 0.0
-            return Command.refuse(f"lengths: non-positive leg length {float(q.min())} m")
-        data = self._features(observation, q)
-        if isinstance(data, str):
-            return self._fallback(observation, data)
-        e, N, b, J, notes = data
+        q = law.checked_lengths(observation)
+        if isinstance(q, Command):
+            self._U[:] = 0.0  # nothing moves: the next warm start is rest
+            return q
+        ts = law.tasks(observation, q)
+        if isinstance(ts, Command):
+            assert ts.reason is not None
+            return self._fallback(observation, ts.reason)
+        e, N, b, J, notes = ts.error, ts.normal, ts.gradient, ts.inverse_jacobian, ts.notes
         t_start = time.perf_counter()
         solved = self._solve(observation, q, e, N, b, J)
         if isinstance(solved, str):
@@ -254,44 +244,11 @@ class MPCLaw(Controller):
         w, _ = np.linalg.eigh(N)
         rank = int(np.count_nonzero(w > (law.threshold ** 2) * max(w[-1], 0.0)))
         cond = math.sqrt(w[-1] / w[0]) if w[0] > 0 else math.inf
-        law._tau_prev[:] = tau
-        law._q_prev[:] = q
+        law.estimate.commanded(tau, q)
         notes = [*notes, f"mpc {self.model} N={self.horizon}: {status}"]
         return Command(qdot, twist=tau, error=e, error_norm=float(np.sqrt(e @ e)), rank=rank,
                        condition=cond, features_used=e.shape[0], notes=notes,
                        active_constraints=active)
-
-    def _features(self, obs: Observation, q: np.ndarray
-                  ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, list[str]] | str:
-        """Error, ``L^T L``, ``L^T e``, ``J_inv`` and notes, as the fallback law computes them."""
-        law = self.law
-        if law._kernel is not None and law._load_kernel(obs, q):
-            r = law._kernel.evaluate()
-            law._tau_prev[:] = 0.0
-            law._directions[:] = r.directions
-            law._observed[:] = True
-            law._u_now = r.directions
-            if not (math.isfinite(r.error_norm) and math.isfinite(r.n_sum)):
-                return "non-finite error or interaction matrix (degenerate features)"
-            return r.error, r.N, r.b, r.J, []
-        st = law._stack(obs, q)
-        law._tau_prev[:] = 0.0
-        if isinstance(st, str):
-            return st
-        e, N, b = st.normal_equations()
-        if not (math.isfinite(float(e @ e)) and math.isfinite(float(N.sum()))):
-            return "non-finite error or interaction matrix (degenerate features)"
-        u = law._u_now
-        unknown = ~np.isfinite(u[:, 0])
-        if unknown.any():
-            model = law._model_directions(q)
-            if model is None:
-                return (f"direction of leg {int(np.flatnonzero(unknown)[0])} unknown: cannot "
-                        "build the inverse Jacobian")
-            u = np.where(unknown[:, None], model, u)
-            law._u_now = u
-        J = inverse_jacobian_into(np.zeros((6, 6)), law._A, u)
-        return e, N, b, J, list(st.notes)
 
     def _solve(self, obs: Observation, q: np.ndarray, e: np.ndarray, N: np.ndarray,
                b: np.ndarray, J: np.ndarray
@@ -302,7 +259,8 @@ class MPCLaw(Controller):
         assert spec is not None
         sl = self._lay.slices
         vec = self._vec
-        dt = law._dt
+        window = law.solver.window
+        dt = window.dt
         lam = law.gain(float(np.abs(e).max()) if e.size else 0.0)
         if self.reference == "exponential":
             ratio = max(0.0, 1.0 - lam * dt)
@@ -311,10 +269,8 @@ class MPCLaw(Controller):
             vec[sl["ref"]] = 0.0
         vec[sl["J0"]] = J.reshape(-1)
         vec[sl["q0"]] = q
-        inv_dt = 1.0 / dt
-        vmax = law._vmax
-        lo1 = np.clip((law._q_lo - q) * inv_dt, -vmax, vmax)
-        hi1 = np.clip((law._q_hi - q) * inv_dt, -vmax, vmax)
+        vmax = window.max_speed
+        _, _, lo1, hi1 = velocity_bounds(q, window.lower, window.upper, vmax, 1.0 / dt)
         vec[sl["lo1"]] = lo1
         vec[sl["hi1"]] = hi1
         fitted = self._fit(q)
@@ -324,7 +280,7 @@ class MPCLaw(Controller):
         vec[sl["R0"]] = R0.reshape(-1)
         vec[sl["t0"]] = t0
         if spec.model == "global":
-            feats, use = self._measured(obs)
+            feats, use = law.measured_features(obs)
             star = self._star
             feats = np.where(use[:, None], feats, star)
             model_f, model_q = self._model_features(R0, t0)
@@ -381,14 +337,14 @@ class MPCLaw(Controller):
         """Platform pose in the camera frame from ``B_i = A_i + q_i u_i`` (legs whose
         direction is known this step; at least three)."""
         law = self.law
-        u = law._u_now
-        known = np.isfinite(u[:, 0]) & law._observed
+        u = law.estimate.in_use
+        known = np.isfinite(u[:, 0]) & law.estimate.observed
         if known.sum() < 3:
             known = np.isfinite(u[:, 0])
         if known.sum() < 3:
             return "fewer than three leg directions known: cannot reconstruct the pose"
-        B = np.where(known[:, None], law._A + q[:, None] * np.where(known[:, None], u, 0.0),
-                     0.0)
+        A = law.base_points
+        B = np.where(known[:, None], A + q[:, None] * np.where(known[:, None], u, 0.0), 0.0)
         geo = self.context.geometry if self.context is not None else None
         if geo is None:
             return "no context"
@@ -405,14 +361,15 @@ class MPCLaw(Controller):
         law = self.law
         geo = self.context.geometry if self.context is not None else None
         assert geo is not None
-        d = geo.platform_points @ R.T + t - law._A
+        A = law.base_points
+        d = geo.platform_points @ R.T + t - A
         qm = np.sqrt(np.einsum("ij,ij->i", d, d))
         u = d / qm[:, None]
         if self._kind == "directions":
             return u, qm
-        n, _ = leg_edges(law._A, u, geo.leg_radius)
+        n, _ = leg_edges(A, u, geo.leg_radius)
         if self._kind == "lines":
-            n = n @ np.linalg.inv(law._K)  # rows: (K^-T n)^T
+            n = n @ np.linalg.inv(law.line_matrix)  # rows: (K^-T n)^T
             n = n / np.linalg.norm(n, axis=-1, keepdims=True)
         return n.reshape(12, 3), qm
 
@@ -444,19 +401,6 @@ class LegEdgeMPCController(MPCLaw):
         law = self.law
         assert isinstance(law, LegEdgeQPController)
         return "lines" if law.use_lines else "normals"
-
-    def _desired_features(self) -> np.ndarray:
-        law = self.law
-        assert isinstance(law, LegEdgeQPController)
-        star = law._l_star if law.use_lines else law._n_star
-        return np.asarray(star, dtype=float).reshape(12, 3)
-
-    def _measured(self, obs: Observation) -> tuple[np.ndarray, np.ndarray]:
-        law = self.law
-        assert isinstance(law, LegEdgeQPController)
-        vis = (np.asarray(obs.edge_visible, dtype=bool) & law._goal_visible).reshape(12)
-        feats = obs.lines if law.use_lines else obs.normals
-        return np.asarray(feats, dtype=float).reshape(12, 3), vis
 
 
 class LegDirectionMPCController(MPCLaw):

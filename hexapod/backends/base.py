@@ -14,6 +14,7 @@ from typing import TypeVar
 
 import numpy as np
 
+from hexapod.actuation import Actuation, check_actuation
 from hexapod.exceptions import BackendError, ShapeError
 from hexapod.geometry import HexapodGeometry
 
@@ -58,6 +59,9 @@ class Backend(ABC):
     max_speed: float
     #: What the robot says it is (shown by the servo loop).
     identity: str = ""
+    #: The command kinds it applies (leg velocities; a force-controlled robot adds
+    #: :attr:`~hexapod.actuation.Actuation.FORCE` and overrides :meth:`step_forces`).
+    actuations: tuple[Actuation, ...] = (Actuation.VELOCITY,)
 
     @classmethod
     def open(cls, args: str, geometry: HexapodGeometry, start: np.ndarray | None = None
@@ -83,6 +87,40 @@ class Backend(ABC):
     @abstractmethod
     def step(self, velocities: np.ndarray, dt: float) -> BackendStep:
         """Apply leg velocities [m/s] for ``dt`` [s] (after clamping) and measure."""
+
+    def step_forces(self, forces: np.ndarray, dt: float) -> BackendStep:
+        """Apply leg forces [N] for ``dt`` [s] (a backend listing
+        :attr:`~hexapod.actuation.Actuation.FORCE` in :attr:`actuations` overrides it).
+
+        Raises:
+            ActuationError: This backend applies leg velocities only.
+        """
+        check_actuation(Actuation.FORCE, self.actuations, self._receiver(), "force command")
+        raise NotImplementedError(f"{type(self).__name__} lists force actuation but does not "
+                                  "implement step_forces")
+
+    def apply(self, command: np.ndarray, actuation: Actuation, dt: float,
+              controller: str = "controller") -> BackendStep:
+        """Apply one period's command of its kind: :meth:`step` for leg velocities
+        [m/s], :meth:`step_forces` for leg forces [N].
+
+        Args:
+            command: (6,) the command's values.
+            actuation: What they are.
+            dt: Period [s].
+            controller: Who commands (named by the refusal).
+
+        Raises:
+            ActuationError: The backend does not apply this kind of command.
+        """
+        kind = check_actuation(actuation, self.actuations, self._receiver(), controller)
+        if kind is Actuation.FORCE:
+            return self.step_forces(command, dt)
+        return self.step(command, dt)
+
+    def _receiver(self) -> str:
+        name = self.identity or type(self).__name__
+        return f"the backend {name!r}"
 
     @abstractmethod
     def measured_lengths(self) -> np.ndarray:

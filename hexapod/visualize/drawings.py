@@ -19,7 +19,8 @@ def frustum_segments(camera_from_base: np.ndarray, K: np.ndarray, size: np.ndarr
 
     A perspective camera is a pyramid through the image corners (depth along the
     optical axis [m]); a unified (catadioptric) camera is a cone of rays 75 deg off
-    its axis, wider than a hemisphere would be drawn by a pyramid.
+    its axis, wider than a hemisphere would be drawn by a pyramid; so is a fisheye,
+    double sphere or extended unified camera.
     """
     T = np.asarray(camera_from_base, dtype=float)
     R = T[:3, :3]

@@ -31,7 +31,7 @@ RECORD_SHAPES: dict[str, tuple[int | str, ...]] = {
 #: Keys of a trial record, with their number of dimensions.
 RECORD_KEYS: dict[str, int] = {k: len(s) for k, s in RECORD_SHAPES.items()}
 #: Camera kinds a record may name.
-CAMERA_KINDS = ("perspective", "unified")
+CAMERA_KINDS = ("perspective", "unified", "fisheye", "double_sphere", "eucm")
 
 
 @dataclass

@@ -56,7 +56,7 @@ def test_compiled_core_equals_numpy(world: World, name: str, options: dict[str, 
     for R, t in zip(Rs[1:], ts[1:], strict=True):
         obs = world.observation(R, t)
         _same(fast.step(obs), slow.step(obs))
-        np.testing.assert_allclose(fast._directions, slow._directions,  # type: ignore[attr-defined]
+        np.testing.assert_allclose(fast.estimate.directions, slow.estimate.directions,  # type: ignore[attr-defined]
                                    rtol=0, atol=1e-14)
 
 
@@ -152,26 +152,26 @@ def test_lean_core_equals_the_full_core_where_it_certifies(world: World, name: s
     law.reset(world.context(world.goal(Rs[0], ts[0]), 0.02))
     kernel = law._kernel  # type: ignore[attr-defined]
     assert kernel is not None and kernel.lean_function is not kernel.function
-    o = kernel._out
+    o = kernel.outputs
     rows = []
     for R, t in zip(Rs[1:], ts[1:], strict=True):
         assert law._load_kernel(world.observation(R, t), np.ones(6))  # type: ignore[attr-defined]
         kernel.set("lengths", world.observation(R, t).lengths)
-        rows.append(kernel._x.copy())
+        rows.append(kernel.input_vector.copy())
     X = np.array(rows)
     full, lean = kernel.function.batch(X), kernel.lean_function.batch(X)
     assert np.all(full[:, o["rank"].start] == 6) and np.all(lean[:, o["rank"].start] == 6)
     for key in ("error", "error_norm", "tau", "qdot", "qdot_check", "directions"):
         assert np.array_equal(full[:, o[key]], lean[:, o[key]]), key
     # a threshold that no row passes (0.99: condition numbers below 1.01): no certificate
-    X[:, kernel._slices["threshold2"]] = 0.99 ** 2
+    X[:, kernel.slices["threshold2"]] = 0.99 ** 2
     full, lean = kernel.function.batch(X), kernel.lean_function.batch(X)
     assert np.all(full[:, o["rank"].start] < 6) and np.all(lean[:, o["rank"].start] == 0)
     if name == "leg-direction":  # every measured direction equal to the desired one's
         bad = X[:1].copy()     # mirror: a rank-deficient interaction matrix
-        bad[0, kernel._slices["features"]] = 0.0
-        bad[0, kernel._slices["features"].start + 2::3] = 1.0
-        bad[0, kernel._slices["desired"]] = bad[0, kernel._slices["features"]]
+        bad[0, kernel.slices["features"]] = 0.0
+        bad[0, kernel.slices["features"].start + 2::3] = 1.0
+        bad[0, kernel.slices["desired"]] = bad[0, kernel.slices["features"]]
         f, g = kernel.function.batch(bad)[0], kernel.lean_function.batch(bad)[0]
         assert f[o["rank"].start] < 6 and g[o["rank"].start] == 0
 
@@ -220,7 +220,7 @@ def test_qp_shortcut_equals_the_osqp_solution(world: World, name: str,
     real = LimitQP.solve
 
     def counting(self: LimitQP, *args: Any, **kwargs: Any) -> Any:
-        calls.append("short" if self is short.qp else "full")  # type: ignore[attr-defined]
+        calls.append("short" if self is short.solver.qp else "full")  # type: ignore[attr-defined]
         return real(self, *args, **kwargs)
 
     monkeypatch.setattr(LimitQP, "solve", counting)
@@ -237,10 +237,10 @@ def test_qp_shortcut_equals_the_osqp_solution(world: World, name: str,
 
 
 def test_qp_shortcut_off_with_chosen_osqp_settings() -> None:
-    assert registry.create("leg-edge-qp").shortcut  # type: ignore[attr-defined]
-    assert not registry.create("leg-edge-qp", max_iter=10).shortcut  # type: ignore[attr-defined]
+    assert registry.create("leg-edge-qp").solver.shortcut  # type: ignore[attr-defined]
+    assert not registry.create("leg-edge-qp", max_iter=10).solver.shortcut  # type: ignore[attr-defined]
     assert registry.create("leg-edge-qp", max_iter=10,  # type: ignore[attr-defined]
-                           shortcut=True).shortcut
+                           shortcut=True).solver.shortcut
 
 
 @pytest.mark.parametrize("turn", [0.0, np.pi - 1e-4])

@@ -38,7 +38,7 @@ def test_matches_the_classical_law_away_from_limits(world: World, classical: str
         np.testing.assert_allclose(cb.velocities, ca.velocities, rtol=0, atol=1e-6 * scale)
         np.testing.assert_allclose(cb.twist, ca.twist, rtol=0,
                                    atol=1e-6 * np.abs(ca.twist).max())
-    assert b.qp._solver is not None  # set up once, then updated and warm-started
+    assert b.solver.qp._solver is not None  # set up once, then updated and warm-started
 
 
 def _pose_with_long_legs(world: World, extra: float) -> tuple[np.ndarray, np.ndarray]:

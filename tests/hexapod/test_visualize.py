@@ -127,7 +127,7 @@ def test_record_errors_name_the_file_and_the_key(record: TrialRecord, tmp_path: 
     with pytest.raises(RecordError, match=r"'lengths': expected shape \(101, 6\)"):
         load_trial(tmp_path / "short.npz")
     with pytest.raises(RecordError, match="camera_kind"):
-        TrialRecord(dict(record.arrays, camera_kind=np.array("fisheye")))
+        TrialRecord(dict(record.arrays, camera_kind=np.array("orthographic")))
     with pytest.raises(RecordError, match="missing keys"):
         save_trial(tmp_path / "x.npz", t=np.zeros(3))
     assert not (tmp_path / "x.npz").exists()

@@ -155,8 +155,12 @@ def test_hand_written_yaml_1_2_in_ros_camera_info_style(tmp_path: Path) -> None:
     path = tmp_path / "ros.yaml"
     path.write_text(text.format(k, "plumb_bob", d))
     assert load_camera(path, camera_from_base=POSE) == _perspective().replace(name="ros")
-    path.write_text(text.format(k, "equidistant", d))
-    with pytest.raises(ConfigFileError, match="'equidistant' is not supported") as info:
+    path.write_text(text.format(k, "equidistant", d))  # a fisheye has 4 coefficients
+    with pytest.raises(ConfigFileError, match="4 coefficients of cv::fisheye") as info:
+        load_camera(path)
+    assert info.value.key == "distortion_coefficients"
+    path.write_text(text.format(k, "fov", d))
+    with pytest.raises(ConfigFileError, match=r"'fov' is not supported.*equidistant") as info:
         load_camera(path)
     assert info.value.key == "distortion_model"
     path.write_text(text.format(k, "plumb_bob", d).replace("rows: 3", "rows: 2"))
@@ -236,8 +240,8 @@ def _bad_files() -> dict[str, tuple[dict[str, Any], str, str]]:
                   "distortion_coefficients", r"1xN or Nx1.*\(2, 3\)"),
         "D 6 values": ({**good, "distortion_coefficients": np.zeros((6, 1))},
                        "distortion_coefficients", "got 6"),
-        "D rational": ({**good, "distortion_coefficients": np.r_[D_PER, 0.01, 0, 0]},
-                       "distortion_coefficients", "k4=0.01"),
+        "D 9 values": ({**good, "distortion_coefficients": np.r_[D_PER, 0.01, 0, 0, 0]},
+                       "distortion_coefficients", "got 9"),
         "D NaN": ({**good, "distortion_coefficients": np.r_[D_PER[:4], np.nan]},
                   "distortion_coefficients", "NaN"),
         "omni 5 values": ({**_omni_calibration_cpp(), "distortion_coefficients": D_PER},
@@ -245,7 +249,10 @@ def _bad_files() -> dict[str, tuple[dict[str, Any], str, str]]:
         "negative xi": ({**_omni_calibration_cpp(), "xi": -0.5}, "xi", ">= 0"),
         "width 640.5": ({**good, "image_width": 640.5}, "image_width", "positive integer"),
         "width text": ({**good, "image_width": "640"}, "image_width", "numbers"),
-        "fisheye": ({**good, "fisheye_model": 1}, "fisheye_model", "Kannala-Brandt"),
+        "fisheye 8 values": ({**good, "fisheye_model": 1}, "distortion_coefficients",
+                             r"4 coefficients of cv::fisheye \(k1, k2, k3, k4\), got 8"),
+        "fisheye with xi": ({**_omni_calibration_cpp(), "fisheye_model": 1}, "xi",
+                            "fisheye"),
         "two names": ({**_omni_calibration_cpp(), "D": D_OMNI}, "distortion_coefficients",
                       "not both"),
     }

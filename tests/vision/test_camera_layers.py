@@ -13,15 +13,17 @@ ROOT = Path(vision.cameras.__file__).parent
 #: Layer of each module of vision.cameras (a module imports only lower layers).
 LAYERS = {
     "checks": 0, "fields": 0,
-    "projection": 1, "distortion": 1,
-    "base": 2,
-    "perspective": 3, "unified": 3,
-    "presets": 4,
-    "files": 4, "files.project": 4, "files.opencv": 4,
-    "factory": 5,
-    "": 6,
+    "lens": 1, "projection": 1,
+    "distortion": 2, "distortion_full": 2, "radial": 2,
+    "base": 3,
+    "perspective": 4, "unified": 4,
+    "fisheye": 5, "double_sphere": 5, "eucm": 5,
+    "presets": 6,
+    "files": 6, "files.project": 6, "files.opencv": 6, "files.ros": 6, "files.kalibr": 6,
+    "factory": 7,
+    "": 8,
 }
-MODELS = ("base", "perspective", "unified", "presets")
+MODELS = ("base", "perspective", "unified", "fisheye", "double_sphere", "eucm", "presets")
 
 
 def _module(path: Path) -> str:

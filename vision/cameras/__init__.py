@@ -1,5 +1,6 @@
-"""Camera models: perspective (pinhole) and unified central (Geyer-Daniilidis / Mei),
-with OpenCV's lens distortion.
+"""Camera models: perspective (pinhole) with OpenCV's lens distortion (5 to 14
+coefficients), unified central (Geyer-Daniilidis / Mei), OpenCV's fisheye
+(Kannala-Brandt), double sphere and extended unified.
 
 Conventions (``docs/math.md`` section 5):
 
@@ -29,21 +30,33 @@ Layout, imports one way (each module imports only those above it):
   fields a file gives;
 - :mod:`~vision.cameras.projection`, :mod:`~vision.cameras.distortion`: the maths;
 - :mod:`~vision.cameras.base`: the common base :class:`Camera`;
+- :mod:`~vision.cameras.lens` (the base of the lens maps and the fold check),
+  :mod:`~vision.cameras.distortion` (OpenCV's five coefficients),
+  :mod:`~vision.cameras.distortion_full` (its 14), :mod:`~vision.cameras.radial`
+  (Kannala-Brandt, double sphere, extended unified as radial lens maps);
 - one module per model: :mod:`~vision.cameras.perspective`,
-  :mod:`~vision.cameras.unified`;
+  :mod:`~vision.cameras.unified`, :mod:`~vision.cameras.fisheye`,
+  :mod:`~vision.cameras.double_sphere`, :mod:`~vision.cameras.eucm`;
 - :mod:`~vision.cameras.presets`: the cameras of the seeds;
-- :mod:`vision.cameras.files`: the file formats (project TOML, OpenCV FileStorage),
-  which import no model;
+- :mod:`vision.cameras.files`: the file formats (project TOML, OpenCV FileStorage,
+  ROS camera_info, Kalibr camchain), which import no model;
 - :mod:`~vision.cameras.factory`: cameras from names, files and tables.
 """
 
 from vision.cameras.base import Camera
+from vision.cameras.double_sphere import DoubleSphereCamera
+from vision.cameras.eucm import ExtendedUnifiedCamera
 from vision.cameras.factory import (
+    camera_from_calibration,
     load_camera,
     load_opencv_camera,
+    read_calibration,
     read_camera,
+    save_kalibr_camera,
     save_opencv_camera,
+    save_ros_camera_info,
 )
+from vision.cameras.fisheye import FisheyeCamera
 from vision.cameras.perspective import PerspectiveCamera
 from vision.cameras.presets import (
     FRONT_AZIMUTH_DEG,
@@ -56,6 +69,7 @@ from vision.cameras.presets import (
     OMNI_DISTORTION,
     OMNI_FOCAL,
     camera_preset,
+    fisheye_camera,
     front_camera,
     omni_camera,
 )
@@ -72,13 +86,21 @@ __all__ = [
     "OMNI_DISTORTION",
     "OMNI_FOCAL",
     "Camera",
+    "DoubleSphereCamera",
+    "ExtendedUnifiedCamera",
+    "FisheyeCamera",
     "PerspectiveCamera",
     "UnifiedCamera",
+    "camera_from_calibration",
     "camera_preset",
+    "fisheye_camera",
     "front_camera",
     "load_camera",
     "load_opencv_camera",
     "omni_camera",
+    "read_calibration",
     "read_camera",
+    "save_kalibr_camera",
     "save_opencv_camera",
+    "save_ros_camera_info",
 ]

@@ -21,12 +21,9 @@ from hexapod.config import load_toml, suggest
 from hexapod.kinematics import Transform
 from vision.cameras import projection
 from vision.cameras.checks import as_pixels, as_points
-from vision.cameras.distortion import (
-    RadialTangential,
-    check_no_fold_in_image,
-    parse_coefficients,
-)
+from vision.cameras.distortion import RadialTangential, parse_coefficients
 from vision.cameras.fields import CameraFields
+from vision.cameras.lens import Lens, check_no_fold_in_image
 from vision.exceptions import CameraError
 
 #: ``(table, path, model) -> camera`` and ``camera -> table``: the camera file format,
@@ -46,21 +43,29 @@ class Camera(ABC):
     """Common base of the camera models.
 
     Attributes:
-        kind: ``"perspective"`` or ``"unified"``.
+        kind: The model: ``"perspective"``, ``"unified"``, ``"fisheye"``,
+            ``"double_sphere"`` or ``"eucm"``.
         K: (3, 3) intrinsics [px] (read-only array).
         width: Image width [px].
         height: Image height [px].
         xi: Mirror parameter of the unified model (0 for the perspective camera).
-        distortion: Read-only lens distortion coefficients in OpenCV's order,
-            ``(k1, k2, p1, p2, k3)`` (perspective) or ``(k1, k2, p1, p2)`` (unified);
-            zeros for an ideal lens.
-        lens: The distortion map (:class:`vision.cameras.distortion.RadialTangential`).
+        distortion: Read-only lens parameters in the model's order: OpenCV's
+            ``(k1, k2, p1, p2, k3[, k4..k6[, s1..s4[, tau_x, tau_y]]])`` (perspective),
+            ``(k1, k2, p1, p2)`` (unified), ``(k1, k2, k3, k4)`` (fisheye), ``(xi,
+            alpha)`` (double sphere), ``(alpha, beta)`` (extended unified); zeros for
+            an ideal lens.
+        lens: The distortion map (:class:`vision.cameras.lens.Lens`: OpenCV's
+            radial-tangential model, its full model, or a radial fisheye model).
         camera_from_base: Pose of the camera w.r.t. the robot base,
             ``p_camera = R p_base + t``.
         name: A label.
     """
 
     kind: ClassVar[str]
+    #: ``"perspective"`` (a pinhole, possibly through a lens: the edges are lines of
+    #: the ideal image, the tracker detects them) or ``"unified"`` (conics, the
+    #: omnidirectional circle scan): the part of the pipeline the model uses.
+    family: ClassVar[str]
     #: Accepted lengths of the distortion vector.
     distortion_lengths: ClassVar[tuple[int, ...]]
     K: np.ndarray
@@ -68,7 +73,7 @@ class Camera(ABC):
     height: int
     xi: float
     distortion: np.ndarray
-    lens: RadialTangential
+    lens: Lens
     camera_from_base: Transform
     name: str
     source: str | None
@@ -88,13 +93,25 @@ class Camera(ABC):
 
     def _set_lens(self, distortion: Any) -> None:
         """Validate the distortion; refuse one that folds inside the image."""
-        coeffs = parse_coefficients(distortion, self.distortion_lengths, self.source)
-        self.lens = RadialTangential(coeffs)
-        d = coeffs[: max(self.distortion_lengths)].copy()
+        self.lens, d = self._make_lens(distortion)
         d.flags.writeable = False
         self.distortion = d
         check_no_fold_in_image(self.lens, self.K, self.width, self.height,
                                projection.domain_radius(self.xi), self.source)
+
+    def _make_lens(self, distortion: Any) -> tuple[Lens, np.ndarray]:
+        """The lens map of the distortion coefficients and the coefficients kept
+        (OpenCV's radial-tangential model; other models override)."""
+        coeffs = parse_coefficients(distortion, self.distortion_lengths, self.source)
+        return RadialTangential(coeffs), coeffs[: max(self.distortion_lengths)].copy()
+
+    def lens_scaled(self, factor: float) -> Camera:
+        """The camera with its distortion coefficients times ``factor`` (0: the ideal
+        lens), e.g. the model of a user who misses part of the lens."""
+        if factor == 1.0 or not self.is_distorted:
+            return self
+        d = np.asarray(self.distortion, float) * factor
+        return self.replace(distortion=None if not np.any(d) else d)
 
     # ------------------------------------------------------------- derived
     @property
@@ -343,10 +360,11 @@ class Camera(ABC):
     def to_toml(self, path: str | Path) -> None:
         """Save the camera to a TOML file.
 
-        Format: ``kind`` (``"perspective"``/``"unified"``), ``name``, ``width_px``,
-        ``height_px``, ``fx_px``, ``fy_px``, ``cx_px``, ``cy_px``, ``skew_px``, ``xi``
-        (unified only) and a table ``[camera_from_base]`` with ``translation_mm`` and
-        ``rotation_vector_deg`` (axis times angle, degrees) such that
+        Format (:mod:`vision.cameras.files.project`): ``kind`` (the model), ``name``,
+        ``width_px``, ``height_px``, ``fx_px``, ``fy_px``, ``cx_px``, ``cy_px``,
+        ``skew_px``, ``xi`` (unified only), ``distortion`` (the lens parameters, absent
+        for an ideal lens) and a table ``[camera_from_base]`` with ``translation_mm``
+        and ``rotation_vector_deg`` (axis times angle, degrees) such that
         ``p_camera = R p_base + t``.
         """
         Path(path).write_text(tomli_w.dumps(self.to_dict()))

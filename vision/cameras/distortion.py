@@ -11,33 +11,27 @@ With ``r^2 = x^2 + y^2`` and ``L = 1 + k1 r^2 + k2 r^4 + k3 r^6``::
 This is the model of ``cv2.projectPoints`` with the coefficient vector
 ``(k1, k2, p1, p2[, k3])`` and of ``cv::omnidir`` (Mei's model, ``(k1, k2, p1, p2)``,
 ``k3 = 0``). The rational (``k4..k6``), thin-prism (``s1..s4``) and tilt terms of
-OpenCV's longer vectors are not part of it.
+OpenCV's longer vectors are :class:`vision.cameras.distortion_full.OpenCVLens`.
 
-The inverse has no closed form: :meth:`RadialTangential.remove` solves ``D(m) = m_d``
-by Newton's method inside the fold-free region around the principal point (the
-star-shaped region bounded, along each direction from the origin, by the first zero of
-the Jacobian determinant ``det dD/dm``). :func:`check_no_fold_in_image` verifies that
-the image of that boundary (the fold curve) stays outside the image, so that every
+The inverse has no closed form: :meth:`Lens.remove <vision.cameras.lens.Lens.remove>`
+solves ``D(m) = m_d`` by Newton's method inside the fold-free region around the
+principal point (the star-shaped region bounded, along each direction from the origin,
+by the first zero of the Jacobian determinant ``det dD/dm``, found here exactly from
+the roots of a polynomial). :func:`vision.cameras.lens.check_no_fold_in_image` verifies
+that the image of that boundary (the fold curve) stays outside the image, so that every
 pixel has exactly one pre-image there.
 """
 
 from __future__ import annotations
 
-import logging
 import math
 from functools import lru_cache
 from typing import Any
 
 import numpy as np
 
-from vision.exceptions import CameraError, DistortionError
-
-log = logging.getLogger(__name__)
-
-#: Directions of the fold-curve sampling (the fold radius is exact along each).
-FOLD_DIRECTIONS = 1024
-#: Iteration limit of the Newton inverse.
-MAX_NEWTON_ITERATIONS = 60
+from vision.cameras.lens import FOLD_DIRECTIONS, Lens
+from vision.exceptions import CameraError
 
 
 def _poly_mul(a: np.ndarray, b: np.ndarray) -> np.ndarray:
@@ -48,7 +42,7 @@ def _poly_mul(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     return out
 
 
-class RadialTangential:
+class RadialTangential(Lens):
     """OpenCV's radial-tangential distortion ``(k1, k2, p1, p2, k3)`` of normalised coordinates.
 
     Args:
@@ -60,13 +54,15 @@ class RadialTangential:
         coefficients: (5,) read-only ``(k1, k2, p1, p2, k3)``.
     """
 
+    names = ("k1", "k2", "p1", "p2", "k3")
+
     def __init__(self, coefficients: Any = None, source: str | None = None) -> None:
         self.coefficients = parse_coefficients(coefficients, (4, 5), source)
 
     @property
-    def is_identity(self) -> bool:
-        """True when every coefficient is zero (the ideal lens)."""
-        return not np.any(self.coefficients)
+    def is_radial(self) -> bool:
+        """True without decentring terms (``p1 = p2 = 0``)."""
+        return not np.any(self.coefficients[2:4])
 
     def __eq__(self, other: object) -> bool:
         if not isinstance(other, RadialTangential):
@@ -104,6 +100,21 @@ class RadialTangential:
         j12 = x * y * M + 2.0 * p1 * x + 2.0 * p2 * y
         j22 = L + y * y * M + 6.0 * p1 * y + 2.0 * p2 * x
         return np.stack([np.stack([j11, j12], -1), np.stack([j12, j22], -1)], -2)
+
+    def parts(self, x: np.ndarray, y: np.ndarray) -> tuple[np.ndarray, ...]:
+        """:meth:`apply` and :meth:`jacobian` without stacking: ``(x_d, y_d, j11, j12,
+        j21, j22)`` (the Jacobian is symmetric: ``j21`` is ``j12``)."""
+        k1, k2, p1, p2, k3 = (float(v) for v in self.coefficients)
+        r2 = x * x + y * y
+        L = 1.0 + r2 * (k1 + r2 * (k2 + r2 * k3))
+        M = 2.0 * k1 + r2 * (4.0 * k2 + 6.0 * k3 * r2)
+        xy2 = 2.0 * x * y
+        xd = x * L + p1 * xy2 + p2 * (r2 + 2.0 * x * x)
+        yd = y * L + p1 * (r2 + 2.0 * y * y) + p2 * xy2
+        j11 = L + x * x * M + 2.0 * p1 * y + 6.0 * p2 * x
+        j12 = x * y * M + 2.0 * p1 * x + 2.0 * p2 * y
+        j22 = L + y * y * M + 6.0 * p1 * y + 2.0 * p2 * x
+        return xd, yd, j11, j12, j12, j22
 
     # ------------------------------------------------------------------ folds
     def fold_radius(self, theta: np.ndarray) -> np.ndarray:
@@ -169,21 +180,6 @@ class RadialTangential:
         """Fold radius on :data:`FOLD_DIRECTIONS` directions: (theta, radius)."""
         return _fold_table(tuple(float(c) for c in self.coefficients))
 
-    def fold_free_radius(self, m: np.ndarray) -> np.ndarray:
-        """A lower bound of the fold radius (...) in the direction of ``m`` (..., 2).
-
-        The minimum of the tabulated fold radius at the two neighbouring directions of
-        :data:`FOLD_DIRECTIONS`, less 0.1 %: points closer to the origin are in the
-        fold-free region (up to the curvature of the fold curve between two samples).
-        """
-        radius = self._fold_table[1]
-        with np.errstate(invalid="ignore"):
-            t = np.nan_to_num(np.arctan2(m[..., 1], m[..., 0]))
-        step = 2.0 * math.pi / FOLD_DIRECTIONS
-        i = np.floor((t + math.pi) / step).astype(np.intp) % FOLD_DIRECTIONS
-        j = (i + 1) % FOLD_DIRECTIONS
-        return np.asarray(np.minimum(radius[i], radius[j]) * 0.999)
-
     # ------------------------------------------------------------------ inverse
     def _radial_guess(self, md: np.ndarray) -> np.ndarray:
         """Start of :meth:`remove`: the radial part inverted along the direction of ``md``.
@@ -216,66 +212,6 @@ class RadialTangential:
             u = np.where(rho[:, None] > 0, md / rho[:, None], 0.0)
         return np.asarray(r[:, None] * u)
 
-    def remove(self, md: np.ndarray) -> np.ndarray:
-        """Undistorted coordinates ``m`` (..., 2) with ``apply(m) = md`` (..., 2).
-
-        Newton's method from ``m = md`` with a backtracking line search on ``|D(m) - md|``
-        that keeps the iterates in the fold-free region around the origin, so the
-        solution is the pre-image on the principal sheet (the one cameras see).
-        Converged to the rounding of ``D`` (residual below ``1e-15 max(1, |md|)``).
-
-        Returns:
-            (..., 2), NaN where ``md`` is not finite or the iteration did not converge
-            (no pre-image in the fold-free region: beyond the fold curve).
-        """
-        md = np.asarray(md, dtype=float)
-        if self.is_identity:
-            return md.copy()
-        shape = md.shape
-        target = md.reshape(-1, 2)
-        ok = np.all(np.isfinite(target), axis=-1)
-        m = np.where(ok[:, None], target, 0.0)
-        scale = np.maximum(1.0, np.linalg.norm(m, axis=-1))
-        m = self._radial_guess(m)
-        F = self.apply(m) - target
-        res = np.linalg.norm(F, axis=-1)
-        done = ok & (res <= 1e-15 * scale)
-        active = ok & ~done
-        for _ in range(MAX_NEWTON_ITERATIONS):
-            if not active.any():
-                break
-            idx = np.flatnonzero(active)
-            mi, fi, ri = m[idx], F[idx], res[idx]
-            J = self.jacobian(mi)
-            det = J[:, 0, 0] * J[:, 1, 1] - J[:, 0, 1] * J[:, 1, 0]
-            with np.errstate(invalid="ignore", divide="ignore", over="ignore"):
-                step = np.stack([J[:, 1, 1] * fi[:, 0] - J[:, 0, 1] * fi[:, 1],
-                                 J[:, 0, 0] * fi[:, 1] - J[:, 1, 0] * fi[:, 0]], -1) / det[:, None]
-            tiny = np.linalg.norm(step, axis=-1) <= 1e-14 * np.maximum(
-                1.0, np.linalg.norm(mi, axis=-1))
-            t = np.ones(idx.size)
-            accepted = np.zeros(idx.size, dtype=bool)
-            for _ in range(50):
-                trial = mi - t[:, None] * step
-                with np.errstate(invalid="ignore", over="ignore"):
-                    Ft = self.apply(trial) - target[idx]
-                    rt = np.linalg.norm(Ft, axis=-1)
-                    inside = np.linalg.norm(trial, axis=-1) < self.fold_free_radius(trial)
-                good = ~accepted & inside & ((rt < ri) | (tiny & np.isfinite(rt)))
-                mi[good], fi[good], ri[good] = trial[good], Ft[good], rt[good]
-                accepted |= good
-                if accepted.all():
-                    break
-                t *= 0.5
-            m[idx], F[idx], res[idx] = mi, fi, ri
-            fin = tiny | (ri <= 1e-15 * scale[idx])
-            # No decrease possible: converged if at the rounding floor of D, else failed.
-            floor = ~accepted & (ri <= 1e-12 * scale[idx])
-            done[idx[fin | floor]] = True
-            active[idx[fin | ~accepted]] = False
-        out = np.where(done[:, None], m, np.nan)
-        return out.reshape(shape)
-
 
 @lru_cache(maxsize=64)
 def _fold_table(coefficients: tuple[float, ...]) -> tuple[np.ndarray, np.ndarray]:
@@ -297,27 +233,30 @@ def _polyval(coef: np.ndarray, r: np.ndarray) -> np.ndarray:
 
 
 def parse_coefficients(coefficients: Any, lengths: tuple[int, ...],
-                       source: str | None = None) -> np.ndarray:
-    """OpenCV distortion coefficients as a read-only (5,) ``(k1, k2, p1, p2, k3)``.
+                       source: str | None = None, names: str = "k1, k2, p1, p2[, k3]"
+                       ) -> np.ndarray:
+    """Distortion coefficients as a read-only vector, zero-padded to the longest of the
+    ``lengths`` and at least 5 (OpenCV's ``(k1, k2, p1, p2, k3[, ...])``).
 
     Args:
         coefficients: None (no distortion) or a sequence of ``lengths`` numbers.
         lengths: The accepted lengths (``(4, 5)`` perspective, ``(4,)`` unified).
         source: File the coefficients come from (for the message).
+        names: The coefficient names, for the message.
 
     Raises:
         CameraError: Wrong length, not numbers, NaN or inf (field ``"distortion"``).
     """
-    out = np.zeros(5)
+    out = np.zeros(max(5, *lengths))
     if coefficients is not None:
         try:
             arr = np.array(coefficients, dtype=float)
         except (TypeError, ValueError):
             raise CameraError("distortion", f"expected {_lengths(lengths)} numbers "
-                              f"(k1, k2, p1, p2[, k3]), got {coefficients!r}", source) from None
+                              f"({names}), got {coefficients!r}", source) from None
         if arr.ndim != 1 or arr.shape[0] not in lengths:
             raise CameraError("distortion", f"expected {_lengths(lengths)} numbers "
-                              f"(k1, k2, p1, p2[, k3]), got shape {arr.shape}", source)
+                              f"({names}), got shape {arr.shape}", source)
         if not np.all(np.isfinite(arr)):
             raise CameraError("distortion", f"contains NaN or inf: {arr.tolist()}", source)
         out[: arr.shape[0]] = arr
@@ -327,78 +266,3 @@ def parse_coefficients(coefficients: Any, lengths: tuple[int, ...],
 
 def _lengths(lengths: tuple[int, ...]) -> str:
     return " or ".join(str(n) for n in lengths)
-
-
-def _clip_segments(a: np.ndarray, b: np.ndarray, lo: np.ndarray, hi: np.ndarray
-                   ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Liang-Barsky clipping of the segments a-b (N, 2) by the box [lo, hi]: whether
-    they meet it and the parameters ``t0 <= t1`` of the part inside."""
-    d = b - a
-    t0 = np.zeros(a.shape[0])
-    t1 = np.ones(a.shape[0])
-    hit = np.ones(a.shape[0], dtype=bool)
-    for k in range(2):
-        for p, q in ((-d[:, k], a[:, k] - lo[k]), (d[:, k], hi[k] - a[:, k])):
-            parallel = p == 0
-            hit &= ~(parallel & (q < 0))
-            with np.errstate(invalid="ignore", divide="ignore"):
-                r = q / p
-            t0 = np.where(~parallel & (p < 0), np.maximum(t0, r), t0)
-            t1 = np.where(~parallel & (p > 0), np.minimum(t1, r), t1)
-    return hit & (t0 <= t1), t0, t1
-
-
-def check_no_fold_in_image(distortion: RadialTangential, K: np.ndarray, width: int,
-                           height: int, domain_radius: float = math.inf,
-                           source: str | None = None) -> None:
-    """Refuse a distortion whose fold curve enters the image.
-
-    The fold radius is computed exactly along :data:`FOLD_DIRECTIONS` directions of the
-    undistorted plane (first positive root of the Jacobian determinant, tangential
-    terms included), the fold points are mapped to pixels with the distortion and
-    ``K``, and each point and each segment between neighbouring points is tested
-    against the image ``[-0.5, w - 0.5] x [-0.5, h - 0.5]`` (corners included). Folds
-    beyond ``domain_radius`` (no ray maps there: the unified model with ``xi > 1``)
-    are ignored.
-
-    Raises:
-        DistortionError: With the fold point deepest inside the image.
-    """
-    if distortion.is_identity:
-        return
-    theta, radius = distortion._fold_table
-    fin = np.isfinite(radius) & (radius < domain_radius)
-    if not fin.any():
-        return
-    r = np.where(fin, radius, 0.0)
-    md = distortion.apply(r[:, None] * np.stack([np.cos(theta), np.sin(theta)], -1))
-    pix = md @ K[:2, :2].T + K[:2, 2]
-    lo = np.array([-0.5, -0.5])
-    hi = np.array([width - 0.5, height - 0.5])
-    nxt = np.roll(np.arange(theta.size), -1)
-    # Neighbouring fold points on the same branch of the curve (no jump of the radius).
-    pair = fin & fin[nxt] & (np.abs(r - r[nxt]) <= 0.1 * np.minimum(r, r[nxt]))
-    hit, t0, t1 = _clip_segments(pix, pix[nxt], lo, hi)
-    hit &= pair
-    t = np.where(hit, 0.5 * (t0 + t1), 0.0)
-    # Isolated fold points in the image (next to a jump of the radius) count too.
-    hit |= fin & np.all((pix >= lo) & (pix <= hi), axis=-1)
-    if not hit.any():
-        return
-    # The evidence: the fold point, computed exactly, in the direction of the middle of
-    # the part inside the image of the segment that goes deepest into it.
-    p_mid = pix + t[:, None] * (pix[nxt] - pix)
-    depth = np.minimum(p_mid - lo, hi - p_mid).min(axis=-1)
-    i = int(np.argmax(np.where(hit, depth, -np.inf)))
-    step = 2.0 * math.pi / theta.size
-    th = np.array([theta[i] + t[i] * step])
-    r_i = float(distortion.fold_radius(th)[0])
-    if not math.isfinite(r_i):  # the root left between the samples: keep the sample
-        th, r_i = theta[i:i + 1], float(r[i])
-    md_i = distortion.apply(r_i * np.stack([np.cos(th), np.sin(th)], -1))[0]
-    p_i = K[:2, :2] @ md_i + K[:2, 2]
-    err = DistortionError(
-        distortion.coefficients, r_i, float(np.linalg.norm(md_i)),
-        float(np.linalg.norm(p_i - K[:2, 2])), (float(p_i[0]), float(p_i[1])), source)
-    log.debug("%s", err)
-    raise err

@@ -39,3 +39,32 @@ class CameraFields:
     name: str
     source: str
     distortion: np.ndarray | None = None
+
+
+@dataclass(frozen=True)
+class Calibration:
+    """The intrinsics of a calibration file (OpenCV, ROS camera_info, Kalibr).
+
+    Attributes:
+        kind: The camera model (a camera ``kind``: ``"perspective"``, ``"unified"``,
+            ``"fisheye"``, ``"double_sphere"``, ``"eucm"``).
+        K: (3, 3) camera matrix [px].
+        distortion: The lens coefficients in the order of the model's ``distortion``
+            (OpenCV's order for the perspective, unified and fisheye models; ``(xi,
+            alpha)`` for the double sphere, ``(alpha, beta)`` for the extended unified).
+        xi: Mirror parameter of Mei's model; None for the other models.
+        width: Image width [px], None when the file does not say.
+        height: Image height [px], None when the file does not say.
+        source: The file.
+        notes: What the file gave that the camera does not use (e.g. Kalibr's
+            ``T_cam_imu``), for the log and the user.
+    """
+
+    kind: str
+    K: np.ndarray
+    distortion: np.ndarray
+    xi: float | None
+    width: int | None
+    height: int | None
+    source: str
+    notes: tuple[str, ...] = ()

@@ -24,7 +24,14 @@ from hexapod.kinematics import Transform
 from vision.cameras import projection
 from vision.cameras.base import Camera
 from vision.cameras.checks import as_pixels, as_points, check_K, check_pose, check_size, unit
+from vision.cameras.distortion import RadialTangential, parse_coefficients
+from vision.cameras.distortion_full import OpenCVLens, check_tilt, needs_full_model
 from vision.cameras.fields import CameraFields
+from vision.cameras.lens import Lens
+from vision.exceptions import CameraError
+
+#: OpenCV's coefficient-vector lengths and the terms they end with.
+OPENCV_LENGTHS = (4, 5, 8, 12, 14)
 
 
 class PerspectiveCamera(Camera):
@@ -37,8 +44,13 @@ class PerspectiveCamera(Camera):
         camera_from_base: Pose w.r.t. the robot base (identity by default).
         name: A label.
         source: File the camera was read from (for the messages).
-        distortion: OpenCV's coefficients ``(k1, k2, p1, p2[, k3])`` (4 or 5 numbers;
-            None or zeros: an ideal lens), applied to ``(X/Z, Y/Z)``.
+        distortion: OpenCV's coefficients ``(k1, k2, p1, p2[, k3[, k4, k5, k6[, s1, s2,
+            s3, s4[, tau_x, tau_y]]]])`` (4, 5, 8, 12 or 14 numbers, as
+            ``cv2.projectPoints``; None or zeros: an ideal lens), applied to
+            ``(X/Z, Y/Z)``. With a nonzero term beyond ``k3`` the lens is OpenCV's full
+            model (:class:`vision.cameras.distortion_full.OpenCVLens`), else the
+            radial-tangential one (:class:`vision.cameras.distortion.RadialTangential`)
+            and :attr:`distortion` keeps five numbers.
 
     Raises:
         CameraError: A field is invalid.
@@ -51,7 +63,8 @@ class PerspectiveCamera(Camera):
     """
 
     kind: ClassVar[str] = "perspective"
-    distortion_lengths: ClassVar[tuple[int, ...]] = (4, 5)
+    family: ClassVar[str] = "perspective"
+    distortion_lengths: ClassVar[tuple[int, ...]] = OPENCV_LENGTHS
 
     def __init__(
         self,
@@ -79,6 +92,28 @@ class PerspectiveCamera(Camera):
         lm.flags.writeable = False
         self.line_matrix = lm
         self._line_matrix_inv_T = np.linalg.inv(lm).T
+
+    def _make_lens(self, distortion: Any) -> tuple[Lens, np.ndarray]:
+        c = parse_coefficients(distortion, OPENCV_LENGTHS, self.source,
+                               "k1, k2, p1, p2[, k3[, k4, k5, k6[, s1..s4[, tau_x, tau_y]]]]")
+        if not needs_full_model(c):
+            return RadialTangential(c[:5]), c[:5].copy()
+        check_tilt(c, self.source)
+        last = int(np.flatnonzero(c)[-1]) + 1
+        n = min(k for k in OPENCV_LENGTHS if k >= last)
+        return OpenCVLens(c), c[:n].copy()
+
+    def _scaled_to_pinhole(self, factor: float) -> PerspectiveCamera:
+        """:meth:`lens_scaled` of a lens model without a partial form: itself (1) or the
+        pinhole of the same ``K``, pose and name (0)."""
+        if factor == 1.0:
+            return self
+        if factor == 0.0:
+            return PerspectiveCamera(self.K, self.width, self.height, self.camera_from_base,
+                                     self.name, self.source)
+        raise CameraError("distortion", f"a {self.kind} lens is modelled (0 %) or ignored "
+                                        f"(100 %), not in part (factor {factor:g})",
+                          self.source)
 
     @property
     def normalisation(self) -> np.ndarray:

@@ -47,6 +47,7 @@ class UnifiedCamera(Camera):
     """
 
     kind: ClassVar[str] = "unified"
+    family: ClassVar[str] = "unified"
     distortion_lengths: ClassVar[tuple[int, ...]] = (4,)
 
     def __init__(

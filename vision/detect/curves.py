@@ -49,6 +49,8 @@ class CurvedSamples:
         margin: (6, 2, M) occlusion margin in the ideal image [px].
         seg: (6, 2, 2, 2) ideal-image ends of the predicted edges (on ``lines``).
         lines: (6, 2, 3) ideal-image lines ``K^-T n`` with unit ``(a, b)``.
+        md: (6, 2, M, 2) distorted normalised coordinates ``D(m)`` of the samples.
+        jac: (6, 2, M, 4) the lens Jacobian ``(j11, j12, j21, j22)`` at ``m``.
     """
 
     P: np.ndarray
@@ -58,6 +60,8 @@ class CurvedSamples:
     margin: np.ndarray
     seg: np.ndarray
     lines: np.ndarray
+    md: np.ndarray | None = None
+    jac: np.ndarray | None = None
 
     @property
     def edge_out(self) -> np.ndarray:
@@ -68,22 +72,6 @@ class CurvedSamples:
         with np.errstate(invalid="ignore", divide="ignore"):
             o /= np.linalg.norm(o, axis=-1, keepdims=True)
         return np.where(np.any(fin, axis=2), o, np.nan)
-
-
-def _lens(c: np.ndarray, x: np.ndarray, y: np.ndarray) -> tuple[np.ndarray, ...]:
-    """The distortion ``(x_d, y_d)`` at ``(x, y)`` and its (symmetric) Jacobian
-    ``(j11, j12, j22)``: :class:`vision.cameras.distortion.RadialTangential` without stacking."""
-    k1, k2, p1, p2, k3 = (float(v) for v in c)
-    r2 = x * x + y * y
-    L = 1.0 + r2 * (k1 + r2 * (k2 + r2 * k3))
-    M = 2.0 * k1 + r2 * (4.0 * k2 + 6.0 * k3 * r2)
-    xy2 = 2.0 * x * y
-    xd = x * L + p1 * xy2 + p2 * (r2 + 2.0 * x * x)
-    yd = y * L + p1 * (r2 + 2.0 * y * y) + p2 * xy2
-    j11 = L + x * x * M + 2.0 * p1 * y + 6.0 * p2 * x
-    j12 = x * y * M + 2.0 * p1 * x + 2.0 * p2 * y
-    j22 = L + y * y * M + 6.0 * p1 * y + 2.0 * p2 * x
-    return xd, yd, j11, j12, j22
 
 
 def _min_singular(a: np.ndarray, b: np.ndarray, c: np.ndarray, d: np.ndarray) -> np.ndarray:
@@ -119,7 +107,7 @@ def curved_samples(camera: Camera, prediction: LegPrediction, t: np.ndarray,
     with np.errstate(invalid="ignore", divide="ignore"):
         iz = np.where(Z > 0, 1.0 / Z, np.nan)
     x, y = X[..., 0] * iz, X[..., 1] * iz
-    xd, yd, j11, j12, j22 = _lens(camera.lens.coefficients, x, y)
+    xd, yd, j11, j12, j21, j22 = camera.lens.parts(x, y)
     K = camera.K
     fx, sk, cx, fy, cy = K[0, 0], K[0, 1], K[0, 2], K[1, 1], K[1, 2]
     P = np.stack([fx * xd + sk * yd + cx, fy * yd + cy], -1)
@@ -129,7 +117,7 @@ def curved_samples(camera: Camera, prediction: LegPrediction, t: np.ndarray,
         """Pixel derivative (du, dv) of the projection along the 3D direction v (6, 2, 3)."""
         a = (v[:, :, None, 0] - x * v[:, :, None, 2]) * iz
         b = (v[:, :, None, 1] - y * v[:, :, None, 2]) * iz
-        e, f = j11 * a + j12 * b, j12 * a + j22 * b
+        e, f = j11 * a + j12 * b, j21 * a + j22 * b
         return fx * e + sk * f, fy * f
 
     tu, tv = image_direction(d)
@@ -142,9 +130,9 @@ def curved_samples(camera: Camera, prediction: LegPrediction, t: np.ndarray,
     m = np.stack([x, y], -1)
     gate = np.stack([fx * x + sk * y + cx, fy * y + cy], -1)
     # The ideal-to-raw pixel map K2 Jd K2^-1 and its smallest magnification.
-    a11 = j11 + sk * j12 / fx
+    a11 = j11 + sk * j21 / fx
     a12 = (fx * j12 + sk * j22 - a11 * sk) / fy
-    a21 = fy * j12 / fx
+    a21 = fy * j21 / fx
     a22 = j22 - a21 * sk / fy
     with np.errstate(invalid="ignore", divide="ignore"):
         margin = margin_px / _min_singular(a11, a12, a21, a22)
@@ -154,7 +142,9 @@ def curved_samples(camera: Camera, prediction: LegPrediction, t: np.ndarray,
     seg = ends - dist[..., None] * lines[:, :, None, :2]
     M = t.size
     return CurvedSamples(P=P[:, :, :M], out=out[:, :, :M], m=m[:, :, :M],
-                         gate=gate[:, :, :M], margin=margin[:, :, :M], seg=seg, lines=lines)
+                         gate=gate[:, :, :M], margin=margin[:, :, :M], seg=seg, lines=lines,
+                         md=np.stack([xd, yd], -1)[:, :, :M],
+                         jac=np.stack([j11, j12, j21, j22], -1)[:, :, :M])
 
 
 def lift_near(camera: Camera, pixels: np.ndarray, m0: np.ndarray
@@ -172,34 +162,68 @@ def lift_near(camera: Camera, pixels: np.ndarray, m0: np.ndarray
         (:meth:`Camera.lift` to the rounding: residual of the distortion equation
         below ``1e-15 max(1, |m_d|)``); NaN where a pixel is not finite.
     """
+    rays, m, _ = lift_near_parts(camera, pixels, m0)
+    return rays, m
+
+
+def lift_near_parts(camera: Camera, pixels: np.ndarray, m0: np.ndarray,
+                    md0: np.ndarray | None = None, jac0: np.ndarray | None = None
+                    ) -> tuple[np.ndarray, np.ndarray, tuple[np.ndarray, ...] | None]:
+    """:func:`lift_near`, and the lens Jacobian at the lifted points.
+
+    With the distorted point ``md0`` and the lens Jacobian ``jac0`` (``(j11, j12, j21,
+    j22)`` in the last axis) at ``m0`` (:class:`CurvedSamples` has them), the first
+    Newton step costs no lens evaluation. Newton's method stops once the residual is at
+    the rounding of the lens map, so the last evaluation gives the Jacobian at the
+    returned point (for :func:`pixels_per_radian`).
+
+    Returns:
+        Rays (..., 3), ``m`` (..., 2) and ``(j11, j12, j21, j22)`` at ``m`` (None where
+        a point needed the camera's safeguarded solver: recompute them).
+    """
     md = camera.pixels_to_distorted(pixels)
     ux, uy = md[..., 0], md[..., 1]
     ok0 = np.isfinite(m0).all(-1)
     x = np.where(ok0, m0[..., 0], ux)
     y = np.where(ok0, m0[..., 1], uy)
-    c = camera.lens.coefficients
+    lens = camera.lens
+    tol = 1e-15 * np.maximum(1.0, np.hypot(ux, uy))
+    jac = None
     with np.errstate(invalid="ignore", divide="ignore", over="ignore"):
+        if md0 is not None and jac0 is not None:
+            a, b, c, d = jac0[..., 0], jac0[..., 1], jac0[..., 2], jac0[..., 3]
+            fx_, fy_ = md0[..., 0] - ux, md0[..., 1] - uy
+            det = a * d - b * c
+            sx = (d * fx_ - b * fy_) / det
+            sy = (a * fy_ - c * fx_) / det
+            good = ok0 & np.isfinite(sx) & np.isfinite(sy)
+            x, y = np.where(good, x - sx, x), np.where(good, y - sy, y)
         for _ in range(LIFT_ITERATIONS):
-            xd, yd, j11, j12, j22 = _lens(c, x, y)
+            xd, yd, j11, j12, j21, j22 = lens.parts(x, y)
             fx_, fy_ = xd - ux, yd - uy
-            det = j11 * j22 - j12 * j12
-            sx = (j22 * fx_ - j12 * fy_) / det
-            sy = (j11 * fy_ - j12 * fx_) / det
-            x, y = x - sx, y - sy
-            if not (np.any(np.abs(sx) > 1e-15) or np.any(np.abs(sy) > 1e-15)):
+            res = np.hypot(fx_, fy_)
+            if not np.any(res > tol):
+                jac = (j11, j12, j21, j22)
                 break
-        xd, yd = _lens(c, x, y)[:2]
-        res = np.hypot(xd - ux, yd - uy)
+            det = j11 * j22 - j12 * j21
+            x = x - (j22 * fx_ - j12 * fy_) / det
+            y = y - (j11 * fy_ - j21 * fx_) / det
+        else:
+            xd, yd, j11, j12, j21, j22 = lens.parts(x, y)
+            res = np.hypot(xd - ux, yd - uy)
+            jac = (j11, j12, j21, j22)
     m = np.stack([x, y], -1)
     finite = np.isfinite(md).all(-1)
-    bad = finite & ~(res <= 1e-15 * np.maximum(1.0, np.hypot(ux, uy)))
+    bad = finite & ~(res <= tol)
     if np.any(bad):
         m[bad] = camera.undistort(md[bad])
+        jac = None
     m = np.where(finite[..., None], m, np.nan)
-    return projection.lift(m, 0.0), m
+    return projection.lift(m, 0.0), m, jac
 
 
-def pixels_per_radian(camera: Camera, m: np.ndarray, normals: np.ndarray) -> np.ndarray:
+def pixels_per_radian(camera: Camera, m: np.ndarray, normals: np.ndarray,
+                      jac: tuple[np.ndarray, ...] | None = None) -> np.ndarray:
     """Pixels per radian of ``n . X`` at points of a perspective image:
     ``1 / |n^T dX/dp|`` (``dX/dp`` the lift Jacobian, distortion included).
 
@@ -207,6 +231,8 @@ def pixels_per_radian(camera: Camera, m: np.ndarray, normals: np.ndarray) -> np.
         camera: The camera (``xi = 0``).
         m: (..., N, 2) undistorted normalised coordinates of the points (NaN allowed).
         normals: (..., 3) the plane normal of each row of points.
+        jac: The lens Jacobian ``(j11, j12, j21, j22)`` at ``m`` when known
+            (:func:`lift_near_parts`); computed otherwise.
 
     Returns:
         (..., N) the distance [px] of a point from the curve of ``n`` per radian of
@@ -219,11 +245,14 @@ def pixels_per_radian(camera: Camera, m: np.ndarray, normals: np.ndarray) -> np.
     # Gradient of n . X_s w.r.t. m, then through the inverse distortion and K.
     g0 = (nn[..., 0] - ns * x / h) / h
     g1 = (nn[..., 1] - ns * y / h) / h
-    _, _, j11, j12, j22 = _lens(camera.lens.coefficients, x, y)
+    if jac is None:
+        _, _, j11, j12, j21, j22 = camera.lens.parts(x, y)
+    else:
+        j11, j12, j21, j22 = jac
     K = camera.K
     with np.errstate(invalid="ignore", divide="ignore"):
-        det = j11 * j22 - j12 * j12
-        d0 = (g0 * j22 - g1 * j12) / det
+        det = j11 * j22 - j12 * j21
+        d0 = (g0 * j22 - g1 * j21) / det
         d1 = (g1 * j11 - g0 * j12) / det
         p0 = d0 / K[0, 0]
         p1 = (d1 - p0 * K[0, 1]) / K[1, 1]

@@ -102,7 +102,7 @@ class OmniDetector:
         # rotation of the circle's ray only for fx = fy, no skew and a lens without
         # decentring terms (a radial distortion keeps the image rotationally symmetric).
         self._isotropic = bool(camera.K[0, 1] == 0 and camera.fx == camera.fy
-                               and not np.any(camera.lens.coefficients[2:4]))
+                               and camera.lens.is_radial)
         # Through a distorted lens: the residuals are scaled by the pixels per radian
         # along the circle (across a leg's edge, which crosses the circles nearly
         # radially; a distorted image is not conformal), per sample, and without the

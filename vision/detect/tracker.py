@@ -16,7 +16,7 @@ from vision.detect.common import (
     _robust_fit,
     fit_normals,
 )
-from vision.detect.curves import curved_samples, lift_near, pixels_per_radian
+from vision.detect.curves import curved_samples, lift_near, lift_near_parts, pixels_per_radian
 from vision.detect.profiles import (
     _NO_GRADIENT,
     _gradient_profiles,
@@ -213,9 +213,9 @@ class PerspectiveTracker:
             valid &= ~self._contested(cs.gate, cs.seg, cs.lines, cs.margin)
             valid &= _theil_sen_inliers(offset, valid, t, 2.0 * self.outlier_px)
         pts = np.where(valid[..., None], cs.P + offset[..., None] * cs.out, np.nan)
-        rays, m = lift_near(self.camera, pts, cs.m)
+        rays, m, jac = lift_near_parts(self.camera, pts, cs.m, cs.md, cs.jac)
         rays = np.where(valid[..., None], rays, 0.0)
-        ppr = pixels_per_radian(self.camera, m, prediction.normals)
+        ppr = pixels_per_radian(self.camera, m, prediction.normals, jac)
         normals, vis, cnt, rms, inl = _robust_fit(
             rays, valid, ppr, prediction.normals, self.outlier_px, self.min_points,
             self.max_rms_px, use_compiled=compiled)

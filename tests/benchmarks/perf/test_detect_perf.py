@@ -41,9 +41,11 @@ def test_benchmark_table_never_finds_more_than_the_truth() -> None:
 
 def test_distortion_rows_beside_the_ideal_ones(tmp_path) -> None:
     """``--distortion``: each camera twice, ideal then distorted (the ``lens`` column, the
-    last), the same poses (same number of visible edges for the omnidirectional camera,
-    which sees every edge), detections as good as through the ideal lens (median error
-    within 1.5 times), and the pictures of the distorted frames."""
+    last but one), then the front camera through the other lens models; the same poses
+    (same number of visible edges for the omnidirectional camera, which sees every
+    edge), detections as good as through the ideal lens (median error within 1.5 times),
+    the time over the ideal lens's (the last column, 1.00x for the ideal lens) and the
+    pictures of the distorted frames."""
     buf = io.StringIO()
     with redirect_stdout(buf):
         assert main(["--frames", "8", "--repeats", "1", "--distortion",
@@ -51,13 +53,34 @@ def test_distortion_rows_beside_the_ideal_ones(tmp_path) -> None:
     rows = [[c.strip() for c in line.strip("|").split("|")]
             for line in buf.getvalue().splitlines()
             if line.startswith("| omni") or line.startswith("| front")]
-    assert [(r[0], r[-1]) for r in rows] == [("omni", "ideal"), ("omni", "distorted"),
-                                             ("front", "ideal"), ("front", "distorted")]
+    assert [(r[0], r[-2]) for r in rows] == [
+        ("omni", "ideal"), ("omni", "distorted"), ("front", "ideal"), ("front", "distorted"),
+        ("front", "opencv-full"), ("front", "fisheye"), ("front", "double-sphere"),
+        ("front", "eucm")]
     assert rows[0][11] == rows[1][11] == "96/96"
-    for ideal, distorted in (rows[0:2], rows[2:4]):
-        assert float(distorted[8]) < 1.5 * float(ideal[8]), (ideal, distorted)
-        found, visible = map(int, re.fullmatch(r"(\d+)/(\d+)", distorted[11]).groups())
-        assert found + int(distorted[12]) == visible and int(distorted[14]) == 0
+    assert rows[0][-1] == rows[2][-1] == "1.00x"
+    for ideal, lens in [rows[0:2], *([rows[2], r] for r in rows[3:])]:
+        assert float(lens[8]) < 1.5 * float(ideal[8]), (ideal, lens)
+        found, visible = map(int, re.fullmatch(r"(\d+)/(\d+)", lens[11]).groups())
+        assert found + int(lens[12]) == visible and int(lens[14]) == 0
+        ratio = float(lens[-1].rstrip("x"))
+        assert abs(ratio - float(lens[3]) / float(ideal[3])) < 0.01 * ratio + 0.01
     names = sorted(p.name for p in tmp_path.iterdir())
-    assert names == ["detect-front-distorted.png", "detect-front.png",
+    assert names == ["detect-front-distorted.png", "detect-front-double-sphere.png",
+                     "detect-front-eucm.png", "detect-front-fisheye.png",
+                     "detect-front-opencv-full.png", "detect-front.png",
                      "detect-omni-distorted.png", "detect-omni.png"]
+
+
+def test_interleaved_rounds_give_ratios_to_the_ideal_lens() -> None:
+    """``--rounds``: a second table, one row per camera, the ideal rows at 1.00x and each
+    ratio the row's time over its camera's ideal-lens time."""
+    buf = io.StringIO()
+    with redirect_stdout(buf):
+        assert main(["--frames", "2", "--repeats", "1", "--rounds", "2"]) == 0
+    text = buf.getvalue().split("# interleaved")[1]
+    rows = [[c.strip() for c in line.strip("|").split("|")] for line in text.splitlines()
+            if line.startswith("| omni") or line.startswith("| front")]
+    assert [(r[0], r[1]) for r in rows] == [("omni", "ideal"), ("front", "ideal")]
+    for r in rows:
+        assert r[3] == r[5] == "1.00x" and float(r[2]) > 0 and float(r[4]) >= float(r[2])

@@ -292,3 +292,44 @@ def test_servo_through_an_opencv_calibration_file(tmp_path: Path,
     assert servo.main(["--backend", "emulator", "--goal", str(goal), "--camera-pose",
                        "front"]) == 2
     assert "--camera-pose: only with an OpenCV calibration file" in capsys.readouterr().err
+
+
+def test_servo_through_a_kalibr_fisheye(tmp_path: Path,
+                                        capsys: pytest.CaptureFixture[str]) -> None:
+    """--camera-file camchain.yaml (Kalibr pinhole-equi, the fisheye preset's lens) with
+    --camera-pose fisheye: rendered and tracked through the fisheye, the loop converges."""
+    from hexapod.geometry import deltalab
+    from vision.cameras import fisheye_camera, save_kalibr_camera
+
+    save_kalibr_camera(fisheye_camera(deltalab()), tmp_path / "camchain.yaml")
+    goal = _goal(tmp_path, f"lengths_mm = {_mm(GOAL_MM)}\n")
+    argv = ["--backend", "emulator", "--camera", "sim", "--controller", "leg-edge",
+            "--goal", str(goal), "--camera-file", str(tmp_path / "camchain.yaml"),
+            "--camera-pose", "fisheye", *FAST]
+    assert servo.main(argv) == 0, capsys.readouterr().out[-2000:]
+    assert "converged after" in capsys.readouterr().out
+
+
+def test_the_serial_board_refuses_a_force_controller_before_moving() -> None:
+    """A force command reaches neither the serial protocol nor the emulated board: the
+    servo loop refuses the controller first, naming it and what the robot applies."""
+    from controllers.base import ControllerContext
+    from hexapod.exceptions import ActuationError
+    from hexapod.geometry import deltalab
+    from tests.controllers.force_plugin import LegSpringForces
+    from vision.cameras import front_camera
+
+    g = deltalab()
+    cam = front_camera(g)
+    goal = servo.goal_features(servo.ServoGoal(np.array(GOAL_MM) * 1e-3, None, "<test>"),
+                               cam, g)
+    ctrl = LegSpringForces()
+    ctrl.reset(ControllerContext(cam.camera_from_base.apply(g.base_points), g, cam, 0.02, goal))
+    from hexapod.backends.serial_emulated import open_emulated_robot
+
+    with open_emulated_robot(g) as robot:
+        q0 = robot.measured_lengths()
+        with pytest.raises(ActuationError, match="controller 'test-leg-spring-forces' commands "
+                                                 r"leg forces \[N\], but the robot"):
+            servo.servo_loop(robot, servo.SimCamera(cam, g), ctrl, goal, g, 0.02, max_steps=3)
+        np.testing.assert_allclose(robot.measured_lengths(), q0, rtol=0, atol=1e-6)

@@ -49,7 +49,7 @@ def test_sweep_expands_to_cartesian_product() -> None:
          "calibration_error.base_points_mm", "out of the allowed range [0, 100]"),
         ({**MINIMAL, "task": {"max_steps": [1, 2]}}, "task.max_steps", "sweepable"),
         ({"name": "t"}, "controllers", "missing"),
-        ({**MINIMAL, "camera": {"preset": "fisheye"}}, "camera.preset", "front"),
+        ({**MINIMAL, "camera": {"preset": "wide-angle"}}, "camera.preset", "front"),
         ({**MINIMAL, "controllers": ["a", "a"]}, "controllers", "duplicate"),
         ({**MINIMAL, "sensor": {"teach_frames": 0}}, "sensor.teach_frames", "[1, 1000]"),
         # values that parse but cannot run (found by mutating the built-in scenarios)

@@ -13,12 +13,13 @@ The files written by OpenCV's calibration samples and tools:
   ``xi``; no image size. ``D`` is accepted as the name of the coefficients.
 
 ROS's camera_info YAML files use the same names (matrices as ``{rows, cols, data}``,
-with ``distortion_model``: ``plumb_bob`` or ``rational_polynomial`` are read, other
-models refused). A file with ``xi`` is a unified (omnidirectional) camera, otherwise a
-perspective one.
-Coefficients beyond ``k3`` (rational, thin-prism, tilt models) must be zero, and
-``cv::fisheye`` calibrations (``fisheye_model: 1``, the Kannala-Brandt model) are
-refused: these are other models. The pose of the camera is not in these files.
+with ``distortion_model``: ``plumb_bob`` and ``rational_polynomial`` are OpenCV's
+perspective model, ``equidistant`` its fisheye model; others are refused, naming the
+key). A file with ``xi`` is a unified (omnidirectional) camera, one with
+``fisheye_model: 1`` (the tutorial's ``cv::fisheye`` calibrations) or ``distortion_model:
+equidistant`` a fisheye (Kannala-Brandt, 4 coefficients ``(k1, k2, k3, k4)``), otherwise
+a perspective one with OpenCV's 4, 5, 8, 12 or 14 coefficients (rational, thin-prism
+and tilt terms included). The pose of the camera is not in these files.
 
 Reading and writing go through ``cv2.FileStorage``: YAML 1.0 (``%YAML:1.0``, what
 OpenCV up to 4.x writes), YAML 1.2 (what OpenCV 5 writes), XML and JSON; the format
@@ -29,7 +30,6 @@ from __future__ import annotations
 
 import logging
 import math
-from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -37,6 +37,7 @@ import cv2
 import numpy as np
 
 from hexapod.exceptions import ConfigFileError
+from vision.cameras.fields import Calibration
 
 log = logging.getLogger(__name__)
 
@@ -52,34 +53,11 @@ KEYS = {
     "fisheye": ("fisheye_model",),
     "model": ("distortion_model",),
 }
-#: ``distortion_model`` values (ROS's camera_info files) of the radial-tangential model.
-RADIAL_TANGENTIAL_MODELS = ("plumb_bob", "rational_polynomial")
+#: ``distortion_model`` values (ROS's camera_info files) and the camera kind of each.
+ROS_MODELS = {"plumb_bob": "perspective", "rational_polynomial": "perspective",
+              "equidistant": "fisheye"}
 #: Lengths of OpenCV's perspective coefficient vectors.
 PERSPECTIVE_LENGTHS = (4, 5, 8, 12, 14)
-_NAMES = ("k1", "k2", "p1", "p2", "k3", "k4", "k5", "k6", "s1", "s2", "s3", "s4", "tau_x",
-          "tau_y")
-
-
-@dataclass(frozen=True)
-class OpenCVCalibration:
-    """The intrinsics of an OpenCV calibration file.
-
-    Attributes:
-        K: (3, 3) camera matrix [px].
-        distortion: ``(k1, k2, p1, p2, k3)`` (perspective) or ``(k1, k2, p1, p2)``
-            (unified), the zero higher-order terms of a longer vector dropped.
-        xi: Mirror parameter of Mei's model; None for a perspective camera.
-        width: Image width [px], None when the file does not say.
-        height: Image height [px], None when the file does not say.
-        source: The file.
-    """
-
-    K: np.ndarray
-    distortion: np.ndarray
-    xi: float | None
-    width: int | None
-    height: int | None
-    source: str
 
 
 def is_opencv_file(path: str | Path) -> bool:
@@ -182,7 +160,7 @@ def _size(fs: Any, field: str, path: str) -> int | None:
     return int(v.reshape(-1)[0])
 
 
-def read_opencv_calibration(path: str | Path) -> OpenCVCalibration:
+def read_opencv_calibration(path: str | Path) -> Calibration:
     """Read the intrinsics of an OpenCV calibration file (see the module docstring).
 
     Raises:
@@ -194,17 +172,18 @@ def read_opencv_calibration(path: str | Path) -> OpenCVCalibration:
     src = str(p)
     fs = _open(p)
     try:
+        kind = "perspective"
         hit = _find(fs, "fisheye", src, required=False)
         if hit is not None and np.any(_numbers(hit[1], src, hit[0]) != 0):
-            raise ConfigFileError(src, "a cv::fisheye calibration (Kannala-Brandt model) is "
-                                       "not supported: calibrate with cv2.calibrateCamera "
-                                       "or cv::omnidir", key=hit[0])
+            kind = "fisheye"
         hit = _find(fs, "model", src, required=False)
-        if hit is not None and not (hit[1].isString()
-                                    and hit[1].string() in RADIAL_TANGENTIAL_MODELS):
-            raise ConfigFileError(src, f"distortion model {hit[1].string()!r} is not "
-                                       f"supported; expected one of "
-                                       f"{', '.join(RADIAL_TANGENTIAL_MODELS)}", key=hit[0])
+        if hit is not None:
+            name = hit[1].string() if hit[1].isString() else None
+            if name not in ROS_MODELS:
+                raise ConfigFileError(src, f"distortion model {name!r} is not supported; "
+                                           f"expected one of {', '.join(ROS_MODELS)}",
+                                      key=hit[0])
+            kind = ROS_MODELS[name]
         key, node = _find(fs, "camera_matrix", src)  # type: ignore[misc]
         K = _numbers(node, src, key)
         if K.shape != (3, 3):
@@ -225,35 +204,56 @@ def read_opencv_calibration(path: str | Path) -> OpenCVCalibration:
             xi = float(v.reshape(-1)[0])
         key, node = _find(fs, "distortion", src)  # type: ignore[misc]
         d = _vector(_numbers(node, src, key), src, key)
-        lengths = (4,) if xi is not None else PERSPECTIVE_LENGTHS
-        if d.size not in lengths and d.size != 0:
-            model = "cv::omnidir (k1, k2, p1, p2)" if xi is not None else (
-                "cv2.calibrateCamera (k1, k2, p1, p2[, k3[, k4, k5, k6[, s1..s4[, tx, ty]]]])")
-            raise ConfigFileError(src, f"expected {' or '.join(map(str, lengths))} "
-                                       f"coefficients of {model}, got {d.size}", key=key)
-        extra = d[5:]
-        if np.any(extra != 0):
-            names = ", ".join(f"{_NAMES[5 + i]}={c:g}" for i, c in enumerate(extra) if c != 0)
-            raise ConfigFileError(src, f"the rational, thin-prism and tilt terms are not "
-                                       f"supported (only k1, k2, p1, p2, k3): {names}",
-                                  key=key)
-        n = 4 if xi is not None else 5
-        dist = np.zeros(n)
-        dist[: min(n, d.size)] = d[:n]
+        if xi is not None:
+            if kind == "fisheye":
+                raise ConfigFileError(src, "xi (Mei's model) in a fisheye calibration",
+                                      key=xi_hit[0])  # type: ignore[index]
+            kind = "unified"
+        dist = _coefficients(d, kind, src, key)
         width, height = _size(fs, "width", src), _size(fs, "height", src)
     finally:
         fs.release()
-    log.debug("read %s: K=%s, distortion=%s, xi=%s, size=%sx%s", src, K.tolist(),
+    log.debug("read %s: %s, K=%s, distortion=%s, xi=%s, size=%sx%s", src, kind, K.tolist(),
               dist.tolist(), xi, width, height)
-    return OpenCVCalibration(K, dist, xi, width, height, src)
+    return Calibration(kind, K, dist, xi, width, height, src)
+
+
+def _coefficients(d: np.ndarray, kind: str, src: str, key: str) -> np.ndarray:
+    """The distortion vector of a model: 4 numbers (unified, fisheye) or OpenCV's
+    perspective vector, cut after its last nonzero term at one of OpenCV's lengths
+    (at least 5); empty: no distortion.
+
+    Raises:
+        ConfigFileError: A length the model does not have (naming the key).
+    """
+    lengths = PERSPECTIVE_LENGTHS if kind == "perspective" else (4,)
+    if d.size not in lengths and d.size != 0:
+        model = {"unified": "cv::omnidir (k1, k2, p1, p2)",
+                 "fisheye": "cv::fisheye (k1, k2, k3, k4)"}.get(
+            kind, "cv2.calibrateCamera (k1, k2, p1, p2[, k3[, k4, k5, k6[, s1..s4[, tx, "
+                  "ty]]]])")
+        raise ConfigFileError(src, f"expected {' or '.join(map(str, lengths))} "
+                                   f"coefficients of {model}, got {d.size}", key=key)
+    if kind != "perspective":
+        out = np.zeros(4)
+        out[: d.size] = d
+        return out
+    nonzero = np.flatnonzero(d)
+    last = int(nonzero[-1]) + 1 if nonzero.size else 0
+    n = min(k for k in PERSPECTIVE_LENGTHS if k >= max(last, 5))
+    out = np.zeros(n)
+    out[: min(n, d.size)] = d[:n]
+    return out
 
 
 def write_opencv_calibration(path: str | Path, K: np.ndarray, distortion: np.ndarray,
-                             width: int, height: int, xi: float | None = None) -> None:
+                             width: int, height: int, xi: float | None = None,
+                             fisheye: bool = False) -> None:
     """Write intrinsics as OpenCV's calibration samples do, with ``cv2.FileStorage``.
 
     Keys: ``image_width``, ``image_height``, ``camera_matrix`` (3x3),
-    ``distortion_coefficients`` (1xN) and, for Mei's model, ``xi``. The format
+    ``distortion_coefficients`` (1xN), for Mei's model ``xi`` and for a ``cv::fisheye``
+    calibration ``fisheye_model: 1`` (as the calibration tutorial). The format
     follows the extension (YAML 1.2 for ``.yml``/``.yaml`` with OpenCV 5).
 
     Raises:
@@ -275,12 +275,14 @@ def write_opencv_calibration(path: str | Path, K: np.ndarray, distortion: np.nda
                  np.asarray(distortion, dtype=np.float64).reshape(1, -1))
         if xi is not None and not math.isnan(xi):
             fs.write("xi", float(xi))
+        if fisheye:
+            fs.write("fisheye_model", 1)
     finally:
         fs.release()
     log.debug("wrote %s", p)
 
 
-def calibration_size(cal: OpenCVCalibration, given: tuple[int, int] | None,
+def calibration_size(cal: Calibration, given: tuple[int, int] | None,
                      given_by: str) -> tuple[int, int]:
     """The image size of a calibration: the file's, or ``given`` when the file has none
     (``omni_calibration.cpp`` does not write it).

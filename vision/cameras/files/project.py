@@ -4,13 +4,16 @@ This module turns a table into the fields of a camera (:class:`CameraFields`) an
 camera into a table; the models (:mod:`vision.cameras`) build and validate the camera
 itself, so this module does not depend on them.
 
-Format: ``kind`` (``"perspective"``/``"unified"``), ``name``, ``width_px``,
-``height_px``, ``fx_px``, ``fy_px``, ``cx_px``, ``cy_px``, ``skew_px``, ``xi``
-(unified only), ``distortion`` (OpenCV's coefficients: ``[k1, k2, p1, p2, k3]`` for a
-perspective camera, 4 or 5 numbers; ``[k1, k2, p1, p2]`` for a unified one; absent for
-an ideal lens) and a table ``[camera_from_base]`` with ``translation_mm`` and
-``rotation_vector_deg`` (axis times angle, degrees) or ``rotation_matrix``, such that
-``p_camera = R p_base + t``.
+Format: ``kind`` (``"perspective"``, ``"unified"``, ``"fisheye"``,
+``"double_sphere"``, ``"eucm"``), ``name``, ``width_px``, ``height_px``, ``fx_px``,
+``fy_px``, ``cx_px``, ``cy_px``, ``skew_px``, ``xi`` (unified only), ``distortion``
+(the lens: OpenCV's coefficients ``[k1, k2, p1, p2[, k3[, k4, k5, k6[, s1, s2, s3,
+s4[, tau_x, tau_y]]]]]`` for a perspective camera, 4, 5, 8, 12 or 14 numbers;
+``[k1, k2, p1, p2]`` for a unified one; ``[k1, k2, k3, k4]`` for a fisheye
+(``cv2.fisheye``); ``[xi, alpha]`` for the double sphere, ``[alpha, beta]`` for the
+extended unified model; absent for an ideal lens) and a table ``[camera_from_base]``
+with ``translation_mm`` and ``rotation_vector_deg`` (axis times angle, degrees) or
+``rotation_matrix``, such that ``p_camera = R p_base + t``.
 
 Instead of the intrinsic keys, ``opencv = "calib.yml"`` names an OpenCV calibration
 file (:mod:`vision.cameras.files.opencv`; the path is relative to the TOML file; read by
@@ -45,9 +48,15 @@ OPENCV_TABLE_KEYS = ("kind", "name", "opencv", "width_px", "height_px", "camera_
 #: Keys of its ``[camera_from_base]`` table.
 POSE_KEYS = ("translation_mm", "rotation_vector_deg", "rotation_matrix")
 #: The camera kinds (models) a file may name.
-KINDS = ("perspective", "unified")
+KINDS = ("perspective", "unified", "fisheye", "double_sphere", "eucm")
 #: Accepted lengths of the ``distortion`` list of each kind.
-DISTORTION_LENGTHS = {"perspective": (4, 5), "unified": (4,)}
+DISTORTION_LENGTHS = {"perspective": (4, 5, 8, 12, 14), "unified": (4,), "fisheye": (4,),
+                      "double_sphere": (2,), "eucm": (2,)}
+#: The names of the ``distortion`` list of each kind (for the messages).
+DISTORTION_NAMES = {
+    "perspective": "k1, k2, p1, p2[, k3[, k4, k5, k6[, s1, s2, s3, s4[, tau_x, tau_y]]]]",
+    "unified": "k1, k2, p1, p2", "fisheye": "k1, k2, k3, k4", "double_sphere": "xi, alpha",
+    "eucm": "alpha, beta"}
 
 
 def camera_table(camera: Camera) -> dict[str, Any]:
@@ -144,7 +153,8 @@ def read_camera_table(table: dict[str, Any], path: str = "<dict>",
                 path, f"a perspective camera has xi = 0, got {xi} (use kind = 'unified')",
                 key="xi")
     distortion = (read_distortion(table["distortion"], DISTORTION_LENGTHS[kind], path,
-                                  "distortion") if "distortion" in table else None)
+                                  "distortion", DISTORTION_NAMES[kind])
+                  if "distortion" in table else None)
     pose = read_pose_table(table, path)
     name = table.get("name", Path(path).stem)
     if not isinstance(name, str):
@@ -153,13 +163,13 @@ def read_camera_table(table: dict[str, Any], path: str = "<dict>",
                         distortion)
 
 
-def read_distortion(value: Any, lengths: tuple[int, ...], path: str, key: str) -> np.ndarray:
+def read_distortion(value: Any, lengths: tuple[int, ...], path: str, key: str,
+                    names: str = "k1, k2, p1, p2, k3") -> np.ndarray:
     """A distortion vector of one of the ``lengths`` (finite numbers).
 
     Raises:
         ConfigFileError: Not a flat list of that many finite numbers (naming ``key``).
     """
-    names = "k1, k2, p1, p2, k3"
     want = " or ".join(str(n) for n in lengths)
     try:
         arr = np.array(value, dtype=float)

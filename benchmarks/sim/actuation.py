@@ -1,0 +1,48 @@
+"""The study worlds' side of typed actuation (:mod:`hexapod.actuation`).
+
+The kinematic world integrates leg velocities exactly; it refuses a controller that
+commands leg forces (before its first step, and any batch of another kind than the
+controller declared), with an :class:`~hexapod.exceptions.ActuationError` naming the
+controller. The trial's row then carries that message as its failure.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+from controllers.base import CommandBatch
+from controllers.batch import actuation_of
+from hexapod.actuation import Actuation, check_actuation
+
+#: What the kinematic world applies.
+KINEMATIC_WORLD: tuple[Actuation, ...] = (Actuation.VELOCITY,)
+#: How the messages name it.
+KINEMATIC_WORLD_NAME = "the kinematic world"
+
+
+def require_actuation(controller: Any, label: str,
+                      accepted: tuple[Actuation, ...] = KINEMATIC_WORLD,
+                      receiver: str = KINEMATIC_WORLD_NAME) -> Actuation:
+    """The actuation ``controller`` declares, if ``receiver`` applies it.
+
+    Args:
+        controller: A controller or batch wrapper (its ``actuation`` attribute).
+        label: The controller's label in the study (named by the refusal).
+        accepted: What the world applies.
+        receiver: How the refusal names the world.
+
+    Raises:
+        ActuationError: The world does not apply it.
+    """
+    return check_actuation(actuation_of(controller), accepted, receiver, label)
+
+
+def require_batch(commands: CommandBatch, declared: Actuation, label: str) -> None:
+    """Refuse a batch of another kind than its controller declared.
+
+    Raises:
+        ActuationError: ``commands.actuation`` is not ``declared``.
+    """
+    if commands.actuation is not declared:
+        check_actuation(commands.actuation, (declared,),
+                        f"a study whose controller declared {declared.quantity}", label)

@@ -1,0 +1,30 @@
+"""Solvers: what turns one period's tasks into a command.
+
+In the manner of Pink's solver: a task (:mod:`controllers.tasks`, or the stacked
+:class:`~controllers.laws.TaskStep` a vision law builds from them) says what to regulate;
+a solver says how. A controller is a (task, solver) pair: ``leg-edge`` is the leg-edge
+task with :class:`DampedPseudoInverse`, ``leg-edge-qp`` the same task with
+:class:`LimitQPSolver`, ``leg-edge-mpc`` the predictive controller
+(:mod:`controllers.mpc`) over the same task, falling back to the limit QP.
+
+- :class:`DampedPseudoInverse` (:mod:`~controllers.solvers.pseudo_inverse`):
+  ``tau = -lambda (L^T L + mu^2 I)^+ L^T e`` with the adaptive gain ``lambda``;
+- :class:`LimitQPSolver` (:mod:`~controllers.solvers.limit_qp`): the same objective
+  under stroke and leg-speed bounds, OSQP (:mod:`~controllers.solvers.osqp_limits`);
+- the predictive controller: :mod:`controllers.mpc` (horizon, SQP, DAQP), which takes
+  the tasks of its fallback law (:meth:`~controllers.laws.VisionLaw.tasks`).
+
+Computed-torque solvers (second-order laws that command leg forces) belong here, in
+their own module: from each task's ``error``, ``jacobian`` and ``jacobian_dot_twist``
+(``e_ddot = L tau_dot + L_dot tau``) they choose the platform acceleration, map it
+through the dynamic model to leg forces, and return commands with
+``actuation = Actuation.FORCE`` (:mod:`hexapod.actuation`); ``docs/plugins.md`` shows
+the shape.
+"""
+
+from controllers.solvers.base import Solved, Solver
+from controllers.solvers.limit_qp import LimitQPSolver, StrokeWindow, velocity_bounds
+from controllers.solvers.pseudo_inverse import DampedPseudoInverse
+
+__all__ = ["DampedPseudoInverse", "LimitQPSolver", "Solved", "Solver", "StrokeWindow",
+           "velocity_bounds"]

@@ -1,0 +1,67 @@
+"""The solver interface: a solver turns one period's tasks into a twist.
+
+A solver takes the stacked tasks of a period (:class:`~controllers.laws.TaskStep`: the
+error, ``L^T L``, ``L^T e``, the gain, the inverse Jacobian) and the measured lengths,
+never the controller that built them; it returns the twist and its diagnostics, and
+may touch the final leg velocities (:meth:`Solver.finish`). Per-trial constants it
+derives from the context (the QP's stroke window) come from :meth:`Solver.reset`.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from typing import Any
+
+import numpy as np
+
+from controllers.base import ControllerContext
+from controllers.law_kernel import LawResult
+
+#: A solve: ``tau`` (6,), rank, condition, active constraints, refusal reason (or None),
+#: and the final ``q_dot`` (6,) when already computed and checked finite (None: the
+#: law computes ``finish(J tau)`` and checks it).
+Solved = tuple[np.ndarray, int, float, list[str], str | None, np.ndarray | None]
+
+
+class Solver:
+    """Base of the solvers: the identity :meth:`finish`, no per-trial constants.
+
+    Attributes:
+        threshold: Relative singular-value threshold of the rank test.
+    """
+
+    threshold: float = 1e-6
+
+    @property
+    def damping2(self) -> float:
+        """``mu^2`` the compiled law core adds to the eigenvalues of ``L^T L`` (its
+        classical solution is then this solver's unconstrained one)."""
+        return 0.0
+
+    def reset(self, context: ControllerContext, controller: str, dt: float) -> None:
+        """Per-trial constants from the context (nothing by default).
+
+        Args:
+            context: The trial's context.
+            controller: The controller's name (for errors).
+            dt: Control period [s].
+        """
+
+    def solve(self, N: np.ndarray, b: np.ndarray, lam: float, q: np.ndarray, J: np.ndarray,
+              pre: LawResult | None) -> Solved:
+        """The twist from ``N = L^T L`` (6, 6), ``b = L^T e`` (6,), the gain ``lam``
+        [1/s], the lengths ``q`` (6,) [m] and ``J_inv`` (6, 6); ``pre`` is the compiled
+        core's result when it computed the period."""
+        raise NotImplementedError
+
+    def finish(self, qdot: np.ndarray) -> np.ndarray:
+        """Last touch on the leg velocities [m/s] (identity)."""
+        return qdot
+
+    # ------------------------------------------------------------------ batch
+    def batch_reset(self, trials: Sequence[Any]) -> None:
+        """Gather the per-trial constants of the trials' own solvers (nothing by default)."""
+
+    def batch_accept(self, trials: np.ndarray, q: np.ndarray, qdot: np.ndarray) -> np.ndarray:
+        """(n,) rows whose compiled classical solution is this solver's answer as is."""
+        return np.ones(len(trials), dtype=bool)

@@ -1,0 +1,22 @@
+"""Tasks: one feature each, as a pure object (error, Jacobian, second-order term).
+
+In the manner of Pink's tasks (``docs/plugins.md``, "Adding a task"): a task knows its
+feature, never how it is solved; a solver (the damped pseudo-inverse of
+:mod:`controllers.laws`, the limit QP of :mod:`controllers.qp`, the predictive
+controller of :mod:`controllers.mpc`, the computed-torque solvers to come) combines
+tasks. Every method is batched over a leading trial axis.
+
+- :class:`LegDirectionTask`: ``u x u*`` (seeds 001/003);
+- :class:`LegEdgeTask`: ``n x n*`` or ``l x l*`` (seeds 002/003);
+- :class:`JointLengthTask`: ``q - q*``;
+- :class:`PlatformPoseTask`: ``(t - t*, log(R R*^T))``.
+"""
+
+from controllers.tasks.base import Task, TaskState
+from controllers.tasks.joint_length import JointLengthTask
+from controllers.tasks.leg_direction import LegDirectionTask
+from controllers.tasks.leg_edge import LegEdgeTask
+from controllers.tasks.platform_pose import PlatformPoseTask
+
+__all__ = ["JointLengthTask", "LegDirectionTask", "LegEdgeTask", "PlatformPoseTask", "Task",
+           "TaskState"]

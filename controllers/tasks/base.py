@@ -1,0 +1,167 @@
+"""The task interface (in the manner of Pink's ``Task``) and the state tasks read.
+
+A task is a pure object: from a :class:`TaskState` (one row per trial) it gives
+
+- :meth:`Task.error` ``e`` (n, m),
+- :meth:`Task.jacobian` ``L`` (n, m, 6), the interaction with the platform twist
+  ``tau = (v, w)`` (``e_dot = L tau``, twist in the frame of the state, at its origin),
+- :meth:`Task.jacobian_dot_twist` ``L_dot tau`` (n, m): the derivative of the Jacobian
+  along the motion with a constant twist, times that twist; the term a second-order
+  law (computed torque) adds to ``L tau_dot``: ``e_ddot = L tau_dot + L_dot tau``.
+
+Errors and Jacobians are numpy (the functions of :mod:`controllers.interaction`, one
+definition with the control laws). The second-order term is generated from a CasADi
+expression of the task's error and of the state's motion, ``L_dot tau = d/ds (L(s) tau)
+s_dot(s, tau)`` (:func:`second_order_function`), so it is never written by hand.
+Each is checked against finite differences of the true kinematics
+(``tests/controllers/test_tasks.py``).
+"""
+
+from __future__ import annotations
+
+from abc import ABC, abstractmethod
+from collections.abc import Callable
+from dataclasses import dataclass
+
+import casadi as ca
+import numpy as np
+
+from controllers.interaction import cross
+from vision.legs import leg_edges
+
+
+@dataclass(frozen=True)
+class TaskState:
+    """What the tasks read, one row per trial (the camera frame for the vision tasks).
+
+    Attributes:
+        base_points: (n, 6, 3) base points ``A_i`` [m].
+        directions: (n, 6, 3) unit leg directions ``u_i``.
+        lengths: (n, 6) leg lengths ``q_i`` [m].
+        normals: (n, 6, 2, 3) edge normals, or None.
+        rotation: (n, 3, 3) platform orientation, or None.
+        translation: (n, 3) platform position [m], or None.
+    """
+
+    base_points: np.ndarray
+    directions: np.ndarray
+    lengths: np.ndarray
+    normals: np.ndarray | None = None
+    rotation: np.ndarray | None = None
+    translation: np.ndarray | None = None
+
+    def __len__(self) -> int:
+        return int(self.lengths.shape[0])
+
+    @staticmethod
+    def at_pose(base_points: np.ndarray, platform_points: np.ndarray, rotation: np.ndarray,
+                translation: np.ndarray, leg_radius: float) -> TaskState:
+        """The exact state of robots at platform poses (the reference of the tests).
+
+        Args:
+            base_points: (6, 3) or (n, 6, 3) ``A_i`` in the task frame [m].
+            platform_points: (6, 3) ``E_i`` in the platform frame [m].
+            rotation: (n, 3, 3) platform orientations in the task frame.
+            translation: (n, 3) platform positions in the task frame [m].
+            leg_radius: Leg radius [m] (for the edge normals).
+        """
+        R = np.asarray(rotation, dtype=float)
+        t = np.asarray(translation, dtype=float)
+        A = np.broadcast_to(np.asarray(base_points, dtype=float), (len(R), 6, 3))
+        B = np.einsum("nij,kj->nki", R, platform_points) + t[:, None, :]
+        d = B - A
+        q = np.sqrt(np.einsum("nki,nki->nk", d, d))
+        u = d / q[..., None]
+        normals, _ = leg_edges(A, u, leg_radius)
+        return TaskState(np.array(A), u, q, normals, R, t)
+
+
+class Task(ABC):
+    """A feature with its error, its Jacobian and the second-order term."""
+
+    #: Name (diagnostics).
+    name: str = "task"
+    #: Rows of one feature block (3 for a unit-vector feature).
+    block: int = 3
+
+    @abstractmethod
+    def error(self, state: TaskState) -> np.ndarray:
+        """(n, m) the task error."""
+
+    @abstractmethod
+    def jacobian(self, state: TaskState) -> np.ndarray:
+        """(n, m, 6) ``L`` with ``e_dot = L tau``."""
+
+    @abstractmethod
+    def jacobian_dot_twist(self, state: TaskState, twist: np.ndarray) -> np.ndarray:
+        """(n, m) ``L_dot tau`` along the motion with the constant twist ``tau`` (n, 6)."""
+
+
+def leg_rates(u: ca.SX, A: ca.SX, q: ca.SX, tau: ca.SX) -> tuple[ca.SX, ca.SX]:
+    """``u_dot`` and ``q_dot`` of a leg moved by the platform twist (``docs/math.md`` §3):
+    the platform joint ``B = A + q u`` moves at ``B_dot = v + w x B``."""
+    B = A + q * u
+    Bdot = tau[:3] + ca.cross(tau[3:], B)
+    qdot = ca.dot(u, Bdot)
+    return (Bdot - qdot * u) / q, qdot
+
+
+def second_order_function(name: str, n_state: int, n_param: int,
+                          error: Callable[[ca.SX, ca.SX], ca.SX],
+                          state_rate: Callable[[ca.SX, ca.SX, ca.SX], ca.SX]) -> ca.Function:
+    """``(s, p, tau) -> L_dot tau`` of one feature block, by automatic differentiation.
+
+    With ``e(s, p)`` the block's error and ``s_dot(s, p, tau)`` the motion of its state,
+    ``e_dot = de/ds s_dot = L(s) tau`` and ``L_dot tau = d(L(s) tau)/ds s_dot``.
+    """
+    s = ca.SX.sym("s", n_state)
+    p = ca.SX.sym("p", n_param)
+    tau = ca.SX.sym("tau", 6)
+    sdot = state_rate(s, p, tau)
+    edot = ca.jtimes(error(s, p), s, sdot)
+    return ca.Function(name, [s, p, tau], [ca.jtimes(edot, s, sdot)])
+
+
+def leg_second_order(name: str, n_param: int, error: Callable[[ca.SX, ca.SX], ca.SX]
+                     ) -> ca.Function:
+    """:func:`second_order_function` of a per-leg feature: state ``(u, q)`` (4), parameters
+    ``(A, ...)`` (``n_param``, the base point first), the leg moved by :func:`leg_rates`."""
+    return second_order_function(
+        name, 4, n_param, error,
+        lambda s, p, tau: ca.vertcat(*leg_rates(s[:3], p[:3], s[3], tau)))
+
+
+def evaluate_legs(function: ca.Function, state: TaskState, params: np.ndarray,
+                  twist: np.ndarray) -> np.ndarray:
+    """A :func:`leg_second_order` function over every leg of every row: (n, 6, out).
+
+    Args:
+        function: The per-leg function.
+        state: The rows' state (directions and lengths).
+        params: (n, 6, n_param) the per-leg parameters.
+        twist: (n, 6) the rows' twists.
+    """
+    n = len(state)
+    s = np.concatenate([state.directions, state.lengths[..., None]], axis=-1)
+    tau = np.repeat(np.asarray(twist, dtype=float).reshape(n, 6), 6, axis=0)
+    out = evaluate_blocks(function, s.reshape(-1, 4), params.reshape(n * 6, -1), tau)
+    return out.reshape(n, 6, -1)
+
+
+def evaluate_blocks(function: ca.Function, s: np.ndarray, p: np.ndarray, tau: np.ndarray
+                    ) -> np.ndarray:
+    """Evaluate a block function over rows (k, ...) -> (k, out) (CasADi ``map``)."""
+    k = s.shape[0]
+    if k == 0:
+        return np.zeros((0, function.size1_out(0)))
+    out = function.map(k)(s.T, p.T, tau.T)
+    return np.asarray(out, dtype=float).T
+
+
+def unit(x: np.ndarray) -> np.ndarray:
+    """Rows scaled to unit norm."""
+    return x / np.sqrt(np.einsum("...k,...k->...", x, x))[..., None]
+
+
+__all__ = ["Task", "TaskState", "cross", "evaluate_blocks", "evaluate_legs", "leg_rates",
+           "leg_second_order", "second_order_function", "unit"]

@@ -1,0 +1,100 @@
+"""Platform-pose task (the model-based baseline's error, ``docs/math.md`` section 6):
+``e = (t - t*, log(R R*^T))`` with the twist ``(v, w)`` in the frame of the pose, at its
+origin (``t_dot = v + w x t``, ``R_dot = [w]_x R``):
+
+``L = [[I, -[t]_x], [0, J_l^-1(phi)]]`` with ``phi = log(R R*^T)`` and the inverse left
+Jacobian of SO(3) ``J_l^-1(phi) = I - [phi]_x / 2 + (1/theta^2 - (1 + cos theta) /
+(2 theta sin theta)) [phi]_x^2``. Valid away from a half-turn of orientation error.
+"""
+
+from __future__ import annotations
+
+from functools import lru_cache
+
+import casadi as ca
+import numpy as np
+
+from controllers.tasks.base import Task, TaskState, evaluate_blocks, second_order_function
+from hexapod.se3 import log_so3, skew
+
+
+def _log_so3(R: ca.SX) -> ca.SX:
+    """:func:`hexapod.se3.log_so3` away from a half-turn, as an expression."""
+    cos = (R[0, 0] + R[1, 1] + R[2, 2] - 1.0) / 2.0
+    v = ca.vertcat(R[2, 1] - R[1, 2], R[0, 2] - R[2, 0], R[1, 0] - R[0, 1])
+    theta = ca.atan2(0.5 * ca.sqrt(ca.dot(v, v)), cos)
+    return theta / (2.0 * ca.sin(theta)) * v
+
+
+@lru_cache(maxsize=1)
+def _second_order() -> ca.Function:
+    # state (R row-major, t), parameters (R* row-major, t*)
+    def error(s: ca.SX, p: ca.SX) -> ca.SX:
+        R = ca.reshape(s[:9], 3, 3).T
+        Rs = ca.reshape(p[:9], 3, 3).T
+        return ca.vertcat(s[9:12] - p[9:12], _log_so3(R @ Rs.T))
+
+    def rate(s: ca.SX, p: ca.SX, tau: ca.SX) -> ca.SX:
+        R = ca.reshape(s[:9], 3, 3).T
+        w = tau[3:]
+        Rdot = ca.skew(w) @ R
+        return ca.vertcat(ca.reshape(Rdot.T, 9, 1), tau[:3] + ca.cross(w, s[9:12]))
+
+    return second_order_function("platform_pose_second_order", 12, 12, error, rate)
+
+
+def inverse_left_jacobian(phi: np.ndarray) -> np.ndarray:
+    """``J_l^-1(phi)`` (..., 3, 3) of rotation vectors (..., 3): ``phi_dot = J_l^-1 w`` for
+    ``R_dot = [w]_x R``."""
+    theta = np.linalg.norm(phi, axis=-1)[..., None, None]
+    K = skew(phi)
+    small = theta < 1e-4
+    th = np.where(small, 1.0, theta)
+    c = np.where(small, 1.0 / 12.0 + theta**2 / 720.0,
+                 1.0 / th**2 - (1.0 + np.cos(th)) / (2.0 * th * np.sin(th)))
+    return np.eye(3) - 0.5 * K + c * (K @ K)
+
+
+class PlatformPoseTask(Task):
+    """The platform pose towards a desired pose.
+
+    Args:
+        rotation: (3, 3) or (n, 3, 3) desired orientation ``R*``.
+        translation: (3,) or (n, 3) desired position ``t*`` [m].
+    """
+
+    name = "platform-pose"
+    block = 6
+
+    def __init__(self, rotation: np.ndarray, translation: np.ndarray) -> None:
+        self.rotation = np.asarray(rotation, dtype=float)
+        self.translation = np.asarray(translation, dtype=float)
+
+    def _pose(self, state: TaskState) -> tuple[np.ndarray, np.ndarray]:
+        if state.rotation is None or state.translation is None:
+            raise ValueError("PlatformPoseTask needs the state's rotation and translation")
+        return state.rotation, state.translation
+
+    def _phi(self, R: np.ndarray) -> np.ndarray:
+        return log_so3(R @ np.swapaxes(np.broadcast_to(self.rotation, R.shape), -1, -2))
+
+    def error(self, state: TaskState) -> np.ndarray:
+        R, t = self._pose(state)
+        return np.concatenate([t - self.translation, self._phi(R)], axis=-1)
+
+    def jacobian(self, state: TaskState) -> np.ndarray:
+        R, t = self._pose(state)
+        n = len(t)
+        L = np.zeros((n, 6, 6))
+        L[:, :3, :3] = np.eye(3)
+        L[:, :3, 3:] = -skew(t)
+        L[:, 3:, 3:] = inverse_left_jacobian(self._phi(R))
+        return L
+
+    def jacobian_dot_twist(self, state: TaskState, twist: np.ndarray) -> np.ndarray:
+        R, t = self._pose(state)
+        n = len(t)
+        s = np.concatenate([R.reshape(n, 9), t], axis=1)
+        p = np.concatenate([np.broadcast_to(self.rotation, (n, 3, 3)).reshape(n, 9),
+                            np.broadcast_to(self.translation, (n, 3))], axis=1)
+        return evaluate_blocks(_second_order(), s, p, np.asarray(twist, float).reshape(n, 6))

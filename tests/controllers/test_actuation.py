@@ -1,0 +1,80 @@
+"""Typed actuation: a command says whether it sets leg velocities or leg forces, and
+whatever applies it refuses the kind it cannot apply, naming the controller."""
+
+from __future__ import annotations
+
+from dataclasses import replace
+
+import numpy as np
+import pytest
+
+from benchmarks.sim import run_trials
+from benchmarks.study.scenario import ControllerSpec, load_scenario
+from controllers.base import Command, CommandBatch, registry
+from controllers.batch import actuation_of, batch_controller
+from hexapod.actuation import Actuation, check_actuation
+from hexapod.backends.sim import SimulatedRobot
+from hexapod.exceptions import ActuationError
+from hexapod.geometry import deltalab
+
+PLUGIN = "tests.controllers.force_plugin:LegSpringForces"
+REFUSAL = ("controller 'springs' commands leg forces [N], but the kinematic world applies "
+           "only leg velocities [m/s]")
+
+
+def test_a_force_plugin_declares_and_returns_forces() -> None:
+    ctrl = registry.create(PLUGIN)
+    assert ctrl.actuation is Actuation.FORCE
+    assert actuation_of(batch_controller(PLUGIN, {})) is Actuation.FORCE
+    assert actuation_of(registry.create("leg-edge")) is Actuation.VELOCITY
+
+
+def test_command_values_follow_the_actuation() -> None:
+    f = np.arange(6.0)
+    cmd = Command.of_forces(f, error_norm=1.0)
+    assert cmd.actuation is Actuation.FORCE
+    np.testing.assert_array_equal(cmd.values, f)
+    np.testing.assert_array_equal(cmd.velocities, np.zeros(6))
+    refused = Command.refuse("no", actuation=Actuation.FORCE)
+    np.testing.assert_array_equal(refused.values, np.zeros(6))
+    batch = CommandBatch.from_commands([cmd, refused])
+    assert batch.actuation is Actuation.FORCE
+    np.testing.assert_array_equal(batch.values, [f, np.zeros(6)])
+    velocity = Command(np.ones(6))
+    with pytest.raises(ActuationError, match="row 0"):
+        CommandBatch.zeros(1, Actuation.FORCE).put(0, velocity)
+
+
+@pytest.mark.parametrize("engine", ["batched", "per-trial"])
+def test_the_kinematic_world_refuses_a_force_controller(engine: str) -> None:
+    sc = replace(load_scenario("quick").with_overrides(trials=2),
+                 controllers=(ControllerSpec(PLUGIN, "springs"),))
+    point = sc.expand()[0]
+    rows = [r.row for r in run_trials(point, 0, [0, 1], engine=engine)]
+    for row in rows:
+        assert row["converged"] is False
+        assert row["steps"] == 0
+        assert REFUSAL in row["failure"], row["failure"]
+        assert row["failure"].startswith("ActuationError")
+
+
+def test_a_velocity_backend_refuses_forces_and_applies_velocities() -> None:
+    g = deltalab()
+    robot = SimulatedRobot(g)
+    q0 = robot.measured_lengths()
+    with pytest.raises(ActuationError, match="controller 'springs' commands leg forces"):
+        robot.apply(np.ones(6), Actuation.FORCE, 0.02, "springs")
+    np.testing.assert_array_equal(robot.measured_lengths(), q0)  # nothing applied
+    v = np.full(6, 1e-3)
+    step = robot.apply(v, Actuation.VELOCITY, 0.02, "springs")
+    np.testing.assert_allclose(step.lengths, q0 + 0.02 * v, rtol=0, atol=1e-15)
+
+
+def test_check_actuation_names_everything() -> None:
+    with pytest.raises(ActuationError) as info:
+        check_actuation("force", (Actuation.VELOCITY,), "the GCS board", "my-law")
+    err = info.value
+    assert (err.controller, err.actuation, err.receiver) == ("my-law", "force", "the GCS board")
+    assert check_actuation("velocity", (Actuation.VELOCITY,), "x", "y") is Actuation.VELOCITY
+    with pytest.raises(ActuationError, match="unknown actuation 'torque'"):
+        check_actuation("torque", tuple(Actuation), "x", "my-law")
