@@ -74,6 +74,7 @@ PERF_MODULES = {
     "calibration": "benchmarks.perf.calibration",
     "study": "benchmarks.perf.study",
     "dynamics": "benchmarks.perf.dynamics",
+    "dynamic-world": "benchmarks.perf.dynamic_world",
 }
 
 
@@ -118,6 +119,8 @@ def build_parser() -> argparse.ArgumentParser:
                    help="sim (default, vectorised), emulator (a firmware emulator on a pty), "
                         "serial:URL, a plugin's NAME[:ARGS] or module:attr[:ARGS] "
                         "(docs/backends.md)")
+    s.add_argument("--world", choices=("kinematic", "dynamic"),
+                   help="override the scenarios' [robot] world (docs/dynamic-world.md)")
     s.add_argument("--engine", choices=("batched", "per-trial"), default="batched",
                    help="batched (default: every trial of a work unit as arrays) or per-trial "
                         "(one controller object per trial; same results, slower)")

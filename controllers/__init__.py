@@ -10,7 +10,9 @@ Built-in controllers are registered in :data:`controllers.base.registry` here:
   horizon (local or global prediction model, strokes, speeds, visibility and
   tilt constraints; CasADi, DAQP), falling back to the QP laws;
 - ``model-based``: forward kinematics of the nominal model + pose servoing;
-- ``joint-space``: leg lengths to the nominal inverse kinematics of the goal.
+- ``joint-space``: leg lengths to the nominal inverse kinematics of the goal;
+- ``latency-compensated``: any of them (``law``) fed the image features predicted over
+  the image's delay with the nominal model (:mod:`controllers.latency`).
 
 The vision laws are (task, solver) pairs: the features are tasks
 (:mod:`controllers.tasks`), the pseudo-inverse and the limit QP are solvers
@@ -31,6 +33,7 @@ from controllers.base import (
     registry,
 )
 from controllers.joint import JointSpaceController
+from controllers.latency import LatencyCompensated
 from controllers.leg_direction import LegDirectionController
 from controllers.leg_edge import LegEdgeController
 from controllers.model_based import ModelBasedController
@@ -47,6 +50,7 @@ BUILTINS = {
     "leg-direction-mpc": LegDirectionMPCController,
     "model-based": ModelBasedController,
     "joint-space": JointSpaceController,
+    "latency-compensated": LatencyCompensated,
 }
 
 for _name, _factory in BUILTINS.items():
@@ -60,6 +64,7 @@ __all__ = [
     "ControllerContext",
     "Goal",
     "JointSpaceController",
+    "LatencyCompensated",
     "LegDirectionController",
     "LegDirectionMPCController",
     "LegDirectionQPController",

@@ -58,6 +58,9 @@ class Observation:
         edge_visible: (6, 2) bool, which edges were observed.
         direction_visible: (6,) bool, which directions were observed.
         quality: Optional per-edge quality (e.g. fit residual), (6, 2).
+        image_t: Capture time of the image the features come from [s] (None: taken at
+            ``t``); older than ``t`` by the camera's latency and frame period
+            (:mod:`benchmarks.sim.clock`).
         q_dot: (6,) measured leg velocities [m/s], or None when the robot gives none
             (a kinematic world does not; force laws need them).
     """
@@ -70,6 +73,7 @@ class Observation:
     edge_visible: np.ndarray = field(default_factory=lambda: np.ones((6, 2), dtype=bool))
     direction_visible: np.ndarray = field(default_factory=lambda: np.ones(6, dtype=bool))
     quality: np.ndarray | None = None
+    image_t: float | None = None
     q_dot: np.ndarray | None = None
 
 
@@ -107,6 +111,10 @@ class ControllerContext:
         dt: Control period [s].
         goal: The desired features / pose.
         stroke_margin: Distance kept from the stroke limits by limit-aware laws [m].
+        reference: A trajectory task's reference (a
+            :class:`hexapod.trajectory.PoseTrajectory` in the base frame: pose, twist and
+            acceleration at any time), or None for a fixed goal
+            (:mod:`controllers.tracking`).
     """
 
     base_points: np.ndarray
@@ -115,6 +123,7 @@ class ControllerContext:
     dt: float
     goal: Goal
     stroke_margin: float = 0.002
+    reference: Any = None
 
     @property
     def stroke(self) -> tuple[float, float]:
@@ -207,6 +216,7 @@ class ObservationBatch:
         directions: (n, 6, 3) or None.
         edge_visible: (n, 6, 2) bool.
         direction_visible: (n, 6) bool.
+        image_t: (n,) capture times of the images [s], or None (taken at ``t``).
         q_dot: (n, 6) measured leg velocities [m/s], or None.
     """
 
@@ -218,6 +228,7 @@ class ObservationBatch:
     directions: np.ndarray | None
     edge_visible: np.ndarray
     direction_visible: np.ndarray
+    image_t: np.ndarray | None = None
     q_dot: np.ndarray | None = None
 
     def __len__(self) -> int:
@@ -231,6 +242,7 @@ class ObservationBatch:
             lines=None if self.lines is None else self.lines[k],
             directions=None if self.directions is None else self.directions[k],
             edge_visible=self.edge_visible[k], direction_visible=self.direction_visible[k],
+            image_t=None if self.image_t is None else float(self.image_t[k]),
             q_dot=None if self.q_dot is None else self.q_dot[k])
 
 

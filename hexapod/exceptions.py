@@ -460,3 +460,17 @@ class ViewerError(HexapodError):
         self.problem = problem
         where = f"MeshCat server {url}" if url else "MeshCat server"
         super().__init__(f"{where}: {problem} (waited {timeout:g} s)")
+
+
+class TrajectoryError(HexapodError, ValueError):
+    """A reference trajectory cannot be built from its parameters.
+
+    Attributes:
+        field: The offending parameter (``"speed"``, ``"shape"``...).
+        problem: What is wrong with it.
+    """
+
+    def __init__(self, field: str, problem: str) -> None:
+        self.field = field
+        self.problem = problem
+        super().__init__(f"trajectory {field}: {problem}")

@@ -53,7 +53,7 @@ STAGES = (
     ("features and noise", "benchmarks.sim.engine", "noisy_features"),
     ("convergence test (pose errors)", "benchmarks.sim.engine", "pose_error"),
     ("controller step_batch", "benchmarks.sim.engine", "_step_batch"),
-    ("forward kinematics (C)", "benchmarks.sim.engine", "solve_rows"),
+    ("forward kinematics (C)", "benchmarks.sim.plant", "solve_rows"),
 )
 
 
@@ -63,7 +63,6 @@ def _breakdown(sc: object, controller: int, trials: int) -> tuple[int, float, di
     called inside another, the observation of the goals, counts for itself only)."""
     import importlib
 
-    from benchmarks.sim import engine
 
     spent: dict[str, float] = dict.fromkeys([label for label, _, _ in STAGES], 0.0)
     saved: list[tuple[object, str, object]] = []
@@ -95,8 +94,8 @@ def _breakdown(sc: object, controller: int, trials: int) -> tuple[int, float, di
         if attr == "_step_batch":
             continue
         mod = importlib.import_module(module)
-        if module == "controllers.batch":
-            mod = engine  # the engine's own reference to batch_controller
+        if module == "controllers.batch":  # the engine's own reference to batch_controller
+            mod = importlib.import_module("benchmarks.sim.reference")
         saved.append((mod, attr, getattr(mod, attr)))
         setattr(mod, attr, reset_timed(getattr(mod, attr)) if attr == "batch_controller"
                 else timed(label, getattr(mod, attr)))

@@ -7,6 +7,7 @@ from __future__ import annotations
 import logging
 import statistics
 import traceback
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -62,12 +63,17 @@ class Book:
     step_times: list[list[float]] = field(default_factory=list)
     rtts: list[list[float]] = field(default_factory=list)
     series: list[dict[str, list[Any]]] = field(default_factory=list)
+    tracker: Any = None  # the tracking metrics of a trajectory task
 
     @classmethod
     def new(cls, sc: Scenario, group: list[TrialSetup], record_trials: int) -> Book:
         """Fresh bookkeeping of a group."""
+        from benchmarks.sim.tracking import tracker_for
+
         n = len(group)
         recording = [s.trial < record_trials for s in group]
+        pos_tol = 1e-3 * sc.task.position_tolerance_mm
+        ori_tol = float(np.deg2rad(sc.task.orientation_tolerance_deg))
         return cls(
             n=n, pos_tol=1e-3 * sc.task.position_tolerance_mm,
             ori_tol=float(np.deg2rad(sc.task.orientation_tolerance_deg)),
@@ -79,13 +85,16 @@ class Book:
             hidden=np.zeros(n, dtype=int), recording=recording, failure=[None] * n,
             tail_pos=[[] for _ in range(n)], tail_ori=[[] for _ in range(n)],
             step_times=[[] for _ in range(n)], rtts=[[] for _ in range(n)],
-            series=[{k: [] for k in SERIES_KEYS} if rec else {} for rec in recording])
+            series=[{k: [] for k in SERIES_KEYS} if rec else {} for rec in recording],
+            tracker=tracker_for(sc, group, pos_tol, ori_tol))
 
     def check(self, sc: Scenario, step: int, idx: np.ndarray, dp: np.ndarray,
               da: np.ndarray) -> np.ndarray:
         """The convergence test of one period for the active rows ``idx`` (pose errors
         ``dp`` [m], ``da`` [rad]); returns which of them are done."""
         ok = (dp < self.pos_tol) & (da < self.ori_tol)
+        if self.tracker is not None:
+            self.tracker.add(step, idx, dp, da)
         self.settled[idx] = np.where(ok, self.settled[idx] + 1, 0)
         self.last_bad[idx[~ok]] = step
         if sc.task.fixed_duration and step > self.tail_start:
@@ -143,6 +152,14 @@ class Book:
             self.failure[rows[j]] = f"controller refused to move: {reasons[j]}"
         return invalid | too_many
 
+    def world_failures(self, failed: dict[int, str], step: int) -> None:
+        """End the rows whose true world failed during period ``step`` (a plant's
+        :meth:`~benchmarks.sim.plant.Plant.advance`), each with its reason."""
+        for k, reason in failed.items():
+            self.failure[k] = reason
+            self.active[k] = False
+            self.steps[k] = step + 1
+
     def record(self, k: int, t: float, q: np.ndarray, R: np.ndarray, tr: np.ndarray,
                visible: np.ndarray, error_norm: float, dp: float, da: float,
                velocities: np.ndarray) -> None:
@@ -158,9 +175,17 @@ class Book:
         ser["orientation_error"].append(da)
         ser["velocities"].append(velocities.copy())
 
+    def record_more(self, k: int, values: dict[str, np.ndarray]) -> None:
+        """Append a plant's extra values of one period to row ``k``'s series
+        (:meth:`benchmarks.sim.plant.Plant.series`)."""
+        for key, value in values.items():
+            self.series[k].setdefault(key, []).append(value)
+
     def results(self, sc: Scenario, spec: Any, group: list[TrialSetup], R: np.ndarray,
-                t: np.ndarray, detect_times: list[float] | None = None) -> list[TrialResult]:
-        """The result rows (and recorded series) of the group at the final poses."""
+                t: np.ndarray, detect_times: list[float] | None = None,
+                figures: Callable[[int], dict[str, Any]] | None = None) -> list[TrialResult]:
+        """The result rows (and recorded series) of the group at the final poses
+        (``figures``: a plant's extra figures of row ``m``)."""
         R_goal = np.array([s.goal_rotation for s in group])
         t_goal = np.array([s.goal_translation for s in group])
         dp, da = pose_error(R, t, R_goal, t_goal)
@@ -197,6 +222,10 @@ class Book:
                 row["rtt_median_ms"] = float(np.median(arr))
                 row["rtt_p99_ms"] = float(np.percentile(arr, 99))
                 row["missed_periods"] = int(self.missed[m])
+            if self.tracker is not None:
+                row.update(self.tracker.row(m))
+            if figures is not None:
+                row.update(figures(m))
             for key, value in s.calibration.items():
                 row[f"calibration_{key}"] = value
             ser_out = None

@@ -34,13 +34,13 @@ import numpy as np
 
 from benchmarks.sim.actuation import require_actuation, require_batch
 from benchmarks.sim.book import Book, TrialResult, failure_row
+from benchmarks.sim.clock import clocked_measure, make_clock
+from benchmarks.sim.plant import make_plant
+from benchmarks.sim.reference import Targets, task_batch_controller
 from benchmarks.sim.sensors import GeometricSensor, draws_noise, noisy_features, trial_goal
 from benchmarks.sim.world import TrialSetup, trial_rng
 from benchmarks.study.scenario import Scenario
 from controllers.base import Goal, ObservationBatch
-from controllers.batch import batch_controller
-from hexapod.backends.base import clamp_velocities
-from hexapod.fk import pack_rows, solve_rows
 from hexapod.kinematics import inverse_kinematics
 from hexapod.se3 import pose_error
 from vision.fast_observe import WorldParams, observe_batch
@@ -193,7 +193,7 @@ def _run(sc: Scenario, spec: Any, group: list[TrialSetup], contexts: list[Any],
          batched: bool) -> list[TrialResult]:
     from benchmarks.sim.stepper import stroke_violations
 
-    controller = batch_controller(spec.name, spec.options, batched)
+    controller = task_batch_controller(sc, spec, batched)
     actuation = require_actuation(controller, spec.label)
     controller.reset_batch(contexts)
     sensor = BatchSensor(sc, group)
@@ -202,8 +202,7 @@ def _run(sc: Scenario, spec: Any, group: list[TrialSetup], contexts: list[Any],
     q = np.array([s.start_lengths for s in group])
     R = np.array([s.start_rotation for s in group])
     t = np.array([s.start_translation for s in group])
-    R_goal = np.array([s.goal_rotation for s in group])
-    t_goal = np.array([s.goal_translation for s in group])
+    targets = Targets(sc, group)
     offsets = np.array([s.world.joint_offsets for s in group])
     A = sensor.params.base_points
     E = sensor.params.platform_points
@@ -214,16 +213,21 @@ def _run(sc: Scenario, spec: Any, group: list[TrialSetup], contexts: list[Any],
     batch_times: list[float] = []  # controller time per row of each step [s]
     stepped = np.zeros(len(group), dtype=int)  # steps each trial was commanded (0, 1, ...)
     dt = sc.dt
-    fk_rows = pack_rows(R, t, q, A, E)
+    plant = make_plant(sc, group, q, R, t, A, E)
+    clock = make_clock(sc, group, q, R, t, A, E)
+
+    def measure(rows: np.ndarray, R_r: np.ndarray, t_r: np.ndarray) -> dict[str, Any]:
+        return sensor.measure(R_r, t_r, rows, [rngs[k] for k in rows] if noisy
+                              else [None] * len(rows))
+
     for step in range(sc.task.max_steps + 1):
         idx = np.flatnonzero(book.active)
         if len(idx) == 0:
             break
         R_i, t_i = R[idx], t[idx]
-        dp, da = pose_error(R_i, t_i, R_goal[idx], t_goal[idx])
+        dp, da = pose_error(R_i, t_i, *targets(step, idx))
         done = book.check(sc, step, idx, dp, da)
-        meas = sensor.measure(R_i, t_i, idx, [rngs[k] for k in idx] if noisy
-                              else [None] * len(idx))
+        meas = clocked_measure(clock, step, idx, (R, t), measure)
         book.seen(idx, meas["edge_visible"])
         if on_step is not None:
             for j, k in enumerate(idx):
@@ -235,10 +239,11 @@ def _run(sc: Scenario, spec: Any, group: list[TrialSetup], contexts: list[Any],
         if len(rows):
             tr = idx if every else idx[rows]
             obs = ObservationBatch(
-                trials=tr, t=np.full(len(rows), step * dt), lengths=q[tr] + offsets[tr],
+                trials=tr, t=np.full(len(rows), step * dt),
+                lengths=plant.measured_lengths(tr, offsets[tr]),
                 **{key: (meas[key] if every or meas[key] is None else meas[key][rows])
                    for key in ("normals", "lines", "directions", "edge_visible",
-                               "direction_visible")})
+                               "direction_visible", "image_t")})
             t0 = time.perf_counter()
             cmds = controller.step_batch(obs)
             batch_times.append((time.perf_counter() - t0) / len(rows))
@@ -253,6 +258,7 @@ def _run(sc: Scenario, spec: Any, group: list[TrialSetup], contexts: list[Any],
             r = int(idx[j])
             book.record(r, step * dt, q[r], R[r], t[r], meas["edge_visible"][j], norms[j],
                         dp[j], da[j], v_cmd[j])
+            book.record_more(r, plant.series(r))
         finished = idx[done]
         book.active[finished] = False
         book.steps[finished] = step
@@ -260,25 +266,9 @@ def _run(sc: Scenario, spec: Any, group: list[TrialSetup], contexts: list[Any],
         if len(run) == 0:
             continue
         v_run = v_cmd[~done]
-        q_run = q[run]
-        book.violations[run] += stroke_violations(q_run, v_run, dt, stroke, vmax)
-        vc, _ = clamp_velocities(q_run, v_run, dt, stroke, vmax)
-        q[run] = np.clip(q_run + vc * dt, *stroke)
-        x = fk_rows[run]  # the robots' points packed once; the guesses and lengths now
-        x[:, 0:9] = np.swapaxes(R[run], -1, -2).reshape(-1, 9)
-        x[:, 9:12] = t[run]
-        x[:, 12:18] = q[run]
-        sol = solve_rows(x)
-        bad = ~sol.converged
-        if np.any(bad):
-            for b in run[bad].tolist():
-                book.failure[b] = "forward kinematics of the true robot failed (singularity?)"
-                book.active[b] = False
-                book.steps[b] = step + 1
-        okk = run[~bad]
-        R[okk] = sol.rotations[~bad]
-        t[okk] = sol.translations[~bad]
+        book.violations[run] += stroke_violations(q[run], v_run, dt, stroke, vmax)
+        book.world_failures(plant.advance(run, v_run, dt), step)
     times = np.array(batch_times)
     for m in range(len(group)):  # a trial is commanded from step 0 until it is done
         book.step_times[m] = times[:stepped[m]].tolist()
-    return book.results(sc, spec, group, R, t)
+    return book.results(sc, spec, group, R, t, figures=plant.row_figures)

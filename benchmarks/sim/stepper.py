@@ -22,8 +22,12 @@ from typing import Any
 
 import numpy as np
 
+from benchmarks.exceptions import ScenarioError
 from benchmarks.sim.actuation import KINEMATIC_WORLD, require_actuation
 from benchmarks.sim.book import Book, TrialResult, failure_row
+from benchmarks.sim.clock import clocked_measure, make_clock
+from benchmarks.sim.plant import FK_FAILURE, KinematicPlant, make_plant
+from benchmarks.sim.reference import Targets, task_controller
 from benchmarks.sim.sensors import make_sensor, trial_goal
 from benchmarks.sim.world import (
     TrialSetup,
@@ -34,10 +38,10 @@ from benchmarks.sim.world import (
     trial_rng,
 )
 from benchmarks.study.scenario import Scenario
-from controllers.base import Command, ControllerContext, Observation, registry
-from hexapod import HexapodGeometry, forward_kinematics_batch
+from controllers.base import Command, ControllerContext, Observation
+from hexapod import HexapodGeometry
 from hexapod.actuation import Actuation
-from hexapod.backends.base import Backend, clamp_velocities
+from hexapod.backends.base import Backend
 from hexapod.se3 import pose_error
 
 log = logging.getLogger(__name__)
@@ -94,6 +98,10 @@ def run_trials(
             results[k] = TrialResult(failure_row(sc, spec, k, made))
         else:
             setups.append(made)
+    if getattr(sc, "world", "kinematic") == "dynamic" and backend_factory is not None:
+        raise ScenarioError(sc.source, "the dynamic world simulates the robot: it runs with "
+                            "the simulated backend only (a robot or an emulator is its own "
+                            "world; the emulators take --dynamics)", key="robot.world")
     if engine not in ENGINES:
         raise ValueError(f"engine: expected one of {', '.join(ENGINES)}, got {engine!r}")
     if (engine == "batched" and backend_factory is None and sensor_factory is None
@@ -161,7 +169,7 @@ def _run_group(sc: Scenario, controller_index: int, group: list[TrialSetup],
     sensor = (sensor_factory or make_sensor)(sc, group[0])
     controllers = []
     for s in group:
-        ctrl = registry.create(spec.name, **spec.options)
+        ctrl = task_controller(sc, spec)
         if backend_factory is None:  # a backend says itself what it applies (Backend.apply)
             require_actuation(ctrl, spec.label)
         ctrl.reset(trial_context(sc, s, trial_goal(sensor, s, sc)))
@@ -176,32 +184,41 @@ def _run_group(sc: Scenario, controller_index: int, group: list[TrialSetup],
     q = np.array([s.start_lengths for s in group])
     R = np.array([s.start_rotation for s in group])
     t = np.array([s.start_translation for s in group])
-    R_goal = np.array([s.goal_rotation for s in group])
-    t_goal = np.array([s.goal_translation for s in group])
+    targets = Targets(sc, group)
     offsets = world.joint_offsets
     kinds = [Actuation.VELOCITY] * len(group)  # what each trial's last command set
     book = Book.new(sc, group, record_trials)
     dt = sc.dt
+    poses = KinematicPlant(q, R, t, g.base_points, g.platform_points, g.stroke, g.max_speed)
+    plant = poses if backends is not None else make_plant(sc, group, q, R, t,
+                                                          g.base_points, g.platform_points)
+    clock = make_clock(sc, group, q, R, t, g.base_points, g.platform_points)
+
+    def measure(rows: np.ndarray, R_r: np.ndarray, t_r: np.ndarray) -> dict[str, Any]:
+        return sensor.measure(R_r, t_r, [rngs[k] for k in rows])  # type: ignore[no-any-return]
+
     for step in range(sc.task.max_steps + 1):
         idx = np.flatnonzero(book.active)
         if len(idx) == 0:
             break
-        dp, da = pose_error(R[idx], t[idx], R_goal[idx], t_goal[idx])
+        dp, da = pose_error(R[idx], t[idx], *targets(step, idx))
         done = book.check(sc, step, idx, dp, da)
-        meas = sensor.measure(R[idx], t[idx], [rngs[k] for k in idx])
+        meas = clocked_measure(clock, step, idx, (R, t), measure)
         book.seen(idx, meas["edge_visible"])
         if on_step is not None:
             for j, k in enumerate(idx):
                 on_step(group[k].trial, R[k], t[k], meas["edge_visible"][j])
         v_cmd = np.zeros((len(idx), 6))
+        lengths = plant.measured_lengths(idx, offsets)
         for j, k in enumerate(idx):
             obs = Observation(
-                t=step * dt, lengths=q[k] + offsets,
+                t=step * dt, lengths=lengths[j],
                 normals=meas["normals"][j],
                 lines=None if meas["lines"] is None else meas["lines"][j],
                 directions=meas["directions"][j],
                 edge_visible=meas["edge_visible"][j],
                 direction_visible=meas["direction_visible"][j],
+                image_t=None if meas["image_t"] is None else float(meas["image_t"][j]),
             )
             cmd: Command | None = None
             if not done[j]:
@@ -219,6 +236,7 @@ def _run_group(sc: Scenario, controller_index: int, group: list[TrialSetup],
                 book.record(int(k), step * dt, q[k], R[k], t[k], meas["edge_visible"][j],
                             cmd.error_norm if cmd is not None else np.nan, dp[j], da[j],
                             v_cmd[j])
+                book.record_more(int(k), plant.series(int(k)))
         finished = idx[done]
         book.active[finished] = False
         book.steps[finished] = step
@@ -228,31 +246,26 @@ def _run_group(sc: Scenario, controller_index: int, group: list[TrialSetup],
         v_run = v_cmd[~done]
         book.violations[run] += stroke_violations(q[run], v_run, dt, g.stroke, g.max_speed)
         if backends is None:
-            vc, _ = clamp_velocities(q[run], v_run, dt, g.stroke, g.max_speed)
-            q[run] = np.clip(q[run] + vc * dt, *g.stroke)
-        else:
-            for j, k in enumerate(run):
-                bs = backends[k].apply(v_run[j], kinds[k], dt, spec.label)
-                q[k] = bs.lengths - offsets
-                book.rtts[k].append(bs.round_trip_s)
-                book.missed[k] += int(bs.missed_period)
-        sol = forward_kinematics_batch(g, q[run], R[run], t[run])
-        bad = ~sol.converged
-        if np.any(bad):
-            for k in run[bad]:
-                book.failure[k] = "forward kinematics of the true robot failed (singularity?)"
-                book.active[k] = False
-                book.steps[k] = step + 1
-        okk = run[~bad]
-        R[okk] = sol.rotations[~bad]
-        t[okk] = sol.translations[~bad]
-    return book.results(sc, spec, group, R, t, getattr(sensor, "detect_times", None))
+            book.world_failures(plant.advance(run, v_run, dt), step)
+            continue
+        for j, k in enumerate(run):
+            bs = backends[k].apply(v_run[j], kinds[k], dt, spec.label)
+            q[k] = bs.lengths - offsets
+            book.rtts[k].append(bs.round_trip_s)
+            book.missed[k] += int(bs.missed_period)
+        bad = poses.solve_poses(run)  # the backends moved the legs: the poses follow
+        book.world_failures(dict.fromkeys(run[bad].tolist(), FK_FAILURE), step)
+    return book.results(sc, spec, group, R, t, getattr(sensor, "detect_times", None),
+                        plant.row_figures)
 
 
 def trial_context(sc: Scenario, setup: TrialSetup, goal: Any) -> ControllerContext:
     """What the controllers of a trial are told: the estimated parameters and the goal."""
+    from benchmarks.sim.reference import trial_reference
+
     return ControllerContext(base_points=setup.base_points, geometry=setup.nominal_geometry,
-                             camera=setup.estimated_camera, dt=sc.dt, goal=goal)
+                             camera=setup.estimated_camera, dt=sc.dt, goal=goal,
+                             reference=trial_reference(sc, setup))
 
 
 def stroke_violations(q: np.ndarray, v: np.ndarray, dt: float,

@@ -94,7 +94,8 @@ class TrialSetup:
 
 
 def trial_rng(seed: int, trial: int, stream: int) -> np.random.Generator:
-    """The random stream ``stream`` of trial ``trial`` (0: world, 1: sensor, 2: goal image)."""
+    """The random stream ``stream`` of trial ``trial`` (0: world, 1: sensor, 2: goal image,
+    3: calibration, 4: inertial parameters)."""
     return np.random.default_rng([int(seed), int(trial), int(stream)])
 
 
@@ -173,6 +174,10 @@ def make_trials(sc: Scenario, trials: list[int], nominal: HexapodGeometry, camer
                 if isinstance(pose, Exception):
                     raise pose
             (R_s, R_g), (t_s, t_g) = pose
+            if task.kind == "trajectory":  # a closed curve ends where it started
+                from benchmarks.sim.reference import trajectory_end
+
+                R_g, t_g = trajectory_end(task, R_s, t_s, R_g, t_g)
             q_s = (start_lengths[k] if k in start_lengths
                    else inverse_kinematics(world.geometry, R_s, t_s))
             points = base_points.copy()
@@ -234,7 +239,29 @@ def _draw_world(sc: Scenario, trial: int, nominal: HexapodGeometry, camera: Came
         )
         true_camera = _perturb_camera(camera, z_rot, z_pos, z_k, ce)
         offsets = 1e-3 * ce.joint_offsets_mm * z_off
+        if ce.mass_percent or ce.inertia_percent:  # its own stream: the draws above stay
+            true_geometry = true_geometry.replace(inertia=perturbed_inertia(
+                true_geometry.inertia, ce.mass_percent, ce.inertia_percent,
+                trial_rng(sc.seed, trial, 4)))
     return rng, World(true_geometry, true_camera, offsets), ce, shared
+
+
+def perturbed_inertia(inertia: Any, mass_percent: float, inertia_percent: float,
+                      rng: np.random.Generator) -> Any:
+    """A true robot's inertial parameters around the robot file's: each body's mass
+    (platform, leg body, leg rod) times ``exp(s_m z)`` and its rotational inertia times
+    ``exp(s_i z')``, ``s`` the relative standard deviations [%] / 100 (positive factors:
+    a tensor stays positive definite and within the triangle inequality). Six standard
+    normals drawn from ``rng``, in a fixed order, whatever the magnitudes."""
+    z = rng.standard_normal(6)
+    fm = np.exp(1e-2 * mass_percent * z[:3])
+    fi = np.exp(1e-2 * inertia_percent * z[3:])
+    return inertia.replace(
+        platform_mass=inertia.platform_mass * fm[0], body_mass=inertia.body_mass * fm[1],
+        rod_mass=inertia.rod_mass * fm[2],
+        platform_inertia=np.asarray(inertia.platform_inertia) * fi[0],
+        body_inertia=np.asarray(inertia.body_inertia) * fi[1],
+        rod_inertia=np.asarray(inertia.rod_inertia) * fi[2])
 
 
 def _fixed_poses(sc: Scenario, geometry: HexapodGeometry

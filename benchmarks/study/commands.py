@@ -33,6 +33,10 @@ def cmd_run(args: argparse.Namespace) -> int:
     scenarios = [load_scenario(s).with_overrides(args.trials, args.seed, ctrl_list,
                                                  args.max_steps, args.calibration)
                  for s in args.scenarios]
+    if getattr(args, "world", None):  # --world: every scenario in that world
+        from dataclasses import replace
+
+        scenarios = [replace(sc, world=args.world) for sc in scenarios]
     for sc in scenarios:
         check_controllers(sc)
     if not getattr(args, "no_check", False):

@@ -16,6 +16,12 @@ _NON_SWEEP = {
     "rtt_median_ms", "rtt_p99_ms", "missed_periods", "detect_time_ms",
     "tail_position_error_mm", "tail_orientation_error_deg", "hidden_edge_periods",
     "cause",
+    # the tracking metrics of a trajectory task (benchmarks.sim.tracking)
+    "trajectory_duration_s", "tracking_rms_position_mm", "tracking_max_position_mm",
+    "tracking_rms_orientation_deg", "tracking_max_orientation_deg", "settling_time_s",
+    # the dynamic world's drive figures (benchmarks.sim.dynamic_plant)
+    "max_leg_force_n", "saturation_time_s", "drive_tracking_rms_mm_s",
+    "drive_tracking_max_mm_s",
 }
 
 
@@ -61,6 +67,11 @@ class Summary:
     calibration_refused: int = 0
     tail_position_median_mm: float = float("nan")
     tail_position_max_mm: float = float("nan")
+    leg_force_max_n: float = float("nan")
+    saturation_time_median_s: float = float("nan")
+    saturated_trials: int = 0
+    tracking_rms_median_mm_s: float = float("nan")
+    tracking_max_mm_s: float = float("nan")
 
     @property
     def convergence_rate(self) -> float:
@@ -125,8 +136,23 @@ def summarize(rows: list[dict[str, Any]]) -> list[Summary]:
             tail_position_median_mm=_stat([r.get("tail_position_error_mm") for r in rs],
                                           "median"),
             tail_position_max_mm=_stat([r.get("tail_position_error_mm") for r in rs], "max"),
+            **_drive_figures(rs),
         ))
     return out
+
+
+def _drive_figures(rs: list[dict[str, Any]]) -> dict[str, Any]:
+    """The dynamic world's drive figures of a group of rows (none in the kinematic world):
+    the largest leg force, the median time at a force limit and the trials that reached
+    one, the median RMS and the largest drive tracking error."""
+    return {
+        "leg_force_max_n": _stat([r.get("max_leg_force_n") for r in rs], "max"),
+        "saturation_time_median_s": _stat([r.get("saturation_time_s") for r in rs], "median"),
+        "saturated_trials": sum(1 for r in rs if (r.get("saturation_time_s") or 0) > 0),
+        "tracking_rms_median_mm_s": _stat([r.get("drive_tracking_rms_mm_s") for r in rs],
+                                          "median"),
+        "tracking_max_mm_s": _stat([r.get("drive_tracking_max_mm_s") for r in rs], "max"),
+    }
 
 
 def format_sweep(sweep: dict[str, Any]) -> str:

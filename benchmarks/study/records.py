@@ -45,4 +45,7 @@ def trial_record(sc: Scenario, unit: WorkUnit, row: dict[str, Any],
         "scenario": np.array(sc.name),
         "controller": np.array(unit.controller),
         "trial": np.array(int(row["trial"])),
+        # the dynamic world: the drives' forces [N] and their limits (the viewer's colours)
+        **({"leg_forces": series["leg_forces"], "force_limit": g.drives.force_limit}
+           if "leg_forces" in series else {}),
     }

@@ -14,6 +14,7 @@ import numpy as np
 from benchmarks.study import plots
 from benchmarks.study.metrics import Summary, format_sweep, summarize
 from benchmarks.study.runner import deduplicate, machine_info, read_results
+from benchmarks.study.tracking_report import tracking_section
 
 log = logging.getLogger(__name__)
 
@@ -132,6 +133,8 @@ def write_report(out_dir: Path) -> Path:
                                 [[format_sweep(s.sweep), s.controller, s.backend,
                                   _fmt(s.rtt_median_ms), _fmt(s.rtt_p99_ms),
                                   str(s.missed_periods)] for s in ss]), ""]
+        if any(np.isfinite(s.leg_force_max_n) for s in ss):
+            lines += drive_section(ss)
         if any(s.hidden_edge_periods for s in ss):
             lines += ["Visibility (periods where the camera saw fewer than the 12 edges, summed "
                       "over the trials; trials with at least one such period):", ""]
@@ -175,6 +178,8 @@ def write_report(out_dir: Path) -> Path:
                 lines += [_md_table([str(h) for h in ref["header"]],
                                     [[str(c) for c in r] for r in ref["rows"]]), ""]
         points = sorted({s.point for s in ss})
+        lines += tracking_section(out_dir, name, [r for r in rows if r["scenario"] == name],
+                                  plots.representative(points))
         for p in plots.representative(points):
             img = plots.time_series(out_dir, name, p)
             if img:
@@ -197,3 +202,17 @@ def write_report(out_dir: Path) -> Path:
     path = out_dir / "report.md"
     path.write_text("\n".join(lines))
     return path
+
+
+def drive_section(ss: list[Summary]) -> list[str]:
+    """The dynamic world's drives: leg forces, saturation and tracking (markdown lines)."""
+    return ["Drives (dynamic world: the drives' forces on the legs, the time any drive spent "
+            "at its force limit, the drive tracking error = velocity setpoint minus realised "
+            "leg velocity, over every physics step):", "",
+            _md_table(["sweep", "controller", "max leg force N", "saturation s (median)",
+                       "trials saturated", "tracking RMS mm/s (median)",
+                       "tracking max mm/s"],
+                      [[format_sweep(s.sweep), s.controller, _fmt(s.leg_force_max_n, 1),
+                        _fmt(s.saturation_time_median_s, 3), f"{s.saturated_trials}/{s.trials}",
+                        _fmt(s.tracking_rms_median_mm_s, 3), _fmt(s.tracking_max_mm_s, 1)]
+                       for s in ss]), ""]

@@ -19,10 +19,14 @@ from benchmarks.study.scenario_checks import referenced_file
 from benchmarks.study.scenario_model import (
     _SCALED,
     CALIBRATION_ERROR_KEYS,
+    CLOCK_KEYS,
     NOISE_KEYS,
     RANGES,
+    TASK_KEYS,
+    WORLDS,
     CalibrationConfig,
     CalibrationErrorConfig,
+    ClockConfig,
     ControllerSpec,
     ImageConfig,
     NoiseConfig,
@@ -32,6 +36,7 @@ from benchmarks.study.scenario_model import (
 )
 from hexapod.config import load_toml, suggest
 from hexapod.exceptions import ConfigFileError
+from hexapod.trajectory import PLANES, PROFILES, SHAPES
 
 __all__ = [
     "CALIBRATION_ERROR_KEYS", "NOISE_KEYS", "RANGES", "CalibrationConfig",
@@ -41,7 +46,8 @@ __all__ = [
 ]
 
 _TOP = ("name", "description", "seed", "trials", "controllers", "controller_options", "robot",
-        "camera", "sensor", "noise", "calibration_error", "calibration", "task", "reference")
+        "camera", "sensor", "noise", "calibration_error", "calibration", "task", "reference",
+        "clock")
 
 
 def _section(table: dict[str, Any], key: str, path: str) -> dict[str, Any]:
@@ -190,11 +196,11 @@ def parse_scenario(table: dict[str, Any], path: str = "<dict>") -> Scenario:
                             "a distinct 'label'", key="controllers")
 
     robot = _section(table, "robot", path)
+    robot_keys = ("preset", "geometry", "dt", "world", "physics_dt")
     for key in robot:
-        if key not in ("preset", "geometry", "dt"):
-            raise ScenarioError(path, "unknown key; expected one of preset, geometry, dt",
-                                key=f"robot.{key}",
-                                suggestion=suggest(key, ("preset", "geometry", "dt")))
+        if key not in robot_keys:
+            raise ScenarioError(path, f"unknown key; expected one of {', '.join(robot_keys)}",
+                                key=f"robot.{key}", suggestion=suggest(key, robot_keys))
     if "preset" in robot and "geometry" in robot:
         raise ScenarioError(path, "give either 'preset' or 'geometry', not both", key="robot")
     base_dir = Path(path).parent if path != "<dict>" else Path.cwd()
@@ -208,6 +214,7 @@ def parse_scenario(table: dict[str, Any], path: str = "<dict>") -> Scenario:
         robot_preset = _typed(robot["preset"], str, path, "robot.preset", ("deltalab",))
     dt = _typed(robot.get("dt", 0.02), float, path, "robot.dt")
     check_range(dt, "robot.dt", path)
+    world, physics_dt = _parse_world(robot, dt, path)
 
     camera = _section(table, "camera", path)
     camera_keys = ("preset", "file", "opencv", "pose", "camera_from_base", "width_px",
@@ -286,8 +293,13 @@ def parse_scenario(table: dict[str, Any], path: str = "<dict>") -> Scenario:
         raise ScenarioError(path, f"{cal.min_singular_ratio} exceeds warn_singular_ratio "
                             f"({cal.warn_singular_ratio}): the hard limit must be below the "
                             "warning", key="calibration.min_singular_ratio")
-    task = _parse_dataclass(TaskConfig, _section(table, "task", path), path, "task", (),
-                            {"kind": ("random-pairs", "fixed")})
+    task = _parse_dataclass(TaskConfig, _section(table, "task", path), path, "task", TASK_KEYS,
+                            {"kind": ("random-pairs", "fixed", "trajectory"),
+                             "shape": SHAPES, "profile": PROFILES, "plane": tuple(PLANES)},
+                            sweep)
+    task = _check_trajectory_task(task, sweep, path)
+    clock = _parse_dataclass(ClockConfig, _section(table, "clock", path), path, "clock",
+                             CLOCK_KEYS, None, sweep)
     if task.settle_steps > task.max_steps:
         raise ScenarioError(path, f"{task.settle_steps} exceeds task.max_steps "
                             f"({task.max_steps})", key="task.settle_steps")
@@ -303,11 +315,28 @@ def parse_scenario(table: dict[str, Any], path: str = "<dict>") -> Scenario:
         name=name, description=description, seed=seed, trials=trials,
         controllers=tuple(specs), robot_preset=robot_preset, robot_geometry=robot_geometry,
         dt=dt, camera_preset=camera_preset, camera_file=camera_file, sensor=sensor,
+        world=world, physics_dt=physics_dt,
         teach_frames=teach_frames, image=image,
-        noise=noise, calibration_error=cal_err, calibration=cal, task=task,
+        noise=noise, calibration_error=cal_err, calibration=cal, task=task, clock=clock,
         reference=reference, sweep_axes=sweep, source=path, geometry_data=geometry_data,
         camera_data=camera_data, calibration_points=points,
     )
+
+
+def _parse_world(robot: dict[str, Any], dt: float, path: str) -> tuple[str, float]:
+    """``[robot] world`` and ``physics_dt`` (a divisor of the control period ``dt``)."""
+    world = _typed(robot.get("world", "kinematic"), str, path, "robot.world", WORLDS)
+    physics_dt = _typed(robot.get("physics_dt", 0.001), float, path, "robot.physics_dt")
+    check_range(physics_dt, "robot.physics_dt", path)
+    if physics_dt > dt * (1 + 1e-9):
+        raise ScenarioError(path, f"{physics_dt:g} s is longer than the control period "
+                            f"robot.dt ({dt:g} s)", key="robot.physics_dt")
+    steps = round(dt / physics_dt)
+    if abs(steps * physics_dt - dt) > 1e-9 * dt:
+        raise ScenarioError(path, f"the control period robot.dt ({dt:g} s) is not a whole "
+                            f"number of physics steps of {physics_dt:g} s",
+                            key="robot.physics_dt")
+    return world, physics_dt
 
 
 def _read_files(geometry_file: str | None, camera_file: str | None, cal: CalibrationConfig,
@@ -385,6 +414,18 @@ def _check_scaled_errors(cal_err: CalibrationErrorConfig, sweep: dict[str, list[
             raise ScenarioError(path, f"times scale {max(scales):g} gives a standard "
                                 f"deviation of {worst:g}, beyond the allowed {hi:g}",
                                 key=f"calibration_error.{key}")
+
+
+def _check_trajectory_task(task: TaskConfig, sweep: dict[str, list[Any]], path: str
+                           ) -> TaskConfig:
+    """A trajectory task runs for ``max_steps`` (``fixed_duration``); its keys swept only
+    in a trajectory task."""
+    if task.kind == "trajectory":
+        return replace(task, fixed_duration=True)
+    for key in TASK_KEYS:
+        if f"task.{key}" in sweep:
+            raise ScenarioError(path, "only a trajectory task sweeps it", key=f"task.{key}")
+    return task
 
 
 def _check_configurations(value: str, path: str) -> None:

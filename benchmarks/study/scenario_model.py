@@ -17,7 +17,10 @@ NOISE_KEYS = ("amplitude_deg", "pixel_sigma_px", "points_per_edge", "outlier_fra
               "dropout_probability")
 CALIBRATION_ERROR_KEYS = ("scale", "base_points_mm", "platform_points_mm", "joint_offsets_mm",
                           "camera_pose_mm", "camera_pose_deg", "intrinsics_percent",
-                          "leg_radius_percent", "distortion_percent")
+                          "leg_radius_percent", "distortion_percent", "mass_percent",
+                          "inertia_percent")
+#: The worlds a study runs in (``[robot] world``).
+WORLDS = ("kinematic", "dynamic")
 
 
 #: Allowed range of every numeric key: ``(low, high, low_inclusive, high_inclusive)``.
@@ -27,6 +30,7 @@ RANGES: dict[str, tuple[float, float, bool, bool]] = {
     "seed": (0, 2**63 - 1, True, True),
     "trials": (1, 10_000_000, True, True),
     "robot.dt": (0.0, 1.0, False, True),
+    "robot.physics_dt": (1e-6, 0.1, True, True),
     "sensor.teach_frames": (1, 1000, True, True),
     "sensor.blur_px": (0.0, 20.0, True, True),
     "sensor.noise_std": (0.0, 255.0, True, True),
@@ -44,6 +48,8 @@ RANGES: dict[str, tuple[float, float, bool, bool]] = {
     "calibration_error.intrinsics_percent": (0.0, 50.0, True, True),
     "calibration_error.leg_radius_percent": (0.0, 50.0, True, True),
     "calibration_error.distortion_percent": (0.0, 100.0, True, True),
+    "calibration_error.mass_percent": (0.0, 50.0, True, True),
+    "calibration_error.inertia_percent": (0.0, 50.0, True, True),
     "calibration.noise_deg": (0.0, 90.0, True, True),
     "calibration.warn_singular_ratio": (0.0, 1.0, True, False),
     "calibration.min_singular_ratio": (0.0, 1.0, True, False),
@@ -54,7 +60,21 @@ RANGES: dict[str, tuple[float, float, bool, bool]] = {
     "task.max_translation_mm": (0.0, 10_000.0, True, True),
     "task.max_angle_deg": (0.0, 90.0, True, True),
     "task.settle_steps": (1, 10_000_000, True, True),
+    "task.speed_mm_s": (0.0, 10_000.0, False, True),
+    "task.acceleration_mm_s2": (0.0, 1_000_000.0, False, True),
+    "task.angular_speed_deg_s": (0.0, 10_000.0, False, True),
+    "task.angular_acceleration_deg_s2": (0.0, 1_000_000.0, False, True),
+    "task.radius_mm": (0.0, 1000.0, False, True),
+    "task.laps": (1, 1000, True, True),
+    "clock.frame_rate_hz": (0.0, 100_000.0, True, True),
+    "clock.latency_ms": (0.0, 10_000.0, True, True),
+    "clock.latency_frames": (0.0, 1000.0, True, True),
+    "clock.jitter_ms": (0.0, 1000.0, True, True),
 }
+#: Keys of [clock] (the camera's clock), every one sweepable.
+CLOCK_KEYS = ("frame_rate_hz", "latency_ms", "latency_frames", "jitter_ms")
+#: Keys of [task] that may be swept (trajectory tasks).
+TASK_KEYS = ("speed_mm_s", "acceleration_mm_s2")
 #: The calibration-error keys in millimetres or degrees whose standard deviation, times
 #: ``scale``, must stay within the range of the key itself (the effective error).
 _SCALED = tuple(k for k in CALIBRATION_ERROR_KEYS if k not in ("scale", "distortion_percent"))
@@ -132,6 +152,10 @@ class CalibrationErrorConfig:
             [%]: its coefficients are the true ones times ``1 - distortion_percent /
             100`` (100: a model that ignores the distortion, what a pipeline without
             distortion support assumes). Not random, not multiplied by ``scale``.
+        mass_percent: Relative std of the platform's and the legs' masses [%] (the
+            dynamic world's true robot; the controllers are told the robot file's).
+        inertia_percent: Relative std of their rotational inertias [%]. Each body's
+            factor is ``exp(s z)`` (always positive, about ``1 + s z`` for small ``s``).
         scale: Multiplies every standard deviation above (sweep it to grow all
             errors together).
     """
@@ -145,6 +169,8 @@ class CalibrationErrorConfig:
     intrinsics_percent: float = 0.0
     leg_radius_percent: float = 0.0
     distortion_percent: float = 0.0
+    mass_percent: float = 0.0
+    inertia_percent: float = 0.0
 
 
 @dataclass(frozen=True)
@@ -191,11 +217,32 @@ class ImageConfig:
 
 
 @dataclass(frozen=True)
+class ClockConfig:
+    """The camera's clock (:mod:`benchmarks.sim.clock`); the defaults: a camera triggered
+    at every control instant whose image arrives at once.
+
+    Attributes:
+        frame_rate_hz: Frames per second (0: one frame per control period, at its instant).
+        latency_ms: Delay from capture to delivery [ms].
+        latency_frames: Further delay, in frame periods (control periods at rate 0).
+        jitter_ms: Standard deviation of the capture times around their nominal grid
+            [ms] (clipped to 0.45 frame).
+    """
+
+    frame_rate_hz: float = 0.0
+    latency_ms: float = 0.0
+    latency_frames: float = 0.0
+    jitter_ms: float = 0.0
+
+
+@dataclass(frozen=True)
 class TaskConfig:
     """What each trial must do.
 
     Attributes:
-        kind: ``"random-pairs"`` (start and goal drawn inside the strokes) or ``"fixed"``.
+        kind: ``"random-pairs"`` (start and goal drawn inside the strokes), ``"fixed"``
+            or ``"trajectory"`` (track a reference from a random start: the trial runs
+            ``max_steps``, as ``fixed_duration``).
         start_mm: Start leg lengths (fixed task) [mm].
         goal_mm: Goal leg lengths (fixed task) [mm].
         max_steps: Step budget.
@@ -207,6 +254,19 @@ class TaskConfig:
         settle_steps: Steps the tolerances must hold to count as converged.
         fixed_duration: Run every trial for ``max_steps`` (noise studies: the final
             error is the error at the end; converged means within tolerance then).
+        shape: Trajectory task: ``"line"`` (start to goal), ``"circle"`` or
+            ``"lemniscate"`` (through the start, ``laps`` times); see
+            :mod:`hexapod.trajectory`.
+        profile: Trajectory timing law: ``"quintic"`` or ``"trapezoidal"``.
+        speed_mm_s: Largest platform speed along the trajectory [mm/s].
+        acceleration_mm_s2: Largest tangential acceleration [mm/s^2].
+        angular_speed_deg_s: Largest angular speed of a line [deg/s].
+        angular_acceleration_deg_s2: Largest angular acceleration of a line [deg/s^2].
+        radius_mm: Radius of the circle, half-width of the lemniscate [mm].
+        laps: Turns of a closed curve.
+        plane: Plane of a closed curve in the base frame: ``"xy"``, ``"xz"``, ``"yz"``.
+        feed_forward: Add the reference's nominal leg-length rate to the velocity
+            commands (:mod:`controllers.tracking`); false: feedback only.
     """
 
     kind: str = "random-pairs"
@@ -220,6 +280,16 @@ class TaskConfig:
     max_angle_deg: float = 10.0
     settle_steps: int = 1
     fixed_duration: bool = False
+    shape: str = "line"
+    profile: str = "quintic"
+    speed_mm_s: float = 50.0
+    acceleration_mm_s2: float = 500.0
+    angular_speed_deg_s: float = 10.0
+    angular_acceleration_deg_s2: float = 50.0
+    radius_mm: float = 20.0
+    laps: int = 1
+    plane: str = "xy"
+    feed_forward: bool = True
 
 
 @dataclass(frozen=True)
@@ -235,6 +305,9 @@ class Scenario:
         robot_preset: Geometry preset name (or None when ``robot_geometry`` is set).
         robot_geometry: Path to a geometry TOML file.
         dt: Control period [s].
+        world: ``"kinematic"`` (the massless ideal robot, the default) or ``"dynamic"``
+            (the true robot's dynamics and drives, ``docs/dynamic-world.md``).
+        physics_dt: Physics step of the dynamic world [s] (``dt`` is a multiple of it).
         camera_preset: ``"front"`` or ``"omni"`` (or None when ``camera_file`` is set).
         camera_file: Path to a camera TOML file.
         sensor: ``"geometric"`` or ``"image"``.
@@ -245,6 +318,7 @@ class Scenario:
         calibration_error: Calibration error settings.
         calibration: Calibration procedure settings.
         task: Task settings.
+        clock: The camera's clock (frame rate, latency, jitter).
         reference: Figures of the reproduced seed (free-form table for the report).
         sweep: The swept keys of this point, e.g. ``{"noise.amplitude_deg": 0.05}``.
         source: File it was read from.
@@ -265,6 +339,8 @@ class Scenario:
     robot_preset: str | None = "deltalab"
     robot_geometry: str | None = None
     dt: float = 0.02
+    world: str = "kinematic"
+    physics_dt: float = 0.001
     camera_preset: str | None = "front"
     camera_file: str | None = None
     sensor: str = "geometric"
@@ -274,6 +350,7 @@ class Scenario:
     calibration_error: CalibrationErrorConfig = CalibrationErrorConfig()
     calibration: CalibrationConfig = CalibrationConfig()
     task: TaskConfig = TaskConfig()
+    clock: ClockConfig = ClockConfig()
     reference: dict[str, Any] = field(default_factory=dict)
     sweep: dict[str, Any] = field(default_factory=dict)
     sweep_axes: dict[str, list[Any]] = field(default_factory=dict)

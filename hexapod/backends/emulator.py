@@ -73,6 +73,9 @@ def config_to_args(config: BoardConfig, faults: FaultConfig | None = None) -> li
             "--watchdog", str(round(c.watchdog * 1e3)), "--identity", c.identity]
     if c.lengths is not None:
         args += ["--lengths", *(protocol.format_mm(x) for x in c.lengths)]
+    if c.dynamics is not None:  # the robot file (or preset) whose mass and drives move it
+        args += ["--dynamics", "--geometry", c.dynamics.source or c.dynamics.name,
+                 "--physics-dt", repr(c.physics_dt * 1e3)]
     if faults is not None:
         args += faults.to_args()
     return args
@@ -192,6 +195,12 @@ def build_parser() -> argparse.ArgumentParser:
     robot.add_argument("--lag", type=float, metavar="S",
                        help="first-order lag time constant of each leg [s] (default 0; "
                             "not with --gcs)")
+    robot.add_argument("--dynamics", action="store_true",
+                       help="the axes move as the robot with mass and drives (the geometry's "
+                            "[inertia] and [drives], velocity mode under a position loop: "
+                            "lag, force limit, friction, gravity)")
+    robot.add_argument("--physics-dt", type=float, default=1.0, metavar="MS",
+                       help="physics step of --dynamics [ms] (default 1)")
     robot.add_argument("--identity", help="the *IDN? text (default: emulator and geometry name)")
     robot.add_argument("--watchdog", type=int, metavar="MS",
                        help=f"initial watchdog period [ms] (default "
@@ -267,7 +276,9 @@ def config_from_args(args: argparse.Namespace) -> tuple[BoardConfig, FaultConfig
     watchdog = protocol.WATCHDOG_DEFAULT_MS if args.watchdog is None else args.watchdog
     board = BoardConfig(stroke=geometry.stroke, max_speed=geometry.max_speed, lengths=lengths,
                         lag=0.0 if args.lag is None else args.lag, watchdog=watchdog / 1e3,
-                        identity=args.identity or f"hexapod-emulator 0.1.0 {geometry.name}")
+                        identity=args.identity or f"hexapod-emulator 0.1.0 {geometry.name}",
+                        dynamics=geometry if args.dynamics else None,
+                        physics_dt=args.physics_dt / 1e3)
     return board, _faults_from_args(args)
 
 
@@ -290,7 +301,8 @@ def gcs_config_from_args(args: argparse.Namespace) -> tuple[GcsConfig, FaultConf
                        pivot=tuple(np.asarray(args.pivot, float) * 1e-3),
                        rotation_order=args.rotation_order, velocity=args.velocity / 1e3,
                        zero_height=None if args.zero_height is None else args.zero_height / 1e3,
-                       max_velocity=args.max_velocity / 1e3, **extra)
+                       max_velocity=args.max_velocity / 1e3, dynamics=args.dynamics,
+                       physics_dt=args.physics_dt / 1e3, **extra)
     return config, _faults_from_args(args)
 
 

@@ -54,6 +54,9 @@ class BoardConfig:
             speed limit until it reaches its setpoint).
         watchdog: Initial watchdog period [s] (``WDT`` changes it).
         identity: The ``*IDN?`` text.
+        dynamics: The TRUE robot whose mass and drives the axes move
+            (:mod:`hexapod.backends.emulator_dynamics`; ``lag`` is then unused), or None.
+        physics_dt: Physics step of ``dynamics`` [s].
     """
 
     stroke: tuple[float, float] = (0.345, 0.485)
@@ -62,6 +65,8 @@ class BoardConfig:
     lag: float = 0.0
     watchdog: float = protocol.WATCHDOG_DEFAULT_MS / 1000.0
     identity: str = "hexapod-emulator 0.1.0"
+    dynamics: HexapodGeometry | None = None
+    physics_dt: float = 1e-3
 
     def __post_init__(self) -> None:
         lo, hi = (float(x) for x in self.stroke)
@@ -138,11 +143,20 @@ class Board:
         self.last_command = ""
         self._last_mov = now
         self._t = now
+        self._axes = None
+        if config.dynamics is not None:
+            from hexapod.backends.emulator_dynamics import DynamicAxes
+
+            self._axes = DynamicAxes(config.dynamics, self.lengths, config.physics_dt)
 
     # ---------------------------------------------------------------- physics
     @property
     def moving(self) -> bool:
-        """At least one leg is away from its setpoint."""
+        """At least one leg is away from its setpoint (with ``dynamics``: by more than
+        :data:`ARRIVED`, or still moving faster than 1 um/s)."""
+        if self._axes is not None:
+            return bool(np.any(np.abs(self.setpoints - self.lengths) > ARRIVED)
+                        or np.any(np.abs(self._axes.leg_velocities()) > 1e-6))
         return bool(np.any(self.setpoints != self.lengths))
 
     def trip_time(self) -> float | None:
@@ -168,6 +182,9 @@ class Board:
         if dt <= 0:
             return
         self._t = now
+        if self._axes is not None:
+            self.lengths = self._axes.move(self.setpoints, self.speed, dt)
+            return
         err = self.setpoints - self.lengths
         dist = np.abs(err)
         v, tau = self.speed, self.config.lag

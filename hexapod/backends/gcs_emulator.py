@@ -67,6 +67,10 @@ class GcsConfig:
             rad/s x 180/pi / 1000 for rotations: ``VLS`` is mm/s and deg/s).
         max_velocity: Largest ``VLS`` accepted [m/s].
         identity: The ``*IDN?`` answer.
+        dynamics: The platform is moved by the robot with mass and drives
+            (:mod:`hexapod.backends.emulator_dynamics`): the straight-line motion becomes
+            the legs' position setpoints, and ``POS?`` answers the true pose.
+        physics_dt: Physics step of ``dynamics`` [s].
     """
 
     geometry: HexapodGeometry
@@ -78,6 +82,8 @@ class GcsConfig:
     velocity: float = 0.01
     max_velocity: float = 0.5
     identity: str = "hexapod-vs, GCS hexapod emulator, 0, 0.1.0"
+    dynamics: bool = False
+    physics_dt: float = 1e-3
     convention: PoseConvention = field(init=False, repr=False, compare=False)
 
     def __post_init__(self) -> None:
@@ -162,26 +168,49 @@ class GcsController:
         #: The last commands received (newest last), for inspection.
         self.history: deque[str] = deque(maxlen=256)
         self._t = now
+        self._axes = None
+        if config.dynamics:
+            from hexapod.backends.emulator_dynamics import DynamicAxes
+
+            self._axes = DynamicAxes(self.geometry, self.lengths_of(c0), config.physics_dt)
 
     # ---------------------------------------------------------------- motion
     def advance(self, now: float) -> None:
-        """Move the platform up to ``now`` [s] (straight line in the six coordinates)."""
+        """Move the platform up to ``now`` [s] (straight line in the six coordinates;
+        with ``dynamics`` the legs of the robot with mass follow that line)."""
+        if self._axes is not None:
+            start = self._t
+            for k in range(self._axes.steps_for(now - start)):
+                commanded = self._commanded(start + (k + 1) * self._axes.h)
+                self._axes.step(self.lengths_of(commanded), self.geometry.max_speed)
         self._t = max(self._t, now)
-        if self._duration <= 0 or now >= self._t0 + self._duration:
-            self._coords = self._target.copy()
+        self._coords = self._commanded(now)
+        if self._duration > 0 and now >= self._t0 + self._duration:
             self._duration = 0.0
-            return
+
+    def _commanded(self, now: float) -> np.ndarray:
+        """The commanded coordinates at ``now`` [s] on the straight line."""
+        if self._duration <= 0 or now >= self._t0 + self._duration:
+            return self._target.copy()
         s = max(0.0, (now - self._t0) / self._duration)
-        self._coords = self._start + s * (self._target - self._start)
+        return self._start + s * (self._target - self._start)  # type: ignore[no-any-return]
 
     @property
     def coords(self) -> np.ndarray:
-        """The current coordinates (x, y, z [m], u, v, w [rad]) (at the last advance)."""
+        """The current coordinates (x, y, z [m], u, v, w [rad]) (at the last advance):
+        the commanded ones, or with ``dynamics`` those of the robot's true pose."""
+        if self._axes is not None:
+            return self.convention.coords(*self._axes.pose())  # type: ignore[no-any-return]
         return self._coords.copy()
 
     @property
     def moving(self) -> bool:
-        """The platform is on its way to a target (at the last advance)."""
+        """The platform is on its way to a target (at the last advance); with
+        ``dynamics``, until its legs have arrived (within 1 um) and stopped."""
+        if self._axes is not None and self._duration <= 0:
+            arrived = np.all(np.abs(self._axes.lengths - self.lengths_of(self._target))
+                             <= 1e-6)
+            return not (arrived and self._axes.settled)
         return self._duration > 0
 
     def lengths_of(self, coords: np.ndarray) -> np.ndarray:
@@ -272,7 +301,7 @@ class GcsController:
 
     def _pos(self, args: list[str], now: float) -> str:
         axes = gp.parse_axis_list(args)
-        return self._axis_lines(to_wire(self._coords), axes)
+        return self._axis_lines(to_wire(self.coords), axes)
 
     def _ont(self, args: list[str], now: float) -> str:
         axes = gp.parse_axis_list(args)

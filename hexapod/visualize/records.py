@@ -102,6 +102,12 @@ def _validated(arrays: dict[str, Any], path: str) -> dict[str, np.ndarray]:
     if str(out["camera_kind"]) not in CAMERA_KINDS:
         raise RecordError(path, f"'{out['camera_kind']}' is not one of {CAMERA_KINDS}",
                           "camera_kind")
+    for key, shape in (("leg_forces", (n, 6)), ("force_limit", (6,))):  # dynamic world
+        if key in out and out[key].shape != shape:
+            raise RecordError(path, f"expected shape {shape} (T = {n} frames), got "
+                              f"{out[key].shape}", key)
+    if ("leg_forces" in out) != ("force_limit" in out):
+        raise RecordError(path, "leg_forces and force_limit go together", "force_limit")
     out["edge_visible"] = out["edge_visible"].astype(bool)
     return out
 

@@ -100,7 +100,8 @@ def _with_page_script(html: str) -> str:
 
 def plot_trial(record: TrialRecord, png_path: str | Path) -> Path:
     """Plot the trial's curves: feature error norm (log), position and orientation error
-    (log), leg lengths against their strokes.
+    (log), leg lengths against their strokes, and in the dynamic world the drive forces
+    against their limits.
 
     Args:
         record: The trial.
@@ -116,7 +117,8 @@ def plot_trial(record: TrialRecord, png_path: str | Path) -> Path:
 
     a = record.arrays
     t = a["t"]
-    fig, axes = plt.subplots(1, 3, figsize=(13, 3.6))
+    forces = "leg_forces" in a
+    fig, axes = plt.subplots(1, 4 if forces else 3, figsize=(17.5 if forces else 13, 3.6))
     err = np.asarray(a["error_norm"], float)
     ok = np.isfinite(err) & (err > 0)
     axes[0].semilogy(t[ok], err[ok])
@@ -132,6 +134,13 @@ def plot_trial(record: TrialRecord, png_path: str | Path) -> Path:
         axes[2].axhline(q * 1e3, color="k", linestyle="--", linewidth=0.8)
     axes[2].set_title("leg lengths [mm] and strokes")
     axes[2].legend(fontsize=7, ncol=2)
+    if forces:  # the dynamic world
+        for i in range(6):
+            axes[3].plot(t, a["leg_forces"][:, i], label=f"leg {i}")
+        for f in (a["force_limit"].max(), -a["force_limit"].max()):
+            axes[3].axhline(f, color="k", linestyle="--", linewidth=0.8)
+        axes[3].set_title("drive forces [N] and limits")
+        axes[3].legend(fontsize=7, ncol=2)
     for ax in axes:
         ax.set_xlabel("time [s]")
         ax.grid(True, which="both", alpha=0.3)

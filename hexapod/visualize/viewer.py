@@ -15,6 +15,7 @@ import numpy as np
 from hexapod.geometry import HexapodGeometry
 from hexapod.model import LEG_BODY_COLOR, LEG_ROD_COLOR, HexapodModel, build_model
 from hexapod.visualize.drawings import camera_centre, edge_planes, frustum_segments
+from hexapod.visualize.forces import force_colours
 from hexapod.visualize.records import CAMERA_KINDS, TrialRecord
 from hexapod.visualize.server import (
     SERVER_START_TIMEOUT,
@@ -341,7 +342,10 @@ class HexapodViewer:
         Every ``1/fps`` seconds of the trial gives one frame (the control period
         closest in time): the transforms of every geometry (placements from
         ``pinocchio.updateGeometryPlacements``) and, for the legs that have a hidden
-        edge at some time, the colour of the leg body and rod.
+        edge at some time, the colour of the leg body and rod; a record of the dynamic
+        world (``leg_forces``) colours every rod by its drive force instead
+        (:func:`hexapod.visualize.forces.force_colours`), the body alone showing a
+        hidden edge.
 
         Args:
             record: The trial.
@@ -358,6 +362,9 @@ class HexapodViewer:
         frames = np.clip(np.searchsorted(t - t[0], times - 0.5 / fps), 0, record.frames - 1)
         hidden = ~np.all(record["edge_visible"], axis=-1)  # (T, 6)
         ever_hidden = np.flatnonzero(hidden.any(axis=0))
+        rods = None  # the dynamic world: rods coloured by their drive forces
+        if "leg_forces" in record.arrays:
+            rods = force_colours(record["leg_forces"], record["force_limit"])
         names = [self.viz.getViewerNodeName(obj, pin.GeometryType.VISUAL)
                  for obj in vmodel.geometryObjects]
         for f_idx, k in enumerate(frames):
@@ -367,8 +374,14 @@ class HexapodViewer:
             with anim.at_frame(self.viewer, f_idx) as frame:
                 for g_id, name in enumerate(names):
                     frame[name].set_transform(vdata.oMg[g_id].homogeneous)
+                if rods is not None:
+                    for leg in range(6):
+                        frame[f"{self.root}/leg{leg}_rod/<object>"].set_property(
+                            "material.color", "color", rods[k, leg, :3].tolist())
                 for i in ever_hidden:
                     for part, normal in (("body", LEG_BODY_COLOR), ("rod", LEG_ROD_COLOR)):
+                        if rods is not None and part == "rod":
+                            continue  # the body alone shows a hidden edge
                         colour = HIDDEN_LEG_COLOR if hidden[k, i] else normal
                         frame[f"{self.root}/leg{i}_{part}/<object>"].set_property(
                             "material.color", "color", colour[:3].tolist())

@@ -75,3 +75,19 @@ def test_a_plugin_without_step_batch_runs_in_the_same_study() -> None:
     plugin_rows = [r for r in batched if r["controller"] == PLUGIN]
     assert len(plugin_rows) == 3 and all(r["failure"] is None or "not conv" in r["failure"]
                                          for r in plugin_rows)
+
+
+@pytest.mark.parametrize("name", ["quick", "tahri2009-convergence"])
+def test_batched_rows_equal_the_per_trial_rows_in_the_dynamic_world(name: str) -> None:
+    """The dynamic world (mass, drives, encoders; quick with 20 % mass and inertia errors,
+    every trial its own robot; tahri2009 with one shared robot): the same rows, drive
+    figures and recorded series (leg forces included) on both paths."""
+    sc = load_scenario(name).with_overrides(trials=2, max_steps=60)
+    sc = replace(sc, world="dynamic", controllers=sc.controllers[:2])
+    if name == "quick":
+        sc = replace(sc, calibration_error=replace(sc.calibration_error, mass_percent=20.0,
+                                                   inertia_percent=20.0))
+    per_trial, batched = _rows(sc, "per-trial", 2), _rows(sc, "batched", 2)
+    assert all("leg_forces" in r["series"] for r in batched if "series" in r)
+    assert all(r["max_leg_force_n"] > 0 and r["drive_tracking_rms_mm_s"] > 0 for r in batched)
+    _compare(per_trial, batched)

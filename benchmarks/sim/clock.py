@@ -1,0 +1,191 @@
+"""The camera's clock: frames at their own rate, delivered after a latency, with
+timestamp jitter; the encoders are read at every control period.
+
+Frame ``k`` is captured at ``c_k = k / frame_rate + j_k`` (``j_k`` the jitter: normal
+with standard deviation ``jitter_ms``, clipped to +-0.45 frame so that frames stay in
+order, drawn from the trial's stream 5) and reaches the controller at ``c_k + latency``
+(``latency_ms / 1000 + latency_frames / frame_rate``). At the control instant
+``tau = step dt`` the controller gets the newest frame delivered by then, with its
+capture time as the observation's ``image_t``; the same frame is given again until the
+next one arrives. The camera runs before the task starts: frames captured before 0 see
+the robot at rest at its start pose.
+
+The image shows the true robot at ``c_k``. In the kinematic world the legs move at a
+constant (clamped) speed within a period, so the true lengths at ``c_k`` are the linear
+interpolation of the two control instants around it, exactly, and the pose is the
+forward kinematics of the true robot, warm-started at the earlier instant (a frame
+captured on a control instant takes that instant's pose, bit for bit).
+
+Without a ``[clock]`` table (or with ``frame_rate_hz = 0`` and no latency or jitter)
+the camera is triggered at every control instant and its image arrives at once: the
+measurement is exactly the one the engines made before the clock existed.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+from typing import Any
+
+import numpy as np
+
+from benchmarks.sim.world import TrialSetup, trial_rng
+from benchmarks.study.scenario import Scenario
+from hexapod.fk import pack_rows, solve_rows
+
+#: The random stream of a trial's frame-time jitter.
+JITTER_STREAM = 5
+#: Largest jitter, as a fraction of the frame period (frames stay in order).
+MAX_JITTER_FRACTION = 0.45
+#: Capture times closer than this to a control instant are that instant [s].
+INSTANT = 1e-9
+
+Measure = Callable[[np.ndarray, np.ndarray, np.ndarray], dict[str, Any]]
+
+
+def clock_active(sc: Scenario) -> bool:
+    """Whether the scenario's camera has a clock of its own (see the module docstring)."""
+    c = getattr(sc, "clock", None)
+    return c is not None and (c.frame_rate_hz > 0 or c.latency_ms > 0 or c.latency_frames > 0
+                              or c.jitter_ms > 0)
+
+
+def latency_s(sc: Scenario) -> float:
+    """The scenario's image latency [s] (frames counted at the frame rate, or at the
+    control rate when the camera is triggered by the controller)."""
+    c = sc.clock
+    period = 1.0 / c.frame_rate_hz if c.frame_rate_hz > 0 else sc.dt
+    return 1e-3 * c.latency_ms + c.latency_frames * period
+
+
+class CameraClock:
+    """The frames of a group of trials (index = row of the group).
+
+    Args:
+        sc: The scenario (``sc.clock``, ``sc.dt``, ``sc.task.max_steps``).
+        group: The trials (their indices seed the jitter).
+        q: (N, 6) true leg lengths [m] (the engine's array, read at every period).
+        R: (N, 3, 3) true rotations (read).
+        t: (N, 3) true positions [m] (read).
+        base_points: (6, 3) or (N, 6, 3) true base points [m].
+        platform_points: (6, 3) or (N, 6, 3) true platform points [m].
+    """
+
+    def __init__(self, sc: Scenario, group: list[TrialSetup], q: np.ndarray, R: np.ndarray,
+                 t: np.ndarray, base_points: np.ndarray, platform_points: np.ndarray) -> None:
+        c = sc.clock
+        n = len(group)
+        self.dt = sc.dt
+        self.q, self.R, self.t = q, R, t
+        self.period = 1.0 / c.frame_rate_hz if c.frame_rate_hz > 0 else sc.dt
+        self.latency = latency_s(sc)
+        run = sc.task.max_steps * sc.dt
+        before = math.ceil(self.latency / self.period) + 2  # frames captured before 0
+        count = before + math.ceil(run / self.period) + 2
+        k = np.arange(count) - before
+        capture = np.tile(k * self.period, (n, 1))
+        if c.jitter_ms > 0:
+            limit = MAX_JITTER_FRACTION * self.period
+            for m, s in enumerate(group):
+                rng = trial_rng(sc.seed, s.trial, JITTER_STREAM)
+                capture[m] += np.clip(1e-3 * c.jitter_ms * rng.standard_normal(count),
+                                      -limit, limit)
+        self.capture = capture
+        self.delivered = capture + self.latency
+        depth = math.ceil((self.latency + 2.0 * self.period) / self.dt) + 3
+        self.depth = depth
+        self.hist_q = np.repeat(q[:, None], depth, axis=1)
+        self.hist_R = np.repeat(R[:, None], depth, axis=1)
+        self.hist_t = np.repeat(t[:, None], depth, axis=1)
+        self.frame = np.full(n, -1)  # index into ``capture`` of each row's current frame
+        self.cache: dict[str, np.ndarray | None] = {}
+        self._rows = pack_rows(R, t, q, base_points, platform_points)
+
+    def measure(self, step: int, idx: np.ndarray, measure: Measure) -> dict[str, Any]:
+        """The features the rows ``idx`` receive at control step ``step``.
+
+        Args:
+            step: The control step (``tau = step dt``).
+            idx: (n,) the active rows (their state in ``q``, ``R``, ``t`` is at ``tau``).
+            measure: ``(rows, R, t) -> features`` of the sensor at true poses (one
+                generator per row: the noise of a frame is drawn when it is measured).
+
+        Returns:
+            The sensor's dictionary for ``idx``, and ``image_t`` (n,) the capture times [s].
+        """
+        slot = step % self.depth
+        self.hist_q[idx, slot] = self.q[idx]
+        self.hist_R[idx, slot] = self.R[idx]
+        self.hist_t[idx, slot] = self.t[idx]
+        tau = step * self.dt
+        newest = np.array([np.searchsorted(self.delivered[m], tau + INSTANT, side="right") - 1
+                           for m in idx.tolist()], dtype=int)
+        new = newest != self.frame[idx]
+        rows = idx[new]
+        if len(rows):
+            c = self.capture[rows, newest[new]]
+            R_c, t_c = self._poses_at(rows, c, step)
+            m = measure(rows, R_c, t_c)
+            self._store(rows, m, len(self.q))
+            self.frame[rows] = newest[new]
+        out: dict[str, Any] = {k: (None if v is None else v[idx]) for k, v in self.cache.items()}
+        out["image_t"] = self.capture[idx, self.frame[idx]]
+        return out
+
+    def _store(self, rows: np.ndarray, m: dict[str, Any], n: int) -> None:
+        for key, value in m.items():
+            if value is None:
+                self.cache.setdefault(key, None)
+                continue
+            arr = np.asarray(value)
+            if self.cache.get(key) is None:
+                self.cache[key] = np.zeros((n, *arr.shape[1:]), dtype=arr.dtype)
+            self.cache[key][rows] = arr  # type: ignore[index]
+
+    def _poses_at(self, rows: np.ndarray, c: np.ndarray, step: int
+                  ) -> tuple[np.ndarray, np.ndarray]:
+        """True poses of ``rows`` at capture times ``c`` (<= ``step dt``)."""
+        s0 = np.floor((c + INSTANT) / self.dt).astype(int)
+        s0 = np.minimum(s0, step)
+        frac = (c - s0 * self.dt) / self.dt
+        before = s0 < 0  # the robot at rest at its start pose
+        s0 = np.maximum(s0, 0)
+        frac = np.where(before, 0.0, frac)
+        a = s0 % self.depth
+        b = np.minimum(s0 + 1, step) % self.depth
+        q0, q1 = self.hist_q[rows, a], self.hist_q[rows, b]
+        R = self.hist_R[rows, a].copy()
+        t = self.hist_t[rows, a].copy()
+        between = np.abs(frac) * self.dt > INSTANT
+        if between.any():
+            j = np.flatnonzero(between)
+            x = self._rows[rows[j]]
+            x[:, 0:9] = np.swapaxes(R[j], -1, -2).reshape(-1, 9)
+            x[:, 9:12] = t[j]
+            x[:, 12:18] = q0[j] + frac[j, None] * (q1[j] - q0[j])
+            sol = solve_rows(x)
+            ok = sol.converged  # a failure keeps the earlier instant's pose
+            R[j[ok]] = sol.rotations[ok]
+            t[j[ok]] = sol.translations[ok]
+        return R, t
+
+
+def make_clock(sc: Scenario, group: list[TrialSetup], q: np.ndarray, R: np.ndarray,
+               t: np.ndarray, base_points: np.ndarray, platform_points: np.ndarray
+               ) -> CameraClock | None:
+    """The camera clock of a group of trials, or None when the camera has none."""
+    if not clock_active(sc):
+        return None
+    return CameraClock(sc, group, q, R, t, base_points, platform_points)
+
+
+def clocked_measure(clock: CameraClock | None, step: int, idx: np.ndarray,
+                    state: tuple[np.ndarray, np.ndarray], measure: Measure
+                    ) -> dict[str, Any]:
+    """The hook of both engines: the sensor at the rows' current poses without a clock
+    (``image_t`` None), else through :meth:`CameraClock.measure`."""
+    if clock is None:
+        m = measure(idx, state[0][idx], state[1][idx])
+        m["image_t"] = None
+        return m
+    return clock.measure(step, idx, measure)

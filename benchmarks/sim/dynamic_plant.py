@@ -1,0 +1,103 @@
+"""The dynamic world: the TRUE robot's mechanism, drives and encoders between control periods.
+
+``[robot] world = "dynamic"`` (``docs/dynamic-world.md``). Every trial's true robot (its own
+geometry, inertia and drives, :mod:`benchmarks.sim.world`) is integrated over a control
+period ``dt`` in ``dt / physics_dt`` steps by :class:`hexapod.dynamics.robots.DynamicRobots`
+(linearly implicit Euler in the twist, semi-implicit Euler on SE(3) for the pose; the
+legs follow). In velocity mode the drives' setpoints are the controller's leg velocities
+clamped to the stroke and speed limits as the kinematic world clamps them; in force mode
+they are leg forces.
+
+A trial starts at rest, its drives holding the platform against gravity. Its world fails
+when, at the end of a period, a leg is beyond its stroke by more than :data:`END_STOP` (it
+hit an end stop) or the state is not finite.
+
+The controller sees the encoders: true lengths plus the joint offsets, quantised to the
+encoder resolution. The plant gives each trial's result row its largest drive force, the
+time any drive spent at its force limit and the drive tracking error (velocity setpoint
+minus realised leg velocity), and its recorded series the drives' forces.
+"""
+
+from __future__ import annotations
+
+import logging
+from typing import Any
+
+import numpy as np
+
+from benchmarks.sim.world import TrialSetup
+from hexapod.backends.base import clamp_velocities
+from hexapod.dynamics.drive_model import quantise
+from hexapod.dynamics.robots import DynamicRobots
+
+log = logging.getLogger(__name__)
+
+#: A leg beyond its stroke by more than this has hit its end stop [m].
+END_STOP = 1e-4
+
+
+class DynamicPlant:
+    """The dynamic world of a group of trials (see the module docstring).
+
+    Args:
+        sc: The scenario (``dt``, ``physics_dt``).
+        group: The trials; each row's true robot is ``group[k].world.geometry``.
+        q: (N, 6) true leg lengths [m] (changed in place).
+        R: (N, 3, 3) true platform rotations (changed in place).
+        t: (N, 3) true platform positions [m] (changed in place).
+        base_points, platform_points: The true robots' points, (6, 3) or (N, 6, 3) [m].
+    """
+
+    def __init__(self, sc: Any, group: list[TrialSetup], q: np.ndarray, R: np.ndarray,
+                 t: np.ndarray, base_points: np.ndarray, platform_points: np.ndarray) -> None:
+        self.q = q
+        self.steps = max(1, round(sc.dt / sc.physics_dt))
+        self.h = sc.dt / self.steps
+        geometries = [s.world.geometry for s in group]
+        self.stroke, self.max_speed = geometries[0].stroke, geometries[0].max_speed
+        self.robots = DynamicRobots(geometries, R, t, base_points, platform_points)
+
+    def advance(self, run: np.ndarray, velocities: np.ndarray, dt: float
+                ) -> dict[int, str]:
+        """See :meth:`benchmarks.sim.plant.Plant.advance` (``velocities`` are leg velocity
+        setpoints [m/s] in velocity mode, leg forces [N] in force mode)."""
+        robots = self.robots
+        if robots.drives.mode == "velocity":
+            setpoints, _ = clamp_velocities(self.q[run], velocities, dt, self.stroke,
+                                            self.max_speed)
+        else:
+            setpoints = np.where(np.isfinite(velocities), velocities, 0.0)
+        diverged = robots.advance(run, setpoints, self.h, self.steps)
+        q = robots.lengths(run)
+        lo, hi = self.stroke
+        out = ~np.all((q > lo - END_STOP) & (q < hi + END_STOP), axis=1) & ~diverged
+        failed = {int(k): "the dynamic world diverged (a non-finite state)"
+                  for k in run[diverged]}
+        for j in np.flatnonzero(out):
+            leg = int(np.argmax(np.maximum(lo - q[j], q[j] - hi)))
+            failed[int(run[j])] = (f"leg {leg} hit its end stop: {q[j, leg] * 1e3:.3f} mm, "
+                                   f"stroke [{lo * 1e3:.3f}, {hi * 1e3:.3f}] mm")
+        good = ~diverged
+        self.q[run[good]] = q[good]
+        return failed
+
+    def measured_lengths(self, rows: np.ndarray, offsets: np.ndarray) -> np.ndarray:
+        """See :meth:`benchmarks.sim.plant.Plant.measured_lengths`: the encoders' counts."""
+        return quantise(self.q[rows] + offsets, self.robots.resolution[rows])
+
+    def row_figures(self, row: int) -> dict[str, Any]:
+        """The drive figures of one trial's result row: largest drive force [N], time at
+        a force limit [s], RMS and largest drive tracking error [mm/s]."""
+        r = self.robots
+        count = r.track_count[row]
+        return {
+            "max_leg_force_n": float(r.force_max[row]),
+            "saturation_time_s": float(r.saturated_time[row]),
+            "drive_tracking_rms_mm_s": (float(np.sqrt(r.track_sq[row] / count) * 1e3)
+                                        if count else None),
+            "drive_tracking_max_mm_s": float(r.track_max[row] * 1e3) if count else None,
+        }
+
+    def series(self, row: int) -> dict[str, np.ndarray]:
+        """The drives' forces (6,) [N] at the end of the last period."""
+        return {"leg_forces": self.robots.forces[row].copy()}

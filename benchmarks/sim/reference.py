@@ -1,0 +1,94 @@
+"""The time axis of a trajectory task (``[task] kind = "trajectory"``): each trial's
+reference trajectory, the pose its error is measured against at every period, and its
+controllers made to track it (:class:`controllers.tracking.TrackingController`).
+
+A point-to-point task goes through the same functions unchanged: its target is the goal
+pose at every period and its controllers are built as before.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+
+from benchmarks.sim.world import TrialSetup
+from benchmarks.study.scenario import Scenario, TaskConfig
+from controllers.batch import PerTrialLoop, actuation_of, batch_controller
+from hexapod.trajectory import PoseTrajectory
+
+
+def trajectory(task: TaskConfig, start_rotation: np.ndarray, start_translation: np.ndarray,
+               goal_rotation: np.ndarray, goal_translation: np.ndarray) -> PoseTrajectory:
+    """The reference of a trajectory task from a trial's start (and, for a line, goal)
+    pose, with the task's limits in SI units."""
+    return PoseTrajectory(
+        task.shape, task.profile, start_rotation, start_translation,
+        1e-3 * task.speed_mm_s, 1e-3 * task.acceleration_mm_s2,
+        goal_rotation=goal_rotation, goal_translation=goal_translation,
+        angular_speed=float(np.deg2rad(task.angular_speed_deg_s)),
+        angular_acceleration=float(np.deg2rad(task.angular_acceleration_deg_s2)),
+        radius=1e-3 * task.radius_mm, laps=task.laps, plane=task.plane)
+
+
+def trajectory_end(task: TaskConfig, start_rotation: np.ndarray,
+                   start_translation: np.ndarray, goal_rotation: np.ndarray,
+                   goal_translation: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The goal pose of a trial of ``task``: where its reference ends (the start pose
+    for a closed curve), else the drawn goal."""
+    if task.kind != "trajectory" or task.shape == "line":
+        return goal_rotation, goal_translation
+    return np.array(start_rotation, dtype=float), np.array(start_translation, dtype=float)
+
+
+def trial_reference(sc: Scenario, setup: TrialSetup) -> PoseTrajectory | None:
+    """The reference of a trial (None for a point-to-point task)."""
+    if sc.task.kind != "trajectory":
+        return None
+    return trajectory(sc.task, setup.start_rotation, setup.start_translation,
+                      setup.goal_rotation, setup.goal_translation)
+
+
+class Targets:
+    """The pose each trial of a group is measured against at each period: its goal, or
+    its reference at ``step dt`` (sampled once on the control grid)."""
+
+    def __init__(self, sc: Scenario, group: list[TrialSetup]) -> None:
+        self.rotation = np.array([s.goal_rotation for s in group])
+        self.translation = np.array([s.goal_translation for s in group])
+        self._grid: tuple[np.ndarray, np.ndarray] | None = None
+        if sc.task.kind == "trajectory" and group:
+            times = sc.dt * np.arange(sc.task.max_steps + 1)
+            samples = [trial_reference(sc, s).at(times) for s in group]  # type: ignore[union-attr]
+            self._grid = (np.array([r.rotation for r in samples]),
+                          np.array([r.translation for r in samples]))
+
+    def __call__(self, step: int, idx: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(len(idx), 3, 3) rotations and (len(idx), 3) translations of rows ``idx``."""
+        if self._grid is None:
+            return self.rotation[idx], self.translation[idx]
+        return self._grid[0][idx, step], self._grid[1][idx, step]
+
+
+def task_controller(sc: Scenario, spec: Any) -> Any:
+    """A controller of ``spec`` for the task of ``sc``: as registered, wrapped in a
+    :class:`~controllers.tracking.TrackingController` for a trajectory task."""
+    from controllers.base import registry
+
+    ctrl = registry.create(spec.name, **spec.options)
+    if sc.task.kind != "trajectory":
+        return ctrl
+    from controllers.tracking import TrackingController
+
+    return TrackingController(ctrl, feed_forward=sc.task.feed_forward)
+
+
+def task_batch_controller(sc: Scenario, spec: Any, batched: bool) -> Any:
+    """The batch interface of :func:`task_controller` (a trajectory task steps its
+    tracking controllers one per trial, :class:`controllers.batch.PerTrialLoop`)."""
+    if sc.task.kind != "trajectory":
+        return batch_controller(spec.name, spec.options, batched)
+    first = [task_controller(sc, spec)]
+    actuation = actuation_of(first[0])
+    return PerTrialLoop(lambda: first.pop() if first else task_controller(sc, spec),
+                        actuation)

@@ -1,0 +1,80 @@
+"""Tracking metrics of a trajectory task: RMS and largest error of the TRUE pose from
+the reference while it moves, the error when it stops, and the settling time after it
+(the time from the reference's end until the pose stays within the task's
+tolerances). Fed by :meth:`benchmarks.sim.book.Book.check` every period."""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+
+from benchmarks.sim.reference import trial_reference
+from benchmarks.sim.world import TrialSetup
+from benchmarks.study.scenario import Scenario
+
+
+class Tracker:
+    """The tracking metrics of a group of trials (index = row of the group).
+
+    Args:
+        sc: The scenario (a trajectory task).
+        group: The trials.
+        pos_tol: Position tolerance [m].
+        ori_tol: Orientation tolerance [rad].
+    """
+
+    def __init__(self, sc: Scenario, group: list[TrialSetup], pos_tol: float,
+                 ori_tol: float) -> None:
+        n = len(group)
+        self.dt = sc.dt
+        self.last_step = sc.task.max_steps
+        self.pos_tol = pos_tol
+        self.ori_tol = ori_tol
+        self.duration = np.array([trial_reference(sc, s).duration  # type: ignore[union-attr]
+                                  for s in group])
+        self.count = np.zeros(n, dtype=int)
+        self.sum_dp2 = np.zeros(n)
+        self.sum_da2 = np.zeros(n)
+        self.max_dp = np.zeros(n)
+        self.max_da = np.zeros(n)
+        self.last_bad = np.full(n, -1)
+
+    def add(self, step: int, idx: np.ndarray, dp: np.ndarray, da: np.ndarray) -> None:
+        """One period of the rows ``idx``: position errors ``dp`` [m], orientation errors
+        ``da`` [rad] from the reference."""
+        moving = step * self.dt <= self.duration[idx] + 1e-12
+        rows = idx[moving]
+        self.count[rows] += 1
+        self.sum_dp2[rows] += dp[moving] ** 2
+        self.sum_da2[rows] += da[moving] ** 2
+        self.max_dp[rows] = np.maximum(self.max_dp[rows], dp[moving])
+        self.max_da[rows] = np.maximum(self.max_da[rows], da[moving])
+        bad = (dp >= self.pos_tol) | (da >= self.ori_tol)
+        self.last_bad[idx[bad]] = step
+
+    def row(self, m: int) -> dict[str, Any]:
+        """The metrics of row ``m`` for its result row."""
+        c = max(int(self.count[m]), 1)
+        end = float(self.duration[m])
+        last = int(self.last_bad[m])
+        if last >= self.last_step:
+            settle: float | None = None  # out of tolerance at the last period
+        else:
+            settle = max(0.0, (last + 1) * self.dt - end) if last >= 0 else 0.0
+        return {
+            "trajectory_duration_s": end,
+            "tracking_rms_position_mm": float(np.sqrt(self.sum_dp2[m] / c) * 1e3),
+            "tracking_max_position_mm": float(self.max_dp[m] * 1e3),
+            "tracking_rms_orientation_deg": float(np.rad2deg(np.sqrt(self.sum_da2[m] / c))),
+            "tracking_max_orientation_deg": float(np.rad2deg(self.max_da[m])),
+            "settling_time_s": settle,
+        }
+
+
+def tracker_for(sc: Scenario, group: list[TrialSetup], pos_tol: float, ori_tol: float
+                ) -> Tracker | None:
+    """A :class:`Tracker` for a trajectory task, None otherwise."""
+    if sc.task.kind != "trajectory":
+        return None
+    return Tracker(sc, group, pos_tol, ori_tol)

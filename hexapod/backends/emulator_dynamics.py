@@ -1,0 +1,113 @@
+"""The emulated boards' axes as the dynamic robot (``hexapod-emulator --dynamics``).
+
+Without it an emulated leg moves at the speed limit straight to its setpoint. With it,
+each axis is what a real controller drives: a **position loop** (proportional, bandwidth
+:data:`POSITION_BANDWIDTH_HZ`, its output limited to the board's speed) whose velocity
+is the setpoint of the leg's **velocity-mode drive** on the TRUE robot with mass
+(:class:`hexapod.dynamics.robots.DynamicRobots`: the robot file's ``[inertia]`` and
+``[drives]``, integrated at ``physics_dt``). So a servo loop talking to the emulator meets
+the drives' lag, their force limit and friction, and gravity.
+
+The state advances lazily: when the board is asked (a command, the watchdog), the axes
+are integrated over the time elapsed since, in whole physics steps (the remainder is
+carried to the next call), with the setpoints held meanwhile, as they were.
+"""
+
+from __future__ import annotations
+
+import logging
+
+import numpy as np
+
+from hexapod.dynamics.robots import DynamicRobots
+from hexapod.exceptions import BackendError, HexapodError
+from hexapod.fk import forward_kinematics
+from hexapod.geometry import HexapodGeometry
+
+log = logging.getLogger(__name__)
+
+#: Bandwidth of the axes' position loop [Hz] (a fifth of the drives' default 50 Hz).
+POSITION_BANDWIDTH_HZ = 10.0
+#: Longest catch-up integrated at once [s]; a longer silence jumps (the robot is at
+#: rest under its position loop long before).
+MAX_CATCH_UP = 5.0
+
+
+class DynamicAxes:
+    """Six axes of one robot with mass and drives.
+
+    Args:
+        geometry: The TRUE robot (kinematics, inertia, drives in velocity mode).
+        lengths: Initial leg lengths (6,) [m] (the robot starts at rest there).
+        physics_dt: Physics step [s].
+
+    Raises:
+        BackendError: The drives are in force mode, or the lengths have no pose.
+    """
+
+    def __init__(self, geometry: HexapodGeometry, lengths: np.ndarray,
+                 physics_dt: float = 1e-3) -> None:
+        if geometry.drives.mode != "velocity":
+            raise BackendError("--dynamics needs drives in velocity mode (a board sends "
+                               f"position setpoints), the robot file has {geometry.drives.mode!r}")
+        if not (np.isfinite(physics_dt) and 0 < physics_dt <= 0.01):
+            raise BackendError(f"physics_dt must be in (0, 10] ms, got {physics_dt * 1e3} ms")
+        try:
+            fk = forward_kinematics(geometry, np.asarray(lengths, float))
+        except HexapodError as exc:
+            raise BackendError(f"initial lengths {np.round(np.asarray(lengths) * 1e3, 3)} mm "
+                               f"have no pose: {exc}") from None
+        self.robots = DynamicRobots([geometry], fk.rotation[None].copy(),
+                                    fk.translation[None].copy())
+        self.h = physics_dt
+        self.gain = 2 * np.pi * POSITION_BANDWIDTH_HZ
+        self._carry = 0.0
+        self._rows = np.array([0])
+        self.lengths = self.robots.lengths(self._rows)[0]
+        self._resting = True
+        self._rest = np.array(lengths, dtype=float)
+
+    def leg_velocities(self) -> np.ndarray:
+        """The legs' velocities now (6,) [m/s]."""
+        r = self.robots
+        _, _, K, _, _ = r.model.terms_batch(r.R, r.t, r.twist, **r.rows(self._rows))
+        return K[0] @ r.twist[0]  # type: ignore[no-any-return]
+
+    def steps_for(self, dt: float) -> int:
+        """The whole physics steps in ``dt`` [s] plus the remainder carried so far (the
+        new remainder is carried on)."""
+        elapsed = min(dt, MAX_CATCH_UP) + self._carry
+        steps = int(elapsed / self.h)
+        self._carry = elapsed - steps * self.h
+        return steps
+
+    def step(self, setpoints: np.ndarray, speed: float) -> None:
+        """One physics step towards the position setpoints (6,) [m], the position loop's
+        velocity limited to ``speed`` [m/s]. Until the first setpoint away from where it
+        started, the robot is at rest in equilibrium (drives holding gravity) and the
+        step is skipped (it would move it by round-off only): an idle emulator costs
+        nothing."""
+        if self._resting:
+            if np.array_equal(setpoints, self._rest):
+                return
+            self._resting = False
+        v = np.clip(self.gain * (setpoints - self.lengths), -speed, speed)
+        if self.robots.advance(self._rows, v[None], self.h, 1).any():
+            raise BackendError("the dynamic robot diverged (a non-finite state)")
+        self.lengths = self.robots.lengths(self._rows)[0]
+
+    def move(self, setpoints: np.ndarray, speed: float, dt: float) -> np.ndarray:
+        """Integrate ``dt`` [s] with the position setpoints (6,) [m] held, the position
+        loop's velocity limited to ``speed`` [m/s]; returns the leg lengths (6,) [m]."""
+        for _ in range(self.steps_for(dt)):
+            self.step(setpoints, speed)
+        return self.lengths.copy()
+
+    def pose(self) -> tuple[np.ndarray, np.ndarray]:
+        """The platform's true pose now: rotation (3, 3), position (3,) [m]."""
+        return self.robots.R[0].copy(), self.robots.t[0].copy()
+
+    @property
+    def settled(self) -> bool:
+        """Every leg slower than 1 um/s."""
+        return bool(np.all(np.abs(self.leg_velocities()) <= 1e-6))

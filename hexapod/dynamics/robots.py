@@ -1,0 +1,175 @@
+"""Many hexapods with mass and drives, integrated in time (the dynamic world's physics).
+
+:class:`DynamicRobots` holds the state of ``n`` robots (rows), each with its own geometry,
+inertia and drives, and integrates them over a control period in steps of ``h``:
+
+1. the mechanism's terms ``M(x)``, ``h(x, tau)`` and ``K(x)`` (``q_dot = K tau``) of the
+   compiled closed-chain model (:mod:`hexapod.dynamics.compiled`);
+2. the drives' forces (:mod:`hexapod.dynamics.drive_model`: PI velocity loop or force
+   mode, friction);
+3. the leg's equation with the reflected rotor inertia ``m_r``: the force on the
+   mechanism is ``motor - friction - m_r q_ddot`` with ``q_ddot = K tau_dot + b``,
+   ``b_i = u_i . (w x (w x r_i)) + |B_dot_i - q_dot_i u_i|^2 / q_i``, so
+   ``(M + K^T diag(m_r - h s) K) tau_dot = K^T (motor - friction - m_r b) - h``, with
+   ``s`` the velocity slope of the drives' forces taken implicitly (**linearly implicit
+   Euler** in the twist);
+4. the pose with the new twist (**semi-implicit Euler on SE(3)**): ``t += h v``,
+   ``R <- exp(h [w]x) R``; the legs follow (``q_i = |t + R eB_i - A_i|``).
+
+Two implementations of one step, tested equal: :meth:`DynamicRobots.step_reference`
+(numpy, readable, the oracle) and the compiled period
+(:mod:`hexapod.dynamics.robots_compiled`, every step of a period fused in C, used by
+:meth:`DynamicRobots.advance`).
+
+A robot starts at rest, its drives holding the platform against gravity (the integral
+action preloaded with the static leg forces).
+"""
+
+from __future__ import annotations
+
+import logging
+from typing import Any
+
+import numpy as np
+
+from hexapod.dynamics.compiled import parameter_row
+from hexapod.dynamics.drive_model import DriveModel
+from hexapod.dynamics.model import DynamicModel
+from hexapod.se3 import exp_so3
+from hexapod.workspace import home_pose
+
+log = logging.getLogger(__name__)
+
+
+def legs(R: np.ndarray, t: np.ndarray, A: np.ndarray, E: np.ndarray
+         ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Leg lengths (n, 6) [m], unit vectors (n, 6, 3) and platform arms ``r_i = R eB_i``
+    (n, 6, 3) [m] of poses ``R`` (n, 3, 3), ``t`` (n, 3) [m]."""
+    r = np.einsum("nij,nkj->nki", R, E)
+    leg = t[:, None, :] + r - A
+    q = np.linalg.norm(leg, axis=-1)
+    return q, leg / q[..., None], r
+
+
+def leg_bias(twist: np.ndarray, q: np.ndarray, u: np.ndarray, r: np.ndarray) -> np.ndarray:
+    """``b = q_ddot - K tau_dot`` (n, 6) [m/s^2]: the legs' acceleration at zero platform
+    acceleration, ``u_i . (w x (w x r_i)) + |B_dot_i - q_dot_i u_i|^2 / q_i``."""
+    v, w = twist[:, None, :3], twist[:, None, 3:]
+    wr = np.cross(w, r)
+    b_dot = v + wr
+    qd = np.einsum("nki,nki->nk", u, b_dot)
+    perp = b_dot - qd[..., None] * u
+    return np.einsum("nki,nki->nk", u, np.cross(w, wr)) + np.einsum(  # type: ignore[no-any-return]
+        "nki,nki->nk", perp, perp) / q
+
+
+class DynamicRobots:
+    """``n`` robots with mass and drives (see the module docstring).
+
+    Args:
+        geometries: The true robot of every row (geometry, ``inertia``, ``drives``); one
+            drive mode for all.
+        R: (n, 3, 3) platform rotations (used and changed in place).
+        t: (n, 3) platform positions [m] (used and changed in place).
+        base_points, platform_points: (6, 3) or (n, 6, 3) points [m] (default: each
+            row's geometry's).
+    """
+
+    def __init__(self, geometries: list[Any], R: np.ndarray, t: np.ndarray,
+                 base_points: np.ndarray | None = None,
+                 platform_points: np.ndarray | None = None) -> None:
+        n = len(geometries)
+        self.n = n
+        self.R, self.t = R, t
+        self.A = np.array(np.broadcast_to(
+            base_points if base_points is not None else [g.base_points for g in geometries],
+            (n, 6, 3)))
+        self.E = np.array(np.broadcast_to(
+            platform_points if platform_points is not None
+            else [g.platform_points for g in geometries], (n, 6, 3)))
+        self.model = DynamicModel(geometries[0])
+        self.parameters = np.array([parameter_row(g.inertia) for g in geometries])
+        drives = [g.drives for g in geometries]
+        self.rotor = np.array([d.rotor_inertia for d in drives], dtype=float)
+        self.resolution = np.array([d.encoder_resolution for d in drives], dtype=float)
+        self.drives = DriveModel(drives, self._tuned_mass(geometries), n)
+        #: (n, 6) twists ``(v, w)`` [m/s, rad/s].
+        self.twist = np.zeros((n, 6))
+        rows = np.arange(n)
+        self.drives.hold(rows, self.model.inverse_batch(R, t, np.zeros((n, 6)),
+                                                        np.zeros((n, 6)), **self.rows(rows)))
+        #: (n, 6) the drives' forces at the end of the last step [N].
+        self.forces = self.drives.integral.copy()
+        #: (n,) time any drive of the row spent at its force limit [s].
+        self.saturated_time = np.zeros(n)
+        #: (n,) sum of the squared drive tracking errors [m^2/s^2] and their count.
+        self.track_sq = np.zeros(n)
+        self.track_count = np.zeros(n)
+        #: (n,) largest drive tracking error [m/s] and largest drive force [N].
+        self.track_max = np.zeros(n)
+        self.force_max = np.abs(self.forces).max(axis=1)
+
+    def rows(self, rows: np.ndarray) -> dict[str, np.ndarray]:
+        """The per-row overrides of :class:`DynamicModel`'s batches for ``rows``."""
+        return {"base_points": self.A[rows], "platform_points": self.E[rows],
+                "parameters": self.parameters[rows]}
+
+    def _tuned_mass(self, geometries: list[Any]) -> np.ndarray:
+        """(n, 6) the inertia each velocity loop is tuned on [kg]: the rotor's plus the
+        mechanism's seen by the leg at the robot's home pose (the diagonal of
+        ``K^-T M K^-1``), as a drive is tuned once on its robot."""
+        n = len(geometries)
+        homes = [home_pose(g) for g in geometries]
+        R0 = np.array([h[0] for h in homes])
+        t0 = np.array([h[1] for h in homes])
+        M, _, K, _, _ = self.model.terms_batch(R0, t0, np.zeros((n, 6)),
+                                               **self.rows(np.arange(n)))
+        Kinv = np.linalg.inv(K)
+        joint = np.swapaxes(Kinv, -1, -2) @ M @ Kinv
+        return self.rotor + np.diagonal(joint, axis1=-2, axis2=-1)  # type: ignore[no-any-return]
+
+    def lengths(self, rows: np.ndarray) -> np.ndarray:
+        """True leg lengths (n, 6) [m] of ``rows``."""
+        return legs(self.R[rows], self.t[rows], self.A[rows], self.E[rows])[0]
+
+    def advance(self, rows: np.ndarray, setpoints: np.ndarray, h: float, steps: int
+                ) -> np.ndarray:
+        """Integrate ``rows`` over ``steps`` steps of ``h`` [s] (compiled).
+
+        Args:
+            rows: (n,) row indices.
+            setpoints: (n, 6) leg velocities [m/s] (velocity mode) or forces [N] (force
+                mode), held over the period.
+            h: Physics step [s].
+            steps: Steps in the period.
+
+        Returns:
+            (n,) mask of rows whose state is not finite after the period (left unchanged).
+        """
+        from hexapod.dynamics.robots_compiled import advance_compiled
+
+        return advance_compiled(self, rows, setpoints, h, steps)
+
+    def step_reference(self, rows: np.ndarray, setpoints: np.ndarray, h: float) -> None:
+        """One step of ``rows`` in numpy (the oracle of the compiled period)."""
+        R, t, tw = self.R[rows], self.t[rows], self.twist[rows]
+        M, hb, K, _, _ = self.model.terms_batch(R, t, tw, **self.rows(rows))
+        qd = np.einsum("nij,nj->ni", K, tw)
+        f = self.drives.forces(rows, setpoints, qd, h)
+        q, u, r = legs(R, t, self.A[rows], self.E[rows])
+        m_r = self.rotor[rows]
+        lhs = M + np.einsum("nki,nk,nkj->nij", K, m_r - h * f.slope, K)
+        rhs = np.einsum("nki,nk->ni", K, f.motor - f.friction - m_r * leg_bias(tw, q, u, r)) - hb
+        acc = np.linalg.solve(lhs, rhs[..., None])[..., 0]
+        tw = tw + h * acc
+        self.twist[rows] = tw
+        self.t[rows] = t + h * tw[:, :3]
+        self.R[rows] = exp_so3(h * tw[:, 3:]) @ R
+        self.forces[rows] = f.motor
+        if self.drives.mode == "velocity":
+            err = np.abs(setpoints - qd)
+            self.track_sq[rows] += np.sum(err**2, axis=1)
+            self.track_count[rows] += 6
+            self.track_max[rows] = np.maximum(self.track_max[rows], err.max(axis=1))
+        self.saturated_time[rows] += h * np.any(f.saturated, axis=1)
+        self.force_max[rows] = np.maximum(self.force_max[rows], np.abs(f.motor).max(axis=1))

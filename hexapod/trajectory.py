@@ -1,0 +1,268 @@
+"""Reference pose trajectories with their first and second time derivatives.
+
+A trajectory starts at rest at a start pose and ends at rest:
+
+- ``line``: to a goal pose, the position along the segment and the orientation about
+  the fixed axis of ``log(R0^T R1)``, both driven by one timing law ``s(t)`` from 0 to
+  1, so that neither the translation speed and acceleration nor the angular ones
+  exceed their limits;
+- ``circle``: ``laps`` turns of a circle of radius ``r`` through the start position, in
+  a plane of the base frame, the orientation held;
+- ``lemniscate``: ``laps`` figure-eights of Gerono's lemniscate
+  ``r (sin phi, sin phi cos phi)`` centred on the start position, the orientation held.
+
+The timing law is a quintic polynomial (smooth acceleration) or a trapezoidal speed
+profile (bang-coast-bang acceleration). The speed limit bounds ``|dp/dt|`` everywhere;
+the acceleration limit bounds the tangential acceleration (exactly ``|d2p/dt2|`` on a
+line; on the curves the centripetal part, up to ``speed^2 / r``, comes on top).
+
+Conventions (``docs/math.md``): the twist ``(v, w)`` is the velocity of the platform
+frame's origin and the angular velocity, both in the base frame; the acceleration is
+their time derivative. Units are SI (m, rad, s).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from hexapod.exceptions import TrajectoryError
+from hexapod.se3 import exp_so3, log_so3
+
+#: Timing laws.
+PROFILES = ("quintic", "trapezoidal")
+#: Path shapes.
+SHAPES = ("line", "circle", "lemniscate")
+#: Planes of the closed curves: the base-frame axes ``(e1, e2)`` spanning them.
+PLANES = {"xy": (0, 1), "xz": (0, 2), "yz": (1, 2)}
+
+#: Peak speed and acceleration of the quintic ``10 u^3 - 15 u^4 + 6 u^5`` over unit time.
+_QUINTIC_PEAK_SPEED = 15.0 / 8.0
+_QUINTIC_PEAK_ACCELERATION = 10.0 / math.sqrt(3.0)
+
+
+@dataclass(frozen=True)
+class TimingLaw:
+    """A path parameter ``s(t)`` from 0 (at ``t <= 0``) to 1 (at ``t >= duration``), at
+    rest at both ends.
+
+    Attributes:
+        kind: ``"quintic"`` or ``"trapezoidal"``.
+        duration: Time from start to end [s].
+        ramp: Duration of the acceleration (and deceleration) phase of the trapezoid [s].
+        peak: Peak ``ds/dt`` of the trapezoid [1/s].
+    """
+
+    kind: str
+    duration: float
+    ramp: float = 0.0
+    peak: float = 0.0
+
+    @staticmethod
+    def fit(kind: str, speed: float, acceleration: float) -> TimingLaw:
+        """The fastest law of ``kind`` with ``|ds/dt| <= speed`` and ``|d2s/dt2| <=
+        acceleration`` (normalised limits [1/s], [1/s^2]; ``inf`` for no motion)."""
+        if kind not in PROFILES:
+            raise TrajectoryError("profile", f"expected one of {', '.join(PROFILES)}, "
+                                  f"got {kind!r}")
+        if math.isinf(speed) and math.isinf(acceleration):
+            return TimingLaw(kind, 0.0)
+        if kind == "quintic":
+            duration = max(_QUINTIC_PEAK_SPEED / speed,
+                           math.sqrt(_QUINTIC_PEAK_ACCELERATION / acceleration))
+            return TimingLaw(kind, duration)
+        if speed * speed / acceleration <= 1.0:  # the peak speed is reached: a cruise phase
+            ramp = speed / acceleration
+            return TimingLaw(kind, 1.0 / speed + ramp, ramp, speed)
+        peak = math.sqrt(acceleration)  # a triangle: accelerate, then brake at once
+        return TimingLaw(kind, 2.0 / peak, 1.0 / peak, peak)
+
+    def __call__(self, t: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """``s``, ``ds/dt`` [1/s] and ``d2s/dt2`` [1/s^2] at times ``t`` [s] (any shape)."""
+        t = np.asarray(t, dtype=float)
+        T = self.duration
+        if T <= 0.0:
+            return (np.where(t >= 0.0, 1.0, 0.0), np.zeros_like(t), np.zeros_like(t))
+        if self.kind == "quintic":
+            u = np.clip(t / T, 0.0, 1.0)
+            inside = (t > 0.0) & (t < T)
+            s = u**3 * (10.0 - 15.0 * u + 6.0 * u * u)
+            sd = np.where(inside, 30.0 * u * u * (1.0 - u) ** 2 / T, 0.0)
+            sdd = np.where(inside, 60.0 * u * (1.0 - u) * (1.0 - 2.0 * u) / (T * T), 0.0)
+            return s, sd, sdd
+        ta, v = self.ramp, self.peak
+        a = v / ta
+        tc = np.clip(t, 0.0, T)
+        rise = tc < ta
+        fall = tc > T - ta
+        s = np.where(rise, 0.5 * a * tc * tc,
+                     np.where(fall, 1.0 - 0.5 * a * (T - tc) ** 2, 0.5 * a * ta * ta
+                              + v * (tc - ta)))
+        sd = np.where(rise, a * tc, np.where(fall, a * (T - tc), v))
+        sdd = np.where(rise, a, np.where(fall, -a, 0.0))
+        outside = (t <= 0.0) | (t >= T)
+        return s, np.where(outside, 0.0, sd), np.where(outside, 0.0, sdd)
+
+
+@dataclass(frozen=True)
+class ReferenceSample:
+    """A trajectory at ``m`` times (leading axis).
+
+    Attributes:
+        rotation: (m, 3, 3) platform orientation in the base frame.
+        translation: (m, 3) platform position in the base frame [m].
+        velocity: (m, 3) linear velocity of the platform origin, base frame [m/s].
+        angular_velocity: (m, 3) angular velocity, base frame [rad/s].
+        acceleration: (m, 3) time derivative of ``velocity`` [m/s^2].
+        angular_acceleration: (m, 3) time derivative of ``angular_velocity`` [rad/s^2].
+    """
+
+    rotation: np.ndarray
+    translation: np.ndarray
+    velocity: np.ndarray
+    angular_velocity: np.ndarray
+    acceleration: np.ndarray
+    angular_acceleration: np.ndarray
+
+    @property
+    def twist(self) -> np.ndarray:
+        """(m, 6) ``(v, w)``."""
+        return np.concatenate([self.velocity, self.angular_velocity], axis=-1)
+
+    @property
+    def twist_rate(self) -> np.ndarray:
+        """(m, 6) ``(dv/dt, dw/dt)``."""
+        return np.concatenate([self.acceleration, self.angular_acceleration], axis=-1)
+
+
+def _positive(value: float | None, field: str) -> float:
+    if value is None or isinstance(value, bool):
+        raise TrajectoryError(field, f"a positive number is required, got {value!r}")
+    v = float(value)
+    if not (math.isfinite(v) and v > 0.0):
+        raise TrajectoryError(field, f"must be positive and finite, got {value!r}")
+    return v
+
+
+class PoseTrajectory:
+    """A reference pose trajectory from a start pose at rest (see the module docstring).
+
+    Args:
+        shape: ``"line"``, ``"circle"`` or ``"lemniscate"``.
+        profile: ``"quintic"`` or ``"trapezoidal"``.
+        start_rotation: (3, 3) start orientation (base frame).
+        start_translation: (3,) start position (base frame) [m].
+        speed: Largest platform speed ``|dp/dt|`` [m/s].
+        acceleration: Largest tangential acceleration [m/s^2].
+        goal_rotation: (3, 3) end orientation of a line.
+        goal_translation: (3,) end position of a line [m].
+        angular_speed: Largest angular speed of a line [rad/s].
+        angular_acceleration: Largest angular acceleration of a line [rad/s^2].
+        radius: Radius of the circle, half-width of the lemniscate [m].
+        laps: Turns of a closed curve (a positive integer: it ends where it started).
+        plane: ``"xy"``, ``"xz"`` or ``"yz"``: the plane of a closed curve.
+
+    Raises:
+        TrajectoryError: Naming the parameter at fault.
+    """
+
+    def __init__(self, shape: str, profile: str, start_rotation: np.ndarray,
+                 start_translation: np.ndarray, speed: float, acceleration: float, *,
+                 goal_rotation: np.ndarray | None = None,
+                 goal_translation: np.ndarray | None = None,
+                 angular_speed: float | None = None, angular_acceleration: float | None = None,
+                 radius: float | None = None, laps: int = 1, plane: str = "xy") -> None:
+        if shape not in SHAPES:
+            raise TrajectoryError("shape", f"expected one of {', '.join(SHAPES)}, got {shape!r}")
+        if profile not in PROFILES:
+            raise TrajectoryError("profile", f"expected one of {', '.join(PROFILES)}, "
+                                  f"got {profile!r}")
+        R0 = np.asarray(start_rotation, dtype=float)
+        p0 = np.asarray(start_translation, dtype=float)
+        if R0.shape != (3, 3) or p0.shape != (3,) or not (np.all(np.isfinite(R0))
+                                                          and np.all(np.isfinite(p0))):
+            raise TrajectoryError("start", "expected a finite (3, 3) rotation and (3,) "
+                                  "translation")
+        self.shape = shape
+        self.profile = profile
+        self.speed = _positive(speed, "speed")
+        self.acceleration = _positive(acceleration, "acceleration")
+        self._R0 = R0
+        self._p0 = p0
+        inf = math.inf
+        if shape == "line":
+            if goal_rotation is None or goal_translation is None:
+                raise TrajectoryError("goal", "a line needs a goal pose")
+            R1 = np.asarray(goal_rotation, dtype=float)
+            self._delta = np.asarray(goal_translation, dtype=float) - p0
+            self._axis_angle = log_so3(R0.T @ R1)  # body-frame rotation vector
+            length = float(np.linalg.norm(self._delta))
+            angle = float(np.linalg.norm(self._axis_angle))
+            speeds, accels = [inf], [inf]
+            if length > 0.0:
+                speeds.append(self.speed / length)
+                accels.append(self.acceleration / length)
+            if angle > 0.0:
+                speeds.append(_positive(angular_speed, "angular_speed") / angle)
+                accels.append(_positive(angular_acceleration, "angular_acceleration") / angle)
+            self.timing = TimingLaw.fit(profile, min(speeds), min(accels))
+            self.end_rotation = R0 @ exp_so3(self._axis_angle)
+            self.end_translation = p0 + self._delta
+            return
+        self.radius = _positive(radius, "radius")
+        if isinstance(laps, bool) or not isinstance(laps, int | np.integer) or laps < 1:
+            raise TrajectoryError("laps", f"a positive integer is required, got {laps!r}")
+        if plane not in PLANES:
+            raise TrajectoryError("plane", f"expected one of {', '.join(PLANES)}, got {plane!r}")
+        i, j = PLANES[plane]
+        self._e1 = np.eye(3)[i]
+        self._e2 = np.eye(3)[j]
+        self._phi_total = 2.0 * math.pi * int(laps)
+        # the largest |dp/dphi|: r on the circle, r sqrt(2) on the lemniscate (at phi = 0)
+        peak = self.radius * (1.0 if shape == "circle" else math.sqrt(2.0)) * self._phi_total
+        self.timing = TimingLaw.fit(profile, self.speed / peak, self.acceleration / peak)
+        self.end_rotation = R0.copy()
+        self.end_translation = p0.copy()
+
+    @property
+    def duration(self) -> float:
+        """Time from the start to the end of the motion [s]."""
+        return self.timing.duration
+
+    def at(self, t: float | np.ndarray) -> ReferenceSample:
+        """The reference at times ``t`` [s] (a scalar or an (m,) array): before 0 the start
+        pose, after :attr:`duration` the end pose, at rest."""
+        times = np.atleast_1d(np.asarray(t, dtype=float))
+        s, sd, sdd = self.timing(times)
+        m = len(times)
+        zeros = np.zeros((m, 3))
+        if self.shape == "line":
+            rv = self._axis_angle
+            rotation = self._R0 @ exp_so3(s[:, None] * rv)
+            w_dir = self._R0 @ rv  # the fixed axis times the angle, base frame
+            return ReferenceSample(
+                rotation, self._p0 + s[:, None] * self._delta, sd[:, None] * self._delta,
+                sd[:, None] * w_dir, sdd[:, None] * self._delta, sdd[:, None] * w_dir)
+        phi = self._phi_total * s
+        dphi = self._phi_total * sd
+        ddphi = self._phi_total * sdd
+        g, g1, g2 = self._curve(phi)
+        velocity = g1 * dphi[:, None]
+        acceleration = g2 * (dphi * dphi)[:, None] + g1 * ddphi[:, None]
+        rotation = np.broadcast_to(self._R0, (m, 3, 3)).copy()
+        return ReferenceSample(rotation, self._p0 + g, velocity, zeros, acceleration,
+                               zeros.copy())
+
+    def _curve(self, phi: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """The curve's offset from the start position and its first two derivatives with
+        respect to ``phi``, each (m, 3)."""
+        r, e1, e2 = self.radius, self._e1, self._e2
+        c, s = np.cos(phi)[:, None], np.sin(phi)[:, None]
+        if self.shape == "circle":
+            return (r * ((c - 1.0) * e1 + s * e2), r * (-s * e1 + c * e2),
+                    -r * (c * e1 + s * e2))
+        c2, s2 = np.cos(2.0 * phi)[:, None], np.sin(2.0 * phi)[:, None]
+        return (r * (s * e1 + 0.5 * s2 * e2), r * (c * e1 + c2 * e2),
+                -r * (s * e1 + 2.0 * s2 * e2))

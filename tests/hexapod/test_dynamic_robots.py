@@ -1,0 +1,142 @@
+"""The dynamic robots (hexapod.dynamics.robots): the compiled period equals the numpy steps,
+the power balance of mechanism, rotor inertia and drives holds (a second formulation of the
+integrated equations), gravity is held at rest, and the legs follow velocity setpoints."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from hexapod.dynamics.robots import DynamicRobots, legs
+from hexapod.geometry import deltalab
+from hexapod.workspace import sample_poses
+
+
+def _robots(n: int, mode: str = "velocity", seed: int = 3, **drive: float
+            ) -> tuple[DynamicRobots, np.ndarray, np.ndarray]:
+    g = deltalab()
+    g = g.replace(drives=g.drives.replace(mode=mode, **drive))
+    R, t = sample_poses(g, n, np.random.default_rng(seed), max_translation=0.03,
+                        max_angle=np.deg2rad(5.0), margin=0.02)
+    R, t = np.array(R), np.array(t)
+    return DynamicRobots([g] * n, R, t), R, t
+
+
+def _state(r: DynamicRobots) -> np.ndarray:
+    return np.concatenate([r.R.reshape(r.n, 9), r.t, r.twist, r.drives.integral, r.forces,
+                           r.saturated_time[:, None], r.track_sq[:, None],
+                           r.track_max[:, None], r.force_max[:, None]], axis=1)
+
+
+@pytest.mark.parametrize("mode", ["velocity", "force"])
+def test_the_compiled_period_equals_the_numpy_steps(mode: str) -> None:
+    """Random poses and setpoints (some drives saturate, 60 N limit), 20 steps of 1 ms:
+    the same state, forces and accumulators to 1e-9 (relative to each quantity's scale)."""
+    n = 16
+    rng = np.random.default_rng(5)
+    sp = (rng.uniform(-0.05, 0.05, (n, 6)) if mode == "velocity"
+          else rng.uniform(-120.0, 120.0, (n, 6)))
+    a, _, _ = _robots(n, mode, force_limit=60.0)
+    b, _, _ = _robots(n, mode, force_limit=60.0)
+    rows = np.arange(n)
+    for _ in range(3):  # three periods: the twist and the integral are non-zero
+        assert not a.advance(rows, sp, 1e-3, 20).any()
+        for _ in range(20):
+            b.step_reference(rows, sp, 1e-3)
+    sa, sb = _state(a), _state(b)
+    scale = np.maximum(np.abs(sb).max(axis=0), 1e-6)
+    np.testing.assert_array_less(np.abs(sa - sb) / scale, 1e-9)
+    assert np.any(a.saturated_time > 0) and np.any(np.abs(a.twist) > 1e-3)
+
+
+def test_power_balance_of_mechanism_rotors_and_drives() -> None:
+    """Force mode, constant forces, friction on: the change of the mechanism's energy
+    (kinetic + potential, DynamicModel.energy) plus the rotors' kinetic energy
+    (m_r q_dot^2 / 2) equals the work of the drives minus friction, integrated along the
+    motion (0.1 ms steps over 0.2 s; agreement within 1 % of the work)."""
+    n = 4
+    r, _, _ = _robots(n, "force", viscous=20.0, coulomb=3.0)
+    rows = np.arange(n)
+    hold = r.drives.integral.copy()
+    push = hold + np.random.default_rng(2).uniform(-25.0, 25.0, (n, 6))
+
+    def energy() -> np.ndarray:
+        _, _, K, kin, pot = r.model.terms_batch(r.R, r.t, r.twist, **r.rows(rows))
+        qd = np.einsum("nij,nj->ni", K, r.twist)
+        return kin + pot + 0.5 * np.sum(r.rotor * qd**2, axis=1)
+
+    h = 1e-4
+    e0 = energy()
+    work = np.zeros(n)
+    for _ in range(2000):
+        _, _, K, _, _ = r.model.terms_batch(r.R, r.t, r.twist, **r.rows(rows))
+        qd0 = np.einsum("nij,nj->ni", K, r.twist)
+        f = r.drives.forces(rows, push, qd0, h)
+        r.step_reference(rows, push, h)
+        _, _, K1, _, _ = r.model.terms_batch(r.R, r.t, r.twist, **r.rows(rows))
+        qd1 = np.einsum("nij,nj->ni", K1, r.twist)
+        net = f.motor - f.friction
+        # trapezoid rule on the power, the friction's force re-evaluated at the end
+        fr1 = r.drives.viscous * qd1 + r.drives.coulomb * np.tanh(qd1 / 1e-4)
+        work += h * np.sum(0.5 * (net * qd0 + (f.motor - fr1) * qd1), axis=1)
+    de = energy() - e0
+    assert np.all(np.abs(work) > 0.05)
+    np.testing.assert_allclose(de, work, rtol=0.01)
+
+
+def test_gravity_is_held_at_rest() -> None:
+    """Zero velocity setpoints: the platform stays where it started (drift below 1 um
+    and 1e-5 rad over 1 s), the drives carrying its weight."""
+    r, R0, t0 = _robots(3)
+    R0, t0 = R0.copy(), t0.copy()
+    rows = np.arange(3)
+    for _ in range(50):
+        r.advance(rows, np.zeros((3, 6)), 1e-3, 20)
+    assert np.abs(r.t - t0).max() < 1e-6
+    assert np.abs(r.R - R0).max() < 1e-5
+    assert np.all(np.abs(r.forces).sum(axis=1) > 1.0)
+
+
+def test_the_legs_follow_their_velocity_setpoints() -> None:
+    """10 mm/s on every leg for 0.2 s: the legs finish at the setpoint speed, and their
+    travel falls short of 2 mm by what the integral action must absorb: by the final-value
+    theorem, ``(c v + f_c) / ki`` (viscous and Coulomb friction over the integral gain),
+    within 10 %."""
+    r, R, t = _robots(2)
+    rows = np.arange(2)
+    q0 = legs(R, t, r.A, r.E)[0].copy()
+    for _ in range(10):
+        r.advance(rows, np.full((2, 6), 0.01), 1e-3, 20)
+    deficit = 0.002 - (r.lengths(rows) - q0)
+    d = r.drives
+    expected = (d.viscous * 0.01 + d.coulomb) / d.ki
+    np.testing.assert_allclose(deficit, expected, rtol=0.1)
+    _, _, K, _, _ = r.model.terms_batch(r.R, r.t, r.twist, **r.rows(rows))
+    np.testing.assert_allclose(np.einsum("nij,nj->ni", K, r.twist), 0.01, rtol=0.02)
+
+
+def test_the_step_equals_the_compiled_models_drive_layer() -> None:
+    """A second formulation of one step: the acceleration of the numpy step (its twist
+    change over h) equals DynamicModel.forward_drives_batch with the rotor inertia as the
+    added mass and the drives' implicit slope as ``-h df/dq_dot`` (its own bias K_dot
+    twist from CasADi's directional derivative, ours written out: leg_bias)."""
+    n = 8
+    r, _, _ = _robots(n, force_limit=60.0)
+    rows = np.arange(n)
+    rng = np.random.default_rng(9)
+    r.twist[:] = rng.normal(0.0, [0.02, 0.02, 0.02, 0.1, 0.1, 0.1], (n, 6))
+    sp = rng.uniform(-0.05, 0.05, (n, 6))
+    h = 1e-3
+    R, t, tw = r.R.copy(), r.t.copy(), r.twist.copy()
+    integral = r.drives.integral.copy()
+    qd, bias = r.model.legs_batch(R, t, tw, **r.rows(rows))
+    f = r.drives.forces(rows, sp, qd, h)
+    r.drives.integral[:] = integral  # forces() advanced it: the step starts from the same
+    acc, _, _ = r.model.forward_drives_batch(R, t, tw, f.motor - f.friction, r.rotor,
+                                             -h * f.slope, **r.rows(rows))
+    q, u, arm = legs(R, t, r.A, r.E)
+    from hexapod.dynamics.robots import leg_bias
+
+    np.testing.assert_allclose(leg_bias(tw, q, u, arm), bias, rtol=1e-9, atol=1e-12)
+    r.step_reference(rows, sp, h)
+    np.testing.assert_allclose((r.twist - tw) / h, acc, rtol=1e-7, atol=1e-9)
