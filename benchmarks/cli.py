@@ -1,8 +1,10 @@
-"""``hexapod-bench``: list, run, report, compare, export, reproduce, perf, calibrate, viz, servo.
+"""``hexapod-bench``: list, check, run, report, compare, export, reproduce, perf, calibrate, viz,
+servo.
 
 Examples::
 
     hexapod-bench list
+    hexapod-bench check my-study.toml --picture view.png
     hexapod-bench run quick --out runs/quick
     hexapod-bench run tahri2009-convergence --out runs/tahri --workers 2
     hexapod-bench run my-study.toml --out runs/mine --dask local --resume
@@ -140,6 +142,9 @@ def build_parser() -> argparse.ArgumentParser:
                         "(one controller object per trial; same results, slower)")
     s.add_argument("--viz", action="store_true", help="live MeshCat view (in-process)")
     s.add_argument("--no-progress", action="store_true", help="no progress bar")
+    s.add_argument("--no-check", action="store_true",
+                   help="skip the pre-flight checks of 'hexapod-bench check' (a setup where "
+                        "every trial would fail is refused otherwise)")
     s.set_defaults(func=cmd_run)
 
     s = sub.add_parser("calibrate", help="calibrate the base points from leg observations")
@@ -187,6 +192,23 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--hold", type=float, default=5.0,
                    help="live view: seconds to keep the server after the replay")
     s.set_defaults(func=cmd_viz)
+
+    from benchmarks.study.check_command import cmd_check
+
+    s = sub.add_parser("check", help="check a scenario, robot or camera file before a study "
+                                     "(exit 1: the setup cannot run)",
+                       description="Load and validate FILE (a scenario or built-in scenario "
+                                   "name, a robot geometry file or a camera file) and print "
+                                   "the home pose and leg lengths, the reachable workspace, "
+                                   "what the camera sees, the conditioning at home and the "
+                                   "problems with the key to change (docs/robot-files.md). Exit "
+                                   "code 0: the setup can run; 1: every trial would fail; "
+                                   "2: a file is invalid.")
+    s.add_argument("file", metavar="FILE")
+    s.add_argument("--picture", metavar="PNG",
+                   help="write an image of the robot at home seen by the camera (edges "
+                        "seen in green, hidden in red)")
+    s.set_defaults(func=cmd_check)
 
     s = sub.add_parser("report", help="rebuild DIR/report.md from DIR/results.jsonl")
     s.add_argument("dir")

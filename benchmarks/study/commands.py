@@ -47,14 +47,59 @@ def cmd_run(args: argparse.Namespace) -> int:
     for text in warnings:
         print(f"warning: {text}", file=sys.stderr)
     args.calibration_warnings = warnings
+    if not getattr(args, "no_check", False):
+        _preflight(scenarios)
     from benchmarks.study.runner import backend_factory
 
     backend_factory(args.backend)  # validates the spec before any work
     from benchmarks.study.outdir import check_run_directory
 
     check_run_directory(out, getattr(args, "overwrite", False))  # before the lock file
-    with run_lock(out):  # one run per results directory, from the check to the report
-        return _run_locked(scenarios, out, args)
+    from benchmarks.study.failures import summarised_warnings
+
+    # one run per results directory, from the check to the report
+    with run_lock(out), summarised_warnings(not getattr(args, "verbose", False)) as repeated:
+        code = _run_locked(scenarios, out, args)
+    return _failure_epilogue(out, repeated.repeats(), code)
+
+
+def _preflight(scenarios: list[Any]) -> None:
+    """The checks of ``hexapod-bench check`` before the first trial: warnings printed, a
+    setup where every trial would fail the same way refused (:class:`SetupError`)."""
+    from benchmarks.exceptions import SetupError
+    from benchmarks.study.check_command import preflight
+
+    for sc in scenarios:
+        problems = preflight(sc)
+        errors = [p for p in problems if p.severity == "error"]
+        if errors:
+            raise SetupError(sc.source, errors)
+        for p in problems:
+            print(f"hexapod-bench: warning: {sc.name}: {p.text}", file=sys.stderr)
+
+
+def _failure_epilogue(out: Path, repeats: list[str], code: int) -> int:
+    """Print the failures once per cause (with their counts) and the repeated warnings;
+    the exit code is 1 when every trial of the results directory failed."""
+    from benchmarks.study.failures import every_trial_failed, failure_summary
+    from benchmarks.study.runner import deduplicate, read_results
+
+    rows, _, _ = deduplicate(read_results(out))
+    con = _console()
+    for line in repeats:
+        con.print(f"warning: {line}", markup=False, highlight=False, soft_wrap=True)
+    lines = failure_summary(rows)
+    for line in lines:
+        con.print(line, markup=False, highlight=False, soft_wrap=True)
+    if lines:
+        con.print(f"(every failure in full: {out / 'report.md'}, section Failures; the "
+                  "tracebacks of unexpected errors: hexapod-bench -v run ...)", markup=False,
+                  highlight=False, soft_wrap=True)
+    if code == 0 and every_trial_failed(rows):
+        print("hexapod-bench: error: every trial failed: the setup cannot run as it is (the "
+              "causes are above)", file=sys.stderr)
+        return 1
+    return code
 
 
 def auto_chunk(scenarios: list[Any], workers: int, backend: str) -> int:

@@ -81,6 +81,24 @@ def settings_lines(scenario_meta: dict[str, Any], out_dir: Path) -> list[str]:
     return [*lines, ""]
 
 
+def failures_section(rows: list[dict[str, Any]]) -> list[str]:
+    """``## Failures``: the trials that did not run to their end, once per distinct cause
+    with their count, controllers and sweep points, and the first one's full exception."""
+    from benchmarks.study.failures import failure_groups
+
+    groups = failure_groups(rows)
+    if not groups:
+        return []
+    out = ["## Failures", "", f"{sum(g.count for g in groups)} of {len(rows)} trials did not "
+           "run to their end; one entry per distinct cause:", ""]
+    for g in groups:
+        who = ", ".join(f"{c}: {n}" for c, n in sorted(g.controllers.items()))
+        out += [f"- **{g.count} trial(s)** ({who}; sweep points: "
+                f"{', '.join(sorted(g.points))}): {g.cause}",
+                f"  - first: {g.example}"]
+    return [*out, ""]
+
+
 def write_report(out_dir: Path, overwrite: bool = False) -> Path:
     """Write ``DIR/report.md`` (and its PNG plots) from ``DIR/results.jsonl``.
 
@@ -206,14 +224,7 @@ def write_report(out_dir: Path, overwrite: bool = False) -> Path:
             lines += ["Distribution of the final position errors per controller (empirical "
                       "CDF, every trial" + (", all sweep points pooled" if len(points) > 1
                                             else "") + "):", "", f"![error CDF]({cdf})", ""]
-    failures = [r for r in rows if r.get("failure") and not r["failure"].startswith("not conv")]
-    if failures:
-        lines += ["## Failures", ""]
-        counts: dict[str, int] = defaultdict(int)
-        for r in failures:
-            counts[f"{r['controller']}: {r['failure'][:160]}"] += 1
-        lines += [f"- {n} x {k}" for k, n in sorted(counts.items(), key=lambda kv: -kv[1])][:30]
-        lines.append("")
+    lines += failures_section(rows)
     lines += unconverged_lines(rows)
     path = out_dir / "report.md"
     path.write_text("\n".join(lines))

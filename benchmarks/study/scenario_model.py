@@ -97,11 +97,18 @@ def check_range(value: Any, key: str, path: str) -> None:
 
 @dataclass(frozen=True)
 class ControllerSpec:
-    """A controller of a study: registry name (or ``module:attr``), label, options."""
+    """A controller of a study: registry name (or ``module:attr``), label, options.
+
+    ``key`` is where the file names it (``"controllers[0]"``; None: the command line)
+    and ``option_keys`` the file key of each option (``"controllers[0].gain"`` or
+    ``"controller_options.gain"``), for the error messages.
+    """
 
     name: str
     label: str
     options: dict[str, Any] = field(default_factory=dict)
+    key: str | None = field(default=None, compare=False)
+    option_keys: dict[str, str] = field(default_factory=dict, compare=False)
 
 
 @dataclass(frozen=True)
@@ -376,7 +383,9 @@ class Scenario:
         sc = self
         if calibration_file is not None:
             if not Path(calibration_file).exists():
-                raise ScenarioError(calibration_file, "calibration file not found")
+                raise ScenarioError("--calibration", f"{calibration_file!r}: file not found: tried "
+                                    f"{Path(calibration_file).resolve()} (relative to the "
+                                    "current folder)")
             from benchmarks.study.calibration import load_calibrated_base_points
 
             try:
