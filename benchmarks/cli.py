@@ -1,8 +1,10 @@
-"""``hexapod-bench``: list, run, report, compare, export, reproduce, perf, calibrate, viz, servo.
+"""``hexapod-bench``: list, check, run, report, compare, export, reproduce, perf, calibrate, viz,
+servo.
 
 Examples::
 
     hexapod-bench list
+    hexapod-bench check my-study.toml --picture view.png
     hexapod-bench run quick --out runs/quick
     hexapod-bench run tahri2009-convergence --out runs/tahri --workers 2
     hexapod-bench run my-study.toml --out runs/mine --dask local --resume
@@ -106,17 +108,29 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--seed", type=int, help="override the scenario seed")
     s.add_argument("--max-steps", type=int, help="override the step budget of each trial")
     s.add_argument("--calibration", metavar="FILE",
-                   help="controllers use the base points of this calibrated.toml")
+                   help="controllers use the base points of this calibrated.toml (the "
+                        "vision laws and the predictive ones; model-based and joint-space "
+                        "ignore them); refused if made with another robot or camera")
+    s.add_argument("--allow-foreign-calibration", action="store_true",
+                   help="use a calibration file made with another robot or camera anyway "
+                        "(warned)")
     s.add_argument("--controllers", help="comma-separated names, labels or module:attr")
     s.add_argument("--workers", type=int, default=1, help="processes (default 1)")
     s.add_argument("--dask", metavar="ADDRESS", help="Dask scheduler address, or 'local'")
     s.add_argument("--resume", action="store_true", help="finish an interrupted run")
+    s.add_argument("--overwrite", action="store_true",
+                   help="write into a directory that holds files other than a run's (files "
+                        "of the same names, e.g. report.md, are replaced; results are never "
+                        "discarded: a directory with results needs --resume)")
     s.add_argument("--chunk", type=int, default=None,
                    help="trials per work unit (default: a quarter of a worker's share of "
                         "the trials, between 25 and 1000, at most a sweep point's trials; 25 "
                         "with a real-time backend)")
-    s.add_argument("--record", type=int, default=2,
-                   help="keep the time series of the first K trials of each controller")
+    s.add_argument("--record", type=int, default=2, metavar="K",
+                   help="keep the time series of trials 0 to K-1 of each controller at each "
+                        "sweep point in DIR/trials/ (default 2: trials 0 and 1; the others "
+                        "keep only their row in results.jsonl); 'viz' replays them, the "
+                        "report plots trial 0")
     s.add_argument("--backend", default="sim",
                    help="sim (default, vectorised), emulator (a firmware emulator on a pty), "
                         "serial:URL, a plugin's NAME[:ARGS] or module:attr[:ARGS] "
@@ -128,6 +142,9 @@ def build_parser() -> argparse.ArgumentParser:
                         "(one controller object per trial; same results, slower)")
     s.add_argument("--viz", action="store_true", help="live MeshCat view (in-process)")
     s.add_argument("--no-progress", action="store_true", help="no progress bar")
+    s.add_argument("--no-check", action="store_true",
+                   help="skip the pre-flight checks of 'hexapod-bench check' (a setup where "
+                        "every trial would fail is refused otherwise)")
     s.set_defaults(func=cmd_run)
 
     s = sub.add_parser("calibrate", help="calibrate the base points from leg observations")
@@ -144,6 +161,9 @@ def build_parser() -> argparse.ArgumentParser:
                         "scenario's [calibration] warn_singular_ratio, 0.005)")
     s.add_argument("--min-ratio", type=float, metavar="R",
                    help="refuse below R (default: [calibration] min_singular_ratio, 0.0015)")
+    s.add_argument("--overwrite", action="store_true",
+                   help="replace the calibration.json and calibrated.toml of --out, or write "
+                        "into a directory that holds other files")
     s.add_argument("--observations", metavar="FILE",
                    help="calibrate from measured edge normals and leg lengths (.json/.npz) "
                         "instead of simulating the scenario's world")
@@ -166,12 +186,34 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--html", help="write a self-contained HTML animation (+ a PNG of the "
                                   "curves beside it) instead of the live view")
     s.add_argument("--still", type=int, help="with --html: a still of this period")
+    s.add_argument("--overwrite", action="store_true",
+                   help="with --html: replace the file (and the PNG beside it) even if "
+                        "hexapod-bench did not write it")
     s.add_argument("--hold", type=float, default=5.0,
                    help="live view: seconds to keep the server after the replay")
     s.set_defaults(func=cmd_viz)
 
+    from benchmarks.study.check_command import cmd_check
+
+    s = sub.add_parser("check", help="check a scenario, robot or camera file before a study "
+                                     "(exit 1: the setup cannot run)",
+                       description="Load and validate FILE (a scenario or built-in scenario "
+                                   "name, a robot geometry file or a camera file) and print "
+                                   "the home pose and leg lengths, the reachable workspace, "
+                                   "what the camera sees, the conditioning at home and the "
+                                   "problems with the key to change (docs/robot-files.md). Exit "
+                                   "code 0: the setup can run; 1: every trial would fail; "
+                                   "2: a file is invalid.")
+    s.add_argument("file", metavar="FILE")
+    s.add_argument("--picture", metavar="PNG",
+                   help="write an image of the robot at home seen by the camera (edges "
+                        "seen in green, hidden in red)")
+    s.set_defaults(func=cmd_check)
+
     s = sub.add_parser("report", help="rebuild DIR/report.md from DIR/results.jsonl")
     s.add_argument("dir")
+    s.add_argument("--overwrite", action="store_true",
+                   help="replace DIR/report.md even if hexapod-bench did not write it")
     s.set_defaults(func=cmd_report)
 
     s = sub.add_parser("perf", help="performance and accuracy figures",

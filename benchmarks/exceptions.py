@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from typing import Any
+
 from hexapod.exceptions import ConfigFileError
 
 
@@ -43,3 +45,25 @@ class DirectoryLockedError(ResultsError):
         super().__init__(path, f"another hexapod-bench run ({who}: {holder or '?'}) is "
                          "writing into this directory; wait for it to finish (or stop it), "
                          "or choose another --out")
+
+
+class ForeignCalibrationError(ScenarioError):
+    """A calibration file was made with another robot or camera than the one it is used
+    with (its ``[made_with]`` table names both and their fingerprints)."""
+
+
+class SetupError(BenchmarkError):
+    """A study whose every trial would fail the same way, refused before its first trial.
+
+    Attributes:
+        source: The scenario file.
+        problems: The errors found (:class:`~benchmarks.study.setup_check.Problem`: each
+            has a ``text``).
+    """
+
+    def __init__(self, source: str, problems: list[Any]) -> None:
+        self.source = source
+        self.problems = problems
+        text = "; ".join(p.text for p in problems)
+        super().__init__(f"{source}: the setup cannot run, every trial would fail: {text} "
+                         f"(hexapod-bench check {source} shows the details)")

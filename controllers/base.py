@@ -30,7 +30,9 @@ import numpy as np
 from controllers.exceptions import PluginLoadError, UnknownControllerError
 from hexapod.actuation import Actuation
 from hexapod.config import suggest
+from hexapod.exceptions import UnsafeNameError
 from hexapod.geometry import HexapodGeometry
+from hexapod.outputs import check_name
 
 log = logging.getLogger(__name__)
 
@@ -378,7 +380,16 @@ class Registry:
 
     def register(self, name: str, factory: ControllerFactory, package: str = "hexapod-vs",
                  version: str | None = None) -> None:
-        """Register a controller factory under ``name``."""
+        """Register a controller factory under ``name``.
+
+        Raises:
+            PluginLoadError: ``name`` breaks :func:`hexapod.outputs.check_name` (it
+                becomes part of file names: the recorded trials).
+        """
+        try:
+            check_name(name, "controller name")
+        except UnsafeNameError as exc:
+            raise PluginLoadError(str(name), package, exc.problem) from None
         if version is None:
             version = _distribution_version(package)
         doc = (getattr(factory, "__doc__", None) or "").strip().splitlines()
@@ -406,7 +417,11 @@ class Registry:
                 err = PluginLoadError(ep.name, dist, f"{ep.value} is not callable")
                 self.errors.append(err)
                 continue
-            self.register(ep.name, factory, dist, version)
+            try:
+                self.register(ep.name, factory, dist, version)
+            except PluginLoadError as err:
+                log.warning("%s", err)
+                self.errors.append(err)
 
     def names(self) -> list[str]:
         """Registered names (plugins included), sorted."""

@@ -474,3 +474,35 @@ class TrajectoryError(HexapodError, ValueError):
         self.field = field
         self.problem = problem
         super().__init__(f"trajectory {field}: {problem}")
+
+
+class UnsafeNameError(HexapodError, ValueError):
+    """A name that becomes part of a file name (a scenario, a controller label, a plugin
+    name) is not allowed: a separator, ``..``, a control character, a bad character.
+
+    Attributes:
+        what: What the name is (``"scenario name"``, ``"controller label"``...).
+        value: The name as given.
+        problem: What is wrong with it.
+    """
+
+    def __init__(self, what: str, value: str, problem: str) -> None:
+        self.what = what
+        self.value = value
+        self.problem = problem
+        super().__init__(f"{what} {value!r}: {problem}")
+
+
+class OutputError(HexapodError):
+    """An output would leave its directory, or would replace or mix with files the project
+    did not write (nothing was written).
+
+    Attributes:
+        path: The file or directory.
+        problem: What is there and how to proceed.
+    """
+
+    def __init__(self, path: str, problem: str) -> None:
+        self.path = path
+        self.problem = problem
+        super().__init__(f"{path}: {problem}")

@@ -213,8 +213,13 @@ class HexapodGeometry:
         name = table.get("name", Path(path).stem)
         if not isinstance(name, str):
             raise ConfigFileError(path, f"expected a string, got {name!r}", key="name")
-        geometry = cls(base, plat, (float(stroke[0]), float(stroke[1])), radius, speed, name,
-                       source=path)
+        _check_file_values(table, path)
+        try:
+            geometry = cls(base, plat, (float(stroke[0]), float(stroke[1])), radius, speed,
+                           name, source=path)
+        except GeometryError as exc:  # name the key as written in the file
+            raise GeometryError(_FILE_KEYS.get(exc.field, exc.field), exc.problem,
+                                path) from None
         tables: dict[str, Any] = {}
         if "inertia" in table:
             tables["inertia"] = InertiaParameters.from_dict(table["inertia"], path,
@@ -260,6 +265,33 @@ class HexapodGeometry:
         """Save the geometry to a TOML file (lengths in millimetres), with its
         ``[inertia]`` and ``[drives]`` tables written out in full."""
         Path(path).write_text(tomli_w.dumps(self.to_dict(dynamics=True)))
+
+
+#: The file key of each field (errors name the key as written in the file).
+_FILE_KEYS = {"base_points": "base_points_mm", "platform_points": "platform_points_mm",
+              "stroke": "stroke_mm", "leg_radius": "leg_radius_mm",
+              "max_speed": "max_speed_mm_s"}
+
+
+def _check_file_values(table: dict[str, Any], path: str) -> None:
+    """The values of a geometry file in its own terms (millimetres, the key as written).
+
+    Raises:
+        GeometryError: ``stroke_mm`` not ``[shortest, longest]`` with a positive shortest
+            length, or a non-positive ``leg_radius_mm`` / ``max_speed_mm_s``.
+    """
+    lo, hi = (float(x) for x in table["stroke_mm"])
+    if lo <= 0:
+        raise GeometryError("stroke_mm", f"the shortest leg length must be positive, got "
+                            f"{lo:g} mm (stroke_mm = [shortest, longest] in mm)", path)
+    if lo >= hi:
+        raise GeometryError(
+            "stroke_mm", f"expected [shortest, longest] in mm with shortest < longest, got "
+            f"[{lo:g}, {hi:g}] mm" + (" (swap the two values?)" if lo > hi else ""), path)
+    for key, unit in (("leg_radius_mm", "mm"), ("max_speed_mm_s", "mm/s")):
+        if key in table and float(table[key]) <= 0:
+            raise GeometryError(key, f"must be positive, got {float(table[key]):g} {unit}",
+                                path)
 
 
 def circular_points(radius: float, angles: np.ndarray, z: float = 0.0) -> np.ndarray:

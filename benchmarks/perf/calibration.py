@@ -25,6 +25,7 @@ import numpy as np
 
 from hexapod.geometry import deltalab
 from hexapod.kinematics import Transform
+from hexapod.outputs import GENERATOR, check_replace
 from hexapod.se3 import look_at
 from vision.calibration import StudyResult, calibration_study
 from vision.cameras import camera_preset
@@ -96,9 +97,13 @@ def main(argv: Sequence[str] | None = None) -> int:
     parser.add_argument("--method", choices=["lstsq", "irls"], default="lstsq")
     parser.add_argument("--seed", type=int, default=1)
     parser.add_argument("--json", type=Path, default=None, help="write the figures here")
+    parser.add_argument("--overwrite", action="store_true",
+                        help="replace --json even if hexapod-bench did not write it")
     args = parser.parse_args(argv)
     if args.repeats < 1:
         parser.error("--repeats must be >= 1")
+    if args.json is not None:
+        check_replace(args.json, args.overwrite)
     results = run_study(args.noise, args.repeats, args.seed, args.camera, args.visibility,
                         args.method, args.eye)
     where = f" at {args.eye} m" if args.eye else " (preset placement)"
@@ -106,8 +111,9 @@ def main(argv: Sequence[str] | None = None) -> int:
           f"{' with visibility' if args.visibility else ''}, 64 extremal configurations")
     print(format_table(results))
     if args.json is not None:
-        args.json.write_text(json.dumps({"camera": args.camera, "visibility": args.visibility,
-                                         "seed": args.seed, "eye": args.eye,
+        args.json.write_text(json.dumps({"generator": GENERATOR, "camera": args.camera,
+                                         "visibility": args.visibility, "seed": args.seed,
+                                         "eye": args.eye,
                                          "results": [r.to_dict() for r in results]}, indent=2))
     return 0
 

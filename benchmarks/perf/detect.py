@@ -39,6 +39,7 @@ import cv2
 import numpy as np
 
 from hexapod import deltalab
+from hexapod.outputs import check_replace, mark_png
 from hexapod.workspace import sample_poses
 from vision import kernels
 from vision.cameras import (
@@ -122,6 +123,13 @@ def lens_models(front: PerspectiveCamera) -> list[tuple[str, Camera]]:
             ("eucm", ExtendedUnifiedCamera(front.K, w, h, pose, distortion=EUCM_LENS))]
 
 
+def picture_name(omni: bool, lens: str, style: RenderStyle) -> str:
+    """``detect-omni.png``, ``detect-front-cluttered-distorted.png``..."""
+    suffix = "" if style.background == "plain" else f"-{style.background}"
+    suffix += "" if lens == "ideal" else f"-{lens}"
+    return f"detect-{'omni' if omni else 'front'}{suffix}.png"
+
+
 def _run(cam: Camera, frames: int, style: RenderStyle, seed: int,
          pictures: Path | None, repeats: int, lens: str = "ideal") -> dict[str, float]:
     geo = deltalab()
@@ -162,10 +170,10 @@ def _run(cam: Camera, frames: int, style: RenderStyle, seed: int,
         counts.add(obs.edge_visible, obs.visible_fraction, d.edge_visible)
         if pictures is not None and k == 0:
             pictures.mkdir(parents=True, exist_ok=True)
-            suffix = "" if style.background == "plain" else f"-{style.background}"
-            suffix += "" if lens == "ideal" else f"-{lens}"
-            name = f"detect-{'omni' if omni else 'front'}{suffix}.png"
-            cv2.imwrite(str(pictures / name), draw_detection(img, cam, d))
+            ok, png = cv2.imencode(".png", draw_detection(img, cam, d))
+            if ok:
+                (pictures / picture_name(omni, lens, style)).write_bytes(
+                    mark_png(png.tobytes()))
     e = np.concatenate(errs) if errs else np.array([np.nan])
     return {
         "render_ms": 1e3 * float(np.median(render_t)),
@@ -240,6 +248,8 @@ def main(argv: Sequence[str] | None = None) -> int:
                         "--distortion also detect-omni-distorted.png, "
                         "detect-front-distorted.png and detect-front-LENS.png of the other "
                         "lens models)")
+    p.add_argument("--overwrite", action="store_true",
+                   help="replace pictures of those names that hexapod-bench did not write")
     args = p.parse_args(argv)
     style = RenderStyle(background=args.background, blur_px=args.blur, noise_std=args.noise)
     out = sys.stdout
@@ -271,6 +281,10 @@ def main(argv: Sequence[str] | None = None) -> int:
             cameras.append((name, "distorted", ideal.replace(distortion=distortion)))
     if args.distortion:
         cameras += [("front", label, cam) for label, cam in lens_models(front)]
+    if args.pictures is not None:  # refused before any work, never half-way
+        for name, lens, _ in cameras:
+            check_replace(args.pictures / picture_name(name == "omni", lens, style),
+                          args.overwrite)
     ideal_ms: dict[str, float] = {}
     for name, lens, cam in cameras:
         r = _run(cam, args.frames, style, args.seed, args.pictures, args.repeats, lens)

@@ -159,7 +159,9 @@ def edges_figure(path: str, seed: int = 0) -> None:
     fig.suptitle("Simulated leg edges of the reference robot (vision.observe_legs, "
                  "vision.edge_points)")
     fig.tight_layout()
-    fig.savefig(path, dpi=90)
+    from hexapod.outputs import PNG_METADATA
+
+    fig.savefig(path, dpi=90, metadata=PNG_METADATA)
     plt.close(fig)
 
 
@@ -174,8 +176,13 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--figure", metavar="PNG",
                         help="also draw the simulated edges of both cameras to this file "
                              "(docs/vision-edges.png)")
+    parser.add_argument("--overwrite", action="store_true",
+                        help="replace --figure even if hexapod-bench did not write it")
     args = parser.parse_args(argv)
     if args.figure:
+        from hexapod.outputs import check_replace
+
+        check_replace(args.figure, args.overwrite)
         edges_figure(args.figure)
         print(f"figure written to {args.figure}")
     start = time.perf_counter()

@@ -66,6 +66,7 @@ from benchmarks.robot.loop import (
     servo_loop,
 )
 from hexapod.geometry import HexapodGeometry
+from hexapod.outputs import check_replace
 from vision.feature_cameras import (
     Features,
     FeatureSensor,
@@ -185,6 +186,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--calibration", metavar="FILE",
                    help="calibrated.toml: the controller uses these base points (camera "
                         "frame) instead of the nominal ones")
+    p.add_argument("--allow-foreign-calibration", action="store_true",
+                   help="use a --calibration made with another robot or camera (warned)")
     p.add_argument("--dt", type=float, default=0.02, help="control period [s] (default 0.02)")
     p.add_argument("--max-steps", type=int,
                    help="stop after N periods (default: until convergence or Ctrl-C)")
@@ -289,14 +292,25 @@ def _viewer(enabled: bool, geometry: HexapodGeometry, camera: Any, goal: Any
         viewer.close()
 
 
+def _is_servo_log(path: Path) -> bool:
+    """A log ``servo --log`` wrote: its first line is a period (``step``, ``t_s``)."""
+    try:
+        with path.open(encoding="utf-8") as f:
+            first = json.loads(f.readline())
+    except (OSError, ValueError):
+        return False
+    return isinstance(first, dict) and {"step", "t_s"} <= set(first)
+
+
 def _teach(args: argparse.Namespace, geometry: HexapodGeometry, camera: Any,
            start: np.ndarray | None, status: StatusLine) -> int:
     from hexapod.fk import forward_kinematics
 
     path = Path(args.goal)
-    if path.exists():
-        raise BenchmarkError(f"{path}: already exists; delete it or choose another --goal "
-                             "(--teach never overwrites a goal)")
+    for taught in (path, path.with_suffix(".features.npz")):
+        if taught.exists():
+            raise BenchmarkError(f"{taught}: already exists; delete it or choose another "
+                                 "--goal (--teach never overwrites a goal or its features)")
     sensor = open_camera(args.camera, camera, geometry, args.seed)
     frames: list[Features] = []
     try:
@@ -331,7 +345,8 @@ def run(args: argparse.Namespace) -> int:
     before the robot is touched.
     """
     import controllers  # noqa: F401 - registers the built-ins
-    from benchmarks.study.calibration import load_calibrated_base_points
+    from benchmarks.study.calibration import read_calibrated_file
+    from benchmarks.study.provenance import check_calibration
     from controllers.base import ControllerContext, registry
 
     _check_args(args)
@@ -353,6 +368,8 @@ def run(args: argparse.Namespace) -> int:
         return _teach(args, geometry, camera, start, status)
 
     # everything the user gave is checked before the robot is touched
+    if args.log:
+        check_replace(args.log, ours=_is_servo_log, how="choose another --log, or delete it")
     goal_file = load_goal(args.goal, geometry)
     goal = goal_features(goal_file, camera, geometry)
     options = parse_options(args.option)
@@ -361,8 +378,14 @@ def run(args: argparse.Namespace) -> int:
     except TypeError as exc:  # an option the factory does not take
         raise BenchmarkError(f"--controller {args.controller}: bad option in "
                              f"{sorted(options)}: {exc}") from None
-    base_points = (load_calibrated_base_points(args.calibration) if args.calibration
-                   else camera.camera_from_base.apply(geometry.base_points))
+    base_points = camera.camera_from_base.apply(geometry.base_points)
+    if args.calibration:
+        base_points, recorded = read_calibrated_file(args.calibration)
+        for text in check_calibration(args.calibration, base_points, recorded,
+                                      Path(args.geometry).name, geometry,
+                                      Path(args.camera_file).name, camera,
+                                      getattr(args, "allow_foreign_calibration", False)):
+            print(f"warning: {text}", file=sys.stderr)
     controller.reset(ControllerContext(base_points=base_points, geometry=geometry,
                                        camera=camera, dt=args.dt, goal=goal))
     sensor = open_camera(args.camera, camera, geometry, args.seed)

@@ -13,9 +13,12 @@ from typing import Any
 
 import numpy as np
 
+from benchmarks.sim.tolerance import unconverged_reason
 from benchmarks.sim.world import TrialSetup
+from benchmarks.study.failures import user_message
 from benchmarks.study.scenario import Scenario
 from controllers.base import registry
+from controllers.exceptions import ControllerError
 from hexapod.exceptions import HexapodError
 from hexapod.se3 import pose_error
 from vision.exceptions import VisionError
@@ -195,7 +198,8 @@ class Book:
             fail = self.failure[m]
             conv = bool(self.converged[m])
             if fail is None and not conv:
-                fail = f"not converged within {sc.task.max_steps} steps"
+                fail = unconverged_reason(sc.task, float(dp[m] * 1e3),
+                                          float(np.rad2deg(da[m])))
             settle = int(self.last_bad[m] + 1) if sc.task.fixed_duration else int(self.steps[m])
             times = self.step_times[m]
             row.update({
@@ -261,11 +265,13 @@ def failure_row(sc: Scenario, spec: Any, trial: int, exc: BaseException) -> dict
     row.update({
         "converged": False, "steps": 0, "final_position_error_mm": None,
         "final_orientation_error_deg": None, "stroke_violations": 0, "step_time_us": None,
-        "failure": f"{type(exc).__name__}: {exc}",
+        "failure": f"{type(exc).__name__}: {exc}", "cause": user_message(exc),
     })
-    if isinstance(exc, HexapodError | VisionError):  # the user's data: the message says it
-        log.warning("trial %s/%s/%d failed: %s", sc.name, spec.label, trial, exc)
-    else:
-        log.warning("trial %s/%s/%d failed: %s\n%s", sc.name, spec.label, trial, exc,
-                    "".join(traceback.format_exception(exc)))
+    # one line in the user's terms (the command line prints each cause once and counts
+    # the repeats); the traceback of an unexpected error only with -v (INFO)
+    log.warning("trial %s/%s/%d failed: %s", sc.name, spec.label, trial, row["cause"],
+                extra={"cause": row["cause"]})
+    if not isinstance(exc, HexapodError | VisionError | ControllerError):
+        log.info("traceback of trial %s/%s/%d:\n%s", sc.name, spec.label, trial,
+                 "".join(traceback.format_exception(exc)))
     return row

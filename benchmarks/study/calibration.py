@@ -24,6 +24,8 @@ import tomli_w
 
 from benchmarks.study.scenario import Scenario
 from hexapod.config import check_keys, get_matrix, load_toml
+from hexapod.exceptions import ConfigFileError
+from hexapod.outputs import GENERATOR, TEXT_MARKER
 
 log = logging.getLogger(__name__)
 
@@ -64,15 +66,41 @@ def load_calibrated_base_points(path: str | Path) -> np.ndarray:
     Raises:
         ConfigFileError: Missing file, bad TOML, missing or misspelt key, bad shape.
     """
+    return read_calibrated_file(path)[0]
+
+
+#: The keys of a ``[made_with]`` table (:mod:`benchmarks.study.provenance`).
+MADE_WITH_KEYS = ("robot", "robot_fingerprint", "camera", "camera_fingerprint")
+
+
+def read_calibrated_file(path: str | Path) -> tuple[np.ndarray, dict[str, str] | None]:
+    """Base points (6, 3) in the camera frame [m] and the ``[made_with]`` table (None for a
+    file without one) of a ``calibrated.toml`` file.
+
+    Raises:
+        ConfigFileError: Missing file, bad TOML, missing or misspelt key, bad shape.
+    """
     table = load_toml(path)
     check_keys(table, ("base_points_camera_mm", "camera_from_base", "scale", "leg_radius_mm",
-                       "source"), str(path), required=("base_points_camera_mm",))
-    return get_matrix(table, "base_points_camera_mm", (6, 3), str(path)) * 1e-3
+                       "source", "made_with"), str(path), required=("base_points_camera_mm",))
+    points = get_matrix(table, "base_points_camera_mm", (6, 3), str(path)) * 1e-3
+    recorded = table.get("made_with")
+    if recorded is None:
+        return points, None
+    if not isinstance(recorded, dict):
+        raise ConfigFileError(str(path), "expected a table [made_with]", key="made_with")
+    check_keys(recorded, MADE_WITH_KEYS, str(path), prefix="made_with.",
+               required=MADE_WITH_KEYS)
+    for key in MADE_WITH_KEYS:
+        if not isinstance(recorded[key], str):
+            raise ConfigFileError(str(path), f"expected a string, got {recorded[key]!r}",
+                                  key=f"made_with.{key}")
+    return points, dict(recorded)
 
 
 def run_calibration(sc: Scenario, out: Path, configurations: str | None = None,
                     repeat: int = 1, solver: str | None = None,
-                    correct_scale: bool = False) -> dict[str, Any]:
+                    correct_scale: bool = False, overwrite: bool = False) -> dict[str, Any]:
     """Repeat the calibration in the scenario's worlds; write calibration.json and calibrated.toml.
 
     Repetition k uses the world of trial k (its calibration-error draw) and the
@@ -80,8 +108,14 @@ def run_calibration(sc: Scenario, out: Path, configurations: str | None = None,
 
     Returns:
         The content of ``calibration.json``.
+
+    Raises:
+        OutputError: ``out`` holds other files or a calibration already (and not
+            ``overwrite``); nothing is written.
     """
-    from benchmarks.sim import load_camera, load_geometry, make_trial, trial_rng
+    from benchmarks.sim import make_trial, trial_rng
+    from benchmarks.study.outdir import check_calibration_directory
+    from benchmarks.study.provenance import made_with, scenario_setup
     from vision.calibration import (
         calibrate,
         collect_observations,
@@ -90,9 +124,9 @@ def run_calibration(sc: Scenario, out: Path, configurations: str | None = None,
         rotation_noise,
     )
 
-    out.mkdir(parents=True, exist_ok=True)
-    nominal = load_geometry(sc)
-    camera = load_camera(sc, nominal)
+    check_calibration_directory(out, overwrite)
+    robot_name, nominal, camera_name, camera = scenario_setup(sc)
+    provenance = made_with(robot_name, nominal, camera_name, camera)
     cal_cfg = sc.calibration
     if configurations is not None:
         cal_cfg = replace(cal_cfg, configurations=configurations)
@@ -140,12 +174,14 @@ def run_calibration(sc: Scenario, out: Path, configurations: str | None = None,
             "configurations": int(lin.configurations.max()) if np.ndim(lin.configurations)
             else int(lin.configurations),
             "first_repetition": results[0].to_dict(),
+            **_far_from_nominal(results[0].base_points, nominal, camera),
         })
         all_diffs += diffs
         if first_result is None:
             first_result = results[0]
     overall = error_summary(np.array(all_diffs), np.zeros((6, 3)))
     doc = {
+        "generator": GENERATOR,
         "scenario": sc.name,
         "configurations": cal_cfg.configurations,
         "solver": cal_cfg.solver,
@@ -155,18 +191,21 @@ def run_calibration(sc: Scenario, out: Path, configurations: str | None = None,
         "median_error_mm": overall["median_error_mm"],
         "max_error_mm": overall["max_error_mm"],
         "max_component_error_mm": overall["max_component_error_mm"],
+        "made_with": provenance,
         "points": points_out,
     }
+    out.mkdir(parents=True, exist_ok=True)
     (out / "calibration.json").write_text(json.dumps(doc, indent=1))
     if first_result is None:  # a scenario always has at least one sweep point
         raise RuntimeError("no calibration was run")
     write_calibrated_file(out / "calibrated.toml", first_result, source=f"{sc.name} "
-                          f"(repetition 0, sweep point 0, {cal_cfg.configurations})")
+                          f"(repetition 0, sweep point 0, {cal_cfg.configurations})",
+                          made_with=provenance)
     return doc
 
 
 def calibrate_from_file(sc: Scenario, observations: Path, out: Path, solver: str | None = None,
-                        correct_scale: bool = False) -> dict[str, Any]:
+                        correct_scale: bool = False, overwrite: bool = False) -> dict[str, Any]:
     """Calibrate from observations a user measured (e.g. with a real camera).
 
     Args:
@@ -176,31 +215,61 @@ def calibrate_from_file(sc: Scenario, observations: Path, out: Path, solver: str
         out: Output directory (``calibration.json``, ``calibrated.toml``).
         solver: ``"lstsq"`` or ``"irls"`` (default: the scenario's).
         correct_scale: Divide the estimates by the measured scale.
+        overwrite: Replace a calibration in ``out``, or write among other files.
 
     Returns:
         The content of ``calibration.json`` (no error against a truth: there is none).
+
+    Raises:
+        OutputError: ``out`` holds other files or a calibration already (and not
+            ``overwrite``); nothing is written.
     """
-    from benchmarks.sim import load_geometry
+    from benchmarks.study.outdir import check_calibration_directory
+    from benchmarks.study.provenance import made_with, scenario_setup
     from vision.calibration import CalibrationData, calibrate
 
-    out.mkdir(parents=True, exist_ok=True)
-    nominal = load_geometry(sc)
+    check_calibration_directory(out, overwrite)
+    robot_name, nominal, camera_name, camera = scenario_setup(sc)
+    provenance = made_with(robot_name, nominal, camera_name, camera)
     data = CalibrationData.load(observations)
     res = calibrate(data, nominal.leg_radius, nominal.base_points,
                     method=(solver or sc.calibration.solver),  # type: ignore[arg-type]
                     correct_scale=correct_scale,
                     min_singular_ratio=sc.calibration.min_singular_ratio,
                     warn_singular_ratio=sc.calibration.warn_singular_ratio)
-    doc = {"scenario": sc.name, "observations": str(observations),
+    out.mkdir(parents=True, exist_ok=True)
+    doc = {"generator": GENERATOR, "scenario": sc.name, "observations": str(observations),
            "configurations": int(data.n_configurations),
-           "solver": solver or sc.calibration.solver, "result": res.to_dict()}
+           "solver": solver or sc.calibration.solver, "made_with": provenance,
+           "result": res.to_dict(), **_far_from_nominal(res.base_points, nominal, camera)}
     (out / "calibration.json").write_text(json.dumps(doc, indent=1))
-    write_calibrated_file(out / "calibrated.toml", res, source=str(observations))
+    write_calibrated_file(out / "calibrated.toml", res, source=str(observations),
+                          made_with=provenance)
     return doc
 
 
-def write_calibrated_file(path: Path, result: Any, source: str) -> None:
-    """Write the calibrated parameters (millimetres, degrees) read by ``run --calibration``."""
+def _far_from_nominal(points: np.ndarray, nominal: Any, camera: Any) -> dict[str, Any]:
+    """The distances of estimated base points from the nominal ones and the legs beyond
+    :data:`benchmarks.study.provenance.FAR_FROM_NOMINAL_MM`."""
+    from benchmarks.study.provenance import FAR_FROM_NOMINAL_MM, distances_from_nominal
+
+    d = distances_from_nominal(points, nominal, camera)
+    return {"distance_from_nominal_mm": d.round(3).tolist(),
+            "far_from_nominal_threshold_mm": FAR_FROM_NOMINAL_MM,
+            "far_from_nominal_legs": [int(i) for i in np.flatnonzero(d > FAR_FROM_NOMINAL_MM)]}
+
+
+def write_calibrated_file(path: Path, result: Any, source: str,
+                          made_with: dict[str, str] | None = None) -> None:
+    """Write the calibrated parameters (millimetres, degrees) read by ``run --calibration``.
+
+    Args:
+        path: The ``calibrated.toml`` to write.
+        result: The calibration (:class:`vision.calibration.CalibrationResult`).
+        source: What it was calibrated from (free text).
+        made_with: The robot and camera it was made with
+            (:func:`benchmarks.study.provenance.made_with`).
+    """
     from hexapod.se3 import log_so3
 
     T = result.camera_from_base
@@ -214,4 +283,6 @@ def write_calibrated_file(path: Path, result: Any, source: str) -> None:
         "scale": float(result.scale),
         "leg_radius_mm": float(result.radius * 1e3),
     }
-    path.write_text(tomli_w.dumps(table))
+    if made_with is not None:
+        table["made_with"] = dict(made_with)
+    path.write_text(f"# {TEXT_MARKER} (hexapod-bench calibrate)\n" + tomli_w.dumps(table))

@@ -37,13 +37,69 @@ def cmd_run(args: argparse.Namespace) -> int:
         from dataclasses import replace
 
         scenarios = [replace(sc, world=args.world) for sc in scenarios]
+    from benchmarks.study.provenance import check_scenario_calibration
+
+    warnings: list[str] = []
     for sc in scenarios:
         check_controllers(sc)
+        warnings += check_scenario_calibration(sc, getattr(args, "allow_foreign_calibration",
+                                                           False))
+    for text in warnings:
+        print(f"warning: {text}", file=sys.stderr)
+    args.calibration_warnings = warnings
+    if not getattr(args, "no_check", False):
+        _preflight(scenarios)
     from benchmarks.study.runner import backend_factory
 
     backend_factory(args.backend)  # validates the spec before any work
-    with run_lock(out):  # one run per results directory, from the check to the report
-        return _run_locked(scenarios, out, args)
+    from benchmarks.study.outdir import check_run_directory
+
+    check_run_directory(out, getattr(args, "overwrite", False))  # before the lock file
+    from benchmarks.study.failures import summarised_warnings
+
+    # one run per results directory, from the check to the report
+    with run_lock(out), summarised_warnings(not getattr(args, "verbose", False)) as repeated:
+        code = _run_locked(scenarios, out, args)
+    return _failure_epilogue(out, repeated.repeats(), code)
+
+
+def _preflight(scenarios: list[Any]) -> None:
+    """The checks of ``hexapod-bench check`` before the first trial: warnings printed, a
+    setup where every trial would fail the same way refused (:class:`SetupError`)."""
+    from benchmarks.exceptions import SetupError
+    from benchmarks.study.check_command import preflight
+
+    for sc in scenarios:
+        problems = preflight(sc)
+        errors = [p for p in problems if p.severity == "error"]
+        if errors:
+            raise SetupError(sc.source, errors)
+        for p in problems:
+            print(f"hexapod-bench: warning: {sc.name}: {p.text}", file=sys.stderr)
+
+
+def _failure_epilogue(out: Path, repeats: list[str], code: int) -> int:
+    """Print the failures once per cause (with their counts) and the repeated warnings;
+    the exit code is 1 when every trial of the results directory failed."""
+    from benchmarks.study.failures import every_trial_failed, failure_summary
+    from benchmarks.study.runner import deduplicate, read_results
+
+    rows, _, _ = deduplicate(read_results(out))
+    con = _console()
+    for line in repeats:
+        con.print(f"warning: {line}", markup=False, highlight=False, soft_wrap=True)
+    lines = failure_summary(rows)
+    for line in lines:
+        con.print(line, markup=False, highlight=False, soft_wrap=True)
+    if lines:
+        con.print(f"(every failure in full: {out / 'report.md'}, section Failures; the "
+                  "tracebacks of unexpected errors: hexapod-bench -v run ...)", markup=False,
+                  highlight=False, soft_wrap=True)
+    if code == 0 and every_trial_failed(rows):
+        print("hexapod-bench: error: every trial failed: the setup cannot run as it is (the "
+              "causes are above)", file=sys.stderr)
+        return 1
+    return code
 
 
 def auto_chunk(scenarios: list[Any], workers: int, backend: str) -> int:
@@ -83,10 +139,12 @@ def _run_locked(scenarios: list[Any], out: Path, args: argparse.Namespace) -> in
     meta.update({
         "command": "hexapod-bench " + " ".join(shlex.quote(a) for a in sys.argv[1:]),
         "workers": args.workers, "executor": executor,
+        "warnings": getattr(args, "calibration_warnings", []),
         "scenarios": {**meta.get("scenarios", {}), **{
             sc.name: {"description": sc.description, "reference": sc.reference,
                       "source": sc.source} for sc in scenarios}},
     })
+    _keep_inputs(out, scenarios, meta, args)
     meta_path.write_text(json.dumps(meta, indent=2))
     if args.viz:
         return _run_with_viz(scenarios, out, args)
@@ -129,12 +187,28 @@ def _run_locked(scenarios: list[Any], out: Path, args: argparse.Namespace) -> in
     wall = time.perf_counter() - t0
     meta["wall_time_s"] = wall
     meta_path.write_text(json.dumps(meta, indent=2))
-    report = write_report(out)
+    report = write_report(out, getattr(args, "overwrite", False))
     _print_summary(out, con)
     done_text = f"{written} of {total} trials" if written != total else f"{total} trials"
     con.print(f"{done_text} in {wall:.1f} s ({executor}, {args.workers} worker(s))"
               f"{' before the interruption' if interrupted else ''}; report: {report}")
     return 130 if interrupted else 0
+
+
+def _keep_inputs(out: Path, scenarios: list[Any], meta: dict[str, Any],
+                 args: argparse.Namespace) -> None:
+    """Copy each scenario and its files into ``out/inputs/`` and record its settings and
+    the ``--record`` count in ``meta`` (see :mod:`benchmarks.study.inputs`)."""
+    from benchmarks.study.inputs import copy_inputs, settings
+
+    meta["record"] = args.record
+    for sc in scenarios:
+        kept = copy_inputs(out, sc, getattr(args, "allow_foreign_calibration", False))
+        if kept.get("changed"):
+            print(f"warning: {sc.source} differs from the copy this run started with "
+                  f"({out / kept['folder'] / 'source.toml'}, kept): the resumed trials use "
+                  "the file as it is now", file=sys.stderr)
+        meta["scenarios"][sc.name].update(inputs=kept, settings=settings(sc))
 
 
 def _run_with_viz(scenarios: list[Any], out: Path, args: argparse.Namespace) -> int:
@@ -165,7 +239,7 @@ def _run_with_viz(scenarios: list[Any], out: Path, args: argparse.Namespace) -> 
         viewer.close()
     from benchmarks.study.report import write_report
 
-    write_report(out)
+    write_report(out, getattr(args, "overwrite", False))
     _print_summary(out, con)
     return 0
 
@@ -206,11 +280,12 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
         from benchmarks.study.calibration import calibrate_from_file
 
         doc = calibrate_from_file(sc, Path(args.observations), out, args.solver,
-                                  args.correct_scale)
+                                  args.correct_scale, overwrite=args.overwrite)
         res = doc["result"]
         print(f"calibrated {doc['configurations']} configurations from {args.observations}: "
               f"rigid-fit RMS {res['fit_rms_mm']:.3f} mm, scale {res['scale']:.5f}; wrote "
               f"{out / 'calibration.json'} and {out / 'calibrated.toml'}")
+        _print_far_from_nominal(doc, out)
         lin = res["linear"]
         for leg in lin["ill_conditioned_legs"]:
             print(f"warning: leg {leg} is ill-conditioned (singular-value ratio "
@@ -220,7 +295,7 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
         return 0
     t0 = time.perf_counter()
     doc = run_calibration(sc, out, args.configurations, args.repeat, args.solver,
-                          args.correct_scale)
+                          args.correct_scale, overwrite=args.overwrite)
     con = _console()
     t = Table(title=f"Base-point calibration ({sc.name}, {doc['configurations']}, "
                     f"{doc['solver']}, {args.repeat} repetition(s))")
@@ -234,10 +309,21 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
                   f"{max(p['per_point_median_mm']):.3f}", f"{p['min_singular_ratio']:.4f}",
                   ", ".join(str(leg) for leg in p["ill_conditioned_legs"]) or "-")
     con.print(t)
+    _print_far_from_nominal(doc["points"][0], out)
     con.print(f"{time.perf_counter() - t0:.1f} s; wrote {out / 'calibration.json'} and "
               f"{out / 'calibrated.toml'} (use: hexapod-bench run ... --calibration "
               f"{out / 'calibrated.toml'})")
     return 0
+
+
+def _print_far_from_nominal(part: dict[str, Any], out: Path) -> None:
+    """Flag the base points of calibrated.toml far from the nominal ones (stderr)."""
+    from benchmarks.study.provenance import far_message
+
+    text = far_message(str(out / "calibrated.toml"), part["distance_from_nominal_mm"],
+                       part["far_from_nominal_threshold_mm"])
+    if text:
+        print(f"warning: {text}", file=sys.stderr)
 
 
 def _with_ratio_options(sc: Any, args: argparse.Namespace) -> Any:
@@ -272,8 +358,11 @@ def find_record(out: Path, trial: int, controller: str | None = None,
     folder = out / "trials"
     files = sorted(folder.glob("*.npz")) if folder.exists() else []
     if not files:
-        raise BenchmarkError(f"{out}: no recorded trial (run with --record K to keep the "
-                             "time series of the first K trials)")
+        recorded = _recorded_count(out)
+        why = " (the run used --record 0)" if recorded == 0 else ""
+        raise BenchmarkError(f"{out}: no recorded trial{why}; rerun into a new --out with "
+                             "--record K to keep the time series of trials 0 to K-1 of each "
+                             "controller")
     matches = []
     for f in files:
         parts = f.stem.split("__")
@@ -286,14 +375,29 @@ def find_record(out: Path, trial: int, controller: str | None = None,
         matches.append(f)
     if not matches:
         available = sorted({f.stem for f in files})[:20]
+        recorded = _recorded_count(out)
+        hint = ""
+        if recorded is not None and trial >= recorded:
+            hint = (f"; the run kept the time series of trials 0 to {recorded - 1} only "
+                    f"(--record {recorded}): rerun into a new --out with --record "
+                    f"{trial + 1} to keep trial {trial}")
         raise BenchmarkError(f"{out}: no recorded trial {trial}"
                              + (f" of '{controller}'" if controller else "")
-                             + f"; recorded: {', '.join(available)}")
+                             + f"{hint}; recorded: {', '.join(available)}")
     if len(matches) > 1:
         raise BenchmarkError(f"{out}: {len(matches)} records match ("
                              + ", ".join(m.stem for m in matches[:8])
                              + "); choose with --controller, --scenario or --point")
     return matches[0]
+
+
+def _recorded_count(out: Path) -> int | None:
+    """The ``--record`` of the run (``run.json``), None when unknown."""
+    try:
+        value = json.loads((out / "run.json").read_text()).get("record")
+    except (OSError, ValueError):
+        return None
+    return value if isinstance(value, int) else None
 
 
 def cmd_viz(args: argparse.Namespace) -> int:
@@ -302,10 +406,20 @@ def cmd_viz(args: argparse.Namespace) -> int:
 
     out = Path(args.dir)
     path = find_record(out, args.trial, args.controller, args.scenario, args.point)
+    if args.html:
+        from hexapod.outputs import check_replace
+
+        html_path, png_path = Path(args.html), Path(args.html).with_suffix(".png")
+        if html_path == png_path:
+            raise BenchmarkError(f"--html {args.html}: the curves go beside it as "
+                                 f"{png_path.name}; give the page an .html name")
+        overwrite = getattr(args, "overwrite", False)
+        check_replace(html_path, overwrite)
+        check_replace(png_path, overwrite)
     record = load_trial(path)
     if args.html:
-        html = replay_html(record, args.html, frame=args.still)
-        png = plot_trial(record, Path(args.html).with_suffix(".png"))
+        html = replay_html(record, html_path, frame=args.still)
+        png = plot_trial(record, png_path)
         print(f"{record.title}: wrote {html} (open it in a browser, no network needed) "
               f"and {png}")
         return 0
@@ -331,7 +445,7 @@ def cmd_report(args: argparse.Namespace) -> int:
     """Rebuild report.md from results.jsonl."""
     from benchmarks.study.report import write_report
 
-    path = write_report(Path(args.dir))
+    path = write_report(Path(args.dir), getattr(args, "overwrite", False))
     _print_summary(Path(args.dir), _console())
     print(f"report: {path}")
     return 0

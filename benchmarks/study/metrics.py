@@ -15,6 +15,7 @@ _NON_SWEEP = {
     "final_orientation_error_deg", "stroke_violations", "step_time_us", "failure",
     "rtt_median_ms", "rtt_p99_ms", "missed_periods", "detect_time_ms",
     "tail_position_error_mm", "tail_orientation_error_deg", "hidden_edge_periods",
+    "cause",
     # the tracking metrics of a trajectory task (benchmarks.sim.tracking)
     "trajectory_duration_s", "tracking_rms_position_mm", "tracking_max_position_mm",
     "tracking_rms_orientation_deg", "tracking_max_orientation_deg", "settling_time_s",

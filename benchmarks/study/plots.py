@@ -12,6 +12,7 @@ import numpy as np
 
 from benchmarks.study.metrics import Summary
 from benchmarks.study.results import TRIALS_DIR
+from hexapod.outputs import PNG_METADATA, inside
 
 #: Sweep points whose recorded trial gets an error-versus-time figure, at most.
 MAX_TIME_SERIES = 4
@@ -24,6 +25,17 @@ def _pyplot() -> Any:
     import matplotlib.pyplot as plt
 
     return plt
+
+
+def _save(plt: Any, fig: Any, out_dir: Path, name: str) -> str:
+    """Save a figure as ``out_dir/name`` (checked to stay inside, marked as the project's)
+    and return its Markdown link target (``./`` before a name with ``:``, which a
+    Markdown reader would take for a URL scheme)."""
+    try:
+        fig.savefig(inside(out_dir, name), dpi=90, metadata=PNG_METADATA)
+    finally:
+        plt.close(fig)
+    return f"./{name}" if ":" in name else name
 
 
 def representative(points: list[int]) -> list[int]:
@@ -59,9 +71,7 @@ def time_series(out_dir: Path, scenario: str, point: int) -> str | None:
         ax.legend(fontsize=7)
     fig.tight_layout()
     name = f"{scenario}_p{point}_timeseries.png"
-    fig.savefig(out_dir / name, dpi=90)
-    plt.close(fig)
-    return name
+    return _save(plt, fig, out_dir, name)
 
 
 def _label(s: Summary) -> str:
@@ -97,9 +107,7 @@ def sweeps(out_dir: Path, scenario: str, summaries: list[Summary]) -> list[str]:
         ax.legend(fontsize=7)
     fig.tight_layout()
     name = f"{scenario}_sweep_{key}.png"
-    fig.savefig(out_dir / name, dpi=90)
-    plt.close(fig)
-    return [name]
+    return [_save(plt, fig, out_dir, name)]
 
 
 def heat_maps(out_dir: Path, scenario: str, summaries: list[Summary]) -> str | None:
@@ -160,9 +168,7 @@ def heat_maps(out_dir: Path, scenario: str, summaries: list[Summary]) -> str | N
             fig.colorbar(im, ax=ax, fraction=0.046)
     fig.tight_layout()
     name = f"{scenario}_map.png"
-    fig.savefig(out_dir / name, dpi=90)
-    plt.close(fig)
-    return name
+    return _save(plt, fig, out_dir, name)
 
 
 def error_cdf(out_dir: Path, scenario: str, rows: list[dict[str, Any]]) -> str | None:
@@ -193,6 +199,4 @@ def error_cdf(out_dir: Path, scenario: str, rows: list[dict[str, Any]]) -> str |
     ax.legend(fontsize=7)
     fig.tight_layout()
     name = f"{scenario}_error_cdf.png"
-    fig.savefig(out_dir / name, dpi=90)
-    plt.close(fig)
-    return name
+    return _save(plt, fig, out_dir, name)

@@ -15,6 +15,7 @@ from benchmarks.study import intervals, plots, profiles
 from benchmarks.study.metrics import Summary, format_sweep, summarize
 from benchmarks.study.runner import deduplicate, machine_info, read_results
 from benchmarks.study.tracking_report import tracking_section
+from hexapod.outputs import TEXT_MARKER
 
 log = logging.getLogger(__name__)
 
@@ -66,10 +67,50 @@ def duplicate_note(dropped: int, conflicting: int) -> str:
     return text
 
 
-def write_report(out_dir: Path) -> Path:
-    """Write ``DIR/report.md`` (and its PNG plots) from ``DIR/results.jsonl``."""
+def settings_lines(scenario_meta: dict[str, Any], out_dir: Path) -> list[str]:
+    """The report's list of the settings that define a scenario's run (from ``run.json``)."""
+    found = scenario_meta.get("settings")
+    if not found:
+        return []
+    lines = ["Settings:", ""] + [f"- {k}: {v}" for k, v in found.items()]
+    folder = (scenario_meta.get("inputs") or {}).get("folder")
+    if folder:
+        lines.append(f"- files: the scenario and every file it names are kept in `{folder}/` "
+                     f"(rerun: `hexapod-bench run {out_dir / folder}/scenario.toml --out "
+                     "NEW_DIR`)")
+    return [*lines, ""]
+
+
+def failures_section(rows: list[dict[str, Any]]) -> list[str]:
+    """``## Failures``: the trials that did not run to their end, once per distinct cause
+    with their count, controllers and sweep points, and the first one's full exception."""
+    from benchmarks.study.failures import failure_groups
+
+    groups = failure_groups(rows)
+    if not groups:
+        return []
+    out = ["## Failures", "", f"{sum(g.count for g in groups)} of {len(rows)} trials did not "
+           "run to their end; one entry per distinct cause:", ""]
+    for g in groups:
+        who = ", ".join(f"{c}: {n}" for c, n in sorted(g.controllers.items()))
+        out += [f"- **{g.count} trial(s)** ({who}; sweep points: "
+                f"{', '.join(sorted(g.points))}): {g.cause}",
+                f"  - first: {g.example}"]
+    return [*out, ""]
+
+
+def write_report(out_dir: Path, overwrite: bool = False) -> Path:
+    """Write ``DIR/report.md`` (and its PNG plots) from ``DIR/results.jsonl``.
+
+    Raises:
+        OutputError: ``DIR/report.md`` is a file the project did not write (and not
+            ``overwrite``).
+    """
+    from benchmarks.study.outdir import check_report_file
+
     out_dir = Path(out_dir)
     rows, dropped, conflicting = deduplicate(read_results(out_dir))
+    check_report_file(out_dir, overwrite)
     if dropped:
         log.warning("%s: %s", out_dir / "results.jsonl", duplicate_note(dropped, conflicting))
     summaries = summarize(rows)
@@ -77,13 +118,15 @@ def write_report(out_dir: Path) -> Path:
     if (out_dir / META_FILE).exists():
         meta = json.loads((out_dir / META_FILE).read_text())
     info = machine_info()
-    lines = ["# Benchmark report", ""]
+    lines = ["# Benchmark report", "", f"<!-- {TEXT_MARKER}: hexapod-bench report -->", ""]
     lines.append(f"Generated {datetime.now(UTC).strftime('%Y-%m-%d %H:%M UTC')} from "
                  f"`{out_dir / 'results.jsonl'}` ({len(rows)} trials).")
     if meta.get("command"):
         lines.append(f"Command: `{meta['command']}`")
     if dropped:
         lines += ["", f"**Duplicate rows**: {duplicate_note(dropped, conflicting)}"]
+    if meta.get("warnings"):
+        lines += ["", "**Warnings of the run**:", ""] + [f"- {w}" for w in meta["warnings"]]
     lines += ["", "## Machine and libraries", ""]
     lines += [f"- {k}: {v}" for k, v in info.items()]
     if meta.get("wall_time_s") is not None:
@@ -108,6 +151,7 @@ def write_report(out_dir: Path) -> Path:
         sm = scen_meta.get(name, {})
         if sm.get("description"):
             lines += [sm["description"], ""]
+        lines += settings_lines(sm, out_dir)
         lines += [_md_table(TABLE_HEADER, intervals.summary_rows_with_intervals(ss, groups)),
                   ""]
         if any(np.isfinite(s.rtt_median_ms) for s in ss):
@@ -180,17 +224,28 @@ def write_report(out_dir: Path) -> Path:
             lines += ["Distribution of the final position errors per controller (empirical "
                       "CDF, every trial" + (", all sweep points pooled" if len(points) > 1
                                             else "") + "):", "", f"![error CDF]({cdf})", ""]
-    failures = [r for r in rows if r.get("failure") and not r["failure"].startswith("not conv")]
-    if failures:
-        lines += ["## Failures", ""]
-        counts: dict[str, int] = defaultdict(int)
-        for r in failures:
-            counts[f"{r['controller']}: {r['failure'][:160]}"] += 1
-        lines += [f"- {n} x {k}" for k, n in sorted(counts.items(), key=lambda kv: -kv[1])][:30]
-        lines.append("")
+    lines += failures_section(rows)
+    lines += unconverged_lines(rows)
     path = out_dir / "report.md"
     path.write_text("\n".join(lines))
     return path
+
+
+def unconverged_lines(rows: list[dict[str, Any]]) -> list[str]:
+    """The report's count of the trials that ended outside the tolerances, by cause."""
+    from benchmarks.sim.tolerance import outside_counts
+
+    counts = outside_counts(rows)
+    if not counts:
+        return []
+    kinds = ["position", "rotation", "position and rotation", "within, not settled"]
+    return ["## Trials that ended outside the tolerances", "",
+            "Trials that did not converge, by what was outside the tolerances at their end "
+            "(each row's `failure` in results.jsonl gives the values, e.g. `not converged: "
+            "rotation 0.0565 deg > 0.05 deg after 800 steps`):", "",
+            _md_table(["controller", *kinds],
+                      [[c, *(str(n.get(k, 0)) for k in kinds)] for c, n in counts.items()]),
+            ""]
 
 
 def drive_section(ss: list[Summary]) -> list[str]:

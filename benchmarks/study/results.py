@@ -19,6 +19,7 @@ from typing import Any
 import numpy as np
 
 from benchmarks.exceptions import DirectoryLockedError, ResultsError
+from hexapod.outputs import inside
 
 log = logging.getLogger(__name__)
 
@@ -103,7 +104,7 @@ class ResultsWriter:
         from hexapod.visualize import save_trial
 
         for name, rec in records:
-            save_trial(self.out_dir / TRIALS_DIR / name, **rec)
+            save_trial(inside(self.out_dir / TRIALS_DIR, name), **rec)
         for row in rows:
             self._f.write(json.dumps(_jsonable(row), sort_keys=True) + "\n")
         self._f.flush()

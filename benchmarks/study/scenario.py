@@ -15,6 +15,7 @@ from pathlib import Path
 from typing import Any
 
 from benchmarks.exceptions import ScenarioError
+from benchmarks.study.scenario_checks import referenced_file
 from benchmarks.study.scenario_model import (
     _SCALED,
     CALIBRATION_ERROR_KEYS,
@@ -153,7 +154,8 @@ def parse_scenario(table: dict[str, Any], path: str = "<dict>") -> Scenario:
                                 key=key, suggestion=suggest(key, _TOP))
     if "name" not in table:
         raise ScenarioError(path, "missing required key", key="name")
-    name = _typed(table["name"], str, path, "name")
+    name = _checked_name(_typed(table["name"], str, path, "name"), "scenario name", path,
+                         "name")
     description = _typed(table.get("description", ""), str, path, "description")
     seed = _typed(table.get("seed", 1), int, path, "seed")
     check_range(seed, "seed", path)
@@ -184,7 +186,13 @@ def parse_scenario(table: dict[str, Any], path: str = "<dict>") -> Scenario:
     if not isinstance(defaults, dict):
         raise ScenarioError(path, "expected a table of options given to every controller",
                             key="controller_options")
-    specs = [ControllerSpec(sp.name, sp.label, {**defaults, **sp.options}) for sp in specs]
+    specs = [ControllerSpec(sp.name, sp.label, {**defaults, **sp.options}, f"controllers[{k}]",
+                            {**{o: f"controller_options.{o}" for o in defaults},
+                             **{o: f"controllers[{k}].{o}" for o in sp.options}})
+             for k, sp in enumerate(specs)]
+    for k, sp in enumerate(specs):
+        _checked_name(sp.name, "controller name", path, f"controllers[{k}]")
+        _checked_name(sp.label, "controller label", path, f"controllers[{k}].label")
     labels = [s.label for s in specs]
     dup = {x for x in labels if labels.count(x) > 1}
     if dup:
@@ -203,7 +211,8 @@ def parse_scenario(table: dict[str, Any], path: str = "<dict>") -> Scenario:
     robot_geometry = None
     robot_preset: str | None = "deltalab"
     if "geometry" in robot:
-        robot_geometry = str(base_dir / _typed(robot["geometry"], str, path, "robot.geometry"))
+        value = _typed(robot["geometry"], str, path, "robot.geometry")
+        robot_geometry = referenced_file(base_dir, value, "robot.geometry", path)
         robot_preset = None
     elif "preset" in robot:
         robot_preset = _typed(robot["preset"], str, path, "robot.preset", ("deltalab",))
@@ -240,11 +249,13 @@ def parse_scenario(table: dict[str, Any], path: str = "<dict>") -> Scenario:
     camera_preset: str | None = "front"
     opencv: dict[str, Any] | None = None
     if "file" in camera and calibration is None:
-        camera_file = str(base_dir / _typed(camera["file"], str, path, "camera.file"))
+        camera_file = referenced_file(base_dir, _typed(camera["file"], str, path, "camera.file"),
+                                      "camera.file", path)
         camera_preset = None
     elif calibration is not None:
-        camera_file = str(base_dir / _typed(camera[calibration], str, path,
-                                            f"camera.{calibration}"))
+        camera_file = referenced_file(base_dir, _typed(camera[calibration], str, path,
+                                                       f"camera.{calibration}"),
+                                      f"camera.{calibration}", path)
         camera_preset = None
         opencv = {k: camera[k] for k in ("pose", "camera_from_base", "width_px", "height_px")
                   if k in camera}
@@ -280,7 +291,7 @@ def parse_scenario(table: dict[str, Any], path: str = "<dict>") -> Scenario:
     if cal.method == "file":
         if not cal.file:
             raise ScenarioError(path, "method 'file' needs a 'file'", key="calibration.file")
-        cal = replace(cal, file=str(base_dir / cal.file))
+        cal = replace(cal, file=referenced_file(base_dir, cal.file, "calibration.file", path))
     _check_configurations(cal.configurations, path)
     if cal.min_singular_ratio > cal.warn_singular_ratio:
         raise ScenarioError(path, f"{cal.min_singular_ratio} exceeds warn_singular_ratio "
@@ -314,6 +325,17 @@ def parse_scenario(table: dict[str, Any], path: str = "<dict>") -> Scenario:
         reference=reference, sweep_axes=sweep, source=path, geometry_data=geometry_data,
         camera_data=camera_data, calibration_points=points,
     )
+
+
+def _checked_name(value: str, what: str, path: str, key: str) -> str:
+    """:func:`hexapod.outputs.check_name` as a :class:`ScenarioError` naming the file and key."""
+    from hexapod.exceptions import UnsafeNameError
+    from hexapod.outputs import check_name
+
+    try:
+        return check_name(value, what)
+    except UnsafeNameError as exc:
+        raise ScenarioError(path, f"{exc.value!r}: {exc.problem}", key=key) from None
 
 
 def _parse_world(robot: dict[str, Any], dt: float, path: str) -> tuple[str, float]:
@@ -465,19 +487,27 @@ def check_controllers(sc: Scenario) -> None:
         ScenarioError: An option the controller refuses, naming the controller and option.
     """
     import controllers  # noqa: F401 - registers the built-ins
+    from benchmarks.study.scenario_checks import check_option_names
     from controllers.base import registry
-    from controllers.exceptions import OptionError
+    from controllers.exceptions import OptionError, UnknownControllerError
 
     for k, spec in enumerate(sc.controllers):
-        registry.factory(spec.name)
+        where = spec.key or f"controllers[{k}]"
+        try:
+            factory = registry.factory(spec.name)
+        except UnknownControllerError as exc:
+            if spec.key is None:  # named on the command line
+                raise ScenarioError("--controllers", str(exc)) from None
+            raise ScenarioError(sc.source, str(exc), key=where) from None
+        check_option_names(sc.source, spec, factory, where)
         try:
             registry.create(spec.name, **spec.options)
         except OptionError as exc:
             raise ScenarioError(sc.source, f"{spec.name}: {exc.problem}",
-                                key=f"controllers[{k}].{exc.option}") from None
+                                key=spec.option_keys.get(exc.option,
+                                                         f"{where}.{exc.option}")) from None
         except TypeError as exc:  # an option the factory does not take
-            raise ScenarioError(sc.source, f"{spec.name}: {exc}",
-                                key=f"controllers[{k}]") from None
+            raise ScenarioError(sc.source, f"{spec.name}: {exc}", key=where) from None
 
 
 def builtin_scenarios() -> dict[str, Path]:

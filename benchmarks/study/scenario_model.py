@@ -97,11 +97,18 @@ def check_range(value: Any, key: str, path: str) -> None:
 
 @dataclass(frozen=True)
 class ControllerSpec:
-    """A controller of a study: registry name (or ``module:attr``), label, options."""
+    """A controller of a study: registry name (or ``module:attr``), label, options.
+
+    ``key`` is where the file names it (``"controllers[0]"``; None: the command line)
+    and ``option_keys`` the file key of each option (``"controllers[0].gain"`` or
+    ``"controller_options.gain"``), for the error messages.
+    """
 
     name: str
     label: str
     options: dict[str, Any] = field(default_factory=dict)
+    key: str | None = field(default=None, compare=False)
+    option_keys: dict[str, str] = field(default_factory=dict, compare=False)
 
 
 @dataclass(frozen=True)
@@ -183,6 +190,8 @@ class CalibrationConfig:
             (``calibration_ill_conditioned_legs`` in its row).
         min_singular_ratio: Below this the calibration refuses (the trial fails with a
             ``CalibrationError`` naming the leg and the ratio).
+        allow_foreign: Method ``"file"``: use a file made with another robot or camera
+            (warned loudly) instead of refusing it.
     """
 
     method: str = "none"
@@ -192,6 +201,7 @@ class CalibrationConfig:
     noise_deg: float | None = None
     warn_singular_ratio: float = WARN_SINGULAR_RATIO
     min_singular_ratio: float = MIN_SINGULAR_RATIO
+    allow_foreign: bool = False
 
 
 @dataclass(frozen=True)
@@ -373,7 +383,9 @@ class Scenario:
         sc = self
         if calibration_file is not None:
             if not Path(calibration_file).exists():
-                raise ScenarioError(calibration_file, "calibration file not found")
+                raise ScenarioError("--calibration", f"{calibration_file!r}: file not found: tried "
+                                    f"{Path(calibration_file).resolve()} (relative to the "
+                                    "current folder)")
             from benchmarks.study.calibration import load_calibrated_base_points
 
             try:
@@ -393,6 +405,15 @@ class Scenario:
             _check_option(seed, "seed", "--seed")
             sc = replace(sc, seed=seed)
         if controllers:
+            from hexapod.exceptions import UnsafeNameError
+            from hexapod.outputs import check_name
+
+            for c in controllers:
+                try:
+                    check_name(c, "controller")
+                except UnsafeNameError as exc:
+                    raise ScenarioError("--controllers", f"{exc.value!r}: {exc.problem}"
+                                        ) from None
             by_label = {c.label: c for c in sc.controllers}
             sc = replace(sc, controllers=tuple(by_label.get(c, ControllerSpec(c, c))
                                                for c in controllers))

@@ -34,8 +34,9 @@ import numpy as np
 
 from hexapod.backends.base import Backend, started
 from hexapod.config import suggest
-from hexapod.exceptions import BackendPluginError, UnknownBackendError
+from hexapod.exceptions import BackendPluginError, UnknownBackendError, UnsafeNameError
 from hexapod.geometry import HexapodGeometry
+from hexapod.outputs import check_name
 
 log = logging.getLogger(__name__)
 
@@ -129,7 +130,15 @@ class BackendRegistry:
             package: Distribution that provides it.
             version: Its version (looked up when None).
             needs_args: What ARGS it needs (a spec without them is refused early).
+
+        Raises:
+            BackendPluginError: ``name`` breaks :func:`hexapod.outputs.check_name`, or
+                ``target`` is no backend.
         """
+        try:
+            check_name(name, "backend name")
+        except UnsafeNameError as exc:
+            raise BackendPluginError(str(name), package, exc.problem) from None
         opener = _opener(name, target, package)
         if needs_args:
             self._needs_args[name] = needs_args

@@ -10,6 +10,7 @@ from pathlib import Path
 import numpy as np
 
 from hexapod.exceptions import ViewerError
+from hexapod.outputs import HTML_MARKER, PNG_METADATA, TEXT_MARKER
 from hexapod.visualize.records import TrialRecord, load_trial
 from hexapod.visualize.viewer import HexapodViewer
 
@@ -81,11 +82,21 @@ def replay_html(record: TrialRecord, html_path: str | Path, fps: float = 25.0,
         if frame is None:
             viewer.animate(record, fps)
         html = viewer.static_html()
-    html = _with_page_script(html)
+    html = _with_marker(_with_page_script(html))
     path = Path(html_path)
     path.write_text(html, encoding="utf-8")
     log.info("%s: wrote %s (%.1f MB)", record.title, path, len(html) / 1e6)
     return path
+
+
+def _with_marker(html: str) -> str:
+    """The page with :data:`hexapod.outputs.HTML_MARKER` in its head (or at its top), so
+    that a later ``viz --html`` may replace it."""
+    head = html.find("<head>")
+    if 0 <= head < 4096:
+        return html[:head + 6] + HTML_MARKER + html[head + 6:]
+    doctype = html.find(">") + 1 if html.lstrip().lower().startswith("<!doctype") else 0
+    return html[:doctype] + f"\n<!-- {TEXT_MARKER} -->\n" + html[doctype:]
 
 
 def _with_page_script(html: str) -> str:
@@ -147,7 +158,7 @@ def plot_trial(record: TrialRecord, png_path: str | Path) -> Path:
     fig.suptitle(record.title)
     fig.tight_layout()
     path = Path(png_path)
-    fig.savefig(path, dpi=90)
+    fig.savefig(path, dpi=90, metadata=PNG_METADATA)
     plt.close(fig)
     return path
 

@@ -213,5 +213,5 @@ def test_toml_bad_values(tmp_path: Path) -> None:
     path = _write(tmp_path, "\n".join(lines.values()))
     with pytest.raises(GeometryError) as gexc:
         HexapodGeometry.from_toml(path)
-    assert gexc.value.field == "stroke"
+    assert gexc.value.field == "stroke_mm"  # the key as written in the file
     assert gexc.value.source == str(path)

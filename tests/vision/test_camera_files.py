@@ -207,7 +207,9 @@ def test_toml_that_points_to_an_opencv_file(tmp_path: Path) -> None:
         'opencv = "calib/omni.yml"\nkind = "perspective"\nwidth_px = 640\nheight_px = 480\n':
             ("kind", "unified calibration"),
         'opencv = "calib/omni.yml"\n': ("image_width", "width_px and height_px"),
-        'opencv = "calib/missing.yml"\n': (None, "not found"),
+        'opencv = "calib/missing.yml"\n': (
+            "opencv", "file not found: tried .*calib/missing.yml \\(a relative path is "
+                      "relative to the folder of the camera file"),
         "opencv = 3\n": ("opencv", "path of an OpenCV"),
         'opencv = "calib/omni.yml"\nwidth_px = 640\nheigth_px = 480\n':
             ("heigth_px", "did you mean 'height_px'"),

@@ -88,6 +88,11 @@ def read_opencv_table(table: dict[str, Any], path: str,
         raise ConfigFileError(path, f"expected the path of an OpenCV calibration file, got "
                                     f"{ref!r}", key="opencv")
     cal_path = Path(ref) if Path(ref).is_absolute() else Path(path).parent / ref
+    if not cal_path.is_file():  # the full path tried, and the rule for relative paths
+        rule = ("" if Path(ref).is_absolute() else " (a relative path is relative to the "
+                f"folder of the camera file, {Path(path).parent.resolve()})")
+        raise ConfigFileError(path, f"{ref!r}: file not found: tried {cal_path.resolve()}"
+                              f"{rule}", key="opencv")
     cal = read_calibration(cal_path)
     file_kind = cal.kind
     kind = read_kind(table, path, model, file_kind)

@@ -6,9 +6,12 @@ import io
 import re
 from contextlib import redirect_stdout
 
+import cv2
 import numpy as np
+import pytest
 
 from benchmarks.perf.detect import EdgeCounts, main
+from hexapod.exceptions import OutputError
 
 
 def test_a_detected_partly_hidden_edge_is_not_counted_as_found() -> None:
@@ -70,6 +73,16 @@ def test_distortion_rows_beside_the_ideal_ones(tmp_path) -> None:
                      "detect-front-eucm.png", "detect-front-fisheye.png",
                      "detect-front-opencv-full.png", "detect-front.png",
                      "detect-omni-distorted.png", "detect-omni.png"]
+    # the pictures are marked as the project's and still decode; a picture of the user's
+    # under one of those names is refused before any work
+    from hexapod.outputs import written_by_project
+
+    assert all(written_by_project(tmp_path / n) for n in names)
+    assert cv2.imread(str(tmp_path / "detect-omni.png")) is not None
+    (tmp_path / "detect-front.png").write_bytes(b"\x89PNG\r\n\x1a\n a photo")
+    with redirect_stdout(io.StringIO()), pytest.raises(OutputError, match="already exists"):
+        main(["--frames", "1", "--repeats", "1", "--pictures", str(tmp_path)])
+    assert (tmp_path / "detect-front.png").read_bytes() == b"\x89PNG\r\n\x1a\n a photo"
 
 
 def test_interleaved_rounds_give_ratios_to_the_ideal_lens() -> None:

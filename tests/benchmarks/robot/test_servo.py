@@ -294,6 +294,37 @@ def test_servo_through_an_opencv_calibration_file(tmp_path: Path,
     assert "--camera-pose: only with an OpenCV calibration file" in capsys.readouterr().err
 
 
+def test_log_never_replaces_a_users_file_but_replaces_an_earlier_log(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    goal = _goal(tmp_path, f"lengths_mm = {_mm(GOAL_MM)}\n")
+    notes = tmp_path / "notes.jsonl"
+    notes.write_text('{"my": "measurements"}\n')
+    code = servo.main(["--backend", NO_ROBOT, "--goal", str(goal), "--log", str(notes)])
+    err = capsys.readouterr().err
+    assert code == 2
+    assert (f"{notes}: already exists (a .jsonl file of 23 bytes, not written by hexapod-vs);"
+            " choose another --log, or delete it") in err
+    assert "nonexistent" not in err, "checked before the port is opened"
+    assert notes.read_text() == '{"my": "measurements"}\n'
+    earlier = tmp_path / "earlier.jsonl"
+    earlier.write_text('{"step": 0, "t_s": 0.0}\n')  # what servo --log writes
+    code = servo.main(["--backend", NO_ROBOT, "--goal", str(goal), "--log", str(earlier)])
+    err = capsys.readouterr().err
+    assert code == 2 and "already exists" not in err and "nonexistent" in err
+
+
+def test_teach_never_replaces_the_features_beside_the_goal(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    features = tmp_path / "taught.features.npz"
+    features.write_bytes(b"someone else's features")
+    code = servo.main(["--backend", NO_ROBOT, "--goal", str(tmp_path / "taught.toml"),
+                       "--teach"])
+    assert code == 2
+    assert f"{features}: already exists" in capsys.readouterr().err
+    assert features.read_bytes() == b"someone else's features"
+    assert not (tmp_path / "taught.toml").exists()
+
+
 def test_servo_through_a_kalibr_fisheye(tmp_path: Path,
                                         capsys: pytest.CaptureFixture[str]) -> None:
     """--camera-file camchain.yaml (Kalibr pinhole-equi, the fisheye preset's lens) with

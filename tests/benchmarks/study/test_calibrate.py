@@ -118,7 +118,8 @@ def test_ill_conditioned_calibration_is_refused_or_marked(tmp_path: Path,
     study.write_text('name = "legs30"\n' + common + '[robot]\ngeometry = "legs30.toml"\n'
                      '[calibration]\nmethod = "linear"\nsolver = "lstsq"\n')
     out = tmp_path / "refused"
-    assert cli_main(["run", str(study), "--out", str(out), "--no-progress"]) == 0
+    # every trial failed (refused by its calibration): the run exits 1
+    assert cli_main(["run", str(study), "--out", str(out), "--no-progress"]) == 1
     rows = read_results(out)
     assert len(rows) == 3
     for r in rows:

@@ -136,7 +136,7 @@ def test_controller_options_are_checked_when_the_study_is_loaded(tmp_path: Path)
     with pytest.raises(ScenarioError) as info:
         check_controllers(parse_scenario({**MINIMAL, "controllers": [
             {"name": "leg-edge", "gian": 2.0}]}, "study.toml"))
-    assert info.value.key == "controllers[0]" and "gian" in str(info.value)
+    assert info.value.key == "controllers[0].gian" and "gain" in str(info.value)
     study = tmp_path / "nan.toml"
     study.write_text('name = "t"\ncontrollers = [{name = "leg-edge", gain = nan}]\n')
     out = tmp_path / "out"

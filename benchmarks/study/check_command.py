@@ -1,0 +1,277 @@
+"""``hexapod-bench check FILE``: load a scenario, a robot (geometry) or a camera file,
+validate it and print what a user needs to trust it (:mod:`benchmarks.study.setup_check`);
+``run`` performs the same checks before its first trial (:func:`preflight`)."""
+
+from __future__ import annotations
+
+import argparse
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from benchmarks.exceptions import BenchmarkError
+from benchmarks.study.setup_check import (
+    Problem,
+    SetupReport,
+    Where,
+    check_setup,
+    fixed_task_problems,
+)
+from hexapod.geometry import HexapodGeometry
+
+#: Exit code of ``check`` when the setup cannot run.
+CANNOT_RUN = 1
+
+
+@dataclass
+class Setup:
+    """What ``check`` examines: a robot, a camera, a task box, and where they come from.
+
+    Attributes:
+        kind: ``"scenario"``, ``"robot"`` or ``"camera"``.
+        geometry: The robot.
+        camera: The camera.
+        task: ``(max_translation_mm, max_angle_deg, margin_mm)``.
+        where: How to name the keys to change.
+        needs_camera: Controllers that need the camera (empty: none does); None for a
+            robot or camera file alone (a vision study needs it).
+        controllers: Labels of all the controllers of a scenario.
+        notes: Lines saying what was assumed (the preset used for the missing part).
+        problems: Problems found while loading (a fixed task's unreachable goal).
+    """
+
+    kind: str
+    geometry: HexapodGeometry
+    camera: Any
+    task: tuple[float, float, float]
+    where: Where
+    needs_camera: list[str] | None
+    notes: list[str]
+    problems: list[Problem]
+    controllers: tuple[str, ...] = ()
+
+
+def _default_task() -> tuple[float, float, float]:
+    from benchmarks.study.scenario_model import TaskConfig
+
+    t = TaskConfig()
+    return (t.max_translation_mm, t.max_angle_deg, t.margin_mm)
+
+
+def scenario_setup(sc: Any) -> Setup:
+    """The setup of a loaded scenario (its robot, camera, task box and controllers)."""
+    import controllers  # noqa: F401 - registers the built-ins
+    from benchmarks.sim import load_camera, load_geometry
+    from controllers.base import registry
+
+    g = load_geometry(sc)
+    cam = load_camera(sc, g)
+    where = Where(
+        strokes=(f"stroke_mm in {sc.robot_geometry}" if sc.robot_geometry
+                 else "[robot] preset (give [robot] geometry = your robot file)"),
+        points=(f"base_points_mm / platform_points_mm in {sc.robot_geometry}"
+                if sc.robot_geometry else "[robot] geometry"),
+        camera=(f"[camera_from_base] in {sc.camera_file}" if sc.camera_file
+                else f"[camera] preset '{sc.camera_preset}' in {sc.source} (or [camera] "
+                     "file = a camera file)"),
+        task=f"[task] max_translation_mm / max_angle_deg / margin_mm in {sc.source}")
+    needs = []
+    for spec in sc.controllers:
+        features = getattr(registry.create(spec.name, **spec.options), "features",
+                           frozenset({"lengths"}))
+        if set(features) - {"lengths"}:
+            needs.append(spec.label)
+    problems: list[Problem] = []
+    if sc.task.kind == "fixed":
+        problems += fixed_task_problems(g, sc.task.start_mm, sc.task.goal_mm)
+    task = (sc.task.max_translation_mm, sc.task.max_angle_deg, sc.task.margin_mm)
+    return Setup("scenario", g, cam, task, where, needs, [], problems,
+                 tuple(spec.label for spec in sc.controllers))
+
+
+def load_setup(text: str) -> Setup:
+    """A setup from a built-in scenario name or a file (scenario, robot or camera).
+
+    Raises:
+        ScenarioError, ConfigFileError, GeometryError, CameraError: The file is invalid
+            (naming the key).
+        BenchmarkError: A file that is none of the three.
+    """
+    from benchmarks.study.scenario import builtin_scenarios, load_scenario
+    from hexapod.config import load_toml
+    from vision.cameras import camera_preset, load_camera
+    from vision.cameras.files.opencv import OPENCV_EXTENSIONS
+
+    path = Path(text)
+    if text in builtin_scenarios() or not path.exists():
+        return scenario_setup(load_scenario(text))  # a built-in, or its did-you-mean error
+    if path.suffix.lower() in OPENCV_EXTENSIONS:
+        table: dict[str, Any] = {"opencv": str(path)}
+    else:
+        table = load_toml(path)
+    if "controllers" in table or ("name" in table and "base_points_mm" not in table
+                                  and not {"fx_px", "opencv", "kind"} & set(table)):
+        return scenario_setup(load_scenario(path))
+    if "base_points_mm" in table:
+        g = HexapodGeometry.from_toml(path)
+        cam = camera_preset("front", g)
+        return Setup("robot", g, cam, _default_task(), Where(
+            strokes=f"stroke_mm in {path}",
+            points=f"base_points_mm / platform_points_mm in {path}",
+            camera="the camera's placement (the front preset placed for this robot here)",
+            task="[task] of a scenario"), None,
+            ["camera: the front preset, placed for this robot (a scenario names yours)"], [])
+    if {"fx_px", "opencv", "kind", "camera_from_base"} & set(table):
+        from hexapod.geometry import deltalab
+
+        cam = load_camera(path)
+        return Setup("camera", deltalab(), cam, _default_task(), Where(
+            strokes="[robot] of a scenario", points="[robot] of a scenario",
+            camera=f"[camera_from_base] in {path}", task="[task] of a scenario"), None,
+            ["robot: the deltalab preset (a scenario names yours)"], [])
+    raise BenchmarkError(f"{path}: cannot tell what this file is: a scenario has "
+                         "'controllers', a robot file 'base_points_mm', a camera file "
+                         "'fx_px' (or 'opencv') and [camera_from_base] (docs/robot-files.md)")
+
+
+def examine(setup: Setup) -> SetupReport:
+    """Measure a setup (:func:`check_setup`) and add the problems found while loading."""
+    partial = bool(setup.needs_camera) and len(setup.needs_camera or ()) < len(
+        setup.controllers)
+    needs = setup.needs_camera is None or (bool(setup.needs_camera) and not partial)
+    report = check_setup(setup.geometry, setup.camera, *setup.task, needs_camera=needs,
+                         where=setup.where)
+    if partial:  # the camera's problems spoil the controllers that need it, not the study
+        report.problems = [
+            Problem(p.severity, f"{p.text} (the trials of {', '.join(setup.needs_camera or ())}"
+                                " would fail; the other controllers do not need the camera)",
+                    p.topic)
+            if p.topic == "camera" else p for p in report.problems]
+    report.problems[:0] = setup.problems
+    return report
+
+
+def preflight(sc: Any) -> list[Problem]:
+    """The checks of ``check`` for a study about to run: its problems.
+
+    A camera that sees no leg is an error only when every controller needs the camera.
+    """
+    return examine(scenario_setup(sc)).problems
+
+
+def _f(x: float, digits: int = 1) -> str:
+    return "-" if not np.isfinite(x) else f"{x:.{digits}f}"
+
+
+def describe(setup: Setup, report: SetupReport, source: str) -> list[str]:
+    """The lines ``check`` prints."""
+    g, cam = setup.geometry, setup.camera
+    base_r = np.linalg.norm(g.base_points[:, :2], axis=1)
+    plat_r = np.linalg.norm(g.platform_points[:, :2], axis=1)
+    lines = [f"{source}: a {setup.kind} file" if setup.kind != "scenario" or Path(
+        source).exists() else f"{source}: a built-in scenario", *setup.notes, "",
+        f"Robot '{g.name}': base radius {_f(base_r.mean() * 1e3)} mm, platform radius "
+        f"{_f(plat_r.mean() * 1e3)} mm, stroke {g.q_min * 1e3:g}-{g.q_max * 1e3:g} mm, leg "
+        f"radius {g.leg_radius * 1e3:g} mm, speed limit {g.max_speed * 1e3:g} mm/s",
+        f"  home pose: platform parallel to the base, centred, {_f(report.home_height_mm)} mm "
+        "above it",
+        "  leg lengths at home [mm]: " + ", ".join(
+            f"{i}: {_f(q)}" for i, q in enumerate(report.home_lengths_mm)), ""]
+    mt, ma, mm = report.box
+    r = report.translation_range_mm
+    lines += [
+        f"Workspace (task box: within {mt:g} mm and {ma:g} deg of home, {mm:g} mm from the "
+        "stroke limits):",
+        f"  {100 * report.fraction:.1f} % of {report.samples} random poses keep every leg "
+        "inside its stroke",
+        "  their range from home [mm]: " + ", ".join(
+            f"{a} {_f(r[k, 0])} to {_f(r[k, 1])}" for k, a in enumerate("xyz"))
+        + f"; rotations up to {_f(report.max_angle_reached_deg)} deg",
+        "  reach from home along one axis [mm]: " + ", ".join(
+            f"{a} {_f(v)}" for a, v in zip(("+x", "-x", "+y", "-y", "+z", "-z"),
+                                           report.reach_mm, strict=True))
+        + "; about one axis [deg]: " + ", ".join(
+            f"{a} {_f(v)}" for a, v in zip("xyz", report.reach_deg, strict=True)), ""]
+    lines += [f"Camera '{cam.name}' ({cam.kind}, {cam.width}x{cam.height} px, fx "
+              f"{cam.K[0, 0]:.1f} px)",
+              f"  at home it sees {int(report.home_visible.sum())} of 12 leg edges "
+              "(pixels of the base end -> platform end):"]
+    for i in range(6):
+        parts = []
+        for j in range(2):
+            p = report.home_pixels[i, j]
+            seen = "seen" if report.home_visible[i, j] else "hidden"
+            ends = (f"({_f(p[0, 0])}, {_f(p[0, 1])}) -> ({_f(p[1, 0])}, {_f(p[1, 1])})"
+                    if np.all(np.isfinite(p)) else "not imaged")
+            parts.append(f"edge {j} {seen} {ends}")
+        lines.append(f"    leg {i}: " + "; ".join(parts))
+    lines += [f"  over the workspace: all 12 edges seen at {100 * report.poses_all_visible:.1f}"
+              f" % of the reachable poses, none at {100 * report.poses_blind:.1f} %; least "
+              f"seen edge: {100 * float(np.min(report.view_fraction)):.1f} % of the poses",
+              f"  edge interaction at home: condition number {_f(report.edge_condition, 1)} "
+              f"(smallest/largest singular value {report.edge_ratio:.2e})"]
+    if setup.needs_camera is not None:
+        lines.append("  controllers that need the camera: "
+                     + (", ".join(setup.needs_camera) or "none"))
+    lines.append("")
+    if report.problems:
+        lines.append("Problems:")
+        lines += [f"  {p.severity}: {p.text}" for p in report.problems]
+    else:
+        lines.append("No problem found.")
+    lines.append("The setup can run." if report.can_run else
+                 "The setup cannot run: every trial would fail (fix the errors above).")
+    return lines
+
+
+def write_picture(setup: Setup, report: SetupReport, path: Path) -> Path:
+    """An image of the robot at home seen by the camera (the project's renderer), each
+    edge drawn green where the camera sees it and red where hidden, legs numbered."""
+    import cv2
+
+    from hexapod.workspace import home_pose
+    from vision.legs import limb_points, observe_legs
+    from vision.render import render_legs
+
+    home = home_pose(setup.geometry)
+    img = cv2.cvtColor(render_legs(setup.camera, setup.geometry, *home, rng=0),
+                       cv2.COLOR_GRAY2BGR)
+    obs = observe_legs(setup.camera, setup.geometry, *home)
+    # each edge as a polyline of its projected points (a curve through a distorting lens
+    # or an omnidirectional camera)
+    s = np.linspace(0.0, 1.0, 33)
+    points = limb_points(obs.base_points, obs.directions, obs.radius, obs.lengths,
+                         obs.normals, s)
+    pixels, _ = setup.camera.project(points)
+    for i in range(6):
+        for j in range(2):
+            line = pixels[i, j]
+            line = line[np.all(np.isfinite(line), axis=-1)]
+            if len(line) < 2:
+                continue
+            colour = (0, 200, 0) if report.home_visible[i, j] else (0, 0, 230)
+            cv2.polylines(img, [np.round(line).astype(np.int32)], False, colour, 2,
+                          cv2.LINE_AA)
+        ends = report.home_pixels[i, :, 0]
+        if np.all(np.isfinite(ends)):
+            x, y = (round(float(c)) for c in ends.mean(axis=0))
+            cv2.putText(img, str(i), (x + 6, y + 6), cv2.FONT_HERSHEY_SIMPLEX, 0.7,
+                        (255, 120, 0), 2, cv2.LINE_AA)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    if not cv2.imwrite(str(path), img):
+        raise BenchmarkError(f"--picture: cannot write {path} (use a .png or .jpg name)")
+    return path
+
+
+def cmd_check(args: argparse.Namespace) -> int:
+    """Check a scenario, robot or camera file; exit 1 when the setup cannot run."""
+    setup = load_setup(args.file)
+    report = examine(setup)
+    for line in describe(setup, report, args.file):
+        print(line)
+    if args.picture:
+        print(f"picture of the robot at home seen by the camera: "
+              f"{write_picture(setup, report, Path(args.picture))}")
+    return 0 if report.can_run else CANNOT_RUN

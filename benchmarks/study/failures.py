@@ -1,0 +1,204 @@
+"""Trial failures in the user's terms, grouped by cause.
+
+A trial that cannot run to its end (no pose inside the strokes, a camera that sees no leg
+at the goal, a controller that refuses its context...) gets a ``failure`` in its row (the
+exception, for the record) and a ``cause``: one line in the user's terms, with the file
+key to change where there is one. The command line prints each distinct cause once with
+its count (:func:`failure_summary`), the report lists them in full (:func:`failure_groups`)
+and a run where every trial failed exits non-zero (:func:`every_trial_failed`).
+
+Repeated log warnings (the same warning for every sweep point of a large map) are printed
+once per distinct message template and counted (:class:`RepeatedWarnings`).
+"""
+
+from __future__ import annotations
+
+import logging
+from collections import Counter
+from dataclasses import dataclass, field
+from typing import Any
+
+#: A failure that only says the trial did not converge: the trial ran to its end.
+NOT_CONVERGED = "not conv"
+
+
+def user_message(exc: BaseException) -> str:
+    """One line in the user's terms for the exception that ended a trial.
+
+    The known causes of a setup that cannot work are translated into what to change in
+    which file; any other exception keeps its own message, prefixed by its type when it
+    is not one of the project's (a bug, or a plugin's error).
+    """
+    from controllers.exceptions import ContextError, ControllerError
+    from hexapod.exceptions import HexapodError, WorkspaceError
+    from vision.exceptions import VisionError
+
+    if isinstance(exc, WorkspaceError):
+        return (f"no start or goal pose: only {exc.found} of {exc.attempts} random poses "
+                f"(within {exc.max_translation * 1e3:g} mm and {_deg(exc.max_angle):g} deg of "
+                f"the home pose) keep every leg {exc.margin * 1e3:g} mm inside its stroke; "
+                "change stroke_mm in the robot file, or [task] max_translation_mm, "
+                "max_angle_deg or margin_mm in the scenario")
+    if isinstance(exc, ContextError) and exc.field.startswith("goal"):
+        if "desired direction" in exc.problem:
+            seen = ("the camera sees both edges of no leg at the goal pose (a leg's direction "
+                    "needs both)")
+        elif "visible desired edge" in exc.problem:
+            seen = "the camera sees no leg edge at the goal pose"
+        else:
+            seen = ""
+        if seen:
+            return (f"{seen}, so there is no desired image to servo to; move the camera "
+                    "([camera] in the scenario, or [camera_from_base] in the camera file) so "
+                    "that it sees the legs (hexapod-bench check shows what it sees)")
+    if isinstance(exc, HexapodError | VisionError | ControllerError):
+        return str(exc)
+    return f"{type(exc).__name__}: {exc}"
+
+
+def _deg(rad: float) -> float:
+    import math
+
+    return math.degrees(rad)
+
+
+def is_failure(row: dict[str, Any]) -> bool:
+    """Whether a result row is a trial that did not run to its end (not merely unconverged)."""
+    failure = row.get("failure")
+    return bool(failure) and not str(failure).startswith(NOT_CONVERGED)
+
+
+def row_cause(row: dict[str, Any]) -> str:
+    """The cause of a failed row: its ``cause`` (user's terms), else its ``failure``."""
+    return str(row.get("cause") or row.get("failure"))
+
+
+@dataclass
+class FailureGroup:
+    """The failed trials that share a cause.
+
+    Attributes:
+        cause: The cause, in the user's terms.
+        count: Failed trials.
+        controllers: Failed trials per controller label.
+        points: Sweep points (``scenario/p<k>``) where it happened.
+        example: The identity of the first such trial and its full exception text.
+    """
+
+    cause: str
+    count: int = 0
+    controllers: Counter[str] = field(default_factory=Counter)
+    points: set[str] = field(default_factory=set)
+    example: str = ""
+
+
+def failure_groups(rows: list[dict[str, Any]]) -> list[FailureGroup]:
+    """The failed rows grouped by cause, the most frequent first."""
+    groups: dict[str, FailureGroup] = {}
+    for r in rows:
+        if not is_failure(r):
+            continue
+        cause = row_cause(r)
+        g = groups.get(cause)
+        if g is None:
+            g = groups[cause] = FailureGroup(
+                cause, example=f"{r.get('scenario')}/p{r.get('point', 0)}/"
+                               f"{r.get('controller')}/trial {r.get('trial')}: {r['failure']}")
+        g.count += 1
+        g.controllers[str(r.get("controller"))] += 1
+        g.points.add(f"{r.get('scenario')}/p{r.get('point', 0)}")
+    return sorted(groups.values(), key=lambda g: -g.count)
+
+
+def every_trial_failed(rows: list[dict[str, Any]]) -> bool:
+    """True when there are rows and none of them ran to its end."""
+    return bool(rows) and all(is_failure(r) for r in rows)
+
+
+def failure_summary(rows: list[dict[str, Any]]) -> list[str]:
+    """The lines the command line prints: one per distinct cause, with its count."""
+    groups = failure_groups(rows)
+    if not groups:
+        return []
+    failed = sum(g.count for g in groups)
+    lines = [f"{failed} of {len(rows)} trials failed (did not run to their end):"]
+    for g in groups:
+        who = ", ".join(f"{c} {n}" for c, n in sorted(g.controllers.items()))
+        where = f"; {len(g.points)} sweep points" if len(g.points) > 1 else ""
+        lines.append(f"  {g.count} x ({who}{where}): {g.cause}")
+    return lines
+
+
+class RepeatedWarnings(logging.Filter):
+    """Let the first warning of each distinct cause through, count the repeats.
+
+    The cause of a record is its ``cause`` attribute (``extra={"cause": ...}``) when it
+    has one, else its logger, message template and integer arguments: the integers name
+    what is at fault (a leg, a count), the other values are measurements, so "leg 3 is
+    ill-conditioned (ratio 0.011)" in every sweep point is one cause and leg 4 another.
+    A record seen by several handlers is counted once. Records below WARNING pass.
+    """
+
+    def __init__(self) -> None:
+        super().__init__()
+        self.counts: Counter[tuple[str, str]] = Counter()
+        self.first: dict[tuple[str, str], str] = {}
+        self.summarised: set[tuple[str, str]] = set()
+        self._last: tuple[logging.LogRecord, bool] | None = None
+
+    def filter(self, record: logging.LogRecord) -> bool:
+        """Whether to emit the record (the first of its cause)."""
+        if record.levelno < logging.WARNING:
+            return True
+        if self._last is not None and self._last[0] is record:  # another handler: same answer
+            return self._last[1]
+        emit = self._count(record)
+        self._last = (record, emit)
+        return emit
+
+    def _count(self, record: logging.LogRecord) -> bool:
+        """Count a record once; True for the first of its cause."""
+        cause = getattr(record, "cause", None)
+        if cause:
+            key = (record.name, str(cause))
+        else:
+            args = record.args if isinstance(record.args, tuple) else ()
+            ints = [a for a in args if isinstance(a, int) and not isinstance(a, bool)]
+            key = (record.name, f"{record.msg} {ints}")
+        if cause:  # a trial failure: the failure summary counts it
+            self.summarised.add(key)
+        self.counts[key] += 1
+        if self.counts[key] == 1:
+            self.first[key] = record.getMessage()
+            return True
+        return False
+
+    def repeats(self) -> list[str]:
+        """One line per cause that was repeated (other than the trial failures, which
+        :func:`failure_summary` counts): how many more, and the first message."""
+        return [f"{n - 1} more warning(s) like: {self.first[k]}"
+                for k, n in self.counts.items() if n > 1 and k not in self.summarised]
+
+
+class summarised_warnings:  # noqa: N801 - used as a context manager, like contextlib's
+    """Attach a :class:`RepeatedWarnings` to the root logger's handlers for a run.
+
+    Args:
+        enabled: False (``-v``): every warning is printed, nothing is counted.
+    """
+
+    def __init__(self, enabled: bool = True) -> None:
+        self.filter = RepeatedWarnings()
+        self.enabled = enabled
+        self._handlers: list[logging.Handler] = []
+
+    def __enter__(self) -> RepeatedWarnings:
+        if self.enabled:
+            self._handlers = list(logging.getLogger().handlers)
+            for h in self._handlers:
+                h.addFilter(self.filter)
+        return self.filter
+
+    def __exit__(self, *exc: object) -> None:
+        for h in self._handlers:
+            h.removeFilter(self.filter)

@@ -1,0 +1,109 @@
+"""What ``run``, ``report`` and ``calibrate`` accept as their output directory.
+
+A command writes into a directory that is absent, empty or its own; a directory holding
+files of another kind is refused (saying what it holds and how to proceed) unless the
+user adds ``--overwrite``, and a file the project did not write is never replaced
+silently. The rules are :mod:`hexapod.outputs`'; this module says which entries are
+whose. See ``docs/outputs.md``.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from benchmarks.study.results import LOCK_FILE, RESULTS_FILE, TRIALS_DIR
+from hexapod.exceptions import OutputError
+from hexapod.outputs import check_output_dir, check_replace, written_by_project
+
+META_FILE = "run.json"
+REPORT_FILE = "report.md"
+#: The copies of the scenario and of the files it names (see :mod:`benchmarks.study.inputs`).
+INPUTS_DIR = "inputs"
+CALIBRATION_JSON = "calibration.json"
+CALIBRATED_TOML = "calibrated.toml"
+#: Entries of a run directory recognised by name.
+_RUN_NAMES = frozenset({RESULTS_FILE, META_FILE, LOCK_FILE, TRIALS_DIR, INPUTS_DIR})
+#: The first line of the reports written before the marker existed.
+_LEGACY_REPORT = b"# Benchmark report\n"
+
+
+def report_is_ours(path: Path) -> bool:
+    """Whether ``report.md`` is a report ``hexapod-bench`` wrote (marked, or an older one)."""
+    if written_by_project(path):
+        return True
+    try:
+        with path.open("rb") as f:
+            return f.read(len(_LEGACY_REPORT)) == _LEGACY_REPORT
+    except OSError:
+        return False
+
+
+def _run_entry(entry: Path) -> bool:
+    if entry.name in _RUN_NAMES:
+        return True
+    if entry.name == REPORT_FILE:
+        return report_is_ours(entry)
+    return entry.suffix == ".png" and entry.is_file() and written_by_project(entry)
+
+
+def is_run_directory(out: Path) -> bool:
+    """A directory ``run`` wrote: it holds ``results.jsonl`` or ``run.json``."""
+    return (out / RESULTS_FILE).is_file() or (out / META_FILE).is_file()
+
+
+def check_run_directory(out: Path, overwrite: bool = False) -> None:
+    """Refuse a ``run --out`` that is not absent, empty or a run directory.
+
+    A run directory keeps its rule (refused when it holds results, unless ``--resume``:
+    checked under the lock); its ``report.md`` must be one the project wrote.
+
+    Raises:
+        OutputError: A file, a directory of another kind, or a report.md not ours.
+    """
+    out = Path(out)
+    if is_run_directory(out):
+        check_report_file(out, overwrite)
+        return
+    check_output_dir(out, _run_entry, "run directory (no results.jsonl or run.json)",
+                     overwrite)
+
+
+def check_report_file(out: Path, overwrite: bool = False) -> None:
+    """Refuse to replace a ``report.md`` the project did not write (unless ``--overwrite``).
+
+    Raises:
+        OutputError: Naming the file and how to proceed.
+    """
+    check_replace(Path(out) / REPORT_FILE, overwrite, ours=report_is_ours)
+
+
+def check_calibration_directory(out: Path, overwrite: bool = False) -> None:
+    """Refuse a ``calibrate --out`` that holds other files, or a calibration already.
+
+    Raises:
+        OutputError: What the directory holds (the source of an existing
+            ``calibrated.toml``) and how to proceed.
+    """
+    out = Path(out)
+    check_output_dir(out, lambda e: e.name in (CALIBRATION_JSON, CALIBRATED_TOML, INPUTS_DIR),
+                     "calibration directory", overwrite)
+    if overwrite:
+        return
+    existing = [out / n for n in (CALIBRATED_TOML, CALIBRATION_JSON) if (out / n).exists()]
+    if existing:
+        names = ", ".join(e.name for e in existing)
+        raise OutputError(str(out), f"already holds a calibration ({names}"
+                          f"{_calibration_source(out / CALIBRATED_TOML)}); choose another "
+                          "--out, or add --overwrite to replace it")
+
+
+def _calibration_source(path: Path) -> str:
+    """``; made from X`` for an existing calibrated.toml (empty when unreadable)."""
+    try:
+        import tomllib
+
+        table = tomllib.loads(path.read_text(encoding="utf-8"))
+    except (OSError, ValueError):
+        return ""
+    src = table.get("source")
+    return f"; calibrated.toml made from {src}" if isinstance(src, str) and src else ""

@@ -1,0 +1,317 @@
+"""What a user needs to trust a setup (a robot, a camera, a task box) before a study.
+
+:func:`check_setup` measures: the home pose and its leg lengths, the size of the reachable
+workspace (the fraction of random poses of the task box inside the strokes, their ranges,
+the reach along each axis from home), which leg edges the camera sees at home (with their
+pixels) and over the workspace, and the conditioning of the edge interaction at home. It
+lists the problems in plain words with the key to change; an ``"error"`` problem means
+that every trial would fail the same way (``hexapod-bench check`` exits non-zero, ``run``
+refuses the study before its first trial).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from hexapod.exceptions import HexapodError
+from hexapod.geometry import HexapodGeometry
+from hexapod.kinematics import inverse_kinematics
+from hexapod.se3 import exp_so3
+from hexapod.workspace import home_pose
+
+#: Random poses drawn in the task box to measure the workspace.
+WORKSPACE_SAMPLES = 2000
+#: Reachable poses over which the camera's view is measured.
+VIEW_SAMPLES = 300
+#: Below this fraction of the task box inside the strokes, drawing a trial's start and goal
+#: may fail (:func:`hexapod.workspace.sample_poses` gives up below about 1 in 1000).
+LOW_FRACTION = 0.01
+#: Smallest / largest singular value of the edge interaction below which it is singular.
+SINGULAR_RATIO = 1e-6
+
+
+@dataclass(frozen=True)
+class Problem:
+    """Something that stops the setup from running (``"error"``) or may spoil it.
+
+    Attributes:
+        severity: ``"error"`` (every trial would fail the same way) or ``"warning"``.
+        text: What is wrong, in plain words, with the key to change.
+        topic: ``"camera"`` (what the camera sees: only the controllers that use the
+            camera suffer), or ``"robot"`` (the workspace, the task).
+    """
+
+    severity: str
+    text: str
+    topic: str = "robot"
+
+
+@dataclass(frozen=True)
+class Where:
+    """How to name the keys of a setup in messages.
+
+    Attributes:
+        strokes: Where the strokes are set (``"stroke_mm in robot.toml"``).
+        points: Where the joint points are set.
+        camera: Where the camera is placed.
+        task: Where the task box is set.
+    """
+
+    strokes: str = "stroke_mm in the robot file"
+    points: str = "base_points_mm / platform_points_mm in the robot file"
+    camera: str = "[camera_from_base] in the camera file"
+    task: str = "[task] max_translation_mm / max_angle_deg / margin_mm in the scenario"
+
+
+@dataclass
+class SetupReport:
+    """The measurements of :func:`check_setup` (millimetres and degrees for display).
+
+    Attributes:
+        home_height_mm: Height of the home pose [mm].
+        home_lengths_mm: (6,) leg lengths at home [mm].
+        box: ``(max_translation_mm, max_angle_deg, margin_mm)`` of the task box.
+        samples: Random poses drawn in the box.
+        fraction: Fraction of them with every leg inside the strokes (less the margin).
+        translation_range_mm: (3, 2) min and max of x, y, z of the reachable poses
+            relative to home [mm] (NaN when none).
+        max_angle_reached_deg: Largest rotation among the reachable poses [deg].
+        reach_mm: Reach from home along +x, -x, +y, -y, +z, -z alone [mm].
+        reach_deg: Reach from home about x, y, z (positive sense) alone [deg].
+        home_visible: (6, 2) edges seen at home.
+        home_pixels: (6, 2, 2, 2) pixels of the ends of each edge at home (base end,
+            platform end), NaN where not imaged.
+        view_fraction: (6, 2) fraction of the reachable poses where each edge is seen.
+        poses_blind: Fraction of the reachable poses where no edge is seen.
+        poses_all_visible: Fraction where all 12 edges are seen.
+        edge_ratio: Smallest / largest singular value of the edge interaction at home
+            (the visible edges; NaN when none is visible).
+        edge_condition: Its condition number (largest / smallest).
+        problems: What is wrong.
+    """
+
+    home_height_mm: float
+    home_lengths_mm: np.ndarray
+    box: tuple[float, float, float]
+    samples: int
+    fraction: float
+    translation_range_mm: np.ndarray
+    max_angle_reached_deg: float
+    reach_mm: np.ndarray
+    reach_deg: np.ndarray
+    home_visible: np.ndarray
+    home_pixels: np.ndarray
+    view_fraction: np.ndarray
+    poses_blind: float
+    poses_all_visible: float
+    edge_ratio: float
+    edge_condition: float
+    problems: list[Problem] = field(default_factory=list)
+
+    @property
+    def can_run(self) -> bool:
+        """No problem is an error."""
+        return not any(p.severity == "error" for p in self.problems)
+
+
+def random_box_poses(geometry: HexapodGeometry, n: int, max_translation: float,
+                     max_angle: float, rng: np.random.Generator
+                     ) -> tuple[np.ndarray, np.ndarray]:
+    """``n`` poses uniform in the task box: positions in a cube of half-width
+    ``max_translation`` [m] around home, rotation vectors uniform in a ball of radius
+    ``max_angle`` [rad] (the distribution of :func:`hexapod.workspace.sample_poses`)."""
+    t = home_pose(geometry)[1] + rng.uniform(-max_translation, max_translation, (n, 3))
+    d = rng.normal(size=(n, 3))
+    d /= np.linalg.norm(d, axis=1, keepdims=True)
+    return exp_so3(d * (max_angle * rng.uniform(0, 1, n) ** (1 / 3))[:, None]), t
+
+
+def _inside(geometry: HexapodGeometry, R: np.ndarray, t: np.ndarray,
+            margin: float = 0.0) -> np.ndarray:
+    q = inverse_kinematics(geometry, R, t)
+    return np.all((q >= geometry.q_min + margin) & (q <= geometry.q_max - margin), axis=-1)
+
+
+def axis_reach(geometry: HexapodGeometry) -> tuple[np.ndarray, np.ndarray]:
+    """Reach from home along each axis alone, by bisection on the stroke test.
+
+    Returns:
+        Translations along +x, -x, +y, -y, +z, -z [m] and rotations about x, y, z [rad]
+        (0 when home itself is outside the strokes).
+    """
+    R0, t0 = home_pose(geometry)
+    if not _inside(geometry, R0, t0):
+        return np.zeros(6), np.zeros(3)
+    dirs = np.vstack([np.eye(3), -np.eye(3)])[[0, 3, 1, 4, 2, 5]]
+    lo, hi = np.zeros(6), np.full(6, 2.0 * geometry.q_max)
+    for _ in range(40):
+        mid = 0.5 * (lo + hi)
+        ok = _inside(geometry, np.broadcast_to(R0, (6, 3, 3)), t0 + mid[:, None] * dirs)
+        lo, hi = np.where(ok, mid, lo), np.where(ok, hi, mid)
+    alo, ahi = np.zeros(3), np.full(3, np.pi)
+    for _ in range(40):
+        mid = 0.5 * (alo + ahi)
+        ok = _inside(geometry, exp_so3(np.eye(3) * mid[:, None]), np.broadcast_to(t0, (3, 3)))
+        alo, ahi = np.where(ok, mid, alo), np.where(ok, ahi, mid)
+    return lo, alo
+
+
+def edge_interaction_ratio(obs: Any) -> tuple[float, float]:
+    """Smallest / largest singular value, and condition number, of the edge interaction
+    ``L`` (``docs/math.md`` section 6) of the visible edges of one observation."""
+    from controllers.interaction import edge_normal_task
+
+    vis = np.asarray(obs.edge_visible, bool)
+    if not vis.any():
+        return float("nan"), float("nan")
+    legs, _ = np.nonzero(vis)
+    n = obs.normals[vis]
+    L = edge_normal_task(n, n, obs.directions[legs], obs.base_points[legs], obs.lengths[legs])
+    s = np.linalg.svd(L.reshape(-1, 6), compute_uv=False)
+    ratio = float(s[-1] / s[0]) if s[0] > 0 else 0.0
+    return ratio, (float(s[0] / s[-1]) if s[-1] > 0 else float("inf"))
+
+
+def check_setup(geometry: HexapodGeometry, camera: Any, max_translation_mm: float = 60.0,
+                max_angle_deg: float = 10.0, margin_mm: float = 5.0,
+                needs_camera: bool = True, where: Where | None = None,
+                seed: int = 0) -> SetupReport:
+    """Measure a setup and list its problems.
+
+    Args:
+        geometry: The robot.
+        camera: The camera (placed by its ``camera_from_base``).
+        max_translation_mm: Half-width of the task box [mm].
+        max_angle_deg: Largest rotation of the task box [deg].
+        margin_mm: Distance kept from the stroke limits [mm].
+        needs_camera: Whether the controllers need the camera (a blind camera is then an
+            error, else a warning).
+        where: How to name the keys in the messages.
+        seed: Seed of the random poses (the report is reproducible).
+    """
+    from vision.legs import observe_legs
+
+    where = where or Where()
+    rng = np.random.default_rng(seed)
+    problems: list[Problem] = []
+    R0, t0 = home_pose(geometry)
+    q0 = inverse_kinematics(geometry, R0, t0)
+    out_legs = [i for i in range(6) if not geometry.q_min <= q0[i] <= geometry.q_max]
+    stroke = f"[{geometry.q_min * 1e3:g}, {geometry.q_max * 1e3:g}] mm"
+    if out_legs:
+        if np.min(q0) > geometry.q_max:
+            why = (f"even with the platform lowered onto the base the legs measure "
+                   f"{_mm_list(q0[out_legs])} mm, longer than the longest length of the "
+                   f"stroke {stroke}")
+        else:
+            why = (f"with the platform parallel to the base and centred, leg(s) "
+                   f"{', '.join(map(str, out_legs))} cannot be within the stroke {stroke} at "
+                   f"any height (at {t0[2] * 1e3:.1f} mm: {_mm_list(q0[out_legs])} mm)")
+        problems.append(Problem("error", (
+            f"empty workspace, no home pose: {why}; change {where.strokes}, or "
+            f"{where.points}")))
+    R, t = random_box_poses(geometry, WORKSPACE_SAMPLES, 1e-3 * max_translation_mm,
+                            np.deg2rad(max_angle_deg), rng)
+    ok = _inside(geometry, R, t, 1e-3 * margin_mm)
+    fraction = float(ok.mean())
+    if not ok.any() and not out_legs:  # (no home pose already says it)
+        problems.append(Problem("error", (
+            f"empty workspace: none of {WORKSPACE_SAMPLES} random poses (within "
+            f"{max_translation_mm:g} mm and {max_angle_deg:g} deg of the home pose) keeps "
+            f"every leg {margin_mm:g} mm inside the stroke {stroke}; change {where.strokes}, "
+            f"or {where.task}")))
+    elif fraction < LOW_FRACTION:
+        problems.append(Problem("warning", (
+            f"small workspace: {100 * fraction:.2f} % of the random poses of the task box "
+            f"keep the legs inside the strokes; drawing a trial's start and goal may fail; "
+            f"shrink {where.task}, or widen {where.strokes}")))
+    rel = t[ok] - t0
+    trange = (np.stack([rel.min(axis=0), rel.max(axis=0)], axis=-1) * 1e3 if ok.any()
+              else np.full((3, 2), np.nan))
+    angles = np.degrees(np.arccos(np.clip((np.trace(R[ok], axis1=1, axis2=2) - 1) / 2,
+                                          -1, 1))) if ok.any() else np.array([np.nan])
+    reach_t, reach_r = axis_reach(geometry)
+
+    home_obs = observe_legs(camera, geometry, R0, t0)
+    kept = np.flatnonzero(ok)[:VIEW_SAMPLES]
+    if len(kept):
+        obs = observe_legs(camera, geometry, R[kept], t[kept])
+        vis = np.asarray(obs.edge_visible, bool)
+    else:
+        vis = home_obs.edge_visible[None]
+    seen = vis.reshape(len(vis), -1).any(axis=1)
+    ratio, cond = edge_interaction_ratio(home_obs)
+    report = SetupReport(
+        home_height_mm=t0[2] * 1e3, home_lengths_mm=q0 * 1e3,
+        box=(max_translation_mm, max_angle_deg, margin_mm), samples=WORKSPACE_SAMPLES,
+        fraction=fraction, translation_range_mm=trange,
+        max_angle_reached_deg=float(np.max(angles)), reach_mm=reach_t * 1e3,
+        reach_deg=np.degrees(reach_r), home_visible=np.asarray(home_obs.edge_visible, bool),
+        home_pixels=np.asarray(home_obs.segments, float), view_fraction=vis.mean(axis=0),
+        poses_blind=float(1.0 - seen.mean()),
+        poses_all_visible=float(vis.reshape(len(vis), -1).all(axis=1).mean()),
+        edge_ratio=ratio, edge_condition=cond, problems=problems)
+    problems += _camera_problems(report, camera, home_obs, needs_camera, where)
+    return report
+
+
+def _camera_problems(report: SetupReport, camera: Any, home_obs: Any, needs_camera: bool,
+                     where: Where) -> list[Problem]:
+    """What the camera's view says: blind at home or over the workspace, too few edges."""
+    out: list[Problem] = []
+    n_home = int(report.home_visible.sum())
+    severity = "error" if needs_camera else "warning"
+    if n_home == 0:
+        depth = np.einsum("ij,ij->i", home_obs.base_points, np.ones((6, 3)) * [0, 0, 1])
+        if camera.kind == "perspective" and np.all(depth < 0):
+            why = (f"the robot is behind the camera (its base joints are "
+                   f"{-np.max(depth) * 1e3:.0f} mm or more behind the image plane; "
+                   "p_camera = R p_base + t, and a perspective camera looks along its +z)")
+        elif not np.any(np.isfinite(report.home_pixels)):
+            why = "no point of any leg projects into the image"
+        else:
+            why = (f"the legs project outside the {camera.width}x{camera.height} image or "
+                   "hide one another")
+        out.append(Problem(severity, f"the camera sees no leg edge at the home pose: {why}; "
+                           f"change {where.camera}", "camera"))
+    elif report.poses_blind >= 1.0:
+        out.append(Problem(severity, "the camera sees no leg edge at any reachable pose of "
+                           f"the task box; change {where.camera}", "camera"))
+    elif report.poses_blind > 0:
+        out.append(Problem("warning", f"the camera sees no leg edge at "
+                           f"{100 * report.poses_blind:.1f} % of the reachable poses; trials "
+                           f"with such a goal fail; change {where.camera}, or {where.task}",
+                           "camera"))
+    if n_home and report.edge_ratio < SINGULAR_RATIO:
+        out.append(Problem("warning", (
+            f"the {n_home} edges seen at home do not determine the six degrees of freedom "
+            f"of the platform (edge interaction singular: smallest/largest singular value "
+            f"{report.edge_ratio:.1e}); leg-edge control will drift; change {where.camera} "
+            "so that it sees more legs"), "camera"))
+    return out
+
+
+def _mm_list(values: np.ndarray) -> str:
+    return ", ".join(f"{v * 1e3:.1f}" for v in values)
+
+
+def fixed_task_problems(geometry: HexapodGeometry, start_mm: Any, goal_mm: Any,
+                        key_prefix: str = "task") -> list[Problem]:
+    """A fixed task's start and goal leg lengths have a platform pose (forward kinematics
+    from home converges), else an error naming the key."""
+    from hexapod.fk import forward_kinematics
+
+    out: list[Problem] = []
+    for key, value in (("start_mm", start_mm), ("goal_mm", goal_mm)):
+        if value is None:
+            continue
+        try:
+            forward_kinematics(geometry, 1e-3 * np.asarray(value, float))
+        except HexapodError:  # no convergence, a singular Jacobian: unreachable lengths
+            out.append(Problem("error", f"{key_prefix}.{key}: no platform pose near the home "
+                               "pose has these six leg lengths (the goal is unreachable); "
+                               "choose lengths of a reachable pose"))
+    return out

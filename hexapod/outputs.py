@@ -1,0 +1,230 @@
+"""Where outputs may go: names that become file names, paths that must stay inside their
+directory, and files the project may replace.
+
+One rule for every path the project builds from a name (a scenario name, a controller
+label, a plugin name): :func:`check_name` where the name enters (a scenario file, a
+plugin, a command line), and :func:`inside` where the path is built, before anything is
+written. A file is replaced only if the project wrote it (:func:`written_by_project`
+recognises the marker every writer puts in its files) or if the user asked for it with an
+explicit option (:func:`check_replace`); a directory that holds files of another kind is
+refused (:func:`foreign_entries`, :func:`check_output_dir`). See ``docs/outputs.md``.
+"""
+
+from __future__ import annotations
+
+import string
+import struct
+import zlib
+from collections.abc import Callable, Iterable
+from pathlib import Path
+
+from hexapod.exceptions import OutputError, UnsafeNameError
+
+#: Longest name [characters].
+NAME_MAX = 100
+#: Characters a name may hold (``:`` and ``.`` for ``module:attr`` controller specs).
+NAME_CHARACTERS = frozenset(string.ascii_letters + string.digits + "_.+:-")
+#: The rule in words (error messages and docs).
+NAME_RULE = (f"a name becomes part of file names: use letters, digits and . _ - + : "
+             f"(starting with a letter, a digit or _), at most {NAME_MAX} characters, "
+             "no '..'")
+
+#: What every writer of the project puts in its files (HTML meta, PNG text, comments).
+GENERATOR = "hexapod-vs"
+#: ``savefig(..., metadata=PNG_METADATA)``: the PNG text chunk that marks the project's.
+PNG_METADATA = {"Software": GENERATOR}
+#: The first line of the project's text files (TOML, Markdown as an HTML comment).
+TEXT_MARKER = f"written by {GENERATOR}"
+#: The ``<meta>`` tag of the project's HTML pages.
+HTML_MARKER = f'<meta name="generator" content="{GENERATOR}">'
+#: The byte patterns that mark a file as the project's, in its first :data:`_HEAD` bytes.
+_MARKS = (HTML_MARKER.encode(), TEXT_MARKER.encode(), f'"generator": "{GENERATOR}"'.encode(),
+          b"Software\x00" + GENERATOR.encode())
+_HEAD = 65536
+
+
+def check_name(value: object, what: str) -> str:
+    """Check a name that will become part of a file name.
+
+    Args:
+        value: The name as read (from a file, a plugin, a command line).
+        what: What it is, for the message (``"scenario name"``).
+
+    Returns:
+        The name.
+
+    Raises:
+        UnsafeNameError: Not a string, empty, too long, a separator, ``..``, a NUL or
+            control character, or another character outside :data:`NAME_CHARACTERS`.
+    """
+    if not isinstance(value, str):
+        raise UnsafeNameError(what, repr(value), "expected a string")
+    if not value:
+        raise UnsafeNameError(what, value, "empty; " + NAME_RULE)
+    if len(value) > NAME_MAX:
+        raise UnsafeNameError(what, value, f"{len(value)} characters; {NAME_RULE}")
+    for ch in value:
+        if ch in "/\\":
+            problem = f"contains the path separator {ch!r}"
+        elif ch == "\x00":
+            problem = "contains a NUL character"
+        elif ord(ch) < 32 or ord(ch) == 127:
+            problem = f"contains the control character {ch!r}"
+        elif ch not in NAME_CHARACTERS:
+            problem = f"contains {ch!r}"
+        else:
+            continue
+        raise UnsafeNameError(what, value, f"{problem}; {NAME_RULE}")
+    if ".." in value:
+        raise UnsafeNameError(what, value, f"contains '..'; {NAME_RULE}")
+    if value[0] not in string.ascii_letters + string.digits + "_":
+        raise UnsafeNameError(what, value, f"starts with {value[0]!r}; {NAME_RULE}")
+    return value
+
+
+def inside(directory: str | Path, *parts: str) -> Path:
+    """``directory / parts``, refused unless it stays inside ``directory``.
+
+    Args:
+        directory: The output directory.
+        *parts: Relative path parts (usually built from names).
+
+    Raises:
+        OutputError: An absolute part, a ``..`` part, or a path (symbolic links
+            resolved) outside ``directory``.
+    """
+    base = Path(directory)
+    path = base.joinpath(*parts)
+    for part in parts:
+        p = Path(part)
+        if p.is_absolute() or ".." in p.parts or "\x00" in part:
+            raise OutputError(str(path), f"would be written outside {base}/ (the part "
+                              f"{part!r} leaves the directory); nothing was written")
+    root = base.resolve()
+    if not path.resolve().is_relative_to(root):
+        raise OutputError(str(path), f"resolves to {path.resolve()}, outside {root}/ (a "
+                          "symbolic link?); nothing was written")
+    return path
+
+
+#: The schema metadata that marks the project's Parquet files
+#: (``table.replace_schema_metadata(PARQUET_METADATA)`` before writing; it is in the
+#: footer: :func:`written_by_project` asks pyarrow).
+PARQUET_METADATA = {b"generator": GENERATOR.encode()}
+
+
+def written_by_project(path: str | Path) -> bool:
+    """Whether a file carries the project's marker (see :data:`GENERATOR`): in its first
+    64 KiB, or for a ``.parquet`` file in its schema metadata (:data:`PARQUET_METADATA`)."""
+    p = Path(path)
+    try:
+        with p.open("rb") as f:
+            head = f.read(_HEAD)
+    except OSError:
+        return False
+    if any(mark in head for mark in _MARKS):
+        return True
+    if p.suffix == ".parquet" and head.startswith(b"PAR1"):
+        return _parquet_is_ours(p)
+    return False
+
+
+def _parquet_is_ours(path: Path) -> bool:
+    try:
+        import pyarrow.parquet as pq
+
+        meta = pq.read_schema(path).metadata or {}
+    except Exception:  # no pyarrow, or not a readable Parquet file: not ours
+        return False
+    return bool(meta.get(b"generator") == PARQUET_METADATA[b"generator"])
+
+
+def _describe(path: Path) -> str:
+    if path.is_dir():
+        return "a directory"
+    try:
+        size = path.stat().st_size
+    except OSError:
+        return "a file"
+    kind = f"a {path.suffix} file" if path.suffix else "a file"
+    return f"{kind} of {size} bytes, not written by {GENERATOR}"
+
+
+def check_replace(path: str | Path, overwrite: bool = False, option: str = "--overwrite",
+                  ours: Callable[[Path], bool] | None = None, how: str | None = None) -> None:
+    """Refuse to replace an existing file the project did not write, unless asked to.
+
+    Args:
+        path: The file about to be written.
+        overwrite: The user asked explicitly (``option`` given).
+        option: The option that asks, for the message.
+        ours: Recognises the project's files of this kind (default
+            :func:`written_by_project`).
+        how: How to proceed, for the message (default: another name or ``option``).
+
+    Raises:
+        OutputError: ``path`` is a directory, or a file neither the project's nor
+            ``overwrite`` (naming what it is and how to proceed).
+    """
+    p = Path(path)
+    if p.is_dir():
+        raise OutputError(str(p), "is a directory; give a file name")
+    if not p.exists() or overwrite:
+        return
+    if (ours or written_by_project)(p):
+        return
+    how = how or f"choose another name, or add {option} to replace it"
+    raise OutputError(str(p), f"already exists ({_describe(p)}); {how}")
+
+
+def foreign_entries(directory: str | Path, own: Callable[[Path], bool]) -> list[Path]:
+    """The entries of a directory that ``own`` does not recognise (sorted)."""
+    d = Path(directory)
+    if not d.is_dir():
+        return []
+    return sorted(e for e in d.iterdir() if not own(e))
+
+
+def listing(entries: Iterable[Path], limit: int = 8) -> str:
+    """``a.md, b.txt (and 3 more)``: what a refused directory holds."""
+    names = [e.name + ("/" if e.is_dir() else "") for e in entries]
+    text = ", ".join(names[:limit])
+    return text + (f" (and {len(names) - limit} more)" if len(names) > limit else "")
+
+
+def check_output_dir(directory: str | Path, own: Callable[[Path], bool], kind: str,
+                     overwrite: bool = False, proceed: str = "") -> None:
+    """Refuse a directory that holds entries a command did not write, unless asked to.
+
+    Args:
+        directory: The output directory (absent or empty: fine).
+        own: Recognises the entries the command writes.
+        kind: What the command's directories are (``"run directory"``).
+        overwrite: The user gave ``--overwrite``.
+        proceed: Extra ways to proceed, for the message.
+
+    Raises:
+        OutputError: A file where the directory should be, or foreign entries.
+    """
+    d = Path(directory)
+    if d.exists() and not d.is_dir():
+        raise OutputError(str(d), "is a file, not a directory; choose another --out")
+    foreign = foreign_entries(d, own)
+    if foreign and not overwrite:
+        raise OutputError(str(d), f"is not empty and is not a {kind}: it holds "
+                          f"{listing(foreign)}; choose another --out{proceed}, or add "
+                          "--overwrite to write into it anyway (files of the same names "
+                          "are replaced, the others are left alone)")
+
+
+def mark_png(data: bytes) -> bytes:
+    """PNG bytes with the project's text chunk (``Software: hexapod-vs``) after the header.
+
+    For PNG writers that take no metadata (OpenCV's ``imencode``).
+    """
+    sig, ihdr_end = b"\x89PNG\r\n\x1a\n", 8 + 4 + 4 + 13 + 4
+    if not data.startswith(sig):
+        raise ValueError("not a PNG")
+    body = b"tEXt" + b"Software\x00" + GENERATOR.encode()
+    chunk = struct.pack(">I", len(body) - 4) + body + struct.pack(">I", zlib.crc32(body))
+    return data[:ihdr_end] + chunk + data[ihdr_end:]

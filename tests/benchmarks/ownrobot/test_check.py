@@ -1,0 +1,142 @@
+"""``hexapod-bench check``: what a user needs to trust a robot, a camera or a scenario."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import cv2
+import numpy as np
+import pytest
+
+from benchmarks.cli import main
+from benchmarks.study.setup_check import axis_reach, check_setup, edge_interaction_ratio
+from hexapod.geometry import deltalab
+from hexapod.kinematics import inverse_kinematics
+from hexapod.workspace import home_pose
+from tests.benchmarks.ownrobot.robots import BLIND_CAMERA, own_robot, write_study
+from vision.cameras import front_camera
+from vision.legs import observe_legs
+
+
+def _check(args: list[str], capsys: pytest.CaptureFixture[str]) -> tuple[int, str]:
+    code = main(["check", *args])
+    cap = capsys.readouterr()
+    return code, cap.out + cap.err
+
+
+def test_check_a_robot_file(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    path = tmp_path / "robot.toml"
+    own_robot().to_toml(path)
+    picture = tmp_path / "view.png"
+    code, out = _check([str(path), "--picture", str(picture)], capsys)
+    assert code == 0, out
+    assert f"{path}: a robot file" in out
+    assert "camera: the front preset, placed for this robot" in out
+    assert ("Robot 'own': base radius 350.0 mm, platform radius 200.0 mm, stroke 380-540 mm"
+            in out)
+    # a symmetric robot: every leg at mid-stroke at home
+    assert "leg lengths at home [mm]: 0: 460.0, 1: 460.0, 2: 460.0, 3: 460.0, 4: 460.0, " \
+           "5: 460.0" in out
+    assert "at home it sees 12 of 12 leg edges" in out
+    assert "No problem found." in out and "The setup can run." in out
+    image = cv2.imread(str(picture))
+    assert image.shape == (780, 1024, 3)
+    green = (image[..., 1] > 150) & (image[..., 0] < 80) & (image[..., 2] < 80)
+    assert green.sum() > 2000  # the seen edges are drawn
+
+
+def test_home_pixels_agree_with_opencv() -> None:
+    """The base ends of the two edges of each leg straddle the image of A_i (OpenCV)."""
+    g = own_robot()
+    cam = front_camera(g)
+    report = check_setup(g, cam)
+    T = cam.camera_from_base
+    rvec, _ = cv2.Rodrigues(T.rotation)
+    px, _ = cv2.projectPoints(g.base_points, rvec, T.translation, cam.K, None)
+    mid = report.home_pixels[:, :, 0].mean(axis=1)
+    radius_px = cam.K[0, 0] * g.leg_radius / np.min(T.apply(g.base_points)[:, 2])
+    assert np.max(np.linalg.norm(mid - px[:, 0], axis=1)) < radius_px
+
+
+def test_workspace_figures_are_those_of_the_strokes() -> None:
+    g = own_robot()
+    cam = front_camera(g)
+    assert check_setup(g, cam, 0.0, 0.0, 0.0).fraction == 1.0  # home only
+    small = check_setup(g, cam, 60.0, 10.0, 5.0).fraction
+    large = check_setup(g, cam, 150.0, 25.0, 5.0).fraction
+    assert 0.0 < large < small < 1.0
+    # the reach along each axis puts one leg at a stroke limit (inverse kinematics)
+    t_reach, r_reach = axis_reach(g)
+    R0, t0 = home_pose(g)
+    dirs = np.array([[1, 0, 0], [-1, 0, 0], [0, 1, 0], [0, -1, 0], [0, 0, 1], [0, 0, -1]])
+    for d, s in zip(dirs, t_reach, strict=True):
+        q = inverse_kinematics(g, R0, t0 + s * d)
+        gap = min(np.min(np.abs(q - g.q_min)), np.min(np.abs(q - g.q_max)))
+        assert gap < 1e-6 and np.all(q >= g.q_min - 1e-9) and np.all(q <= g.q_max + 1e-9)
+        q_beyond = inverse_kinematics(g, R0, t0 + (s + 1e-4) * d)
+        assert np.any(q_beyond < g.q_min) or np.any(q_beyond > g.q_max)
+    assert np.all(r_reach > np.deg2rad(10))
+
+
+def test_edge_interaction_rank_needs_several_legs() -> None:
+    g = deltalab()
+    obs = observe_legs(front_camera(g), g, *home_pose(g))
+    ratio, cond = edge_interaction_ratio(obs)
+    assert ratio > 1e-3 and cond == pytest.approx(1 / ratio)
+    mask = np.zeros((6, 2), bool)
+    mask[0] = True  # one leg: two rank-one rows, rank 2 < 6
+    one = type(obs)(**{**obs.__dict__, "edge_visible": mask})
+    assert edge_interaction_ratio(one)[0] < 1e-9
+
+
+def test_check_a_blind_camera_file(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    path = tmp_path / "camera.toml"
+    path.write_text(BLIND_CAMERA)
+    picture = tmp_path / "blind.png"
+    code, out = _check([str(path), "--picture", str(picture)], capsys)
+    assert code == 1, out
+    assert "robot: the deltalab preset" in out
+    assert "at home it sees 0 of 12 leg edges" in out
+    assert ("error: the camera sees no leg edge at the home pose: the robot is behind the "
+            "camera (its base joints are 2000 mm or more behind the image plane") in out
+    assert f"change [camera_from_base] in {path}" in out
+    assert "The setup cannot run" in out
+    image = cv2.imread(str(picture))
+    assert not ((image[..., 1] > 150) & (image[..., 0] < 80)).any()  # nothing seen
+
+
+def test_check_a_scenario_with_an_empty_workspace(tmp_path: Path,
+                                                  capsys: pytest.CaptureFixture[str]) -> None:
+    own_robot(stroke=(0.100, 0.150)).to_toml(tmp_path / "robot.toml")
+    study = write_study(tmp_path)
+    code, out = _check([str(study)], capsys)
+    assert code == 1
+    assert "0.0 % of 2000 random poses keep every leg inside its stroke" in out
+    assert "error: empty workspace, no home pose: even with the platform lowered onto the " \
+           "base the legs measure" in out
+    assert f"change stroke_mm in {tmp_path / 'robot.toml'}" in out
+
+
+@pytest.mark.parametrize(("box", "severity", "code"), [
+    ("max_translation_mm = 200.0\nmax_angle_deg = 30.0", "warning: small workspace", 0),
+    ("max_translation_mm = 400.0\nmax_angle_deg = 40.0", "error: empty workspace: none of", 1),
+])
+def test_check_a_task_box_too_large(tmp_path: Path, capsys: pytest.CaptureFixture[str],
+                                    box: str, severity: str, code: int) -> None:
+    own_robot().to_toml(tmp_path / "robot.toml")
+    study = write_study(tmp_path)
+    study.write_text(study.read_text().replace("[task]\n", f"[task]\n{box}\n"))
+    got, out = _check([str(study)], capsys)
+    assert got == code, out
+    assert severity in out
+    assert f"[task] max_translation_mm / max_angle_deg / margin_mm in {study}" in out
+
+
+def test_check_refuses_a_file_it_cannot_read(tmp_path: Path,
+                                             capsys: pytest.CaptureFixture[str]) -> None:
+    path = tmp_path / "what.toml"
+    path.write_text("colour = 'blue'\n")
+    code, out = _check([str(path)], capsys)
+    assert code == 2 and "cannot tell what this file is" in out
+    code, out = _check(["quik"], capsys)
+    assert code == 2 and "(did you mean 'quick'?)" in out

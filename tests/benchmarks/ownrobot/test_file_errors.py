@@ -1,0 +1,119 @@
+"""Errors in the file's terms: the key as written, its unit, did-you-mean, the path tried."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+
+from benchmarks.cli import main
+from benchmarks.exceptions import ScenarioError
+from benchmarks.study.scenario import check_controllers, load_scenario
+from hexapod.exceptions import GeometryError
+from hexapod.geometry import HexapodGeometry
+from tests.benchmarks.ownrobot.robots import own_robot, write_study
+
+
+def _run(args: list[str], capsys: pytest.CaptureFixture[str]) -> tuple[int, str]:
+    code = main(args)
+    return code, capsys.readouterr().err
+
+
+def test_swapped_stroke_names_stroke_mm_in_mm(tmp_path: Path,
+                                             capsys: pytest.CaptureFixture[str]) -> None:
+    table = own_robot().to_dict()
+    table["stroke_mm"] = [540, 380]
+    robot = tmp_path / "robot.toml"
+    import tomli_w
+
+    robot.write_text(tomli_w.dumps(table))
+    with pytest.raises(GeometryError) as info:
+        HexapodGeometry.from_toml(robot)
+    text = str(info.value)
+    assert info.value.field == "stroke_mm"
+    assert "[540, 380] mm" in text and "swap" in text and str(robot) in text
+    assert "q_min" not in text and " m)" not in text
+    code, err = _run(["run", str(write_study(tmp_path)), "--out", str(tmp_path / "o")], capsys)
+    assert code == 2
+    assert "stroke_mm" in err and "[540, 380] mm" in err
+    assert not (tmp_path / "o" / "results.jsonl").exists()
+
+
+@pytest.mark.parametrize(("field", "value", "fragment"), [
+    ("stroke_mm", [0, 380], "must be positive, got 0 mm"),
+    ("leg_radius_mm", -2.0, "leg_radius_mm: must be positive, got -2 mm"),
+    ("max_speed_mm_s", 0.0, "max_speed_mm_s: must be positive, got 0 mm/s"),
+])
+def test_geometry_values_in_millimetres(tmp_path: Path, field: str, value: object,
+                                        fragment: str) -> None:
+    table = own_robot().to_dict()
+    table[field] = value
+    with pytest.raises(GeometryError) as info:
+        HexapodGeometry.from_dict(table, "robot.toml")
+    assert info.value.field == field and fragment in str(info.value)
+
+
+def test_coincident_points_name_the_file_key(tmp_path: Path) -> None:
+    table = own_robot().to_dict()
+    table["platform_points_mm"][1] = table["platform_points_mm"][0]
+    with pytest.raises(GeometryError) as info:
+        HexapodGeometry.from_dict(table, "robot.toml")
+    assert str(info.value).startswith("robot.toml: platform_points_mm: points 0 and 1 coincide")
+
+
+def test_misspelt_controller_option_gets_did_you_mean(tmp_path: Path,
+                                                      capsys: pytest.CaptureFixture[str]
+                                                      ) -> None:
+    own_robot().to_toml(tmp_path / "robot.toml")
+    study = write_study(tmp_path, controllers='[{name = "leg-edge", adaptiv_gain = [5.0, 1.0, '
+                                              '30.0]}]')
+    with pytest.raises(ScenarioError) as info:
+        check_controllers(load_scenario(study))
+    assert info.value.key == "controllers[0].adaptiv_gain"
+    assert info.value.suggestion == "adaptive_gain"
+    assert "controller 'leg-edge' has no option 'adaptiv_gain'" in str(info.value)
+    assert "unexpected keyword" not in str(info.value)
+    code, err = _run(["run", str(study), "--out", str(tmp_path / "o")], capsys)
+    assert code == 2
+    assert f"{study}: key 'controllers[0].adaptiv_gain'" in err
+    assert "(did you mean 'adaptive_gain'?)" in err
+
+
+def test_misspelt_shared_option_names_controller_options(tmp_path: Path) -> None:
+    own_robot().to_toml(tmp_path / "robot.toml")
+    study = write_study(tmp_path, controllers='["leg-edge", "model-based"]',
+                        extra="[controller_options]\ngian = 2.0")
+    with pytest.raises(ScenarioError) as info:
+        check_controllers(load_scenario(study))
+    assert info.value.key == "controller_options.gian" and info.value.suggestion == "gain"
+
+
+def test_unknown_controller_names_the_file_and_key(tmp_path: Path,
+                                                   capsys: pytest.CaptureFixture[str]) -> None:
+    own_robot().to_toml(tmp_path / "robot.toml")
+    study = write_study(tmp_path, controllers='["leg-edge", "leg-edgee"]')
+    code, err = _run(["run", str(study), "--out", str(tmp_path / "o")], capsys)
+    assert code == 2
+    assert f"{study}: key 'controllers[1]': unknown controller 'leg-edgee'" in err
+    assert "(did you mean 'leg-edge'?)" in err
+    code, err = _run(["run", str(study), "--out", str(tmp_path / "o"), "--controllers",
+                      "modle-based"], capsys)
+    assert code == 2 and err.startswith("hexapod-bench: error: --controllers: unknown "
+                                        "controller 'modle-based'")
+
+
+@pytest.mark.parametrize("section", ["robot.geometry", "camera.file"])
+def test_missing_relative_file_gives_the_path_tried_and_the_rule(
+        tmp_path: Path, section: str, capsys: pytest.CaptureFixture[str]) -> None:
+    folder = tmp_path / "studies"
+    folder.mkdir()
+    if section == "robot.geometry":
+        study = write_study(folder, geometry="my-hexapod.toml")
+    else:
+        study = write_study(folder, geometry=None, camera="cams/my-camera.toml")
+    name = "my-hexapod.toml" if section == "robot.geometry" else "cams/my-camera.toml"
+    code, err = _run(["run", str(study), "--out", str(tmp_path / "o")], capsys)
+    assert code == 2
+    assert f"key '{section}'" in err
+    assert f"tried {(folder / name).resolve()}" in err
+    assert f"relative to the folder of the scenario file, {folder.resolve()}" in err

@@ -1,0 +1,140 @@
+"""hexapod.outputs: the name rule, paths kept inside their directory, files replaced only
+when the project wrote them or the user asked."""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+import cv2
+import numpy as np
+import pytest
+
+from hexapod.exceptions import OutputError, UnsafeNameError
+from hexapod.outputs import (
+    check_name,
+    check_output_dir,
+    check_replace,
+    inside,
+    mark_png,
+    written_by_project,
+)
+
+
+@pytest.mark.parametrize("name", ["quick", "leg-edge", "tests.benchmarks.plugins:Joints",
+                                  "edge_fast+2", "a.b", "_x", "7dof"])
+def test_ordinary_names_pass(name: str) -> None:
+    assert check_name(name, "scenario name") == name
+
+
+@pytest.mark.parametrize(("name", "problem"), [
+    ("../../escape", "path separator '/'"),
+    ("a/b", "path separator '/'"),
+    ("a\\b", "path separator '\\\\'"),
+    ("..", "contains '..'"),
+    ("a..b", "contains '..'"),
+    ("nul\x00byte", "NUL character"),
+    ("tab\there", "control character '\\t'"),
+    ("new\nline", "control character '\\n'"),
+    ("bell\x07", "control character '\\x07'"),
+    ("del\x7f", "control character '\\x7f'"),
+    ("with space", "contains ' '"),
+    ("étude", "contains 'é'"),
+    (".hidden", "starts with '.'"),
+    ("-rf", "starts with '-'"),
+    ("", "empty"),
+    ("x" * 101, "101 characters"),
+])
+def test_unsafe_names_are_refused_with_the_reason(name: str, problem: str) -> None:
+    with pytest.raises(UnsafeNameError) as info:
+        check_name(name, "scenario name")
+    assert problem in str(info.value)
+    assert str(info.value).startswith(f"scenario name {name!r}: ")
+    assert "letters, digits" in info.value.problem
+
+
+def test_a_non_string_name_is_refused() -> None:
+    with pytest.raises(UnsafeNameError, match="expected a string"):
+        check_name(3, "controller label")
+
+
+def test_inside_keeps_paths_in_their_directory(tmp_path: Path) -> None:
+    assert inside(tmp_path, "a.png") == tmp_path / "a.png"
+    assert inside(tmp_path / "trials", "x__p0__y__00000.npz").parent == tmp_path / "trials"
+    for part in ("../escape.png", "/etc/passwd", "a/../../b"):
+        with pytest.raises(OutputError, match="outside"):
+            inside(tmp_path, part)
+    (tmp_path / "link").symlink_to(tmp_path.parent)
+    with pytest.raises(OutputError, match="symbolic link"):
+        inside(tmp_path, "link", "x.png")
+
+
+def test_check_replace_protects_files_the_project_did_not_write(tmp_path: Path) -> None:
+    mine = tmp_path / "notes.html"
+    mine.write_text("<html>my notes</html>")
+    with pytest.raises(OutputError) as info:
+        check_replace(mine)
+    assert "already exists (a .html file of 21 bytes, not written by hexapod-vs)" in str(
+        info.value)
+    assert "--overwrite" in str(info.value)
+    check_replace(mine, overwrite=True)  # asked explicitly
+    ours = tmp_path / "page.html"
+    ours.write_text('<!DOCTYPE html><html><head><meta name="generator" content="hexapod-vs">')
+    check_replace(ours)  # the project's: replaced silently
+    check_replace(tmp_path / "new.html")  # absent
+    with pytest.raises(OutputError, match="is a directory"):
+        check_replace(tmp_path)
+    assert mine.read_text() == "<html>my notes</html>"
+
+
+def test_marked_png_is_recognised_and_still_decodes(tmp_path: Path) -> None:
+    img = np.zeros((8, 12, 3), np.uint8)
+    img[2:5, 3:9] = (10, 200, 30)
+    ok, data = cv2.imencode(".png", img)
+    assert ok
+    plain, marked = tmp_path / "plain.png", tmp_path / "marked.png"
+    plain.write_bytes(data.tobytes())
+    marked.write_bytes(mark_png(data.tobytes()))
+    assert not written_by_project(plain)
+    assert written_by_project(marked)
+    np.testing.assert_array_equal(cv2.imread(str(marked)), img)  # the CRC is right
+    with pytest.raises(ValueError, match="not a PNG"):
+        mark_png(b"GIF89a")
+
+
+def test_check_output_dir_lists_what_is_there(tmp_path: Path) -> None:
+    d = tmp_path / "d"
+    check_output_dir(d, lambda e: False, "run directory")  # absent: fine
+    d.mkdir()
+    check_output_dir(d, lambda e: False, "run directory")  # empty: fine
+    for k in range(10):
+        (d / f"f{k}.txt").write_text("x")
+    (d / "sub").mkdir()
+    with pytest.raises(OutputError) as info:
+        check_output_dir(d, lambda e: e.name == "f0.txt", "run directory")
+    text = str(info.value)
+    assert "is not empty and is not a run directory: it holds f1.txt, f2.txt" in text
+    assert "(and 2 more)" in text and "--overwrite" in text
+    check_output_dir(d, lambda e: False, "run directory", overwrite=True)
+    f = tmp_path / "file"
+    f.write_text("")
+    with pytest.raises(OutputError, match="is a file, not a directory"):
+        check_output_dir(f, lambda e: True, "run directory")
+    assert sorted(os.listdir(d))[:2] == ["f0.txt", "f1.txt"]
+
+
+def test_parquet_files_are_recognised_by_their_schema_metadata(tmp_path: Path) -> None:
+    import pyarrow as pa
+    import pyarrow.parquet as pq
+
+    from hexapod.outputs import PARQUET_METADATA
+
+    table = pa.table({"trial": [0, 1], "error_mm": [0.1, 0.2]})
+    theirs, ours = tmp_path / "theirs.parquet", tmp_path / "ours.parquet"
+    pq.write_table(table, theirs)
+    pq.write_table(table.replace_schema_metadata(PARQUET_METADATA), ours)
+    assert not written_by_project(theirs)
+    assert written_by_project(ours)
+    check_replace(ours)
+    with pytest.raises(OutputError, match="not written by hexapod-vs"):
+        check_replace(theirs)
