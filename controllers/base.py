@@ -183,7 +183,7 @@ class Command:
 
     @property
     def values(self) -> np.ndarray:
-        """(6,) the command of its kind: velocities [m/s] or forces [N]."""
+        """(6,) the command of its kind, velocities [m/s] or forces [N]."""
         if self.actuation is Actuation.FORCE:
             return np.zeros(6) if self.forces is None else self.forces
         return self.velocities
@@ -269,7 +269,7 @@ class CommandBatch:
 
     @property
     def values(self) -> np.ndarray:
-        """(n, 6) the commands of their kind: velocities [m/s] or forces [N]."""
+        """(n, 6) the commands of their kind, velocities [m/s] or forces [N]."""
         if self.actuation is Actuation.FORCE:
             return np.zeros_like(self.velocities) if self.forces is None else self.forces
         return self.velocities

@@ -152,6 +152,9 @@ def _run_locked(scenarios: list[Any], out: Path, args: argparse.Namespace) -> in
     show = sys.stdout.isatty() and not args.no_progress
     interrupted = False
     written = 0
+    from benchmarks.study.runner import read_results
+
+    rows_before = len(read_results(out))  # a resumed run's earlier rows
 
     def advance(unit: Any) -> None:
         nonlocal written
@@ -181,6 +184,8 @@ def _run_locked(scenarios: list[Any], out: Path, args: argparse.Namespace) -> in
             run_units(units, out, args.workers, args.dask, progress=advance)
     except KeyboardInterrupt:
         interrupted = True
+        # Ctrl-C may land between a chunk's write and its progress call: count the file
+        written = len(read_results(out)) - rows_before
         con.print(f"\n[yellow]interrupted[/yellow]: {written} of {total} trials written to "
                   f"{out}/results.jsonl; finish with: hexapod-bench run "
                   f"{' '.join(args.scenarios)} --out {out} --resume")
