@@ -154,7 +154,10 @@ def _run_locked(scenarios: list[Any], out: Path, args: argparse.Namespace) -> in
     written = 0
     from benchmarks.study.runner import read_results
 
-    rows_before = len(read_results(out))  # a resumed run's earlier rows
+    def rows_written() -> int:
+        return len(read_results(out)) if (out / "results.jsonl").exists() else 0
+
+    rows_before = rows_written()  # a resumed run's earlier rows
 
     def advance(unit: Any) -> None:
         nonlocal written
@@ -185,7 +188,7 @@ def _run_locked(scenarios: list[Any], out: Path, args: argparse.Namespace) -> in
     except KeyboardInterrupt:
         interrupted = True
         # Ctrl-C may land between a chunk's write and its progress call: count the file
-        written = len(read_results(out)) - rows_before
+        written = rows_written() - rows_before
         con.print(f"\n[yellow]interrupted[/yellow]: {written} of {total} trials written to "
                   f"{out}/results.jsonl; finish with: hexapod-bench run "
                   f"{' '.join(args.scenarios)} --out {out} --resume")
