@@ -258,10 +258,10 @@ def _run(sc: Scenario, spec: Any, group: list[TrialSetup], contexts: list[Any],
             require_batch(cmds, actuation, spec.label)
             stepped[tr] += 1
             norms[rows] = cmds.error_norm
-            failed = book.commands(tr, cmds.velocities, cmds.reasons)
+            failed = book.commands(tr, cmds.values, cmds.reasons)
             done[rows[failed]] = True
             ok = rows[~failed]
-            v_cmd[ok] = cmds.velocities[~failed]
+            v_cmd[ok] = cmds.values[~failed]
         for j in np.flatnonzero(recording[idx]).tolist():
             r = int(idx[j])
             book.record(r, step * dt, q[r], R[r], t[r], meas["edge_visible"][j], norms[j],
