@@ -13,13 +13,14 @@ from __future__ import annotations
 
 import dataclasses
 import math
+from typing import ClassVar
 
 import numpy as np
 import pytest
 from scipy.optimize import curve_fit
 
 from controllers import registry
-from controllers.base import ControllerContext, Goal, Observation
+from controllers.base import Command, ControllerContext, Goal, Observation
 from controllers.computed_torque import ComputedTorqueController
 from hexapod import HexapodGeometry
 from hexapod.actuation import Actuation
@@ -176,3 +177,38 @@ def test_the_study_worlds_apply_or_refuse_it(engine: str) -> None:
     assert row["failure"].startswith("ActuationError")
     assert ("controller 'ctc' commands leg forces [N], but the kinematic world applies only "
             "leg velocities [m/s]") in row["failure"]
+
+
+class RecordingSprings(ComputedTorqueController):
+    """computed-torque keeping what it observed (every instance appends here)."""
+
+    seen: ClassVar[list[Observation]] = []
+
+    def step(self, observation: Observation) -> Command:
+        RecordingSprings.seen.append(observation)
+        return super().step(observation)
+
+
+def test_the_dynamic_world_measures_leg_velocities() -> None:
+    """``q_dot`` is the leg rate the encoders see: it agrees with the change of the
+    measured lengths over the period (their mean over the period, to the velocity's
+    change within it and one count of quantisation)."""
+    from benchmarks.sim import run_trials
+    from benchmarks.study.scenario import ControllerSpec, load_scenario
+
+    RecordingSprings.seen = []
+    spec = (ControllerSpec("tests.controllers.test_computed_torque:RecordingSprings", "rec"),)
+    sc = dataclasses.replace(load_scenario("quick-dynamic").with_overrides(trials=1),
+                             controllers=spec)
+    run_trials(sc.expand()[0], 0, [0], engine="per-trial")
+    obs = RecordingSprings.seen[:60]
+    q = np.array([o.lengths for o in obs])
+    qd = np.array([o.q_dot for o in obs])
+    dt = sc.dt
+    mean_rate = (q[1:] - q[:-1]) / dt  # the average rate over each period
+    between = (qd[1:] + qd[:-1]) / 2  # trapezoid of the sampled rates
+    assert np.abs(qd).max() > 0.01  # the legs moved (over 10 mm/s)
+    assert np.abs(mean_rate - between).max() < 0.02 * np.abs(qd).max() + 2e-6 / dt
+    # quantised to one encoder count per period (1 um / 20 ms)
+    counts = qd * dt / 1e-6
+    np.testing.assert_allclose(counts, np.round(counts), atol=1e-6)
