@@ -11,6 +11,8 @@ Built-in controllers are registered in :data:`controllers.base.registry` here:
   tilt constraints; CasADi, DAQP), falling back to the QP laws;
 - ``model-based``: forward kinematics of the nominal model + pose servoing;
 - ``joint-space``: leg lengths to the nominal inverse kinematics of the goal;
+- ``computed-torque``: joint-space computed torque on the encoder lengths with the
+  nominal dynamic model, commanding leg forces (the dynamic world only);
 - ``latency-compensated``: any of them (``law``) fed the image features predicted over
   the image's delay with the nominal model (:mod:`controllers.latency`).
 
@@ -32,6 +34,7 @@ from controllers.base import (
     observation_problem,
     registry,
 )
+from controllers.computed_torque import ComputedTorqueController
 from controllers.joint import JointSpaceController
 from controllers.latency import LatencyCompensated
 from controllers.leg_direction import LegDirectionController
@@ -50,6 +53,7 @@ BUILTINS = {
     "leg-direction-mpc": LegDirectionMPCController,
     "model-based": ModelBasedController,
     "joint-space": JointSpaceController,
+    "computed-torque": ComputedTorqueController,
     "latency-compensated": LatencyCompensated,
 }
 
@@ -60,6 +64,7 @@ __all__ = [
     "BUILTINS",
     "Actuation",
     "Command",
+    "ComputedTorqueController",
     "Controller",
     "ControllerContext",
     "Goal",

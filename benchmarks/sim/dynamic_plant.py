@@ -26,9 +26,11 @@ from typing import Any
 import numpy as np
 
 from benchmarks.sim.world import TrialSetup
+from hexapod.actuation import Actuation
 from hexapod.backends.base import clamp_velocities
 from hexapod.dynamics.drive_model import quantise
 from hexapod.dynamics.robots import DynamicRobots
+from hexapod.exceptions import ActuationError
 
 log = logging.getLogger(__name__)
 
@@ -53,9 +55,29 @@ class DynamicPlant:
         self.q = q
         self.steps = max(1, round(sc.dt / sc.physics_dt))
         self.h = sc.dt / self.steps
+        self.dt = sc.dt
         geometries = [s.world.geometry for s in group]
         self.stroke, self.max_speed = geometries[0].stroke, geometries[0].max_speed
         self.robots = DynamicRobots(geometries, R, t, base_points, platform_points)
+
+    def use_actuation(self, actuation: Actuation, label: str) -> None:
+        """Drive the legs in the mode of ``actuation``: force (torque) mode for leg
+        forces, the robot file's mode for leg velocities."""
+        if actuation is Actuation.FORCE:
+            self.robots.drives.mode = "force"
+        elif self.robots.drives.mode == "force":
+            raise ActuationError(label, "velocity", ("force",), "the dynamic world's "
+                                 "force-mode drives (robot file [drives] mode = \"force\")",
+                                 problem=None, quantity=Actuation.VELOCITY.quantity,
+                                 accepted_quantities=[Actuation.FORCE.quantity])
+
+    def measured_rates(self, rows: np.ndarray) -> np.ndarray:
+        """The encoders' leg velocities (n, 6) [m/s]: the true leg rates quantised to one
+        encoder count per control period (what a velocity estimate from the counts
+        resolves)."""
+        r = self.robots
+        rates, _ = r.model.legs_batch(r.R[rows], r.t[rows], r.twist[rows], **r.rows(rows))
+        return quantise(rates, r.resolution[rows] / self.dt)
 
     def advance(self, run: np.ndarray, velocities: np.ndarray, dt: float
                 ) -> dict[int, str]:

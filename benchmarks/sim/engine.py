@@ -32,7 +32,12 @@ from typing import Any
 
 import numpy as np
 
-from benchmarks.sim.actuation import require_actuation, require_batch
+from benchmarks.sim.actuation import (
+    drive_plant,
+    require_actuation,
+    require_batch,
+    world_actuation,
+)
 from benchmarks.sim.book import Book, TrialResult, failure_row
 from benchmarks.sim.clock import clocked_measure, make_clock
 from benchmarks.sim.plant import make_plant
@@ -41,6 +46,7 @@ from benchmarks.sim.sensors import GeometricSensor, draws_noise, noisy_features,
 from benchmarks.sim.world import TrialSetup, trial_rng
 from benchmarks.study.scenario import Scenario
 from controllers.base import Goal, ObservationBatch
+from hexapod.actuation import Actuation
 from hexapod.kinematics import inverse_kinematics
 from hexapod.se3 import pose_error
 from vision.fast_observe import WorldParams, observe_batch
@@ -194,7 +200,7 @@ def _run(sc: Scenario, spec: Any, group: list[TrialSetup], contexts: list[Any],
     from benchmarks.sim.stepper import stroke_violations
 
     controller = task_batch_controller(sc, spec, batched)
-    actuation = require_actuation(controller, spec.label)
+    actuation = require_actuation(controller, spec.label, *world_actuation(sc))
     controller.reset_batch(contexts)
     sensor = BatchSensor(sc, group)
     rngs = rows_generators(sc, group, 1, True)
@@ -214,6 +220,7 @@ def _run(sc: Scenario, spec: Any, group: list[TrialSetup], contexts: list[Any],
     stepped = np.zeros(len(group), dtype=int)  # steps each trial was commanded (0, 1, ...)
     dt = sc.dt
     plant = make_plant(sc, group, q, R, t, A, E)
+    drive_plant(plant, actuation, spec.label)
     clock = make_clock(sc, group, q, R, t, A, E)
 
     def measure(rows: np.ndarray, R_r: np.ndarray, t_r: np.ndarray) -> dict[str, Any]:
@@ -241,6 +248,7 @@ def _run(sc: Scenario, spec: Any, group: list[TrialSetup], contexts: list[Any],
             obs = ObservationBatch(
                 trials=tr, t=np.full(len(rows), step * dt),
                 lengths=plant.measured_lengths(tr, offsets[tr]),
+                q_dot=plant.measured_rates(tr),
                 **{key: (meas[key] if every or meas[key] is None else meas[key][rows])
                    for key in ("normals", "lines", "directions", "edge_visible",
                                "direction_visible", "image_t")})
@@ -250,10 +258,10 @@ def _run(sc: Scenario, spec: Any, group: list[TrialSetup], contexts: list[Any],
             require_batch(cmds, actuation, spec.label)
             stepped[tr] += 1
             norms[rows] = cmds.error_norm
-            failed = book.commands(tr, cmds.velocities, cmds.reasons)
+            failed = book.commands(tr, cmds.values, cmds.reasons)
             done[rows[failed]] = True
             ok = rows[~failed]
-            v_cmd[ok] = cmds.velocities[~failed]
+            v_cmd[ok] = cmds.values[~failed]
         for j in np.flatnonzero(recording[idx]).tolist():
             r = int(idx[j])
             book.record(r, step * dt, q[r], R[r], t[r], meas["edge_visible"][j], norms[j],
@@ -266,7 +274,8 @@ def _run(sc: Scenario, spec: Any, group: list[TrialSetup], contexts: list[Any],
         if len(run) == 0:
             continue
         v_run = v_cmd[~done]
-        book.violations[run] += stroke_violations(q[run], v_run, dt, stroke, vmax)
+        if actuation is Actuation.VELOCITY:  # leg forces are not checked as speeds
+            book.violations[run] += stroke_violations(q[run], v_run, dt, stroke, vmax)
         book.world_failures(plant.advance(run, v_run, dt), step)
     times = np.array(batch_times)
     for m in range(len(group)):  # a trial is commanded from step 0 until it is done

@@ -54,6 +54,10 @@ class Plant(Protocol):
         """The encoder readings of ``rows``: true lengths plus ``offsets`` (n, 6) [m]."""
         ...
 
+    def measured_rates(self, rows: np.ndarray) -> np.ndarray | None:
+        """The measured leg velocities of ``rows`` (n, 6) [m/s], or None (kinematic)."""
+        ...
+
     def row_figures(self, row: int) -> dict[str, Any]:
         """Extra figures of one trial for its result row (none in the kinematic world)."""
         ...
@@ -116,6 +120,10 @@ class KinematicPlant:
     def row_figures(self, row: int) -> dict[str, Any]:
         """See :meth:`Plant.row_figures`: nothing."""
         return {}
+
+    def measured_rates(self, rows: np.ndarray) -> np.ndarray | None:
+        """The kinematic world measures no leg velocities (``Observation.q_dot`` None)."""
+        return None
 
     def series(self, row: int) -> dict[str, np.ndarray]:
         """See :meth:`Plant.series`: nothing."""

@@ -23,7 +23,7 @@ from typing import Any
 import numpy as np
 
 from benchmarks.exceptions import ScenarioError
-from benchmarks.sim.actuation import KINEMATIC_WORLD, require_actuation
+from benchmarks.sim.actuation import drive_plant, require_actuation, world_actuation
 from benchmarks.sim.book import Book, TrialResult, failure_row
 from benchmarks.sim.clock import clocked_measure, make_clock
 from benchmarks.sim.plant import FK_FAILURE, KinematicPlant, make_plant
@@ -39,6 +39,7 @@ from benchmarks.sim.world import (
 )
 from benchmarks.study.scenario import Scenario
 from controllers.base import Command, ControllerContext, Observation
+from controllers.batch import actuation_of
 from hexapod import HexapodGeometry
 from hexapod.actuation import Actuation
 from hexapod.backends.base import Backend
@@ -171,7 +172,7 @@ def _run_group(sc: Scenario, controller_index: int, group: list[TrialSetup],
     for s in group:
         ctrl = task_controller(sc, spec)
         if backend_factory is None:  # a backend says itself what it applies (Backend.apply)
-            require_actuation(ctrl, spec.label)
+            require_actuation(ctrl, spec.label, *world_actuation(sc))
         ctrl.reset(trial_context(sc, s, trial_goal(sensor, s, sc)))
         controllers.append(ctrl)
     rngs = [trial_rng(sc.seed, s.trial, 1) for s in group]
@@ -192,6 +193,8 @@ def _run_group(sc: Scenario, controller_index: int, group: list[TrialSetup],
     poses = KinematicPlant(q, R, t, g.base_points, g.platform_points, g.stroke, g.max_speed)
     plant = poses if backends is not None else make_plant(sc, group, q, R, t,
                                                           g.base_points, g.platform_points)
+    if backends is None:
+        drive_plant(plant, actuation_of(controllers[0]), spec.label)
     clock = make_clock(sc, group, q, R, t, g.base_points, g.platform_points)
 
     def measure(rows: np.ndarray, R_r: np.ndarray, t_r: np.ndarray) -> dict[str, Any]:
@@ -210,6 +213,7 @@ def _run_group(sc: Scenario, controller_index: int, group: list[TrialSetup],
                 on_step(group[k].trial, R[k], t[k], meas["edge_visible"][j])
         v_cmd = np.zeros((len(idx), 6))
         lengths = plant.measured_lengths(idx, offsets)
+        rates = plant.measured_rates(idx)
         for j, k in enumerate(idx):
             obs = Observation(
                 t=step * dt, lengths=lengths[j],
@@ -219,14 +223,15 @@ def _run_group(sc: Scenario, controller_index: int, group: list[TrialSetup],
                 edge_visible=meas["edge_visible"][j],
                 direction_visible=meas["direction_visible"][j],
                 image_t=None if meas["image_t"] is None else float(meas["image_t"][j]),
+                q_dot=None if rates is None else rates[j],
             )
             cmd: Command | None = None
             if not done[j]:
                 t0 = time.perf_counter()
                 cmd = controllers[k].step(obs)
                 book.step_times[k].append(time.perf_counter() - t0)
-                if backends is None and cmd.actuation not in KINEMATIC_WORLD:
-                    require_actuation(cmd, spec.label)
+                if backends is None and cmd.actuation not in world_actuation(sc)[0]:
+                    require_actuation(cmd, spec.label, *world_actuation(sc))
                 kinds[k] = cmd.actuation
                 if book.command(int(k), cmd.values, cmd.reason):
                     done[j] = True
@@ -244,7 +249,9 @@ def _run_group(sc: Scenario, controller_index: int, group: list[TrialSetup],
         if len(run) == 0:
             continue
         v_run = v_cmd[~done]
-        book.violations[run] += stroke_violations(q[run], v_run, dt, g.stroke, g.max_speed)
+        if kinds[run[0]] is Actuation.VELOCITY:  # leg forces are not checked as speeds
+            book.violations[run] += stroke_violations(q[run], v_run, dt, g.stroke,
+                                                      g.max_speed)
         if backends is None:
             book.world_failures(plant.advance(run, v_run, dt), step)
             continue

@@ -1,0 +1,186 @@
+"""Joint-space computed torque on the encoder lengths (the industrial baseline).
+
+A force controller (:attr:`Actuation.FORCE`): it needs a dynamic world with force-mode
+drives and the measured leg velocities ``q_dot`` (``Observation.q_dot``). Its model is the
+controller context's NOMINAL geometry, inertia and drives, never the world's truth:
+
+- reference ``q*(t)``, ``q_dot*(t)``, ``q_ddot*(t)``: the nominal inverse kinematics of the
+  trajectory's pose (``context.reference``), ``q_dot* = K x_dot*`` and
+  ``q_ddot* = K x_ddot* + K_dot x_dot*``; a fixed goal (``goal.lengths``) is reached along
+  a quintic in leg space from the lengths measured at the first step, timed so that no
+  leg's reference speed exceeds the nominal speed limit (a step on the full distance would
+  saturate the drives and overshoot into the end stops);
+- pose ``(R, t)``: the nominal forward kinematics of the encoder lengths, twist
+  ``x_dot = K^-1 q_dot``;
+- desired leg acceleration ``a = q_ddot* + Kd (q_dot* - q_dot) + Kp (q* - q)`` with
+  ``Kp = omega_n^2``, ``Kd = 2 zeta omega_n``: the leg error obeys
+  ``e_ddot + 2 zeta omega_n e_dot + omega_n^2 e = 0`` when the model is exact;
+- platform acceleration ``x_ddot = K^-1 (a - K_dot x_dot)`` and the mechanism's forces
+  ``DynamicModel.inverse(R, t, x_dot, x_ddot)``, plus the nominal drives' reflected rotor
+  inertia ``m_r a`` and friction ``c q_dot + f_c tanh(q_dot* / v_s)``.
+
+The force is held over the control period: the design is continuous, so ``omega_n dt``
+must stay small. The default ``omega_n = 2 pi * 2 Hz`` with ``zeta = 0.7`` gives
+``omega_n dt = 0.25`` at the 20 ms period.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from controllers.base import (
+    Command,
+    Controller,
+    ControllerContext,
+    Goal,
+    Observation,
+)
+from controllers.exceptions import ContextError
+from hexapod.actuation import Actuation
+from hexapod.dynamics import DynamicModel
+from hexapod.dynamics.drive_model import COULOMB_SMOOTHING
+from hexapod.fk import forward_kinematics
+from hexapod.kinematics import inverse_kinematics
+
+#: Default natural frequency of the leg error [Hz].
+NATURAL_FREQUENCY_HZ = 2.0
+#: Peak of the quintic's speed over its mean speed.
+QUINTIC_PEAK_SPEED = 15.0 / 8.0
+#: Default damping ratio of the leg error.
+DAMPING = 1.0
+
+
+class ComputedTorqueController(Controller):
+    """Joint-space computed torque (see the module docstring).
+
+    Args:
+        natural_frequency: ``f_n`` [Hz] of the leg error's second-order response.
+        damping: Its damping ratio ``zeta``.
+        smooth_goal: Reach a fixed goal along the leg-space quintic (False: a step of
+            ``q*`` to the goal, the error's free response).
+    """
+
+    name = "computed-torque"
+    features = frozenset({"lengths"})
+    actuation = Actuation.FORCE
+
+    def __init__(self, natural_frequency: float = NATURAL_FREQUENCY_HZ,
+                 damping: float = DAMPING, smooth_goal: bool = True) -> None:
+        fn, zeta = float(natural_frequency), float(damping)
+        if not (math.isfinite(fn) and fn > 0):
+            raise ContextError(self.name, "natural_frequency", f"must be positive, got {fn}")
+        if not (math.isfinite(zeta) and zeta > 0):
+            raise ContextError(self.name, "damping", f"must be positive, got {zeta}")
+        omega = 2 * math.pi * fn
+        self.kp = omega**2
+        self.kd = 2 * zeta * omega
+        self.smooth_goal = bool(smooth_goal)
+        self._ctx: ControllerContext | None = None
+        self._model: DynamicModel | None = None
+        self._pose: tuple[np.ndarray, np.ndarray] | None = None
+        self._q_star = np.zeros(6)
+        #: ``(t0 [s], q0 [m], duration [s])`` of the quintic to a fixed goal.
+        self._start: tuple[float, np.ndarray, float] | None = None
+
+    def reset(self, context: ControllerContext) -> None:
+        """Build the nominal model; read the reference or ``goal.lengths``.
+
+        Raises:
+            ContextError: Neither a reference nor finite goal lengths.
+        """
+        self._ctx = context
+        self._model = DynamicModel(context.geometry)
+        self._pose = None
+        if context.reference is None:
+            self.retarget(context.goal)
+
+    def retarget(self, goal: Goal) -> None:
+        """A new fixed goal (ignored when tracking a reference: it is sampled itself)."""
+        if self._ctx is not None and self._ctx.reference is not None:
+            return
+        if goal.lengths is None:
+            raise ContextError(self.name, "goal.lengths", "missing")
+        qs = np.asarray(goal.lengths, dtype=float)
+        if qs.shape != (6,) or not np.all(np.isfinite(qs)):
+            raise ContextError(self.name, "goal.lengths", f"expected 6 finite values, got {qs}")
+        self._q_star = qs.copy()
+        self._start = None
+
+    def desired(self, t: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """``(q*, q_dot*, q_ddot*)`` at time ``t`` [s] ([m], [m/s], [m/s^2])."""
+        ctx, model = self._ctx, self._model
+        assert ctx is not None and model is not None
+        if ctx.reference is None:
+            return self._quintic(t)
+        ref = ctx.reference.at(np.array([t]))
+        R, p, tw, acc = ref.rotation, ref.translation, ref.twist, ref.twist_rate
+        q = inverse_kinematics(ctx.geometry, R[0], p[0])
+        K = model.terms_batch(R, p, tw)[2][0]
+        rate, bias = model.legs_batch(R, p, tw)
+        return q, rate[0], K @ acc[0] + bias[0]
+
+    def _quintic(self, t: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """The leg-space quintic from the first measured lengths to ``goal.lengths``."""
+        assert self._start is not None
+        t0, q0, T = self._start
+        d = self._q_star - q0
+        if T <= 0.0:
+            return self._q_star, np.zeros(6), np.zeros(6)
+        x = min(max((t - t0) / T, 0.0), 1.0)
+        s = x**3 * (10 - 15 * x + 6 * x**2)
+        sd = 30 * x**2 * (1 - x) ** 2 / T if 0.0 < x < 1.0 else 0.0
+        sdd = 60 * x * (1 - x) * (1 - 2 * x) / T**2 if 0.0 < x < 1.0 else 0.0
+        return q0 + s * d, sd * d, sdd * d
+
+    def step(self, observation: Observation) -> Command:
+        """The leg forces of this period [N] (refused, zero, with a reason when the
+        lengths, their rates or the time are missing or not finite, or the nominal model
+        fails)."""
+        if self._ctx is None or self._model is None:
+            return self._refuse("reset(context) was not called")
+        t = float(observation.t)
+        q = np.asarray(observation.lengths, dtype=float)
+        if observation.q_dot is None:
+            return self._refuse("needs the measured leg velocities (Observation.q_dot), "
+                                "which only the dynamic world gives")
+        qd = np.asarray(observation.q_dot, dtype=float)
+        for what, x in (("time", np.array([t])), ("lengths", q), ("leg velocities", qd)):
+            if x.size == 0 or not np.all(np.isfinite(x)):
+                return self._refuse(f"measured {what} not finite: {x}")
+        if self._start is None:  # the fixed goal's quintic starts here
+            T = QUINTIC_PEAK_SPEED * float(np.abs(self._q_star - q).max()) / \
+                self._ctx.max_speed if self.smooth_goal else 0.0
+            self._start = (t, q.copy(), T)
+        try:
+            fk = forward_kinematics(self._ctx.geometry, q, guess=self._pose,
+                                    check_stroke=False)
+            R, p = fk.rotation, fk.translation
+            q_s, qd_s, qdd_s = self.desired(t)
+            K = self._model.terms_batch(R[None], p[None], np.zeros((1, 6)))[2][0]
+            twist = np.linalg.solve(K, qd)
+            bias = self._model.legs_batch(R[None], p[None], twist[None])[1][0]
+            e = q_s - q
+            a = qdd_s + self.kd * (qd_s - qd) + self.kp * e
+            acc = np.linalg.solve(K, a - bias)
+            f = self._model.inverse(R, p, twist, acc) + self._drive_forces(a, qd, qd_s)
+        except Exception as exc:  # the nominal model failed here: refuse with its reason
+            return self._refuse(f"nominal model failed: {exc}")
+        if not np.all(np.isfinite(f)):
+            return self._refuse(f"non-finite leg forces {f}")
+        self._pose = (R, p)
+        return Command.of_forces(f, error=e, error_norm=float(np.linalg.norm(e)), rank=6,
+                                 condition=float(np.linalg.cond(K)), features_used=6)
+
+    def _drive_forces(self, a: np.ndarray, qd: np.ndarray, qd_s: np.ndarray) -> np.ndarray:
+        """The nominal drives' share [N]: reflected rotor inertia, viscous friction at the
+        measured leg velocity, Coulomb friction in the direction of the REFERENCE's (at
+        rest the measured velocity's sign is noise, and a held force must break away)."""
+        assert self._ctx is not None
+        d = self._ctx.geometry.drives
+        return (np.asarray(d.rotor_inertia) * a + np.asarray(d.viscous) * qd  # type: ignore[no-any-return]
+                + np.asarray(d.coulomb) * np.tanh(qd_s / COULOMB_SMOOTHING))
+
+    def _refuse(self, problem: str) -> Command:
+        return Command.refuse(f"{self.name}: {problem}", actuation=Actuation.FORCE)
