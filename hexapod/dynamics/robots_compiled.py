@@ -2,8 +2,11 @@
 
 The step is :meth:`hexapod.dynamics.robots.DynamicRobots.step_reference` written once
 more in CasADi SX (the mechanism's terms are those of :mod:`hexapod.dynamics.compiled`,
-substituted into the step), folded over the period's steps (``Function.fold``) and
-generated to C (:mod:`hexapod.compiled`); the two are tested equal. One row of the period
+substituted into the step) and generated to C twice: by this project's lane generator
+(:mod:`hexapod.compiled_lanes`: four rows per vector instruction, the period's steps
+looped in C; used) and by CasADi, folded over the period's steps (``Function.fold``,
+:mod:`hexapod.compiled`: the fallback, and the lane code's bitwise reference); the step
+and the numpy reference are tested equal. One row of the period
 function carries a robot's state, its constants and its accumulators (:data:`LAYOUT`);
 the output row has the same layout.
 """
@@ -18,6 +21,7 @@ import casadi as ca
 import numpy as np
 
 from hexapod.compiled import CompiledFunction
+from hexapod.compiled_lanes import LaneFunction
 from hexapod.dynamics import compiled as mech
 from hexapod.dynamics.drive_model import COULOMB_SMOOTHING
 
@@ -137,11 +141,30 @@ def period_function(steps: int) -> CompiledFunction:
                                         [step.fold(steps)(xm)]))
 
 
+@lru_cache(maxsize=1)
+def step_lanes() -> LaneFunction | None:
+    """The physics step as lane-parallel C (:mod:`hexapod.compiled_lanes`: several rows
+    per vector instruction, the steps of a period looped in C; the same results as
+    :func:`period_function` bit for bit), or None where it cannot be compiled."""
+    x, y = _step_expression()
+    return LaneFunction.create(ca.Function("hexapod_dyn_step", [x], [y]),
+                               "hexapod_dyn_step_lanes")
+
+
+def run_period(x: np.ndarray, steps: int) -> np.ndarray:
+    """The rows ``x`` (n, :data:`WIDTH`) after a period of ``steps`` physics steps: the
+    lane-parallel C, else CasADi's folded period."""
+    lanes = step_lanes()
+    if lanes is not None:
+        return lanes.iterate(x, steps)
+    return period_function(steps).batch(x)
+
+
 def advance_compiled(robots: Any, rows: np.ndarray, setpoints: np.ndarray, h: float,
                      steps: int) -> np.ndarray:
     """:meth:`hexapod.dynamics.robots.DynamicRobots.advance` in C; returns the (n,) mask
     of rows whose state is not finite after the period (left unchanged)."""
-    y = period_function(steps).batch(pack_period(robots, rows, setpoints, h))
+    y = run_period(pack_period(robots, rows, setpoints, h), steps)
     return unpack_period(robots, rows, y, steps)
 
 

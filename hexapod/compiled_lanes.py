@@ -1,0 +1,249 @@
+"""A CasADi SX step iterated in C over a batch, several rows at once (SIMD lanes).
+
+:class:`LaneFunction` takes a ``ca.Function`` of one row to the next row of the same
+width (one physics step, say) and generates its own C from the function's instruction
+list (not CasADi's code generator): every value is a vector of :data:`LANES` doubles
+(GCC/Clang vector extensions), so one pass through the instructions advances
+:data:`LANES` rows; the step is repeated ``iterations`` times in C with the row kept in
+registers and on the stack. Every instruction is one IEEE operation per lane, as in
+CasADi's own C (``-ffp-contract=off``: no fused multiply-add), so the results are those
+of the scalar code bit for bit; the transcendental functions (``tanh``, ``sin``, ...)
+are libm's, lane by lane.
+
+The C is compiled twice in one library, for the baseline instruction set and for AVX2
+(chosen at run time with ``__builtin_cpu_supports`` on x86-64; the same results, the
+instruction set only changes the width of the machine's vector operations). The library
+is cached as :mod:`hexapod.compiled`'s are. Without a C compiler, or with an instruction
+this generator does not know, :meth:`LaneFunction.create` returns None and the caller
+keeps CasADi's path.
+"""
+
+from __future__ import annotations
+
+import ctypes
+import logging
+import math
+import subprocess
+
+import casadi as ca
+import numpy as np
+
+from hexapod.compiled import build_shared_library
+from hexapod.exceptions import UnsupportedInstructionError
+
+log = logging.getLogger(__name__)
+
+#: Rows advanced together (doubles per vector).
+LANES = 4
+
+_OPS = {getattr(ca, name): name[3:] for name in dir(ca) if name.startswith("OP_")}
+
+#: Binary operators written with C's operator on vectors.
+_INFIX = {"ADD": "+", "SUB": "-", "MUL": "*", "DIV": "/"}
+#: Comparisons: a mask, then 1.0 or 0.0 as CasADi's C gives.
+_COMPARE = {"LT": "<", "LE": "<=", "EQ": "==", "NE": "!="}
+#: Functions of one argument applied lane by lane (libm).
+_LIBM = {"SQRT": "sqrt", "TANH": "tanh", "SIN": "sin", "COS": "cos", "EXP": "exp",
+         "LOG": "log", "TAN": "tan", "ATAN": "atan", "ASIN": "asin", "ACOS": "acos",
+         "SINH": "sinh", "COSH": "cosh", "ERF": "erf", "FLOOR": "floor", "CEIL": "ceil"}
+
+_PRELUDE = r"""
+#include <math.h>
+#include <string.h>
+typedef double V __attribute__((vector_size({bytes})));
+typedef long long VI __attribute__((vector_size({bytes})));
+#define LANES {lanes}
+static inline V lane_select(VI m, V a, V b) {{ return (V)(((VI)a & m) | ((VI)b & ~m)); }}
+static inline V lane_mask(VI m) {{ const V one = {{{ones}}}; return (V)((VI)one & m); }}
+"""
+
+_LIBM_LANE = r"""
+static inline V lane_{f}(V a) {{ V r; for (int i = 0; i < LANES; ++i) r[i] = {f}(a[i]);
+  return r; }}
+"""
+
+_DRIVER = r"""
+static inline __attribute__((always_inline)) void {name}_block(V* st, long long iterations) {{
+  V nx[{width}];
+  for (long long it = 0; it < iterations; ++it) {{
+{body}
+    memcpy(st, nx, sizeof(nx));
+  }}
+}}
+
+static void {name}_rows(const double* x, double* y, long long n, long long iterations) {{
+  V st[{width}];
+  for (long long k = 0; k < n; k += LANES) {{
+    long long m = n - k < LANES ? n - k : LANES;
+    for (int j = 0; j < {width}; ++j)
+      for (int l = 0; l < LANES; ++l) st[j][l] = x[(k + (l < m ? l : m - 1)) * {width} + j];
+    {name}_block(st, iterations);
+    for (int j = 0; j < {width}; ++j)
+      for (int l = 0; l < m; ++l) y[(k + l) * {width} + j] = st[j][l];
+  }}
+}}
+
+#if defined(__x86_64__) && (defined(__GNUC__) || defined(__clang__))
+__attribute__((target("avx2")))
+static void {name}_rows_avx2(const double* x, double* y, long long n, long long iterations) {{
+  V st[{width}];
+  for (long long k = 0; k < n; k += LANES) {{
+    long long m = n - k < LANES ? n - k : LANES;
+    for (int j = 0; j < {width}; ++j)
+      for (int l = 0; l < LANES; ++l) st[j][l] = x[(k + (l < m ? l : m - 1)) * {width} + j];
+    {name}_block(st, iterations);
+    for (int j = 0; j < {width}; ++j)
+      for (int l = 0; l < m; ++l) y[(k + l) * {width} + j] = st[j][l];
+  }}
+}}
+#endif
+
+int {name}_run(const double* x, double* y, long long n, long long iterations, int isa) {{
+#if defined(__x86_64__) && (defined(__GNUC__) || defined(__clang__))
+  if (isa != 0 && __builtin_cpu_supports("avx2")) {{
+    {name}_rows_avx2(x, y, n, iterations);
+    return 1;
+  }}
+#endif
+  {name}_rows(x, y, n, iterations);
+  return 0;
+}}
+"""
+
+
+def _constant(value: float) -> str:
+    if math.isnan(value):
+        return "NAN"
+    if math.isinf(value):
+        return "INFINITY" if value > 0 else "-INFINITY"
+    return value.hex()
+
+
+def lane_code(function: ca.Function, name: str) -> str:
+    """The C source of ``function`` (one dense row in, one row of the same width out)
+    iterated over lanes of rows (module docstring).
+
+    Raises:
+        UnsupportedInstructionError: An instruction outside the translated set (its name).
+    """
+    width = int(function.nnz_in(0))
+    if (function.n_in() != 1 or function.n_out() != 1 or int(function.nnz_out(0)) != width
+            or not function.sparsity_in(0).is_dense()
+            or not function.sparsity_out(0).is_dense()):
+        raise ValueError(f"{name}: a lane function maps one row to one row of the same width")
+    slot: dict[int, str] = {}  # CasADi's work index -> the SSA value it holds
+    lines, used_libm = [], set()
+    for k in range(function.n_instructions()):
+        op = _OPS.get(function.instruction_id(k), str(function.instruction_id(k)))
+        ins = function.instruction_input(k)
+        outs = function.instruction_output(k)
+        if op == "OUTPUT":
+            lines.append(f"nx[{outs[1]}] = {slot[ins[0]]};")
+            continue
+        v = f"v{k}"
+        a = [slot.get(i, "") for i in ins]
+        if op == "INPUT":
+            expr = f"st[{ins[1]}]"
+        elif op == "CONST":
+            c = _constant(float(function.instruction_constant(k)))
+            lines.append(f"const V {v} = {{{', '.join([c] * LANES)}}};")
+            slot[outs[0]] = v
+            continue
+        elif op in _INFIX:
+            expr = f"{a[0]} {_INFIX[op]} {a[1]}"
+        elif op == "SQ":
+            expr = f"{a[0]} * {a[0]}"
+        elif op == "TWICE":
+            expr = f"{a[0]} + {a[0]}"
+        elif op == "NEG":
+            expr = f"-{a[0]}"
+        elif op == "INV":
+            expr = f"1.0 / {a[0]}"
+        elif op == "ASSIGN":
+            expr = a[0]
+        elif op in _COMPARE:
+            expr = f"lane_mask((VI)({a[0]} {_COMPARE[op]} {a[1]}))"
+        elif op == "NOT":
+            expr = f"lane_mask((VI)({a[0]} == 0.0))"
+        elif op == "AND":
+            expr = f"lane_mask((VI)({a[0]} != 0.0) & (VI)({a[1]} != 0.0))"
+        elif op == "OR":
+            expr = f"lane_mask((VI)({a[0]} != 0.0) | (VI)({a[1]} != 0.0))"
+        elif op == "IF_ELSE_ZERO":  # CasADi's C: (c ? x : 0), NaN counts as true
+            expr = f"(V)((VI)({a[0]} != 0.0) & (VI){a[1]})"
+        elif op == "FABS":
+            expr = f"(V)((VI){a[0]} & (VI){{{', '.join(['0x7fffffffffffffffLL'] * LANES)}}})"
+        elif op in ("FMIN", "FMAX"):  # libm's fmin/fmax: a NaN argument gives the other one
+            cmp = "<" if op == "FMIN" else ">"
+            expr = (f"lane_select((VI)({a[1]} != {a[1]}), {a[0]}, lane_select((VI)({a[0]} "
+                    f"{cmp} {a[1]}), {a[0]}, {a[1]}))")
+        elif op == "SIGN":  # casadi_sign: -1, 1, or the argument itself (0, -0, NaN)
+            expr = (f"lane_select((VI)({a[0]} < 0.0), -{_one()}, lane_select((VI)({a[0]} > "
+                    f"0.0), {_one()}, {a[0]}))")
+        elif op in _LIBM:
+            used_libm.add(_LIBM[op])
+            expr = f"lane_{_LIBM[op]}({a[0]})"
+        else:
+            raise UnsupportedInstructionError(name, op)
+        lines.append(f"const V {v} = {expr};")
+        slot[outs[0]] = v
+    prelude = _PRELUDE.format(bytes=8 * LANES, lanes=LANES, ones=", ".join(["1.0"] * LANES))
+    helpers = "".join(_LIBM_LANE.format(f=f) for f in sorted(used_libm))
+    body = "\n".join("    " + line for line in lines)
+    return prelude + helpers + _DRIVER.format(name=name, width=width, body=body)
+
+
+def _one() -> str:
+    return "(V){" + ", ".join(["1.0"] * LANES) + "}"
+
+
+class LaneFunction:
+    """A row-to-row CasADi function iterated in C over lanes of rows (module docstring).
+
+    Build with :meth:`create`.
+
+    Args:
+        name: C name of the function.
+        width: Length of a row.
+        library: The loaded shared library.
+    """
+
+    def __init__(self, name: str, width: int, library: ctypes.CDLL) -> None:
+        self.name = name
+        self.width = width
+        self._lib = library
+        run = getattr(library, f"{name}_run")
+        run.argtypes = [ctypes.c_void_p, ctypes.c_void_p, ctypes.c_longlong, ctypes.c_longlong,
+                        ctypes.c_int]
+        run.restype = ctypes.c_int
+        self._run = run
+        #: Whether the last call used the AVX2 code (x86-64 machines that have it).
+        self.used_avx2 = False
+
+    @classmethod
+    def create(cls, function: ca.Function, name: str) -> LaneFunction | None:
+        """The compiled lane function of ``function``, or None (logged) when it cannot be
+        generated or compiled."""
+        try:
+            code = lane_code(function, name)
+            path = build_shared_library(name, code, ("-O2", "-fno-math-errno",
+                                                     "-ffp-contract=off"))
+            return cls(name, int(function.nnz_in(0)), ctypes.CDLL(str(path)))
+        except (OSError, subprocess.SubprocessError, UnsupportedInstructionError) as exc:
+            log.warning("%s: no lane-parallel C (%s); using CasADi's code", name, exc)
+            return None
+
+    def iterate(self, x: np.ndarray, iterations: int, avx2: bool = True) -> np.ndarray:
+        """The rows of ``x`` (N, width) after ``iterations`` applications of the function.
+
+        Args:
+            x: Input rows.
+            iterations: How many times the function is applied (0: a copy).
+            avx2: Allow the AVX2 code where the machine has it (False: the baseline
+                instruction set, for tests).
+        """
+        x = np.ascontiguousarray(x, dtype=float).reshape(-1, self.width)
+        y = np.empty_like(x)
+        self.used_avx2 = bool(self._run(x.ctypes.data, y.ctypes.data, x.shape[0],
+                                        int(iterations), int(avx2)))
+        return y
