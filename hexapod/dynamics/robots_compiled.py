@@ -72,17 +72,19 @@ def _step_expression() -> tuple[ca.SX, ca.SX]:
     sym, terms = mech._expressions()
     row = ca.vertcat(get("R"), get("t"), get("twist"), ca.SX.zeros(6), get("A"), get("E"),
                      get("p"))
-    M, hb, K = (ca.substitute(terms[k], sym, row) for k in ("M", "h", "K"))
+    # q_dot = K tau and the legs' bias acceleration b = q_ddot - K tau_dot come with the
+    # mechanism's terms (the same leg vectors)
+    M_joint, leg_mass, hb, K, qd, b = (ca.substitute(terms[k], sym, row) for k in (
+        "M_joint", "leg_mass", "h", "K", "q_dot", "leg_bias"))
     R = ca.reshape(get("R"), 3, 3)
     t, tw, h = get("t"), get("twist"), get("h")
     kp, ki, lim, integral, sp = get("kp"), get("ki"), get("limit"), get("integral"), \
         get("setpoint")
-    qd = K @ tw
     # the drives (hexapod.dynamics.drive_model.DriveModel.forces)
-    xs = qd / COULOMB_SMOOTHING
+    xs = qd * (1 / COULOMB_SMOOTHING)
     small = ca.fabs(xs) < 1e-8
     secant = ca.if_else(small, 1.0, ca.tanh(xs) / ca.if_else(small, 1.0, xs))
-    d_friction = get("viscous") + get("coulomb") / COULOMB_SMOOTHING * secant
+    d_friction = get("viscous") + get("coulomb") * (1 / COULOMB_SMOOTHING) * secant
     friction = get("viscous") * qd + get("coulomb") * ca.tanh(xs)
     err = sp - qd
     u = kp * err + integral
@@ -94,23 +96,14 @@ def _step_expression() -> tuple[ca.SX, ca.SX]:
     saturated = ca.if_else(force, ca.fabs(sp) >= lim, sat_v)
     slope = -ca.if_else(force, ca.SX.zeros(6), ca.if_else(sat_v, 0.0, kp)) - d_friction
     new_integral = ca.if_else(force, integral, new_integral)
-    # the legs' bias acceleration b
-    A = ca.reshape(get("A"), 3, 6)
-    E = ca.reshape(get("E"), 3, 6)
-    v, w = tw[0:3], tw[3:6]
-    bias = []
-    for i in range(6):
-        r = R @ E[:, i]
-        leg = t + r - A[:, i]
-        q = ca.norm_2(leg)
-        ui = leg / q
-        wr = ca.cross(w, r)
-        b_dot = v + wr
-        perp = b_dot - ca.dot(ui, b_dot) * ui
-        bias.append(ca.dot(ui, ca.cross(w, wr)) + ca.dot(perp, perp) / q)
-    b = ca.vertcat(*bias)
+    # M + K^T diag(rotor - h slope) K: one rank-one term per leg, its mechanism's part
+    # (M = M_joint + K^T diag(leg_mass) K) and the drive's added, from the upper triangle
     rotor = get("rotor")
-    lhs = M + K.T @ ca.diag(rotor - h * slope) @ K
+    leg_total = leg_mass + rotor - h * slope
+    lhs = M_joint
+    for i in range(6):
+        k = K[i, :].T
+        lhs += mech._symmetric_outer(leg_total[i] * k, k)
     rhs = K.T @ (motor - friction - rotor * b) - hb
     acc = mech._ldl_solve(lhs, rhs)
     tw_new = tw + h * acc
