@@ -62,53 +62,58 @@ static inline V lane_{f}(V a) {{ V r; for (int i = 0; i < LANES; ++i) r[i] = {f}
   return r; }}
 """
 
-_DRIVER = r"""
+_BLOCK = r"""
 static inline __attribute__((always_inline)) void {name}_block(V* st, long long iterations) {{
   V nx[{width}];
   for (long long it = 0; it < iterations; ++it) {{
 {body}
     memcpy(st, nx, sizeof(nx));
   }}
+{finish}
 }}
+"""
 
-static void {name}_rows(const double* x, double* y, long long n, long long iterations) {{
+_FINISH = r"""  {{
+{body}
+    memcpy(st, nx, sizeof(nx));
+  }}"""
+
+_ROWS = r"""
+{attribute}
+static void {name}_rows{suffix}(double* table, const long long* rows, long long n,
+                               long long iterations, long long check, unsigned char* bad) {{
   V st[{width}];
   for (long long k = 0; k < n; k += LANES) {{
     long long m = n - k < LANES ? n - k : LANES;
     for (int j = 0; j < {width}; ++j)
-      for (int l = 0; l < LANES; ++l) st[j][l] = x[(k + (l < m ? l : m - 1)) * {width} + j];
+      for (int l = 0; l < LANES; ++l) st[j][l] = table[rows[k + (l < m ? l : m - 1)] * {width} + j];
     {name}_block(st, iterations);
-    for (int j = 0; j < {width}; ++j)
-      for (int l = 0; l < m; ++l) y[(k + l) * {width} + j] = st[j][l];
+    for (int l = 0; l < m; ++l) {{
+      int finite = 1;
+      for (long long j = 0; j < check; ++j) finite &= isfinite(st[j][l]) ? 1 : 0;
+      bad[k + l] = (unsigned char)!finite;
+      if (finite)
+        for (int j = 0; j < {width}; ++j) table[rows[k + l] * {width} + j] = st[j][l];
+    }}
   }}
 }}
+"""
 
-#if defined(__x86_64__) && (defined(__GNUC__) || defined(__clang__))
-__attribute__((target("avx2")))
-static void {name}_rows_avx2(const double* x, double* y, long long n, long long iterations) {{
-  V st[{width}];
-  for (long long k = 0; k < n; k += LANES) {{
-    long long m = n - k < LANES ? n - k : LANES;
-    for (int j = 0; j < {width}; ++j)
-      for (int l = 0; l < LANES; ++l) st[j][l] = x[(k + (l < m ? l : m - 1)) * {width} + j];
-    {name}_block(st, iterations);
-    for (int j = 0; j < {width}; ++j)
-      for (int l = 0; l < m; ++l) y[(k + l) * {width} + j] = st[j][l];
-  }}
-}}
-#endif
-
-int {name}_run(const double* x, double* y, long long n, long long iterations, int isa) {{
+_RUN = r"""
+int {name}_run(double* table, const long long* rows, long long n, long long iterations,
+               long long check, unsigned char* bad, int isa) {{
 #if defined(__x86_64__) && (defined(__GNUC__) || defined(__clang__))
   if (isa != 0 && __builtin_cpu_supports("avx2")) {{
-    {name}_rows_avx2(x, y, n, iterations);
+    {name}_rows_avx2(table, rows, n, iterations, check, bad);
     return 1;
   }}
 #endif
-  {name}_rows(x, y, n, iterations);
+  {name}_rows(table, rows, n, iterations, check, bad);
   return 0;
 }}
 """
+
+_AVX2 = "#if defined(__x86_64__) && (defined(__GNUC__) || defined(__clang__))\n"
 
 
 def _constant(value: float) -> str:
@@ -119,20 +124,20 @@ def _constant(value: float) -> str:
     return value.hex()
 
 
-def lane_code(function: ca.Function, name: str) -> str:
-    """The C source of ``function`` (one dense row in, one row of the same width out)
-    iterated over lanes of rows (module docstring).
-
-    Raises:
-        UnsupportedInstructionError: An instruction outside the translated set (its name).
-    """
+def _check(function: ca.Function, name: str) -> int:
     width = int(function.nnz_in(0))
     if (function.n_in() != 1 or function.n_out() != 1 or int(function.nnz_out(0)) != width
             or not function.sparsity_in(0).is_dense()
             or not function.sparsity_out(0).is_dense()):
         raise ValueError(f"{name}: a lane function maps one row to one row of the same width")
+    return width
+
+
+def _body(function: ca.Function, name: str, used_libm: set[str]) -> str:
+    """The statements computing ``nx`` (the next row) from ``st`` (the row), one SSA
+    vector value per instruction; the libm functions used are added to ``used_libm``."""
     slot: dict[int, str] = {}  # CasADi's work index -> the SSA value it holds
-    lines, used_libm = [], set()
+    lines = []
     for k in range(function.n_instructions()):
         op = _OPS.get(function.instruction_id(k), str(function.instruction_id(k)))
         ins = function.instruction_input(k)
@@ -145,10 +150,8 @@ def lane_code(function: ca.Function, name: str) -> str:
         if op == "INPUT":
             expr = f"st[{ins[1]}]"
         elif op == "CONST":
-            c = _constant(float(function.instruction_constant(k)))
-            lines.append(f"const V {v} = {{{', '.join([c] * LANES)}}};")
-            slot[outs[0]] = v
-            continue
+            expr = "(V){" + ", ".join(
+                [_constant(float(function.instruction_constant(k)))] * LANES) + "}"
         elif op in _INFIX:
             expr = f"{a[0]} {_INFIX[op]} {a[1]}"
         elif op == "SQ":
@@ -187,10 +190,32 @@ def lane_code(function: ca.Function, name: str) -> str:
             raise UnsupportedInstructionError(name, op)
         lines.append(f"const V {v} = {expr};")
         slot[outs[0]] = v
+    return "\n".join("    " + line for line in lines)
+
+
+def lane_code(function: ca.Function, name: str, finish: ca.Function | None = None) -> str:
+    """The C source of ``function`` (one dense row in, one row of the same width out)
+    iterated over lanes of rows, then ``finish`` (the same shape) once (module docstring).
+
+    Raises:
+        UnsupportedInstructionError: An instruction outside the translated set (its name).
+        ValueError: A function that does not map a row to a row of its width.
+    """
+    width = _check(function, name)
+    used_libm: set[str] = set()
+    body = _body(function, name, used_libm)
+    end = ""
+    if finish is not None:
+        if _check(finish, name) != width:
+            raise ValueError(f"{name}: the finishing function's row is not {width} long")
+        end = _FINISH.format(body=_body(finish, name, used_libm))
     prelude = _PRELUDE.format(bytes=8 * LANES, lanes=LANES, ones=", ".join(["1.0"] * LANES))
     helpers = "".join(_LIBM_LANE.format(f=f) for f in sorted(used_libm))
-    body = "\n".join("    " + line for line in lines)
-    return prelude + helpers + _DRIVER.format(name=name, width=width, body=body)
+    rows = (_ROWS.format(name=name, width=width, attribute="", suffix="") + _AVX2
+            + _ROWS.format(name=name, width=width, attribute='__attribute__((target("avx2")))',
+                           suffix="_avx2") + "#endif\n")
+    return (prelude + helpers + _BLOCK.format(name=name, width=width, body=body, finish=end)
+            + rows + _RUN.format(name=name))
 
 
 def _one() -> str:
@@ -214,18 +239,19 @@ class LaneFunction:
         self._lib = library
         run = getattr(library, f"{name}_run")
         run.argtypes = [ctypes.c_void_p, ctypes.c_void_p, ctypes.c_longlong, ctypes.c_longlong,
-                        ctypes.c_int]
+                        ctypes.c_longlong, ctypes.c_void_p, ctypes.c_int]
         run.restype = ctypes.c_int
         self._run = run
         #: Whether the last call used the AVX2 code (x86-64 machines that have it).
         self.used_avx2 = False
 
     @classmethod
-    def create(cls, function: ca.Function, name: str) -> LaneFunction | None:
-        """The compiled lane function of ``function``, or None (logged) when it cannot be
-        generated or compiled."""
+    def create(cls, function: ca.Function, name: str, finish: ca.Function | None = None
+               ) -> LaneFunction | None:
+        """The compiled lane function of ``function`` (then ``finish`` once, if given), or
+        None (logged) when it cannot be generated or compiled."""
         try:
-            code = lane_code(function, name)
+            code = lane_code(function, name, finish)
             path = build_shared_library(name, code, ("-O2", "-fno-math-errno",
                                                      "-ffp-contract=off"))
             return cls(name, int(function.nnz_in(0)), ctypes.CDLL(str(path)))
@@ -233,17 +259,40 @@ class LaneFunction:
             log.warning("%s: no lane-parallel C (%s); using CasADi's code", name, exc)
             return None
 
-    def iterate(self, x: np.ndarray, iterations: int, avx2: bool = True) -> np.ndarray:
-        """The rows of ``x`` (N, width) after ``iterations`` applications of the function.
+    def advance(self, table: np.ndarray, rows: np.ndarray, iterations: int, check: int = 0,
+                avx2: bool = True) -> np.ndarray:
+        """Advance rows ``rows`` of ``table`` in place: ``iterations`` applications of the
+        function, then the finishing function.
 
         Args:
-            x: Input rows.
-            iterations: How many times the function is applied (0: a copy).
+            table: (N, width) C-contiguous float64 rows, changed in place.
+            rows: (n,) indices of the rows to advance.
+            iterations: How many times the function is applied.
+            check: A row is written back only if its first ``check`` values are finite
+                (0: always).
             avx2: Allow the AVX2 code where the machine has it (False: the baseline
                 instruction set, for tests).
+
+        Returns:
+            (n,) mask of the rows left unchanged (a non-finite value among the first
+            ``check``).
         """
-        x = np.ascontiguousarray(x, dtype=float).reshape(-1, self.width)
-        y = np.empty_like(x)
-        self.used_avx2 = bool(self._run(x.ctypes.data, y.ctypes.data, x.shape[0],
-                                        int(iterations), int(avx2)))
+        if (table.dtype != np.float64 or not table.flags.c_contiguous or table.ndim != 2
+                or table.shape[1] != self.width):
+            raise ValueError(f"{self.name}: table must be a C-contiguous float64 array "
+                             f"(N, {self.width}), got {table.dtype} {table.shape}")
+        idx = np.ascontiguousarray(rows, dtype=np.int64)
+        if idx.size and (idx.min() < 0 or idx.max() >= table.shape[0]):
+            raise IndexError(f"{self.name}: row indices outside [0, {table.shape[0]})")
+        bad = np.zeros(idx.shape[0], dtype=np.uint8)
+        self.used_avx2 = bool(self._run(table.ctypes.data, idx.ctypes.data, idx.shape[0],
+                                        int(iterations), int(check), bad.ctypes.data,
+                                        int(avx2)))
+        return bad.astype(bool)
+
+    def iterate(self, x: np.ndarray, iterations: int, avx2: bool = True) -> np.ndarray:
+        """The rows of ``x`` (N, width) after ``iterations`` applications of the function
+        (and the finishing function); ``x`` is not changed."""
+        y = np.array(x, dtype=float, order="C").reshape(-1, self.width)
+        self.advance(y, np.arange(y.shape[0]), iterations, 0, avx2)
         return y
