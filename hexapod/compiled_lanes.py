@@ -67,7 +67,6 @@ static inline __attribute__((always_inline)) void {name}_block(V* st, long long 
   V nx[{width}];
   for (long long it = 0; it < iterations; ++it) {{
 {body}
-    memcpy(st, nx, sizeof(nx));
   }}
 {finish}
 }}
@@ -75,7 +74,6 @@ static inline __attribute__((always_inline)) void {name}_block(V* st, long long 
 
 _FINISH = r"""  {{
 {body}
-    memcpy(st, nx, sizeof(nx));
   }}"""
 
 _ROWS = r"""
@@ -134,21 +132,27 @@ def _check(function: ca.Function, name: str) -> int:
 
 
 def _body(function: ca.Function, name: str, used_libm: set[str]) -> str:
-    """The statements computing ``nx`` (the next row) from ``st`` (the row), one SSA
-    vector value per instruction; the libm functions used are added to ``used_libm``."""
+    """The statements computing the next row from the row ``st`` in place, one SSA
+    vector value per instruction: the values that change are kept in ``nx`` and written
+    into ``st`` at the end (an output equal to its own input is not copied); the libm
+    functions used are added to ``used_libm``."""
     slot: dict[int, str] = {}  # CasADi's work index -> the SSA value it holds
-    lines = []
+    read: dict[str, int] = {}  # SSA value -> the row index it was read from
+    lines, changed = [], []
     for k in range(function.n_instructions()):
         op = _OPS.get(function.instruction_id(k), str(function.instruction_id(k)))
         ins = function.instruction_input(k)
         outs = function.instruction_output(k)
         if op == "OUTPUT":
-            lines.append(f"nx[{outs[1]}] = {slot[ins[0]]};")
+            if read.get(slot[ins[0]]) != outs[1]:
+                lines.append(f"nx[{outs[1]}] = {slot[ins[0]]};")
+                changed.append(outs[1])
             continue
         v = f"v{k}"
         a = [slot.get(i, "") for i in ins]
         if op == "INPUT":
             expr = f"st[{ins[1]}]"
+            read[v] = ins[1]
         elif op == "CONST":
             expr = "(V){" + ", ".join(
                 [_constant(float(function.instruction_constant(k)))] * LANES) + "}"
@@ -190,6 +194,7 @@ def _body(function: ca.Function, name: str, used_libm: set[str]) -> str:
             raise UnsupportedInstructionError(name, op)
         lines.append(f"const V {v} = {expr};")
         slot[outs[0]] = v
+    lines += [f"st[{j}] = nx[{j}];" for j in changed]
     return "\n".join("    " + line for line in lines)
 
 
