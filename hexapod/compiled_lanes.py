@@ -24,6 +24,7 @@ import ctypes
 import logging
 import math
 import subprocess
+from collections.abc import Callable
 
 import casadi as ca
 import numpy as np
@@ -46,6 +47,47 @@ _COMPARE = {"LT": "<", "LE": "<=", "EQ": "==", "NE": "!="}
 _LIBM = {"SQRT": "sqrt", "TANH": "tanh", "SIN": "sin", "COS": "cos", "EXP": "exp",
          "LOG": "log", "TAN": "tan", "ATAN": "atan", "ASIN": "asin", "ACOS": "acos",
          "SINH": "sinh", "COSH": "cosh", "ERF": "erf", "FLOOR": "floor", "CEIL": "ceil"}
+
+_ONE = "(V){" + ", ".join(["1.0"] * LANES) + "}"
+_ABS_MASK = "(VI){" + ", ".join(["0x7fffffffffffffffLL"] * LANES) + "}"
+
+
+def _infix(c: str) -> Callable[[list[str]], str]:
+    return lambda a: f"{a[0]} {c} {a[1]}"
+
+
+def _compare(c: str) -> Callable[[list[str]], str]:
+    # a mask, then 1.0 or 0.0 as CasADi's C gives
+    return lambda a: f"lane_mask((VI)({a[0]} {c} {a[1]}))"
+
+
+def _min_max(cmp: str) -> Callable[[list[str]], str]:
+    # libm's fmin/fmax: a NaN argument gives the other one
+    return lambda a: (f"lane_select((VI)({a[1]} != {a[1]}), {a[0]}, "
+                      f"lane_select((VI)({a[0]} {cmp} {a[1]}), {a[0]}, {a[1]}))")
+
+
+#: The C expression of each instruction from its arguments' values.
+_TRANSLATE: dict[str, Callable[[list[str]], str]] = {
+    **{op: _infix(c) for op, c in _INFIX.items()},
+    **{op: _compare(c) for op, c in _COMPARE.items()},
+    "SQ": lambda a: f"{a[0]} * {a[0]}",
+    "TWICE": lambda a: f"{a[0]} + {a[0]}",
+    "NEG": lambda a: f"-{a[0]}",
+    "INV": lambda a: f"1.0 / {a[0]}",
+    "ASSIGN": lambda a: a[0],
+    "NOT": lambda a: f"lane_mask((VI)({a[0]} == 0.0))",
+    "AND": lambda a: f"lane_mask((VI)({a[0]} != 0.0) & (VI)({a[1]} != 0.0))",
+    "OR": lambda a: f"lane_mask((VI)({a[0]} != 0.0) | (VI)({a[1]} != 0.0))",
+    # CasADi's C: (c ? x : 0), a NaN condition counts as true
+    "IF_ELSE_ZERO": lambda a: f"(V)((VI)({a[0]} != 0.0) & (VI){a[1]})",
+    "FABS": lambda a: f"(V)((VI){a[0]} & {_ABS_MASK})",
+    "FMIN": _min_max("<"),
+    "FMAX": _min_max(">"),
+    # casadi_sign: -1, 1, or the argument itself (0, -0, NaN)
+    "SIGN": lambda a: (f"lane_select((VI)({a[0]} < 0.0), -{_ONE}, "
+                       f"lane_select((VI)({a[0]} > 0.0), {_ONE}, {a[0]}))"),
+}
 
 _PRELUDE = r"""
 #include <math.h>
@@ -156,37 +198,8 @@ def _body(function: ca.Function, name: str, used_libm: set[str]) -> str:
         elif op == "CONST":
             expr = "(V){" + ", ".join(
                 [_constant(float(function.instruction_constant(k)))] * LANES) + "}"
-        elif op in _INFIX:
-            expr = f"{a[0]} {_INFIX[op]} {a[1]}"
-        elif op == "SQ":
-            expr = f"{a[0]} * {a[0]}"
-        elif op == "TWICE":
-            expr = f"{a[0]} + {a[0]}"
-        elif op == "NEG":
-            expr = f"-{a[0]}"
-        elif op == "INV":
-            expr = f"1.0 / {a[0]}"
-        elif op == "ASSIGN":
-            expr = a[0]
-        elif op in _COMPARE:
-            expr = f"lane_mask((VI)({a[0]} {_COMPARE[op]} {a[1]}))"
-        elif op == "NOT":
-            expr = f"lane_mask((VI)({a[0]} == 0.0))"
-        elif op == "AND":
-            expr = f"lane_mask((VI)({a[0]} != 0.0) & (VI)({a[1]} != 0.0))"
-        elif op == "OR":
-            expr = f"lane_mask((VI)({a[0]} != 0.0) | (VI)({a[1]} != 0.0))"
-        elif op == "IF_ELSE_ZERO":  # CasADi's C: (c ? x : 0), NaN counts as true
-            expr = f"(V)((VI)({a[0]} != 0.0) & (VI){a[1]})"
-        elif op == "FABS":
-            expr = f"(V)((VI){a[0]} & (VI){{{', '.join(['0x7fffffffffffffffLL'] * LANES)}}})"
-        elif op in ("FMIN", "FMAX"):  # libm's fmin/fmax: a NaN argument gives the other one
-            cmp = "<" if op == "FMIN" else ">"
-            expr = (f"lane_select((VI)({a[1]} != {a[1]}), {a[0]}, lane_select((VI)({a[0]} "
-                    f"{cmp} {a[1]}), {a[0]}, {a[1]}))")
-        elif op == "SIGN":  # casadi_sign: -1, 1, or the argument itself (0, -0, NaN)
-            expr = (f"lane_select((VI)({a[0]} < 0.0), -{_one()}, lane_select((VI)({a[0]} > "
-                    f"0.0), {_one()}, {a[0]}))")
+        elif op in _TRANSLATE:
+            expr = _TRANSLATE[op](a)
         elif op in _LIBM:
             used_libm.add(_LIBM[op])
             expr = f"lane_{_LIBM[op]}({a[0]})"
@@ -221,10 +234,6 @@ def lane_code(function: ca.Function, name: str, finish: ca.Function | None = Non
                            suffix="_avx2") + "#endif\n")
     return (prelude + helpers + _BLOCK.format(name=name, width=width, body=body, finish=end)
             + rows + _RUN.format(name=name))
-
-
-def _one() -> str:
-    return "(V){" + ", ".join(["1.0"] * LANES) + "}"
 
 
 class LaneFunction:

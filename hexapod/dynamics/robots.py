@@ -68,7 +68,8 @@ class DynamicRobots:
 
     The geometry, inertia and drive parameters are read at construction; the state
     (``twist``, ``drives.integral``, ``forces`` and the accumulators) lives in the rows
-    of :attr:`table`, which the compiled period advances in place.
+    of :attr:`table`, which the compiled period advances in place: write into these
+    arrays (``robots.twist[:] = ...``), never rebind them.
 
     Args:
         geometries: The true robot of every row (geometry, ``inertia``, ``drives``); one
