@@ -111,7 +111,7 @@ def _leg(A: ca.SX, B: ca.SX, B_dot: ca.SX, c_B: ca.SX, leg: ca.SX
     return u, beta, m_r, y, potential, q_dot, bias
 
 
-def _symmetric_outer(a: ca.SX, k: ca.SX) -> ca.SX:
+def symmetric_outer(a: ca.SX, k: ca.SX) -> ca.SX:
     """``a k^T`` for ``a`` parallel to ``k``, from its upper triangle (21 products)."""
     n = k.shape[0]
     out = ca.SX.zeros(n, n)
@@ -123,7 +123,7 @@ def _symmetric_outer(a: ca.SX, k: ca.SX) -> ca.SX:
     return out
 
 
-def _ldl_solve(M: ca.SX, b: ca.SX) -> ca.SX:
+def ldl_solve(M: ca.SX, b: ca.SX) -> ca.SX:
     """``M^-1 b`` for a symmetric positive-definite ``M`` by an unrolled LDL^T."""
     n = M.shape[0]
     L = [[ca.SX(0)] * n for _ in range(n)]
@@ -143,7 +143,7 @@ def _ldl_solve(M: ca.SX, b: ca.SX) -> ca.SX:
     return ca.vertcat(*out)
 
 
-def _expressions() -> tuple[ca.SX, dict[str, ca.SX]]:
+def expressions() -> tuple[ca.SX, dict[str, ca.SX]]:
     """The symbolic input row and the dynamics' terms as SX expressions of it.
 
     Besides the terms of :data:`TERMS` (``M``, ``h``, ``K``, ``kinetic``, ``potential``,
@@ -192,7 +192,7 @@ def _expressions() -> tuple[ca.SX, dict[str, ca.SX]]:
         s0 += beta
         s1 += beta * b
         s2 += beta * (ca.dot(b, b) * ca.SX.eye(3) - b @ b.T)
-        M += _symmetric_outer((m_r - beta) * k, k)
+        M += symmetric_outer((m_r - beta) * k, k)
         leg_coefficients.append(m_r - beta)
         h += ca.vertcat(y, ca.cross(b, y))
         potential += v_leg
@@ -209,7 +209,7 @@ def _expressions() -> tuple[ca.SX, dict[str, ca.SX]]:
 
 @lru_cache(maxsize=1)
 def _cached_expressions() -> tuple[ca.SX, dict[str, ca.SX]]:
-    return _expressions()
+    return expressions()
 
 
 def _build(name: str) -> ca.Function:
@@ -220,7 +220,7 @@ def _build(name: str) -> ca.Function:
     M, h, K = e["M"], e["h"], e["K"]
     u = x[18:24]
     if name == "forward":
-        return ca.Function("hexapod_dyn_forward", [x], [ca.cse(_ldl_solve(M, K.T @ u - h))])
+        return ca.Function("hexapod_dyn_forward", [x], [ca.cse(ldl_solve(M, K.T @ u - h))])
     if name == "inverse":
         rhs = M @ u + h
         f = ca.solve(K.T, rhs)
@@ -238,7 +238,7 @@ def _build(name: str) -> ca.Function:
         a, b = extra[0:6], extra[6:12]
         leg_bias = e["leg_bias"]
         M_eff = M + K.T @ ca.diag(a + b) @ K
-        acc = _ldl_solve(M_eff, K.T @ (u - a * leg_bias) - h)
+        acc = ldl_solve(M_eff, K.T @ (u - a * leg_bias) - h)
         return ca.Function("hexapod_dyn_forward_drives", [ca.vertcat(x, extra)],
                            [ca.cse(ca.vertcat(acc, e["q_dot"], K @ acc + leg_bias))])
     raise ValueError(f"unknown compiled dynamics function {name!r}; expected one of "

@@ -60,7 +60,7 @@ def _exp_so3(w: ca.SX) -> ca.SX:
     th = ca.if_else(small, 1.0, theta)
     a = ca.if_else(small, 1.0 - theta**2 / 6.0, ca.sin(th) / th)
     b = ca.if_else(small, 0.5 - theta**2 / 24.0, (1.0 - ca.cos(th)) / th**2)
-    K = mech._skew(w)
+    K = ca.skew(w)
     return ca.SX.eye(3) + a * K + b * (K @ K)
 
 
@@ -71,7 +71,7 @@ def _step_expression() -> tuple[ca.SX, ca.SX]:
     def get(name: str) -> ca.SX:
         return x[LAYOUT[name]]
 
-    sym, terms = mech._expressions()
+    sym, terms = mech.expressions()
     row = ca.vertcat(get("R"), get("t"), get("twist"), ca.SX.zeros(6), get("A"), get("E"),
                      get("p"))
     # q_dot = K tau and the legs' bias acceleration b = q_ddot - K tau_dot come with the
@@ -105,9 +105,9 @@ def _step_expression() -> tuple[ca.SX, ca.SX]:
     lhs = M_joint
     for i in range(6):
         k = K[i, :].T
-        lhs += mech._symmetric_outer(leg_total[i] * k, k)
+        lhs += mech.symmetric_outer(leg_total[i] * k, k)
     rhs = K.T @ (motor - friction - rotor * b) - hb
-    acc = mech._ldl_solve(lhs, rhs)
+    acc = mech.ldl_solve(lhs, rhs)
     tw_new = tw + h * acc
     t_new = t + h * tw_new[0:3]
     R_new = _exp_so3(h * tw_new[3:6]) @ R
