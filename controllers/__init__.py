@@ -41,6 +41,7 @@ from controllers.base import (
 )
 from controllers.cartesian_ctc import CartesianCTC, VisionCTC
 from controllers.computed_torque import ComputedTorqueController
+from controllers.feature_ctc import LegDirectionCTC, LegEdgeCTC
 from controllers.joint import JointSpaceController
 from controllers.latency import LatencyCompensated
 from controllers.leg_direction import LegDirectionController
@@ -62,6 +63,8 @@ BUILTINS = {
     "computed-torque": ComputedTorqueController,
     "cartesian-ctc": CartesianCTC,
     "vision-ctc": VisionCTC,
+    "leg-edge-ctc": LegEdgeCTC,
+    "leg-direction-ctc": LegDirectionCTC,
     "latency-compensated": LatencyCompensated,
 }
 
@@ -79,9 +82,11 @@ __all__ = [
     "Goal",
     "JointSpaceController",
     "LatencyCompensated",
+    "LegDirectionCTC",
     "LegDirectionController",
     "LegDirectionMPCController",
     "LegDirectionQPController",
+    "LegEdgeCTC",
     "LegEdgeController",
     "LegEdgeMPCController",
     "LegEdgeQPController",
