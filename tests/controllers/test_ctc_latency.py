@@ -1,0 +1,55 @@
+"""Latency compensation of the vision computed-torque laws (``latency-compensated`` with
+``law = "vision-ctc"`` / ``"leg-edge-ctc"``): on the dynamic world, with an exact model, an
+image one period old predicted to the control instant gives the command of the image
+taken at the instant; without the prediction the command differs."""
+
+from __future__ import annotations
+
+from dataclasses import replace
+
+import numpy as np
+import pytest
+
+from controllers import registry
+from controllers.latency import LatencyCompensated
+from hexapod import HexapodGeometry
+from hexapod.actuation import Actuation
+from hexapod.dynamics.robots import DynamicRobots
+from hexapod.workspace import home_pose
+from tests.controllers.ctc_world import DT, PHYSICS_STEPS, CtcWorld, ideal_drives
+
+
+@pytest.mark.parametrize("law", ["vision-ctc", "leg-edge-ctc", "leg-direction-ctc"])
+def test_an_old_image_predicted_with_an_exact_model(geometry: HexapodGeometry,
+                                                    law: str) -> None:
+    world = CtcWorld.make(ideal_drives(geometry))
+    R0, t0 = home_pose(world.truth)
+    ctx = world.context(world.goal(R0, t0 + np.array([0.004, -0.003, 0.002])))
+    comp = LatencyCompensated(law=law)
+    assert comp.actuation is Actuation.FORCE
+    plain, late_law = registry.create(law), registry.create(law)
+    for c in (comp, plain, late_law):
+        c.reset(ctx)
+    robot = DynamicRobots([world.truth], R0[None].copy(), t0[None].copy())
+    robot.drives.mode = "force"
+    rows = np.arange(1)
+    previous = None
+    for k in range(12):
+        now = world.observation(robot, k * DT)
+        expected = plain.step(now)
+        if previous is None:
+            got = comp.step(now)
+            late_law.step(now)
+        else:
+            late = replace(now, normals=previous.normals, directions=previous.directions,
+                           image_t=previous.t)
+            got = comp.step(late)
+            stale = late_law.step(late)
+            assert got.reason is None and expected.reason is None, (got.reason,
+                                                                    expected.reason)
+            np.testing.assert_allclose(got.forces, expected.forces, rtol=1e-6, atol=1e-6)
+            if k > 2:  # moving: the stale image gives other forces
+                assert np.abs(stale.forces - expected.forces).max() > 1e-3
+        robot.advance(rows, np.asarray(expected.forces)[None], DT / PHYSICS_STEPS,
+                      PHYSICS_STEPS)
+        previous = now
