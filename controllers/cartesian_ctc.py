@@ -210,7 +210,7 @@ def pose_measurement(model: object, R: np.ndarray, t: np.ndarray, q: np.ndarray,
     # the pose task reads the pose only (base points and directions unused)
     state = TaskState(np.zeros((1, 6, 3)), np.zeros((1, 6, 3)), q[None], None, R[None],
                       t[None])
-    return Measured(R, t, twist, state)
+    return Measured(R, t, twist, state, inverse_jacobian=K)
 
 
 def pose_tasks(reference: object, times: np.ndarray) -> list[Task]:

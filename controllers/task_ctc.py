@@ -63,6 +63,7 @@ class Measured:
         frame: The task's frame from the base (None: the base frame itself).
         rows: (m,) bool, the task rows to use (None: all).
         note: A diagnostic (e.g. legs left out).
+        inverse_jacobian: (6, 6) nominal ``K`` at the pose, or None.
     """
 
     rotation: np.ndarray
@@ -72,6 +73,7 @@ class Measured:
     frame: Transform | None = None
     rows: np.ndarray | None = None
     note: str | None = None
+    inverse_jacobian: np.ndarray | None = None
 
 
 def line_to(context: ControllerContext, R0: np.ndarray, t0: np.ndarray, R1: np.ndarray,
@@ -229,7 +231,8 @@ class TaskComputedTorque(RemembersOptions, Controller):
         if sol.reason is not None:
             return self.refuse(sol.reason, e[rows])
         f, _ = self.solver.forces(self.model, m.rotation, m.translation, m.twist, sol.acc,
-                                  qd, hold=float(self.context.dt))
+                                  qd, hold=float(self.context.dt),
+                                  inverse_jacobian=m.inverse_jacobian)
         if not np.all(np.isfinite(f)):
             return self.refuse(f"non-finite leg forces {f}")
         notes = [] if m.note is None else [m.note]

@@ -160,7 +160,8 @@ class ComputedTorqueSolver:
     @staticmethod
     def forces(model: DynamicModel, R: np.ndarray, t: np.ndarray, twist: np.ndarray,
                acc: np.ndarray, q_dot: np.ndarray, coulomb_velocity: np.ndarray | None = None,
-               hold: float = 0.0) -> tuple[np.ndarray, np.ndarray]:
+               hold: float = 0.0, inverse_jacobian: np.ndarray | None = None
+               ) -> tuple[np.ndarray, np.ndarray]:
         """Leg forces [N] of the platform acceleration, and the leg acceleration [m/s^2].
 
         Args:
@@ -173,8 +174,10 @@ class ComputedTorqueSolver:
                 takes [m/s]; None: the velocity the legs reach over ``hold`` at the
                 commanded acceleration, ``q_dot + hold a``.
             hold: Time the force is held (the control period) [s].
+            inverse_jacobian: ``K`` (6, 6) at the pose when already known.
         """
-        K = model.terms_batch(R[None], t[None], twist[None])[2][0]
+        K = inverse_jacobian if inverse_jacobian is not None else model.terms_batch(
+            R[None], t[None], twist[None])[2][0]
         bias = model.legs_batch(R[None], t[None], twist[None])[1][0]
         a = K @ acc + bias
         v = q_dot + hold * a if coulomb_velocity is None else coulomb_velocity
