@@ -69,6 +69,8 @@ class ComputedTorqueController(Controller):
     name = "computed-torque"
     features = frozenset({"lengths"})
     actuation = Actuation.FORCE
+    #: Samples ``context.reference`` itself (:mod:`controllers.tracking` passes it through).
+    tracks_reference = True
 
     def __init__(self, natural_frequency: float = NATURAL_FREQUENCY_HZ,
                  damping: float = DAMPING, smooth_goal: bool = True) -> None:
