@@ -70,6 +70,7 @@ class FeatureCTC(TaskComputedTorque):
             raise ContextError(self.name, "base_points", f"expected (6, 3) finite, got {A}")
         self._frame = cam
         self._A = A
+        self._grid: tuple[object, np.ndarray] | None = None
 
     def take_goal(self, goal: Goal) -> None:
         """The taught features (``goal.normals`` or ``goal.directions``).
@@ -115,15 +116,37 @@ class FeatureCTC(TaskComputedTorque):
         raise NotImplementedError
 
     def tasks_at(self, times: np.ndarray | None, measured: Measured) -> list[Task]:
-        """The task towards the anchored model features at ``times``, or the taught goal."""
+        """The task towards the anchored model features at ``times``, or the taught goal.
+
+        The features of the instants around the control grid ``k dt`` are computed once
+        for the whole reference (one batched camera model call); other instants on
+        demand."""
         ctx = self.context
         if times is None or self.reference is None or ctx is None:
             return [self.make_task(self._taught)]
+        dt = float(ctx.dt)
+        k = round(float(times[1]) / dt)
+        if abs(float(times[1]) - k * dt) < 1e-9 and k >= 0:
+            if self._grid is None or self._grid[0] is not self.reference:
+                n = int(np.ceil(float(self.reference.duration) / dt)) + 3
+                grid_times = (dt * np.arange(n)[:, None] + (times - times[1])).ravel()
+                self._grid = (self.reference, self._anchored(grid_times).reshape(
+                    n, 3, *self._taught.shape))
+            grid = self._grid[1]
+            rows = grid[min(k, len(grid) - 1)]
+            return [self.make_task(rows[i]) for i in range(3)]
+        return [self.make_task(f) for f in self._anchored(times)]
+
+    def _anchored(self, times: np.ndarray) -> np.ndarray:
+        """(m, ...) the nominal features of the reference at ``times``, anchored at the
+        taught goal."""
+        ctx = self.context
+        assert ctx is not None and self.reference is not None
         end = float(self.reference.duration) + 1.0
         goals = reference_goals(replace(ctx, reference=self.reference),
                                 np.append(times, end))
         _anchor(goals, replace(ctx.goal, **{self.key: self._taught}))
-        return [self.make_task(goals[self.key][i]) for i in range(len(times))]
+        return np.asarray(goals[self.key][:-1])
 
     def retarget(self, goal: Goal) -> None:
         """A new fixed goal; with a reference the taught features anchor it."""

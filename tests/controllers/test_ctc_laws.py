@@ -183,3 +183,29 @@ def test_bad_measurements_are_refused_with_a_reason(world: CtcWorld, law: str) -
         edge_visible=~np.repeat(one[:, None], 2, axis=1), direction_visible=~one))
     assert cmd.reason is None, cmd.reason
     assert np.all(np.isfinite(cmd.forces)) and np.abs(cmd.forces).max() > 0
+
+
+@pytest.mark.parametrize("law", ["leg-edge-ctc", "leg-direction-ctc"])
+def test_reference_features_on_the_grid_and_off_it(world: CtcWorld, law: str) -> None:
+    """The features of the reference precomputed on the control grid are those computed
+    on demand for an instant off the grid (2 ns later: the same forces to 1e-6)."""
+    R0, t0 = home_pose(world.truth)
+    R1 = R0 @ exp_so3(np.deg2rad(np.array([1.0, -1.0, 0.5])))
+    t1 = t0 + np.array([0.008, -0.006, 0.006])
+    ref = PoseTrajectory("line", "quintic", R0, t0, speed=0.01, acceleration=0.05,
+                         goal_rotation=R1, goal_translation=t1, angular_speed=0.03,
+                         angular_acceleration=0.1)
+    on, off = registry.create(law), registry.create(law)
+    for c in (on, off):
+        c.reset(world.context(world.goal(R1, t1), ref))
+    from hexapod.dynamics.robots import DynamicRobots
+
+    robot = DynamicRobots([world.truth], R0[None].copy(), t0[None].copy())
+    robot.drives.mode = "force"
+    for k in range(15):
+        obs = world.observation(robot, k * DT)
+        a = on.step(obs)
+        b = off.step(dataclasses.replace(obs, t=k * DT + 2e-9))
+        assert a.reason is None and b.reason is None
+        np.testing.assert_allclose(a.forces, b.forces, rtol=1e-6, atol=1e-6)
+        robot.advance(np.arange(1), np.asarray(a.forces)[None], DT / 20, 20)
