@@ -22,7 +22,7 @@ controller context's NOMINAL geometry, inertia and drives, never the world's tru
   inertia ``m_r a`` and friction ``c q_dot + f_c tanh(q_dot* / v_s)``.
 
 The force is held over the control period: the design is continuous, so ``omega_n dt``
-must stay small. The default ``omega_n = 2 pi * 2 Hz`` with ``zeta = 0.7`` gives
+must stay small. The default ``omega_n = 2 pi * 2 Hz`` with ``zeta = 1`` gives
 ``omega_n dt = 0.25`` at the 20 ms period.
 """
 
