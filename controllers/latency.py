@@ -66,6 +66,9 @@ class LatencyCompensated(Controller):
         self.law = registry.create(self.law_name, **options)
         self.features = frozenset(getattr(self.law, "features", frozenset())) | {"lengths"}
         self.actuation = actuation_of(self.law)
+        #: A law that samples ``context.reference`` itself is passed through by
+        #: :class:`~controllers.tracking.TrackingController`, and so is its wrapper.
+        self.tracks_reference = bool(getattr(self.law, "tracks_reference", False))
         self.context: ControllerContext | None = None
         self._times: deque[float] = deque(maxlen=HISTORY)
         self._lengths: deque[np.ndarray] = deque(maxlen=HISTORY)

@@ -90,3 +90,30 @@ def test_an_image_between_readings_uses_the_leg_rates(geometry: HexapodGeometry)
     hermite, linear = max(gaps["hermite"]), max(gaps["linear"])
     assert linear > 1e-3  # the linear interpolation misses the acceleration
     assert hermite < 0.01 * linear, (hermite, linear)  # measured: 1.6e-5 N, 0.026 N
+
+
+def test_the_tracking_wrapper_passes_the_compensated_law_through(
+        geometry: HexapodGeometry) -> None:
+    """``latency-compensated`` around a CTC law samples the reference like the law (the
+    study's tracking wrapper resets it with the taught goal, never retargets it): it
+    tracks a line as the bare law does."""
+    import math
+
+    from controllers.tracking import TrackingController
+    from hexapod.se3 import exp_so3
+    from hexapod.trajectory import PoseTrajectory
+
+    world = CtcWorld.make(ideal_drives(geometry))
+    R0, t0 = home_pose(world.truth)
+    R1 = R0 @ exp_so3(np.deg2rad(np.array([1.0, -1.0, 0.5])))
+    t1 = t0 + np.array([0.008, -0.006, 0.006])
+    ref = PoseTrajectory("line", "quintic", R0, t0, speed=0.01, acceleration=0.05,
+                         goal_rotation=R1, goal_translation=t1, angular_speed=0.03,
+                         angular_acceleration=0.1)
+    ctrl = TrackingController(LatencyCompensated(law="leg-edge-ctc"))
+    assert ctrl.inner.tracks_reference
+    ctrl.reset(world.context(world.goal(R1, t1), ref))
+    steps = math.ceil(ref.duration / DT) + 25
+    p, _, _ = world.run(ctrl, (R0, t0), steps)
+    err = np.linalg.norm(p - ref.at(DT * np.arange(steps + 1)).translation, axis=1)
+    assert err.max() < 30e-6 and err[-1] < 2e-6, (err.max(), err[-1])
