@@ -20,7 +20,6 @@ from controllers.base import ControllerContext, Goal, Observation
 from controllers.exceptions import ContextError
 from controllers.task_ctc import Measured, TaskComputedTorque, goal_pose_of
 from controllers.tasks import PlatformPoseTask, Task, TaskState
-from hexapod.fk import forward_kinematics
 from hexapod.kinematics import Transform
 
 #: Smallest second singular value of the seen platform points about their centroid,
@@ -60,10 +59,7 @@ class CartesianCTC(TaskComputedTorque):
                 ) -> Measured | str:
         """The nominal forward kinematics of the encoders and ``K^-1 q_dot``."""
         assert self.context is not None and self.model is not None
-        fk = forward_kinematics(self.context.geometry, q, guess=self.guess,
-                                check_stroke=False)
-        R, t = fk.rotation, fk.translation
-        self.guess = (R, t)
+        R, t = self.encoder_pose(q)
         return pose_measurement(self.model, R, t, q, q_dot)
 
     def tasks_at(self, times: np.ndarray | None, measured: Measured) -> list[Task]:

@@ -43,6 +43,7 @@ from controllers.solvers.computed_torque import (
     SecondOrderGains,
     drive_forces,
 )
+from controllers.task_ctc import encoder_readings
 from hexapod.actuation import Actuation
 from hexapod.dynamics import DynamicModel
 from hexapod.fk import forward_kinematics
@@ -142,15 +143,10 @@ class ComputedTorqueController(Controller):
         fails)."""
         if self._ctx is None or self._model is None:
             return self._refuse("reset(context) was not called")
-        t = float(observation.t)
-        q = np.asarray(observation.lengths, dtype=float)
-        if observation.q_dot is None:
-            return self._refuse("needs the measured leg velocities (Observation.q_dot), "
-                                "which only the dynamic world gives")
-        qd = np.asarray(observation.q_dot, dtype=float)
-        for what, x in (("time", np.array([t])), ("lengths", q), ("leg velocities", qd)):
-            if x.size == 0 or not np.all(np.isfinite(x)):
-                return self._refuse(f"measured {what} not finite: {x}")
+        readings = encoder_readings(observation)
+        if isinstance(readings, str):
+            return self._refuse(readings)
+        t, q, qd = readings
         if self._start is None:  # the fixed goal's quintic starts here
             T = QUINTIC_PEAK_SPEED * float(np.abs(self._q_star - q).max()) / \
                 self._ctx.max_speed if self.smooth_goal else 0.0

@@ -35,7 +35,6 @@ from controllers.exceptions import ContextError
 from controllers.task_ctc import Measured, TaskComputedTorque, goal_pose_of
 from controllers.tasks import LegDirectionTask, LegEdgeTask, Task, TaskState
 from controllers.tracking import _anchor, reference_goals
-from hexapod.fk import forward_kinematics
 from hexapod.kinematics import Transform
 
 #: A unit vector standing in for a hidden leg's features (its rows are not used).
@@ -92,10 +91,7 @@ class FeatureCTC(TaskComputedTorque):
                 ) -> Measured | str:
         """Encoders' pose and twist; the seen features as the task state."""
         assert self.context is not None and self.model is not None
-        fk = forward_kinematics(self.context.geometry, q, guess=self.guess,
-                                check_stroke=False)
-        R, t = fk.rotation, fk.translation
-        self.guess = (R, t)
+        R, t = self.encoder_pose(q)
         m = pose_measurement(self.model, R, t, q, q_dot)
         feats = self.features_seen(observation)
         if isinstance(feats, str):

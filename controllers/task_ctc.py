@@ -38,6 +38,7 @@ from controllers.solvers.computed_torque import (
 from controllers.tasks.base import Task, TaskState
 from hexapod.actuation import Actuation
 from hexapod.dynamics import DynamicModel
+from hexapod.fk import forward_kinematics
 from hexapod.kinematics import Transform, inverse_kinematics
 from hexapod.trajectory import PoseTrajectory
 
@@ -181,15 +182,10 @@ class TaskComputedTorque(RemembersOptions, Controller):
         """The leg forces of this period [N], or a refusal (zeros) with its reason."""
         if self.context is None or self.model is None:
             return self.refuse("reset(context) was not called")
-        t = float(observation.t)
-        q = np.asarray(observation.lengths, dtype=float)
-        if observation.q_dot is None:
-            return self.refuse("needs the measured leg velocities (Observation.q_dot), "
-                               "which only the dynamic world gives")
-        qd = np.asarray(observation.q_dot, dtype=float)
-        for what, x in (("time", np.array([t])), ("lengths", q), ("leg velocities", qd)):
-            if x.size == 0 or not np.all(np.isfinite(x)):
-                return self.refuse(f"measured {what} not finite: {x}")
+        readings = encoder_readings(observation)
+        if isinstance(readings, str):
+            return self.refuse(readings)
+        t, q, qd = readings
         try:
             m = self.measure(observation, q, qd)
             if isinstance(m, str):
@@ -199,6 +195,15 @@ class TaskComputedTorque(RemembersOptions, Controller):
             return self._command(t, m, qd)
         except Exception as exc:  # the nominal model failed here: refuse with its reason
             return self.refuse(f"nominal model failed: {exc}")
+
+    def encoder_pose(self, q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """The nominal forward kinematics of the lengths ``q`` [m] (warm-started at the
+        last one)."""
+        assert self.context is not None
+        fk = forward_kinematics(self.context.geometry, q, guess=self.guess,
+                                check_stroke=False)
+        self.guess = (fk.rotation, fk.translation)
+        return fk.rotation, fk.translation
 
     def _start(self, t: float, m: Measured) -> None:
         self._started, self._t0 = True, t
@@ -246,6 +251,21 @@ class TaskComputedTorque(RemembersOptions, Controller):
         """A zero force command with the reason."""
         return Command.refuse(f"{self.name}: {problem}", error=error,
                               actuation=Actuation.FORCE)
+
+
+def encoder_readings(observation: Observation) -> tuple[float, np.ndarray, np.ndarray] | str:
+    """The time [s], lengths [m] and leg velocities [m/s] of an observation, or why they
+    cannot be used (missing leg velocities, a non-finite value)."""
+    t = float(observation.t)
+    q = np.asarray(observation.lengths, dtype=float)
+    if observation.q_dot is None:
+        return ("needs the measured leg velocities (Observation.q_dot), which only the "
+                "dynamic world gives")
+    qd = np.asarray(observation.q_dot, dtype=float)
+    for what, x in (("time", np.array([t])), ("lengths", q), ("leg velocities", qd)):
+        if x.size == 0 or not np.all(np.isfinite(x)):
+            return f"measured {what} not finite: {x}"
+    return t, q, qd
 
 
 def _with_goal(context: ControllerContext, goal: Goal) -> ControllerContext:

@@ -26,6 +26,7 @@ from hexapod.se3 import exp_so3, pose_error
 from hexapod.trajectory import PoseTrajectory
 from hexapod.workspace import home_pose
 from tests.controllers.ctc_world import DT, CtcWorld, ideal_drives
+from tests.controllers.test_computed_torque import _sampled_design, _step_response
 
 LAWS = ("cartesian-ctc", "vision-ctc", "leg-edge-ctc", "leg-direction-ctc")
 
@@ -33,22 +34,6 @@ LAWS = ("cartesian-ctc", "vision-ctc", "leg-edge-ctc", "leg-direction-ctc")
 @pytest.fixture
 def world(geometry: HexapodGeometry) -> CtcWorld:
     return CtcWorld.make(ideal_drives(geometry))
-
-
-def _step_response(t: np.ndarray, omega: float, zeta: float) -> np.ndarray:
-    """Error of a unit step from rest: ``e(0) = -1``, ``e_dot(0) = 0``."""
-    wd = omega * math.sqrt(1 - zeta**2)
-    return -np.exp(-zeta * omega * t) * (np.cos(wd * t)  # type: ignore[no-any-return]
-                                         + zeta / math.sqrt(1 - zeta**2) * np.sin(wd * t))
-
-
-def _sampled_design(omega: float, zeta: float) -> tuple[float, float]:
-    """Natural frequency and damping of the design held over ``DT`` (zero-order hold)."""
-    A = np.array([[1.0, DT], [0.0, 1.0]])
-    B = np.array([[DT**2 / 2], [DT]])
-    poles = np.linalg.eigvals(A - B @ np.array([[omega**2, 2 * zeta * omega]]))
-    s = np.log(poles.astype(complex)) / DT
-    return float(abs(s[0])), float(-s[0].real / abs(s[0]))
 
 
 @pytest.mark.parametrize("law", LAWS)
