@@ -17,8 +17,12 @@ from __future__ import annotations
 import numpy as np
 
 from controllers.base import ControllerContext, Goal, Observation
-from controllers.exceptions import ContextError
-from controllers.task_ctc import Measured, TaskComputedTorque, goal_pose_of
+from controllers.task_ctc import (
+    Measured,
+    TaskComputedTorque,
+    camera_and_base_points,
+    goal_pose_of,
+)
 from controllers.tasks import PlatformPoseTask, Task, TaskState
 from hexapod.kinematics import Transform
 
@@ -103,13 +107,7 @@ class VisionCTC(CartesianCTC):
         Raises:
             ContextError: No camera pose, or base points not (6, 3) finite.
         """
-        cam = getattr(context.camera, "camera_from_base", None)
-        if not isinstance(cam, Transform):
-            raise ContextError(self.name, "camera", "needs the estimated camera with its "
-                               "camera_from_base pose")
-        A = np.asarray(context.base_points, dtype=float)
-        if A.shape != (6, 3) or not np.all(np.isfinite(A)):
-            raise ContextError(self.name, "base_points", f"expected (6, 3) finite, got {A}")
+        cam, _ = camera_and_base_points(self.name, context)
         self._base_from_camera = cam.inverse()
         self._offset: Transform | None = None
         taught = self._taught(context.goal)

@@ -32,10 +32,14 @@ import numpy as np
 from controllers.base import ControllerContext, Goal, Observation
 from controllers.cartesian_ctc import directions_seen, pose_measurement
 from controllers.exceptions import ContextError
-from controllers.task_ctc import Measured, TaskComputedTorque, goal_pose_of
+from controllers.task_ctc import (
+    Measured,
+    TaskComputedTorque,
+    camera_and_base_points,
+    goal_pose_of,
+)
 from controllers.tasks import LegDirectionTask, LegEdgeTask, Task, TaskState
 from controllers.tracking import _anchor, reference_goals
-from hexapod.kinematics import Transform
 
 #: A unit vector standing in for a hidden leg's features (its rows are not used).
 _DUMMY = np.array([0.0, 0.0, 1.0])
@@ -60,13 +64,7 @@ class FeatureCTC(TaskComputedTorque):
         Raises:
             ContextError: Naming the missing or bad field.
         """
-        cam = getattr(context.camera, "camera_from_base", None)
-        if not isinstance(cam, Transform):
-            raise ContextError(self.name, "camera", "needs the estimated camera with its "
-                               "camera_from_base pose")
-        A = np.asarray(context.base_points, dtype=float)
-        if A.shape != (6, 3) or not np.all(np.isfinite(A)):
-            raise ContextError(self.name, "base_points", f"expected (6, 3) finite, got {A}")
+        cam, A = camera_and_base_points(self.name, context)
         self._frame = cam
         self._A = A
         self._grid: tuple[object, np.ndarray] | None = None

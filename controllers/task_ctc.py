@@ -274,6 +274,23 @@ def _with_goal(context: ControllerContext, goal: Goal) -> ControllerContext:
     return replace(context, goal=goal)
 
 
+def camera_and_base_points(controller: str, context: ControllerContext
+                           ) -> tuple[Transform, np.ndarray]:
+    """The estimated camera pose ``camera_from_base`` and base points (6, 3) [m].
+
+    Raises:
+        ContextError: No camera pose, or base points not (6, 3) finite.
+    """
+    cam = getattr(context.camera, "camera_from_base", None)
+    if not isinstance(cam, Transform):
+        raise ContextError(controller, "camera", "needs the estimated camera with its "
+                           "camera_from_base pose")
+    A = np.asarray(context.base_points, dtype=float)
+    if A.shape != (6, 3) or not np.all(np.isfinite(A)):
+        raise ContextError(controller, "base_points", f"expected (6, 3) finite, got {A}")
+    return cam, A
+
+
 def goal_pose_of(controller: str, goal: Goal) -> tuple[np.ndarray, np.ndarray]:
     """``goal.rotation`` and ``goal.translation``, checked.
 

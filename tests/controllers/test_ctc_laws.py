@@ -49,6 +49,21 @@ def test_registered_force_controllers(law: str) -> None:
 
 
 @pytest.mark.parametrize("law", LAWS)
+def test_missing_context_is_named(world: CtcWorld, law: str) -> None:
+    R0, t0 = home_pose(world.truth)
+    ctx = world.context(world.goal(R0, t0))
+    ctrl = registry.create(law)
+    if law != "cartesian-ctc":  # the camera laws need the estimated camera pose
+        with pytest.raises(ContextError, match="context field 'camera'"):
+            ctrl.reset(dataclasses.replace(ctx, camera=None))
+    key = {"cartesian-ctc": "goal.rotation/translation", "vision-ctc": "goal.rotation",
+           "leg-edge-ctc": "goal.normals", "leg-direction-ctc": "goal.directions"}[law]
+    with pytest.raises(ContextError, match=key):
+        ctrl.reset(dataclasses.replace(ctx, goal=dataclasses.replace(
+            ctx.goal, normals=None, directions=None, rotation=None)))
+
+
+@pytest.mark.parametrize("law", LAWS)
 def test_tracks_a_circle(world: CtcWorld, law: str) -> None:
     """A 10 mm circle at 5 mm/s: within 20 um of the reference all along (the held force's
     lag), within 2 um at the end."""
