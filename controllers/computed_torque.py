@@ -63,6 +63,9 @@ QUINTIC_PEAK_SPEED = 15.0 / 8.0
 DAMPING = 1.0
 #: Forward-kinematics tolerance on the length residual [m] (as :func:`forward_kinematics`).
 FK_TOLERANCE = 1e-12
+#: Calls of the compiled step (``compiled_ctc.FK_CALLS`` x 3 Newton iterations each)
+#: before the numpy path takes over (as its budget of 50 iterations).
+FK_MAX_CALLS = 16
 
 
 class ComputedTorqueController(Controller):
@@ -201,18 +204,27 @@ class ComputedTorqueController(Controller):
         row[24:30] = q_s
         row[30:36] = qd_s
         row[36:42] = qdd_s
-        y = compiled_ctc.joint_step(FK_TOLERANCE, INVERSE_TOLERANCE).single(row)
-        if y[54] != 1.0 or not math.isfinite(float(y @ y)):
+        step = compiled_ctc.joint_step(INVERSE_TOLERANCE)
+        y = step.single(row)
+        calls = 1
+        while not y[54] < FK_TOLERANCE:  # Newton from the pose reached, as forward_kinematics
+            if calls >= FK_MAX_CALLS or not math.isfinite(float(y[54])):
+                return None
+            row[0:12] = y[0:12]
+            y = step.single(row)
+            calls += 1
+        if y[55] != 1.0 or not math.isfinite(float(y @ y)):
             return None
         K = y[12:48].reshape(6, 6).T
         _, s, _, info = _singular_values(K, compute_uv=0)  # LAPACK gesdd as np.linalg.svd
         if info != 0 or not (s[0] > 0 and s[-1] > self.solver.threshold * s[0]):
             return None
+        s_max, s_min = float(s[0]), float(s[-1])
         f = y[48:54]
         self._pose = (y[0:9].reshape(3, 3).T, y[9:12])
         e = q_s - q
-        return Command.of_forces(f, error=e, error_norm=float(np.linalg.norm(e)), rank=6,
-                                 condition=float(s[0] / s[-1]), features_used=6)
+        return Command.of_forces(f, error=e, error_norm=math.sqrt(float(e @ e)), rank=6,
+                                 condition=s_max / s_min, features_used=6)
 
     def _numpy_step(self, q: np.ndarray, qd: np.ndarray, q_s: np.ndarray,
                     qd_s: np.ndarray, qdd_s: np.ndarray) -> Command:

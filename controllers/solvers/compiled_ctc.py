@@ -9,7 +9,8 @@ expressions (:func:`hexapod.fk._newton_expression` and
 
 - forward kinematics of the encoder lengths: ``FK_CALLS`` calls of the compiled
   Newton steps (``FK_CALLS * ITERATIONS_PER_CALL`` iterations) from the previous pose,
-  with the length residual out so that the caller can check convergence;
+  with the length residual out so that the caller can check convergence (and call
+  again from the pose reached);
 - ``K`` at that pose, the twist ``tau = K^-1 q_dot`` and the bias ``K_dot tau``;
 - the desired leg acceleration ``a* = q_ddot* + Kd (q_dot* - K tau) + Kp (q* - q)``,
   ``tau_dot = K^-1 (a* - K_dot tau)`` and the leg acceleration ``a = K tau_dot +
@@ -29,8 +30,9 @@ the 19 inertial parameters (:func:`hexapod.dynamics.compiled.parameter_row`); th
 drives' rotor inertia, viscous and Coulomb coefficients (6 each); ``Kp``, ``Kd``.
 
 Output (:data:`OUT`): ``R`` (9, column-major), ``t`` (3), ``K`` (36, column-major), the
-forces (6) [N], and 1.0 when the forward kinematics converged (max absolute length
-residual below ``fk_tolerance``) and the inverse solve's residual is below
+forces (6) [N], the max absolute FK length residual [m] (the caller calls again from
+the pose reached while it is not below its tolerance, as :func:`hexapod.fk.
+forward_kinematics` does), and 1.0 when the inverse solve's residual is below
 ``inverse_tolerance`` relative to its right-hand side (else 0.0; NaN compares false).
 """
 
@@ -47,14 +49,14 @@ from hexapod.dynamics.model import INVERSE_TOLERANCE
 from hexapod.fk import _newton_expression
 
 #: Calls of the compiled Newton steps unrolled in the function.
-FK_CALLS = 2
+FK_CALLS = 1
 #: Length of an input row.
 ROW = 117
 #: Length of an output row.
-OUT = 55
+OUT = 56
 
 
-def _build(fk_tolerance: float, inverse_tolerance: float) -> ca.Function:
+def _build(inverse_tolerance: float) -> ca.Function:
     x = ca.SX.sym("x", ROW)
     pose, q, qd = x[0:12], x[12:18], x[18:24]
     q_s, qd_s, qdd_s = x[24:30], x[30:36], x[36:42]
@@ -80,25 +82,22 @@ def _build(fk_tolerance: float, inverse_tolerance: float) -> ca.Function:
     f = ca.solve(K.T, rhs)
     inverse_residual = ca.norm_2(K.T @ f - rhs)
     f = f + rotor * a + viscous * qd + coulomb * ca.tanh(qd_s / COULOMB_SMOOTHING)
-    fk_converged = ca.mmax(ca.fabs(residual)) < fk_tolerance
-    inverse_solved = inverse_residual <= inverse_tolerance * ca.norm_2(rhs) + 1e-12
-    ok = ca.if_else(ca.logic_and(fk_converged, inverse_solved), 1.0, 0.0)
-    out = ca.vertcat(R_t, ca.reshape(K, 36, 1), f, ok)
+    fk_residual = ca.mmax(ca.fabs(residual))
+    inverse_solved = ca.if_else(
+        inverse_residual <= inverse_tolerance * ca.norm_2(rhs) + 1e-12, 1.0, 0.0)
+    out = ca.vertcat(R_t, ca.reshape(K, 36, 1), f, fk_residual, inverse_solved)
     return ca.Function("hexapod_ctc_joint_step", [x], [ca.cse(out)])
 
 
 @lru_cache(maxsize=4)
-def joint_step(fk_tolerance: float = 1e-12, inverse_tolerance: float = INVERSE_TOLERANCE
-               ) -> CompiledFunction:
+def joint_step(inverse_tolerance: float = INVERSE_TOLERANCE) -> CompiledFunction:
     """The compiled step (built and compiled on first use; cached on disk).
 
     Args:
-        fk_tolerance: Convergence threshold of the forward kinematics on the max
-            absolute length residual [m] (as :func:`hexapod.fk.forward_kinematics`).
         inverse_tolerance: Relative residual of the inverse solve above which ``K`` is
             taken as singular (as :meth:`hexapod.dynamics.DynamicModel.inverse_batch`).
     """
-    return CompiledFunction(_build(float(fk_tolerance), float(inverse_tolerance)))
+    return CompiledFunction(_build(float(inverse_tolerance)))
 
 
 __all__ = ["FK_CALLS", "OUT", "ROW", "joint_step"]
