@@ -3,7 +3,7 @@
 :class:`~controllers.computed_torque.ComputedTorqueController` spends its time in
 Python and numpy around several small compiled calls (forward kinematics, the
 dynamics' terms twice, the inverse dynamics). This module composes the SAME symbolic
-expressions (:func:`hexapod.fk._newton_expression` and
+expressions (:func:`hexapod.fk.newton_function` and
 :func:`hexapod.dynamics.compiled.expressions`) into one function, generated to C by
 :class:`hexapod.compiled.CompiledFunction`:
 
@@ -46,7 +46,7 @@ from hexapod.compiled import CompiledFunction
 from hexapod.dynamics import compiled as dyn
 from hexapod.dynamics.drive_model import COULOMB_SMOOTHING
 from hexapod.dynamics.model import INVERSE_TOLERANCE
-from hexapod.fk import _newton_expression
+from hexapod.fk import newton_function
 
 #: Calls of the compiled Newton steps unrolled in the function.
 FK_CALLS = 1
@@ -64,7 +64,7 @@ def _build(inverse_tolerance: float) -> ca.Function:
     params = x[78:97]
     rotor, viscous, coulomb = x[97:103], x[103:109], x[109:115]
     kp, kd = x[115], x[116]
-    newton = _newton_expression()
+    newton = newton_function()
     y = newton(ca.vertcat(pose, q, points))
     for _ in range(FK_CALLS - 1):
         y = newton(ca.vertcat(y[0:12], q, points))
