@@ -18,7 +18,8 @@ NOISE_KEYS = ("amplitude_deg", "pixel_sigma_px", "points_per_edge", "outlier_fra
 CALIBRATION_ERROR_KEYS = ("scale", "base_points_mm", "platform_points_mm", "joint_offsets_mm",
                           "camera_pose_mm", "camera_pose_deg", "intrinsics_percent",
                           "leg_radius_percent", "distortion_percent", "mass_percent",
-                          "inertia_percent")
+                          "inertia_percent", "model_mass_error_percent",
+                          "model_inertia_error_percent")
 #: The worlds a study runs in (``[robot] world``).
 WORLDS = ("kinematic", "dynamic")
 
@@ -50,6 +51,8 @@ RANGES: dict[str, tuple[float, float, bool, bool]] = {
     "calibration_error.distortion_percent": (0.0, 100.0, True, True),
     "calibration_error.mass_percent": (0.0, 50.0, True, True),
     "calibration_error.inertia_percent": (0.0, 50.0, True, True),
+    "calibration_error.model_mass_error_percent": (-50.0, 100.0, True, True),
+    "calibration_error.model_inertia_error_percent": (-50.0, 100.0, True, True),
     "calibration.noise_deg": (0.0, 90.0, True, True),
     "calibration.warn_singular_ratio": (0.0, 1.0, True, False),
     "calibration.min_singular_ratio": (0.0, 1.0, True, False),
@@ -77,7 +80,10 @@ CLOCK_KEYS = ("frame_rate_hz", "latency_ms", "latency_frames", "jitter_ms")
 TASK_KEYS = ("speed_mm_s", "acceleration_mm_s2")
 #: The calibration-error keys in millimetres or degrees whose standard deviation, times
 #: ``scale``, must stay within the range of the key itself (the effective error).
-_SCALED = tuple(k for k in CALIBRATION_ERROR_KEYS if k not in ("scale", "distortion_percent"))
+#: Calibration errors that are not standard deviations: not multiplied by ``scale``.
+UNSCALED = ("scale", "distortion_percent", "model_mass_error_percent",
+            "model_inertia_error_percent")
+_SCALED = tuple(k for k in CALIBRATION_ERROR_KEYS if k not in UNSCALED)
 
 
 def check_range(value: Any, key: str, path: str) -> None:
@@ -156,6 +162,12 @@ class CalibrationErrorConfig:
             dynamic world's true robot; the controllers are told the robot file's).
         inertia_percent: Relative std of their rotational inertias [%]. Each body's
             factor is ``exp(s z)`` (always positive, about ``1 + s z`` for small ``s``).
+        model_mass_error_percent: The controllers' model's error on every body's mass
+            (platform, leg body, leg rod) [%], the same for every trial: the robot
+            file's masses (what the controllers are told) are the true ones times
+            ``1 + e / 100`` (+30: the model is 30 % too heavy). Not random, not
+            multiplied by ``scale``; the drives' rotor inertia is not changed.
+        model_inertia_error_percent: Likewise for their rotational inertias [%].
         scale: Multiplies every standard deviation above (sweep it to grow all
             errors together).
     """
@@ -171,6 +183,8 @@ class CalibrationErrorConfig:
     distortion_percent: float = 0.0
     mass_percent: float = 0.0
     inertia_percent: float = 0.0
+    model_mass_error_percent: float = 0.0
+    model_inertia_error_percent: float = 0.0
 
 
 @dataclass(frozen=True)

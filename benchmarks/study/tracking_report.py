@@ -119,7 +119,8 @@ def tracking_plot(out_dir: Path, scenario: str, point: int) -> str | None:
 
 def forces_figure(out_dir: Path, scenario: str, point: int) -> Any:
     """The drives' forces against time of the recorded trial 0 of every controller at one
-    sweep point, one panel per controller (six legs, the force limits dashed); None
+    sweep point, one panel per controller (six legs, the force limits dashed when a force
+    exceeds half of them); None
     without a recorded trial with forces (the kinematic world)."""
     traces = []
     for f in sorted((out_dir / TRIALS_DIR).glob(f"{scenario}__p{point}__*__00000.npz")):
@@ -140,13 +141,17 @@ def forces_figure(out_dir: Path, scenario: str, point: int) -> Any:
     for ax, (controller, t, forces, limit) in zip(axes[0], traces, strict=True):
         for leg in range(forces.shape[1]):
             ax.plot(t, forces[:, leg], lw=0.9, label=f"leg {leg}")
-        for sign in (1.0, -1.0):
-            ax.axhline(sign * float(np.min(limit)), color="k", ls="--", lw=0.7)
-        ax.set_title(f"{controller}: drive forces [N]", fontsize=9)
+        lim = float(np.min(limit))
+        if np.abs(forces).max() > 0.5 * lim:  # the limits drawn when the forces near them
+            for sign in (1.0, -1.0):
+                ax.axhline(sign * lim, color="k", ls="--", lw=0.7)
+            ax.set_title(f"{controller}: drive forces [N]", fontsize=9)
+        else:
+            ax.set_title(f"{controller}: drive forces [N] (limit {lim:g})", fontsize=9)
         ax.set_xlabel("time [s]")
         ax.grid(True, alpha=0.3)
     axes[0][0].legend(fontsize=6, ncol=2)
-    fig.tight_layout()
+    fig.subplots_adjust(left=0.06, right=0.98, bottom=0.15, top=0.9, wspace=0.12)
     return fig
 
 
