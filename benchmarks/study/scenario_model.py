@@ -73,16 +73,18 @@ RANGES: dict[str, tuple[float, float, bool, bool]] = {
     "clock.latency_ms": (0.0, 10_000.0, True, True),
     "clock.latency_frames": (0.0, 1000.0, True, True),
     "clock.jitter_ms": (0.0, 1000.0, True, True),
+    "clock.exposure_ms": (0.0, 1000.0, True, True),
+    "clock.exposure_samples": (1, 256, True, True),
 }
 #: Keys of [clock] (the camera's clock), every one sweepable.
-CLOCK_KEYS = ("frame_rate_hz", "latency_ms", "latency_frames", "jitter_ms")
+CLOCK_KEYS = ("frame_rate_hz", "latency_ms", "latency_frames", "jitter_ms", "exposure_ms")
 #: Keys of [task] that may be swept (trajectory tasks).
 TASK_KEYS = ("speed_mm_s", "acceleration_mm_s2")
-#: The calibration-error keys in millimetres or degrees whose standard deviation, times
-#: ``scale``, must stay within the range of the key itself (the effective error).
 #: Calibration errors that are not standard deviations: not multiplied by ``scale``.
 UNSCALED = ("scale", "distortion_percent", "model_mass_error_percent",
             "model_inertia_error_percent")
+#: The calibration-error keys in millimetres or degrees whose standard deviation, times
+#: ``scale``, must stay within the range of the key itself (the effective error).
 _SCALED = tuple(k for k in CALIBRATION_ERROR_KEYS if k not in UNSCALED)
 
 
@@ -244,12 +246,20 @@ class ClockConfig:
         latency_frames: Further delay, in frame periods (control periods at rate 0).
         jitter_ms: Standard deviation of the capture times around their nominal grid
             [ms] (clipped to 0.45 frame).
+        exposure_ms: Exposure time [ms] (0: an instant): a frame integrates the robot's
+            motion over the exposure that ends at its capture time (motion blur; the
+            rendered images only, ``[sensor] kind = "image"``); its ``image_t`` is the
+            middle of the exposure.
+        exposure_samples: Poses drawn and averaged over the exposure
+            (:func:`vision.exposure.render_exposed`).
     """
 
     frame_rate_hz: float = 0.0
     latency_ms: float = 0.0
     latency_frames: float = 0.0
     jitter_ms: float = 0.0
+    exposure_ms: float = 0.0
+    exposure_samples: int = 8
 
 
 @dataclass(frozen=True)
