@@ -25,6 +25,11 @@ built for a fixed goal:
   the reference stays on it (tested in the kinematic world).
 
 Every time-varying goal is computed once, at ``reset``, on the control grid.
+
+A controller that tracks ``context.reference`` itself (``tracks_reference = True``: the
+computed-torque laws, which need the reference's derivatives and sample it at their own
+instants) is passed through: reset with the trial's context (the TAUGHT goal and the
+reference), never retargeted, no feed-forward added.
 """
 
 from __future__ import annotations
@@ -150,7 +155,7 @@ class TrackingController(Controller):
         reference = getattr(context, "reference", None)
         self._contexts = []
         self._k = -1
-        if reference is None:
+        if reference is None or getattr(self.inner, "tracks_reference", False):
             self.inner.reset(context)
             return
         dt = float(context.dt)

@@ -90,7 +90,7 @@ class DynamicPlant:
         else:
             setpoints = np.where(np.isfinite(velocities), velocities, 0.0)
         diverged = robots.advance(run, setpoints, self.h, self.steps)
-        q = robots.lengths(run)
+        q = robots.period_lengths[run]
         lo, hi = self.stroke
         out = ~np.all((q > lo - END_STOP) & (q < hi + END_STOP), axis=1) & ~diverged
         failed = {int(k): "the dynamic world diverged (a non-finite state)"
