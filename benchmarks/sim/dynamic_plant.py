@@ -120,6 +120,10 @@ class DynamicPlant:
             "drive_tracking_max_mm_s": float(r.track_max[row] * 1e3) if count else None,
         }
 
+    def drive_forces(self, rows: np.ndarray) -> np.ndarray:
+        """The drives' forces (n, 6) [N] of ``rows`` at the end of the last period."""
+        return self.robots.forces[rows]
+
     def series(self, row: int) -> dict[str, np.ndarray]:
         """The drives' forces (6,) [N] at the end of the last period."""
         return {"leg_forces": self.robots.forces[row].copy()}

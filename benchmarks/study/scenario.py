@@ -311,6 +311,9 @@ def parse_scenario(table: dict[str, Any], path: str = "<dict>") -> Scenario:
     task = check_trajectory_task(task, sweep, path)
     clock = _parse_dataclass(ClockConfig, _section(table, "clock", path), path, "clock",
                              CLOCK_KEYS, None, sweep)
+    if sensor != "image" and max(sweep.get("clock.exposure_ms", [clock.exposure_ms])) > 0:
+        raise ScenarioError(path, "motion blur needs rendered images ([sensor] kind = "
+                            "\"image\")", key="clock.exposure_ms")
     if task.settle_steps > task.max_steps:
         raise ScenarioError(path, f"{task.settle_steps} exceeds task.max_steps "
                             f"({task.max_steps})", key="task.settle_steps")
