@@ -32,7 +32,7 @@ from controllers.solvers.base import Solver
 class BatchedLaw(RemembersOptions):
     """Mixin of :class:`~controllers.laws.VisionLaw`: ``reset_batch`` and ``step_batch``."""
 
-    _kernel: Any
+    kernel: Any
     estimate: LegDirectionEstimate
     solver: Solver
 
@@ -63,7 +63,7 @@ class BatchedLaw(RemembersOptions):
         self.batch_estimate = LegDirectionEstimate.fresh(n)
         for k, inst in enumerate(trials):
             inst.estimate = self.batch_estimate.row(k)
-        kernels = [t._kernel for t in trials]
+        kernels = [t.kernel for t in trials]
         self._has_kernel = np.array([k is not None for k in kernels], dtype=bool)
         self._fn = None
         if self._has_kernel.any():

@@ -17,11 +17,11 @@ from typing import Any
 from benchmarks.exceptions import ScenarioError
 from benchmarks.study.scenario_checks import referenced_file
 from benchmarks.study.scenario_model import (
-    _SCALED,
     CALIBRATION_ERROR_KEYS,
     CLOCK_KEYS,
     NOISE_KEYS,
     RANGES,
+    SCALED_ERROR_KEYS,
     TASK_KEYS,
     WORLDS,
     CalibrationConfig,
@@ -421,7 +421,7 @@ def _check_scaled_errors(cal_err: CalibrationErrorConfig, sweep: dict[str, list[
                          path: str) -> None:
     """Each calibration error times the largest ``scale`` stays within its key's range."""
     scales = sweep.get("calibration_error.scale", [cal_err.scale])
-    for key in _SCALED:
+    for key in SCALED_ERROR_KEYS:
         values = sweep.get(f"calibration_error.{key}", [getattr(cal_err, key)])
         worst = max(values) * max(scales)
         hi = RANGES[f"calibration_error.{key}"][1]

@@ -77,7 +77,8 @@ CLOCK_KEYS = ("frame_rate_hz", "latency_ms", "latency_frames", "jitter_ms")
 TASK_KEYS = ("speed_mm_s", "acceleration_mm_s2")
 #: The calibration-error keys in millimetres or degrees whose standard deviation, times
 #: ``scale``, must stay within the range of the key itself (the effective error).
-_SCALED = tuple(k for k in CALIBRATION_ERROR_KEYS if k not in ("scale", "distortion_percent"))
+SCALED_ERROR_KEYS = tuple(k for k in CALIBRATION_ERROR_KEYS
+                          if k not in ("scale", "distortion_percent"))
 
 
 def check_range(value: Any, key: str, path: str) -> None:

@@ -118,7 +118,7 @@ def _symmetric_outer(a: ca.SX, k: ca.SX) -> ca.SX:
     return out
 
 
-def _ldl_solve(M: ca.SX, b: ca.SX) -> ca.SX:
+def ldl_solve(M: ca.SX, b: ca.SX) -> ca.SX:
     """``M^-1 b`` for a symmetric positive-definite ``M`` by an unrolled LDL^T."""
     n = M.shape[0]
     L = [[ca.SX(0)] * n for _ in range(n)]
@@ -138,7 +138,7 @@ def _ldl_solve(M: ca.SX, b: ca.SX) -> ca.SX:
     return ca.vertcat(*out)
 
 
-def _expressions() -> tuple[ca.SX, dict[str, ca.SX]]:
+def expressions() -> tuple[ca.SX, dict[str, ca.SX]]:
     """The symbolic input row and the dynamics' terms as SX expressions of it."""
     x = ca.SX.sym("x", ROW)
     R = ca.reshape(x[0:9], 3, 3)
@@ -193,7 +193,7 @@ def _expressions() -> tuple[ca.SX, dict[str, ca.SX]]:
 
 @lru_cache(maxsize=1)
 def _cached_expressions() -> tuple[ca.SX, dict[str, ca.SX]]:
-    return _expressions()
+    return expressions()
 
 
 def _build(name: str) -> ca.Function:
@@ -204,7 +204,7 @@ def _build(name: str) -> ca.Function:
     M, h, K = e["M"], e["h"], e["K"]
     u = x[18:24]
     if name == "forward":
-        return ca.Function("hexapod_dyn_forward", [x], [ca.cse(_ldl_solve(M, K.T @ u - h))])
+        return ca.Function("hexapod_dyn_forward", [x], [ca.cse(ldl_solve(M, K.T @ u - h))])
     if name == "inverse":
         rhs = M @ u + h
         f = ca.solve(K.T, rhs)
@@ -222,7 +222,7 @@ def _build(name: str) -> ca.Function:
         a, b = extra[0:6], extra[6:12]
         leg_bias = e["leg_bias"]
         M_eff = M + K.T @ ca.diag(a + b) @ K
-        acc = _ldl_solve(M_eff, K.T @ (u - a * leg_bias) - h)
+        acc = ldl_solve(M_eff, K.T @ (u - a * leg_bias) - h)
         return ca.Function("hexapod_dyn_forward_drives", [ca.vertcat(x, extra)],
                            [ca.cse(ca.vertcat(acc, e["q_dot"], K @ acc + leg_bias))])
     raise ValueError(f"unknown compiled dynamics function {name!r}; expected one of "

@@ -54,7 +54,7 @@ def _exp_so3(w: ca.SX) -> ca.SX:
     th = ca.if_else(small, 1.0, theta)
     a = ca.if_else(small, 1.0 - theta**2 / 6.0, ca.sin(th) / th)
     b = ca.if_else(small, 0.5 - theta**2 / 24.0, (1.0 - ca.cos(th)) / th**2)
-    K = mech._skew(w)
+    K = ca.skew(w)
     return ca.SX.eye(3) + a * K + b * (K @ K)
 
 
@@ -65,7 +65,7 @@ def _step_expression() -> tuple[ca.SX, ca.SX]:
     def get(name: str) -> ca.SX:
         return x[LAYOUT[name]]
 
-    sym, terms = mech._expressions()
+    sym, terms = mech.expressions()
     row = ca.vertcat(get("R"), get("t"), get("twist"), ca.SX.zeros(6), get("A"), get("E"),
                      get("p"))
     M, hb, K = (ca.substitute(terms[k], sym, row) for k in ("M", "h", "K"))
@@ -108,7 +108,7 @@ def _step_expression() -> tuple[ca.SX, ca.SX]:
     rotor = get("rotor")
     lhs = M + K.T @ ca.diag(rotor - h * slope) @ K
     rhs = K.T @ (motor - friction - rotor * b) - hb
-    acc = mech._ldl_solve(lhs, rhs)
+    acc = mech.ldl_solve(lhs, rhs)
     tw_new = tw + h * acc
     t_new = t + h * tw_new[0:3]
     R_new = _exp_so3(h * tw_new[3:6]) @ R
