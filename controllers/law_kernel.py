@@ -41,6 +41,7 @@ from functools import lru_cache
 import casadi as ca
 import numpy as np
 
+from controllers.law_tools import gain_formula
 from controllers.tasks.joint_length import inverse_jacobian_row
 from controllers.tasks.leg_direction import direction_block
 from controllers.tasks.leg_edge import edge_block, leg_direction_of_edges, normal_of_line
@@ -209,10 +210,9 @@ def law_tail(e: ca.SX, N: ca.SX, b: ca.SX, directions: list[ca.SX], base_points:
         The :data:`LAW_OUTPUTS`, in order.
     """
     l0, linf, slope, thr2, d2 = (params[k] for k in range(5))
-    # Gain (controllers.laws.Gain.__call__) at x = |e|_inf.
+    # Gain (controllers.law_tools.gain_formula) at x = |e|_inf.
     x = ca.mmax(ca.fabs(e))
-    d = l0 - linf
-    lam = ca.if_else(d == 0, l0, d * ca.exp(((-slope) * x) / ca.if_else(d == 0, 1.0, d)) + linf)
+    lam = gain_formula(x, l0, linf, slope, ca.exp, ca.if_else)
     if lean:
         full = full_rank_certificate(N, thr2) == 1.0
         rank = ca.if_else(full, 6.0, 0.0)

@@ -41,6 +41,7 @@ from controllers.estimators import PoseEstimate
 from controllers.exceptions import ContextError
 from controllers.interaction import cross
 from controllers.law_kernel import jacobi_eigen
+from controllers.law_tools import gain_formula
 from controllers.laws import Gain, check_number, check_observation
 from controllers.options import RemembersOptions
 from hexapod.compiled import CompiledFunction
@@ -82,8 +83,7 @@ def _pose_servo_function() -> ca.Function:
     dp = ts - t
     e = ca.vertcat(-dp, -rot)
     xe = ca.mmax(ca.fabs(e))
-    d = l0 - linf
-    lam = ca.if_else(d == 0, l0, d * ca.exp(((-slope) * xe) / ca.if_else(d == 0, 1.0, d)) + linf)
+    lam = gain_formula(xe, l0, linf, slope, ca.exp, ca.if_else)
     w = lam * rot
     tau = ca.vertcat(lam * dp - ca.cross(w, t), w)
     rows = []
