@@ -24,6 +24,7 @@ from typing import Any
 import numpy as np
 
 from controllers.base import CommandBatch, ControllerContext, ObservationBatch
+from controllers.batch import step_rows_per_trial
 from controllers.estimators import LegDirectionEstimate
 from controllers.options import RemembersOptions
 from controllers.solvers.base import Solver
@@ -98,8 +99,7 @@ class BatchedLaw(RemembersOptions):
                 done = self._fast(rows, trials[rows], feats[rows], q[rows], out.velocities,
                                   out.error_norm)
                 slow[rows[done]] = False
-        for k in np.flatnonzero(slow):
-            out.put(int(k), self._trials[int(trials[k])].step(obs.item(int(k))))
+        step_rows_per_trial(self._trials, obs, trials, np.flatnonzero(slow), out)
         return out
 
     def _fast(self, rows: np.ndarray, trials: np.ndarray, feats: np.ndarray, q: np.ndarray,

@@ -37,6 +37,7 @@ from controllers.base import (
     Observation,
     ObservationBatch,
 )
+from controllers.batch import step_rows_per_trial
 from controllers.estimators import PoseEstimate
 from controllers.exceptions import ContextError
 from controllers.interaction import cross
@@ -299,6 +300,5 @@ class ModelBasedController(RemembersOptions, Controller):
             out.velocities[rows[acc]] = Y[acc][:, _OUT["qdot"]]
             out.error_norm[rows[acc]] = Y[acc, _AT["norm"]]
             slow[rows[acc]] = False
-        for k in np.flatnonzero(slow):
-            out.put(int(k), self._trials[int(trials[k])].step(obs.item(int(k))))
+        step_rows_per_trial(self._trials, obs, trials, np.flatnonzero(slow), out)
         return out

@@ -164,33 +164,34 @@ class LegEdgeTask(Task):
 
     def _blocks(self, state: TaskState) -> list[np.ndarray]:
         n = len(state)
-        if state.normals is None:
-            raise ValueError("LegEdgeTask needs the state's normals")
-        u2, A2, q2 = self._per_edge(state)
+        normals, u2, A2, q2 = self._per_edge(state)
         k = 12 * n
         Kt = np.broadcast_to(self.line_matrix.T.reshape(1, 9, order="F"), (k, 9))
         Kit = np.broadcast_to(self.line_matrix_inv_t.reshape(1, 9, order="F"), (k, 9))
-        return map_blocks(block_function(self.kind), state.normals.reshape(-1, 3),
+        return map_blocks(block_function(self.kind), normals,
                           self._star(n).reshape(-1, 3), u2, A2, q2, Kt, Kit)
 
     def error(self, state: TaskState) -> np.ndarray:
         return self._blocks(state)[0].reshape(len(state), 36)
 
-    def _per_edge(self, state: TaskState) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    def _per_edge(self, state: TaskState
+                  ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """Per edge (12 n rows): the normals, and their legs' directions, base points and
+        lengths."""
+        if state.normals is None:
+            raise ValueError("LegEdgeTask needs the state's normals")
         u2 = np.repeat(state.directions, 2, axis=-2).reshape(-1, 3)
         A2 = np.repeat(state.base_points, 2, axis=-2).reshape(-1, 3)
         q2 = np.repeat(state.lengths, 2, axis=-1).reshape(-1)
-        return u2, A2, q2
+        return state.normals.reshape(-1, 3), u2, A2, q2
 
     def jacobian(self, state: TaskState) -> np.ndarray:
         return self._blocks(state)[1].reshape(len(state), 36, 6)
 
     def jacobian_dot_twist(self, state: TaskState, twist: np.ndarray) -> np.ndarray:
         n = len(state)
-        if state.normals is None:
-            raise ValueError("LegEdgeTask needs the state's normals")
-        u2, A2, q2 = self._per_edge(state)
-        s = np.concatenate([state.normals.reshape(-1, 3), u2, q2[:, None]], axis=1)
+        normals, u2, A2, q2 = self._per_edge(state)
+        s = np.concatenate([normals, u2, q2[:, None]], axis=1)
         kit = np.broadcast_to(self.line_matrix_inv_t.reshape(9), (12 * n, 9))
         p = np.concatenate([A2, self._star(n).reshape(-1, 3), kit], axis=1)
         tau = np.repeat(np.asarray(twist, dtype=float).reshape(n, 6), 12, axis=0)
