@@ -13,6 +13,11 @@ Built-in controllers are registered in :data:`controllers.base.registry` here:
 - ``joint-space``: leg lengths to the nominal inverse kinematics of the goal;
 - ``computed-torque``: joint-space computed torque on the encoder lengths with the
   nominal dynamic model, commanding leg forces (the dynamic world only);
+- ``cartesian-ctc``, ``vision-ctc``: Cartesian computed torque on the platform pose, from
+  the encoders' forward kinematics or from the legs the camera sees (Paccot et al. 2008);
+- ``leg-edge-ctc``, ``leg-direction-ctc``: computed torque in the space of the leg
+  features (Özgür et al. 2011), all on the computed-torque solver
+  (:mod:`controllers.solvers.computed_torque`);
 - ``latency-compensated``: any of them (``law``) fed the image features predicted over
   the image's delay with the nominal model (:mod:`controllers.latency`).
 
@@ -34,7 +39,9 @@ from controllers.base import (
     observation_problem,
     registry,
 )
+from controllers.cartesian_ctc import CartesianCTC, VisionCTC
 from controllers.computed_torque import ComputedTorqueController
+from controllers.feature_ctc import LegDirectionCTC, LegEdgeCTC
 from controllers.joint import JointSpaceController
 from controllers.latency import LatencyCompensated
 from controllers.leg_direction import LegDirectionController
@@ -54,6 +61,10 @@ BUILTINS = {
     "model-based": ModelBasedController,
     "joint-space": JointSpaceController,
     "computed-torque": ComputedTorqueController,
+    "cartesian-ctc": CartesianCTC,
+    "vision-ctc": VisionCTC,
+    "leg-edge-ctc": LegEdgeCTC,
+    "leg-direction-ctc": LegDirectionCTC,
     "latency-compensated": LatencyCompensated,
 }
 
@@ -63,6 +74,7 @@ for _name, _factory in BUILTINS.items():
 __all__ = [
     "BUILTINS",
     "Actuation",
+    "CartesianCTC",
     "Command",
     "ComputedTorqueController",
     "Controller",
@@ -70,15 +82,18 @@ __all__ = [
     "Goal",
     "JointSpaceController",
     "LatencyCompensated",
+    "LegDirectionCTC",
     "LegDirectionController",
     "LegDirectionMPCController",
     "LegDirectionQPController",
+    "LegEdgeCTC",
     "LegEdgeController",
     "LegEdgeMPCController",
     "LegEdgeQPController",
     "ModelBasedController",
     "Observation",
     "Registry",
+    "VisionCTC",
     "observation_problem",
     "registry",
 ]

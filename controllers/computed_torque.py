@@ -12,21 +12,21 @@ controller context's NOMINAL geometry, inertia and drives, never the world's tru
   saturate the drives and overshoot into the end stops);
 - pose ``(R, t)``: the nominal forward kinematics of the encoder lengths, twist
   ``x_dot = K^-1 q_dot``;
-- desired leg acceleration ``a = q_ddot* + Kd (q_dot* - q_dot) + Kp (q* - q)`` with
-  ``Kp = omega_n^2``, ``Kd = 2 zeta omega_n``: the leg error obeys
-  ``e_ddot + 2 zeta omega_n e_dot + omega_n^2 e = 0`` when the model is exact;
-- platform acceleration ``x_ddot = K^-1 (a - K_dot x_dot)`` and the mechanism's forces
+- the joint-length task ``e = q - q*`` with ``L = K`` and ``L_dot tau = K_dot x_dot``,
+  solved by :class:`~controllers.solvers.computed_torque.ComputedTorqueSolver`: desired
+  leg acceleration ``a = q_ddot* + Kd (q_dot* - q_dot) + Kp (q* - q)`` with
+  ``Kp = omega_n^2``, ``Kd = 2 zeta omega_n`` (the leg error obeys
+  ``e_ddot + 2 zeta omega_n e_dot + omega_n^2 e = 0`` when the model is exact),
+  platform acceleration ``x_ddot = K^-1 (a - K_dot x_dot)`` and the mechanism's forces
   ``DynamicModel.inverse(R, t, x_dot, x_ddot)``, plus the nominal drives' reflected rotor
   inertia ``m_r a`` and friction ``c q_dot + f_c tanh(q_dot* / v_s)``.
 
 The force is held over the control period: the design is continuous, so ``omega_n dt``
-must stay small. The default ``omega_n = 2 pi * 2 Hz`` with ``zeta = 0.7`` gives
+must stay small. The default ``omega_n = 2 pi * 2 Hz`` with ``zeta = 1`` gives
 ``omega_n dt = 0.25`` at the 20 ms period.
 """
 
 from __future__ import annotations
-
-import math
 
 import numpy as np
 
@@ -38,9 +38,14 @@ from controllers.base import (
     Observation,
 )
 from controllers.exceptions import ContextError
+from controllers.solvers.computed_torque import (
+    ComputedTorqueSolver,
+    SecondOrderGains,
+    drive_forces,
+)
+from controllers.task_ctc import encoder_readings
 from hexapod.actuation import Actuation
 from hexapod.dynamics import DynamicModel
-from hexapod.dynamics.drive_model import COULOMB_SMOOTHING
 from hexapod.fk import forward_kinematics
 from hexapod.kinematics import inverse_kinematics
 
@@ -65,17 +70,15 @@ class ComputedTorqueController(Controller):
     name = "computed-torque"
     features = frozenset({"lengths"})
     actuation = Actuation.FORCE
+    #: Samples ``context.reference`` itself (:mod:`controllers.tracking` passes it through).
+    tracks_reference = True
 
     def __init__(self, natural_frequency: float = NATURAL_FREQUENCY_HZ,
                  damping: float = DAMPING, smooth_goal: bool = True) -> None:
-        fn, zeta = float(natural_frequency), float(damping)
-        if not (math.isfinite(fn) and fn > 0):
-            raise ContextError(self.name, "natural_frequency", f"must be positive, got {fn}")
-        if not (math.isfinite(zeta) and zeta > 0):
-            raise ContextError(self.name, "damping", f"must be positive, got {zeta}")
-        omega = 2 * math.pi * fn
-        self.kp = omega**2
-        self.kd = 2 * zeta * omega
+        gains = SecondOrderGains.checked(self.name, natural_frequency, damping)
+        self.solver = ComputedTorqueSolver(gains)
+        self.kp = gains.kp
+        self.kd = gains.kd
         self.smooth_goal = bool(smooth_goal)
         self._ctx: ControllerContext | None = None
         self._model: DynamicModel | None = None
@@ -140,15 +143,10 @@ class ComputedTorqueController(Controller):
         fails)."""
         if self._ctx is None or self._model is None:
             return self._refuse("reset(context) was not called")
-        t = float(observation.t)
-        q = np.asarray(observation.lengths, dtype=float)
-        if observation.q_dot is None:
-            return self._refuse("needs the measured leg velocities (Observation.q_dot), "
-                                "which only the dynamic world gives")
-        qd = np.asarray(observation.q_dot, dtype=float)
-        for what, x in (("time", np.array([t])), ("lengths", q), ("leg velocities", qd)):
-            if x.size == 0 or not np.all(np.isfinite(x)):
-                return self._refuse(f"measured {what} not finite: {x}")
+        readings = encoder_readings(observation)
+        if isinstance(readings, str):
+            return self._refuse(readings)
+        t, q, qd = readings
         if self._start is None:  # the fixed goal's quintic starts here
             T = QUINTIC_PEAK_SPEED * float(np.abs(self._q_star - q).max()) / \
                 self._ctx.max_speed if self.smooth_goal else 0.0
@@ -162,25 +160,20 @@ class ComputedTorqueController(Controller):
             twist = np.linalg.solve(K, qd)
             bias = self._model.legs_batch(R[None], p[None], twist[None])[1][0]
             e = q_s - q
-            a = qdd_s + self.kd * (qd_s - qd) + self.kp * e
-            acc = np.linalg.solve(K, a - bias)
-            f = self._model.inverse(R, p, twist, acc) + self._drive_forces(a, qd, qd_s)
+            sol = self.solver.acceleration(-e, K, bias, twist, error_t=-qd_s,
+                                           error_tt=-qdd_s)
+            if sol.reason is not None:
+                return self._refuse(sol.reason)
+            a = K @ sol.acc + bias
+            f = self._model.inverse(R, p, twist, sol.acc) + drive_forces(self._model, a, qd,
+                                                                         qd_s)
         except Exception as exc:  # the nominal model failed here: refuse with its reason
             return self._refuse(f"nominal model failed: {exc}")
         if not np.all(np.isfinite(f)):
             return self._refuse(f"non-finite leg forces {f}")
         self._pose = (R, p)
-        return Command.of_forces(f, error=e, error_norm=float(np.linalg.norm(e)), rank=6,
-                                 condition=float(np.linalg.cond(K)), features_used=6)
-
-    def _drive_forces(self, a: np.ndarray, qd: np.ndarray, qd_s: np.ndarray) -> np.ndarray:
-        """The nominal drives' share [N]: reflected rotor inertia, viscous friction at the
-        measured leg velocity, Coulomb friction in the direction of the REFERENCE's (at
-        rest the measured velocity's sign is noise, and a held force must break away)."""
-        assert self._ctx is not None
-        d = self._ctx.geometry.drives
-        return (np.asarray(d.rotor_inertia) * a + np.asarray(d.viscous) * qd  # type: ignore[no-any-return]
-                + np.asarray(d.coulomb) * np.tanh(qd_s / COULOMB_SMOOTHING))
+        return Command.of_forces(f, error=e, error_norm=float(np.linalg.norm(e)),
+                                 rank=sol.rank, condition=sol.condition, features_used=6)
 
     def _refuse(self, problem: str) -> Command:
         return Command.refuse(f"{self.name}: {problem}", actuation=Actuation.FORCE)

@@ -11,7 +11,10 @@ where ``s_model(q)`` is what the estimated camera would see of the nominal robot
 forward kinematics of the encoder lengths ``q``, and ``q(image_t)`` is the linear
 interpolation of the encoder readings around the capture time (the legs move at the
 commanded, constant speed within a period in the kinematic world, so it is exact
-there; before the first reading the robot rests at its first reading). Edge normals
+there; before the first reading the robot rests at its first reading). Where the
+readings carry the measured leg velocities (``Observation.q_dot``, the dynamic world,
+whose legs accelerate within a period) the interpolation is the cubic Hermite one of
+the lengths and their rates (``use_rates``). Edge normals
 and leg directions are predicted and renormalised, image lines follow from the
 predicted normals through the estimated camera. With an exact model the prediction is
 the image the camera would take at ``t`` (tested); with a model error the error of the
@@ -48,21 +51,29 @@ class LatencyCompensated(Controller):
 
     Args:
         law: Registry name of the wrapped law.
+        use_rates: Interpolate the lengths with their measured rates when the readings
+            have them (cubic Hermite; False: linear).
         **options: The wrapped law's options.
     """
 
     name = "latency-compensated"
 
-    def __init__(self, law: str = "leg-edge", **options: Any) -> None:
+    def __init__(self, law: str = "leg-edge", use_rates: bool = True, **options: Any
+                 ) -> None:
         from controllers.base import registry
 
         self.law_name = str(law)
         self.law = registry.create(self.law_name, **options)
         self.features = frozenset(getattr(self.law, "features", frozenset())) | {"lengths"}
         self.actuation = actuation_of(self.law)
+        #: A law that samples ``context.reference`` itself is passed through by
+        #: :class:`~controllers.tracking.TrackingController`, and so is its wrapper.
+        self.tracks_reference = bool(getattr(self.law, "tracks_reference", False))
         self.context: ControllerContext | None = None
         self._times: deque[float] = deque(maxlen=HISTORY)
         self._lengths: deque[np.ndarray] = deque(maxlen=HISTORY)
+        self._rates: deque[np.ndarray | None] = deque(maxlen=HISTORY)
+        self.use_rates = bool(use_rates)
         self._guess: tuple[np.ndarray, np.ndarray] | None = None
         self._params: Any = None  # the model's packed observation parameters
 
@@ -73,6 +84,7 @@ class LatencyCompensated(Controller):
         self.context = context
         self._times.clear()
         self._lengths.clear()
+        self._rates.clear()
         self._guess = None
         self._params = None
 
@@ -94,8 +106,12 @@ class LatencyCompensated(Controller):
             if self._times and t <= self._times[-1]:
                 self._times.clear()
                 self._lengths.clear()
+                self._rates.clear()
             self._times.append(t)
             self._lengths.append(q.copy())
+            rate = None if observation.q_dot is None else np.array(observation.q_dot, float)
+            ok = rate is not None and rate.shape == (6,) and bool(np.all(np.isfinite(rate)))
+            self._rates.append(rate if ok else None)
         image_t = observation.image_t
         if (image_t is None or not math.isfinite(float(image_t)) or image_t >= t - 1e-12
                 or not self._times or self._times[-1] != t):
@@ -115,7 +131,13 @@ class LatencyCompensated(Controller):
         if j >= len(times) - 1:
             return np.array(self._lengths[-1])
         a, b = self._lengths[j], self._lengths[j + 1]
-        frac = (time - times[j]) / (times[j + 1] - times[j])
+        h = times[j + 1] - times[j]
+        frac = (time - times[j]) / h
+        va, vb = self._rates[j], self._rates[j + 1]
+        if self.use_rates and va is not None and vb is not None:  # cubic Hermite
+            s2, s3 = frac * frac, frac * frac * frac
+            return ((2 * s3 - 3 * s2 + 1) * a + (s3 - 2 * s2 + frac) * h * va  # type: ignore[no-any-return]
+                    + (3 * s2 - 2 * s3) * b + (s3 - s2) * h * vb)
         return a + frac * (b - a)  # type: ignore[no-any-return]
 
     def _model_normals(self, R: np.ndarray, t: np.ndarray) -> np.ndarray:

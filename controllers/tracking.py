@@ -25,6 +25,11 @@ built for a fixed goal:
   the reference stays on it (tested in the kinematic world).
 
 Every time-varying goal is computed once, at ``reset``, on the control grid.
+
+A controller that tracks ``context.reference`` itself (``tracks_reference = True``: the
+computed-torque laws, which need the reference's derivatives and sample it at their own
+instants) is passed through: reset with the trial's context (the TAUGHT goal and the
+reference), never retargeted, no feed-forward added.
 """
 
 from __future__ import annotations
@@ -89,7 +94,7 @@ def reference_goals(context: ControllerContext, times: np.ndarray) -> dict[str, 
     return out
 
 
-def _anchor(goals: dict[str, Any], taught: Goal) -> None:
+def anchor_goals(goals: dict[str, Any], taught: Goal) -> None:
     """Anchor the model's features at the taught goal (in place): ``s* = s_taught +
     s_model(t) - s_model(end)``, unit vectors renormalised; the model's last sample is
     the end pose. A feature the goal did not see stays the model's."""
@@ -150,7 +155,7 @@ class TrackingController(Controller):
         reference = getattr(context, "reference", None)
         self._contexts = []
         self._k = -1
-        if reference is None:
+        if reference is None or getattr(self.inner, "tracks_reference", False):
             self.inner.reset(context)
             return
         dt = float(context.dt)
@@ -160,7 +165,7 @@ class TrackingController(Controller):
         steps = math.ceil(float(reference.duration) / dt) + 2
         times = dt * np.arange(steps)
         goals = reference_goals(context, times)
-        _anchor(goals, context.goal)
+        anchor_goals(goals, context.goal)
         q = goals["lengths"]
         if not np.all(np.isfinite(q)):
             raise ContextError(self.name, "reference", "the nominal inverse kinematics of the "

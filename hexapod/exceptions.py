@@ -506,3 +506,18 @@ class OutputError(HexapodError):
         self.path = path
         self.problem = problem
         super().__init__(f"{path}: {problem}")
+
+
+class UnsupportedInstructionError(HexapodError, ValueError):
+    """A CasADi function uses an instruction the lane-parallel code generator
+    (:mod:`hexapod.compiled_lanes`) does not translate.
+
+    Attributes:
+        function: Name of the function.
+        instruction: CasADi's name of the instruction (``"ATAN2"``...).
+    """
+
+    def __init__(self, function: str, instruction: str) -> None:
+        self.function = function
+        self.instruction = instruction
+        super().__init__(f"{function}: instruction {instruction} has no lane translation")

@@ -33,6 +33,7 @@ from vision.detect import (
     OmniDetector,
     PerspectiveTracker,
 )
+from vision.exposure import middle_pose, render_exposed
 from vision.render import Renderer, RenderStyle
 
 logger = logging.getLogger(__name__)
@@ -146,8 +147,10 @@ class ImageSensor:
         """Render the robot at a pose and measure the leg edges in the image.
 
         Args:
-            rotation: (3, 3) true platform orientation in the base frame.
-            translation: (3,) true platform position in the base frame [m].
+            rotation: (3, 3) true platform orientation in the base frame, or (S, 3, 3)
+                the orientations along the exposure (motion blur,
+                :func:`vision.exposure.render_exposed`).
+            translation: (3,) true platform position in the base frame [m], or (S, 3).
             predicted_normals: (6, 2, 3) normals found in the previous frame, in the
                 estimated camera frame, NaN where not found (None: first frame).
 
@@ -155,9 +158,9 @@ class ImageSensor:
             An :class:`ImageMeasurement`.
         """
         t0 = time.perf_counter()
-        image = self.renderer.render(rotation, translation)
+        image = render_exposed(self.renderer, rotation, translation)
         t1 = time.perf_counter()
-        pred = self.predict(rotation, translation)
+        pred = self.predict(*middle_pose(rotation, translation))
         det = self.detector.track(image, pred, predicted_normals, self.align_px,
                                   self.refine_px)
         lines = None

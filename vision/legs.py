@@ -23,6 +23,23 @@ import numpy as np
 from hexapod.geometry import HexapodGeometry
 from hexapod.kinematics import legs_in_frame
 from vision.cameras import Camera, PerspectiveCamera
+from vision.occlusion import occluded_by_disc, occluded_by_legs, occluded_by_legs_compiled
+
+__all__ = [
+    "DEFAULT_MIN_VISIBLE_FRACTION",
+    "DEFAULT_VISIBILITY_SAMPLES",
+    "EdgePoints",
+    "LegObservation",
+    "directions_from_edges",
+    "edge_points",
+    "leg_edges",
+    "limb_points",
+    "observation_edge_points",
+    "observe_legs",
+    "observe_legs_numpy",
+    "occluded_by_disc",
+    "occluded_by_legs",
+]
 
 
 def leg_edges(
@@ -185,100 +202,6 @@ def limb_points(
     return A + r * n + (s * q) * u
 
 
-def occluded_by_legs(
-    points: np.ndarray,
-    base_points: np.ndarray,
-    directions: np.ndarray,
-    lengths: np.ndarray,
-    radius: float,
-    exclude_own: bool = True,
-) -> np.ndarray:
-    """Whether the segments from the projection centre to points cross a leg.
-
-    Each leg is a solid finite cylinder of radius ``r`` around the segment
-    ``A_j .. A_j + q_j u_j``. The intersection of the open segment ``s' P``,
-    ``s'`` in ``(0, 1)``, with it is the intersection of three intervals of ``s'``:
-    inside the infinite cylinder (a quadratic), between the two end planes, and
-    ``(0, 1)``.
-
-    Args:
-        points: (..., 6, 2, N, 3) points of the edges of leg ``i`` (camera frame).
-        base_points, directions, lengths: the legs, (..., 6, 3), (..., 6, 3), (..., 6).
-        radius: Leg radius [m].
-        exclude_own: Skip leg ``i`` for the points of leg ``i`` (its limbs are
-            tangent to it, never hidden by it).
-
-    Returns:
-        (..., 6, 2, N) bool.
-    """
-    P = np.asarray(points, float)[..., None, :]  # (..., 6i, 2, N, 1, 3)
-    lead = P.shape[:-5]
-    A = np.broadcast_to(base_points, (*lead, 6, 3)).reshape(*lead, 1, 1, 1, 6, 3)
-    u = np.broadcast_to(directions, (*lead, 6, 3)).reshape(*lead, 1, 1, 1, 6, 3)
-    q = np.broadcast_to(lengths, (*lead, 6)).reshape(*lead, 1, 1, 1, 6)
-    Pu = np.sum(P * u, axis=-1)  # (..., 6i, 2, N, 6j)
-    Au = np.sum(A * u, axis=-1)  # (..., 1, 1, 1, 6j)
-    Pp = P - Pu[..., None] * u
-    Ap = A - Au[..., None] * u
-    a = np.sum(Pp * Pp, axis=-1)
-    b = -2.0 * np.sum(Pp * Ap, axis=-1)
-    c = np.sum(Ap * Ap, axis=-1) - radius * radius
-    disc = b * b - 4.0 * a * c
-    with np.errstate(invalid="ignore", divide="ignore"):
-        sq = np.sqrt(np.where(disc > 0, disc, 0.0))
-        a_safe = np.where(a > 0, a, 1.0)
-        s1 = (-b - sq) / (2.0 * a_safe)
-        s2 = (-b + sq) / (2.0 * a_safe)
-        # Ray parallel to the axis (a == 0): inside for every s' iff c < 0.
-        par = a <= 1e-300
-        s1 = np.where(par, np.where(c < 0, -np.inf, np.inf), s1)
-        s2 = np.where(par, np.where(c < 0, np.inf, -np.inf), s2)
-        hit_cyl = (disc > 0) | par
-        # Axial interval: 0 <= s' Pu - Au <= q.
-        Pu_safe = np.where(Pu != 0, Pu, 1.0)
-        t0 = Au / Pu_safe
-        t1 = (Au + q) / Pu_safe
-        lo_ax = np.where(Pu > 0, t0, t1)
-        hi_ax = np.where(Pu > 0, t1, t0)
-        flat = Pu == 0
-        inside_ax = (-Au >= 0) & (-Au <= q)
-        lo_ax = np.where(flat, np.where(inside_ax, -np.inf, np.inf), lo_ax)
-        hi_ax = np.where(flat, np.where(inside_ax, np.inf, -np.inf), hi_ax)
-    lo = np.maximum(np.maximum(s1, lo_ax), 0.0)
-    hi = np.minimum(np.minimum(s2, hi_ax), 1.0 - 1e-9)
-    hit = hit_cyl & (lo < hi)
-    if exclude_own:
-        hit &= ~np.eye(6, dtype=bool)[:, None, None, :]
-    return np.any(hit, axis=-1)
-
-
-def occluded_by_disc(
-    points: np.ndarray, centre: np.ndarray, normal: np.ndarray, disc_radius: float
-) -> np.ndarray:
-    """Whether the segments from the projection centre to points cross a disc.
-
-    Args:
-        points: (..., 6, 2, N, 3) camera-frame points.
-        centre: (..., 3) disc centre.
-        normal: (..., 3) unit disc normal.
-        disc_radius: [m].
-
-    Returns:
-        (..., 6, 2, N) bool.
-    """
-    P = np.asarray(points, float)
-    c = np.asarray(centre, float)[..., None, None, None, :]
-    nd = np.asarray(normal, float)[..., None, None, None, :]
-    den = np.sum(nd * P, axis=-1)
-    num = np.sum(nd * c, axis=-1)
-    with np.errstate(invalid="ignore", divide="ignore"):
-        s = num / np.where(den != 0, den, np.nan)
-    X = s[..., None] * P
-    d2 = np.sum((X - c) ** 2, axis=-1)
-    with np.errstate(invalid="ignore"):
-        return (s > 0) & (s < 1.0 - 1e-9) & (d2 <= disc_radius**2)
-
-
 def _check_sampling(min_visible_fraction: float, n_samples: int) -> None:
     if not 0.0 < min_visible_fraction <= 1.0:
         raise ValueError(f"min_visible_fraction must be in (0, 1], got {min_visible_fraction}")
@@ -389,8 +312,6 @@ def observe_legs_numpy(
     _, imaged = camera.project(P)
     vis = imaged & exists[..., None, None]
     if occlusion:
-        from vision.occlusion import occluded_by_legs_compiled
-
         vis &= ~occluded_by_legs_compiled(P, A, u, q, r)
         vis &= ~occluded_by_disc(P, centre, disc_normal, rho)
     frac = vis.mean(axis=-1)

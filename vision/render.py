@@ -360,6 +360,11 @@ class Renderer:
         Returns:
             (height, width) uint8 image.
         """
+        return self.finish(self.draw(rotation, translation))
+
+    def draw(self, rotation: np.ndarray, translation: np.ndarray) -> np.ndarray:
+        """The scene at one pose on the background, before the optics' blur and the
+        pixel noise (:meth:`finish`): (height, width) uint8 image."""
         R = np.asarray(rotation, float)
         t = np.asarray(translation, float)
         if R.shape != (3, 3) or t.shape != (3,):
@@ -380,6 +385,11 @@ class Renderer:
             else:
                 shapes += self._leg_shapes(i, *polys)
         self._draw(img, shapes)
+        return img
+
+    def finish(self, img: np.ndarray) -> np.ndarray:
+        """The optics' Gaussian blur and the pixel noise on a drawn image (in place);
+        returns it."""
         if self.style.blur_px > 0:
             k = 2 * math.ceil(3.0 * self.style.blur_px) + 1
             cv2.GaussianBlur(img, (k, k), self.style.blur_px, dst=img)

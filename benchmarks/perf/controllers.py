@@ -32,7 +32,9 @@ from vision.legs import leg_edges
 #: Budgets of the issue [us]: direction and edge laws, QP law, predictive laws (N = 10).
 BUDGET_US = {"leg-direction": 100.0, "leg-edge": 100.0, "leg-edge-qp": 300.0,
              "leg-direction-qp": 300.0, "leg-edge-mpc": 2000.0, "leg-direction-mpc": 2000.0,
-             "leg-edge-mpc+model=global": 2000.0, "leg-direction-mpc+model=global": 2000.0}
+             "leg-edge-mpc+model=global": 2000.0, "leg-direction-mpc+model=global": 2000.0,
+             "computed-torque": 50.0, "cartesian-ctc": 50.0, "vision-ctc": 100.0,
+             "leg-edge-ctc": 100.0, "leg-direction-ctc": 100.0}
 #: Variants timed by default besides the registered names.
 DEFAULT_VARIANTS = ("leg-edge-mpc+model=global", "leg-direction-mpc+model=global")
 
@@ -86,8 +88,10 @@ def _observation(camera: Camera, geometry, R: np.ndarray, t: np.ndarray, time_s:
     legs = legs_in_frame(geometry, R, t, camera.camera_from_base)
     normals, _ = leg_edges(legs.base_points, legs.directions, geometry.leg_radius)
     lines = camera.normal_to_line(normals) if camera.family == "perspective" else None  # type: ignore[attr-defined]
+    # leg rates for the force laws (1 mm/s, fixed), ignored by the velocity laws
+    q_dot = 1e-3 * np.sin(np.arange(6) + time_s)
     obs = Observation(time_s, legs.lengths, normals=normals, lines=lines,
-                      directions=legs.directions)
+                      directions=legs.directions, q_dot=q_dot)
     goal = Goal(normals=normals, lines=lines, directions=legs.directions, lengths=legs.lengths,
                 rotation=R, translation=t)
     return obs, goal

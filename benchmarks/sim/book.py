@@ -89,6 +89,11 @@ class Book:
             series=[{k: [] for k in SERIES_KEYS} if rec else {} for rec in recording],
             tracker=tracker_for(sc, group, pos_tol, ori_tol))
 
+    def follow(self, plant: Any) -> None:
+        """Let the tracking metrics sample ``plant``'s drive forces every period."""
+        if self.tracker is not None:
+            self.tracker.follow(plant)
+
     def check(self, sc: Scenario, step: int, idx: np.ndarray, dp: np.ndarray,
               da: np.ndarray) -> np.ndarray:
         """The convergence test of one period for the active rows ``idx`` (pose errors

@@ -16,6 +16,12 @@ interpolation of the two control instants around it, exactly, and the pose is th
 forward kinematics of the true robot, warm-started at the earlier instant (a frame
 captured on a control instant takes that instant's pose, bit for bit).
 
+With an exposure time ``T`` (``exposure_ms``, rendered images only) frame ``k`` is
+exposed over ``[c_k - T, c_k]``: the sensor gets the true poses at the midpoints of
+``exposure_samples`` equal slices of it and averages their images
+(:func:`vision.exposure.render_exposed`), and ``image_t`` is ``c_k - T / 2``, the middle
+of the exposure. The frame is still delivered at ``c_k + latency``.
+
 Without a ``[clock]`` table (or with ``frame_rate_hz = 0`` and no latency or jitter)
 the camera is triggered at every control instant and its image arrives at once: the
 measurement is exactly the one the engines made before the clock existed.
@@ -47,7 +53,7 @@ def clock_active(sc: Scenario) -> bool:
     """Whether the scenario's camera has a clock of its own (see the module docstring)."""
     c = getattr(sc, "clock", None)
     return c is not None and (c.frame_rate_hz > 0 or c.latency_ms > 0 or c.latency_frames > 0
-                              or c.jitter_ms > 0)
+                              or c.jitter_ms > 0 or c.exposure_ms > 0)
 
 
 def latency_s(sc: Scenario) -> float:
@@ -92,7 +98,9 @@ class CameraClock:
                                       -limit, limit)
         self.capture = capture
         self.delivered = capture + self.latency
-        depth = math.ceil((self.latency + 2.0 * self.period) / self.dt) + 3
+        self.exposure = 1e-3 * c.exposure_ms
+        self.samples = c.exposure_samples
+        depth = math.ceil((self.latency + self.exposure + 2.0 * self.period) / self.dt) + 3
         self.depth = depth
         self.hist_q = np.repeat(q[:, None], depth, axis=1)
         self.hist_R = np.repeat(R[:, None], depth, axis=1)
@@ -124,13 +132,25 @@ class CameraClock:
         rows = idx[new]
         if len(rows):
             c = self.capture[rows, newest[new]]
-            R_c, t_c = self._poses_at(rows, c, step)
+            R_c, t_c = self._exposed_poses(rows, c, step)
             m = measure(rows, R_c, t_c)
             self._store(rows, m, len(self.q))
             self.frame[rows] = newest[new]
         out: dict[str, Any] = {k: (None if v is None else v[idx]) for k, v in self.cache.items()}
-        out["image_t"] = self.capture[idx, self.frame[idx]]
+        out["image_t"] = self.capture[idx, self.frame[idx]] - 0.5 * self.exposure
         return out
+
+    def _exposed_poses(self, rows: np.ndarray, c: np.ndarray, step: int
+                       ) -> tuple[np.ndarray, np.ndarray]:
+        """The true poses of the frames of ``rows`` captured at ``c``: (n, 3, 3), (n, 3)
+        without exposure, else (n, S, 3, 3), (n, S, 3) at the midpoints of ``S`` slices
+        of ``[c - T, c]``."""
+        if self.exposure <= 0:
+            return self._poses_at(rows, c, step)
+        T, S = self.exposure, self.samples
+        poses = [self._poses_at(rows, c - T + T * (j + 0.5) / S, step) for j in range(S)]
+        return (np.stack([p[0] for p in poses], axis=1),
+                np.stack([p[1] for p in poses], axis=1))
 
     def _store(self, rows: np.ndarray, m: dict[str, Any], n: int) -> None:
         for key, value in m.items():

@@ -90,7 +90,7 @@ class DynamicPlant:
         else:
             setpoints = np.where(np.isfinite(velocities), velocities, 0.0)
         diverged = robots.advance(run, setpoints, self.h, self.steps)
-        q = robots.lengths(run)
+        q = robots.period_lengths[run]
         lo, hi = self.stroke
         out = ~np.all((q > lo - END_STOP) & (q < hi + END_STOP), axis=1) & ~diverged
         failed = {int(k): "the dynamic world diverged (a non-finite state)"
@@ -119,6 +119,10 @@ class DynamicPlant:
                                         if count else None),
             "drive_tracking_max_mm_s": float(r.track_max[row] * 1e3) if count else None,
         }
+
+    def drive_forces(self, rows: np.ndarray) -> np.ndarray:
+        """The drives' forces (n, 6) [N] of ``rows`` at the end of the last period."""
+        return self.robots.forces[rows]
 
     def series(self, row: int) -> dict[str, np.ndarray]:
         """The drives' forces (6,) [N] at the end of the last period."""

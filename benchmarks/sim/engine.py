@@ -221,6 +221,7 @@ def _run(sc: Scenario, spec: Any, group: list[TrialSetup], contexts: list[Any],
     dt = sc.dt
     plant = make_plant(sc, group, q, R, t, A, E)
     drive_plant(plant, actuation, spec.label)
+    book.follow(plant)
     clock = make_clock(sc, group, q, R, t, A, E)
 
     def measure(rows: np.ndarray, R_r: np.ndarray, t_r: np.ndarray) -> dict[str, Any]:

@@ -195,6 +195,7 @@ def _run_group(sc: Scenario, controller_index: int, group: list[TrialSetup],
                                                           g.base_points, g.platform_points)
     if backends is None:
         drive_plant(plant, actuation_of(controllers[0]), spec.label)
+        book.follow(plant)
     clock = make_clock(sc, group, q, R, t, g.base_points, g.platform_points)
 
     def measure(rows: np.ndarray, R_r: np.ndarray, t_r: np.ndarray) -> dict[str, Any]:

@@ -1,10 +1,18 @@
 """Tracking metrics of a trajectory task: RMS and largest error of the TRUE pose from
 the reference while it moves, the error when it stops, and the settling time after it
 (the time from the reference's end until the pose stays within the task's
-tolerances). Fed by :meth:`benchmarks.sim.book.Book.check` every period."""
+tolerances). Fed by :meth:`benchmarks.sim.book.Book.check` every period.
+
+In the dynamic world it also gives the RMS drive force of the trial
+(``rms_leg_force_n``): the six drives' forces sampled at every control instant, from the
+first period to the last (the values the trial's recorded series ``leg_forces`` holds),
+``sqrt(mean over periods and legs of f^2)``; the peak force and the time at a force
+limit come from the plant, over every physics step
+(:meth:`benchmarks.sim.dynamic_plant.DynamicPlant.row_figures`)."""
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from typing import Any
 
 import numpy as np
@@ -39,6 +47,15 @@ class Tracker:
         self.max_dp = np.zeros(n)
         self.max_da = np.zeros(n)
         self.last_bad = np.full(n, -1)
+        #: The plant's drive forces (n, 6) [N] of some rows, None in the kinematic world.
+        self.drive_forces: Callable[[np.ndarray], np.ndarray] | None = None
+        self.sum_f2 = np.zeros(n)
+        self.count_f = np.zeros(n, dtype=int)
+
+    def follow(self, plant: Any) -> None:
+        """Sample the drive forces of ``plant`` at every period (a plant without
+        ``drive_forces``, the kinematic world's, gives none)."""
+        self.drive_forces = getattr(plant, "drive_forces", None)
 
     def add(self, step: int, idx: np.ndarray, dp: np.ndarray, da: np.ndarray) -> None:
         """One period of the rows ``idx``: position errors ``dp`` [m], orientation errors
@@ -52,6 +69,10 @@ class Tracker:
         self.max_da[rows] = np.maximum(self.max_da[rows], da[moving])
         bad = (dp >= self.pos_tol) | (da >= self.ori_tol)
         self.last_bad[idx[bad]] = step
+        if self.drive_forces is not None:
+            f = np.asarray(self.drive_forces(idx), dtype=float)
+            self.sum_f2[idx] += np.sum(f**2, axis=1)
+            self.count_f[idx] += f.shape[1]
 
     def row(self, m: int) -> dict[str, Any]:
         """The metrics of row ``m`` for its result row."""
@@ -62,7 +83,10 @@ class Tracker:
             settle: float | None = None  # out of tolerance at the last period
         else:
             settle = max(0.0, (last + 1) * self.dt - end) if last >= 0 else 0.0
+        forces = ({"rms_leg_force_n": float(np.sqrt(self.sum_f2[m] / self.count_f[m]))}
+                  if self.count_f[m] else {})
         return {
+            **forces,
             "trajectory_duration_s": end,
             "tracking_rms_position_mm": float(np.sqrt(self.sum_dp2[m] / c) * 1e3),
             "tracking_max_position_mm": float(self.max_dp[m] * 1e3),

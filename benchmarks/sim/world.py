@@ -12,6 +12,7 @@ from typing import Any
 import numpy as np
 
 from benchmarks.study.scenario import Scenario
+from benchmarks.study.scenario_model import UNSCALED
 from hexapod import HexapodGeometry, Transform, forward_kinematics_batch
 from hexapod.geometry import preset as geometry_preset
 from hexapod.kinematics import inverse_kinematics
@@ -211,8 +212,7 @@ def _scaled_error(sc: Scenario) -> tuple[Any, bool]:
     """The scenario's calibration error at its scale, and whether it is zero (every
     trial then shares the nominal world)."""
     ce = sc.calibration_error
-    ce = type(ce)(**{k: (getattr(ce, k) * ce.scale
-                         if k not in ("scale", "distortion_percent") else getattr(ce, k))
+    ce = type(ce)(**{k: (getattr(ce, k) * ce.scale if k not in UNSCALED else getattr(ce, k))
                      for k in ce.__dataclass_fields__})
     shared = all(getattr(ce, k) == 0.0 for k in ce.__dataclass_fields__
                   if k not in ("scale", "distortion_percent"))
@@ -243,6 +243,10 @@ def _draw_world(sc: Scenario, trial: int, nominal: HexapodGeometry, camera: Came
             true_geometry = true_geometry.replace(inertia=perturbed_inertia(
                 true_geometry.inertia, ce.mass_percent, ce.inertia_percent,
                 trial_rng(sc.seed, trial, 4)))
+        if ce.model_mass_error_percent or ce.model_inertia_error_percent:
+            true_geometry = true_geometry.replace(inertia=model_error_inertia(
+                true_geometry.inertia, ce.model_mass_error_percent,
+                ce.model_inertia_error_percent))
     return rng, World(true_geometry, true_camera, offsets), ce, shared
 
 
@@ -262,6 +266,22 @@ def perturbed_inertia(inertia: Any, mass_percent: float, inertia_percent: float,
         platform_inertia=np.asarray(inertia.platform_inertia) * fi[0],
         body_inertia=np.asarray(inertia.body_inertia) * fi[1],
         rod_inertia=np.asarray(inertia.rod_inertia) * fi[2])
+
+
+def model_error_inertia(inertia: Any, mass_error_percent: float,
+                        inertia_error_percent: float) -> Any:
+    """The true robot's inertial parameters when the model (``inertia``, the robot
+    file's) is off by the given errors [%]: every body's mass divided by
+    ``1 + e_m / 100`` and its rotational inertia by ``1 + e_i / 100`` (the model is the
+    truth times those factors)."""
+    fm = 1.0 / (1.0 + 1e-2 * mass_error_percent)
+    fi = 1.0 / (1.0 + 1e-2 * inertia_error_percent)
+    return inertia.replace(
+        platform_mass=inertia.platform_mass * fm, body_mass=inertia.body_mass * fm,
+        rod_mass=inertia.rod_mass * fm,
+        platform_inertia=np.asarray(inertia.platform_inertia) * fi,
+        body_inertia=np.asarray(inertia.body_inertia) * fi,
+        rod_inertia=np.asarray(inertia.rod_inertia) * fi)
 
 
 def _fixed_poses(sc: Scenario, geometry: HexapodGeometry

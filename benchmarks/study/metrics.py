@@ -19,6 +19,7 @@ _NON_SWEEP = {
     # the tracking metrics of a trajectory task (benchmarks.sim.tracking)
     "trajectory_duration_s", "tracking_rms_position_mm", "tracking_max_position_mm",
     "tracking_rms_orientation_deg", "tracking_max_orientation_deg", "settling_time_s",
+    "rms_leg_force_n",
     # the dynamic world's drive figures (benchmarks.sim.dynamic_plant)
     "max_leg_force_n", "saturation_time_s", "drive_tracking_rms_mm_s",
     "drive_tracking_max_mm_s",

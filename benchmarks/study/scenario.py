@@ -15,13 +15,20 @@ from pathlib import Path
 from typing import Any
 
 from benchmarks.exceptions import ScenarioError
-from benchmarks.study.scenario_checks import referenced_file
+from benchmarks.study.scenario_checks import (
+    check_configurations,
+    check_controllers,
+    check_fixed_task,
+    check_lens_error,
+    check_scaled_errors,
+    check_trajectory_task,
+    referenced_file,
+)
 from benchmarks.study.scenario_model import (
     CALIBRATION_ERROR_KEYS,
     CLOCK_KEYS,
     NOISE_KEYS,
     RANGES,
-    SCALED_ERROR_KEYS,
     TASK_KEYS,
     WORLDS,
     CalibrationConfig,
@@ -284,7 +291,7 @@ def parse_scenario(table: dict[str, Any], path: str = "<dict>") -> Scenario:
     cal_err = _parse_dataclass(CalibrationErrorConfig,
                                _section(table, "calibration_error", path), path,
                                "calibration_error", CALIBRATION_ERROR_KEYS, None, sweep)
-    _check_scaled_errors(cal_err, sweep, path)
+    check_scaled_errors(cal_err, sweep, path)
     cal = _parse_dataclass(CalibrationConfig, _section(table, "calibration", path), path,
                            "calibration", (), {"method": ("none", "linear", "file"),
                                                "solver": ("lstsq", "irls")})
@@ -292,7 +299,7 @@ def parse_scenario(table: dict[str, Any], path: str = "<dict>") -> Scenario:
         if not cal.file:
             raise ScenarioError(path, "method 'file' needs a 'file'", key="calibration.file")
         cal = replace(cal, file=referenced_file(base_dir, cal.file, "calibration.file", path))
-    _check_configurations(cal.configurations, path)
+    check_configurations(cal.configurations, path)
     if cal.min_singular_ratio > cal.warn_singular_ratio:
         raise ScenarioError(path, f"{cal.min_singular_ratio} exceeds warn_singular_ratio "
                             f"({cal.warn_singular_ratio}): the hard limit must be below the "
@@ -301,17 +308,20 @@ def parse_scenario(table: dict[str, Any], path: str = "<dict>") -> Scenario:
                             {"kind": ("random-pairs", "fixed", "trajectory"),
                              "shape": SHAPES, "profile": PROFILES, "plane": tuple(PLANES)},
                             sweep)
-    task = _check_trajectory_task(task, sweep, path)
+    task = check_trajectory_task(task, sweep, path)
     clock = _parse_dataclass(ClockConfig, _section(table, "clock", path), path, "clock",
                              CLOCK_KEYS, None, sweep)
+    if sensor != "image" and max(sweep.get("clock.exposure_ms", [clock.exposure_ms])) > 0:
+        raise ScenarioError(path, "motion blur needs rendered images ([sensor] kind = "
+                            "\"image\")", key="clock.exposure_ms")
     if task.settle_steps > task.max_steps:
         raise ScenarioError(path, f"{task.settle_steps} exceeds task.max_steps "
                             f"({task.max_steps})", key="task.settle_steps")
     geometry_data, camera_data, points = _read_files(robot_geometry, camera_file, cal, opencv,
                                                      robot_preset, path)
     if task.kind == "fixed":
-        _check_fixed_task(task, robot_preset, geometry_data, path)
-    _check_lens_error(camera_data, cal_err, sweep, path)
+        check_fixed_task(task, robot_preset, geometry_data, path)
+    check_lens_error(camera_data, cal_err, sweep, path)
     reference = table.get("reference", {})
     if not isinstance(reference, dict):
         raise ScenarioError(path, "expected a table", key="reference")
@@ -399,115 +409,6 @@ def _read_files(geometry_file: str | None, camera_file: str | None, cal: Calibra
     except CameraError as exc:
         raise ScenarioError(camera_file or path, str(exc), key="camera") from None
     return geometry, camera, points
-
-
-def _check_lens_error(camera: Any, cal_err: CalibrationErrorConfig,
-                      sweep: dict[str, list[Any]], path: str) -> None:
-    """Each ``distortion_percent`` is one the camera file's lens model has (a fisheye,
-    double sphere or extended unified lens: 0 or 100 only)."""
-    if camera is None:
-        return
-    from vision.exceptions import CameraError
-
-    key = "calibration_error.distortion_percent"
-    for value in sweep.get(key, [cal_err.distortion_percent]):
-        try:
-            camera.lens_scaled(1.0 - 1e-2 * float(value))
-        except CameraError as exc:
-            raise ScenarioError(path, f"{value}: {exc}", key=key) from None
-
-
-def _check_scaled_errors(cal_err: CalibrationErrorConfig, sweep: dict[str, list[Any]],
-                         path: str) -> None:
-    """Each calibration error times the largest ``scale`` stays within its key's range."""
-    scales = sweep.get("calibration_error.scale", [cal_err.scale])
-    for key in SCALED_ERROR_KEYS:
-        values = sweep.get(f"calibration_error.{key}", [getattr(cal_err, key)])
-        worst = max(values) * max(scales)
-        hi = RANGES[f"calibration_error.{key}"][1]
-        if worst > hi:
-            raise ScenarioError(path, f"times scale {max(scales):g} gives a standard "
-                                f"deviation of {worst:g}, beyond the allowed {hi:g}",
-                                key=f"calibration_error.{key}")
-
-
-def _check_trajectory_task(task: TaskConfig, sweep: dict[str, list[Any]], path: str
-                           ) -> TaskConfig:
-    """A trajectory task runs for ``max_steps`` (``fixed_duration``); its keys swept only
-    in a trajectory task."""
-    if task.kind == "trajectory":
-        return replace(task, fixed_duration=True)
-    for key in TASK_KEYS:
-        if f"task.{key}" in sweep:
-            raise ScenarioError(path, "only a trajectory task sweeps it", key=f"task.{key}")
-    return task
-
-
-def _check_configurations(value: str, path: str) -> None:
-    """``extremal`` or ``random:N`` with an integer N >= 2."""
-    key = "calibration.configurations"
-    if value == "extremal":
-        return
-    if not value.startswith("random:"):
-        raise ScenarioError(path, f"expected 'extremal' or 'random:N', got {value!r}", key=key)
-    count = value.split(":", 1)[1]
-    if not count.isdigit() or not 2 <= int(count) <= 100_000:
-        raise ScenarioError(path, f"expected 'random:N' with an integer N in [2, 100000], got "
-                            f"{value!r}", key=key)
-
-
-def _check_fixed_task(task: TaskConfig, preset: str | None, geometry: Any,
-                      path: str) -> None:
-    """A fixed task has 6 leg lengths per end, inside the nominal strokes."""
-    from hexapod.geometry import preset as geometry_preset
-
-    for key in ("start_mm", "goal_mm"):
-        value = getattr(task, key)
-        if value is None or len(value) != 6:
-            raise ScenarioError(path, "a fixed task needs 6 leg lengths [mm]", key=f"task.{key}")
-    if geometry is None:
-        geometry = geometry_preset(preset or "deltalab")
-    lo, hi = (1e3 * x for x in geometry.stroke)
-    for key in ("start_mm", "goal_mm"):
-        for leg, q in enumerate(getattr(task, key)):
-            if not lo <= q <= hi:
-                raise ScenarioError(path, f"leg {leg}: {q:g} mm is outside the stroke "
-                                    f"[{lo:g}, {hi:g}] mm", key=f"task.{key}")
-
-
-def check_controllers(sc: Scenario) -> None:
-    """Resolve every controller of a scenario and build it with its options once.
-
-    A misspelt name or an option a controller refuses (a NaN gain, an unknown
-    option) is reported before any trial runs, instead of failing every trial.
-
-    Raises:
-        UnknownControllerError: A name no controller is registered under (with the close one).
-        PluginLoadError: A ``module:attr`` that cannot be imported.
-        ScenarioError: An option the controller refuses, naming the controller and option.
-    """
-    import controllers  # noqa: F401 - registers the built-ins
-    from benchmarks.study.scenario_checks import check_option_names
-    from controllers.base import registry
-    from controllers.exceptions import OptionError, UnknownControllerError
-
-    for k, spec in enumerate(sc.controllers):
-        where = spec.key or f"controllers[{k}]"
-        try:
-            factory = registry.factory(spec.name)
-        except UnknownControllerError as exc:
-            if spec.key is None:  # named on the command line
-                raise ScenarioError("--controllers", str(exc)) from None
-            raise ScenarioError(sc.source, str(exc), key=where) from None
-        check_option_names(sc.source, spec, factory, where)
-        try:
-            registry.create(spec.name, **spec.options)
-        except OptionError as exc:
-            raise ScenarioError(sc.source, f"{spec.name}: {exc.problem}",
-                                key=spec.option_keys.get(exc.option,
-                                                         f"{where}.{exc.option}")) from None
-        except TypeError as exc:  # an option the factory does not take
-            raise ScenarioError(sc.source, f"{spec.name}: {exc}", key=where) from None
 
 
 def builtin_scenarios() -> dict[str, Path]:

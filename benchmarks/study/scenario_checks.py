@@ -1,14 +1,26 @@
 """Checks of what a scenario file names, in the file's terms: the files it references
-(relative to the scenario file) and the options of its controllers (against each
-controller's signature)."""
+(relative to the scenario file), the options of its controllers (against each
+controller's signature, and each controller built once), and the consistency of its
+sections (lens error against the camera's model, scaled calibration errors within
+range, trajectory-only task keys, calibration configurations, a fixed task's leg
+lengths within the strokes)."""
 
 from __future__ import annotations
 
+from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
 from benchmarks.exceptions import ScenarioError
-from benchmarks.study.scenario_model import ControllerSpec
+from benchmarks.study.scenario_model import (
+    RANGES,
+    SCALED_ERROR_KEYS,
+    TASK_KEYS,
+    CalibrationErrorConfig,
+    ControllerSpec,
+    Scenario,
+    TaskConfig,
+)
 from hexapod.config import suggest
 
 
@@ -55,3 +67,111 @@ def check_option_names(source: str, spec: ControllerSpec, factory: Any, where: s
                 source, f"controller '{spec.name}' has no option '{option}'; its options: "
                 f"{', '.join(accepted) or 'none'}", key=key,
                 suggestion=suggest(option, accepted))
+
+
+def check_lens_error(camera: Any, cal_err: CalibrationErrorConfig,
+                      sweep: dict[str, list[Any]], path: str) -> None:
+    """Each ``distortion_percent`` is one the camera file's lens model has (a fisheye,
+    double sphere or extended unified lens: 0 or 100 only)."""
+    if camera is None:
+        return
+    from vision.exceptions import CameraError
+
+    key = "calibration_error.distortion_percent"
+    for value in sweep.get(key, [cal_err.distortion_percent]):
+        try:
+            camera.lens_scaled(1.0 - 1e-2 * float(value))
+        except CameraError as exc:
+            raise ScenarioError(path, f"{value}: {exc}", key=key) from None
+
+
+def check_scaled_errors(cal_err: CalibrationErrorConfig, sweep: dict[str, list[Any]],
+                         path: str) -> None:
+    """Each calibration error times the largest ``scale`` stays within its key's range."""
+    scales = sweep.get("calibration_error.scale", [cal_err.scale])
+    for key in SCALED_ERROR_KEYS:
+        values = sweep.get(f"calibration_error.{key}", [getattr(cal_err, key)])
+        worst = max(values) * max(scales)
+        hi = RANGES[f"calibration_error.{key}"][1]
+        if worst > hi:
+            raise ScenarioError(path, f"times scale {max(scales):g} gives a standard "
+                                f"deviation of {worst:g}, beyond the allowed {hi:g}",
+                                key=f"calibration_error.{key}")
+
+
+def check_trajectory_task(task: TaskConfig, sweep: dict[str, list[Any]], path: str
+                           ) -> TaskConfig:
+    """A trajectory task runs for ``max_steps`` (``fixed_duration``); its keys swept only
+    in a trajectory task."""
+    if task.kind == "trajectory":
+        return replace(task, fixed_duration=True)
+    for key in TASK_KEYS:
+        if f"task.{key}" in sweep:
+            raise ScenarioError(path, "only a trajectory task sweeps it", key=f"task.{key}")
+    return task
+
+
+def check_configurations(value: str, path: str) -> None:
+    """``extremal`` or ``random:N`` with an integer N >= 2."""
+    key = "calibration.configurations"
+    if value == "extremal":
+        return
+    if not value.startswith("random:"):
+        raise ScenarioError(path, f"expected 'extremal' or 'random:N', got {value!r}", key=key)
+    count = value.split(":", 1)[1]
+    if not count.isdigit() or not 2 <= int(count) <= 100_000:
+        raise ScenarioError(path, f"expected 'random:N' with an integer N in [2, 100000], got "
+                            f"{value!r}", key=key)
+
+
+def check_fixed_task(task: TaskConfig, preset: str | None, geometry: Any,
+                      path: str) -> None:
+    """A fixed task has 6 leg lengths per end, inside the nominal strokes."""
+    from hexapod.geometry import preset as geometry_preset
+
+    for key in ("start_mm", "goal_mm"):
+        value = getattr(task, key)
+        if value is None or len(value) != 6:
+            raise ScenarioError(path, "a fixed task needs 6 leg lengths [mm]", key=f"task.{key}")
+    if geometry is None:
+        geometry = geometry_preset(preset or "deltalab")
+    lo, hi = (1e3 * x for x in geometry.stroke)
+    for key in ("start_mm", "goal_mm"):
+        for leg, q in enumerate(getattr(task, key)):
+            if not lo <= q <= hi:
+                raise ScenarioError(path, f"leg {leg}: {q:g} mm is outside the stroke "
+                                    f"[{lo:g}, {hi:g}] mm", key=f"task.{key}")
+
+
+def check_controllers(sc: Scenario) -> None:
+    """Resolve every controller of a scenario and build it with its options once.
+
+    A misspelt name or an option a controller refuses (a NaN gain, an unknown
+    option) is reported before any trial runs, instead of failing every trial.
+
+    Raises:
+        UnknownControllerError: A name no controller is registered under (with the close one).
+        PluginLoadError: A ``module:attr`` that cannot be imported.
+        ScenarioError: An option the controller refuses, naming the controller and option.
+    """
+    import controllers  # noqa: F401 - registers the built-ins
+    from controllers.base import registry
+    from controllers.exceptions import OptionError, UnknownControllerError
+
+    for k, spec in enumerate(sc.controllers):
+        where = spec.key or f"controllers[{k}]"
+        try:
+            factory = registry.factory(spec.name)
+        except UnknownControllerError as exc:
+            if spec.key is None:  # named on the command line
+                raise ScenarioError("--controllers", str(exc)) from None
+            raise ScenarioError(sc.source, str(exc), key=where) from None
+        check_option_names(sc.source, spec, factory, where)
+        try:
+            registry.create(spec.name, **spec.options)
+        except OptionError as exc:
+            raise ScenarioError(sc.source, f"{spec.name}: {exc.problem}",
+                                key=spec.option_keys.get(exc.option,
+                                                         f"{where}.{exc.option}")) from None
+        except TypeError as exc:  # an option the factory does not take
+            raise ScenarioError(sc.source, f"{spec.name}: {exc}", key=where) from None

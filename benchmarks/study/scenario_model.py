@@ -18,7 +18,8 @@ NOISE_KEYS = ("amplitude_deg", "pixel_sigma_px", "points_per_edge", "outlier_fra
 CALIBRATION_ERROR_KEYS = ("scale", "base_points_mm", "platform_points_mm", "joint_offsets_mm",
                           "camera_pose_mm", "camera_pose_deg", "intrinsics_percent",
                           "leg_radius_percent", "distortion_percent", "mass_percent",
-                          "inertia_percent")
+                          "inertia_percent", "model_mass_error_percent",
+                          "model_inertia_error_percent")
 #: The worlds a study runs in (``[robot] world``).
 WORLDS = ("kinematic", "dynamic")
 
@@ -50,6 +51,8 @@ RANGES: dict[str, tuple[float, float, bool, bool]] = {
     "calibration_error.distortion_percent": (0.0, 100.0, True, True),
     "calibration_error.mass_percent": (0.0, 50.0, True, True),
     "calibration_error.inertia_percent": (0.0, 50.0, True, True),
+    "calibration_error.model_mass_error_percent": (-50.0, 100.0, True, True),
+    "calibration_error.model_inertia_error_percent": (-50.0, 100.0, True, True),
     "calibration.noise_deg": (0.0, 90.0, True, True),
     "calibration.warn_singular_ratio": (0.0, 1.0, True, False),
     "calibration.min_singular_ratio": (0.0, 1.0, True, False),
@@ -70,15 +73,19 @@ RANGES: dict[str, tuple[float, float, bool, bool]] = {
     "clock.latency_ms": (0.0, 10_000.0, True, True),
     "clock.latency_frames": (0.0, 1000.0, True, True),
     "clock.jitter_ms": (0.0, 1000.0, True, True),
+    "clock.exposure_ms": (0.0, 1000.0, True, True),
+    "clock.exposure_samples": (1, 256, True, True),
 }
 #: Keys of [clock] (the camera's clock), every one sweepable.
-CLOCK_KEYS = ("frame_rate_hz", "latency_ms", "latency_frames", "jitter_ms")
+CLOCK_KEYS = ("frame_rate_hz", "latency_ms", "latency_frames", "jitter_ms", "exposure_ms")
 #: Keys of [task] that may be swept (trajectory tasks).
 TASK_KEYS = ("speed_mm_s", "acceleration_mm_s2")
+#: Calibration errors that are not standard deviations: not multiplied by ``scale``.
+UNSCALED = ("scale", "distortion_percent", "model_mass_error_percent",
+            "model_inertia_error_percent")
 #: The calibration-error keys in millimetres or degrees whose standard deviation, times
 #: ``scale``, must stay within the range of the key itself (the effective error).
-SCALED_ERROR_KEYS = tuple(k for k in CALIBRATION_ERROR_KEYS
-                          if k not in ("scale", "distortion_percent"))
+SCALED_ERROR_KEYS = tuple(k for k in CALIBRATION_ERROR_KEYS if k not in UNSCALED)
 
 
 def check_range(value: Any, key: str, path: str) -> None:
@@ -157,6 +164,12 @@ class CalibrationErrorConfig:
             dynamic world's true robot; the controllers are told the robot file's).
         inertia_percent: Relative std of their rotational inertias [%]. Each body's
             factor is ``exp(s z)`` (always positive, about ``1 + s z`` for small ``s``).
+        model_mass_error_percent: The controllers' model's error on every body's mass
+            (platform, leg body, leg rod) [%], the same for every trial: the robot
+            file's masses (what the controllers are told) are the true ones times
+            ``1 + e / 100`` (+30: the model is 30 % too heavy). Not random, not
+            multiplied by ``scale``; the drives' rotor inertia is not changed.
+        model_inertia_error_percent: Likewise for their rotational inertias [%].
         scale: Multiplies every standard deviation above (sweep it to grow all
             errors together).
     """
@@ -172,6 +185,8 @@ class CalibrationErrorConfig:
     distortion_percent: float = 0.0
     mass_percent: float = 0.0
     inertia_percent: float = 0.0
+    model_mass_error_percent: float = 0.0
+    model_inertia_error_percent: float = 0.0
 
 
 @dataclass(frozen=True)
@@ -231,12 +246,20 @@ class ClockConfig:
         latency_frames: Further delay, in frame periods (control periods at rate 0).
         jitter_ms: Standard deviation of the capture times around their nominal grid
             [ms] (clipped to 0.45 frame).
+        exposure_ms: Exposure time [ms] (0: an instant): a frame integrates the robot's
+            motion over the exposure that ends at its capture time (motion blur; the
+            rendered images only, ``[sensor] kind = "image"``); its ``image_t`` is the
+            middle of the exposure.
+        exposure_samples: Poses drawn and averaged over the exposure
+            (:func:`vision.exposure.render_exposed`).
     """
 
     frame_rate_hz: float = 0.0
     latency_ms: float = 0.0
     latency_frames: float = 0.0
     jitter_ms: float = 0.0
+    exposure_ms: float = 0.0
+    exposure_samples: int = 8
 
 
 @dataclass(frozen=True)

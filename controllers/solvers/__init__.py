@@ -14,12 +14,13 @@ task with :class:`DampedPseudoInverse`, ``leg-edge-qp`` the same task with
 - the predictive controller: :mod:`controllers.mpc` (horizon, SQP, DAQP), which takes
   the tasks of its fallback law (:meth:`~controllers.laws.VisionLaw.tasks`).
 
-Computed-torque solvers (second-order laws that command leg forces) belong here, in
-their own module: from each task's ``error``, ``jacobian`` and ``jacobian_dot_twist``
-(``e_ddot = L tau_dot + L_dot tau``) they choose the platform acceleration, map it
-through the dynamic model to leg forces, and return commands with
-``actuation = Actuation.FORCE`` (:mod:`hexapod.actuation`); ``docs/plugins.md`` shows
-the shape.
+The computed-torque solver (:mod:`~controllers.solvers.computed_torque`, second order,
+commanding leg forces): from a task's ``error``, ``jacobian`` and ``jacobian_dot_twist``
+(``e_ddot = L tau_dot + L_dot tau``) it chooses the platform acceleration giving the
+designed second-order error dynamics and maps it through the nominal dynamic model to
+leg forces (``actuation = Actuation.FORCE``, :mod:`hexapod.actuation`); the
+computed-torque laws (``computed-torque``, ``cartesian-ctc``, ``vision-ctc``,
+``leg-edge-ctc``, ``leg-direction-ctc``) use it.
 """
 
 from controllers.solvers.base import Solved, Solver

@@ -3,7 +3,8 @@
 In the manner of Pink's tasks (``docs/plugins.md``, "Adding a task"): a task knows its
 feature, never how it is solved; a solver (the damped pseudo-inverse of
 :mod:`controllers.laws`, the limit QP of :mod:`controllers.qp`, the predictive
-controller of :mod:`controllers.mpc`, the computed-torque solvers to come) combines
+controller of :mod:`controllers.mpc`, the computed-torque solver of
+:mod:`controllers.solvers.computed_torque`) combines
 tasks. Every method is batched over a leading trial axis.
 
 - :class:`LegDirectionTask`: ``u x u*`` (seeds 001/003);

@@ -19,11 +19,15 @@ from hexapod.se3 import log_so3, skew
 
 
 def _log_so3(R: ca.SX) -> ca.SX:
-    """:func:`hexapod.se3.log_so3` away from a half-turn, as an expression."""
+    """:func:`hexapod.se3.log_so3` away from a half-turn, as an expression (its series
+    ``theta / (2 sin theta) = 1/2 + sin^2 theta / 12`` near zero, where the closed form
+    and its derivatives are 0/0)."""
     cos = (R[0, 0] + R[1, 1] + R[2, 2] - 1.0) / 2.0
     v = ca.vertcat(R[2, 1] - R[1, 2], R[0, 2] - R[2, 0], R[1, 0] - R[0, 1])
-    theta = ca.atan2(0.5 * ca.sqrt(ca.dot(v, v)), cos)
-    return theta / (2.0 * ca.sin(theta)) * v
+    sin2 = ca.dot(v, v) / 4.0
+    theta = ca.atan2(ca.sqrt(sin2), cos)
+    factor = ca.if_else(sin2 < 1e-10, 0.5 + sin2 / 12.0, theta / (2.0 * ca.sin(theta)))
+    return factor * v
 
 
 @lru_cache(maxsize=1)

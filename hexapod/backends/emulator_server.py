@@ -6,9 +6,10 @@ with ``handle_line(line, now) -> reply``, ``advance(now)``, ``frame(reply) -> by
 pseudo-terminal (``.device`` is the slave path that pyserial opens) or on a loopback TCP
 port (``socket://127.0.0.1:PORT``), in a thread (``start()``/``stop()``) or in the
 foreground (``serve_forever()``), and injects seeded faults on demand
-(:class:`FaultConfig`): latency, dropped replies, garbled bytes, a silent device, a
-disconnection. A reply that frames to no bytes (a set command of a protocol that answers
-only queries, like PI's GCS) sends nothing.
+(:class:`~hexapod.backends.emulator_faults.FaultConfig`, re-exported here): latency,
+dropped replies, garbled bytes, a silent device, a disconnection. A reply that frames
+to no bytes (a set command of a protocol that answers only queries, like PI's GCS)
+sends nothing.
 
 :class:`~hexapod.backends.emulator_board.Emulator` is the server of the project's own
 controller board (:class:`~hexapod.backends.emulator_board.Board`);
@@ -30,10 +31,11 @@ import threading
 import time
 import tty
 from collections import deque
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from types import TracebackType
 from typing import ClassVar, Generic, Protocol, Self, TypeVar
 
+from hexapod.backends.emulator_faults import FaultConfig, FaultState, garble
 from hexapod.exceptions import BackendError
 
 logger = logging.getLogger(__name__)
@@ -79,72 +81,10 @@ class EmulatedDevice(Protocol):
 D = TypeVar("D", bound=EmulatedDevice)
 
 
-@dataclass(frozen=True)
-class FaultConfig:
-    """Faults the emulator injects, drawn from a generator seeded with ``seed``.
-
-    Attributes:
-        latency: Fixed delay added to every reply [s].
-        jitter: Extra delay, uniform in [0, jitter], added to every reply [s].
-        drop_rate: Probability that a reply is not sent (the command is still executed).
-        garble_rate: Probability that one byte of a line is corrupted, drawn separately
-            for each received command (the board then answers ``ERR 3``) and each reply.
-        silent_after: Stop replying (but keep executing commands) after this many commands.
-        disconnect_after: Close the connection after replying to this many commands.
-        seed: Seed of the fault generator.
-
-    Counts of commands start when the faults are set (:meth:`Emulator.set_faults`).
-    """
-
-    latency: float = 0.0
-    jitter: float = 0.0
-    drop_rate: float = 0.0
-    garble_rate: float = 0.0
-    silent_after: int | None = None
-    disconnect_after: int | None = None
-    seed: int = 0
-
-    def __post_init__(self) -> None:
-        for name in ("latency", "jitter"):
-            value = getattr(self, name)
-            if not (math.isfinite(value) and value >= 0):
-                raise BackendError(f"fault {name} must be >= 0 s, got {value}")
-        for name in ("drop_rate", "garble_rate"):
-            value = getattr(self, name)
-            if not 0.0 <= value <= 1.0:
-                raise BackendError(f"fault {name} must be a probability, got {value}")
-        for name in ("silent_after", "disconnect_after"):
-            value = getattr(self, name)
-            if value is not None and value < 0:
-                raise BackendError(f"fault {name} must be >= 0 commands, got {value}")
-
-    def to_args(self) -> list[str]:
-        """The ``hexapod-emulator`` options that inject these faults (milliseconds)."""
-        args = ["--latency", repr(self.latency * 1e3), "--jitter", repr(self.jitter * 1e3),
-                "--drop", repr(self.drop_rate), "--garble", repr(self.garble_rate),
-                "--seed", str(self.seed)]
-        if self.silent_after is not None:
-            args += ["--silent-after", str(self.silent_after)]
-        if self.disconnect_after is not None:
-            args += ["--disconnect-after", str(self.disconnect_after)]
-        return args
-
-
-
-
 @dataclass
 class _Reply:
     due: float
     data: bytes
-
-
-@dataclass
-class _FaultState:
-    config: FaultConfig = field(default_factory=FaultConfig)
-    rng: random.Random = field(default_factory=lambda: random.Random(0))
-    commands: int = 0
-    disconnect_pending: bool = False
-    disconnect_at: float = math.inf
 
 
 def _check_loopback(host: str, allow_remote: bool) -> None:
@@ -198,7 +138,7 @@ class EmulatorServer(Generic[D]):
         self.line_rate = float(line_rate)
         self._host, self._port = host, port
         self._lock = threading.RLock()
-        self._faults = _FaultState()
+        self._faults = FaultState()
         self.set_faults(faults or FaultConfig())
         self._stop = threading.Event()
         self._stopped = threading.Event()
@@ -223,7 +163,7 @@ class EmulatorServer(Generic[D]):
     def set_faults(self, faults: FaultConfig) -> None:
         """Inject other faults from now on (re-seeds the generator, restarts the counts)."""
         with self._lock:
-            self._faults = _FaultState(faults, random.Random(faults.seed))
+            self._faults = FaultState(faults, random.Random(faults.seed))
 
     @property
     def faults(self) -> FaultConfig:
@@ -421,7 +361,7 @@ class EmulatorServer(Generic[D]):
         if fs.disconnect_pending:
             return  # the cable is being pulled
         if f.garble_rate and fs.rng.random() < f.garble_rate:
-            line = self._garble(line, fs.rng, self.board.terminator)
+            line = garble(line, fs.rng, self.board.terminator)
         with self._lock:
             reply = self.board.handle_line(line, time.monotonic())
         fs.commands += 1
@@ -434,21 +374,10 @@ class EmulatorServer(Generic[D]):
                 logger.debug("emulator: dropping the reply %r", data)
                 return
             if f.garble_rate and fs.rng.random() < f.garble_rate:
-                data = self._garble(data, fs.rng, self.board.terminator)
+                data = garble(data, fs.rng, self.board.terminator)
             self._queue(data, len(line))
         if f.disconnect_after is not None and fs.commands >= f.disconnect_after:
             fs.disconnect_pending = True
-
-    @staticmethod
-    def _garble(line: bytes, rng: random.Random, terminator: bytes = b"\n") -> bytes:
-        """Replace one byte (never the final terminator) by another printable one."""
-        body = bytearray(line[: -len(terminator)] if line.endswith(terminator) else line)
-        if not body:
-            return line
-        i = rng.randrange(len(body))
-        choices = [c for c in range(0x21, 0x7F) if c != body[i]]
-        body[i] = rng.choice(choices)
-        return bytes(body) + line[len(body):]
 
     def _queue(self, data: bytes, received: int) -> None:
         f = self._faults.config
@@ -502,6 +431,3 @@ class EmulatorServer(Generic[D]):
             with contextlib.suppress(OSError):
                 os.close(fd)
         self._stopped.set()
-
-
-

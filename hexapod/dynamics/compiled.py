@@ -90,23 +90,28 @@ def _leg(A: ca.SX, B: ca.SX, B_dot: ca.SX, c_B: ca.SX, leg: ca.SX
     m_b, d_b, i_b, m_r, d_r, i_r = (leg[k] for k in range(6))
     gravity = leg[6:9]
     L = B - A
-    q = ca.sqrt(ca.dot(L, L))
-    u = L / q
+    q_sq = ca.dot(L, L)
+    # the leg's one division; the others are products by 1/q (written as a square root,
+    # which CasADi does not fold back into divisions as it does x * (1/q))
+    inv_q = ca.sqrt(1 / q_sq)
+    q = q_sq * inv_q
+    inv_q2 = inv_q * inv_q
+    u = L * inv_q
     q_dot = ca.dot(u, B_dot)
-    u_dot = (B_dot - q_dot * u) / q
+    u_dot = (B_dot - q_dot * u) * inv_q
     J = m_b * d_b**2 + m_r * (q - d_r) ** 2 + i_b + i_r
-    beta = J / q**2
+    beta = J * inv_q2
     g_u = ca.dot(gravity, u)
     n_leg = (m_r * d_r * ca.dot(u_dot, u_dot) * u
-             + (2 * q_dot / q**2) * (m_r * d_r * (q - d_r) - m_b * d_b**2 - i_b - i_r) * u_dot
-             - m_r * g_u * u - ((m_b * d_b + m_r * (q - d_r)) / q) * (gravity - g_u * u))
+             + (2 * q_dot * inv_q2) * (m_r * d_r * (q - d_r) - m_b * d_b**2 - i_b - i_r) * u_dot
+             - m_r * g_u * u - ((m_b * d_b + m_r * (q - d_r)) * inv_q) * (gravity - g_u * u))
     y = beta * c_B + (m_r - beta) * ca.dot(u, c_B) * u + n_leg
     potential = -m_b * ca.dot(gravity, A + d_b * u) - m_r * ca.dot(gravity, B - d_r * u)
     bias = ca.dot(u, c_B) + q * ca.dot(u_dot, u_dot)
     return u, beta, m_r, y, potential, q_dot, bias
 
 
-def _symmetric_outer(a: ca.SX, k: ca.SX) -> ca.SX:
+def symmetric_outer(a: ca.SX, k: ca.SX) -> ca.SX:
     """``a k^T`` for ``a`` parallel to ``k``, from its upper triangle (21 products)."""
     n = k.shape[0]
     out = ca.SX.zeros(n, n)
@@ -139,7 +144,13 @@ def ldl_solve(M: ca.SX, b: ca.SX) -> ca.SX:
 
 
 def expressions() -> tuple[ca.SX, dict[str, ca.SX]]:
-    """The symbolic input row and the dynamics' terms as SX expressions of it."""
+    """The symbolic input row and the dynamics' terms as SX expressions of it.
+
+    Besides the terms of :data:`TERMS` (``M``, ``h``, ``K``, ``kinetic``, ``potential``,
+    ``q_dot``, ``leg_bias``): ``M = M_joint + K^T diag(leg_mass) K``, the legs' rank-one
+    parts apart (``leg_mass_i = m_r - J_i / q_i^2``), for a caller that adds leg-space
+    masses of its own (one rank-one term per leg instead of two).
+    """
     x = ca.SX.sym("x", ROW)
     R = ca.reshape(x[0:9], 3, 3)
     t = x[9:12]
@@ -167,7 +178,8 @@ def expressions() -> tuple[ca.SX, dict[str, ca.SX]]:
     # Jb = [I, -[b]x], c_B = w x (w x b); Jb^T M_leg Jb = beta Jb^T Jb + (m_r - beta) k k^T
     # with k = Jb^T u the leg's row of K, and Jb^T Jb = [[I, -[b]x], [[b]x, |b|^2 I - b b^T]]
     # summed over the legs as sum(beta), sum(beta b) and sum(beta (|b|^2 I - b b^T)).
-    k_rows, q_dots, biases = [], [], []
+    M_joint = M  # M without the legs' rank-one terms (m_r - beta) k k^T
+    k_rows, q_dots, biases, leg_coefficients = [], [], [], []
     s0, s1, s2 = ca.SX(0), ca.SX.zeros(3), ca.SX.zeros(3, 3)
     for i in range(6):
         b = R @ E[:, i]
@@ -180,15 +192,19 @@ def expressions() -> tuple[ca.SX, dict[str, ca.SX]]:
         s0 += beta
         s1 += beta * b
         s2 += beta * (ca.dot(b, b) * ca.SX.eye(3) - b @ b.T)
-        M += _symmetric_outer((m_r - beta) * k, k)
+        M += symmetric_outer((m_r - beta) * k, k)
+        leg_coefficients.append(m_r - beta)
         h += ca.vertcat(y, ca.cross(b, y))
         potential += v_leg
         k_rows.append(k.T)
-    M += ca.vertcat(ca.horzcat(s0 * ca.SX.eye(3), -_skew(s1)), ca.horzcat(_skew(s1), s2))
+    legs_joint = ca.vertcat(ca.horzcat(s0 * ca.SX.eye(3), -_skew(s1)),
+                            ca.horzcat(_skew(s1), s2))
+    M += legs_joint
     K = ca.vertcat(*k_rows)
     kinetic = 0.5 * ca.dot(tau, M @ tau)
     return x, {"M": M, "h": h, "K": K, "kinetic": kinetic, "potential": potential,
-               "q_dot": ca.vertcat(*q_dots), "leg_bias": ca.vertcat(*biases)}
+               "q_dot": ca.vertcat(*q_dots), "leg_bias": ca.vertcat(*biases),
+               "M_joint": M_joint + legs_joint, "leg_mass": ca.vertcat(*leg_coefficients)}
 
 
 @lru_cache(maxsize=1)

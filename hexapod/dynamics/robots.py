@@ -66,6 +66,11 @@ def leg_bias(twist: np.ndarray, q: np.ndarray, u: np.ndarray, r: np.ndarray) -> 
 class DynamicRobots:
     """``n`` robots with mass and drives (see the module docstring).
 
+    The geometry, inertia and drive parameters are read at construction; the state
+    (``twist``, ``drives.integral``, ``forces`` and the accumulators) lives in the rows
+    of :attr:`table`, which the compiled period advances in place: write into these
+    arrays (``robots.twist[:] = ...``), never rebind them.
+
     Args:
         geometries: The true robot of every row (geometry, ``inertia``, ``drives``); one
             drive mode for all.
@@ -108,6 +113,25 @@ class DynamicRobots:
         #: (n,) largest drive tracking error [m/s] and largest drive force [N].
         self.track_max = np.zeros(n)
         self.force_max = np.abs(self.forces).max(axis=1)
+        self._share_table()
+
+    def _share_table(self) -> None:
+        """Keep every row in one table (constants, state, accumulators: the compiled
+        period's rows, advanced in place) and make the state attributes its views."""
+        from hexapod.dynamics.robots_compiled import column, new_table
+
+        #: (n, W) the robots' rows (:data:`hexapod.dynamics.robots_compiled.LAYOUT`).
+        self.table = new_table(self)
+        self.twist = column(self.table, "twist")
+        self.drives.integral = column(self.table, "integral")
+        self.forces = column(self.table, "motor")
+        self.saturated_time = column(self.table, "saturated_time")
+        self.track_sq = column(self.table, "track_sq")
+        self.track_max = column(self.table, "track_max")
+        self.force_max = column(self.table, "force_max")
+        #: (n, 6) true leg lengths [m] at the end of the last :meth:`advance` (at
+        #: construction before it; :meth:`step_reference` does not update them).
+        self.period_lengths = column(self.table, "q")
 
     def rows(self, rows: np.ndarray) -> dict[str, np.ndarray]:
         """The per-row overrides of :class:`DynamicModel`'s batches for ``rows``."""

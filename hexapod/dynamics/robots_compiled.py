@@ -2,10 +2,15 @@
 
 The step is :meth:`hexapod.dynamics.robots.DynamicRobots.step_reference` written once
 more in CasADi SX (the mechanism's terms are those of :mod:`hexapod.dynamics.compiled`,
-substituted into the step), folded over the period's steps (``Function.fold``) and
-generated to C (:mod:`hexapod.compiled`); the two are tested equal. One row of the period
-function carries a robot's state, its constants and its accumulators (:data:`LAYOUT`);
-the output row has the same layout.
+substituted into the step) and generated to C twice: by this project's lane generator
+(:mod:`hexapod.compiled_lanes`: four rows per vector instruction, the period's steps
+looped in C; used) and by CasADi, folded over the period's steps (``Function.fold``,
+:mod:`hexapod.compiled`: the fallback, and the lane code's bitwise reference); the step
+and the numpy reference are tested equal. One row carries a robot's constants, state,
+accumulators and leg lengths (:data:`LAYOUT`); the robots keep their rows in a table
+(:func:`new_table`) whose state columns are their attributes (views), and a period
+advances the table's rows in place: nothing is packed or unpacked but the poses (the
+caller's arrays) and the setpoints.
 """
 
 from __future__ import annotations
@@ -18,6 +23,7 @@ import casadi as ca
 import numpy as np
 
 from hexapod.compiled import CompiledFunction
+from hexapod.compiled_lanes import LaneFunction
 from hexapod.dynamics import compiled as mech
 from hexapod.dynamics.drive_model import COULOMB_SMOOTHING
 
@@ -29,7 +35,7 @@ def _layout() -> dict[str, slice]:
              ("E", 18), ("p", mech.N_PARAMETERS), ("kp", 6), ("ki", 6), ("limit", 6),
              ("rotor", 6), ("viscous", 6), ("coulomb", 6), ("h", 1), ("force_mode", 1),
              ("motor", 6), ("saturated_time", 1), ("track_sq", 1), ("track_max", 1),
-             ("force_max", 1)]
+             ("force_max", 1), ("q", 6)]
     out, k = {}, 0
     for name, size in sizes:
         out[name] = slice(k, k + size)
@@ -68,17 +74,19 @@ def _step_expression() -> tuple[ca.SX, ca.SX]:
     sym, terms = mech.expressions()
     row = ca.vertcat(get("R"), get("t"), get("twist"), ca.SX.zeros(6), get("A"), get("E"),
                      get("p"))
-    M, hb, K = (ca.substitute(terms[k], sym, row) for k in ("M", "h", "K"))
+    # q_dot = K tau and the legs' bias acceleration b = q_ddot - K tau_dot come with the
+    # mechanism's terms (the same leg vectors)
+    M_joint, leg_mass, hb, K, qd, b = (ca.substitute(terms[k], sym, row) for k in (
+        "M_joint", "leg_mass", "h", "K", "q_dot", "leg_bias"))
     R = ca.reshape(get("R"), 3, 3)
     t, tw, h = get("t"), get("twist"), get("h")
     kp, ki, lim, integral, sp = get("kp"), get("ki"), get("limit"), get("integral"), \
         get("setpoint")
-    qd = K @ tw
     # the drives (hexapod.dynamics.drive_model.DriveModel.forces)
-    xs = qd / COULOMB_SMOOTHING
+    xs = qd * (1 / COULOMB_SMOOTHING)
     small = ca.fabs(xs) < 1e-8
     secant = ca.if_else(small, 1.0, ca.tanh(xs) / ca.if_else(small, 1.0, xs))
-    d_friction = get("viscous") + get("coulomb") / COULOMB_SMOOTHING * secant
+    d_friction = get("viscous") + get("coulomb") * (1 / COULOMB_SMOOTHING) * secant
     friction = get("viscous") * qd + get("coulomb") * ca.tanh(xs)
     err = sp - qd
     u = kp * err + integral
@@ -90,23 +98,14 @@ def _step_expression() -> tuple[ca.SX, ca.SX]:
     saturated = ca.if_else(force, ca.fabs(sp) >= lim, sat_v)
     slope = -ca.if_else(force, ca.SX.zeros(6), ca.if_else(sat_v, 0.0, kp)) - d_friction
     new_integral = ca.if_else(force, integral, new_integral)
-    # the legs' bias acceleration b
-    A = ca.reshape(get("A"), 3, 6)
-    E = ca.reshape(get("E"), 3, 6)
-    v, w = tw[0:3], tw[3:6]
-    bias = []
-    for i in range(6):
-        r = R @ E[:, i]
-        leg = t + r - A[:, i]
-        q = ca.norm_2(leg)
-        ui = leg / q
-        wr = ca.cross(w, r)
-        b_dot = v + wr
-        perp = b_dot - ca.dot(ui, b_dot) * ui
-        bias.append(ca.dot(ui, ca.cross(w, wr)) + ca.dot(perp, perp) / q)
-    b = ca.vertcat(*bias)
+    # M + K^T diag(rotor - h slope) K: one rank-one term per leg, its mechanism's part
+    # (M = M_joint + K^T diag(leg_mass) K) and the drive's added, from the upper triangle
     rotor = get("rotor")
-    lhs = M + K.T @ ca.diag(rotor - h * slope) @ K
+    leg_total = leg_mass + rotor - h * slope
+    lhs = M_joint
+    for i in range(6):
+        k = K[i, :].T
+        lhs += mech.symmetric_outer(leg_total[i] * k, k)
     rhs = K.T @ (motor - friction - rotor * b) - hb
     acc = mech.ldl_solve(lhs, rhs)
     tw_new = tw + h * acc
@@ -127,68 +126,136 @@ def _step_expression() -> tuple[ca.SX, ca.SX]:
     return x, ca.cse(out)
 
 
+def _finish_expression() -> tuple[ca.SX, ca.SX]:
+    """The end of a period: the row with the legs' lengths ``q`` of its pose."""
+    x = ca.SX.sym("x", WIDTH)
+    R = ca.reshape(x[LAYOUT["R"]], 3, 3)
+    A = ca.reshape(x[LAYOUT["A"]], 3, 6)
+    E = ca.reshape(x[LAYOUT["E"]], 3, 6)
+    out = ca.SX(x)
+    out[LAYOUT["q"]] = ca.vertcat(*(ca.norm_2(x[LAYOUT["t"]] + R @ E[:, i] - A[:, i])
+                                    for i in range(6)))
+    return x, ca.cse(out)
+
+
+def _functions() -> tuple[ca.Function, ca.Function]:
+    x, y = _step_expression()
+    xf, yf = _finish_expression()
+    return (ca.Function("hexapod_dyn_step", [x], [y]),
+            ca.Function("hexapod_dyn_legs", [xf], [yf]))
+
+
 @lru_cache(maxsize=8)
 def period_function(steps: int) -> CompiledFunction:
-    """The compiled period of ``steps`` physics steps (built on first use, cached)."""
-    x, y = _step_expression()
-    step = ca.Function("hexapod_dyn_step", [x], [y])
+    """The compiled period of ``steps`` physics steps, then the legs' lengths, in CasADi's
+    C (built on first use, cached): the fallback of :func:`period_lanes`."""
+    step, finish = _functions()
     xm = ca.MX.sym("x", WIDTH)
     return CompiledFunction(ca.Function(f"hexapod_dyn_period_{steps}", [xm],
-                                        [step.fold(steps)(xm)]))
+                                        [finish(step.fold(steps)(xm))]))
 
 
-def advance_compiled(robots: Any, rows: np.ndarray, setpoints: np.ndarray, h: float,
-                     steps: int) -> np.ndarray:
-    """:meth:`hexapod.dynamics.robots.DynamicRobots.advance` in C; returns the (n,) mask
-    of rows whose state is not finite after the period (left unchanged)."""
-    y = period_function(steps).batch(pack_period(robots, rows, setpoints, h))
-    return unpack_period(robots, rows, y, steps)
+@lru_cache(maxsize=1)
+def period_lanes() -> LaneFunction | None:
+    """The period as lane-parallel C (:mod:`hexapod.compiled_lanes`: several rows per
+    vector instruction, the physics steps looped in C, then the legs' lengths; the same
+    results as :func:`period_function` bit for bit), or None where it cannot be compiled."""
+    step, finish = _functions()
+    return LaneFunction.create(step, "hexapod_dyn_period_lanes", finish)
+
+
+def run_period(x: np.ndarray, steps: int) -> np.ndarray:
+    """The rows ``x`` (n, :data:`WIDTH`) after a period of ``steps`` physics steps: the
+    lane-parallel C, else CasADi's folded period."""
+    lanes = period_lanes()
+    if lanes is not None:
+        return lanes.iterate(x, steps)
+    return period_function(steps).batch(x)
+
+
+def column(table: np.ndarray, name: str) -> np.ndarray:
+    """The view of quantity ``name`` of :data:`LAYOUT` in ``table`` (n, :data:`WIDTH`):
+    (n, size), or (n,) for a single number."""
+    s = LAYOUT[name]
+    return table[:, s.start] if s.stop - s.start == 1 else table[:, s]
+
+
+def new_table(robots: Any) -> np.ndarray:
+    """The rows (n, :data:`WIDTH`) of ``robots`` (a
+    :class:`~hexapod.dynamics.robots.DynamicRobots`): their constants (geometry, inertia,
+    drive parameters) and their present state, accumulators and leg lengths."""
+    from hexapod.dynamics.robots import legs
+
+    n = robots.n
+    d = robots.drives
+    x = np.zeros((n, WIDTH))
+    L = LAYOUT
+    x[:, L["R"]] = np.swapaxes(robots.R, -1, -2).reshape(n, 9)
+    x[:, L["t"]] = robots.t
+    x[:, L["twist"]] = robots.twist
+    x[:, L["integral"]] = d.integral
+    x[:, L["A"]] = robots.A.reshape(n, 18)
+    x[:, L["E"]] = robots.E.reshape(n, 18)
+    x[:, L["p"]] = robots.parameters
+    for key, arr in (("kp", d.kp), ("ki", d.ki), ("limit", d.force_limit),
+                     ("rotor", robots.rotor), ("viscous", d.viscous), ("coulomb", d.coulomb),
+                     ("motor", robots.forces)):
+        x[:, L[key]] = arr
+    for key, arr in (("saturated_time", robots.saturated_time), ("track_sq", robots.track_sq),
+                     ("track_max", robots.track_max), ("force_max", robots.force_max)):
+        x[:, L[key].start] = arr
+    x[:, L["q"]] = legs(robots.R, robots.t, robots.A, robots.E)[0]
+    return x
+
+
+def _index(rows: np.ndarray) -> np.ndarray | slice:
+    """``rows`` as a slice when they are consecutive (numpy copies a slice several times
+    faster than it gathers rows), else themselves."""
+    n = len(rows)
+    if n and rows[-1] - rows[0] == n - 1 and np.all(np.diff(rows) == 1):
+        return slice(int(rows[0]), int(rows[0]) + n)
+    return rows
+
+
+def load_period(robots: Any, rows: np.ndarray, setpoints: np.ndarray, h: float) -> None:
+    """Write the period's inputs of ``rows`` into ``robots.table``: the poses (from the
+    caller's ``R`` and ``t``), the setpoints, the step and the drive mode."""
+    table = robots.table
+    L = LAYOUT
+    rows = _index(rows)  # type: ignore[assignment]
+    table[rows, L["R"]] = np.swapaxes(robots.R[rows], -1, -2).reshape(-1, 9)
+    table[rows, L["t"]] = robots.t[rows]
+    table[rows, L["setpoint"]] = setpoints
+    table[rows, L["h"].start] = h
+    table[rows, L["force_mode"].start] = 1.0 if robots.drives.mode == "force" else 0.0
 
 
 def pack_period(robots: Any, rows: np.ndarray, setpoints: np.ndarray, h: float
                 ) -> np.ndarray:
-    """The input rows (n, :data:`WIDTH`) of the period function for ``rows``."""
-    n = len(rows)
-    d = robots.drives
-    x = np.empty((n, WIDTH))
-    L = LAYOUT
-    x[:, L["R"]] = np.swapaxes(robots.R[rows], -1, -2).reshape(n, 9)
-    x[:, L["t"]] = robots.t[rows]
-    x[:, L["twist"]] = robots.twist[rows]
-    x[:, L["integral"]] = d.integral[rows]
-    x[:, L["setpoint"]] = setpoints
-    x[:, L["A"]] = robots.A[rows].reshape(n, 18)
-    x[:, L["E"]] = robots.E[rows].reshape(n, 18)
-    x[:, L["p"]] = robots.parameters[rows]
-    for key, arr in (("kp", d.kp), ("ki", d.ki), ("limit", d.force_limit),
-                     ("rotor", robots.rotor), ("viscous", d.viscous), ("coulomb", d.coulomb)):
-        x[:, L[key]] = arr[rows]
-    x[:, L["h"]] = h
-    x[:, L["force_mode"]] = 1.0 if d.mode == "force" else 0.0
-    x[:, L["motor"]] = robots.forces[rows]
-    for key, arr in (("saturated_time", robots.saturated_time), ("track_sq", robots.track_sq),
-                     ("track_max", robots.track_max), ("force_max", robots.force_max)):
-        x[:, L[key].start] = arr[rows]
-    return x
+    """The input rows (n, :data:`WIDTH`) of the period for ``rows`` (a copy; the table
+    holds the period's inputs afterwards, as :func:`advance_compiled` leaves it)."""
+    load_period(robots, rows, setpoints, h)
+    return robots.table[rows]  # type: ignore[no-any-return]
 
 
-def unpack_period(robots: Any, rows: np.ndarray, y: np.ndarray, steps: int) -> np.ndarray:
-    """Store the period function's output rows ``y`` into ``robots``; returns the (n,)
-    mask of rows whose state is not finite (left unchanged)."""
-    L = LAYOUT
-    d = robots.drives
-    bad = ~np.all(np.isfinite(y[:, :L["setpoint"].start]), axis=1)
-    ok, y = rows[~bad], y[~bad]
-    m = len(ok)
-    robots.R[ok] = np.swapaxes(y[:, L["R"]].reshape(m, 3, 3), -1, -2)
-    robots.t[ok] = y[:, L["t"]]
-    robots.twist[ok] = y[:, L["twist"]]
-    d.integral[ok] = y[:, L["integral"]]
-    robots.forces[ok] = y[:, L["motor"]]
-    robots.saturated_time[ok] = y[:, L["saturated_time"].start]
-    robots.track_sq[ok] = y[:, L["track_sq"].start]
-    robots.track_max[ok] = y[:, L["track_max"].start]
-    robots.force_max[ok] = y[:, L["force_max"].start]
-    if d.mode == "velocity":
+def advance_compiled(robots: Any, rows: np.ndarray, setpoints: np.ndarray, h: float,
+                     steps: int) -> np.ndarray:
+    """:meth:`hexapod.dynamics.robots.DynamicRobots.advance` in C, in place in
+    ``robots.table``; returns the (n,) mask of rows whose state is not finite after the
+    period (left unchanged)."""
+    load_period(robots, rows, setpoints, h)
+    table = robots.table
+    check = LAYOUT["setpoint"].start  # the state: pose, twist, integral
+    lanes = period_lanes()
+    if lanes is not None:
+        bad = lanes.advance(table, rows, steps, check)
+    else:
+        y = period_function(steps).batch(table[rows])
+        bad = ~np.all(np.isfinite(y[:, :check]), axis=1)
+        table[rows[~bad]] = y[~bad]
+    ok = _index(rows[~bad] if bad.any() else rows)
+    robots.R[ok] = np.swapaxes(table[ok, LAYOUT["R"]].reshape(-1, 3, 3), -1, -2)
+    robots.t[ok] = table[ok, LAYOUT["t"]]
+    if robots.drives.mode == "velocity":
         robots.track_count[ok] += 6 * steps
-    return bad  # type: ignore[no-any-return]
+    return bad

@@ -140,3 +140,70 @@ def test_the_step_equals_the_compiled_models_drive_layer() -> None:
     np.testing.assert_allclose(leg_bias(tw, q, u, arm), bias, rtol=1e-9, atol=1e-12)
     r.step_reference(rows, sp, h)
     np.testing.assert_allclose((r.twist - tw) / h, acc, rtol=1e-7, atol=1e-9)
+
+
+@pytest.mark.parametrize("avx2", [True, False])
+def test_the_lane_parallel_period_equals_casadis_folded_period_bit_for_bit(avx2: bool
+                                                                           ) -> None:
+    """The period the plant runs (hexapod.compiled_lanes, four rows per vector
+    instruction) against CasADi's own C of the same step folded over the period: equal to
+    the last bit, on moving robots with saturating drives (60 N) in both drive modes and a
+    row count that is not a whole number of lanes."""
+    from hexapod.dynamics.robots_compiled import (
+        LAYOUT,
+        pack_period,
+        period_function,
+        period_lanes,
+    )
+
+    lanes = period_lanes()
+    assert lanes is not None
+    for mode, sp_scale in (("velocity", 0.05), ("force", 120.0)):
+        n = 11
+        r, _, _ = _robots(n, mode, force_limit=60.0)
+        rng = np.random.default_rng(4)
+        r.twist[:] = rng.normal(0.0, [0.02, 0.02, 0.02, 0.1, 0.1, 0.1], (n, 6))
+        x = pack_period(r, np.arange(n), rng.uniform(-sp_scale, sp_scale, (n, 6)), 1e-3)
+        want = period_function(20).batch(x)
+        got = lanes.iterate(x, 20, avx2=avx2)
+        np.testing.assert_array_equal(got, want)
+        tw = LAYOUT["twist"]
+        assert np.all(np.any(got[:, tw] != x[:, tw], axis=1))  # every twist moved
+        # the period ends with the legs' lengths of the final pose
+        R = np.swapaxes(got[:, LAYOUT["R"]].reshape(n, 3, 3), -1, -2)
+        np.testing.assert_allclose(got[:, LAYOUT["q"]], legs(R, got[:, LAYOUT["t"]], r.A,
+                                                             r.E)[0], rtol=1e-14)
+
+
+def test_a_diverging_row_is_flagged_and_left_unchanged_its_lane_neighbours_advance(
+        monkeypatch: pytest.MonkeyPatch) -> None:
+    """One row given a NaN twist among 7 (so in a lane block with others): advance flags it
+    and leaves its state and accumulators as they were; the other rows end exactly as
+    without it, with their leg lengths updated, and CasADi's folded period (the fallback)
+    does the same to the last bit."""
+    import hexapod.dynamics.robots_compiled as rc
+
+    n = 7
+    sp = np.random.default_rng(8).uniform(-0.03, 0.03, (n, 6))
+    rows = np.arange(n)
+    others = rows != 2
+
+    def run() -> tuple[DynamicRobots, np.ndarray, np.ndarray]:
+        r, _, _ = _robots(n)
+        r.twist[2] = np.nan
+        before = _state(r)
+        return r, before, r.advance(rows, sp, 1e-3, 20)
+
+    a, before, bad = run()
+    assert bad.tolist() == [k == 2 for k in range(n)]
+    np.testing.assert_array_equal(_state(a)[2], before[2])  # NaN where it was NaN
+    b, _, _ = _robots(n)
+    b.advance(rows[others], sp[others], 1e-3, 20)
+    np.testing.assert_array_equal(_state(a)[others], _state(b)[others])
+    np.testing.assert_allclose(a.period_lengths[others], a.lengths(rows[others]), rtol=1e-14)
+    assert np.all(a.period_lengths[others] != legs(*_robots(n)[1:], a.A, a.E)[0][others])
+    monkeypatch.setattr(rc, "period_lanes", lambda: None)
+    c, _, bad_c = run()
+    assert bad_c.tolist() == bad.tolist()
+    np.testing.assert_array_equal(_state(c), _state(a))
+    np.testing.assert_array_equal(c.table[others], a.table[others])

@@ -17,13 +17,15 @@ LAYERS = {
     "distortion": 2, "distortion_full": 2, "radial": 2,
     "base": 3,
     "perspective": 4, "unified": 4,
-    "fisheye": 5, "double_sphere": 5, "eucm": 5,
-    "presets": 6,
-    "files": 6, "files.project": 6, "files.opencv": 6, "files.ros": 6, "files.kalibr": 6,
-    "factory": 7,
-    "": 8,
+    "radial_camera": 5,
+    "fisheye": 6, "double_sphere": 6, "eucm": 6,
+    "presets": 7,
+    "files": 7, "files.project": 7, "files.opencv": 7, "files.ros": 7, "files.kalibr": 7,
+    "factory": 8,
+    "": 9,
 }
-MODELS = ("base", "perspective", "unified", "fisheye", "double_sphere", "eucm", "presets")
+MODELS = ("base", "perspective", "unified", "radial_camera", "fisheye", "double_sphere", "eucm",
+          "presets")
 
 
 def _module(path: Path) -> str:

@@ -11,17 +11,22 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from hexapod import Transform
-from hexapod.se3 import exp_so3
 from hexapod.workspace import sample_poses
-from tests.vision.detection_checks import same_detection
+from tests.vision.detection_checks import (
+    STYLE,
+    angles_deg,
+    check_curved_samples,
+    detect_omni_sampled_poses,
+    miscalibrated,
+    same_detection,
+    track_sampled_poses,
+)
 from vision.cameras import FRONT_DISTORTION, OMNI_DISTORTION, front_camera, omni_camera
 from vision.detect import LegPrediction, OmniDetector, PerspectiveTracker
 from vision.detect.curves import curved_samples, lift_near, pixels_per_radian
-from vision.legs import edge_points, limb_points, observe_legs
+from vision.legs import edge_points, observe_legs
 from vision.render import Renderer, RenderStyle
 
-STYLE = RenderStyle(blur_px=0.8, noise_std=3.0)
 #: A radial-only Mei distortion (no decentring terms).
 OMNI_RADIAL = (-0.08, 0.012, 0.0, 0.0)
 
@@ -34,10 +39,6 @@ def _omni(geometry, distortion=OMNI_DISTORTION):
     return omni_camera(geometry).replace(distortion=distortion)
 
 
-def _angles_deg(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    return np.degrees(np.arccos(np.clip(np.sum(a * b, -1), -1.0, 1.0)))
-
-
 # ----------------------------------------------------------------- curved samples
 def test_curved_samples_lie_on_the_predicted_curves(geometry):
     """Every sample is the projection of its limb point, its search direction is
@@ -45,34 +46,10 @@ def test_curved_samples_lie_on_the_predicted_curves(geometry):
     out of the leg; the lift near a sample equals the camera's lift; the pixels per
     radian are those of a finite difference of ``n . lift(p)``."""
     cam = _front(geometry)
-    pred = LegPrediction.from_pose(cam, geometry)
-    t = np.linspace(0.06, 0.94, 24)
-    cs = curved_samples(cam, pred, t, 3.0)
-    P = limb_points(pred.base_points, pred.directions, pred.radius, pred.lengths,
-                    pred.normals, t)
-    pix, _ = cam.project(P)
-    assert np.abs(pix - cs.P).max() < 1e-9
-    ahead, _ = cam.project(limb_points(pred.base_points, pred.directions, pred.radius,
-                                       pred.lengths, pred.normals, t + 1e-6))
-    tangent = ahead - pix
-    cos = np.sum(tangent * cs.out, -1) / np.linalg.norm(tangent, axis=-1)
-    assert np.abs(cos).max() < 1e-6
+    pred, cs, P, pix = check_curved_samples(cam, geometry)
     outside, _ = cam.project(P + 0.001 * pred.normals[:, :, None, :])
     assert np.all(np.sum((outside - pix) * cs.out, -1) > 0)
     assert np.all(cs.margin >= 3.0) and np.all(cs.margin < 4.0)  # barrel: compressed
-    q = cs.P + np.random.default_rng(0).uniform(-12.0, 12.0, cs.P.shape)
-    rays, m = lift_near(cam, q, cs.m)
-    assert np.abs(rays - cam.lift(q)).max() < 1e-12
-    n = pred.normals
-    e = 1e-4
-
-    def f(p: np.ndarray) -> np.ndarray:
-        return np.einsum("ijkx,ijx->ijk", cam.lift(p), n)
-
-    ex, ey = np.array([e, 0.0]), np.array([0.0, e])
-    grad = np.hypot(f(q + ex) - f(q - ex), f(q + ey) - f(q - ey))
-    ppr = pixels_per_radian(cam, m, n)
-    assert np.abs(ppr * grad / (2 * e) - 1.0).max() < 1e-6
 
 
 # ----------------------------------------------------------------- accuracy
@@ -84,19 +61,7 @@ def test_tracker_accuracy_on_distorted_frames(geometry, rng):
     deg: bounds 0.0156 and 0.0334 deg); measured through the lens: 0.0108 and 0.0279
     deg, 1 visible edge missed (at most 2 allowed, as undistorted), none mostly hidden
     reported."""
-    cam = _front(geometry)
-    r = Renderer(cam, geometry, STYLE, rng=rng)
-    tr = PerspectiveTracker(cam)
-    Rs, ts = sample_poses(geometry, 40, rng)
-    errs, missed = [], 0
-    for k in range(40):
-        obs = observe_legs(cam, geometry, Rs[k], ts[k])
-        pred = LegPrediction.from_pose(cam, geometry, Rs[k], ts[k] + 0.003)
-        d = tr.detect(r.render(Rs[k], ts[k]), pred)
-        errs.append(_angles_deg(d.normals, obs.normals)[d.edge_visible])
-        missed += int((obs.edge_visible & ~d.edge_visible).sum())
-        assert not np.any(d.edge_visible & (obs.visible_fraction < 0.25))
-    e = np.concatenate(errs)
+    e, missed, _ = track_sampled_poses(_front(geometry), geometry, rng, 40)
     assert missed <= 2
     assert np.median(e) < 0.0156 and np.percentile(e, 95) < 0.0334, (np.median(e),
                                                                     np.percentile(e, 95))
@@ -114,19 +79,8 @@ def test_omni_detector_accuracy_on_distorted_frames(geometry, rng, distortion):
     distortion compresses the image (fewer pixels per radian), hence slightly larger
     angles for the same pixel accuracy."""
     cam = _omni(geometry, distortion)
-    det = OmniDetector(cam)
-    assert det._isotropic == (distortion is OMNI_RADIAL)
-    r = Renderer(cam, geometry, STYLE, rng=rng)
-    Rs, ts = sample_poses(geometry, 60, rng)
-    errs, missed, invented = [], 0, 0
-    for k in range(60):
-        obs = observe_legs(cam, geometry, Rs[k], ts[k])
-        d = det.detect(r.render(Rs[k], ts[k]), geometry=geometry)
-        errs.append(_angles_deg(d.normals, obs.normals)[d.edge_visible])
-        missed += int((obs.edge_visible & ~d.edge_visible).sum())
-        invented += int((d.edge_visible & ~obs.edge_visible).sum())
-        assert np.all(d.residual[d.edge_visible] <= det.max_rms_px)
-    e = np.concatenate(errs)
+    assert OmniDetector(cam)._isotropic == (distortion is OMNI_RADIAL)
+    e, missed, invented = detect_omni_sampled_poses(cam, geometry, rng, 60)
     assert missed == 0 and invented == 0
     assert np.median(e) < 0.095 and np.percentile(e, 95) < 0.180, (np.median(e),
                                                                   np.percentile(e, 95))
@@ -144,7 +98,7 @@ def test_the_pipeline_without_the_distortion_model_is_wrong(geometry, rng):
         obs = observe_legs(cam, geometry, Rs[k], ts[k])
         d = PerspectiveTracker(ideal).detect(
             r.render(Rs[k], ts[k]), LegPrediction.from_pose(ideal, geometry, Rs[k], ts[k]))
-        errs.append(_angles_deg(d.normals, obs.normals)[d.edge_visible])
+        errs.append(angles_deg(d.normals, obs.normals)[d.edge_visible])
     assert np.median(np.concatenate(errs)) > 0.2
 
 
@@ -155,14 +109,7 @@ def test_tracking_under_calibration_error_on_distorted_frames(geometry, rng):
     refinement) finds every edge the truth shows whole and clear of the other legs,
     each within 0.5 px of the true curved edge (measured: 0.25 px at worst)."""
     cam = _front(geometry)
-    T = cam.camera_from_base
-    dR = exp_so3(np.deg2rad(0.8) * np.array([0.6, -0.48, 0.64]))
-    K = cam.K.copy()
-    K[0, 0] *= 1.01
-    K[0, 2] += 6.0
-    K[1, 2] -= 5.0
-    est = cam.replace(K=K, camera_from_base=Transform(dR @ T.rotation,
-                                                      dR @ T.translation + [0.008, 0, 0]))
+    est = miscalibrated(cam)
     exact, tr = PerspectiveTracker(cam), PerspectiveTracker(est)
     r = Renderer(cam, geometry, STYLE, rng=rng)
     Rs, ts = sample_poses(geometry, 20, rng)
@@ -204,7 +151,7 @@ def test_occluded_edges_are_reported_missing_through_the_lens(geometry):
         d = tr.detect(r.render(Rs[i], ts[i]),
                       LegPrediction.from_pose(cam, geometry, Rs[i], ts[i]))
         assert not np.any(d.edge_visible & hidden[i])
-        errs.append(_angles_deg(d.normals, obs.normals[i])[d.edge_visible])
+        errs.append(angles_deg(d.normals, obs.normals[i])[d.edge_visible])
     assert np.percentile(np.concatenate(errs), 95) < 0.1
 
 
@@ -294,6 +241,6 @@ def test_image_sensor_through_a_distorted_lens(geometry, make_camera):
         obs = observe_legs(cam, geometry, R, t)
         whole = obs.visible_fraction > 0.99
         assert np.all(m.edge_visible[whole])
-        errs.append(_angles_deg(m.normals, obs.normals)[m.edge_visible & obs.edge_visible])
+        errs.append(angles_deg(m.normals, obs.normals)[m.edge_visible & obs.edge_visible])
     bound = 0.05 if cam.kind == "perspective" else 0.3
     assert np.percentile(np.concatenate(errs), 95) < bound

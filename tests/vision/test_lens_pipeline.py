@@ -13,7 +13,7 @@ import pytest
 
 from hexapod import HexapodGeometry
 from hexapod.fk import forward_kinematics_batch
-from hexapod.workspace import sample_poses
+from tests.vision.detection_checks import angles_deg, check_curved_samples, track_sampled_poses
 from vision.calibration import calibrate_base_points
 from vision.calibration.collect import collect_pixel_observations
 from vision.cameras import (
@@ -25,13 +25,9 @@ from vision.cameras import (
     front_camera,
 )
 from vision.cameras.presets import FISHEYE_DISTORTION
-from vision.detect import LegPrediction, PerspectiveTracker
-from vision.detect.curves import curved_samples, lift_near, pixels_per_radian
 from vision.image_sensor import ImageSensor
-from vision.legs import limb_points, observe_legs
-from vision.render import Renderer, RenderStyle
+from vision.legs import observe_legs
 
-STYLE = RenderStyle(blur_px=0.8, noise_std=3.0)
 #: OpenCV's full model: the 4.8 mm lens's five terms plus rational, prism and tilt.
 FULL = (-0.28, 0.09, 5e-4, -3e-4, -0.012, 0.02, 0.004, 0.0, 2e-4, -1e-4, 3e-4, 1e-4,
         0.002, -0.001)
@@ -55,10 +51,6 @@ def _lenses(geometry: HexapodGeometry) -> dict[str, PerspectiveCamera]:
 NAMES = ["full", "fisheye", "ds", "eucm"]
 
 
-def _angles_deg(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    return np.degrees(np.arccos(np.clip(np.sum(a * b, -1), -1.0, 1.0)))
-
-
 @pytest.mark.parametrize("name", NAMES)
 def test_curved_samples_and_lift_through_each_lens(geometry: HexapodGeometry,
                                                    name: str) -> None:
@@ -66,31 +58,7 @@ def test_curved_samples_and_lift_through_each_lens(geometry: HexapodGeometry,
     samples are projections of the limb, their search direction is normal to the
     curve, the lift near a sample is the camera's lift, the pixels per radian those of
     a finite difference."""
-    cam = _lenses(geometry)[name]
-    pred = LegPrediction.from_pose(cam, geometry)
-    t = np.linspace(0.06, 0.94, 24)
-    cs = curved_samples(cam, pred, t, 3.0)
-    P = limb_points(pred.base_points, pred.directions, pred.radius, pred.lengths,
-                    pred.normals, t)
-    pix, _ = cam.project(P)
-    assert np.abs(pix - cs.P).max() < 1e-9
-    ahead, _ = cam.project(limb_points(pred.base_points, pred.directions, pred.radius,
-                                       pred.lengths, pred.normals, t + 1e-6))
-    tangent = ahead - pix
-    cos = np.sum(tangent * cs.out, -1) / np.linalg.norm(tangent, axis=-1)
-    assert np.abs(cos).max() < 1e-6
-    q = cs.P + np.random.default_rng(0).uniform(-12.0, 12.0, cs.P.shape)
-    rays, m = lift_near(cam, q, cs.m)
-    assert np.abs(rays - cam.lift(q)).max() < 1e-12
-    n = pred.normals
-    e = 1e-4
-
-    def f(p: np.ndarray) -> np.ndarray:
-        return np.einsum("ijkx,ijx->ijk", cam.lift(p), n)
-
-    ex, ey = np.array([e, 0.0]), np.array([0.0, e])
-    grad = np.hypot(f(q + ex) - f(q - ex), f(q + ey) - f(q - ey))
-    assert np.abs(pixels_per_radian(cam, m, n) * grad / (2 * e) - 1.0).max() < 1e-6
+    check_curved_samples(_lenses(geometry)[name], geometry)
 
 
 @pytest.mark.parametrize("name", NAMES)
@@ -100,19 +68,7 @@ def test_tracker_accuracy_through_each_lens(geometry: HexapodGeometry,
     within 1.5 times the ideal lens's figures of tests/vision/test_detect_distortion.py
     (median 0.0156 deg, 95th percentile 0.0334 deg), at most 2 visible edges missed,
     no mostly hidden edge reported."""
-    cam = _lenses(geometry)[name]
-    r = Renderer(cam, geometry, STYLE, rng=rng)
-    tr = PerspectiveTracker(cam)
-    Rs, ts = sample_poses(geometry, 20, rng)
-    errs, missed = [], 0
-    for k in range(20):
-        obs = observe_legs(cam, geometry, Rs[k], ts[k])
-        pred = LegPrediction.from_pose(cam, geometry, Rs[k], ts[k] + 0.003)
-        d = tr.detect(r.render(Rs[k], ts[k]), pred)
-        errs.append(_angles_deg(d.normals, obs.normals)[d.edge_visible])
-        missed += int((obs.edge_visible & ~d.edge_visible).sum())
-        assert not np.any(d.edge_visible & (obs.visible_fraction < 0.25))
-    err = np.concatenate(errs)
+    err, missed, _ = track_sampled_poses(_lenses(geometry)[name], geometry, rng, 20)
     assert missed <= 2
     assert np.median(err) < 0.0156 and np.percentile(err, 95) < 0.0334, (
         np.median(err), np.percentile(err, 95))
@@ -132,7 +88,7 @@ def test_image_sensor_through_the_close_fisheye(geometry: HexapodGeometry) -> No
             m = sensor.measure(sol.rotations[k], sol.translations[k])
             truth = observe_legs(cam, geometry, sol.rotations[k], sol.translations[k])
             vis = np.asarray(m.edge_visible)
-            err = _angles_deg(np.asarray(m.normals), truth.normals)
+            err = angles_deg(np.asarray(m.normals), truth.normals)
             if modelled:
                 assert vis.all() and err.max() < 0.1, err
             else:

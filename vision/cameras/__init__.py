@@ -35,7 +35,8 @@ Layout, imports one way (each module imports only those above it):
   :mod:`~vision.cameras.distortion_full` (its 14), :mod:`~vision.cameras.radial`
   (Kannala-Brandt, double sphere, extended unified as radial lens maps);
 - one module per model: :mod:`~vision.cameras.perspective`,
-  :mod:`~vision.cameras.unified`, :mod:`~vision.cameras.fisheye`,
+  :mod:`~vision.cameras.unified`, and on the common base of the radial lenses
+  (:mod:`~vision.cameras.radial_camera`) :mod:`~vision.cameras.fisheye`,
   :mod:`~vision.cameras.double_sphere`, :mod:`~vision.cameras.eucm`;
 - :mod:`~vision.cameras.presets`: the cameras of the seeds;
 - :mod:`vision.cameras.files`: the file formats (project TOML, OpenCV FileStorage,

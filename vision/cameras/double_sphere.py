@@ -6,63 +6,23 @@ With ``d1 = |X|``, ``d2 = |(X, Y, xi d1 + Z)|``: ``p = K (X, Y) / (alpha d2 + (1
 
 from __future__ import annotations
 
-from typing import Any, ClassVar
+from typing import ClassVar
 
-import numpy as np
-
-from hexapod.kinematics import Transform
-from vision.cameras.lens import Lens
-from vision.cameras.perspective import PerspectiveCamera
-from vision.cameras.radial import DoubleSphere
+from vision.cameras.radial import DoubleSphere, RadialLens
+from vision.cameras.radial_camera import RadialLensCamera
 
 
-class DoubleSphereCamera(PerspectiveCamera):
+class DoubleSphereCamera(RadialLensCamera):
     """Double sphere camera (Usenko et al. 2018).
 
-    Args:
-        K: (3, 3) intrinsics [px].
-        width: Image width [px].
-        height: Image height [px].
-        camera_from_base: Pose w.r.t. the robot base (identity by default).
-        name: A label.
-        source: File the camera was read from (for the messages).
-        distortion: ``(xi, alpha)``, ``-1 < xi < 1``, ``0 <= alpha <= 1`` (None:
-            zeros, the pinhole).
+    A :class:`~vision.cameras.radial_camera.RadialLensCamera` whose lens is
+    :class:`vision.cameras.radial.DoubleSphere`.
 
-    Raises:
-        CameraError: A field is invalid.
-        DistortionError: The lens folds inside the image.
-
-    A perspective camera whose lens is :class:`vision.cameras.radial.DoubleSphere`: rays in
-    front of the camera only (``Z > 0``); the ideal image (lines ``K^-T n``) is the
-    pinhole's ``K (X/Z, Y/Z)``, which the perspective pipeline (renderer, tracker,
-    calibration) uses with the lens as for any distortion.
+    Its ``distortion`` is ``(xi, alpha)``, ``-1 < xi < 1``, ``0 <= alpha <= 1`` (None:
+    zeros, the pinhole).
     """
 
     kind: ClassVar[str] = "double_sphere"
     distortion_lengths: ClassVar[tuple[int, ...]] = (2,)
-
-    def __init__(
-        self,
-        K: np.ndarray,
-        width: int,
-        height: int,
-        camera_from_base: Transform | None = None,
-        name: str = "double_sphere",
-        source: str | None = None,
-        distortion: Any = None,
-    ) -> None:
-        super().__init__(K, width, height, camera_from_base, name, source, distortion)
-
-    def _make_lens(self, distortion: Any) -> tuple[Lens, np.ndarray]:
-        lens = DoubleSphere(np.zeros(2) if distortion is None else distortion, self.source)
-        return lens, np.array(lens.coefficients)
-
-    def lens_scaled(self, factor: float) -> PerspectiveCamera:
-        """The camera itself (``factor`` 1) or, ignoring the lens (``factor`` 0), the
-        pinhole camera of the same ``K`` (what a pipeline without this model uses).
-
-        Raises:
-            CameraError: Another factor (the lens has no partial form).
-        """
-        return self._scaled_to_pinhole(factor)
+    lens_type: ClassVar[type[RadialLens]] = DoubleSphere
+    default_distortion: ClassVar[tuple[float, ...]] = (0.0, 0.0)

@@ -28,7 +28,6 @@ from vision.cameras.distortion import RadialTangential, parse_coefficients
 from vision.cameras.distortion_full import OpenCVLens, check_tilt, needs_full_model
 from vision.cameras.fields import CameraFields
 from vision.cameras.lens import Lens
-from vision.exceptions import CameraError
 
 #: OpenCV's coefficient-vector lengths and the terms they end with.
 OPENCV_LENGTHS = (4, 5, 8, 12, 14)
@@ -42,7 +41,7 @@ class PerspectiveCamera(Camera):
         width: Image width [px].
         height: Image height [px].
         camera_from_base: Pose w.r.t. the robot base (identity by default).
-        name: A label.
+        name: A label (None: the model's :attr:`kind`).
         source: File the camera was read from (for the messages).
         distortion: OpenCV's coefficients ``(k1, k2, p1, p2[, k3[, k4, k5, k6[, s1, s2,
             s3, s4[, tau_x, tau_y]]]])`` (4, 5, 8, 12 or 14 numbers, as
@@ -72,7 +71,7 @@ class PerspectiveCamera(Camera):
         width: int,
         height: int,
         camera_from_base: Transform | None = None,
-        name: str = "perspective",
+        name: str | None = None,
         source: str | None = None,
         distortion: Any = None,
     ) -> None:
@@ -84,7 +83,7 @@ class PerspectiveCamera(Camera):
         self.camera_from_base = check_pose(
             Transform.identity() if camera_from_base is None else camera_from_base, source
         )
-        self.name = str(name)
+        self.name = self.kind if name is None else str(name)
         self._set_lens(distortion)
         w, h = float(self.width), float(self.height)
         N = np.array([[1.0 / w, 0.0, -0.5], [0.0, 1.0 / w, -0.5 * h / w], [0.0, 0.0, 1.0]])
@@ -102,18 +101,6 @@ class PerspectiveCamera(Camera):
         last = int(np.flatnonzero(c)[-1]) + 1
         n = min(k for k in OPENCV_LENGTHS if k >= last)
         return OpenCVLens(c), c[:n].copy()
-
-    def _scaled_to_pinhole(self, factor: float) -> PerspectiveCamera:
-        """:meth:`lens_scaled` of a lens model without a partial form: itself (1) or the
-        pinhole of the same ``K``, pose and name (0)."""
-        if factor == 1.0:
-            return self
-        if factor == 0.0:
-            return PerspectiveCamera(self.K, self.width, self.height, self.camera_from_base,
-                                     self.name, self.source)
-        raise CameraError("distortion", f"a {self.kind} lens is modelled (0 %) or ignored "
-                                        f"(100 %), not in part (factor {factor:g})",
-                          self.source)
 
     @property
     def normalisation(self) -> np.ndarray:

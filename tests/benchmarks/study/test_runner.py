@@ -144,17 +144,44 @@ def test_results_rows_have_the_documented_fields(tmp_path: Path) -> None:
     assert list((tmp_path / "trials").glob("*.npz")), "trial 0 is recorded"
 
 
+#: Control periods of the end-to-end runs: 120, fewer for the scenarios whose periods are
+#: costly (1000 frames/s cameras, rendered fisheye images, 1 ms physics); every
+#: controller at every sweep point still runs, records and is reported.
+END_TO_END_STEPS = {"camera-latency": 30, "fisheye-close": 40, "quick-dynamic": 40,
+                    "inertia-error": 40, "paccot2008-tracking": 40}
+
+
 @pytest.mark.parametrize("name", sorted(builtin_scenarios()))
 def test_builtin_scenario_end_to_end(name: str, tmp_path: Path) -> None:
+    """Each built-in scenario runs (1 trial per controller and sweep point): rows that
+    converged or ran out of steps, never two for the same controller and sweep point,
+    and a report naming the scenario and each controller (the ``report`` command on a
+    run's directory: test_report_command_rebuilds_the_report)."""
     out = tmp_path / name
+    steps = END_TO_END_STEPS.get(name, 120)
     code = cli_main(["run", name, "--out", str(out), "--trials", "1", "--no-progress",
-                     "--record", "1", "--max-steps", "120"])
+                     "--record", "1", "--max-steps", str(steps)])
     assert code == 0
     rows = read_results(out)
     assert rows and all(r["failure"] is None or "not converged" in r["failure"] for r in rows)
+    assert len({(r["point"], r["controller"]) for r in rows}) == len(rows)
     report = (out / "report.md").read_text()
     assert f"Scenario `{name}`" in report
+    assert all(c in report for c in {r["controller"] for r in rows})
+
+
+def test_report_command_rebuilds_the_report(tmp_path: Path) -> None:
+    """``hexapod-bench report DIR`` on a finished run's directory rewrites the run's own
+    report: the same text but for the time it was generated."""
+    out = tmp_path / "quick"
+    assert cli_main(["run", "quick", "--out", str(out), "--trials", "2", "--no-progress",
+                     "--record", "1", "--max-steps", "60"]) == 0
+    first = (out / "report.md").read_text().splitlines()
     assert cli_main(["report", str(out)]) == 0
+    again = (out / "report.md").read_text().splitlines()
+    assert len(first) == len(again) > 20
+    differ = [(a, b) for a, b in zip(first, again, strict=True) if a != b]
+    assert all(a.startswith("Generated ") for a, _ in differ), differ
 
 
 def test_a_second_run_on_a_locked_directory_is_refused(tmp_path: Path) -> None:

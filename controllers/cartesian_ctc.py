@@ -1,0 +1,214 @@
+"""Cartesian computed torque: ``cartesian-ctc`` (pose from the encoders) and
+``vision-ctc`` (pose from the legs the camera sees, Paccot et al. ICRA 2008).
+
+Both regulate the platform-pose task (:class:`~controllers.tasks.PlatformPoseTask`,
+``e = (t - t*, log(R R*^T))``, base frame) with the
+:class:`~controllers.solvers.computed_torque.ComputedTorqueSolver`: the pose error obeys
+``e_ddot + 2 zeta omega_n e_dot + omega_n^2 e = 0`` when the model is exact. They
+command leg forces and need ``Observation.q_dot`` (the dynamic world).
+
+Models (never the world's truth): the context's NOMINAL geometry (base and platform
+points, strokes, speed limit), its nominal inertia and drives (the dynamic model), the
+ESTIMATED base points ``A_i`` and camera pose (``vision-ctc``).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from controllers.base import ControllerContext, Goal, Observation
+from controllers.task_ctc import (
+    Measured,
+    TaskComputedTorque,
+    camera_and_base_points,
+    goal_pose_of,
+)
+from controllers.tasks import PlatformPoseTask, Task, TaskState
+from hexapod.kinematics import Transform
+
+#: Smallest second singular value of the seen platform points about their centroid,
+#: relative to the platform radius, for a pose fit (collinear points give none).
+SPREAD = 1e-2
+
+
+class CartesianCTC(TaskComputedTorque):
+    """Cartesian computed torque with the pose from the forward kinematics of the encoders.
+
+    Model: the nominal geometry's forward kinematics of the encoder lengths gives the
+    pose, ``tau = K^-1 q_dot`` its twist (``K`` the nominal inverse Jacobian); the
+    nominal dynamic model maps the platform acceleration to leg forces. The reference
+    pose, twist and acceleration come from ``context.reference`` (base frame) or a
+    quintic line to the fixed ``goal.rotation``/``goal.translation`` (the nominal base
+    frame). Under a geometric calibration error the encoders' pose is wrong and so is
+    the pose the robot settles at (the joint-space baseline's weakness, kept).
+
+    Args:
+        natural_frequency: ``f_n`` [Hz] (default 2 Hz: ``omega_n dt = 0.25`` at 20 ms).
+        damping: ``zeta`` (default 1).
+        smooth_goal: Reach a fixed goal along a quintic line (False: a step).
+    """
+
+    name = "cartesian-ctc"
+    features = frozenset({"lengths"})
+
+    def take_goal(self, goal: Goal) -> None:
+        """The fixed goal pose (``goal.rotation``, ``goal.translation``)."""
+        self._goal = goal_pose_of(self.name, goal)
+
+    def goal_pose(self) -> tuple[np.ndarray, np.ndarray]:
+        """The fixed goal pose."""
+        return self._goal
+
+    def measure(self, observation: Observation, q: np.ndarray, q_dot: np.ndarray
+                ) -> Measured | str:
+        """The nominal forward kinematics of the encoders and ``K^-1 q_dot``."""
+        assert self.context is not None and self.model is not None
+        R, t = self.encoder_pose(q)
+        return pose_measurement(self.model, R, t, q, q_dot)
+
+    def tasks_at(self, times: np.ndarray | None, measured: Measured) -> list[Task]:
+        """The pose task towards the reference at ``times`` (or the fixed goal)."""
+        if times is None or self.reference is None:
+            return [PlatformPoseTask(*self.goal_pose())]
+        return pose_tasks(self.reference, times)
+
+
+class VisionCTC(CartesianCTC):
+    """Cartesian computed torque with the pose the camera sees of the legs (Paccot et al.
+    2008, with leg observation instead of a target on the platform).
+
+    Measurement: the platform joints ``B_i = A_i + q_i u_i`` in the camera frame from the
+    ESTIMATED base points ``A_i`` (context), the leg directions ``u_i`` seen (the
+    observation's directions, else those of the edge normals, ``u = n2 x n1``) and the
+    encoder lengths; the rigid fit (Kabsch) of the NOMINAL platform points to them gives
+    the pose, expressed in the base frame through the ESTIMATED camera pose. Hidden legs
+    are left out (at least three non-collinear joints, else a refusal with the reason).
+    The twist is ``K(x)^-1 q_dot`` with the nominal inverse Jacobian at that visual pose,
+    as Paccot et al. did (the camera gives the pose, the encoders its rate).
+
+    Goal: the pose reconstructed the same way from the TAUGHT goal (its directions or
+    edge normals and ``goal.lengths``), so that a bias of the reconstruction is the same
+    at the goal and cancels there; without taught directions, ``goal.rotation`` and
+    ``goal.translation``. A reference trajectory (``context.reference``) is moved by the
+    rigid offset between its end pose and that taught pose (it ends at the taught goal).
+
+    Args:
+        natural_frequency: ``f_n`` [Hz] (default 2 Hz).
+        damping: ``zeta`` (default 1).
+        smooth_goal: Reach a fixed goal along a quintic line (False: a step).
+    """
+
+    name = "vision-ctc"
+    features = frozenset({"lengths", "directions"})
+
+    def prepare(self, context: ControllerContext) -> None:
+        """Check the camera and base points; anchor a reference at the taught goal.
+
+        Raises:
+            ContextError: No camera pose, or base points not (6, 3) finite.
+        """
+        cam, _ = camera_and_base_points(self.name, context)
+        self._base_from_camera = cam.inverse()
+        self._offset: Transform | None = None
+        taught = self._taught(context.goal)
+        if context.reference is not None and taught is not None:
+            end = context.reference.at(np.array([context.reference.duration]))
+            Re, te = end.rotation[0], end.translation[0]
+            Rd = taught[0] @ Re.T
+            self._offset = Transform(Rd, taught[1] - Rd @ te)
+
+    def take_goal(self, goal: Goal) -> None:
+        """The taught visual goal pose, else ``goal.rotation``/``goal.translation``."""
+        taught = self._taught(goal)
+        self._goal = taught if taught is not None else goal_pose_of(self.name, goal)
+
+    def _taught(self, goal: Goal) -> tuple[np.ndarray, np.ndarray] | None:
+        if goal.lengths is None or (goal.directions is None and goal.normals is None):
+            return None
+        u, seen = directions_seen(goal.directions, goal.normals, None, None)
+        pose = self._visual_pose(np.asarray(goal.lengths, dtype=float), u, seen)
+        return None if isinstance(pose, str) else pose
+
+    def _visual_pose(self, q: np.ndarray, u: np.ndarray, seen: np.ndarray
+                     ) -> tuple[np.ndarray, np.ndarray] | str:
+        assert self.context is not None
+        seen = seen & np.isfinite(q)
+        n = int(seen.sum())
+        if n < 3:
+            return f"only {n} legs seen (legs {np.flatnonzero(seen).tolist()}): the pose " \
+                "needs at least 3"
+        B = np.asarray(self.context.base_points)[seen] + q[seen, None] * u[seen]
+        E = np.asarray(self.context.geometry.platform_points)[seen]
+        s = np.linalg.svd(E - E.mean(axis=0), compute_uv=False)
+        if s[1] < SPREAD * float(np.linalg.norm(E, axis=1).max()):
+            return f"the {n} legs seen are collinear on the platform: no pose"
+        from controllers.mpc.prediction import fit_pose
+
+        Rc, tc = fit_pose(B, E)
+        bc = self._base_from_camera
+        return bc.rotation @ Rc, bc.rotation @ tc + bc.translation
+
+    def measure(self, observation: Observation, q: np.ndarray, q_dot: np.ndarray
+                ) -> Measured | str:
+        """The visual pose and ``K(x)^-1 q_dot``."""
+        assert self.model is not None
+        u, seen = directions_seen(observation.directions, observation.normals,
+                                  observation.direction_visible, observation.edge_visible)
+        pose = self._visual_pose(q, u, seen)
+        if isinstance(pose, str):
+            return pose
+        m = pose_measurement(self.model, pose[0], pose[1], q, q_dot)
+        if not np.all(seen):
+            m.note = f"pose from legs {np.flatnonzero(seen).tolist()}"
+        return m
+
+    def tasks_at(self, times: np.ndarray | None, measured: Measured) -> list[Task]:
+        """The pose task towards the (anchored) reference, or the taught goal."""
+        ref = self.reference
+        if times is not None and self._offset is not None and ref is self.context.reference:  # type: ignore[union-attr]
+            sample = ref.at(times)
+            D = self._offset
+            R = D.rotation @ sample.rotation
+            t = sample.translation @ D.rotation.T + D.translation
+            return [PlatformPoseTask(R[i], t[i]) for i in range(len(times))]
+        return super().tasks_at(times, measured)
+
+
+def directions_seen(directions: np.ndarray | None, normals: np.ndarray | None,
+                    direction_visible: np.ndarray | None, edge_visible: np.ndarray | None
+                    ) -> tuple[np.ndarray, np.ndarray]:
+    """Leg directions (6, 3) and which are seen (6,): the given directions, else those of
+    both edge normals of a leg; a non-finite one is not seen."""
+    from vision.legs import directions_from_edges
+
+    if directions is not None:
+        u = np.asarray(directions, dtype=float)
+        seen = np.ones(6, bool) if direction_visible is None else np.asarray(
+            direction_visible, bool).copy()
+    elif normals is not None:
+        with np.errstate(invalid="ignore", divide="ignore"):
+            u = directions_from_edges(np.asarray(normals, dtype=float))
+        seen = np.ones(6, bool) if edge_visible is None else np.all(
+            np.asarray(edge_visible, bool), axis=-1)
+    else:
+        return np.full((6, 3), np.nan), np.zeros(6, bool)
+    seen &= np.all(np.isfinite(u), axis=-1)
+    return u, seen
+
+
+def pose_measurement(model: object, R: np.ndarray, t: np.ndarray, q: np.ndarray,
+                     q_dot: np.ndarray) -> Measured:
+    """The pose task's measurement at ``(R, t)``: twist ``K^-1 q_dot`` (nominal ``K``)."""
+    K = model.terms_batch(R[None], t[None], np.zeros((1, 6)))[2][0]  # type: ignore[attr-defined]
+    twist = np.linalg.solve(K, q_dot)
+    # the pose task reads the pose only (base points and directions unused)
+    state = TaskState(np.zeros((1, 6, 3)), np.zeros((1, 6, 3)), q[None], None, R[None],
+                      t[None])
+    return Measured(R, t, twist, state, inverse_jacobian=K)
+
+
+def pose_tasks(reference: object, times: np.ndarray) -> list[Task]:
+    """Pose tasks towards ``reference.at(times)``."""
+    sample = reference.at(times)  # type: ignore[attr-defined]
+    return [PlatformPoseTask(sample.rotation[i], sample.translation[i])
+            for i in range(len(times))]

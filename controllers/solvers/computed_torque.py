@@ -1,0 +1,266 @@
+"""The computed-torque solver: a task's second-order error dynamics, linearised by the
+nominal inverse dynamic model, to leg forces.
+
+For a task with error ``e`` (m,), Jacobian ``L`` (m, 6) with respect to the platform
+twist ``tau`` and second-order term ``L_dot tau`` (:mod:`controllers.tasks`), tracking a
+reference that moves on its own, the error's derivatives are
+
+``e_dot = L tau + e_t``,  ``e_ddot = L tau_dot + L_dot tau + e_tt``
+
+with ``e_t`` and ``e_tt`` what the reference's motion alone adds (for an error
+``e = s - s*``: ``e_t = -s*_dot``, ``e_tt = -s*_ddot``; :func:`reference_terms` gives
+them for any task). The solver asks for ``e_ddot = -2 zeta omega_n e_dot - omega_n^2 e``:
+
+``tau_dot = L^+ (-2 zeta omega_n e_dot - omega_n^2 e - L_dot tau - e_tt)``
+
+(least squares over the rows given; refused when ``L`` loses rank, or damped,
+``(L^T L + mu^2 I)^-1 L^T``, when a damping ``mu`` is set), then the leg forces
+
+``f = DynamicModel.inverse(R, t, tau, tau_dot) + m_r a + c q_dot + f_c tanh(v_ref / v_s)``
+
+(:func:`drive_forces`: the nominal drives' reflected rotor inertia at the leg
+acceleration ``a = K tau_dot + K_dot tau``, viscous and Coulomb friction). With an exact
+model and a square, full-rank ``L`` the error obeys the designed second-order response.
+
+Twists: the solver works in the dynamic model's coordinates (``docs/math.md`` section
+11: base frame, ``v = dt/dt`` the platform origin's velocity). A task written in another
+frame with the spatial twist of :mod:`controllers.tasks` (``B_dot = v + w x B``, e.g.
+the camera frame) is brought to them by :func:`task_in_model_twist`.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+from dataclasses import dataclass
+
+import numpy as np
+
+from controllers.exceptions import ContextError
+from controllers.tasks.base import Task, TaskState
+from hexapod.dynamics import DynamicModel
+from hexapod.dynamics.drive_model import COULOMB_SMOOTHING
+from hexapod.kinematics import Transform
+from hexapod.se3 import skew
+
+#: Time step of the central differences of a task along its reference [s].
+REFERENCE_STEP = 1e-3
+
+
+@dataclass(frozen=True)
+class SecondOrderGains:
+    """``e_ddot + 2 zeta omega_n e_dot + omega_n^2 e = 0``.
+
+    Attributes:
+        natural_frequency: ``f_n`` [Hz].
+        damping: ``zeta``.
+    """
+
+    natural_frequency: float
+    damping: float
+
+    @staticmethod
+    def checked(controller: str, natural_frequency: float, damping: float
+                ) -> SecondOrderGains:
+        """Validated gains.
+
+        Raises:
+            ContextError: Naming the option that is not positive and finite.
+        """
+        fn, zeta = float(natural_frequency), float(damping)
+        if not (math.isfinite(fn) and fn > 0):
+            raise ContextError(controller, "natural_frequency", f"must be positive, got {fn}")
+        if not (math.isfinite(zeta) and zeta > 0):
+            raise ContextError(controller, "damping", f"must be positive, got {zeta}")
+        return SecondOrderGains(fn, zeta)
+
+    @property
+    def omega(self) -> float:
+        """``omega_n`` [rad/s]."""
+        return 2 * math.pi * self.natural_frequency
+
+    @property
+    def kp(self) -> float:
+        """``omega_n^2`` [1/s^2]."""
+        return self.omega**2
+
+    @property
+    def kd(self) -> float:
+        """``2 zeta omega_n`` [1/s]."""
+        return 2 * self.damping * self.omega
+
+
+@dataclass
+class Acceleration:
+    """The solver's platform acceleration and its diagnostics.
+
+    Attributes:
+        acc: (6,) ``tau_dot`` (model coordinates) [m/s^2, rad/s^2], zeros when refused.
+        error_rate: (m,) ``e_dot``.
+        rank: Rank of ``L``.
+        condition: Its condition number (inf when rank-deficient).
+        reason: Why it is refused (None when valid).
+    """
+
+    acc: np.ndarray
+    error_rate: np.ndarray
+    rank: int
+    condition: float
+    reason: str | None = None
+
+
+class ComputedTorqueSolver:
+    """Second-order task dynamics to a platform acceleration and leg forces (see the
+    module docstring).
+
+    Args:
+        gains: The designed error dynamics.
+        threshold: Relative singular-value threshold of the rank test.
+        damping: ``mu`` of a damped least squares (0: refuse a rank-deficient ``L``).
+    """
+
+    def __init__(self, gains: SecondOrderGains, threshold: float = 1e-6,
+                 damping: float = 0.0) -> None:
+        self.gains = gains
+        self.threshold = float(threshold)
+        self.damping = float(damping)
+
+    def acceleration(self, error: np.ndarray, jacobian: np.ndarray, ldot_tau: np.ndarray,
+                     twist: np.ndarray, error_t: np.ndarray | None = None,
+                     error_tt: np.ndarray | None = None) -> Acceleration:
+        """``tau_dot`` giving the designed ``e_ddot``.
+
+        Args:
+            error: (m,) ``e``.
+            jacobian: (m, 6) ``L`` (model coordinates).
+            ldot_tau: (m,) ``L_dot tau``.
+            twist: (6,) ``tau`` (model coordinates).
+            error_t: (m,) ``e_t`` of the reference's motion (None: a fixed reference).
+            error_tt: (m,) ``e_tt`` (None: zeros).
+        """
+        e = np.asarray(error, dtype=float)
+        L = np.asarray(jacobian, dtype=float)
+        e_dot = L @ twist + (0.0 if error_t is None else error_t)
+        rhs = -self.gains.kd * e_dot - self.gains.kp * e - ldot_tau
+        if error_tt is not None:
+            rhs = rhs - error_tt
+        if L.shape[0] == 0:
+            return Acceleration(np.zeros(6), e_dot, 0, math.inf, "no task rows")
+        U, s, Vt = np.linalg.svd(L, full_matrices=False)
+        rank = int(np.sum(s > self.threshold * s[0])) if s[0] > 0 else 0
+        cond = float(s[0] / s[-1]) if s[-1] > 0 else math.inf
+        if rank < 6 and self.damping == 0.0:
+            return Acceleration(np.zeros(6), e_dot, rank, cond,
+                                f"task Jacobian of rank {rank} < 6 "
+                                f"({L.shape[0]} rows, condition {cond:.3g})")
+        inv = s / (s * s + self.damping**2)
+        acc = Vt.T @ (inv * (U.T @ rhs))
+        return Acceleration(acc, e_dot, rank, cond)
+
+    @staticmethod
+    def forces(model: DynamicModel, R: np.ndarray, t: np.ndarray, twist: np.ndarray,
+               acc: np.ndarray, q_dot: np.ndarray, coulomb_velocity: np.ndarray | None = None,
+               hold: float = 0.0, inverse_jacobian: np.ndarray | None = None
+               ) -> tuple[np.ndarray, np.ndarray]:
+        """Leg forces [N] of the platform acceleration, and the leg acceleration [m/s^2].
+
+        Args:
+            model: The NOMINAL dynamic model (its geometry's drives).
+            R, t: Platform pose (base frame) [-, m].
+            twist: (6,) model twist.
+            acc: (6,) platform acceleration.
+            q_dot: (6,) measured leg velocities [m/s].
+            coulomb_velocity: (6,) the leg velocities whose sign the Coulomb friction
+                takes [m/s]; None: the velocity the legs reach over ``hold`` at the
+                commanded acceleration, ``q_dot + hold a``.
+            hold: Time the force is held (the control period) [s].
+            inverse_jacobian: ``K`` (6, 6) at the pose when already known.
+        """
+        K = inverse_jacobian if inverse_jacobian is not None else model.terms_batch(
+            R[None], t[None], twist[None])[2][0]
+        bias = model.legs_batch(R[None], t[None], twist[None])[1][0]
+        a = K @ acc + bias
+        v = q_dot + hold * a if coulomb_velocity is None else coulomb_velocity
+        f = model.inverse(R, t, twist, acc) + drive_forces(model, a, q_dot, v)
+        return f, a
+
+
+def drive_forces(model: DynamicModel, a: np.ndarray, q_dot: np.ndarray,
+                 coulomb_velocity: np.ndarray) -> np.ndarray:
+    """The nominal drives' share [N]: reflected rotor inertia at the leg acceleration
+    ``a``, viscous friction at the measured leg velocity, Coulomb friction in the
+    direction of ``coulomb_velocity`` (a reference's: at rest the measured velocity's
+    sign is noise, and a held force must break away)."""
+    d = model.geometry.drives
+    return (np.asarray(d.rotor_inertia) * a + np.asarray(d.viscous) * q_dot  # type: ignore[no-any-return]
+            + np.asarray(d.coulomb) * np.tanh(coulomb_velocity / COULOMB_SMOOTHING))
+
+
+def task_in_model_twist(jacobian: np.ndarray, translation: np.ndarray, twist: np.ndarray,
+                        frame_from_base: Transform | None = None
+                        ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """A task written with the spatial twist of its frame, in model coordinates.
+
+    The spatial twist of the task's frame is ``tau_s = G tau`` with
+    ``G = Ad(frame_from_base) [[I, [t]_x], [0, I]]`` (the base frame's spatial velocity
+    ``v_s = v - w x t``, then the adjoint of the frame), so ``L_model = L G`` and
+    ``e_ddot`` gains ``L G_dot tau`` with ``G_dot tau = Ad (v x w, 0)``.
+
+    Args:
+        jacobian: (m, 6) ``L`` of the task's spatial twist.
+        translation: (3,) platform position, base frame [m].
+        twist: (6,) model twist ``(v, w)``.
+        frame_from_base: The task frame (None: the base frame).
+
+    Returns:
+        ``L G`` (m, 6), the task's twist ``tau_s`` (6,) (to evaluate its
+        ``L_dot tau_s``), and ``L G_dot tau`` (m,).
+    """
+    G = np.eye(6)
+    G[:3, 3:] = skew(np.asarray(translation, dtype=float))
+    gdot = np.concatenate([np.cross(twist[:3], twist[3:]), np.zeros(3)])
+    if frame_from_base is not None:
+        Rf, pf = frame_from_base.rotation, frame_from_base.translation
+        Ad = np.zeros((6, 6))
+        Ad[:3, :3] = Rf
+        Ad[:3, 3:] = skew(pf) @ Rf
+        Ad[3:, 3:] = Rf
+        G = Ad @ G
+        gdot = Ad @ gdot
+    L = np.asarray(jacobian, dtype=float)
+    return L @ G, G @ twist, L @ gdot
+
+
+def reference_terms(task_at: Callable[[int], Task], state: TaskState, twist: np.ndarray,
+                    step: float = REFERENCE_STEP) -> tuple[np.ndarray, np.ndarray]:
+    """``e_t`` and ``e_tt`` of a task whose desired value moves, by central differences.
+
+    With ``e(s, t)`` the task error at the state ``s`` and the reference at ``t``:
+    ``e_t = de/dt`` and ``e_tt = d2e/dt2 + 2 d(L tau)/dt``, the state held
+    (``e_ddot = L tau_dot + L_dot tau + e_tt``).
+
+    Args:
+        task_at: ``task_at(k)`` the task with the reference at ``t + k step`` for
+            ``k`` in (-1, 0, 1).
+        state: One state row.
+        twist: (6,) the task's twist ``tau`` (of its own frame).
+        step: ``step`` [s].
+    """
+    tasks = {k: task_at(k) for k in (-1, 0, 1)}
+    e = {k: tasks[k].error(state)[0] for k in (-1, 0, 1)}
+    Lp = tasks[1].jacobian(state)[0]
+    Lm = tasks[-1].jacobian(state)[0]
+    e_t = (e[1] - e[-1]) / (2 * step)
+    e_tt = (e[1] - 2 * e[0] + e[-1]) / step**2 + (Lp - Lm) @ twist / step
+    return e_t, e_tt
+
+
+__all__ = [
+    "REFERENCE_STEP",
+    "Acceleration",
+    "ComputedTorqueSolver",
+    "SecondOrderGains",
+    "drive_forces",
+    "reference_terms",
+    "task_in_model_twist",
+]

@@ -1,0 +1,309 @@
+"""Computed torque on a task: the shared loop of ``cartesian-ctc``, ``vision-ctc``,
+``leg-edge-ctc`` and ``leg-direction-ctc``.
+
+Each period a :class:`TaskComputedTorque` subclass measures a platform pose and twist for
+the NOMINAL dynamic model and a task state (:meth:`TaskComputedTorque.measure`), builds
+its task at the reference of three instants (:meth:`TaskComputedTorque.tasks_at`), and
+the :class:`~controllers.solvers.computed_torque.ComputedTorqueSolver` turns the task's
+error, Jacobian and ``L_dot tau``, plus the reference's own motion
+(:func:`~controllers.solvers.computed_torque.reference_terms`, central differences over
+1 ms), into leg forces held over the period.
+
+The reference is the trajectory of ``context.reference`` (base frame, sampled at the
+observation's time) or, for a fixed goal, a straight line from the pose measured at the
+first step to the goal pose with a quintic timing, slow enough that no leg's nominal
+speed exceeds the speed limit (``smooth_goal``; off: the goal is a step, the error's
+free response).
+"""
+
+from __future__ import annotations
+
+import math
+from abc import abstractmethod
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from controllers.base import Command, Controller, ControllerContext, Goal, Observation
+from controllers.exceptions import ContextError
+from controllers.options import RemembersOptions
+from controllers.solvers.computed_torque import (
+    REFERENCE_STEP,
+    ComputedTorqueSolver,
+    SecondOrderGains,
+    reference_terms,
+    task_in_model_twist,
+)
+from controllers.tasks.base import Task, TaskState
+from hexapod.actuation import Actuation
+from hexapod.dynamics import DynamicModel
+from hexapod.fk import forward_kinematics
+from hexapod.kinematics import Transform, inverse_kinematics
+from hexapod.trajectory import PoseTrajectory
+
+#: Default natural frequency of the task error [Hz] (``omega_n dt = 0.25`` at 20 ms).
+NATURAL_FREQUENCY_HZ = 2.0
+#: Default damping ratio.
+DAMPING = 1.0
+#: Peak of the quintic's speed over its mean speed.
+QUINTIC_PEAK_SPEED = 15.0 / 8.0
+#: Peak of the quintic's acceleration times ``T^2`` over the distance.
+QUINTIC_PEAK_ACCELERATION = 10.0 / math.sqrt(3.0)
+
+
+@dataclass
+class Measured:
+    """What a law measured this period.
+
+    Attributes:
+        rotation: (3, 3) platform orientation for the dynamic model (base frame).
+        translation: (3,) platform position [m].
+        twist: (6,) model twist ``(v [m/s], w [rad/s])`` (base frame, origin velocity).
+        state: The task state (one row), in the task's frame.
+        frame: The task's frame from the base (None: the base frame itself).
+        rows: (m,) bool, the task rows to use (None: all).
+        note: A diagnostic (e.g. legs left out).
+        inverse_jacobian: (6, 6) nominal ``K`` at the pose, or None.
+    """
+
+    rotation: np.ndarray
+    translation: np.ndarray
+    twist: np.ndarray
+    state: TaskState
+    frame: Transform | None = None
+    rows: np.ndarray | None = None
+    note: str | None = None
+    inverse_jacobian: np.ndarray | None = None
+
+
+def line_to(context: ControllerContext, R0: np.ndarray, t0: np.ndarray, R1: np.ndarray,
+            t1: np.ndarray) -> PoseTrajectory:
+    """A quintic line from ``(R0, t0)`` to ``(R1, t1)`` (base frame) timed so that no leg's
+    nominal speed exceeds ``context.max_speed`` (the peak of the quintic is 15/8 of the
+    mean)."""
+    dq = inverse_kinematics(context.geometry, R1, t1) - inverse_kinematics(
+        context.geometry, R0, t0)
+    T = max(QUINTIC_PEAK_SPEED * float(np.abs(dq).max()) / context.max_speed, 1e-3)
+    length = float(np.linalg.norm(t1 - t0))
+    angle = float(np.linalg.norm(_log(R0.T @ R1)))
+
+    def limits(d: float) -> tuple[float, float]:  # speed and acceleration giving T
+        if d <= 0.0:
+            return 1.0, 1.0
+        return QUINTIC_PEAK_SPEED * d / T, 2.0 * QUINTIC_PEAK_ACCELERATION * d / T**2
+
+    v, a = limits(length)
+    w, alpha = limits(angle)
+    return PoseTrajectory("line", "quintic", R0, t0, v, a, goal_rotation=R1,
+                          goal_translation=t1, angular_speed=w, angular_acceleration=alpha)
+
+
+def _log(R: np.ndarray) -> np.ndarray:
+    from hexapod.se3 import log_so3
+
+    return log_so3(R)  # type: ignore[no-any-return]
+
+
+class TaskComputedTorque(RemembersOptions, Controller):
+    """Computed torque on a task (see the module docstring). Subclasses set ``name``,
+    ``features`` and implement :meth:`measure`, :meth:`goal_pose` and :meth:`tasks_at`.
+
+    Args:
+        natural_frequency: ``f_n`` [Hz] of the task error's second-order response.
+        damping: Its damping ratio ``zeta``.
+        smooth_goal: Reach a fixed goal along the quintic line (False: a step).
+    """
+
+    actuation = Actuation.FORCE
+    #: Samples ``context.reference`` itself (:mod:`controllers.tracking` passes it through).
+    tracks_reference = True
+
+    def __init__(self, natural_frequency: float = NATURAL_FREQUENCY_HZ,
+                 damping: float = DAMPING, smooth_goal: bool = True) -> None:
+        self.gains = SecondOrderGains.checked(self.name, natural_frequency, damping)
+        self.solver = ComputedTorqueSolver(self.gains)
+        if not isinstance(smooth_goal, bool | np.bool_):
+            raise ContextError(self.name, "smooth_goal", f"must be true or false, got "
+                               f"{smooth_goal!r}")
+        self.smooth_goal = bool(smooth_goal)
+        self.context: ControllerContext | None = None
+        self.model: DynamicModel | None = None
+        self.reference: Any = None  # anything with at(times) and duration, base frame
+        self._t0 = 0.0
+        self._started = False
+        self.guess: tuple[np.ndarray, np.ndarray] | None = None
+
+    def reset(self, context: ControllerContext) -> None:
+        """Build the nominal model; take the reference or the goal.
+
+        Raises:
+            ContextError: What the law needs is missing from the context.
+        """
+        self.context = context
+        self.model = DynamicModel(context.geometry)
+        self.guess = None
+        self.prepare(context)
+        self.retarget(context.goal)
+
+    def prepare(self, context: ControllerContext) -> None:
+        """Per-trial checks and constants of a subclass (nothing by default)."""
+
+    def retarget(self, goal: Goal) -> None:
+        """A new fixed goal (ignored when tracking ``context.reference``)."""
+        ctx = self.context
+        if ctx is None:
+            return
+        if ctx.reference is not None:
+            self.reference, self._t0, self._started = ctx.reference, 0.0, True
+            return
+        self.context = ctx = ctx if ctx.goal is goal else _with_goal(ctx, goal)
+        self.take_goal(goal)
+        self.reference, self._started = None, False
+
+    def take_goal(self, goal: Goal) -> None:
+        """Read what the law regulates to from a fixed goal (raises ContextError)."""
+
+    @abstractmethod
+    def goal_pose(self) -> tuple[np.ndarray, np.ndarray]:
+        """The fixed goal's pose (base frame), the end of the smooth line."""
+
+    @abstractmethod
+    def measure(self, observation: Observation, q: np.ndarray, q_dot: np.ndarray
+                ) -> Measured | str:
+        """This period's measurement, or why there is none."""
+
+    @abstractmethod
+    def tasks_at(self, times: np.ndarray | None, measured: Measured) -> list[Task]:
+        """The task with its reference at ``times`` (3,) [s] of the reference's clock
+        (None: the fixed goal itself, one task)."""
+
+    def step(self, observation: Observation) -> Command:
+        """The leg forces of this period [N], or a refusal (zeros) with its reason."""
+        if self.context is None or self.model is None:
+            return self.refuse("reset(context) was not called")
+        readings = encoder_readings(observation)
+        if isinstance(readings, str):
+            return self.refuse(readings)
+        t, q, qd = readings
+        try:
+            m = self.measure(observation, q, qd)
+            if isinstance(m, str):
+                return self.refuse(m)
+            if not self._started:
+                self._start(t, m)
+            return self._command(t, m, qd)
+        except Exception as exc:  # the nominal model failed here: refuse with its reason
+            return self.refuse(f"nominal model failed: {exc}")
+
+    def encoder_pose(self, q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """The nominal forward kinematics of the lengths ``q`` [m] (warm-started at the
+        last one)."""
+        assert self.context is not None
+        fk = forward_kinematics(self.context.geometry, q, guess=self.guess,
+                                check_stroke=False)
+        self.guess = (fk.rotation, fk.translation)
+        return fk.rotation, fk.translation
+
+    def _start(self, t: float, m: Measured) -> None:
+        self._started, self._t0 = True, t
+        if self.smooth_goal:
+            assert self.context is not None
+            self.reference = line_to(self.context, m.rotation, m.translation,
+                                     *self.goal_pose())
+
+    def _command(self, t: float, m: Measured, qd: np.ndarray) -> Command:
+        assert self.model is not None and self.context is not None
+        ref = self.reference
+        tr = t - self._t0
+        moving = ref is not None and tr < float(ref.duration) + 2 * REFERENCE_STEP
+        times = tr + REFERENCE_STEP * np.arange(-1.0, 2.0) if ref is not None else None
+        tasks = self.tasks_at(times, m)
+        task = tasks[1] if len(tasks) == 3 else tasks[0]
+        e = task.error(m.state)[0]
+        L_task = task.jacobian(m.state)[0]
+        L, twist_task, gdot = task_in_model_twist(L_task, m.translation, m.twist, m.frame)
+        ldot = task.jacobian_dot_twist(m.state, twist_task[None])[0] + gdot
+        e_t = e_tt = None
+        if moving:
+            e_t, e_tt = reference_terms(lambda k: tasks[k + 1], m.state, twist_task)
+        rows = np.all(np.isfinite(L), axis=1) & np.isfinite(e) & np.isfinite(ldot)
+        if e_t is not None and e_tt is not None:
+            rows &= np.isfinite(e_t) & np.isfinite(e_tt)
+        if m.rows is not None:
+            rows &= m.rows
+        sol = self.solver.acceleration(
+            e[rows], L[rows], ldot[rows], m.twist, None if e_t is None else e_t[rows],
+            None if e_tt is None else e_tt[rows])
+        if sol.reason is not None:
+            return self.refuse(sol.reason, e[rows])
+        f, _ = self.solver.forces(self.model, m.rotation, m.translation, m.twist, sol.acc,
+                                  qd, hold=float(self.context.dt),
+                                  inverse_jacobian=m.inverse_jacobian)
+        if not np.all(np.isfinite(f)):
+            return self.refuse(f"non-finite leg forces {f}")
+        notes = [] if m.note is None else [m.note]
+        return Command.of_forces(f, error=e[rows], error_norm=float(np.linalg.norm(e[rows])),
+                                 rank=sol.rank, condition=sol.condition,
+                                 features_used=int(rows.sum()), notes=notes)
+
+    def refuse(self, problem: str, error: np.ndarray | None = None) -> Command:
+        """A zero force command with the reason."""
+        return Command.refuse(f"{self.name}: {problem}", error=error,
+                              actuation=Actuation.FORCE)
+
+
+def encoder_readings(observation: Observation) -> tuple[float, np.ndarray, np.ndarray] | str:
+    """The time [s], lengths [m] and leg velocities [m/s] of an observation, or why they
+    cannot be used (missing leg velocities, a non-finite value)."""
+    t = float(observation.t)
+    q = np.asarray(observation.lengths, dtype=float)
+    if observation.q_dot is None:
+        return ("needs the measured leg velocities (Observation.q_dot), which only the "
+                "dynamic world gives")
+    qd = np.asarray(observation.q_dot, dtype=float)
+    for what, x in (("time", np.array([t])), ("lengths", q), ("leg velocities", qd)):
+        if x.size == 0 or not np.all(np.isfinite(x)):
+            return f"measured {what} not finite: {x}"
+    return t, q, qd
+
+
+def _with_goal(context: ControllerContext, goal: Goal) -> ControllerContext:
+    from dataclasses import replace
+
+    return replace(context, goal=goal)
+
+
+def camera_and_base_points(controller: str, context: ControllerContext
+                           ) -> tuple[Transform, np.ndarray]:
+    """The estimated camera pose ``camera_from_base`` and base points (6, 3) [m].
+
+    Raises:
+        ContextError: No camera pose, or base points not (6, 3) finite.
+    """
+    cam = getattr(context.camera, "camera_from_base", None)
+    if not isinstance(cam, Transform):
+        raise ContextError(controller, "camera", "needs the estimated camera with its "
+                           "camera_from_base pose")
+    A = np.asarray(context.base_points, dtype=float)
+    if A.shape != (6, 3) or not np.all(np.isfinite(A)):
+        raise ContextError(controller, "base_points", f"expected (6, 3) finite, got {A}")
+    return cam, A
+
+
+def goal_pose_of(controller: str, goal: Goal) -> tuple[np.ndarray, np.ndarray]:
+    """``goal.rotation`` and ``goal.translation``, checked.
+
+    Raises:
+        ContextError: Missing or not finite.
+    """
+    if goal.rotation is None or goal.translation is None:
+        raise ContextError(controller, "goal.rotation/translation", "missing")
+    R = np.asarray(goal.rotation, dtype=float)
+    t = np.asarray(goal.translation, dtype=float)
+    if R.shape != (3, 3) or t.shape != (3,) or not (np.all(np.isfinite(R))
+                                                    and np.all(np.isfinite(t))):
+        raise ContextError(controller, "goal.rotation/translation",
+                           f"expected a finite (3, 3) rotation and (3,) position, got "
+                           f"{R.shape} and {t.shape}")
+    return R, t
