@@ -22,7 +22,7 @@ import os
 import sys
 
 from benchmarks.exceptions import BenchmarkError
-from benchmarks.study.commands import _console, cmd_calibrate, cmd_report, cmd_run, cmd_viz
+from benchmarks.study.commands import cmd_calibrate, cmd_report, cmd_run, cmd_viz, console
 from hexapod.exceptions import HexapodError
 
 log = logging.getLogger("hexapod-bench")
@@ -36,7 +36,7 @@ def cmd_list(args: argparse.Namespace) -> int:
     from benchmarks.study.scenario import builtin_scenarios, load_scenario
     from controllers.base import registry
 
-    con = _console()
+    con = console()
     t = Table(title="Scenarios")
     t.add_column("name")
     t.add_column("trials", justify="right")

@@ -13,6 +13,8 @@ import logging
 from collections.abc import Callable, Sequence
 from typing import Any
 
+import numpy as np
+
 from controllers.base import (
     Actuation,
     Command,
@@ -37,6 +39,22 @@ def supports_batch(controller: Any) -> bool:
     """Whether a controller object steps many trials itself."""
     return callable(getattr(controller, "reset_batch", None)) and callable(
         getattr(controller, "step_batch", None))
+
+
+def step_rows_per_trial(instances: Sequence[Any], observations: ObservationBatch,
+                        trials: np.ndarray, rows: np.ndarray, out: CommandBatch) -> None:
+    """Step ``rows`` of a batch with their trials' own instances (the rows a batched core
+    cannot finish), writing each command into ``out``.
+
+    Args:
+        instances: The per-trial controllers, by trial.
+        observations: The batch.
+        trials: (n,) the trial of each row.
+        rows: The rows to step.
+        out: The batch's commands.
+    """
+    for k in rows:
+        out.put(int(k), instances[int(trials[k])].step(observations.item(int(k))))
 
 
 class PerTrialLoop:

@@ -39,7 +39,7 @@ from controllers.task_ctc import (
     goal_pose_of,
 )
 from controllers.tasks import LegDirectionTask, LegEdgeTask, Task, TaskState
-from controllers.tracking import _anchor, reference_goals
+from controllers.tracking import anchor_goals, reference_goals
 
 #: A unit vector standing in for a hidden leg's features (its rows are not used).
 _DUMMY = np.array([0.0, 0.0, 1.0])
@@ -139,7 +139,7 @@ class FeatureCTC(TaskComputedTorque):
         end = float(self.reference.duration) + 1.0
         goals = reference_goals(replace(ctx, reference=self.reference),
                                 np.append(times, end))
-        _anchor(goals, replace(ctx.goal, **{self.key: self._taught}))
+        anchor_goals(goals, replace(ctx.goal, **{self.key: self._taught}))
         return np.asarray(goals[self.key][:-1])
 
     def retarget(self, goal: Goal) -> None:

@@ -24,6 +24,7 @@ from typing import Any
 import numpy as np
 
 from controllers.base import CommandBatch, ControllerContext, ObservationBatch
+from controllers.batch import step_rows_per_trial
 from controllers.estimators import LegDirectionEstimate
 from controllers.options import RemembersOptions
 from controllers.solvers.base import Solver
@@ -32,7 +33,7 @@ from controllers.solvers.base import Solver
 class BatchedLaw(RemembersOptions):
     """Mixin of :class:`~controllers.laws.VisionLaw`: ``reset_batch`` and ``step_batch``."""
 
-    _kernel: Any
+    kernel: Any
     estimate: LegDirectionEstimate
     solver: Solver
 
@@ -63,7 +64,7 @@ class BatchedLaw(RemembersOptions):
         self.batch_estimate = LegDirectionEstimate.fresh(n)
         for k, inst in enumerate(trials):
             inst.estimate = self.batch_estimate.row(k)
-        kernels = [t._kernel for t in trials]
+        kernels = [t.kernel for t in trials]
         self._has_kernel = np.array([k is not None for k in kernels], dtype=bool)
         self._fn = None
         if self._has_kernel.any():
@@ -98,8 +99,7 @@ class BatchedLaw(RemembersOptions):
                 done = self._fast(rows, trials[rows], feats[rows], q[rows], out.velocities,
                                   out.error_norm)
                 slow[rows[done]] = False
-        for k in np.flatnonzero(slow):
-            out.put(int(k), self._trials[int(trials[k])].step(obs.item(int(k))))
+        step_rows_per_trial(self._trials, obs, trials, np.flatnonzero(slow), out)
         return out
 
     def _fast(self, rows: np.ndarray, trials: np.ndarray, feats: np.ndarray, q: np.ndarray,

@@ -41,6 +41,10 @@ from functools import lru_cache
 import casadi as ca
 import numpy as np
 
+from controllers.law_tools import gain_formula
+from controllers.tasks.joint_length import inverse_jacobian_row
+from controllers.tasks.leg_direction import direction_block
+from controllers.tasks.leg_edge import edge_block, leg_direction_of_edges, normal_of_line
 from hexapod.compiled import CompiledFunction
 
 #: Cyclic Jacobi sweeps of the 6 x 6 eigen-decomposition (quadratic convergence:
@@ -107,15 +111,6 @@ def cholesky_solve(M: list[list[ca.SX]], rhs: list[ca.SX]) -> list[ca.SX]:
             v = v - L[k][i] * sol[k]
         sol[i] = v / L[i][i]
     return sol
-
-
-def _unit(v: ca.SX) -> ca.SX:
-    return v / ca.sqrt(ca.dot(v, v))
-
-
-def _skew(v: ca.SX) -> ca.SX:
-    return ca.vertcat(ca.horzcat(0, -v[2], v[1]), ca.horzcat(v[2], 0, -v[0]),
-                      ca.horzcat(-v[1], v[0], 0))
 
 
 def jacobi_eigen(N: ca.SX, sweeps: int = JACOBI_SWEEPS, vectors: bool = True
@@ -215,10 +210,9 @@ def law_tail(e: ca.SX, N: ca.SX, b: ca.SX, directions: list[ca.SX], base_points:
         The :data:`LAW_OUTPUTS`, in order.
     """
     l0, linf, slope, thr2, d2 = (params[k] for k in range(5))
-    # Gain (controllers.laws.Gain.__call__) at x = |e|_inf.
+    # Gain (controllers.law_tools.gain_formula) at x = |e|_inf.
     x = ca.mmax(ca.fabs(e))
-    d = l0 - linf
-    lam = ca.if_else(d == 0, l0, d * ca.exp(((-slope) * x) / ca.if_else(d == 0, 1.0, d)) + linf)
+    lam = gain_formula(x, l0, linf, slope, ca.exp, ca.if_else)
     if lean:
         full = full_rank_certificate(N, thr2) == 1.0
         rank = ca.if_else(full, 6.0, 0.0)
@@ -247,7 +241,7 @@ def law_tail(e: ca.SX, N: ca.SX, b: ca.SX, directions: list[ca.SX], base_points:
     sol = cholesky_solve(M, [b[i] for i in range(6)])
     tau = ca.vertcat(*[ca.if_else(full, x, 0.0) for x in sol]) * (-lam)
     # Inverse Jacobian rows [u_i^T, (A_i x u_i)^T] and q_dot = J_inv tau.
-    J = ca.vertcat(*[ca.horzcat(u.T, ca.cross(A, u).T)
+    J = ca.vertcat(*[inverse_jacobian_row(u, A)
                      for u, A in zip(directions, base_points, strict=True)])
     qdot = J @ tau
     return [ca.sqrt(ca.dot(e, e)), ca.sum1(ca.reshape(N, 36, 1)), rank, cond, lam, tau, qdot,
@@ -279,11 +273,7 @@ def _direction_function(lean: bool = False) -> ca.Function:
     Nu = _upper_zeros()
     b = ca.SX.zeros(6, 1)
     for i in range(6):
-        ei = ca.cross(u[i], us[i])
-        P = ca.SX.eye(3) - u[i] @ u[i].T
-        C = -(_skew(us[i]) @ P) * (1.0 / q[i])  # one division per leg
-        B = A[i] + q[i] * u[i]
-        L = ca.horzcat(C, -(C @ _skew(B)))
+        ei, L = direction_block(u[i], us[i], A[i], q[i])
         for row in range(6):
             for col in range(row, 6):
                 Nu[row][col] = Nu[row][col] + ca.dot(L[:, row], L[:, col])
@@ -307,33 +297,22 @@ def _edge_function(use_lines: bool, lean: bool = False) -> ca.Function:
     Kinv_t = ca.reshape(x[sl["K_inv"]], 3, 3)  # (K^-1)^T
     A = [x[sl["base_points"]][3 * i:3 * i + 3] for i in range(6)]
     q = [x[sl["lengths"]][i] for i in range(6)]
-    n = [_unit(Kt @ f) if use_lines else f for f in feat]
-    u = [_unit(ca.cross(n[2 * i + 1], n[2 * i])) for i in range(6)]
-    errors = [ca.cross(feat[k], star[k]) for k in range(12)]
+    n = [normal_of_line(f, Kt) if use_lines else f for f in feat]
+    u = [leg_direction_of_edges(n[2 * i], n[2 * i + 1]) for i in range(6)]
+    errors = []
     Nu = _upper_zeros()
     b = ca.SX.zeros(6, 1)
     inv_q = [1.0 / qi for qi in q]  # one division per leg
     for k in range(12):
         i = k // 2
-        nk, ui, Ai, qi = n[k], u[i], A[i], q[i]
-        w = ca.cross(ui, nk)
-        z = ui - w * (ca.dot(Ai, ui) / ca.dot(Ai, w))
-        r = nk - ca.dot(nk, ui) * ui
-        B = Ai + qi * ui
-        g = ca.vertcat(r * inv_q[i], ca.cross(B, r) * inv_q[i])
-        if use_lines:
-            lk = feat[k]
-            y = Kinv_t @ z
-            y = y - lk * ca.dot(lk, y)
-            y = y * ca.sqrt(ca.dot(Kt @ lk, Kt @ lk))
-            a = ca.cross(star[k], y)
-        else:
-            a = ca.cross(star[k], z)
+        ek, a, g = edge_block(feat[k], star[k], n[k], u[i], A[i], q[i], inv_q[i],
+                              Kt if use_lines else None, Kinv_t if use_lines else None)
+        errors.append(ek)
         weight = ca.dot(a, a)
         for row in range(6):
             for col in range(row, 6):
                 Nu[row][col] = Nu[row][col] + weight * (g[row] * g[col])
-        b += ca.dot(a, errors[k]) * g
+        b += ca.dot(a, ek) * g
     N = _symmetric(Nu)
     e = ca.vertcat(*errors)
     tail = law_tail(e, N, b, u, A, x[n_feat:], lean)

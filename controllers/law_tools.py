@@ -7,7 +7,7 @@ from __future__ import annotations
 
 import logging
 import math
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from typing import Any
 
@@ -92,6 +92,34 @@ def check_choice(controller: str, option: str, value: Any, choices: Sequence[str
     return value
 
 
+def _select(condition: Any, if_true: Any, if_false: Any) -> Any:
+    return if_true if condition else if_false
+
+
+def gain_formula(x: Any, at_zero: Any, at_infinity: Any, slope_at_zero: Any,
+                 exp: Callable[[Any], Any] = math.exp,
+                 select: Callable[[Any, Any, Any], Any] = _select) -> Any:
+    """The adaptive gain, its one definition (:class:`Gain`; ``docs/math.md`` section 6):
+    ``lambda(x) = d exp(-lambda0' x / d) + lambda_inf`` with ``d = lambda0 - lambda_inf``,
+    ``lambda0`` when ``d = 0``.
+
+    On numbers by default (the per-trial laws); on CasADi expressions with
+    ``exp=ca.exp, select=ca.if_else`` (the compiled cores of
+    :mod:`controllers.law_kernel` and :mod:`controllers.model_based`).
+
+    Args:
+        x: Error size ``|e|_inf``.
+        at_zero: ``lambda0`` [1/s].
+        at_infinity: ``lambda_inf`` [1/s].
+        slope_at_zero: ``lambda0'`` [1/s per unit of error].
+        exp: The exponential.
+        select: ``select(condition, if_true, if_false)``.
+    """
+    d = at_zero - at_infinity
+    return select(d == 0, at_zero,
+                  d * exp(((-slope_at_zero) * x) / select(d == 0, 1.0, d)) + at_infinity)
+
+
 @dataclass(frozen=True)
 class Gain:
     """Constant or adaptive gain (ViSP's ``vpAdaptiveGain``), ``docs/math.md`` section 6.
@@ -121,11 +149,8 @@ class Gain:
         return self.at_zero == self.at_infinity
 
     def __call__(self, x: float) -> float:
-        """Gain [1/s] for the error size ``x = |e|_inf``."""
-        d = self.at_zero - self.at_infinity
-        if d == 0.0:
-            return self.at_zero
-        return d * math.exp(-self.slope_at_zero * x / d) + self.at_infinity
+        """Gain [1/s] for the error size ``x = |e|_inf`` (:func:`gain_formula`)."""
+        return float(gain_formula(x, self.at_zero, self.at_infinity, self.slope_at_zero))
 
     @staticmethod
     def from_options(controller: str, gain: Any = 1.0,

@@ -139,7 +139,7 @@ class VisionLaw(BatchedLaw, Controller):
         self._J = np.zeros((6, 6))
         #: Compiled core of the common case (:mod:`controllers.law_kernel`), set by the
         #: subclass in :meth:`_reset_features`; None: numpy path only.
-        self._kernel: LawKernel | None = None
+        self.kernel: LawKernel | None = None
 
     # ----------------------------------------------------------------- reset
     def reset(self, context: ControllerContext) -> None:
@@ -168,14 +168,14 @@ class VisionLaw(BatchedLaw, Controller):
                 raise ContextError(self.name, "goal.lengths",
                                    f"expected 6 positive finite lengths, got {qs}")
             self._q_star = qs
-        self._kernel = None
+        self.kernel = None
         self._reset_features(context)
         self.solver.reset(context, self.name, dt)
-        if self._kernel is not None:
+        if self.kernel is not None:
             g = self.gain
-            self._kernel.set("gain", (g.at_zero, g.at_infinity, g.slope_at_zero))
-            self._kernel.set("threshold2", self.threshold * self.threshold)
-            self._kernel.set("damping2", self.solver.damping2)
+            self.kernel.set("gain", (g.at_zero, g.at_infinity, g.slope_at_zero))
+            self.kernel.set("threshold2", self.threshold * self.threshold)
+            self.kernel.set("damping2", self.solver.damping2)
 
     @property
     def base_points(self) -> np.ndarray:
@@ -243,7 +243,7 @@ class VisionLaw(BatchedLaw, Controller):
             q: Its lengths from :meth:`checked_lengths` [m].
         """
         est = self.estimate
-        kernel = self._kernel
+        kernel = self.kernel
         if kernel is not None and self._load_kernel(observation, q):
             r = kernel.evaluate()
             est.halted()  # until a command is actually sent
@@ -317,7 +317,7 @@ class VisionLaw(BatchedLaw, Controller):
                        active_constraints=active)
 
     def _load_kernel(self, obs: Observation, q: np.ndarray) -> bool:
-        """Write the measured features and lengths into ``self._kernel`` when the
+        """Write the measured features and lengths into ``self.kernel`` when the
         compiled core applies (every feature visible, CURRENT interaction).
 
         Returns:

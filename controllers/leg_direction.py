@@ -69,7 +69,7 @@ class LegDirectionController(VisionLaw):
             kernel = direction_kernel()
             kernel.set("desired", us)
             kernel.set("base_points", self._A)
-            self._kernel = kernel
+            self.kernel = kernel
             self._k_features = kernel.inputs["features"].reshape(6, 3)
             self._k_lengths = kernel.inputs["lengths"]
 

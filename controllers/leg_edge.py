@@ -155,7 +155,7 @@ class LegEdgeController(VisionLaw):
             kernel.set("K", self._K)
             kernel.set("K_inv", self._K_inv_t.T)
             kernel.set("base_points", self._A)
-            self._kernel = kernel
+            self.kernel = kernel
             self._k_features = kernel.inputs["features"].reshape(6, 2, 3)
             self._k_lengths = kernel.inputs["lengths"]
         self._desired_L: np.ndarray | None = None

@@ -37,10 +37,12 @@ from controllers.base import (
     Observation,
     ObservationBatch,
 )
+from controllers.batch import step_rows_per_trial
 from controllers.estimators import PoseEstimate
 from controllers.exceptions import ContextError
 from controllers.interaction import cross
 from controllers.law_kernel import jacobi_eigen
+from controllers.law_tools import gain_formula
 from controllers.laws import Gain, check_number, check_observation
 from controllers.options import RemembersOptions
 from hexapod.compiled import CompiledFunction
@@ -82,8 +84,7 @@ def _pose_servo_function() -> ca.Function:
     dp = ts - t
     e = ca.vertcat(-dp, -rot)
     xe = ca.mmax(ca.fabs(e))
-    d = l0 - linf
-    lam = ca.if_else(d == 0, l0, d * ca.exp(((-slope) * xe) / ca.if_else(d == 0, 1.0, d)) + linf)
+    lam = gain_formula(xe, l0, linf, slope, ca.exp, ca.if_else)
     w = lam * rot
     tau = ca.vertcat(lam * dp - ca.cross(w, t), w)
     rows = []
@@ -134,8 +135,10 @@ class ModelBasedController(RemembersOptions, Controller):
                  compiled: bool = True) -> None:
         self.gain = Gain.from_options(self.name, gain, adaptive_gain)
         self.compiled = bool(compiled)
-        self._kernel: CompiledFunction | None = None
-        self._x = np.zeros(75)
+        #: The compiled pose servo (None: numpy path, or not reset).
+        self.kernel: CompiledFunction | None = None
+        #: The servo's input row (constants written by :meth:`reset`).
+        self.servo_input = np.zeros(75)
         self.fk_tolerance = check_number(self.name, "fk_tolerance", fk_tolerance)
         self.fk_max_iterations = int(check_number(self.name, "fk_max_iterations",
                                                   fk_max_iterations, 1.0, strict=False))
@@ -173,17 +176,19 @@ class ModelBasedController(RemembersOptions, Controller):
         self._R_star, self._t_star = R.copy(), t.copy()
         #: The last pose of the forward kinematics (its next warm start).
         self.estimate = PoseEstimate.of(*home_pose(geo))
-        self._A = np.asarray(geo.base_points, dtype=float)
-        self._E = np.asarray(geo.platform_points, dtype=float)
+        #: (6, 3) nominal base points ``A_i`` [m].
+        self.base_points = np.asarray(geo.base_points, dtype=float)
+        #: (6, 3) nominal platform points ``E_i`` in the platform frame [m].
+        self.platform_points = np.asarray(geo.platform_points, dtype=float)
         cam: Any = context.camera
         pose = getattr(cam, "camera_from_base", None)
         self._camera_from_base: Transform | None = pose if isinstance(pose, Transform) else None
-        self._kernel = pose_servo_kernel() if self.compiled else None
-        x = self._x
+        self.kernel = pose_servo_kernel() if self.compiled else None
+        x = self.servo_input
         x[_IN["R_star"]] = self._R_star.reshape(9)
         x[_IN["t_star"]] = self._t_star
-        x[_IN["A"]] = self._A.reshape(18)
-        x[_IN["E"]] = self._E.reshape(18)
+        x[_IN["A"]] = self.base_points.reshape(18)
+        x[_IN["E"]] = self.platform_points.reshape(18)
         g = self.gain
         x[_IN["gain"]] = (g.at_zero, g.at_infinity, g.slope_at_zero)
         cam_pose = self._camera_from_base
@@ -210,11 +215,11 @@ class ModelBasedController(RemembersOptions, Controller):
         R, t = sol.rotation, sol.translation
         est.set(R, t)
         notes = [f"forward kinematics: {sol.iterations} iterations"]
-        if self._kernel is not None:
-            x = self._x
+        if self.kernel is not None:
+            x = self.servo_input
             x[0:9] = R.reshape(9)
             x[9:12] = t
-            y = self._kernel.single(x)
+            y = self.kernel.single(x)
             if y[_AT["near_pi"]] == 0.0:
                 e = y[_OUT["e"]]
                 if y[_AT["check"]] != 0.0:
@@ -231,11 +236,11 @@ class ModelBasedController(RemembersOptions, Controller):
         v = lam * dp - cross(w, t)
         tau = np.concatenate([v, w])
         # Nominal inverse Jacobian at the estimated pose (base frame).
-        legs = (self._E @ R.T) + t - self._A
+        legs = (self.platform_points @ R.T) + t - self.base_points
         u = legs / np.linalg.norm(legs, axis=1, keepdims=True)
         J = self._J
         J[:, :3] = u
-        J[:, 3:] = cross(self._A, u)
+        J[:, 3:] = cross(self.base_points, u)
         qdot = J @ tau
         if not np.all(np.isfinite(qdot)):
             return Command.refuse("non-finite command (numerical failure)", e)
@@ -256,11 +261,11 @@ class ModelBasedController(RemembersOptions, Controller):
             np.array([t.estimate.translation for t in trials]).reshape(-1, 3))
         for k, inst in enumerate(trials):
             inst.estimate = self.batch_estimate.row(k)
-        self._b_A = np.array([t._A for t in trials])
-        self._b_E = np.array([t._E for t in trials])
+        self._b_A = np.array([t.base_points for t in trials])
+        self._b_E = np.array([t.platform_points for t in trials])
         self._b_geometry = trials[0].context.geometry if trials and trials[0].context else None
-        self._b_X = np.array([t._x for t in trials]) if trials else np.zeros((0, 75))
-        self._b_kernel = bool(trials) and all(t._kernel is not None for t in trials)
+        self._b_X = np.array([t.servo_input for t in trials]) if trials else np.zeros((0, 75))
+        self._b_kernel = bool(trials) and all(t.kernel is not None for t in trials)
 
     def step_batch(self, observations: ObservationBatch) -> CommandBatch:
         """Forward kinematics of every row in one batch (warm-started per trial), the
@@ -295,6 +300,5 @@ class ModelBasedController(RemembersOptions, Controller):
             out.velocities[rows[acc]] = Y[acc][:, _OUT["qdot"]]
             out.error_norm[rows[acc]] = Y[acc, _AT["norm"]]
             slow[rows[acc]] = False
-        for k in np.flatnonzero(slow):
-            out.put(int(k), self._trials[int(trials[k])].step(obs.item(int(k))))
+        step_rows_per_trial(self._trials, obs, trials, np.flatnonzero(slow), out)
         return out

@@ -94,7 +94,7 @@ def reference_goals(context: ControllerContext, times: np.ndarray) -> dict[str, 
     return out
 
 
-def _anchor(goals: dict[str, Any], taught: Goal) -> None:
+def anchor_goals(goals: dict[str, Any], taught: Goal) -> None:
     """Anchor the model's features at the taught goal (in place): ``s* = s_taught +
     s_model(t) - s_model(end)``, unit vectors renormalised; the model's last sample is
     the end pose. A feature the goal did not see stays the model's."""
@@ -165,7 +165,7 @@ class TrackingController(Controller):
         steps = math.ceil(float(reference.duration) / dt) + 2
         times = dt * np.arange(steps)
         goals = reference_goals(context, times)
-        _anchor(goals, context.goal)
+        anchor_goals(goals, context.goal)
         q = goals["lengths"]
         if not np.all(np.isfinite(q)):
             raise ContextError(self.name, "reference", "the nominal inverse kinematics of the "

@@ -130,7 +130,7 @@ def newton_function() -> ca.Function:
 
 
 @lru_cache(maxsize=1)
-def _newton() -> CompiledFunction:
+def newton_kernel() -> CompiledFunction:
     """The Newton steps compiled to C (see :mod:`hexapod.compiled`)."""
     return CompiledFunction(_newton_expression())
 
@@ -215,7 +215,7 @@ def forward_kinematics(
 
 def _fk_newton(geometry: HexapodGeometry, q: np.ndarray, R: np.ndarray, t: np.ndarray,
                tol: float, max_iterations: int) -> ForwardKinematicsResult:
-    newton = _newton()
+    newton = newton_kernel()
     x = np.empty(54)
     x[0:9] = R.T.ravel()
     x[9:12] = t
@@ -289,7 +289,7 @@ def solve_rows(x: np.ndarray, tol: float = 1e-12, max_iterations: int = 30
     """:func:`forward_kinematics_batch` on packed rows (:func:`pack_rows`; changed in
     place)."""
     n = x.shape[0]
-    newton = _newton()
+    newton = newton_kernel()
     it = 0
     res = np.full(n, np.inf)
     active = np.arange(n)

@@ -79,7 +79,7 @@ def dynamics_figures(n: int = 1000, repeats: int = 30, seed: int = 0,
     forces = rng.normal(scale=30.0, size=(n, 6))
     ref = ReferenceDynamics(g)
     states = [ref.state(R[k], t[k], twist[k])[:2] for k in range(n)]
-    taus = [ref._tau(forces[k]) for k in range(n)]
+    taus = [ref.generalized_forces(forces[k]) for k in range(n)]
     model, data = ref.model, ref.data
 
     # Pinocchio constraintDynamics, call by call (the baseline).
@@ -91,7 +91,7 @@ def dynamics_figures(n: int = 1000, repeats: int = 30, seed: int = 0,
             a = pin.constraintDynamics(model, data, q, v, taus[k], ref.constraints,
                                        ref.constraint_datas, ref.prox)
             times.append(time.perf_counter() - t0)
-            acc_ref[k] = ref._classical(R[k], v, a)
+            acc_ref[k] = ref.classical_acceleration(R[k], v, a)
     base_us = float(np.median(times)) * 1e6
     figures = [DynamicsFigure("pinocchio constraintDynamics", base_us, 1.0, 0.0)]
 
@@ -109,7 +109,7 @@ def dynamics_figures(n: int = 1000, repeats: int = 30, seed: int = 0,
             t0 = time.perf_counter()
             a = pin.lcaba(model, ldata, q, v, taus[k], ref.constraints, ldatas, prox)
             times.append(time.perf_counter() - t0)
-            acc_l[k] = ref._classical(R[k], v, a)
+            acc_l[k] = ref.classical_acceleration(R[k], v, a)
     us = float(np.median(times)) * 1e6
     figures.append(DynamicsFigure("pinocchio lcaba (mu 1e-3)", us, base_us / us,
                                   _relative(acc_l, acc_ref)))

@@ -13,7 +13,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from hexapod import build_model, deltalab, forward_kinematics, inverse_kinematics, sample_poses
-from hexapod.fk import _newton
+from hexapod.fk import newton_kernel
 from hexapod.se3 import exp_so3, pose_error
 
 
@@ -73,7 +73,7 @@ def format_fk(figures: list[FkFigure]) -> str:
     """A plain-text table with the speed-up of the fast method over the baseline."""
     base = {f.start: f.median_us for f in figures if f.method == "pinocchio"}
     lines = [
-        f"forward kinematics, {'compiled C' if _newton().compiled else 'CasADi VM'} Newton "
+        f"forward kinematics, {'compiled C' if newton_kernel().compiled else 'CasADi VM'} Newton "
         "vs Pinocchio constrained Gauss-Newton (reference robot)",
         f"{'method':<10} {'start':<5} {'median us':>10} {'p95 us':>9} {'speed-up':>9} "
         f"{'iters':>6} {'max pos err m':>14} {'max rot err rad':>16} {'max residual m':>15}",

@@ -43,10 +43,10 @@ def print_comparisons(comparisons: list[Any], title: str) -> None:
     from rich.markup import escape
     from rich.table import Table
 
-    from benchmarks.study.commands import _console
+    from benchmarks.study.commands import console
     from benchmarks.study.compare import ALPHA
 
-    con = _console()
+    con = console()
     t = Table(title=title)
     for col in ("scenario", "sweep", "a", "b", "metric", "n", "a", "b",
                 "a - b [95 % CI]", "test", "p", "p Holm", "verdict"):
@@ -131,10 +131,10 @@ def cmd_reproduce(args: argparse.Namespace) -> int:
     from rich.markup import escape
     from rich.table import Table
 
-    from benchmarks.study.commands import _console
+    from benchmarks.study.commands import console
     from benchmarks.study.reproduce import interval_text, markdown, reproduce
 
-    con = _console()
+    con = console()
     t0 = time.perf_counter()
     results = reproduce(args.which, Path(args.out), args.quick, args.workers,
                         say=lambda text: con.print(text, markup=False, highlight=False))

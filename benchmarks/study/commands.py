@@ -14,7 +14,7 @@ from typing import Any
 from benchmarks.exceptions import BenchmarkError
 
 
-def _console() -> Any:
+def console() -> Any:
     """A rich console: the terminal's width, or 200 columns for a pipe or a CI log."""
     from rich.console import Console
 
@@ -85,7 +85,7 @@ def _failure_epilogue(out: Path, repeats: list[str], code: int) -> int:
     from benchmarks.study.runner import deduplicate, read_results
 
     rows, _, _ = deduplicate(read_results(out))
-    con = _console()
+    con = console()
     for line in repeats:
         con.print(f"warning: {line}", markup=False, highlight=False, soft_wrap=True)
     lines = failure_summary(rows)
@@ -128,7 +128,7 @@ def _run_locked(scenarios: list[Any], out: Path, args: argparse.Namespace) -> in
         raise BenchmarkError(f"--chunk must be >= 1, got {chunk}")
     units = plan(scenarios, chunk, args.record, done, args.backend, args.engine)
     total = sum(len(u.trials) for u in units)
-    con = _console()
+    con = console()
     if done:
         con.print(f"resuming: {len(done)} trials already done, {total} to go")
     executor = "dask" if args.dask else ("process pool" if args.workers > 1 else "in-process")
@@ -225,7 +225,7 @@ def _run_with_viz(scenarios: list[Any], out: Path, args: argparse.Namespace) -> 
     from benchmarks.study.runner import ResultsWriter, execute, plan
     from hexapod.visualize import HexapodViewer
 
-    con = _console()
+    con = console()
     sc0 = scenarios[0].expand()[0]
     g = load_geometry(sc0)
     cam = load_camera(sc0, g)
@@ -304,7 +304,7 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
     t0 = time.perf_counter()
     doc = run_calibration(sc, out, args.configurations, args.repeat, args.solver,
                           args.correct_scale, overwrite=args.overwrite)
-    con = _console()
+    con = console()
     t = Table(title=f"Base-point calibration ({sc.name}, {doc['configurations']}, "
                     f"{doc['solver']}, {args.repeat} repetition(s))")
     for col in ("sweep", "median error mm", "max error mm", "max component mm",
@@ -454,7 +454,7 @@ def cmd_report(args: argparse.Namespace) -> int:
     from benchmarks.study.report import write_report
 
     path = write_report(Path(args.dir), getattr(args, "overwrite", False))
-    _print_summary(Path(args.dir), _console())
+    _print_summary(Path(args.dir), console())
     print(f"report: {path}")
     return 0
 

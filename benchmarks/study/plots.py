@@ -18,7 +18,8 @@ from hexapod.outputs import PNG_METADATA, inside
 MAX_TIME_SERIES = 4
 
 
-def _pyplot() -> Any:
+def pyplot() -> Any:
+    """matplotlib.pyplot on the Agg backend (imported on first use)."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -51,7 +52,7 @@ def time_series(out_dir: Path, scenario: str, point: int) -> str | None:
     files = sorted((out_dir / TRIALS_DIR).glob(f"{scenario}__p{point}__*__00000.npz"))
     if not files:
         return None
-    plt = _pyplot()
+    plt = pyplot()
     fig, axes = plt.subplots(1, 2, figsize=(10, 3.5))
     for f in files:
         with np.load(f) as rec:
@@ -86,7 +87,7 @@ def sweeps(out_dir: Path, scenario: str, summaries: list[Summary]) -> list[str]:
     if len(axes_keys) != 1:
         return []
     key = axes_keys[0]
-    plt = _pyplot()
+    plt = pyplot()
     fig, (a0, a1) = plt.subplots(1, 2, figsize=(10, 3.5))
     by_ctrl: dict[str, list[Summary]] = defaultdict(list)
     for s in summaries:
@@ -124,7 +125,7 @@ def heat_maps(out_dir: Path, scenario: str, summaries: list[Summary]) -> str | N
     for s in summaries:
         by_ctrl[_label(s)][(s.sweep[y_key], s.sweep[x_key])] = s
     ctrls = list(by_ctrl)
-    plt = _pyplot()
+    plt = pyplot()
     from matplotlib.colors import LogNorm
 
     fig, axes = plt.subplots(2, len(ctrls), figsize=(4.2 * len(ctrls) + 1, 8.5), squeeze=False)
@@ -185,7 +186,7 @@ def error_cdf(out_dir: Path, scenario: str, rows: list[dict[str, Any]]) -> str |
             by_ctrl[label].append(max(float(e), 1e-9))
     if not by_ctrl:
         return None
-    plt = _pyplot()
+    plt = pyplot()
     fig, ax = plt.subplots(figsize=(6.5, 4))
     for label in sorted(by_ctrl):
         e = np.sort(by_ctrl[label])

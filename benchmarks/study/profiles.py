@@ -81,9 +81,9 @@ def plot_profiles(out_dir: Path, scenario: str, rows: list[dict[str, Any]]) -> s
         if len(ctrls) < 2 or costs.shape[0] == 0:
             return None
         panels.append((title, ctrls, ratios(costs)))
-    from benchmarks.study.plots import _pyplot
+    from benchmarks.study.plots import pyplot
 
-    plt = _pyplot()
+    plt = pyplot()
     fig, axes = plt.subplots(1, 2, figsize=(11, 3.8))
     for ax, (title, ctrls, r) in zip(axes, panels, strict=True):
         finite = r[np.isfinite(r)]

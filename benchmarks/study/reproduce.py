@@ -270,7 +270,7 @@ def interval_text(r: Result) -> str:
         return "- (a maximum)"
     lo, hi = r.interval
     if r.figure.measure.startswith("rate"):
-        return f"[{stats._percent(lo)}, {stats._percent(hi)}] %"
+        return f"[{stats.percent_bound(lo)}, {stats.percent_bound(hi)}] %"
     if r.figure.measure.startswith("paired:converged"):
         return f"difference [{100 * lo:+.0f}, {100 * hi:+.0f}] points"
     if r.figure.relation == "better":

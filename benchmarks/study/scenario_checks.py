@@ -13,8 +13,8 @@ from typing import Any
 
 from benchmarks.exceptions import ScenarioError
 from benchmarks.study.scenario_model import (
-    _SCALED,
     RANGES,
+    SCALED_ERROR_KEYS,
     TASK_KEYS,
     CalibrationErrorConfig,
     ControllerSpec,
@@ -89,7 +89,7 @@ def check_scaled_errors(cal_err: CalibrationErrorConfig, sweep: dict[str, list[A
                          path: str) -> None:
     """Each calibration error times the largest ``scale`` stays within its key's range."""
     scales = sweep.get("calibration_error.scale", [cal_err.scale])
-    for key in _SCALED:
+    for key in SCALED_ERROR_KEYS:
         values = sweep.get(f"calibration_error.{key}", [getattr(cal_err, key)])
         worst = max(values) * max(scales)
         hi = RANGES[f"calibration_error.{key}"][1]

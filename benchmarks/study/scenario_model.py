@@ -85,7 +85,7 @@ UNSCALED = ("scale", "distortion_percent", "model_mass_error_percent",
             "model_inertia_error_percent")
 #: The calibration-error keys in millimetres or degrees whose standard deviation, times
 #: ``scale``, must stay within the range of the key itself (the effective error).
-_SCALED = tuple(k for k in CALIBRATION_ERROR_KEYS if k not in UNSCALED)
+SCALED_ERROR_KEYS = tuple(k for k in CALIBRATION_ERROR_KEYS if k not in UNSCALED)
 
 
 def check_range(value: Any, key: str, path: str) -> None:

@@ -356,10 +356,10 @@ def format_rate(k: int, n: int, level: float = LEVEL) -> str:
     if n == 0:
         return "-"
     low, high = wilson_interval(k, n, level)
-    return f"{100 * k / n:.1f} % [{_percent(low)}, {_percent(high)}]"
+    return f"{100 * k / n:.1f} % [{percent_bound(low)}, {percent_bound(high)}]"
 
 
-def _percent(x: float) -> str:
+def percent_bound(x: float) -> str:
     """A bound in percent with one decimal, or as many (up to 3) as keep a bound that is
     not 0 or 100 % from printing as one (10000 of 10000: ``[99.96, 100.0]``)."""
     for digits in (1, 2, 3):

@@ -34,6 +34,9 @@ from functools import lru_cache
 import casadi as ca
 import numpy as np
 
+from controllers.tasks.base import sx_skew
+from controllers.tasks.leg_edge import line_of_normal
+
 #: Feature kinds: image lines (perspective edges), edge normals, leg directions.
 FEATURE_KINDS = ("lines", "normals", "directions")
 
@@ -77,17 +80,6 @@ def platform_points_from_legs(base_points: np.ndarray, lengths: np.ndarray,
 
 
 # --------------------------------------------------------------------------- SX blocks
-def sx_skew(v: ca.SX) -> ca.SX:
-    """``[v]_x`` (3, 3)."""
-    return ca.vertcat(ca.horzcat(0, -v[2], v[1]), ca.horzcat(v[2], 0, -v[0]),
-                      ca.horzcat(-v[1], v[0], 0))
-
-
-def sx_unit(v: ca.SX) -> ca.SX:
-    """``v / |v|``."""
-    return v / ca.sqrt(ca.dot(v, v))
-
-
 def sx_exp_se3(v: ca.SX, w: ca.SX) -> tuple[ca.SX, ca.SX]:
     """SE(3) exponential of the twist displacement ``(v, w)`` [m, rad] (``hexapod.se3``).
 
@@ -160,8 +152,8 @@ def sx_features(kind: str, us: list[ca.SX], A: list[ca.SX], r: ca.SX | float,
     out = []
     for Ai, ui in zip(A, us, strict=True):
         for n in sx_edge_normals(Ai, ui, r):
-            out.append(sx_unit(line_inv_t @ n) if line_inv_t is not None and kind == "lines"
-                       else n)
+            out.append(line_of_normal(n, line_inv_t)
+                       if line_inv_t is not None and kind == "lines" else n)
     return out
 
 

@@ -69,8 +69,8 @@ from controllers.mpc.prediction import (
     sx_legs,
     sx_limb_ends,
     sx_pixel,
-    sx_skew,
 )
+from controllers.tasks.base import sx_skew
 from hexapod.compiled import CompiledFunction
 
 log = logging.getLogger(__name__)

@@ -9,10 +9,14 @@ A task is a pure object: from a :class:`TaskState` (one row per trial) it gives
   along the motion with a constant twist, times that twist; the term a second-order
   law (computed torque) adds to ``L tau_dot``: ``e_ddot = L tau_dot + L_dot tau``.
 
-Errors and Jacobians are numpy (the functions of :mod:`controllers.interaction`, one
-definition with the control laws). The second-order term is generated from a CasADi
-expression of the task's error and of the state's motion, ``L_dot tau = d/ds (L(s) tau)
-s_dot(s, tau)`` (:func:`second_order_function`), so it is never written by hand.
+Each feature task defines its block once, as a CasADi expression (error and Jacobian of
+one leg or one edge: ``direction_block``, ``edge_block``, ``joint_length_block``). From
+that one definition come the task's ``error``/``jacobian`` (its ``block_function``
+mapped over the rows), the compiled law cores (:mod:`controllers.law_kernel` generates
+its C from the same expressions) and the second-order term, generated from the block's
+error and the state's motion, ``L_dot tau = d/ds (L(s) tau) s_dot(s, tau)``
+(:func:`second_order_function`), so it is never written by hand. The numpy functions of
+:mod:`controllers.interaction` are the test oracle and the laws' general path.
 Each is checked against finite differences of the true kinematics
 (``tests/controllers/test_tasks.py``).
 """
@@ -158,10 +162,48 @@ def evaluate_blocks(function: ca.Function, s: np.ndarray, p: np.ndarray, tau: np
     return np.asarray(out, dtype=float).T
 
 
+def sx_skew(v: ca.SX) -> ca.SX:
+    """``[v]_x`` (3, 3) of a (3, 1) expression."""
+    return ca.vertcat(ca.horzcat(0, -v[2], v[1]), ca.horzcat(v[2], 0, -v[0]),
+                      ca.horzcat(-v[1], v[0], 0))
+
+
+def sx_unit(v: ca.SX) -> ca.SX:
+    """``v / |v|`` of a (3, 1) expression."""
+    return v / ca.sqrt(ca.dot(v, v))
+
+
+def map_blocks(function: ca.Function, *columns: np.ndarray) -> list[np.ndarray]:
+    """A block function over ``k`` blocks (CasADi ``map``): each input (k, ...), a block's
+    matrix flattened column-major (vectors as they are); each output (k, rows, cols).
+
+    Args:
+        function: One block (inputs and outputs of fixed shapes).
+        columns: The inputs, block first.
+    """
+    k = columns[0].shape[0]
+    args = []
+    for j, c in enumerate(columns):
+        rows, cols = function.size1_in(j), function.size2_in(j)
+        # a block's (rows, cols) input, column-major in its row of c, side by side
+        block = np.asarray(c, dtype=float).reshape(k, cols, rows).transpose(2, 0, 1)
+        args.append(block.reshape(rows, k * cols))
+    outs = function.map(k)(*args) if k else [
+        np.zeros((function.size1_out(j), 0)) for j in range(function.n_out())]
+    if function.n_out() == 1:
+        outs = [outs]
+    res = []
+    for j, out in enumerate(outs):
+        rows, cols = function.size1_out(j), function.size2_out(j)
+        res.append(np.asarray(out, dtype=float).reshape(rows, k, cols).transpose(1, 0, 2))
+    return res
+
+
 def unit(x: np.ndarray) -> np.ndarray:
     """Rows scaled to unit norm."""
     return x / np.sqrt(np.einsum("...k,...k->...", x, x))[..., None]
 
 
 __all__ = ["Task", "TaskState", "cross", "evaluate_blocks", "evaluate_legs", "leg_rates",
-           "leg_second_order", "second_order_function", "unit"]
+           "leg_second_order", "map_blocks", "second_order_function", "sx_skew", "sx_unit",
+           "unit"]

@@ -1,5 +1,10 @@
 """Leg-direction task (seeds 001/003): ``e_i = u_i x u_i*``, ``L_i = -[u_i*]_x M_i``
-(``docs/math.md`` sections 3 and 6), one 3-row block per leg."""
+(``docs/math.md`` sections 3 and 6), one 3-row block per leg.
+
+:func:`direction_block` is the one definition of the block: the task evaluates it
+(:func:`block_function`), the compiled law core is generated from it
+(:mod:`controllers.law_kernel`), and the second-order term differentiates its error.
+"""
 
 from __future__ import annotations
 
@@ -8,15 +13,48 @@ from functools import lru_cache
 import casadi as ca
 import numpy as np
 
-from controllers.interaction import cross, direction_task
-from controllers.tasks.base import Task, TaskState, evaluate_legs, leg_second_order
+from controllers.tasks.base import (
+    Task,
+    TaskState,
+    evaluate_legs,
+    leg_second_order,
+    map_blocks,
+    sx_skew,
+)
+
+
+def direction_block(u: ca.SX, desired: ca.SX, base_point: ca.SX, length: ca.SX
+                    ) -> tuple[ca.SX, ca.SX]:
+    """Error ``u x u*`` (3, 1) and Jacobian ``-[u*]_x M`` (3, 6) of one leg.
+
+    ``M = (1/q) P(u) [I, -[B]_x]`` with ``P(u) = I - u u^T`` and ``B = A + q u``.
+
+    Args:
+        u: (3, 1) unit leg direction.
+        desired: (3, 1) desired direction ``u*``.
+        base_point: (3, 1) ``A`` [m].
+        length: Leg length ``q`` [m].
+    """
+    e = ca.cross(u, desired)
+    P = ca.SX.eye(3) - u @ u.T
+    C = -(sx_skew(desired) @ P) * (1.0 / length)  # one division per leg
+    B = base_point + length * u
+    return e, ca.horzcat(C, -(C @ sx_skew(B)))
+
+
+@lru_cache(maxsize=1)
+def block_function() -> ca.Function:
+    """``(u, u*, A, q) -> (e, L)`` of :func:`direction_block`."""
+    u, us, A = (ca.SX.sym(k, 3) for k in ("u", "u_star", "A"))
+    q = ca.SX.sym("q")
+    return ca.Function("leg_direction_block", [u, us, A, q], list(direction_block(u, us, A, q)))
 
 
 @lru_cache(maxsize=1)
 def _second_order() -> ca.Function:
-    # parameters (A, u*)
+    # state (u, q), parameters (A, u*)
     return leg_second_order("leg_direction_second_order", 6,
-                            lambda s, p: ca.cross(s[:3], p[3:6]))
+                            lambda s, p: direction_block(s[:3], p[3:6], p[:3], s[3])[0])
 
 
 class LegDirectionTask(Task):
@@ -34,17 +72,17 @@ class LegDirectionTask(Task):
     def _star(self, n: int) -> np.ndarray:
         return np.broadcast_to(self.desired, (n, 6, 3))
 
-    def error(self, state: TaskState) -> np.ndarray:
+    def _blocks(self, state: TaskState) -> list[np.ndarray]:
         n = len(state)
-        return cross(state.directions, self._star(n)).reshape(n, 18)
+        return map_blocks(block_function(), state.directions.reshape(-1, 3),
+                          self._star(n).reshape(-1, 3), state.base_points.reshape(-1, 3),
+                          state.lengths.reshape(-1))
+
+    def error(self, state: TaskState) -> np.ndarray:
+        return self._blocks(state)[0].reshape(len(state), 18)
 
     def jacobian(self, state: TaskState) -> np.ndarray:
-        n = len(state)
-        _, L = direction_task(state.directions.reshape(-1, 3),
-                              np.ascontiguousarray(self._star(n)).reshape(-1, 3),
-                              state.base_points.reshape(-1, 3), state.lengths.reshape(-1),
-                              error=False)
-        return L.reshape(n, 18, 6)
+        return self._blocks(state)[1].reshape(len(state), 18, 6)
 
     def jacobian_dot_twist(self, state: TaskState, twist: np.ndarray) -> np.ndarray:
         n = len(state)

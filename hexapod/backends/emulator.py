@@ -19,9 +19,7 @@ The emulator is split along its seams:
 from __future__ import annotations
 
 import argparse
-import contextlib
 import logging
-import os
 import select
 import signal
 import subprocess
@@ -337,9 +335,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         return 2
 
     def _terminate(signum: int, frame: FrameType | None) -> None:
-        emu._stop.set()
-        with contextlib.suppress(OSError):
-            os.write(emu._wake_w, b"x")
+        emu.request_stop()
 
     signal.signal(signal.SIGTERM, _terminate)
     print(emu.url, flush=True)

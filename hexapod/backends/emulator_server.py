@@ -205,11 +205,15 @@ class EmulatorServer(Generic[D]):
             self._thread.start()
         return self
 
-    def stop(self, timeout: float = 2.0) -> None:
-        """Stop serving, join the thread and close every file descriptor."""
+    def request_stop(self) -> None:
+        """Ask the serving loop to end (safe in a signal handler: no join, no close)."""
         self._stop.set()
         with contextlib.suppress(OSError):
             os.write(self._wake_w, b"x")
+
+    def stop(self, timeout: float = 2.0) -> None:
+        """Stop serving, join the thread and close every file descriptor."""
+        self.request_stop()
         if self._thread is not None and self._thread is not threading.current_thread():
             self._thread.join(timeout)
         self._close_all()

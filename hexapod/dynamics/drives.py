@@ -105,13 +105,6 @@ class DriveParameters:
         """The assumed defaults (module docstring); the same (immutable) object."""
         return _default()
 
-    @classmethod
-    def _make_default(cls) -> DriveParameters:
-        return cls(force_limit=np.full(6, 200.0), rotor_inertia=np.full(6, 2.5),
-                   viscous=np.full(6, 50.0), coulomb=np.full(6, 5.0),
-                   encoder_resolution=np.full(6, 1e-6), mode="velocity",
-                   velocity_bandwidth=np.full(6, 50.0))
-
     def __eq__(self, other: object) -> bool:
         if not isinstance(other, DriveParameters):
             return NotImplemented
@@ -177,4 +170,7 @@ class DriveParameters:
 
 @lru_cache(maxsize=1)
 def _default() -> DriveParameters:
-    return DriveParameters._make_default()
+    return DriveParameters(force_limit=np.full(6, 200.0), rotor_inertia=np.full(6, 2.5),
+                           viscous=np.full(6, 50.0), coulomb=np.full(6, 5.0),
+                           encoder_resolution=np.full(6, 1e-6), mode="velocity",
+                           velocity_bandwidth=np.full(6, 50.0))

@@ -198,35 +198,6 @@ class InertiaParameters:
         """
         return _default(float(platform_radius), float(leg_radius), float(q_min))
 
-    @classmethod
-    def _make_default(cls, platform_radius: float, leg_radius: float, q_min: float
-                      ) -> InertiaParameters:
-        """The defaults, built without the checks of ``__post_init__`` (valid by
-        construction, tested; every robot of a study with its own leg radius makes
-        one)."""
-        thickness = 0.01
-        m_p = 2.0
-        lateral = m_p * (3 * platform_radius**2 + thickness**2) / 12
-        length = 0.9 * q_min
-        values: dict[str, Any] = {
-            "platform_mass": m_p,
-            "platform_com": np.zeros(3),
-            "platform_inertia": np.array([lateral, lateral, m_p * platform_radius**2 / 2,
-                                          0.0, 0.0, 0.0]),
-            "body_mass": 0.5, "body_com": length / 2,
-            "body_inertia": np.array(cylinder_inertia(0.5, leg_radius, length)),
-            "rod_mass": 0.2, "rod_com": length / 2,
-            "rod_inertia": np.array(cylinder_inertia(0.2, 0.6 * leg_radius, length)),
-            "gravity": np.array([0.0, 0.0, -STANDARD_GRAVITY]),
-            "source": None,
-        }
-        obj = cls.__new__(cls)
-        for key, value in values.items():
-            if isinstance(value, np.ndarray):
-                value.flags.writeable = False
-            object.__setattr__(obj, key, value)
-        return obj
-
     def massless(self) -> InertiaParameters:
         """The same platform with massless legs (the textbook case)."""
         return self.replace(body_mass=0.0, body_inertia=np.zeros(2), rod_mass=0.0,
@@ -267,7 +238,30 @@ class InertiaParameters:
 
 @lru_cache(maxsize=256)
 def _default(platform_radius: float, leg_radius: float, q_min: float) -> InertiaParameters:
-    return InertiaParameters._make_default(platform_radius, leg_radius, q_min)
+    """The defaults, built without the checks of ``__post_init__`` (valid by construction,
+    tested; every robot of a study with its own leg radius makes one)."""
+    thickness = 0.01
+    m_p = 2.0
+    lateral = m_p * (3 * platform_radius**2 + thickness**2) / 12
+    length = 0.9 * q_min
+    values: dict[str, Any] = {
+        "platform_mass": m_p,
+        "platform_com": np.zeros(3),
+        "platform_inertia": np.array([lateral, lateral, m_p * platform_radius**2 / 2,
+                                      0.0, 0.0, 0.0]),
+        "body_mass": 0.5, "body_com": length / 2,
+        "body_inertia": np.array(cylinder_inertia(0.5, leg_radius, length)),
+        "rod_mass": 0.2, "rod_com": length / 2,
+        "rod_inertia": np.array(cylinder_inertia(0.2, 0.6 * leg_radius, length)),
+        "gravity": np.array([0.0, 0.0, -STANDARD_GRAVITY]),
+        "source": None,
+    }
+    obj = InertiaParameters.__new__(InertiaParameters)
+    for key, value in values.items():
+        if isinstance(value, np.ndarray):
+            value.flags.writeable = False
+        object.__setattr__(obj, key, value)
+    return obj
 
 
 def _check_tensor(key: str, tensor: np.ndarray, source: str | None) -> None:

@@ -118,13 +118,15 @@ class ReferenceDynamics:
         return np.column_stack([self.state(R, t, e)[1] for e in np.eye(6)])
 
     # ------------------------------------------------------------- dynamics
-    def _tau(self, forces: np.ndarray) -> np.ndarray:
+    def generalized_forces(self, forces: np.ndarray) -> np.ndarray:
+        """The generalised forces of the model (zero but on the prismatic joints) of the
+        leg forces [N]."""
         tau = np.zeros(self.model.nv)
         tau[self.prismatic_v] = forces
         return tau
 
     @staticmethod
-    def _classical(R: np.ndarray, v: np.ndarray, a: np.ndarray) -> np.ndarray:
+    def classical_acceleration(R: np.ndarray, v: np.ndarray, a: np.ndarray) -> np.ndarray:
         """Platform acceleration ``(d2t/dt2, dw/dt)`` in the base frame from the
         free-flyer's LOCAL velocity ``v[:6]`` and acceleration ``a[:6]``."""
         return np.concatenate([R @ (a[:3] + np.cross(v[3:6], v[:3])), R @ a[3:6]])
@@ -136,9 +138,9 @@ class ReferenceDynamics:
         if self.massless_legs:
             return self.forward_kkt(R, t, twist, forces)
         q, v, _ = self.state(R, t, twist)
-        a = pin.constraintDynamics(self.model, self.data, q, v, self._tau(forces),
+        a = pin.constraintDynamics(self.model, self.data, q, v, self.generalized_forces(forces),
                                    self.constraints, self.constraint_datas, self.prox)
-        return self._classical(R, v, a)
+        return self.classical_acceleration(R, v, a)
 
     def forward_lcaba(self, R: np.ndarray, t: np.ndarray, twist: np.ndarray,
                       forces: np.ndarray, mu: float = 1e-3, iterations: int = 50
@@ -159,9 +161,9 @@ class ReferenceDynamics:
         for cm in self.constraints:
             datas.append(cm.createData())
         pin.computeJointMinimalOrdering(self.model, data, self.constraints)
-        a = pin.lcaba(self.model, data, q, v, self._tau(forces), self.constraints, datas,
-                      pin.ProximalSettings(1e-14, mu, iterations))
-        return self._classical(R, v, a)
+        a = pin.lcaba(self.model, data, q, v, self.generalized_forces(forces), self.constraints,
+                      datas, pin.ProximalSettings(1e-14, mu, iterations))
+        return self.classical_acceleration(R, v, a)
 
     def forward_kkt(self, R: np.ndarray, t: np.ndarray, twist: np.ndarray,
                     forces: np.ndarray) -> np.ndarray:
@@ -178,9 +180,9 @@ class ReferenceDynamics:
         kkt[:n, :n] = M
         kkt[:n, n:] = J.T
         kkt[n:, :n] = J
-        rhs = np.concatenate([self._tau(forces) - b, -gamma])
+        rhs = np.concatenate([self.generalized_forces(forces) - b, -gamma])
         a = np.linalg.lstsq(kkt, rhs, rcond=1e-13)[0][:n]
-        return self._classical(R, v, a)
+        return self.classical_acceleration(R, v, a)
 
     def inverse(self, R: np.ndarray, t: np.ndarray, twist: np.ndarray, acc: np.ndarray
                 ) -> np.ndarray:

@@ -52,7 +52,7 @@ def test_compiled_core_equals_numpy(world: World, name: str, options: dict[str, 
     slow = registry.create(name, compiled=False, **options)
     fast.reset(ctx)
     slow.reset(ctx)
-    assert fast._kernel is not None and slow._kernel is None  # type: ignore[attr-defined]
+    assert fast.kernel is not None and slow.kernel is None  # type: ignore[attr-defined]
     for R, t in zip(Rs[1:], ts[1:], strict=True):
         obs = world.observation(R, t)
         _same(fast.step(obs), slow.step(obs))
@@ -67,11 +67,11 @@ def test_hidden_features_and_other_interactions_take_the_numpy_path(world: World
     ctx = world.context(world.goal(Rs[0], ts[0]), 0.02)
     law = registry.create(name, interaction="mean")
     law.reset(ctx)
-    assert law._kernel is None  # type: ignore[attr-defined]
+    assert law.kernel is None  # type: ignore[attr-defined]
     law = registry.create(name)
     law.reset(ctx)
     calls = []
-    kernel = law._kernel  # type: ignore[attr-defined]
+    kernel = law.kernel  # type: ignore[attr-defined]
     real = kernel.evaluate
     kernel.evaluate = lambda: calls.append(1) or real()
     obs = world.observation(Rs[1], ts[1])
@@ -150,7 +150,7 @@ def test_lean_core_equals_the_full_core_where_it_certifies(world: World, name: s
     Rs, ts = world.poses(12, rng, max_translation=0.02, max_angle=np.deg2rad(4), margin=0.03)
     law = registry.create(name)
     law.reset(world.context(world.goal(Rs[0], ts[0]), 0.02))
-    kernel = law._kernel  # type: ignore[attr-defined]
+    kernel = law.kernel  # type: ignore[attr-defined]
     assert kernel is not None and kernel.lean_function is not kernel.function
     o = kernel.outputs
     rows = []

@@ -10,7 +10,8 @@ from collections.abc import Callable
 import numpy as np
 import pytest
 
-from controllers.interaction import direction_task
+from controllers.interaction import direction_task, edge_line_task, edge_normal_task
+from controllers.law_kernel import direction_kernel
 from controllers.tasks import (
     JointLengthTask,
     LegDirectionTask,
@@ -135,16 +136,59 @@ def test_a_task_is_batched_row_by_row(geometry: HexapodGeometry,
                 np.testing.assert_allclose(b[k], x[0], rtol=0, atol=1e-15)
 
 
-def test_the_direction_task_is_the_laws_definition(geometry: HexapodGeometry,
-                                                   rng: np.random.Generator) -> None:
-    """The task and the leg-direction law use one definition (interaction.direction_task)."""
+def test_the_direction_task_is_the_compiled_cores_definition(geometry: HexapodGeometry,
+                                                              rng: np.random.Generator) -> None:
+    """The task and the compiled leg-direction core evaluate one expression
+    (``direction_block``): the core's error and ``J_inv`` are the tasks' to the last bit,
+    its ``N = L^T L`` the task's to rounding; the numpy oracle agrees to rounding."""
     A, E, R, t, _ = _world(geometry, rng)
     s = TaskState.at_pose(A, E, R, t, geometry.leg_radius)
     task = _tasks(geometry, A, E, rng)["directions"]
-    e, L = direction_task(s.directions[0], task.desired, s.base_points[0], s.lengths[0])
-    assert e is not None
-    assert np.array_equal(task.error(s)[0], e.reshape(18))
-    assert np.array_equal(task.jacobian(s)[0], L.reshape(18, 6))
+    kernel = direction_kernel()
+    kernel.set("desired", task.desired)
+    kernel.set("base_points", A)
+    kernel.set("gain", (1.0, 1.0, 0.0))
+    for k in range(N):
+        kernel.set("features", s.directions[k])
+        kernel.set("lengths", s.lengths[k])
+        out = kernel.evaluate()
+        row = TaskState(s.base_points[k:k + 1], s.directions[k:k + 1], s.lengths[k:k + 1])
+        L = task.jacobian(row)[0]
+        assert np.array_equal(out.error, task.error(row)[0])
+        assert np.array_equal(out.J, JointLengthTask(s.lengths[k]).jacobian(row)[0])
+        np.testing.assert_allclose(out.N, L.T @ L, rtol=1e-13, atol=1e-13 * np.abs(out.N).max())
+        e, L_np = direction_task(s.directions[k], task.desired, A, s.lengths[k])
+        assert e is not None
+        np.testing.assert_allclose(out.error, e.reshape(18), rtol=0, atol=1e-15)
+        np.testing.assert_allclose(L, L_np.reshape(18, 6), rtol=0, atol=1e-13)
+
+
+def test_the_edge_tasks_agree_with_the_numpy_oracle(geometry: HexapodGeometry,
+                                                    rng: np.random.Generator) -> None:
+    """The edge tasks' CasADi blocks against the numpy rank-one blocks of
+    ``controllers.interaction`` (rounding)."""
+    A, E, R, t, _ = _world(geometry, rng)
+    s = TaskState.at_pose(A, E, R, t, geometry.leg_radius)
+    tasks = _tasks(geometry, A, E, rng)
+    assert s.normals is not None
+    u2 = np.repeat(s.directions, 2, axis=-2).reshape(-1, 3)
+    A2 = np.repeat(s.base_points, 2, axis=-2).reshape(-1, 3)
+    q2 = np.repeat(s.lengths, 2, axis=-1).reshape(-1)
+    n12 = s.normals.reshape(-1, 3)
+    for kind in ("normals", "lines"):
+        task = tasks[kind]
+        assert isinstance(task, LegEdgeTask)
+        f = task.features(s).reshape(-1, 3)
+        star = np.broadcast_to(task.desired, (N, 6, 2, 3)).reshape(-1, 3)
+        if kind == "lines":
+            L_np = edge_line_task(f, star, n12, u2, A2, q2, task.line_matrix,
+                                  task.line_matrix_inv_t)
+        else:
+            L_np = edge_normal_task(n12, star, u2, A2, q2)
+        np.testing.assert_allclose(task.error(s).reshape(-1, 3), np.cross(f, star),
+                                   rtol=0, atol=1e-15)
+        np.testing.assert_allclose(task.jacobian(s).reshape(-1, 3, 6), L_np, rtol=0,
+                                   atol=1e-12 * np.abs(L_np).max())
 
 
 def test_a_line_task_needs_the_line_matrix() -> None:
