@@ -28,7 +28,10 @@ must stay small. The default ``omega_n = 2 pi * 2 Hz`` with ``zeta = 1`` gives
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
+from scipy.linalg.lapack import dgesdd as _singular_values
 
 from controllers.base import (
     Command,
@@ -38,6 +41,7 @@ from controllers.base import (
     Observation,
 )
 from controllers.exceptions import ContextError
+from controllers.solvers import compiled_ctc
 from controllers.solvers.computed_torque import (
     ComputedTorqueSolver,
     SecondOrderGains,
@@ -46,8 +50,10 @@ from controllers.solvers.computed_torque import (
 from controllers.task_ctc import encoder_readings
 from hexapod.actuation import Actuation
 from hexapod.dynamics import DynamicModel
+from hexapod.dynamics.model import INVERSE_TOLERANCE
 from hexapod.fk import forward_kinematics
 from hexapod.kinematics import inverse_kinematics
+from hexapod.workspace import home_pose
 
 #: Default natural frequency of the leg error [Hz].
 NATURAL_FREQUENCY_HZ = 2.0
@@ -55,6 +61,11 @@ NATURAL_FREQUENCY_HZ = 2.0
 QUINTIC_PEAK_SPEED = 15.0 / 8.0
 #: Default damping ratio of the leg error.
 DAMPING = 1.0
+#: Forward-kinematics tolerance on the length residual [m] (as :func:`forward_kinematics`).
+FK_TOLERANCE = 1e-12
+#: Calls of the compiled step (``compiled_ctc.FK_CALLS`` x 3 Newton iterations each)
+#: before the numpy path takes over (as its budget of 50 iterations).
+FK_MAX_CALLS = 16
 
 
 class ComputedTorqueController(Controller):
@@ -86,6 +97,11 @@ class ComputedTorqueController(Controller):
         self._q_star = np.zeros(6)
         #: ``(t0 [s], q0 [m], duration [s])`` of the quintic to a fixed goal.
         self._start: tuple[float, np.ndarray, float] | None = None
+        #: Input row of the compiled step, its constant part filled at reset.
+        self._row = np.zeros(compiled_ctc.ROW)
+        #: Steps taken by the compiled path and by the numpy path (diagnostics).
+        self.compiled_steps = 0
+        self.numpy_steps = 0
 
     def reset(self, context: ControllerContext) -> None:
         """Build the nominal model; read the reference or ``goal.lengths``.
@@ -96,6 +112,13 @@ class ComputedTorqueController(Controller):
         self._ctx = context
         self._model = DynamicModel(context.geometry)
         self._pose = None
+        g, d = context.geometry, context.geometry.drives
+        self._row[42:60] = g.base_points.ravel()
+        self._row[60:78] = g.platform_points.ravel()
+        self._row[78:97] = self._model.parameters
+        self._row[97:115] = np.concatenate([np.broadcast_to(np.asarray(c, dtype=float), (6,))
+                                            for c in (d.rotor_inertia, d.viscous, d.coulomb)])
+        self._row[115:117] = (self.kp, self.kd)
         if context.reference is None:
             self.retarget(context.goal)
 
@@ -152,10 +175,66 @@ class ComputedTorqueController(Controller):
                 self._ctx.max_speed if self.smooth_goal else 0.0
             self._start = (t, q.copy(), T)
         try:
+            q_s, qd_s, qdd_s = self.desired(t)
+        except Exception as exc:  # the nominal model failed here: refuse with its reason
+            return self._refuse(f"nominal model failed: {exc}")
+        fast = self._compiled_step(q, qd, q_s, qd_s, qdd_s)
+        if fast is not None:
+            self.compiled_steps += 1
+            return fast
+        self.numpy_steps += 1
+        return self._numpy_step(q, qd, q_s, qd_s, qdd_s)
+
+    def _compiled_step(self, q: np.ndarray, qd: np.ndarray, q_s: np.ndarray,
+                       qd_s: np.ndarray, qdd_s: np.ndarray) -> Command | None:
+        """The step by :func:`compiled_ctc.joint_step` (rounding-level equal to
+        :meth:`_numpy_step`), or None off its happy path (FK not converged from the
+        previous pose, ``K`` rank-deficient, a singular inverse solve, a non-finite
+        value): the numpy path then decides, with its reasons."""
+        assert self._ctx is not None
+        row = self._row
+        if self._pose is None:
+            R0, p0 = home_pose(self._ctx.geometry)
+        else:
+            R0, p0 = self._pose
+        row[0:9] = R0.T.ravel()
+        row[9:12] = p0
+        row[12:18] = q
+        row[18:24] = qd
+        row[24:30] = q_s
+        row[30:36] = qd_s
+        row[36:42] = qdd_s
+        step = compiled_ctc.joint_step(INVERSE_TOLERANCE)
+        y = step.single(row)
+        calls = 1
+        while not y[54] < FK_TOLERANCE:  # Newton from the pose reached, as forward_kinematics
+            if calls >= FK_MAX_CALLS or not math.isfinite(float(y[54])):
+                return None
+            row[0:12] = y[0:12]
+            y = step.single(row)
+            calls += 1
+        if y[55] != 1.0 or not math.isfinite(float(y @ y)):
+            return None
+        K = y[12:48].reshape(6, 6).T
+        _, s, _, info = _singular_values(K, compute_uv=0)  # LAPACK gesdd as np.linalg.svd
+        if info != 0 or not (s[0] > 0 and s[-1] > self.solver.threshold * s[0]):
+            return None
+        s_max, s_min = float(s[0]), float(s[-1])
+        f = y[48:54]
+        self._pose = (y[0:9].reshape(3, 3).T, y[9:12])
+        e = q_s - q
+        return Command.of_forces(f, error=e, error_norm=math.sqrt(float(e @ e)), rank=6,
+                                 condition=s_max / s_min, features_used=6)
+
+    def _numpy_step(self, q: np.ndarray, qd: np.ndarray, q_s: np.ndarray,
+                    qd_s: np.ndarray, qdd_s: np.ndarray) -> Command:
+        """The step by numpy around the model's separate compiled calls (the reference
+        path)."""
+        assert self._ctx is not None and self._model is not None
+        try:
             fk = forward_kinematics(self._ctx.geometry, q, guess=self._pose,
                                     check_stroke=False)
             R, p = fk.rotation, fk.translation
-            q_s, qd_s, qdd_s = self.desired(t)
             K = self._model.terms_batch(R[None], p[None], np.zeros((1, 6)))[2][0]
             twist = np.linalg.solve(K, qd)
             bias = self._model.legs_batch(R[None], p[None], twist[None])[1][0]

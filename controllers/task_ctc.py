@@ -263,7 +263,7 @@ def encoder_readings(observation: Observation) -> tuple[float, np.ndarray, np.nd
                 "dynamic world gives")
     qd = np.asarray(observation.q_dot, dtype=float)
     for what, x in (("time", np.array([t])), ("lengths", q), ("leg velocities", qd)):
-        if x.size == 0 or not np.all(np.isfinite(x)):
+        if x.size == 0 or not np.isfinite(x).all():
             return f"measured {what} not finite: {x}"
     return t, q, qd
 

@@ -123,6 +123,12 @@ def _newton_expression() -> ca.Function:
     return ca.Function("hexapod_fk_newton", [x], [ca.vertcat(ca.reshape(Rk, 9, 1), tk, lens - q)])
 
 
+def newton_function() -> ca.Function:
+    """The (uncompiled) CasADi function of ``ITERATIONS_PER_CALL`` Newton steps, its
+    layout as :func:`_newton_expression`, for composing into other functions."""
+    return _newton_expression()
+
+
 @lru_cache(maxsize=1)
 def newton_kernel() -> CompiledFunction:
     """The Newton steps compiled to C (see :mod:`hexapod.compiled`)."""

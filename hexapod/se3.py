@@ -12,15 +12,14 @@ import numpy as np
 def skew(x: np.ndarray) -> np.ndarray:
     """Skew matrices ``[x]_x`` of vectors (..., 3) -> (..., 3, 3)."""
     x = np.asarray(x, dtype=float)
-    z = np.zeros(x.shape[:-1])
-    return np.stack(
-        [
-            np.stack([z, -x[..., 2], x[..., 1]], axis=-1),
-            np.stack([x[..., 2], z, -x[..., 0]], axis=-1),
-            np.stack([-x[..., 1], x[..., 0], z], axis=-1),
-        ],
-        axis=-2,
-    )
+    out = np.zeros((*x.shape[:-1], 3, 3))  # filled in place: no stacks (hot in CTC laws)
+    out[..., 0, 1] = -x[..., 2]
+    out[..., 0, 2] = x[..., 1]
+    out[..., 1, 0] = x[..., 2]
+    out[..., 1, 2] = -x[..., 0]
+    out[..., 2, 0] = -x[..., 1]
+    out[..., 2, 1] = x[..., 0]
+    return out
 
 
 def exp_so3(w: np.ndarray) -> np.ndarray:

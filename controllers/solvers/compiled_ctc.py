@@ -1,0 +1,103 @@
+"""The joint-space computed-torque step as one compiled CasADi function (C, ctypes).
+
+:class:`~controllers.computed_torque.ComputedTorqueController` spends its time in
+Python and numpy around several small compiled calls (forward kinematics, the
+dynamics' terms twice, the inverse dynamics). This module composes the SAME symbolic
+expressions (:func:`hexapod.fk.newton_function` and
+:func:`hexapod.dynamics.compiled.expressions`) into one function, generated to C by
+:class:`hexapod.compiled.CompiledFunction`:
+
+- forward kinematics of the encoder lengths: ``FK_CALLS`` calls of the compiled
+  Newton steps (``FK_CALLS * ITERATIONS_PER_CALL`` iterations) from the previous pose,
+  with the length residual out so that the caller can check convergence (and call
+  again from the pose reached);
+- ``K`` at that pose, the twist ``tau = K^-1 q_dot`` and the bias ``K_dot tau``;
+- the desired leg acceleration ``a* = q_ddot* + Kd (q_dot* - K tau) + Kp (q* - q)``,
+  ``tau_dot = K^-1 (a* - K_dot tau)`` and the leg acceleration ``a = K tau_dot +
+  K_dot tau``;
+- the mechanism's forces ``K^-T (M tau_dot + h)`` (with the residual of that solve, as
+  :meth:`hexapod.dynamics.DynamicModel.inverse_batch` checks it) plus the drives'
+  reflected inertia, viscous and Coulomb terms (:func:`~controllers.solvers.
+  computed_torque.drive_forces`).
+
+The caller keeps the numpy path for everything off the happy path (FK not converged,
+a rank-deficient ``K``, a singular inverse solve, a non-finite value): there the
+compiled result is discarded and the reference path decides.
+
+Input row (:data:`ROW`): guess ``R`` (9, column-major), ``t`` (3); ``q``, ``q_dot``,
+``q*``, ``q_dot*``, ``q_ddot*`` (6 each); ``A``, ``E`` (18 each, point after point);
+the 19 inertial parameters (:func:`hexapod.dynamics.compiled.parameter_row`); the
+drives' rotor inertia, viscous and Coulomb coefficients (6 each); ``Kp``, ``Kd``.
+
+Output (:data:`OUT`): ``R`` (9, column-major), ``t`` (3), ``K`` (36, column-major), the
+forces (6) [N], the max absolute FK length residual [m] (the caller calls again from
+the pose reached while it is not below its tolerance, as :func:`hexapod.fk.
+forward_kinematics` does), and 1.0 when the inverse solve's residual is below
+``inverse_tolerance`` relative to its right-hand side (else 0.0; NaN compares false).
+"""
+
+from __future__ import annotations
+
+from functools import lru_cache
+
+import casadi as ca
+
+from hexapod.compiled import CompiledFunction
+from hexapod.dynamics import compiled as dyn
+from hexapod.dynamics.drive_model import COULOMB_SMOOTHING
+from hexapod.dynamics.model import INVERSE_TOLERANCE
+from hexapod.fk import newton_function
+
+#: Calls of the compiled Newton steps unrolled in the function.
+FK_CALLS = 1
+#: Length of an input row.
+ROW = 117
+#: Length of an output row.
+OUT = 56
+
+
+def _build(inverse_tolerance: float) -> ca.Function:
+    x = ca.SX.sym("x", ROW)
+    pose, q, qd = x[0:12], x[12:18], x[18:24]
+    q_s, qd_s, qdd_s = x[24:30], x[30:36], x[36:42]
+    points = x[42:78]
+    params = x[78:97]
+    rotor, viscous, coulomb = x[97:103], x[103:109], x[109:115]
+    kp, kd = x[115], x[116]
+    newton = newton_function()
+    y = newton(ca.vertcat(pose, q, points))
+    for _ in range(FK_CALLS - 1):
+        y = newton(ca.vertcat(y[0:12], q, points))
+    R_t, residual = y[0:12], y[12:18]
+    row, e = dyn.expressions()
+    terms = ca.Function("terms", [row], [e["M"], e["h"], e["K"], e["leg_bias"]])
+    zeros = ca.SX.zeros(6)
+    K = terms(ca.vertcat(R_t, zeros, zeros, points, params))[2]
+    twist = ca.solve(K, qd)
+    M, h, K, bias = terms(ca.vertcat(R_t, twist, zeros, points, params))
+    a_star = qdd_s + kd * (qd_s - K @ twist) + kp * (q_s - q)
+    acc = ca.solve(K, a_star - bias)
+    a = K @ acc + bias
+    rhs = M @ acc + h
+    f = ca.solve(K.T, rhs)
+    inverse_residual = ca.norm_2(K.T @ f - rhs)
+    f = f + rotor * a + viscous * qd + coulomb * ca.tanh(qd_s / COULOMB_SMOOTHING)
+    fk_residual = ca.mmax(ca.fabs(residual))
+    inverse_solved = ca.if_else(
+        inverse_residual <= inverse_tolerance * ca.norm_2(rhs) + 1e-12, 1.0, 0.0)
+    out = ca.vertcat(R_t, ca.reshape(K, 36, 1), f, fk_residual, inverse_solved)
+    return ca.Function("hexapod_ctc_joint_step", [x], [ca.cse(out)])
+
+
+@lru_cache(maxsize=4)
+def joint_step(inverse_tolerance: float = INVERSE_TOLERANCE) -> CompiledFunction:
+    """The compiled step (built and compiled on first use; cached on disk).
+
+    Args:
+        inverse_tolerance: Relative residual of the inverse solve above which ``K`` is
+            taken as singular (as :meth:`hexapod.dynamics.DynamicModel.inverse_batch`).
+    """
+    return CompiledFunction(_build(float(inverse_tolerance)))
+
+
+__all__ = ["FK_CALLS", "OUT", "ROW", "joint_step"]

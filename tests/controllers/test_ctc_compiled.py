@@ -1,0 +1,102 @@
+"""The compiled computed-torque step against the numpy path it replaces.
+
+:func:`controllers.solvers.compiled_ctc.joint_step` composes the forward kinematics, the
+dynamics' terms, the solve and the inverse dynamics into one C function; the numpy path
+(:meth:`ComputedTorqueController._numpy_step`, separate compiled calls, an SVD solve and
+:meth:`DynamicModel.inverse`) is the reference. They must agree to rounding on random
+states, and the controller must fall back to the numpy path (and its refusal) off the
+compiled path's happy path.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from controllers import registry
+from controllers.base import Observation
+from controllers.computed_torque import ComputedTorqueController
+from hexapod import deltalab, sample_poses
+from hexapod.dynamics import DynamicModel
+from hexapod.kinematics import inverse_kinematics
+from tests.controllers.ctc_world import CtcWorld
+
+#: Relative agreement of the forces (and the condition number) [-].
+FORCE_RTOL = 1e-9
+
+
+def _controller() -> tuple[ComputedTorqueController, CtcWorld]:
+    world = CtcWorld.make(deltalab())
+    g = world.nominal
+    R, t = sample_poses(g, 1, rng=np.random.default_rng(3), max_translation=0.01)
+    ctrl = registry.create("computed-torque")
+    assert isinstance(ctrl, ComputedTorqueController)
+    ctrl.reset(world.context(world.goal(R[0], t[0])))
+    return ctrl, world
+
+
+def test_compiled_step_equals_the_numpy_path_on_random_states() -> None:
+    ctrl, world = _controller()
+    g = world.nominal
+    model = DynamicModel(g)
+    rng = np.random.default_rng(7)
+    Rs, ts = sample_poses(g, 40, rng=rng, max_translation=0.03, max_angle=np.deg2rad(6),
+                          margin=0.01)
+    guesses_R, guesses_t = sample_poses(g, 40, rng=rng, max_translation=0.03,
+                                        max_angle=np.deg2rad(6), margin=0.01)
+    compared = 0
+    for R, t, gR, gt in zip(Rs, ts, guesses_R, guesses_t, strict=True):
+        twist = np.concatenate([rng.normal(0, 0.05, 3), rng.normal(0, 0.3, 3)])
+        q = inverse_kinematics(g, R, t)
+        qd = model.legs_batch(R[None], t[None], twist[None])[0][0]
+        q_s = q + rng.normal(0, 2e-3, 6)
+        qd_s = rng.normal(0, 0.02, 6)
+        qdd_s = rng.normal(0, 0.2, 6)
+        ctrl._pose = (gR, gt)
+        fast = ctrl._compiled_step(q, qd, q_s, qd_s, qdd_s)
+        assert fast is not None, "the compiled path refused a regular state"
+        pose_fast = ctrl._pose
+        ctrl._pose = (gR, gt)
+        slow = ctrl._numpy_step(q, qd, q_s, qd_s, qdd_s)
+        assert slow.reason is None and fast.reason is None
+        f_fast, f_slow = np.asarray(fast.forces), np.asarray(slow.forces)
+        scale = float(np.abs(f_slow).max())
+        assert scale > 1.0  # forces of a real robot under gravity, not zeros
+        np.testing.assert_allclose(f_fast, f_slow, rtol=0, atol=FORCE_RTOL * scale)
+        assert fast.condition == pytest.approx(slow.condition, rel=FORCE_RTOL)
+        assert fast.rank == slow.rank == 6
+        np.testing.assert_allclose(fast.error, slow.error, rtol=0, atol=1e-15)
+        assert pose_fast is not None and ctrl._pose is not None
+        np.testing.assert_allclose(pose_fast[0], ctrl._pose[0], atol=1e-12)
+        np.testing.assert_allclose(pose_fast[1], ctrl._pose[1], atol=1e-12)
+        # the pose found is the one the lengths came from
+        np.testing.assert_allclose(pose_fast[1], t, atol=1e-9)
+        compared += 1
+    assert compared == 40
+
+
+def test_the_step_takes_the_compiled_path_on_a_regular_trajectory() -> None:
+    ctrl, world = _controller()
+    g = world.nominal
+    Rs, ts = sample_poses(g, 10, rng=np.random.default_rng(1), max_translation=0.01)
+    for k, (R, t) in enumerate(zip(Rs, ts, strict=True)):
+        cmd = ctrl.step(Observation(0.02 * k, inverse_kinematics(g, R, t), q_dot=np.zeros(6)))
+        assert cmd.reason is None
+    assert ctrl.compiled_steps == 10 and ctrl.numpy_steps == 0
+
+
+def test_unreachable_lengths_fall_back_to_the_numpy_refusal() -> None:
+    ctrl, _ = _controller()
+    cmd = ctrl.step(Observation(0.0, np.array([0.2, 0.2, 0.2, 0.2, 0.2, 5.0]), q_dot=np.zeros(6)))
+    assert cmd.reason is not None and "nominal model failed" in cmd.reason
+    assert np.all(np.isfinite(cmd.forces)) and not np.any(cmd.forces)
+    assert ctrl.numpy_steps == 1 and ctrl.compiled_steps == 0
+
+
+
+
+def test_output_layout() -> None:
+    from controllers.solvers import compiled_ctc
+
+    fn = compiled_ctc.joint_step()
+    assert (fn.n_in, fn.n_out) == (compiled_ctc.ROW, compiled_ctc.OUT)
