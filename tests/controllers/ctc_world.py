@@ -21,6 +21,9 @@ from controllers.base import Command, Controller, ControllerContext, Goal, Obser
 from hexapod import HexapodGeometry
 from hexapod.dynamics.robots import DynamicRobots
 from hexapod.kinematics import inverse_kinematics, legs_in_frame
+from hexapod.se3 import exp_so3
+from hexapod.trajectory import PoseTrajectory
+from hexapod.workspace import home_pose
 from vision.cameras import Camera, front_camera
 from vision.legs import leg_edges
 
@@ -109,3 +112,16 @@ class CtcWorld:
             ps.append(robot.t[0].copy())
             Rs.append(robot.R[0].copy())
         return np.array(ps), np.array(Rs), cmds
+
+
+def line_reference(truth: HexapodGeometry, profile: str, angles_deg: tuple[float, float, float]
+                   ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, PoseTrajectory]:
+    """A line from home, (8, -6, 6) mm and the rotation ``exp(angles_deg)`` away, at
+    10 mm/s and 0.03 rad/s: ``(R0, t0, R1, t1, reference)``."""
+    R0, t0 = home_pose(truth)
+    R1 = R0 @ exp_so3(np.deg2rad(np.array(angles_deg)))
+    t1 = t0 + np.array([0.008, -0.006, 0.006])
+    ref = PoseTrajectory("line", profile, R0, t0, speed=0.01, acceleration=0.05,
+                         goal_rotation=R1, goal_translation=t1, angular_speed=0.03,
+                         angular_acceleration=0.1)
+    return R0, t0, R1, t1, ref

@@ -16,7 +16,7 @@ from hexapod import HexapodGeometry
 from hexapod.actuation import Actuation
 from hexapod.dynamics.robots import DynamicRobots
 from hexapod.workspace import home_pose
-from tests.controllers.ctc_world import DT, PHYSICS_STEPS, CtcWorld, ideal_drives
+from tests.controllers.ctc_world import DT, PHYSICS_STEPS, CtcWorld, ideal_drives, line_reference
 
 
 @pytest.mark.parametrize("law", ["vision-ctc", "leg-edge-ctc", "leg-direction-ctc"])
@@ -100,16 +100,9 @@ def test_the_tracking_wrapper_passes_the_compensated_law_through(
     import math
 
     from controllers.tracking import TrackingController
-    from hexapod.se3 import exp_so3
-    from hexapod.trajectory import PoseTrajectory
 
     world = CtcWorld.make(ideal_drives(geometry))
-    R0, t0 = home_pose(world.truth)
-    R1 = R0 @ exp_so3(np.deg2rad(np.array([1.0, -1.0, 0.5])))
-    t1 = t0 + np.array([0.008, -0.006, 0.006])
-    ref = PoseTrajectory("line", "quintic", R0, t0, speed=0.01, acceleration=0.05,
-                         goal_rotation=R1, goal_translation=t1, angular_speed=0.03,
-                         angular_acceleration=0.1)
+    R0, t0, R1, t1, ref = line_reference(world.truth, "quintic", (1.0, -1.0, 0.5))
     ctrl = TrackingController(LatencyCompensated(law="leg-edge-ctc"))
     assert ctrl.inner.tracks_reference
     ctrl.reset(world.context(world.goal(R1, t1), ref))

@@ -22,10 +22,10 @@ from controllers.exceptions import ContextError
 from controllers.tracking import TrackingController
 from hexapod import HexapodGeometry
 from hexapod.actuation import Actuation
-from hexapod.se3 import exp_so3, pose_error
+from hexapod.se3 import pose_error
 from hexapod.trajectory import PoseTrajectory
 from hexapod.workspace import home_pose
-from tests.controllers.ctc_world import DT, CtcWorld, ideal_drives
+from tests.controllers.ctc_world import DT, CtcWorld, ideal_drives, line_reference
 from tests.controllers.test_computed_torque import _sampled_design, _step_response
 
 LAWS = ("cartesian-ctc", "vision-ctc", "leg-edge-ctc", "leg-direction-ctc")
@@ -88,12 +88,7 @@ def test_tracks_a_line_with_a_rotation(world: CtcWorld, law: str) -> None:
     the study's tracking wrapper (:class:`controllers.tracking.TrackingController`), which
     passes these laws through: they sample the reference themselves, anchored at the
     taught goal."""
-    R0, t0 = home_pose(world.truth)
-    R1 = R0 @ exp_so3(np.deg2rad(np.array([1.2, -1.0, 1.2])))
-    t1 = t0 + np.array([0.008, -0.006, 0.006])
-    ref = PoseTrajectory("line", "trapezoidal", R0, t0, speed=0.01, acceleration=0.05,
-                         goal_rotation=R1, goal_translation=t1, angular_speed=0.03,
-                         angular_acceleration=0.1)
+    R0, t0, R1, t1, ref = line_reference(world.truth, "trapezoidal", (1.2, -1.0, 1.2))
     ctrl = TrackingController(registry.create(law))
     ctrl.reset(world.context(world.goal(R1, t1), ref))
     steps = math.ceil(ref.duration / DT) + 25
@@ -189,12 +184,7 @@ def test_bad_measurements_are_refused_with_a_reason(world: CtcWorld, law: str) -
 def test_reference_features_on_the_grid_and_off_it(world: CtcWorld, law: str) -> None:
     """The features of the reference precomputed on the control grid are those computed
     on demand for an instant off the grid (2 ns later: the same forces to 1e-6)."""
-    R0, t0 = home_pose(world.truth)
-    R1 = R0 @ exp_so3(np.deg2rad(np.array([1.0, -1.0, 0.5])))
-    t1 = t0 + np.array([0.008, -0.006, 0.006])
-    ref = PoseTrajectory("line", "quintic", R0, t0, speed=0.01, acceleration=0.05,
-                         goal_rotation=R1, goal_translation=t1, angular_speed=0.03,
-                         angular_acceleration=0.1)
+    R0, t0, R1, t1, ref = line_reference(world.truth, "quintic", (1.0, -1.0, 0.5))
     on, off = registry.create(law), registry.create(law)
     for c in (on, off):
         c.reset(world.context(world.goal(R1, t1), ref))
