@@ -66,6 +66,17 @@ class DynamicAxes:
         self.lengths = self.robots.lengths(self._rows)[0]
         self._resting = True
         self._rest = np.array(lengths, dtype=float)
+        self._warm_up()
+
+    def _warm_up(self) -> None:
+        """Build (or load from the disk cache) the compiled code of a physics step now:
+        a first compilation takes seconds, and a server must not stall its first command
+        on it."""
+        from hexapod.dynamics.robots_compiled import period_function, period_lanes
+
+        if period_lanes() is None:
+            period_function(1)
+        self.leg_velocities()
 
     def leg_velocities(self) -> np.ndarray:
         """The legs' velocities now (6,) [m/s]."""
