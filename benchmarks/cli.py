@@ -34,7 +34,7 @@ def cmd_list(args: argparse.Namespace) -> int:
 
     import controllers  # noqa: F401 - registers the built-ins
     from benchmarks.study.scenario import builtin_scenarios, load_scenario
-    from controllers.base import registry
+    from controllers.registry import registry
 
     con = console()
     t = Table(title="Scenarios")

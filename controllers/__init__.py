@@ -1,6 +1,6 @@
 """Controllers: turn observations into leg velocities behind one plugin interface.
 
-Built-in controllers are registered in :data:`controllers.base.registry` here:
+Built-in controllers are registered in :data:`controllers.registry.registry` here:
 
 - ``leg-direction``: leg directions, ``u x u*`` (seeds 001/003);
 - ``leg-edge``: leg edges, pixel lines or normals (seeds 002/003);

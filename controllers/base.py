@@ -1,42 +1,26 @@
-"""The controller plugin interface: observations, context, commands, registry.
+"""The controller plugin interface: observations, context, commands.
 
 A controller sees only what a real robot and camera give (an
 :class:`Observation`) and what the user knows or calibrated (a
 :class:`ControllerContext`); it never sees the simulator's true state.
 
-Register a third-party controller through the entry-point group
-``hexapod.controllers`` of its distribution::
-
-    [project.entry-points."hexapod.controllers"]
-    my-law = "my_package.my_module:MyController"
-
-The object an entry point names is a *factory*: a callable taking keyword
-options and returning a :class:`Controller` (a :class:`Controller` subclass is
-one). On the command line, ``module:attr`` names a factory directly.
+Controllers are found by name in the registry (:mod:`controllers.registry`, re-exported
+here: ``registry``, ``Registry``, ``ENTRY_POINT_GROUP``).
 """
 
 from __future__ import annotations
 
-import importlib
-import importlib.metadata as metadata
 import logging
 from abc import ABC, abstractmethod
-from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
 
-from controllers.exceptions import PluginLoadError, UnknownControllerError
 from hexapod.actuation import Actuation
-from hexapod.config import suggest
-from hexapod.exceptions import UnsafeNameError
 from hexapod.geometry import HexapodGeometry
-from hexapod.outputs import check_name
 
 log = logging.getLogger(__name__)
-
-ENTRY_POINT_GROUP = "hexapod.controllers"
 
 #: Feature names a controller may declare in ``Controller.features``.
 FEATURES = ("lengths", "normals", "lines", "directions")
@@ -344,145 +328,6 @@ class Controller(ABC):
         """Compute the command for one observation (never raises for bad measurements)."""
 
 
-ControllerFactory = Callable[..., Controller]
-
-
-@dataclass(frozen=True)
-class ControllerInfo:
-    """A registered controller and where it comes from.
-
-    Attributes:
-        name: Registry name.
-        package: Distribution that provides it.
-        version: Version of that distribution.
-        description: First line of the factory's docstring.
-    """
-
-    name: str
-    package: str
-    version: str
-    description: str
-
-
-class Registry:
-    """Controllers by name: built-ins, entry-point plugins and ``module:attr`` specs.
-
-    Entry points of the group ``hexapod.controllers`` are loaded lazily, once; a
-    plugin that fails to import is recorded in :attr:`errors` and the others
-    remain usable.
-    """
-
-    def __init__(self) -> None:
-        self._factories: dict[str, ControllerFactory] = {}
-        self._info: dict[str, ControllerInfo] = {}
-        self.errors: list[PluginLoadError] = []
-        self._plugins_loaded = False
-
-    def register(self, name: str, factory: ControllerFactory, package: str = "hexapod-vs",
-                 version: str | None = None) -> None:
-        """Register a controller factory under ``name``.
-
-        Raises:
-            PluginLoadError: ``name`` breaks :func:`hexapod.outputs.check_name` (it
-                becomes part of file names: the recorded trials).
-        """
-        try:
-            check_name(name, "controller name")
-        except UnsafeNameError as exc:
-            raise PluginLoadError(str(name), package, exc.problem) from None
-        if version is None:
-            version = _distribution_version(package)
-        doc = (getattr(factory, "__doc__", None) or "").strip().splitlines()
-        self._factories[name] = factory
-        self._info[name] = ControllerInfo(name, package, version, doc[0] if doc else "")
-
-    def load_plugins(self, force: bool = False) -> None:
-        """Load the entry points of the ``hexapod.controllers`` group."""
-        if self._plugins_loaded and not force:
-            return
-        self._plugins_loaded = True
-        for ep in metadata.entry_points(group=ENTRY_POINT_GROUP):
-            dist = ep.dist.name if ep.dist is not None else "unknown"
-            version = ep.dist.version if ep.dist is not None else "unknown"
-            if ep.name in self._factories and self._info[ep.name].package == dist:
-                continue
-            try:
-                factory = ep.load()
-            except Exception as exc:  # a broken plugin must not break the others
-                err = PluginLoadError(ep.name, dist, f"{type(exc).__name__}: {exc}")
-                log.warning("%s", err)
-                self.errors.append(err)
-                continue
-            if not callable(factory):
-                err = PluginLoadError(ep.name, dist, f"{ep.value} is not callable")
-                self.errors.append(err)
-                continue
-            try:
-                self.register(ep.name, factory, dist, version)
-            except PluginLoadError as err:
-                log.warning("%s", err)
-                self.errors.append(err)
-
-    def names(self) -> list[str]:
-        """Registered names (plugins included), sorted."""
-        self.load_plugins()
-        return sorted(self._factories)
-
-    def info(self) -> list[ControllerInfo]:
-        """Every registered controller with its package and version."""
-        self.load_plugins()
-        return [self._info[n] for n in sorted(self._info)]
-
-    def factory(self, name: str) -> ControllerFactory:
-        """The factory of ``name`` or of a ``module:attr`` spec."""
-        self.load_plugins()
-        if name in self._factories:
-            return self._factories[name]
-        if ":" in name:
-            module, _, attr = name.partition(":")
-            try:
-                obj: Any = importlib.import_module(module)
-                for part in attr.split("."):
-                    obj = getattr(obj, part)
-            except (ImportError, AttributeError) as exc:
-                raise PluginLoadError(name, "command line", f"{type(exc).__name__}: {exc}"
-                                      ) from None
-            if not callable(obj):
-                raise PluginLoadError(name, "command line", "not callable")
-            package = module.split(".")[0]
-            self.register(name, obj, package, _distribution_version(package))
-            return obj
-        raise UnknownControllerError(name, list(self._factories), suggest(name,
-                                                                         self._factories))
-
-    def create(self, name: str, **options: Any) -> Controller:
-        """Instantiate a controller by name with its options."""
-        factory = self.factory(name)
-        ctrl = factory(**options)
-        if not isinstance(ctrl, Controller):
-            for attr in ("reset", "step"):
-                if not callable(getattr(ctrl, attr, None)):
-                    raise PluginLoadError(name, self._info[name].package,
-                                          f"the factory returned an object without {attr}()")
-        return ctrl
-
-    def source(self, name: str) -> ControllerInfo:
-        """Package and version of a registered controller."""
-        self.factory(name)
-        return self._info[name]
-
-
-def _distribution_version(package: str) -> str:
-    try:
-        return metadata.version(package)
-    except metadata.PackageNotFoundError:
-        return "unknown"
-
-
-#: The process-wide registry (built-ins are added by :mod:`controllers`).
-registry = Registry()
-
-
 def observation_problem(obs: Observation, features: frozenset[str]) -> str | None:
     """Return why an observation cannot be used (None if it can).
 
@@ -523,3 +368,17 @@ def usable_observation_problem(obs: Observation, features: frozenset[str]) -> st
         return observation_problem(obs, features)
     except (TypeError, ValueError) as exc:
         return f"malformed observation: {exc}"
+
+
+# The registry lives in :mod:`controllers.registry` (documented there); re-exported for the
+# names users import from here.
+from controllers.registry import ENTRY_POINT_GROUP as ENTRY_POINT_GROUP  # noqa: E402
+from controllers.registry import ControllerFactory as ControllerFactory  # noqa: E402
+from controllers.registry import ControllerInfo as ControllerInfo  # noqa: E402
+from controllers.registry import Registry as Registry  # noqa: E402
+from controllers.registry import registry as registry  # noqa: E402
+
+__all__ = [
+    "FEATURES", "Command", "CommandBatch", "Controller", "ControllerContext", "Goal",
+    "Observation", "ObservationBatch", "observation_problem", "usable_observation_problem",
+]

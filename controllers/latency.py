@@ -60,7 +60,7 @@ class LatencyCompensated(Controller):
 
     def __init__(self, law: str = "leg-edge", use_rates: bool = True, **options: Any
                  ) -> None:
-        from controllers.base import registry
+        from controllers.registry import registry
 
         self.law_name = str(law)
         self.law = registry.create(self.law_name, **options)

@@ -17,8 +17,8 @@ from benchmarks.sim.tolerance import unconverged_reason
 from benchmarks.sim.world import TrialSetup
 from benchmarks.study.failures import user_message
 from benchmarks.study.scenario import Scenario
-from controllers.base import registry
 from controllers.exceptions import ControllerError
+from controllers.registry import registry
 from hexapod.exceptions import HexapodError
 from hexapod.se3 import pose_error
 from vision.exceptions import VisionError

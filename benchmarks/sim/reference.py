@@ -73,7 +73,7 @@ class Targets:
 def task_controller(sc: Scenario, spec: Any) -> Any:
     """A controller of ``spec`` for the task of ``sc``: as registered, wrapped in a
     :class:`~controllers.tracking.TrackingController` for a trajectory task."""
-    from controllers.base import registry
+    from controllers.registry import registry
 
     ctrl = registry.create(spec.name, **spec.options)
     if sc.task.kind != "trajectory":

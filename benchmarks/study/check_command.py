@@ -64,7 +64,7 @@ def scenario_setup(sc: Any) -> Setup:
     """The setup of a loaded scenario (its robot, camera, task box and controllers)."""
     import controllers  # noqa: F401 - registers the built-ins
     from benchmarks.sim import load_camera, load_geometry
-    from controllers.base import registry
+    from controllers.registry import registry
 
     g = load_geometry(sc)
     cam = load_camera(sc, g)

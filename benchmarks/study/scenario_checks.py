@@ -155,8 +155,8 @@ def check_controllers(sc: Scenario) -> None:
         ScenarioError: An option the controller refuses, naming the controller and option.
     """
     import controllers  # noqa: F401 - registers the built-ins
-    from controllers.base import registry
     from controllers.exceptions import OptionError, UnknownControllerError
+    from controllers.registry import registry
 
     for k, spec in enumerate(sc.controllers):
         where = spec.key or f"controllers[{k}]"

@@ -9,8 +9,8 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from controllers.base import registry
 from controllers.latency import LatencyCompensated
+from controllers.registry import registry
 from tests.controllers.controller_world import World, make_camera
 
 

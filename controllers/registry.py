@@ -1,0 +1,173 @@
+"""The controller registry: built-ins, entry-point plugins and ``module:attr`` specs.
+
+Register a third-party controller through the entry-point group
+``hexapod.controllers`` of its distribution::
+
+    [project.entry-points."hexapod.controllers"]
+    my-law = "my_package.my_module:MyController"
+
+The object an entry point names is a *factory*: a callable taking keyword
+options and returning a :class:`~controllers.base.Controller` (a subclass is
+one). On the command line, ``module:attr`` names a factory directly.
+"""
+
+from __future__ import annotations
+
+import importlib
+import importlib.metadata as metadata
+import logging
+from collections.abc import Callable
+from dataclasses import dataclass
+from typing import TYPE_CHECKING, Any
+
+from controllers.exceptions import PluginLoadError, UnknownControllerError
+from hexapod.config import suggest
+from hexapod.exceptions import UnsafeNameError
+from hexapod.outputs import check_name
+
+if TYPE_CHECKING:
+    from controllers.base import Controller
+
+log = logging.getLogger(__name__)
+
+ENTRY_POINT_GROUP = "hexapod.controllers"
+
+ControllerFactory = Callable[..., "Controller"]
+
+
+@dataclass(frozen=True)
+class ControllerInfo:
+    """A registered controller and where it comes from.
+
+    Attributes:
+        name: Registry name.
+        package: Distribution that provides it.
+        version: Version of that distribution.
+        description: First line of the factory's docstring.
+    """
+
+    name: str
+    package: str
+    version: str
+    description: str
+
+
+class Registry:
+    """Controllers by name: built-ins, entry-point plugins and ``module:attr`` specs.
+
+    Entry points of the group ``hexapod.controllers`` are loaded lazily, once; a
+    plugin that fails to import is recorded in :attr:`errors` and the others
+    remain usable.
+    """
+
+    def __init__(self) -> None:
+        self._factories: dict[str, ControllerFactory] = {}
+        self._info: dict[str, ControllerInfo] = {}
+        self.errors: list[PluginLoadError] = []
+        self._plugins_loaded = False
+
+    def register(self, name: str, factory: ControllerFactory, package: str = "hexapod-vs",
+                 version: str | None = None) -> None:
+        """Register a controller factory under ``name``.
+
+        Raises:
+            PluginLoadError: ``name`` breaks :func:`hexapod.outputs.check_name` (it
+                becomes part of file names: the recorded trials).
+        """
+        try:
+            check_name(name, "controller name")
+        except UnsafeNameError as exc:
+            raise PluginLoadError(str(name), package, exc.problem) from None
+        if version is None:
+            version = _distribution_version(package)
+        doc = (getattr(factory, "__doc__", None) or "").strip().splitlines()
+        self._factories[name] = factory
+        self._info[name] = ControllerInfo(name, package, version, doc[0] if doc else "")
+
+    def load_plugins(self, force: bool = False) -> None:
+        """Load the entry points of the ``hexapod.controllers`` group."""
+        if self._plugins_loaded and not force:
+            return
+        self._plugins_loaded = True
+        for ep in metadata.entry_points(group=ENTRY_POINT_GROUP):
+            dist = ep.dist.name if ep.dist is not None else "unknown"
+            version = ep.dist.version if ep.dist is not None else "unknown"
+            if ep.name in self._factories and self._info[ep.name].package == dist:
+                continue
+            try:
+                factory = ep.load()
+            except Exception as exc:  # a broken plugin must not break the others
+                err = PluginLoadError(ep.name, dist, f"{type(exc).__name__}: {exc}")
+                log.warning("%s", err)
+                self.errors.append(err)
+                continue
+            if not callable(factory):
+                err = PluginLoadError(ep.name, dist, f"{ep.value} is not callable")
+                self.errors.append(err)
+                continue
+            try:
+                self.register(ep.name, factory, dist, version)
+            except PluginLoadError as err:
+                log.warning("%s", err)
+                self.errors.append(err)
+
+    def names(self) -> list[str]:
+        """Registered names (plugins included), sorted."""
+        self.load_plugins()
+        return sorted(self._factories)
+
+    def info(self) -> list[ControllerInfo]:
+        """Every registered controller with its package and version."""
+        self.load_plugins()
+        return [self._info[n] for n in sorted(self._info)]
+
+    def factory(self, name: str) -> ControllerFactory:
+        """The factory of ``name`` or of a ``module:attr`` spec."""
+        self.load_plugins()
+        if name in self._factories:
+            return self._factories[name]
+        if ":" in name:
+            module, _, attr = name.partition(":")
+            try:
+                obj: Any = importlib.import_module(module)
+                for part in attr.split("."):
+                    obj = getattr(obj, part)
+            except (ImportError, AttributeError) as exc:
+                raise PluginLoadError(name, "command line", f"{type(exc).__name__}: {exc}"
+                                      ) from None
+            if not callable(obj):
+                raise PluginLoadError(name, "command line", "not callable")
+            package = module.split(".")[0]
+            self.register(name, obj, package, _distribution_version(package))
+            return obj
+        raise UnknownControllerError(name, list(self._factories), suggest(name,
+                                                                         self._factories))
+
+    def create(self, name: str, **options: Any) -> Controller:
+        """Instantiate a controller by name with its options."""
+        from controllers.base import Controller  # base imports this module
+
+        factory = self.factory(name)
+        ctrl = factory(**options)
+        if not isinstance(ctrl, Controller):
+            for attr in ("reset", "step"):
+                if not callable(getattr(ctrl, attr, None)):
+                    raise PluginLoadError(name, self._info[name].package,
+                                          f"the factory returned an object without {attr}()")
+        return ctrl
+
+    def source(self, name: str) -> ControllerInfo:
+        """Package and version of a registered controller."""
+        self.factory(name)
+        return self._info[name]
+
+
+def _distribution_version(package: str) -> str:
+    try:
+        return metadata.version(package)
+    except metadata.PackageNotFoundError:
+        return "unknown"
+
+
+#: The process-wide registry (built-ins are added by :mod:`controllers`).
+registry = Registry()
