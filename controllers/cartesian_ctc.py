@@ -18,6 +18,7 @@ import numpy as np
 
 from controllers.base import ControllerContext, Goal, Observation
 from controllers.task_ctc import (
+    CompiledTaskStep,
     Measured,
     TaskComputedTorque,
     camera_and_base_points,
@@ -66,11 +67,28 @@ class CartesianCTC(TaskComputedTorque):
         R, t = self.encoder_pose(q)
         return pose_measurement(self.model, R, t, q, q_dot)
 
-    def tasks_at(self, times: np.ndarray | None, measured: Measured) -> list[Task]:
-        """The pose task towards the reference at ``times`` (or the fixed goal)."""
-        if times is None or self.reference is None:
-            return [PlatformPoseTask(*self.goal_pose())]
-        return pose_tasks(self.reference, times)
+    def desired_at(self, tr: float | None
+                   ) -> tuple[Task, np.ndarray | None, np.ndarray | None]:
+        """The pose task towards the reference at ``tr`` with its twist and twist rate
+        (or the fixed goal, at rest)."""
+        if tr is None or self.reference is None:
+            return PlatformPoseTask(*self.goal_pose()), None, None
+        row = self.pose_reference(tr)
+        return PlatformPoseTask(row[0:9].reshape(3, 3), row[9:12]), row[12:18], row[18:24]
+
+    def compiled_inputs(self, step: CompiledTaskStep, observation: Observation, tr: float,
+                        q: np.ndarray) -> tuple[np.ndarray | None, str | None] | None:
+        """The reference (the pose comes from the encoders in the compiled step)."""
+        self.reference_input(step, tr)
+        return None, None
+
+    def reference_input(self, step: CompiledTaskStep, tr: float) -> None:
+        """The reference row at ``tr`` (the fixed goal at rest without a reference)."""
+        if self.reference is None:
+            R, t = self.goal_pose()
+            step.set("reference", np.concatenate([R.ravel(), t, np.zeros(12)]))
+        else:
+            step.set("reference", self.pose_reference(tr))
 
 
 class VisionCTC(CartesianCTC):
@@ -100,6 +118,7 @@ class VisionCTC(CartesianCTC):
 
     name = "vision-ctc"
     features = frozenset({"lengths", "directions"})
+    compiled_fk = False
 
     def prepare(self, context: ControllerContext) -> None:
         """Check the camera and base points; anchor a reference at the taught goal.
@@ -162,16 +181,32 @@ class VisionCTC(CartesianCTC):
             m.note = f"pose from legs {np.flatnonzero(seen).tolist()}"
         return m
 
-    def tasks_at(self, times: np.ndarray | None, measured: Measured) -> list[Task]:
-        """The pose task towards the (anchored) reference, or the taught goal."""
-        ref = self.reference
-        if times is not None and self._offset is not None and ref is self.context.reference:  # type: ignore[union-attr]
-            sample = ref.at(times)
-            D = self._offset
-            R = D.rotation @ sample.rotation
-            t = sample.translation @ D.rotation.T + D.translation
-            return [PlatformPoseTask(R[i], t[i]) for i in range(len(times))]
-        return super().tasks_at(times, measured)
+    def anchor(self, R: np.ndarray, t: np.ndarray, twist: np.ndarray, twist_rate: np.ndarray
+               ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """``context.reference`` moved rigidly to end at the taught goal (``R' = D R``,
+        ``t' = D t + d``: the twist and its rate turn with ``D``); the smooth line as it
+        is."""
+        ctx = self.context
+        if self._offset is None or ctx is None or self.reference is not ctx.reference:
+            return R, t, twist, twist_rate
+        D = self._offset.rotation
+
+        def turn(x: np.ndarray) -> np.ndarray:  # (m, 6) -> each half turned by D
+            return (x.reshape(-1, 2, 3) @ D.T).reshape(-1, 6)  # type: ignore[no-any-return]
+
+        return (D @ R, t @ D.T + self._offset.translation, turn(twist), turn(twist_rate))
+
+    def compiled_inputs(self, step: CompiledTaskStep, observation: Observation, tr: float,
+                        q: np.ndarray) -> tuple[np.ndarray | None, str | None] | None:
+        """The visual pose (the numpy path refuses when there is none) and the reference."""
+        u, seen = directions_seen(observation.directions, observation.normals,
+                                  observation.direction_visible, observation.edge_visible)
+        pose = self._visual_pose(q, u, seen)
+        if isinstance(pose, str):
+            return None
+        step.set_pose(*pose)
+        self.reference_input(step, tr)
+        return None, None if np.all(seen) else f"pose from legs {np.flatnonzero(seen).tolist()}"
 
 
 def directions_seen(directions: np.ndarray | None, normals: np.ndarray | None,
@@ -206,9 +241,3 @@ def pose_measurement(model: object, R: np.ndarray, t: np.ndarray, q: np.ndarray,
                       t[None])
     return Measured(R, t, twist, state, inverse_jacobian=K)
 
-
-def pose_tasks(reference: object, times: np.ndarray) -> list[Task]:
-    """Pose tasks towards ``reference.at(times)``."""
-    sample = reference.at(times)  # type: ignore[attr-defined]
-    return [PlatformPoseTask(sample.rotation[i], sample.translation[i])
-            for i in range(len(times))]

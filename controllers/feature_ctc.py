@@ -32,7 +32,9 @@ import numpy as np
 from controllers.base import ControllerContext, Goal, Observation
 from controllers.cartesian_ctc import directions_seen, pose_measurement
 from controllers.exceptions import ContextError
+from controllers.solvers.reference_motion import feature_motion, size_in
 from controllers.task_ctc import (
+    CompiledTaskStep,
     Measured,
     TaskComputedTorque,
     camera_and_base_points,
@@ -67,7 +69,7 @@ class FeatureCTC(TaskComputedTorque):
         cam, A = camera_and_base_points(self.name, context)
         self._frame = cam
         self._A = A
-        self._grid: tuple[object, np.ndarray] | None = None
+        self._grid: tuple[object, np.ndarray] | None = None  # feature_reference's grid
 
     def take_goal(self, goal: Goal) -> None:
         """The taught features (``goal.normals`` or ``goal.directions``).
@@ -109,27 +111,85 @@ class FeatureCTC(TaskComputedTorque):
         """The task towards ``desired`` features."""
         raise NotImplementedError
 
-    def tasks_at(self, times: np.ndarray | None, measured: Measured) -> list[Task]:
-        """The task towards the anchored model features at ``times``, or the taught goal.
+    def desired_at(self, tr: float | None
+                   ) -> tuple[Task, np.ndarray | None, np.ndarray | None]:
+        """The task towards the anchored model features at ``tr`` with their rate and
+        acceleration, or the taught goal at rest."""
+        if tr is None or self.reference is None:
+            return self.make_task(self._taught), None, None
+        s, s_dot, s_ddot = (x.reshape(self._taught.shape) for x in self.feature_reference(tr))
+        return self.make_task(s), s_dot, s_ddot
 
-        The features of the instants around the control grid ``k dt`` are computed once
-        for the whole reference (one batched camera model call); other instants on
-        demand."""
-        ctx = self.context
-        if times is None or self.reference is None or ctx is None:
-            return [self.make_task(self._taught)]
+    def feature_reference(self, tr: float) -> np.ndarray:
+        """(3, m) the anchored model features at ``tr`` [s], their rate and acceleration
+        (:mod:`controllers.solvers.reference_motion`). The control grid ``k dt`` is
+        computed once per reference (one batched call); other instants on demand."""
+        ctx, ref = self.context, self.reference
+        assert ctx is not None and ref is not None
         dt = float(ctx.dt)
-        k = round(float(times[1]) / dt)
-        if abs(float(times[1]) - k * dt) < 1e-9 and k >= 0:
-            if self._grid is None or self._grid[0] is not self.reference:
-                n = int(np.ceil(float(self.reference.duration) / dt)) + 3
-                grid_times = (dt * np.arange(n)[:, None] + (times - times[1])).ravel()
-                self._grid = (self.reference, self._anchored(grid_times).reshape(
-                    n, 3, *self._taught.shape))
+        k = round(tr / dt)
+        if abs(tr - k * dt) < 1e-9 and k >= 0:
+            if self._grid is None or self._grid[0] is not ref:
+                n = int(np.ceil(float(ref.duration) / dt)) + 2
+                self._grid = (ref, self.feature_rows(dt * np.arange(n)))
             grid = self._grid[1]
-            rows = grid[min(k, len(grid) - 1)]
-            return [self.make_task(rows[i]) for i in range(3)]
-        return [self.make_task(f) for f in self._anchored(times)]
+            return grid[min(k, len(grid) - 1)]  # type: ignore[no-any-return]
+        return self.feature_rows(np.array([tr]))[0]
+
+    def feature_rows(self, times: np.ndarray) -> np.ndarray:
+        """(m, 3, n) rows of :meth:`feature_reference` at ``times`` (m,) [s]; NaN where
+        the model's camera does not see the feature (:meth:`_anchored`)."""
+        ctx = self.context
+        assert ctx is not None and self.reference is not None
+        kind = "normals" if self.key == "normals" else "directions"
+        size = 36 if kind == "normals" else 18
+        end = float(self.reference.duration) + 1.0
+        model_end = np.asarray(reference_goals(replace(ctx, reference=self.reference),
+                                               np.array([end]))[self.key][0]).reshape(-1, 3)
+        taught = self._taught.reshape(-1, 3)
+        taught = np.where(np.all(np.isfinite(taught), axis=-1)[:, None], taught, model_end)
+        g = ctx.geometry
+        cam = self._frame
+        rows = np.empty((len(times), size_in(kind)))
+        rows[:, 0:24] = self.pose_rows(times)
+        rows[:, 24:] = np.concatenate([
+            taught.ravel(), model_end.ravel(), cam.rotation.ravel(), cam.translation,
+            g.base_points.ravel(), g.platform_points.ravel(), [g.leg_radius]])
+        out = feature_motion(kind).batch(rows).reshape(len(times), 3, size)
+        seen = np.isfinite(self._anchored(times).reshape(len(times), size))
+        return np.where(seen[:, None, :], out, np.nan)
+
+    def compiled_constants(self, step: CompiledTaskStep) -> None:
+        """The estimated base points (camera frame) and the camera frame."""
+        step.set("base", self._A.ravel())
+        step.set("frame", np.concatenate([self._frame.rotation.ravel(),
+                                          self._frame.translation]))
+
+    def compiled_inputs(self, step: CompiledTaskStep, observation: Observation, tr: float,
+                        q: np.ndarray) -> tuple[np.ndarray | None, str | None] | None:
+        """The features seen and the rows to use; the reference at ``tr``."""
+        feats = self.features_seen(observation)
+        if isinstance(feats, str):
+            return None
+        u, normals, rows = feats
+        step.set("features", u.ravel() if normals is None else np.concatenate(
+            [normals.ravel(), u.ravel()]))
+        if self.reference is None:
+            ref = np.stack([self._taught.ravel(), np.zeros(rows.size), np.zeros(rows.size)])
+        else:
+            ref = self.feature_reference(tr)
+        # a feature the model's camera does not see (NaN) leaves its rows, as in the
+        # numpy path, with a finite stand-in
+        known = np.repeat(np.isfinite(ref).reshape(3, -1, 3).all(axis=(0, 2)), 3)
+        if not known.all():
+            rows = rows & known
+            ref = np.where(known, ref, np.array([[0.0], [0.0], [0.0]]))
+            ref[0] = np.where(known, ref[0], np.tile(_DUMMY, rows.size // 3))
+        step.set("mask", rows.astype(float))
+        step.set("desired", ref[0])
+        step.set("rate", ref[1])
+        step.set("acceleration", ref[2])
+        return rows, None
 
     def _anchored(self, times: np.ndarray) -> np.ndarray:
         """(m, ...) the nominal features of the reference at ``times``, anchored at the
@@ -156,6 +216,7 @@ class LegEdgeCTC(FeatureCTC):
     name = "leg-edge-ctc"
     features = frozenset({"lengths", "normals"})
     key = "normals"
+    compiled_kind = "edges"
 
     def features_seen(self, observation: Observation
                       ) -> tuple[np.ndarray, np.ndarray | None, np.ndarray] | str:
@@ -178,6 +239,7 @@ class LegDirectionCTC(FeatureCTC):
     name = "leg-direction-ctc"
     features = frozenset({"lengths", "directions"})
     key = "directions"
+    compiled_kind = "directions"
 
     def features_seen(self, observation: Observation
                       ) -> tuple[np.ndarray, np.ndarray | None, np.ndarray] | str:

@@ -1,0 +1,116 @@
+"""The compiled path of the task-space computed-torque laws.
+
+:class:`CompiledTaskStep` fills the input row of the law's compiled step
+(:func:`controllers.solvers.compiled_task_ctc.task_step`: the pose, the dynamics, the
+task, the reference's terms, the solve and the leg forces in one C call), calls it and
+reads the command. It answers None off the happy path (the law's measurement has no
+answer, forward kinematics not converged from the last pose, a rank-deficient task
+Jacobian, a singular inverse solve, a non-finite value, fewer than six rows): the
+law's numpy path (:meth:`controllers.task_ctc.TaskComputedTorque._command`, the
+reference, tested equal) then decides, with its reasons.
+
+A law gives the compiled path its kind and pose source (``compiled_kind``,
+``compiled_fk``), its constants (``compiled_constants(step)``) and, each period, its
+measurement and reference (``compiled_inputs(step, observation, tr, q)``, returning the
+rows to use or None, and a note).
+"""
+
+from __future__ import annotations
+
+import math
+from typing import TYPE_CHECKING
+
+import numpy as np
+from scipy.linalg.lapack import dgesdd as _singular_values
+
+from controllers.base import Command, Observation
+from controllers.solvers.compiled_task_ctc import layout, task_step
+from hexapod.dynamics.model import INVERSE_TOLERANCE
+from hexapod.workspace import home_pose
+
+if TYPE_CHECKING:
+    from controllers.task_ctc import TaskComputedTorque
+
+#: Forward-kinematics tolerance on the length residual [m] (as :func:`forward_kinematics`).
+FK_TOLERANCE = 1e-12
+#: Calls of the compiled step (3 Newton iterations each) before the numpy path takes over.
+FK_MAX_CALLS = 16
+
+
+class CompiledTaskStep:
+    """The compiled step of one law (see the module docstring).
+
+    Args:
+        law: The law, reset (its context and nominal model built).
+    """
+
+    def __init__(self, law: TaskComputedTorque) -> None:
+        assert law.context is not None and law.model is not None
+        self.kind: str = law.compiled_kind
+        self.fk: bool = law.compiled_fk
+        self.function = task_step(self.kind, self.fk, INVERSE_TOLERANCE)
+        self.inputs, self.outputs = layout(self.kind)
+        self.row = np.zeros(self.function.n_in)
+        g = law.context.geometry
+        d = g.drives
+        self.set("points", np.concatenate([g.base_points.ravel(),
+                                           g.platform_points.ravel()]))
+        self.set("params", law.model.parameters)
+        for name in ("rotor_inertia", "viscous", "coulomb"):
+            self.set(name.split("_")[0], np.broadcast_to(
+                np.asarray(getattr(d, name), dtype=float), (6,)))
+        self.set("gains", np.array([law.gains.kp, law.gains.kd, float(law.context.dt)]))
+        self.home = home_pose(g)
+        law.compiled_constants(self)
+
+    def set(self, name: str, value: np.ndarray | float) -> None:
+        """Write an input field (:func:`~controllers.solvers.compiled_task_ctc.layout`)."""
+        self.row[self.inputs[name]] = value
+
+    def set_pose(self, R: np.ndarray, t: np.ndarray) -> None:
+        """The input pose (the FK guess, or the measured pose)."""
+        self.row[0:9] = R.T.ravel()
+        self.row[9:12] = t
+
+    def step(self, law: TaskComputedTorque, observation: Observation, tr: float,
+             q: np.ndarray, qd: np.ndarray) -> Command | None:
+        """The command of this period, or None off the happy path."""
+        if self.fk:
+            R0, t0 = law.guess if law.guess is not None else self.home
+            self.set_pose(R0, t0)
+        prepared = law.compiled_inputs(self, observation, tr, q)
+        if prepared is None:
+            return None
+        rows, note = prepared
+        if rows is not None and int(rows.sum()) < 6:
+            return None
+        row, out = self.row, self.outputs
+        row[self.inputs["q"]] = q
+        row[self.inputs["q_dot"]] = qd
+        y = self.function.single(row)
+        residual = out["fk_residual"].start
+        calls = 1
+        while self.fk and not y[residual] < FK_TOLERANCE:
+            if calls >= FK_MAX_CALLS or not math.isfinite(float(y[residual])):
+                return None
+            row[0:12] = y[0:12]
+            y = self.function.single(row)
+            calls += 1
+        if y[out["solved"].start] != 1.0 or not math.isfinite(float(y @ y)):
+            return None
+        factor = y[out["factor"]].reshape(6, 6).T
+        _, s, _, info = _singular_values(factor, compute_uv=0)
+        if info != 0 or not (s[0] > 0 and s[-1] > law.solver.threshold * s[0]):
+            return None
+        if self.fk:
+            law.guess = (y[0:9].reshape(3, 3).T, y[9:12])
+        e = y[out["error"]]
+        if rows is not None:
+            e = e[rows]
+        return Command.of_forces(y[out["forces"]], error=e,
+                                 error_norm=math.sqrt(float(e @ e)), rank=6,
+                                 condition=float(s[0] / s[-1]), features_used=len(e),
+                                 notes=[] if note is None else [note])
+
+
+__all__ = ["FK_MAX_CALLS", "FK_TOLERANCE", "CompiledTaskStep"]
