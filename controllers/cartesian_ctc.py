@@ -15,6 +15,7 @@ ESTIMATED base points ``A_i`` and camera pose (``vision-ctc``).
 from __future__ import annotations
 
 import numpy as np
+from scipy.linalg.lapack import dgesdd as _svd
 
 from controllers.base import ControllerContext, Goal, Observation
 from controllers.task_ctc import (
@@ -156,14 +157,14 @@ class VisionCTC(CartesianCTC):
         if n < 3:
             return f"only {n} legs seen (legs {np.flatnonzero(seen).tolist()}): the pose " \
                 "needs at least 3"
-        B = np.asarray(self.context.base_points)[seen] + q[seen, None] * u[seen]
-        E = np.asarray(self.context.geometry.platform_points)[seen]
-        s = np.linalg.svd(E - E.mean(axis=0), compute_uv=False)
-        if s[1] < SPREAD * float(np.linalg.norm(E, axis=1).max()):
-            return f"the {n} legs seen are collinear on the platform: no pose"
-        from controllers.mpc.prediction import fit_pose
-
-        Rc, tc = fit_pose(B, E)
+        A = np.asarray(self.context.base_points)
+        E = np.asarray(self.context.geometry.platform_points)
+        if n < 6:
+            A, q, u, E = A[seen], q[seen], u[seen], E[seen]
+            s = np.linalg.svd(E - E.mean(axis=0), compute_uv=False)
+            if s[1] < SPREAD * float(np.linalg.norm(E, axis=1).max()):
+                return f"the {n} legs seen are collinear on the platform: no pose"
+        Rc, tc = rigid_fit(A + q[:, None] * u, E)
         bc = self._base_from_camera
         return bc.rotation @ Rc, bc.rotation @ tc + bc.translation
 
@@ -229,6 +230,32 @@ def directions_seen(directions: np.ndarray | None, normals: np.ndarray | None,
         return np.full((6, 3), np.nan), np.zeros(6, bool)
     seen &= np.all(np.isfinite(u), axis=-1)
     return u, seen
+
+
+def rigid_fit(points: np.ndarray, model_points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The rigid fit ``(R, t) = argmin sum_i |R m_i + t - p_i|^2`` (Kabsch, a proper
+    rotation) of :func:`controllers.mpc.prediction.fit_pose` with equal weights, by one
+    direct LAPACK call (``gesdd``, as ``numpy.linalg.svd``) for the step's budget.
+
+    Args:
+        points: (n, 3) target points ``p_i`` [m].
+        model_points: (n, 3) model points ``m_i`` [m] (at least three, not collinear).
+    """
+    pc = points.mean(axis=0)
+    mc = model_points.mean(axis=0)
+    U, _, Vt, info = _svd((points - pc).T @ (model_points - mc))
+    if info != 0:
+        from controllers.mpc.prediction import fit_pose
+
+        return fit_pose(points, model_points)
+    R = U @ Vt
+    det = (R[0, 0] * (R[1, 1] * R[2, 2] - R[1, 2] * R[2, 1])
+           - R[0, 1] * (R[1, 0] * R[2, 2] - R[1, 2] * R[2, 0])
+           + R[0, 2] * (R[1, 0] * R[2, 1] - R[1, 1] * R[2, 0]))
+    if det < 0:  # a reflection: the last singular direction turned
+        U[:, 2] = -U[:, 2]
+        R = U @ Vt
+    return R, pc - R @ mc
 
 
 def pose_measurement(model: object, R: np.ndarray, t: np.ndarray, q: np.ndarray,

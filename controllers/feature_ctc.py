@@ -42,9 +42,16 @@ from controllers.task_ctc import (
 )
 from controllers.tasks import LegDirectionTask, LegEdgeTask, Task, TaskState
 from controllers.tracking import anchor_goals, reference_goals
+from vision.legs import directions_from_edges
 
 #: A unit vector standing in for a hidden leg's features (its rows are not used).
 _DUMMY = np.array([0.0, 0.0, 1.0])
+#: Every row of the edge task (36) and of the direction task (18) (read only).
+_EVERY_EDGE = np.ones(36, bool)
+_EVERY_EDGE.flags.writeable = False
+_EVERY_LEG = np.ones(18, bool)
+_EVERY_LEG.flags.writeable = False
+_ONES = np.ones(36)
 
 
 class FeatureCTC(TaskComputedTorque):
@@ -69,7 +76,9 @@ class FeatureCTC(TaskComputedTorque):
         cam, A = camera_and_base_points(self.name, context)
         self._frame = cam
         self._A = A
-        self._grid: tuple[object, np.ndarray] | None = None  # feature_reference's grid
+        #: The reference's grid: rows (n, 3, m), sanitised rows and known rows.
+        self._grid: tuple[object, np.ndarray, list[np.ndarray], list[np.ndarray | None]] | \
+            None = None
 
     def take_goal(self, goal: Goal) -> None:
         """The taught features (``goal.normals`` or ``goal.directions``).
@@ -124,17 +133,27 @@ class FeatureCTC(TaskComputedTorque):
         """(3, m) the anchored model features at ``tr`` [s], their rate and acceleration
         (:mod:`controllers.solvers.reference_motion`). The control grid ``k dt`` is
         computed once per reference (one batched call); other instants on demand."""
+        i = self._grid_index(tr)
+        if i is None:
+            return self.feature_rows(np.array([tr]))[0]
+        assert self._grid is not None
+        return self._grid[1][i]  # type: ignore[no-any-return]
+
+    def _grid_index(self, tr: float) -> int | None:
+        """The row of ``tr`` [s] in the reference's control grid (built on first use), or
+        None off the grid."""
         ctx, ref = self.context, self.reference
         assert ctx is not None and ref is not None
         dt = float(ctx.dt)
         k = round(tr / dt)
-        if abs(tr - k * dt) < 1e-9 and k >= 0:
-            if self._grid is None or self._grid[0] is not ref:
-                n = int(np.ceil(float(ref.duration) / dt)) + 2
-                self._grid = (ref, self.feature_rows(dt * np.arange(n)))
-            grid = self._grid[1]
-            return grid[min(k, len(grid) - 1)]  # type: ignore[no-any-return]
-        return self.feature_rows(np.array([tr]))[0]
+        if not (abs(tr - k * dt) < 1e-9 and k >= 0):
+            return None
+        if self._grid is None or self._grid[0] is not ref:
+            n = int(np.ceil(float(ref.duration) / dt)) + 2
+            rows = self.feature_rows(dt * np.arange(n))
+            clean = [_sanitised(r) for r in rows]
+            self._grid = (ref, rows, [c[0] for c in clean], [c[1] for c in clean])
+        return min(k, len(self._grid[1]) - 1)
 
     def feature_rows(self, times: np.ndarray) -> np.ndarray:
         """(m, 3, n) rows of :meth:`feature_reference` at ``times`` (m,) [s]; NaN where
@@ -159,6 +178,21 @@ class FeatureCTC(TaskComputedTorque):
         seen = np.isfinite(self._anchored(times).reshape(len(times), size))
         return np.where(seen[:, None, :], out, np.nan)
 
+    def compiled_reference(self, tr: float) -> tuple[np.ndarray, np.ndarray | None]:
+        """(3 m,) :meth:`feature_reference` at ``tr`` for the compiled step, the features
+        the model's camera does not see (NaN) replaced by finite stand-ins, and the rows
+        known (None: all)."""
+        i = self._grid_index(tr)
+        if i is None:
+            return _sanitised(self.feature_rows(np.array([tr]))[0])
+        assert self._grid is not None
+        return self._grid[2][i], self._grid[3][i]
+
+    def _taught_reference(self) -> tuple[np.ndarray, np.ndarray | None]:
+        """The taught features at rest, as :meth:`compiled_reference`."""
+        taught = self._taught.ravel()
+        return _sanitised(np.stack([taught, np.zeros_like(taught), np.zeros_like(taught)]))
+
     def compiled_constants(self, step: CompiledTaskStep) -> None:
         """The estimated base points (camera frame) and the camera frame."""
         step.set("base", self._A.ravel())
@@ -175,20 +209,14 @@ class FeatureCTC(TaskComputedTorque):
         step.set("features", u.ravel() if normals is None else np.concatenate(
             [normals.ravel(), u.ravel()]))
         if self.reference is None:
-            ref = np.stack([self._taught.ravel(), np.zeros(rows.size), np.zeros(rows.size)])
+            ref, known = self._taught_reference()
         else:
-            ref = self.feature_reference(tr)
-        # a feature the model's camera does not see (NaN) leaves its rows, as in the
-        # numpy path, with a finite stand-in
-        known = np.repeat(np.isfinite(ref).reshape(3, -1, 3).all(axis=(0, 2)), 3)
-        if not known.all():
+            ref, known = self.compiled_reference(tr)
+        if known is not None:  # a feature the model's camera does not see leaves its rows
             rows = rows & known
-            ref = np.where(known, ref, np.array([[0.0], [0.0], [0.0]]))
-            ref[0] = np.where(known, ref[0], np.tile(_DUMMY, rows.size // 3))
-        step.set("mask", rows.astype(float))
-        step.set("desired", ref[0])
-        step.set("rate", ref[1])
-        step.set("acceleration", ref[2])
+        step.set("mask", _ONES[:rows.size] if rows is _EVERY_EDGE or rows is _EVERY_LEG
+                 else rows.astype(float))
+        step.set("reference_features", ref)
         return rows, None
 
     def _anchored(self, times: np.ndarray) -> np.ndarray:
@@ -209,6 +237,18 @@ class FeatureCTC(TaskComputedTorque):
             self.take_goal(goal)
 
 
+def _sanitised(ref: np.ndarray) -> tuple[np.ndarray, np.ndarray | None]:
+    """(3, m) desired features, rates and accelerations -> (3 m,) with every unit vector
+    having a non-finite value replaced by a unit vector at rest, and the rows kept (None:
+    all)."""
+    known = np.repeat(np.isfinite(ref).reshape(3, -1, 3).all(axis=(0, 2)), 3)
+    if known.all():
+        return np.ascontiguousarray(ref).ravel(), None
+    out = np.where(known, ref, 0.0)
+    out[0] = np.where(known, out[0], np.tile(_DUMMY, known.size // 3))
+    return out.ravel(), known
+
+
 class LegEdgeCTC(FeatureCTC):
     """Computed torque on the leg edges (edge normals, ``e = n x n*``; see the module
     docstring)."""
@@ -223,7 +263,12 @@ class LegEdgeCTC(FeatureCTC):
         if observation.normals is None:
             return "needs the edge normals (Observation.normals)"
         n = np.asarray(observation.normals, dtype=float)
-        u, legs = directions_seen(None, n, None, observation.edge_visible)
+        visible = observation.edge_visible
+        if (visible is None or np.all(visible)) and np.isfinite(n).all():
+            u = directions_from_edges(n)  # every edge seen: the general path's result
+            if np.isfinite(u).all():
+                return u, n, _EVERY_EDGE
+        u, legs = directions_seen(None, n, None, visible)
         legs &= np.all(np.isfinite(n), axis=(-2, -1))
         u = np.where(legs[:, None], u, _DUMMY)
         n = np.where(legs[:, None, None], n, np.cross(_DUMMY, [1.0, 0.0, 0.0]))
@@ -245,6 +290,8 @@ class LegDirectionCTC(FeatureCTC):
                       ) -> tuple[np.ndarray, np.ndarray | None, np.ndarray] | str:
         u, legs = directions_seen(observation.directions, observation.normals,
                                   observation.direction_visible, observation.edge_visible)
+        if legs.all():
+            return u, None, _EVERY_LEG
         u = np.where(legs[:, None], u, _DUMMY)
         return u, None, np.repeat(legs, 3)
 

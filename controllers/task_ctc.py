@@ -324,6 +324,8 @@ def encoder_readings(observation: Observation) -> tuple[float, np.ndarray, np.nd
         return ("needs the measured leg velocities (Observation.q_dot), which only the "
                 "dynamic world gives")
     qd = np.asarray(observation.q_dot, dtype=float)
+    if math.isfinite(t) and q.size and qd.size and math.isfinite(float(q @ q + qd @ qd)):
+        return t, q, qd  # every value finite (a NaN or inf makes the sum of squares so)
     for what, x in (("time", np.array([t])), ("lengths", q), ("leg velocities", qd)):
         if x.size == 0 or not np.isfinite(x).all():
             return f"measured {what} not finite: {x}"

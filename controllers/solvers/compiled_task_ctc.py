@@ -36,8 +36,8 @@ point after point, 36), the 19 inertial ``params``, the drives' ``rotor``, ``vis
 the measured ``features`` (normals (6, 2, 3) then the leg directions (6, 3) for the
 edges, directions (6, 3)), the task frame's
 ``base`` points ``A_i`` (18), the row ``mask`` (1 or 0), the ``frame`` from the base
-(``R`` row-major, ``p``: 12) and the desired features, their ``rate`` and
-``acceleration``.
+(``R`` row-major, ``p``: 12) and the ``reference_features``: the desired features, their
+rate and their acceleration (``m`` each).
 
 Outputs: ``pose`` (12, as the input), ``K`` (36, column-major), ``fk_residual`` (max
 absolute length residual [m]), ``forces`` (6) [N], ``solved`` (1.0 when the inverse
@@ -87,7 +87,7 @@ def layout(kind: str) -> tuple[dict[str, slice], dict[str, slice]]:
     m = ROWS[kind]
     extra = (("reference", 24),) if kind == "pose" else (
         ("features", 54 if kind == "edges" else 18), ("base", 18), ("mask", m),
-        ("frame", 12), ("desired", m), ("rate", m), ("acceleration", m))
+        ("frame", 12), ("reference_features", 3 * m))
     out = (("pose", 12), ("K", 36), ("fk_residual", 1), ("forces", 6), ("solved", 1),
            ("error", m), ("factor", 36))
     return _offsets(_COMMON + extra), _offsets(out)
@@ -151,7 +151,9 @@ def _feature_task(kind: str, x: ca.SX, sl: dict[str, slice], q: ca.SX, tau_s: ca
     """Error, Jacobian (spatial twist of the frame), ``L_dot tau_s``, ``e_t``, ``e_tt`` of
     the edge or direction task, block after block."""
     feats, A = x[sl["features"]], x[sl["base"]]
-    des, rate, acc = x[sl["desired"]], x[sl["rate"]], x[sl["acceleration"]]
+    ref = x[sl["reference_features"]]
+    m = ref.shape[0] // 3
+    des, rate, acc = ref[0:m], ref[m:2 * m], ref[2 * m:3 * m]
     es, Ls, ldots, ets, etts = [], [], [], [], []
     eye = ca.reshape(ca.SX.eye(3), 9, 1)
     zeros3 = ca.SX.zeros(3)
