@@ -199,15 +199,22 @@ class VisionCTC(CartesianCTC):
 
     def compiled_inputs(self, step: CompiledTaskStep, observation: Observation, tr: float,
                         q: np.ndarray) -> tuple[np.ndarray | None, str | None] | None:
-        """The visual pose (the numpy path refuses when there is none) and the reference."""
+        """The leg directions seen (the compiled step fits the pose to the six legs; a
+        hidden one leaves the period to the numpy path) and the reference."""
         u, seen = directions_seen(observation.directions, observation.normals,
                                   observation.direction_visible, observation.edge_visible)
-        pose = self._visual_pose(q, u, seen)
-        if isinstance(pose, str):
+        if not seen.all():
             return None
-        step.set_pose(*pose)
+        step.set("directions", u.ravel())
         self.reference_input(step, tr)
-        return None, None if np.all(seen) else f"pose from legs {np.flatnonzero(seen).tolist()}"
+        return None, None
+
+    def compiled_constants(self, step: CompiledTaskStep) -> None:
+        """The estimated base points (camera frame) and camera pose."""
+        assert self.context is not None
+        bc = self._base_from_camera
+        step.set("base", np.asarray(self.context.base_points, dtype=float).ravel())
+        step.set("frame", np.concatenate([bc.rotation.ravel(), bc.translation]))
 
 
 def directions_seen(directions: np.ndarray | None, normals: np.ndarray | None,

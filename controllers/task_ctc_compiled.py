@@ -35,6 +35,9 @@ if TYPE_CHECKING:
 FK_TOLERANCE = 1e-12
 #: Calls of the compiled step (3 Newton iterations each) before the numpy path takes over.
 FK_MAX_CALLS = 16
+#: Size of the rigid fit's last Newton step [rad] below which it has converged (the
+#: next would be of its square: the fit is exact to rounding).
+FIT_TOLERANCE = 1e-8
 
 
 class CompiledTaskStep:
@@ -49,7 +52,7 @@ class CompiledTaskStep:
         self.kind: str = law.compiled_kind
         self.fk: bool = law.compiled_fk
         self.function = task_step(self.kind, self.fk, INVERSE_TOLERANCE)
-        self.inputs, self.outputs = layout(self.kind)
+        self.inputs, self.outputs = layout(self.kind, self.fk)
         self.row = np.zeros(self.function.n_in)
         g = law.context.geometry
         d = g.drives
@@ -75,9 +78,8 @@ class CompiledTaskStep:
     def step(self, law: TaskComputedTorque, observation: Observation, tr: float,
              q: np.ndarray, qd: np.ndarray) -> Command | None:
         """The command of this period, or None off the happy path."""
-        if self.fk:
-            R0, t0 = law.guess if law.guess is not None else self.home
-            self.set_pose(R0, t0)
+        R0, t0 = law.guess if law.guess is not None else self.home
+        self.set_pose(R0, t0)
         prepared = law.compiled_inputs(self, observation, tr, q)
         if prepared is None:
             return None
@@ -89,8 +91,9 @@ class CompiledTaskStep:
         row[self.inputs["q_dot"]] = qd
         y = self.function.single(row)
         residual = out["fk_residual"].start
+        tolerance = FK_TOLERANCE if self.fk else FIT_TOLERANCE
         calls = 1
-        while self.fk and not y[residual] < FK_TOLERANCE:
+        while not y[residual] < tolerance:
             if calls >= FK_MAX_CALLS or not math.isfinite(float(y[residual])):
                 return None
             row[0:12] = y[0:12]
@@ -102,8 +105,7 @@ class CompiledTaskStep:
         _, s, _, info = _singular_values(factor, compute_uv=0)
         if info != 0 or not (s[0] > 0 and s[-1] > law.solver.threshold * s[0]):
             return None
-        if self.fk:
-            law.guess = (y[0:9].reshape(3, 3).T, y[9:12])
+        law.guess = (y[0:9].reshape(3, 3).T, y[9:12])
         e = y[out["error"]]
         if rows is not None:
             e = e[rows]
@@ -113,4 +115,4 @@ class CompiledTaskStep:
                                  notes=[] if note is None else [note])
 
 
-__all__ = ["FK_MAX_CALLS", "FK_TOLERANCE", "CompiledTaskStep"]
+__all__ = ["FIT_TOLERANCE", "FK_MAX_CALLS", "FK_TOLERANCE", "CompiledTaskStep"]

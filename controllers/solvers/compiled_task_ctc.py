@@ -9,7 +9,11 @@ does for the joint-space law:
 
 - the pose: :func:`hexapod.fk.newton_function` from a guess on the encoder lengths
   (``fk=True``; the length residual out, the caller calls again from the pose reached
-  until it converges), or the measured pose as given (``fk=False``, ``vision-ctc``);
+  until it converges), or (``fk=False``, ``vision-ctc``) the rigid fit of the nominal
+  platform points to the joints ``B_i = A_i + q_i u_i`` of the six legs seen (camera
+  frame), by Newton steps on the rotation from a guess (:func:`_rigid_fit`; the last
+  step's size out, the caller calls again until it is below its tolerance), brought to
+  the base frame through the estimated camera pose;
 - ``K`` there, the twist ``tau = K^-1 q_dot``, ``M``, ``h`` and ``K_dot tau``
   (:func:`hexapod.dynamics.compiled.expressions`);
 - the task's error, Jacobian and ``L_dot tau`` (the blocks of :mod:`controllers.tasks`:
@@ -81,11 +85,19 @@ def _offsets(fields: tuple[tuple[str, int], ...]) -> dict[str, slice]:
     return out
 
 
-@lru_cache(maxsize=3)
-def layout(kind: str) -> tuple[dict[str, slice], dict[str, slice]]:
-    """The input and output slices of a kind (module docstring)."""
+#: Newton steps of the rigid fit per call.
+FIT_ITERATIONS = 4
+
+
+@lru_cache(maxsize=4)
+def layout(kind: str, fk: bool = True) -> tuple[dict[str, slice], dict[str, slice]]:
+    """The input and output slices of a kind (module docstring); the visual pose
+    (``fk=False``) takes the legs' ``directions`` (18), the estimated ``base`` points
+    (18, camera frame) and the ``frame`` (the base from the camera, ``R`` row-major,
+    ``p``: 12) after the reference."""
     m = ROWS[kind]
-    extra = (("reference", 24),) if kind == "pose" else (
+    visual = (("directions", 18), ("base", 18), ("frame", 12)) if not fk else ()
+    extra = (("reference", 24), *visual) if kind == "pose" else (
         ("features", 54 if kind == "edges" else 18), ("base", 18), ("mask", m),
         ("frame", 12), ("reference_features", 3 * m))
     out = (("pose", 12), ("K", 36), ("fk_residual", 1), ("forces", 6), ("solved", 1),
@@ -117,6 +129,42 @@ def _model_twist(translation: ca.SX, twist: ca.SX, frame: ca.SX | None
         G = Ad @ G
         gdot = Ad @ gdot
     return G, gdot
+
+
+def _rigid_fit(R0: ca.SX, q: ca.SX, u: ca.SX, A: ca.SX, E: ca.SX, frame: ca.SX
+               ) -> tuple[ca.SX, ca.SX]:
+    """The pose (``R`` column-major, ``t``: 12, base frame) of the rigid fit
+    ``min sum_i |R_c E_i + t_c - B_i|^2`` of the platform points ``E`` to the joints
+    ``B_i = A_i + q_i u_i`` (camera frame), and the size of the last step [rad].
+
+    With ``t_c = B_mean - R_c E_mean`` the fit maximises ``tr(R_c^T C)``,
+    ``C = sum (B_i - B_mean)(E_i - E_mean)^T`` (Kabsch); a Newton step on
+    ``R_c <- exp([d]_x) R_c`` solves ``(tr(S) I - sym(S)) d = vee(S - S^T)`` with
+    ``S = C R_c^T`` (the quadratic model of ``-tr(R_c^T C)``), from the guess ``R0``
+    (base frame). The frame is the base from the camera (``R`` row-major, ``p``).
+    """
+    Rbc = ca.reshape(frame[0:9], 3, 3).T
+    pbc = frame[9:12]
+    B = [A[3 * i:3 * i + 3] + q[i] * u[3 * i:3 * i + 3] for i in range(6)]
+    P = [E[3 * i:3 * i + 3] for i in range(6)]
+    bc = sum(B, ca.SX.zeros(3)) / 6.0
+    mc = sum(P, ca.SX.zeros(3)) / 6.0
+    C = sum(((b - bc) @ (p - mc).T for b, p in zip(B, P, strict=True)), ca.SX.zeros(3, 3))
+    Rc = Rbc.T @ ca.reshape(R0[0:9], 3, 3)
+    size = ca.SX(0.0)
+    for _ in range(FIT_ITERATIONS):
+        S = C @ Rc.T
+        w = ca.vertcat(S[2, 1] - S[1, 2], S[0, 2] - S[2, 0], S[1, 0] - S[0, 1])
+        H = ca.trace(S) * ca.SX.eye(3) - 0.5 * (S + S.T)
+        d = ca.solve(H, w)
+        theta = ca.fmax(ca.sqrt(ca.dot(d, d)), 1e-300)
+        K = ca.skew(d)
+        a = ca.sin(theta) / theta
+        b = 2 * ca.sin(theta / 2) ** 2 / theta**2
+        Rc = (ca.SX.eye(3) + a * K + b * (K @ K)) @ Rc
+        size = theta
+    tc = bc - Rc @ mc
+    return ca.vertcat(ca.reshape(Rbc @ Rc, 9, 1), Rbc @ tc + pbc), size
 
 
 def _pose_block() -> ca.Function:
@@ -194,7 +242,7 @@ def _feature_task(kind: str, x: ca.SX, sl: dict[str, slice], q: ca.SX, tau_s: ca
 
 
 def _build(kind: str, fk: bool, inverse_tolerance: float) -> ca.Function:
-    sl, out_sl = layout(kind)
+    sl, out_sl = layout(kind, fk)
     x = ca.SX.sym("x", _size(sl))
     q, qd, points = x[sl["q"]], x[sl["q_dot"]], x[sl["points"]]
     params = x[sl["params"]]
@@ -204,7 +252,8 @@ def _build(kind: str, fk: bool, inverse_tolerance: float) -> ca.Function:
         y = newton_function()(ca.vertcat(x[sl["pose"]], q, points))
         R_t, fk_residual = y[0:12], ca.mmax(ca.fabs(y[12:18]))
     else:
-        R_t, fk_residual = x[sl["pose"]], ca.SX(0.0)
+        R_t, fk_residual = _rigid_fit(x[sl["pose"]], q, x[sl["directions"]], x[sl["base"]],
+                                      points[18:36], x[sl["frame"]])
     row, expr = dyn.expressions()
     terms = ca.Function("terms", [row], [expr["M"], expr["h"], expr["K"], expr["leg_bias"]])
     zeros = ca.SX.zeros(6)
@@ -212,7 +261,7 @@ def _build(kind: str, fk: bool, inverse_tolerance: float) -> ca.Function:
     twist = ca.solve(K, qd)
     M, h, K, bias = terms(ca.vertcat(R_t, twist, zeros, points, params))
     R, t = ca.reshape(R_t[0:9], 3, 3), R_t[9:12]
-    frame = None if kind == "pose" else x[sl["frame"]]
+    frame = None if kind == "pose" else x[sl["frame"]]  # the task's frame
     G, gdot = _model_twist(t, twist, frame)
     tau_s = G @ twist
     if kind == "pose":
@@ -252,7 +301,7 @@ def task_step(kind: str, fk: bool, inverse_tolerance: float = INVERSE_TOLERANCE
     Args:
         kind: ``"pose"``, ``"edges"`` (edge normals) or ``"directions"``.
         fk: The pose from the encoder lengths by Newton steps from the input pose (else
-            the input pose is the measured pose).
+            the rigid fit to the legs seen, from the input pose; the pose kind only).
         inverse_tolerance: Relative residual of the inverse solve above which ``K`` is
             taken as singular.
 
@@ -261,7 +310,9 @@ def task_step(kind: str, fk: bool, inverse_tolerance: float = INVERSE_TOLERANCE
     """
     if kind not in ROWS:
         raise ValueError(f"kind: expected one of {', '.join(ROWS)}, got {kind!r}")
+    if not fk and kind != "pose":
+        raise ValueError(f"kind {kind!r}: the pose comes from the encoders (fk=True)")
     return CompiledFunction(_build(kind, bool(fk), float(inverse_tolerance)))
 
 
-__all__ = ["ROWS", "layout", "task_step"]
+__all__ = ["FIT_ITERATIONS", "ROWS", "layout", "task_step"]
