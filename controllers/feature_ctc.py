@@ -25,6 +25,7 @@ independent rows give a refusal with the reason.
 
 from __future__ import annotations
 
+import math
 from dataclasses import replace
 
 import numpy as np
@@ -52,6 +53,8 @@ _EVERY_EDGE.flags.writeable = False
 _EVERY_LEG = np.ones(18, bool)
 _EVERY_LEG.flags.writeable = False
 _ONES = np.ones(36)
+#: Stands for the directions of the edge normals, computed by the compiled step.
+_OF_NORMALS = np.full((6, 3), np.nan)
 
 
 class FeatureCTC(TaskComputedTorque):
@@ -115,6 +118,11 @@ class FeatureCTC(TaskComputedTorque):
                       ) -> tuple[np.ndarray, np.ndarray | None, np.ndarray] | str:
         """Directions (6, 3), normals (6, 2, 3) or None, and the rows to use."""
         raise NotImplementedError
+
+    def compiled_features(self, observation: Observation
+                          ) -> tuple[np.ndarray, np.ndarray | None, np.ndarray] | str:
+        """:meth:`features_seen` for the compiled step (the same by default)."""
+        return self.features_seen(observation)
 
     def make_task(self, desired: np.ndarray) -> Task:
         """The task towards ``desired`` features."""
@@ -202,12 +210,17 @@ class FeatureCTC(TaskComputedTorque):
     def compiled_inputs(self, step: CompiledTaskStep, observation: Observation, tr: float,
                         q: np.ndarray) -> tuple[np.ndarray | None, str | None] | None:
         """The features seen and the rows to use; the reference at ``tr``."""
-        feats = self.features_seen(observation)
+        feats = self.compiled_features(observation)
         if isinstance(feats, str):
             return None
         u, normals, rows = feats
-        step.set("features", u.ravel() if normals is None else np.concatenate(
-            [normals.ravel(), u.ravel()]))
+        if normals is None:
+            step.set("features", u.ravel())
+        elif u is _OF_NORMALS:  # the compiled step takes the directions of the normals
+            step.row[step.inputs["features"].start:][:36] = normals.ravel()
+            step.row[step.inputs["features"].start + 54] = 1.0
+        else:
+            step.set("features", np.concatenate([normals.ravel(), u.ravel(), [0.0]]))
         if self.reference is None:
             ref, known = self._taught_reference()
         else:
@@ -273,6 +286,17 @@ class LegEdgeCTC(FeatureCTC):
         u = np.where(legs[:, None], u, _DUMMY)
         n = np.where(legs[:, None, None], n, np.cross(_DUMMY, [1.0, 0.0, 0.0]))
         return u, n, np.repeat(legs, 6)
+
+    def compiled_features(self, observation: Observation
+                          ) -> tuple[np.ndarray, np.ndarray | None, np.ndarray] | str:
+        """Every edge seen: the normals, the directions left to the compiled step
+        (``_OF_NORMALS``); else :meth:`features_seen`."""
+        if observation.normals is not None:
+            n = np.asarray(observation.normals, dtype=float)
+            visible = observation.edge_visible
+            if (visible is None or np.all(visible)) and math.isfinite(float(n.sum())):
+                return _OF_NORMALS, n, _EVERY_EDGE
+        return self.features_seen(observation)
 
     def make_task(self, desired: np.ndarray) -> Task:
         return LegEdgeTask(desired, "normals")

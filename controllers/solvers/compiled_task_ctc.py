@@ -37,8 +37,9 @@ measured pose), ``q``, ``q_dot`` (6 each), ``points`` (``A`` then ``E``, base fr
 point after point, 36), the 19 inertial ``params``, the drives' ``rotor``, ``viscous``,
 ``coulomb`` (6 each), ``gains`` (``Kp``, ``Kd``, ``hold`` [s]); for the pose kind the
 ``reference`` ``(R*`` row-major, ``t*``, twist, twist rate) (24); for the feature kinds
-the measured ``features`` (normals (6, 2, 3) then the leg directions (6, 3) for the
-edges, directions (6, 3)), the task frame's
+the measured ``features`` (for the edges the normals (6, 2, 3), the leg directions
+(6, 3) and 1.0 to take the directions of the normals instead, ``unit(n_2 x n_1)``;
+directions (6, 3)), the task frame's
 ``base`` points ``A_i`` (18), the row ``mask`` (1 or 0), the ``frame`` from the base
 (``R`` row-major, ``p``: 12) and the ``reference_features``: the desired features, their
 rate and their acceleration (``m`` each).
@@ -61,6 +62,7 @@ from controllers.tasks.leg_direction import block_function as direction_block_fu
 from controllers.tasks.leg_direction import reference_block as direction_reference
 from controllers.tasks.leg_direction import second_order_block as direction_second_order
 from controllers.tasks.leg_edge import block_function as edge_block_function
+from controllers.tasks.leg_edge import leg_direction_of_edges
 from controllers.tasks.leg_edge import reference_block as edge_reference
 from controllers.tasks.leg_edge import second_order_block as edge_second_order
 from controllers.tasks.platform_pose import pose_error, pose_rate
@@ -85,6 +87,8 @@ def _offsets(fields: tuple[tuple[str, int], ...]) -> dict[str, slice]:
     return out
 
 
+#: Calls of the compiled forward-kinematics Newton steps (3 iterations each) per call.
+FK_CALLS = 2
 #: Newton steps of the rigid fit per call.
 FIT_ITERATIONS = 4
 
@@ -98,7 +102,7 @@ def layout(kind: str, fk: bool = True) -> tuple[dict[str, slice], dict[str, slic
     m = ROWS[kind]
     visual = (("directions", 18), ("base", 18), ("frame", 12)) if not fk else ()
     extra = (("reference", 24), *visual) if kind == "pose" else (
-        ("features", 54 if kind == "edges" else 18), ("base", 18), ("mask", m),
+        ("features", 55 if kind == "edges" else 18), ("base", 18), ("mask", m),
         ("frame", 12), ("reference_features", 3 * m))
     out = (("pose", 12), ("K", 36), ("fk_residual", 1), ("forces", 6), ("solved", 1),
            ("error", m), ("factor", 36))
@@ -157,7 +161,7 @@ def _rigid_fit(R0: ca.SX, q: ca.SX, u: ca.SX, A: ca.SX, E: ca.SX, frame: ca.SX
         w = ca.vertcat(S[2, 1] - S[1, 2], S[0, 2] - S[2, 0], S[1, 0] - S[0, 1])
         H = ca.trace(S) * ca.SX.eye(3) - 0.5 * (S + S.T)
         d = ca.solve(H, w)
-        theta = ca.fmax(ca.sqrt(ca.dot(d, d)), 1e-300)
+        theta = ca.fmax(ca.sqrt(ca.dot(d, d)), 1e-12)  # as hexapod.fk: no 0/0
         K = ca.skew(d)
         a = ca.sin(theta) / theta
         b = 2 * ca.sin(theta / 2) ** 2 / theta**2
@@ -209,7 +213,8 @@ def _feature_task(kind: str, x: ca.SX, sl: dict[str, slice], q: ca.SX, tau_s: ca
         Ai, qi = A[3 * i:3 * i + 3], q[i]
         if kind == "edges":
             n1, n2 = feats[6 * i:6 * i + 3], feats[6 * i + 3:6 * i + 6]
-            ui = feats[36 + 3 * i:39 + 3 * i]
+            ui = ca.if_else(feats[54], leg_direction_of_edges(n1, n2),
+                            feats[36 + 3 * i:39 + 3 * i])
             for j, n in enumerate((n1, n2)):
                 k = 6 * i + 3 * j
                 ns = des[k:k + 3]
@@ -249,7 +254,10 @@ def _build(kind: str, fk: bool, inverse_tolerance: float) -> ca.Function:
     rotor, viscous, coulomb = x[sl["rotor"]], x[sl["viscous"]], x[sl["coulomb"]]
     kp, kd, hold = x[sl["gains"].start], x[sl["gains"].start + 1], x[sl["gains"].start + 2]
     if fk:
-        y = newton_function()(ca.vertcat(x[sl["pose"]], q, points))
+        newton = newton_function()
+        y = newton(ca.vertcat(x[sl["pose"]], q, points))
+        for _ in range(FK_CALLS - 1):
+            y = newton(ca.vertcat(y[0:12], q, points))
         R_t, fk_residual = y[0:12], ca.mmax(ca.fabs(y[12:18]))
     else:
         R_t, fk_residual = _rigid_fit(x[sl["pose"]], q, x[sl["directions"]], x[sl["base"]],
