@@ -21,7 +21,7 @@ import math
 from typing import TYPE_CHECKING
 
 import numpy as np
-from scipy.linalg.lapack import dgesdd as _singular_values
+from scipy.linalg.lapack import dsyevd as _eigenvalues
 
 from controllers.base import Command, Observation
 from controllers.solvers.compiled_task_ctc import layout, task_step
@@ -101,9 +101,9 @@ class CompiledTaskStep:
             calls += 1
         if y[out["solved"].start] != 1.0 or not math.isfinite(float(y @ y)):
             return None
-        factor = y[out["factor"]].reshape(6, 6).T
-        _, s, _, info = _singular_values(factor, compute_uv=0)
-        if info != 0 or not (s[0] > 0 and s[-1] > law.solver.threshold * s[0]):
+        # the squared singular values of the masked Jacobian (LAPACK syevd of L^T L)
+        w, _, info = _eigenvalues(y[out["factor"]].reshape(6, 6), compute_v=0)
+        if info != 0 or not (w[-1] > 0 and w[0] > law.solver.threshold**2 * w[-1]):
             return None
         law.guess = (y[0:9].reshape(3, 3).T, y[9:12])
         e = y[out["error"]]
@@ -111,7 +111,8 @@ class CompiledTaskStep:
             e = e[rows]
         return Command.of_forces(y[out["forces"]], error=e,
                                  error_norm=math.sqrt(float(e @ e)), rank=6,
-                                 condition=float(s[0] / s[-1]), features_used=len(e),
+                                 condition=math.sqrt(float(w[-1] / w[0])),
+                                 features_used=len(e),
                                  notes=[] if note is None else [note])
 
 

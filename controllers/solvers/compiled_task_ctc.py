@@ -47,8 +47,8 @@ rate and their acceleration (``m`` each).
 Outputs: ``pose`` (12, as the input), ``K`` (36, column-major), ``fk_residual`` (max
 absolute length residual [m]), ``forces`` (6) [N], ``solved`` (1.0 when the inverse
 solve's residual is below the tolerance, as :mod:`controllers.solvers.compiled_ctc`),
-``error`` (m) and ``factor`` (36, column-major: a 6x6 matrix with the singular values of
-the masked model Jacobian).
+``error`` (m) and ``factor`` (36, column-major: ``L^T L`` of the masked model Jacobian,
+whose eigenvalues are its squared singular values).
 """
 
 from __future__ import annotations
@@ -295,7 +295,7 @@ def _build(kind: str, fk: bool, inverse_tolerance: float) -> ca.Function:
     solved = ca.if_else(inverse_residual <= inverse_tolerance * ca.norm_2(rhs_f) + 1e-12,
                         1.0, 0.0)
     out = ca.vertcat(R_t, ca.reshape(K, 36, 1), fk_residual, f, solved, e,
-                     ca.reshape(factor, 36, 1))
+                     ca.reshape(factor.T @ factor, 36, 1))
     assert out.shape[0] == _size(out_sl)
     return ca.Function(f"hexapod_ctc_{kind}_{'fk' if fk else 'pose'}_step", [x],
                        [ca.cse(ca.densify(out))])

@@ -28,7 +28,8 @@ from vision.legs import leg_edges
 LAWS = ("cartesian-ctc", "vision-ctc", "leg-edge-ctc", "leg-direction-ctc")
 #: Agreement of the forces relative to their largest magnitude [-].
 FORCE_RTOL = 1e-9
-#: Relative agreement of the condition number (SVD of L against SVD of its QR factor).
+#: Relative agreement of the condition number (SVD of L against the eigenvalues of L^T L:
+#: a relative error of about eps cond^2).
 CONDITION_RTOL = 1e-9
 #: Agreement of the task errors: both forward kinematics stop below a 1e-12 m length
 #: residual, at different Newton iterates (the compiled step runs six per call).
