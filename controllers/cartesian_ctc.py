@@ -52,6 +52,7 @@ class CartesianCTC(TaskComputedTorque):
 
     name = "cartesian-ctc"
     features = frozenset({"lengths"})
+    compiled_kind = "pose"
 
     def take_goal(self, goal: Goal) -> None:
         """The fixed goal pose (``goal.rotation``, ``goal.translation``)."""

@@ -123,8 +123,9 @@ class TaskComputedTorque(RemembersOptions, Controller):
     actuation = Actuation.FORCE
     #: Samples ``context.reference`` itself (:mod:`controllers.tracking` passes it through).
     tracks_reference = True
-    #: Task kind of the compiled step (:mod:`controllers.solvers.compiled_task_ctc`).
-    compiled_kind = "pose"
+    #: Task kind of the compiled step (:mod:`controllers.solvers.compiled_task_ctc`; None:
+    #: the numpy path only).
+    compiled_kind: str | None = None
     #: The compiled step finds the pose from the encoders (else it is given).
     compiled_fk = True
 
@@ -161,7 +162,7 @@ class TaskComputedTorque(RemembersOptions, Controller):
         self._pose_grid = None
         self.prepare(context)
         self.retarget(context.goal)
-        self.compiled = CompiledTaskStep(self)
+        self.compiled = None if self.compiled_kind is None else CompiledTaskStep(self)
 
     def prepare(self, context: ControllerContext) -> None:
         """Per-trial checks and constants of a subclass (nothing by default)."""
@@ -169,12 +170,12 @@ class TaskComputedTorque(RemembersOptions, Controller):
     def compiled_constants(self, step: CompiledTaskStep) -> None:
         """Write the law's constant inputs of the compiled step (nothing by default)."""
 
-    @abstractmethod
     def compiled_inputs(self, step: CompiledTaskStep, observation: Observation, tr: float,
                         q: np.ndarray) -> tuple[np.ndarray | None, str | None] | None:
         """Write this period's measurement and reference (``tr`` [s] on the reference's
         clock) into the compiled step's row; the task rows to use (None: all) and a
-        note, or None to leave the period to the numpy path."""
+        note, or None to leave the period to the numpy path (the default)."""
+        return None
 
     def retarget(self, goal: Goal) -> None:
         """A new fixed goal (ignored when tracking ``context.reference``)."""

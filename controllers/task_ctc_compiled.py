@@ -49,6 +49,7 @@ class CompiledTaskStep:
 
     def __init__(self, law: TaskComputedTorque) -> None:
         assert law.context is not None and law.model is not None
+        assert law.compiled_kind is not None
         self.kind: str = law.compiled_kind
         self.fk: bool = law.compiled_fk
         self.function = task_step(self.kind, self.fk, INVERSE_TOLERANCE)
