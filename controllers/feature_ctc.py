@@ -319,5 +319,16 @@ class LegDirectionCTC(FeatureCTC):
         u = np.where(legs[:, None], u, _DUMMY)
         return u, None, np.repeat(legs, 3)
 
+    def compiled_features(self, observation: Observation
+                          ) -> tuple[np.ndarray, np.ndarray | None, np.ndarray] | str:
+        """Every direction given and seen: them (:meth:`features_seen`'s result without
+        its general checks); else :meth:`features_seen`."""
+        if observation.directions is not None:
+            u = np.asarray(observation.directions, dtype=float)
+            visible = observation.direction_visible
+            if (visible is None or np.all(visible)) and math.isfinite(float(u.sum())):
+                return u, None, _EVERY_LEG
+        return self.features_seen(observation)
+
     def make_task(self, desired: np.ndarray) -> Task:
         return LegDirectionTask(desired)
