@@ -93,6 +93,7 @@ class FeatureCTC(TaskComputedTorque):
         if value is None:
             raise ContextError(self.name, f"goal.{self.key}", "missing (the taught features)")
         self._taught = np.asarray(value, dtype=float)
+        self._grid = None  # the reference's features are anchored at the taught ones
 
     def goal_pose(self) -> tuple[np.ndarray, np.ndarray]:
         """The goal pose, the end of the smooth line (nominal base frame)."""

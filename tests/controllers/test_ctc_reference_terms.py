@@ -122,3 +122,19 @@ def test_anchored_features_equal_the_numpy_model(name: str) -> None:
     # at rest before the start and after the end, moving in between
     assert np.abs(rows[0, 1:]).max() == 0.0 and np.abs(rows[-1, 1:]).max() == 0.0
     assert np.abs(rows[8, 1]).max() > 1e-3
+
+
+def test_a_new_taught_goal_reanchors_the_feature_reference() -> None:
+    """The reference's features end at the taught ones, also after a retarget with the
+    same reference (the grid of the old goal is dropped)."""
+    law, world = _setup("leg-edge-ctc", "circle")
+    assert isinstance(law, FeatureCTC)
+    end = 0.02 * (np.ceil(float(law.reference.duration) / 0.02) + 5)  # on the grid, at rest
+    first = law.feature_reference(end)[0].reshape(6, 2, 3)
+    np.testing.assert_allclose(first, law.context.goal.normals, atol=1e-12)
+    R, t = sample_poses(world.truth, 1, rng=np.random.default_rng(9), max_translation=0.01)
+    goal = world.goal(R[0], t[0])
+    law.retarget(goal)
+    second = law.feature_reference(end)[0].reshape(6, 2, 3)
+    np.testing.assert_allclose(second, goal.normals, atol=1e-12)
+    assert np.abs(second - first).max() > 1e-3
