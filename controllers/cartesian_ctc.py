@@ -15,9 +15,11 @@ ESTIMATED base points ``A_i`` and camera pose (``vision-ctc``).
 from __future__ import annotations
 
 import numpy as np
+from scipy.linalg.lapack import dgesdd as _svd
 
 from controllers.base import ControllerContext, Goal, Observation
 from controllers.task_ctc import (
+    CompiledTaskStep,
     Measured,
     TaskComputedTorque,
     camera_and_base_points,
@@ -50,6 +52,7 @@ class CartesianCTC(TaskComputedTorque):
 
     name = "cartesian-ctc"
     features = frozenset({"lengths"})
+    compiled_kind = "pose"
 
     def take_goal(self, goal: Goal) -> None:
         """The fixed goal pose (``goal.rotation``, ``goal.translation``)."""
@@ -66,11 +69,28 @@ class CartesianCTC(TaskComputedTorque):
         R, t = self.encoder_pose(q)
         return pose_measurement(self.model, R, t, q, q_dot)
 
-    def tasks_at(self, times: np.ndarray | None, measured: Measured) -> list[Task]:
-        """The pose task towards the reference at ``times`` (or the fixed goal)."""
-        if times is None or self.reference is None:
-            return [PlatformPoseTask(*self.goal_pose())]
-        return pose_tasks(self.reference, times)
+    def desired_at(self, tr: float | None
+                   ) -> tuple[Task, np.ndarray | None, np.ndarray | None]:
+        """The pose task towards the reference at ``tr`` with its twist and twist rate
+        (or the fixed goal, at rest)."""
+        if tr is None or self.reference is None:
+            return PlatformPoseTask(*self.goal_pose()), None, None
+        row = self.pose_reference(tr)
+        return PlatformPoseTask(row[0:9].reshape(3, 3), row[9:12]), row[12:18], row[18:24]
+
+    def compiled_inputs(self, step: CompiledTaskStep, observation: Observation, tr: float,
+                        q: np.ndarray) -> tuple[np.ndarray | None, str | None] | None:
+        """The reference (the pose comes from the encoders in the compiled step)."""
+        self.reference_input(step, tr)
+        return None, None
+
+    def reference_input(self, step: CompiledTaskStep, tr: float) -> None:
+        """The reference row at ``tr`` (the fixed goal at rest without a reference)."""
+        if self.reference is None:
+            R, t = self.goal_pose()
+            step.set("reference", np.concatenate([R.ravel(), t, np.zeros(12)]))
+        else:
+            step.set("reference", self.pose_reference(tr))
 
 
 class VisionCTC(CartesianCTC):
@@ -100,6 +120,7 @@ class VisionCTC(CartesianCTC):
 
     name = "vision-ctc"
     features = frozenset({"lengths", "directions"})
+    compiled_fk = False
 
     def prepare(self, context: ControllerContext) -> None:
         """Check the camera and base points; anchor a reference at the taught goal.
@@ -137,14 +158,14 @@ class VisionCTC(CartesianCTC):
         if n < 3:
             return f"only {n} legs seen (legs {np.flatnonzero(seen).tolist()}): the pose " \
                 "needs at least 3"
-        B = np.asarray(self.context.base_points)[seen] + q[seen, None] * u[seen]
-        E = np.asarray(self.context.geometry.platform_points)[seen]
-        s = np.linalg.svd(E - E.mean(axis=0), compute_uv=False)
-        if s[1] < SPREAD * float(np.linalg.norm(E, axis=1).max()):
-            return f"the {n} legs seen are collinear on the platform: no pose"
-        from controllers.mpc.prediction import fit_pose
-
-        Rc, tc = fit_pose(B, E)
+        A = np.asarray(self.context.base_points)
+        E = np.asarray(self.context.geometry.platform_points)
+        if n < 6:
+            A, q, u, E = A[seen], q[seen], u[seen], E[seen]
+            s = np.linalg.svd(E - E.mean(axis=0), compute_uv=False)
+            if s[1] < SPREAD * float(np.linalg.norm(E, axis=1).max()):
+                return f"the {n} legs seen are collinear on the platform: no pose"
+        Rc, tc = rigid_fit(A + q[:, None] * u, E)
         bc = self._base_from_camera
         return bc.rotation @ Rc, bc.rotation @ tc + bc.translation
 
@@ -162,16 +183,39 @@ class VisionCTC(CartesianCTC):
             m.note = f"pose from legs {np.flatnonzero(seen).tolist()}"
         return m
 
-    def tasks_at(self, times: np.ndarray | None, measured: Measured) -> list[Task]:
-        """The pose task towards the (anchored) reference, or the taught goal."""
-        ref = self.reference
-        if times is not None and self._offset is not None and ref is self.context.reference:  # type: ignore[union-attr]
-            sample = ref.at(times)
-            D = self._offset
-            R = D.rotation @ sample.rotation
-            t = sample.translation @ D.rotation.T + D.translation
-            return [PlatformPoseTask(R[i], t[i]) for i in range(len(times))]
-        return super().tasks_at(times, measured)
+    def anchor(self, R: np.ndarray, t: np.ndarray, twist: np.ndarray, twist_rate: np.ndarray
+               ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """``context.reference`` moved rigidly to end at the taught goal (``R' = D R``,
+        ``t' = D t + d``: the twist and its rate turn with ``D``); the smooth line as it
+        is."""
+        ctx = self.context
+        if self._offset is None or ctx is None or self.reference is not ctx.reference:
+            return R, t, twist, twist_rate
+        D = self._offset.rotation
+
+        def turn(x: np.ndarray) -> np.ndarray:  # (m, 6) -> each half turned by D
+            return (x.reshape(-1, 2, 3) @ D.T).reshape(-1, 6)  # type: ignore[no-any-return]
+
+        return (D @ R, t @ D.T + self._offset.translation, turn(twist), turn(twist_rate))
+
+    def compiled_inputs(self, step: CompiledTaskStep, observation: Observation, tr: float,
+                        q: np.ndarray) -> tuple[np.ndarray | None, str | None] | None:
+        """The leg directions seen (the compiled step fits the pose to the six legs; a
+        hidden one leaves the period to the numpy path) and the reference."""
+        u, seen = directions_seen(observation.directions, observation.normals,
+                                  observation.direction_visible, observation.edge_visible)
+        if not seen.all():
+            return None
+        step.set("directions", u.ravel())
+        self.reference_input(step, tr)
+        return None, None
+
+    def compiled_constants(self, step: CompiledTaskStep) -> None:
+        """The estimated base points (camera frame) and camera pose."""
+        assert self.context is not None
+        bc = self._base_from_camera
+        step.set("base", np.asarray(self.context.base_points, dtype=float).ravel())
+        step.set("frame", np.concatenate([bc.rotation.ravel(), bc.translation]))
 
 
 def directions_seen(directions: np.ndarray | None, normals: np.ndarray | None,
@@ -196,6 +240,32 @@ def directions_seen(directions: np.ndarray | None, normals: np.ndarray | None,
     return u, seen
 
 
+def rigid_fit(points: np.ndarray, model_points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The rigid fit ``(R, t) = argmin sum_i |R m_i + t - p_i|^2`` (Kabsch, a proper
+    rotation) of :func:`controllers.mpc.prediction.fit_pose` with equal weights, by one
+    direct LAPACK call (``gesdd``, as ``numpy.linalg.svd``) for the step's budget.
+
+    Args:
+        points: (n, 3) target points ``p_i`` [m].
+        model_points: (n, 3) model points ``m_i`` [m] (at least three, not collinear).
+    """
+    pc = points.mean(axis=0)
+    mc = model_points.mean(axis=0)
+    U, _, Vt, info = _svd((points - pc).T @ (model_points - mc))
+    if info != 0:
+        from controllers.mpc.prediction import fit_pose
+
+        return fit_pose(points, model_points)
+    R = U @ Vt
+    det = (R[0, 0] * (R[1, 1] * R[2, 2] - R[1, 2] * R[2, 1])
+           - R[0, 1] * (R[1, 0] * R[2, 2] - R[1, 2] * R[2, 0])
+           + R[0, 2] * (R[1, 0] * R[2, 1] - R[1, 1] * R[2, 0]))
+    if det < 0:  # a reflection: the last singular direction turned
+        U[:, 2] = -U[:, 2]
+        R = U @ Vt
+    return R, pc - R @ mc
+
+
 def pose_measurement(model: object, R: np.ndarray, t: np.ndarray, q: np.ndarray,
                      q_dot: np.ndarray) -> Measured:
     """The pose task's measurement at ``(R, t)``: twist ``K^-1 q_dot`` (nominal ``K``)."""
@@ -206,9 +276,3 @@ def pose_measurement(model: object, R: np.ndarray, t: np.ndarray, q: np.ndarray,
                       t[None])
     return Measured(R, t, twist, state, inverse_jacobian=K)
 
-
-def pose_tasks(reference: object, times: np.ndarray) -> list[Task]:
-    """Pose tasks towards ``reference.at(times)``."""
-    sample = reference.at(times)  # type: ignore[attr-defined]
-    return [PlatformPoseTask(sample.rotation[i], sample.translation[i])
-            for i in range(len(times))]

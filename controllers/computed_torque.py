@@ -31,7 +31,7 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from scipy.linalg.lapack import dgesdd as _singular_values
+from scipy.linalg.lapack import dsyevd as _eigenvalues
 
 from controllers.base import (
     Command,
@@ -215,11 +215,11 @@ class ComputedTorqueController(Controller):
             calls += 1
         if y[55] != 1.0 or not math.isfinite(float(y @ y)):
             return None
-        K = y[12:48].reshape(6, 6).T
-        _, s, _, info = _singular_values(K, compute_uv=0)  # LAPACK gesdd as np.linalg.svd
-        if info != 0 or not (s[0] > 0 and s[-1] > self.solver.threshold * s[0]):
+        # the squared singular values of K: the eigenvalues of K^T K (LAPACK syevd)
+        w, _, info = _eigenvalues(y[12:48].reshape(6, 6), compute_v=0)
+        if info != 0 or not (w[-1] > 0 and w[0] > self.solver.threshold**2 * w[-1]):
             return None
-        s_max, s_min = float(s[0]), float(s[-1])
+        s_max, s_min = math.sqrt(float(w[-1])), math.sqrt(float(w[0]))
         f = y[48:54]
         self._pose = (y[0:9].reshape(3, 3).T, y[9:12])
         e = q_s - q

@@ -25,6 +25,7 @@ independent rows give a refusal with the reason.
 
 from __future__ import annotations
 
+import math
 from dataclasses import replace
 
 import numpy as np
@@ -32,7 +33,9 @@ import numpy as np
 from controllers.base import ControllerContext, Goal, Observation
 from controllers.cartesian_ctc import directions_seen, pose_measurement
 from controllers.exceptions import ContextError
+from controllers.solvers.reference_motion import feature_motion, size_in
 from controllers.task_ctc import (
+    CompiledTaskStep,
     Measured,
     TaskComputedTorque,
     camera_and_base_points,
@@ -40,9 +43,18 @@ from controllers.task_ctc import (
 )
 from controllers.tasks import LegDirectionTask, LegEdgeTask, Task, TaskState
 from controllers.tracking import anchor_goals, reference_goals
+from vision.legs import directions_from_edges
 
 #: A unit vector standing in for a hidden leg's features (its rows are not used).
 _DUMMY = np.array([0.0, 0.0, 1.0])
+#: Every row of the edge task (36) and of the direction task (18) (read only).
+_EVERY_EDGE = np.ones(36, bool)
+_EVERY_EDGE.flags.writeable = False
+_EVERY_LEG = np.ones(18, bool)
+_EVERY_LEG.flags.writeable = False
+_ONES = np.ones(36)
+#: Stands for the directions of the edge normals, computed by the compiled step.
+_OF_NORMALS = np.full((6, 3), np.nan)
 
 
 class FeatureCTC(TaskComputedTorque):
@@ -67,7 +79,9 @@ class FeatureCTC(TaskComputedTorque):
         cam, A = camera_and_base_points(self.name, context)
         self._frame = cam
         self._A = A
-        self._grid: tuple[object, np.ndarray] | None = None
+        #: The reference's grid: rows (n, 3, m), sanitised rows and known rows.
+        self._grid: tuple[object, np.ndarray, list[np.ndarray], list[np.ndarray | None]] | \
+            None = None
 
     def take_goal(self, goal: Goal) -> None:
         """The taught features (``goal.normals`` or ``goal.directions``).
@@ -79,6 +93,7 @@ class FeatureCTC(TaskComputedTorque):
         if value is None:
             raise ContextError(self.name, f"goal.{self.key}", "missing (the taught features)")
         self._taught = np.asarray(value, dtype=float)
+        self._grid = None  # the reference's features are anchored at the taught ones
 
     def goal_pose(self) -> tuple[np.ndarray, np.ndarray]:
         """The goal pose, the end of the smooth line (nominal base frame)."""
@@ -105,31 +120,118 @@ class FeatureCTC(TaskComputedTorque):
         """Directions (6, 3), normals (6, 2, 3) or None, and the rows to use."""
         raise NotImplementedError
 
+    def compiled_features(self, observation: Observation
+                          ) -> tuple[np.ndarray, np.ndarray | None, np.ndarray] | str:
+        """:meth:`features_seen` for the compiled step (the same by default)."""
+        return self.features_seen(observation)
+
     def make_task(self, desired: np.ndarray) -> Task:
         """The task towards ``desired`` features."""
         raise NotImplementedError
 
-    def tasks_at(self, times: np.ndarray | None, measured: Measured) -> list[Task]:
-        """The task towards the anchored model features at ``times``, or the taught goal.
+    def desired_at(self, tr: float | None
+                   ) -> tuple[Task, np.ndarray | None, np.ndarray | None]:
+        """The task towards the anchored model features at ``tr`` with their rate and
+        acceleration, or the taught goal at rest."""
+        if tr is None or self.reference is None:
+            return self.make_task(self._taught), None, None
+        s, s_dot, s_ddot = (x.reshape(self._taught.shape) for x in self.feature_reference(tr))
+        return self.make_task(s), s_dot, s_ddot
 
-        The features of the instants around the control grid ``k dt`` are computed once
-        for the whole reference (one batched camera model call); other instants on
-        demand."""
-        ctx = self.context
-        if times is None or self.reference is None or ctx is None:
-            return [self.make_task(self._taught)]
+    def feature_reference(self, tr: float) -> np.ndarray:
+        """(3, m) the anchored model features at ``tr`` [s], their rate and acceleration
+        (:mod:`controllers.solvers.reference_motion`). The control grid ``k dt`` is
+        computed once per reference (one batched call); other instants on demand."""
+        i = self._grid_index(tr)
+        if i is None:
+            return self.feature_rows(np.array([tr]))[0]
+        assert self._grid is not None
+        return self._grid[1][i]  # type: ignore[no-any-return]
+
+    def _grid_index(self, tr: float) -> int | None:
+        """The row of ``tr`` [s] in the reference's control grid (built on first use), or
+        None off the grid."""
+        ctx, ref = self.context, self.reference
+        assert ctx is not None and ref is not None
         dt = float(ctx.dt)
-        k = round(float(times[1]) / dt)
-        if abs(float(times[1]) - k * dt) < 1e-9 and k >= 0:
-            if self._grid is None or self._grid[0] is not self.reference:
-                n = int(np.ceil(float(self.reference.duration) / dt)) + 3
-                grid_times = (dt * np.arange(n)[:, None] + (times - times[1])).ravel()
-                self._grid = (self.reference, self._anchored(grid_times).reshape(
-                    n, 3, *self._taught.shape))
-            grid = self._grid[1]
-            rows = grid[min(k, len(grid) - 1)]
-            return [self.make_task(rows[i]) for i in range(3)]
-        return [self.make_task(f) for f in self._anchored(times)]
+        k = round(tr / dt)
+        if not (abs(tr - k * dt) < 1e-9 and k >= 0):
+            return None
+        if self._grid is None or self._grid[0] is not ref:
+            n = int(np.ceil(float(ref.duration) / dt)) + 2
+            rows = self.feature_rows(dt * np.arange(n))
+            clean = [_sanitised(r) for r in rows]
+            self._grid = (ref, rows, [c[0] for c in clean], [c[1] for c in clean])
+        return min(k, len(self._grid[1]) - 1)
+
+    def feature_rows(self, times: np.ndarray) -> np.ndarray:
+        """(m, 3, n) rows of :meth:`feature_reference` at ``times`` (m,) [s]; NaN where
+        the model's camera does not see the feature (:meth:`_anchored`)."""
+        ctx = self.context
+        assert ctx is not None and self.reference is not None
+        kind = "normals" if self.key == "normals" else "directions"
+        size = 36 if kind == "normals" else 18
+        end = float(self.reference.duration) + 1.0
+        model_end = np.asarray(reference_goals(replace(ctx, reference=self.reference),
+                                               np.array([end]))[self.key][0]).reshape(-1, 3)
+        taught = self._taught.reshape(-1, 3)
+        taught = np.where(np.all(np.isfinite(taught), axis=-1)[:, None], taught, model_end)
+        g = ctx.geometry
+        cam = self._frame
+        rows = np.empty((len(times), size_in(kind)))
+        rows[:, 0:24] = self.pose_rows(times)
+        rows[:, 24:] = np.concatenate([
+            taught.ravel(), model_end.ravel(), cam.rotation.ravel(), cam.translation,
+            g.base_points.ravel(), g.platform_points.ravel(), [g.leg_radius]])
+        out = feature_motion(kind).batch(rows).reshape(len(times), 3, size)
+        seen = np.isfinite(self._anchored(times).reshape(len(times), size))
+        return np.where(seen[:, None, :], out, np.nan)
+
+    def compiled_reference(self, tr: float) -> tuple[np.ndarray, np.ndarray | None]:
+        """(3 m,) :meth:`feature_reference` at ``tr`` for the compiled step, the features
+        the model's camera does not see (NaN) replaced by finite stand-ins, and the rows
+        known (None: all)."""
+        i = self._grid_index(tr)
+        if i is None:
+            return _sanitised(self.feature_rows(np.array([tr]))[0])
+        assert self._grid is not None
+        return self._grid[2][i], self._grid[3][i]
+
+    def _taught_reference(self) -> tuple[np.ndarray, np.ndarray | None]:
+        """The taught features at rest, as :meth:`compiled_reference`."""
+        taught = self._taught.ravel()
+        return _sanitised(np.stack([taught, np.zeros_like(taught), np.zeros_like(taught)]))
+
+    def compiled_constants(self, step: CompiledTaskStep) -> None:
+        """The estimated base points (camera frame) and the camera frame."""
+        step.set("base", self._A.ravel())
+        step.set("frame", np.concatenate([self._frame.rotation.ravel(),
+                                          self._frame.translation]))
+
+    def compiled_inputs(self, step: CompiledTaskStep, observation: Observation, tr: float,
+                        q: np.ndarray) -> tuple[np.ndarray | None, str | None] | None:
+        """The features seen and the rows to use; the reference at ``tr``."""
+        feats = self.compiled_features(observation)
+        if isinstance(feats, str):
+            return None
+        u, normals, rows = feats
+        if normals is None:
+            step.set("features", u.ravel())
+        elif u is _OF_NORMALS:  # the compiled step takes the directions of the normals
+            step.row[step.inputs["features"].start:][:36] = normals.ravel()
+            step.row[step.inputs["features"].start + 54] = 1.0
+        else:
+            step.set("features", np.concatenate([normals.ravel(), u.ravel(), [0.0]]))
+        if self.reference is None:
+            ref, known = self._taught_reference()
+        else:
+            ref, known = self.compiled_reference(tr)
+        if known is not None:  # a feature the model's camera does not see leaves its rows
+            rows = rows & known
+        step.set("mask", _ONES[:rows.size] if rows is _EVERY_EDGE or rows is _EVERY_LEG
+                 else rows.astype(float))
+        step.set("reference_features", ref)
+        return rows, None
 
     def _anchored(self, times: np.ndarray) -> np.ndarray:
         """(m, ...) the nominal features of the reference at ``times``, anchored at the
@@ -149,6 +251,18 @@ class FeatureCTC(TaskComputedTorque):
             self.take_goal(goal)
 
 
+def _sanitised(ref: np.ndarray) -> tuple[np.ndarray, np.ndarray | None]:
+    """(3, m) desired features, rates and accelerations -> (3 m,) with every unit vector
+    having a non-finite value replaced by a unit vector at rest, and the rows kept (None:
+    all)."""
+    known = np.repeat(np.isfinite(ref).reshape(3, -1, 3).all(axis=(0, 2)), 3)
+    if known.all():
+        return np.ascontiguousarray(ref).ravel(), None
+    out = np.where(known, ref, 0.0)
+    out[0] = np.where(known, out[0], np.tile(_DUMMY, known.size // 3))
+    return out.ravel(), known
+
+
 class LegEdgeCTC(FeatureCTC):
     """Computed torque on the leg edges (edge normals, ``e = n x n*``; see the module
     docstring)."""
@@ -156,17 +270,34 @@ class LegEdgeCTC(FeatureCTC):
     name = "leg-edge-ctc"
     features = frozenset({"lengths", "normals"})
     key = "normals"
+    compiled_kind = "edges"
 
     def features_seen(self, observation: Observation
                       ) -> tuple[np.ndarray, np.ndarray | None, np.ndarray] | str:
         if observation.normals is None:
             return "needs the edge normals (Observation.normals)"
         n = np.asarray(observation.normals, dtype=float)
-        u, legs = directions_seen(None, n, None, observation.edge_visible)
+        visible = observation.edge_visible
+        if (visible is None or np.all(visible)) and np.isfinite(n).all():
+            u = directions_from_edges(n)  # every edge seen: the general path's result
+            if np.isfinite(u).all():
+                return u, n, _EVERY_EDGE
+        u, legs = directions_seen(None, n, None, visible)
         legs &= np.all(np.isfinite(n), axis=(-2, -1))
         u = np.where(legs[:, None], u, _DUMMY)
         n = np.where(legs[:, None, None], n, np.cross(_DUMMY, [1.0, 0.0, 0.0]))
         return u, n, np.repeat(legs, 6)
+
+    def compiled_features(self, observation: Observation
+                          ) -> tuple[np.ndarray, np.ndarray | None, np.ndarray] | str:
+        """Every edge seen: the normals, the directions left to the compiled step
+        (``_OF_NORMALS``); else :meth:`features_seen`."""
+        if observation.normals is not None:
+            n = np.asarray(observation.normals, dtype=float)
+            visible = observation.edge_visible
+            if (visible is None or np.all(visible)) and math.isfinite(float(n.sum())):
+                return _OF_NORMALS, n, _EVERY_EDGE
+        return self.features_seen(observation)
 
     def make_task(self, desired: np.ndarray) -> Task:
         return LegEdgeTask(desired, "normals")
@@ -178,13 +309,27 @@ class LegDirectionCTC(FeatureCTC):
     name = "leg-direction-ctc"
     features = frozenset({"lengths", "directions"})
     key = "directions"
+    compiled_kind = "directions"
 
     def features_seen(self, observation: Observation
                       ) -> tuple[np.ndarray, np.ndarray | None, np.ndarray] | str:
         u, legs = directions_seen(observation.directions, observation.normals,
                                   observation.direction_visible, observation.edge_visible)
+        if legs.all():
+            return u, None, _EVERY_LEG
         u = np.where(legs[:, None], u, _DUMMY)
         return u, None, np.repeat(legs, 3)
+
+    def compiled_features(self, observation: Observation
+                          ) -> tuple[np.ndarray, np.ndarray | None, np.ndarray] | str:
+        """Every direction given and seen: them (:meth:`features_seen`'s result without
+        its general checks); else :meth:`features_seen`."""
+        if observation.directions is not None:
+            u = np.asarray(observation.directions, dtype=float)
+            visible = observation.direction_visible
+            if (visible is None or np.all(visible)) and math.isfinite(float(u.sum())):
+                return u, None, _EVERY_LEG
+        return self.features_seen(observation)
 
     def make_task(self, desired: np.ndarray) -> Task:
         return LegDirectionTask(desired)

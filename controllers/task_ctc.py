@@ -3,11 +3,17 @@
 
 Each period a :class:`TaskComputedTorque` subclass measures a platform pose and twist for
 the NOMINAL dynamic model and a task state (:meth:`TaskComputedTorque.measure`), builds
-its task at the reference of three instants (:meth:`TaskComputedTorque.tasks_at`), and
-the :class:`~controllers.solvers.computed_torque.ComputedTorqueSolver` turns the task's
-error, Jacobian and ``L_dot tau``, plus the reference's own motion
-(:func:`~controllers.solvers.computed_torque.reference_terms`, central differences over
-1 ms), into leg forces held over the period.
+its task towards the reference at the observation's time with the desired value's rate
+and acceleration (:meth:`TaskComputedTorque.desired_at`: the trajectory's own twist and
+twist rate, :meth:`hexapod.trajectory.PoseTrajectory.at`), and the
+:class:`~controllers.solvers.computed_torque.ComputedTorqueSolver` turns the task's
+error, Jacobian and ``L_dot tau``, plus the reference's own motion ``e_t``, ``e_tt``
+(:meth:`controllers.tasks.Task.reference_terms`, analytic), into leg forces held over
+the period.
+
+That numpy path is the reference and the fallback: on the happy path the whole step is
+one compiled C function (:class:`controllers.task_ctc_compiled.CompiledTaskStep`,
+:mod:`controllers.solvers.compiled_task_ctc`), equal to it to rounding.
 
 The reference is the trajectory of ``context.reference`` (base frame, sampled at the
 observation's time) or, for a fixed goal, a straight line from the pose measured at the
@@ -29,12 +35,11 @@ from controllers.base import Command, Controller, ControllerContext, Goal, Obser
 from controllers.exceptions import ContextError
 from controllers.options import RemembersOptions
 from controllers.solvers.computed_torque import (
-    REFERENCE_STEP,
     ComputedTorqueSolver,
     SecondOrderGains,
-    reference_terms,
     task_in_model_twist,
 )
+from controllers.task_ctc_compiled import CompiledTaskStep
 from controllers.tasks.base import Task, TaskState
 from hexapod.actuation import Actuation
 from hexapod.dynamics import DynamicModel
@@ -118,6 +123,11 @@ class TaskComputedTorque(RemembersOptions, Controller):
     actuation = Actuation.FORCE
     #: Samples ``context.reference`` itself (:mod:`controllers.tracking` passes it through).
     tracks_reference = True
+    #: Task kind of the compiled step (:mod:`controllers.solvers.compiled_task_ctc`; None:
+    #: the numpy path only).
+    compiled_kind: str | None = None
+    #: The compiled step finds the pose from the encoders (else it is given).
+    compiled_fk = True
 
     def __init__(self, natural_frequency: float = NATURAL_FREQUENCY_HZ,
                  damping: float = DAMPING, smooth_goal: bool = True) -> None:
@@ -133,6 +143,12 @@ class TaskComputedTorque(RemembersOptions, Controller):
         self._t0 = 0.0
         self._started = False
         self.guess: tuple[np.ndarray, np.ndarray] | None = None
+        self._pose_grid: tuple[Any, np.ndarray] | None = None
+        #: The compiled step (None: the numpy path only).
+        self.compiled: CompiledTaskStep | None = None
+        #: Steps taken by the compiled path and by the numpy path (diagnostics).
+        self.compiled_steps = 0
+        self.numpy_steps = 0
 
     def reset(self, context: ControllerContext) -> None:
         """Build the nominal model; take the reference or the goal.
@@ -143,11 +159,23 @@ class TaskComputedTorque(RemembersOptions, Controller):
         self.context = context
         self.model = DynamicModel(context.geometry)
         self.guess = None
+        self._pose_grid = None
         self.prepare(context)
         self.retarget(context.goal)
+        self.compiled = None if self.compiled_kind is None else CompiledTaskStep(self)
 
     def prepare(self, context: ControllerContext) -> None:
         """Per-trial checks and constants of a subclass (nothing by default)."""
+
+    def compiled_constants(self, step: CompiledTaskStep) -> None:
+        """Write the law's constant inputs of the compiled step (nothing by default)."""
+
+    def compiled_inputs(self, step: CompiledTaskStep, observation: Observation, tr: float,
+                        q: np.ndarray) -> tuple[np.ndarray | None, str | None] | None:
+        """Write this period's measurement and reference (``tr`` [s] on the reference's
+        clock) into the compiled step's row; the task rows to use (None: all) and a
+        note, or None to leave the period to the numpy path (the default)."""
+        return None
 
     def retarget(self, goal: Goal) -> None:
         """A new fixed goal (ignored when tracking ``context.reference``)."""
@@ -174,9 +202,40 @@ class TaskComputedTorque(RemembersOptions, Controller):
         """This period's measurement, or why there is none."""
 
     @abstractmethod
-    def tasks_at(self, times: np.ndarray | None, measured: Measured) -> list[Task]:
-        """The task with its reference at ``times`` (3,) [s] of the reference's clock
-        (None: the fixed goal itself, one task)."""
+    def desired_at(self, tr: float | None
+                   ) -> tuple[Task, np.ndarray | None, np.ndarray | None]:
+        """The task towards the reference at ``tr`` [s] of the reference's clock (None:
+        the fixed goal itself), with its desired value's rate and acceleration (None: at
+        rest; for a pose task the reference's twist and twist rate)."""
+
+    def pose_reference(self, tr: float) -> np.ndarray:
+        """(24,) the reference at ``tr`` [s]: ``R*`` (row-major), ``t*``, twist, twist rate
+        (base frame, :meth:`anchor`). The control grid ``k dt`` is sampled once per
+        reference (one batched call); other instants on demand."""
+        ctx, ref = self.context, self.reference
+        assert ctx is not None and ref is not None
+        dt = float(ctx.dt)
+        k = round(tr / dt)
+        if abs(tr - k * dt) < 1e-9 and k >= 0:
+            if self._pose_grid is None or self._pose_grid[0] is not ref:
+                n = int(np.ceil(float(ref.duration) / dt)) + 2
+                self._pose_grid = (ref, self.pose_rows(dt * np.arange(n)))
+            grid = self._pose_grid[1]
+            return grid[min(k, len(grid) - 1)]  # type: ignore[no-any-return]
+        return self.pose_rows(np.array([tr]))[0]
+
+    def pose_rows(self, times: np.ndarray) -> np.ndarray:
+        """(m, 24) rows of :meth:`pose_reference` at ``times`` (m,) [s]."""
+        sample = self.reference.at(times)
+        R, t, tw, twr = self.anchor(sample.rotation, sample.translation, sample.twist,
+                                    sample.twist_rate)
+        return np.concatenate([R.reshape(len(t), 9), t, tw, twr], axis=1)
+
+    def anchor(self, R: np.ndarray, t: np.ndarray, twist: np.ndarray, twist_rate: np.ndarray
+               ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """The reference's poses (m, 3, 3), (m, 3), twists and rates (m, 6) as the law
+        tracks them (unchanged by default)."""
+        return R, t, twist, twist_rate
 
     def step(self, observation: Observation) -> Command:
         """The leg forces of this period [N], or a refusal (zeros) with its reason."""
@@ -187,6 +246,12 @@ class TaskComputedTorque(RemembersOptions, Controller):
             return self.refuse(readings)
         t, q, qd = readings
         try:
+            if self._started and self.compiled is not None:
+                fast = self.compiled.step(self, observation, t - self._t0, q, qd)
+                if fast is not None:
+                    self.compiled_steps += 1
+                    return fast
+            self.numpy_steps += 1
             m = self.measure(observation, q, qd)
             if isinstance(m, str):
                 return self.refuse(m)
@@ -213,20 +278,18 @@ class TaskComputedTorque(RemembersOptions, Controller):
                                      *self.goal_pose())
 
     def _command(self, t: float, m: Measured, qd: np.ndarray) -> Command:
+        """The numpy path (the reference of the compiled one, and its fallback)."""
         assert self.model is not None and self.context is not None
-        ref = self.reference
-        tr = t - self._t0
-        moving = ref is not None and tr < float(ref.duration) + 2 * REFERENCE_STEP
-        times = tr + REFERENCE_STEP * np.arange(-1.0, 2.0) if ref is not None else None
-        tasks = self.tasks_at(times, m)
-        task = tasks[1] if len(tasks) == 3 else tasks[0]
+        task, rate, acc = self.desired_at(None if self.reference is None
+                                          else t - self._t0)
         e = task.error(m.state)[0]
         L_task = task.jacobian(m.state)[0]
         L, twist_task, gdot = task_in_model_twist(L_task, m.translation, m.twist, m.frame)
         ldot = task.jacobian_dot_twist(m.state, twist_task[None])[0] + gdot
         e_t = e_tt = None
-        if moving:
-            e_t, e_tt = reference_terms(lambda k: tasks[k + 1], m.state, twist_task)
+        if rate is not None and acc is not None:
+            e_t, e_tt = (x[0] for x in task.reference_terms(m.state, twist_task[None],
+                                                            rate[None], acc[None]))
         rows = np.all(np.isfinite(L), axis=1) & np.isfinite(e) & np.isfinite(ldot)
         if e_t is not None and e_tt is not None:
             rows &= np.isfinite(e_t) & np.isfinite(e_tt)
@@ -262,6 +325,8 @@ def encoder_readings(observation: Observation) -> tuple[float, np.ndarray, np.nd
         return ("needs the measured leg velocities (Observation.q_dot), which only the "
                 "dynamic world gives")
     qd = np.asarray(observation.q_dot, dtype=float)
+    if math.isfinite(t) and q.size and qd.size and math.isfinite(float(q @ q + qd @ qd)):
+        return t, q, qd  # every value finite (a NaN or inf makes the sum of squares so)
     for what, x in (("time", np.array([t])), ("lengths", q), ("leg velocities", qd)):
         if x.size == 0 or not np.isfinite(x).all():
             return f"measured {what} not finite: {x}"

@@ -29,7 +29,8 @@ Input row (:data:`ROW`): guess ``R`` (9, column-major), ``t`` (3); ``q``, ``q_do
 the 19 inertial parameters (:func:`hexapod.dynamics.compiled.parameter_row`); the
 drives' rotor inertia, viscous and Coulomb coefficients (6 each); ``Kp``, ``Kd``.
 
-Output (:data:`OUT`): ``R`` (9, column-major), ``t`` (3), ``K`` (36, column-major), the
+Output (:data:`OUT`): ``R`` (9, column-major), ``t`` (3), ``K^T K`` (36, column-major:
+its eigenvalues are the squared singular values of ``K``, for the rank test), the
 forces (6) [N], the max absolute FK length residual [m] (the caller calls again from
 the pose reached while it is not below its tolerance, as :func:`hexapod.fk.
 forward_kinematics` does), and 1.0 when the inverse solve's residual is below
@@ -85,7 +86,7 @@ def _build(inverse_tolerance: float) -> ca.Function:
     fk_residual = ca.mmax(ca.fabs(residual))
     inverse_solved = ca.if_else(
         inverse_residual <= inverse_tolerance * ca.norm_2(rhs) + 1e-12, 1.0, 0.0)
-    out = ca.vertcat(R_t, ca.reshape(K, 36, 1), f, fk_residual, inverse_solved)
+    out = ca.vertcat(R_t, ca.reshape(K.T @ K, 36, 1), f, fk_residual, inverse_solved)
     return ca.Function("hexapod_ctc_joint_step", [x], [ca.cse(out)])
 
 

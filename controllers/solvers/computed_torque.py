@@ -8,8 +8,10 @@ reference that moves on its own, the error's derivatives are
 ``e_dot = L tau + e_t``,  ``e_ddot = L tau_dot + L_dot tau + e_tt``
 
 with ``e_t`` and ``e_tt`` what the reference's motion alone adds (for an error
-``e = s - s*``: ``e_t = -s*_dot``, ``e_tt = -s*_ddot``; :func:`reference_terms` gives
-them for any task). The solver asks for ``e_ddot = -2 zeta omega_n e_dot - omega_n^2 e``:
+``e = s - s*``: ``e_t = -s*_dot``, ``e_tt = -s*_ddot``; the tasks give them analytically,
+:meth:`controllers.tasks.Task.reference_terms`, and :func:`reference_terms` by central
+differences for any task, their test oracle). The solver asks for
+``e_ddot = -2 zeta omega_n e_dot - omega_n^2 e``:
 
 ``tau_dot = L^+ (-2 zeta omega_n e_dot - omega_n^2 e - L_dot tau - e_tt)``
 

@@ -7,7 +7,10 @@ A task is a pure object: from a :class:`TaskState` (one row per trial) it gives
   ``tau = (v, w)`` (``e_dot = L tau``, twist in the frame of the state, at its origin),
 - :meth:`Task.jacobian_dot_twist` ``L_dot tau`` (n, m): the derivative of the Jacobian
   along the motion with a constant twist, times that twist; the term a second-order
-  law (computed torque) adds to ``L tau_dot``: ``e_ddot = L tau_dot + L_dot tau``.
+  law (computed torque) adds to ``L tau_dot``: ``e_ddot = L tau_dot + L_dot tau``;
+- :meth:`Task.reference_terms` ``e_t`` and ``e_tt`` (n, m): what a desired value moving
+  on its own adds, ``e_dot = L tau + e_t``, ``e_ddot = L tau_dot + L_dot tau + e_tt``
+  (:func:`reference_function`, from the same block error by automatic differentiation).
 
 Each feature task defines its block once, as a CasADi expression (error and Jacobian of
 one leg or one edge: ``direction_block``, ``edge_block``, ``joint_length_block``). From
@@ -100,6 +103,18 @@ class Task(ABC):
     def jacobian_dot_twist(self, state: TaskState, twist: np.ndarray) -> np.ndarray:
         """(n, m) ``L_dot tau`` along the motion with the constant twist ``tau`` (n, 6)."""
 
+    def reference_terms(self, state: TaskState, twist: np.ndarray, rate: np.ndarray,
+                        acceleration: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """``e_t`` and ``e_tt`` (n, m) of the desired value moving at ``rate`` with
+        ``acceleration`` (the desired value's shape with a leading trial axis; for a pose
+        task the reference's twist and its rate), the state moving with the twist ``tau``
+        (n, 6) (:func:`reference_function`).
+
+        Raises:
+            NotImplementedError: The task has no moving reference.
+        """
+        raise NotImplementedError(f"{self.name}: no moving reference")
+
 
 def leg_rates(u: ca.SX, A: ca.SX, q: ca.SX, tau: ca.SX) -> tuple[ca.SX, ca.SX]:
     """``u_dot`` and ``q_dot`` of a leg moved by the platform twist (``docs/math.md`` §3):
@@ -124,6 +139,41 @@ def second_order_function(name: str, n_state: int, n_param: int,
     sdot = state_rate(s, p, tau)
     edot = ca.jtimes(error(s, p), s, sdot)
     return ca.Function(name, [s, p, tau], [ca.jtimes(edot, s, sdot)])
+
+
+def reference_function(name: str, n_state: int, n_param: int,
+                       error: Callable[[ca.SX, ca.SX], ca.SX],
+                       state_rate: Callable[[ca.SX, ca.SX, ca.SX], ca.SX]) -> ca.Function:
+    """``(s, p, tau, p_dot, p_ddot) -> (e_t, e_tt)`` of one feature block whose parameters
+    ``p`` (the desired value) move, by automatic differentiation.
+
+    With ``e(s, p(t))``, the state moving at ``s_dot(s, p, tau)``:
+    ``e_dot = e_s s_dot + e_p p_dot = L tau + e_t`` and, the twist held,
+    ``e_ddot = L tau_dot + L_dot tau + e_tt`` with
+    ``e_tt = e_pp[p_dot, p_dot] + e_p p_ddot + 2 d(L tau)/dp p_dot``.
+    """
+    s = ca.SX.sym("s", n_state)
+    p = ca.SX.sym("p", n_param)
+    tau = ca.SX.sym("tau", 6)
+    pd = ca.SX.sym("p_dot", n_param)
+    pdd = ca.SX.sym("p_ddot", n_param)
+    e = error(s, p)
+    e_t = ca.jtimes(e, p, pd)
+    l_tau = ca.jtimes(e, s, state_rate(s, p, tau))
+    e_tt = ca.jtimes(e_t, p, pd) + ca.jtimes(e, p, pdd) + 2.0 * ca.jtimes(l_tau, p, pd)
+    return ca.Function(name, [s, p, tau, pd, pdd], [e_t, e_tt])
+
+
+def evaluate_reference(function: ca.Function, s: np.ndarray, p: np.ndarray,
+                       tau: np.ndarray, p_dot: np.ndarray, p_ddot: np.ndarray
+                       ) -> tuple[np.ndarray, np.ndarray]:
+    """A :func:`reference_function` over block rows (k, ...) -> ``e_t``, ``e_tt`` (k, out)."""
+    k = s.shape[0]
+    if k == 0:
+        z = np.zeros((0, function.size1_out(0)))
+        return z, z.copy()
+    e_t, e_tt = function.map(k)(s.T, p.T, tau.T, p_dot.T, p_ddot.T)
+    return np.asarray(e_t, dtype=float).T, np.asarray(e_tt, dtype=float).T
 
 
 def leg_second_order(name: str, n_param: int, error: Callable[[ca.SX, ca.SX], ca.SX]
@@ -204,6 +254,6 @@ def unit(x: np.ndarray) -> np.ndarray:
     return x / np.sqrt(np.einsum("...k,...k->...", x, x))[..., None]
 
 
-__all__ = ["Task", "TaskState", "cross", "evaluate_blocks", "evaluate_legs", "leg_rates",
-           "leg_second_order", "map_blocks", "second_order_function", "sx_skew", "sx_unit",
-           "unit"]
+__all__ = ["Task", "TaskState", "cross", "evaluate_blocks", "evaluate_legs",
+           "evaluate_reference", "leg_rates", "leg_second_order", "map_blocks",
+           "reference_function", "second_order_function", "sx_skew", "sx_unit", "unit"]

@@ -17,8 +17,11 @@ from controllers.tasks.base import (
     Task,
     TaskState,
     evaluate_legs,
+    evaluate_reference,
+    leg_rates,
     leg_second_order,
     map_blocks,
+    reference_function,
     sx_skew,
 )
 
@@ -50,11 +53,30 @@ def block_function() -> ca.Function:
     return ca.Function("leg_direction_block", [u, us, A, q], list(direction_block(u, us, A, q)))
 
 
+def _error(s: ca.SX, p: ca.SX) -> ca.SX:
+    # state (u, q), parameters (A, u*)
+    return direction_block(s[:3], p[3:6], p[:3], s[3])[0]
+
+
 @lru_cache(maxsize=1)
 def _second_order() -> ca.Function:
-    # state (u, q), parameters (A, u*)
-    return leg_second_order("leg_direction_second_order", 6,
-                            lambda s, p: direction_block(s[:3], p[3:6], p[:3], s[3])[0])
+    return leg_second_order("leg_direction_second_order", 6, _error)
+
+
+@lru_cache(maxsize=1)
+def second_order_block() -> ca.Function:
+    """``(s, p, tau) -> L_dot tau`` of one leg: state ``(u, q)`` (4), parameters
+    ``(A, u*)`` (6)."""
+    return _second_order()
+
+
+@lru_cache(maxsize=1)
+def reference_block() -> ca.Function:
+    """:func:`~controllers.tasks.base.reference_function` of one leg (layout of
+    :func:`second_order_block`)."""
+    return reference_function(
+        "leg_direction_reference", 4, 6, _error,
+        lambda s, p, tau: ca.vertcat(*leg_rates(s[:3], p[:3], s[3], tau)))
 
 
 class LegDirectionTask(Task):
@@ -88,3 +110,18 @@ class LegDirectionTask(Task):
         n = len(state)
         p = np.concatenate([state.base_points, self._star(n)], axis=-1)
         return evaluate_legs(_second_order(), state, p, twist).reshape(n, 18)
+
+    def reference_terms(self, state: TaskState, twist: np.ndarray, rate: np.ndarray,
+                        acceleration: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """``e_t``, ``e_tt`` (n, 18) of desired directions moving at ``rate`` with
+        ``acceleration`` (each (n, 6, 3))."""
+        n = len(state)
+        s = np.concatenate([state.directions, state.lengths[..., None]], axis=-1)
+        p = np.concatenate([state.base_points, self._star(n)], axis=-1).reshape(6 * n, 6)
+        tau = np.repeat(np.asarray(twist, dtype=float).reshape(n, 6), 6, axis=0)
+        pd, pdd = (np.zeros((6 * n, 6)) for _ in range(2))
+        pd[:, 3:] = np.asarray(rate, float).reshape(-1, 3)
+        pdd[:, 3:] = np.asarray(acceleration, float).reshape(-1, 3)
+        e_t, e_tt = evaluate_reference(reference_block(), s.reshape(6 * n, 4), p, tau, pd,
+                                       pdd)
+        return e_t.reshape(n, 18), e_tt.reshape(n, 18)

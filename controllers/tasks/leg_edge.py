@@ -12,6 +12,7 @@ task evaluates it (:func:`block_function`), the compiled law cores are generated
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from functools import lru_cache
 
 import casadi as ca
@@ -21,8 +22,10 @@ from controllers.tasks.base import (
     Task,
     TaskState,
     evaluate_blocks,
+    evaluate_reference,
     leg_rates,
     map_blocks,
+    reference_function,
     second_order_function,
     sx_unit,
     unit,
@@ -116,16 +119,34 @@ def _edge_state_rate(s: ca.SX, p: ca.SX, tau: ca.SX) -> ca.SX:
     return ca.vertcat(-z * ca.dot(g, tau), udot, qdot)
 
 
-@lru_cache(maxsize=2)
-def _second_order(kind: str) -> ca.Function:
+def _error(kind: str) -> Callable[[ca.SX, ca.SX], ca.SX]:
     # state (n, u, q), parameters (A, desired, K^-T row-major)
     def error(s: ca.SX, p: ca.SX) -> ca.SX:
         n = s[:3]
         f = line_of_normal(n, ca.reshape(p[6:15], 3, 3).T) if kind == "lines" else n
         return ca.cross(f, p[3:6])
 
-    return second_order_function(f"leg_edge_{kind}_second_order", 7, 15, error,
+    return error
+
+
+@lru_cache(maxsize=2)
+def _second_order(kind: str) -> ca.Function:
+    return second_order_function(f"leg_edge_{kind}_second_order", 7, 15, _error(kind),
                                  _edge_state_rate)
+
+
+@lru_cache(maxsize=2)
+def reference_block(kind: str) -> ca.Function:
+    """:func:`~controllers.tasks.base.reference_function` of one edge: state
+    ``(n, u, q)`` (7), parameters ``(A, f*, K^-T row-major)`` (15)."""
+    return reference_function(f"leg_edge_{kind}_reference", 7, 15, _error(kind),
+                              _edge_state_rate)
+
+
+@lru_cache(maxsize=2)
+def second_order_block(kind: str) -> ca.Function:
+    """``(s, p, tau) -> L_dot tau`` of one edge (layout of :func:`reference_block`)."""
+    return _second_order(kind)
 
 
 class LegEdgeTask(Task):
@@ -188,11 +209,29 @@ class LegEdgeTask(Task):
     def jacobian(self, state: TaskState) -> np.ndarray:
         return self._blocks(state)[1].reshape(len(state), 36, 6)
 
-    def jacobian_dot_twist(self, state: TaskState, twist: np.ndarray) -> np.ndarray:
+    def _edge_rows(self, state: TaskState, twist: np.ndarray
+                   ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Per edge (12 n rows): the state, the parameters and the twist."""
         n = len(state)
         normals, u2, A2, q2 = self._per_edge(state)
         s = np.concatenate([normals, u2, q2[:, None]], axis=1)
         kit = np.broadcast_to(self.line_matrix_inv_t.reshape(9), (12 * n, 9))
         p = np.concatenate([A2, self._star(n).reshape(-1, 3), kit], axis=1)
         tau = np.repeat(np.asarray(twist, dtype=float).reshape(n, 6), 12, axis=0)
-        return evaluate_blocks(_second_order(self.kind), s, p, tau).reshape(n, 36)
+        return s, p, tau
+
+    def jacobian_dot_twist(self, state: TaskState, twist: np.ndarray) -> np.ndarray:
+        s, p, tau = self._edge_rows(state, twist)
+        return evaluate_blocks(_second_order(self.kind), s, p, tau).reshape(len(state), 36)
+
+    def reference_terms(self, state: TaskState, twist: np.ndarray, rate: np.ndarray,
+                        acceleration: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """``e_t``, ``e_tt`` (n, 36) of desired features moving at ``rate`` with
+        ``acceleration`` (each (n, 6, 2, 3))."""
+        n = len(state)
+        s, p, tau = self._edge_rows(state, twist)
+        pd, pdd = (np.zeros((12 * n, 15)) for _ in range(2))
+        pd[:, 3:6] = np.asarray(rate, float).reshape(-1, 3)
+        pdd[:, 3:6] = np.asarray(acceleration, float).reshape(-1, 3)
+        e_t, e_tt = evaluate_reference(reference_block(self.kind), s, p, tau, pd, pdd)
+        return e_t.reshape(n, 36), e_tt.reshape(n, 36)

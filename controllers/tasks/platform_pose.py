@@ -14,7 +14,14 @@ from functools import lru_cache
 import casadi as ca
 import numpy as np
 
-from controllers.tasks.base import Task, TaskState, evaluate_blocks, second_order_function
+from controllers.tasks.base import (
+    Task,
+    TaskState,
+    evaluate_blocks,
+    evaluate_reference,
+    reference_function,
+    second_order_function,
+)
 from hexapod.se3 import log_so3, skew
 
 
@@ -30,21 +37,48 @@ def _log_so3(R: ca.SX) -> ca.SX:
     return factor * v
 
 
+def pose_error(s: ca.SX, p: ca.SX) -> ca.SX:
+    """The block error of the state ``s = (R row-major, t)`` (12) towards the parameters
+    ``p = (R* row-major, t*)`` (12), as an expression."""
+    R = ca.reshape(s[:9], 3, 3).T
+    Rs = ca.reshape(p[:9], 3, 3).T
+    return ca.vertcat(s[9:12] - p[9:12], _log_so3(R @ Rs.T))
+
+
+def pose_rate(s: ca.SX, p: ca.SX, tau: ca.SX) -> ca.SX:
+    """``s_dot`` of the state ``(R row-major, t)`` moved by the twist ``tau`` of the
+    module docstring (``t_dot = v + w x t``, ``R_dot = [w]_x R``)."""
+    R = ca.reshape(s[:9], 3, 3).T
+    w = tau[3:]
+    Rdot = ca.skew(w) @ R
+    return ca.vertcat(ca.reshape(Rdot.T, 9, 1), tau[:3] + ca.cross(w, s[9:12]))
+
+
+def pose_motion(R: np.ndarray, twist: np.ndarray, twist_rate: np.ndarray
+                ) -> tuple[np.ndarray, np.ndarray]:
+    """``p_dot`` and ``p_ddot`` (n, 12) of desired poses ``(R*, t*)`` (n, 3, 3) moving
+    with a reference's twist ``(v*, w*)`` (n, 6) and its rate (n, 6) (base frame,
+    ``v*`` the origin's velocity: ``t*_dot = v*``, ``R*_dot = [w*]_x R*``, so
+    ``R*_ddot = ([alpha*]_x + [w*]_x^2) R*``), rotations row-major."""
+    R = np.asarray(R, dtype=float)
+    n = len(R)
+    W = skew(np.asarray(twist, dtype=float)[:, 3:])
+    Rd = W @ R
+    Rdd = (skew(np.asarray(twist_rate, dtype=float)[:, 3:]) + W @ W) @ R
+    return (np.concatenate([Rd.reshape(n, 9), twist[:, :3]], axis=1),
+            np.concatenate([Rdd.reshape(n, 9), twist_rate[:, :3]], axis=1))
+
+
 @lru_cache(maxsize=1)
 def _second_order() -> ca.Function:
     # state (R row-major, t), parameters (R* row-major, t*)
-    def error(s: ca.SX, p: ca.SX) -> ca.SX:
-        R = ca.reshape(s[:9], 3, 3).T
-        Rs = ca.reshape(p[:9], 3, 3).T
-        return ca.vertcat(s[9:12] - p[9:12], _log_so3(R @ Rs.T))
+    return second_order_function("platform_pose_second_order", 12, 12, pose_error,
+                                 pose_rate)
 
-    def rate(s: ca.SX, p: ca.SX, tau: ca.SX) -> ca.SX:
-        R = ca.reshape(s[:9], 3, 3).T
-        w = tau[3:]
-        Rdot = ca.skew(w) @ R
-        return ca.vertcat(ca.reshape(Rdot.T, 9, 1), tau[:3] + ca.cross(w, s[9:12]))
 
-    return second_order_function("platform_pose_second_order", 12, 12, error, rate)
+@lru_cache(maxsize=1)
+def _reference() -> ca.Function:
+    return reference_function("platform_pose_reference", 12, 12, pose_error, pose_rate)
 
 
 def inverse_left_jacobian(phi: np.ndarray) -> np.ndarray:
@@ -95,10 +129,28 @@ class PlatformPoseTask(Task):
         L[:, 3:, 3:] = inverse_left_jacobian(self._phi(R))
         return L
 
-    def jacobian_dot_twist(self, state: TaskState, twist: np.ndarray) -> np.ndarray:
+    def _rows(self, state: TaskState) -> tuple[np.ndarray, np.ndarray]:
         R, t = self._pose(state)
         n = len(t)
         s = np.concatenate([R.reshape(n, 9), t], axis=1)
         p = np.concatenate([np.broadcast_to(self.rotation, (n, 3, 3)).reshape(n, 9),
                             np.broadcast_to(self.translation, (n, 3))], axis=1)
-        return evaluate_blocks(_second_order(), s, p, np.asarray(twist, float).reshape(n, 6))
+        return s, p
+
+    def jacobian_dot_twist(self, state: TaskState, twist: np.ndarray) -> np.ndarray:
+        s, p = self._rows(state)
+        return evaluate_blocks(_second_order(), s, p,
+                               np.asarray(twist, float).reshape(len(s), 6))
+
+    def reference_terms(self, state: TaskState, twist: np.ndarray, rate: np.ndarray,
+                        acceleration: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """``e_t``, ``e_tt`` (n, 6) of the desired pose moving with the reference's twist
+        ``rate`` (n, 6) ``(v*, w*)`` and its rate ``acceleration`` (n, 6) (base frame,
+        :func:`pose_motion`)."""
+        s, p = self._rows(state)
+        n = len(s)
+        Rs = np.broadcast_to(self.rotation, (n, 3, 3))
+        pd, pdd = pose_motion(Rs, np.asarray(rate, float).reshape(n, 6),
+                              np.asarray(acceleration, float).reshape(n, 6))
+        return evaluate_reference(_reference(), s, p,
+                                  np.asarray(twist, float).reshape(n, 6), pd, pdd)

@@ -1,0 +1,326 @@
+"""The task-space computed-torque step as one compiled CasADi function per task kind.
+
+:class:`~controllers.task_ctc.TaskComputedTorque` (``cartesian-ctc``, ``vision-ctc``,
+``leg-edge-ctc``, ``leg-direction-ctc``) evaluates its task, the nominal model and the
+solver in Python and numpy around many small calls. This module composes the SAME
+symbolic definitions into one function per task kind, generated to C by
+:class:`hexapod.compiled.CompiledFunction`, as :mod:`controllers.solvers.compiled_ctc`
+does for the joint-space law:
+
+- the pose: :func:`hexapod.fk.newton_function` from a guess on the encoder lengths
+  (``fk=True``; the length residual out, the caller calls again from the pose reached
+  until it converges), or (``fk=False``, ``vision-ctc``) the rigid fit of the nominal
+  platform points to the joints ``B_i = A_i + q_i u_i`` of the six legs seen (camera
+  frame), by Newton steps on the rotation from a guess (:func:`_rigid_fit`; the last
+  step's size out, the caller calls again until it is below its tolerance), brought to
+  the base frame through the estimated camera pose;
+- ``K`` there, the twist ``tau = K^-1 q_dot``, ``M``, ``h`` and ``K_dot tau``
+  (:func:`hexapod.dynamics.compiled.expressions`);
+- the task's error, Jacobian and ``L_dot tau`` (the blocks of :mod:`controllers.tasks`:
+  :func:`~controllers.tasks.platform_pose.pose_error` and its state rate, the edge and
+  direction blocks and their second-order functions), brought to the model's twist as
+  :func:`~controllers.solvers.computed_torque.task_in_model_twist` does, and the
+  reference's ``e_t``, ``e_tt`` (the tasks' :func:`~controllers.tasks.base.
+  reference_function`);
+- the solver: ``tau_dot`` the least-squares solution over the rows whose ``mask`` is 1
+  (QR of the masked Jacobian; a plain solve of the square pose task), then the leg
+  forces ``K^-T (M tau_dot + h)`` plus the drives' reflected inertia, viscous and Coulomb
+  terms at the velocity the legs reach over the period ``hold``
+  (:meth:`~controllers.solvers.computed_torque.ComputedTorqueSolver.forces`).
+
+The caller keeps the numpy path (the reference) for everything off the happy path: FK
+not converged, a rank-deficient Jacobian (its singular values are those of the output
+``factor``), a singular inverse solve, a non-finite value.
+
+Inputs (:func:`layout`): ``pose`` (``R`` column-major, ``t``: the FK guess, or the
+measured pose), ``q``, ``q_dot`` (6 each), ``points`` (``A`` then ``E``, base frame,
+point after point, 36), the 19 inertial ``params``, the drives' ``rotor``, ``viscous``,
+``coulomb`` (6 each), ``gains`` (``Kp``, ``Kd``, ``hold`` [s]); for the pose kind the
+``reference`` ``(R*`` row-major, ``t*``, twist, twist rate) (24); for the feature kinds
+the measured ``features`` (for the edges the normals (6, 2, 3), the leg directions
+(6, 3) and 1.0 to take the directions of the normals instead, ``unit(n_2 x n_1)``;
+directions (6, 3)), the task frame's
+``base`` points ``A_i`` (18), the row ``mask`` (1 or 0), the ``frame`` from the base
+(``R`` row-major, ``p``: 12) and the ``reference_features``: the desired features, their
+rate and their acceleration (``m`` each).
+
+Outputs: ``pose`` (12, as the input), ``K`` (36, column-major), ``fk_residual`` (max
+absolute length residual [m]), ``forces`` (6) [N], ``solved`` (1.0 when the inverse
+solve's residual is below the tolerance, as :mod:`controllers.solvers.compiled_ctc`),
+``error`` (m) and ``factor`` (36, column-major: ``L^T L`` of the masked model Jacobian,
+whose eigenvalues are its squared singular values).
+"""
+
+from __future__ import annotations
+
+from functools import lru_cache
+
+import casadi as ca
+
+from controllers.tasks.base import reference_function, second_order_function
+from controllers.tasks.leg_direction import block_function as direction_block_function
+from controllers.tasks.leg_direction import reference_block as direction_reference
+from controllers.tasks.leg_direction import second_order_block as direction_second_order
+from controllers.tasks.leg_edge import block_function as edge_block_function
+from controllers.tasks.leg_edge import leg_direction_of_edges
+from controllers.tasks.leg_edge import reference_block as edge_reference
+from controllers.tasks.leg_edge import second_order_block as edge_second_order
+from controllers.tasks.platform_pose import pose_error, pose_rate
+from hexapod.compiled import CompiledFunction
+from hexapod.dynamics import compiled as dyn
+from hexapod.dynamics.drive_model import COULOMB_SMOOTHING
+from hexapod.dynamics.model import INVERSE_TOLERANCE
+from hexapod.fk import newton_function
+
+#: Task kinds and their number of rows.
+ROWS = {"pose": 6, "edges": 36, "directions": 18}
+
+_COMMON = (("pose", 12), ("q", 6), ("q_dot", 6), ("points", 36), ("params", 19),
+           ("rotor", 6), ("viscous", 6), ("coulomb", 6), ("gains", 3))
+
+
+def _offsets(fields: tuple[tuple[str, int], ...]) -> dict[str, slice]:
+    out, k = {}, 0
+    for name, n in fields:
+        out[name] = slice(k, k + n)
+        k += n
+    return out
+
+
+#: Calls of the compiled forward-kinematics Newton steps (3 iterations each) per call.
+FK_CALLS = 2
+#: Newton steps of the rigid fit per call.
+FIT_ITERATIONS = 4
+
+
+@lru_cache(maxsize=4)
+def layout(kind: str, fk: bool = True) -> tuple[dict[str, slice], dict[str, slice]]:
+    """The input and output slices of a kind (module docstring); the visual pose
+    (``fk=False``) takes the legs' ``directions`` (18), the estimated ``base`` points
+    (18, camera frame) and the ``frame`` (the base from the camera, ``R`` row-major,
+    ``p``: 12) after the reference."""
+    m = ROWS[kind]
+    visual = (("directions", 18), ("base", 18), ("frame", 12)) if not fk else ()
+    extra = (("reference", 24), *visual) if kind == "pose" else (
+        ("features", 55 if kind == "edges" else 18), ("base", 18), ("mask", m),
+        ("frame", 12), ("reference_features", 3 * m))
+    out = (("pose", 12), ("K", 36), ("fk_residual", 1), ("forces", 6), ("solved", 1),
+           ("error", m), ("factor", 36))
+    return _offsets(_COMMON + extra), _offsets(out)
+
+
+def _size(slices: dict[str, slice]) -> int:
+    return max(s.stop for s in slices.values())
+
+
+def _row_major(R: ca.SX) -> ca.SX:
+    return ca.reshape(R.T, 9, 1)
+
+
+def _model_twist(translation: ca.SX, twist: ca.SX, frame: ca.SX | None
+                 ) -> tuple[ca.SX, ca.SX]:
+    """``G`` (6, 6) and ``G_dot tau`` (6) of
+    :func:`~controllers.solvers.computed_torque.task_in_model_twist`."""
+    G = ca.SX.eye(6)
+    G[0:3, 3:6] = ca.skew(translation)
+    gdot = ca.vertcat(ca.cross(twist[0:3], twist[3:6]), ca.SX.zeros(3))
+    if frame is not None:
+        Rf = ca.reshape(frame[0:9], 3, 3).T
+        Ad = ca.SX.zeros(6, 6)
+        Ad[0:3, 0:3] = Rf
+        Ad[0:3, 3:6] = ca.skew(frame[9:12]) @ Rf
+        Ad[3:6, 3:6] = Rf
+        G = Ad @ G
+        gdot = Ad @ gdot
+    return G, gdot
+
+
+def _rigid_fit(R0: ca.SX, q: ca.SX, u: ca.SX, A: ca.SX, E: ca.SX, frame: ca.SX
+               ) -> tuple[ca.SX, ca.SX]:
+    """The pose (``R`` column-major, ``t``: 12, base frame) of the rigid fit
+    ``min sum_i |R_c E_i + t_c - B_i|^2`` of the platform points ``E`` to the joints
+    ``B_i = A_i + q_i u_i`` (camera frame), and the size of the last step [rad].
+
+    With ``t_c = B_mean - R_c E_mean`` the fit maximises ``tr(R_c^T C)``,
+    ``C = sum (B_i - B_mean)(E_i - E_mean)^T`` (Kabsch); a Newton step on
+    ``R_c <- exp([d]_x) R_c`` solves ``(tr(S) I - sym(S)) d = vee(S - S^T)`` with
+    ``S = C R_c^T`` (the quadratic model of ``-tr(R_c^T C)``), from the guess ``R0``
+    (base frame). The frame is the base from the camera (``R`` row-major, ``p``).
+    """
+    Rbc = ca.reshape(frame[0:9], 3, 3).T
+    pbc = frame[9:12]
+    B = [A[3 * i:3 * i + 3] + q[i] * u[3 * i:3 * i + 3] for i in range(6)]
+    P = [E[3 * i:3 * i + 3] for i in range(6)]
+    bc = sum(B, ca.SX.zeros(3)) / 6.0
+    mc = sum(P, ca.SX.zeros(3)) / 6.0
+    C = sum(((b - bc) @ (p - mc).T for b, p in zip(B, P, strict=True)), ca.SX.zeros(3, 3))
+    Rc = Rbc.T @ ca.reshape(R0[0:9], 3, 3)
+    size = ca.SX(0.0)
+    for _ in range(FIT_ITERATIONS):
+        S = C @ Rc.T
+        w = ca.vertcat(S[2, 1] - S[1, 2], S[0, 2] - S[2, 0], S[1, 0] - S[0, 1])
+        H = ca.trace(S) * ca.SX.eye(3) - 0.5 * (S + S.T)
+        d = ca.solve(H, w)
+        theta = ca.fmax(ca.sqrt(ca.dot(d, d)), 1e-12)  # as hexapod.fk: no 0/0
+        K = ca.skew(d)
+        a = ca.sin(theta) / theta
+        b = 2 * ca.sin(theta / 2) ** 2 / theta**2
+        Rc = (ca.SX.eye(3) + a * K + b * (K @ K)) @ Rc
+        size = theta
+    tc = bc - Rc @ mc
+    return ca.vertcat(ca.reshape(Rbc @ Rc, 9, 1), Rbc @ tc + pbc), size
+
+
+def _pose_block() -> ca.Function:
+    """``(s, p) -> (e, L)`` of the pose task, ``L`` the derivative of ``e`` along
+    :func:`~controllers.tasks.platform_pose.pose_rate` (its module's closed form)."""
+    s, p, tau = ca.SX.sym("s", 12), ca.SX.sym("p", 12), ca.SX.sym("tau", 6)
+    e = pose_error(s, p)
+    L = ca.jacobian(ca.jtimes(e, s, pose_rate(s, p, tau)), tau)
+    return ca.Function("pose_block", [s, p], [e, L])
+
+
+def _pose_task(R: ca.SX, t: ca.SX, tau_s: ca.SX, ref: ca.SX
+               ) -> tuple[ca.SX, ca.SX, ca.SX, ca.SX, ca.SX]:
+    """Error, Jacobian (spatial twist), ``L_dot tau_s``, ``e_t``, ``e_tt`` of the pose task."""
+    s = ca.vertcat(_row_major(R), t)
+    Rs = ca.reshape(ref[0:9], 3, 3).T
+    p = ref[0:12]
+    w, alpha = ref[15:18], ref[21:24]
+    W = ca.skew(w)
+    pd = ca.vertcat(_row_major(W @ Rs), ref[12:15])
+    pdd = ca.vertcat(_row_major((ca.skew(alpha) + W @ W) @ Rs), ref[18:21])
+    e, L = _pose_block()(s, p)
+    ldot = second_order_function("pose_second_order", 12, 12, pose_error, pose_rate)(
+        s, p, tau_s)
+    e_t, e_tt = reference_function("pose_reference", 12, 12, pose_error, pose_rate)(
+        s, p, tau_s, pd, pdd)
+    return e, L, ldot, e_t, e_tt
+
+
+def _feature_task(kind: str, x: ca.SX, sl: dict[str, slice], q: ca.SX, tau_s: ca.SX
+                  ) -> tuple[ca.SX, ca.SX, ca.SX, ca.SX, ca.SX]:
+    """Error, Jacobian (spatial twist of the frame), ``L_dot tau_s``, ``e_t``, ``e_tt`` of
+    the edge or direction task, block after block."""
+    feats, A = x[sl["features"]], x[sl["base"]]
+    ref = x[sl["reference_features"]]
+    m = ref.shape[0] // 3
+    des, rate, acc = ref[0:m], ref[m:2 * m], ref[2 * m:3 * m]
+    es, Ls, ldots, ets, etts = [], [], [], [], []
+    eye = ca.reshape(ca.SX.eye(3), 9, 1)
+    zeros3 = ca.SX.zeros(3)
+    for i in range(6):
+        Ai, qi = A[3 * i:3 * i + 3], q[i]
+        if kind == "edges":
+            n1, n2 = feats[6 * i:6 * i + 3], feats[6 * i + 3:6 * i + 6]
+            ui = ca.if_else(feats[54], leg_direction_of_edges(n1, n2),
+                            feats[36 + 3 * i:39 + 3 * i])
+            for j, n in enumerate((n1, n2)):
+                k = 6 * i + 3 * j
+                ns = des[k:k + 3]
+                e, L = edge_block_function("normals")(n, ns, ui, Ai, qi, ca.SX.eye(3),
+                                                      ca.SX.eye(3))
+                s = ca.vertcat(n, ui, qi)
+                p = ca.vertcat(Ai, ns, eye)
+                es.append(e)
+                Ls.append(L)
+                ldots.append(edge_second_order("normals")(s, p, tau_s))
+                e_t, e_tt = edge_reference("normals")(
+                    s, p, tau_s, ca.vertcat(zeros3, rate[k:k + 3], ca.SX.zeros(9)),
+                    ca.vertcat(zeros3, acc[k:k + 3], ca.SX.zeros(9)))
+                ets.append(e_t)
+                etts.append(e_tt)
+        else:
+            ui, us = feats[3 * i:3 * i + 3], des[3 * i:3 * i + 3]
+            e, L = direction_block_function()(ui, us, Ai, qi)
+            s, p = ca.vertcat(ui, qi), ca.vertcat(Ai, us)
+            es.append(e)
+            Ls.append(L)
+            ldots.append(direction_second_order()(s, p, tau_s))
+            e_t, e_tt = direction_reference()(
+                s, p, tau_s, ca.vertcat(zeros3, rate[3 * i:3 * i + 3]),
+                ca.vertcat(zeros3, acc[3 * i:3 * i + 3]))
+            ets.append(e_t)
+            etts.append(e_tt)
+    return (ca.vertcat(*es), ca.vertcat(*Ls), ca.vertcat(*ldots), ca.vertcat(*ets),
+            ca.vertcat(*etts))
+
+
+def _build(kind: str, fk: bool, inverse_tolerance: float) -> ca.Function:
+    sl, out_sl = layout(kind, fk)
+    x = ca.SX.sym("x", _size(sl))
+    q, qd, points = x[sl["q"]], x[sl["q_dot"]], x[sl["points"]]
+    params = x[sl["params"]]
+    rotor, viscous, coulomb = x[sl["rotor"]], x[sl["viscous"]], x[sl["coulomb"]]
+    kp, kd, hold = x[sl["gains"].start], x[sl["gains"].start + 1], x[sl["gains"].start + 2]
+    if fk:
+        newton = newton_function()
+        y = newton(ca.vertcat(x[sl["pose"]], q, points))
+        for _ in range(FK_CALLS - 1):
+            y = newton(ca.vertcat(y[0:12], q, points))
+        R_t, fk_residual = y[0:12], ca.mmax(ca.fabs(y[12:18]))
+    else:
+        R_t, fk_residual = _rigid_fit(x[sl["pose"]], q, x[sl["directions"]], x[sl["base"]],
+                                      points[18:36], x[sl["frame"]])
+    row, expr = dyn.expressions()
+    terms = ca.Function("terms", [row], [expr["M"], expr["h"], expr["K"], expr["leg_bias"]])
+    zeros = ca.SX.zeros(6)
+    K = terms(ca.vertcat(R_t, zeros, zeros, points, params))[2]
+    twist = ca.solve(K, qd)
+    M, h, K, bias = terms(ca.vertcat(R_t, twist, zeros, points, params))
+    R, t = ca.reshape(R_t[0:9], 3, 3), R_t[9:12]
+    frame = None if kind == "pose" else x[sl["frame"]]  # the task's frame
+    G, gdot = _model_twist(t, twist, frame)
+    tau_s = G @ twist
+    if kind == "pose":
+        e, L, ldot, e_t, e_tt = _pose_task(R, t, tau_s, x[sl["reference"]])
+    else:
+        e, L, ldot, e_t, e_tt = _feature_task(kind, x, sl, q, tau_s)
+    L_model = L @ G
+    ldot = ldot + L @ gdot
+    rhs = -kd * (L_model @ twist + e_t) - kp * e - ldot - e_tt
+    if kind == "pose":
+        acc = ca.solve(L_model, rhs)
+        factor = L_model
+    else:
+        mask = x[sl["mask"]]
+        Lw = L_model * ca.repmat(mask, 1, 6)
+        Q, factor = ca.qr(Lw)
+        acc = ca.solve(factor, Q.T @ (mask * rhs))
+    a = K @ acc + bias
+    rhs_f = M @ acc + h
+    f = ca.solve(K.T, rhs_f)
+    inverse_residual = ca.norm_2(K.T @ f - rhs_f)
+    f = f + rotor * a + viscous * qd + coulomb * ca.tanh((qd + hold * a) / COULOMB_SMOOTHING)
+    solved = ca.if_else(inverse_residual <= inverse_tolerance * ca.norm_2(rhs_f) + 1e-12,
+                        1.0, 0.0)
+    out = ca.vertcat(R_t, ca.reshape(K, 36, 1), fk_residual, f, solved, e,
+                     ca.reshape(factor.T @ factor, 36, 1))
+    assert out.shape[0] == _size(out_sl)
+    return ca.Function(f"hexapod_ctc_{kind}_{'fk' if fk else 'pose'}_step", [x],
+                       [ca.cse(ca.densify(out))])
+
+
+@lru_cache(maxsize=8)
+def task_step(kind: str, fk: bool, inverse_tolerance: float = INVERSE_TOLERANCE
+              ) -> CompiledFunction:
+    """The compiled step of a task kind (built and compiled on first use; cached on disk).
+
+    Args:
+        kind: ``"pose"``, ``"edges"`` (edge normals) or ``"directions"``.
+        fk: The pose from the encoder lengths by Newton steps from the input pose (else
+            the rigid fit to the legs seen, from the input pose; the pose kind only).
+        inverse_tolerance: Relative residual of the inverse solve above which ``K`` is
+            taken as singular.
+
+    Raises:
+        ValueError: An unknown kind.
+    """
+    if kind not in ROWS:
+        raise ValueError(f"kind: expected one of {', '.join(ROWS)}, got {kind!r}")
+    if not fk and kind != "pose":
+        raise ValueError(f"kind {kind!r}: the pose comes from the encoders (fk=True)")
+    return CompiledFunction(_build(kind, bool(fk), float(inverse_tolerance)))
+
+
+__all__ = ["FIT_ITERATIONS", "ROWS", "layout", "task_step"]

@@ -1,0 +1,99 @@
+"""The desired leg features along a pose reference and their first two time derivatives.
+
+The feature laws' reference (:mod:`controllers.feature_ctc`) is the features the
+ESTIMATED camera would see of the NOMINAL robot along a pose trajectory, anchored at the
+taught goal: ``s*(t) = unit(s_taught + s_model(x*(t)) - s_model(end))`` per unit vector
+(:func:`controllers.tracking.anchor_goals`). With the reference's pose ``x* = (R*, t*)``,
+twist ``(v*, w*)`` and its rate (base frame, ``t*_dot = v*``, ``R*_dot = [w*]_x R*``;
+:class:`hexapod.trajectory.PoseTrajectory`), the chain rule gives
+
+``s*_dot = ds/dx x*_dot``,  ``s*_ddot = d2s/dx2 [x*_dot, x*_dot] + ds/dx x*_ddot``
+
+(CasADi's automatic differentiation of the one symbolic model of the features below),
+evaluated in C (:class:`hexapod.compiled.CompiledFunction`) over a whole reference's
+control grid at once.
+
+Input row (:func:`size_in`): ``R*`` (9, row-major), ``t*`` (3), twist (6), twist rate
+(6), the taught features (``m``) and the model's features at the end pose (``m``), the
+camera frame from the base (``R`` row-major, ``p``: 12), the nominal base and platform
+points (18 each, point after point) and the leg radius (1). Output: ``s*``, ``s*_dot``,
+``s*_ddot`` (``m`` each). ``m`` is 36 for the edge normals ((6, 2, 3) order), 18 for the
+directions.
+"""
+
+from __future__ import annotations
+
+from functools import lru_cache
+
+import casadi as ca
+
+from controllers.mpc.prediction import sx_edge_normals
+from controllers.tasks.base import sx_unit
+from hexapod.compiled import CompiledFunction
+
+#: Rows of each feature kind.
+ROWS = {"normals": 36, "directions": 18}
+
+
+def size_in(kind: str) -> int:
+    """Length of an input row."""
+    return 24 + 2 * ROWS[kind] + 12 + 36 + 1
+
+
+def model_features(kind: str, R: ca.SX, t: ca.SX, frame: ca.SX, A: ca.SX, E: ca.SX,
+                   radius: ca.SX) -> ca.SX:
+    """The features (``m``) of the robot at ``(R, t)`` (base frame) seen from ``frame``
+    (``R`` row-major, ``p``), as :func:`vision.legs.observe_legs` computes them (all
+    edges existing)."""
+    Rf = ca.reshape(frame[0:9], 3, 3).T
+    pf = frame[9:12]
+    out: list[ca.SX] = []
+    for i in range(6):
+        Ai, Ei = A[3 * i:3 * i + 3], E[3 * i:3 * i + 3]
+        u = sx_unit(R @ Ei + t - Ai)
+        Ac, uc = Rf @ Ai + pf, Rf @ u
+        if kind == "normals":
+            out.extend(sx_edge_normals(Ac, uc, radius))
+        else:
+            out.append(uc)
+    return ca.vertcat(*out)
+
+
+def _build(kind: str) -> ca.Function:
+    m = ROWS[kind]
+    x = ca.SX.sym("x", size_in(kind))
+    k = 24
+    taught, end = x[k:k + m], x[k + m:k + 2 * m]
+    k += 2 * m
+    frame, A, E, radius = x[k:k + 12], x[k + 12:k + 30], x[k + 30:k + 48], x[k + 48]
+    P = ca.SX.sym("P", 12)  # (R* row-major, t*)
+    d1, d2 = ca.SX.sym("d1", 12), ca.SX.sym("d2", 12)
+    R = ca.reshape(P[0:9], 3, 3).T
+    model = model_features(kind, R, P[9:12], frame, A, E, radius)
+    shifted = taught + model - end
+    s = ca.vertcat(*[sx_unit(shifted[3 * j:3 * j + 3]) for j in range(m // 3)])
+    sd = ca.jtimes(s, P, d1)
+    sdd = ca.jtimes(sd, P, d1) + ca.jtimes(s, P, d2)
+    chain = ca.Function("chain", [P, d1, d2, x], [s, sd, sdd])
+    Rs = ca.reshape(x[0:9], 3, 3).T
+    W = ca.skew(x[15:18])
+    p_dot = ca.vertcat(ca.reshape((W @ Rs).T, 9, 1), x[12:15])
+    p_ddot = ca.vertcat(ca.reshape(((ca.skew(x[21:24]) + W @ W) @ Rs).T, 9, 1), x[18:21])
+    out = chain(x[0:12], p_dot, p_ddot, x)
+    return ca.Function(f"hexapod_feature_reference_{kind}", [x],
+                       [ca.cse(ca.densify(ca.vertcat(*out)))])
+
+
+@lru_cache(maxsize=2)
+def feature_motion(kind: str) -> CompiledFunction:
+    """``s*``, ``s*_dot``, ``s*_ddot`` of the anchored model features (module docstring).
+
+    Args:
+        kind: ``"normals"`` or ``"directions"``.
+    """
+    if kind not in ROWS:
+        raise ValueError(f"kind: expected one of {', '.join(ROWS)}, got {kind!r}")
+    return CompiledFunction(_build(kind))
+
+
+__all__ = ["ROWS", "feature_motion", "model_features", "size_in"]
