@@ -63,6 +63,8 @@ QUINTIC_PEAK_SPEED = 15.0 / 8.0
 DAMPING = 1.0
 #: Forward-kinematics tolerance on the length residual [m] (as :func:`forward_kinematics`).
 FK_TOLERANCE = 1e-12
+#: How far from ``k dt`` an observation's time may be to use the reference's grid [s].
+GRID_TIME_TOLERANCE = 1e-9
 #: Calls of the compiled step (``compiled_ctc.FK_CALLS`` x 3 Newton iterations each)
 #: before the numpy path takes over (as its budget of 50 iterations).
 FK_MAX_CALLS = 16
@@ -99,6 +101,8 @@ class ComputedTorqueController(Controller):
         self._start: tuple[float, np.ndarray, float] | None = None
         #: Input row of the compiled step, its constant part filled at reset.
         self._row = np.zeros(compiled_ctc.ROW)
+        #: ``(q*, q_dot*, q_ddot*)`` of a reference on the control grid ``k dt`` (N, 3, 6).
+        self._grid = np.zeros((0, 3, 6))
         #: Steps taken by the compiled path and by the numpy path (diagnostics).
         self.compiled_steps = 0
         self.numpy_steps = 0
@@ -119,8 +123,13 @@ class ComputedTorqueController(Controller):
         self._row[97:115] = np.concatenate([np.broadcast_to(np.asarray(c, dtype=float), (6,))
                                             for c in (d.rotor_inertia, d.viscous, d.coulomb)])
         self._row[115:117] = (self.kp, self.kd)
+        self._grid = np.zeros((0, 3, 6))
         if context.reference is None:
             self.retarget(context.goal)
+        else:  # the reference's legs on the control grid, in one batched evaluation
+            dt = float(context.dt)
+            steps = math.ceil(float(context.reference.duration) / dt) + 3
+            self._grid = self._reference_legs(dt * np.arange(steps))
 
     def retarget(self, goal: Goal) -> None:
         """A new fixed goal (ignored when tracking a reference: it is sampled itself)."""
@@ -140,12 +149,26 @@ class ComputedTorqueController(Controller):
         assert ctx is not None and model is not None
         if ctx.reference is None:
             return self._quintic(t)
-        ref = ctx.reference.at(np.array([t]))
+        k = round(t / float(ctx.dt))
+        if 0 <= k < len(self._grid) and abs(t - k * float(ctx.dt)) <= GRID_TIME_TOLERANCE:
+            g = self._grid[k]
+            return g[0], g[1], g[2]
+        g = self._reference_legs(np.array([t]))[0]
+        return g[0], g[1], g[2]
+
+    def _reference_legs(self, times: np.ndarray) -> np.ndarray:
+        """``(q*, q_dot*, q_ddot*)`` of the reference at ``times`` (N,) [s]: (N, 3, 6)."""
+        ctx, model = self._ctx, self._model
+        assert ctx is not None and model is not None
+        ref = ctx.reference.at(times)
         R, p, tw, acc = ref.rotation, ref.translation, ref.twist, ref.twist_rate
-        q = inverse_kinematics(ctx.geometry, R[0], p[0])
-        K = model.terms_batch(R, p, tw)[2][0]
+        out = np.empty((len(times), 3, 6))
+        out[:, 0] = [inverse_kinematics(ctx.geometry, Ri, pi) for Ri, pi in zip(R, p, strict=True)]
+        K = model.terms_batch(R, p, tw)[2]
         rate, bias = model.legs_batch(R, p, tw)
-        return q, rate[0], K @ acc[0] + bias[0]
+        out[:, 1] = rate
+        out[:, 2] = np.einsum("nij,nj->ni", K, acc) + bias
+        return out
 
     def _quintic(self, t: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """The leg-space quintic from the first measured lengths to ``goal.lengths``."""
