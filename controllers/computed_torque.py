@@ -150,6 +150,9 @@ class ComputedTorqueController(Controller):
         if ctx.reference is None:
             return self._quintic(t)
         k = round(t / float(ctx.dt))
+        if len(self._grid) and t > float(ctx.reference.duration) + ctx.dt:
+            g = self._grid[-1]  # at rest at the end, as the grid's last instant
+            return g[0], g[1], g[2]
         if 0 <= k < len(self._grid) and abs(t - k * float(ctx.dt)) <= GRID_TIME_TOLERANCE:
             g = self._grid[k]
             return g[0], g[1], g[2]
