@@ -15,9 +15,10 @@ built for a fixed goal:
   Nothing is taught along the path: under a calibration error the features in between
   carry the model's error of the feature CHANGE, and the end of the path is the taught
   goal, reached as accurately as by a point-to-point task;
-- the controller is retargeted to that goal every period (its ``retarget(goal)`` when it
-  has one, else ``reset`` with the new goal: the law's state, such as the dead-reckoned
-  directions of hidden legs, starts afresh);
+- the controller is retargeted to that goal every period: its ``retarget(goal)`` when it
+  has one (the built-in vision laws keep their state: the dead-reckoned directions of
+  hidden legs, the last twist, the warm starts; the goal moved, the robot did not), else
+  ``reset`` with the new goal (the law's state starts afresh);
 - a velocity command (not a force command) gets the feed-forward
   ``(q*(t_{k+1}) - q*(t_k)) / dt``, the nominal leg lengths' change over the coming
   period. For a vision law it is the feature-rate

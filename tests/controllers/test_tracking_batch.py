@@ -75,10 +75,14 @@ def _batch(rows: list[Observation], trials: list[int]) -> ObservationBatch:
         values = [getattr(o, name) for o in rows]
         return None if values[0] is None else np.array(values)
 
+    image_t = [o.t if o.image_t is None else o.image_t for o in rows]
+    rates = [np.full(6, np.nan) if o.q_dot is None else o.q_dot for o in rows]
     return ObservationBatch(
         trials=np.array(trials), t=np.array([o.t for o in rows]), lengths=stack("lengths"),
         normals=stack("normals"), lines=stack("lines"), directions=stack("directions"),
-        edge_visible=stack("edge_visible"), direction_visible=stack("direction_visible"))
+        edge_visible=stack("edge_visible"), direction_visible=stack("direction_visible"),
+        image_t=np.array(image_t, dtype=float),
+        q_dot=None if all(o.q_dot is None for o in rows) else np.array(rates))
 
 
 def _same(a: CommandBatch, b: CommandBatch) -> None:
@@ -232,27 +236,29 @@ def _tracking_contexts(world: World, n: int) -> list[ControllerContext]:
     return out
 
 
-@pytest.mark.parametrize(("law", "options"), [
-    ("leg-edge", {}),
-    ("leg-direction", {}),
-    ("leg-edge-qp", {}),
-    ("model-based", {}),
-    ("joint-space", {}),
-    ("latency-compensated", {"law": "leg-edge"}),
+@pytest.mark.parametrize(("law", "options", "loop"), [
+    ("leg-edge", {}, False),
+    ("leg-direction", {}, False),
+    ("leg-edge-qp", {}, False),
+    ("model-based", {}, False),
+    ("joint-space", {}, False),
+    ("latency-compensated", {"law": "leg-edge"}, False),
+    ("leg-edge", {}, True),
 ])
 def test_tracking_batch_gives_the_rows_of_one_tracking_controller_per_trial(
-        law: str, options: dict[str, Any]) -> None:
+        law: str, options: dict[str, Any], loop: bool) -> None:
     """Four trials tracking their circles for 70 periods (past the references' end), with
     hidden edges at random, a row whose time is NaN, and a trial missing from some steps:
-    the commands of :class:`TrackingBatch` over the law's own batch are those of one
-    :class:`TrackingController` per trial, feed-forward included, to the last bit."""
+    the commands of :class:`TrackingBatch` over the law's own batch (or over a per-trial
+    loop) are those of one :class:`TrackingController` per trial, feed-forward included,
+    to the last bit."""
     world = _world("perspective")
     n = 4
     contexts = _tracking_contexts(world, n)
     opts = {**GAIN, **options}
-    inner = batch_controller(law, opts)
+    inner = batch_controller(law, opts, batched=not loop)
     assert tracks_in_batch(inner)
-    assert isinstance(inner, PerTrialLoop) == (law == "latency-compensated")
+    assert isinstance(inner, PerTrialLoop) == loop
     tracking = TrackingBatch(inner, name=law)
     tracking.reset_batch(contexts)
     singles = [TrackingController(registry.create(law, **opts)) for _ in range(n)]
