@@ -18,12 +18,12 @@ from controllers.base import (
     Controller,
     ControllerContext,
     Goal,
-    GoalBatch,
     Observation,
     ObservationBatch,
     usable_observation_problem,
 )
 from controllers.exceptions import ContextError
+from controllers.goal_batch import GoalBatch
 from controllers.laws import Gain
 
 

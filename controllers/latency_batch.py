@@ -20,7 +20,8 @@ from typing import Any
 
 import numpy as np
 
-from controllers.base import CommandBatch, ControllerContext, GoalBatch, ObservationBatch
+from controllers.base import CommandBatch, ControllerContext, ObservationBatch
+from controllers.goal_batch import GoalBatch
 
 
 class BatchedLatency:

@@ -23,9 +23,10 @@ from typing import Any
 
 import numpy as np
 
-from controllers.base import CommandBatch, ControllerContext, GoalBatch, ObservationBatch
+from controllers.base import CommandBatch, ControllerContext, ObservationBatch
 from controllers.batch import step_rows_per_trial
 from controllers.estimators import LegDirectionEstimate
+from controllers.goal_batch import GoalBatch
 from controllers.options import RemembersOptions
 from controllers.solvers.base import Solver
 

@@ -22,8 +22,9 @@ from typing import Any
 
 import numpy as np
 
-from controllers.base import ControllerContext, GoalBatch, Observation, ObservationBatch
+from controllers.base import ControllerContext, Observation, ObservationBatch
 from controllers.exceptions import ContextError
+from controllers.goal_batch import GoalBatch
 from controllers.interaction import (
     cross,
     edge_line_factors,

@@ -36,13 +36,13 @@ from controllers.base import (
     Controller,
     ControllerContext,
     Goal,
-    GoalBatch,
     Observation,
     ObservationBatch,
 )
 from controllers.batch import step_rows_per_trial
 from controllers.estimators import PoseEstimate
 from controllers.exceptions import ContextError
+from controllers.goal_batch import GoalBatch
 from controllers.interaction import cross
 from controllers.law_kernel import jacobi_eigen
 from controllers.law_tools import gain_formula

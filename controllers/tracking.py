@@ -43,7 +43,6 @@ from typing import Any
 import numpy as np
 
 from controllers.base import (
-    GOAL_FIELDS,
     Actuation,
     Command,
     Controller,
@@ -53,6 +52,7 @@ from controllers.base import (
 )
 from controllers.batch import actuation_of
 from controllers.exceptions import ContextError
+from controllers.goal_batch import GOAL_FIELDS
 
 log = logging.getLogger(__name__)
 

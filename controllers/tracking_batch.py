@@ -24,15 +24,14 @@ from typing import Any
 import numpy as np
 
 from controllers.base import (
-    GOAL_FIELDS,
     Actuation,
     Command,
     CommandBatch,
     ControllerContext,
-    GoalBatch,
     ObservationBatch,
 )
 from controllers.batch import PerTrialLoop, actuation_of
+from controllers.goal_batch import GOAL_FIELDS, GoalBatch
 from controllers.tracking import TrackingPlan, retarget, tracking_plan
 
 log = logging.getLogger(__name__)

@@ -10,8 +10,8 @@ from typing import Any
 import numpy as np
 import pytest
 
-from controllers.base import GoalBatch
 from controllers.batch import PerTrialLoop, batch_controller
+from controllers.goal_batch import GoalBatch
 from controllers.latency import LatencyCompensated
 from tests.controllers.controller_world import World, make_camera
 from tests.controllers.test_tracking_batch import _batch, _goal, _hidden, _observation, _same

@@ -18,12 +18,12 @@ from controllers.base import (
     CommandBatch,
     ControllerContext,
     Goal,
-    GoalBatch,
     Observation,
     ObservationBatch,
 )
 from controllers.batch import PerTrialLoop, batch_controller
 from controllers.exceptions import ContextError
+from controllers.goal_batch import GoalBatch
 from controllers.tracking import TrackingController
 from controllers.tracking_batch import TrackingBatch, tracks_in_batch
 from hexapod.trajectory import PoseTrajectory
