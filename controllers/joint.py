@@ -17,11 +17,13 @@ from controllers.base import (
     CommandBatch,
     Controller,
     ControllerContext,
+    Goal,
     Observation,
     ObservationBatch,
     usable_observation_problem,
 )
 from controllers.exceptions import ContextError
+from controllers.goal_batch import GoalBatch
 from controllers.laws import Gain
 
 
@@ -47,9 +49,17 @@ class JointSpaceController(Controller):
         Raises:
             ContextError: The goal has no valid lengths.
         """
-        if context.goal.lengths is None:
+        self.retarget(context.goal)
+
+    def retarget(self, goal: Goal) -> None:
+        """A new goal (the law keeps no other state: the same as :meth:`reset`).
+
+        Raises:
+            ContextError: The goal has no valid lengths.
+        """
+        if goal.lengths is None:
             raise ContextError(self.name, "goal.lengths", "missing")
-        qs = np.asarray(context.goal.lengths, dtype=float)
+        qs = np.asarray(goal.lengths, dtype=float)
         if qs.shape != (6,) or not np.all(np.isfinite(qs)):
             raise ContextError(self.name, "goal.lengths", f"expected 6 finite values, got {qs}")
         self._q_star = qs.copy()
@@ -74,6 +84,21 @@ class JointSpaceController(Controller):
             assert self._q_star is not None
             stars.append(self._q_star)
         self._b_q_star = np.array(stars).reshape(len(stars), 6)
+
+    def retarget_batch(self, trials: np.ndarray, goals: GoalBatch) -> None:
+        """New goals of some trials (row ``j`` for trial ``trials[j]``), as :meth:`retarget`.
+
+        Raises:
+            ContextError: A goal without 6 finite lengths.
+        """
+        trials = np.asarray(trials, dtype=int)
+        qs = None if goals.lengths is None else np.asarray(goals.lengths, dtype=float)
+        if qs is None or qs.shape != (len(trials), 6) or not np.all(np.isfinite(qs)):
+            for j, k in enumerate(trials.tolist()):  # one by one: the goal at fault raises
+                self.retarget(goals.item(j))
+                self._b_q_star[k] = self._q_star
+            return
+        self._b_q_star[trials] = qs
 
     def step_batch(self, observations: ObservationBatch) -> CommandBatch:
         """``q_dot = -lambda (q - q*)`` for every row (a row with non-finite lengths or

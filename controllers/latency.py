@@ -37,6 +37,7 @@ import numpy as np
 
 from controllers.base import Command, Controller, ControllerContext, Goal, Observation
 from controllers.batch import actuation_of
+from controllers.latency_batch import BatchedLatency
 from controllers.tracking import retarget
 
 log = logging.getLogger(__name__)
@@ -45,7 +46,83 @@ log = logging.getLogger(__name__)
 HISTORY = 512
 
 
-class LatencyCompensated(Controller):
+def move_normals(seen: np.ndarray, delta: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Image normals (..., 6, 2, 3) moved by the model's change ``delta`` and
+    renormalised (a NaN, unseen component stays; where the model's change is not finite
+    the image normal is kept), and the mask (..., 6, 2) of finite changes."""
+    delta_ok = np.all(np.isfinite(delta), axis=-1)
+    with np.errstate(invalid="ignore"):
+        moved = seen + np.where(delta_ok[..., None], delta, 0.0)
+        moved /= np.linalg.norm(moved, axis=-1, keepdims=True)
+    return np.where(np.isfinite(seen), moved, seen), delta_ok
+
+
+class EncoderHistory:
+    """The encoder readings of one trial (times, lengths, measured rates) and the last
+    pose of the nominal forward kinematics (its warm start).
+
+    Args:
+        use_rates: Interpolate with the measured rates when both readings have them.
+    """
+
+    def __init__(self, use_rates: bool = True) -> None:
+        self.use_rates = bool(use_rates)
+        self.times: deque[float] = deque(maxlen=HISTORY)
+        self.lengths: deque[np.ndarray] = deque(maxlen=HISTORY)
+        self.rates: deque[np.ndarray | None] = deque(maxlen=HISTORY)
+        #: The nominal pose at the last prediction's control instant, or None.
+        self.guess: tuple[np.ndarray, np.ndarray] | None = None
+
+    def clear(self) -> None:
+        """Forget the readings and the warm start."""
+        self.times.clear()
+        self.lengths.clear()
+        self.rates.clear()
+        self.guess = None
+
+    def record(self, observation: Observation) -> None:
+        """Keep the reading of an observation with 6 finite lengths and a finite time (a
+        time that goes back starts the history afresh)."""
+        q = np.asarray(observation.lengths, dtype=float)
+        t = float(observation.t)
+        if q.shape == (6,) and np.all(np.isfinite(q)) and math.isfinite(t):
+            if self.times and t <= self.times[-1]:
+                self.times.clear()
+                self.lengths.clear()
+                self.rates.clear()
+            self.times.append(t)
+            self.lengths.append(q.copy())
+            rate = None if observation.q_dot is None else np.array(observation.q_dot, float)
+            ok = rate is not None and rate.shape == (6,) and bool(np.all(np.isfinite(rate)))
+            self.rates.append(rate if ok else None)
+
+    def predicts(self, observation: Observation) -> bool:
+        """Whether the observation's image is older than its (recorded) control instant."""
+        image_t = observation.image_t
+        t = float(observation.t)
+        return not (image_t is None or not math.isfinite(float(image_t))
+                    or image_t >= t - 1e-12 or not self.times or self.times[-1] != t)
+
+    def lengths_at(self, time: float) -> np.ndarray:
+        """The encoder lengths at ``time``, interpolated between readings."""
+        times = np.fromiter(self.times, dtype=float, count=len(self.times))
+        j = int(np.searchsorted(times, time, side="right")) - 1
+        if j < 0:
+            return np.array(self.lengths[0])
+        if j >= len(times) - 1:
+            return np.array(self.lengths[-1])
+        a, b = self.lengths[j], self.lengths[j + 1]
+        h = times[j + 1] - times[j]
+        frac = (time - times[j]) / h
+        va, vb = self.rates[j], self.rates[j + 1]
+        if self.use_rates and va is not None and vb is not None:  # cubic Hermite
+            s2, s3 = frac * frac, frac * frac * frac
+            return ((2 * s3 - 3 * s2 + 1) * a + (s3 - 2 * s2 + frac) * h * va  # type: ignore[no-any-return]
+                    + (3 * s2 - 2 * s3) * b + (s3 - s2) * h * vb)
+        return a + frac * (b - a)  # type: ignore[no-any-return]
+
+
+class LatencyCompensated(BatchedLatency, Controller):
     """A law whose image features are predicted over the image's delay (see the module
     docstring).
 
@@ -70,11 +147,10 @@ class LatencyCompensated(Controller):
         #: :class:`~controllers.tracking.TrackingController`, and so is its wrapper.
         self.tracks_reference = bool(getattr(self.law, "tracks_reference", False))
         self.context: ControllerContext | None = None
-        self._times: deque[float] = deque(maxlen=HISTORY)
-        self._lengths: deque[np.ndarray] = deque(maxlen=HISTORY)
-        self._rates: deque[np.ndarray | None] = deque(maxlen=HISTORY)
         self.use_rates = bool(use_rates)
-        self._guess: tuple[np.ndarray, np.ndarray] | None = None
+        self._law_options = dict(options)
+        #: The encoder readings and the forward kinematics' warm start.
+        self.history = EncoderHistory(self.use_rates)
         self._params: Any = None  # the model's packed observation parameters
 
     def reset(self, context: ControllerContext) -> None:
@@ -82,10 +158,7 @@ class LatencyCompensated(Controller):
         self.law.reset(context)
         self.features = frozenset(getattr(self.law, "features", self.features)) | {"lengths"}
         self.context = context
-        self._times.clear()
-        self._lengths.clear()
-        self._rates.clear()
-        self._guess = None
+        self.history.clear()
         self._params = None
 
     def retarget(self, goal: Goal) -> None:
@@ -100,23 +173,11 @@ class LatencyCompensated(Controller):
         if self.context is None:
             return Command.refuse(f"{self.name}: reset(context) was not called",
                                   actuation=self.actuation)
-        q = np.asarray(observation.lengths, dtype=float)
-        t = float(observation.t)
-        if q.shape == (6,) and np.all(np.isfinite(q)) and math.isfinite(t):
-            if self._times and t <= self._times[-1]:
-                self._times.clear()
-                self._lengths.clear()
-                self._rates.clear()
-            self._times.append(t)
-            self._lengths.append(q.copy())
-            rate = None if observation.q_dot is None else np.array(observation.q_dot, float)
-            ok = rate is not None and rate.shape == (6,) and bool(np.all(np.isfinite(rate)))
-            self._rates.append(rate if ok else None)
-        image_t = observation.image_t
-        if (image_t is None or not math.isfinite(float(image_t)) or image_t >= t - 1e-12
-                or not self._times or self._times[-1] != t):
+        history = self.history
+        history.record(observation)
+        if not history.predicts(observation):
             return self.law.step(observation)  # type: ignore[no-any-return]
-        predicted, note = self._predict(observation, float(image_t))
+        predicted, note = self._predict(observation, float(observation.image_t))  # type: ignore[arg-type]
         cmd: Command = self.law.step(predicted)
         if note:
             cmd.notes.append(note)
@@ -124,21 +185,7 @@ class LatencyCompensated(Controller):
 
     def _lengths_at(self, time: float) -> np.ndarray:
         """The encoder lengths at ``time``, interpolated between readings."""
-        times = np.fromiter(self._times, dtype=float, count=len(self._times))
-        j = int(np.searchsorted(times, time, side="right")) - 1
-        if j < 0:
-            return np.array(self._lengths[0])
-        if j >= len(times) - 1:
-            return np.array(self._lengths[-1])
-        a, b = self._lengths[j], self._lengths[j + 1]
-        h = times[j + 1] - times[j]
-        frac = (time - times[j]) / h
-        va, vb = self._rates[j], self._rates[j + 1]
-        if self.use_rates and va is not None and vb is not None:  # cubic Hermite
-            s2, s3 = frac * frac, frac * frac * frac
-            return ((2 * s3 - 3 * s2 + 1) * a + (s3 - 2 * s2 + frac) * h * va  # type: ignore[no-any-return]
-                    + (3 * s2 - 2 * s3) * b + (s3 - s2) * h * vb)
-        return a + frac * (b - a)  # type: ignore[no-any-return]
+        return self.history.lengths_at(time)
 
     def _model_normals(self, R: np.ndarray, t: np.ndarray) -> np.ndarray:
         """(n, 6, 2, 3) edge normals the estimated camera sees of the nominal robot at
@@ -172,21 +219,17 @@ class LatencyCompensated(Controller):
             return obs, "latency not compensated: no camera model or no edge normals"
         q = np.stack([self._lengths_at(image_t), np.asarray(obs.lengths, dtype=float)])
         guess_R = guess_t = None
-        if self._guess is not None:
-            guess_R = np.repeat(self._guess[0][None], 2, axis=0)
-            guess_t = np.repeat(self._guess[1][None], 2, axis=0)
+        guess = self.history.guess
+        if guess is not None:
+            guess_R = np.repeat(guess[0][None], 2, axis=0)
+            guess_t = np.repeat(guess[1][None], 2, axis=0)
         sol = forward_kinematics_batch(ctx.geometry, q, guess_R, guess_t)
         if not np.all(sol.converged):
             return obs, "latency not compensated: nominal forward kinematics failed"
-        self._guess = (sol.rotations[1].copy(), sol.translations[1].copy())
+        self.history.guess = (sol.rotations[1].copy(), sol.translations[1].copy())
         model_normals = self._model_normals(sol.rotations, sol.translations)
-        delta = model_normals[1] - model_normals[0]
-        delta_ok = np.all(np.isfinite(delta), axis=-1)
-        seen = np.asarray(obs.normals, dtype=float)
-        with np.errstate(invalid="ignore"):
-            moved = seen + np.where(delta_ok[..., None], delta, 0.0)
-            moved /= np.linalg.norm(moved, axis=-1, keepdims=True)
-        normals = np.where(np.isfinite(seen), moved, seen)
+        normals, delta_ok = move_normals(np.asarray(obs.normals, dtype=float),
+                                         model_normals[1] - model_normals[0])
         lines = obs.lines
         if lines is not None and getattr(camera, "kind", None) == "perspective":
             with np.errstate(invalid="ignore"):

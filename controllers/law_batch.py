@@ -26,6 +26,7 @@ import numpy as np
 from controllers.base import CommandBatch, ControllerContext, ObservationBatch
 from controllers.batch import step_rows_per_trial
 from controllers.estimators import LegDirectionEstimate
+from controllers.goal_batch import GoalBatch
 from controllers.options import RemembersOptions
 from controllers.solvers.base import Solver
 
@@ -45,6 +46,13 @@ class BatchedLaw(RemembersOptions):
         """The rows' measured features for the compiled core, (n, F), and the mask (n,)
         of rows whose features are all visible. (None, None): no compiled core."""
         return None, None
+
+    def _batch_desired(self, goals: GoalBatch) -> tuple[np.ndarray | None, np.ndarray]:
+        """The compiled core's desired-feature input of each goal, (m, D), and the mask
+        (m,) of goals that the law would read into exactly that with its compiled core
+        (every feature visible and finite, the CURRENT interaction). (None, mask): no
+        such shortcut; every goal then goes through its instance's ``retarget``."""
+        return None, np.zeros(len(goals), dtype=bool)
 
     def _batch_reset_extra(self) -> None:
         """Per-trial constants of subclasses (the solver's are gathered by
@@ -66,18 +74,74 @@ class BatchedLaw(RemembersOptions):
             inst.estimate = self.batch_estimate.row(k)
         kernels = [t.kernel for t in trials]
         self._has_kernel = np.array([k is not None for k in kernels], dtype=bool)
+        #: Rows of ``_X`` holding a compiled core's constants (a retarget may then write
+        #: the desired features alone).
+        self._x_ready = self._has_kernel.copy()
+        #: Goals given to ``retarget_batch`` not yet read by the trial's instance.
+        self._pending: dict[int, tuple[GoalBatch, int]] = {}
         self._fn = None
-        if self._has_kernel.any():
-            first = next(k for k in kernels if k is not None)
-            self._fn = first.lean_function
-            self._slices = first.slices
-            self._outs = first.outputs
-            self._X = np.zeros((n, first.function.n_in))
-            for k, kern in enumerate(kernels):
-                if kern is not None:
-                    self._X[k] = kern.input_vector
+        for k, kern in enumerate(kernels):
+            self._take_kernel(k, kern)
         self.solver.batch_reset([t.solver for t in trials])
         self._batch_reset_extra()
+
+    def _take_kernel(self, trial: int, kern: Any) -> None:
+        """Copy a trial's compiled-core inputs into its row of the batch's inputs."""
+        if kern is None:
+            return
+        if self._fn is None:
+            self._fn = kern.lean_function
+            self._slices = kern.slices
+            self._outs = kern.outputs
+            self._X = np.zeros((len(self._trials), kern.function.n_in))
+        self._X[trial] = kern.input_vector
+        self._x_ready[trial] = True
+
+    # ------------------------------------------------------------------ retarget
+    def retarget_batch(self, trials: np.ndarray, goals: GoalBatch) -> None:
+        """New goals for some trials (row ``j`` of ``goals`` for trial ``trials[j]``),
+        keeping their state, as each instance's ``retarget``.
+
+        A goal that the compiled core takes as it is (:meth:`_batch_desired`) is written
+        into the batch's inputs at once and read by the instance only when that trial
+        next needs it (a row the core cannot finish); any other goal is read by the
+        instance now.
+
+        Raises:
+            ContextError: A goal the law cannot use (as ``retarget``).
+        """
+        trials = np.asarray(trials, dtype=int)
+        desired, quick = self._batch_desired(goals)
+        if desired is not None and self._fn is not None:
+            quick = quick & self._x_ready[trials]
+            rows = np.flatnonzero(quick)
+            if len(rows):
+                tr = trials[rows]
+                self._X[tr, self._slices["desired"]] = desired[rows]
+                self._has_kernel[tr] = True
+                for j, k in zip(rows.tolist(), tr.tolist(), strict=True):
+                    self._pending[k] = (goals, j)
+        else:
+            quick = np.zeros(len(trials), dtype=bool)
+        for j in np.flatnonzero(~quick).tolist():
+            k = int(trials[j])
+            self._pending.pop(k, None)
+            self._retarget_instance(k, goals.item(j))
+
+    def _retarget_instance(self, trial: int, goal: Any) -> None:
+        inst = self._trials[trial]
+        inst.retarget(goal)
+        kern = inst.kernel
+        self._has_kernel[trial] = kern is not None
+        self._take_kernel(trial, kern)
+
+    def _apply_pending(self, trials: np.ndarray) -> None:
+        """Let the instances of ``trials`` read the goals they were given."""
+        for k in np.asarray(trials, dtype=int).tolist():
+            pending = self._pending.pop(k, None)
+            if pending is not None:
+                goals, j = pending
+                self._retarget_instance(k, goals.item(j))
 
     # ------------------------------------------------------------------ step
     def step_batch(self, observations: ObservationBatch) -> CommandBatch:
@@ -99,7 +163,10 @@ class BatchedLaw(RemembersOptions):
                 done = self._fast(rows, trials[rows], feats[rows], q[rows], out.velocities,
                                   out.error_norm)
                 slow[rows[done]] = False
-        step_rows_per_trial(self._trials, obs, trials, np.flatnonzero(slow), out)
+        slow_rows = np.flatnonzero(slow)
+        if self._pending and len(slow_rows):
+            self._apply_pending(trials[slow_rows])
+        step_rows_per_trial(self._trials, obs, trials, slow_rows, out)
         return out
 
     def _fast(self, rows: np.ndarray, trials: np.ndarray, feats: np.ndarray, q: np.ndarray,

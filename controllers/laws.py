@@ -29,8 +29,8 @@ from __future__ import annotations
 import logging
 import math
 from abc import abstractmethod
-from collections.abc import Sequence
-from dataclasses import dataclass
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -38,6 +38,7 @@ from controllers.base import (
     Command,
     Controller,
     ControllerContext,
+    Goal,
     Observation,
 )
 from controllers.estimators import LegDirectionEstimate, PoseEstimate
@@ -140,6 +141,7 @@ class VisionLaw(BatchedLaw, Controller):
         #: Compiled core of the common case (:mod:`controllers.law_kernel`), set by the
         #: subclass in :meth:`_reset_features`; None: numpy path only.
         self.kernel: LawKernel | None = None
+        self._spare_kernel: LawKernel | None = None
 
     # ----------------------------------------------------------------- reset
     def reset(self, context: ControllerContext) -> None:
@@ -160,22 +162,84 @@ class VisionLaw(BatchedLaw, Controller):
         self._dt = dt
         self.estimate = LegDirectionEstimate.fresh()
         self.model_pose = None
-        q_star = context.goal.lengths
-        self._q_star: np.ndarray | None = None
-        if q_star is not None:
-            qs = np.asarray(q_star, dtype=float)
-            if qs.shape != (6,) or not np.all(np.isfinite(qs)) or np.any(qs <= 0):
-                raise ContextError(self.name, "goal.lengths",
-                                   f"expected 6 positive finite lengths, got {qs}")
-            self._q_star = qs
+        self._q_star: np.ndarray | None = self._goal_lengths(context.goal)
         self.kernel = None
+        self._spare_kernel = None
         self._reset_features(context)
         self.solver.reset(context, self.name, dt)
+        self._configure_kernel()
+
+    def retarget(self, goal: Goal) -> None:
+        """A new goal, keeping what the law carries between periods (the goal of each
+        period of a trajectory task, :mod:`controllers.tracking`).
+
+        The desired features and lengths become the goal's, exactly as :meth:`reset`
+        would set them; the leg-direction estimate (the dead-reckoned directions of
+        hidden legs and the last commanded twist), the forward-kinematics warm start and
+        the solver's state stay: the goal moved, the robot did not. The compiled core is
+        kept (its desired features rewritten) when the new goal still allows it.
+
+        Raises:
+            ContextError: :meth:`reset` was not called, or the goal is invalid (as in
+                :meth:`reset`; the law then keeps its previous goal).
+        """
+        if self.context is None:
+            raise ContextError(self.name, "context", "retarget(goal) before reset(context)")
+        context = replace(self.context, goal=goal)
+        q_star = self._goal_lengths(goal)
+        state = self._goal_state()
+        self._q_star = q_star
+        self._spare_kernel, self.kernel = self.kernel, None
+        try:
+            self._retarget_features(context)
+        except ContextError:
+            self._restore_goal_state(state)
+            raise
+        finally:
+            self._spare_kernel = None
+        self.context = context
+        self._configure_kernel()
+
+    def _goal_lengths(self, goal: Goal) -> np.ndarray | None:
+        """``goal.lengths`` checked (None when the goal has none).
+
+        Raises:
+            ContextError: Not 6 positive finite lengths.
+        """
+        if goal.lengths is None:
+            return None
+        qs = np.asarray(goal.lengths, dtype=float)
+        if qs.shape != (6,) or not np.all(np.isfinite(qs)) or np.any(qs <= 0):
+            raise ContextError(self.name, "goal.lengths",
+                               f"expected 6 positive finite lengths, got {qs}")
+        return qs
+
+    def _configure_kernel(self) -> None:
+        """Write the gain, threshold and damping into the compiled core (if any)."""
         if self.kernel is not None:
             g = self.gain
             self.kernel.set("gain", (g.at_zero, g.at_infinity, g.slope_at_zero))
             self.kernel.set("threshold2", self.threshold * self.threshold)
             self.kernel.set("damping2", self.solver.damping2)
+
+    def _reuse_kernel(self, make: Callable[[], LawKernel]) -> LawKernel:
+        """The compiled core for :meth:`_reset_features`: the one kept by
+        :meth:`retarget` (same law, same camera), else ``make()``."""
+        spare, self._spare_kernel = self._spare_kernel, None
+        return spare if spare is not None else make()
+
+    def _retarget_features(self, context: ControllerContext) -> None:
+        """Read the desired features of a new goal (:meth:`retarget`); subclasses skip
+        what does not depend on the goal."""
+        self._reset_features(context)
+
+    def _goal_state(self) -> dict[str, object]:
+        """What :meth:`_retarget_features` may change (restored when it fails)."""
+        return dict(vars(self))
+
+    def _restore_goal_state(self, state: dict[str, object]) -> None:
+        vars(self).clear()
+        vars(self).update(state)
 
     @property
     def base_points(self) -> np.ndarray:

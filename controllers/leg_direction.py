@@ -14,6 +14,7 @@ import numpy as np
 
 from controllers.base import ControllerContext, Observation, ObservationBatch
 from controllers.exceptions import ContextError
+from controllers.goal_batch import GoalBatch
 from controllers.interaction import cross, direction_task
 from controllers.law_kernel import direction_kernel
 from controllers.laws import Stack, VisionLaw
@@ -66,7 +67,7 @@ class LegDirectionController(VisionLaw):
         # Fill value for hidden directions: the desired ones (keeps the arithmetic finite).
         self._fill = np.where(vis[:, None], us, np.array([0.0, 0.0, 1.0]))
         if self.compiled and self.interaction == "current" and vis.all():
-            kernel = direction_kernel()
+            kernel = self._reuse_kernel(direction_kernel)
             kernel.set("desired", us)
             kernel.set("base_points", self._A)
             self.kernel = kernel
@@ -89,6 +90,21 @@ class LegDirectionController(VisionLaw):
         n = len(obs)
         vis = np.all(np.asarray(obs.direction_visible, dtype=bool).reshape(n, 6), axis=1)
         return np.asarray(obs.directions, dtype=float).reshape(n, 18), vis
+
+    def _batch_desired(self, goals: GoalBatch) -> tuple[np.ndarray | None, np.ndarray]:
+        """The goals' directions as the compiled core's desired input, where all six are
+        finite unit vectors: what :meth:`_reset_features` reads then."""
+        m = len(goals)
+        d = goals.directions
+        if d is None or not self.compiled or self.interaction != "current":
+            return None, np.zeros(m, dtype=bool)
+        us = np.asarray(d, dtype=float)
+        if us.shape != (m, 6, 3):
+            return None, np.zeros(m, dtype=bool)  # the instances say what is wrong
+        with np.errstate(invalid="ignore"):
+            ok = np.isfinite(us).reshape(m, 18).all(axis=1)
+            ok &= (np.abs(np.linalg.norm(us, axis=-1) - 1.0) <= 1e-6).all(axis=1)
+        return us.reshape(m, 18), ok
 
     def _load_kernel(self, obs: Observation, q: np.ndarray) -> bool:
         vis = obs.direction_visible

@@ -24,6 +24,7 @@ import numpy as np
 
 from controllers.base import ControllerContext, Observation, ObservationBatch
 from controllers.exceptions import ContextError
+from controllers.goal_batch import GoalBatch
 from controllers.interaction import (
     cross,
     edge_line_factors,
@@ -91,6 +92,11 @@ class LegEdgeController(VisionLaw):
             self._K = K
             self._K_inv_t = np.linalg.inv(K).T
         self.features = frozenset({"lengths", "lines" if self.use_lines else "normals"})
+        self._A2 = np.repeat(self._A, 2, axis=0)
+        self._retarget_features(context)
+
+    def _retarget_features(self, context: ControllerContext) -> None:
+        """The desired edges of ``context.goal`` (the camera part of the reset stays)."""
         goal = context.goal
         vis = np.ones((6, 2), dtype=bool)
         if goal.edge_visible is not None:
@@ -148,9 +154,8 @@ class LegEdgeController(VisionLaw):
         self._fill = fill
         if self.use_lines:
             self._l_fill = _unit(fill @ self._K_inv_t.T)
-        self._A2 = np.repeat(self._A, 2, axis=0)
         if self.compiled and self.interaction == "current" and vis.all():
-            kernel = edge_law_kernel(self.use_lines)
+            kernel = self._reuse_kernel(lambda: edge_law_kernel(self.use_lines))
             kernel.set("desired", self._l_star if self.use_lines else self._n_star)
             kernel.set("K", self._K)
             kernel.set("K_inv", self._K_inv_t.T)
@@ -272,6 +277,30 @@ class LegEdgeController(VisionLaw):
         n = len(obs)
         vis = np.all(np.asarray(obs.edge_visible, dtype=bool).reshape(n, 12), axis=1)
         return np.asarray(arr, dtype=float).reshape(n, 36), vis
+
+    def _batch_desired(self, goals: GoalBatch) -> tuple[np.ndarray | None, np.ndarray]:
+        """The goals' lines (or normals) as the compiled core's desired input, where every
+        edge of the goal is visible and finite (and the goal gives both its lines and its
+        normals in pixel-line mode): what :meth:`_retarget_features` reads then."""
+        m = len(goals)
+        uses = getattr(self, "_batch_uses_lines", None)
+        n_star = goals.normals
+        if (uses is None or not self.compiled or self.interaction != "current"
+                or n_star is None or (uses and goals.lines is None)):
+            return None, np.zeros(m, dtype=bool)
+        star = goals.lines if uses else n_star
+        assert star is not None
+        vis_shape = (m, 6, 2) if goals.edge_visible is None else np.shape(goals.edge_visible)
+        if (np.shape(n_star) != (m, 6, 2, 3) or np.shape(star) != (m, 6, 2, 3)
+                or vis_shape != (m, 6, 2)):
+            return None, np.zeros(m, dtype=bool)  # the instances say what is wrong
+        with np.errstate(invalid="ignore"):
+            ok = np.isfinite(n_star).reshape(m, 36).all(axis=1)
+            if uses:
+                ok &= np.isfinite(star).reshape(m, 36).all(axis=1)
+        if goals.edge_visible is not None:
+            ok &= np.asarray(goals.edge_visible, dtype=bool).reshape(m, 12).all(axis=1)
+        return np.asarray(star, dtype=float).reshape(m, 36), ok
 
     def _load_kernel(self, obs: Observation, q: np.ndarray) -> bool:
         vis = obs.edge_visible

@@ -23,6 +23,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Sequence
+from dataclasses import replace
 from functools import lru_cache
 from typing import Any
 
@@ -34,12 +35,14 @@ from controllers.base import (
     CommandBatch,
     Controller,
     ControllerContext,
+    Goal,
     Observation,
     ObservationBatch,
 )
 from controllers.batch import step_rows_per_trial
 from controllers.estimators import PoseEstimate
 from controllers.exceptions import ContextError
+from controllers.goal_batch import GoalBatch
 from controllers.interaction import cross
 from controllers.law_kernel import jacobi_eigen
 from controllers.law_tools import gain_formula
@@ -48,6 +51,7 @@ from controllers.options import RemembersOptions
 from hexapod.compiled import CompiledFunction
 from hexapod.exceptions import HexapodError
 from hexapod.fk import forward_kinematics, forward_kinematics_batch
+from hexapod.geometry import HexapodGeometry
 from hexapod.kinematics import Transform, twist_to_frame
 from hexapod.se3 import log_so3
 from hexapod.workspace import home_pose
@@ -152,26 +156,7 @@ class ModelBasedController(RemembersOptions, Controller):
             ContextError: No goal pose and no goal lengths, or invalid values.
         """
         geo = context.geometry
-        goal = context.goal
-        if goal.rotation is not None and goal.translation is not None:
-            R = np.asarray(goal.rotation, dtype=float)
-            t = np.asarray(goal.translation, dtype=float)
-            if R.shape != (3, 3) or t.shape != (3,) or not (np.all(np.isfinite(R))
-                                                            and np.all(np.isfinite(t))):
-                raise ContextError(self.name, "goal.rotation/translation",
-                                   "expected a finite (3, 3) rotation and (3,) translation")
-            if np.abs(R.T @ R - np.eye(3)).max() > 1e-6:
-                raise ContextError(self.name, "goal.rotation", "not a rotation matrix")
-        elif goal.lengths is not None:
-            try:
-                sol = forward_kinematics(geo, np.asarray(goal.lengths, dtype=float),
-                                         check_stroke=False)
-            except (HexapodError, ValueError) as exc:
-                raise ContextError(self.name, "goal.lengths",
-                                   f"no nominal pose for them: {exc}") from None
-            R, t = sol.rotation, sol.translation
-        else:
-            raise ContextError(self.name, "goal", "needs rotation and translation (or lengths)")
+        R, t = self._goal_pose(context.goal, geo)
         self.context = context
         self._R_star, self._t_star = R.copy(), t.copy()
         #: The last pose of the forward kinematics (its next warm start).
@@ -194,6 +179,50 @@ class ModelBasedController(RemembersOptions, Controller):
         cam_pose = self._camera_from_base
         x[_IN["Rc"]] = (np.eye(3) if cam_pose is None else cam_pose.rotation).reshape(9)
         x[_IN["pc"]] = 0.0 if cam_pose is None else cam_pose.translation
+
+    def retarget(self, goal: Goal) -> None:
+        """A new goal pose, keeping the forward kinematics' warm start (the goal of each
+        period of a trajectory task, :mod:`controllers.tracking`).
+
+        Raises:
+            ContextError: :meth:`reset` was not called, or the goal is invalid (as in
+                :meth:`reset`).
+        """
+        if self.context is None:
+            raise ContextError(self.name, "context", "retarget(goal) before reset(context)")
+        R, t = self._goal_pose(goal, self.context.geometry)
+        self.context = replace(self.context, goal=goal)
+        self._R_star, self._t_star = R.copy(), t.copy()
+        self.servo_input[_IN["R_star"]] = self._R_star.reshape(9)
+        self.servo_input[_IN["t_star"]] = self._t_star
+
+    def _goal_pose(self, goal: Goal, geo: HexapodGeometry) -> tuple[np.ndarray, np.ndarray]:
+        """The goal pose: ``goal.rotation`` and ``goal.translation``, else the nominal
+        forward kinematics of ``goal.lengths``.
+
+        Raises:
+            ContextError: Neither, or invalid values.
+        """
+        if goal.rotation is not None and goal.translation is not None:
+            R = np.asarray(goal.rotation, dtype=float)
+            t = np.asarray(goal.translation, dtype=float)
+            if R.shape != (3, 3) or t.shape != (3,) or not (np.all(np.isfinite(R))
+                                                            and np.all(np.isfinite(t))):
+                raise ContextError(self.name, "goal.rotation/translation",
+                                   "expected a finite (3, 3) rotation and (3,) translation")
+            if np.abs(R.T @ R - np.eye(3)).max() > 1e-6:
+                raise ContextError(self.name, "goal.rotation", "not a rotation matrix")
+        elif goal.lengths is not None:
+            try:
+                sol = forward_kinematics(geo, np.asarray(goal.lengths, dtype=float),
+                                         check_stroke=False)
+            except (HexapodError, ValueError) as exc:
+                raise ContextError(self.name, "goal.lengths",
+                                   f"no nominal pose for them: {exc}") from None
+            R, t = sol.rotation, sol.translation
+        else:
+            raise ContextError(self.name, "goal", "needs rotation and translation (or lengths)")
+        return R, t
 
     def step(self, observation: Observation) -> Command:
         """Forward kinematics, pose error, twist, ``q_dot = J_inv(nominal) tau``."""
@@ -266,6 +295,18 @@ class ModelBasedController(RemembersOptions, Controller):
         self._b_geometry = trials[0].context.geometry if trials and trials[0].context else None
         self._b_X = np.array([t.servo_input for t in trials]) if trials else np.zeros((0, 75))
         self._b_kernel = bool(trials) and all(t.kernel is not None for t in trials)
+
+    def retarget_batch(self, trials: np.ndarray, goals: GoalBatch) -> None:
+        """New goals of some trials (row ``j`` for trial ``trials[j]``): each instance's
+        :meth:`retarget`, the batch's servo inputs updated.
+
+        Raises:
+            ContextError: A goal the law cannot use.
+        """
+        for j, k in enumerate(np.asarray(trials, dtype=int).tolist()):
+            inst = self._trials[k]
+            inst.retarget(goals.item(j))
+            self._b_X[k] = inst.servo_input
 
     def step_batch(self, observations: ObservationBatch) -> CommandBatch:
         """Forward kinematics of every row in one batch (warm-started per trial), the

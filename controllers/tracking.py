@@ -15,9 +15,10 @@ built for a fixed goal:
   Nothing is taught along the path: under a calibration error the features in between
   carry the model's error of the feature CHANGE, and the end of the path is the taught
   goal, reached as accurately as by a point-to-point task;
-- the controller is retargeted to that goal every period (its ``retarget(goal)`` when it
-  has one, else ``reset`` with the new goal: the law's state, such as the dead-reckoned
-  directions of hidden legs, starts afresh);
+- the controller is retargeted to that goal every period: its ``retarget(goal)`` when it
+  has one (the built-in vision laws keep their state: the dead-reckoned directions of
+  hidden legs, the last twist, the warm starts; the goal moved, the robot did not), else
+  ``reset`` with the new goal (the law's state starts afresh);
 - a velocity command (not a force command) gets the feed-forward
   ``(q*(t_{k+1}) - q*(t_k)) / dt``, the nominal leg lengths' change over the coming
   period. For a vision law it is the feature-rate
@@ -36,7 +37,7 @@ from __future__ import annotations
 
 import logging
 import math
-from dataclasses import replace
+from dataclasses import dataclass, replace
 from typing import Any
 
 import numpy as np
@@ -51,6 +52,7 @@ from controllers.base import (
 )
 from controllers.batch import actuation_of
 from controllers.exceptions import ContextError
+from controllers.goal_batch import GOAL_FIELDS
 
 log = logging.getLogger(__name__)
 
@@ -123,10 +125,72 @@ def retarget(controller: Any, context: ControllerContext) -> None:
         controller.reset(context)
 
 
+@dataclass
+class TrackingPlan:
+    """The goals of one trial on the control grid, up to the reference's end (computed
+    once, at reset).
+
+    Attributes:
+        dt: Control period [s].
+        goals: The goal fields (:data:`controllers.base.GOAL_FIELDS`), (steps, ...)
+            arrays, or None when the context gives no such feature.
+        q_rate: (steps, 6) the feed-forward ``(q*(t_{k+1}) - q*(t_k)) / dt`` [m/s] (zero
+            at the last period).
+    """
+
+    dt: float
+    goals: dict[str, np.ndarray | None]
+    q_rate: np.ndarray
+
+    @property
+    def steps(self) -> int:
+        """Periods of the grid."""
+        return len(self.q_rate)
+
+    def goal(self, k: int) -> Goal:
+        """The goal of period ``k``."""
+        return Goal(**{name: None if arr is None else arr[k]
+                       for name, arr in self.goals.items()})
+
+    def period(self, t: float) -> int:
+        """The period of time ``t`` [s] (finite), clipped to the grid."""
+        return min(max(round(t / self.dt), 0), self.steps - 1)
+
+
+def tracking_plan(context: ControllerContext, name: str) -> TrackingPlan:
+    """The goals of ``context.reference`` on the control grid (see the module docstring).
+
+    Raises:
+        ContextError: The period is not positive, the reference cannot be sampled, or
+            its nominal inverse kinematics is not finite.
+    """
+    reference = context.reference
+    dt = float(context.dt)
+    if not (math.isfinite(dt) and dt > 0):
+        raise ContextError(name, "dt", f"must be positive and finite, got {dt}")
+    steps = math.ceil(float(reference.duration) / dt) + 2
+    times = dt * np.arange(steps)
+    goals = reference_goals(context, times)
+    anchor_goals(goals, context.goal)
+    q = goals["lengths"]
+    if not np.all(np.isfinite(q)):
+        raise ContextError(name, "reference", "the nominal inverse kinematics of the "
+                           "reference is not finite")
+    q_rate = np.zeros((steps, 6))
+    q_rate[:-1] = np.diff(q, axis=0) / dt
+    return TrackingPlan(dt, {key: goals.get(key) for key in GOAL_FIELDS}, q_rate)
+
+
+def tracks_itself(controller: Any) -> bool:
+    """Whether a controller samples ``context.reference`` itself (then passed through)."""
+    return bool(getattr(controller, "tracks_reference", False))
+
+
 class TrackingController(Controller):
     """Any controller made to track ``context.reference`` (see the module docstring).
 
-    Without a reference in the context it is the wrapped controller, unchanged.
+    Without a reference in the context it is the wrapped controller, unchanged. Many
+    trials at once: :class:`controllers.tracking_batch.TrackingBatch`.
 
     Args:
         inner: The controller (reset and stepped through this wrapper only).
@@ -141,9 +205,8 @@ class TrackingController(Controller):
         self.actuation = actuation_of(inner)
         self.feed_forward = bool(feed_forward)
         self._contexts: list[ControllerContext] = []
-        self._q_rate = np.zeros((0, 6))
+        self._plan: TrackingPlan | None = None
         self._k = -1
-        self._dt = 0.0
 
     def reset(self, context: ControllerContext) -> None:
         """Compute the goals of the control grid up to the reference's end and reset the
@@ -154,49 +217,31 @@ class TrackingController(Controller):
         """
         reference = getattr(context, "reference", None)
         self._contexts = []
+        self._plan = None
         self._k = -1
-        if reference is None or getattr(self.inner, "tracks_reference", False):
+        if reference is None or tracks_itself(self.inner):
             self.inner.reset(context)
             return
-        dt = float(context.dt)
-        if not (math.isfinite(dt) and dt > 0):
-            raise ContextError(self.name, "dt", f"must be positive and finite, got {dt}")
-        self._dt = dt
-        steps = math.ceil(float(reference.duration) / dt) + 2
-        times = dt * np.arange(steps)
-        goals = reference_goals(context, times)
-        anchor_goals(goals, context.goal)
-        q = goals["lengths"]
-        if not np.all(np.isfinite(q)):
-            raise ContextError(self.name, "reference", "the nominal inverse kinematics of the "
-                               "reference is not finite")
-        self._q_rate = np.zeros((steps, 6))
-        self._q_rate[:-1] = np.diff(q, axis=0) / dt
-        for k in range(steps):
-            goal = Goal(
-                normals=goals.get("normals", [None] * steps)[k],
-                lines=None if goals.get("lines") is None else goals["lines"][k],
-                directions=goals.get("directions", [None] * steps)[k],
-                lengths=q[k], rotation=goals["rotation"][k],
-                translation=goals["translation"][k],
-                edge_visible=goals.get("edge_visible", [None] * steps)[k])
-            self._contexts.append(replace(context, goal=goal))
+        plan = tracking_plan(context, self.name)
+        self._contexts = [replace(context, goal=plan.goal(k)) for k in range(plan.steps)]
+        self._plan = plan
         self._k = 0
         self.inner.reset(self._contexts[0])
 
     def step(self, observation: Observation) -> Command:
         """The wrapped controller's command for the goal of this period, plus the
         feed-forward."""
-        if not self._contexts:
+        plan = self._plan
+        if plan is None:
             return self.inner.step(observation)  # type: ignore[no-any-return]
         t = float(observation.t)
         if not math.isfinite(t):
-            return Command.refuse(f"time is {t} (not finite)")
-        k = min(max(round(t / self._dt), 0), len(self._contexts) - 1)
+            return Command.refuse(f"time is {t} (not finite)", actuation=self.actuation)
+        k = plan.period(t)
         if k != self._k:
             retarget(self.inner, self._contexts[k])
             self._k = k
         cmd: Command = self.inner.step(observation)
         if self.feed_forward and cmd.reason is None and cmd.actuation is Actuation.VELOCITY:
-            cmd.velocities = np.asarray(cmd.velocities, dtype=float) + self._q_rate[k]
+            cmd.velocities = np.asarray(cmd.velocities, dtype=float) + plan.q_rate[k]
         return cmd

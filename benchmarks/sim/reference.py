@@ -84,11 +84,28 @@ def task_controller(sc: Scenario, spec: Any) -> Any:
 
 
 def task_batch_controller(sc: Scenario, spec: Any, batched: bool) -> Any:
-    """The batch interface of :func:`task_controller` (a trajectory task steps its
-    tracking controllers one per trial, :class:`controllers.batch.PerTrialLoop`)."""
+    """The batch interface of :func:`task_controller`.
+
+    A trajectory task with ``batched``: the controller's own batch (or its per-trial
+    loop) wrapped in a :class:`~controllers.tracking_batch.TrackingBatch`, which
+    retargets every row each period and adds the feed-forward; a controller that samples
+    the reference itself (``tracks_reference``) is its own batch, as the per-trial wrapper
+    passes it through. Without ``batched``, or for a plugin batch without
+    ``retarget_batch``: one :class:`~controllers.tracking.TrackingController` per trial in
+    a :class:`controllers.batch.PerTrialLoop` (the reference of the batched path)."""
     if sc.task.kind != "trajectory":
         return batch_controller(spec.name, spec.options, batched)
     first = [task_controller(sc, spec)]
+    if batched:
+        from controllers.tracking import tracks_itself
+        from controllers.tracking_batch import TrackingBatch, tracks_in_batch
+
+        if tracks_itself(first[0].inner):
+            return batch_controller(spec.name, spec.options, batched)
+        inner = batch_controller(spec.name, spec.options, batched)
+        if tracks_in_batch(inner):
+            return TrackingBatch(inner, feed_forward=sc.task.feed_forward,
+                                 name=first[0].name)
     actuation = actuation_of(first[0])
     return PerTrialLoop(lambda: first.pop() if first else task_controller(sc, spec),
                         actuation)
