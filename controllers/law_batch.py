@@ -6,7 +6,7 @@ what the law carries between periods is one batch
 :class:`~controllers.estimators.LegDirectionEstimate` whose rows are the instances'
 estimates (views: a trial stepped by its instance and the same trial stepped in the
 batch write the same memory). What changes is the common case (every feature visible
-and finite, the CURRENT interaction, a full-rank interaction matrix): there, the rows
+and finite, now and in the goal, a full-rank interaction matrix): there, the rows
 of all such trials go through the law's compiled core in one C loop
 (:meth:`hexapod.compiled.CompiledFunction.batch`, the same code as the per-trial
 :meth:`~controllers.laws.VisionLaw.tasks`), and the estimate is updated by the
@@ -37,6 +37,11 @@ class BatchedLaw(RemembersOptions):
     estimate: LegDirectionEstimate
     solver: Solver
 
+    @property
+    def batch_core(self) -> bool:  # provided by VisionLaw
+        """Whether this trial's common case may be stepped by the batch's lean core."""
+        return False
+
     def reset(self, context: ControllerContext) -> None:  # provided by VisionLaw
         raise NotImplementedError
 
@@ -64,7 +69,7 @@ class BatchedLaw(RemembersOptions):
         self.batch_estimate = LegDirectionEstimate.fresh(n)
         for k, inst in enumerate(trials):
             inst.estimate = self.batch_estimate.row(k)
-        kernels = [t.kernel for t in trials]
+        kernels = [t.kernel if t.batch_core else None for t in trials]
         self._has_kernel = np.array([k is not None for k in kernels], dtype=bool)
         self._fn = None
         if self._has_kernel.any():

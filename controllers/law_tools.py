@@ -255,6 +255,28 @@ def _unit_rows(x: np.ndarray) -> np.ndarray:
 
 # --------------------------------------------------------------------------- the law
 @dataclass
+class Selection:
+    """What a :class:`~controllers.laws.VisionLaw` gives its compiled core when a feature
+    is hidden (now or in the goal): which features are used, and the leg directions.
+
+    Attributes:
+        features: (m, 3) the measured features, a finite fill value where hidden.
+        used: (m,) bool, the features used this step (weight 1; the others weight 0).
+        measured: (6,) bool, legs whose direction the core takes from this step's
+            features.
+        leg_directions: (6, 3) the directions of the other legs (dead-reckoned or
+            approximated; NaN when unknown: the law then asks the nominal model).
+        notes: Diagnostics to report.
+    """
+
+    features: np.ndarray
+    used: np.ndarray
+    measured: np.ndarray
+    leg_directions: np.ndarray
+    notes: list[str]
+
+
+@dataclass
 class Stack:
     """The features of one step, as stacked by a :class:`VisionLaw` subclass.
 

@@ -47,6 +47,7 @@ from controllers.law_kernel import LawKernel, LawResult
 from controllers.law_tools import (
     INTERACTIONS,
     Gain,
+    Selection,
     Stack,
     check_choice,
     check_number,
@@ -60,7 +61,7 @@ from controllers.solvers.base import Solver
 from controllers.solvers.pseudo_inverse import DampedPseudoInverse
 
 __all__ = [
-    "INTERACTIONS", "Gain", "Stack", "VisionLaw", "check_choice", "check_number",
+    "INTERACTIONS", "Gain", "Selection", "Stack", "VisionLaw", "check_choice", "check_number",
     "check_observation", "inverse_jacobian_into", "solve_least_squares", "solve_normal",
     "solve_normal_damped",
 ]
@@ -140,6 +141,9 @@ class VisionLaw(BatchedLaw, Controller):
         #: Compiled core of the common case (:mod:`controllers.law_kernel`), set by the
         #: subclass in :meth:`_reset_features`; None: numpy path only.
         self.kernel: LawKernel | None = None
+        #: The kernel's weights and ``measured`` inputs were set by :meth:`_select`
+        #: (restored to ones by :meth:`_load_kernel`).
+        self._kernel_selected = False
 
     # ----------------------------------------------------------------- reset
     def reset(self, context: ControllerContext) -> None:
@@ -169,10 +173,15 @@ class VisionLaw(BatchedLaw, Controller):
                                    f"expected 6 positive finite lengths, got {qs}")
             self._q_star = qs
         self.kernel = None
+        self._kernel_selected = False
+        #: Every feature is visible in the goal (set by :meth:`_reset_features`).
+        self._goal_all_visible = True
         self._reset_features(context)
         self.solver.reset(context, self.name, dt)
         if self.kernel is not None:
             g = self.gain
+            if self._q_star is not None and "desired_lengths" in self.kernel.inputs:
+                self.kernel.set("desired_lengths", self._q_star)
             self.kernel.set("gain", (g.at_zero, g.at_infinity, g.slope_at_zero))
             self.kernel.set("threshold2", self.threshold * self.threshold)
             self.kernel.set("damping2", self.solver.damping2)
@@ -199,6 +208,16 @@ class VisionLaw(BatchedLaw, Controller):
     @abstractmethod
     def _reset_features(self, context: ControllerContext) -> None:
         """Read and validate the desired features."""
+
+    def _select(self, obs: Observation, q: np.ndarray) -> Selection:
+        """The used features and the leg directions when a feature is hidden (the
+        compiled core computes the rest).
+
+        Must also update ``self.estimate`` (:class:`LegDirectionEstimate`) as
+        :meth:`_stack` does, except the directions of the legs it marks ``measured``
+        (the core measures them; :meth:`tasks` writes them).
+        """
+        raise NotImplementedError
 
     @abstractmethod
     def _stack(self, obs: Observation, q: np.ndarray) -> Stack | str:
@@ -232,11 +251,14 @@ class VisionLaw(BatchedLaw, Controller):
 
         The part of a step every solver shares (the pseudo-inverse of :meth:`step`, the
         limit QP, the predictive controller): the features of a usable observation
-        (:meth:`checked_lengths`) go through the compiled core when it applies
-        (:meth:`_load_kernel`), else through :meth:`_stack`; the estimate is updated
-        (measured and dead-reckoned directions, nothing commanded yet), and the inverse
-        Jacobian is built, with the nominal model's directions for legs never seen
-        (then written to ``estimate.in_use``).
+        (:meth:`checked_lengths`) go through the compiled core (:mod:`controllers.law_kernel`):
+        directly when every feature is visible now and in the goal
+        (:meth:`_load_kernel`), else after :meth:`_select` has chosen the used features
+        (weight 1, the others weight 0) and the directions of the legs not measured
+        (dead-reckoned, approximated); without a core (``compiled=False``) through
+        :meth:`_stack`. The estimate is updated (measured and dead-reckoned directions,
+        nothing commanded yet), and the inverse Jacobian is built, with the nominal
+        model's directions for legs never seen (then written to ``estimate.in_use``).
 
         Args:
             observation: The observation.
@@ -244,7 +266,9 @@ class VisionLaw(BatchedLaw, Controller):
         """
         est = self.estimate
         kernel = self.kernel
-        if kernel is not None and self._load_kernel(observation, q):
+        if kernel is None:
+            return self._numpy_tasks(observation, q)
+        if self._load_kernel(observation, q):
             r = kernel.evaluate()
             est.halted()  # until a command is actually sent
             est.measured_all(r.directions)
@@ -252,6 +276,40 @@ class VisionLaw(BatchedLaw, Controller):
                 return Command.refuse("non-finite error or interaction matrix (degenerate "
                                       "features)", r.error)
             return TaskStep(r.error, r.error_norm, r.N, r.b, r.gain, r.J, [], r)
+        sel = self._select(observation, q)  # dead-reckons hidden legs with the last twist
+        est.halted()  # until a command is actually sent
+        inputs = kernel.inputs
+        inputs["features"][:] = sel.features.reshape(-1)
+        inputs["lengths"][:] = q
+        inputs["weights"][:] = sel.used
+        inputs["measured"][:] = sel.measured
+        inputs["leg_directions"][:] = sel.leg_directions.reshape(-1)
+        if "desired_lengths" in inputs:
+            inputs["desired_lengths"][:] = self._desired_lengths(q)
+        self._kernel_selected = True
+        r = kernel.evaluate()
+        m = sel.measured
+        est.directions[m] = r.directions[m]
+        est.in_use[m] = r.directions[m]
+        e = r.error.reshape(len(sel.used), -1)[sel.used].reshape(-1)
+        if not (math.isfinite(r.error_norm) and math.isfinite(r.n_sum)):
+            return Command.refuse("non-finite error or interaction matrix (degenerate features)",
+                                  e)
+        notes = sel.notes
+        unknown = np.flatnonzero(~np.isfinite(est.in_use[:, 0]))
+        if len(unknown):
+            model = self._model_directions(q)
+            if model is None:
+                return Command.refuse(self._unknown_reason(unknown), e)
+            est.in_use[unknown] = model[unknown]
+            inputs["leg_directions"][:] = est.in_use.reshape(-1)
+            r = kernel.evaluate()
+            notes.append(self._model_note(unknown))
+        return TaskStep(e, r.error_norm, r.N, r.b, r.gain, r.J, notes, r)
+
+    def _numpy_tasks(self, observation: Observation, q: np.ndarray) -> TaskStep | Command:
+        """:meth:`tasks` without a compiled core (``compiled=False``): :meth:`_stack`."""
+        est = self.estimate
         st = self._stack(observation, q)  # dead-reckons hidden legs with the last twist
         est.halted()  # until a command is actually sent
         if isinstance(st, str):
@@ -266,18 +324,24 @@ class VisionLaw(BatchedLaw, Controller):
         if len(unknown):
             model = self._model_directions(q)
             if model is None:
-                return Command.refuse(f"direction of leg {int(unknown[0])} unknown (hidden "
-                                      "since reset, no desired direction, no nominal model "
-                                      "prediction): cannot build the inverse Jacobian", e)
+                return Command.refuse(self._unknown_reason(unknown), e)
             u = u.copy()
             u[unknown] = model[unknown]
             est.in_use[:] = u
-            st.notes.append("nominal-model directions (forward kinematics of the measured "
-                            "lengths) for never-seen legs "
-                            + ", ".join(str(int(i)) for i in unknown))
+            st.notes.append(self._model_note(unknown))
         J = inverse_jacobian_into(self._J, self._A, u)
         lam = self.gain(float(np.abs(e).max()) if e.size else 0.0)
         return TaskStep(e, error_norm, N, b, lam, J, st.notes, None)
+
+    @staticmethod
+    def _unknown_reason(unknown: np.ndarray) -> str:
+        return (f"direction of leg {int(unknown[0])} unknown (hidden since reset, no desired "
+                "direction, no nominal model prediction): cannot build the inverse Jacobian")
+
+    @staticmethod
+    def _model_note(unknown: np.ndarray) -> str:
+        return ("nominal-model directions (forward kinematics of the measured lengths) for "
+                "never-seen legs " + ", ".join(str(int(i)) for i in unknown))
 
     def step(self, observation: Observation) -> Command:
         """One period: ``q_dot = J_inv (-lambda L^+ e)`` (never raises for bad measurements)."""
@@ -317,13 +381,34 @@ class VisionLaw(BatchedLaw, Controller):
                        active_constraints=active)
 
     def _load_kernel(self, obs: Observation, q: np.ndarray) -> bool:
-        """Write the measured features and lengths into ``self.kernel`` when the
-        compiled core applies (every feature visible, CURRENT interaction).
+        """Write the measured features and lengths into ``self.kernel`` when every
+        feature is visible, now and in the goal (the common case: every weight one,
+        every leg direction measured).
 
         Returns:
-            False to take the numpy path.
+            False to take :meth:`_select`.
         """
         return False
+
+    def _common_inputs(self, q: np.ndarray) -> None:
+        """The inputs of the common case besides the features (:meth:`_load_kernel`)."""
+        kernel = self.kernel
+        assert kernel is not None
+        if self._kernel_selected:
+            kernel.inputs["weights"][:] = 1.0
+            kernel.inputs["measured"][:] = 1.0
+            self._kernel_selected = False
+        kernel.inputs["lengths"][:] = q
+        if self._q_star is None and "desired_lengths" in kernel.inputs:
+            kernel.inputs["desired_lengths"][:] = q
+
+    @property
+    def batch_core(self) -> bool:
+        """Whether the batched laws may step this trial's common case with the lean core
+        (a core whose inputs change only by the features and the lengths)."""
+        k = self.kernel
+        return (k is not None and self._goal_all_visible
+                and (self._q_star is not None or "desired_lengths" not in k.inputs))
 
     def _model_directions(self, q: np.ndarray) -> np.ndarray | None:
         """Leg directions (6, 3) in the camera frame predicted by the nominal model.

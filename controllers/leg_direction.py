@@ -16,7 +16,7 @@ from controllers.base import ControllerContext, Observation, ObservationBatch
 from controllers.exceptions import ContextError
 from controllers.interaction import cross, direction_task
 from controllers.law_kernel import direction_kernel
-from controllers.laws import Stack, VisionLaw
+from controllers.laws import Selection, Stack, VisionLaw
 from hexapod.se3 import skew
 
 
@@ -65,13 +65,14 @@ class LegDirectionController(VisionLaw):
         self._goal_visible = vis
         # Fill value for hidden directions: the desired ones (keeps the arithmetic finite).
         self._fill = np.where(vis[:, None], us, np.array([0.0, 0.0, 1.0]))
-        if self.compiled and self.interaction == "current" and vis.all():
-            kernel = direction_kernel()
+        self._goal_all_visible = bool(vis.all())
+        if self.compiled:
+            kernel = direction_kernel(self.interaction)
             kernel.set("desired", us)
             kernel.set("base_points", self._A)
+            kernel.set("weights", vis)
             self.kernel = kernel
             self._k_features = kernel.inputs["features"].reshape(6, 3)
-            self._k_lengths = kernel.inputs["lengths"]
 
     def desired_features(self) -> np.ndarray:
         """(6, 3) the desired leg directions (zeros where unknown)."""
@@ -92,40 +93,49 @@ class LegDirectionController(VisionLaw):
 
     def _load_kernel(self, obs: Observation, q: np.ndarray) -> bool:
         vis = obs.direction_visible
-        if not (vis.all() if type(vis) is np.ndarray else np.all(np.asarray(vis, dtype=bool))):
+        if not (self._goal_all_visible and (vis.all() if type(vis) is np.ndarray
+                                            else np.all(np.asarray(vis, dtype=bool)))):
             return False
         self._k_features[...] = obs.directions
-        self._k_lengths[...] = q
+        self._common_inputs(q)
         return True
 
-    def _stack(self, obs: Observation, q: np.ndarray) -> Stack | str:
+    def _select(self, obs: Observation, q: np.ndarray) -> Selection:
         u_obs = np.asarray(obs.directions, dtype=float)
         vis = np.asarray(obs.direction_visible, dtype=bool) & self._goal_visible
-        notes: list[str] = []
-        all_visible = bool(vis.all())
         est = self.estimate
-        if all_visible:
-            u = u_obs
-            est.measured_all(u_obs)
+        est.predict_hidden(~vis, self._A, self._dt)
+        est.directions[vis] = u_obs[vis]
+        est.observed[:] = vis
+        known = np.isfinite(est.directions[:, 0])
+        # J_inv of a leg never seen: its desired direction (exact at the goal).
+        est.in_use[:] = np.where(known[:, None], est.directions,
+                                 np.where(self._goal_visible[:, None], self._u_star, np.nan))
+        return Selection(np.where(vis[:, None], u_obs, self._fill), vis, vis,
+                         est.in_use.copy(), self._hidden_notes(vis, known))
+
+    def _hidden_notes(self, vis: np.ndarray, known: np.ndarray) -> list[str]:
+        """The notes of a step with hidden legs."""
+        notes = [self._usage_note(vis, 6)]
+        predicted = np.flatnonzero(~vis & known)
+        if len(predicted):
+            notes.append("predicted directions of hidden legs "
+                         + ", ".join(str(int(i)) for i in predicted))
+        approx = np.flatnonzero(~known & self._goal_visible)
+        if len(approx):
+            notes.append("desired direction used for never-seen legs "
+                         + ", ".join(str(int(i)) for i in approx))
+        return notes
+
+    def _stack(self, obs: Observation, q: np.ndarray) -> Stack | str:
+        vis = np.asarray(obs.direction_visible, dtype=bool) & self._goal_visible
+        if vis.all():
+            u = np.asarray(obs.directions, dtype=float)
+            self.estimate.measured_all(u)
+            used, notes = None, []
         else:
-            est.predict_hidden(~vis, self._A, self._dt)
-            est.directions[vis] = u_obs[vis]
-            est.observed[:] = vis
-            u = np.where(vis[:, None], u_obs, self._fill)
-            notes.append(self._usage_note(vis, 6))
-            known = np.isfinite(est.directions[:, 0])
-            # J_inv of a leg never seen: its desired direction (exact at the goal).
-            est.in_use[:] = np.where(known[:, None], est.directions,
-                                     np.where(self._goal_visible[:, None], self._u_star,
-                                              np.nan))
-            predicted = np.flatnonzero(~vis & known)
-            if len(predicted):
-                notes.append("predicted directions of hidden legs "
-                             + ", ".join(str(int(i)) for i in predicted))
-            approx = np.flatnonzero(~known & self._goal_visible)
-            if len(approx):
-                notes.append("desired direction used for never-seen legs "
-                             + ", ".join(str(int(i)) for i in approx))
+            sel = self._select(obs, q)
+            u, used, notes = sel.features, sel.used, sel.notes
         us = self._u_star
         A = self._A
         e = cross(u, us)
@@ -136,4 +146,4 @@ class LegDirectionController(VisionLaw):
             if self.interaction == "mean":
                 _, Lc = direction_task(u, us, A, q, error=False)
                 L = 0.5 * (L + Lc)
-        return Stack(e, L, None if all_visible else vis, notes)
+        return Stack(e, L, used, notes)

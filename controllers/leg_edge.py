@@ -32,7 +32,7 @@ from controllers.interaction import (
     edge_normal_task,
 )
 from controllers.law_kernel import edge_law_kernel
-from controllers.laws import Stack, VisionLaw, check_choice
+from controllers.laws import Selection, Stack, VisionLaw, check_choice
 
 #: Values of the ``edge_feature`` option.
 EDGE_FEATURES = ("auto", "lines", "normals")
@@ -149,17 +149,21 @@ class LegEdgeController(VisionLaw):
         if self.use_lines:
             self._l_fill = _unit(fill @ self._K_inv_t.T)
         self._A2 = np.repeat(self._A, 2, axis=0)
-        if self.compiled and self.interaction == "current" and vis.all():
-            kernel = edge_law_kernel(self.use_lines)
+        self._goal_all_visible = bool(self._goal_visible.all())
+        self._desired_L: np.ndarray | None = None
+        if self.compiled:
+            kernel = edge_law_kernel(self.use_lines, self.interaction)
             kernel.set("desired", self._l_star if self.use_lines else self._n_star)
             kernel.set("K", self._K)
             kernel.set("K_inv", self._K_inv_t.T)
             kernel.set("base_points", self._A)
+            kernel.set("weights", self._goal_visible)
+            if self.interaction != "current":
+                kernel.set("desired_normals", self._n_star)
+                kernel.set("desired_directions", self._u_star)
             self.kernel = kernel
             self._k_features = kernel.inputs["features"].reshape(6, 2, 3)
-            self._k_lengths = kernel.inputs["lengths"]
-        self._desired_L: np.ndarray | None = None
-        if self.interaction != "current" and self._q_star is not None:
+        elif self.interaction != "current" and self._q_star is not None:
             self._desired_L = self._desired_interaction(self._q_star)
 
     def _goal_array(self, value: Any, field: str) -> np.ndarray | None:
@@ -180,64 +184,69 @@ class LegEdgeController(VisionLaw):
             return edge_line_task(ls, ls, ns, u2, self._A2, q2, self._K, self._K_inv_t)
         return edge_normal_task(ns, ns, u2, self._A2, q2)
 
-    def _stack(self, obs: Observation, q: np.ndarray) -> Stack | str:
+    def _select(self, obs: Observation, q: np.ndarray) -> Selection:
         vis = np.asarray(obs.edge_visible, dtype=bool) & self._goal_visible
-        all_visible = bool(vis.all())
-        notes: list[str] = []
         if self.use_lines:
-            feat = np.asarray(obs.lines, dtype=float)
-            if not all_visible:
-                feat = np.where(vis[..., None], feat, self._l_fill)
-            n = _unit(feat @ self._K)
-            star = self._l_star
+            feat = np.where(vis[..., None], np.asarray(obs.lines, dtype=float), self._l_fill)
         else:
-            feat = np.asarray(obs.normals, dtype=float)
-            if not all_visible:
-                feat = np.where(vis[..., None], feat, self._fill)
-            n = feat
-            star = self._n_star
-        u_edges = _unit(cross(n[:, 1], n[:, 0]))
+            feat = np.where(vis[..., None], np.asarray(obs.normals, dtype=float), self._fill)
+        both: np.ndarray = np.all(vis, axis=1)
         est = self.estimate
-        if all_visible:
-            est.measured_all(u_edges)
-            u = u_edges
-        else:
-            both: np.ndarray = np.all(vis, axis=1)
-            est.predict_hidden(~both, self._A, self._dt)
-            est.directions[both] = u_edges[both]
-            est.observed[:] = both
-            known = np.isfinite(est.directions[:, 0])
-            # A leg never seen whole: its desired direction, projected on the plane of its
-            # visible edge if it has one (exact at the goal).
+        est.predict_hidden(~both, self._A, self._dt)
+        est.observed[:] = both
+        known = np.isfinite(est.directions[:, 0]) | both
+        legs = np.where(known[:, None], est.directions, np.nan)  # the core measures `both`
+        # A leg never seen whole: its desired direction, projected on the plane of its
+        # visible edge if it has one (exact at the goal).
+        approx: np.ndarray = ~known & np.isfinite(self._u_star_known[:, 0])
+        if approx.any():
+            n = _unit(feat @ self._K) if self.use_lines else feat
             us = self._u_star
             one: np.ndarray = np.any(vis, axis=1) & ~both
             n_vis = np.where(vis[:, 0, None], n[:, 0], n[:, 1])
             proj = np.where(one[:, None], _unit(us - np.einsum("ik,ik->i", us, n_vis)[:, None]
                                                 * n_vis), us)
-            approx: np.ndarray = ~known & np.isfinite(self._u_star_known[:, 0])
-            u = np.where(known[:, None], est.directions,
-                         np.where(approx[:, None], proj, u_edges))
-            est.in_use[:] = np.where((known | approx)[:, None], u, np.nan)
-            vis = vis & (known | approx)[:, None]
-            notes.append(self._usage_note(vis, 12))
-            predicted = np.flatnonzero(~both & known)
-            if len(predicted):
-                notes.append("predicted directions of partly hidden legs "
-                             + ", ".join(str(int(i)) for i in predicted))
-            if approx.any():
-                notes.append("desired direction used for never-seen legs "
-                             + ", ".join(str(int(i)) for i in np.flatnonzero(approx)))
+            legs = np.where(approx[:, None], proj, legs)
+        est.in_use[:] = legs
+        vis = vis & (known | approx)[:, None]
+        notes = [self._usage_note(vis, 12)]
+        predicted = np.flatnonzero(~both & known)
+        if len(predicted):
+            notes.append("predicted directions of partly hidden legs "
+                         + ", ".join(str(int(i)) for i in predicted))
+        if approx.any():
+            notes.append("desired direction used for never-seen legs "
+                         + ", ".join(str(int(i)) for i in np.flatnonzero(approx)))
+        return Selection(feat.reshape(12, 3), vis.reshape(12), both, legs, notes)
+
+    def _stack(self, obs: Observation, q: np.ndarray) -> Stack | str:
+        vis = np.asarray(obs.edge_visible, dtype=bool) & self._goal_visible
+        used: np.ndarray | None = None
+        if vis.all():
+            feat = np.asarray(obs.lines if self.use_lines else obs.normals, dtype=float)
+            notes: list[str] = []
+        else:
+            sel = self._select(obs, q)
+            feat, used, notes = sel.features.reshape(6, 2, 3), sel.used, sel.notes
+        n = _unit(feat @ self._K) if self.use_lines else feat
+        star = self._l_star if self.use_lines else self._n_star
+        u = _unit(cross(n[:, 1], n[:, 0]))
+        est = self.estimate
+        if used is None:
+            est.measured_all(u)
+        else:
+            est.directions[sel.measured] = u[sel.measured]
+            est.in_use[sel.measured] = u[sel.measured]
+            u = np.where(np.isfinite(est.in_use[:, :1]), est.in_use, u)
         e = cross(feat, star).reshape(12, 3)
-        used = None if all_visible else vis.reshape(12)
         if self.interaction == "current":
             a, g = self._current_factors(feat, n, u, q)
             return Stack(e, None, used, notes, a=a, g=g)
-        else:
-            L = (self._desired_L if self._desired_L is not None
-                 else self._desired_interaction(self._desired_lengths(q)))
-            if self.interaction == "mean":
-                a, g = self._current_factors(feat, n, u, q)
-                L = 0.5 * (L + a[:, :, None] * g[:, None, :])
+        L = (self._desired_L if self._desired_L is not None
+             else self._desired_interaction(self._desired_lengths(q)))
+        if self.interaction == "mean":
+            a, g = self._current_factors(feat, n, u, q)
+            L = 0.5 * (L + a[:, :, None] * g[:, None, :])
         return Stack(e, L, used, notes)
 
     @property
@@ -275,10 +284,11 @@ class LegEdgeController(VisionLaw):
 
     def _load_kernel(self, obs: Observation, q: np.ndarray) -> bool:
         vis = obs.edge_visible
-        if not (vis.all() if type(vis) is np.ndarray else np.all(np.asarray(vis, dtype=bool))):
+        if not (self._goal_all_visible and (vis.all() if type(vis) is np.ndarray
+                                            else np.all(np.asarray(vis, dtype=bool)))):
             return False
         self._k_features[...] = obs.lines if self.use_lines else obs.normals
-        self._k_lengths[...] = q
+        self._common_inputs(q)
         return True
 
     def _current_factors(self, feat: np.ndarray, n: np.ndarray, u: np.ndarray,

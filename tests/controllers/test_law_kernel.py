@@ -60,29 +60,110 @@ def test_compiled_core_equals_numpy(world: World, name: str, options: dict[str, 
                                    rtol=0, atol=1e-14)
 
 
+def _hide(obs: Any, step: int, never_seen: bool) -> None:
+    """Hide features on a schedule: one edge of leg 2 from step 1, leg 4 whole from step
+    3 (its direction is then dead-reckoned), leg 5 whole from the start (never seen)."""
+    edges = np.ones((6, 2), dtype=bool)
+    legs = np.ones(6, dtype=bool)
+    if step >= 1:
+        edges[2, 0] = False
+    if step >= 3:
+        edges[4] = False
+        legs[4] = False
+    if never_seen:
+        edges[5] = False
+        legs[5] = False
+    obs.edge_visible = edges
+    obs.direction_visible = legs
+    obs.normals = np.where(edges[..., None], obs.normals, np.nan)
+    if obs.lines is not None:
+        obs.lines = np.where(edges[..., None], obs.lines, np.nan)
+    obs.directions = np.where(legs[:, None], obs.directions, np.nan)
+
+
+@pytest.mark.parametrize("interaction", ["current", "desired", "mean"])
 @pytest.mark.parametrize("name", LAWS)
-def test_hidden_features_and_other_interactions_take_the_numpy_path(world: World,
-                                                                    name: str) -> None:
-    Rs, ts = world.poses(2, np.random.default_rng(5), margin=0.03)
-    ctx = world.context(world.goal(Rs[0], ts[0]), 0.02)
-    law = registry.create(name, interaction="mean")
-    law.reset(ctx)
-    assert law.kernel is None  # type: ignore[attr-defined]
-    law = registry.create(name)
-    law.reset(ctx)
+@pytest.mark.parametrize("case", ["hidden", "never-seen", "goal-hidden"])
+def test_compiled_core_equals_numpy_with_hidden_features(world: World, name: str,
+                                                         interaction: str, case: str) -> None:
+    """Hidden features (zero-weight rows of the core), dead-reckoned, approximated and
+    nominal-model leg directions, every interaction choice: the compiled core gives the
+    numpy path's commands, notes, rank, error and estimate."""
+    rng = np.random.default_rng(11)
+    Rs, ts = world.poses(2, rng, max_translation=0.02, max_angle=np.deg2rad(4), margin=0.03)
+    goal = world.goal(Rs[0], ts[0])
+    if case == "goal-hidden":  # leg 5 unknown in the goal too: the nominal model's direction
+        goal.edge_visible = np.ones((6, 2), dtype=bool)
+        goal.edge_visible[5] = False
+        goal.directions = goal.directions.copy()
+        goal.directions[5] = np.nan
+        goal.normals = np.where(goal.edge_visible[..., None], goal.normals, np.nan)
+        if goal.lines is not None:
+            goal.lines = np.where(goal.edge_visible[..., None], goal.lines, np.nan)
+    ctx = world.context(goal, 0.02)
+    fast = registry.create(name, compiled=True, interaction=interaction, gain=2.0)
+    slow = registry.create(name, compiled=False, interaction=interaction, gain=2.0)
+    fast.reset(ctx)
+    slow.reset(ctx)
+    assert fast.kernel is not None and slow.kernel is None  # type: ignore[attr-defined]
     calls = []
-    kernel = law.kernel  # type: ignore[attr-defined]
+    kernel = fast.kernel  # type: ignore[attr-defined]
     real = kernel.evaluate
     kernel.evaluate = lambda: calls.append(1) or real()
-    obs = world.observation(Rs[1], ts[1])
-    assert law.step(obs).ok and len(calls) == 1
-    obs.edge_visible = np.ones((6, 2), dtype=bool)
-    obs.edge_visible[2, 0] = False
-    obs.direction_visible = np.ones(6, dtype=bool)
-    obs.direction_visible[2] = False
-    cmd = law.step(obs)
-    assert cmd.ok and len(calls) == 1
-    assert any(n.startswith("using") for n in cmd.notes)
+    R, t = Rs[1], ts[1]
+    notes = set()
+    for step in range(8):
+        obs = world.observation(R, t, 0.02 * step)
+        _hide(obs, step, case != "hidden")
+        a, b = fast.step(obs), slow.step(obs)
+        assert a.ok and b.ok, (a.reason, b.reason)
+        # Cholesky against LAPACK's eigh (and OSQP's refined active set for the QP laws):
+        # agreement to rounding times the condition number.
+        scale = np.abs(b.velocities).max()
+        np.testing.assert_allclose(a.velocities, b.velocities, rtol=0, atol=1e-8 * scale)
+        np.testing.assert_allclose(a.twist, b.twist, rtol=0, atol=1e-8 * np.abs(b.twist).max())
+        np.testing.assert_allclose(a.error, b.error, rtol=0, atol=1e-15)
+        assert a.error_norm == pytest.approx(b.error_norm, rel=1e-12)
+        assert a.rank == b.rank == 6
+        np.testing.assert_allclose(a.condition, b.condition, rtol=1e-7)
+        assert a.features_used == b.features_used
+        assert a.notes == b.notes
+        for k in ("directions", "in_use"):  # dead reckoning integrates the twists above
+            np.testing.assert_allclose(getattr(fast.estimate, k), getattr(slow.estimate, k),  # type: ignore[attr-defined]
+                                       rtol=0, atol=1e-10)
+        notes.update(n.split(" ")[0] for n in a.notes)
+        R, t = world.move(R, t, b.twist, 0.02)
+    assert len(calls) >= 8
+    expected = {"using", "predicted"} | {"hidden": set(), "never-seen": {"desired"},
+                                         "goal-hidden": {"nominal-model"}}[case]
+    assert expected <= notes, notes
+
+
+@pytest.mark.parametrize("name", LAWS)
+def test_too_few_features_give_the_numpy_rank(world: World, name: str) -> None:
+    """Two legs left: the core's rank is the numpy path's (< 6), both refuse alike."""
+    Rs, ts = world.poses(2, np.random.default_rng(5), margin=0.03)
+    ctx = world.context(world.goal(Rs[0], ts[0]), 0.02)
+    out = []
+    for compiled in (True, False):
+        law = registry.create(name, compiled=compiled)
+        law.reset(ctx)
+        obs = world.observation(Rs[1], ts[1])
+        obs.edge_visible = np.zeros((6, 2), dtype=bool)
+        obs.edge_visible[:2] = True
+        obs.direction_visible = np.zeros(6, dtype=bool)
+        obs.direction_visible[:2] = True
+        out.append(law.step(obs))
+    a, b = out
+    assert not a.ok and not b.ok
+    assert a.rank == b.rank < 6 and a.features_used == b.features_used
+    assert a.notes == b.notes
+    # The condition number of a singular N is its rounding noise (inf or ~1e8 from
+    # either eigen-solver): the reasons agree up to it, and both are beyond the threshold.
+    assert a.reason is not None and b.reason is not None
+    assert a.reason.split("(condition")[0] == b.reason.split("(condition")[0]
+    assert min(a.condition, b.condition) > 1e6
+    np.testing.assert_allclose(a.error, b.error, rtol=0, atol=1e-15)
 
 
 def test_jacobi_eigen_solve_equals_lapack(rng: np.random.Generator) -> None:
