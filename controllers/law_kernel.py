@@ -312,35 +312,41 @@ class LawKernel:
             directions=y[o["directions"]].reshape(6, 3))
 
 
-@lru_cache(maxsize=6)
-def _direction_compiled(interaction: str = "current", lean: bool = False) -> CompiledFunction:
-    return CompiledFunction(_direction_function(interaction, lean))
-
-
 @lru_cache(maxsize=12)
-def _edge_compiled(use_lines: bool, interaction: str = "current",
-                   lean: bool = False) -> CompiledFunction:
-    return CompiledFunction(_edge_function(use_lines, interaction, lean))
+def _direction_compiled(interaction: str = "current", lean: bool = False,
+                        compiled: bool = True) -> CompiledFunction:
+    return CompiledFunction(_direction_function(interaction, lean), compiled)
 
 
-def direction_kernel(interaction: str = "current") -> LawKernel:
+@lru_cache(maxsize=24)
+def _edge_compiled(use_lines: bool, interaction: str = "current", lean: bool = False,
+                   compiled: bool = True) -> CompiledFunction:
+    return CompiledFunction(_edge_function(use_lines, interaction, lean), compiled)
+
+
+def direction_kernel(interaction: str = "current", compiled: bool = True) -> LawKernel:
     """A kernel of the leg-direction law (its own input buffer; shared compiled code).
 
     Args:
         interaction: Where the interaction matrix is evaluated (:data:`CORE_INTERACTIONS`).
+        compiled: C code (False: the CasADi virtual machine evaluates the same core).
     """
     _check_interaction(interaction)
-    return LawKernel(_direction_compiled(interaction), direction_inputs(interaction), 18,
-                     lambda: _direction_compiled(interaction, True))
+    return LawKernel(_direction_compiled(interaction, False, compiled),
+                     direction_inputs(interaction), 18,
+                     lambda: _direction_compiled(interaction, True, compiled))
 
 
-def edge_law_kernel(use_lines: bool, interaction: str = "current") -> LawKernel:
+def edge_law_kernel(use_lines: bool, interaction: str = "current",
+                    compiled: bool = True) -> LawKernel:
     """A kernel of the leg-edge law on pixel lines (True) or normals (False).
 
     Args:
         use_lines: Pixel lines (True) or normals (False).
         interaction: Where the interaction matrix is evaluated (:data:`CORE_INTERACTIONS`).
+        compiled: C code (False: the CasADi virtual machine evaluates the same core).
     """
     _check_interaction(interaction)
-    return LawKernel(_edge_compiled(use_lines, interaction), edge_inputs(interaction), 36,
-                     lambda: _edge_compiled(use_lines, interaction, True))
+    return LawKernel(_edge_compiled(use_lines, interaction, False, compiled),
+                     edge_inputs(interaction), 36,
+                     lambda: _edge_compiled(use_lines, interaction, True, compiled))

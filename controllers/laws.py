@@ -15,13 +15,16 @@ pseudo-inverse or QP, missing features, diagnostics) is written once, here, in
   dead-reckoning of the direction of hidden legs (needed by ``J_inv``).
 
 Speed: ``step`` is called millions of times by the benchmarks, and its cost is the
-number of numpy calls, not the arithmetic. In the common case (every feature
-visible, CURRENT interaction) a law hands the measured features to its compiled
-core (:mod:`controllers.law_kernel`, CasADi generated to C, one ctypes call of a
-few microseconds: error, ``L^T L``, ``L^T e``, gain, eigen-solve with rank and
-condition, ``J_inv``, ``q_dot``) and :meth:`VisionLaw.tasks` only wraps the
-result in a :class:`~controllers.base.Command`. Every other case runs the numpy
-path below, which is the reference the compiled core is tested against.
+number of numpy calls, not the arithmetic. A law hands the measured features to its
+compiled core (:mod:`controllers.law_kernel`, generated from the tasks' CasADi blocks
+to C, one ctypes call of a few microseconds: error, ``L^T W L``, ``L^T W e``, gain,
+rank and condition, damped solve, ``J_inv``, ``q_dot``), for every interaction choice.
+In the common case (every feature visible, now and in the goal) nothing else is
+computed: :meth:`VisionLaw.tasks` only wraps the result. With hidden features the law
+first chooses the used features (weight 1, the hidden ones weight 0) and the
+directions of the legs it cannot measure (:meth:`VisionLaw._select`: dead-reckoned or
+approximated). The numpy formulas of :mod:`controllers.interaction` are the tests'
+oracle (``tests/controllers/numpy_law.py``).
 """
 
 from __future__ import annotations
@@ -48,7 +51,6 @@ from controllers.law_tools import (
     INTERACTIONS,
     Gain,
     Selection,
-    Stack,
     check_choice,
     check_number,
     check_observation,
@@ -61,7 +63,7 @@ from controllers.solvers.base import Solver
 from controllers.solvers.pseudo_inverse import DampedPseudoInverse
 
 __all__ = [
-    "INTERACTIONS", "Gain", "Selection", "Stack", "VisionLaw", "check_choice", "check_number",
+    "INTERACTIONS", "Gain", "Selection", "VisionLaw", "check_choice", "check_number",
     "check_observation", "inverse_jacobian_into", "solve_least_squares", "solve_normal",
     "solve_normal_damped",
 ]
@@ -99,10 +101,11 @@ class TaskStep:
 class VisionLaw(BatchedLaw, Controller):
     """Base of the image-based laws: ``tau = -lambda L^+ e``, ``q_dot = J_inv tau``.
 
-    Subclasses implement :meth:`_reset_features` (read the goal) and
-    :meth:`_stack` (error and interaction blocks, visibility, current leg
-    directions in the estimate). The solver (:attr:`solver`, the damped pseudo-inverse by
-    default) turns the tasks into a twist: the QP laws set the limit QP there.
+    Subclasses implement :meth:`_reset_features` (read the goal, set the compiled core
+    :attr:`kernel`), :meth:`_load_kernel` (the common case) and :meth:`_select` (the used
+    features and the leg directions when a feature is hidden). The solver
+    (:attr:`solver`, the damped pseudo-inverse by default) turns the tasks into a twist:
+    the QP laws set the limit QP there.
 
     Args:
         gain: Constant gain ``lambda`` [1/s].
@@ -137,9 +140,8 @@ class VisionLaw(BatchedLaw, Controller):
         #: Last nominal-model pose (warm start of the forward kinematics that predicts
         #: the directions of never-seen legs), None before the first.
         self.model_pose: PoseEstimate | None = None
-        self._J = np.zeros((6, 6))
-        #: Compiled core of the common case (:mod:`controllers.law_kernel`), set by the
-        #: subclass in :meth:`_reset_features`; None: numpy path only.
+        #: The compiled core (:mod:`controllers.law_kernel`), set by the subclass in
+        #: :meth:`_reset_features`.
         self.kernel: LawKernel | None = None
         #: The kernel's weights and ``measured`` inputs were set by :meth:`_select`
         #: (restored to ones by :meth:`_load_kernel`).
@@ -177,14 +179,17 @@ class VisionLaw(BatchedLaw, Controller):
         #: Every feature is visible in the goal (set by :meth:`_reset_features`).
         self._goal_all_visible = True
         self._reset_features(context)
+        if self.kernel is None:
+            raise TypeError(f"{self.name}: _reset_features must set the compiled core "
+                            "(self.kernel)")
         self.solver.reset(context, self.name, dt)
-        if self.kernel is not None:
-            g = self.gain
-            if self._q_star is not None and "desired_lengths" in self.kernel.inputs:
-                self.kernel.set("desired_lengths", self._q_star)
-            self.kernel.set("gain", (g.at_zero, g.at_infinity, g.slope_at_zero))
-            self.kernel.set("threshold2", self.threshold * self.threshold)
-            self.kernel.set("damping2", self.solver.damping2)
+        kernel = self.kernel
+        g = self.gain
+        if self._q_star is not None and "desired_lengths" in kernel.inputs:
+            kernel.set("desired_lengths", self._q_star)
+        kernel.set("gain", (g.at_zero, g.at_infinity, g.slope_at_zero))
+        kernel.set("threshold2", self.threshold * self.threshold)
+        kernel.set("damping2", self.solver.damping2)
 
     @property
     def base_points(self) -> np.ndarray:
@@ -213,21 +218,13 @@ class VisionLaw(BatchedLaw, Controller):
         """The used features and the leg directions when a feature is hidden (the
         compiled core computes the rest).
 
-        Must also update ``self.estimate`` (:class:`LegDirectionEstimate`) as
-        :meth:`_stack` does, except the directions of the legs it marks ``measured``
-        (the core measures them; :meth:`tasks` writes them).
+        Must also update ``self.estimate`` (:class:`LegDirectionEstimate`): dead-reckon
+        the hidden legs with the last twist, write the legs observed this step and the
+        directions ``J_inv`` uses (``in_use``: dead-reckoned, an approximation from the
+        goal for legs never seen, NaN when unknown), except the directions of the legs
+        it marks ``measured`` (the core measures them; :meth:`tasks` writes them).
         """
         raise NotImplementedError
-
-    @abstractmethod
-    def _stack(self, obs: Observation, q: np.ndarray) -> Stack | str:
-        """Error and interaction blocks, or the reason why none can be built.
-
-        Must also update ``self.estimate`` (:class:`LegDirectionEstimate`): the
-        measured leg directions (dead-reckoned for hidden legs, NaN if never seen),
-        the legs measured this step, and the directions ``J_inv`` uses this step
-        (or an approximation from the goal for legs never seen; NaN when unknown).
-        """
 
     # ----------------------------------------------------------------- step
     def _check(self, obs: Observation) -> str | None:
@@ -255,10 +252,10 @@ class VisionLaw(BatchedLaw, Controller):
         directly when every feature is visible now and in the goal
         (:meth:`_load_kernel`), else after :meth:`_select` has chosen the used features
         (weight 1, the others weight 0) and the directions of the legs not measured
-        (dead-reckoned, approximated); without a core (``compiled=False``) through
-        :meth:`_stack`. The estimate is updated (measured and dead-reckoned directions,
-        nothing commanded yet), and the inverse Jacobian is built, with the nominal
-        model's directions for legs never seen (then written to ``estimate.in_use``).
+        (dead-reckoned, approximated). The estimate is updated (measured and
+        dead-reckoned directions, nothing commanded yet), and the inverse Jacobian is
+        built, with the nominal model's directions for legs never seen (then written to
+        ``estimate.in_use``).
 
         Args:
             observation: The observation.
@@ -266,8 +263,7 @@ class VisionLaw(BatchedLaw, Controller):
         """
         est = self.estimate
         kernel = self.kernel
-        if kernel is None:
-            return self._numpy_tasks(observation, q)
+        assert kernel is not None, "reset() sets the compiled core"
         if self._load_kernel(observation, q):
             r = kernel.evaluate()
             est.halted()  # until a command is actually sent
@@ -306,32 +302,6 @@ class VisionLaw(BatchedLaw, Controller):
             r = kernel.evaluate()
             notes.append(self._model_note(unknown))
         return TaskStep(e, r.error_norm, r.N, r.b, r.gain, r.J, notes, r)
-
-    def _numpy_tasks(self, observation: Observation, q: np.ndarray) -> TaskStep | Command:
-        """:meth:`tasks` without a compiled core (``compiled=False``): :meth:`_stack`."""
-        est = self.estimate
-        st = self._stack(observation, q)  # dead-reckons hidden legs with the last twist
-        est.halted()  # until a command is actually sent
-        if isinstance(st, str):
-            return Command.refuse(st)
-        e, N, b = st.normal_equations()
-        error_norm = math.sqrt(float(e @ e))
-        if not (math.isfinite(error_norm) and math.isfinite(float(N.sum()))):
-            return Command.refuse("non-finite error or interaction matrix (degenerate features)",
-                                  e)
-        u = est.in_use
-        unknown = np.flatnonzero(~np.isfinite(u[:, 0]))
-        if len(unknown):
-            model = self._model_directions(q)
-            if model is None:
-                return Command.refuse(self._unknown_reason(unknown), e)
-            u = u.copy()
-            u[unknown] = model[unknown]
-            est.in_use[:] = u
-            st.notes.append(self._model_note(unknown))
-        J = inverse_jacobian_into(self._J, self._A, u)
-        lam = self.gain(float(np.abs(e).max()) if e.size else 0.0)
-        return TaskStep(e, error_norm, N, b, lam, J, st.notes, None)
 
     @staticmethod
     def _unknown_reason(unknown: np.ndarray) -> str:

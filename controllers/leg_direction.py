@@ -1,9 +1,10 @@
 """Leg-direction visual servoing (seeds 001 and 003): ``e_i = u_i x u_i*``.
 
 ``L_i = -[u_i*]_x M_i`` (``docs/math.md`` section 6), stacked over the visible legs
-(18 x 6 with all six), ``tau = -lambda L^+ e``, ``q_dot = J_inv tau``. With every
-direction visible and the CURRENT interaction, one call of the compiled core
-(:func:`controllers.law_kernel.direction_kernel`) computes the step.
+(18 x 6 with all six), ``tau = -lambda L^+ e``, ``q_dot = J_inv tau``. One call of
+the compiled core (:func:`controllers.law_kernel.direction_kernel`, generated from the
+task's block :func:`controllers.tasks.leg_direction.direction_block`) computes the
+step, for every interaction choice; hidden legs are its zero-weight rows.
 """
 
 from __future__ import annotations
@@ -14,10 +15,8 @@ import numpy as np
 
 from controllers.base import ControllerContext, Observation, ObservationBatch
 from controllers.exceptions import ContextError
-from controllers.interaction import cross, direction_task
 from controllers.law_kernel import direction_kernel
-from controllers.laws import Selection, Stack, VisionLaw
-from hexapod.se3 import skew
+from controllers.laws import Selection, VisionLaw
 
 
 class LegDirectionController(VisionLaw):
@@ -29,8 +28,8 @@ class LegDirectionController(VisionLaw):
         interaction: ``"current"``, ``"desired"`` or ``"mean"``.
         threshold: Relative singular-value threshold (rank test).
         damping: Pseudo-inverse damping.
-        compiled: Use the compiled core (:mod:`controllers.law_kernel`) when every
-            direction is visible with the CURRENT interaction (same result, faster).
+        compiled: Evaluate the core (:mod:`controllers.law_kernel`) compiled to C (False:
+            the CasADi virtual machine evaluates the same expression, slower).
     """
 
     name = "leg-direction"
@@ -61,18 +60,16 @@ class LegDirectionController(VisionLaw):
         if np.any(np.abs(norms - 1.0) > 1e-6):
             raise ContextError(self.name, "goal.directions", f"not unit vectors: norms {norms}")
         self._u_star = us
-        self._u_star_skew = skew(us)
         self._goal_visible = vis
         # Fill value for hidden directions: the desired ones (keeps the arithmetic finite).
         self._fill = np.where(vis[:, None], us, np.array([0.0, 0.0, 1.0]))
         self._goal_all_visible = bool(vis.all())
-        if self.compiled:
-            kernel = direction_kernel(self.interaction)
-            kernel.set("desired", us)
-            kernel.set("base_points", self._A)
-            kernel.set("weights", vis)
-            self.kernel = kernel
-            self._k_features = kernel.inputs["features"].reshape(6, 3)
+        kernel = direction_kernel(self.interaction, self.compiled)
+        kernel.set("desired", us)
+        kernel.set("base_points", self._A)
+        kernel.set("weights", vis)
+        self.kernel = kernel
+        self._k_features = kernel.inputs["features"].reshape(6, 3)
 
     def desired_features(self) -> np.ndarray:
         """(6, 3) the desired leg directions (zeros where unknown)."""
@@ -126,24 +123,3 @@ class LegDirectionController(VisionLaw):
             notes.append("desired direction used for never-seen legs "
                          + ", ".join(str(int(i)) for i in approx))
         return notes
-
-    def _stack(self, obs: Observation, q: np.ndarray) -> Stack | str:
-        vis = np.asarray(obs.direction_visible, dtype=bool) & self._goal_visible
-        if vis.all():
-            u = np.asarray(obs.directions, dtype=float)
-            self.estimate.measured_all(u)
-            used, notes = None, []
-        else:
-            sel = self._select(obs, q)
-            u, used, notes = sel.features, sel.used, sel.notes
-        us = self._u_star
-        A = self._A
-        e = cross(u, us)
-        if self.interaction == "current":
-            _, L = direction_task(u, us, A, q, error=False, desired_skew=self._u_star_skew)
-        else:
-            _, L = direction_task(us, us, A, self._desired_lengths(q), error=False)
-            if self.interaction == "mean":
-                _, Lc = direction_task(u, us, A, q, error=False)
-                L = 0.5 * (L + Lc)
-        return Stack(e, L, used, notes)

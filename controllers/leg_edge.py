@@ -11,8 +11,9 @@ Features (``docs/math.md`` section 6), two per leg, stacked over the visible edg
 The leg direction used by ``H``, ``M_i`` and ``J_inv`` is rebuilt from the two
 edges of the leg, ``u = (n2 x n1) / |n2 x n1|`` (``vision/legs.py`` convention).
 
-With every edge visible and the CURRENT interaction, one call of the compiled
-core (:func:`controllers.law_kernel.edge_law_kernel`) computes the step.
+One call of the compiled core (:func:`controllers.law_kernel.edge_law_kernel`, generated
+from the task's block :func:`controllers.tasks.leg_edge.edge_block`) computes the step,
+for every interaction choice; hidden edges are its zero-weight rows.
 """
 
 from __future__ import annotations
@@ -24,15 +25,9 @@ import numpy as np
 
 from controllers.base import ControllerContext, Observation, ObservationBatch
 from controllers.exceptions import ContextError
-from controllers.interaction import (
-    cross,
-    edge_line_factors,
-    edge_line_task,
-    edge_normal_factors,
-    edge_normal_task,
-)
+from controllers.interaction import cross
 from controllers.law_kernel import edge_law_kernel
-from controllers.laws import Selection, Stack, VisionLaw, check_choice
+from controllers.laws import Selection, VisionLaw, check_choice
 
 #: Values of the ``edge_feature`` option.
 EDGE_FEATURES = ("auto", "lines", "normals")
@@ -53,8 +48,8 @@ class LegEdgeController(VisionLaw):
         damping: Pseudo-inverse damping.
         edge_feature: ``"auto"`` (lines for a perspective camera, normals for a
             unified one), ``"lines"`` or ``"normals"`` (force the normals).
-        compiled: Use the compiled core (:mod:`controllers.law_kernel`) when every
-            edge is visible with the CURRENT interaction (same result, faster).
+        compiled: Evaluate the core (:mod:`controllers.law_kernel`) compiled to C (False:
+            the CasADi virtual machine evaluates the same expression, slower).
     """
 
     name = "leg-edge"
@@ -72,7 +67,6 @@ class LegEdgeController(VisionLaw):
         self.use_lines = edge_feature == "lines"
         self._K = np.eye(3)
         self._K_inv_t = np.eye(3)
-        self._A2 = np.zeros((12, 3))
 
     # ----------------------------------------------------------------- reset
     def _reset_features(self, context: ControllerContext) -> None:
@@ -148,23 +142,18 @@ class LegEdgeController(VisionLaw):
         self._fill = fill
         if self.use_lines:
             self._l_fill = _unit(fill @ self._K_inv_t.T)
-        self._A2 = np.repeat(self._A, 2, axis=0)
         self._goal_all_visible = bool(self._goal_visible.all())
-        self._desired_L: np.ndarray | None = None
-        if self.compiled:
-            kernel = edge_law_kernel(self.use_lines, self.interaction)
-            kernel.set("desired", self._l_star if self.use_lines else self._n_star)
-            kernel.set("K", self._K)
-            kernel.set("K_inv", self._K_inv_t.T)
-            kernel.set("base_points", self._A)
-            kernel.set("weights", self._goal_visible)
-            if self.interaction != "current":
-                kernel.set("desired_normals", self._n_star)
-                kernel.set("desired_directions", self._u_star)
-            self.kernel = kernel
-            self._k_features = kernel.inputs["features"].reshape(6, 2, 3)
-        elif self.interaction != "current" and self._q_star is not None:
-            self._desired_L = self._desired_interaction(self._q_star)
+        kernel = edge_law_kernel(self.use_lines, self.interaction, self.compiled)
+        kernel.set("desired", self._l_star if self.use_lines else self._n_star)
+        kernel.set("K", self._K)
+        kernel.set("K_inv", self._K_inv_t.T)
+        kernel.set("base_points", self._A)
+        kernel.set("weights", self._goal_visible)
+        if self.interaction != "current":
+            kernel.set("desired_normals", self._n_star)
+            kernel.set("desired_directions", self._u_star)
+        self.kernel = kernel
+        self._k_features = kernel.inputs["features"].reshape(6, 2, 3)
 
     def _goal_array(self, value: Any, field: str) -> np.ndarray | None:
         if value is None:
@@ -175,15 +164,6 @@ class LegEdgeController(VisionLaw):
         return arr
 
     # ----------------------------------------------------------------- step
-    def _desired_interaction(self, q_star: np.ndarray) -> np.ndarray:
-        q2 = np.repeat(q_star, 2)
-        u2 = np.repeat(self._u_star, 2, axis=0)
-        ns = self._n_star.reshape(12, 3)
-        if self.use_lines:
-            ls = self._l_star.reshape(12, 3)
-            return edge_line_task(ls, ls, ns, u2, self._A2, q2, self._K, self._K_inv_t)
-        return edge_normal_task(ns, ns, u2, self._A2, q2)
-
     def _select(self, obs: Observation, q: np.ndarray) -> Selection:
         vis = np.asarray(obs.edge_visible, dtype=bool) & self._goal_visible
         if self.use_lines:
@@ -218,36 +198,6 @@ class LegEdgeController(VisionLaw):
             notes.append("desired direction used for never-seen legs "
                          + ", ".join(str(int(i)) for i in np.flatnonzero(approx)))
         return Selection(feat.reshape(12, 3), vis.reshape(12), both, legs, notes)
-
-    def _stack(self, obs: Observation, q: np.ndarray) -> Stack | str:
-        vis = np.asarray(obs.edge_visible, dtype=bool) & self._goal_visible
-        used: np.ndarray | None = None
-        if vis.all():
-            feat = np.asarray(obs.lines if self.use_lines else obs.normals, dtype=float)
-            notes: list[str] = []
-        else:
-            sel = self._select(obs, q)
-            feat, used, notes = sel.features.reshape(6, 2, 3), sel.used, sel.notes
-        n = _unit(feat @ self._K) if self.use_lines else feat
-        star = self._l_star if self.use_lines else self._n_star
-        u = _unit(cross(n[:, 1], n[:, 0]))
-        est = self.estimate
-        if used is None:
-            est.measured_all(u)
-        else:
-            est.directions[sel.measured] = u[sel.measured]
-            est.in_use[sel.measured] = u[sel.measured]
-            u = np.where(np.isfinite(est.in_use[:, :1]), est.in_use, u)
-        e = cross(feat, star).reshape(12, 3)
-        if self.interaction == "current":
-            a, g = self._current_factors(feat, n, u, q)
-            return Stack(e, None, used, notes, a=a, g=g)
-        L = (self._desired_L if self._desired_L is not None
-             else self._desired_interaction(self._desired_lengths(q)))
-        if self.interaction == "mean":
-            a, g = self._current_factors(feat, n, u, q)
-            L = 0.5 * (L + a[:, :, None] * g[:, None, :])
-        return Stack(e, L, used, notes)
 
     @property
     def line_matrix(self) -> np.ndarray:
@@ -290,13 +240,3 @@ class LegEdgeController(VisionLaw):
         self._k_features[...] = obs.lines if self.use_lines else obs.normals
         self._common_inputs(q)
         return True
-
-    def _current_factors(self, feat: np.ndarray, n: np.ndarray, u: np.ndarray,
-                         q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        q2 = np.repeat(q, 2)
-        u2 = np.repeat(u, 2, axis=0)
-        n12 = n.reshape(12, 3)
-        if self.use_lines:
-            return edge_line_factors(feat.reshape(12, 3), self._l_star.reshape(12, 3), n12, u2,
-                                     self._A2, q2, self._K, self._K_inv_t)
-        return edge_normal_factors(n12, self._n_star.reshape(12, 3), u2, self._A2, q2)
