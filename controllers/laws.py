@@ -185,8 +185,13 @@ class VisionLaw(BatchedLaw, Controller):
         self.solver.reset(context, self.name, dt)
         kernel = self.kernel
         g = self.gain
-        if self._q_star is not None and "desired_lengths" in kernel.inputs:
-            kernel.set("desired_lengths", self._q_star)
+        self._k_lengths: np.ndarray = kernel.inputs["lengths"]
+        self._k_desired_lengths: np.ndarray | None = None
+        if "desired_lengths" in kernel.inputs:
+            if self._q_star is not None:
+                kernel.set("desired_lengths", self._q_star)
+            else:
+                self._k_desired_lengths = kernel.inputs["desired_lengths"]
         kernel.set("gain", (g.at_zero, g.at_infinity, g.slope_at_zero))
         kernel.set("threshold2", self.threshold * self.threshold)
         kernel.set("damping2", self.solver.damping2)
@@ -362,15 +367,15 @@ class VisionLaw(BatchedLaw, Controller):
 
     def _common_inputs(self, q: np.ndarray) -> None:
         """The inputs of the common case besides the features (:meth:`_load_kernel`)."""
-        kernel = self.kernel
-        assert kernel is not None
         if self._kernel_selected:
+            kernel = self.kernel
+            assert kernel is not None
             kernel.inputs["weights"][:] = 1.0
             kernel.inputs["measured"][:] = 1.0
             self._kernel_selected = False
-        kernel.inputs["lengths"][:] = q
-        if self._q_star is None and "desired_lengths" in kernel.inputs:
-            kernel.inputs["desired_lengths"][:] = q
+        self._k_lengths[...] = q
+        if self._k_desired_lengths is not None:  # q* unknown: the measured lengths
+            self._k_desired_lengths[...] = q
 
     @property
     def batch_core(self) -> bool:
