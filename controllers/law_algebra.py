@@ -127,12 +127,14 @@ def full_rank_certificate(N: ca.SX, thr2: ca.SX) -> ca.SX:
 
 def law_tail(e: ca.SX, N: ca.SX, b: ca.SX, directions: list[ca.SX], base_points: list[ca.SX],
              params: ca.SX, lean: bool = False) -> list[ca.SX]:
-    """The law part shared by every feature kind (see the module docstring).
+    """The law part shared by every feature kind (:mod:`controllers.law_kernel`): gain,
+    rank, condition, damped solve at full rank, ``J_inv`` and ``q_dot``.
 
     Args:
-        e: Stacked error (m, 1).
-        N: ``L^T L`` (6, 6).
-        b: ``L^T e`` (6, 1).
+        e: Stacked error of the used features, zeros for the others (m, 1): its norm
+            and its largest entry (the gain) count the used rows only.
+        N: ``L^T W L`` (6, 6).
+        b: ``L^T W e`` (6, 1).
         directions: Six (3, 1) leg directions for ``J_inv``.
         base_points: Six (3, 1) ``A_i`` [m].
         params: The :data:`LAW_INPUTS` (5, 1).

@@ -29,7 +29,7 @@ call, a few microseconds, computes:
 
 Every case of the laws (hidden features, every interaction choice) is computed here;
 the numpy formulas of :mod:`controllers.interaction` are the tests' oracle
-(``tests/controllers/test_law_kernel.py``).
+(``tests/controllers/numpy_law.py``, ``tests/controllers/test_law_kernel.py``).
 
 Input: the feature block (:func:`direction_inputs`, :func:`edge_inputs`), then the law
 parameters :data:`LAW_INPUTS`. Output: the feature error (every feature, used or not),
