@@ -1,7 +1,12 @@
-"""Interaction matrices of the leg features (``docs/math.md`` sections 3, 4, 5, 6).
+"""Interaction matrices of the leg features (``docs/math.md`` sections 3, 4, 5, 6), in numpy.
 
-One implementation shared by every controller. Twists ``tau = (v, w)`` are
-expressed in the camera frame and reduced at its origin (``docs/math.md`` section 2).
+The independent reference of the tasks' CasADi blocks (:mod:`controllers.tasks`), from
+which the vision laws' compiled cores are generated (:mod:`controllers.law_kernel`): the
+laws do not compute with these functions; the tests do (``tests/controllers/numpy_law.py``
+steps a law with them), and so does the dead reckoning of hidden legs
+(:meth:`controllers.estimators.LegDirectionEstimate.predict_hidden`, ``M_i``). Twists
+``tau = (v, w)`` are expressed in the camera frame and reduced at its origin
+(``docs/math.md`` section 2).
 
 Two forms are given:
 

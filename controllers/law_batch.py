@@ -6,7 +6,7 @@ what the law carries between periods is one batch
 :class:`~controllers.estimators.LegDirectionEstimate` whose rows are the instances'
 estimates (views: a trial stepped by its instance and the same trial stepped in the
 batch write the same memory). What changes is the common case (every feature visible
-and finite, the CURRENT interaction, a full-rank interaction matrix): there, the rows
+and finite, now and in the goal, a full-rank interaction matrix): there, the rows
 of all such trials go through the law's compiled core in one C loop
 (:meth:`hexapod.compiled.CompiledFunction.batch`, the same code as the per-trial
 :meth:`~controllers.laws.VisionLaw.tasks`), and the estimate is updated by the
@@ -37,6 +37,11 @@ class BatchedLaw(RemembersOptions):
     kernel: Any
     estimate: LegDirectionEstimate
     solver: Solver
+
+    @property
+    def batch_core(self) -> bool:  # provided by VisionLaw
+        """Whether this trial's common case may be stepped by the batch's lean core."""
+        return False
 
     def reset(self, context: ControllerContext) -> None:  # provided by VisionLaw
         raise NotImplementedError
@@ -72,7 +77,7 @@ class BatchedLaw(RemembersOptions):
         self.batch_estimate = LegDirectionEstimate.fresh(n)
         for k, inst in enumerate(trials):
             inst.estimate = self.batch_estimate.row(k)
-        kernels = [t.kernel for t in trials]
+        kernels = [t.kernel if t.batch_core else None for t in trials]
         self._has_kernel = np.array([k is not None for k in kernels], dtype=bool)
         #: Rows of ``_X`` holding a compiled core's constants (a retarget may then write
         #: the desired features alone).
@@ -131,7 +136,7 @@ class BatchedLaw(RemembersOptions):
     def _retarget_instance(self, trial: int, goal: Any) -> None:
         inst = self._trials[trial]
         inst.retarget(goal)
-        kern = inst.kernel
+        kern = inst.kernel if inst.batch_core else None
         self._has_kernel[trial] = kern is not None
         self._take_kernel(trial, kern)
 

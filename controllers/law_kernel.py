@@ -2,34 +2,38 @@
 
 A ``step`` of a vision law is a few hundred floating-point operations spread
 over some sixty numpy calls; on this scale the cost is the calls, not the
-arithmetic. The core of the common case (every feature visible, CURRENT
-interaction) is therefore written once as a CasADi SX expression, generated
-to C, compiled by the system C compiler and called through :mod:`ctypes` on
-preallocated buffers by :class:`hexapod.compiled.CompiledFunction` (the
-technique of :mod:`hexapod.fk`; the CasADi virtual machine evaluates the same
-expression when there is no compiler). One call, a few microseconds, computes:
+arithmetic. The core is therefore written once as a CasADi SX expression, from the
+tasks' own block definitions (:func:`controllers.tasks.leg_direction.direction_block`,
+:func:`controllers.tasks.leg_edge.edge_block`,
+:func:`controllers.tasks.joint_length.inverse_jacobian_row`), generated to C, compiled
+by the system C compiler and called through :mod:`ctypes` on preallocated buffers by
+:class:`hexapod.compiled.CompiledFunction` (the technique of :mod:`hexapod.fk`; the
+CasADi virtual machine evaluates the same expression when there is no compiler). One
+call, a few microseconds, computes:
 
-- the feature part (one per feature kind): the stacked error ``e`` and the
-  normal equations ``N = L^T L``, ``b = L^T e`` (``docs/math.md`` section 6), and the
-  leg directions the inverse Jacobian needs;
-- the law part, shared by every feature kind (:func:`law_tail`): the adaptive
-  gain ``lambda(|e|_inf)``; the eigen-decomposition of the 6 x 6 ``N`` by a fixed
-  number of cyclic Jacobi sweeps (unrolled: exact to rounding for a symmetric
-  6 x 6 matrix), hence the rank (eigenvalues above ``threshold^2 w_max``), the
-  condition number ``sqrt(w_max / w_min)`` and the thresholded, damped
-  pseudo-inverse solution ``tau = -lambda sum_j (v_j^T b) / (w_j + d2) v_j`` of
-  :func:`controllers.laws.solve_normal`; the inverse Jacobian ``J_inv``
-  (``docs/math.md`` section 3) and ``q_dot = J_inv tau``; and the finiteness checks
-  of :meth:`controllers.laws.VisionLaw.step` (error norm, sum of ``N``, a
-  ``q_dot`` check that is 0 exactly when every entry is finite).
+- the feature part (one per feature kind): the stacked error ``e`` and the weighted
+  normal equations ``N = L^T W L``, ``b = L^T W e`` (``docs/math.md`` section 6;
+  :class:`~controllers.law_algebra.WeightedNormal`), with the interaction matrix at the
+  current features (CURRENT), at the desired ones (DESIRED) or their mean (MEAN): one
+  core per choice. A feature of weight zero (hidden now or in the goal) is left out
+  exactly: nothing of it reaches ``N``, ``b``, the error norm, the gain or the rank;
+- the leg directions: measured (from the features), or given by the law's estimate
+  (dead-reckoned or approximated for hidden legs), per leg (input ``measured``);
+- the law part, shared by every feature kind (:func:`~controllers.law_algebra.law_tail`):
+  the adaptive gain ``lambda(|e|_inf)``, the rank and condition number of ``N``, the
+  damped solution ``tau = -lambda (N + d2 I)^-1 b`` at full rank
+  (:func:`controllers.law_tools.solve_normal`), the inverse Jacobian ``J_inv``
+  (``docs/math.md`` section 3), ``q_dot = J_inv tau`` and the finiteness checks of
+  :meth:`controllers.laws.VisionLaw.step` (error norm, sum of ``N``, a ``q_dot`` check
+  that is 0 exactly when every entry is finite).
 
-The other cases (hidden features, DESIRED / MEAN interaction) keep the numpy
-path of :mod:`controllers.laws`; both paths are tested equal
-(``tests/controllers/test_law_kernel.py``).
+Every case of the laws (hidden features, every interaction choice) is computed here;
+the numpy formulas of :mod:`controllers.interaction` are the tests' oracle
+(``tests/controllers/numpy_law.py``, ``tests/controllers/test_law_kernel.py``).
 
-Input: the feature block (see :data:`DIRECTION_INPUTS`, :data:`EDGE_INPUTS`),
-then the law parameters :data:`LAW_INPUTS`. Output: the feature error, then
-:data:`LAW_OUTPUTS`, then the leg directions (18).
+Input: the feature block (:func:`direction_inputs`, :func:`edge_inputs`), then the law
+parameters :data:`LAW_INPUTS`. Output: the feature error (every feature, used or not),
+then :data:`LAW_OUTPUTS`, then the leg directions (18) the inverse Jacobian used.
 """
 
 from __future__ import annotations
@@ -41,27 +45,62 @@ from functools import lru_cache
 import casadi as ca
 import numpy as np
 
-from controllers.law_tools import gain_formula
-from controllers.tasks.joint_length import inverse_jacobian_row
+from controllers.law_algebra import (
+    JACOBI_SWEEPS,
+    LAW_SWEEPS,
+    WeightedNormal,
+    cholesky_solve,
+    full_rank_certificate,
+    jacobi_eigen,
+    law_tail,
+)
 from controllers.tasks.leg_direction import direction_block
 from controllers.tasks.leg_edge import edge_block, leg_direction_of_edges, normal_of_line
 from hexapod.compiled import CompiledFunction
 
-#: Cyclic Jacobi sweeps of the 6 x 6 eigen-decomposition (quadratic convergence:
-#: 5 to 6 reach double precision on the matrices of the laws; 8 leave a margin).
-JACOBI_SWEEPS = 8
-#: Sweeps of the laws' eigenvalues (rank and condition only; see :func:`law_tail`).
-LAW_SWEEPS = 6
+__all__ = [
+    "DIRECTION_INPUTS", "EDGE_INPUTS", "JACOBI_SWEEPS", "LAW_INPUTS", "LAW_OUTPUTS",
+    "LAW_SWEEPS", "LawKernel", "LawResult", "cholesky_solve", "direction_inputs",
+    "direction_kernel", "edge_inputs", "edge_law_kernel", "full_rank_certificate",
+    "jacobi_eigen", "law_tail",
+]
 
+#: Where a core evaluates the interaction matrix (:data:`controllers.law_tools.INTERACTIONS`).
+CORE_INTERACTIONS = ("current", "desired", "mean")
 #: Law parameters after the feature block: gain ``(lambda0, lambda_inf, lambda0')``,
 #: squared threshold, squared damping (or the QP regularization).
 LAW_INPUTS = (("gain", 3), ("threshold2", 1), ("damping2", 1))
-#: Direction-law feature block: measured ``u`` (6 x 3), desired ``u*``, ``A`` (6 x 3), ``q``.
-DIRECTION_INPUTS = (("features", 18), ("desired", 18), ("base_points", 18), ("lengths", 6))
-#: Edge-law feature block: features (12 x 3 lines or normals), desired, ``K``, ``K^-1``
-#: (row-major; identities for normals), ``A`` (6 x 3), ``q``.
-EDGE_INPUTS = (("features", 36), ("desired", 36), ("K", 9), ("K_inv", 9), ("base_points", 18),
-               ("lengths", 6))
+#: Per-leg inputs of every core: the weight of each feature (0: left out), the leg
+#: directions the law knows (used where a leg is not ``measured``), and ``measured``
+#: (1: the leg's direction comes from this period's features).
+_LEG_INPUTS = (("leg_directions", 18), ("measured", 6))
+
+
+def direction_inputs(interaction: str = "current") -> tuple[tuple[str, int], ...]:
+    """The direction law's feature block: measured ``u`` (6 x 3), desired ``u*``, ``A``
+    (6 x 3), ``q``, the weights (6), :data:`_LEG_INPUTS`, and for the DESIRED / MEAN
+    interaction the lengths ``q*`` where it is evaluated."""
+    block = (("features", 18), ("desired", 18), ("base_points", 18), ("lengths", 6),
+             ("weights", 6), *_LEG_INPUTS)
+    return block if interaction == "current" else (*block, ("desired_lengths", 6))
+
+
+def edge_inputs(interaction: str = "current") -> tuple[tuple[str, int], ...]:
+    """The edge law's feature block: features (12 x 3 lines or normals), desired, ``K``,
+    ``K^-1`` (row-major; identities for normals), ``A`` (6 x 3), ``q``, the weights (12),
+    :data:`_LEG_INPUTS`, and for the DESIRED / MEAN interaction the desired normals
+    (12 x 3), leg directions ``u*`` (6 x 3) and lengths ``q*``."""
+    block = (("features", 36), ("desired", 36), ("K", 9), ("K_inv", 9), ("base_points", 18),
+             ("lengths", 6), ("weights", 12), *_LEG_INPUTS)
+    if interaction == "current":
+        return block
+    return (*block, ("desired_normals", 36), ("desired_directions", 18),
+            ("desired_lengths", 6))
+
+
+#: The CURRENT-interaction layouts.
+DIRECTION_INPUTS = direction_inputs()
+EDGE_INPUTS = edge_inputs()
 #: After the error: ``|e|``, sum of ``N``, rank, condition, gain, ``tau`` (6), ``q_dot`` (6),
 #: finiteness check of ``q_dot``, ``N`` (36, row-major), ``b`` (6), ``J_inv`` (36).
 LAW_OUTPUTS = (("error_norm", 1), ("n_sum", 1), ("rank", 1), ("condition", 1), ("gain", 1),
@@ -82,243 +121,99 @@ def _offsets_cached(fields: tuple[tuple[str, int], ...], start: int) -> dict[str
     return out
 
 
-# --------------------------------------------------------------------------- expressions
-def cholesky_solve(M: list[list[ca.SX]], rhs: list[ca.SX]) -> list[ca.SX]:
-    """``M^-1 rhs`` for a symmetric positive definite 6 x 6 ``M`` (unrolled Cholesky;
-    NaN when ``M`` is not positive definite)."""
-    n = len(rhs)
-    L: list[list[ca.SX]] = [[ca.SX(0.0)] * n for _ in range(n)]
-    for j in range(n):
-        d = M[j][j]
-        for k in range(j):
-            d = d - L[j][k] * L[j][k]
-        L[j][j] = ca.sqrt(d)
-        for i in range(j + 1, n):
-            v = M[i][j]
-            for k in range(j):
-                v = v - L[i][k] * L[j][k]
-            L[i][j] = v / L[j][j]
-    z: list[ca.SX] = []
-    for i in range(n):
-        v = rhs[i]
-        for k in range(i):
-            v = v - L[i][k] * z[k]
-        z.append(v / L[i][i])
-    sol: list[ca.SX] = [ca.SX(0.0)] * n
-    for i in reversed(range(n)):
-        v = z[i]
-        for k in range(i + 1, n):
-            v = v - L[k][i] * sol[k]
-        sol[i] = v / L[i][i]
-    return sol
+def _check_interaction(interaction: str) -> None:
+    if interaction not in CORE_INTERACTIONS:
+        raise ValueError(f"interaction: expected one of {', '.join(CORE_INTERACTIONS)}, "
+                         f"got {interaction!r}")
 
 
-def jacobi_eigen(N: ca.SX, sweeps: int = JACOBI_SWEEPS, vectors: bool = True
-                 ) -> tuple[list[ca.SX], list[list[ca.SX]]]:
-    """Eigenvalues and eigenvectors of a symmetric 6 x 6 SX matrix (cyclic Jacobi, unrolled).
-
-    Each rotation zeroes ``a_pq`` (Golub and Van Loan, ``sym.schur2``); a rotation
-    whose ``a_pq`` is already zero is skipped without dividing by it.
-
-    Args:
-        N: The matrix.
-        sweeps: Cyclic sweeps (unrolled).
-        vectors: Accumulate the eigenvectors (False: the identity is returned for
-            ``V``, and the expression is about a third smaller).
-
-    Returns:
-        The eigenvalues ``w`` (6, unsorted) and ``V`` as rows ``V[k][j]`` (column
-        ``j`` is the eigenvector of ``w[j]``).
-    """
-    n = N.shape[0]
-    a = [[N[i, j] for j in range(n)] for i in range(n)]
-    V: list[list[ca.SX]] = [[ca.SX(1.0 if i == j else 0.0) for j in range(n)] for i in range(n)]
-    for _ in range(sweeps):
-        for p in range(n - 1):
-            for q in range(p + 1, n):
-                apq = a[p][q]
-                zero = apq == 0
-                theta = (a[q][q] - a[p][p]) / (2.0 * ca.if_else(zero, 1.0, apq))
-                t = ca.if_else(theta >= 0, 1.0, -1.0) / (ca.fabs(theta)
-                                                         + ca.sqrt(1.0 + theta * theta))
-                t = ca.if_else(zero, 0.0, t)
-                c = 1.0 / ca.sqrt(1.0 + t * t)
-                s = t * c
-                app = a[p][p] - t * apq
-                aqq = a[q][q] + t * apq
-                for k in range(n):
-                    if k in (p, q):
-                        continue
-                    akp, akq = a[k][p], a[k][q]
-                    a[k][p] = a[p][k] = c * akp - s * akq
-                    a[k][q] = a[q][k] = s * akp + c * akq
-                a[p][p], a[q][q] = app, aqq
-                a[p][q] = a[q][p] = ca.SX(0.0)
-                if not vectors:
-                    continue
-                for k in range(n):
-                    vkp, vkq = V[k][p], V[k][q]
-                    V[k][p] = c * vkp - s * vkq
-                    V[k][q] = s * vkp + c * vkq
-    return [a[i][i] for i in range(n)], V
+def _rows(x: ca.SX, n: int) -> list[ca.SX]:
+    """The (3, 1) rows of a stacked (3 n, 1) vector."""
+    return [x[3 * i:3 * i + 3] for i in range(n)]
 
 
-def full_rank_certificate(N: ca.SX, thr2: ca.SX) -> ca.SX:
-    """1 when ``N`` is certainly of full rank for the eigenvalue threshold, else 0.
-
-    The certificate of the lean cores (:func:`law_tail` with ``lean``): the Cholesky
-    pivots of ``N - c I`` with ``c = (2 thr2 + 1e-10) |N|_F`` are all positive. As
-    ``|N|_F >= w_max``, this proves ``w_min > c >= thr2 w_max`` with a margin of a
-    factor two (and of ``1e-10 |N|_F`` against rounding), i.e. the rank the exact
-    eigenvalues give is 6. A 0 says nothing: the caller computes the exact rank.
-    """
-    fro = ca.sqrt(ca.sum1(ca.reshape(N * N, 36, 1)))
-    c = (2.0 * thr2 + 1e-10) * fro
-    L: list[list[ca.SX]] = [[ca.SX(0.0)] * 6 for _ in range(6)]
-    ok = fro > 0
-    for j in range(6):
-        d = N[j, j] - c
-        for k in range(j):
-            d = d - L[j][k] * L[j][k]
-        ok = ca.logic_and(ok, d > 0)
-        L[j][j] = ca.sqrt(ca.if_else(d > 0, d, 1.0))
-        for i in range(j + 1, 6):
-            v = N[i, j]
-            for k in range(j):
-                v = v - L[i][k] * L[j][k]
-            L[i][j] = v / L[j][j]
-    return ca.if_else(ok, 1.0, 0.0)
+def _leg_directions(x: ca.SX, sl: dict[str, slice], measured: list[ca.SX]) -> list[ca.SX]:
+    """Per leg: the direction measured this period, else the given one."""
+    given = _rows(x[sl["leg_directions"]], 6)
+    m = x[sl["measured"]]
+    return [ca.if_else(m[i] != 0, u, d) for i, (u, d) in enumerate(zip(measured, given,
+                                                                         strict=True))]
 
 
-def law_tail(e: ca.SX, N: ca.SX, b: ca.SX, directions: list[ca.SX], base_points: list[ca.SX],
-             params: ca.SX, lean: bool = False) -> list[ca.SX]:
-    """The law part shared by every feature kind (see the module docstring).
-
-    Args:
-        e: Stacked error (m, 1).
-        N: ``L^T L`` (6, 6).
-        b: ``L^T e`` (6, 1).
-        directions: Six (3, 1) leg directions for ``J_inv``.
-        base_points: Six (3, 1) ``A_i`` [m].
-        params: The :data:`LAW_INPUTS` (5, 1).
-        lean: The core of the batched laws: no eigenvalues; the rank output is 6 when
-            :func:`full_rank_certificate` proves full rank (then every output equals
-            the full core's to the last bit) and 0 otherwise (the caller steps that
-            row with the full core); the condition output is NaN.
-
-    Returns:
-        The :data:`LAW_OUTPUTS`, in order.
-    """
-    l0, linf, slope, thr2, d2 = (params[k] for k in range(5))
-    # Gain (controllers.law_tools.gain_formula) at x = |e|_inf.
-    x = ca.mmax(ca.fabs(e))
-    lam = gain_formula(x, l0, linf, slope, ca.exp, ca.if_else)
-    if lean:
-        full = full_rank_certificate(N, thr2) == 1.0
-        rank = ca.if_else(full, 6.0, 0.0)
-        cond = ca.SX(float("nan"))
-    else:
-        # Rank and condition from the eigenvalues (solve_normal's threshold). The
-        # command is needed only at full rank (the laws refuse below it), where the
-        # thresholded, damped pseudo-inverse sum_j (v_j^T b) / (w_j + d2) v_j is
-        # (N + d2 I)^-1 b: a Cholesky solve, without the eigenvectors.
-        w, _ = jacobi_eigen(N, LAW_SWEEPS, vectors=False)
-        w_max = w[0]
-        w_min = w[0]
-        for j in range(1, 6):
-            w_max = ca.fmax(w_max, w[j])
-            w_min = ca.fmin(w_min, w[j])
-        positive = w_max > 0
-        keep = [ca.logic_and(positive, w[j] > thr2 * w_max) for j in range(6)]
-        rank = ca.SX(0.0)
-        for kept in keep:
-            rank = rank + ca.if_else(kept, 1.0, 0.0)
-        cond = ca.if_else(ca.logic_and(positive, w_min > 0),
-                          ca.sqrt(w_max / ca.if_else(w_min > 0, w_min, 1.0)), ca.inf)
-        full = rank == 6.0
-    M = [[ca.if_else(full, N[i, j] + (d2 if i == j else 0.0), 1.0 if i == j else 0.0)
-          for j in range(6)] for i in range(6)]
-    sol = cholesky_solve(M, [b[i] for i in range(6)])
-    tau = ca.vertcat(*[ca.if_else(full, x, 0.0) for x in sol]) * (-lam)
-    # Inverse Jacobian rows [u_i^T, (A_i x u_i)^T] and q_dot = J_inv tau.
-    J = ca.vertcat(*[inverse_jacobian_row(u, A)
-                     for u, A in zip(directions, base_points, strict=True)])
-    qdot = J @ tau
-    return [ca.sqrt(ca.dot(e, e)), ca.sum1(ca.reshape(N, 36, 1)), rank, cond, lam, tau, qdot,
-            ca.sum1(qdot - qdot), ca.reshape(N.T, 36, 1), b, ca.reshape(J.T, 36, 1)]
-
-
-def _upper_zeros() -> list[list[ca.SX]]:
-    """The upper triangle of a 6 x 6 accumulator (``N = L^T L`` is symmetric: each sum is
-    built once)."""
-    return [[ca.SX(0.0) for _ in range(6)] for _ in range(6)]
-
-
-def _symmetric(upper: list[list[ca.SX]]) -> ca.SX:
-    """The symmetric 6 x 6 matrix of an upper triangle."""
-    return ca.vertcat(*[ca.horzcat(*[upper[min(i, j)][max(i, j)] for j in range(6)])
-                        for i in range(6)])
-
-
-def _direction_function(lean: bool = False) -> ca.Function:
+def _direction_function(interaction: str = "current", lean: bool = False) -> ca.Function:
     """Leg-direction law: ``e_i = u_i x u_i*``, ``L_i = -[u_i*]_x M_i`` (docs/math.md §3, §6)."""
-    n_feat = sum(s for _, s in DIRECTION_INPUTS)
+    _check_interaction(interaction)
+    inputs = direction_inputs(interaction)
+    n_feat = sum(s for _, s in inputs)
     x = ca.SX.sym("x", n_feat + sum(s for _, s in LAW_INPUTS))
-    sl = _offsets(DIRECTION_INPUTS)
-    u = [x[sl["features"]][3 * i:3 * i + 3] for i in range(6)]
-    us = [x[sl["desired"]][3 * i:3 * i + 3] for i in range(6)]
-    A = [x[sl["base_points"]][3 * i:3 * i + 3] for i in range(6)]
+    sl = _offsets(inputs)
+    u = _rows(x[sl["features"]], 6)
+    us = _rows(x[sl["desired"]], 6)
+    A = _rows(x[sl["base_points"]], 6)
     q = [x[sl["lengths"]][i] for i in range(6)]
+    w = x[sl["weights"]]
+    acc = WeightedNormal()
     errors = []
-    Nu = _upper_zeros()
-    b = ca.SX.zeros(6, 1)
     for i in range(6):
         ei, L = direction_block(u[i], us[i], A[i], q[i])
-        for row in range(6):
-            for col in range(row, 6):
-                Nu[row][col] = Nu[row][col] + ca.dot(L[:, row], L[:, col])
-        b += L.T @ ei
+        if interaction != "current":
+            _, Ld = direction_block(us[i], us[i], A[i], x[sl["desired_lengths"]][i])
+            L = Ld if interaction == "desired" else 0.5 * (Ld + L)
+        acc.add_dense(ei, L, w[i])
         errors.append(ei)
-    N = _symmetric(Nu)
-    e = ca.vertcat(*errors)
-    tail = law_tail(e, N, b, u, A, x[n_feat:], lean)
-    name = "hexapod_direction_law" + ("_lean" if lean else "")
-    return ca.Function(name, [x], [ca.vertcat(e, *tail, *u)])
+    directions = _leg_directions(x, sl, u)
+    tail = law_tail(ca.vertcat(*acc.used_errors), acc.N, acc.b, directions, A, x[n_feat:],
+                    lean)
+    name = "hexapod_direction_law_w" + ("" if interaction == "current" else f"_{interaction}")
+    name += "_lean" if lean else ""
+    return ca.Function(name, [x], [ca.vertcat(*errors, *tail, *directions)])
 
 
-def _edge_function(use_lines: bool, lean: bool = False) -> ca.Function:
-    """Leg-edge law on pixel lines or normals (rank-one blocks, ``controllers.interaction``)."""
-    n_feat = sum(s for _, s in EDGE_INPUTS)
+def _edge_function(use_lines: bool, interaction: str = "current",
+                   lean: bool = False) -> ca.Function:
+    """Leg-edge law on pixel lines or normals (rank-one blocks, ``docs/math.md`` §6)."""
+    _check_interaction(interaction)
+    inputs = edge_inputs(interaction)
+    n_feat = sum(s for _, s in inputs)
     x = ca.SX.sym("x", n_feat + sum(s for _, s in LAW_INPUTS))
-    sl = _offsets(EDGE_INPUTS)
-    feat = [x[sl["features"]][3 * k:3 * k + 3] for k in range(12)]
-    star = [x[sl["desired"]][3 * k:3 * k + 3] for k in range(12)]
+    sl = _offsets(inputs)
+    feat = _rows(x[sl["features"]], 12)
+    star = _rows(x[sl["desired"]], 12)
     Kt = ca.reshape(x[sl["K"]], 3, 3)  # column-major read of a row-major K: K^T
     Kinv_t = ca.reshape(x[sl["K_inv"]], 3, 3)  # (K^-1)^T
-    A = [x[sl["base_points"]][3 * i:3 * i + 3] for i in range(6)]
+    lines = (Kt, Kinv_t) if use_lines else (None, None)
+    A = _rows(x[sl["base_points"]], 6)
     q = [x[sl["lengths"]][i] for i in range(6)]
+    w = x[sl["weights"]]
     n = [normal_of_line(f, Kt) if use_lines else f for f in feat]
-    u = [leg_direction_of_edges(n[2 * i], n[2 * i + 1]) for i in range(6)]
+    u = _leg_directions(x, sl, [leg_direction_of_edges(n[2 * i], n[2 * i + 1])
+                                for i in range(6)])
+    acc = WeightedNormal()
     errors = []
-    Nu = _upper_zeros()
-    b = ca.SX.zeros(6, 1)
     inv_q = [1.0 / qi for qi in q]  # one division per leg
+    if interaction != "current":
+        n_star = _rows(x[sl["desired_normals"]], 12)
+        u_star = _rows(x[sl["desired_directions"]], 6)
+        q_star = [x[sl["desired_lengths"]][i] for i in range(6)]
+        inv_q_star = [1.0 / qi for qi in q_star]
     for k in range(12):
         i = k // 2
-        ek, a, g = edge_block(feat[k], star[k], n[k], u[i], A[i], q[i], inv_q[i],
-                              Kt if use_lines else None, Kinv_t if use_lines else None)
+        ek, a, g = edge_block(feat[k], star[k], n[k], u[i], A[i], q[i], inv_q[i], *lines)
         errors.append(ek)
-        weight = ca.dot(a, a)
-        for row in range(6):
-            for col in range(row, 6):
-                Nu[row][col] = Nu[row][col] + weight * (g[row] * g[col])
-        b += ca.dot(a, ek) * g
-    N = _symmetric(Nu)
-    e = ca.vertcat(*errors)
-    tail = law_tail(e, N, b, u, A, x[n_feat:], lean)
-    name = "hexapod_edge_law_lines_v2" if use_lines else "hexapod_edge_law_normals_v2"
-    name += "_lean" if lean else ""
-    return ca.Function(name, [x], [ca.vertcat(e, *tail, *u)])
+        if interaction == "current":
+            acc.add_rank_one(ek, a, g, w[k])
+            continue
+        # The Jacobian at the desired features: the block of the desired edge itself.
+        _, ad, gd = edge_block(star[k], star[k], n_star[k], u_star[i], A[i], q_star[i],
+                               inv_q_star[i], *lines)
+        if interaction == "desired":
+            acc.add_rank_one(ek, ad, gd, w[k])
+        else:
+            acc.add_dense(ek, 0.5 * (ad @ gd.T + a @ g.T), w[k])
+    tail = law_tail(ca.vertcat(*acc.used_errors), acc.N, acc.b, u, A, x[n_feat:], lean)
+    name = "hexapod_edge_law_" + ("lines" if use_lines else "normals") + "_w"
+    name += ("" if interaction == "current" else f"_{interaction}") + ("_lean" if lean else "")
+    return ca.Function(name, [x], [ca.vertcat(*errors, *tail, *u)])
 
 
 # --------------------------------------------------------------------------- runtime
@@ -385,6 +280,10 @@ class LawKernel:
         self.inputs = {k: self.input_vector[s] for k, s in self.slices.items()}
         #: Where each named output lies in the output vector.
         self.outputs = _offsets((("error", n_error), *LAW_OUTPUTS, ("directions", 18)))
+        # Every feature used, every leg direction measured (the common case).
+        for name in ("weights", "measured"):
+            if name in self.inputs:
+                self.inputs[name][:] = 1.0
 
     @property
     def lean_function(self) -> CompiledFunction:
@@ -413,23 +312,41 @@ class LawKernel:
             directions=y[o["directions"]].reshape(6, 3))
 
 
-@lru_cache(maxsize=2)
-def _direction_compiled(lean: bool = False) -> CompiledFunction:
-    return CompiledFunction(_direction_function(lean))
+@lru_cache(maxsize=12)
+def _direction_compiled(interaction: str = "current", lean: bool = False,
+                        compiled: bool = True) -> CompiledFunction:
+    return CompiledFunction(_direction_function(interaction, lean), compiled)
 
 
-@lru_cache(maxsize=4)
-def _edge_compiled(use_lines: bool, lean: bool = False) -> CompiledFunction:
-    return CompiledFunction(_edge_function(use_lines, lean))
+@lru_cache(maxsize=24)
+def _edge_compiled(use_lines: bool, interaction: str = "current", lean: bool = False,
+                   compiled: bool = True) -> CompiledFunction:
+    return CompiledFunction(_edge_function(use_lines, interaction, lean), compiled)
 
 
-def direction_kernel() -> LawKernel:
-    """A kernel of the leg-direction law (its own input buffer; shared compiled code)."""
-    return LawKernel(_direction_compiled(), DIRECTION_INPUTS, 18,
-                     lambda: _direction_compiled(True))
+def direction_kernel(interaction: str = "current", compiled: bool = True) -> LawKernel:
+    """A kernel of the leg-direction law (its own input buffer; shared compiled code).
+
+    Args:
+        interaction: Where the interaction matrix is evaluated (:data:`CORE_INTERACTIONS`).
+        compiled: C code (False: the CasADi virtual machine evaluates the same core).
+    """
+    _check_interaction(interaction)
+    return LawKernel(_direction_compiled(interaction, False, compiled),
+                     direction_inputs(interaction), 18,
+                     lambda: _direction_compiled(interaction, True, compiled))
 
 
-def edge_law_kernel(use_lines: bool) -> LawKernel:
-    """A kernel of the leg-edge law on pixel lines (True) or normals (False)."""
-    return LawKernel(_edge_compiled(use_lines), EDGE_INPUTS, 36,
-                     lambda: _edge_compiled(use_lines, True))
+def edge_law_kernel(use_lines: bool, interaction: str = "current",
+                    compiled: bool = True) -> LawKernel:
+    """A kernel of the leg-edge law on pixel lines (True) or normals (False).
+
+    Args:
+        use_lines: Pixel lines (True) or normals (False).
+        interaction: Where the interaction matrix is evaluated (:data:`CORE_INTERACTIONS`).
+        compiled: C code (False: the CasADi virtual machine evaluates the same core).
+    """
+    _check_interaction(interaction)
+    return LawKernel(_edge_compiled(use_lines, interaction, False, compiled),
+                     edge_inputs(interaction), 36,
+                     lambda: _edge_compiled(use_lines, interaction, True, compiled))

@@ -1,7 +1,7 @@
 """The pieces the control laws are built from (``docs/math.md`` section 6): observation
 checks, option checks, the constant or adaptive :class:`Gain`, the least-squares solves
 with a singular-value threshold and damping, the inverse Jacobian, and the feature
-:class:`Stack` a law combines."""
+:class:`Selection` a law gives its compiled core when a feature is hidden."""
 
 from __future__ import annotations
 
@@ -255,48 +255,22 @@ def _unit_rows(x: np.ndarray) -> np.ndarray:
 
 # --------------------------------------------------------------------------- the law
 @dataclass
-class Stack:
-    """The features of one step, as stacked by a :class:`VisionLaw` subclass.
-
-    The interaction blocks are given either densely (``interaction``, (m, 3, 6)) or,
-    when each block is rank one ``L_k = a_k g_k^T`` (the edge features), by their
-    factors ``a`` (m, 3) and ``g`` (m, 6): the law then forms ``L^T L`` and
-    ``L^T e`` without building the 36 x 6 matrix.
+class Selection:
+    """What a :class:`~controllers.laws.VisionLaw` gives its compiled core when a feature
+    is hidden (now or in the goal): which features are used, and the leg directions.
 
     Attributes:
-        error: (m, 3) error blocks of every feature (unused rows may hold anything finite).
-        interaction: (m, 3, 6) interaction blocks, or None with ``a``, ``g``.
-        used: (m,) bool, blocks used this step, or None when all are.
+        features: (m, 3) the measured features, a finite fill value where hidden.
+        used: (m,) bool, the features used this step (weight 1; the others weight 0).
+        measured: (6,) bool, legs whose direction the core takes from this step's
+            features.
+        leg_directions: (6, 3) the directions of the other legs (dead-reckoned or
+            approximated; NaN when unknown: the law then asks the nominal model).
         notes: Diagnostics to report.
-        a: (m, 3) left factors of rank-one blocks.
-        g: (m, 6) right factors of rank-one blocks.
-        N: ``L^T L`` (6, 6) when already computed (with ``b``; every block used).
-        b: ``L^T e`` (6,) when already computed.
     """
 
-    error: np.ndarray
-    interaction: np.ndarray | None
-    used: np.ndarray | None
+    features: np.ndarray
+    used: np.ndarray
+    measured: np.ndarray
+    leg_directions: np.ndarray
     notes: list[str]
-    a: np.ndarray | None = None
-    g: np.ndarray | None = None
-    N: np.ndarray | None = None
-    b: np.ndarray | None = None
-
-    def normal_equations(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """The used error ``e`` (k,), ``L^T L`` (6, 6) and ``L^T e`` (6,)."""
-        if self.N is not None and self.b is not None:  # computed by a compiled kernel
-            return self.error.reshape(-1), self.N, self.b
-        used = self.used
-        err = self.error if used is None else self.error[used]
-        if self.interaction is not None:
-            L = (self.interaction if used is None else self.interaction[used]).reshape(-1, 6)
-            e = err.reshape(-1)
-            return e, L.T @ L, L.T @ e
-        if self.a is None or self.g is None:
-            raise ValueError("Stack: give the interaction blocks or their rank-one factors")
-        a = self.a if used is None else self.a[used]
-        g = self.g if used is None else self.g[used]
-        w = np.einsum("ij,ij->i", a, a)
-        c = np.einsum("ij,ij->i", a, err)
-        return err.reshape(-1), (g.T * w) @ g, g.T @ c

@@ -15,13 +15,16 @@ pseudo-inverse or QP, missing features, diagnostics) is written once, here, in
   dead-reckoning of the direction of hidden legs (needed by ``J_inv``).
 
 Speed: ``step`` is called millions of times by the benchmarks, and its cost is the
-number of numpy calls, not the arithmetic. In the common case (every feature
-visible, CURRENT interaction) a law hands the measured features to its compiled
-core (:mod:`controllers.law_kernel`, CasADi generated to C, one ctypes call of a
-few microseconds: error, ``L^T L``, ``L^T e``, gain, eigen-solve with rank and
-condition, ``J_inv``, ``q_dot``) and :meth:`VisionLaw.tasks` only wraps the
-result in a :class:`~controllers.base.Command`. Every other case runs the numpy
-path below, which is the reference the compiled core is tested against.
+number of numpy calls, not the arithmetic. A law hands the measured features to its
+compiled core (:mod:`controllers.law_kernel`, generated from the tasks' CasADi blocks
+to C, one ctypes call of a few microseconds: error, ``L^T W L``, ``L^T W e``, gain,
+rank and condition, damped solve, ``J_inv``, ``q_dot``), for every interaction choice.
+In the common case (every feature visible, now and in the goal) nothing else is
+computed: :meth:`VisionLaw.tasks` only wraps the result. With hidden features the law
+first chooses the used features (weight 1, the hidden ones weight 0) and the
+directions of the legs it cannot measure (:meth:`VisionLaw._select`: dead-reckoned or
+approximated). The numpy formulas of :mod:`controllers.interaction` are the tests'
+oracle (``tests/controllers/numpy_law.py``).
 """
 
 from __future__ import annotations
@@ -48,7 +51,7 @@ from controllers.law_kernel import LawKernel, LawResult
 from controllers.law_tools import (
     INTERACTIONS,
     Gain,
-    Stack,
+    Selection,
     check_choice,
     check_number,
     check_observation,
@@ -61,7 +64,7 @@ from controllers.solvers.base import Solver
 from controllers.solvers.pseudo_inverse import DampedPseudoInverse
 
 __all__ = [
-    "INTERACTIONS", "Gain", "Stack", "VisionLaw", "check_choice", "check_number",
+    "INTERACTIONS", "Gain", "Selection", "VisionLaw", "check_choice", "check_number",
     "check_observation", "inverse_jacobian_into", "solve_least_squares", "solve_normal",
     "solve_normal_damped",
 ]
@@ -99,10 +102,11 @@ class TaskStep:
 class VisionLaw(BatchedLaw, Controller):
     """Base of the image-based laws: ``tau = -lambda L^+ e``, ``q_dot = J_inv tau``.
 
-    Subclasses implement :meth:`_reset_features` (read the goal) and
-    :meth:`_stack` (error and interaction blocks, visibility, current leg
-    directions in the estimate). The solver (:attr:`solver`, the damped pseudo-inverse by
-    default) turns the tasks into a twist: the QP laws set the limit QP there.
+    Subclasses implement :meth:`_reset_features` (read the goal, set the compiled core
+    :attr:`kernel`), :meth:`_load_kernel` (the common case) and :meth:`_select` (the used
+    features and the leg directions when a feature is hidden). The solver
+    (:attr:`solver`, the damped pseudo-inverse by default) turns the tasks into a twist:
+    the QP laws set the limit QP there.
 
     Args:
         gain: Constant gain ``lambda`` [1/s].
@@ -137,11 +141,13 @@ class VisionLaw(BatchedLaw, Controller):
         #: Last nominal-model pose (warm start of the forward kinematics that predicts
         #: the directions of never-seen legs), None before the first.
         self.model_pose: PoseEstimate | None = None
-        self._J = np.zeros((6, 6))
-        #: Compiled core of the common case (:mod:`controllers.law_kernel`), set by the
-        #: subclass in :meth:`_reset_features`; None: numpy path only.
+        #: The compiled core (:mod:`controllers.law_kernel`), set by the subclass in
+        #: :meth:`_reset_features`.
         self.kernel: LawKernel | None = None
         self._spare_kernel: LawKernel | None = None
+        #: The kernel's weights and ``measured`` inputs were set by :meth:`_select`
+        #: (restored to ones by :meth:`_load_kernel`).
+        self._kernel_selected = False
 
     # ----------------------------------------------------------------- reset
     def reset(self, context: ControllerContext) -> None:
@@ -165,6 +171,9 @@ class VisionLaw(BatchedLaw, Controller):
         self._q_star: np.ndarray | None = self._goal_lengths(context.goal)
         self.kernel = None
         self._spare_kernel = None
+        self._kernel_selected = False
+        #: Every feature is visible in the goal (set by :meth:`_reset_features`).
+        self._goal_all_visible = True
         self._reset_features(context)
         self.solver.reset(context, self.name, dt)
         self._configure_kernel()
@@ -189,6 +198,7 @@ class VisionLaw(BatchedLaw, Controller):
         q_star = self._goal_lengths(goal)
         state = self._goal_state()
         self._q_star = q_star
+        self._unselect_kernel()  # a reused core starts from the common case's inputs
         self._spare_kernel, self.kernel = self.kernel, None
         try:
             self._retarget_features(context)
@@ -215,12 +225,23 @@ class VisionLaw(BatchedLaw, Controller):
         return qs
 
     def _configure_kernel(self) -> None:
-        """Write the gain, threshold and damping into the compiled core (if any)."""
-        if self.kernel is not None:
-            g = self.gain
-            self.kernel.set("gain", (g.at_zero, g.at_infinity, g.slope_at_zero))
-            self.kernel.set("threshold2", self.threshold * self.threshold)
-            self.kernel.set("damping2", self.solver.damping2)
+        """Write the goal lengths (DESIRED/MEAN cores), the gain, threshold and damping into
+        the compiled core, and keep views of its lengths inputs."""
+        kernel = self.kernel
+        if kernel is None:
+            raise TypeError(f"{self.name}: _reset_features must set the compiled core "
+                            "(self.kernel)")
+        g = self.gain
+        self._k_lengths: np.ndarray = kernel.inputs["lengths"]
+        self._k_desired_lengths: np.ndarray | None = None
+        if "desired_lengths" in kernel.inputs:
+            if self._q_star is not None:
+                kernel.set("desired_lengths", self._q_star)
+            else:
+                self._k_desired_lengths = kernel.inputs["desired_lengths"]
+        kernel.set("gain", (g.at_zero, g.at_infinity, g.slope_at_zero))
+        kernel.set("threshold2", self.threshold * self.threshold)
+        kernel.set("damping2", self.solver.damping2)
 
     def _reuse_kernel(self, make: Callable[[], LawKernel]) -> LawKernel:
         """The compiled core for :meth:`_reset_features`: the one kept by
@@ -264,15 +285,17 @@ class VisionLaw(BatchedLaw, Controller):
     def _reset_features(self, context: ControllerContext) -> None:
         """Read and validate the desired features."""
 
-    @abstractmethod
-    def _stack(self, obs: Observation, q: np.ndarray) -> Stack | str:
-        """Error and interaction blocks, or the reason why none can be built.
+    def _select(self, obs: Observation, q: np.ndarray) -> Selection:
+        """The used features and the leg directions when a feature is hidden (the
+        compiled core computes the rest).
 
-        Must also update ``self.estimate`` (:class:`LegDirectionEstimate`): the
-        measured leg directions (dead-reckoned for hidden legs, NaN if never seen),
-        the legs measured this step, and the directions ``J_inv`` uses this step
-        (or an approximation from the goal for legs never seen; NaN when unknown).
+        Must also update ``self.estimate`` (:class:`LegDirectionEstimate`): dead-reckon
+        the hidden legs with the last twist, write the legs observed this step and the
+        directions ``J_inv`` uses (``in_use``: dead-reckoned, an approximation from the
+        goal for legs never seen, NaN when unknown), except the directions of the legs
+        it marks ``measured`` (the core measures them; :meth:`tasks` writes them).
         """
+        raise NotImplementedError
 
     # ----------------------------------------------------------------- step
     def _check(self, obs: Observation) -> str | None:
@@ -296,11 +319,14 @@ class VisionLaw(BatchedLaw, Controller):
 
         The part of a step every solver shares (the pseudo-inverse of :meth:`step`, the
         limit QP, the predictive controller): the features of a usable observation
-        (:meth:`checked_lengths`) go through the compiled core when it applies
-        (:meth:`_load_kernel`), else through :meth:`_stack`; the estimate is updated
-        (measured and dead-reckoned directions, nothing commanded yet), and the inverse
-        Jacobian is built, with the nominal model's directions for legs never seen
-        (then written to ``estimate.in_use``).
+        (:meth:`checked_lengths`) go through the compiled core (:mod:`controllers.law_kernel`):
+        directly when every feature is visible now and in the goal
+        (:meth:`_load_kernel`), else after :meth:`_select` has chosen the used features
+        (weight 1, the others weight 0) and the directions of the legs not measured
+        (dead-reckoned, approximated). The estimate is updated (measured and
+        dead-reckoned directions, nothing commanded yet), and the inverse Jacobian is
+        built, with the nominal model's directions for legs never seen (then written to
+        ``estimate.in_use``).
 
         Args:
             observation: The observation.
@@ -308,7 +334,8 @@ class VisionLaw(BatchedLaw, Controller):
         """
         est = self.estimate
         kernel = self.kernel
-        if kernel is not None and self._load_kernel(observation, q):
+        assert kernel is not None, "reset() sets the compiled core"
+        if self._load_kernel(observation, q):
             r = kernel.evaluate()
             est.halted()  # until a command is actually sent
             est.measured_all(r.directions)
@@ -316,32 +343,46 @@ class VisionLaw(BatchedLaw, Controller):
                 return Command.refuse("non-finite error or interaction matrix (degenerate "
                                       "features)", r.error)
             return TaskStep(r.error, r.error_norm, r.N, r.b, r.gain, r.J, [], r)
-        st = self._stack(observation, q)  # dead-reckons hidden legs with the last twist
+        sel = self._select(observation, q)  # dead-reckons hidden legs with the last twist
         est.halted()  # until a command is actually sent
-        if isinstance(st, str):
-            return Command.refuse(st)
-        e, N, b = st.normal_equations()
-        error_norm = math.sqrt(float(e @ e))
-        if not (math.isfinite(error_norm) and math.isfinite(float(N.sum()))):
+        inputs = kernel.inputs
+        inputs["features"][:] = sel.features.reshape(-1)
+        inputs["lengths"][:] = q
+        inputs["weights"][:] = sel.used
+        inputs["measured"][:] = sel.measured
+        inputs["leg_directions"][:] = sel.leg_directions.reshape(-1)
+        if "desired_lengths" in inputs:
+            inputs["desired_lengths"][:] = self._desired_lengths(q)
+        self._kernel_selected = True
+        r = kernel.evaluate()
+        m = sel.measured
+        est.directions[m] = r.directions[m]
+        est.in_use[m] = r.directions[m]
+        e = r.error.reshape(len(sel.used), -1)[sel.used].reshape(-1)
+        if not (math.isfinite(r.error_norm) and math.isfinite(r.n_sum)):
             return Command.refuse("non-finite error or interaction matrix (degenerate features)",
                                   e)
-        u = est.in_use
-        unknown = np.flatnonzero(~np.isfinite(u[:, 0]))
+        notes = sel.notes
+        unknown = np.flatnonzero(~np.isfinite(est.in_use[:, 0]))
         if len(unknown):
             model = self._model_directions(q)
             if model is None:
-                return Command.refuse(f"direction of leg {int(unknown[0])} unknown (hidden "
-                                      "since reset, no desired direction, no nominal model "
-                                      "prediction): cannot build the inverse Jacobian", e)
-            u = u.copy()
-            u[unknown] = model[unknown]
-            est.in_use[:] = u
-            st.notes.append("nominal-model directions (forward kinematics of the measured "
-                            "lengths) for never-seen legs "
-                            + ", ".join(str(int(i)) for i in unknown))
-        J = inverse_jacobian_into(self._J, self._A, u)
-        lam = self.gain(float(np.abs(e).max()) if e.size else 0.0)
-        return TaskStep(e, error_norm, N, b, lam, J, st.notes, None)
+                return Command.refuse(self._unknown_reason(unknown), e)
+            est.in_use[unknown] = model[unknown]
+            inputs["leg_directions"][:] = est.in_use.reshape(-1)
+            r = kernel.evaluate()
+            notes.append(self._model_note(unknown))
+        return TaskStep(e, r.error_norm, r.N, r.b, r.gain, r.J, notes, r)
+
+    @staticmethod
+    def _unknown_reason(unknown: np.ndarray) -> str:
+        return (f"direction of leg {int(unknown[0])} unknown (hidden since reset, no desired "
+                "direction, no nominal model prediction): cannot build the inverse Jacobian")
+
+    @staticmethod
+    def _model_note(unknown: np.ndarray) -> str:
+        return ("nominal-model directions (forward kinematics of the measured lengths) for "
+                "never-seen legs " + ", ".join(str(int(i)) for i in unknown))
 
     def step(self, observation: Observation) -> Command:
         """One period: ``q_dot = J_inv (-lambda L^+ e)`` (never raises for bad measurements)."""
@@ -381,13 +422,39 @@ class VisionLaw(BatchedLaw, Controller):
                        active_constraints=active)
 
     def _load_kernel(self, obs: Observation, q: np.ndarray) -> bool:
-        """Write the measured features and lengths into ``self.kernel`` when the
-        compiled core applies (every feature visible, CURRENT interaction).
+        """Write the measured features and lengths into ``self.kernel`` when every
+        feature is visible, now and in the goal (the common case: every weight one,
+        every leg direction measured).
 
         Returns:
-            False to take the numpy path.
+            False to take :meth:`_select`.
         """
         return False
+
+    def _common_inputs(self, q: np.ndarray) -> None:
+        """The inputs of the common case besides the features (:meth:`_load_kernel`)."""
+        self._unselect_kernel()
+        self._k_lengths[...] = q
+        if self._k_desired_lengths is not None:  # q* unknown: the measured lengths
+            self._k_desired_lengths[...] = q
+
+    def _unselect_kernel(self) -> None:
+        """Give the core back the common case's weights and ``measured`` inputs (ones)
+        after :meth:`_select` changed them."""
+        if self._kernel_selected:
+            kernel = self.kernel
+            assert kernel is not None
+            kernel.inputs["weights"][:] = 1.0
+            kernel.inputs["measured"][:] = 1.0
+            self._kernel_selected = False
+
+    @property
+    def batch_core(self) -> bool:
+        """Whether the batched laws may step this trial's common case with the lean core
+        (a core whose inputs change only by the features and the lengths)."""
+        k = self.kernel
+        return (k is not None and self._goal_all_visible
+                and (self._q_star is not None or "desired_lengths" not in k.inputs))
 
     def _model_directions(self, q: np.ndarray) -> np.ndarray | None:
         """Leg directions (6, 3) in the camera frame predicted by the nominal model.

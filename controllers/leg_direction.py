@@ -1,9 +1,10 @@
 """Leg-direction visual servoing (seeds 001 and 003): ``e_i = u_i x u_i*``.
 
 ``L_i = -[u_i*]_x M_i`` (``docs/math.md`` section 6), stacked over the visible legs
-(18 x 6 with all six), ``tau = -lambda L^+ e``, ``q_dot = J_inv tau``. With every
-direction visible and the CURRENT interaction, one call of the compiled core
-(:func:`controllers.law_kernel.direction_kernel`) computes the step.
+(18 x 6 with all six), ``tau = -lambda L^+ e``, ``q_dot = J_inv tau``. One call of
+the compiled core (:func:`controllers.law_kernel.direction_kernel`, generated from the
+task's block :func:`controllers.tasks.leg_direction.direction_block`) computes the
+step, for every interaction choice; hidden legs are its zero-weight rows.
 """
 
 from __future__ import annotations
@@ -15,10 +16,8 @@ import numpy as np
 from controllers.base import ControllerContext, Observation, ObservationBatch
 from controllers.exceptions import ContextError
 from controllers.goal_batch import GoalBatch
-from controllers.interaction import cross, direction_task
 from controllers.law_kernel import direction_kernel
-from controllers.laws import Stack, VisionLaw
-from hexapod.se3 import skew
+from controllers.laws import Selection, VisionLaw
 
 
 class LegDirectionController(VisionLaw):
@@ -30,8 +29,8 @@ class LegDirectionController(VisionLaw):
         interaction: ``"current"``, ``"desired"`` or ``"mean"``.
         threshold: Relative singular-value threshold (rank test).
         damping: Pseudo-inverse damping.
-        compiled: Use the compiled core (:mod:`controllers.law_kernel`) when every
-            direction is visible with the CURRENT interaction (same result, faster).
+        compiled: Evaluate the core (:mod:`controllers.law_kernel`) compiled to C (False:
+            the CasADi virtual machine evaluates the same expression, slower).
     """
 
     name = "leg-direction"
@@ -62,17 +61,16 @@ class LegDirectionController(VisionLaw):
         if np.any(np.abs(norms - 1.0) > 1e-6):
             raise ContextError(self.name, "goal.directions", f"not unit vectors: norms {norms}")
         self._u_star = us
-        self._u_star_skew = skew(us)
         self._goal_visible = vis
         # Fill value for hidden directions: the desired ones (keeps the arithmetic finite).
         self._fill = np.where(vis[:, None], us, np.array([0.0, 0.0, 1.0]))
-        if self.compiled and self.interaction == "current" and vis.all():
-            kernel = self._reuse_kernel(direction_kernel)
-            kernel.set("desired", us)
-            kernel.set("base_points", self._A)
-            self.kernel = kernel
-            self._k_features = kernel.inputs["features"].reshape(6, 3)
-            self._k_lengths = kernel.inputs["lengths"]
+        self._goal_all_visible = bool(vis.all())
+        kernel = self._reuse_kernel(lambda: direction_kernel(self.interaction, self.compiled))
+        kernel.set("desired", us)
+        kernel.set("base_points", self._A)
+        kernel.set("weights", vis)
+        self.kernel = kernel
+        self._k_features = kernel.inputs["features"].reshape(6, 3)
 
     def desired_features(self) -> np.ndarray:
         """(6, 3) the desired leg directions (zeros where unknown)."""
@@ -108,48 +106,36 @@ class LegDirectionController(VisionLaw):
 
     def _load_kernel(self, obs: Observation, q: np.ndarray) -> bool:
         vis = obs.direction_visible
-        if not (vis.all() if type(vis) is np.ndarray else np.all(np.asarray(vis, dtype=bool))):
+        if not (self._goal_all_visible and (vis.all() if type(vis) is np.ndarray
+                                            else np.all(np.asarray(vis, dtype=bool)))):
             return False
         self._k_features[...] = obs.directions
-        self._k_lengths[...] = q
+        self._common_inputs(q)
         return True
 
-    def _stack(self, obs: Observation, q: np.ndarray) -> Stack | str:
+    def _select(self, obs: Observation, q: np.ndarray) -> Selection:
         u_obs = np.asarray(obs.directions, dtype=float)
         vis = np.asarray(obs.direction_visible, dtype=bool) & self._goal_visible
-        notes: list[str] = []
-        all_visible = bool(vis.all())
         est = self.estimate
-        if all_visible:
-            u = u_obs
-            est.measured_all(u_obs)
-        else:
-            est.predict_hidden(~vis, self._A, self._dt)
-            est.directions[vis] = u_obs[vis]
-            est.observed[:] = vis
-            u = np.where(vis[:, None], u_obs, self._fill)
-            notes.append(self._usage_note(vis, 6))
-            known = np.isfinite(est.directions[:, 0])
-            # J_inv of a leg never seen: its desired direction (exact at the goal).
-            est.in_use[:] = np.where(known[:, None], est.directions,
-                                     np.where(self._goal_visible[:, None], self._u_star,
-                                              np.nan))
-            predicted = np.flatnonzero(~vis & known)
-            if len(predicted):
-                notes.append("predicted directions of hidden legs "
-                             + ", ".join(str(int(i)) for i in predicted))
-            approx = np.flatnonzero(~known & self._goal_visible)
-            if len(approx):
-                notes.append("desired direction used for never-seen legs "
-                             + ", ".join(str(int(i)) for i in approx))
-        us = self._u_star
-        A = self._A
-        e = cross(u, us)
-        if self.interaction == "current":
-            _, L = direction_task(u, us, A, q, error=False, desired_skew=self._u_star_skew)
-        else:
-            _, L = direction_task(us, us, A, self._desired_lengths(q), error=False)
-            if self.interaction == "mean":
-                _, Lc = direction_task(u, us, A, q, error=False)
-                L = 0.5 * (L + Lc)
-        return Stack(e, L, None if all_visible else vis, notes)
+        est.predict_hidden(~vis, self._A, self._dt)
+        est.directions[vis] = u_obs[vis]
+        est.observed[:] = vis
+        known = np.isfinite(est.directions[:, 0])
+        # J_inv of a leg never seen: its desired direction (exact at the goal).
+        est.in_use[:] = np.where(known[:, None], est.directions,
+                                 np.where(self._goal_visible[:, None], self._u_star, np.nan))
+        return Selection(np.where(vis[:, None], u_obs, self._fill), vis, vis,
+                         est.in_use.copy(), self._hidden_notes(vis, known))
+
+    def _hidden_notes(self, vis: np.ndarray, known: np.ndarray) -> list[str]:
+        """The notes of a step with hidden legs."""
+        notes = [self._usage_note(vis, 6)]
+        predicted = np.flatnonzero(~vis & known)
+        if len(predicted):
+            notes.append("predicted directions of hidden legs "
+                         + ", ".join(str(int(i)) for i in predicted))
+        approx = np.flatnonzero(~known & self._goal_visible)
+        if len(approx):
+            notes.append("desired direction used for never-seen legs "
+                         + ", ".join(str(int(i)) for i in approx))
+        return notes

@@ -11,8 +11,9 @@ Features (``docs/math.md`` section 6), two per leg, stacked over the visible edg
 The leg direction used by ``H``, ``M_i`` and ``J_inv`` is rebuilt from the two
 edges of the leg, ``u = (n2 x n1) / |n2 x n1|`` (``vision/legs.py`` convention).
 
-With every edge visible and the CURRENT interaction, one call of the compiled
-core (:func:`controllers.law_kernel.edge_law_kernel`) computes the step.
+One call of the compiled core (:func:`controllers.law_kernel.edge_law_kernel`, generated
+from the task's block :func:`controllers.tasks.leg_edge.edge_block`) computes the step,
+for every interaction choice; hidden edges are its zero-weight rows.
 """
 
 from __future__ import annotations
@@ -27,13 +28,9 @@ from controllers.exceptions import ContextError
 from controllers.goal_batch import GoalBatch
 from controllers.interaction import (
     cross,
-    edge_line_factors,
-    edge_line_task,
-    edge_normal_factors,
-    edge_normal_task,
 )
 from controllers.law_kernel import edge_law_kernel
-from controllers.laws import Stack, VisionLaw, check_choice
+from controllers.laws import Selection, VisionLaw, check_choice
 
 #: Values of the ``edge_feature`` option.
 EDGE_FEATURES = ("auto", "lines", "normals")
@@ -54,8 +51,8 @@ class LegEdgeController(VisionLaw):
         damping: Pseudo-inverse damping.
         edge_feature: ``"auto"`` (lines for a perspective camera, normals for a
             unified one), ``"lines"`` or ``"normals"`` (force the normals).
-        compiled: Use the compiled core (:mod:`controllers.law_kernel`) when every
-            edge is visible with the CURRENT interaction (same result, faster).
+        compiled: Evaluate the core (:mod:`controllers.law_kernel`) compiled to C (False:
+            the CasADi virtual machine evaluates the same expression, slower).
     """
 
     name = "leg-edge"
@@ -73,7 +70,6 @@ class LegEdgeController(VisionLaw):
         self.use_lines = edge_feature == "lines"
         self._K = np.eye(3)
         self._K_inv_t = np.eye(3)
-        self._A2 = np.zeros((12, 3))
 
     # ----------------------------------------------------------------- reset
     def _reset_features(self, context: ControllerContext) -> None:
@@ -154,18 +150,19 @@ class LegEdgeController(VisionLaw):
         self._fill = fill
         if self.use_lines:
             self._l_fill = _unit(fill @ self._K_inv_t.T)
-        if self.compiled and self.interaction == "current" and vis.all():
-            kernel = self._reuse_kernel(lambda: edge_law_kernel(self.use_lines))
-            kernel.set("desired", self._l_star if self.use_lines else self._n_star)
-            kernel.set("K", self._K)
-            kernel.set("K_inv", self._K_inv_t.T)
-            kernel.set("base_points", self._A)
-            self.kernel = kernel
-            self._k_features = kernel.inputs["features"].reshape(6, 2, 3)
-            self._k_lengths = kernel.inputs["lengths"]
-        self._desired_L: np.ndarray | None = None
-        if self.interaction != "current" and self._q_star is not None:
-            self._desired_L = self._desired_interaction(self._q_star)
+        self._goal_all_visible = bool(self._goal_visible.all())
+        kernel = self._reuse_kernel(
+            lambda: edge_law_kernel(self.use_lines, self.interaction, self.compiled))
+        kernel.set("desired", self._l_star if self.use_lines else self._n_star)
+        kernel.set("K", self._K)
+        kernel.set("K_inv", self._K_inv_t.T)
+        kernel.set("base_points", self._A)
+        kernel.set("weights", self._goal_visible)
+        if self.interaction != "current":
+            kernel.set("desired_normals", self._n_star)
+            kernel.set("desired_directions", self._u_star)
+        self.kernel = kernel
+        self._k_features = kernel.inputs["features"].reshape(6, 2, 3)
 
     def _goal_array(self, value: Any, field: str) -> np.ndarray | None:
         if value is None:
@@ -176,74 +173,40 @@ class LegEdgeController(VisionLaw):
         return arr
 
     # ----------------------------------------------------------------- step
-    def _desired_interaction(self, q_star: np.ndarray) -> np.ndarray:
-        q2 = np.repeat(q_star, 2)
-        u2 = np.repeat(self._u_star, 2, axis=0)
-        ns = self._n_star.reshape(12, 3)
-        if self.use_lines:
-            ls = self._l_star.reshape(12, 3)
-            return edge_line_task(ls, ls, ns, u2, self._A2, q2, self._K, self._K_inv_t)
-        return edge_normal_task(ns, ns, u2, self._A2, q2)
-
-    def _stack(self, obs: Observation, q: np.ndarray) -> Stack | str:
+    def _select(self, obs: Observation, q: np.ndarray) -> Selection:
         vis = np.asarray(obs.edge_visible, dtype=bool) & self._goal_visible
-        all_visible = bool(vis.all())
-        notes: list[str] = []
         if self.use_lines:
-            feat = np.asarray(obs.lines, dtype=float)
-            if not all_visible:
-                feat = np.where(vis[..., None], feat, self._l_fill)
-            n = _unit(feat @ self._K)
-            star = self._l_star
+            feat = np.where(vis[..., None], np.asarray(obs.lines, dtype=float), self._l_fill)
         else:
-            feat = np.asarray(obs.normals, dtype=float)
-            if not all_visible:
-                feat = np.where(vis[..., None], feat, self._fill)
-            n = feat
-            star = self._n_star
-        u_edges = _unit(cross(n[:, 1], n[:, 0]))
+            feat = np.where(vis[..., None], np.asarray(obs.normals, dtype=float), self._fill)
+        both: np.ndarray = np.all(vis, axis=1)
         est = self.estimate
-        if all_visible:
-            est.measured_all(u_edges)
-            u = u_edges
-        else:
-            both: np.ndarray = np.all(vis, axis=1)
-            est.predict_hidden(~both, self._A, self._dt)
-            est.directions[both] = u_edges[both]
-            est.observed[:] = both
-            known = np.isfinite(est.directions[:, 0])
-            # A leg never seen whole: its desired direction, projected on the plane of its
-            # visible edge if it has one (exact at the goal).
+        est.predict_hidden(~both, self._A, self._dt)
+        est.observed[:] = both
+        known = np.isfinite(est.directions[:, 0]) | both
+        legs = np.where(known[:, None], est.directions, np.nan)  # the core measures `both`
+        # A leg never seen whole: its desired direction, projected on the plane of its
+        # visible edge if it has one (exact at the goal).
+        approx: np.ndarray = ~known & np.isfinite(self._u_star_known[:, 0])
+        if approx.any():
+            n = _unit(feat @ self._K) if self.use_lines else feat
             us = self._u_star
             one: np.ndarray = np.any(vis, axis=1) & ~both
             n_vis = np.where(vis[:, 0, None], n[:, 0], n[:, 1])
             proj = np.where(one[:, None], _unit(us - np.einsum("ik,ik->i", us, n_vis)[:, None]
                                                 * n_vis), us)
-            approx: np.ndarray = ~known & np.isfinite(self._u_star_known[:, 0])
-            u = np.where(known[:, None], est.directions,
-                         np.where(approx[:, None], proj, u_edges))
-            est.in_use[:] = np.where((known | approx)[:, None], u, np.nan)
-            vis = vis & (known | approx)[:, None]
-            notes.append(self._usage_note(vis, 12))
-            predicted = np.flatnonzero(~both & known)
-            if len(predicted):
-                notes.append("predicted directions of partly hidden legs "
-                             + ", ".join(str(int(i)) for i in predicted))
-            if approx.any():
-                notes.append("desired direction used for never-seen legs "
-                             + ", ".join(str(int(i)) for i in np.flatnonzero(approx)))
-        e = cross(feat, star).reshape(12, 3)
-        used = None if all_visible else vis.reshape(12)
-        if self.interaction == "current":
-            a, g = self._current_factors(feat, n, u, q)
-            return Stack(e, None, used, notes, a=a, g=g)
-        else:
-            L = (self._desired_L if self._desired_L is not None
-                 else self._desired_interaction(self._desired_lengths(q)))
-            if self.interaction == "mean":
-                a, g = self._current_factors(feat, n, u, q)
-                L = 0.5 * (L + a[:, :, None] * g[:, None, :])
-        return Stack(e, L, used, notes)
+            legs = np.where(approx[:, None], proj, legs)
+        est.in_use[:] = legs
+        vis = vis & (known | approx)[:, None]
+        notes = [self._usage_note(vis, 12)]
+        predicted = np.flatnonzero(~both & known)
+        if len(predicted):
+            notes.append("predicted directions of partly hidden legs "
+                         + ", ".join(str(int(i)) for i in predicted))
+        if approx.any():
+            notes.append("desired direction used for never-seen legs "
+                         + ", ".join(str(int(i)) for i in np.flatnonzero(approx)))
+        return Selection(feat.reshape(12, 3), vis.reshape(12), both, legs, notes)
 
     @property
     def line_matrix(self) -> np.ndarray:
@@ -304,18 +267,9 @@ class LegEdgeController(VisionLaw):
 
     def _load_kernel(self, obs: Observation, q: np.ndarray) -> bool:
         vis = obs.edge_visible
-        if not (vis.all() if type(vis) is np.ndarray else np.all(np.asarray(vis, dtype=bool))):
+        if not (self._goal_all_visible and (vis.all() if type(vis) is np.ndarray
+                                            else np.all(np.asarray(vis, dtype=bool)))):
             return False
         self._k_features[...] = obs.lines if self.use_lines else obs.normals
-        self._k_lengths[...] = q
+        self._common_inputs(q)
         return True
-
-    def _current_factors(self, feat: np.ndarray, n: np.ndarray, u: np.ndarray,
-                         q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        q2 = np.repeat(q, 2)
-        u2 = np.repeat(u, 2, axis=0)
-        n12 = n.reshape(12, 3)
-        if self.use_lines:
-            return edge_line_factors(feat.reshape(12, 3), self._l_star.reshape(12, 3), n12, u2,
-                                     self._A2, q2, self._K, self._K_inv_t)
-        return edge_normal_factors(n12, self._n_star.reshape(12, 3), u2, self._A2, q2)

@@ -44,7 +44,7 @@ from controllers.estimators import PoseEstimate
 from controllers.exceptions import ContextError
 from controllers.goal_batch import GoalBatch
 from controllers.interaction import cross
-from controllers.law_kernel import jacobi_eigen
+from controllers.law_algebra import jacobi_eigen
 from controllers.law_tools import gain_formula
 from controllers.laws import Gain, check_number, check_observation
 from controllers.options import RemembersOptions

@@ -104,9 +104,11 @@ class CompiledFunction:
 
     Args:
         function: ``ca.Function`` with one dense input (n_in,) and one dense output (n_out,).
+        compile: Generate and compile the C code (False: the CasADi virtual machine
+            evaluates the function, by choice, without a warning).
     """
 
-    def __init__(self, function: ca.Function) -> None:
+    def __init__(self, function: ca.Function, compile: bool = True) -> None:
         if function.n_in() != 1 or function.n_out() != 1:
             raise ValueError("CompiledFunction needs exactly one input and one output")
         self.function = function
@@ -115,6 +117,8 @@ class CompiledFunction:
         self.n_out = int(function.nnz_out(0))
         self.compiled = False
         self._lib: ctypes.CDLL | None = None
+        if not compile:
+            return
         try:
             self._compile()
         except (OSError, subprocess.SubprocessError) as exc:

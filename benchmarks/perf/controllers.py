@@ -9,7 +9,10 @@ machines are shared and noisy). For the predictive controllers (``*-mpc``) the
 table adds the mean SQP iterations per step, the steps that applied an unconverged
 iterate and the fallbacks to the QP law. A controller may be given options as
 ``NAME+key=value+...`` (e.g. ``leg-edge-mpc+model=global+horizon=5``); by default
-the global-model variants of the predictive controllers are timed too.
+the global-model variants of the predictive controllers are timed too. With
+``--hidden`` one edge of leg 2 (and the direction of leg 2) is hidden in every
+observation: the laws' hidden-feature path (zero-weight rows of the compiled core, the
+leg's direction from the estimate).
 """
 
 from __future__ import annotations
@@ -98,11 +101,12 @@ def _observation(camera: Camera, geometry, R: np.ndarray, t: np.ndarray, time_s:
 
 
 def time_controllers(names: list[str] | None = None, steps: int = 5000, camera: str = "front",
-                     seed: int = 0, repeats: int = 5) -> list[StepTiming]:
+                     seed: int = 0, repeats: int = 5, hidden: bool = False) -> list[StepTiming]:
     """Median time per ``step`` of each controller over ``steps`` calls.
 
     The controllers are interleaved ``repeats`` times (``steps / repeats`` calls each
-    time) so that a burst of load on the machine affects them alike.
+    time) so that a burst of load on the machine affects them alike. ``hidden``: edge
+    (2, 0) and direction 2 hidden in every observation.
     """
     geo = deltalab()
     cam = front_camera(geo) if camera == "front" else omni_camera(geo)
@@ -112,6 +116,11 @@ def time_controllers(names: list[str] | None = None, steps: int = 5000, camera: 
     _, goal = _observation(cam, geo, Rs[0], ts[0], 0.0)
     observations = [_observation(cam, geo, R, t, 0.02 * k)[0]
                     for k, (R, t) in enumerate(zip(Rs[1:], ts[1:], strict=True))]
+    if hidden:
+        for obs in observations:
+            obs.edge_visible = np.ones((6, 2), dtype=bool)
+            obs.edge_visible[2, 0] = False
+            obs.direction_visible = np.arange(6) != 2
     base = cam.camera_from_base.apply(geo.base_points)
     names = list(names or [*registry.names(), *DEFAULT_VARIANTS])
     if "joint-space" not in names:
@@ -152,9 +161,10 @@ def time_controllers(names: list[str] | None = None, steps: int = 5000, camera: 
     return result
 
 
-def format_timings(timings: list[StepTiming], camera: str) -> str:
+def format_timings(timings: list[StepTiming], camera: str, hidden: bool = False) -> str:
     """A plain-text table."""
-    lines = [f"controller step time, reference robot, {camera} camera, all features visible",
+    seen = "edge (2, 0) and direction 2 hidden" if hidden else "all features visible"
+    lines = [f"controller step time, reference robot, {camera} camera, {seen}",
              f"{'controller':<32} {'median us':>10} {'p95 us':>9} {'x joint':>8} "
              f"{'budget us':>10} {'refused':>8} {'SQP it':>7} {'unconv':>7} {'fallback':>8}"]
     for t in timings:
@@ -177,9 +187,12 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--steps", type=int, default=5000, help="steps per controller")
     parser.add_argument("--camera", choices=("front", "omni"), default="front")
     parser.add_argument("--seed", type=int, default=0)
+    parser.add_argument("--hidden", action="store_true",
+                        help="hide edge (2, 0) and direction 2 in every observation")
     args = parser.parse_args(argv)
-    timings = time_controllers(args.names or None, args.steps, args.camera, args.seed)
-    sys.stdout.write(format_timings(timings, args.camera) + "\n")
+    timings = time_controllers(args.names or None, args.steps, args.camera, args.seed,
+                               hidden=args.hidden)
+    sys.stdout.write(format_timings(timings, args.camera, args.hidden) + "\n")
     return 0
 
 

@@ -162,14 +162,17 @@ def axis_reach(geometry: HexapodGeometry) -> tuple[np.ndarray, np.ndarray]:
 def edge_interaction_ratio(obs: Any) -> tuple[float, float]:
     """Smallest / largest singular value, and condition number, of the edge interaction
     ``L`` (``docs/math.md`` section 6) of the visible edges of one observation."""
-    from controllers.interaction import edge_normal_task
+    from controllers.tasks.base import map_blocks
+    from controllers.tasks.leg_edge import block_function
 
     vis = np.asarray(obs.edge_visible, bool)
     if not vis.any():
         return float("nan"), float("nan")
     legs, _ = np.nonzero(vis)
     n = obs.normals[vis]
-    L = edge_normal_task(n, n, obs.directions[legs], obs.base_points[legs], obs.lengths[legs])
+    eye = np.broadcast_to(np.eye(3).reshape(1, 9), (len(n), 9))  # unused for normals
+    _, L = map_blocks(block_function("normals"), n, n, obs.directions[legs],
+                      obs.base_points[legs], obs.lengths[legs], eye, eye)
     s = np.linalg.svd(L.reshape(-1, 6), compute_uv=False)
     ratio = float(s[-1] / s[0]) if s[0] > 0 else 0.0
     return ratio, (float(s[0] / s[-1]) if s[-1] > 0 else float("inf"))

@@ -21,7 +21,7 @@ import numpy as np
 import osqp
 import scipy.sparse as sp
 
-from controllers.law_kernel import cholesky_solve
+from controllers.law_algebra import cholesky_solve
 from hexapod.compiled import CompiledFunction
 
 log = logging.getLogger(__name__)

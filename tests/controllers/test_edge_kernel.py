@@ -1,4 +1,4 @@
-"""The compiled leg-edge kernel gives the same commands as the numpy path."""
+"""The compiled leg-edge kernel gives the same commands as the numpy oracle."""
 
 from __future__ import annotations
 
@@ -7,6 +7,7 @@ import pytest
 
 from controllers.base import ControllerContext, Goal, Observation, registry
 from hexapod import HexapodGeometry, sample_poses
+from tests.controllers.numpy_law import numpy_law
 from vision.cameras import front_camera, omni_camera
 from vision.legs import observe_legs
 
@@ -24,8 +25,8 @@ def test_compiled_kernel_equals_numpy(make_camera: object, other_geometry: Hexap
                 edge_visible=np.ones((6, 2), dtype=bool))
     ctx = ControllerContext(cam.camera_from_base.apply(g.base_points) + 1e-3, g, cam, 0.02,
                             goal)
-    fast = registry.create("leg-edge", compiled=True)
-    slow = registry.create("leg-edge", compiled=False)
+    fast = registry.create("leg-edge")
+    slow = numpy_law("leg-edge")
     fast.reset(ctx)
     slow.reset(ctx)
     for k in range(1, 12):

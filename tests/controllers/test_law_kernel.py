@@ -1,4 +1,5 @@
-"""The compiled law core gives the numpy path's commands; the QP shortcut gives OSQP's."""
+"""The compiled law core gives the numpy oracle's commands (``numpy_law``); the QP shortcut
+gives OSQP's."""
 
 from __future__ import annotations
 
@@ -9,16 +10,20 @@ import numpy as np
 import pytest
 
 from controllers import registry
+from controllers.interaction import direction_task
 from controllers.law_kernel import (
+    DIRECTION_INPUTS,
     LawKernel,
     _direction_function,
+    direction_kernel,
     full_rank_certificate,
     jacobi_eigen,
 )
-from controllers.laws import solve_normal_damped
+from controllers.laws import Gain, solve_normal_damped
 from controllers.qp import LimitQP
 from hexapod.compiled import CompiledFunction
 from tests.controllers.controller_world import World, make_camera
+from tests.controllers.numpy_law import numpy_law
 
 LAWS = ["leg-direction", "leg-edge", "leg-direction-qp", "leg-edge-qp"]
 OPTIONS: list[dict[str, Any]] = [{}, {"adaptive_gain": (4.0, 0.5, 30.0)}, {"damping": 0.05}]
@@ -48,11 +53,10 @@ def test_compiled_core_equals_numpy(world: World, name: str, options: dict[str, 
                                     rng: np.random.Generator) -> None:
     Rs, ts = world.poses(8, rng, max_translation=0.02, max_angle=np.deg2rad(4), margin=0.03)
     ctx = world.context(world.goal(Rs[0], ts[0]), 0.02)
-    fast = registry.create(name, compiled=True, **options)
-    slow = registry.create(name, compiled=False, **options)
+    fast = registry.create(name, **options)
+    slow = numpy_law(name, **options)
     fast.reset(ctx)
     slow.reset(ctx)
-    assert fast.kernel is not None and slow.kernel is None  # type: ignore[attr-defined]
     for R, t in zip(Rs[1:], ts[1:], strict=True):
         obs = world.observation(R, t)
         _same(fast.step(obs), slow.step(obs))
@@ -60,29 +64,108 @@ def test_compiled_core_equals_numpy(world: World, name: str, options: dict[str, 
                                    rtol=0, atol=1e-14)
 
 
+def _hide(obs: Any, step: int, never_seen: bool) -> None:
+    """Hide features on a schedule: one edge of leg 2 from step 1, leg 4 whole from step
+    3 (its direction is then dead-reckoned), leg 5 whole from the start (never seen)."""
+    edges = np.ones((6, 2), dtype=bool)
+    legs = np.ones(6, dtype=bool)
+    if step >= 1:
+        edges[2, 0] = False
+    if step >= 3:
+        edges[4] = False
+        legs[4] = False
+    if never_seen:
+        edges[5] = False
+        legs[5] = False
+    obs.edge_visible = edges
+    obs.direction_visible = legs
+    obs.normals = np.where(edges[..., None], obs.normals, np.nan)
+    if obs.lines is not None:
+        obs.lines = np.where(edges[..., None], obs.lines, np.nan)
+    obs.directions = np.where(legs[:, None], obs.directions, np.nan)
+
+
+@pytest.mark.parametrize("interaction", ["current", "desired", "mean"])
 @pytest.mark.parametrize("name", LAWS)
-def test_hidden_features_and_other_interactions_take_the_numpy_path(world: World,
-                                                                    name: str) -> None:
-    Rs, ts = world.poses(2, np.random.default_rng(5), margin=0.03)
-    ctx = world.context(world.goal(Rs[0], ts[0]), 0.02)
-    law = registry.create(name, interaction="mean")
-    law.reset(ctx)
-    assert law.kernel is None  # type: ignore[attr-defined]
-    law = registry.create(name)
-    law.reset(ctx)
+@pytest.mark.parametrize("case", ["hidden", "never-seen", "goal-hidden"])
+def test_compiled_core_equals_numpy_with_hidden_features(world: World, name: str,
+                                                         interaction: str, case: str) -> None:
+    """Hidden features (zero-weight rows of the core), dead-reckoned, approximated and
+    nominal-model leg directions, every interaction choice: the compiled core gives the
+    numpy path's commands, notes, rank, error and estimate."""
+    rng = np.random.default_rng(11)
+    Rs, ts = world.poses(2, rng, max_translation=0.02, max_angle=np.deg2rad(4), margin=0.03)
+    goal = world.goal(Rs[0], ts[0])
+    if case == "goal-hidden":  # leg 5 unknown in the goal too: the nominal model's direction
+        goal.edge_visible = np.ones((6, 2), dtype=bool)
+        goal.edge_visible[5] = False
+        goal.directions = goal.directions.copy()
+        goal.directions[5] = np.nan
+        goal.normals = np.where(goal.edge_visible[..., None], goal.normals, np.nan)
+        if goal.lines is not None:
+            goal.lines = np.where(goal.edge_visible[..., None], goal.lines, np.nan)
+    ctx = world.context(goal, 0.02)
+    fast = registry.create(name, interaction=interaction, gain=2.0)
+    slow = numpy_law(name, interaction=interaction, gain=2.0)
+    fast.reset(ctx)
+    slow.reset(ctx)
     calls = []
-    kernel = law.kernel  # type: ignore[attr-defined]
+    kernel = fast.kernel  # type: ignore[attr-defined]
     real = kernel.evaluate
     kernel.evaluate = lambda: calls.append(1) or real()
-    obs = world.observation(Rs[1], ts[1])
-    assert law.step(obs).ok and len(calls) == 1
-    obs.edge_visible = np.ones((6, 2), dtype=bool)
-    obs.edge_visible[2, 0] = False
-    obs.direction_visible = np.ones(6, dtype=bool)
-    obs.direction_visible[2] = False
-    cmd = law.step(obs)
-    assert cmd.ok and len(calls) == 1
-    assert any(n.startswith("using") for n in cmd.notes)
+    R, t = Rs[1], ts[1]
+    notes = set()
+    for step in range(8):
+        obs = world.observation(R, t, 0.02 * step)
+        _hide(obs, step, case != "hidden")
+        a, b = fast.step(obs), slow.step(obs)
+        assert a.ok and b.ok, (a.reason, b.reason)
+        # Cholesky against LAPACK's eigh (and OSQP's refined active set for the QP laws):
+        # agreement to rounding times the condition number.
+        scale = np.abs(b.velocities).max()
+        np.testing.assert_allclose(a.velocities, b.velocities, rtol=0, atol=1e-8 * scale)
+        np.testing.assert_allclose(a.twist, b.twist, rtol=0, atol=1e-8 * np.abs(b.twist).max())
+        np.testing.assert_allclose(a.error, b.error, rtol=0, atol=1e-15)
+        assert a.error_norm == pytest.approx(b.error_norm, rel=1e-12)
+        assert a.rank == b.rank == 6
+        np.testing.assert_allclose(a.condition, b.condition, rtol=1e-7)
+        assert a.features_used == b.features_used
+        assert a.notes == b.notes
+        for k in ("directions", "in_use"):  # dead reckoning integrates the twists above
+            np.testing.assert_allclose(getattr(fast.estimate, k), getattr(slow.estimate, k),  # type: ignore[attr-defined]
+                                       rtol=0, atol=1e-10)
+        notes.update(n.split(" ")[0] for n in a.notes)
+        R, t = world.move(R, t, b.twist, 0.02)
+    assert len(calls) >= 8
+    expected = {"using", "predicted"} | {"hidden": set(), "never-seen": {"desired"},
+                                         "goal-hidden": {"nominal-model"}}[case]
+    assert expected <= notes, notes
+
+
+@pytest.mark.parametrize("name", LAWS)
+def test_too_few_features_give_the_numpy_rank(world: World, name: str) -> None:
+    """Two legs left: the core's rank is the numpy path's (< 6), both refuse alike."""
+    Rs, ts = world.poses(2, np.random.default_rng(5), margin=0.03)
+    ctx = world.context(world.goal(Rs[0], ts[0]), 0.02)
+    out = []
+    for law in (registry.create(name), numpy_law(name)):
+        law.reset(ctx)
+        obs = world.observation(Rs[1], ts[1])
+        obs.edge_visible = np.zeros((6, 2), dtype=bool)
+        obs.edge_visible[:2] = True
+        obs.direction_visible = np.zeros(6, dtype=bool)
+        obs.direction_visible[:2] = True
+        out.append(law.step(obs))
+    a, b = out
+    assert not a.ok and not b.ok
+    assert a.rank == b.rank < 6 and a.features_used == b.features_used
+    assert a.notes == b.notes
+    # The condition number of a singular N is its rounding noise (inf or ~1e8 from
+    # either eigen-solver): the reasons agree up to it, and both are beyond the threshold.
+    assert a.reason is not None and b.reason is not None
+    assert a.reason.split("(condition")[0] == b.reason.split("(condition")[0]
+    assert min(a.condition, b.condition) > 1e6
+    np.testing.assert_allclose(a.error, b.error, rtol=0, atol=1e-15)
 
 
 def test_jacobi_eigen_solve_equals_lapack(rng: np.random.Generator) -> None:
@@ -179,13 +262,9 @@ def test_lean_core_equals_the_full_core_where_it_certifies(world: World, name: s
 def test_virtual_machine_fallback_equals_c(monkeypatch: pytest.MonkeyPatch,
                                            rng: np.random.Generator) -> None:
     """Without a C compiler the CasADi VM evaluates the same core."""
-    c_kernel = LawKernel(CompiledFunction(_direction_function()),
-                         [("features", 18), ("desired", 18), ("base_points", 18),
-                          ("lengths", 6)], 18)
+    c_kernel = LawKernel(CompiledFunction(_direction_function()), DIRECTION_INPUTS, 18)
     monkeypatch.setenv("CC", "/nonexistent/cc")
-    vm_kernel = LawKernel(CompiledFunction(_direction_function()),
-                          [("features", 18), ("desired", 18), ("base_points", 18),
-                           ("lengths", 6)], 18)
+    vm_kernel = LawKernel(CompiledFunction(_direction_function()), DIRECTION_INPUTS, 18)
     assert c_kernel.compiled and not vm_kernel.compiled
     u = rng.normal(size=(6, 3))
     u /= np.linalg.norm(u, axis=1, keepdims=True)
@@ -199,9 +278,13 @@ def test_virtual_machine_fallback_equals_c(monkeypatch: pytest.MonkeyPatch,
         k.set("lengths", np.full(6, 0.3))
         k.set("gain", (1.0, 1.0, 0.0))
         k.set("threshold2", 1e-12)
-    a, b = c_kernel.evaluate(), vm_kernel.evaluate()
-    np.testing.assert_allclose(a.qdot, b.qdot, rtol=1e-12, atol=1e-15)
-    assert a.rank == b.rank and a.condition == pytest.approx(b.condition, rel=1e-12)
+    for weights in (np.ones(6), np.array([1.0, 0.0, 1.0, 1.0, 1.0, 1.0])):
+        for k in (c_kernel, vm_kernel):
+            k.set("weights", weights)
+        a, b = c_kernel.evaluate(), vm_kernel.evaluate()
+        assert a.rank == b.rank == 6 and np.all(a.qdot != 0)
+        np.testing.assert_allclose(a.qdot, b.qdot, rtol=1e-12, atol=1e-15)
+        assert a.condition == pytest.approx(b.condition, rel=1e-12)
 
 
 @pytest.mark.parametrize("name", ["leg-direction-qp", "leg-edge-qp"])
@@ -322,3 +405,43 @@ def test_compiled_refinement_equals_numpy(rng: np.random.Generator) -> None:
         np.testing.assert_allclose(out, ref, rtol=1e-9, atol=1e-12 * np.abs(ref).max())
         n_active.add(int(np.count_nonzero(np.abs(J @ out) >= width - 1e-9)))
     assert {0, 1, 2} <= n_active
+
+
+def test_weighted_rows_are_the_weighted_least_squares(rng: np.random.Generator) -> None:
+    """Weights w_i: N = sum w_i L_i^T L_i and b = sum w_i L_i^T e_i with the numpy blocks of
+    controllers.interaction; a zero weight leaves the block out of the error norm, the
+    gain and the rank too, even when that block is not finite."""
+    kernel = direction_kernel()
+    u = rng.normal(size=(6, 3)) + np.array([0.0, 0.0, 3.0])
+    u /= np.linalg.norm(u, axis=1, keepdims=True)
+    us = u + 0.05 * rng.normal(size=(6, 3))
+    us /= np.linalg.norm(us, axis=1, keepdims=True)
+    A, q = rng.normal(size=(6, 3)), rng.uniform(0.2, 0.4, 6)
+    for name, value in (("features", u), ("desired", us), ("base_points", A), ("lengths", q),
+                        ("gain", (3.0, 0.5, 20.0)), ("threshold2", 1e-12)):
+        kernel.set(name, value)
+    e, L = direction_task(u, us, A, q)
+    assert e is not None
+    w = rng.uniform(0.1, 2.0, 6)
+    w[2] = 0.0
+    kernel.set("weights", w)
+    r = kernel.evaluate()
+    Lw = L * np.sqrt(w)[:, None, None]
+    np.testing.assert_allclose(r.N, np.einsum("kij,kil->jl", Lw, Lw), rtol=1e-12,
+                               atol=1e-14 * np.abs(r.N).max())
+    np.testing.assert_allclose(r.b, np.einsum("kij,ki->j", L * w[:, None, None], e),
+                               rtol=1e-12, atol=1e-14 * np.abs(r.b).max())
+    used = e[w > 0]
+    assert r.error_norm == pytest.approx(np.linalg.norm(used), rel=1e-14)
+    assert r.gain == pytest.approx(Gain(3.0, 0.5, 20.0)(float(np.abs(used).max())), rel=1e-14)
+    features = u.copy()
+    features[2] = np.nan  # an unused block that is not finite changes nothing
+    kernel.set("features", features)
+    measured = np.ones(6)  # leg 2's direction for J_inv given, not measured
+    measured[2] = 0.0
+    kernel.set("measured", measured)
+    kernel.set("leg_directions", np.where(measured[:, None] > 0, np.nan, u))
+    s = kernel.evaluate()
+    assert np.array_equal(s.N, r.N) and np.array_equal(s.b, r.b) and np.array_equal(s.qdot,
+                                                                                    r.qdot)
+    assert s.error_norm == r.error_norm and s.rank == r.rank == 6

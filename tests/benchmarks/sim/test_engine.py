@@ -14,6 +14,7 @@ from benchmarks.sim import run_trials
 from benchmarks.study.calibration import calibration_hook
 from benchmarks.study.scenario import ControllerSpec, builtin_scenarios, load_scenario
 from controllers.batch import PerTrialLoop, batch_controller
+from controllers.law_batch import BatchedLaw
 from tests.benchmarks.plugins import ProportionalJoints
 
 #: Fields that legitimately differ between the two paths (the controller's timing).
@@ -102,4 +103,26 @@ def test_batched_rows_equal_the_per_trial_rows_in_the_dynamic_world(name: str) -
     per_trial, batched = _rows(sc, "per-trial", 2), _rows(sc, "batched", 2)
     assert all("leg_forces" in r["series"] for r in batched if "series" in r)
     assert all(r["max_leg_force_n"] > 0 and r["drive_tracking_rms_mm_s"] > 0 for r in batched)
+    _compare(per_trial, batched)
+
+
+@pytest.mark.parametrize("interaction", ["desired", "mean"])
+def test_batched_rows_equal_the_per_trial_rows_with_the_desired_or_mean_interaction(
+        interaction: str, monkeypatch: pytest.MonkeyPatch) -> None:
+    """The DESIRED and MEAN cores in the batch's lean loop: the per-trial rows."""
+    sc = load_scenario("quick").with_overrides(trials=3, max_steps=100)
+    options = {"interaction": interaction, "adaptive_gain": [5.0, 1.0, 30.0]}
+    sc = replace(sc, controllers=tuple(ControllerSpec(n, n, dict(options))
+                                       for n in ("leg-direction", "leg-edge", "leg-edge-qp")))
+    per_trial = _rows(sc, "per-trial", 3)
+    fast_rows: list[int] = []
+    real = BatchedLaw._fast
+
+    def counting(self: BatchedLaw, rows: np.ndarray, *args: Any) -> np.ndarray:
+        fast_rows.append(len(rows))
+        return real(self, rows, *args)
+
+    monkeypatch.setattr(BatchedLaw, "_fast", counting)
+    batched = _rows(sc, "batched", 3)
+    assert sum(fast_rows) > 100  # the lean core stepped the common case
     _compare(per_trial, batched)

@@ -1,0 +1,244 @@
+"""The algebra shared by the compiled law cores (:mod:`controllers.law_kernel`), as CasADi
+SX expressions: an unrolled Cholesky solve, the cyclic Jacobi eigen-decomposition of a
+symmetric 6 x 6 matrix, the full-rank certificate of the lean cores, and the law part
+every feature kind shares (:func:`law_tail`: gain, rank, condition, damped solve,
+inverse Jacobian, ``q_dot``)."""
+
+from __future__ import annotations
+
+import casadi as ca
+
+from controllers.law_tools import gain_formula
+from controllers.tasks.joint_length import inverse_jacobian_row
+
+#: Cyclic Jacobi sweeps of the 6 x 6 eigen-decomposition (quadratic convergence:
+#: 5 to 6 reach double precision on the matrices of the laws; 8 leave a margin).
+JACOBI_SWEEPS = 8
+#: Sweeps of the laws' eigenvalues (rank and condition only; see :func:`law_tail`).
+LAW_SWEEPS = 6
+
+
+def cholesky_solve(M: list[list[ca.SX]], rhs: list[ca.SX]) -> list[ca.SX]:
+    """``M^-1 rhs`` for a symmetric positive definite 6 x 6 ``M`` (unrolled Cholesky;
+    NaN when ``M`` is not positive definite)."""
+    n = len(rhs)
+    L: list[list[ca.SX]] = [[ca.SX(0.0)] * n for _ in range(n)]
+    for j in range(n):
+        d = M[j][j]
+        for k in range(j):
+            d = d - L[j][k] * L[j][k]
+        L[j][j] = ca.sqrt(d)
+        for i in range(j + 1, n):
+            v = M[i][j]
+            for k in range(j):
+                v = v - L[i][k] * L[j][k]
+            L[i][j] = v / L[j][j]
+    z: list[ca.SX] = []
+    for i in range(n):
+        v = rhs[i]
+        for k in range(i):
+            v = v - L[i][k] * z[k]
+        z.append(v / L[i][i])
+    sol: list[ca.SX] = [ca.SX(0.0)] * n
+    for i in reversed(range(n)):
+        v = z[i]
+        for k in range(i + 1, n):
+            v = v - L[k][i] * sol[k]
+        sol[i] = v / L[i][i]
+    return sol
+
+
+def jacobi_eigen(N: ca.SX, sweeps: int = JACOBI_SWEEPS, vectors: bool = True
+                 ) -> tuple[list[ca.SX], list[list[ca.SX]]]:
+    """Eigenvalues and eigenvectors of a symmetric 6 x 6 SX matrix (cyclic Jacobi, unrolled).
+
+    Each rotation zeroes ``a_pq`` (Golub and Van Loan, ``sym.schur2``); a rotation
+    whose ``a_pq`` is already zero is skipped without dividing by it.
+
+    Args:
+        N: The matrix.
+        sweeps: Cyclic sweeps (unrolled).
+        vectors: Accumulate the eigenvectors (False: the identity is returned for
+            ``V``, and the expression is about a third smaller).
+
+    Returns:
+        The eigenvalues ``w`` (6, unsorted) and ``V`` as rows ``V[k][j]`` (column
+        ``j`` is the eigenvector of ``w[j]``).
+    """
+    n = N.shape[0]
+    a = [[N[i, j] for j in range(n)] for i in range(n)]
+    V: list[list[ca.SX]] = [[ca.SX(1.0 if i == j else 0.0) for j in range(n)] for i in range(n)]
+    for _ in range(sweeps):
+        for p in range(n - 1):
+            for q in range(p + 1, n):
+                apq = a[p][q]
+                zero = apq == 0
+                theta = (a[q][q] - a[p][p]) / (2.0 * ca.if_else(zero, 1.0, apq))
+                t = ca.if_else(theta >= 0, 1.0, -1.0) / (ca.fabs(theta)
+                                                         + ca.sqrt(1.0 + theta * theta))
+                t = ca.if_else(zero, 0.0, t)
+                c = 1.0 / ca.sqrt(1.0 + t * t)
+                s = t * c
+                app = a[p][p] - t * apq
+                aqq = a[q][q] + t * apq
+                for k in range(n):
+                    if k in (p, q):
+                        continue
+                    akp, akq = a[k][p], a[k][q]
+                    a[k][p] = a[p][k] = c * akp - s * akq
+                    a[k][q] = a[q][k] = s * akp + c * akq
+                a[p][p], a[q][q] = app, aqq
+                a[p][q] = a[q][p] = ca.SX(0.0)
+                if not vectors:
+                    continue
+                for k in range(n):
+                    vkp, vkq = V[k][p], V[k][q]
+                    V[k][p] = c * vkp - s * vkq
+                    V[k][q] = s * vkp + c * vkq
+    return [a[i][i] for i in range(n)], V
+
+
+def full_rank_certificate(N: ca.SX, thr2: ca.SX) -> ca.SX:
+    """1 when ``N`` is certainly of full rank for the eigenvalue threshold, else 0.
+
+    The certificate of the lean cores (:func:`law_tail` with ``lean``): the Cholesky
+    pivots of ``N - c I`` with ``c = (2 thr2 + 1e-10) |N|_F`` are all positive. As
+    ``|N|_F >= w_max``, this proves ``w_min > c >= thr2 w_max`` with a margin of a
+    factor two (and of ``1e-10 |N|_F`` against rounding), i.e. the rank the exact
+    eigenvalues give is 6. A 0 says nothing: the caller computes the exact rank.
+    """
+    fro = ca.sqrt(ca.sum1(ca.reshape(N * N, 36, 1)))
+    c = (2.0 * thr2 + 1e-10) * fro
+    L: list[list[ca.SX]] = [[ca.SX(0.0)] * 6 for _ in range(6)]
+    ok = fro > 0
+    for j in range(6):
+        d = N[j, j] - c
+        for k in range(j):
+            d = d - L[j][k] * L[j][k]
+        ok = ca.logic_and(ok, d > 0)
+        L[j][j] = ca.sqrt(ca.if_else(d > 0, d, 1.0))
+        for i in range(j + 1, 6):
+            v = N[i, j]
+            for k in range(j):
+                v = v - L[i][k] * L[j][k]
+            L[i][j] = v / L[j][j]
+    return ca.if_else(ok, 1.0, 0.0)
+
+
+def law_tail(e: ca.SX, N: ca.SX, b: ca.SX, directions: list[ca.SX], base_points: list[ca.SX],
+             params: ca.SX, lean: bool = False) -> list[ca.SX]:
+    """The law part shared by every feature kind (:mod:`controllers.law_kernel`): gain,
+    rank, condition, damped solve at full rank, ``J_inv`` and ``q_dot``.
+
+    Args:
+        e: Stacked error of the used features, zeros for the others (m, 1): its norm
+            and its largest entry (the gain) count the used rows only.
+        N: ``L^T W L`` (6, 6).
+        b: ``L^T W e`` (6, 1).
+        directions: Six (3, 1) leg directions for ``J_inv``.
+        base_points: Six (3, 1) ``A_i`` [m].
+        params: The :data:`LAW_INPUTS` (5, 1).
+        lean: The core of the batched laws: no eigenvalues; the rank output is 6 when
+            :func:`full_rank_certificate` proves full rank (then every output equals
+            the full core's to the last bit) and 0 otherwise (the caller steps that
+            row with the full core); the condition output is NaN.
+
+    Returns:
+        The :data:`LAW_OUTPUTS`, in order.
+    """
+    l0, linf, slope, thr2, d2 = (params[k] for k in range(5))
+    # Gain (controllers.law_tools.gain_formula) at x = |e|_inf.
+    x = ca.mmax(ca.fabs(e))
+    lam = gain_formula(x, l0, linf, slope, ca.exp, ca.if_else)
+    if lean:
+        full = full_rank_certificate(N, thr2) == 1.0
+        rank = ca.if_else(full, 6.0, 0.0)
+        cond = ca.SX(float("nan"))
+    else:
+        # Rank and condition from the eigenvalues (solve_normal's threshold). The
+        # command is needed only at full rank (the laws refuse below it), where the
+        # thresholded, damped pseudo-inverse sum_j (v_j^T b) / (w_j + d2) v_j is
+        # (N + d2 I)^-1 b: a Cholesky solve, without the eigenvectors.
+        w, _ = jacobi_eigen(N, LAW_SWEEPS, vectors=False)
+        w_max = w[0]
+        w_min = w[0]
+        for j in range(1, 6):
+            w_max = ca.fmax(w_max, w[j])
+            w_min = ca.fmin(w_min, w[j])
+        positive = w_max > 0
+        keep = [ca.logic_and(positive, w[j] > thr2 * w_max) for j in range(6)]
+        rank = ca.SX(0.0)
+        for kept in keep:
+            rank = rank + ca.if_else(kept, 1.0, 0.0)
+        cond = ca.if_else(ca.logic_and(positive, w_min > 0),
+                          ca.sqrt(w_max / ca.if_else(w_min > 0, w_min, 1.0)), ca.inf)
+        full = rank == 6.0
+    M = [[ca.if_else(full, N[i, j] + (d2 if i == j else 0.0), 1.0 if i == j else 0.0)
+          for j in range(6)] for i in range(6)]
+    sol = cholesky_solve(M, [b[i] for i in range(6)])
+    tau = ca.vertcat(*[ca.if_else(full, x, 0.0) for x in sol]) * (-lam)
+    # Inverse Jacobian rows [u_i^T, (A_i x u_i)^T] and q_dot = J_inv tau.
+    J = ca.vertcat(*[inverse_jacobian_row(u, A)
+                     for u, A in zip(directions, base_points, strict=True)])
+    qdot = J @ tau
+    return [ca.sqrt(ca.dot(e, e)), ca.sum1(ca.reshape(N, 36, 1)), rank, cond, lam, tau, qdot,
+            ca.sum1(qdot - qdot), ca.reshape(N.T, 36, 1), b, ca.reshape(J.T, 36, 1)]
+
+
+def upper_zeros() -> list[list[ca.SX]]:
+    """The upper triangle of a 6 x 6 accumulator (``N = L^T L`` is symmetric: each sum is
+    built once)."""
+    return [[ca.SX(0.0) for _ in range(6)] for _ in range(6)]
+
+
+def symmetric_of_upper(upper: list[list[ca.SX]]) -> ca.SX:
+    """The symmetric 6 x 6 matrix of an upper triangle."""
+    return ca.vertcat(*[ca.horzcat(*[upper[min(i, j)][max(i, j)] for j in range(6)])
+                        for i in range(6)])
+
+
+class WeightedNormal:
+    """``N = sum_k w_k L_k^T L_k`` and ``b = sum_k w_k L_k^T e_k`` over weighted blocks.
+
+    A block of weight zero is left out exactly: its terms are replaced by zeros (a
+    ``NaN`` or ``inf`` in an unused block does not reach ``N`` or ``b``), and its error
+    counts neither in :attr:`used_errors` (the error norm and the gain of the law) nor
+    in the rank of ``N``. With weight one the sums are, to the last bit, the unweighted
+    ones (``1 x`` is ``x``).
+    """
+
+    def __init__(self) -> None:
+        self.upper = upper_zeros()
+        self.b = ca.SX.zeros(6, 1)
+        #: The blocks' errors with the unused ones replaced by zeros.
+        self.used_errors: list[ca.SX] = []
+
+    def add_dense(self, e: ca.SX, L: ca.SX, weight: ca.SX) -> None:
+        """A block ``e`` (r, 1), ``L`` (r, 6) of weight ``weight`` (>= 0)."""
+        used = weight != 0
+        Lm = ca.if_else(used, L, 0.0)
+        em = ca.if_else(used, e, 0.0)
+        for row in range(6):
+            for col in range(row, 6):
+                self.upper[row][col] = self.upper[row][col] + weight * ca.dot(Lm[:, row],
+                                                                              Lm[:, col])
+        self.b += weight * (Lm.T @ em)
+        self.used_errors.append(em)
+
+    def add_rank_one(self, e: ca.SX, a: ca.SX, g: ca.SX, weight: ca.SX) -> None:
+        """A rank-one block ``L = a g^T`` (``a`` (r, 1), ``g`` (6, 1)): ``L^T L =
+        |a|^2 g g^T``, ``L^T e = (a^T e) g``."""
+        used = weight != 0
+        gm = ca.if_else(used, g, 0.0)
+        w = ca.if_else(used, weight * ca.dot(a, a), 0.0)
+        c = ca.if_else(used, weight * ca.dot(a, e), 0.0)
+        for row in range(6):
+            for col in range(row, 6):
+                self.upper[row][col] = self.upper[row][col] + w * (gm[row] * gm[col])
+        self.b += c * gm
+        self.used_errors.append(ca.if_else(used, e, 0.0))
+
+    @property
+    def N(self) -> ca.SX:
+        """``N`` (6, 6)."""
+        return symmetric_of_upper(self.upper)
