@@ -79,11 +79,13 @@ def test_row_coverage_across_a_curved_limb_is_the_true_limb_position(geometry, r
     for R, t in zip(Rs, ts, strict=True):
         img = r.render(R, t).astype(float)
         true, obs = _true_limbs(cam, geometry, R, t)
+        # each limb's samples in increasing image row, sorted once per pose
+        order = np.argsort(true[..., 1], axis=-1)
+        by_row = np.take_along_axis(true, order[..., None], axis=2)
 
-        def x_at(i: int, j: int, y: float, true: np.ndarray = true) -> float:
-            c = true[i, j]
-            order = np.argsort(c[:, 1])
-            return float(np.interp(y, c[order, 1], c[order, 0]))
+        def x_at(i: int, j: int, y: float, by_row: np.ndarray = by_row) -> float:
+            c = by_row[i, j]
+            return float(np.interp(y, c[:, 1], c[:, 0]))
 
         def other_leg_near(i: int, y: int, xa: float, xb: float,
                            true: np.ndarray = true) -> bool:
