@@ -8,8 +8,6 @@ from __future__ import annotations
 
 import os
 import signal
-import subprocess
-import sys
 import time
 from collections.abc import Iterator
 
@@ -20,6 +18,7 @@ import serial
 from hexapod.backends import protocol
 from hexapod.backends.emulator import BoardConfig, Emulator, FaultConfig
 from hexapod.exceptions import BackendError, ChecksumError
+from tests.hexapod.emulator_process import emulator_process, spawn_emulator
 
 STROKE = (0.345, 0.485)
 SPEED = 0.05
@@ -444,17 +443,9 @@ def test_from_geometry(other_geometry: object) -> None:
 
 
 # ----------------------------------------------------------------------------- command line
-def _spawn(*args: str) -> subprocess.Popen[str]:
-    return subprocess.Popen([sys.executable, "-m", "hexapod.backends.emulator", *args],
-                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
-
-
 def test_cli_pty_prints_the_device_then_serves(tmp_path: object) -> None:
-    proc = _spawn("--pty", "--lengths", "400", "--speed", "30", "--watchdog", "200",
-                  "--stroke", "350", "480")
-    try:
-        assert proc.stdout is not None
-        device = proc.stdout.readline().strip()
+    with emulator_process("--pty", "--lengths", "400", "--speed", "30", "--watchdog", "200",
+                          "--stroke", "350", "480") as (proc, device):
         assert device.startswith("/dev/")
         lk = Link(device, timeout=2.0)
         try:
@@ -464,18 +455,11 @@ def test_cli_pty_prints_the_device_then_serves(tmp_path: object) -> None:
             lk.close()
         proc.send_signal(signal.SIGTERM)
         assert proc.wait(10) == 0
-    finally:
-        if proc.poll() is None:
-            proc.kill()
-            proc.wait()
 
 
 def test_cli_tcp_and_faults() -> None:
-    proc = _spawn("--tcp", "127.0.0.1:0", "--geometry", "deltalab", "--latency", "20",
-                  "--seed", "4")
-    try:
-        assert proc.stdout is not None
-        url = proc.stdout.readline().strip()
+    with emulator_process("--tcp", "127.0.0.1:0", "--geometry", "deltalab", "--latency", "20",
+                          "--seed", "4") as (proc, url):
         assert url.startswith("socket://127.0.0.1:")
         lk = Link(url, timeout=2.0)
         try:
@@ -486,14 +470,10 @@ def test_cli_tcp_and_faults() -> None:
             lk.close()
         proc.send_signal(signal.SIGINT)
         assert proc.wait(10) == 0
-    finally:
-        if proc.poll() is None:
-            proc.kill()
-            proc.wait()
 
 
 def test_cli_refuses_remote_address() -> None:
-    proc = _spawn("--tcp", "0.0.0.0:0")
+    proc = spawn_emulator("--tcp", "0.0.0.0:0")
     out, err = proc.communicate(timeout=30)
     assert proc.returncode == 2
     assert out == ""

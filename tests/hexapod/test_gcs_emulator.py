@@ -9,8 +9,6 @@ from __future__ import annotations
 
 import signal
 import socket
-import subprocess
-import sys
 import time
 from collections.abc import Iterator
 
@@ -25,6 +23,7 @@ from hexapod.backends.gcs_emulator import GcsConfig, GcsEmulator
 from hexapod.backends.gcs_pose import PoseConvention, rotation_from_uvw
 from hexapod.exceptions import BackendError
 from hexapod.kinematics import inverse_kinematics
+from tests.hexapod.emulator_process import emulator_process, spawn_emulator
 
 
 class Link:
@@ -347,17 +346,9 @@ def test_disconnect_fault_closes_the_socket(geometry: HexapodGeometry) -> None:
 
 
 # ----------------------------------------------------------------------------- command line
-def _spawn(*args: str) -> subprocess.Popen[str]:
-    return subprocess.Popen([sys.executable, "-m", "hexapod.backends.emulator", *args],
-                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
-
-
 def test_cli_gcs_tcp() -> None:
-    proc = _spawn("--gcs", "--tcp", "127.0.0.1:0", "--pose", "1", "2", "3", "0.5", "0", "0",
-                  "--velocity", "25")
-    try:
-        assert proc.stdout is not None
-        url = proc.stdout.readline().strip()
+    with emulator_process("--gcs", "--tcp", "127.0.0.1:0", "--pose", "1", "2", "3", "0.5",
+                          "0", "0", "--velocity", "25") as (proc, url):
         assert url.startswith("tcp://127.0.0.1:")
         lk = Link(url.removeprefix("tcp://"), timeout=5.0)
         try:
@@ -367,17 +358,10 @@ def test_cli_gcs_tcp() -> None:
             lk.close()
         proc.send_signal(signal.SIGTERM)
         assert proc.wait(10) == 0
-    finally:
-        if proc.poll() is None:
-            proc.kill()
-            proc.wait()
 
 
 def test_cli_gcs_pty() -> None:
-    proc = _spawn("--gcs", "--pty", "--lengths", "400")
-    try:
-        assert proc.stdout is not None
-        url = proc.stdout.readline().strip()
+    with emulator_process("--gcs", "--pty", "--lengths", "400") as (proc, url):
         assert url.startswith("serial:/dev/")
         port = serial.serial_for_url(url.removeprefix("serial:"), timeout=2.0)
         try:
@@ -390,14 +374,10 @@ def test_cli_gcs_pty() -> None:
             port.close()
         proc.send_signal(signal.SIGINT)
         assert proc.wait(10) == 0
-    finally:
-        if proc.poll() is None:
-            proc.kill()
-            proc.wait()
 
 
 def test_cli_gcs_refuses_board_options() -> None:
-    proc = _spawn("--gcs", "--tcp", "127.0.0.1:0", "--watchdog", "200")
+    proc = spawn_emulator("--gcs", "--tcp", "127.0.0.1:0", "--watchdog", "200")
     out, err = proc.communicate(timeout=30)
     assert proc.returncode == 2 and out == ""
     assert "--watchdog" in err

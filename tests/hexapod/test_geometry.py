@@ -33,6 +33,37 @@ def test_deltalab_matches_math_section_9(geometry: HexapodGeometry) -> None:
     assert q_home.mean() == pytest.approx(geometry.q_mid, abs=1e-12)
 
 
+def test_the_remembered_home_height_is_the_bisections_of_that_robot(
+        geometry: HexapodGeometry, other_geometry: HexapodGeometry,
+        monkeypatch: pytest.MonkeyPatch) -> None:
+    """hexapod.workspace remembers home heights per robot (points and stroke): a new
+    instance of the same robot gets the bisection's value without bisecting again; a
+    robot with another stroke or other points gets its own."""
+    from dataclasses import replace
+
+    from hexapod import workspace
+
+    monkeypatch.setattr(workspace, "_HOME_HEIGHTS", {})
+    bisect = workspace._bisect_home_height
+    calls: list[str] = []
+
+    def counted(g: HexapodGeometry) -> float:
+        calls.append(g.name)
+        return bisect(g)
+
+    monkeypatch.setattr(workspace, "_bisect_home_height", counted)
+    h = deltalab().home_height
+    assert h == bisect(geometry) and deltalab().home_height == h and calls == ["deltalab"]
+    longer = replace(geometry, stroke=(geometry.q_min, geometry.q_max + 0.02))
+    assert longer.home_height == bisect(longer) > h + 0.005
+    assert other_geometry.home_height == bisect(other_geometry) != h
+    assert calls == ["deltalab", "deltalab", "other"]
+    monkeypatch.setattr(workspace, "HOME_CACHE_SIZE", 3)  # full: a fourth robot clears it
+    shorter = replace(geometry, stroke=(geometry.q_min - 0.02, geometry.q_max))
+    assert shorter.home_height == bisect(shorter) < h - 0.005
+    assert len(workspace._HOME_HEIGHTS) == 1 and deltalab().home_height == h
+
+
 def test_preset_and_unknown_preset_suggests() -> None:
     assert preset("deltalab") == deltalab()
     with pytest.raises(GeometryError, match="did you mean 'deltalab'"):

@@ -151,6 +151,9 @@ def _clip_area(polygon: np.ndarray, x: float, y: float) -> float:
     """Area of a convex polygon inside the pixel square centred on (x, y): the square
     clipped by each edge of the polygon (Sutherland-Hodgman), then the shoelace."""
     P = np.asarray(polygon, float)
+    lo, hi = P.min(axis=0), P.max(axis=0)
+    if x + 0.5 <= lo[0] or x - 0.5 >= hi[0] or y + 0.5 <= lo[1] or y - 0.5 >= hi[1]:
+        return 0.0  # the square is outside the polygon's bounding box
     if np.sum(P[:, 0] * np.roll(P[:, 1], -1) - np.roll(P[:, 0], -1) * P[:, 1]) < 0:
         P = P[::-1]
     out = [(x - 0.5, y - 0.5), (x + 0.5, y - 0.5), (x + 0.5, y + 0.5), (x - 0.5, y + 0.5)]

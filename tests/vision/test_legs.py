@@ -179,16 +179,16 @@ def _brute_force_occlusion(P, A, u, q, r, disc, skip_own, M=4000):
     its plane at a radius < its radius). Returns (occluded, ambiguous)."""
     s = np.linspace(0.0, 1.0, M + 1)[1:-1]
     X = s[:, None] * P  # (M-1, 3)
-    clear = np.inf
-    inside = False
-    for j in range(6):
-        if j == skip_own:
-            continue
-        ax = (X - A[j]) @ u[j]
-        d = np.linalg.norm(X - A[j] - ax[:, None] * u[j], axis=1)
-        g = np.maximum(np.maximum(d - r, -ax), ax - q[j])  # < 0 inside the solid cylinder
-        inside |= bool(np.any(g < 0))
-        clear = min(clear, float(np.min(np.abs(g))))
+    # X = s P: for each other leg j, the axial coordinate (X - A_j).u_j and the squared
+    # distance |X - A_j|^2 are polynomials in s (the samples' distance to the axis follows)
+    others = [j for j in range(6) if j != skip_own]
+    Ao, uo = A[others][:, None], u[others][:, None]  # (5, 1, 3)
+    ax = s * (uo @ P) - np.sum(Ao * uo, axis=2)  # (5, M-1)
+    sq = s * s * (P @ P) - 2.0 * s * (Ao @ P) + np.sum(Ao * Ao, axis=2)
+    d = np.sqrt(np.maximum(sq - ax * ax, 0.0))
+    g = np.maximum(np.maximum(d - r, -ax), ax - q[others][:, None])  # < 0 inside a cylinder
+    inside = bool(np.any(g < 0))
+    clear = float(np.min(np.abs(g)))
     c, nd, rho = disc
     clear = min(clear, abs(float((P - c) @ nd)))  # a point on the plane: ambiguous
     e = (X - c) @ nd

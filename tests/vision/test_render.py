@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 
 from hexapod.workspace import home_pose, sample_poses
+from tests.vision.coverage_checks import limb_column
 from vision.cameras import FRONT_DISTORTION, OMNI_DISTORTION, front_camera, omni_camera
 from vision.legs import edge_points, observe_legs
 from vision.render import Renderer, RenderError, RenderStyle, render_legs
@@ -77,14 +78,8 @@ def test_row_coverage_across_a_limb_is_the_true_limb_position(geometry, rng):
                     x0 = int(np.floor(x_true)) - 4
                     if other_leg_near(i, y, x0, x0 + 9):
                         continue
-                    cov = (bg - img[y, x0:x0 + 10]) / (bg - lv)
-                    step = np.diff(cov)
-                    if abs(cov[0] - 1) < 0.01 and abs(cov[-1]) < 0.01 and step.max() < 0.01:
-                        x_est = x0 - 0.5 + cov.sum()  # inside on the left
-                    elif (abs(cov[0]) < 0.01 and abs(cov[-1] - 1) < 0.01
-                          and step.min() > -0.01):
-                        x_est = x0 + 9.5 - cov.sum()  # inside on the right
-                    else:
+                    x_est = limb_column(img[y], x0, bg, lv)
+                    if x_est is None:
                         continue  # another leg in the window (not one monotonic step)
                     errors.append(x_est - x_true)
     e = np.abs(np.array(errors))

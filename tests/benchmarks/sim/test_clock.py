@@ -5,7 +5,7 @@ the same rows; latency compensation is exact when the model is exact."""
 
 from __future__ import annotations
 
-from typing import Any, ClassVar
+from typing import Any
 
 import numpy as np
 import pytest
@@ -13,10 +13,9 @@ import pytest
 from benchmarks.exceptions import ScenarioError
 from benchmarks.sim import run_trials
 from benchmarks.sim.clock import CameraClock
-from benchmarks.sim.plant import KinematicPlant
 from benchmarks.sim.world import load_camera, load_geometry, make_trials
 from benchmarks.study.scenario import parse_scenario
-from controllers.base import Command, Controller, ControllerContext, Observation
+from tests.benchmarks.sim.clock_world import RECORDER, Recorder, clock_world
 from tests.benchmarks.sim.test_engine import _compare, _rows
 
 CIRCLE = {"kind": "trajectory", "shape": "circle", "speed_mm_s": 40.0,
@@ -58,24 +57,6 @@ def test_both_engines_give_the_same_rows_with_a_clock() -> None:
     _compare(_rows(sc, "per-trial", 3), _rows(sc, "batched", 3))
 
 
-class Recorder(Controller):
-    """Records the times of the observations it gets; commands a slow constant motion."""
-
-    name = "recorder"
-    features = frozenset({"lengths"})
-    seen: ClassVar[list[tuple[float, float | None]]] = []
-
-    def __init__(self, gain: float = 0.0) -> None:
-        self.gain = gain
-
-    def reset(self, context: ControllerContext) -> None:
-        pass
-
-    def step(self, observation: Observation) -> Command:
-        Recorder.seen.append((observation.t, observation.image_t))
-        return Command(np.full(6, 1e-3))
-
-
 @pytest.mark.parametrize(("clock", "lo", "hi"), [
     # 30 Hz frames against 50 Hz control: the age cycles through the frame period
     ({"frame_rate_hz": 30.0, "latency_frames": 2.0}, 2 / 30, 3 / 30),
@@ -88,7 +69,7 @@ class Recorder(Controller):
 def test_images_are_as_old_as_the_clock_says(clock: dict[str, Any], lo: float, hi: float,
                                              engine: str) -> None:
     Recorder.seen = []
-    sc = _scenario(clock, controllers=["tests.benchmarks.sim.test_clock:Recorder"])
+    sc = _scenario(clock, controllers=[RECORDER])
     run_trials(sc, 0, [0], engine=engine)
     t, image_t = np.array(Recorder.seen, dtype=float).T
     age = t - image_t
@@ -102,38 +83,27 @@ def test_the_pose_of_a_frame_between_instants_is_where_the_plant_was() -> None:
     reaches by moving 7 ms with that period's command; a frame on an instant sees that
     instant's pose, and one captured before the start the start pose."""
     sc = _scenario({"frame_rate_hz": 50.0, "latency_ms": 13.0})
-    g = load_geometry(sc)
-    setups = make_trials(sc, [0, 1], g, load_camera(sc, g))
-    q = np.array([s.start_lengths for s in setups])
-    R = np.array([s.start_rotation for s in setups])
-    t = np.array([s.start_translation for s in setups])
-    start = (q.copy(), R.copy(), t.copy())
-    plant = KinematicPlant(q, R, t, g.base_points, g.platform_points, g.stroke, g.max_speed)
-    clock = CameraClock(sc, setups, q, R, t, g.base_points, g.platform_points)
-    v = np.array([[0.01, -0.02, 0.015, 0.0, 0.005, -0.01], [-0.01, 0.0, 0.02, 0.01, 0.0, 0.0]])
-    idx = np.arange(2)
+    w = clock_world(sc)
     seen: list[np.ndarray] = []
 
     def keep(rows: np.ndarray, Rr: np.ndarray, tr: np.ndarray) -> dict[str, Any]:
         seen.append(tr)
         return {"x": tr}
 
-    clock.measure(0, idx, keep)  # at 0: the frame of -20 ms (delivered at -7 ms)
-    np.testing.assert_array_equal(seen[-1], start[2])
-    plant.advance(idx, v, sc.dt)
-    after = t.copy()
-    clock.measure(1, idx, keep)  # at 20 ms: the frame of 0 ms (delivered at 13 ms)
-    np.testing.assert_array_equal(seen[-1], start[2])
-    R_c, t_c = clock._poses_at(idx, np.array([0.007, 0.007]), 1)
-    part = KinematicPlant(*(a.copy() for a in start), g.base_points, g.platform_points,
-                          g.stroke, g.max_speed)
-    part.advance(idx, v, 0.007)
+    w.clock.measure(0, w.rows, keep)  # at 0: the frame of -20 ms (delivered at -7 ms)
+    np.testing.assert_array_equal(seen[-1], w.start[2])
+    w.advance()
+    after = w.t.copy()
+    w.clock.measure(1, w.rows, keep)  # at 20 ms: the frame of 0 ms (delivered at 13 ms)
+    np.testing.assert_array_equal(seen[-1], w.start[2])
+    R_c, t_c = w.clock._poses_at(w.rows, np.array([0.007, 0.007]), 1)
+    part = w.moved_from_start(0.007)
     np.testing.assert_allclose(t_c, part.t, atol=1e-12)
     np.testing.assert_allclose(R_c, part.R, atol=1e-12)
     assert np.linalg.norm(t_c - after) > 1e-4  # not the instant's pose
-    R_e, t_e = clock._poses_at(idx, np.array([0.02, 0.02]), 1)
+    R_e, t_e = w.clock._poses_at(w.rows, np.array([0.02, 0.02]), 1)
     np.testing.assert_array_equal(t_e, after)
-    np.testing.assert_array_equal(R_e, R)
+    np.testing.assert_array_equal(R_e, w.R)
 
 
 def test_jitter_has_its_standard_deviation() -> None:

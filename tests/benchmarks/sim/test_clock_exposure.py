@@ -12,11 +12,8 @@ import pytest
 
 from benchmarks.exceptions import ScenarioError
 from benchmarks.sim import run_trials
-from benchmarks.sim.clock import CameraClock
-from benchmarks.sim.plant import KinematicPlant
-from benchmarks.sim.world import load_camera, load_geometry, make_trials
 from benchmarks.study.scenario import parse_scenario
-from tests.benchmarks.sim.test_clock import Recorder
+from tests.benchmarks.sim.clock_world import RECORDER, Recorder, clock_world
 
 IMAGE = {"kind": "image", "blur_px": 0.8, "noise_std": 2.0}
 
@@ -54,34 +51,23 @@ def test_the_exposed_poses_are_where_the_plant_was() -> None:
     command), its timestamp 16 ms."""
     sc = _scenario({"frame_rate_hz": 100.0, "latency_ms": 13.0, "exposure_ms": 8.0,
                     "exposure_samples": 4})
-    g = load_geometry(sc)
-    setups = make_trials(sc, [0, 1], g, load_camera(sc, g))
-    q = np.array([s.start_lengths for s in setups])
-    R = np.array([s.start_rotation for s in setups])
-    t = np.array([s.start_translation for s in setups])
-    start = (q.copy(), R.copy(), t.copy())
-    plant = KinematicPlant(q, R, t, g.base_points, g.platform_points, g.stroke, g.max_speed)
-    clock = CameraClock(sc, setups, q, R, t, g.base_points, g.platform_points)
-    v = np.array([[0.01, -0.02, 0.015, 0.0, 0.005, -0.01], [-0.01, 0.0, 0.02, 0.01, 0.0, 0.0]])
-    idx = np.arange(2)
+    w = clock_world(sc)
     seen: list[tuple[np.ndarray, np.ndarray]] = []
 
     def keep(rows: np.ndarray, Rr: np.ndarray, tr: np.ndarray) -> dict[str, Any]:
         seen.append((Rr, tr))
         return {"x": tr}
 
-    clock.measure(0, idx, keep)
-    plant.advance(idx, v, sc.dt)
-    clock.measure(1, idx, keep)
-    plant.advance(idx, v, sc.dt)
-    out = clock.measure(2, idx, keep)
+    w.clock.measure(0, w.rows, keep)
+    w.advance()
+    w.clock.measure(1, w.rows, keep)
+    w.advance()
+    out = w.clock.measure(2, w.rows, keep)
     np.testing.assert_allclose(out["image_t"], [0.016, 0.016], atol=1e-12)
     R_s, t_s = seen[-1]
     assert R_s.shape == (2, 4, 3, 3) and t_s.shape == (2, 4, 3)
     for j, when in enumerate((0.013, 0.015, 0.017, 0.019)):
-        part = KinematicPlant(*(a.copy() for a in start), g.base_points, g.platform_points,
-                              g.stroke, g.max_speed)
-        part.advance(idx, v, when)
+        part = w.moved_from_start(when)
         np.testing.assert_allclose(t_s[:, j], part.t, atol=1e-12)
         np.testing.assert_allclose(R_s[:, j], part.R, atol=1e-12)
     assert np.linalg.norm(t_s[:, 0] - t_s[:, 3]) > 1e-5  # the robot moved during it
@@ -92,7 +78,7 @@ def test_a_blurred_study_runs_and_its_images_are_half_an_exposure_old() -> None:
     image is 5 ms old (the middle of its exposure), the trial runs to its end."""
     Recorder.seen = []
     sc = _scenario({"exposure_ms": 10.0},
-                   controllers=["tests.benchmarks.sim.test_clock:Recorder"])
+                   controllers=[RECORDER])
     (res,) = run_trials(sc, 0, [0])
     assert res.row["failure"] is None or "not converged" in res.row["failure"]
     t, image_t = np.array(Recorder.seen, dtype=float).T
