@@ -109,11 +109,12 @@ def _desired_edge_interaction(law: Any, q_star: np.ndarray) -> np.ndarray:
     u2 = np.repeat(law._u_star, 2, axis=0)
     A2 = np.repeat(law.base_points, 2, axis=0)
     ns = law._n_star.reshape(12, 3)
-    if law.use_lines:
-        K = law.line_matrix
-        ls = law.desired_features()
-        return edge_line_task(ls, ls, ns, u2, A2, q2, K, np.linalg.inv(K).T)
-    return edge_normal_task(ns, ns, u2, A2, q2)
+    with np.errstate(divide="ignore", invalid="ignore"):  # the goal's hidden edges: NaN rows
+        if law.use_lines:
+            K = law.line_matrix
+            ls = law.desired_features()
+            return edge_line_task(ls, ls, ns, u2, A2, q2, K, np.linalg.inv(K).T)
+        return edge_normal_task(ns, ns, u2, A2, q2)
 
 
 def edge_stack(law: Any, obs: Observation, q: np.ndarray) -> Stack:
