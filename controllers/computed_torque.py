@@ -40,7 +40,7 @@ from controllers.base import (
     Goal,
     Observation,
 )
-from controllers.exceptions import ContextError
+from controllers.law_tools import goal_lengths
 from controllers.solvers import compiled_ctc
 from controllers.solvers.computed_torque import (
     ComputedTorqueSolver,
@@ -135,12 +135,7 @@ class ComputedTorqueController(Controller):
         """A new fixed goal (ignored when tracking a reference: it is sampled itself)."""
         if self._ctx is not None and self._ctx.reference is not None:
             return
-        if goal.lengths is None:
-            raise ContextError(self.name, "goal.lengths", "missing")
-        qs = np.asarray(goal.lengths, dtype=float)
-        if qs.shape != (6,) or not np.all(np.isfinite(qs)):
-            raise ContextError(self.name, "goal.lengths", f"expected 6 finite values, got {qs}")
-        self._q_star = qs.copy()
+        self._q_star = goal_lengths(self.name, goal)
         self._start = None
 
     def desired(self, t: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

@@ -22,8 +22,8 @@ from controllers.base import (
     ObservationBatch,
     usable_observation_problem,
 )
-from controllers.exceptions import ContextError
 from controllers.goal_batch import GoalBatch
+from controllers.law_tools import goal_lengths
 from controllers.laws import Gain
 
 
@@ -57,12 +57,7 @@ class JointSpaceController(Controller):
         Raises:
             ContextError: The goal has no valid lengths.
         """
-        if goal.lengths is None:
-            raise ContextError(self.name, "goal.lengths", "missing")
-        qs = np.asarray(goal.lengths, dtype=float)
-        if qs.shape != (6,) or not np.all(np.isfinite(qs)):
-            raise ContextError(self.name, "goal.lengths", f"expected 6 finite values, got {qs}")
-        self._q_star = qs.copy()
+        self._q_star = goal_lengths(self.name, goal)
 
     def step(self, observation: Observation) -> Command:
         """``q_dot = -lambda (q - q*)``."""

@@ -76,6 +76,23 @@ def check_number(controller: str, option: str, value: Any, minimum: float = 0.0,
     return x
 
 
+def goal_lengths(controller: str, goal: Any) -> np.ndarray:
+    """``goal.lengths`` checked: a copy (6,) [m].
+
+    Raises:
+        ContextError: Missing, or not 6 positive finite lengths.
+    """
+    from controllers.exceptions import ContextError
+
+    if goal.lengths is None:
+        raise ContextError(controller, "goal.lengths", "missing")
+    qs = np.array(goal.lengths, dtype=float)
+    if qs.shape != (6,) or not np.all(np.isfinite(qs)) or np.any(qs <= 0):
+        raise ContextError(controller, "goal.lengths",
+                           f"expected 6 positive finite lengths, got {qs}")
+    return qs
+
+
 def check_choice(controller: str, option: str, value: Any, choices: Sequence[str]) -> str:
     """Validate a string option against its choices (suggesting the closest).
 

@@ -55,6 +55,7 @@ from controllers.law_tools import (
     check_choice,
     check_number,
     check_observation,
+    goal_lengths,
     inverse_jacobian_into,
     solve_least_squares,
     solve_normal,
@@ -211,18 +212,9 @@ class VisionLaw(BatchedLaw, Controller):
         self._configure_kernel()
 
     def _goal_lengths(self, goal: Goal) -> np.ndarray | None:
-        """``goal.lengths`` checked (None when the goal has none).
-
-        Raises:
-            ContextError: Not 6 positive finite lengths.
-        """
-        if goal.lengths is None:
-            return None
-        qs = np.asarray(goal.lengths, dtype=float)
-        if qs.shape != (6,) or not np.all(np.isfinite(qs)) or np.any(qs <= 0):
-            raise ContextError(self.name, "goal.lengths",
-                               f"expected 6 positive finite lengths, got {qs}")
-        return qs
+        """``goal.lengths`` checked (None when the goal has none; ContextError when not 6
+        positive finite lengths)."""
+        return None if goal.lengths is None else goal_lengths(self.name, goal)
 
     def _configure_kernel(self) -> None:
         """Write the goal lengths (DESIRED/MEAN cores), the gain, threshold and damping into
