@@ -57,6 +57,46 @@ ROW = 117
 OUT = 56
 
 
+def sx_encoder_pose(pose: ca.SX, q: ca.SX, points: ca.SX, calls: int
+                    ) -> tuple[ca.SX, ca.SX]:
+    """The pose ``R`` (9, column-major) and ``t`` (3) of the encoder lengths ``q`` after
+    ``calls`` calls of the compiled Newton steps from ``pose``, and the (6,) length
+    residual."""
+    newton = newton_function()
+    y = newton(ca.vertcat(pose, q, points))
+    for _ in range(calls - 1):
+        y = newton(ca.vertcat(y[0:12], q, points))
+    return y[0:12], y[12:18]
+
+
+def sx_model_state(R_t: ca.SX, qd: ca.SX, points: ca.SX, params: ca.SX
+                   ) -> tuple[ca.SX, ca.SX, ca.SX, ca.SX, ca.SX]:
+    """At the pose ``R_t``: ``K``, the twist ``K^-1 q_dot``, and with it ``M``, ``h`` and
+    the legs' bias ``K_dot tau`` of the nominal model."""
+    row, e = dyn.expressions()
+    terms = ca.Function("terms", [row], [e["M"], e["h"], e["K"], e["leg_bias"]])
+    zeros = ca.SX.zeros(6)
+    K = terms(ca.vertcat(R_t, zeros, zeros, points, params))[2]
+    twist = ca.solve(K, qd)
+    M, h, K, bias = terms(ca.vertcat(R_t, twist, zeros, points, params))
+    return K, twist, M, h, bias
+
+
+def sx_mechanism_forces(K: ca.SX, M: ca.SX, h: ca.SX, bias: ca.SX, acc: ca.SX,
+                        inverse_tolerance: float) -> tuple[ca.SX, ca.SX, ca.SX]:
+    """The leg acceleration ``a = K tau_dot + K_dot tau``, the mechanism's forces
+    ``K^-T (M tau_dot + h)`` and 1.0 when that solve's residual is below
+    ``inverse_tolerance`` relative to its right-hand side (else 0.0; NaN compares
+    false)."""
+    a = K @ acc + bias
+    rhs = M @ acc + h
+    f = ca.solve(K.T, rhs)
+    inverse_residual = ca.norm_2(K.T @ f - rhs)
+    solved = ca.if_else(inverse_residual <= inverse_tolerance * ca.norm_2(rhs) + 1e-12,
+                        1.0, 0.0)
+    return a, f, solved
+
+
 def _build(inverse_tolerance: float) -> ca.Function:
     x = ca.SX.sym("x", ROW)
     pose, q, qd = x[0:12], x[12:18], x[18:24]
@@ -65,27 +105,13 @@ def _build(inverse_tolerance: float) -> ca.Function:
     params = x[78:97]
     rotor, viscous, coulomb = x[97:103], x[103:109], x[109:115]
     kp, kd = x[115], x[116]
-    newton = newton_function()
-    y = newton(ca.vertcat(pose, q, points))
-    for _ in range(FK_CALLS - 1):
-        y = newton(ca.vertcat(y[0:12], q, points))
-    R_t, residual = y[0:12], y[12:18]
-    row, e = dyn.expressions()
-    terms = ca.Function("terms", [row], [e["M"], e["h"], e["K"], e["leg_bias"]])
-    zeros = ca.SX.zeros(6)
-    K = terms(ca.vertcat(R_t, zeros, zeros, points, params))[2]
-    twist = ca.solve(K, qd)
-    M, h, K, bias = terms(ca.vertcat(R_t, twist, zeros, points, params))
+    R_t, residual = sx_encoder_pose(pose, q, points, FK_CALLS)
+    K, twist, M, h, bias = sx_model_state(R_t, qd, points, params)
     a_star = qdd_s + kd * (qd_s - K @ twist) + kp * (q_s - q)
     acc = ca.solve(K, a_star - bias)
-    a = K @ acc + bias
-    rhs = M @ acc + h
-    f = ca.solve(K.T, rhs)
-    inverse_residual = ca.norm_2(K.T @ f - rhs)
+    a, f, inverse_solved = sx_mechanism_forces(K, M, h, bias, acc, inverse_tolerance)
     f = f + rotor * a + viscous * qd + coulomb * ca.tanh(qd_s / COULOMB_SMOOTHING)
     fk_residual = ca.mmax(ca.fabs(residual))
-    inverse_solved = ca.if_else(
-        inverse_residual <= inverse_tolerance * ca.norm_2(rhs) + 1e-12, 1.0, 0.0)
     out = ca.vertcat(R_t, ca.reshape(K.T @ K, 36, 1), f, fk_residual, inverse_solved)
     return ca.Function("hexapod_ctc_joint_step", [x], [ca.cse(out)])
 
@@ -101,4 +127,5 @@ def joint_step(inverse_tolerance: float = INVERSE_TOLERANCE) -> CompiledFunction
     return CompiledFunction(_build(float(inverse_tolerance)))
 
 
-__all__ = ["FK_CALLS", "OUT", "ROW", "joint_step"]
+__all__ = ["FK_CALLS", "OUT", "ROW", "joint_step", "sx_encoder_pose", "sx_mechanism_forces",
+           "sx_model_state"]

@@ -57,6 +57,11 @@ from functools import lru_cache
 
 import casadi as ca
 
+from controllers.solvers.compiled_ctc import (
+    sx_encoder_pose,
+    sx_mechanism_forces,
+    sx_model_state,
+)
 from controllers.tasks.base import reference_function, second_order_function
 from controllers.tasks.leg_direction import block_function as direction_block_function
 from controllers.tasks.leg_direction import reference_block as direction_reference
@@ -67,10 +72,8 @@ from controllers.tasks.leg_edge import reference_block as edge_reference
 from controllers.tasks.leg_edge import second_order_block as edge_second_order
 from controllers.tasks.platform_pose import pose_error, pose_rate
 from hexapod.compiled import CompiledFunction
-from hexapod.dynamics import compiled as dyn
 from hexapod.dynamics.drive_model import COULOMB_SMOOTHING
 from hexapod.dynamics.model import INVERSE_TOLERANCE
-from hexapod.fk import newton_function
 
 #: Task kinds and their number of rows.
 ROWS = {"pose": 6, "edges": 36, "directions": 18}
@@ -254,20 +257,12 @@ def _build(kind: str, fk: bool, inverse_tolerance: float) -> ca.Function:
     rotor, viscous, coulomb = x[sl["rotor"]], x[sl["viscous"]], x[sl["coulomb"]]
     kp, kd, hold = x[sl["gains"].start], x[sl["gains"].start + 1], x[sl["gains"].start + 2]
     if fk:
-        newton = newton_function()
-        y = newton(ca.vertcat(x[sl["pose"]], q, points))
-        for _ in range(FK_CALLS - 1):
-            y = newton(ca.vertcat(y[0:12], q, points))
-        R_t, fk_residual = y[0:12], ca.mmax(ca.fabs(y[12:18]))
+        R_t, residual = sx_encoder_pose(x[sl["pose"]], q, points, FK_CALLS)
+        fk_residual = ca.mmax(ca.fabs(residual))
     else:
         R_t, fk_residual = _rigid_fit(x[sl["pose"]], q, x[sl["directions"]], x[sl["base"]],
                                       points[18:36], x[sl["frame"]])
-    row, expr = dyn.expressions()
-    terms = ca.Function("terms", [row], [expr["M"], expr["h"], expr["K"], expr["leg_bias"]])
-    zeros = ca.SX.zeros(6)
-    K = terms(ca.vertcat(R_t, zeros, zeros, points, params))[2]
-    twist = ca.solve(K, qd)
-    M, h, K, bias = terms(ca.vertcat(R_t, twist, zeros, points, params))
+    K, twist, M, h, bias = sx_model_state(R_t, qd, points, params)
     R, t = ca.reshape(R_t[0:9], 3, 3), R_t[9:12]
     frame = None if kind == "pose" else x[sl["frame"]]  # the task's frame
     G, gdot = _model_twist(t, twist, frame)
@@ -287,13 +282,8 @@ def _build(kind: str, fk: bool, inverse_tolerance: float) -> ca.Function:
         Lw = L_model * ca.repmat(mask, 1, 6)
         Q, factor = ca.qr(Lw)
         acc = ca.solve(factor, Q.T @ (mask * rhs))
-    a = K @ acc + bias
-    rhs_f = M @ acc + h
-    f = ca.solve(K.T, rhs_f)
-    inverse_residual = ca.norm_2(K.T @ f - rhs_f)
+    a, f, solved = sx_mechanism_forces(K, M, h, bias, acc, inverse_tolerance)
     f = f + rotor * a + viscous * qd + coulomb * ca.tanh((qd + hold * a) / COULOMB_SMOOTHING)
-    solved = ca.if_else(inverse_residual <= inverse_tolerance * ca.norm_2(rhs_f) + 1e-12,
-                        1.0, 0.0)
     out = ca.vertcat(R_t, ca.reshape(K, 36, 1), fk_residual, f, solved, e,
                      ca.reshape(factor.T @ factor, 36, 1))
     assert out.shape[0] == _size(out_sl)
