@@ -6,7 +6,7 @@ from __future__ import annotations
 
 import logging
 from collections.abc import Callable
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any
 
 import numpy as np
@@ -24,12 +24,19 @@ log = logging.getLogger(__name__)
 
 
 def load_geometry(scenario: Scenario) -> HexapodGeometry:
-    """The nominal geometry of a scenario (the data read when it was loaded, if any)."""
+    """The nominal geometry of a scenario (the data read when it was loaded, if any), with
+    the scenario's ``[drives]`` changes."""
     if scenario.geometry_data is not None:
-        return scenario.geometry_data  # type: ignore[no-any-return]
-    if scenario.robot_geometry is not None:
-        return HexapodGeometry.from_toml(scenario.robot_geometry)
-    return geometry_preset(scenario.robot_preset or "deltalab")
+        geometry: HexapodGeometry = scenario.geometry_data
+    elif scenario.robot_geometry is not None:
+        geometry = HexapodGeometry.from_toml(scenario.robot_geometry)
+    else:
+        geometry = geometry_preset(scenario.robot_preset or "deltalab")
+    bandwidth = scenario.drives.velocity_bandwidth_hz
+    if bandwidth > 0:
+        drives = replace(geometry.drives, velocity_bandwidth=np.full(6, float(bandwidth)))
+        geometry = replace(geometry, drives=drives)
+    return geometry
 
 
 def load_camera(scenario: Scenario, geometry: HexapodGeometry) -> Camera:

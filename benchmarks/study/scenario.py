@@ -27,6 +27,7 @@ from benchmarks.study.scenario_checks import (
 from benchmarks.study.scenario_model import (
     CALIBRATION_ERROR_KEYS,
     CLOCK_KEYS,
+    DRIVES_KEYS,
     NOISE_KEYS,
     RANGES,
     TASK_KEYS,
@@ -35,6 +36,7 @@ from benchmarks.study.scenario_model import (
     CalibrationErrorConfig,
     ClockConfig,
     ControllerSpec,
+    DrivesConfig,
     ImageConfig,
     NoiseConfig,
     Scenario,
@@ -54,7 +56,7 @@ __all__ = [
 
 _TOP = ("name", "description", "seed", "trials", "controllers", "controller_options", "robot",
         "camera", "sensor", "noise", "calibration_error", "calibration", "task", "reference",
-        "clock")
+        "clock", "drives")
 
 
 def _section(table: dict[str, Any], key: str, path: str) -> dict[str, Any]:
@@ -311,6 +313,8 @@ def parse_scenario(table: dict[str, Any], path: str = "<dict>") -> Scenario:
     task = check_trajectory_task(task, sweep, path)
     clock = _parse_dataclass(ClockConfig, _section(table, "clock", path), path, "clock",
                              CLOCK_KEYS, None, sweep)
+    drives = _parse_dataclass(DrivesConfig, _section(table, "drives", path), path, "drives",
+                              DRIVES_KEYS, None, sweep)
     if sensor != "image" and max(sweep.get("clock.exposure_ms", [clock.exposure_ms])) > 0:
         raise ScenarioError(path, "motion blur needs rendered images ([sensor] kind = "
                             "\"image\")", key="clock.exposure_ms")
@@ -332,6 +336,7 @@ def parse_scenario(table: dict[str, Any], path: str = "<dict>") -> Scenario:
         world=world, physics_dt=physics_dt,
         teach_frames=teach_frames, image=image,
         noise=noise, calibration_error=cal_err, calibration=cal, task=task, clock=clock,
+        drives=drives,
         reference=reference, sweep_axes=sweep, source=path, geometry_data=geometry_data,
         camera_data=camera_data, calibration_points=points,
     )

@@ -75,9 +75,12 @@ RANGES: dict[str, tuple[float, float, bool, bool]] = {
     "clock.jitter_ms": (0.0, 1000.0, True, True),
     "clock.exposure_ms": (0.0, 1000.0, True, True),
     "clock.exposure_samples": (1, 256, True, True),
+    "drives.velocity_bandwidth_hz": (0.0, 100_000.0, True, True),
 }
 #: Keys of [clock] (the camera's clock), every one sweepable.
 CLOCK_KEYS = ("frame_rate_hz", "latency_ms", "latency_frames", "jitter_ms", "exposure_ms")
+#: Keys of [drives] (the robot's drives, world and controllers alike), every one sweepable.
+DRIVES_KEYS = ("velocity_bandwidth_hz",)
 #: Keys of [task] that may be swept (trajectory tasks).
 TASK_KEYS = ("speed_mm_s", "acceleration_mm_s2")
 #: Calibration errors that are not standard deviations: not multiplied by ``scale``.
@@ -263,6 +266,20 @@ class ClockConfig:
 
 
 @dataclass(frozen=True)
+class DrivesConfig:
+    """Changes to the robot's drives (the robot file's ``[drives]``): the true robot of the
+    dynamic world and the controllers' nominal model alike, so that a study can sweep
+    them on one robot file.
+
+    Attributes:
+        velocity_bandwidth_hz: Bandwidth of every leg's velocity loop [Hz] (0: the robot
+            file's own).
+    """
+
+    velocity_bandwidth_hz: float = 0.0
+
+
+@dataclass(frozen=True)
 class TaskConfig:
     """What each trial must do.
 
@@ -346,6 +363,7 @@ class Scenario:
         calibration: Calibration procedure settings.
         task: Task settings.
         clock: The camera's clock (frame rate, latency, jitter).
+        drives: Changes to the robot's drives (:class:`DrivesConfig`).
         reference: Figures of the reproduced seed (free-form table for the report).
         sweep: The swept keys of this point, e.g. ``{"noise.amplitude_deg": 0.05}``.
         source: File it was read from.
@@ -378,6 +396,7 @@ class Scenario:
     calibration: CalibrationConfig = CalibrationConfig()
     task: TaskConfig = TaskConfig()
     clock: ClockConfig = ClockConfig()
+    drives: DrivesConfig = DrivesConfig()
     reference: dict[str, Any] = field(default_factory=dict)
     sweep: dict[str, Any] = field(default_factory=dict)
     sweep_axes: dict[str, list[Any]] = field(default_factory=dict)

@@ -48,6 +48,9 @@ log = logging.getLogger(__name__)
 MODELS = ("local", "global")
 #: Reference trajectories of the error: ``(1 - lambda dt)^k e_0`` or zero.
 REFERENCES = ("exponential", "zero")
+#: Models of the velocity drives in the prediction: ideal (each setpoint happens at once)
+#: or a first-order lag at the drives' velocity bandwidth.
+DRIVE_MODELS = ("ideal", "lag")
 
 
 class MPCLaw(Controller):
@@ -83,6 +86,12 @@ class MPCLaw(Controller):
             structure, a few seconds, cached on disk); False: CasADi virtual machine and
             ``casadi.conic`` (same results, several times slower per step, nothing to
             build).
+        drive_model: ``"ideal"`` (the predicted leg velocities are the setpoints, as in
+            the kinematic world) or ``"lag"``: each leg's velocity follows its setpoint as
+            a first-order lag at the NOMINAL drives' ``velocity_bandwidth`` (robot file
+            ``[drives]``), starting from the measured leg velocities
+            (``Observation.q_dot``; without them, from the lag model run on the past
+            setpoints). For velocity-mode drives on the dynamic world or a real robot.
         law_options: Further options of the fallback QP law (e.g. ``edge_feature``).
     """
 
@@ -100,7 +109,8 @@ class MPCLaw(Controller):
                  tolerance: float = 1e-3, accept_unconverged: bool = True,
                  time_limit: float | None = None,
                  regularization: float = 1e-10, threshold: float = 1e-6,
-                 compiled: bool = True, **law_options: Any) -> None:
+                 compiled: bool = True, drive_model: str = "ideal",
+                 **law_options: Any) -> None:
         name = self.name
         if isinstance(horizon, bool) or not isinstance(horizon, int) or horizon < 1:
             raise OptionError(name, "horizon", f"expected an integer >= 1, got {horizon!r}")
@@ -111,6 +121,7 @@ class MPCLaw(Controller):
         self.horizon = horizon
         self.model = check_choice(name, "model", model, MODELS)
         self.reference = check_choice(name, "reference", reference, REFERENCES)
+        self.drive_model = check_choice(name, "drive_model", drive_model, DRIVE_MODELS)
         self.error_weight = check_number(name, "error_weight", error_weight, 0.0, strict=False)
         self.terminal_weight = check_number(name, "terminal_weight", terminal_weight, 0.0,
                                             strict=False)
@@ -147,6 +158,9 @@ class MPCLaw(Controller):
         self.stats = SolveStats()
         self._spec: ProblemSpec | None = None
         self._U = np.zeros(6 * horizon)
+        self._lag = (np.zeros(6), np.zeros(6))
+        self._v0 = np.zeros(6)
+        self.drive_velocities = np.zeros(6)
 
     # ----------------------------------------------------------------- reset
     def reset(self, context: ControllerContext) -> None:
@@ -166,7 +180,7 @@ class MPCLaw(Controller):
         if self.visibility and not visibility:
             log.info("%s: visibility constraint ignored (needs a perspective camera)", self.name)
         self._spec = ProblemSpec(self._kind, self.model, self.horizon, self.max_tilt is not None,
-                                 visibility)
+                                 visibility, self.drive_model == "lag")
         self._kernel: CompiledFunction | VirtualMachineKernel
         if self.compiled:
             self._kernel = problem_kernel(self._spec)
@@ -209,6 +223,12 @@ class MPCLaw(Controller):
             self._vec[sl["K"]] = K.reshape(-1)
             self._vec[sl["box"]] = (-0.5 + m, cam.width - 0.5 - m, -0.5 + m,
                                     cam.height - 0.5 - m)
+        if self._spec.drives:
+            self._lag = drive_lag(context, window.dt, self.name)
+            self._vec[sl["alag"]], self._vec[sl["clag"]] = self._lag
+        #: The lag model's leg velocities at the next step [m/s] (drive_model "lag": the
+        #: estimate used when an observation carries no measured leg velocities).
+        self.drive_velocities = np.zeros(6)
         self._star = law.desired_features()
         self._U = np.zeros(6 * self.horizon)
         #: Last reconstructed platform pose ``(R, t)`` in the camera frame (diagnostic).
@@ -221,9 +241,21 @@ class MPCLaw(Controller):
     # ----------------------------------------------------------------- step
     def step(self, observation: Observation) -> Command:
         """One receding-horizon step (never raises for bad measurements)."""
-        law = self.law
         if self.context is None:
             return Command.refuse(f"{self.name}: reset(context) was not called")
+        cmd = self._step(observation)
+        if self._spec is not None and self._spec.drives:
+            a, _ = self._lag
+            u = cmd.velocities if np.all(np.isfinite(cmd.velocities)) else np.zeros(6)
+            self.drive_velocities = a * self._v0 + (1 - a) * u
+        return cmd
+
+    def _step(self, observation: Observation) -> Command:
+        law = self.law
+        if self._spec is not None and self._spec.drives:
+            v = observation.q_dot
+            self._v0 = (np.asarray(v, dtype=float) if v is not None
+                        and np.all(np.isfinite(v)) else self.drive_velocities)
         q = law.checked_lengths(observation)
         if isinstance(q, Command):
             self._U[:] = 0.0  # nothing moves: the next warm start is rest
@@ -269,6 +301,13 @@ class MPCLaw(Controller):
             vec[sl["ref"]] = 0.0
         vec[sl["J0"]] = J.reshape(-1)
         vec[sl["q0"]] = q
+        if spec.drives:
+            try:
+                J0i = np.linalg.inv(J)
+            except np.linalg.LinAlgError:
+                return "singular inverse Jacobian: cannot map the drives' lag to twists"
+            vec[sl["J0i"]] = J0i.reshape(-1)
+            vec[sl["v0"]] = self._v0
         vmax = window.max_speed
         _, _, lo1, hi1 = velocity_bounds(q, window.lower, window.upper, vmax, 1.0 / dt)
         vec[sl["lo1"]] = lo1
@@ -383,6 +422,25 @@ class MPCLaw(Controller):
         cmd.notes = [*cmd.notes, f"mpc fallback: {reason}"]
         cmd.active_constraints = [*cmd.active_constraints, f"mpc fallback: {reason}"]
         return cmd
+
+
+def drive_lag(context: ControllerContext, dt: float, name: str
+              ) -> tuple[np.ndarray, np.ndarray]:
+    """``(a, c)`` (6,) of the first-order lag of the nominal velocity drives over one
+    period ``dt`` [s]: ``a = exp(-omega dt)`` [-], ``c = (1 - a) / omega`` [s], with
+    ``omega = 2 pi`` times the drives' ``velocity_bandwidth`` [Hz].
+
+    Raises:
+        OptionError: The nominal drives are in force mode (nothing lags a velocity
+            setpoint: this controller commands velocities).
+    """
+    drives = context.geometry.drives
+    if drives.mode != "velocity":
+        raise OptionError(name, "drive_model", "'lag' models velocity-mode drives; the "
+                          f"robot's [drives] mode is {drives.mode!r}")
+    omega = 2 * np.pi * np.broadcast_to(np.asarray(drives.velocity_bandwidth, float), (6,))
+    a = np.exp(-omega * dt)
+    return a, -np.expm1(-omega * dt) / omega
 
 
 class LegEdgeMPCController(MPCLaw):

@@ -35,6 +35,13 @@ robot is already beyond a bound, so that ``U = 0`` stays feasible):
   every edge segment stay inside the image with a margin [px] (a straight segment
   is inside the image when its ends are).
 
+With ``ProblemSpec.drives`` (option ``drive_model = "lag"``) the twists are the
+velocity drives' SETPOINTS: each leg's velocity follows ``J_inv,0 tau_k`` as a
+first-order lag at the drive's bandwidth, from the leg velocities measured now, and
+the twist displacement of period ``k`` is the lagged one, still linear in ``U``
+(:func:`_drive_blocks`, ``docs/math.md`` section 6); the local model sums these
+displacements, the global one moves the pose by their exponential.
+
 Each SQP iteration linearises the stage values ``v_k(x_k)`` with respect to a left
 pose perturbation ``xi = (v, w)`` (6 columns, by CasADi AD) and carries it to ``U``
 with the sensitivities ``D_k = d xi_k / d U``: ``D_{k+1} = Ad(E_k) D_k + [0 .. B_k ..]``
@@ -108,6 +115,8 @@ class ProblemSpec:
         horizon: ``N`` periods.
         tilt: Whether the tilt rows exist.
         visibility: Whether the image-bound rows exist (perspective camera).
+        drives: Whether the prediction models the velocity drives' lag (each leg's
+            velocity follows its setpoint as a first-order lag; see the module docstring).
     """
 
     kind: str
@@ -115,6 +124,7 @@ class ProblemSpec:
     horizon: int
     tilt: bool
     visibility: bool
+    drives: bool = False
 
     @property
     def stage_rows(self) -> int:
@@ -143,6 +153,8 @@ class ProblemSpec:
             fields += [("zb", 3), ("cosmax", 1)]
         if self.visibility:
             fields += [("K", 9), ("box", 4)]
+        if self.drives:
+            fields += [("J0i", 36), ("alag", 6), ("clag", 6), ("v0", 6)]
         return Layout(fields)
 
     def output_layout(self) -> Layout:
@@ -247,6 +259,46 @@ def _step_jacobian() -> ca.Function:
     return ca.Function("mpc_step", [tau, dt], [dR, dp, ca.horzcat(*cols), Ad])
 
 
+def _drive_blocks(P: dict[str, Any], N: int, dt: Any) -> tuple[list[Any], list[Any]]:
+    """The twist displacement of each period under lagging drives, linear in ``U``.
+
+    Leg ``i``'s velocity follows its setpoint ``u_k = J_0 tau_k`` as a first-order lag of
+    pole ``omega_i``: over a period ``v_{k+1} = a v_k + (1 - a) u_k`` and the leg moves
+    ``dq_k = (dt - c) u_k + c v_k`` with ``a = exp(-omega dt)``, ``c = (1 - a) / omega``
+    (per leg). With the inverse Jacobian frozen at ``J_0`` the platform's twist
+    displacement is ``ds_k = J_0^-1 dq_k = sum_{j <= k} P_{k-j} tau_j + p_k`` with
+    ``P_0 = J_0^-1 diag(dt - c) J_0``, ``P_l = J_0^-1 diag(c (1 - a) a^(l-1)) J_0`` and
+    ``p_k = J_0^-1 (c a^k v_0)``, ``v_0`` the leg velocities now.
+
+    Returns:
+        ``[P_0, ..., P_{N-1}]`` (6, 6) and ``[p_0, ..., p_{N-1}]`` (6, 1).
+    """
+    J0 = _mat(P["J0"], 6, 6)
+    J0i = _mat(P["J0i"], 6, 6)
+    a, c, v0 = P["alag"], P["clag"], P["v0"]
+
+    def legmap(d: Any) -> Any:
+        return J0i @ (ca.repmat(d, 1, 6) * J0)
+
+    blocks = [legmap(dt - c)]
+    offsets = []
+    power: Any = ca.MX.ones(6, 1)  # a^k
+    for k in range(N):
+        offsets.append(J0i @ (c * power * v0))
+        if k < N - 1:
+            blocks.append(legmap(c * (1 - a) * power))
+        power = power * a
+    return blocks, offsets
+
+
+def _displacement(blocks: list[Any], offsets: list[Any], U: list[Any], k: int) -> Any:
+    """``ds_k = sum_{j <= k} P_{k-j} tau_j + p_k`` (see :func:`_drive_blocks`)."""
+    ds = offsets[k]
+    for j in range(k + 1):
+        ds = ds + blocks[k - j] @ U[j]
+    return ds
+
+
 def _kernel_function(spec: ProblemSpec) -> ca.Function:
     """The QP data of one SQP iteration as one MX function calling the SX stage functions.
 
@@ -291,14 +343,21 @@ def _kernel_function(spec: ProblemSpec) -> ca.Function:
         hi_stage.append(ca.repmat(ca.vertcat(box[1], box[3]), 24, 1))
     lo_s = ca.fmin(ca.vertcat(*lo_stage), vals0)
     hi_s = ca.fmax(ca.vertcat(*hi_stage), vals0)
+    lag = _drive_blocks(P, N, dt) if spec.drives else None
     if spec.model == "global":
         e0 = P["e0"]
         wrow = ca.vertcat(*[ca.repmat(P["wf"][j], 3, 1) for j in range(feature_count(spec.kind))])
         R, t = R0, t0
         D: list[Any] = []
         for k in range(1, N + 1):
-            dR, dp, Bk, Ad = step_f(U[k - 1], dt)
-            D = [Ad @ Dj for Dj in D] + [Bk]
+            if lag is None:
+                dR, dp, Bk, Ad = step_f(U[k - 1], dt)
+                D = [Ad @ Dj for Dj in D] + [Bk]
+            else:  # the displacement of the lagging drives, one unit of time
+                blocks, offsets = lag
+                dR, dp, Bk, Ad = step_f(_displacement(blocks, offsets, U, k - 1), 1.0)
+                D = [Ad @ Dj + Bk @ blocks[k - 1 - j] for j, Dj in enumerate(D)] \
+                    + [Bk @ blocks[0]]
             R, t = dR @ R, dR @ t + dp
             res, Gr, vals, Gv, _ = pose_f(R, t, v)
             wk = P["w"][k - 1]
@@ -320,19 +379,33 @@ def _kernel_function(spec: ProblemSpec) -> ca.Function:
         Nm = _mat(P["N"], 6, 6)
         b = P["b"]
         s: Any = ca.MX.zeros(6, 1)
+        if lag is not None:  # d s_k / d tau_j = S_{k-1-j}, S_l = P_0 + ... + P_l
+            blocks, offsets = lag
+            S = [blocks[0]]
+            for blk in blocks[1:]:
+                S.append(S[-1] + blk)
         for k in range(1, N + 1):
-            s = s + dt * U[k - 1]
+            s = s + (dt * U[k - 1] if lag is None else _displacement(blocks, offsets, U, k - 1))
             wk = P["w"][k - 1]
             one_r = 1 - P["ref"][k - 1]
             Ns = Nm @ s
             cost += wk * (P["e0sq"] * one_r * one_r + 2 * one_r * ca.dot(b, s) + ca.dot(s, Ns))
             m = wk * (Ns + one_r * b)
-            for i in range(k):
-                gb[i] += dt * m
-                for j in range(i, k):
-                    Hb[i][j] += (dt * dt * wk) * Nm
+            if lag is None:
+                for i in range(k):
+                    gb[i] += dt * m
+                    for j in range(i, k):
+                        Hb[i][j] += (dt * dt * wk) * Nm
+                rows_c.append(ca.horzcat(*([dt * G0] * k), ca.MX.zeros(sr, 6 * (N - k))))
+            else:
+                NS = [wk * (Nm @ S[k - 1 - j]) for j in range(k)]
+                for i in range(k):
+                    gb[i] += S[k - 1 - i].T @ m
+                    for j in range(i, k):
+                        Hb[i][j] += S[k - 1 - i].T @ NS[j]
+                rows_c.append(ca.horzcat(*[G0 @ S[k - 1 - j] for j in range(k)],
+                                         ca.MX.zeros(sr, 6 * (N - k))))
             vals_c.append(vals0 + G0 @ s)
-            rows_c.append(ca.horzcat(*([dt * G0] * k), ca.MX.zeros(sr, 6 * (N - k))))
             lo_c.append(lo_s)
             hi_c.append(hi_s)
     # Speed rows: J_inv,0 tau_k, the first one with the first-period stroke window.
@@ -361,7 +434,7 @@ def _kernel_function(spec: ProblemSpec) -> ca.Function:
     out = ca.densify(ca.vertcat(cost, ca.vec(H.T), ca.vertcat(*gb), ca.vec(C.T), lba, uba,
                                    vals_all))
     name = f"hexapod_mpc_{spec.kind}_{spec.model}_{N}{'_t' if spec.tilt else ''}" \
-           f"{'_v' if spec.visibility else ''}"
+           f"{'_v' if spec.visibility else ''}{'_d' if spec.drives else ''}"
     return ca.Function(name, [v], [out])
 
 

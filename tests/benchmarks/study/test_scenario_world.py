@@ -17,7 +17,8 @@ MINIMAL = {"name": "t", "controllers": ["leg-edge"]}
 def test_the_kinematic_world_is_the_default_of_every_builtin_but_the_dynamic_ones() -> None:
     for name in builtin_scenarios():
         sc = load_scenario(name)
-        dynamic = "dynamic" in name or name in ("inertia-error", "paccot2008-tracking")
+        dynamic = "dynamic" in name or name in ("inertia-error", "paccot2008-tracking",
+                                                "mpc-drives")
         assert sc.world == ("dynamic" if dynamic else "kinematic"), name
         assert sc.physics_dt == 0.001
 
@@ -85,6 +86,42 @@ def test_the_true_robot_gets_the_inertial_error_and_the_controllers_the_file() -
                        ti.platform_inertia[0] / ni.platform_inertia[0]])
     spread = np.std(np.log(masses), axis=0)
     assert np.all((spread > 0.12) & (spread < 0.3)), spread
+
+
+def test_drives_section_sets_the_bandwidth_of_the_robot_and_the_model() -> None:
+    """``[drives] velocity_bandwidth_hz`` (a sweep axis) replaces the robot file's
+    bandwidth in the nominal geometry the controllers get AND in every trial's true
+    robot; 0 keeps the file's; the rest of the drives is the file's."""
+    sc = parse_scenario({**MINIMAL, "robot": {"world": "dynamic"},
+                         "drives": {"velocity_bandwidth_hz": [0.0, 7.5]}})
+    points = sc.expand()
+    assert [p.sweep for p in points] == [{"drives.velocity_bandwidth_hz": 0.0},
+                                         {"drives.velocity_bandwidth_hz": 7.5}]
+    file_drives = load_geometry(points[0]).drives
+    assert np.all(file_drives.velocity_bandwidth == 50.0)
+    nominal = load_geometry(points[1])
+    np.testing.assert_array_equal(nominal.drives.velocity_bandwidth, np.full(6, 7.5))
+    np.testing.assert_array_equal(nominal.drives.force_limit, file_drives.force_limit)
+    trial = make_trial(points[1], 0, nominal, load_camera(points[1], nominal))
+    np.testing.assert_array_equal(trial.world.geometry.drives.velocity_bandwidth,
+                                  np.full(6, 7.5))
+    np.testing.assert_array_equal(trial.nominal_geometry.drives.velocity_bandwidth,
+                                  np.full(6, 7.5))
+
+
+@pytest.mark.parametrize(
+    ("drives", "key", "fragment"),
+    [
+        ({"velocity_bandwidth_hz": -5.0}, "drives.velocity_bandwidth_hz", "out of the allowed"),
+        ({"velocity_bandwidth_hz": "fast"}, "drives.velocity_bandwidth_hz", "expected a number"),
+        ({"velocity_bandwidth": 5.0}, "drives.velocity_bandwidth", "velocity_bandwidth_hz"),
+    ],
+)
+def test_bad_drives_keys_name_the_file_and_key(drives: dict, key: str, fragment: str) -> None:
+    with pytest.raises(ScenarioError) as info:
+        parse_scenario({**MINIMAL, "drives": drives}, "drives.toml")
+    text = str(info.value)
+    assert "drives.toml" in text and key in text and fragment in text, text
 
 
 def test_a_dynamic_run_records_and_reports_its_drives(tmp_path) -> None:
