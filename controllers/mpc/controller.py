@@ -51,6 +51,9 @@ REFERENCES = ("exponential", "zero")
 #: Models of the velocity drives in the prediction: ideal (each setpoint happens at once)
 #: or a first-order lag at the drives' velocity bandwidth.
 DRIVE_MODELS = ("ideal", "lag")
+#: Where the lag model's leg velocities start: the encoders' measurement (the lag run on
+#: the past setpoints when there is none), or always that run.
+DRIVE_STATES = ("measured", "model")
 
 
 class MPCLaw(Controller):
@@ -92,6 +95,9 @@ class MPCLaw(Controller):
             ``[drives]``), starting from the measured leg velocities
             (``Observation.q_dot``; without them, from the lag model run on the past
             setpoints). For velocity-mode drives on the dynamic world or a real robot.
+        drive_state: ``"measured"`` (the default, as above) or ``"model"``: the lag
+            model always starts from its own run on the past setpoints, ignoring
+            ``q_dot`` (an ablation: ``docs/results.md``, "Slow velocity drives").
         law_options: Further options of the fallback QP law (e.g. ``edge_feature``).
     """
 
@@ -110,7 +116,7 @@ class MPCLaw(Controller):
                  time_limit: float | None = None,
                  regularization: float = 1e-10, threshold: float = 1e-6,
                  compiled: bool = True, drive_model: str = "ideal",
-                 **law_options: Any) -> None:
+                 drive_state: str = "measured", **law_options: Any) -> None:
         name = self.name
         if isinstance(horizon, bool) or not isinstance(horizon, int) or horizon < 1:
             raise OptionError(name, "horizon", f"expected an integer >= 1, got {horizon!r}")
@@ -122,6 +128,7 @@ class MPCLaw(Controller):
         self.model = check_choice(name, "model", model, MODELS)
         self.reference = check_choice(name, "reference", reference, REFERENCES)
         self.drive_model = check_choice(name, "drive_model", drive_model, DRIVE_MODELS)
+        self.drive_state = check_choice(name, "drive_state", drive_state, DRIVE_STATES)
         self.error_weight = check_number(name, "error_weight", error_weight, 0.0, strict=False)
         self.terminal_weight = check_number(name, "terminal_weight", terminal_weight, 0.0,
                                             strict=False)
@@ -253,7 +260,7 @@ class MPCLaw(Controller):
     def _step(self, observation: Observation) -> Command:
         law = self.law
         if self._spec is not None and self._spec.drives:
-            v = observation.q_dot
+            v = observation.q_dot if self.drive_state == "measured" else None
             self._v0 = (np.asarray(v, dtype=float) if v is not None
                         and np.all(np.isfinite(v)) else self.drive_velocities)
         q = law.checked_lengths(observation)

@@ -159,8 +159,18 @@ def test_the_drive_state_without_measured_velocities(geometry) -> None:  # type:
                                rtol=0, atol=1e-15)
     assert np.abs(u0).max() > 1e-4 and np.abs(u1 - u0).max() > 0
     measured = np.full(6, 0.003)
+    before = ctrl.drive_velocities.copy()
     ctrl.step(replace(obs, q_dot=measured))
     np.testing.assert_array_equal(ctrl._vec[v0_slice], measured)
+    # drive_state = "model": the measurement is ignored, the lag's own run is used.
+    ablated = registry.create("leg-edge-mpc", horizon=5, drive_model="lag",
+                              drive_state="model", compiled=False)
+    ablated.reset(world.context(world.goal(Rs[1], ts[1]), DT))
+    ablated.step(obs)
+    ablated.step(obs)
+    np.testing.assert_array_equal(ablated.drive_velocities, before)
+    ablated.step(replace(obs, q_dot=measured))
+    np.testing.assert_array_equal(ablated._vec[v0_slice], before)
 
 
 def test_lag_model_refused_on_force_drives(geometry) -> None:  # type: ignore[no-untyped-def]
@@ -174,6 +184,8 @@ def test_lag_model_refused_on_force_drives(geometry) -> None:  # type: ignore[no
         ctrl.reset(world.context(world.goal(Rs[1], ts[1]), DT))
     with pytest.raises(OptionError, match="drive_model"):
         registry.create("leg-edge-mpc", drive_model="second-order")
+    with pytest.raises(OptionError, match="drive_state"):
+        registry.create("leg-edge-mpc", drive_model="lag", drive_state="estimated")
 
 
 def test_drive_lag_constants(geometry) -> None:  # type: ignore[no-untyped-def]
