@@ -116,6 +116,22 @@ class ComputedTorqueController(Controller):
         self.compiled_steps = 0
         self.numpy_steps = 0
 
+    def __getstate__(self) -> dict[str, object]:
+        """Picklable: the compiled step's binding (ctypes) is left out, its input row
+        kept and bound again on unpickling."""
+        state = self.__dict__.copy()
+        bound = state.pop("_bound")
+        state["_bound_row"] = None if bound is None else bound.x.copy()
+        return state
+
+    def __setstate__(self, state: dict[str, object]) -> None:
+        row = state.pop("_bound_row")
+        self.__dict__.update(state)
+        self._bound = None
+        if isinstance(row, np.ndarray):
+            self._bound = compiled_ctc.joint_step(INVERSE_TOLERANCE).bind()
+            self._bound.x[:] = row
+
     def reset(self, context: ControllerContext) -> None:
         """Build the nominal model; read the reference or ``goal.lengths``.
 

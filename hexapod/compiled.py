@@ -202,9 +202,9 @@ class BoundCall:
     overwritten by the next call: copy what must outlive it.
 
     ``call()`` returns 0 on success and a nonzero flag when the C function fails (check
-    it; :meth:`check` raises instead). Its own work arrays make bindings independent of
-    each other and of :meth:`CompiledFunction.single`. A deep copy is a new binding with
-    copies of the buffers.
+    it). Its own work arrays make bindings independent of each other and of
+    :meth:`CompiledFunction.single`. A deep copy is a new binding with copies of the
+    buffers.
 
     Args:
         function: The compiled function (or its CasADi virtual-machine fallback).
@@ -231,16 +231,6 @@ class BoundCall:
         self.call = partial(function._single, ctypes.addressof(self._args),
                             ctypes.addressof(self._res), self._iw.ctypes.data,
                             self._w.ctypes.data, 0)
-
-    def check(self) -> np.ndarray:
-        """Evaluate and return :attr:`y` (not a copy).
-
-        Raises:
-            CompilationError: The compiled function failed.
-        """
-        if self.call():
-            raise CompilationError(f"{self.function.name}: the compiled function failed")
-        return self.y
 
     def __deepcopy__(self, memo: dict[int, object]) -> BoundCall:
         """A new binding of the same function with copies of the buffers (a plain deep
