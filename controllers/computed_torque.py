@@ -69,8 +69,6 @@ GRID_TIME_TOLERANCE = 1e-9
 #: Calls of the compiled step (``compiled_ctc.FK_CALLS`` x 3 Newton iterations each)
 #: before the numpy path takes over (as its budget of 50 iterations).
 FK_MAX_CALLS = 16
-#: No pose guess in the compiled step's input row (``_guess_of`` matches no pose).
-_NO_GUESS = object()
 
 
 class ComputedTorqueController(Controller):
@@ -98,15 +96,18 @@ class ComputedTorqueController(Controller):
         self.smooth_goal = bool(smooth_goal)
         self._ctx: ControllerContext | None = None
         self._model: DynamicModel | None = None
-        self._pose: tuple[np.ndarray, np.ndarray] | None = None
+        #: The last pose found, as set (:attr:`_pose`) or as the compiled step's
+        #: ``(R column-major, t)`` row (12,) (None: the set one is the pose).
+        self._pose_set: tuple[np.ndarray, np.ndarray] | None = None
+        self._pose_row: np.ndarray | None = None
         self._q_star = np.zeros(6)
         #: ``(t0 [s], q0 [m], duration [s], q* - q0 [m])`` of the quintic to a fixed goal.
         self._start: tuple[float, np.ndarray, float, np.ndarray] | None = None
         #: The compiled step's own input and output rows (bound at the first reset): the
-        #: input's constant part is filled at reset, its pose guess (``x[0:12]``) is the
-        #: pose of :attr:`_guess_of` when that is :attr:`_pose` (else rewritten).
+        #: input's constant part is filled at reset; its pose guess (``x[0:12]``) is
+        #: :attr:`_pose` when ``_guess_in_row`` (else written from it).
         self._bound: BoundCall | None = None
-        self._guess_of: object = _NO_GUESS
+        self._guess_in_row = False
         #: ``(q*, q_dot*, q_ddot*)`` of a reference on the control grid ``k dt`` (N, 18).
         self._grid = np.zeros((0, 18))
         #: The control period [s] and the time after which the reference is at rest [s].
@@ -115,6 +116,18 @@ class ComputedTorqueController(Controller):
         #: Steps taken by the compiled path and by the numpy path (diagnostics).
         self.compiled_steps = 0
         self.numpy_steps = 0
+
+    @property
+    def _pose(self) -> tuple[np.ndarray, np.ndarray] | None:
+        """The last pose found ``(R, t)`` (the forward kinematics' next guess), or None."""
+        row = self._pose_row
+        if row is None:
+            return self._pose_set
+        return row[0:9].reshape(3, 3).T, row[9:12]
+
+    @_pose.setter
+    def _pose(self, pose: tuple[np.ndarray, np.ndarray] | None) -> None:
+        self._pose_set, self._pose_row, self._guess_in_row = pose, None, False
 
     def __getstate__(self) -> dict[str, object]:
         """Picklable: the compiled step's binding (ctypes) is left out, its input row
@@ -143,7 +156,6 @@ class ComputedTorqueController(Controller):
         self._pose = None
         if self._bound is None:
             self._bound = compiled_ctc.joint_step(INVERSE_TOLERANCE).bind()
-        self._guess_of = _NO_GUESS
         row = self._bound.x
         g, d = context.geometry, context.geometry.drives
         row[42:60] = g.base_points.ravel()
@@ -285,16 +297,17 @@ class ComputedTorqueController(Controller):
         assert self._ctx is not None and self._bound is not None
         bound = self._bound
         x, y, call = bound.x, bound.y, bound.call
-        if self._pose is not self._guess_of:  # else x[0:12] holds the pose already
-            R0, p0 = home_pose(self._ctx.geometry) if self._pose is None else self._pose
+        if not self._guess_in_row:
+            pose = self._pose
+            R0, p0 = home_pose(self._ctx.geometry) if pose is None else pose
             x[0:9] = R0.T.ravel()
             x[9:12] = p0
-            self._guess_of = self._pose
+            self._guess_in_row = True
         if call():
             raise CompilationError(f"{bound.function.name}: the compiled function failed")
         calls = 1
         while not y[54] < FK_TOLERANCE:  # Newton from the pose reached, as forward_kinematics
-            self._guess_of = _NO_GUESS
+            self._guess_in_row = False
             if calls >= FK_MAX_CALLS or not math.isfinite(y[54]):
                 return None
             x[0:12] = y[0:12]
@@ -308,14 +321,14 @@ class ComputedTorqueController(Controller):
         w_min, w_max = float(w[0]), float(w[-1])
         if info != 0 or not (w_max > 0 and w_min > self.solver.threshold**2 * w_max):
             return None
-        f = y[48:54].copy()
-        pose = y[0:12].copy()
-        x[0:12] = pose  # the next step's guess
-        self._pose = self._guess_of = (pose[0:9].reshape(3, 3).T, pose[9:12])
+        out = y.copy()
+        x[0:12] = out[0:12]  # the next step's guess
+        self._pose_row, self._guess_in_row = out[0:12], True
         e = x[24:30] - q
         return Command(np.zeros(6), error=e, error_norm=math.sqrt(e.dot(e)), rank=6,
                        condition=math.sqrt(w_max) / math.sqrt(w_min), features_used=6,
-                       active_constraints=[], notes=[], actuation=Actuation.FORCE, forces=f)
+                       active_constraints=[], notes=[], actuation=Actuation.FORCE,
+                       forces=out[48:54])
 
     def _numpy_step(self, q: np.ndarray, qd: np.ndarray, q_s: np.ndarray,
                     qd_s: np.ndarray, qdd_s: np.ndarray) -> Command:
