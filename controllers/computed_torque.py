@@ -101,8 +101,9 @@ class ComputedTorqueController(Controller):
         self._pose_set: tuple[np.ndarray, np.ndarray] | None = None
         self._pose_row: np.ndarray | None = None
         self._q_star = np.zeros(6)
-        #: ``(t0 [s], q0 [m], duration [s], q* - q0 [m])`` of the quintic to a fixed goal.
-        self._start: tuple[float, np.ndarray, float, np.ndarray] | None = None
+        #: ``(t0 [s], duration [s], q0 [m], q* - q0 [m])`` of the quintic to a fixed goal
+        #: (the legs as lists of floats).
+        self._start: tuple[float, float, list[float], list[float]] | None = None
         #: The compiled step's own input and output rows (bound at the first reset): the
         #: input's constant part is filled at reset; its pose guess (``x[0:12]``) is
         #: :attr:`_pose` when ``_guess_in_row`` (else written from it).
@@ -223,7 +224,7 @@ class ComputedTorqueController(Controller):
         """The leg-space quintic from the first measured lengths to ``goal.lengths``
         (``q*``, ``q_dot*``, ``q_ddot*`` into ``out`` (18,))."""
         assert self._start is not None
-        t0, q0, T, d = self._start
+        t0, T, a, b = self._start
         if T <= 0.0:
             out[0:6] = self._q_star
             out[6:18] = 0.0
@@ -235,11 +236,12 @@ class ComputedTorqueController(Controller):
             sdd = 60 * x * (1 - x) * (1 - 2 * x) / T**2
         else:
             sd = sdd = 0.0
-        q_s = out[0:6]
-        np.multiply(d, s, out=q_s)
-        q_s += q0  # q0 + s d
-        np.multiply(d, sd, out=out[6:12])
-        np.multiply(d, sdd, out=out[12:18])
+        # q0 + s d, s_dot d, s_ddot d: a multiplication and an addition per value, as
+        # numpy's elementwise ones (same numbers; in Python floats, no array calls)
+        out[:] = [a[0] + s * b[0], a[1] + s * b[1], a[2] + s * b[2],
+                  a[3] + s * b[3], a[4] + s * b[4], a[5] + s * b[5],
+                  sd * b[0], sd * b[1], sd * b[2], sd * b[3], sd * b[4], sd * b[5],
+                  sdd * b[0], sdd * b[1], sdd * b[2], sdd * b[3], sdd * b[4], sdd * b[5]]
 
     def step(self, observation: Observation) -> Command:
         """The leg forces of this period [N] (refused, zero, with a reason when the
@@ -261,8 +263,7 @@ class ComputedTorqueController(Controller):
         if self._start is None:  # the fixed goal's quintic starts here
             T = QUINTIC_PEAK_SPEED * float(np.abs(self._q_star - q).max()) / \
                 self._ctx.max_speed if self.smooth_goal else 0.0
-            q0 = q.copy()
-            self._start = (t, q0, T, self._q_star - q0)
+            self._start = (t, T, q.tolist(), (self._q_star - q).tolist())
         desired = x[24:42]
         try:
             self._desired_into(t, desired)
