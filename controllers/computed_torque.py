@@ -318,7 +318,7 @@ class ComputedTorqueController(Controller):
         if y[55] != 1.0 or not math.isfinite(y.dot(y)):  # (y.dot(y) is the same ddot as y @ y)
             return None
         # the squared singular values of K: the eigenvalues of K^T K (LAPACK syevd)
-        w, _, info = _eigenvalues(y[12:48].reshape(6, 6), compute_v=0)
+        w, _, info = _eigenvalues(y[12:48].reshape(6, 6), 0)  # compute_v=0 (by position)
         w_min, w_max = float(w[0]), float(w[-1])
         if info != 0 or not (w_max > 0 and w_min > self.solver.threshold**2 * w_max):
             return None
