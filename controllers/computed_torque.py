@@ -49,6 +49,7 @@ from controllers.solvers.computed_torque import (
 )
 from controllers.task_ctc import encoder_readings
 from hexapod.actuation import Actuation
+from hexapod.compiled import BoundCall, CompilationError
 from hexapod.dynamics import DynamicModel
 from hexapod.dynamics.model import INVERSE_TOLERANCE
 from hexapod.fk import forward_kinematics
@@ -95,17 +96,55 @@ class ComputedTorqueController(Controller):
         self.smooth_goal = bool(smooth_goal)
         self._ctx: ControllerContext | None = None
         self._model: DynamicModel | None = None
-        self._pose: tuple[np.ndarray, np.ndarray] | None = None
+        #: The last pose found, as set (:attr:`_pose`) or as the compiled step's
+        #: ``(R column-major, t)`` row (12,) (None: the set one is the pose).
+        self._pose_set: tuple[np.ndarray, np.ndarray] | None = None
+        self._pose_row: np.ndarray | None = None
         self._q_star = np.zeros(6)
-        #: ``(t0 [s], q0 [m], duration [s])`` of the quintic to a fixed goal.
-        self._start: tuple[float, np.ndarray, float] | None = None
-        #: Input row of the compiled step, its constant part filled at reset.
-        self._row = np.zeros(compiled_ctc.ROW)
-        #: ``(q*, q_dot*, q_ddot*)`` of a reference on the control grid ``k dt`` (N, 3, 6).
-        self._grid = np.zeros((0, 3, 6))
+        #: ``(t0 [s], duration [s], q0 [m], q* - q0 [m])`` of the quintic to a fixed goal
+        #: (the legs as lists of floats).
+        self._start: tuple[float, float, list[float], list[float]] | None = None
+        #: The compiled step's own input and output rows (bound at the first reset): the
+        #: input's constant part is filled at reset; its pose guess (``x[0:12]``) is
+        #: :attr:`_pose` when ``_guess_in_row`` (else written from it).
+        self._bound: BoundCall | None = None
+        self._guess_in_row = False
+        #: ``(q*, q_dot*, q_ddot*)`` of a reference on the control grid ``k dt`` (N, 18).
+        self._grid = np.zeros((0, 18))
+        #: The control period [s] and the time after which the reference is at rest [s].
+        self._dt = 0.0
+        self._t_end = math.inf
         #: Steps taken by the compiled path and by the numpy path (diagnostics).
         self.compiled_steps = 0
         self.numpy_steps = 0
+
+    @property
+    def _pose(self) -> tuple[np.ndarray, np.ndarray] | None:
+        """The last pose found ``(R, t)`` (the forward kinematics' next guess), or None."""
+        row = self._pose_row
+        if row is None:
+            return self._pose_set
+        return row[0:9].reshape(3, 3).T, row[9:12]
+
+    @_pose.setter
+    def _pose(self, pose: tuple[np.ndarray, np.ndarray] | None) -> None:
+        self._pose_set, self._pose_row, self._guess_in_row = pose, None, False
+
+    def __getstate__(self) -> dict[str, object]:
+        """Picklable: the compiled step's binding (ctypes) is left out, its input row
+        kept and bound again on unpickling."""
+        state = self.__dict__.copy()
+        bound = state.pop("_bound")
+        state["_bound_row"] = None if bound is None else bound.x.copy()
+        return state
+
+    def __setstate__(self, state: dict[str, object]) -> None:
+        row = state.pop("_bound_row")
+        self.__dict__.update(state)
+        self._bound = None
+        if isinstance(row, np.ndarray):
+            self._bound = compiled_ctc.joint_step(INVERSE_TOLERANCE).bind()
+            self._bound.x[:] = row
 
     def reset(self, context: ControllerContext) -> None:
         """Build the nominal model; read the reference or ``goal.lengths``.
@@ -116,20 +155,26 @@ class ComputedTorqueController(Controller):
         self._ctx = context
         self._model = DynamicModel(context.geometry)
         self._pose = None
+        if self._bound is None:
+            self._bound = compiled_ctc.joint_step(INVERSE_TOLERANCE).bind()
+        row = self._bound.x
         g, d = context.geometry, context.geometry.drives
-        self._row[42:60] = g.base_points.ravel()
-        self._row[60:78] = g.platform_points.ravel()
-        self._row[78:97] = self._model.parameters
-        self._row[97:115] = np.concatenate([np.broadcast_to(np.asarray(c, dtype=float), (6,))
-                                            for c in (d.rotor_inertia, d.viscous, d.coulomb)])
-        self._row[115:117] = (self.kp, self.kd)
-        self._grid = np.zeros((0, 3, 6))
+        row[42:60] = g.base_points.ravel()
+        row[60:78] = g.platform_points.ravel()
+        row[78:97] = self._model.parameters
+        row[97:115] = np.concatenate([np.broadcast_to(np.asarray(c, dtype=float), (6,))
+                                      for c in (d.rotor_inertia, d.viscous, d.coulomb)])
+        row[115:117] = (self.kp, self.kd)
+        self._grid = np.zeros((0, 18))
+        self._dt = float(context.dt)
         if context.reference is None:
+            self._t_end = math.inf
             self.retarget(context.goal)
         else:  # the reference's legs on the control grid, in one batched evaluation
-            dt = float(context.dt)
+            dt = self._dt
+            self._t_end = float(context.reference.duration) + context.dt
             steps = math.ceil(float(context.reference.duration) / dt) + 3
-            self._grid = self._reference_legs(dt * np.arange(steps))
+            self._grid = self._reference_legs(dt * np.arange(steps)).reshape(steps, 18)
 
     def retarget(self, goal: Goal) -> None:
         """A new fixed goal (ignored when tracking a reference: it is sampled itself)."""
@@ -140,19 +185,26 @@ class ComputedTorqueController(Controller):
 
     def desired(self, t: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """``(q*, q_dot*, q_ddot*)`` at time ``t`` [s] ([m], [m/s], [m/s^2])."""
-        ctx, model = self._ctx, self._model
-        assert ctx is not None and model is not None
+        out = np.empty(18)
+        self._desired_into(t, out)
+        return out[0:6], out[6:12], out[12:18]
+
+    def _desired_into(self, t: float, out: np.ndarray) -> None:
+        """:meth:`desired` written into ``out`` (18,): ``q*``, ``q_dot*``, ``q_ddot*``."""
+        ctx = self._ctx
+        assert ctx is not None
         if ctx.reference is None:
-            return self._quintic(t)
-        k = round(t / float(ctx.dt))
-        if len(self._grid) and t > float(ctx.reference.duration) + ctx.dt:
-            g = self._grid[-1]  # at rest at the end, as the grid's last instant
-            return g[0], g[1], g[2]
-        if 0 <= k < len(self._grid) and abs(t - k * float(ctx.dt)) <= GRID_TIME_TOLERANCE:
-            g = self._grid[k]
-            return g[0], g[1], g[2]
-        g = self._reference_legs(np.array([t]))[0]
-        return g[0], g[1], g[2]
+            self._quintic_into(t, out)
+            return
+        grid, dt = self._grid, self._dt
+        k = round(t / dt)
+        if len(grid) and t > self._t_end:  # at rest at the end, as the grid's last instant
+            out[:] = grid[-1]
+            return
+        if 0 <= k < len(grid) and abs(t - k * dt) <= GRID_TIME_TOLERANCE:
+            out[:] = grid[k]
+            return
+        out[:] = self._reference_legs(np.array([t]))[0].ravel()
 
     def _reference_legs(self, times: np.ndarray) -> np.ndarray:
         """``(q*, q_dot*, q_ddot*)`` of the reference at ``times`` (N,) [s]: (N, 3, 6)."""
@@ -168,43 +220,62 @@ class ComputedTorqueController(Controller):
         out[:, 2] = np.einsum("nij,nj->ni", K, acc) + bias
         return out
 
-    def _quintic(self, t: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """The leg-space quintic from the first measured lengths to ``goal.lengths``."""
+    def _quintic_into(self, t: float, out: np.ndarray) -> None:
+        """The leg-space quintic from the first measured lengths to ``goal.lengths``
+        (``q*``, ``q_dot*``, ``q_ddot*`` into ``out`` (18,))."""
         assert self._start is not None
-        t0, q0, T = self._start
-        d = self._q_star - q0
+        t0, T, a, b = self._start
         if T <= 0.0:
-            return self._q_star, np.zeros(6), np.zeros(6)
+            out[0:6] = self._q_star
+            out[6:18] = 0.0
+            return
         x = min(max((t - t0) / T, 0.0), 1.0)
         s = x**3 * (10 - 15 * x + 6 * x**2)
-        sd = 30 * x**2 * (1 - x) ** 2 / T if 0.0 < x < 1.0 else 0.0
-        sdd = 60 * x * (1 - x) * (1 - 2 * x) / T**2 if 0.0 < x < 1.0 else 0.0
-        return q0 + s * d, sd * d, sdd * d
+        if 0.0 < x < 1.0:
+            sd = 30 * x**2 * (1 - x) ** 2 / T
+            sdd = 60 * x * (1 - x) * (1 - 2 * x) / T**2
+        else:
+            sd = sdd = 0.0
+        # q0 + s d, s_dot d, s_ddot d: a multiplication and an addition per value, as
+        # numpy's elementwise ones (same numbers; in Python floats, no array calls)
+        out[:] = [a[0] + s * b[0], a[1] + s * b[1], a[2] + s * b[2],
+                  a[3] + s * b[3], a[4] + s * b[4], a[5] + s * b[5],
+                  sd * b[0], sd * b[1], sd * b[2], sd * b[3], sd * b[4], sd * b[5],
+                  sdd * b[0], sdd * b[1], sdd * b[2], sdd * b[3], sdd * b[4], sdd * b[5]]
 
     def step(self, observation: Observation) -> Command:
         """The leg forces of this period [N] (refused, zero, with a reason when the
         lengths, their rates or the time are missing or not finite, or the nominal model
         fails)."""
-        if self._ctx is None or self._model is None:
+        if self._ctx is None or self._model is None or self._bound is None:
             return self._refuse("reset(context) was not called")
-        readings = encoder_readings(observation)
-        if isinstance(readings, str):
-            return self._refuse(readings)
-        t, q, qd = readings
+        x = self._bound.x
+        fast_readings = _finite_readings(observation, x)
+        if fast_readings is None:  # encoder_readings decides (its reasons), off the common case
+            readings = encoder_readings(observation)
+            if isinstance(readings, str):
+                return self._refuse(readings)
+            t, q, qd = readings
+            x[12:18] = q
+            x[18:24] = qd
+        else:
+            t, q, qd = fast_readings
         if self._start is None:  # the fixed goal's quintic starts here
             T = QUINTIC_PEAK_SPEED * float(np.abs(self._q_star - q).max()) / \
                 self._ctx.max_speed if self.smooth_goal else 0.0
-            self._start = (t, q.copy(), T)
+            self._start = (t, T, q.tolist(), (self._q_star - q).tolist())
+        desired = x[24:42]
         try:
-            q_s, qd_s, qdd_s = self.desired(t)
+            self._desired_into(t, desired)
         except Exception as exc:  # the nominal model failed here: refuse with its reason
             return self._refuse(f"nominal model failed: {exc}")
-        fast = self._compiled_step(q, qd, q_s, qd_s, qdd_s)
+        fast = self._compiled_core(q)
         if fast is not None:
             self.compiled_steps += 1
             return fast
         self.numpy_steps += 1
-        return self._numpy_step(q, qd, q_s, qd_s, qdd_s)
+        d = desired.copy()
+        return self._numpy_step(q, qd, d[0:6], d[6:12], d[12:18])
 
     def _compiled_step(self, q: np.ndarray, qd: np.ndarray, q_s: np.ndarray,
                        qd_s: np.ndarray, qdd_s: np.ndarray) -> Command | None:
@@ -212,40 +283,53 @@ class ComputedTorqueController(Controller):
         :meth:`_numpy_step`), or None off its happy path (FK not converged from the
         previous pose, ``K`` rank-deficient, a singular inverse solve, a non-finite
         value): the numpy path then decides, with its reasons."""
-        assert self._ctx is not None
-        row = self._row
-        if self._pose is None:
-            R0, p0 = home_pose(self._ctx.geometry)
-        else:
-            R0, p0 = self._pose
-        row[0:9] = R0.T.ravel()
-        row[9:12] = p0
-        row[12:18] = q
-        row[18:24] = qd
-        row[24:30] = q_s
-        row[30:36] = qd_s
-        row[36:42] = qdd_s
-        step = compiled_ctc.joint_step(INVERSE_TOLERANCE)
-        y = step.single(row)
+        assert self._bound is not None
+        x = self._bound.x
+        x[12:18] = q
+        x[18:24] = qd
+        x[24:30] = q_s
+        x[30:36] = qd_s
+        x[36:42] = qdd_s
+        return self._compiled_core(q)
+
+    def _compiled_core(self, q: np.ndarray) -> Command | None:
+        """:meth:`_compiled_step` with ``q``, ``q_dot`` and ``(q*, q_dot*, q_ddot*)``
+        already in the input row (``x[12:42]``)."""
+        assert self._ctx is not None and self._bound is not None
+        bound = self._bound
+        x, y, call = bound.x, bound.y, bound.call
+        if not self._guess_in_row:
+            pose = self._pose
+            R0, p0 = home_pose(self._ctx.geometry) if pose is None else pose
+            x[0:9] = R0.T.ravel()
+            x[9:12] = p0
+            self._guess_in_row = True
+        if call():
+            raise CompilationError(f"{bound.function.name}: the compiled function failed")
         calls = 1
         while not y[54] < FK_TOLERANCE:  # Newton from the pose reached, as forward_kinematics
-            if calls >= FK_MAX_CALLS or not math.isfinite(float(y[54])):
+            self._guess_in_row = False
+            if calls >= FK_MAX_CALLS or not math.isfinite(y[54]):
                 return None
-            row[0:12] = y[0:12]
-            y = step.single(row)
+            x[0:12] = y[0:12]
+            if call():
+                raise CompilationError(f"{bound.function.name}: the compiled function failed")
             calls += 1
-        if y[55] != 1.0 or not math.isfinite(float(y @ y)):
+        if y[55] != 1.0 or not math.isfinite(y.dot(y)):  # (y.dot(y) is the same ddot as y @ y)
             return None
         # the squared singular values of K: the eigenvalues of K^T K (LAPACK syevd)
-        w, _, info = _eigenvalues(y[12:48].reshape(6, 6), compute_v=0)
-        if info != 0 or not (w[-1] > 0 and w[0] > self.solver.threshold**2 * w[-1]):
+        w, _, info = _eigenvalues(y[12:48].reshape(6, 6), 0)  # compute_v=0 (by position)
+        w_min, w_max = float(w[0]), float(w[-1])
+        if info != 0 or not (w_max > 0 and w_min > self.solver.threshold**2 * w_max):
             return None
-        s_max, s_min = math.sqrt(float(w[-1])), math.sqrt(float(w[0]))
-        f = y[48:54]
-        self._pose = (y[0:9].reshape(3, 3).T, y[9:12])
-        e = q_s - q
-        return Command.of_forces(f, error=e, error_norm=math.sqrt(float(e @ e)), rank=6,
-                                 condition=s_max / s_min, features_used=6)
+        out = y.copy()
+        x[0:12] = out[0:12]  # the next step's guess
+        self._pose_row, self._guess_in_row = out[0:12], True
+        e = x[24:30] - q
+        return Command(np.zeros(6), error=e, error_norm=math.sqrt(e.dot(e)), rank=6,
+                       condition=math.sqrt(w_max) / math.sqrt(w_min), features_used=6,
+                       active_constraints=[], notes=[], actuation=Actuation.FORCE,
+                       forces=out[48:54])
 
     def _numpy_step(self, q: np.ndarray, qd: np.ndarray, q_s: np.ndarray,
                     qd_s: np.ndarray, qdd_s: np.ndarray) -> Command:
@@ -277,3 +361,25 @@ class ComputedTorqueController(Controller):
 
     def _refuse(self, problem: str) -> Command:
         return Command.refuse(f"{self.name}: {problem}", actuation=Actuation.FORCE)
+
+
+def _finite_readings(observation: Observation, x: np.ndarray
+                     ) -> tuple[float, np.ndarray, np.ndarray] | None:
+    """The common case of :func:`~controllers.task_ctc.encoder_readings`: a finite time
+    and finite (6,) lengths [m] and leg velocities [m/s], written into the input row
+    (``x[12:24]``); None otherwise (missing, another shape, a non-finite value, or a
+    sum of squares that overflows), where ``encoder_readings`` decides."""
+    qd = observation.q_dot
+    if qd is None:
+        return None
+    q = np.asarray(observation.lengths, dtype=float)
+    qd = np.asarray(qd, dtype=float)
+    if q.shape != (6,) or qd.shape != (6,):
+        return None
+    t = float(observation.t)
+    x[12:18] = q
+    x[18:24] = qd
+    v = x[12:24]
+    if math.isfinite(t) and math.isfinite(v.dot(v)):  # a NaN or inf makes the sum so
+        return t, q, qd
+    return None

@@ -8,7 +8,9 @@ cached in ``$HEXAPOD_CACHE_DIR`` (default ``~/.cache/hexapod-vs``) under the has
 of its code. Without a C compiler the CasADi virtual machine evaluates the same
 function (same results, slower) and a warning is logged once.
 
-A function must have one dense vector input and one dense vector output.
+A function must have one dense vector input and one dense vector output. A caller that
+evaluates one row at a time in a hot loop can :meth:`CompiledFunction.bind` its own input
+and output buffers and call the C function on them in place (no copies).
 """
 
 from __future__ import annotations
@@ -21,6 +23,8 @@ import platform
 import shutil
 import subprocess
 import tempfile
+from collections.abc import Callable
+from functools import partial
 from pathlib import Path
 
 import casadi as ca
@@ -163,6 +167,10 @@ class CompiledFunction:
         """Shared, not copied: the compiled code is immutable (callers copy inputs)."""
         return self
 
+    def bind(self) -> BoundCall:
+        """Own input and output buffers evaluated in place (see :class:`BoundCall`)."""
+        return BoundCall(self)
+
     def single(self, x: np.ndarray) -> np.ndarray:
         """Evaluate on one input (n_in,) -> a fresh (n_out,) array."""
         if self._lib is None:
@@ -184,3 +192,51 @@ class CompiledFunction:
         for k in range(n):
             y[k] = np.asarray(self.function(x[k]), dtype=float).ravel()
         return y
+
+
+class BoundCall:
+    """One input row :attr:`x` (n_in,) and one output row :attr:`y` (n_out,) of a
+    :class:`CompiledFunction`, owned by the caller, and :attr:`call` evaluating the
+    function from ``x`` into ``y`` in place: no argument conversion and no copies
+    (:meth:`CompiledFunction.single` copies its input in and its output out). ``y`` is
+    overwritten by the next call: copy what must outlive it.
+
+    ``call()`` returns 0 on success and a nonzero flag when the C function fails (check
+    it). Its own work arrays make bindings independent of each other and of
+    :meth:`CompiledFunction.single`. A deep copy is a new binding with copies of the
+    buffers.
+
+    Args:
+        function: The compiled function (or its CasADi virtual-machine fallback).
+    """
+
+    def __init__(self, function: CompiledFunction) -> None:
+        self.function = function
+        self.x = np.zeros(function.n_in)
+        self.y = np.zeros(function.n_out)
+        self.call: Callable[[], int]
+        if function._lib is None:  # the CasADi virtual machine: same results, slower
+            def evaluate() -> int:
+                self.y[:] = np.asarray(function.function(self.x), dtype=float).ravel()
+                return 0
+            self.call = evaluate
+            return
+        n_arg, n_res, n_iw, n_w = (ctypes.c_longlong() for _ in range(4))
+        getattr(function._lib, f"{function.name}_work")(
+            ctypes.byref(n_arg), ctypes.byref(n_res), ctypes.byref(n_iw), ctypes.byref(n_w))
+        self._args = (ctypes.c_void_p * max(n_arg.value, 1))(self.x.ctypes.data)
+        self._res = (ctypes.c_void_p * max(n_res.value, 1))(self.y.ctypes.data)
+        self._iw = np.zeros(max(n_iw.value, 1), dtype=np.int64)
+        self._w = np.zeros(max(n_w.value, 1))
+        self.call = partial(function._single, ctypes.addressof(self._args),
+                            ctypes.addressof(self._res), self._iw.ctypes.data,
+                            self._w.ctypes.data, 0)
+
+    def __deepcopy__(self, memo: dict[int, object]) -> BoundCall:
+        """A new binding of the same function with copies of the buffers (a plain deep
+        copy would keep pointers to this binding's buffers)."""
+        copy = BoundCall(self.function)
+        copy.x[:] = self.x
+        copy.y[:] = self.y
+        memo[id(self)] = copy
+        return copy
