@@ -38,6 +38,7 @@ class Setup:
         needs_camera: Controllers that need the camera (empty: none does); None for a
             robot or camera file alone (a vision study needs it).
         controllers: Labels of all the controllers of a scenario.
+        drives_note: How a scenario's ``[drives]`` changes the robot file's drives.
         notes: Lines saying what was assumed (the preset used for the missing part).
         problems: Problems found while loading (a fixed task's unreachable goal).
     """
@@ -51,6 +52,7 @@ class Setup:
     notes: list[str]
     problems: list[Problem]
     controllers: tuple[str, ...] = ()
+    drives_note: str | None = None
 
 
 def _default_task() -> tuple[float, float, float]:
@@ -87,8 +89,14 @@ def scenario_setup(sc: Any) -> Setup:
     if sc.task.kind == "fixed":
         problems += fixed_task_problems(g, sc.task.start_mm, sc.task.goal_mm)
     task = (sc.task.max_translation_mm, sc.task.max_angle_deg, sc.task.margin_mm)
+    swept = sc.sweep_axes.get("drives.velocity_bandwidth_hz")
+    bandwidth = sc.drives.velocity_bandwidth_hz
+    note = (f"the velocity loops swept by [drives] velocity_bandwidth_hz in {sc.source}: "
+            + ", ".join(f"{v:g}" for v in swept) + " Hz (shown: the first)" if swept
+            else f"the velocity loops set to {bandwidth:g} Hz by [drives] in {sc.source}"
+            if bandwidth > 0 else None)
     return Setup("scenario", g, cam, task, where, needs, [], problems,
-                 tuple(spec.label for spec in sc.controllers))
+                 tuple(spec.label for spec in sc.controllers), note)
 
 
 def load_setup(text: str) -> Setup:
@@ -165,6 +173,34 @@ def _f(x: float, digits: int = 1) -> str:
     return "-" if not np.isfinite(x) else f"{x:.{digits}f}"
 
 
+def _per_leg(values: np.ndarray, scale: float, unit: str) -> str:
+    """One value when the six legs agree, else the six [unit]."""
+    v = np.asarray(values, dtype=float) * scale
+    if np.all(v == v[0]):
+        return f"{v[0]:g} {unit}"
+    return "[" + ", ".join(f"{x:g}" for x in v) + f"] {unit}"
+
+
+def _dynamics_lines(g: HexapodGeometry, note: str | None) -> list[str]:
+    """The masses and drives the dynamic world and the force laws use, and where they
+    come from (the robot file's tables, or the stated assumptions; ``note``: a
+    scenario's change to the drives)."""
+    m, d = g.inertia, g.drives
+    extra = [f"  {note}"] if note else []
+    masses = f"[inertia] in {m.source}" if m.source else "assumed: no [inertia] table"
+    drives = f"[drives] in {d.source}" if d.source else "assumed: no [drives] table"
+    return [
+        "Dynamics (the dynamic world, the force controllers, drive_model = \"lag\"):",
+        f"  masses: platform {m.platform_mass:g} kg, per leg {m.body_mass:g} kg body + "
+        f"{m.rod_mass:g} kg rod ({masses})",
+        f"  drives ({drives}): "
+        f"{d.mode} mode, force limit {_per_leg(d.force_limit, 1, 'N')}, velocity loop "
+        f"{_per_leg(d.velocity_bandwidth, 1, 'Hz')}, rotor inertia "
+        f"{_per_leg(d.rotor_inertia, 1, 'kg')}, viscous {_per_leg(d.viscous, 1, 'N s/m')}, "
+        f"Coulomb {_per_leg(d.coulomb, 1, 'N')}, encoders "
+        f"{_per_leg(d.encoder_resolution, 1e6, 'um')}", *extra, ""]
+
+
 def describe(setup: Setup, report: SetupReport, source: str) -> list[str]:
     """The lines ``check`` prints."""
     g, cam = setup.geometry, setup.camera
@@ -179,6 +215,7 @@ def describe(setup: Setup, report: SetupReport, source: str) -> list[str]:
         "above it",
         "  leg lengths at home [mm]: " + ", ".join(
             f"{i}: {_f(q)}" for i, q in enumerate(report.home_lengths_mm)), ""]
+    lines += _dynamics_lines(g, setup.drives_note)
     mt, ma, mm = report.box
     r = report.translation_range_mm
     lines += [

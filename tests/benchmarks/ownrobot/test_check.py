@@ -140,3 +140,25 @@ def test_check_refuses_a_file_it_cannot_read(tmp_path: Path,
     assert code == 2 and "cannot tell what this file is" in out
     code, out = _check(["quik"], capsys)
     assert code == 2 and "(did you mean 'quick'?)" in out
+
+
+def test_check_states_the_dynamics_and_where_they_come_from(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """The masses and drives a dynamic study will use, from the robot file's tables
+    (named) or the stated assumptions, and a scenario's sweep of the drives."""
+    from dataclasses import replace
+
+    robot = own_robot()
+    drives = replace(robot.drives, velocity_bandwidth=np.array([8.0, 8, 8, 8, 8, 12]),
+                     force_limit=np.full(6, 150.0))
+    path = tmp_path / "robot.toml"
+    replace(robot, drives=drives).to_toml(path)
+    code, out = _check([str(path)], capsys)
+    assert code == 0, out
+    assert f"[inertia] in {path}" in out and f"[drives] in {path}" in out
+    assert ("velocity mode, force limit 150 N, velocity loop [8, 8, 8, 8, 8, 12] Hz"
+            in out), out
+    code, out = _check(["mpc-drives"], capsys)
+    assert code == 0, out
+    assert "assumed: no [drives] table" in out
+    assert "swept by [drives] velocity_bandwidth_hz" in out and "5, 10, 20, 50 Hz" in out
