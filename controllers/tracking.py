@@ -125,6 +125,15 @@ def retarget(controller: Any, context: ControllerContext) -> None:
         controller.reset(context)
 
 
+def announce_offset(controller: Any, q_rate: np.ndarray) -> None:
+    """Tell ``controller`` the feed-forward [m/s] about to be added to its coming command
+    (its ``velocity_offset(q_dot)`` when it has one: the predictive controllers' drive
+    model needs it; the other laws do not)."""
+    method = getattr(controller, "velocity_offset", None)
+    if callable(method):
+        method(q_rate)
+
+
 @dataclass
 class TrackingPlan:
     """The goals of one trial on the control grid, up to the reference's end (computed
@@ -241,6 +250,8 @@ class TrackingController(Controller):
         if k != self._k:
             retarget(self.inner, self._contexts[k])
             self._k = k
+        if self.feed_forward and self.actuation is Actuation.VELOCITY:
+            announce_offset(self.inner, plan.q_rate[k])
         cmd: Command = self.inner.step(observation)
         if self.feed_forward and cmd.reason is None and cmd.actuation is Actuation.VELOCITY:
             cmd.velocities = np.asarray(cmd.velocities, dtype=float) + plan.q_rate[k]

@@ -32,7 +32,7 @@ from controllers.base import (
 )
 from controllers.batch import PerTrialLoop, actuation_of
 from controllers.goal_batch import GOAL_FIELDS, GoalBatch
-from controllers.tracking import TrackingPlan, retarget, tracking_plan
+from controllers.tracking import TrackingPlan, announce_offset, retarget, tracking_plan
 
 log = logging.getLogger(__name__)
 
@@ -153,6 +153,11 @@ class TrackingBatch:
         if moved.any():
             self._retarget(tr[moved], k[rows][moved])
             self._k[tr[moved]] = k[rows][moved]
+        if self.feed_forward and self.actuation is Actuation.VELOCITY and len(rows):
+            per_trial = getattr(self.inner, "controllers", None)
+            if per_trial is not None:  # a PerTrialLoop: each trial's controller is told
+                for row, trial in zip(rows.tolist(), tr.tolist(), strict=True):
+                    announce_offset(per_trial[trial], self._q_rate[trial, k[row]])
         bad = np.flatnonzero(has & ~finite)
         if len(bad):
             out = CommandBatch.zeros(len(trials), self.actuation)

@@ -27,8 +27,8 @@ from typing import Any
 
 import numpy as np
 
-from controllers.base import Command, Controller, ControllerContext, Observation
-from controllers.exceptions import OptionError
+from controllers.base import Command, Controller, ControllerContext, Goal, Observation
+from controllers.exceptions import ContextError, OptionError
 from controllers.laws import check_choice, check_number
 from controllers.mpc.prediction import fit_pose
 from controllers.mpc.problem import ProblemSpec, VirtualMachineKernel, problem_kernel
@@ -167,6 +167,7 @@ class MPCLaw(Controller):
         self._U = np.zeros(6 * horizon)
         self._lag = (np.zeros(6), np.zeros(6))
         self._v0 = np.zeros(6)
+        self._offset = np.zeros(6)
         self.drive_velocities = np.zeros(6)
 
     # ----------------------------------------------------------------- reset
@@ -236,11 +237,28 @@ class MPCLaw(Controller):
         #: The lag model's leg velocities at the next step [m/s] (drive_model "lag": the
         #: estimate used when an observation carries no measured leg velocities).
         self.drive_velocities = np.zeros(6)
+        self._offset = np.zeros(6)
         self._star = law.desired_features()
         self._U = np.zeros(6 * self.horizon)
         #: Last reconstructed platform pose ``(R, t)`` in the camera frame (diagnostic).
         self.pose: tuple[np.ndarray, np.ndarray] | None = None
         self.stats = SolveStats()
+
+    def retarget(self, goal: Goal) -> None:
+        """A new goal, keeping what the controller carries between periods (the goal of
+        each period of a trajectory task, :mod:`controllers.tracking`): the warm start,
+        the fallback law's estimate and the drives' state stay, the desired features
+        become the goal's, exactly as :meth:`reset` would set them.
+
+        Raises:
+            ContextError: :meth:`reset` was not called, or the goal is invalid (the
+                controller then keeps its previous goal).
+        """
+        if self.context is None:
+            raise ContextError(self.name, "context", "retarget(goal) before reset(context)")
+        self.law.retarget(goal)
+        self.context = self.law.context
+        self._star = self.law.desired_features()
 
     def _feature_kind(self) -> str:
         return "directions"
@@ -250,19 +268,30 @@ class MPCLaw(Controller):
         """One receding-horizon step (never raises for bad measurements)."""
         if self.context is None:
             return Command.refuse(f"{self.name}: reset(context) was not called")
-        cmd = self._step(observation)
+        offset, self._offset = self._offset, np.zeros(6)
+        cmd = self._step(observation, offset)
         if self._spec is not None and self._spec.drives:
             a, _ = self._lag
             u = cmd.velocities if np.all(np.isfinite(cmd.velocities)) else np.zeros(6)
-            self.drive_velocities = a * self._v0 + (1 - a) * u
+            self.drive_velocities = a * (self._v0 + offset) + (1 - a) * (u + offset)
         return cmd
 
-    def _step(self, observation: Observation) -> Command:
+    def velocity_offset(self, q_dot: np.ndarray) -> None:
+        """The leg velocities [m/s] a wrapper adds to the coming step's command (the
+        feed-forward of a trajectory task, :mod:`controllers.tracking`): the goal moves
+        with them. With ``drive_model = "lag"`` the prediction then runs on the leg
+        velocities RELATIVE to it (exact for a feed-forward constant over the horizon:
+        the drives lag the sum, the goal moves with the feed-forward alone); the ideal
+        prediction does not need it. Cleared after the step."""
+        self._offset = np.asarray(q_dot, dtype=float).reshape(6)
+
+    def _step(self, observation: Observation, offset: np.ndarray) -> Command:
         law = self.law
         if self._spec is not None and self._spec.drives:
             v = observation.q_dot if self.drive_state == "measured" else None
-            self._v0 = (np.asarray(v, dtype=float) if v is not None
-                        and np.all(np.isfinite(v)) else self.drive_velocities)
+            now = (np.asarray(v, dtype=float) if v is not None
+                   and np.all(np.isfinite(v)) else self.drive_velocities)
+            self._v0 = now - offset
         q = law.checked_lengths(observation)
         if isinstance(q, Command):
             self._U[:] = 0.0  # nothing moves: the next warm start is rest

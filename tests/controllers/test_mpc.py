@@ -464,3 +464,32 @@ def test_hidden_edges_are_left_out(model: str, other_geometry) -> None:  # type:
     assert any("using 11 of 12 edges" in n for n in cmd.notes)
     # measured: 3.8 % (local), 0.5 % (global) of the largest twist component
     np.testing.assert_allclose(cmd.twist, ref.twist, rtol=0, atol=0.1 * np.abs(ref.twist).max())
+
+
+@pytest.mark.parametrize("model", ["local", "global"])
+@pytest.mark.parametrize(("camera", "kind", "name"), MPC_KINDS)
+def test_retarget_is_reset_on_the_new_goal_but_keeps_the_state(  # type: ignore[no-untyped-def]
+        camera: str, kind: str, name: str, model: str, other_geometry) -> None:
+    """Right after reset (warm start at rest), ``retarget(goal)`` then a step commands
+    exactly what a controller reset on that goal commands; later, the warm start is
+    kept (not zeroed as a reset would), and a bad goal leaves the old one in place."""
+    from controllers.base import Goal
+    from controllers.exceptions import ContextError
+
+    world = _world(camera, other_geometry)
+    Rs, ts = world.poses(3, np.random.default_rng(21), margin=0.02)
+    moved = _mpc(name, world, (Rs[1], ts[1]), model=model, horizon=4, compiled=False)
+    fresh = _mpc(name, world, (Rs[2], ts[2]), model=model, horizon=4, compiled=False)
+    moved.retarget(world.goal(Rs[2], ts[2]))
+    obs = world.observation(Rs[0], ts[0])
+    a, b = moved.step(obs), fresh.step(obs)
+    np.testing.assert_array_equal(a.velocities, b.velocities)
+    np.testing.assert_array_equal(a.error, b.error)
+    warm = moved._U.copy()
+    assert np.abs(warm).max() > 0
+    star = moved._star.copy()
+    with pytest.raises(ContextError):
+        moved.retarget(Goal(lengths=np.full(5, 0.4)))
+    np.testing.assert_array_equal(moved._star, star)
+    moved.retarget(world.goal(Rs[1], ts[1]))
+    np.testing.assert_array_equal(moved._U, warm)

@@ -200,3 +200,28 @@ def test_drive_lag_constants(geometry) -> None:  # type: ignore[no-untyped-def]
     moved = np.trapezoid(1 - np.exp(-omega * t), t)
     np.testing.assert_allclose(c, DT - moved, rtol=1e-8)
     np.testing.assert_allclose(a, np.exp(-omega * DT), rtol=1e-15)
+
+
+def test_the_feed_forward_offset_makes_the_prediction_relative(geometry) -> None:  # type: ignore[no-untyped-def]
+    """``velocity_offset(ff)`` before a step (the tracking wrapper's feed-forward): the
+    prediction starts from the measured velocities minus ``ff`` (the legs relative to
+    the moving goal), the lag model's own estimate runs on the command plus ``ff``, and
+    the offset holds for that step only."""
+    from controllers import registry
+
+    world = World(_geometry(geometry, 8.0), make_camera("unified", geometry))
+    Rs, ts = world.poses(2, np.random.default_rng(3), margin=0.02)
+    ctrl = registry.create("leg-edge-mpc", horizon=4, drive_model="lag", compiled=False)
+    ctrl.reset(world.context(world.goal(Rs[1], ts[1]), DT))
+    a, _ = ctrl._lag
+    v0_slice = ctrl._lay.slices["v0"]
+    obs = world.observation(Rs[0], ts[0])
+    v = np.linspace(-0.004, 0.006, 6)
+    ff = np.full(6, 0.002)
+    ctrl.velocity_offset(ff)
+    u = ctrl.step(replace(obs, q_dot=v)).velocities
+    np.testing.assert_allclose(ctrl._vec[v0_slice], v - ff, rtol=0, atol=1e-18)
+    np.testing.assert_allclose(ctrl.drive_velocities, a * v + (1 - a) * (u + ff), rtol=0,
+                               atol=1e-15)
+    ctrl.step(replace(obs, q_dot=v))
+    np.testing.assert_array_equal(ctrl._vec[v0_slice], v)

@@ -244,6 +244,7 @@ def _tracking_contexts(world: World, n: int) -> list[ControllerContext]:
     ("joint-space", {}, False),
     ("latency-compensated", {"law": "leg-edge"}, False),
     ("leg-edge", {}, True),
+    ("leg-edge-mpc", {"drive_model": "lag", "horizon": 3, "compiled": False}, True),
 ])
 def test_tracking_batch_gives_the_rows_of_one_tracking_controller_per_trial(
         law: str, options: dict[str, Any], loop: bool) -> None:
