@@ -148,7 +148,8 @@ def test_results_rows_have_the_documented_fields(tmp_path: Path) -> None:
 #: costly (1000 frames/s cameras, rendered fisheye images, 1 ms physics); every
 #: controller at every sweep point still runs, records and is reported.
 END_TO_END_STEPS = {"camera-latency": 30, "fisheye-close": 40, "quick-dynamic": 40,
-                    "inertia-error": 40, "paccot2008-tracking": 40, "mpc-drives": 20}
+                    "inertia-error": 40, "paccot2008-tracking": 40, "mpc-drives": 20,
+                    "mpc-drives-tracking": 20}
 
 
 @pytest.mark.parametrize("name", sorted(builtin_scenarios()))
