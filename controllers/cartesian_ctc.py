@@ -245,6 +245,13 @@ def directions_seen(directions: np.ndarray | None, normals: np.ndarray | None,
     return u, seen
 
 
+def all_seen(visible: np.ndarray | None) -> bool:
+    """No visibility flags, or all of them set (an array's own ``all``, else numpy's)."""
+    if visible is None:
+        return True
+    return bool(visible.all() if isinstance(visible, np.ndarray) else np.all(visible))
+
+
 def _every_direction(observation: Observation) -> np.ndarray | None:
     """The common case of :func:`directions_seen` with every leg seen: the given (6, 3)
     directions, all finite and none marked hidden; None otherwise (no directions, another
@@ -253,8 +260,7 @@ def _every_direction(observation: Observation) -> np.ndarray | None:
     if observation.directions is None:
         return None
     u = np.asarray(observation.directions, dtype=float)
-    visible = observation.direction_visible
-    if u.shape != (6, 3) or not (visible is None or np.all(visible)):
+    if u.shape != (6, 3) or not all_seen(observation.direction_visible):
         return None
     return u if math.isfinite(u.sum()) else None  # a NaN or inf makes the sum so
 
