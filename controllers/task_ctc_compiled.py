@@ -13,6 +13,12 @@ A law gives the compiled path its kind and pose source (``compiled_kind``,
 ``compiled_fk``), its constants (``compiled_constants(step)``) and, each period, its
 measurement and reference (``compiled_inputs(step, observation, tr, q)``, returning the
 rows to use or None, and a note).
+
+The C function runs on the step's own bound input and output rows
+(:meth:`hexapod.compiled.CompiledFunction.bind`): the law writes into :attr:`CompiledTaskStep.row`
+in place (the readings too, :func:`controllers.task_ctc.finite_readings`), the pose guess
+stays in the row while it is the law's ``guess``, and the command copies what it keeps of
+the output row.
 """
 
 from __future__ import annotations
