@@ -14,6 +14,8 @@ ESTIMATED base points ``A_i`` and camera pose (``vision-ctc``).
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 from scipy.linalg.lapack import dgesdd as _svd
 
@@ -90,7 +92,7 @@ class CartesianCTC(TaskComputedTorque):
             R, t = self.goal_pose()
             step.set("reference", np.concatenate([R.ravel(), t, np.zeros(12)]))
         else:
-            step.set("reference", self.pose_reference(tr))
+            step.row[step.inputs["reference"]] = self.pose_reference(tr)
 
 
 class VisionCTC(CartesianCTC):
@@ -202,11 +204,14 @@ class VisionCTC(CartesianCTC):
                         q: np.ndarray) -> tuple[np.ndarray | None, str | None] | None:
         """The leg directions seen (the compiled step fits the pose to the six legs; a
         hidden one leaves the period to the numpy path) and the reference."""
-        u, seen = directions_seen(observation.directions, observation.normals,
-                                  observation.direction_visible, observation.edge_visible)
-        if not seen.all():
-            return None
-        step.set("directions", u.ravel())
+        u = _every_direction(observation)
+        if u is None:  # directions_seen decides, off the common case
+            u, seen = directions_seen(observation.directions, observation.normals,
+                                      observation.direction_visible,
+                                      observation.edge_visible)
+            if not seen.all():
+                return None
+        step.row[step.inputs["directions"]] = u.ravel()
         self.reference_input(step, tr)
         return None, None
 
@@ -238,6 +243,26 @@ def directions_seen(directions: np.ndarray | None, normals: np.ndarray | None,
         return np.full((6, 3), np.nan), np.zeros(6, bool)
     seen &= np.all(np.isfinite(u), axis=-1)
     return u, seen
+
+
+def all_seen(visible: np.ndarray | None) -> bool:
+    """No visibility flags, or all of them set (an array's own ``all``, else numpy's)."""
+    if visible is None:
+        return True
+    return bool(visible.all() if isinstance(visible, np.ndarray) else np.all(visible))
+
+
+def _every_direction(observation: Observation) -> np.ndarray | None:
+    """The common case of :func:`directions_seen` with every leg seen: the given (6, 3)
+    directions, all finite and none marked hidden; None otherwise (no directions, another
+    shape, a hidden or non-finite one, or a sum that overflows), where
+    :func:`directions_seen` decides. When both answer, they give the same directions."""
+    if observation.directions is None:
+        return None
+    u = np.asarray(observation.directions, dtype=float)
+    if u.shape != (6, 3) or not all_seen(observation.direction_visible):
+        return None
+    return u if math.isfinite(u.sum()) else None  # a NaN or inf makes the sum so
 
 
 def rigid_fit(points: np.ndarray, model_points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

@@ -47,7 +47,7 @@ from controllers.solvers.computed_torque import (
     SecondOrderGains,
     drive_forces,
 )
-from controllers.task_ctc import encoder_readings
+from controllers.task_ctc import encoder_readings, finite_readings
 from hexapod.actuation import Actuation
 from hexapod.compiled import BoundCall, CompilationError
 from hexapod.dynamics import DynamicModel
@@ -250,7 +250,7 @@ class ComputedTorqueController(Controller):
         if self._ctx is None or self._model is None or self._bound is None:
             return self._refuse("reset(context) was not called")
         x = self._bound.x
-        fast_readings = _finite_readings(observation, x)
+        fast_readings = finite_readings(observation, x)
         if fast_readings is None:  # encoder_readings decides (its reasons), off the common case
             readings = encoder_readings(observation)
             if isinstance(readings, str):
@@ -362,24 +362,3 @@ class ComputedTorqueController(Controller):
     def _refuse(self, problem: str) -> Command:
         return Command.refuse(f"{self.name}: {problem}", actuation=Actuation.FORCE)
 
-
-def _finite_readings(observation: Observation, x: np.ndarray
-                     ) -> tuple[float, np.ndarray, np.ndarray] | None:
-    """The common case of :func:`~controllers.task_ctc.encoder_readings`: a finite time
-    and finite (6,) lengths [m] and leg velocities [m/s], written into the input row
-    (``x[12:24]``); None otherwise (missing, another shape, a non-finite value, or a
-    sum of squares that overflows), where ``encoder_readings`` decides."""
-    qd = observation.q_dot
-    if qd is None:
-        return None
-    q = np.asarray(observation.lengths, dtype=float)
-    qd = np.asarray(qd, dtype=float)
-    if q.shape != (6,) or qd.shape != (6,):
-        return None
-    t = float(observation.t)
-    x[12:18] = q
-    x[18:24] = qd
-    v = x[12:24]
-    if math.isfinite(t) and math.isfinite(v.dot(v)):  # a NaN or inf makes the sum so
-        return t, q, qd
-    return None

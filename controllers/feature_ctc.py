@@ -31,7 +31,7 @@ from dataclasses import replace
 import numpy as np
 
 from controllers.base import ControllerContext, Goal, Observation
-from controllers.cartesian_ctc import directions_seen, pose_measurement
+from controllers.cartesian_ctc import all_seen, directions_seen, pose_measurement
 from controllers.exceptions import ContextError
 from controllers.solvers.reference_motion import feature_motion, size_in
 from controllers.task_ctc import (
@@ -52,7 +52,6 @@ _EVERY_EDGE = np.ones(36, bool)
 _EVERY_EDGE.flags.writeable = False
 _EVERY_LEG = np.ones(18, bool)
 _EVERY_LEG.flags.writeable = False
-_ONES = np.ones(36)
 #: Stands for the directions of the edge normals, computed by the compiled step.
 _OF_NORMALS = np.full((6, 3), np.nan)
 
@@ -210,28 +209,35 @@ class FeatureCTC(TaskComputedTorque):
 
     def compiled_inputs(self, step: CompiledTaskStep, observation: Observation, tr: float,
                         q: np.ndarray) -> tuple[np.ndarray | None, str | None] | None:
-        """The features seen and the rows to use; the reference at ``tr``."""
+        """The features seen and the rows to use (None: every row, all seen and known);
+        the reference at ``tr``."""
         feats = self.compiled_features(observation)
         if isinstance(feats, str):
             return None
         u, normals, rows = feats
+        row, inputs = step.row, step.inputs
         if normals is None:
-            step.set("features", u.ravel())
+            row[inputs["features"]] = u.ravel()
         elif u is _OF_NORMALS:  # the compiled step takes the directions of the normals
-            step.row[step.inputs["features"].start:][:36] = normals.ravel()
-            step.row[step.inputs["features"].start + 54] = 1.0
+            start = inputs["features"].start
+            row[start:start + 36] = normals.ravel()
+            row[start + 54] = 1.0
         else:
             step.set("features", np.concatenate([normals.ravel(), u.ravel(), [0.0]]))
         if self.reference is None:
             ref, known = self._taught_reference()
         else:
             ref, known = self.compiled_reference(tr)
-        if known is not None:  # a feature the model's camera does not see leaves its rows
-            rows = rows & known
-        step.set("mask", _ONES[:rows.size] if rows is _EVERY_EDGE or rows is _EVERY_LEG
-                 else rows.astype(float))
-        step.set("reference_features", ref)
-        return rows, None
+        every: np.ndarray | None = None
+        if known is None and (rows is _EVERY_EDGE or rows is _EVERY_LEG):
+            row[inputs["mask"]] = 1.0
+        else:
+            if known is not None:  # a feature the model's camera does not see leaves its rows
+                rows = rows & known
+            row[inputs["mask"]] = rows.astype(float)
+            every = rows
+        row[inputs["reference_features"]] = ref
+        return every, None
 
     def _anchored(self, times: np.ndarray) -> np.ndarray:
         """(m, ...) the nominal features of the reference at ``times``, anchored at the
@@ -294,8 +300,7 @@ class LegEdgeCTC(FeatureCTC):
         (``_OF_NORMALS``); else :meth:`features_seen`."""
         if observation.normals is not None:
             n = np.asarray(observation.normals, dtype=float)
-            visible = observation.edge_visible
-            if (visible is None or np.all(visible)) and math.isfinite(float(n.sum())):
+            if all_seen(observation.edge_visible) and math.isfinite(n.sum()):
                 return _OF_NORMALS, n, _EVERY_EDGE
         return self.features_seen(observation)
 
@@ -326,8 +331,7 @@ class LegDirectionCTC(FeatureCTC):
         its general checks); else :meth:`features_seen`."""
         if observation.directions is not None:
             u = np.asarray(observation.directions, dtype=float)
-            visible = observation.direction_visible
-            if (visible is None or np.all(visible)) and math.isfinite(float(u.sum())):
+            if all_seen(observation.direction_visible) and math.isfinite(u.sum()):
                 return u, None, _EVERY_LEG
         return self.features_seen(observation)
 

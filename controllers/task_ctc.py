@@ -241,16 +241,25 @@ class TaskComputedTorque(RemembersOptions, Controller):
         """The leg forces of this period [N], or a refusal (zeros) with its reason."""
         if self.context is None or self.model is None:
             return self.refuse("reset(context) was not called")
-        readings = encoder_readings(observation)
-        if isinstance(readings, str):
-            return self.refuse(readings)
-        t, q, qd = readings
+        compiled = self.compiled if self._started else None
+        # the common case writes the readings into the compiled step's row itself
+        fast = None if compiled is None else finite_readings(observation, compiled.row)
+        if fast is None:  # encoder_readings decides (its reasons), off the common case
+            readings = encoder_readings(observation)
+            if isinstance(readings, str):
+                return self.refuse(readings)
+            t, q, qd = readings
+        else:
+            t, q, qd = fast
         try:
-            if self._started and self.compiled is not None:
-                fast = self.compiled.step(self, observation, t - self._t0, q, qd)
-                if fast is not None:
+            if compiled is not None:
+                if fast is None:
+                    cmd = compiled.step(self, observation, t - self._t0, q, qd)
+                else:
+                    cmd = compiled.step_written(self, observation, t - self._t0)
+                if cmd is not None:
                     self.compiled_steps += 1
-                    return fast
+                    return cmd
             self.numpy_steps += 1
             m = self.measure(observation, q, qd)
             if isinstance(m, str):
@@ -331,6 +340,29 @@ def encoder_readings(observation: Observation) -> tuple[float, np.ndarray, np.nd
         if x.size == 0 or not np.isfinite(x).all():
             return f"measured {what} not finite: {x}"
     return t, q, qd
+
+
+def finite_readings(observation: Observation, x: np.ndarray
+                    ) -> tuple[float, np.ndarray, np.ndarray] | None:
+    """The common case of :func:`encoder_readings`: a finite time [s] and finite (6,)
+    lengths [m] and leg velocities [m/s], written into a compiled step's input row
+    (``x[12:18]`` and ``x[18:24]``, the lengths then the rates); None otherwise
+    (missing, another shape, a non-finite value, or a sum of squares that overflows),
+    where :func:`encoder_readings` decides. When both answer, they answer the same."""
+    qd = observation.q_dot
+    if qd is None:
+        return None
+    q = np.asarray(observation.lengths, dtype=float)
+    qd = np.asarray(qd, dtype=float)
+    if q.shape != (6,) or qd.shape != (6,):
+        return None
+    t = float(observation.t)
+    x[12:18] = q
+    x[18:24] = qd
+    v = x[12:24]
+    if math.isfinite(t) and math.isfinite(v.dot(v)):  # a NaN or inf makes the sum so
+        return t, q, qd
+    return None
 
 
 def _with_goal(context: ControllerContext, goal: Goal) -> ControllerContext:

@@ -13,6 +13,12 @@ A law gives the compiled path its kind and pose source (``compiled_kind``,
 ``compiled_fk``), its constants (``compiled_constants(step)``) and, each period, its
 measurement and reference (``compiled_inputs(step, observation, tr, q)``, returning the
 rows to use or None, and a note).
+
+The C function runs on the step's own bound input and output rows
+(:meth:`hexapod.compiled.CompiledFunction.bind`): the law writes into :attr:`CompiledTaskStep.row`
+in place (the readings too, :func:`controllers.task_ctc.finite_readings`), the pose guess
+stays in the row while it is the law's ``guess``, and the command copies what it keeps of
+the output row.
 """
 
 from __future__ import annotations
@@ -25,6 +31,8 @@ from scipy.linalg.lapack import dsyevd as _eigenvalues
 
 from controllers.base import Command, Observation
 from controllers.solvers.compiled_task_ctc import layout, task_step
+from hexapod.actuation import Actuation
+from hexapod.compiled import BoundCall, CompilationError
 from hexapod.dynamics.model import INVERSE_TOLERANCE
 from hexapod.workspace import home_pose
 
@@ -38,10 +46,18 @@ FK_MAX_CALLS = 16
 #: Size of the rigid fit's last Newton step [rad] below which it has converged (the
 #: next would be of its square: the fit is exact to rounding).
 FIT_TOLERANCE = 1e-8
+#: No pose in the input row (``CompiledTaskStep._guess_of`` matches no guess).
+_NO_GUESS = object()
 
 
 class CompiledTaskStep:
     """The compiled step of one law (see the module docstring).
+
+    The step evaluates the C function on its own bound input and output rows
+    (:meth:`hexapod.compiled.CompiledFunction.bind`, no copies): the input row
+    :attr:`row` keeps its constants, and its pose (``row[0:12]``) is the pose of
+    :attr:`_guess_of` when that is the law's ``guess`` (else it is rewritten). What the
+    command keeps of the output row is copied (the next call overwrites it).
 
     Args:
         law: The law, reset (its context and nominal model built).
@@ -54,7 +70,7 @@ class CompiledTaskStep:
         self.fk: bool = law.compiled_fk
         self.function = task_step(self.kind, self.fk, INVERSE_TOLERANCE)
         self.inputs, self.outputs = layout(self.kind, self.fk)
-        self.row = np.zeros(self.function.n_in)
+        self._bind(np.zeros(self.function.n_in))
         g = law.context.geometry
         d = g.drives
         self.set("points", np.concatenate([g.base_points.ravel(),
@@ -65,7 +81,39 @@ class CompiledTaskStep:
                 np.asarray(getattr(d, name), dtype=float), (6,)))
         self.set("gains", np.array([law.gains.kp, law.gains.kd, float(law.context.dt)]))
         self.home = home_pose(g)
+        out = self.outputs
+        self._residual = out["fk_residual"].start
+        self._solved = out["solved"].start
+        self._factor = out["factor"]
+        self._error = out["error"]
+        self._forces = out["forces"]
+        self._tolerance = FK_TOLERANCE if self.fk else FIT_TOLERANCE
         law.compiled_constants(self)
+
+    def _bind(self, row: np.ndarray) -> None:
+        """Bind the compiled function to its own rows, the input row a copy of ``row``."""
+        self.bound: BoundCall = self.function.bind()
+        self.bound.x[:] = row
+        #: The input row (the bound one: written in place, evaluated without a copy).
+        self.row = self.bound.x
+        #: The guess whose pose ``row[0:12]`` holds (``_NO_GUESS``: none).
+        self._guess_of: object = _NO_GUESS
+
+    def __getstate__(self) -> dict[str, object]:
+        """Picklable: the compiled function and its binding (ctypes) are left out, the
+        input row kept; both are rebuilt on unpickling."""
+        state = self.__dict__.copy()
+        for key in ("function", "bound", "row", "_guess_of"):
+            del state[key]
+        state["_row"] = self.row.copy()
+        return state
+
+    def __setstate__(self, state: dict[str, object]) -> None:
+        row = state.pop("_row")
+        self.__dict__.update(state)
+        self.function = task_step(self.kind, self.fk, INVERSE_TOLERANCE)
+        assert isinstance(row, np.ndarray)
+        self._bind(row)
 
     def set(self, name: str, value: np.ndarray | float) -> None:
         """Write an input field (:func:`~controllers.solvers.compiled_task_ctc.layout`)."""
@@ -75,46 +123,62 @@ class CompiledTaskStep:
         """The input pose (the FK guess, or the measured pose)."""
         self.row[0:9] = R.T.ravel()
         self.row[9:12] = t
+        self._guess_of = _NO_GUESS
 
     def step(self, law: TaskComputedTorque, observation: Observation, tr: float,
              q: np.ndarray, qd: np.ndarray) -> Command | None:
-        """The command of this period, or None off the happy path."""
-        R0, t0 = law.guess if law.guess is not None else self.home
-        self.set_pose(R0, t0)
-        prepared = law.compiled_inputs(self, observation, tr, q)
+        """The command of this period, or None off the happy path.
+
+        ``q`` [m] and ``qd`` [m/s] are written into the row (``row[12:24]``, the layout's
+        ``q`` and ``q_dot``; :meth:`step_written` when they are there already)."""
+        self.row[12:18] = q
+        self.row[18:24] = qd
+        return self.step_written(law, observation, tr)
+
+    def step_written(self, law: TaskComputedTorque, observation: Observation, tr: float
+                     ) -> Command | None:
+        """:meth:`step` with ``q`` and ``q_dot`` already in the row (``row[12:24]``)."""
+        guess = law.guess
+        if guess is not self._guess_of:  # else row[0:12] holds its pose already
+            R0, t0 = guess if guess is not None else self.home
+            self.set_pose(R0, t0)
+            self._guess_of = guess
+        prepared = law.compiled_inputs(self, observation, tr, self.row[12:18])
         if prepared is None:
             return None
         rows, note = prepared
         if rows is not None and int(rows.sum()) < 6:
             return None
-        row, out = self.row, self.outputs
-        row[self.inputs["q"]] = q
-        row[self.inputs["q_dot"]] = qd
-        y = self.function.single(row)
-        residual = out["fk_residual"].start
-        tolerance = FK_TOLERANCE if self.fk else FIT_TOLERANCE
+        bound = self.bound
+        row, y, call = bound.x, bound.y, bound.call
+        if call():
+            raise CompilationError(f"{self.function.name}: the compiled function failed")
+        residual, tolerance = self._residual, self._tolerance
         calls = 1
         while not y[residual] < tolerance:
-            if calls >= FK_MAX_CALLS or not math.isfinite(float(y[residual])):
+            self._guess_of = _NO_GUESS
+            if calls >= FK_MAX_CALLS or not math.isfinite(y[residual]):
                 return None
             row[0:12] = y[0:12]
-            y = self.function.single(row)
+            if call():
+                raise CompilationError(f"{self.function.name}: the compiled function failed")
             calls += 1
-        if y[out["solved"].start] != 1.0 or not math.isfinite(float(y @ y)):
+        if y[self._solved] != 1.0 or not math.isfinite(y.dot(y)):  # (the ddot of y @ y)
             return None
         # the squared singular values of the masked Jacobian (LAPACK syevd of L^T L)
-        w, _, info = _eigenvalues(y[out["factor"]].reshape(6, 6), compute_v=0)
-        if info != 0 or not (w[-1] > 0 and w[0] > law.solver.threshold**2 * w[-1]):
+        w, _, info = _eigenvalues(y[self._factor].reshape(6, 6), 0)  # (compute_v=0)
+        w_min, w_max = float(w[0]), float(w[-1])
+        if info != 0 or not (w_max > 0 and w_min > law.solver.threshold**2 * w_max):
             return None
-        law.guess = (y[0:9].reshape(3, 3).T, y[9:12])
-        e = y[out["error"]]
-        if rows is not None:
-            e = e[rows]
-        return Command.of_forces(y[out["forces"]], error=e,
-                                 error_norm=math.sqrt(float(e @ e)), rank=6,
-                                 condition=math.sqrt(float(w[-1] / w[0])),
-                                 features_used=len(e),
-                                 notes=[] if note is None else [note])
+        pose = y[0:12].copy()
+        row[0:12] = pose  # the next step's guess
+        law.guess = self._guess_of = (pose[0:9].reshape(3, 3).T, pose[9:12])
+        e = y[self._error]
+        e = e.copy() if rows is None else e[rows]
+        return Command(np.zeros(6), error=e, error_norm=math.sqrt(e.dot(e)), rank=6,
+                       condition=math.sqrt(w_max / w_min), features_used=len(e),
+                       active_constraints=[], notes=[] if note is None else [note],
+                       actuation=Actuation.FORCE, forces=y[self._forces].copy())
 
 
 __all__ = ["FIT_TOLERANCE", "FK_MAX_CALLS", "FK_TOLERANCE", "CompiledTaskStep"]
