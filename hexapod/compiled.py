@@ -26,6 +26,7 @@ import tempfile
 from collections.abc import Callable
 from functools import partial
 from pathlib import Path
+from typing import Any
 
 import casadi as ca
 import numpy as np
@@ -120,6 +121,10 @@ class CompiledFunction:
         self.n_in = int(function.nnz_in(0))
         self.n_out = int(function.nnz_out(0))
         self.compiled = False
+        #: The C entry point ``f(arg, res, iw, w, mem)`` (None without compilation).
+        self.entry: Any = None
+        #: Sizes of its ``arg``, ``res``, ``iw`` and ``w`` work arrays.
+        self.work_sizes = (0, 0, 0, 0)
         self._lib: ctypes.CDLL | None = None
         if not compile:
             return
@@ -161,6 +166,8 @@ class CompiledFunction:
         self._single = single
         self._batch = batch
         self._lib = lib
+        self.entry = single
+        self.work_sizes = (n_arg.value, n_res.value, n_iw.value, n_w.value)
         self.compiled = True
 
     def __deepcopy__(self, memo: dict[int, object]) -> CompiledFunction:
@@ -215,20 +222,18 @@ class BoundCall:
         self.x = np.zeros(function.n_in)
         self.y = np.zeros(function.n_out)
         self.call: Callable[[], int]
-        if function._lib is None:  # the CasADi virtual machine: same results, slower
+        if function.entry is None:  # the CasADi virtual machine: same results, slower
             def evaluate() -> int:
                 self.y[:] = np.asarray(function.function(self.x), dtype=float).ravel()
                 return 0
             self.call = evaluate
             return
-        n_arg, n_res, n_iw, n_w = (ctypes.c_longlong() for _ in range(4))
-        getattr(function._lib, f"{function.name}_work")(
-            ctypes.byref(n_arg), ctypes.byref(n_res), ctypes.byref(n_iw), ctypes.byref(n_w))
-        self._args = (ctypes.c_void_p * max(n_arg.value, 1))(self.x.ctypes.data)
-        self._res = (ctypes.c_void_p * max(n_res.value, 1))(self.y.ctypes.data)
-        self._iw = np.zeros(max(n_iw.value, 1), dtype=np.int64)
-        self._w = np.zeros(max(n_w.value, 1))
-        self.call = partial(function._single, ctypes.addressof(self._args),
+        n_arg, n_res, n_iw, n_w = function.work_sizes
+        self._args = (ctypes.c_void_p * max(n_arg, 1))(self.x.ctypes.data)
+        self._res = (ctypes.c_void_p * max(n_res, 1))(self.y.ctypes.data)
+        self._iw = np.zeros(max(n_iw, 1), dtype=np.int64)
+        self._w = np.zeros(max(n_w, 1))
+        self.call = partial(function.entry, ctypes.addressof(self._args),
                             ctypes.addressof(self._res), self._iw.ctypes.data,
                             self._w.ctypes.data, 0)
 
