@@ -41,6 +41,19 @@ def _stepped(geometry, bandwidth_hz: float, model: str, v0: np.ndarray | None,  
     return ctrl, obs
 
 
+def _fresh(geometry, horizon: int = 5, **options):  # type: ignore[no-untyped-def]
+    """A reset ``leg-edge-mpc`` with the lag model (8 Hz drives), its first observation
+    and the world (the goal: a second pose)."""
+    from controllers import registry
+
+    world = World(_geometry(geometry, 8.0), make_camera("unified", geometry))
+    Rs, ts = world.poses(2, np.random.default_rng(3), margin=0.02)
+    ctrl = registry.create("leg-edge-mpc", horizon=horizon, drive_model="lag",
+                           compiled=False, **options)
+    ctrl.reset(world.context(world.goal(Rs[1], ts[1]), DT))
+    return ctrl, world.observation(Rs[0], ts[0])
+
+
 def _kernel(ctrl, U: np.ndarray) -> np.ndarray:  # type: ignore[no-untyped-def]
     vec = ctrl._vec.copy()
     vec[ctrl._lay.slices["U"]] = U
@@ -142,15 +155,9 @@ def test_the_drive_state_without_measured_velocities(geometry) -> None:  # type:
     """Without ``q_dot`` the lag model starts from its own estimate: the lag run on the
     setpoints it commanded (``v_{k+1} = a v_k + (1 - a) u_k``, from rest at reset); with
     ``q_dot`` it starts from the measurement."""
-    from controllers import registry
-
-    world = World(_geometry(geometry, 8.0), make_camera("unified", geometry))
-    Rs, ts = world.poses(2, np.random.default_rng(3), margin=0.02)
-    ctrl = registry.create("leg-edge-mpc", horizon=5, drive_model="lag", compiled=False)
-    ctrl.reset(world.context(world.goal(Rs[1], ts[1]), DT))
+    ctrl, obs = _fresh(geometry)
     a, _ = ctrl._lag
     v0_slice = ctrl._lay.slices["v0"]
-    obs = world.observation(Rs[0], ts[0])
     u0 = ctrl.step(obs).velocities
     np.testing.assert_array_equal(ctrl._vec[v0_slice], np.zeros(6))
     u1 = ctrl.step(obs).velocities
@@ -168,9 +175,7 @@ def test_the_drive_state_without_measured_velocities(geometry) -> None:  # type:
     ctrl.step(replace(obs, q_dot=measured))
     np.testing.assert_array_equal(ctrl._vec[v0_slice], measured)
     # drive_state = "model": the measurement is ignored, the lag's own run is used.
-    ablated = registry.create("leg-edge-mpc", horizon=5, drive_model="lag",
-                              drive_state="model", compiled=False)
-    ablated.reset(world.context(world.goal(Rs[1], ts[1]), DT))
+    ablated, _ = _fresh(geometry, drive_state="model")
     ablated.step(obs)
     ablated.step(obs)
     np.testing.assert_array_equal(ablated.drive_velocities, after_two)
@@ -212,15 +217,9 @@ def test_the_feed_forward_offset_makes_the_prediction_relative(geometry) -> None
     prediction starts from the measured velocities minus ``ff`` (the legs relative to
     the moving goal), the lag model's own estimate runs on the command plus ``ff``, and
     the offset holds for that step only."""
-    from controllers import registry
-
-    world = World(_geometry(geometry, 8.0), make_camera("unified", geometry))
-    Rs, ts = world.poses(2, np.random.default_rng(3), margin=0.02)
-    ctrl = registry.create("leg-edge-mpc", horizon=4, drive_model="lag", compiled=False)
-    ctrl.reset(world.context(world.goal(Rs[1], ts[1]), DT))
+    ctrl, obs = _fresh(geometry, horizon=4)
     a, _ = ctrl._lag
     v0_slice = ctrl._lay.slices["v0"]
-    obs = world.observation(Rs[0], ts[0])
     v = np.linspace(-0.004, 0.006, 6)
     ff = np.full(6, 0.002)
     ctrl.velocity_offset(ff)
