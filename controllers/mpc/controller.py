@@ -30,6 +30,7 @@ import numpy as np
 from controllers.base import Command, Controller, ControllerContext, Goal, Observation
 from controllers.exceptions import ContextError, OptionError
 from controllers.laws import check_choice, check_number
+from controllers.mpc.drive_state import DRIVE_STATES, DriveLag, drive_lag
 from controllers.mpc.prediction import fit_pose
 from controllers.mpc.problem import ProblemSpec, VirtualMachineKernel, problem_kernel
 from controllers.mpc.solver import (
@@ -51,9 +52,7 @@ REFERENCES = ("exponential", "zero")
 #: Models of the velocity drives in the prediction: ideal (each setpoint happens at once)
 #: or a first-order lag at the drives' velocity bandwidth.
 DRIVE_MODELS = ("ideal", "lag")
-#: Where the lag model's leg velocities start: the encoders' measurement (the lag run on
-#: the past setpoints when there is none), or always that run.
-DRIVE_STATES = ("measured", "model")
+
 
 
 class MPCLaw(Controller):
@@ -95,9 +94,11 @@ class MPCLaw(Controller):
             ``[drives]``), starting from the measured leg velocities
             (``Observation.q_dot``; without them, from the lag model run on the past
             setpoints). For velocity-mode drives on the dynamic world or a real robot.
-        drive_state: ``"measured"`` (the default, as above) or ``"model"``: the lag
-            model always starts from its own run on the past setpoints, ignoring
-            ``q_dot`` (an ablation: ``docs/results.md``, "Slow velocity drives").
+        drive_state: Where the lag model starts (:mod:`controllers.mpc.drive_state`):
+            ``"measured"`` (the default, as above), ``"encoders"`` (reconstructed from the
+            encoder lengths and the setpoints sent, for a robot that reports no
+            velocities) or ``"model"`` (the lag's run on the past setpoints alone: an
+            ablation, ``docs/results.md``, "Slow velocity drives").
         law_options: Further options of the fallback QP law (e.g. ``edge_feature``).
     """
 
@@ -165,10 +166,10 @@ class MPCLaw(Controller):
         self.stats = SolveStats()
         self._spec: ProblemSpec | None = None
         self._U = np.zeros(6 * horizon)
-        self._lag = (np.zeros(6), np.zeros(6))
+        #: The drives' state of the lag model (None with the ideal prediction).
+        self.drives: DriveLag | None = None
         self._v0 = np.zeros(6)
         self._offset = np.zeros(6)
-        self.drive_velocities = np.zeros(6)
 
     # ----------------------------------------------------------------- reset
     def reset(self, context: ControllerContext) -> None:
@@ -231,12 +232,11 @@ class MPCLaw(Controller):
             self._vec[sl["K"]] = K.reshape(-1)
             self._vec[sl["box"]] = (-0.5 + m, cam.width - 0.5 - m, -0.5 + m,
                                     cam.height - 0.5 - m)
+        self.drives = None
         if self._spec.drives:
-            self._lag = drive_lag(context, window.dt, self.name)
-            self._vec[sl["alag"]], self._vec[sl["clag"]] = self._lag
-        #: The lag model's leg velocities at the next step [m/s] (drive_model "lag": the
-        #: estimate used when an observation carries no measured leg velocities).
-        self.drive_velocities = np.zeros(6)
+            a, c = drive_lag(context, window.dt, self.name)
+            self.drives = DriveLag(a, c, window.dt, self.drive_state)
+            self._vec[sl["alag"]], self._vec[sl["clag"]] = a, c
         self._offset = np.zeros(6)
         self._star = law.desired_features()
         self._U = np.zeros(6 * self.horizon)
@@ -270,10 +270,8 @@ class MPCLaw(Controller):
             return Command.refuse(f"{self.name}: reset(context) was not called")
         offset, self._offset = self._offset, np.zeros(6)
         cmd = self._step(observation, offset)
-        if self._spec is not None and self._spec.drives:
-            a, _ = self._lag
-            u = cmd.velocities if np.all(np.isfinite(cmd.velocities)) else np.zeros(6)
-            self.drive_velocities = a * (self._v0 + offset) + (1 - a) * (u + offset)
+        if self.drives is not None:
+            self.drives.sent(self._v0 + offset, observation.lengths, cmd.velocities + offset)
         return cmd
 
     def velocity_offset(self, q_dot: np.ndarray) -> None:
@@ -287,11 +285,8 @@ class MPCLaw(Controller):
 
     def _step(self, observation: Observation, offset: np.ndarray) -> Command:
         law = self.law
-        if self._spec is not None and self._spec.drives:
-            v = observation.q_dot if self.drive_state == "measured" else None
-            now = (np.asarray(v, dtype=float) if v is not None
-                   and np.all(np.isfinite(v)) else self.drive_velocities)
-            self._v0 = now - offset
+        if self.drives is not None:
+            self._v0 = self.drives.now(observation.lengths, observation.q_dot) - offset
         q = law.checked_lengths(observation)
         if isinstance(q, Command):
             self._U[:] = 0.0  # nothing moves: the next warm start is rest
@@ -458,25 +453,6 @@ class MPCLaw(Controller):
         cmd.notes = [*cmd.notes, f"mpc fallback: {reason}"]
         cmd.active_constraints = [*cmd.active_constraints, f"mpc fallback: {reason}"]
         return cmd
-
-
-def drive_lag(context: ControllerContext, dt: float, name: str
-              ) -> tuple[np.ndarray, np.ndarray]:
-    """``(a, c)`` (6,) of the first-order lag of the nominal velocity drives over one
-    period ``dt`` [s]: ``a = exp(-omega dt)`` [-], ``c = (1 - a) / omega`` [s], with
-    ``omega = 2 pi`` times the drives' ``velocity_bandwidth`` [Hz].
-
-    Raises:
-        OptionError: The nominal drives are in force mode (nothing lags a velocity
-            setpoint: this controller commands velocities).
-    """
-    drives = context.geometry.drives
-    if drives.mode != "velocity":
-        raise OptionError(name, "drive_model", "'lag' models velocity-mode drives; the "
-                          f"robot's [drives] mode is {drives.mode!r}")
-    omega = 2 * np.pi * np.broadcast_to(np.asarray(drives.velocity_bandwidth, float), (6,))
-    a = np.exp(-omega * dt)
-    return a, -np.expm1(-omega * dt) / omega
 
 
 class LegEdgeMPCController(MPCLaw):

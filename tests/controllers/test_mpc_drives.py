@@ -15,7 +15,7 @@ import numpy as np
 import pytest
 
 from controllers.exceptions import OptionError
-from controllers.mpc.controller import drive_lag
+from controllers.mpc.drive_state import drive_lag
 from tests.controllers.controller_world import World, make_camera
 
 DT = 0.02
@@ -63,9 +63,15 @@ def _kernel(ctrl, U: np.ndarray) -> np.ndarray:  # type: ignore[no-untyped-def]
 def _rk4_lengths(q0: np.ndarray, v0: np.ndarray, setpoints: np.ndarray, omega: np.ndarray,
                  substeps: int = 400) -> np.ndarray:
     """Leg lengths at the end of each period: ``q' = v``, ``v' = omega (u_k - v)``, RK4."""
+    return _rk4(q0, v0, setpoints, omega, substeps)[0]
+
+
+def _rk4(q0: np.ndarray, v0: np.ndarray, setpoints: np.ndarray, omega: np.ndarray,
+         substeps: int = 400) -> tuple[np.ndarray, np.ndarray]:
+    """Leg lengths and velocities at the end of each period (see :func:`_rk4_lengths`)."""
     h = DT / substeps
     q, v = q0.copy(), v0.copy()
-    out = []
+    out, vel = [], []
     def f(qv: tuple[np.ndarray, np.ndarray], u: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         return qv[1], omega * (u - qv[1])
 
@@ -78,7 +84,8 @@ def _rk4_lengths(q0: np.ndarray, v0: np.ndarray, setpoints: np.ndarray, omega: n
             q = q + h / 6 * (k1[0] + 2 * k2[0] + 2 * k3[0] + k4[0])
             v = v + h / 6 * (k1[1] + 2 * k2[1] + 2 * k3[1] + k4[1])
         out.append(q)
-    return np.array(out)
+        vel.append(v)
+    return np.array(out), np.array(vel)
 
 
 @pytest.mark.parametrize("bandwidth_hz", [2.0, 8.0, 50.0])
@@ -156,18 +163,18 @@ def test_the_drive_state_without_measured_velocities(geometry) -> None:  # type:
     setpoints it commanded (``v_{k+1} = a v_k + (1 - a) u_k``, from rest at reset); with
     ``q_dot`` it starts from the measurement."""
     ctrl, obs = _fresh(geometry)
-    a, _ = ctrl._lag
+    a = ctrl.drives.a
     v0_slice = ctrl._lay.slices["v0"]
     u0 = ctrl.step(obs).velocities
     np.testing.assert_array_equal(ctrl._vec[v0_slice], np.zeros(6))
     u1 = ctrl.step(obs).velocities
     np.testing.assert_allclose(ctrl._vec[v0_slice], (1 - a) * u0, rtol=0, atol=1e-15)
-    np.testing.assert_allclose(ctrl.drive_velocities, a * (1 - a) * u0 + (1 - a) * u1,
+    np.testing.assert_allclose(ctrl.drives.velocities, a * (1 - a) * u0 + (1 - a) * u1,
                                rtol=0, atol=1e-15)
     assert np.abs(u0).max() > 1e-4 and np.abs(u1 - u0).max() > 0
-    after_two = ctrl.drive_velocities.copy()
+    after_two = ctrl.drives.velocities.copy()
     # a NaN in the measured velocities: the lag's own estimate, never a NaN command
-    estimate = ctrl.drive_velocities.copy()
+    estimate = ctrl.drives.velocities.copy()
     cmd = ctrl.step(replace(obs, q_dot=np.array([0.001, np.nan, 0, 0, 0, 0])))
     np.testing.assert_array_equal(ctrl._vec[v0_slice], estimate)
     assert cmd.reason is None and np.all(np.isfinite(cmd.velocities))
@@ -178,7 +185,7 @@ def test_the_drive_state_without_measured_velocities(geometry) -> None:  # type:
     ablated, _ = _fresh(geometry, drive_state="model")
     ablated.step(obs)
     ablated.step(obs)
-    np.testing.assert_array_equal(ablated.drive_velocities, after_two)
+    np.testing.assert_array_equal(ablated.drives.velocities, after_two)
     ablated.step(replace(obs, q_dot=measured))
     np.testing.assert_array_equal(ablated._vec[v0_slice], after_two)
 
@@ -218,14 +225,40 @@ def test_the_feed_forward_offset_makes_the_prediction_relative(geometry) -> None
     the moving goal), the lag model's own estimate runs on the command plus ``ff``, and
     the offset holds for that step only."""
     ctrl, obs = _fresh(geometry, horizon=4)
-    a, _ = ctrl._lag
+    a = ctrl.drives.a
     v0_slice = ctrl._lay.slices["v0"]
     v = np.linspace(-0.004, 0.006, 6)
     ff = np.full(6, 0.002)
     ctrl.velocity_offset(ff)
     u = ctrl.step(replace(obs, q_dot=v)).velocities
     np.testing.assert_allclose(ctrl._vec[v0_slice], v - ff, rtol=0, atol=1e-18)
-    np.testing.assert_allclose(ctrl.drive_velocities, a * v + (1 - a) * (u + ff), rtol=0,
+    np.testing.assert_allclose(ctrl.drives.velocities, a * v + (1 - a) * (u + ff), rtol=0,
                                atol=1e-15)
     ctrl.step(replace(obs, q_dot=v))
     np.testing.assert_array_equal(ctrl._vec[v0_slice], v)
+
+
+@pytest.mark.parametrize("bandwidth_hz", [3.0, 50.0])
+def test_the_encoders_give_the_drives_velocity(bandwidth_hz: float) -> None:
+    """``drive_state = "encoders"``: from the encoder lengths alone (and the setpoints
+    sent), the leg velocities now are those of six first-order drives integrated by RK4,
+    from an unknown start velocity and an encoder offset, from the second step on."""
+    from controllers.mpc.drive_state import DriveLag
+
+    rng = np.random.default_rng(int(bandwidth_hz))
+    omega = np.full(6, 2 * np.pi * bandwidth_hz)
+    a = np.exp(-omega * DT)
+    lag = DriveLag(a, (1 - a) / omega, DT, "encoders")
+    setpoints = rng.normal(scale=0.01, size=(8, 6))
+    v_start = rng.normal(scale=0.01, size=6)
+    q, v = _rk4(np.full(6, 0.4), v_start, setpoints, omega)
+    offset = rng.normal(scale=1e-3, size=6)  # the encoders' zero error
+    lengths = np.vstack([np.full(6, 0.4), q]) + offset
+    velocities = np.vstack([v_start, v])
+    for k in range(len(setpoints)):
+        now = lag.now(lengths[k], None)
+        if k == 0:
+            np.testing.assert_array_equal(now, np.zeros(6))  # nothing yet: the lag's run
+        else:
+            np.testing.assert_allclose(now, velocities[k], rtol=0, atol=1e-10)
+        lag.sent(now, lengths[k], setpoints[k])

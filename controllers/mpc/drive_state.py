@@ -1,0 +1,106 @@
+"""Where the velocity drives are now: the starting state of the predictive controllers'
+drive-aware prediction (``drive_model = "lag"``, :mod:`controllers.mpc.problem`).
+
+The prediction models each leg's velocity loop as a first-order lag over a period
+``dt``: ``v_{k+1} = a v_k + (1 - a) u_k`` and ``dq_k = (dt - c) u_k + c v_k``
+(``a = exp(-omega dt)``, ``c = (1 - a) / omega``, ``docs/math.md`` section 6). It
+starts from the leg velocities now, which :class:`DriveLag` gives from one of three
+sources (option ``drive_state``):
+
+- ``"measured"``: the robot's leg velocities (``Observation.q_dot``, the dynamic world's
+  encoders);
+- ``"encoders"``: reconstructed from the encoder LENGTHS alone, for a robot that reports
+  no velocities: the last period's displacement ``dq`` and the setpoint ``u`` sent for
+  it give the velocity at its start, ``v_prev = (dq - (dt - c) u) / c``, and the lag
+  carries it to now, ``v = a v_prev + (1 - a) u`` (exact when the drives are the model;
+  the encoders' offsets cancel in ``dq``);
+- ``"model"``: the lag run on the past setpoints from rest, ignoring every measurement
+  (an ablation).
+
+When the chosen source has nothing finite to give (the first step, a NaN), the lag's run
+on the past setpoints is used.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from controllers.base import ControllerContext
+from controllers.exceptions import OptionError
+
+#: Sources of the drives' state.
+DRIVE_STATES = ("measured", "encoders", "model")
+
+
+def drive_lag(context: ControllerContext, dt: float, name: str
+              ) -> tuple[np.ndarray, np.ndarray]:
+    """``(a, c)`` (6,) of the first-order lag of the nominal velocity drives over one
+    period ``dt`` [s]: ``a = exp(-omega dt)`` [-], ``c = (1 - a) / omega`` [s], with
+    ``omega = 2 pi`` times the drives' ``velocity_bandwidth`` [Hz].
+
+    Raises:
+        OptionError: The nominal drives are in force mode (nothing lags a velocity
+            setpoint: the controller commands velocities).
+    """
+    drives = context.geometry.drives
+    if drives.mode != "velocity":
+        raise OptionError(name, "drive_model", "'lag' models velocity-mode drives; the "
+                          f"robot's [drives] mode is {drives.mode!r}")
+    omega = 2 * np.pi * np.broadcast_to(np.asarray(drives.velocity_bandwidth, float), (6,))
+    a = np.exp(-omega * dt)
+    return a, -np.expm1(-omega * dt) / omega
+
+
+@dataclass
+class DriveLag:
+    """The lagging drives' state between steps (see the module docstring).
+
+    Attributes:
+        a: (6,) ``exp(-omega dt)``.
+        c: (6,) ``(1 - a) / omega`` [s].
+        dt: Control period [s].
+        source: One of :data:`DRIVE_STATES`.
+        velocities: (6,) the lag's run on the past setpoints: the leg velocities expected
+            at the next step [m/s].
+    """
+
+    a: np.ndarray
+    c: np.ndarray
+    dt: float
+    source: str
+    velocities: np.ndarray = field(default_factory=lambda: np.zeros(6))
+    _lengths: np.ndarray | None = None
+    _setpoints: np.ndarray | None = None
+
+    def now(self, lengths: np.ndarray, q_dot: np.ndarray | None) -> np.ndarray:
+        """The leg velocities now [m/s] from the source (the lag's run when it has
+        nothing finite).
+
+        Args:
+            lengths: (6,) encoder lengths now [m].
+            q_dot: (6,) measured leg velocities [m/s], or None.
+        """
+        if self.source == "measured" and q_dot is not None:
+            v = np.asarray(q_dot, dtype=float)
+            if np.all(np.isfinite(v)):
+                return v
+        if (self.source == "encoders" and self._lengths is not None
+                and self._setpoints is not None):
+            u = self._setpoints
+            start = (np.asarray(lengths, dtype=float) - self._lengths
+                     - (self.dt - self.c) * u) / self.c
+            v = self.a * start + (1 - self.a) * u
+            if np.all(np.isfinite(v)):
+                return v  # type: ignore[no-any-return]
+        return self.velocities
+
+    def sent(self, now: np.ndarray, lengths: np.ndarray, setpoints: np.ndarray) -> None:
+        """Record the step: the velocities ``now`` it started from, the encoder
+        ``lengths`` [m] and the setpoints [m/s] the drives receive (non-finite: zero)."""
+        u = np.where(np.isfinite(setpoints), setpoints, 0.0)
+        self.velocities = self.a * now + (1 - self.a) * u
+        q = np.asarray(lengths, dtype=float)
+        self._lengths = q.copy() if np.all(np.isfinite(q)) else None
+        self._setpoints = u
