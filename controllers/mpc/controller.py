@@ -54,7 +54,6 @@ REFERENCES = ("exponential", "zero")
 DRIVE_MODELS = ("ideal", "lag")
 
 
-
 class MPCLaw(Controller):
     """Base of the predictive controllers (see the module docstring for the options).
 
@@ -91,13 +90,12 @@ class MPCLaw(Controller):
         drive_model: ``"ideal"`` (the predicted leg velocities are the setpoints, as in
             the kinematic world) or ``"lag"``: each leg's velocity follows its setpoint as
             a first-order lag at the NOMINAL drives' ``velocity_bandwidth`` (robot file
-            ``[drives]``), starting from the measured leg velocities
-            (``Observation.q_dot``; without them, from the lag model run on the past
-            setpoints). For velocity-mode drives on the dynamic world or a real robot.
+            ``[drives]``), starting from the leg velocities now (``drive_state``). For
+            velocity-mode drives on the dynamic world or a real robot.
         drive_state: Where the lag model starts (:mod:`controllers.mpc.drive_state`):
-            ``"measured"`` (the default, as above), ``"encoders"`` (reconstructed from the
-            encoder lengths and the setpoints sent, for a robot that reports no
-            velocities) or ``"model"`` (the lag's run on the past setpoints alone: an
+            ``"measured"`` (the default: ``Observation.q_dot``, else reconstructed from
+            the encoder lengths and the setpoints sent), ``"encoders"`` (always the
+            reconstruction) or ``"model"`` (the lag's run on the past setpoints alone: an
             ablation, ``docs/results.md``, "Slow velocity drives").
         law_options: Further options of the fallback QP law (e.g. ``edge_feature``).
     """

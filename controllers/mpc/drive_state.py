@@ -7,8 +7,9 @@ The prediction models each leg's velocity loop as a first-order lag over a perio
 starts from the leg velocities now, which :class:`DriveLag` gives from one of three
 sources (option ``drive_state``):
 
-- ``"measured"``: the robot's leg velocities (``Observation.q_dot``, the dynamic world's
-  encoders);
+- ``"measured"`` (the default): the robot's leg velocities (``Observation.q_dot``, the
+  dynamic world's encoders); when a step has none (a robot that reports only lengths,
+  a NaN), the reconstruction from the encoder lengths below;
 - ``"encoders"``: reconstructed from the encoder LENGTHS alone, for a robot that reports
   no velocities: the last period's displacement ``dq`` and the setpoint ``u`` sent for
   it give the velocity at its start, ``v_prev = (dq - (dt - c) u) / c``, and the lag
@@ -75,8 +76,9 @@ class DriveLag:
     _setpoints: np.ndarray | None = None
 
     def now(self, lengths: np.ndarray, q_dot: np.ndarray | None) -> np.ndarray:
-        """The leg velocities now [m/s] from the source (the lag's run when it has
-        nothing finite).
+        """The leg velocities now [m/s] from the source (the encoders' reconstruction
+        when ``"measured"`` has no finite ``q_dot``; the lag's run when neither gives a
+        finite value).
 
         Args:
             lengths: (6,) encoder lengths now [m].
@@ -86,7 +88,7 @@ class DriveLag:
             v = np.asarray(q_dot, dtype=float)
             if np.all(np.isfinite(v)):
                 return v
-        if (self.source == "encoders" and self._lengths is not None
+        if (self.source != "model" and self._lengths is not None
                 and self._setpoints is not None):
             u = self._setpoints
             start = (np.asarray(lengths, dtype=float) - self._lengths

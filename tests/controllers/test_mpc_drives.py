@@ -159,35 +159,38 @@ def test_an_infinitely_fast_drive_is_the_ideal_prediction(geometry, model: str) 
 
 
 def test_the_drive_state_without_measured_velocities(geometry) -> None:  # type: ignore[no-untyped-def]
-    """Without ``q_dot`` the lag model starts from its own estimate: the lag run on the
-    setpoints it commanded (``v_{k+1} = a v_k + (1 - a) u_k``, from rest at reset); with
-    ``q_dot`` it starts from the measurement."""
-    ctrl, obs = _fresh(geometry)
+    """``drive_state = "model"``: the lag's run on the setpoints it commanded
+    (``v_{k+1} = a v_k + (1 - a) u_k``, from rest at reset), whatever is measured. The
+    default ``"measured"`` takes ``q_dot`` when it is finite, else the reconstruction
+    from the encoder lengths (as ``"encoders"`` would give), never a NaN command."""
+    from controllers.mpc.drive_state import DriveLag
+
+    ctrl, obs = _fresh(geometry, drive_state="model")
     a = ctrl.drives.a
     v0_slice = ctrl._lay.slices["v0"]
     u0 = ctrl.step(obs).velocities
     np.testing.assert_array_equal(ctrl._vec[v0_slice], np.zeros(6))
-    u1 = ctrl.step(obs).velocities
+    u1 = ctrl.step(replace(obs, q_dot=np.full(6, 0.003))).velocities  # ignored
     np.testing.assert_allclose(ctrl._vec[v0_slice], (1 - a) * u0, rtol=0, atol=1e-15)
     np.testing.assert_allclose(ctrl.drives.velocities, a * (1 - a) * u0 + (1 - a) * u1,
                                rtol=0, atol=1e-15)
     assert np.abs(u0).max() > 1e-4 and np.abs(u1 - u0).max() > 0
-    after_two = ctrl.drives.velocities.copy()
-    # a NaN in the measured velocities: the lag's own estimate, never a NaN command
-    estimate = ctrl.drives.velocities.copy()
-    cmd = ctrl.step(replace(obs, q_dot=np.array([0.001, np.nan, 0, 0, 0, 0])))
-    np.testing.assert_array_equal(ctrl._vec[v0_slice], estimate)
-    assert cmd.reason is None and np.all(np.isfinite(cmd.velocities))
-    measured = np.full(6, 0.003)
-    ctrl.step(replace(obs, q_dot=measured))
-    np.testing.assert_array_equal(ctrl._vec[v0_slice], measured)
-    # drive_state = "model": the measurement is ignored, the lag's own run is used.
-    ablated, _ = _fresh(geometry, drive_state="model")
-    ablated.step(obs)
-    ablated.step(obs)
-    np.testing.assert_array_equal(ablated.drives.velocities, after_two)
-    ablated.step(replace(obs, q_dot=measured))
-    np.testing.assert_array_equal(ablated._vec[v0_slice], after_two)
+
+    measured, _ = _fresh(geometry)
+    reconstruct = DriveLag(measured.drives.a, measured.drives.c, DT, "encoders")
+    v = np.full(6, 0.003)
+    u = measured.step(replace(obs, q_dot=v)).velocities
+    np.testing.assert_array_equal(measured._vec[v0_slice], v)
+    reconstruct.sent(v, obs.lengths, u)
+    moved = replace(obs, lengths=obs.lengths + 1e-5)
+    want = reconstruct.now(moved.lengths, None)
+    for q_dot in (None, np.array([0.001, np.nan, 0, 0, 0, 0])):
+        fresh, _ = _fresh(geometry)
+        fresh.step(replace(obs, q_dot=v))
+        cmd = fresh.step(replace(moved, q_dot=q_dot))
+        np.testing.assert_allclose(fresh._vec[v0_slice], want, rtol=0, atol=1e-15)
+        assert cmd.reason is None and np.all(np.isfinite(cmd.velocities))
+    assert np.abs(want - a * v - (1 - a) * u).max() > 1e-4  # not the lag's run
 
 
 def test_lag_model_refused_on_force_drives(geometry) -> None:  # type: ignore[no-untyped-def]
