@@ -145,9 +145,11 @@ def test_results_rows_have_the_documented_fields(tmp_path: Path) -> None:
 
 
 #: Control periods of the end-to-end runs: 120, fewer for the scenarios whose periods are
-#: costly (1000 frames/s cameras, rendered fisheye images, 1 ms physics); every
+#: costly (1000 frames/s cameras, rendered images, 1 ms physics, 64 sweep points); every
 #: controller at every sweep point still runs, records and is reported.
 END_TO_END_STEPS = {"camera-latency": 30, "fisheye-close": 40, "quick-dynamic": 40,
+                    "calibration-map": 30, "andreff2006-images-distorted": 40,
+                    "camera-latency-p2p": 40,
                     "inertia-error": 40, "paccot2008-tracking": 40, "mpc-drives": 20,
                     "mpc-drives-tracking": 20}
 
