@@ -4,7 +4,7 @@ stepped in a batch (:mod:`controllers.tracking_batch`)."""
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, fields
 
 import numpy as np
 
@@ -56,6 +56,5 @@ class GoalBatch:
                             for name in GOAL_FIELDS})
 
 
-#: The fields of :class:`Goal` (and of :class:`GoalBatch`).
-GOAL_FIELDS = ("normals", "lines", "directions", "lengths", "rotation", "translation",
-               "edge_visible")
+#: The fields of :class:`Goal` (and of :class:`GoalBatch`, which mirrors them typed).
+GOAL_FIELDS = tuple(f.name for f in fields(Goal))

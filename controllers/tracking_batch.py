@@ -32,7 +32,7 @@ from controllers.base import (
 )
 from controllers.batch import PerTrialLoop, actuation_of
 from controllers.goal_batch import GOAL_FIELDS, GoalBatch
-from controllers.tracking import TrackingPlan, announce_offset, retarget, tracking_plan
+from controllers.tracking import TrackingPlan, retarget, tracking_plan
 
 log = logging.getLogger(__name__)
 
@@ -84,6 +84,7 @@ class TrackingBatch:
         self._plans: list[TrackingPlan | None] = []
         self._contexts: list[ControllerContext] = []
         self._has = np.zeros(0, dtype=bool)
+        self._told: dict[int, Any] = {}
 
     # ------------------------------------------------------------------ reset
     def reset_batch(self, contexts: Sequence[ControllerContext]) -> None:
@@ -126,6 +127,11 @@ class TrackingBatch:
                 self._fill(self._q_rate[i], p.q_rate)
         self.inner.reset_batch([ctx if p is None else replace(ctx, goal=p.goal(0))
                                 for ctx, p in zip(self._contexts, plans, strict=True)])
+        #: The per-trial controllers told the feed-forward before each step (those with a
+        #: ``velocity_offset``; none for a batch object).
+        per_trial = getattr(self.inner, "controllers", None) or []
+        self._told = {trial: c for trial, c in enumerate(per_trial)
+                      if callable(getattr(c, "velocity_offset", None))}
 
     @staticmethod
     def _fill(out: np.ndarray, values: np.ndarray) -> None:
@@ -153,11 +159,10 @@ class TrackingBatch:
         if moved.any():
             self._retarget(tr[moved], k[rows][moved])
             self._k[tr[moved]] = k[rows][moved]
-        if self.feed_forward and self.actuation is Actuation.VELOCITY and len(rows):
-            per_trial = getattr(self.inner, "controllers", None)
-            if per_trial is not None:  # a PerTrialLoop: each trial's controller is told
-                for row, trial in zip(rows.tolist(), tr.tolist(), strict=True):
-                    announce_offset(per_trial[trial], self._q_rate[trial, k[row]])
+        if self._told and self.feed_forward and self.actuation is Actuation.VELOCITY:
+            for row, trial in zip(rows.tolist(), tr.tolist(), strict=True):
+                if trial in self._told:
+                    self._told[trial].velocity_offset(self._q_rate[trial, k[row]])
         bad = np.flatnonzero(has & ~finite)
         if len(bad):
             out = CommandBatch.zeros(len(trials), self.actuation)

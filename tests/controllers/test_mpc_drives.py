@@ -26,32 +26,25 @@ def _geometry(geometry, bandwidth_hz: float, mode: str = "velocity"):  # type: i
     return replace(geometry, drives=drives)
 
 
-def _stepped(geometry, bandwidth_hz: float, model: str, v0: np.ndarray | None,  # type: ignore[no-untyped-def]
-             horizon: int = 5, **options):
-    """A ``leg-edge-mpc`` with the lag model after one step from a pose near its goal."""
+def _fresh(geometry, bandwidth_hz: float = 8.0, horizon: int = 5, **options):  # type: ignore[no-untyped-def]
+    """A reset ``leg-edge-mpc`` with the lag model and its first observation (a pose
+    near its goal)."""
     from controllers import registry
 
     world = World(_geometry(geometry, bandwidth_hz), make_camera("unified", geometry))
-    Rs, ts = world.poses(2, np.random.default_rng(3), margin=0.02)
-    ctrl = registry.create("leg-edge-mpc", model=model, horizon=horizon, drive_model="lag",
-                           compiled=False, max_iter=1, **options)
-    ctrl.reset(world.context(world.goal(Rs[1], ts[1]), DT))
-    obs = world.observation(Rs[0], ts[0])
-    ctrl.step(obs if v0 is None else replace(obs, q_dot=v0))
-    return ctrl, obs
-
-
-def _fresh(geometry, horizon: int = 5, **options):  # type: ignore[no-untyped-def]
-    """A reset ``leg-edge-mpc`` with the lag model (8 Hz drives), its first observation
-    and the world (the goal: a second pose)."""
-    from controllers import registry
-
-    world = World(_geometry(geometry, 8.0), make_camera("unified", geometry))
     Rs, ts = world.poses(2, np.random.default_rng(3), margin=0.02)
     ctrl = registry.create("leg-edge-mpc", horizon=horizon, drive_model="lag",
                            compiled=False, **options)
     ctrl.reset(world.context(world.goal(Rs[1], ts[1]), DT))
     return ctrl, world.observation(Rs[0], ts[0])
+
+
+def _stepped(geometry, bandwidth_hz: float, model: str, v0: np.ndarray | None,  # type: ignore[no-untyped-def]
+             horizon: int = 5, **options):
+    """:func:`_fresh` (one SQP iteration) after one step, with ``q_dot = v0``."""
+    ctrl, obs = _fresh(geometry, bandwidth_hz, horizon, model=model, max_iter=1, **options)
+    ctrl.step(obs if v0 is None else replace(obs, q_dot=v0))
+    return ctrl, obs
 
 
 def _kernel(ctrl, U: np.ndarray) -> np.ndarray:  # type: ignore[no-untyped-def]
