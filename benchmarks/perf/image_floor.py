@@ -44,6 +44,7 @@ from benchmarks.sim import (
     run_trials,
 )
 from benchmarks.study.scenario import Scenario, load_scenario
+from controllers.base import ObservationBatch
 from hexapod.se3 import log_so3
 from vision.render import Renderer
 
@@ -56,11 +57,11 @@ class _Mixed:
         self.goal = goal
         self.detect_times: list[float] = getattr(current, "detect_times", [])
 
-    def measure(self, *args: Any, **kwargs: Any) -> dict[str, Any]:
-        return dict(self.current.measure(*args, **kwargs))
+    def measure(self, *args: Any, **kwargs: Any) -> ObservationBatch:
+        return self.current.measure(*args, **kwargs)  # type: ignore[no-any-return]
 
-    def measure_goal(self, *args: Any, **kwargs: Any) -> dict[str, Any]:
-        return dict(self.goal.measure_goal(*args, **kwargs))
+    def measure_goal(self, *args: Any, **kwargs: Any) -> ObservationBatch:
+        return self.goal.measure_goal(*args, **kwargs)  # type: ignore[no-any-return]
 
 
 class _Exact(GeometricSensor):
@@ -68,7 +69,7 @@ class _Exact(GeometricSensor):
 
     def measure(self, rotations: np.ndarray, translations: np.ndarray,
                 rngs: list[np.random.Generator], apply_noise: bool = True
-                ) -> dict[str, Any]:
+                ) -> ObservationBatch:
         return super().measure(rotations, translations, rngs, apply_noise=False)
 
 

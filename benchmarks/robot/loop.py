@@ -1,6 +1,7 @@
-"""The real servo loop (:func:`servo_loop`): the pose predicted from the measured lengths,
-the camera's features, the controller's command, the backend's period; its status (one
-rewritten line on a terminal) and its result."""
+"""The real servo session (:func:`servo_loop`): the simulator's closed loop with a batch of
+one, a robot behind its backend as the plant (the pose predicted from the measured
+lengths), the camera's features, the controller's command, the backend's period; its book
+(:class:`ServoBook`), status (one rewritten line on a terminal) and result."""
 
 from __future__ import annotations
 
@@ -16,6 +17,8 @@ import numpy as np
 
 from benchmarks.exceptions import BenchmarkError
 from benchmarks.robot.goals import feature_directions, feature_error, feature_lines
+from benchmarks.sim.sensors import camera_batch
+from controllers.base import ObservationBatch
 from hexapod.exceptions import ForwardKinematicsError
 from hexapod.geometry import HexapodGeometry
 from vision.feature_cameras import FeatureSensor, sensor_camera
@@ -158,11 +161,15 @@ def servo_loop(
 ) -> ServoResult:
     """Run a reset controller on a connected robot until convergence, ``max_steps`` or Ctrl-C.
 
-    The caller halts the robot (use it as a context manager); Ctrl-C is caught here
-    and reported as the outcome ``"interrupted"``.
+    The session is the simulator's closed loop (:func:`benchmarks.sim.loop.closed_loop`)
+    with a batch of one: the robot is a :class:`~benchmarks.sim.plant.BackendPlant` (the
+    pose is the nominal forward kinematics of the measured lengths), the camera a
+    :class:`ServoCamera`, the book a :class:`ServoBook`. The caller halts the robot (use
+    it as a context manager); Ctrl-C is caught here and reported as the outcome
+    ``"interrupted"``.
 
     Args:
-        robot: A connected backend (``measured_lengths()``, ``step(v, dt)``).
+        robot: A connected backend (``measured_lengths()``, ``apply(v, kind, dt, name)``).
         sensor: The camera.
         controller: A controller already reset with its context.
         goal: The controller's :class:`~controllers.base.Goal` (lengths, normals).
@@ -178,94 +185,192 @@ def servo_loop(
     Returns:
         The outcome and the link statistics.
     """
-    from controllers.base import Observation
-    from controllers.batch import actuation_of
+    from benchmarks.sim.loop import closed_loop
+    from benchmarks.sim.plant import BackendPlant
+    from controllers.batch import PerTrialLoop, actuation_of
     from hexapod.actuation import check_actuation
-    from hexapod.fk import forward_kinematics
 
-    q_goal = np.asarray(goal.lengths, float)
-    n_goal = np.asarray(goal.normals, float)
-    vis_goal = np.asarray(goal.edge_visible, bool)
-    cam = sensor_camera(sensor)
-    res = ServoResult("max-steps", 0, 0.0)
-    settled = 0
-    guess: tuple[np.ndarray, np.ndarray] | None = None
-    t0 = time.perf_counter()
-    step = 0
     name = getattr(controller, "name", "controller")
     declared = check_actuation(actuation_of(controller), robot.actuations,
                                f"the robot {robot.identity or type(robot).__name__!r}", name)
+    one = PerTrialLoop(lambda: controller, declared)  # already reset: a batch of one
+    one.controllers = [controller]
+    camera = ServoCamera(sensor)
+    res = ServoResult("max-steps", 0, 0.0)
+    t0 = time.perf_counter()
     try:
-        q = np.asarray(robot.measured_lengths(), float)
-        while max_steps is None or step < max_steps:
-            try:
-                sol = forward_kinematics(geometry, q, guess=guess, check_stroke=False)
-                guess = (sol.rotation, sol.translation)
-            except ForwardKinematicsError as exc:
-                if guess is None:
-                    raise BenchmarkError(f"no platform pose for the measured lengths "
-                                         f"{np.round(q * 1e3, 3)} mm: {exc}") from None
-                log.warning("forward kinematics failed (%s); keeping the last pose", exc)
-            rotation, translation = guess
-            feats = sensor.measure(rotation, translation)
-            reason: str | None = None
-            ctrl_err = math.nan
-            actuation = declared
-            if feats is None:
-                v = np.zeros(6)
-                reason = "lost camera frame"
-                f_err = math.nan
-                if getattr(sensor, "ended", False):
-                    res.outcome = "camera ended"
-                    break
-            else:
-                f_err = feature_error(feats, n_goal, vis_goal)
-                directions, both = feature_directions(feats)
-                obs = Observation(
-                    t=step * dt, lengths=q.copy(), normals=feats.normals,
-                    lines=feature_lines(cam, feats.normals),
-                    directions=directions, edge_visible=feats.edge_visible,
-                    direction_visible=both)
-                cmd = controller.step(obs)
-                v = np.asarray(cmd.values, float)
-                actuation = cmd.actuation
-                ctrl_err = float(cmd.error_norm)
-                reason = cmd.reason
-                if reason is None and (v.shape != (6,) or not np.all(np.isfinite(v))):
-                    reason = f"invalid command {v!r}"
-                if reason is not None:
-                    v = np.zeros(6)
-                    res.refused += 1
-            if on_pose is not None:
-                on_pose(rotation, translation, None if feats is None else feats.edge_visible)
-            bs = robot.apply(v, actuation, dt, name)
-            q = np.asarray(bs.lengths, float)
-            res.rtts.append(float(bs.round_trip_s))
-            res.missed += int(bs.missed_period)
-            leg_err = float(np.max(np.abs(q - q_goal)))
-            ok = (leg_err <= tolerance and math.isfinite(f_err) and f_err <= feature_tolerance)
-            settled = settled + 1 if ok else 0
-            res.lost_frames = sensor.lost_frames
-            status = PeriodStatus(
-                step=step, t=time.perf_counter() - t0, lengths=q, leg_error=leg_err,
-                feature_error=f_err, controller_error=ctrl_err, velocities=v,
-                visible_edges=0 if feats is None else feats.visible_count, reason=reason,
-                lost_frame=feats is None, rtt=float(bs.round_trip_s),
-                missed=bool(bs.missed_period), missed_total=res.missed,
-                lost_total=res.lost_frames, refused_total=res.refused)
-            res.last = status
-            step += 1
-            if on_period is not None:
-                on_period(status)
-            if settled >= settle:
-                res.outcome = "converged"
-                break
+        q = np.asarray(robot.measured_lengths(), float)[None].copy()
+        R, t = np.zeros((1, 3, 3)), np.zeros((1, 3))
+        poses = _NominalPoses(geometry, q, R, t)
+        plant = BackendPlant([robot], q, R, t, np.zeros((1, 6)), poses)
+        plant.use_actuation(declared, name)
+        book = ServoBook(plant, camera, goal, tolerance, feature_tolerance, settle, res, t0,
+                         declared, name, on_period, on_pose)
+        closed_loop(plant, camera, None, one, book, dt, np.zeros((1, 6)),
+                    None if max_steps is None else max_steps - 1)
     except KeyboardInterrupt:
         res.outcome = "interrupted"
-    res.steps = step
     res.wall_s = time.perf_counter() - t0
     res.lost_frames = sensor.lost_frames
     return res
+
+
+class _NominalPoses:
+    """The predicted pose of the robot: the nominal forward kinematics of its measured
+    lengths, seeded with the previous pose (a failure keeps the last pose, warned; with
+    no pose yet it is a :class:`BenchmarkError`)."""
+
+    def __init__(self, geometry: HexapodGeometry, q: np.ndarray, R: np.ndarray,
+                 t: np.ndarray) -> None:
+        self.geometry = geometry
+        self.q, self.R, self.t = q, R, t
+        self.guess: tuple[np.ndarray, np.ndarray] | None = None
+        self(np.zeros(1, dtype=int))
+
+    def __call__(self, run: np.ndarray) -> np.ndarray:
+        from hexapod.fk import forward_kinematics
+
+        try:
+            sol = forward_kinematics(self.geometry, self.q[0], guess=self.guess,
+                                     check_stroke=False)
+            self.guess = (sol.rotation, sol.translation)
+            self.R[0], self.t[0] = sol.rotation, sol.translation
+        except ForwardKinematicsError as exc:
+            if self.guess is None:
+                raise BenchmarkError(f"no platform pose for the measured lengths "
+                                     f"{np.round(self.q[0] * 1e3, 3)} mm: {exc}") from None
+            log.warning("forward kinematics failed (%s); keeping the last pose", exc)
+        return np.zeros(len(run), dtype=bool)
+
+
+class ServoCamera:
+    """The loop's sensor over a :class:`FeatureSensor`: the features of the image at the
+    predicted pose as the camera's batch of one (a lost frame: no edge seen, and
+    ``features`` None).
+
+    Args:
+        sensor: The camera.
+    """
+
+    def __init__(self, sensor: FeatureSensor) -> None:
+        self.sensor = sensor
+        self.camera = sensor_camera(sensor)
+        #: This period's features (None: lost frame).
+        self.features: Any = None
+
+    def measure(self, rows: np.ndarray, rotations: np.ndarray, translations: np.ndarray
+                ) -> ObservationBatch:
+        """The image at the pose of the one row."""
+        feats = self.sensor.measure(rotations[0], translations[0])
+        self.features = feats
+        if feats is None:
+            return camera_batch(np.full((1, 6, 2, 3), np.nan), None, np.full((1, 6, 3), np.nan),
+                                np.zeros((1, 6, 2), dtype=bool), np.zeros((1, 6), dtype=bool))
+        directions, both = feature_directions(feats)
+        lines = feature_lines(self.camera, feats.normals)
+        return camera_batch(np.asarray(feats.normals)[None],
+                            None if lines is None else np.asarray(lines)[None],
+                            np.asarray(directions)[None], np.asarray(feats.edge_visible)[None],
+                            np.asarray(both)[None])
+
+
+class ServoBook:
+    """The servo session's book (:class:`benchmarks.sim.loop.LoopBook`, one row): a lost
+    frame or a refused or invalid command moves nothing that period (zeros are sent, so
+    the robot's watchdog never trips); the session converges after ``settle`` periods
+    within both tolerances, ends with the camera's video; every period gives its
+    :class:`PeriodStatus`."""
+
+    def __init__(self, plant: Any, camera: ServoCamera, goal: Any, tolerance: float,
+                 feature_tolerance: float, settle: int, result: ServoResult, t0: float,
+                 declared: Any, name: str,
+                 on_period: Callable[[PeriodStatus], None] | None,
+                 on_pose: Callable[[np.ndarray, np.ndarray, np.ndarray | None], None] | None
+                 ) -> None:
+        self.active = np.ones(1, dtype=bool)
+        self.plant, self.camera = plant, camera
+        self.q_goal = np.asarray(goal.lengths, float)
+        self.n_goal = np.asarray(goal.normals, float)
+        self.vis_goal = np.asarray(goal.edge_visible, bool)
+        self.tolerance, self.feature_tolerance, self.settle = (tolerance, feature_tolerance,
+                                                               settle)
+        self.res, self.t0 = result, t0
+        self.declared, self.name = declared, name
+        self.on_period, self.on_pose = on_period, on_pose
+        self.settled = 0
+        self.reason: str | None = None
+        self.f_err = math.nan
+        self.ctrl_err = math.nan
+
+    def check(self, step: int, idx: np.ndarray) -> np.ndarray:
+        """Never done before the period (the session ends after a period)."""
+        return np.zeros(len(idx), dtype=bool)
+
+    def observed(self, step: int, idx: np.ndarray, obs: ObservationBatch) -> np.ndarray:
+        """The feature error of this image; a lost frame (the end of a video ends the
+        session)."""
+        feats = self.camera.features
+        self.ctrl_err = math.nan
+        self.plant.use_actuation(self.declared, self.name)
+        if feats is None:
+            self.reason, self.f_err = "lost camera frame", math.nan
+            if getattr(self.camera.sensor, "ended", False):
+                self.res.outcome = "camera ended"
+                self.active[:] = False
+            return np.zeros(1, dtype=bool)
+        self.reason = None
+        self.f_err = feature_error(feats, self.n_goal, self.vis_goal)
+        return np.ones(1, dtype=bool)
+
+    def commanded(self, step: int, rows: np.ndarray, commands: Any,
+                  seconds: float) -> tuple[np.ndarray, np.ndarray]:
+        """A refused or invalid command is replaced by zeros (counted); none ends."""
+        v = commands.values[0]
+        self.plant.use_actuation(commands.actuation, self.name)
+        self.ctrl_err = float(commands.error_norm[0])
+        self.reason = commands.reasons[0]
+        if self.reason is None and (v.shape != (6,) or not np.all(np.isfinite(v))):
+            self.reason = f"invalid command {v!r}"
+        if self.reason is not None:
+            self.res.refused += 1
+        return np.array([self.reason is None]), np.zeros(1, dtype=bool)
+
+    def period(self, step: int, idx: np.ndarray, done: np.ndarray, obs: ObservationBatch,
+               error_norm: np.ndarray, values: np.ndarray) -> None:
+        """Show the predicted pose (viewer)."""
+        self.values = values[0].copy()
+        if self.on_pose is not None and self.active[0]:
+            feats = self.camera.features
+            self.on_pose(self.plant.R[0], self.plant.t[0],
+                         None if feats is None else feats.edge_visible)
+
+    def advanced(self, step: int, run: np.ndarray, failures: dict[int, str]) -> None:
+        """The period's status, and the convergence test."""
+        res, plant = self.res, self.plant
+        bs = plant.last[0]
+        q = plant.q[0].copy()
+        res.rtts.append(float(bs.round_trip_s))
+        res.missed += int(bs.missed_period)
+        leg_err = float(np.max(np.abs(q - self.q_goal)))
+        ok = (leg_err <= self.tolerance and math.isfinite(self.f_err)
+              and self.f_err <= self.feature_tolerance)
+        self.settled = self.settled + 1 if ok else 0
+        res.lost_frames = self.camera.sensor.lost_frames
+        feats = self.camera.features
+        status = PeriodStatus(
+            step=step, t=time.perf_counter() - self.t0, lengths=q, leg_error=leg_err,
+            feature_error=self.f_err, controller_error=self.ctrl_err, velocities=self.values,
+            visible_edges=0 if feats is None else feats.visible_count, reason=self.reason,
+            lost_frame=feats is None, rtt=float(bs.round_trip_s),
+            missed=bool(bs.missed_period), missed_total=res.missed,
+            lost_total=res.lost_frames, refused_total=res.refused)
+        res.last = status
+        res.steps = step + 1
+        if self.on_period is not None:
+            self.on_period(status)
+        if self.settled >= self.settle:
+            res.outcome = "converged"
+            self.active[:] = False
 
 
 class StatusLine:

@@ -1,6 +1,7 @@
-"""The bookkeeping of a group of trials stepped together, shared by both engines: the
-convergence test of every period, the failures, timings and recorded series, and the
-result rows (one row of ``results.jsonl`` per trial)."""
+"""The bookkeeping of a group of trials stepped together, the book of the closed loop
+(:class:`benchmarks.sim.loop.LoopBook`): the convergence test of every period, the
+failures, timings and recorded series, and the result rows (one row of ``results.jsonl``
+per trial)."""
 
 from __future__ import annotations
 
@@ -13,12 +14,15 @@ from typing import Any
 
 import numpy as np
 
+from benchmarks.sim.actuation import require_batch
 from benchmarks.sim.tolerance import unconverged_reason
 from benchmarks.sim.world import TrialSetup
 from benchmarks.study.failures import user_message
 from benchmarks.study.scenario import Scenario
+from controllers.base import CommandBatch, ObservationBatch
 from controllers.exceptions import ControllerError
 from controllers.registry import registry
+from hexapod.actuation import Actuation
 from hexapod.exceptions import HexapodError
 from hexapod.se3 import pose_error
 from vision.exceptions import VisionError
@@ -42,7 +46,8 @@ class TrialResult:
 
 @dataclass
 class Book:
-    """Per-trial bookkeeping arrays of a group of ``n`` trials (index = row of the group)."""
+    """Per-trial bookkeeping arrays of a group of ``n`` trials (index = row of the group),
+    and the loop's hooks (:meth:`attach` first)."""
 
     n: int
     pos_tol: float
@@ -55,16 +60,28 @@ class Book:
     converged: np.ndarray
     violations: np.ndarray
     refused: np.ndarray
-    missed: np.ndarray
     hidden: np.ndarray
     recording: list[bool]
     failure: list[str | None] = field(default_factory=list)
     tail_pos: list[list[float]] = field(default_factory=list)
     tail_ori: list[list[float]] = field(default_factory=list)
     step_times: list[list[float]] = field(default_factory=list)
-    rtts: list[list[float]] = field(default_factory=list)
     series: list[dict[str, list[Any]]] = field(default_factory=list)
     tracker: Any = None  # the tracking metrics of a trajectory task
+    task: Any = None  # the scenario's task
+    dt: float = 0.0  # the control period [s]
+    stroke: tuple[float, float] = (0.0, 0.0)  # the true legs' stroke [m]
+    max_speed: float = 0.0  # the true legs' speed limit [m/s]
+    trials: list[int] = field(default_factory=list)  # the trial index of each row
+    # set by attach: the loop's world
+    plant: Any = None
+    targets: Callable[[int, np.ndarray], tuple[np.ndarray, np.ndarray]] | None = None
+    actuation: Actuation = Actuation.VELOCITY
+    label: str = ""
+    on_step: Callable[[int, np.ndarray, np.ndarray, np.ndarray], None] | None = None
+    batch_times: list[float] = field(default_factory=list)  # controller time per row [s]
+    stepped: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=int))
+    _errors: tuple[np.ndarray, np.ndarray] | None = None  # this period's pose errors
 
     @classmethod
     def new(cls, sc: Scenario, group: list[TrialSetup], record_trials: int) -> Book:
@@ -82,40 +99,100 @@ class Book:
             active=np.ones(n, dtype=bool), steps=np.zeros(n, dtype=int),
             settled=np.zeros(n, dtype=int), last_bad=np.full(n, -1),
             converged=np.zeros(n, dtype=bool), violations=np.zeros(n, dtype=int),
-            refused=np.zeros(n, dtype=int), missed=np.zeros(n, dtype=int),
+            refused=np.zeros(n, dtype=int),
             hidden=np.zeros(n, dtype=int), recording=recording, failure=[None] * n,
             tail_pos=[[] for _ in range(n)], tail_ori=[[] for _ in range(n)],
-            step_times=[[] for _ in range(n)], rtts=[[] for _ in range(n)],
+            step_times=[[] for _ in range(n)],
             series=[{k: [] for k in SERIES_KEYS} if rec else {} for rec in recording],
-            tracker=tracker_for(sc, group, pos_tol, ori_tol))
+            tracker=tracker_for(sc, group, pos_tol, ori_tol), task=sc.task, dt=sc.dt,
+            stroke=group[0].world.geometry.stroke if group else (0.0, 0.0),
+            max_speed=group[0].world.geometry.max_speed if group else 0.0,
+            trials=[s.trial for s in group], stepped=np.zeros(n, dtype=int))
 
-    def follow(self, plant: Any) -> None:
-        """Let the tracking metrics sample ``plant``'s drive forces every period."""
+    def attach(self, plant: Any, targets: Callable[[int, np.ndarray],
+                                                   tuple[np.ndarray, np.ndarray]],
+               actuation: Actuation, label: str,
+               on_step: Callable[[int, np.ndarray, np.ndarray, np.ndarray], None] | None
+               ) -> None:
+        """The loop's world: the plant (its true state; the tracking metrics sample its
+        drive forces), the pose each row is measured against at each step, what the
+        controller ``label`` declared it commands, and a live view's callback
+        ``(trial, rotation, translation, edge_visible)``."""
+        self.plant = plant
+        self.targets = targets
+        self.actuation = actuation
+        self.label = label
+        self.on_step = on_step
         if self.tracker is not None:
             self.tracker.follow(plant)
 
-    def check(self, sc: Scenario, step: int, idx: np.ndarray, dp: np.ndarray,
-              da: np.ndarray) -> np.ndarray:
-        """The convergence test of one period for the active rows ``idx`` (pose errors
-        ``dp`` [m], ``da`` [rad]); returns which of them are done."""
+    def check(self, step: int, idx: np.ndarray) -> np.ndarray:
+        """The convergence test of one period for the active rows ``idx`` (their pose
+        errors to their targets); returns which of them are done."""
+        assert self.targets is not None, "Book.attach first"
+        dp, da = pose_error(self.plant.R[idx], self.plant.t[idx], *self.targets(step, idx))
+        self._errors = (dp, da)
         ok = (dp < self.pos_tol) & (da < self.ori_tol)
         if self.tracker is not None:
             self.tracker.add(step, idx, dp, da)
         self.settled[idx] = np.where(ok, self.settled[idx] + 1, 0)
         self.last_bad[idx[~ok]] = step
-        if sc.task.fixed_duration and step > self.tail_start:
+        task = self.task
+        if task.fixed_duration and step > self.tail_start:
             for j, k in enumerate(idx):
                 self.tail_pos[k].append(float(dp[j]))
                 self.tail_ori[k].append(float(da[j]))
-        if sc.task.fixed_duration:
-            done = np.full(len(idx), step == sc.task.max_steps)
+        if task.fixed_duration:
+            done = np.full(len(idx), step == task.max_steps)
             self.converged[idx] = ok
         else:
-            done = self.settled[idx] >= sc.task.settle_steps
+            done = self.settled[idx] >= task.settle_steps
             self.converged[idx[done]] = True
-            if step == sc.task.max_steps:
+            if step == task.max_steps:
                 done[:] = True
         return done
+
+    def observed(self, step: int, idx: np.ndarray, obs: ObservationBatch) -> np.ndarray:
+        """Count the hidden edges, show the live view; every row has its image."""
+        self.seen(idx, obs.edge_visible)
+        if self.on_step is not None:
+            R, t = self.plant.R, self.plant.t
+            for j, k in enumerate(idx.tolist()):
+                self.on_step(self.trials[k], R[k], t[k], obs.edge_visible[j])
+        return np.ones(len(idx), dtype=bool)
+
+    def commanded(self, step: int, rows: np.ndarray, commands: CommandBatch,
+                  seconds: float) -> tuple[np.ndarray, np.ndarray]:
+        """Refuse a batch of another kind than declared; account the commands
+        (:meth:`commands`): a row that fails with its command ends, without it."""
+        require_batch(commands, self.actuation, self.label)
+        self.batch_times.append(seconds)
+        self.stepped[rows] += 1
+        failed = self.commands(rows, commands.values, commands.reasons)
+        return ~failed, failed
+
+    def period(self, step: int, idx: np.ndarray, done: np.ndarray, obs: ObservationBatch,
+               error_norm: np.ndarray, values: np.ndarray) -> None:
+        """Record the period of the recorded rows, end the ``done`` rows, count the leg
+        velocity commands that would leave the stroke."""
+        plant = self.plant
+        dp, da = self._errors  # type: ignore[misc]
+        for j in np.flatnonzero(np.asarray(self.recording)[idx]).tolist():
+            r = int(idx[j])
+            self.record(r, step * self.dt, plant.q[r], plant.R[r], plant.t[r],
+                        obs.edge_visible[j], error_norm[j], dp[j], da[j], values[j])
+            self.record_more(r, plant.series(r))
+        finished = idx[done]
+        self.active[finished] = False
+        self.steps[finished] = step
+        if self.actuation is Actuation.VELOCITY and not done.all():
+            run = idx[~done]
+            self.violations[run] += stroke_violations(
+                plant.q[run], values[~done], self.dt, self.stroke, self.max_speed)
+
+    def advanced(self, step: int, run: np.ndarray, failures: dict[int, str]) -> None:
+        """End the rows whose world failed (:meth:`world_failures`)."""
+        self.world_failures(failures, step)
 
     def seen(self, idx: np.ndarray, edge_visible: np.ndarray) -> None:
         """Count the periods where the rows ``idx`` measured fewer than their 12 edges."""
@@ -192,6 +269,10 @@ class Book:
                 figures: Callable[[int], dict[str, Any]] | None = None) -> list[TrialResult]:
         """The result rows (and recorded series) of the group at the final poses
         (``figures``: a plant's extra figures of row ``m``)."""
+        if self.batch_times:  # a row is commanded from step 0 until it is done
+            times = np.array(self.batch_times)
+            for m in range(self.n):
+                self.step_times[m] = times[:self.stepped[m]].tolist()
         R_goal = np.array([s.goal_rotation for s in group])
         t_goal = np.array([s.goal_translation for s in group])
         dp, da = pose_error(R, t, R_goal, t_goal)
@@ -224,11 +305,6 @@ class Book:
                     self.tail_ori[m])))
             if detect_times:
                 row["detect_time_ms"] = float(np.median(detect_times) * 1e3)
-            if self.rtts[m]:
-                arr = np.array(self.rtts[m]) * 1e3
-                row["rtt_median_ms"] = float(np.median(arr))
-                row["rtt_p99_ms"] = float(np.percentile(arr, 99))
-                row["missed_periods"] = int(self.missed[m])
             if self.tracker is not None:
                 row.update(self.tracker.row(m))
             if figures is not None:
@@ -242,6 +318,13 @@ class Book:
                 ser_out["goal_translation"] = s.goal_translation
             out.append(TrialResult(row, ser_out))
         return out
+
+
+def stroke_violations(q: np.ndarray, v: np.ndarray, dt: float,
+                      stroke: tuple[float, float], max_speed: float) -> np.ndarray:
+    """(n,) 1 where the (speed-limited) command would leave the stroke this period."""
+    q_next = q + np.clip(v, -max_speed, max_speed) * dt
+    return np.any((q_next < stroke[0] - 1e-9) | (q_next > stroke[1] + 1e-9), axis=1)
 
 
 def base_row(sc: Scenario, spec: Any, trial: int) -> dict[str, Any]:

@@ -31,12 +31,12 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable
-from typing import Any
 
 import numpy as np
 
 from benchmarks.sim.world import TrialSetup, trial_rng
 from benchmarks.study.scenario import Scenario
+from controllers.base import ObservationBatch
 from hexapod.fk import pack_rows, solve_rows
 
 #: The random stream of a trial's frame-time jitter.
@@ -46,7 +46,10 @@ MAX_JITTER_FRACTION = 0.45
 #: Capture times closer than this to a control instant are that instant [s].
 INSTANT = 1e-9
 
-Measure = Callable[[np.ndarray, np.ndarray, np.ndarray], dict[str, Any]]
+#: A sensor: ``(rows, R, t) ->`` the camera's batch of ``rows`` at poses ``R``, ``t``.
+Measure = Callable[[np.ndarray, np.ndarray, np.ndarray], ObservationBatch]
+#: The fields of a frame kept until the next one arrives.
+FRAME_FIELDS = ("normals", "lines", "directions", "edge_visible", "direction_visible")
 
 
 def clock_active(sc: Scenario) -> bool:
@@ -109,7 +112,7 @@ class CameraClock:
         self.cache: dict[str, np.ndarray | None] = {}
         self._rows = pack_rows(R, t, q, base_points, platform_points)
 
-    def measure(self, step: int, idx: np.ndarray, measure: Measure) -> dict[str, Any]:
+    def measure(self, step: int, idx: np.ndarray, measure: Measure) -> ObservationBatch:
         """The features the rows ``idx`` receive at control step ``step``.
 
         Args:
@@ -119,7 +122,7 @@ class CameraClock:
                 generator per row: the noise of a frame is drawn when it is measured).
 
         Returns:
-            The sensor's dictionary for ``idx``, and ``image_t`` (n,) the capture times [s].
+            The camera's batch of ``idx``, with ``image_t`` (n,) the capture times [s].
         """
         slot = step % self.depth
         self.hist_q[idx, slot] = self.q[idx]
@@ -136,9 +139,11 @@ class CameraClock:
             m = measure(rows, R_c, t_c)
             self._store(rows, m, len(self.q))
             self.frame[rows] = newest[new]
-        out: dict[str, Any] = {k: (None if v is None else v[idx]) for k, v in self.cache.items()}
-        out["image_t"] = self.capture[idx, self.frame[idx]] - 0.5 * self.exposure
-        return out
+        frame = {k: (None if v is None else v[idx]) for k, v in self.cache.items()}
+        return ObservationBatch(trials=np.arange(len(idx)), t=np.zeros(len(idx)),
+                                lengths=np.full((len(idx), 6), np.nan),
+                                image_t=self.capture[idx, self.frame[idx]] - 0.5 * self.exposure,
+                                **frame)  # type: ignore[arg-type]
 
     def _exposed_poses(self, rows: np.ndarray, c: np.ndarray, step: int
                        ) -> tuple[np.ndarray, np.ndarray]:
@@ -152,8 +157,9 @@ class CameraClock:
         return (np.stack([p[0] for p in poses], axis=1),
                 np.stack([p[1] for p in poses], axis=1))
 
-    def _store(self, rows: np.ndarray, m: dict[str, Any], n: int) -> None:
-        for key, value in m.items():
+    def _store(self, rows: np.ndarray, m: ObservationBatch, n: int) -> None:
+        for key in FRAME_FIELDS:
+            value = getattr(m, key)
             if value is None:
                 self.cache.setdefault(key, None)
                 continue
@@ -201,11 +207,10 @@ def make_clock(sc: Scenario, group: list[TrialSetup], q: np.ndarray, R: np.ndarr
 
 def clocked_measure(clock: CameraClock | None, step: int, idx: np.ndarray,
                     state: tuple[np.ndarray, np.ndarray], measure: Measure
-                    ) -> dict[str, Any]:
-    """The hook of both engines: the sensor at the rows' current poses without a clock
-    (``image_t`` None), else through :meth:`CameraClock.measure`."""
+                    ) -> ObservationBatch:
+    """The camera's batch of the rows ``idx`` at control step ``step``: the sensor at the
+    rows' current poses without a clock (``image_t`` None), else through
+    :meth:`CameraClock.measure`."""
     if clock is None:
-        m = measure(idx, state[0][idx], state[1][idx])
-        m["image_t"] = None
-        return m
+        return measure(idx, state[0][idx], state[1][idx])
     return clock.measure(step, idx, measure)

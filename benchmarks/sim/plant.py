@@ -1,10 +1,9 @@
-"""The plant seam: the TRUE robot between two control periods, for both engines.
+"""The plant seam: the robot between two control periods, for the one closed loop
+(:func:`benchmarks.sim.loop.closed_loop`).
 
-A plant owns nothing of the controller: it receives the commanded leg velocities of the
-rows that still run and moves the true state (leg lengths ``q``, platform pose ``R``,
-``t``) over one control period. Both the batched engine (:mod:`benchmarks.sim.engine`)
-and the per-trial path (:mod:`benchmarks.sim.stepper`) call the same plant, so they
-give the same rows in every world.
+A plant owns nothing of the controller: it receives the commands of the rows that still
+run and moves the state (leg lengths ``q``, platform pose ``R``, ``t``) over one control
+period.
 
 - :class:`KinematicPlant` (``[robot] world = "kinematic"``, the default): today's world,
   massless and ideal. The command is clamped to the stroke and speed limits and
@@ -12,6 +11,10 @@ give the same rows in every world.
   robot, warm-started at the previous pose.
 - :class:`~benchmarks.sim.dynamic_plant.DynamicPlant` (``world = "dynamic"``): the true
   robot's dynamics and drives integrated at ``physics_dt`` (its own module).
+- :class:`BackendPlant`: robots behind backends (a real robot over its link, an emulator,
+  a backend plugin), one per row; each applies its row's command and paces the period,
+  the poses follow from the lengths they measure (a study's ``--backend``, and the servo
+  session's robot, a batch of one).
 
 The plants change the caller's arrays ``q``, ``R`` and ``t`` in place (rows ``run``).
 """
@@ -19,11 +22,13 @@ The plants change the caller's arrays ``q``, ``R`` and ``t`` in place (rows ``ru
 from __future__ import annotations
 
 import logging
+from collections.abc import Callable, Sequence
 from typing import Any, Protocol
 
 import numpy as np
 
-from hexapod.backends.base import clamp_velocities
+from hexapod.actuation import Actuation
+from hexapod.backends.base import Backend, clamp_velocities
 from hexapod.fk import pack_rows, solve_rows
 
 log = logging.getLogger(__name__)
@@ -124,6 +129,77 @@ class KinematicPlant:
     def measured_rates(self, rows: np.ndarray) -> np.ndarray | None:
         """The kinematic world measures no leg velocities (``Observation.q_dot`` None)."""
         return None
+
+    def series(self, row: int) -> dict[str, np.ndarray]:
+        """See :meth:`Plant.series`: nothing."""
+        return {}
+
+
+class BackendPlant:
+    """Robots behind backends, one per row: each backend applies its row's command over
+    the period (and paces it), the lengths are what it measures, the poses follow.
+
+    Args:
+        backends: One connected backend per row.
+        q: (N, 6) leg lengths [m] (changed in place: measured minus ``offsets``).
+        R: (N, 3, 3) platform rotations (changed in place by ``solve_poses``).
+        t: (N, 3) platform positions [m] (idem).
+        offsets: (N, 6) encoder offsets [m]: measured = ``q`` + offsets.
+        solve_poses: Sets the poses of rows ``run`` from their lengths ``q``; returns the
+            (n,) mask of rows whose pose could not be found
+            (:meth:`KinematicPlant.solve_poses` in a study).
+    """
+
+    def __init__(self, backends: Sequence[Backend], q: np.ndarray, R: np.ndarray,
+                 t: np.ndarray, offsets: np.ndarray,
+                 solve_poses: Callable[[np.ndarray], np.ndarray]) -> None:
+        self.backends = list(backends)
+        self.q, self.R, self.t = q, R, t
+        self.offsets = offsets
+        self.solve_poses = solve_poses
+        self.actuation = Actuation.VELOCITY
+        self.label = "controller"
+        n = len(self.backends)
+        #: Each row's round-trip times [s].
+        self.rtts: list[list[float]] = [[] for _ in range(n)]
+        #: Each row's late periods.
+        self.missed = np.zeros(n, dtype=int)
+        #: Each row's last :class:`~hexapod.backends.base.BackendStep` (None before).
+        self.last: list[Any] = [None] * n
+
+    def use_actuation(self, actuation: Actuation, label: str) -> None:
+        """Apply what the controller ``label`` commands (each backend checks it)."""
+        self.actuation = actuation
+        self.label = label
+
+    def advance(self, run: np.ndarray, velocities: np.ndarray, dt: float
+                ) -> dict[int, str]:
+        """See :meth:`Plant.advance` (``velocities``: the commands of their kind)."""
+        for j, k in enumerate(run.tolist()):
+            bs = self.backends[k].apply(velocities[j], self.actuation, dt, self.label)
+            self.q[k] = bs.lengths - self.offsets[k]
+            self.rtts[k].append(float(bs.round_trip_s))
+            self.missed[k] += int(bs.missed_period)
+            self.last[k] = bs
+        bad = self.solve_poses(run)  # the backends moved the legs: the poses follow
+        return dict.fromkeys(run[bad].tolist(), FK_FAILURE)
+
+    def measured_lengths(self, rows: np.ndarray, offsets: np.ndarray) -> np.ndarray:
+        """See :meth:`Plant.measured_lengths` (what the backends measured)."""
+        return self.q[rows] + offsets  # type: ignore[no-any-return]
+
+    def measured_rates(self, rows: np.ndarray) -> np.ndarray | None:
+        """Backends report no leg velocities."""
+        return None
+
+    def row_figures(self, row: int) -> dict[str, Any]:
+        """The link's figures of one row: round-trip median and p99 [ms], late periods."""
+        if not self.rtts[row]:
+            return {}
+        arr = np.array(self.rtts[row]) * 1e3
+        return {"rtt_median_ms": float(np.median(arr)),
+                "rtt_p99_ms": float(np.percentile(arr, 99)),
+                "missed_periods": int(self.missed[row])}
 
     def series(self, row: int) -> dict[str, np.ndarray]:
         """See :meth:`Plant.series`: nothing."""

@@ -1,6 +1,11 @@
 """What the camera gives in a simulated trial: geometric features with the scenario's
-noise (:class:`GeometricSensor`), or rendered images through the detector, and the
-desired features taught at the goal (:func:`trial_goal`)."""
+noise (:class:`GeometricSensor`, :class:`BatchSensor`), or rendered images through the
+detector, and the desired features taught at the goal (:func:`trial_goal`).
+
+Every sensor returns an :class:`~controllers.base.ObservationBatch` holding the camera's
+part of the observation (:func:`camera_batch`: features and visibility, lengths NaN); the
+closed loop (:mod:`benchmarks.sim.loop`) adds the rows' trials, time and encoder readings.
+"""
 
 from __future__ import annotations
 
@@ -12,12 +17,57 @@ import numpy as np
 
 from benchmarks.sim.world import TrialSetup, World, trial_rng
 from benchmarks.study.scenario import Scenario
-from controllers.base import Goal
+from controllers.base import Goal, ObservationBatch
 from hexapod.kinematics import inverse_kinematics
 from vision.cameras import Camera
-from vision.legs import directions_from_edges, observe_legs
+from vision.fast_observe import WorldParams, observe_batch
+from vision.legs import LegObservation, directions_from_edges, observe_legs
 
 log = logging.getLogger(__name__)
+
+#: The fields of an :class:`ObservationBatch` a camera gives.
+CAMERA_FIELDS = ("normals", "lines", "directions", "edge_visible", "direction_visible",
+                 "image_t")
+
+
+def camera_batch(normals: np.ndarray, lines: np.ndarray | None, directions: np.ndarray,
+                 edge_visible: np.ndarray, direction_visible: np.ndarray
+                 ) -> ObservationBatch:
+    """The camera's part of the observations of ``n`` rows: the features and their
+    visibility; ``trials`` ``0..n-1``, ``t`` zeros and ``lengths`` NaN until the loop
+    adds the rows, the time and the encoders' readings.
+
+    Args:
+        normals: (n, 6, 2, 3) edge normals (NaN where hidden).
+        lines: (n, 6, 2, 3) image lines (perspective camera) or None.
+        directions: (n, 6, 3) leg directions (NaN where an edge is hidden).
+        edge_visible: (n, 6, 2) bool.
+        direction_visible: (n, 6) bool.
+    """
+    n = len(normals)
+    return ObservationBatch(trials=np.arange(n), t=np.zeros(n),
+                            lengths=np.full((n, 6), np.nan), normals=normals, lines=lines,
+                            directions=directions, edge_visible=edge_visible,
+                            direction_visible=direction_visible)
+
+
+def take(obs: ObservationBatch, rows: np.ndarray) -> ObservationBatch:
+    """Rows ``rows`` of a batch (every array field indexed)."""
+    return ObservationBatch(**{f: (None if (v := getattr(obs, f)) is None else v[rows])
+                               for f in obs.__dataclass_fields__})
+
+
+def goal_of(m: ObservationBatch, setup: TrialSetup) -> Goal:
+    """The :class:`Goal` of a trial from the camera's batch of one taught at its goal
+    pose (the pose and its nominal inverse kinematics for the model-based baselines)."""
+    return Goal(
+        normals=m.normals[0],  # type: ignore[index]
+        lines=None if m.lines is None else m.lines[0],
+        directions=m.directions[0],  # type: ignore[index]
+        lengths=inverse_kinematics(setup.nominal_geometry, setup.goal_rotation,
+                                   setup.goal_translation),
+        rotation=setup.goal_rotation, translation=setup.goal_translation,
+        edge_visible=m.edge_visible[0])
 
 
 class GeometricSensor:
@@ -39,7 +89,7 @@ class GeometricSensor:
 
     def measure(self, rotations: np.ndarray, translations: np.ndarray,
                 rngs: list[np.random.Generator], apply_noise: bool = True
-                ) -> dict[str, Any]:
+                ) -> ObservationBatch:
         """Batched measurement at true poses (N, 3, 3), (N, 3); one generator per item."""
         w = self.world
         lo = observe_legs(w.camera, w.geometry, rotations, translations)
@@ -49,7 +99,7 @@ class GeometricSensor:
 
     def measure_goal(self, rotation: np.ndarray, translation: np.ndarray,
                      rng: np.random.Generator, frames: int = 1, apply_noise: bool = True
-                     ) -> dict[str, Any]:
+                     ) -> ObservationBatch:
         """The desired features: ``frames`` measurements at one true pose, averaged.
 
         Args:
@@ -60,7 +110,7 @@ class GeometricSensor:
             apply_noise: Whether the scenario's noise applies (``[noise] on_goal``).
 
         Returns:
-            The batched measurement dictionary of :meth:`measure`, batch of one.
+            The camera's batch of :meth:`measure`, batch of one.
         """
         R = np.repeat(np.asarray(rotation, float)[None], frames, axis=0)
         t = np.repeat(np.asarray(translation, float)[None], frames, axis=0)
@@ -79,7 +129,7 @@ def draws_noise(sc: Scenario, apply_noise: bool) -> bool:
 def noisy_features(sc: Scenario, normals: np.ndarray, visible: np.ndarray,
                    rngs: Sequence[Any], apply_noise: bool, estimated: Any,
                    cameras: list[tuple[np.ndarray, Any]],
-                   item: Callable[[int], tuple[Any, Any]]) -> dict[str, Any]:
+                   item: Callable[[int], tuple[Any, Any]]) -> ObservationBatch:
     """The scenario's noise on true edges, and the features the controllers receive.
 
     Rotation noise perturbs each true edge normal; the perspective image lines follow
@@ -99,8 +149,7 @@ def noisy_features(sc: Scenario, normals: np.ndarray, visible: np.ndarray,
             pixel noise.
 
     Returns:
-        ``normals``, ``lines`` (None for a unified camera), ``directions``,
-        ``edge_visible``, ``direction_visible``.
+        The camera's batch (:func:`camera_batch`; ``lines`` None for a unified camera).
     """
     normals = np.array(normals, dtype=float)
     visible = np.array(visible, dtype=bool)
@@ -139,8 +188,7 @@ def noisy_features(sc: Scenario, normals: np.ndarray, visible: np.ndarray,
         directions = directions_from_edges(normals)
     if not all_visible:
         directions = np.where(both[..., None], directions, np.nan)
-    return {"normals": normals, "lines": lines, "directions": directions,
-            "edge_visible": visible, "direction_visible": both}
+    return camera_batch(normals, lines, directions, visible, both)
 
 
 def _take(lo: Any, k: int) -> Any:
@@ -156,8 +204,8 @@ def _take(lo: Any, k: int) -> Any:
     return dc_replace(lo, **changes)
 
 
-def _average_frames(m: dict[str, Any], perspective_camera: Any | None,
-                    max_deviation: float | None = None) -> dict[str, Any]:
+def _average_frames(m: ObservationBatch, perspective_camera: Any | None,
+                    max_deviation: float | None = None) -> ObservationBatch:
     """Average K measurements of one static pose (leading axis K) into a batch of one.
 
     Normals: :func:`vision.estimate.average_normals` (frames farther than
@@ -168,10 +216,9 @@ def _average_frames(m: dict[str, Any], perspective_camera: Any | None,
     """
     from vision.estimate import average_normals
 
-    if len(m["normals"]) == 1:
+    if len(m) == 1:
         return m
-    normals, visible = average_normals(m["normals"], m["edge_visible"],
-                                       max_deviation=max_deviation)
+    normals, visible = average_normals(m.normals, m.edge_visible, max_deviation=max_deviation)
     lines = None
     if perspective_camera is not None:
         with np.errstate(invalid="ignore"):
@@ -179,9 +226,9 @@ def _average_frames(m: dict[str, Any], perspective_camera: Any | None,
     both = np.asarray(visible.all(axis=-1))
     with np.errstate(invalid="ignore"):
         directions = directions_from_edges(normals)
-    return {"normals": normals[None], "lines": lines,
-            "directions": np.where(both[..., None], directions, np.nan)[None],
-            "edge_visible": visible[None], "direction_visible": both[None]}
+    return camera_batch(normals[None], lines,
+                        np.where(both[..., None], directions, np.nan)[None], visible[None],
+                        both[None])
 
 
 def trial_goal(sensor: GeometricSensor | Any, setup: TrialSetup, sc: Scenario) -> Goal:
@@ -202,19 +249,9 @@ def trial_goal(sensor: GeometricSensor | Any, setup: TrialSetup, sc: Scenario) -
         The :class:`~controllers.base.Goal`.
     """
     rng = trial_rng(sc.seed, setup.trial, 2)
-    m = sensor.measure_goal(setup.goal_rotation, setup.goal_translation, rng,
-                            frames=sc.teach_frames, apply_noise=sc.noise.on_goal)
-    nominal_lengths = inverse_kinematics(setup.nominal_geometry, setup.goal_rotation,
-                                         setup.goal_translation)
-    return Goal(
-        normals=m["normals"][0],
-        lines=None if m["lines"] is None else m["lines"][0],
-        directions=m["directions"][0],
-        lengths=nominal_lengths,
-        rotation=setup.goal_rotation,
-        translation=setup.goal_translation,
-        edge_visible=m["edge_visible"][0],
-    )
+    return goal_of(sensor.measure_goal(setup.goal_rotation, setup.goal_translation, rng,
+                                       frames=sc.teach_frames,
+                                       apply_noise=sc.noise.on_goal), setup)
 
 
 def make_sensor(sc: Scenario, setup: TrialSetup) -> Any:
@@ -249,7 +286,7 @@ class _ImageSensorAdapter:
 
     def measure_goal(self, rotation: np.ndarray, translation: np.ndarray,
                      rng: np.random.Generator, frames: int = 1, apply_noise: bool = True
-                     ) -> dict[str, Any]:
+                     ) -> ObservationBatch:
         """``frames`` rendered images of the goal pose, their normals averaged: the first
         frame detected from the model's prediction (alignment, then refine), the next ones
         tracked from the previous frame, as the run will track them (and as ``servo
@@ -283,15 +320,15 @@ class _ImageSensorAdapter:
         both = np.asarray(vis.all(axis=-1))
         with np.errstate(invalid="ignore"):
             directions = directions_from_edges(n)
-        m_all = {"normals": n, "lines": lines,
-                 "directions": np.where(both[..., None], directions, np.nan),
-                 "edge_visible": vis, "direction_visible": both}
+        m_all = camera_batch(n, lines, np.where(both[..., None], directions, np.nan), vis,
+                             both)
         tolerance = self.sensor.detector.outlier_px * radians_per_pixel(est)
         return _average_frames(m_all, est if est.family == "perspective" else None, tolerance)
 
     def measure(self, rotations: np.ndarray, translations: np.ndarray,
                 rngs: list[np.random.Generator], apply_noise: bool = True
-                ) -> dict[str, Any]:
+                ) -> ObservationBatch:
+        """Each row's image rendered and detected, tracked from that row's last one."""
         out: dict[str, list[Any]] = {"normals": [], "lines": [], "edge_visible": []}
         for k in range(len(rotations)):
             key = id(rngs[k])
@@ -311,6 +348,108 @@ class _ImageSensorAdapter:
         with np.errstate(invalid="ignore"):
             directions = directions_from_edges(normals)
         lines = None if out["lines"][0] is None else np.array(out["lines"], float)
-        return {"normals": normals, "lines": lines,
-                "directions": np.where(both[..., None], directions, np.nan),
-                "edge_visible": visible, "direction_visible": both}
+        return camera_batch(normals, lines, np.where(both[..., None], directions, np.nan),
+                            visible, both)
+
+
+class RowSensor:
+    """The loop's sensor interface (``measure(rows, R, t)``) over a sensor of one world
+    (:class:`GeometricSensor`, rendered images, or a study's own): the rows of a group
+    measured together, each with its own generator.
+
+    Args:
+        sensor: Has ``measure(R, t, rngs)`` (and ``measure_goal``) like
+            :class:`GeometricSensor`.
+        rngs: One generator per row of the group.
+    """
+
+    def __init__(self, sensor: Any, rngs: list[np.random.Generator]) -> None:
+        self.sensor = sensor
+        self.rngs = rngs
+        #: Detection times of rendered images [s] (empty for geometric features).
+        self.detect_times: list[float] = getattr(sensor, "detect_times", [])
+
+    def measure(self, rows: np.ndarray, rotations: np.ndarray, translations: np.ndarray
+                ) -> ObservationBatch:
+        """The camera's batch of ``rows`` at their true poses."""
+        return self.sensor.measure(  # type: ignore[no-any-return]
+            rotations, translations, [self.rngs[k] for k in rows])
+
+
+class BatchSensor:
+    """The geometric sensor over a batch of trials, each in its own world (one C call for
+    the legs, edges and visibility of every row, :func:`vision.fast_observe.observe_batch`).
+
+    Args:
+        sc: The scenario (its noise).
+        setups: The trials (their worlds and the estimated camera, the same for all).
+    """
+
+    def __init__(self, sc: Scenario, setups: list[TrialSetup]) -> None:
+        self.sc = sc
+        self.setups = setups
+        worlds = [s.world for s in setups]
+        self.params = WorldParams.from_worlds([w.geometry for w in worlds],
+                                              [w.camera for w in worlds])
+        self.estimated = setups[0].estimated_camera
+        # rows of one camera object go through its methods together, as one world's sensor
+        ids: dict[int, int] = {}
+        self._camera_group = np.array([ids.setdefault(id(w.camera), len(ids)) for w in worlds])
+        self._group_camera = {g: worlds[k].camera for k, g in
+                              reversed(list(enumerate(self._camera_group)))}
+        self.rngs = rows_generators(sc, setups, 1, True)
+        self.detect_times: list[float] = []
+
+    def measure(self, rows: np.ndarray, rotations: np.ndarray, translations: np.ndarray
+                ) -> ObservationBatch:
+        """The camera's batch of ``rows`` at their true poses (the run's noise)."""
+        return self.sample(rotations, translations, rows, [self.rngs[k] for k in rows])
+
+    def sample(self, rotations: np.ndarray, translations: np.ndarray, items: np.ndarray,
+               rngs: Sequence[Any], apply_noise: bool = True) -> ObservationBatch:
+        """Features of the trials ``items`` at poses (n, 3, 3), (n, 3), one generator
+        each (:func:`rows_generators`)."""
+        obs = observe_batch(self.params, rotations, translations, items)
+        groups = self._camera_group[items]
+        cameras = [(np.flatnonzero(groups == g), self._group_camera[int(g)])
+                   for g in np.unique(groups)]
+
+        def item(k: int) -> tuple[LegObservation, Any]:
+            world = self.setups[int(items[k])].world
+            return _leg_observation(obs, k, world.geometry.leg_radius,
+                                    float(self.params.platform_radius[items[k]])), world.camera
+
+        return noisy_features(self.sc, obs.normals, obs.edge_visible, rngs, apply_noise,
+                              self.estimated, cameras, item)
+
+    def goals(self, setups: list[TrialSetup]) -> list[Goal]:
+        """The goals of every trial (:func:`trial_goal` with one taught frame) in one
+        batch."""
+        sc = self.sc
+        R = np.array([s.goal_rotation for s in setups])
+        t = np.array([s.goal_translation for s in setups])
+        m = self.sample(R, t, np.arange(len(setups)),
+                        rows_generators(sc, setups, 2, sc.noise.on_goal),
+                        apply_noise=sc.noise.on_goal)
+        return [goal_of(take(m, np.array([k])), s) for k, s in enumerate(setups)]
+
+
+def rows_generators(sc: Scenario, setups: list[TrialSetup], stream: int, apply_noise: bool
+                    ) -> list[Any]:
+    """The trials' random streams ``stream`` for the sensor, or Nones when the scenario's
+    noise draws nothing (:func:`draws_noise`: ten microseconds saved per trial)."""
+    if not draws_noise(sc, apply_noise):
+        return [None] * len(setups)
+    return [trial_rng(sc.seed, s.trial, stream) for s in setups]
+
+
+def _leg_observation(obs: Any, k: int, radius: float, platform_radius: float
+                     ) -> LegObservation:
+    """Row ``k`` of a batch observation as a :class:`LegObservation` (pixel noise)."""
+    return LegObservation(
+        base_points=obs.base_points[k], directions=obs.directions[k], lengths=obs.lengths[k],
+        normals=obs.normals[k], exists=obs.exists[k], edge_visible=obs.edge_visible[k],
+        visible_fraction=obs.visible_fraction[k], lines=None,
+        segments=np.full((6, 2, 2, 2), np.nan), visible_interval=obs.visible_interval[k],
+        platform_centre=obs.platform_centre[k], platform_normal=obs.platform_normal[k],
+        platform_radius=platform_radius, radius=radius)

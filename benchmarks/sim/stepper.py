@@ -1,22 +1,25 @@
-"""Closed-loop trials: true world -> sensor -> controller -> backend -> true world.
+"""Closed-loop trials: true world -> sensor -> controller -> plant -> true world.
 
-One trial (ARCHITECTURE.md, "one control step, as data"): the true world (true
-geometry, true camera, true pose) produces observations through :mod:`vision`
-(geometric features + noise, or rendered images + detection); the controller,
-built from the ESTIMATED parameters, returns leg velocities; the backend clamps
-them to the stroke and speed limits and applies them for ``dt``; the new true
-pose is the forward kinematics of the TRUE geometry, warm-started.
+One trial (``docs/architecture.md``, "the loop"): the true world (true geometry, true
+camera, true pose) produces observations through :mod:`vision` (geometric features +
+noise, or rendered images + detection); the controller, built from the ESTIMATED
+parameters, returns leg commands; the plant (kinematic, dynamic, or a robot behind a
+backend) applies them for ``dt``. Every work unit runs through the one loop,
+:func:`benchmarks.sim.loop.closed_loop`.
 
-Trials that share one true world (no calibration error) are stepped together,
-vectorised over a leading axis; each trial has its own random streams seeded
-from ``(scenario seed, trial index)``, so a trial's result does not depend on
-which other trials run beside it (nor on the executor or the chunking).
+With the geometric sensor and the simulated robot, the ``batched`` engine steps every
+trial of the unit as one batch, whatever their worlds (a calibration error gives each
+trial its own robot and camera), through the controller's ``step_batch``. Otherwise, or
+with ``engine="per-trial"``, the trials whose world is the nominal one are stepped
+together through one controller object per trial
+(:class:`controllers.batch.PerTrialLoop`) and one sensor of their world, the others one
+by one. Each trial has its own random streams seeded from ``(scenario seed, trial
+index)``, so a trial's result does not depend on which other trials run beside it.
 """
 
 from __future__ import annotations
 
 import logging
-import time
 from collections.abc import Callable
 from typing import Any
 
@@ -25,10 +28,17 @@ import numpy as np
 from benchmarks.exceptions import ScenarioError
 from benchmarks.sim.actuation import drive_plant, require_actuation, world_actuation
 from benchmarks.sim.book import Book, TrialResult, failure_row
-from benchmarks.sim.clock import clocked_measure, make_clock
-from benchmarks.sim.plant import FK_FAILURE, KinematicPlant, make_plant
-from benchmarks.sim.reference import Targets, task_controller
-from benchmarks.sim.sensors import make_sensor, trial_goal
+from benchmarks.sim.clock import make_clock
+from benchmarks.sim.loop import closed_loop
+from benchmarks.sim.plant import BackendPlant, KinematicPlant, make_plant
+from benchmarks.sim.reference import Targets, task_batch_controller
+from benchmarks.sim.sensors import (
+    BatchSensor,
+    GeometricSensor,
+    RowSensor,
+    make_sensor,
+    trial_goal,
+)
 from benchmarks.sim.world import (
     TrialSetup,
     World,
@@ -38,12 +48,10 @@ from benchmarks.sim.world import (
     trial_rng,
 )
 from benchmarks.study.scenario import Scenario
-from controllers.base import Command, ControllerContext, Observation
+from controllers.base import ControllerContext, Goal
 from controllers.batch import actuation_of
 from hexapod import HexapodGeometry
-from hexapod.actuation import Actuation
 from hexapod.backends.base import Backend
-from hexapod.se3 import pose_error
 
 log = logging.getLogger(__name__)
 
@@ -65,11 +73,13 @@ def run_trials(
 ) -> list[TrialResult]:
     """Run trials of one scenario point with one controller.
 
-    With the geometric sensor and the simulated backend, every trial goes through the
-    batched engine (:mod:`benchmarks.sim.engine`, ``engine="batched"``). Otherwise, or
-    with ``engine="per-trial"``, trials whose world is the nominal one are stepped
-    together with one controller object per trial, the others one by one. A crash in a
-    trial is recorded as its failure. Both engines give the same rows.
+    Every group of trials runs through :func:`benchmarks.sim.loop.closed_loop`. With the
+    geometric sensor and the simulated backend, the ``batched`` engine steps every trial
+    as one batch (the controller's ``step_batch``). Otherwise, or with
+    ``engine="per-trial"``, trials whose world is the nominal one are stepped together
+    with one controller object per trial, the others one by one (see the module
+    docstring). A crash in a trial is recorded as its failure. Both engines give the
+    same rows.
 
     Args:
         sc: An expanded scenario (one sweep point).
@@ -105,41 +115,133 @@ def run_trials(
                             "world; the emulators take --dynamics)", key="robot.world")
     if engine not in ENGINES:
         raise ValueError(f"engine: expected one of {', '.join(ENGINES)}, got {engine!r}")
-    if (engine == "batched" and backend_factory is None and sensor_factory is None
-            and sc.sensor == "geometric"):
-        from benchmarks.sim.engine import run_batch
-
-        for res in run_batch(sc, controller_index, setups, record_trials, on_step):
-            results[res.row["trial"]] = res
-        return [results[k] for k in trials]
-    shared = [s for s in setups if s.shared and backend_factory is None]
-    single = [s for s in setups if not (s.shared and backend_factory is None)]
-    groups = ([shared] if shared else []) + [[s] for s in single]
+    batched = (engine == "batched" and backend_factory is None and sensor_factory is None
+               and sc.sensor == "geometric")
+    if batched:
+        groups = [setups] if setups else []
+    else:
+        shared = [s for s in setups if s.shared and backend_factory is None]
+        groups = ([shared] if shared else []) + [[s] for s in setups if s not in shared]
+    unit = _Unit(sc, controller_index, record_trials, batched, backend_factory, on_step,
+                 sensor_factory)
     for group in groups:
-        opened: list[Backend] = []
+        for res in unit.isolated(group):
+            results[res.row["trial"]] = res
+    return [results[k] for k in trials]
+
+
+class _Unit:
+    """How the groups of a work unit run (the arguments of :func:`run_trials`)."""
+
+    def __init__(self, sc: Scenario, controller_index: int, record_trials: int,
+                 batched: bool,
+                 backend_factory: Callable[[HexapodGeometry, np.ndarray], Backend] | None,
+                 on_step: Callable[[int, np.ndarray, np.ndarray, np.ndarray], None] | None,
+                 sensor_factory: Callable[[Scenario, TrialSetup], Any] | None) -> None:
+        self.sc = sc
+        self.spec = sc.controllers[controller_index]
+        self.record_trials = record_trials
+        self.batched = batched
+        self.backend_factory = backend_factory
+        self.on_step = on_step
+        self.sensor_factory = sensor_factory or make_sensor
+
+    def isolated(self, group: list[TrialSetup]) -> list[TrialResult]:
+        """The results of a group; when it fails, of its trials one by one (a crash in a
+        trial is that trial's failure)."""
         try:
-            for res in _run_group(sc, controller_index, group, record_trials, backend_factory,
-                                  on_step, opened, sensor_factory):
-                results[res.row["trial"]] = res
+            return self.run(group)
         except Exception as exc:
             if len(group) == 1:
-                results[group[0].trial] = TrialResult(failure_row(sc, spec, group[0].trial,
-                                                                   exc))
-            else:  # isolate the failing trial(s): run them one by one
+                return [TrialResult(failure_row(self.sc, self.spec, group[0].trial, exc))]
+        out = []
+        for s in group:
+            try:
+                out += self.run([s])
+            except Exception as exc2:
+                out.append(TrialResult(failure_row(self.sc, self.spec, s.trial, exc2)))
+        return out
+
+    def run(self, setups: list[TrialSetup]) -> list[TrialResult]:
+        """Run a group through the closed loop (a trial whose goal cannot be measured in
+        a batched group gets its failure row; the others run)."""
+        sc, spec = self.sc, self.spec
+        sensor: BatchSensor | RowSensor
+        if self.batched:
+            sensor = BatchSensor(sc, setups)
+            goals = _goals(sc, sensor, setups)
+        else:
+            sensor = RowSensor(self.sensor_factory(sc, setups[0]),
+                               [trial_rng(sc.seed, s.trial, 1) for s in setups])
+            goals = [trial_goal(sensor.sensor, s, sc) for s in setups]
+        out = {k: TrialResult(failure_row(sc, spec, setups[k].trial, g))
+               for k, g in enumerate(goals) if isinstance(g, Exception)}
+        keep = [k for k in range(len(setups)) if k not in out]
+        if len(keep) < len(setups):
+            group = [setups[k] for k in keep]
+            sensor = BatchSensor(sc, group)
+        else:
+            group = setups
+        if group:
+            contexts = [trial_context(sc, setups[k], goals[k]) for k in keep]
+            for k, res in zip(keep, self._loop(group, contexts, sensor), strict=True):
+                out[k] = res
+        return [out[k] for k in range(len(setups))]
+
+    def _loop(self, group: list[TrialSetup], contexts: list[ControllerContext],
+              sensor: BatchSensor | RowSensor) -> list[TrialResult]:
+        sc, spec = self.sc, self.spec
+        controller = task_batch_controller(sc, spec, self.batched)
+        if self.backend_factory is None:
+            actuation = require_actuation(controller, spec.label, *world_actuation(sc))
+        else:  # a backend says itself what it applies (Backend.apply)
+            actuation = actuation_of(controller)
+        controller.reset_batch(contexts)
+        q = np.array([s.start_lengths for s in group])
+        R = np.array([s.start_rotation for s in group])
+        t = np.array([s.start_translation for s in group])
+        offsets = np.array([s.world.joint_offsets for s in group])
+        g = group[0].world.geometry
+        if isinstance(sensor, BatchSensor):
+            A, E = sensor.params.base_points, sensor.params.platform_points
+        else:  # one world
+            A, E = g.base_points, g.platform_points
+        opened: list[Backend] = []
+        try:
+            if self.backend_factory is None:
+                plant: Any = make_plant(sc, group, q, R, t, A, E)
+            else:
                 for s in group:
-                    single_opened: list[Backend] = []
-                    try:
-                        res = _run_group(sc, controller_index, [s], record_trials,
-                                         backend_factory, on_step, single_opened,
-                                         sensor_factory)[0]
-                    except Exception as exc2:
-                        res = TrialResult(failure_row(sc, spec, s.trial, exc2))
-                    finally:
-                        _close_all(single_opened)
-                    results[s.trial] = res
+                    opened.append(self.backend_factory(g, s.start_lengths + s.world.joint_offsets))
+                poses = KinematicPlant(q, R, t, A, E, g.stroke, g.max_speed)
+                plant = BackendPlant(opened, q, R, t, offsets, poses.solve_poses)
+            drive_plant(plant, actuation, spec.label)
+            book = Book.new(sc, group, self.record_trials)
+            book.attach(plant, Targets(sc, group), actuation, spec.label, self.on_step)
+            closed_loop(plant, sensor, make_clock(sc, group, q, R, t, A, E), controller,
+                        book, sc.dt, offsets, sc.task.max_steps)
         finally:
             _close_all(opened)
-    return [results[k] for k in trials]
+        return book.results(sc, spec, group, R, t, sensor.detect_times, plant.row_figures)
+
+
+def _goals(sc: Scenario, sensor: BatchSensor, setups: list[TrialSetup]
+           ) -> list[Goal | Exception]:
+    """The goal of every trial (:func:`benchmarks.sim.sensors.trial_goal`): measured in one
+    batch when one frame is taught, trial by trial otherwise (and to find the trials at
+    fault when the batch fails); a trial whose goal cannot be measured has its error."""
+    if sc.teach_frames == 1:
+        try:
+            return list(sensor.goals(setups))
+        except Exception:  # find the trial(s) at fault below
+            pass
+    goals: list[Goal | Exception] = []
+    for s in setups:
+        try:
+            goals.append(trial_goal(GeometricSensor(sc, s.world, s.estimated_camera), s, sc))
+        except Exception as exc:  # that trial's failure
+            goals.append(exc)
+    return goals
 
 
 def _close_all(backends: list[Backend]) -> None:
@@ -153,120 +255,6 @@ def _close_all(backends: list[Backend]) -> None:
             b.close()
 
 
-def _run_group(sc: Scenario, controller_index: int, group: list[TrialSetup],
-               record_trials: int,
-               backend_factory: Callable[[HexapodGeometry, np.ndarray], Backend] | None,
-               on_step: Callable[[int, np.ndarray, np.ndarray, np.ndarray], None] | None,
-               opened: list[Backend] | None = None,
-               sensor_factory: Callable[[Scenario, TrialSetup], Any] | None = None
-               ) -> list[TrialResult]:
-    """Run trials sharing one world in lockstep, one controller object per trial (the
-    per-trial path; backends it opens go to ``opened``)."""
-    if opened is None:
-        opened = []
-    spec = sc.controllers[controller_index]
-    world = group[0].world
-    g = world.geometry
-    sensor = (sensor_factory or make_sensor)(sc, group[0])
-    controllers = []
-    for s in group:
-        ctrl = task_controller(sc, spec)
-        if backend_factory is None:  # a backend says itself what it applies (Backend.apply)
-            require_actuation(ctrl, spec.label, *world_actuation(sc))
-        ctrl.reset(trial_context(sc, s, trial_goal(sensor, s, sc)))
-        controllers.append(ctrl)
-    rngs = [trial_rng(sc.seed, s.trial, 1) for s in group]
-    backends = None
-    if backend_factory is not None:
-        backends = []
-        for s in group:
-            backends.append(backend_factory(g, s.start_lengths + world.joint_offsets))
-            opened.append(backends[-1])
-    q = np.array([s.start_lengths for s in group])
-    R = np.array([s.start_rotation for s in group])
-    t = np.array([s.start_translation for s in group])
-    targets = Targets(sc, group)
-    offsets = world.joint_offsets
-    kinds = [Actuation.VELOCITY] * len(group)  # what each trial's last command set
-    book = Book.new(sc, group, record_trials)
-    dt = sc.dt
-    poses = KinematicPlant(q, R, t, g.base_points, g.platform_points, g.stroke, g.max_speed)
-    plant = poses if backends is not None else make_plant(sc, group, q, R, t,
-                                                          g.base_points, g.platform_points)
-    if backends is None:
-        drive_plant(plant, actuation_of(controllers[0]), spec.label)
-        book.follow(plant)
-    clock = make_clock(sc, group, q, R, t, g.base_points, g.platform_points)
-
-    def measure(rows: np.ndarray, R_r: np.ndarray, t_r: np.ndarray) -> dict[str, Any]:
-        return sensor.measure(R_r, t_r, [rngs[k] for k in rows])  # type: ignore[no-any-return]
-
-    for step in range(sc.task.max_steps + 1):
-        idx = np.flatnonzero(book.active)
-        if len(idx) == 0:
-            break
-        dp, da = pose_error(R[idx], t[idx], *targets(step, idx))
-        done = book.check(sc, step, idx, dp, da)
-        meas = clocked_measure(clock, step, idx, (R, t), measure)
-        book.seen(idx, meas["edge_visible"])
-        if on_step is not None:
-            for j, k in enumerate(idx):
-                on_step(group[k].trial, R[k], t[k], meas["edge_visible"][j])
-        v_cmd = np.zeros((len(idx), 6))
-        lengths = plant.measured_lengths(idx, offsets)
-        rates = plant.measured_rates(idx)
-        for j, k in enumerate(idx):
-            obs = Observation(
-                t=step * dt, lengths=lengths[j],
-                normals=meas["normals"][j],
-                lines=None if meas["lines"] is None else meas["lines"][j],
-                directions=meas["directions"][j],
-                edge_visible=meas["edge_visible"][j],
-                direction_visible=meas["direction_visible"][j],
-                image_t=None if meas["image_t"] is None else float(meas["image_t"][j]),
-                q_dot=None if rates is None else rates[j],
-            )
-            cmd: Command | None = None
-            if not done[j]:
-                t0 = time.perf_counter()
-                cmd = controllers[k].step(obs)
-                book.step_times[k].append(time.perf_counter() - t0)
-                if backends is None and cmd.actuation not in world_actuation(sc)[0]:
-                    require_actuation(cmd, spec.label, *world_actuation(sc))
-                kinds[k] = cmd.actuation
-                if book.command(int(k), cmd.values, cmd.reason):
-                    done[j] = True
-                else:
-                    v_cmd[j] = cmd.values
-            if book.recording[k]:
-                book.record(int(k), step * dt, q[k], R[k], t[k], meas["edge_visible"][j],
-                            cmd.error_norm if cmd is not None else np.nan, dp[j], da[j],
-                            v_cmd[j])
-                book.record_more(int(k), plant.series(int(k)))
-        finished = idx[done]
-        book.active[finished] = False
-        book.steps[finished] = step
-        run = idx[~done]
-        if len(run) == 0:
-            continue
-        v_run = v_cmd[~done]
-        if kinds[run[0]] is Actuation.VELOCITY:  # leg forces are not checked as speeds
-            book.violations[run] += stroke_violations(q[run], v_run, dt, g.stroke,
-                                                      g.max_speed)
-        if backends is None:
-            book.world_failures(plant.advance(run, v_run, dt), step)
-            continue
-        for j, k in enumerate(run):
-            bs = backends[k].apply(v_run[j], kinds[k], dt, spec.label)
-            q[k] = bs.lengths - offsets
-            book.rtts[k].append(bs.round_trip_s)
-            book.missed[k] += int(bs.missed_period)
-        bad = poses.solve_poses(run)  # the backends moved the legs: the poses follow
-        book.world_failures(dict.fromkeys(run[bad].tolist(), FK_FAILURE), step)
-    return book.results(sc, spec, group, R, t, getattr(sensor, "detect_times", None),
-                        plant.row_figures)
-
-
 def trial_context(sc: Scenario, setup: TrialSetup, goal: Any) -> ControllerContext:
     """What the controllers of a trial are told: the estimated parameters and the goal."""
     from benchmarks.sim.reference import trial_reference
@@ -274,10 +262,3 @@ def trial_context(sc: Scenario, setup: TrialSetup, goal: Any) -> ControllerConte
     return ControllerContext(base_points=setup.base_points, geometry=setup.nominal_geometry,
                              camera=setup.estimated_camera, dt=sc.dt, goal=goal,
                              reference=trial_reference(sc, setup))
-
-
-def stroke_violations(q: np.ndarray, v: np.ndarray, dt: float,
-                      stroke: tuple[float, float], max_speed: float) -> np.ndarray:
-    """(n,) 1 where the (speed-limited) command would leave the stroke this period."""
-    q_next = q + np.clip(v, -max_speed, max_speed) * dt
-    return np.any((q_next < stroke[0] - 1e-9) | (q_next > stroke[1] + 1e-9), axis=1)

@@ -12,8 +12,9 @@ import numpy as np
 
 from benchmarks.sim.clock import CameraClock
 from benchmarks.sim.plant import KinematicPlant
+from benchmarks.sim.sensors import camera_batch
 from benchmarks.sim.world import load_camera, load_geometry, make_trials
-from controllers.base import Command, Controller, ControllerContext, Observation
+from controllers.base import Command, Controller, ControllerContext, Observation, ObservationBatch
 from hexapod import HexapodGeometry
 
 #: The controller spec of :class:`Recorder` in a scenario table.
@@ -70,6 +71,12 @@ class ClockWorld:
                               g.platform_points, g.stroke, g.max_speed)
         part.advance(self.rows, VELOCITIES, duration)
         return part
+
+
+def frame(n: int) -> ObservationBatch:
+    """A camera batch of ``n`` rows, every edge seen (the clock tests' sensor output)."""
+    return camera_batch(np.zeros((n, 6, 2, 3)), None, np.zeros((n, 6, 3)),
+                        np.ones((n, 6, 2), dtype=bool), np.ones((n, 6), dtype=bool))
 
 
 def clock_world(sc: Any) -> ClockWorld:

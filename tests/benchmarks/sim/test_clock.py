@@ -15,7 +15,9 @@ from benchmarks.sim import run_trials
 from benchmarks.sim.clock import CameraClock
 from benchmarks.sim.world import load_camera, load_geometry, make_trials
 from benchmarks.study.scenario import parse_scenario
+from controllers.base import ObservationBatch
 from tests.benchmarks.sim.clock_world import RECORDER, Recorder, clock_world
+from tests.benchmarks.sim.clock_world import frame as _frame
 from tests.benchmarks.sim.test_engine import _compare, _rows
 
 CIRCLE = {"kind": "trajectory", "shape": "circle", "speed_mm_s": 40.0,
@@ -86,9 +88,9 @@ def test_the_pose_of_a_frame_between_instants_is_where_the_plant_was() -> None:
     w = clock_world(sc)
     seen: list[np.ndarray] = []
 
-    def keep(rows: np.ndarray, Rr: np.ndarray, tr: np.ndarray) -> dict[str, Any]:
+    def keep(rows: np.ndarray, Rr: np.ndarray, tr: np.ndarray) -> ObservationBatch:
         seen.append(tr)
-        return {"x": tr}
+        return _frame(len(rows))
 
     w.clock.measure(0, w.rows, keep)  # at 0: the frame of -20 ms (delivered at -7 ms)
     np.testing.assert_array_equal(seen[-1], w.start[2])

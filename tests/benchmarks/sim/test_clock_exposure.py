@@ -13,7 +13,9 @@ import pytest
 from benchmarks.exceptions import ScenarioError
 from benchmarks.sim import run_trials
 from benchmarks.study.scenario import parse_scenario
+from controllers.base import ObservationBatch
 from tests.benchmarks.sim.clock_world import RECORDER, Recorder, clock_world
+from tests.benchmarks.sim.clock_world import frame as _frame
 
 IMAGE = {"kind": "image", "blur_px": 0.8, "noise_std": 2.0}
 
@@ -54,16 +56,16 @@ def test_the_exposed_poses_are_where_the_plant_was() -> None:
     w = clock_world(sc)
     seen: list[tuple[np.ndarray, np.ndarray]] = []
 
-    def keep(rows: np.ndarray, Rr: np.ndarray, tr: np.ndarray) -> dict[str, Any]:
+    def keep(rows: np.ndarray, Rr: np.ndarray, tr: np.ndarray) -> ObservationBatch:
         seen.append((Rr, tr))
-        return {"x": tr}
+        return _frame(len(rows))
 
     w.clock.measure(0, w.rows, keep)
     w.advance()
     w.clock.measure(1, w.rows, keep)
     w.advance()
     out = w.clock.measure(2, w.rows, keep)
-    np.testing.assert_allclose(out["image_t"], [0.016, 0.016], atol=1e-12)
+    np.testing.assert_allclose(out.image_t, [0.016, 0.016], atol=1e-12)
     R_s, t_s = seen[-1]
     assert R_s.shape == (2, 4, 3, 3) and t_s.shape == (2, 4, 3)
     for j, when in enumerate((0.013, 0.015, 0.017, 0.019)):

@@ -1,0 +1,129 @@
+"""The one closed loop: plant -> camera -> controller batch -> plant, every period.
+
+Every run of a controller goes through :func:`closed_loop`: the simulated studies (every
+trial of a work unit as one batch, in the kinematic or the dynamic world, with geometric
+features or rendered images, with or without a camera clock), a study on robots behind
+backends (:class:`~benchmarks.sim.plant.BackendPlant`) and the real servo session
+(``hexapod-bench servo``, a batch of one). What differs between them is a component:
+
+- the **plant** (:mod:`benchmarks.sim.plant`): ``advance`` moves the rows over a period,
+  ``measured_lengths`` and ``measured_rates`` are the encoders; its arrays ``R``, ``t``
+  are the poses the camera sees;
+- the **sensor**: ``measure(rows, R, t)`` returns the camera's
+  :class:`~controllers.base.ObservationBatch` of those rows
+  (:func:`benchmarks.sim.sensors.camera_batch`);
+- the **clock** (:class:`benchmarks.sim.clock.CameraClock`, or None: an image at every
+  control instant);
+- the **controller batch**: ``step_batch(ObservationBatch) -> CommandBatch``;
+- the **book** (:class:`LoopBook`): when a row is done, what happens to a command, what
+  is recorded (:class:`benchmarks.sim.book.Book` for a study,
+  :class:`benchmarks.robot.loop.ServoBook` for the servo session).
+
+One period of the active rows ``idx``: the book says which rows are done, the camera
+measures every active row, the rows that are not done and have an image are stepped as
+one batch, the book accounts the commands, and the rows still running are advanced by the
+plant with their commands (zeros where there is none).
+"""
+
+from __future__ import annotations
+
+import itertools
+import time
+from collections.abc import Iterable
+from dataclasses import replace
+from typing import Any, Protocol
+
+import numpy as np
+
+from benchmarks.sim.clock import CameraClock, clocked_measure
+from benchmarks.sim.sensors import take
+from controllers.base import CommandBatch, ObservationBatch
+
+
+class LoopBook(Protocol):
+    """What the loop asks of its book (see the module docstring).
+
+    Attributes:
+        active: (N,) rows still running (the loop ends when none is).
+    """
+
+    active: np.ndarray
+
+    def check(self, step: int, idx: np.ndarray) -> np.ndarray:
+        """(n,) which of the active rows ``idx`` are done at the start of ``step`` (they
+        are measured, not stepped)."""
+        ...
+
+    def observed(self, step: int, idx: np.ndarray, obs: ObservationBatch) -> np.ndarray:
+        """Account the camera's batch of ``idx``; returns the (n,) mask of rows with an
+        image to step on (a book may end rows here by clearing ``active``)."""
+        ...
+
+    def commanded(self, step: int, rows: np.ndarray, commands: CommandBatch,
+                  seconds: float) -> tuple[np.ndarray, np.ndarray]:
+        """Account the commands of ``rows`` (the controller took ``seconds`` per row);
+        returns the (n,) masks of the commands applied and of the rows that end."""
+        ...
+
+    def period(self, step: int, idx: np.ndarray, done: np.ndarray, obs: ObservationBatch,
+               error_norm: np.ndarray, values: np.ndarray) -> None:
+        """The period's outcome for ``idx`` (``done`` rows end at ``step``; ``values`` the
+        commands, zeros where none), before the plant moves the others."""
+        ...
+
+    def advanced(self, step: int, run: np.ndarray, failures: dict[int, str]) -> None:
+        """The plant moved rows ``run``; ``failures`` are rows whose world failed."""
+        ...
+
+
+def closed_loop(plant: Any, sensor: Any, clock: CameraClock | None, controller: Any,
+                book: LoopBook, dt: float, offsets: np.ndarray,
+                max_steps: int | None = None) -> int:
+    """Run the loop until the book ends every row or ``max_steps`` periods have passed.
+
+    Args:
+        plant: The plant (its ``R``, ``t`` arrays are the poses the camera sees).
+        sensor: ``measure(rows, R, t) -> ObservationBatch`` (the camera's part).
+        clock: The camera's clock, or None.
+        controller: Reset for every row (``step_batch``).
+        book: The bookkeeping of the rows.
+        dt: Control period [s].
+        offsets: (N, 6) encoder offsets of the rows [m] (the plant's ``measured_lengths``).
+        max_steps: Periods ``0..max_steps`` (None: until the book ends).
+
+    Returns:
+        The number of periods begun.
+    """
+    steps: Iterable[int] = itertools.count() if max_steps is None else range(max_steps + 1)
+    begun = 0
+    for step in steps:
+        idx = np.flatnonzero(book.active)
+        if len(idx) == 0:
+            break
+        begun = step + 1
+        done = book.check(step, idx)
+        obs = clocked_measure(clock, step, idx, (plant.R, plant.t), sensor.measure)
+        seen = book.observed(step, idx, obs)
+        done |= ~book.active[idx]
+        values = np.zeros((len(idx), 6))
+        norms = np.full(len(idx), np.nan)
+        every = not done.any() and bool(seen.all())  # the common case: no row copies
+        rows = np.arange(len(idx)) if every else np.flatnonzero(~done & seen)
+        if len(rows):
+            tr = idx if every else idx[rows]
+            batch = replace(obs if every else take(obs, rows), trials=tr,
+                            t=np.full(len(rows), step * dt),
+                            lengths=plant.measured_lengths(tr, offsets[tr]),
+                            q_dot=plant.measured_rates(tr))
+            t0 = time.perf_counter()
+            cmds = controller.step_batch(batch)
+            seconds = (time.perf_counter() - t0) / len(rows)
+            applied, ends = book.commanded(step, tr, cmds, seconds)
+            norms[rows] = cmds.error_norm
+            done[rows[ends]] = True
+            values[rows[applied]] = cmds.values[applied]
+        book.period(step, idx, done, obs, norms, values)
+        run = idx[~done]
+        if len(run):
+            book.advanced(step, run, plant.advance(run, values[~done], dt))
+    return begun
