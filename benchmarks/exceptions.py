@@ -67,3 +67,41 @@ class SetupError(BenchmarkError):
         text = "; ".join(p.text for p in problems)
         super().__init__(f"{source}: the setup cannot run, every trial would fail: {text} "
                          f"(hexapod-bench check {source} shows the details)")
+
+
+def user_message(exc: BaseException) -> str:
+    """One line in the user's terms for the exception that ended a trial (a failure
+    row's ``cause``).
+
+    The known causes of a setup that cannot work are translated into what to change in
+    which file; any other exception keeps its own message, prefixed by its type when it
+    is not one of the project's (a bug, or a plugin's error).
+    """
+    import math
+
+    from controllers.exceptions import ContextError, ControllerError
+    from hexapod.exceptions import HexapodError, WorkspaceError
+    from vision.exceptions import VisionError
+
+    if isinstance(exc, WorkspaceError):
+        return (f"no start or goal pose: only {exc.found} of {exc.attempts} random poses "
+                f"(within {exc.max_translation * 1e3:g} mm and "
+                f"{math.degrees(exc.max_angle):g} deg of the home pose) keep every leg "
+                f"{exc.margin * 1e3:g} mm inside its stroke; change stroke_mm in the robot "
+                "file, or [task] max_translation_mm, max_angle_deg or margin_mm in the "
+                "scenario")
+    if isinstance(exc, ContextError) and exc.field.startswith("goal"):
+        if "desired direction" in exc.problem:
+            seen = ("the camera sees both edges of no leg at the goal pose (a leg's direction "
+                    "needs both)")
+        elif "visible desired edge" in exc.problem:
+            seen = "the camera sees no leg edge at the goal pose"
+        else:
+            seen = ""
+        if seen:
+            return (f"{seen}, so there is no desired image to servo to; move the camera "
+                    "([camera] in the scenario, or [camera_from_base] in the camera file) so "
+                    "that it sees the legs (hexapod-bench check shows what it sees)")
+    if isinstance(exc, HexapodError | VisionError | ControllerError):
+        return str(exc)
+    return f"{type(exc).__name__}: {exc}"

@@ -14,11 +14,11 @@ from typing import Any
 
 import numpy as np
 
+from benchmarks.exceptions import user_message
 from benchmarks.sim.actuation import require_batch
+from benchmarks.sim.inputs import SimScenario
 from benchmarks.sim.tolerance import unconverged_reason
 from benchmarks.sim.world import TrialSetup
-from benchmarks.study.failures import user_message
-from benchmarks.study.scenario import Scenario
 from controllers.base import CommandBatch, ObservationBatch
 from controllers.exceptions import ControllerError
 from controllers.registry import registry
@@ -84,7 +84,7 @@ class Book:
     _errors: tuple[np.ndarray, np.ndarray] | None = None  # this period's pose errors
 
     @classmethod
-    def new(cls, sc: Scenario, group: list[TrialSetup], record_trials: int) -> Book:
+    def new(cls, sc: SimScenario, group: list[TrialSetup], record_trials: int) -> Book:
         """Fresh bookkeeping of a group."""
         from benchmarks.sim.tracking import tracker_for
 
@@ -264,15 +264,15 @@ class Book:
         for key, value in values.items():
             self.series[k].setdefault(key, []).append(value)
 
-    def results(self, sc: Scenario, spec: Any, group: list[TrialSetup], R: np.ndarray,
+    def results(self, sc: SimScenario, spec: Any, group: list[TrialSetup], R: np.ndarray,
                 t: np.ndarray, detect_times: list[float] | None = None,
                 figures: Callable[[int], dict[str, Any]] | None = None) -> list[TrialResult]:
         """The result rows (and recorded series) of the group at the final poses
         (``figures``: a plant's extra figures of row ``m``)."""
         if self.batch_times:  # a row is commanded from step 0 until it is done
-            times = np.array(self.batch_times)
+            per_row = np.array(self.batch_times)
             for m in range(self.n):
-                self.step_times[m] = times[:self.stepped[m]].tolist()
+                self.step_times[m] = per_row[:self.stepped[m]].tolist()
         R_goal = np.array([s.goal_rotation for s in group])
         t_goal = np.array([s.goal_translation for s in group])
         dp, da = pose_error(R, t, R_goal, t_goal)
@@ -327,7 +327,7 @@ def stroke_violations(q: np.ndarray, v: np.ndarray, dt: float,
     return np.any((q_next < stroke[0] - 1e-9) | (q_next > stroke[1] + 1e-9), axis=1)
 
 
-def base_row(sc: Scenario, spec: Any, trial: int) -> dict[str, Any]:
+def base_row(sc: SimScenario, spec: Any, trial: int) -> dict[str, Any]:
     """The identity of a result row: scenario, controller (with its package), trial, sweep."""
     info = None
     try:
@@ -347,7 +347,7 @@ def base_row(sc: Scenario, spec: Any, trial: int) -> dict[str, Any]:
     return row
 
 
-def failure_row(sc: Scenario, spec: Any, trial: int, exc: BaseException) -> dict[str, Any]:
+def failure_row(sc: SimScenario, spec: Any, trial: int, exc: BaseException) -> dict[str, Any]:
     """The row of a trial that crashed (the crash is the trial's failure)."""
     row = base_row(sc, spec, trial)
     row.update({

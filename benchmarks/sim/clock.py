@@ -34,8 +34,8 @@ from collections.abc import Callable
 
 import numpy as np
 
+from benchmarks.sim.inputs import SimScenario
 from benchmarks.sim.world import TrialSetup, trial_rng
-from benchmarks.study.scenario import Scenario
 from controllers.base import ObservationBatch
 from hexapod.fk import pack_rows, solve_rows
 
@@ -52,14 +52,14 @@ Measure = Callable[[np.ndarray, np.ndarray, np.ndarray], ObservationBatch]
 FRAME_FIELDS = ("normals", "lines", "directions", "edge_visible", "direction_visible")
 
 
-def clock_active(sc: Scenario) -> bool:
+def clock_active(sc: SimScenario) -> bool:
     """Whether the scenario's camera has a clock of its own (see the module docstring)."""
     c = getattr(sc, "clock", None)
     return c is not None and (c.frame_rate_hz > 0 or c.latency_ms > 0 or c.latency_frames > 0
                               or c.jitter_ms > 0 or c.exposure_ms > 0)
 
 
-def latency_s(sc: Scenario) -> float:
+def latency_s(sc: SimScenario) -> float:
     """The scenario's image latency [s] (frames counted at the frame rate, or at the
     control rate when the camera is triggered by the controller)."""
     c = sc.clock
@@ -80,7 +80,7 @@ class CameraClock:
         platform_points: (6, 3) or (N, 6, 3) true platform points [m].
     """
 
-    def __init__(self, sc: Scenario, group: list[TrialSetup], q: np.ndarray, R: np.ndarray,
+    def __init__(self, sc: SimScenario, group: list[TrialSetup], q: np.ndarray, R: np.ndarray,
                  t: np.ndarray, base_points: np.ndarray, platform_points: np.ndarray) -> None:
         c = sc.clock
         n = len(group)
@@ -196,7 +196,7 @@ class CameraClock:
         return R, t
 
 
-def make_clock(sc: Scenario, group: list[TrialSetup], q: np.ndarray, R: np.ndarray,
+def make_clock(sc: SimScenario, group: list[TrialSetup], q: np.ndarray, R: np.ndarray,
                t: np.ndarray, base_points: np.ndarray, platform_points: np.ndarray
                ) -> CameraClock | None:
     """The camera clock of a group of trials, or None when the camera has none."""

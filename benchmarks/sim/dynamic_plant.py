@@ -52,7 +52,7 @@ class DynamicPlant:
 
     def __init__(self, sc: Any, group: list[TrialSetup], q: np.ndarray, R: np.ndarray,
                  t: np.ndarray, base_points: np.ndarray, platform_points: np.ndarray) -> None:
-        self.q = q
+        self.q, self.R, self.t = q, R, t  # R, t changed in place by the robots
         self.steps = max(1, round(sc.dt / sc.physics_dt))
         self.h = sc.dt / self.steps
         self.dt = sc.dt

@@ -12,13 +12,13 @@ from typing import Any
 
 import numpy as np
 
+from benchmarks.sim.inputs import SimScenario, SimTask
 from benchmarks.sim.world import TrialSetup
-from benchmarks.study.scenario import Scenario, TaskConfig
 from controllers.batch import PerTrialLoop, actuation_of, batch_controller
 from hexapod.trajectory import PoseTrajectory
 
 
-def trajectory(task: TaskConfig, start_rotation: np.ndarray, start_translation: np.ndarray,
+def trajectory(task: SimTask, start_rotation: np.ndarray, start_translation: np.ndarray,
                goal_rotation: np.ndarray, goal_translation: np.ndarray) -> PoseTrajectory:
     """The reference of a trajectory task from a trial's start (and, for a line, goal)
     pose, with the task's limits in SI units."""
@@ -31,7 +31,7 @@ def trajectory(task: TaskConfig, start_rotation: np.ndarray, start_translation: 
         radius=1e-3 * task.radius_mm, laps=task.laps, plane=task.plane)
 
 
-def trajectory_end(task: TaskConfig, start_rotation: np.ndarray,
+def trajectory_end(task: SimTask, start_rotation: np.ndarray,
                    start_translation: np.ndarray, goal_rotation: np.ndarray,
                    goal_translation: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """The goal pose of a trial of ``task``: where its reference ends (the start pose
@@ -41,7 +41,7 @@ def trajectory_end(task: TaskConfig, start_rotation: np.ndarray,
     return np.array(start_rotation, dtype=float), np.array(start_translation, dtype=float)
 
 
-def trial_reference(sc: Scenario, setup: TrialSetup) -> PoseTrajectory | None:
+def trial_reference(sc: SimScenario, setup: TrialSetup) -> PoseTrajectory | None:
     """The reference of a trial (None for a point-to-point task)."""
     if sc.task.kind != "trajectory":
         return None
@@ -53,7 +53,7 @@ class Targets:
     """The pose each trial of a group is measured against at each period: its goal, or
     its reference at ``step dt`` (sampled once on the control grid)."""
 
-    def __init__(self, sc: Scenario, group: list[TrialSetup]) -> None:
+    def __init__(self, sc: SimScenario, group: list[TrialSetup]) -> None:
         self.rotation = np.array([s.goal_rotation for s in group])
         self.translation = np.array([s.goal_translation for s in group])
         self._grid: tuple[np.ndarray, np.ndarray] | None = None
@@ -70,7 +70,7 @@ class Targets:
         return self._grid[0][idx, step], self._grid[1][idx, step]
 
 
-def task_controller(sc: Scenario, spec: Any) -> Any:
+def task_controller(sc: SimScenario, spec: Any) -> Any:
     """A controller of ``spec`` for the task of ``sc``: as registered, wrapped in a
     :class:`~controllers.tracking.TrackingController` for a trajectory task."""
     from controllers.registry import registry
@@ -83,7 +83,7 @@ def task_controller(sc: Scenario, spec: Any) -> Any:
     return TrackingController(ctrl, feed_forward=sc.task.feed_forward)
 
 
-def task_batch_controller(sc: Scenario, spec: Any, batched: bool) -> Any:
+def task_batch_controller(sc: SimScenario, spec: Any, batched: bool) -> Any:
     """The batch interface of :func:`task_controller`.
 
     A trajectory task with ``batched``: the controller's own batch (or its per-trial

@@ -15,8 +15,8 @@ from typing import Any
 
 import numpy as np
 
+from benchmarks.sim.inputs import SimScenario
 from benchmarks.sim.world import TrialSetup, World, trial_rng
-from benchmarks.study.scenario import Scenario
 from controllers.base import Goal, ObservationBatch
 from hexapod.kinematics import inverse_kinematics
 from vision.cameras import Camera
@@ -54,7 +54,7 @@ def camera_batch(normals: np.ndarray, lines: np.ndarray | None, directions: np.n
 def take(obs: ObservationBatch, rows: np.ndarray) -> ObservationBatch:
     """Rows ``rows`` of a batch (every array field indexed)."""
     return ObservationBatch(**{f: (None if (v := getattr(obs, f)) is None else v[rows])
-                               for f in obs.__dataclass_fields__})
+                               for f in obs.__dataclass_fields__})  # type: ignore[arg-type]
 
 
 def goal_of(m: ObservationBatch, setup: TrialSetup) -> Goal:
@@ -81,7 +81,7 @@ class GeometricSensor:
     the normal on the points lifted with the estimated camera.
     """
 
-    def __init__(self, sc: Scenario, world: World, estimated_camera: Camera) -> None:
+    def __init__(self, sc: SimScenario, world: World, estimated_camera: Camera) -> None:
         self.sc = sc
         self.world = world
         self.est: Any = estimated_camera  # a PerspectiveCamera when ``perspective``
@@ -118,7 +118,7 @@ class GeometricSensor:
         return _average_frames(m, self.est if self.perspective else None)
 
 
-def draws_noise(sc: Scenario, apply_noise: bool) -> bool:
+def draws_noise(sc: SimScenario, apply_noise: bool) -> bool:
     """Whether :func:`noisy_features` draws from the rows' generators (without noise, the
     batched engine does not create them: ten microseconds each)."""
     noise = sc.noise
@@ -126,7 +126,7 @@ def draws_noise(sc: Scenario, apply_noise: bool) -> bool:
                             or noise.model == "pixel" or noise.dropout_probability > 0)
 
 
-def noisy_features(sc: Scenario, normals: np.ndarray, visible: np.ndarray,
+def noisy_features(sc: SimScenario, normals: np.ndarray, visible: np.ndarray,
                    rngs: Sequence[Any], apply_noise: bool, estimated: Any,
                    cameras: list[tuple[np.ndarray, Any]],
                    item: Callable[[int], tuple[Any, Any]]) -> ObservationBatch:
@@ -218,6 +218,7 @@ def _average_frames(m: ObservationBatch, perspective_camera: Any | None,
 
     if len(m) == 1:
         return m
+    assert m.normals is not None  # a camera's batch has normals
     normals, visible = average_normals(m.normals, m.edge_visible, max_deviation=max_deviation)
     lines = None
     if perspective_camera is not None:
@@ -231,7 +232,7 @@ def _average_frames(m: ObservationBatch, perspective_camera: Any | None,
                         both[None])
 
 
-def trial_goal(sensor: GeometricSensor | Any, setup: TrialSetup, sc: Scenario) -> Goal:
+def trial_goal(sensor: GeometricSensor | Any, setup: TrialSetup, sc: SimScenario) -> Goal:
     """What the controllers are told about the goal of a trial.
 
     The desired features are taught by showing: the sensor measures the TRUE goal pose
@@ -254,7 +255,7 @@ def trial_goal(sensor: GeometricSensor | Any, setup: TrialSetup, sc: Scenario) -
                                        apply_noise=sc.noise.on_goal), setup)
 
 
-def make_sensor(sc: Scenario, setup: TrialSetup) -> Any:
+def make_sensor(sc: SimScenario, setup: TrialSetup) -> Any:
     """The sensor of a trial: a :class:`GeometricSensor`, or rendered images through
     :class:`vision.image_sensor.ImageSensor` (``[sensor] kind = "image"``; pixel noise
     from the trial's stream 4)."""
@@ -385,7 +386,7 @@ class BatchSensor:
         setups: The trials (their worlds and the estimated camera, the same for all).
     """
 
-    def __init__(self, sc: Scenario, setups: list[TrialSetup]) -> None:
+    def __init__(self, sc: SimScenario, setups: list[TrialSetup]) -> None:
         self.sc = sc
         self.setups = setups
         worlds = [s.world for s in setups]
@@ -434,7 +435,7 @@ class BatchSensor:
         return [goal_of(take(m, np.array([k])), s) for k, s in enumerate(setups)]
 
 
-def rows_generators(sc: Scenario, setups: list[TrialSetup], stream: int, apply_noise: bool
+def rows_generators(sc: SimScenario, setups: list[TrialSetup], stream: int, apply_noise: bool
                     ) -> list[Any]:
     """The trials' random streams ``stream`` for the sensor, or Nones when the scenario's
     noise draws nothing (:func:`draws_noise`: ten microseconds saved per trial)."""

@@ -21,7 +21,7 @@ from __future__ import annotations
 
 import logging
 from collections.abc import Callable
-from typing import Any
+from typing import Any, TypeVar
 
 import numpy as np
 
@@ -29,6 +29,7 @@ from benchmarks.exceptions import ScenarioError
 from benchmarks.sim.actuation import drive_plant, require_actuation, world_actuation
 from benchmarks.sim.book import Book, TrialResult, failure_row
 from benchmarks.sim.clock import make_clock
+from benchmarks.sim.inputs import SimScenario
 from benchmarks.sim.loop import closed_loop
 from benchmarks.sim.plant import BackendPlant, KinematicPlant, make_plant
 from benchmarks.sim.reference import Targets, task_batch_controller
@@ -47,7 +48,6 @@ from benchmarks.sim.world import (
     make_trials,
     trial_rng,
 )
-from benchmarks.study.scenario import Scenario
 from controllers.base import ControllerContext, Goal
 from controllers.batch import actuation_of
 from hexapod import HexapodGeometry
@@ -59,8 +59,12 @@ log = logging.getLogger(__name__)
 ENGINES = ("batched", "per-trial")
 
 
+#: The scenario type a caller passes (its sensor factory receives it).
+S = TypeVar("S", bound=SimScenario)
+
+
 def run_trials(
-    sc: Scenario,
+    sc: S,
     controller_index: int,
     trials: list[int],
     record_trials: int = 0,
@@ -68,7 +72,7 @@ def run_trials(
     calibrate: Callable[[World, np.random.Generator], tuple[np.ndarray, dict[str, float]]]
     | None = None,
     on_step: Callable[[int, np.ndarray, np.ndarray, np.ndarray], None] | None = None,
-    sensor_factory: Callable[[Scenario, TrialSetup], Any] | None = None,
+    sensor_factory: Callable[[S, TrialSetup], Any] | None = None,
     engine: str = "batched",
 ) -> list[TrialResult]:
     """Run trials of one scenario point with one controller.
@@ -133,11 +137,11 @@ def run_trials(
 class _Unit:
     """How the groups of a work unit run (the arguments of :func:`run_trials`)."""
 
-    def __init__(self, sc: Scenario, controller_index: int, record_trials: int,
+    def __init__(self, sc: SimScenario, controller_index: int, record_trials: int,
                  batched: bool,
                  backend_factory: Callable[[HexapodGeometry, np.ndarray], Backend] | None,
                  on_step: Callable[[int, np.ndarray, np.ndarray, np.ndarray], None] | None,
-                 sensor_factory: Callable[[Scenario, TrialSetup], Any] | None) -> None:
+                 sensor_factory: Callable[[Any, TrialSetup], Any] | None) -> None:
         self.sc = sc
         self.spec = sc.controllers[controller_index]
         self.record_trials = record_trials
@@ -225,7 +229,7 @@ class _Unit:
         return book.results(sc, spec, group, R, t, sensor.detect_times, plant.row_figures)
 
 
-def _goals(sc: Scenario, sensor: BatchSensor, setups: list[TrialSetup]
+def _goals(sc: SimScenario, sensor: BatchSensor, setups: list[TrialSetup]
            ) -> list[Goal | Exception]:
     """The goal of every trial (:func:`benchmarks.sim.sensors.trial_goal`): measured in one
     batch when one frame is taught, trial by trial otherwise (and to find the trials at
@@ -255,7 +259,7 @@ def _close_all(backends: list[Backend]) -> None:
             b.close()
 
 
-def trial_context(sc: Scenario, setup: TrialSetup, goal: Any) -> ControllerContext:
+def trial_context(sc: SimScenario, setup: TrialSetup, goal: Any) -> ControllerContext:
     """What the controllers of a trial are told: the estimated parameters and the goal."""
     from benchmarks.sim.reference import trial_reference
 

@@ -29,7 +29,7 @@ def unconverged_reason(task: Any, position_mm: float, orientation_deg: float) ->
     """Why a trial that ran out of steps did not converge.
 
     Args:
-        task: The scenario's :class:`~benchmarks.study.scenario_model.TaskConfig`.
+        task: The scenario's :class:`~benchmarks.sim.inputs.SimTask`.
         position_mm: Final position error [mm].
         orientation_deg: Final orientation error [deg].
 

@@ -17,9 +17,9 @@ from typing import Any
 
 import numpy as np
 
+from benchmarks.sim.inputs import SimScenario
 from benchmarks.sim.reference import trial_reference
 from benchmarks.sim.world import TrialSetup
-from benchmarks.study.scenario import Scenario
 
 
 class Tracker:
@@ -32,7 +32,7 @@ class Tracker:
         ori_tol: Orientation tolerance [rad].
     """
 
-    def __init__(self, sc: Scenario, group: list[TrialSetup], pos_tol: float,
+    def __init__(self, sc: SimScenario, group: list[TrialSetup], pos_tol: float,
                  ori_tol: float) -> None:
         n = len(group)
         self.dt = sc.dt
@@ -96,7 +96,7 @@ class Tracker:
         }
 
 
-def tracker_for(sc: Scenario, group: list[TrialSetup], pos_tol: float, ori_tol: float
+def tracker_for(sc: SimScenario, group: list[TrialSetup], pos_tol: float, ori_tol: float
                 ) -> Tracker | None:
     """A :class:`Tracker` for a trajectory task, None otherwise."""
     if sc.task.kind != "trajectory":

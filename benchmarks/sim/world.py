@@ -11,8 +11,7 @@ from typing import Any
 
 import numpy as np
 
-from benchmarks.study.scenario import Scenario
-from benchmarks.study.scenario_model import UNSCALED
+from benchmarks.sim.inputs import SimCalibrationError, SimScenario
 from hexapod import HexapodGeometry, Transform, forward_kinematics_batch
 from hexapod.geometry import preset as geometry_preset
 from hexapod.kinematics import inverse_kinematics
@@ -23,7 +22,7 @@ from vision.cameras import Camera, camera_preset
 log = logging.getLogger(__name__)
 
 
-def load_geometry(scenario: Scenario) -> HexapodGeometry:
+def load_geometry(scenario: SimScenario) -> HexapodGeometry:
     """The nominal geometry of a scenario (the data read when it was loaded, if any), with
     the scenario's ``[drives]`` changes."""
     if scenario.geometry_data is not None:
@@ -39,7 +38,7 @@ def load_geometry(scenario: Scenario) -> HexapodGeometry:
     return geometry
 
 
-def load_camera(scenario: Scenario, geometry: HexapodGeometry) -> Camera:
+def load_camera(scenario: SimScenario, geometry: HexapodGeometry) -> Camera:
     """The nominal camera of a scenario (the data read when it was loaded, if any)."""
     if scenario.camera_data is not None:
         return scenario.camera_data  # type: ignore[no-any-return]
@@ -122,7 +121,7 @@ def _perturb_camera(camera: Camera, z_rot: np.ndarray, z_pos: np.ndarray, z_k: n
     return camera.replace(K=K, camera_from_base=new_T)
 
 
-def make_trial(sc: Scenario, trial: int, nominal: HexapodGeometry, camera: Camera,
+def make_trial(sc: SimScenario, trial: int, nominal: HexapodGeometry, camera: Camera,
                calibrate: Callable[[World, np.random.Generator], tuple[np.ndarray,
                                                                        dict[str, float]]]
                | None = None) -> TrialSetup:
@@ -137,7 +136,7 @@ def make_trial(sc: Scenario, trial: int, nominal: HexapodGeometry, camera: Camer
     return out
 
 
-def make_trials(sc: Scenario, trials: list[int], nominal: HexapodGeometry, camera: Camera,
+def make_trials(sc: SimScenario, trials: list[int], nominal: HexapodGeometry, camera: Camera,
                 calibrate: Callable[[World, np.random.Generator], tuple[np.ndarray,
                                                                         dict[str, float]]]
                 | None = None) -> list[TrialSetup | Exception]:
@@ -215,18 +214,14 @@ def _start_lengths(drawn: list[Any], poses: dict[int, Any]) -> dict[int, np.ndar
     return out
 
 
-def _scaled_error(sc: Scenario) -> tuple[Any, bool]:
+def _scaled_error(sc: SimScenario) -> tuple[SimCalibrationError, bool]:
     """The scenario's calibration error at its scale, and whether it is zero (every
     trial then shares the nominal world)."""
-    ce = sc.calibration_error
-    ce = type(ce)(**{k: (getattr(ce, k) * ce.scale if k not in UNSCALED else getattr(ce, k))
-                     for k in ce.__dataclass_fields__})
-    shared = all(getattr(ce, k) == 0.0 for k in ce.__dataclass_fields__
-                  if k not in ("scale", "distortion_percent"))
-    return ce, shared
+    ce = sc.calibration_error.at_scale()
+    return ce, ce.nominal_world()
 
 
-def _draw_world(sc: Scenario, trial: int, nominal: HexapodGeometry, camera: Camera, ce: Any,
+def _draw_world(sc: SimScenario, trial: int, nominal: HexapodGeometry, camera: Camera, ce: Any,
                 shared: bool) -> tuple[np.random.Generator, World, Any, bool]:
     """The trial's generator (after the world's draws), its world, the scaled
     calibration error ``ce`` and whether the world is the nominal one (``shared``)."""
@@ -291,7 +286,7 @@ def model_error_inertia(inertia: Any, mass_error_percent: float,
         rod_inertia=np.asarray(inertia.rod_inertia) * fi)
 
 
-def _fixed_poses(sc: Scenario, geometry: HexapodGeometry
+def _fixed_poses(sc: SimScenario, geometry: HexapodGeometry
                  ) -> tuple[np.ndarray, np.ndarray]:
     """Start and goal poses (2, 3, 3), (2, 3) of a fixed task (its leg lengths)."""
     task = sc.task

@@ -18,48 +18,10 @@ from collections import Counter
 from dataclasses import dataclass, field
 from typing import Any
 
+from benchmarks.exceptions import user_message  # noqa: F401 - where the study finds it
+
 #: A failure that only says the trial did not converge: the trial ran to its end.
 NOT_CONVERGED = "not conv"
-
-
-def user_message(exc: BaseException) -> str:
-    """One line in the user's terms for the exception that ended a trial.
-
-    The known causes of a setup that cannot work are translated into what to change in
-    which file; any other exception keeps its own message, prefixed by its type when it
-    is not one of the project's (a bug, or a plugin's error).
-    """
-    from controllers.exceptions import ContextError, ControllerError
-    from hexapod.exceptions import HexapodError, WorkspaceError
-    from vision.exceptions import VisionError
-
-    if isinstance(exc, WorkspaceError):
-        return (f"no start or goal pose: only {exc.found} of {exc.attempts} random poses "
-                f"(within {exc.max_translation * 1e3:g} mm and {_deg(exc.max_angle):g} deg of "
-                f"the home pose) keep every leg {exc.margin * 1e3:g} mm inside its stroke; "
-                "change stroke_mm in the robot file, or [task] max_translation_mm, "
-                "max_angle_deg or margin_mm in the scenario")
-    if isinstance(exc, ContextError) and exc.field.startswith("goal"):
-        if "desired direction" in exc.problem:
-            seen = ("the camera sees both edges of no leg at the goal pose (a leg's direction "
-                    "needs both)")
-        elif "visible desired edge" in exc.problem:
-            seen = "the camera sees no leg edge at the goal pose"
-        else:
-            seen = ""
-        if seen:
-            return (f"{seen}, so there is no desired image to servo to; move the camera "
-                    "([camera] in the scenario, or [camera_from_base] in the camera file) so "
-                    "that it sees the legs (hexapod-bench check shows what it sees)")
-    if isinstance(exc, HexapodError | VisionError | ControllerError):
-        return str(exc)
-    return f"{type(exc).__name__}: {exc}"
-
-
-def _deg(rad: float) -> float:
-    import math
-
-    return math.degrees(rad)
 
 
 def is_failure(row: dict[str, Any]) -> bool:

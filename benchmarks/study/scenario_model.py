@@ -191,6 +191,17 @@ class CalibrationErrorConfig:
     model_mass_error_percent: float = 0.0
     model_inertia_error_percent: float = 0.0
 
+    def at_scale(self) -> CalibrationErrorConfig:
+        """The errors at the scale: every key but :data:`UNSCALED` times ``scale``."""
+        return type(self)(**{k: getattr(self, k) * self.scale if k not in UNSCALED
+                             else getattr(self, k) for k in self.__dataclass_fields__})
+
+    def nominal_world(self) -> bool:
+        """Whether no error moves the true world away from the nominal one (every trial
+        then shares it: ``distortion_percent`` changes only the camera model)."""
+        return all(getattr(self, k) == 0.0 for k in self.__dataclass_fields__
+                   if k not in ("scale", "distortion_percent"))
+
 
 @dataclass(frozen=True)
 class CalibrationConfig:

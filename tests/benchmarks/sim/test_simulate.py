@@ -71,8 +71,8 @@ def test_one_teach_frame_is_the_single_measurement() -> None:
     goal = trial_goal(sensor, setup, sc)
     m = sensor.measure(setup.goal_rotation[None], setup.goal_translation[None],
                        [trial_rng(sc.seed, 2, 2)])
-    assert np.array_equal(goal.normals, m["normals"][0])
-    assert np.array_equal(goal.lines, m["lines"][0])
+    assert np.array_equal(goal.normals, m.normals[0])
+    assert np.array_equal(goal.lines, m.lines[0])
 
 
 def test_image_goal_frames_are_averaged_and_never_seed_the_tracking() -> None:
@@ -93,9 +93,9 @@ def test_image_goal_frames_are_averaged_and_never_seed_the_tracking() -> None:
     assert np.degrees(err).max() < 0.1  # the accuracy bound of tests/vision/test_image_sensor.py
     m = sensor.measure(setup.start_rotation[None], setup.start_translation[None], [rng])
     truth = observe_legs(camera, nominal, setup.start_rotation, setup.start_translation)
-    assert m["edge_visible"][0].sum() >= truth.edge_visible.sum() - 1
-    seen = m["edge_visible"][0] & truth.edge_visible
-    assert np.degrees(angle_between(m["normals"][0][seen], truth.normals[seen])).max() < 0.1
+    assert m.edge_visible[0].sum() >= truth.edge_visible.sum() - 1
+    seen = m.edge_visible[0] & truth.edge_visible
+    assert np.degrees(angle_between(m.normals[0][seen], truth.normals[seen])).max() < 0.1
 
 
 def test_goal_image_under_calibration_error_keeps_every_edge() -> None:
