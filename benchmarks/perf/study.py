@@ -38,7 +38,7 @@ def _run(sc: object, controller: int, trials: int, engine: str) -> tuple[float, 
     from benchmarks.study.calibration import calibration_hook
 
     t0, w0 = time.process_time(), time.perf_counter()
-    res = run_trials(sc, controller, list(range(trials)), 0,  # type: ignore[arg-type]
+    res = run_trials(sc, controller, list(range(trials)), 0,  # type: ignore[type-var]
                      calibrate=calibration_hook(sc),  # type: ignore[arg-type]
                      engine=engine)
     return time.process_time() - t0, time.perf_counter() - w0, [r.row for r in res]
@@ -47,12 +47,12 @@ def _run(sc: object, controller: int, trials: int, engine: str) -> tuple[float, 
 #: The stages of the batched engine timed by ``--breakdown``: (label, module, attribute).
 STAGES = (
     ("trial set-up: worlds and poses", "benchmarks.sim.stepper", "make_trials"),
-    ("trial set-up: goals", "benchmarks.sim.engine", "_goals"),
+    ("trial set-up: goals", "benchmarks.sim.stepper", "_goals"),
     ("trial set-up: controller reset", "controllers.batch", "batch_controller"),
-    ("observation (C)", "benchmarks.sim.engine", "observe_batch"),
-    ("features and noise", "benchmarks.sim.engine", "noisy_features"),
-    ("convergence test (pose errors)", "benchmarks.sim.engine", "pose_error"),
-    ("controller step_batch", "benchmarks.sim.engine", "_step_batch"),
+    ("observation (C)", "benchmarks.sim.sensors", "observe_batch"),
+    ("features and noise", "benchmarks.sim.sensors", "noisy_features"),
+    ("convergence test (pose errors)", "benchmarks.sim.book", "pose_error"),
+    ("controller step_batch", "benchmarks.sim.loop", "_step_batch"),
     ("forward kinematics (C)", "benchmarks.sim.plant", "solve_rows"),
 )
 

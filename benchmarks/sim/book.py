@@ -34,6 +34,8 @@ MAX_REFUSED_STEPS = 25
 #: The recorded time series of a trial.
 SERIES_KEYS = ("t", "lengths", "rotations", "translations", "edge_visible", "error_norm",
                "position_error", "orientation_error", "velocities")
+#: The series whose values are arrays of the loop's (copied when recorded).
+COPIED = ("lengths", "rotations", "translations", "edge_visible", "velocities")
 
 
 @dataclass
@@ -153,8 +155,10 @@ class Book:
         return done
 
     def observed(self, step: int, idx: np.ndarray, obs: ObservationBatch) -> np.ndarray:
-        """Count the hidden edges, show the live view; every row has its image."""
-        self.seen(idx, obs.edge_visible)
+        """Count the periods where a row measured fewer than its 12 edges, show the live
+        view; every row has its image."""
+        self.hidden[idx] += ~np.asarray(obs.edge_visible, dtype=bool).reshape(
+            len(idx), -1).all(axis=1)
         if self.on_step is not None:
             R, t = self.plant.R, self.plant.t
             for j, k in enumerate(idx.tolist()):
@@ -163,25 +167,43 @@ class Book:
 
     def commanded(self, step: int, rows: np.ndarray, commands: CommandBatch,
                   seconds: float) -> tuple[np.ndarray, np.ndarray]:
-        """Refuse a batch of another kind than declared; account the commands
-        (:meth:`commands`): a row that fails with its command ends, without it."""
+        """Refuse a batch of another kind than declared; a row fails (and ends, its
+        command not applied) with an invalid command or after too many refusals in a
+        row."""
         require_batch(commands, self.actuation, self.label)
         self.batch_times.append(seconds)
         self.stepped[rows] += 1
-        failed = self.commands(rows, commands.values, commands.reasons)
+        v, reasons = commands.values, commands.reasons
+        invalid = ~np.isfinite(v).all(axis=1)
+        if reasons.count(None) == len(reasons) and not invalid.any():  # the common case
+            self.refused[rows] = 0
+            return ~invalid, invalid
+        refused = np.fromiter((r is not None for r in reasons), dtype=bool, count=len(rows))
+        self.refused[rows[~refused]] = 0
+        self.refused[rows[refused]] += 1
+        too_many = refused & (self.refused[rows] >= MAX_REFUSED_STEPS)
+        for j in np.flatnonzero(invalid & ~too_many):
+            self.failure[rows[j]] = f"controller returned an invalid command {v[j]!r}"
+        for j in np.flatnonzero(too_many):
+            self.failure[rows[j]] = f"controller refused to move: {reasons[j]}"
+        failed = invalid | too_many
         return ~failed, failed
 
     def period(self, step: int, idx: np.ndarray, done: np.ndarray, obs: ObservationBatch,
                error_norm: np.ndarray, values: np.ndarray) -> None:
-        """Record the period of the recorded rows, end the ``done`` rows, count the leg
-        velocity commands that would leave the stroke."""
+        """Record the period of the recorded rows (with the plant's extra values), end
+        the ``done`` rows, count the leg velocity commands that would leave the stroke."""
         plant = self.plant
         dp, da = self._errors  # type: ignore[misc]
         for j in np.flatnonzero(np.asarray(self.recording)[idx]).tolist():
             r = int(idx[j])
-            self.record(r, step * self.dt, plant.q[r], plant.R[r], plant.t[r],
-                        obs.edge_visible[j], error_norm[j], dp[j], da[j], values[j])
-            self.record_more(r, plant.series(r))
+            ser = self.series[r]
+            for key, value in zip(SERIES_KEYS, (
+                    step * self.dt, plant.q[r], plant.R[r], plant.t[r], obs.edge_visible[j],
+                    error_norm[j], dp[j], da[j], values[j]), strict=True):
+                ser[key].append(np.array(value, copy=True) if key in COPIED else value)
+            for key, value in plant.series(r).items():
+                ser.setdefault(key, []).append(value)
         finished = idx[done]
         self.active[finished] = False
         self.steps[finished] = step
@@ -191,78 +213,11 @@ class Book:
                 plant.q[run], values[~done], self.dt, self.stroke, self.max_speed)
 
     def advanced(self, step: int, run: np.ndarray, failures: dict[int, str]) -> None:
-        """End the rows whose world failed (:meth:`world_failures`)."""
-        self.world_failures(failures, step)
-
-    def seen(self, idx: np.ndarray, edge_visible: np.ndarray) -> None:
-        """Count the periods where the rows ``idx`` measured fewer than their 12 edges."""
-        self.hidden[idx] += ~np.asarray(edge_visible, dtype=bool).reshape(len(idx), -1).all(
-            axis=1)
-
-    def command(self, k: int, velocities: np.ndarray, reason: str | None) -> bool:
-        """Account one command of row ``k``; returns True when the trial fails with it
-        (an invalid command, or too many refusals in a row)."""
-        vel = np.asarray(velocities, dtype=float)
-        failed = False
-        if vel.shape != (6,) or not np.all(np.isfinite(vel)):
-            self.failure[k] = f"controller returned an invalid command {vel!r}"
-            failed = True
-        if reason is not None:
-            self.refused[k] += 1
-            if self.refused[k] >= MAX_REFUSED_STEPS:
-                self.failure[k] = f"controller refused to move: {reason}"
-                failed = True
-        else:
-            self.refused[k] = 0
-        return failed
-
-    def commands(self, rows: np.ndarray, velocities: np.ndarray, reasons: list[str | None]
-                 ) -> np.ndarray:
-        """:meth:`command` for many rows at once; returns the (n,) mask of failed rows."""
-        rows = np.asarray(rows, dtype=int)
-        v = np.asarray(velocities, dtype=float)
-        invalid = ~np.isfinite(v).all(axis=1)
-        if reasons.count(None) == len(reasons) and not invalid.any():  # the common case
-            self.refused[rows] = 0
-            return invalid
-        refused = np.fromiter((r is not None for r in reasons), dtype=bool, count=len(rows))
-        self.refused[rows[~refused]] = 0
-        self.refused[rows[refused]] += 1
-        too_many = refused & (self.refused[rows] >= MAX_REFUSED_STEPS)
-        for j in np.flatnonzero(invalid & ~too_many):
-            self.failure[rows[j]] = f"controller returned an invalid command {v[j]!r}"
-        for j in np.flatnonzero(too_many):
-            self.failure[rows[j]] = f"controller refused to move: {reasons[j]}"
-        return invalid | too_many
-
-    def world_failures(self, failed: dict[int, str], step: int) -> None:
-        """End the rows whose true world failed during period ``step`` (a plant's
-        :meth:`~benchmarks.sim.plant.Plant.advance`), each with its reason."""
-        for k, reason in failed.items():
+        """End the rows whose true world failed during the period, each with its reason."""
+        for k, reason in failures.items():
             self.failure[k] = reason
             self.active[k] = False
             self.steps[k] = step + 1
-
-    def record(self, k: int, t: float, q: np.ndarray, R: np.ndarray, tr: np.ndarray,
-               visible: np.ndarray, error_norm: float, dp: float, da: float,
-               velocities: np.ndarray) -> None:
-        """Append one period to row ``k``'s series."""
-        ser = self.series[k]
-        ser["t"].append(t)
-        ser["lengths"].append(q.copy())
-        ser["rotations"].append(R.copy())
-        ser["translations"].append(tr.copy())
-        ser["edge_visible"].append(np.array(visible, copy=True))
-        ser["error_norm"].append(error_norm)
-        ser["position_error"].append(dp)
-        ser["orientation_error"].append(da)
-        ser["velocities"].append(velocities.copy())
-
-    def record_more(self, k: int, values: dict[str, np.ndarray]) -> None:
-        """Append a plant's extra values of one period to row ``k``'s series
-        (:meth:`benchmarks.sim.plant.Plant.series`)."""
-        for key, value in values.items():
-            self.series[k].setdefault(key, []).append(value)
 
     def results(self, sc: SimScenario, spec: Any, group: list[TrialSetup], R: np.ndarray,
                 t: np.ndarray, detect_times: list[float] | None = None,

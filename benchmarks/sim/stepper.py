@@ -1,6 +1,6 @@
 """Closed-loop trials: true world -> sensor -> controller -> plant -> true world.
 
-One trial (``docs/architecture.md``, "the loop"): the true world (true geometry, true
+One trial (:mod:`benchmarks.sim.loop`, the one closed loop): the true world (true geometry, true
 camera, true pose) produces observations through :mod:`vision` (geometric features +
 noise, or rendered images + detection); the controller, built from the ESTIMATED
 parameters, returns leg commands; the plant (kinematic, dynamic, or a robot behind a
