@@ -30,7 +30,7 @@ from __future__ import annotations
 import argparse
 import math
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, replace
 from typing import Any
 
@@ -68,8 +68,7 @@ class _Exact(GeometricSensor):
     """Noise-free geometric features: what a perfect detector would measure."""
 
     def measure(self, rotations: np.ndarray, translations: np.ndarray,
-                rngs: list[np.random.Generator], apply_noise: bool = True
-                ) -> ObservationBatch:
+                rngs: Sequence[Any], apply_noise: bool = True) -> ObservationBatch:
         return super().measure(rotations, translations, rngs, apply_noise=False)
 
 

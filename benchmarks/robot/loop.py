@@ -258,7 +258,7 @@ class ServoCamera:
         #: This period's features (None: lost frame).
         self.features: Any = None
 
-    def measure(self, rows: np.ndarray, rotations: np.ndarray, translations: np.ndarray
+    def observe(self, rows: np.ndarray, rotations: np.ndarray, translations: np.ndarray
                 ) -> ObservationBatch:
         """The image at the pose of the one row."""
         feats = self.sensor.measure(rotations[0], translations[0])

@@ -9,7 +9,7 @@ backends (:class:`~benchmarks.sim.plant.BackendPlant`) and the real servo sessio
 - the **plant** (:mod:`benchmarks.sim.plant`): ``advance`` moves the rows over a period,
   ``measured_lengths`` and ``measured_rates`` are the encoders; its arrays ``R``, ``t``
   are the poses the camera sees;
-- the **sensor**: ``measure(rows, R, t)`` returns the camera's
+- the **sensor**: ``observe(rows, R, t)`` returns the camera's
   :class:`~controllers.base.ObservationBatch` of those rows
   (:func:`benchmarks.sim.sensors.camera_batch`);
 - the **clock** (:class:`benchmarks.sim.clock.CameraClock`, or None: an image at every
@@ -83,7 +83,7 @@ def closed_loop(plant: Any, sensor: Any, clock: CameraClock | None, controller: 
 
     Args:
         plant: The plant (its ``R``, ``t`` arrays are the poses the camera sees).
-        sensor: ``measure(rows, R, t) -> ObservationBatch`` (the camera's part).
+        sensor: ``observe(rows, R, t) -> ObservationBatch`` (the camera's part).
         clock: The camera's clock, or None.
         controller: Reset for every row (``step_batch``).
         book: The bookkeeping of the rows.
@@ -102,7 +102,7 @@ def closed_loop(plant: Any, sensor: Any, clock: CameraClock | None, controller: 
             break
         begun = step + 1
         done = book.check(step, idx)
-        obs = clocked_measure(clock, step, idx, (plant.R, plant.t), sensor.measure)
+        obs = clocked_measure(clock, step, idx, (plant.R, plant.t), sensor.observe)
         seen = book.observed(step, idx, obs)
         done |= ~book.active[idx]
         values = np.zeros((len(idx), 6))

@@ -1,5 +1,5 @@
 """What the camera gives in a simulated trial: geometric features with the scenario's
-noise (:class:`GeometricSensor`, :class:`BatchSensor`), or rendered images through the
+noise (:class:`GeometricSensor`), or rendered images through the
 detector, and the desired features taught at the goal (:func:`trial_goal`).
 
 Every sensor returns an :class:`~controllers.base.ObservationBatch` holding the camera's
@@ -21,7 +21,7 @@ from controllers.base import Goal, ObservationBatch
 from hexapod.kinematics import inverse_kinematics
 from vision.cameras import Camera
 from vision.fast_observe import WorldParams, observe_batch
-from vision.legs import LegObservation, directions_from_edges, observe_legs
+from vision.legs import LegObservation, directions_from_edges
 
 log = logging.getLogger(__name__)
 
@@ -71,7 +71,9 @@ def goal_of(m: ObservationBatch, setup: TrialSetup) -> Goal:
 
 
 class GeometricSensor:
-    """Features from the true geometry plus the scenario's noise model.
+    """Features from the true geometry plus the scenario's noise model, for rows each in
+    its own world (one C call for the legs, edges and visibility of every row,
+    :func:`vision.fast_observe.observe_batch`).
 
     Rotation noise perturbs each true edge normal; the perspective image lines
     follow from the noisy normals through the TRUE camera, and the normals the
@@ -79,23 +81,76 @@ class GeometricSensor:
     intrinsics (so an intrinsics error reaches the controller as it would).
     Pixel noise samples points along each visible edge, perturbs them and fits
     the normal on the points lifted with the estimated camera.
+
+    Args:
+        sc: The scenario (its noise).
+        worlds: The true world of each row (one world: every row sees it).
+        estimated_camera: The camera the controllers are told of (every row's).
+        rngs: One generator per row for :meth:`observe` (the run's noise).
     """
 
-    def __init__(self, sc: SimScenario, world: World, estimated_camera: Camera) -> None:
+    def __init__(self, sc: SimScenario, worlds: World | Sequence[World],
+                 estimated_camera: Camera, rngs: Sequence[Any] = ()) -> None:
         self.sc = sc
-        self.world = world
+        self.worlds = [worlds] if isinstance(worlds, World) else list(worlds)
+        self.params = WorldParams.from_worlds([w.geometry for w in self.worlds],
+                                              [w.camera for w in self.worlds])
         self.est: Any = estimated_camera  # a PerspectiveCamera when ``perspective``
-        self.perspective = world.camera.family == "perspective"
+        self.perspective = self.worlds[0].camera.family == "perspective"
+        # rows of one camera object go through its methods together
+        ids: dict[int, int] = {}
+        self._camera_group = np.array([ids.setdefault(id(w.camera), len(ids))
+                                       for w in self.worlds])
+        self._group_camera = {g: self.worlds[k].camera for k, g in
+                              reversed(list(enumerate(self._camera_group)))}
+        self.rngs = list(rngs)
+        self.detect_times: list[float] = []
+
+    @classmethod
+    def of_trials(cls, sc: SimScenario, setups: list[TrialSetup]) -> GeometricSensor:
+        """The sensor of trials in their worlds, with their run's generators."""
+        return cls(sc, [s.world for s in setups], setups[0].estimated_camera,
+                   rows_generators(sc, setups, 1, True))
+
+    def observe(self, rows: np.ndarray, rotations: np.ndarray, translations: np.ndarray
+                ) -> ObservationBatch:
+        """The loop's interface: the camera's batch of ``rows`` at their true poses."""
+        return self.sample(rotations, translations, rows, [self.rngs[k] for k in rows])
 
     def measure(self, rotations: np.ndarray, translations: np.ndarray,
-                rngs: list[np.random.Generator], apply_noise: bool = True
-                ) -> ObservationBatch:
-        """Batched measurement at true poses (N, 3, 3), (N, 3); one generator per item."""
-        w = self.world
-        lo = observe_legs(w.camera, w.geometry, rotations, translations)
-        return noisy_features(self.sc, lo.normals, lo.edge_visible, rngs, apply_noise,
-                              self.est, [(np.arange(len(rngs)), w.camera)],
-                              lambda k: (_take(lo, k), w.camera))
+                rngs: Sequence[Any], apply_noise: bool = True) -> ObservationBatch:
+        """Measurements of the first world at true poses (N, 3, 3), (N, 3); one generator
+        per item."""
+        return self.sample(rotations, translations, np.zeros(len(rotations), dtype=int),
+                           rngs, apply_noise)
+
+    def sample(self, rotations: np.ndarray, translations: np.ndarray, items: np.ndarray,
+               rngs: Sequence[Any], apply_noise: bool = True) -> ObservationBatch:
+        """Features of the worlds ``items`` at poses (n, 3, 3), (n, 3), one generator
+        each (anything when :func:`draws_noise` is False)."""
+        obs = observe_batch(self.params, rotations, translations, items)
+        groups = self._camera_group[items]
+        cameras = [(np.flatnonzero(groups == g), self._group_camera[int(g)])
+                   for g in np.unique(groups)]
+
+        def item(k: int) -> tuple[LegObservation, Any]:
+            world = self.worlds[int(items[k])]
+            return _leg_observation(obs, k, world.geometry.leg_radius,
+                                    float(self.params.platform_radius[items[k]])), world.camera
+
+        return noisy_features(self.sc, obs.normals, obs.edge_visible, rngs, apply_noise,
+                              self.est, cameras, item)
+
+    def goals(self, setups: list[TrialSetup]) -> list[Goal]:
+        """The goals of the trials of the rows (:func:`trial_goal` with one taught frame)
+        in one batch."""
+        sc = self.sc
+        R = np.array([s.goal_rotation for s in setups])
+        t = np.array([s.goal_translation for s in setups])
+        m = self.sample(R, t, np.arange(len(setups)),
+                        rows_generators(sc, setups, 2, sc.noise.on_goal),
+                        apply_noise=sc.noise.on_goal)
+        return [goal_of(take(m, np.array([k])), s) for k, s in enumerate(setups)]
 
     def measure_goal(self, rotation: np.ndarray, translation: np.ndarray,
                      rng: np.random.Generator, frames: int = 1, apply_noise: bool = True
@@ -189,19 +244,6 @@ def noisy_features(sc: SimScenario, normals: np.ndarray, visible: np.ndarray,
     if not all_visible:
         directions = np.where(both[..., None], directions, np.nan)
     return camera_batch(normals, lines, directions, visible, both)
-
-
-def _take(lo: Any, k: int) -> Any:
-    """Item ``k`` of a batched :class:`vision.legs.LegObservation`."""
-    from dataclasses import fields as dc_fields
-    from dataclasses import replace as dc_replace
-
-    changes = {}
-    for f in dc_fields(lo):
-        value = getattr(lo, f.name)
-        if isinstance(value, np.ndarray) and value.ndim >= 1:
-            changes[f.name] = value[k]
-    return dc_replace(lo, **changes)
 
 
 def _average_frames(m: ObservationBatch, perspective_camera: Any | None,
@@ -354,9 +396,9 @@ class _ImageSensorAdapter:
 
 
 class RowSensor:
-    """The loop's sensor interface (``measure(rows, R, t)``) over a sensor of one world
-    (:class:`GeometricSensor`, rendered images, or a study's own): the rows of a group
-    measured together, each with its own generator.
+    """The loop's sensor interface (``observe(rows, R, t)``) over a sensor of one world
+    (rendered images, or a study's own): the rows of a group measured together, each
+    with its own generator.
 
     Args:
         sensor: Has ``measure(R, t, rngs)`` (and ``measure_goal``) like
@@ -370,69 +412,11 @@ class RowSensor:
         #: Detection times of rendered images [s] (empty for geometric features).
         self.detect_times: list[float] = getattr(sensor, "detect_times", [])
 
-    def measure(self, rows: np.ndarray, rotations: np.ndarray, translations: np.ndarray
+    def observe(self, rows: np.ndarray, rotations: np.ndarray, translations: np.ndarray
                 ) -> ObservationBatch:
         """The camera's batch of ``rows`` at their true poses."""
         return self.sensor.measure(  # type: ignore[no-any-return]
             rotations, translations, [self.rngs[k] for k in rows])
-
-
-class BatchSensor:
-    """The geometric sensor over a batch of trials, each in its own world (one C call for
-    the legs, edges and visibility of every row, :func:`vision.fast_observe.observe_batch`).
-
-    Args:
-        sc: The scenario (its noise).
-        setups: The trials (their worlds and the estimated camera, the same for all).
-    """
-
-    def __init__(self, sc: SimScenario, setups: list[TrialSetup]) -> None:
-        self.sc = sc
-        self.setups = setups
-        worlds = [s.world for s in setups]
-        self.params = WorldParams.from_worlds([w.geometry for w in worlds],
-                                              [w.camera for w in worlds])
-        self.estimated = setups[0].estimated_camera
-        # rows of one camera object go through its methods together, as one world's sensor
-        ids: dict[int, int] = {}
-        self._camera_group = np.array([ids.setdefault(id(w.camera), len(ids)) for w in worlds])
-        self._group_camera = {g: worlds[k].camera for k, g in
-                              reversed(list(enumerate(self._camera_group)))}
-        self.rngs = rows_generators(sc, setups, 1, True)
-        self.detect_times: list[float] = []
-
-    def measure(self, rows: np.ndarray, rotations: np.ndarray, translations: np.ndarray
-                ) -> ObservationBatch:
-        """The camera's batch of ``rows`` at their true poses (the run's noise)."""
-        return self.sample(rotations, translations, rows, [self.rngs[k] for k in rows])
-
-    def sample(self, rotations: np.ndarray, translations: np.ndarray, items: np.ndarray,
-               rngs: Sequence[Any], apply_noise: bool = True) -> ObservationBatch:
-        """Features of the trials ``items`` at poses (n, 3, 3), (n, 3), one generator
-        each (:func:`rows_generators`)."""
-        obs = observe_batch(self.params, rotations, translations, items)
-        groups = self._camera_group[items]
-        cameras = [(np.flatnonzero(groups == g), self._group_camera[int(g)])
-                   for g in np.unique(groups)]
-
-        def item(k: int) -> tuple[LegObservation, Any]:
-            world = self.setups[int(items[k])].world
-            return _leg_observation(obs, k, world.geometry.leg_radius,
-                                    float(self.params.platform_radius[items[k]])), world.camera
-
-        return noisy_features(self.sc, obs.normals, obs.edge_visible, rngs, apply_noise,
-                              self.estimated, cameras, item)
-
-    def goals(self, setups: list[TrialSetup]) -> list[Goal]:
-        """The goals of every trial (:func:`trial_goal` with one taught frame) in one
-        batch."""
-        sc = self.sc
-        R = np.array([s.goal_rotation for s in setups])
-        t = np.array([s.goal_translation for s in setups])
-        m = self.sample(R, t, np.arange(len(setups)),
-                        rows_generators(sc, setups, 2, sc.noise.on_goal),
-                        apply_noise=sc.noise.on_goal)
-        return [goal_of(take(m, np.array([k])), s) for k, s in enumerate(setups)]
 
 
 def rows_generators(sc: SimScenario, setups: list[TrialSetup], stream: int, apply_noise: bool

@@ -34,7 +34,6 @@ from benchmarks.sim.loop import closed_loop
 from benchmarks.sim.plant import BackendPlant, KinematicPlant, make_plant
 from benchmarks.sim.reference import Targets, task_batch_controller
 from benchmarks.sim.sensors import (
-    BatchSensor,
     GeometricSensor,
     RowSensor,
     make_sensor,
@@ -170,9 +169,9 @@ class _Unit:
         """Run a group through the closed loop (a trial whose goal cannot be measured in
         a batched group gets its failure row; the others run)."""
         sc, spec = self.sc, self.spec
-        sensor: BatchSensor | RowSensor
+        sensor: GeometricSensor | RowSensor
         if self.batched:
-            sensor = BatchSensor(sc, setups)
+            sensor = GeometricSensor.of_trials(sc, setups)
             goals = _goals(sc, sensor, setups)
         else:
             sensor = RowSensor(self.sensor_factory(sc, setups[0]),
@@ -183,7 +182,7 @@ class _Unit:
         keep = [k for k in range(len(setups)) if k not in out]
         if len(keep) < len(setups):
             group = [setups[k] for k in keep]
-            sensor = BatchSensor(sc, group)
+            sensor = GeometricSensor.of_trials(sc, group)
         else:
             group = setups
         if group:
@@ -193,7 +192,7 @@ class _Unit:
         return [out[k] for k in range(len(setups))]
 
     def _loop(self, group: list[TrialSetup], contexts: list[ControllerContext],
-              sensor: BatchSensor | RowSensor) -> list[TrialResult]:
+              sensor: GeometricSensor | RowSensor) -> list[TrialResult]:
         sc, spec = self.sc, self.spec
         controller = task_batch_controller(sc, spec, self.batched)
         if self.backend_factory is None:
@@ -206,7 +205,7 @@ class _Unit:
         t = np.array([s.start_translation for s in group])
         offsets = np.array([s.world.joint_offsets for s in group])
         g = group[0].world.geometry
-        if isinstance(sensor, BatchSensor):
+        if isinstance(sensor, GeometricSensor):
             A, E = sensor.params.base_points, sensor.params.platform_points
         else:  # one world
             A, E = g.base_points, g.platform_points
@@ -229,7 +228,7 @@ class _Unit:
         return book.results(sc, spec, group, R, t, sensor.detect_times, plant.row_figures)
 
 
-def _goals(sc: SimScenario, sensor: BatchSensor, setups: list[TrialSetup]
+def _goals(sc: SimScenario, sensor: GeometricSensor, setups: list[TrialSetup]
            ) -> list[Goal | Exception]:
     """The goal of every trial (:func:`benchmarks.sim.sensors.trial_goal`): measured in one
     batch when one frame is taught, trial by trial otherwise (and to find the trials at
