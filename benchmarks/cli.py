@@ -1,5 +1,5 @@
 """``hexapod-bench``: list, check, run, report, compare, export, reproduce, perf, calibrate, viz,
-servo.
+servo, warm.
 
 Examples::
 
@@ -89,6 +89,26 @@ def cmd_perf(args: argparse.Namespace) -> int:
     module = importlib.import_module(PERF_MODULES[args.what])
     argv = ["fk"] if args.what == "fk" else []
     return int(module.main(argv + list(args.rest)))
+
+
+def cmd_warm(args: argparse.Namespace) -> int:
+    """Compile the kernels of the built-in scenarios, one line per scenario."""
+    import time
+
+    from benchmarks.warm import WarmResult, cached_libraries, warm
+
+    start, before = time.perf_counter(), cached_libraries()
+
+    def report(res: WarmResult) -> None:
+        print(f"warm {res.scenario}: {res.units} units stepped, {res.seconds:.1f} s", flush=True)
+
+    print("compiling the C kernels of the built-in scenarios (first run only: ~2 min on "
+          "2 cores; a warm cache only loads them)", flush=True)
+    warm(args.scenarios or None, args.workers, report)
+    compiled = len(cached_libraries() - before)
+    print(f"warm: {compiled} kernels compiled, {len(before) + compiled} in the cache, "
+          f"{time.perf_counter() - start:.1f} s", flush=True)
+    return 0
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -222,6 +242,13 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("what", choices=sorted(PERF_MODULES))
     s.add_argument("rest", nargs=argparse.REMAINDER, help="arguments for the figure")
     s.set_defaults(func=cmd_perf)
+
+    s = sub.add_parser("warm", help="compile every C kernel the built-in scenarios use (once; "
+                                    "a warm cache only loads them)")
+    s.add_argument("scenarios", nargs="*", metavar="SCENARIO",
+                   help="built-in scenario names (default: all)")
+    s.add_argument("--workers", type=int, default=2, help="processes (default 2)")
+    s.set_defaults(func=cmd_warm)
 
     from benchmarks.study.analysis_cli import add_analysis_commands
 
