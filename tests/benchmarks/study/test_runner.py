@@ -220,8 +220,9 @@ def test_a_second_run_on_a_locked_directory_is_refused(tmp_path: Path) -> None:
     assert len(keys) == len(set(keys)), "no trial written twice"
     # released when the holder ends: the directory can be resumed
     assert lock.read_text() == ""
-    assert cli_main(["run", str(scen), "--out", str(out), "--resume", "--trials", "3",
-                     "--no-progress"]) == 0
+    # (the study it holds: 200 trials; fewer would be another study, refused)
+    assert cli_main(["run", str(scen), "--out", str(out), "--resume", "--no-progress"]) == 0
+    assert sorted(r["trial"] for r in read_results(out)) == list(range(200))
 
 
 def test_report_ignores_duplicate_rows_and_says_so(tmp_path: Path, capsys: object) -> None:
