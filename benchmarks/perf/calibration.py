@@ -23,6 +23,7 @@ from typing import Any
 
 import numpy as np
 
+from benchmarks.study.outdir import OutputFile
 from hexapod.geometry import deltalab
 from hexapod.kinematics import Transform
 from hexapod.outputs import GENERATOR, check_replace
@@ -96,7 +97,8 @@ def main(argv: Sequence[str] | None = None) -> int:
                         help="place the camera here [m, base frame], looking at (0, 0, 0.2)")
     parser.add_argument("--method", choices=["lstsq", "irls"], default="lstsq")
     parser.add_argument("--seed", type=int, default=1)
-    parser.add_argument("--json", type=Path, default=None, help="write the figures here")
+    parser.add_argument("--json", type=Path, default=None, action=OutputFile,
+                        help="write the figures here")
     parser.add_argument("--overwrite", action="store_true",
                         help="replace --json even if hexapod-bench did not write it")
     args = parser.parse_args(argv)

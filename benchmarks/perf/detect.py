@@ -38,6 +38,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 
+from benchmarks.study.outdir import OutputDir
 from hexapod import deltalab
 from hexapod.outputs import check_replace, mark_png
 from hexapod.workspace import sample_poses
@@ -242,7 +243,7 @@ def main(argv: Sequence[str] | None = None) -> int:
                    help="also time the detection of every camera round by round, the "
                         "cameras interleaved (N rounds of 10 frames each): the ratios to "
                         "the ideal lens under a changing machine load")
-    p.add_argument("--pictures", type=Path, default=None,
+    p.add_argument("--pictures", type=Path, default=None, action=OutputDir,
                    help="write detect-omni.png / detect-front.png of the first frame here "
                         "(-cluttered before .png on a cluttered background; with "
                         "--distortion also detect-omni-distorted.png, "

@@ -23,6 +23,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from benchmarks.study.outdir import OutputFile
 from hexapod import deltalab, sample_poses
 from vision.cameras import Camera, front_camera, omni_camera
 from vision.estimate import angle_between, direction_from_normals, fit_normal, fit_normal_conic
@@ -173,7 +174,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--points", type=int, default=20, help="points per edge (default 20)")
     parser.add_argument("--sigma", type=float, default=0.5, help="pixel noise [px] (default 0.5)")
     parser.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
-    parser.add_argument("--figure", metavar="PNG",
+    parser.add_argument("--figure", metavar="PNG", action=OutputFile,
                         help="also draw the simulated edges of both cameras to this file "
                              "(docs/vision-edges.png)")
     parser.add_argument("--overwrite", action="store_true",

@@ -221,8 +221,8 @@ def _keep_inputs(out: Path, scenarios: list[Any], meta: dict[str, Any],
         kept = copy_inputs(out, sc, getattr(args, "allow_foreign_calibration", False))
         if kept.get("changed"):
             print(f"warning: {sc.source} differs from the copy this run started with "
-                  f"({out / kept['folder'] / 'source.toml'}, kept): the resumed trials use "
-                  "the file as it is now", file=sys.stderr)
+                  f"({out / kept['folder'] / 'source.toml'}, kept); the study it describes was "
+                  "checked against the directory's, setting by setting", file=sys.stderr)
         meta["scenarios"][sc.name].update(inputs=kept, settings=settings(sc),
                                           study=study_of(sc))
 

@@ -23,13 +23,15 @@ from hexapod.outputs import GENERATOR
 #: Exit code of a refused output (the CLI's "bad input" code, docs/outputs.md).
 REFUSED = 2
 
-#: Options that look like paths but name a file or directory the command only reads (or,
-#: ``viz --scenario``, a scenario's name).
-INPUTS = {("viz", "--scenario"), ("run", "scenarios"), ("run", "--calibration"), ("calibrate", "scenario"),
+#: Options that look like paths but name a file or directory the command only reads, or
+#: a name (a scenario, a camera preset).
+INPUTS = {("run", "scenarios"), ("run", "--calibration"), ("calibrate", "scenario"),
           ("calibrate", "--observations"), ("check", "file"), ("viz", "dir"),
-          ("compare", "dirs"), ("export", "dir"), ("servo", "--camera-file"),
-          ("servo", "--camera-pose"), ("servo", "--geometry"), ("servo", "--calibration"),
-          ("servo", "--camera")}
+          ("viz", "--scenario"), ("compare", "dirs"), ("export", "dir"),
+          ("servo", "--camera-file"), ("servo", "--camera-pose"), ("servo", "--geometry"),
+          ("servo", "--calibration"), ("servo", "--camera"), ("perf calibration", "--camera"),
+          ("perf controllers", "--camera"), ("perf dynamic-world", "--scenario"),
+          ("perf study", "--scenario")}
 #: Option names and metavars that look like a path: each such option must be an output
 #: (tagged ``OutputFile``/``OutputDir``) or listed in :data:`INPUTS`.
 _PATHY_DEST = {"out", "dir", "dirs", "file", "json", "parquet", "picture", "markdown", "html",
@@ -39,10 +41,37 @@ _PATHY_DEST = {"out", "dir", "dirs", "file", "json", "parquet", "picture", "mark
 _PATHY_METAVAR = ("FILE", "PNG", "DIR", "PATH", "TOML", "SCENARIO", "JSON", "CSV", "HTML")
 
 
+class _ParsedError(Exception):
+    """Carries the parser a module's ``main`` built (see :func:`_perf_parsers`)."""
+
+
+def _perf_parsers() -> dict[str, argparse.ArgumentParser]:
+    """``perf WHAT`` -> the parser of that figure's module (each builds its own in
+    ``main``: caught at its ``parse_args``, before any work)."""
+    import importlib
+    from unittest import mock
+
+    from benchmarks.cli import PERF_MODULES
+
+    def caught(self: argparse.ArgumentParser, *args: Any, **kwargs: Any) -> None:
+        raise _ParsedError(self)
+
+    parsers = {}
+    with mock.patch.object(argparse.ArgumentParser, "parse_args", caught):
+        for what, module in PERF_MODULES.items():
+            try:
+                importlib.import_module(module).main([])
+            except _ParsedError as parsed:
+                parsers[f"perf {what}"] = parsed.args[0]
+    assert set(parsers) == {f"perf {w}" for w in PERF_MODULES}, "a perf parser not found"
+    return parsers
+
+
 def _subcommands() -> dict[str, argparse.ArgumentParser]:
+    """Every subcommand's parser (``perf WHAT`` as one each)."""
     parser = build_parser()
     (sub,) = [a for a in parser._actions if isinstance(a, argparse._SubParsersAction)]
-    return dict(sub.choices)
+    return {**{k: v for k, v in sub.choices.items() if k != "perf"}, **_perf_parsers()}
 
 
 def _name(action: argparse.Action) -> str:
@@ -127,6 +156,10 @@ FILE_CASES: dict[tuple[str, str], list[tuple[list[str], str]]] = {
                                     "--markdown", "{out}"], "draft.md")],
     ("viz", "--html"): [(["viz", "{run}", "--controller", "leg-edge", "--html", "{out}"],
                          "page.html")],
+    ("perf vision", "--figure"): [(["perf", "vision", "--poses", "3", "--figure", "{out}"],
+                                   "edges.png")],
+    ("perf calibration", "--json"): [(["perf", "calibration", "--repeats", "1", "--noise",
+                                       "0.01", "--json", "{out}"], "figures.json")],
 }
 #: Outputs with a rule of their own (docs/outputs.md): never replaced, no --overwrite.
 NEVER_REPLACED: dict[tuple[str, str], list[str]] = {
@@ -144,6 +177,8 @@ DIR_CASES: dict[tuple[str, str], tuple[list[str], str, bool]] = {
     ("reproduce", "--out"): (["reproduce", "seed001", "--quick", "--out", "{out}"],
                              "notes.txt", False),
     ("report", "dir"): (["report", "{out}"], "report.md", True),
+    ("perf detect", "--pictures"): (["perf", "detect", "--frames", "1", "--repeats", "1",
+                                     "--pictures", "{out}"], "detect-front.png", True),
 }
 
 
@@ -162,8 +197,9 @@ def test_every_output_option_of_every_subcommand_is_tagged_and_exercised() -> No
     dirs = {k for k, kind in outputs.items() if kind == "directory"}
     assert files == set(FILE_CASES) | set(NEVER_REPLACED), "an output without its test"
     assert dirs == set(DIR_CASES), "an output directory without its test"
-    for cmd, option in files - set(NEVER_REPLACED):
-        flags = {s for a in _subcommands()[cmd]._actions for s in a.option_strings}
+    parsers = _subcommands()
+    for cmd, option in (files | dirs) - set(NEVER_REPLACED):
+        flags = {s for a in parsers[cmd]._actions for s in a.option_strings}
         assert "--overwrite" in flags, f"{cmd} {option}: no --overwrite"
 
 
@@ -221,13 +257,17 @@ def test_a_directory_holding_a_users_file_is_refused_unless_overwrite(
     else:
         out.mkdir()
     user = out / name
-    user.write_text("my own work\n")
+    if user.suffix == ".png":
+        _user_png(user)
+    else:
+        user.write_text("my own work\n")
+    before = user.read_bytes()
     argv = _argv(template, out=str(out), scenario=str(scenario))
     assert cli_main(argv) == REFUSED
     assert f"hexapod-bench: error: {out}" in capsys.readouterr().err
-    assert user.read_text() == "my own work\n"
+    assert user.read_bytes() == before
     assert cli_main([*argv, "--overwrite"]) == 0, capsys.readouterr().err
     if replaced:
         assert _marked(user)
     else:
-        assert user.read_text() == "my own work\n"
+        assert user.read_bytes() == before
