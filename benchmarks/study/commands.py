@@ -117,15 +117,15 @@ def _run_locked(scenarios: list[Any], out: Path, args: argparse.Namespace) -> in
     from benchmarks.study.report import META_FILE, write_report
     from benchmarks.study.runner import completed_keys, plan, run_units
 
-    existing = (out / "results.jsonl").exists() and (out / "results.jsonl").stat().st_size > 0
-    if existing and not args.resume:
-        raise BenchmarkError(f"{out}: already holds results; use --resume to finish that run "
-                             "or choose another --out")
     meta_path = out / META_FILE
     meta: dict[str, Any] = json.loads(meta_path.read_text()) if meta_path.exists() else {}
     from benchmarks.study.study_record import check_same_study, command_entry, record_command
 
     grows = check_same_study(out, meta, scenarios)  # before any trial: one study per directory
+    existing = (out / "results.jsonl").exists() and (out / "results.jsonl").stat().st_size > 0
+    if existing and not args.resume:
+        raise BenchmarkError(f"{out}: already holds results; use --resume to finish that run "
+                             "or choose another --out")
     done = completed_keys(out) if args.resume else set()
     chunk = args.chunk or auto_chunk(scenarios, args.workers, args.backend)
     if chunk < 1:

@@ -127,9 +127,10 @@ class OutputDir(argparse._StoreAction):
 
 
 def study_entry(entry: Path) -> bool:
-    """Whether an entry of ``reproduce --out`` is its own: a run or calibration directory."""
-    return entry.is_dir() and (is_run_directory(entry) or (entry / CALIBRATION_JSON).is_file()
-                               or not any(entry.iterdir()))
+    """Whether an entry of ``reproduce --out`` is its own: a directory holding only what a
+    run or a calibration writes (also one interrupted before its first row)."""
+    return entry.is_dir() and all(
+        _run_entry(e) or e.name in (CALIBRATION_JSON, CALIBRATED_TOML) for e in entry.iterdir())
 
 
 def check_reproduce_directory(out: Path, overwrite: bool = False) -> None:
