@@ -220,11 +220,15 @@ def check_output_dir(directory: str | Path, own: Callable[[Path], bool], kind: s
 def mark_png(data: bytes) -> bytes:
     """PNG bytes with the project's text chunk (``Software: hexapod-vs``) after the header.
 
-    For PNG writers that take no metadata (OpenCV's ``imencode``).
+    For PNG writers that take no metadata (OpenCV's ``imencode``). Already marked: the
+    bytes as they are. A writer that puts its own ``Software`` chunk (matplotlib) is
+    given :data:`PNG_METADATA` instead: a reader keeps one ``Software`` per file.
     """
     sig, ihdr_end = b"\x89PNG\r\n\x1a\n", 8 + 4 + 4 + 13 + 4
     if not data.startswith(sig):
         raise ValueError("not a PNG")
+    if b"tEXtSoftware\x00" + GENERATOR.encode() in data:
+        return data  # marked already (matplotlib's savefig(metadata=PNG_METADATA))
     body = b"tEXt" + b"Software\x00" + GENERATOR.encode()
     chunk = struct.pack(">I", len(body) - 4) + body + struct.pack(">I", zlib.crc32(body))
     return data[:ihdr_end] + chunk + data[ihdr_end:]

@@ -90,7 +90,7 @@ def _circle(centre: np.ndarray, normal: np.ndarray, radius: float, n: int = 400)
     return centre + radius * (np.cos(phi)[:, None] * a + np.sin(phi)[:, None] * b)
 
 
-def edges_figure(path: str, seed: int = 0) -> None:
+def edges_figure(path: str, seed: int = 0, overwrite: bool = False) -> None:
     """Draw what the front and the omnidirectional cameras see of the reference robot
     (home pose and one tilted pose): the edges (solid where observed, dotted where
     hidden by another leg or the platform), the base and platform circles, and for the
@@ -160,10 +160,14 @@ def edges_figure(path: str, seed: int = 0) -> None:
     fig.suptitle("Simulated leg edges of the reference robot (vision.observe_legs, "
                  "vision.edge_points)")
     fig.tight_layout()
-    from hexapod.outputs import PNG_METADATA
+    import io
 
-    fig.savefig(path, dpi=90, metadata=PNG_METADATA)
+    from hexapod.outputs import PNG_METADATA, write_output
+
+    buf = io.BytesIO()
+    fig.savefig(buf, format="png", dpi=90, metadata=PNG_METADATA)
     plt.close(fig)
+    write_output(path, buf.getvalue(), overwrite)  # marked; a user's file refused
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -184,7 +188,7 @@ def main(argv: list[str] | None = None) -> int:
         from hexapod.outputs import check_replace
 
         check_replace(args.figure, args.overwrite)
-        edges_figure(args.figure)
+        edges_figure(args.figure, overwrite=args.overwrite)
         print(f"figure written to {args.figure}")
     start = time.perf_counter()
     figures = accuracy_figures(args.poses, args.points, args.sigma, args.seed)
