@@ -23,6 +23,7 @@ import sys
 
 from benchmarks.exceptions import BenchmarkError
 from benchmarks.study.commands import cmd_calibrate, cmd_report, cmd_run, cmd_viz, console
+from benchmarks.study.outdir import OutputDir, OutputFile
 from hexapod.exceptions import HexapodError
 
 log = logging.getLogger("hexapod-bench")
@@ -123,7 +124,7 @@ def build_parser() -> argparse.ArgumentParser:
 
     s = sub.add_parser("run", help="run scenarios (built-in names or TOML paths)")
     s.add_argument("scenarios", nargs="+", metavar="SCENARIO")
-    s.add_argument("--out", required=True, help="results directory")
+    s.add_argument("--out", required=True, action=OutputDir, help="results directory")
     s.add_argument("--trials", type=int, help="trials per sweep point and controller")
     s.add_argument("--seed", type=int, help="override the scenario seed")
     s.add_argument("--max-steps", type=int, help="override the step budget of each trial")
@@ -169,7 +170,7 @@ def build_parser() -> argparse.ArgumentParser:
 
     s = sub.add_parser("calibrate", help="calibrate the base points from leg observations")
     s.add_argument("scenario", metavar="SCENARIO")
-    s.add_argument("--out", required=True, help="output directory")
+    s.add_argument("--out", required=True, action=OutputDir, help="output directory")
     s.add_argument("--configurations", help="extremal (default) or random:N")
     s.add_argument("--repeat", type=int, default=1, help="repetitions (new noise each)")
     s.add_argument("--solver", choices=["lstsq", "irls"], help="default: the scenario's")
@@ -203,8 +204,9 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--controller", help="controller label")
     s.add_argument("--scenario", help="scenario name (when the run has several)")
     s.add_argument("--point", type=int, help="sweep point index")
-    s.add_argument("--html", help="write a self-contained HTML animation (+ a PNG of the "
-                                  "curves beside it) instead of the live view")
+    s.add_argument("--html", action=OutputFile,
+                   help="write a self-contained HTML animation (+ a PNG of the curves beside "
+                        "it) instead of the live view")
     s.add_argument("--still", type=int, help="with --html: a still of this period")
     s.add_argument("--overwrite", action="store_true",
                    help="with --html: replace the file (and the PNG beside it) even if "
@@ -225,13 +227,16 @@ def build_parser() -> argparse.ArgumentParser:
                                    "code 0: the setup can run; 1: every trial would fail; "
                                    "2: a file is invalid.")
     s.add_argument("file", metavar="FILE")
-    s.add_argument("--picture", metavar="PNG",
+    s.add_argument("--picture", metavar="PNG", action=OutputFile,
                    help="write an image of the robot at home seen by the camera (edges "
-                        "seen in green, hidden in red)")
+                        "seen in green, hidden in red; .png or .jpg)")
+    s.add_argument("--overwrite", action="store_true",
+                   help="replace the --picture file even if hexapod-bench did not write it")
     s.set_defaults(func=cmd_check)
 
     s = sub.add_parser("report", help="rebuild DIR/report.md from DIR/results.jsonl")
-    s.add_argument("dir")
+    s.add_argument("dir", action=OutputDir, help="a run directory (report.md and its "
+                                                 "figures are written into it)")
     s.add_argument("--overwrite", action="store_true",
                    help="replace DIR/report.md even if hexapod-bench did not write it")
     s.set_defaults(func=cmd_report)
@@ -260,6 +265,7 @@ def main(argv: list[str] | None = None) -> int:
     """Entry point of ``hexapod-bench``."""
     parser = build_parser()
     args = parser.parse_args(argv)
+    args.argv = list(sys.argv[1:] if argv is None else argv)  # run.json's commands
     logging.basicConfig(level=logging.INFO if args.verbose else logging.WARNING,
                         format="%(levelname)s %(name)s: %(message)s")
     os.environ.setdefault("PYTHONWARNINGS", "ignore")

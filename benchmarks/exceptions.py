@@ -67,3 +67,21 @@ class SetupError(BenchmarkError):
         text = "; ".join(p.text for p in problems)
         super().__init__(f"{source}: the setup cannot run, every trial would fail: {text} "
                          f"(hexapod-bench check {source} shows the details)")
+
+
+class StudyMismatchError(ResultsError):
+    """A run into a directory that holds another study (``run --resume`` with another
+    seed, world, controllers, scenario content or trial plan), refused before any trial.
+
+    Attributes:
+        path: The run directory.
+        differences: Each difference in words (``--seed: 1 in the directory, 99 given``).
+    """
+
+    def __init__(self, path: str, differences: list[str]) -> None:
+        self.differences = differences
+        listed = "".join(f"\n  {d}" for d in differences)
+        super().__init__(path, "holds another study than the one given (a run directory "
+                         f"holds one study; nothing was run):{listed}\nrun the given study "
+                         "into another --out, or give the directory's settings (its "
+                         "command lines are in run.json and report.md)")

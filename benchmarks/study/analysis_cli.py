@@ -12,12 +12,14 @@ import time
 from pathlib import Path
 from typing import Any
 
+from benchmarks.study.outdir import OutputDir, OutputFile
+
 
 def cmd_export(args: argparse.Namespace) -> int:
     """Write a run's trials as a Parquet table (one row per trial)."""
     from benchmarks.study.table import export_parquet
 
-    path, n = export_parquet(Path(args.dir), Path(args.parquet))
+    path, n = export_parquet(Path(args.dir), Path(args.parquet), args.overwrite)
     print(f"wrote {n} trials of {args.dir} to {path} (read it back with "
           f"pandas.read_parquet('{path}'))")
     return 0
@@ -71,8 +73,11 @@ def cmd_compare(args: argparse.Namespace) -> int:
     """Paired tests between the controllers of a run, or between two runs."""
     from benchmarks.study.compare import DEFAULT_METRICS, compare_controllers, compare_runs
     from benchmarks.study.table import load
+    from hexapod.outputs import check_replace, write_output
 
     t0 = time.perf_counter()
+    if args.json:
+        check_replace(args.json, args.overwrite)  # before the work
     metrics = tuple(args.metric) if args.metric else DEFAULT_METRICS
     status = 0
     if len(args.dirs) == 1:
@@ -119,8 +124,8 @@ def cmd_compare(args: argparse.Namespace) -> int:
 
         raise BenchmarkError(f"compare takes one run directory or two, got {len(args.dirs)}")
     if args.json:
-        Path(args.json).write_text(json.dumps([c.to_json() for c in comparisons] + extra,
-                                              indent=1))
+        write_output(args.json, {"comparisons": [c.to_json() for c in comparisons] + extra},
+                     args.overwrite)
         print(f"wrote {len(comparisons) + len(extra)} comparison(s) to {args.json}")
     print(f"({time.perf_counter() - t0:.2f} s)")
     return status
@@ -132,9 +137,14 @@ def cmd_reproduce(args: argparse.Namespace) -> int:
     from rich.table import Table
 
     from benchmarks.study.commands import console
+    from benchmarks.study.outdir import check_reproduce_directory
     from benchmarks.study.reproduce import interval_text, markdown, reproduce
+    from hexapod.outputs import check_replace, write_output
 
     con = console()
+    if args.markdown:
+        check_replace(args.markdown, args.overwrite)  # before minutes of studies
+    check_reproduce_directory(Path(args.out), args.overwrite)
     t0 = time.perf_counter()
     results = reproduce(args.which, Path(args.out), args.quick, args.workers,
                         say=lambda text: con.print(text, markup=False, highlight=False))
@@ -156,7 +166,7 @@ def cmd_reproduce(args: argparse.Namespace) -> int:
     con.print(f"{within} of {len(results)} figures within the paper's; "
               f"{time.perf_counter() - t0:.0f} s; studies in {args.out}", highlight=False)
     if args.markdown:
-        Path(args.markdown).write_text(markdown(results) + "\n")
+        write_output(args.markdown, markdown(results) + "\n", args.overwrite)
         con.print(f"wrote {args.markdown}")
     return 0
 
@@ -165,7 +175,10 @@ def add_analysis_commands(sub: argparse._SubParsersAction) -> None:  # type: ign
     """Register ``export``, ``compare`` and ``reproduce`` on the CLI's sub-parsers."""
     s = sub.add_parser("export", help="write a run's trials as a table (Parquet)")
     s.add_argument("dir", help="a run directory")
-    s.add_argument("--parquet", required=True, metavar="FILE", help="output Parquet file")
+    s.add_argument("--parquet", required=True, metavar="FILE", action=OutputFile,
+                   help="output Parquet file")
+    s.add_argument("--overwrite", action="store_true",
+                   help="replace the --parquet file even if hexapod-bench did not write it")
     s.set_defaults(func=cmd_export)
 
     s = sub.add_parser("compare", help="paired tests between the controllers of a run, or "
@@ -182,7 +195,10 @@ def add_analysis_commands(sub: argparse._SubParsersAction) -> None:  # type: ign
     s.add_argument("--metric", action="append", metavar="NAME",
                    help="converged, final_error, orientation_error, steps or a numeric "
                         "column (repeatable; default: converged, final_error, steps)")
-    s.add_argument("--json", metavar="FILE", help="write the comparisons as JSON")
+    s.add_argument("--json", metavar="FILE", action=OutputFile,
+                   help="write the comparisons as JSON")
+    s.add_argument("--overwrite", action="store_true",
+                   help="replace the --json file even if hexapod-bench did not write it")
     s.add_argument("--list", type=int, default=20, metavar="N",
                    help="two runs: rows that differ to print (default 20)")
     s.add_argument("--check", action="store_true",
@@ -196,9 +212,13 @@ def add_analysis_commands(sub: argparse._SubParsersAction) -> None:  # type: ign
     s.add_argument("--quick", action="store_true",
                    help="fewer trials (30 per noise level for seed 001, 1000 pairs for seed "
                         "003, 30 calibrations): minutes instead of tens of minutes")
-    s.add_argument("--out", default="runs/reproduce",
+    s.add_argument("--out", default="runs/reproduce", action=OutputDir,
                    help="where the studies' results go (default runs/reproduce; a study "
                         "already there is finished or reused, not redone)")
     s.add_argument("--workers", type=int, default=1, help="processes (default 1)")
-    s.add_argument("--markdown", metavar="FILE", help="also write the table as Markdown")
+    s.add_argument("--markdown", metavar="FILE", action=OutputFile,
+                   help="also write the table as Markdown")
+    s.add_argument("--overwrite", action="store_true",
+                   help="replace the --markdown file even if hexapod-bench did not write "
+                        "it, or write into an --out that holds other files")
     s.set_defaults(func=cmd_reproduce)

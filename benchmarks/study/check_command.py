@@ -20,6 +20,7 @@ from benchmarks.study.setup_check import (
     fixed_task_problems,
 )
 from hexapod.geometry import HexapodGeometry
+from hexapod.outputs import check_replace, write_output
 
 #: Exit code of ``check`` when the setup cannot run.
 CANNOT_RUN = 1
@@ -263,9 +264,28 @@ def describe(setup: Setup, report: SetupReport, source: str) -> list[str]:
     return lines
 
 
-def write_picture(setup: Setup, report: SetupReport, path: Path) -> Path:
+def check_picture(path: Path, overwrite: bool = False) -> None:
+    """Refuse a ``--picture`` name that is not .png/.jpg, or a user's file (without
+    ``overwrite``), before any work.
+
+    Raises:
+        BenchmarkError: Another suffix.
+        OutputError: A file hexapod-bench did not write.
+    """
+    if path.suffix.lower() not in (".png", ".jpg", ".jpeg"):
+        raise BenchmarkError(f"--picture {path}: use a .png or .jpg name")
+    check_replace(path, overwrite)
+
+
+def write_picture(setup: Setup, report: SetupReport, path: Path,
+                  overwrite: bool = False) -> Path:
     """An image of the robot at home seen by the camera (the project's renderer), each
-    edge drawn green where the camera sees it and red where hidden, legs numbered."""
+    edge drawn green where the camera sees it and red where hidden, legs numbered; PNG
+    or JPEG by the suffix, marked as the project's (:func:`hexapod.outputs.write_output`).
+
+    Raises:
+        OutputError: ``path`` is a user's file (without ``overwrite``).
+    """
     import cv2
 
     from hexapod.workspace import home_pose
@@ -296,19 +316,23 @@ def write_picture(setup: Setup, report: SetupReport, path: Path) -> Path:
             x, y = (round(float(c)) for c in ends.mean(axis=0))
             cv2.putText(img, str(i), (x + 6, y + 6), cv2.FONT_HERSHEY_SIMPLEX, 0.7,
                         (255, 120, 0), 2, cv2.LINE_AA)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    if not cv2.imwrite(str(path), img):
-        raise BenchmarkError(f"--picture: cannot write {path} (use a .png or .jpg name)")
-    return path
+    ok, data = cv2.imencode(".jpg" if path.suffix.lower() in (".jpg", ".jpeg") else ".png",
+                            img)
+    if not ok:
+        raise BenchmarkError(f"--picture: cannot encode {path}")
+    return write_output(path, data.tobytes(), overwrite)
 
 
 def cmd_check(args: argparse.Namespace) -> int:
     """Check a scenario, robot or camera file; exit 1 when the setup cannot run."""
+    overwrite = getattr(args, "overwrite", False)
+    if args.picture:
+        check_picture(Path(args.picture), overwrite)
     setup = load_setup(args.file)
     report = examine(setup)
     for line in describe(setup, report, args.file):
         print(line)
     if args.picture:
         print(f"picture of the robot at home seen by the camera: "
-              f"{write_picture(setup, report, Path(args.picture))}")
+              f"{write_picture(setup, report, Path(args.picture), overwrite)}")
     return 0 if report.can_run else CANNOT_RUN

@@ -5,7 +5,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import shlex
 import sys
 import time
 from pathlib import Path
@@ -118,6 +117,11 @@ def _run_locked(scenarios: list[Any], out: Path, args: argparse.Namespace) -> in
     from benchmarks.study.report import META_FILE, write_report
     from benchmarks.study.runner import completed_keys, plan, run_units
 
+    meta_path = out / META_FILE
+    meta: dict[str, Any] = json.loads(meta_path.read_text()) if meta_path.exists() else {}
+    from benchmarks.study.study_record import check_same_study, command_entry, record_command
+
+    grows = check_same_study(out, meta, scenarios)  # before any trial: one study per directory
     existing = (out / "results.jsonl").exists() and (out / "results.jsonl").stat().st_size > 0
     if existing and not args.resume:
         raise BenchmarkError(f"{out}: already holds results; use --resume to finish that run "
@@ -129,15 +133,17 @@ def _run_locked(scenarios: list[Any], out: Path, args: argparse.Namespace) -> in
     units = plan(scenarios, chunk, args.record, done, args.backend, args.engine)
     total = sum(len(u.trials) for u in units)
     con = console()
+    did = [f"grew {name} from {a} to {b} trials per sweep point and controller"
+           for name, (a, b) in grows.items()]
+    for text in did:
+        con.print(f"growing the study: {text} (everything else as in the directory)")
     if done:
         con.print(f"resuming: {len(done)} trials already done, {total} to go")
+    did.append(f"{len(done)} trials already done, {total} to run" if done else
+               f"{total} trials to run")
     executor = "dask" if args.dask else ("process pool" if args.workers > 1 else "in-process")
-    meta_path = out / META_FILE
-    meta: dict[str, Any] = {}
-    if meta_path.exists():
-        meta = json.loads(meta_path.read_text())
+    record_command(meta, command_entry(getattr(args, "argv", sys.argv[1:]), "; ".join(did)))
     meta.update({
-        "command": "hexapod-bench " + " ".join(shlex.quote(a) for a in sys.argv[1:]),
         "workers": args.workers, "executor": executor,
         "warnings": getattr(args, "calibration_warnings", []),
         "scenarios": {**meta.get("scenarios", {}), **{
@@ -208,15 +214,17 @@ def _keep_inputs(out: Path, scenarios: list[Any], meta: dict[str, Any],
     """Copy each scenario and its files into ``out/inputs/`` and record its settings and
     the ``--record`` count in ``meta`` (see :mod:`benchmarks.study.inputs`)."""
     from benchmarks.study.inputs import copy_inputs, settings
+    from benchmarks.study.study_record import study_of
 
     meta["record"] = args.record
     for sc in scenarios:
         kept = copy_inputs(out, sc, getattr(args, "allow_foreign_calibration", False))
         if kept.get("changed"):
             print(f"warning: {sc.source} differs from the copy this run started with "
-                  f"({out / kept['folder'] / 'source.toml'}, kept): the resumed trials use "
-                  "the file as it is now", file=sys.stderr)
-        meta["scenarios"][sc.name].update(inputs=kept, settings=settings(sc))
+                  f"({out / kept['folder'] / 'source.toml'}, kept); the study it describes was "
+                  "checked against the directory's, setting by setting", file=sys.stderr)
+        meta["scenarios"][sc.name].update(inputs=kept, settings=settings(sc),
+                                          study=study_of(sc))
 
 
 def _run_with_viz(scenarios: list[Any], out: Path, args: argparse.Namespace) -> int:
@@ -451,10 +459,26 @@ def cmd_viz(args: argparse.Namespace) -> int:
 
 def cmd_report(args: argparse.Namespace) -> int:
     """Rebuild report.md from results.jsonl."""
+    from benchmarks.study.outdir import META_FILE, check_report_file
     from benchmarks.study.report import write_report
+    from benchmarks.study.study_record import command_entry, record_command
 
-    path = write_report(Path(args.dir), getattr(args, "overwrite", False))
-    _print_summary(Path(args.dir), console())
+    out, overwrite = Path(args.dir), getattr(args, "overwrite", False)
+    check_report_file(out, overwrite)
+    meta_path = out / META_FILE
+    kept = meta_path.read_text() if meta_path.is_file() else None
+    if kept is not None:  # run.json keeps every command that wrote the directory
+        meta = json.loads(kept)
+        record_command(meta, command_entry(getattr(args, "argv", sys.argv[1:]),
+                                           "rebuilt report.md and its figures"))
+        meta_path.write_text(json.dumps(meta, indent=2))
+    try:
+        path = write_report(out, overwrite)
+    except BaseException:
+        if kept is not None:  # nothing written: the record stays as it was
+            meta_path.write_text(kept)
+        raise
+    _print_summary(out, console())
     print(f"report: {path}")
     return 0
 

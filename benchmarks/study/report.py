@@ -14,6 +14,7 @@ import numpy as np
 from benchmarks.study import intervals, plots, profiles
 from benchmarks.study.metrics import Summary, format_sweep, summarize
 from benchmarks.study.runner import deduplicate, machine_info, read_results
+from benchmarks.study.study_record import command_lines
 from benchmarks.study.tracking_report import tracking_section
 from hexapod.outputs import TEXT_MARKER
 
@@ -121,8 +122,7 @@ def write_report(out_dir: Path, overwrite: bool = False) -> Path:
     lines = ["# Benchmark report", "", f"<!-- {TEXT_MARKER}: hexapod-bench report -->", ""]
     lines.append(f"Generated {datetime.now(UTC).strftime('%Y-%m-%d %H:%M UTC')} from "
                  f"`{out_dir / 'results.jsonl'}` ({len(rows)} trials).")
-    if meta.get("command"):
-        lines.append(f"Command: `{meta['command']}`")
+    lines += command_lines(meta)
     if dropped:
         lines += ["", f"**Duplicate rows**: {duplicate_note(dropped, conflicting)}"]
     if meta.get("warnings"):

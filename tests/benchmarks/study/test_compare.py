@@ -70,7 +70,9 @@ def test_identical_runs_no_difference_no_determinism_failure(
     out = capsys.readouterr().out
     assert "Regressions (B significantly worse than A): 0" in out
     assert "Determinism check: 0 of 24 matched trials differ" in out
-    doc = json.loads(js.read_text())
+    marked = json.loads(js.read_text())
+    assert marked["generator"] == "hexapod-vs"
+    doc = marked["comparisons"]
     assert all(set(d) >= REQUIRED for d in doc)
     tests = [d for d in doc if d["test"] != "determinism"]
     assert {d["metric"] for d in tests} == {"converged", "final_error", "steps"}
