@@ -92,8 +92,9 @@ def print_table(con: Any, title: str, header: Sequence[str], rows: Sequence[Sequ
 
     cells = [[escape(c) if escape_cells else c for c in r] for r in rows]
     constant = [k for k in keys if len(rows) > 1 and len({r[k] for r in rows}) == 1]
-    if constant:
-        title += " - " + ", ".join(f"{header[k]}: {rows[0][k]}" for k in constant)
+    said = [k for k in constant if rows[0][k] not in ("", "-")]
+    if said:
+        title += " - " + ", ".join(f"{header[k]}: {rows[0][k]}" for k in said)
     shown = [i for i in range(len(header)) if i not in constant]
     for lines in (1, 2, 99):  # the headers on one line if the table fits, else wrapped
         widths = [_need(header[i], [r[i] for r in rows], lines) for i in shown]
