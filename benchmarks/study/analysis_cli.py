@@ -75,7 +75,7 @@ def print_comparisons(comparisons: list[Any], title: str,
                  else f"{name_b if c.better == c.a else name_a} better"]
                 for c in comparisons]
     print_table(con, title, header, rows, keys=keys, left=(*keys, len(header) - 1),
-                escape_cells=True)  # sweeps and intervals hold brackets
+                escape_cells=True, wrap=(1,))  # sweeps and intervals hold brackets
     significant = [c for c in comparisons if c.better is not None]
     con.print(f"Significant at {100 * ALPHA:.0f} % after Holm's correction "
               f"({len(significant)} of {len(comparisons)} comparisons):")

@@ -277,11 +277,11 @@ def _print_summary(out: Path, con: Any) -> None:
             continue
         print_table(con, f"Trajectory tracking ({out}) - scenario: {name}",
                     tracking_header(rs), tracking_rows(rs, with_intervals=False),
-                    keys=(0, 1), left=(0, 1))
+                    keys=(0, 1), left=(0, 1), wrap=(0,))
     if point_to_point or not rows:
         print_table(con, f"Results ({out})", TABLE_HEADER,
                     summary_table_rows(summarize(point_to_point)), keys=(0, 1, 2, 3),
-                    left=(0, 1, 2, 3))
+                    left=(0, 1, 2, 3), wrap=(1,))
 
 
 def cmd_calibrate(args: argparse.Namespace) -> int:

@@ -28,10 +28,12 @@ def _lines(header: str, width: int) -> int:
     return lines
 
 
-def _need(header: str, cells: Sequence[str], header_lines: int) -> int:
-    """Width a column needs: its widest cell, and its header on at most ``header_lines``
-    lines (wrapped at words; a cell never wraps)."""
-    width = max([max([len(w) for w in header.split()] or [0]), *(len(c) for c in cells)])
+def _need(header: str, cells: Sequence[str], header_lines: int, wrap: bool = False) -> int:
+    """Width a column needs: its widest cell (its longest word when ``wrap``: a sweep
+    ``a=1, b=2`` may wrap after a comma, no other cell wraps), and its header on at most
+    ``header_lines`` lines (wrapped at words)."""
+    longest = [max([len(w) for w in c.split()] or [0]) if wrap else len(c) for c in cells]
+    width = max([max([len(w) for w in header.split()] or [0]), *longest])
     while _lines(header, width) > header_lines:
         width += 1
     return width
@@ -74,7 +76,7 @@ def column_groups(widths: Sequence[int], keys: Sequence[int], width: int
 
 def print_table(con: Any, title: str, header: Sequence[str], rows: Sequence[Sequence[str]],
                 keys: Sequence[int] = (), left: Sequence[int] = (),
-                escape_cells: bool = False) -> None:
+                escape_cells: bool = False, wrap: Sequence[int] = ()) -> None:
     """Print a table that fits ``con.width`` without cutting a cell.
 
     Args:
@@ -86,6 +88,8 @@ def print_table(con: Any, title: str, header: Sequence[str], rows: Sequence[Sequ
             moved to the title when every row has the same value).
         left: Indices of the left-justified columns (the others are right-justified).
         escape_cells: Escape rich markup in the cells (brackets in intervals, sweeps).
+        wrap: Indices of the columns whose cells may wrap at their spaces when the table
+            does not fit otherwise (a sweep ``a=1, b=2``: every value stays whole).
     """
     from rich.markup import escape
     from rich.table import Table
@@ -96,12 +100,14 @@ def print_table(con: Any, title: str, header: Sequence[str], rows: Sequence[Sequ
     if said:
         title += " - " + ", ".join(f"{header[k]}: {rows[0][k]}" for k in said)
     shown = [i for i in range(len(header)) if i not in constant]
-    for lines in (1, 2, 99):  # the headers on one line if the table fits, else wrapped
-        widths = [_need(header[i], [r[i] for r in rows], lines) for i in shown]
-        if table_width(widths) <= int(con.width):
-            break
     key_pos = [shown.index(k) for k in keys if k in shown]
-    groups = column_groups(widths, key_pos, int(con.width))
+    # the headers on one line if the table fits, else wrapped; then the wrapping cells
+    for lines, wrapping in ((1, False), (2, False), (99, False), (99, True)):
+        widths = [_need(header[i], [r[i] for r in rows], lines, wrapping and i in wrap)
+                  for i in shown]
+        groups = column_groups(widths, key_pos, int(con.width))
+        if groups is not None and (len(groups) == 1 or lines == 99):
+            break
     if groups is None:
         _print_blocks(con, title, header, rows, shown, [shown[k] for k in key_pos])
         return
