@@ -58,7 +58,7 @@ def print_comparisons(comparisons: list[Any], title: str,
     if runs is None:
         header = ["scenario", "sweep", "a", "b", "metric", "n", "a's value", "b's value",
                   "a - b [95 % CI]", "test", "p", "p Holm", "verdict"]
-        keys = (0, 1, 2, 3, 4)
+        keys: tuple[int, ...] = (0, 1, 2, 3, 4)
         rows = [[c.scenario, c.sweep, c.a, c.b, c.metric, str(c.n), _fmt_value(c, c.a_value),
                  _fmt_value(c, c.b_value), _fmt_diff(c), c.test, f"{c.p_value:.3g}",
                  f"{c.p_holm:.3g}", "-" if c.better is None else f"{c.better} better"]
