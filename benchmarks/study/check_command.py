@@ -67,6 +67,7 @@ def scenario_setup(sc: Any) -> Setup:
     import controllers  # noqa: F401 - registers the built-ins
     from benchmarks.sim import load_camera, load_geometry
     from controllers.registry import registry
+    from vision.cameras.files.opencv import is_opencv_file
 
     g = load_geometry(sc)
     cam = load_camera(sc, g)
@@ -75,7 +76,10 @@ def scenario_setup(sc: Any) -> Setup:
                  else "[robot] preset (give [robot] geometry = your robot file)"),
         points=(f"base_points_mm / platform_points_mm in {sc.robot_geometry}"
                 if sc.robot_geometry else "[robot] geometry"),
-        camera=(f"[camera_from_base] in {sc.camera_file}" if sc.camera_file
+        camera=(f"[camera] pose or [camera.camera_from_base] in {sc.source} (the "
+                f"calibration file {sc.camera_file} holds no pose)"
+                if sc.camera_file and is_opencv_file(sc.camera_file)
+                else f"[camera_from_base] in {sc.camera_file}" if sc.camera_file
                 else f"[camera] preset '{sc.camera_preset}' in {sc.source} (or [camera] "
                      "file = a camera file)"),
         task=f"[task] max_translation_mm / max_angle_deg / margin_mm in {sc.source}")

@@ -118,3 +118,19 @@ def test_a_ros_file_without_its_distortion_model_is_refused(
     code, out = _check([str(path)], capsys)
     assert code == 2
     assert f"{path}: key 'distortion_model': a ROS camera_info file" in out
+
+
+def test_a_scenario_naming_a_calibration_file_is_told_to_change_its_own_keys(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """The camera's pose of a scenario that names a calibration file is the scenario's
+    ([camera] pose or [camera.camera_from_base]), never the file's."""
+    path = _ros(tmp_path)
+    study = tmp_path / "study.toml"
+    study.write_text('name = "blind"\ntrials = 2\ncontrollers = ["leg-edge"]\n[camera]\n'
+                     'file = "ros.yaml"\n[camera.camera_from_base]\n'
+                     "translation_mm = [0.0, 0.0, -3000.0]\n")  # the robot behind it
+    code, out = _check([str(study)], capsys)
+    assert code == 1, out
+    assert (f"change [camera] pose or [camera.camera_from_base] in {study} (the calibration "
+            f"file {path} holds no pose)") in out
+    assert f"[camera_from_base] in {path}" not in out
