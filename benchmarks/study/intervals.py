@@ -115,6 +115,13 @@ def calibration_rows(summaries: list[Summary], groups: dict[GroupKey, list[dict[
     return out
 
 
+def median_cell(rows: list[dict[str, Any]], key: str, digits: int = 3) -> str:
+    """The median over the rows of a per-trial figure (``rtt_median_ms``,
+    ``detect_time_ms``...) with its bootstrap interval."""
+    cell, = quantile_cells([r.get(key) for r in rows], [0.5], digits)
+    return cell
+
+
 DRIVE_HEADER = ["sweep", "controller", "max leg force N", "saturation s (median)",
                 "trials saturated", "tracking RMS mm/s (median)", "tracking max mm/s"]
 

@@ -11,7 +11,7 @@ from typing import Any
 
 import numpy as np
 
-from benchmarks.study import intervals, plots, profiles
+from benchmarks.study import intervals, plots, profiles, stats
 from benchmarks.study.metrics import Summary, format_sweep, summarize
 from benchmarks.study.runner import deduplicate, machine_info, read_results
 from benchmarks.study.tracking_report import tracking_section
@@ -50,6 +50,12 @@ TABLE_HEADER = ["scenario", "sweep", "controller", "backend", "converged", "fail
                 "step us", "stroke viol."]
 #: ``steps med``: median steps to converge (fixed-duration tasks: to settle within the
 #: tolerances for good).
+
+
+def _group(groups: dict[intervals.GroupKey, list[dict[str, Any]]], s: Summary
+           ) -> list[dict[str, Any]]:
+    """The rows of a summary's group."""
+    return groups[(s.scenario, s.point, s.controller, s.backend)]
 
 
 def _md_table(header: list[str], rows: list[list[str]]) -> str:
@@ -159,12 +165,15 @@ def write_report(out_dir: Path, overwrite: bool = False) -> Path:
         lines += [_md_table(TABLE_HEADER, intervals.summary_rows_with_intervals(ss, groups)),
                   ""]
         if any(np.isfinite(s.rtt_median_ms) for s in ss):
-            lines += ["Robot link (communication time per period):", ""]
+            lines += ["Robot link (communication time per period; *RTT median*: the median "
+                      "over the trials of each trial's median, with its interval; *RTT p99*: "
+                      "the largest of the trials' 99th percentiles):", ""]
             lines += [_md_table(["sweep", "controller", "backend", "RTT median ms",
                                  "RTT p99 ms", "missed periods"],
                                 [[format_sweep(s.sweep), s.controller, s.backend,
-                                  _fmt(s.rtt_median_ms), _fmt(s.rtt_p99_ms),
-                                  str(s.missed_periods)] for s in ss]), ""]
+                                  intervals.median_cell(_group(groups, s), "rtt_median_ms"),
+                                  _fmt(s.rtt_p99_ms), str(s.missed_periods)]
+                                 for s in ss]), ""]
         if any(np.isfinite(s.leg_force_max_n) for s in ss):
             lines += drive_section(ss, groups)
         if any(s.hidden_edge_periods for s in ss):
@@ -174,7 +183,9 @@ def write_report(out_dir: Path, overwrite: bool = False) -> Path:
                                  "trials with a hidden edge"],
                                 [[format_sweep(s.sweep), s.controller,
                                   str(s.hidden_edge_periods),
-                                  f"{s.hidden_edge_trials}/{s.trials}"] for s in ss]), ""]
+                                  f"{s.hidden_edge_trials}/{s.trials}: "
+                                  f"{stats.format_rate(s.hidden_edge_trials, s.trials)}"]
+                                 for s in ss]), ""]
         if any(np.isfinite(s.tail_position_median_mm) for s in ss):
             lines += ["Convergence tail (median of the position error over the last 20 % of "
                       "each fixed-duration trial, as the seeds read their tails):", ""]
@@ -185,7 +196,8 @@ def write_report(out_dir: Path, overwrite: bool = False) -> Path:
             lines += ["Images in the loop (render, detect, estimate at every step):", ""]
             lines += [_md_table(["sweep", "controller", "detection median ms per frame"],
                                 [[format_sweep(s.sweep), s.controller,
-                                  _fmt(s.detect_time_median_ms)] for s in ss]), ""]
+                                  intervals.median_cell(_group(groups, s), "detect_time_ms")]
+                                 for s in ss]), ""]
         if any(np.isfinite(s.calibration_median_mm) or s.calibration_refused for s in ss):
             lines += ["Calibration of the base points before control (error per point: the "
                       "norm, and seed 001's measure, the largest error on any coordinate of "
