@@ -143,7 +143,7 @@ def cmd_compare(args: argparse.Namespace) -> int:
                   "test": "determinism", "n": matched, "statistic": len(n_rows),
                   "p_value": None, "p_holm": None,
                   "difference": len(n_rows) / matched if matched else None,
-                  "interval": None,
+                  "interval": None, "unmatched": {"A": only_a, "B": only_b},
                   "rows": json.loads(different.to_json(orient="records"))}]
         if args.check and (regressions or len(n_rows)):
             status = 1
