@@ -93,6 +93,7 @@ def print_table(con: Any, title: str, header: Sequence[str], rows: Sequence[Sequ
     """
     from rich.markup import escape
     from rich.table import Table
+    from rich.text import Text
 
     cells = [[escape(c) if escape_cells else c for c in r] for r in rows]
     constant = [k for k in keys if len(rows) > 1 and len({r[k] for r in rows}) == 1]
@@ -113,7 +114,7 @@ def print_table(con: Any, title: str, header: Sequence[str], rows: Sequence[Sequ
         return
     for n, group in enumerate(groups):
         part = f" ({n + 1}/{len(groups)})" if len(groups) > 1 else ""
-        t = Table(title=title + part)
+        t = Table(title=Text(title + part))  # a path or a sweep is not markup
         for j in group:
             i = shown[j]
             t.add_column(header[i], justify="left" if i in left else "right",
