@@ -331,8 +331,8 @@ def compare_runs(df_a: pd.DataFrame, df_b: pd.DataFrame, name_a: str = "A",
 
     common = sorted(set(df_a.columns) & set(df_b.columns))
     names, per_scenario = _metric_plan(df_a, metrics)
-    names = [n for n in names if metrics is not None or resolve_metric(n, list(df_a.columns))[0]
-             in common]
+    if metrics is None:  # the task's metrics that both runs recorded
+        names = [n for n in names if METRICS[n][0] in common]
     metric_cols = {resolve_metric(name, common)[0] for name in names}
     cols = sorted(set(OUTCOME_COLUMNS) & set(common))
     merge_cols = sorted((set(cols) | metric_cols | {"converged"}
