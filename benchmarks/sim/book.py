@@ -201,7 +201,11 @@ class Book:
             row = dict(base)
             row["trial"] = int(s.trial)
             fail = self.failure[m]
-            conv = bool(self.converged[m])
+            # a trial that failed (an end stop, a refused or invalid command) did not
+            # converge, whatever its last convergence test said (a fixed-duration task
+            # tests every period against the moving reference)
+            conv = bool(self.converged[m]) and fail is None
+            failed = fail is not None
             if fail is None and not conv:
                 fail = unconverged_reason(sc.task, float(dp[m] * 1e3),
                                           float(np.rad2deg(da[m])))
@@ -231,6 +235,8 @@ class Book:
                 row["missed_periods"] = int(self.missed[m])
             if self.tracker is not None:
                 row.update(self.tracker.row(m))
+                if failed:  # it never reached the reference's end: it did not settle
+                    row["settling_time_s"] = None
             if figures is not None:
                 row.update(figures(m))
             for key, value in s.calibration.items():

@@ -68,6 +68,7 @@ def scenario_setup(sc: Any) -> Setup:
     import controllers  # noqa: F401 - registers the built-ins
     from benchmarks.sim import load_camera, load_geometry
     from controllers.registry import registry
+    from vision.cameras.files.opencv import is_opencv_file
 
     g = load_geometry(sc)
     cam = load_camera(sc, g)
@@ -76,7 +77,10 @@ def scenario_setup(sc: Any) -> Setup:
                  else "[robot] preset (give [robot] geometry = your robot file)"),
         points=(f"base_points_mm / platform_points_mm in {sc.robot_geometry}"
                 if sc.robot_geometry else "[robot] geometry"),
-        camera=(f"[camera_from_base] in {sc.camera_file}" if sc.camera_file
+        camera=(f"[camera] pose or [camera.camera_from_base] in {sc.source} (the "
+                f"calibration file {sc.camera_file} holds no pose)"
+                if sc.camera_file and is_opencv_file(sc.camera_file)
+                else f"[camera_from_base] in {sc.camera_file}" if sc.camera_file
                 else f"[camera] preset '{sc.camera_preset}' in {sc.source} (or [camera] "
                      "file = a camera file)"),
         task=f"[task] max_translation_mm / max_angle_deg / margin_mm in {sc.source}")
@@ -132,6 +136,8 @@ def load_setup(text: str) -> Setup:
             camera="the camera's placement (the front preset placed for this robot here)",
             task="[task] of a scenario"), None,
             ["camera: the front preset, placed for this robot (a scenario names yours)"], [])
+    if path.suffix.lower() in OPENCV_EXTENSIONS:
+        return calibration_setup(path)
     if {"fx_px", "opencv", "kind", "camera_from_base"} & set(table):
         from hexapod.geometry import deltalab
 
@@ -143,6 +149,37 @@ def load_setup(text: str) -> Setup:
     raise BenchmarkError(f"{path}: cannot tell what this file is: a scenario has "
                          "'controllers', a robot file 'base_points_mm', a camera file "
                          "'fx_px' (or 'opencv') and [camera_from_base] (docs/robot-files.md)")
+
+
+#: The preset whose placement a calibration file's camera gets in ``check``, by kind.
+CALIBRATION_POSE = {"perspective": "front", "fisheye": "fisheye"}
+
+
+def calibration_setup(path: Path) -> Setup:
+    """The setup of a calibration file checked alone (OpenCV, ROS ``camera_info``,
+    Kalibr): such a file holds no pose, so its camera is placed where the preset of its
+    kind sits for the deltalab robot (``front`` for a perspective camera, ``fisheye``,
+    else ``omni``), and the keys to change are those of the scenario that names it."""
+    from hexapod.geometry import deltalab
+    from vision.cameras import camera_preset, load_camera
+
+    g = deltalab()
+    kind = load_camera(path).kind
+    preset = CALIBRATION_POSE.get(kind, "omni")
+    cam = load_camera(path, camera_from_base=camera_preset(preset, g).camera_from_base)
+    t_mm = np.round(cam.camera_from_base.inverse().translation * 1e3, 1) + 0.0  # no -0.0
+    where = Where(strokes="[robot] of a scenario", points="[robot] of a scenario",
+                  camera=(f'the camera\'s pose in the scenario that names {path} ([camera] '
+                          f'pose = "{preset}" or [camera.camera_from_base]; the file holds '
+                          "no pose)"),
+                  task="[task] of a scenario")
+    notes = ["robot: the deltalab preset (a scenario names yours)",
+             f"camera pose: a calibration file holds none; placed where the '{preset}' "
+             f"preset sits for this robot (projection centre at ({t_mm[0]:.1f}, "
+             f"{t_mm[1]:.1f}, {t_mm[2]:.1f}) mm in the base frame); a scenario gives "
+             f'yours: [camera] file = "{path.name}" with pose = "..." or '
+             "[camera.camera_from_base]"]
+    return Setup("camera", g, cam, _default_task(), where, None, notes, [])
 
 
 def examine(setup: Setup) -> SetupReport:
@@ -232,19 +269,7 @@ def describe(setup: Setup, report: SetupReport, source: str) -> list[str]:
                                            report.reach_mm, strict=True))
         + "; about one axis [deg]: " + ", ".join(
             f"{a} {_f(v)}" for a, v in zip("xyz", report.reach_deg, strict=True)), ""]
-    lines += [f"Camera '{cam.name}' ({cam.kind}, {cam.width}x{cam.height} px, fx "
-              f"{cam.K[0, 0]:.1f} px)",
-              f"  at home it sees {int(report.home_visible.sum())} of 12 leg edges "
-              "(pixels of the base end -> platform end):"]
-    for i in range(6):
-        parts = []
-        for j in range(2):
-            p = report.home_pixels[i, j]
-            seen = "seen" if report.home_visible[i, j] else "hidden"
-            ends = (f"({_f(p[0, 0])}, {_f(p[0, 1])}) -> ({_f(p[1, 0])}, {_f(p[1, 1])})"
-                    if np.all(np.isfinite(p)) else "not imaged")
-            parts.append(f"edge {j} {seen} {ends}")
-        lines.append(f"    leg {i}: " + "; ".join(parts))
+    lines += camera_lines(cam, report)
     lines += [f"  over the workspace: all 12 edges seen at {100 * report.poses_all_visible:.1f}"
               f" % of the reachable poses, none at {100 * report.poses_blind:.1f} %; least "
               f"seen edge: {100 * float(np.min(report.view_fraction)):.1f} % of the poses",
@@ -261,6 +286,50 @@ def describe(setup: Setup, report: SetupReport, source: str) -> list[str]:
         lines.append("No problem found.")
     lines.append("The setup can run." if report.can_run else
                  "The setup cannot run: every trial would fail (fix the errors above).")
+    return lines
+
+
+#: How each end of an edge is said (:func:`benchmarks.study.setup_check.end_status`).
+END_TEXT = {"image": "in the image", "outside": "outside the image",
+            "far": "far outside the image", "behind": "behind the camera",
+            "unimaged": "beyond the lens's field of view",
+            "inside-leg": "no edge (the camera is inside the leg's cylinder)"}
+
+
+def _end(where: str, pixel: np.ndarray) -> str:
+    """One end of an edge: its pixel only where it is in the image or near it."""
+    if where in ("image", "outside"):
+        return f"{END_TEXT[where]} ({_f(pixel[0])}, {_f(pixel[1])})"
+    return END_TEXT[where]
+
+
+def camera_lines(cam: Any, report: SetupReport) -> list[str]:
+    """The camera's part of ``check``: the edges seen at home, each end of each edge
+    said where it is (in the image with its pixel, outside the image, behind the
+    camera...), never a pixel of a point that is not in view as if it were."""
+    from vision.legs import DEFAULT_MIN_VISIBLE_FRACTION
+
+    seen = report.home_visible
+    whole = seen & np.all(report.home_ends == "image", axis=-1)
+    lines = [f"Camera '{cam.name}' ({cam.kind}, {cam.width}x{cam.height} px, fx "
+             f"{cam.K[0, 0]:.1f} px)",
+             f"  at home it sees {int(seen.sum())} of 12 leg edges ({int(whole.sum())} "
+             f"with both ends in the image, {int((seen & ~whole).sum())} with an end out of it); "
+             "an edge is "
+             f"seen when at least {100 * DEFAULT_MIN_VISIBLE_FRACTION:.0f} % of its length "
+             "is in view (imaged, in the image, not hidden); its ends (base, platform):"]
+    for i in range(6):
+        for j in range(2):
+            pct = 100 * float(report.home_fraction[i, j])
+            state = (f"seen, {pct:.0f} % in view" if seen[i, j] else
+                     f"not seen ({pct:.0f} % in view)")
+            ends = [_end(str(report.home_ends[i, j, k]), report.home_pixels[i, j, k])
+                    for k in range(2)]
+            if ends[0] == ends[1] and not ends[0].endswith(")"):
+                ends_text = f"both ends {ends[0]}"
+            else:
+                ends_text = f"base end {ends[0]}, platform end {ends[1]}"
+            lines.append(f"    leg {i} edge {j}: {state}; {ends_text}")
     return lines
 
 

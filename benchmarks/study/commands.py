@@ -261,24 +261,35 @@ def _run_with_viz(scenarios: list[Any], out: Path, args: argparse.Namespace) -> 
 
 
 def _print_summary(out: Path, con: Any) -> None:
-    from rich.table import Table
-
+    """The results table of a run directory, per scenario after its task: tracking
+    figures for a trajectory task, convergence and final errors for a point-to-point one
+    (the failed trials counted apart and left out of the error columns); fitted to the
+    terminal's width (:mod:`benchmarks.study.fit_table`)."""
+    from benchmarks.study.fit_table import print_table
     from benchmarks.study.metrics import summarize
     from benchmarks.study.report import TABLE_HEADER, duplicate_note, summary_table_rows
     from benchmarks.study.runner import deduplicate, read_results
+    from benchmarks.study.tracking_report import is_tracking, tracking_header, tracking_rows
 
     rows, dropped, conflicting = deduplicate(read_results(out))
     if dropped:
         con.print(f"[yellow]warning[/yellow]: {out / 'results.jsonl'}: "
                   f"{duplicate_note(dropped, conflicting)}")
-    summaries = summarize(rows)
-    t = Table(title=f"Results ({out})")
-    for col in TABLE_HEADER:
-        t.add_column(col, justify="left" if col in ("scenario", "sweep", "controller",
-                                                    "backend") else "right")
-    for row in summary_table_rows(summaries):
-        t.add_row(*row)
-    con.print(t)
+    by_scenario: dict[str, list[dict[str, Any]]] = {}
+    for r in rows:
+        by_scenario.setdefault(r["scenario"], []).append(r)
+    point_to_point = []
+    for name, rs in by_scenario.items():
+        if not is_tracking(rs):
+            point_to_point += rs
+            continue
+        print_table(con, f"Trajectory tracking ({out}) - scenario: {name}",
+                    tracking_header(rs), tracking_rows(rs, with_intervals=False),
+                    keys=(0, 1), left=(0, 1), wrap=(0,))
+    if point_to_point or not rows:
+        print_table(con, f"Results ({out})", TABLE_HEADER,
+                    summary_table_rows(summarize(point_to_point)), keys=(0, 1, 2, 3),
+                    left=(0, 1, 2, 3), wrap=(1,))
 
 
 def cmd_calibrate(args: argparse.Namespace) -> int:
