@@ -26,6 +26,7 @@ REFUSED = 2
 #: Options that look like paths but name a file or directory the command only reads, or
 #: a name (a scenario, a camera preset).
 INPUTS = {("run", "scenarios"), ("run", "--calibration"), ("calibrate", "scenario"),
+          ("warm", "scenarios"),
           ("calibrate", "--observations"), ("check", "file"), ("viz", "dir"),
           ("viz", "--scenario"), ("compare", "dirs"), ("export", "dir"),
           ("servo", "--camera-file"), ("servo", "--camera-pose"), ("servo", "--geometry"),

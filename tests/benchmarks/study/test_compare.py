@@ -166,7 +166,8 @@ def test_two_runs_count_the_unmatched_trials_and_head_columns_with_the_runs(
     assert matched == 40 and all(c.n == 40 for c in comps if c.metric != "steps")
     js = tmp_path / "c.json"
     assert cli_main(["compare", str(a), str(b), "--json", str(js)]) == 0
-    det = next(d for d in json.loads(js.read_text()) if d["test"] == "determinism")
+    det = next(d for d in json.loads(js.read_text())["comparisons"]
+               if d["test"] == "determinism")
     assert det["n"] == 40 and det["unmatched"] == {"A": 0, "B": 120}
 
 
