@@ -20,6 +20,7 @@ import argparse
 import logging
 import os
 import sys
+from typing import Any
 
 from benchmarks.exceptions import BenchmarkError
 from benchmarks.study.commands import cmd_calibrate, cmd_report, cmd_run, cmd_viz, console
@@ -37,6 +38,8 @@ def cmd_list(args: argparse.Namespace) -> int:
     from controllers.registry import registry
 
     con = console()
+    if getattr(args, "options", None):
+        return _list_options(args.options, con)
     t = Table(title="Scenarios")
     t.add_column("name")
     t.add_column("trials", justify="right")
@@ -69,6 +72,33 @@ def cmd_list(args: argparse.Namespace) -> int:
     return 0
 
 
+def _list_options(name: str, con: Any) -> int:
+    """Print the options a controller declares (the table the scenario checks use)."""
+    from rich.table import Table
+
+    from controllers.options import REQUIRED
+    from controllers.registry import registry
+
+    table = registry.options(name)
+    info = registry.source(name)
+    t = Table(title=f"Options of {name} ({info.package} {info.version}): {info.description}")
+    for col in ("option", "type", "unit", "default", "meaning"):
+        t.add_column(col, overflow="fold")
+    for o in table.options:
+        t.add_row(o.name, o.type, o.unit or "-",
+                  "(required)" if o.default is REQUIRED else repr(o.default),
+                  o.meaning or "(not documented)")
+    con.print(t)
+    if table.open:
+        con.print(f"{name} also takes further options it hands on"
+                  + (f": {table.passes_on}" if table.passes_on else "")
+                  + " (checked when the controller is built)", markup=False)
+    con.print("Set them in a scenario: controllers = [{name = \"" + name + "\", option = "
+              "value}], or [controller_options] for every controller that declares the option "
+              "(docs/scenarios.md).", markup=False)
+    return 0
+
+
 PERF_MODULES = {
     "fk": "benchmarks.perf.fk",
     "controllers": "benchmarks.perf.controllers",
@@ -98,7 +128,11 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("-v", "--verbose", action="store_true", help="log at INFO level")
     sub = p.add_subparsers(dest="command", required=True)
 
-    s = sub.add_parser("list", help="scenarios and controllers (with their source package)")
+    s = sub.add_parser("list", help="scenarios and controllers (with their source package); "
+                                    "--options NAME: a controller's options")
+    s.add_argument("--options", metavar="NAME",
+                   help="print the options of controller NAME (type, unit, default, "
+                        "meaning): what a scenario may set for it")
     s.set_defaults(func=cmd_list)
 
     s = sub.add_parser("run", help="run scenarios (built-in names or TOML paths)")

@@ -26,7 +26,7 @@ def cmd_run(args: argparse.Namespace) -> int:
     """Run studies and write results.jsonl and report.md."""
     import controllers  # noqa: F401 - registers the built-ins
     from benchmarks.study.runner import run_lock
-    from benchmarks.study.scenario import check_controllers, load_scenario
+    from benchmarks.study.scenario import load_scenario
 
     out = Path(args.out)
     ctrl_list = [c.strip() for c in args.controllers.split(",")] if args.controllers else None
@@ -37,18 +37,21 @@ def cmd_run(args: argparse.Namespace) -> int:
         from dataclasses import replace
 
         scenarios = [replace(sc, world=args.world) for sc in scenarios]
-    from benchmarks.study.provenance import check_scenario_calibration
+    from benchmarks.study.preflight import preflight, refusal, warning_lines
 
-    warnings: list[str] = []
-    for sc in scenarios:
-        check_controllers(sc)
-        warnings += check_scenario_calibration(sc, getattr(args, "allow_foreign_calibration",
-                                                           False))
-    for text in warnings:
+    # the pre-flight of 'hexapod-bench check', the same function
+    pre = preflight(scenarios, getattr(args, "allow_foreign_calibration", False),
+                    measure=not getattr(args, "no_check", False))
+    for text in pre.warnings:
         print(f"warning: {text}", file=sys.stderr)
-    args.calibration_warnings = warnings
-    if not getattr(args, "no_check", False):
-        _preflight(scenarios)
+    args.calibration_warnings = pre.warnings
+    scenarios = pre.scenarios
+    for check in pre.checks:
+        refused = refusal(check)
+        if refused is not None:
+            raise refused
+        for line in warning_lines(check):
+            print(line, file=sys.stderr)
     from benchmarks.study.runner import backend_factory
 
     backend_factory(args.backend)  # validates the spec before any work
@@ -61,21 +64,6 @@ def cmd_run(args: argparse.Namespace) -> int:
     with run_lock(out), summarised_warnings(not getattr(args, "verbose", False)) as repeated:
         code = _run_locked(scenarios, out, args)
     return _failure_epilogue(out, repeated.repeats(), code)
-
-
-def _preflight(scenarios: list[Any]) -> None:
-    """The checks of ``hexapod-bench check`` before the first trial: warnings printed, a
-    setup where every trial would fail the same way refused (:class:`SetupError`)."""
-    from benchmarks.exceptions import SetupError
-    from benchmarks.study.check_command import preflight
-
-    for sc in scenarios:
-        problems = preflight(sc)
-        errors = [p for p in problems if p.severity == "error"]
-        if errors:
-            raise SetupError(sc.source, errors)
-        for p in problems:
-            print(f"hexapod-bench: warning: {sc.name}: {p.text}", file=sys.stderr)
 
 
 def _failure_epilogue(out: Path, repeats: list[str], code: int) -> int:
