@@ -67,3 +67,21 @@ class SetupError(BenchmarkError):
         text = "; ".join(p.text for p in problems)
         super().__init__(f"{source}: the setup cannot run, every trial would fail: {text} "
                          f"(hexapod-bench check {source} shows the details)")
+
+
+class BatchFailedError(BenchmarkError):
+    """A batch of trials stopped as a whole (the controller's ``step_batch`` raised, or
+    returned commands of the wrong shape or kind); each trial of it gets a failure row
+    saying so, with the step and its last errors (it is not rerun).
+
+    Attributes:
+        step: The period at which it happened.
+        errors: The last position [m] and orientation [rad] errors of each row.
+        cause: The exception.
+    """
+
+    def __init__(self, step: int, errors: tuple[Any, Any], cause: BaseException) -> None:
+        self.step = step
+        self.errors = errors
+        self.cause = cause
+        super().__init__(f"at step {step}: {type(cause).__name__}: {cause}")

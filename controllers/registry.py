@@ -137,8 +137,8 @@ class Registry:
                                       ) from None
             if not callable(obj):
                 raise PluginLoadError(name, "command line", "not callable")
-            package = module.split(".")[0]
-            self.register(name, obj, package, _distribution_version(package))
+            package, version = _module_distribution(module)
+            self.register(name, obj, package, version)
             return obj
         raise UnknownControllerError(name, list(self._factories), suggest(name,
                                                                          self._factories))
@@ -175,6 +175,18 @@ def describe(factory: Any) -> str:
     doc = inspect.cleandoc(getattr(factory, "__doc__", None) or "")
     paragraph = " ".join(doc.split("\n\n")[0].split())
     return first_sentence(paragraph)
+
+
+def _module_distribution(module: str) -> tuple[str, str]:
+    """The installed distribution that provides ``module`` and its version (its import
+    name and "unknown" when no installed distribution provides it: a file on the path)."""
+    top = module.split(".")[0]
+    for dist in metadata.packages_distributions().get(top, []):
+        try:
+            return dist, metadata.version(dist)
+        except metadata.PackageNotFoundError:
+            continue
+    return top, _distribution_version(top)
 
 
 def _distribution_version(package: str) -> str:

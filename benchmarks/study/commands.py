@@ -68,8 +68,15 @@ def cmd_run(args: argparse.Namespace) -> int:
 
 def _failure_epilogue(out: Path, repeats: list[str], code: int) -> int:
     """Print the failures once per cause (with their counts) and the repeated warnings;
-    the exit code is 1 when every trial of the results directory failed."""
-    from benchmarks.study.failures import every_trial_failed, failure_summary
+    the exit code is 1 when every trial of the results directory failed, 3 when a
+    controller failed every one of its trials (the others ran)."""
+    from benchmarks.study.failures import (
+        CONTROLLER_FAILED,
+        EVERY_TRIAL_FAILED,
+        controllers_failing_every_trial,
+        every_trial_failed,
+        failure_summary,
+    )
     from benchmarks.study.runner import deduplicate, read_results
 
     rows, _, _ = deduplicate(read_results(out))
@@ -86,7 +93,14 @@ def _failure_epilogue(out: Path, repeats: list[str], code: int) -> int:
     if code == 0 and every_trial_failed(rows):
         print("hexapod-bench: error: every trial failed: the setup cannot run as it is (the "
               "causes are above)", file=sys.stderr)
-        return 1
+        return EVERY_TRIAL_FAILED
+    dead = controllers_failing_every_trial(rows)
+    if code == 0 and dead:
+        print("hexapod-bench: error: " + "; ".join(
+            f"{label} failed all its {n} trials" for label, n in dead.items())
+            + f" (the causes are above; exit code {CONTROLLER_FAILED}: the other controllers "
+              "ran)", file=sys.stderr)
+        return CONTROLLER_FAILED
     return code
 
 

@@ -77,9 +77,8 @@ def preflight(scenarios: list[Any], allow_foreign_calibration: bool = False,
         ScenarioError: A controller, option or file refused, in the file's terms.
     """
     from benchmarks.study.provenance import check_scenario_calibration
-    from benchmarks.study.scenario_checks import check_controllers
-
     from benchmarks.study.scenario import check_physics_dt
+    from benchmarks.study.scenario_checks import check_controllers
 
     checks, warnings = [], []
     for sc in scenarios:
