@@ -160,17 +160,26 @@ class Book:
         return invalid | too_many
 
     def crashed(self, rows: np.ndarray, crashes: dict[int, BaseException], label: str,
-                step: int) -> np.ndarray:
+                step: int, scenario: str = "", trials: list[int] | None = None) -> np.ndarray:
         """End the rows whose controller raised at period ``step`` (``crashes``: by
-        position in ``rows``), each with its exception; returns the (n,) mask of them."""
+        position in ``rows``), each with its exception; returns the (n,) mask of them.
+
+        Args:
+            scenario: The scenario's name and ``trials`` the trial index of each row of
+                the group (for the log lines, as :func:`failure_row`'s).
+        """
         mask = np.zeros(len(rows), dtype=bool)
         for j, exc in crashes.items():
+            r = int(rows[j])
             mask[j] = True
-            self.failure[int(rows[j])] = (f"{label} raised at step {step}: "
-                                          f"{type(exc).__name__}: {exc}")
-            self.causes[int(rows[j])] = user_message(exc)
-            log.warning("trial row %d of %s failed at step %d: %s", int(rows[j]), label,
-                        step, user_message(exc), extra={"cause": user_message(exc)})
+            self.failure[r] = f"{label} raised at step {step}: {type(exc).__name__}: {exc}"
+            self.causes[r] = user_message(exc)
+            trial = trials[r] if trials is not None else r
+            log.warning("trial %s/%s/%d failed at step %d: %s", scenario, label, trial, step,
+                        self.causes[r], extra={"cause": self.causes[r]})
+            if not isinstance(exc, HexapodError | VisionError | ControllerError):
+                log.info("traceback of trial %s/%s/%d:\n%s", scenario, label, trial,
+                         "".join(traceback.format_exception(exc)))
         return mask
 
     def world_failures(self, failed: dict[int, str], step: int) -> None:

@@ -275,7 +275,8 @@ def _run(sc: Scenario, spec: Any, group: list[TrialSetup], contexts: list[Any],
             failed = book.commands(tr, cmds.values, cmds.reasons)
             crashes = getattr(controller, "crashes", None)  # a per-trial loop's rows
             if crashes:
-                failed |= book.crashed(tr, crashes, spec.label, step)
+                failed |= book.crashed(tr, crashes, spec.label, step, sc.name,
+                                       [s.trial for s in group])
             done[rows[failed]] = True
             ok = rows[~failed]
             v_cmd[ok] = cmds.values[~failed]
