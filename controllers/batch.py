@@ -77,7 +77,7 @@ def checked_command(cmd: Any, name: str, actuation: Actuation) -> Command:
     """
     from controllers.exceptions import CommandError
 
-    if not isinstance(cmd, Command):
+    if not all(hasattr(cmd, a) for a in ("values", "reason", "actuation", "error_norm")):
         raise CommandError(name, f"returned {type(cmd).__name__}, not a Command")
     shape = np.shape(cmd.values)
     if shape != (6,):
@@ -86,7 +86,7 @@ def checked_command(cmd: Any, name: str, actuation: Actuation) -> Command:
     if cmd.actuation is not actuation:
         raise CommandError(name, f"returned {cmd.actuation.quantity} but declared "
                                  f"{actuation.quantity} (its 'actuation' attribute)")
-    return cmd
+    return cmd  # type: ignore[no-any-return]
 
 
 class PerTrialLoop:

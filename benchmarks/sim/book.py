@@ -172,7 +172,7 @@ class Book:
         for j, exc in crashes.items():
             r = int(rows[j])
             mask[j] = True
-            self.failure[r] = f"{label} raised at step {step}: {type(exc).__name__}: {exc}"
+            self.failure[r] = f"{label} failed at step {step}: {type(exc).__name__}: {exc}"
             self.causes[r] = user_message(exc)
             trial = trials[r] if trials is not None else r
             log.warning("trial %s/%s/%d failed at step %d: %s", scenario, label, trial, step,

@@ -145,26 +145,36 @@ def run_batch(sc: Scenario, controller_index: int, setups: list[TrialSetup],
     try:
         results = _run(sc, spec, [setups[k] for k in keys], [contexts[k] for k in keys],
                        record_trials, on_step, batched) if keys else []
-    except Exception as exc:  # the batch failed as a whole: each of its trials says so
+    except BatchFailedError as exc:  # stopped while stepping: each of its trials says so
         # (not rerun trial by trial: a crashing controller must not run twice; a per-trial
         # controller's own crash is isolated inside the batch, PerTrialLoop)
-        stopped = isinstance(exc, BatchFailedError)
-        step, errors, cause = ((exc.step, exc.errors, exc.cause) if stopped
-                               else (0, None, exc))
-        where = f"at step {step}" if stopped else "before its first step"
-        results = []
-        for j, k in enumerate(keys):
-            row = failure_row(sc, spec, setups[k].trial, cause,
-                              batch=f"the batch of {len(keys)} trials of {spec.label} failed "
-                                    f"{where} (every trial of it counted failed, not rerun)",
-                              step=step, errors=None if errors is None else
-                              (errors[0][j], errors[1][j]))
-            results.append(TrialResult(row))
+        results = _stopped(sc, spec, [setups[k].trial for k in keys], exc)
+    except Exception:  # before its first step (a reset, a refusal): no trial has run yet,
+        results = []   # so each runs alone to find the one(s) at fault
+        for k in keys:
+            try:
+                results += _run(sc, spec, [setups[k]], [contexts[k]], record_trials, on_step,
+                                batched)
+            except BatchFailedError as exc:
+                results += _stopped(sc, spec, [setups[k].trial], exc)
+            except Exception as exc:
+                results.append(TrialResult(failure_row(sc, spec, setups[k].trial, exc)))
     out: list[TrialResult] = []
     it = iter(results)
     for k in range(len(setups)):
         out.append(failed[k] if k in failed else next(it))
     return out
+
+
+def _stopped(sc: Scenario, spec: Any, trials: list[int], exc: BatchFailedError
+             ) -> list[TrialResult]:
+    """The rows of a batch stopped at a step: each with the step, its last errors and the
+    exception (a batch of several trials says it failed as a whole)."""
+    batch = (f"the batch of {len(trials)} trials of {spec.label} failed at step {exc.step} "
+             "(every trial of it counted failed, not rerun)" if len(trials) > 1 else None)
+    return [TrialResult(failure_row(sc, spec, trial, exc.cause, batch=batch, step=exc.step,
+                                    errors=(exc.errors[0][j], exc.errors[1][j])))
+            for j, trial in enumerate(trials)]
 
 
 def _goals(sc: Scenario, setups: list[TrialSetup], failed: dict[int, TrialResult],

@@ -27,29 +27,34 @@ def _scenario(controllers: list[object], trials: int = 4) -> object:
                  "orientation_tolerance_deg": 0.05}}, "failures.toml")
 
 
-def _rows(tmp_path: Path, controllers: list[object], trials: int = 4) -> list[dict]:
-    run_units(plan([_scenario(controllers, trials)], chunk_size=trials, record_trials=0),
-              tmp_path)
+def _rows(tmp_path: Path, controllers: list[object], trials: int = 4,
+          engine: str = "batched") -> list[dict]:
+    run_units(plan([_scenario(controllers, trials)], chunk_size=trials, record_trials=0,
+                   engine=engine), tmp_path)
     return read_results(tmp_path)
 
 
-def test_a_crash_keeps_its_step_errors_and_exception(tmp_path: Path) -> None:
-    rows = _rows(tmp_path, [{"name": AT_STEP, "crash_step": 20, "gain": 0.5}])
+@pytest.mark.parametrize("engine", ["batched", "per-trial"])
+def test_a_crash_keeps_its_step_errors_and_exception(engine: str, tmp_path: Path) -> None:
+    rows = _rows(tmp_path, [{"name": AT_STEP, "crash_step": 20, "gain": 0.5}], engine=engine)
     assert len(rows) == 4
     for r in rows:
         assert r["steps"] == 20, r
-        assert r["failure"] == (f"{AT_STEP} raised at step 20: RuntimeError: deliberate "
+        assert r["failure"] == (f"{AT_STEP} failed at step 20: RuntimeError: deliberate "
                                 "crash at call 21")
         assert r["cause"] == "RuntimeError: deliberate crash at call 21"
         assert r["final_position_error_mm"] is not None and r["final_position_error_mm"] > 0
 
 
-def test_a_wrong_shape_names_the_controller_and_the_shapes(tmp_path: Path) -> None:
-    rows = _rows(tmp_path, [WRONG])
+@pytest.mark.parametrize("engine", ["batched", "per-trial"])
+def test_a_wrong_shape_names_the_controller_and_the_shapes(engine: str,
+                                                           tmp_path: Path) -> None:
+    rows = _rows(tmp_path, [WRONG], engine=engine)
+    name = "test-wrong-shape" if engine == "batched" else WRONG
     for r in rows:
         assert r["steps"] == 0
-        assert r["failure"] == (f"{WRONG} raised at step 0: CommandError: controller "
-                                "'test-wrong-shape' returned a command of shape (3,); a "
+        assert r["failure"] == (f"{WRONG} failed at step 0: CommandError: controller "
+                                f"'{name}' returned a command of shape (3,); a "
                                 "command holds one value per leg, shape (6,)")
         assert "broadcast" not in r["failure"]
 
