@@ -10,7 +10,7 @@ from pathlib import Path
 import pytest
 
 from benchmarks.cli import main
-from tests.benchmarks.ownrobot.robots import BLIND_CAMERA
+from tests.benchmarks.ownrobot.robots import BLIND_CAMERA, own_robot
 
 CRASH_FREE = "tests.benchmarks.plugins:ProportionalJoints"
 
@@ -50,11 +50,25 @@ BAD = {
         'controllers = ["leg-edge"]\n[camera]\nfile = "camera.toml"\n',
         "the setup cannot run, every trial would fail: the camera sees no leg edge at the "
         "home pose"),
+    "empty workspace (strokes too short for the robot)": (
+        'controllers = ["leg-edge"]\n[robot]\ngeometry = "short.toml"\n',
+        "the setup cannot run, every trial would fail: empty workspace, no home pose"),
+    "unreachable fixed goal": (
+        'controllers = ["leg-edge"]\n[robot]\ngeometry = "long.toml"\n[task]\n'
+        'kind = "fixed"\nstart_mm = [460, 460, 460, 460, 460, 460]\n'
+        "goal_mm = [990, 260, 600, 600, 600, 600]\n",
+        "the setup cannot run, every trial would fail: task.goal_mm: no platform pose near "
+        "the home pose has these six leg lengths"),
+    "a value out of its range": (
+        'controllers = ["leg-edge"]\n[noise]\nmodel = "rotation"\namplitude_deg = 1e9\n',
+        "key 'noise.amplitude_deg': 1000000000.0 is out of the allowed range [0, 90]"),
 }
 
 
 def _write(folder: Path, body: str) -> Path:
     (folder / "camera.toml").write_text(BLIND_CAMERA)
+    own_robot(stroke=(0.100, 0.150)).to_toml(folder / "short.toml")
+    own_robot(stroke=(0.250, 1.000)).to_toml(folder / "long.toml")
     path = folder / "study.toml"
     path.write_text(f'name = "bad"\ntrials = 2\n{body}')
     return path
