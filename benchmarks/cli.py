@@ -31,10 +31,12 @@ log = logging.getLogger("hexapod-bench")
 
 def cmd_list(args: argparse.Namespace) -> int:
     """List built-in scenarios and registered controllers with their source package."""
+    from rich.markup import escape
     from rich.table import Table
 
     import controllers  # noqa: F401 - registers the built-ins
     from benchmarks.study.scenario import builtin_scenarios, load_scenario
+    from controllers.options import first_sentence
     from controllers.registry import registry
 
     con = console()
@@ -49,13 +51,14 @@ def cmd_list(args: argparse.Namespace) -> int:
         sc = load_scenario(name)
         points = len(sc.expand())
         t.add_row(name, f"{sc.trials} x {points} pt" if points > 1 else str(sc.trials),
-                  ", ".join(c.label for c in sc.controllers), sc.description.split(". ")[0])
+                  ", ".join(c.label for c in sc.controllers),
+                  escape(first_sentence(sc.description)))
     con.print(t)
     t = Table(title="Controllers")
     for col in ("name", "package", "version", "description"):
         t.add_column(col)
     for info in registry.info():
-        t.add_row(info.name, info.package, info.version, info.description)
+        t.add_row(info.name, info.package, info.version, escape(info.description))
     con.print(t)
     from hexapod.backends.registry import backends
 
@@ -74,6 +77,7 @@ def cmd_list(args: argparse.Namespace) -> int:
 
 def _list_options(name: str, con: Any) -> int:
     """Print the options a controller declares (the table the scenario checks use)."""
+    from rich.markup import escape
     from rich.table import Table
 
     from controllers.options import REQUIRED
@@ -81,13 +85,14 @@ def _list_options(name: str, con: Any) -> int:
 
     table = registry.options(name)
     info = registry.source(name)
-    t = Table(title=f"Options of {name} ({info.package} {info.version}): {info.description}")
+    t = Table(title=escape(f"Options of {name} ({info.package} {info.version}): "
+                           f"{info.description}"))
     for col in ("option", "type", "unit", "default", "meaning"):
         t.add_column(col, overflow="fold")
     for o in table.options:
-        t.add_row(o.name, o.type, o.unit or "-",
-                  "(required)" if o.default is REQUIRED else repr(o.default),
-                  o.meaning or "(not documented)")
+        t.add_row(o.name, escape(o.type), o.unit or "-",
+                  "(required)" if o.default is REQUIRED else escape(repr(o.default)),
+                  escape(o.meaning) or "(not documented)")
     con.print(t)
     if table.open:
         con.print(f"{name} also takes further options it hands on"
