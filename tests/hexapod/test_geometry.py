@@ -99,7 +99,7 @@ def test_wrong_shape(geometry: HexapodGeometry, field: str) -> None:
 def test_non_finite(geometry: HexapodGeometry, field: str, bad: float) -> None:
     kw = _kwargs(geometry)
     kw[field][3, 1] = bad
-    with pytest.raises(GeometryError, match="leg 3: its point.s y coordinate is") as exc:
+    with pytest.raises(GeometryError, match="leg 3: its point's y coordinate is") as exc:
         HexapodGeometry(**kw)
     assert exc.value.field == field
     assert "not finite" in exc.value.problem
