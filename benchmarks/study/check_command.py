@@ -135,8 +135,10 @@ def load_setup(text: str) -> Setup:
     from vision.cameras.files.opencv import OPENCV_EXTENSIONS
 
     sc = load_scenario_file(text)
-    if sc is not None:
-        return scenario_setup(sc)
+    if sc is not None:  # its controllers resolved as a run resolves them
+        from benchmarks.study.scenario_checks import check_controllers
+
+        return scenario_setup(check_controllers(sc)[0])
     path = Path(text)
     if path.suffix.lower() in OPENCV_EXTENSIONS:
         table: dict[str, Any] = {"opencv": str(path)}
