@@ -157,9 +157,12 @@ def describe_trajectory(facts: list[TrajectoryFacts], sc: Any) -> list[str]:
         lo, hi = f.duration_s
         dur = f"{lo:.2f} s" if abs(hi - lo) < 5e-3 else f"{lo:.2f} to {hi:.2f} s"
         head = f"  {_sweep_text(f.sweep)}: " if f.sweep else "  "
+        left = f.run_time_s - hi
+        after = (f"leaves {left:.2f} s after it" if left >= 0 else
+                 f"ends {-left:.2f} s before it does")
         lines.append(
-            f"{head}the reference lasts {dur}; max_steps x dt = {f.run_time_s:.2f} s leaves "
-            f"{f.run_time_s - hi:.2f} s after it; the legs travel up to {f.travel_mm:.1f} mm "
+            f"{head}the reference lasts {dur}; max_steps x dt = {f.run_time_s:.2f} s {after}; "
+            f"the legs travel up to {f.travel_mm:.1f} mm "
             f"along it (margin_mm = {task.margin_mm:g}); {f.hits} of {f.sampled} sampled "
             f"starts ({100 * f.fraction:.1f} %) would hit an end stop")
     return [*lines, ""]
