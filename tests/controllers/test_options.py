@@ -86,3 +86,17 @@ def test_module_attr_is_recorded_with_its_distribution() -> None:
 
     assert _module_distribution("yaml") == ("PyYAML", yaml.__version__)
     assert _module_distribution("tests.benchmarks.plugins") == ("tests", "unknown")
+
+
+def test_the_docs_table_is_the_real_output(capsys: pytest.CaptureFixture[str]) -> None:
+    """docs/scenarios.md shows ``list --options vision-ctc`` as it prints."""
+    from pathlib import Path
+
+    doc = (Path(__file__).resolve().parents[2] / "docs" / "scenarios.md").read_text()
+    block = doc[doc.index("$ hexapod-bench list --options vision-ctc"):]
+    rows = [line for line in block[:block.index("```")].splitlines()
+            if line.startswith("│")]
+    assert len(rows) == 3
+    assert main(["list", "--options", "vision-ctc"]) == 0
+    out = capsys.readouterr().out.splitlines()
+    assert rows == [line for line in out if line.startswith("│")]
