@@ -20,6 +20,7 @@ import argparse
 import logging
 import os
 import sys
+from typing import Any
 
 from benchmarks.exceptions import BenchmarkError
 from benchmarks.study.commands import cmd_calibrate, cmd_report, cmd_run, cmd_viz, console
@@ -31,13 +32,17 @@ log = logging.getLogger("hexapod-bench")
 
 def cmd_list(args: argparse.Namespace) -> int:
     """List built-in scenarios and registered controllers with their source package."""
+    from rich.markup import escape
     from rich.table import Table
 
     import controllers  # noqa: F401 - registers the built-ins
     from benchmarks.study.scenario import builtin_scenarios, load_scenario
+    from controllers.options import first_sentence
     from controllers.registry import registry
 
     con = console()
+    if getattr(args, "options", None):
+        return _list_options(args.options, con)
     t = Table(title="Scenarios")
     t.add_column("name")
     t.add_column("trials", justify="right")
@@ -47,13 +52,14 @@ def cmd_list(args: argparse.Namespace) -> int:
         sc = load_scenario(name)
         points = len(sc.expand())
         t.add_row(name, f"{sc.trials} x {points} pt" if points > 1 else str(sc.trials),
-                  ", ".join(c.label for c in sc.controllers), sc.description.split(". ")[0])
+                  ", ".join(c.label for c in sc.controllers),
+                  escape(first_sentence(sc.description)))
     con.print(t)
     t = Table(title="Controllers")
     for col in ("name", "package", "version", "description"):
         t.add_column(col)
     for info in registry.info():
-        t.add_row(info.name, info.package, info.version, info.description)
+        t.add_row(info.name, info.package, info.version, escape(info.description))
     con.print(t)
     from hexapod.backends.registry import backends
 
@@ -67,6 +73,35 @@ def cmd_list(args: argparse.Namespace) -> int:
         con.print(f"[red]plugin failed to load:[/red] {err}")
     for berr in backends.errors:
         con.print(f"[red]backend plugin failed to load:[/red] {berr}")
+    return 0
+
+
+def _list_options(name: str, con: Any) -> int:
+    """Print the options a controller declares (the table the scenario checks use)."""
+    from rich.markup import escape
+    from rich.table import Table
+
+    from controllers.options import REQUIRED
+    from controllers.registry import registry
+
+    table = registry.options(name)
+    info = registry.source(name)
+    t = Table(title=escape(f"Options of {name} ({info.package} {info.version}): "
+                           f"{info.description}"))
+    for col in ("option", "type", "unit", "default", "meaning"):
+        t.add_column(col, overflow="fold")
+    for o in table.options:
+        t.add_row(o.name, escape(o.type), o.unit or "-",
+                  "(required)" if o.default is REQUIRED else escape(repr(o.default)),
+                  escape(o.meaning) or "(not documented)")
+    con.print(t)
+    if table.open:
+        con.print(f"{name} also takes further options it hands on"
+                  + (f": {table.passes_on}" if table.passes_on else "")
+                  + " (checked when the controller is built)", markup=False)
+    con.print("Set them in a scenario: controllers = [{name = \"" + name + "\", option = "
+              "value}], or [controller_options] for every controller that declares the option "
+              "(docs/scenarios.md).", markup=False)
     return 0
 
 
@@ -119,7 +154,11 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("-v", "--verbose", action="store_true", help="log at INFO level")
     sub = p.add_subparsers(dest="command", required=True)
 
-    s = sub.add_parser("list", help="scenarios and controllers (with their source package)")
+    s = sub.add_parser("list", help="scenarios and controllers (with their source package); "
+                                    "--options NAME: a controller's options")
+    s.add_argument("--options", metavar="NAME",
+                   help="print the options of controller NAME (type, unit, default, "
+                        "meaning): what a scenario may set for it")
     s.set_defaults(func=cmd_list)
 
     s = sub.add_parser("run", help="run scenarios (built-in names or TOML paths)")

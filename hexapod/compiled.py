@@ -59,6 +59,10 @@ class CompilationError(OSError):
     """The C code of a CasADi function could not be compiled or loaded."""
 
 
+#: Whether this process has said that it compiles C kernels.
+_ANNOUNCED = False
+
+
 def cache_dir() -> Path:
     """Where compiled libraries are kept: ``$HEXAPOD_CACHE_DIR`` or ``~/.cache/hexapod-vs``."""
     return Path(os.environ.get("HEXAPOD_CACHE_DIR", Path.home() / ".cache" / "hexapod-vs"))
@@ -101,6 +105,11 @@ def build_shared_library(name: str, code: str, flags: tuple[str, ...] = ("-O2",)
         fcntl.flock(lock, fcntl.LOCK_EX)
         if lib_path.exists():
             return lib_path
+        global _ANNOUNCED
+        if not _ANNOUNCED:  # once per process: the user sees why the first run waits
+            _ANNOUNCED = True
+            log.warning("compiling the controllers' C kernels (first run only, ~30 s; "
+                        "cached in %s)", cache)
         log.info("compiling %s (C, cached in %s)", name, cache)
         src = cache / f"{name}_{digest}.{os.getpid()}.c"
         src.write_text(code)

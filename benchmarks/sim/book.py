@@ -65,6 +65,7 @@ class Book:
     rtts: list[list[float]] = field(default_factory=list)
     series: list[dict[str, list[Any]]] = field(default_factory=list)
     tracker: Any = None  # the tracking metrics of a trajectory task
+    causes: dict[int, str] = field(default_factory=dict)  # a crash's cause, user's terms
 
     @classmethod
     def new(cls, sc: Scenario, group: list[TrialSetup], record_trials: int) -> Book:
@@ -158,6 +159,29 @@ class Book:
             self.failure[rows[j]] = f"controller refused to move: {reasons[j]}"
         return invalid | too_many
 
+    def crashed(self, rows: np.ndarray, crashes: dict[int, BaseException], label: str,
+                step: int, scenario: str = "", trials: list[int] | None = None) -> np.ndarray:
+        """End the rows whose controller raised at period ``step`` (``crashes``: by
+        position in ``rows``), each with its exception; returns the (n,) mask of them.
+
+        Args:
+            scenario: The scenario's name and ``trials`` the trial index of each row of
+                the group (for the log lines, as :func:`failure_row`'s).
+        """
+        mask = np.zeros(len(rows), dtype=bool)
+        for j, exc in crashes.items():
+            r = int(rows[j])
+            mask[j] = True
+            self.failure[r] = f"{label} failed at step {step}: {type(exc).__name__}: {exc}"
+            self.causes[r] = user_message(exc)
+            trial = trials[r] if trials is not None else r
+            log.warning("trial %s/%s/%d failed at step %d: %s", scenario, label, trial, step,
+                        self.causes[r], extra={"cause": self.causes[r]})
+            if not isinstance(exc, HexapodError | VisionError | ControllerError):
+                log.info("traceback of trial %s/%s/%d:\n%s", scenario, label, trial,
+                         "".join(traceback.format_exception(exc)))
+        return mask
+
     def world_failures(self, failed: dict[int, str], step: int) -> None:
         """End the rows whose true world failed during period ``step`` (a plant's
         :meth:`~benchmarks.sim.plant.Plant.advance`), each with its reason."""
@@ -221,6 +245,8 @@ class Book:
                 "step_time_us": float(statistics.median(times) * 1e6) if times else None,
                 "failure": None if conv else fail,
             })
+            if m in self.causes and not conv:
+                row["cause"] = self.causes[m]
             if self.tail_pos[m]:
                 # the seeds' "median positioning error of the convergence tail": the last 20 %
                 row["tail_position_error_mm"] = float(np.median(self.tail_pos[m]) * 1e3)
@@ -270,13 +296,26 @@ def base_row(sc: Scenario, spec: Any, trial: int) -> dict[str, Any]:
     return row
 
 
-def failure_row(sc: Scenario, spec: Any, trial: int, exc: BaseException) -> dict[str, Any]:
-    """The row of a trial that crashed (the crash is the trial's failure)."""
+def failure_row(sc: Scenario, spec: Any, trial: int, exc: BaseException,
+                batch: str | None = None, step: int = 0,
+                errors: tuple[float, float] | None = None) -> dict[str, Any]:
+    """The row of a trial that crashed (the crash is the trial's failure).
+
+    Args:
+        batch: How its batch failed (a batch stopped as a whole), or None.
+        step: The period at which it happened.
+        errors: The last position [m] and orientation [rad] errors measured, if any.
+    """
     row = base_row(sc, spec, trial)
+    finite = errors is not None and bool(np.all(np.isfinite(errors)))
     row.update({
-        "converged": False, "steps": 0, "final_position_error_mm": None,
-        "final_orientation_error_deg": None, "stroke_violations": 0, "step_time_us": None,
-        "failure": f"{type(exc).__name__}: {exc}", "cause": user_message(exc),
+        "converged": False, "steps": int(step),
+        "final_position_error_mm": float(errors[0]) * 1e3 if finite and errors else None,
+        "final_orientation_error_deg": (float(np.rad2deg(errors[1])) if finite and errors
+                                        else None),
+        "stroke_violations": 0, "step_time_us": None,
+        "failure": (f"{batch}: " if batch else "") + f"{type(exc).__name__}: {exc}",
+        "cause": user_message(exc),
     })
     # one line in the user's terms (the command line prints each cause once and counts
     # the repeats); the traceback of an unexpected error only with -v (INFO)

@@ -32,6 +32,7 @@ from typing import Any
 
 import numpy as np
 
+from benchmarks.exceptions import BatchFailedError
 from benchmarks.sim.actuation import (
     drive_plant,
     require_actuation,
@@ -144,12 +145,18 @@ def run_batch(sc: Scenario, controller_index: int, setups: list[TrialSetup],
     try:
         results = _run(sc, spec, [setups[k] for k in keys], [contexts[k] for k in keys],
                        record_trials, on_step, batched) if keys else []
-    except Exception:  # isolate the failing trial(s) (a reset or a step that raises)
-        results = []
+    except BatchFailedError as exc:  # stopped while stepping: each of its trials says so
+        # (not rerun trial by trial: a crashing controller must not run twice; a per-trial
+        # controller's own crash is isolated inside the batch, PerTrialLoop)
+        results = _stopped(sc, spec, [setups[k].trial for k in keys], exc)
+    except Exception:  # before its first step (a reset, a refusal): no trial has run yet,
+        results = []   # so each runs alone to find the one(s) at fault
         for k in keys:
             try:
                 results += _run(sc, spec, [setups[k]], [contexts[k]], record_trials, on_step,
                                 batched)
+            except BatchFailedError as exc:
+                results += _stopped(sc, spec, [setups[k].trial], exc)
             except Exception as exc:
                 results.append(TrialResult(failure_row(sc, spec, setups[k].trial, exc)))
     out: list[TrialResult] = []
@@ -157,6 +164,17 @@ def run_batch(sc: Scenario, controller_index: int, setups: list[TrialSetup],
     for k in range(len(setups)):
         out.append(failed[k] if k in failed else next(it))
     return out
+
+
+def _stopped(sc: Scenario, spec: Any, trials: list[int], exc: BatchFailedError
+             ) -> list[TrialResult]:
+    """The rows of a batch stopped at a step: each with the step, its last errors and the
+    exception (a batch of several trials says it failed as a whole)."""
+    batch = (f"the batch of {len(trials)} trials of {spec.label} failed at step {exc.step} "
+             "(every trial of it counted failed, not rerun)" if len(trials) > 1 else None)
+    return [TrialResult(failure_row(sc, spec, trial, exc.cause, batch=batch, step=exc.step,
+                                    errors=(exc.errors[0][j], exc.errors[1][j])))
+            for j, trial in enumerate(trials)]
 
 
 def _goals(sc: Scenario, setups: list[TrialSetup], failed: dict[int, TrialResult],
@@ -223,6 +241,7 @@ def _run(sc: Scenario, spec: Any, group: list[TrialSetup], contexts: list[Any],
     drive_plant(plant, actuation, spec.label)
     book.follow(plant)
     clock = make_clock(sc, group, q, R, t, A, E)
+    last = (np.full(len(group), np.nan), np.full(len(group), np.nan))  # errors [m], [rad]
 
     def measure(rows: np.ndarray, R_r: np.ndarray, t_r: np.ndarray) -> dict[str, Any]:
         return sensor.measure(R_r, t_r, rows, [rngs[k] for k in rows] if noisy
@@ -234,6 +253,7 @@ def _run(sc: Scenario, spec: Any, group: list[TrialSetup], contexts: list[Any],
             break
         R_i, t_i = R[idx], t[idx]
         dp, da = pose_error(R_i, t_i, *targets(step, idx))
+        last[0][idx], last[1][idx] = dp, da
         done = book.check(sc, step, idx, dp, da)
         meas = clocked_measure(clock, step, idx, (R, t), measure)
         book.seen(idx, meas["edge_visible"])
@@ -254,12 +274,19 @@ def _run(sc: Scenario, spec: Any, group: list[TrialSetup], contexts: list[Any],
                    for key in ("normals", "lines", "directions", "edge_visible",
                                "direction_visible", "image_t")})
             t0 = time.perf_counter()
-            cmds = controller.step_batch(obs)
+            try:
+                cmds = controller.step_batch(obs)
+                require_batch(cmds, actuation, spec.label, len(rows))
+            except Exception as exc:  # the batch as a whole: reported as such, not rerun
+                raise BatchFailedError(step, last, exc) from exc
             batch_times.append((time.perf_counter() - t0) / len(rows))
-            require_batch(cmds, actuation, spec.label)
             stepped[tr] += 1
             norms[rows] = cmds.error_norm
             failed = book.commands(tr, cmds.values, cmds.reasons)
+            crashes = getattr(controller, "crashes", None)  # a per-trial loop's rows
+            if crashes:
+                failed |= book.crashed(tr, crashes, spec.label, step, sc.name,
+                                       [s.trial for s in group])
             done[rows[failed]] = True
             ok = rows[~failed]
             v_cmd[ok] = cmds.values[~failed]

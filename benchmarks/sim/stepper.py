@@ -39,7 +39,7 @@ from benchmarks.sim.world import (
 )
 from benchmarks.study.scenario import Scenario
 from controllers.base import Command, ControllerContext, Observation
-from controllers.batch import actuation_of
+from controllers.batch import actuation_of, checked_command
 from hexapod import HexapodGeometry
 from hexapod.actuation import Actuation
 from hexapod.backends.base import Backend
@@ -229,7 +229,14 @@ def _run_group(sc: Scenario, controller_index: int, group: list[TrialSetup],
             cmd: Command | None = None
             if not done[j]:
                 t0 = time.perf_counter()
-                cmd = controllers[k].step(obs)
+                try:  # a crash or a malformed command ends this trial, named, at this step
+                    cmd = checked_command(controllers[k].step(obs), spec.label,
+                                          actuation_of(controllers[k]))
+                except Exception as exc:
+                    book.crashed(np.array([k]), {0: exc}, spec.label, step, sc.name,
+                                 [s.trial for s in group])
+                    done[j] = True
+                    continue
                 book.step_times[k].append(time.perf_counter() - t0)
                 if backends is None and cmd.actuation not in world_actuation(sc)[0]:
                     require_actuation(cmd, spec.label, *world_actuation(sc))

@@ -104,6 +104,29 @@ def scenario_setup(sc: Any) -> Setup:
                  tuple(spec.label for spec in sc.controllers), note)
 
 
+def load_scenario_file(text: str) -> Any | None:
+    """The scenario ``text`` names (a built-in name or a scenario file), None for a robot
+    or camera file.
+
+    Raises:
+        ScenarioError, ConfigFileError: The file is invalid (naming the key).
+    """
+    from benchmarks.study.scenario import builtin_scenarios, load_scenario
+    from hexapod.config import load_toml
+    from vision.cameras.files.opencv import OPENCV_EXTENSIONS
+
+    path = Path(text)
+    if text in builtin_scenarios() or not path.exists():
+        return load_scenario(text)  # a built-in, or its did-you-mean error
+    if path.suffix.lower() in OPENCV_EXTENSIONS:
+        return None
+    table = load_toml(path)
+    if "controllers" in table or ("name" in table and "base_points_mm" not in table
+                                  and not {"fx_px", "opencv", "kind"} & set(table)):
+        return load_scenario(path)
+    return None
+
+
 def load_setup(text: str) -> Setup:
     """A setup from a built-in scenario name or a file (scenario, robot or camera).
 
@@ -112,21 +135,20 @@ def load_setup(text: str) -> Setup:
             (naming the key).
         BenchmarkError: A file that is none of the three.
     """
-    from benchmarks.study.scenario import builtin_scenarios, load_scenario
     from hexapod.config import load_toml
     from vision.cameras import camera_preset, load_camera
     from vision.cameras.files.opencv import OPENCV_EXTENSIONS
 
+    sc = load_scenario_file(text)
+    if sc is not None:  # its controllers resolved as a run resolves them
+        from benchmarks.study.scenario_checks import check_controllers
+
+        return scenario_setup(check_controllers(sc)[0])
     path = Path(text)
-    if text in builtin_scenarios() or not path.exists():
-        return scenario_setup(load_scenario(text))  # a built-in, or its did-you-mean error
     if path.suffix.lower() in OPENCV_EXTENSIONS:
         table: dict[str, Any] = {"opencv": str(path)}
     else:
         table = load_toml(path)
-    if "controllers" in table or ("name" in table and "base_points_mm" not in table
-                                  and not {"fx_px", "opencv", "kind"} & set(table)):
-        return scenario_setup(load_scenario(path))
     if "base_points_mm" in table:
         g = HexapodGeometry.from_toml(path)
         cam = camera_preset("front", g)
@@ -199,14 +221,6 @@ def examine(setup: Setup) -> SetupReport:
     return report
 
 
-def preflight(sc: Any) -> list[Problem]:
-    """The checks of ``check`` for a study about to run: its problems.
-
-    A camera that sees no leg is an error only when every controller needs the camera.
-    """
-    return examine(scenario_setup(sc)).problems
-
-
 def _f(x: float, digits: int = 1) -> str:
     return "-" if not np.isfinite(x) else f"{x:.{digits}f}"
 
@@ -239,8 +253,10 @@ def _dynamics_lines(g: HexapodGeometry, note: str | None) -> list[str]:
         f"{_per_leg(d.encoder_resolution, 1e6, 'um')}", *extra, ""]
 
 
-def describe(setup: Setup, report: SetupReport, source: str) -> list[str]:
-    """The lines ``check`` prints."""
+def describe(setup: Setup, report: SetupReport, source: str,
+             extra: list[str] | None = None) -> list[str]:
+    """The lines ``check`` prints (``extra``: lines before the problems, a trajectory
+    task's references)."""
     g, cam = setup.geometry, setup.camera
     base_r = np.linalg.norm(g.base_points[:, :2], axis=1)
     plat_r = np.linalg.norm(g.platform_points[:, :2], axis=1)
@@ -279,6 +295,7 @@ def describe(setup: Setup, report: SetupReport, source: str) -> list[str]:
         lines.append("  controllers that need the camera: "
                      + (", ".join(setup.needs_camera) or "none"))
     lines.append("")
+    lines += extra or []
     if report.problems:
         lines.append("Problems:")
         lines += [f"  {p.severity}: {p.text}" for p in report.problems]
@@ -393,15 +410,39 @@ def write_picture(setup: Setup, report: SetupReport, path: Path,
 
 
 def cmd_check(args: argparse.Namespace) -> int:
-    """Check a scenario, robot or camera file; exit 1 when the setup cannot run."""
+    """Check a scenario, robot or camera file; exit 1 when the setup cannot run.
+
+    A scenario goes through ``run``'s own pre-flight (:func:`benchmarks.study.preflight.
+    preflight`): the same refusals in the same words (a file error: exit 2, as ``run``;
+    a setup where every trial would fail: the details, then ``run``'s refusal, exit 1).
+    """
+    import sys
+
+    from benchmarks.study.preflight import preflight, refusal
+    from benchmarks.study.trajectory_check import describe_trajectory
+
     overwrite = getattr(args, "overwrite", False)
     if args.picture:
         check_picture(Path(args.picture), overwrite)
-    setup = load_setup(args.file)
-    report = examine(setup)
-    for line in describe(setup, report, args.file):
+    sc = load_scenario_file(args.file)
+    refused = None
+    extra: list[str] = []
+    if sc is not None:
+        pre = preflight([sc])
+        for text in pre.warnings:
+            print(f"warning: {text}", file=sys.stderr)
+        check = pre.checks[0]
+        setup, report = check.setup, check.report
+        extra = describe_trajectory(check.trajectory, check.scenario)
+        refused = refusal(check)
+    else:
+        setup = load_setup(args.file)
+        report = examine(setup)
+    for line in describe(setup, report, args.file, extra):
         print(line)
     if args.picture:
         print(f"picture of the robot at home seen by the camera: "
               f"{write_picture(setup, report, Path(args.picture), overwrite)}")
+    if refused is not None:  # run's refusal, word for word
+        print(f"hexapod-bench: error: {refused}", file=sys.stderr)
     return 0 if report.can_run else CANNOT_RUN

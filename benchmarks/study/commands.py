@@ -25,7 +25,7 @@ def cmd_run(args: argparse.Namespace) -> int:
     """Run studies and write results.jsonl and report.md."""
     import controllers  # noqa: F401 - registers the built-ins
     from benchmarks.study.runner import run_lock
-    from benchmarks.study.scenario import check_controllers, load_scenario
+    from benchmarks.study.scenario import load_scenario
 
     out = Path(args.out)
     ctrl_list = [c.strip() for c in args.controllers.split(",")] if args.controllers else None
@@ -36,18 +36,21 @@ def cmd_run(args: argparse.Namespace) -> int:
         from dataclasses import replace
 
         scenarios = [replace(sc, world=args.world) for sc in scenarios]
-    from benchmarks.study.provenance import check_scenario_calibration
+    from benchmarks.study.preflight import preflight, refusal, warning_lines
 
-    warnings: list[str] = []
-    for sc in scenarios:
-        check_controllers(sc)
-        warnings += check_scenario_calibration(sc, getattr(args, "allow_foreign_calibration",
-                                                           False))
-    for text in warnings:
+    # the pre-flight of 'hexapod-bench check', the same function
+    pre = preflight(scenarios, getattr(args, "allow_foreign_calibration", False),
+                    measure=not getattr(args, "no_check", False))
+    for text in pre.warnings:
         print(f"warning: {text}", file=sys.stderr)
-    args.calibration_warnings = warnings
-    if not getattr(args, "no_check", False):
-        _preflight(scenarios)
+    args.calibration_warnings = pre.warnings
+    scenarios = pre.scenarios
+    for check in pre.checks:
+        refused = refusal(check)
+        if refused is not None:
+            raise refused
+        for line in warning_lines(check):
+            print(line, file=sys.stderr)
     from benchmarks.study.runner import backend_factory
 
     backend_factory(args.backend)  # validates the spec before any work
@@ -62,25 +65,17 @@ def cmd_run(args: argparse.Namespace) -> int:
     return _failure_epilogue(out, repeated.repeats(), code)
 
 
-def _preflight(scenarios: list[Any]) -> None:
-    """The checks of ``hexapod-bench check`` before the first trial: warnings printed, a
-    setup where every trial would fail the same way refused (:class:`SetupError`)."""
-    from benchmarks.exceptions import SetupError
-    from benchmarks.study.check_command import preflight
-
-    for sc in scenarios:
-        problems = preflight(sc)
-        errors = [p for p in problems if p.severity == "error"]
-        if errors:
-            raise SetupError(sc.source, errors)
-        for p in problems:
-            print(f"hexapod-bench: warning: {sc.name}: {p.text}", file=sys.stderr)
-
-
 def _failure_epilogue(out: Path, repeats: list[str], code: int) -> int:
     """Print the failures once per cause (with their counts) and the repeated warnings;
-    the exit code is 1 when every trial of the results directory failed."""
-    from benchmarks.study.failures import every_trial_failed, failure_summary
+    the exit code is 1 when every trial of the results directory failed, 3 when a
+    controller failed every one of its trials (the others ran)."""
+    from benchmarks.study.failures import (
+        CONTROLLER_FAILED,
+        EVERY_TRIAL_FAILED,
+        controllers_failing_every_trial,
+        every_trial_failed,
+        failure_summary,
+    )
     from benchmarks.study.runner import deduplicate, read_results
 
     rows, _, _ = deduplicate(read_results(out))
@@ -97,7 +92,14 @@ def _failure_epilogue(out: Path, repeats: list[str], code: int) -> int:
     if code == 0 and every_trial_failed(rows):
         print("hexapod-bench: error: every trial failed: the setup cannot run as it is (the "
               "causes are above)", file=sys.stderr)
-        return 1
+        return EVERY_TRIAL_FAILED
+    dead = controllers_failing_every_trial(rows)
+    if code == 0 and dead:
+        print("hexapod-bench: error: " + "; ".join(
+            f"{label} failed all its {n} trials" for label, n in dead.items())
+            + f" (the causes are above; exit code {CONTROLLER_FAILED}: the other controllers "
+              "ran)", file=sys.stderr)
+        return CONTROLLER_FAILED
     return code
 
 

@@ -146,6 +146,23 @@ def failure_groups(rows: list[dict[str, Any]]) -> list[FailureGroup]:
     return sorted(groups.values(), key=lambda g: -g.count)
 
 
+#: Exit code of ``run`` when every trial of the results directory failed.
+EVERY_TRIAL_FAILED = 1
+#: Exit code of ``run`` when a controller failed every one of its trials (others ran).
+CONTROLLER_FAILED = 3
+
+
+def controllers_failing_every_trial(rows: list[dict[str, Any]]) -> dict[str, int]:
+    """The controllers (labels, per scenario) none of whose trials ran to its end, with
+    their trial counts."""
+    by: dict[str, list[bool]] = {}
+    for r in rows:
+        key = f"{r.get('controller')}" + (f" ({r.get('scenario')})" if r.get("scenario")
+                                          else "")
+        by.setdefault(key, []).append(is_failure(r))
+    return {k: len(v) for k, v in by.items() if v and all(v)}
+
+
 def every_trial_failed(rows: list[dict[str, Any]]) -> bool:
     """True when there are rows and none of them ran to its end."""
     return bool(rows) and all(is_failure(r) for r in rows)

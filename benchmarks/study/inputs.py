@@ -96,6 +96,9 @@ def copy_inputs(out: Path, sc: Any, allow_foreign: bool = False) -> dict[str, An
     table.setdefault("task", {})["max_steps"] = sc.task.max_steps
     table["controllers"] = [{"name": c.name, "label": c.label, **c.options}
                             for c in sc.controllers]
+    # each controller carries the [controller_options] it took (the pre-flight gave them
+    # to the controllers that declare them): the table would give them again
+    table.pop("controller_options", None)
     (folder / "scenario.toml").write_text(_HEADER + tomli_w.dumps(table))
     return {"folder": rel, "changed": False, **_listing(folder)}
 
