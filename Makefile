@@ -4,7 +4,10 @@ VENV := .venv
 BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed
 
-.PHONY: demo test lint docs venv clean browser
+# every core for the tests (pytest-xdist); JOBS=1 runs them in one process
+JOBS ?= auto
+
+.PHONY: demo test quick warm lint docs venv clean browser
 
 $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
@@ -22,10 +25,20 @@ demo: $(STAMP)
 browser:
 	@bash tests/ensure_browser.sh
 
-test: $(STAMP) browser
-	$(BIN)/python -m pytest -q
+# compile every C kernel the built-in scenarios use, once, as one visible step
+warm: $(STAMP)
+	$(BIN)/hexapod-bench warm
+
+# the whole suite on every core, then the linters: CI's command
+test: $(STAMP) browser warm
+	$(BIN)/python -m pytest -q -n $(JOBS) --dist worksteal --durations=10
 	$(BIN)/ruff check hexapod vision controllers benchmarks tests
 	$(BIN)/mypy
+
+# the inner loop of a change: every test not marked slow, under a minute on a warm kernel
+# cache (run `make warm` or `make test` once first); an unmarked test over 2 s fails it
+quick: $(STAMP)
+	$(BIN)/python -m pytest -q -n $(JOBS) --dist worksteal -m "not slow" --unmarked-budget 2
 
 lint: $(STAMP)
 	$(BIN)/ruff check hexapod vision controllers benchmarks tests

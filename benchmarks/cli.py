@@ -1,5 +1,5 @@
 """``hexapod-bench``: list, check, run, report, compare, export, reproduce, perf, calibrate, viz,
-servo.
+servo, warm.
 
 Examples::
 
@@ -20,9 +20,11 @@ import argparse
 import logging
 import os
 import sys
+from typing import Any
 
 from benchmarks.exceptions import BenchmarkError
 from benchmarks.study.commands import cmd_calibrate, cmd_report, cmd_run, cmd_viz, console
+from benchmarks.study.outdir import OutputDir, OutputFile
 from hexapod.exceptions import HexapodError
 
 log = logging.getLogger("hexapod-bench")
@@ -30,13 +32,17 @@ log = logging.getLogger("hexapod-bench")
 
 def cmd_list(args: argparse.Namespace) -> int:
     """List built-in scenarios and registered controllers with their source package."""
+    from rich.markup import escape
     from rich.table import Table
 
     import controllers  # noqa: F401 - registers the built-ins
     from benchmarks.study.scenario import builtin_scenarios, load_scenario
+    from controllers.options import first_sentence
     from controllers.registry import registry
 
     con = console()
+    if getattr(args, "options", None):
+        return _list_options(args.options, con)
     t = Table(title="Scenarios")
     t.add_column("name")
     t.add_column("trials", justify="right")
@@ -46,13 +52,14 @@ def cmd_list(args: argparse.Namespace) -> int:
         sc = load_scenario(name)
         points = len(sc.expand())
         t.add_row(name, f"{sc.trials} x {points} pt" if points > 1 else str(sc.trials),
-                  ", ".join(c.label for c in sc.controllers), sc.description.split(". ")[0])
+                  ", ".join(c.label for c in sc.controllers),
+                  escape(first_sentence(sc.description)))
     con.print(t)
     t = Table(title="Controllers")
     for col in ("name", "package", "version", "description"):
         t.add_column(col)
     for info in registry.info():
-        t.add_row(info.name, info.package, info.version, info.description)
+        t.add_row(info.name, info.package, info.version, escape(info.description))
     con.print(t)
     from hexapod.backends.registry import backends
 
@@ -66,6 +73,35 @@ def cmd_list(args: argparse.Namespace) -> int:
         con.print(f"[red]plugin failed to load:[/red] {err}")
     for berr in backends.errors:
         con.print(f"[red]backend plugin failed to load:[/red] {berr}")
+    return 0
+
+
+def _list_options(name: str, con: Any) -> int:
+    """Print the options a controller declares (the table the scenario checks use)."""
+    from rich.markup import escape
+    from rich.table import Table
+
+    from controllers.options import REQUIRED
+    from controllers.registry import registry
+
+    table = registry.options(name)
+    info = registry.source(name)
+    t = Table(title=escape(f"Options of {name} ({info.package} {info.version}): "
+                           f"{info.description}"))
+    for col in ("option", "type", "unit", "default", "meaning"):
+        t.add_column(col, overflow="fold")
+    for o in table.options:
+        t.add_row(o.name, escape(o.type), o.unit or "-",
+                  "(required)" if o.default is REQUIRED else escape(repr(o.default)),
+                  escape(o.meaning) or "(not documented)")
+    con.print(t)
+    if table.open:
+        con.print(f"{name} also takes further options it hands on"
+                  + (f": {table.passes_on}" if table.passes_on else "")
+                  + " (checked when the controller is built)", markup=False)
+    con.print("Set them in a scenario: controllers = [{name = \"" + name + "\", option = "
+              "value}], or [controller_options] for every controller that declares the option "
+              "(docs/scenarios.md).", markup=False)
     return 0
 
 
@@ -91,6 +127,26 @@ def cmd_perf(args: argparse.Namespace) -> int:
     return int(module.main(argv + list(args.rest)))
 
 
+def cmd_warm(args: argparse.Namespace) -> int:
+    """Compile the kernels of the built-in scenarios, one line per scenario."""
+    import time
+
+    from benchmarks.warm import WarmResult, cached_libraries, warm
+
+    start, before = time.perf_counter(), cached_libraries()
+
+    def report(res: WarmResult) -> None:
+        print(f"warm {res.scenario}: {res.units} units stepped, {res.seconds:.1f} s", flush=True)
+
+    print("compiling the C kernels of the built-in scenarios (first run only: ~2 min on "
+          "2 cores; a warm cache only loads them)", flush=True)
+    warm(args.scenarios or None, args.workers, report)
+    compiled = len(cached_libraries() - before)
+    print(f"warm: {compiled} kernels compiled, {len(before) + compiled} in the cache, "
+          f"{time.perf_counter() - start:.1f} s", flush=True)
+    return 0
+
+
 def build_parser() -> argparse.ArgumentParser:
     """The argument parser of ``hexapod-bench``."""
     p = argparse.ArgumentParser(prog="hexapod-bench", description=__doc__.split("\n")[0],
@@ -98,12 +154,16 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("-v", "--verbose", action="store_true", help="log at INFO level")
     sub = p.add_subparsers(dest="command", required=True)
 
-    s = sub.add_parser("list", help="scenarios and controllers (with their source package)")
+    s = sub.add_parser("list", help="scenarios and controllers (with their source package); "
+                                    "--options NAME: a controller's options")
+    s.add_argument("--options", metavar="NAME",
+                   help="print the options of controller NAME (type, unit, default, "
+                        "meaning): what a scenario may set for it")
     s.set_defaults(func=cmd_list)
 
     s = sub.add_parser("run", help="run scenarios (built-in names or TOML paths)")
     s.add_argument("scenarios", nargs="+", metavar="SCENARIO")
-    s.add_argument("--out", required=True, help="results directory")
+    s.add_argument("--out", required=True, action=OutputDir, help="results directory")
     s.add_argument("--trials", type=int, help="trials per sweep point and controller")
     s.add_argument("--seed", type=int, help="override the scenario seed")
     s.add_argument("--max-steps", type=int, help="override the step budget of each trial")
@@ -149,7 +209,7 @@ def build_parser() -> argparse.ArgumentParser:
 
     s = sub.add_parser("calibrate", help="calibrate the base points from leg observations")
     s.add_argument("scenario", metavar="SCENARIO")
-    s.add_argument("--out", required=True, help="output directory")
+    s.add_argument("--out", required=True, action=OutputDir, help="output directory")
     s.add_argument("--configurations", help="extremal (default) or random:N")
     s.add_argument("--repeat", type=int, default=1, help="repetitions (new noise each)")
     s.add_argument("--solver", choices=["lstsq", "irls"], help="default: the scenario's")
@@ -183,8 +243,9 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--controller", help="controller label")
     s.add_argument("--scenario", help="scenario name (when the run has several)")
     s.add_argument("--point", type=int, help="sweep point index")
-    s.add_argument("--html", help="write a self-contained HTML animation (+ a PNG of the "
-                                  "curves beside it) instead of the live view")
+    s.add_argument("--html", action=OutputFile,
+                   help="write a self-contained HTML animation (+ a PNG of the curves beside "
+                        "it) instead of the live view")
     s.add_argument("--still", type=int, help="with --html: a still of this period")
     s.add_argument("--overwrite", action="store_true",
                    help="with --html: replace the file (and the PNG beside it) even if "
@@ -205,13 +266,16 @@ def build_parser() -> argparse.ArgumentParser:
                                    "code 0: the setup can run; 1: every trial would fail; "
                                    "2: a file is invalid.")
     s.add_argument("file", metavar="FILE")
-    s.add_argument("--picture", metavar="PNG",
+    s.add_argument("--picture", metavar="PNG", action=OutputFile,
                    help="write an image of the robot at home seen by the camera (edges "
-                        "seen in green, hidden in red)")
+                        "seen in green, hidden in red; .png or .jpg)")
+    s.add_argument("--overwrite", action="store_true",
+                   help="replace the --picture file even if hexapod-bench did not write it")
     s.set_defaults(func=cmd_check)
 
     s = sub.add_parser("report", help="rebuild DIR/report.md from DIR/results.jsonl")
-    s.add_argument("dir")
+    s.add_argument("dir", action=OutputDir, help="a run directory (report.md and its "
+                                                 "figures are written into it)")
     s.add_argument("--overwrite", action="store_true",
                    help="replace DIR/report.md even if hexapod-bench did not write it")
     s.set_defaults(func=cmd_report)
@@ -223,6 +287,13 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("rest", nargs=argparse.REMAINDER, help="arguments for the figure")
     s.set_defaults(func=cmd_perf)
 
+    s = sub.add_parser("warm", help="compile every C kernel the built-in scenarios use (once; "
+                                    "a warm cache only loads them)")
+    s.add_argument("scenarios", nargs="*", metavar="SCENARIO",
+                   help="built-in scenario names (default: all)")
+    s.add_argument("--workers", type=int, default=2, help="processes (default 2)")
+    s.set_defaults(func=cmd_warm)
+
     from benchmarks.study.analysis_cli import add_analysis_commands
 
     add_analysis_commands(sub)  # export, compare, reproduce
@@ -233,6 +304,7 @@ def main(argv: list[str] | None = None) -> int:
     """Entry point of ``hexapod-bench``."""
     parser = build_parser()
     args = parser.parse_args(argv)
+    args.argv = list(sys.argv[1:] if argv is None else argv)  # run.json's commands
     logging.basicConfig(level=logging.INFO if args.verbose else logging.WARNING,
                         format="%(levelname)s %(name)s: %(message)s")
     os.environ.setdefault("PYTHONWARNINGS", "ignore")

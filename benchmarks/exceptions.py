@@ -105,3 +105,39 @@ def user_message(exc: BaseException) -> str:
     if isinstance(exc, HexapodError | VisionError | ControllerError):
         return str(exc)
     return f"{type(exc).__name__}: {exc}"
+
+
+class StudyMismatchError(ResultsError):
+    """A run into a directory that holds another study (``run --resume`` with another
+    seed, world, controllers, scenario content or trial plan), refused before any trial.
+
+    Attributes:
+        path: The run directory.
+        differences: Each difference in words (``--seed: 1 in the directory, 99 given``).
+    """
+
+    def __init__(self, path: str, differences: list[str]) -> None:
+        self.differences = differences
+        listed = "".join(f"\n  {d}" for d in differences)
+        super().__init__(path, "holds another study than the one given (a run directory "
+                         f"holds one study; nothing was run):{listed}\nrun the given study "
+                         "into another --out, or give the directory's settings (its "
+                         "command lines are in run.json and report.md)")
+
+
+class BatchFailedError(BenchmarkError):
+    """A batch of trials stopped as a whole (the controller's ``step_batch`` raised, or
+    returned commands of the wrong shape or kind); each trial of it gets a failure row
+    saying so, with the step and its last errors (it is not rerun).
+
+    Attributes:
+        step: The period at which it happened.
+        errors: The last position [m] and orientation [rad] errors of each row.
+        cause: The exception.
+    """
+
+    def __init__(self, step: int, errors: tuple[Any, Any], cause: BaseException) -> None:
+        self.step = step
+        self.errors = errors
+        self.cause = cause
+        super().__init__(f"at step {step}: {type(cause).__name__}: {cause}")

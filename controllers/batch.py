@@ -57,8 +57,45 @@ def step_rows_per_trial(instances: Sequence[Any], observations: ObservationBatch
         out.put(int(k), instances[int(trials[k])].step(observations.item(int(k))))
 
 
+class _FailedReset:
+    """The place of a trial whose controller's ``reset`` raised: its first ``step``
+    raises that exception again (the trial fails at step 0 with it; nothing is rerun)."""
+
+    def __init__(self, exc: BaseException) -> None:
+        self.exc = exc
+
+    def step(self, observation: Any) -> Command:
+        raise self.exc
+
+
+def checked_command(cmd: Any, name: str, actuation: Actuation) -> Command:
+    """A per-trial command of the right type, shape and kind.
+
+    Raises:
+        CommandError: Not a :class:`Command`, not 6 leg values, or another kind than the
+            controller declared (named, with the shapes or kinds).
+    """
+    from controllers.exceptions import CommandError
+
+    if not all(hasattr(cmd, a) for a in ("values", "reason", "actuation", "error_norm")):
+        raise CommandError(name, f"returned {type(cmd).__name__}, not a Command")
+    shape = np.shape(cmd.values)
+    if shape != (6,):
+        raise CommandError(name, f"returned a command of shape {shape}; a command holds one "
+                                 "value per leg, shape (6,)")
+    if cmd.actuation is not actuation:
+        raise CommandError(name, f"returned {cmd.actuation.quantity} but declared "
+                                 f"{actuation.quantity} (its 'actuation' attribute)")
+    return cmd  # type: ignore[no-any-return]
+
+
 class PerTrialLoop:
     """The batch interface over one controller per trial (``step`` in a loop).
+
+    A trial whose controller raises (in ``reset`` or ``step``) or returns a command of the
+    wrong shape or kind is isolated: its row gets a zero command and its exception in
+    :attr:`crashes`, the other rows are stepped as usual (the engine ends that trial with
+    the exception and the step; nothing is run twice).
 
     Args:
         factory: Builds a fresh controller (with its options).
@@ -72,19 +109,36 @@ class PerTrialLoop:
         self.controllers: list[Any] = []
         #: The last :class:`Command` of each row of the last step (diagnostics).
         self.last_commands: list[Command] = []
+        #: The rows (positions in the last observation batch) whose controller raised at
+        #: the last step, with the exception.
+        self.crashes: dict[int, BaseException] = {}
 
     def reset_batch(self, contexts: Sequence[ControllerContext]) -> None:
-        """One controller per context, reset with it."""
+        """One controller per context, reset with it (a reset that raises fails that
+        trial at its first step)."""
         self.controllers = []
         for ctx in contexts:
             ctrl = self.factory()
-            ctrl.reset(ctx)
+            try:
+                ctrl.reset(ctx)
+            except Exception as exc:  # that trial's failure, reported at step 0
+                ctrl = _FailedReset(exc)
             self.controllers.append(ctrl)
 
     def step_batch(self, observations: ObservationBatch) -> CommandBatch:
         """``step`` of each row's controller."""
-        cmds = [self.controllers[int(t)].step(observations.item(k))
-                for k, t in enumerate(observations.trials)]
+        cmds = []
+        self.crashes = {}
+        for k, t in enumerate(observations.trials):
+            ctrl = self.controllers[int(t)]
+            try:
+                cmd = checked_command(ctrl.step(observations.item(k)),
+                                      str(getattr(ctrl, "name", type(ctrl).__name__)),
+                                      self.actuation)
+            except Exception as exc:  # that trial's failure
+                self.crashes[k] = exc
+                cmd = Command.refuse(f"{type(exc).__name__}: {exc}", actuation=self.actuation)
+            cmds.append(cmd)
         self.last_commands = cmds
         return CommandBatch.from_commands(cmds)
 

@@ -47,8 +47,9 @@ class CartesianCTC(TaskComputedTorque):
     the pose the robot settles at (the joint-space baseline's weakness, kept).
 
     Args:
-        natural_frequency: ``f_n`` [Hz] (default 2 Hz: ``omega_n dt = 0.25`` at 20 ms).
-        damping: ``zeta`` (default 1).
+        natural_frequency: Natural frequency ``f_n`` [Hz] of the error's second-order
+            response (default 2 Hz: ``omega_n dt = 0.25`` at 20 ms).
+        damping: Damping ratio ``zeta`` of that response (default 1).
         smooth_goal: Reach a fixed goal along a quintic line (False: a step).
     """
 
@@ -115,8 +116,9 @@ class VisionCTC(CartesianCTC):
     rigid offset between its end pose and that taught pose (it ends at the taught goal).
 
     Args:
-        natural_frequency: ``f_n`` [Hz] (default 2 Hz).
-        damping: ``zeta`` (default 1).
+        natural_frequency: Natural frequency ``f_n`` [Hz] of the error's second-order
+            response (default 2 Hz).
+        damping: Damping ratio ``zeta`` of that response (default 1).
         smooth_goal: Reach a fixed goal along a quintic line (False: a step).
     """
 

@@ -75,3 +75,17 @@ class OptionError(ControllerError, ValueError):
         self.option = option
         self.problem = problem
         super().__init__(f"{controller}: option '{option}': {problem}")
+
+
+class CommandError(ControllerError, ValueError):
+    """A controller returned a command of the wrong shape or kind.
+
+    Attributes:
+        controller: The controller name.
+        problem: What is wrong (the shapes or kinds, given and expected).
+    """
+
+    def __init__(self, controller: str, problem: str) -> None:
+        self.controller = controller
+        self.problem = problem
+        super().__init__(f"controller '{controller}' {problem}")

@@ -60,8 +60,9 @@ class FeatureCTC(TaskComputedTorque):
     """Computed torque on a leg-feature task (see the module docstring).
 
     Args:
-        natural_frequency: ``f_n`` [Hz] (default 2 Hz: ``omega_n dt = 0.25`` at 20 ms).
-        damping: ``zeta`` (default 1).
+        natural_frequency: Natural frequency ``f_n`` [Hz] of the error's second-order
+            response (default 2 Hz: ``omega_n dt = 0.25`` at 20 ms).
+        damping: Damping ratio ``zeta`` of that response (default 1).
         smooth_goal: Reach a fixed goal along the features of a quintic line (False: the
             taught features as a step).
     """

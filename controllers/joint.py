@@ -33,7 +33,7 @@ class JointSpaceController(Controller):
     Args:
         gain: Constant gain ``lambda`` [1/s].
         adaptive_gain: ``(lambda0, lambda_inf, lambda0')`` (overrides ``gain``),
-            with ``x = |q - q*|_inf`` [m].
+            with ``x = |q - q*|_inf`` in metres.
     """
 
     name = "joint-space"

@@ -30,6 +30,7 @@ class LegEdgeQPController(LegEdgeController):
     """
 
     name = "leg-edge-qp"
+    OPTION_DOCS = (LimitQPSolver,)  # documents the QP options (list --options)
 
     def __init__(self, gain: float = 1.0, adaptive_gain: Sequence[float] | None = None,
                  interaction: str = "current", threshold: float = 1e-6, damping: float = 0.0,
@@ -56,6 +57,7 @@ class LegDirectionQPController(LegDirectionController):
     """
 
     name = "leg-direction-qp"
+    OPTION_DOCS = (LimitQPSolver,)  # documents the QP options (list --options)
 
     def __init__(self, gain: float = 1.0, adaptive_gain: Sequence[float] | None = None,
                  interaction: str = "current", threshold: float = 1e-6, damping: float = 0.0,

@@ -21,6 +21,7 @@ from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
 
 from controllers.exceptions import PluginLoadError, UnknownControllerError
+from controllers.options import OptionTable, first_sentence, option_table
 from hexapod.config import suggest
 from hexapod.exceptions import UnsafeNameError
 from hexapod.outputs import check_name
@@ -43,7 +44,7 @@ class ControllerInfo:
         name: Registry name.
         package: Distribution that provides it.
         version: Version of that distribution.
-        description: First line of the factory's docstring.
+        description: First sentence of the factory's docstring.
     """
 
     name: str
@@ -80,9 +81,8 @@ class Registry:
             raise PluginLoadError(str(name), package, exc.problem) from None
         if version is None:
             version = _distribution_version(package)
-        doc = (getattr(factory, "__doc__", None) or "").strip().splitlines()
         self._factories[name] = factory
-        self._info[name] = ControllerInfo(name, package, version, doc[0] if doc else "")
+        self._info[name] = ControllerInfo(name, package, version, describe(factory))
 
     def load_plugins(self, force: bool = False) -> None:
         """Load the entry points of the ``hexapod.controllers`` group."""
@@ -137,8 +137,8 @@ class Registry:
                                       ) from None
             if not callable(obj):
                 raise PluginLoadError(name, "command line", "not callable")
-            package = module.split(".")[0]
-            self.register(name, obj, package, _distribution_version(package))
+            package, version = _module_distribution(module)
+            self.register(name, obj, package, version)
             return obj
         raise UnknownControllerError(name, list(self._factories), suggest(name,
                                                                          self._factories))
@@ -156,10 +156,37 @@ class Registry:
                                           f"the factory returned an object without {attr}()")
         return ctrl
 
+    def options(self, name: str) -> OptionTable:
+        """The options ``name`` declares (:func:`controllers.options.option_table`): what
+        the scenario checks accept and ``hexapod-bench list --options`` prints."""
+        return option_table(self.factory(name))
+
     def source(self, name: str) -> ControllerInfo:
         """Package and version of a registered controller."""
         self.factory(name)
         return self._info[name]
+
+
+def describe(factory: Any) -> str:
+    """The first sentence of a factory's docstring, whole (its first paragraph may span
+    several lines)."""
+    import inspect
+
+    doc = inspect.cleandoc(getattr(factory, "__doc__", None) or "")
+    paragraph = " ".join(doc.split("\n\n")[0].split())
+    return first_sentence(paragraph)
+
+
+def _module_distribution(module: str) -> tuple[str, str]:
+    """The installed distribution that provides ``module`` and its version (its import
+    name and "unknown" when no installed distribution provides it: a file on the path)."""
+    top = module.split(".")[0]
+    for dist in metadata.packages_distributions().get(top, []):
+        try:
+            return dist, metadata.version(dist)
+        except metadata.PackageNotFoundError:
+            continue
+    return top, _distribution_version(top)
 
 
 def _distribution_version(package: str) -> str:

@@ -16,6 +16,7 @@ and output buffers and call the C function on them in place (no copies).
 from __future__ import annotations
 
 import ctypes
+import fcntl
 import hashlib
 import logging
 import os
@@ -58,6 +59,10 @@ class CompilationError(OSError):
     """The C code of a CasADi function could not be compiled or loaded."""
 
 
+#: Whether this process has said that it compiles C kernels.
+_ANNOUNCED = False
+
+
 def cache_dir() -> Path:
     """Where compiled libraries are kept: ``$HEXAPOD_CACHE_DIR`` or ``~/.cache/hexapod-vs``."""
     return Path(os.environ.get("HEXAPOD_CACHE_DIR", Path.home() / ".cache" / "hexapod-vs"))
@@ -66,9 +71,11 @@ def cache_dir() -> Path:
 def build_shared_library(name: str, code: str, flags: tuple[str, ...] = ("-O2",)) -> Path:
     """Compile C source to a shared library once, cached under the hash of the source.
 
-    The library is written to :func:`cache_dir` as ``{name}_{hash}.so``; processes that
-    compile the same code at once each use their own temporary files and the last
-    atomic rename wins (the results are identical).
+    The library is written to :func:`cache_dir` as ``{name}_{hash}.so``. Processes that
+    need the same library at once take turns on ``{name}_{hash}.lock`` (an advisory lock),
+    so one compiles and the others load its result; the library appears by an atomic
+    rename of a per-process temporary file, so no reader ever sees half of it (even a
+    writer that ignores the lock, e.g. an older version of this code, is safe).
 
     Args:
         name: A C identifier-like name for the files.
@@ -90,14 +97,27 @@ def build_shared_library(name: str, code: str, flags: tuple[str, ...] = ("-O2",)
     key = code + platform.machine() + " ".join(flags)
     digest = hashlib.sha256(key.encode()).hexdigest()[:16]
     lib_path = cache / f"{name}_{digest}.so"
-    if not lib_path.exists():
+    if lib_path.exists():
+        return lib_path
+    # one compiler per kernel: a process that finds another compiling it waits for the
+    # library instead of compiling it again (test workers, process pools, warm)
+    with open(cache / f"{name}_{digest}.lock", "a") as lock:
+        fcntl.flock(lock, fcntl.LOCK_EX)
+        if lib_path.exists():
+            return lib_path
+        global _ANNOUNCED
+        if not _ANNOUNCED:  # once per process: the user sees why the first run waits
+            _ANNOUNCED = True
+            log.warning("compiling the controllers' C kernels (first run only, ~30 s; "
+                        "cached in %s)", cache)
+        log.info("compiling %s (C, cached in %s)", name, cache)
         src = cache / f"{name}_{digest}.{os.getpid()}.c"
         src.write_text(code)
         tmp_lib = cache / f"{name}_{digest}.{os.getpid()}.so"
         try:
             subprocess.run([cc, *flags, "-shared", "-fPIC", str(src), "-o", str(tmp_lib)],
                            check=True, capture_output=True, timeout=300)
-            os.replace(tmp_lib, lib_path)
+            os.replace(tmp_lib, lib_path)  # atomic: a reader sees no library or all of it
         finally:
             src.unlink(missing_ok=True)
             tmp_lib.unlink(missing_ok=True)

@@ -94,6 +94,12 @@ def get_matrix(
         raise ConfigFileError(
             path, f"expected shape {shape}, got {arr.shape}", key=prefix + key
         )
-    if not np.all(np.isfinite(arr)):
-        raise ConfigFileError(path, "contains NaN or inf", key=prefix + key)
+    bad = np.argwhere(~np.isfinite(arr))
+    if len(bad):
+        where = tuple(int(i) for i in bad[0])
+        if shape == (6, 3):  # a point per leg
+            what = f"leg {where[0]}: its point's {'xyz'[where[1]]} coordinate is {arr[where]}"
+        else:
+            what = f"entry {list(where)} is {arr[where]}"
+        raise ConfigFileError(path, f"contains NaN or inf: {what}", key=prefix + key)
     return arr

@@ -36,7 +36,8 @@ def _validate_points(name: str, value: Any, source: str | None) -> np.ndarray:
     bad = np.argwhere(~np.isfinite(arr))
     if len(bad):
         i, j = bad[0]
-        raise GeometryError(name, f"point {i} coordinate {j} is {arr[i, j]} (not finite)", source)
+        raise GeometryError(name, f"leg {i}: its point's {'xyz'[j]} coordinate is "
+                            f"{arr[i, j]} (not finite; row {i} of the 6 points)", source)
     for i, j in itertools.combinations(range(6), 2):
         d = float(np.linalg.norm(arr[i] - arr[j]))
         if d < MIN_JOINT_SEPARATION:

@@ -220,11 +220,94 @@ def check_output_dir(directory: str | Path, own: Callable[[Path], bool], kind: s
 def mark_png(data: bytes) -> bytes:
     """PNG bytes with the project's text chunk (``Software: hexapod-vs``) after the header.
 
-    For PNG writers that take no metadata (OpenCV's ``imencode``).
+    For PNG writers that take no metadata (OpenCV's ``imencode``). Already marked: the
+    bytes as they are. A writer that puts its own ``Software`` chunk (matplotlib) is
+    given :data:`PNG_METADATA` instead: a reader keeps one ``Software`` per file.
     """
     sig, ihdr_end = b"\x89PNG\r\n\x1a\n", 8 + 4 + 4 + 13 + 4
     if not data.startswith(sig):
         raise ValueError("not a PNG")
+    if b"tEXtSoftware\x00" + GENERATOR.encode() in data:
+        return data  # marked already (matplotlib's savefig(metadata=PNG_METADATA))
     body = b"tEXt" + b"Software\x00" + GENERATOR.encode()
     chunk = struct.pack(">I", len(body) - 4) + body + struct.pack(">I", zlib.crc32(body))
     return data[:ihdr_end] + chunk + data[ihdr_end:]
+
+
+#: The first line of the project's Markdown files (an HTML comment: invisible once
+#: rendered).
+MARKDOWN_MARKER = f"<!-- {TEXT_MARKER} -->"
+
+
+def mark_jpeg(data: bytes) -> bytes:
+    """JPEG bytes with a comment segment ``written by hexapod-vs`` after the start marker."""
+    if not data.startswith(b"\xff\xd8"):
+        raise ValueError("not a JPEG")
+    text = TEXT_MARKER.encode()
+    return data[:2] + b"\xff\xfe" + struct.pack(">H", len(text) + 2) + text + data[2:]
+
+
+def _marked(path: Path, content: object) -> bytes:
+    """The bytes of an output with the project's mark, by kind of content."""
+    import json
+
+    if isinstance(content, dict | list):
+        doc = ({"generator": GENERATOR, **content} if isinstance(content, dict)
+               else {"generator": GENERATOR, "items": content})
+        return (json.dumps(doc, indent=1) + "\n").encode()
+    if isinstance(content, bytes):
+        if content.startswith(b"\x89PNG\r\n\x1a\n"):
+            return mark_png(content)
+        if content.startswith(b"\xff\xd8"):
+            return mark_jpeg(content)
+        raise ValueError(f"{path}: bytes of an unknown kind (PNG or JPEG expected)")
+    if isinstance(content, str):
+        if path.suffix in (".md", ".markdown", ".html", ".htm"):
+            mark = HTML_MARKER if path.suffix.startswith(".htm") else MARKDOWN_MARKER
+            return (mark + "\n" + content).encode()
+        if path.suffix == ".toml":
+            return (f"# {TEXT_MARKER}\n" + content).encode()
+        raise ValueError(f"{path}: no mark for a text file of this kind (.md, .html, .toml)")
+    if hasattr(content, "schema") and hasattr(content, "replace_schema_metadata"):
+        import io
+
+        import pyarrow.parquet as pq
+
+        meta = {**(content.schema.metadata or {}), **PARQUET_METADATA}
+        buf = io.BytesIO()
+        pq.write_table(content.replace_schema_metadata(meta), buf)
+        return buf.getvalue()
+    raise TypeError(f"{path}: cannot write a {type(content).__name__}")
+
+
+def write_output(path: str | Path, content: object, overwrite: bool = False,
+                 option: str = "--overwrite") -> Path:
+    """Write one output file the project's way (``docs/outputs.md``): a file the project
+    did not write is refused unless ``overwrite``, the file carries the project's mark,
+    its folder is created, and it is replaced whole (written beside it, then renamed).
+
+    Args:
+        path: The file.
+        content: A dict (JSON, with a ``"generator"`` key first; a list goes under
+            ``"items"``), PNG or JPEG bytes (a text chunk ``Software``, a comment
+            segment), a ``str`` for a ``.md`` (first line an HTML comment), ``.html``
+            (a ``<meta name="generator">``) or ``.toml`` file (a first-line comment), or
+            a ``pyarrow.Table`` (Parquet, ``generator`` in the schema metadata).
+        overwrite: The user gave ``option``.
+        option: The option that allows replacing a user's file, for the message.
+
+    Returns:
+        The path written.
+
+    Raises:
+        OutputError: An existing file the project did not write (without
+            ``overwrite``), or a directory.
+    """
+    p = Path(path)
+    check_replace(p, overwrite, option)
+    data = _marked(p, content)
+    p.parent.mkdir(parents=True, exist_ok=True)
+    tmp = p.with_name(f".{p.name}.part")
+    tmp.write_bytes(data)
+    tmp.replace(p)
+    return p

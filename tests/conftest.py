@@ -8,6 +8,34 @@ import pytest
 from hexapod import HexapodGeometry, deltalab
 from hexapod.geometry import circular_points
 
+_SETUP_SECONDS = pytest.StashKey[float]()
+
+
+def pytest_addoption(parser: pytest.Parser) -> None:
+    parser.addoption("--unmarked-budget", type=float, default=None, metavar="SECONDS",
+                     help="fail a test not marked slow whose setup and call take longer "
+                          "(`make quick` uses 2 s, so that the quick tier stays quick)")
+
+
+@pytest.hookimpl(wrapper=True)
+def pytest_runtest_makereport(item: pytest.Item, call: pytest.CallInfo[None]
+                              ) -> pytest.TestReport:
+    """With ``--unmarked-budget``: an unmarked test over budget fails, with its time."""
+    report: pytest.TestReport = yield
+    if report.when == "setup":
+        item.stash[_SETUP_SECONDS] = report.duration
+    budget = item.config.getoption("--unmarked-budget")
+    if (budget is None or report.when != "call" or not report.passed
+            or item.get_closest_marker("slow") is not None):
+        return report
+    took = report.duration + item.stash.get(_SETUP_SECONDS, 0.0)
+    if took > budget:
+        report.outcome = "failed"
+        report.longrepr = (f"{item.nodeid} took {took:.2f} s (setup and call), over the quick "
+                           f"tier's budget of {budget:g} s: make it cheaper or mark it "
+                           f"@pytest.mark.slow")
+    return report
+
 
 @pytest.fixture
 def geometry() -> HexapodGeometry:

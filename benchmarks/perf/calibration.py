@@ -15,7 +15,6 @@ Run::
 from __future__ import annotations
 
 import argparse
-import json
 import sys
 from collections.abc import Sequence
 from pathlib import Path
@@ -23,9 +22,10 @@ from typing import Any
 
 import numpy as np
 
+from benchmarks.study.outdir import OutputFile
 from hexapod.geometry import deltalab
 from hexapod.kinematics import Transform
-from hexapod.outputs import GENERATOR, check_replace
+from hexapod.outputs import check_replace, write_output
 from hexapod.se3 import look_at
 from vision.calibration import StudyResult, calibration_study
 from vision.cameras import camera_preset
@@ -96,7 +96,8 @@ def main(argv: Sequence[str] | None = None) -> int:
                         help="place the camera here [m, base frame], looking at (0, 0, 0.2)")
     parser.add_argument("--method", choices=["lstsq", "irls"], default="lstsq")
     parser.add_argument("--seed", type=int, default=1)
-    parser.add_argument("--json", type=Path, default=None, help="write the figures here")
+    parser.add_argument("--json", type=Path, default=None, action=OutputFile,
+                        help="write the figures here")
     parser.add_argument("--overwrite", action="store_true",
                         help="replace --json even if hexapod-bench did not write it")
     args = parser.parse_args(argv)
@@ -111,10 +112,9 @@ def main(argv: Sequence[str] | None = None) -> int:
           f"{' with visibility' if args.visibility else ''}, 64 extremal configurations")
     print(format_table(results))
     if args.json is not None:
-        args.json.write_text(json.dumps({"generator": GENERATOR, "camera": args.camera,
-                                         "visibility": args.visibility, "seed": args.seed,
-                                         "eye": args.eye,
-                                         "results": [r.to_dict() for r in results]}, indent=2))
+        write_output(args.json, {"camera": args.camera, "visibility": args.visibility,
+                                 "seed": args.seed, "eye": args.eye,
+                                 "results": [r.to_dict() for r in results]}, args.overwrite)
     return 0
 
 

@@ -38,8 +38,9 @@ from pathlib import Path
 import cv2
 import numpy as np
 
+from benchmarks.study.outdir import OutputDir
 from hexapod import deltalab
-from hexapod.outputs import check_replace, mark_png
+from hexapod.outputs import check_replace, write_output
 from hexapod.workspace import sample_poses
 from vision import kernels
 from vision.cameras import (
@@ -131,7 +132,8 @@ def picture_name(omni: bool, lens: str, style: RenderStyle) -> str:
 
 
 def _run(cam: Camera, frames: int, style: RenderStyle, seed: int,
-         pictures: Path | None, repeats: int, lens: str = "ideal") -> dict[str, float]:
+         pictures: Path | None, repeats: int, lens: str = "ideal",
+         overwrite: bool = False) -> dict[str, float]:
     geo = deltalab()
     rng = np.random.default_rng(seed)
     Rs, ts = sample_poses(geo, frames, rng)
@@ -172,8 +174,8 @@ def _run(cam: Camera, frames: int, style: RenderStyle, seed: int,
             pictures.mkdir(parents=True, exist_ok=True)
             ok, png = cv2.imencode(".png", draw_detection(img, cam, d))
             if ok:
-                (pictures / picture_name(omni, lens, style)).write_bytes(
-                    mark_png(png.tobytes()))
+                write_output(pictures / picture_name(omni, lens, style), png.tobytes(),
+                             overwrite)
     e = np.concatenate(errs) if errs else np.array([np.nan])
     return {
         "render_ms": 1e3 * float(np.median(render_t)),
@@ -242,7 +244,7 @@ def main(argv: Sequence[str] | None = None) -> int:
                    help="also time the detection of every camera round by round, the "
                         "cameras interleaved (N rounds of 10 frames each): the ratios to "
                         "the ideal lens under a changing machine load")
-    p.add_argument("--pictures", type=Path, default=None,
+    p.add_argument("--pictures", type=Path, default=None, action=OutputDir,
                    help="write detect-omni.png / detect-front.png of the first frame here "
                         "(-cluttered before .png on a cluttered background; with "
                         "--distortion also detect-omni-distorted.png, "
@@ -287,7 +289,8 @@ def main(argv: Sequence[str] | None = None) -> int:
                           args.overwrite)
     ideal_ms: dict[str, float] = {}
     for name, lens, cam in cameras:
-        r = _run(cam, args.frames, style, args.seed, args.pictures, args.repeats, lens)
+        r = _run(cam, args.frames, style, args.seed, args.pictures, args.repeats, lens,
+                 args.overwrite)
         ideal_ms.setdefault(name, r["detect_ms"])
         out.write(f"| {name} | {cam.width}x{cam.height} | {r['render_ms']:.2f} | "
                   f"{r['detect_ms']:.3f} | {r['detect_p95_ms']:.3f} | {GOALS_MS[name]} | "

@@ -23,6 +23,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from benchmarks.study.outdir import OutputFile
 from hexapod import deltalab, sample_poses
 from vision.cameras import Camera, front_camera, omni_camera
 from vision.estimate import angle_between, direction_from_normals, fit_normal, fit_normal_conic
@@ -89,7 +90,7 @@ def _circle(centre: np.ndarray, normal: np.ndarray, radius: float, n: int = 400)
     return centre + radius * (np.cos(phi)[:, None] * a + np.sin(phi)[:, None] * b)
 
 
-def edges_figure(path: str, seed: int = 0) -> None:
+def edges_figure(path: str, seed: int = 0, overwrite: bool = False) -> None:
     """Draw what the front and the omnidirectional cameras see of the reference robot
     (home pose and one tilted pose): the edges (solid where observed, dotted where
     hidden by another leg or the platform), the base and platform circles, and for the
@@ -159,10 +160,14 @@ def edges_figure(path: str, seed: int = 0) -> None:
     fig.suptitle("Simulated leg edges of the reference robot (vision.observe_legs, "
                  "vision.edge_points)")
     fig.tight_layout()
-    from hexapod.outputs import PNG_METADATA
+    import io
 
-    fig.savefig(path, dpi=90, metadata=PNG_METADATA)
+    from hexapod.outputs import PNG_METADATA, write_output
+
+    buf = io.BytesIO()
+    fig.savefig(buf, format="png", dpi=90, metadata=PNG_METADATA)
     plt.close(fig)
+    write_output(path, buf.getvalue(), overwrite)  # marked; a user's file refused
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -173,7 +178,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--points", type=int, default=20, help="points per edge (default 20)")
     parser.add_argument("--sigma", type=float, default=0.5, help="pixel noise [px] (default 0.5)")
     parser.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
-    parser.add_argument("--figure", metavar="PNG",
+    parser.add_argument("--figure", metavar="PNG", action=OutputFile,
                         help="also draw the simulated edges of both cameras to this file "
                              "(docs/vision-edges.png)")
     parser.add_argument("--overwrite", action="store_true",
@@ -183,7 +188,7 @@ def main(argv: list[str] | None = None) -> int:
         from hexapod.outputs import check_replace
 
         check_replace(args.figure, args.overwrite)
-        edges_figure(args.figure)
+        edges_figure(args.figure, overwrite=args.overwrite)
         print(f"figure written to {args.figure}")
     start = time.perf_counter()
     figures = accuracy_figures(args.poses, args.points, args.sigma, args.seed)

@@ -16,6 +16,7 @@ from benchmarks.exceptions import BenchmarkError
 from hexapod.config import check_keys, get_matrix, load_toml
 from hexapod.exceptions import ConfigFileError, ForwardKinematicsError
 from hexapod.geometry import HexapodGeometry
+from hexapod.outputs import TEXT_MARKER
 from vision.feature_cameras import Features, sensor_camera
 
 log = logging.getLogger(__name__)
@@ -175,7 +176,8 @@ def save_goal(path: str | Path, lengths: np.ndarray, features: Features,
                            "features": npz.name}
     if name:
         doc["name"] = name
-    p.write_text("# taught by hexapod-bench servo --teach\n" + tomli_w.dumps(doc))
+    p.write_text(f"# {TEXT_MARKER}: taught by hexapod-bench servo --teach\n"
+                 + tomli_w.dumps(doc))
     return npz
 
 

@@ -323,17 +323,33 @@ class ServoBook:
         return np.ones(1, dtype=bool)
 
     def commanded(self, step: int, rows: np.ndarray, commands: Any,
-                  seconds: float) -> tuple[np.ndarray, np.ndarray]:
-        """A refused or invalid command is replaced by zeros (counted); none ends."""
+                  seconds: float, crashes: dict[int, BaseException]
+                  ) -> tuple[np.ndarray, np.ndarray]:
+        """A refused or invalid command (of the wrong shape or kind: a
+        :class:`~controllers.exceptions.CommandError`) is replaced by zeros (counted);
+        none ends.
+
+        Raises:
+            Exception: The controller's own exception (the session stops with it).
+        """
+        from controllers.exceptions import CommandError
+
+        crash = crashes.get(0)
+        if crash is not None and not isinstance(crash, CommandError):
+            raise crash
         v = commands.values[0]
         self.plant.use_actuation(commands.actuation, self.name)
         self.ctrl_err = float(commands.error_norm[0])
-        self.reason = commands.reasons[0]
+        self.reason = commands.reasons[0] if crash is None else str(crash)
         if self.reason is None and (v.shape != (6,) or not np.all(np.isfinite(v))):
             self.reason = f"invalid command {v!r}"
         if self.reason is not None:
             self.res.refused += 1
         return np.array([self.reason is None]), np.zeros(1, dtype=bool)
+
+    def stopped(self, step: int, exc: Exception) -> BaseException:
+        """The session stops with the controller's exception as it is."""
+        return exc
 
     def period(self, step: int, idx: np.ndarray, done: np.ndarray, obs: ObservationBatch,
                error_norm: np.ndarray, values: np.ndarray) -> None:

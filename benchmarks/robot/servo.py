@@ -65,6 +65,7 @@ from benchmarks.robot.loop import (
     StatusLine,
     servo_loop,
 )
+from benchmarks.study.outdir import OutputFile
 from hexapod.geometry import HexapodGeometry
 from hexapod.outputs import check_replace
 from vision.feature_cameras import (
@@ -162,7 +163,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("-o", "--option", action="append", default=[], metavar="KEY=VALUE",
                    help="controller option (repeatable; VALUE is a TOML value or a word), "
                         "e.g. -o gain=2")
-    p.add_argument("--goal", required=True,
+    p.add_argument("--goal", required=True, action=OutputFile,
                    help="goal TOML file: lengths_mm = [6 values] (and optionally features = "
                         "'goal.npz'); with --teach, the file to write")
     p.add_argument("--teach", action="store_true",
@@ -201,7 +202,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--start-mm", type=float, nargs=6, metavar="L",
                    help="emulator only: initial leg lengths [mm] (default mid-stroke)")
     p.add_argument("--seed", type=int, default=0, help="pixel noise of --camera sim")
-    p.add_argument("--log", metavar="FILE.jsonl", help="write one JSON line per period")
+    p.add_argument("--log", metavar="FILE.jsonl", action=OutputFile,
+                   help="write one JSON line per period (an earlier servo log is replaced, "
+                        "any other file refused)")
     p.add_argument("--viz", action="store_true", help="live MeshCat view (loopback server)")
 
 

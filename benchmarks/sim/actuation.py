@@ -17,6 +17,8 @@ from __future__ import annotations
 
 from typing import Any
 
+import numpy as np
+
 from controllers.base import CommandBatch
 from controllers.batch import actuation_of
 from hexapod.actuation import Actuation, check_actuation
@@ -67,12 +69,23 @@ def require_actuation(controller: Any, label: str,
     return check_actuation(actuation_of(controller), accepted, receiver, label)
 
 
-def require_batch(commands: CommandBatch, declared: Actuation, label: str) -> None:
-    """Refuse a batch of another kind than its controller declared.
+def require_batch(commands: CommandBatch, declared: Actuation, label: str,
+                  rows: int | None = None) -> None:
+    """Refuse a batch of another kind than its controller declared, or of another shape
+    than ``(rows, 6)``.
 
     Raises:
         ActuationError: ``commands.actuation`` is not ``declared``.
+        CommandError: The values are not one row of 6 leg values per observed trial.
     """
+    if rows is not None:
+        shape = np.shape(commands.values)
+        if shape != (rows, 6):
+            from controllers.exceptions import CommandError
+
+            raise CommandError(label, f"returned commands of shape {shape} for {rows} "
+                                      f"trials; expected ({rows}, 6): one row of 6 leg "
+                                      "values per trial")
     if commands.actuation is not declared:
         check_actuation(commands.actuation, (declared,),
                         f"a study whose controller declared {declared.quantity}", label)

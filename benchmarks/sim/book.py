@@ -14,7 +14,7 @@ from typing import Any
 
 import numpy as np
 
-from benchmarks.exceptions import user_message
+from benchmarks.exceptions import BatchFailedError, user_message
 from benchmarks.sim.actuation import require_batch
 from benchmarks.sim.inputs import SimScenario
 from benchmarks.sim.tolerance import unconverged_reason
@@ -84,6 +84,12 @@ class Book:
     batch_times: list[float] = field(default_factory=list)  # controller time per row [s]
     stepped: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=int))
     _errors: tuple[np.ndarray, np.ndarray] | None = None  # this period's pose errors
+    scenario: str = ""  # the scenario's name (log lines)
+    causes: dict[int, str] = field(default_factory=dict)  # a crash's cause, user's terms
+    #: The last position [m] and orientation [rad] errors of every row (NaN before its
+    #: first period): a batch that fails as a whole reports them.
+    last_errors: tuple[np.ndarray, np.ndarray] = field(
+        default_factory=lambda: (np.zeros(0), np.zeros(0)))
 
     @classmethod
     def new(cls, sc: SimScenario, group: list[TrialSetup], record_trials: int) -> Book:
@@ -109,7 +115,8 @@ class Book:
             tracker=tracker_for(sc, group, pos_tol, ori_tol), task=sc.task, dt=sc.dt,
             stroke=group[0].world.geometry.stroke if group else (0.0, 0.0),
             max_speed=group[0].world.geometry.max_speed if group else 0.0,
-            trials=[s.trial for s in group], stepped=np.zeros(n, dtype=int))
+            trials=[s.trial for s in group], stepped=np.zeros(n, dtype=int),
+            scenario=sc.name, last_errors=(np.full(n, np.nan), np.full(n, np.nan)))
 
     def attach(self, plant: Any, targets: Callable[[int, np.ndarray],
                                                    tuple[np.ndarray, np.ndarray]],
@@ -134,6 +141,7 @@ class Book:
         assert self.targets is not None, "Book.attach first"
         dp, da = pose_error(self.plant.R[idx], self.plant.t[idx], *self.targets(step, idx))
         self._errors = (dp, da)
+        self.last_errors[0][idx], self.last_errors[1][idx] = dp, da
         ok = (dp < self.pos_tol) & (da < self.ori_tol)
         if self.tracker is not None:
             self.tracker.add(step, idx, dp, da)
@@ -166,16 +174,25 @@ class Book:
         return np.ones(len(idx), dtype=bool)
 
     def commanded(self, step: int, rows: np.ndarray, commands: CommandBatch,
-                  seconds: float) -> tuple[np.ndarray, np.ndarray]:
-        """Refuse a batch of another kind than declared; a row fails (and ends, its
-        command not applied) with an invalid command or after too many refusals in a
-        row."""
-        require_batch(commands, self.actuation, self.label)
+                  seconds: float, crashes: dict[int, BaseException]
+                  ) -> tuple[np.ndarray, np.ndarray]:
+        """Refuse a batch of another kind than declared or of another shape than one row
+        of 6 per stepped row; a row fails (and ends, its command not applied) with an
+        invalid command, after too many refusals in a row, or when its own controller
+        raised (``crashes``, by position in ``rows``: a per-trial controller's crash or
+        malformed command, isolated by :class:`~controllers.batch.PerTrialLoop`).
+
+        Raises:
+            ActuationError: The batch is of another kind than declared.
+            CommandError: The batch is of another shape than ``(len(rows), 6)``.
+        """
+        require_batch(commands, self.actuation, self.label, len(rows))
         self.batch_times.append(seconds)
         self.stepped[rows] += 1
         v, reasons = commands.values, commands.reasons
         invalid = ~np.isfinite(v).all(axis=1)
-        if reasons.count(None) == len(reasons) and not invalid.any():  # the common case
+        if (not crashes and reasons.count(None) == len(reasons)
+                and not invalid.any()):  # the common case
             self.refused[rows] = 0
             return ~invalid, invalid
         refused = np.fromiter((r is not None for r in reasons), dtype=bool, count=len(rows))
@@ -187,7 +204,36 @@ class Book:
         for j in np.flatnonzero(too_many):
             self.failure[rows[j]] = f"controller refused to move: {reasons[j]}"
         failed = invalid | too_many
+        if crashes:
+            failed |= self._crashed(step, rows, crashes)
         return ~failed, failed
+
+    def _crashed(self, step: int, rows: np.ndarray, crashes: dict[int, BaseException]
+                 ) -> np.ndarray:
+        """End the rows whose controller raised at period ``step`` (``crashes``: by
+        position in ``rows``), each with its exception; returns the (n,) mask of them."""
+        mask = np.zeros(len(rows), dtype=bool)
+        label, scenario = self.label, self.scenario
+        for j, exc in crashes.items():
+            r = int(rows[j])
+            mask[j] = True
+            self.failure[r] = f"{label} failed at step {step}: {type(exc).__name__}: {exc}"
+            self.causes[r] = user_message(exc)
+            trial = self.trials[r]
+            log.warning("trial %s/%s/%d failed at step %d: %s", scenario, label, trial, step,
+                        self.causes[r], extra={"cause": self.causes[r]})
+            if not isinstance(exc, HexapodError | VisionError | ControllerError):
+                log.info("traceback of trial %s/%s/%d:\n%s", scenario, label, trial,
+                         "".join(traceback.format_exception(exc)))
+        return mask
+
+    def stopped(self, step: int, exc: Exception) -> BaseException:
+        """The exception the loop raises when the controller's batch failed as a whole at
+        ``step`` (``step_batch`` raised, or its commands were refused by
+        :meth:`commanded`): a :class:`~benchmarks.exceptions.BatchFailedError` with the
+        last errors of every row (each trial of the group gets a failure row saying so;
+        nothing is rerun)."""
+        return BatchFailedError(step, self.last_errors, exc)
 
     def period(self, step: int, idx: np.ndarray, done: np.ndarray, obs: ObservationBatch,
                error_norm: np.ndarray, values: np.ndarray) -> None:
@@ -237,7 +283,11 @@ class Book:
             row = dict(base)
             row["trial"] = int(s.trial)
             fail = self.failure[m]
-            conv = bool(self.converged[m])
+            # a trial that failed (an end stop, a refused or invalid command) did not
+            # converge, whatever its last convergence test said (a fixed-duration task
+            # tests every period against the moving reference)
+            conv = bool(self.converged[m]) and fail is None
+            failed = fail is not None
             if fail is None and not conv:
                 fail = unconverged_reason(sc.task, float(dp[m] * 1e3),
                                           float(np.rad2deg(da[m])))
@@ -253,6 +303,8 @@ class Book:
                 "step_time_us": float(statistics.median(times) * 1e6) if times else None,
                 "failure": None if conv else fail,
             })
+            if m in self.causes and not conv:
+                row["cause"] = self.causes[m]
             if self.tail_pos[m]:
                 # the seeds' "median positioning error of the convergence tail": the last 20 %
                 row["tail_position_error_mm"] = float(np.median(self.tail_pos[m]) * 1e3)
@@ -262,6 +314,8 @@ class Book:
                 row["detect_time_ms"] = float(np.median(detect_times) * 1e3)
             if self.tracker is not None:
                 row.update(self.tracker.row(m))
+                if failed:  # it never reached the reference's end: it did not settle
+                    row["settling_time_s"] = None
             if figures is not None:
                 row.update(figures(m))
             for key, value in s.calibration.items():
@@ -302,13 +356,26 @@ def base_row(sc: SimScenario, spec: Any, trial: int) -> dict[str, Any]:
     return row
 
 
-def failure_row(sc: SimScenario, spec: Any, trial: int, exc: BaseException) -> dict[str, Any]:
-    """The row of a trial that crashed (the crash is the trial's failure)."""
+def failure_row(sc: SimScenario, spec: Any, trial: int, exc: BaseException,
+                batch: str | None = None, step: int = 0,
+                errors: tuple[float, float] | None = None) -> dict[str, Any]:
+    """The row of a trial that crashed (the crash is the trial's failure).
+
+    Args:
+        batch: How its batch failed (a batch stopped as a whole), or None.
+        step: The period at which it happened.
+        errors: The last position [m] and orientation [rad] errors measured, if any.
+    """
     row = base_row(sc, spec, trial)
+    finite = errors is not None and bool(np.all(np.isfinite(errors)))
     row.update({
-        "converged": False, "steps": 0, "final_position_error_mm": None,
-        "final_orientation_error_deg": None, "stroke_violations": 0, "step_time_us": None,
-        "failure": f"{type(exc).__name__}: {exc}", "cause": user_message(exc),
+        "converged": False, "steps": int(step),
+        "final_position_error_mm": float(errors[0]) * 1e3 if finite and errors else None,
+        "final_orientation_error_deg": (float(np.rad2deg(errors[1])) if finite and errors
+                                        else None),
+        "stroke_violations": 0, "step_time_us": None,
+        "failure": (f"{batch}: " if batch else "") + f"{type(exc).__name__}: {exc}",
+        "cause": user_message(exc),
     })
     # one line in the user's terms (the command line prints each cause once and counts
     # the repeats); the traceback of an unexpected error only with -v (INFO)

@@ -14,7 +14,10 @@ backends (:class:`~benchmarks.sim.plant.BackendPlant`) and the real servo sessio
   (:func:`benchmarks.sim.sensors.camera_batch`);
 - the **clock** (:class:`benchmarks.sim.clock.CameraClock`, or None: an image at every
   control instant);
-- the **controller batch**: ``step_batch(ObservationBatch) -> CommandBatch``;
+- the **controller batch**: ``step_batch(ObservationBatch) -> CommandBatch`` (a
+  per-trial controller's own crash is isolated to its row, its ``crashes``; a batch that
+  raises or returns commands of the wrong shape or kind stops the loop with the
+  exception of the book's :meth:`LoopBook.stopped`);
 - the **book** (:class:`LoopBook`): when a row is done, what happens to a command, what
   is recorded (:class:`benchmarks.sim.book.Book` for a study,
   :class:`benchmarks.robot.loop.ServoBook` for the servo session).
@@ -60,9 +63,19 @@ class LoopBook(Protocol):
         ...
 
     def commanded(self, step: int, rows: np.ndarray, commands: CommandBatch,
-                  seconds: float) -> tuple[np.ndarray, np.ndarray]:
-        """Account the commands of ``rows`` (the controller took ``seconds`` per row);
-        returns the (n,) masks of the commands applied and of the rows that end."""
+                  seconds: float, crashes: dict[int, BaseException]
+                  ) -> tuple[np.ndarray, np.ndarray]:
+        """Account the commands of ``rows`` (the controller took ``seconds`` per row;
+        ``crashes``: the rows, by position in ``rows``, whose own controller raised, as
+        :class:`~controllers.batch.PerTrialLoop` isolates them); returns the (n,) masks
+        of the commands applied and of the rows that end. Raises when the batch as a
+        whole is refused (wrong shape or kind)."""
+        ...
+
+    def stopped(self, step: int, exc: Exception) -> BaseException:
+        """The exception to raise when the controller's batch failed as a whole at
+        ``step`` (``step_batch`` or :meth:`commanded` raised ``exc``): ``exc`` itself
+        or one that says what it means for the rows."""
         ...
 
     def period(self, step: int, idx: np.ndarray, done: np.ndarray, obs: ObservationBatch,
@@ -116,9 +129,16 @@ def closed_loop(plant: Any, sensor: Any, clock: CameraClock | None, controller: 
                             lengths=plant.measured_lengths(tr, offsets[tr]),
                             q_dot=plant.measured_rates(tr))
             t0 = time.perf_counter()
-            cmds = controller.step_batch(batch)
-            seconds = (time.perf_counter() - t0) / len(rows)
-            applied, ends = book.commanded(step, tr, cmds, seconds)
+            try:
+                cmds = controller.step_batch(batch)
+                seconds = (time.perf_counter() - t0) / len(rows)
+                applied, ends = book.commanded(step, tr, cmds, seconds,
+                                               getattr(controller, "crashes", None) or {})
+            except Exception as exc:  # the batch as a whole: the book says what follows
+                stopped = book.stopped(step, exc)
+                if stopped is exc:
+                    raise
+                raise stopped from exc
             norms[rows] = cmds.error_norm
             done[rows[ends]] = True
             values[rows[applied]] = cmds.values[applied]

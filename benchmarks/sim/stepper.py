@@ -25,7 +25,7 @@ from typing import Any, TypeVar
 
 import numpy as np
 
-from benchmarks.exceptions import ScenarioError
+from benchmarks.exceptions import BatchFailedError, ScenarioError
 from benchmarks.sim.actuation import drive_plant, require_actuation, world_actuation
 from benchmarks.sim.book import Book, TrialResult, failure_row
 from benchmarks.sim.clock import make_clock
@@ -150,8 +150,10 @@ class _Unit:
         self.sensor_factory = sensor_factory or make_sensor
 
     def isolated(self, group: list[TrialSetup]) -> list[TrialResult]:
-        """The results of a group; when it fails, of its trials one by one (a crash in a
-        trial is that trial's failure)."""
+        """The results of a group; when it fails before its first step (a reset, a
+        refusal: no trial has run yet), of its trials one by one to find the one(s) at
+        fault (a crash in a trial is that trial's failure). A group stopped while
+        stepping is not rerun (:meth:`run`)."""
         try:
             return self.run(group)
         except Exception as exc:
@@ -187,7 +189,13 @@ class _Unit:
             group = setups
         if group:
             contexts = [trial_context(sc, setups[k], goals[k]) for k in keep]
-            for k, res in zip(keep, self._loop(group, contexts, sensor), strict=True):
+            try:
+                results = self._loop(group, contexts, sensor)
+            except BatchFailedError as exc:  # stopped while stepping: each trial says so
+                # (not rerun trial by trial: a crashing controller must not run twice; a
+                # per-trial controller's own crash is isolated inside the batch)
+                results = _stopped(sc, spec, [s.trial for s in group], exc)
+            for k, res in zip(keep, results, strict=True):
                 out[k] = res
         return [out[k] for k in range(len(setups))]
 
@@ -226,6 +234,17 @@ class _Unit:
         finally:
             _close_all(opened)
         return book.results(sc, spec, group, R, t, sensor.detect_times, plant.row_figures)
+
+
+def _stopped(sc: SimScenario, spec: Any, trials: list[int], exc: BatchFailedError
+             ) -> list[TrialResult]:
+    """The rows of a group stopped at a step: each with the step, its last errors and the
+    exception (a batch of several trials says it failed as a whole)."""
+    batch = (f"the batch of {len(trials)} trials of {spec.label} failed at step {exc.step} "
+             "(every trial of it counted failed, not rerun)" if len(trials) > 1 else None)
+    return [TrialResult(failure_row(sc, spec, trial, exc.cause, batch=batch, step=exc.step,
+                                    errors=(exc.errors[0][j], exc.errors[1][j])))
+            for j, trial in enumerate(trials)]
 
 
 def _goals(sc: SimScenario, sensor: GeometricSensor, setups: list[TrialSetup]

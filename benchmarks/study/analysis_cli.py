@@ -12,12 +12,14 @@ import time
 from pathlib import Path
 from typing import Any
 
+from benchmarks.study.outdir import OutputDir, OutputFile
+
 
 def cmd_export(args: argparse.Namespace) -> int:
     """Write a run's trials as a Parquet table (one row per trial)."""
     from benchmarks.study.table import export_parquet
 
-    path, n = export_parquet(Path(args.dir), Path(args.parquet))
+    path, n = export_parquet(Path(args.dir), Path(args.parquet), args.overwrite)
     print(f"wrote {n} trials of {args.dir} to {path} (read it back with "
           f"pandas.read_parquet('{path}'))")
     return 0
@@ -38,25 +40,44 @@ def _fmt_diff(c: Any) -> str:
     return f"{c.difference:+.3g} [{lo:+.3g}, {hi:+.3g}]"
 
 
-def print_comparisons(comparisons: list[Any], title: str) -> None:
-    """The comparison table, then the significant differences in plain words."""
-    from rich.markup import escape
-    from rich.table import Table
+def print_comparisons(comparisons: list[Any], title: str,
+                      runs: tuple[str, str] | None = None) -> None:
+    """The comparison table (fitted to the terminal), then the significant differences in
+    plain words.
 
+    Args:
+        comparisons: From :func:`benchmarks.study.compare.compare_controllers` or
+            :func:`benchmarks.study.compare.compare_runs`.
+        title: The table's title.
+        runs: Two runs: the names of run B and run A, which head their columns (one
+            row per controller); None: one run (a row per pair of controllers).
+    """
     from benchmarks.study.commands import console
     from benchmarks.study.compare import ALPHA
+    from benchmarks.study.fit_table import print_table
 
     con = console()
-    t = Table(title=title)
-    for col in ("scenario", "sweep", "a", "b", "metric", "n", "a", "b",
-                "a - b [95 % CI]", "test", "p", "p Holm", "verdict"):
-        t.add_column(col, justify="right" if col in ("n", "p", "p Holm") else "left")
-    for c in comparisons:
-        cells = [c.scenario, c.sweep, c.a, c.b, c.metric, str(c.n), _fmt_value(c, c.a_value),
+    if runs is None:
+        header = ["scenario", "sweep", "a", "b", "metric", "n", "a's value", "b's value",
+                  "a - b [95 % CI]", "test", "p", "p Holm", "verdict"]
+        keys: tuple[int, ...] = (0, 1, 2, 3, 4)
+        rows = [[c.scenario, c.sweep, c.a, c.b, c.metric, str(c.n), _fmt_value(c, c.a_value),
                  _fmt_value(c, c.b_value), _fmt_diff(c), c.test, f"{c.p_value:.3g}",
                  f"{c.p_holm:.3g}", "-" if c.better is None else f"{c.better} better"]
-        t.add_row(*(escape(x) for x in cells))  # sweeps and intervals hold brackets
-    con.print(t)
+                for c in comparisons]
+    else:
+        name_b, name_a = runs
+        header = ["scenario", "sweep", "controller", "metric", "n", name_b, name_a,
+                  f"{name_b} - {name_a} [95 % CI]", "test", "p", "p Holm", "verdict"]
+        keys = (0, 1, 2, 3)
+        rows = [[c.scenario, c.sweep, c.a.split(":", 1)[-1], c.metric, str(c.n),
+                 _fmt_value(c, c.a_value), _fmt_value(c, c.b_value), _fmt_diff(c), c.test,
+                 f"{c.p_value:.3g}", f"{c.p_holm:.3g}",
+                 "-" if c.better is None
+                 else f"{name_b if c.better == c.a else name_a} better"]
+                for c in comparisons]
+    print_table(con, title, header, rows, keys=keys, left=(*keys, len(header) - 1),
+                escape_cells=True, wrap=(1,))  # sweeps and intervals hold brackets
     significant = [c for c in comparisons if c.better is not None]
     con.print(f"Significant at {100 * ALPHA:.0f} % after Holm's correction "
               f"({len(significant)} of {len(comparisons)} comparisons):")
@@ -67,13 +88,25 @@ def print_comparisons(comparisons: list[Any], title: str) -> None:
         con.print("- none: no difference between these controllers is significant")
 
 
+def run_names(dir_a: str, dir_b: str) -> tuple[str, str]:
+    """The names of two runs in the comparison table: ``A (before)``, ``B (after)``
+    (their directories' names, or the paths as given when the names are the same)."""
+    na, nb = Path(dir_a).name, Path(dir_b).name
+    if na == nb:
+        na, nb = dir_a, dir_b
+    return f"A ({na})", f"B ({nb})"
+
+
 def cmd_compare(args: argparse.Namespace) -> int:
     """Paired tests between the controllers of a run, or between two runs."""
-    from benchmarks.study.compare import DEFAULT_METRICS, compare_controllers, compare_runs
+    from benchmarks.study.compare import compare_controllers, compare_runs, match_counts
     from benchmarks.study.table import load
+    from hexapod.outputs import check_replace, write_output
 
     t0 = time.perf_counter()
-    metrics = tuple(args.metric) if args.metric else DEFAULT_METRICS
+    if args.json:
+        check_replace(args.json, args.overwrite)  # before the work
+    metrics = tuple(args.metric) if args.metric else None  # None: the task's
     status = 0
     if len(args.dirs) == 1:
         df = load(args.dirs[0])
@@ -88,10 +121,15 @@ def cmd_compare(args: argparse.Namespace) -> int:
             raise BenchmarkError("--baseline compares the controllers of one run; with two "
                                  "runs every controller is compared with itself")
         dir_a, dir_b = args.dirs
-        comparisons, different, matched = compare_runs(load(dir_a), load(dir_b), "A", "B",
-                                                       metrics)
+        df_a, df_b = load(dir_a), load(dir_b)
+        comparisons, different, matched = compare_runs(df_a, df_b, "A", "B", metrics)
+        _, only_a, only_b = match_counts(df_a, df_b)
+        name_a, name_b = run_names(dir_a, dir_b)
         print_comparisons(comparisons, f"Run B ({dir_b}) against run A ({dir_a}), "
-                                       f"{matched} matched trials")
+                                       f"{matched} matched trials", (name_b, name_a))
+        print(f"Trials matched by scenario, sweep point, controller and trial: {matched} "
+              f"compared; unmatched, left out: {only_a} of the {len(df_a)} of run A "
+              f"({dir_a}), {only_b} of the {len(df_b)} of run B ({dir_b})")
         regressions = [c for c in comparisons if c.verdict.startswith("REGRESSION")]
         print(f"Regressions (B significantly worse than A): {len(regressions)}")
         for c in regressions:
@@ -110,7 +148,7 @@ def cmd_compare(args: argparse.Namespace) -> int:
                   "test": "determinism", "n": matched, "statistic": len(n_rows),
                   "p_value": None, "p_holm": None,
                   "difference": len(n_rows) / matched if matched else None,
-                  "interval": None,
+                  "interval": None, "unmatched": {"A": only_a, "B": only_b},
                   "rows": json.loads(different.to_json(orient="records"))}]
         if args.check and (regressions or len(n_rows)):
             status = 1
@@ -119,8 +157,8 @@ def cmd_compare(args: argparse.Namespace) -> int:
 
         raise BenchmarkError(f"compare takes one run directory or two, got {len(args.dirs)}")
     if args.json:
-        Path(args.json).write_text(json.dumps([c.to_json() for c in comparisons] + extra,
-                                              indent=1))
+        write_output(args.json, {"comparisons": [c.to_json() for c in comparisons] + extra},
+                     args.overwrite)
         print(f"wrote {len(comparisons) + len(extra)} comparison(s) to {args.json}")
     print(f"({time.perf_counter() - t0:.2f} s)")
     return status
@@ -132,9 +170,14 @@ def cmd_reproduce(args: argparse.Namespace) -> int:
     from rich.table import Table
 
     from benchmarks.study.commands import console
+    from benchmarks.study.outdir import check_reproduce_directory
     from benchmarks.study.reproduce import interval_text, markdown, reproduce
+    from hexapod.outputs import check_replace, write_output
 
     con = console()
+    if args.markdown:
+        check_replace(args.markdown, args.overwrite)  # before minutes of studies
+    check_reproduce_directory(Path(args.out), args.overwrite)
     t0 = time.perf_counter()
     results = reproduce(args.which, Path(args.out), args.quick, args.workers,
                         say=lambda text: con.print(text, markup=False, highlight=False))
@@ -156,7 +199,7 @@ def cmd_reproduce(args: argparse.Namespace) -> int:
     con.print(f"{within} of {len(results)} figures within the paper's; "
               f"{time.perf_counter() - t0:.0f} s; studies in {args.out}", highlight=False)
     if args.markdown:
-        Path(args.markdown).write_text(markdown(results) + "\n")
+        write_output(args.markdown, markdown(results) + "\n", args.overwrite)
         con.print(f"wrote {args.markdown}")
     return 0
 
@@ -165,7 +208,10 @@ def add_analysis_commands(sub: argparse._SubParsersAction) -> None:  # type: ign
     """Register ``export``, ``compare`` and ``reproduce`` on the CLI's sub-parsers."""
     s = sub.add_parser("export", help="write a run's trials as a table (Parquet)")
     s.add_argument("dir", help="a run directory")
-    s.add_argument("--parquet", required=True, metavar="FILE", help="output Parquet file")
+    s.add_argument("--parquet", required=True, metavar="FILE", action=OutputFile,
+                   help="output Parquet file")
+    s.add_argument("--overwrite", action="store_true",
+                   help="replace the --parquet file even if hexapod-bench did not write it")
     s.set_defaults(func=cmd_export)
 
     s = sub.add_parser("compare", help="paired tests between the controllers of a run, or "
@@ -173,16 +219,25 @@ def add_analysis_commands(sub: argparse._SubParsersAction) -> None:  # type: ign
                        description="DIR: every pair of controllers (or each against "
                                    "--baseline) on the trials both ran: McNemar's exact test "
                                    "on convergence, Wilcoxon's signed-rank test on final "
-                                   "error and steps, median paired difference with its "
-                                   "bootstrap interval, Holm's correction. DIR_A DIR_B: the "
-                                   "same trials of two runs matched; regressions and rows "
+                                   "error and steps (a trajectory task: on tracking RMS, "
+                                   "max, settling time, time at a force limit), median "
+                                   "paired difference with its bootstrap interval, Holm's "
+                                   "correction; failed trials left out of all but "
+                                   "convergence. DIR_A DIR_B: the same trials of two runs "
+                                   "matched (the unmatched counted); regressions and rows "
                                    "that differ listed.")
     s.add_argument("dirs", nargs="+", metavar="DIR", help="one run directory, or two (A B)")
     s.add_argument("--baseline", metavar="NAME", help="compare each controller with this one")
     s.add_argument("--metric", action="append", metavar="NAME",
-                   help="converged, final_error, orientation_error, steps or a numeric "
-                        "column (repeatable; default: converged, final_error, steps)")
-    s.add_argument("--json", metavar="FILE", help="write the comparisons as JSON")
+                   help="converged, final_error, orientation_error, steps, tracking_rms, "
+                        "tracking_max, settling, saturation or a numeric column "
+                        "(repeatable; default: the task's: converged, final_error, steps "
+                        "for a point-to-point task; tracking_rms, tracking_max, settling "
+                        "and, in the dynamic world, saturation for a trajectory task)")
+    s.add_argument("--json", metavar="FILE", action=OutputFile,
+                   help="write the comparisons as JSON")
+    s.add_argument("--overwrite", action="store_true",
+                   help="replace the --json file even if hexapod-bench did not write it")
     s.add_argument("--list", type=int, default=20, metavar="N",
                    help="two runs: rows that differ to print (default 20)")
     s.add_argument("--check", action="store_true",
@@ -196,9 +251,13 @@ def add_analysis_commands(sub: argparse._SubParsersAction) -> None:  # type: ign
     s.add_argument("--quick", action="store_true",
                    help="fewer trials (30 per noise level for seed 001, 1000 pairs for seed "
                         "003, 30 calibrations): minutes instead of tens of minutes")
-    s.add_argument("--out", default="runs/reproduce",
+    s.add_argument("--out", default="runs/reproduce", action=OutputDir,
                    help="where the studies' results go (default runs/reproduce; a study "
                         "already there is finished or reused, not redone)")
     s.add_argument("--workers", type=int, default=1, help="processes (default 1)")
-    s.add_argument("--markdown", metavar="FILE", help="also write the table as Markdown")
+    s.add_argument("--markdown", metavar="FILE", action=OutputFile,
+                   help="also write the table as Markdown")
+    s.add_argument("--overwrite", action="store_true",
+                   help="replace the --markdown file even if hexapod-bench did not write "
+                        "it, or write into an --out that holds other files")
     s.set_defaults(func=cmd_reproduce)

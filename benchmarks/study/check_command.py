@@ -20,6 +20,7 @@ from benchmarks.study.setup_check import (
     fixed_task_problems,
 )
 from hexapod.geometry import HexapodGeometry
+from hexapod.outputs import check_replace, write_output
 
 #: Exit code of ``check`` when the setup cannot run.
 CANNOT_RUN = 1
@@ -67,6 +68,7 @@ def scenario_setup(sc: Any) -> Setup:
     import controllers  # noqa: F401 - registers the built-ins
     from benchmarks.sim import load_camera, load_geometry
     from controllers.registry import registry
+    from vision.cameras.files.opencv import is_opencv_file
 
     g = load_geometry(sc)
     cam = load_camera(sc, g)
@@ -75,7 +77,10 @@ def scenario_setup(sc: Any) -> Setup:
                  else "[robot] preset (give [robot] geometry = your robot file)"),
         points=(f"base_points_mm / platform_points_mm in {sc.robot_geometry}"
                 if sc.robot_geometry else "[robot] geometry"),
-        camera=(f"[camera_from_base] in {sc.camera_file}" if sc.camera_file
+        camera=(f"[camera] pose or [camera.camera_from_base] in {sc.source} (the "
+                f"calibration file {sc.camera_file} holds no pose)"
+                if sc.camera_file and is_opencv_file(sc.camera_file)
+                else f"[camera_from_base] in {sc.camera_file}" if sc.camera_file
                 else f"[camera] preset '{sc.camera_preset}' in {sc.source} (or [camera] "
                      "file = a camera file)"),
         task=f"[task] max_translation_mm / max_angle_deg / margin_mm in {sc.source}")
@@ -99,6 +104,29 @@ def scenario_setup(sc: Any) -> Setup:
                  tuple(spec.label for spec in sc.controllers), note)
 
 
+def load_scenario_file(text: str) -> Any | None:
+    """The scenario ``text`` names (a built-in name or a scenario file), None for a robot
+    or camera file.
+
+    Raises:
+        ScenarioError, ConfigFileError: The file is invalid (naming the key).
+    """
+    from benchmarks.study.scenario import builtin_scenarios, load_scenario
+    from hexapod.config import load_toml
+    from vision.cameras.files.opencv import OPENCV_EXTENSIONS
+
+    path = Path(text)
+    if text in builtin_scenarios() or not path.exists():
+        return load_scenario(text)  # a built-in, or its did-you-mean error
+    if path.suffix.lower() in OPENCV_EXTENSIONS:
+        return None
+    table = load_toml(path)
+    if "controllers" in table or ("name" in table and "base_points_mm" not in table
+                                  and not {"fx_px", "opencv", "kind"} & set(table)):
+        return load_scenario(path)
+    return None
+
+
 def load_setup(text: str) -> Setup:
     """A setup from a built-in scenario name or a file (scenario, robot or camera).
 
@@ -107,21 +135,20 @@ def load_setup(text: str) -> Setup:
             (naming the key).
         BenchmarkError: A file that is none of the three.
     """
-    from benchmarks.study.scenario import builtin_scenarios, load_scenario
     from hexapod.config import load_toml
     from vision.cameras import camera_preset, load_camera
     from vision.cameras.files.opencv import OPENCV_EXTENSIONS
 
+    sc = load_scenario_file(text)
+    if sc is not None:  # its controllers resolved as a run resolves them
+        from benchmarks.study.scenario_checks import check_controllers
+
+        return scenario_setup(check_controllers(sc)[0])
     path = Path(text)
-    if text in builtin_scenarios() or not path.exists():
-        return scenario_setup(load_scenario(text))  # a built-in, or its did-you-mean error
     if path.suffix.lower() in OPENCV_EXTENSIONS:
         table: dict[str, Any] = {"opencv": str(path)}
     else:
         table = load_toml(path)
-    if "controllers" in table or ("name" in table and "base_points_mm" not in table
-                                  and not {"fx_px", "opencv", "kind"} & set(table)):
-        return scenario_setup(load_scenario(path))
     if "base_points_mm" in table:
         g = HexapodGeometry.from_toml(path)
         cam = camera_preset("front", g)
@@ -131,6 +158,8 @@ def load_setup(text: str) -> Setup:
             camera="the camera's placement (the front preset placed for this robot here)",
             task="[task] of a scenario"), None,
             ["camera: the front preset, placed for this robot (a scenario names yours)"], [])
+    if path.suffix.lower() in OPENCV_EXTENSIONS:
+        return calibration_setup(path)
     if {"fx_px", "opencv", "kind", "camera_from_base"} & set(table):
         from hexapod.geometry import deltalab
 
@@ -142,6 +171,37 @@ def load_setup(text: str) -> Setup:
     raise BenchmarkError(f"{path}: cannot tell what this file is: a scenario has "
                          "'controllers', a robot file 'base_points_mm', a camera file "
                          "'fx_px' (or 'opencv') and [camera_from_base] (docs/robot-files.md)")
+
+
+#: The preset whose placement a calibration file's camera gets in ``check``, by kind.
+CALIBRATION_POSE = {"perspective": "front", "fisheye": "fisheye"}
+
+
+def calibration_setup(path: Path) -> Setup:
+    """The setup of a calibration file checked alone (OpenCV, ROS ``camera_info``,
+    Kalibr): such a file holds no pose, so its camera is placed where the preset of its
+    kind sits for the deltalab robot (``front`` for a perspective camera, ``fisheye``,
+    else ``omni``), and the keys to change are those of the scenario that names it."""
+    from hexapod.geometry import deltalab
+    from vision.cameras import camera_preset, load_camera
+
+    g = deltalab()
+    kind = load_camera(path).kind
+    preset = CALIBRATION_POSE.get(kind, "omni")
+    cam = load_camera(path, camera_from_base=camera_preset(preset, g).camera_from_base)
+    t_mm = np.round(cam.camera_from_base.inverse().translation * 1e3, 1) + 0.0  # no -0.0
+    where = Where(strokes="[robot] of a scenario", points="[robot] of a scenario",
+                  camera=(f'the camera\'s pose in the scenario that names {path} ([camera] '
+                          f'pose = "{preset}" or [camera.camera_from_base]; the file holds '
+                          "no pose)"),
+                  task="[task] of a scenario")
+    notes = ["robot: the deltalab preset (a scenario names yours)",
+             f"camera pose: a calibration file holds none; placed where the '{preset}' "
+             f"preset sits for this robot (projection centre at ({t_mm[0]:.1f}, "
+             f"{t_mm[1]:.1f}, {t_mm[2]:.1f}) mm in the base frame); a scenario gives "
+             f'yours: [camera] file = "{path.name}" with pose = "..." or '
+             "[camera.camera_from_base]"]
+    return Setup("camera", g, cam, _default_task(), where, None, notes, [])
 
 
 def examine(setup: Setup) -> SetupReport:
@@ -159,14 +219,6 @@ def examine(setup: Setup) -> SetupReport:
             if p.topic == "camera" else p for p in report.problems]
     report.problems[:0] = setup.problems
     return report
-
-
-def preflight(sc: Any) -> list[Problem]:
-    """The checks of ``check`` for a study about to run: its problems.
-
-    A camera that sees no leg is an error only when every controller needs the camera.
-    """
-    return examine(scenario_setup(sc)).problems
 
 
 def _f(x: float, digits: int = 1) -> str:
@@ -201,8 +253,10 @@ def _dynamics_lines(g: HexapodGeometry, note: str | None) -> list[str]:
         f"{_per_leg(d.encoder_resolution, 1e6, 'um')}", *extra, ""]
 
 
-def describe(setup: Setup, report: SetupReport, source: str) -> list[str]:
-    """The lines ``check`` prints."""
+def describe(setup: Setup, report: SetupReport, source: str,
+             extra: list[str] | None = None) -> list[str]:
+    """The lines ``check`` prints (``extra``: lines before the problems, a trajectory
+    task's references)."""
     g, cam = setup.geometry, setup.camera
     base_r = np.linalg.norm(g.base_points[:, :2], axis=1)
     plat_r = np.linalg.norm(g.platform_points[:, :2], axis=1)
@@ -231,19 +285,7 @@ def describe(setup: Setup, report: SetupReport, source: str) -> list[str]:
                                            report.reach_mm, strict=True))
         + "; about one axis [deg]: " + ", ".join(
             f"{a} {_f(v)}" for a, v in zip("xyz", report.reach_deg, strict=True)), ""]
-    lines += [f"Camera '{cam.name}' ({cam.kind}, {cam.width}x{cam.height} px, fx "
-              f"{cam.K[0, 0]:.1f} px)",
-              f"  at home it sees {int(report.home_visible.sum())} of 12 leg edges "
-              "(pixels of the base end -> platform end):"]
-    for i in range(6):
-        parts = []
-        for j in range(2):
-            p = report.home_pixels[i, j]
-            seen = "seen" if report.home_visible[i, j] else "hidden"
-            ends = (f"({_f(p[0, 0])}, {_f(p[0, 1])}) -> ({_f(p[1, 0])}, {_f(p[1, 1])})"
-                    if np.all(np.isfinite(p)) else "not imaged")
-            parts.append(f"edge {j} {seen} {ends}")
-        lines.append(f"    leg {i}: " + "; ".join(parts))
+    lines += camera_lines(cam, report)
     lines += [f"  over the workspace: all 12 edges seen at {100 * report.poses_all_visible:.1f}"
               f" % of the reachable poses, none at {100 * report.poses_blind:.1f} %; least "
               f"seen edge: {100 * float(np.min(report.view_fraction)):.1f} % of the poses",
@@ -253,6 +295,7 @@ def describe(setup: Setup, report: SetupReport, source: str) -> list[str]:
         lines.append("  controllers that need the camera: "
                      + (", ".join(setup.needs_camera) or "none"))
     lines.append("")
+    lines += extra or []
     if report.problems:
         lines.append("Problems:")
         lines += [f"  {p.severity}: {p.text}" for p in report.problems]
@@ -263,9 +306,72 @@ def describe(setup: Setup, report: SetupReport, source: str) -> list[str]:
     return lines
 
 
-def write_picture(setup: Setup, report: SetupReport, path: Path) -> Path:
+#: How each end of an edge is said (:func:`benchmarks.study.setup_check.end_status`).
+END_TEXT = {"image": "in the image", "outside": "outside the image",
+            "far": "far outside the image", "behind": "behind the camera",
+            "unimaged": "beyond the lens's field of view",
+            "inside-leg": "no edge (the camera is inside the leg's cylinder)"}
+
+
+def _end(where: str, pixel: np.ndarray) -> str:
+    """One end of an edge: its pixel only where it is in the image or near it."""
+    if where in ("image", "outside"):
+        return f"{END_TEXT[where]} ({_f(pixel[0])}, {_f(pixel[1])})"
+    return END_TEXT[where]
+
+
+def camera_lines(cam: Any, report: SetupReport) -> list[str]:
+    """The camera's part of ``check``: the edges seen at home, each end of each edge
+    said where it is (in the image with its pixel, outside the image, behind the
+    camera...), never a pixel of a point that is not in view as if it were."""
+    from vision.legs import DEFAULT_MIN_VISIBLE_FRACTION
+
+    seen = report.home_visible
+    whole = seen & np.all(report.home_ends == "image", axis=-1)
+    lines = [f"Camera '{cam.name}' ({cam.kind}, {cam.width}x{cam.height} px, fx "
+             f"{cam.K[0, 0]:.1f} px)",
+             f"  at home it sees {int(seen.sum())} of 12 leg edges ({int(whole.sum())} "
+             f"with both ends in the image, {int((seen & ~whole).sum())} with an end out of it); "
+             "an edge is "
+             f"seen when at least {100 * DEFAULT_MIN_VISIBLE_FRACTION:.0f} % of its length "
+             "is in view (imaged, in the image, not hidden); its ends (base, platform):"]
+    for i in range(6):
+        for j in range(2):
+            pct = 100 * float(report.home_fraction[i, j])
+            state = (f"seen, {pct:.0f} % in view" if seen[i, j] else
+                     f"not seen ({pct:.0f} % in view)")
+            ends = [_end(str(report.home_ends[i, j, k]), report.home_pixels[i, j, k])
+                    for k in range(2)]
+            if ends[0] == ends[1] and not ends[0].endswith(")"):
+                ends_text = f"both ends {ends[0]}"
+            else:
+                ends_text = f"base end {ends[0]}, platform end {ends[1]}"
+            lines.append(f"    leg {i} edge {j}: {state}; {ends_text}")
+    return lines
+
+
+def check_picture(path: Path, overwrite: bool = False) -> None:
+    """Refuse a ``--picture`` name that is not .png/.jpg, or a user's file (without
+    ``overwrite``), before any work.
+
+    Raises:
+        BenchmarkError: Another suffix.
+        OutputError: A file hexapod-bench did not write.
+    """
+    if path.suffix.lower() not in (".png", ".jpg", ".jpeg"):
+        raise BenchmarkError(f"--picture {path}: use a .png or .jpg name")
+    check_replace(path, overwrite)
+
+
+def write_picture(setup: Setup, report: SetupReport, path: Path,
+                  overwrite: bool = False) -> Path:
     """An image of the robot at home seen by the camera (the project's renderer), each
-    edge drawn green where the camera sees it and red where hidden, legs numbered."""
+    edge drawn green where the camera sees it and red where hidden, legs numbered; PNG
+    or JPEG by the suffix, marked as the project's (:func:`hexapod.outputs.write_output`).
+
+    Raises:
+        OutputError: ``path`` is a user's file (without ``overwrite``).
+    """
     import cv2
 
     from hexapod.workspace import home_pose
@@ -296,19 +402,47 @@ def write_picture(setup: Setup, report: SetupReport, path: Path) -> Path:
             x, y = (round(float(c)) for c in ends.mean(axis=0))
             cv2.putText(img, str(i), (x + 6, y + 6), cv2.FONT_HERSHEY_SIMPLEX, 0.7,
                         (255, 120, 0), 2, cv2.LINE_AA)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    if not cv2.imwrite(str(path), img):
-        raise BenchmarkError(f"--picture: cannot write {path} (use a .png or .jpg name)")
-    return path
+    ok, data = cv2.imencode(".jpg" if path.suffix.lower() in (".jpg", ".jpeg") else ".png",
+                            img)
+    if not ok:
+        raise BenchmarkError(f"--picture: cannot encode {path}")
+    return write_output(path, data.tobytes(), overwrite)
 
 
 def cmd_check(args: argparse.Namespace) -> int:
-    """Check a scenario, robot or camera file; exit 1 when the setup cannot run."""
-    setup = load_setup(args.file)
-    report = examine(setup)
-    for line in describe(setup, report, args.file):
+    """Check a scenario, robot or camera file; exit 1 when the setup cannot run.
+
+    A scenario goes through ``run``'s own pre-flight (:func:`benchmarks.study.preflight.
+    preflight`): the same refusals in the same words (a file error: exit 2, as ``run``;
+    a setup where every trial would fail: the details, then ``run``'s refusal, exit 1).
+    """
+    import sys
+
+    from benchmarks.study.preflight import preflight, refusal
+    from benchmarks.study.trajectory_check import describe_trajectory
+
+    overwrite = getattr(args, "overwrite", False)
+    if args.picture:
+        check_picture(Path(args.picture), overwrite)
+    sc = load_scenario_file(args.file)
+    refused = None
+    extra: list[str] = []
+    if sc is not None:
+        pre = preflight([sc])
+        for text in pre.warnings:
+            print(f"warning: {text}", file=sys.stderr)
+        check = pre.checks[0]
+        setup, report = check.setup, check.report
+        extra = describe_trajectory(check.trajectory, check.scenario)
+        refused = refusal(check)
+    else:
+        setup = load_setup(args.file)
+        report = examine(setup)
+    for line in describe(setup, report, args.file, extra):
         print(line)
     if args.picture:
         print(f"picture of the robot at home seen by the camera: "
-              f"{write_picture(setup, report, Path(args.picture))}")
+              f"{write_picture(setup, report, Path(args.picture), overwrite)}")
+    if refused is not None:  # run's refusal, word for word
+        print(f"hexapod-bench: error: {refused}", file=sys.stderr)
     return 0 if report.can_run else CANNOT_RUN

@@ -5,7 +5,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import shlex
 import sys
 import time
 from pathlib import Path
@@ -26,7 +25,7 @@ def cmd_run(args: argparse.Namespace) -> int:
     """Run studies and write results.jsonl and report.md."""
     import controllers  # noqa: F401 - registers the built-ins
     from benchmarks.study.runner import run_lock
-    from benchmarks.study.scenario import check_controllers, load_scenario
+    from benchmarks.study.scenario import load_scenario
 
     out = Path(args.out)
     ctrl_list = [c.strip() for c in args.controllers.split(",")] if args.controllers else None
@@ -37,18 +36,21 @@ def cmd_run(args: argparse.Namespace) -> int:
         from dataclasses import replace
 
         scenarios = [replace(sc, world=args.world) for sc in scenarios]
-    from benchmarks.study.provenance import check_scenario_calibration
+    from benchmarks.study.preflight import preflight, refusal, warning_lines
 
-    warnings: list[str] = []
-    for sc in scenarios:
-        check_controllers(sc)
-        warnings += check_scenario_calibration(sc, getattr(args, "allow_foreign_calibration",
-                                                           False))
-    for text in warnings:
+    # the pre-flight of 'hexapod-bench check', the same function
+    pre = preflight(scenarios, getattr(args, "allow_foreign_calibration", False),
+                    measure=not getattr(args, "no_check", False))
+    for text in pre.warnings:
         print(f"warning: {text}", file=sys.stderr)
-    args.calibration_warnings = warnings
-    if not getattr(args, "no_check", False):
-        _preflight(scenarios)
+    args.calibration_warnings = pre.warnings
+    scenarios = pre.scenarios
+    for check in pre.checks:
+        refused = refusal(check)
+        if refused is not None:
+            raise refused
+        for line in warning_lines(check):
+            print(line, file=sys.stderr)
     from benchmarks.study.runner import backend_factory
 
     backend_factory(args.backend)  # validates the spec before any work
@@ -63,25 +65,17 @@ def cmd_run(args: argparse.Namespace) -> int:
     return _failure_epilogue(out, repeated.repeats(), code)
 
 
-def _preflight(scenarios: list[Any]) -> None:
-    """The checks of ``hexapod-bench check`` before the first trial: warnings printed, a
-    setup where every trial would fail the same way refused (:class:`SetupError`)."""
-    from benchmarks.exceptions import SetupError
-    from benchmarks.study.check_command import preflight
-
-    for sc in scenarios:
-        problems = preflight(sc)
-        errors = [p for p in problems if p.severity == "error"]
-        if errors:
-            raise SetupError(sc.source, errors)
-        for p in problems:
-            print(f"hexapod-bench: warning: {sc.name}: {p.text}", file=sys.stderr)
-
-
 def _failure_epilogue(out: Path, repeats: list[str], code: int) -> int:
     """Print the failures once per cause (with their counts) and the repeated warnings;
-    the exit code is 1 when every trial of the results directory failed."""
-    from benchmarks.study.failures import every_trial_failed, failure_summary
+    the exit code is 1 when every trial of the results directory failed, 3 when a
+    controller failed every one of its trials (the others ran)."""
+    from benchmarks.study.failures import (
+        CONTROLLER_FAILED,
+        EVERY_TRIAL_FAILED,
+        controllers_failing_every_trial,
+        every_trial_failed,
+        failure_summary,
+    )
     from benchmarks.study.runner import deduplicate, read_results
 
     rows, _, _ = deduplicate(read_results(out))
@@ -98,7 +92,14 @@ def _failure_epilogue(out: Path, repeats: list[str], code: int) -> int:
     if code == 0 and every_trial_failed(rows):
         print("hexapod-bench: error: every trial failed: the setup cannot run as it is (the "
               "causes are above)", file=sys.stderr)
-        return 1
+        return EVERY_TRIAL_FAILED
+    dead = controllers_failing_every_trial(rows)
+    if code == 0 and dead:
+        print("hexapod-bench: error: " + "; ".join(
+            f"{label} failed all its {n} trials" for label, n in dead.items())
+            + f" (the causes are above; exit code {CONTROLLER_FAILED}: the other controllers "
+              "ran)", file=sys.stderr)
+        return CONTROLLER_FAILED
     return code
 
 
@@ -118,6 +119,11 @@ def _run_locked(scenarios: list[Any], out: Path, args: argparse.Namespace) -> in
     from benchmarks.study.report import META_FILE, write_report
     from benchmarks.study.runner import completed_keys, plan, run_units
 
+    meta_path = out / META_FILE
+    meta: dict[str, Any] = json.loads(meta_path.read_text()) if meta_path.exists() else {}
+    from benchmarks.study.study_record import check_same_study, command_entry, record_command
+
+    grows = check_same_study(out, meta, scenarios)  # before any trial: one study per directory
     existing = (out / "results.jsonl").exists() and (out / "results.jsonl").stat().st_size > 0
     if existing and not args.resume:
         raise BenchmarkError(f"{out}: already holds results; use --resume to finish that run "
@@ -129,15 +135,17 @@ def _run_locked(scenarios: list[Any], out: Path, args: argparse.Namespace) -> in
     units = plan(scenarios, chunk, args.record, done, args.backend, args.engine)
     total = sum(len(u.trials) for u in units)
     con = console()
+    did = [f"grew {name} from {a} to {b} trials per sweep point and controller"
+           for name, (a, b) in grows.items()]
+    for text in did:
+        con.print(f"growing the study: {text} (everything else as in the directory)")
     if done:
         con.print(f"resuming: {len(done)} trials already done, {total} to go")
+    did.append(f"{len(done)} trials already done, {total} to run" if done else
+               f"{total} trials to run")
     executor = "dask" if args.dask else ("process pool" if args.workers > 1 else "in-process")
-    meta_path = out / META_FILE
-    meta: dict[str, Any] = {}
-    if meta_path.exists():
-        meta = json.loads(meta_path.read_text())
+    record_command(meta, command_entry(getattr(args, "argv", sys.argv[1:]), "; ".join(did)))
     meta.update({
-        "command": "hexapod-bench " + " ".join(shlex.quote(a) for a in sys.argv[1:]),
         "workers": args.workers, "executor": executor,
         "warnings": getattr(args, "calibration_warnings", []),
         "scenarios": {**meta.get("scenarios", {}), **{
@@ -208,15 +216,17 @@ def _keep_inputs(out: Path, scenarios: list[Any], meta: dict[str, Any],
     """Copy each scenario and its files into ``out/inputs/`` and record its settings and
     the ``--record`` count in ``meta`` (see :mod:`benchmarks.study.inputs`)."""
     from benchmarks.study.inputs import copy_inputs, settings
+    from benchmarks.study.study_record import study_of
 
     meta["record"] = args.record
     for sc in scenarios:
         kept = copy_inputs(out, sc, getattr(args, "allow_foreign_calibration", False))
         if kept.get("changed"):
             print(f"warning: {sc.source} differs from the copy this run started with "
-                  f"({out / kept['folder'] / 'source.toml'}, kept): the resumed trials use "
-                  "the file as it is now", file=sys.stderr)
-        meta["scenarios"][sc.name].update(inputs=kept, settings=settings(sc))
+                  f"({out / kept['folder'] / 'source.toml'}, kept); the study it describes was "
+                  "checked against the directory's, setting by setting", file=sys.stderr)
+        meta["scenarios"][sc.name].update(inputs=kept, settings=settings(sc),
+                                          study=study_of(sc))
 
 
 def _run_with_viz(scenarios: list[Any], out: Path, args: argparse.Namespace) -> int:
@@ -253,24 +263,35 @@ def _run_with_viz(scenarios: list[Any], out: Path, args: argparse.Namespace) -> 
 
 
 def _print_summary(out: Path, con: Any) -> None:
-    from rich.table import Table
-
+    """The results table of a run directory, per scenario after its task: tracking
+    figures for a trajectory task, convergence and final errors for a point-to-point one
+    (the failed trials counted apart and left out of the error columns); fitted to the
+    terminal's width (:mod:`benchmarks.study.fit_table`)."""
+    from benchmarks.study.fit_table import print_table
     from benchmarks.study.metrics import summarize
     from benchmarks.study.report import TABLE_HEADER, duplicate_note, summary_table_rows
     from benchmarks.study.runner import deduplicate, read_results
+    from benchmarks.study.tracking_report import is_tracking, tracking_header, tracking_rows
 
     rows, dropped, conflicting = deduplicate(read_results(out))
     if dropped:
         con.print(f"[yellow]warning[/yellow]: {out / 'results.jsonl'}: "
                   f"{duplicate_note(dropped, conflicting)}")
-    summaries = summarize(rows)
-    t = Table(title=f"Results ({out})")
-    for col in TABLE_HEADER:
-        t.add_column(col, justify="left" if col in ("scenario", "sweep", "controller",
-                                                    "backend") else "right")
-    for row in summary_table_rows(summaries):
-        t.add_row(*row)
-    con.print(t)
+    by_scenario: dict[str, list[dict[str, Any]]] = {}
+    for r in rows:
+        by_scenario.setdefault(r["scenario"], []).append(r)
+    point_to_point = []
+    for name, rs in by_scenario.items():
+        if not is_tracking(rs):
+            point_to_point += rs
+            continue
+        print_table(con, f"Trajectory tracking ({out}) - scenario: {name}",
+                    tracking_header(rs), tracking_rows(rs, with_intervals=False),
+                    keys=(0, 1), left=(0, 1), wrap=(0,))
+    if point_to_point or not rows:
+        print_table(con, f"Results ({out})", TABLE_HEADER,
+                    summary_table_rows(summarize(point_to_point)), keys=(0, 1, 2, 3),
+                    left=(0, 1, 2, 3), wrap=(1,))
 
 
 def cmd_calibrate(args: argparse.Namespace) -> int:
@@ -451,10 +472,26 @@ def cmd_viz(args: argparse.Namespace) -> int:
 
 def cmd_report(args: argparse.Namespace) -> int:
     """Rebuild report.md from results.jsonl."""
+    from benchmarks.study.outdir import META_FILE, check_report_file
     from benchmarks.study.report import write_report
+    from benchmarks.study.study_record import command_entry, record_command
 
-    path = write_report(Path(args.dir), getattr(args, "overwrite", False))
-    _print_summary(Path(args.dir), console())
+    out, overwrite = Path(args.dir), getattr(args, "overwrite", False)
+    check_report_file(out, overwrite)
+    meta_path = out / META_FILE
+    kept = meta_path.read_text() if meta_path.is_file() else None
+    if kept is not None:  # run.json keeps every command that wrote the directory
+        meta = json.loads(kept)
+        record_command(meta, command_entry(getattr(args, "argv", sys.argv[1:]),
+                                           "rebuilt report.md and its figures"))
+        meta_path.write_text(json.dumps(meta, indent=2))
+    try:
+        path = write_report(out, overwrite)
+    except BaseException:
+        if kept is not None:  # nothing written: the record stays as it was
+            meta_path.write_text(kept)
+        raise
+    _print_summary(out, console())
     print(f"report: {path}")
     return 0
 

@@ -37,8 +37,15 @@ METRICS: dict[str, tuple[str, str, bool]] = {
     "final_error": ("final_position_error_mm", "mm", False),
     "orientation_error": ("final_orientation_error_deg", "deg", False),
     "steps": ("steps", "steps", False),
+    "tracking_rms": ("tracking_rms_position_mm", "mm", False),
+    "tracking_max": ("tracking_max_position_mm", "mm", False),
+    "settling": ("settling_time_s", "s", False),
+    "saturation": ("saturation_time_s", "s", False),
 }
+#: Default metrics of a point-to-point task.
 DEFAULT_METRICS = ("converged", "final_error", "steps")
+#: Default metrics of a trajectory task (``saturation``: in the dynamic world).
+TRACKING_METRICS = ("tracking_rms", "tracking_max", "settling", "saturation")
 KEY = ["scenario", "point", "controller", "trial"]
 #: Columns compared by the determinism check of two runs.
 OUTCOME_COLUMNS = ("converged", "steps", "final_position_error_mm",
@@ -122,6 +129,36 @@ def resolve_metric(name: str, columns: list[str]) -> tuple[str, str, bool]:
                          f"column of the results ({', '.join(sorted(columns))})")
 
 
+def _has_values(frame: pd.DataFrame, column: str) -> bool:
+    return column in frame and bool(frame[column].notna().any())
+
+
+def task_metrics(frame: pd.DataFrame) -> tuple[str, ...]:
+    """The default metrics of one scenario's trials: :data:`TRACKING_METRICS` for a
+    trajectory task (the rows carry tracking figures; ``saturation`` only with the
+    dynamic world's drive figures), :data:`DEFAULT_METRICS` for a point-to-point one."""
+    if not _has_values(frame, "tracking_rms_position_mm"):
+        return DEFAULT_METRICS
+    return tuple(m for m in TRACKING_METRICS if _has_values(frame, METRICS[m][0]))
+
+
+def default_metrics(df: pd.DataFrame) -> dict[str, tuple[str, ...]]:
+    """:func:`task_metrics` of every scenario of a run."""
+    return {str(name): task_metrics(frame) for name, frame in df.groupby("scenario")}
+
+
+def failed_mask(frame: pd.DataFrame, suffix: str = "") -> pd.Series:
+    """The trials that did not run to their end (an end stop, a crash: a ``failure`` that
+    is not the ``not converged`` of a trial that ran to its end)."""
+    import pandas as pd
+
+    col = f"failure{suffix}"
+    if col not in frame:
+        return pd.Series(False, index=frame.index)
+    text = frame[col].astype("string")
+    return (text.notna() & (text != "") & ~text.str.startswith("not conv")).fillna(False)
+
+
 def _sweep_text(df: pd.DataFrame) -> dict[tuple[str, int], str]:
     cols = df.attrs.get("sweep_columns", [])
     first = df.drop_duplicates(["scenario", "point"])
@@ -133,10 +170,13 @@ def _sweep_text(df: pd.DataFrame) -> dict[tuple[str, int], str]:
 
 
 def _values(frame: pd.DataFrame, column: str, metric: str) -> pd.DataFrame:
-    """Trials x controllers of one (scenario, point); steps only where converged."""
+    """Trials x controllers of one (scenario, point); steps only where converged; a
+    failed trial (:func:`failed_mask`) has no value but its convergence (a failure)."""
     sub = frame[["trial", "controller", column]].copy()
     if metric == "steps":
         sub[column] = sub[column].where(frame["converged"].astype(bool))
+    if metric != "converged":
+        sub[column] = sub[column].where(~failed_mask(frame))
     return sub.pivot(index="trial", columns="controller", values=column)
 
 
@@ -165,15 +205,27 @@ def _comparison(scenario: str, point: int, sweep: str, a: str, b: str, metric: s
                       discordant=res.discordant)
 
 
+def _metric_plan(df: pd.DataFrame, metrics: tuple[str, ...] | None
+                 ) -> tuple[list[str], dict[str, tuple[str, ...]]]:
+    """The metrics to compare, and those of each scenario (its task's defaults when
+    ``metrics`` is None, else ``metrics`` everywhere)."""
+    if metrics is not None:
+        return list(metrics), {str(s): metrics for s in df["scenario"].unique()}
+    per = default_metrics(df)
+    return list(dict.fromkeys(m for ms in per.values() for m in ms)), per
+
+
 def compare_controllers(df: pd.DataFrame, baseline: str | None = None,
-                        metrics: tuple[str, ...] = DEFAULT_METRICS) -> list[Comparison]:
+                        metrics: tuple[str, ...] | None = None) -> list[Comparison]:
     """Every pair of controllers of a run (or each against ``baseline``), at every sweep
-    point, on the trials both ran.
+    point, on the trials both ran (the failed trials left out of every metric but
+    ``converged``).
 
     Args:
         df: From :func:`benchmarks.study.load`.
         baseline: Compare every other controller against this one only.
-        metrics: Metric names (:data:`METRICS`) or numeric columns.
+        metrics: Metric names (:data:`METRICS`) or numeric columns; None: each
+            scenario's task's (:func:`task_metrics`).
 
     Returns:
         The comparisons, Holm-adjusted per metric, with verdicts.
@@ -189,11 +241,14 @@ def compare_controllers(df: pd.DataFrame, baseline: str | None = None,
         raise BenchmarkError(f"one controller in this run ({', '.join(controllers)}): "
                              "nothing to compare; compare two runs with DIR_A DIR_B")
     sweeps = _sweep_text(df)
+    names, per_scenario = _metric_plan(df, metrics)
     out: list[Comparison] = []
-    for name in metrics:
+    for name in names:
         column, unit, _ = resolve_metric(name, list(df.columns))
         family: list[Comparison] = []
         for (scenario, point), frame in df.groupby(["scenario", "point"], sort=True):
+            if name not in per_scenario[str(scenario)]:
+                continue
             table = _values(frame, column, name)
             present = [c for c in controllers if c in table.columns]
             if baseline is not None:
@@ -244,11 +299,24 @@ def _effect(c: Comparison) -> str:
             f"lower in {down} of the pairs")
 
 
+def match_counts(df_a: pd.DataFrame, df_b: pd.DataFrame) -> tuple[int, int, int]:
+    """Trials of two runs matched by (scenario, sweep point, controller, trial).
+
+    Returns:
+        ``(matched, only in A, only in B)``.
+    """
+    a = set(map(tuple, df_a[KEY].astype(str).to_numpy().tolist()))
+    b = set(map(tuple, df_b[KEY].astype(str).to_numpy().tolist()))
+    return len(a & b), len(a - b), len(b - a)
+
+
 def compare_runs(df_a: pd.DataFrame, df_b: pd.DataFrame, name_a: str = "A",
-                 name_b: str = "B", metrics: tuple[str, ...] = DEFAULT_METRICS
+                 name_b: str = "B", metrics: tuple[str, ...] | None = None
                  ) -> tuple[list[Comparison], pd.DataFrame, int]:
     """Two runs of the same scenarios: run B against run A, per controller and sweep
-    point, on the matched trials.
+    point, on the matched trials (a trial failed in either run left out of every metric
+    but ``converged``; ``metrics`` None: each scenario's task's, :func:`task_metrics`
+    of run A).
 
     Returns:
         The comparisons (``a`` is ``B:controller``, ``b`` is ``A:controller``; a
@@ -262,9 +330,13 @@ def compare_runs(df_a: pd.DataFrame, df_b: pd.DataFrame, name_a: str = "A",
     import pandas as pd
 
     common = sorted(set(df_a.columns) & set(df_b.columns))
-    metric_cols = {resolve_metric(name, common)[0] for name in metrics}
+    names, per_scenario = _metric_plan(df_a, metrics)
+    if metrics is None:  # the task's metrics that both runs recorded
+        names = [n for n in names if METRICS[n][0] in common]
+    metric_cols = {resolve_metric(name, common)[0] for name in names}
     cols = sorted(set(OUTCOME_COLUMNS) & set(common))
-    merge_cols = sorted((set(cols) | metric_cols | {"converged"}) - set(KEY))
+    merge_cols = sorted((set(cols) | metric_cols | {"converged"}
+                         | ({"failure"} & set(common))) - set(KEY))
     merged = df_a[KEY + merge_cols].merge(df_b[KEY + merge_cols], on=KEY,
                                            suffixes=("_a", "_b"))
     if merged.empty:
@@ -288,13 +360,18 @@ def compare_runs(df_a: pd.DataFrame, df_b: pd.DataFrame, name_a: str = "A",
                  else pd.DataFrame(columns=[*KEY, "column", "a", "b"]))
     sweeps = _sweep_text(df_a)
     out: list[Comparison] = []
-    for name in metrics:
+    for name in names:
         column, unit, _ = resolve_metric(name, common)
         family: list[Comparison] = []
         for (scenario, point, ctrl), g in merged.groupby(["scenario", "point", "controller"],
                                                          sort=True):
+            if name not in per_scenario.get(str(scenario), ()):
+                continue
             xa = g[f"{column}_a"].to_numpy(dtype=float)
             xb = g[f"{column}_b"].to_numpy(dtype=float)
+            if name != "converged":
+                xa = np.where(failed_mask(g, "_a").to_numpy(), np.nan, xa)
+                xb = np.where(failed_mask(g, "_b").to_numpy(), np.nan, xb)
             if name == "steps":
                 xa = np.where(g["converged_a"].astype(bool), xa, np.nan)
                 xb = np.where(g["converged_b"].astype(bool), xb, np.nan)

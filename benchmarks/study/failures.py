@@ -14,6 +14,7 @@ once per distinct message template and counted (:class:`RepeatedWarnings`).
 from __future__ import annotations
 
 import logging
+import re
 from collections import Counter
 from dataclasses import dataclass, field
 from typing import Any
@@ -35,12 +36,40 @@ def row_cause(row: dict[str, Any]) -> str:
     return str(row.get("cause") or row.get("failure"))
 
 
+#: A measured value in a cause (a number with a decimal point or an exponent): the
+#: integers of a cause name what is at fault (a leg, a step count) and stay in its kind.
+_MEASURE = re.compile(r"(-?\d+\.\d+(?:e[-+]?\d+)?|-?\d+e[-+]?\d+)", re.IGNORECASE)
+
+
+def cause_kind(cause: str) -> str:
+    """The kind of a cause: its text with the measured values left out.
+
+    ``leg 1 hit its end stop: 425.101 mm, stroke [400.000, 500.000] mm`` and the same
+    with 426.3 mm are one kind (leg 1's end stop); leg 2's end stop is another.
+    """
+    return _MEASURE.sub("#", cause)
+
+
+def _merge_causes(causes: list[str]) -> str:
+    """One text for causes of one kind: each measured value that differs between them
+    given as its range (``425.101 to 431.250 mm``), the others as they are."""
+    parts = [_MEASURE.split(c) for c in causes]
+    out = list(parts[0])
+    for i in range(1, len(out), 2):  # the odd parts are the measured values
+        texts = [p[i] for p in parts]
+        if len(set(texts)) > 1:
+            values = [float(t) for t in texts]
+            out[i] = f"{texts[values.index(min(values))]} to {texts[values.index(max(values))]}"
+    return "".join(out)
+
+
 @dataclass
 class FailureGroup:
-    """The failed trials that share a cause.
+    """The failed trials that share a kind of cause (:func:`cause_kind`).
 
     Attributes:
-        cause: The cause, in the user's terms.
+        cause: The cause, in the user's terms; the measured values that differ between
+            the trials given as their range.
         count: Failed trials.
         controllers: Failed trials per controller label.
         points: Sweep points (``scenario/p<k>``) where it happened.
@@ -55,21 +84,45 @@ class FailureGroup:
 
 
 def failure_groups(rows: list[dict[str, Any]]) -> list[FailureGroup]:
-    """The failed rows grouped by cause, the most frequent first."""
+    """The failed rows grouped by kind of cause (:func:`cause_kind`: one group for leg
+    1's end stop whatever length each trial reached), the most frequent first."""
     groups: dict[str, FailureGroup] = {}
+    causes: dict[str, list[str]] = {}
     for r in rows:
         if not is_failure(r):
             continue
         cause = row_cause(r)
-        g = groups.get(cause)
+        kind = cause_kind(cause)
+        g = groups.get(kind)
         if g is None:
-            g = groups[cause] = FailureGroup(
+            g = groups[kind] = FailureGroup(
                 cause, example=f"{r.get('scenario')}/p{r.get('point', 0)}/"
                                f"{r.get('controller')}/trial {r.get('trial')}: {r['failure']}")
+            causes[kind] = []
+        causes[kind].append(cause)
         g.count += 1
         g.controllers[str(r.get("controller"))] += 1
         g.points.add(f"{r.get('scenario')}/p{r.get('point', 0)}")
+    for kind, g in groups.items():
+        g.cause = _merge_causes(causes[kind])
     return sorted(groups.values(), key=lambda g: -g.count)
+
+
+#: Exit code of ``run`` when every trial of the results directory failed.
+EVERY_TRIAL_FAILED = 1
+#: Exit code of ``run`` when a controller failed every one of its trials (others ran).
+CONTROLLER_FAILED = 3
+
+
+def controllers_failing_every_trial(rows: list[dict[str, Any]]) -> dict[str, int]:
+    """The controllers (labels, per scenario) none of whose trials ran to its end, with
+    their trial counts."""
+    by: dict[str, list[bool]] = {}
+    for r in rows:
+        key = f"{r.get('controller')}" + (f" ({r.get('scenario')})" if r.get("scenario")
+                                          else "")
+        by.setdefault(key, []).append(is_failure(r))
+    return {k: len(v) for k, v in by.items() if v and all(v)}
 
 
 def every_trial_failed(rows: list[dict[str, Any]]) -> bool:

@@ -72,6 +72,7 @@ def copy_inputs(out: Path, sc: Any, allow_foreign: bool = False) -> dict[str, An
     source = Path(sc.source)
     if (folder / "source.toml").is_file():
         same = (folder / "source.toml").read_bytes() == source.read_bytes()
+        _grow(folder / "scenario.toml", sc.trials)
         return {"folder": rel, "changed": not same, **_listing(folder)}
     folder.mkdir(parents=True, exist_ok=True)
     shutil.copyfile(source, folder / "source.toml")
@@ -91,13 +92,31 @@ def copy_inputs(out: Path, sc: Any, allow_foreign: bool = False) -> dict[str, An
     if not cal:
         del table["calibration"]
     table["trials"], table["seed"] = sc.trials, sc.seed
+    table.setdefault("robot", {})["world"] = sc.world  # --world too
     table.setdefault("task", {})["max_steps"] = sc.task.max_steps
     table["controllers"] = [{"name": c.name, "label": c.label, **c.options}
                             for c in sc.controllers]
-    header = (f"# {TEXT_MARKER}: the scenario of this run, command-line overrides applied "
-              "and paths local (source.toml: the file as read)\n")
-    (folder / "scenario.toml").write_text(header + tomli_w.dumps(table))
+    # each controller carries the [controller_options] it took (the pre-flight gave them
+    # to the controllers that declare them): the table would give them again
+    table.pop("controller_options", None)
+    (folder / "scenario.toml").write_text(_HEADER + tomli_w.dumps(table))
     return {"folder": rel, "changed": False, **_listing(folder)}
+
+
+#: The first lines of ``inputs/NAME/scenario.toml``.
+_HEADER = (f"# {TEXT_MARKER}: the scenario of this run, command-line overrides applied "
+           "and paths local (source.toml: the file as read)\n")
+
+
+def _grow(path: Path, trials: int) -> None:
+    """A grown study (more trials, everything else checked the same): the runnable copy
+    says the new trial count."""
+    if not path.is_file():
+        return
+    table = load_toml(path)
+    if table.get("trials") != trials:
+        table["trials"] = trials
+        path.write_text(_HEADER + tomli_w.dumps(table))
 
 
 def _listing(folder: Path) -> dict[str, Any]:

@@ -56,21 +56,30 @@ def quantile_cells(values: list[Any], quantiles: list[float], digits: int = 3) -
             for q, iv in zip(quantiles, ivs, strict=True)]
 
 
+def completed(rows: list[dict[str, Any]]) -> list[dict[str, Any]]:
+    """The rows of the trials that ran to their end (the failed ones left out of the
+    error statistics; the tables count them apart)."""
+    from benchmarks.study.failures import is_failure
+
+    return [r for r in rows if not is_failure(r)]
+
+
 def summary_rows_with_intervals(summaries: list[Summary],
                                 groups: dict[GroupKey, list[dict[str, Any]]]
                                 ) -> list[list[str]]:
     """The rows of the report's main table (columns of
-    :data:`benchmarks.study.report.TABLE_HEADER`), with intervals."""
+    :data:`benchmarks.study.report.TABLE_HEADER`), with intervals; the error columns
+    over the trials that ran to their end."""
     out = []
     for s in summaries:
-        rs = groups[(s.scenario, s.point, s.controller, s.backend)]
+        rs = completed(groups[(s.scenario, s.point, s.controller, s.backend)])
         pos_med, pos_p95 = quantile_cells([r["final_position_error_mm"] for r in rs],
                                           [0.5, 0.95])
         rot_med, = quantile_cells([r["final_orientation_error_deg"] for r in rs], [0.5], 4)
         steps, = quantile_cells([r["steps"] for r in rs if r["converged"]], [0.5], 0)
         out.append([
             s.scenario, format_sweep(s.sweep), s.controller, s.backend,
-            stats.format_rate(s.converged, s.trials), pos_med, pos_p95,
+            stats.format_rate(s.converged, s.trials), str(s.failed), pos_med, pos_p95,
             _fmt(s.position_max_mm), rot_med, _fmt(s.orientation_max_deg, 4), steps,
             _fmt(s.step_time_median_us, 1), str(s.stroke_violations),
         ])
@@ -82,7 +91,7 @@ def tail_rows(summaries: list[Summary], groups: dict[GroupKey, list[dict[str, An
     """Rows of the convergence-tail table: median over trials with its interval, max."""
     out = []
     for s in summaries:
-        rs = groups[(s.scenario, s.point, s.controller, s.backend)]
+        rs = completed(groups[(s.scenario, s.point, s.controller, s.backend)])
         med, = quantile_cells([r.get("tail_position_error_mm") for r in rs], [0.5])
         out.append([format_sweep(s.sweep), s.controller, med, _fmt(s.tail_position_max_mm)])
     return out
@@ -103,6 +112,34 @@ def calibration_rows(summaries: list[Summary], groups: dict[GroupKey, list[dict[
                     _fmt(s.calibration_min_ratio, 4),
                     f"{s.calibration_ill_conditioned}/{s.trials}",
                     f"{s.calibration_refused}/{s.trials}"])
+    return out
+
+
+def median_cell(rows: list[dict[str, Any]], key: str, digits: int = 3) -> str:
+    """The median over the rows of a per-trial figure (``rtt_median_ms``,
+    ``detect_time_ms``...) with its bootstrap interval."""
+    cell, = quantile_cells([r.get(key) for r in rows], [0.5], digits)
+    return cell
+
+
+DRIVE_HEADER = ["sweep", "controller", "max leg force N", "saturation s (median)",
+                "trials saturated", "tracking RMS mm/s (median)", "tracking max mm/s"]
+
+
+def drive_rows(summaries: list[Summary], groups: dict[GroupKey, list[dict[str, Any]]]
+               ) -> list[list[str]]:
+    """Rows of the dynamic world's drives table (:data:`DRIVE_HEADER`), over the trials
+    that ran to their end: the largest force, the median time at a force limit with its
+    interval, the trials that reached a limit (rate with its Wilson interval), the
+    median drive tracking RMS with its interval and the largest drive tracking error."""
+    out = []
+    for s in summaries:
+        rs = completed(groups[(s.scenario, s.point, s.controller, s.backend)])
+        sat, = quantile_cells([r.get("saturation_time_s") for r in rs], [0.5])
+        rms, = quantile_cells([r.get("drive_tracking_rms_mm_s") for r in rs], [0.5])
+        out.append([format_sweep(s.sweep), s.controller, _fmt(s.leg_force_max_n, 1), sat,
+                    stats.format_rate(s.saturated_trials, len(rs)), rms,
+                    _fmt(s.tracking_max_mm_s, 1)])
     return out
 
 

@@ -34,7 +34,13 @@ def sweep_values(row: dict[str, Any]) -> dict[str, Any]:
 
 @dataclass
 class Summary:
-    """Figures of one controller at one sweep point of one scenario."""
+    """Figures of one controller at one sweep point of one scenario.
+
+    ``failed`` counts the trials that did not run to their end
+    (:func:`benchmarks.study.failures.is_failure`); they count in ``trials`` and as not
+    converged, and are left out of the error, tail and drive figures, which are those of
+    the trials that ran to their end.
+    """
 
     scenario: str
     point: int
@@ -73,6 +79,7 @@ class Summary:
     saturated_trials: int = 0
     tracking_rms_median_mm_s: float = float("nan")
     tracking_max_mm_s: float = float("nan")
+    failed: int = 0
 
     @property
     def convergence_rate(self) -> float:
@@ -94,7 +101,10 @@ def _stat(values: list[Any], fn: str) -> float:
 
 
 def summarize(rows: list[dict[str, Any]]) -> list[Summary]:
-    """One :class:`Summary` per (scenario, sweep point, controller, backend), sorted."""
+    """One :class:`Summary` per (scenario, sweep point, controller, backend), sorted
+    (the failed trials left out of the error figures, counted in ``failed``)."""
+    from benchmarks.study.failures import is_failure
+
     groups: dict[tuple[str, int, str, str], list[dict[str, Any]]] = defaultdict(list)
     for r in rows:
         groups[(r["scenario"], int(r.get("point", 0)), r["controller"],
@@ -102,8 +112,9 @@ def summarize(rows: list[dict[str, Any]]) -> list[Summary]:
     out = []
     for (scenario, point, controller, backend), rs in sorted(groups.items(),
                                                              key=lambda kv: kv[0]):
-        pos = [r["final_position_error_mm"] for r in rs]
-        ori = [r["final_orientation_error_deg"] for r in rs]
+        done = [r for r in rs if not is_failure(r)]
+        pos = [r["final_position_error_mm"] for r in done]
+        ori = [r["final_orientation_error_deg"] for r in done]
         conv = [r for r in rs if r["converged"]]
         crashed = [r for r in rs if r["final_position_error_mm"] is None]
         out.append(Summary(
@@ -134,10 +145,11 @@ def summarize(rows: list[dict[str, Any]]) -> list[Summary]:
                                                 or 0) > 0),
             calibration_refused=sum(1 for r in rs if str(r.get("failure") or "").startswith(
                 "CalibrationError")),
-            tail_position_median_mm=_stat([r.get("tail_position_error_mm") for r in rs],
+            tail_position_median_mm=_stat([r.get("tail_position_error_mm") for r in done],
                                           "median"),
-            tail_position_max_mm=_stat([r.get("tail_position_error_mm") for r in rs], "max"),
-            **_drive_figures(rs),
+            tail_position_max_mm=_stat([r.get("tail_position_error_mm") for r in done], "max"),
+            failed=len(rs) - len(done),
+            **_drive_figures(done),
         ))
     return out
 

@@ -9,6 +9,7 @@ whose. See ``docs/outputs.md``.
 
 from __future__ import annotations
 
+import argparse
 from pathlib import Path
 
 from benchmarks.study.results import LOCK_FILE, RESULTS_FILE, TRIALS_DIR
@@ -107,3 +108,36 @@ def _calibration_source(path: Path) -> str:
         return ""
     src = table.get("source")
     return f"; calibrated.toml made from {src}" if isinstance(src, str) and src else ""
+
+
+class OutputFile(argparse._StoreAction):
+    """``add_argument(..., action=OutputFile)``: an option naming a file the command writes
+    (with :func:`hexapod.outputs.write_output`: a user's file refused unless
+    ``--overwrite``, the project's mark in it). The tag lets a test find every output
+    option of every subcommand."""
+
+    kind = "file"
+
+
+class OutputDir(argparse._StoreAction):
+    """``add_argument(..., action=OutputDir)``: a directory the command writes into (absent,
+    empty or its own; see :func:`hexapod.outputs.check_output_dir`)."""
+
+    kind = "directory"
+
+
+def study_entry(entry: Path) -> bool:
+    """Whether an entry of ``reproduce --out`` is its own: a directory holding only what a
+    run or a calibration writes (also one interrupted before its first row)."""
+    return entry.is_dir() and all(
+        _run_entry(e) or e.name in (CALIBRATION_JSON, CALIBRATED_TOML) for e in entry.iterdir())
+
+
+def check_reproduce_directory(out: Path, overwrite: bool = False) -> None:
+    """Refuse a ``reproduce --out`` that holds entries other than its studies' directories.
+
+    Raises:
+        OutputError: What it holds and how to proceed.
+    """
+    check_output_dir(out, study_entry, "reproduce directory (run and calibration "
+                     "directories only)", overwrite)

@@ -11,9 +11,10 @@ from typing import Any
 
 import numpy as np
 
-from benchmarks.study import intervals, plots, profiles
+from benchmarks.study import intervals, plots, profiles, stats
 from benchmarks.study.metrics import Summary, format_sweep, summarize
 from benchmarks.study.runner import deduplicate, machine_info, read_results
+from benchmarks.study.study_record import command_lines
 from benchmarks.study.tracking_report import tracking_section
 from hexapod.outputs import TEXT_MARKER
 
@@ -36,7 +37,7 @@ def summary_table_rows(summaries: list[Summary]) -> list[list[str]]:
     for s in summaries:
         rows.append([
             s.scenario, format_sweep(s.sweep), s.controller, s.backend,
-            f"{100 * s.convergence_rate:.1f}% ({s.converged}/{s.trials})",
+            f"{100 * s.convergence_rate:.1f}% ({s.converged}/{s.trials})", str(s.failed),
             _fmt(s.position_median_mm), _fmt(s.position_p95_mm), _fmt(s.position_max_mm),
             _fmt(s.orientation_median_deg, 4), _fmt(s.orientation_max_deg, 4),
             _fmt(s.steps_median, 0), _fmt(s.step_time_median_us, 1),
@@ -45,11 +46,17 @@ def summary_table_rows(summaries: list[Summary]) -> list[list[str]]:
     return rows
 
 
-TABLE_HEADER = ["scenario", "sweep", "controller", "backend", "converged", "pos med mm",
+TABLE_HEADER = ["scenario", "sweep", "controller", "backend", "converged", "failed", "pos med mm",
                 "pos p95 mm", "pos max mm", "rot med deg", "rot max deg", "steps med",
                 "step us", "stroke viol."]
 #: ``steps med``: median steps to converge (fixed-duration tasks: to settle within the
 #: tolerances for good).
+
+
+def _group(groups: dict[intervals.GroupKey, list[dict[str, Any]]], s: Summary
+           ) -> list[dict[str, Any]]:
+    """The rows of a summary's group."""
+    return groups[(s.scenario, s.point, s.controller, s.backend)]
 
 
 def _md_table(header: list[str], rows: list[list[str]]) -> str:
@@ -90,7 +97,8 @@ def failures_section(rows: list[dict[str, Any]]) -> list[str]:
     if not groups:
         return []
     out = ["## Failures", "", f"{sum(g.count for g in groups)} of {len(rows)} trials did not "
-           "run to their end; one entry per distinct cause:", ""]
+           "run to their end; one entry per kind of cause (a measured value that differs "
+           "between its trials given as its range):", ""]
     for g in groups:
         who = ", ".join(f"{c}: {n}" for c, n in sorted(g.controllers.items()))
         out += [f"- **{g.count} trial(s)** ({who}; sweep points: "
@@ -121,8 +129,7 @@ def write_report(out_dir: Path, overwrite: bool = False) -> Path:
     lines = ["# Benchmark report", "", f"<!-- {TEXT_MARKER}: hexapod-bench report -->", ""]
     lines.append(f"Generated {datetime.now(UTC).strftime('%Y-%m-%d %H:%M UTC')} from "
                  f"`{out_dir / 'results.jsonl'}` ({len(rows)} trials).")
-    if meta.get("command"):
-        lines.append(f"Command: `{meta['command']}`")
+    lines += command_lines(meta)
     if dropped:
         lines += ["", f"**Duplicate rows**: {duplicate_note(dropped, conflicting)}"]
     if meta.get("warnings"):
@@ -136,7 +143,10 @@ def write_report(out_dir: Path, overwrite: bool = False) -> Path:
               "Each row is one controller at one point of the scenario's sweep. *converged*: "
               "trials whose true platform pose reached the position and orientation tolerances "
               "of the scenario. Final errors are those of the TRUE pose against the TRUE goal, "
-              "over all trials (converged or not). *steps med*: median number of control "
+              "over the trials that ran to their end (converged or not); *failed*: trials "
+              "that did not run to their end (an end stop, a crash: section Failures), "
+              "counted as not converged and left out of the error columns. *steps med*: "
+              "median number of control "
               "periods to converge (for fixed-duration tasks: after which the error stayed "
               "within the tolerances). *step us*: median time of one controller "
               "`step`. *stroke viol.*: periods where a command would have driven a leg "
@@ -155,14 +165,17 @@ def write_report(out_dir: Path, overwrite: bool = False) -> Path:
         lines += [_md_table(TABLE_HEADER, intervals.summary_rows_with_intervals(ss, groups)),
                   ""]
         if any(np.isfinite(s.rtt_median_ms) for s in ss):
-            lines += ["Robot link (communication time per period):", ""]
+            lines += ["Robot link (communication time per period; *RTT median*: the median "
+                      "over the trials of each trial's median, with its interval; *RTT p99*: "
+                      "the largest of the trials' 99th percentiles):", ""]
             lines += [_md_table(["sweep", "controller", "backend", "RTT median ms",
                                  "RTT p99 ms", "missed periods"],
                                 [[format_sweep(s.sweep), s.controller, s.backend,
-                                  _fmt(s.rtt_median_ms), _fmt(s.rtt_p99_ms),
-                                  str(s.missed_periods)] for s in ss]), ""]
+                                  intervals.median_cell(_group(groups, s), "rtt_median_ms"),
+                                  _fmt(s.rtt_p99_ms), str(s.missed_periods)]
+                                 for s in ss]), ""]
         if any(np.isfinite(s.leg_force_max_n) for s in ss):
-            lines += drive_section(ss)
+            lines += drive_section(ss, groups)
         if any(s.hidden_edge_periods for s in ss):
             lines += ["Visibility (periods where the camera saw fewer than the 12 edges, summed "
                       "over the trials; trials with at least one such period):", ""]
@@ -170,7 +183,9 @@ def write_report(out_dir: Path, overwrite: bool = False) -> Path:
                                  "trials with a hidden edge"],
                                 [[format_sweep(s.sweep), s.controller,
                                   str(s.hidden_edge_periods),
-                                  f"{s.hidden_edge_trials}/{s.trials}"] for s in ss]), ""]
+                                  f"{s.hidden_edge_trials}/{s.trials}: "
+                                  f"{stats.format_rate(s.hidden_edge_trials, s.trials)}"]
+                                 for s in ss]), ""]
         if any(np.isfinite(s.tail_position_median_mm) for s in ss):
             lines += ["Convergence tail (median of the position error over the last 20 % of "
                       "each fixed-duration trial, as the seeds read their tails):", ""]
@@ -181,7 +196,8 @@ def write_report(out_dir: Path, overwrite: bool = False) -> Path:
             lines += ["Images in the loop (render, detect, estimate at every step):", ""]
             lines += [_md_table(["sweep", "controller", "detection median ms per frame"],
                                 [[format_sweep(s.sweep), s.controller,
-                                  _fmt(s.detect_time_median_ms)] for s in ss]), ""]
+                                  intervals.median_cell(_group(groups, s), "detect_time_ms")]
+                                 for s in ss]), ""]
         if any(np.isfinite(s.calibration_median_mm) or s.calibration_refused for s in ss):
             lines += ["Calibration of the base points before control (error per point: the "
                       "norm, and seed 001's measure, the largest error on any coordinate of "
@@ -248,15 +264,12 @@ def unconverged_lines(rows: list[dict[str, Any]]) -> list[str]:
             ""]
 
 
-def drive_section(ss: list[Summary]) -> list[str]:
-    """The dynamic world's drives: leg forces, saturation and tracking (markdown lines)."""
+def drive_section(ss: list[Summary], groups: dict[intervals.GroupKey, list[dict[str, Any]]]
+                  ) -> list[str]:
+    """The dynamic world's drives: leg forces, saturation and tracking (markdown lines),
+    medians and rates with their intervals, over the trials that ran to their end."""
     return ["Drives (dynamic world: the drives' forces on the legs, the time any drive spent "
             "at its force limit, the drive tracking error = velocity setpoint minus realised "
-            "leg velocity, over every physics step):", "",
-            _md_table(["sweep", "controller", "max leg force N", "saturation s (median)",
-                       "trials saturated", "tracking RMS mm/s (median)",
-                       "tracking max mm/s"],
-                      [[format_sweep(s.sweep), s.controller, _fmt(s.leg_force_max_n, 1),
-                        _fmt(s.saturation_time_median_s, 3), f"{s.saturated_trials}/{s.trials}",
-                        _fmt(s.tracking_rms_median_mm_s, 3), _fmt(s.tracking_max_mm_s, 1)]
-                       for s in ss]), ""]
+            "leg velocity, over every physics step; the trials that ran to their end, "
+            "medians and rates with their 95 % intervals):", "",
+            _md_table(intervals.DRIVE_HEADER, intervals.drive_rows(ss, groups)), ""]

@@ -98,6 +98,12 @@ def run_study(study: str, out: Path, quick: bool, workers: int,
         return d
     from benchmarks.study.commands import auto_chunk
     from benchmarks.study.runner import completed_keys, plan, run_lock, run_units
+    from benchmarks.study.study_record import (
+        check_same_study,
+        command_entry,
+        record_command,
+        study_of,
+    )
 
     trials = TRIALS[name][1 if quick else 0]
     sc = load_scenario(name).with_overrides(trials=trials)
@@ -108,9 +114,14 @@ def run_study(study: str, out: Path, quick: bool, workers: int,
         todo = sum(len(u.trials) for u in units)
         say(f"{study}: {todo} trials to run, {len(done)} done "
             f"(hexapod-bench run {name} --trials {trials} --out {d} --workers {workers})")
-        meta = {"command": f"hexapod-bench run {name} --trials {trials} --out {d}",
-                "scenarios": {sc.name: {"description": sc.description,
-                                        "reference": sc.reference, "source": sc.source}}}
+        meta = json.loads((d / "run.json").read_text()) if (d / "run.json").is_file() else {}
+        check_same_study(d, meta, [sc])
+        record_command(meta, command_entry(
+            ["run", name, "--trials", str(trials), "--out", str(d)],
+            f"hexapod-bench reproduce: {len(done)} trials already done, {todo} to run"))
+        meta["scenarios"] = {sc.name: {"description": sc.description,
+                                       "reference": sc.reference, "source": sc.source,
+                                       "study": study_of(sc)}}
         (d / "run.json").write_text(json.dumps(meta, indent=2))
         t0 = time.perf_counter()
         if units:

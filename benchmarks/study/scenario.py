@@ -338,7 +338,7 @@ def parse_scenario(table: dict[str, Any], path: str = "<dict>") -> Scenario:
         noise=noise, calibration_error=cal_err, calibration=cal, task=task, clock=clock,
         drives=drives,
         reference=reference, sweep_axes=sweep, source=path, geometry_data=geometry_data,
-        camera_data=camera_data, calibration_points=points,
+        camera_data=camera_data, calibration_points=points, controller_options=dict(defaults),
     )
 
 
@@ -354,10 +354,22 @@ def _checked_name(value: str, what: str, path: str, key: str) -> str:
 
 
 def _parse_world(robot: dict[str, Any], dt: float, path: str) -> tuple[str, float]:
-    """``[robot] world`` and ``physics_dt`` (a divisor of the control period ``dt``)."""
+    """``[robot] world`` and ``physics_dt`` (in the dynamic world, a divisor of the control
+    period ``dt``; the kinematic world has no physics step)."""
     world = _typed(robot.get("world", "kinematic"), str, path, "robot.world", WORLDS)
     physics_dt = _typed(robot.get("physics_dt", 0.001), float, path, "robot.physics_dt")
     check_range(physics_dt, "robot.physics_dt", path)
+    if world == "dynamic":
+        check_physics_dt(dt, physics_dt, path)
+    return world, physics_dt
+
+
+def check_physics_dt(dt: float, physics_dt: float, path: str) -> None:
+    """The dynamic world's physics step divides the control period.
+
+    Raises:
+        ScenarioError: It does not, naming ``robot.physics_dt``.
+    """
     if physics_dt > dt * (1 + 1e-9):
         raise ScenarioError(path, f"{physics_dt:g} s is longer than the control period "
                             f"robot.dt ({dt:g} s)", key="robot.physics_dt")
@@ -366,7 +378,6 @@ def _parse_world(robot: dict[str, Any], dt: float, path: str) -> tuple[str, floa
         raise ScenarioError(path, f"the control period robot.dt ({dt:g} s) is not a whole "
                             f"number of physics steps of {physics_dt:g} s",
                             key="robot.physics_dt")
-    return world, physics_dt
 
 
 def _read_files(geometry_file: str | None, camera_file: str | None, cal: CalibrationConfig,

@@ -42,31 +42,65 @@ def referenced_file(base_dir: Path, value: str, key: str, path: str) -> str:
     return str(target)
 
 
-def check_option_names(source: str, spec: ControllerSpec, factory: Any, where: str) -> None:
-    """Every option of ``spec`` is a parameter of the controller's factory (its signature).
+def check_option_names(source: str, spec: ControllerSpec, table: Any, where: str) -> None:
+    """Every option of ``spec`` is one the controller declares
+    (:func:`controllers.options.option_table`: the same table ``list --options`` prints).
 
     Raises:
         ScenarioError: An option the controller does not take, naming the key as written
             in the file, the controller's options and the close one.
     """
-    import inspect
-
-    try:
-        params = inspect.signature(factory).parameters
-    except (TypeError, ValueError):  # no signature to check against (a C callable)
+    if table.open:  # it hands further options on: they are checked when it is built
         return
-    if any(p.kind is inspect.Parameter.VAR_KEYWORD for p in params.values()):
-        return
-    accepted = [n for n, p in params.items()
-                if p.kind in (inspect.Parameter.POSITIONAL_OR_KEYWORD,
-                              inspect.Parameter.KEYWORD_ONLY)]
     for option in spec.options:
-        if option not in accepted:
+        if not table.declares(option):
             key = spec.option_keys.get(option, f"{where}.{option}")
             raise ScenarioError(
                 source, f"controller '{spec.name}' has no option '{option}'; its options: "
-                f"{', '.join(accepted) or 'none'}", key=key,
-                suggestion=suggest(option, accepted))
+                f"{', '.join(table.names) or 'none'} (hexapod-bench list --options "
+                f"{spec.name})", key=key, suggestion=suggest(option, table.names))
+
+
+def _shared_options(sc: Scenario, tables: list[Any]) -> tuple[list[ControllerSpec], list[str]]:
+    """Give each ``[controller_options]`` key to the controllers that declare it.
+
+    A key no controller of the study declares is refused (a typo), unless
+    ``--controllers`` chose the controllers (the file's keys were written for others):
+    then it is left out, with a warning.
+
+    Returns:
+        The controllers with their options, and the warnings.
+    """
+    shared = {o for spec in sc.controllers for o, k in spec.option_keys.items()
+              if k == f"controller_options.{o}"}
+    takers = {o: [spec.label for spec, t in zip(sc.controllers, tables, strict=True)
+                  if t.open or t.declares(o)] for o in sorted(shared)}
+    warnings: list[str] = []
+    for option, labels in takers.items():
+        if labels:
+            continue
+        declared = sorted({n for t in tables for n in t.names})
+        if any(spec.key is None for spec in sc.controllers):
+            warnings.append(
+                f"[controller_options] {option} of {sc.source} is left out: no controller "
+                f"chosen by --controllers ({', '.join(s.label for s in sc.controllers)}) "
+                "takes it")
+            continue
+        raise ScenarioError(
+            sc.source, "no controller of the study takes this option ("
+            + "; ".join(f"{spec.label}: {', '.join(t.names) or 'none'}"
+                        for spec, t in zip(sc.controllers, tables, strict=True))
+            + "); [controller_options] go to each controller that declares them",
+            key=f"controller_options.{option}", suggestion=suggest(option, declared))
+    specs = []
+    for spec, t in zip(sc.controllers, tables, strict=True):
+        drop = {o for o in spec.options if spec.option_keys.get(o) == f"controller_options.{o}"
+                and not (t.open or t.declares(o))}
+        specs.append(replace(spec, options={k: v for k, v in spec.options.items()
+                                            if k not in drop},
+                             option_keys={k: v for k, v in spec.option_keys.items()
+                                          if k not in drop}) if drop else spec)
+    return specs, warnings
 
 
 def check_lens_error(camera: Any, cal_err: CalibrationErrorConfig,
@@ -143,11 +177,17 @@ def check_fixed_task(task: TaskConfig, preset: str | None, geometry: Any,
                                     f"[{lo:g}, {hi:g}] mm", key=f"task.{key}")
 
 
-def check_controllers(sc: Scenario) -> None:
-    """Resolve every controller of a scenario and build it with its options once.
+def check_controllers(sc: Scenario) -> tuple[Scenario, list[str]]:
+    """Resolve every controller of a scenario, give it its options and build it once.
 
-    A misspelt name or an option a controller refuses (a NaN gain, an unknown
-    option) is reported before any trial runs, instead of failing every trial.
+    A misspelt name, an option a controller does not declare or refuses (a NaN gain), a
+    ``[controller_options]`` key no controller declares, or a controller that commands
+    what the scenario's world cannot apply (leg forces in the kinematic world) is reported
+    before any trial runs, in the file's terms, instead of failing every trial.
+
+    Returns:
+        The scenario with each controller's options resolved (``[controller_options]``
+        kept only where declared), and warnings to print.
 
     Raises:
         UnknownControllerError: A name no controller is registered under (with the close one).
@@ -155,23 +195,46 @@ def check_controllers(sc: Scenario) -> None:
         ScenarioError: An option the controller refuses, naming the controller and option.
     """
     import controllers  # noqa: F401 - registers the built-ins
+    from benchmarks.sim.actuation import world_actuation
+    from controllers.batch import actuation_of
     from controllers.exceptions import OptionError, UnknownControllerError
     from controllers.registry import registry
+    from hexapod.exceptions import ActuationError
 
+    tables = []
     for k, spec in enumerate(sc.controllers):
         where = spec.key or f"controllers[{k}]"
         try:
-            factory = registry.factory(spec.name)
+            tables.append(registry.options(spec.name))
         except UnknownControllerError as exc:
             if spec.key is None:  # named on the command line
                 raise ScenarioError("--controllers", str(exc)) from None
             raise ScenarioError(sc.source, str(exc), key=where) from None
-        check_option_names(sc.source, spec, factory, where)
+    specs, warnings = _shared_options(sc, tables)
+    sc = replace(sc, controllers=tuple(specs))
+    accepted, world = world_actuation(sc)
+    for k, (spec, table) in enumerate(zip(sc.controllers, tables, strict=True)):
+        where = spec.key or f"controllers[{k}]"
+        named = spec.key or "--controllers"
+        check_option_names(sc.source, spec, table, where)
         try:
-            registry.create(spec.name, **spec.options)
+            ctrl = registry.create(spec.name, **spec.options)
         except OptionError as exc:
             raise ScenarioError(sc.source, f"{spec.name}: {exc.problem}",
                                 key=spec.option_keys.get(exc.option,
                                                          f"{where}.{exc.option}")) from None
-        except TypeError as exc:  # an option the factory does not take
+        except TypeError as exc:  # an option the factory (or the law it wraps) does not take
             raise ScenarioError(sc.source, f"{spec.name}: {exc}", key=where) from None
+        kind = actuation_of(ctrl)
+        if kind not in accepted:
+            try:
+                from hexapod.actuation import check_actuation
+
+                check_actuation(kind, accepted, world, spec.label)
+            except ActuationError as exc:
+                fix = ("set [robot] world = \"dynamic\" (or run with --world dynamic)"
+                       if sc.world != "dynamic" else "choose another controller")
+                raise ScenarioError(sc.source if spec.key else "--controllers",
+                                    f"{exc}; {fix}",
+                                    key=named if spec.key else None) from None
+    return sc, warnings

@@ -381,6 +381,9 @@ class Scenario:
         geometry_data: The robot read from ``robot_geometry`` when the scenario was loaded.
         camera_data: The camera read from ``camera_file`` when the scenario was loaded.
         calibration_points: (6, 3) base points [m] read from ``calibration.file``.
+        controller_options: The file's ``[controller_options]`` (given to each controller
+            that declares the option, :func:`benchmarks.study.scenario_checks.
+            check_controllers`; kept for the controllers ``--controllers`` chooses).
 
     The files a scenario names are read once, where it is loaded (the client): work
     units carry their data to the workers, which need not see the files (a Dask
@@ -415,6 +418,7 @@ class Scenario:
     geometry_data: Any = None
     camera_data: Any = None
     calibration_points: Any = None
+    controller_options: dict[str, Any] = field(default_factory=dict, compare=False)
 
     def expand(self) -> list[Scenario]:
         """One scenario per point of the sweep (Cartesian product of the swept keys)."""
@@ -469,8 +473,11 @@ class Scenario:
                     raise ScenarioError("--controllers", f"{exc.value!r}: {exc.problem}"
                                         ) from None
             by_label = {c.label: c for c in sc.controllers}
-            sc = replace(sc, controllers=tuple(by_label.get(c, ControllerSpec(c, c))
-                                               for c in controllers))
+            defaults = sc.controller_options  # the file's [controller_options], as in a file
+            keys = {o: f"controller_options.{o}" for o in defaults}
+            sc = replace(sc, controllers=tuple(
+                by_label.get(c, ControllerSpec(c, c, dict(defaults), None, dict(keys)))
+                for c in controllers))
         return sc
 
 

@@ -84,6 +84,11 @@ class SetupReport:
         home_visible: (6, 2) edges seen at home.
         home_pixels: (6, 2, 2, 2) pixels of the ends of each edge at home (base end,
             platform end), NaN where not imaged.
+        home_ends: (6, 2, 2) where each end of each edge is at home
+            (:func:`end_status`: ``"image"``, ``"outside"``, ``"far"``, ``"behind"``,
+            ``"unimaged"``, ``"inside-leg"``).
+        home_fraction: (6, 2) fraction of each edge's length in view at home (imaged,
+            inside the image, not hidden).
         view_fraction: (6, 2) fraction of the reachable poses where each edge is seen.
         poses_blind: Fraction of the reachable poses where no edge is seen.
         poses_all_visible: Fraction where all 12 edges are seen.
@@ -110,6 +115,8 @@ class SetupReport:
     edge_ratio: float
     edge_condition: float
     problems: list[Problem] = field(default_factory=list)
+    home_ends: np.ndarray = field(default_factory=lambda: np.full((6, 2, 2), "image"))
+    home_fraction: np.ndarray = field(default_factory=lambda: np.ones((6, 2)))
 
     @property
     def can_run(self) -> bool:
@@ -157,6 +164,43 @@ def axis_reach(geometry: HexapodGeometry) -> tuple[np.ndarray, np.ndarray]:
         ok = _inside(geometry, exp_so3(np.eye(3) * mid[:, None]), np.broadcast_to(t0, (3, 3)))
         alo, ahi = np.where(ok, mid, alo), np.where(ok, ahi, mid)
     return lo, alo
+
+
+def end_status(camera: Any, obs: Any) -> np.ndarray:
+    """Where the two ends of each edge of one observation are, for the user: in the
+    image, outside it (within one image size of it), far outside it, behind a
+    perspective camera, not imaged by the lens (beyond a fisheye's or a mirror's field
+    of view), or without edges (the camera inside the leg's cylinder).
+
+    Args:
+        camera: The camera of the observation.
+        obs: One :class:`vision.legs.LegObservation` (not batched).
+
+    Returns:
+        (6, 2, 2) strings: ``"image"``, ``"outside"``, ``"far"``, ``"behind"``,
+        ``"unimaged"`` or ``"inside-leg"``.
+    """
+    from vision.legs import limb_points
+
+    ends = limb_points(obs.base_points, obs.directions, obs.radius, obs.lengths,
+                       obs.normals, np.array([0.0, 1.0]))  # camera frame
+    px = np.asarray(obs.segments, float)
+    w, h = float(camera.width), float(camera.height)
+    finite = np.all(np.isfinite(px), axis=-1)
+    with np.errstate(invalid="ignore"):
+        x, y = px[..., 0], px[..., 1]
+        inside = finite & (x >= -0.5) & (x <= w - 0.5) & (y >= -0.5) & (y <= h - 0.5)
+        near = finite & (x >= -w) & (x <= 2 * w) & (y >= -h) & (y <= 2 * h)
+        behind = (ends[..., 2] <= 0) if camera.kind == "perspective" else np.zeros(
+            finite.shape, bool)
+    out = np.full(finite.shape, "unimaged", dtype=object)
+    out[finite & ~near] = "far"
+    out[near & ~inside] = "outside"
+    out[inside] = "image"
+    out[behind] = "behind"
+    no_edges = ~np.all(np.isfinite(obs.normals), axis=-1)  # (6, 2)
+    out[no_edges] = "inside-leg"
+    return out
 
 
 def edge_interaction_ratio(obs: Any) -> tuple[float, float]:
@@ -256,7 +300,9 @@ def check_setup(geometry: HexapodGeometry, camera: Any, max_translation_mm: floa
         home_pixels=np.asarray(home_obs.segments, float), view_fraction=vis.mean(axis=0),
         poses_blind=float(1.0 - seen.mean()),
         poses_all_visible=float(vis.reshape(len(vis), -1).all(axis=1).mean()),
-        edge_ratio=ratio, edge_condition=cond, problems=problems)
+        edge_ratio=ratio, edge_condition=cond, problems=problems,
+        home_ends=end_status(camera, home_obs),
+        home_fraction=np.nan_to_num(np.asarray(home_obs.visible_fraction, float)))
     problems += _camera_problems(report, camera, home_obs, needs_camera, where)
     return report
 
@@ -276,8 +322,14 @@ def _camera_problems(report: SetupReport, camera: Any, home_obs: Any, needs_came
         elif not np.any(np.isfinite(report.home_pixels)):
             why = "no point of any leg projects into the image"
         else:
+            ends = report.home_ends
+            counts = [(int(np.sum(ends == k)), text) for k, text in (
+                ("behind", "behind the camera"), ("far", "far outside the image"),
+                ("outside", "outside the image"), ("unimaged", "beyond the lens's field"),
+                ("image", "in the image"))]
             why = (f"the legs project outside the {camera.width}x{camera.height} image or "
-                   "hide one another")
+                   "hide one another (of the 24 edge ends: "
+                   + ", ".join(f"{n} {text}" for n, text in counts if n) + ")")
         out.append(Problem(severity, f"the camera sees no leg edge at the home pose: {why}; "
                            f"change {where.camera}", "camera"))
     elif report.poses_blind >= 1.0:

@@ -112,17 +112,30 @@ def _read_fast(out_dir: Path) -> pd.DataFrame | None:
     return table.to_pandas()
 
 
-def export_parquet(out_dir: str | Path, path: str | Path) -> tuple[Path, int]:
-    """Write the table of :func:`load` to a Parquet file.
+def export_parquet(out_dir: str | Path, path: str | Path, overwrite: bool = False
+                   ) -> tuple[Path, int]:
+    """Write the table of :func:`load` to a Parquet file (``generator`` in its schema
+    metadata; see :func:`hexapod.outputs.write_output`).
+
+    Args:
+        out_dir: The run directory.
+        path: The Parquet file.
+        overwrite: Replace a file hexapod-bench did not write.
 
     Returns:
         The file and its number of rows.
+
+    Raises:
+        OutputError: ``path`` is a user's file (without ``overwrite``); nothing written.
     """
+    import pyarrow as pa
+
+    from hexapod.outputs import check_replace, write_output
+
+    check_replace(path, overwrite)  # before reading the run
     df = load(out_dir)
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
     attrs: dict[str, Any] = dict(df.attrs)
     df.attrs = {}  # pyarrow stores attrs as JSON metadata; keep the file plain
-    df.to_parquet(path, engine="pyarrow", index=False)
+    table = pa.Table.from_pandas(df, preserve_index=False)
     df.attrs = attrs
-    return path, len(df)
+    return write_output(path, table, overwrite), len(df)

@@ -13,13 +13,14 @@ from typing import Any
 
 import numpy as np
 
+from benchmarks.study import intervals, stats
 from benchmarks.study.metrics import format_sweep, sweep_values
 
 log = logging.getLogger(__name__)
 
 TRIALS_DIR = "trials"
-#: Columns of the tracking table.
-HEADER = ["sweep", "controller", "trials", "RMS mm (median)", "RMS mm (p95)",
+#: Columns of the tracking table (medians with their 95 % intervals in the report).
+HEADER = ["sweep", "controller", "trials", "failed", "RMS mm (median)", "RMS mm (p95)",
           "max mm (median)", "max mm (worst)", "RMS deg (median)", "settled",
           "settling s (median)"]
 #: Columns added in the dynamic world (rows with drive figures).
@@ -27,15 +28,28 @@ FORCE_HEADER = ["peak N (median)", "peak N (worst)", "RMS N (median)", "at limit
                 "at limit s (worst)"]
 
 
-def _stat(values: list[Any], how: str) -> float:
-    arr = np.array([v for v in values if v is not None], dtype=float)
+def is_tracking(rows: list[dict[str, Any]]) -> bool:
+    """Whether the rows are those of a trajectory task (they carry tracking figures)."""
+    return any("tracking_rms_position_mm" in r for r in rows)
+
+
+def _finite(values: list[Any]) -> np.ndarray:
+    arr = np.array([np.nan if v is None else v for v in values], dtype=float)
+    return arr[np.isfinite(arr)]
+
+
+def _cells(values: list[Any], hows: list[str], with_intervals: bool) -> list[str]:
+    """The statistics ``hows`` (``median``, ``p95``, ``max``) of the finite values: the
+    quantiles with their bootstrap intervals when ``with_intervals``, the maximum
+    without (no interval says anything about the largest of n draws)."""
+    arr = _finite(values)
     if arr.size == 0:
-        return float("nan")
-    if how == "median":
-        return float(np.median(arr))
-    if how == "p95":
-        return float(np.percentile(arr, 95))
-    return float(np.max(arr))
+        return ["-" for _ in hows]
+    q = {"median": 0.5, "p95": 0.95}
+    qs = [q[h] for h in hows if h in q]
+    qcells = iter(intervals.quantile_cells(list(arr), qs) if with_intervals
+                  else [_fmt(float(np.quantile(arr, x))) for x in qs])
+    return [_fmt(float(arr.max())) if h == "max" else next(qcells) for h in hows]
 
 
 def _fmt(x: float) -> str:
@@ -52,36 +66,54 @@ def tracking_header(rows: list[dict[str, Any]]) -> list[str]:
     return HEADER + (FORCE_HEADER if _dynamic(rows) else [])
 
 
-def _force_cells(rs: list[dict[str, Any]]) -> list[str]:
+def _force_cells(rs: list[dict[str, Any]], with_intervals: bool) -> list[str]:
     """Peak force [N] (median and worst trial), RMS force [N] (median) and time at a force
     limit [s] (median and worst) of one (sweep point, controller) group."""
-    peak = [r.get("max_leg_force_n") for r in rs]
-    sat = [r.get("saturation_time_s") for r in rs]
-    return [_fmt(_stat(peak, "median")), _fmt(_stat(peak, "max")),
-            _fmt(_stat([r.get("rms_leg_force_n") for r in rs], "median")),
-            _fmt(_stat(sat, "median")), _fmt(_stat(sat, "max"))]
+    return [*_cells([r.get("max_leg_force_n") for r in rs], ["median", "max"], with_intervals),
+            *_cells([r.get("rms_leg_force_n") for r in rs], ["median"], with_intervals),
+            *_cells([r.get("saturation_time_s") for r in rs], ["median", "max"],
+                    with_intervals)]
 
 
-def tracking_rows(rows: list[dict[str, Any]]) -> list[list[str]]:
+def tracking_rows(rows: list[dict[str, Any]], with_intervals: bool = True
+                  ) -> list[list[str]]:
     """The table rows: one per (sweep point, controller) of the trajectory trials (with
-    :data:`FORCE_HEADER`'s cells in the dynamic world)."""
+    :data:`FORCE_HEADER`'s cells in the dynamic world).
+
+    The failed trials (:func:`benchmarks.study.failures.is_failure`: an end stop, a
+    crash) are counted in *failed* and left out of every other figure, which are those
+    of the trials that ran to their end; *settled* is their rate with its Wilson
+    interval.
+
+    Args:
+        rows: The result rows of one scenario.
+        with_intervals: Medians and 95th percentiles with their 95 % bootstrap
+            intervals (the report), or the values alone (the terminal).
+    """
+    from benchmarks.study.failures import is_failure
+
     groups: dict[tuple[int, str], list[dict[str, Any]]] = defaultdict(list)
     for r in rows:
-        if r.get("tracking_rms_position_mm") is not None:
-            groups[(int(r.get("point", 0)), str(r["controller"]))].append(r)
+        groups[(int(r.get("point", 0)), str(r["controller"]))].append(r)
     forces = _dynamic([r for rs in groups.values() for r in rs])
     out = []
-    for (_, controller), rs in sorted(groups.items()):
-        settled = [r["settling_time_s"] for r in rs if r.get("settling_time_s") is not None]
+    for (_, controller), every in sorted(groups.items()):
+        rs = [r for r in every if not is_failure(r)]
+        settled = sum(1 for r in rs if r.get("settling_time_s") is not None)
+        rate = (stats.format_rate(settled, len(rs)) if with_intervals
+                else f"{settled}/{len(rs)}") if rs else "-"
         out.append([
-            format_sweep(sweep_values(rs[0])), controller, str(len(rs)),
-            _fmt(_stat([r["tracking_rms_position_mm"] for r in rs], "median")),
-            _fmt(_stat([r["tracking_rms_position_mm"] for r in rs], "p95")),
-            _fmt(_stat([r["tracking_max_position_mm"] for r in rs], "median")),
-            _fmt(_stat([r["tracking_max_position_mm"] for r in rs], "max")),
-            _fmt(_stat([r["tracking_rms_orientation_deg"] for r in rs], "median")),
-            f"{len(settled)}/{len(rs)}", _fmt(_stat(settled, "median")),
-            *(_force_cells(rs) if forces else [])])
+            format_sweep(sweep_values(every[0])), controller, str(len(every)),
+            str(len(every) - len(rs)),
+            *_cells([r.get("tracking_rms_position_mm") for r in rs], ["median", "p95"],
+                    with_intervals),
+            *_cells([r.get("tracking_max_position_mm") for r in rs], ["median", "max"],
+                    with_intervals),
+            *_cells([r.get("tracking_rms_orientation_deg") for r in rs], ["median"],
+                    with_intervals),
+            rate,
+            *_cells([r.get("settling_time_s") for r in rs], ["median"], with_intervals),
+            *(_force_cells(rs, with_intervals) if forces else [])])
     return out
 
 
@@ -178,10 +210,12 @@ def tracking_section(out_dir: Path, scenario: str, rows: list[dict[str, Any]],
         rows: Its result rows.
         points: The sweep points to plot.
     """
-    table = tracking_rows(rows)
-    if not table:
+    if not is_tracking(rows):
         return []
-    lines = ["Trajectory tracking (error of the TRUE pose from the reference while it moves; "
+    table = tracking_rows(rows)
+    lines = ["Trajectory tracking (error of the TRUE pose from the reference while it moves, "
+             "medians and 95th percentiles with their 95 % intervals; *failed*: trials that "
+             "did not run to their end (section Failures), left out of every other column; "
              "*settled*: trials within the tolerances at the end; *settling*: time from the "
              "reference's end until the error stays within them"
              + ("; *peak N*: largest drive force over every physics step; *RMS N*: drive "

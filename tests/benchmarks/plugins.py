@@ -4,7 +4,15 @@ from __future__ import annotations
 
 import numpy as np
 
-from controllers.base import Command, Controller, ControllerContext, Observation
+from controllers.base import (
+    Command,
+    CommandBatch,
+    Controller,
+    ControllerContext,
+    Observation,
+    ObservationBatch,
+)
+from controllers.options import OptionSpec
 
 
 class ProportionalJoints(Controller):
@@ -40,3 +48,72 @@ class CrashOnSomeTrials(ProportionalJoints):
         if self.crash and observation.t > 0.05:
             raise RuntimeError("deliberate crash for the test")
         return super().step(observation)
+
+
+class CrashAtStep(ProportionalJoints):
+    """Raises inside ``step`` at period ``crash_step`` of every trial (a broken plugin)."""
+
+    name = "test-crash-at-step"
+
+    def __init__(self, gain: float = 2.0, crash_step: int = 20) -> None:
+        super().__init__(gain)
+        self.crash_step = crash_step
+        self.calls = 0
+
+    def step(self, observation: Observation) -> Command:
+        self.calls += 1
+        if self.calls > self.crash_step:
+            raise RuntimeError(f"deliberate crash at call {self.calls}")
+        return super().step(observation)
+
+
+class WrongShape(ProportionalJoints):
+    """Returns three values instead of six (a plugin author's slip)."""
+
+    name = "test-wrong-shape"
+
+    def step(self, observation: Observation) -> Command:
+        cmd = super().step(observation)
+        return Command(cmd.velocities[:3], error=cmd.error, error_norm=cmd.error_norm)
+
+
+#: Calls of :class:`CrashingBatch`'s ``step_batch`` in this process (not rerun: counted).
+BATCH_CALLS: list[int] = []
+
+
+class CrashingBatch(ProportionalJoints):
+    """Steps its trials as one batch and raises at its fifth batch step."""
+
+    name = "test-crashing-batch"
+
+    def reset_batch(self, contexts: list[ControllerContext]) -> None:
+        self.goals = np.array([np.asarray(c.goal.lengths) for c in contexts])
+        self.batch_steps = 0
+
+    def step_batch(self, observations: ObservationBatch) -> CommandBatch:
+        BATCH_CALLS.append(len(observations.trials))
+        self.batch_steps += 1
+        if self.batch_steps == 5:
+            raise RuntimeError("deliberate batch crash")
+        err = observations.lengths - self.goals[observations.trials]
+        out = CommandBatch.zeros(len(err))
+        out.velocities[:] = -self.gain * err
+        out.error_norm[:] = np.linalg.norm(err, axis=1)
+        return out
+
+
+class AdaptiveJoints(ProportionalJoints):
+    """A plugin that declares ``adaptive_gain`` (it takes quick's [controller_options])."""
+
+    name = "test-adaptive-joints"
+
+    def __init__(self, gain: float = 2.0, adaptive_gain: list[float] | None = None) -> None:
+        super().__init__(gain)
+        self.adaptive_gain = adaptive_gain
+
+
+class DeclaredOptions(ProportionalJoints):
+    """A plugin that declares its options itself (``OPTIONS``)."""
+
+    name = "test-declared"
+    OPTIONS = (OptionSpec("gain", "float", 2.0, "1/s", "Gain of the leg-length servo."),)

@@ -99,7 +99,7 @@ def test_wrong_shape(geometry: HexapodGeometry, field: str) -> None:
 def test_non_finite(geometry: HexapodGeometry, field: str, bad: float) -> None:
     kw = _kwargs(geometry)
     kw[field][3, 1] = bad
-    with pytest.raises(GeometryError, match="point 3 coordinate 1") as exc:
+    with pytest.raises(GeometryError, match="leg 3: its point's y coordinate is") as exc:
         HexapodGeometry(**kw)
     assert exc.value.field == field
     assert "not finite" in exc.value.problem
@@ -246,3 +246,18 @@ def test_toml_bad_values(tmp_path: Path) -> None:
         HexapodGeometry.from_toml(path)
     assert gexc.value.field == "stroke_mm"  # the key as written in the file
     assert gexc.value.source == str(path)
+
+
+def test_a_nan_point_names_its_leg(tmp_path: Path) -> None:
+    """A robot file with a NaN coordinate: the error names the key, the leg and the axis."""
+    path = tmp_path / "robot.toml"
+    deltalab().to_toml(path)
+    lines = path.read_text().splitlines()
+    start = lines.index("base_points_mm = [")
+    # the second coordinate of the fourth point (leg 3): 1 + 5 lines per point, then + 2
+    lines[start + 1 + 5 * 3 + 2] = "        nan,"
+    path.write_text("\n".join(lines) + "\n")
+    with pytest.raises(ConfigFileError) as info:
+        HexapodGeometry.from_toml(path)
+    assert info.value.key == "base_points_mm"
+    assert "leg 3: its point's y coordinate is nan" in str(info.value)

@@ -17,6 +17,7 @@ from hexapod.outputs import (
     check_replace,
     inside,
     mark_png,
+    write_output,
     written_by_project,
 )
 
@@ -138,3 +139,41 @@ def test_parquet_files_are_recognised_by_their_schema_metadata(tmp_path: Path) -
     check_replace(ours)
     with pytest.raises(OutputError, match="not written by hexapod-vs"):
         check_replace(theirs)
+
+
+def test_write_output_marks_every_kind_and_refuses_a_users_file(tmp_path: Path) -> None:
+    import json
+
+    import pyarrow as pa
+    import pyarrow.parquet as pq
+    from PIL import Image
+
+    ok, png = cv2.imencode(".png", np.zeros((4, 4, 3), np.uint8))
+    ok2, jpg = cv2.imencode(".jpg", np.zeros((8, 8, 3), np.uint8))
+    assert ok and ok2
+    table = pa.table({"x": [1.0, 2.0]})
+    contents: dict[str, object] = {"a.json": {"k": 1}, "b.json": [1, 2], "c.png": png.tobytes(),
+                                   "d.jpg": jpg.tobytes(), "e.md": "| a |\n", "f.toml": "x = 1\n",
+                                   "g.html": "<p>x</p>", "h.parquet": table}
+    for name, content in contents.items():
+        path = tmp_path / "sub" / name
+        path.parent.mkdir(exist_ok=True)
+        path.write_bytes(b"mine")
+        with pytest.raises(OutputError, match=f"{name}: already exists .* --overwrite"):
+            write_output(path, content)
+        assert path.read_bytes() == b"mine"
+        assert write_output(path, content, overwrite=True) == path
+        assert written_by_project(path), name
+        write_output(path, content)  # its own file: replaced without asking
+    assert json.loads((tmp_path / "sub/a.json").read_text()) == {"generator": "hexapod-vs",
+                                                                  "k": 1}
+    assert json.loads((tmp_path / "sub/b.json").read_text())["items"] == [1, 2]
+    with Image.open(tmp_path / "sub/c.png") as im:
+        assert im.text["Software"] == "hexapod-vs"  # type: ignore[attr-defined]
+    with Image.open(tmp_path / "sub/d.jpg") as im:
+        assert im.info["comment"] == b"written by hexapod-vs" and im.size == (8, 8)
+    assert (tmp_path / "sub/e.md").read_text() == "<!-- written by hexapod-vs -->\n| a |\n"
+    assert pq.read_table(tmp_path / "sub/h.parquet").column("x").to_pylist() == [1.0, 2.0]
+    assert not list((tmp_path / "sub").glob(".*.part")), "no temporary file left"
+    with pytest.raises(ValueError, match="PNG or JPEG"):
+        write_output(tmp_path / "x.bin", b"GIF89a")

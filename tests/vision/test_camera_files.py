@@ -167,6 +167,18 @@ def test_hand_written_yaml_1_2_in_ros_camera_info_style(tmp_path: Path) -> None:
     with pytest.raises(ConfigFileError, match="2x3 numbers") as info:
         load_camera(path)
     assert info.value.key == "camera_matrix"
+    # a ROS file without distortion_model is refused (docs/robot-files.md), naming the
+    # file and the key; an OpenCV file (no ROS key) needs none
+    path.write_text(text.format(k, "plumb_bob", d).replace("distortion_model: plumb_bob\n",
+                                                           ""))
+    with pytest.raises(ConfigFileError, match=r"ROS camera_info file \(it has camera_name\) "
+                                              r"must give distortion_model") as info:
+        load_camera(path)
+    assert info.value.key == "distortion_model" and info.value.path == str(path)
+    path.write_text(text.format(k, "plumb_bob", d).replace("distortion_model: plumb_bob\n",
+                                                           "").replace("camera_name: cam\n",
+                                                                       ""))
+    assert load_camera(path, camera_from_base=POSE).distortion.tolist() == list(D_PER)
 
 
 # ---------------------------------------------------------------- writing

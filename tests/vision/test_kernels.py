@@ -294,11 +294,38 @@ def test_compiled_lens_maps_equal_numpy(rng, label, lens) -> None:
     with np.errstate(all="ignore"):
         reference = lens.parts_numpy(x, y)
         compiled = lens.parts(x, y)
+    # The fisheye map's atan: numpy >= 2.4 has its own vectorised arctan, which differs
+    # from the C library's atan by one unit in the last place on some inputs (about 0.1 %
+    # of them), and the Jacobian's (rho'/(1 + r^2) - f) / r^2 amplifies it by
+    # cancellation near the centre; where numpy's arctan is the C library's, bitwise
+    # equality is required.
+    atan_rtol = 0.0 if _numpy_arctan_is_libm() or "fisheye" not in label else 1e-14
     for a, b in zip(compiled, reference, strict=True):
         assert a.shape == x.shape
-        np.testing.assert_array_equal(a, b)
+        _equal_within(a, b, atan_rtol)
     for a, b in zip(lens.parts(0.3, -0.2), lens.parts_numpy(0.3, -0.2), strict=True):
-        assert np.ndim(a) == 0 and a == b
+        assert np.ndim(a) == 0
+        _equal_within(np.asarray(a), np.asarray(b), atan_rtol)
+
+
+def _numpy_arctan_is_libm() -> bool:
+    """Whether numpy's arctan is the C library's atan on a dense sample (bitwise)."""
+    import math
+
+    x = np.linspace(0.0, 30.0, 20001)
+    return bool(np.array_equal(np.arctan(x), np.array([math.atan(v) for v in x])))
+
+
+def _equal_within(a: np.ndarray, b: np.ndarray, rtol: float) -> None:
+    """Equal bit for bit (``rtol`` 0), or within ``rtol`` of the array's largest finite
+    magnitude (NaN and infinities at the same places, equal)."""
+    if rtol == 0.0:
+        np.testing.assert_array_equal(a, b)
+        return
+    finite = np.isfinite(b)
+    np.testing.assert_array_equal(a[~finite], b[~finite])
+    scale = float(np.max(np.abs(b[finite]), initial=1.0))
+    np.testing.assert_allclose(a[finite], b[finite], rtol=0.0, atol=rtol * scale)
 
 
 @pytest.mark.parametrize("label, lens", _lenses()[2:7:2], ids=["opencv-14", "radtan",

@@ -22,7 +22,8 @@ CAMERA_CAUSE = "the camera sees no leg edge at the goal pose"
 
 def test_blind_camera_failures_once_per_cause(tmp_path: Path) -> None:
     """leg-edge cannot run with a camera that sees no leg; model-based can: the run goes
-    on (exit 0), the leg-edge failures are one cause counted, no traceback."""
+    on, the leg-edge failures are one cause counted, no traceback; leg-edge failed every
+    one of its trials: exit code 3."""
     own_robot().to_toml(tmp_path / "robot.toml")
     (tmp_path / "camera.toml").write_text(BLIND_CAMERA)
     study = write_study(tmp_path, camera="camera.toml", trials=3,
@@ -30,7 +31,8 @@ def test_blind_camera_failures_once_per_cause(tmp_path: Path) -> None:
     out = tmp_path / "out"
     res = run_cli("run", str(study), "--out", str(out), "--no-progress")
     text = res.stdout + res.stderr
-    assert res.returncode == 0, text
+    assert res.returncode == 3, text
+    assert "hexapod-bench: error: leg-edge (own) failed all its 3 trials" in res.stderr
     assert "Traceback" not in text
     assert text.count(CAMERA_CAUSE) == 2, text  # the first warning, then the summary line
     assert "3 of 6 trials failed" in text and "3 x (leg-edge 3): " + CAMERA_CAUSE in text

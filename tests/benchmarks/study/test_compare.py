@@ -70,7 +70,9 @@ def test_identical_runs_no_difference_no_determinism_failure(
     out = capsys.readouterr().out
     assert "Regressions (B significantly worse than A): 0" in out
     assert "Determinism check: 0 of 24 matched trials differ" in out
-    doc = json.loads(js.read_text())
+    marked = json.loads(js.read_text())
+    assert marked["generator"] == "hexapod-vs"
+    doc = marked["comparisons"]
     assert all(set(d) >= REQUIRED for d in doc)
     tests = [d for d in doc if d["test"] != "determinism"]
     assert {d["metric"] for d in tests} == {"converged", "final_error", "steps"}
@@ -140,3 +142,41 @@ def test_compare_errors(tmp_path: Path) -> None:
         compare_controllers(df2, baseline="nope")
     with pytest.raises(BenchmarkError, match="--metric 'bogus'"):
         compare_controllers(df2, metrics=("bogus",))
+
+
+def test_two_runs_count_the_unmatched_trials_and_head_columns_with_the_runs(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """40 trials against 160 of the same study: 40 matched, 0 and 120 unmatched; the
+    value columns are headed with each run's name (not "a" for run B)."""
+    rows = [r for r in two_controllers(160) if r["controller"] == "good"]
+    a = write_run(tmp_path / "before", rows[:40])
+    b = write_run(tmp_path / "after", rows)
+    assert cli_main(["compare", str(a), str(b)]) == 0
+    out = capsys.readouterr().out
+    assert (f"Trials matched by scenario, sweep point, controller and trial: 40 compared; "
+            f"unmatched, left out: 0 of the 40 of run A ({a}), 120 of the 160 of run B "
+            f"({b})") in out
+    head = next(line for line in out.splitlines() if "metric" in line)
+    cols = [c.strip() for c in head.strip("┃").split("┃")]
+    # scenario and controller are the same in every row: they went to the title
+    assert cols[:5] == ["metric", "n", "B (after)", "A (before)",
+                        "B (after) - A (before) [95 % CI]"]
+    assert "scenario: synthetic, controller: good" in " ".join(out.split())
+    comps, _, matched = compare_runs(load(a), load(b))
+    assert matched == 40 and all(c.n == 40 for c in comps if c.metric != "steps")
+    js = tmp_path / "c.json"
+    assert cli_main(["compare", str(a), str(b), "--json", str(js)]) == 0
+    det = next(d for d in json.loads(js.read_text())["comparisons"]
+               if d["test"] == "determinism")
+    assert det["n"] == 40 and det["unmatched"] == {"A": 0, "B": 120}
+
+
+def test_failed_trials_are_left_out_of_all_but_convergence(tmp_path: Path) -> None:
+    rows = two_controllers(30)
+    for r in rows[:5]:  # five trials of "good" end at an end stop, with a large error
+        r.update(converged=False, failure="leg 1 hit its end stop: 425.101 mm",
+                 final_position_error_mm=27.0)
+    by = {c.metric: c for c in compare_controllers(load(write_run(tmp_path / "r", rows)))}
+    assert by["converged"].n == 30 and by["converged"].discordant == (5, 0)  # a: bad
+    assert by["final_error"].n == 25  # the failed trials' 27 mm not compared
+    assert by["final_error"].p_value == 1.0

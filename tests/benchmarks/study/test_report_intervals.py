@@ -29,12 +29,13 @@ def test_report_cells_have_intervals(tmp_path: Path) -> None:
     cells = [c.strip() for c in row.strip("|").split("|")]
     ci = sps.binomtest(94, 100).proportion_ci(method="wilson")
     assert cells[4] == f"94.0 % [{100 * ci.low:.1f}, {100 * ci.high:.1f}]"
-    med, lo, hi = map(float, re.match(r"([\d.]+) \[([\d.]+), ([\d.]+)\]", cells[5]).groups())
+    assert cells[5] == "0"  # failed: the trials that did not run to their end
+    med, lo, hi = map(float, re.match(r"([\d.]+) \[([\d.]+), ([\d.]+)\]", cells[6]).groups())
     assert med == round(float(np.median(err)), 3)
     (blo, bhi), = stats.bootstrap_quantiles(err, [0.5])
     assert (lo, hi) == (round(blo, 3), round(bhi, 3))
     assert lo < med < hi
-    steps_cell = re.match(r"(\d+) \[(\d+), (\d+)\]", cells[10])
+    steps_cell = re.match(r"(\d+) \[(\d+), (\d+)\]", cells[11])
     assert steps_cell is not None
     assert abs(float(steps_cell.group(1)) - np.median(steps[conv])) <= 0.5
     assert f"{stats.RESAMPLES} resamples, seed {stats.SEED}" in text
@@ -45,3 +46,32 @@ def test_report_cells_have_intervals(tmp_path: Path) -> None:
     cal_row = text.splitlines()[text.splitlines().index(cal) + 2]
     comp = float(cal_row.strip("|").split("|")[4])
     assert comp == round(max(r["calibration_max_component_error_mm"] for r in rows), 3)
+
+
+def test_link_images_and_visibility_tables_have_intervals(tmp_path: Path) -> None:
+    """The robot link's and the image pipeline's medians carry their bootstrap intervals,
+    the trials with a hidden edge their Wilson interval (docs/statistics.md: every table)."""
+    rng = np.random.default_rng(3)
+    err = rng.lognormal(-2, 0.4, 40)
+    rows = make_rows("leg-edge", err, np.ones(40, bool), rng.integers(60, 120, 40))
+    rtt = rng.uniform(1.0, 2.0, 40)
+    det = rng.uniform(3.0, 5.0, 40)
+    for k, r in enumerate(rows):
+        r.update(rtt_median_ms=float(rtt[k]), rtt_p99_ms=float(rtt[k]) * 2,
+                 missed_periods=0, detect_time_ms=float(det[k]),
+                 hidden_edge_periods=3 if k < 10 else 0)
+    text = write_report(write_run(tmp_path / "run", rows)).read_text()
+    lines = text.splitlines()
+
+    def row_after(header_start: str) -> list[str]:
+        i = next(k for k, line in enumerate(lines) if line.startswith(header_start))
+        return [c.strip() for c in lines[i + 2].strip("|").split("|")]
+
+    link = row_after("| sweep | controller | backend | RTT median ms")
+    (lo, hi), = stats.bootstrap_quantiles(rtt, [0.5])
+    assert link[3] == f"{np.median(rtt):.3f} [{lo:.3f}, {hi:.3f}]"
+    images = row_after("| sweep | controller | detection median ms")
+    (lo, hi), = stats.bootstrap_quantiles(det, [0.5])
+    assert images[2] == f"{np.median(det):.3f} [{lo:.3f}, {hi:.3f}]"
+    seen = row_after("| sweep | controller | hidden-edge periods")
+    assert seen[3] == f"10/40: {stats.format_rate(10, 40)}"

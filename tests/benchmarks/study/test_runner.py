@@ -175,13 +175,17 @@ def test_builtin_scenario_end_to_end(name: str, tmp_path: Path) -> None:
 
 def test_report_command_rebuilds_the_report(tmp_path: Path) -> None:
     """``hexapod-bench report DIR`` on a finished run's directory rewrites the run's own
-    report: the same text but for the time it was generated."""
+    report: the same text but for the time it was generated and the report command added
+    to the commands that wrote the directory."""
     out = tmp_path / "quick"
     assert cli_main(["run", "quick", "--out", str(out), "--trials", "2", "--no-progress",
                      "--record", "1", "--max-steps", "60"]) == 0
     first = (out / "report.md").read_text().splitlines()
     assert cli_main(["report", str(out)]) == 0
     again = (out / "report.md").read_text().splitlines()
+    added = [line for line in again if line.startswith(f"2. `hexapod-bench report {out}` (")]
+    assert len(added) == 1 and added[0].endswith(": rebuilt report.md and its figures")
+    again.remove(added[0])
     assert len(first) == len(again) > 20
     differ = [(a, b) for a, b in zip(first, again, strict=True) if a != b]
     assert all(a.startswith("Generated ") for a, _ in differ), differ
@@ -220,8 +224,9 @@ def test_a_second_run_on_a_locked_directory_is_refused(tmp_path: Path) -> None:
     assert len(keys) == len(set(keys)), "no trial written twice"
     # released when the holder ends: the directory can be resumed
     assert lock.read_text() == ""
-    assert cli_main(["run", str(scen), "--out", str(out), "--resume", "--trials", "3",
-                     "--no-progress"]) == 0
+    # (the study it holds: 200 trials; fewer would be another study, refused)
+    assert cli_main(["run", str(scen), "--out", str(out), "--resume", "--no-progress"]) == 0
+    assert sorted(r["trial"] for r in read_results(out)) == list(range(200))
 
 
 def test_report_ignores_duplicate_rows_and_says_so(tmp_path: Path, capsys: object) -> None:

@@ -36,8 +36,10 @@ def test_world_and_physics_dt_are_read() -> None:
         ({"world": 1}, "robot.world", "expected a string"),
         ({"physics_dt": 0.0}, "robot.physics_dt", "out of the allowed range"),
         ({"physics_dt": "1ms"}, "robot.physics_dt", "expected a number"),
-        ({"physics_dt": 0.03}, "robot.physics_dt", "longer than the control period"),
-        ({"physics_dt": 0.003}, "robot.physics_dt", "not a whole number of physics steps"),
+        ({"world": "dynamic", "physics_dt": 0.03}, "robot.physics_dt",
+         "longer than the control period"),
+        ({"world": "dynamic", "physics_dt": 0.003}, "robot.physics_dt",
+         "not a whole number of physics steps"),
         ({"physic_dt": 0.001}, "robot.physic_dt", "physics_dt"),
     ],
 )
@@ -46,6 +48,13 @@ def test_bad_world_keys_name_the_file_and_key(robot: dict, key: str, fragment: s
         parse_scenario({**MINIMAL, "robot": robot}, "world.toml")
     text = str(info.value)
     assert "world.toml" in text and key in text and fragment in text, text
+
+
+def test_the_kinematic_world_takes_no_physics_step() -> None:
+    """``physics_dt`` is the dynamic world's: a kinematic study's period need not be a
+    multiple of it (its range is still checked)."""
+    sc = parse_scenario({**MINIMAL, "robot": {"dt": 0.0125, "physics_dt": 0.003}})
+    assert (sc.world, sc.dt) == ("kinematic", 0.0125)
 
 
 @pytest.mark.parametrize("key", ["mass_percent", "inertia_percent"])

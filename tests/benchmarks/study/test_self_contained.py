@@ -87,10 +87,20 @@ def test_a_resumed_run_keeps_its_copy_and_warns_when_the_file_changed(
     lab.write_text(original.replace("trials = 3", "trials = 4"))
     capsys.readouterr()
     assert cli_main(["run", str(lab), "--out", str(out), "--no-progress", "--resume"]) == 0
-    err = capsys.readouterr().err
+    captured = capsys.readouterr()
     assert f"warning: {lab} differs from the copy this run started with " \
-        f"({out}/inputs/mine/source.toml, kept)" in err
+        f"({out}/inputs/mine/source.toml, kept); the study it describes was checked " \
+        "against the directory's, setting by setting" in captured.err
     assert (out / "inputs" / "mine" / "source.toml").read_text() == original
+    # more trials, everything else the same: the study grows, and the runnable copy says so
+    assert "growing the study: grew mine from 3 to 4 trials" in " ".join(captured.out.split())
+    assert "\ntrials = 4\n" in (out / "inputs" / "mine" / "scenario.toml").read_text()
+    assert len(read_results(out)) == 2 * 2 * 4
+    # another change in the file: refused, the copy and the rows untouched
+    lab.write_text(original.replace("max_steps = 60", "max_steps = 70"))
+    assert cli_main(["run", str(lab), "--out", str(out), "--no-progress", "--resume"]) == 2
+    assert "--max-steps: 60 in the directory, 70 given" in capsys.readouterr().err
+    assert len(read_results(out)) == 2 * 2 * 4
 
 
 @pytest.mark.parametrize(("position", "rotation", "expected"), [

@@ -15,11 +15,13 @@ The files written by OpenCV's calibration samples and tools:
 ROS's camera_info YAML files use the same names (matrices as ``{rows, cols, data}``,
 with ``distortion_model``: ``plumb_bob`` and ``rational_polynomial`` are OpenCV's
 perspective model, ``equidistant`` its fisheye model; others are refused, naming the
-key). A file with ``xi`` is a unified (omnidirectional) camera, one with
-``fisheye_model: 1`` (the tutorial's ``cv::fisheye`` calibrations) or ``distortion_model:
-equidistant`` a fisheye (Kannala-Brandt, 4 coefficients ``(k1, k2, k3, k4)``), otherwise
-a perspective one with OpenCV's 4, 5, 8, 12 or 14 coefficients (rational, thin-prism
-and tilt terms included). The pose of the camera is not in these files.
+key, and so is a ROS file, one with ``camera_name``, ``rectification_matrix`` or
+``projection_matrix``, without ``distortion_model``). A file with ``xi`` is a unified
+(omnidirectional) camera, one with ``fisheye_model: 1`` (the tutorial's ``cv::fisheye``
+calibrations) or ``distortion_model: equidistant`` a fisheye (Kannala-Brandt, 4
+coefficients ``(k1, k2, k3, k4)``), otherwise a perspective one with OpenCV's 4, 5, 8, 12
+or 14 coefficients (rational, thin-prism and tilt terms included). The pose of the
+camera is not in these files.
 
 Reading and writing go through ``cv2.FileStorage``: YAML 1.0 (``%YAML:1.0``, what
 OpenCV up to 4.x writes), YAML 1.2 (what OpenCV 5 writes), XML and JSON; the format
@@ -104,6 +106,14 @@ def _find(fs: Any, field: str, path: str, required: bool = True) -> tuple[str, A
     return found[0], fs.getNode(found[0])
 
 
+def _ros_keys(fs: Any) -> list[str]:
+    """The keys of the file that only a ROS ``camera_info`` file has, as written."""
+    from vision.cameras.files.ros import ROS_ONLY_KEYS
+
+    names: tuple[str, ...] = fs.root().keys()
+    return [k for k in names if k.lower() in ROS_ONLY_KEYS]
+
+
 def _numbers(node: Any, path: str, key: str) -> np.ndarray:
     """A matrix (opencv-matrix map), a sequence of numbers or a number, as an array."""
     if node.isMap():
@@ -177,6 +187,11 @@ def read_opencv_calibration(path: str | Path) -> Calibration:
         if hit is not None and np.any(_numbers(hit[1], src, hit[0]) != 0):
             kind = "fisheye"
         hit = _find(fs, "model", src, required=False)
+        ros = _ros_keys(fs)
+        if hit is None and ros:
+            raise ConfigFileError(src, f"a ROS camera_info file (it has {', '.join(ros)}) "
+                                       "must give distortion_model (one of "
+                                       f"{', '.join(ROS_MODELS)})", key="distortion_model")
         if hit is not None:
             name = hit[1].string() if hit[1].isString() else None
             if name not in ROS_MODELS:

@@ -1,0 +1,121 @@
+"""The pre-flight of a study: ONE function, :func:`preflight`, that ``hexapod-bench run``
+calls before its first trial and ``hexapod-bench check`` calls on a scenario, so that
+both give the same verdict in the same words.
+
+It resolves the controllers (names, options against each controller's declared table,
+``[controller_options]`` given to the controllers that declare them, each built once,
+what it commands against the world), checks a calibration file against the robot and
+camera, measures the setup (:func:`benchmarks.study.check_command.examine`) and, for a
+trajectory task, the plan's references (:mod:`benchmarks.study.trajectory_check`).
+A problem found in the file's terms raises a :class:`~benchmarks.exceptions.ScenarioError`;
+a setup whose every trial would fail raises a :class:`~benchmarks.exceptions.SetupError`
+(:func:`refuse`).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any
+
+from benchmarks.exceptions import SetupError
+from benchmarks.study.setup_check import Problem
+
+
+@dataclass
+class StudyCheck:
+    """What the pre-flight found for one scenario.
+
+    Attributes:
+        scenario: The scenario with its controllers resolved (what runs).
+        setup: What ``check`` describes (:class:`benchmarks.study.check_command.Setup`).
+        report: The setup's measurements (:class:`~benchmarks.study.setup_check.SetupReport`).
+        trajectory: A trajectory task's references, per sweep point.
+        problems: Every problem (the setup's, then the trajectory's).
+    """
+
+    scenario: Any
+    setup: Any = None
+    report: Any = None
+    trajectory: list[Any] = field(default_factory=list)
+    problems: list[Problem] = field(default_factory=list)
+
+    @property
+    def errors(self) -> list[Problem]:
+        """The problems that make every trial fail."""
+        return [p for p in self.problems if p.severity == "error"]
+
+
+@dataclass
+class Preflight:
+    """The pre-flight of a study.
+
+    Attributes:
+        checks: One per scenario, in order.
+        warnings: Warnings about the files (a foreign calibration, an option left out).
+    """
+
+    checks: list[StudyCheck]
+    warnings: list[str]
+
+    @property
+    def scenarios(self) -> list[Any]:
+        """The scenarios as they run."""
+        return [c.scenario for c in self.checks]
+
+
+def preflight(scenarios: list[Any], allow_foreign_calibration: bool = False,
+              measure: bool = True) -> Preflight:
+    """Check a study before it runs (``run``) or as ``check`` does.
+
+    Args:
+        scenarios: The scenarios, command-line overrides applied.
+        allow_foreign_calibration: ``--allow-foreign-calibration``.
+        measure: Measure the setups and the trajectories (False: ``run --no-check``, the
+            file checks only).
+
+    Raises:
+        ScenarioError: A controller, option or file refused, in the file's terms.
+    """
+    from benchmarks.study.provenance import check_scenario_calibration
+    from benchmarks.study.scenario import check_physics_dt
+    from benchmarks.study.scenario_checks import check_controllers
+
+    checks, warnings = [], []
+    for sc in scenarios:
+        if sc.world == "dynamic":  # (--world dynamic may make a kinematic file dynamic)
+            check_physics_dt(sc.dt, sc.physics_dt, sc.source)
+        resolved, notes = check_controllers(sc)
+        warnings += notes
+        warnings += check_scenario_calibration(resolved, allow_foreign_calibration)
+        checks.append(StudyCheck(resolved))
+    if measure:
+        for check in checks:
+            measure_study(check)
+    return Preflight(checks, warnings)
+
+
+def measure_study(check: StudyCheck) -> None:
+    """Measure one resolved scenario: its setup and, for a trajectory task, its plan's
+    references (fills ``check``)."""
+    from benchmarks.study.check_command import examine, scenario_setup
+    from benchmarks.study.trajectory_check import trajectory_facts
+
+    check.setup = scenario_setup(check.scenario)
+    check.report = examine(check.setup)
+    check.problems = check.report.problems  # one list: the report's verdict includes all
+    if check.report.can_run:  # a robot without a workspace has no trajectory to check
+        check.trajectory = trajectory_facts(check.scenario)
+        for facts in check.trajectory:
+            check.problems += facts.problems
+
+
+def refusal(check: StudyCheck) -> SetupError | None:
+    """The refusal of a study whose every trial would fail (None: it can run)."""
+    errors = check.errors
+    return SetupError(check.scenario.source, errors) if errors else None
+
+
+def warning_lines(check: StudyCheck) -> list[str]:
+    """The warnings of a study that can run, as ``run`` prints them on stderr."""
+    return [f"hexapod-bench: warning: {check.scenario.name}: {p.text}"
+            for p in check.problems if p.severity != "error"]

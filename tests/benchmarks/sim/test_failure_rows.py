@@ -1,0 +1,89 @@
+"""Failures that say what failed: a crash keeps its step, the last errors and the
+exception; a failed batch is reported as such and not rerun; a command of the wrong shape
+names the controller and the shapes; a controller that fails all its trials makes the
+run exit with its own code."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+
+from benchmarks.cli import main
+from benchmarks.study.runner import plan, read_results, run_units
+from benchmarks.study.scenario import parse_scenario
+from tests.benchmarks import plugins
+
+JOINTS = "tests.benchmarks.plugins:ProportionalJoints"
+AT_STEP = "tests.benchmarks.plugins:CrashAtStep"
+WRONG = "tests.benchmarks.plugins:WrongShape"
+BATCH = "tests.benchmarks.plugins:CrashingBatch"
+
+
+def _scenario(controllers: list[object], trials: int = 4) -> object:
+    return parse_scenario({
+        "name": "failures", "seed": 3, "trials": trials, "controllers": controllers,
+        "task": {"max_steps": 100, "position_tolerance_mm": 0.5,
+                 "orientation_tolerance_deg": 0.05}}, "failures.toml")
+
+
+def _rows(tmp_path: Path, controllers: list[object], trials: int = 4,
+          engine: str = "batched") -> list[dict]:
+    run_units(plan([_scenario(controllers, trials)], chunk_size=trials, record_trials=0,
+                   engine=engine), tmp_path)
+    return read_results(tmp_path)
+
+
+@pytest.mark.parametrize("engine", ["batched", "per-trial"])
+def test_a_crash_keeps_its_step_errors_and_exception(engine: str, tmp_path: Path) -> None:
+    rows = _rows(tmp_path, [{"name": AT_STEP, "crash_step": 20, "gain": 0.5}], engine=engine)
+    assert len(rows) == 4
+    for r in rows:
+        assert r["steps"] == 20, r
+        assert r["failure"] == (f"{AT_STEP} failed at step 20: RuntimeError: deliberate "
+                                "crash at call 21")
+        assert r["cause"] == "RuntimeError: deliberate crash at call 21"
+        assert r["final_position_error_mm"] is not None and r["final_position_error_mm"] > 0
+
+
+@pytest.mark.parametrize("engine", ["batched", "per-trial"])
+def test_a_wrong_shape_names_the_controller_and_the_shapes(engine: str,
+                                                           tmp_path: Path) -> None:
+    rows = _rows(tmp_path, [WRONG], engine=engine)
+    name = "test-wrong-shape"  # both engines: the one loop, the controller's own name
+    for r in rows:
+        assert r["steps"] == 0
+        assert r["failure"] == (f"{WRONG} failed at step 0: CommandError: controller "
+                                f"'{name}' returned a command of shape (3,); a "
+                                "command holds one value per leg, shape (6,)")
+        assert "broadcast" not in r["failure"]
+
+
+def test_a_failed_batch_is_reported_and_not_rerun(tmp_path: Path) -> None:
+    plugins.BATCH_CALLS.clear()
+    rows = _rows(tmp_path, [BATCH, JOINTS], trials=3)
+    assert plugins.BATCH_CALLS == [3] * 5  # five batch steps of the 3 trials, once each
+    batch = [r for r in rows if r["controller"] == BATCH]
+    assert len(batch) == 3
+    for r in batch:
+        assert r["failure"].startswith(f"the batch of 3 trials of {BATCH} failed at step 4 "
+                                       "(every trial of it counted failed, not rerun): "
+                                       "RuntimeError: deliberate batch crash")
+        assert r["steps"] == 4 and r["final_position_error_mm"] > 0
+    assert all(r["failure"] is None or "batch" not in r["failure"]
+               for r in rows if r["controller"] == JOINTS)
+
+
+@pytest.mark.slow
+def test_a_controller_failing_all_its_trials_exits_3(tmp_path: Path,
+                                                     capsys: pytest.CaptureFixture[str]
+                                                     ) -> None:
+    study = tmp_path / "study.toml"
+    study.write_text(f'name = "broken-plugin"\ntrials = 3\ncontrollers = ["{AT_STEP}", '
+                     f'"{JOINTS}"]\n[task]\nmax_steps = 100\n')
+    code = main(["run", str(study), "--out", str(tmp_path / "o"), "--no-progress",
+                 "--record", "0"])
+    err = capsys.readouterr().err
+    assert code == 3, err
+    assert (f"hexapod-bench: error: {AT_STEP} (broken-plugin) failed all its 3 trials (the "
+            "causes are above; exit code 3: the other controllers ran)") in err

@@ -1,0 +1,198 @@
+"""``check`` and ``run`` share one pre-flight (:mod:`benchmarks.study.preflight`): over a
+table of bad scenario files, both refuse with the same words; what only a plan shows
+(options, actuation against the world, a trajectory's end stops and duration) is found
+before any trial."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+
+from benchmarks.cli import main
+from tests.benchmarks.ownrobot.robots import BLIND_CAMERA, own_robot
+
+CRASH_FREE = "tests.benchmarks.plugins:ProportionalJoints"
+
+#: name -> (scenario text, what the refusal says). Each is refused by both commands.
+BAD = {
+    "option typo in a controller table": (
+        'controllers = [{name = "vision-ctc", natural_frequncy = 3.0}]\n'
+        '[robot]\nworld = "dynamic"\n',
+        "key 'controllers[0].natural_frequncy': controller 'vision-ctc' has no option "
+        "'natural_frequncy'; its options: natural_frequency, damping, smooth_goal "
+        "(hexapod-bench list --options vision-ctc) (did you mean 'natural_frequency'?)"),
+    "[controller_options] typo": (
+        'controllers = ["leg-edge", "joint-space"]\n[controller_options]\n'
+        "adaptve_gain = [5.0, 1.0, 30.0]\n",
+        "key 'controller_options.adaptve_gain': no controller of the study takes this "
+        "option (leg-edge: gain, adaptive_gain,"),
+    "an option value refused": (
+        'controllers = [{name = "leg-edge-qp", damping = 0.1}]\n',
+        "key 'controllers[0].damping': leg-edge-qp: use 'regularization' with the QP law"),
+    "unknown controller": (
+        'controllers = ["leg-egde"]\n',
+        "unknown controller 'leg-egde'"),
+    "force controller in the kinematic world": (
+        'controllers = ["leg-edge", "computed-torque"]\n',
+        "key 'controllers[1]': controller 'computed-torque' commands leg forces [N], but "
+        "the kinematic world applies only leg velocities [m/s]"),
+    "physics step not dividing the period in the dynamic world": (
+        'controllers = ["leg-edge"]\n[robot]\nworld = "dynamic"\ndt = 0.02\n'
+        "physics_dt = 0.003\n",
+        "key 'robot.physics_dt': the control period robot.dt (0.02 s) is not a whole number "
+        "of physics steps of 0.003 s"),
+    "every start of a trajectory hits an end stop": (
+        'controllers = ["leg-edge"]\n[task]\nkind = "trajectory"\nshape = "circle"\n'
+        "radius_mm = 60.0\nmax_translation_mm = 30.0\nmax_steps = 600\n",
+        "the setup cannot run, every trial would fail: "),
+    "blind camera": (
+        'controllers = ["leg-edge"]\n[camera]\nfile = "camera.toml"\n',
+        "the setup cannot run, every trial would fail: the camera sees no leg edge at the "
+        "home pose"),
+    "empty workspace (strokes too short for the robot)": (
+        'controllers = ["leg-edge"]\n[robot]\ngeometry = "short.toml"\n',
+        "the setup cannot run, every trial would fail: empty workspace, no home pose"),
+    "unreachable fixed goal": (
+        'controllers = ["leg-edge"]\n[robot]\ngeometry = "long.toml"\n[task]\n'
+        'kind = "fixed"\nstart_mm = [460, 460, 460, 460, 460, 460]\n'
+        "goal_mm = [990, 260, 600, 600, 600, 600]\n",
+        "the setup cannot run, every trial would fail: task.goal_mm: no platform pose near "
+        "the home pose has these six leg lengths"),
+    "a value out of its range": (
+        'controllers = ["leg-edge"]\n[noise]\nmodel = "rotation"\namplitude_deg = 1e9\n',
+        "key 'noise.amplitude_deg': 1000000000.0 is out of the allowed range [0, 90]"),
+}
+
+
+def _write(folder: Path, body: str) -> Path:
+    (folder / "camera.toml").write_text(BLIND_CAMERA)
+    own_robot(stroke=(0.100, 0.150)).to_toml(folder / "short.toml")
+    own_robot(stroke=(0.250, 1.000)).to_toml(folder / "long.toml")
+    path = folder / "study.toml"
+    path.write_text(f'name = "bad"\ntrials = 2\n{body}')
+    return path
+
+
+def _call(args: list[str], capsys: pytest.CaptureFixture[str]) -> tuple[int, str, str]:
+    code = main(args)
+    cap = capsys.readouterr()
+    return code, cap.out, cap.err
+
+
+def _refusal(stderr: str) -> list[str]:
+    return [line for line in stderr.splitlines() if line.startswith("hexapod-bench: error:")]
+
+
+@pytest.mark.parametrize("case", sorted(BAD))
+def test_check_and_run_refuse_alike(case: str, tmp_path: Path,
+                                    capsys: pytest.CaptureFixture[str]) -> None:
+    body, expected = BAD[case]
+    study = _write(tmp_path, body)
+    out = tmp_path / "out"
+    c_code, _, c_err = _call(["check", str(study)], capsys)
+    r_code, r_out, r_err = _call(["run", str(study), "--out", str(out), "--no-progress"],
+                                 capsys)
+    assert r_code == 2, r_err  # run refuses before any trial
+    assert not (out / "results.jsonl").exists() and r_out == ""
+    assert c_code in (1, 2)  # check: 2 a file error, 1 a setup that cannot run
+    assert _refusal(c_err) == _refusal(r_err) and len(_refusal(r_err)) == 1, (c_err, r_err)
+    assert expected in _refusal(r_err)[0]
+    # the other messages (the warnings) are the same too
+    assert [x for x in c_err.splitlines() if "warning" in x] == [
+        x for x in r_err.splitlines() if "warning" in x]
+
+
+def test_the_kinematic_world_has_no_physics_step(tmp_path: Path,
+                                                 capsys: pytest.CaptureFixture[str]) -> None:
+    study = _write(tmp_path, f'controllers = ["{CRASH_FREE}"]\n[robot]\ndt = 0.02\n'
+                             "physics_dt = 0.003\n")
+    code, out, err = _call(["check", str(study)], capsys)
+    assert code == 0, err
+    assert "The setup can run." in out
+
+
+def test_mixed_study_options_go_to_the_controllers_that_declare_them(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    from benchmarks.study.preflight import preflight
+    from benchmarks.study.scenario import load_scenario
+
+    study = _write(tmp_path, 'controllers = ["leg-edge", "computed-torque"]\n'
+                             "[controller_options]\nadaptive_gain = [5.0, 1.0, 30.0]\n"
+                             "natural_frequency = 3.0\n"
+                             '[robot]\nworld = "dynamic"\n')
+    pre = preflight([load_scenario(study)], measure=False)
+    leg_edge, ctc = pre.scenarios[0].controllers
+    assert leg_edge.options == {"adaptive_gain": [5.0, 1.0, 30.0]}
+    assert ctc.options == {"natural_frequency": 3.0}
+    assert pre.warnings == []
+    code, out, err = _call(["check", str(study)], capsys)
+    assert code == 0 and "No problem found." in out, err
+
+
+def test_trajectory_duration_and_end_stops_are_stated(tmp_path: Path,
+                                                      capsys: pytest.CaptureFixture[str]
+                                                      ) -> None:
+    study = _write(tmp_path, 'controllers = ["leg-edge"]\ntrials = 40\n[task]\n'
+                             'kind = "trajectory"\nshape = "circle"\nradius_mm = 15.0\n'
+                             "speed_mm_s = 20.0\nmax_steps = 300\n")
+    study.write_text(study.read_text().replace("trials = 2\n", ""))
+    code, out, err = _call(["check", str(study)], capsys)
+    assert code == 0, err
+    from benchmarks.study.scenario import load_scenario
+    from benchmarks.study.trajectory_check import trajectory_facts
+
+    facts = trajectory_facts(load_scenario(study))[0]
+    lo, hi = facts.duration_s
+    # a circle of 15 mm at 20 mm/s lasts 2 pi 15 / 20 = 4.7 s at full speed, more with
+    # the quintic's acceleration: longer than 300 x 20 ms
+    assert 2 * 3.14159 * 15 / 20 < lo <= hi and hi > 6.0 and facts.sampled == 40
+    assert f"the reference lasts {lo:.2f}" in out and "max_steps x dt = 6.00 s" in out
+    assert (f"warning: the reference lasts up to {hi:.2f} s, longer than max_steps x dt = "
+            f"300 x 20 ms = 6.00 s: the trials stop before it ends; raise [task] max_steps "
+            f"to at least {int(-(-(hi + 0.5) // 0.02))}") in out
+    assert f"{facts.hits} of 40 sampled starts" in out
+    if facts.hits:
+        assert "would hit an end stop following the circle reference" in out
+        assert f"set margin_mm >= {int(-(-facts.travel_mm // 1))}" in out
+
+
+@pytest.mark.slow
+def test_end_stop_estimate_is_the_runs_own(tmp_path: Path,
+                                           capsys: pytest.CaptureFixture[str]) -> None:
+    """The estimate samples the run's own starts: in the kinematic world, the trials that
+    push a leg against its stroke are those whose reference leaves it."""
+    import json
+
+    from benchmarks.study.scenario import load_scenario
+    from benchmarks.study.trajectory_check import trajectory_facts
+
+    study = _write(tmp_path, f'controllers = ["{CRASH_FREE}"]\n[task]\n'
+                             'kind = "trajectory"\nshape = "circle"\nradius_mm = 15.0\n'
+                             "max_steps = 300\n")
+    study.write_text(study.read_text().replace("trials = 2", "trials = 40"))
+    facts = trajectory_facts(load_scenario(study))[0]
+    assert 0 < facts.hits < 40
+    code, _, err = _call(["run", str(study), "--out", str(tmp_path / "o"), "--no-progress",
+                          "--record", "0"], capsys)
+    assert code == 0, err
+    assert f"{facts.hits} of 40 sampled starts" in err
+    rows = [json.loads(x) for x in (tmp_path / "o" / "results.jsonl").read_text().splitlines()]
+    pushed = sum(1 for r in rows if r["stroke_violations"])
+    assert pushed == facts.hits
+
+
+def test_run_and_check_warn_alike_on_an_option_left_out(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """``--controllers`` chooses a controller that does not take the file's
+    ``[controller_options]``: the option is left out with a warning (not refused: the
+    file's keys were written for its own controllers)."""
+    from benchmarks.study.preflight import preflight
+    from benchmarks.study.scenario import load_scenario
+
+    sc = load_scenario("quick").with_overrides(controllers=[CRASH_FREE])
+    pre = preflight([sc], measure=False)
+    assert pre.scenarios[0].controllers[0].options == {}
+    assert len(pre.warnings) == 1
+    assert pre.warnings[0].startswith("[controller_options] adaptive_gain of ")
+    assert "no controller chosen by --controllers" in pre.warnings[0]
