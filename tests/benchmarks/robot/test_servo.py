@@ -164,6 +164,45 @@ def test_lost_frames_are_counted_and_command_zero() -> None:
     assert "3 lost frames" in res.summary()
 
 
+def _servo_with(ctrl: object, max_steps: int) -> tuple[object, list[servo.PeriodStatus]]:
+    """Run ``ctrl`` (reset here) for ``max_steps`` periods against the emulator."""
+    from controllers.base import ControllerContext
+    from hexapod.backends.serial_emulated import open_emulated_robot
+    from hexapod.geometry import deltalab
+    from vision.cameras import front_camera
+
+    g = deltalab()
+    cam = front_camera(g)
+    goal = servo.goal_features(servo.ServoGoal(np.array(GOAL_MM) * 1e-3, None, "<test>"),
+                               cam, g)
+    ctrl.reset(ControllerContext(  # type: ignore[attr-defined]
+        cam.camera_from_base.apply(g.base_points), g, cam, 0.02, goal))
+    seen: list[servo.PeriodStatus] = []
+    with open_emulated_robot(g) as robot:
+        res = servo.servo_loop(robot, servo.SimCamera(cam, g), ctrl, goal, g, 0.02,
+                               max_steps=max_steps, on_period=seen.append)
+    return res, seen
+
+
+def test_a_controller_exception_ends_the_session_with_it() -> None:
+    from tests.benchmarks.plugins import CrashAtStep
+
+    with pytest.raises(RuntimeError, match="deliberate crash at call 4"):
+        _servo_with(CrashAtStep(gain=0.5, crash_step=3), max_steps=10)
+
+
+def test_a_command_of_the_wrong_shape_is_refused_and_commands_zero() -> None:
+    from tests.benchmarks.plugins import WrongShape
+
+    res, seen = _servo_with(WrongShape(), max_steps=3)
+    assert res.outcome == "max-steps" and len(seen) == 3  # type: ignore[attr-defined]
+    assert res.refused == 3  # type: ignore[attr-defined]
+    for s in seen:
+        assert not np.any(s.velocities)
+        assert s.reason == ("controller 'test-wrong-shape' returned a command of shape "
+                            "(3,); a command holds one value per leg, shape (6,)")
+
+
 @pytest.mark.parametrize(("text", "fragments"), [
     (f"length_mm = {_mm(GOAL_MM)}\n", ["'length_mm'", "did you mean 'lengths_mm'"]),
     ("name = 'x'\n", ["'lengths_mm'", "missing required key"]),
