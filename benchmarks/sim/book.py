@@ -63,7 +63,7 @@ class Book:
     violations: np.ndarray
     refused: np.ndarray
     hidden: np.ndarray
-    recording: list[bool]
+    recording: np.ndarray  # (n,) bool: the rows whose series are kept
     failure: list[str | None] = field(default_factory=list)
     tail_pos: list[list[float]] = field(default_factory=list)
     tail_ori: list[list[float]] = field(default_factory=list)
@@ -108,7 +108,8 @@ class Book:
             settled=np.zeros(n, dtype=int), last_bad=np.full(n, -1),
             converged=np.zeros(n, dtype=bool), violations=np.zeros(n, dtype=int),
             refused=np.zeros(n, dtype=int),
-            hidden=np.zeros(n, dtype=int), recording=recording, failure=[None] * n,
+            hidden=np.zeros(n, dtype=int), recording=np.array(recording, dtype=bool),
+            failure=[None] * n,
             tail_pos=[[] for _ in range(n)], tail_ori=[[] for _ in range(n)],
             step_times=[[] for _ in range(n)],
             series=[{k: [] for k in SERIES_KEYS} if rec else {} for rec in recording],
@@ -241,7 +242,7 @@ class Book:
         the ``done`` rows, count the leg velocity commands that would leave the stroke."""
         plant = self.plant
         dp, da = self._errors  # type: ignore[misc]
-        for j in np.flatnonzero(np.asarray(self.recording)[idx]).tolist():
+        for j in np.flatnonzero(self.recording[idx]).tolist():
             r = int(idx[j])
             ser = self.series[r]
             for key, value in zip(SERIES_KEYS, (

@@ -38,7 +38,17 @@ FK_FAILURE = "forward kinematics of the true robot failed (singularity?)"
 
 
 class Plant(Protocol):
-    """The true robot between control periods (see the module docstring)."""
+    """The robot between control periods (see the module docstring).
+
+    Attributes:
+        q: (N, 6) leg lengths [m] of every row (the plant changes them).
+        R: (N, 3, 3) platform rotations: the poses the camera sees.
+        t: (N, 3) platform positions [m].
+    """
+
+    q: np.ndarray
+    R: np.ndarray
+    t: np.ndarray
 
     def advance(self, run: np.ndarray, velocities: np.ndarray, dt: float
                 ) -> dict[int, str]:
