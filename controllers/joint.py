@@ -18,11 +18,11 @@ from controllers.base import (
     Controller,
     ControllerContext,
     Goal,
-    Observation,
+    GoalBatch,
     ObservationBatch,
     usable_observation_problem,
 )
-from controllers.goal_batch import GoalBatch
+from controllers.exceptions import ContextError
 from controllers.law_tools import goal_lengths
 from controllers.laws import Gain
 
@@ -43,54 +43,50 @@ class JointSpaceController(Controller):
         self.gain = Gain.from_options(self.name, gain, adaptive_gain)
         self._q_star: np.ndarray | None = None
 
-    def reset(self, context: ControllerContext) -> None:
+    def reset_trial(self, context: ControllerContext) -> None:
         """Read ``goal.lengths``.
 
         Raises:
             ContextError: The goal has no valid lengths.
         """
-        self.retarget(context.goal)
+        self.retarget_trial(context.goal)
 
-    def retarget(self, goal: Goal) -> None:
-        """A new goal (the law keeps no other state: the same as :meth:`reset`).
+    def retarget_trial(self, goal: Goal) -> None:
+        """A new goal (the law keeps no other state: the same as :meth:`reset_trial`).
 
         Raises:
             ContextError: The goal has no valid lengths.
         """
         self._q_star = goal_lengths(self.name, goal)
 
-    def step(self, observation: Observation) -> Command:
-        """``q_dot = -lambda (q - q*)``."""
-        if self._q_star is None:
-            return Command.refuse(f"{self.name}: reset(context) was not called")
-        problem = usable_observation_problem(observation, self.features)
-        if problem is not None:
-            return Command.refuse(problem)
-        e = np.asarray(observation.lengths, dtype=float) - self._q_star
-        lam = self.gain(float(np.abs(e).max()))
-        return Command(-lam * e, error=e, error_norm=math.sqrt(float(e @ e)), rank=6,
-                       condition=1.0, features_used=6)
-
     def reset_batch(self, contexts: Sequence[ControllerContext]) -> None:
-        """Read ``goal.lengths`` of every trial (as :meth:`reset`)."""
+        """Read ``goal.lengths`` of every trial (as :meth:`reset_trial`).
+
+        Raises:
+            ContextError: A goal without valid lengths.
+        """
         stars = []
         for ctx in contexts:
-            self.reset(ctx)
+            self.reset_trial(ctx)
             assert self._q_star is not None
             stars.append(self._q_star)
         self._b_q_star = np.array(stars).reshape(len(stars), 6)
+        self.trial_instances = [self]
 
     def retarget_batch(self, trials: np.ndarray, goals: GoalBatch) -> None:
-        """New goals of some trials (row ``j`` for trial ``trials[j]``), as :meth:`retarget`.
+        """New goals of some trials (row ``j`` for trial ``trials[j]``), as
+        :meth:`retarget_trial`.
 
         Raises:
-            ContextError: A goal without 6 finite lengths.
+            ContextError: A goal without 6 finite lengths, or no reset yet.
         """
+        if not self.trial_instances:
+            raise ContextError(self.name, "context", "retarget(goal) before reset(context)")
         trials = np.asarray(trials, dtype=int)
         qs = None if goals.lengths is None else np.asarray(goals.lengths, dtype=float)
         if qs is None or qs.shape != (len(trials), 6) or not np.all(np.isfinite(qs)):
             for j, k in enumerate(trials.tolist()):  # one by one: the goal at fault raises
-                self.retarget(goals.item(j))
+                self.retarget_trial(goals.item(j))
                 self._b_q_star[k] = self._q_star
             return
         self._b_q_star[trials] = qs
@@ -111,6 +107,9 @@ class JointSpaceController(Controller):
                 continue
             out.velocities[k] = -self.gain(float(x[k])) * e[k]
             out.error_norm[k] = math.sqrt(float(e[k] @ e[k]))
+        out.details = lambda k: None if out.reasons[k] is not None else Command(
+            out.velocities[k].copy(), error=e[k].copy(), error_norm=float(out.error_norm[k]),
+            rank=6, condition=1.0, features_used=6)
         return out
 
     def _refusal(self, obs: ObservationBatch, k: int) -> Command:

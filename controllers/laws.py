@@ -39,15 +39,17 @@ import numpy as np
 
 from controllers.base import (
     Command,
+    CommandBatch,
     Controller,
     ControllerContext,
     Goal,
+    GoalBatch,
     Observation,
+    ObservationBatch,
 )
 from controllers.estimators import LegDirectionEstimate, PoseEstimate
 from controllers.exceptions import ContextError, OptionError
-from controllers.law_batch import BatchedLaw
-from controllers.law_kernel import LawKernel, LawResult
+from controllers.law_kernel import KernelRows, LawKernel, LawResult
 from controllers.law_tools import (
     INTERACTIONS,
     Gain,
@@ -100,7 +102,7 @@ class TaskStep:
     compiled: LawResult | None
 
 
-class VisionLaw(BatchedLaw, Controller):
+class VisionLaw(Controller):
     """Base of the image-based laws: ``tau = -lambda L^+ e``, ``q_dot = J_inv tau``.
 
     Subclasses implement :meth:`_reset_features` (read the goal, set the compiled core
@@ -151,7 +153,7 @@ class VisionLaw(BatchedLaw, Controller):
         self._kernel_selected = False
 
     # ----------------------------------------------------------------- reset
-    def reset(self, context: ControllerContext) -> None:
+    def reset_trial(self, context: ControllerContext) -> None:
         """Read the estimated base points, the period and the goal.
 
         Raises:
@@ -179,7 +181,7 @@ class VisionLaw(BatchedLaw, Controller):
         self.solver.reset(context, self.name, dt)
         self._configure_kernel()
 
-    def retarget(self, goal: Goal) -> None:
+    def retarget_trial(self, goal: Goal) -> None:
         """A new goal, keeping what the law carries between periods (the goal of each
         period of a trajectory task, :mod:`controllers.tracking`).
 
@@ -376,8 +378,9 @@ class VisionLaw(BatchedLaw, Controller):
         return ("nominal-model directions (forward kinematics of the measured lengths) for "
                 "never-seen legs " + ", ".join(str(int(i)) for i in unknown))
 
-    def step(self, observation: Observation) -> Command:
-        """One period: ``q_dot = J_inv (-lambda L^+ e)`` (never raises for bad measurements)."""
+    def step_trial(self, observation: Observation) -> Command:
+        """One period of this instance's trial: ``q_dot = J_inv (-lambda L^+ e)`` (never
+        raises for bad measurements)."""
         if self.context is None:
             return Command.refuse(f"{self.name}: reset(context) was not called")
         q = self.checked_lengths(observation)
@@ -390,6 +393,136 @@ class VisionLaw(BatchedLaw, Controller):
         return self._command(self.solver.solve(ts.normal, ts.gradient, ts.gain, q, J,
                                                ts.compiled),
                              J, e, ts.error_norm, e.shape[0], q, ts.notes)
+
+    # ----------------------------------------------------------------- the batch
+    # Each trial keeps its own instance of the law (:attr:`trial_instances`, this one the
+    # first), so that every case keeps exactly the per-trial behaviour; what the law
+    # carries between periods is one batch LegDirectionEstimate whose rows are the
+    # instances' estimates (views). The common case (every feature visible and finite,
+    # now and in the goal, a full-rank interaction matrix) goes through the law's lean
+    # compiled core over all its rows in one C loop (:class:`~controllers.law_kernel.
+    # KernelRows`); any other row (a hidden or non-finite feature, a refusal, a QP whose
+    # unconstrained optimum leaves a bound) is stepped by its own instance
+    # (:meth:`step_trial`, through :meth:`step_rows`).
+    def _batch_features(self, obs: ObservationBatch) -> tuple[np.ndarray | None,
+                                                               np.ndarray | None]:
+        """The rows' measured features for the compiled core, (n, F), and the mask (n,)
+        of rows whose features are all visible. (None, None): no compiled core."""
+        return None, None
+
+    def _batch_desired(self, goals: GoalBatch) -> tuple[np.ndarray | None, np.ndarray]:
+        """The compiled core's desired-feature input of each goal, (m, D), and the mask
+        (m,) of goals that the law would read into exactly that with its compiled core
+        (every feature visible and finite, the CURRENT interaction). (None, mask): no
+        such shortcut; every goal then goes through its instance's ``retarget_trial``."""
+        return None, np.zeros(len(goals), dtype=bool)
+
+    def _batch_reset_extra(self) -> None:
+        """Per-trial constants of subclasses (the solver's are gathered by
+        :meth:`~controllers.solvers.base.Solver.batch_reset`)."""
+
+    def reset_batch(self, contexts: Sequence[ControllerContext]) -> None:
+        """One instance per context (this one first, the others built with its options),
+        each reset with its context; their estimates become rows of one batch estimate
+        and their compiled cores' inputs rows of one array.
+
+        Raises:
+            ContextError: A context the law cannot use (as :meth:`reset_trial`).
+        """
+        super().reset_batch(contexts)
+        trials = self.trial_instances
+        #: The estimates of every trial (the instances' estimates are its rows).
+        self.batch_estimate = LegDirectionEstimate.fresh(len(trials))
+        for k, inst in enumerate(trials):
+            inst.estimate = self.batch_estimate.row(k)
+        self._core_rows = KernelRows(len(trials))
+        for k, inst in enumerate(trials):
+            self._core_rows.take(k, inst.kernel if inst.batch_core else None)
+        #: Goals given to ``retarget_batch`` not yet read by the trial's instance.
+        self._pending: dict[int, tuple[GoalBatch, int]] = {}
+        self.solver.batch_reset([t.solver for t in trials])
+        self._batch_reset_extra()
+
+    def retarget_batch(self, trials: np.ndarray, goals: GoalBatch) -> None:
+        """New goals for some trials (row ``j`` of ``goals`` for trial ``trials[j]``),
+        keeping their state, as each instance's :meth:`retarget_trial`.
+
+        In a batch of many trials, a goal that the compiled core takes as it is
+        (:meth:`_batch_desired`) is written into the batch's inputs at once and read by
+        the instance only when that trial next needs it (a row the core cannot finish);
+        any other goal, and the goal of a batch of one, is read by the instance now.
+
+        Raises:
+            ContextError: A goal the law cannot use, or no reset yet.
+        """
+        if not self.trial_instances:
+            raise ContextError(self.name, "context", "retarget(goal) before reset(context)")
+        trials = np.asarray(trials, dtype=int)
+        desired, quick = self._batch_desired(goals)
+        if desired is not None and len(self.trial_instances) > 1:  # (one reads it now)
+            quick = self._core_rows.write_desired(trials, desired, quick)
+            for j in np.flatnonzero(quick).tolist():
+                self._pending[int(trials[j])] = (goals, j)
+        else:
+            quick = np.zeros(len(trials), dtype=bool)
+        for j in np.flatnonzero(~quick).tolist():
+            k = int(trials[j])
+            self._pending.pop(k, None)
+            self._retarget_instance(k, goals.item(j))
+
+    def _retarget_instance(self, trial: int, goal: Goal) -> None:
+        inst = self.trial_instances[trial]
+        inst.retarget_trial(goal)
+        self._core_rows.take(trial, inst.kernel if inst.batch_core else None)
+
+    def step_batch(self, observations: ObservationBatch) -> CommandBatch:
+        """One period of the rows' trials: the common case through the compiled core as
+        arrays, the other rows by their instances (see above)."""
+        obs = observations
+        n = len(obs)
+        trials = np.asarray(obs.trials, dtype=int)
+        out = CommandBatch.zeros(n)
+        slow = np.ones(n, dtype=bool)
+        rows_core = self._core_rows
+        feats, visible = (self._batch_features(obs) if rows_core.function is not None
+                          else (None, None))
+        if feats is not None and visible is not None:
+            q = np.asarray(obs.lengths, dtype=float)
+            with np.errstate(invalid="ignore"):
+                fast = (rows_core.ready[trials] & visible & np.isfinite(feats).all(axis=1)
+                        & np.isfinite(q).all(axis=1) & (q.min(axis=1) > 0)
+                        & np.isfinite(np.asarray(obs.t, dtype=float)))
+            rows = np.flatnonzero(fast)
+            if len(rows):
+                slow[rows[self._fast(rows, trials[rows], feats[rows], q[rows], out)]] = False
+        slow_rows = np.flatnonzero(slow)
+        if self._pending and len(slow_rows):
+            for k in trials[slow_rows].tolist():
+                pending = self._pending.pop(k, None)
+                if pending is not None:
+                    self._retarget_instance(k, pending[0].item(pending[1]))
+        self.step_rows(obs, slow_rows, out)
+        return out
+
+    def _fast(self, rows: np.ndarray, trials: np.ndarray, feats: np.ndarray, q: np.ndarray,
+              out: CommandBatch) -> np.ndarray:
+        """The compiled core over the rows; fills the accepted ones, returns their mask."""
+        rc = self._core_rows
+        Y = rc.evaluate(trials, feats, q)
+        o = rc.outputs
+        ok = rc.accepted(Y) & self.solver.batch_accept(trials, q, Y[:, o["qdot"]])
+        if ok.all():  # the common case: no row copies
+            Ya, tr, qa, ra = Y, trials, q, rows
+        else:
+            acc = np.flatnonzero(ok)
+            Ya, tr, qa, ra = Y[acc], trials[acc], q[acc], rows[acc]
+        est = self.batch_estimate
+        est.measured_all(Ya[:, o["directions"]].reshape(-1, 6, 3), tr)
+        est.commanded(Ya[:, o["tau"]], qa, tr)
+        out.velocities[ra] = Ya[:, o["qdot"]]
+        out.error_norm[ra] = Ya[:, o["error_norm"].start]
+        out.details = lambda k: rc.command(Ya, ra, k)
+        return ok
 
     def _command(self, solved: tuple[np.ndarray, int, float, list[str], str | None,
                                      np.ndarray | None],

@@ -10,10 +10,11 @@ from typing import Any
 import numpy as np
 import pytest
 
-from controllers.batch import PerTrialLoop, batch_controller
-from controllers.goal_batch import GoalBatch
+from controllers.base import GoalBatch
+from controllers.batch import batch_controller
 from controllers.latency import LatencyCompensated
 from tests.controllers.controller_world import World, make_camera
+from tests.controllers.one_by_one import OneByOne
 from tests.controllers.test_tracking_batch import _batch, _goal, _hidden, _observation, _same
 
 DT = 0.02
@@ -39,9 +40,7 @@ def test_batch_rows_equal_one_compensator_per_trial(kind: str, compiled: bool, l
     batch = batch_controller("latency-compensated", options)
     assert isinstance(batch, LatencyCompensated)
     batch.reset_batch(contexts)
-    singles = batch_controller("latency-compensated", options, batched=False)
-    assert isinstance(singles, PerTrialLoop)
-    singles.reset_batch(contexts)
+    singles = OneByOne(lambda: batch_controller("latency-compensated", options), contexts)
     R, t = Rs[:n].copy(), ts[:n].copy()
     past: list[list[Any]] = [[] for _ in range(n)]  # each trial's earlier observations
     late_rows = 0
