@@ -41,7 +41,6 @@ from __future__ import annotations
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from functools import lru_cache
-from typing import Any
 
 import casadi as ca
 import numpy as np
@@ -351,91 +350,3 @@ def edge_law_kernel(use_lines: bool, interaction: str = "current",
     return LawKernel(_edge_compiled(use_lines, interaction, False, compiled),
                      edge_inputs(interaction), 36,
                      lambda: _edge_compiled(use_lines, interaction, True, compiled))
-
-
-class KernelRows:
-    """The inputs of the compiled cores of a batch's trials, one row per trial, and the
-    lean core that evaluates any rows of them in one C loop (the vision laws' step over
-    a batch, :meth:`controllers.laws.VisionLaw.step_batch`).
-
-    Args:
-        n: Trials of the batch.
-    """
-
-    def __init__(self, n: int) -> None:
-        #: The lean core (None until a trial has a compiled core).
-        self.function: CompiledFunction | None = None
-        #: Where each named input lies in a row, and each named output in a result.
-        self.slices: dict[str, slice] = {}
-        self.outputs: dict[str, slice] = {}
-        self.n = n
-        self.X = np.zeros((0, 0))
-        #: (n,) the trials whose row holds its core's inputs (the lean core may step them).
-        self.ready = np.zeros(n, dtype=bool)
-        #: (n,) the rows holding a core's constants (a retarget may write its desired
-        #: features alone).
-        self.filled = np.zeros(n, dtype=bool)
-
-    def take(self, trial: int, kernel: LawKernel | None) -> None:
-        """Copy a trial's core inputs into its row (None: the trial has no lean core)."""
-        self.ready[trial] = kernel is not None
-        if kernel is None:
-            return
-        if self.function is None:
-            self.function = kernel.lean_function
-            self.slices = kernel.slices
-            self.outputs = kernel.outputs
-            self.X = np.zeros((self.n, kernel.function.n_in))
-        self.X[trial] = kernel.input_vector
-        self.filled[trial] = True
-
-    def write_desired(self, trials: np.ndarray, desired: np.ndarray, quick: np.ndarray
-                      ) -> np.ndarray:
-        """Write the desired features ``desired`` (m, D) of the goals ``quick`` (m,) into
-        the rows of ``trials`` (m,) that hold their constants; returns the mask of the
-        goals written."""
-        if self.function is None:
-            return np.zeros(len(trials), dtype=bool)
-        quick = quick & self.filled[trials]
-        rows = np.flatnonzero(quick)
-        if len(rows):
-            self.X[trials[rows], self.slices["desired"]] = desired[rows]
-            self.ready[trials[rows]] = True
-        return quick  # type: ignore[no-any-return]
-
-    def evaluate(self, trials: np.ndarray, features: np.ndarray, lengths: np.ndarray
-                 ) -> np.ndarray:
-        """The lean core over the rows of ``trials`` with their measured ``features``
-        (m, F) and ``lengths`` (m, 6) [m]: the (m, outputs) results."""
-        assert self.function is not None
-        X = self.X[trials]
-        X[:, self.slices["features"]] = features
-        X[:, self.slices["lengths"]] = lengths
-        return self.function.batch(X)
-
-    def accepted(self, Y: np.ndarray) -> np.ndarray:
-        """(m,) the results that are a command as they are: a finite error and
-        interaction matrix, rank 6, a finite command (the refusals and the non-finite
-        cases are left to the trial's own step, which says why)."""
-        o = self.outputs
-        with np.errstate(invalid="ignore"):
-            return (np.isfinite(Y[:, o["error_norm"].start])  # type: ignore[no-any-return]
-                    & np.isfinite(Y[:, o["n_sum"].start])
-                    & (Y[:, o["rank"].start] >= 6) & (Y[:, o["qdot_check"].start] == 0.0))
-
-    def command(self, Y: np.ndarray, rows: np.ndarray, k: int) -> Any:
-        """The full :class:`~controllers.base.Command` of batch row ``k`` from its result
-        (``Y[j]`` for ``rows[j] == k``), or None when the row has none here."""
-        from controllers.base import Command
-
-        hit = np.flatnonzero(rows == k)
-        if not len(hit):
-            return None
-        y = Y[int(hit[0])]
-        o = self.outputs
-        error = y[o["error"]].copy()
-        return Command(y[o["qdot"]].copy(), twist=y[o["tau"]].copy(), error=error,
-                       error_norm=float(y[o["error_norm"].start]),
-                       rank=int(y[o["rank"].start]),
-                       condition=float(y[o["condition"].start]),
-                       features_used=error.shape[0])

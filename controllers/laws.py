@@ -14,17 +14,18 @@ pseudo-inverse or QP, missing features, diagnostics) is written once, here, in
   MEAN features, feature selection by visibility with a rank check, and
   dead-reckoning of the direction of hidden legs (needed by ``J_inv``).
 
-Speed: ``step`` is called millions of times by the benchmarks, and its cost is the
-number of numpy calls, not the arithmetic. A law hands the measured features to its
-compiled core (:mod:`controllers.law_kernel`, generated from the tasks' CasADi blocks
-to C, one ctypes call of a few microseconds: error, ``L^T W L``, ``L^T W e``, gain,
-rank and condition, damped solve, ``J_inv``, ``q_dot``), for every interaction choice.
-In the common case (every feature visible, now and in the goal) nothing else is
-computed: :meth:`VisionLaw.tasks` only wraps the result. With hidden features the law
-first chooses the used features (weight 1, the hidden ones weight 0) and the
-directions of the legs it cannot measure (:meth:`VisionLaw._select`: dead-reckoned or
-approximated). The numpy formulas of :mod:`controllers.interaction` are the tests'
-oracle (``tests/controllers/numpy_law.py``).
+One step, over a batch of trials (:meth:`VisionLaw.step_batch`): each trial keeps its
+own instance of the law (``trial_instances``, this one the first; its estimate a row of
+the batch's), so that every case keeps exactly the per-trial behaviour. The common case
+(every feature visible and finite, now and in the goal, a full-rank interaction matrix,
+a solver that takes the classical solution as it is) goes through the law's lean
+compiled core (:mod:`controllers.law_kernel`, generated from the tasks' CasADi blocks)
+over all its rows in one C loop (:class:`~controllers.law_rows.KernelRows`). Any other
+row is stepped by its instance (:meth:`VisionLaw.step_trial`): the features go through
+the same core after :meth:`VisionLaw._select` has chosen the used features (weight 1,
+the hidden ones weight 0) and the directions of the legs it cannot measure
+(dead-reckoned or approximated). The numpy formulas of :mod:`controllers.interaction`
+are the tests' oracle (``tests/controllers/numpy_law.py``).
 """
 
 from __future__ import annotations
@@ -33,7 +34,7 @@ import logging
 import math
 from abc import abstractmethod
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass, replace
+from dataclasses import replace
 
 import numpy as np
 
@@ -47,13 +48,21 @@ from controllers.base import (
     Observation,
     ObservationBatch,
 )
-from controllers.estimators import LegDirectionEstimate, PoseEstimate
+from controllers.estimators import (
+    LegDirectionEstimate,
+    PoseEstimate,
+    model_directions,
+    model_directions_note,
+    unknown_direction_reason,
+)
 from controllers.exceptions import ContextError, OptionError
-from controllers.law_kernel import KernelRows, LawKernel, LawResult
+from controllers.law_kernel import LawKernel
+from controllers.law_rows import KernelRows
 from controllers.law_tools import (
     INTERACTIONS,
     Gain,
     Selection,
+    TaskStep,
     check_choice,
     check_number,
     check_observation,
@@ -67,39 +76,12 @@ from controllers.solvers.base import Solver
 from controllers.solvers.pseudo_inverse import DampedPseudoInverse
 
 __all__ = [
-    "INTERACTIONS", "Gain", "Selection", "VisionLaw", "check_choice", "check_number",
+    "INTERACTIONS", "Gain", "Selection", "TaskStep", "VisionLaw", "check_choice", "check_number",
     "check_observation", "inverse_jacobian_into", "solve_least_squares", "solve_normal",
     "solve_normal_damped",
 ]
 
 log = logging.getLogger(__name__)
-
-
-@dataclass(slots=True)
-class TaskStep:
-    """The stacked tasks of one period, as a solver takes them (:meth:`VisionLaw.tasks`).
-
-    Attributes:
-        error: (m,) stacked error ``e`` of the used features.
-        error_norm: ``|e|``.
-        normal: (6, 6) ``L^T L`` of the stacked interaction matrix ``L``.
-        gradient: (6,) ``L^T e``.
-        gain: ``lambda(|e|_inf)`` [1/s].
-        inverse_jacobian: (6, 6) ``J_inv`` (rows ``[u_i^T, (A_i x u_i)^T]``), at the
-            directions of ``estimate.in_use``.
-        notes: Diagnostics (features used, predicted or approximated directions).
-        compiled: The compiled core's full result (its classical solution, rank,
-            condition) when it computed the period, else None.
-    """
-
-    error: np.ndarray
-    error_norm: float
-    normal: np.ndarray
-    gradient: np.ndarray
-    gain: float
-    inverse_jacobian: np.ndarray
-    notes: list[str]
-    compiled: LawResult | None
 
 
 class VisionLaw(Controller):
@@ -361,22 +343,12 @@ class VisionLaw(Controller):
         if len(unknown):
             model = self._model_directions(q)
             if model is None:
-                return Command.refuse(self._unknown_reason(unknown), e)
+                return Command.refuse(unknown_direction_reason(unknown), e)
             est.in_use[unknown] = model[unknown]
             inputs["leg_directions"][:] = est.in_use.reshape(-1)
             r = kernel.evaluate()
-            notes.append(self._model_note(unknown))
+            notes.append(model_directions_note(unknown))
         return TaskStep(e, r.error_norm, r.N, r.b, r.gain, r.J, notes, r)
-
-    @staticmethod
-    def _unknown_reason(unknown: np.ndarray) -> str:
-        return (f"direction of leg {int(unknown[0])} unknown (hidden since reset, no desired "
-                "direction, no nominal model prediction): cannot build the inverse Jacobian")
-
-    @staticmethod
-    def _model_note(unknown: np.ndarray) -> str:
-        return ("nominal-model directions (forward kinematics of the measured lengths) for "
-                "never-seen legs " + ", ".join(str(int(i)) for i in unknown))
 
     def step_trial(self, observation: Observation) -> Command:
         """One period of this instance's trial: ``q_dot = J_inv (-lambda L^+ e)`` (never
@@ -395,15 +367,6 @@ class VisionLaw(Controller):
                              J, e, ts.error_norm, e.shape[0], q, ts.notes)
 
     # ----------------------------------------------------------------- the batch
-    # Each trial keeps its own instance of the law (:attr:`trial_instances`, this one the
-    # first), so that every case keeps exactly the per-trial behaviour; what the law
-    # carries between periods is one batch LegDirectionEstimate whose rows are the
-    # instances' estimates (views). The common case (every feature visible and finite,
-    # now and in the goal, a full-rank interaction matrix) goes through the law's lean
-    # compiled core over all its rows in one C loop (:class:`~controllers.law_kernel.
-    # KernelRows`); any other row (a hidden or non-finite feature, a refusal, a QP whose
-    # unconstrained optimum leaves a bound) is stepped by its own instance
-    # (:meth:`step_trial`, through :meth:`step_rows`).
     def _batch_features(self, obs: ObservationBatch) -> tuple[np.ndarray | None,
                                                                np.ndarray | None]:
         """The rows' measured features for the compiled core, (n, F), and the mask (n,)
@@ -494,7 +457,9 @@ class VisionLaw(Controller):
                         & np.isfinite(np.asarray(obs.t, dtype=float)))
             rows = np.flatnonzero(fast)
             if len(rows):
-                slow[rows[self._fast(rows, trials[rows], feats[rows], q[rows], out)]] = False
+                done = rows_core.step(rows, trials[rows], feats[rows], q[rows],
+                                      self.solver, self.batch_estimate, out)
+                slow[rows[done]] = False
         slow_rows = np.flatnonzero(slow)
         if self._pending and len(slow_rows):
             for k in trials[slow_rows].tolist():
@@ -503,26 +468,6 @@ class VisionLaw(Controller):
                     self._retarget_instance(k, pending[0].item(pending[1]))
         self.step_rows(obs, slow_rows, out)
         return out
-
-    def _fast(self, rows: np.ndarray, trials: np.ndarray, feats: np.ndarray, q: np.ndarray,
-              out: CommandBatch) -> np.ndarray:
-        """The compiled core over the rows; fills the accepted ones, returns their mask."""
-        rc = self._core_rows
-        Y = rc.evaluate(trials, feats, q)
-        o = rc.outputs
-        ok = rc.accepted(Y) & self.solver.batch_accept(trials, q, Y[:, o["qdot"]])
-        if ok.all():  # the common case: no row copies
-            Ya, tr, qa, ra = Y, trials, q, rows
-        else:
-            acc = np.flatnonzero(ok)
-            Ya, tr, qa, ra = Y[acc], trials[acc], q[acc], rows[acc]
-        est = self.batch_estimate
-        est.measured_all(Ya[:, o["directions"]].reshape(-1, 6, 3), tr)
-        est.commanded(Ya[:, o["tau"]], qa, tr)
-        out.velocities[ra] = Ya[:, o["qdot"]]
-        out.error_norm[ra] = Ya[:, o["error_norm"].start]
-        out.details = lambda k: rc.command(Ya, ra, k)
-        return ok
 
     def _command(self, solved: tuple[np.ndarray, int, float, list[str], str | None,
                                      np.ndarray | None],
@@ -582,31 +527,13 @@ class VisionLaw(Controller):
                 and (self._q_star is not None or "desired_lengths" not in k.inputs))
 
     def _model_directions(self, q: np.ndarray) -> np.ndarray | None:
-        """Leg directions (6, 3) in the camera frame predicted by the nominal model.
-
-        Forward kinematics of the measured lengths with the nominal geometry, seen
-        through the estimated ``camera_from_base``. Used only where a leg has never
-        been observed and the goal image does not show it either: the inverse
-        Jacobian needs every direction, and an approximate one only slows the
-        convergence (the error itself never involves the model). None when the
-        context has no camera pose or the forward kinematics fails.
-        """
-        ctx = self.context
-        pose = getattr(getattr(ctx, "camera", None), "camera_from_base", None)
-        if ctx is None or pose is None:
-            return None
-        from hexapod.exceptions import HexapodError
-        from hexapod.fk import forward_kinematics
-        from hexapod.kinematics import legs_in_frame
-
-        try:
-            sol = forward_kinematics(ctx.geometry, q, check_stroke=False,
-                                     guess=None if self.model_pose is None
-                                     else self.model_pose.pose)
-        except HexapodError:
-            return None
-        self.model_pose = PoseEstimate(sol.rotation, sol.translation)
-        return legs_in_frame(ctx.geometry, sol.rotation, sol.translation, pose).directions
+        """Leg directions (6, 3) in the camera frame predicted by the nominal model
+        (:func:`~controllers.estimators.model_directions`), warm-started by and updating
+        :attr:`model_pose`."""
+        directions, pose = model_directions(self.context, q, self.model_pose)
+        if pose is not None:
+            self.model_pose = pose
+        return directions
 
     # ----------------------------------------------------------------- helpers
     def _desired_lengths(self, q: np.ndarray) -> np.ndarray:

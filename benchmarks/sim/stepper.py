@@ -1,6 +1,6 @@
 """Closed-loop trials: true world -> sensor -> controller -> backend -> true world.
 
-One trial (ARCHITECTURE.md, "one control step, as data"): the true world (true
+One trial (``docs/architecture.md``, the loop): the true world (true
 geometry, true camera, true pose) produces observations through :mod:`vision`
 (geometric features + noise, or rendered images + detection); the controller,
 built from the ESTIMATED parameters, returns leg velocities; the backend clamps
