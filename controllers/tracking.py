@@ -236,7 +236,7 @@ class TrackingController(Controller):
         for name in GOAL_FIELDS:
             arrays = [p.goals[name] for p in plans if p is not None]
             present = [a is not None for a in arrays]
-            if not all(present):
+            if not arrays or not all(present):  # (no trial tracks: nothing to stack)
                 self._uniform &= not any(present)
                 self._goals[name] = None
                 continue
