@@ -93,7 +93,7 @@ class JointSpaceController(Controller):
 
     def step_batch(self, observations: ObservationBatch) -> CommandBatch:
         """``q_dot = -lambda (q - q*)`` for every row (a row with non-finite lengths or
-        time is refused, as by :meth:`step`)."""
+        time is refused, as one trial alone)."""
         obs = observations
         n = len(obs)
         q = np.asarray(obs.lengths, dtype=float)

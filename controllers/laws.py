@@ -167,15 +167,15 @@ class VisionLaw(Controller):
         """A new goal, keeping what the law carries between periods (the goal of each
         period of a trajectory task, :mod:`controllers.tracking`).
 
-        The desired features and lengths become the goal's, exactly as :meth:`reset`
+        The desired features and lengths become the goal's, exactly as :meth:`reset_trial`
         would set them; the leg-direction estimate (the dead-reckoned directions of
         hidden legs and the last commanded twist), the forward-kinematics warm start and
         the solver's state stay: the goal moved, the robot did not. The compiled core is
         kept (its desired features rewritten) when the new goal still allows it.
 
         Raises:
-            ContextError: :meth:`reset` was not called, or the goal is invalid (as in
-                :meth:`reset`; the law then keeps its previous goal).
+            ContextError: :meth:`reset_trial` was not called, or the goal is invalid (as in
+                :meth:`reset_trial`; the law then keeps its previous goal).
         """
         if self.context is None:
             raise ContextError(self.name, "context", "retarget(goal) before reset(context)")
@@ -221,12 +221,12 @@ class VisionLaw(Controller):
 
     def _reuse_kernel(self, make: Callable[[], LawKernel]) -> LawKernel:
         """The compiled core for :meth:`_reset_features`: the one kept by
-        :meth:`retarget` (same law, same camera), else ``make()``."""
+        :meth:`retarget_trial` (same law, same camera), else ``make()``."""
         spare, self._spare_kernel = self._spare_kernel, None
         return spare if spare is not None else make()
 
     def _retarget_features(self, context: ControllerContext) -> None:
-        """Read the desired features of a new goal (:meth:`retarget`); subclasses skip
+        """Read the desired features of a new goal (:meth:`retarget_trial`); subclasses skip
         what does not depend on the goal."""
         self._reset_features(context)
 
@@ -293,7 +293,7 @@ class VisionLaw(Controller):
     def tasks(self, observation: Observation, q: np.ndarray) -> TaskStep | Command:
         """This period's tasks for a solver, or the refusal of why none can be built.
 
-        The part of a step every solver shares (the pseudo-inverse of :meth:`step`, the
+        The part of a step every solver shares (the pseudo-inverse of :meth:`step_trial`, the
         limit QP, the predictive controller): the features of a usable observation
         (:meth:`checked_lengths`) go through the compiled core (:mod:`controllers.law_kernel`):
         directly when every feature is visible now and in the goal

@@ -139,7 +139,7 @@ class ModelBasedController(Controller):
         self.compiled = bool(compiled)
         #: The compiled pose servo (None: numpy path, or not reset).
         self.kernel: CompiledFunction | None = None
-        #: The servo's input row (constants written by :meth:`reset`).
+        #: The servo's input row (constants written by :meth:`reset_trial`).
         self.servo_input = np.zeros(75)
         self.fk_tolerance = check_number(self.name, "fk_tolerance", fk_tolerance)
         self.fk_max_iterations = int(check_number(self.name, "fk_max_iterations",
@@ -183,8 +183,8 @@ class ModelBasedController(Controller):
         period of a trajectory task, :mod:`controllers.tracking`).
 
         Raises:
-            ContextError: :meth:`reset` was not called, or the goal is invalid (as in
-                :meth:`reset`).
+            ContextError: :meth:`reset_trial` was not called, or the goal is invalid (as in
+                :meth:`reset_trial`).
         """
         if self.context is None:
             raise ContextError(self.name, "context", "retarget(goal) before reset(context)")
@@ -296,7 +296,7 @@ class ModelBasedController(Controller):
 
     def retarget_batch(self, trials: np.ndarray, goals: GoalBatch) -> None:
         """New goals of some trials (row ``j`` for trial ``trials[j]``): each instance's
-        :meth:`retarget`, the batch's servo inputs updated.
+        :meth:`retarget_trial`, the batch's servo inputs updated.
 
         Raises:
             ContextError: A goal the law cannot use.

@@ -15,17 +15,18 @@ built for a fixed goal:
   Nothing is taught along the path: under a calibration error the features in between
   carry the model's error of the feature CHANGE, and the end of the path is the taught
   goal, reached as accurately as by a point-to-point task;
-- the controller is retargeted to that goal every period: its ``retarget(goal)`` when it
-  has one (the built-in vision laws keep their state: the dead-reckoned directions of
-  hidden legs, the last twist, the warm starts; the goal moved, the robot did not), else
-  ``reset`` with the new goal (the law's state starts afresh);
+- the controller is retargeted to that goal every period, the rows whose period changed
+  in one ``retarget_batch`` (each trial's ``retarget_trial``: the built-in vision laws
+  keep their state, the dead-reckoned directions of hidden legs, the last twist, the
+  warm starts; the goal moved, the robot did not; by default a reset with the new goal,
+  the law's state starting afresh);
 - a velocity command (not a force command) gets the feed-forward
   ``(q*(t_{k+1}) - q*(t_k)) / dt``, the nominal leg lengths' change over the coming
   period. For a vision law it is the feature-rate
   term ``L^+ ds*/dt`` written in joint space: with the nominal model exact, a robot on
   the reference stays on it (tested in the kinematic world).
 
-Every time-varying goal is computed once, at ``reset``, on the control grid.
+Every time-varying goal is computed once, at ``reset_batch``, on the control grid.
 
 A controller that tracks ``context.reference`` itself (``tracks_reference = True``: the
 computed-torque laws, which need the reference's derivatives and sample it at their own

@@ -246,10 +246,10 @@ class MPCLaw(Controller):
         """A new goal, keeping what the controller carries between periods (the goal of
         each period of a trajectory task, :mod:`controllers.tracking`): the warm start,
         the fallback law's estimate and the drives' state stay, the desired features
-        become the goal's, exactly as :meth:`reset` would set them.
+        become the goal's, exactly as :meth:`reset_trial` would set them.
 
         Raises:
-            ContextError: :meth:`reset` was not called, or the goal is invalid (the
+            ContextError: :meth:`reset_trial` was not called, or the goal is invalid (the
                 controller then keeps its previous goal).
         """
         if self.context is None:
