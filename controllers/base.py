@@ -49,11 +49,12 @@ class Controller(RemembersOptions, ABC):
     constructor takes the options as keyword arguments.
 
     The step is ONE method, over a batch of trials: :meth:`step_batch`
-    (:class:`ObservationBatch` -> :class:`CommandBatch`). The base steps the rows one by
-    one with each trial's own instance (:meth:`step_trial`, the only per-row loop of the
-    package) wherever a subclass computes no rows as arrays: a controller either
-    overrides :meth:`step_batch` (computing what it can as arrays, handing the other rows
-    to :meth:`step_rows`) or defines only :meth:`step_trial` and :meth:`reset_trial`.
+    (:class:`ObservationBatch` -> :class:`CommandBatch`). The base's computes the rows the
+    controller can as arrays (:meth:`step_arrays`) and steps the others one by one with
+    each trial's own instance (:meth:`step_trial`, the only per-row loop of the
+    package): a controller defines :meth:`reset_trial` and :meth:`step_trial` (and
+    :meth:`step_arrays` to compute rows as arrays), or overrides :meth:`step_batch`
+    altogether.
     :meth:`step` and :meth:`reset` are the per-trial adapters (a batch of one: the real
     servo loop, and anyone who steps one robot); they are final.
 
@@ -102,10 +103,13 @@ class Controller(RemembersOptions, ABC):
     @final
     def step(self, observation: Observation) -> Command:
         """The command of one observation: :meth:`step_batch` of a batch of one (never
-        raises for bad measurements)."""
+        raises for bad measurements). Where the batch step is the base's, a lone row is
+        stepped by its trial's instance (:meth:`step_row`): that call, directly."""
         if not self.trial_instances:
             return Command.refuse(f"{self.name}: reset(context) was not called",
                                   actuation=self.actuation)
+        if type(self).step_batch is Controller.step_batch:
+            return self.step_row(0, observation)
         batch = ObservationBatch.of(observation)
         if batch is None:
             problem = usable_observation_problem(observation, self.features)
@@ -138,19 +142,31 @@ class Controller(RemembersOptions, ABC):
         self.trial_instances = instances
 
     def step_batch(self, observations: ObservationBatch) -> CommandBatch:
-        """The commands of every row (by default each row by its trial's instance)."""
-        out = CommandBatch.zeros(len(observations), self.actuation)
-        self.step_rows(observations, np.arange(len(observations)), out)
+        """The commands of every row: the rows the controller computes as arrays
+        (:meth:`step_arrays`, for two rows or more: one row costs less by its instance),
+        the others each by its trial's instance (:meth:`step_rows`)."""
+        n = len(observations)
+        out = CommandBatch.zeros(n, self.actuation)
+        rows = self.step_arrays(observations, out) if n > 1 else np.arange(n)
+        self.step_rows(observations, rows, out)
         return out
+
+    def step_arrays(self, observations: ObservationBatch, out: CommandBatch) -> np.ndarray:
+        """Compute the rows the controller can as arrays, into ``out``; returns the rows
+        left to the trials' instances (by default all of them)."""
+        return np.arange(len(observations))
 
     def step_rows(self, observations: ObservationBatch, rows: np.ndarray,
                   out: CommandBatch) -> None:
-        """Step ``rows`` of a batch one by one, each with its trial's instance
-        (:meth:`step_trial`), writing the commands into ``out``."""
-        instances = self.trial_instances
+        """Step ``rows`` of a batch one by one (:meth:`step_row`), writing the commands
+        into ``out``."""
         trials = observations.trials
         for k in rows.tolist():
-            out.put(k, instances[int(trials[k])].step_trial(observations.item(k)))
+            out.put(k, self.step_row(int(trials[k]), observations.item(k)))
+
+    def step_row(self, trial: int, observation: Observation) -> Command:
+        """The command of one row, by its trial's instance (:meth:`step_trial`)."""
+        return self.trial_instances[trial].step_trial(observation)  # type: ignore[no-any-return]
 
     def retarget_batch(self, trials: np.ndarray, goals: GoalBatch) -> None:
         """New goals for some trials (row ``j`` of ``goals`` for trial ``trials[j]``),

@@ -67,19 +67,6 @@ class KernelRows:
             self.ready[trials[rows]] = True
         return quick  # type: ignore[no-any-return]
 
-    def evaluate(self, trials: np.ndarray, features: np.ndarray, lengths: np.ndarray
-                 ) -> np.ndarray:
-        """The core over the rows of ``trials`` with their measured ``features`` (m, F)
-        and ``lengths`` (m, 6) [m]: the (m, outputs) results. Many rows: the lean core
-        (the same command to the last bit, without the eigenvalues); one row (a trial
-        stepped alone): the full core, whose exact rank and condition its command
-        reports (:meth:`command`)."""
-        assert self.function is not None and self.full is not None
-        X = self.X[trials]
-        X[:, self.slices["features"]] = features
-        X[:, self.slices["lengths"]] = lengths
-        return (self.full if len(X) == 1 else self.function).batch(X)
-
     def accepted(self, Y: np.ndarray) -> np.ndarray:
         """(m,) the results that are a command as they are: a finite error and
         interaction matrix, rank 6, a finite command (the refusals and the non-finite
@@ -101,28 +88,34 @@ class KernelRows:
         Returns:
             (m,) the rows filled.
         """
-        Y = self.evaluate(trials, features, lengths)
+        X = self.X[trials]
+        X[:, self.slices["features"]] = features
+        X[:, self.slices["lengths"]] = lengths
+        assert self.function is not None
+        Y = self.function.batch(X)
         o = self.outputs
         ok = self.accepted(Y) & solver.batch_accept(trials, lengths, Y[:, o["qdot"]])
         if ok.all():  # the common case: no row copies
-            Ya, tr, qa, ra = Y, trials, lengths, rows
+            Xa, Ya, tr, qa, ra = X, Y, trials, lengths, rows
         else:
             acc = np.flatnonzero(ok)
-            Ya, tr, qa, ra = Y[acc], trials[acc], lengths[acc], rows[acc]
+            Xa, Ya, tr, qa, ra = X[acc], Y[acc], trials[acc], lengths[acc], rows[acc]
         estimate.measured_all(Ya[:, o["directions"]].reshape(-1, 6, 3), tr)
         estimate.commanded(Ya[:, o["tau"]], qa, tr)
         out.velocities[ra] = Ya[:, o["qdot"]]
         out.error_norm[ra] = Ya[:, o["error_norm"].start]
-        out.details = lambda k: self.command(Ya, ra, k)
+        out.details = lambda k: self.command(Xa, ra, k)
         return ok  # type: ignore[no-any-return]
 
-    def command(self, Y: np.ndarray, rows: np.ndarray, k: int) -> Command | None:
-        """The full :class:`~controllers.base.Command` of batch row ``k`` from its result
-        (``Y[j]`` for ``rows[j] == k``), or None when the row has none here."""
+    def command(self, X: np.ndarray, rows: np.ndarray, k: int) -> Command | None:
+        """The full :class:`~controllers.base.Command` of batch row ``k`` (``X[j]`` the
+        inputs of ``rows[j] == k``), with the full core's diagnostics (its exact rank and
+        condition: the lean core has no eigenvalues), or None when the row has none
+        here. Computed on demand (:meth:`controllers.base.CommandBatch.command`)."""
         hit = np.flatnonzero(rows == k)
-        if not len(hit):
+        if not len(hit) or self.full is None:
             return None
-        y = Y[int(hit[0])]
+        y = self.full.single(X[int(hit[0])])
         o = self.outputs
         error = y[o["error"]].copy()
         return Command(y[o["qdot"]].copy(), twist=y[o["tau"]].copy(), error=error,

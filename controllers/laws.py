@@ -438,13 +438,12 @@ class VisionLaw(Controller):
         inst.retarget_trial(goal)
         self._core_rows.take(trial, inst.kernel if inst.batch_core else None)
 
-    def step_batch(self, observations: ObservationBatch) -> CommandBatch:
-        """One period of the rows' trials: the common case through the compiled core as
-        arrays, the other rows by their instances (see above)."""
+    def step_arrays(self, observations: ObservationBatch, out: CommandBatch) -> np.ndarray:
+        """The common case of the rows through the compiled core as arrays; returns the
+        other rows (see the module docstring)."""
         obs = observations
         n = len(obs)
         trials = np.asarray(obs.trials, dtype=int)
-        out = CommandBatch.zeros(n)
         slow = np.ones(n, dtype=bool)
         rows_core = self._core_rows
         feats, visible = (self._batch_features(obs) if rows_core.function is not None
@@ -460,14 +459,15 @@ class VisionLaw(Controller):
                 done = rows_core.step(rows, trials[rows], feats[rows], q[rows],
                                       self.solver, self.batch_estimate, out)
                 slow[rows[done]] = False
-        slow_rows = np.flatnonzero(slow)
-        if self._pending and len(slow_rows):
-            for k in trials[slow_rows].tolist():
-                pending = self._pending.pop(k, None)
-                if pending is not None:
-                    self._retarget_instance(k, pending[0].item(pending[1]))
-        self.step_rows(obs, slow_rows, out)
-        return out
+        return np.flatnonzero(slow)
+
+    def step_row(self, trial: int, observation: Observation) -> Command:
+        """One row by its trial's instance, which first reads a goal given to
+        :meth:`retarget_batch` that it has not read yet."""
+        pending = self._pending.pop(trial, None) if self._pending else None
+        if pending is not None:
+            self._retarget_instance(trial, pending[0].item(pending[1]))
+        return self.trial_instances[trial].step_trial(observation)  # type: ignore[no-any-return]
 
     def _command(self, solved: tuple[np.ndarray, int, float, list[str], str | None,
                                      np.ndarray | None],

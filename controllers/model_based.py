@@ -308,7 +308,7 @@ class ModelBasedController(Controller):
             inst.retarget_trial(goals.item(j))
             self._b_X[k] = inst.servo_input
 
-    def step_batch(self, observations: ObservationBatch) -> CommandBatch:
+    def step_arrays(self, observations: ObservationBatch, out: CommandBatch) -> np.ndarray:
         """Forward kinematics of every row in one batch (warm-started per trial), the
         compiled pose servo in one C loop; rows the batch cannot finish exactly (failed
         forward kinematics, a half-turn error, a non-finite command) are stepped by
@@ -316,7 +316,6 @@ class ModelBasedController(Controller):
         obs = observations
         n = len(obs)
         trials = np.asarray(obs.trials, dtype=int)
-        out = CommandBatch.zeros(n)
         slow = np.ones(n, dtype=bool)
         q = np.asarray(obs.lengths, dtype=float)
         with np.errstate(invalid="ignore"):
@@ -343,8 +342,7 @@ class ModelBasedController(Controller):
             slow[rows[acc]] = False
             out.details = lambda k: self._details(Y[acc], rows[acc], tr[acc], k,
                                                   sol.iterations)
-        self.step_rows(obs, np.flatnonzero(slow), out)
-        return out
+        return np.flatnonzero(slow)
 
     def _details(self, Y: np.ndarray, rows: np.ndarray, trials: np.ndarray, k: int,
                  iterations: int) -> Command | None:
