@@ -147,7 +147,7 @@ class Controller(RemembersOptions, ABC):
         the others each by its trial's instance (:meth:`step_rows`)."""
         n = len(observations)
         out = CommandBatch.zeros(n, self.actuation)
-        rows = self.step_arrays(observations, out) if n > 1 else np.arange(n)
+        rows = self.step_arrays(observations, out) if n > 1 else _TRIAL_ZERO[:n]
         self.step_rows(observations, rows, out)
         return out
 

@@ -212,12 +212,17 @@ class ObservationBatch:
     direction_visible: np.ndarray
     image_t: np.ndarray | None = None
     q_dot: np.ndarray | None = None
+    #: The observation a batch of one was made of (:meth:`of`), else None.
+    _one: Observation | None = field(default=None, init=False, repr=False, compare=False)
 
     def __len__(self) -> int:
         return len(self.trials)
 
     def item(self, k: int) -> Observation:
-        """The observation of row ``k`` (views of the batch arrays)."""
+        """The observation of row ``k`` (views of the batch arrays; for a batch made of
+        one observation by :meth:`of`, that observation)."""
+        if self._one is not None:
+            return self._one
         return Observation(
             t=float(self.t[k]), lengths=self.lengths[k],
             normals=None if self.normals is None else self.normals[k],
@@ -246,25 +251,32 @@ class ObservationBatch:
         observation is malformed (a field of the wrong shape or not numbers): the
         per-trial adapter :meth:`Controller.step` then refuses it with the reason."""
         try:
-            t = float(obs.t)
-            lengths = np.asarray(obs.lengths, dtype=float)
-            edges = np.asarray(obs.edge_visible, dtype=bool)
-            dirs_seen = np.asarray(obs.direction_visible, dtype=bool)
-            if lengths.shape != (6,) or edges.shape != (6, 2) or dirs_seen.shape != (6,):
-                return None
-            arrays: list[np.ndarray | None] = []
-            for value, shape in ((obs.normals, (6, 2, 3)), (obs.lines, (6, 2, 3)),
-                                 (obs.directions, (6, 3)), (obs.q_dot, (6,))):
-                arr = None if value is None else np.asarray(value, dtype=float)
-                if arr is not None and arr.shape != shape:
-                    return None
-                arrays.append(None if arr is None else arr[None])
+            rows = [_one_row(value, shape, kind) for value, shape, kind in (
+                (obs.lengths, (6,), float), (obs.edge_visible, (6, 2), bool),
+                (obs.direction_visible, (6,), bool), (obs.normals, (6, 2, 3), float),
+                (obs.lines, (6, 2, 3), float), (obs.directions, (6, 3), float),
+                (obs.q_dot, (6,), float))]
+            t = np.array([float(obs.t)])
             image_t = None if obs.image_t is None else np.array([float(obs.image_t)])
         except (TypeError, ValueError):
             return None
-        normals, lines, directions, q_dot = arrays
-        return ObservationBatch(_TRIAL_ZERO, np.array([t]), lengths[None], normals, lines,
-                                directions, edges[None], dirs_seen[None], image_t, q_dot)
+        lengths, edges, seen, normals, lines, directions, q_dot = rows
+        batch = ObservationBatch(_TRIAL_ZERO, t, lengths, normals, lines, directions, edges,
+                                 seen, image_t, q_dot)
+        batch._one = obs
+        return batch
+
+
+def _one_row(value: Any, shape: tuple[int, ...], kind: type) -> np.ndarray | None:
+    """``value`` as an array of ``shape`` with a leading axis of one (a view when it is
+    one already), None for None; ValueError for another shape."""
+    if value is None:
+        return None
+    arr = value if type(value) is np.ndarray and value.dtype == kind else np.asarray(value,
+                                                                                    kind)
+    if arr.shape != shape:
+        raise ValueError(f"expected shape {shape}, got {arr.shape}")
+    return arr[None]  # type: ignore[no-any-return]
 
 
 _TRIAL_ZERO = np.zeros(1, dtype=int)
