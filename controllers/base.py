@@ -80,7 +80,7 @@ class Controller(RemembersOptions, ABC):
         super().__init_subclass__(**kwargs)
         own = vars(cls)
         if "step" in own and not getattr(cls, "_per_trial_plugin", False):
-            if any("step_batch" in vars(k) or "step_trial" in vars(k)
+            if any({"step_batch", "step_trial", "step_arrays"} & vars(k).keys()
                    for k in cls.__mro__ if k is not Controller and issubclass(k, Controller)):
                 raise TypeError(f"{cls.__qualname__}: step(observation) is the base's "
                                 "per-trial adapter (final): define step_batch or step_trial")

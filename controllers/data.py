@@ -261,6 +261,8 @@ class ObservationBatch:
         except (TypeError, ValueError):
             return None
         lengths, edges, seen, normals, lines, directions, q_dot = rows
+        if lengths is None or edges is None or seen is None:
+            return None
         batch = ObservationBatch(_TRIAL_ZERO, t, lengths, normals, lines, directions, edges,
                                  seen, image_t, q_dot)
         batch._one = obs
