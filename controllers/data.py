@@ -7,7 +7,6 @@ and a batch of trials (:class:`Observation` / :class:`ObservationBatch`, :class:
 from __future__ import annotations
 
 import logging
-from collections.abc import Callable
 from dataclasses import dataclass, field, fields
 from typing import Any
 
@@ -346,8 +345,6 @@ class CommandBatch:
         forces: (n, 6) leg forces [N] of a force batch (zeros where refused), else None.
         commands: (n,) the full :class:`Command` of the rows stepped one by one (None
             elsewhere, or None when no row was).
-        details: Builds the full :class:`Command` of a row computed as arrays, on demand
-            (:meth:`command`), or None.
     """
 
     velocities: np.ndarray
@@ -356,7 +353,6 @@ class CommandBatch:
     actuation: Actuation = Actuation.VELOCITY
     forces: np.ndarray | None = None
     commands: list[Command | None] | None = None
-    details: Callable[[int], Command | None] | None = None
 
     @property
     def values(self) -> np.ndarray:
@@ -399,11 +395,9 @@ class CommandBatch:
 
     def command(self, k: int) -> Command:
         """Row ``k`` as a :class:`Command`: its command from the arrays, with the
-        diagnostics of the one :meth:`put` there or else from :attr:`details`, else its
-        norm and reason alone."""
+        diagnostics of the one :meth:`put` there (a row computed as arrays has only its
+        norm and reason)."""
         kept = None if self.commands is None else self.commands[k]
-        if kept is None and self.details is not None:
-            kept = self.details(k)
         if kept is not None:  # the arrays hold the command (a wrapper may have added to it)
             kept.velocities = self.velocities[k].copy()
             if self.forces is not None:

@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from controllers.base import Command, CommandBatch
+from controllers.base import CommandBatch
 from controllers.estimators import LegDirectionEstimate
 from controllers.law_kernel import LawKernel
 from controllers.solvers.base import Solver
@@ -25,9 +25,8 @@ class KernelRows:
     """
 
     def __init__(self, n: int) -> None:
-        #: The lean core (None until a trial has a compiled core), and the full one.
+        #: The lean core (None until a trial has a compiled core).
         self.function: CompiledFunction | None = None
-        self.full: CompiledFunction | None = None
         #: Where each named input lies in a row, and each named output in a result.
         self.slices: dict[str, slice] = {}
         self.outputs: dict[str, slice] = {}
@@ -46,7 +45,6 @@ class KernelRows:
             return
         if self.function is None:
             self.function = kernel.lean_function
-            self.full = kernel.function
             self.slices = kernel.slices
             self.outputs = kernel.outputs
             self.X = np.zeros((self.n, kernel.function.n_in))
@@ -83,7 +81,7 @@ class KernelRows:
         """The lean core over the batch rows ``rows`` of ``trials`` with their measured
         ``features`` and ``lengths`` [m]; the rows whose result is the command
         (:meth:`accepted`, and ``solver.batch_accept``) update the batch's ``estimate``
-        as a commanded step and fill ``out`` (full commands on demand, :meth:`command`).
+        as a commanded step and fill ``out``.
 
         Returns:
             (m,) the rows filled.
@@ -96,30 +94,12 @@ class KernelRows:
         o = self.outputs
         ok = self.accepted(Y) & solver.batch_accept(trials, lengths, Y[:, o["qdot"]])
         if ok.all():  # the common case: no row copies
-            Xa, Ya, tr, qa, ra = X, Y, trials, lengths, rows
+            Ya, tr, qa, ra = Y, trials, lengths, rows
         else:
             acc = np.flatnonzero(ok)
-            Xa, Ya, tr, qa, ra = X[acc], Y[acc], trials[acc], lengths[acc], rows[acc]
+            Ya, tr, qa, ra = Y[acc], trials[acc], lengths[acc], rows[acc]
         estimate.measured_all(Ya[:, o["directions"]].reshape(-1, 6, 3), tr)
         estimate.commanded(Ya[:, o["tau"]], qa, tr)
         out.velocities[ra] = Ya[:, o["qdot"]]
         out.error_norm[ra] = Ya[:, o["error_norm"].start]
-        out.details = lambda k: self.command(Xa, ra, k)
         return ok  # type: ignore[no-any-return]
-
-    def command(self, X: np.ndarray, rows: np.ndarray, k: int) -> Command | None:
-        """The full :class:`~controllers.base.Command` of batch row ``k`` (``X[j]`` the
-        inputs of ``rows[j] == k``), with the full core's diagnostics (its exact rank and
-        condition: the lean core has no eigenvalues), or None when the row has none
-        here. Computed on demand (:meth:`controllers.base.CommandBatch.command`)."""
-        hit = np.flatnonzero(rows == k)
-        if not len(hit) or self.full is None:
-            return None
-        y = self.full.single(X[int(hit[0])])
-        o = self.outputs
-        error = y[o["error"]].copy()
-        return Command(y[o["qdot"]].copy(), twist=y[o["tau"]].copy(), error=error,
-                       error_norm=float(y[o["error_norm"].start]),
-                       rank=int(y[o["rank"].start]),
-                       condition=float(y[o["condition"].start]),
-                       features_used=error.shape[0])

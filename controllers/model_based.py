@@ -340,21 +340,4 @@ class ModelBasedController(Controller):
             out.velocities[rows[acc]] = Y[acc][:, _OUT["qdot"]]
             out.error_norm[rows[acc]] = Y[acc, _AT["norm"]]
             slow[rows[acc]] = False
-            out.details = lambda k: self._details(Y[acc], rows[acc], tr[acc], k,
-                                                  sol.iterations)
         return np.flatnonzero(slow)
-
-    def _details(self, Y: np.ndarray, rows: np.ndarray, trials: np.ndarray, k: int,
-                 iterations: int) -> Command | None:
-        """The full command of batch row ``k`` from its servo result (None: not here)."""
-        hit = np.flatnonzero(rows == k)
-        if not len(hit):
-            return None
-        y = Y[int(hit[0])]
-        e = y[_OUT["e"]].copy()
-        inst = self.trial_instances[int(trials[int(hit[0])])]
-        twist = y[_OUT["twist"]].copy() if inst._camera_from_base is not None else None
-        return Command(y[_OUT["qdot"]].copy(), twist=twist, error=e,
-                       error_norm=float(y[_AT["norm"]]), rank=6,
-                       condition=float(y[_AT["cond"]]), features_used=6,
-                       notes=[f"forward kinematics: {iterations} iterations"])
