@@ -249,12 +249,20 @@ class ObservationBatch:
         """The batch of one observation (trial 0; views of its arrays), or None when the
         observation is malformed (a field of the wrong shape or not numbers): the
         per-trial adapter :meth:`Controller.step` then refuses it with the reason."""
+        fields_ = (obs.lengths, obs.edge_visible, obs.direction_visible, obs.normals,
+                   obs.lines, obs.directions, obs.q_dot)
         try:
-            rows = [_one_row(value, shape, kind) for value, shape, kind in (
-                (obs.lengths, (6,), float), (obs.edge_visible, (6, 2), bool),
-                (obs.direction_visible, (6,), bool), (obs.normals, (6, 2, 3), float),
-                (obs.lines, (6, 2, 3), float), (obs.directions, (6, 3), float),
-                (obs.q_dot, (6,), float))]
+            rows: list[np.ndarray | None] = []
+            for v, shape, kind in zip(fields_, _SHAPES, _KINDS, strict=True):
+                if v is None:
+                    rows.append(None)
+                elif type(v) is np.ndarray and v.shape == shape and v.dtype == kind:
+                    rows.append(v[None])  # the common case: a view
+                else:
+                    break
+            if len(rows) < len(fields_):  # convert and check every field
+                rows = [_one_row(v, shape, kind)
+                        for v, shape, kind in zip(fields_, _SHAPES, _KINDS, strict=True)]
             t = np.array([float(obs.t)])
             image_t = None if obs.image_t is None else np.array([float(obs.image_t)])
         except (TypeError, ValueError):
@@ -268,7 +276,13 @@ class ObservationBatch:
         return batch
 
 
-def _one_row(value: Any, shape: tuple[int, ...], kind: type) -> np.ndarray | None:
+#: The shapes and kinds of the fields of one observation, in :meth:`ObservationBatch.of`'s
+#: order (lengths, edge_visible, direction_visible, normals, lines, directions, q_dot).
+_SHAPES = ((6,), (6, 2), (6,), (6, 2, 3), (6, 2, 3), (6, 3), (6,))
+_KINDS = (np.float64, np.bool_, np.bool_, np.float64, np.float64, np.float64, np.float64)
+
+
+def _one_row(value: Any, shape: tuple[int, ...], kind: Any) -> np.ndarray | None:
     """``value`` as an array of ``shape`` with a leading axis of one (a view when it is
     one already), None for None; ValueError for another shape."""
     if value is None:
