@@ -1,8 +1,9 @@
-"""The controller plugin interface: observations, context, commands.
+"""The controller plugin interface: one step over a batch of trials.
 
 A controller sees only what a real robot and camera give (an
-:class:`Observation`) and what the user knows or calibrated (a
-:class:`ControllerContext`); it never sees the simulator's true state.
+:class:`Observation`, or an :class:`ObservationBatch` of many trials) and what the user
+knows or calibrated (a :class:`ControllerContext`); it never sees the simulator's true
+state. The data types live in :mod:`controllers.data` and are re-exported here.
 
 Controllers are found by name in the registry (:mod:`controllers.registry`, re-exported
 here: ``registry``, ``Registry``, ``ENTRY_POINT_GROUP``).
@@ -11,305 +12,62 @@ here: ``registry``, ``Registry``, ``ENTRY_POINT_GROUP``).
 from __future__ import annotations
 
 import logging
-from abc import ABC, abstractmethod
-from dataclasses import dataclass, field
-from typing import Any
+from abc import ABC
+from collections.abc import Sequence
+from dataclasses import replace
+from typing import Any, final
 
 import numpy as np
 
+from controllers.data import (
+    _TRIAL_ZERO,
+    FEATURES,
+    GOAL_FIELDS,
+    Command,
+    CommandBatch,
+    ControllerContext,
+    Goal,
+    GoalBatch,
+    Observation,
+    ObservationBatch,
+    observation_problem,
+    usable_observation_problem,
+)
+from controllers.options import RemembersOptions
 from hexapod.actuation import Actuation
-from hexapod.geometry import HexapodGeometry
 
 log = logging.getLogger(__name__)
 
-#: Feature names a controller may declare in ``Controller.features``.
-FEATURES = ("lengths", "normals", "lines", "directions")
 
-
-@dataclass
-class Observation:
-    """What the robot and the camera measured at one instant.
-
-    All vectors are in the camera frame. Hidden features are NaN and flagged
-    False in the masks.
-
-    Attributes:
-        t: Time [s].
-        lengths: (6,) measured leg lengths (encoders, offsets included) [m].
-        normals: (6, 2, 3) unit edge normals (interpretation planes), computed with
-            the estimated intrinsics; None when the sensor gives none.
-        lines: (6, 2, 3) unit image lines in normalised pixel coordinates
-            (perspective camera only), else None.
-        directions: (6, 3) unit leg directions, else None.
-        edge_visible: (6, 2) bool, which edges were observed.
-        direction_visible: (6,) bool, which directions were observed.
-        quality: Optional per-edge quality (e.g. fit residual), (6, 2).
-        image_t: Capture time of the image the features come from [s] (None: taken at
-            ``t``); older than ``t`` by the camera's latency and frame period
-            (:mod:`benchmarks.sim.clock`).
-        q_dot: (6,) measured leg velocities [m/s], or None when the robot gives none
-            (a kinematic world does not; force laws need them).
-    """
-
-    t: float
-    lengths: np.ndarray
-    normals: np.ndarray | None = None
-    lines: np.ndarray | None = None
-    directions: np.ndarray | None = None
-    edge_visible: np.ndarray = field(default_factory=lambda: np.ones((6, 2), dtype=bool))
-    direction_visible: np.ndarray = field(default_factory=lambda: np.ones(6, dtype=bool))
-    quality: np.ndarray | None = None
-    image_t: float | None = None
-    q_dot: np.ndarray | None = None
-
-
-@dataclass
-class Goal:
-    """The desired configuration, as features and (for the baselines) as a pose.
-
-    Attributes:
-        normals: (6, 2, 3) desired edge normals (from the image at the goal).
-        lines: (6, 2, 3) desired image lines (perspective camera).
-        directions: (6, 3) desired leg directions.
-        lengths: (6,) desired leg lengths in the nominal model [m].
-        rotation: (3, 3) desired platform orientation in the nominal base frame.
-        translation: (3,) desired platform position in the nominal base frame [m].
-        edge_visible: (6, 2) which desired edges were observed.
-    """
-
-    normals: np.ndarray | None = None
-    lines: np.ndarray | None = None
-    directions: np.ndarray | None = None
-    lengths: np.ndarray | None = None
-    rotation: np.ndarray | None = None
-    translation: np.ndarray | None = None
-    edge_visible: np.ndarray | None = None
-
-
-@dataclass
-class ControllerContext:
-    """What the user knows or calibrated (estimates, never the truth).
-
-    Attributes:
-        base_points: (6, 3) estimated base points ``A_i`` in the camera frame [m].
-        geometry: Nominal geometry (base frame), with strokes and speed limit.
-        camera: The estimated camera (intrinsics and ``camera_from_base``), or None.
-        dt: Control period [s].
-        goal: The desired features / pose.
-        stroke_margin: Distance kept from the stroke limits by limit-aware laws [m].
-        reference: A trajectory task's reference (a
-            :class:`hexapod.trajectory.PoseTrajectory` in the base frame: pose, twist and
-            acceleration at any time), or None for a fixed goal
-            (:mod:`controllers.tracking`).
-    """
-
-    base_points: np.ndarray
-    geometry: HexapodGeometry
-    camera: Any
-    dt: float
-    goal: Goal
-    stroke_margin: float = 0.002
-    reference: Any = None
-
-    @property
-    def stroke(self) -> tuple[float, float]:
-        """(q_min, q_max) [m]."""
-        return self.geometry.stroke
-
-    @property
-    def max_speed(self) -> float:
-        """Leg speed limit [m/s]."""
-        return self.geometry.max_speed
-
-
-@dataclass
-class Command:
-    """A controller's output for one step, with its diagnostics.
-
-    What it commands is :attr:`actuation`: leg velocities (the default; ``velocities``)
-    or leg forces (``forces``, with ``velocities`` zeros); build a force command with
-    :meth:`of_forces`. :attr:`values` is the command of its kind.
-
-    Attributes:
-        velocities: (6,) leg velocity command [m/s]; zeros when the controller refuses
-            or commands forces.
-        twist: (6,) platform twist ``(v, w)`` in the camera frame, if the law computes one.
-        error: The stacked task error.
-        error_norm: Its Euclidean norm.
-        rank: Rank of the (stacked) interaction matrix.
-        condition: Its condition number.
-        features_used: Number of scalar feature rows used.
-        active_constraints: Names of the active constraints (QP laws).
-        reason: Why the command is zero (None when the command is valid).
-        notes: Other diagnostics (e.g. "using 10 of 12 edges").
-        actuation: What the command sets (:class:`~hexapod.actuation.Actuation`).
-        forces: (6,) leg force command [N] of a force command (zeros when refused),
-            else None.
-    """
-
-    velocities: np.ndarray
-    twist: np.ndarray | None = None
-    error: np.ndarray = field(default_factory=lambda: np.zeros(0))
-    error_norm: float = 0.0
-    rank: int = 0
-    condition: float = float("nan")
-    features_used: int = 0
-    active_constraints: list[str] = field(default_factory=list)
-    reason: str | None = None
-    notes: list[str] = field(default_factory=list)
-    actuation: Actuation = Actuation.VELOCITY
-    forces: np.ndarray | None = None
-
-    @property
-    def ok(self) -> bool:
-        """True when the controller produced a movement command."""
-        return self.reason is None
-
-    @property
-    def values(self) -> np.ndarray:
-        """(6,) the command of its kind, velocities [m/s] or forces [N]."""
-        if self.actuation is Actuation.FORCE:
-            return np.zeros(6) if self.forces is None else self.forces
-        return self.velocities
-
-    @staticmethod
-    def of_forces(forces: np.ndarray, **diagnostics: Any) -> Command:
-        """A leg-force command [N] (``velocities`` zeros), with its diagnostics."""
-        return Command(np.zeros(6), actuation=Actuation.FORCE,
-                       forces=np.asarray(forces, dtype=float), **diagnostics)
-
-    @staticmethod
-    def refuse(reason: str, error: np.ndarray | None = None,
-               actuation: Actuation = Actuation.VELOCITY) -> Command:
-        """A zero command with its reason (never NaN)."""
-        err = np.zeros(0) if error is None else np.nan_to_num(error)
-        return Command(np.zeros(6), reason=reason, error=err,
-                       error_norm=float(np.linalg.norm(err)), actuation=actuation,
-                       forces=np.zeros(6) if actuation is Actuation.FORCE else None)
-
-
-@dataclass
-class ObservationBatch:
-    """Observations of several trials at one period: :class:`Observation` fields with a
-    leading trial axis (n, ...), for :meth:`Controller.step_batch`.
-
-    Attributes:
-        trials: (n,) indices of the trials, into the contexts given to ``reset_batch``.
-        t: (n,) times [s].
-        lengths: (n, 6) measured leg lengths [m].
-        normals: (n, 6, 2, 3) or None.
-        lines: (n, 6, 2, 3) or None.
-        directions: (n, 6, 3) or None.
-        edge_visible: (n, 6, 2) bool.
-        direction_visible: (n, 6) bool.
-        image_t: (n,) capture times of the images [s], or None (taken at ``t``).
-        q_dot: (n, 6) measured leg velocities [m/s], or None.
-    """
-
-    trials: np.ndarray
-    t: np.ndarray
-    lengths: np.ndarray
-    normals: np.ndarray | None
-    lines: np.ndarray | None
-    directions: np.ndarray | None
-    edge_visible: np.ndarray
-    direction_visible: np.ndarray
-    image_t: np.ndarray | None = None
-    q_dot: np.ndarray | None = None
-
-    def __len__(self) -> int:
-        return len(self.trials)
-
-    def item(self, k: int) -> Observation:
-        """The observation of row ``k`` (views of the batch arrays)."""
-        return Observation(
-            t=float(self.t[k]), lengths=self.lengths[k],
-            normals=None if self.normals is None else self.normals[k],
-            lines=None if self.lines is None else self.lines[k],
-            directions=None if self.directions is None else self.directions[k],
-            edge_visible=self.edge_visible[k], direction_visible=self.direction_visible[k],
-            image_t=None if self.image_t is None else float(self.image_t[k]),
-            q_dot=None if self.q_dot is None else self.q_dot[k])
-
-
-@dataclass
-class CommandBatch:
-    """The commands of :meth:`Controller.step_batch`, one row per observation row.
-
-    Attributes:
-        velocities: (n, 6) leg velocities [m/s] (zeros where refused or for forces;
-            never NaN).
-        error_norm: (n,) norm of each task error.
-        reasons: (n,) why a command is zero (None where it is valid).
-        actuation: What every row commands (one kind per batch).
-        forces: (n, 6) leg forces [N] of a force batch (zeros where refused), else None.
-    """
-
-    velocities: np.ndarray
-    error_norm: np.ndarray
-    reasons: list[str | None]
-    actuation: Actuation = Actuation.VELOCITY
-    forces: np.ndarray | None = None
-
-    @property
-    def values(self) -> np.ndarray:
-        """(n, 6) the commands of their kind, velocities [m/s] or forces [N]."""
-        if self.actuation is Actuation.FORCE:
-            return np.zeros_like(self.velocities) if self.forces is None else self.forces
-        return self.velocities
-
-    @property
-    def ok(self) -> np.ndarray:
-        """(n,) True where the controller produced a movement command."""
-        return np.array([r is None for r in self.reasons], dtype=bool)
-
-    @staticmethod
-    def zeros(n: int, actuation: Actuation = Actuation.VELOCITY) -> CommandBatch:
-        """``n`` rows of zero commands, zero norms and no reasons, to be filled."""
-        forces = np.zeros((n, 6)) if actuation is Actuation.FORCE else None
-        return CommandBatch(np.zeros((n, 6)), np.zeros(n), [None] * n, actuation, forces)
-
-    def put(self, k: int, command: Command) -> None:
-        """Set row ``k`` to a per-trial :class:`Command` (of the batch's actuation).
-
-        Raises:
-            ActuationError: The command is of another kind than the batch.
-        """
-        if command.actuation is not self.actuation:
-            from hexapod.actuation import check_actuation
-
-            check_actuation(command.actuation, (self.actuation,),
-                            f"a batch of {self.actuation.quantity}", "row " + str(k))
-        self.velocities[k] = command.velocities
-        if self.forces is not None:
-            self.forces[k] = command.values
-        self.error_norm[k] = command.error_norm
-        self.reasons[k] = command.reason
-
-    @staticmethod
-    def from_commands(commands: list[Command]) -> CommandBatch:
-        """Stack per-trial :class:`Command` objects (all of one actuation)."""
-        kind = commands[0].actuation if commands else Actuation.VELOCITY
-        out = CommandBatch.zeros(len(commands), kind)
-        for k, c in enumerate(commands):
-            out.put(k, c)
-        return out
-
-
-class Controller(ABC):
-    """A controller: ``reset(context)`` once, then ``step(observation)`` every period.
+class Controller(RemembersOptions, ABC):
+    """A controller: ``reset_batch(contexts)`` once, then ``step_batch(observations)``
+    every period, over the trials of a batch (``docs/plugins.md``).
 
     Subclasses set ``name`` and ``features`` (subset of :data:`FEATURES`), say what
     they command in ``actuation`` (leg velocities unless set to
-    :attr:`~hexapod.actuation.Actuation.FORCE`) and implement :meth:`reset` and
-    :meth:`step`. A class is its own factory: its
+    :attr:`~hexapod.actuation.Actuation.FORCE`). A class is its own factory: its
     constructor takes the options as keyword arguments.
 
-    A controller may also step many trials at once (the study engine calls it when
-    it can): ``reset_batch(contexts)`` prepares one trial per context and
-    ``step_batch(observations)`` (an :class:`ObservationBatch`) returns a
-    :class:`CommandBatch`. Both are optional; without them the engine builds one
-    controller per trial and calls ``step`` in a loop (``docs/plugins.md``).
+    The step is ONE method, over a batch of trials: :meth:`step_batch`
+    (:class:`ObservationBatch` -> :class:`CommandBatch`). The base's computes the rows the
+    controller can as arrays (:meth:`step_arrays`) and steps the others one by one with
+    each trial's own instance (:meth:`step_trial`, the only per-row loop of the
+    package): a controller defines :meth:`reset_trial` and :meth:`step_trial` (and
+    :meth:`step_arrays` to compute rows as arrays), or overrides :meth:`step_batch`
+    altogether.
+    :meth:`step` and :meth:`reset` are the per-trial adapters (a batch of one: the real
+    servo loop, and anyone who steps one robot); they are final.
+
+    A plugin written before batches, that defines ``reset(context)`` and
+    ``step(observation)`` (and maybe ``retarget(goal)``), keeps working: the base takes
+    them as its per-trial methods (the batch then steps one instance per trial).
+
+    Failures of one trial stay that trial's (:meth:`step_rows`, :meth:`reset_batch`): a
+    row whose instance raises or returns a command of the wrong type, shape or kind gets
+    a refusal and its exception in :attr:`crashes` (the study ends that trial at its step
+    with it); where every row is stepped by its instance, a trial whose reset raises
+    fails at its first step with that exception. A batch step that raises as a whole
+    (an own ``step_batch``, :meth:`step_arrays`) fails the batch.
     """
 
     #: Registry name.
@@ -318,56 +76,247 @@ class Controller(ABC):
     features: frozenset[str] = frozenset({"lengths"})
     #: What the commands set: leg velocities [m/s] (default) or leg forces [N].
     actuation: Actuation = Actuation.VELOCITY
+    #: The instance of each trial of the batch (this one is trial 0), after a reset.
+    trial_instances: list[Any] = []  # noqa: RUF012 (replaced, never mutated)
+    #: The context each instance was last reset with (None before).
+    trial_context: ControllerContext | None = None
+    #: The rows (positions in the last stepped batch) whose trial's instance raised or
+    #: returned a malformed command at the last :meth:`step_batch`, with the exception.
+    crashes: dict[int, BaseException] = {}  # noqa: RUF012 (replaced, never mutated)
+    #: Set by the base on a plugin class that defines the per-trial ``step`` itself.
+    _per_trial_plugin: bool = False
 
-    @abstractmethod
+    def __init_subclass__(cls, **kwargs: Any) -> None:
+        super().__init_subclass__(**kwargs)
+        own = vars(cls)
+        if "step" in own and not getattr(cls, "_per_trial_plugin", False):
+            if any({"step_batch", "step_trial", "step_arrays"} & vars(k).keys()
+                   for k in cls.__mro__ if k is not Controller and issubclass(k, Controller)):
+                raise TypeError(f"{cls.__qualname__}: step(observation) is the base's "
+                                "per-trial adapter (final): define step_batch or step_trial")
+            cls._per_trial_plugin = True  # a plugin written before batches
+        if getattr(cls, "_per_trial_plugin", False):  # its methods are the trial's
+            for name in ("reset", "step", "retarget"):
+                if name in own:
+                    setattr(cls, name + "_trial", own[name])
+
+    # ------------------------------------------------------------------ per-trial adapters
+    @final
     def reset(self, context: ControllerContext) -> None:
-        """Prepare for a new run with the estimated parameters and the goal."""
+        """Prepare a batch of one trial (:meth:`reset_batch` of ``[context]``).
 
-    @abstractmethod
+        Raises:
+            ContextError: A field the controller needs is missing or invalid.
+        """
+        self.reset_batch([context])
+        failed = self.trial_instances[0] if self.trial_instances else None
+        if isinstance(failed, FailedReset):
+            self.trial_instances = []
+            raise failed.exc
+
+    @final
     def step(self, observation: Observation) -> Command:
-        """Compute the command for one observation (never raises for bad measurements)."""
+        """The command of one observation: :meth:`step_batch` of a batch of one (never
+        raises for bad measurements). Where the batch step is the base's, a lone row is
+        stepped by its trial's instance (:meth:`step_row`): that call, directly.
+
+        Raises:
+            Exception: The trial's own failure (what its step raised, or a
+                :class:`~controllers.exceptions.CommandError` for a malformed command,
+                isolated in :attr:`crashes` by a batch step).
+        """
+        if not self.trial_instances:
+            return Command.refuse(f"{self.name}: reset(context) was not called",
+                                  actuation=self.actuation)
+        if type(self).step_batch is Controller.step_batch:
+            return self.step_row(0, observation)
+        batch = ObservationBatch.of(observation)
+        if batch is None:
+            problem = usable_observation_problem(observation, self.features)
+            return Command.refuse(problem or "malformed observation", actuation=self.actuation)
+        out = self.step_batch(batch)
+        crash = self.crashes.get(0)
+        if crash is not None:
+            raise crash
+        return out.command(0)
+
+    @final
+    def retarget(self, goal: Goal) -> None:
+        """A new goal for a batch of one, keeping the state (:meth:`retarget_batch`).
+
+        Raises:
+            ContextError: The goal is invalid, or :meth:`reset` was not called.
+        """
+        self.retarget_batch(_TRIAL_ZERO, GoalBatch.of(goal))
+
+    # ------------------------------------------------------------------ the batch
+    def reset_batch(self, contexts: Sequence[ControllerContext]) -> None:
+        """One instance per context (this one is the first; the others built with its
+        options, :meth:`clone`), each reset with its context by :meth:`reset_trial`.
+
+        Where every row is stepped by its trial's instance (neither :meth:`step_batch`
+        nor :meth:`step_arrays` overridden: a per-trial plugin, a
+        :class:`~controllers.batch.ForeignController`), a trial whose reset raises is
+        that trial's failure: its place holds a :class:`FailedReset`, whose step raises
+        the exception again (the trial fails at step 0 with it; the others run).
+
+        Raises:
+            ContextError: A context the controller cannot use (where rows are computed
+                as arrays, the batch's reset fails as a whole).
+        """
+        isolate = self._rows_by_instance()
+        instances: list[Any] = []
+        self.crashes = {}
+        for k, ctx in enumerate(contexts):
+            inst = self if k == 0 else self.clone()
+            try:
+                inst.reset_trial(ctx)
+            except Exception as exc:
+                if not isolate:
+                    raise
+                log.debug("%s: the reset of trial %d raised %r", self.name, k, exc)
+                instances.append(FailedReset(exc))
+                continue
+            inst.trial_context = ctx
+            instances.append(inst)
+        self.trial_instances = instances
+
+    @classmethod
+    def _rows_by_instance(cls) -> bool:
+        """Whether every row of a batch is stepped by its trial's instance."""
+        return (cls.step_batch is Controller.step_batch
+                and cls.step_arrays is Controller.step_arrays)
+
+    def step_batch(self, observations: ObservationBatch) -> CommandBatch:
+        """The commands of every row: the rows the controller computes as arrays
+        (:meth:`step_arrays`, for two rows or more: one row costs less by its instance),
+        the others each by its trial's instance (:meth:`step_rows`)."""
+        n = len(observations)
+        out = CommandBatch.zeros(n, self.actuation)
+        self.crashes = {}
+        rows = self.step_arrays(observations, out) if n > 1 else _TRIAL_ZERO[:n]
+        self.step_rows(observations, rows, out)
+        return out
+
+    def step_arrays(self, observations: ObservationBatch, out: CommandBatch) -> np.ndarray:
+        """Compute the rows the controller can as arrays, into ``out``; returns the rows
+        left to the trials' instances (by default all of them)."""
+        return np.arange(len(observations))
+
+    def step_rows(self, observations: ObservationBatch, rows: np.ndarray,
+                  out: CommandBatch) -> None:
+        """Step ``rows`` of a batch one by one (:meth:`step_row`), writing the commands
+        into ``out``.
+
+        A row whose step raises, or returns a command of the wrong type, shape or kind
+        (:func:`checked_command`), is that trial's failure: it gets a refusal and its
+        exception in :attr:`crashes` (by position in the batch); the other rows are
+        stepped as usual."""
+        trials = observations.trials
+        name, actuation = self.name, self.actuation
+        for k in rows.tolist():
+            try:
+                cmd = checked_command(self.step_row(int(trials[k]), observations.item(k)),
+                                      name, actuation)
+            except Exception as exc:  # that trial's failure
+                if not self.crashes:
+                    self.crashes = {}
+                self.crashes[k] = exc
+                cmd = Command.refuse(f"{type(exc).__name__}: {exc}", actuation=actuation)
+            out.put(k, cmd)
+
+    def step_row(self, trial: int, observation: Observation) -> Command:
+        """The command of one row, by its trial's instance (:meth:`step_trial`)."""
+        return self.trial_instances[trial].step_trial(observation)  # type: ignore[no-any-return]
+
+    def retarget_batch(self, trials: np.ndarray, goals: GoalBatch) -> None:
+        """New goals for some trials (row ``j`` of ``goals`` for trial ``trials[j]``),
+        keeping their state: each instance's :meth:`retarget_trial`.
+
+        Raises:
+            ContextError: A goal the controller cannot use, or no reset yet.
+        """
+        if not self.trial_instances:
+            from controllers.exceptions import ContextError
+
+            raise ContextError(self.name, "context", "retarget(goal) before reset(context)")
+        for j, k in enumerate(np.asarray(trials, dtype=int).tolist()):
+            inst = self.trial_instances[k]
+            if isinstance(inst, FailedReset):  # it fails at its next step
+                continue
+            goal = goals.item(j)
+            inst.retarget_trial(goal)
+            assert inst.trial_context is not None
+            inst.trial_context = replace(inst.trial_context, goal=goal)
+
+    # ------------------------------------------------------------------ one trial
+    def reset_trial(self, context: ControllerContext) -> None:
+        """Prepare this instance for one trial (the estimated parameters and the goal)."""
+        raise NotImplementedError(f"{type(self).__qualname__}: defines neither reset_batch "
+                                  "nor reset_trial")
+
+    def step_trial(self, observation: Observation) -> Command:
+        """The command of this instance's trial (never raises for bad measurements)."""
+        raise NotImplementedError(f"{type(self).__qualname__}: defines neither step_batch "
+                                  "nor step_trial")
+
+    def retarget_trial(self, goal: Goal) -> None:
+        """A new goal for this instance's trial (by default a reset with it: the state
+        starts afresh)."""
+        assert self.trial_context is not None
+        self.reset_trial(replace(self.trial_context, goal=goal))
+
+    @property
+    def batch_size(self) -> int:
+        """Trials of the batch (after a reset)."""
+        return len(self.trial_instances)
 
 
-def observation_problem(obs: Observation, features: frozenset[str]) -> str | None:
-    """Return why an observation cannot be used (None if it can).
+class FailedReset:
+    """The place of a trial whose reset raised (:meth:`Controller.reset_batch`): its
+    step raises that exception again, so the trial fails at its first step with it
+    (nothing is rerun).
 
-    Checks that the needed fields exist with the right shapes, and that every
-    value flagged visible is finite.
+    Args:
+        exc: The reset's exception.
     """
-    q = np.asarray(obs.lengths, dtype=float)
-    if q.shape != (6,):
-        return f"lengths: expected 6 values, got shape {q.shape}"
-    bad = np.flatnonzero(~np.isfinite(q))
-    if len(bad):
-        return f"lengths: leg {int(bad[0])} is {q[bad[0]]} (not finite)"
-    if not np.isfinite(obs.t):
-        return f"time is {obs.t} (not finite)"
-    for name, shape, mask in (("normals", (6, 2, 3), obs.edge_visible),
-                              ("lines", (6, 2, 3), obs.edge_visible),
-                              ("directions", (6, 3), obs.direction_visible)):
-        if name not in features:
-            continue
-        value = getattr(obs, name)
-        if value is None:
-            return f"{name}: not measured by this sensor"
-        arr = np.asarray(value, dtype=float)
-        if arr.shape != shape:
-            return f"{name}: expected shape {shape}, got {arr.shape}"
-        m = np.asarray(mask, dtype=bool)
-        finite = np.all(np.isfinite(arr), axis=-1)
-        bad_idx = np.argwhere(m & ~finite)
-        if len(bad_idx):
-            return f"{name}: visible feature {tuple(int(x) for x in bad_idx[0])} is not finite"
-    return None
+
+    trial_context: ControllerContext | None = None
+
+    def __init__(self, exc: BaseException) -> None:
+        self.exc = exc
+
+    def step_trial(self, observation: Observation) -> Command:
+        """Raise the reset's exception."""
+        raise self.exc
 
 
-def usable_observation_problem(obs: Observation, features: frozenset[str]) -> str | None:
-    """:func:`observation_problem`, with a malformed observation (wrong types) reported as
-    a reason too: what every controller's ``step`` checks before computing."""
-    try:
-        return observation_problem(obs, features)
-    except (TypeError, ValueError) as exc:
-        return f"malformed observation: {exc}"
+def checked_command(cmd: Any, name: str, actuation: Actuation) -> Command:
+    """A per-trial command of the right type, shape and kind.
+
+    Args:
+        cmd: What a trial's step returned.
+        name: The controller's name (named by the refusal).
+        actuation: What the controller declared it commands.
+
+    Raises:
+        CommandError: Not a :class:`Command`, not 6 leg values, or another kind than the
+            controller declared (named, with the shapes or kinds).
+    """
+    if type(cmd) is Command and cmd.actuation is actuation and np.shape(cmd.values) == (6,):
+        return cmd  # the common case
+    from controllers.exceptions import CommandError
+
+    if not all(hasattr(cmd, a) for a in ("values", "reason", "actuation", "error_norm")):
+        raise CommandError(name, f"returned {type(cmd).__name__}, not a Command")
+    shape = np.shape(cmd.values)
+    if shape != (6,):
+        raise CommandError(name, f"returned a command of shape {shape}; a command holds one "
+                                 "value per leg, shape (6,)")
+    if cmd.actuation is not actuation:
+        raise CommandError(name, f"returned {cmd.actuation.quantity} but declared "
+                                 f"{actuation.quantity} (its 'actuation' attribute)")
+    return cmd  # type: ignore[no-any-return]
 
 
 # The registry lives in :mod:`controllers.registry` (documented there); re-exported for the
@@ -379,6 +328,7 @@ from controllers.registry import Registry as Registry  # noqa: E402
 from controllers.registry import registry as registry  # noqa: E402
 
 __all__ = [
-    "FEATURES", "Command", "CommandBatch", "Controller", "ControllerContext", "Goal",
-    "Observation", "ObservationBatch", "observation_problem", "usable_observation_problem",
+    "FEATURES", "GOAL_FIELDS", "Actuation", "Command", "CommandBatch", "Controller",
+    "ControllerContext", "FailedReset", "Goal", "GoalBatch", "Observation", "ObservationBatch",
+    "checked_command", "observation_problem", "usable_observation_problem",
 ]

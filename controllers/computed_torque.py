@@ -146,7 +146,7 @@ class ComputedTorqueController(Controller):
             self._bound = compiled_ctc.joint_step(INVERSE_TOLERANCE).bind()
             self._bound.x[:] = row
 
-    def reset(self, context: ControllerContext) -> None:
+    def reset_trial(self, context: ControllerContext) -> None:
         """Build the nominal model; read the reference or ``goal.lengths``.
 
         Raises:
@@ -169,14 +169,14 @@ class ComputedTorqueController(Controller):
         self._dt = float(context.dt)
         if context.reference is None:
             self._t_end = math.inf
-            self.retarget(context.goal)
+            self.retarget_trial(context.goal)
         else:  # the reference's legs on the control grid, in one batched evaluation
             dt = self._dt
             self._t_end = float(context.reference.duration) + context.dt
             steps = math.ceil(float(context.reference.duration) / dt) + 3
             self._grid = self._reference_legs(dt * np.arange(steps)).reshape(steps, 18)
 
-    def retarget(self, goal: Goal) -> None:
+    def retarget_trial(self, goal: Goal) -> None:
         """A new fixed goal (ignored when tracking a reference: it is sampled itself)."""
         if self._ctx is not None and self._ctx.reference is not None:
             return
@@ -243,7 +243,7 @@ class ComputedTorqueController(Controller):
                   sd * b[0], sd * b[1], sd * b[2], sd * b[3], sd * b[4], sd * b[5],
                   sdd * b[0], sdd * b[1], sdd * b[2], sdd * b[3], sdd * b[4], sdd * b[5]]
 
-    def step(self, observation: Observation) -> Command:
+    def step_trial(self, observation: Observation) -> Command:
         """The leg forces of this period [N] (refused, zero, with a reason when the
         lengths, their rates or the time are missing or not finite, or the nominal model
         fails)."""

@@ -251,9 +251,9 @@ class FeatureCTC(TaskComputedTorque):
         anchor_goals(goals, replace(ctx.goal, **{self.key: self._taught}))
         return np.asarray(goals[self.key][:-1])
 
-    def retarget(self, goal: Goal) -> None:
+    def retarget_trial(self, goal: Goal) -> None:
         """A new fixed goal; with a reference the taught features anchor it."""
-        super().retarget(goal)
+        super().retarget_trial(goal)
         if self.context is not None and self.context.reference is not None:
             self.take_goal(goal)
 

@@ -14,15 +14,12 @@ import numpy as np
 
 from controllers.base import (
     Command,
-    CommandBatch,
     Controller,
     ControllerContext,
     Goal,
     Observation,
-    ObservationBatch,
     usable_observation_problem,
 )
-from controllers.goal_batch import GoalBatch
 from controllers.law_tools import goal_lengths
 from controllers.laws import Gain
 
@@ -43,24 +40,25 @@ class JointSpaceController(Controller):
         self.gain = Gain.from_options(self.name, gain, adaptive_gain)
         self._q_star: np.ndarray | None = None
 
-    def reset(self, context: ControllerContext) -> None:
+    def reset_trial(self, context: ControllerContext) -> None:
         """Read ``goal.lengths``.
 
         Raises:
             ContextError: The goal has no valid lengths.
         """
-        self.retarget(context.goal)
+        self.retarget_trial(context.goal)
 
-    def retarget(self, goal: Goal) -> None:
-        """A new goal (the law keeps no other state: the same as :meth:`reset`).
+    def retarget_trial(self, goal: Goal) -> None:
+        """A new goal (the law keeps no other state: the same as :meth:`reset_trial`).
 
         Raises:
             ContextError: The goal has no valid lengths.
         """
         self._q_star = goal_lengths(self.name, goal)
 
-    def step(self, observation: Observation) -> Command:
-        """``q_dot = -lambda (q - q*)``."""
+    def step_trial(self, observation: Observation) -> Command:
+        """``q_dot = -lambda (q - q*)`` (the gain a function of ``|q - q*|_inf``, one
+        trial's number: every row of a batch is stepped so)."""
         if self._q_star is None:
             return Command.refuse(f"{self.name}: reset(context) was not called")
         problem = usable_observation_problem(observation, self.features)
@@ -70,49 +68,3 @@ class JointSpaceController(Controller):
         lam = self.gain(float(np.abs(e).max()))
         return Command(-lam * e, error=e, error_norm=math.sqrt(float(e @ e)), rank=6,
                        condition=1.0, features_used=6)
-
-    def reset_batch(self, contexts: Sequence[ControllerContext]) -> None:
-        """Read ``goal.lengths`` of every trial (as :meth:`reset`)."""
-        stars = []
-        for ctx in contexts:
-            self.reset(ctx)
-            assert self._q_star is not None
-            stars.append(self._q_star)
-        self._b_q_star = np.array(stars).reshape(len(stars), 6)
-
-    def retarget_batch(self, trials: np.ndarray, goals: GoalBatch) -> None:
-        """New goals of some trials (row ``j`` for trial ``trials[j]``), as :meth:`retarget`.
-
-        Raises:
-            ContextError: A goal without 6 finite lengths.
-        """
-        trials = np.asarray(trials, dtype=int)
-        qs = None if goals.lengths is None else np.asarray(goals.lengths, dtype=float)
-        if qs is None or qs.shape != (len(trials), 6) or not np.all(np.isfinite(qs)):
-            for j, k in enumerate(trials.tolist()):  # one by one: the goal at fault raises
-                self.retarget(goals.item(j))
-                self._b_q_star[k] = self._q_star
-            return
-        self._b_q_star[trials] = qs
-
-    def step_batch(self, observations: ObservationBatch) -> CommandBatch:
-        """``q_dot = -lambda (q - q*)`` for every row (a row with non-finite lengths or
-        time is refused, as by :meth:`step`)."""
-        obs = observations
-        n = len(obs)
-        q = np.asarray(obs.lengths, dtype=float)
-        e = q - self._b_q_star[np.asarray(obs.trials, dtype=int)]
-        out = CommandBatch.zeros(n)
-        good = np.isfinite(q).all(axis=1) & np.isfinite(np.asarray(obs.t, dtype=float))
-        x = np.abs(e).max(axis=1)
-        for k in range(n):
-            if not good[k]:
-                out.put(k, self._refusal(obs, k))
-                continue
-            out.velocities[k] = -self.gain(float(x[k])) * e[k]
-            out.error_norm[k] = math.sqrt(float(e[k] @ e[k]))
-        return out
-
-    def _refusal(self, obs: ObservationBatch, k: int) -> Command:
-        problem = usable_observation_problem(obs.item(k), self.features)
-        return Command.refuse(problem or "invalid observation")

@@ -30,15 +30,21 @@ from __future__ import annotations
 import logging
 import math
 from collections import deque
+from collections.abc import Sequence
 from dataclasses import replace
 from typing import Any
 
 import numpy as np
 
-from controllers.base import Command, Controller, ControllerContext, Goal, Observation
+from controllers.base import (
+    CommandBatch,
+    Controller,
+    ControllerContext,
+    GoalBatch,
+    Observation,
+    ObservationBatch,
+)
 from controllers.batch import actuation_of
-from controllers.latency_batch import BatchedLatency
-from controllers.tracking import retarget
 
 log = logging.getLogger(__name__)
 
@@ -122,9 +128,18 @@ class EncoderHistory:
         return a + frac * (b - a)  # type: ignore[no-any-return]
 
 
-class LatencyCompensated(BatchedLatency, Controller):
+class LatencyCompensated(Controller):
     """A law whose image features are predicted over the image's delay (see the module
-    docstring).
+    docstring), over a batch of trials.
+
+    Each trial keeps its own encoder history (:class:`EncoderHistory`, one reading per
+    row and period), while the prediction of every row whose image is late is computed
+    as arrays: one nominal forward kinematics over the two poses of all those rows (the
+    capture instant and the control instant, warm-started per trial), one compiled
+    observation of the nominal robot at all those poses (each trial's estimated camera;
+    the numpy observation pair by pair for a camera the compiled core does not
+    reproduce), the features moved by :func:`move_normals`. The wrapped law then steps
+    every row in its own batch.
 
     Args:
         law: Registry name of the wrapped law.
@@ -137,112 +152,165 @@ class LatencyCompensated(BatchedLatency, Controller):
 
     def __init__(self, law: str = "leg-edge", use_rates: bool = True, **options: Any
                  ) -> None:
-        from controllers.registry import registry
+        from controllers.batch import batch_controller
 
         self.law_name = str(law)
-        self.law = registry.create(self.law_name, **options)
+        self.law = batch_controller(self.law_name, options)
         self.features = frozenset(getattr(self.law, "features", frozenset())) | {"lengths"}
         self.actuation = actuation_of(self.law)
         #: A law that samples ``context.reference`` itself is passed through by
         #: :class:`~controllers.tracking.TrackingController`, and so is its wrapper.
         self.tracks_reference = bool(getattr(self.law, "tracks_reference", False))
-        self.context: ControllerContext | None = None
         self.use_rates = bool(use_rates)
-        self._law_options = dict(options)
-        #: The encoder readings and the forward kinematics' warm start.
-        self.history = EncoderHistory(self.use_rates)
-        self._params: Any = None  # the model's packed observation parameters
+        self._contexts: list[ControllerContext] = []
+        self._histories: list[EncoderHistory] = []
 
-    def reset(self, context: ControllerContext) -> None:
-        """Reset the law; forget the encoder history."""
-        self.law.reset(context)
+    # ------------------------------------------------------------------ reset
+    def reset_batch(self, contexts: Sequence[ControllerContext]) -> None:
+        """The wrapped law's batch reset with the contexts; every history empty.
+
+        Raises:
+            ContextError: A context the law cannot use.
+        """
+        from vision import fast_observe
+
+        self._contexts = list(contexts)
+        self._histories = [EncoderHistory(self.use_rates) for _ in self._contexts]
+        self.law.reset_batch(self._contexts)
         self.features = frozenset(getattr(self.law, "features", self.features)) | {"lengths"}
-        self.context = context
-        self.history.clear()
-        self._params = None
+        self.trial_instances = [self] * len(self._contexts)
+        n = len(self._contexts)
+        # the compiled observation of each trial's nominal robot and estimated camera,
+        # one parameter set per camera kind and image size (-1: the numpy observation)
+        self._group = np.full(n, -1, dtype=int)
+        self._item = np.zeros(n, dtype=int)
+        self._batch_params: list[Any] = []
+        keys: dict[tuple[Any, ...], list[int]] = {}
+        compiled = fast_observe.compiled()
+        for i, ctx in enumerate(self._contexts):
+            cam = ctx.camera
+            if (cam is not None and compiled and getattr(cam, "kind", None) in (
+                    "perspective", "unified") and fast_observe.supported(cam)):
+                keys.setdefault((cam.kind, int(cam.width), int(cam.height)), []).append(i)
+        for members in keys.values():
+            self._group[members] = len(self._batch_params)
+            self._item[members] = np.arange(len(members))
+            self._batch_params.append(fast_observe.WorldParams.from_worlds(
+                [self._contexts[i].geometry for i in members],
+                [self._contexts[i].camera for i in members]))
 
-    def retarget(self, goal: Goal) -> None:
-        """A new goal for the law (a trajectory task); the encoder history stays."""
-        if self.context is None:
-            return
-        self.context = replace(self.context, goal=goal)
-        retarget(self.law, self.context)
+    def retarget_batch(self, trials: np.ndarray, goals: GoalBatch) -> None:
+        """New goals for the law of some trials (the histories stay).
 
-    def step(self, observation: Observation) -> Command:
-        """The law's command on the predicted features."""
-        if self.context is None:
-            return Command.refuse(f"{self.name}: reset(context) was not called",
-                                  actuation=self.actuation)
-        history = self.history
-        history.record(observation)
-        if not history.predicts(observation):
-            return self.law.step(observation)  # type: ignore[no-any-return]
-        predicted, note = self._predict(observation, float(observation.image_t))  # type: ignore[arg-type]
-        cmd: Command = self.law.step(predicted)
-        if note:
-            cmd.notes.append(note)
-        return cmd
+        Raises:
+            ContextError: A goal the law cannot use, or no reset yet.
+        """
+        self.law.retarget_batch(trials, goals)
+        for j, k in enumerate(np.asarray(trials, dtype=int).tolist()):
+            self._contexts[k] = replace(self._contexts[k], goal=goals.item(j))
 
-    def _lengths_at(self, time: float) -> np.ndarray:
-        """The encoder lengths at ``time``, interpolated between readings."""
-        return self.history.lengths_at(time)
+    # ------------------------------------------------------------------ step
+    def step_batch(self, observations: ObservationBatch) -> CommandBatch:
+        """Every row's reading recorded, the late images' features predicted at the
+        control instant, then one step of the law's batch."""
+        obs = observations
+        trials = np.asarray(obs.trials, dtype=int)
+        late: list[int] = []
+        before: list[np.ndarray] = []
+        for j, k in enumerate(trials.tolist()):
+            row = obs.item(j)
+            history = self._histories[k]
+            history.record(row)
+            if (history.predicts(row) and obs.normals is not None
+                    and self._contexts[k].camera is not None):
+                late.append(j)
+                before.append(history.lengths_at(float(row.image_t)))  # type: ignore[arg-type]
+        if late:
+            obs = self._predicted(obs, trials, np.array(late), np.array(before))
+        out = self.law.step_batch(obs)
+        self.crashes = self.law.crashes  # the rows are the law's batch's
+        return out
 
-    def _model_normals(self, R: np.ndarray, t: np.ndarray) -> np.ndarray:
-        """(n, 6, 2, 3) edge normals the estimated camera sees of the nominal robot at
-        poses ``R`` (n, 3, 3), ``t`` (n, 3): the compiled observation with the model's
-        parameters packed once, else :func:`vision.legs.observe_legs`."""
+    def _predicted(self, obs: ObservationBatch, trials: np.ndarray, rows: np.ndarray,
+                   before: np.ndarray) -> ObservationBatch:
+        """The batch with the features of ``rows`` moved from their capture instants
+        (encoder lengths ``before``, (m, 6)) to their control instants."""
+        from hexapod.fk import forward_kinematics_batch
+        from hexapod.workspace import home_pose
+        from vision.legs import directions_from_edges
+
+        tr = trials[rows]
+        m = len(rows)
+        q = np.empty((2 * m, 6))
+        q[0::2] = before
+        q[1::2] = np.asarray(obs.lengths, dtype=float)[rows]
+        R0 = np.empty((2 * m, 3, 3))
+        t0 = np.empty((2 * m, 3))
+        A = np.empty((2 * m, 6, 3))
+        E = np.empty((2 * m, 6, 3))
+        for i, k in enumerate(tr.tolist()):
+            geo = self._contexts[k].geometry
+            guess = self._histories[k].guess
+            R0[2 * i:2 * i + 2], t0[2 * i:2 * i + 2] = (home_pose(geo) if guess is None
+                                                        else guess)
+            A[2 * i:2 * i + 2] = geo.base_points
+            E[2 * i:2 * i + 2] = geo.platform_points
+        sol = forward_kinematics_batch(self._contexts[int(tr[0])].geometry, q, R0, t0,
+                                       base_points=A, platform_points=E)
+        ok = sol.converged[0::2] & sol.converged[1::2]
+        keep = np.flatnonzero(ok)
+        if not len(keep):
+            return obs
+        for i in keep.tolist():
+            self._histories[int(tr[i])].guess = (sol.rotations[2 * i + 1].copy(),
+                                                 sol.translations[2 * i + 1].copy())
+        rows, tr = rows[keep], tr[keep]
+        pairs = np.stack([2 * keep, 2 * keep + 1], axis=1).reshape(-1)
+        model = self._batch_model_normals(tr, sol.rotations[pairs], sol.translations[pairs])
+        assert obs.normals is not None
+        normals, _ = move_normals(np.asarray(obs.normals, dtype=float)[rows],
+                                  model[1::2] - model[0::2])
+        out_normals = np.array(obs.normals, dtype=float)
+        out_normals[rows] = normals
+        out_lines = obs.lines
+        if out_lines is not None:
+            out_lines = np.array(out_lines, dtype=float)
+            for i, k in enumerate(tr.tolist()):
+                camera = self._contexts[k].camera
+                if getattr(camera, "kind", None) == "perspective":
+                    with np.errstate(invalid="ignore"):
+                        out_lines[rows[i]] = camera.normal_to_line(normals[i])
+        out_dirs = obs.directions
+        if out_dirs is not None:
+            out_dirs = np.array(out_dirs, dtype=float)
+            both = np.asarray(obs.direction_visible, dtype=bool)[rows]
+            with np.errstate(invalid="ignore"):
+                out_dirs[rows] = np.where(both[..., None], directions_from_edges(normals),
+                                          out_dirs[rows])
+        image_t = None if obs.image_t is None else np.array(obs.image_t, dtype=float)
+        if image_t is not None:
+            image_t[rows] = np.asarray(obs.t, dtype=float)[rows]
+        return replace(obs, normals=out_normals, lines=out_lines, directions=out_dirs,
+                       image_t=image_t)
+
+    def _batch_model_normals(self, trials: np.ndarray, R: np.ndarray, t: np.ndarray
+                       ) -> np.ndarray:
+        """(2m, 6, 2, 3) the normals each trial's estimated camera sees of its nominal
+        robot at the pose pairs ``R`` (2m, 3, 3), ``t`` (2m, 3) of ``trials`` (m,)."""
         from vision import fast_observe
         from vision.legs import observe_legs
 
-        ctx = self.context
-        assert ctx is not None
-        if self._params is None:
-            camera = ctx.camera
-            fast = (fast_observe.compiled() and getattr(camera, "kind", None) in (
-                "perspective", "unified") and fast_observe.supported(camera))
-            self._params = (fast_observe.WorldParams.from_worlds([ctx.geometry], [camera])
-                            if fast else False)
-        if self._params is False:
-            return observe_legs(ctx.camera, ctx.geometry, R, t).normals  # type: ignore[no-any-return]
-        obs = fast_observe.observe_batch(self._params, R, t, np.zeros(len(R), dtype=int))
-        return obs.normals  # type: ignore[no-any-return]
-
-    def _predict(self, obs: Observation, image_t: float) -> tuple[Observation, str | None]:
-        """The observation with its features moved from ``image_t`` to ``obs.t``."""
-        from hexapod.fk import forward_kinematics_batch
-        from vision.legs import directions_from_edges
-
-        ctx = self.context
-        assert ctx is not None
-        camera = ctx.camera
-        if camera is None or obs.normals is None:
-            return obs, "latency not compensated: no camera model or no edge normals"
-        q = np.stack([self._lengths_at(image_t), np.asarray(obs.lengths, dtype=float)])
-        guess_R = guess_t = None
-        guess = self.history.guess
-        if guess is not None:
-            guess_R = np.repeat(guess[0][None], 2, axis=0)
-            guess_t = np.repeat(guess[1][None], 2, axis=0)
-        sol = forward_kinematics_batch(ctx.geometry, q, guess_R, guess_t)
-        if not np.all(sol.converged):
-            return obs, "latency not compensated: nominal forward kinematics failed"
-        self.history.guess = (sol.rotations[1].copy(), sol.translations[1].copy())
-        model_normals = self._model_normals(sol.rotations, sol.translations)
-        normals, delta_ok = move_normals(np.asarray(obs.normals, dtype=float),
-                                         model_normals[1] - model_normals[0])
-        lines = obs.lines
-        if lines is not None and getattr(camera, "kind", None) == "perspective":
-            with np.errstate(invalid="ignore"):
-                lines = camera.normal_to_line(normals)
-        directions = obs.directions
-        if directions is not None:
-            both = np.asarray(obs.direction_visible, dtype=bool)
-            with np.errstate(invalid="ignore"):
-                directions = np.where(both[:, None], directions_from_edges(normals),
-                                      np.asarray(directions, dtype=float))
-        visible = np.asarray(obs.edge_visible, dtype=bool)
-        note = None
-        if np.any(visible & ~delta_ok):
-            note = "latency not compensated for edges the model predicts hidden"
-        return replace(obs, normals=normals, lines=lines, directions=directions,
-                       image_t=obs.t), note
+        out = np.empty((len(R), 6, 2, 3))
+        pair_trials = np.repeat(trials, 2)
+        groups = self._group[pair_trials]
+        for g in np.unique(groups).tolist():
+            at = np.flatnonzero(groups == g)
+            if g < 0:  # pair by pair, as the per-trial step
+                for i in at[0::2].tolist():
+                    ctx = self._contexts[int(pair_trials[i])]
+                    out[i:i + 2] = observe_legs(ctx.camera, ctx.geometry, R[i:i + 2],
+                                                t[i:i + 2]).normals
+            else:
+                out[at] = fast_observe.observe_batch(self._batch_params[g], R[at], t[at],
+                                                     self._item[pair_trials[at]]).normals
+        return out

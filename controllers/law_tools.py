@@ -291,3 +291,31 @@ class Selection:
     measured: np.ndarray
     leg_directions: np.ndarray
     notes: list[str]
+
+
+@dataclass(slots=True)
+class TaskStep:
+    """The stacked tasks of one period, as a solver takes them
+    (:meth:`~controllers.laws.VisionLaw.tasks`).
+
+    Attributes:
+        error: (m,) stacked error ``e`` of the used features.
+        error_norm: ``|e|``.
+        normal: (6, 6) ``L^T L`` of the stacked interaction matrix ``L``.
+        gradient: (6,) ``L^T e``.
+        gain: ``lambda(|e|_inf)`` [1/s].
+        inverse_jacobian: (6, 6) ``J_inv`` (rows ``[u_i^T, (A_i x u_i)^T]``), at the
+            directions of ``estimate.in_use``.
+        notes: Diagnostics (features used, predicted or approximated directions).
+        compiled: The compiled core's full result (its classical solution, rank,
+            condition) when it computed the period, else None.
+    """
+
+    error: np.ndarray
+    error_norm: float
+    normal: np.ndarray
+    gradient: np.ndarray
+    gain: float
+    inverse_jacobian: np.ndarray
+    notes: list[str]
+    compiled: Any

@@ -14,17 +14,18 @@ pseudo-inverse or QP, missing features, diagnostics) is written once, here, in
   MEAN features, feature selection by visibility with a rank check, and
   dead-reckoning of the direction of hidden legs (needed by ``J_inv``).
 
-Speed: ``step`` is called millions of times by the benchmarks, and its cost is the
-number of numpy calls, not the arithmetic. A law hands the measured features to its
-compiled core (:mod:`controllers.law_kernel`, generated from the tasks' CasADi blocks
-to C, one ctypes call of a few microseconds: error, ``L^T W L``, ``L^T W e``, gain,
-rank and condition, damped solve, ``J_inv``, ``q_dot``), for every interaction choice.
-In the common case (every feature visible, now and in the goal) nothing else is
-computed: :meth:`VisionLaw.tasks` only wraps the result. With hidden features the law
-first chooses the used features (weight 1, the hidden ones weight 0) and the
-directions of the legs it cannot measure (:meth:`VisionLaw._select`: dead-reckoned or
-approximated). The numpy formulas of :mod:`controllers.interaction` are the tests'
-oracle (``tests/controllers/numpy_law.py``).
+One step, over a batch of trials (:meth:`VisionLaw.step_batch`): each trial keeps its
+own instance of the law (``trial_instances``, this one the first; its estimate a row of
+the batch's), so that every case keeps exactly the per-trial behaviour. The common case
+(every feature visible and finite, now and in the goal, a full-rank interaction matrix,
+a solver that takes the classical solution as it is) goes through the law's lean
+compiled core (:mod:`controllers.law_kernel`, generated from the tasks' CasADi blocks)
+over all its rows in one C loop (:class:`~controllers.law_rows.KernelRows`). Any other
+row is stepped by its instance (:meth:`VisionLaw.step_trial`): the features go through
+the same core after :meth:`VisionLaw._select` has chosen the used features (weight 1,
+the hidden ones weight 0) and the directions of the legs it cannot measure
+(dead-reckoned or approximated). The numpy formulas of :mod:`controllers.interaction`
+are the tests' oracle (``tests/controllers/numpy_law.py``).
 """
 
 from __future__ import annotations
@@ -33,25 +34,35 @@ import logging
 import math
 from abc import abstractmethod
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass, replace
+from dataclasses import replace
 
 import numpy as np
 
 from controllers.base import (
     Command,
+    CommandBatch,
     Controller,
     ControllerContext,
     Goal,
+    GoalBatch,
     Observation,
+    ObservationBatch,
 )
-from controllers.estimators import LegDirectionEstimate, PoseEstimate
+from controllers.estimators import (
+    LegDirectionEstimate,
+    PoseEstimate,
+    model_directions,
+    model_directions_note,
+    unknown_direction_reason,
+)
 from controllers.exceptions import ContextError, OptionError
-from controllers.law_batch import BatchedLaw
-from controllers.law_kernel import LawKernel, LawResult
+from controllers.law_kernel import LawKernel
+from controllers.law_rows import KernelRows
 from controllers.law_tools import (
     INTERACTIONS,
     Gain,
     Selection,
+    TaskStep,
     check_choice,
     check_number,
     check_observation,
@@ -65,7 +76,7 @@ from controllers.solvers.base import Solver
 from controllers.solvers.pseudo_inverse import DampedPseudoInverse
 
 __all__ = [
-    "INTERACTIONS", "Gain", "Selection", "VisionLaw", "check_choice", "check_number",
+    "INTERACTIONS", "Gain", "Selection", "TaskStep", "VisionLaw", "check_choice", "check_number",
     "check_observation", "inverse_jacobian_into", "solve_least_squares", "solve_normal",
     "solve_normal_damped",
 ]
@@ -73,34 +84,7 @@ __all__ = [
 log = logging.getLogger(__name__)
 
 
-@dataclass(slots=True)
-class TaskStep:
-    """The stacked tasks of one period, as a solver takes them (:meth:`VisionLaw.tasks`).
-
-    Attributes:
-        error: (m,) stacked error ``e`` of the used features.
-        error_norm: ``|e|``.
-        normal: (6, 6) ``L^T L`` of the stacked interaction matrix ``L``.
-        gradient: (6,) ``L^T e``.
-        gain: ``lambda(|e|_inf)`` [1/s].
-        inverse_jacobian: (6, 6) ``J_inv`` (rows ``[u_i^T, (A_i x u_i)^T]``), at the
-            directions of ``estimate.in_use``.
-        notes: Diagnostics (features used, predicted or approximated directions).
-        compiled: The compiled core's full result (its classical solution, rank,
-            condition) when it computed the period, else None.
-    """
-
-    error: np.ndarray
-    error_norm: float
-    normal: np.ndarray
-    gradient: np.ndarray
-    gain: float
-    inverse_jacobian: np.ndarray
-    notes: list[str]
-    compiled: LawResult | None
-
-
-class VisionLaw(BatchedLaw, Controller):
+class VisionLaw(Controller):
     """Base of the image-based laws: ``tau = -lambda L^+ e``, ``q_dot = J_inv tau``.
 
     Subclasses implement :meth:`_reset_features` (read the goal, set the compiled core
@@ -151,7 +135,7 @@ class VisionLaw(BatchedLaw, Controller):
         self._kernel_selected = False
 
     # ----------------------------------------------------------------- reset
-    def reset(self, context: ControllerContext) -> None:
+    def reset_trial(self, context: ControllerContext) -> None:
         """Read the estimated base points, the period and the goal.
 
         Raises:
@@ -179,19 +163,19 @@ class VisionLaw(BatchedLaw, Controller):
         self.solver.reset(context, self.name, dt)
         self._configure_kernel()
 
-    def retarget(self, goal: Goal) -> None:
+    def retarget_trial(self, goal: Goal) -> None:
         """A new goal, keeping what the law carries between periods (the goal of each
         period of a trajectory task, :mod:`controllers.tracking`).
 
-        The desired features and lengths become the goal's, exactly as :meth:`reset`
+        The desired features and lengths become the goal's, exactly as :meth:`reset_trial`
         would set them; the leg-direction estimate (the dead-reckoned directions of
         hidden legs and the last commanded twist), the forward-kinematics warm start and
         the solver's state stay: the goal moved, the robot did not. The compiled core is
         kept (its desired features rewritten) when the new goal still allows it.
 
         Raises:
-            ContextError: :meth:`reset` was not called, or the goal is invalid (as in
-                :meth:`reset`; the law then keeps its previous goal).
+            ContextError: :meth:`reset_trial` was not called, or the goal is invalid (as in
+                :meth:`reset_trial`; the law then keeps its previous goal).
         """
         if self.context is None:
             raise ContextError(self.name, "context", "retarget(goal) before reset(context)")
@@ -237,12 +221,12 @@ class VisionLaw(BatchedLaw, Controller):
 
     def _reuse_kernel(self, make: Callable[[], LawKernel]) -> LawKernel:
         """The compiled core for :meth:`_reset_features`: the one kept by
-        :meth:`retarget` (same law, same camera), else ``make()``."""
+        :meth:`retarget_trial` (same law, same camera), else ``make()``."""
         spare, self._spare_kernel = self._spare_kernel, None
         return spare if spare is not None else make()
 
     def _retarget_features(self, context: ControllerContext) -> None:
-        """Read the desired features of a new goal (:meth:`retarget`); subclasses skip
+        """Read the desired features of a new goal (:meth:`retarget_trial`); subclasses skip
         what does not depend on the goal."""
         self._reset_features(context)
 
@@ -309,7 +293,7 @@ class VisionLaw(BatchedLaw, Controller):
     def tasks(self, observation: Observation, q: np.ndarray) -> TaskStep | Command:
         """This period's tasks for a solver, or the refusal of why none can be built.
 
-        The part of a step every solver shares (the pseudo-inverse of :meth:`step`, the
+        The part of a step every solver shares (the pseudo-inverse of :meth:`step_trial`, the
         limit QP, the predictive controller): the features of a usable observation
         (:meth:`checked_lengths`) go through the compiled core (:mod:`controllers.law_kernel`):
         directly when every feature is visible now and in the goal
@@ -359,25 +343,16 @@ class VisionLaw(BatchedLaw, Controller):
         if len(unknown):
             model = self._model_directions(q)
             if model is None:
-                return Command.refuse(self._unknown_reason(unknown), e)
+                return Command.refuse(unknown_direction_reason(unknown), e)
             est.in_use[unknown] = model[unknown]
             inputs["leg_directions"][:] = est.in_use.reshape(-1)
             r = kernel.evaluate()
-            notes.append(self._model_note(unknown))
+            notes.append(model_directions_note(unknown))
         return TaskStep(e, r.error_norm, r.N, r.b, r.gain, r.J, notes, r)
 
-    @staticmethod
-    def _unknown_reason(unknown: np.ndarray) -> str:
-        return (f"direction of leg {int(unknown[0])} unknown (hidden since reset, no desired "
-                "direction, no nominal model prediction): cannot build the inverse Jacobian")
-
-    @staticmethod
-    def _model_note(unknown: np.ndarray) -> str:
-        return ("nominal-model directions (forward kinematics of the measured lengths) for "
-                "never-seen legs " + ", ".join(str(int(i)) for i in unknown))
-
-    def step(self, observation: Observation) -> Command:
-        """One period: ``q_dot = J_inv (-lambda L^+ e)`` (never raises for bad measurements)."""
+    def step_trial(self, observation: Observation) -> Command:
+        """One period of this instance's trial: ``q_dot = J_inv (-lambda L^+ e)`` (never
+        raises for bad measurements)."""
         if self.context is None:
             return Command.refuse(f"{self.name}: reset(context) was not called")
         q = self.checked_lengths(observation)
@@ -390,6 +365,109 @@ class VisionLaw(BatchedLaw, Controller):
         return self._command(self.solver.solve(ts.normal, ts.gradient, ts.gain, q, J,
                                                ts.compiled),
                              J, e, ts.error_norm, e.shape[0], q, ts.notes)
+
+    # ----------------------------------------------------------------- the batch
+    def _batch_features(self, obs: ObservationBatch) -> tuple[np.ndarray | None,
+                                                               np.ndarray | None]:
+        """The rows' measured features for the compiled core, (n, F), and the mask (n,)
+        of rows whose features are all visible. (None, None): no compiled core."""
+        return None, None
+
+    def _batch_desired(self, goals: GoalBatch) -> tuple[np.ndarray | None, np.ndarray]:
+        """The compiled core's desired-feature input of each goal, (m, D), and the mask
+        (m,) of goals that the law would read into exactly that with its compiled core
+        (every feature visible and finite, the CURRENT interaction). (None, mask): no
+        such shortcut; every goal then goes through its instance's ``retarget_trial``."""
+        return None, np.zeros(len(goals), dtype=bool)
+
+    def _batch_reset_extra(self) -> None:
+        """Per-trial constants of subclasses (the solver's are gathered by
+        :meth:`~controllers.solvers.base.Solver.batch_reset`)."""
+
+    def reset_batch(self, contexts: Sequence[ControllerContext]) -> None:
+        """One instance per context (this one first, the others built with its options),
+        each reset with its context; their estimates become rows of one batch estimate
+        and their compiled cores' inputs rows of one array.
+
+        Raises:
+            ContextError: A context the law cannot use (as :meth:`reset_trial`).
+        """
+        super().reset_batch(contexts)
+        trials = self.trial_instances
+        #: The estimates of every trial (the instances' estimates are its rows).
+        self.batch_estimate = LegDirectionEstimate.fresh(len(trials))
+        for k, inst in enumerate(trials):
+            inst.estimate = self.batch_estimate.row(k)
+        self._core_rows = KernelRows(len(trials))
+        for k, inst in enumerate(trials):
+            self._core_rows.take(k, inst.kernel if inst.batch_core else None)
+        #: Goals given to ``retarget_batch`` not yet read by the trial's instance.
+        self._pending: dict[int, tuple[GoalBatch, int]] = {}
+        self.solver.batch_reset([t.solver for t in trials])
+        self._batch_reset_extra()
+
+    def retarget_batch(self, trials: np.ndarray, goals: GoalBatch) -> None:
+        """New goals for some trials (row ``j`` of ``goals`` for trial ``trials[j]``),
+        keeping their state, as each instance's :meth:`retarget_trial`.
+
+        In a batch of many trials, a goal that the compiled core takes as it is
+        (:meth:`_batch_desired`) is written into the batch's inputs at once and read by
+        the instance only when that trial next needs it (a row the core cannot finish);
+        any other goal, and the goal of a batch of one, is read by the instance now.
+
+        Raises:
+            ContextError: A goal the law cannot use, or no reset yet.
+        """
+        if not self.trial_instances:
+            raise ContextError(self.name, "context", "retarget(goal) before reset(context)")
+        trials = np.asarray(trials, dtype=int)
+        desired, quick = self._batch_desired(goals)
+        if desired is not None and len(self.trial_instances) > 1:  # (one reads it now)
+            quick = self._core_rows.write_desired(trials, desired, quick)
+            for j in np.flatnonzero(quick).tolist():
+                self._pending[int(trials[j])] = (goals, j)
+        else:
+            quick = np.zeros(len(trials), dtype=bool)
+        for j in np.flatnonzero(~quick).tolist():
+            k = int(trials[j])
+            self._pending.pop(k, None)
+            self._retarget_instance(k, goals.item(j))
+
+    def _retarget_instance(self, trial: int, goal: Goal) -> None:
+        inst = self.trial_instances[trial]
+        inst.retarget_trial(goal)
+        self._core_rows.take(trial, inst.kernel if inst.batch_core else None)
+
+    def step_arrays(self, observations: ObservationBatch, out: CommandBatch) -> np.ndarray:
+        """The common case of the rows through the compiled core as arrays; returns the
+        other rows (see the module docstring)."""
+        obs = observations
+        n = len(obs)
+        trials = np.asarray(obs.trials, dtype=int)
+        slow = np.ones(n, dtype=bool)
+        rows_core = self._core_rows
+        feats, visible = (self._batch_features(obs) if rows_core.function is not None
+                          else (None, None))
+        if feats is not None and visible is not None:
+            q = np.asarray(obs.lengths, dtype=float)
+            with np.errstate(invalid="ignore"):
+                fast = (rows_core.ready[trials] & visible & np.isfinite(feats).all(axis=1)
+                        & np.isfinite(q).all(axis=1) & (q.min(axis=1) > 0)
+                        & np.isfinite(np.asarray(obs.t, dtype=float)))
+            rows = np.flatnonzero(fast)
+            if len(rows):
+                done = rows_core.step(rows, trials[rows], feats[rows], q[rows],
+                                      self.solver, self.batch_estimate, out)
+                slow[rows[done]] = False
+        return np.flatnonzero(slow)
+
+    def step_row(self, trial: int, observation: Observation) -> Command:
+        """One row by its trial's instance, which first reads a goal given to
+        :meth:`retarget_batch` that it has not read yet."""
+        pending = self._pending.pop(trial, None) if self._pending else None
+        if pending is not None:
+            self._retarget_instance(trial, pending[0].item(pending[1]))
+        return self.trial_instances[trial].step_trial(observation)  # type: ignore[no-any-return]
 
     def _command(self, solved: tuple[np.ndarray, int, float, list[str], str | None,
                                      np.ndarray | None],
@@ -449,31 +527,13 @@ class VisionLaw(BatchedLaw, Controller):
                 and (self._q_star is not None or "desired_lengths" not in k.inputs))
 
     def _model_directions(self, q: np.ndarray) -> np.ndarray | None:
-        """Leg directions (6, 3) in the camera frame predicted by the nominal model.
-
-        Forward kinematics of the measured lengths with the nominal geometry, seen
-        through the estimated ``camera_from_base``. Used only where a leg has never
-        been observed and the goal image does not show it either: the inverse
-        Jacobian needs every direction, and an approximate one only slows the
-        convergence (the error itself never involves the model). None when the
-        context has no camera pose or the forward kinematics fails.
-        """
-        ctx = self.context
-        pose = getattr(getattr(ctx, "camera", None), "camera_from_base", None)
-        if ctx is None or pose is None:
-            return None
-        from hexapod.exceptions import HexapodError
-        from hexapod.fk import forward_kinematics
-        from hexapod.kinematics import legs_in_frame
-
-        try:
-            sol = forward_kinematics(ctx.geometry, q, check_stroke=False,
-                                     guess=None if self.model_pose is None
-                                     else self.model_pose.pose)
-        except HexapodError:
-            return None
-        self.model_pose = PoseEstimate(sol.rotation, sol.translation)
-        return legs_in_frame(ctx.geometry, sol.rotation, sol.translation, pose).directions
+        """Leg directions (6, 3) in the camera frame predicted by the nominal model
+        (:func:`~controllers.estimators.model_directions`), warm-started by and updating
+        :attr:`model_pose`."""
+        directions, pose = model_directions(self.context, q, self.model_pose)
+        if pose is not None:
+            self.model_pose = pose
+        return directions
 
     # ----------------------------------------------------------------- helpers
     def _desired_lengths(self, q: np.ndarray) -> np.ndarray:

@@ -13,9 +13,8 @@ from collections.abc import Sequence
 
 import numpy as np
 
-from controllers.base import ControllerContext, Observation, ObservationBatch
+from controllers.base import ControllerContext, GoalBatch, Observation, ObservationBatch
 from controllers.exceptions import ContextError
-from controllers.goal_batch import GoalBatch
 from controllers.law_kernel import direction_kernel
 from controllers.laws import Selection, VisionLaw
 

@@ -23,9 +23,8 @@ from typing import Any
 
 import numpy as np
 
-from controllers.base import ControllerContext, Observation, ObservationBatch
+from controllers.base import ControllerContext, GoalBatch, Observation, ObservationBatch
 from controllers.exceptions import ContextError
-from controllers.goal_batch import GoalBatch
 from controllers.interaction import (
     cross,
 )
@@ -226,7 +225,7 @@ class LegEdgeController(VisionLaw):
 
     def _batch_reset_extra(self) -> None:
         super()._batch_reset_extra()
-        uses = {t.use_lines for t in self._trials}
+        uses = {t.use_lines for t in self.trial_instances}
         self._batch_uses_lines: bool | None = uses.pop() if len(uses) == 1 else None
 
     def _batch_features(self, obs: ObservationBatch) -> tuple[np.ndarray | None,

@@ -36,18 +36,16 @@ from controllers.base import (
     Controller,
     ControllerContext,
     Goal,
+    GoalBatch,
     Observation,
     ObservationBatch,
 )
-from controllers.batch import step_rows_per_trial
 from controllers.estimators import PoseEstimate
 from controllers.exceptions import ContextError
-from controllers.goal_batch import GoalBatch
 from controllers.interaction import cross
 from controllers.law_algebra import jacobi_eigen
 from controllers.law_tools import gain_formula
 from controllers.laws import Gain, check_number, check_observation
-from controllers.options import RemembersOptions
 from hexapod.compiled import CompiledFunction
 from hexapod.exceptions import HexapodError
 from hexapod.fk import forward_kinematics, forward_kinematics_batch
@@ -119,7 +117,7 @@ def pose_servo_kernel() -> CompiledFunction:
     return CompiledFunction(_pose_servo_function())
 
 
-class ModelBasedController(RemembersOptions, Controller):
+class ModelBasedController(Controller):
     """Forward kinematics of the measured lengths (nominal geometry) + pose servoing.
 
     Args:
@@ -141,7 +139,7 @@ class ModelBasedController(RemembersOptions, Controller):
         self.compiled = bool(compiled)
         #: The compiled pose servo (None: numpy path, or not reset).
         self.kernel: CompiledFunction | None = None
-        #: The servo's input row (constants written by :meth:`reset`).
+        #: The servo's input row (constants written by :meth:`reset_trial`).
         self.servo_input = np.zeros(75)
         self.fk_tolerance = check_number(self.name, "fk_tolerance", fk_tolerance)
         self.fk_max_iterations = int(check_number(self.name, "fk_max_iterations",
@@ -149,7 +147,7 @@ class ModelBasedController(RemembersOptions, Controller):
         self.context: ControllerContext | None = None
         self._J = np.zeros((6, 6))
 
-    def reset(self, context: ControllerContext) -> None:
+    def reset_trial(self, context: ControllerContext) -> None:
         """Read the nominal geometry and the goal pose (or the goal lengths).
 
         Raises:
@@ -180,13 +178,13 @@ class ModelBasedController(RemembersOptions, Controller):
         x[_IN["Rc"]] = (np.eye(3) if cam_pose is None else cam_pose.rotation).reshape(9)
         x[_IN["pc"]] = 0.0 if cam_pose is None else cam_pose.translation
 
-    def retarget(self, goal: Goal) -> None:
+    def retarget_trial(self, goal: Goal) -> None:
         """A new goal pose, keeping the forward kinematics' warm start (the goal of each
         period of a trajectory task, :mod:`controllers.tracking`).
 
         Raises:
-            ContextError: :meth:`reset` was not called, or the goal is invalid (as in
-                :meth:`reset`).
+            ContextError: :meth:`reset_trial` was not called, or the goal is invalid (as in
+                :meth:`reset_trial`).
         """
         if self.context is None:
             raise ContextError(self.name, "context", "retarget(goal) before reset(context)")
@@ -224,7 +222,7 @@ class ModelBasedController(RemembersOptions, Controller):
             raise ContextError(self.name, "goal", "needs rotation and translation (or lengths)")
         return R, t
 
-    def step(self, observation: Observation) -> Command:
+    def step_trial(self, observation: Observation) -> Command:
         """Forward kinematics, pose error, twist, ``q_dot = J_inv(nominal) tau``."""
         if self.context is None:
             return Command.refuse(f"{self.name}: reset(context) was not called")
@@ -280,10 +278,10 @@ class ModelBasedController(RemembersOptions, Controller):
 
     # ------------------------------------------------------------------ batch
     def reset_batch(self, contexts: Sequence[ControllerContext]) -> None:
-        """One instance per context (built with this controller's options), reset with it;
-        their pose estimates are the rows of one batch estimate."""
-        self._trials: list[ModelBasedController] = self.clones_reset(contexts)
-        trials = self._trials
+        """One instance per context (this one first, the others built with its options),
+        reset with it; their pose estimates are the rows of one batch estimate."""
+        super().reset_batch(contexts)
+        trials: list[ModelBasedController] = self.trial_instances
         #: The forward-kinematics warm starts of every trial (the instances' rows).
         self.batch_estimate = PoseEstimate.of(
             np.array([t.estimate.rotation for t in trials]).reshape(-1, 3, 3),
@@ -298,17 +296,19 @@ class ModelBasedController(RemembersOptions, Controller):
 
     def retarget_batch(self, trials: np.ndarray, goals: GoalBatch) -> None:
         """New goals of some trials (row ``j`` for trial ``trials[j]``): each instance's
-        :meth:`retarget`, the batch's servo inputs updated.
+        :meth:`retarget_trial`, the batch's servo inputs updated.
 
         Raises:
             ContextError: A goal the law cannot use.
         """
+        if not self.trial_instances:
+            raise ContextError(self.name, "context", "retarget(goal) before reset(context)")
         for j, k in enumerate(np.asarray(trials, dtype=int).tolist()):
-            inst = self._trials[k]
-            inst.retarget(goals.item(j))
+            inst = self.trial_instances[k]
+            inst.retarget_trial(goals.item(j))
             self._b_X[k] = inst.servo_input
 
-    def step_batch(self, observations: ObservationBatch) -> CommandBatch:
+    def step_arrays(self, observations: ObservationBatch, out: CommandBatch) -> np.ndarray:
         """Forward kinematics of every row in one batch (warm-started per trial), the
         compiled pose servo in one C loop; rows the batch cannot finish exactly (failed
         forward kinematics, a half-turn error, a non-finite command) are stepped by
@@ -316,7 +316,6 @@ class ModelBasedController(RemembersOptions, Controller):
         obs = observations
         n = len(obs)
         trials = np.asarray(obs.trials, dtype=int)
-        out = CommandBatch.zeros(n)
         slow = np.ones(n, dtype=bool)
         q = np.asarray(obs.lengths, dtype=float)
         with np.errstate(invalid="ignore"):
@@ -341,5 +340,4 @@ class ModelBasedController(RemembersOptions, Controller):
             out.velocities[rows[acc]] = Y[acc][:, _OUT["qdot"]]
             out.error_norm[rows[acc]] = Y[acc, _AT["norm"]]
             slow[rows[acc]] = False
-        step_rows_per_trial(self._trials, obs, trials, np.flatnonzero(slow), out)
-        return out
+        return np.flatnonzero(slow)

@@ -2,16 +2,16 @@
 the scenario checks and ``hexapod-bench list --options``), and controllers that remember
 the options they were built with.
 
-A batched law steps each trial with its own instance of the law (the rows its compiled
-core cannot finish); those instances are built from the options of the batch's own
-instance, never copied from it (a copy would carry whatever state it holds).
+A controller steps each trial of a batch with its own instance where it computes no
+rows as arrays (:class:`controllers.base.Controller`); those instances are built from the
+options of the batch's own instance, never copied from it (a copy would carry whatever
+state it holds).
 """
 
 from __future__ import annotations
 
 import inspect
 import re
-from collections.abc import Iterable
 from dataclasses import dataclass
 from typing import Any, TypeVar
 
@@ -37,15 +37,6 @@ class RemembersOptions:
         """A new instance with the same options, not reset."""
         args, kwargs = self._options
         return type(self)(*args, **kwargs)
-
-    def clones_reset(self: T, contexts: Iterable[Any]) -> list[T]:
-        """One :meth:`clone` per context, reset with it (the trials of a batch)."""
-        out = []
-        for ctx in contexts:
-            inst = self.clone()
-            inst.reset(ctx)  # type: ignore[attr-defined]
-            out.append(inst)
-        return out
 
 
 #: A constructor parameter without a default (the option must be given).

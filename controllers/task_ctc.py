@@ -33,7 +33,6 @@ import numpy as np
 
 from controllers.base import Command, Controller, ControllerContext, Goal, Observation
 from controllers.exceptions import ContextError
-from controllers.options import RemembersOptions
 from controllers.solvers.computed_torque import (
     ComputedTorqueSolver,
     SecondOrderGains,
@@ -110,7 +109,7 @@ def _log(R: np.ndarray) -> np.ndarray:
     return log_so3(R)  # type: ignore[no-any-return]
 
 
-class TaskComputedTorque(RemembersOptions, Controller):
+class TaskComputedTorque(Controller):
     """Computed torque on a task (see the module docstring). Subclasses set ``name``,
     ``features`` and implement :meth:`measure`, :meth:`goal_pose` and :meth:`tasks_at`.
 
@@ -150,7 +149,7 @@ class TaskComputedTorque(RemembersOptions, Controller):
         self.compiled_steps = 0
         self.numpy_steps = 0
 
-    def reset(self, context: ControllerContext) -> None:
+    def reset_trial(self, context: ControllerContext) -> None:
         """Build the nominal model; take the reference or the goal.
 
         Raises:
@@ -161,7 +160,7 @@ class TaskComputedTorque(RemembersOptions, Controller):
         self.guess = None
         self._pose_grid = None
         self.prepare(context)
-        self.retarget(context.goal)
+        self.retarget_trial(context.goal)
         self.compiled = None if self.compiled_kind is None else CompiledTaskStep(self)
 
     def prepare(self, context: ControllerContext) -> None:
@@ -177,7 +176,7 @@ class TaskComputedTorque(RemembersOptions, Controller):
         note, or None to leave the period to the numpy path (the default)."""
         return None
 
-    def retarget(self, goal: Goal) -> None:
+    def retarget_trial(self, goal: Goal) -> None:
         """A new fixed goal (ignored when tracking ``context.reference``)."""
         ctx = self.context
         if ctx is None:
@@ -237,7 +236,7 @@ class TaskComputedTorque(RemembersOptions, Controller):
         tracks them (unchanged by default)."""
         return R, t, twist, twist_rate
 
-    def step(self, observation: Observation) -> Command:
+    def step_trial(self, observation: Observation) -> Command:
         """The leg forces of this period [N], or a refusal (zeros) with its reason."""
         if self.context is None or self.model is None:
             return self.refuse("reset(context) was not called")

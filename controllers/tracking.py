@@ -15,17 +15,18 @@ built for a fixed goal:
   Nothing is taught along the path: under a calibration error the features in between
   carry the model's error of the feature CHANGE, and the end of the path is the taught
   goal, reached as accurately as by a point-to-point task;
-- the controller is retargeted to that goal every period: its ``retarget(goal)`` when it
-  has one (the built-in vision laws keep their state: the dead-reckoned directions of
-  hidden legs, the last twist, the warm starts; the goal moved, the robot did not), else
-  ``reset`` with the new goal (the law's state starts afresh);
+- the controller is retargeted to that goal every period, the rows whose period changed
+  in one ``retarget_batch`` (each trial's ``retarget_trial``: the built-in vision laws
+  keep their state, the dead-reckoned directions of hidden legs, the last twist, the
+  warm starts; the goal moved, the robot did not; by default a reset with the new goal,
+  the law's state starting afresh);
 - a velocity command (not a force command) gets the feed-forward
   ``(q*(t_{k+1}) - q*(t_k)) / dt``, the nominal leg lengths' change over the coming
   period. For a vision law it is the feature-rate
   term ``L^+ ds*/dt`` written in joint space: with the nominal model exact, a robot on
   the reference stays on it (tested in the kinematic world).
 
-Every time-varying goal is computed once, at ``reset``, on the control grid.
+Every time-varying goal is computed once, at ``reset_batch``, on the control grid.
 
 A controller that tracks ``context.reference`` itself (``tracks_reference = True``: the
 computed-torque laws, which need the reference's derivatives and sample it at their own
@@ -37,22 +38,25 @@ from __future__ import annotations
 
 import logging
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass, replace
 from typing import Any
 
 import numpy as np
 
 from controllers.base import (
+    GOAL_FIELDS,
     Actuation,
     Command,
+    CommandBatch,
     Controller,
     ControllerContext,
     Goal,
-    Observation,
+    GoalBatch,
+    ObservationBatch,
 )
 from controllers.batch import actuation_of
 from controllers.exceptions import ContextError
-from controllers.goal_batch import GOAL_FIELDS
 
 log = logging.getLogger(__name__)
 
@@ -113,25 +117,6 @@ def anchor_goals(goals: dict[str, Any], taught: Goal) -> None:
             shifted /= np.linalg.norm(shifted, axis=-1, keepdims=True)
         known = np.all(np.isfinite(s_taught), axis=-1)
         goals[key] = np.where(known[..., None], shifted, model)
-
-
-def retarget(controller: Any, context: ControllerContext) -> None:
-    """Give ``controller`` the goal of ``context``: its ``retarget(goal)`` when it has
-    one (keeping its state), else ``reset(context)``."""
-    method = getattr(controller, "retarget", None)
-    if callable(method):
-        method(context.goal)
-    else:
-        controller.reset(context)
-
-
-def announce_offset(controller: Any, q_rate: np.ndarray) -> None:
-    """Tell ``controller`` the feed-forward [m/s] about to be added to its coming command
-    (its ``velocity_offset(q_dot)`` when it has one: the predictive controllers' drive
-    model needs it; the other laws do not)."""
-    method = getattr(controller, "velocity_offset", None)
-    if callable(method):
-        method(q_rate)
 
 
 @dataclass
@@ -196,10 +181,18 @@ def tracks_itself(controller: Any) -> bool:
 
 
 class TrackingController(Controller):
-    """Any controller made to track ``context.reference`` (see the module docstring).
+    """Any controller made to track ``context.reference``, over a batch of trials (see
+    the module docstring).
 
-    Without a reference in the context it is the wrapped controller, unchanged. Many
-    trials at once: :class:`controllers.tracking_batch.TrackingBatch`.
+    Each trial's goals on the control grid are computed once, at reset
+    (:func:`tracking_plan`), and stacked over the trials. Each period, the rows whose
+    period changed get their new goal in one call of the wrapped controller's
+    ``retarget_batch(trials, goals)`` (the vision laws write the desired features into
+    their compiled core's inputs as arrays), then one ``step_batch`` of the wrapped
+    controller, and the feed-forward of each row's period is added to the velocity
+    commands. A trial whose context has no reference is the wrapped controller's row,
+    unchanged; so is every trial of a controller that samples the reference itself
+    (``tracks_reference``).
 
     Args:
         inner: The controller (reset and stepped through this wrapper only).
@@ -207,52 +200,126 @@ class TrackingController(Controller):
             commands.
     """
 
-    def __init__(self, inner: Any, feed_forward: bool = True) -> None:
+    def __init__(self, inner: Controller, feed_forward: bool = True) -> None:
         self.inner = inner
         self.name = str(getattr(inner, "name", "controller"))
         self.features = frozenset(getattr(inner, "features", frozenset({"lengths"})))
         self.actuation = actuation_of(inner)
         self.feed_forward = bool(feed_forward)
-        self._contexts: list[ControllerContext] = []
-        self._plan: TrackingPlan | None = None
-        self._k = -1
+        self._plans: list[TrackingPlan | None] = []
+        self._has = np.zeros(0, dtype=bool)
+        self._told: dict[int, Any] = {}
 
-    def reset(self, context: ControllerContext) -> None:
-        """Compute the goals of the control grid up to the reference's end and reset the
-        wrapped controller with the first.
+    # ------------------------------------------------------------------ reset
+    def reset_batch(self, contexts: Sequence[ControllerContext]) -> None:
+        """Every trial's goals on the control grid; the wrapped controller reset with the
+        first goal of each.
 
         Raises:
-            ContextError: The reference cannot be sampled, or its goals are not finite.
+            ContextError: A trial's reference cannot be sampled, or its goals are not
+                finite.
         """
-        reference = getattr(context, "reference", None)
-        self._contexts = []
-        self._plan = None
-        self._k = -1
-        if reference is None or tracks_itself(self.inner):
-            self.inner.reset(context)
-            return
-        plan = tracking_plan(context, self.name)
-        self._contexts = [replace(context, goal=plan.goal(k)) for k in range(plan.steps)]
-        self._plan = plan
-        self._k = 0
-        self.inner.reset(self._contexts[0])
+        contexts = list(contexts)
+        itself = tracks_itself(self.inner)
+        plans = [None if itself or getattr(ctx, "reference", None) is None
+                 else tracking_plan(ctx, self.name) for ctx in contexts]
+        self._plans = plans
+        n = len(plans)
+        self._has = np.array([p is not None for p in plans], dtype=bool)
+        self._k = np.where(self._has, 0, -1)
+        self._dt = np.array([1.0 if p is None else p.dt for p in plans])
+        self._last = np.array([0 if p is None else p.steps - 1 for p in plans], dtype=int)
+        size = int(self._last.max()) + 1 if n else 0
+        self._q_rate = np.zeros((n, size, 6))
+        self._goals: dict[str, np.ndarray | None] = {}
+        #: Every trial with a plan has the same goal fields (else goals go one by one).
+        self._uniform = True
+        for name in GOAL_FIELDS:
+            arrays = [p.goals[name] for p in plans if p is not None]
+            present = [a is not None for a in arrays]
+            if not arrays or not all(present):  # (no trial tracks: nothing to stack)
+                self._uniform &= not any(present)
+                self._goals[name] = None
+                continue
+            first = np.asarray(arrays[0])
+            stacked = np.zeros((n, size, *first.shape[1:]), dtype=first.dtype)
+            for i, p in enumerate(plans):
+                if p is not None:
+                    self._fill(stacked[i], np.asarray(p.goals[name]))
+            self._goals[name] = stacked
+        for i, p in enumerate(plans):
+            if p is not None:
+                self._fill(self._q_rate[i], p.q_rate)
+        self.inner.reset_batch([ctx if p is None else replace(ctx, goal=p.goal(0))
+                                for ctx, p in zip(contexts, plans, strict=True)])
+        self.trial_instances = [self] * n
+        #: The trials' instances told the feed-forward before each step (those with a
+        #: ``velocity_offset``: the predictive controllers').
+        self._told = {trial: c for trial, c in enumerate(self.inner.trial_instances)
+                      if callable(getattr(c, "velocity_offset", None))}
 
-    def step(self, observation: Observation) -> Command:
-        """The wrapped controller's command for the goal of this period, plus the
-        feed-forward."""
-        plan = self._plan
-        if plan is None:
-            return self.inner.step(observation)  # type: ignore[no-any-return]
-        t = float(observation.t)
-        if not math.isfinite(t):
-            return Command.refuse(f"time is {t} (not finite)", actuation=self.actuation)
-        k = plan.period(t)
-        if k != self._k:
-            retarget(self.inner, self._contexts[k])
-            self._k = k
-        if self.feed_forward and self.actuation is Actuation.VELOCITY:
-            announce_offset(self.inner, plan.q_rate[k])
-        cmd: Command = self.inner.step(observation)
-        if self.feed_forward and cmd.reason is None and cmd.actuation is Actuation.VELOCITY:
-            cmd.velocities = np.asarray(cmd.velocities, dtype=float) + plan.q_rate[k]
-        return cmd
+    @staticmethod
+    def _fill(out: np.ndarray, values: np.ndarray) -> None:
+        """``values`` (steps, ...) into ``out`` (size, ...), the last one repeated."""
+        m = len(values)
+        out[:m] = values
+        out[m:] = values[-1]
+
+    # ------------------------------------------------------------------ step
+    def step_batch(self, observations: ObservationBatch) -> CommandBatch:
+        """The wrapped controller's commands for the goals of this period, plus the
+        feed-forward (a tracking row whose time is not finite is refused)."""
+        obs = observations
+        trials = np.asarray(obs.trials, dtype=int)
+        has = self._has[trials]
+        if not has.any():
+            out = self.inner.step_batch(obs)
+            self.crashes = self.inner.crashes  # the rows are the inner batch's
+            return out
+        t = np.asarray(obs.t, dtype=float)
+        finite = np.isfinite(t)
+        rows = np.flatnonzero(has & finite)
+        tr = trials[rows]
+        k = np.zeros(len(trials), dtype=int)
+        k[rows] = np.clip(np.rint(t[rows] / self._dt[tr]), 0, self._last[tr]).astype(int)
+        moved = k[rows] != self._k[tr]
+        if moved.any():
+            self._retarget(tr[moved], k[rows][moved])
+            self._k[tr[moved]] = k[rows][moved]
+        if self._told and self.feed_forward and self.actuation is Actuation.VELOCITY:
+            for row, trial in zip(rows.tolist(), tr.tolist(), strict=True):
+                if trial in self._told:
+                    self._told[trial].velocity_offset(self._q_rate[trial, k[row]])
+        bad = np.flatnonzero(has & ~finite)
+        if len(bad):
+            out = CommandBatch.zeros(len(trials), self.actuation)
+            for j in bad.tolist():
+                out.put(j, Command.refuse(f"time is {float(t[j])} (not finite)",
+                                          actuation=self.actuation))
+            good = np.flatnonzero(~(has & ~finite))
+            self.crashes = {}
+            if len(good):
+                sub = self.inner.step_batch(obs.rows(good))
+                for j, row in enumerate(good.tolist()):
+                    out.put(row, sub.command(j))
+                self.crashes = {int(good[j]): exc for j, exc in self.inner.crashes.items()}
+        else:
+            out = self.inner.step_batch(obs)
+            self.crashes = self.inner.crashes
+        if self.feed_forward and out.actuation is Actuation.VELOCITY and len(rows):
+            ok = np.array([out.reasons[j] is None for j in rows.tolist()], dtype=bool)
+            add = rows[ok]
+            out.velocities[add] = out.velocities[add] + self._q_rate[trials[add], k[add]]
+        return out
+
+    def _retarget(self, trials: np.ndarray, periods: np.ndarray) -> None:
+        """Give ``trials`` the goals of ``periods``."""
+        if self._uniform:
+            self.inner.retarget_batch(trials, GoalBatch(
+                **{name: None if arr is None else arr[trials, periods]
+                   for name, arr in self._goals.items()}))
+            return
+        for tr, k in zip(trials.tolist(), periods.tolist(), strict=True):
+            plan = self._plans[tr]
+            assert plan is not None
+            self.inner.retarget_batch(np.array([tr]), GoalBatch.of(plan.goal(k)))

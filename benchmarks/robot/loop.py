@@ -187,14 +187,16 @@ def servo_loop(
     """
     from benchmarks.sim.loop import closed_loop
     from benchmarks.sim.plant import BackendPlant
-    from controllers.batch import PerTrialLoop, actuation_of
+    from controllers.base import Controller
+    from controllers.batch import ForeignController, actuation_of
     from hexapod.actuation import check_actuation
 
     name = getattr(controller, "name", "controller")
     declared = check_actuation(actuation_of(controller), robot.actuations,
                                f"the robot {robot.identity or type(robot).__name__!r}", name)
-    one = PerTrialLoop(lambda: controller, declared)  # already reset: a batch of one
-    one.controllers = [controller]
+    # already reset: a batch of one (a trial's crash or malformed command in ``crashes``)
+    one = (controller if isinstance(controller, Controller)
+           else ForeignController.adopt(controller))
     camera = ServoCamera(sensor)
     res = ServoResult("max-steps", 0, 0.0)
     t0 = time.perf_counter()

@@ -180,8 +180,8 @@ class Book:
         """Refuse a batch of another kind than declared or of another shape than one row
         of 6 per stepped row; a row fails (and ends, its command not applied) with an
         invalid command, after too many refusals in a row, or when its own controller
-        raised (``crashes``, by position in ``rows``: a per-trial controller's crash or
-        malformed command, isolated by :class:`~controllers.batch.PerTrialLoop`).
+        raised (``crashes``, by position in ``rows``: a trial instance's crash or
+        malformed command, isolated by :meth:`controllers.base.Controller.step_rows`).
 
         Raises:
             ActuationError: The batch is of another kind than declared.

@@ -15,7 +15,7 @@ backends (:class:`~benchmarks.sim.plant.BackendPlant`) and the real servo sessio
 - the **clock** (:class:`benchmarks.sim.clock.CameraClock`, or None: an image at every
   control instant);
 - the **controller batch**: ``step_batch(ObservationBatch) -> CommandBatch`` (a
-  per-trial controller's own crash is isolated to its row, its ``crashes``; a batch that
+  trial's own crash is isolated to its row, the controller's ``crashes``; a batch that
   raises or returns commands of the wrong shape or kind stops the loop with the
   exception of the book's :meth:`LoopBook.stopped`);
 - the **book** (:class:`LoopBook`): when a row is done, what happens to a command, what
@@ -66,8 +66,8 @@ class LoopBook(Protocol):
                   seconds: float, crashes: dict[int, BaseException]
                   ) -> tuple[np.ndarray, np.ndarray]:
         """Account the commands of ``rows`` (the controller took ``seconds`` per row;
-        ``crashes``: the rows, by position in ``rows``, whose own controller raised, as
-        :class:`~controllers.batch.PerTrialLoop` isolates them); returns the (n,) masks
+        ``crashes``: the rows, by position in ``rows``, whose trial's own instance raised,
+        as :meth:`controllers.base.Controller.step_rows` isolates them); returns the (n,) masks
         of the commands applied and of the rows that end. Raises when the batch as a
         whole is refused (wrong shape or kind)."""
         ...

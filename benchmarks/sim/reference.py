@@ -14,7 +14,7 @@ import numpy as np
 
 from benchmarks.sim.inputs import SimScenario, SimTask
 from benchmarks.sim.world import TrialSetup
-from controllers.batch import PerTrialLoop, actuation_of, batch_controller
+from controllers.batch import ForeignController, batch_controller
 from hexapod.trajectory import PoseTrajectory
 
 
@@ -72,10 +72,9 @@ class Targets:
 
 def task_controller(sc: SimScenario, spec: Any) -> Any:
     """A controller of ``spec`` for the task of ``sc``: as registered, wrapped in a
-    :class:`~controllers.tracking.TrackingController` for a trajectory task."""
-    from controllers.registry import registry
-
-    ctrl = registry.create(spec.name, **spec.options)
+    :class:`~controllers.tracking.TrackingController` for a trajectory task (which
+    passes the trials of a controller that samples the reference itself through)."""
+    ctrl = batch_controller(spec.name, spec.options)
     if sc.task.kind != "trajectory":
         return ctrl
     from controllers.tracking import TrackingController
@@ -83,29 +82,13 @@ def task_controller(sc: SimScenario, spec: Any) -> Any:
     return TrackingController(ctrl, feed_forward=sc.task.feed_forward)
 
 
-def task_batch_controller(sc: SimScenario, spec: Any, batched: bool) -> Any:
-    """The batch interface of :func:`task_controller`.
+def task_batch_controller(sc: SimScenario, spec: Any, batched: bool = True) -> Any:
+    """The controller of :func:`task_controller`, for ``reset_batch`` / ``step_batch``.
 
-    A trajectory task with ``batched``: the controller's own batch (or its per-trial
-    loop) wrapped in a :class:`~controllers.tracking_batch.TrackingBatch`, which
-    retargets every row each period and adds the feed-forward; a controller that samples
-    the reference itself (``tracks_reference``) is its own batch, as the per-trial wrapper
-    passes it through. Without ``batched``, or for a plugin batch without
-    ``retarget_batch``: one :class:`~controllers.tracking.TrackingController` per trial in
-    a :class:`controllers.batch.PerTrialLoop` (the reference of the batched path)."""
-    if sc.task.kind != "trajectory":
-        return batch_controller(spec.name, spec.options, batched)
-    first = [task_controller(sc, spec)]
+    With ``batched``, the controller itself (every controller steps a batch). Without:
+    the per-trial engine's, one :func:`task_controller` per trial, each reset and
+    stepped alone as a batch of one (a :class:`~controllers.batch.ForeignController`:
+    the reference the batched rows are compared with)."""
     if batched:
-        from controllers.tracking import tracks_itself
-        from controllers.tracking_batch import TrackingBatch, tracks_in_batch
-
-        if tracks_itself(first[0].inner):
-            return batch_controller(spec.name, spec.options, batched)
-        inner = batch_controller(spec.name, spec.options, batched)
-        if tracks_in_batch(inner):
-            return TrackingBatch(inner, feed_forward=sc.task.feed_forward,
-                                 name=first[0].name)
-    actuation = actuation_of(first[0])
-    return PerTrialLoop(lambda: first.pop() if first else task_controller(sc, spec),
-                        actuation)
+        return task_controller(sc, spec)
+    return ForeignController(lambda: task_controller(sc, spec))

@@ -1,19 +1,19 @@
 """Closed-loop trials: true world -> sensor -> controller -> plant -> true world.
 
-One trial (:mod:`benchmarks.sim.loop`, the one closed loop): the true world (true geometry, true
-camera, true pose) produces observations through :mod:`vision` (geometric features +
-noise, or rendered images + detection); the controller, built from the ESTIMATED
-parameters, returns leg commands; the plant (kinematic, dynamic, or a robot behind a
-backend) applies them for ``dt``. Every work unit runs through the one loop,
-:func:`benchmarks.sim.loop.closed_loop`.
+One trial (``docs/architecture.md``, the loop; :mod:`benchmarks.sim.loop`, the one closed
+loop): the true world (true geometry, true camera, true pose) produces observations through
+:mod:`vision` (geometric features + noise, or rendered images + detection); the
+controller, built from the ESTIMATED parameters, returns leg commands; the plant
+(kinematic, dynamic, or a robot behind a backend) applies them for ``dt``. Every work unit
+runs through the one loop, :func:`benchmarks.sim.loop.closed_loop`.
 
 With the geometric sensor and the simulated robot, the ``batched`` engine steps every
 trial of the unit as one batch, whatever their worlds (a calibration error gives each
 trial its own robot and camera), through the controller's ``step_batch``. Otherwise, or
 with ``engine="per-trial"``, the trials whose world is the nominal one are stepped
-together through one controller object per trial
-(:class:`controllers.batch.PerTrialLoop`) and one sensor of their world, the others one
-by one. Each trial has its own random streams seeded from ``(scenario seed, trial
+together through one controller object per trial, each a batch of one
+(:class:`controllers.batch.ForeignController`), and one sensor of their world, the others
+one by one. Each trial has its own random streams seeded from ``(scenario seed, trial
 index)``, so a trial's result does not depend on which other trials run beside it.
 """
 

@@ -170,7 +170,7 @@ class MPCLaw(Controller):
         self._offset = np.zeros(6)
 
     # ----------------------------------------------------------------- reset
-    def reset(self, context: ControllerContext) -> None:
+    def reset_trial(self, context: ControllerContext) -> None:
         """Reset the fallback law (limits, goal), build or load the compiled problem.
 
         Raises:
@@ -178,7 +178,7 @@ class MPCLaw(Controller):
             OptionError: An option does not fit the context (e.g. no stroke left).
         """
         law = self.law
-        law.reset(context)
+        law.reset_trial(context)
         self.features = law.features
         self.context = context
         self._kind = self._feature_kind()
@@ -242,19 +242,19 @@ class MPCLaw(Controller):
         self.pose: tuple[np.ndarray, np.ndarray] | None = None
         self.stats = SolveStats()
 
-    def retarget(self, goal: Goal) -> None:
+    def retarget_trial(self, goal: Goal) -> None:
         """A new goal, keeping what the controller carries between periods (the goal of
         each period of a trajectory task, :mod:`controllers.tracking`): the warm start,
         the fallback law's estimate and the drives' state stay, the desired features
-        become the goal's, exactly as :meth:`reset` would set them.
+        become the goal's, exactly as :meth:`reset_trial` would set them.
 
         Raises:
-            ContextError: :meth:`reset` was not called, or the goal is invalid (the
+            ContextError: :meth:`reset_trial` was not called, or the goal is invalid (the
                 controller then keeps its previous goal).
         """
         if self.context is None:
             raise ContextError(self.name, "context", "retarget(goal) before reset(context)")
-        self.law.retarget(goal)
+        self.law.retarget_trial(goal)
         self.context = self.law.context
         self._star = self.law.desired_features()
 
@@ -262,7 +262,7 @@ class MPCLaw(Controller):
         return "directions"
 
     # ----------------------------------------------------------------- step
-    def step(self, observation: Observation) -> Command:
+    def step_trial(self, observation: Observation) -> Command:
         """One receding-horizon step (never raises for bad measurements)."""
         if self.context is None:
             return Command.refuse(f"{self.name}: reset(context) was not called")
@@ -447,7 +447,7 @@ class MPCLaw(Controller):
         self.stats.reasons[reason] = self.stats.reasons.get(reason, 0) + 1
         self._U[:] = 0.0
         log.debug("%s: falling back to %s: %s", self.name, self.law.name, reason)
-        cmd = self.law.step(obs)
+        cmd = self.law.step_trial(obs)
         cmd.notes = [*cmd.notes, f"mpc fallback: {reason}"]
         cmd.active_constraints = [*cmd.active_constraints, f"mpc fallback: {reason}"]
         return cmd

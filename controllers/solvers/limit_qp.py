@@ -113,7 +113,7 @@ class LimitQPSolver(Solver):
                                                 f"{max_iter!r}")
         #: The OSQP problem (set up once per reset, then updated and warm-started).
         self.qp = LimitQP(reg, tol_abs, tol_rel, max_iter)
-        #: This trial's limits (after :meth:`reset`).
+        #: This trial's limits (after its reset).
         self.window = StrokeWindow(0.0, 0.0, 0.0, 1.0)
         self._lower = np.zeros(6)
         self._upper = np.zeros(6)

@@ -22,6 +22,7 @@ import numpy as np
 
 from controllers import registry
 from controllers.base import Command, Observation
+from controllers.estimators import model_directions_note, unknown_direction_reason
 from controllers.interaction import (
     cross,
     direction_task,
@@ -31,7 +32,7 @@ from controllers.interaction import (
     edge_normal_task,
 )
 from controllers.law_tools import inverse_jacobian_into
-from controllers.laws import TaskStep, VisionLaw
+from controllers.laws import TaskStep
 from controllers.leg_edge import LegEdgeController
 
 
@@ -165,11 +166,11 @@ def numpy_tasks(law: Any, observation: Observation, q: np.ndarray) -> TaskStep |
     if len(unknown):
         model = law._model_directions(q)
         if model is None:
-            return Command.refuse(VisionLaw._unknown_reason(unknown), e)
+            return Command.refuse(unknown_direction_reason(unknown), e)
         u = u.copy()
         u[unknown] = model[unknown]
         est.in_use[:] = u
-        st.notes.append(VisionLaw._model_note(unknown))
+        st.notes.append(model_directions_note(unknown))
     J = inverse_jacobian_into(np.zeros((6, 6)), law.base_points, u)
     lam = law.gain(float(np.abs(e).max()) if e.size else 0.0)
     return TaskStep(e, error_norm, N, b, lam, J, st.notes, None)

@@ -24,11 +24,11 @@ def test_a_second_reset_batch_starts_from_scratch(name: str, other_geometry,  # 
     reused.reset_batch(contexts[::-1])
     fresh = batch_controller(name, {})
     fresh.reset_batch(contexts[::-1])
-    trials = reused._trials
-    assert len(trials) == 6
+    trials = reused.trial_instances
+    assert len(trials) == 6 and trials[0] is reused  # the controller is its first trial
     batch = reused.batch_estimate
     for k, inst in enumerate(trials):  # each trial's estimate is its row of this batch's
-        assert not hasattr(inst, "_trials") and not hasattr(inst, "batch_estimate")
+        assert k == 0 or not (inst.trial_instances or hasattr(inst, "batch_estimate"))
         for name in ("rotation", "directions"):
             if hasattr(batch, name):
                 row = getattr(inst.estimate, name)

@@ -184,9 +184,9 @@ class RecordingSprings(ComputedTorqueController):
 
     seen: ClassVar[list[Observation]] = []
 
-    def step(self, observation: Observation) -> Command:
+    def step_trial(self, observation: Observation) -> Command:
         RecordingSprings.seen.append(observation)
-        return super().step(observation)
+        return super().step_trial(observation)
 
 
 def test_the_dynamic_world_measures_leg_velocities() -> None:

@@ -13,8 +13,8 @@ import pytest
 from benchmarks.sim import run_trials
 from benchmarks.study.calibration import calibration_hook
 from benchmarks.study.scenario import ControllerSpec, builtin_scenarios, load_scenario
-from controllers.batch import PerTrialLoop, batch_controller
-from controllers.law_batch import BatchedLaw
+from controllers.batch import batch_controller
+from controllers.law_rows import KernelRows
 from tests.benchmarks.plugins import ProportionalJoints
 
 #: Fields that legitimately differ between the two paths (the controller's timing).
@@ -81,8 +81,8 @@ def test_a_plugin_without_step_batch_runs_in_the_same_study() -> None:
     sc = load_scenario("quick").with_overrides(trials=3, max_steps=200)
     sc = replace(sc, controllers=(ControllerSpec(PLUGIN, PLUGIN, {"gain": 4.0}),
                                   ControllerSpec("leg-edge", "leg-edge", {"gain": 4.0})))
-    assert isinstance(batch_controller(PLUGIN, {}), PerTrialLoop)
-    assert not hasattr(ProportionalJoints, "step_batch")
+    assert isinstance(batch_controller(PLUGIN, {}), ProportionalJoints)
+    assert "step_batch" not in vars(ProportionalJoints)  # stepped by the base's adapter
     batched, per_trial = _rows(sc, "batched", 3), _rows(sc, "per-trial", 3)
     _compare(per_trial, batched)
     plugin_rows = [r for r in batched if r["controller"] == PLUGIN]
@@ -116,13 +116,13 @@ def test_batched_rows_equal_the_per_trial_rows_with_the_desired_or_mean_interact
                                        for n in ("leg-direction", "leg-edge", "leg-edge-qp")))
     per_trial = _rows(sc, "per-trial", 3)
     fast_rows: list[int] = []
-    real = BatchedLaw._fast
+    real = KernelRows.step
 
-    def counting(self: BatchedLaw, rows: np.ndarray, *args: Any) -> np.ndarray:
+    def counting(self: KernelRows, rows: np.ndarray, *args: Any) -> np.ndarray:
         fast_rows.append(len(rows))
         return real(self, rows, *args)
 
-    monkeypatch.setattr(BatchedLaw, "_fast", counting)
+    monkeypatch.setattr(KernelRows, "step", counting)
     batched = _rows(sc, "batched", 3)
     assert sum(fast_rows) > 100  # the lean core stepped the common case
     _compare(per_trial, batched)

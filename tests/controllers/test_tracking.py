@@ -1,9 +1,9 @@
 """Trajectory tracking in a batch: ``retarget`` keeps the law's state and sets exactly the
 goal that ``reset`` would; ``retarget_batch`` (features written into the compiled core's
-inputs, the instances told later) gives the commands of per-instance retargets; and
-:class:`controllers.tracking_batch.TrackingBatch` gives the commands of one
-:class:`controllers.tracking.TrackingController` per trial, row for row, with hidden goal
-edges, hidden measured edges, a non-finite time and the feed-forward."""
+inputs, the instances told later) gives the commands of per-trial retargets; and
+:class:`controllers.tracking.TrackingController` over a batch gives the commands of one
+per trial stepped alone, row for row, with hidden goal edges, hidden measured edges, a
+non-finite time and the feed-forward."""
 
 from __future__ import annotations
 
@@ -18,16 +18,15 @@ from controllers.base import (
     CommandBatch,
     ControllerContext,
     Goal,
+    GoalBatch,
     Observation,
     ObservationBatch,
 )
-from controllers.batch import PerTrialLoop, batch_controller
 from controllers.exceptions import ContextError
-from controllers.goal_batch import GoalBatch
 from controllers.tracking import TrackingController
-from controllers.tracking_batch import TrackingBatch, tracks_in_batch
 from hexapod.trajectory import PoseTrajectory
 from tests.controllers.controller_world import World, make_camera
+from tests.controllers.one_by_one import OneByOne
 
 DT = 0.02
 GAIN = {"adaptive_gain": [5.0, 1.0, 30.0]}
@@ -142,7 +141,8 @@ def test_retarget_sets_the_goal_of_reset_and_keeps_the_state(law: str, kind: str
     if kept.kernel is not None:
         np.testing.assert_array_equal(kept.kernel.inputs["desired"],
                                       fresh.kernel.inputs["desired"])
-    assert kept.context is not None and kept.context.goal is goal1
+    assert kept.context is not None  # the goal of a batch of one: views of goal1
+    np.testing.assert_array_equal(kept.context.goal.normals, goal1.normals)
     obs = _observation(world, R, t, 3 * DT)
     a, b = kept.step(obs), fresh.step(obs)
     assert a.ok and b.ok
@@ -194,9 +194,7 @@ def test_retarget_batch_gives_the_commands_of_per_instance_retargets(
     batch = registry.create(law, **opts)
     assert hasattr(batch, "retarget_batch")
     batch.reset_batch(contexts)
-    loop = batch_controller(law, opts, batched=False)
-    assert isinstance(loop, PerTrialLoop)
-    loop.reset_batch(contexts)
+    loop = OneByOne(lambda: registry.create(law, **opts), contexts)
     quick = instance = 0
     for k in range(12):
         moved = np.flatnonzero(rng.random(n) < 0.7)
@@ -236,31 +234,26 @@ def _tracking_contexts(world: World, n: int) -> list[ControllerContext]:
     return out
 
 
-@pytest.mark.parametrize(("law", "options", "loop"), [
-    ("leg-edge", {}, False),
-    ("leg-direction", {}, False),
-    ("leg-edge-qp", {}, False),
-    ("model-based", {}, False),
-    ("joint-space", {}, False),
-    ("latency-compensated", {"law": "leg-edge"}, False),
-    ("leg-edge", {}, True),
-    ("leg-edge-mpc", {"drive_model": "lag", "horizon": 3, "compiled": False}, True),
+@pytest.mark.parametrize(("law", "options"), [
+    ("leg-edge", {}),
+    ("leg-direction", {}),
+    ("leg-edge-qp", {}),
+    ("model-based", {}),
+    ("joint-space", {}),
+    ("latency-compensated", {"law": "leg-edge"}),
+    ("leg-edge-mpc", {"drive_model": "lag", "horizon": 3, "compiled": False}),
 ])
-def test_tracking_batch_gives_the_rows_of_one_tracking_controller_per_trial(
-        law: str, options: dict[str, Any], loop: bool) -> None:
+def test_tracking_a_batch_gives_the_rows_of_one_tracking_controller_per_trial(
+        law: str, options: dict[str, Any]) -> None:
     """Four trials tracking their circles for 70 periods (past the references' end), with
     hidden edges at random, a row whose time is NaN, and a trial missing from some steps:
-    the commands of :class:`TrackingBatch` over the law's own batch (or over a per-trial
-    loop) are those of one :class:`TrackingController` per trial, feed-forward included,
-    to the last bit."""
+    the commands of one :class:`TrackingController` over the batch are those of one per
+    trial stepped alone, feed-forward included, to the last bit."""
     world = _world("perspective")
     n = 4
     contexts = _tracking_contexts(world, n)
     opts = {**GAIN, **options}
-    inner = batch_controller(law, opts, batched=not loop)
-    assert tracks_in_batch(inner)
-    assert isinstance(inner, PerTrialLoop) == loop
-    tracking = TrackingBatch(inner, name=law)
+    tracking = TrackingController(registry.create(law, **opts))
     tracking.reset_batch(contexts)
     singles = [TrackingController(registry.create(law, **opts)) for _ in range(n)]
     for ctrl, ctx in zip(singles, contexts, strict=True):
@@ -290,9 +283,8 @@ def test_the_feed_forward_is_the_nominal_length_rate() -> None:
     ``(q*(t_{k+1}) - q*(t_k)) / dt`` of its period (zero after the reference's end)."""
     world = _world("perspective")
     contexts = _tracking_contexts(world, 2)
-    with_ff = TrackingBatch(registry.create("leg-edge", **GAIN), name="leg-edge")
-    without = TrackingBatch(registry.create("leg-edge", **GAIN), feed_forward=False,
-                            name="leg-edge")
+    with_ff = TrackingController(registry.create("leg-edge", **GAIN))
+    without = TrackingController(registry.create("leg-edge", **GAIN), feed_forward=False)
     with_ff.reset_batch(contexts)
     without.reset_batch(contexts)
     from hexapod.kinematics import inverse_kinematics
@@ -314,14 +306,3 @@ def test_the_feed_forward_is_the_nominal_length_rate() -> None:
             np.testing.assert_allclose(a.velocities[i] - b.velocities[i], rate, atol=1e-12)
             if k == 10:
                 assert np.abs(rate).max() > 1e-3
-
-
-def test_a_plugin_batch_without_retarget_batch_is_not_wrapped() -> None:
-    class Plain:
-        def reset_batch(self, contexts: Any) -> None: ...
-
-        def step_batch(self, observations: Any) -> Any: ...
-
-    assert not tracks_in_batch(Plain())
-    with pytest.raises(TypeError, match="retarget_batch"):
-        TrackingBatch(Plain())

@@ -7,8 +7,7 @@ from dataclasses import fields
 
 import numpy as np
 
-from controllers.base import Goal
-from controllers.goal_batch import GOAL_FIELDS, GoalBatch
+from controllers.data import GOAL_FIELDS, Goal, GoalBatch
 
 
 def test_goal_batch_has_exactly_the_goal_fields() -> None:
