@@ -20,9 +20,9 @@ from typing import Any, final
 import numpy as np
 
 from controllers.data import (
-    _TRIAL_ZERO,
     FEATURES,
     GOAL_FIELDS,
+    TRIAL_ZERO,
     Command,
     CommandBatch,
     ControllerContext,
@@ -147,7 +147,7 @@ class Controller(RemembersOptions, ABC):
         Raises:
             ContextError: The goal is invalid, or :meth:`reset` was not called.
         """
-        self.retarget_batch(_TRIAL_ZERO, GoalBatch.of(goal))
+        self.retarget_batch(TRIAL_ZERO, GoalBatch.of(goal))
 
     # ------------------------------------------------------------------ the batch
     def reset_batch(self, contexts: Sequence[ControllerContext]) -> None:
@@ -194,7 +194,7 @@ class Controller(RemembersOptions, ABC):
         n = len(observations)
         out = CommandBatch.zeros(n, self.actuation)
         self.crashes = {}
-        rows = self.step_arrays(observations, out) if n > 1 else _TRIAL_ZERO[:n]
+        rows = self.step_arrays(observations, out) if n > 1 else TRIAL_ZERO[:n]
         self.step_rows(observations, rows, out)
         return out
 

@@ -211,8 +211,9 @@ class ObservationBatch:
     direction_visible: np.ndarray
     image_t: np.ndarray | None = None
     q_dot: np.ndarray | None = None
-    #: The observation a batch of one was made of (:meth:`of`), else None.
-    _one: Observation | None = field(default=None, init=False, repr=False, compare=False)
+    #: The observation a batch of one was made of (:meth:`of`), else None (not an init
+    #: field: a batch derived with ``dataclasses.replace`` does not keep it).
+    single: Observation | None = field(default=None, init=False, repr=False, compare=False)
 
     def __len__(self) -> int:
         return len(self.trials)
@@ -220,8 +221,8 @@ class ObservationBatch:
     def item(self, k: int) -> Observation:
         """The observation of row ``k`` (views of the batch arrays; for a batch made of
         one observation by :meth:`of`, that observation)."""
-        if self._one is not None:
-            return self._one
+        if self.single is not None:
+            return self.single
         return Observation(
             t=float(self.t[k]), lengths=self.lengths[k],
             normals=None if self.normals is None else self.normals[k],
@@ -270,9 +271,9 @@ class ObservationBatch:
         lengths, edges, seen, normals, lines, directions, q_dot = rows
         if lengths is None or edges is None or seen is None:
             return None
-        batch = ObservationBatch(_TRIAL_ZERO, t, lengths, normals, lines, directions, edges,
+        batch = ObservationBatch(TRIAL_ZERO, t, lengths, normals, lines, directions, edges,
                                  seen, image_t, q_dot)
-        batch._one = obs
+        batch.single = obs
         return batch
 
 
@@ -294,8 +295,9 @@ def _one_row(value: Any, shape: tuple[int, ...], kind: Any) -> np.ndarray | None
     return arr[None]  # type: ignore[no-any-return]
 
 
-_TRIAL_ZERO = np.zeros(1, dtype=int)
-_TRIAL_ZERO.flags.writeable = False
+#: The trials of a batch of one, ``[0]`` (read-only; sliced ``[:0]`` for none).
+TRIAL_ZERO = np.zeros(1, dtype=int)
+TRIAL_ZERO.flags.writeable = False
 
 
 @dataclass

@@ -194,9 +194,10 @@ def servo_loop(
     name = getattr(controller, "name", "controller")
     declared = check_actuation(actuation_of(controller), robot.actuations,
                                f"the robot {robot.identity or type(robot).__name__!r}", name)
-    # already reset: a batch of one (a trial's crash or malformed command in ``crashes``)
-    one = (controller if isinstance(controller, Controller)
-           else ForeignController.adopt(controller))
+    # already reset: a batch of one (a trial's crash or malformed command in ``crashes``);
+    # a per-trial plugin's own reset and step, or a foreign object's, through an adapter
+    batch_of_one = isinstance(controller, Controller) and type(controller).step is Controller.step
+    one = controller if batch_of_one else ForeignController.adopt(controller)
     camera = ServoCamera(sensor)
     res = ServoResult("max-steps", 0, 0.0)
     t0 = time.perf_counter()

@@ -138,3 +138,125 @@ def test_a_per_trial_plugin_is_retargeted_by_its_retarget_else_reset() -> None:
         np.testing.assert_array_equal(out.velocities[0],  # row 0 is trial 2
                                       goal - _observations(3, np.random.default_rng(1)
                                                            ).lengths[0])
+
+
+class FailsOnTrial(Controller):
+    """A per-trial plugin whose trial ``bad`` (by its goal's offset) fails: in ``reset``
+    (``where="reset"``), by raising in ``step``, or by returning three values."""
+
+    name = "fails-on-trial"
+
+    def __init__(self, where: str = "step") -> None:
+        self.where = where
+
+    def reset(self, context: ControllerContext) -> None:
+        self.goal = np.asarray(context.goal.lengths)
+        self.bad = bool(self.goal[0] > self.goal[1])
+        if self.bad and self.where == "reset":
+            raise ValueError("deliberate reset failure")
+
+    def step(self, observation: Observation) -> Command:
+        if self.bad and self.where == "step":
+            raise RuntimeError("deliberate step failure")
+        v = self.goal - observation.lengths
+        return Command(v[:3] if self.bad and self.where == "shape" else v)
+
+
+def _one_bad(n: int, bad: int) -> list[ControllerContext]:
+    contexts = _contexts(n)
+    q = np.array(contexts[bad].goal.lengths, dtype=float)
+    q[0] += 1e-4
+    contexts[bad] = ControllerContext(base_points=contexts[bad].base_points,
+                                      geometry=contexts[bad].geometry, camera=None, dt=0.02,
+                                      goal=Goal(lengths=q))
+    return contexts
+
+
+@pytest.mark.parametrize("where", ["step", "shape", "reset"])
+def test_a_failing_trial_is_isolated_in_its_row(where: str) -> None:
+    from controllers.exceptions import CommandError
+
+    ctrl = FailsOnTrial(where)
+    ctrl.reset_batch(_one_bad(4, bad=2))  # a reset that raises is that trial's failure
+    obs = _observations(4, np.random.default_rng(5))  # trials 3, 2, 1, 0: trial 2 is row 1
+    out = ctrl.step_batch(obs)
+    assert list(ctrl.crashes) == [1]
+    exc = ctrl.crashes[1]
+    if where == "step":
+        assert isinstance(exc, RuntimeError) and str(exc) == "deliberate step failure"
+    elif where == "reset":
+        assert isinstance(exc, ValueError) and str(exc) == "deliberate reset failure"
+    else:
+        assert isinstance(exc, CommandError)
+        assert str(exc) == ("controller 'fails-on-trial' returned a command of shape (3,); a "
+                            "command holds one value per leg, shape (6,)")
+    assert out.reasons[1] == f"{type(exc).__name__}: {exc}"
+    np.testing.assert_array_equal(out.velocities[1], np.zeros(6))
+    for row in (0, 2, 3):  # the other rows are stepped as usual
+        trial = int(obs.trials[row])
+        assert out.reasons[row] is None
+        np.testing.assert_array_equal(out.velocities[row], np.asarray(
+            _one_bad(4, 2)[trial].goal.lengths) - obs.lengths[row])
+    ok = ctrl.step_batch(obs.rows(np.array([0, 2])))  # the next step starts afresh
+    assert ctrl.crashes == {} and ok.reasons == [None, None]
+
+
+@pytest.mark.parametrize("where", ["step", "shape", "reset"])
+def test_one_trial_stepped_alone_raises_its_failure(where: str) -> None:
+    from controllers.exceptions import CommandError
+
+    ctrl = FailsOnTrial(where)
+    ctx = _one_bad(3, bad=2)[2]
+    if where == "reset":
+        with pytest.raises(ValueError, match="deliberate reset failure"):
+            ctrl.reset(ctx)
+        return
+    ctrl.reset(ctx)
+    obs = _observations(1, np.random.default_rng(2)).item(0)
+    if where == "step":
+        with pytest.raises(RuntimeError, match="deliberate step failure"):
+            ctrl.step(obs)
+    else:  # the per-trial adapter hands the command back as it is; a batch checks it
+        assert np.shape(ctrl.step(obs).values) == (3,)
+        from controllers.tracking import TrackingController
+
+        wrapped = TrackingController(FailsOnTrial(where))  # an own step_batch: checked
+        wrapped.reset(ctx)
+        with pytest.raises(CommandError, match=r"shape \(3,\)"):
+            wrapped.step(obs)
+
+
+def test_an_array_batch_whose_reset_fails_fails_as_a_whole() -> None:
+    from controllers.exceptions import ContextError
+    from controllers.leg_edge import LegEdgeController
+
+    law = LegEdgeController()
+    with pytest.raises(ContextError):
+        law.reset_batch(_contexts(2))  # no camera: the law's arrays cannot be built
+
+
+def test_a_foreign_object_is_stepped_one_object_per_trial() -> None:
+    from controllers.batch import ForeignController
+
+    class Plain:
+        """Not a Controller: reset and step only."""
+
+        def reset(self, context: ControllerContext) -> None:
+            self.inner = FailsOnTrial("step")
+            self.inner.reset(context)
+
+        def step(self, observation: Observation) -> Command:
+            return self.inner.step(observation)
+
+    made: list[Plain] = []
+    ctrl = ForeignController(lambda: made.append(Plain()) or made[-1], name="plain")
+    ctrl.reset_batch(_one_bad(3, bad=0))
+    assert len(made) == 3 and len({id(i.inner) for i in made}) == 3
+    obs = _observations(3, np.random.default_rng(4))  # trials 2, 1, 0: trial 0 is row 2
+    out = ctrl.step_batch(obs)
+    assert list(ctrl.crashes) == [2] and out.reasons[:2] == [None, None]
+    one = ForeignController.adopt(made[1])  # already reset: a batch of one
+    from dataclasses import replace
+
+    row = replace(obs.rows(np.array([1])), trials=np.array([0]))
+    assert one.step_batch(row).reasons == [None]
