@@ -74,6 +74,7 @@ def test_reproduce_seed003_small(tmp_path: Path, monkeypatch: pytest.MonkeyPatch
     assert any("0 trials to run, 40 done" in s for s in said)
 
 
+@pytest.mark.slow
 def test_seed001_tail_statistics_from_the_records(tmp_path: Path,
                                                   monkeypatch: pytest.MonkeyPatch) -> None:
     """The tail read from every trial's record agrees with the engine's tail median."""
