@@ -217,13 +217,14 @@ class FeatureCTC(TaskComputedTorque):
         u, normals, rows = feats
         row, inputs = step.row, step.inputs
         if normals is None:
-            row[inputs["features"]] = u.ravel()
+            row[inputs["directions"]] = u.ravel()
         elif u is _OF_NORMALS:  # the compiled step takes the directions of the normals
-            start = inputs["features"].start
-            row[start:start + 36] = normals.ravel()
-            row[start + 54] = 1.0
+            row[inputs["normals"]] = normals.ravel()
+            row[inputs.index("of_normals")] = 1.0
         else:
-            step.set("features", np.concatenate([normals.ravel(), u.ravel(), [0.0]]))
+            row[inputs["normals"]] = normals.ravel()
+            row[inputs["directions"]] = u.ravel()
+            row[inputs.index("of_normals")] = 0.0
         if self.reference is None:
             ref, known = self._taught_reference()
         else:
