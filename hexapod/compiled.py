@@ -142,9 +142,11 @@ class Layout:
     def view(self, row: np.ndarray, block: str) -> np.ndarray:
         """The view of ``block`` in ``row`` (..., :attr:`size`), shaped as declared (a
         one-number block of shape 1 is a (1,) view; of shape ``()`` a 0-d view)."""
-        if row.shape[-1] != self.size:
-            raise LayoutError(self.name, f"a row of {row.shape[-1]} numbers, the layout "
-                              f"has {self.size}")
+        if row.shape[-1] != self.size or row.strides[-1] != row.itemsize:
+            raise LayoutError(self.name, f"a row of {row.shape[-1]} numbers (stride "
+                              f"{row.strides[-1]} bytes): the layout has {self.size}, "
+                              "contiguous")
+        # the last axis is contiguous: splitting a block of it is a view, never a copy
         return row[..., self[block]].reshape(*row.shape[:-1], *self.shapes[block])
 
     def views(self, row: np.ndarray) -> dict[str, np.ndarray]:
@@ -201,15 +203,15 @@ def build_shared_library(name: str, code: str | Callable[[], str],
     if key is None:
         code = code if isinstance(code, str) else code()
         key = code
+    cc = os.environ.get("CC", "cc")
+    if shutil.which(cc) is None:
+        raise CompilationError(f"no C compiler '{cc}'")
     cache = cache_dir()
     digest = hashlib.sha256((key + platform.machine() + " ".join(flags)).encode()
                             ).hexdigest()[:16]
     lib_path = cache / f"{name}_{digest}.so"
     if lib_path.exists():
         return lib_path
-    cc = os.environ.get("CC", "cc")
-    if shutil.which(cc) is None:
-        raise CompilationError(f"no C compiler '{cc}'")
     cache.mkdir(parents=True, exist_ok=True)
     src = cache / f"{name}_{digest}.{os.getpid()}.c"
     src.write_text(code if isinstance(code, str) else code())
