@@ -69,6 +69,11 @@ GRID_TIME_TOLERANCE = 1e-9
 #: Calls of the compiled step (``compiled_ctc.FK_CALLS`` x 3 Newton iterations each)
 #: before the numpy path takes over (as its budget of 50 iterations).
 FK_MAX_CALLS = 16
+#: Where the compiled step's blocks lie in its rows (:data:`compiled_ctc.INPUTS`,
+#: :data:`compiled_ctc.OUTPUTS`), looked up once.
+_DESIRED = compiled_ctc.INPUTS["desired"]
+_POSE_OUT, _FACTOR, _FORCES = (compiled_ctc.OUTPUTS[k] for k in ("pose", "factor", "forces"))
+_RESIDUAL, _SOLVED = (compiled_ctc.OUTPUTS.index(k) for k in ("fk_residual", "solved"))
 
 
 class ComputedTorqueController(Controller):
@@ -150,7 +155,7 @@ class ComputedTorqueController(Controller):
     def _desired_row(self) -> np.ndarray:
         """The input row's ``(q*, q_dot*, q_ddot*)`` (18,) (a view)."""
         assert self._bound is not None
-        return self._bound.x[compiled_ctc.INPUTS["desired"]]
+        return self._bound.x[_DESIRED]
 
     def reset(self, context: ControllerContext) -> None:
         """Build the nominal model; read the reference or ``goal.lengths``.
@@ -302,8 +307,6 @@ class ComputedTorqueController(Controller):
         assert self._ctx is not None and self._bound is not None
         bound = self._bound
         pose_in, y, call = bound.inputs["pose"], bound.y, bound.call
-        out_layout = compiled_ctc.OUTPUTS
-        pose_out, residual = out_layout["pose"], out_layout.index("fk_residual")
         if not self._guess_in_row:
             pose = self._pose
             R0, p0 = home_pose(self._ctx.geometry) if pose is None else pose
@@ -313,30 +316,29 @@ class ComputedTorqueController(Controller):
         if call():
             raise CompilationError(f"{bound.function.name}: the compiled function failed")
         calls = 1
-        while not y[residual] < FK_TOLERANCE:  # Newton from the pose reached, as FK does
+        while not y[_RESIDUAL] < FK_TOLERANCE:  # Newton from the pose reached, as FK does
             self._guess_in_row = False
-            if calls >= FK_MAX_CALLS or not math.isfinite(y[residual]):
+            if calls >= FK_MAX_CALLS or not math.isfinite(y[_RESIDUAL]):
                 return None
-            pose_in[:] = y[pose_out]
+            pose_in[:] = y[_POSE_OUT]
             if call():
                 raise CompilationError(f"{bound.function.name}: the compiled function failed")
             calls += 1
-        if y[out_layout.index("solved")] != 1.0 or not math.isfinite(y.dot(y)):  # (y @ y)
+        if y[_SOLVED] != 1.0 or not math.isfinite(y.dot(y)):  # (the same ddot as y @ y)
             return None
         # the squared singular values of K: the eigenvalues of K^T K (LAPACK syevd)
-        factor = y[out_layout["factor"]].reshape(6, 6)
-        w, _, info = _eigenvalues(factor, 0)  # compute_v=0 (by position)
+        w, _, info = _eigenvalues(y[_FACTOR].reshape(6, 6), 0)  # compute_v=0 (by position)
         w_min, w_max = float(w[0]), float(w[-1])
         if info != 0 or not (w_max > 0 and w_min > self.solver.threshold**2 * w_max):
             return None
         out = y.copy()
-        pose_in[:] = out[pose_out]  # the next step's guess
-        self._pose_row, self._guess_in_row = out[pose_out], True
-        e = bound.inputs["desired"][0] - q
+        pose_in[:] = out[_POSE_OUT]  # the next step's guess
+        self._pose_row, self._guess_in_row = out[_POSE_OUT], True
+        e = bound.x[_DESIRED][0:6] - q
         return Command(np.zeros(6), error=e, error_norm=math.sqrt(e.dot(e)), rank=6,
                        condition=math.sqrt(w_max) / math.sqrt(w_min), features_used=6,
                        active_constraints=[], notes=[], actuation=Actuation.FORCE,
-                       forces=out[out_layout["forces"]])
+                       forces=out[_FORCES])
 
     def _numpy_step(self, q: np.ndarray, qd: np.ndarray, q_s: np.ndarray,
                     qd_s: np.ndarray, qdd_s: np.ndarray) -> Command:

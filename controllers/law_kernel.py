@@ -272,6 +272,8 @@ class LawKernel:
         self.inputs = function.inputs.views(self.input_vector)
         #: Where each named output lies in the output vector.
         self.outputs = function.outputs
+        self._at = {k: self.outputs.index(k) for k in ("error_norm", "n_sum", "rank",
+                                                       "condition", "gain", "qdot_check")}
         # Every feature used, every leg direction measured (the common case).
         for name in ("weights", "measured"):
             if name in self.inputs:
@@ -294,12 +296,12 @@ class LawKernel:
     def evaluate(self) -> LawResult:
         """One call of the core on the current inputs."""
         y = self.function.single(self.input_vector)
-        o = self.outputs
+        o, at = self.outputs.slices, self._at
         return LawResult(
-            error=y[o["error"]], error_norm=float(y[o.index("error_norm")]),
-            n_sum=float(y[o.index("n_sum")]), rank=int(y[o.index("rank")]),
-            condition=float(y[o.index("condition")]), gain=float(y[o.index("gain")]),
-            tau=y[o["tau"]], qdot=y[o["qdot"]], qdot_finite=y[o.index("qdot_check")] == 0.0,
+            error=y[o["error"]], error_norm=float(y[at["error_norm"]]),
+            n_sum=float(y[at["n_sum"]]), rank=int(y[at["rank"]]),
+            condition=float(y[at["condition"]]), gain=float(y[at["gain"]]),
+            tau=y[o["tau"]], qdot=y[o["qdot"]], qdot_finite=y[at["qdot_check"]] == 0.0,
             N=y[o["N"]].reshape(6, 6), b=y[o["b"]], J=y[o["J"]].reshape(6, 6),
             directions=y[o["directions"]].reshape(6, 3))
 

@@ -1,16 +1,16 @@
 """The dynamic robots' control period compiled to C: every physics step fused, looped in C.
 
-The step is :meth:`hexapod.dynamics.robots.DynamicRobots.step_reference` written once
-more in CasADi SX (the mechanism's terms are those of :mod:`hexapod.dynamics.compiled`,
-substituted into the step) and generated to C twice: by this project's lane generator
+The step (the module docstring of :mod:`hexapod.dynamics.robots`) is written in CasADi
+SX (the mechanism's terms are those of :mod:`hexapod.dynamics.compiled`, substituted into
+the step) and generated to C twice: by this project's lane generator
 (:mod:`hexapod.compiled_lanes`: four rows per vector instruction, the period's steps
 looped in C; used) and by CasADi, folded over the period's steps (``Function.fold``,
-:mod:`hexapod.compiled`: the fallback, and the lane code's bitwise reference); the step
-and the numpy reference are tested equal. One row carries a robot's constants, state,
-accumulators and leg lengths (:data:`LAYOUT`); the robots keep their rows in a table
-(:func:`new_table`) whose state columns are their attributes (views), and a period
-advances the table's rows in place: nothing is packed or unpacked but the poses (the
-caller's arrays) and the setpoints.
+:mod:`hexapod.compiled`: the fallback, and the lane code's bitwise reference); the tests
+hold the step equal to its numpy oracle (``tests/hexapod/dynamic_robots_oracle.py``). One
+row carries a robot's constants, state, accumulators and leg lengths (:data:`LAYOUT`);
+the robots keep their rows in a table (:func:`new_table`) whose state columns are their
+attributes (views), and a period advances the table's rows in place: nothing is packed
+or unpacked but the poses (the caller's arrays) and the setpoints.
 """
 
 from __future__ import annotations
