@@ -27,6 +27,7 @@ import math
 from typing import TYPE_CHECKING
 
 import numpy as np
+from numpy.typing import ArrayLike
 from scipy.linalg.lapack import dsyevd as _eigenvalues
 
 from controllers.base import Command, Observation
@@ -117,10 +118,10 @@ class CompiledTaskStep:
         assert isinstance(row, np.ndarray)
         self._bind(row)
 
-    def set(self, name: str, value: object) -> None:
+    def set(self, name: str, value: ArrayLike) -> None:
         """Write an input block (:func:`~controllers.solvers.compiled_task_ctc.layout`;
         its values in row-major order, or one value for all)."""
-        self.row[self.inputs[name]] = np.ravel(value)  # type: ignore[arg-type]
+        self.row[self.inputs[name]] = np.ravel(value)
 
     def set_pose(self, R: np.ndarray, t: np.ndarray) -> None:
         """The input pose (the FK guess, or the measured pose)."""

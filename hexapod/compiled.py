@@ -4,9 +4,9 @@ Calling a CasADi ``Function`` from Python costs tens of microseconds (argument
 conversion); the same function generated to C by CasADi, compiled once by the
 system C compiler and called through :mod:`ctypes` on preallocated buffers costs
 a few microseconds, and a batch is looped over in C. The shared library is
-cached in ``$HEXAPOD_CACHE_DIR`` (default ``~/.cache/hexapod-vs``) under the hash
-of its code. Without a C compiler the CasADi virtual machine evaluates the same
-function (same results, slower) and a warning is logged once.
+cached in ``$HEXAPOD_CACHE_DIR`` (default ``~/.cache/hexapod-vs``) under a hash
+of its function (below). Without a C compiler the CasADi virtual machine evaluates the
+same function (same results, slower) and a warning is logged once.
 
 A function must have one dense vector input and one dense vector output, each described
 where the function is built by a :class:`Layout` (ordered named blocks with shapes): the
@@ -288,7 +288,7 @@ class CompiledFunction:
         """What identifies the library: CasADi's version, the serialized function and the C
         wrapper (no code generation; the flags and the machine are added by
         :func:`build_shared_library`)."""
-        return "\n".join((ca.__version__, self.function.serialize(), self._wrapper()))
+        return "\n".join((ca.CasadiMeta.version(), self.function.serialize(), self._wrapper()))
 
     def _wrapper(self) -> str:
         return _BATCH_WRAPPER.format(name=self.name, n_in=self.n_in, n_out=self.n_out)

@@ -42,6 +42,9 @@ NEWTON_INPUTS = Layout([("R", (3, 3)), ("t", 3), ("q", 6), ("A", (6, 3)), ("E", 
 #: Its output row: ``R`` (column-major) and ``t`` after the steps, the length residual.
 NEWTON_OUTPUTS = Layout([("R", (3, 3)), ("t", 3), ("residual", 6)],
                         "forward-kinematics Newton output")
+#: The pose (``R`` then ``t``: the same slice in and out), each output block's slice.
+_POSE = slice(NEWTON_INPUTS["R"].start, NEWTON_INPUTS["t"].stop)
+_R_OUT, _T_OUT, _RESIDUAL = (NEWTON_OUTPUTS[k] for k in ("R", "t", "residual"))
 
 Method = Literal["newton", "pinocchio"]
 
@@ -227,20 +230,25 @@ def forward_kinematics(
 def _fk_newton(geometry: HexapodGeometry, q: np.ndarray, R: np.ndarray, t: np.ndarray,
                tol: float, max_iterations: int) -> ForwardKinematicsResult:
     newton = newton_kernel()
-    x = _pack(R[None], t[None], q[None], geometry.base_points, geometry.platform_points)[0]
-    pose = slice(NEWTON_INPUTS["R"].start, NEWTON_INPUTS["t"].stop)  # R then t, in and out
+    at = NEWTON_INPUTS.slices
+    x = np.empty(NEWTON_INPUTS.size)
+    x[at["R"]] = R.T.ravel()  # (column-major)
+    x[at["t"]] = t
+    x[at["q"]] = q
+    x[at["A"]] = geometry.base_points.ravel()
+    x[at["E"]] = geometry.platform_points.ravel()
     it = 0
     res = np.inf
-    while it < max_iterations:
+    while it < max_iterations:  # (slices looked up once: a pose servo's hot loop)
         y = newton.single(x)
         it += ITERATIONS_PER_CALL
-        R_out, t_out, residual = _unpack(y)
-        res = float(np.abs(residual).max())
+        res = float(np.abs(y[_RESIDUAL]).max())
         if not np.isfinite(res):
             raise ForwardKinematicsError("newton", res, it, "singular Jacobian on the way")
         if res < tol:
-            return ForwardKinematicsResult(R_out, t_out, it, res, "newton")
-        x[pose] = y[pose]
+            return ForwardKinematicsResult(y[_R_OUT].reshape(3, 3).T, y[_T_OUT], it, res,
+                                           "newton")
+        x[_POSE] = y[_POSE]
     raise ForwardKinematicsError("newton", res, it, "no convergence within the iteration budget")
 
 
@@ -310,8 +318,7 @@ def solve_rows(x: np.ndarray, tol: float = 1e-12, max_iterations: int = 30
     it = 0
     res = np.full(n, np.inf)
     active = np.arange(n)
-    pose = slice(NEWTON_INPUTS["R"].start, NEWTON_INPUTS["t"].stop)  # R then t, in and out
-    residual = NEWTON_OUTPUTS["residual"]
+    pose, residual = _POSE, _RESIDUAL
     y_all = np.empty((n, NEWTON_OUTPUTS.size))
     y_all[:, pose] = x[:, pose]
     y_all[:, residual] = np.inf
