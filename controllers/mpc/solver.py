@@ -124,11 +124,12 @@ class CompiledQP:
         include = _casadi_dir() / "include"
         if not lib_daqp.exists() or not (include / "daqp" / "api.h").exists():
             raise OSError(f"DAQP library or headers not found in {_casadi_dir()}")
-        function = CompiledFunction(f, inputs=self.inputs, outputs=self.outputs,
-                                    flags=("-O2", f"-I{include}"), preload=(lib_daqp,))
-        if not function.compiled:
-            raise OSError(f"{function.name}: not compiled")
-        self._bound = function.bind()
+        #: The compiled solver (its C function, layouts and library).
+        self.function = CompiledFunction(f, inputs=self.inputs, outputs=self.outputs,
+                                         flags=("-O2", f"-I{include}"), preload=(lib_daqp,))
+        if not self.function.compiled:
+            raise OSError(f"{self.function.name}: not compiled")
+        self._bound = self.function.bind()
         self._in = self._bound.inputs
         self._x = self.outputs["x"]
         self._multipliers = self.outputs["multipliers"]

@@ -96,7 +96,7 @@ def _kernels() -> Iterator[tuple[str, Callable[[], Any]]]:
     for spec in (ProblemSpec("lines", "local", 2, False, False),
                  ProblemSpec("normals", "global", 2, True, True, True)):
         yield f"MPC {spec}", lambda s=spec: problem_kernel(s)
-    yield "DAQP", lambda: CompiledQP(12, 30)._bound.function
+    yield "DAQP", lambda: CompiledQP(12, 30).function
 
 
 @pytest.mark.slow
