@@ -49,7 +49,7 @@ from hexapod.compiled import CompiledFunction, Layout
 from hexapod.dynamics import compiled as dyn
 from hexapod.dynamics.drive_model import COULOMB_SMOOTHING
 from hexapod.dynamics.model import INVERSE_TOLERANCE
-from hexapod.fk import newton_function
+from hexapod.fk import NEWTON_OUTPUTS, newton_function
 
 #: Calls of the compiled Newton steps unrolled in the function.
 FK_CALLS = 1
@@ -71,10 +71,10 @@ def sx_encoder_pose(pose: ca.SX, q: ca.SX, points: ca.SX, calls: int
     ``calls`` calls of the compiled Newton steps from ``pose``, and the (6,) length
     residual."""
     newton = newton_function()
-    y = newton(ca.vertcat(pose, q, points))
+    y = NEWTON_OUTPUTS.split(newton(ca.vertcat(pose, q, points)))
     for _ in range(calls - 1):
-        y = newton(ca.vertcat(y[0:12], q, points))
-    return y[0:12], y[12:18]
+        y = NEWTON_OUTPUTS.split(newton(ca.vertcat(y["R"], y["t"], q, points)))
+    return ca.vertcat(y["R"], y["t"]), y["residual"]
 
 
 def sx_model_state(R_t: ca.SX, qd: ca.SX, points: ca.SX, params: ca.SX
