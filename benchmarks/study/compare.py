@@ -30,12 +30,19 @@ import numpy as np
 
 from benchmarks.exceptions import BenchmarkError
 from benchmarks.study import exact, stats
+from benchmarks.study.verdicts import (
+    ALPHA,
+    MARGINS,
+    holm_and_verdicts,
+    margin_text,
+    resolve_margins,
+)
 
 if TYPE_CHECKING:
     import pandas as pd
 
-#: Significance level of the verdicts (after Holm's correction).
-ALPHA = 0.05
+__all__ = ["ALPHA", "MARGINS", "Comparison", "compare_controllers", "compare_runs",
+           "margin_text", "resolve_margins"]
 
 #: ``--metric`` names -> (column, unit, higher is better).
 METRICS: dict[str, tuple[str, str, bool]] = {
@@ -47,13 +54,6 @@ METRICS: dict[str, tuple[str, str, bool]] = {
     "tracking_max": ("tracking_max_position_mm", "mm", False),
     "settling": ("settling_time_s", "s", False),
     "saturation": ("saturation_time_s", "s", False),
-}
-#: Default equivalence margins (the metric's unit; ``converged``: a fraction of the
-#: trials, 0.05 = 5 percentage points): a paired difference smaller than this is of no
-#: practical weight in a benchmark of 0.1 mm tolerances. ``--margin NAME=VALUE``.
-MARGINS: dict[str, float] = {
-    "converged": 0.05, "final_error": 0.01, "orientation_error": 0.001, "steps": 10.0,
-    "tracking_rms": 0.01, "tracking_max": 0.02, "settling": 0.05, "saturation": 0.05,
 }
 #: Default metrics of a point-to-point task.
 DEFAULT_METRICS = ("converged", "final_error", "steps")
@@ -286,25 +286,6 @@ def _metric_plan(df: pd.DataFrame, metrics: tuple[str, ...] | None
     return list(dict.fromkeys(m for ms in per.values() for m in ms)), per
 
 
-def resolve_margins(margins: dict[str, float] | None) -> dict[str, float]:
-    """:data:`MARGINS` updated with ``margins``.
-
-    Raises:
-        BenchmarkError: A margin that is not positive and finite, or a ``converged``
-            margin above 1 (a fraction of the trials).
-    """
-    out = dict(MARGINS)
-    for name, value in (margins or {}).items():
-        if not (np.isfinite(value) and value > 0):
-            raise BenchmarkError(f"--margin {name}={value}: an equivalence margin must be "
-                                 "positive and finite")
-        if name == "converged" and value > 1:
-            raise BenchmarkError(f"--margin converged={value}: a fraction of the trials, "
-                                 "in (0, 1]")
-        out[name] = float(value)
-    return out
-
-
 def compare_controllers(df: pd.DataFrame, baseline: str | None = None,
                         metrics: tuple[str, ...] | None = None,
                         margins: dict[str, float] | None = None) -> list[Comparison]:
@@ -356,76 +337,9 @@ def compare_controllers(df: pd.DataFrame, baseline: str | None = None,
                 family.append(_comparison(str(scenario), int(point),
                                           sweeps[(str(scenario), int(point))], a, b, name,
                                           column, unit, x, y, margin_of.get(name)))
-        _holm_and_verdicts(family, name)
+        holm_and_verdicts(family, name, METRICS.get(name, ('', '', False))[2])
         out += family
     return out
-
-
-def margin_text(c: Comparison) -> str:
-    """``+-0.01 mm`` (``+-5 points`` for convergence)."""
-    if c.margin is None:
-        return "-"
-    if c.metric == "converged":
-        return f"+-{100 * c.margin:.3g} points"
-    return f"+-{c.margin:.3g}" + (f" {c.unit}" if c.unit else "")
-
-
-def _holm_and_verdicts(family: list[Comparison], metric: str) -> None:
-    adjusted = stats.holm([c.p_value for c in family])
-    adjusted_eq = stats.holm([c.p_equivalence for c in family])
-    higher_better = METRICS.get(metric, ("", "", False))[2]
-    for c, p, p_eq in zip(family, adjusted, adjusted_eq, strict=True):
-        c.p_holm = p
-        c.p_equivalence_holm = p_eq
-        equivalent = bool(np.isfinite(p_eq) and p_eq < ALPHA)
-        eq = (f"TOST Holm p = {exact.format_p(p_eq)} for {margin_text(c)}"
-              if c.margin is not None else "no equivalence margin: --margin "
-              f"{metric}=VALUE")
-        if not np.isfinite(p) or c.n == 0:
-            c.verdict = f"{metric}: no pairs to compare"
-            c.outcome = "not shown equivalent"
-            continue
-        if p >= ALPHA or c.direction == 0:
-            if equivalent:
-                c.outcome = "equivalent"
-                c.verdict = (f"{metric}: {c.a} and {c.b} are equivalent within "
-                             f"{margin_text(c)} ({_effect(c)}; {eq}, {c.n} pairs)")
-            else:
-                c.outcome = "not shown equivalent"
-                c.verdict = (f"{metric}: {c.a} and {c.b} not shown different, not shown "
-                             f"equivalent within {margin_text(c)} (Holm p = "
-                             f"{exact.format_p(p)}; {eq}, {c.n} pairs)")
-            continue
-        c.outcome = "different"
-        a_better = (c.direction > 0) == higher_better
-        c.better = c.a if a_better else c.b
-        worse = c.b if a_better else c.a
-        also = (f"; yet equivalent within {margin_text(c)}, {eq}" if equivalent else "")
-        c.verdict = f"{metric}: {c.better} is better than {worse} ({_effect(c)}, " \
-                    f"Holm p = {exact.format_p(p)}{also}, {c.n} pairs)"
-
-
-def _num(x: float, spec: str) -> str:
-    """A value of a comparison: ``censored`` for an infinite median or end (steps of
-    trials that did not converge), ``-`` for none."""
-    if x is None or np.isnan(x):
-        return "-"
-    if np.isinf(x):
-        return "censored" if x > 0 else "-censored"
-    return format(x, spec)
-
-
-def _effect(c: Comparison) -> str:
-    lo, hi = c.interval
-    if c.metric == "converged":
-        return (f"{100 * c.a_value:.1f} % against {100 * c.b_value:.1f} %, difference "
-                f"{100 * c.difference:+.1f} points [{100 * lo:+.1f}, {100 * hi:+.1f}]")
-    unit = f" {c.unit}" if c.unit else ""
-    up, down = c.discordant or (0, 0)
-    return (f"median paired difference {_num(c.difference, '+.4g')}{unit} "
-            f"[{_num(lo, '+.4g')}, {_num(hi, '+.4g')}], medians {_num(c.a_value, '.4g')} "
-            f"and {_num(c.b_value, '.4g')}{unit}; {c.a} higher in {up} and lower in {down} "
-            "of the pairs")
 
 
 def match_counts(df_a: pd.DataFrame, df_b: pd.DataFrame) -> tuple[int, int, int]:
@@ -510,7 +424,7 @@ def compare_runs(df_a: pd.DataFrame, df_b: pd.DataFrame, name_a: str = "A",
                                       sweeps.get((str(scenario), int(point)), "-"),
                                       f"{name_b}:{ctrl}", f"{name_a}:{ctrl}", name, column,
                                       unit, xb, xa, margin_of.get(name)))
-        _holm_and_verdicts(family, name)
+        holm_and_verdicts(family, name, METRICS.get(name, ('', '', False))[2])
         for comp in family:
             if comp.better is not None and comp.better == comp.b:
                 comp.verdict = "REGRESSION: " + comp.verdict
