@@ -11,7 +11,7 @@ from typing import Any
 
 import numpy as np
 
-from benchmarks.study import intervals, plots, profiles, stats
+from benchmarks.study import curves_report, intervals, plots, profiles, stats
 from benchmarks.study.metrics import Summary, format_sweep, summarize
 from benchmarks.study.runner import deduplicate, machine_info, read_results
 from benchmarks.study.study_record import command_lines
@@ -207,6 +207,11 @@ def write_report(out_dir: Path, overwrite: bool = False) -> Path:
                       "refused a leg below the hard limit, which then did not run):", ""]
             lines += [_md_table(intervals.CALIBRATION_HEADER,
                                 intervals.calibration_rows(ss, groups)), ""]
+        sweeps = {s.point: s.sweep for s in ss}
+        scen_rows = [r for r in rows if r["scenario"] == name]
+        lines += curves_report.time_to_converge_section(
+            out_dir, name, scen_rows, sweeps, plots.representative(sorted(sweeps)))
+        lines += curves_report.tolerance_section(scen_rows, sweeps)
         ref = sm.get("reference")
         if ref:
             lines += ["### The seed's figures beside ours", ""]
@@ -237,9 +242,11 @@ def write_report(out_dir: Path, overwrite: bool = False) -> Path:
                       f"![performance profiles]({prof})", ""]
         cdf = plots.error_cdf(out_dir, name, [r for r in rows if r["scenario"] == name])
         if cdf:
-            lines += ["Distribution of the final position errors per controller (empirical "
-                      "CDF, every trial" + (", all sweep points pooled" if len(points) > 1
-                                            else "") + "):", "", f"![error CDF]({cdf})", ""]
+            lines += ["Success against tolerance: the fraction of the trials whose final "
+                      "position error is within each tolerance (the empirical CDF of the "
+                      "errors, every trial" + (", all sweep points pooled" if len(points) > 1
+                                               else "") + ", with 95 % Wilson bands):", "",
+                      f"![error CDF]({cdf})", ""]
     lines += failures_section(rows)
     lines += unconverged_lines(rows)
     path = out_dir / "report.md"

@@ -6,6 +6,7 @@ import re
 from pathlib import Path
 
 import numpy as np
+import pytest
 from scipy import stats as sps
 
 from benchmarks.study import stats
@@ -81,6 +82,7 @@ def test_link_images_and_visibility_tables_have_intervals(tmp_path: Path) -> Non
     assert seen[3] == f"10/40: {stats.format_rate(10, 40)}"
 
 
+@pytest.mark.slow
 def test_steps_median_censored_at_the_cap(tmp_path: Path) -> None:
     """A controller that converges on 8 of 20 trials (500 steps run): its median steps is
     censored, "> 500", not the median of its 8 successes (no survivorship)."""
