@@ -59,6 +59,9 @@ METRICS: dict[str, tuple[str, str, bool]] = {
 DEFAULT_METRICS = ("converged", "final_error", "steps")
 #: Default metrics of a trajectory task (``saturation``: in the dynamic world).
 TRACKING_METRICS = ("tracking_rms", "tracking_max", "settling", "saturation")
+#: Metrics compared as censored data (a trial that did not converge or settle is known
+#: only to exceed the run): steps to converge, settling time.
+CENSORED = ("steps", "settling")
 KEY = ["scenario", "point", "controller", "trial"]
 #: Columns compared by the determinism check of two runs.
 OUTCOME_COLUMNS = ("converged", "steps", "final_position_error_mm",
@@ -206,6 +209,9 @@ def _values(frame: pd.DataFrame, column: str, metric: str) -> pd.DataFrame:
     if metric == "steps":
         sub[column] = censor_steps(sub[column].to_numpy(dtype=float),
                                    frame["converged"].fillna(False).to_numpy(dtype=bool))
+    elif metric == "settling":  # not settled, or failed: censored at the run's end
+        settled = sub[column].notna().to_numpy() & ~failed_mask(frame).to_numpy()
+        sub[column] = censor_steps(sub[column].to_numpy(dtype=float), settled)
     elif metric != "converged":
         sub[column] = sub[column].where(~failed_mask(frame))
     return sub.pivot(index="trial", columns="controller", values=column)
@@ -236,7 +242,7 @@ def _test(x: np.ndarray, y: np.ndarray, metric: str) -> stats.TestResult:
     if metric == "converged":
         ok = ~(np.isnan(x) | np.isnan(y))
         return stats.mcnemar_exact(x[ok] > 0.5, y[ok] > 0.5)
-    if metric == "steps":
+    if metric in CENSORED:
         return censored_sign_test(x, y)
     return stats.wilcoxon_signed_rank(x, y)
 
@@ -255,7 +261,7 @@ def _equivalence(x: np.ndarray, y: np.ndarray, metric: str, margin: float | None
 
 def _summary_value(x: np.ndarray, y: np.ndarray, metric: str) -> tuple[float, float]:
     ok = ~(np.isnan(x) | np.isnan(y))
-    if metric != "steps":
+    if metric not in CENSORED:
         ok &= np.isfinite(x) & np.isfinite(y)
     if not ok.any():
         return float("nan"), float("nan")
@@ -417,6 +423,9 @@ def compare_runs(df_a: pd.DataFrame, df_b: pd.DataFrame, name_a: str = "A",
             if name == "steps":
                 xa = censor_steps(xa, g["converged_a"].fillna(False).to_numpy(dtype=bool))
                 xb = censor_steps(xb, g["converged_b"].fillna(False).to_numpy(dtype=bool))
+            elif name == "settling":
+                xa = censor_steps(xa, np.isfinite(xa) & ~failed_mask(g, "_a").to_numpy())
+                xb = censor_steps(xb, np.isfinite(xb) & ~failed_mask(g, "_b").to_numpy())
             elif name != "converged":
                 xa = np.where(failed_mask(g, "_a").to_numpy(), np.nan, xa)
                 xb = np.where(failed_mask(g, "_b").to_numpy(), np.nan, xb)

@@ -38,18 +38,19 @@ def group_rows(rows: list[dict[str, Any]]) -> dict[GroupKey, list[dict[str, Any]
     return groups
 
 
-def _bound(x: float, digits: int, cap: float | None) -> str:
-    """One end of an interval: ``> cap`` for a censored value, ``-inf``/``inf`` for an end
-    outside the sample (too few trials for that side at 95 %)."""
+def _bound(x: float, digits: int, cap: float | str | None) -> str:
+    """One end of an interval: ``> cap`` for a censored value (``cap``: the run's length,
+    or a word, ``run``), ``-inf``/``inf`` for an end outside the sample (too few trials
+    for that side at 95 %)."""
     if x == np.inf and cap is not None:
-        return f"> {_fmt(cap, digits)}"
+        return f"> {cap if isinstance(cap, str) else _fmt(cap, digits)}"
     if np.isinf(x):
         return "-inf" if x < 0 else "inf"
     return _fmt(x, digits)
 
 
 def with_interval(value: float, interval: tuple[float, float], digits: int = 3,
-                  cap: float | None = None) -> str:
+                  cap: float | str | None = None) -> str:
     """``0.049 [0.047, 0.051]`` (``-`` for a missing value; with ``cap``, an infinite
     value or end is a censored one, ``> cap``: ``> 500 [431, > 500]``)."""
     if value is None or np.isnan(value):
