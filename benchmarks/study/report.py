@@ -40,7 +40,8 @@ def summary_table_rows(summaries: list[Summary]) -> list[list[str]]:
             f"{100 * s.convergence_rate:.1f}% ({s.converged}/{s.trials})", str(s.failed),
             _fmt(s.position_median_mm), _fmt(s.position_p95_mm), _fmt(s.position_max_mm),
             _fmt(s.orientation_median_deg, 4), _fmt(s.orientation_max_deg, 4),
-            _fmt(s.steps_median, 0), _fmt(s.step_time_median_us, 1),
+            "> run" if s.steps_median == np.inf else _fmt(s.steps_median, 0),
+            _fmt(s.step_time_median_us, 1),
             str(s.stroke_violations),
         ])
     return rows

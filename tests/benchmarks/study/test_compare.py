@@ -259,3 +259,22 @@ def test_rate_difference_has_newcombes_interval_and_tiny_p_is_bounded(tmp_path: 
     fe = next(c for c in compare_controllers(load(write_run(tmp_path / "big", rows)))
               if c.metric == "final_error")
     assert fe.p_holm < 1e-16 and "Holm p = < 1e-16" in fe.verdict
+
+
+def test_settling_is_compared_with_censoring(tmp_path: Path) -> None:
+    """A trajectory task: ``quick`` settles in 0.1 s on 4 of 12 trials and never on the
+    others; ``steady`` settles in 0.3 s on all 12. On the trials both settled ``quick``
+    wins; counted with the unsettled ones, ``steady`` is faster on 8 of 12 pairs."""
+    rows = []
+    for ctrl, times in (("quick", [0.1] * 4 + [None] * 8), ("steady", [0.3] * 12)):
+        r = make_rows(ctrl, np.full(12, 0.05), np.array([t is not None for t in times]),
+                      np.full(12, 100))
+        for row, t in zip(r, times, strict=True):
+            row.update(tracking_rms_position_mm=0.1, tracking_max_position_mm=0.2,
+                       settling_time_s=t)
+        rows += r
+    comps = compare_controllers(load(write_run(tmp_path / "t", rows)), metrics=("settling",))
+    (c,) = comps
+    assert c.test == "sign-censored"
+    assert c.discordant == (8, 4)
+    assert c.p_value == pytest.approx(sps.binomtest(8, 12, 0.5).pvalue)

@@ -95,3 +95,20 @@ def test_steps_median_censored_at_the_cap(tmp_path: Path) -> None:
     cells = [c.strip() for c in row.strip("|").split("|")]
     low = sps.quantile_test(np.where(conv, steps, np.inf), p=0.5).confidence_interval().low
     assert cells[11] == f"> 500 [{low:.0f}, > 500]"
+
+
+def test_console_steps_median_is_censored_not_the_survivors() -> None:
+    """The run's console table (Summary.steps_median): 8 of 20 converged, so the median
+    steps is beyond the run, not the median of the 8 that converged."""
+    from benchmarks.study.metrics import summarize
+    from benchmarks.study.report import TABLE_HEADER, summary_table_rows
+
+    conv = np.arange(20) < 8
+    rows = make_rows("slow", np.full(20, 0.1), conv, np.where(conv, 150, 500))
+    (s,) = summarize(rows)
+    assert s.steps_median == np.inf
+    (row,) = summary_table_rows([s])
+    assert row[TABLE_HEADER.index("steps med")] == "> run"
+    conv = np.arange(20) < 15  # 15 of 20: the median is known
+    (s,) = summarize(make_rows("ok", np.full(20, 0.1), conv, np.where(conv, 150, 500)))
+    assert s.steps_median == 150.0
