@@ -6,8 +6,8 @@ controllers are compared on paired data:
 - rates (convergence): Wilson score interval (no continuity correction) at 95 %;
 - medians and 95th percentiles: the distribution-free order-statistic interval
   (:mod:`benchmarks.study.exact`); the seeded percentile bootstrap
-  (:func:`bootstrap_quantiles`, :data:`SEED`, :data:`RESAMPLES`) remains for the
-  scorecard of ``hexapod-bench reproduce``;
+  (:func:`bootstrap_quantiles`, :data:`SEED`, :data:`RESAMPLES`) stays available, no
+  table uses it;
 - convergence of two controllers on the same trials: McNemar's exact test, the
   two-sided binomial test on the discordant pairs, and Newcombe's paired interval of
   the rate difference;
