@@ -149,9 +149,11 @@ def write_report(out_dir: Path, overwrite: bool = False) -> Path:
               "counted as not converged and left out of the error columns. *steps med*: "
               "median number of control "
               "periods to converge (for fixed-duration tasks: after which the error stayed "
-              "within the tolerances). *step us*: median time of one controller "
-              "`step`. *stroke viol.*: periods where a command would have driven a leg "
-              "beyond its stroke (the backend clamped it).", "", intervals.method_note(), ""]
+              "within the tolerances), over every trial, a trial that did not converge "
+              "counted as needing more than the run (`> N`). *step us*: median time of "
+              "one controller `step`. *stroke viol.*: periods where a command would have "
+              "driven a leg beyond its stroke (the backend clamped it).", "",
+              intervals.method_note(), ""]
     groups = intervals.group_rows(rows)
     by_scenario: dict[str, list[Summary]] = defaultdict(list)
     for s in summaries:
