@@ -27,6 +27,7 @@ from typing import Any
 
 import numpy as np
 
+from benchmarks.exceptions import BenchmarkError
 from benchmarks.study import stats
 
 #: Tolerances [mm] of the report's success-against-tolerance table.
@@ -67,7 +68,8 @@ def censored_data(rows: list[dict[str, Any]]) -> tuple[Any, int, float]:
         ``(data, converged, cap)``.
 
     Raises:
-        ValueError: A converged trial without a finite step count (names the trial).
+        BenchmarkError: A converged trial without a finite step count (names the
+            scenario, controller and trial).
     """
     import scipy.stats as sps
 
@@ -79,8 +81,10 @@ def censored_data(rows: list[dict[str, Any]]) -> tuple[Any, int, float]:
         if r.get("converged"):
             s = r.get("steps")
             if s is None or not np.isfinite(s):
-                raise ValueError(f"trial {r.get('trial')} of {r.get('controller')} "
-                                 f"converged with steps={s!r}")
+                raise BenchmarkError(f"results.jsonl: scenario {r.get('scenario')!r}, "
+                                     f"controller {r.get('controller')!r}, trial "
+                                     f"{r.get('trial')}: converged with steps={s!r} (a "
+                                     "converged trial needs a finite step count)")
             done.append(float(s))
         else:
             cens += 1

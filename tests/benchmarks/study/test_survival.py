@@ -11,6 +11,7 @@ import numpy as np
 import pytest
 import scipy.stats as sps
 
+from benchmarks.exceptions import BenchmarkError
 from benchmarks.study import survival
 from benchmarks.study.report import write_report
 from tests.benchmarks.study.helpers_rows import make_rows, write_run
@@ -108,3 +109,11 @@ def test_report_has_time_to_converge_and_tolerance_sections(tmp_path: Path) -> N
     lr = next(line for line in text.splitlines() if line.startswith("| - | fast | slow |"))
     assert "< 1e-16" not in lr and float(lr.split("|")[4]) < 1e-3
     assert (tmp_path / "run" / "synthetic_time_to_converge.png").is_file()
+
+
+def test_a_converged_trial_without_steps_is_refused_by_name() -> None:
+    rows = _rows([3, 5], 1)
+    rows[1]["steps"] = None
+    with pytest.raises(BenchmarkError, match=r"controller 'c', trial 1: converged with "
+                                             r"steps=None"):
+        survival.time_to_converge(rows)
