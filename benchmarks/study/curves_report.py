@@ -47,9 +47,10 @@ def time_to_converge_section(out_dir: Path, scenario: str, rows: list[dict[str, 
     if not groups:
         return []
     table, tests = [], []
+    kms: dict[int, dict[str, survival.TimeToConverge]] = defaultdict(dict)
     for p in sorted(groups):
         for label, rs in sorted(groups[p].items()):
-            km = survival.time_to_converge(rs)
+            km = kms[p][label] = survival.time_to_converge(rs)
             table.append([format_sweep(sweeps.get(p, {})), label, str(km.trials),
                           str(km.converged), f"{_steps(km.median, km.cap)} "
                           f"[{_steps(km.low, km.cap)}, {_steps(km.high, km.cap)}]"])
@@ -71,8 +72,7 @@ def time_to_converge_section(out_dir: Path, scenario: str, rows: list[dict[str, 
                             [[format_sweep(sweeps.get(p, {})), a, b, format_p(pv),
                               format_p(ph)] for (p, a, b, pv), ph
                              in zip(tests, adjusted, strict=True)]), ""]
-    img = _km_plot(out_dir, scenario, groups, [p for p in plot_points if p in groups],
-                   sweeps)
+    img = _km_plot(out_dir, scenario, kms, [p for p in plot_points if p in groups], sweeps)
     if img:
         lines += ["Fraction of the trials converged against steps (1 - Kaplan-Meier "
                   "survival), per controller:", "", f"![time to converge]({img})", ""]
@@ -80,15 +80,14 @@ def time_to_converge_section(out_dir: Path, scenario: str, rows: list[dict[str, 
 
 
 def _km_plot(out_dir: Path, scenario: str,
-             groups: dict[int, dict[str, list[dict[str, Any]]]], points: list[int],
+             kms: dict[int, dict[str, survival.TimeToConverge]], points: list[int],
              sweeps: dict[int, dict[str, Any]]) -> str | None:
     if not points:
         return None
     plt = pyplot()
     fig, axes = plt.subplots(1, len(points), figsize=(5 * len(points), 3.6), squeeze=False)
     for ax, p in zip(axes[0], points, strict=True):
-        for label, rs in sorted(groups[p].items()):
-            km = survival.time_to_converge(rs)
+        for label, km in sorted(kms[p].items()):
             if km.steps.size:
                 ax.step(np.r_[0, km.steps], np.r_[0, km.converged_fraction], where="post",
                         label=f"{label} ({km.converged}/{km.trials})")
@@ -113,10 +112,8 @@ def tolerance_section(rows: list[dict[str, Any]], sweeps: dict[int, dict[str, An
     table = []
     for p in sorted(groups):
         for label, rs in sorted(groups[p].items()):
-            cells = []
-            for tol in survival.TOLERANCES_MM:
-                k, n, _ = survival.within_tolerance(rs, tol)
-                cells.append(stats.format_rate(k, n))
+            frac, _, _ = survival.tolerance_curve(rs, np.array(survival.TOLERANCES_MM))
+            cells = [stats.format_rate(round(f * len(rs)), len(rs)) for f in frac]
             table.append([format_sweep(sweeps.get(p, {})), label, *cells])
     return ["### Success against tolerance", "",
             "Fraction of the trials whose final position error is within each tolerance "

@@ -12,7 +12,7 @@ import numpy as np
 
 from benchmarks.study.metrics import Summary
 from benchmarks.study.results import TRIALS_DIR
-from benchmarks.study.stats import wilson_interval
+from benchmarks.study.stats import wilson_intervals
 from hexapod.outputs import PNG_METADATA, inside
 
 #: Sweep points whose recorded trial gets an error-versus-time figure, at most.
@@ -196,8 +196,8 @@ def error_cdf(out_dir: Path, scenario: str, rows: list[dict[str, Any]]) -> str |
         k = np.arange(1, len(e) + 1)
         line, = ax.step(e, k / totals[label], where="post",
                         label=f"{label} ({totals[label]} trials)")
-        band = np.array([wilson_interval(int(j), totals[label]) for j in k])
-        ax.fill_between(e, band[:, 0], band[:, 1], step="post", alpha=0.2,
+        low, high = wilson_intervals(k, totals[label])
+        ax.fill_between(e, low, high, step="post", alpha=0.2,
                         color=line.get_color(), linewidth=0)
     ax.set_xscale("log")
     ax.set_ylim(0, 1.01)

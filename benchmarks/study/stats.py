@@ -95,14 +95,23 @@ def wilson_interval(k: int, n: int, level: float = LEVEL) -> tuple[float, float]
         raise ValueError(f"successes k={k} must lie in [0, n={n}]")
     if n == 0:
         return float("nan"), float("nan")
+    low, high = wilson_intervals(np.array([k]), n, level)
+    return float(low[0]), float(high[0])
+
+
+def wilson_intervals(k: np.ndarray, n: int, level: float = LEVEL
+                     ) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`wilson_interval` of many success counts out of the same ``n`` at once (a
+    curve's pointwise band), as arrays (``n`` must be positive; ``k`` in ``[0, n]``)."""
+    k = np.asarray(k, dtype=float)
     z = NormalDist().inv_cdf(0.5 + level / 2)
     p = k / n
     denom = 1 + z * z / n
     centre = (p + z * z / (2 * n)) / denom
     half = z * np.sqrt(p * (1 - p) / n + z * z / (4 * n * n)) / denom
-    low = 0.0 if k == 0 else max(0.0, centre - half)
-    high = 1.0 if k == n else min(1.0, centre + half)
-    return float(low), float(high)
+    low = np.where(k == 0, 0.0, np.maximum(0.0, centre - half))
+    high = np.where(k == n, 1.0, np.minimum(1.0, centre + half))
+    return low, high
 
 
 def _finite(values: Sequence[float] | np.ndarray) -> np.ndarray:

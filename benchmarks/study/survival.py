@@ -140,17 +140,17 @@ def within_tolerance(rows: list[dict[str, Any]], tolerance_mm: float
     Returns:
         ``(within, trials, Wilson interval of the fraction)``.
     """
-    k = sum(1 for r in rows if r.get("final_position_error_mm") is not None
-            and np.isfinite(r["final_position_error_mm"])
-            and r["final_position_error_mm"] <= tolerance_mm
-            and not _failed(r))
+    k = int(np.sum(_final_errors(rows) <= tolerance_mm))
     return k, len(rows), stats.wilson_interval(k, len(rows))
 
 
-def _failed(r: dict[str, Any]) -> bool:
+def _final_errors(rows: list[dict[str, Any]]) -> np.ndarray:
+    """Final position errors [mm], ``inf`` for a failed trial or one without an error."""
     from benchmarks.study.failures import is_failure
 
-    return bool(is_failure(r))
+    e = np.array([np.inf if (r.get("final_position_error_mm") is None or is_failure(r))
+                  else r["final_position_error_mm"] for r in rows], dtype=float)
+    return np.where(np.isfinite(e), e, np.inf)
 
 
 def tolerance_curve(rows: list[dict[str, Any]], grid: np.ndarray
@@ -160,13 +160,11 @@ def tolerance_curve(rows: list[dict[str, Any]], grid: np.ndarray
     Returns:
         ``(fraction, low, high)``, arrays like ``grid``.
     """
-    e = np.array([r["final_position_error_mm"] if (r.get("final_position_error_mm")
-                                                   is not None and not _failed(r))
-                  else np.inf for r in rows], dtype=float)
-    e = np.where(np.isfinite(e), e, np.inf)
+    e = _final_errors(rows)
     n = e.size
+    if n == 0:
+        nan = np.full(grid.size, np.nan)
+        return nan, nan.copy(), nan.copy()
     k = np.searchsorted(np.sort(e), grid, side="right")
-    bands = np.array([stats.wilson_interval(int(j), n) for j in k]) if n else \
-        np.full((grid.size, 2), np.nan)
-    frac = k / n if n else np.full(grid.size, np.nan)
-    return frac, bands[:, 0], bands[:, 1]
+    low, high = stats.wilson_intervals(k, n)
+    return k / n, low, high
