@@ -208,3 +208,12 @@ def test_holm_hand_computed() -> None:
                                                                 nan_ok=True)
     assert stats.holm([0.001]) == [0.001]
     assert stats.holm([]) == []
+
+
+def test_wilson_intervals_as_arrays_match_scipy() -> None:
+    k = np.array([0, 1, 7, 19, 20])
+    low, high = stats.wilson_intervals(k, 20)
+    for j, lo, hi in zip(k, low, high, strict=True):
+        ci = sps.binomtest(int(j), 20).proportion_ci(method="wilson")
+        assert (lo, hi) == pytest.approx((ci.low, ci.high))
+    assert (low[0], high[-1]) == (0.0, 1.0)
