@@ -278,3 +278,18 @@ def test_settling_is_compared_with_censoring(tmp_path: Path) -> None:
     assert c.test == "sign-censored"
     assert c.discordant == (8, 4)
     assert c.p_value == pytest.approx(sps.binomtest(8, 12, 0.5).pvalue)
+
+
+def test_margin_option_in_points_and_json_fields(tmp_path: Path) -> None:
+    """``--margin converged=10`` is 10 points (0.1 of the trials) in the JSON, which
+    carries each comparison's outcome and equivalence p-values."""
+    run = write_run(tmp_path / "r", two_controllers(60))
+    js = tmp_path / "c.json"
+    assert cli_main(["compare", str(run), "--margin", "converged=10", "--json", str(js)]) == 0
+    doc = {d["metric"]: d for d in json.loads(js.read_text())["comparisons"]}
+    assert doc["converged"]["margin"] == pytest.approx(0.1)
+    assert doc["final_error"]["margin"] == pytest.approx(0.01)
+    assert doc["converged"]["outcome"] == "equivalent"  # 60 of 60 each: [-6.0, +6.0] pts
+    assert doc["converged"]["p_equivalence_holm"] < 0.05
+    assert {d["outcome"] for d in doc.values()} <= {"different", "equivalent",
+                                                    "not shown equivalent"}
