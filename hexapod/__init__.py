@@ -1,6 +1,6 @@
 """Gough-Stewart platform: geometry, kinematics, closed-chain Pinocchio model, backends.
 
-The robot knows nothing of cameras or controllers (see ``ARCHITECTURE.md``).
+The robot knows nothing of cameras or controllers (see ``docs/architecture.md``).
 """
 
 from hexapod.exceptions import (
