@@ -20,6 +20,7 @@ import numpy as np
 from scipy.linalg.lapack import dgesdd as _svd
 
 from controllers.base import ControllerContext, Goal, Observation
+from controllers.solvers.compiled_task_ctc import REFERENCE
 from controllers.task_ctc import (
     CompiledTaskStep,
     Measured,
@@ -78,8 +79,8 @@ class CartesianCTC(TaskComputedTorque):
         (or the fixed goal, at rest)."""
         if tr is None or self.reference is None:
             return PlatformPoseTask(*self.goal_pose()), None, None
-        row = self.pose_reference(tr)
-        return PlatformPoseTask(row[0:9].reshape(3, 3), row[9:12]), row[12:18], row[18:24]
+        ref = REFERENCE.views(self.pose_reference(tr))
+        return PlatformPoseTask(ref["R"], ref["t"]), ref["twist"], ref["twist_rate"]
 
     def compiled_inputs(self, step: CompiledTaskStep, observation: Observation, tr: float,
                         q: np.ndarray) -> tuple[np.ndarray | None, str | None] | None:
@@ -93,7 +94,7 @@ class CartesianCTC(TaskComputedTorque):
             R, t = self.goal_pose()
             step.set("reference", np.concatenate([R.ravel(), t, np.zeros(12)]))
         else:
-            step.row[step.inputs["reference"]] = self.pose_reference(tr)
+            step.set("reference", self.pose_reference(tr))
 
 
 class VisionCTC(CartesianCTC):

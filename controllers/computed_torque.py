@@ -69,6 +69,11 @@ GRID_TIME_TOLERANCE = 1e-9
 #: Calls of the compiled step (``compiled_ctc.FK_CALLS`` x 3 Newton iterations each)
 #: before the numpy path takes over (as its budget of 50 iterations).
 FK_MAX_CALLS = 16
+#: Where the compiled step's blocks lie in its rows (:data:`compiled_ctc.INPUTS`,
+#: :data:`compiled_ctc.OUTPUTS`), looked up once.
+_DESIRED = compiled_ctc.INPUTS["desired"]
+_POSE_OUT, _FACTOR, _FORCES = (compiled_ctc.OUTPUTS[k] for k in ("pose", "factor", "forces"))
+_RESIDUAL, _SOLVED = (compiled_ctc.OUTPUTS.index(k) for k in ("fk_residual", "solved"))
 
 
 class ComputedTorqueController(Controller):
@@ -105,7 +110,7 @@ class ComputedTorqueController(Controller):
         #: (the legs as lists of floats).
         self._start: tuple[float, float, list[float], list[float]] | None = None
         #: The compiled step's own input and output rows (bound at the first reset): the
-        #: input's constant part is filled at reset; its pose guess (``x[0:12]``) is
+        #: input's constant part is filled at reset; its pose guess (block ``pose``) is
         #: :attr:`_pose` when ``_guess_in_row`` (else written from it).
         self._bound: BoundCall | None = None
         self._guess_in_row = False
@@ -146,6 +151,12 @@ class ComputedTorqueController(Controller):
             self._bound = compiled_ctc.joint_step(INVERSE_TOLERANCE).bind()
             self._bound.x[:] = row
 
+    @property
+    def _desired_row(self) -> np.ndarray:
+        """The input row's ``(q*, q_dot*, q_ddot*)`` (18,) (a view)."""
+        assert self._bound is not None
+        return self._bound.x[_DESIRED]
+
     def reset_trial(self, context: ControllerContext) -> None:
         """Build the nominal model; read the reference or ``goal.lengths``.
 
@@ -157,14 +168,14 @@ class ComputedTorqueController(Controller):
         self._pose = None
         if self._bound is None:
             self._bound = compiled_ctc.joint_step(INVERSE_TOLERANCE).bind()
-        row = self._bound.x
+        row = self._bound.inputs
         g, d = context.geometry, context.geometry.drives
-        row[42:60] = g.base_points.ravel()
-        row[60:78] = g.platform_points.ravel()
-        row[78:97] = self._model.parameters
-        row[97:115] = np.concatenate([np.broadcast_to(np.asarray(c, dtype=float), (6,))
-                                      for c in (d.rotor_inertia, d.viscous, d.coulomb)])
-        row[115:117] = (self.kp, self.kd)
+        row["points"][:] = (g.base_points, g.platform_points)
+        row["params"][:] = self._model.parameters
+        row["rotor"][:] = d.rotor_inertia
+        row["viscous"][:] = d.viscous
+        row["coulomb"][:] = d.coulomb
+        row["gains"][:] = (self.kp, self.kd)
         self._grid = np.zeros((0, 18))
         self._dt = float(context.dt)
         if context.reference is None:
@@ -249,22 +260,22 @@ class ComputedTorqueController(Controller):
         fails)."""
         if self._ctx is None or self._model is None or self._bound is None:
             return self._refuse("reset(context) was not called")
-        x = self._bound.x
-        fast_readings = finite_readings(observation, x)
+        row = self._bound.inputs
+        fast_readings = finite_readings(observation, row["q"], row["q_dot"])
         if fast_readings is None:  # encoder_readings decides (its reasons), off the common case
             readings = encoder_readings(observation)
             if isinstance(readings, str):
                 return self._refuse(readings)
             t, q, qd = readings
-            x[12:18] = q
-            x[18:24] = qd
+            row["q"][:] = q
+            row["q_dot"][:] = qd
         else:
             t, q, qd = fast_readings
         if self._start is None:  # the fixed goal's quintic starts here
             T = QUINTIC_PEAK_SPEED * float(np.abs(self._q_star - q).max()) / \
                 self._ctx.max_speed if self.smooth_goal else 0.0
             self._start = (t, T, q.tolist(), (self._q_star - q).tolist())
-        desired = x[24:42]
+        desired = self._desired_row
         try:
             self._desired_into(t, desired)
         except Exception as exc:  # the nominal model failed here: refuse with its reason
@@ -284,52 +295,50 @@ class ComputedTorqueController(Controller):
         previous pose, ``K`` rank-deficient, a singular inverse solve, a non-finite
         value): the numpy path then decides, with its reasons."""
         assert self._bound is not None
-        x = self._bound.x
-        x[12:18] = q
-        x[18:24] = qd
-        x[24:30] = q_s
-        x[30:36] = qd_s
-        x[36:42] = qdd_s
+        row = self._bound.inputs
+        row["q"][:] = q
+        row["q_dot"][:] = qd
+        row["desired"][:] = (q_s, qd_s, qdd_s)
         return self._compiled_core(q)
 
     def _compiled_core(self, q: np.ndarray) -> Command | None:
         """:meth:`_compiled_step` with ``q``, ``q_dot`` and ``(q*, q_dot*, q_ddot*)``
-        already in the input row (``x[12:42]``)."""
+        already in the input row."""
         assert self._ctx is not None and self._bound is not None
         bound = self._bound
-        x, y, call = bound.x, bound.y, bound.call
+        pose_in, y, call = bound.inputs["pose"], bound.y, bound.call
         if not self._guess_in_row:
             pose = self._pose
             R0, p0 = home_pose(self._ctx.geometry) if pose is None else pose
-            x[0:9] = R0.T.ravel()
-            x[9:12] = p0
+            pose_in[0:9] = R0.T.ravel()
+            pose_in[9:12] = p0
             self._guess_in_row = True
         if call():
             raise CompilationError(f"{bound.function.name}: the compiled function failed")
         calls = 1
-        while not y[54] < FK_TOLERANCE:  # Newton from the pose reached, as forward_kinematics
+        while not y[_RESIDUAL] < FK_TOLERANCE:  # Newton from the pose reached, as FK does
             self._guess_in_row = False
-            if calls >= FK_MAX_CALLS or not math.isfinite(y[54]):
+            if calls >= FK_MAX_CALLS or not math.isfinite(y[_RESIDUAL]):
                 return None
-            x[0:12] = y[0:12]
+            pose_in[:] = y[_POSE_OUT]
             if call():
                 raise CompilationError(f"{bound.function.name}: the compiled function failed")
             calls += 1
-        if y[55] != 1.0 or not math.isfinite(y.dot(y)):  # (y.dot(y) is the same ddot as y @ y)
+        if y[_SOLVED] != 1.0 or not math.isfinite(y.dot(y)):  # (the same ddot as y @ y)
             return None
         # the squared singular values of K: the eigenvalues of K^T K (LAPACK syevd)
-        w, _, info = _eigenvalues(y[12:48].reshape(6, 6), 0)  # compute_v=0 (by position)
+        w, _, info = _eigenvalues(y[_FACTOR].reshape(6, 6), 0)  # compute_v=0 (by position)
         w_min, w_max = float(w[0]), float(w[-1])
         if info != 0 or not (w_max > 0 and w_min > self.solver.threshold**2 * w_max):
             return None
         out = y.copy()
-        x[0:12] = out[0:12]  # the next step's guess
-        self._pose_row, self._guess_in_row = out[0:12], True
-        e = x[24:30] - q
+        pose_in[:] = out[_POSE_OUT]  # the next step's guess
+        self._pose_row, self._guess_in_row = out[_POSE_OUT], True
+        e = bound.x[_DESIRED][0:6] - q
         return Command(np.zeros(6), error=e, error_norm=math.sqrt(e.dot(e)), rank=6,
                        condition=math.sqrt(w_max) / math.sqrt(w_min), features_used=6,
                        active_constraints=[], notes=[], actuation=Actuation.FORCE,
-                       forces=out[48:54])
+                       forces=out[_FORCES])
 
     def _numpy_step(self, q: np.ndarray, qd: np.ndarray, q_s: np.ndarray,
                     qd_s: np.ndarray, qdd_s: np.ndarray) -> Command:

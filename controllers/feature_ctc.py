@@ -33,7 +33,7 @@ import numpy as np
 from controllers.base import ControllerContext, Goal, Observation
 from controllers.cartesian_ctc import all_seen, directions_seen, pose_measurement
 from controllers.exceptions import ContextError
-from controllers.solvers.reference_motion import feature_motion, size_in
+from controllers.solvers.reference_motion import feature_motion, layouts
 from controllers.task_ctc import (
     CompiledTaskStep,
     Measured,
@@ -178,11 +178,15 @@ class FeatureCTC(TaskComputedTorque):
         taught = np.where(np.all(np.isfinite(taught), axis=-1)[:, None], taught, model_end)
         g = ctx.geometry
         cam = self._frame
-        rows = np.empty((len(times), size_in(kind)))
-        rows[:, 0:24] = self.pose_rows(times)
-        rows[:, 24:] = np.concatenate([
-            taught.ravel(), model_end.ravel(), cam.rotation.ravel(), cam.translation,
-            g.base_points.ravel(), g.platform_points.ravel(), [g.leg_radius]])
+        inputs = layouts(kind)[0]
+        rows = np.empty((len(times), inputs.size))
+        v = inputs.views(rows)
+        v["reference"][:] = self.pose_rows(times)
+        v["taught"][:] = taught.ravel()
+        v["end"][:] = model_end.ravel()
+        v["frame"][:] = np.concatenate([cam.rotation.ravel(), cam.translation])
+        v["points"][:] = (g.base_points, g.platform_points)
+        v["radius"][:] = g.leg_radius
         out = feature_motion(kind).batch(rows).reshape(len(times), 3, size)
         seen = np.isfinite(self._anchored(times).reshape(len(times), size))
         return np.where(seen[:, None, :], out, np.nan)
@@ -218,13 +222,14 @@ class FeatureCTC(TaskComputedTorque):
         u, normals, rows = feats
         row, inputs = step.row, step.inputs
         if normals is None:
-            row[inputs["features"]] = u.ravel()
+            row[inputs["directions"]] = u.ravel()
         elif u is _OF_NORMALS:  # the compiled step takes the directions of the normals
-            start = inputs["features"].start
-            row[start:start + 36] = normals.ravel()
-            row[start + 54] = 1.0
+            row[inputs["normals"]] = normals.ravel()
+            row[inputs.index("of_normals")] = 1.0
         else:
-            step.set("features", np.concatenate([normals.ravel(), u.ravel(), [0.0]]))
+            row[inputs["normals"]] = normals.ravel()
+            row[inputs["directions"]] = u.ravel()
+            row[inputs.index("of_normals")] = 0.0
         if self.reference is None:
             ref, known = self._taught_reference()
         else:

@@ -33,7 +33,8 @@ the numpy formulas of :mod:`controllers.interaction` are the tests' oracle
 
 Input: the feature block (:func:`direction_inputs`, :func:`edge_inputs`), then the law
 parameters :data:`LAW_INPUTS`. Output: the feature error (every feature, used or not),
-then :data:`LAW_OUTPUTS`, then the leg directions (18) the inverse Jacobian used.
+then :data:`LAW_OUTPUTS`, then the leg directions (18) the inverse Jacobian used (the
+:class:`~hexapod.compiled.Layout` pair of :func:`law_layouts`).
 """
 
 from __future__ import annotations
@@ -56,13 +57,13 @@ from controllers.law_algebra import (
 )
 from controllers.tasks.leg_direction import direction_block
 from controllers.tasks.leg_edge import edge_block, leg_direction_of_edges, normal_of_line
-from hexapod.compiled import CompiledFunction
+from hexapod.compiled import CompiledFunction, Layout
 
 __all__ = [
     "DIRECTION_INPUTS", "EDGE_INPUTS", "JACOBI_SWEEPS", "LAW_INPUTS", "LAW_OUTPUTS",
     "LAW_SWEEPS", "LawKernel", "LawResult", "cholesky_solve", "direction_inputs",
     "direction_kernel", "edge_inputs", "edge_law_kernel", "full_rank_certificate",
-    "jacobi_eigen", "law_tail",
+    "jacobi_eigen", "law_layouts", "law_tail",
 ]
 
 #: Where a core evaluates the interaction matrix (:data:`controllers.law_tools.INTERACTIONS`).
@@ -107,18 +108,13 @@ LAW_OUTPUTS = (("error_norm", 1), ("n_sum", 1), ("rank", 1), ("condition", 1), (
                ("tau", 6), ("qdot", 6), ("qdot_check", 1), ("N", 36), ("b", 6), ("J", 36))
 
 
-def _offsets(fields: Sequence[tuple[str, int]], start: int = 0) -> dict[str, slice]:
-    return dict(_offsets_cached(tuple(fields), start))
-
-
-@lru_cache(maxsize=32)
-def _offsets_cached(fields: tuple[tuple[str, int], ...], start: int) -> dict[str, slice]:
-    out: dict[str, slice] = {}
-    k = start
-    for name, size in fields:
-        out[name] = slice(k, k + size)
-        k += size
-    return out
+def law_layouts(feature_inputs: Sequence[tuple[str, int]], n_error: int, name: str
+                ) -> tuple[Layout, Layout]:
+    """The input layout (the feature block, then :data:`LAW_INPUTS`) and the output
+    layout (the error (``n_error``), :data:`LAW_OUTPUTS`, the leg directions (18)) of a
+    law core."""
+    return (Layout([*feature_inputs, *LAW_INPUTS], f"{name} input"),
+            Layout([("error", n_error), *LAW_OUTPUTS, ("directions", 18)], f"{name} output"))
 
 
 def _check_interaction(interaction: str) -> None:
@@ -132,10 +128,10 @@ def _rows(x: ca.SX, n: int) -> list[ca.SX]:
     return [x[3 * i:3 * i + 3] for i in range(n)]
 
 
-def _leg_directions(x: ca.SX, sl: dict[str, slice], measured: list[ca.SX]) -> list[ca.SX]:
+def _leg_directions(v: dict[str, ca.SX], measured: list[ca.SX]) -> list[ca.SX]:
     """Per leg: the direction measured this period, else the given one."""
-    given = _rows(x[sl["leg_directions"]], 6)
-    m = x[sl["measured"]]
+    given = _rows(v["leg_directions"], 6)
+    m = v["measured"]
     return [ca.if_else(m[i] != 0, u, d) for i, (u, d) in enumerate(zip(measured, given,
                                                                          strict=True))]
 
@@ -143,27 +139,26 @@ def _leg_directions(x: ca.SX, sl: dict[str, slice], measured: list[ca.SX]) -> li
 def _direction_function(interaction: str = "current", lean: bool = False) -> ca.Function:
     """Leg-direction law: ``e_i = u_i x u_i*``, ``L_i = -[u_i*]_x M_i`` (docs/math.md §3, §6)."""
     _check_interaction(interaction)
-    inputs = direction_inputs(interaction)
-    n_feat = sum(s for _, s in inputs)
-    x = ca.SX.sym("x", n_feat + sum(s for _, s in LAW_INPUTS))
-    sl = _offsets(inputs)
-    u = _rows(x[sl["features"]], 6)
-    us = _rows(x[sl["desired"]], 6)
-    A = _rows(x[sl["base_points"]], 6)
-    q = [x[sl["lengths"]][i] for i in range(6)]
-    w = x[sl["weights"]]
+    inputs = law_layouts(direction_inputs(interaction), 18, "direction law")[0]
+    x = ca.SX.sym("x", inputs.size)
+    v = inputs.split(x)
+    u = _rows(v["features"], 6)
+    us = _rows(v["desired"], 6)
+    A = _rows(v["base_points"], 6)
+    q = [v["lengths"][i] for i in range(6)]
+    w = v["weights"]
     acc = WeightedNormal()
     errors = []
     for i in range(6):
         ei, L = direction_block(u[i], us[i], A[i], q[i])
         if interaction != "current":
-            _, Ld = direction_block(us[i], us[i], A[i], x[sl["desired_lengths"]][i])
+            _, Ld = direction_block(us[i], us[i], A[i], v["desired_lengths"][i])
             L = Ld if interaction == "desired" else 0.5 * (Ld + L)
         acc.add_dense(ei, L, w[i])
         errors.append(ei)
-    directions = _leg_directions(x, sl, u)
-    tail = law_tail(ca.vertcat(*acc.used_errors), acc.N, acc.b, directions, A, x[n_feat:],
-                    lean)
+    directions = _leg_directions(v, u)
+    tail = law_tail(ca.vertcat(*acc.used_errors), acc.N, acc.b, directions, A,
+                    x[inputs["gain"].start:], lean)
     name = "hexapod_direction_law_w" + ("" if interaction == "current" else f"_{interaction}")
     name += "_lean" if lean else ""
     return ca.Function(name, [x], [ca.vertcat(*errors, *tail, *directions)])
@@ -173,28 +168,27 @@ def _edge_function(use_lines: bool, interaction: str = "current",
                    lean: bool = False) -> ca.Function:
     """Leg-edge law on pixel lines or normals (rank-one blocks, ``docs/math.md`` §6)."""
     _check_interaction(interaction)
-    inputs = edge_inputs(interaction)
-    n_feat = sum(s for _, s in inputs)
-    x = ca.SX.sym("x", n_feat + sum(s for _, s in LAW_INPUTS))
-    sl = _offsets(inputs)
-    feat = _rows(x[sl["features"]], 12)
-    star = _rows(x[sl["desired"]], 12)
-    Kt = ca.reshape(x[sl["K"]], 3, 3)  # column-major read of a row-major K: K^T
-    Kinv_t = ca.reshape(x[sl["K_inv"]], 3, 3)  # (K^-1)^T
+    inputs = law_layouts(edge_inputs(interaction), 36, "edge law")[0]
+    x = ca.SX.sym("x", inputs.size)
+    v = inputs.split(x)
+    feat = _rows(v["features"], 12)
+    star = _rows(v["desired"], 12)
+    Kt = ca.reshape(v["K"], 3, 3)  # column-major read of a row-major K: K^T
+    Kinv_t = ca.reshape(v["K_inv"], 3, 3)  # (K^-1)^T
     lines = (Kt, Kinv_t) if use_lines else (None, None)
-    A = _rows(x[sl["base_points"]], 6)
-    q = [x[sl["lengths"]][i] for i in range(6)]
-    w = x[sl["weights"]]
+    A = _rows(v["base_points"], 6)
+    q = [v["lengths"][i] for i in range(6)]
+    w = v["weights"]
     n = [normal_of_line(f, Kt) if use_lines else f for f in feat]
-    u = _leg_directions(x, sl, [leg_direction_of_edges(n[2 * i], n[2 * i + 1])
-                                for i in range(6)])
+    u = _leg_directions(v, [leg_direction_of_edges(n[2 * i], n[2 * i + 1])
+                            for i in range(6)])
     acc = WeightedNormal()
     errors = []
     inv_q = [1.0 / qi for qi in q]  # one division per leg
     if interaction != "current":
-        n_star = _rows(x[sl["desired_normals"]], 12)
-        u_star = _rows(x[sl["desired_directions"]], 6)
-        q_star = [x[sl["desired_lengths"]][i] for i in range(6)]
+        n_star = _rows(v["desired_normals"], 12)
+        u_star = _rows(v["desired_directions"], 6)
+        q_star = [v["desired_lengths"][i] for i in range(6)]
         inv_q_star = [1.0 / qi for qi in q_star]
     for k in range(12):
         i = k // 2
@@ -210,7 +204,8 @@ def _edge_function(use_lines: bool, interaction: str = "current",
             acc.add_rank_one(ek, ad, gd, w[k])
         else:
             acc.add_dense(ek, 0.5 * (ad @ gd.T + a @ g.T), w[k])
-    tail = law_tail(ca.vertcat(*acc.used_errors), acc.N, acc.b, u, A, x[n_feat:], lean)
+    tail = law_tail(ca.vertcat(*acc.used_errors), acc.N, acc.b, u, A,
+                    x[inputs["gain"].start:], lean)
     name = "hexapod_edge_law_" + ("lines" if use_lines else "normals") + "_w"
     name += ("" if interaction == "current" else f"_{interaction}") + ("_lean" if lean else "")
     return ca.Function(name, [x], [ca.vertcat(*errors, *tail, *u)])
@@ -260,26 +255,25 @@ class LawKernel:
     the views of :attr:`inputs` and calls :meth:`evaluate`.
 
     Args:
-        function: The compiled core.
-        feature_inputs: The feature block layout.
-        n_error: Size of the stacked error.
+        function: The compiled core, with its layouts (:func:`law_layouts`).
         lean: Builds the lean core of the same law (same inputs and outputs; see
             :func:`law_tail`), compiled on first use by :attr:`lean_function`.
     """
 
-    def __init__(self, function: CompiledFunction, feature_inputs: Sequence[tuple[str, int]],
-                 n_error: int, lean: Callable[[], CompiledFunction] | None = None) -> None:
+    def __init__(self, function: CompiledFunction,
+                 lean: Callable[[], CompiledFunction] | None = None) -> None:
         self.function = function
         self._lean = lean
-        n_feat = sum(s for _, s in feature_inputs)
         #: The input vector (constants set once, features and lengths each step).
         self.input_vector = np.zeros(function.n_in)
         #: Where each named input lies in :attr:`input_vector`.
-        self.slices = {**_offsets(feature_inputs), **_offsets(LAW_INPUTS, n_feat)}
+        self.slices = function.inputs
         #: Views of the input vector by name (write into them).
-        self.inputs = {k: self.input_vector[s] for k, s in self.slices.items()}
+        self.inputs = function.inputs.views(self.input_vector)
         #: Where each named output lies in the output vector.
-        self.outputs = _offsets((("error", n_error), *LAW_OUTPUTS, ("directions", 18)))
+        self.outputs = function.outputs
+        self._at = {k: self.outputs.index(k) for k in ("error_norm", "n_sum", "rank",
+                                                       "condition", "gain", "qdot_check")}
         # Every feature used, every leg direction measured (the common case).
         for name in ("weights", "measured"):
             if name in self.inputs:
@@ -302,12 +296,12 @@ class LawKernel:
     def evaluate(self) -> LawResult:
         """One call of the core on the current inputs."""
         y = self.function.single(self.input_vector)
-        o = self.outputs
+        o, at = self.outputs.slices, self._at
         return LawResult(
-            error=y[o["error"]], error_norm=float(y[o["error_norm"].start]),
-            n_sum=float(y[o["n_sum"].start]), rank=int(y[o["rank"].start]),
-            condition=float(y[o["condition"].start]), gain=float(y[o["gain"].start]),
-            tau=y[o["tau"]], qdot=y[o["qdot"]], qdot_finite=y[o["qdot_check"].start] == 0.0,
+            error=y[o["error"]], error_norm=float(y[at["error_norm"]]),
+            n_sum=float(y[at["n_sum"]]), rank=int(y[at["rank"]]),
+            condition=float(y[at["condition"]]), gain=float(y[at["gain"]]),
+            tau=y[o["tau"]], qdot=y[o["qdot"]], qdot_finite=y[at["qdot_check"]] == 0.0,
             N=y[o["N"]].reshape(6, 6), b=y[o["b"]], J=y[o["J"]].reshape(6, 6),
             directions=y[o["directions"]].reshape(6, 3))
 
@@ -315,13 +309,16 @@ class LawKernel:
 @lru_cache(maxsize=12)
 def _direction_compiled(interaction: str = "current", lean: bool = False,
                         compiled: bool = True) -> CompiledFunction:
-    return CompiledFunction(_direction_function(interaction, lean), compiled)
+    inputs, outputs = law_layouts(direction_inputs(interaction), 18, "direction law")
+    return CompiledFunction(_direction_function(interaction, lean), compiled, inputs, outputs)
 
 
 @lru_cache(maxsize=24)
 def _edge_compiled(use_lines: bool, interaction: str = "current", lean: bool = False,
                    compiled: bool = True) -> CompiledFunction:
-    return CompiledFunction(_edge_function(use_lines, interaction, lean), compiled)
+    inputs, outputs = law_layouts(edge_inputs(interaction), 36, "edge law")
+    return CompiledFunction(_edge_function(use_lines, interaction, lean), compiled, inputs,
+                            outputs)
 
 
 def direction_kernel(interaction: str = "current", compiled: bool = True) -> LawKernel:
@@ -333,7 +330,6 @@ def direction_kernel(interaction: str = "current", compiled: bool = True) -> Law
     """
     _check_interaction(interaction)
     return LawKernel(_direction_compiled(interaction, False, compiled),
-                     direction_inputs(interaction), 18,
                      lambda: _direction_compiled(interaction, True, compiled))
 
 
@@ -348,5 +344,4 @@ def edge_law_kernel(use_lines: bool, interaction: str = "current",
     """
     _check_interaction(interaction)
     return LawKernel(_edge_compiled(use_lines, interaction, False, compiled),
-                     edge_inputs(interaction), 36,
                      lambda: _edge_compiled(use_lines, interaction, True, compiled))

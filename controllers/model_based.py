@@ -46,7 +46,7 @@ from controllers.interaction import cross
 from controllers.law_algebra import jacobi_eigen
 from controllers.law_tools import gain_formula
 from controllers.laws import Gain, check_number, check_observation
-from hexapod.compiled import CompiledFunction
+from hexapod.compiled import CompiledFunction, Layout
 from hexapod.exceptions import HexapodError
 from hexapod.fk import forward_kinematics, forward_kinematics_batch
 from hexapod.geometry import HexapodGeometry
@@ -56,23 +56,25 @@ from hexapod.workspace import home_pose
 
 #: Input of the compiled pose servo: R (row-major), t, R*, t*, A (6 x 3), eB (6 x 3),
 #: gain (lambda0, lambda_inf, lambda0'), camera_from_base rotation and translation.
-_IN = {"R": slice(0, 9), "t": slice(9, 12), "R_star": slice(12, 21), "t_star": slice(21, 24),
-       "A": slice(24, 42), "E": slice(42, 60), "gain": slice(60, 63), "Rc": slice(63, 72),
-       "pc": slice(72, 75)}
+SERVO_INPUTS = Layout([("R", (3, 3)), ("t", 3), ("R_star", (3, 3)), ("t_star", 3),
+                       ("A", (6, 3)), ("E", (6, 3)), ("gain", 3), ("Rc", (3, 3)), ("pc", 3)],
+                      "pose servo input")
 #: Output: e (6), |e|, tau (6), q_dot (6), q_dot check, camera twist (6), condition, near pi.
-_OUT = {"e": slice(0, 6), "tau": slice(7, 13), "qdot": slice(13, 19), "twist": slice(20, 26)}
-_AT = {"norm": 6, "check": 19, "cond": 26, "near_pi": 27}
+SERVO_OUTPUTS = Layout([("e", 6), ("norm", 1), ("tau", 6), ("qdot", 6), ("check", 1),
+                        ("twist", 6), ("cond", 1), ("near_pi", 1)], "pose servo output")
+_IN, _OUT = SERVO_INPUTS, SERVO_OUTPUTS
+_AT = {name: SERVO_OUTPUTS.index(name) for name in ("norm", "check", "cond", "near_pi")}
 
 
 def _pose_servo_function() -> ca.Function:
-    x = ca.SX.sym("x", 75)
+    x = ca.SX.sym("x", _IN.size)
     R = ca.reshape(x[_IN["R"]], 3, 3).T  # row-major
     t = x[_IN["t"]]
     Rs = ca.reshape(x[_IN["R_star"]], 3, 3).T
     ts = x[_IN["t_star"]]
     Rc = ca.reshape(x[_IN["Rc"]], 3, 3).T
     pc = x[_IN["pc"]]
-    l0, linf, slope = x[60], x[61], x[62]
+    l0, linf, slope = (x[_IN["gain"]][k] for k in range(3))
     # log_so3(R* R^T) (hexapod.se3.log_so3 away from a half-turn).
     M = Rs @ R.T
     cos = (M[0, 0] + M[1, 1] + M[2, 2] - 1.0) / 2.0
@@ -91,8 +93,8 @@ def _pose_servo_function() -> ca.Function:
     tau = ca.vertcat(lam * dp - ca.cross(w, t), w)
     rows = []
     for i in range(6):
-        A = x[24 + 3 * i:27 + 3 * i]
-        E = x[42 + 3 * i:45 + 3 * i]
+        A = x[_IN["A"]][3 * i:3 * i + 3]
+        E = x[_IN["E"]][3 * i:3 * i + 3]
         leg = R @ E + t - A
         u = leg / ca.sqrt(ca.dot(leg, leg))
         rows.append(ca.horzcat(u.T, ca.cross(A, u).T))
@@ -114,7 +116,7 @@ def _pose_servo_function() -> ca.Function:
 @lru_cache(maxsize=1)
 def pose_servo_kernel() -> CompiledFunction:
     """The compiled pose servo (everything after the forward kinematics)."""
-    return CompiledFunction(_pose_servo_function())
+    return CompiledFunction(_pose_servo_function(), inputs=_IN, outputs=_OUT)
 
 
 class ModelBasedController(Controller):
@@ -140,7 +142,7 @@ class ModelBasedController(Controller):
         #: The compiled pose servo (None: numpy path, or not reset).
         self.kernel: CompiledFunction | None = None
         #: The servo's input row (constants written by :meth:`reset_trial`).
-        self.servo_input = np.zeros(75)
+        self.servo_input = np.zeros(_IN.size)
         self.fk_tolerance = check_number(self.name, "fk_tolerance", fk_tolerance)
         self.fk_max_iterations = int(check_number(self.name, "fk_max_iterations",
                                                   fk_max_iterations, 1.0, strict=False))
@@ -244,8 +246,8 @@ class ModelBasedController(Controller):
         notes = [f"forward kinematics: {sol.iterations} iterations"]
         if self.kernel is not None:
             x = self.servo_input
-            x[0:9] = R.reshape(9)
-            x[9:12] = t
+            x[_IN["R"]] = R.reshape(9)
+            x[_IN["t"]] = t
             y = self.kernel.single(x)
             if y[_AT["near_pi"]] == 0.0:
                 e = y[_OUT["e"]]
@@ -291,7 +293,7 @@ class ModelBasedController(Controller):
         self._b_A = np.array([t.base_points for t in trials])
         self._b_E = np.array([t.platform_points for t in trials])
         self._b_geometry = trials[0].context.geometry if trials and trials[0].context else None
-        self._b_X = np.array([t.servo_input for t in trials]) if trials else np.zeros((0, 75))
+        self._b_X = np.array([t.servo_input for t in trials]) if trials else np.zeros((0, _IN.size))
         self._b_kernel = bool(trials) and all(t.kernel is not None for t in trials)
 
     def retarget_batch(self, trials: np.ndarray, goals: GoalBatch) -> None:
@@ -330,8 +332,8 @@ class ModelBasedController(Controller):
                                            base_points=self._b_A[tr],
                                            platform_points=self._b_E[tr])
             X = self._b_X[tr]
-            X[:, 0:9] = sol.rotations.reshape(-1, 9)
-            X[:, 9:12] = sol.translations
+            X[:, _IN["R"]] = sol.rotations.reshape(-1, 9)
+            X[:, _IN["t"]] = sol.translations
             Y = pose_servo_kernel().batch(X)
             ok = (sol.converged & (Y[:, _AT["near_pi"]] == 0.0)
                   & (Y[:, _AT["check"]] == 0.0))

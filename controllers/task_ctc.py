@@ -242,7 +242,8 @@ class TaskComputedTorque(Controller):
             return self.refuse("reset(context) was not called")
         compiled = self.compiled if self._started else None
         # the common case writes the readings into the compiled step's row itself
-        fast = None if compiled is None else finite_readings(observation, compiled.row)
+        fast = None if compiled is None else finite_readings(
+            observation, compiled.views["q"], compiled.views["q_dot"])
         if fast is None:  # encoder_readings decides (its reasons), off the common case
             readings = encoder_readings(observation)
             if isinstance(readings, str):
@@ -341,13 +342,13 @@ def encoder_readings(observation: Observation) -> tuple[float, np.ndarray, np.nd
     return t, q, qd
 
 
-def finite_readings(observation: Observation, x: np.ndarray
+def finite_readings(observation: Observation, q_row: np.ndarray, qd_row: np.ndarray
                     ) -> tuple[float, np.ndarray, np.ndarray] | None:
     """The common case of :func:`encoder_readings`: a finite time [s] and finite (6,)
-    lengths [m] and leg velocities [m/s], written into a compiled step's input row
-    (``x[12:18]`` and ``x[18:24]``, the lengths then the rates); None otherwise
-    (missing, another shape, a non-finite value, or a sum of squares that overflows),
-    where :func:`encoder_readings` decides. When both answer, they answer the same."""
+    lengths [m] and leg velocities [m/s], written into a compiled step's input row (its
+    views ``q_row`` and ``qd_row``); None otherwise (missing, another shape, a
+    non-finite value, or a sum of squares that overflows), where
+    :func:`encoder_readings` decides. When both answer, they answer the same."""
     qd = observation.q_dot
     if qd is None:
         return None
@@ -356,10 +357,10 @@ def finite_readings(observation: Observation, x: np.ndarray
     if q.shape != (6,) or qd.shape != (6,):
         return None
     t = float(observation.t)
-    x[12:18] = q
-    x[18:24] = qd
-    v = x[12:24]
-    if math.isfinite(t) and math.isfinite(v.dot(v)):  # a NaN or inf makes the sum so
+    q_row[:] = q
+    qd_row[:] = qd
+    # a NaN or inf makes the sums so
+    if math.isfinite(t) and math.isfinite(q_row.dot(q_row) + qd_row.dot(qd_row)):
         return t, q, qd
     return None
 

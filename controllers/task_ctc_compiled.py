@@ -27,6 +27,7 @@ import math
 from typing import TYPE_CHECKING
 
 import numpy as np
+from numpy.typing import ArrayLike
 from scipy.linalg.lapack import dsyevd as _eigenvalues
 
 from controllers.base import Command, Observation
@@ -55,7 +56,7 @@ class CompiledTaskStep:
 
     The step evaluates the C function on its own bound input and output rows
     (:meth:`hexapod.compiled.CompiledFunction.bind`, no copies): the input row
-    :attr:`row` keeps its constants, and its pose (``row[0:12]``) is the pose of
+    :attr:`row` keeps its constants, and its ``pose`` block is the pose of
     :attr:`_guess_of` when that is the law's ``guess`` (else it is rewritten). What the
     command keeps of the output row is copied (the next call overwrites it).
 
@@ -73,20 +74,20 @@ class CompiledTaskStep:
         self._bind(np.zeros(self.function.n_in))
         g = law.context.geometry
         d = g.drives
-        self.set("points", np.concatenate([g.base_points.ravel(),
-                                           g.platform_points.ravel()]))
+        self.set("points", (g.base_points, g.platform_points))
         self.set("params", law.model.parameters)
-        for name in ("rotor_inertia", "viscous", "coulomb"):
-            self.set(name.split("_")[0], np.broadcast_to(
-                np.asarray(getattr(d, name), dtype=float), (6,)))
-        self.set("gains", np.array([law.gains.kp, law.gains.kd, float(law.context.dt)]))
+        self.set("rotor", d.rotor_inertia)
+        self.set("viscous", d.viscous)
+        self.set("coulomb", d.coulomb)
+        self.set("gains", (law.gains.kp, law.gains.kd, float(law.context.dt)))
         self.home = home_pose(g)
         out = self.outputs
-        self._residual = out["fk_residual"].start
-        self._solved = out["solved"].start
+        self._residual = out.index("fk_residual")
+        self._solved = out.index("solved")
         self._factor = out["factor"]
         self._error = out["error"]
         self._forces = out["forces"]
+        self._pose = out["pose"]
         self._tolerance = FK_TOLERANCE if self.fk else FIT_TOLERANCE
         law.compiled_constants(self)
 
@@ -96,14 +97,16 @@ class CompiledTaskStep:
         self.bound.x[:] = row
         #: The input row (the bound one: written in place, evaluated without a copy).
         self.row = self.bound.x
-        #: The guess whose pose ``row[0:12]`` holds (``_NO_GUESS``: none).
+        #: Its views by block (:func:`~controllers.solvers.compiled_task_ctc.layout`).
+        self.views = self.bound.inputs
+        #: The guess whose pose the ``pose`` block holds (``_NO_GUESS``: none).
         self._guess_of: object = _NO_GUESS
 
     def __getstate__(self) -> dict[str, object]:
         """Picklable: the compiled function and its binding (ctypes) are left out, the
         input row kept; both are rebuilt on unpickling."""
         state = self.__dict__.copy()
-        for key in ("function", "bound", "row", "_guess_of"):
+        for key in ("function", "bound", "row", "views", "_guess_of"):
             del state[key]
         state["_row"] = self.row.copy()
         return state
@@ -115,42 +118,45 @@ class CompiledTaskStep:
         assert isinstance(row, np.ndarray)
         self._bind(row)
 
-    def set(self, name: str, value: np.ndarray | float) -> None:
-        """Write an input field (:func:`~controllers.solvers.compiled_task_ctc.layout`)."""
-        self.row[self.inputs[name]] = value
+    def set(self, name: str, value: ArrayLike) -> None:
+        """Write an input block (:func:`~controllers.solvers.compiled_task_ctc.layout`;
+        its values in row-major order, or one value for all)."""
+        self.row[self.inputs[name]] = np.ravel(value)
 
     def set_pose(self, R: np.ndarray, t: np.ndarray) -> None:
         """The input pose (the FK guess, or the measured pose)."""
-        self.row[0:9] = R.T.ravel()
-        self.row[9:12] = t
+        pose = self.views["pose"]
+        pose[0:9] = R.T.ravel()
+        pose[9:12] = t
         self._guess_of = _NO_GUESS
 
     def step(self, law: TaskComputedTorque, observation: Observation, tr: float,
              q: np.ndarray, qd: np.ndarray) -> Command | None:
         """The command of this period, or None off the happy path.
 
-        ``q`` [m] and ``qd`` [m/s] are written into the row (``row[12:24]``, the layout's
-        ``q`` and ``q_dot``; :meth:`step_written` when they are there already)."""
-        self.row[12:18] = q
-        self.row[18:24] = qd
+        ``q`` [m] and ``qd`` [m/s] are written into the row (blocks ``q`` and ``q_dot``;
+        :meth:`step_written` when they are there already)."""
+        self.views["q"][:] = q
+        self.views["q_dot"][:] = qd
         return self.step_written(law, observation, tr)
 
     def step_written(self, law: TaskComputedTorque, observation: Observation, tr: float
                      ) -> Command | None:
-        """:meth:`step` with ``q`` and ``q_dot`` already in the row (``row[12:24]``)."""
+        """:meth:`step` with ``q`` and ``q_dot`` already in the row."""
         guess = law.guess
-        if guess is not self._guess_of:  # else row[0:12] holds its pose already
+        if guess is not self._guess_of:  # else the pose block holds its pose already
             R0, t0 = guess if guess is not None else self.home
             self.set_pose(R0, t0)
             self._guess_of = guess
-        prepared = law.compiled_inputs(self, observation, tr, self.row[12:18])
+        prepared = law.compiled_inputs(self, observation, tr, self.views["q"])
         if prepared is None:
             return None
         rows, note = prepared
         if rows is not None and int(rows.sum()) < 6:
             return None
         bound = self.bound
-        row, y, call = bound.x, bound.y, bound.call
+        pose_in, y, call = self.views["pose"], bound.y, bound.call
+        pose_out = self._pose
         if call():
             raise CompilationError(f"{self.function.name}: the compiled function failed")
         residual, tolerance = self._residual, self._tolerance
@@ -159,7 +165,7 @@ class CompiledTaskStep:
             self._guess_of = _NO_GUESS
             if calls >= FK_MAX_CALLS or not math.isfinite(y[residual]):
                 return None
-            row[0:12] = y[0:12]
+            pose_in[:] = y[pose_out]
             if call():
                 raise CompilationError(f"{self.function.name}: the compiled function failed")
             calls += 1
@@ -170,8 +176,8 @@ class CompiledTaskStep:
         w_min, w_max = float(w[0]), float(w[-1])
         if info != 0 or not (w_max > 0 and w_min > law.solver.threshold**2 * w_max):
             return None
-        pose = y[0:12].copy()
-        row[0:12] = pose  # the next step's guess
+        pose = y[pose_out].copy()
+        pose_in[:] = pose  # the next step's guess
         law.guess = self._guess_of = (pose[0:9].reshape(3, 3).T, pose[9:12])
         e = y[self._error]
         e = e.copy() if rows is None else e[rows]

@@ -4,13 +4,22 @@ Calling a CasADi ``Function`` from Python costs tens of microseconds (argument
 conversion); the same function generated to C by CasADi, compiled once by the
 system C compiler and called through :mod:`ctypes` on preallocated buffers costs
 a few microseconds, and a batch is looped over in C. The shared library is
-cached in ``$HEXAPOD_CACHE_DIR`` (default ``~/.cache/hexapod-vs``) under the hash
-of its code. Without a C compiler the CasADi virtual machine evaluates the same
-function (same results, slower) and a warning is logged once.
+cached in ``$HEXAPOD_CACHE_DIR`` (default ``~/.cache/hexapod-vs``) under a hash
+of its function (below). Without a C compiler the CasADi virtual machine evaluates the
+same function (same results, slower) and a warning is logged once.
 
-A function must have one dense vector input and one dense vector output. A caller that
-evaluates one row at a time in a hot loop can :meth:`CompiledFunction.bind` its own input
-and output buffers and call the C function on them in place (no copies).
+A function must have one dense vector input and one dense vector output, each described
+where the function is built by a :class:`Layout` (ordered named blocks with shapes): the
+caller reads and writes its rows by name (:meth:`Layout.views`), never by hand offsets, and
+a layout whose size is not the function's is refused (:class:`~hexapod.exceptions.
+LayoutError`). A caller that evaluates one row at a time in a hot loop can
+:meth:`CompiledFunction.bind` its own input and output buffers and call the C function on
+them in place (no copies).
+
+The cache key of a library is the hash of the serialized function
+(``Function.serialize()``), CasADi's version, the C wrapper and the compiler flags: a
+warm process finds its library without generating the C code, which is only generated
+when the library is missing.
 """
 
 from __future__ import annotations
@@ -24,7 +33,7 @@ import platform
 import shutil
 import subprocess
 import tempfile
-from collections.abc import Callable
+from collections.abc import Callable, Iterator, Sequence
 from functools import partial
 from pathlib import Path
 from typing import Any
@@ -32,7 +41,12 @@ from typing import Any
 import casadi as ca
 import numpy as np
 
+from hexapod.exceptions import LayoutError
+
 log = logging.getLogger(__name__)
+
+#: The compiler flags of a kernel (``-shared -fPIC`` are added).
+DEFAULT_FLAGS = ("-O2", "-fno-math-errno")
 
 _BATCH_WRAPPER = r"""
 #include <stdlib.h>
@@ -55,6 +69,106 @@ int {name}_batch(const casadi_real* x, casadi_real* y, long long n) {{
 """
 
 
+#: A block's shape: a number of values, or the shape of its view (row-major).
+Shape = int | tuple[int, ...]
+
+
+class Layout:
+    """Ordered named blocks of a packed row, each with a shape.
+
+    Declared where a kernel is built, it says where each quantity lies in the kernel's
+    input or output row: the kernel's expression reads its input by name
+    (:meth:`split`) and the callers write and read rows through views by name
+    (:meth:`views`, :meth:`index`), so no caller reads ``row[42:60]`` by hand and a
+    kernel change cannot silently misalign an offset (:class:`CompiledFunction` checks
+    the sizes).
+
+    Args:
+        blocks: ``(name, shape)`` in row order; a shape is a number of values or a tuple
+            (the shape of the block's view, row-major; ``()`` or 1 is one number).
+        name: What the row is (for error messages).
+    """
+
+    def __init__(self, blocks: Sequence[tuple[str, Shape]], name: str = "row") -> None:
+        self.name = name
+        #: Each block's slice of the row.
+        self.slices: dict[str, slice] = {}
+        #: Each block's shape (its view's).
+        self.shapes: dict[str, tuple[int, ...]] = {}
+        k = 0
+        for block, shape in blocks:
+            if block in self.slices:
+                raise LayoutError(name, f"block {block!r} named twice")
+            dims = (shape,) if isinstance(shape, int) else tuple(shape)
+            size = int(np.prod(dims, dtype=int))
+            if size < 0 or any(d < 0 for d in dims):
+                raise LayoutError(name, f"block {block!r}: negative shape {shape}")
+            self.slices[block] = slice(k, k + size)
+            self.shapes[block] = dims
+            k += size
+        #: Number of values in a row.
+        self.size = k
+
+    def __repr__(self) -> str:
+        blocks = ", ".join(f"{b}{list(s) if len(s) != 1 else s[0]}" for b, s in self.shapes.items())
+        return f"Layout({self.name}: {blocks}; {self.size})"
+
+    def __contains__(self, block: object) -> bool:
+        return block in self.slices
+
+    def __iter__(self) -> Iterator[str]:
+        return iter(self.slices)
+
+    def __getitem__(self, block: str) -> slice:
+        """The slice of ``block``."""
+        try:
+            return self.slices[block]
+        except KeyError:
+            raise LayoutError(self.name, f"no block {block!r} (blocks: "
+                              f"{', '.join(self.slices)})") from None
+
+    def index(self, block: str) -> int:
+        """The position of a one-number block."""
+        s = self[block]
+        if s.stop - s.start != 1:
+            raise LayoutError(self.name, f"block {block!r} holds {s.stop - s.start} numbers, "
+                              "not one")
+        return s.start
+
+    def extended(self, blocks: Sequence[tuple[str, Shape]], name: str | None = None) -> Layout:
+        """This layout with ``blocks`` appended."""
+        return Layout([*((b, self.shapes[b]) for b in self.slices), *blocks],
+                      self.name if name is None else name)
+
+    def view(self, row: np.ndarray, block: str) -> np.ndarray:
+        """The view of ``block`` in ``row`` (..., :attr:`size`), shaped as declared (a
+        one-number block of shape 1 is a (1,) view; of shape ``()`` a 0-d view)."""
+        if row.shape[-1] != self.size or row.strides[-1] != row.itemsize:
+            raise LayoutError(self.name, f"a row of {row.shape[-1]} numbers (stride "
+                              f"{row.strides[-1]} bytes): the layout has {self.size}, "
+                              "contiguous")
+        # the last axis is contiguous: splitting a block of it is a view, never a copy
+        return row[..., self[block]].reshape(*row.shape[:-1], *self.shapes[block])
+
+    def views(self, row: np.ndarray) -> dict[str, np.ndarray]:
+        """Every block's :meth:`view` of ``row`` (write into them to fill the row)."""
+        return {block: self.view(row, block) for block in self.slices}
+
+    def split(self, v: Any) -> dict[str, Any]:
+        """The pieces of a symbolic (or numeric) vector ``v`` (:attr:`size`, 1) by block
+        (flat columns)."""
+        if v.shape[0] != self.size:
+            raise LayoutError(self.name, f"a vector of {v.shape[0]} numbers, the layout "
+                              f"has {self.size}")
+        return {block: v[s] for block, s in self.slices.items()}
+
+    def check(self, size: int, function: str, which: str) -> None:
+        """Raise :class:`LayoutError` unless the layout has ``size`` numbers."""
+        if size != self.size:
+            raise LayoutError(function, f"{which} layout {self!r} has {self.size} numbers, "
+                              f"the function's {which} has {size}")
+
+
 class CompilationError(OSError):
     """The C code of a CasADi function could not be compiled or loaded."""
 
@@ -68,8 +182,9 @@ def cache_dir() -> Path:
     return Path(os.environ.get("HEXAPOD_CACHE_DIR", Path.home() / ".cache" / "hexapod-vs"))
 
 
-def build_shared_library(name: str, code: str, flags: tuple[str, ...] = ("-O2",)) -> Path:
-    """Compile C source to a shared library once, cached under the hash of the source.
+def build_shared_library(name: str, code: str | Callable[[], str],
+                         flags: tuple[str, ...] = ("-O2",), key: str | None = None) -> Path:
+    """Compile C source to a shared library once, cached under the hash of its key.
 
     The library is written to :func:`cache_dir` as ``{name}_{hash}.so``. Processes that
     need the same library at once take turns on ``{name}_{hash}.lock`` (an advisory lock),
@@ -79,8 +194,11 @@ def build_shared_library(name: str, code: str, flags: tuple[str, ...] = ("-O2",)
 
     Args:
         name: A C identifier-like name for the files.
-        code: The complete C translation unit.
+        code: The complete C translation unit, or a function generating it (called only
+            when the library is missing).
         flags: Compiler flags (``-shared -fPIC`` are added).
+        key: What identifies the code (default: the code itself); it must change
+            whenever the code would.
 
     Returns:
         The path of the shared library.
@@ -89,16 +207,19 @@ def build_shared_library(name: str, code: str, flags: tuple[str, ...] = ("-O2",)
         CompilationError: No compiler (``$CC``, default ``cc``).
         subprocess.CalledProcessError: The compiler failed (its stderr is attached).
     """
+    if key is None:
+        code = code if isinstance(code, str) else code()
+        key = code
     cc = os.environ.get("CC", "cc")
     if shutil.which(cc) is None:
         raise CompilationError(f"no C compiler '{cc}'")
     cache = cache_dir()
-    cache.mkdir(parents=True, exist_ok=True)
-    key = code + platform.machine() + " ".join(flags)
-    digest = hashlib.sha256(key.encode()).hexdigest()[:16]
+    digest = hashlib.sha256((key + platform.machine() + " ".join(flags)).encode()
+                            ).hexdigest()[:16]
     lib_path = cache / f"{name}_{digest}.so"
     if lib_path.exists():
         return lib_path
+    cache.mkdir(parents=True, exist_ok=True)
     # one compiler per kernel: a process that finds another compiling it waits for the
     # library instead of compiling it again (test workers, process pools, warm)
     with open(cache / f"{name}_{digest}.lock", "a") as lock:
@@ -112,7 +233,7 @@ def build_shared_library(name: str, code: str, flags: tuple[str, ...] = ("-O2",)
                         "cached in %s)", cache)
         log.info("compiling %s (C, cached in %s)", name, cache)
         src = cache / f"{name}_{digest}.{os.getpid()}.c"
-        src.write_text(code)
+        src.write_text(code if isinstance(code, str) else code())
         tmp_lib = cache / f"{name}_{digest}.{os.getpid()}.so"
         try:
             subprocess.run([cc, *flags, "-shared", "-fPIC", str(src), "-o", str(tmp_lib)],
@@ -124,6 +245,19 @@ def build_shared_library(name: str, code: str, flags: tuple[str, ...] = ("-O2",)
     return lib_path
 
 
+def generated_code(function: ca.Function) -> str:
+    """CasADi's C code of ``function`` (generated in a temporary directory)."""
+    name = function.name()
+    with tempfile.TemporaryDirectory() as tmp:
+        cwd = os.getcwd()
+        try:
+            os.chdir(tmp)
+            function.generate(f"{name}.c")
+        finally:
+            os.chdir(cwd)
+        return (Path(tmp) / f"{name}.c").read_text()
+
+
 class CompiledFunction:
     """A CasADi function of one vector, compiled to C (CasADi VM fallback).
 
@@ -131,15 +265,30 @@ class CompiledFunction:
         function: ``ca.Function`` with one dense input (n_in,) and one dense output (n_out,).
         compile: Generate and compile the C code (False: the CasADi virtual machine
             evaluates the function, by choice, without a warning).
+        inputs: The layout of the input row (default: one block ``"x"``).
+        outputs: The layout of the output row (default: one block ``"y"``).
+        flags: Compiler flags (``-shared -fPIC`` are added).
+        preload: Shared libraries the generated code links against, loaded with global
+            symbols before it (e.g. a QP solver's).
+
+    Raises:
+        LayoutError: A layout's size is not the function's input's or output's.
     """
 
-    def __init__(self, function: ca.Function, compile: bool = True) -> None:
+    def __init__(self, function: ca.Function, compile: bool = True,
+                 inputs: Layout | None = None, outputs: Layout | None = None,
+                 flags: tuple[str, ...] = DEFAULT_FLAGS, preload: Sequence[Path] = ()) -> None:
         if function.n_in() != 1 or function.n_out() != 1:
             raise ValueError("CompiledFunction needs exactly one input and one output")
         self.function = function
         self.name = function.name()
         self.n_in = int(function.nnz_in(0))
         self.n_out = int(function.nnz_out(0))
+        #: Where each named quantity lies in an input row and in an output row.
+        self.inputs = inputs if inputs is not None else Layout([("x", self.n_in)], "input")
+        self.outputs = outputs if outputs is not None else Layout([("y", self.n_out)], "output")
+        self.inputs.check(self.n_in, self.name, "input")
+        self.outputs.check(self.n_out, self.name, "output")
         self.compiled = False
         #: The C entry point ``f(arg, res, iw, w, mem)`` (None without compilation).
         self.entry: Any = None
@@ -149,26 +298,34 @@ class CompiledFunction:
         if not compile:
             return
         try:
-            self._compile()
+            self._compile(flags, preload)
         except (OSError, subprocess.SubprocessError) as exc:
             log.warning("%s: C compilation unavailable (%s); using the CasADi virtual machine",
                         self.name, exc)
 
-    def _compile(self) -> None:
-        with tempfile.TemporaryDirectory() as tmp:
-            cwd = os.getcwd()
-            try:
-                os.chdir(tmp)
-                self.function.generate(f"{self.name}.c")
-            finally:
-                os.chdir(cwd)
-            code = (Path(tmp) / f"{self.name}.c").read_text()
-        code += _BATCH_WRAPPER.format(name=self.name, n_in=self.n_in, n_out=self.n_out)
-        lib_path = build_shared_library(self.name, code, ("-O2", "-fno-math-errno"))
+    def cache_key(self) -> str:
+        """What identifies the library: CasADi's version, the serialized function and the C
+        wrapper (no code generation; the flags and the machine are added by
+        :func:`build_shared_library`)."""
+        return "\n".join((ca.CasadiMeta.version(), self.function.serialize(), self._wrapper()))
+
+    def _wrapper(self) -> str:
+        return _BATCH_WRAPPER.format(name=self.name, n_in=self.n_in, n_out=self.n_out)
+
+    def _compile(self, flags: tuple[str, ...], preload: Sequence[Path]) -> None:
+        self._preloaded = [ctypes.CDLL(str(path), mode=ctypes.RTLD_GLOBAL) for path in preload]
+        lib_path = build_shared_library(
+            self.name, lambda: generated_code(self.function) + self._wrapper(), flags,
+            key=self.cache_key())
         lib = ctypes.CDLL(str(lib_path))
         n_arg, n_res, n_iw, n_w = (ctypes.c_longlong() for _ in range(4))
         getattr(lib, f"{self.name}_work")(ctypes.byref(n_arg), ctypes.byref(n_res),
                                           ctypes.byref(n_iw), ctypes.byref(n_w))
+        alloc = getattr(lib, f"{self.name}_alloc_mem", None)
+        init = getattr(lib, f"{self.name}_init_mem", None)
+        if alloc is not None and init is not None:  # memory slot 0 (a QP solver's)
+            alloc.restype = ctypes.c_int
+            init(alloc())
         single = getattr(lib, self.name)
         single.argtypes = [ctypes.c_void_p] * 4 + [ctypes.c_int]
         single.restype = ctypes.c_int
@@ -230,8 +387,9 @@ class BoundCall:
 
     ``call()`` returns 0 on success and a nonzero flag when the C function fails (check
     it). Its own work arrays make bindings independent of each other and of
-    :meth:`CompiledFunction.single`. A deep copy is a new binding with copies of the
-    buffers.
+    :meth:`CompiledFunction.single`. :attr:`inputs` and :attr:`outputs` are their views by
+    block (the function's :class:`Layout`). A deep copy is a new binding with copies of
+    the buffers.
 
     Args:
         function: The compiled function (or its CasADi virtual-machine fallback).
@@ -241,6 +399,9 @@ class BoundCall:
         self.function = function
         self.x = np.zeros(function.n_in)
         self.y = np.zeros(function.n_out)
+        #: Views of :attr:`x` and :attr:`y` by block (the function's layouts).
+        self.inputs = function.inputs.views(self.x)
+        self.outputs = function.outputs.views(self.y)
         self.call: Callable[[], int]
         if function.entry is None:  # the CasADi virtual machine: same results, slower
             def evaluate() -> int:

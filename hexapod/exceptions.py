@@ -172,6 +172,21 @@ class ShapeError(HexapodError, ValueError):
         super().__init__(f"{name}: expected {expected}, got {got}")
 
 
+class LayoutError(HexapodError, ValueError):
+    """A packed row's layout does not fit the compiled function it describes, or a
+    block of it is misused.
+
+    Attributes:
+        function: The compiled function's name.
+        problem: What does not fit (sizes, the block's name).
+    """
+
+    def __init__(self, function: str, problem: str) -> None:
+        self.function = function
+        self.problem = problem
+        super().__init__(f"{function}: {problem}")
+
+
 class BackendError(HexapodError):
     """A robot backend failed (communication, protocol or robot error)."""
 

@@ -25,7 +25,7 @@ import casadi as ca
 import numpy as np
 import pinocchio as pin
 
-from hexapod.compiled import CompiledFunction
+from hexapod.compiled import CompiledFunction, Layout
 from hexapod.exceptions import ForwardKinematicsError, ShapeError, StrokeLimitError
 from hexapod.geometry import HexapodGeometry
 from hexapod.model import HexapodModel, build_model, constraint_residual_and_jacobian
@@ -35,6 +35,16 @@ log = logging.getLogger(__name__)
 
 #: Newton iterations unrolled in one call of the compiled CasADi function.
 ITERATIONS_PER_CALL = 3
+#: The Newton steps' input row: the guess ``R`` (column-major: the block's (3, 3) view is
+#: ``R^T``) and ``t`` [m], the lengths ``q`` [m], the base and platform points (6 x 3) [m].
+NEWTON_INPUTS = Layout([("R", (3, 3)), ("t", 3), ("q", 6), ("A", (6, 3)), ("E", (6, 3))],
+                       "forward-kinematics Newton input")
+#: Its output row: ``R`` (column-major) and ``t`` after the steps, the length residual.
+NEWTON_OUTPUTS = Layout([("R", (3, 3)), ("t", 3), ("residual", 6)],
+                        "forward-kinematics Newton output")
+#: The pose (``R`` then ``t``: the same slice in and out), each output block's slice.
+_POSE = slice(NEWTON_INPUTS["R"].start, NEWTON_INPUTS["t"].stop)
+_R_OUT, _T_OUT, _RESIDUAL = (NEWTON_OUTPUTS[k] for k in ("R", "t", "residual"))
 
 Method = Literal["newton", "pinocchio"]
 
@@ -90,12 +100,13 @@ def _newton_expression() -> ca.Function:
     of R; each step solves ``J step = -(lengths - q)`` with the 6x6 inverse
     Jacobian of the current estimate.
     """
-    x = ca.SX.sym("x", 54)
-    R = ca.reshape(x[0:9], 3, 3)
-    t = x[9:12]
-    q = x[12:18]
-    A = ca.reshape(x[18:36], 3, 6)
-    E = ca.reshape(x[36:54], 3, 6)
+    x = ca.SX.sym("x", NEWTON_INPUTS.size)
+    v = NEWTON_INPUTS.split(x)
+    R = ca.reshape(v["R"], 3, 3)
+    t = v["t"]
+    q = v["q"]
+    A = ca.reshape(v["A"], 3, 6)
+    E = ca.reshape(v["E"], 3, 6)
 
     def lengths_and_jacobian(R: ca.SX, t: ca.SX) -> tuple[ca.SX, ca.SX]:
         rows, lens = [], []
@@ -132,22 +143,25 @@ def newton_function() -> ca.Function:
 @lru_cache(maxsize=1)
 def newton_kernel() -> CompiledFunction:
     """The Newton steps compiled to C (see :mod:`hexapod.compiled`)."""
-    return CompiledFunction(_newton_expression())
+    return CompiledFunction(_newton_expression(), inputs=NEWTON_INPUTS, outputs=NEWTON_OUTPUTS)
 
 
 def _pack(R: np.ndarray, t: np.ndarray, q: np.ndarray, A: np.ndarray, E: np.ndarray
           ) -> np.ndarray:
-    """Pack batched inputs (N, ...) into rows of the CasADi input layout (N, 54)."""
-    n = q.shape[0]
-    return np.concatenate(
-        [np.swapaxes(R, -1, -2).reshape(n, 9), t.reshape(n, 3), q.reshape(n, 6),
-         np.broadcast_to(A, (n, 6, 3)).reshape(n, 18),
-         np.broadcast_to(E, (n, 6, 3)).reshape(n, 18)], axis=1)
+    """Pack batched inputs (N, ...) into rows of :data:`NEWTON_INPUTS` (N, 54)."""
+    x = np.empty((q.shape[0], NEWTON_INPUTS.size))
+    v = NEWTON_INPUTS.views(x)
+    v["R"][:] = np.swapaxes(R, -1, -2)  # (a column-major block: its view is R^T)
+    v["t"][:] = t
+    v["q"][:] = q
+    v["A"][:] = A
+    v["E"][:] = E
+    return x
 
 
 def _unpack(y: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    n = y.shape[0]
-    return np.swapaxes(y[:, :9].reshape(n, 3, 3), -1, -2), y[:, 9:12], y[:, 12:18]
+    v = NEWTON_OUTPUTS.views(y)
+    return np.swapaxes(v["R"], -1, -2), v["t"], v["residual"]
 
 
 def _check_lengths(geometry: HexapodGeometry, lengths: np.ndarray, check_stroke: bool) -> None:
@@ -216,23 +230,25 @@ def forward_kinematics(
 def _fk_newton(geometry: HexapodGeometry, q: np.ndarray, R: np.ndarray, t: np.ndarray,
                tol: float, max_iterations: int) -> ForwardKinematicsResult:
     newton = newton_kernel()
-    x = np.empty(54)
-    x[0:9] = R.T.ravel()
-    x[9:12] = t
-    x[12:18] = q
-    x[18:36] = geometry.base_points.ravel()
-    x[36:54] = geometry.platform_points.ravel()
+    at = NEWTON_INPUTS.slices
+    x = np.empty(NEWTON_INPUTS.size)
+    x[at["R"]] = R.T.ravel()  # (column-major)
+    x[at["t"]] = t
+    x[at["q"]] = q
+    x[at["A"]] = geometry.base_points.ravel()
+    x[at["E"]] = geometry.platform_points.ravel()
     it = 0
     res = np.inf
-    while it < max_iterations:
+    while it < max_iterations:  # (slices looked up once: a pose servo's hot loop)
         y = newton.single(x)
         it += ITERATIONS_PER_CALL
-        res = float(np.abs(y[12:18]).max())
+        res = float(np.abs(y[_RESIDUAL]).max())
         if not np.isfinite(res):
             raise ForwardKinematicsError("newton", res, it, "singular Jacobian on the way")
         if res < tol:
-            return ForwardKinematicsResult(y[0:9].reshape(3, 3).T, y[9:12], it, res, "newton")
-        x[:12] = y[:12]
+            return ForwardKinematicsResult(y[_R_OUT].reshape(3, 3).T, y[_T_OUT], it, res,
+                                           "newton")
+        x[_POSE] = y[_POSE]
     raise ForwardKinematicsError("newton", res, it, "no convergence within the iteration budget")
 
 
@@ -280,8 +296,17 @@ def pack_rows(R: np.ndarray, t: np.ndarray, q: np.ndarray, A: np.ndarray, E: np.
     """The (N, 54) input rows of :func:`solve_rows`: guesses ``R`` (N, 3, 3) and ``t``
     (N, 3) [m], lengths ``q`` (N, 6) [m], base and platform points ``A``, ``E`` ((6, 3)
     or (N, 6, 3)) [m]. A caller that solves the same robots again and again packs once
-    and rewrites the first 18 columns (``R`` transposed, ``t``, ``q``)."""
+    and rewrites the guesses and lengths (:func:`set_guesses`)."""
     return _pack(R, t, q, A, E)
+
+
+def set_guesses(x: np.ndarray, R: np.ndarray, t: np.ndarray, q: np.ndarray) -> None:
+    """Rewrite the guesses ``R`` (n, 3, 3), ``t`` (n, 3) [m] and the lengths ``q`` (n, 6)
+    [m] of packed rows ``x`` (n, 54) (:func:`pack_rows`) in place."""
+    v = NEWTON_INPUTS.views(x)
+    v["R"][:] = np.swapaxes(R, -1, -2)
+    v["t"][:] = t
+    v["q"][:] = q
 
 
 def solve_rows(x: np.ndarray, tol: float = 1e-12, max_iterations: int = 30
@@ -293,16 +318,17 @@ def solve_rows(x: np.ndarray, tol: float = 1e-12, max_iterations: int = 30
     it = 0
     res = np.full(n, np.inf)
     active = np.arange(n)
-    y_all = np.empty((n, 18))
-    y_all[:, :12] = x[:, :12]
-    y_all[:, 12:] = np.inf
+    pose, residual = _POSE, _RESIDUAL
+    y_all = np.empty((n, NEWTON_OUTPUTS.size))
+    y_all[:, pose] = x[:, pose]
+    y_all[:, residual] = np.inf
     while it < max_iterations and len(active):
         y = newton.batch(x if len(active) == n else x[active])
         it += ITERATIONS_PER_CALL
         y_all[active] = y
-        r = np.max(np.abs(y[:, 12:18]), axis=1)
+        r = np.max(np.abs(y[:, residual]), axis=1)
         res[active] = r
-        x[active, :12] = y[:, :12]
+        x[active, pose] = y[:, pose]
         keep = np.isfinite(r) & (r >= tol)
         active = active[keep]
     rot, trans, _ = _unpack(y_all)

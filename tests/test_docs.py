@@ -12,6 +12,8 @@ import subprocess
 import sys
 from pathlib import Path
 
+import pytest
+
 ROOT = Path(__file__).resolve().parents[1]
 SOURCE = ROOT / "docs" / "api"
 
@@ -29,6 +31,7 @@ EXPECTED = (
 )
 
 
+@pytest.mark.slow
 def test_api_reference_builds_without_warnings(tmp_path: Path) -> None:
     assert importlib.util.find_spec("sphinx") is not None, (
         "Sphinx is not installed in this environment: it is a 'dev' extra "

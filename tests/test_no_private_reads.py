@@ -109,6 +109,7 @@ class A:
         "from m import _hidden", "t._kernel", "getattr(t, '_y', None)"]
 
 
+@pytest.mark.slow
 def test_no_module_reads_another_objects_private_attributes() -> None:
     used: set[tuple[str, str]] = set()
     bad = []

@@ -37,7 +37,7 @@ import numpy as np
 from benchmarks.sim.inputs import SimScenario
 from benchmarks.sim.world import TrialSetup, trial_rng
 from controllers.base import ObservationBatch
-from hexapod.fk import pack_rows, solve_rows
+from hexapod.fk import pack_rows, set_guesses, solve_rows
 
 #: The random stream of a trial's frame-time jitter.
 JITTER_STREAM = 5
@@ -186,9 +186,7 @@ class CameraClock:
         if between.any():
             j = np.flatnonzero(between)
             x = self._rows[rows[j]]
-            x[:, 0:9] = np.swapaxes(R[j], -1, -2).reshape(-1, 9)
-            x[:, 9:12] = t[j]
-            x[:, 12:18] = q0[j] + frac[j, None] * (q1[j] - q0[j])
+            set_guesses(x, R[j], t[j], q0[j] + frac[j, None] * (q1[j] - q0[j]))
             sol = solve_rows(x)
             ok = sol.converged  # a failure keeps the earlier instant's pose
             R[j[ok]] = sol.rotations[ok]

@@ -29,7 +29,7 @@ import numpy as np
 
 from hexapod.actuation import Actuation
 from hexapod.backends.base import Backend, clamp_velocities
-from hexapod.fk import pack_rows, solve_rows
+from hexapod.fk import pack_rows, set_guesses, solve_rows
 
 log = logging.getLogger(__name__)
 
@@ -118,9 +118,7 @@ class KinematicPlant:
         """Set the poses of ``run`` to the forward kinematics of their lengths, warm-started
         at their poses; returns the (n,) mask of rows where it failed (pose kept)."""
         x = self._rows[run]
-        x[:, 0:9] = np.swapaxes(self.R[run], -1, -2).reshape(-1, 9)
-        x[:, 9:12] = self.t[run]
-        x[:, 12:18] = self.q[run]
+        set_guesses(x, self.R[run], self.t[run], self.q[run])
         sol = solve_rows(x)
         bad = ~sol.converged
         okk = run[~bad]

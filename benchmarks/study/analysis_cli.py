@@ -25,10 +25,19 @@ def cmd_export(args: argparse.Namespace) -> int:
     return 0
 
 
+def _num(v: float, spec: str) -> str:
+    """A value, ``censored`` for an infinite one (steps of trials that did not converge)."""
+    if v is None or v != v:
+        return "-"
+    if v in (float("inf"), float("-inf")):
+        return "censored" if v > 0 else "-censored"
+    return format(v, spec)
+
+
 def _fmt_value(c: Any, v: float) -> str:
     if v is None or v != v:
         return "-"
-    return f"{100 * v:.1f} %" if c.metric == "converged" else f"{v:.4g}"
+    return f"{100 * v:.1f} %" if c.metric == "converged" else _num(v, ".4g")
 
 
 def _fmt_diff(c: Any) -> str:
@@ -37,7 +46,44 @@ def _fmt_diff(c: Any) -> str:
         return "-"
     if c.metric == "converged":
         return f"{100 * c.difference:+.1f} [{100 * lo:+.1f}, {100 * hi:+.1f}] pts"
-    return f"{c.difference:+.3g} [{lo:+.3g}, {hi:+.3g}]"
+    return f"{_num(c.difference, '+.3g')} [{_num(lo, '+.3g')}, {_num(hi, '+.3g')}]"
+
+
+def _fmt_verdict(c: Any, runs: tuple[str, str] | None) -> str:
+    """The table's verdict cell: who is better, equivalent within the margin, or ``-``
+    (not shown different, not shown equivalent)."""
+    from benchmarks.study.compare import margin_text
+
+    if c.better is not None:
+        if runs is None:
+            return f"{c.better} better"
+        return f"{runs[0] if c.better == c.a else runs[1]} better"
+    if c.outcome == "equivalent":
+        return f"equivalent {margin_text(c)}"
+    return "-"
+
+
+def parse_margins(items: list[str] | None) -> dict[str, float]:
+    """``--margin NAME=VALUE`` options as margins by metric (``converged`` given in
+    percentage points, returned as a fraction).
+
+    Raises:
+        BenchmarkError: An item that is not ``NAME=NUMBER``.
+    """
+    from benchmarks.exceptions import BenchmarkError
+
+    out: dict[str, float] = {}
+    for item in items or []:
+        name, sep, value = item.partition("=")
+        try:
+            number = float(value)
+        except ValueError:
+            number = float("nan")
+        if not sep or not name or number != number:
+            raise BenchmarkError(f"--margin {item!r}: expected NAME=NUMBER, e.g. "
+                                 "final_error=0.01 (mm) or converged=5 (points)")
+        out[name] = number / 100 if name == "converged" else number
+    return out
 
 
 def print_comparisons(comparisons: list[Any], title: str,
@@ -54,27 +100,28 @@ def print_comparisons(comparisons: list[Any], title: str,
     """
     from benchmarks.study.commands import console
     from benchmarks.study.compare import ALPHA
+    from benchmarks.study.exact import format_p
     from benchmarks.study.fit_table import print_table
 
     con = console()
     if runs is None:
         header = ["scenario", "sweep", "a", "b", "metric", "n", "a's value", "b's value",
-                  "a - b [95 % CI]", "test", "p", "p Holm", "verdict"]
+                  "a - b [95 % CI]", "test", "p", "p Holm", "TOST p Holm", "verdict"]
         keys: tuple[int, ...] = (0, 1, 2, 3, 4)
         rows = [[c.scenario, c.sweep, c.a, c.b, c.metric, str(c.n), _fmt_value(c, c.a_value),
-                 _fmt_value(c, c.b_value), _fmt_diff(c), c.test, f"{c.p_value:.3g}",
-                 f"{c.p_holm:.3g}", "-" if c.better is None else f"{c.better} better"]
+                 _fmt_value(c, c.b_value), _fmt_diff(c), c.test, format_p(c.p_value),
+                 format_p(c.p_holm), format_p(c.p_equivalence_holm), _fmt_verdict(c, None)]
                 for c in comparisons]
     else:
         name_b, name_a = runs
         header = ["scenario", "sweep", "controller", "metric", "n", name_b, name_a,
-                  f"{name_b} - {name_a} [95 % CI]", "test", "p", "p Holm", "verdict"]
+                  f"{name_b} - {name_a} [95 % CI]", "test", "p", "p Holm", "TOST p Holm",
+                  "verdict"]
         keys = (0, 1, 2, 3)
         rows = [[c.scenario, c.sweep, c.a.split(":", 1)[-1], c.metric, str(c.n),
                  _fmt_value(c, c.a_value), _fmt_value(c, c.b_value), _fmt_diff(c), c.test,
-                 f"{c.p_value:.3g}", f"{c.p_holm:.3g}",
-                 "-" if c.better is None
-                 else f"{name_b if c.better == c.a else name_a} better"]
+                 format_p(c.p_value), format_p(c.p_holm), format_p(c.p_equivalence_holm),
+                 _fmt_verdict(c, runs)]
                 for c in comparisons]
     print_table(con, title, header, rows, keys=keys, left=(*keys, len(header) - 1),
                 escape_cells=True, wrap=(1,))  # sweeps and intervals hold brackets
@@ -86,6 +133,18 @@ def print_comparisons(comparisons: list[Any], title: str,
         con.print(f"- {where}: {c.verdict}", markup=False, highlight=False)
     if not significant:
         con.print("- none: no difference between these controllers is significant")
+    equivalent = [c for c in comparisons if c.outcome == "equivalent"]
+    open_ = [c for c in comparisons if c.outcome == "not shown equivalent"]
+    con.print(f"Equivalent within their margins (TOST at {100 * ALPHA:.0f} % after Holm's "
+              f"correction; {len(equivalent)} of {len(comparisons)} comparisons):")
+    for c in equivalent:
+        where = f"{c.scenario}" + (f" [{c.sweep}]" if c.sweep != "-" else "")
+        con.print(f"- {where}: {c.verdict}", markup=False, highlight=False)
+    if not equivalent:
+        con.print("- none")
+    con.print(f"Neither shown different nor shown equivalent: {len(open_)} of "
+              f"{len(comparisons)} comparisons (no conclusion: more trials, or a wider "
+              "margin with --margin NAME=VALUE)")
 
 
 def run_names(dir_a: str, dir_b: str) -> tuple[str, str]:
@@ -107,10 +166,11 @@ def cmd_compare(args: argparse.Namespace) -> int:
     if args.json:
         check_replace(args.json, args.overwrite)  # before the work
     metrics = tuple(args.metric) if args.metric else None  # None: the task's
+    margins = parse_margins(args.margin)
     status = 0
     if len(args.dirs) == 1:
         df = load(args.dirs[0])
-        comparisons = compare_controllers(df, args.baseline, metrics)
+        comparisons = compare_controllers(df, args.baseline, metrics, margins)
         print_comparisons(comparisons, f"Paired comparisons ({args.dirs[0]}, "
                                        f"{len(df)} trials)")
         extra: list[dict[str, Any]] = []
@@ -122,7 +182,8 @@ def cmd_compare(args: argparse.Namespace) -> int:
                                  "runs every controller is compared with itself")
         dir_a, dir_b = args.dirs
         df_a, df_b = load(dir_a), load(dir_b)
-        comparisons, different, matched = compare_runs(df_a, df_b, "A", "B", metrics)
+        comparisons, different, matched = compare_runs(df_a, df_b, "A", "B", metrics,
+                                                       margins)
         _, only_a, only_b = match_counts(df_a, df_b)
         name_a, name_b = run_names(dir_a, dir_b)
         print_comparisons(comparisons, f"Run B ({dir_b}) against run A ({dir_a}), "
@@ -218,14 +279,17 @@ def add_analysis_commands(sub: argparse._SubParsersAction) -> None:  # type: ign
                                        "between two runs of the same scenarios",
                        description="DIR: every pair of controllers (or each against "
                                    "--baseline) on the trials both ran: McNemar's exact test "
-                                   "on convergence, Wilcoxon's signed-rank test on final "
-                                   "error and steps (a trajectory task: on tracking RMS, "
-                                   "max, settling time, time at a force limit), median "
-                                   "paired difference with its bootstrap interval, Holm's "
-                                   "correction; failed trials left out of all but "
-                                   "convergence. DIR_A DIR_B: the same trials of two runs "
-                                   "matched (the unmatched counted); regressions and rows "
-                                   "that differ listed.")
+                                   "on convergence with Newcombe's interval, Wilcoxon's "
+                                   "signed-rank test on final error (a trajectory task: on "
+                                   "tracking RMS, max, settling time, time at a force limit) "
+                                   "with the median paired difference and its order-"
+                                   "statistic interval, the sign test on steps censored at "
+                                   "the run's length, Holm's correction; equivalence "
+                                   "within a margin by two one-sided tests (TOST); failed "
+                                   "trials left out of all but convergence and steps. "
+                                   "DIR_A DIR_B: the same trials of two runs matched (the "
+                                   "unmatched counted); regressions and rows that differ "
+                                   "listed.")
     s.add_argument("dirs", nargs="+", metavar="DIR", help="one run directory, or two (A B)")
     s.add_argument("--baseline", metavar="NAME", help="compare each controller with this one")
     s.add_argument("--metric", action="append", metavar="NAME",
@@ -234,6 +298,11 @@ def add_analysis_commands(sub: argparse._SubParsersAction) -> None:  # type: ign
                         "(repeatable; default: the task's: converged, final_error, steps "
                         "for a point-to-point task; tracking_rms, tracking_max, settling "
                         "and, in the dynamic world, saturation for a trajectory task)")
+    s.add_argument("--margin", action="append", metavar="NAME=VALUE",
+                   help="equivalence margin of a metric in its unit (repeatable; defaults: "
+                        "converged=5 points, final_error=0.01 mm, orientation_error=0.001 "
+                        "deg, steps=10, tracking_rms=0.01 mm, tracking_max=0.02 mm, "
+                        "settling=0.05 s, saturation=0.05 s)")
     s.add_argument("--json", metavar="FILE", action=OutputFile,
                    help="write the comparisons as JSON")
     s.add_argument("--overwrite", action="store_true",

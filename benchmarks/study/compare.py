@@ -2,12 +2,18 @@
 
 Every controller of a run meets the same trials (same worlds, same draws), so the
 comparison of two controllers is paired: trial ``k`` of one against trial ``k`` of the
-other at the same sweep point. Convergence is compared by McNemar's exact test, the
-continuous metrics (final errors; steps, on the trials both converged) by Wilcoxon's
-signed-rank test with the median paired difference and its bootstrap interval. Holm's
-correction runs over all the comparisons of one metric (every pair at every sweep
-point): a difference is called significant when its Holm-adjusted p-value is below
-:data:`ALPHA`.
+other at the same sweep point. Convergence is compared by McNemar's exact test with
+Newcombe's paired interval of the rate difference, the continuous metrics (final
+errors, tracking) by Wilcoxon's signed-rank test with the median paired difference and
+its order-statistic interval, the steps to converge as censored data (a trial that did
+not converge is censored at the run's length) by the sign test on the pairs whose order
+is known. Holm's correction runs over all the comparisons of one metric (every pair at
+every sweep point): a difference is called significant when its Holm-adjusted p-value
+is below :data:`ALPHA`. "No difference" is never concluded from a test that found
+none: two controllers are *equivalent within M* only when the two one-sided tests
+(TOST, on the paired differences; :data:`MARGINS` per metric, Holm-corrected over the
+metric's comparisons too) reject a difference of M or more; otherwise they are *not
+shown equivalent*.
 
 Between two runs (before and after a change, two machines, two library versions) the
 trials are matched by (scenario, sweep point, controller, trial); a significant
@@ -23,13 +29,20 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from benchmarks.exceptions import BenchmarkError
-from benchmarks.study import stats
+from benchmarks.study import exact, stats
+from benchmarks.study.verdicts import (
+    ALPHA,
+    MARGINS,
+    holm_and_verdicts,
+    margin_text,
+    resolve_margins,
+)
 
 if TYPE_CHECKING:
     import pandas as pd
 
-#: Significance level of the verdicts (after Holm's correction).
-ALPHA = 0.05
+__all__ = ["ALPHA", "MARGINS", "Comparison", "compare_controllers", "compare_runs",
+           "margin_text", "resolve_margins"]
 
 #: ``--metric`` names -> (column, unit, higher is better).
 METRICS: dict[str, tuple[str, str, bool]] = {
@@ -46,6 +59,9 @@ METRICS: dict[str, tuple[str, str, bool]] = {
 DEFAULT_METRICS = ("converged", "final_error", "steps")
 #: Default metrics of a trajectory task (``saturation``: in the dynamic world).
 TRACKING_METRICS = ("tracking_rms", "tracking_max", "settling", "saturation")
+#: Metrics compared as censored data (a trial that did not converge or settle is known
+#: only to exceed the run): steps to converge, settling time.
+CENSORED = ("steps", "settling")
 KEY = ["scenario", "point", "controller", "trial"]
 #: Columns compared by the determinism check of two runs.
 OUTCOME_COLUMNS = ("converged", "steps", "final_position_error_mm",
@@ -64,17 +80,23 @@ class Comparison:
         b: Second controller (two runs: ``A:controller``).
         metric: ``converged``, ``final_error``, ``steps``... or a column name.
         column: The row column compared.
-        test: ``mcnemar-exact`` or ``wilcoxon``.
+        test: ``mcnemar-exact``, ``wilcoxon`` or ``sign-censored`` (steps).
         n: Pairs used.
         statistic: The test's statistic.
         p_value: Two-sided p-value.
         p_holm: Holm-adjusted p-value over the comparisons of the metric.
-        difference: Rate difference (converged) or median paired difference.
-        interval: Its 95 % bootstrap interval.
+        difference: Rate difference (converged) or median paired difference (steps:
+            ``+-inf`` for a pair where only one converged).
+        interval: Its 95 % interval (Newcombe's; order statistics).
         a_value: ``a``'s rate or median over the pairs.
         b_value: ``b``'s rate or median over the pairs.
         better: ``a``, ``b`` or None (not significant).
         verdict: The result in plain words.
+        margin: The equivalence margin (the metric's unit; None: no margin known).
+        p_equivalence: TOST p-value (nan without a margin).
+        p_equivalence_holm: Its Holm-adjusted value over the metric's comparisons.
+        outcome: ``different``, ``equivalent`` (within the margin, not different) or
+            ``not shown equivalent``.
     """
 
     scenario: str
@@ -97,6 +119,10 @@ class Comparison:
     verdict: str = ""
     direction: int = 0
     discordant: tuple[int, int] | None = None
+    margin: float | None = None
+    p_equivalence: float = float("nan")
+    p_equivalence_holm: float = float("nan")
+    outcome: str = ""
     unit: str = field(default="", repr=False)
 
     def to_json(self) -> dict[str, Any]:
@@ -169,40 +195,91 @@ def _sweep_text(df: pd.DataFrame) -> dict[tuple[str, int], str]:
     return out
 
 
+def censor_steps(steps: np.ndarray, converged: np.ndarray) -> np.ndarray:
+    """Steps to converge, ``+inf`` for a trial that did not (a failed trial included:
+    it counts as not converged), so that only its order is used."""
+    return np.where(np.asarray(converged, dtype=bool), np.asarray(steps, dtype=float), np.inf)
+
+
 def _values(frame: pd.DataFrame, column: str, metric: str) -> pd.DataFrame:
-    """Trials x controllers of one (scenario, point); steps only where converged; a
-    failed trial (:func:`failed_mask`) has no value but its convergence (a failure)."""
+    """Trials x controllers of one (scenario, point); steps censored (``+inf``) where
+    not converged; a failed trial (:func:`failed_mask`) has no value but its
+    convergence (a failure) and its censored steps."""
     sub = frame[["trial", "controller", column]].copy()
     if metric == "steps":
-        sub[column] = sub[column].where(frame["converged"].astype(bool))
-    if metric != "converged":
+        sub[column] = censor_steps(sub[column].to_numpy(dtype=float),
+                                   frame["converged"].fillna(False).to_numpy(dtype=bool))
+    elif metric == "settling":  # not settled, or failed: censored at the run's end
+        settled = sub[column].notna().to_numpy() & ~failed_mask(frame).to_numpy()
+        sub[column] = censor_steps(sub[column].to_numpy(dtype=float), settled)
+    elif metric != "converged":
         sub[column] = sub[column].where(~failed_mask(frame))
     return sub.pivot(index="trial", columns="controller", values=column)
+
+
+def censored_sign_test(x: np.ndarray, y: np.ndarray) -> stats.TestResult:
+    """Paired steps to converge with censoring (``+inf``: did not converge): the exact
+    sign test on the pairs whose order is known (both converged, or one did: it was the
+    faster), the pairs where neither converged left out; the median of the paired
+    differences (``+-inf`` where one did not converge) with its order-statistic
+    interval."""
+    ok = ~(np.isnan(x) | np.isnan(y))
+    d = x[ok] - y[ok]
+    d = d[~np.isnan(d)]  # neither converged: the order is unknown
+    pos, neg, p = exact.sign_test(d)
+    if d.size == 0:
+        return stats.TestResult("sign-censored", 0, 0.0, 1.0, float("nan"), float("nan"),
+                                float("nan"), (0, 0), 0)
+    low, high = exact.quantile_interval(d, 0.5)
+    with np.errstate(invalid="ignore"):  # -inf and +inf in the middle: unknown, nan
+        med = float(np.quantile(d, 0.5))
+    return stats.TestResult("sign-censored", int(d.size), float(pos), p, med, low, high,
+                            (pos, neg),
+                            int(np.sign(pos - neg)))
 
 
 def _test(x: np.ndarray, y: np.ndarray, metric: str) -> stats.TestResult:
     if metric == "converged":
         ok = ~(np.isnan(x) | np.isnan(y))
         return stats.mcnemar_exact(x[ok] > 0.5, y[ok] > 0.5)
+    if metric in CENSORED:
+        return censored_sign_test(x, y)
     return stats.wilcoxon_signed_rank(x, y)
 
 
+def _equivalence(x: np.ndarray, y: np.ndarray, metric: str, margin: float | None) -> float:
+    """TOST p-value of the pairs within ``margin`` (nan without a margin)."""
+    if margin is None:
+        return float("nan")
+    ok = ~(np.isnan(x) | np.isnan(y))
+    if metric == "converged":
+        a, b = x[ok] > 0.5, y[ok] > 0.5
+        return exact.tost_rate(int(np.sum(a & b)), int(np.sum(a & ~b)), int(np.sum(~a & b)),
+                               int(np.sum(~a & ~b)), margin)
+    return exact.tost_paired(x[ok] - y[ok], margin)
+
+
 def _summary_value(x: np.ndarray, y: np.ndarray, metric: str) -> tuple[float, float]:
-    ok = np.isfinite(x) & np.isfinite(y)
+    ok = ~(np.isnan(x) | np.isnan(y))
+    if metric not in CENSORED:
+        ok &= np.isfinite(x) & np.isfinite(y)
     if not ok.any():
         return float("nan"), float("nan")
-    f = np.mean if metric == "converged" else np.median
-    return float(f(x[ok])), float(f(y[ok]))
+    if metric == "converged":
+        return float(np.mean(x[ok])), float(np.mean(y[ok]))
+    return exact.censored_quantile(x[ok], 0.5), exact.censored_quantile(y[ok], 0.5)
 
 
 def _comparison(scenario: str, point: int, sweep: str, a: str, b: str, metric: str,
-                column: str, unit: str, x: np.ndarray, y: np.ndarray) -> Comparison:
+                column: str, unit: str, x: np.ndarray, y: np.ndarray,
+                margin: float | None = None) -> Comparison:
     res = _test(x, y, metric)
     av, bv = _summary_value(x, y, metric)
     return Comparison(scenario, point, sweep, a, b, metric, column, res.test, res.n,
                       res.statistic, res.p_value, float("nan"), res.difference,
                       (res.low, res.high), av, bv, unit=unit, direction=res.direction,
-                      discordant=res.discordant)
+                      discordant=res.discordant, margin=margin,
+                      p_equivalence=_equivalence(x, y, metric, margin))
 
 
 def _metric_plan(df: pd.DataFrame, metrics: tuple[str, ...] | None
@@ -216,7 +293,8 @@ def _metric_plan(df: pd.DataFrame, metrics: tuple[str, ...] | None
 
 
 def compare_controllers(df: pd.DataFrame, baseline: str | None = None,
-                        metrics: tuple[str, ...] | None = None) -> list[Comparison]:
+                        metrics: tuple[str, ...] | None = None,
+                        margins: dict[str, float] | None = None) -> list[Comparison]:
     """Every pair of controllers of a run (or each against ``baseline``), at every sweep
     point, on the trials both ran (the failed trials left out of every metric but
     ``converged``).
@@ -226,6 +304,7 @@ def compare_controllers(df: pd.DataFrame, baseline: str | None = None,
         baseline: Compare every other controller against this one only.
         metrics: Metric names (:data:`METRICS`) or numeric columns; None: each
             scenario's task's (:func:`task_metrics`).
+        margins: Equivalence margins by metric name, over :data:`MARGINS`.
 
     Returns:
         The comparisons, Holm-adjusted per metric, with verdicts.
@@ -242,6 +321,7 @@ def compare_controllers(df: pd.DataFrame, baseline: str | None = None,
                              "nothing to compare; compare two runs with DIR_A DIR_B")
     sweeps = _sweep_text(df)
     names, per_scenario = _metric_plan(df, metrics)
+    margin_of = resolve_margins(margins)
     out: list[Comparison] = []
     for name in names:
         column, unit, _ = resolve_metric(name, list(df.columns))
@@ -262,41 +342,10 @@ def compare_controllers(df: pd.DataFrame, baseline: str | None = None,
                 y = table[b].to_numpy(dtype=float)
                 family.append(_comparison(str(scenario), int(point),
                                           sweeps[(str(scenario), int(point))], a, b, name,
-                                          column, unit, x, y))
-        _holm_and_verdicts(family, name)
+                                          column, unit, x, y, margin_of.get(name)))
+        holm_and_verdicts(family, name, METRICS.get(name, ('', '', False))[2])
         out += family
     return out
-
-
-def _holm_and_verdicts(family: list[Comparison], metric: str) -> None:
-    adjusted = stats.holm([c.p_value for c in family])
-    higher_better = METRICS.get(metric, ("", "", False))[2]
-    for c, p in zip(family, adjusted, strict=True):
-        c.p_holm = p
-        if not np.isfinite(p) or c.n == 0:
-            c.verdict = f"{metric}: no pairs to compare"
-            continue
-        if p >= ALPHA or c.direction == 0:
-            c.verdict = (f"{metric}: no significant difference between {c.a} and {c.b} "
-                         f"(Holm p = {p:.3g}, {c.n} pairs)")
-            continue
-        a_better = (c.direction > 0) == higher_better
-        c.better = c.a if a_better else c.b
-        worse = c.b if a_better else c.a
-        c.verdict = f"{metric}: {c.better} is better than {worse} ({_effect(c)}, " \
-                    f"Holm p = {p:.3g}, {c.n} pairs)"
-
-
-def _effect(c: Comparison) -> str:
-    lo, hi = c.interval
-    if c.metric == "converged":
-        return (f"{100 * c.a_value:.1f} % against {100 * c.b_value:.1f} %, difference "
-                f"{100 * c.difference:+.1f} points [{100 * lo:+.1f}, {100 * hi:+.1f}]")
-    unit = f" {c.unit}" if c.unit else ""
-    up, down = c.discordant or (0, 0)
-    return (f"median paired difference {c.difference:+.4g}{unit} [{lo:+.4g}, {hi:+.4g}], "
-            f"medians {c.a_value:.4g} and {c.b_value:.4g}{unit}; {c.a} higher in {up} and "
-            f"lower in {down} of the pairs")
 
 
 def match_counts(df_a: pd.DataFrame, df_b: pd.DataFrame) -> tuple[int, int, int]:
@@ -311,7 +360,8 @@ def match_counts(df_a: pd.DataFrame, df_b: pd.DataFrame) -> tuple[int, int, int]
 
 
 def compare_runs(df_a: pd.DataFrame, df_b: pd.DataFrame, name_a: str = "A",
-                 name_b: str = "B", metrics: tuple[str, ...] | None = None
+                 name_b: str = "B", metrics: tuple[str, ...] | None = None,
+                 margins: dict[str, float] | None = None
                  ) -> tuple[list[Comparison], pd.DataFrame, int]:
     """Two runs of the same scenarios: run B against run A, per controller and sweep
     point, on the matched trials (a trial failed in either run left out of every metric
@@ -359,6 +409,7 @@ def compare_runs(df_a: pd.DataFrame, df_b: pd.DataFrame, name_a: str = "A",
     different = (pd.concat(diffs, ignore_index=True) if diffs
                  else pd.DataFrame(columns=[*KEY, "column", "a", "b"]))
     sweeps = _sweep_text(df_a)
+    margin_of = resolve_margins(margins)
     out: list[Comparison] = []
     for name in names:
         column, unit, _ = resolve_metric(name, common)
@@ -369,17 +420,20 @@ def compare_runs(df_a: pd.DataFrame, df_b: pd.DataFrame, name_a: str = "A",
                 continue
             xa = g[f"{column}_a"].to_numpy(dtype=float)
             xb = g[f"{column}_b"].to_numpy(dtype=float)
-            if name != "converged":
+            if name == "steps":
+                xa = censor_steps(xa, g["converged_a"].fillna(False).to_numpy(dtype=bool))
+                xb = censor_steps(xb, g["converged_b"].fillna(False).to_numpy(dtype=bool))
+            elif name == "settling":
+                xa = censor_steps(xa, np.isfinite(xa) & ~failed_mask(g, "_a").to_numpy())
+                xb = censor_steps(xb, np.isfinite(xb) & ~failed_mask(g, "_b").to_numpy())
+            elif name != "converged":
                 xa = np.where(failed_mask(g, "_a").to_numpy(), np.nan, xa)
                 xb = np.where(failed_mask(g, "_b").to_numpy(), np.nan, xb)
-            if name == "steps":
-                xa = np.where(g["converged_a"].astype(bool), xa, np.nan)
-                xb = np.where(g["converged_b"].astype(bool), xb, np.nan)
             family.append(_comparison(str(scenario), int(point),
                                       sweeps.get((str(scenario), int(point)), "-"),
                                       f"{name_b}:{ctrl}", f"{name_a}:{ctrl}", name, column,
-                                      unit, xb, xa))
-        _holm_and_verdicts(family, name)
+                                      unit, xb, xa, margin_of.get(name)))
+        holm_and_verdicts(family, name, METRICS.get(name, ('', '', False))[2])
         for comp in family:
             if comp.better is not None and comp.better == comp.b:
                 comp.verdict = "REGRESSION: " + comp.verdict

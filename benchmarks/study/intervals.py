@@ -1,8 +1,10 @@
 """Table cells with their 95 % intervals for the Markdown report.
 
-Rates get the Wilson score interval, medians and 95th percentiles a seeded percentile
-bootstrap (:mod:`benchmarks.study.stats`); a maximum gets none (no interval says
-anything about the largest of n draws without a model of the tail).
+Rates get the Wilson score interval, medians and 95th percentiles the distribution-free
+order-statistic interval (:mod:`benchmarks.study.exact`; a step count of a trial that
+did not converge is censored at the run's length and printed ``> N``); a maximum gets
+none (no interval says anything about the largest of n draws without a model of the
+tail).
 """
 
 from __future__ import annotations
@@ -12,7 +14,7 @@ from typing import Any
 
 import numpy as np
 
-from benchmarks.study import stats
+from benchmarks.study import exact, stats
 from benchmarks.study.metrics import Summary, format_sweep
 
 GroupKey = tuple[str, int, str, str]
@@ -36,24 +38,60 @@ def group_rows(rows: list[dict[str, Any]]) -> dict[GroupKey, list[dict[str, Any]
     return groups
 
 
-def with_interval(value: float, interval: tuple[float, float], digits: int = 3) -> str:
-    """``0.049 [0.047, 0.051]`` (``-`` for a missing value)."""
-    if value is None or not np.isfinite(value):
+def _bound(x: float, digits: int, cap: float | str | None) -> str:
+    """One end of an interval: ``> cap`` for a censored value (``cap``: the run's length,
+    or a word, ``run``), ``-inf``/``inf`` for an end outside the sample (too few trials
+    for that side at 95 %)."""
+    if x == np.inf and cap is not None:
+        return f"> {cap if isinstance(cap, str) else _fmt(cap, digits)}"
+    if np.isinf(x):
+        return "-inf" if x < 0 else "inf"
+    return _fmt(x, digits)
+
+
+def with_interval(value: float, interval: tuple[float, float], digits: int = 3,
+                  cap: float | str | None = None) -> str:
+    """``0.049 [0.047, 0.051]`` (``-`` for a missing value; with ``cap``, an infinite
+    value or end is a censored one, ``> cap``: ``> 500 [431, > 500]``)."""
+    if value is None or np.isnan(value):
         return "-"
     low, high = interval
-    if not (np.isfinite(low) and np.isfinite(high)):
-        return _fmt(value, digits)
-    return f"{_fmt(value, digits)} [{_fmt(low, digits)}, {_fmt(high, digits)}]"
+    text = _bound(value, digits, cap) if cap is not None else _fmt(value, digits)
+    if np.isnan(low) or np.isnan(high):
+        return text
+    return f"{text} [{_bound(low, digits, cap)}, {_bound(high, digits, cap)}]"
 
 
 def quantile_cells(values: list[Any], quantiles: list[float], digits: int = 3) -> list[str]:
-    """Quantiles of the finite values with their bootstrap intervals (one resampling)."""
+    """Quantiles of the finite values with their order-statistic intervals."""
     arr = np.array([v for v in values if v is not None and np.isfinite(v)], dtype=float)
     if arr.size == 0:
         return ["-" for _ in quantiles]
-    ivs = stats.bootstrap_quantiles(arr, quantiles)
-    return [with_interval(float(np.quantile(arr, q)), iv, digits)
-            for q, iv in zip(quantiles, ivs, strict=True)]
+    return [with_interval(float(np.quantile(arr, q)), exact.quantile_interval(arr, q), digits)
+            for q in quantiles]
+
+
+def censored_steps(rows: list[dict[str, Any]]) -> tuple[np.ndarray, float | None]:
+    """The steps to converge of a group's trials, ``+inf`` for a trial that did not
+    converge (failed ones included: they count as not converged), and the cap (the
+    longest run of the group, None when every trial converged)."""
+    steps = [r.get("steps") for r in rows]
+    known = [float(s) for s in steps if s is not None and np.isfinite(s)]
+    out = np.array([float(r["steps"]) if r.get("converged") else np.inf for r in rows])
+    cap = max(known) if known and not all(bool(r.get("converged")) for r in rows) else None
+    return out, cap
+
+
+def steps_cell(rows: list[dict[str, Any]]) -> str:
+    """Median steps to converge over all the trials of a group, the ones that did not
+    converge censored at the run's length (no survivorship: a controller that converges
+    on half its trials has a median at the cap), with the order-statistic interval:
+    ``> 500 [312, > 500]``."""
+    steps, cap = censored_steps(rows)
+    if steps.size == 0:
+        return "-"
+    return with_interval(exact.censored_quantile(steps, 0.5),
+                         exact.quantile_interval(steps, 0.5), 0, cap)
 
 
 def completed(rows: list[dict[str, Any]]) -> list[dict[str, Any]]:
@@ -76,7 +114,7 @@ def summary_rows_with_intervals(summaries: list[Summary],
         pos_med, pos_p95 = quantile_cells([r["final_position_error_mm"] for r in rs],
                                           [0.5, 0.95])
         rot_med, = quantile_cells([r["final_orientation_error_deg"] for r in rs], [0.5], 4)
-        steps, = quantile_cells([r["steps"] for r in rs if r["converged"]], [0.5], 0)
+        steps = steps_cell(groups[(s.scenario, s.point, s.controller, s.backend)])
         out.append([
             s.scenario, format_sweep(s.sweep), s.controller, s.backend,
             stats.format_rate(s.converged, s.trials), str(s.failed), pos_med, pos_p95,
@@ -151,8 +189,11 @@ CALIBRATION_HEADER = ["sweep", "controller", "median error mm (per point)",
 def method_note() -> str:
     """How the report's intervals are computed (seed and resamples included)."""
     return (f"Intervals are {100 * stats.LEVEL:.0f} % confidence intervals: Wilson score "
-            "intervals (no continuity correction) for the convergence rates, percentile "
-            f"bootstrap intervals for the medians and 95th percentiles ({stats.RESAMPLES} "
-            f"resamples, seed {stats.SEED}, over the trials of the row); maxima have none. "
-            "`hexapod-bench compare DIR` tests the differences between controllers on "
-            "the trials they share.")
+            "intervals (no continuity correction) for the convergence rates, "
+            "distribution-free order-statistic intervals (from the binomial distribution "
+            "of the ranks) for the medians and 95th percentiles, over the trials of the "
+            "row; `-inf`/`inf`: too few trials to bound that side. *steps med* counts "
+            "every trial, a trial that did not converge censored at the run's length: "
+            "`> 500` is a median or an end known only to exceed the 500 steps run. "
+            "Maxima have none. `hexapod-bench compare DIR` tests the differences between "
+            "controllers on the trials they share.")

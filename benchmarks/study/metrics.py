@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 from collections import defaultdict
 from dataclasses import dataclass
 from typing import Any
@@ -100,6 +101,17 @@ def _stat(values: list[Any], fn: str) -> float:
     return float(np.max(arr))
 
 
+def _censored_steps_median(rows: list[dict[str, Any]]) -> float:
+    """Median steps to converge over every trial, a trial that did not converge (failed
+    ones included) censored at the run's length: ``inf`` when the median is censored
+    (more than half did not converge), not the median of the survivors."""
+    from benchmarks.study.exact import censored_quantile
+
+    steps = [float(r["steps"]) if r["converged"] and r.get("steps") is not None else math.inf
+             for r in rows]
+    return censored_quantile(steps, 0.5) if steps else float("nan")
+
+
 def summarize(rows: list[dict[str, Any]]) -> list[Summary]:
     """One :class:`Summary` per (scenario, sweep point, controller, backend), sorted
     (the failed trials left out of the error figures, counted in ``failed``)."""
@@ -124,7 +136,7 @@ def summarize(rows: list[dict[str, Any]]) -> list[Summary]:
             position_median_mm=_stat(pos, "median"), position_p95_mm=_stat(pos, "p95"),
             position_max_mm=_stat(pos, "max"), orientation_median_deg=_stat(ori, "median"),
             orientation_p95_deg=_stat(ori, "p95"), orientation_max_deg=_stat(ori, "max"),
-            steps_median=_stat([r["steps"] for r in conv], "median"),
+            steps_median=_censored_steps_median(rs),
             step_time_median_us=_stat([r["step_time_us"] for r in rs], "median"),
             stroke_violations=int(sum(r.get("stroke_violations") or 0 for r in rs)),
             rtt_median_ms=_stat([r.get("rtt_median_ms") for r in rs], "median"),

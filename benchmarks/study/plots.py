@@ -12,6 +12,7 @@ import numpy as np
 
 from benchmarks.study.metrics import Summary
 from benchmarks.study.results import TRIALS_DIR
+from benchmarks.study.stats import wilson_intervals
 from hexapod.outputs import PNG_METADATA, inside
 
 #: Sweep points whose recorded trial gets an error-versus-time figure, at most.
@@ -173,8 +174,10 @@ def heat_maps(out_dir: Path, scenario: str, summaries: list[Summary]) -> str | N
 
 
 def error_cdf(out_dir: Path, scenario: str, rows: list[dict[str, Any]]) -> str | None:
-    """Empirical CDF of the final position error [mm] (log scale), a curve per controller
-    (and backend); trials that crashed count as never reaching any error."""
+    """Success against tolerance: the fraction of the trials whose final position error
+    is within each tolerance [mm] (log scale; the empirical CDF of the errors), a curve
+    per controller (and backend) with its pointwise 95 % Wilson band; trials that crashed
+    count as never within any tolerance."""
     by_ctrl: dict[str, list[float]] = defaultdict(list)
     totals: dict[str, int] = defaultdict(int)
     for r in rows:
@@ -190,12 +193,16 @@ def error_cdf(out_dir: Path, scenario: str, rows: list[dict[str, Any]]) -> str |
     fig, ax = plt.subplots(figsize=(6.5, 4))
     for label in sorted(by_ctrl):
         e = np.sort(by_ctrl[label])
-        ax.step(e, np.arange(1, len(e) + 1) / totals[label], where="post",
-                label=f"{label} ({totals[label]} trials)")
+        k = np.arange(1, len(e) + 1)
+        line, = ax.step(e, k / totals[label], where="post",
+                        label=f"{label} ({totals[label]} trials)")
+        low, high = wilson_intervals(k, totals[label])
+        ax.fill_between(e, low, high, step="post", alpha=0.2,
+                        color=line.get_color(), linewidth=0)
     ax.set_xscale("log")
     ax.set_ylim(0, 1.01)
-    ax.set_xlabel("final position error [mm]")
-    ax.set_ylabel("fraction of trials")
+    ax.set_xlabel("tolerance on the final position error [mm]")
+    ax.set_ylabel("fraction of trials within")
     ax.grid(True, which="both", alpha=0.3)
     ax.legend(fontsize=7)
     fig.tight_layout()

@@ -11,7 +11,7 @@ from typing import Any
 
 import numpy as np
 
-from benchmarks.study import intervals, plots, profiles, stats
+from benchmarks.study import curves_report, intervals, plots, profiles, stats
 from benchmarks.study.metrics import Summary, format_sweep, summarize
 from benchmarks.study.runner import deduplicate, machine_info, read_results
 from benchmarks.study.study_record import command_lines
@@ -40,7 +40,8 @@ def summary_table_rows(summaries: list[Summary]) -> list[list[str]]:
             f"{100 * s.convergence_rate:.1f}% ({s.converged}/{s.trials})", str(s.failed),
             _fmt(s.position_median_mm), _fmt(s.position_p95_mm), _fmt(s.position_max_mm),
             _fmt(s.orientation_median_deg, 4), _fmt(s.orientation_max_deg, 4),
-            _fmt(s.steps_median, 0), _fmt(s.step_time_median_us, 1),
+            "> run" if s.steps_median == np.inf else _fmt(s.steps_median, 0),
+            _fmt(s.step_time_median_us, 1),
             str(s.stroke_violations),
         ])
     return rows
@@ -148,9 +149,11 @@ def write_report(out_dir: Path, overwrite: bool = False) -> Path:
               "counted as not converged and left out of the error columns. *steps med*: "
               "median number of control "
               "periods to converge (for fixed-duration tasks: after which the error stayed "
-              "within the tolerances). *step us*: median time of one controller "
-              "`step`. *stroke viol.*: periods where a command would have driven a leg "
-              "beyond its stroke (the backend clamped it).", "", intervals.method_note(), ""]
+              "within the tolerances), over every trial, a trial that did not converge "
+              "counted as needing more than the run (`> N`). *step us*: median time of "
+              "one controller `step`. *stroke viol.*: periods where a command would have "
+              "driven a leg beyond its stroke (the backend clamped it).", "",
+              intervals.method_note(), ""]
     groups = intervals.group_rows(rows)
     by_scenario: dict[str, list[Summary]] = defaultdict(list)
     for s in summaries:
@@ -207,6 +210,11 @@ def write_report(out_dir: Path, overwrite: bool = False) -> Path:
                       "refused a leg below the hard limit, which then did not run):", ""]
             lines += [_md_table(intervals.CALIBRATION_HEADER,
                                 intervals.calibration_rows(ss, groups)), ""]
+        sweeps = {s.point: s.sweep for s in ss}
+        scen_rows = [r for r in rows if r["scenario"] == name]
+        lines += curves_report.time_to_converge_section(
+            out_dir, name, scen_rows, sweeps, plots.representative(sorted(sweeps)))
+        lines += curves_report.tolerance_section(scen_rows, sweeps)
         ref = sm.get("reference")
         if ref:
             lines += ["### The seed's figures beside ours", ""]
@@ -237,9 +245,11 @@ def write_report(out_dir: Path, overwrite: bool = False) -> Path:
                       f"![performance profiles]({prof})", ""]
         cdf = plots.error_cdf(out_dir, name, [r for r in rows if r["scenario"] == name])
         if cdf:
-            lines += ["Distribution of the final position errors per controller (empirical "
-                      "CDF, every trial" + (", all sweep points pooled" if len(points) > 1
-                                            else "") + "):", "", f"![error CDF]({cdf})", ""]
+            lines += ["Success against tolerance: the fraction of the trials whose final "
+                      "position error is within each tolerance (the empirical CDF of the "
+                      "errors, every trial" + (", all sweep points pooled" if len(points) > 1
+                                               else "") + ", with 95 % Wilson bands):", "",
+                      f"![error CDF]({cdf})", ""]
     lines += failures_section(rows)
     lines += unconverged_lines(rows)
     path = out_dir / "report.md"

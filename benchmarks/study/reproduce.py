@@ -28,7 +28,7 @@ from typing import Any
 import numpy as np
 
 from benchmarks.exceptions import BenchmarkError
-from benchmarks.study import stats
+from benchmarks.study import exact, stats
 from benchmarks.study.paper_figures import (
     FIGURES,
     RECORD_ALL,
@@ -157,11 +157,11 @@ def measure(fig: Figure, d: Path, frames: dict[Path, Any]) -> Result:
         err = np.asarray(p["errors_mm"], float)  # repetitions x points
         if kind == "median_error":
             # the root of the median squared error is the median error
-            (lo, hi), = stats.bootstrap_quantiles(err.ravel(), [0.5])
+            lo, hi = exact.quantile_interval(err.ravel(), 0.5)
             v = float(np.sqrt(np.median(err.ravel() ** 2)))
             return Result(fig, f"{v:.3g} mm", v, (lo, hi), err.size)
         worst = int(np.argmax(np.median(err, axis=0)))
-        (lo, hi), = stats.bootstrap_quantiles(err[:, worst], [0.5])
+        lo, hi = exact.quantile_interval(err[:, worst], 0.5)
         v = float(np.median(err[:, worst]))
         return Result(fig, f"{v:.3g} mm (leg {worst})", v, (lo, hi), err.shape[0])
     if d not in frames:
@@ -187,7 +187,7 @@ def measure(fig: Figure, d: Path, frames: dict[Path, Any]) -> Result:
         if fig.single:  # one trial in the paper: the range of single trials
             lo, hi = (float(q) for q in np.percentile(x, [2.5, 97.5]))
         else:
-            (lo, hi), = stats.bootstrap_quantiles(x, [0.5])
+            lo, hi = exact.quantile_interval(x, 0.5)
         return Result(fig, f"{v:.3g} mm", v, (lo, hi), x.size)
     # paired: controller against other on the same trials
     other = _rows(df, fig, fig.other).set_index("trial")
@@ -198,12 +198,12 @@ def measure(fig: Figure, d: Path, frames: dict[Path, Any]) -> Result:
     if column == "converged":
         res = stats.mcnemar_exact(a > 0.5, b > 0.5)
         text = (f"{fig.controller} {100 * a.mean():.0f} %, {fig.other} {100 * b.mean():.0f} % "
-                f"converged (McNemar p = {res.p_value:.2g})")
+                f"converged (McNemar p = {exact.format_p(res.p_value)})")
         better = res.direction > 0
     else:
         res = stats.wilcoxon_signed_rank(a, b)
         text = (f"median {np.nanmedian(a):.3g} mm against {np.nanmedian(b):.3g} mm "
-                f"(Wilcoxon p = {res.p_value:.2g})")
+                f"(Wilcoxon p = {exact.format_p(res.p_value)})")
         better = res.direction < 0
     r = Result(fig, text, res.difference, (res.low, res.high), res.n, p_value=res.p_value)
     r.verdict = "better" if better else "worse"
@@ -239,8 +239,8 @@ def verdicts(results: list[Result]) -> None:
     paired = [r for r in results if r.figure.relation == "better"]
     for r, p in zip(paired, stats.holm([r.p_value or 1.0 for r in paired]), strict=True):
         ok = r.verdict == "better" and p < 0.05
-        r.verdict = (f"within (Holm p = {p:.2g})" if ok else
-                     f"outside (not found better at 5 %, Holm p = {p:.2g})")
+        r.verdict = (f"within (Holm p = {exact.format_p(p)})" if ok else
+                     f"outside (not found better at 5 %, Holm p = {exact.format_p(p)})")
         if not ok:
             r.why = r.figure.why_outside
     for r in results:

@@ -4,19 +4,23 @@ Every controller of a run meets the same trials (same worlds, same draws), so tw
 controllers are compared on paired data:
 
 - rates (convergence): Wilson score interval (no continuity correction) at 95 %;
-- medians and 95th percentiles: percentile bootstrap, seeded (:data:`SEED`,
-  :data:`RESAMPLES` resamples unless told otherwise);
+- medians and 95th percentiles: the distribution-free order-statistic interval
+  (:mod:`benchmarks.study.exact`); the seeded percentile bootstrap
+  (:func:`bootstrap_quantiles`, :data:`SEED`, :data:`RESAMPLES`) stays available, no
+  table uses it;
 - convergence of two controllers on the same trials: McNemar's exact test, the
-  two-sided binomial test on the discordant pairs;
-- paired continuous metrics (final error, steps): Wilcoxon's signed-rank test (as
+  two-sided binomial test on the discordant pairs, and Newcombe's paired interval of
+  the rate difference;
+- paired continuous metrics (final error): Wilcoxon's signed-rank test (as
   ``scipy.stats.wilcoxon`` computes it), and the median of the paired differences
-  with a seeded percentile-bootstrap interval;
+  with its order-statistic interval;
 - several comparisons at once: Holm's step-down correction.
 
 References: E. B. Wilson, "Probable inference, the law of succession, and statistical
 inference", J. Am. Stat. Assoc. 22, 1927; Q. McNemar, Psychometrika 12, 1947;
 F. Wilcoxon, Biometrics Bulletin 1, 1945; S. Holm, Scand. J. Statistics 6, 1979;
-B. Efron and R. Tibshirani, "An Introduction to the Bootstrap", 1993.
+B. Efron and R. Tibshirani, "An Introduction to the Bootstrap", 1993; R. G. Newcombe,
+Statistics in Medicine 17, 2635-2650, 1998.
 """
 
 from __future__ import annotations
@@ -29,6 +33,8 @@ from fractions import Fraction
 from statistics import NormalDist
 
 import numpy as np
+
+from benchmarks.study import exact
 
 #: Confidence level of every interval.
 LEVEL = 0.95
@@ -89,14 +95,23 @@ def wilson_interval(k: int, n: int, level: float = LEVEL) -> tuple[float, float]
         raise ValueError(f"successes k={k} must lie in [0, n={n}]")
     if n == 0:
         return float("nan"), float("nan")
+    low, high = wilson_intervals(np.array([k]), n, level)
+    return float(low[0]), float(high[0])
+
+
+def wilson_intervals(k: np.ndarray, n: int, level: float = LEVEL
+                     ) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`wilson_interval` of many success counts out of the same ``n`` at once (a
+    curve's pointwise band), as arrays (``n`` must be positive; ``k`` in ``[0, n]``)."""
+    k = np.asarray(k, dtype=float)
     z = NormalDist().inv_cdf(0.5 + level / 2)
     p = k / n
     denom = 1 + z * z / n
     centre = (p + z * z / (2 * n)) / denom
     half = z * np.sqrt(p * (1 - p) / n + z * z / (4 * n * n)) / denom
-    low = 0.0 if k == 0 else max(0.0, centre - half)
-    high = 1.0 if k == n else min(1.0, centre + half)
-    return float(low), float(high)
+    low = np.where(k == 0, 0.0, np.maximum(0.0, centre - half))
+    high = np.where(k == n, 1.0, np.minimum(1.0, centre + half))
+    return low, high
 
 
 def _finite(values: Sequence[float] | np.ndarray) -> np.ndarray:
@@ -163,27 +178,6 @@ def bootstrap_quantiles(values: Sequence[float] | np.ndarray, quantiles: Sequenc
     return out
 
 
-def bootstrap_rate_difference(only_a: int, only_b: int, n: int, resamples: int = RESAMPLES,
-                              seed: int = SEED, level: float = LEVEL) -> tuple[float, float]:
-    """Percentile-bootstrap interval of the difference of two paired success rates.
-
-    A resample of the ``n`` pairs holds multinomial counts of the pairs where only
-    ``a`` succeeded, only ``b``, or both or neither; the difference is
-    ``(only_a - only_b) / n``.
-    """
-    if n == 0:
-        return float("nan"), float("nan")
-    if only_a + only_b == 0:
-        return 0.0, 0.0
-    rng = np.random.default_rng(seed)
-    counts = rng.multinomial(n, [only_a / n, only_b / n, 1 - (only_a + only_b) / n],
-                             size=resamples)
-    diff = (counts[:, 0] - counts[:, 1]) / n
-    tail = 100 * (1 - level) / 2
-    low, high = np.percentile(diff, [tail, 100 - tail])
-    return float(low), float(high)
-
-
 def _pairs(a: Sequence[float] | np.ndarray, b: Sequence[float] | np.ndarray
            ) -> tuple[np.ndarray, np.ndarray]:
     x = np.asarray([np.nan if v is None else v for v in a], dtype=float)
@@ -195,8 +189,7 @@ def _pairs(a: Sequence[float] | np.ndarray, b: Sequence[float] | np.ndarray
 
 
 def mcnemar_exact(a: Sequence[bool] | np.ndarray, b: Sequence[bool] | np.ndarray,
-                  resamples: int = RESAMPLES, seed: int = SEED, level: float = LEVEL
-                  ) -> TestResult:
+                  level: float = LEVEL) -> TestResult:
     """McNemar's exact test of two success indicators on the same trials.
 
     Only the discordant pairs carry information: under the null hypothesis each is
@@ -206,13 +199,13 @@ def mcnemar_exact(a: Sequence[bool] | np.ndarray, b: Sequence[bool] | np.ndarray
     Args:
         a: Success of ``a`` per trial.
         b: Success of ``b`` on the same trials.
-        resamples: Bootstrap resamples of the rate difference's interval.
-        seed: Bootstrap seed.
         level: Confidence level.
 
     Returns:
-        The test; ``difference`` is ``rate(a) - rate(b)`` with a bootstrap interval of
-        the mean paired difference.
+        The test; ``difference`` is ``rate(a) - rate(b)`` with Newcombe's paired
+        interval (:func:`benchmarks.study.exact.newcombe_paired`), which keeps its width
+        when one controller succeeds on every trial (20 of 20 against 0 of 20:
+        ``[+0.77, +1.0]``, not a bootstrap's ``[+1.0, +1.0]``).
     """
     x = np.asarray(a, dtype=bool)
     y = np.asarray(b, dtype=bool)
@@ -220,27 +213,30 @@ def mcnemar_exact(a: Sequence[bool] | np.ndarray, b: Sequence[bool] | np.ndarray
         raise ValueError(f"paired samples differ in length: {x.size} and {y.size}")
     only_a = int(np.sum(x & ~y))
     only_b = int(np.sum(~x & y))
+    both = int(np.sum(x & y))
     m = only_a + only_b
     p = _binomial_two_sided_half(min(only_a, only_b), m)
-    low, high = bootstrap_rate_difference(only_a, only_b, int(x.size), resamples, seed, level)
+    low, high = exact.newcombe_paired(both, only_a, only_b, int(x.size) - both - m, level)
     diff = (only_a - only_b) / x.size if x.size else float("nan")
     return TestResult("mcnemar-exact", int(x.size), float(only_a), p, diff, low, high,
                       (only_a, only_b), int(np.sign(only_a - only_b)))
 
 
 def median_difference(a: Sequence[float] | np.ndarray, b: Sequence[float] | np.ndarray,
-                      resamples: int = RESAMPLES, seed: int = SEED, level: float = LEVEL
-                      ) -> tuple[float, float, float]:
-    """Median of the paired differences ``a - b`` with its bootstrap interval.
+                      level: float = LEVEL) -> tuple[float, float, float]:
+    """Median of the paired differences ``a - b`` with its distribution-free
+    order-statistic interval (:func:`benchmarks.study.exact.quantile_interval`, the
+    interval of the sign test).
 
     Returns:
-        ``(median, low, high)`` (``nan`` without a complete pair).
+        ``(median, low, high)`` (``nan`` without a complete pair; an end outside the
+        sample, below 6 pairs at 95 %, is infinite).
     """
     x, y = _pairs(a, b)
     d = x - y
     if d.size == 0:
         return float("nan"), float("nan"), float("nan")
-    (low, high), = bootstrap_quantiles(d, [0.5], resamples, seed, level)
+    low, high = exact.quantile_interval(d, 0.5, level)
     return float(np.median(d)), low, high
 
 
@@ -290,8 +286,7 @@ def _signed_rank_exact(ranks: np.ndarray, r_plus: float) -> float:
 
 
 def wilcoxon_signed_rank(a: Sequence[float] | np.ndarray, b: Sequence[float] | np.ndarray,
-                         resamples: int = RESAMPLES, seed: int = SEED, level: float = LEVEL
-                         ) -> TestResult:
+                         level: float = LEVEL) -> TestResult:
     """Wilcoxon's signed-rank test of paired values, two-sided, with the median paired
     difference and its interval.
 
@@ -308,7 +303,7 @@ def wilcoxon_signed_rank(a: Sequence[float] | np.ndarray, b: Sequence[float] | n
         The test; ``statistic`` is the smaller of the positive and negative rank sums.
     """
     x, y = _pairs(a, b)
-    med, low, high = median_difference(x, y, resamples, seed, level)
+    med, low, high = median_difference(x, y, level)
     d = x - y
     nz = d[d != 0]
     count = nz.size

@@ -13,7 +13,7 @@ from typing import Any
 
 import numpy as np
 
-from benchmarks.study import intervals, stats
+from benchmarks.study import exact, intervals, stats
 from benchmarks.study.metrics import format_sweep, sweep_values
 
 log = logging.getLogger(__name__)
@@ -40,7 +40,7 @@ def _finite(values: list[Any]) -> np.ndarray:
 
 def _cells(values: list[Any], hows: list[str], with_intervals: bool) -> list[str]:
     """The statistics ``hows`` (``median``, ``p95``, ``max``) of the finite values: the
-    quantiles with their bootstrap intervals when ``with_intervals``, the maximum
+    quantiles with their order-statistic intervals when ``with_intervals``, the maximum
     without (no interval says anything about the largest of n draws)."""
     arr = _finite(values)
     if arr.size == 0:
@@ -50,6 +50,20 @@ def _cells(values: list[Any], hows: list[str], with_intervals: bool) -> list[str
     qcells = iter(intervals.quantile_cells(list(arr), qs) if with_intervals
                   else [_fmt(float(np.quantile(arr, x))) for x in qs])
     return [_fmt(float(arr.max())) if h == "max" else next(qcells) for h in hows]
+
+
+def _settling_cell(rs: list[dict[str, Any]], with_intervals: bool) -> str:
+    """Median settling time [s] over the trials that ran to their end, a trial that did
+    not settle censored at the run's end (``> run``: more than half did not settle), with
+    its order-statistic interval in the report."""
+    if not rs:
+        return "-"
+    t = np.array([np.inf if r.get("settling_time_s") is None else r["settling_time_s"]
+                  for r in rs], dtype=float)
+    med = exact.censored_quantile(t, 0.5)
+    if not with_intervals:
+        return "> run" if med == np.inf else _fmt(med)
+    return intervals.with_interval(med, exact.quantile_interval(t, 0.5), 3, "run")
 
 
 def _fmt(x: float) -> str:
@@ -87,7 +101,7 @@ def tracking_rows(rows: list[dict[str, Any]], with_intervals: bool = True
 
     Args:
         rows: The result rows of one scenario.
-        with_intervals: Medians and 95th percentiles with their 95 % bootstrap
+        with_intervals: Medians and 95th percentiles with their 95 % order-statistic
             intervals (the report), or the values alone (the terminal).
     """
     from benchmarks.study.failures import is_failure
@@ -112,7 +126,7 @@ def tracking_rows(rows: list[dict[str, Any]], with_intervals: bool = True
             *_cells([r.get("tracking_rms_orientation_deg") for r in rs], ["median"],
                     with_intervals),
             rate,
-            *_cells([r.get("settling_time_s") for r in rs], ["median"], with_intervals),
+            _settling_cell(rs, with_intervals),
             *(_force_cells(rs, with_intervals) if forces else [])])
     return out
 

@@ -60,7 +60,6 @@ and runs the SQP iterations.
 from __future__ import annotations
 
 import logging
-from collections.abc import Sequence
 from dataclasses import dataclass
 from functools import lru_cache
 from typing import Any
@@ -78,31 +77,12 @@ from controllers.mpc.prediction import (
     sx_pixel,
 )
 from controllers.tasks.base import sx_skew
-from hexapod.compiled import CompiledFunction
+from hexapod.compiled import CompiledFunction, Layout
 
 log = logging.getLogger(__name__)
 
 #: Upper bound used for one-sided rows (the tilt cosine never exceeds 1).
 _BIG = 1e20
-
-
-class Layout:
-    """Named slices of a packed vector."""
-
-    def __init__(self, fields: Sequence[tuple[str, int]]) -> None:
-        self.slices: dict[str, slice] = {}
-        k = 0
-        for name, size in fields:
-            self.slices[name] = slice(k, k + size)
-            k += size
-        self.size = k
-
-    def __contains__(self, name: str) -> bool:
-        return name in self.slices
-
-    def split(self, v: Any) -> dict[str, Any]:
-        """The SX pieces of ``v``."""
-        return {n: v[s] for n, s in self.slices.items()}
 
 
 @dataclass(frozen=True)
@@ -155,7 +135,7 @@ class ProblemSpec:
             fields += [("K", 9), ("box", 4)]
         if self.drives:
             fields += [("J0i", 36), ("alag", 6), ("clag", 6), ("v0", 6)]
-        return Layout(fields)
+        return Layout(fields, f"MPC {self.kind} {self.model} input")
 
     def output_layout(self) -> Layout:
         """Layout of the kernel output: cost, ``H`` (row-major), ``g``, ``C`` (row-major),
@@ -163,7 +143,7 @@ class ProblemSpec:
         n = 6 * self.horizon
         m = self.rows
         return Layout([("cost", 1), ("H", n * n), ("g", n), ("C", m * n), ("lba", m),
-                       ("uba", m), ("values", m)])
+                       ("uba", m), ("values", m)], f"MPC {self.kind} {self.model} output")
 
     def row_names(self) -> list[str]:
         """A name per constraint row (for ``Command.active_constraints``)."""
@@ -441,7 +421,8 @@ def _kernel_function(spec: ProblemSpec) -> ca.Function:
 @lru_cache(maxsize=32)
 def problem_kernel(spec: ProblemSpec) -> CompiledFunction:
     """The compiled QP-data kernel of a problem structure (cached per process and on disk)."""
-    return CompiledFunction(_kernel_function(spec))
+    return CompiledFunction(_kernel_function(spec), inputs=spec.input_layout(),
+                            outputs=spec.output_layout())
 
 
 class VirtualMachineKernel:

@@ -16,12 +16,9 @@
 
 from __future__ import annotations
 
-import ctypes
 import logging
 import math
-import os
 import subprocess
-import tempfile
 import time
 from dataclasses import dataclass, field
 from functools import lru_cache
@@ -31,7 +28,7 @@ import casadi as ca
 import numpy as np
 
 from controllers.mpc.problem import ProblemSpec, VirtualMachineKernel
-from hexapod.compiled import CompilationError, CompiledFunction, build_shared_library
+from hexapod.compiled import CompilationError, CompiledFunction, Layout
 
 log = logging.getLogger(__name__)
 
@@ -96,12 +93,13 @@ class CompiledQP:
 
     The Python interface of ``casadi.conic`` costs several hundred microseconds per
     call on these sizes (argument conversion and checks) for a solve of about a
-    hundred; the generated solver is called on preallocated buffers instead. It
-    links against the DAQP library shipped in the CasADi wheel (``libdaqp.so``,
-    loaded with global symbols before the generated library). Input: ``H`` (n x n),
-    ``g``, ``C`` (m x n, row-major), ``lba``, ``uba``; output: ``x``, the row
-    multipliers, the optimal value. A call that returns non-zero is a solve that DAQP
-    did not finish as optimal (infeasible, iteration limit, ...).
+    hundred; the generated solver is called on preallocated buffers instead
+    (:class:`hexapod.compiled.CompiledFunction`, bound). It links against the DAQP
+    library shipped in the CasADi wheel (``libdaqp.so``, loaded with global symbols
+    before the generated library). Input (:attr:`inputs`): ``H`` (n x n), ``g``, ``C``
+    (m x n), ``lba``, ``uba``; output (:attr:`outputs`): ``x``, the row ``multipliers``,
+    the optimal ``cost``. A call that returns non-zero is a solve that DAQP did not
+    finish as optimal (infeasible, iteration limit, ...).
 
     Raises:
         OSError: No compiler, or the DAQP library or headers are missing (the caller
@@ -111,77 +109,48 @@ class CompiledQP:
     def __init__(self, variables: int, rows: int) -> None:
         n, m = variables, rows
         self.n, self.m = n, m
-        self.n_in = n * n + n + m * n + 2 * m
-        self.n_out = n + m + 1
-        vin = ca.MX.sym("v", self.n_in)
-        k = 0
-        parts = []
-        for size in (n * n, n, m * n, m, m):
-            parts.append(vin[k:k + size])
-            k += size
-        H = ca.reshape(parts[0], n, n)
-        C = ca.reshape(parts[2], n, m).T
-        sol = qp_solver(n, m)(h=H, g=parts[1], a=C, lba=parts[3], uba=parts[4])
+        self.inputs = Layout([("H", (n, n)), ("g", n), ("C", (m, n)), ("lba", m), ("uba", m)],
+                             f"QP {n} x {m} input")
+        self.outputs = Layout([("x", n), ("multipliers", m), ("cost", 1)],
+                              f"QP {n} x {m} output")
+        vin = ca.MX.sym("v", self.inputs.size)
+        P = self.inputs.split(vin)
+        H = ca.reshape(P["H"], n, n)
+        C = ca.reshape(P["C"], n, m).T
+        sol = qp_solver(n, m)(h=H, g=P["g"], a=C, lba=P["lba"], uba=P["uba"])
         f = ca.Function(f"hexapod_mpc_daqp_{n}_{m}", [vin],
                         [ca.vertcat(sol["x"], sol["lam_a"], sol["cost"])])
-        self.name = f.name()
         lib_daqp = _casadi_dir() / "libdaqp.so"
         include = _casadi_dir() / "include"
         if not lib_daqp.exists() or not (include / "daqp" / "api.h").exists():
             raise OSError(f"DAQP library or headers not found in {_casadi_dir()}")
-        with tempfile.TemporaryDirectory() as tmp:
-            cwd = os.getcwd()
-            try:
-                os.chdir(tmp)
-                f.generate(f"{self.name}.c")
-            finally:
-                os.chdir(cwd)
-            code = (Path(tmp) / f"{self.name}.c").read_text()
-        path = build_shared_library(self.name, code, ("-O2", f"-I{include}"))
-        self._daqp = ctypes.CDLL(str(lib_daqp), mode=ctypes.RTLD_GLOBAL)
-        lib = ctypes.CDLL(str(path))
-        n_arg, n_res, n_iw, n_w = (ctypes.c_longlong() for _ in range(4))
-        getattr(lib, f"{self.name}_work")(ctypes.byref(n_arg), ctypes.byref(n_res),
-                                          ctypes.byref(n_iw), ctypes.byref(n_w))
-        fn = getattr(lib, self.name)
-        fn.argtypes = [ctypes.c_void_p] * 4 + [ctypes.c_int]
-        fn.restype = ctypes.c_int
-        self.x = np.zeros(self.n_in)
-        self.y = np.zeros(self.n_out)
-        self._args = (ctypes.c_void_p * max(n_arg.value, 1))(self.x.ctypes.data)
-        self._res = (ctypes.c_void_p * max(n_res.value, 1))(self.y.ctypes.data)
-        self._iw = np.zeros(max(n_iw.value, 1), dtype=np.int64)
-        self._w = np.zeros(max(n_w.value, 1))
-        self._call = (ctypes.addressof(self._args), ctypes.addressof(self._res),
-                      self._iw.ctypes.data, self._w.ctypes.data, 0)
-        alloc = getattr(lib, f"{self.name}_alloc_mem", None)
-        init = getattr(lib, f"{self.name}_init_mem", None)
-        if alloc is not None and init is not None:  # memory slot 0 of the generated solver
-            alloc.restype = ctypes.c_int
-            init(alloc())
-        self._fn = fn
-        self._lib = lib
+        #: The compiled solver (its C function, layouts and library).
+        self.function = CompiledFunction(f, inputs=self.inputs, outputs=self.outputs,
+                                         flags=("-O2", f"-I{include}"), preload=(lib_daqp,))
+        if not self.function.compiled:
+            raise OSError(f"{self.function.name}: not compiled")
+        self._bound = self.function.bind()
+        self._in = self._bound.inputs
+        self._x = self.outputs["x"]
+        self._multipliers = self.outputs["multipliers"]
 
     def solve(self, H: np.ndarray, g: np.ndarray, C: np.ndarray, lba: np.ndarray,
               uba: np.ndarray) -> QPResult:
         """Solve ``min 1/2 d^T H d + g^T d`` s.t. ``lba <= C d <= uba`` (sizes of this solver)."""
-        n, m = self.n, self.m
-        x = self.x
-        x[:n * n] = H.reshape(-1)
-        x[n * n:n * n + n] = g
-        k = n * n + n
-        x[k:k + m * n] = C.reshape(-1)
-        k += m * n
-        x[k:k + m] = lba
-        x[k + m:k + 2 * m] = uba
-        if self._fn(*self._call):
+        v = self._in
+        v["H"][:] = H
+        v["g"][:] = g
+        v["C"][:] = C
+        v["lba"][:] = lba
+        v["uba"][:] = uba
+        if self._bound.call():
             return QPResult(None, "QP not solved: DAQP did not reach an optimal solution", 0,
                             None)
-        y = self.y
-        step = y[:n].copy()
+        y = self._bound.y
+        step = y[self._x].copy()
         if not math.isfinite(float(step.sum())):
             return QPResult(None, "QP returned a non-finite solution", 0, None)
-        return QPResult(step, "optimal", 0, y[n:n + m].copy())
+        return QPResult(step, "optimal", 0, y[self._multipliers].copy())
 
 
 @lru_cache(maxsize=32)

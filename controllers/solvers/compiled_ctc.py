@@ -24,17 +24,19 @@ The caller keeps the numpy path for everything off the happy path (FK not conver
 a rank-deficient ``K``, a singular inverse solve, a non-finite value): there the
 compiled result is discarded and the reference path decides.
 
-Input row (:data:`ROW`): guess ``R`` (9, column-major), ``t`` (3); ``q``, ``q_dot``,
-``q*``, ``q_dot*``, ``q_ddot*`` (6 each); ``A``, ``E`` (18 each, point after point);
-the 19 inertial parameters (:func:`hexapod.dynamics.compiled.parameter_row`); the
-drives' rotor inertia, viscous and Coulomb coefficients (6 each); ``Kp``, ``Kd``.
+Input row (:data:`INPUTS`): the ``pose`` guess ``R`` (9, column-major), ``t`` (3);
+``q``, ``q_dot`` (6 each); ``desired``: ``q*``, ``q_dot*``, ``q_ddot*`` (3 x 6); the
+``points`` ``A``, ``E`` (2 x 6 x 3, point after point); the 19 inertial ``params``
+(:func:`hexapod.dynamics.compiled.parameter_row`); the drives' ``rotor`` inertia,
+``viscous`` and ``coulomb`` coefficients (6 each); the ``gains`` ``Kp``, ``Kd``.
 
-Output (:data:`OUT`): ``R`` (9, column-major), ``t`` (3), ``K^T K`` (36, column-major:
-its eigenvalues are the squared singular values of ``K``, for the rank test), the
-forces (6) [N], the max absolute FK length residual [m] (the caller calls again from
-the pose reached while it is not below its tolerance, as :func:`hexapod.fk.
-forward_kinematics` does), and 1.0 when the inverse solve's residual is below
-``inverse_tolerance`` relative to its right-hand side (else 0.0; NaN compares false).
+Output (:data:`OUTPUTS`): the ``pose`` ``R`` (9, column-major), ``t`` (3), ``factor``
+``K^T K`` (6 x 6, symmetric: its eigenvalues are the squared singular values of ``K``,
+for the rank test), the ``forces`` (6) [N], the max absolute FK length residual
+``fk_residual`` [m] (the caller calls again from the pose reached while it is not below
+its tolerance, as :func:`hexapod.fk.forward_kinematics` does), and ``solved``: 1.0 when
+the inverse solve's residual is below ``inverse_tolerance`` relative to its right-hand
+side (else 0.0; NaN compares false).
 """
 
 from __future__ import annotations
@@ -43,18 +45,24 @@ from functools import lru_cache
 
 import casadi as ca
 
-from hexapod.compiled import CompiledFunction
+from hexapod.compiled import CompiledFunction, Layout
 from hexapod.dynamics import compiled as dyn
 from hexapod.dynamics.drive_model import COULOMB_SMOOTHING
 from hexapod.dynamics.model import INVERSE_TOLERANCE
-from hexapod.fk import newton_function
+from hexapod.fk import NEWTON_OUTPUTS, newton_function
 
 #: Calls of the compiled Newton steps unrolled in the function.
 FK_CALLS = 1
-#: Length of an input row.
-ROW = 117
-#: Length of an output row.
-OUT = 56
+#: The model blocks of every compiled computed-torque step (the task-space ones too:
+#: :mod:`controllers.solvers.compiled_task_ctc`) after the pose, ``q`` and ``q_dot``.
+MODEL_BLOCKS = (("points", (2, 6, 3)), ("params", 19), ("rotor", 6), ("viscous", 6),
+                ("coulomb", 6))
+#: The input row of the joint-space step (module docstring).
+INPUTS = Layout([("pose", 12), ("q", 6), ("q_dot", 6), ("desired", (3, 6)), *MODEL_BLOCKS,
+                 ("gains", 2)], "joint-space computed-torque input")
+#: Its output row.
+OUTPUTS = Layout([("pose", 12), ("factor", (6, 6)), ("forces", 6), ("fk_residual", 1),
+                  ("solved", 1)], "joint-space computed-torque output")
 
 
 def sx_encoder_pose(pose: ca.SX, q: ca.SX, points: ca.SX, calls: int
@@ -63,10 +71,10 @@ def sx_encoder_pose(pose: ca.SX, q: ca.SX, points: ca.SX, calls: int
     ``calls`` calls of the compiled Newton steps from ``pose``, and the (6,) length
     residual."""
     newton = newton_function()
-    y = newton(ca.vertcat(pose, q, points))
+    y = NEWTON_OUTPUTS.split(newton(ca.vertcat(pose, q, points)))
     for _ in range(calls - 1):
-        y = newton(ca.vertcat(y[0:12], q, points))
-    return y[0:12], y[12:18]
+        y = NEWTON_OUTPUTS.split(newton(ca.vertcat(y["R"], y["t"], q, points)))
+    return ca.vertcat(y["R"], y["t"]), y["residual"]
 
 
 def sx_model_state(R_t: ca.SX, qd: ca.SX, points: ca.SX, params: ca.SX
@@ -98,19 +106,18 @@ def sx_mechanism_forces(K: ca.SX, M: ca.SX, h: ca.SX, bias: ca.SX, acc: ca.SX,
 
 
 def _build(inverse_tolerance: float) -> ca.Function:
-    x = ca.SX.sym("x", ROW)
-    pose, q, qd = x[0:12], x[12:18], x[18:24]
-    q_s, qd_s, qdd_s = x[24:30], x[30:36], x[36:42]
-    points = x[42:78]
-    params = x[78:97]
-    rotor, viscous, coulomb = x[97:103], x[103:109], x[109:115]
-    kp, kd = x[115], x[116]
+    x = ca.SX.sym("x", INPUTS.size)
+    v = INPUTS.split(x)
+    pose, q, qd, desired, points = v["pose"], v["q"], v["q_dot"], v["desired"], v["points"]
+    q_s, qd_s, qdd_s = desired[0:6], desired[6:12], desired[12:18]
+    kp, kd = v["gains"][0], v["gains"][1]
     R_t, residual = sx_encoder_pose(pose, q, points, FK_CALLS)
-    K, twist, M, h, bias = sx_model_state(R_t, qd, points, params)
+    K, twist, M, h, bias = sx_model_state(R_t, qd, points, v["params"])
     a_star = qdd_s + kd * (qd_s - K @ twist) + kp * (q_s - q)
     acc = ca.solve(K, a_star - bias)
     a, f, inverse_solved = sx_mechanism_forces(K, M, h, bias, acc, inverse_tolerance)
-    f = f + rotor * a + viscous * qd + coulomb * ca.tanh(qd_s / COULOMB_SMOOTHING)
+    f = f + v["rotor"] * a + v["viscous"] * qd + v["coulomb"] * ca.tanh(
+        qd_s / COULOMB_SMOOTHING)
     fk_residual = ca.mmax(ca.fabs(residual))
     out = ca.vertcat(R_t, ca.reshape(K.T @ K, 36, 1), f, fk_residual, inverse_solved)
     return ca.Function("hexapod_ctc_joint_step", [x], [ca.cse(out)])
@@ -124,8 +131,8 @@ def joint_step(inverse_tolerance: float = INVERSE_TOLERANCE) -> CompiledFunction
         inverse_tolerance: Relative residual of the inverse solve above which ``K`` is
             taken as singular (as :meth:`hexapod.dynamics.DynamicModel.inverse_batch`).
     """
-    return CompiledFunction(_build(float(inverse_tolerance)))
+    return CompiledFunction(_build(float(inverse_tolerance)), inputs=INPUTS, outputs=OUTPUTS)
 
 
-__all__ = ["FK_CALLS", "OUT", "ROW", "joint_step", "sx_encoder_pose", "sx_mechanism_forces",
-           "sx_model_state"]
+__all__ = ["FK_CALLS", "INPUTS", "MODEL_BLOCKS", "OUTPUTS", "joint_step", "sx_encoder_pose",
+           "sx_mechanism_forces", "sx_model_state"]

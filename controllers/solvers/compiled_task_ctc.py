@@ -34,21 +34,22 @@ not converged, a rank-deficient Jacobian (its singular values are those of the o
 
 Inputs (:func:`layout`): ``pose`` (``R`` column-major, ``t``: the FK guess, or the
 measured pose), ``q``, ``q_dot`` (6 each), ``points`` (``A`` then ``E``, base frame,
-point after point, 36), the 19 inertial ``params``, the drives' ``rotor``, ``viscous``,
-``coulomb`` (6 each), ``gains`` (``Kp``, ``Kd``, ``hold`` [s]); for the pose kind the
-``reference`` ``(R*`` row-major, ``t*``, twist, twist rate) (24); for the feature kinds
-the measured ``features`` (for the edges the normals (6, 2, 3), the leg directions
-(6, 3) and 1.0 to take the directions of the normals instead, ``unit(n_2 x n_1)``;
-directions (6, 3)), the task frame's
-``base`` points ``A_i`` (18), the row ``mask`` (1 or 0), the ``frame`` from the base
-(``R`` row-major, ``p``: 12) and the ``reference_features``: the desired features, their
-rate and their acceleration (``m`` each).
+point after point, 2 x 6 x 3), the 19 inertial ``params``, the drives' ``rotor``,
+``viscous``, ``coulomb`` (6 each), ``gains`` (``Kp``, ``Kd``, ``hold`` [s]); for the
+pose kind the ``reference`` (:data:`REFERENCE`: ``R*`` row-major, ``t*``, twist, twist
+rate); for the feature kinds the measured features (for the edges the ``normals``
+(6 x 2 x 3), the leg ``directions`` (6 x 3) and ``of_normals``, 1.0 to take the
+directions of the normals instead, ``unit(n_2 x n_1)``; for the directions kind the
+``directions`` (6 x 3)), the task frame's ``base`` points ``A_i`` (6 x 3), the row
+``mask`` (1 or 0), the ``frame`` from the base (``R`` row-major, ``p``: 12) and the
+``reference_features``: the desired features, their rate and their acceleration (``m``
+each).
 
 Outputs: ``pose`` (12, as the input), ``K`` (36, column-major), ``fk_residual`` (max
 absolute length residual [m]), ``forces`` (6) [N], ``solved`` (1.0 when the inverse
 solve's residual is below the tolerance, as :mod:`controllers.solvers.compiled_ctc`),
-``error`` (m) and ``factor`` (36, column-major: ``L^T L`` of the masked model Jacobian,
-whose eigenvalues are its squared singular values).
+``error`` (m) and ``factor`` (6 x 6: ``L^T L`` of the masked model Jacobian, whose
+eigenvalues are its squared singular values).
 """
 
 from __future__ import annotations
@@ -58,6 +59,7 @@ from functools import lru_cache
 import casadi as ca
 
 from controllers.solvers.compiled_ctc import (
+    MODEL_BLOCKS,
     sx_encoder_pose,
     sx_mechanism_forces,
     sx_model_state,
@@ -71,23 +73,17 @@ from controllers.tasks.leg_edge import leg_direction_of_edges
 from controllers.tasks.leg_edge import reference_block as edge_reference
 from controllers.tasks.leg_edge import second_order_block as edge_second_order
 from controllers.tasks.platform_pose import pose_error, pose_rate
-from hexapod.compiled import CompiledFunction
+from hexapod.compiled import CompiledFunction, Layout
 from hexapod.dynamics.drive_model import COULOMB_SMOOTHING
 from hexapod.dynamics.model import INVERSE_TOLERANCE
 
 #: Task kinds and their number of rows.
 ROWS = {"pose": 6, "edges": 36, "directions": 18}
 
-_COMMON = (("pose", 12), ("q", 6), ("q_dot", 6), ("points", 36), ("params", 19),
-           ("rotor", 6), ("viscous", 6), ("coulomb", 6), ("gains", 3))
-
-
-def _offsets(fields: tuple[tuple[str, int], ...]) -> dict[str, slice]:
-    out, k = {}, 0
-    for name, n in fields:
-        out[name] = slice(k, k + n)
-        k += n
-    return out
+_COMMON = (("pose", 12), ("q", 6), ("q_dot", 6), *MODEL_BLOCKS, ("gains", 3))
+#: A reference pose row: ``R*`` (row-major), ``t*``, the twist and its rate.
+REFERENCE = Layout([("R", (3, 3)), ("t", 3), ("twist", 6), ("twist_rate", 6)],
+                   "reference pose")
 
 
 #: Calls of the compiled forward-kinematics Newton steps (3 iterations each) per call.
@@ -97,23 +93,22 @@ FIT_ITERATIONS = 4
 
 
 @lru_cache(maxsize=4)
-def layout(kind: str, fk: bool = True) -> tuple[dict[str, slice], dict[str, slice]]:
-    """The input and output slices of a kind (module docstring); the visual pose
-    (``fk=False``) takes the legs' ``directions`` (18), the estimated ``base`` points
-    (18, camera frame) and the ``frame`` (the base from the camera, ``R`` row-major,
+def layout(kind: str, fk: bool = True) -> tuple[Layout, Layout]:
+    """The input and output layouts of a kind (module docstring); the visual pose
+    (``fk=False``) takes the legs' ``directions`` (6 x 3), the estimated ``base`` points
+    (6 x 3, camera frame) and the ``frame`` (the base from the camera, ``R`` row-major,
     ``p``: 12) after the reference."""
     m = ROWS[kind]
-    visual = (("directions", 18), ("base", 18), ("frame", 12)) if not fk else ()
-    extra = (("reference", 24), *visual) if kind == "pose" else (
-        ("features", 55 if kind == "edges" else 18), ("base", 18), ("mask", m),
-        ("frame", 12), ("reference_features", 3 * m))
+    visual = (("directions", (6, 3)), ("base", (6, 3)), ("frame", 12)) if not fk else ()
+    features = (("normals", (6, 2, 3)), ("directions", (6, 3)), ("of_normals", 1)) \
+        if kind == "edges" else (("directions", (6, 3)),)
+    extra = (("reference", REFERENCE.size), *visual) if kind == "pose" else (
+        *features, ("base", (6, 3)), ("mask", m), ("frame", 12),
+        ("reference_features", (3, m)))
     out = (("pose", 12), ("K", 36), ("fk_residual", 1), ("forces", 6), ("solved", 1),
-           ("error", m), ("factor", 36))
-    return _offsets(_COMMON + extra), _offsets(out)
-
-
-def _size(slices: dict[str, slice]) -> int:
-    return max(s.stop for s in slices.values())
+           ("error", m), ("factor", (6, 6)))
+    name = f"task computed-torque {kind} {'fk' if fk else 'pose'}"
+    return Layout(_COMMON + extra, name + " input"), Layout(out, name + " output")
 
 
 def _row_major(R: ca.SX) -> ca.SX:
@@ -201,12 +196,12 @@ def _pose_task(R: ca.SX, t: ca.SX, tau_s: ca.SX, ref: ca.SX
     return e, L, ldot, e_t, e_tt
 
 
-def _feature_task(kind: str, x: ca.SX, sl: dict[str, slice], q: ca.SX, tau_s: ca.SX
+def _feature_task(kind: str, v: dict[str, ca.SX], q: ca.SX, tau_s: ca.SX
                   ) -> tuple[ca.SX, ca.SX, ca.SX, ca.SX, ca.SX]:
     """Error, Jacobian (spatial twist of the frame), ``L_dot tau_s``, ``e_t``, ``e_tt`` of
-    the edge or direction task, block after block."""
-    feats, A = x[sl["features"]], x[sl["base"]]
-    ref = x[sl["reference_features"]]
+    the edge or direction task (``v``: the input's blocks), block after block."""
+    A, directions = v["base"], v["directions"]
+    ref = v["reference_features"]
     m = ref.shape[0] // 3
     des, rate, acc = ref[0:m], ref[m:2 * m], ref[2 * m:3 * m]
     es, Ls, ldots, ets, etts = [], [], [], [], []
@@ -215,9 +210,10 @@ def _feature_task(kind: str, x: ca.SX, sl: dict[str, slice], q: ca.SX, tau_s: ca
     for i in range(6):
         Ai, qi = A[3 * i:3 * i + 3], q[i]
         if kind == "edges":
-            n1, n2 = feats[6 * i:6 * i + 3], feats[6 * i + 3:6 * i + 6]
-            ui = ca.if_else(feats[54], leg_direction_of_edges(n1, n2),
-                            feats[36 + 3 * i:39 + 3 * i])
+            normals = v["normals"]
+            n1, n2 = normals[6 * i:6 * i + 3], normals[6 * i + 3:6 * i + 6]
+            ui = ca.if_else(v["of_normals"][0], leg_direction_of_edges(n1, n2),
+                            directions[3 * i:3 * i + 3])
             for j, n in enumerate((n1, n2)):
                 k = 6 * i + 3 * j
                 ns = des[k:k + 3]
@@ -234,7 +230,7 @@ def _feature_task(kind: str, x: ca.SX, sl: dict[str, slice], q: ca.SX, tau_s: ca
                 ets.append(e_t)
                 etts.append(e_tt)
         else:
-            ui, us = feats[3 * i:3 * i + 3], des[3 * i:3 * i + 3]
+            ui, us = directions[3 * i:3 * i + 3], des[3 * i:3 * i + 3]
             e, L = direction_block_function()(ui, us, Ai, qi)
             s, p = ca.vertcat(ui, qi), ca.vertcat(Ai, us)
             es.append(e)
@@ -250,27 +246,27 @@ def _feature_task(kind: str, x: ca.SX, sl: dict[str, slice], q: ca.SX, tau_s: ca
 
 
 def _build(kind: str, fk: bool, inverse_tolerance: float) -> ca.Function:
-    sl, out_sl = layout(kind, fk)
-    x = ca.SX.sym("x", _size(sl))
-    q, qd, points = x[sl["q"]], x[sl["q_dot"]], x[sl["points"]]
-    params = x[sl["params"]]
-    rotor, viscous, coulomb = x[sl["rotor"]], x[sl["viscous"]], x[sl["coulomb"]]
-    kp, kd, hold = x[sl["gains"].start], x[sl["gains"].start + 1], x[sl["gains"].start + 2]
+    inputs = layout(kind, fk)[0]
+    x = ca.SX.sym("x", inputs.size)
+    v = inputs.split(x)
+    q, qd, points = v["q"], v["q_dot"], v["points"]
+    rotor, viscous, coulomb = v["rotor"], v["viscous"], v["coulomb"]
+    kp, kd, hold = v["gains"][0], v["gains"][1], v["gains"][2]
     if fk:
-        R_t, residual = sx_encoder_pose(x[sl["pose"]], q, points, FK_CALLS)
+        R_t, residual = sx_encoder_pose(v["pose"], q, points, FK_CALLS)
         fk_residual = ca.mmax(ca.fabs(residual))
     else:
-        R_t, fk_residual = _rigid_fit(x[sl["pose"]], q, x[sl["directions"]], x[sl["base"]],
-                                      points[18:36], x[sl["frame"]])
-    K, twist, M, h, bias = sx_model_state(R_t, qd, points, params)
+        R_t, fk_residual = _rigid_fit(v["pose"], q, v["directions"], v["base"],
+                                      points[18:36], v["frame"])
+    K, twist, M, h, bias = sx_model_state(R_t, qd, points, v["params"])
     R, t = ca.reshape(R_t[0:9], 3, 3), R_t[9:12]
-    frame = None if kind == "pose" else x[sl["frame"]]  # the task's frame
+    frame = None if kind == "pose" else v["frame"]  # the task's frame
     G, gdot = _model_twist(t, twist, frame)
     tau_s = G @ twist
     if kind == "pose":
-        e, L, ldot, e_t, e_tt = _pose_task(R, t, tau_s, x[sl["reference"]])
+        e, L, ldot, e_t, e_tt = _pose_task(R, t, tau_s, v["reference"])
     else:
-        e, L, ldot, e_t, e_tt = _feature_task(kind, x, sl, q, tau_s)
+        e, L, ldot, e_t, e_tt = _feature_task(kind, v, q, tau_s)
     L_model = L @ G
     ldot = ldot + L @ gdot
     rhs = -kd * (L_model @ twist + e_t) - kp * e - ldot - e_tt
@@ -278,7 +274,7 @@ def _build(kind: str, fk: bool, inverse_tolerance: float) -> ca.Function:
         acc = ca.solve(L_model, rhs)
         factor = L_model
     else:
-        mask = x[sl["mask"]]
+        mask = v["mask"]
         Lw = L_model * ca.repmat(mask, 1, 6)
         Q, factor = ca.qr(Lw)
         acc = ca.solve(factor, Q.T @ (mask * rhs))
@@ -286,7 +282,6 @@ def _build(kind: str, fk: bool, inverse_tolerance: float) -> ca.Function:
     f = f + rotor * a + viscous * qd + coulomb * ca.tanh((qd + hold * a) / COULOMB_SMOOTHING)
     out = ca.vertcat(R_t, ca.reshape(K, 36, 1), fk_residual, f, solved, e,
                      ca.reshape(factor.T @ factor, 36, 1))
-    assert out.shape[0] == _size(out_sl)
     return ca.Function(f"hexapod_ctc_{kind}_{'fk' if fk else 'pose'}_step", [x],
                        [ca.cse(ca.densify(out))])
 
@@ -310,7 +305,9 @@ def task_step(kind: str, fk: bool, inverse_tolerance: float = INVERSE_TOLERANCE
         raise ValueError(f"kind: expected one of {', '.join(ROWS)}, got {kind!r}")
     if not fk and kind != "pose":
         raise ValueError(f"kind {kind!r}: the pose comes from the encoders (fk=True)")
-    return CompiledFunction(_build(kind, bool(fk), float(inverse_tolerance)))
+    inputs, outputs = layout(kind, bool(fk))
+    return CompiledFunction(_build(kind, bool(fk), float(inverse_tolerance)), inputs=inputs,
+                            outputs=outputs)
 
 
-__all__ = ["FIT_ITERATIONS", "ROWS", "layout", "task_step"]
+__all__ = ["FIT_ITERATIONS", "REFERENCE", "ROWS", "layout", "task_step"]

@@ -22,7 +22,7 @@ import osqp
 import scipy.sparse as sp
 
 from controllers.law_algebra import cholesky_solve
-from hexapod.compiled import CompiledFunction
+from hexapod.compiled import CompiledFunction, Layout
 
 log = logging.getLogger(__name__)
 
@@ -62,7 +62,7 @@ class LimitQP:
         self._ext: Any = None
         self._P = np.zeros((6, 6))
         self._eye_eps = regularization * np.eye(6)
-        self._refine_in = np.zeros(103)
+        self._refine_in = np.zeros(REFINE_INPUTS.size)
 
     def reset(self) -> None:
         """Forget the previous problem and set OSQP up again, on placeholder values.
@@ -164,16 +164,23 @@ class LimitQP:
         compiled :func:`refine_kernel`.
         """
         buf = self._refine_in
-        buf[0:36] = P.reshape(36)
-        buf[36:42] = c
-        buf[42:78] = J.reshape(36)
-        buf[78:84] = lower
-        buf[84:90] = upper
-        buf[90:96] = x
-        buf[96:102] = y
-        buf[102] = self.active_tolerance
+        buf[REFINE_INPUTS["P"]] = P.reshape(36)
+        buf[REFINE_INPUTS["c"]] = c
+        buf[REFINE_INPUTS["J"]] = J.reshape(36)
+        buf[REFINE_INPUTS["lower"]] = lower
+        buf[REFINE_INPUTS["upper"]] = upper
+        buf[REFINE_INPUTS["x"]] = x
+        buf[REFINE_INPUTS["y"]] = y
+        buf[REFINE_INPUTS["tolerance"]] = self.active_tolerance
         out = refine_kernel().single(buf)
-        return out[:6] if out[6] == 1.0 else x
+        return out[REFINE_OUTPUTS["x"]] if out[REFINE_OUTPUTS["accepted"]][0] == 1.0 else x
+
+
+#: The refinement's input: ``P`` (6 x 6), ``c``, ``J`` (6 x 6, row-major), the bounds,
+#: OSQP's ``x`` and ``y``, the active tolerance; its output: ``x`` and ``accepted``.
+REFINE_INPUTS = Layout([("P", (6, 6)), ("c", 6), ("J", (6, 6)), ("lower", 6), ("upper", 6),
+                        ("x", 6), ("y", 6), ("tolerance", 1)], "QP refinement input")
+REFINE_OUTPUTS = Layout([("x", 6), ("accepted", 1)], "QP refinement output")
 
 
 def _refine_function() -> ca.Function:
@@ -189,15 +196,16 @@ def _refine_function() -> ca.Function:
     zero (so their ``nu`` is 0), ``nu = S^-1 (-(bound + J P^-1 c))`` on the active
     rows, ``x = -P^-1 (c + J^T nu)``.
     """
-    v = ca.SX.sym("v", 103)
-    P = [[v[6 * i + j] for j in range(6)] for i in range(6)]
-    c = [v[36 + i] for i in range(6)]
-    J = [[v[42 + 6 * i + j] for j in range(6)] for i in range(6)]
-    lo = [v[78 + i] for i in range(6)]
-    hi = [v[84 + i] for i in range(6)]
-    x = [v[90 + i] for i in range(6)]
-    y = [v[96 + i] for i in range(6)]
-    tol = v[102]
+    v = ca.SX.sym("v", REFINE_INPUTS.size)
+    b = REFINE_INPUTS.split(v)
+    P = [[b["P"][6 * i + j] for j in range(6)] for i in range(6)]
+    c = [b["c"][i] for i in range(6)]
+    J = [[b["J"][6 * i + j] for j in range(6)] for i in range(6)]
+    lo = [b["lower"][i] for i in range(6)]
+    hi = [b["upper"][i] for i in range(6)]
+    x = [b["x"][i] for i in range(6)]
+    y = [b["y"][i] for i in range(6)]
+    tol = b["tolerance"][0]
     Jx = [sum((J[i][k] * x[k] for k in range(1, 6)), J[i][0] * x[0]) for i in range(6)]
     at_up = [ca.logic_and(Jx[i] >= hi[i] - tol, y[i] > 0) for i in range(6)]
     at_lo = [ca.logic_and(Jx[i] <= lo[i] + tol, y[i] < 0) for i in range(6)]
@@ -232,4 +240,4 @@ def _refine_function() -> ca.Function:
 @lru_cache(maxsize=1)
 def refine_kernel() -> CompiledFunction:
     """The compiled active-set refinement of :class:`LimitQP`."""
-    return CompiledFunction(_refine_function())
+    return CompiledFunction(_refine_function(), inputs=REFINE_INPUTS, outputs=REFINE_OUTPUTS)

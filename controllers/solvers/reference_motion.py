@@ -13,12 +13,13 @@ twist ``(v*, w*)`` and its rate (base frame, ``t*_dot = v*``, ``R*_dot = [w*]_x 
 evaluated in C (:class:`hexapod.compiled.CompiledFunction`) over a whole reference's
 control grid at once.
 
-Input row (:func:`size_in`): ``R*`` (9, row-major), ``t*`` (3), twist (6), twist rate
-(6), the taught features (``m``) and the model's features at the end pose (``m``), the
-camera frame from the base (``R`` row-major, ``p``: 12), the nominal base and platform
-points (18 each, point after point) and the leg radius (1). Output: ``s*``, ``s*_dot``,
-``s*_ddot`` (``m`` each). ``m`` is 36 for the edge normals ((6, 2, 3) order), 18 for the
-directions.
+Input row (:func:`layouts`): the ``reference`` pose row
+(:data:`~controllers.solvers.compiled_task_ctc.REFERENCE`: ``R*`` row-major, ``t*``,
+twist, twist rate), the ``taught`` features (``m``) and the model's features at the
+``end`` pose (``m``), the camera ``frame`` from the base (``R`` row-major, ``p``: 12),
+the nominal base and platform ``points`` (2 x 6 x 3, point after point) and the leg
+``radius``. Output: ``s*``, ``s*_dot``, ``s*_ddot`` (3 x ``m``). ``m`` is 36 for the
+edge normals ((6, 2, 3) order), 18 for the directions.
 """
 
 from __future__ import annotations
@@ -28,16 +29,22 @@ from functools import lru_cache
 import casadi as ca
 
 from controllers.mpc.prediction import sx_edge_normals
+from controllers.solvers.compiled_task_ctc import REFERENCE
 from controllers.tasks.base import sx_unit
-from hexapod.compiled import CompiledFunction
+from hexapod.compiled import CompiledFunction, Layout
 
 #: Rows of each feature kind.
 ROWS = {"normals": 36, "directions": 18}
 
 
-def size_in(kind: str) -> int:
-    """Length of an input row."""
-    return 24 + 2 * ROWS[kind] + 12 + 36 + 1
+@lru_cache(maxsize=2)
+def layouts(kind: str) -> tuple[Layout, Layout]:
+    """The input and output layouts of a kind's function (module docstring)."""
+    m = ROWS[kind]
+    return (Layout([("reference", REFERENCE.size), ("taught", m), ("end", m), ("frame", 12),
+                    ("points", (2, 6, 3)), ("radius", 1)], f"{kind} reference input"),
+            Layout([("features", m), ("rate", m), ("acceleration", m)],
+                   f"{kind} reference output"))
 
 
 def model_features(kind: str, R: ca.SX, t: ca.SX, frame: ca.SX, A: ca.SX, E: ca.SX,
@@ -61,11 +68,11 @@ def model_features(kind: str, R: ca.SX, t: ca.SX, frame: ca.SX, A: ca.SX, E: ca.
 
 def _build(kind: str) -> ca.Function:
     m = ROWS[kind]
-    x = ca.SX.sym("x", size_in(kind))
-    k = 24
-    taught, end = x[k:k + m], x[k + m:k + 2 * m]
-    k += 2 * m
-    frame, A, E, radius = x[k:k + 12], x[k + 12:k + 30], x[k + 30:k + 48], x[k + 48]
+    inputs = layouts(kind)[0]
+    x = ca.SX.sym("x", inputs.size)
+    v = inputs.split(x)
+    frame, points, radius = v["frame"], v["points"], v["radius"][0]
+    taught, end, A, E = v["taught"], v["end"], points[0:18], points[18:36]
     P = ca.SX.sym("P", 12)  # (R* row-major, t*)
     d1, d2 = ca.SX.sym("d1", 12), ca.SX.sym("d2", 12)
     R = ca.reshape(P[0:9], 3, 3).T
@@ -75,11 +82,13 @@ def _build(kind: str) -> ca.Function:
     sd = ca.jtimes(s, P, d1)
     sdd = ca.jtimes(sd, P, d1) + ca.jtimes(s, P, d2)
     chain = ca.Function("chain", [P, d1, d2, x], [s, sd, sdd])
-    Rs = ca.reshape(x[0:9], 3, 3).T
-    W = ca.skew(x[15:18])
-    p_dot = ca.vertcat(ca.reshape((W @ Rs).T, 9, 1), x[12:15])
-    p_ddot = ca.vertcat(ca.reshape(((ca.skew(x[21:24]) + W @ W) @ Rs).T, 9, 1), x[18:21])
-    out = chain(x[0:12], p_dot, p_ddot, x)
+    ref = REFERENCE.split(v["reference"])
+    Rs = ca.reshape(ref["R"], 3, 3).T
+    W = ca.skew(ref["twist"][3:6])
+    p_dot = ca.vertcat(ca.reshape((W @ Rs).T, 9, 1), ref["twist"][0:3])
+    p_ddot = ca.vertcat(ca.reshape(((ca.skew(ref["twist_rate"][3:6]) + W @ W) @ Rs).T, 9, 1),
+                        ref["twist_rate"][0:3])
+    out = chain(ca.vertcat(ref["R"], ref["t"]), p_dot, p_ddot, x)
     return ca.Function(f"hexapod_feature_reference_{kind}", [x],
                        [ca.cse(ca.densify(ca.vertcat(*out)))])
 
@@ -93,7 +102,7 @@ def feature_motion(kind: str) -> CompiledFunction:
     """
     if kind not in ROWS:
         raise ValueError(f"kind: expected one of {', '.join(ROWS)}, got {kind!r}")
-    return CompiledFunction(_build(kind))
+    return CompiledFunction(_build(kind), inputs=layouts(kind)[0], outputs=layouts(kind)[1])
 
 
-__all__ = ["ROWS", "feature_motion", "model_features", "size_in"]
+__all__ = ["ROWS", "feature_motion", "layouts", "model_features"]

@@ -43,20 +43,30 @@ from functools import lru_cache
 import casadi as ca
 import numpy as np
 
-from hexapod.compiled import CompiledFunction
+from hexapod.compiled import CompiledFunction, Layout
 from hexapod.dynamics.inertia import InertiaParameters
 
-#: Length of an input row.
-ROW = 79
 #: Number of inertial parameters in a row.
 N_PARAMETERS = 19
-#: Layout of the ``terms`` output: M (36, column-major), h (6), K (36, column-major),
-#: kinetic energy (1), potential energy (1), leg rates ``q_dot`` (6), leg acceleration
-#: bias ``K_dot tau`` (6).
-TERMS = 92
-#: Length of an input row of ``forward_drives``: a row, then the legs' added masses
-#: ``a`` (6) and implicit masses ``b`` (6) [kg].
-DRIVES_ROW = ROW + 12
+#: The input row of every function (module docstring; ``R`` column-major: the block's
+#: (3, 3) view is ``R^T``).
+INPUTS = Layout([("R", (3, 3)), ("t", 3), ("twist", 6), ("u", 6), ("A", (6, 3)),
+                 ("E", (6, 3)), ("params", N_PARAMETERS)], "dynamics input")
+#: Length of an input row.
+ROW = INPUTS.size
+#: The input row of ``forward_drives``: a row, then the legs' added masses ``a`` (6) and
+#: implicit masses ``b`` (6) [kg].
+DRIVES_INPUTS = INPUTS.extended([("a", 6), ("b", 6)], "dynamics-with-drives input")
+#: Each function's output row. ``terms``: ``M`` and ``K`` (column-major: their views are
+#: the transposes), ``h``, the kinetic and potential energies, the leg rates ``q_dot``
+#: and the legs' acceleration bias ``K_dot tau``.
+OUTPUTS = {
+    "forward": Layout([("acc", 6)], "forward dynamics output"),
+    "inverse": Layout([("forces", 6), ("residual", 6), ("rhs", 6)], "inverse dynamics output"),
+    "terms": Layout([("M", (6, 6)), ("h", 6), ("K", (6, 6)), ("kinetic", 1),
+                     ("potential", 1), ("q_dot", 6), ("leg_bias", 6)], "dynamics terms output"),
+    "forward_drives": Layout([("acc", 6), ("q_dot", 6), ("q_ddot", 6)],
+                             "forward dynamics with drives output")}
 
 
 def parameter_row(inertia: InertiaParameters) -> np.ndarray:
@@ -146,19 +156,20 @@ def ldl_solve(M: ca.SX, b: ca.SX) -> ca.SX:
 def expressions() -> tuple[ca.SX, dict[str, ca.SX]]:
     """The symbolic input row and the dynamics' terms as SX expressions of it.
 
-    Besides the terms of :data:`TERMS` (``M``, ``h``, ``K``, ``kinetic``, ``potential``,
+    Besides the terms of ``OUTPUTS["terms"]`` (``M``, ``h``, ``K``, ``kinetic``, ``potential``,
     ``q_dot``, ``leg_bias``): ``M = M_joint + K^T diag(leg_mass) K``, the legs' rank-one
     parts apart (``leg_mass_i = m_r - J_i / q_i^2``), for a caller that adds leg-space
     masses of its own (one rank-one term per leg instead of two).
     """
     x = ca.SX.sym("x", ROW)
-    R = ca.reshape(x[0:9], 3, 3)
-    t = x[9:12]
-    tau = x[12:18]
+    blocks = INPUTS.split(x)
+    R = ca.reshape(blocks["R"], 3, 3)
+    t = blocks["t"]
+    tau = blocks["twist"]
     v, w = tau[0:3], tau[3:6]
-    A = ca.reshape(x[24:42], 3, 6)
-    E = ca.reshape(x[42:60], 3, 6)
-    p = x[60:79]
+    A = ca.reshape(blocks["A"], 3, 6)
+    E = ca.reshape(blocks["E"], 3, 6)
+    p = blocks["params"]
     m_p, c_p = p[0], p[1:4]
     ixx, iyy, izz, ixy, ixz, iyz = (p[k] for k in range(4, 10))
     I_p = ca.vertcat(ca.horzcat(ixx, ixy, ixz), ca.horzcat(ixy, iyy, iyz),
@@ -214,11 +225,11 @@ def _cached_expressions() -> tuple[ca.SX, dict[str, ca.SX]]:
 
 def _build(name: str) -> ca.Function:
     """The CasADi function ``name``: ``forward`` (acceleration, 6), ``inverse`` (leg
-    forces, their residual ``K^T f - (M acc + h)`` and ``M acc + h``: 18), ``terms``
-    (:data:`TERMS`) or ``forward_drives`` (:data:`DRIVES_ROW` inputs, 18 outputs)."""
+    forces, their residual ``K^T f - (M acc + h)`` and ``M acc + h``: 18), ``terms`` or
+    ``forward_drives`` (:data:`DRIVES_INPUTS`; the outputs: :data:`OUTPUTS`)."""
     x, e = _cached_expressions()
     M, h, K = e["M"], e["h"], e["K"]
-    u = x[18:24]
+    u = x[INPUTS["u"]]
     if name == "forward":
         return ca.Function("hexapod_dyn_forward", [x], [ca.cse(ldl_solve(M, K.T @ u - h))])
     if name == "inverse":
@@ -250,7 +261,8 @@ def compiled(name: str) -> CompiledFunction:
     """One of the compiled functions (``"forward"``, ``"inverse"``, ``"terms"``,
     ``"forward_drives"``), built and compiled on first use (the C library is cached
     on disk by :mod:`hexapod.compiled`)."""
-    return CompiledFunction(_build(name))
+    inputs = DRIVES_INPUTS if name == "forward_drives" else INPUTS
+    return CompiledFunction(_build(name), inputs=inputs, outputs=OUTPUTS[name])
 
 
 def pack(R: np.ndarray, t: np.ndarray, twist: np.ndarray, u: np.ndarray,
@@ -267,13 +279,13 @@ def pack(R: np.ndarray, t: np.ndarray, twist: np.ndarray, u: np.ndarray,
         platform_points: (6, 3) or (N, 6, 3) ``eB_i`` [m].
         parameters: (19,) or (N, 19) rows of :func:`parameter_row`.
     """
-    n = t.shape[0]
-    rows = np.empty((n, ROW))
-    rows[:, 0:9] = np.swapaxes(R, -1, -2).reshape(n, 9)
-    rows[:, 9:12] = t
-    rows[:, 12:18] = twist
-    rows[:, 18:24] = u
-    rows[:, 24:42] = np.broadcast_to(base_points, (n, 6, 3)).reshape(n, 18)
-    rows[:, 42:60] = np.broadcast_to(platform_points, (n, 6, 3)).reshape(n, 18)
-    rows[:, 60:79] = np.broadcast_to(parameters, (n, N_PARAMETERS))
+    rows = np.empty((t.shape[0], ROW))
+    v = INPUTS.views(rows)
+    v["R"][:] = np.swapaxes(R, -1, -2)
+    v["t"][:] = t
+    v["twist"][:] = twist
+    v["u"][:] = u
+    v["A"][:] = base_points
+    v["E"][:] = platform_points
+    v["params"][:] = parameters
     return rows

@@ -141,13 +141,14 @@ class DynamicModel:
         if self._reference is not None:
             return np.array([self.inverse(*args) for args in zip(R, t, twist, acc,
                                                                  strict=True)])
-        y = _c.compiled("inverse").batch(self.rows(R, t, twist, acc, **overrides))
-        residual = np.linalg.norm(y[:, 6:12], axis=1)
-        singular = ~(residual <= INVERSE_TOLERANCE * np.linalg.norm(y[:, 12:18], axis=1)
+        y = _c.OUTPUTS["inverse"].views(
+            _c.compiled("inverse").batch(self.rows(R, t, twist, acc, **overrides)))
+        residual = np.linalg.norm(y["residual"], axis=1)
+        singular = ~(residual <= INVERSE_TOLERANCE * np.linalg.norm(y["rhs"], axis=1)
                      + 1e-12)
         if np.any(singular):
             raise DynamicsError("inverse", int(np.argmax(singular)))
-        return self._checked(y[:, :6], "inverse")
+        return self._checked(y["forces"], "inverse")
 
     def terms_batch(self, R: np.ndarray, t: np.ndarray, twist: np.ndarray,
                     **overrides: np.ndarray
@@ -161,10 +162,10 @@ class DynamicModel:
         """
         n = np.shape(t)[0]
         y = _c.compiled("terms").batch(self.rows(R, t, twist, np.zeros((n, 6)), **overrides))
-        y = self._checked(y, "terms")
-        M = np.swapaxes(y[:, 0:36].reshape(n, 6, 6), -1, -2)
-        K = np.swapaxes(y[:, 42:78].reshape(n, 6, 6), -1, -2)
-        return M, y[:, 36:42], K, y[:, 78], y[:, 79]
+        v = _c.OUTPUTS["terms"].views(self._checked(y, "terms"))
+        M = np.swapaxes(v["M"], -1, -2)  # (column-major blocks)
+        K = np.swapaxes(v["K"], -1, -2)
+        return M, v["h"], K, v["kinetic"][:, 0], v["potential"][:, 0]
 
     def legs_batch(self, R: np.ndarray, t: np.ndarray, twist: np.ndarray,
                    **overrides: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -174,8 +175,8 @@ class DynamicModel:
         ``q_ddot = K acc + K_dot twist``."""
         n = np.shape(t)[0]
         y = _c.compiled("terms").batch(self.rows(R, t, twist, np.zeros((n, 6)), **overrides))
-        y = self._checked(y, "terms")
-        return y[:, 80:86], y[:, 86:92]
+        v = _c.OUTPUTS["terms"].views(self._checked(y, "terms"))
+        return v["q_dot"], v["leg_bias"]
 
     def forward_drives_batch(self, R: np.ndarray, t: np.ndarray, twist: np.ndarray,
                              forces: np.ndarray, added_mass: np.ndarray,
@@ -210,8 +211,8 @@ class DynamicModel:
         b = np.zeros((n, 6)) if implicit_mass is None else _array(
             "implicit_mass", np.broadcast_to(implicit_mass, (n, 6)), (6,))
         y = _c.compiled("forward_drives").batch(np.concatenate([rows, a, b], axis=1))
-        y = self._checked(y, "forward_drives")
-        return y[:, 0:6], y[:, 6:12], y[:, 12:18]
+        v = _c.OUTPUTS["forward_drives"].views(self._checked(y, "forward_drives"))
+        return v["acc"], v["q_dot"], v["q_ddot"]
 
     def mass_matrix_batch(self, R: np.ndarray, t: np.ndarray) -> np.ndarray:
         """:meth:`mass_matrix` over a leading axis -> (N, 6, 6)."""

@@ -16,10 +16,10 @@ inertia and drives, and integrates them over a control period in steps of ``h``:
 4. the pose with the new twist (**semi-implicit Euler on SE(3)**): ``t += h v``,
    ``R <- exp(h [w]x) R``; the legs follow (``q_i = |t + R eB_i - A_i|``).
 
-Two implementations of one step, tested equal: :meth:`DynamicRobots.step_reference`
-(numpy, readable, the oracle) and the compiled period
+One implementation of the step: the compiled period
 (:mod:`hexapod.dynamics.robots_compiled`, every step of a period fused in C, used by
-:meth:`DynamicRobots.advance`).
+:meth:`DynamicRobots.advance`); the tests hold it equal to the same step written out in
+numpy (``tests/hexapod/dynamic_robots_oracle.py``).
 
 A robot starts at rest, its drives holding the platform against gravity (the integral
 action preloaded with the static leg forces).
@@ -35,7 +35,6 @@ import numpy as np
 from hexapod.dynamics.compiled import parameter_row
 from hexapod.dynamics.drive_model import DriveModel
 from hexapod.dynamics.model import DynamicModel
-from hexapod.se3 import exp_so3
 from hexapod.workspace import home_pose
 
 log = logging.getLogger(__name__)
@@ -49,18 +48,6 @@ def legs(R: np.ndarray, t: np.ndarray, A: np.ndarray, E: np.ndarray
     leg = t[:, None, :] + r - A
     q = np.linalg.norm(leg, axis=-1)
     return q, leg / q[..., None], r
-
-
-def leg_bias(twist: np.ndarray, q: np.ndarray, u: np.ndarray, r: np.ndarray) -> np.ndarray:
-    """``b = q_ddot - K tau_dot`` (n, 6) [m/s^2]: the legs' acceleration at zero platform
-    acceleration, ``u_i . (w x (w x r_i)) + |B_dot_i - q_dot_i u_i|^2 / q_i``."""
-    v, w = twist[:, None, :3], twist[:, None, 3:]
-    wr = np.cross(w, r)
-    b_dot = v + wr
-    qd = np.einsum("nki,nki->nk", u, b_dot)
-    perp = b_dot - qd[..., None] * u
-    return np.einsum("nki,nki->nk", u, np.cross(w, wr)) + np.einsum(  # type: ignore[no-any-return]
-        "nki,nki->nk", perp, perp) / q
 
 
 class DynamicRobots:
@@ -130,7 +117,7 @@ class DynamicRobots:
         self.track_max = column(self.table, "track_max")
         self.force_max = column(self.table, "force_max")
         #: (n, 6) true leg lengths [m] at the end of the last :meth:`advance` (at
-        #: construction before it; :meth:`step_reference` does not update them).
+        #: construction before it).
         self.period_lengths = column(self.table, "q")
 
     def rows(self, rows: np.ndarray) -> dict[str, np.ndarray]:
@@ -173,27 +160,3 @@ class DynamicRobots:
         from hexapod.dynamics.robots_compiled import advance_compiled
 
         return advance_compiled(self, rows, setpoints, h, steps)
-
-    def step_reference(self, rows: np.ndarray, setpoints: np.ndarray, h: float) -> None:
-        """One step of ``rows`` in numpy (the oracle of the compiled period)."""
-        R, t, tw = self.R[rows], self.t[rows], self.twist[rows]
-        M, hb, K, _, _ = self.model.terms_batch(R, t, tw, **self.rows(rows))
-        qd = np.einsum("nij,nj->ni", K, tw)
-        f = self.drives.forces(rows, setpoints, qd, h)
-        q, u, r = legs(R, t, self.A[rows], self.E[rows])
-        m_r = self.rotor[rows]
-        lhs = M + np.einsum("nki,nk,nkj->nij", K, m_r - h * f.slope, K)
-        rhs = np.einsum("nki,nk->ni", K, f.motor - f.friction - m_r * leg_bias(tw, q, u, r)) - hb
-        acc = np.linalg.solve(lhs, rhs[..., None])[..., 0]
-        tw = tw + h * acc
-        self.twist[rows] = tw
-        self.t[rows] = t + h * tw[:, :3]
-        self.R[rows] = exp_so3(h * tw[:, 3:]) @ R
-        self.forces[rows] = f.motor
-        if self.drives.mode == "velocity":
-            err = np.abs(setpoints - qd)
-            self.track_sq[rows] += np.sum(err**2, axis=1)
-            self.track_count[rows] += 6
-            self.track_max[rows] = np.maximum(self.track_max[rows], err.max(axis=1))
-        self.saturated_time[rows] += h * np.any(f.saturated, axis=1)
-        self.force_max[rows] = np.maximum(self.force_max[rows], np.abs(f.motor).max(axis=1))

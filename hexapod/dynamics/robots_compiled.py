@@ -1,16 +1,16 @@
 """The dynamic robots' control period compiled to C: every physics step fused, looped in C.
 
-The step is :meth:`hexapod.dynamics.robots.DynamicRobots.step_reference` written once
-more in CasADi SX (the mechanism's terms are those of :mod:`hexapod.dynamics.compiled`,
-substituted into the step) and generated to C twice: by this project's lane generator
+The step (the module docstring of :mod:`hexapod.dynamics.robots`) is written in CasADi
+SX (the mechanism's terms are those of :mod:`hexapod.dynamics.compiled`, substituted into
+the step) and generated to C twice: by this project's lane generator
 (:mod:`hexapod.compiled_lanes`: four rows per vector instruction, the period's steps
 looped in C; used) and by CasADi, folded over the period's steps (``Function.fold``,
-:mod:`hexapod.compiled`: the fallback, and the lane code's bitwise reference); the step
-and the numpy reference are tested equal. One row carries a robot's constants, state,
-accumulators and leg lengths (:data:`LAYOUT`); the robots keep their rows in a table
-(:func:`new_table`) whose state columns are their attributes (views), and a period
-advances the table's rows in place: nothing is packed or unpacked but the poses (the
-caller's arrays) and the setpoints.
+:mod:`hexapod.compiled`: the fallback, and the lane code's bitwise reference); the tests
+hold the step equal to its numpy oracle (``tests/hexapod/dynamic_robots_oracle.py``). One
+row carries a robot's constants, state, accumulators and leg lengths (:data:`LAYOUT`);
+the robots keep their rows in a table (:func:`new_table`) whose state columns are their
+attributes (views), and a period advances the table's rows in place: nothing is packed
+or unpacked but the poses (the caller's arrays) and the setpoints.
 """
 
 from __future__ import annotations
@@ -22,7 +22,7 @@ from typing import Any
 import casadi as ca
 import numpy as np
 
-from hexapod.compiled import CompiledFunction
+from hexapod.compiled import CompiledFunction, Layout
 from hexapod.compiled_lanes import LaneFunction
 from hexapod.dynamics import compiled as mech
 from hexapod.dynamics.drive_model import COULOMB_SMOOTHING
@@ -30,23 +30,14 @@ from hexapod.dynamics.drive_model import COULOMB_SMOOTHING
 log = logging.getLogger(__name__)
 
 
-def _layout() -> dict[str, slice]:
-    sizes = [("R", 9), ("t", 3), ("twist", 6), ("integral", 6), ("setpoint", 6), ("A", 18),
-             ("E", 18), ("p", mech.N_PARAMETERS), ("kp", 6), ("ki", 6), ("limit", 6),
-             ("rotor", 6), ("viscous", 6), ("coulomb", 6), ("h", 1), ("force_mode", 1),
-             ("motor", 6), ("saturated_time", 1), ("track_sq", 1), ("track_max", 1),
-             ("force_max", 1), ("q", 6)]
-    out, k = {}, 0
-    for name, size in sizes:
-        out[name] = slice(k, k + size)
-        k += size
-    return out
-
-
-#: Where each quantity sits in a row of the period function.
-LAYOUT = _layout()
+#: Where each quantity sits in a row of the period function (its input and output).
+LAYOUT = Layout([("R", 9), ("t", 3), ("twist", 6), ("integral", 6), ("setpoint", 6),
+                 ("A", 18), ("E", 18), ("p", mech.N_PARAMETERS), ("kp", 6), ("ki", 6),
+                 ("limit", 6), ("rotor", 6), ("viscous", 6), ("coulomb", 6), ("h", 1),
+                 ("force_mode", 1), ("motor", 6), ("saturated_time", 1), ("track_sq", 1),
+                 ("track_max", 1), ("force_max", 1), ("q", 6)], "dynamic robot row")
 #: Length of a row.
-WIDTH = max(s.stop for s in LAYOUT.values())
+WIDTH = LAYOUT.size
 
 
 def _clip(x: ca.SX, lim: ca.SX) -> ca.SX:
@@ -152,7 +143,8 @@ def period_function(steps: int) -> CompiledFunction:
     step, finish = _functions()
     xm = ca.MX.sym("x", WIDTH)
     return CompiledFunction(ca.Function(f"hexapod_dyn_period_{steps}", [xm],
-                                        [finish(step.fold(steps)(xm))]))
+                                        [finish(step.fold(steps)(xm))]),
+                            inputs=LAYOUT, outputs=LAYOUT)
 
 
 @lru_cache(maxsize=1)
@@ -203,7 +195,7 @@ def new_table(robots: Any) -> np.ndarray:
         x[:, L[key]] = arr
     for key, arr in (("saturated_time", robots.saturated_time), ("track_sq", robots.track_sq),
                      ("track_max", robots.track_max), ("force_max", robots.force_max)):
-        x[:, L[key].start] = arr
+        x[:, L.index(key)] = arr
     x[:, L["q"]] = legs(robots.R, robots.t, robots.A, robots.E)[0]
     return x
 
@@ -226,8 +218,8 @@ def load_period(robots: Any, rows: np.ndarray, setpoints: np.ndarray, h: float) 
     table[rows, L["R"]] = np.swapaxes(robots.R[rows], -1, -2).reshape(-1, 9)
     table[rows, L["t"]] = robots.t[rows]
     table[rows, L["setpoint"]] = setpoints
-    table[rows, L["h"].start] = h
-    table[rows, L["force_mode"].start] = 1.0 if robots.drives.mode == "force" else 0.0
+    table[rows, L.index("h")] = h
+    table[rows, L.index("force_mode")] = 1.0 if robots.drives.mode == "force" else 0.0
 
 
 def pack_period(robots: Any, rows: np.ndarray, setpoints: np.ndarray, h: float

@@ -91,12 +91,3 @@ def test_unreachable_lengths_fall_back_to_the_numpy_refusal() -> None:
     assert cmd.reason is not None and "nominal model failed" in cmd.reason
     assert np.all(np.isfinite(cmd.forces)) and not np.any(cmd.forces)
     assert ctrl.numpy_steps == 1 and ctrl.compiled_steps == 0
-
-
-
-
-def test_output_layout() -> None:
-    from controllers.solvers import compiled_ctc
-
-    fn = compiled_ctc.joint_step()
-    assert (fn.n_in, fn.n_out) == (compiled_ctc.ROW, compiled_ctc.OUT)

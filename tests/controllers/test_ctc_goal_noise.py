@@ -113,6 +113,7 @@ def test_a_noisy_goal_is_settled_at_its_least_squares_pose(
         assert ang < 1e-8, (fn, ang, offset_angle)
 
 
+@pytest.mark.slow
 def test_the_directions_amplify_the_goal_noise(geometry: HexapodGeometry) -> None:
     """The same noisy normals taught to both laws, 20 draws: the direction law's
     least-squares pose is several times farther from the goal than the edge law's

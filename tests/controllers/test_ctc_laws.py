@@ -63,6 +63,7 @@ def test_missing_context_is_named(world: CtcWorld, law: str) -> None:
             ctx.goal, normals=None, directions=None, rotation=None)))
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("law", LAWS)
 def test_tracks_a_circle(world: CtcWorld, law: str) -> None:
     """A 10 mm circle at 5 mm/s: within 20 um of the reference all along (the held force's

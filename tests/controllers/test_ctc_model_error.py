@@ -49,6 +49,7 @@ def _final_errors(truth: HexapodGeometry, eps: float, law: str, fn: float = 2.0
     return float(pos), float(ang)
 
 
+@pytest.mark.slow
 def test_errors_grow_as_the_theory_says(geometry: HexapodGeometry) -> None:
     truth = ideal_drives(geometry)
     err = {(law, eps): _final_errors(truth, eps, law) for law in LAWS
@@ -98,6 +99,7 @@ def test_refused_on_the_kinematic_world(law: str) -> None:
             "leg velocities [m/s]") in row["failure"]
 
 
+@pytest.mark.slow
 def test_leg_edge_ctc_in_the_study_dynamic_world() -> None:
     """quick-dynamic (its calibration error, noise and drive friction), batched engine:
     the leg-edge law converges (to 0.1 mm when measured; the scenario's threshold is

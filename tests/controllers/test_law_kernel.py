@@ -18,6 +18,7 @@ from controllers.law_kernel import (
     direction_kernel,
     full_rank_certificate,
     jacobi_eigen,
+    law_layouts,
 )
 from controllers.laws import Gain, solve_normal_damped
 from controllers.qp import LimitQP
@@ -262,9 +263,10 @@ def test_lean_core_equals_the_full_core_where_it_certifies(world: World, name: s
 def test_virtual_machine_fallback_equals_c(monkeypatch: pytest.MonkeyPatch,
                                            rng: np.random.Generator) -> None:
     """Without a C compiler the CasADi VM evaluates the same core."""
-    c_kernel = LawKernel(CompiledFunction(_direction_function()), DIRECTION_INPUTS, 18)
+    layouts = law_layouts(DIRECTION_INPUTS, 18, "direction law")
+    c_kernel = LawKernel(CompiledFunction(_direction_function(), True, *layouts))
     monkeypatch.setenv("CC", "/nonexistent/cc")
-    vm_kernel = LawKernel(CompiledFunction(_direction_function()), DIRECTION_INPUTS, 18)
+    vm_kernel = LawKernel(CompiledFunction(_direction_function(), True, *layouts))
     assert c_kernel.compiled and not vm_kernel.compiled
     u = rng.normal(size=(6, 3))
     u /= np.linalg.norm(u, axis=1, keepdims=True)

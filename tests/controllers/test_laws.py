@@ -109,6 +109,7 @@ def test_least_squares_rank_deficient(rng: np.random.Generator) -> None:
 
 
 # ----------------------------------------------------------------------------- closed loop
+@pytest.mark.slow
 @pytest.mark.parametrize("name", VISION)
 def test_exponential_decay_and_goal_reached(world: World, name: str) -> None:
     """ė = -λ e: successive error norms shrink by 1 - λ dt, and the goal pose is reached."""
@@ -155,6 +156,7 @@ def test_adaptive_gain_converges(world: World, name: str) -> None:
 
 
 # ----------------------------------------------------------------------------- missing features
+@pytest.mark.slow
 @pytest.mark.parametrize("name", ["leg-edge", "leg-edge-qp"])
 def test_hidden_edges_use_what_is_visible(world: World, name: str) -> None:
     dt = 0.01

@@ -263,6 +263,7 @@ def test_qp_data_match_finite_differences(other_geometry) -> None:  # type: igno
     assert np.all(np.isfinite(vals))
 
 
+@pytest.mark.slow
 def test_closed_loop_keeps_the_strokes(geometry) -> None:  # type: ignore[no-untyped-def]
     """A large motion (omni camera, reference robot) during which the classical edge law
     leaves the stroke (by about 10 mm); both predictive models keep every leg inside."""
@@ -301,6 +302,7 @@ def _outside_by(world: World, pix: np.ndarray) -> float:
                      (-0.5 - pix[..., 1]).max(), (pix[..., 1] - (h - 0.5)).max()))
 
 
+@pytest.mark.slow
 def test_visibility_constraint_keeps_the_edges_in_the_image(geometry) -> None:  # type: ignore[no-untyped-def]
     """Front camera with its principal point raised by 140 px (the platform ends of the legs
     near the top border): the classical edge law takes an edge out of the image on this
@@ -419,6 +421,7 @@ def test_global_model_at_the_goal_and_on_malformed_observations(camera: str, kin
         assert np.array_equal(cmd.velocities, np.zeros(6))
 
 
+@pytest.mark.slow
 def test_tilt_bound_is_kept(geometry) -> None:  # type: ignore[no-untyped-def]
     """Goal tilted by 8 deg, bound 4 deg: the classical law tilts the platform to 8 deg,
     the predictive laws stop at the bound (global: exactly at the predicted stages;

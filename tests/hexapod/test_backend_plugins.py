@@ -112,6 +112,7 @@ def test_conformance_catches_a_backend_that_ignores_the_limits() -> None:
     assert "stroke: measured" in text
 
 
+@pytest.mark.slow
 def test_emulator_conforms_within_its_micrometre_quantisation() -> None:
     """The protocol carries lengths in micrometres and each period starts from the rounded
     measurement: the emulator drifts from the exact simulator by a few micrometres."""
@@ -121,6 +122,7 @@ def test_emulator_conforms_within_its_micrometre_quantisation() -> None:
     assert 1e-7 < report.max_deviation < 1e-5
 
 
+@pytest.mark.slow
 def test_a_plugin_backend_runs_a_trial(site: Path, tmp_path: Path) -> None:
     """`hexapod-bench run --backend lagging:0.005` in a fresh process that finds the plugin
     through its distribution's entry points; the trial converges as with the simulator."""

@@ -57,6 +57,7 @@ def _gain_at(params: DriveParameters, f_hz: float, h: float) -> float:
     return float(np.hypot(*coef) / amp)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("bandwidth", [20.0, 50.0, 120.0])
 def test_the_velocity_loop_has_the_stated_bandwidth(bandwidth: float) -> None:
     """Measured from the simulated response (physics step 0.1 ms): -3 dB at the stated

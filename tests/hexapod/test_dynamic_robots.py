@@ -10,6 +10,7 @@ import pytest
 from hexapod.dynamics.robots import DynamicRobots, legs
 from hexapod.geometry import deltalab
 from hexapod.workspace import sample_poses
+from tests.hexapod.dynamic_robots_oracle import leg_bias, step_reference
 
 
 def _robots(n: int, mode: str = "velocity", seed: int = 3, **drive: float
@@ -42,7 +43,7 @@ def test_the_compiled_period_equals_the_numpy_steps(mode: str) -> None:
     for _ in range(3):  # three periods: the twist and the integral are non-zero
         assert not a.advance(rows, sp, 1e-3, 20).any()
         for _ in range(20):
-            b.step_reference(rows, sp, 1e-3)
+            step_reference(b, rows, sp, 1e-3)
     sa, sb = _state(a), _state(b)
     scale = np.maximum(np.abs(sb).max(axis=0), 1e-6)
     np.testing.assert_array_less(np.abs(sa - sb) / scale, 1e-9)
@@ -72,7 +73,7 @@ def test_power_balance_of_mechanism_rotors_and_drives() -> None:
         _, _, K, _, _ = r.model.terms_batch(r.R, r.t, r.twist, **r.rows(rows))
         qd0 = np.einsum("nij,nj->ni", K, r.twist)
         f = r.drives.forces(rows, push, qd0, h)
-        r.step_reference(rows, push, h)
+        step_reference(r, rows, push, h)
         _, _, K1, _, _ = r.model.terms_batch(r.R, r.t, r.twist, **r.rows(rows))
         qd1 = np.einsum("nij,nj->ni", K1, r.twist)
         net = f.motor - f.friction
@@ -135,10 +136,8 @@ def test_the_step_equals_the_compiled_models_drive_layer() -> None:
     acc, _, _ = r.model.forward_drives_batch(R, t, tw, f.motor - f.friction, r.rotor,
                                              -h * f.slope, **r.rows(rows))
     q, u, arm = legs(R, t, r.A, r.E)
-    from hexapod.dynamics.robots import leg_bias
-
     np.testing.assert_allclose(leg_bias(tw, q, u, arm), bias, rtol=1e-9, atol=1e-12)
-    r.step_reference(rows, sp, h)
+    step_reference(r, rows, sp, h)
     np.testing.assert_allclose((r.twist - tw) / h, acc, rtol=1e-7, atol=1e-9)
 
 

@@ -112,6 +112,7 @@ def test_through_the_real_emulator() -> None:
         emu.stop()
 
 
+@pytest.mark.slow
 def test_the_console_script_takes_dynamics() -> None:
     proc = subprocess.Popen([sys.executable, "-m", "hexapod.backends.emulator", "--pty",
                              "--dynamics", "--physics-dt", "0.5"], stdout=subprocess.PIPE,
@@ -143,6 +144,7 @@ def _gcs(dynamics: bool):
     return ctrl
 
 
+@pytest.mark.slow
 def test_the_gcs_platform_follows_its_line_through_the_dynamic_robot() -> None:
     """The commanded straight line becomes the legs' position setpoints: the true pose
     lags it, POS? answers the true pose, ONT? says 0 until the legs have arrived and
@@ -163,6 +165,7 @@ def test_the_gcs_platform_follows_its_line_through_the_dynamic_robot() -> None:
     assert dyn.handle_line(b"ONT? Z\n", 5.0).strip() == "Z=1"
 
 
+@pytest.mark.slow
 def test_the_gcs_console_script_takes_dynamics() -> None:
     import socket
 

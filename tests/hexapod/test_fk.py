@@ -30,6 +30,7 @@ def poses() -> tuple[np.ndarray, np.ndarray]:
     return sample_poses(deltalab(), N_POSES, rng=np.random.default_rng(99))
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("method", ["newton", "pinocchio"])
 def test_round_trip_1000_poses(geometry: HexapodGeometry, poses: tuple[np.ndarray, np.ndarray],
                                method: str) -> None:

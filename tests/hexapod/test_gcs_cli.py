@@ -60,6 +60,7 @@ def controller() -> Iterator[str]:
         proc.communicate(timeout=10)
 
 
+@pytest.mark.slow
 def test_ctrl_c_on_servo_halts_the_platform(controller: str, tmp_path: Path) -> None:
     goal = tmp_path / "goal.toml"
     goal.write_text("lengths_mm = [" + ", ".join(f"{x:.3f}" for x in GOAL_MM) + "]\n")
@@ -85,6 +86,7 @@ def test_ctrl_c_on_servo_halts_the_platform(controller: str, tmp_path: Path) -> 
     assert err_code == b"0\n"
 
 
+@pytest.mark.slow
 def test_study_with_a_dropped_connection_keeps_the_rows(tmp_path: Path) -> None:
     out = tmp_path / "run"
     base = [sys.executable, "-m", "benchmarks.cli", "run", "quick", "--out", str(out),

@@ -355,6 +355,7 @@ def test_emulator_stops_with_the_robot() -> None:
     assert not emu.running
 
 
+@pytest.mark.slow
 def test_emulator_in_a_child_process(geometry: HexapodGeometry) -> None:
     faults = FaultConfig(latency=0.002, seed=3)
     with open_emulated_robot(geometry, Q0, faults=faults, process=True, lag=0.001) as r:

@@ -199,6 +199,7 @@ def _listening_addresses(pid: int) -> list[str]:
     return found
 
 
+@pytest.mark.slow
 def test_live_viewer_loopback_non_blocking_and_closed(record: TrialRecord) -> None:
     viewer = HexapodViewer(record.geometry)
     server = viewer.server_process
@@ -260,6 +261,7 @@ def test_html_is_self_contained(record: TrialRecord, tmp_path: Path) -> None:
     assert "viewer.animator.seek" in html  # page.html#t=... opens paused at t
 
 
+@pytest.mark.slow
 def test_replay_in_a_real_browser(record: TrialRecord, tmp_path: Path) -> None:
     npz = save_trial(tmp_path / "trial.npz", **record.arrays)
     html, png = replay_trial(npz, tmp_path / "replay.html")

@@ -33,6 +33,7 @@ def _with_forces(record):
     return {**record.arrays, "leg_forces": forces, "force_limit": np.full(6, 120.0)}
 
 
+@pytest.mark.slow
 def test_a_dynamic_record_replays_with_its_forces(tmp_path: Path) -> None:
     record = synthetic_record(deltalab())
     path = save_trial(tmp_path / "dyn.npz", **_with_forces(record))

@@ -67,6 +67,7 @@ def test_tracker_accuracy_on_distorted_frames(geometry, rng):
                                                                     np.percentile(e, 95))
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("distortion", [OMNI_DISTORTION, OMNI_RADIAL])
 def test_omni_detector_accuracy_on_distorted_frames(geometry, rng, distortion):
     """Omnidirectional camera with a mild Mei distortion, no initialisation, the frames

@@ -257,6 +257,7 @@ def _brute_force_fold_in_image(d: tuple, K: np.ndarray) -> tuple[bool, float]:
     return bool((depth >= 0).any()), float(depth.max())
 
 
+@pytest.mark.slow
 def test_fold_check_agrees_with_a_brute_force_search(rng: np.random.Generator) -> None:
     K = _K()
     decided = 0

@@ -199,6 +199,7 @@ def test_perspective_line_fit_is_the_conic_alternative(geometry) -> None:
     assert np.median(angle_between(a, b)[ok]) < 0.2 * np.median(e)
 
 
+@pytest.mark.slow
 def test_accuracy_benchmark_runs(capsys, tmp_path) -> None:
     from benchmarks.perf.vision import accuracy_figures, main
 

@@ -81,6 +81,7 @@ def test_mismatched_cameras_raise(geometry):
         ImageSensor(front_camera(geometry), omni_camera(geometry), geometry)
 
 
+@pytest.mark.slow
 def test_averaged_teaching_reduces_the_spread_of_the_taught_normals(geometry, rng):
     """Teaching a goal from a burst of K rendered frames (normals averaged by
     ``average_normals``) instead of one: over repeated teachings at the same pose, the

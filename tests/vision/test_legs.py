@@ -200,6 +200,7 @@ def _brute_force_occlusion(P, A, u, q, r, disc, skip_own, M=4000):
     return inside, clear < 1e-3
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("seed", [0, 1, 2])
 def test_occlusion_against_brute_force(geometry, seed: int) -> None:
     rng = np.random.default_rng(seed)

@@ -95,6 +95,7 @@ def _omni_lens(geometry):
     return omni_camera(geometry).replace(distortion=OMNI_DISTORTION)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("exact", [True, False])
 @pytest.mark.parametrize("make_camera", [front_camera, omni_camera, _front_lens, _omni_lens])
 def test_rendered_edges_lie_on_the_true_limbs(geometry, make_camera, exact):
@@ -212,6 +213,7 @@ def _ray_hits(rays: np.ndarray, geometry, cam, R: np.ndarray, t: np.ndarray,
     return hits
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("make_camera", [front_camera, omni_camera])
 def test_draw_order_is_the_order_of_the_true_depths(geometry, rng, make_camera):
     """Wherever two objects (legs, platform disc) overlap in the image, the one the

@@ -38,6 +38,7 @@ def _true_limbs(cam, geometry, R, t, n: int = 4001) -> tuple[np.ndarray, object]
     return pix, obs
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("make_camera", [_front, _omni])
 def test_drawn_limbs_are_within_0_02_px_of_the_true_curves(geometry, rng, make_camera):
     """The silhouette's sides (the polygons the exact renderer fills) against the true
@@ -65,6 +66,7 @@ def test_drawn_limbs_are_within_0_02_px_of_the_true_curves(geometry, rng, make_c
     assert sag > 1.0, sag
 
 
+@pytest.mark.slow
 def test_row_coverage_across_a_curved_limb_is_the_true_limb_position(geometry, rng):
     """tests/vision/test_render.py's row-coverage test through the front camera's
     distorted lens: along an image row, the coverage summed across a limb gives the

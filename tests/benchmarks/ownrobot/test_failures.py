@@ -20,6 +20,7 @@ from tests.benchmarks.ownrobot.robots import BLIND_CAMERA, CRASH, own_robot, run
 CAMERA_CAUSE = "the camera sees no leg edge at the goal pose"
 
 
+@pytest.mark.slow
 def test_blind_camera_failures_once_per_cause(tmp_path: Path) -> None:
     """leg-edge cannot run with a camera that sees no leg; model-based can: the run goes
     on, the leg-edge failures are one cause counted, no traceback; leg-edge failed every
@@ -43,6 +44,7 @@ def test_blind_camera_failures_once_per_cause(tmp_path: Path) -> None:
     assert "first: own/p0/leg-edge/trial 0: ContextError: leg-edge: context field" in section
 
 
+@pytest.mark.slow
 def test_every_trial_failed_exits_non_zero_and_traceback_only_with_v(tmp_path: Path) -> None:
     own_robot().to_toml(tmp_path / "robot.toml")
     study = write_study(tmp_path, controllers=f'["{CRASH}"]')

@@ -33,6 +33,7 @@ def test_blind_camera_is_refused(tmp_path: Path, capsys: pytest.CaptureFixture[s
     assert not (out / "results.jsonl").exists() and stdout == ""
 
 
+@pytest.mark.slow
 def test_blind_camera_with_a_controller_that_needs_none_runs(
         tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     own_robot().to_toml(tmp_path / "robot.toml")

@@ -99,6 +99,7 @@ def test_the_python_snippets_write_the_examples(folder: Path,
         assert json.loads(values) == pytest.approx(json.loads(want.group(1)), abs=2e-3)
 
 
+@pytest.mark.slow
 def test_a_robot_from_the_page_passes_check_and_runs(folder: Path,
                                                      capsys: pytest.CaptureFixture[str]
                                                      ) -> None:

@@ -28,6 +28,7 @@ def test_a_detected_partly_hidden_edge_is_not_counted_as_found() -> None:
     assert (c.truth, c.found, c.missed, c.partly_hidden, c.invented) == (10, 9, 1, 1, 1)
 
 
+@pytest.mark.slow
 def test_benchmark_table_never_finds_more_than_the_truth() -> None:
     buf = io.StringIO()
     with redirect_stdout(buf):
@@ -42,6 +43,7 @@ def test_benchmark_table_never_finds_more_than_the_truth() -> None:
         assert found <= visible and found + missed == visible, line
 
 
+@pytest.mark.slow
 def test_distortion_rows_beside_the_ideal_ones(tmp_path) -> None:
     """``--distortion``: each camera twice, ideal then distorted (the ``lens`` column, the
     last but one), then the front camera through the other lens models; the same poses

@@ -8,6 +8,7 @@ import pytest
 from benchmarks.perf import study
 
 
+@pytest.mark.slow
 def test_the_table_has_both_engines_and_equal_rows(capsys: pytest.CaptureFixture[str]) -> None:
     assert study.main(["--trials", "6", "--repeats", "1"]) == 0
     out = capsys.readouterr().out
@@ -27,6 +28,7 @@ def test_bad_options_are_refused(capsys: pytest.CaptureFixture[str]) -> None:
     assert "--trials and --repeats must be >= 1" in capsys.readouterr().err
 
 
+@pytest.mark.slow
 def test_the_breakdown_accounts_for_the_whole_run(capsys: pytest.CaptureFixture[str]) -> None:
     assert study.main(["--trials", "4", "--repeats", "1", "--breakdown"]) == 0
     out = capsys.readouterr().out

@@ -30,6 +30,7 @@ def _mm(values: list[float]) -> str:
     return "[" + ", ".join(f"{x:.3f}" for x in values) + "]"
 
 
+@pytest.mark.slow
 def test_converges_through_the_emulator_with_a_log(
         tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     goal = _goal(tmp_path, f"lengths_mm = {_mm(GOAL_MM)}\n")
@@ -52,6 +53,7 @@ def test_converges_through_the_emulator_with_a_log(
     assert 1 <= out.count("max|q-q*|") < steps
 
 
+@pytest.mark.slow
 def test_teach_then_servo_to_the_taught_features(
         tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     goal = tmp_path / "taught.toml"
@@ -86,6 +88,7 @@ def test_teach_averages_a_burst_of_frames_through_the_cli(
     assert taught.features is not None and taught.features.visible_count == 12
 
 
+@pytest.mark.slow
 def test_teach_averaging_reduces_the_spread_of_the_taught_normals() -> None:
     """The teach path (rendered camera, edges tracked from frame to frame): over repeated
     teachings at one pose, the spread of the taught normals about the truth drops as
@@ -260,6 +263,7 @@ def test_parse_options() -> None:
                                      "adaptive_gain": [4, 0.4, 30]}
 
 
+@pytest.mark.slow
 def test_ctrl_c_halts_and_exits_130(tmp_path: Path) -> None:
     """A real SIGINT to a real process: the loop stops, the robot is halted, exit 130."""
     goal = _goal(tmp_path, f"lengths_mm = {_mm(GOAL_MM)}\n")
@@ -310,6 +314,7 @@ def test_video_camera_detects_the_legs_and_stops_at_the_end_of_the_file(
     assert "normals averaged over 8 of 20 frames" in out
 
 
+@pytest.mark.slow
 def test_servo_through_an_opencv_calibration_file(tmp_path: Path,
                                                    capsys: pytest.CaptureFixture[str]) -> None:
     """--camera-file cal.yml (a distorted lens written by cv2.FileStorage) with

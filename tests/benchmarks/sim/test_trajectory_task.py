@@ -29,6 +29,7 @@ def _scenario(task: dict[str, Any], **extra: Any) -> Any:
     return parse_scenario(table)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize(("shape", "profile"), [("circle", "quintic"),
                                                 ("lemniscate", "trapezoidal"),
                                                 ("line", "trapezoidal")])
@@ -71,6 +72,7 @@ def test_a_calibration_error_shows_in_the_tracking_error() -> None:
     assert all(0.05 < r["tracking_rms_position_mm"] < 10.0 for r in rows)
 
 
+@pytest.mark.slow
 def test_both_engines_give_the_same_tracking_rows() -> None:
     sc = _scenario({"shape": "lemniscate", "max_steps": 120},
                    calibration_error={"base_points_mm": 1.0, "camera_pose_mm": 2.0},

@@ -48,6 +48,7 @@ def test_noisy_calibration_sweeps_and_reports_errors(tmp_path: Path) -> None:
     assert doc["max_error_mm"] >= max(p["max_error_mm"] for p in doc["points"]) - 1e-12
 
 
+@pytest.mark.slow
 def test_run_with_a_calibration_file(tmp_path: Path) -> None:
     cal = tmp_path / "cal"
     scen = _scenario(tmp_path)
@@ -72,6 +73,7 @@ def test_bad_calibration_file(tmp_path: Path) -> None:
                      str(tmp_path / "missing.toml")]) == 2
 
 
+@pytest.mark.slow
 def test_viz_replays_a_recorded_trial_to_html(tmp_path: Path) -> None:
     scen = _scenario(tmp_path)
     out = tmp_path / "run"
@@ -102,6 +104,7 @@ def test_calibrate_from_a_user_observation_file(tmp_path: Path) -> None:
                      "--observations", str(broken)]) == 2
 
 
+@pytest.mark.slow
 def test_ill_conditioned_calibration_is_refused_or_marked(tmp_path: Path,
                                                          caplog: pytest.LogCaptureFixture
                                                          ) -> None:

@@ -7,12 +7,13 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from scipy import stats as sps
 
 from benchmarks.cli import main as cli_main
 from benchmarks.exceptions import BenchmarkError
-from benchmarks.study import load
+from benchmarks.study import exact, load
 from benchmarks.study.compare import compare_controllers, compare_runs
-from tests.benchmarks.study.helpers_rows import two_controllers, write_run
+from tests.benchmarks.study.helpers_rows import make_rows, two_controllers, write_run
 
 #: Two leg-edge laws on the same trials, the second with a fifth of the gain: made
 #: slower on purpose. No noise, so both reach the goal.
@@ -180,3 +181,115 @@ def test_failed_trials_are_left_out_of_all_but_convergence(tmp_path: Path) -> No
     assert by["converged"].n == 30 and by["converged"].discordant == (5, 0)  # a: bad
     assert by["final_error"].n == 25  # the failed trials' 27 mm not compared
     assert by["final_error"].p_value == 1.0
+
+
+def _censored_pair(tmp_path: Path, fast_converges: int) -> list:
+    """``fast`` converges in 100 steps on its first ``fast_converges`` of 20 trials and
+    not at all on the others (500 steps run); ``sure`` converges on all 20 in 200."""
+    n = 20
+    err = np.full(n, 0.05)
+    conv = np.arange(n) < fast_converges
+    fast = make_rows("fast", err, conv, np.where(conv, 100, 500))
+    sure = make_rows("sure", err, np.ones(n, bool), np.full(n, 200))
+    return compare_controllers(load(write_run(tmp_path / f"c{fast_converges}", fast + sure)),
+                               metrics=("steps",))
+
+
+def test_steps_are_compared_with_censoring_not_on_the_survivors(tmp_path: Path) -> None:
+    """On the trials both converged ``fast`` wins every pair (the survivorship view); with
+    the trials it never converged counted as slower, ``sure`` is faster on 17 of 20."""
+    (c,) = _censored_pair(tmp_path, 3)
+    assert c.test == "sign-censored"
+    assert c.discordant == (17, 3)  # fast (a) higher, i.e. slower, in 17 pairs
+    assert c.p_value == pytest.approx(sps.binomtest(17, 20, 0.5).pvalue)
+    assert c.better == "sure"
+    assert c.a_value == np.inf  # fast's median is censored: it converged on 3 of 20
+    assert c.interval[1] == np.inf
+    (c,) = _censored_pair(tmp_path, 12)  # 12 faster, 8 censored: no conclusion
+    assert c.discordant == (8, 12) and c.better is None
+    assert c.outcome == "not shown equivalent"
+
+
+def test_equivalence_needs_tost_not_a_missing_difference(tmp_path: Path,
+                                                         capsys: pytest.CaptureFixture[str]
+                                                         ) -> None:
+    """Two controllers whose final errors differ by at most 0.1 %: equivalent within
+    0.01 mm on 300 pairs; on 8 pairs, the same differences are not shown equivalent (the
+    one-sided sign tests cannot go below 1/16 with 4 pairs), and not different."""
+    rows = two_controllers(300)
+    rng = np.random.default_rng(2)
+    for r in rows:
+        if r["controller"] == "bad":
+            r["final_position_error_mm"] *= float(rng.uniform(0.999, 1.001))
+    comps = {c.metric: c for c in compare_controllers(load(write_run(tmp_path / "r", rows)))}
+    fe = comps["final_error"]
+    assert fe.better is None and fe.outcome == "equivalent"
+    assert fe.p_equivalence_holm < 0.05 and fe.margin == 0.01
+    assert "equivalent within +-0.01 mm" in fe.verdict
+    assert "no significant difference" not in fe.verdict
+    few = [r for r in rows if r["trial"] < 4]
+    small = {c.metric: c for c in compare_controllers(load(write_run(tmp_path / "s", few)))}
+    assert small["final_error"].outcome == "not shown equivalent"
+    assert small["final_error"].p_equivalence == pytest.approx(0.5 ** 4)
+    assert "not shown different, not shown equivalent within +-0.01 mm" in \
+        small["final_error"].verdict
+    assert cli_main(["compare", str(tmp_path / "r"), "--margin", "final_error=0.00001"]) == 0
+    out = capsys.readouterr().out
+    assert "Equivalent within their margins" in out
+    assert cli_main(["compare", str(tmp_path / "r"), "--margin", "final_error"]) != 0
+    assert "--margin 'final_error': expected NAME=NUMBER" in capsys.readouterr().err
+    with pytest.raises(BenchmarkError, match="positive"):
+        compare_controllers(load(tmp_path / "r"), margins={"steps": -1.0})
+
+
+def test_rate_difference_has_newcombes_interval_and_tiny_p_is_bounded(tmp_path: Path
+                                                                       ) -> None:
+    """20 of 20 against 0 of 20: the interval is Newcombe's, not the bootstrap's
+    [+100, +100]; a p-value below 1e-16 is printed as such."""
+    n = 20
+    err = np.full(n, 0.05)
+    rows = (make_rows("all", err, np.ones(n, bool), np.full(n, 100))
+            + make_rows("none", err, np.zeros(n, bool), np.full(n, 500)))
+    c = next(c for c in compare_controllers(load(write_run(tmp_path / "r", rows)))
+             if c.metric == "converged")
+    assert c.interval == exact.newcombe_paired(0, 20, 0, 0)
+    assert c.interval[0] < 0.9
+    assert "difference +100.0 points [+77.2, +100.0]" in c.verdict
+    rows = two_controllers(3000, worse_by=1.5)
+    fe = next(c for c in compare_controllers(load(write_run(tmp_path / "big", rows)))
+              if c.metric == "final_error")
+    assert fe.p_holm < 1e-16 and "Holm p = < 1e-16" in fe.verdict
+
+
+def test_settling_is_compared_with_censoring(tmp_path: Path) -> None:
+    """A trajectory task: ``quick`` settles in 0.1 s on 4 of 12 trials and never on the
+    others; ``steady`` settles in 0.3 s on all 12. On the trials both settled ``quick``
+    wins; counted with the unsettled ones, ``steady`` is faster on 8 of 12 pairs."""
+    rows = []
+    for ctrl, times in (("quick", [0.1] * 4 + [None] * 8), ("steady", [0.3] * 12)):
+        r = make_rows(ctrl, np.full(12, 0.05), np.array([t is not None for t in times]),
+                      np.full(12, 100))
+        for row, t in zip(r, times, strict=True):
+            row.update(tracking_rms_position_mm=0.1, tracking_max_position_mm=0.2,
+                       settling_time_s=t)
+        rows += r
+    comps = compare_controllers(load(write_run(tmp_path / "t", rows)), metrics=("settling",))
+    (c,) = comps
+    assert c.test == "sign-censored"
+    assert c.discordant == (8, 4)
+    assert c.p_value == pytest.approx(sps.binomtest(8, 12, 0.5).pvalue)
+
+
+def test_margin_option_in_points_and_json_fields(tmp_path: Path) -> None:
+    """``--margin converged=10`` is 10 points (0.1 of the trials) in the JSON, which
+    carries each comparison's outcome and equivalence p-values."""
+    run = write_run(tmp_path / "r", two_controllers(60))
+    js = tmp_path / "c.json"
+    assert cli_main(["compare", str(run), "--margin", "converged=10", "--json", str(js)]) == 0
+    doc = {d["metric"]: d for d in json.loads(js.read_text())["comparisons"]}
+    assert doc["converged"]["margin"] == pytest.approx(0.1)
+    assert doc["final_error"]["margin"] == pytest.approx(0.01)
+    assert doc["converged"]["outcome"] == "equivalent"  # 60 of 60 each: [-6.0, +6.0] pts
+    assert doc["converged"]["p_equivalence_holm"] < 0.05
+    assert {d["outcome"] for d in doc.values()} <= {"different", "equivalent",
+                                                    "not shown equivalent"}

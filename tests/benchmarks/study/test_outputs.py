@@ -101,7 +101,7 @@ def test_report_refuses_a_name_from_a_results_file_that_leaves_the_directory(
     before = _tree(tmp_path)
     assert cli_main(["report", str(out)]) == 2
     err = capsys.readouterr().err
-    assert "escape_error_cdf.png: would be written outside" in err
+    assert "escape_time_to_converge.png: would be written outside" in err  # the first figure
     assert "nothing was written" in err
     assert sorted(_tree(tmp_path)) == sorted(before), "no file created anywhere"
 

@@ -5,6 +5,7 @@ from __future__ import annotations
 from pathlib import Path
 
 import numpy as np
+import pytest
 
 from benchmarks.study.profiles import cost_table, profile, ratios
 from benchmarks.study.report import write_report
@@ -31,6 +32,7 @@ def test_profile_hand_computed() -> None:
                              [0.25, 0.25, 0.5, 0.5]])
 
 
+@pytest.mark.slow
 def test_cost_table_failures_and_report_figure(tmp_path: Path) -> None:
     rows = two_controllers(50, worse_by=1.2, worse_fails=5)
     ctrls, costs = cost_table(rows, "steps")

@@ -88,6 +88,7 @@ def test_fingerprints_follow_the_parameters_not_the_names(tmp_path: Path) -> Non
     assert camera_fingerprint(moved) != camera_fingerprint(cam)
 
 
+@pytest.mark.slow
 def test_the_same_setup_uses_it_silently(calibrated: Path, tmp_path: Path,
                                           capsys: pytest.CaptureFixture[str]) -> None:
     out = tmp_path / "run"
@@ -125,6 +126,7 @@ def test_another_camera_alone_is_refused(calibrated: Path, tmp_path: Path,
     assert "robot 'deltalab'" not in err, "the robot is the same"
 
 
+@pytest.mark.slow
 def test_insisting_warns_loudly_and_flags_the_far_points(
         calibrated: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     _own_robot(tmp_path / "my-hexapod.toml")
@@ -142,6 +144,7 @@ def test_insisting_warns_loudly_and_flags_the_far_points(
     assert any("base point(s) 0 (" in w for w in warnings)
 
 
+@pytest.mark.slow
 def test_the_scenario_key_refuses_or_allows_the_same_way(
         calibrated: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     _own_robot(tmp_path / "my-hexapod.toml")
@@ -155,6 +158,7 @@ def test_the_scenario_key_refuses_or_allows_the_same_way(
     assert "FOREIGN CALIBRATION" in capsys.readouterr().err
 
 
+@pytest.mark.slow
 def test_a_file_without_provenance_is_used_with_a_warning(
         calibrated: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     table = tomllib.loads(calibrated.read_text())
@@ -212,6 +216,7 @@ def test_servo_refuses_a_foreign_calibration_before_the_robot_is_contacted(
     assert "nonexistent" not in err
 
 
+@pytest.mark.slow
 def test_a_file_in_a_study_that_draws_calibration_errors_is_questioned(
         calibrated: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     scen = _scenario(tmp_path, "drawn",

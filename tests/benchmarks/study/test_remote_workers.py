@@ -44,6 +44,7 @@ def _write_study(folder: Path) -> Path:
     return study
 
 
+@pytest.mark.slow
 def test_a_worker_that_cannot_see_the_files_runs_the_study(tmp_path: Path) -> None:
     study = _write_study(tmp_path / "study")
     sc = load_scenario(study)  # the client reads the files here, once

@@ -6,6 +6,7 @@ import re
 from pathlib import Path
 
 import numpy as np
+import pytest
 from scipy import stats as sps
 
 from benchmarks.study import stats
@@ -32,13 +33,17 @@ def test_report_cells_have_intervals(tmp_path: Path) -> None:
     assert cells[5] == "0"  # failed: the trials that did not run to their end
     med, lo, hi = map(float, re.match(r"([\d.]+) \[([\d.]+), ([\d.]+)\]", cells[6]).groups())
     assert med == round(float(np.median(err)), 3)
-    (blo, bhi), = stats.bootstrap_quantiles(err, [0.5])
-    assert (lo, hi) == (round(blo, 3), round(bhi, 3))
+    ref = sps.quantile_test(err, p=0.5).confidence_interval(0.95)
+    assert (lo, hi) == (round(ref.low, 3), round(ref.high, 3))
     assert lo < med < hi
+    # steps: every trial, the 6 that did not converge censored at the run's length
+    censored = np.where(conv, steps, np.inf)
+    ref = sps.quantile_test(censored, p=0.5).confidence_interval(0.95)
     steps_cell = re.match(r"(\d+) \[(\d+), (\d+)\]", cells[11])
     assert steps_cell is not None
-    assert abs(float(steps_cell.group(1)) - np.median(steps[conv])) <= 0.5
-    assert f"{stats.RESAMPLES} resamples, seed {stats.SEED}" in text
+    assert abs(float(steps_cell.group(1)) - np.median(censored)) <= 0.5
+    assert (int(steps_cell.group(2)), int(steps_cell.group(3))) == (ref.low, ref.high)
+    assert "order-statistic" in text
     assert "Wilson" in text
     # the calibration table gives seed 001's measure beside the per-point norm
     cal = next(line for line in text.splitlines() if "max coordinate error mm" in line)
@@ -49,7 +54,7 @@ def test_report_cells_have_intervals(tmp_path: Path) -> None:
 
 
 def test_link_images_and_visibility_tables_have_intervals(tmp_path: Path) -> None:
-    """The robot link's and the image pipeline's medians carry their bootstrap intervals,
+    """The robot link's and the image pipeline's medians carry their order-statistic intervals,
     the trials with a hidden edge their Wilson interval (docs/statistics.md: every table)."""
     rng = np.random.default_rng(3)
     err = rng.lognormal(-2, 0.4, 40)
@@ -68,10 +73,42 @@ def test_link_images_and_visibility_tables_have_intervals(tmp_path: Path) -> Non
         return [c.strip() for c in lines[i + 2].strip("|").split("|")]
 
     link = row_after("| sweep | controller | backend | RTT median ms")
-    (lo, hi), = stats.bootstrap_quantiles(rtt, [0.5])
+    lo, hi = sps.quantile_test(rtt, p=0.5).confidence_interval(0.95)
     assert link[3] == f"{np.median(rtt):.3f} [{lo:.3f}, {hi:.3f}]"
     images = row_after("| sweep | controller | detection median ms")
-    (lo, hi), = stats.bootstrap_quantiles(det, [0.5])
+    lo, hi = sps.quantile_test(det, p=0.5).confidence_interval(0.95)
     assert images[2] == f"{np.median(det):.3f} [{lo:.3f}, {hi:.3f}]"
     seen = row_after("| sweep | controller | hidden-edge periods")
     assert seen[3] == f"10/40: {stats.format_rate(10, 40)}"
+
+
+@pytest.mark.slow
+def test_steps_median_censored_at_the_cap(tmp_path: Path) -> None:
+    """A controller that converges on 8 of 20 trials (500 steps run): its median steps is
+    censored, "> 500", not the median of its 8 successes (no survivorship)."""
+    rng = np.random.default_rng(4)
+    conv = np.arange(20) < 8
+    steps = np.where(conv, rng.integers(100, 200, 20), 500)
+    rows = make_rows("slow", rng.lognormal(-2, 0.4, 20), conv, steps)
+    text = write_report(write_run(tmp_path / "run", rows)).read_text()
+    row = next(line for line in text.splitlines() if line.startswith("| synthetic |"))
+    cells = [c.strip() for c in row.strip("|").split("|")]
+    low = sps.quantile_test(np.where(conv, steps, np.inf), p=0.5).confidence_interval().low
+    assert cells[11] == f"> 500 [{low:.0f}, > 500]"
+
+
+def test_console_steps_median_is_censored_not_the_survivors() -> None:
+    """The run's console table (Summary.steps_median): 8 of 20 converged, so the median
+    steps is beyond the run, not the median of the 8 that converged."""
+    from benchmarks.study.metrics import summarize
+    from benchmarks.study.report import TABLE_HEADER, summary_table_rows
+
+    conv = np.arange(20) < 8
+    rows = make_rows("slow", np.full(20, 0.1), conv, np.where(conv, 150, 500))
+    (s,) = summarize(rows)
+    assert s.steps_median == np.inf
+    (row,) = summary_table_rows([s])
+    assert row[TABLE_HEADER.index("steps med")] == "> run"
+    conv = np.arange(20) < 15  # 15 of 20: the median is known
+    (s,) = summarize(make_rows("ok", np.full(20, 0.1), conv, np.where(conv, 150, 500)))
+    assert s.steps_median == 150.0

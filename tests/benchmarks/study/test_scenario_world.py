@@ -133,6 +133,7 @@ def test_bad_drives_keys_name_the_file_and_key(drives: dict, key: str, fragment:
     assert "drives.toml" in text and key in text and fragment in text, text
 
 
+@pytest.mark.slow
 def test_a_dynamic_run_records_and_reports_its_drives(tmp_path) -> None:
     """quick-dynamic through the CLI: every row has the drive figures, the recorded trial
     its leg forces, and the report a drives table (the figures are not sweep values)."""

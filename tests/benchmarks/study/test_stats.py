@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 from scipy import stats as sps
 
-from benchmarks.study import stats
+from benchmarks.study import exact, stats
 
 
 @pytest.mark.parametrize(("k", "n"), [(0, 10), (1, 10), (94, 100), (100, 100), (10000, 10000),
@@ -104,17 +104,16 @@ def test_bootstrap_seed_recorded_behaviour() -> None:
     assert stats.bootstrap_quantiles([2.0], [0.5, 0.95]) == [(2.0, 2.0), (2.0, 2.0)]
 
 
-def test_rate_difference_interval_close_to_scipy() -> None:
+def test_rate_difference_interval_is_newcombes() -> None:
+    """McNemar's rate difference carries Newcombe's paired interval of its 2x2 table."""
     rng = np.random.default_rng(6)
     a = rng.random(300) < 0.8
     b = rng.random(300) < 0.6
-    res = stats.mcnemar_exact(a, b, resamples=8000, seed=3)
-    d = a.astype(float) - b.astype(float)
-    ref = sps.bootstrap((d,), np.mean, n_resamples=8000, method="percentile",
-                        random_state=np.random.default_rng(9)).confidence_interval
-    width = ref.high - ref.low
-    assert abs(res.low - ref.low) < 0.05 * width
-    assert abs(res.high - ref.high) < 0.05 * width
+    res = stats.mcnemar_exact(a, b)
+    table = (int(np.sum(a & b)), int(np.sum(a & ~b)), int(np.sum(~a & b)),
+             int(np.sum(~a & ~b)))
+    assert (res.low, res.high) == exact.newcombe_paired(*table)
+    assert res.low < res.difference < res.high
 
 
 def test_mcnemar_is_a_binomial_test_on_discordant_pairs() -> None:
@@ -123,7 +122,7 @@ def test_mcnemar_is_a_binomial_test_on_discordant_pairs() -> None:
         n = int(rng.integers(5, 300))
         a = rng.random(n) < rng.uniform(0.2, 0.9)
         b = rng.random(n) < rng.uniform(0.2, 0.9)
-        res = stats.mcnemar_exact(a, b, resamples=200)
+        res = stats.mcnemar_exact(a, b)
         only_a = int(np.sum(a & ~b))
         only_b = int(np.sum(~a & b))
         assert res.discordant == (only_a, only_b)
@@ -156,7 +155,7 @@ def test_wilcoxon_matches_scipy(n: int, kind: str) -> None:
         x, y = np.round(10 * x), np.round(10 * y)
     elif kind == "zeros":  # identical controllers on part of the trials
         y[: n // 2] = x[: n // 2]
-    res = stats.wilcoxon_signed_rank(x, y, resamples=300)
+    res = stats.wilcoxon_signed_rank(x, y)
     if not np.any(x != y):
         assert res.p_value == 1.0
         return
@@ -176,7 +175,7 @@ def test_wilcoxon_exact_by_enumerating_signs() -> None:
     sums = np.array([sum(r for r, s in zip(ranks, signs, strict=True) if s)
                      for signs in itertools.product((0, 1), repeat=d.size)])
     p_exact = np.mean(np.minimum(sums, ranks.sum() - sums) <= t_obs)
-    res = stats.wilcoxon_signed_rank(d, np.zeros_like(d), resamples=100)
+    res = stats.wilcoxon_signed_rank(d, np.zeros_like(d))
     assert res.statistic == t_obs
     assert res.p_value == pytest.approx(p_exact, rel=1e-12)
 
@@ -187,7 +186,7 @@ def test_wilcoxon_identical_samples_and_missing_values() -> None:
     assert (res.p_value, res.difference, res.low, res.high) == (1.0, 0.0, 0.0, 0.0)
     y = list(x + 1.0)
     y[3] = None  # a crashed trial: its pair is left out
-    res = stats.wilcoxon_signed_rank(list(x), y, resamples=200)
+    res = stats.wilcoxon_signed_rank(list(x), y)
     assert res.n == 19
     assert res.difference == -1.0
 
@@ -209,3 +208,12 @@ def test_holm_hand_computed() -> None:
                                                                 nan_ok=True)
     assert stats.holm([0.001]) == [0.001]
     assert stats.holm([]) == []
+
+
+def test_wilson_intervals_as_arrays_match_scipy() -> None:
+    k = np.array([0, 1, 7, 19, 20])
+    low, high = stats.wilson_intervals(k, 20)
+    for j, lo, hi in zip(k, low, high, strict=True):
+        ci = sps.binomtest(int(j), 20).proportion_ci(method="wilson")
+        assert (lo, hi) == pytest.approx((ci.low, ci.high))
+    assert (low[0], high[-1]) == (0.0, 1.0)

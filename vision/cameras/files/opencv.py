@@ -106,10 +106,13 @@ def _find(fs: Any, field: str, path: str, required: bool = True) -> tuple[str, A
     return found[0], fs.getNode(found[0])
 
 
+#: Keys only a ROS ``camera_info`` file has (an OpenCV calibration file has none): a file
+#: with one of them is read as ROS's, whose ``distortion_model`` is then required.
+ROS_ONLY_KEYS = ("camera_name", "rectification_matrix", "projection_matrix")
+
+
 def _ros_keys(fs: Any) -> list[str]:
     """The keys of the file that only a ROS ``camera_info`` file has, as written."""
-    from vision.cameras.files.ros import ROS_ONLY_KEYS
-
     names: tuple[str, ...] = fs.root().keys()
     return [k for k in names if k.lower() in ROS_ONLY_KEYS]
 

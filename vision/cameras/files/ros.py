@@ -21,11 +21,6 @@ from hexapod.exceptions import ConfigFileError
 
 log = logging.getLogger(__name__)
 
-#: Keys only a ROS ``camera_info`` file has (an OpenCV calibration file has none): a file
-#: with one of them is read as ROS's, whose ``distortion_model`` is then required.
-ROS_ONLY_KEYS = ("camera_name", "rectification_matrix", "projection_matrix")
-
-
 def ros_model(kind: str, distortion: np.ndarray) -> str | None:
     """The ROS ``distortion_model`` of a camera kind and its coefficients, None if none."""
     d = np.asarray(distortion, float)

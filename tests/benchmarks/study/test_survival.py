@@ -1,0 +1,119 @@
+"""Time to converge as censored data (Kaplan-Meier, log-rank) and success against the
+tolerance, against scipy.stats and cases worked by hand."""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pytest
+import scipy.stats as sps
+
+from benchmarks.exceptions import BenchmarkError
+from benchmarks.study import survival
+from benchmarks.study.report import write_report
+from tests.benchmarks.study.helpers_rows import make_rows, write_run
+
+
+def _rows(done: list[int], censored: int, cap: int = 12, name: str = "c") -> list[dict[str, Any]]:
+    steps = np.array(done + [cap] * censored)
+    conv = np.arange(steps.size) < len(done)
+    return make_rows(name, np.full(steps.size, 0.05), conv, steps)
+
+
+def test_kaplan_meier_by_hand() -> None:
+    """Converged at 3, 5, 5, 8, 10 steps, three trials censored at the run's 12 steps:
+    S = 7/8 after 3 (8 at risk), 7/8 * 5/7 = 5/8 after 5 (7 at risk, 2 events), 5/8 * 4/5
+    = 1/2 after 8 (5 at risk), 1/2 * 3/4 = 3/8 after 10 (4 at risk): the median, the
+    first step where S <= 1/2, is 8 steps."""
+    km = survival.time_to_converge(_rows([3, 5, 5, 8, 10], 3))
+    assert (km.trials, km.converged, km.cap) == (8, 5, 12.0)
+    assert km.median == 8.0
+    s = dict(zip(km.steps.tolist(), (1 - km.converged_fraction).tolist(), strict=True))
+    assert s[3.0] == pytest.approx(7 / 8)
+    assert s[5.0] == pytest.approx(5 / 8)
+    assert s[8.0] == pytest.approx(1 / 2)
+    assert s[10.0] == pytest.approx(3 / 8)
+    ref = sps.ecdf(sps.CensoredData(uncensored=[3, 5, 5, 8, 10], right=[12, 12, 12]))
+    assert np.allclose(1 - km.converged_fraction, ref.sf.probabilities)
+    assert km.low <= km.median <= km.high
+
+
+def test_censored_median_is_beyond_the_run() -> None:
+    km = survival.time_to_converge(_rows([3, 4, 5], 6))
+    assert km.median == math.inf and km.high == math.inf
+    km = survival.time_to_converge(_rows([], 4))
+    assert (km.converged, km.median, km.low) == (0, math.inf, math.inf)
+
+
+def test_kaplan_meier_median_interval_covers() -> None:
+    """Exponential times (median 100 steps) censored at a run of 150 steps, 40 trials:
+    the interval holds the true median in about 95 % of 300 repetitions."""
+    rng = np.random.default_rng(5)
+    true = 100.0
+    hits = 0
+    reps = 300
+    for _ in range(reps):
+        t = np.ceil(rng.exponential(true / math.log(2), 40))
+        done = [int(x) for x in t if x < 150]
+        km = survival.time_to_converge(_rows(done, 40 - len(done), cap=150))
+        hits += km.low <= true <= km.high
+    assert hits / reps >= 0.92
+
+
+def test_logrank_matches_scipy_and_identical_groups() -> None:
+    a = _rows([3, 5, 5, 8, 10], 3, name="a")
+    b = _rows([1, 2, 2, 3, 4, 6], 2, name="b")
+    ref = sps.logrank(sps.CensoredData(uncensored=[3, 5, 5, 8, 10], right=[12] * 3),
+                      sps.CensoredData(uncensored=[1, 2, 2, 3, 4, 6], right=[12] * 2))
+    assert survival.logrank_p(a, b) == pytest.approx(ref.pvalue)
+    assert survival.logrank_p(a, a) == pytest.approx(1.0)
+    assert math.isnan(survival.logrank_p(_rows([], 2), _rows([], 3)))
+
+
+def test_failed_trials_are_censored_at_the_run_not_where_they_stopped() -> None:
+    rows = _rows([3, 5, 5, 8, 10], 3)
+    rows[-1].update(steps=2, failure="leg 1 hit its end stop: 425.1 mm")
+    data, k, cap = survival.censored_data(rows)
+    assert (k, cap) == (5, 12.0)
+    assert sorted(data._right.tolist()) == [12.0, 12.0, 12.0]
+
+
+def test_success_against_tolerance() -> None:
+    err = np.array([0.005, 0.02, 0.04, 0.08, 0.2, 0.6, 2.0, 0.03])
+    rows = make_rows("c", err, np.ones(8, bool), np.full(8, 100))
+    rows[-1].update(failure="leg 2 hit its end stop: 480.2 mm")  # not within any
+    k, n, (lo, hi) = survival.within_tolerance(rows, 0.05)
+    assert (k, n) == (3, 8)  # 0.005, 0.02, 0.04; the failed trial's 0.03 does not count
+    ci = sps.binomtest(3, 8).proportion_ci(method="wilson")
+    assert (lo, hi) == pytest.approx((ci.low, ci.high))
+    frac, low, high = survival.tolerance_curve(rows, np.array([0.001, 0.05, 1.0, 10.0]))
+    assert frac.tolist() == [0.0, 3 / 8, 6 / 8, 7 / 8]
+    assert np.all(low <= frac) and np.all(frac <= high)
+
+
+@pytest.mark.slow
+def test_report_has_time_to_converge_and_tolerance_sections(tmp_path: Path) -> None:
+    rng = np.random.default_rng(4)
+    conv = np.arange(20) < 8  # 8 of 20 within a run of 500 steps
+    rows = (make_rows("slow", rng.lognormal(-2, 0.4, 20), conv,
+                      np.where(conv, rng.integers(100, 200, 20), 500))
+            + make_rows("fast", rng.lognormal(-3, 0.4, 20), np.ones(20, bool),
+                        rng.integers(50, 90, 20)))
+    text = write_report(write_run(tmp_path / "run", rows)).read_text()
+    assert "### Time to converge" in text and "### Success against tolerance" in text
+    slow = next(line for line in text.splitlines() if line.startswith("| - | slow | 20 | 8 |"))
+    assert slow.split("|")[5].strip().startswith("> 500 [")  # half never converged
+    lr = next(line for line in text.splitlines() if line.startswith("| - | fast | slow |"))
+    assert "< 1e-16" not in lr and float(lr.split("|")[4]) < 1e-3
+    assert (tmp_path / "run" / "synthetic_time_to_converge.png").is_file()
+
+
+def test_a_converged_trial_without_steps_is_refused_by_name() -> None:
+    rows = _rows([3, 5], 1)
+    rows[1]["steps"] = None
+    with pytest.raises(BenchmarkError, match=r"controller 'c', trial 1: converged with "
+                                             r"steps=None"):
+        survival.time_to_converge(rows)

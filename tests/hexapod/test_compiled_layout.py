@@ -1,0 +1,178 @@
+"""``hexapod.compiled``: the named layouts of the kernels' rows and the cache key.
+
+Every built-in kernel declares the layout of its input and output rows where it is built;
+:class:`CompiledFunction` refuses a layout whose size is not its function's, so that a
+kernel change cannot silently misalign an offset. The library of a kernel is found by the
+hash of its serialized function: a warm process does not generate C code to find it.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Iterator
+from pathlib import Path
+from typing import Any
+
+import casadi as ca
+import numpy as np
+import pytest
+
+from hexapod import compiled
+from hexapod.compiled import CompiledFunction, Layout
+from hexapod.exceptions import LayoutError
+
+
+def test_blocks_are_named_slices_and_shaped_views() -> None:
+    lay = Layout([("R", (3, 3)), ("t", 3), ("flag", 1)], "test row")
+    assert lay.size == 13 and list(lay) == ["R", "t", "flag"]
+    assert lay["t"] == slice(9, 12) and lay.index("flag") == 12 and "R" in lay
+    rows = np.zeros((4, 13))
+    v = lay.views(rows)
+    assert v["R"].shape == (4, 3, 3) and v["t"].shape == (4, 3) and v["flag"].shape == (4, 1)
+    v["R"][:] = np.arange(9.0).reshape(3, 3)  # written through: a view, not a copy
+    v["t"][2] = (1.0, 2.0, 3.0)
+    np.testing.assert_array_equal(rows[:, 0:9], np.tile(np.arange(9.0), (4, 1)))
+    np.testing.assert_array_equal(rows[2, 9:12], [1.0, 2.0, 3.0])
+    assert lay.extended([("more", 2)]).slices["more"] == slice(13, 15)
+    x = ca.SX.sym("x", 13)
+    assert str(lay.split(x)["t"]) == str(x[9:12])
+
+
+@pytest.mark.parametrize(("make", "evidence"), [
+    (lambda: Layout([("a", 2), ("a", 3)]), "named twice"),
+    (lambda: Layout([("a", 2)])["b"], "no block 'b'"),
+    (lambda: Layout([("a", 2)]).index("a"), "holds 2 numbers"),
+    (lambda: Layout([("a", 2)]).view(np.zeros(3), "a"), "a row of 3 numbers"),
+    (lambda: Layout([("a", 2)]).view(np.zeros((2, 4))[:, ::2], "a"), "stride 16"),
+])
+def test_misuse_is_refused_with_the_evidence(make: Callable[[], object], evidence: str) -> None:
+    with pytest.raises(LayoutError, match=evidence):
+        make()
+
+
+def test_a_layout_that_does_not_fit_its_function_is_refused() -> None:
+    x = ca.SX.sym("x", 5)
+    f = ca.Function("hexapod_test_layout_fit", [x], [ca.vertcat(x, ca.sum1(x))])
+    fits_in, fits_out = Layout([("a", 2), ("b", 3)]), Layout([("x", 5), ("sum", 1)])
+    assert CompiledFunction(f, False, fits_in, fits_out).inputs is fits_in
+    with pytest.raises(LayoutError, match=r"hexapod_test_layout_fit: input layout .* has 4"):
+        CompiledFunction(f, False, Layout([("a", 2), ("b", 2)]), fits_out)
+    with pytest.raises(LayoutError, match=r"output layout .* has 7 numbers, the "
+                                          r"function's output has 6"):
+        CompiledFunction(f, False, fits_in, Layout([("x", 5), ("sum", 2)]))
+
+
+def _kernels() -> Iterator[tuple[str, Callable[[], Any]]]:
+    """Every built-in kernel factory (the lru-cached ones)."""
+    from controllers import law_kernel, model_based
+    from controllers.mpc.problem import ProblemSpec, problem_kernel
+    from controllers.mpc.solver import CompiledQP
+    from controllers.solvers import (
+        compiled_ctc,
+        compiled_task_ctc,
+        osqp_limits,
+        reference_motion,
+    )
+    from hexapod import fk
+    from hexapod.dynamics import compiled as dyn
+    from hexapod.dynamics import robots_compiled
+
+    yield "fk", fk.newton_kernel
+    for name in ("forward", "inverse", "terms", "forward_drives"):
+        yield f"dynamics {name}", lambda name=name: dyn.compiled(name)
+    yield "dynamic robots' period", lambda: robots_compiled.period_function(2)
+    yield "joint-space ctc", compiled_ctc.joint_step
+    for kind, fk_pose in (("pose", True), ("pose", False), ("edges", True),
+                          ("directions", True)):
+        yield f"task ctc {kind}", lambda k=kind, f=fk_pose: compiled_task_ctc.task_step(k, f)
+    for kind in reference_motion.ROWS:
+        yield f"reference motion {kind}", lambda k=kind: reference_motion.feature_motion(k)
+    yield "QP refinement", osqp_limits.refine_kernel
+    yield "pose servo", model_based.pose_servo_kernel
+    for interaction in ("current", "mean"):
+        yield f"direction law {interaction}", lambda i=interaction: law_kernel.direction_kernel(
+            i).function
+        yield f"edge law {interaction}", lambda i=interaction: law_kernel.edge_law_kernel(
+            True, i).function
+    for spec in (ProblemSpec("lines", "local", 2, False, False),
+                 ProblemSpec("normals", "global", 2, True, True, True)):
+        yield f"MPC {spec}", lambda s=spec: problem_kernel(s)
+    yield "DAQP", lambda: CompiledQP(12, 30).function
+
+
+@pytest.mark.slow
+def test_every_kernel_declares_layouts_that_fit_its_function(
+        monkeypatch: pytest.MonkeyPatch) -> None:
+    """Built without C (the layouts are checked at construction; nothing compiled), the
+    factories' caches emptied before and after."""
+    built: list[str] = []
+
+    def no_c(self: CompiledFunction, flags: object, preload: object) -> None:
+        self.compiled = True  # (CompiledQP wants a compiled function; never called here)
+
+    monkeypatch.setattr(CompiledFunction, "_compile", no_c)
+    kernels = list(_kernels())
+    _clear_caches()
+    try:
+        for name, make in kernels:
+            fn = make()
+            assert isinstance(fn, CompiledFunction), name
+            assert fn.inputs.size == fn.function.nnz_in(0), name
+            assert fn.outputs.size == fn.function.nnz_out(0), name
+            # a named layout (not the default one-block one)
+            assert len(fn.inputs.slices) > 1 or list(fn.inputs) != ["x"], name
+            assert len(fn.outputs.slices) > 1 or list(fn.outputs) != ["y"], name
+            built.append(name)
+    finally:
+        _clear_caches()
+    assert len(built) == len(kernels) == 22
+
+
+def _clear_caches() -> None:
+    from controllers import law_kernel, model_based
+    from controllers.mpc import problem
+    from controllers.solvers import (
+        compiled_ctc,
+        compiled_task_ctc,
+        osqp_limits,
+        reference_motion,
+    )
+    from hexapod import fk
+    from hexapod.dynamics import compiled as dyn
+    from hexapod.dynamics import robots_compiled
+
+    for cached in (fk.newton_kernel, dyn.compiled, robots_compiled.period_function,
+                   compiled_ctc.joint_step, compiled_task_ctc.task_step,
+                   reference_motion.feature_motion, osqp_limits.refine_kernel,
+                   model_based.pose_servo_kernel, law_kernel._direction_compiled,
+                   law_kernel._edge_compiled, problem.problem_kernel):
+        cached.cache_clear()
+
+
+def _function(scale: float) -> ca.Function:
+    x = ca.SX.sym("x", 3)
+    return ca.Function("hexapod_test_cache_key", [x], [scale * ca.sin(x)])
+
+
+def test_a_warm_process_finds_its_library_without_generating_c(
+        monkeypatch: pytest.MonkeyPatch, tmp_path: Path) -> None:
+    monkeypatch.setenv("HEXAPOD_CACHE_DIR", str(tmp_path))
+    calls: list[str] = []
+    generate = compiled.generated_code
+
+    def counted(function: ca.Function) -> str:
+        calls.append(function.name())
+        return generate(function)
+
+    monkeypatch.setattr(compiled, "generated_code", counted)
+    cold = CompiledFunction(_function(2.0))
+    assert cold.compiled and calls == ["hexapod_test_cache_key"]
+    assert len(list(tmp_path.glob("hexapod_test_cache_key_*.so"))) == 1
+    warm = CompiledFunction(_function(2.0))  # a new function object, the same function
+    assert warm.compiled and len(calls) == 1  # found by its key: no C generated
+    x = np.array([0.1, -0.4, 2.0])
+    np.testing.assert_array_equal(warm.single(x), cold.single(x))
+    np.testing.assert_allclose(warm.single(x), 2.0 * np.sin(x), rtol=1e-15)
+    other = CompiledFunction(_function(3.0))  # another function under the same name
+    assert other.cache_key() != cold.cache_key() and len(calls) == 2
+    assert len(list(tmp_path.glob("hexapod_test_cache_key_*.so"))) == 2
+    np.testing.assert_allclose(other.single(x), 3.0 * np.sin(x), rtol=1e-15)
