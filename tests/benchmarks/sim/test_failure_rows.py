@@ -7,17 +7,47 @@ from __future__ import annotations
 
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 from benchmarks.cli import main
 from benchmarks.study.runner import plan, read_results, run_units
 from benchmarks.study.scenario import parse_scenario
+from controllers.base import CommandBatch, ControllerContext, ObservationBatch
 from tests.benchmarks import plugins
 
 JOINTS = "tests.benchmarks.plugins:ProportionalJoints"
 AT_STEP = "tests.benchmarks.plugins:CrashAtStep"
 WRONG = "tests.benchmarks.plugins:WrongShape"
 BATCH = "tests.benchmarks.plugins:CrashingBatch"
+RESET = "tests.benchmarks.sim.test_failure_rows:ResetFailsWithTrialOne"
+
+#: The sizes of the batches :class:`ResetFailsWithTrialOne` was reset with.
+RESETS: list[int] = []
+
+
+class ResetFailsWithTrialOne(plugins.ProportionalJoints):
+    """A batch controller whose ``reset_batch`` raises for any batch that holds the
+    second trial (its goal is told apart by its lengths, as the first reset sees them)."""
+
+    name = "test-reset-fails"
+    bad_goal: np.ndarray | None = None
+
+    def reset_batch(self, contexts: list[ControllerContext]) -> None:
+        RESETS.append(len(contexts))
+        goals = np.array([np.asarray(c.goal.lengths) for c in contexts])
+        if ResetFailsWithTrialOne.bad_goal is None:
+            ResetFailsWithTrialOne.bad_goal = goals[1]
+        if any(np.array_equal(g, ResetFailsWithTrialOne.bad_goal) for g in goals):
+            raise RuntimeError("deliberate reset failure")
+        self.goals = goals
+
+    def step_batch(self, observations: ObservationBatch) -> CommandBatch:
+        err = observations.lengths - self.goals[observations.trials]
+        out = CommandBatch.zeros(len(err))
+        out.velocities[:] = -self.gain * err
+        out.error_norm[:] = np.linalg.norm(err, axis=1)
+        return out
 
 
 def _scenario(controllers: list[object], trials: int = 4) -> object:
@@ -87,3 +117,16 @@ def test_a_controller_failing_all_its_trials_exits_3(tmp_path: Path,
     assert code == 3, err
     assert (f"hexapod-bench: error: {AT_STEP} (broken-plugin) failed all its 3 trials (the "
             "causes are above; exit code 3: the other controllers ran)") in err
+
+
+def test_a_batch_failing_before_its_first_step_is_rerun_trial_by_trial(
+        tmp_path: Path) -> None:
+    RESETS.clear()
+    ResetFailsWithTrialOne.bad_goal = None
+    rows = sorted(_rows(tmp_path, [RESET], trials=3), key=lambda r: r["trial"])
+    assert RESETS == [3, 1, 1, 1]  # the batch, then each trial alone to find the one
+    assert [r["failure"] is None or "not converged" in r["failure"] for r in rows] == [
+        True, False, True]
+    assert rows[1]["steps"] == 0 and rows[1]["final_position_error_mm"] is None
+    assert rows[1]["failure"] == "RuntimeError: deliberate reset failure"
+    assert rows[0]["steps"] > 0 and rows[2]["steps"] > 0
