@@ -12,7 +12,7 @@ from controllers.base import CommandBatch
 from controllers.estimators import LegDirectionEstimate
 from controllers.law_kernel import LawKernel
 from controllers.solvers.base import Solver
-from hexapod.compiled import CompiledFunction
+from hexapod.compiled import CompiledFunction, Layout
 
 
 class KernelRows:
@@ -27,9 +27,10 @@ class KernelRows:
     def __init__(self, n: int) -> None:
         #: The lean core (None until a trial has a compiled core).
         self.function: CompiledFunction | None = None
-        #: Where each named input lies in a row, and each named output in a result.
-        self.slices: dict[str, slice] = {}
-        self.outputs: dict[str, slice] = {}
+        #: Where each named input lies in a row, and each named output in a result (the
+        #: lean core's layouts; empty until a trial has a compiled core).
+        self.slices: Layout = Layout((), "law core input")
+        self.outputs: Layout = Layout((), "law core output")
         self.n = n
         self.X = np.zeros((0, 0))
         #: (n,) the trials whose row holds its core's inputs (the lean core may step them).
