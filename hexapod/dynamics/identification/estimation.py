@@ -66,7 +66,8 @@ def _solve(W: np.ndarray, y: np.ndarray) -> np.ndarray:
 
 def weighted_least_squares(Yb: np.ndarray, forces: np.ndarray, basis: BaseParameters,
                            prior: np.ndarray, template: InertiaParameters,
-                           drives: DriveParameters) -> Estimate:
+                           drives: DriveParameters, mask: np.ndarray | None = None
+                           ) -> Estimate:
     """Estimate the base parameters (module docstring).
 
     Args:
@@ -75,6 +76,8 @@ def weighted_least_squares(Yb: np.ndarray, forces: np.ndarray, basis: BaseParame
         basis: The base parameters.
         prior: (n,) standard parameters for what the forces cannot separate.
         template, drives: The robot file's tables (for the consistency check).
+        mask: (N, 6) the leg equations to use (default: all), e.g. without the legs
+            moving too slowly for the Coulomb model.
 
     Raises:
         IdentificationError: Too few samples, a rank-deficient regressor (the excitation
@@ -84,24 +87,31 @@ def weighted_least_squares(Yb: np.ndarray, forces: np.ndarray, basis: BaseParame
     n, _, r = Yb.shape
     if forces.shape != (n, 6):
         raise IdentificationError(f"forces: expected shape ({n}, 6), got {forces.shape}")
-    if not (np.all(np.isfinite(Yb)) and np.all(np.isfinite(forces))):
+    keep = np.ones((n, 6), bool) if mask is None else np.asarray(mask, bool)
+    W = Yb[keep]
+    y = forces[keep]
+    leg = np.nonzero(keep)[1]
+    m = y.size
+    if not (np.all(np.isfinite(W)) and np.all(np.isfinite(y))):
         raise IdentificationError("non-finite regressor or forces (a bad sample)")
-    if 6 * n < 2 * r:
-        raise IdentificationError(f"{n} samples of 6 legs for {r} base parameters: too few")
-    W = Yb.reshape(-1, r)
-    y = forces.reshape(-1)
-    sv = np.linalg.svd(W / np.linalg.norm(W, axis=0), compute_uv=False)
+    counts = np.bincount(leg, minlength=6)
+    if m < 2 * r or np.any(counts < 2 * r / 6):
+        raise IdentificationError(f"{m} leg equations (per leg {counts.tolist()}) for {r} "
+                                  "base parameters: too few")
+    norms = np.maximum(np.linalg.norm(W, axis=0), 1e-300)
+    sv = np.linalg.svd(W / norms, compute_uv=False)
     if sv[-1] < 1e-10 * sv[0]:
-        _, _, vt = np.linalg.svd(W / np.linalg.norm(W, axis=0))
+        _, _, vt = np.linalg.svd(W / norms)
         weakest = basis.names[int(np.argmax(np.abs(vt[-1])))]
         raise IdentificationError(f"the excitation leaves a base parameter undetermined "
                                   f"(condition {sv[0] / sv[-1]:.3g}); weakest: {weakest}")
     theta = _solve(W, y)
-    rho = (forces - Yb @ theta)
-    sigma = np.sqrt(np.sum(rho**2, axis=0) / (n - r / 6))
-    sigma = np.maximum(sigma, 1e-12 * max(float(np.abs(forces).max()), 1e-300))
-    Ww = (Yb / sigma[None, :, None]).reshape(-1, r)
-    yw = (forces / sigma).reshape(-1)
+    rho = y - W @ theta
+    dof = counts * (1 - r / m)
+    sigma = np.sqrt(np.bincount(leg, rho**2, minlength=6) / dof)
+    sigma = np.maximum(sigma, 1e-12 * max(float(np.abs(y).max()), 1e-300))
+    Ww = W / sigma[leg, None]
+    yw = y / sigma[leg]
     theta = _solve(Ww, yw)
     consistency: list[str] = []
     standard = basis.standard(theta, prior)
@@ -122,13 +132,15 @@ def weighted_least_squares(Yb: np.ndarray, forces: np.ndarray, basis: BaseParame
                            "non-negative drive parameters, positive-definite platform "
                            "tensor within the triangle inequality): no constraint active")
     rho_w = yw - Ww @ theta
-    s2 = float(rho_w @ rho_w / (6 * n - r))
+    s2 = float(rho_w @ rho_w / (m - r))
     cov = s2 * np.linalg.inv(Ww.T @ Ww)
-    residuals = forces - Yb @ theta
+    rho = y - W @ theta
+    residuals = np.full((n, 6), np.nan)
+    residuals[keep] = rho
     return Estimate(theta=theta, se=np.sqrt(np.diag(cov)), covariance=cov,
-                    sigma_legs=np.sqrt(np.sum(residuals**2, axis=0) / (n - r / 6)),
+                    sigma_legs=np.sqrt(np.bincount(leg, rho**2, minlength=6) / dof),
                     residuals=residuals, condition=float(np.linalg.cond(Ww)),
-                    relative_residual=float(np.linalg.norm(residuals) / np.linalg.norm(forces)),
+                    relative_residual=float(np.linalg.norm(rho) / np.linalg.norm(y)),
                     standard=standard, consistency=consistency)
 
 

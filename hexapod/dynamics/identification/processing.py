@@ -25,6 +25,9 @@ from hexapod.workspace import home_pose
 
 #: Default cutoff of the zero-phase filter [Hz].
 DEFAULT_CUTOFF_HZ = 20.0
+#: Leg equations with the leg slower than this are not used [m/s]: around a reversal the
+#: Coulomb model (and a real drive's stick-slip) is least reliable.
+DEFAULT_MIN_SPEED = 2e-3
 #: Time dropped at each end (the filter's and the differences' edges) [s].
 EDGE_S = 0.25
 
@@ -38,6 +41,7 @@ class Samples:
         R, t, twist, acc: Platform pose, twist and acceleration (N, ...).
         forces: (N, 6) filtered measured forces [N].
         lengths: (N, 6) filtered leg lengths [m].
+        rates: (N, 6) leg rates [m/s] (filtered, differentiated).
     """
 
     time: np.ndarray
@@ -47,6 +51,11 @@ class Samples:
     acc: np.ndarray
     forces: np.ndarray
     lengths: np.ndarray
+    rates: np.ndarray
+
+    def mask(self, min_speed: float = DEFAULT_MIN_SPEED) -> np.ndarray:
+        """(N, 6) the leg equations whose leg moves at least ``min_speed`` [m/s]."""
+        return np.abs(self.rates) >= min_speed  # type: ignore[no-any-return]
 
 
 def samples(geometry: HexapodGeometry, time_step: float, lengths: np.ndarray,
@@ -101,4 +110,4 @@ def samples(geometry: HexapodGeometry, time_step: float, lengths: np.ndarray,
     twist = np.linalg.solve(K, qd[keep][..., None])[..., 0]
     _, bias = model.legs_batch(R, t, twist)
     acc = np.linalg.solve(K, (qdd[keep] - bias)[..., None])[..., 0]
-    return Samples(keep * time_step, R, t, twist, acc, ff[keep], qf[keep])
+    return Samples(keep * time_step, R, t, twist, acc, ff[keep], qf[keep], qd[keep])
