@@ -68,7 +68,7 @@ def reference_lengths(geometry: HexapodGeometry, excitation: Excitation, duratio
 
 
 def run(truth: HexapodGeometry, excitation: Excitation, duration: float,
-        sample_dt: float = 1e-3, physics_dt: float = 1e-4) -> Record:
+        sample_dt: float = 1e-3, physics_dt: float = 2e-5) -> Record:
     """Run the excitation on the true robot ``truth`` (module docstring), sampled every
     ``sample_dt`` [s] (the position loop's period too), integrated at ``physics_dt``.
 

@@ -9,11 +9,11 @@ consistency (Gautier's IDIM-WLS).
 3. the standard parameters rebuilt (:meth:`BaseParameters.standard`: the ones the forces
    cannot separate keep the prior, the robot file's) and checked: positive masses,
    non-negative drive parameters, a positive-definite platform tensor within the
-   triangle inequality. If that fails, the bounded least squares
-   (``scipy.optimize.lsq_linear``: the drive parameters and the platform's mass combination
-   bounded below) is solved instead, and a tensor still not positive definite is
-   projected onto the nearest one with principal moments ``>= 1e-9`` kg m^2 (both said
-   in :attr:`Estimate.consistency`).
+   triangle inequality, legs' transverse inertias about their centres of mass
+   non-negative. If that fails, the weighted least squares is solved again under those
+   constraints (:func:`margins` ``>= 0``, SLSQP), and :attr:`Estimate.consistency` says
+   so. The standard errors are those of the unconstrained model's covariance at the
+   estimate (a bound active at the truth makes them conservative).
 """
 
 from __future__ import annotations
@@ -31,6 +31,9 @@ from hexapod.dynamics.inertia import InertiaParameters, inertia_matrix
 from hexapod.exceptions import IdentificationError, InertiaError
 
 log = logging.getLogger(__name__)
+
+#: How far inside the physical set the constrained solution is kept (margins' units).
+_INSIDE = 1e-7
 
 
 @dataclass
@@ -118,12 +121,12 @@ def weighted_least_squares(Yb: np.ndarray, forces: np.ndarray, basis: BaseParame
     problems = _physical_problems(standard, template, drives)
     if problems:
         consistency.append("unconstrained estimate not physical (" + "; ".join(problems)
-                           + "): solved the bounded least squares instead")
-        theta = _bounded(Ww, yw, theta, basis, prior)
+                           + "): solved the least squares constrained to physical "
+                           "parameters instead (SLSQP)")
+        theta, ok = _constrained(Ww, yw, theta, basis, prior)
+        if not ok:
+            consistency.append("the constrained solver did not converge")
         standard = basis.standard(theta, prior)
-        standard, projected = _project_tensor(standard)
-        if projected:
-            consistency.append(projected)
         left = _physical_problems(standard, template, drives)
         if left:
             consistency.append("still not physical: " + "; ".join(left))
@@ -161,35 +164,44 @@ def _physical_problems(standard: np.ndarray, template: InertiaParameters,
     return out
 
 
-def _bounded(Ww: np.ndarray, yw: np.ndarray, theta: np.ndarray, basis: BaseParameters,
-             prior: np.ndarray) -> np.ndarray:
-    """The least squares with the drive parameters non-negative and the platform mass
-    combination (``m_p`` plus what regroups with it) above the regrouped prior's share."""
-    r = theta.size
-    lo, hi = np.full(r, -np.inf), np.full(r, np.inf)
-    for i, k in enumerate(basis.independent):
-        if k >= N_MECHANISM:
-            lo[i] = 0.0
-        elif STANDARD_NAMES[k] == "m_p":
-            lo[i] = float(basis.beta[i] @ prior[basis.dependent]) + 1e-6
-    res = scipy.optimize.lsq_linear(Ww, yw, bounds=(lo, hi), method="bvls")
-    return res.x  # type: ignore[no-any-return]
-
-
-def _project_tensor(standard: np.ndarray) -> tuple[np.ndarray, str]:
-    """Project the platform tensor about its centre of mass onto principal moments
-    ``>= 1e-9`` kg m^2 (and the triangle inequality), keeping its axes."""
-    th = standard.copy()
+def margins(standard: np.ndarray) -> np.ndarray:
+    """Physical-consistency margins of standard parameters, each ``>= 0`` when physical:
+    the drive parameters, the platform's mass, the smallest principal moment of its
+    tensor about the centre of mass and its triangle inequality (scaled by 10 to weigh
+    like the masses), the legs' transverse inertias about their centres of mass (at least half the axial)."""
+    th = np.asarray(standard, float)
     m = th[0]
-    c = th[1:4] / m
-    shift = m * (c @ c * np.eye(3) - np.outer(c, c))
-    I_c = inertia_matrix(th[4:10]) - shift
-    w, V = np.linalg.eigh(I_c)
-    w2 = np.maximum(w, 1e-9)
-    w2[2] = min(w2[2], w2[0] + w2[1])
-    if np.allclose(w, w2):
-        return th, ""
-    I_new = V @ np.diag(w2) @ V.T + shift
-    th[4:10] = [I_new[0, 0], I_new[1, 1], I_new[2, 2], I_new[0, 1], I_new[0, 2], I_new[1, 2]]
-    return th, (f"platform tensor projected: principal moments {np.round(w, 9).tolist()} -> "
-                f"{np.round(w2, 9).tolist()} kg m^2")
+    out = list(th[N_MECHANISM:]) + [m]
+    if m > 0:
+        c = th[1:4] / m
+        I_c = inertia_matrix(th[4:10]) - m * (c @ c * np.eye(3) - np.outer(c, c))
+        w = np.linalg.eigvalsh(I_c)
+        out += [10 * w[0], 10 * (w[0] + w[1] - w[2])]
+    else:
+        out += [m, m]
+    mb, mdb, itb, iab, mr, mdr, itr, iar = th[10:18]
+    # transverse about the centre of mass at least half the axial (triangle inequality)
+    out.append(10 * (itb - (mdb**2 / mb if mb > 0 else 0.0) - iab / 2))
+    out.append(10 * (itr - (mdr**2 / mr if mr > 0 else 0.0) - iar / 2))
+    return np.array(out)
+
+
+def _constrained(Ww: np.ndarray, yw: np.ndarray, theta: np.ndarray, basis: BaseParameters,
+                 prior: np.ndarray) -> tuple[np.ndarray, bool]:
+    """The weighted least squares under :func:`margins` ``>= 0`` (SLSQP from the
+    unconstrained solution, the cost scaled by its value there)."""
+    H = Ww.T @ Ww
+    g = Ww.T @ yw
+    scale = max(float(np.linalg.norm(Ww @ theta - yw) ** 2), 1e-12)
+
+    def cost(x: np.ndarray) -> float:
+        return float(x @ H @ x - 2 * g @ x) / scale
+
+    def grad(x: np.ndarray) -> np.ndarray:
+        return 2 * (H @ x - g) / scale  # type: ignore[no-any-return]
+
+    res = scipy.optimize.minimize(
+        cost, theta, jac=grad, method="SLSQP",
+        constraints=[{"type": "ineq", "fun": lambda x: margins(basis.standard(x, prior)) - _INSIDE}],
+        options={"maxiter": 500, "ftol": 1e-12})
+    return res.x, bool(res.success)

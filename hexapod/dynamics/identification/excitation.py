@@ -143,7 +143,7 @@ def _scaled(geometry: HexapodGeometry, a: np.ndarray, b: np.ndarray, f0: float,
     lo, hi = 0.0, 1.0
     while _measure(geometry, hi * a, hi * b, f0, times, basis, prior)[2] < 1 and hi < 1e6:
         lo, hi = hi, 2 * hi
-    for _ in range(12):
+    for _ in range(8):
         mid = 0.5 * (lo + hi)
         if _measure(geometry, mid * a, mid * b, f0, times, basis, prior)[2] < 1:
             lo = mid
@@ -179,7 +179,7 @@ def optimise(geometry: HexapodGeometry, basis: BaseParameters, seed: int = 0,
     start = time.perf_counter()
     best: tuple[float, np.ndarray, np.ndarray, dict[str, float]] | None = None
     starts = 0
-    while starts < 8 or (best is None and time.perf_counter() - start < budget_s):
+    while best is None or (starts < 8 and time.perf_counter() - start < budget_s / 2):
         a, b = draw()
         cand = _scaled(geometry, a, b, base_frequency, times, basis, prior)
         starts += 1

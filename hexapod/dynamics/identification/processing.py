@@ -24,7 +24,7 @@ from hexapod.geometry import HexapodGeometry
 from hexapod.workspace import home_pose
 
 #: Default cutoff of the zero-phase filter [Hz].
-DEFAULT_CUTOFF_HZ = 20.0
+DEFAULT_CUTOFF_HZ = 50.0
 #: Leg equations with the leg slower than this are not used [m/s]: around a reversal the
 #: Coulomb model (and a real drive's stick-slip) is least reliable.
 DEFAULT_MIN_SPEED = 2e-3
