@@ -59,7 +59,7 @@ class Record:
 def reference_lengths(geometry: HexapodGeometry, excitation: Excitation, duration: float,
                       h: float) -> np.ndarray:
     """The excitation's leg lengths (N + 1, 6) [m] at ``k h``, ``k = 0..N``."""
-    n = int(round(duration / h))
+    n = round(duration / h)
     time_s = np.arange(n + 1) * h
     R, t = excitation.poses(geometry, time_s)
     q, _, _ = legs(R, t, np.broadcast_to(geometry.base_points, (n + 1, 6, 3)),
@@ -83,7 +83,7 @@ def run(truth: HexapodGeometry, excitation: Excitation, duration: float,
     if truth.drives.mode != "velocity":
         raise BackendError("the dynamic world's identification run drives velocity-mode "
                            f"drives; the robot file has mode {truth.drives.mode!r}")
-    sub = max(1, int(round(sample_dt / physics_dt)))
+    sub = max(1, round(sample_dt / physics_dt))
     h = sample_dt / sub
     q_ref = reference_lengths(truth, excitation, duration, sample_dt)
     qd_ref = np.gradient(q_ref, sample_dt, axis=0)

@@ -11,7 +11,8 @@ consistency (Gautier's IDIM-WLS).
    non-negative drive parameters, a positive-definite platform tensor within the
    triangle inequality, legs' transverse inertias about their centres of mass
    non-negative. If that fails, the weighted least squares is solved again under those
-   constraints (:func:`margins` ``>= 0``, SLSQP), and :attr:`Estimate.consistency` says
+   constraints (:func:`margins` ``>= 0``, SLSQP), the inseparable standard parameters free
+   to move from the prior to a physical split, and :attr:`Estimate.consistency` says
    so. The standard errors are those of the unconstrained model's covariance at the
    estimate (a bound active at the truth makes them conservative).
 """
@@ -50,6 +51,8 @@ class Estimate:
         relative_residual: ``|rho| / |f|`` of the unweighted residuals.
         standard: (n,) the standard parameters rebuilt (priors where not identifiable).
         consistency: What the physical-consistency step did (one sentence each).
+        unconstrained: (r,) the weighted least squares before any constraint (equal to
+            ``theta`` when none was needed).
     """
 
     theta: np.ndarray
@@ -61,6 +64,7 @@ class Estimate:
     relative_residual: float
     standard: np.ndarray
     consistency: list[str] = field(default_factory=list)
+    unconstrained: np.ndarray | None = None
 
 
 def _solve(W: np.ndarray, y: np.ndarray) -> np.ndarray:
@@ -117,16 +121,21 @@ def weighted_least_squares(Yb: np.ndarray, forces: np.ndarray, basis: BaseParame
     yw = y / sigma[leg]
     theta = _solve(Ww, yw)
     consistency: list[str] = []
+    unconstrained = theta.copy()
     standard = basis.standard(theta, prior)
     problems = _physical_problems(standard, template, drives)
     if problems:
         consistency.append("unconstrained estimate not physical (" + "; ".join(problems)
                            + "): solved the least squares constrained to physical "
                            "parameters instead (SLSQP)")
-        theta, ok = _constrained(Ww, yw, theta, basis, prior)
+        theta, standard, ok = _constrained(Ww, yw, theta, basis, prior)
         if not ok:
             consistency.append("the constrained solver did not converge")
-        standard = basis.standard(theta, prior)
+        moved = [STANDARD_NAMES[int(j)] for j in basis.dependent
+                 if abs(standard[j] - prior[j]) > 1e-9 * max(abs(prior[j]), 1.0)]
+        if moved:
+            consistency.append("parameters the forces cannot separate moved from the robot "
+                               "file's values to a physical split: " + ", ".join(moved))
         left = _physical_problems(standard, template, drives)
         if left:
             consistency.append("still not physical: " + "; ".join(left))
@@ -144,7 +153,7 @@ def weighted_least_squares(Yb: np.ndarray, forces: np.ndarray, basis: BaseParame
                     sigma_legs=np.sqrt(np.bincount(leg, rho**2, minlength=6) / dof),
                     residuals=residuals, condition=float(np.linalg.cond(Ww)),
                     relative_residual=float(np.linalg.norm(rho) / np.linalg.norm(y)),
-                    standard=standard, consistency=consistency)
+                    standard=standard, consistency=consistency, unconstrained=unconstrained)
 
 
 def _physical_problems(standard: np.ndarray, template: InertiaParameters,
@@ -168,10 +177,11 @@ def margins(standard: np.ndarray) -> np.ndarray:
     """Physical-consistency margins of standard parameters, each ``>= 0`` when physical:
     the drive parameters, the platform's mass, the smallest principal moment of its
     tensor about the centre of mass and its triangle inequality (scaled by 10 to weigh
-    like the masses), the legs' transverse inertias about their centres of mass (at least half the axial)."""
+    like the masses), the legs' transverse inertias about their centres of mass (at least
+    half the axial)."""
     th = np.asarray(standard, float)
     m = th[0]
-    out = list(th[N_MECHANISM:]) + [m]
+    out = [*th[N_MECHANISM:], m]
     if m > 0:
         c = th[1:4] / m
         I_c = inertia_matrix(th[4:10]) - m * (c @ c * np.eye(3) - np.outer(c, c))
@@ -187,21 +197,36 @@ def margins(standard: np.ndarray) -> np.ndarray:
 
 
 def _constrained(Ww: np.ndarray, yw: np.ndarray, theta: np.ndarray, basis: BaseParameters,
-                 prior: np.ndarray) -> tuple[np.ndarray, bool]:
+                 prior: np.ndarray) -> tuple[np.ndarray, np.ndarray, bool]:
     """The weighted least squares under :func:`margins` ``>= 0`` (SLSQP from the
-    unconstrained solution, the cost scaled by its value there)."""
+    unconstrained solution). The standard parameters the forces cannot separate are free
+    too (the fit does not depend on them), pulled to the prior by a tiny penalty: the
+    physical split closest to the robot file's. Returns the base parameters, the
+    standard ones and whether the solver converged."""
+    r = theta.size
     H = Ww.T @ Ww
     g = Ww.T @ yw
     scale = max(float(np.linalg.norm(Ww @ theta - yw) ** 2), 1e-12)
+    p2 = prior[basis.dependent]
+    s2 = np.maximum(np.abs(p2), 1e-3)
+    penalty = 1e-6
+
+    def standard(x: np.ndarray) -> np.ndarray:
+        th = np.array(prior, dtype=float)
+        th[basis.dependent] = x[r:]
+        th[basis.independent] = x[:r] - basis.beta @ x[r:]
+        return th
 
     def cost(x: np.ndarray) -> float:
-        return float(x @ H @ x - 2 * g @ x) / scale
+        d = (x[r:] - p2) / s2
+        return float(x[:r] @ H @ x[:r] - 2 * g @ x[:r]) / scale + penalty * float(d @ d)
 
     def grad(x: np.ndarray) -> np.ndarray:
-        return 2 * (H @ x - g) / scale  # type: ignore[no-any-return]
+        return np.concatenate([2 * (H @ x[:r] - g) / scale,
+                               2 * penalty * (x[r:] - p2) / s2**2])
 
     res = scipy.optimize.minimize(
-        cost, theta, jac=grad, method="SLSQP",
-        constraints=[{"type": "ineq", "fun": lambda x: margins(basis.standard(x, prior)) - _INSIDE}],
-        options={"maxiter": 500, "ftol": 1e-12})
-    return res.x, bool(res.success)
+        cost, np.concatenate([theta, p2]), jac=grad, method="SLSQP",
+        constraints=[{"type": "ineq", "fun": lambda x: margins(standard(x)) - _INSIDE}],
+        options={"maxiter": 1000, "ftol": 1e-14})
+    return res.x[:r], standard(res.x), bool(res.success)
