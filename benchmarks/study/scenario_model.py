@@ -370,6 +370,10 @@ class Scenario:
         geometry_data: The robot read from ``robot_geometry`` when the scenario was loaded.
         camera_data: The camera read from ``camera_file`` when the scenario was loaded.
         calibration_points: (6, 3) base points [m] read from ``calibration.file``.
+        robot_model: ``[robot] model``: a robot file whose ``[inertia]`` and ``[drives]``
+            the controllers use instead of the robot's (an identified model); the world's
+            truth is unchanged.
+        model_data: The robot read from ``robot_model``.
 
     The files a scenario names are read once, where it is loaded (the client): work
     units carry their data to the workers, which need not see the files (a Dask
@@ -404,6 +408,8 @@ class Scenario:
     geometry_data: Any = None
     camera_data: Any = None
     calibration_points: Any = None
+    robot_model: str | None = None
+    model_data: Any = None
 
     def expand(self) -> list[Scenario]:
         """One scenario per point of the sweep (Cartesian product of the swept keys)."""

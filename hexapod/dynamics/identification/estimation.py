@@ -177,8 +177,8 @@ def margins(standard: np.ndarray) -> np.ndarray:
     """Physical-consistency margins of standard parameters, each ``>= 0`` when physical:
     the drive parameters, the platform's mass, the smallest principal moment of its
     tensor about the centre of mass and its triangle inequality (scaled by 10 to weigh
-    like the masses), the legs' transverse inertias about their centres of mass (at least
-    half the axial)."""
+    like the masses), the legs' masses and axial inertias, their transverse inertias about
+    their centres of mass (at least half the axial)."""
     th = np.asarray(standard, float)
     m = th[0]
     out = [*th[N_MECHANISM:], m]
@@ -190,6 +190,7 @@ def margins(standard: np.ndarray) -> np.ndarray:
     else:
         out += [m, m]
     mb, mdb, itb, iab, mr, mdr, itr, iar = th[10:18]
+    out += [mb, mr, iab, iar]
     # transverse about the centre of mass at least half the axial (triangle inequality)
     out.append(10 * (itb - (mdb**2 / mb if mb > 0 else 0.0) - iab / 2))
     out.append(10 * (itr - (mdr**2 / mr if mr > 0 else 0.0) - iar / 2))
