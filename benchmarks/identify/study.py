@@ -147,7 +147,7 @@ def main(argv: list[str] | None = None) -> int:
     """``python -m benchmarks.identify.study --out DIR [--reps N]``."""
     p = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     p.add_argument("--out", required=True)
-    p.add_argument("--reps", type=int, default=100)
+    p.add_argument("--reps", type=int, default=50)
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--overwrite", action="store_true")
     args = p.parse_args(argv)

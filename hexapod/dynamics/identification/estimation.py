@@ -203,31 +203,38 @@ def _constrained(Ww: np.ndarray, yw: np.ndarray, theta: np.ndarray, basis: BaseP
     unconstrained solution). The standard parameters the forces cannot separate are free
     too (the fit does not depend on them), pulled to the prior by a tiny penalty: the
     physical split closest to the robot file's. Returns the base parameters, the
-    standard ones and whether the solver converged."""
+    standard ones and whether the solver converged.
+
+    The cost is the distance from the unconstrained solution in the metric of the
+    normal equations (the least squares' cost up to a constant), normalised, in variables
+    scaled by their magnitudes (SLSQP needs both)."""
     r = theta.size
     H = Ww.T @ Ww
-    g = Ww.T @ yw
-    scale = max(float(np.linalg.norm(Ww @ theta - yw) ** 2), 1e-12)
-    p2 = prior[basis.dependent]
-    s2 = np.maximum(np.abs(p2), 1e-3)
-    penalty = 1e-6
+    x0 = np.concatenate([theta, prior[basis.dependent]])
+    sx = np.maximum(np.abs(x0), 1e-4)
+    Hs = H * np.outer(sx[:r], sx[:r])
+    Hs /= max(float(np.linalg.norm(Hs, 2)), 1e-300)
+    z_free = theta / sx[:r]
+    z_prior = x0[r:] / sx[r:]
+    penalty = 1e-8
 
-    def standard(x: np.ndarray) -> np.ndarray:
+    def standard(z: np.ndarray) -> np.ndarray:
+        x = z * sx
         th = np.array(prior, dtype=float)
         th[basis.dependent] = x[r:]
         th[basis.independent] = x[:r] - basis.beta @ x[r:]
         return th
 
-    def cost(x: np.ndarray) -> float:
-        d = (x[r:] - p2) / s2
-        return float(x[:r] @ H @ x[:r] - 2 * g @ x[:r]) / scale + penalty * float(d @ d)
+    def cost(z: np.ndarray) -> float:
+        e = z[:r] - z_free
+        d = z[r:] - z_prior
+        return float(e @ Hs @ e) + penalty * float(d @ d)
 
-    def grad(x: np.ndarray) -> np.ndarray:
-        return np.concatenate([2 * (H @ x[:r] - g) / scale,
-                               2 * penalty * (x[r:] - p2) / s2**2])
+    def grad(z: np.ndarray) -> np.ndarray:
+        return np.concatenate([2 * Hs @ (z[:r] - z_free), 2 * penalty * (z[r:] - z_prior)])
 
     res = scipy.optimize.minimize(
-        cost, np.concatenate([theta, p2]), jac=grad, method="SLSQP",
-        constraints=[{"type": "ineq", "fun": lambda x: margins(standard(x)) - _INSIDE}],
-        options={"maxiter": 1000, "ftol": 1e-14})
-    return res.x[:r], standard(res.x), bool(res.success)
+        cost, x0 / sx, jac=grad, method="SLSQP",
+        constraints=[{"type": "ineq", "fun": lambda z: margins(standard(z)) - _INSIDE}],
+        options={"maxiter": 2000, "ftol": 1e-16})
+    return res.x[:r] * sx[:r], standard(res.x), bool(res.success)
