@@ -75,6 +75,11 @@ def run(args: argparse.Namespace) -> int:
                                       f"{'positive' if key == '--duration' else 'non-negative'}"
                                       " number")
     check_backend(args.backend)
+    from benchmarks.identify.outputs import OUTPUTS
+    from hexapod.outputs import check_replace
+
+    for name in OUTPUTS:  # before the run: a user's file is refused at once
+        check_replace(Path(args.out) / name, args.overwrite, "--overwrite")
     robot = load_robot(args.robot)
     truth = load_robot(args.truth) if args.truth else None
     settings = Settings(duration=args.duration, seed=args.seed,

@@ -18,6 +18,9 @@ from hexapod.dynamics.identification.parameters import STANDARD_NAMES, to_tables
 from hexapod.geometry import HexapodGeometry
 from hexapod.outputs import write_output
 
+#: The files ``identify`` writes into its folder.
+OUTPUTS = ("identified.toml", "identification.json", "residuals.png", "report.md")
+
 
 def identified_geometry(ident: Identification, source: str | None = None) -> HexapodGeometry:
     """The robot file with the identified ``[inertia]`` and ``[drives]`` tables."""
