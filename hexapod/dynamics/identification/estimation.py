@@ -161,11 +161,11 @@ def _physical_problems(standard: np.ndarray, template: InertiaParameters,
     out = []
     d = standard[N_MECHANISM:]
     for k in np.flatnonzero(d < 0):
-        out.append(f"{STANDARD_NAMES[N_MECHANISM + k]} = {d[k]:.4g} < 0")
+        out.append(f"{STANDARD_NAMES[N_MECHANISM + int(k)]} = {d[k]:.4g} < 0")
     for name in ("m_b", "m_r"):
-        k = STANDARD_NAMES.index(name)
-        if standard[k] < 0:
-            out.append(f"{name} = {standard[k]:.4g} kg < 0")
+        j = STANDARD_NAMES.index(name)
+        if standard[j] < 0:
+            out.append(f"{name} = {standard[j]:.4g} kg < 0")
     try:
         to_tables(standard, template, drives)
     except InertiaError as exc:
