@@ -45,8 +45,8 @@ def test_the_model_file_feeds_the_controllers_only(tmp_path: Path) -> None:
 
 
 def test_a_missing_or_bad_model_file_is_refused(tmp_path: Path) -> None:
-    with pytest.raises(ScenarioError, match="robot.model"):
+    with pytest.raises(ScenarioError, match=r"robot\.model"):
         load_scenario(str(_write(tmp_path, "nowhere.toml")))
     (tmp_path / "bad.toml").write_text("name = 'x'\n")
-    with pytest.raises(ScenarioError, match="robot.model"):
+    with pytest.raises(ScenarioError, match=r"robot\.model"):
         load_scenario(str(_write(tmp_path, "bad.toml")))

@@ -91,18 +91,18 @@ def test_non_physical_estimate_is_solved_under_the_constraints() -> None:
 
 def test_an_excitation_at_rest_is_refused_naming_the_weakest_parameter() -> None:
     """At rest only gravity acts: the inertias are undetermined, and the error says it."""
-    nominal, truth, b, _ = _data()
+    nominal, _truth, b, _ = _data()
     R, t, _, _ = random_states(nominal, 100, np.random.default_rng(3))
     zero = np.zeros((100, 6))
     Y, _, _ = regressor(nominal, R, t, zero, zero)
     prior = standard_vector(nominal.inertia, nominal.drives)
-    with pytest.raises(IdentificationError, match="undetermined.*weakest"):
+    with pytest.raises(IdentificationError, match=r"undetermined.*weakest"):
         weighted_least_squares(b.columns(Y), Y @ prior, b, prior, nominal.inertia,
                                nominal.drives)
 
 
 def test_too_few_or_bad_data_are_refused() -> None:
-    nominal, truth, b, Y = _data(n=10)
+    nominal, _truth, b, Y = _data(n=10)
     prior = standard_vector(nominal.inertia, nominal.drives)
     with pytest.raises(IdentificationError, match="too few"):
         weighted_least_squares(b.columns(Y)[:3], np.zeros((3, 6)), b, prior,
