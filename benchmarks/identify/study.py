@@ -20,6 +20,7 @@ import argparse
 import logging
 import time
 from pathlib import Path
+from collections.abc import Callable
 from typing import Any
 
 import numpy as np
@@ -56,8 +57,10 @@ def lopsided(geometry: HexapodGeometry) -> HexapodGeometry:
 
 
 def study(reps: int, configurations: tuple[tuple[float, float, float], ...] = CONFIGURATIONS,
-          seed: int = 0, budget_s: float = 10.0) -> dict[str, Any]:
-    """Run the study (module docstring); returns the JSON document."""
+          seed: int = 0, budget_s: float = 10.0,
+          progress: Callable[[dict[str, Any]], None] | None = None) -> dict[str, Any]:
+    """Run the study (module docstring); returns the JSON document. ``progress`` gets the
+    document so far after every configuration (e.g. to write it)."""
     nominal = preset("deltalab")
     truth = lopsided(nominal)
     basis = base_parameters(nominal, seed=seed)
@@ -89,6 +92,7 @@ def study(reps: int, configurations: tuple[tuple[float, float, float], ...] = CO
                 Y, _, _ = regressor(nominal, s.R, s.t, s.twist, s.acc)
                 est = weighted_least_squares(basis.columns(Y), s.forces, basis, prior,
                                              nominal.inertia, nominal.drives, s.mask())
+                log.info("repetition %d: %s", r, est.consistency[0][:40])
             except Exception as exc:  # one repetition's failure, counted
                 log.warning("repetition %d failed: %s", r, exc)
                 failed += 1
@@ -119,8 +123,11 @@ def study(reps: int, configurations: tuple[tuple[float, float, float], ...] = CO
                            for i, (n, tb) in enumerate(zip(basis.names, true_base, strict=True))],
         })
         log.info("point %s done", points[-1]["coverage_95_overall"])
-    return {"truth": truth.to_dict(dynamics=True), "excitation": excitation.to_dict(),
-            "points": points}
+        doc = {"truth": truth.to_dict(dynamics=True), "excitation": excitation.to_dict(),
+               "points": points}
+        if progress is not None:
+            progress(doc)
+    return doc
 
 
 def markdown(doc: dict[str, Any]) -> str:
@@ -152,10 +159,13 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--overwrite", action="store_true")
     args = p.parse_args(argv)
     logging.basicConfig(level=logging.INFO, format="%(asctime)s %(message)s")
-    doc = study(args.reps, seed=args.seed)
     out = Path(args.out)
-    write_output(out / "study.json", doc, args.overwrite)
-    write_output(out / "study.md", markdown(doc), args.overwrite)
+
+    def write(doc: dict[str, Any]) -> None:
+        write_output(out / "study.json", doc, args.overwrite)
+        write_output(out / "study.md", markdown(doc), args.overwrite)
+
+    doc = study(args.reps, seed=args.seed, progress=write)
     print(markdown(doc))
     return 0
 
