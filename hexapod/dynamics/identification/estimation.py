@@ -73,8 +73,8 @@ def _solve(W: np.ndarray, y: np.ndarray) -> np.ndarray:
 
 def weighted_least_squares(Yb: np.ndarray, forces: np.ndarray, basis: BaseParameters,
                            prior: np.ndarray, template: InertiaParameters,
-                           drives: DriveParameters, mask: np.ndarray | None = None
-                           ) -> Estimate:
+                           drives: DriveParameters, mask: np.ndarray | None = None,
+                           constrain: bool = True) -> Estimate:
     """Estimate the base parameters (module docstring).
 
     Args:
@@ -85,6 +85,8 @@ def weighted_least_squares(Yb: np.ndarray, forces: np.ndarray, basis: BaseParame
         template, drives: The robot file's tables (for the consistency check).
         mask: (N, 6) the leg equations to use (default: all), e.g. without the legs
             moving too slowly for the Coulomb model.
+        constrain: Solve under the physical constraints when the estimate is not
+            physical (False: only say so, e.g. for a coverage study of the intervals).
 
     Raises:
         IdentificationError: Too few samples, a rank-deficient regressor (the excitation
@@ -124,7 +126,10 @@ def weighted_least_squares(Yb: np.ndarray, forces: np.ndarray, basis: BaseParame
     unconstrained = theta.copy()
     standard = basis.standard(theta, prior)
     problems = _physical_problems(standard, template, drives)
-    if problems:
+    if problems and not constrain:
+        consistency.append("unconstrained estimate not physical (" + "; ".join(problems)
+                           + "): not constrained (asked not to)")
+    elif problems:
         consistency.append("unconstrained estimate not physical (" + "; ".join(problems)
                            + "): solved the least squares constrained to physical "
                            "parameters instead (SLSQP)")
