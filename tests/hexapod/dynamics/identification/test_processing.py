@@ -29,7 +29,7 @@ def test_a_platform_at_rest_has_zero_twist_and_acceleration() -> None:
     g = preset("deltalab")
     q = np.full((3000, 6), g.q_mid)
     s = samples(g, 1e-3, q, np.ones_like(q))
-    np.testing.assert_allclose(s.twist, 0, atol=1e-12)
-    np.testing.assert_allclose(s.acc, 0, atol=1e-9)
+    np.testing.assert_allclose(s.twist, 0, atol=1e-10)  # filter rounding
+    np.testing.assert_allclose(s.acc, 0, atol=1e-8)  # the forward kinematics to 1e-12 m
     np.testing.assert_allclose(s.forces, 1.0, atol=1e-9)
     assert not s.mask().any()  # no leg moves: no equation kept
