@@ -140,7 +140,7 @@ def markdown(doc: dict[str, Any]) -> str:
     lines = ["# Identification study (Monte Carlo coverage)", "",
              "| encoder um | force noise % | excitation s | reps | coverage of the 95 % "
              "intervals (unconstrained WLS) | all within 3 SE | max rel. error m_p + 6 m_r | "
-             "constrained | "
+             "not physical as estimated | "
              "worst parameter (coverage, RMS z) |", "|---|---|---|---|---|---|---|---|---|"]
     for p in doc["points"]:
         worst = min(p["parameters"], key=lambda q: q["coverage_95"])
