@@ -31,8 +31,8 @@ def add_arguments(s: argparse.ArgumentParser) -> None:
                    help="force noise, percent of each leg's RMS force (default 1)")
     s.add_argument("--encoder-resolution", type=float, metavar="UM",
                    help="encoder resolution [um] (default: the robot file's)")
-    s.add_argument("--search-seconds", type=float, default=10.0, metavar="S",
-                   help="time for the excitation search [s] (default 10)")
+    s.add_argument("--search-candidates", type=int, default=16, metavar="N",
+                   help="excitation shapes the search tries (default 16, about 10 s)")
     s.add_argument("--overwrite", action="store_true",
                    help="replace a user's files of the same names in --out")
 
@@ -68,7 +68,9 @@ def run(args: argparse.Namespace) -> int:
     from benchmarks.study.commands import console
     from hexapod.exceptions import IdentificationError
 
-    for key, value in (("--duration", args.duration), ("--search-seconds", args.search_seconds),
+    if args.search_candidates < 2:
+        raise IdentificationError(f"--search-candidates {args.search_candidates}: at least 2")
+    for key, value in (("--duration", args.duration),
                        ("--force-noise", args.force_noise)):
         if not np.isfinite(value) or value < 0 or (key == "--duration" and value <= 0):
             raise IdentificationError(f"{key} {value}: must be a finite "
@@ -86,7 +88,7 @@ def run(args: argparse.Namespace) -> int:
                         force_noise=args.force_noise / 100,
                         resolution=(args.encoder_resolution * 1e-6
                                     if args.encoder_resolution is not None else None),
-                        budget_s=args.search_seconds, backend=args.backend)
+                        candidates=args.search_candidates, backend=args.backend)
     t0 = time.perf_counter()
     ident = identify(robot, settings, truth)
     con = console()

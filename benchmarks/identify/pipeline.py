@@ -47,7 +47,7 @@ class Settings:
         seed: Seed of the excitation search and of the sensor noise.
         force_noise: Force noise, a fraction of each leg's RMS force (0.01: 1 %).
         resolution: Encoder resolution [m] (None: the robot file's).
-        budget_s: Time for the excitation search [s].
+        candidates: Excitation shapes tried by the search.
         cutoff_hz: Zero-phase filter cutoff [Hz].
         min_speed: Leg equations below this leg speed are not used [m/s].
         backend: ``--backend`` spec (:data:`WORLD_BACKENDS` or a backend with forces).
@@ -58,7 +58,7 @@ class Settings:
     seed: int = 0
     force_noise: float = 0.01
     resolution: float | None = None
-    budget_s: float = 10.0
+    candidates: int = 16
     cutoff_hz: float = DEFAULT_CUTOFF_HZ
     min_speed: float = DEFAULT_MIN_SPEED
     backend: str = "world"
@@ -151,7 +151,8 @@ def identify(robot: HexapodGeometry, settings: Settings,
     basis = base_parameters(robot, seed=settings.seed)
     timings["base_parameters_s"] = time.perf_counter() - t0
     t1 = time.perf_counter()
-    excitation = optimise(robot, basis, seed=settings.seed, budget_s=settings.budget_s)
+    excitation = optimise(robot, basis, seed=settings.seed,
+                          candidates=settings.candidates)
     timings["excitation_s"] = time.perf_counter() - t1
     t1 = time.perf_counter()
     rng = np.random.default_rng([settings.seed, 38])

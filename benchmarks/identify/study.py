@@ -57,7 +57,7 @@ def lopsided(geometry: HexapodGeometry) -> HexapodGeometry:
 
 
 def study(reps: int, configurations: tuple[tuple[float, float, float], ...] = CONFIGURATIONS,
-          seed: int = 0, budget_s: float = 10.0,
+          seed: int = 0, candidates: int = 16,
           progress: Callable[[dict[str, Any]], None] | None = None,
           constrained_fit: bool = False) -> dict[str, Any]:
     """Run the study (module docstring); returns the JSON document. ``progress`` gets the
@@ -70,7 +70,7 @@ def study(reps: int, configurations: tuple[tuple[float, float, float], ...] = CO
     basis = base_parameters(nominal, seed=seed)
     true_base = basis.of(standard_vector(truth.inertia, truth.drives))
     prior = standard_vector(nominal.inertia, nominal.drives)
-    excitation = optimise(nominal, basis, seed=seed, budget_s=budget_s)
+    excitation = optimise(nominal, basis, seed=seed, candidates=candidates)
     records = {}
     points = []
     for resolution, noise, duration in configurations:

@@ -176,7 +176,7 @@ DIR_CASES: dict[tuple[str, str], tuple[list[str], str, bool]] = {
     ("calibrate", "--out"): (["calibrate", "{scenario}", "--out", "{out}"],
                              "calibrated.toml", True),
     ("identify", "--out"): (["identify", "deltalab", "--out", "{out}", "--duration", "4",
-                             "--search-seconds", "0.5"], "identified.toml", True),
+                             "--search-candidates", "2"], "identified.toml", True),
     ("reproduce", "--out"): (["reproduce", "seed001", "--quick", "--out", "{out}"],
                              "notes.txt", False),
     ("report", "dir"): (["report", "{out}"], "report.md", True),

@@ -36,7 +36,7 @@ def test_identify_writes_a_robot_file_the_project_loads(tmp_path: Path) -> None:
     loads with identified tables; the JSON has every base parameter with its SE; a
     second run into the same folder replaces the project's own files."""
     args = ["identify", "deltalab", "--out", str(tmp_path), "--duration", "4",
-            "--search-seconds", "1"]
+            "--search-candidates", "2"]
     assert main(args) == 0
     for name in ("identified.toml", "identification.json", "report.md", "residuals.png"):
         assert (tmp_path / name).stat().st_size > 0
@@ -62,7 +62,7 @@ def test_identify_refuses_to_replace_a_users_file(tmp_path: Path,
                                                   capsys: pytest.CaptureFixture[str]) -> None:
     (tmp_path / "identified.toml").write_text("name = 'mine'\n")
     assert main(["identify", "deltalab", "--out", str(tmp_path), "--duration", "2",
-                 "--search-seconds", "0.5"]) == 2
+                 "--search-candidates", "2"]) == 2
     assert "identified.toml" in capsys.readouterr().err
     assert (tmp_path / "identified.toml").read_text() == "name = 'mine'\n"
 
