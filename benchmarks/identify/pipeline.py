@@ -173,7 +173,7 @@ def identify(robot: HexapodGeometry, settings: Settings,
         from hexapod.backends.registry import open_backend
 
         R0, t0_ = excitation.poses(robot, np.zeros(1))
-        from hexapod.dynamics.robots import legs
+        from hexapod.dynamics.identification.excitation import legs
 
         start = legs(R0, t0_, robot.base_points[None], robot.platform_points[None])[0][0]
         with open_backend(settings.backend, robot, start) as backend:

@@ -20,8 +20,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from hexapod.dynamics.drive_model import quantise
-from hexapod.dynamics.identification.excitation import Excitation
-from hexapod.dynamics.robots import DynamicRobots, legs
+from hexapod.dynamics.identification.excitation import Excitation, legs
+from hexapod.dynamics.robots import DynamicRobots
 from hexapod.exceptions import BackendError
 from hexapod.geometry import HexapodGeometry
 

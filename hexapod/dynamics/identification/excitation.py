@@ -25,7 +25,6 @@ import numpy as np
 from hexapod.dynamics.identification.base import BaseParameters
 from hexapod.dynamics.identification.parameters import standard_vector
 from hexapod.dynamics.identification.regressor import regressor
-from hexapod.dynamics.robots import legs
 from hexapod.geometry import HexapodGeometry
 from hexapod.se3 import exp_so3
 from hexapod.workspace import home_pose
@@ -86,6 +85,17 @@ class Excitation:
         return {"base_frequency_hz": self.base_frequency, "harmonics": int(self.a.shape[1]),
                 "a": self.a.tolist(), "b": self.b.tolist(), "condition": self.condition,
                 "limits": self.limits}
+
+
+def legs(R: np.ndarray, t: np.ndarray, A: np.ndarray, E: np.ndarray
+         ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Leg lengths (n, 6) [m], unit vectors (n, 6, 3) and platform arms ``r_i = R eB_i``
+    (n, 6, 3) [m] of poses ``R`` (n, 3, 3), ``t`` (n, 3) [m], base points ``A`` and
+    platform points ``E`` (n, 6, 3) [m]."""
+    r = np.einsum("nij,nkj->nki", R, E)
+    leg = t[:, None, :] + r - A
+    q = np.linalg.norm(leg, axis=-1)
+    return q, leg / q[..., None], r
 
 
 def series(a: np.ndarray, b: np.ndarray, f0: float, time_s: np.ndarray
