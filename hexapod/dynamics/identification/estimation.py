@@ -112,8 +112,9 @@ def weighted_least_squares(Yb: np.ndarray, forces: np.ndarray, basis: BaseParame
     if sv[-1] < 1e-10 * sv[0]:
         _, _, vt = np.linalg.svd(W / norms)
         weakest = basis.names[int(np.argmax(np.abs(vt[-1])))]
+        cond = f"{sv[0] / sv[-1]:.3g}" if sv[-1] > 0 else "infinite"
         raise IdentificationError(f"the excitation leaves a base parameter undetermined "
-                                  f"(condition {sv[0] / sv[-1]:.3g}); weakest: {weakest}")
+                                  f"(condition {cond}); weakest: {weakest}")
     theta = _solve(W, y)
     rho = y - W @ theta
     dof = counts * (1 - r / m)
