@@ -167,6 +167,9 @@ def make_trials(sc: Scenario, trials: list[int], nominal: HexapodGeometry, camer
         poses = dict(zip(ok, many, strict=True))
     base_points = camera.camera_from_base.apply(nominal.base_points)
     start_lengths = _start_lengths(drawn, poses)
+    model = nominal  # the controllers' model: [robot] model's inertia and drives, if given
+    if getattr(sc, "model_data", None) is not None:
+        model = nominal.replace(inertia=sc.model_data.inertia, drives=sc.model_data.drives)
     out: list[TrialSetup | Exception] = []
     for k, trial in enumerate(trials):
         d = drawn[k]
@@ -192,7 +195,7 @@ def make_trials(sc: Scenario, trials: list[int], nominal: HexapodGeometry, camer
             calibration: dict[str, float] = {}
             if calibrate is not None:
                 points, calibration = calibrate(world, trial_rng(sc.seed, trial, 3))
-            out.append(TrialSetup(trial, world, nominal,
+            out.append(TrialSetup(trial, world, model,
                                   estimated_camera(camera, ce.distortion_percent), points,
                                   R_s, t_s, R_g, t_g, q_s, shared, calibration))
         except Exception as exc:  # that trial's failure
