@@ -62,6 +62,7 @@ def two_real_runs(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, Path]
     return dirs[0], dirs[1]
 
 
+@pytest.mark.slow
 def test_identical_runs_no_difference_no_determinism_failure(
         two_real_runs: tuple[Path, Path], tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:

@@ -68,6 +68,7 @@ def _recorded(out: Path, controller: str) -> dict[str, np.ndarray]:
         return {k: rec[k] for k in rec.files}
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("controller", ["joint-space", "computed-torque"])
 def test_row_forces_agree_with_the_recorded_trial(run: tuple[Path, list[dict]],
                                                   controller: str) -> None:
