@@ -83,6 +83,7 @@ def test_identical_runs_no_difference_no_determinism_failure(
     assert det["statistic"] == 0 and det["n"] == 24
 
 
+@pytest.mark.slow
 def test_slower_controller_is_found(two_real_runs: tuple[Path, Path],
                                     capsys: pytest.CaptureFixture[str]) -> None:
     a, _ = two_real_runs

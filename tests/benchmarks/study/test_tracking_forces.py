@@ -89,6 +89,7 @@ def test_row_forces_agree_with_the_recorded_trial(run: tuple[Path, list[dict]],
     assert row["saturation_time_s"] > 0  # the case is one that reaches the limit
 
 
+@pytest.mark.slow
 def test_the_study_reaches_and_misses_the_limit(run: tuple[Path, list[dict]]) -> None:
     """Not a degenerate case: some trial saturates for part of its motion only."""
     _, rows = run

@@ -22,6 +22,7 @@ def _data(n: int = 300, seed: int = 1):
     return nominal, truth, b, Y
 
 
+@pytest.mark.slow
 def test_noise_free_data_recovers_the_base_parameters() -> None:
     """Forces from the true parameters, no noise, a prior that is wrong: the weighted
     least squares gives the truth's base parameters to 1e-6 (relative to each one's
@@ -43,6 +44,7 @@ def test_noise_free_data_recovers_the_base_parameters() -> None:
     assert np.all(margins(est.standard) >= 0)
 
 
+@pytest.mark.slow
 def test_noise_free_data_with_a_physical_prior_needs_no_constraint() -> None:
     """The robot file is the truth: recovered to 1e-6, no constraint active."""
     nominal, _, b, Y = _data()
@@ -55,6 +57,7 @@ def test_noise_free_data_with_a_physical_prior_needs_no_constraint() -> None:
     assert error.max() < 1e-6
 
 
+@pytest.mark.slow
 def test_standard_errors_match_the_scatter_of_noisy_estimates() -> None:
     """With Gaussian force noise of known sigma, the standard errors are those of the
     least squares (compared with the covariance computed from the known sigma)."""
@@ -72,6 +75,7 @@ def test_standard_errors_match_the_scatter_of_noisy_estimates() -> None:
     np.testing.assert_allclose(est.sigma_legs, sigma, rtol=0.15)
 
 
+@pytest.mark.slow
 def test_non_physical_estimate_is_solved_under_the_constraints() -> None:
     """Forces from a robot whose leg 0 has a negative viscous friction: the estimate is
     constrained to a non-negative one and the consistency note says so."""
