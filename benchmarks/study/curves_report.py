@@ -14,7 +14,7 @@ import numpy as np
 from benchmarks.study import stats, survival
 from benchmarks.study.exact import format_p
 from benchmarks.study.metrics import format_sweep
-from benchmarks.study.plots import _save, pyplot
+from benchmarks.study.plots import pyplot, save_figure
 
 
 def _md_table(header: list[str], rows: list[list[str]]) -> str:
@@ -98,7 +98,7 @@ def _km_plot(out_dir: Path, scenario: str,
         ax.grid(True, alpha=0.3)
         ax.legend(fontsize=7)
     fig.tight_layout()
-    return _save(plt, fig, out_dir, f"{scenario}_time_to_converge.png")
+    return save_figure(plt, fig, out_dir, f"{scenario}_time_to_converge.png")
 
 
 def tolerance_section(rows: list[dict[str, Any]], sweeps: dict[int, dict[str, Any]]

@@ -29,7 +29,7 @@ def pyplot() -> Any:
     return plt
 
 
-def _save(plt: Any, fig: Any, out_dir: Path, name: str) -> str:
+def save_figure(plt: Any, fig: Any, out_dir: Path, name: str) -> str:
     """Save a figure as ``out_dir/name`` (checked to stay inside, marked as the project's)
     and return its Markdown link target (``./`` before a name with ``:``, which a
     Markdown reader would take for a URL scheme)."""
@@ -73,7 +73,7 @@ def time_series(out_dir: Path, scenario: str, point: int) -> str | None:
         ax.legend(fontsize=7)
     fig.tight_layout()
     name = f"{scenario}_p{point}_timeseries.png"
-    return _save(plt, fig, out_dir, name)
+    return save_figure(plt, fig, out_dir, name)
 
 
 def _label(s: Summary) -> str:
@@ -109,7 +109,7 @@ def sweeps(out_dir: Path, scenario: str, summaries: list[Summary]) -> list[str]:
         ax.legend(fontsize=7)
     fig.tight_layout()
     name = f"{scenario}_sweep_{key}.png"
-    return [_save(plt, fig, out_dir, name)]
+    return [save_figure(plt, fig, out_dir, name)]
 
 
 def heat_maps(out_dir: Path, scenario: str, summaries: list[Summary]) -> str | None:
@@ -170,7 +170,7 @@ def heat_maps(out_dir: Path, scenario: str, summaries: list[Summary]) -> str | N
             fig.colorbar(im, ax=ax, fraction=0.046)
     fig.tight_layout()
     name = f"{scenario}_map.png"
-    return _save(plt, fig, out_dir, name)
+    return save_figure(plt, fig, out_dir, name)
 
 
 def error_cdf(out_dir: Path, scenario: str, rows: list[dict[str, Any]]) -> str | None:
@@ -207,4 +207,4 @@ def error_cdf(out_dir: Path, scenario: str, rows: list[dict[str, Any]]) -> str |
     ax.legend(fontsize=7)
     fig.tight_layout()
     name = f"{scenario}_error_cdf.png"
-    return _save(plt, fig, out_dir, name)
+    return save_figure(plt, fig, out_dir, name)
