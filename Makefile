@@ -29,16 +29,20 @@ browser:
 warm: $(STAMP)
 	$(BIN)/hexapod-bench warm
 
-# the whole suite on every core, then the linters: CI's command
+# the whole suite on every core (the wall-clock tests alone, after), then the linters:
+# CI's command
 test: $(STAMP) browser warm
-	$(BIN)/python -m pytest -q -n $(JOBS) --dist worksteal --durations=10
+	$(BIN)/python -m pytest -q -n $(JOBS) --dist worksteal --durations=10 -m "not realtime"
+	$(BIN)/python -m pytest -q -m realtime
 	$(BIN)/ruff check hexapod vision controllers benchmarks tests
 	$(BIN)/mypy
 
-# the inner loop of a change: every test not marked slow, under a minute on a warm kernel
-# cache (run `make warm` or `make test` once first); an unmarked test over 2 s fails it
+# the inner loop of a change: every test not marked slow (nor realtime), under a minute on
+# a warm kernel cache (run `make warm` or `make test` once first); an unmarked test over
+# 2 s fails it
 quick: $(STAMP)
-	$(BIN)/python -m pytest -q -n $(JOBS) --dist worksteal -m "not slow" --unmarked-budget 2
+	$(BIN)/python -m pytest -q -n $(JOBS) --dist worksteal -m "not slow and not realtime" \
+		--unmarked-budget 2
 
 lint: $(STAMP)
 	$(BIN)/ruff check hexapod vision controllers benchmarks tests

@@ -1,5 +1,5 @@
-"""``hexapod-bench``: list, check, run, report, compare, export, reproduce, perf, calibrate, viz,
-servo, warm.
+"""``hexapod-bench``: list, check, run, report, compare, export, reproduce, perf, calibrate,
+identify, viz, servo, warm.
 
 Examples::
 
@@ -228,6 +228,13 @@ def build_parser() -> argparse.ArgumentParser:
                    help="calibrate from measured edge normals and leg lengths (.json/.npz) "
                         "instead of simulating the scenario's world")
     s.set_defaults(func=cmd_calibrate)
+
+    from benchmarks.identify import command as identify_command
+
+    s = sub.add_parser("identify", help="identify a robot's dynamic parameters and drive "
+                                        "gains from its own motion (docs/identification.md)")
+    identify_command.add_arguments(s)
+    s.set_defaults(func=identify_command.run)
 
     from benchmarks.robot import servo
 

@@ -536,3 +536,9 @@ class UnsupportedInstructionError(HexapodError, ValueError):
         self.function = function
         self.instruction = instruction
         super().__init__(f"{function}: instruction {instruction} has no lane translation")
+
+
+class IdentificationError(HexapodError, ValueError):
+    """Dynamic identification impossible on the data given (too few samples, an
+    excitation that leaves a base parameter undetermined, non-finite data); the message
+    says which."""

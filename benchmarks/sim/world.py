@@ -166,6 +166,10 @@ def make_trials(sc: SimScenario, trials: list[int], nominal: HexapodGeometry, ca
         poses = dict(zip(ok, many, strict=True))
     base_points = camera.camera_from_base.apply(nominal.base_points)
     start_lengths = _start_lengths(drawn, poses)
+    model = nominal  # the controllers' model: [robot] model's inertia and drives, if given
+    model_data = getattr(sc, "model_data", None)  # a study's [robot] model, if any
+    if model_data is not None:
+        model = nominal.replace(inertia=model_data.inertia, drives=model_data.drives)
     out: list[TrialSetup | Exception] = []
     for k, trial in enumerate(trials):
         d = drawn[k]
@@ -191,7 +195,7 @@ def make_trials(sc: SimScenario, trials: list[int], nominal: HexapodGeometry, ca
             calibration: dict[str, float] = {}
             if calibrate is not None:
                 points, calibration = calibrate(world, trial_rng(sc.seed, trial, 3))
-            out.append(TrialSetup(trial, world, nominal,
+            out.append(TrialSetup(trial, world, model,
                                   estimated_camera(camera, ce.distortion_percent), points,
                                   R_s, t_s, R_g, t_g, q_s, shared, calibration))
         except Exception as exc:  # that trial's failure

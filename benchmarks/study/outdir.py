@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import argparse
 from pathlib import Path
+from typing import Any
 
 from benchmarks.study.results import LOCK_FILE, RESULTS_FILE, TRIALS_DIR
 from hexapod.exceptions import OutputError
@@ -110,7 +111,18 @@ def _calibration_source(path: Path) -> str:
     return f"; calibrated.toml made from {src}" if isinstance(src, str) and src else ""
 
 
-class OutputFile(argparse._StoreAction):
+class _OutputAction(argparse.Action):
+    """Stores the option's value, as argparse's default action does; the subclasses tag
+    the option as an output (see :class:`OutputFile`)."""
+
+    kind = ""
+
+    def __call__(self, parser: argparse.ArgumentParser, namespace: argparse.Namespace,
+                 values: Any, option_string: str | None = None) -> None:
+        setattr(namespace, self.dest, values)
+
+
+class OutputFile(_OutputAction):
     """``add_argument(..., action=OutputFile)``: an option naming a file the command writes
     (with :func:`hexapod.outputs.write_output`: a user's file refused unless
     ``--overwrite``, the project's mark in it). The tag lets a test find every output
@@ -119,7 +131,7 @@ class OutputFile(argparse._StoreAction):
     kind = "file"
 
 
-class OutputDir(argparse._StoreAction):
+class OutputDir(_OutputAction):
     """``add_argument(..., action=OutputDir)``: a directory the command writes into (absent,
     empty or its own; see :func:`hexapod.outputs.check_output_dir`)."""
 

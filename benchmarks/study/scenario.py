@@ -209,7 +209,7 @@ def parse_scenario(table: dict[str, Any], path: str = "<dict>") -> Scenario:
                             "a distinct 'label'", key="controllers")
 
     robot = _section(table, "robot", path)
-    robot_keys = ("preset", "geometry", "dt", "world", "physics_dt")
+    robot_keys = ("preset", "geometry", "dt", "world", "physics_dt", "model")
     for key in robot:
         if key not in robot_keys:
             raise ScenarioError(path, f"unknown key; expected one of {', '.join(robot_keys)}",
@@ -225,6 +225,7 @@ def parse_scenario(table: dict[str, Any], path: str = "<dict>") -> Scenario:
         robot_preset = None
     elif "preset" in robot:
         robot_preset = _typed(robot["preset"], str, path, "robot.preset", ("deltalab",))
+    robot_model, model_data = _read_model(robot, base_dir, path)
     dt = _typed(robot.get("dt", 0.02), float, path, "robot.dt")
     check_range(dt, "robot.dt", path)
     world, physics_dt = _parse_world(robot, dt, path)
@@ -339,7 +340,28 @@ def parse_scenario(table: dict[str, Any], path: str = "<dict>") -> Scenario:
         drives=drives,
         reference=reference, sweep_axes=sweep, source=path, geometry_data=geometry_data,
         camera_data=camera_data, calibration_points=points, controller_options=dict(defaults),
+        robot_model=robot_model, model_data=model_data,
     )
+
+
+def _read_model(robot: dict[str, Any], base_dir: Path, path: str) -> tuple[str | None, Any]:
+    """``[robot] model``: a robot file whose ``[inertia]`` and ``[drives]`` are the
+    controllers' model (e.g. ``hexapod-bench identify``'s ``identified.toml``), read once.
+
+    Raises:
+        ScenarioError: The file is missing or invalid, naming it.
+    """
+    if "model" not in robot:
+        return None, None
+    from hexapod.exceptions import HexapodError
+    from hexapod.geometry import HexapodGeometry
+
+    value = _typed(robot["model"], str, path, "robot.model")
+    model = referenced_file(base_dir, value, "robot.model", path)
+    try:
+        return model, HexapodGeometry.from_toml(model)
+    except HexapodError as exc:
+        raise ScenarioError(path, f"{model}: {exc}", key="robot.model") from None
 
 
 def _checked_name(value: str, what: str, path: str, key: str) -> str:

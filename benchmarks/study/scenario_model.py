@@ -384,6 +384,10 @@ class Scenario:
         controller_options: The file's ``[controller_options]`` (given to each controller
             that declares the option, :func:`benchmarks.study.scenario_checks.
             check_controllers`; kept for the controllers ``--controllers`` chooses).
+        robot_model: ``[robot] model``: a robot file whose ``[inertia]`` and ``[drives]``
+            the controllers use instead of the robot's (an identified model); the world's
+            truth is unchanged.
+        model_data: The robot read from ``robot_model``.
 
     The files a scenario names are read once, where it is loaded (the client): work
     units carry their data to the workers, which need not see the files (a Dask
@@ -419,6 +423,8 @@ class Scenario:
     camera_data: Any = None
     calibration_points: Any = None
     controller_options: dict[str, Any] = field(default_factory=dict, compare=False)
+    robot_model: str | None = None
+    model_data: Any = None
 
     def expand(self) -> list[Scenario]:
         """One scenario per point of the sweep (Cartesian product of the swept keys)."""

@@ -37,9 +37,11 @@ STUDY_VERSION = 1
 #: Scenario fields that are not settings of the study (words, the file's path, the data
 #: read from the files, which are hashed by file instead).
 _NOT_SETTINGS = frozenset({"name", "description", "reference", "sweep", "source",
-                           "geometry_data", "camera_data", "calibration_points"})
+                           "geometry_data", "camera_data", "calibration_points",
+                           "model_data"})
 #: Fields that name a file: the study holds a hash of its content.
-_FILE_FIELDS = {"robot_geometry": "robot.geometry", "camera_file": "camera.file",
+_FILE_FIELDS = {"robot_geometry": "robot.geometry", "robot_model": "robot.model",
+                "camera_file": "camera.file",
                 "calibration.file": "calibration.file"}
 #: Keys a command-line option sets: differences are named by the option.
 OPTIONS = {"seed": "--seed", "trials": "--trials", "world": "--world",

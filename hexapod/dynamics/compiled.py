@@ -219,7 +219,9 @@ def expressions() -> tuple[ca.SX, dict[str, ca.SX]]:
 
 
 @lru_cache(maxsize=1)
-def _cached_expressions() -> tuple[ca.SX, dict[str, ca.SX]]:
+def cached_expressions() -> tuple[ca.SX, dict[str, ca.SX]]:
+    """:func:`expressions`, built once per process (the kernels and the identification
+    regressor differentiate the same graph)."""
     return expressions()
 
 
@@ -227,7 +229,7 @@ def _build(name: str) -> ca.Function:
     """The CasADi function ``name``: ``forward`` (acceleration, 6), ``inverse`` (leg
     forces, their residual ``K^T f - (M acc + h)`` and ``M acc + h``: 18), ``terms`` or
     ``forward_drives`` (:data:`DRIVES_INPUTS`; the outputs: :data:`OUTPUTS`)."""
-    x, e = _cached_expressions()
+    x, e = cached_expressions()
     M, h, K = e["M"], e["h"], e["K"]
     u = x[INPUTS["u"]]
     if name == "forward":

@@ -32,7 +32,7 @@ INPUTS = {("run", "scenarios"), ("run", "--calibration"), ("calibrate", "scenari
           ("servo", "--camera-file"), ("servo", "--camera-pose"), ("servo", "--geometry"),
           ("servo", "--calibration"), ("servo", "--camera"), ("perf calibration", "--camera"),
           ("perf controllers", "--camera"), ("perf dynamic-world", "--scenario"),
-          ("perf study", "--scenario")}
+          ("perf study", "--scenario"), ("identify", "robot"), ("identify", "--truth")}
 #: Option names and metavars that look like a path: each such option must be an output
 #: (tagged ``OutputFile``/``OutputDir``) or listed in :data:`INPUTS`.
 _PATHY_DEST = {"out", "dir", "dirs", "file", "json", "parquet", "picture", "markdown", "html",
@@ -175,6 +175,8 @@ DIR_CASES: dict[tuple[str, str], tuple[list[str], str, bool]] = {
                        "report.md", True),
     ("calibrate", "--out"): (["calibrate", "{scenario}", "--out", "{out}"],
                              "calibrated.toml", True),
+    ("identify", "--out"): (["identify", "deltalab", "--out", "{out}", "--duration", "4",
+                             "--search-candidates", "2"], "identified.toml", True),
     ("reproduce", "--out"): (["reproduce", "seed001", "--quick", "--out", "{out}"],
                              "notes.txt", False),
     ("report", "dir"): (["report", "{out}"], "report.md", True),

@@ -194,6 +194,7 @@ def test_jacobi_eigen_solve_equals_lapack(rng: np.random.Generator) -> None:
         np.testing.assert_allclose(x, xr, rtol=0, atol=1e-14 * kept_cond * np.abs(xr).max())
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("threshold", [1e-6, 1e-3, 0.1])
 def test_full_rank_certificate_is_sound_and_tight(threshold: float,
                                                   rng: np.random.Generator) -> None:

@@ -79,6 +79,7 @@ def test_list_descriptions_are_whole_sentences() -> None:
         "2008, with leg observation instead of a target on the platform).")
 
 
+@pytest.mark.slow
 def test_module_attr_is_recorded_with_its_distribution() -> None:
     import yaml
 

@@ -112,6 +112,7 @@ def test_conformance_catches_a_backend_that_ignores_the_limits() -> None:
     assert "stroke: measured" in text
 
 
+@pytest.mark.realtime
 @pytest.mark.slow
 def test_emulator_conforms_within_its_micrometre_quantisation() -> None:
     """The protocol carries lengths in micrometres and each period starts from the rounded

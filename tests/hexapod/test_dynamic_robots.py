@@ -50,6 +50,7 @@ def test_the_compiled_period_equals_the_numpy_steps(mode: str) -> None:
     assert np.any(a.saturated_time > 0) and np.any(np.abs(a.twist) > 1e-3)
 
 
+@pytest.mark.slow
 def test_power_balance_of_mechanism_rotors_and_drives() -> None:
     """Force mode, constant forces, friction on: the change of the mechanism's energy
     (kinetic + potential, DynamicModel.energy) plus the rotors' kinetic energy

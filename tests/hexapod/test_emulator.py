@@ -264,6 +264,7 @@ def test_err_returns_the_last_error_then_clears(link: Link) -> None:
 
 
 # ----------------------------------------------------------------------------- watchdog
+@pytest.mark.realtime
 def test_watchdog_trips_holds_and_latches_until_err(link: Link) -> None:
     assert link.send("WDT 50") == "OK"
     assert link.send("SVO 1") == "OK"
@@ -318,6 +319,7 @@ def test_watchdog_only_with_servo_on_and_only_valid_mov_feeds_it(link: Link) -> 
 
 
 # ----------------------------------------------------------------------------- lag
+@pytest.mark.realtime
 def test_first_order_lag() -> None:
     tau = 0.05
     cfg = BoardConfig(stroke=STROKE, max_speed=SPEED, lengths=Q0, lag=tau)

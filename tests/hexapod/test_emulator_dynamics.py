@@ -20,6 +20,9 @@ from hexapod.backends.emulator_board import Board
 from hexapod.exceptions import BackendError
 from hexapod.geometry import deltalab
 
+#: Wall-clock periods against real emulator processes: run alone (`make test`).
+pytestmark = pytest.mark.realtime
+
 Q0 = np.full(6, 0.40)
 STEP = 0.003  # m: every leg 3 mm longer
 

@@ -249,6 +249,7 @@ def test_dropped_connection_raises_and_closes(robot: GcsHexapod, emulator: GcsEm
     robot.close()  # idempotent
 
 
+@pytest.mark.realtime
 def test_killed_emulator_process_mid_run(geometry: HexapodGeometry) -> None:
     r = open_emulated_gcs(geometry, Q0, process=True)
     try:

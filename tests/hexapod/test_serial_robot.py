@@ -33,6 +33,9 @@ from hexapod.exceptions import (
     WatchdogError,
 )
 
+#: Wall-clock periods against real emulator processes: run alone (`make test`).
+pytestmark = pytest.mark.realtime
+
 DT = 0.02
 Q0 = np.array([0.40, 0.405, 0.41, 0.415, 0.42, 0.425])
 

@@ -48,6 +48,7 @@ def test_blind_camera_with_a_controller_that_needs_none_runs(
     assert "1 of 2 trials failed" in stdout
 
 
+@pytest.mark.slow
 def test_empty_workspace_is_refused(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     own_robot(stroke=(0.100, 0.150)).to_toml(tmp_path / "robot.toml")
     study = write_study(tmp_path)

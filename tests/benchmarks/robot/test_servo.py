@@ -13,6 +13,9 @@ import pytest
 from benchmarks.robot import servo
 from tests.benchmarks.robot.interrupt import interrupt_servo
 
+#: Wall-clock periods against real emulator processes: run alone (`make test`).
+pytestmark = pytest.mark.realtime
+
 # a reachable goal 2 to 3 mm from the emulator's initial (mid-stroke, 415 mm) lengths
 GOAL_MM = [417.5, 412.5, 417.0, 413.0, 417.5, 412.5]
 FAST = ["-o", "gain=3", "--tolerance-mm", "0.5", "--max-steps", "150"]

@@ -62,6 +62,7 @@ def two_real_runs(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, Path]
     return dirs[0], dirs[1]
 
 
+@pytest.mark.slow
 def test_identical_runs_no_difference_no_determinism_failure(
         two_real_runs: tuple[Path, Path], tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
@@ -82,6 +83,7 @@ def test_identical_runs_no_difference_no_determinism_failure(
     assert det["statistic"] == 0 and det["n"] == 24
 
 
+@pytest.mark.slow
 def test_slower_controller_is_found(two_real_runs: tuple[Path, Path],
                                     capsys: pytest.CaptureFixture[str]) -> None:
     a, _ = two_real_runs

@@ -152,6 +152,7 @@ def test_a_backend_plugin_with_an_unsafe_name_is_reported_not_registered(
 
 
 # ------------------------------------------------------- case 2: run --out over user files
+@pytest.mark.slow
 def test_run_refuses_a_directory_holding_a_users_files(
         tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     out = tmp_path / "mine"
@@ -175,6 +176,7 @@ def test_run_refuses_a_directory_holding_a_users_files(
     assert (out / "report.md").read_text().startswith("# Benchmark report")
 
 
+@pytest.mark.slow
 def test_a_run_directory_keeps_its_rule_and_its_foreign_report_is_kept(
         tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     scen = _scenario(tmp_path)
@@ -232,6 +234,7 @@ def test_calibrate_refuses_a_directory_of_other_files(
 
 
 # ---------------------------------------------------------------- single-file outputs
+@pytest.mark.slow
 def test_viz_html_replaces_its_own_page_but_not_a_users_file(
         tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     out = tmp_path / "run"
@@ -257,6 +260,7 @@ def test_viz_html_replaces_its_own_page_but_not_a_users_file(
     assert "give the page an .html name" in capsys.readouterr().err
 
 
+@pytest.mark.slow
 def test_a_name_with_a_colon_stays_a_local_figure_in_the_report(
         tmp_path: Path) -> None:
     out = tmp_path / "run"
@@ -268,6 +272,7 @@ def test_a_name_with_a_colon_stays_a_local_figure_in_the_report(
     assert "](lab:a" not in report
 
 
+@pytest.mark.slow
 def test_perf_outputs_replace_their_own_files_only(
         tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     figure, figures = tmp_path / "edges.png", tmp_path / "cal.json"

@@ -41,6 +41,7 @@ def _stable(rows: list[dict]) -> list[dict]:
     return sorted(out, key=lambda r: (r["point"], r["controller"], r["trial"]))
 
 
+@pytest.mark.slow
 def test_results_identical_across_executors_and_chunkings(tmp_path: Path) -> None:
     sc = _scenario()
     runs = {
@@ -63,6 +64,7 @@ def test_results_identical_across_executors_and_chunkings(tmp_path: Path) -> Non
         assert rows == reference, f"{name} differs from the in-process run"
 
 
+@pytest.mark.slow
 def test_a_crashing_trial_is_recorded_and_the_run_goes_on(tmp_path: Path) -> None:
     sc = _scenario(trials=6, controllers=[{"name": CRASH, "gain": 5.0},
                                           {"name": JOINTS, "gain": 5.0}])
@@ -76,6 +78,7 @@ def test_a_crashing_trial_is_recorded_and_the_run_goes_on(tmp_path: Path) -> Non
     assert len(fine) == 12 and all(r["failure"] is None for r in fine if r["converged"])
 
 
+@pytest.mark.slow
 def test_resume_after_partial_run_redoes_nothing(tmp_path: Path) -> None:
     sc = _scenario(trials=4)
     full = tmp_path / "full"
@@ -96,6 +99,7 @@ def test_resume_after_partial_run_redoes_nothing(tmp_path: Path) -> None:
     assert _stable(read_results(part)) == _stable(read_results(full))
 
 
+@pytest.mark.slow
 def test_cli_interrupted_run_resumes(tmp_path: Path) -> None:
     scen = tmp_path / "long.toml"
     scen.write_text(
@@ -154,6 +158,7 @@ END_TO_END_STEPS = {"camera-latency": 30, "fisheye-close": 40, "quick-dynamic": 
                     "mpc-drives-tracking": 20}
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("name", sorted(builtin_scenarios()))
 def test_builtin_scenario_end_to_end(name: str, tmp_path: Path) -> None:
     """Each built-in scenario runs (1 trial per controller and sweep point): rows that
@@ -173,6 +178,7 @@ def test_builtin_scenario_end_to_end(name: str, tmp_path: Path) -> None:
     assert all(c in report for c in {r["controller"] for r in rows})
 
 
+@pytest.mark.slow
 def test_report_command_rebuilds_the_report(tmp_path: Path) -> None:
     """``hexapod-bench report DIR`` on a finished run's directory rewrites the run's own
     report: the same text but for the time it was generated and the report command added
@@ -191,6 +197,7 @@ def test_report_command_rebuilds_the_report(tmp_path: Path) -> None:
     assert all(a.startswith("Generated ") for a, _ in differ), differ
 
 
+@pytest.mark.slow
 def test_a_second_run_on_a_locked_directory_is_refused(tmp_path: Path) -> None:
     """Two real processes: the second refuses while the first holds DIR/.lock, naming it."""
     scen = tmp_path / "long.toml"
@@ -229,6 +236,7 @@ def test_a_second_run_on_a_locked_directory_is_refused(tmp_path: Path) -> None:
     assert sorted(r["trial"] for r in read_results(out)) == list(range(200))
 
 
+@pytest.mark.slow
 def test_report_ignores_duplicate_rows_and_says_so(tmp_path: Path, capsys: object) -> None:
     sc = _scenario(trials=3)
     run_units(plan([sc], chunk_size=3, record_trials=0), tmp_path)

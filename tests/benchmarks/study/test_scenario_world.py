@@ -158,6 +158,7 @@ def test_a_dynamic_run_records_and_reports_its_drives(tmp_path) -> None:
     assert "Drives (dynamic world" in report and "max leg force N" in report
 
 
+@pytest.mark.slow
 def test_run_world_overrides_the_scenarios_world(tmp_path) -> None:
     """``run quick --world dynamic`` runs quick in the dynamic world (its rows carry the
     drive figures), ``--world kinematic`` runs quick-dynamic without them."""

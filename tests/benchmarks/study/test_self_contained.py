@@ -40,6 +40,7 @@ def _outcomes(out: Path) -> list[tuple[str, int, int, float]]:
                   for r in read_results(out))
 
 
+@pytest.mark.slow
 def test_the_run_keeps_the_scenario_and_every_file_it_names(
         lab: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     cal = tmp_path / "cal"
@@ -79,6 +80,7 @@ def test_the_run_keeps_the_scenario_and_every_file_it_names(
         assert line in report, line
 
 
+@pytest.mark.slow
 def test_a_resumed_run_keeps_its_copy_and_warns_when_the_file_changed(
         lab: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     out = tmp_path / "run"
@@ -121,6 +123,7 @@ def test_the_unconverged_reason_names_what_ended_outside(
     assert unconverged_reason(task, position, rotation) == expected
 
 
+@pytest.mark.slow
 def test_fixed_duration_failures_in_the_results_are_in_the_users_terms(
         lab: Path, tmp_path: Path) -> None:
     out = tmp_path / "run"
@@ -155,6 +158,7 @@ def test_run_help_says_what_record_keeps(capsys: pytest.CaptureFixture[str]) -> 
             "their row in results.jsonl)") in text
 
 
+@pytest.mark.slow
 def test_viz_points_to_record_for_a_trial_that_was_not_recorded(
         lab: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     out = tmp_path / "run"

@@ -143,6 +143,7 @@ def test_mcnemar_identical_and_one_sided_case() -> None:
     assert res.low <= -0.06 <= res.high < 0
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("n", [8, 13, 14, 20, 30, 50, 51, 200, 5000])
 @pytest.mark.parametrize("kind", ["continuous", "ties", "zeros"])
 def test_wilcoxon_matches_scipy(n: int, kind: str) -> None:

@@ -118,6 +118,7 @@ def _edit(scen: Path, old: str, new: str) -> None:
     scen.write_text(text.replace(old, new))
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize(("change", "extra", "named"), [
     (None, ["--world", "dynamic"], "--world: kinematic in the directory, dynamic given"),
     (None, ["--seed", "7"], "--seed: 1 in the directory, 7 given"),
@@ -186,6 +187,7 @@ def test_several_differences_are_all_named(
     assert "--trials" not in err
 
 
+@pytest.mark.slow
 def test_the_runs_own_scenario_copy_resumes_and_grows_the_study(
         study: tuple[Path, Path], capsys: pytest.CaptureFixture[str]) -> None:
     scen, out = study
@@ -228,6 +230,7 @@ def test_differences_compare_key_by_key() -> None:
     assert info.value.differences == ["scenarios: a in the directory, none given"]
 
 
+@pytest.mark.slow
 def test_report_is_one_of_the_commands_that_wrote_the_directory(
         study: tuple[Path, Path]) -> None:
     _, out = study

@@ -68,6 +68,7 @@ def _recorded(out: Path, controller: str) -> dict[str, np.ndarray]:
         return {k: rec[k] for k in rec.files}
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("controller", ["joint-space", "computed-torque"])
 def test_row_forces_agree_with_the_recorded_trial(run: tuple[Path, list[dict]],
                                                   controller: str) -> None:
@@ -88,6 +89,7 @@ def test_row_forces_agree_with_the_recorded_trial(run: tuple[Path, list[dict]],
     assert row["saturation_time_s"] > 0  # the case is one that reaches the limit
 
 
+@pytest.mark.slow
 def test_the_study_reaches_and_misses_the_limit(run: tuple[Path, list[dict]]) -> None:
     """Not a degenerate case: some trial saturates for part of its motion only."""
     _, rows = run

@@ -1,0 +1,115 @@
+"""``hexapod-bench identify ROBOT_OR_SCENARIO --out DIR``: the command line."""
+
+from __future__ import annotations
+
+import argparse
+import shlex
+import time
+from pathlib import Path
+
+import numpy as np
+
+from hexapod.geometry import HexapodGeometry
+
+
+def add_arguments(s: argparse.ArgumentParser) -> None:
+    """The ``identify`` subcommand's options."""
+    from benchmarks.study.outdir import OutputDir
+
+    s.add_argument("robot", metavar="ROBOT_OR_SCENARIO",
+                   help="robot file (TOML), preset name, or scenario (its robot)")
+    s.add_argument("--out", required=True, action=OutputDir, help="output directory")
+    s.add_argument("--backend", default="world", metavar="SPEC",
+                   help="where the excitation runs: 'world' (default: the dynamic world, the "
+                        "simulated truth) or a backend that reports forces")
+    s.add_argument("--truth", metavar="ROBOT",
+                   help="the dynamic world's true robot (default: the robot file itself)")
+    s.add_argument("--duration", type=float, default=20.0, metavar="S",
+                   help="excitation length [s] (default 20)")
+    s.add_argument("--seed", type=int, default=0)
+    s.add_argument("--force-noise", type=float, default=1.0, metavar="PERCENT",
+                   help="force noise, percent of each leg's RMS force (default 1)")
+    s.add_argument("--encoder-resolution", type=float, metavar="UM",
+                   help="encoder resolution [um] (default: the robot file's)")
+    s.add_argument("--search-candidates", type=int, default=16, metavar="N",
+                   help="excitation shapes the search tries (default 16, about 10 s)")
+    s.add_argument("--overwrite", action="store_true",
+                   help="replace a user's files of the same names in --out")
+
+
+def load_robot(name: str) -> HexapodGeometry:
+    """A robot file, a preset, or a scenario's robot."""
+    from hexapod.exceptions import GeometryError
+    from hexapod.geometry import preset
+
+    path = Path(name)
+    if path.suffix != ".toml":
+        try:
+            return preset(name)
+        except GeometryError:
+            pass
+    if path.suffix == ".toml" and path.exists():
+        from hexapod.config import load_toml
+
+        if "base_points_mm" in load_toml(path):
+            return HexapodGeometry.from_toml(path)
+    from benchmarks.sim.world import load_geometry
+    from benchmarks.study.scenario import load_scenario
+
+    return load_geometry(load_scenario(name))
+
+
+def run(args: argparse.Namespace) -> int:
+    """Identify, print the table, write the outputs."""
+    from rich.table import Table
+
+    from benchmarks.identify.outputs import write_all
+    from benchmarks.identify.pipeline import Settings, check_backend, identify
+    from benchmarks.study.commands import console
+    from hexapod.exceptions import IdentificationError
+
+    if args.search_candidates < 2:
+        raise IdentificationError(f"--search-candidates {args.search_candidates}: at least 2")
+    for key, value in (("--duration", args.duration),
+                       ("--force-noise", args.force_noise)):
+        if not np.isfinite(value) or value < 0 or (key == "--duration" and value <= 0):
+            raise IdentificationError(f"{key} {value}: must be a finite "
+                                      f"{'positive' if key == '--duration' else 'non-negative'}"
+                                      " number")
+    check_backend(args.backend)
+    from benchmarks.identify.outputs import OUTPUTS
+    from hexapod.outputs import check_replace
+
+    for name in OUTPUTS:  # before the run: a user's file is refused at once
+        check_replace(Path(args.out) / name, args.overwrite, "--overwrite")
+    robot = load_robot(args.robot)
+    truth = load_robot(args.truth) if args.truth else None
+    settings = Settings(duration=args.duration, seed=args.seed,
+                        force_noise=args.force_noise / 100,
+                        resolution=(args.encoder_resolution * 1e-6
+                                    if args.encoder_resolution is not None else None),
+                        candidates=args.search_candidates, backend=args.backend)
+    t0 = time.perf_counter()
+    ident = identify(robot, settings, truth)
+    con = console()
+    con.print(f"excitation: condition number {ident.excitation.condition:.4g} (scaled base "
+              f"regressor over one period, {ident.basis.size} base parameters)")
+    command = "hexapod-bench " + shlex.join(getattr(args, "argv", []) or ["identify", args.robot])
+    doc = write_all(ident, Path(args.out), command, args.overwrite)
+    t = Table(title=f"Identified base parameters ({args.robot})")
+    has_true = ident.truth is not None
+    for col in ("base parameter", "unit", "estimate", "SE") + (("true", "z") if has_true
+                                                                else ()):
+        t.add_column(col, justify="left" if col == "base parameter" else "right")
+    for p in doc["base_parameters"]:
+        row = [p["name"], p["unit"], f"{p['estimate']:.6g}", f"{p['se']:.3g}"]
+        if has_true:
+            row += [f"{p['true']:.6g}", f"{p['z']:.2f}"]
+        t.add_row(*row)
+    con.print(t)
+    for line in ident.estimate.consistency:
+        con.print(f"consistency: {line}")
+    con.print(f"residual sigma per leg {np.round(ident.estimate.sigma_legs, 4).tolist()} N; "
+              f"{time.perf_counter() - t0:.1f} s; wrote {args.out}/identified.toml, "
+              "identification.json, report.md, residuals.png")
+    return 0

@@ -1,0 +1,157 @@
+"""What ``hexapod-bench identify`` writes: ``identified.toml``, ``identification.json``,
+``report.md`` and ``residuals.png`` (through :func:`hexapod.outputs.write_output`)."""
+
+from __future__ import annotations
+
+import datetime
+import io
+import subprocess
+from dataclasses import replace
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import tomli_w
+
+from benchmarks.identify.pipeline import Identification
+from hexapod.dynamics.identification.parameters import STANDARD_NAMES, to_tables, unit
+from hexapod.geometry import HexapodGeometry
+from hexapod.outputs import write_output
+
+#: The files ``identify`` writes into its folder.
+OUTPUTS = ("identified.toml", "identification.json", "residuals.png", "report.md")
+
+
+def identified_geometry(ident: Identification, source: str | None = None) -> HexapodGeometry:
+    """The robot file with the identified ``[inertia]`` and ``[drives]`` tables."""
+    inertia, drives = to_tables(ident.estimate.standard, ident.robot.inertia,
+                                ident.robot.drives, source)
+    return replace(ident.robot, inertia=inertia, drives=drives)
+
+
+def _commit() -> str:
+    try:
+        out = subprocess.run(["git", "rev-parse", "--short", "HEAD"], capture_output=True,
+                             text=True, timeout=5, cwd=Path(__file__).parent)
+        return out.stdout.strip() or "unknown"
+    except (OSError, subprocess.SubprocessError):
+        return "unknown"
+
+
+def document(ident: Identification, command: str) -> dict[str, Any]:
+    """The ``identification.json`` content."""
+    est, basis = ident.estimate, ident.basis
+    true_base = basis.of(ident.truth) if ident.truth is not None else None
+    params = []
+    for i, name in enumerate(basis.names):
+        k = int(basis.independent[i])
+        row: dict[str, Any] = {"name": name, "unit": unit(STANDARD_NAMES[k]),
+                               "estimate": float(est.theta[i]), "se": float(est.se[i]),
+                               "prior": float(basis.of(ident.prior)[i])}
+        if true_base is not None:
+            row["true"] = float(true_base[i])
+            row["z"] = float((est.theta[i] - true_base[i]) / est.se[i])
+        params.append(row)
+    used = int(ident.mask.sum())
+    return {
+        "command": command, "commit": _commit(),
+        "date": datetime.datetime.now(datetime.UTC).isoformat(timespec="seconds"),
+        "robot": ident.robot.source or ident.robot.name,
+        "record": ident.record,
+        "excitation": ident.excitation.to_dict(),
+        "base_parameters": params,
+        "unidentifiable": list(basis.unidentifiable),
+        "not_separable_kept_at_prior": [STANDARD_NAMES[int(j)] for j in basis.dependent],
+        "standard": {n: float(x) for n, x in zip(STANDARD_NAMES, est.standard, strict=True)},
+        "condition_weighted": est.condition,
+        "residual_sigma_legs_n": est.sigma_legs.tolist(),
+        "relative_residual": est.relative_residual,
+        "equations_used": used, "samples": int(ident.mask.shape[0]),
+        "consistency": est.consistency,
+        "timings_s": ident.timings,
+    }
+
+
+def toml_text(ident: Identification, command: str) -> str:
+    """``identified.toml``: the robot file with the identified tables and its provenance."""
+    geometry = identified_geometry(ident)
+    basis = ident.basis
+    lines = [f"# identified by: {command}",
+             f"# commit {_commit()}, {datetime.datetime.now(datetime.UTC):%Y-%m-%d %H:%M} UTC, "
+             f"from {ident.robot.source or ident.robot.name}; details in identification.json",
+             f"# base parameters identified: {basis.size}; condition number of the "
+             f"excitation {ident.excitation.condition:.4g}",
+             "# kept at the robot file's values (the leg forces cannot separate them): "
+             + ", ".join(STANDARD_NAMES[int(j)] for j in basis.dependent), ""]
+    return "\n".join(lines) + tomli_w.dumps(geometry.to_dict(dynamics=True))
+
+
+def residual_png(ident: Identification) -> bytes:
+    """The fit's residuals against time, one panel per leg, and measured vs model."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    s, est = ident.samples, ident.estimate
+    fig, axes = plt.subplots(6, 1, figsize=(9, 10), sharex=True)
+    model = s.forces - np.nan_to_num(est.residuals)
+    for i, ax in enumerate(axes):
+        m = ident.mask[:, i]
+        ax.plot(s.time, s.forces[:, i], lw=0.6, color="0.6", label="measured (filtered)")
+        ax.plot(s.time[m], model[m, i], ".", ms=1.5, color="C0", label="model")
+        ax.plot(s.time[m], est.residuals[m, i] * 10, ".", ms=1.5, color="C3",
+                label="residual x 10")
+        ax.set_ylabel(f"leg {i} [N]")
+    axes[0].legend(loc="upper right", fontsize=7, ncol=3)
+    axes[-1].set_xlabel("time [s]")
+    fig.suptitle(f"identification residuals: sigma per leg "
+                 f"{np.round(est.sigma_legs, 3).tolist()} N")
+    fig.tight_layout()
+    buf = io.BytesIO()
+    fig.savefig(buf, format="png", dpi=80)
+    plt.close(fig)
+    return buf.getvalue()
+
+
+def report_text(doc: dict[str, Any]) -> str:
+    """``report.md``."""
+    lines = ["# Dynamic identification", "", f"`{doc['command']}` (commit {doc['commit']}, "
+             f"{doc['date']})", "",
+             f"Robot: {doc['robot']}; record: {doc['record']}.", "",
+             f"Excitation: Fourier series, {doc['excitation']['harmonics']} harmonics of "
+             f"{doc['excitation']['base_frequency_hz']} Hz, condition number of the scaled "
+             f"base regressor {doc['excitation']['condition']:.4g}; limits used "
+             f"{ {k: round(v, 4) for k, v in doc['excitation']['limits'].items()} }.", "",
+             f"Estimation: {doc['equations_used']} leg equations of {doc['samples']} samples, "
+             f"weighted least squares (condition {doc['condition_weighted']:.4g}), residual "
+             f"sigma per leg {[round(x, 4) for x in doc['residual_sigma_legs_n']]} N, relative "
+             f"residual {doc['relative_residual']:.4g}.", "",
+             "Physical consistency: " + " ".join(doc["consistency"]), "",
+             "| base parameter | unit | estimate | SE | prior (robot file) |"
+             + (" true | z |" if "true" in doc["base_parameters"][0] else ""),
+             "|---|---|---|---|---|" + ("---|---|" if "true" in doc["base_parameters"][0]
+                                         else "")]
+    for p in doc["base_parameters"]:
+        row = (f"| {p['name']} | {p['unit']} | {p['estimate']:.6g} | {p['se']:.3g} | "
+               f"{p['prior']:.6g} |")
+        if "true" in p:
+            row += f" {p['true']:.6g} | {p['z']:.2f} |"
+        lines.append(row)
+    lines += ["", "Not identifiable (they do not enter the dynamics): "
+              + ", ".join(doc["unidentifiable"]) + ". Kept at the robot file's values "
+              "(only their combinations above are identified): "
+              + ", ".join(doc["not_separable_kept_at_prior"]) + ".", "",
+              "![residuals](residuals.png)", "",
+              f"Timings: { {k: round(v, 2) for k, v in doc['timings_s'].items()} }", ""]
+    return "\n".join(lines)
+
+
+def write_all(ident: Identification, out: Path, command: str, overwrite: bool) -> dict[str, Any]:
+    """Write the four outputs into ``out``; returns the JSON document."""
+    doc = document(ident, command)
+    write_output(out / "identified.toml", toml_text(ident, command), overwrite)
+    write_output(out / "identification.json", doc, overwrite)
+    write_output(out / "residuals.png", residual_png(ident), overwrite)
+    write_output(out / "report.md", report_text(doc), overwrite)
+    return doc

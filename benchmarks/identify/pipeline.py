@@ -1,0 +1,197 @@
+"""One identification: excitation, record, estimation (no printing, no files).
+
+The record comes from the dynamic world (:mod:`.simulate`, the true robot given as
+``truth``, by default the robot file itself) or from a backend that reports forces: a
+:class:`~hexapod.backends.base.Backend` with a ``measured_forces()`` method returning the
+six drive forces [N] of the last step. The project's own backends report leg lengths only
+(:class:`~hexapod.backends.base.BackendStep`), so they are refused, naming that reason.
+"""
+
+from __future__ import annotations
+
+import logging
+import time
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from benchmarks.identify.simulate import POSITION_GAIN, Record, reference_lengths, run
+from hexapod.dynamics.drive_model import quantise
+from hexapod.dynamics.identification.base import BaseParameters, base_parameters
+from hexapod.dynamics.identification.estimation import Estimate, weighted_least_squares
+from hexapod.dynamics.identification.excitation import Excitation, optimise
+from hexapod.dynamics.identification.parameters import standard_vector
+from hexapod.dynamics.identification.processing import (
+    DEFAULT_CUTOFF_HZ,
+    DEFAULT_MIN_SPEED,
+    Samples,
+    samples,
+)
+from hexapod.dynamics.identification.regressor import regressor
+from hexapod.exceptions import BackendError
+from hexapod.geometry import HexapodGeometry
+
+log = logging.getLogger(__name__)
+
+#: ``--backend`` names of the dynamic world (the simulated truth).
+WORLD_BACKENDS = ("world", "dynamic-world")
+
+
+@dataclass
+class Settings:
+    """How to identify.
+
+    Attributes:
+        duration: Excitation length [s].
+        seed: Seed of the excitation search and of the sensor noise.
+        force_noise: Force noise, a fraction of each leg's RMS force (0.01: 1 %).
+        resolution: Encoder resolution [m] (None: the robot file's).
+        candidates: Excitation shapes tried by the search.
+        cutoff_hz: Zero-phase filter cutoff [Hz].
+        min_speed: Leg equations below this leg speed are not used [m/s].
+        backend: ``--backend`` spec (:data:`WORLD_BACKENDS` or a backend with forces).
+        sample_dt: Sampling period of the record [s].
+    """
+
+    duration: float = 20.0
+    seed: int = 0
+    force_noise: float = 0.01
+    resolution: float | None = None
+    candidates: int = 16
+    cutoff_hz: float = DEFAULT_CUTOFF_HZ
+    min_speed: float = DEFAULT_MIN_SPEED
+    backend: str = "world"
+    sample_dt: float = 1e-3
+
+
+@dataclass
+class Identification:
+    """An identification's results."""
+
+    robot: HexapodGeometry
+    basis: BaseParameters
+    excitation: Excitation
+    samples: Samples
+    mask: np.ndarray
+    estimate: Estimate
+    prior: np.ndarray
+    truth: np.ndarray | None
+    timings: dict[str, float] = field(default_factory=dict)
+    record: dict[str, Any] = field(default_factory=dict)
+
+
+def measured(record: Record, settings: Settings, rng: np.random.Generator
+             ) -> tuple[np.ndarray, np.ndarray]:
+    """What the sensors read: lengths through the encoders (an encoder zero anywhere
+    within a count, then quantised), forces with Gaussian noise of ``force_noise`` times
+    each leg's RMS force."""
+    res = (np.full(6, settings.resolution) if settings.resolution is not None
+           else record.resolution)
+    offset = rng.uniform(-0.5, 0.5, 6) * res
+    lengths = quantise(record.lengths + offset, res) - offset
+    rms = np.sqrt(np.mean(record.forces**2, axis=0))
+    forces = record.forces + settings.force_noise * rms * rng.standard_normal(
+        record.forces.shape)
+    return lengths, forces
+
+
+def record_backend(backend: Any, robot: HexapodGeometry, excitation: Excitation,
+                   duration: float, dt: float) -> tuple[np.ndarray, np.ndarray]:
+    """Run the excitation on a backend that reports forces (a position loop on its
+    encoders, leg velocities as commands); returns the lengths and forces (N, 6)."""
+    q_ref = reference_lengths(robot, excitation, duration, dt)
+    qd_ref = np.gradient(q_ref, dt, axis=0)
+    q = backend.measured_lengths()
+    lengths, forces = [], []
+    for k in range(q_ref.shape[0] - 1):
+        step = backend.step(qd_ref[k] + POSITION_GAIN * (q_ref[k] - q), dt)
+        q = step.lengths
+        lengths.append(q)
+        forces.append(np.asarray(backend.measured_forces(), float))
+    return np.array(lengths), np.array(forces)
+
+
+def check_backend(spec: str) -> None:
+    """Refuse a backend that cannot report forces, before anything runs.
+
+    Raises:
+        BackendError: Naming the backend and why.
+    """
+    if spec in WORLD_BACKENDS:
+        return
+    from hexapod.backends.registry import backends
+
+    name, _, _ = backends.resolve(spec)
+    builtin = {"sim": "the kinematic simulator has no mass and no drives",
+               "emulator": "the emulated boards' protocol reports positions only, even with "
+                           "--dynamics (no force or current reading)",
+               "serial": "the serial protocol (docs/serial-protocol.md) reports positions only",
+               "gcs": "the GCS protocol reports positions only",
+               "gcs-emulator": "the GCS protocol reports positions only"}
+    reason = builtin.get(name)
+    if reason is not None:
+        raise BackendError(f"--backend {spec}: cannot identify the dynamics: {reason}; the "
+                           "identification needs the drive forces (use --backend world, the "
+                           "dynamic world, or a backend with measured_forces())")
+
+
+def identify(robot: HexapodGeometry, settings: Settings,
+             truth: HexapodGeometry | None = None) -> Identification:
+    """Identify ``robot`` (the robot file: limits, prior) on the dynamic world whose true
+    robot is ``truth`` (default ``robot``) or on ``settings.backend``.
+
+    Raises:
+        BackendError: A backend without forces.
+        IdentificationError: The data cannot determine the parameters.
+    """
+    check_backend(settings.backend)
+    timings: dict[str, float] = {}
+    t0 = time.perf_counter()
+    basis = base_parameters(robot, seed=settings.seed)
+    timings["base_parameters_s"] = time.perf_counter() - t0
+    t1 = time.perf_counter()
+    excitation = optimise(robot, basis, seed=settings.seed,
+                          candidates=settings.candidates)
+    timings["excitation_s"] = time.perf_counter() - t1
+    t1 = time.perf_counter()
+    rng = np.random.default_rng([settings.seed, 38])
+    info: dict[str, Any] = {"backend": settings.backend, "duration_s": settings.duration,
+                            "sample_dt_s": settings.sample_dt}
+    true_theta = None
+    if settings.backend in WORLD_BACKENDS:
+        world = truth if truth is not None else robot
+        rec = run(world, excitation, settings.duration, settings.sample_dt)
+        lengths, forces = measured(rec, settings, rng)
+        true_theta = standard_vector(world.inertia, world.drives)
+        info.update({"saturated_samples": rec.saturated,
+                     "force_noise_fraction": settings.force_noise,
+                     "encoder_resolution_m": (settings.resolution if settings.resolution
+                                              is not None else rec.resolution.tolist()),
+                     "true_robot": world.source or world.name})
+    else:
+        from hexapod.backends.registry import open_backend
+
+        R0, t0_ = excitation.poses(robot, np.zeros(1))
+        from hexapod.dynamics.identification.excitation import legs
+
+        start = legs(R0, t0_, robot.base_points[None], robot.platform_points[None])[0][0]
+        with open_backend(settings.backend, robot, start) as backend:
+            if not callable(getattr(backend, "measured_forces", None)):
+                raise BackendError(f"--backend {settings.backend}: {type(backend).__name__} "
+                                   "has no measured_forces(): it cannot report the drive "
+                                   "forces the identification needs")
+            lengths, forces = record_backend(backend, robot, excitation, settings.duration,
+                                             settings.sample_dt)
+    timings["record_s"] = time.perf_counter() - t1
+    t1 = time.perf_counter()
+    s = samples(robot, settings.sample_dt, lengths, forces, settings.cutoff_hz)
+    Y, _, _ = regressor(robot, s.R, s.t, s.twist, s.acc)
+    mask = s.mask(settings.min_speed)
+    prior = standard_vector(robot.inertia, robot.drives)
+    est = weighted_least_squares(basis.columns(Y), s.forces, basis, prior, robot.inertia,
+                                 robot.drives, mask)
+    timings["estimation_s"] = time.perf_counter() - t1
+    timings["total_s"] = time.perf_counter() - t0
+    return Identification(robot, basis, excitation, s, mask, est, prior, true_theta,
+                          timings, info)
