@@ -25,9 +25,6 @@ PACKAGES = ("controllers", "benchmarks", "hexapod")
 ALLOWED: dict[tuple[str, str], str] = {
     ("benchmarks/study/analysis_cli.py", "argparse._SubParsersAction"):
         "the standard library's type of add_subparsers(); argparse gives it no public name",
-    ("benchmarks/study/outdir.py", "argparse._StoreAction"):
-        "the standard library's class of action='store', which the output options "
-        "(OutputFile, OutputDir) extend with a tag; argparse gives it no public name",
     ("controllers/solvers/osqp_limits.py", "getattr(solver, '_solver', None)"):
         "OSQP's Python wrapper keeps its compiled solver there (no public accessor); used "
         "only when it has the expected methods, else the wrapper",
