@@ -154,6 +154,7 @@ def test_nan_lengths_are_refused_with_a_reason(geometry: HexapodGeometry) -> Non
     assert np.all(np.isfinite(cmd.values))
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("engine", ["batched", "per-trial"])
 def test_the_study_worlds_apply_or_refuse_it(engine: str) -> None:
     from benchmarks.sim import run_trials
@@ -189,6 +190,7 @@ class RecordingSprings(ComputedTorqueController):
         return super().step_trial(observation)
 
 
+@pytest.mark.slow
 def test_the_dynamic_world_measures_leg_velocities() -> None:
     """``q_dot`` is the leg rate the encoders see: it agrees with the change of the
     measured lengths over the period (their mean over the period, to the velocity's

@@ -40,6 +40,7 @@ def _strip(rows: list[dict[str, Any]]) -> list[dict[str, Any]]:
     return [{k: v for k, v in r.items() if k not in ("series",)} for r in rows]
 
 
+@pytest.mark.slow
 def test_a_camera_at_the_control_rate_is_the_engine_without_clock() -> None:
     extra = {"noise": {"model": "rotation", "amplitude_deg": 0.01},
              "calibration_error": {"base_points_mm": 0.5}}
@@ -50,6 +51,7 @@ def test_a_camera_at_the_control_rate_is_the_engine_without_clock() -> None:
         assert a == b  # bit for bit
 
 
+@pytest.mark.slow
 def test_both_engines_give_the_same_rows_with_a_clock() -> None:
     sc = _scenario({"frame_rate_hz": 30.0, "latency_frames": 2.0, "jitter_ms": 2.0},
                    controllers=["leg-edge", "joint-space",
@@ -121,6 +123,7 @@ def test_jitter_has_its_standard_deviation() -> None:
     assert np.abs(jitter).max() <= 0.45 * 0.01
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("task", [POINT, CIRCLE])
 @pytest.mark.parametrize("law", ["leg-edge", "leg-direction"])
 def test_latency_compensation_is_exact_with_an_exact_model(task: dict[str, Any],

@@ -68,6 +68,7 @@ def _compare(a: list[dict[str, Any]], b: list[dict[str, Any]]) -> None:
                                            err_msg=key)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("name", GEOMETRIC)
 def test_batched_rows_equal_the_per_trial_rows(name: str) -> None:
     """Every built-in scenario with the geometric sensor (2 trials per controller at every
@@ -77,6 +78,7 @@ def test_batched_rows_equal_the_per_trial_rows(name: str) -> None:
     _compare(_rows(sc, "per-trial", 2, diagonal=True), _rows(sc, "batched", 2, diagonal=True))
 
 
+@pytest.mark.slow
 def test_a_plugin_without_step_batch_runs_in_the_same_study() -> None:
     sc = load_scenario("quick").with_overrides(trials=3, max_steps=200)
     sc = replace(sc, controllers=(ControllerSpec(PLUGIN, PLUGIN, {"gain": 4.0}),
@@ -106,6 +108,7 @@ def test_batched_rows_equal_the_per_trial_rows_in_the_dynamic_world(name: str) -
     _compare(per_trial, batched)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("interaction", ["desired", "mean"])
 def test_batched_rows_equal_the_per_trial_rows_with_the_desired_or_mean_interaction(
         interaction: str, monkeypatch: pytest.MonkeyPatch) -> None:

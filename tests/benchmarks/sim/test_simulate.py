@@ -5,6 +5,7 @@ from __future__ import annotations
 from dataclasses import replace
 
 import numpy as np
+import pytest
 
 from benchmarks.sim import (
     load_camera,
@@ -132,6 +133,7 @@ def test_goal_image_under_calibration_error_keeps_every_edge() -> None:
     assert goal.edge_visible is not None and goal.edge_visible.all()
 
 
+@pytest.mark.slow
 def test_edge_law_converges_from_rendered_images_on_the_seed_002_task() -> None:
     """andreff2006-images, trial 0, 300 periods: rendering, detection and estimation at
     every period, the goal taught from 10 images. The leg-edge law reaches the

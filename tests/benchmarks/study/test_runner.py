@@ -99,6 +99,7 @@ def test_resume_after_partial_run_redoes_nothing(tmp_path: Path) -> None:
     assert _stable(read_results(part)) == _stable(read_results(full))
 
 
+@pytest.mark.realtime
 @pytest.mark.slow
 def test_cli_interrupted_run_resumes(tmp_path: Path) -> None:
     scen = tmp_path / "long.toml"
