@@ -98,6 +98,7 @@ def test_the_study_reaches_and_misses_the_limit(run: tuple[Path, list[dict]]) ->
     assert all(r["max_leg_force_n"] <= LIMIT * (1 + 1e-12) for r in rows)
 
 
+@pytest.mark.slow
 def test_table_cells_are_the_groups_medians_and_worst(run: tuple[Path, list[dict]]) -> None:
     out, rows = run
     assert tracking_header(rows) == HEADER + FORCE_HEADER
