@@ -128,23 +128,25 @@ def print_comparisons(comparisons: list[Any], title: str,
     significant = [c for c in comparisons if c.better is not None]
     con.print(f"Significant at {100 * ALPHA:.0f} % after Holm's correction "
               f"({len(significant)} of {len(comparisons)} comparisons):")
-    for c in significant:
-        where = f"{c.scenario}" + (f" [{c.sweep}]" if c.sweep != "-" else "")
-        con.print(f"- {where}: {c.verdict}", markup=False, highlight=False)
-    if not significant:
-        con.print("- none: no difference between these controllers is significant")
+    _print_verdicts(con, significant,
+                    "- none: no difference between these controllers is significant")
     equivalent = [c for c in comparisons if c.outcome == "equivalent"]
     open_ = [c for c in comparisons if c.outcome == "not shown equivalent"]
     con.print(f"Equivalent within their margins (TOST at {100 * ALPHA:.0f} % after Holm's "
               f"correction; {len(equivalent)} of {len(comparisons)} comparisons):")
-    for c in equivalent:
-        where = f"{c.scenario}" + (f" [{c.sweep}]" if c.sweep != "-" else "")
-        con.print(f"- {where}: {c.verdict}", markup=False, highlight=False)
-    if not equivalent:
-        con.print("- none")
+    _print_verdicts(con, equivalent, "- none")
     con.print(f"Neither shown different nor shown equivalent: {len(open_)} of "
               f"{len(comparisons)} comparisons (no conclusion: more trials, or a wider "
               "margin with --margin NAME=VALUE)")
+
+
+def _print_verdicts(con: Any, comparisons: list[Any], none: str) -> None:
+    """One line per comparison (where, then its verdict), or ``none`` for an empty list."""
+    for c in comparisons:
+        where = f"{c.scenario}" + (f" [{c.sweep}]" if c.sweep != "-" else "")
+        con.print(f"- {where}: {c.verdict}", markup=False, highlight=False)
+    if not comparisons:
+        con.print(none)
 
 
 def run_names(dir_a: str, dir_b: str) -> tuple[str, str]:
