@@ -1,0 +1,50 @@
+"""Exit codes of ``hexapod-bench servo``: what happened, in one number.
+
+Every exit path of a servo session ends in the same shutdown (halt the robot, wait for
+its confirmation, write the final record), then returns one of these codes. They are
+documented in ``docs/servo.md``; scripts and lab supervisors may rely on them.
+"""
+
+from __future__ import annotations
+
+import enum
+import signal
+
+__all__ = ["ServoExit", "exit_for_signal"]
+
+
+class ServoExit(enum.IntEnum):
+    """Exit codes of a servo session.
+
+    Attributes:
+        CONVERGED: the goal was reached (or ``--teach`` recorded it).
+        INTERNAL: an unexpected error during motion; the robot was halted.
+        REFUSED: bad input, refused before the robot moved.
+        LIMIT: stopped by a limit the user or the robot file set (time, travel,
+            steps, missed deadlines, the end of a recording).
+        LINK: the link to the robot failed during motion.
+        SAFETY: a safety stop (camera disagreeing with the encoders, a blind camera
+            past its timeout).
+        INTERRUPTED: SIGINT (Ctrl-C); SIGTERM and SIGHUP give 128 + their number.
+    """
+
+    CONVERGED = 0
+    INTERNAL = 1
+    REFUSED = 2
+    LIMIT = 3
+    LINK = 4
+    SAFETY = 5
+    INTERRUPTED = 130
+
+
+def exit_for_signal(signum: int) -> int:
+    """The exit code of a session ended by a signal: 128 + its number (shell convention).
+
+    Args:
+        signum: the signal's number (``signal.SIGINT`` gives 130, ``SIGTERM`` 143,
+            ``SIGHUP`` 129).
+
+    Returns:
+        The exit code.
+    """
+    return 128 + int(signal.Signals(signum))
