@@ -80,7 +80,8 @@ def front_camera(geometry: HexapodGeometry | None = None,
     a = np.deg2rad(FRONT_AZIMUTH_DEG)
     base_distance = FRONT_DISTANCE if distance is None else float(distance)
     if not np.isfinite(base_distance) or base_distance <= 0.0:
-        raise CameraError("distance", f"front camera: must be positive and finite, got {distance} m")
+        raise CameraError("distance", f"front camera: must be positive and finite, "
+                          f"got {distance} m")
     d = base_distance * scale
     eye = np.array([d * np.cos(a), d * np.sin(a), zbase + FRONT_EYE_HEIGHT * zscale])
     target = np.array([0.0, 0.0, zbase + FRONT_TARGET_HEIGHT * zscale])
