@@ -211,8 +211,8 @@ def _median_result(fig: Figure, x: np.ndarray, unit_text: str = "") -> Result:
     note = ""
     if fig.paper_trials == 1:
         pct = 100.0 * float(np.mean(x <= fig.value * fig.scale))
-        note = (f"the paper's one-trial {fig.paper} is at the {pct:.0f}th percentile of the "
-                f"framework's {x.size} single trials")
+        note = (f"{pct:.0f} % of the framework's {x.size} single trials are at or below "
+                f"the paper's one-trial {fig.paper}")
     return Result(fig, f"{v:.3g} mm{unit_text}", v, (lo, hi), x.size, note=note)
 
 
@@ -253,19 +253,22 @@ def measure(fig: Figure, d: Path, frames: dict[Path, Any]) -> Result:
         return r
     if fig.statistic == "median_tail_max":
         tails = _tail_maxima(d, rows, fig.controller)
-        r = _median_result(fig, tails[:, -1])
-        med = np.median(tails, axis=0)
+        r = _median_result(fig, tails[:, -2])
+        med = np.median(tails[:, :-1], axis=0)
+        ratio = float(np.median(tails[:, -2] / tails[:, -1]))
         r.note = "; ".join(x for x in (r.note, "median tail maximum over the last " + ", ".join(
             f"{k} periods {m:.3g} mm" for k, m in zip(TAIL_LENGTHS, med, strict=True))
             + f" ({med[-1] / med[0]:.2f}x over a {TAIL_LENGTHS[-1] // TAIL_LENGTHS[0]}x "
-            "longer tail)") if x)
+            f"longer tail); a trial's tail maximum is {ratio:.2g}x its tail median "
+            "(median over trials)") if x)
         return r
     return _median_result(fig, rows[fig.column].to_numpy(dtype=float))
 
 
 def _tail_maxima(d: Path, rows: Any, controller: str) -> np.ndarray:
     """Largest position error [mm] over the last :data:`TAIL_LENGTHS` periods of each
-    recorded trial (trials x lengths; the last length is the tail the report reads)."""
+    recorded trial (the last length is the tail the report reads), then the median
+    error over that tail: trials x (lengths + 1)."""
     out = []
     for _, r in rows.iterrows():
         f = (d / "trials" /
@@ -277,7 +280,8 @@ def _tail_maxima(d: Path, rows: Any, controller: str) -> np.ndarray:
             e = np.asarray(rec["position_error"], float) * 1e3
         tail = int(TAIL_FRACTION * len(e))
         lengths = [min(k, tail) for k in TAIL_LENGTHS[:-1]] + [tail]
-        out.append([float(e[len(e) - k:].max()) for k in lengths])
+        out.append([float(e[len(e) - k:].max()) for k in lengths]
+                   + [float(np.median(e[len(e) - tail:]))])
     return np.asarray(out)
 
 
