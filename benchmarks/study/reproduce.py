@@ -355,8 +355,27 @@ def reproduce(which: str, out: Path, quick: bool = False, workers: int = 1,
         dirs[study] = run_study(study, out, quick, workers, say, transform, trials)
     frames: dict[Path, Any] = {}
     results = [measure(f, dirs[f.study], frames) for f in figs]
+    tail_ratios(results)
     verdicts(results)
     return results
+
+
+def tail_ratios(results: list[Result]) -> None:
+    """Add to each tail-maximum row the ratio of the paper's tail maximum to its tail
+    median at the same setting (the rows of the same study, controller and sweep point),
+    beside the framework's ratio already in its note."""
+    medians = {(r.figure.study, r.figure.controller, tuple(sorted(r.figure.sweep.items()))): r
+               for r in results if r.figure.column == "tail_position_error_mm"}
+    for r in results:
+        f = r.figure
+        m = medians.get((f.study, f.controller, tuple(sorted(f.sweep.items()))))
+        if f.statistic != "median_tail_max" or m is None:
+            continue
+        mf = m.figure
+        lo = (f.value - f.tolerance) / (mf.value + mf.tolerance)
+        hi = (f.value + f.tolerance) / max(mf.value - mf.tolerance, 1e-12)
+        r.note += (f"; the paper's tail maximum is {f.value / mf.value:.2g}x its tail median "
+                   f"({f.paper} / {mf.paper}; {lo:.2g}x to {hi:.2g}x as printed)")
 
 
 def interval_text(r: Result) -> str:

@@ -90,6 +90,23 @@ def test_summary_counts_rows_by_verdict_and_variants_apart() -> None:
                            "0 not comparable. Rule:")
 
 
+def test_tail_maximum_rows_get_the_papers_ratio() -> None:
+    mx = _fig("1.9 mm", 1.9, statistic="median_tail_max", column="",
+              sweep={"noise_amplitude_deg": 0.05})
+    md = _fig("0.6 mm", 0.6, column="tail_position_error_mm",
+              sweep={"noise_amplitude_deg": 0.05})
+    other = replace(md, sweep={"noise_amplitude_deg": 0.1})
+    rs = [Result(mx, "", 1.5, (1.2, 1.6), 30, note="n"), Result(other, "", 1.0, (1, 1), 30),
+          Result(md, "", 0.55, (0.5, 0.6), 30)]
+    from benchmarks.study.reproduce import tail_ratios
+
+    tail_ratios(rs)
+    # 1.9 / 0.6 = 3.17; as printed 1.85 / 0.65 = 2.85 to 1.95 / 0.55 = 3.55
+    assert rs[0].note == ("n; the paper's tail maximum is 3.2x its tail median (1.9 mm / "
+                          "0.6 mm; 2.8x to 3.5x as printed)")
+    assert rs[1].note == rs[2].note == ""
+
+
 def test_select() -> None:
     assert {f.seed for f in select("all")} == set(paper_figures.SEEDS)
     assert all(f.seed == "seed003" for f in select("seed003"))
@@ -167,4 +184,7 @@ def test_seed001_tail_statistics_from_the_records(tmp_path: Path,
     assert text.count("| seed001 |") == 10
     assert "median tail maximum over the last 25 periods" in text
     assert "x its tail median (median over trials)" in text
+    # the paper's ratio at 0.01 deg: 0.6 / 0.1, from 0.55 / 0.15 to 0.65 / 0.05
+    assert "the paper's tail maximum is 6x its tail median (0.6 mm / 0.1 mm; 3.7x to 13x" \
+        in text
     assert "final position error" not in text
