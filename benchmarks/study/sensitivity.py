@@ -23,7 +23,7 @@ from __future__ import annotations
 
 import itertools
 import json
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
@@ -126,7 +126,7 @@ def parse_axis(key: str, text: str) -> tuple[Any, ...]:
     return tuple(out)
 
 
-def grid(axes: dict[str, Sequence[Any]]) -> list[Point]:
+def grid(axes: Mapping[str, Sequence[Any]]) -> list[Point]:
     """Every point of the Cartesian product of the axes (missing axes: the defaults)."""
     full = {k: tuple(axes.get(k, v)) for k, v in DEFAULT_GRID.items()}
     return [Point(*values) for values in itertools.product(*full.values())]

@@ -4,6 +4,8 @@
 
 from __future__ import annotations
 
+from collections.abc import Callable
+
 import numpy as np
 
 from hexapod.config import suggest
@@ -162,7 +164,9 @@ def fisheye_camera(geometry: HexapodGeometry | None = None) -> FisheyeCamera:
     return FisheyeCamera(K, 1024, 780, pose, name="fisheye", distortion=FISHEYE_DISTORTION)
 
 
-PRESETS = {"front": front_camera, "omni": omni_camera, "fisheye": fisheye_camera}
+#: The presets by name, each called with the robot (or None: the reference robot).
+PRESETS: dict[str, Callable[[HexapodGeometry | None], Camera]] = {
+    "front": front_camera, "omni": omni_camera, "fisheye": fisheye_camera}
 
 
 def camera_preset(name: str, geometry: HexapodGeometry | None = None) -> Camera:
