@@ -262,7 +262,17 @@ def measure(fig: Figure, d: Path, frames: dict[Path, Any]) -> Result:
             f"longer tail); a trial's tail maximum is {ratio:.2g}x its tail median "
             "(median over trials)") if x)
         return r
-    return _median_result(fig, rows[fig.column].to_numpy(dtype=float))
+    r = _median_result(fig, rows[fig.column].to_numpy(dtype=float))
+    if fig.column.startswith("calibration_") and "calibration_min_singular_ratio" in rows:
+        ratio = rows["calibration_min_singular_ratio"].to_numpy(dtype=float)
+        ratio = ratio[np.isfinite(ratio) & (ratio > 0)]
+        if ratio.size:
+            m = float(np.median(ratio))
+            r.note = "; ".join(x for x in (r.note, (
+                f"smallest to largest singular value of a leg's calibration system {m:.2g} "
+                f"(median over calibrations): the noise is amplified about {1 / m:.0f} "
+                "times along its worst direction")) if x)
+    return r
 
 
 def _tail_maxima(d: Path, rows: Any, controller: str) -> np.ndarray:

@@ -132,6 +132,21 @@ def test_medians_use_the_order_statistic_interval_and_place_the_paper(tmp_path: 
     assert measure(replace(fig, paper_trials=None), d, {}).note == ""
 
 
+def test_calibration_rows_compute_the_conditioning_they_are_explained_by(tmp_path: Path
+                                                                         ) -> None:
+    rows = make_rows("leg-direction", np.full(5, 2.0), np.ones(5, bool), np.full(5, 80),
+                     scenario="andreff2005-noise", sweep={"noise_amplitude_deg": 0.05})
+    for r, ratio in zip(rows, (0.01, 0.02, 0.015, 0.03, 0.011), strict=True):
+        r["calibration_max_component_error_mm"] = 2.0
+        r["calibration_min_singular_ratio"] = ratio
+    d = write_run(tmp_path / "run", rows)
+    fig = _fig(sweep={"noise_amplitude_deg": 0.05}, column="calibration_max_component_error_mm")
+    # the median ratio 0.015: 1 / 0.015 = 66.7
+    assert measure(fig, d, {}).note == (
+        "smallest to largest singular value of a leg's calibration system 0.015 (median "
+        "over calibrations): the noise is amplified about 67 times along its worst direction")
+
+
 def test_one_task_studies_are_reported_as_repeatability(tmp_path: Path) -> None:
     conv = np.arange(20) < 17
     rows = (make_rows("leg-edge", np.ones(20), conv, np.full(20, 80), scenario="s")
