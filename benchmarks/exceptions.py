@@ -141,3 +141,22 @@ class BatchFailedError(BenchmarkError):
         self.errors = errors
         self.cause = cause
         super().__init__(f"at step {step}: {type(cause).__name__}: {cause}")
+
+
+class FigureFileError(BenchmarkError):
+    """The declared paper figures (``hexapod-bench reproduce``) are invalid.
+
+    Attributes:
+        path: The declared-figures file.
+        row: The row (its ``id``, or ``figure[INDEX]`` before the id is known).
+        key: The offending key (None for the row as a whole).
+        problem: What is wrong, with the value.
+    """
+
+    def __init__(self, path: str, row: str, key: str | None, problem: str) -> None:
+        self.path = path
+        self.row = row
+        self.key = key
+        self.problem = problem
+        where = f"{row}.{key}" if key else row
+        super().__init__(f"{path}: {where}: {problem}")

@@ -1,7 +1,7 @@
 """The analysis commands of ``hexapod-bench``: ``export``, ``compare``, ``reproduce``.
 
-They read run directories written by ``hexapod-bench run`` (``reproduce`` runs the
-built-in scenarios first).
+They read run directories written by ``hexapod-bench run`` (``reproduce``, in
+:mod:`benchmarks.study.reproduce_cli`, runs the built-in scenarios first).
 """
 
 from __future__ import annotations
@@ -12,7 +12,7 @@ import time
 from pathlib import Path
 from typing import Any
 
-from benchmarks.study.outdir import OutputDir, OutputFile
+from benchmarks.study.outdir import OutputFile
 
 
 def cmd_export(args: argparse.Namespace) -> int:
@@ -227,46 +227,6 @@ def cmd_compare(args: argparse.Namespace) -> int:
     return status
 
 
-def cmd_reproduce(args: argparse.Namespace) -> int:
-    """Run the studies behind the papers' figures; paper and framework side by side."""
-    from rich.markup import escape
-    from rich.table import Table
-
-    from benchmarks.study.commands import console
-    from benchmarks.study.outdir import check_reproduce_directory
-    from benchmarks.study.reproduce import interval_text, markdown, reproduce
-    from hexapod.outputs import check_replace, write_output
-
-    con = console()
-    if args.markdown:
-        check_replace(args.markdown, args.overwrite)  # before minutes of studies
-    check_reproduce_directory(Path(args.out), args.overwrite)
-    t0 = time.perf_counter()
-    results = reproduce(args.which, Path(args.out), args.quick, args.workers,
-                        say=lambda text: con.print(text, markup=False, highlight=False))
-    t = Table(title=f"Papers and framework ({args.which}"
-                    f"{', --quick' if args.quick else ''})")
-    for col in ("paper", "where", "quantity", "paper's figure", "framework",
-                "95 % interval", "n", "verdict"):
-        t.add_column(col, justify="right" if col == "n" else "left")
-    for r in results:
-        f = r.figure
-        t.add_row(*(escape(x) for x in (f.seed, f.where, f.quantity, f.paper, r.framework,
-                                         interval_text(r), str(r.n), r.verdict)))
-    con.print(t)
-    outside = [r for r in results if r.why]
-    for r in outside:
-        con.print(f"- {r.figure.seed} {r.figure.where}, {r.figure.quantity}: {r.why}",
-                  markup=False, highlight=False)
-    within = sum(r.verdict.startswith("within") for r in results)
-    con.print(f"{within} of {len(results)} figures within the paper's; "
-              f"{time.perf_counter() - t0:.0f} s; studies in {args.out}", highlight=False)
-    if args.markdown:
-        write_output(args.markdown, markdown(results) + "\n", args.overwrite)
-        con.print(f"wrote {args.markdown}")
-    return 0
-
-
 def add_analysis_commands(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
     """Register ``export``, ``compare`` and ``reproduce`` on the CLI's sub-parsers."""
     s = sub.add_parser("export", help="write a run's trials as a table (Parquet)")
@@ -315,20 +275,6 @@ def add_analysis_commands(sub: argparse._SubParsersAction) -> None:  # type: ign
                    help="two runs: exit 1 on a regression or a row that differs")
     s.set_defaults(func=cmd_compare)
 
-    s = sub.add_parser("reproduce", help="run the studies behind the papers' figures and set "
-                                         "paper and framework side by side")
-    s.add_argument("which", nargs="?", default="all",
-                   choices=("seed000", "seed001", "seed002", "seed003", "all"))
-    s.add_argument("--quick", action="store_true",
-                   help="fewer trials (30 per noise level for seed 001, 1000 pairs for seed "
-                        "003, 30 calibrations): minutes instead of tens of minutes")
-    s.add_argument("--out", default="runs/reproduce", action=OutputDir,
-                   help="where the studies' results go (default runs/reproduce; a study "
-                        "already there is finished or reused, not redone)")
-    s.add_argument("--workers", type=int, default=1, help="processes (default 1)")
-    s.add_argument("--markdown", metavar="FILE", action=OutputFile,
-                   help="also write the table as Markdown")
-    s.add_argument("--overwrite", action="store_true",
-                   help="replace the --markdown file even if hexapod-bench did not write "
-                        "it, or write into an --out that holds other files")
-    s.set_defaults(func=cmd_reproduce)
+    from benchmarks.study.reproduce_cli import add_reproduce_command
+
+    add_reproduce_command(sub)

@@ -428,3 +428,18 @@ def test_every_former_public_name_still_imports_from_vision_cameras() -> None:
     assert set(names) <= set(cameras.__all__)
     assert cameras.front_camera is presets.front_camera
     assert cameras.FRONT_DISTANCE == presets.FRONT_DISTANCE == 0.80
+
+
+def test_front_camera_distance_moves_the_eye_along_its_azimuth() -> None:
+    from vision.cameras.presets import FRONT_DISTANCE
+
+    base = front_camera()
+    assert np.allclose(front_camera(distance=FRONT_DISTANCE).K, base.K)
+    eye0 = base.base_from_camera.translation
+    eye = front_camera(distance=0.7).base_from_camera.translation
+    assert np.hypot(eye[0], eye[1]) == pytest.approx(0.7 / FRONT_DISTANCE * np.hypot(*eye0[:2]))
+    assert eye[2] == pytest.approx(eye0[2])
+    assert np.arctan2(eye[1], eye[0]) == pytest.approx(np.arctan2(eye0[1], eye0[0]))
+    for bad in (0.0, -0.8, float("nan")):
+        with pytest.raises(CameraError, match="distance: front camera: must be positive"):
+            front_camera(distance=bad)

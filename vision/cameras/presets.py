@@ -4,6 +4,8 @@
 
 from __future__ import annotations
 
+from collections.abc import Callable
+
 import numpy as np
 
 from hexapod.config import suggest
@@ -41,7 +43,8 @@ FRONT_EYE_HEIGHT = 0.0
 FRONT_TARGET_HEIGHT = 0.265
 
 
-def front_camera(geometry: HexapodGeometry | None = None) -> PerspectiveCamera:
+def front_camera(geometry: HexapodGeometry | None = None,
+                 distance: float | None = None) -> PerspectiveCamera:
     """The front perspective camera of seed 002 (``docs/math.md`` section 9).
 
     Intrinsics: 4.8 mm lens on a 1024x780 sensor with 4.65 um square pixels
@@ -59,6 +62,16 @@ def front_camera(geometry: HexapodGeometry | None = None) -> PerspectiveCamera:
     one another in part of the workspace (about 17 % of the random poses have at
     least one hidden edge), as in the seed. For another geometry the placement is
     scaled by the base radius (distance) and the home height (aim point).
+
+    Args:
+        geometry: The robot (default: the reference robot).
+        distance: Horizontal distance of the projection centre from the base centre
+            for the reference robot [m] (scaled by the base radius as above); default
+            :data:`FRONT_DISTANCE` (the sensitivity study of ``hexapod-bench reproduce
+            --sensitivity`` varies it).
+
+    Raises:
+        CameraError: ``distance`` not positive and finite.
     """
     geo = deltalab() if geometry is None else geometry
     scale = float(np.max(np.linalg.norm(geo.base_points[:, :2], axis=1))) / 0.270
@@ -67,7 +80,11 @@ def front_camera(geometry: HexapodGeometry | None = None) -> PerspectiveCamera:
     f = FRONT_FOCAL_LENGTH / FRONT_PIXEL_SIZE
     K = _intrinsics(f, 1024, 780)
     a = np.deg2rad(FRONT_AZIMUTH_DEG)
-    d = FRONT_DISTANCE * scale
+    base_distance = FRONT_DISTANCE if distance is None else float(distance)
+    if not np.isfinite(base_distance) or base_distance <= 0.0:
+        raise CameraError("distance", f"front camera: must be positive and finite, "
+                          f"got {distance} m")
+    d = base_distance * scale
     eye = np.array([d * np.cos(a), d * np.sin(a), zbase + FRONT_EYE_HEIGHT * zscale])
     target = np.array([0.0, 0.0, zbase + FRONT_TARGET_HEIGHT * zscale])
     pose = _pose_looking_at(eye, target, np.array([0.0, 0.0, 1.0]))
@@ -147,7 +164,9 @@ def fisheye_camera(geometry: HexapodGeometry | None = None) -> FisheyeCamera:
     return FisheyeCamera(K, 1024, 780, pose, name="fisheye", distortion=FISHEYE_DISTORTION)
 
 
-PRESETS = {"front": front_camera, "omni": omni_camera, "fisheye": fisheye_camera}
+#: The presets by name, each called with the robot (or None: the reference robot).
+PRESETS: dict[str, Callable[[HexapodGeometry | None], Camera]] = {
+    "front": front_camera, "omni": omni_camera, "fisheye": fisheye_camera}
 
 
 def camera_preset(name: str, geometry: HexapodGeometry | None = None) -> Camera:

@@ -1,8 +1,12 @@
-"""hexapod-bench reproduce: verdict rules, and small runs of two papers' studies."""
+"""hexapod-bench reproduce: the scorecard's rules on hand-made cases, the summary counts,
+and small runs of two papers' studies."""
 
 from __future__ import annotations
 
+import json
+from dataclasses import replace
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pytest
@@ -11,50 +15,96 @@ from scipy import stats as sps
 from benchmarks.cli import main as cli_main
 from benchmarks.exceptions import BenchmarkError
 from benchmarks.study import load, paper_figures
-from benchmarks.study.paper_figures import Figure
-from benchmarks.study.reproduce import Result, _half_unit, reproduce, select, verdicts
+from benchmarks.study.paper_figures import Figure, builtin_figures
+from benchmarks.study.reproduce import (
+    Result,
+    judge,
+    measure,
+    reproduce,
+    select,
+    summary,
+    verdicts,
+)
+from tests.benchmarks.study.helpers_rows import make_rows, write_run
 
 
-def test_half_unit_of_printed_figures() -> None:
-    assert _half_unit("0.6 mm") == pytest.approx(0.05)
-    assert _half_unit("10 mm") == pytest.approx(0.5)
-    assert _half_unit("1.2 cm") == pytest.approx(0.5)  # in mm
-    assert _half_unit("< 1 mm") == pytest.approx(0.5)
+def _fig(paper: str = "1.4 mm", value: float = 1.4, tolerance: float = 0.05,
+         **kw: Any) -> Figure:
+    base: dict[str, Any] = dict(id="f", seed="seed001", where="sec", quantity="q", paper=paper,
+                                kind="number", value=value, unit="mm", rule="equal",
+                                statistic="median", study="run:andreff2005-noise",
+                                tolerance=tolerance, controller="leg-direction",
+                                column="final_position_error_mm", why_outside="because")
+    base.update(kw)
+    return Figure(**base)
 
 
-def _fig(paper: str, value: float, relation: str = "equal", measure: str = "median:x"
-         ) -> Figure:
-    return Figure("seed001", "sec", "q", paper, value, relation, "run:s", measure,
-                  why_outside="because")
+def test_one_trial_and_many_trial_figures_get_the_same_rule() -> None:
+    """The case the old rule got wrong: 2.43 mm [2.1, 2.8] against the paper's one-trial
+    1.4 mm was 'within' (the range of single trials reached it); under the one rule it is
+    outside, as it would be for a many-trial figure."""
+    one, many = _fig(paper_trials=1), _fig(paper_trials=None)
+    cases = [((2.43, (2.1, 2.8)), "outside (higher)"),
+             ((1.2, (1.0, 1.36)), "within"),      # the interval reaches 1.35
+             ((1.2, (1.0, 1.34)), "outside (lower)"),
+             ((1.5, (1.45, 1.7)), "within")]      # touches 1.45
+    for (v, interval), want in cases:
+        assert judge(one, v, interval) == judge(many, v, interval) == want
 
 
-def test_verdict_rules() -> None:
-    rs = [
-        Result(_fig("0.6 mm", 0.6), "", 0.52, (0.50, 0.56), 30),   # meets [0.55, 0.65]
-        Result(_fig("0.6 mm", 0.6), "", 0.45, (0.40, 0.54), 30),   # below it
-        Result(_fig("3 mm", 3.0), "", 3.6, None, 30),              # max: value vs [2.5, 3.5]
-        Result(_fig("< 1 mm", 1.0, "below"), "", 0.9, (0.8, 0.99), 30),
-        Result(_fig("< 1 mm", 1.0, "below"), "", 0.9, (0.8, 1.01), 30),
-        Result(_fig("100 %", 1.0, measure="rate:converged"), "", 1.0, (0.9996, 1.0), 10000),
-        Result(_fig("100 %", 1.0, measure="rate:converged"), "", 0.98, (0.97, 0.99), 1000),
-    ]
+def test_rules_below_claims_and_other_controllers() -> None:
+    below = _fig("< 1 mm", 1.0, rule="below", tolerance=0.0)
+    assert judge(below, 0.9, (0.8, 0.99)) == "within"
+    assert judge(below, 0.9, (0.8, 1.01)) == "outside (higher)"
+    rate = _fig("100 %", 100.0, 0.5, unit="%", statistic="rate", column="")
+    assert judge(rate, 1.0, (0.9996, 1.0)) == "within"
+    assert judge(rate, 0.98, (0.97, 0.99)) == "outside (lower)"
+    claim = replace(rate, kind="claim", paper="converges")
+    assert judge(claim, 0.0, (0.0, 0.161)) == "contradicts"   # 0/20: the claim fails
+    assert judge(claim, 1.0, (0.839, 1.0)) == "within"        # 20/20
+    both = replace(claim, other="leg-direction", other_value=0.0)
+    assert judge(both, 1.0, (0.839, 1.0), (0.0, 0.161)) == "within"
+    # the edge law converging 4/20 does not make "edge converges, direction does not"
+    assert judge(both, 0.2, (0.081, 0.416), (0.0, 0.161)) == "contradicts"
+    assert judge(both, 1.0, (0.839, 1.0), (0.05, 0.4)) == "contradicts"
+    assert judge(both, 1.0, (0.839, 1.0), None).startswith("not comparable")
+    assert judge(rate, None, None) == "not comparable (no finite value)"
+
+
+def test_summary_counts_rows_by_verdict_and_variants_apart() -> None:
+    f = _fig()
+    rs = [Result(f, "", 1.4, (1.3, 1.5), 30),                          # within
+          Result(replace(f, id="g"), "", 3.0, (2.5, 3.5), 30),         # outside
+          Result(replace(f, id="h", kind="claim", unit="%", statistic="rate", value=100.0,
+                         tolerance=0.5), "", 0.0, (0.0, 0.16), 20),    # contradicts
+          Result(replace(f, id="i"), "", None, None, 0),              # not comparable
+          Result(replace(f, id="v", variant_of="f"), "", 3.0, (2.5, 3.5), 30)]
     verdicts(rs)
-    assert [r.verdict for r in rs] == ["within", "outside (lower)", "outside (higher)",
-                                       "within", "outside (higher)", "within",
-                                       "outside (lower)"]
-    assert [bool(r.why) for r in rs] == [False, True, True, False, True, False, True]
+    assert [r.category for r in rs] == ["within", "outside", "contradicts",
+                                        "not comparable", "outside"]
+    assert [bool(r.why) for r in rs] == [False, True, True, True, True]
+    text = summary(rs)
+    assert text.startswith("4 paper figures (one row each): 1 within, 1 outside, "
+                           "1 contradicts, 1 not comparable; 1 variants (a figure under "
+                           "another setting): 0 within, 1 outside, 0 contradicts, "
+                           "0 not comparable. Rule:")
 
 
-def test_paired_verdicts_are_holm_corrected() -> None:
-    better = _fig("edge better", 0.0, "better")
-    rs = [Result(better, "", -1.0, (-2.0, -0.5), 20, "better", 0.02),
-          Result(better, "", -1.0, (-2.0, -0.5), 20, "better", 0.03),
-          Result(better, "", 1.0, (0.5, 2.0), 20, "worse", 1e-6)]
-    verdicts(rs)
-    # Holm: 1e-6 * 3, 0.02 * 2 = 0.04, 0.03 * 1 -> max(0.04, 0.03) = 0.04
-    assert rs[0].verdict == "within (Holm p = 0.04)"
-    assert rs[1].verdict == "within (Holm p = 0.04)"
-    assert rs[2].verdict.startswith("outside (not found better")
+def test_tail_maximum_rows_get_the_papers_ratio() -> None:
+    mx = _fig("1.9 mm", 1.9, statistic="median_tail_max", column="",
+              sweep={"noise_amplitude_deg": 0.05})
+    md = _fig("0.6 mm", 0.6, column="tail_position_error_mm",
+              sweep={"noise_amplitude_deg": 0.05})
+    other = replace(md, sweep={"noise_amplitude_deg": 0.1})
+    rs = [Result(mx, "", 1.5, (1.2, 1.6), 30, note="n"), Result(other, "", 1.0, (1, 1), 30),
+          Result(md, "", 0.55, (0.5, 0.6), 30)]
+    from benchmarks.study.reproduce import tail_ratios
+
+    tail_ratios(rs)
+    # 1.9 / 0.6 = 3.17; as printed 1.85 / 0.65 = 2.85 to 1.95 / 0.55 = 3.55
+    assert rs[0].note == ("n; the paper's tail maximum is 3.2x its tail median (1.9 mm / "
+                          "0.6 mm; 2.8x to 3.5x as printed)")
+    assert rs[1].note == rs[2].note == ""
 
 
 def test_select() -> None:
@@ -64,21 +114,75 @@ def test_select() -> None:
         select("seed004")
 
 
+def test_medians_use_the_order_statistic_interval_and_place_the_paper(tmp_path: Path
+                                                                      ) -> None:
+    rng = np.random.default_rng(3)
+    x = rng.lognormal(0, 0.5, 100)
+    rows = make_rows("leg-direction", x, np.ones(100, bool), np.full(100, 80),
+                     scenario="andreff2005-noise", sweep={"noise_amplitude_deg": 0.05})
+    d = write_run(tmp_path / "run", rows)
+    fig = _fig(sweep={"noise_amplitude_deg": 0.05}, paper_trials=1)
+    r = measure(fig, d, {})
+    assert r.value == pytest.approx(np.median(x))
+    ref = sps.quantile_test(x, p=0.5).confidence_interval(0.95)  # order statistics
+    assert r.interval == pytest.approx((ref.low, ref.high))
+    pct = 100 * np.mean(x <= 1.4)
+    assert r.note == (f"{pct:.0f} % of the framework's 100 single trials are at or below "
+                      "the paper's one-trial 1.4 mm")
+    assert measure(replace(fig, paper_trials=None), d, {}).note == ""
+
+
+def test_calibration_rows_compute_the_conditioning_they_are_explained_by(tmp_path: Path
+                                                                         ) -> None:
+    rows = make_rows("leg-direction", np.full(5, 2.0), np.ones(5, bool), np.full(5, 80),
+                     scenario="andreff2005-noise", sweep={"noise_amplitude_deg": 0.05})
+    for r, ratio in zip(rows, (0.01, 0.02, 0.015, 0.03, 0.011), strict=True):
+        r["calibration_max_component_error_mm"] = 2.0
+        r["calibration_min_singular_ratio"] = ratio
+    d = write_run(tmp_path / "run", rows)
+    fig = _fig(sweep={"noise_amplitude_deg": 0.05}, column="calibration_max_component_error_mm")
+    # the median ratio 0.015: 1 / 0.015 = 66.7
+    assert measure(fig, d, {}).note == (
+        "smallest to largest singular value of a leg's calibration system 0.015 (median "
+        "over calibrations): the noise is amplified about 67 times along its worst direction")
+
+
+def test_one_task_studies_are_reported_as_repeatability(tmp_path: Path) -> None:
+    conv = np.arange(20) < 17
+    rows = (make_rows("leg-edge", np.ones(20), conv, np.full(20, 80), scenario="s")
+            + make_rows("leg-direction", np.ones(20), ~conv, np.full(20, 80), scenario="s"))
+    d = write_run(tmp_path / "run", rows)
+    fig = _fig("converges", 100.0, 0.5, kind="claim", unit="%", statistic="rate",
+               column="", controller="leg-edge", other="leg-direction", other_value=0.0)
+    r = measure(fig, d, {})
+    assert r.framework == "leg-edge 17/20, leg-direction 3/20 converged"
+    assert r.note == ""  # no study record: not known to be one task
+    (d / "run.json").write_text(json.dumps({"scenarios": {"s": {"study": {
+        "task.kind": "fixed"}}}}))
+    r = measure(fig, d, {})
+    assert "one task (a fixed start and goal) repeated 20 times" in r.note
+    verdicts([r])
+    assert r.verdict == "contradicts"
+
+
+@pytest.mark.slow
 def test_reproduce_seed003_small(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
     monkeypatch.setitem(paper_figures.TRIALS, "tahri2009-convergence", (30, 20))
-    res = reproduce("seed003", tmp_path, quick=True, say=lambda _t: None)
+    figs = [f for f in builtin_figures() if f.study == "run:tahri2009-convergence"]
+    res = reproduce("seed003", tmp_path, quick=True, say=lambda _t: None, figures=figs)
     assert [r.verdict for r in res] == ["within", "within"]
     assert all(r.n == 20 and r.value == 1.0 for r in res)
     # run again: the study is reused, not redone
     said: list[str] = []
-    reproduce("seed003", tmp_path, quick=True, say=said.append)
+    reproduce("seed003", tmp_path, quick=True, say=said.append, figures=figs)
     assert any("0 trials to run, 40 done" in s for s in said)
 
 
 @pytest.mark.slow
 def test_seed001_tail_statistics_from_the_records(tmp_path: Path,
                                                   monkeypatch: pytest.MonkeyPatch) -> None:
-    """The tail read from every trial's record agrees with the engine's tail median."""
+    """The tail read from every trial's record agrees with the engine's tail median, and
+    the tail maximum is printed against the tail's length."""
     monkeypatch.setitem(paper_figures.TRIALS, "andreff2005-noise", (3, 3))
     monkeypatch.setattr("benchmarks.study.reproduce.REPEATS", (3, 3))
     md = tmp_path / "t.md"
@@ -92,27 +196,10 @@ def test_seed001_tail_statistics_from_the_records(tmp_path: Path,
         e = np.asarray(rec["position_error"]) * 1e3
     assert np.median(e[-100:]) == pytest.approx(row.tail_position_error_mm, rel=1e-9)
     text = md.read_text()
-    assert text.count("| seed001 |") == 13
-    assert "max error on any coordinate of any base point" in text
-
-
-def test_single_trial_figures_use_the_range_of_single_trials(tmp_path: Path) -> None:
-    from benchmarks.study.reproduce import measure
-    from tests.benchmarks.study.helpers_rows import make_rows, write_run
-
-    rng = np.random.default_rng(3)
-    x = rng.lognormal(0, 0.5, 100)
-    rows = make_rows("leg-direction", x, np.ones(100, bool), np.full(100, 80),
-                     scenario="andreff2005-noise", sweep={"noise_amplitude_deg": 0.05})
-    d = write_run(tmp_path / "run", rows)
-    base = dict(seed="seed001", where="s", quantity="q", paper="1.4 mm", value=1.4,
-                relation="equal", study="run:andreff2005-noise",
-                measure="median:final_position_error_mm",
-                sweep={"noise_amplitude_deg": 0.05}, controller="leg-direction")
-    one = measure(Figure(**base, single=True), d, {})
-    many = measure(Figure(**base), d, {})
-    assert one.value == many.value == pytest.approx(np.median(x))
-    assert one.interval == pytest.approx(tuple(np.percentile(x, [2.5, 97.5])))
-    ref = sps.quantile_test(x, p=0.5).confidence_interval(0.95)  # order statistics
-    assert many.interval == pytest.approx((ref.low, ref.high))
-    assert one.interval[1] - one.interval[0] > 3 * (many.interval[1] - many.interval[0])
+    assert text.count("| seed001 |") == 10
+    assert "median tail maximum over the last 25 periods" in text
+    assert "x its tail median (median over trials)" in text
+    # the paper's ratio at 0.01 deg: 0.6 / 0.1, from 0.55 / 0.15 to 0.65 / 0.05
+    assert "the paper's tail maximum is 6x its tail median (0.6 mm / 0.1 mm; 3.7x to 13x" \
+        in text
+    assert "final position error" not in text
