@@ -142,6 +142,9 @@ def servo_loop(
         res.outcome = "interrupted"
     except SessionStop as stop:
         res.outcome, res.stop = "stopped", stop
+    except BaseException:
+        res.outcome = "failed"
+        raise
     finally:
         res.wall_s = time.perf_counter() - t0
     return res

@@ -172,6 +172,22 @@ def _classify(exc: BaseException, moved: bool) -> tuple[ServoExit, str]:
     return ServoExit.INTERNAL, f"internal error: {type(exc).__name__}: {exc}"
 
 
+def _halt(robot: Any, timeout_s: float) -> HaltReport:
+    """The robot's stop and its confirmation; a plugin without
+    :meth:`~hexapod.backends.base.Backend.halt_confirmed`, or one that raises, is
+    reported, never raised."""
+    confirm = getattr(robot, "halt_confirmed", None)
+    try:
+        if confirm is not None:
+            report: HaltReport = confirm(timeout_s)
+            return report
+        robot.halt()
+        return HaltReport(False, "halt() returned; this backend does not report whether the "
+                                 "robot stopped")
+    except Exception as exc:
+        return HaltReport(False, f"halting failed: {type(exc).__name__}: {exc}")
+
+
 def _last_move(limited: LimitedRobot | None) -> str:
     if limited is None or not limited.moved:
         return "no motion was commanded"
@@ -271,7 +287,7 @@ def run_session(args: argparse.Namespace, inputs: SessionInputs, status: StatusL
             code, reason = _outcome(result, args)
         halt: HaltReport | None = None
         if robot is not None:
-            halt = robot.halt_confirmed(args.halt_timeout_s)
+            halt = _halt(robot, args.halt_timeout_s)
             try:
                 robot.close()
             except Exception as exc:
@@ -288,6 +304,8 @@ def run_session(args: argparse.Namespace, inputs: SessionInputs, status: StatusL
                  "traceback": None if ended is None or isinstance(ended, SessionStop)
                  else "".join(traceback.format_exception(ended)),
                  "moved": moved, "identity": getattr(robot, "identity", None),
+                 "start_lengths_mm": None if limited is None else [
+                     round(float(x) * 1e3, 4) for x in limited.start],
                  "halt_confirmed": None if halt is None else halt.confirmed,
                  "halt_detail": "the robot was not connected" if halt is None else halt.detail,
                  "halt_s": None if halt is None else round(halt.seconds, 6),

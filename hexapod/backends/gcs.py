@@ -425,6 +425,8 @@ class GcsHexapod(Backend):
                                         "stopped by command)")
         except GcsLinkError as exc:
             return report(False, f"{self.url}: the link failed while halting: {exc}")
+        except BackendError as exc:  # never raises: the caller is shutting down
+            return report(False, f"{self.url}: halting failed: {exc}")
 
     def halt(self) -> None:
         """Stop the platform where it is (``HLT``); never raises if the link is dead."""

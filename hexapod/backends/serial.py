@@ -457,8 +457,9 @@ class SerialRobot(Backend):
 
     def halt_confirmed(self, timeout_s: float = 2.0) -> HaltReport:
         """Send ``HLT`` with ``ERR?`` and wait up to ``timeout_s`` [s] for the board to
-        confirm: ``ERR?`` answering error 10 (halted by command), then ``STA?``
-        reporting no leg moving. Never raises.
+        confirm: ``ERR?`` answering error 10 (halted by command) or 20 (its watchdog,
+        reported first when latched, stopped the legs itself), then ``STA?`` reporting no
+        leg moving. Never raises.
 
         Replies still on their way (after a stall, those of the commands queued before
         the ``HLT``) are read and skipped, never flushed away while waiting; the pair is
@@ -484,6 +485,7 @@ class SerialRobot(Backend):
         try:
             self._flush_input()
             halted = False
+            read_back = ""
             resend = t0
             while not halted:
                 now = time.perf_counter()
@@ -502,14 +504,17 @@ class SerialRobot(Backend):
                     continue
                 if payload.startswith("ERR "):
                     code, _ = protocol.parse_err(payload, "ERR?")
-                    halted = code == protocol.ErrorCode.HALTED
+                    # 10: our HLT; 20: the watchdog (latched first) stopped the legs itself
+                    halted = code in (protocol.ErrorCode.HALTED, protocol.ErrorCode.WATCHDOG)
+                    text = protocol.ERROR_TEXT.get(protocol.ErrorCode(code), "")
+                    read_back = f"ERR? {code} {text}".strip()
             moving = False
             ask = time.perf_counter()
             while True:  # the board took the HLT: are the legs still?
                 now = time.perf_counter()
                 if now >= deadline:
                     why = "the legs still moving" if moving else "STA? unanswered"
-                    return report(False, f"{self.url}: HLT acknowledged (error 10), but {why} "
+                    return report(False, f"{self.url}: HLT sent, {read_back}, but {why} "
                                          f"after {timeout_s:g} s")
                 if now >= ask:
                     self._write("STA?")
@@ -517,16 +522,17 @@ class SerialRobot(Backend):
                 try:
                     st = protocol.parse_sta(protocol.unframe(
                         self._read_line("STA?", min(deadline, ask)), "STA?"))
-                except (SerialTimeoutError, ProtocolError):
-                    continue  # a stale reply, or none yet
+                except (SerialTimeoutError, ProtocolError, RobotFaultError):
+                    continue  # a stale reply (an earlier ERR?'s), or none yet
                 if not st.moving:
-                    return report(True, f"{self.url}: HLT acknowledged (ERR? 10 halted by "
-                                        f"command), STA? moving=0")
+                    return report(True, f"{self.url}: HLT sent, {read_back}, STA? moving=0")
                 moving = True
                 time.sleep(0.005)
                 ask = time.perf_counter()
         except SerialLinkError as exc:
             return report(False, f"{self.url}: the link failed while halting: {exc}")
+        except BackendError as exc:  # never raises: the caller is shutting down
+            return report(False, f"{self.url}: halting failed: {exc}")
 
     def halt(self) -> None:
         """Stop every leg where it is (``HLT``); never raises if the link is dead."""
