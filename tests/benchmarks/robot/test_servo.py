@@ -282,6 +282,18 @@ def test_bad_options_exit_2(tmp_path: Path, capsys: pytest.CaptureFixture[str],
     assert fragment in capsys.readouterr().err
 
 
+def test_help_names_every_kind_of_backend_and_the_limits(
+        capsys: pytest.CaptureFixture[str]) -> None:
+    with pytest.raises(SystemExit):
+        servo.main(["--help"])
+    text = " ".join(capsys.readouterr().out.split())
+    for fragment in ("gcs:tcp://HOST:PORT", "gcs:serial:URL", "serial:URL", "emulator",
+                     "--max-time-s", "--max-travel-mm", "--max-speed-mm-s", "--confirm",
+                     "--max-missed-consecutive", "--max-missed-fraction", "--retries",
+                     "--halt-timeout-s", "--out", "--camera-pose"):
+        assert fragment in text, fragment
+
+
 def test_parse_options() -> None:
     assert servo.parse_options(["gain=2", "interaction=desired", "adaptive_gain=[4, 0.4, 30]"]
                                ) == {"gain": 2, "interaction": "desired",

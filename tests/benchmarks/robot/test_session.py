@@ -296,3 +296,41 @@ def test_confirm_refuses_without_a_terminal(
     assert "--confirm asks y/N on a terminal" in stdout
     rec = final(out)
     assert rec["exit_code"] == 2 and rec["moved"] is False
+
+
+def test_the_speed_cap_is_applied_logged_and_the_step_budget_is_a_limit(
+        tmp_path: Path, caplog: pytest.LogCaptureFixture,
+        capsys: pytest.CaptureFixture[str]) -> None:
+    """--max-speed-mm-s 1: the controller's 8 mm/s command is logged as commanded, 1 mm/s
+    as applied, the leg flagged clamped; a cap above the robot file's is capped to it."""
+    code, out = _run(tmp_path, caplog, *FAST[:2], "--max-speed-mm-s", "1", "--max-steps",
+                     "5", *ANY_LATE)
+    stdout = capsys.readouterr().out
+    assert code == ServoExit.LIMIT, stdout
+    assert "stopped: --max-steps 5 reached (exit 3, limit)" in stdout
+    assert "speed <= 1 mm/s" in stdout
+    assert HALTED in caplog.text
+    rows = periods(out)
+    assert len(rows) == final(out)["periods"] == 5
+    first = rows[0]
+    assert max(abs(x) for x in first["commanded_mm_s"]) > 5
+    assert max(abs(x) for x in first["applied_mm_s"]) <= 1 + 1e-9
+    assert all(c == (abs(v) > 1) for c, v in zip(first["clamped"], first["commanded_mm_s"],
+                                                 strict=True))
+    (tmp_path / "b").mkdir()
+    code, _ = _run(tmp_path / "b", caplog, "--max-speed-mm-s", "500", "--max-steps", "1",
+                   *ANY_LATE)
+    stdout = capsys.readouterr().out
+    assert ("--max-speed-mm-s 500 is above the robot file's max_speed_mm_s 50: capped to 50 "
+            "mm/s") in stdout
+    assert "speed <= 50 mm/s" in stdout
+
+
+def test_the_emulator_prints_and_logs_the_same_url(tmp_path: Path) -> None:
+    for options in (["--pty"], ["--gcs", "--tcp", "127.0.0.1:0"], ["--tcp", "127.0.0.1:0"]):
+        emu = EmulatorProc(tmp_path / "emulator.log", *options)
+        try:
+            time.sleep(0.1)
+            assert f"emulator serving on {emu.url}\n" in emu.log()
+        finally:
+            emu.stop()
