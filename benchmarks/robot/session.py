@@ -23,7 +23,7 @@ from typing import Any
 import numpy as np
 
 from benchmarks.exceptions import BenchmarkError
-from benchmarks.robot.exits import ServoExit, SessionStop
+from benchmarks.robot.exits import ServoExit, SessionStop, exit_for_signal
 from benchmarks.robot.limits import LimitedRobot, SessionLimits
 from benchmarks.robot.loop import servo_loop
 from benchmarks.robot.records import SessionLog, session_path
@@ -188,6 +188,13 @@ def _halt(robot: Any, timeout_s: float) -> HaltReport:
         return HaltReport(False, f"halting failed: {type(exc).__name__}: {exc}")
 
 
+def sig_name(signum: int) -> str:
+    """A signal's name (``SIGHUP``)."""
+    import signal
+
+    return signal.Signals(signum).name
+
+
 def _last_move(limited: LimitedRobot | None) -> str:
     if limited is None or not limited.moved:
         return "no motion was commanded"
@@ -283,6 +290,10 @@ def run_session(args: argparse.Namespace, inputs: SessionInputs, status: StatusL
         moved = limited is not None and limited.moved
         if ended is not None:
             code, reason = _classify(ended, moved)
+            if guard.pending is not None and not isinstance(ended, SessionStop):
+                # e.g. SIGHUP, then the closed terminal failing a print: the signal first
+                sig = exit_for_signal(guard.pending)
+                code, reason = sig, f"{sig_name(guard.pending)} received (then {reason})"
         else:
             code, reason = _outcome(result, args)
         halt: HaltReport | None = None
@@ -291,27 +302,33 @@ def run_session(args: argparse.Namespace, inputs: SessionInputs, status: StatusL
             try:
                 robot.close()
             except Exception as exc:
-                status.message(f"warning: closing the robot failed: {exc}")
+                reason += f"; closing the robot failed: {exc}"
         if sensor is not None:
-            sensor.close()
-        status.final(result.last)
-        _report(status, code, reason, result, halt, limited, moved, log, ended)
-        if ended is not None and code == ServoExit.INTERNAL:
-            traceback.print_exception(ended, file=sys.stderr)
-        final = {"exit_code": int(code), "exit": code.name.lower(), "reason": reason,
-                 "exception": None if ended is None or isinstance(ended, SessionStop)
-                 else f"{type(ended).__name__}: {ended}",
-                 "traceback": None if ended is None or isinstance(ended, SessionStop)
-                 else "".join(traceback.format_exception(ended)),
-                 "moved": moved, "identity": getattr(robot, "identity", None),
-                 "start_lengths_mm": None if limited is None else [
-                     round(float(x) * 1e3, 4) for x in limited.start],
-                 "halt_confirmed": None if halt is None else halt.confirmed,
-                 "halt_detail": "the robot was not connected" if halt is None else halt.detail,
-                 "halt_s": None if halt is None else round(halt.seconds, 6),
-                 "retries": getattr(robot, "retried", None),
-                 "signals": list(guard.received), **_figures(result)}
-        log.final(final)
+            try:
+                sensor.close()
+            except Exception as exc:
+                reason += f"; closing the camera failed: {exc}"
+        failed = ended is not None and not isinstance(ended, SessionStop)
+        log.final({"exit_code": int(code), "exit": code.name.lower(), "reason": reason,
+                   "exception": f"{type(ended).__name__}: {ended}" if failed else None,
+                   "traceback": "".join(traceback.format_exception(ended))
+                   if failed and ended is not None else None,
+                   "moved": moved, "identity": getattr(robot, "identity", None),
+                   "start_lengths_mm": None if limited is None else [
+                       round(float(x) * 1e3, 4) for x in limited.start],
+                   "halt_confirmed": None if halt is None else halt.confirmed,
+                   "halt_detail": "the robot was not connected" if halt is None
+                   else halt.detail,
+                   "halt_s": None if halt is None else round(halt.seconds, 6),
+                   "retries": getattr(robot, "retried", None),
+                   "signals": list(guard.received), **_figures(result)})
+        try:  # the record is written: a closed terminal (SIGHUP) cannot lose it
+            status.final(result.last)
+            _report(status, code, reason, result, halt, limited, moved, log, ended)
+            if ended is not None and code == ServoExit.INTERNAL:
+                traceback.print_exception(ended, file=sys.stderr)
+        except (OSError, ValueError):
+            pass
     return int(code)
 
 
