@@ -17,6 +17,7 @@ import datetime as dt
 import math
 import sys
 import traceback
+from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Any
 
@@ -25,7 +26,7 @@ import numpy as np
 from benchmarks.exceptions import BenchmarkError
 from benchmarks.robot.exits import ServoExit, SessionStop, exit_for_signal
 from benchmarks.robot.limits import LimitedRobot, SessionLimits
-from benchmarks.robot.loop import servo_loop
+from benchmarks.robot.loop import PeriodCheck, servo_loop
 from benchmarks.robot.records import SessionLog, session_path
 from benchmarks.robot.shutdown import SignalGuard
 from benchmarks.robot.status import PeriodStatus, ServoResult, StatusLine
@@ -234,7 +235,7 @@ def _outcome(result: ServoResult, args: argparse.Namespace) -> tuple[ServoExit, 
 
 
 def run_session(args: argparse.Namespace, inputs: SessionInputs, status: StatusLine,
-                on_pose: Any = None) -> int:
+                on_pose: Any = None, checks: Sequence[PeriodCheck] = ()) -> int:
     """Run one session (see the module docstring); returns the exit code.
 
     Args:
@@ -242,6 +243,10 @@ def run_session(args: argparse.Namespace, inputs: SessionInputs, status: StatusL
         inputs: What was checked before anything is opened.
         status: The status line.
         on_pose: The viewer's hook (``--viz``), or None.
+        checks: Per-period safety checks (:class:`~benchmarks.robot.loop.PeriodCheck`:
+            called after each image with the measured lengths and the features; a
+            :class:`~benchmarks.robot.exits.SessionStop` they raise ends the session
+            through the shutdown with its code), after the signal check.
 
     Raises:
         OutputError: The record cannot be placed (``--out``, ``--log``), before anything
@@ -281,7 +286,7 @@ def run_session(args: argparse.Namespace, inputs: SessionInputs, status: StatusL
             servo_loop(limited, sensor, inputs.controller, inputs.goal, inputs.geometry,
                        args.dt, args.max_steps, args.tolerance_mm * 1e-3,
                        args.feature_tolerance, args.settle, log_period(log, status),
-                       on_pose, limits=limits, checks=[guard],
+                       on_pose, limits=limits, checks=[guard, *checks],
                        warn=status.message, result=result)
         except BaseException as exc:  # every way out goes through the shutdown below
             guard.shutting_down = True

@@ -334,3 +334,35 @@ def test_the_emulator_prints_and_logs_the_same_url(tmp_path: Path) -> None:
             assert f"emulator serving on {emu.url}\n" in emu.log()
         finally:
             emu.stop()
+
+
+def test_a_period_check_ends_the_session_with_its_code(
+        tmp_path: Path, caplog: pytest.LogCaptureFixture, capsys: pytest.CaptureFixture[str],
+        monkeypatch: pytest.MonkeyPatch) -> None:
+    """The seam of the safety checks (camera consistency, blind camera): a PeriodCheck
+    called each period with the measured lengths and the features, raising
+    SessionStop(SAFETY, reason), ends the session through the shutdown with exit 5."""
+    import functools
+
+    from benchmarks.robot import session
+    from benchmarks.robot.exits import SessionStop
+
+    seen: list[tuple[int, np.ndarray, object]] = []
+
+    def check(step: int, lengths: np.ndarray, features: object) -> None:
+        seen.append((step, lengths, features))
+        if step == 4:
+            raise SessionStop(ServoExit.SAFETY, "the camera disagrees with the encoders")
+
+    monkeypatch.setattr(servo, "run_session",
+                        functools.partial(session.run_session, checks=[check]))
+    code, out = _run(tmp_path, caplog, *SLOW)
+    stdout = capsys.readouterr().out
+    assert code == ServoExit.SAFETY == 5, stdout
+    assert "stopped: the camera disagrees with the encoders (exit 5, safety)" in stdout
+    assert HALTED in caplog.text
+    assert [s for s, _, _ in seen] == [0, 1, 2, 3, 4]
+    assert seen[0][1].shape == (6,) and seen[0][2] is not None
+    rec = final(out)
+    assert rec["exit_code"] == 5 and rec["halt_confirmed"] is True
+    assert len(periods(out)) == 4  # the command of period 4 was never sent
