@@ -250,6 +250,7 @@ def test_servo_outputs_are_never_replaced(
     assert out.read_text() == "my notes\n"
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("key", sorted(NEVER_REPLACED_DIRS))
 def test_servo_session_directories_are_never_reused(
         key: tuple[str, str], tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:

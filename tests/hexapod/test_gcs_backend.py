@@ -323,6 +323,7 @@ def test_over_a_serial_link(geometry: HexapodGeometry) -> None:
         GcsHexapod("serial:/nonexistent/port", deltalab())
 
 
+@pytest.mark.realtime
 def test_halt_confirmed_reads_error_10(robot: GcsHexapod, emulator: GcsEmulator) -> None:
     robot.step(np.full(6, 0.005), 0.02)
     report = robot.halt_confirmed(2.0)
@@ -330,6 +331,7 @@ def test_halt_confirmed_reads_error_10(robot: GcsHexapod, emulator: GcsEmulator)
     assert not emulator.moving()
 
 
+@pytest.mark.realtime
 def test_halt_queued_during_a_stall_is_confirmed(robot: GcsHexapod,
                                                  emulator: GcsEmulator) -> None:
     emulator.set_faults(FaultConfig(stall_after=1, stall_s=0.6))
@@ -339,6 +341,7 @@ def test_halt_queued_during_a_stall_is_confirmed(robot: GcsHexapod,
     assert 0.4 < report.seconds < 1.5
 
 
+@pytest.mark.realtime
 def test_a_second_client_is_told_the_controller_is_busy(
         robot: GcsHexapod, emulator: GcsEmulator, geometry: HexapodGeometry) -> None:
     with pytest.raises(GcsDisconnectedError, match="busy with another client"):
