@@ -137,9 +137,11 @@ class LimitedRobot:
                         f"{travel[leg] * 1e3:.3f} mm from its start length "
                         f"{self.start[leg] * 1e3:.3f} mm (the command was not sent)"))
         self.moved = True
+        # what was sent, an upper bound until the backend says what it applied
+        self.last_dt = dt
+        self.last_applied = v.copy() if actuation is Actuation.VELOCITY else np.zeros(6)
         bs = self.robot.apply(v, actuation, dt, controller)
         self.q = np.asarray(bs.lengths, float).copy()
-        self.last_dt = dt
         self.last_applied = np.asarray(bs.applied_velocities, float).copy()
         if capped.any():
             bs = replace(bs, clamped=np.asarray(bs.clamped, bool) | capped)

@@ -356,7 +356,7 @@ def _report(status: StatusLine, code: ServoExit, reason: str, result: ServoResul
         print(f"hexapod-bench servo: error: {reason}", file=sys.stderr)
     if code != ServoExit.CONVERGED:
         say(f"stopped: {reason} (exit {int(code)}, {code.name.lower()})")
-    if result.steps or code == ServoExit.CONVERGED:
+    if result.steps or moved or code == ServoExit.CONVERGED:
         say(result.summary())
     if halt is None:
         say("robot: not connected")
