@@ -186,12 +186,17 @@ class StatusLine:
             self._text = Text
             self._live = Live(Text(""), console=Console(file=self.stream),
                               auto_refresh=False, transient=False)
-            self._live.start()
+        # started at the first period: before it, the terminal is plain (a question such
+        # as --confirm's is asked on it, not through the live display)
+        self._started = False
 
     def __call__(self, status: PeriodStatus) -> None:
         """Show one period."""
         now = time.perf_counter()
         if self._live is not None:
+            if not self._started:
+                self._live.start()
+                self._started = True
             if now - self._last_print >= 0.05 or status.reason != self._last_reason:
                 style = "yellow" if status.reason else ""
                 self._live.update(self._line(status, style), refresh=True)
@@ -210,7 +215,8 @@ class StatusLine:
         if self._live is not None:
             if status is not None:
                 self._live.update(self._line(status), refresh=True)
-            self._live.stop()
+            if self._started:
+                self._live.stop()
             self._live = None
         elif status is not None:
             print(status.line(), file=self.stream, flush=True)

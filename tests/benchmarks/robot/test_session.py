@@ -366,3 +366,64 @@ def test_a_period_check_ends_the_session_with_its_code(
     rec = final(out)
     assert rec["exit_code"] == 5 and rec["halt_confirmed"] is True
     assert len(periods(out)) == 4  # the command of period 4 was never sent
+
+
+def _on_a_terminal(args: list[str], answer: bytes, out: Path) -> tuple[int, str]:
+    """``servo ARGS --out OUT`` with a pseudo-terminal as stdin and stdout: wait for the
+    --confirm question, answer, and return the exit code and everything shown."""
+    import pty
+    import select
+    import subprocess
+    import sys
+
+    from tests.benchmarks.robot.sessions import ENV, ROOT
+
+    master, slave = pty.openpty()
+    proc = subprocess.Popen([sys.executable, "-m", "benchmarks.robot.servo", *args, "--out",
+                             str(out)], stdin=slave, stdout=slave, stderr=slave, cwd=ROOT,
+                            env=ENV, start_new_session=True)
+    os.close(slave)
+    shown = b""
+    answered = False
+    deadline = time.monotonic() + 60
+    try:
+        while time.monotonic() < deadline:
+            ready, _, _ = select.select([master], [], [], 0.1)
+            if ready:
+                try:
+                    chunk = os.read(master, 4096)
+                except OSError:  # the child closed the terminal
+                    break
+                if not chunk:
+                    break
+                shown += chunk
+            if not answered and b"move the robot? [y/N]" in shown:
+                os.write(master, answer)
+                answered = True
+            if proc.poll() is not None and not ready:
+                break
+        code = proc.wait(30)
+    finally:
+        if proc.poll() is None:
+            os.killpg(proc.pid, signal.SIGKILL)
+        os.close(master)
+    text = shown.decode(errors="replace")
+    assert answered, text
+    return code, " ".join(text.split())  # the lines the terminal's width wrapped, unwrapped
+
+
+@pytest.mark.parametrize(("answer", "code"), [(b"y\n", 0), (b"n\n", 2)])
+def test_confirm_on_a_terminal_moves_only_after_yes(
+        tmp_path: Path, answer: bytes, code: int) -> None:
+    out = tmp_path / "session"
+    rc, shown = _on_a_terminal(["--backend", "emulator", "--goal", str(goal_file(tmp_path)),
+                                "--confirm", *FAST], answer, out)
+    assert rc == code, shown
+    assert "largest leg travel 2.500 mm (leg 1)" in shown
+    rec = final(out)
+    assert rec["exit_code"] == code
+    if code == 0:
+        assert rec["moved"] is True and "converged after" in shown
+    else:
+        assert rec["moved"] is False and periods(out) == []
+        assert "the planned move was not confirmed" in shown
