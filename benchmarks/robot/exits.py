@@ -10,7 +10,7 @@ from __future__ import annotations
 import enum
 import signal
 
-__all__ = ["ServoExit", "exit_for_signal"]
+__all__ = ["ServoExit", "SessionStop", "exit_for_signal"]
 
 
 class ServoExit(enum.IntEnum):
@@ -25,7 +25,10 @@ class ServoExit(enum.IntEnum):
         LINK: the link to the robot failed during motion.
         SAFETY: a safety stop (camera disagreeing with the encoders, a blind camera
             past its timeout).
-        INTERRUPTED: SIGINT (Ctrl-C); SIGTERM and SIGHUP give 128 + their number.
+        INTERRUPTED: SIGINT (Ctrl-C), 128 + 2.
+        HANGUP: SIGHUP (a closed terminal, a dropped SSH session), 128 + 1.
+        TERMINATED: SIGTERM (``systemctl stop``, ``docker stop``, an IDE's stop
+            button), 128 + 15.
     """
 
     CONVERGED = 0
@@ -35,9 +38,11 @@ class ServoExit(enum.IntEnum):
     LINK = 4
     SAFETY = 5
     INTERRUPTED = 130
+    HANGUP = 129
+    TERMINATED = 143
 
 
-def exit_for_signal(signum: int) -> int:
+def exit_for_signal(signum: int) -> ServoExit:
     """The exit code of a session ended by a signal: 128 + its number (shell convention).
 
     Args:
@@ -46,5 +51,31 @@ def exit_for_signal(signum: int) -> int:
 
     Returns:
         The exit code.
+
+    Raises:
+        ValueError: A signal the session does not handle (only SIGINT, SIGTERM, SIGHUP).
     """
-    return 128 + int(signal.Signals(signum))
+    return ServoExit(128 + int(signal.Signals(signum)))
+
+
+class SessionStop(Exception):  # noqa: N818 (a stop request, not an error)
+    """A request to end a servo session: raised by a per-period check (a limit, the camera
+    consistency check, the blind-camera timeout, ...) and turned by the session into the
+    one shutdown (halt, confirmation, final record) and the exit code ``code``.
+
+    Args:
+        code: The exit code the session ends with.
+        reason: What happened, in words (printed and written to the final record).
+
+    Attributes:
+        code: The exit code the session ends with.
+        reason: What happened, in words.
+    """
+
+    code: ServoExit
+    reason: str
+
+    def __init__(self, code: ServoExit, reason: str) -> None:
+        super().__init__(reason)
+        self.code = ServoExit(code)
+        self.reason = reason

@@ -7,16 +7,17 @@ from __future__ import annotations
 
 import logging
 import math
-import sys
 import time
-from collections.abc import Callable
-from dataclasses import dataclass, field
-from typing import IO, Any
+from collections.abc import Callable, Sequence
+from typing import Any, Protocol
 
 import numpy as np
 
 from benchmarks.exceptions import BenchmarkError
+from benchmarks.robot.exits import ServoExit, SessionStop
 from benchmarks.robot.goals import feature_directions, feature_error, feature_lines
+from benchmarks.robot.limits import DeadlinePolicy, LimitedRobot, SessionLimits
+from benchmarks.robot.status import PeriodStatus, ServoResult
 from benchmarks.sim.sensors import camera_batch
 from controllers.base import ObservationBatch
 from hexapod.exceptions import ForwardKinematicsError
@@ -29,120 +30,28 @@ log = logging.getLogger(__name__)
 DEFAULT_SETTLE = 5
 #: Default feature-error tolerance (norm of the stacked normal differences) [-].
 DEFAULT_FEATURE_TOLERANCE = 2e-3
-#: Plain status lines (stdout not a terminal) are printed every this many seconds.
-PLAIN_STATUS_PERIOD_S = 1.0
 
 
-@dataclass
-class PeriodStatus:
-    """One period of the loop (what the status line and the log show).
+class PeriodCheck(Protocol):
+    """A per-period safety check of a session (the camera's consistency with the
+    encoders, a blind-camera timeout, ...): called every period right after the image,
+    before the controller runs; it ends the session by raising
+    :class:`~benchmarks.robot.exits.SessionStop` ``(code, reason)`` (the session then
+    halts the robot, writes the final record and exits with ``code``)."""
 
-    Attributes:
-        step: Period index (from 0).
-        t: Loop time at the start of the period [s].
-        lengths: (6,) lengths measured at the end of the period [m].
-        leg_error: max |q - q*| at the end of the period [m].
-        feature_error: Feature error of this period's image (NaN for a lost frame).
-        controller_error: The controller's own error norm (NaN if not run).
-        velocities: (6,) commanded leg velocities [m/s] (zeros when refused).
-        visible_edges: Edges found in this period's image.
-        reason: Why the command is zero (refusal, lost frame), or None.
-        lost_frame: The camera gave no image this period.
-        rtt: Time spent communicating with the robot [s].
-        missed: This period was late.
-        missed_total: Late periods so far.
-        lost_total: Lost frames so far.
-        refused_total: Refused commands so far.
-    """
+    def __call__(self, step: int, lengths: np.ndarray, features: Any) -> None:
+        """Check one period.
 
-    step: int
-    t: float
-    lengths: np.ndarray
-    leg_error: float
-    feature_error: float
-    controller_error: float
-    velocities: np.ndarray
-    visible_edges: int
-    reason: str | None
-    lost_frame: bool
-    rtt: float
-    missed: bool
-    missed_total: int
-    lost_total: int
-    refused_total: int
+        Args:
+            step: The period index (from 0).
+            lengths: (6,) leg lengths measured when the image was taken [m].
+            features: This period's :class:`~vision.feature_cameras.Features` (None: the
+                camera gave no image).
 
-    def to_json(self) -> dict[str, Any]:
-        """A log line (lengths in mm, velocities in mm/s, times in ms; NaN as null)."""
-        def num(x: float, scale: float = 1.0) -> float | None:
-            return float(x) * scale if math.isfinite(x) else None
-
-        return {"step": self.step, "t_s": round(self.t, 6),
-                "lengths_mm": [round(float(x) * 1e3, 4) for x in self.lengths],
-                "leg_error_mm": num(self.leg_error, 1e3),
-                "feature_error": num(self.feature_error),
-                "controller_error": num(self.controller_error),
-                "velocities_mm_s": [round(float(x) * 1e3, 4) for x in self.velocities],
-                "visible_edges": self.visible_edges, "reason": self.reason,
-                "lost_frame": self.lost_frame, "rtt_ms": num(self.rtt, 1e3),
-                "missed": self.missed}
-
-    def line(self) -> str:
-        """The status line (mm and ms)."""
-        fe = f"{self.feature_error:.2e}" if math.isfinite(self.feature_error) else "   --   "
-        s = (f"step {self.step:6d} {self.t:7.2f} s | feature err {fe} | "
-             f"max|q-q*| {self.leg_error * 1e3:7.3f} mm | edges {self.visible_edges:2d} | "
-             f"RTT {self.rtt * 1e3:5.2f} ms | missed {self.missed_total} | "
-             f"lost {self.lost_total}")
-        if self.reason:
-            s += f"  [{self.reason}]"
-        return s
-
-
-@dataclass
-class ServoResult:
-    """Outcome of :func:`servo_loop`.
-
-    Attributes:
-        outcome: ``"converged"``, ``"max-steps"``, ``"interrupted"`` or ``"camera ended"``.
-        steps: Periods run.
-        wall_s: Wall time of the loop [s].
-        rtts: Round-trip time of each period [s].
-        missed: Late periods.
-        lost_frames: Lost camera frames.
-        refused: Periods with a refused command.
-        last: The last period's status, if any.
-    """
-
-    outcome: str
-    steps: int
-    wall_s: float
-    rtts: list[float] = field(default_factory=list)
-    missed: int = 0
-    lost_frames: int = 0
-    refused: int = 0
-    last: PeriodStatus | None = None
-
-    @property
-    def converged(self) -> bool:
-        """The loop stopped at convergence."""
-        return self.outcome == "converged"
-
-    @property
-    def rate_hz(self) -> float:
-        """Achieved loop rate [Hz]."""
-        return self.steps / self.wall_s if self.wall_s > 0 else math.nan
-
-    def summary(self) -> str:
-        """One line for the user (mm, ms, Hz)."""
-        rt = np.array(self.rtts) * 1e3 if self.rtts else np.array([math.nan])
-        s = (f"{self.outcome} after {self.steps} periods ({self.wall_s:.2f} s, "
-             f"{self.rate_hz:.1f} Hz): {self.missed} missed periods, {self.lost_frames} lost "
-             f"frames, {self.refused} refused commands; RTT median {np.median(rt):.2f} ms, "
-             f"p99 {np.percentile(rt, 99):.2f} ms")
-        if self.last is not None:
-            s += (f"; final max|q-q*| {self.last.leg_error * 1e3:.3f} mm, feature error "
-                  f"{self.last.feature_error:.2e}")
-        return s
+        Raises:
+            SessionStop: End the session.
+        """
+        ...
 
 
 def servo_loop(
@@ -158,15 +67,22 @@ def servo_loop(
     settle: int = DEFAULT_SETTLE,
     on_period: Callable[[PeriodStatus], None] | None = None,
     on_pose: Callable[[np.ndarray, np.ndarray, np.ndarray | None], None] | None = None,
+    *,
+    limits: SessionLimits | None = None,
+    checks: Sequence[PeriodCheck] = (),
+    warn: Callable[[str], None] | None = None,
+    result: ServoResult | None = None,
 ) -> ServoResult:
-    """Run a reset controller on a connected robot until convergence, ``max_steps`` or Ctrl-C.
+    """Run a reset controller on a connected robot until convergence, a limit, a stop
+    request or Ctrl-C.
 
     The session is the simulator's closed loop (:func:`benchmarks.sim.loop.closed_loop`)
     with a batch of one: the robot is a :class:`~benchmarks.sim.plant.BackendPlant` (the
     pose is the nominal forward kinematics of the measured lengths), the camera a
-    :class:`ServoCamera`, the book a :class:`ServoBook`. The caller halts the robot (use
-    it as a context manager); Ctrl-C is caught here and reported as the outcome
-    ``"interrupted"``.
+    :class:`ServoCamera`, the book a :class:`ServoBook`. The caller halts the robot.
+    Ctrl-C (``KeyboardInterrupt``) is reported as the outcome ``"interrupted"``, a
+    :class:`~benchmarks.robot.exits.SessionStop` as ``"stopped"`` (``result.stop``); any
+    other exception propagates, ``result`` (when given) holding the periods run.
 
     Args:
         robot: A connected backend (``measured_lengths()``, ``apply(v, kind, dt, name)``).
@@ -181,6 +97,11 @@ def servo_loop(
         settle: Consecutive periods within both tolerances to stop.
         on_period: Called after every period (status line, log).
         on_pose: Called with the predicted pose and edge visibility (viewer).
+        limits: The session's limits (speed cap, travel, time, missed deadlines;
+            None: none but ``max_steps``).
+        checks: Per-period checks (:class:`PeriodCheck`), in order.
+        warn: Shows a warning line (missed deadlines; default: the log).
+        result: The result to fill (the caller keeps the periods run if the loop raises).
 
     Returns:
         The outcome and the link statistics.
@@ -199,22 +120,33 @@ def servo_loop(
     batch_of_one = isinstance(controller, Controller) and type(controller).step is Controller.step
     one = controller if batch_of_one else ForeignController.adopt(controller)
     camera = ServoCamera(sensor)
-    res = ServoResult("max-steps", 0, 0.0)
+    res = result if result is not None else ServoResult("max-steps", 0, 0.0)
+    res.outcome = "max-steps"
     t0 = time.perf_counter()
     try:
         q = np.asarray(robot.measured_lengths(), float)[None].copy()
+        if limits is not None and not isinstance(robot, LimitedRobot):
+            robot = LimitedRobot(robot, limits, q[0])
+        deadlines = None if limits is None else DeadlinePolicy(
+            limits, dt, warn if warn is not None else log.warning)
         R, t = np.zeros((1, 3, 3)), np.zeros((1, 3))
         poses = _NominalPoses(geometry, q, R, t)
         plant = BackendPlant([robot], q, R, t, np.zeros((1, 6)), poses)
         plant.use_actuation(declared, name)
         book = ServoBook(plant, camera, goal, tolerance, feature_tolerance, settle, res, t0,
-                         declared, name, on_period, on_pose)
+                         declared, name, on_period, on_pose, checks=checks, limits=limits,
+                         deadlines=deadlines)
         closed_loop(plant, camera, None, one, book, dt, np.zeros((1, 6)),
                     None if max_steps is None else max_steps - 1)
     except KeyboardInterrupt:
         res.outcome = "interrupted"
-    res.wall_s = time.perf_counter() - t0
-    res.lost_frames = sensor.lost_frames
+    except SessionStop as stop:
+        res.outcome, res.stop = "stopped", stop
+    except BaseException:
+        res.outcome = "failed"
+        raise
+    finally:
+        res.wall_s = time.perf_counter() - t0
     return res
 
 
@@ -260,11 +192,15 @@ class ServoCamera:
         self.camera = sensor_camera(sensor)
         #: This period's features (None: lost frame).
         self.features: Any = None
+        #: Time spent getting this period's image and its edges [s].
+        self.seconds = 0.0
 
     def observe(self, rows: np.ndarray, rotations: np.ndarray, translations: np.ndarray
                 ) -> ObservationBatch:
         """The image at the pose of the one row."""
+        t0 = time.perf_counter()
         feats = self.sensor.measure(rotations[0], translations[0])
+        self.seconds = time.perf_counter() - t0
         self.features = feats
         if feats is None:
             return camera_batch(np.full((1, 6, 2, 3), np.nan), None, np.full((1, 6, 3), np.nan),
@@ -282,14 +218,17 @@ class ServoBook:
     frame or a refused or invalid command moves nothing that period (zeros are sent, so
     the robot's watchdog never trips); the session converges after ``settle`` periods
     within both tolerances, ends with the camera's video; every period gives its
-    :class:`PeriodStatus`."""
+    :class:`PeriodStatus`. The per-period ``checks`` run after each image; the time
+    limit and the deadline policy after each period (both end the session with a
+    :class:`~benchmarks.robot.exits.SessionStop`)."""
 
     def __init__(self, plant: Any, camera: ServoCamera, goal: Any, tolerance: float,
                  feature_tolerance: float, settle: int, result: ServoResult, t0: float,
                  declared: Any, name: str,
                  on_period: Callable[[PeriodStatus], None] | None,
-                 on_pose: Callable[[np.ndarray, np.ndarray, np.ndarray | None], None] | None
-                 ) -> None:
+                 on_pose: Callable[[np.ndarray, np.ndarray, np.ndarray | None], None] | None,
+                 *, checks: Sequence[PeriodCheck] = (), limits: SessionLimits | None = None,
+                 deadlines: DeadlinePolicy | None = None) -> None:
         self.active = np.ones(1, dtype=bool)
         self.plant, self.camera = plant, camera
         self.q_goal = np.asarray(goal.lengths, float)
@@ -304,6 +243,9 @@ class ServoBook:
         self.reason: str | None = None
         self.f_err = math.nan
         self.ctrl_err = math.nan
+        self.checks, self.limits, self.deadlines = tuple(checks), limits, deadlines
+        self.controller_s = 0.0
+        self._lost_seen = camera.sensor.lost_frames
 
     def check(self, step: int, idx: np.ndarray) -> np.ndarray:
         """Never done before the period (the session ends after a period)."""
@@ -314,7 +256,10 @@ class ServoBook:
         session)."""
         feats = self.camera.features
         self.ctrl_err = math.nan
+        self.controller_s = 0.0
         self.plant.use_actuation(self.declared, self.name)
+        for check in self.checks:
+            check(step, self.plant.q[0].copy(), feats)
         if feats is None:
             self.reason, self.f_err = "lost camera frame", math.nan
             if getattr(self.camera.sensor, "ended", False):
@@ -341,6 +286,7 @@ class ServoBook:
         if crash is not None and not isinstance(crash, CommandError):
             raise crash
         v = commands.values[0]
+        self.controller_s = float(seconds)
         self.plant.use_actuation(commands.actuation, self.name)
         self.ctrl_err = float(commands.error_norm[0])
         self.reason = commands.reasons[0] if crash is None else str(crash)
@@ -368,21 +314,30 @@ class ServoBook:
         res, plant = self.res, self.plant
         bs = plant.last[0]
         q = plant.q[0].copy()
-        res.rtts.append(float(bs.round_trip_s))
+        link_s = float(bs.round_trip_s)
+        compute_s = self.camera.seconds + self.controller_s
+        res.rtts.append(link_s)
+        res.compute.append(compute_s)
         res.missed += int(bs.missed_period)
         leg_err = float(np.max(np.abs(q - self.q_goal)))
         ok = (leg_err <= self.tolerance and math.isfinite(self.f_err)
               and self.f_err <= self.feature_tolerance)
         self.settled = self.settled + 1 if ok else 0
-        res.lost_frames = self.camera.sensor.lost_frames
+        lost_now = self.camera.sensor.lost_frames
+        lost = lost_now - self._lost_seen
+        self._lost_seen = lost_now
+        res.lost_frames += lost
         feats = self.camera.features
         status = PeriodStatus(
             step=step, t=time.perf_counter() - self.t0, lengths=q, leg_error=leg_err,
             feature_error=self.f_err, controller_error=self.ctrl_err, velocities=self.values,
             visible_edges=0 if feats is None else feats.visible_count, reason=self.reason,
-            lost_frame=feats is None, rtt=float(bs.round_trip_s),
+            lost_frame=feats is None, rtt=link_s,
             missed=bool(bs.missed_period), missed_total=res.missed,
-            lost_total=res.lost_frames, refused_total=res.refused)
+            lost_total=res.lost_frames, refused_total=res.refused,
+            applied=np.asarray(bs.applied_velocities, float).copy(),
+            clamped=np.asarray(bs.clamped, bool).copy(), camera_s=self.camera.seconds,
+            controller_s=self.controller_s, lost_frames=lost)
         res.last = status
         res.steps = step + 1
         if self.on_period is not None:
@@ -390,65 +345,10 @@ class ServoBook:
         if self.settled >= self.settle:
             res.outcome = "converged"
             self.active[:] = False
-
-
-class StatusLine:
-    """The live status: one rewritten line on a terminal (rich), plain lines otherwise.
-
-    Args:
-        stream: Where to write (default stdout).
-        period_s: Plain mode: at most one line every ``period_s`` [s] (the first
-            period and the refusals' changes are always shown).
-    """
-
-    def __init__(self, stream: IO[str] | None = None,
-                 period_s: float = PLAIN_STATUS_PERIOD_S) -> None:
-        self.stream = sys.stdout if stream is None else stream
-        self.tty = bool(getattr(self.stream, "isatty", lambda: False)())
-        self.period_s = float(period_s)
-        self._last_print = -math.inf
-        self._last_reason: str | None = None
-        self._live: Any = None
-        if self.tty:
-            from rich.console import Console
-            from rich.live import Live
-            from rich.text import Text
-
-            self._text = Text
-            self._live = Live(Text(""), console=Console(file=self.stream),
-                              auto_refresh=False, transient=False)
-            self._live.start()
-
-    def __call__(self, status: PeriodStatus) -> None:
-        """Show one period."""
-        now = time.perf_counter()
-        if self._live is not None:
-            if now - self._last_print >= 0.05 or status.reason != self._last_reason:
-                style = "yellow" if status.reason else ""
-                self._live.update(self._line(status, style), refresh=True)
-                self._last_print = now
-        elif (now - self._last_print >= self.period_s or status.reason != self._last_reason):
-            print(status.line(), file=self.stream, flush=True)
-            self._last_print = now
-        self._last_reason = status.reason
-
-    def _line(self, status: PeriodStatus, style: str = "") -> Any:
-        # one terminal line: cropped to the width, never wrapped
-        return self._text(status.line(), style=style, no_wrap=True, overflow="ellipsis")
-
-    def final(self, status: PeriodStatus | None) -> None:
-        """Show the last period and release the terminal line."""
-        if self._live is not None:
-            if status is not None:
-                self._live.update(self._line(status), refresh=True)
-            self._live.stop()
-            self._live = None
-        elif status is not None:
-            print(status.line(), file=self.stream, flush=True)
-
-    def message(self, text: str) -> None:
-        """A line of its own."""
-        if self._live is not None:
-            self._live.console.print(text, markup=False, highlight=False)
-        else:
-            print(text, file=self.stream, flush=True)
+            return
+        if self.deadlines is not None:
+            self.deadlines.update(step, bool(bs.missed_period), compute_s, link_s)
+        limit = None if self.limits is None else self.limits.max_time
+        if limit is not None and status.t >= limit:
+            raise SessionStop(ServoExit.LIMIT, f"--max-time-s {limit:g} reached after "
+                                               f"{res.steps} periods ({status.t:.2f} s)")

@@ -2,9 +2,11 @@
 
 ``hexapod-bench servo --backend serial:URL|emulator|gcs:tcp://HOST:PORT|NAME[:ARGS]
 --camera sim|video:PATH|device:N --controller NAME --goal FILE`` runs one controller at
-the control period until the robot converges, ``--max-steps`` or Ctrl-C, and always
-halts the robot (the backend's context manager sends ``HLT`` and closes the port,
-whatever happens).
+the control period until the robot converges, a limit is reached (``--max-time-s``,
+``--max-steps``, ``--max-travel-mm``, missed deadlines), the recording ends, a signal
+(SIGINT, SIGTERM, SIGHUP) or a failure; every way out goes through the same shutdown
+(:mod:`benchmarks.robot.session`): ``HLT``, its confirmation awaited, a summary, the
+final record, an exit code of :class:`~benchmarks.robot.exits.ServoExit`.
 
 Each period:
 
@@ -35,17 +37,17 @@ from __future__ import annotations
 
 import argparse
 import contextlib
-import json
 import logging
 import math
 import sys
 from collections.abc import Iterator
 from pathlib import Path
-from typing import IO, Any
+from typing import Any
 
 import numpy as np
 
 from benchmarks.exceptions import BenchmarkError
+from benchmarks.robot.exits import ServoExit
 from benchmarks.robot.goals import (
     DEFAULT_TEACH_FRAMES,
     GOAL_KEYS,
@@ -57,17 +59,24 @@ from benchmarks.robot.goals import (
     save_goal,
     teach_tolerance,
 )
-from benchmarks.robot.loop import (
-    DEFAULT_FEATURE_TOLERANCE,
-    DEFAULT_SETTLE,
-    PeriodStatus,
-    ServoResult,
-    StatusLine,
-    servo_loop,
+from benchmarks.robot.limits import (
+    DEFAULT_MAX_MISSED_CONSECUTIVE,
+    DEFAULT_MAX_MISSED_FRACTION,
+    DEFAULT_MAX_TIME_S,
+    MISSED_WINDOW,
 )
-from benchmarks.study.outdir import OutputFile
+from benchmarks.robot.loop import DEFAULT_FEATURE_TOLERANCE, DEFAULT_SETTLE, servo_loop
+from benchmarks.robot.records import LOG_NAME, SESSIONS_DIR, session_path
+from benchmarks.robot.session import (
+    DEFAULT_HALT_TIMEOUT_S,
+    DEFAULT_RETRIES,
+    SessionInputs,
+    run_session,
+    session_limits,
+)
+from benchmarks.robot.status import PeriodStatus, ServoResult, StatusLine
+from benchmarks.study.outdir import OutputDir, OutputFile
 from hexapod.geometry import HexapodGeometry
-from hexapod.outputs import check_replace
 from vision.feature_cameras import (
     Features,
     FeatureSensor,
@@ -81,14 +90,12 @@ __all__ = [
     "DEFAULT_FEATURE_TOLERANCE",
     "DEFAULT_SETTLE",
     "DEFAULT_TEACH_FRAMES",
-    "EXIT_CONVERGED",
-    "EXIT_INTERRUPTED",
-    "EXIT_NOT_CONVERGED",
     "GOAL_KEYS",
     "SIMULATED_BACKENDS",
     "FeatureSensor",
     "Features",
     "PeriodStatus",
+    "ServoExit",
     "ServoGoal",
     "ServoResult",
     "SimCamera",
@@ -112,10 +119,6 @@ __all__ = [
 ]
 
 log = logging.getLogger(__name__)
-
-#: Exit codes of :func:`run`.
-EXIT_CONVERGED, EXIT_NOT_CONVERGED, EXIT_INTERRUPTED = 0, 1, 130
-
 
 def open_backend(spec: str, geometry: HexapodGeometry,
                  start: np.ndarray | None = None) -> Any:
@@ -153,8 +156,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     """Add the options of ``hexapod-bench servo`` to a parser."""
     p.add_argument("--backend", required=True,
                    help="emulator (a firmware emulator on a pseudo-terminal), serial:URL "
-                        "(a device path, socket://127.0.0.1:PORT, ...), sim, a plugin's "
-                        "NAME[:ARGS] or module:attr[:ARGS] (docs/backends.md)")
+                        "(a device path, socket://127.0.0.1:PORT, ...), gcs:tcp://HOST:PORT "
+                        "or gcs:serial:URL (a PI GCS hexapod controller), gcs-emulator, sim, "
+                        "a plugin's NAME[:ARGS] or module:attr[:ARGS] (docs/backends.md)")
     p.add_argument("--camera", default="sim",
                    help="sim (render the legs at the pose of the measured lengths), "
                         "video:PATH or device:N (default sim)")
@@ -190,8 +194,38 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--allow-foreign-calibration", action="store_true",
                    help="use a --calibration made with another robot or camera (warned)")
     p.add_argument("--dt", type=float, default=0.02, help="control period [s] (default 0.02)")
-    p.add_argument("--max-steps", type=int,
-                   help="stop after N periods (default: until convergence or Ctrl-C)")
+    lim = p.add_argument_group("limits (reaching one halts the robot, exit 3)")
+    lim.add_argument("--max-steps", type=int,
+                     help="stop after N periods (default: no period budget)")
+    lim.add_argument("--max-time-s", type=float, default=DEFAULT_MAX_TIME_S, metavar="S",
+                     help=f"stop after S seconds of motion (default {DEFAULT_MAX_TIME_S:g})")
+    lim.add_argument("--max-speed-mm-s", type=float, metavar="MM_S",
+                     help="cap every leg's commanded speed [mm/s] (default and ceiling: the "
+                          "robot file's max_speed_mm_s)")
+    lim.add_argument("--max-travel-mm", type=float, metavar="MM",
+                     help="largest travel of any leg from its start length [mm]: a goal "
+                          "farther is refused before moving, a command beyond it stops the "
+                          "session before it is sent (default: the stroke)")
+    lim.add_argument("--max-missed-consecutive", type=int,
+                     default=DEFAULT_MAX_MISSED_CONSECUTIVE, metavar="N",
+                     help=f"stop after N late periods in a row (default "
+                          f"{DEFAULT_MAX_MISSED_CONSECUTIVE}; 0: never)")
+    lim.add_argument("--max-missed-fraction", type=float, default=DEFAULT_MAX_MISSED_FRACTION,
+                     metavar="F",
+                     help=f"stop when more than F of the last {MISSED_WINDOW} periods were late "
+                          f"(default {DEFAULT_MAX_MISSED_FRACTION:g}; 1: never)")
+    lim.add_argument("--confirm", action="store_true",
+                     help="show the planned move (start, goal, largest leg travel) and ask "
+                          "y/N on the terminal before the first command (refused without a "
+                          "terminal)")
+    lim.add_argument("--halt-timeout-s", type=float, default=DEFAULT_HALT_TIMEOUT_S,
+                     metavar="S",
+                     help=f"at the end, wait up to S seconds for the robot to confirm its "
+                          f"stop (default {DEFAULT_HALT_TIMEOUT_S:g})")
+    lim.add_argument("--retries", type=int, default=DEFAULT_RETRIES, metavar="N",
+                     help=f"serial backends: send an exchange whose reply was lost again up "
+                          f"to N times (default {DEFAULT_RETRIES}: one dropped reply is "
+                          f"survived)")
     p.add_argument("--tolerance-mm", type=float, default=0.1,
                    help="converged when max |q - q*| <= this [mm] (default 0.1) ...")
     p.add_argument("--feature-tolerance", type=float, default=DEFAULT_FEATURE_TOLERANCE,
@@ -202,9 +236,13 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--start-mm", type=float, nargs=6, metavar="L",
                    help="emulator only: initial leg lengths [mm] (default mid-stroke)")
     p.add_argument("--seed", type=int, default=0, help="pixel noise of --camera sim")
+    p.add_argument("--out", metavar="DIR", action=OutputDir,
+                   help=f"the session directory (new or empty; default "
+                        f"{SESSIONS_DIR}/<UTC time>-<controller>/): {LOG_NAME} holds a header, "
+                        f"one JSON line per period and the final record")
     p.add_argument("--log", metavar="FILE.jsonl", action=OutputFile,
-                   help="write one JSON line per period (an earlier servo log is replaced, "
-                        "any other file refused)")
+                   help="write the session record to this file instead of a session "
+                        "directory (an earlier servo log is replaced, any other file refused)")
     p.add_argument("--viz", action="store_true", help="live MeshCat view (loopback server)")
 
 
@@ -295,16 +333,6 @@ def _viewer(enabled: bool, geometry: HexapodGeometry, camera: Any, goal: Any
         viewer.close()
 
 
-def _is_servo_log(path: Path) -> bool:
-    """A log ``servo --log`` wrote: its first line is a period (``step``, ``t_s``)."""
-    try:
-        with path.open(encoding="utf-8") as f:
-            first = json.loads(f.readline())
-    except (OSError, ValueError):
-        return False
-    return isinstance(first, dict) and {"step", "t_s"} <= set(first)
-
-
 def _teach(args: argparse.Namespace, geometry: HexapodGeometry, camera: Any,
            start: np.ndarray | None, status: StatusLine) -> int:
     from hexapod.fk import forward_kinematics
@@ -341,11 +369,14 @@ def _teach(args: argparse.Namespace, geometry: HexapodGeometry, camera: Any,
 
 
 def run(args: argparse.Namespace) -> int:
-    """``hexapod-bench servo``: the loop (or ``--teach``); returns the exit code.
+    """``hexapod-bench servo``: the session (or ``--teach``); returns the exit code.
 
-    Exit codes: 0 converged (or taught), 1 stopped at ``--max-steps`` or at the end of
-    a video, 130 interrupted by Ctrl-C. Bad inputs raise (the CLI maps them to 2)
-    before the robot is touched.
+    Exit codes: :class:`~benchmarks.robot.exits.ServoExit` (0 converged or taught, 1
+    internal error, 2 refused before moving, 3 a limit, 4 the link failed during
+    motion, 5 a safety stop, 130 SIGINT, 143 SIGTERM, 129 SIGHUP). Bad inputs found
+    before anything is opened raise (the CLI maps them to 2); from the session record's
+    creation on, every way out goes through :func:`~benchmarks.robot.session.run_session`'s
+    shutdown.
     """
     import controllers  # noqa: F401 - registers the built-ins
     from benchmarks.study.calibration import read_calibrated_file
@@ -371,8 +402,8 @@ def run(args: argparse.Namespace) -> int:
         return _teach(args, geometry, camera, start, status)
 
     # everything the user gave is checked before the robot is touched
-    if args.log:
-        check_replace(args.log, ours=_is_servo_log, how="choose another --log, or delete it")
+    session_path(args.out, args.log, args.controller)  # the record's place, checked
+    session_limits(args, geometry, lambda text: None)
     goal_file = load_goal(args.goal, geometry)
     goal = goal_features(goal_file, camera, geometry)
     options = parse_options(args.option)
@@ -391,44 +422,14 @@ def run(args: argparse.Namespace) -> int:
             print(f"warning: {text}", file=sys.stderr)
     controller.reset(ControllerContext(base_points=base_points, geometry=geometry,
                                        camera=camera, dt=args.dt, goal=goal))
-    sensor = open_camera(args.camera, camera, geometry, args.seed)
-    logf: IO[str] | None = None
-    result: ServoResult | None = None
-    try:
-        if args.log:
-            logf = Path(args.log).open("w")  # noqa: SIM115 - closed in finally
-        with _viewer(args.viz, geometry, camera, goal) as viewer, \
-                open_backend(args.backend, geometry, start) as robot:
-            status.message(f"servo: {args.controller} on {args.backend} ({robot.identity}), "
-                           f"camera {args.camera}, goal {goal_file.source}, dt "
-                           f"{args.dt * 1e3:g} ms; Ctrl-C halts the robot")
+    inputs = SessionInputs(geometry, camera, goal_file, goal, controller, start)
+    with _viewer(args.viz, geometry, camera, goal) as viewer:
+        on_pose = None
+        if viewer is not None:
+            def on_pose(R: np.ndarray, t: np.ndarray, vis: np.ndarray | None) -> None:
+                viewer.display(R, t, vis)
 
-            def on_period(s: PeriodStatus) -> None:
-                status(s)
-                if logf is not None:
-                    logf.write(json.dumps(s.to_json()) + "\n")
-                    logf.flush()  # readable live (tail -f), and complete after a crash
-
-            on_pose = None
-            if viewer is not None:
-                def on_pose(R: np.ndarray, t: np.ndarray, vis: np.ndarray | None) -> None:
-                    viewer.display(R, t, vis)
-
-            result = servo_loop(robot, sensor, controller, goal, geometry, args.dt,
-                                args.max_steps, args.tolerance_mm * 1e-3,
-                                args.feature_tolerance, args.settle, on_period, on_pose)
-    finally:
-        status.final(result.last if result is not None else None)
-        sensor.close()
-        if logf is not None:
-            logf.close()
-    status.message(result.summary() + ("; the robot was halted" if result.outcome
-                                       == "interrupted" else ""))
-    if result.outcome == "converged":
-        return EXIT_CONVERGED
-    if result.outcome == "interrupted":
-        return EXIT_INTERRUPTED
-    return EXIT_NOT_CONVERGED
+        return run_session(args, inputs, status, on_pose)
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -439,7 +440,8 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def main(argv: list[str] | None = None) -> int:
-    """``python -m benchmarks.robot.servo ...``: :func:`run`, the CLI's error handling (exit 2)."""
+    """``python -m benchmarks.robot.servo ...``: :func:`run`, the CLI's error handling (exit 2
+    for a bad input found before anything is opened)."""
     from controllers.exceptions import ControllerError
     from hexapod.exceptions import HexapodError
     from vision.exceptions import VisionError

@@ -7,6 +7,7 @@ limits and reports the leg lengths a real robot's encoders would measure.
 
 from __future__ import annotations
 
+import time
 from abc import ABC, abstractmethod
 from dataclasses import dataclass, field
 from types import TracebackType
@@ -38,6 +39,21 @@ class BackendStep:
     round_trip_s: float = 0.0
     missed_period: bool = False
     extras: dict[str, float] = field(default_factory=dict)
+
+
+@dataclass(frozen=True)
+class HaltReport:
+    """What a backend knows after commanding its stop (:meth:`Backend.halt_confirmed`).
+
+    Attributes:
+        confirmed: The robot reported itself stopped (a simulated robot always is).
+        detail: What was sent and read back, in words (for the user and the log).
+        seconds: Time spent halting and confirming [s].
+    """
+
+    confirmed: bool
+    detail: str
+    seconds: float = 0.0
 
 
 BackendT = TypeVar("BackendT", bound="Backend")
@@ -128,6 +144,28 @@ class Backend(ABC):
 
     def halt(self) -> None:  # noqa: B027 - optional hook
         """Stop every leg where it is (no-op for a simulation)."""
+
+    def halt_confirmed(self, timeout_s: float = 2.0) -> HaltReport:
+        """Stop every leg (:meth:`halt`) and wait up to ``timeout_s`` [s] for the robot to
+        confirm it; never raises.
+
+        The default knows only that :meth:`halt` returned: a backend that can read
+        back the robot's state overrides it (the serial board and the GCS controller do).
+
+        Args:
+            timeout_s: Longest wait for the confirmation [s].
+
+        Returns:
+            Whether the robot confirmed it stopped, and what happened.
+        """
+        t0 = time.perf_counter()
+        try:
+            self.halt()
+        except Exception as exc:  # a plugin's halt: report, never raise during a shutdown
+            return HaltReport(False, f"halt() failed: {type(exc).__name__}: {exc}",
+                              time.perf_counter() - t0)
+        return HaltReport(False, "halt() returned; this backend does not report whether the "
+                                 "robot stopped", time.perf_counter() - t0)
 
     def close(self) -> None:  # noqa: B027 - optional hook
         """Release the robot (halts it first where that means something)."""

@@ -237,6 +237,11 @@ def build_parser() -> argparse.ArgumentParser:
                         help="stop replying after N commands (still executing them)")
     faults.add_argument("--disconnect-after", type=int, metavar="N",
                         help="close the connection after replying to N commands")
+    faults.add_argument("--stall-after", type=int, metavar="N",
+                        help="after N commands, stall for --stall-ms: nothing read, executed "
+                             "or answered, then every waiting command executed in order")
+    faults.add_argument("--stall-ms", type=float, default=2000.0, metavar="MS",
+                        help="duration of the --stall-after stall [ms] (default 2000)")
     faults.add_argument("--seed", type=int, default=0, help="seed of the faults (default 0)")
     p.add_argument("--line-rate", type=float, default=0.0, metavar="BAUD",
                    help="emulate the transmission time of the lines at this baud rate "
@@ -250,6 +255,7 @@ def _faults_from_args(args: argparse.Namespace) -> FaultConfig:
     return FaultConfig(latency=args.latency / 1e3, jitter=args.jitter / 1e3,
                        drop_rate=args.drop, garble_rate=args.garble,
                        silent_after=args.silent_after, disconnect_after=args.disconnect_after,
+                       stall_after=args.stall_after, stall_s=args.stall_ms / 1e3,
                        seed=args.seed)
 
 

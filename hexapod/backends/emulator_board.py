@@ -349,6 +349,7 @@ class Board:
             return self._err(ErrorCode.SYNTAX, "HLT takes no argument")
         self.setpoints = self.lengths.copy()
         self._set_error(ErrorCode.HALTED)
+        logger.info("HLT: legs halted at %s mm", np.round(self.lengths * 1e3, 3).tolist())
         return "OK"
 
     def _err_query(self, args: list[str], now: float) -> str:

@@ -28,6 +28,11 @@ class FaultConfig:
             for each received command (the board then answers ``ERR 3``) and each reply.
         silent_after: Stop replying (but keep executing commands) after this many commands.
         disconnect_after: Close the connection after replying to this many commands.
+        stall_after: Stall after this many commands: for ``stall_s`` the device neither
+            reads, executes nor answers anything (the commands wait in the link), then
+            executes and answers them all in order (a controller frozen by a busy CPU or
+            a stalled network).
+        stall_s: Duration of the ``stall_after`` stall [s].
         seed: Seed of the fault generator.
 
     Counts of commands start when the faults are set (:meth:`Emulator.set_faults`).
@@ -39,10 +44,12 @@ class FaultConfig:
     garble_rate: float = 0.0
     silent_after: int | None = None
     disconnect_after: int | None = None
+    stall_after: int | None = None
+    stall_s: float = 2.0
     seed: int = 0
 
     def __post_init__(self) -> None:
-        for name in ("latency", "jitter"):
+        for name in ("latency", "jitter", "stall_s"):
             value = getattr(self, name)
             if not (math.isfinite(value) and value >= 0):
                 raise BackendError(f"fault {name} must be >= 0 s, got {value}")
@@ -50,7 +57,7 @@ class FaultConfig:
             value = getattr(self, name)
             if not 0.0 <= value <= 1.0:
                 raise BackendError(f"fault {name} must be a probability, got {value}")
-        for name in ("silent_after", "disconnect_after"):
+        for name in ("silent_after", "disconnect_after", "stall_after"):
             value = getattr(self, name)
             if value is not None and value < 0:
                 raise BackendError(f"fault {name} must be >= 0 commands, got {value}")
@@ -64,6 +71,9 @@ class FaultConfig:
             args += ["--silent-after", str(self.silent_after)]
         if self.disconnect_after is not None:
             args += ["--disconnect-after", str(self.disconnect_after)]
+        if self.stall_after is not None:
+            args += ["--stall-after", str(self.stall_after), "--stall-ms",
+                     repr(self.stall_s * 1e3)]
         return args
 
 
@@ -76,6 +86,7 @@ class FaultState:
     commands: int = 0
     disconnect_pending: bool = False
     disconnect_at: float = math.inf
+    stall_until: float = -math.inf
 
 
 def garble(line: bytes, rng: random.Random, terminator: bytes = b"\n") -> bytes:

@@ -189,12 +189,17 @@ class EmulatorServer(Generic[D]):
             srv.listen(1)
             self._listener = srv
             host, port = srv.getsockname()[:2]
-            self.device = f"{host}:{port}"
-            self.url = f"socket://{host}:{port}" if family == socket.AF_INET else \
-                f"socket://[{host}]:{port}"
+            self.device = f"{host}:{port}" if family == socket.AF_INET else f"[{host}]:{port}"
+        self.url = self.client_url()
         self._opened = True
         logger.info("emulator serving on %s", self.url)
         return self
+
+    def client_url(self) -> str:
+        """The address a client opens (printed by ``hexapod-emulator`` and logged): the
+        pty's path, or ``socket://HOST:PORT`` (a device whose clients name it otherwise
+        overrides this)."""
+        return self.device if self.transport == "pty" else f"socket://{self.device}"
 
     def start(self) -> Self:
         """Open (if needed) and serve in a daemon thread; returns self."""
@@ -271,31 +276,32 @@ class EmulatorServer(Generic[D]):
             timeout = min(timeout, self._replies[0].due - now)
         if trip is not None:
             timeout = min(timeout, trip - now)
+        stalled = self._faults.stall_until > now
+        if stalled:  # frozen: nothing read, executed or sent until the stall ends
+            timeout = self._faults.stall_until - now
         fds: list[int] = [self._wake_r]
-        conn = self._conn_fd()
+        conn = None if stalled else self._conn_fd()
         if conn is not None:
             fds.append(conn)
-        elif self._listener is not None:
+        if self._listener is not None:  # a second client is refused, not left hanging
             fds.append(self._listener.fileno())
         ready, _, _ = select.select(fds, [], [], max(timeout, 0.0))
         if self._wake_r in ready:
             with contextlib.suppress(OSError):
                 os.read(self._wake_r, 64)
         if self._listener is not None and self._listener.fileno() in ready:
-            client, addr = self._listener.accept()
-            client.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
-            client.setblocking(False)
-            self._client = client
-            self._inbuf.clear()
-            self.connections += 1
-            logger.info("emulator: connection from %s", addr)
+            self._accept(self._listener)
         if conn is not None and conn in ready:
             data = self._read(conn)
             if data is None:
                 return self._drop_connection("peer closed the connection")
             self._inbuf += data
+        if stalled and self._faults.stall_until <= time.monotonic():
+            logger.info("emulator: stall over (fault injection), %d bytes waiting",
+                        len(self._inbuf))
+        if self._faults.stall_until <= time.monotonic():
             self._process_input()
-        self._send_due()
+            self._send_due()
         fs = self._faults
         if fs.disconnect_pending and not self._replies and fs.disconnect_at == math.inf:
             # let the host read the last reply: closing a pty master discards unread data
@@ -307,6 +313,23 @@ class EmulatorServer(Generic[D]):
             logger.info("emulator: disconnecting (fault injection)")
             return self._drop_connection("fault injection")
         return True
+
+    def _accept(self, listener: socket.socket) -> None:
+        """Take a new TCP client, or refuse it (closed at once) while one is served: the
+        second client reads end-of-file, never a hanging connection."""
+        client, addr = listener.accept()
+        if self._client is not None:
+            logger.info("emulator: refused a connection from %s (busy: one client at a "
+                        "time)", addr)
+            with contextlib.suppress(OSError):
+                client.close()
+            return
+        client.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
+        client.setblocking(False)
+        self._client = client
+        self._inbuf.clear()
+        self.connections += 1
+        logger.info("emulator: connection from %s", addr)
 
     def _read(self, fd: int) -> bytes | None:
         try:
@@ -340,7 +363,7 @@ class EmulatorServer(Generic[D]):
 
     def _process_input(self) -> None:
         term = self.board.terminator
-        while True:
+        while self._faults.stall_until <= time.monotonic():
             end = self._inbuf.find(term)
             if end < 0:
                 if len(self._inbuf) > self.board.max_line:
@@ -378,6 +401,9 @@ class EmulatorServer(Generic[D]):
             self._queue(data, len(line))
         if f.disconnect_after is not None and fs.commands >= f.disconnect_after:
             fs.disconnect_pending = True
+        if f.stall_after is not None and fs.commands == f.stall_after:
+            fs.stall_until = time.monotonic() + f.stall_s
+            logger.info("emulator: stalling for %.0f ms (fault injection)", f.stall_s * 1e3)
 
     def _queue(self, data: bytes, received: int) -> None:
         f = self._faults.config

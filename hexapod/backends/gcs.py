@@ -42,6 +42,7 @@ from hexapod.backends import gcs_protocol as gp
 from hexapod.backends.base import (
     Backend,
     BackendStep,
+    HaltReport,
     clamp_velocities,
     started,
     step_command,
@@ -124,7 +125,16 @@ class GcsHexapod(Backend):
                     self.velocity * 1e3)
 
     def _connect(self) -> None:
-        self.identity = self._query_text("*IDN?")
+        try:
+            self.identity = self._query_text("*IDN?")
+        except GcsDisconnectedError as exc:
+            raise GcsDisconnectedError(
+                self.url, "the controller closed the connection before answering *IDN?: it "
+                "is busy with another client (a PI controller serves one TCP client at a "
+                "time: close PIMikroMove or the other program) or refused the connection"
+            ) from exc
+        except GcsTimeoutError as exc:
+            raise GcsTimeoutError(self.url, "*IDN?", exc.timeout, exc.received) from exc
         code = gp.parse_int_answer(self._exchange("ERR?", 1)[0], "ERR?")
         if code:
             logger.info("%s: cleared a pending error %d (%s)", self.url, code,
@@ -365,8 +375,58 @@ class GcsHexapod(Backend):
                 if answer.strip() == str(int(gp.GcsError.STOP)).encode():
                     return True
         except (GcsLinkError, GcsReplyError) as exc:
-            logger.warning("%s: could not halt the robot: %s", self.url, exc)
+            logger.warning("%s: HLT sent, not confirmed within %.1f s (%s)", self.url,
+                           self.timeout, exc)
         return False
+
+    def halt_confirmed(self, timeout_s: float = 2.0) -> HaltReport:
+        """Send ``HLT`` with ``ERR?`` and wait up to ``timeout_s`` [s] for error 10 (the
+        controller's confirmation that a stop was commanded and done). Never raises.
+
+        The answers still on their way (after a stall, those of the commands queued
+        before the ``HLT``) are read and skipped, never discarded while waiting; the pair
+        is sent again every ``timeout`` [s] until confirmed (``HLT`` is idempotent), so an
+        ``HLT`` queued during a stall is confirmed as soon as the controller answers.
+
+        Args:
+            timeout_s: Longest wait [s].
+
+        Returns:
+            Confirmed when ``ERR?`` answered 10.
+        """
+        t0 = time.perf_counter()
+        deadline = t0 + timeout_s
+
+        def report(confirmed: bool, detail: str) -> HaltReport:
+            return HaltReport(confirmed, detail, time.perf_counter() - t0)
+
+        if self._closed:
+            return report(False, f"{self.url}: the link is closed, HLT could not be sent")
+        sent = 0
+        stop = str(int(gp.GcsError.STOP)).encode()
+        try:
+            self._link.discard_input()
+            resend = t0
+            while True:
+                now = time.perf_counter()
+                if now >= deadline:
+                    return report(False, f"{self.url}: HLT sent {sent} time(s), not confirmed "
+                                         f"by ERR? (error 10) within {timeout_s:g} s")
+                if now >= resend:
+                    self._link.write(gp.encode("HLT", "ERR?"), "HLT")
+                    sent += 1
+                    resend = now + self.timeout
+                try:
+                    answer = self._link.read_answer("HLT", min(deadline, resend))
+                except GcsTimeoutError:
+                    continue
+                if answer.strip() == stop:
+                    return report(True, f"{self.url}: HLT confirmed (ERR? answered 10, "
+                                        "stopped by command)")
+        except GcsLinkError as exc:
+            return report(False, f"{self.url}: the link failed while halting: {exc}")
+        except BackendError as exc:  # never raises: the caller is shutting down
+            return report(False, f"{self.url}: halting failed: {exc}")
 
     def halt(self) -> None:
         """Stop the platform where it is (``HLT``); never raises if the link is dead."""

@@ -345,6 +345,8 @@ class GcsController:
         gp.parse_axis_list(args)  # HLT [axes]: a hexapod stops as a whole
         self._stop()
         self.error = int(GcsError.STOP)
+        logger.info("HLT: platform halted at %s (error 10 set)",
+                    np.round(self._coords, 6).tolist())
         return ""
 
     def _stp(self, args: list[str], now: float) -> str:
@@ -413,12 +415,10 @@ class GcsEmulator(EmulatorServer[GcsController]):
                          transport=transport, host=host, port=port,
                          allow_remote=allow_remote, line_rate=line_rate)
 
-    def open(self) -> GcsEmulator:
-        """Open the port; :attr:`url` is then what ``--backend gcs:URL`` takes:
-        ``tcp://HOST:PORT``, or ``serial:/dev/pts/N`` on a pseudo-terminal."""
-        super().open()
-        self.url = ("tcp://" if self.transport == "tcp" else "serial:") + self.device
-        return self
+    def client_url(self) -> str:
+        """What ``--backend gcs:URL`` takes (printed and logged): ``tcp://HOST:PORT``, or
+        ``serial:/dev/pts/N`` on a pseudo-terminal."""
+        return ("tcp://" if self.transport == "tcp" else "serial:") + self.device
 
     def coords(self) -> np.ndarray:
         """The controller's coordinates now (x, y, z [m], u, v, w [rad])."""

@@ -28,7 +28,13 @@ import numpy as np
 import serial  # pyserial (absolute import: this module is hexapod.backends.serial)
 
 from hexapod.backends import protocol
-from hexapod.backends.base import Backend, BackendStep, clamp_velocities, step_command
+from hexapod.backends.base import (
+    Backend,
+    BackendStep,
+    HaltReport,
+    clamp_velocities,
+    step_command,
+)
 from hexapod.backends.rate import RateLimiter
 from hexapod.exceptions import (
     BackendError,
@@ -445,8 +451,88 @@ class SerialRobot(Backend):
                 except ProtocolError:
                     continue
         except (SerialLinkError, ProtocolError) as exc:
-            logger.warning("%s: could not halt the robot: %s", self.url, exc)
+            logger.warning("%s: HLT sent, not acknowledged within %.1f s (%s)", self.url,
+                           self.timeout, exc)
         return False
+
+    def halt_confirmed(self, timeout_s: float = 2.0) -> HaltReport:
+        """Send ``HLT`` with ``ERR?`` and wait up to ``timeout_s`` [s] for the board to
+        confirm: ``ERR?`` answering error 10 (halted by command) or 20 (its watchdog,
+        reported first when latched, stopped the legs itself), then ``STA?`` reporting no
+        leg moving. Never raises.
+
+        Replies still on their way (after a stall, those of the commands queued before
+        the ``HLT``) are read and skipped, never flushed away while waiting; the pair is
+        sent again every ``timeout`` [s] until confirmed (``HLT`` is idempotent), so a
+        dropped reply or a latched watchdog error does not hide the halt, and an ``HLT``
+        queued during a stall is confirmed as soon as the board answers again.
+
+        Args:
+            timeout_s: Longest wait [s].
+
+        Returns:
+            Confirmed when the board read back error 10 and then no leg moving.
+        """
+        t0 = time.perf_counter()
+        deadline = t0 + timeout_s
+
+        def report(confirmed: bool, detail: str) -> HaltReport:
+            return HaltReport(confirmed, detail, time.perf_counter() - t0)
+
+        if self._closed:
+            return report(False, f"{self.url}: the link is closed, HLT could not be sent")
+        sent = 0
+        try:
+            self._flush_input()
+            halted = False
+            read_back = ""
+            resend = t0
+            while not halted:
+                now = time.perf_counter()
+                if now >= deadline:
+                    return report(False, f"{self.url}: HLT sent {sent} time(s), not confirmed "
+                                         f"by ERR? (error 10) within {timeout_s:g} s")
+                if now >= resend:
+                    self._write("HLT")
+                    self._write("ERR?")
+                    sent += 1
+                    resend = now + self.timeout
+                try:
+                    line = self._read_line("HLT", min(deadline, resend))
+                    payload = protocol.unframe(line, "ERR?")
+                except (SerialTimeoutError, ProtocolError):
+                    continue
+                if payload.startswith("ERR "):
+                    code, _ = protocol.parse_err(payload, "ERR?")
+                    # 10: our HLT; 20: the watchdog (latched first) stopped the legs itself
+                    halted = code in (protocol.ErrorCode.HALTED, protocol.ErrorCode.WATCHDOG)
+                    text = protocol.ERROR_TEXT.get(protocol.ErrorCode(code), "")
+                    read_back = f"ERR? {code} {text}".strip()
+            moving = False
+            ask = time.perf_counter()
+            while True:  # the board took the HLT: are the legs still?
+                now = time.perf_counter()
+                if now >= deadline:
+                    why = "the legs still moving" if moving else "STA? unanswered"
+                    return report(False, f"{self.url}: HLT sent, {read_back}, but {why} "
+                                         f"after {timeout_s:g} s")
+                if now >= ask:
+                    self._write("STA?")
+                    ask = now + self.timeout
+                try:
+                    st = protocol.parse_sta(protocol.unframe(
+                        self._read_line("STA?", min(deadline, ask)), "STA?"))
+                except (SerialTimeoutError, ProtocolError, RobotFaultError):
+                    continue  # a stale reply (an earlier ERR?'s), or none yet
+                if not st.moving:
+                    return report(True, f"{self.url}: HLT sent, {read_back}, STA? moving=0")
+                moving = True
+                time.sleep(0.005)
+                ask = time.perf_counter()
+        except SerialLinkError as exc:
+            return report(False, f"{self.url}: the link failed while halting: {exc}")
+        except BackendError as exc:  # never raises: the caller is shutting down
+            return report(False, f"{self.url}: halting failed: {exc}")
 
     def halt(self) -> None:
         """Stop every leg where it is (``HLT``); never raises if the link is dead."""

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from hexapod.backends.base import Backend, BackendStep, clamp_velocities
+from hexapod.backends.base import Backend, BackendStep, HaltReport, clamp_velocities
 from hexapod.exceptions import ShapeError, StrokeLimitError
 from hexapod.geometry import HexapodGeometry
 
@@ -53,6 +53,10 @@ class SimulatedRobot(Backend):
         vc, clamped = clamp_velocities(self._q, v, dt, self.stroke, self.max_speed)
         self._q = np.clip(self._q + vc * dt, *self.stroke)
         return BackendStep(self.measured_lengths(), vc, clamped)
+
+    def halt_confirmed(self, timeout_s: float = 2.0) -> HaltReport:
+        """A simulated robot moves only when stepped: it is stopped."""
+        return HaltReport(True, "simulated robot: stopped")
 
     def measured_lengths(self) -> np.ndarray:
         """Encoder reading: true lengths plus the joint offsets [m]."""

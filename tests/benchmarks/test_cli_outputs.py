@@ -168,6 +168,11 @@ NEVER_REPLACED: dict[tuple[str, str], list[str]] = {
     ("servo", "--log"): ["servo", "--backend", "emulator", "--goal", "{tmp}/none.toml",
                          "--log", "{out}"],
 }
+#: Directories with a rule of their own: a new or empty directory only, never replaced.
+NEVER_REPLACED_DIRS: dict[tuple[str, str], list[str]] = {
+    ("servo", "--out"): ["servo", "--backend", "emulator", "--goal", "{tmp}/none.toml",
+                         "--out", "{out}"],
+}
 #: Directories: the user's file placed inside ({out}/NAME) and whether --overwrite
 #: replaces it (True) or keeps it beside the outputs (False).
 DIR_CASES: dict[tuple[str, str], tuple[list[str], str, bool]] = {
@@ -199,9 +204,10 @@ def test_every_output_option_of_every_subcommand_is_tagged_and_exercised() -> No
     files = {k for k, kind in outputs.items() if kind == "file"}
     dirs = {k for k, kind in outputs.items() if kind == "directory"}
     assert files == set(FILE_CASES) | set(NEVER_REPLACED), "an output without its test"
-    assert dirs == set(DIR_CASES), "an output directory without its test"
+    assert dirs == set(DIR_CASES) | set(NEVER_REPLACED_DIRS), \
+        "an output directory without its test"
     parsers = _subcommands()
-    for cmd, option in (files | dirs) - set(NEVER_REPLACED):
+    for cmd, option in (files | dirs) - set(NEVER_REPLACED) - set(NEVER_REPLACED_DIRS):
         flags = {s for a in parsers[cmd]._actions for s in a.option_strings}
         assert "--overwrite" in flags, f"{cmd} {option}: no --overwrite"
 
@@ -242,6 +248,19 @@ def test_servo_outputs_are_never_replaced(
     assert cli_main(_argv(NEVER_REPLACED[key], out=str(out), tmp=str(tmp_path))) == REFUSED
     assert f"{out}: already exists" in capsys.readouterr().err
     assert out.read_text() == "my notes\n"
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("key", sorted(NEVER_REPLACED_DIRS))
+def test_servo_session_directories_are_never_reused(
+        key: tuple[str, str], tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    out = tmp_path / "mine"
+    out.mkdir()
+    (out / "notes.txt").write_text("my notes\n")
+    assert cli_main(_argv(NEVER_REPLACED_DIRS[key], out=str(out), tmp=str(tmp_path))) == REFUSED
+    assert f"{out}: is not empty" in capsys.readouterr().err
+    assert [p.name for p in out.iterdir()] == ["notes.txt"]
+    assert (out / "notes.txt").read_text() == "my notes\n"
 
 
 @pytest.mark.slow

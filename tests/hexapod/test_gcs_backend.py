@@ -321,3 +321,29 @@ def test_over_a_serial_link(geometry: HexapodGeometry) -> None:
         r.close()
     with pytest.raises(GcsLinkError, match="cannot open"):
         GcsHexapod("serial:/nonexistent/port", deltalab())
+
+
+@pytest.mark.realtime
+def test_halt_confirmed_reads_error_10(robot: GcsHexapod, emulator: GcsEmulator) -> None:
+    robot.step(np.full(6, 0.005), 0.02)
+    report = robot.halt_confirmed(2.0)
+    assert report.confirmed and "ERR? answered 10" in report.detail, report
+    assert not emulator.moving()
+
+
+@pytest.mark.realtime
+def test_halt_queued_during_a_stall_is_confirmed(robot: GcsHexapod,
+                                                 emulator: GcsEmulator) -> None:
+    emulator.set_faults(FaultConfig(stall_after=1, stall_s=0.6))
+    robot._link.write(gp.encode("POS?"), "POS?")  # the command that starts the stall
+    report = robot.halt_confirmed(2.0)
+    assert report.confirmed, report
+    assert 0.4 < report.seconds < 1.5
+
+
+@pytest.mark.realtime
+def test_a_second_client_is_told_the_controller_is_busy(
+        robot: GcsHexapod, emulator: GcsEmulator, geometry: HexapodGeometry) -> None:
+    with pytest.raises(GcsDisconnectedError, match="busy with another client"):
+        GcsHexapod(emulator.url, geometry)
+    assert robot.measured_lengths().shape == (6,)  # the first client is still served

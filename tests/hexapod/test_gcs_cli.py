@@ -69,12 +69,16 @@ def test_ctrl_c_on_servo_halts_the_platform(controller: str, tmp_path: Path) -> 
     # process exits if nothing halted it
     spec = f"gcs:tcp://{controller}?velocity=0.1"
     code, out, err = interrupt_servo(
-        ["--backend", spec, "--goal", str(goal), "-o", "gain=3"], log, ROOT, ENV, 60)
+        ["--backend", spec, "--goal", str(goal), "-o", "gain=3", "--max-missed-consecutive",
+         "0", "--max-missed-fraction", "1"], log, ROOT, ENV, 60)
     assert code == 130, (out, err)
-    assert "interrupted after" in out and "the robot was halted" in out
+    assert "stopped: SIGINT received (exit 130" in out
+    assert "robot: halted and confirmed stopped" in out and "HLT confirmed" in out
     assert "Traceback" not in err
-    rows = [json.loads(x) for x in log.read_text().splitlines()]
+    records = [json.loads(x) for x in log.read_text().splitlines()]
+    rows = [r for r in records if "step" in r]
     assert rows[-1]["rtt_ms"] > 0
+    assert records[-1]["final"] is True and records[-1]["halt_confirmed"] is True
     # a second connection: the platform stands still, on target, error 10 already read
     first, ont, err_code = _query(controller, "POS?", "ONT?", "ERR?")
     time.sleep(0.3)

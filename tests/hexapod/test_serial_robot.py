@@ -371,3 +371,39 @@ def test_emulator_in_a_child_process(geometry: HexapodGeometry) -> None:
         assert min(r.exchanges) >= 0.002
         np.testing.assert_allclose(q, Q0 + 5 * 0.01 * DT, atol=5e-6)
     assert not proc.running and proc.proc.returncode == 0
+
+
+def test_halt_confirmed_reads_back_the_halt_and_the_still_legs(
+        robot: SerialRobot, emulator: Emulator) -> None:
+    robot.step(np.full(6, 0.01), 0.02)
+    report = robot.halt_confirmed(2.0)
+    assert report.confirmed, report
+    assert "ERR? 10 halted by command" in report.detail and "STA? moving=0" in report.detail
+    assert not emulator.status().moving
+
+
+def test_halt_queued_during_a_stall_is_confirmed_when_it_ends(
+        robot: SerialRobot, emulator: Emulator) -> None:
+    """The board freezes for 0.6 s: the HLT waits in the link, runs when the stall ends,
+    and is confirmed (the replies of the commands before it are read and skipped)."""
+    emulator.set_faults(FaultConfig(stall_after=1, stall_s=0.6))
+    robot._write("POS?")  # the command that starts the stall
+    t0 = time.perf_counter()
+    report = robot.halt_confirmed(2.0)
+    assert report.confirmed, report
+    assert 0.4 < time.perf_counter() - t0 < 1.5
+
+
+def test_halt_not_confirmed_on_a_silent_board_says_so(
+        robot: SerialRobot, emulator: Emulator) -> None:
+    emulator.set_faults(FaultConfig(silent_after=0))
+    report = robot.halt_confirmed(0.5)
+    assert not report.confirmed
+    assert "not confirmed by ERR? (error 10) within 0.5 s" in report.detail
+    assert 0.45 < report.seconds < 1.0
+
+
+def test_halt_confirmed_after_the_link_closed_says_so(robot: SerialRobot) -> None:
+    robot.close()
+    report = robot.halt_confirmed(1.0)
+    assert not report.confirmed and "the link is closed" in report.detail

@@ -21,7 +21,7 @@ def interrupt_servo(args: list[str], log: Path, cwd: Path, env: dict[str, str],
     try:
         deadline = time.monotonic() + wait_s
         while time.monotonic() < deadline and (
-                not log.exists() or len(log.read_text().splitlines()) < 10):
+                not log.exists() or log.read_text().count('"step"') < 10):
             assert proc.poll() is None, proc.communicate()
             time.sleep(0.05)
         proc.send_signal(signal.SIGINT)

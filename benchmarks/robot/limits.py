@@ -1,0 +1,207 @@
+"""The limits a lab sets on a servo session, and the deadline policy.
+
+- :class:`SessionLimits`: leg speed, leg travel from the start lengths, session time,
+  period budget, missed-deadline policy (``--max-speed-mm-s``, ``--max-travel-mm``,
+  ``--max-time-s``, ``--max-steps``, ``--max-missed-consecutive``,
+  ``--max-missed-fraction``);
+- :class:`LimitedRobot`: the robot as the loop sees it: every command capped to the
+  speed limit and refused beyond the travel limit *before* it is sent, the link time of
+  every period measured;
+- :class:`DeadlinePolicy`: missed periods counted, warned at most once a second, and the
+  session stopped after too many in a row or too large a fraction of a window.
+
+Reaching a limit raises :class:`~benchmarks.robot.exits.SessionStop` with
+:attr:`~benchmarks.robot.exits.ServoExit.LIMIT` and says which limit; the session's one
+shutdown then halts the robot. SI units inside (m, m/s, s).
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from collections import deque
+from collections.abc import Callable
+from dataclasses import dataclass, replace
+from typing import Any
+
+import numpy as np
+
+from benchmarks.robot.exits import ServoExit, SessionStop
+from hexapod.actuation import Actuation
+
+__all__ = [
+    "DEFAULT_MAX_MISSED_CONSECUTIVE",
+    "DEFAULT_MAX_MISSED_FRACTION",
+    "DEFAULT_MAX_TIME_S",
+    "MISSED_WINDOW",
+    "DeadlinePolicy",
+    "LimitedRobot",
+    "SessionLimits",
+]
+
+#: Default ``--max-time-s`` [s]: a session never runs unattended for ever.
+DEFAULT_MAX_TIME_S = 60.0
+#: Default ``--max-missed-consecutive``: this many late periods in a row stop the session.
+DEFAULT_MAX_MISSED_CONSECUTIVE = 10
+#: Default ``--max-missed-fraction``: more than this fraction of the last
+#: :data:`MISSED_WINDOW` periods late stops the session.
+DEFAULT_MAX_MISSED_FRACTION = 0.25
+#: The window of ``--max-missed-fraction`` [periods].
+MISSED_WINDOW = 50
+#: Missed-period warnings are printed at most once every this many seconds.
+WARN_PERIOD_S = 1.0
+
+
+@dataclass(frozen=True)
+class SessionLimits:
+    """What a session may do before it is stopped (exit 3, :attr:`ServoExit.LIMIT`).
+
+    Attributes:
+        max_speed: Leg speed limit [m/s] (at most the robot file's ``max_speed_mm_s``).
+        max_travel: Largest leg travel from the start lengths [m] (None: the stroke).
+        max_time: Longest session [s] (from the first period).
+        max_steps: Period budget (None: none).
+        max_missed_consecutive: Late periods in a row that stop the session (0: never).
+        max_missed_fraction: Fraction of the last :data:`MISSED_WINDOW` periods late
+            that stops the session (1: never).
+    """
+
+    max_speed: float
+    max_travel: float | None = None
+    max_time: float = DEFAULT_MAX_TIME_S
+    max_steps: int | None = None
+    max_missed_consecutive: int = DEFAULT_MAX_MISSED_CONSECUTIVE
+    max_missed_fraction: float = DEFAULT_MAX_MISSED_FRACTION
+
+    def to_json(self) -> dict[str, Any]:
+        """The limits in the user's units (mm, mm/s, s), for the session record."""
+        return {"max_speed_mm_s": self.max_speed * 1e3,
+                "max_travel_mm": None if self.max_travel is None else self.max_travel * 1e3,
+                "max_time_s": self.max_time if math.isfinite(self.max_time) else None,
+                "max_steps": self.max_steps,
+                "max_missed_consecutive": self.max_missed_consecutive,
+                "max_missed_fraction": self.max_missed_fraction,
+                "missed_window": MISSED_WINDOW}
+
+
+class LimitedRobot:
+    """A connected backend behind the session's limits (what the loop's plant drives).
+
+    Every period's command is capped to :attr:`SessionLimits.max_speed` (the capped legs
+    are reported clamped) and, when a leg would leave the travel box around the start
+    lengths, refused before anything is sent (:class:`SessionStop`, exit 3). The link
+    time of each period is the backend's ``round_trip_s``. Other attributes are the
+    backend's.
+
+    Args:
+        robot: The connected backend.
+        limits: The session's limits.
+        start: (6,) measured lengths at the start [m].
+    """
+
+    def __init__(self, robot: Any, limits: SessionLimits, start: np.ndarray) -> None:
+        self.robot = robot
+        self.limits = limits
+        self.start = np.asarray(start, float).copy()
+        self.q = self.start.copy()
+        #: A command was sent (the robot may have moved).
+        self.moved = False
+        #: The last applied velocities [m/s] (zeros before the first period).
+        self.last_applied = np.zeros(6)
+        #: The last period's dt [s].
+        self.last_dt = 0.0
+
+    def __getattr__(self, name: str) -> Any:
+        return getattr(self.robot, name)
+
+    def apply(self, command: np.ndarray, actuation: Actuation, dt: float,
+              controller: str = "controller") -> Any:
+        """Cap, check the travel, then apply through the backend.
+
+        Raises:
+            SessionStop: The command would take a leg beyond ``--max-travel-mm``.
+        """
+        v = np.asarray(command, float)
+        capped = np.zeros(6, dtype=bool)
+        if actuation is Actuation.VELOCITY:
+            cap = self.limits.max_speed
+            capped = np.abs(v) > cap
+            v = np.clip(v, -cap, cap)
+            if self.limits.max_travel is not None:
+                travel = np.abs(self.q + v * dt - self.start)
+                leg = int(np.argmax(travel))
+                if travel[leg] > self.limits.max_travel + 1e-9:
+                    raise SessionStop(ServoExit.LIMIT, (
+                        f"--max-travel-mm {self.limits.max_travel * 1e3:g} reached: leg "
+                        f"{leg + 1} at {self.q[leg] * 1e3:.3f} mm would move "
+                        f"{travel[leg] * 1e3:.3f} mm from its start length "
+                        f"{self.start[leg] * 1e3:.3f} mm (the command was not sent)"))
+        self.moved = True
+        # what was sent, an upper bound until the backend says what it applied
+        self.last_dt = dt
+        self.last_applied = v.copy() if actuation is Actuation.VELOCITY else np.zeros(6)
+        bs = self.robot.apply(v, actuation, dt, controller)
+        self.q = np.asarray(bs.lengths, float).copy()
+        self.last_applied = np.asarray(bs.applied_velocities, float).copy()
+        if capped.any():
+            bs = replace(bs, clamped=np.asarray(bs.clamped, bool) | capped)
+        return bs
+
+
+class DeadlinePolicy:
+    """Missed periods: counted, warned at most once a second, and fatal after
+    ``max_missed_consecutive`` in a row or more than ``max_missed_fraction`` of the last
+    :data:`MISSED_WINDOW` periods.
+
+    Args:
+        limits: The session's limits.
+        dt: The control period [s].
+        warn: Shows a warning line.
+    """
+
+    def __init__(self, limits: SessionLimits, dt: float, warn: Callable[[str], None]) -> None:
+        self.limits, self.dt, self.warn = limits, dt, warn
+        self.consecutive = 0
+        self.total = 0
+        self.window: deque[bool] = deque(maxlen=MISSED_WINDOW)
+        self._last_warn = -math.inf
+        self._since_warn = 0
+
+    def update(self, step: int, missed: bool, compute_s: float, link_s: float) -> None:
+        """Account one period.
+
+        Args:
+            step: The period index.
+            missed: The period was late.
+            compute_s: Time spent in the camera and the controller this period [s].
+            link_s: Time spent communicating with the robot this period [s].
+
+        Raises:
+            SessionStop: Too many missed periods (exit 3).
+        """
+        self.window.append(missed)
+        if not missed:
+            self.consecutive = 0
+            return
+        self.total += 1
+        self.consecutive += 1
+        self._since_warn += 1
+        now = time.perf_counter()
+        why = (f"compute {compute_s * 1e3:.1f} ms + link {link_s * 1e3:.1f} ms for a "
+               f"{self.dt * 1e3:g} ms period")
+        if now - self._last_warn >= WARN_PERIOD_S:
+            self.warn(f"warning: {self._since_warn} late period(s) since the last warning, "
+                      f"{self.total} of {step + 1} so far (last: {why})")
+            self._last_warn, self._since_warn = now, 0
+        n = self.limits.max_missed_consecutive
+        if n > 0 and self.consecutive >= n:
+            raise SessionStop(ServoExit.LIMIT, (
+                f"--max-missed-consecutive {n} reached: {self.consecutive} periods in a row "
+                f"missed their {self.dt * 1e3:g} ms deadline (last: {why})"))
+        f = self.limits.max_missed_fraction
+        late = sum(self.window)
+        if (f < 1 and len(self.window) == MISSED_WINDOW
+                and late > f * MISSED_WINDOW):
+            raise SessionStop(ServoExit.LIMIT, (
+                f"--max-missed-fraction {f:g} reached: {late} of the last {MISSED_WINDOW} "
+                f"periods missed their {self.dt * 1e3:g} ms deadline (last: {why})"))

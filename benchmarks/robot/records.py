@@ -1,0 +1,153 @@
+"""The record of every servo session: one JSON Lines file, written whatever happens.
+
+By default a session writes ``servo-runs/<UTC timestamp>-<controller>/servo.jsonl`` (a new
+directory, never an existing one); ``--out DIR`` names the directory (absent or empty);
+``--log FILE.jsonl`` names the file itself (an earlier servo log is replaced, any other
+file refused). The file holds (``docs/servo.md``, "The session record"):
+
+1. a header ``{"servo_session": 1, ...}``: the command, backend, camera (file and pose),
+   controller, goal, period and limits;
+2. one line per period (:meth:`~benchmarks.robot.loop.PeriodStatus.to_json`), flushed
+   each period (readable live, complete after a crash);
+3. the final record ``{"final": true, "exit_code", "reason", "exception",
+   "halt_confirmed", "missed_periods", ...}``, written on every exit path once the file
+   exists.
+"""
+
+from __future__ import annotations
+
+import datetime as dt
+import json
+import math
+from pathlib import Path
+from typing import IO, Any
+
+from hexapod.exceptions import OutputError
+from hexapod.outputs import check_name, check_replace
+
+__all__ = ["LOG_NAME", "SESSIONS_DIR", "SessionLog", "is_servo_log", "session_path"]
+
+#: Where sessions are recorded by default (relative to the working directory).
+SESSIONS_DIR = "servo-runs"
+#: The log's name in a session directory.
+LOG_NAME = "servo.jsonl"
+#: Version of the header.
+FORMAT = 1
+
+
+def is_servo_log(path: Path) -> bool:
+    """A log ``servo`` wrote: its first line is a session header, or (older logs) a
+    period (``step``, ``t_s``)."""
+    try:
+        with path.open(encoding="utf-8") as f:
+            first = json.loads(f.readline())
+    except (OSError, ValueError):
+        return False
+    return isinstance(first, dict) and ("servo_session" in first
+                                        or {"step", "t_s"} <= set(first))
+
+
+def _safe(text: str) -> str:
+    keep = "".join(c if c.isalnum() or c in "-_." else "-" for c in text)
+    return keep.strip("-.") or "controller"
+
+
+def session_path(out: str | None, log: str | None, controller: str,
+                 now: dt.datetime | None = None) -> Path:
+    """Where the session's log goes (checked; nothing is created).
+
+    Args:
+        out: ``--out DIR`` (absent or empty), or None.
+        log: ``--log FILE`` (an earlier servo log is replaced, any other file refused),
+            or None.
+        controller: The controller's name (in the default directory's name).
+        now: The time of the default directory's name (default: now, UTC).
+
+    Returns:
+        The log file's path.
+
+    Raises:
+        OutputError: ``--out`` is a file or a directory that is not empty, ``--log`` a
+            file the project did not write, both given.
+    """
+    if out is not None and log is not None:
+        raise OutputError(str(log), "give --log FILE or --out DIR, not both")
+    if log is not None:
+        check_replace(log, ours=is_servo_log, how="choose another --log, or delete it")
+        return Path(log)
+    if out is not None:
+        d = Path(out)
+        if d.exists() and (not d.is_dir() or any(d.iterdir())):
+            what = "is not a directory" if not d.is_dir() else "is not empty"
+            raise OutputError(str(d), f"{what}; --out takes a new or empty directory (a "
+                                      "session never replaces a record)")
+        return d / LOG_NAME
+    stamp = (now or dt.datetime.now(dt.UTC)).strftime("%Y%m%dT%H%M%SZ")
+    name = f"{stamp}-{_safe(controller)}"
+    check_name(name, "session directory")
+    base = Path(SESSIONS_DIR) / name
+    d, n = base, 1
+    while d.exists():
+        n += 1
+        d = base.with_name(f"{name}-{n}")
+    return d / LOG_NAME
+
+
+def _clean(value: Any) -> Any:
+    """JSON-safe: NaN and infinities as null."""
+    if isinstance(value, float) and not math.isfinite(value):
+        return None
+    if isinstance(value, dict):
+        return {k: _clean(v) for k, v in value.items()}
+    if isinstance(value, list | tuple):
+        return [_clean(v) for v in value]
+    return value
+
+
+class SessionLog:
+    """The session's JSON Lines record (created by :meth:`open`, closed by :meth:`final`).
+
+    Args:
+        path: The log file (its directory is created).
+    """
+
+    def __init__(self, path: Path) -> None:
+        self.path = Path(path)
+        self._f: IO[str] | None = None
+        self.periods = 0
+        self.finished = False
+
+    def open(self, header: dict[str, Any]) -> SessionLog:
+        """Create the file and write the header.
+
+        Raises:
+            OutputError: The directory or file cannot be created.
+        """
+        try:
+            self.path.parent.mkdir(parents=True, exist_ok=True)
+            self._f = self.path.open("w", encoding="utf-8")
+        except OSError as exc:
+            raise OutputError(str(self.path), f"cannot be written: {exc}") from None
+        self._write({"servo_session": FORMAT, **header})
+        return self
+
+    def _write(self, record: dict[str, Any]) -> None:
+        if self._f is None:
+            return
+        self._f.write(json.dumps(_clean(record)) + "\n")
+        self._f.flush()  # readable live (tail -f), and complete after a crash
+
+    def period(self, record: dict[str, Any]) -> None:
+        """One period's line."""
+        self.periods += 1
+        self._write(record)
+
+    def final(self, record: dict[str, Any]) -> None:
+        """The final record, then close (idempotent)."""
+        if self.finished:
+            return
+        self.finished = True
+        self._write({"final": True, **record})
+        if self._f is not None:
+            self._f.close()
+            self._f = None

@@ -1,0 +1,368 @@
+"""One servo session from the connection to the final record, with one way out.
+
+:func:`run_session` opens the camera and the robot, shows the banner (and with
+``--confirm`` the planned move), runs :func:`~benchmarks.robot.loop.servo_loop` under the
+session's limits and signal handlers, and whatever ends it (convergence, a limit, the end
+of a recording, a signal, a lost link, an exception anywhere) goes through the same
+shutdown: the robot's stop commanded and its confirmation awaited
+(:meth:`~hexapod.backends.base.Backend.halt_confirmed`, ``--halt-timeout-s``), the link
+closed, what happened and whether the robot is confirmed stopped printed, the final
+record written, and the exit code (:class:`~benchmarks.robot.exits.ServoExit`) returned.
+"""
+
+from __future__ import annotations
+
+import argparse
+import datetime as dt
+import math
+import sys
+import traceback
+from collections.abc import Sequence
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from benchmarks.exceptions import BenchmarkError
+from benchmarks.robot.exits import ServoExit, SessionStop, exit_for_signal
+from benchmarks.robot.limits import LimitedRobot, SessionLimits
+from benchmarks.robot.loop import PeriodCheck, servo_loop
+from benchmarks.robot.records import SessionLog, session_path
+from benchmarks.robot.shutdown import SignalGuard
+from benchmarks.robot.status import PeriodStatus, ServoResult, StatusLine
+from hexapod.backends.base import HaltReport
+from hexapod.exceptions import BackendError, LinkError, ProtocolError, RobotFaultError
+from hexapod.geometry import HexapodGeometry
+
+__all__ = ["SessionInputs", "run_session", "session_limits"]
+
+#: Default ``--halt-timeout-s`` [s]: how long the shutdown waits for the robot to
+#: confirm its stop (longer than a 2 s stall of the link plus the time to detect it).
+DEFAULT_HALT_TIMEOUT_S = 3.0
+#: Default ``--retries``: an exchange whose reply is lost is sent again this many times.
+DEFAULT_RETRIES = 1
+
+
+@dataclass
+class SessionInputs:
+    """What :func:`run_session` needs, checked before anything is opened.
+
+    Attributes:
+        geometry: The nominal robot.
+        camera: The camera model.
+        goal_file: The goal file (:class:`~benchmarks.robot.goals.ServoGoal`).
+        goal: The controller's goal.
+        controller: The reset controller.
+        start: Emulator only: initial leg lengths [m].
+    """
+
+    geometry: HexapodGeometry
+    camera: Any
+    goal_file: Any
+    goal: Any
+    controller: Any
+    start: np.ndarray | None
+
+
+def session_limits(args: argparse.Namespace, geometry: HexapodGeometry,
+                   warn: Any) -> SessionLimits:
+    """The limits of the command line, the robot file's speed limit as the ceiling.
+
+    Raises:
+        BenchmarkError: A limit that is not a positive number.
+    """
+    ceiling = geometry.max_speed
+    cap = ceiling
+    if args.max_speed_mm_s is not None:
+        if not args.max_speed_mm_s > 0:
+            raise BenchmarkError(f"--max-speed-mm-s must be positive, got {args.max_speed_mm_s}")
+        cap = args.max_speed_mm_s * 1e-3
+        if cap > ceiling:
+            warn(f"warning: --max-speed-mm-s {args.max_speed_mm_s:g} is above the robot file's "
+                 f"max_speed_mm_s {ceiling * 1e3:g}: capped to {ceiling * 1e3:g} mm/s")
+            cap = ceiling
+    if args.max_travel_mm is not None and not args.max_travel_mm > 0:
+        raise BenchmarkError(f"--max-travel-mm must be positive, got {args.max_travel_mm}")
+    if not args.max_time_s > 0:
+        raise BenchmarkError(f"--max-time-s must be positive, got {args.max_time_s}")
+    if args.max_missed_consecutive < 0:
+        raise BenchmarkError(f"--max-missed-consecutive must be >= 0 (0: never), got "
+                             f"{args.max_missed_consecutive}")
+    if not 0 <= args.max_missed_fraction <= 1:
+        raise BenchmarkError(f"--max-missed-fraction must be in [0, 1] (1: never), got "
+                             f"{args.max_missed_fraction}")
+    if not (math.isfinite(args.halt_timeout_s) and args.halt_timeout_s > 0):
+        raise BenchmarkError(f"--halt-timeout-s must be positive, got {args.halt_timeout_s}")
+    if args.retries < 0:
+        raise BenchmarkError(f"--retries must be >= 0, got {args.retries}")
+    return SessionLimits(
+        max_speed=cap,
+        max_travel=None if args.max_travel_mm is None else args.max_travel_mm * 1e-3,
+        max_time=float(args.max_time_s), max_steps=args.max_steps,
+        max_missed_consecutive=args.max_missed_consecutive,
+        max_missed_fraction=float(args.max_missed_fraction))
+
+
+def _header(args: argparse.Namespace, inputs: SessionInputs,
+            limits: SessionLimits) -> dict[str, Any]:
+    return {"started": dt.datetime.now(dt.UTC).isoformat(timespec="seconds"),
+            "argv": sys.argv[1:], "backend": args.backend, "camera": args.camera,
+            "camera_file": args.camera_file, "camera_pose": args.camera_pose,
+            "controller": args.controller, "options": list(args.option),
+            "goal": str(inputs.goal_file.source),
+            "goal_lengths_mm": [round(float(x) * 1e3, 4) for x in inputs.goal_file.lengths],
+            "geometry": args.geometry, "dt_s": args.dt, "limits": limits.to_json(),
+            "halt_timeout_s": args.halt_timeout_s, "retries": args.retries}
+
+
+def _plan(args: argparse.Namespace, q0: np.ndarray, goal_q: np.ndarray,
+          limits: SessionLimits, say: Any) -> None:
+    """The travel limit against the goal, and ``--confirm``.
+
+    Raises:
+        SessionStop: Refused before moving (exit 2).
+    """
+    travel = np.abs(goal_q - q0)
+    leg = int(np.argmax(travel))
+    if limits.max_travel is not None and travel[leg] > limits.max_travel:
+        raise SessionStop(ServoExit.REFUSED, (
+            f"--max-travel-mm {limits.max_travel * 1e3:g}: the goal is {travel[leg] * 1e3:.3f} "
+            f"mm away on leg {leg + 1} ({q0[leg] * 1e3:.3f} -> {goal_q[leg] * 1e3:.3f} mm); "
+            "refused before moving"))
+    if not args.confirm:
+        return
+    mm = np.round(q0 * 1e3, 3).tolist()
+    gmm = np.round(goal_q * 1e3, 3).tolist()
+    cap = limits.max_speed
+    say(f"planned move: start {mm} mm -> goal {gmm} mm; largest leg travel "
+        f"{travel[leg] * 1e3:.3f} mm (leg {leg + 1}), at least {travel[leg] / cap:.2f} s at "
+        f"{cap * 1e3:g} mm/s; limits: travel "
+        f"{'none' if limits.max_travel is None else f'{limits.max_travel * 1e3:g} mm'}, "
+        f"time {limits.max_time:g} s")
+    if not sys.stdin.isatty():
+        raise SessionStop(ServoExit.REFUSED, "--confirm asks y/N on a terminal and stdin is "
+                                             "not one: refused before moving")
+    try:
+        answer = input("move the robot? [y/N] ")
+    except EOFError:
+        answer = ""
+    if answer.strip().lower() not in ("y", "yes"):
+        raise SessionStop(ServoExit.REFUSED, "the planned move was not confirmed: refused "
+                                             "before moving")
+
+
+def _classify(exc: BaseException, moved: bool) -> tuple[ServoExit, str]:
+    """The exit code and reason of what ended the session."""
+    from controllers.exceptions import ControllerError
+    from hexapod.exceptions import HexapodError
+    from vision.exceptions import VisionError
+
+    if isinstance(exc, SessionStop):
+        return exc.code, exc.reason
+    if isinstance(exc, KeyboardInterrupt):
+        return ServoExit.INTERRUPTED, "SIGINT received"
+    if isinstance(exc, LinkError | ProtocolError | RobotFaultError):
+        if moved:
+            return ServoExit.LINK, f"the link to the robot failed during motion: {exc}"
+        return ServoExit.REFUSED, str(exc)
+    if isinstance(exc, BenchmarkError | HexapodError | ControllerError | VisionError):
+        if not moved:
+            return ServoExit.REFUSED, str(exc)
+        if isinstance(exc, BackendError):
+            return ServoExit.LINK, f"the robot failed during motion: {exc}"
+    return ServoExit.INTERNAL, f"internal error: {type(exc).__name__}: {exc}"
+
+
+def _halt(robot: Any, timeout_s: float) -> HaltReport:
+    """The robot's stop and its confirmation; a plugin without
+    :meth:`~hexapod.backends.base.Backend.halt_confirmed`, or one that raises, is
+    reported, never raised."""
+    confirm = getattr(robot, "halt_confirmed", None)
+    try:
+        if confirm is not None:
+            report: HaltReport = confirm(timeout_s)
+            return report
+        robot.halt()
+        return HaltReport(False, "halt() returned; this backend does not report whether the "
+                                 "robot stopped")
+    except Exception as exc:
+        return HaltReport(False, f"halting failed: {type(exc).__name__}: {exc}")
+
+
+def sig_name(signum: int) -> str:
+    """A signal's name (``SIGHUP``)."""
+    import signal
+
+    return signal.Signals(signum).name
+
+
+def _last_move(limited: LimitedRobot | None) -> str:
+    if limited is None or not limited.moved:
+        return "no motion was commanded"
+    v = float(np.max(np.abs(limited.last_applied)))
+    return (f"the last MOV asked for at most {v * limited.last_dt * 1e3:.3f} mm of leg travel "
+            f"beyond the lengths measured before it ({v * 1e3:.1f} mm/s over one "
+            f"{limited.last_dt * 1e3:g} ms period)")
+
+
+def _figures(result: ServoResult) -> dict[str, Any]:
+    def pct(values: list[float], q: float) -> float | None:
+        return float(np.percentile(np.array(values) * 1e3, q)) if values else None
+
+    last: PeriodStatus | None = result.last
+    return {"periods": result.steps, "missed_periods": result.missed,
+            "lost_frames": result.lost_frames, "refused_commands": result.refused,
+            "wall_s": round(result.wall_s, 6),
+            "rtt_median_ms": pct(result.rtts, 50), "rtt_p99_ms": pct(result.rtts, 99),
+            "compute_median_ms": pct(result.compute, 50),
+            "compute_p99_ms": pct(result.compute, 99),
+            "final_lengths_mm": None if last is None else [
+                round(float(x) * 1e3, 4) for x in last.lengths],
+            "final_leg_error_mm": None if last is None else last.leg_error * 1e3,
+            "final_feature_error": None if last is None else last.feature_error}
+
+
+def _outcome(result: ServoResult, args: argparse.Namespace) -> tuple[ServoExit, str]:
+    if result.outcome == "converged":
+        return ServoExit.CONVERGED, "converged"
+    if result.outcome == "camera ended":
+        return ServoExit.LIMIT, f"the recording {args.camera} ended after {result.steps} periods"
+    if result.outcome == "interrupted":
+        return ServoExit.INTERRUPTED, "SIGINT received"
+    if result.stop is not None:
+        return result.stop.code, result.stop.reason
+    return ServoExit.LIMIT, f"--max-steps {args.max_steps} reached"
+
+
+def run_session(args: argparse.Namespace, inputs: SessionInputs, status: StatusLine,
+                on_pose: Any = None, checks: Sequence[PeriodCheck] = ()) -> int:
+    """Run one session (see the module docstring); returns the exit code.
+
+    Args:
+        args: The parsed options of ``hexapod-bench servo``.
+        inputs: What was checked before anything is opened.
+        status: The status line.
+        on_pose: The viewer's hook (``--viz``), or None.
+        checks: Per-period safety checks (:class:`~benchmarks.robot.loop.PeriodCheck`:
+            called after each image with the measured lengths and the features; a
+            :class:`~benchmarks.robot.exits.SessionStop` they raise ends the session
+            through the shutdown with its code), after the signal check.
+
+    Raises:
+        OutputError: The record cannot be placed (``--out``, ``--log``), before anything
+            is opened.
+        BenchmarkError: A bad limit, before anything is opened.
+    """
+    from benchmarks.robot.servo import open_backend
+    from vision.feature_cameras import open_camera
+
+    limits = session_limits(args, inputs.geometry, status.message)
+    log = SessionLog(session_path(args.out, args.log, args.controller))
+    result = ServoResult("not started", 0, 0.0)
+    robot: Any = None
+    limited: LimitedRobot | None = None
+    sensor: Any = None
+    ended: BaseException | None = None
+    guard = SignalGuard(status.message)
+    with guard:
+        try:
+            log.open(_header(args, inputs, limits))
+            sensor = open_camera(args.camera, inputs.camera, inputs.geometry, args.seed)
+            robot = open_backend(args.backend, inputs.geometry, inputs.start)
+            if hasattr(robot, "timeout_retries"):
+                robot.timeout_retries = args.retries
+            pose = f", pose {args.camera_pose}" if args.camera_pose else ""
+            status.message(
+                f"servo: {args.controller} on {args.backend} ({robot.identity}), camera "
+                f"{args.camera} (file {args.camera_file}{pose}), goal {inputs.goal_file.source}"
+                f", dt {args.dt * 1e3:g} ms; speed <= {limits.max_speed * 1e3:g} mm/s, time "
+                f"<= {limits.max_time:g} s; record {log.path}; Ctrl-C, SIGTERM or SIGHUP "
+                "halt the robot")
+            q0 = np.asarray(robot.measured_lengths(), float)
+            _plan(args, q0, np.asarray(inputs.goal_file.lengths, float), limits,
+                  status.message)
+            limited = LimitedRobot(robot, limits, q0)
+            guard.in_loop = True  # from here the first signal waits for the next period
+            servo_loop(limited, sensor, inputs.controller, inputs.goal, inputs.geometry,
+                       args.dt, args.max_steps, args.tolerance_mm * 1e-3,
+                       args.feature_tolerance, args.settle, log_period(log, status),
+                       on_pose, limits=limits, checks=[guard, *checks],
+                       warn=status.message, result=result)
+        except BaseException as exc:  # every way out goes through the shutdown below
+            guard.shutting_down = True
+            ended = exc
+        guard.shutting_down = True
+        moved = limited is not None and limited.moved
+        if ended is not None:
+            code, reason = _classify(ended, moved)
+            if guard.pending is not None and not isinstance(ended, SessionStop):
+                # e.g. SIGHUP, then the closed terminal failing a print: the signal first
+                sig = exit_for_signal(guard.pending)
+                code, reason = sig, f"{sig_name(guard.pending)} received (then {reason})"
+        else:
+            code, reason = _outcome(result, args)
+        halt: HaltReport | None = None
+        if robot is not None:
+            halt = _halt(robot, args.halt_timeout_s)
+            try:
+                robot.close()
+            except Exception as exc:
+                reason += f"; closing the robot failed: {exc}"
+        if sensor is not None:
+            try:
+                sensor.close()
+            except Exception as exc:
+                reason += f"; closing the camera failed: {exc}"
+        failed = ended is not None and not isinstance(ended, SessionStop)
+        log.final({"exit_code": int(code), "exit": code.name.lower(), "reason": reason,
+                   "exception": f"{type(ended).__name__}: {ended}" if failed else None,
+                   "traceback": "".join(traceback.format_exception(ended))
+                   if failed and ended is not None else None,
+                   "moved": moved, "identity": getattr(robot, "identity", None),
+                   "start_lengths_mm": None if limited is None else [
+                       round(float(x) * 1e3, 4) for x in limited.start],
+                   "halt_confirmed": None if halt is None else halt.confirmed,
+                   "halt_detail": "the robot was not connected" if halt is None
+                   else halt.detail,
+                   "halt_s": None if halt is None else round(halt.seconds, 6),
+                   "retries": getattr(robot, "retried", None),
+                   "signals": list(guard.received), **_figures(result)})
+        try:  # the record is written: a closed terminal (SIGHUP) cannot lose it
+            status.final(result.last)
+            _report(status, code, reason, result, halt, limited, moved, log, ended)
+            if ended is not None and code == ServoExit.INTERNAL:
+                traceback.print_exception(ended, file=sys.stderr)
+        except (OSError, ValueError):
+            pass
+    return int(code)
+
+
+def log_period(log: SessionLog, status: StatusLine) -> Any:
+    """The loop's ``on_period``: the status line and the log line."""
+    def on_period(s: PeriodStatus) -> None:
+        status(s)
+        log.period(s.to_json())
+
+    return on_period
+
+
+def _report(status: StatusLine, code: ServoExit, reason: str, result: ServoResult,
+            halt: HaltReport | None, limited: LimitedRobot | None, moved: bool,
+            log: SessionLog, ended: BaseException | None) -> None:
+    """What happened, the figures, whether the robot is confirmed stopped, the record."""
+    say = status.message
+    if code == ServoExit.REFUSED and not moved and ended is not None and not isinstance(
+            ended, SessionStop):
+        print(f"hexapod-bench servo: error: {reason}", file=sys.stderr)
+    if code != ServoExit.CONVERGED:
+        say(f"stopped: {reason} (exit {int(code)}, {code.name.lower()})")
+    if result.steps or moved or code == ServoExit.CONVERGED:
+        say(result.summary())
+    if halt is None:
+        say("robot: not connected")
+    elif halt.confirmed:
+        say(f"robot: halted and confirmed stopped ({halt.detail}, {halt.seconds:.2f} s)")
+    else:
+        say(f"robot: NOT confirmed stopped: {halt.detail}; {_last_move(limited)}. Check the "
+            "robot before anyone approaches it.")
+    say(f"record: {log.path}")

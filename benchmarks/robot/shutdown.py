@@ -1,0 +1,89 @@
+"""The signals of a servo session: SIGINT, SIGTERM and SIGHUP all end in its one shutdown.
+
+:class:`SignalGuard` installs its handlers for the session's duration (the previous ones
+are restored after). Outside the loop (connecting, the ``--confirm`` question) a signal
+stops the session at once; inside the loop the first signal is taken at the next period
+(no exchange with the robot is cut in the middle) and a second one at once. During the
+shutdown (halt, confirmation, final record) signals are only noted: a second Ctrl-C or a
+``kill`` never skips the halt.
+"""
+
+from __future__ import annotations
+
+import signal
+import sys
+from collections.abc import Callable
+from types import FrameType, TracebackType
+from typing import Any
+
+import numpy as np
+
+from benchmarks.robot.exits import SessionStop, exit_for_signal
+
+__all__ = ["SESSION_SIGNALS", "SignalGuard"]
+
+#: The signals that end a session through its shutdown.
+SESSION_SIGNALS = (signal.SIGINT, signal.SIGTERM, signal.SIGHUP)
+
+
+def _name(signum: int) -> str:
+    return signal.Signals(signum).name
+
+
+class SignalGuard:
+    """SIGINT, SIGTERM and SIGHUP turned into a :class:`SessionStop` with their exit code
+    (130, 143, 129), for the duration of a ``with`` block.
+
+    Args:
+        say: Shows a line to the user (during the shutdown).
+
+    Attributes:
+        in_loop: The loop polls :meth:`__call__` every period (the first signal waits
+            for it).
+        shutting_down: The shutdown has begun: signals are only noted.
+        received: Every signal received, in order (names).
+    """
+
+    def __init__(self, say: Callable[[str], None] | None = None) -> None:
+        self.say = say or (lambda text: print(text, file=sys.stderr, flush=True))
+        self.in_loop = False
+        self.shutting_down = False
+        self.received: list[str] = []
+        self.pending: int | None = None
+        self._previous: dict[int, Any] = {}
+
+    def _stop(self, signum: int) -> SessionStop:
+        return SessionStop(exit_for_signal(signum), f"{_name(signum)} received")
+
+    def _handle(self, signum: int, frame: FrameType | None) -> None:
+        self.received.append(_name(signum))
+        if self.shutting_down:
+            self.say(f"{_name(signum)} received during the shutdown: the robot is being "
+                     "halted first")
+            return
+        if self.in_loop and self.pending is None:
+            self.pending = signum  # taken at the next period
+            return
+        self.pending = signum
+        raise self._stop(signum)
+
+    def __call__(self, step: int, lengths: np.ndarray, features: Any) -> None:
+        """A per-period check (:class:`~benchmarks.robot.loop.PeriodCheck`): a pending
+        signal ends the session.
+
+        Raises:
+            SessionStop: A signal was received.
+        """
+        if self.pending is not None and not self.shutting_down:
+            raise self._stop(self.pending)
+
+    def __enter__(self) -> SignalGuard:
+        for sig in SESSION_SIGNALS:
+            self._previous[sig] = signal.signal(sig, self._handle)
+        return self
+
+    def __exit__(self, exc_type: type[BaseException] | None, exc: BaseException | None,
+                 tb: TracebackType | None) -> None:
+        for sig, previous in self._previous.items():
+            signal.signal(sig, previous)
+        self._previous.clear()
