@@ -18,6 +18,9 @@ Built-in controllers are registered in :data:`controllers.registry.registry` her
 - ``leg-edge-ctc``, ``leg-direction-ctc``: computed torque in the space of the leg
   features (Özgür et al. 2011), all on the computed-torque solver
   (:mod:`controllers.solvers.computed_torque`);
+- ``leg-edge-force-mpc``: a force-level predictive controller on the leg edges (the
+  nominal closed-chain dynamics over a horizon, the drives' force limits as bounds;
+  CasADi, DAQP), falling back to ``leg-edge-ctc``;
 - ``latency-compensated``: any of them (``law``) fed the image features predicted over
   the image's delay with the nominal model (:mod:`controllers.latency`).
 
@@ -42,6 +45,7 @@ from controllers.base import (
 from controllers.cartesian_ctc import CartesianCTC, VisionCTC
 from controllers.computed_torque import ComputedTorqueController
 from controllers.feature_ctc import LegDirectionCTC, LegEdgeCTC
+from controllers.force_mpc import LegEdgeForceMPC
 from controllers.joint import JointSpaceController
 from controllers.latency import LatencyCompensated
 from controllers.leg_direction import LegDirectionController
@@ -65,6 +69,7 @@ BUILTINS = {
     "vision-ctc": VisionCTC,
     "leg-edge-ctc": LegEdgeCTC,
     "leg-direction-ctc": LegDirectionCTC,
+    "leg-edge-force-mpc": LegEdgeForceMPC,
     "latency-compensated": LatencyCompensated,
 }
 
@@ -88,6 +93,7 @@ __all__ = [
     "LegDirectionQPController",
     "LegEdgeCTC",
     "LegEdgeController",
+    "LegEdgeForceMPC",
     "LegEdgeMPCController",
     "LegEdgeQPController",
     "ModelBasedController",
