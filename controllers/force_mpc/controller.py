@@ -44,8 +44,8 @@ from hexapod.dynamics.compiled import parameter_row
 from hexapod.exceptions import HexapodError
 from hexapod.fk import forward_kinematics
 
-#: Largest first force beyond its bound accepted from the QP [N] (DAQP's tolerance);
-#: the applied force is clipped to the bound.
+#: Largest planned force beyond its bound accepted from the QP [N] (DAQP's tolerance);
+#: the plan is then clipped onto the bounds.
 BOUND_TOLERANCE = 1e-6
 
 
@@ -78,11 +78,11 @@ class LegEdgeForceMPC(Controller):
     #: Samples ``context.reference`` itself (:mod:`controllers.tracking` passes it through).
     tracks_reference = True
 
-    def __init__(self, horizon: int = 10, substeps: int = 2, error_weight: float = 1.0,
+    def __init__(self, horizon: int = 10, substeps: int = 4, error_weight: float = 1.0,
                  terminal_weight: float = 1.0, rate_weight: float = 1e-8,
                  effort_weight: float = 0.0, max_iter: int = 1,
                  natural_frequency: float = NATURAL_FREQUENCY_HZ, damping: float = DAMPING,
-                 smooth_goal: bool = True, friction_smoothing: float = 1e-3,
+                 smooth_goal: bool = True, friction_smoothing: float = 3e-3,
                  compiled: bool = True) -> None:
         name = self.name
         for option, value, top in (("horizon", horizon, 50), ("substeps", substeps, 100),
@@ -254,12 +254,14 @@ class LegEdgeForceMPC(Controller):
         stats.last_status = status
         if not converged and self.max_iter > 1:
             stats.unconverged += 1
+        lim = self._limit
+        if not (math.isfinite(float(U.sum())) and np.all(np.abs(U) <= lim + BOUND_TOLERANCE)):
+            worst = int(np.argmax(np.abs(U) - lim))
+            return self._fallback(observation, f"planned force out of its bounds: leg "
+                                  f"{worst % 6} at stage {worst // 6}: {U[worst]} N, limit "
+                                  f"{lim[worst]} N")
+        U = np.clip(U, -lim, lim)  # within DAQP's tolerance of the bounds: onto them
         f = U[:6]
-        lim = self._limit[:6]
-        if not (np.all(np.isfinite(f)) and np.all(np.abs(f) <= lim + BOUND_TOLERANCE)):
-            return self._fallback(observation, f"first force out of its bounds: {f}")
-        f = np.clip(f, -lim, lim)
-        U[:6] = f
         self.plan = U.copy()
         self._U = np.concatenate([U[6:], U[-6:]])  # the warm start of the next period
         self._f_prev = f.copy()
