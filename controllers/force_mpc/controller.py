@@ -190,6 +190,8 @@ class LegEdgeForceMPC(Controller):
         if isinstance(seen, str):
             return self._refuse(seen)
         normals, mask = seen
+        if int(mask.sum()) < 6 * 3:
+            return self._refuse(f"fewer than six edges seen ({int(mask.sum()) // 3})")
         if not self._started:  # the held law starts its reference (line to the goal) here
             first = self.law.step_trial(observation)
             if first.reason is not None:

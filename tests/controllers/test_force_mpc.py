@@ -273,3 +273,15 @@ def test_bad_input_is_refused_never_a_nan_force(geometry: HexapodGeometry) -> No
 def test_step_before_reset_refuses() -> None:
     cmd = registry.create(NAME).step(Observation(0.0, np.full(6, 0.4), q_dot=np.zeros(6)))
     assert not cmd.ok and "reset" in (cmd.reason or "")
+
+
+@pytest.mark.slow
+def test_virtual_machine_gives_the_compiled_results(geometry: HexapodGeometry) -> None:
+    """``compiled = False`` (the CasADi virtual machine, ``casadi.conic``) plans the same
+    forces as the generated C, to rounding (the same expression graph)."""
+    world = CtcWorld.make(geometry)
+    R0, t0, R1, t1 = _goal_away(geometry)
+    robot = _moving_state(world, (R1, t1), (R0, t0), periods=5)
+    plans = [_planned(world, robot, (R1, t1), 5 * DT, compiled=c).plan for c in (True, False)]
+    assert plans[0] is not None and plans[1] is not None
+    assert np.abs(plans[0] - plans[1]).max() < 1e-9 * max(1.0, float(np.abs(plans[0]).max()))
