@@ -50,7 +50,7 @@ import casadi as ca
 import numpy as np
 
 from controllers.mpc.prediction import sx_edge_normals
-from hexapod.compiled import CompiledFunction, Layout
+from hexapod.compiled import CompiledFunction, Layout, Shape
 from hexapod.dynamics import compiled as mech
 from hexapod.dynamics.drive_model import COULOMB_SMOOTHING
 
@@ -86,11 +86,12 @@ class ForceProblemSpec:
     def input_layout(self) -> Layout:
         """The kernel's input row."""
         N = self.horizon
-        return Layout([("state", NX), ("U", 6 * N), ("f_prev", 6), ("reference", (N, NS)),
-                       ("observed", NS), ("mask", NS), ("weights", 4)]
-                      + [(f"model_{b}", MODEL.shapes[b]) for b in MODEL]
-                      + [(f"camera_{b}", CAMERA.shapes[b]) for b in CAMERA],
-                      "force-MPC kernel input")
+        blocks: list[tuple[str, Shape]] = [
+            ("state", NX), ("U", 6 * N), ("f_prev", 6), ("reference", (N, NS)),
+            ("observed", NS), ("mask", NS), ("weights", 4)]
+        blocks += [(f"model_{b}", MODEL.shapes[b]) for b in MODEL]
+        blocks += [(f"camera_{b}", CAMERA.shapes[b]) for b in CAMERA]
+        return Layout(blocks, "force-MPC kernel input")
 
     def output_layout(self) -> Layout:
         """The kernel's output row: the QP data, the cost, the predicted states,
