@@ -219,6 +219,34 @@ def test_tracks_a_circle_as_the_ctc_does(geometry: HexapodGeometry) -> None:
     assert worst[NAME] < 1e-4
 
 
+@pytest.mark.slow
+def test_tracks_within_binding_force_limits(geometry: HexapodGeometry) -> None:
+    """A 10 mm circle at up to 100 mm/s and 3 m/s^2 with drives of 16 N (about 10 N per
+    leg hold the platform against gravity): the force MPC plans within the limit and
+    reaches it (the limit binds), and its largest distance to the reference is smaller
+    than that of ``leg-edge-ctc``, whose commands the drives clip (both measured here)."""
+    limit = 16.0
+    truth = dataclasses.replace(geometry, drives=dataclasses.replace(
+        geometry.drives, force_limit=np.full(6, limit)))
+    world = CtcWorld.make(truth)
+    R0, t0 = home_pose(truth)
+    ref = PoseTrajectory("circle", "quintic", R0, t0, speed=0.1, acceleration=3.0,
+                         radius=0.01, plane="xy")
+    steps = math.ceil(ref.duration / DT) + 25
+    p_ref = ref.at(DT * np.arange(steps + 1)).translation
+    worst, forces = {}, {}
+    for law in (NAME, "leg-edge-ctc"):
+        ctrl = registry.create(law)
+        ctrl.reset(world.context(world.goal(ref.end_rotation, ref.end_translation), ref))
+        p, _, cmds = world.run(ctrl, (R0, t0), steps)
+        worst[law] = float(np.linalg.norm(p - p_ref, axis=1).max())
+        forces[law] = np.abs(np.array([c.forces for c in cmds]))
+    assert forces[NAME].max() <= limit
+    assert np.sum(forces[NAME] >= limit - 1e-9) > 0  # the limit binds
+    assert forces["leg-edge-ctc"].max() > limit  # the drives clip the computed torque
+    assert worst[NAME] < worst["leg-edge-ctc"]
+
+
 # ----------------------------------------------------------------------------- refusals
 def test_options_are_checked() -> None:
     ctrl = registry.create(NAME)
