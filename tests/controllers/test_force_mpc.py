@@ -272,6 +272,9 @@ def test_bad_input_is_refused_never_a_nan_force(geometry: HexapodGeometry) -> No
     ctx = world.context(world.goal(R1, t1))
     with pytest.raises(ContextError, match="camera"):
         registry.create(NAME).reset(dataclasses.replace(ctx, camera=None))
+    with pytest.raises(ContextError, match=r"goal\.normals"):
+        registry.create(NAME).reset(dataclasses.replace(
+            ctx, goal=dataclasses.replace(ctx.goal, normals=None)))
     ctrl = registry.create(NAME)
     ctrl.reset(ctx)
     good = world.observation(robot, 0.0)
