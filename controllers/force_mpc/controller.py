@@ -32,25 +32,42 @@ from typing import Any
 import numpy as np
 
 from controllers.base import Command, Controller, ControllerContext, Goal, Observation
+from controllers.cartesian_ctc import CartesianCTC
 from controllers.exceptions import ContextError, OptionError
 from controllers.feature_ctc import LegEdgeCTC
 from controllers.force_mpc.problem import NS, ForceProblemSpec, force_kernel
 from controllers.law_tools import check_number
 from controllers.mpc.solver import QPResult, SolveStats, compiled_qp, solve_qp
-from controllers.task_ctc import DAMPING, NATURAL_FREQUENCY_HZ, encoder_readings
+from controllers.task_ctc import (
+    DAMPING,
+    NATURAL_FREQUENCY_HZ,
+    TaskComputedTorque,
+    encoder_readings,
+)
 from hexapod.actuation import Actuation
 from hexapod.compiled import BoundCall
 from hexapod.dynamics.compiled import parameter_row
 from hexapod.exceptions import HexapodError
 from hexapod.fk import forward_kinematics
 
+#: Default force-rate weight of the pose variant [1/N^2] (see :class:`PoseForceMPC`). The
+#: ratio of the two features' squared sensitivities to a translation of the platform at
+#: the reference robot's home pose (front camera: 80.6 /m^2 summed over the three axes
+#: for the edges, 3 for the pose) gives the edges' 1e-8 / 27 = 4e-10; with it the plan
+#: chattered at the Coulomb friction's reversals on the tests' 10 mm circle at 20 mm/s
+#: (largest distance to the reference 0.29 mm, RMS 0.067), with 1e-9 less (0.16 mm,
+#: 0.033): a choice on that one case.
+POSE_RATE_WEIGHT = 1e-9
+
 #: Largest planned force beyond its bound accepted from the QP [N] (DAQP's tolerance);
 #: the plan is then clipped onto the bounds.
 BOUND_TOLERANCE = 1e-6
 
 
-class LegEdgeForceMPC(Controller):
-    """Force-level predictive control on the leg edges (see the module docstring).
+class ForceMPCLaw(Controller):
+    """Base of the force-level predictive controllers (see the module docstring): the
+    subclasses say which features (:attr:`kind`), which law they hold
+    (:attr:`law_class`), and read the features and the reference.
 
     Args:
         horizon: Number of periods ``N`` predicted (1 to 50).
@@ -72,8 +89,10 @@ class LegEdgeForceMPC(Controller):
             and ``casadi.conic``; the same results, much slower).
     """
 
-    name = "leg-edge-force-mpc"
-    features = frozenset({"lengths", "normals"})
+    #: The features of the predictive problem (:data:`controllers.force_mpc.problem.FEATURES`).
+    kind = "edges"
+    #: The computed-torque law of the same features: reference, goal and fallback.
+    law_class: type[TaskComputedTorque] = LegEdgeCTC
     actuation = Actuation.FORCE
     #: Samples ``context.reference`` itself (:mod:`controllers.tracking` passes it through).
     tracks_reference = True
@@ -106,9 +125,9 @@ class LegEdgeForceMPC(Controller):
                                                friction_smoothing)
         self.compiled = bool(compiled)
         #: The fallback law, whose reference and goal this controller tracks.
-        self.law = LegEdgeCTC(natural_frequency=natural_frequency, damping=damping,
-                              smooth_goal=smooth_goal)
-        self.spec = ForceProblemSpec(horizon, substeps)
+        self.law: Any = self.law_class(natural_frequency=natural_frequency, damping=damping,
+                                       smooth_goal=smooth_goal)
+        self.spec = ForceProblemSpec(horizon, substeps, self.kind)
         self.stats = SolveStats()
         self.context: ControllerContext | None = None
         self._bound: BoundCall | None = None
@@ -131,13 +150,6 @@ class LegEdgeForceMPC(Controller):
         self.law.reset_trial(context)
         self.context = context
         g = context.geometry
-        cam = getattr(context.camera, "camera_from_base", None)
-        if cam is None:
-            raise ContextError(self.name, "camera", "needs the estimated camera with its "
-                               "camera_from_base pose")
-        A_cam = np.asarray(context.base_points, dtype=float)
-        if A_cam.shape != (6, 3) or not np.all(np.isfinite(A_cam)):
-            raise ContextError(self.name, "base_points", f"expected (6, 3) finite, got {A_cam}")
         dt = float(context.dt)
         if not (math.isfinite(dt) and dt > 0):
             raise ContextError(self.name, "dt", f"expected a positive period [s], got {dt}")
@@ -153,9 +165,7 @@ class LegEdgeForceMPC(Controller):
         v["model_coulomb"][:] = d.coulomb
         v["model_h"][:] = dt / self.substeps
         v["model_smoothing"][:] = self.friction_smoothing
-        v["camera_R"][:] = np.asarray(cam.rotation, dtype=float).T.ravel()  # column-major
-        v["camera_A"][:] = A_cam
-        v["camera_radius"][:] = g.leg_radius
+        self.camera_constants(context, v)
         v["weights"][:] = (self.error_weight, self.terminal_weight, self.rate_weight,
                            self.effort_weight)
         self._limit = np.tile(np.asarray(d.force_limit, dtype=float), self.horizon)
@@ -189,9 +199,7 @@ class LegEdgeForceMPC(Controller):
         seen = self._features(observation)
         if isinstance(seen, str):
             return self._refuse(seen)
-        normals, mask = seen
-        if int(mask.sum()) < 6 * 3:
-            return self._refuse(f"fewer than six edges seen ({int(mask.sum()) // 3})")
+        observed, mask = seen
         if not self._started:  # the held law starts its reference (line to the goal) here
             first = self.law.step_trial(observation)
             if first.reason is not None:
@@ -207,18 +215,21 @@ class LegEdgeForceMPC(Controller):
             reference, known = self._reference(t - self._t0)
         except (HexapodError, np.linalg.LinAlgError, ValueError) as exc:
             return self._fallback(observation, f"nominal model failed: {exc}")
-        mask = mask & known
-        if int(mask.sum()) < 6 * 3:
-            return self._refuse(f"fewer than six edges seen and known ({int(mask.sum()) // 3})")
+        mask = np.where(known, mask, 0.0)  # the rows' weights (0: unused)
+        if observed is None:  # the features are the pose itself
+            observed = np.concatenate([p, R.T.ravel()])
+        problem = self.too_few(mask)
+        if problem is not None:
+            return self._refuse(problem)
         v = self._bound.inputs
         v["state"][0:9] = R.T.ravel()
         v["state"][9:12] = p
         v["state"][12:18] = twist
         v["f_prev"][:] = self._f_prev
         v["reference"][:] = reference
-        v["observed"][:] = np.where(mask, normals, 0.0)
+        v["observed"][:] = np.where(mask, observed, 0.0)
         v["mask"][:] = mask
-        return self._solve(observation, normals, reference[0], mask)
+        return self._solve(observation, observed, reference[0], mask)
 
     def _solve(self, observation: Observation, normals: np.ndarray, ref_now: np.ndarray,
                mask: np.ndarray) -> Command:
@@ -269,7 +280,7 @@ class LegEdgeForceMPC(Controller):
         self._f_prev = f.copy()
         e = np.where(mask, normals - ref_now, 0.0)
         return Command.of_forces(f, error=e, error_norm=float(np.linalg.norm(e)),
-                                 features_used=int(mask.sum()) // 3,
+                                 features_used=self.used(mask),
                                  notes=[f"force-mpc: {status}"])
 
     def _qp_step(self, H: np.ndarray, g: np.ndarray, lo: np.ndarray, hi: np.ndarray
@@ -287,17 +298,26 @@ class LegEdgeForceMPC(Controller):
         return solve_qp(H, g, self._eye, lo, hi)
 
     # ----------------------------------------------------------------- pieces
-    def _features(self, observation: Observation) -> tuple[np.ndarray, np.ndarray] | str:
-        """The observed normals (36,) and the rows seen (36,) bool, or why not."""
-        if observation.normals is None:
-            return "needs the edge normals (Observation.normals)"
-        n = np.asarray(observation.normals, dtype=float)
-        if n.shape != (6, 2, 3):
-            return f"edge normals of shape {n.shape}, expected (6, 2, 3)"
-        seen = np.all(np.isfinite(n), axis=-1)
-        if observation.edge_visible is not None:
-            seen &= np.asarray(observation.edge_visible, dtype=bool).reshape(6, 2)
-        return n.ravel(), np.repeat(seen.ravel(), 3)
+    def camera_constants(self, context: ControllerContext, v: dict[str, np.ndarray]) -> None:
+        """Write the camera's constants of the kernel (none by default).
+
+        Raises:
+            ContextError: A field the features need is missing or invalid.
+        """
+
+    def _features(self, observation: Observation
+                  ) -> tuple[np.ndarray | None, np.ndarray] | str:
+        """The observed features (m,) (None: the pose of the encoders) and the rows'
+        weights (m,) (0: not seen), or why not."""
+        raise NotImplementedError
+
+    def too_few(self, mask: np.ndarray) -> str | None:
+        """Why the rows ``mask`` are too few to control the six legs (None: enough)."""
+        return None
+
+    def used(self, mask: np.ndarray) -> int:
+        """The features used, as the command reports them."""
+        return int(mask.sum())
 
     def _pose(self, q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """The nominal forward kinematics of the lengths [m] (warm-started)."""
@@ -319,24 +339,9 @@ class LegEdgeForceMPC(Controller):
         return np.linalg.solve(K, qd)  # type: ignore[no-any-return]
 
     def _reference(self, tr: float) -> tuple[np.ndarray, np.ndarray]:
-        """The reference features (N, 36) of the stages at ``tr + k dt``, ``k = 1..N``,
-        [s] on the reference's clock, and the rows known at every stage (36,) bool."""
-        N, dt = self.horizon, self._dt
-        law = self.law
-        out = np.empty((N, NS))
-        known = np.ones(NS, dtype=bool)
-        if law.reference is None:
-            taught = np.asarray(law.context.goal.normals if law.context is not None
-                                else None, dtype=float).ravel()
-            fine = np.isfinite(taught)
-            out[:] = np.where(fine, taught, 0.0)
-            return out, fine
-        for k in range(N):
-            ref, rows = law.compiled_reference(tr + (k + 1) * dt)
-            out[k] = ref[:NS]
-            if rows is not None:
-                known &= rows
-        return out, known
+        """The reference features (N, m) of the stages at ``tr + k dt``, ``k = 1..N``,
+        [s] on the reference's clock, and the rows known at every stage (m,) bool."""
+        raise NotImplementedError
 
     def _fallback(self, observation: Observation, reason: str) -> Command:
         """The held law's command this period, noting why."""
@@ -372,6 +377,130 @@ class LegEdgeForceMPC(Controller):
         y = self._kernel.outputs.views(bound.y.copy())
         bound.x[:] = saved
         N = self.horizon
-        return {"states": y["states"].reshape(N, 18), "features": y["features"].reshape(N, NS),
+        return {"states": y["states"].reshape(N, 18),
+                "features": y["features"].reshape(N, self.spec.features),
                 "lengths": y["lengths"].reshape(N, 6), "rates": y["rates"].reshape(N, 6),
                 "cost": float(y["cost"][0])}
+
+
+class LegEdgeForceMPC(ForceMPCLaw):
+    """Force-level predictive control on the leg edges (see the module docstring)."""
+
+    name = "leg-edge-force-mpc"
+    features = frozenset({"lengths", "normals"})
+    kind = "edges"
+    law_class = LegEdgeCTC
+
+    def camera_constants(self, context: ControllerContext, v: dict[str, np.ndarray]) -> None:
+        """The estimated camera's rotation and base points, the legs' radius.
+
+        Raises:
+            ContextError: No camera pose, or base points not (6, 3) finite.
+        """
+        cam = getattr(context.camera, "camera_from_base", None)
+        if cam is None:
+            raise ContextError(self.name, "camera", "needs the estimated camera with its "
+                               "camera_from_base pose")
+        A_cam = np.asarray(context.base_points, dtype=float)
+        if A_cam.shape != (6, 3) or not np.all(np.isfinite(A_cam)):
+            raise ContextError(self.name, "base_points", f"expected (6, 3) finite, got {A_cam}")
+        v["camera_R"][:] = np.asarray(cam.rotation, dtype=float).T.ravel()  # column-major
+        v["camera_A"][:] = A_cam
+        v["camera_radius"][:] = context.geometry.leg_radius
+
+    def _features(self, observation: Observation
+                  ) -> tuple[np.ndarray | None, np.ndarray] | str:
+        """The observed normals (36,) and the rows seen (36,) bool, or why not."""
+        if observation.normals is None:
+            return "needs the edge normals (Observation.normals)"
+        n = np.asarray(observation.normals, dtype=float)
+        if n.shape != (6, 2, 3):
+            return f"edge normals of shape {n.shape}, expected (6, 2, 3)"
+        seen = np.all(np.isfinite(n), axis=-1)
+        if observation.edge_visible is not None:
+            seen &= np.asarray(observation.edge_visible, dtype=bool).reshape(6, 2)
+        if int(seen.sum()) < 6:
+            return f"fewer than six edges seen ({int(seen.sum())})"
+        return n.ravel(), np.repeat(seen.ravel(), 3)
+
+    def too_few(self, mask: np.ndarray) -> str | None:
+        """Fewer than six edges seen and known."""
+        if int(mask.sum()) < 6 * 3:
+            return f"fewer than six edges seen and known ({int(mask.sum()) // 3})"
+        return None
+
+    def used(self, mask: np.ndarray) -> int:
+        """The edges used."""
+        return int(mask.sum()) // 3
+
+    def _reference(self, tr: float) -> tuple[np.ndarray, np.ndarray]:
+        """The reference features (N, 36) of the stages at ``tr + k dt``, ``k = 1..N``,
+        [s] on the reference's clock, and the rows known at every stage (36,) bool."""
+        N, dt = self.horizon, self._dt
+        law = self.law
+        out = np.empty((N, NS))
+        known = np.ones(NS, dtype=bool)
+        if law.reference is None:
+            taught = np.asarray(law.context.goal.normals if law.context is not None
+                                else None, dtype=float).ravel()
+            fine = np.isfinite(taught)
+            out[:] = np.where(fine, taught, 0.0)
+            return out, fine
+        for k in range(N):
+            ref, rows = law.compiled_reference(tr + (k + 1) * dt)
+            out[k] = ref[:NS]
+            if rows is not None:
+                known &= rows
+        return out, known
+
+
+class PoseForceMPC(ForceMPCLaw):
+    """Force-level predictive control on the platform pose (the pose variant): the
+    features are the pose ``(t, R)`` of the encoders' nominal forward kinematics (base
+    frame), the reference ``cartesian-ctc``'s (the trajectory's pose, or a quintic line
+    to ``goal.rotation``/``goal.translation``), its fallback ``cartesian-ctc``.
+
+    Args:
+        rate_weight: Weight of the force rate [1/N^2] (the pose's residuals, metres and
+            the chordal ``|R - R*|``, are smaller than the edges' for the same motion:
+            a smaller default).
+    """
+
+    name = "pose-force-mpc"
+    features = frozenset({"lengths"})
+    kind = "pose"
+    law_class = CartesianCTC
+
+    def __init__(self, horizon: int = 10, substeps: int = 4, error_weight: float = 1.0,
+                 terminal_weight: float = 1.0, rate_weight: float = POSE_RATE_WEIGHT,
+                 effort_weight: float = 0.0, max_iter: int = 1,
+                 natural_frequency: float = NATURAL_FREQUENCY_HZ, damping: float = DAMPING,
+                 smooth_goal: bool = True, friction_smoothing: float = 3e-3,
+                 compiled: bool = True) -> None:
+        super().__init__(horizon, substeps, error_weight, terminal_weight, rate_weight,
+                         effort_weight, max_iter, natural_frequency, damping, smooth_goal,
+                         friction_smoothing, compiled)
+
+    def _features(self, observation: Observation
+                  ) -> tuple[np.ndarray | None, np.ndarray] | str:
+        """The pose of the encoders (filled in later); the rows' weights: 1 for the
+        position [1/m^2], ``r^2 / 2`` for the nine of ``R`` (``|R - R*|^2 = 2 |dphi|^2``
+        for a small rotation ``dphi``), ``r`` the nominal platform joints' mean distance
+        to the platform's origin: the pose error weighs as the joints' displacement."""
+        assert self.context is not None
+        r = float(np.linalg.norm(self.context.geometry.platform_points, axis=1).mean())
+        return None, np.concatenate([np.ones(3), np.full(9, r * r / 2)])
+
+    def _reference(self, tr: float) -> tuple[np.ndarray, np.ndarray]:
+        """The reference poses ``(t*, R*)`` of the stages, or the goal pose."""
+        N, dt, law = self.horizon, self._dt, self.law
+        out = np.empty((N, 12))
+        if law.reference is None:
+            R, t = law.goal_pose()
+            out[:] = np.concatenate([t, np.asarray(R, dtype=float).T.ravel()])
+            return out, np.ones(12, dtype=bool)
+        for k in range(N):
+            row = law.pose_reference(tr + (k + 1) * dt)
+            out[k, 0:3] = row[9:12]
+            out[k, 3:12] = row[0:9].reshape(3, 3).T.ravel()
+        return out, np.ones(12, dtype=bool)

@@ -27,7 +27,8 @@ integration of the nominal robot, to rounding.
 ``sum_k w_k |s_k - s*_k|^2 + rate sum_k |f_k - f_{k-1}|^2 + effort sum_k |f_k|^2``
 
 with the predicted edge normals ``s_k = s_obs + s(x_k) - s(x_0)`` (camera frame: the
-normals seen now, moved by the model's change; hidden edges weigh 0), the
+normals seen now, moved by the model's change; hidden edges weigh 0; the pose variant,
+``kind = "pose"``: ``s = (t, R column-major)``, base frame, the rows weighted), the
 reference ``s*_k`` (the goal features, or the anchored reference at ``t + k dt``) and
 ``f_{-1}`` the force applied last period.
 
@@ -60,6 +61,9 @@ STATE = Layout([("R", 9), ("t", 3), ("twist", 6)], "force-MPC state")
 NX = STATE.size
 #: The features: twelve edge normals (six legs, two edges, three components).
 NS = 36
+#: Number of features of each kind: the edge normals (camera frame), or the platform
+#: pose ``(t [m], R column-major)`` (base frame, the pose variant).
+FEATURES = {"edges": NS, "pose": 12}
 #: The nominal model's constants of a step: base and platform points [m] (base frame),
 #: the 19 inertial parameters, the drives' rotor inertia [kg], viscous [N s/m] and
 #: Coulomb [N] friction, and the step ``h`` [s].
@@ -78,17 +82,24 @@ class ForceProblemSpec:
     Attributes:
         horizon: ``N`` periods.
         substeps: Integration steps per period.
+        kind: The features: ``"edges"`` (the edge normals) or ``"pose"``.
     """
 
     horizon: int
     substeps: int
+    kind: str = "edges"
+
+    @property
+    def features(self) -> int:
+        """Number of features of a stage."""
+        return FEATURES[self.kind]
 
     def input_layout(self) -> Layout:
         """The kernel's input row."""
-        N = self.horizon
+        N, m = self.horizon, self.features
         blocks: list[tuple[str, Shape]] = [
-            ("state", NX), ("U", 6 * N), ("f_prev", 6), ("reference", (N, NS)),
-            ("observed", NS), ("mask", NS), ("weights", 4)]
+            ("state", NX), ("U", 6 * N), ("f_prev", 6), ("reference", (N, m)),
+            ("observed", m), ("mask", m), ("weights", 4)]
         blocks += [(f"model_{b}", MODEL.shapes[b]) for b in MODEL]
         blocks += [(f"camera_{b}", CAMERA.shapes[b]) for b in CAMERA]
         return Layout(blocks, "force-MPC kernel input")
@@ -96,9 +107,9 @@ class ForceProblemSpec:
     def output_layout(self) -> Layout:
         """The kernel's output row: the QP data, the cost, the predicted states,
         features (with the observed offset) and leg lengths [m] of stages ``1..N``."""
-        N, n = self.horizon, 6 * self.horizon
+        N, n, m = self.horizon, 6 * self.horizon, self.features
         return Layout([("H", (n, n)), ("g", n), ("cost", 1), ("states", (N, NX)),
-                       ("features", (N, NS)), ("lengths", (N, 6)), ("rates", (N, 6))],
+                       ("features", (N, m)), ("lengths", (N, 6)), ("rates", (N, 6))],
                       "force-MPC kernel output")
 
 
@@ -147,10 +158,11 @@ def step_expression() -> tuple[ca.SX, ca.SX, ca.SX, ca.SX]:
     return x, f, c, ca.vertcat(ca.reshape(R_new, 9, 1), t_new, tw_new)
 
 
-def features_expression() -> tuple[ca.SX, ca.SX, ca.SX, ca.SX, ca.SX]:
-    """The edge normals (36, camera frame) of the nominal robot at a state: the symbols
-    ``x``, the model constants and the camera constants, the normals and the leg
-    lengths (6) [m]."""
+def features_expression(kind: str = "edges") -> tuple[ca.SX, ca.SX, ca.SX, ca.SX, ca.SX]:
+    """The features of the nominal robot at a state: the edge normals (36, camera
+    frame), or for ``kind = "pose"`` the pose ``(t, R column-major)`` (12, base frame);
+    the symbols ``x``, the model constants and the camera constants, the features and
+    the leg lengths (6) [m]."""
     x = ca.SX.sym("x", NX)
     c = ca.SX.sym("c", MODEL.size)
     cam = ca.SX.sym("cam", CAMERA.size)
@@ -169,6 +181,8 @@ def features_expression() -> tuple[ca.SX, ca.SX, ca.SX, ca.SX, ca.SX]:
         lengths.append(q)
         n1, n2 = sx_edge_normals(Ac[:, i], Rc @ (d / q), k["radius"])
         normals += [n1, n2]
+    if kind == "pose":
+        return x, c, cam, ca.vertcat(s["t"], s["R"]), ca.vertcat(*lengths)
     return x, c, cam, ca.vertcat(*normals), ca.vertcat(*lengths)
 
 
@@ -262,10 +276,10 @@ def _period_function(substeps: int) -> ca.Function:
     return ca.Function("force_mpc_period", [xs, fs, cs], [xk, Ak, Bk, qd])
 
 
-def _features_function() -> ca.Function:
-    """``(x, c, cam) -> (s, ds/dxi, lengths)``: the normals, their Jacobian (36 x 6) in the
+def _features_function(kind: str = "edges") -> ca.Function:
+    """``(x, c, cam) -> (s, ds/dxi, lengths)``: the features, their Jacobian (m x 6) in the
     pose's left perturbation ``xi = (delta t, delta phi)`` and the leg lengths [m]."""
-    x, c, cam, s, q = features_expression()
+    x, c, cam, s, q = features_expression(kind)
     xi = ca.SX.sym("xi", 6)
     st = STATE.split(x)
     R = ca.reshape(st["R"], 3, 3)
@@ -281,10 +295,10 @@ def kernel_function(spec: ForceProblemSpec) -> ca.Function:
     the input row (:meth:`ForceProblemSpec.input_layout`): an MX graph calling the
     period's and the features' SX functions (each generated to C once) and condensing
     with dense matrix products."""
-    N, n = spec.horizon, 6 * spec.horizon
+    N, n, ns = spec.horizon, 6 * spec.horizon, spec.features
     lay = spec.input_layout()
     period = _period_function(spec.substeps)
-    feats = _features_function()
+    feats = _features_function(spec.kind)
     v = ca.MX.sym("v", lay.size)
     P = lay.split(v)
     c = ca.vertcat(*(P[f"model_{b}"] for b in MODEL))
@@ -305,7 +319,7 @@ def kernel_function(spec: ForceProblemSpec) -> ca.Function:
         x, A, B, qd = period(x, f, c)
         S = B if S is None else ca.horzcat(A @ S, B)
         s, C, q = feats(x, c, cam)
-        ref = P["reference"][k * NS:(k + 1) * NS]
+        ref = P["reference"][k * ns:(k + 1) * ns]
         weight = w_term if k == N - 1 else w_err
         wm = weight * mask
         r = s + offset - ref
@@ -334,7 +348,8 @@ def kernel_function(spec: ForceProblemSpec) -> ca.Function:
     cost = cost + 0.5 * w_rate * ca.dot(dr, dr) + 0.5 * w_effort * ca.dot(U, U)
     out = ca.vertcat(ca.reshape(ca.densify(H), n * n, 1), g, cost, *states, *features,
                      *lengths, *rates)
-    return ca.Function(f"hexapod_force_mpc_{N}_{spec.substeps}", [v], [out])
+    name = "hexapod_force_mpc" if spec.kind == "edges" else f"hexapod_force_{spec.kind}_mpc"
+    return ca.Function(f"{name}_{N}_{spec.substeps}", [v], [out])
 
 
 @lru_cache(maxsize=8)

@@ -1,6 +1,6 @@
-"""``leg-edge-force-mpc`` (:mod:`controllers.force_mpc`) on the dynamic world of the
-computed-torque tests (:mod:`tests.controllers.ctc_world`: the study's integrator,
-force-mode drives, the camera seeing the true legs, exact encoders).
+"""``leg-edge-force-mpc`` and ``pose-force-mpc`` (:mod:`controllers.force_mpc`) on the
+dynamic world of the computed-torque tests (:mod:`tests.controllers.ctc_world`: the
+study's integrator, force-mode drives, the camera seeing the true legs, exact encoders).
 
 - its prediction against the world rolled with the planned forces (exact model, no
   noise): the same integration step gives the same numbers to rounding; the default
@@ -23,7 +23,7 @@ import pytest
 from controllers import registry
 from controllers.base import Observation
 from controllers.exceptions import ContextError, OptionError
-from controllers.force_mpc import LegEdgeForceMPC
+from controllers.force_mpc import ForceMPCLaw
 from hexapod import HexapodGeometry, sample_poses
 from hexapod.actuation import Actuation
 from hexapod.dynamics.robots import DynamicRobots
@@ -33,6 +33,9 @@ from hexapod.workspace import home_pose
 from tests.controllers.ctc_world import DT, PHYSICS_STEPS, CtcWorld, ideal_drives
 
 NAME = "leg-edge-force-mpc"
+POSE = "pose-force-mpc"
+#: Each force MPC and the computed-torque law of the same features (its fallback).
+PAIRS = [(NAME, "leg-edge-ctc"), (POSE, "cartesian-ctc")]
 
 
 def _goal_away(g: HexapodGeometry) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
@@ -67,21 +70,23 @@ def _world_rollout(world: CtcWorld, robot: DynamicRobots, plan: np.ndarray,
     twin = DynamicRobots([world.truth], robot.R.copy(), robot.t.copy())
     twin.drives.mode = "force"
     twin.twist[:] = robot.twist
-    out: dict[str, list[np.ndarray]] = {"lengths": [], "rates": [], "features": []}
+    out: dict[str, list[np.ndarray]] = {"lengths": [], "rates": [], "features": [],
+                                        "pose": []}
     for f in plan.reshape(-1, 6):
         assert not twin.advance(np.arange(1), f[None], DT / physics_steps, physics_steps).any()
         obs = world.observation(twin, 0.0)
         out["lengths"].append(twin.period_lengths[0].copy())
         out["rates"].append(np.asarray(obs.q_dot))
         out["features"].append(np.asarray(obs.normals).ravel())
+        out["pose"].append(np.concatenate([twin.t[0], twin.R[0].T.ravel()]))
     return {k: np.array(v) for k, v in out.items()}
 
 
 def _planned(world: CtcWorld, robot: DynamicRobots, goal: tuple[np.ndarray, np.ndarray],
-             t: float, **options: object) -> LegEdgeForceMPC:
+             t: float, name: str = NAME, **options: object) -> ForceMPCLaw:
     """A force MPC reset towards ``goal`` that has planned from the robot's state."""
-    ctrl = registry.create(NAME, **options)
-    assert isinstance(ctrl, LegEdgeForceMPC)
+    ctrl = registry.create(name, **options)
+    assert isinstance(ctrl, ForceMPCLaw)
     ctrl.reset(world.context(world.goal(*goal)))
     cmd = ctrl.step(world.observation(robot, t))
     assert cmd.reason is None and ctrl.stats.fallbacks == 0, cmd.notes
@@ -90,8 +95,9 @@ def _planned(world: CtcWorld, robot: DynamicRobots, goal: tuple[np.ndarray, np.n
 
 # ----------------------------------------------------------------------------- prediction
 @pytest.mark.slow
-@pytest.mark.parametrize("substeps", [4, PHYSICS_STEPS])
-def test_prediction_is_the_worlds_integration(geometry: HexapodGeometry, substeps: int) -> None:
+@pytest.mark.parametrize(("name", "substeps"), [(NAME, 4), (NAME, PHYSICS_STEPS), (POSE, 4)])
+def test_prediction_is_the_worlds_integration(geometry: HexapodGeometry, name: str,
+                                              substeps: int) -> None:
     """Exact model, no noise, the world stepped as the prediction steps (``dt /
     substeps``; 20 is the studies' 1 ms): the predicted leg lengths and rates are the
     world's along the planned forces.
@@ -104,7 +110,7 @@ def test_prediction_is_the_worlds_integration(geometry: HexapodGeometry, substep
     world = CtcWorld.make(geometry)  # the robot file's drives: friction and rotor inertia
     R0, t0, R1, t1 = _goal_away(geometry)
     robot = _moving_state(world, (R1, t1), (R0, t0))
-    ctrl = _planned(world, robot, (R1, t1), 15 * DT, substeps=substeps)
+    ctrl = _planned(world, robot, (R1, t1), 15 * DT, name, substeps=substeps)
     assert ctrl.plan is not None
     pred = ctrl.prediction()
     truth = _world_rollout(world, robot, ctrl.plan, substeps)
@@ -112,8 +118,10 @@ def test_prediction_is_the_worlds_integration(geometry: HexapodGeometry, substep
     assert np.abs(pred["lengths"] - truth["lengths"]).max() < 1e-9
     assert np.abs(pred["rates"] - truth["rates"]).max() < 1e-9
     # the predicted normals are those the camera sees of the world's poses (unit
-    # vectors moving with the pose at about 1/|A| ~ 3 per metre: the same 1e-9)
-    assert np.abs(pred["features"] - truth["features"]).max() < 1e-9
+    # vectors moving with the pose at about 1/|A| ~ 3 per metre: the same 1e-9), the
+    # predicted poses the world's
+    key = "features" if name == NAME else "pose"
+    assert np.abs(pred["features"] - truth[key]).max() < 1e-9
 
 
 @pytest.mark.slow
@@ -176,13 +184,14 @@ def test_plans_stay_within_the_force_limits(geometry: HexapodGeometry) -> None:
 
 # ----------------------------------------------------------------------------- closed loop
 @pytest.mark.slow
-def test_reaches_a_fixed_goal(geometry: HexapodGeometry) -> None:
+@pytest.mark.parametrize(("name", "ctc"), PAIRS)
+def test_reaches_a_fixed_goal(geometry: HexapodGeometry, name: str, ctc: str) -> None:
     """The robot file's drives (friction, rotor inertia), exact model: within the studies'
-    tolerances (0.5 mm, 0.05 deg; ``quick-dynamic``) after 3 s, as ``leg-edge-ctc`` is, no
-    fallback, every force finite and within the limits."""
+    tolerances (0.5 mm, 0.05 deg; ``quick-dynamic``) after 3 s, as the computed torque of
+    the same features is, no fallback, every force finite and within the limits."""
     world = CtcWorld.make(geometry)
     R0, t0, R1, t1 = _goal_away(geometry)
-    for law in (NAME, "leg-edge-ctc"):
+    for law in (name, ctc):
         ctrl = registry.create(law)
         ctrl.reset(world.context(world.goal(R1, t1)))
         p, Rs, cmds = world.run(ctrl, (R0, t0), 150)
@@ -192,16 +201,17 @@ def test_reaches_a_fixed_goal(geometry: HexapodGeometry) -> None:
         forces = np.array([c.forces for c in cmds])
         assert np.all(np.isfinite(forces))
         assert np.abs(forces).max() <= geometry.drives.force_limit.max()
-        if law == NAME:
-            assert isinstance(ctrl, LegEdgeForceMPC)
+        if law == name:
+            assert isinstance(ctrl, ForceMPCLaw)
             assert ctrl.stats.fallbacks == 0 and ctrl.stats.steps == 150
 
 
 @pytest.mark.slow
-def test_tracks_a_circle_as_the_ctc_does(geometry: HexapodGeometry) -> None:
+@pytest.mark.parametrize(("name", "ctc"), PAIRS)
+def test_tracks_a_circle_as_the_ctc_does(geometry: HexapodGeometry, name: str, ctc: str) -> None:
     """A 10 mm circle at 20 mm/s, frictionless drives, exact model: the force MPC's
-    largest distance to the reference is no larger than ``leg-edge-ctc``'s (both
-    measured here), and under 0.1 mm."""
+    largest distance to the reference is no larger than that of the computed torque of
+    the same features (both measured here), and under 0.1 mm."""
     world = CtcWorld.make(ideal_drives(geometry))
     R0, t0 = home_pose(world.truth)
     ref = PoseTrajectory("circle", "quintic", R0, t0, speed=0.02, acceleration=0.1,
@@ -209,14 +219,14 @@ def test_tracks_a_circle_as_the_ctc_does(geometry: HexapodGeometry) -> None:
     steps = math.ceil(ref.duration / DT) + 25
     p_ref = ref.at(DT * np.arange(steps + 1)).translation
     worst = {}
-    for law in (NAME, "leg-edge-ctc"):
+    for law in (name, ctc):
         ctrl = registry.create(law)
         ctrl.reset(world.context(world.goal(ref.end_rotation, ref.end_translation), ref))
         p, _, _ = world.run(ctrl, (R0, t0), steps)
         worst[law] = float(np.linalg.norm(p - p_ref, axis=1).max())
     assert np.abs(p_ref - t0).max() > 0.009  # it went round the circle
-    assert worst[NAME] <= worst["leg-edge-ctc"]
-    assert worst[NAME] < 1e-4
+    assert worst[name] <= worst[ctc]
+    assert worst[name] < 1e-4
 
 
 @pytest.mark.slow
@@ -248,17 +258,18 @@ def test_tracks_within_binding_force_limits(geometry: HexapodGeometry) -> None:
 
 
 # ----------------------------------------------------------------------------- refusals
-def test_options_are_checked() -> None:
-    ctrl = registry.create(NAME)
+@pytest.mark.parametrize("name", [NAME, POSE])
+def test_options_are_checked(name: str) -> None:
+    ctrl = registry.create(name)
     assert ctrl.actuation is Actuation.FORCE
     for key, value in (("horizon", 0), ("horizon", 2.5), ("substeps", True), ("max_iter", 0),
                        ("friction_smoothing", -1.0), ("error_weight", float("nan"))):
         with pytest.raises(OptionError, match=key):
-            registry.create(NAME, **{key: value})
+            registry.create(name, **{key: value})
     with pytest.raises(OptionError, match="rate_weight"):
-        registry.create(NAME, rate_weight=0.0, effort_weight=0.0)
+        registry.create(name, rate_weight=0.0, effort_weight=0.0)
     with pytest.raises(OptionError, match="error_weight"):
-        registry.create(NAME, error_weight=0.0, terminal_weight=0.0)
+        registry.create(name, error_weight=0.0, terminal_weight=0.0)
 
 
 @pytest.mark.slow
@@ -316,3 +327,27 @@ def test_virtual_machine_gives_the_compiled_results(geometry: HexapodGeometry) -
     plans = [_planned(world, robot, (R1, t1), 5 * DT, compiled=c).plan for c in (True, False)]
     assert plans[0] is not None and plans[1] is not None
     assert np.abs(plans[0] - plans[1]).max() < 1e-9 * max(1.0, float(np.abs(plans[0]).max()))
+
+
+@pytest.mark.slow
+def test_pose_variant_refuses_bad_readings_and_names_a_missing_goal(
+        geometry: HexapodGeometry) -> None:
+    """``pose-force-mpc`` needs no camera (its features are the encoders' pose) but the
+    goal pose; NaN lengths or leg rates are refused with zero forces."""
+    world = CtcWorld.make(geometry)
+    R0, t0, R1, t1 = _goal_away(geometry)
+    ctx = world.context(world.goal(R1, t1))
+    with pytest.raises(ContextError, match=r"goal\.rotation"):
+        registry.create(POSE).reset(dataclasses.replace(
+            ctx, goal=dataclasses.replace(ctx.goal, rotation=None)))
+    ctrl = registry.create(POSE)
+    ctrl.reset(dataclasses.replace(ctx, camera=None))
+    robot = DynamicRobots([geometry], R0[None].copy(), t0[None].copy())
+    good = world.observation(robot, 0.0)
+    for what, obs in (("lengths", dataclasses.replace(good, lengths=np.full(6, np.nan))),
+                      ("leg velocities", dataclasses.replace(good, q_dot=np.full(6, np.inf)))):
+        cmd = ctrl.step(obs)
+        assert cmd.reason is not None and what in cmd.reason, cmd.reason
+        assert np.array_equal(np.asarray(cmd.forces), np.zeros(6))
+    cmd = ctrl.step(dataclasses.replace(good, normals=None, directions=None))
+    assert cmd.reason is None and np.all(np.isfinite(np.asarray(cmd.forces)))
