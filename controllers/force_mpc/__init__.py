@@ -6,9 +6,11 @@ pose variant ``pose-force-mpc``.
   integrates them) and the condensed Gauss-Newton QP data, one compiled C function;
 - :mod:`controllers.force_mpc.controller`: the receding horizon (warm start,
   real-time iteration, the drives' force limits as bounds, DAQP), falling back to
-  ``leg-edge-ctc`` (``cartesian-ctc`` for the pose variant).
+  ``leg-edge-ctc`` (``cartesian-ctc`` for the pose variant);
+- :mod:`controllers.force_mpc.variants`: the two feature sets (the edges, the pose).
 """
 
-from controllers.force_mpc.controller import ForceMPCLaw, LegEdgeForceMPC, PoseForceMPC
+from controllers.force_mpc.controller import ForceMPCLaw
+from controllers.force_mpc.variants import LegEdgeForceMPC, PoseForceMPC
 
 __all__ = ["ForceMPCLaw", "LegEdgeForceMPC", "PoseForceMPC"]
