@@ -18,6 +18,10 @@ Built-in controllers are registered in :data:`controllers.registry.registry` her
 - ``leg-edge-ctc``, ``leg-direction-ctc``: computed torque in the space of the leg
   features (Özgür et al. 2011), all on the computed-torque solver
   (:mod:`controllers.solvers.computed_torque`);
+- ``leg-edge-force-mpc``, ``pose-force-mpc``: force-level predictive controllers on the
+  leg edges or on the platform pose (the nominal closed-chain dynamics over a horizon,
+  the drives' force limits as bounds; CasADi, DAQP), falling back to ``leg-edge-ctc`` or
+  ``cartesian-ctc``;
 - ``latency-compensated``: any of them (``law``) fed the image features predicted over
   the image's delay with the nominal model (:mod:`controllers.latency`).
 
@@ -42,6 +46,7 @@ from controllers.base import (
 from controllers.cartesian_ctc import CartesianCTC, VisionCTC
 from controllers.computed_torque import ComputedTorqueController
 from controllers.feature_ctc import LegDirectionCTC, LegEdgeCTC
+from controllers.force_mpc import LegEdgeForceMPC, PoseForceMPC
 from controllers.joint import JointSpaceController
 from controllers.latency import LatencyCompensated
 from controllers.leg_direction import LegDirectionController
@@ -65,6 +70,8 @@ BUILTINS = {
     "vision-ctc": VisionCTC,
     "leg-edge-ctc": LegEdgeCTC,
     "leg-direction-ctc": LegDirectionCTC,
+    "leg-edge-force-mpc": LegEdgeForceMPC,
+    "pose-force-mpc": PoseForceMPC,
     "latency-compensated": LatencyCompensated,
 }
 
@@ -88,10 +95,12 @@ __all__ = [
     "LegDirectionQPController",
     "LegEdgeCTC",
     "LegEdgeController",
+    "LegEdgeForceMPC",
     "LegEdgeMPCController",
     "LegEdgeQPController",
     "ModelBasedController",
     "Observation",
+    "PoseForceMPC",
     "Registry",
     "VisionCTC",
     "observation_problem",

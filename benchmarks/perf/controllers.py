@@ -37,7 +37,8 @@ BUDGET_US = {"leg-direction": 100.0, "leg-edge": 100.0, "leg-edge-qp": 300.0,
              "leg-direction-qp": 300.0, "leg-edge-mpc": 2000.0, "leg-direction-mpc": 2000.0,
              "leg-edge-mpc+model=global": 2000.0, "leg-direction-mpc+model=global": 2000.0,
              "computed-torque": 50.0, "cartesian-ctc": 50.0, "vision-ctc": 100.0,
-             "leg-edge-ctc": 100.0, "leg-direction-ctc": 100.0}
+             "leg-edge-ctc": 100.0, "leg-direction-ctc": 100.0, "leg-edge-force-mpc": 2000.0,
+             "pose-force-mpc": 2000.0}
 #: Variants timed by default besides the registered names.
 DEFAULT_VARIANTS = ("leg-edge-mpc+model=global", "leg-direction-mpc+model=global")
 

@@ -1,0 +1,378 @@
+"""The force-level predictive controllers' receding horizon (:class:`ForceMPCLaw`),
+here for ``leg-edge-force-mpc``, on the leg edges (its pose variant ``pose-force-mpc``
+differs in its features and reference: :mod:`controllers.force_mpc.variants`).
+
+Each period (receding horizon, force-mode drives):
+
+1. read the encoders (lengths ``q`` [m], leg velocities ``q_dot`` [m/s]) and the edge
+   normals the camera sees (refused, zero forces, with the reason when a reading is
+   missing or not finite, as the computed-torque laws refuse);
+2. the state of the prediction: the pose from the NOMINAL forward kinematics of the
+   encoders, the twist ``K^-1 q_dot`` (nominal ``K``);
+3. the reference of the horizon: the features of the stages ``t + k dt``, ``k = 1..N``,
+   exactly those ``leg-edge-ctc`` tracks (the anchored features of the reference
+   trajectory, or of a quintic line to the fixed goal, or the taught goal:
+   :mod:`controllers.feature_ctc`, whose law this controller holds);
+4. one Gauss-Newton QP of :mod:`controllers.force_mpc.problem` (compiled kernel) from
+   the previous plan shifted by one period (warm start), solved first without its
+   bounds (the minimiser ``-H^-1 g``, the QP's optimum when it holds them), else by
+   DAQP generated to C (:func:`controllers.mpc.solver.compiled_qp`): the force limits
+   ``|f_k| <= f_max`` of the nominal drives; ``max_iter`` such iterations (1: the
+   real-time iteration);
+5. apply ``f_0``.
+
+A failed solve (a non-finite QP, DAQP not optimal, a first force out of its bounds)
+falls back to the held ``leg-edge-ctc`` law for that period; the command says so in
+``notes`` and :attr:`ForceMPCLaw.stats` counts it.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Any
+
+import numpy as np
+
+from controllers.base import Command, Controller, ControllerContext, Goal, Observation
+from controllers.exceptions import ContextError, OptionError
+from controllers.feature_ctc import LegEdgeCTC
+from controllers.force_mpc.problem import ForceProblemSpec, force_kernel
+from controllers.law_tools import check_number
+from controllers.mpc.solver import QPResult, SolveStats, compiled_qp, solve_qp
+from controllers.task_ctc import (
+    DAMPING,
+    NATURAL_FREQUENCY_HZ,
+    TaskComputedTorque,
+    encoder_readings,
+)
+from hexapod.actuation import Actuation
+from hexapod.compiled import BoundCall
+from hexapod.dynamics.compiled import parameter_row
+from hexapod.exceptions import HexapodError
+from hexapod.fk import forward_kinematics
+
+#: Largest planned force beyond its bound accepted from the QP, relative to the bound
+#: (DAQP's solutions were seen up to 4e-5 beyond it in the perf runs: 0.008 N at
+#: 200 N); the plan is then clipped onto the bounds.
+BOUND_TOLERANCE = 1e-4
+
+
+class ForceMPCLaw(Controller):
+    """Base of the force-level predictive controllers (see the module docstring): the
+    subclasses say which features (:attr:`kind`), which law they hold
+    (:attr:`law_class`), and read the features and the reference.
+
+    Args:
+        horizon: Number of periods ``N`` predicted (1 to 50).
+        substeps: Integration steps per period of the prediction (``h = dt /
+            substeps``; the dynamic world's own step makes the prediction the world's
+            integration of the nominal robot).
+        error_weight: Weight of the feature error of the stages ``1..N-1``.
+        terminal_weight: Weight of the feature error of stage ``N``.
+        rate_weight: Weight of the force rate ``sum_k |f_k - f_{k-1}|^2`` [1/N^2].
+        effort_weight: Weight of the forces ``sum_k |f_k|^2`` [1/N^2].
+        max_iter: Gauss-Newton QPs per period (1: the real-time iteration).
+        natural_frequency: ``f_n`` [Hz] of the fallback ``leg-edge-ctc`` law.
+        damping: Damping ratio of the fallback law.
+        smooth_goal: Reach a fixed goal along the features of a quintic line (False:
+            the taught features as a step), as ``leg-edge-ctc``.
+        friction_smoothing: Speed ``v_g`` [m/s] at which the QP's sensitivities smooth
+            the drives' Coulomb friction (the prediction itself keeps the drives' model).
+        compiled: Generate the kernel and DAQP to C (False: the CasADi virtual machine
+            and ``casadi.conic``; the same results, much slower).
+    """
+
+    #: The features of the predictive problem (:data:`controllers.force_mpc.problem.FEATURES`).
+    kind = "edges"
+    #: The computed-torque law of the same features: reference, goal and fallback.
+    law_class: type[TaskComputedTorque] = LegEdgeCTC
+    actuation = Actuation.FORCE
+    #: Samples ``context.reference`` itself (:mod:`controllers.tracking` passes it through).
+    tracks_reference = True
+
+    def __init__(self, horizon: int = 10, substeps: int = 4, error_weight: float = 1.0,
+                 terminal_weight: float = 1.0, rate_weight: float = 1e-8,
+                 effort_weight: float = 0.0, max_iter: int = 1,
+                 natural_frequency: float = NATURAL_FREQUENCY_HZ, damping: float = DAMPING,
+                 smooth_goal: bool = True, friction_smoothing: float = 3e-3,
+                 compiled: bool = True) -> None:
+        name = self.name
+        for option, value, top in (("horizon", horizon, 50), ("substeps", substeps, 100),
+                                   ("max_iter", max_iter, 20)):
+            if isinstance(value, bool) or not isinstance(value, int) or not 1 <= value <= top:
+                raise OptionError(name, option, f"expected an integer from 1 to {top}, got "
+                                  f"{value!r}")
+        self.horizon, self.substeps, self.max_iter = horizon, substeps, max_iter
+        self.error_weight = check_number(name, "error_weight", error_weight, 0.0, strict=False)
+        self.terminal_weight = check_number(name, "terminal_weight", terminal_weight, 0.0,
+                                            strict=False)
+        if self.error_weight == 0 and self.terminal_weight == 0:
+            raise OptionError(name, "error_weight", "error and terminal weights are both 0")
+        self.rate_weight = check_number(name, "rate_weight", rate_weight, 0.0, strict=False)
+        self.effort_weight = check_number(name, "effort_weight", effort_weight, 0.0,
+                                          strict=False)
+        if self.rate_weight == 0 and self.effort_weight == 0:
+            raise OptionError(name, "rate_weight", "rate and effort weights are both 0 (the "
+                              "QP needs one of them to be strictly convex)")
+        self.friction_smoothing = check_number(name, "friction_smoothing",
+                                               friction_smoothing)
+        self.compiled = bool(compiled)
+        #: The fallback law, whose reference and goal this controller tracks.
+        self.law: Any = self.law_class(natural_frequency=natural_frequency, damping=damping,
+                                       smooth_goal=smooth_goal)
+        self.spec = ForceProblemSpec(horizon, substeps, self.kind)
+        self.stats = SolveStats()
+        self.context: ControllerContext | None = None
+        self._bound: BoundCall | None = None
+        #: The plan of the last step (6 N,) [N] (before the shift), and the warm start.
+        self.plan: np.ndarray | None = None
+        self._U = np.zeros(6 * horizon)
+        self._f_prev = np.zeros(6)
+        self._started = False
+        self._t0 = 0.0
+        self._guess: tuple[np.ndarray, np.ndarray] | None = None
+
+    # ----------------------------------------------------------------- reset
+    def reset_trial(self, context: ControllerContext) -> None:
+        """Reset the held law (reference, goal), build or load the compiled kernel and
+        write the nominal model's constants.
+
+        Raises:
+            ContextError: A field the controller needs is missing or invalid.
+        """
+        self.law.reset_trial(context)
+        self.context = context
+        g = context.geometry
+        dt = float(context.dt)
+        if not (math.isfinite(dt) and dt > 0):
+            raise ContextError(self.name, "dt", f"expected a positive period [s], got {dt}")
+        self._kernel = force_kernel(self.spec, self.compiled)
+        self._bound = self._kernel.bind()
+        v = self._bound.inputs
+        d = g.drives
+        v["model_A"][:] = g.base_points
+        v["model_E"][:] = g.platform_points
+        v["model_params"][:] = parameter_row(g.inertia)
+        v["model_rotor"][:] = d.rotor_inertia
+        v["model_viscous"][:] = d.viscous
+        v["model_coulomb"][:] = d.coulomb
+        v["model_h"][:] = dt / self.substeps
+        v["model_smoothing"][:] = self.friction_smoothing
+        self.camera_constants(context, v)
+        v["weights"][:] = (self.error_weight, self.terminal_weight, self.rate_weight,
+                           self.effort_weight)
+        self._limit = np.tile(np.asarray(d.force_limit, dtype=float), self.horizon)
+        n = 6 * self.horizon
+        self._qp = compiled_qp(n, n) if self.compiled else None
+        self._eye = np.eye(n)
+        self._dt = dt
+        self.stats = SolveStats()
+        self.plan = None
+        self._U = np.zeros(n)
+        self._f_prev = np.zeros(6)
+        self._started = False
+        self._t0 = 0.0
+        self._guess = None
+
+    def retarget_trial(self, goal: Goal) -> None:
+        """A new fixed goal (ignored when tracking ``context.reference``)."""
+        self.law.retarget_trial(goal)
+        if self.context is not None and self.context.reference is None:
+            self._started = False
+
+    # ----------------------------------------------------------------- step
+    def step_trial(self, observation: Observation) -> Command:
+        """The leg forces of this period [N], or a refusal (zeros) with its reason."""
+        if self.context is None or self._bound is None:
+            return self._refuse("reset(context) was not called")
+        readings = encoder_readings(observation)
+        if isinstance(readings, str):
+            return self._refuse(readings)
+        t, q, qd = readings
+        seen = self._features(observation)
+        if isinstance(seen, str):
+            return self._refuse(seen)
+        observed, mask = seen
+        if not self._started:  # the held law starts its reference (line to the goal) here
+            first = self.law.step_trial(observation)
+            if first.reason is not None:
+                return self._refuse(first.reason.removeprefix(f"{self.law.name}: "))
+            self._started = True
+            # the law's clock: the reference's own, or the line's from this step
+            self._t0 = t if self.context.reference is None else 0.0
+            self._U = np.tile(np.asarray(first.forces, dtype=float), self.horizon)
+            self._f_prev = np.asarray(first.forces, dtype=float).copy()
+        try:
+            R, p = self._pose(q)
+            twist = self._twist(R, p, qd)
+            reference, known = self._reference(t - self._t0)
+        except (HexapodError, np.linalg.LinAlgError, ValueError) as exc:
+            return self._fallback(observation, f"nominal model failed: {exc}")
+        mask = np.where(known, mask, 0.0)  # the rows' weights (0: unused)
+        if observed is None:  # the features are the pose itself
+            observed = np.concatenate([p, R.T.ravel()])
+        problem = self.too_few(mask)
+        if problem is not None:
+            return self._refuse(problem)
+        v = self._bound.inputs
+        v["state"][0:9] = R.T.ravel()
+        v["state"][9:12] = p
+        v["state"][12:18] = twist
+        v["f_prev"][:] = self._f_prev
+        v["reference"][:] = reference
+        v["observed"][:] = np.where(mask, observed, 0.0)
+        v["mask"][:] = mask
+        return self._solve(observation, observed, reference[0], mask)
+
+    def _solve(self, observation: Observation, normals: np.ndarray, ref_now: np.ndarray,
+               mask: np.ndarray) -> Command:
+        """The Gauss-Newton QPs from the warm start, and the command."""
+        assert self._bound is not None
+        bound, stats = self._bound, self.stats
+        stats.steps += 1
+        U = self._U.copy()
+        n = U.size
+        out = self._kernel.outputs
+        status = ""
+        converged = False
+        iterations = 0
+        for it in range(1, self.max_iter + 1):
+            iterations = it
+            bound.inputs["U"][:] = U
+            if bound.call():
+                return self._fallback(observation, "the compiled kernel failed")
+            y = bound.y
+            if not math.isfinite(float(y[out["H"]].sum() + y[out["g"]].sum())):
+                return self._fallback(observation, "non-finite QP data (prediction failed)")
+            H = y[out["H"]].reshape(n, n)
+            g = y[out["g"]]
+            res = self._qp_step(H, g, -self._limit - U, self._limit - U)
+            if res.step is None:
+                return self._fallback(observation, res.status)
+            U = U + res.step
+            status = res.status
+            size = float(np.abs(res.step[:6]).max())
+            if size <= 1e-3 * max(float(np.abs(U[:6]).max()), 1.0):
+                converged = True
+                break
+        stats.sqp_iterations = iterations
+        stats.total_sqp_iterations += iterations
+        stats.last_status = status
+        if not converged and self.max_iter > 1:
+            stats.unconverged += 1
+        lim = self._limit
+        if not (math.isfinite(float(U.sum()))
+                and np.all(np.abs(U) <= lim * (1.0 + BOUND_TOLERANCE))):
+            worst = int(np.argmax(np.abs(U) - lim))
+            return self._fallback(observation, f"planned force out of its bounds: leg "
+                                  f"{worst % 6} at stage {worst // 6}: {U[worst]} N, limit "
+                                  f"{lim[worst]} N")
+        U = np.clip(U, -lim, lim)  # within DAQP's tolerance of the bounds: onto them
+        f = U[:6]
+        self.plan = U.copy()
+        self._U = np.concatenate([U[6:], U[-6:]])  # the warm start of the next period
+        self._f_prev = f.copy()
+        e = np.where(mask, normals - ref_now, 0.0)
+        return Command.of_forces(f, error=e, error_norm=float(np.linalg.norm(e)),
+                                 features_used=self.used(mask),
+                                 notes=[f"force-mpc: {status}"])
+
+    def _qp_step(self, H: np.ndarray, g: np.ndarray, lo: np.ndarray, hi: np.ndarray
+                 ) -> QPResult:
+        """``min 1/2 d^T H d + g^T d`` s.t. ``lo <= d <= hi``: the unconstrained minimiser
+        when it holds the bounds, else DAQP."""
+        try:
+            d = -np.linalg.solve(H, g)
+        except np.linalg.LinAlgError:
+            d = None
+        if d is not None and np.all(d >= lo) and np.all(d <= hi):
+            return QPResult(d, "unconstrained optimum", 0, None)
+        if self._qp is not None:
+            return self._qp.solve(H, g, self._eye, lo, hi)
+        return solve_qp(H, g, self._eye, lo, hi)
+
+    # ----------------------------------------------------------------- pieces
+    def camera_constants(self, context: ControllerContext, v: dict[str, np.ndarray]) -> None:
+        """Write the camera's constants of the kernel (none by default).
+
+        Raises:
+            ContextError: A field the features need is missing or invalid.
+        """
+
+    def _features(self, observation: Observation
+                  ) -> tuple[np.ndarray | None, np.ndarray] | str:
+        """The observed features (m,) (None: the pose of the encoders) and the rows'
+        weights (m,) (0: not seen), or why not."""
+        raise NotImplementedError
+
+    def too_few(self, mask: np.ndarray) -> str | None:
+        """Why the rows ``mask`` are too few to control the six legs (None: enough)."""
+        return None
+
+    def used(self, mask: np.ndarray) -> int:
+        """The features used, as the command reports them."""
+        return int(mask.sum())
+
+    def _pose(self, q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """The nominal forward kinematics of the lengths [m] (warm-started)."""
+        assert self.context is not None
+        fk = forward_kinematics(self.context.geometry, q, guess=self._guess,
+                                check_stroke=False)
+        self._guess = (fk.rotation, fk.translation)
+        return fk.rotation, fk.translation
+
+    def _twist(self, R: np.ndarray, p: np.ndarray, qd: np.ndarray) -> np.ndarray:
+        """``K^-1 q_dot`` (6,) of the nominal model at the pose (``K`` rows
+        ``[u_i, (R eB_i) x u_i]``)."""
+        assert self.context is not None
+        g = self.context.geometry
+        r = g.platform_points @ R.T
+        legs = p + r - g.base_points
+        u = legs / np.linalg.norm(legs, axis=1)[:, None]
+        K = np.hstack([u, np.cross(r, u)])
+        return np.linalg.solve(K, qd)  # type: ignore[no-any-return]
+
+    def _reference(self, tr: float) -> tuple[np.ndarray, np.ndarray]:
+        """The reference features (N, m) of the stages at ``tr + k dt``, ``k = 1..N``,
+        [s] on the reference's clock, and the rows known at every stage (m,) bool."""
+        raise NotImplementedError
+
+    def _fallback(self, observation: Observation, reason: str) -> Command:
+        """The held law's command this period, noting why."""
+        self.stats.fallbacks += 1
+        self.stats.reasons[reason] = self.stats.reasons.get(reason, 0) + 1
+        cmd = self.law.step_trial(observation)
+        if cmd.reason is None and cmd.forces is not None:
+            self._f_prev = np.asarray(cmd.forces, dtype=float).copy()
+            self._U = np.tile(self._f_prev, self.horizon)
+        cmd.notes = [*(cmd.notes or []), f"force-mpc fallback: {reason}"]
+        return cmd
+
+    def _refuse(self, problem: str) -> Command:
+        return Command.refuse(f"{self.name}: {problem}", actuation=Actuation.FORCE)
+
+    # ----------------------------------------------------------------- diagnostics
+    def prediction(self, plan: np.ndarray | None = None) -> dict[str, Any]:
+        """The kernel's prediction from the last step's state along ``plan`` (6 N,) [N]
+        (default: the plan applied at the last step): the states (N, 18), edge normals
+        with the observed offset (N, 36), leg lengths (N, 6) [m] and leg rates (N, 6)
+        [m/s] at the ends of the periods ``1..N``, and the cost.
+
+        Raises:
+            ContextError: No step solved yet.
+        """
+        if self._bound is None or self.plan is None:
+            raise ContextError(self.name, "prediction", "no step solved yet")
+        bound = self._bound
+        saved = bound.x.copy()
+        bound.inputs["U"][:] = self.plan if plan is None else plan
+        if bound.call():
+            raise ContextError(self.name, "prediction", "the compiled kernel failed")
+        y = self._kernel.outputs.views(bound.y.copy())
+        bound.x[:] = saved
+        N = self.horizon
+        return {"states": y["states"].reshape(N, 18),
+                "features": y["features"].reshape(N, self.spec.features),
+                "lengths": y["lengths"].reshape(N, 6), "rates": y["rates"].reshape(N, 6),
+                "cost": float(y["cost"][0])}
+

@@ -1,0 +1,360 @@
+"""The force-level predictive problem: a condensed Gauss-Newton QP, compiled to C.
+
+Decision: the leg forces ``U = (f_0, ..., f_{N-1})`` [N], each held over one control
+period ``dt`` (force-mode drives). **Single shooting**: the predicted states are
+functions of ``U``; the only constraints are the drives' force limits, simple bounds
+on ``U``.
+
+**Prediction** (the NOMINAL model: the controller context's geometry, inertia and
+drives): the state ``x = (R, t, tau)`` (18 numbers: ``R`` column-major, ``t`` [m], the
+twist ``tau = (v [m/s], w [rad/s])``, base frame) moves by the closed-chain dynamics of
+:mod:`hexapod.dynamics.compiled` with the drives of :mod:`hexapod.dynamics.drive_model`
+in force mode, integrated as the dynamic world integrates them
+(:mod:`hexapod.dynamics.robots`), ``substeps`` steps of ``h = dt / substeps`` per
+period:
+
+``(M + K^T diag(m_leg + m_r + h d_f) K) tau_dot = K^T (f - c q_dot - f_c tanh(q_dot /
+v_s) - m_r K_dot tau) - h_mech``, then ``tau += h tau_dot``, ``t += h v``,
+``R <- exp(h [w]x) R``
+
+(linearly implicit Euler in the twist with the friction's secant damping
+``d_f = c + f_c tanh(q_dot / v_s) / q_dot``, semi-implicit Euler on SE(3)). With the
+world's step (``substeps = dt / physics_dt``) the prediction is the world's own
+integration of the nominal robot, to rounding.
+
+**Cost**, over the stages ``k = 1..N`` (the last one weighted ``terminal_weight``):
+
+``sum_k w_k |s_k - s*_k|^2 + rate sum_k |f_k - f_{k-1}|^2 + effort sum_k |f_k|^2``
+
+with the predicted edge normals ``s_k = s_obs + s(x_k) - s(x_0)`` (camera frame: the
+normals seen now, moved by the model's change; hidden edges weigh 0; the pose variant,
+``kind = "pose"``: ``s = (t, R column-major)``, base frame, the rows weighted), the
+reference ``s*_k`` (the goal features, or the anchored reference at ``t + k dt``) and
+``f_{-1}`` the force applied last period.
+
+**Gauss-Newton QP** (one per SQP iteration): the sensitivities ``S_k = d x_k / d U``
+follow ``S_{k+1} = A_k S_k + [0 .. B_k .. 0]`` with the period's Jacobians ``A_k``,
+``B_k`` (CasADi AD of the step, chained over the substeps), and
+``H = sum_k w_k S_k^T C_k^T W C_k S_k + rate D^T D + effort I``,
+``g = sum_k w_k S_k^T C_k^T W r_k + ...`` with ``C_k = d s / d x`` at ``x_k``. Everything
+is one CasADi function generated to C (:class:`hexapod.compiled.CompiledFunction`);
+:mod:`controllers.force_mpc.controller` solves the box-constrained QP (DAQP, shipped
+with CasADi, generated to C: :func:`controllers.mpc.solver.compiled_qp`).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from functools import lru_cache
+
+import casadi as ca
+import numpy as np
+
+from controllers.mpc.prediction import sx_edge_normals
+from hexapod.compiled import CompiledFunction, Layout, Shape
+from hexapod.dynamics import compiled as mech
+from hexapod.dynamics.drive_model import COULOMB_SMOOTHING
+
+#: The state: rotation (column-major), position [m], twist [m/s, rad/s].
+STATE = Layout([("R", 9), ("t", 3), ("twist", 6)], "force-MPC state")
+#: Size of the state.
+NX = STATE.size
+#: The features: twelve edge normals (six legs, two edges, three components).
+NS = 36
+#: Number of features of each kind: the edge normals (camera frame), or the platform
+#: pose ``(t [m], R column-major)`` (base frame, the pose variant).
+FEATURES = {"edges": NS, "pose": 12}
+#: The nominal model's constants of a step: base and platform points [m] (base frame),
+#: the 19 inertial parameters, the drives' rotor inertia [kg], viscous [N s/m] and
+#: Coulomb [N] friction, and the step ``h`` [s].
+MODEL = Layout([("A", (6, 3)), ("E", (6, 3)), ("params", mech.N_PARAMETERS),
+                ("rotor", 6), ("viscous", 6), ("coulomb", 6), ("h", 1), ("smoothing", 1)],
+               "force-MPC model constants")
+#: The features' constants: the camera's rotation from the base (column-major), the
+#: estimated base points in the camera frame [m] and the legs' radius [m].
+CAMERA = Layout([("R", 9), ("A", (6, 3)), ("radius", 1)], "force-MPC camera constants")
+
+
+@dataclass(frozen=True)
+class ForceProblemSpec:
+    """The structure of one problem (what the compiled kernel depends on).
+
+    Attributes:
+        horizon: ``N`` periods.
+        substeps: Integration steps per period.
+        kind: The features: ``"edges"`` (the edge normals) or ``"pose"``.
+    """
+
+    horizon: int
+    substeps: int
+    kind: str = "edges"
+
+    @property
+    def features(self) -> int:
+        """Number of features of a stage."""
+        return FEATURES[self.kind]
+
+    def input_layout(self) -> Layout:
+        """The kernel's input row."""
+        N, m = self.horizon, self.features
+        blocks: list[tuple[str, Shape]] = [
+            ("state", NX), ("U", 6 * N), ("f_prev", 6), ("reference", (N, m)),
+            ("observed", m), ("mask", m), ("weights", 4)]
+        blocks += [(f"model_{b}", MODEL.shapes[b]) for b in MODEL]
+        blocks += [(f"camera_{b}", CAMERA.shapes[b]) for b in CAMERA]
+        return Layout(blocks, "force-MPC kernel input")
+
+    def output_layout(self) -> Layout:
+        """The kernel's output row: the QP data, the cost, the predicted states,
+        features (with the observed offset) and leg lengths [m] of stages ``1..N``."""
+        N, n, m = self.horizon, 6 * self.horizon, self.features
+        return Layout([("H", (n, n)), ("g", n), ("cost", 1), ("states", (N, NX)),
+                       ("features", (N, m)), ("lengths", (N, 6)), ("rates", (N, 6))],
+                      "force-MPC kernel output")
+
+
+def _exp_so3(w: ca.SX) -> ca.SX:
+    """Rodrigues' formula, with the series below 1e-6 rad (as the dynamic world's)."""
+    theta = ca.norm_2(w)
+    small = theta < 1e-6
+    th = ca.if_else(small, 1.0, theta)
+    a = ca.if_else(small, 1.0 - theta**2 / 6.0, ca.sin(th) / th)
+    b = ca.if_else(small, 0.5 - theta**2 / 24.0, (1.0 - ca.cos(th)) / th**2)
+    K = ca.skew(w)
+    return ca.SX.eye(3) + a * K + b * (K @ K)
+
+
+def step_expression() -> tuple[ca.SX, ca.SX, ca.SX, ca.SX]:
+    """One integration step of the nominal robot with force-mode drives (module
+    docstring): the symbols ``x`` (18), ``f`` (6), the model constants, and ``x`` after
+    the step. Written as the dynamic world's step (:mod:`hexapod.dynamics.robots_compiled`)
+    with the drive's force ``f`` inside its limits."""
+    x = ca.SX.sym("x", NX)
+    f = ca.SX.sym("f", 6)
+    c = ca.SX.sym("c", MODEL.size)
+    s = STATE.split(x)
+    m = MODEL.split(c)
+    sym, terms = mech.cached_expressions()
+    row = ca.vertcat(s["R"], s["t"], s["twist"], ca.SX.zeros(6), m["A"], m["E"], m["params"])
+    M_joint, leg_mass, hb, K, qd, b = (ca.substitute(terms[k], sym, row) for k in (
+        "M_joint", "leg_mass", "h", "K", "q_dot", "leg_bias"))
+    h = m["h"]
+    xs = qd * (1 / COULOMB_SMOOTHING)
+    small = ca.fabs(xs) < 1e-8
+    secant = ca.if_else(small, 1.0, ca.tanh(xs) / ca.if_else(small, 1.0, xs))
+    d_friction = m["viscous"] + m["coulomb"] * (1 / COULOMB_SMOOTHING) * secant
+    friction = m["viscous"] * qd + m["coulomb"] * ca.tanh(xs)
+    rotor = m["rotor"]
+    leg_total = leg_mass + rotor + h * d_friction
+    lhs = M_joint
+    for i in range(6):
+        k = K[i, :].T
+        lhs += mech.symmetric_outer(leg_total[i] * k, k)
+    rhs = K.T @ (f - friction - rotor * b) - hb
+    acc = mech.ldl_solve(lhs, rhs)
+    tw_new = s["twist"] + h * acc
+    t_new = s["t"] + h * tw_new[0:3]
+    R_new = _exp_so3(h * tw_new[3:6]) @ ca.reshape(s["R"], 3, 3)
+    return x, f, c, ca.vertcat(ca.reshape(R_new, 9, 1), t_new, tw_new)
+
+
+def features_expression(kind: str = "edges") -> tuple[ca.SX, ca.SX, ca.SX, ca.SX, ca.SX]:
+    """The features of the nominal robot at a state: the edge normals (36, camera
+    frame), or for ``kind = "pose"`` the pose ``(t, R column-major)`` (12, base frame);
+    the symbols ``x``, the model constants and the camera constants, the features and
+    the leg lengths (6) [m]."""
+    x = ca.SX.sym("x", NX)
+    c = ca.SX.sym("c", MODEL.size)
+    cam = ca.SX.sym("cam", CAMERA.size)
+    s = STATE.split(x)
+    m = MODEL.split(c)
+    k = CAMERA.split(cam)
+    R = ca.reshape(s["R"], 3, 3)
+    Rc = ca.reshape(k["R"], 3, 3)
+    A = ca.reshape(m["A"], 3, 6)
+    E = ca.reshape(m["E"], 3, 6)
+    Ac = ca.reshape(k["A"], 3, 6)
+    normals, lengths = [], []
+    for i in range(6):
+        d = s["t"] + R @ E[:, i] - A[:, i]
+        q = ca.sqrt(ca.dot(d, d))
+        lengths.append(q)
+        n1, n2 = sx_edge_normals(Ac[:, i], Rc @ (d / q), k["radius"])
+        normals += [n1, n2]
+    if kind == "pose":
+        return x, c, cam, ca.vertcat(s["t"], s["R"]), ca.vertcat(*lengths)
+    return x, c, cam, ca.vertcat(*normals), ca.vertcat(*lengths)
+
+
+def ldl_solve_columns(M: ca.SX, B: ca.SX) -> ca.SX:
+    """``M^-1 B`` for a symmetric positive-definite ``M`` (n x n) and ``B`` (n x m) by one
+    unrolled LDL^T factorisation (as :func:`hexapod.dynamics.compiled.ldl_solve`)."""
+    n = M.shape[0]
+    L = [[ca.SX(0)] * n for _ in range(n)]
+    D = [ca.SX(0)] * n
+    for j in range(n):
+        D[j] = M[j, j] - sum((L[j][k] * L[j][k] * D[k] for k in range(j)), ca.SX(0))
+        for i in range(j + 1, n):
+            L[i][j] = (M[i, j] - sum((L[i][k] * L[j][k] * D[k] for k in range(j)),
+                                     ca.SX(0))) / D[j]
+    cols = []
+    for c in range(B.shape[1]):
+        y = [ca.SX(0)] * n
+        for i in range(n):
+            y[i] = B[i, c] - sum((L[i][k] * y[k] for k in range(i)), ca.SX(0))
+        z = [y[i] / D[i] for i in range(n)]
+        out = [ca.SX(0)] * n
+        for i in reversed(range(n)):
+            out[i] = z[i] - sum((L[k][i] * out[k] for k in range(i + 1, n)), ca.SX(0))
+        cols.append(ca.vertcat(*out))
+    return ca.horzcat(*cols)
+
+
+def sensitivity_expression(substeps: int) -> tuple[ca.SX, ca.SX, ca.SX, ca.SX]:
+    """The period's linear model in the perturbation ``(xi, delta tau)`` (12: the pose's
+    left perturbation ``xi = (delta t, delta phi)``, ``R -> exp([delta phi]x) R``, and the
+    twist's), its matrices frozen at the period's start state (module docstring):
+    ``(x, c) -> (A (12 x 12), B (12 x 6))``.
+
+    Per substep ``tau' = (Mb + h K^T C K)^-1 (Mb tau + h K^T f)``, ``xi' = xi + h tau'``,
+    with ``Mb = M + K^T diag(m_r) K`` and ``C`` the friction's slope at the period's
+    start: ``c + f_c / v_g (1 - tanh^2(q_dot / v_g))``, the Coulomb force smoothed at
+    ``v_g`` (``smoothing`` [m/s], much wider than the world's ``v_s``: the exact slope,
+    ``f_c / v_s`` at rest, holds only within ``v_s`` and would freeze the plan; without
+    the Coulomb slope the QP would overestimate how far a small force moves a leg at
+    rest, and creep to the goal)."""
+    x = ca.SX.sym("x", NX)
+    c = ca.SX.sym("c", MODEL.size)
+    s = STATE.split(x)
+    m = MODEL.split(c)
+    sym, terms = mech.cached_expressions()
+    row = ca.vertcat(s["R"], s["t"], s["twist"], ca.SX.zeros(6), m["A"], m["E"], m["params"])
+    M_joint, leg_mass, K, qd = (ca.substitute(terms[k], sym, row) for k in (
+        "M_joint", "leg_mass", "K", "q_dot"))
+    h = m["h"]
+    # the friction's slope: viscous, and the Coulomb force smoothed at ``smoothing``
+    slope = m["viscous"] + m["coulomb"] / m["smoothing"] * (
+        1 - ca.tanh(qd / m["smoothing"]) ** 2)
+    Mb = M_joint
+    L = M_joint
+    for i in range(6):
+        k = K[i, :].T
+        Mb += mech.symmetric_outer((leg_mass[i] + m["rotor"][i]) * k, k)
+        L += mech.symmetric_outer((leg_mass[i] + m["rotor"][i] + h * slope[i]) * k, k)
+    PQ = ldl_solve_columns(L, ca.horzcat(Mb, h * K.T))
+    P, Q = PQ[:, :6], PQ[:, 6:]  # tau' = P tau + Q f
+    Att, Axt = ca.SX.eye(6), ca.SX(6, 6)
+    Bt, Bx = ca.SX(6, 6), ca.SX(6, 6)
+    for _ in range(substeps):
+        Bt = P @ Bt + Q
+        Att = P @ Att
+        Axt = Axt + h * Att
+        Bx = Bx + h * Bt
+    A = ca.vertcat(ca.horzcat(ca.SX.eye(6), Axt), ca.horzcat(ca.SX(6, 6), Att))
+    return x, c, A, ca.vertcat(Bx, Bt)
+
+
+def _period_function(substeps: int) -> ca.Function:
+    """``(x, f, c) -> (x_next, A, B, q_dot)``: the state after one period of ``substeps``
+    steps, the linear model of :func:`sensitivity_expression` at ``x``, and the leg rates
+    ``q_dot = K tau`` [m/s] at ``x_next``."""
+    x, f, c, y = step_expression()
+    step = ca.Function("force_mpc_step", [x, f, c], [y])
+    xl, cl, A, B = sensitivity_expression(substeps)
+    lin = ca.Function("force_mpc_linear", [xl, cl], [A, B])
+    xs, fs, cs = (ca.SX.sym(n, v.shape[0]) for n, v in (("x", x), ("f", f), ("c", c)))
+    xk = xs
+    for _ in range(substeps):
+        xk = step(xk, fs, cs)
+    Ak, Bk = lin(xs, cs)
+    sym, terms = mech.cached_expressions()
+    sk = STATE.split(xk)
+    mk = MODEL.split(cs)
+    row = ca.vertcat(sk["R"], sk["t"], sk["twist"], ca.SX.zeros(6), mk["A"], mk["E"],
+                     mk["params"])
+    qd = ca.substitute(terms["q_dot"], sym, row)
+    return ca.Function("force_mpc_period", [xs, fs, cs], [xk, Ak, Bk, qd])
+
+
+def _features_function(kind: str = "edges") -> ca.Function:
+    """``(x, c, cam) -> (s, ds/dxi, lengths)``: the features, their Jacobian (m x 6) in the
+    pose's left perturbation ``xi = (delta t, delta phi)`` and the leg lengths [m]."""
+    x, c, cam, s, q = features_expression(kind)
+    xi = ca.SX.sym("xi", 6)
+    st = STATE.split(x)
+    R = ca.reshape(st["R"], 3, 3)
+    moved = ca.vertcat(ca.reshape((ca.SX.eye(3) + ca.skew(xi[3:6])) @ R, 9, 1),
+                       st["t"] + xi[0:3], st["twist"])
+    s_moved = ca.substitute(s, x, moved)
+    C = ca.substitute(ca.jacobian(s_moved, xi), xi, ca.SX.zeros(6))
+    return ca.Function("force_mpc_features", [x, c, cam], [s, C, q])
+
+
+def kernel_function(spec: ForceProblemSpec) -> ca.Function:
+    """The QP data of one Gauss-Newton iteration (module docstring) as one function of
+    the input row (:meth:`ForceProblemSpec.input_layout`): an MX graph calling the
+    period's and the features' SX functions (each generated to C once) and condensing
+    with dense matrix products."""
+    N, n, ns = spec.horizon, 6 * spec.horizon, spec.features
+    lay = spec.input_layout()
+    period = _period_function(spec.substeps)
+    feats = _features_function(spec.kind)
+    v = ca.MX.sym("v", lay.size)
+    P = lay.split(v)
+    c = ca.vertcat(*(P[f"model_{b}"] for b in MODEL))
+    cam = ca.vertcat(*(P[f"camera_{b}"] for b in CAMERA))
+    U = P["U"]
+    w_err, w_term, w_rate, w_effort = (P["weights"][i] for i in range(4))
+    mask = P["mask"]
+    s0 = feats(P["state"], c, cam)[0]
+    offset = P["observed"] - s0
+    x = P["state"]
+    S: ca.MX | None = None  # d(xi, tau)_k / d(f_0 .. f_{k-1}) (12 x 6 k)
+    H = ca.MX(n, n)
+    g = ca.MX(n, 1)
+    cost = ca.MX(0)
+    states, features, lengths, rates = [], [], [], []
+    for k in range(N):
+        f = U[6 * k:6 * k + 6]
+        x, A, B, qd = period(x, f, c)
+        S = B if S is None else ca.horzcat(A @ S, B)
+        s, C, q = feats(x, c, cam)
+        ref = P["reference"][k * ns:(k + 1) * ns]
+        weight = w_term if k == N - 1 else w_err
+        wm = weight * mask
+        r = s + offset - ref
+        Wr = wm * r
+        Q = C.T @ (ca.repmat(wm, 1, 6) * C)  # (6 x 6) on the pose perturbation
+        Sx = S[0:6, :]
+        m = 6 * k + 6
+        block = Sx.T @ (Q @ Sx)
+        grad = Sx.T @ (C.T @ Wr)
+        if m < n:
+            block = ca.diagcat(block, ca.MX(n - m, n - m))
+            grad = ca.vertcat(grad, ca.MX(n - m, 1))
+        H = H + block
+        g = g + grad
+        cost = cost + 0.5 * ca.dot(r, Wr)
+        states.append(x)
+        features.append(s + offset)
+        lengths.append(q)
+        rates.append(qd)
+    # force rate: sum |f_k - f_{k-1}|^2 (f_{-1} = f_prev), and effort sum |f_k|^2
+    D = np.eye(n) - np.eye(n, k=-6)
+    shift = ca.vertcat(P["f_prev"], ca.MX(n - 6, 1))
+    dr = ca.mtimes(ca.DM(D), U) - shift
+    H = H + w_rate * ca.DM(D.T @ D) + w_effort * ca.DM(np.eye(n))
+    g = g + w_rate * ca.mtimes(ca.DM(D.T), dr) + w_effort * U
+    cost = cost + 0.5 * w_rate * ca.dot(dr, dr) + 0.5 * w_effort * ca.dot(U, U)
+    out = ca.vertcat(ca.reshape(ca.densify(H), n * n, 1), g, cost, *states, *features,
+                     *lengths, *rates)
+    name = "hexapod_force_mpc" if spec.kind == "edges" else f"hexapod_force_{spec.kind}_mpc"
+    return ca.Function(f"{name}_{N}_{spec.substeps}", [v], [out])
+
+
+@lru_cache(maxsize=8)
+def force_kernel(spec: ForceProblemSpec, compile: bool = True) -> CompiledFunction:
+    """The compiled kernel of ``spec`` (built on first use, the C library cached on
+    disk by :mod:`hexapod.compiled`)."""
+    return CompiledFunction(kernel_function(spec), compile=compile,
+                            inputs=spec.input_layout(), outputs=spec.output_layout())
