@@ -53,9 +53,10 @@ def camera_batch(normals: np.ndarray, lines: np.ndarray | None, directions: np.n
 
 
 def take(obs: ObservationBatch, rows: np.ndarray) -> ObservationBatch:
-    """Rows ``rows`` of a batch (every array field indexed)."""
-    return ObservationBatch(**{f: (None if (v := getattr(obs, f)) is None else v[rows])
-                               for f in obs.__dataclass_fields__})  # type: ignore[arg-type]
+    """Rows ``rows`` of a batch (every array field indexed,
+    :meth:`~controllers.data.ObservationBatch.rows`; passing every dataclass field to the
+    constructor failed on ``single``, not an init field, so every call raised)."""
+    return obs.rows(np.asarray(rows))
 
 
 def goal_of(m: ObservationBatch, setup: TrialSetup) -> Goal:
