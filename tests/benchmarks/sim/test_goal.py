@@ -272,3 +272,25 @@ def test_tracking_runs_in_every_setting(goal: str) -> None:
         assert row["failure"] is None or row["failure"].startswith("not converged"), (
             spec.label, row["failure"])
         assert row["tracking_max_position_mm"] < 5.0, (spec.label, row)
+
+
+@pytest.mark.slow
+def test_a_taught_encoder_baseline_ends_a_closed_curve_exactly() -> None:
+    """The confound on a trajectory task (the kinematic world, the model error only): the
+    joint-space law tracking the reference moved to the taught goal ends the circle at
+    the true goal (below 1e-6 mm) once the reference has stopped; tracking the nominal
+    inverse kinematics (``mixed``, ``cartesian``) it ends a calibration error away."""
+    final = {}
+    for g in GOAL_SETTINGS:
+        sc = _scenario(goal=g, controllers=[{"name": "joint-space", "gain": 5.0}],
+                       calibration_error=MODEL_ERROR,
+                       task={"kind": "trajectory", "shape": "circle", "radius_mm": 10.0,
+                             "speed_mm_s": 40.0, "acceleration_mm_s2": 400.0,
+                             "margin_mm": 20.0, "max_translation_mm": 20.0,
+                             "max_steps": 600})
+        rows = [r.row for r in run_trials(sc, 0, [0, 1])]
+        assert all(r["trajectory_duration_s"] < 0.5 * sc.dt * sc.task.max_steps for r in rows), [
+            r["trajectory_duration_s"] for r in rows]
+        final[g] = np.array([r["final_position_error_mm"] for r in rows])
+    assert np.all(final["taught"] < 1e-6), final
+    assert np.all(final["mixed"] > 0.1), final
