@@ -10,7 +10,7 @@ from typing import Any
 import numpy as np
 import pytest
 
-import controllers  # noqa: F401 - registers the built-ins
+import controllers  # registers the built-ins
 from benchmarks.exceptions import ScenarioError
 from benchmarks.sim import run_trials
 from benchmarks.sim.goal import (
@@ -67,7 +67,7 @@ def test_a_bad_goal_setting_is_refused_naming_the_key_and_the_choices() -> None:
         _scenario(goal="taugth")
     text = str(info.value)
     assert "task.goal" in text and "'taugth'" in text and "cartesian" in text
-    with pytest.raises(ValueError, match="task.goal.*'nominal'"):
+    with pytest.raises(ValueError, match=r"task\.goal.*'nominal'"):
         goal_setting(type("S", (), {"task": type("T", (), {"goal": "nominal"})()})())
 
 
@@ -76,7 +76,7 @@ def test_the_goal_setting_can_be_swept_and_not_overridden_then() -> None:
     points = sc.expand()
     assert [p.task.goal for p in points] == ["mixed", "taught", "cartesian"]
     assert points[1].sweep == {"task.goal": "taught"}
-    with pytest.raises(ScenarioError, match="sweeps task.goal"):
+    with pytest.raises(ScenarioError, match=r"sweeps task\.goal"):
         sc.with_goal("taught")
     assert _scenario().with_goal("cartesian").task.goal == "cartesian"
     with pytest.raises(ScenarioError, match="--goal"):
