@@ -221,7 +221,8 @@ def test_every_builtin_controller_runs_in_every_setting() -> None:
     laws in the dynamic world) under each setting. Without model error and noise every
     setting gives the same goal, so each law ends where it ends in the others (the
     velocity laws at the goal: 0.05 mm, 0.01 deg); with the model error of quick each
-    runs without a failure other than not converging. Every row states its setting."""
+    runs 60 periods without a failure other than not converging. Every row states its
+    setting."""
     names = {c if isinstance(c, str) else c["name"] for c in KINEMATIC + DYNAMIC}
     assert names == set(controllers.registry.names())  # nobody left out
     exact: dict[tuple[str, bool], dict[str, list[float]]] = {}
@@ -230,8 +231,9 @@ def test_every_builtin_controller_runs_in_every_setting() -> None:
     for goal in GOAL_SETTINGS:
         for laws, extra, trials in ((KINEMATIC, {}, [0, 1]), (DYNAMIC, dynamic, [0])):
             for errors in ({}, MODEL_ERROR):
+                short = {"task": {**extra.get("task", {}), "max_steps": 60}} if errors else {}
                 sc = _scenario(goal=goal, controllers=laws, calibration_error=errors,
-                               **extra)
+                               **{**extra, **short})
                 for c, spec in enumerate(sc.controllers):
                     rows = [r.row for r in run_trials(sc, c, trials)]
                     for row in rows:
