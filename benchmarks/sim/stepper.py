@@ -279,8 +279,8 @@ def _close_all(backends: list[Backend]) -> None:
 
 def trial_context(sc: SimScenario, setup: TrialSetup, goal: Any) -> ControllerContext:
     """What the controllers of a trial are told: the estimated parameters and the goal
-    (under ``[task] goal = "taught"``, a trajectory's reference moved rigidly to end at
-    the taught goal pose, :class:`benchmarks.sim.goal.AnchoredReference`)."""
+    (under ``[task] goal = "taught"``, a trajectory's reference moved to end at the
+    taught goal pose, :class:`benchmarks.sim.goal.AnchoredReference`)."""
     from benchmarks.sim.goal import AnchoredReference, goal_setting
     from benchmarks.sim.reference import trial_reference
 
