@@ -197,6 +197,9 @@ def build_parser() -> argparse.ArgumentParser:
                         "(docs/backends.md)")
     s.add_argument("--world", choices=("kinematic", "dynamic"),
                    help="override the scenarios' [robot] world (docs/dynamic-world.md)")
+    s.add_argument("--goal", choices=("mixed", "taught", "cartesian"),
+                   help="override the scenarios' [task] goal: what the controllers are told "
+                        "of the goal (docs/scenarios.md, Fairness)")
     s.add_argument("--engine", choices=("batched", "per-trial"), default="batched",
                    help="batched (default: every trial of a work unit as arrays) or per-trial "
                         "(one controller object per trial; same results, slower)")

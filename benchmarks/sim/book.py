@@ -338,7 +338,8 @@ def stroke_violations(q: np.ndarray, v: np.ndarray, dt: float,
 
 
 def base_row(sc: SimScenario, spec: Any, trial: int) -> dict[str, Any]:
-    """The identity of a result row: scenario, controller (with its package), trial, sweep."""
+    """The identity of a result row: scenario, controller (with its package), trial, the
+    goal setting (``[task] goal``), sweep."""
     info = None
     try:
         info = registry.source(spec.name)
@@ -351,6 +352,7 @@ def base_row(sc: SimScenario, spec: Any, trial: int) -> dict[str, Any]:
         "controller_package": info.package if info else None,
         "controller_version": info.version if info else None,
         "trial": int(trial),
+        "goal": getattr(sc.task, "goal", "mixed"),  # the goal setting (benchmarks.sim.goal)
     }
     for key, value in sc.sweep.items():
         row[key.replace(".", "_").replace("calibration_error_", "calib_")] = value

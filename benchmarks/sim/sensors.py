@@ -15,6 +15,7 @@ from typing import Any
 
 import numpy as np
 
+from benchmarks.sim.goal import cartesian_goal, goal_setting, taught_goal
 from benchmarks.sim.inputs import SimScenario
 from benchmarks.sim.world import TrialSetup, World, trial_rng
 from controllers.base import Goal, ObservationBatch
@@ -52,14 +53,16 @@ def camera_batch(normals: np.ndarray, lines: np.ndarray | None, directions: np.n
 
 
 def take(obs: ObservationBatch, rows: np.ndarray) -> ObservationBatch:
-    """Rows ``rows`` of a batch (every array field indexed)."""
-    return ObservationBatch(**{f: (None if (v := getattr(obs, f)) is None else v[rows])
-                               for f in obs.__dataclass_fields__})  # type: ignore[arg-type]
+    """Rows ``rows`` of a batch (every array field indexed,
+    :meth:`~controllers.data.ObservationBatch.rows`; passing every dataclass field to the
+    constructor failed on ``single``, not an init field, so every call raised)."""
+    return obs.rows(np.asarray(rows))
 
 
 def goal_of(m: ObservationBatch, setup: TrialSetup) -> Goal:
-    """The :class:`Goal` of a trial from the camera's batch of one taught at its goal
-    pose (the pose and its nominal inverse kinematics for the model-based baselines)."""
+    """The :class:`Goal` of a trial under the ``"mixed"`` goal setting, from the camera's
+    batch of one taught at its goal pose (the pose and its nominal inverse kinematics for
+    the model-based baselines)."""
     return Goal(
         normals=m.normals[0],  # type: ignore[index]
         lines=None if m.lines is None else m.lines[0],
@@ -145,11 +148,16 @@ class GeometricSensor:
         """The goals of the trials of the rows (:func:`trial_goal` with one taught frame)
         in one batch."""
         sc = self.sc
+        setting = goal_setting(sc)
+        if setting == "cartesian":  # nothing measured at the goal
+            return [cartesian_goal(s) for s in setups]
         R = np.array([s.goal_rotation for s in setups])
         t = np.array([s.goal_translation for s in setups])
         m = self.sample(R, t, np.arange(len(setups)),
                         rows_generators(sc, setups, 2, sc.noise.on_goal),
                         apply_noise=sc.noise.on_goal)
+        if setting == "taught":
+            return [taught_goal(take(m, np.array([k])), s, sc) for k, s in enumerate(setups)]
         return [goal_of(take(m, np.array([k])), s) for k, s in enumerate(setups)]
 
     def measure_goal(self, rotation: np.ndarray, translation: np.ndarray,
@@ -275,13 +283,18 @@ def _average_frames(m: ObservationBatch, perspective_camera: Any | None,
 
 
 def trial_goal(sensor: GeometricSensor | Any, setup: TrialSetup, sc: SimScenario) -> Goal:
-    """What the controllers are told about the goal of a trial.
+    """What the controllers are told about the goal of a trial, by the scenario's goal
+    setting (:mod:`benchmarks.sim.goal`).
 
-    The desired features are taught by showing: the sensor measures the TRUE goal pose
-    ``sc.teach_frames`` times (with the scenario's noise when ``[noise] on_goal``; an
-    image sensor renders and detects each frame) and the normals are averaged
-    (:func:`vision.estimate.average_normals`). The pose and its nominal inverse
-    kinematics are for the model-based and joint-space baselines.
+    Under ``"mixed"`` (the default) and ``"taught"`` the desired features are taught by
+    showing: the sensor measures the TRUE goal pose ``sc.teach_frames`` times (with the
+    scenario's noise when ``[noise] on_goal``; an image sensor renders and detects each
+    frame) and the normals are averaged (:func:`vision.estimate.average_normals`). Under
+    ``"mixed"`` the pose and its nominal inverse kinematics are for the encoder and pose
+    laws; under ``"taught"`` the encoders read at the goal and the model's pose of them
+    (:func:`benchmarks.sim.goal.taught_goal`). Under ``"cartesian"`` nothing is measured:
+    every field is predicted from the controller's model
+    (:func:`benchmarks.sim.goal.cartesian_goal`).
 
     Args:
         sensor: The trial's sensor (:func:`make_sensor`).
@@ -291,10 +304,13 @@ def trial_goal(sensor: GeometricSensor | Any, setup: TrialSetup, sc: SimScenario
     Returns:
         The :class:`~controllers.base.Goal`.
     """
+    setting = goal_setting(sc)
+    if setting == "cartesian":
+        return cartesian_goal(setup)
     rng = trial_rng(sc.seed, setup.trial, 2)
-    return goal_of(sensor.measure_goal(setup.goal_rotation, setup.goal_translation, rng,
-                                       frames=sc.teach_frames,
-                                       apply_noise=sc.noise.on_goal), setup)
+    m = sensor.measure_goal(setup.goal_rotation, setup.goal_translation, rng,
+                            frames=sc.teach_frames, apply_noise=sc.noise.on_goal)
+    return taught_goal(m, setup, sc) if setting == "taught" else goal_of(m, setup)
 
 
 def make_sensor(sc: SimScenario, setup: TrialSetup) -> Any:

@@ -278,9 +278,16 @@ def _close_all(backends: list[Backend]) -> None:
 
 
 def trial_context(sc: SimScenario, setup: TrialSetup, goal: Any) -> ControllerContext:
-    """What the controllers of a trial are told: the estimated parameters and the goal."""
+    """What the controllers of a trial are told: the estimated parameters and the goal
+    (under ``[task] goal = "taught"``, a trajectory's reference moved to end at the
+    taught goal pose, :class:`benchmarks.sim.goal.AnchoredReference`)."""
+    from benchmarks.sim.goal import AnchoredReference, goal_setting
     from benchmarks.sim.reference import trial_reference
 
+    reference: Any = trial_reference(sc, setup)
+    if (reference is not None and goal_setting(sc) == "taught" and goal is not None
+            and goal.rotation is not None and goal.translation is not None):
+        reference = AnchoredReference(reference, goal.rotation, goal.translation)
     return ControllerContext(base_points=setup.base_points, geometry=setup.nominal_geometry,
                              camera=setup.estimated_camera, dt=sc.dt, goal=goal,
-                             reference=trial_reference(sc, setup))
+                             reference=reference)

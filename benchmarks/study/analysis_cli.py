@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import sys
 import time
 from pathlib import Path
 from typing import Any
@@ -160,7 +161,13 @@ def run_names(dir_a: str, dir_b: str) -> tuple[str, str]:
 
 def cmd_compare(args: argparse.Namespace) -> int:
     """Paired tests between the controllers of a run, or between two runs."""
-    from benchmarks.study.compare import compare_controllers, compare_runs, match_counts
+    from benchmarks.study.compare import (
+        compare_controllers,
+        compare_runs,
+        goal_mismatches,
+        goal_settings,
+        match_counts,
+    )
     from benchmarks.study.table import load
     from hexapod.outputs import check_replace, write_output
 
@@ -174,7 +181,8 @@ def cmd_compare(args: argparse.Namespace) -> int:
         df = load(args.dirs[0])
         comparisons = compare_controllers(df, args.baseline, metrics, margins)
         print_comparisons(comparisons, f"Paired comparisons ({args.dirs[0]}, "
-                                       f"{len(df)} trials)")
+                                       f"{len(df)} trials, goal setting "
+                                       f"{goal_settings(df)})")
         extra: list[dict[str, Any]] = []
     elif len(args.dirs) == 2:
         if args.baseline:
@@ -189,7 +197,17 @@ def cmd_compare(args: argparse.Namespace) -> int:
         _, only_a, only_b = match_counts(df_a, df_b)
         name_a, name_b = run_names(dir_a, dir_b)
         print_comparisons(comparisons, f"Run B ({dir_b}) against run A ({dir_a}), "
-                                       f"{matched} matched trials", (name_b, name_a))
+                                       f"{matched} matched trials, goal setting A "
+                                       f"{goal_settings(df_a)}, B {goal_settings(df_b)}",
+                          (name_b, name_a))
+        mismatched = goal_mismatches(df_a, df_b)
+        if mismatched:
+            print(f"warning: the goal setting ([task] goal) differs between the runs in "
+                  f"{len(mismatched)} scenario point(s): their differences include what the "
+                  "controllers were told of the goal (docs/scenarios.md, Fairness), not only "
+                  "how they control", file=sys.stderr)
+            for line in mismatched:
+                print(f"  {line}", file=sys.stderr)
         print(f"Trials matched by scenario, sweep point, controller and trial: {matched} "
               f"compared; unmatched, left out: {only_a} of the {len(df_a)} of run A "
               f"({dir_a}), {only_b} of the {len(df_b)} of run B ({dir_b})")
@@ -212,6 +230,8 @@ def cmd_compare(args: argparse.Namespace) -> int:
                   "p_value": None, "p_holm": None,
                   "difference": len(n_rows) / matched if matched else None,
                   "interval": None, "unmatched": {"A": only_a, "B": only_b},
+                  "goal": {"A": goal_settings(df_a), "B": goal_settings(df_b),
+                           "differs": mismatched},
                   "rows": json.loads(different.to_json(orient="records"))}]
         if args.check and (regressions or len(n_rows)):
             status = 1

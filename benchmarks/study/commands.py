@@ -36,6 +36,8 @@ def cmd_run(args: argparse.Namespace) -> int:
         from dataclasses import replace
 
         scenarios = [replace(sc, world=args.world) for sc in scenarios]
+    if getattr(args, "goal", None):  # --goal: every scenario in that goal setting
+        scenarios = [sc.with_goal(args.goal) for sc in scenarios]
     from benchmarks.study.preflight import preflight, refusal, warning_lines
 
     # the pre-flight of 'hexapod-bench check', the same function

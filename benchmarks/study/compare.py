@@ -348,6 +348,32 @@ def compare_controllers(df: pd.DataFrame, baseline: str | None = None,
     return out
 
 
+def goal_settings(df: pd.DataFrame) -> str:
+    """The goal settings of a run's rows (``[task] goal``, :mod:`benchmarks.sim.goal`), as
+    ``"taught"`` or ``"mixed, taught"`` (a run of several scenarios or a swept setting);
+    ``"mixed"`` for rows written before the setting existed."""
+    if "goal" not in df:
+        return "mixed"
+    return ", ".join(sorted(str(g) for g in df["goal"].fillna("mixed").unique()))
+
+
+def goal_mismatches(df_a: pd.DataFrame, df_b: pd.DataFrame) -> list[str]:
+    """The scenarios and sweep points whose goal setting differs between two runs, one
+    line each (``"quick point 0: A mixed, B taught"``): their differences include what
+    the controllers were told of the goal, not only the controllers' behaviour."""
+    def per_point(df: pd.DataFrame) -> dict[tuple[str, int], str]:
+        goals = df["goal"].fillna("mixed") if "goal" in df else None
+        out: dict[tuple[str, int], str] = {}
+        for (scenario, point), idx in df.groupby(["scenario", "point"]).groups.items():
+            out[(str(scenario), int(point))] = (
+                "mixed" if goals is None else ", ".join(sorted(map(str, goals[idx].unique()))))
+        return out
+
+    a, b = per_point(df_a), per_point(df_b)
+    return [f"{s} point {p}: A {a[(s, p)]}, B {b[(s, p)]}" for s, p in sorted(a.keys() & b.keys())
+            if a[(s, p)] != b[(s, p)]]
+
+
 def match_counts(df_a: pd.DataFrame, df_b: pd.DataFrame) -> tuple[int, int, int]:
     """Trials of two runs matched by (scenario, sweep point, controller, trial).
 

@@ -94,6 +94,8 @@ def copy_inputs(out: Path, sc: Any, allow_foreign: bool = False) -> dict[str, An
     table["trials"], table["seed"] = sc.trials, sc.seed
     table.setdefault("robot", {})["world"] = sc.world  # --world too
     table.setdefault("task", {})["max_steps"] = sc.task.max_steps
+    if "task.goal" not in sc.sweep_axes:  # --goal too; a swept setting stays the file's list
+        table["task"]["goal"] = sc.task.goal
     table["controllers"] = [{"name": c.name, "label": c.label, **c.options}
                             for c in sc.controllers]
     # each controller carries the [controller_options] it took (the pre-flight gave them
@@ -132,6 +134,7 @@ def settings(sc: Any) -> dict[str, str]:
 
     Swept keys show their values (``noise.amplitude_deg [0.01, 0.05]``).
     """
+    from benchmarks.sim.goal import GOAL_TEXT
     from benchmarks.study.provenance import scenario_setup
 
     robot, g, cam_name, cam = scenario_setup(sc)
@@ -165,6 +168,8 @@ def settings(sc: Any) -> dict[str, str]:
                 + f", tolerances {task.position_tolerance_mm:g} mm and "
                   f"{task.orientation_tolerance_deg:g} deg"
                 + (f" for {task.settle_steps} periods" if task.settle_steps > 1 else ""),
+        "goal": ("swept (task.goal)" if "task.goal" in sc.sweep_axes
+                 else GOAL_TEXT[sc.task.goal]),
         "trials": f"{sc.trials} per sweep point and controller, seed {sc.seed}",
     }
     for key, values in sc.sweep_axes.items():

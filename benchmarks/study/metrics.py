@@ -17,6 +17,9 @@ _NON_SWEEP = {
     "rtt_median_ms", "rtt_p99_ms", "missed_periods", "detect_time_ms",
     "tail_position_error_mm", "tail_orientation_error_deg", "hidden_edge_periods",
     "cause",
+    # the goal setting (benchmarks.sim.goal): the run's settings state it; a swept
+    # setting has its sweep column, task_goal
+    "goal",
     # the tracking metrics of a trajectory task (benchmarks.sim.tracking)
     "trajectory_duration_s", "tracking_rms_position_mm", "tracking_max_position_mm",
     "tracking_rms_orientation_deg", "tracking_max_orientation_deg", "settling_time_s",

@@ -28,6 +28,7 @@ from benchmarks.study.scenario_model import (
     CALIBRATION_ERROR_KEYS,
     CLOCK_KEYS,
     DRIVES_KEYS,
+    GOAL_SETTINGS,
     NOISE_KEYS,
     RANGES,
     TASK_KEYS,
@@ -309,7 +310,8 @@ def parse_scenario(table: dict[str, Any], path: str = "<dict>") -> Scenario:
                             "warning", key="calibration.min_singular_ratio")
     task = _parse_dataclass(TaskConfig, _section(table, "task", path), path, "task", TASK_KEYS,
                             {"kind": ("random-pairs", "fixed", "trajectory"),
-                             "shape": SHAPES, "profile": PROFILES, "plane": tuple(PLANES)},
+                             "shape": SHAPES, "profile": PROFILES, "plane": tuple(PLANES),
+                             "goal": GOAL_SETTINGS},
                             sweep)
     task = check_trajectory_task(task, sweep, path)
     clock = _parse_dataclass(ClockConfig, _section(table, "clock", path), path, "clock",

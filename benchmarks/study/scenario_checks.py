@@ -136,11 +136,11 @@ def check_scaled_errors(cal_err: CalibrationErrorConfig, sweep: dict[str, list[A
 def check_trajectory_task(task: TaskConfig, sweep: dict[str, list[Any]], path: str
                            ) -> TaskConfig:
     """A trajectory task runs for ``max_steps`` (``fixed_duration``); its keys swept only
-    in a trajectory task."""
+    in a trajectory task (``goal``, the goal setting, in any task)."""
     if task.kind == "trajectory":
         return replace(task, fixed_duration=True)
     for key in TASK_KEYS:
-        if f"task.{key}" in sweep:
+        if f"task.{key}" in sweep and key != "goal":
             raise ScenarioError(path, "only a trajectory task sweeps it", key=f"task.{key}")
     return task
 

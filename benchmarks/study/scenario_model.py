@@ -82,7 +82,11 @@ CLOCK_KEYS = ("frame_rate_hz", "latency_ms", "latency_frames", "jitter_ms", "exp
 #: Keys of [drives] (the robot's drives, world and controllers alike), every one sweepable.
 DRIVES_KEYS = ("velocity_bandwidth_hz",)
 #: Keys of [task] that may be swept (trajectory tasks).
-TASK_KEYS = ("speed_mm_s", "acceleration_mm_s2")
+TASK_KEYS = ("speed_mm_s", "acceleration_mm_s2", "goal")
+#: The values of ``[task] goal`` (:data:`benchmarks.sim.goal.GOAL_SETTINGS`, which the
+#: simulator defines; repeated here so that reading a scenario does not import it, and
+#: checked equal by the tests).
+GOAL_SETTINGS = ("mixed", "taught", "cartesian")
 #: Calibration errors that are not standard deviations: not multiplied by ``scale``.
 UNSCALED = ("scale", "distortion_percent", "model_mass_error_percent",
             "model_inertia_error_percent")
@@ -322,6 +326,11 @@ class TaskConfig:
         plane: Plane of a closed curve in the base frame: ``"xy"``, ``"xz"``, ``"yz"``.
         feed_forward: Add the reference's nominal leg-length rate to the velocity
             commands (:mod:`controllers.tracking`); false: feedback only.
+        goal: What the controllers are told about the goal (:mod:`benchmarks.sim.goal`):
+            ``"mixed"`` (the legacy default: vision laws taught at the true goal, encoder
+            and pose laws the nominal inverse kinematics), ``"taught"`` (images and
+            encoders recorded at the true goal) or ``"cartesian"`` (a pose; every law
+            predicts its goal from its model).
     """
 
     kind: str = "random-pairs"
@@ -345,6 +354,7 @@ class TaskConfig:
     laps: int = 1
     plane: str = "xy"
     feed_forward: bool = True
+    goal: str = "mixed"
 
 
 @dataclass(frozen=True)
@@ -439,6 +449,21 @@ class Scenario:
                 sc = replace(sc, **{section: replace(getattr(sc, section), **{name: value})})
             points.append(replace(sc, sweep=dict(zip(keys, values, strict=True))))
         return points
+
+    def with_goal(self, goal: str) -> Scenario:
+        """The scenario under another goal setting (``--goal``).
+
+        Raises:
+            ScenarioError: ``goal`` is not a setting, or the scenario sweeps
+                ``task.goal``.
+        """
+        if goal not in GOAL_SETTINGS:
+            raise ScenarioError("--goal", f"expected one of {', '.join(GOAL_SETTINGS)}, got "
+                                f"{goal!r}")
+        if "task.goal" in self.sweep_axes:
+            raise ScenarioError(self.source, "--goal: the scenario sweeps task.goal "
+                                f"({', '.join(self.sweep_axes['task.goal'])})", key="task.goal")
+        return replace(self, task=replace(self.task, goal=goal))
 
     def with_overrides(self, trials: int | None = None, seed: int | None = None,
                        controllers: list[str] | None = None, max_steps: int | None = None,

@@ -45,7 +45,11 @@ _FILE_FIELDS = {"robot_geometry": "robot.geometry", "robot_model": "robot.model"
                 "calibration.file": "calibration.file"}
 #: Keys a command-line option sets: differences are named by the option.
 OPTIONS = {"seed": "--seed", "trials": "--trials", "world": "--world",
-           "controllers": "--controllers", "task.max_steps": "--max-steps"}
+           "controllers": "--controllers", "task.max_steps": "--max-steps",
+           "task.goal": "--goal"}
+#: Keys added after studies were first recorded, with the value a record without them
+#: ran with (a directory of that time resumes under the same settings).
+_ADDED = {"task.goal": "mixed"}
 _ABSENT = object()
 
 
@@ -155,7 +159,7 @@ def differences(recorded: dict[str, Any], given: dict[str, Any]) -> tuple[list[s
     lines: list[str] = []
     grows = None
     for key in sorted(set(recorded) | set(given)):
-        a, b = recorded.get(key, _ABSENT), given.get(key, _ABSENT)
+        a, b = recorded.get(key, _ADDED.get(key, _ABSENT)), given.get(key, _ABSENT)
         if key == "version" or a == b:
             continue
         if key == "trials" and isinstance(a, int) and isinstance(b, int):

@@ -55,7 +55,8 @@ def load(out_dir: str | Path) -> pd.DataFrame:
         if not rows:
             raise ResultsError(str(out_dir / RESULTS_FILE), "no trial rows")
         df = pd.DataFrame.from_records(rows)
-    for col, default in (("point", 0), ("backend", "sim")):
+    # rows written before the goal setting existed used the legacy one (benchmarks.sim.goal)
+    for col, default in (("point", 0), ("backend", "sim"), ("goal", "mixed")):
         if col not in df:
             df[col] = default
     before = len(df)

@@ -295,3 +295,36 @@ def test_margin_option_in_points_and_json_fields(tmp_path: Path) -> None:
     assert doc["converged"]["p_equivalence_holm"] < 0.05
     assert {d["outcome"] for d in doc.values()} <= {"different", "equivalent",
                                                     "not shown equivalent"}
+
+
+@pytest.mark.slow
+def test_compare_states_the_goal_setting_and_warns_when_two_runs_differ(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """Rows without a ``goal`` column are the legacy setting (``mixed``); two runs whose
+    rows used different settings are compared with a warning naming the points, and the
+    JSON says which settings were compared."""
+    from benchmarks.study.compare import goal_mismatches, goal_settings
+
+    rows = [r for r in two_controllers(20) if r["controller"] == "good"]
+    a = write_run(tmp_path / "legacy", rows)  # written before the setting existed
+    b = write_run(tmp_path / "taught", [dict(r, goal="taught") for r in rows])
+    c = write_run(tmp_path / "mixed", [dict(r, goal="mixed") for r in rows])
+    assert goal_settings(load(a)) == "mixed" and goal_settings(load(b)) == "taught"
+    assert goal_mismatches(load(a), load(c)) == []
+    assert goal_mismatches(load(a), load(b)) == ["synthetic point 0: A mixed, B taught"]
+    js = tmp_path / "c.json"
+    assert cli_main(["compare", str(a), str(b), "--json", str(js)]) == 0
+    captured = capsys.readouterr()
+    assert "goal setting A mixed, B taught" in " ".join(captured.out.split())
+    assert "the goal setting ([task] goal) differs between the runs in 1 scenario" \
+        in captured.err
+    assert "synthetic point 0: A mixed, B taught" in captured.err
+    det = next(d for d in json.loads(js.read_text())["comparisons"]
+               if d["test"] == "determinism")
+    assert det["goal"] == {"A": "mixed", "B": "taught",
+                           "differs": ["synthetic point 0: A mixed, B taught"]}
+    assert cli_main(["compare", str(a), str(c)]) == 0
+    assert "differs between the runs" not in capsys.readouterr().err
+    both = write_run(tmp_path / "both", rows + [dict(r, controller="bad", goal="taught")
+                                                for r in rows])
+    assert goal_settings(load(both)) == "mixed, taught"

@@ -55,3 +55,32 @@ def test_the_same_options_from_a_file(tmp_path: Path) -> None:
     cli = preflight([load_scenario("quick").with_overrides(controllers=[ADAPTIVE])],
                     measure=False).scenarios[0]
     assert _controllers(ran) == _controllers(cli)
+
+
+@pytest.mark.slow
+def test_the_goal_setting_is_kept_in_the_copy_and_stated_in_the_settings(
+        tmp_path: Path) -> None:
+    """``--goal taught`` (``Scenario.with_goal``) is written into the runnable copy, which
+    reruns in that setting; the run's settings state it in words; a swept setting stays
+    the file's list."""
+    from benchmarks.cli import build_parser
+    from benchmarks.study.inputs import settings
+
+    args = build_parser().parse_args(["run", "quick", "--out", str(tmp_path / "o"),
+                                      "--goal", "taught"])
+    sc = load_scenario("quick").with_goal(args.goal)
+    kept = copy_inputs(tmp_path / "a", sc)
+    again = load_scenario(tmp_path / "a" / kept["folder"] / "scenario.toml")
+    assert again.task.goal == "taught"
+    assert settings(load_scenario("quick"))["goal"].startswith("mixed (legacy)")
+    assert settings(again)["goal"].startswith("taught: images and encoders")
+    source = tmp_path / "swept.toml"
+    source.write_text(Path(load_scenario("quick").source).read_text()
+                       .replace('kind = "random-pairs"',
+                                'kind = "random-pairs"\ngoal = ["mixed", "cartesian"]'))
+    swept = load_scenario(source)
+    kept = copy_inputs(tmp_path / "b", swept)
+    again = load_scenario(tmp_path / "b" / kept["folder"] / "scenario.toml")
+    assert again.sweep_axes["task.goal"] == ["mixed", "cartesian"]
+    assert settings(swept)["goal"] == "swept (task.goal)"
+    assert settings(swept)["swept task.goal"] == "mixed, cartesian"

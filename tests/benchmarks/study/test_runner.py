@@ -143,10 +143,27 @@ def test_results_rows_have_the_documented_fields(tmp_path: Path) -> None:
     for key in ("scenario", "controller", "trial", "noise_amplitude_deg", "converged", "steps",
                 "final_position_error_mm", "final_orientation_error_deg", "stroke_violations",
                 "step_time_us", "failure", "controller_package", "controller_version",
-                "hidden_edge_periods"):
+                "hidden_edge_periods", "goal"):
         assert all(key in r for r in rows), key
     assert json.loads((tmp_path / "results.jsonl").read_text().splitlines()[0])
     assert list((tmp_path / "trials").glob("*.npz")), "trial 0 is recorded"
+
+
+@pytest.mark.slow
+def test_run_goal_runs_the_scenario_in_that_setting(tmp_path: Path) -> None:
+    """``run --goal taught``: every row, the run's settings, the report and the runnable
+    copy say ``taught``; the joint-space law then ends at the goal of quick's world (its
+    only imperfection for an encoder law is the model error: no encoder noise)."""
+    out = tmp_path / "taught"
+    assert cli_main(["run", "quick", "--out", str(out), "--trials", "2", "--no-progress",
+                     "--controllers", "joint-space", "--goal", "taught"]) == 0
+    rows = read_results(out)
+    assert [r["goal"] for r in rows] == ["taught", "taught"]
+    assert all(r["final_position_error_mm"] < 1e-6 for r in rows), rows
+    meta = json.loads((out / "run.json").read_text())
+    assert meta["scenarios"]["quick"]["settings"]["goal"].startswith("taught:")
+    assert "taught: images and encoders recorded" in (out / "report.md").read_text()
+    assert 'goal = "taught"' in (out / "inputs" / "quick" / "scenario.toml").read_text()
 
 
 #: Control periods of the end-to-end runs: 120, fewer for the scenarios whose periods are

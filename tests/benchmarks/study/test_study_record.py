@@ -224,6 +224,11 @@ def test_differences_compare_key_by_key() -> None:
         ["--seed: 1 in the directory, 2 given"], 5)
     assert differences(a, {**a, "dt": 0.01}) == (
         ["scenario key dt: absent in the directory, 0.01 given"], None)
+    # a study recorded before the goal setting existed ran the legacy one
+    assert differences(a, {**a, "task.goal": "mixed"}) == ([], None)
+    assert differences(a, {**a, "task.goal": "taught"}) == (
+        ["--goal: mixed in the directory, taught given"], None)
+    assert study_of(load_scenario("quick").with_goal("cartesian"))["task.goal"] == "cartesian"
     assert check_same_study(Path("x"), {}, []) == {}, "a new directory: nothing to check"
     with pytest.raises(StudyMismatchError) as info:
         check_same_study(Path("x"), {"scenarios": {"a": {"study": a}}}, [])

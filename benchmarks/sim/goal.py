@@ -1,0 +1,192 @@
+"""What the controllers are told about a trial's goal: the scenario's goal setting
+(``[task] goal``, ``docs/scenarios.md`` "Fairness").
+
+Three settings, each stated in the rows (``goal`` column) and the run's settings:
+
+- ``"mixed"`` (the default, the legacy setting every table before issue 36 used): the
+  vision laws get the features measured at the TRUE goal (taught by showing, with the
+  scenario's noise when ``[noise] on_goal``, averaged over ``teach_frames``); the encoder
+  and pose laws get the goal pose and its NOMINAL inverse kinematics. The two families
+  do not get the same information: a taught image is relative positioning, a nominal
+  inverse kinematics absolute positioning through the model's error.
+- ``"taught"``: the robot is brought to the goal and every sensor is recorded there: the
+  images (as in ``mixed``) and the encoders (the true lengths at the true goal plus the
+  joint offsets, quantised to the encoder resolution in the dynamic world; the encoders
+  of the simulation have no noise, so averaging ``teach_frames`` readings of a still
+  robot gives one reading). The pose laws get the pose their model computes from the
+  taught lengths (forward kinematics of the controller's model). A trajectory task's
+  reference is moved to end at that pose, its displacements kept
+  (:class:`AnchoredReference`).
+- ``"cartesian"``: the goal is a pose in the base frame; every family predicts its goal
+  from its model: the features of that pose seen by the estimated camera with the
+  controller's base points (as ``hexapod-bench servo`` predicts them from a goal file
+  without taught features), the lengths by the model's inverse kinematics.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+
+from benchmarks.sim.world import TrialSetup
+from controllers.base import Goal, ObservationBatch
+from hexapod.geometry import HexapodGeometry
+from hexapod.kinematics import inverse_kinematics
+from hexapod.trajectory import ReferenceSample
+
+#: The goal settings of ``[task] goal``; the first is the default.
+GOAL_SETTINGS = ("mixed", "taught", "cartesian")
+
+#: The settings in words (``run.json``, the report).
+GOAL_TEXT = {
+    "mixed": "mixed (legacy): vision laws taught at the true goal, encoder and pose laws "
+             "the nominal inverse kinematics of the goal pose",
+    "taught": "taught: images and encoders recorded at the true goal; pose laws the "
+              "forward kinematics of the taught lengths in their model",
+    "cartesian": "cartesian: a pose in the base frame; features and lengths predicted "
+                 "from each controller's model",
+}
+
+
+def goal_setting(sc: Any) -> str:
+    """The goal setting of a scenario (``[task] goal``; ``"mixed"`` when its task has
+    none).
+
+    Raises:
+        ValueError: Not one of :data:`GOAL_SETTINGS` (naming the key and the value).
+    """
+    value = getattr(sc.task, "goal", GOAL_SETTINGS[0])
+    if value not in GOAL_SETTINGS:
+        raise ValueError(f"task.goal: expected one of {', '.join(GOAL_SETTINGS)}, got "
+                         f"{value!r}")
+    return str(value)
+
+
+def taught_lengths(sc: Any, setup: TrialSetup) -> np.ndarray:
+    """The encoder readings at the trial's true goal (6,) [m]: the true robot's inverse
+    kinematics plus its joint offsets, quantised to its encoder resolution in the dynamic
+    world (what the plant's ``measured_lengths`` reads there)."""
+    world = setup.world
+    q = inverse_kinematics(world.geometry, setup.goal_rotation, setup.goal_translation)
+    q = np.asarray(q, dtype=float) + np.asarray(world.joint_offsets, dtype=float)
+    if getattr(sc, "world", "kinematic") == "dynamic":
+        from hexapod.dynamics.drive_model import quantise
+
+        q = quantise(q, np.asarray(world.geometry.drives.encoder_resolution, float))
+    return q
+
+
+def model_pose(geometry: HexapodGeometry, lengths: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The pose the model ``geometry`` computes from leg lengths [m] (forward kinematics
+    from the home pose, as a user's model would; the stroke is not checked: the robot
+    was there).
+
+    Raises:
+        ForwardKinematicsError: No pose for these lengths in the model.
+    """
+    from hexapod.fk import forward_kinematics
+
+    sol = forward_kinematics(geometry, np.asarray(lengths, dtype=float), check_stroke=False)
+    return np.asarray(sol.rotation, float), np.asarray(sol.translation, float)
+
+
+def controller_geometry(setup: TrialSetup) -> HexapodGeometry:
+    """The controller's model of the robot with ITS base points: the nominal geometry,
+    its base points replaced by the trial's estimated (calibrated) ones brought to the
+    base frame through the estimated camera pose when they differ from the nominal."""
+    model = setup.nominal_geometry
+    cam_from_base = setup.estimated_camera.camera_from_base
+    nominal_points = cam_from_base.apply(model.base_points)
+    points = np.asarray(setup.base_points, dtype=float)
+    if np.array_equal(nominal_points, points):
+        return model
+    return model.replace(base_points=cam_from_base.inverse().apply(points))
+
+
+def predicted_features(camera: Any, geometry: HexapodGeometry, rotation: np.ndarray,
+                       translation: np.ndarray) -> dict[str, Any]:
+    """The goal features the model predicts at a pose: edge normals (NaN where hidden),
+    image lines (a perspective camera, else None), leg directions (NaN where an edge is
+    hidden) and edge visibility, as ``camera`` sees ``geometry``. An edge the model
+    predicts hidden is NaN, as a hidden edge is in a taught goal: a law that needs it
+    says so itself (an encoder law does not).
+    """
+    from vision.legs import directions_from_edges, observe_legs
+
+    seen = observe_legs(camera, geometry, np.asarray(rotation, float),
+                        np.asarray(translation, float))
+    visible = np.asarray(seen.edge_visible, dtype=bool)
+    normals = np.where(visible[..., None], np.asarray(seen.normals, float), np.nan)
+    both = np.asarray(visible.all(axis=-1))
+    with np.errstate(invalid="ignore"):
+        lines = (camera.normal_to_line(normals) if camera.family == "perspective" else None)
+        directions = np.where(both[..., None], directions_from_edges(normals), np.nan)
+    return {"normals": normals, "lines": lines, "directions": directions,
+            "edge_visible": visible}
+
+
+def taught_goal(m: ObservationBatch, setup: TrialSetup, sc: Any) -> Goal:
+    """The :class:`Goal` of ``"taught"``: the features of the camera's batch of one taught
+    at the goal, the encoders read there (:func:`taught_lengths`) and the pose the
+    controller's model computes from them (:func:`model_pose`)."""
+    q = taught_lengths(sc, setup)
+    R, t = model_pose(setup.nominal_geometry, q)
+    return Goal(normals=m.normals[0],  # type: ignore[index]
+                lines=None if m.lines is None else m.lines[0],
+                directions=m.directions[0],  # type: ignore[index]
+                lengths=q, rotation=R, translation=t, edge_visible=m.edge_visible[0])
+
+
+def cartesian_goal(setup: TrialSetup) -> Goal:
+    """The :class:`Goal` of ``"cartesian"``: the goal pose, its inverse kinematics in the
+    controller's model and the features that model predicts there through the estimated
+    camera (:func:`predicted_features`); nothing is measured at the goal."""
+    R, t = setup.goal_rotation, setup.goal_translation
+    feats = predicted_features(setup.estimated_camera, controller_geometry(setup), R, t)
+    return Goal(lengths=inverse_kinematics(setup.nominal_geometry, R, t), rotation=R,
+                translation=t, **feats)
+
+
+class AnchoredReference:
+    """A reference trajectory moved to end at a goal pose (``"taught"``): every sample's
+    displacement from the reference's end, in the base frame, is kept and applied to
+    the goal: ``t' = t - t_end + t_goal``, ``R' = R R_end^T R_goal`` (the base-frame
+    rotation from the end to the sample, applied to the goal orientation). Velocities,
+    angular velocities (base frame) and their rates are the reference's: the path is
+    the same motion, started from where the model says the taught goal is. (Turning the
+    whole path by the goal's rotation error would also turn its shape: on a 15 mm circle
+    a 0.4 deg error moves the path by 0.1 mm.) The time axis and every other attribute
+    are the reference's.
+
+    Args:
+        reference: Has ``duration`` [s] and ``at(times)`` -> :class:`ReferenceSample`.
+        rotation: (3, 3) the goal orientation the path must end at (base frame).
+        translation: (3,) the goal position [m].
+    """
+
+    def __init__(self, reference: Any, rotation: np.ndarray, translation: np.ndarray
+                 ) -> None:
+        self.reference = reference
+        end = reference.at(np.array([float(reference.duration)]))
+        #: ``R_end^T R_goal``, applied on the right of every orientation.
+        self.rotation_offset = end.rotation[0].T @ np.asarray(rotation, float)
+        #: ``t_goal - t_end`` [m], added to every position.
+        self.translation_offset = np.asarray(translation, float) - end.translation[0]
+
+    @property
+    def duration(self) -> float:
+        """The reference's duration [s]."""
+        return float(self.reference.duration)
+
+    def at(self, t: float | np.ndarray) -> ReferenceSample:
+        """The moved reference at times ``t`` [s]."""
+        s = self.reference.at(t)
+        return ReferenceSample(s.rotation @ self.rotation_offset,
+                               s.translation + self.translation_offset, s.velocity,
+                               s.angular_velocity, s.acceleration, s.angular_acceleration)
+
+    def __getattr__(self, name: str) -> Any:
+        if name == "reference":  # not set yet (a copy being built)
+            raise AttributeError(name)
+        return getattr(self.reference, name)
