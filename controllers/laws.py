@@ -72,6 +72,7 @@ from controllers.law_tools import (
     solve_normal,
     solve_normal_damped,
 )
+from controllers.leg_rate import feed_forward, feedforward_gain
 from controllers.solvers.base import Solver
 from controllers.solvers.pseudo_inverse import DampedPseudoInverse
 
@@ -101,6 +102,10 @@ class VisionLaw(Controller):
             singular value counts as zero, and a stacked interaction matrix of rank
             < 6 makes the law refuse to move.
         damping: Damping ``mu`` of the pseudo-inverse ``(L^T L + mu^2 I)^-1 L^T``.
+        leg_rate_feedforward: Feed the measured leg velocities forward through the nominal
+            drives' lag (:mod:`controllers.leg_rate`): the setpoint ``u = q_dot +
+            kappa (q_dot - v)`` that moves each leg by ``dt q_dot`` over the period
+            (velocity-mode drives; default off: the law's command as it is).
     """
 
     #: What a feature block is called in the notes ("legs", "edges").
@@ -108,8 +113,18 @@ class VisionLaw(Controller):
 
     def __init__(self, gain: float = 1.0, adaptive_gain: Sequence[float] | None = None,
                  interaction: str = "current", threshold: float = 1e-6,
-                 damping: float = 0.0) -> None:
+                 damping: float = 0.0, leg_rate_feedforward: bool = False) -> None:
         self.gain = Gain.from_options(self.name, gain, adaptive_gain)
+        if not isinstance(leg_rate_feedforward, bool | np.bool_):
+            raise OptionError(self.name, "leg_rate_feedforward",
+                              f"expected true or false, got {leg_rate_feedforward!r}")
+        self.leg_rate_feedforward = bool(leg_rate_feedforward)
+        #: ``kappa`` (6,) of the feed-forward after a reset (None: off).
+        self._kappa: np.ndarray | None = None
+        #: What a wrapper adds after the law this period [m/s] (a row of the batch's).
+        self._offset = np.zeros(6)
+        if self.leg_rate_feedforward:  # only then told (controllers.tracking)
+            self.velocity_offset = self._velocity_offset
         self.interaction = check_choice(self.name, "interaction", interaction, INTERACTIONS)
         self.threshold = check_number(self.name, "threshold", threshold, 0.0, strict=False)
         if self.threshold >= 1.0:
@@ -162,6 +177,9 @@ class VisionLaw(Controller):
         self._reset_features(context)
         self.solver.reset(context, self.name, dt)
         self._configure_kernel()
+        if self.leg_rate_feedforward:
+            self._kappa = feedforward_gain(context, dt, self.name)
+            self._offset = np.zeros(6)
 
     def retarget_trial(self, goal: Goal) -> None:
         """A new goal, keeping what the law carries between periods (the goal of each
@@ -352,7 +370,25 @@ class VisionLaw(Controller):
 
     def step_trial(self, observation: Observation) -> Command:
         """One period of this instance's trial: ``q_dot = J_inv (-lambda L^+ e)`` (never
-        raises for bad measurements)."""
+        raises for bad measurements), with the measured leg rates fed forward when
+        ``leg_rate_feedforward`` (:mod:`controllers.leg_rate`)."""
+        cmd = self._law_step(observation)
+        if self._kappa is None:
+            return cmd
+        offset, self._offset[:] = self._offset.copy(), 0.0
+        if cmd.reason is None:
+            cmd.velocities = feed_forward(cmd.velocities, observation.q_dot, offset,
+                                          self._kappa)
+        return cmd
+
+    def _velocity_offset(self, q_dot: np.ndarray) -> None:
+        """The leg velocities [m/s] a wrapper adds to the coming step's command (the
+        tracking feed-forward): the feed-forward then compares the measured leg rates
+        with the law's command plus them. Cleared after the step."""
+        self._offset[:] = np.asarray(q_dot, dtype=float).reshape(6)
+
+    def _law_step(self, observation: Observation) -> Command:
+        """The law's command of one period (before the leg-rate feed-forward)."""
         if self.context is None:
             return Command.refuse(f"{self.name}: reset(context) was not called")
         q = self.checked_lengths(observation)
@@ -405,6 +441,13 @@ class VisionLaw(Controller):
         self._pending: dict[int, tuple[GoalBatch, int]] = {}
         self.solver.batch_reset([t.solver for t in trials])
         self._batch_reset_extra()
+        #: The feed-forward's ``kappa`` and wrapper offsets of every trial (rows), or None.
+        self._batch_kappa: np.ndarray | None = None
+        if self.leg_rate_feedforward:
+            self._batch_kappa = np.array([t._kappa for t in trials])
+            self._batch_offset = np.zeros((len(trials), 6))
+            for k, inst in enumerate(trials):
+                inst._offset = self._batch_offset[k]
 
     def retarget_batch(self, trials: np.ndarray, goals: GoalBatch) -> None:
         """New goals for some trials (row ``j`` of ``goals`` for trial ``trials[j]``),
@@ -459,7 +502,20 @@ class VisionLaw(Controller):
                 done = rows_core.step(rows, trials[rows], feats[rows], q[rows],
                                       self.solver, self.batch_estimate, out)
                 slow[rows[done]] = False
+                if self._batch_kappa is not None:
+                    self._feed_rows(rows[done], trials[rows[done]], obs, out)
         return np.flatnonzero(slow)
+
+    def _feed_rows(self, rows: np.ndarray, trials: np.ndarray, obs: ObservationBatch,
+                   out: CommandBatch) -> None:
+        """The leg-rate feed-forward of the rows the compiled core filled (as
+        :meth:`step_trial` does for one)."""
+        assert self._batch_kappa is not None
+        v = None if obs.q_dot is None else np.asarray(obs.q_dot, dtype=float)[rows]
+        out.velocities[rows] = feed_forward(out.velocities[rows], v,
+                                            self._batch_offset[trials],
+                                            self._batch_kappa[trials])
+        self._batch_offset[trials] = 0.0
 
     def step_row(self, trial: int, observation: Observation) -> Command:
         """One row by its trial's instance, which first reads a goal given to
