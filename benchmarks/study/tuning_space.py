@@ -150,14 +150,32 @@ def candidates(given: dict[str, Any], axes: tuple[Axis, ...], n: int) -> list[di
     if len(axes) == 1:
         points = np.linspace(0.0, 1.0, m)[:, None] if m > 1 else np.full((1, 1), 0.5)
     else:
-        from scipy.stats import qmc
-
-        points = qmc.Halton(d=len(axes), scramble=False).random(m + 1)[1:]
+        points = halton(m, len(axes))
     for u in points:
         opts = dict(given)
         for axis, x in zip(axes, u, strict=True):
             opts[axis.option] = axis.value(float(x))
         out.append(opts)
+    return out
+
+
+_PRIMES = (2, 3, 5, 7, 11, 13, 17, 19, 23, 29)
+
+
+def halton(n: int, d: int) -> np.ndarray:
+    """The points 1 to ``n`` of the unscrambled Halton sequence in ``[0, 1)^d`` (bases
+    the first ``d`` primes; point 0, the origin, left out), (n, d)."""
+    if d > len(_PRIMES):
+        raise ValueError(f"at most {len(_PRIMES)} axes, got {d}")
+    out = np.zeros((n, d))
+    for j, base in enumerate(_PRIMES[:d]):
+        for i in range(n):
+            k, f, x = i + 1, 1.0, 0.0
+            while k:
+                f /= base
+                x += f * (k % base)
+                k //= base
+            out[i, j] = x
     return out
 
 
