@@ -189,11 +189,13 @@ def cmd_tune(args: argparse.Namespace) -> int:
     specs = []
     plans: dict[str, list[dict[str, Any]]] = {}
     families: dict[str, str | None] = {}
+    axes: dict[str, Any] = {}
     for spec in sc.controllers:
         cs = controller_space(spec.label, spec.name, tables[spec.label], space)
         for text in cs.skipped:
             con.print(f"tune: {text}", markup=False, highlight=False)
         families[spec.label] = cs.family
+        axes[spec.label] = cs.axes
         plans[spec.label] = candidates(spec.options, cs.axes, args.candidates)
         for k, opts in enumerate(plans[spec.label]):
             specs.append(replace(spec, label=_label(spec.label, k), options=opts))
@@ -221,6 +223,13 @@ def cmd_tune(args: argparse.Namespace) -> int:
             value, failed = criterion_value(got, criterion)
             scores[spec.label].append(Score(spec.label, k, opts, value, len(got), failed))
     chosen = {label: choose(s) for label, s in scores.items()}
+    for label, s in chosen.items():
+        for axis in axes[label]:
+            if s.index > 0 and axis.at_end(s.options[axis.option]):
+                con.print(f"tune: warning: {label}: the chosen {axis.option} = "
+                          f"{s.options[axis.option]} is at an end of its range [{axis.low:g}, "
+                          f"{axis.high:g}] {axis.unit}: the best may lie beyond (widen the "
+                          "space with --space)", markup=False, highlight=False)
     tuning = {
         "scenario": sc.name, "source": sc.source, "criterion": criterion,
         "metric": CRITERIA[criterion][0], "statistic": CRITERIA[criterion][1],

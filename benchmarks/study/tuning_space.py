@@ -47,6 +47,13 @@ class Axis:
         unit: The unit of the scalar, for the messages and the docs.
     """
 
+    def at_end(self, value: Any) -> bool:
+        """Whether an option's value is at an end of the range (its scalar at ``low`` or
+        ``high``, to 1e-6 relative)."""
+        x = value[0] / self.shape[0] if self.shape is not None else value
+        return any(math.isclose(float(x), b, rel_tol=1e-6, abs_tol=1e-12)
+                   for b in (self.low, self.high))
+
     option: str
     low: float
     high: float
@@ -70,12 +77,16 @@ class Axis:
 #: The declared search spaces, by family (``docs/tuning.md``). Velocity laws (the vision
 #: laws, their QP and predictive variants, joint-space, model-based): the adaptive gain
 #: of ``docs/math.md`` section 6 with the shape of quick's ``[5, 1, 30]``, its
-#: ``lambda0`` from 1 to 20 1/s. Computed torque (joint, Cartesian, feature space): the
-#: closed loop's natural frequency from 0.5 to 8 Hz and the integral gain from 0 to 4
-#: 1/s (an option the computed-torque laws may not have: skipped then).
+#: ``lambda0`` from 1 to 50 1/s (``lambda0 dt`` up to 1 at 20 ms). Computed torque
+#: (joint, Cartesian, feature space): the closed loop's natural frequency from 0.5 to
+#: 16 Hz (``omega_n dt`` up to 2 at 20 ms) and the integral gain from 0 to 4 1/s (an
+#: option the computed-torque laws may not have: skipped then). The upper ends were
+#: widened after a first tuning of ``inertia-error`` chose the old ones (20 1/s, 8 Hz):
+#: a chosen value at an end of its range says the range may be too narrow (``tune``
+#: warns).
 SEARCH_SPACE: dict[str, tuple[Axis, ...]] = {
-    "velocity": (Axis("adaptive_gain", 1.0, 20.0, "log", (1.0, 0.2, 6.0), "1/s"),),
-    "computed-torque": (Axis("natural_frequency", 0.5, 8.0, "log", unit="Hz"),
+    "velocity": (Axis("adaptive_gain", 1.0, 50.0, "log", (1.0, 0.2, 6.0), "1/s"),),
+    "computed-torque": (Axis("natural_frequency", 0.5, 16.0, "log", unit="Hz"),
                         Axis("integral_gain", 0.0, 4.0, "linear", unit="1/s")),
 }
 

@@ -58,6 +58,8 @@ def test_every_controller_gets_n_candidates_the_given_first(n: int) -> None:
 
 def test_one_axis_is_evenly_spaced_in_its_scale_with_its_shape() -> None:
     cands = candidates({}, (Axis("adaptive_gain", 1.0, 16.0, "log", (1.0, 0.2, 6.0)),), 6)
+    assert Axis("g", 1.0, 16.0, "log", (1.0, 0.2, 6.0)).at_end(cands[-1]["adaptive_gain"])
+    assert not Axis("g", 1.0, 16.0, "log", (1.0, 0.2, 6.0)).at_end(cands[2]["adaptive_gain"])
     l0 = [c["adaptive_gain"][0] for c in cands[1:]]
     np.testing.assert_allclose(l0, [1.0, 2.0, 4.0, 8.0, 16.0])
     assert cands[-1]["adaptive_gain"] == [16.0, 3.2, 96.0]
