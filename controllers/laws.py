@@ -119,10 +119,10 @@ class VisionLaw(Controller):
             raise OptionError(self.name, "leg_rate_feedforward",
                               f"expected true or false, got {leg_rate_feedforward!r}")
         self.leg_rate_feedforward = bool(leg_rate_feedforward)
-        #: ``kappa`` (6,) of the feed-forward after a reset (None: off).
-        self._kappa: np.ndarray | None = None
+        #: ``kappa`` (6,) of the leg-rate feed-forward after a reset (None: off).
+        self.rate_kappa: np.ndarray | None = None
         #: What a wrapper adds after the law this period [m/s] (a row of the batch's).
-        self._offset = np.zeros(6)
+        self.rate_offset = np.zeros(6)
         if self.leg_rate_feedforward:  # only then told (controllers.tracking)
             self.velocity_offset = self._velocity_offset
         self.interaction = check_choice(self.name, "interaction", interaction, INTERACTIONS)
@@ -178,8 +178,8 @@ class VisionLaw(Controller):
         self.solver.reset(context, self.name, dt)
         self._configure_kernel()
         if self.leg_rate_feedforward:
-            self._kappa = feedforward_gain(context, dt, self.name)
-            self._offset = np.zeros(6)
+            self.rate_kappa = feedforward_gain(context, dt, self.name)
+            self.rate_offset = np.zeros(6)
 
     def retarget_trial(self, goal: Goal) -> None:
         """A new goal, keeping what the law carries between periods (the goal of each
@@ -373,19 +373,19 @@ class VisionLaw(Controller):
         raises for bad measurements), with the measured leg rates fed forward when
         ``leg_rate_feedforward`` (:mod:`controllers.leg_rate`)."""
         cmd = self._law_step(observation)
-        if self._kappa is None:
+        if self.rate_kappa is None:
             return cmd
-        offset, self._offset[:] = self._offset.copy(), 0.0
+        offset, self.rate_offset[:] = self.rate_offset.copy(), 0.0
         if cmd.reason is None:
             cmd.velocities = feed_forward(cmd.velocities, observation.q_dot, offset,
-                                          self._kappa)
+                                          self.rate_kappa)
         return cmd
 
     def _velocity_offset(self, q_dot: np.ndarray) -> None:
         """The leg velocities [m/s] a wrapper adds to the coming step's command (the
         tracking feed-forward): the feed-forward then compares the measured leg rates
         with the law's command plus them. Cleared after the step."""
-        self._offset[:] = np.asarray(q_dot, dtype=float).reshape(6)
+        self.rate_offset[:] = np.asarray(q_dot, dtype=float).reshape(6)
 
     def _law_step(self, observation: Observation) -> Command:
         """The law's command of one period (before the leg-rate feed-forward)."""
@@ -444,10 +444,10 @@ class VisionLaw(Controller):
         #: The feed-forward's ``kappa`` and wrapper offsets of every trial (rows), or None.
         self._batch_kappa: np.ndarray | None = None
         if self.leg_rate_feedforward:
-            self._batch_kappa = np.array([t._kappa for t in trials])
+            self._batch_kappa = np.array([t.rate_kappa for t in trials])
             self._batch_offset = np.zeros((len(trials), 6))
             for k, inst in enumerate(trials):
-                inst._offset = self._batch_offset[k]
+                inst.rate_offset = self._batch_offset[k]
 
     def retarget_batch(self, trials: np.ndarray, goals: GoalBatch) -> None:
         """New goals for some trials (row ``j`` of ``goals`` for trial ``trials[j]``),
