@@ -49,8 +49,11 @@ def add_arguments(s: argparse.ArgumentParser) -> None:
     s.add_argument("scenario", metavar="SCENARIO", help="a built-in scenario name or a TOML path")
     s.add_argument("--controllers", required=True,
                    help="comma-separated labels (or names) of the scenario's controllers")
-    s.add_argument("--out", required=True, help="output directory (candidates/, tuned.toml, "
-                                                "tuning.json)")
+    from benchmarks.study.outdir import OutputDir
+
+    s.add_argument("--out", required=True, action=OutputDir,
+                   help="output directory (candidates/: the candidates' run; tuned.toml; "
+                        "tuning.json)")
     s.add_argument("--trials", type=int, default=10,
                    help="tuning trials per candidate and sweep point (default 10)")
     s.add_argument("--candidates", type=int, default=6,
@@ -128,6 +131,16 @@ def choose(scores: list[Score]) -> Score:
     return min(scores, key=lambda s: (s.value, s.index))
 
 
+def _own_entry(entry: Path) -> bool:
+    """An entry of a tune directory: the candidates' run directory, or a tuned.toml or
+    tuning.json the project wrote."""
+    from hexapod.outputs import written_by_project
+
+    if entry.name == CANDIDATES_DIR:
+        return entry.is_dir()
+    return entry.name in (TUNED_FILE, SCORES_FILE) and written_by_project(entry)
+
+
 def _label(label: str, k: int) -> str:
     return f"{label}:c{k}"
 
@@ -156,7 +169,7 @@ def cmd_tune(args: argparse.Namespace) -> int:
         load_space,
     )
     from controllers.registry import registry
-    from hexapod.outputs import check_replace
+    from hexapod.outputs import check_output_dir, check_replace
 
     con = console()
     out = Path(args.out)
@@ -175,9 +188,10 @@ def cmd_tune(args: argparse.Namespace) -> int:
     sc = base.with_overrides(args.trials, tuning_seed, labels, args.max_steps)
     criterion = args.criterion or ("median-tracking-rms" if sc.task.kind == "trajectory"
                                    else "median-final")
+    check_output_dir(out, _own_entry, "tune directory (candidates/, tuned.toml, tuning.json)",
+                     args.overwrite)
     for path in (out / TUNED_FILE, out / SCORES_FILE):
-        if not args.resume:
-            check_replace(path, args.overwrite)
+        check_replace(path, args.overwrite)
     space = SEARCH_SPACE if args.space is None else load_space(args.space)
     tables = {spec.label: registry.options(spec.name) for spec in sc.controllers}
     if args.space is not None:
