@@ -77,7 +77,8 @@ class Axis:
 #: The declared search spaces, by family (``docs/tuning.md``). Velocity laws (the vision
 #: laws, their QP and predictive variants, joint-space, model-based): the adaptive gain
 #: of ``docs/math.md`` section 6 with the shape of quick's ``[5, 1, 30]``, its
-#: ``lambda0`` from 1 to 50 1/s (``lambda0 dt`` up to 1 at 20 ms). Computed torque
+#: ``lambda0`` from 1 to 50 1/s (50 = ``1 / dt`` at 20 ms: the discrete loop's deadbeat
+#: gain; above it the error overshoots every period, unstable at ``2 / dt``). Computed torque
 #: (joint, Cartesian, feature space): the closed loop's natural frequency from 0.5 to
 #: 16 Hz (``omega_n dt`` up to 2 at 20 ms) and the integral gain from 0 to 4 1/s (an
 #: option the computed-torque laws may not have: skipped then). The upper ends were
