@@ -72,7 +72,7 @@ from controllers.law_tools import (
     solve_normal,
     solve_normal_damped,
 )
-from controllers.leg_rate import feed_forward, feedforward_gain
+from controllers.leg_rate import LegRateFeedForward
 from controllers.solvers.base import Solver
 from controllers.solvers.pseudo_inverse import DampedPseudoInverse
 
@@ -85,7 +85,7 @@ __all__ = [
 log = logging.getLogger(__name__)
 
 
-class VisionLaw(Controller):
+class VisionLaw(LegRateFeedForward, Controller):
     """Base of the image-based laws: ``tau = -lambda L^+ e``, ``q_dot = J_inv tau``.
 
     Subclasses implement :meth:`_reset_features` (read the goal, set the compiled core
@@ -115,16 +115,7 @@ class VisionLaw(Controller):
                  interaction: str = "current", threshold: float = 1e-6,
                  damping: float = 0.0, leg_rate_feedforward: bool = False) -> None:
         self.gain = Gain.from_options(self.name, gain, adaptive_gain)
-        if not isinstance(leg_rate_feedforward, bool | np.bool_):
-            raise OptionError(self.name, "leg_rate_feedforward",
-                              f"expected true or false, got {leg_rate_feedforward!r}")
-        self.leg_rate_feedforward = bool(leg_rate_feedforward)
-        #: ``kappa`` (6,) of the leg-rate feed-forward after a reset (None: off).
-        self.rate_kappa: np.ndarray | None = None
-        #: What a wrapper adds after the law this period [m/s] (a row of the batch's).
-        self.rate_offset = np.zeros(6)
-        if self.leg_rate_feedforward:  # only then told (controllers.tracking)
-            self.velocity_offset = self._velocity_offset
+        self.init_leg_rate(leg_rate_feedforward)
         self.interaction = check_choice(self.name, "interaction", interaction, INTERACTIONS)
         self.threshold = check_number(self.name, "threshold", threshold, 0.0, strict=False)
         if self.threshold >= 1.0:
@@ -177,9 +168,7 @@ class VisionLaw(Controller):
         self._reset_features(context)
         self.solver.reset(context, self.name, dt)
         self._configure_kernel()
-        if self.leg_rate_feedforward:
-            self.rate_kappa = feedforward_gain(context, dt, self.name)
-            self.rate_offset = np.zeros(6)
+        self.reset_leg_rate(context, dt)
 
     def retarget_trial(self, goal: Goal) -> None:
         """A new goal, keeping what the law carries between periods (the goal of each
@@ -372,20 +361,7 @@ class VisionLaw(Controller):
         """One period of this instance's trial: ``q_dot = J_inv (-lambda L^+ e)`` (never
         raises for bad measurements), with the measured leg rates fed forward when
         ``leg_rate_feedforward`` (:mod:`controllers.leg_rate`)."""
-        cmd = self._law_step(observation)
-        if self.rate_kappa is None:
-            return cmd
-        offset, self.rate_offset[:] = self.rate_offset.copy(), 0.0
-        if cmd.reason is None:
-            cmd.velocities = feed_forward(cmd.velocities, observation.q_dot, offset,
-                                          self.rate_kappa)
-        return cmd
-
-    def _velocity_offset(self, q_dot: np.ndarray) -> None:
-        """The leg velocities [m/s] a wrapper adds to the coming step's command (the
-        tracking feed-forward): the feed-forward then compares the measured leg rates
-        with the law's command plus them. Cleared after the step."""
-        self.rate_offset[:] = np.asarray(q_dot, dtype=float).reshape(6)
+        return self.fed_forward(self._law_step(observation), observation)
 
     def _law_step(self, observation: Observation) -> Command:
         """The law's command of one period (before the leg-rate feed-forward)."""
@@ -441,13 +417,7 @@ class VisionLaw(Controller):
         self._pending: dict[int, tuple[GoalBatch, int]] = {}
         self.solver.batch_reset([t.solver for t in trials])
         self._batch_reset_extra()
-        #: The feed-forward's ``kappa`` and wrapper offsets of every trial (rows), or None.
-        self._batch_kappa: np.ndarray | None = None
-        if self.leg_rate_feedforward:
-            self._batch_kappa = np.array([t.rate_kappa for t in trials])
-            self._batch_offset = np.zeros((len(trials), 6))
-            for k, inst in enumerate(trials):
-                inst.rate_offset = self._batch_offset[k]
+        self.batch_reset_leg_rate(trials)
 
     def retarget_batch(self, trials: np.ndarray, goals: GoalBatch) -> None:
         """New goals for some trials (row ``j`` of ``goals`` for trial ``trials[j]``),
@@ -502,20 +472,8 @@ class VisionLaw(Controller):
                 done = rows_core.step(rows, trials[rows], feats[rows], q[rows],
                                       self.solver, self.batch_estimate, out)
                 slow[rows[done]] = False
-                if self._batch_kappa is not None:
-                    self._feed_rows(rows[done], trials[rows[done]], obs, out)
+                self.feed_rows(rows[done], trials[rows[done]], obs, out)
         return np.flatnonzero(slow)
-
-    def _feed_rows(self, rows: np.ndarray, trials: np.ndarray, obs: ObservationBatch,
-                   out: CommandBatch) -> None:
-        """The leg-rate feed-forward of the rows the compiled core filled (as
-        :meth:`step_trial` does for one)."""
-        assert self._batch_kappa is not None
-        v = None if obs.q_dot is None else np.asarray(obs.q_dot, dtype=float)[rows]
-        out.velocities[rows] = feed_forward(out.velocities[rows], v,
-                                            self._batch_offset[trials],
-                                            self._batch_kappa[trials])
-        self._batch_offset[trials] = 0.0
 
     def step_row(self, trial: int, observation: Observation) -> Command:
         """One row by its trial's instance, which first reads a goal given to
