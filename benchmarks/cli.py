@@ -1,11 +1,13 @@
-"""``hexapod-bench``: list, check, run, report, compare, export, reproduce, perf, calibrate,
-identify, viz, servo, warm.
+"""``hexapod-bench``: list, check, run, tune, report, compare, export, reproduce, perf,
+calibrate, identify, viz, servo, warm.
 
 Examples::
 
     hexapod-bench list
     hexapod-bench check my-study.toml --picture view.png
     hexapod-bench run quick --out runs/quick
+    hexapod-bench tune inertia-error --controllers leg-edge,computed-torque --out runs/tune
+    hexapod-bench run inertia-error --options-file runs/tune/tuned.toml --out runs/tuned
     hexapod-bench run tahri2009-convergence --out runs/tahri --workers 2
     hexapod-bench run my-study.toml --out runs/mine --dask local --resume
     hexapod-bench report runs/quick
@@ -175,6 +177,11 @@ def build_parser() -> argparse.ArgumentParser:
                    help="use a calibration file made with another robot or camera anyway "
                         "(warned)")
     s.add_argument("--controllers", help="comma-separated names, labels or module:attr")
+    s.add_argument("--options-file", metavar="FILE",
+                   help="per-controller options ([controllers.\"LABEL\"] tables, e.g. the "
+                        "tuned.toml of 'hexapod-bench tune'): they replace the scenario's "
+                        "options of the same names; recorded in run.json and the report "
+                        "(docs/tuning.md)")
     s.add_argument("--workers", type=int, default=1, help="processes (default 1)")
     s.add_argument("--dask", metavar="ADDRESS", help="Dask scheduler address, or 'local'")
     s.add_argument("--resume", action="store_true", help="finish an interrupted run")
@@ -304,6 +311,9 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--workers", type=int, default=2, help="processes (default 2)")
     s.set_defaults(func=cmd_warm)
 
+    from benchmarks.study.tune_command import register as register_tune
+
+    register_tune(sub)
     from benchmarks.study.analysis_cli import add_analysis_commands
 
     add_analysis_commands(sub)  # export, compare, reproduce

@@ -72,6 +72,7 @@ from controllers.law_tools import (
     solve_normal,
     solve_normal_damped,
 )
+from controllers.leg_rate import LegRateFeedForward
 from controllers.solvers.base import Solver
 from controllers.solvers.pseudo_inverse import DampedPseudoInverse
 
@@ -84,7 +85,7 @@ __all__ = [
 log = logging.getLogger(__name__)
 
 
-class VisionLaw(Controller):
+class VisionLaw(LegRateFeedForward, Controller):
     """Base of the image-based laws: ``tau = -lambda L^+ e``, ``q_dot = J_inv tau``.
 
     Subclasses implement :meth:`_reset_features` (read the goal, set the compiled core
@@ -101,6 +102,10 @@ class VisionLaw(Controller):
             singular value counts as zero, and a stacked interaction matrix of rank
             < 6 makes the law refuse to move.
         damping: Damping ``mu`` of the pseudo-inverse ``(L^T L + mu^2 I)^-1 L^T``.
+        leg_rate_feedforward: Feed the measured leg velocities forward through the nominal
+            drives' lag (:mod:`controllers.leg_rate`): the setpoint ``u = q_dot +
+            kappa (q_dot - v)`` that moves each leg by ``dt q_dot`` over the period
+            (velocity-mode drives; default off: the law's command as it is).
     """
 
     #: What a feature block is called in the notes ("legs", "edges").
@@ -108,8 +113,9 @@ class VisionLaw(Controller):
 
     def __init__(self, gain: float = 1.0, adaptive_gain: Sequence[float] | None = None,
                  interaction: str = "current", threshold: float = 1e-6,
-                 damping: float = 0.0) -> None:
+                 damping: float = 0.0, leg_rate_feedforward: bool = False) -> None:
         self.gain = Gain.from_options(self.name, gain, adaptive_gain)
+        self.init_leg_rate(leg_rate_feedforward)
         self.interaction = check_choice(self.name, "interaction", interaction, INTERACTIONS)
         self.threshold = check_number(self.name, "threshold", threshold, 0.0, strict=False)
         if self.threshold >= 1.0:
@@ -162,6 +168,7 @@ class VisionLaw(Controller):
         self._reset_features(context)
         self.solver.reset(context, self.name, dt)
         self._configure_kernel()
+        self.reset_leg_rate(context, dt)
 
     def retarget_trial(self, goal: Goal) -> None:
         """A new goal, keeping what the law carries between periods (the goal of each
@@ -352,7 +359,12 @@ class VisionLaw(Controller):
 
     def step_trial(self, observation: Observation) -> Command:
         """One period of this instance's trial: ``q_dot = J_inv (-lambda L^+ e)`` (never
-        raises for bad measurements)."""
+        raises for bad measurements), with the measured leg rates fed forward when
+        ``leg_rate_feedforward`` (:mod:`controllers.leg_rate`)."""
+        return self.fed_forward(self._law_step(observation), observation)
+
+    def _law_step(self, observation: Observation) -> Command:
+        """The law's command of one period (before the leg-rate feed-forward)."""
         if self.context is None:
             return Command.refuse(f"{self.name}: reset(context) was not called")
         q = self.checked_lengths(observation)
@@ -405,6 +417,7 @@ class VisionLaw(Controller):
         self._pending: dict[int, tuple[GoalBatch, int]] = {}
         self.solver.batch_reset([t.solver for t in trials])
         self._batch_reset_extra()
+        self.batch_reset_leg_rate(trials)
 
     def retarget_batch(self, trials: np.ndarray, goals: GoalBatch) -> None:
         """New goals for some trials (row ``j`` of ``goals`` for trial ``trials[j]``),
@@ -459,6 +472,7 @@ class VisionLaw(Controller):
                 done = rows_core.step(rows, trials[rows], feats[rows], q[rows],
                                       self.solver, self.batch_estimate, out)
                 slow[rows[done]] = False
+                self.feed_rows(rows[done], trials[rows[done]], obs, out)
         return np.flatnonzero(slow)
 
     def step_row(self, trial: int, observation: Observation) -> Command:

@@ -38,8 +38,10 @@ class LegDirectionController(VisionLaw):
 
     def __init__(self, gain: float = 1.0, adaptive_gain: Sequence[float] | None = None,
                  interaction: str = "current", threshold: float = 1e-6,
-                 damping: float = 0.0, compiled: bool = True) -> None:
-        super().__init__(gain, adaptive_gain, interaction, threshold, damping)
+                 damping: float = 0.0, compiled: bool = True,
+                 leg_rate_feedforward: bool = False) -> None:
+        super().__init__(gain, adaptive_gain, interaction, threshold, damping,
+                         leg_rate_feedforward)
         self.compiled = bool(compiled)
         self._u_star = np.zeros((6, 3))
         self._goal_visible = np.ones(6, dtype=bool)

@@ -60,8 +60,10 @@ class LegEdgeController(VisionLaw):
 
     def __init__(self, gain: float = 1.0, adaptive_gain: Sequence[float] | None = None,
                  interaction: str = "current", threshold: float = 1e-6, damping: float = 0.0,
-                 edge_feature: str = "auto", compiled: bool = True) -> None:
-        super().__init__(gain, adaptive_gain, interaction, threshold, damping)
+                 edge_feature: str = "auto", compiled: bool = True,
+                 leg_rate_feedforward: bool = False) -> None:
+        super().__init__(gain, adaptive_gain, interaction, threshold, damping,
+                         leg_rate_feedforward)
         self.compiled = bool(compiled)
         self.edge_feature = check_choice(self.name, "edge_feature", edge_feature, EDGE_FEATURES)
         if edge_feature == "lines":

@@ -37,9 +37,10 @@ class LegEdgeQPController(LegEdgeController):
                  edge_feature: str = "auto", regularization: float = 1e-12,
                  stroke_margin: float | None = None, max_speed: float | None = None,
                  eps_abs: float = 1e-6, eps_rel: float = 1e-6, max_iter: int = 4000,
-                 shortcut: bool | None = None, compiled: bool = True) -> None:
+                 shortcut: bool | None = None, compiled: bool = True,
+                 leg_rate_feedforward: bool = False) -> None:
         LegEdgeController.__init__(self, gain, adaptive_gain, interaction, threshold, damping,
-                                   edge_feature, compiled)
+                                   edge_feature, compiled, leg_rate_feedforward)
         if damping:
             raise OptionError(self.name, "damping", "use 'regularization' with the QP law")
         self.solver = LimitQPSolver(self.name, self.threshold, regularization, stroke_margin,
@@ -63,9 +64,10 @@ class LegDirectionQPController(LegDirectionController):
                  interaction: str = "current", threshold: float = 1e-6, damping: float = 0.0,
                  regularization: float = 1e-12, stroke_margin: float | None = None,
                  max_speed: float | None = None, eps_abs: float = 1e-6, eps_rel: float = 1e-6,
-                 max_iter: int = 4000, shortcut: bool | None = None, compiled: bool = True) -> None:
+                 max_iter: int = 4000, shortcut: bool | None = None, compiled: bool = True,
+                 leg_rate_feedforward: bool = False) -> None:
         LegDirectionController.__init__(self, gain, adaptive_gain, interaction, threshold,
-                                        damping, compiled)
+                                        damping, compiled, leg_rate_feedforward)
         if damping:
             raise OptionError(self.name, "damping", "use 'regularization' with the QP law")
         self.solver = LimitQPSolver(self.name, self.threshold, regularization, stroke_margin,

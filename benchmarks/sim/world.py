@@ -253,6 +253,11 @@ def _draw_world(sc: SimScenario, trial: int, nominal: HexapodGeometry, camera: C
             true_geometry = true_geometry.replace(inertia=model_error_inertia(
                 true_geometry.inertia, ce.model_mass_error_percent,
                 ce.model_inertia_error_percent))
+        if (ce.model_friction_error_percent or ce.model_rotor_inertia_error_percent
+                or ce.model_drive_bandwidth_error_percent):
+            true_geometry = true_geometry.replace(drives=model_error_drives(
+                true_geometry.drives, ce.model_friction_error_percent,
+                ce.model_rotor_inertia_error_percent, ce.model_drive_bandwidth_error_percent))
     return rng, World(true_geometry, true_camera, offsets), ce, shared
 
 
@@ -288,6 +293,27 @@ def model_error_inertia(inertia: Any, mass_error_percent: float,
         platform_inertia=np.asarray(inertia.platform_inertia) * fi,
         body_inertia=np.asarray(inertia.body_inertia) * fi,
         rod_inertia=np.asarray(inertia.rod_inertia) * fi)
+
+
+def model_error_drives(drives: Any, friction_error_percent: float,
+                       rotor_inertia_error_percent: float,
+                       bandwidth_error_percent: float) -> Any:
+    """The true robot's drives when the model (``drives``, the robot file's) is off by the
+    given errors [%]: the viscous and Coulomb friction divided by ``1 + e_f / 100``, the
+    rotor inertia by ``1 + e_r / 100`` and the velocity loops' bandwidth by
+    ``1 + e_b / 100`` (the model is the truth times those factors).
+
+    Raises:
+        DriveError: The true drives are impossible (a Coulomb friction at or above the
+            force limit), naming the leg.
+    """
+    ff = 1.0 / (1.0 + 1e-2 * friction_error_percent)
+    fr = 1.0 / (1.0 + 1e-2 * rotor_inertia_error_percent)
+    fb = 1.0 / (1.0 + 1e-2 * bandwidth_error_percent)
+    return drives.replace(
+        viscous=np.asarray(drives.viscous) * ff, coulomb=np.asarray(drives.coulomb) * ff,
+        rotor_inertia=np.asarray(drives.rotor_inertia) * fr,
+        velocity_bandwidth=np.asarray(drives.velocity_bandwidth) * fb)
 
 
 def _fixed_poses(sc: SimScenario, geometry: HexapodGeometry

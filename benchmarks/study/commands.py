@@ -24,7 +24,6 @@ def console() -> Any:
 def cmd_run(args: argparse.Namespace) -> int:
     """Run studies and write results.jsonl and report.md."""
     import controllers  # noqa: F401 - registers the built-ins
-    from benchmarks.study.runner import run_lock
     from benchmarks.study.scenario import load_scenario
 
     out = Path(args.out)
@@ -38,7 +37,18 @@ def cmd_run(args: argparse.Namespace) -> int:
         scenarios = [replace(sc, world=args.world) for sc in scenarios]
     if getattr(args, "goal", None):  # --goal: every scenario in that goal setting
         scenarios = [sc.with_goal(args.goal) for sc in scenarios]
+    from benchmarks.study.options_file import with_options_file
+
+    scenarios, args.options_record = with_options_file(scenarios,
+                                                       getattr(args, "options_file", None))
+    return run_studies(scenarios, out, args)
+
+
+def run_studies(scenarios: list[Any], out: Path, args: argparse.Namespace) -> int:
+    """Check and run loaded scenarios into ``out`` (``run``'s work after the command-line
+    overrides; ``tune`` runs its candidates through it)."""
     from benchmarks.study.preflight import preflight, refusal, warning_lines
+    from benchmarks.study.runner import run_lock
 
     # the pre-flight of 'hexapod-bench check', the same function
     pre = preflight(scenarios, getattr(args, "allow_foreign_calibration", False),
@@ -155,6 +165,9 @@ def _run_locked(scenarios: list[Any], out: Path, args: argparse.Namespace) -> in
                       "source": sc.source} for sc in scenarios}},
     })
     _keep_inputs(out, scenarios, meta, args)
+    from benchmarks.study.options_file import record_options
+
+    record_options(meta, getattr(args, "options_record", None))  # "tuned" or "as given"
     meta_path.write_text(json.dumps(meta, indent=2))
     if args.viz:
         return _run_with_viz(scenarios, out, args)

@@ -131,6 +131,9 @@ def write_report(out_dir: Path, overwrite: bool = False) -> Path:
     lines.append(f"Generated {datetime.now(UTC).strftime('%Y-%m-%d %H:%M UTC')} from "
                  f"`{out_dir / 'results.jsonl'}` ({len(rows)} trials).")
     lines += command_lines(meta)
+    from benchmarks.study.options_file import options_line
+
+    lines += ["", options_line(meta)]
     if dropped:
         lines += ["", f"**Duplicate rows**: {duplicate_note(dropped, conflicting)}"]
     if meta.get("warnings"):

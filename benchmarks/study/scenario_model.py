@@ -19,7 +19,14 @@ CALIBRATION_ERROR_KEYS = ("scale", "base_points_mm", "platform_points_mm", "join
                           "camera_pose_mm", "camera_pose_deg", "intrinsics_percent",
                           "leg_radius_percent", "distortion_percent", "mass_percent",
                           "inertia_percent", "model_mass_error_percent",
-                          "model_inertia_error_percent")
+                          "model_inertia_error_percent", "model_friction_error_percent",
+                          "model_rotor_inertia_error_percent",
+                          "model_drive_bandwidth_error_percent")
+#: The controllers' model's systematic errors [%] (not random, not multiplied by ``scale``):
+#: the true robot's value is the robot file's divided by ``1 + e / 100``.
+MODEL_ERROR_KEYS = ("model_mass_error_percent", "model_inertia_error_percent",
+                    "model_friction_error_percent", "model_rotor_inertia_error_percent",
+                    "model_drive_bandwidth_error_percent")
 #: The worlds a study runs in (``[robot] world``).
 WORLDS = ("kinematic", "dynamic")
 
@@ -53,6 +60,9 @@ RANGES: dict[str, tuple[float, float, bool, bool]] = {
     "calibration_error.inertia_percent": (0.0, 50.0, True, True),
     "calibration_error.model_mass_error_percent": (-50.0, 100.0, True, True),
     "calibration_error.model_inertia_error_percent": (-50.0, 100.0, True, True),
+    "calibration_error.model_friction_error_percent": (-50.0, 100.0, True, True),
+    "calibration_error.model_rotor_inertia_error_percent": (-50.0, 100.0, True, True),
+    "calibration_error.model_drive_bandwidth_error_percent": (-50.0, 100.0, True, True),
     "calibration.noise_deg": (0.0, 90.0, True, True),
     "calibration.warn_singular_ratio": (0.0, 1.0, True, False),
     "calibration.min_singular_ratio": (0.0, 1.0, True, False),
@@ -88,8 +98,7 @@ TASK_KEYS = ("speed_mm_s", "acceleration_mm_s2", "goal")
 #: checked equal by the tests).
 GOAL_SETTINGS = ("mixed", "taught", "cartesian")
 #: Calibration errors that are not standard deviations: not multiplied by ``scale``.
-UNSCALED = ("scale", "distortion_percent", "model_mass_error_percent",
-            "model_inertia_error_percent")
+UNSCALED = ("scale", "distortion_percent", *MODEL_ERROR_KEYS)
 #: The calibration-error keys in millimetres or degrees whose standard deviation, times
 #: ``scale``, must stay within the range of the key itself (the effective error).
 SCALED_ERROR_KEYS = tuple(k for k in CALIBRATION_ERROR_KEYS if k not in UNSCALED)
@@ -177,6 +186,15 @@ class CalibrationErrorConfig:
             ``1 + e / 100`` (+30: the model is 30 % too heavy). Not random, not
             multiplied by ``scale``; the drives' rotor inertia is not changed.
         model_inertia_error_percent: Likewise for their rotational inertias [%].
+        model_friction_error_percent: The controllers' model's error on every drive's
+            friction, viscous [N s/m] and Coulomb [N] alike [%]: the true drives' are the
+            robot file's divided by ``1 + e / 100`` (+30: the model's friction 30 %
+            too high). Not random, not multiplied by ``scale``.
+        model_rotor_inertia_error_percent: Likewise for the drives' rotor inertia
+            reflected to the legs [%].
+        model_drive_bandwidth_error_percent: Likewise for the bandwidth of the drives'
+            velocity loops [%] (what the drive-aware predictive controllers and the
+            ``leg_rate_feedforward`` option model).
         scale: Multiplies every standard deviation above (sweep it to grow all
             errors together).
     """
@@ -194,6 +212,9 @@ class CalibrationErrorConfig:
     inertia_percent: float = 0.0
     model_mass_error_percent: float = 0.0
     model_inertia_error_percent: float = 0.0
+    model_friction_error_percent: float = 0.0
+    model_rotor_inertia_error_percent: float = 0.0
+    model_drive_bandwidth_error_percent: float = 0.0
 
     def at_scale(self) -> CalibrationErrorConfig:
         """The errors at the scale: every key but :data:`UNSCALED` times ``scale``."""

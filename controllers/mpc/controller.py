@@ -117,6 +117,10 @@ class MPCLaw(Controller):
                  compiled: bool = True, drive_model: str = "ideal",
                  drive_state: str = "measured", **law_options: Any) -> None:
         name = self.name
+        if law_options.get("leg_rate_feedforward"):
+            raise OptionError(name, "leg_rate_feedforward", "the one-step laws' option; the "
+                              "predictive controllers model the drives with drive_model = "
+                              "\"lag\" (from the measured leg velocities)")
         if isinstance(horizon, bool) or not isinstance(horizon, int) or horizon < 1:
             raise OptionError(name, "horizon", f"expected an integer >= 1, got {horizon!r}")
         if horizon > 50:

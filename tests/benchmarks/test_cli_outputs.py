@@ -32,7 +32,8 @@ INPUTS = {("run", "scenarios"), ("run", "--calibration"), ("calibrate", "scenari
           ("servo", "--camera-file"), ("servo", "--camera-pose"), ("servo", "--geometry"),
           ("servo", "--calibration"), ("servo", "--camera"), ("perf calibration", "--camera"),
           ("perf controllers", "--camera"), ("perf dynamic-world", "--scenario"),
-          ("perf study", "--scenario"), ("identify", "robot"), ("identify", "--truth")}
+          ("perf study", "--scenario"), ("identify", "robot"), ("identify", "--truth"),
+          ("run", "--options-file"), ("tune", "scenario"), ("tune", "--space")}
 #: Option names and metavars that look like a path: each such option must be an output
 #: (tagged ``OutputFile``/``OutputDir``) or listed in :data:`INPUTS`.
 _PATHY_DEST = {"out", "dir", "dirs", "file", "json", "parquet", "picture", "markdown", "html",
@@ -185,6 +186,9 @@ DIR_CASES: dict[tuple[str, str], tuple[list[str], str, bool]] = {
     ("reproduce", "--out"): (["reproduce", "seed001", "--quick", "--out", "{out}"],
                              "notes.txt", False),
     ("report", "dir"): (["report", "{out}"], "report.md", True),
+    ("tune", "--out"): (["tune", "{scenario}", "--controllers", "leg-edge", "--trials", "1",
+                         "--candidates", "2", "--out", "{out}", "--no-progress"],
+                        "tuned.toml", True),
     ("perf detect", "--pictures"): (["perf", "detect", "--frames", "1", "--repeats", "1",
                                      "--pictures", "{out}"], "detect-front.png", True),
 }

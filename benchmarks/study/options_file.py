@@ -1,0 +1,194 @@
+"""Per-controller options files: what ``hexapod-bench tune`` writes and ``hexapod-bench
+run --options-file FILE`` uses (``docs/tuning.md``).
+
+The file is TOML: a ``[controllers."LABEL"]`` table of options for each controller label
+(they replace the scenario's options of the same names, the others stay), and, when
+``tune`` wrote it, a ``[tuning]`` table saying how they were chosen (scenario, criterion,
+budget, tuning seed). ``run`` records the file in ``run.json`` (``options_file``: its
+path, content hash, options and ``[tuning]`` table) and the report says "tuned (file,
+criterion, budget)" or "as given".
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import tomllib
+from dataclasses import dataclass, field, replace
+from pathlib import Path
+from typing import Any
+
+from benchmarks.exceptions import ScenarioError
+from hexapod.config import suggest
+
+#: The top-level tables of an options file.
+TABLES = ("controllers", "tuning")
+#: The key of ``run.json`` that records the options file.
+META_KEY = "options_file"
+
+
+@dataclass(frozen=True)
+class OptionsFile:
+    """An options file, read.
+
+    Attributes:
+        path: Where it was read.
+        controllers: Options by controller label.
+        tuning: Its ``[tuning]`` table (empty: options written by hand).
+        digest: ``sha256:`` of its bytes.
+    """
+
+    path: str
+    controllers: dict[str, dict[str, Any]]
+    tuning: dict[str, Any] = field(default_factory=dict)
+    digest: str = ""
+
+    def record(self) -> dict[str, Any]:
+        """What ``run.json`` keeps of it."""
+        return {"path": self.path, "digest": self.digest, "controllers": self.controllers,
+                "tuning": self.tuning}
+
+
+def load_options_file(path: str | Path) -> OptionsFile:
+    """Read an options file.
+
+    Raises:
+        ScenarioError: The file cannot be read, an unknown table, a controller entry that
+            is not a table (naming the file and key).
+    """
+    p = str(path)
+    try:
+        raw = Path(path).read_bytes()
+    except FileNotFoundError:
+        raise ScenarioError(p, f"file not found: tried {Path(path).resolve()}") from None
+    except OSError as exc:
+        raise ScenarioError(p, f"cannot be read: {exc}") from None
+    try:
+        data = tomllib.loads(raw.decode("utf-8"))
+    except (UnicodeDecodeError, tomllib.TOMLDecodeError) as exc:
+        raise ScenarioError(p, f"cannot be read as TOML: {exc}") from None
+    for key in data:
+        if key not in TABLES:
+            raise ScenarioError(p, f"unknown table (an options file has {', '.join(TABLES)})",
+                                key=key, suggestion=suggest(key, TABLES))
+    ctrls = data.get("controllers", {})
+    if not isinstance(ctrls, dict) or not ctrls:
+        raise ScenarioError(p, "expected [controllers.\"LABEL\"] tables of options, one per "
+                            "controller label", key="controllers")
+    for label, opts in ctrls.items():
+        if not isinstance(opts, dict):
+            raise ScenarioError(p, f"expected a table of options, got {opts!r}",
+                                key=f'controllers."{label}"')
+    tuning = data.get("tuning", {})
+    if not isinstance(tuning, dict):
+        raise ScenarioError(p, f"expected a table, got {tuning!r}", key="tuning")
+    return OptionsFile(p, {k: dict(v) for k, v in ctrls.items()}, dict(tuning),
+                       "sha256:" + hashlib.sha256(raw).hexdigest())
+
+
+def _toml_value(value: Any) -> str:
+    if isinstance(value, bool):
+        return "true" if value else "false"
+    if isinstance(value, int | float):
+        return repr(value)
+    if isinstance(value, str):
+        return json.dumps(value)
+    if isinstance(value, list | tuple):
+        return "[" + ", ".join(_toml_value(v) for v in value) + "]"
+    if isinstance(value, dict):
+        return "{ " + ", ".join(f"{json.dumps(k)} = {_toml_value(v)}"
+                                for k, v in value.items()) + " }"
+    raise TypeError(f"cannot write {value!r} to TOML")
+
+
+def write_options_file(path: str | Path, controllers: dict[str, dict[str, Any]],
+                       tuning: dict[str, Any], header: str = "") -> None:
+    """Write an options file (``[tuning]`` first, then one table per controller)."""
+    lines = [f"# {line}" if line else "#" for line in header.splitlines()]
+    lines += ["", "[tuning]"]
+    lines += [f"{k} = {_toml_value(v)}" for k, v in tuning.items()]
+    for label, opts in controllers.items():
+        lines += ["", f"[controllers.{json.dumps(label)}]"]
+        lines += [f"{k} = {_toml_value(v)}" for k, v in opts.items()]
+    Path(path).write_text("\n".join(lines) + "\n", encoding="utf-8")
+
+
+def apply_options_file(scenarios: list[Any], options: OptionsFile) -> list[Any]:
+    """The scenarios with each controller's options from the file (the file's value of
+    an option replaces the scenario's; the scenario's other options stay).
+
+    Raises:
+        ScenarioError: A label of the file that no scenario of the run has (with the
+            labels there are), or an option the controller does not take (naming the
+            file, the key and the controller's options).
+    """
+    import controllers  # noqa: F401 - registers the built-ins
+    from controllers.registry import registry
+
+    labels = {c.label for sc in scenarios for c in sc.controllers}
+    for label in options.controllers:
+        if label not in labels:
+            raise ScenarioError(options.path, "no controller of the run has this label (its "
+                                f"controllers: {', '.join(sorted(labels))})",
+                                key=f'controllers."{label}"',
+                                suggestion=suggest(label, sorted(labels)))
+    out = []
+    for sc in scenarios:
+        specs = []
+        for spec in sc.controllers:
+            given = options.controllers.get(spec.label)
+            if given is None:
+                specs.append(spec)
+                continue
+            table = registry.options(spec.name)
+            keys = {}
+            for option in given:
+                key = f'{options.path}: controllers."{spec.label}".{option}'
+                if not (table.open or table.declares(option)):
+                    raise ScenarioError(
+                        options.path, f"controller '{spec.name}' has no option '{option}'; "
+                        f"its options: {', '.join(table.names) or 'none'} (hexapod-bench "
+                        f"list --options {spec.name})", key=f'controllers."{spec.label}".'
+                        f"{option}", suggestion=suggest(option, table.names))
+                keys[option] = key
+            specs.append(replace(spec, options={**spec.options, **given},
+                                 option_keys={**spec.option_keys, **keys}))
+        out.append(replace(sc, controllers=tuple(specs)))
+    return out
+
+
+def with_options_file(scenarios: list[Any], path: str | None
+                      ) -> tuple[list[Any], dict[str, Any] | None]:
+    """``run --options-file``: the scenarios with the file's options and the file's record
+    for ``run.json`` (unchanged and None without a file)."""
+    if not path:
+        return scenarios, None
+    options = load_options_file(path)
+    return apply_options_file(scenarios, options), options.record()
+
+
+def record_options(meta: dict[str, Any], record: dict[str, Any] | None) -> None:
+    """Keep the options file's record in ``run.json`` (a run without one: none kept)."""
+    if record:
+        meta[META_KEY] = record
+    else:
+        meta.pop(META_KEY, None)
+
+
+def options_line(meta: dict[str, Any]) -> str:
+    """The report's line on the controllers' options: tuned (file, criterion, budget) or
+    as given."""
+    rec = meta.get(META_KEY)
+    if not rec:
+        return ("Controller options: **as given** (the scenario's; no `--options-file`, "
+                "docs/tuning.md).")
+    tuning = rec.get("tuning") or {}
+    labels = ", ".join(rec.get("controllers", {}))
+    if not tuning:
+        return (f"Controller options of {labels}: from `{rec.get('path')}` (written by hand, "
+                f"not tuned; {rec.get('digest', '')[:19]}).")
+    return (f"Controller options of {labels}: **tuned** (`{rec.get('path')}`, "
+            f"{rec.get('digest', '')[:19]}): by `hexapod-bench tune` on "
+            f"{tuning.get('scenario')}, criterion {tuning.get('criterion')}, budget "
+            f"{tuning.get('budget')}, tuning seed {tuning.get('tuning_seed')} (the study's: "
+            f"{tuning.get('study_seed')}; held-out trials).")

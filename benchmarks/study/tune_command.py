@@ -1,0 +1,309 @@
+"""``hexapod-bench tune SCENARIO --controllers A,B --out DIR``: matched tuning
+(``docs/tuning.md``).
+
+Every controller goes through the same procedure: its candidates (the options as given,
+then points of its declared search space, :mod:`benchmarks.study.tuning_space`) run on
+TUNING trials, the same ones for every candidate and controller, whose seed is the
+study's plus :data:`SEED_OFFSET` (or ``--seed``, refused when equal to the study's): no
+trial of the study is used to tune. The candidate with the lowest criterion wins (ties:
+the earlier, the options as given first); every controller has the same budget
+(candidates x trials x sweep points). The candidates run as one study in ``DIR/candidates``
+(a run directory: resumable with ``--resume``, its report beside), and the choice is
+written to ``DIR/tuned.toml`` (the options file ``run --options-file`` takes) and every
+candidate's score to ``DIR/tuning.json``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import sys
+from dataclasses import dataclass, replace
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from benchmarks.exceptions import ScenarioError
+
+#: The tuning seed is the study's plus this, unless ``--seed`` is given.
+SEED_OFFSET = 1_000_003
+#: The run directory of the candidates, inside ``--out``.
+CANDIDATES_DIR = "candidates"
+TUNED_FILE = "tuned.toml"
+SCORES_FILE = "tuning.json"
+#: Criteria: (row field, statistic over every tuning trial of every sweep point).
+CRITERIA: dict[str, tuple[str, str]] = {
+    "median-final": ("final_position_error_mm", "median"),
+    "mean-final": ("final_position_error_mm", "mean"),
+    "p90-final": ("final_position_error_mm", "p90"),
+    "median-tracking-rms": ("tracking_rms_position_mm", "median"),
+    "mean-tracking-rms": ("tracking_rms_position_mm", "mean"),
+    "p90-tracking-rms": ("tracking_rms_position_mm", "p90"),
+}
+
+
+def add_arguments(s: argparse.ArgumentParser) -> None:
+    """The arguments of ``hexapod-bench tune``."""
+    s.add_argument("scenario", metavar="SCENARIO", help="a built-in scenario name or a TOML path")
+    s.add_argument("--controllers", required=True,
+                   help="comma-separated labels (or names) of the scenario's controllers")
+    from benchmarks.study.outdir import OutputDir
+
+    s.add_argument("--out", required=True, action=OutputDir,
+                   help="output directory (candidates/: the candidates' run; tuned.toml; "
+                        "tuning.json)")
+    s.add_argument("--trials", type=int, default=10,
+                   help="tuning trials per candidate and sweep point (default 10)")
+    s.add_argument("--candidates", type=int, default=6,
+                   help="candidates per controller, the options as given included (default 6)")
+    s.add_argument("--seed", type=int, help="tuning seed (default: the study's + "
+                                           f"{SEED_OFFSET}; the study's own is refused)")
+    s.add_argument("--criterion", choices=sorted(CRITERIA),
+                   help="what is minimised (default: median-tracking-rms for a trajectory "
+                        "task, else median-final); a failed trial counts as the worst")
+    s.add_argument("--space", metavar="FILE", help="a search space TOML replacing the "
+                                                   "declared one (docs/tuning.md)")
+    s.add_argument("--max-steps", type=int, help="override the step budget of each trial")
+    s.add_argument("--workers", type=int, default=1, help="processes (default 1)")
+    s.add_argument("--resume", action="store_true", help="finish an interrupted tuning")
+    s.add_argument("--overwrite", action="store_true",
+                   help="replace DIR/tuned.toml and DIR/tuning.json")
+    s.add_argument("--no-progress", action="store_true", help="no progress bar")
+
+
+@dataclass(frozen=True)
+class Score:
+    """One candidate's result on the tuning trials.
+
+    Attributes:
+        label: The controller's label.
+        index: The candidate's number (0: the options as given).
+        options: Its options.
+        value: The criterion (inf: more than the statistic allows failed).
+        trials: Tuning trials it ran.
+        failed: Those counted as the worst (a crash, an end stop, no value).
+    """
+
+    label: str
+    index: int
+    options: dict[str, Any]
+    value: float
+    trials: int
+    failed: int
+
+
+def criterion_value(rows: list[dict[str, Any]], criterion: str) -> tuple[float, int]:
+    """The criterion over a candidate's rows, and how many counted as the worst (+inf):
+    a trial that did not run to its end (:func:`benchmarks.study.failures.is_failure`: a
+    crash, an end stop, a refused command) or has no finite value of the field.
+
+    Raises:
+        KeyError: An unknown criterion.
+    """
+    from benchmarks.study.failures import is_failure
+
+    field, statistic = CRITERIA[criterion]
+    values = []
+    failed = 0
+    for row in rows:
+        v = row.get(field)
+        if is_failure(row) or not isinstance(v, int | float) or not math.isfinite(v):
+            values.append(math.inf)
+            failed += 1
+        else:
+            values.append(float(v))
+    if not values:
+        return math.inf, 0
+    x = np.sort(np.asarray(values))
+    if statistic == "median":
+        value = float(np.median(x))
+    elif statistic == "mean":
+        value = float(np.mean(x))
+    else:  # p90: the order statistic at rank ceil(0.9 n) (no interpolation across inf)
+        value = float(x[max(0, math.ceil(0.9 * len(x)) - 1)])
+    return value, failed
+
+
+def choose(scores: list[Score]) -> Score:
+    """The lowest criterion, the earlier candidate on a tie (the options as given first)."""
+    return min(scores, key=lambda s: (s.value, s.index))
+
+
+def _own_entry(entry: Path) -> bool:
+    """An entry of a tune directory: the candidates' run directory, or a tuned.toml or
+    tuning.json the project wrote."""
+    from hexapod.outputs import written_by_project
+
+    if entry.name == CANDIDATES_DIR:
+        return entry.is_dir()
+    return entry.name in (TUNED_FILE, SCORES_FILE) and written_by_project(entry)
+
+
+def _label(label: str, k: int) -> str:
+    return f"{label}:c{k}"
+
+
+def _run_args(args: argparse.Namespace, out: Path, scenario: str) -> argparse.Namespace:
+    """The ``run`` arguments the candidates' study needs."""
+    return argparse.Namespace(
+        out=str(out), scenarios=[scenario], resume=args.resume, chunk=None,
+        workers=args.workers, record=0, backend="sim", engine="batched", dask=None,
+        viz=False, no_progress=args.no_progress, overwrite=False,
+        verbose=getattr(args, "verbose", False), argv=getattr(args, "argv", sys.argv[1:]),
+        allow_foreign_calibration=False, no_check=False, options_record=None)
+
+
+def cmd_tune(args: argparse.Namespace) -> int:
+    """Tune the chosen controllers of a scenario (see the module docstring)."""
+    import controllers  # noqa: F401 - registers the built-ins
+    from benchmarks.study.commands import console, run_studies
+    from benchmarks.study.runner import deduplicate, read_results
+    from benchmarks.study.scenario import load_scenario
+    from benchmarks.study.tuning_space import (
+        SEARCH_SPACE,
+        candidates,
+        check_space_options,
+        controller_space,
+        load_space,
+    )
+    from controllers.registry import registry
+    from hexapod.outputs import check_output_dir, check_replace
+
+    con = console()
+    out = Path(args.out)
+    if args.candidates < 2:
+        raise ScenarioError("--candidates", f"at least 2 (the options as given and one "
+                            f"searched), got {args.candidates}")
+    labels = [c.strip() for c in args.controllers.split(",") if c.strip()]
+    if not labels:
+        raise ScenarioError("--controllers", "no controller named")
+    base = load_scenario(args.scenario)
+    study_seed = base.seed
+    tuning_seed = study_seed + SEED_OFFSET if args.seed is None else args.seed
+    if tuning_seed == study_seed:
+        raise ScenarioError("--seed", f"{tuning_seed} is the study's own seed: tuning trials "
+                            "must be held out from the study's (choose another seed)")
+    sc = base.with_overrides(args.trials, tuning_seed, labels, args.max_steps)
+    criterion = args.criterion or ("median-tracking-rms" if sc.task.kind == "trajectory"
+                                   else "median-final")
+    check_output_dir(out, _own_entry, "tune directory (candidates/, tuned.toml, tuning.json)",
+                     args.overwrite)
+    for path in (out / TUNED_FILE, out / SCORES_FILE):
+        check_replace(path, args.overwrite)
+    space = SEARCH_SPACE if args.space is None else load_space(args.space)
+    tables = {spec.label: registry.options(spec.name) for spec in sc.controllers}
+    if args.space is not None:
+        check_space_options(space, tables, {s.label: s.name for s in sc.controllers},
+                            args.space)
+    from benchmarks.study.scenario_checks import check_controllers
+
+    sc = check_controllers(sc)[0]  # [controller_options] resolved: the options as given
+    specs = []
+    plans: dict[str, list[dict[str, Any]]] = {}
+    families: dict[str, str | None] = {}
+    axes: dict[str, Any] = {}
+    for spec in sc.controllers:
+        cs = controller_space(spec.label, spec.name, tables[spec.label], space)
+        for text in cs.skipped:
+            con.print(f"tune: {text}", markup=False, highlight=False)
+        families[spec.label] = cs.family
+        axes[spec.label] = cs.axes
+        plans[spec.label] = candidates(spec.options, cs.axes, args.candidates)
+        for k, opts in enumerate(plans[spec.label]):
+            specs.append(replace(spec, label=_label(spec.label, k), options=opts))
+    points = len(sc.expand())
+    budget = f"{args.candidates} candidates x {sc.trials} trials x {points} sweep point(s)"
+    con.print(f"tune {sc.name}: {len(labels)} controller(s), {budget} each; criterion "
+              f"{criterion}; tuning seed {tuning_seed} (the study's: {study_seed})",
+              markup=False, highlight=False)
+    run_dir = out / CANDIDATES_DIR
+    out.mkdir(parents=True, exist_ok=True)
+    code = run_studies([replace(sc, controllers=tuple(specs))], run_dir,
+                       _run_args(args, run_dir, args.scenario))
+    if code == 130:
+        con.print(f"interrupted: finish with the same command and --resume ({run_dir})")
+        return code
+    rows, _, _ = deduplicate(read_results(run_dir))
+    by_label: dict[str, list[dict[str, Any]]] = {}
+    for row in rows:
+        by_label.setdefault(row["controller"], []).append(row)
+    scores: dict[str, list[Score]] = {}
+    for spec in sc.controllers:
+        scores[spec.label] = []
+        for k, opts in enumerate(plans[spec.label]):
+            got = by_label.get(_label(spec.label, k), [])
+            value, failed = criterion_value(got, criterion)
+            scores[spec.label].append(Score(spec.label, k, opts, value, len(got), failed))
+    chosen = {label: choose(s) for label, s in scores.items()}
+    for label, s in chosen.items():
+        for axis in axes[label]:
+            if s.index > 0 and axis.at_end(s.options[axis.option]):
+                con.print(f"tune: warning: {label}: the chosen {axis.option} = "
+                          f"{s.options[axis.option]} is at an end of its range [{axis.low:g}, "
+                          f"{axis.high:g}] {axis.unit}: the best may lie beyond (widen the "
+                          "space with --space)", markup=False, highlight=False)
+    tuning = {
+        "scenario": sc.name, "source": sc.source, "criterion": criterion,
+        "metric": CRITERIA[criterion][0], "statistic": CRITERIA[criterion][1],
+        "candidates": args.candidates, "trials": sc.trials, "sweep_points": points,
+        "budget": budget, "tuning_seed": tuning_seed, "study_seed": study_seed,
+        "seed_offset": tuning_seed - study_seed,
+        "families": {k: v or "none" for k, v in families.items()},
+        "chosen": {label: s.index for label, s in chosen.items()},
+        "command": "hexapod-bench " + " ".join(getattr(args, "argv", [])),
+    }
+    _write(out, chosen, scores, tuning)
+    _print(con, scores, chosen, criterion, out)
+    return 0
+
+
+def _write(out: Path, chosen: dict[str, Score], scores: dict[str, list[Score]],
+           tuning: dict[str, Any]) -> None:
+    from benchmarks.study.options_file import write_options_file
+    from hexapod.outputs import TEXT_MARKER
+
+    header = (f"{TEXT_MARKER}: hexapod-bench tune (docs/tuning.md)\n"
+              f"Use: hexapod-bench run {tuning['scenario']} --options-file {out / TUNED_FILE} "
+              "--out DIR (the study's own seed: held-out trials)")
+    write_options_file(out / TUNED_FILE, {label: s.options for label, s in chosen.items()},
+                       tuning, header)
+    data = {"generator": "hexapod-vs", "tuning": tuning, "candidates": {
+        label: [{"index": s.index, "options": s.options,
+                 "criterion": s.value if math.isfinite(s.value) else None,
+                 "trials": s.trials, "failed": s.failed} for s in ss]
+        for label, ss in scores.items()}}
+    (out / SCORES_FILE).write_text(json.dumps(data, indent=2) + "\n")
+
+
+def _print(con: Any, scores: dict[str, list[Score]], chosen: dict[str, Score],
+           criterion: str, out: Path) -> None:
+    from rich.markup import escape
+    from rich.table import Table
+
+    t = Table(title=f"tuning: {criterion} [mm] per candidate (* chosen)")
+    for col in ("controller", "candidate", "options", "criterion", "failed"):
+        t.add_column(col, overflow="fold")
+    for label, ss in scores.items():
+        for s in ss:
+            mark = "*" if s.index == chosen[label].index else ""
+            opts = ", ".join(f"{k}={v}" for k, v in s.options.items()) or "(defaults)"
+            t.add_row(label, f"{s.index}{mark}" + (" (as given)" if s.index == 0 else ""),
+                      escape(opts), f"{s.value:.4g}", f"{s.failed}/{s.trials}")
+    con.print(t)
+    con.print(f"tuned options: {out / TUNED_FILE}; every candidate: {out / SCORES_FILE}",
+              markup=False, highlight=False)
+
+
+def register(sub: Any) -> None:
+    """Add ``tune`` to the subcommands."""
+    s = sub.add_parser("tune", help="matched tuning: each controller's gains chosen the same "
+                                    "way on held-out trials (docs/tuning.md)",
+                       description=__doc__.split("\n\n")[0] if __doc__ else None)
+    add_arguments(s)
+    s.set_defaults(func=cmd_tune)
+
+
+__all__ = ["CRITERIA", "SEED_OFFSET", "Score", "choose", "cmd_tune", "criterion_value",
+           "register"]

@@ -1,0 +1,60 @@
+"""Options files (``run --options-file``): read, written back as read, applied over the
+scenario's options, and refused in the file's terms when they name a label or an option
+that does not exist."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+
+from benchmarks.exceptions import ScenarioError
+from benchmarks.study.options_file import (
+    apply_options_file,
+    load_options_file,
+    options_line,
+    write_options_file,
+)
+from benchmarks.study.scenario import parse_scenario
+
+SC = {"name": "t", "controllers": [{"name": "leg-edge", "edge_feature": "normals"},
+                                   "computed-torque"], "robot": {"world": "dynamic"}}
+
+
+def test_round_trip_and_apply(tmp_path: Path) -> None:
+    f = tmp_path / "o.toml"
+    opts = {"leg-edge": {"adaptive_gain": [5.0, 1.0, 30.0], "leg_rate_feedforward": True},
+            "computed-torque": {"natural_frequency": 4.0}}
+    tuning = {"scenario": "t", "criterion": "median-final", "budget": "6 x 5 x 1",
+              "tuning_seed": 1000004, "study_seed": 1, "chosen": {"leg-edge": 2}}
+    write_options_file(f, opts, tuning, "written by hexapod-vs: test")
+    read = load_options_file(f)
+    assert read.controllers == opts and read.tuning == tuning
+    assert read.digest.startswith("sha256:")
+    (sc,) = apply_options_file([parse_scenario(SC)], read)
+    edge, ctc = sc.controllers
+    assert edge.options == {"edge_feature": "normals", **opts["leg-edge"]}
+    assert ctc.options == {"natural_frequency": 4.0}
+    line = options_line({"options_file": read.record()})
+    assert "**tuned**" in line and "median-final" in line and "1000004" in line
+    assert "as given" in options_line({})
+
+
+@pytest.mark.parametrize(("text", "fragment"), [
+    ('[controllers."leg-edge"]\ngian = 2.0\n', "did you mean 'gain'"),
+    ('[controllers."leg-egde"]\ngain = 2.0\n', "no controller of the run has this label"),
+    ('[controllers]\n"leg-edge" = 2.0\n', "expected a table of options"),
+    ('[tunning]\nx = 1\n[controllers."leg-edge"]\ngain = 2.0\n', "did you mean 'tuning'"),
+    ("[tuning]\nx = 1\n", "expected [controllers"),
+])
+def test_bad_files_name_the_file_and_key(tmp_path: Path, text: str, fragment: str) -> None:
+    f = tmp_path / "bad.toml"
+    f.write_text(text)
+    with pytest.raises(ScenarioError) as info:
+        apply_options_file([parse_scenario(SC)], load_options_file(f))
+    assert str(f) in str(info.value) and fragment in str(info.value), str(info.value)
+
+
+def test_a_missing_file_says_where_it_looked(tmp_path: Path) -> None:
+    with pytest.raises(ScenarioError, match="file not found"):
+        load_options_file(tmp_path / "nope.toml")
