@@ -215,7 +215,7 @@ KINEMATIC = ["leg-direction", "leg-edge", "leg-edge-qp", "leg-direction-qp", "mo
              "joint-space", {"name": "latency-compensated", "law": "leg-edge"},
              "leg-edge-mpc", "leg-direction-mpc"]
 DYNAMIC = ["computed-torque", "cartesian-ctc", "vision-ctc", "leg-edge-ctc",
-           "leg-direction-ctc"]
+           "leg-direction-ctc", "leg-edge-force-mpc", "pose-force-mpc"]
 
 
 @pytest.mark.slow
