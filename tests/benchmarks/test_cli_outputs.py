@@ -87,6 +87,8 @@ def _outputs() -> dict[tuple[str, str], str]:
 
 
 def _pathy(action: argparse.Action) -> bool:
+    if action.choices is not None:  # an enumerated option (run --goal taught) names no path
+        return False
     metavar = action.metavar if isinstance(action.metavar, str) else ""
     return action.dest in _PATHY_DEST or any(m in metavar.upper() for m in _PATHY_METAVAR)
 
