@@ -17,7 +17,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from typing import Any
 
-from benchmarks.exceptions import SetupError
+from benchmarks.exceptions import ScenarioError, SetupError
 from benchmarks.study.setup_check import Problem
 
 
@@ -84,6 +84,10 @@ def preflight(scenarios: list[Any], allow_foreign_calibration: bool = False,
     for sc in scenarios:
         if sc.world == "dynamic":  # (--world dynamic may make a kinematic file dynamic)
             check_physics_dt(sc.dt, sc.physics_dt, sc.source)
+        elif getattr(sc, "payload", None) is not None:
+            raise ScenarioError(sc.source, "a payload has weight and inertia only in the "
+                                "dynamic world: set [robot] world = \"dynamic\" (or run "
+                                "with --world dynamic)", key="payload")
         resolved, notes = check_controllers(sc)
         warnings += notes
         warnings += check_scenario_calibration(resolved, allow_foreign_calibration)

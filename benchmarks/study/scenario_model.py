@@ -9,6 +9,7 @@ from pathlib import Path
 from typing import Any
 
 from benchmarks.exceptions import ScenarioError
+from benchmarks.study.scenario_payload import PAYLOAD_RANGES, PayloadConfig
 from hexapod.exceptions import ConfigFileError
 from vision.calibration import MIN_SINGULAR_RATIO, WARN_SINGULAR_RATIO
 
@@ -19,7 +20,7 @@ CALIBRATION_ERROR_KEYS = ("scale", "base_points_mm", "platform_points_mm", "join
                           "camera_pose_mm", "camera_pose_deg", "intrinsics_percent",
                           "leg_radius_percent", "distortion_percent", "mass_percent",
                           "inertia_percent", "model_mass_error_percent",
-                          "model_inertia_error_percent")
+                          "model_inertia_error_percent", "payload_mass_percent")
 #: The worlds a study runs in (``[robot] world``).
 WORLDS = ("kinematic", "dynamic")
 
@@ -76,6 +77,7 @@ RANGES: dict[str, tuple[float, float, bool, bool]] = {
     "clock.exposure_ms": (0.0, 1000.0, True, True),
     "clock.exposure_samples": (1, 256, True, True),
     "drives.velocity_bandwidth_hz": (0.0, 100_000.0, True, True),
+    **PAYLOAD_RANGES,
 }
 #: Keys of [clock] (the camera's clock), every one sweepable.
 CLOCK_KEYS = ("frame_rate_hz", "latency_ms", "latency_frames", "jitter_ms", "exposure_ms")
@@ -85,7 +87,7 @@ DRIVES_KEYS = ("velocity_bandwidth_hz",)
 TASK_KEYS = ("speed_mm_s", "acceleration_mm_s2")
 #: Calibration errors that are not standard deviations: not multiplied by ``scale``.
 UNSCALED = ("scale", "distortion_percent", "model_mass_error_percent",
-            "model_inertia_error_percent")
+            "model_inertia_error_percent", "payload_mass_percent")
 #: The calibration-error keys in millimetres or degrees whose standard deviation, times
 #: ``scale``, must stay within the range of the key itself (the effective error).
 SCALED_ERROR_KEYS = tuple(k for k in CALIBRATION_ERROR_KEYS if k not in UNSCALED)
@@ -173,6 +175,9 @@ class CalibrationErrorConfig:
             ``1 + e / 100`` (+30: the model is 30 % too heavy). Not random, not
             multiplied by ``scale``; the drives' rotor inertia is not changed.
         model_inertia_error_percent: Likewise for their rotational inertias [%].
+        payload_mass_percent: The controllers' model of the ``[payload]``: its mass
+            (and inertia) the true one's times ``1 + e / 100`` [%] (-100: unknown to
+            them). Not random, not multiplied by ``scale``; the true world is unchanged.
         scale: Multiplies every standard deviation above (sweep it to grow all
             errors together).
     """
@@ -190,6 +195,7 @@ class CalibrationErrorConfig:
     inertia_percent: float = 0.0
     model_mass_error_percent: float = 0.0
     model_inertia_error_percent: float = 0.0
+    payload_mass_percent: float = 0.0
 
     def at_scale(self) -> CalibrationErrorConfig:
         """The errors at the scale: every key but :data:`UNSCALED` times ``scale``."""
@@ -198,9 +204,10 @@ class CalibrationErrorConfig:
 
     def nominal_world(self) -> bool:
         """Whether no error moves the true world away from the nominal one (every trial
-        then shares it: ``distortion_percent`` changes only the camera model)."""
+        then shares it: ``distortion_percent`` and ``payload_mass_percent`` change only
+        the controllers' models)."""
         return all(getattr(self, k) == 0.0 for k in self.__dataclass_fields__
-                   if k not in ("scale", "distortion_percent"))
+                   if k not in ("scale", "distortion_percent", "payload_mass_percent"))
 
 
 @dataclass(frozen=True)
@@ -375,6 +382,7 @@ class Scenario:
         task: Task settings.
         clock: The camera's clock (frame rate, latency, jitter).
         drives: Changes to the robot's drives (:class:`DrivesConfig`).
+        payload: A payload fixed to the true platform (``[payload]``; None: none).
         reference: Figures of the reproduced seed (free-form table for the report).
         sweep: The swept keys of this point, e.g. ``{"noise.amplitude_deg": 0.05}``.
         source: File it was read from.
@@ -415,6 +423,7 @@ class Scenario:
     task: TaskConfig = TaskConfig()
     clock: ClockConfig = ClockConfig()
     drives: DrivesConfig = DrivesConfig()
+    payload: PayloadConfig | None = None
     reference: dict[str, Any] = field(default_factory=dict)
     sweep: dict[str, Any] = field(default_factory=dict)
     sweep_axes: dict[str, list[Any]] = field(default_factory=dict)

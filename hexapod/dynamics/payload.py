@@ -117,3 +117,12 @@ def with_payload(inertia: InertiaParameters, payload: Payload) -> InertiaParamet
               + inertia_matrix(payload.inertia) + _steiner(m_l, c_l - com))
     tensor = 0.5 * (tensor + tensor.T)
     return inertia.replace(platform_mass=mass, platform_com=com, platform_inertia=_six(tensor))
+
+
+def model_payload(payload: Payload, mass_error_percent: float) -> Payload:
+    """A model of ``payload`` whose mass is off by ``mass_error_percent`` [%]: the true
+    mass times ``1 + e / 100``, its inertia alike (the same body, another density; -100:
+    a model that does not know of the payload)."""
+    if mass_error_percent == 0.0 or payload.empty:
+        return payload
+    return payload.with_mass(payload.mass * (1.0 + 1e-2 * mass_error_percent))
