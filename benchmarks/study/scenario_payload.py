@@ -20,7 +20,7 @@ from hexapod.exceptions import InertiaError
 
 #: Keys of ``[payload]`` that may be swept.
 PAYLOAD_KEYS = ("mass_kg",)
-#: Allowed ranges (merged into :data:`benchmarks.study.scenario_model.RANGES`).
+#: Allowed ranges (merged into :data:`benchmarks.study.scenario_ranges.RANGES`).
 PAYLOAD_RANGES: dict[str, tuple[float, float, bool, bool]] = {
     "payload.mass_kg": (0.0, 10_000.0, True, True),
     "calibration_error.payload_mass_percent": (-100.0, 1000.0, True, True),
