@@ -124,7 +124,9 @@ def stop_lines(rows: list[dict[str, Any]]) -> list[str]:
         base_rows = masses[keys[0]].get(c, [])
         base = _errors(base_rows)
         base_med = float(np.median(list(base.values()))) if base else float("nan")
-        tests, cells, failing = [], [], []
+        tests: list[stats.TestResult | None] = []
+        cells: list[list[str]] = []
+        failing: list[bool] = []
         for m in keys:
             every = masses[m].get(c, [])
             errs = _errors(every)
