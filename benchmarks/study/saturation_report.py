@@ -14,7 +14,9 @@ and the tracking error while saturated, :mod:`benchmarks.sim.tracking`):
   median error at the lightest payload (the error at least doubled);
 - who tracks best at each payload: the controller with the lowest median RMS position
   error, against each other one in a paired Wilcoxon test, Holm-adjusted over the
-  comparisons of that payload.
+  comparisons of that payload; a controller most of whose trials failed at a payload is
+  listed as failing there and not compared (its few surviving trials are not a sample
+  of its trials).
 
 The failed trials (an end stop, a diverged world) are counted and left out of the error
 figures (those of the trials that ran to their end), as in the tracking table.
@@ -167,9 +169,16 @@ def best_lines(rows: list[dict[str, Any]]) -> list[str]:
              "[95 % interval] | Holm p | verdict |", "|---|---|---|---|---|---|"]
     for m in sorted(masses):
         errs = {c: _errors(rs) for c, rs in masses[m].items()}
-        meds = {c: float(np.median(list(e.values()))) for c, e in errs.items() if e}
+        # a controller most of whose trials failed is not compared (its survivors are not
+        # its trials): it is listed as failing
+        failing = sorted(c for c, rs in masses[m].items() if len(errs[c]) <= len(rs) / 2)
+        meds = {c: float(np.median(list(e.values()))) for c, e in errs.items()
+                if e and c not in failing}
+        fails = ", ".join(f"{c} ({len(masses[m][c]) - len(errs[c])}/{len(masses[m][c])} "
+                          "failed)" for c in failing)
+        if fails:
+            lines.append(f"| {m:g} kg | - | most trials fail: {fails} | | | |")
         if not meds:
-            lines.append(f"| {m:g} kg | every trial failed | | | | |")
             continue
         best = min(meds, key=lambda c: meds[c])
         others = [c for c in sorted(meds) if c != best]
@@ -194,7 +203,7 @@ def saturation_section(rows: list[dict[str, Any]]) -> list[str]:
     lines = ["Saturation (the drives' force limits; *at a limit*: trials in which a drive "
              "reached its force limit, with its Wilson interval; *at limit %*: fraction of "
              "the run any drive spent there; *most saturated leg*: the leg with the largest "
-             "median time at its limit; *error saturated*: position error from the "
+             "mean time at its limit (and its median); *error saturated*: position error from the "
              "reference at the end of the control periods in which a drive was at its "
              "limit, over the trials that saturated; medians with their 95 % intervals):",
              "", "| " + " | ".join(header) + " |", "|" + "---|" * len(header)]

@@ -72,6 +72,9 @@ def test_who_tracks_best() -> None:
     lines = best_lines(_rows())
     at40 = next(line for line in lines if line.startswith("| 40 kg"))
     assert "| steady (" in at40 and "| weak (" in at40 and "best tracks better" in at40
+    at80 = [line for line in lines if line.startswith("| 80 kg")]
+    assert "most trials fail: weak (20/30 failed)" in at80[0] and len(at80) == 2
+    assert "| steady (" in at80[1] and "| - |" in at80[1]  # alone: nothing to compare
     at0 = next(line for line in lines if line.startswith("| 0 kg"))
     assert "best tracks better" in at0  # +0.05 mm on every pair: significant
     text = "\n".join(saturation_section(_rows()))
