@@ -4,7 +4,7 @@ A payload is its mass, its centre of mass in the platform frame and its inertia 
 that centre (platform axes), the convention of ``[inertia] platform_inertia``. Fixed
 rigidly to the platform, it makes with it one rigid body (:func:`with_payload`): the
 masses add, the centre of mass is their weighted mean and the inertias, each moved to
-the common centre of mass by the parallel-axis theorem (Huygens-Steiner), add:
+the common centre of mass by the parallel-axis theorem (Huygens-Steiner), add::
 
     m = m_p + m_l,   c = (m_p c_p + m_l c_l) / m,
     I = I_p + m_p (|d_p|^2 1 - d_p d_p^T) + I_l + m_l (|d_l|^2 1 - d_l d_l^T),
