@@ -100,3 +100,32 @@ def test_with_mass_scales_the_inertia() -> None:
     assert heavier.mass == 7.4
     np.testing.assert_allclose(heavier.inertia, 2 * TOOL.inertia, rtol=1e-15)
     np.testing.assert_array_equal(heavier.com, TOOL.com)
+
+
+def test_equivalent_heavier_platform_combined_by_pinocchio(geometry: HexapodGeometry,
+                                                           rng: np.random.Generator) -> None:
+    """The platform made heavier by Pinocchio's own sum of the two spatial inertias
+    (``pin.Inertia`` addition): the same mass, centre of mass, inertia and dynamics."""
+    import pinocchio as pin
+
+    m = geometry.inertia
+    total = (pin.Inertia(m.platform_mass, np.asarray(m.platform_com), m.platform_tensor)
+             + pin.Inertia(TOOL.mass, np.asarray(TOOL.com), inertia_matrix(TOOL.inertia)))
+    I = total.inertia
+    heavier = geometry.replace(inertia=m.replace(
+        platform_mass=total.mass, platform_com=np.array(total.lever),
+        platform_inertia=np.array([I[0, 0], I[1, 1], I[2, 2], I[0, 1], I[0, 2], I[1, 2]])))
+    loaded = geometry.replace(inertia=with_payload(m, TOOL))
+    assert loaded.inertia.platform_mass == pytest.approx(heavier.inertia.platform_mass,
+                                                         rel=1e-15)
+    np.testing.assert_allclose(loaded.inertia.platform_com, heavier.inertia.platform_com,
+                               rtol=0, atol=1e-15)
+    np.testing.assert_allclose(loaded.inertia.platform_inertia,
+                               heavier.inertia.platform_inertia, rtol=0, atol=1e-15)
+    n = 8
+    R, t = sample_poses(geometry, n, rng=rng)
+    twist = rng.normal(scale=0.5, size=(n, 6))
+    M1, h1, _, _, _ = DynamicModel(loaded).terms_batch(R, t, twist)
+    M2, h2, _, _, _ = DynamicModel(heavier).terms_batch(R, t, twist)
+    np.testing.assert_allclose(M1, M2, rtol=0, atol=1e-12 * np.abs(M2).max())
+    np.testing.assert_allclose(h1, h2, rtol=0, atol=1e-12 * np.abs(h2).max())
