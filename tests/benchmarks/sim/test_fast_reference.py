@@ -38,3 +38,20 @@ def test_jerk_out_of_range_refused() -> None:
         parse_scenario({"name": "t", "controllers": ["leg-edge"],
                         "task": {**TASK, "jerk_mm_s3": 0.0}}, "s.toml")
     assert info.value.key == "task.jerk_mm_s3"
+
+
+def test_check_warns_a_reference_faster_than_the_legs() -> None:
+    """A circle scaled to 2 m/s^2 moves the legs faster than deltalab's 50 mm/s: check
+    warns naming the speed and the keys; at 40 mm/s it does not."""
+    from benchmarks.study.trajectory_check import trajectory_facts
+
+    task = {"kind": "trajectory", "shape": "circle", "radius_mm": 10.0, "speed_mm_s": 40.0,
+            "margin_mm": 15.0, "max_translation_mm": 20.0, "max_steps": 400}
+    slow, fast = (trajectory_facts(parse_scenario(
+        {"name": "t", "controllers": ["leg-edge"], "task": {**task, **extra}}, "x.toml"),
+        samples=3)[0] for extra in ({}, {"peak_acceleration_mm_s2": 2000.0}))
+    assert 0 < slow.leg_speed_mm_s < 50.0 and not slow.problems
+    assert fast.leg_speed_mm_s > 50.0 and fast.max_speed_mm_s == 50.0
+    (problem,) = fast.problems
+    assert "above the robot's leg speed limit 50 mm/s" in problem.text
+    assert "peak_acceleration_mm_s2" in problem.text and "x.toml" in problem.text
