@@ -11,10 +11,17 @@ A trajectory starts at rest at a start pose and ends at rest:
 - ``lemniscate``: ``laps`` figure-eights of Gerono's lemniscate
   ``r (sin phi, sin phi cos phi)`` centred on the start position, the orientation held.
 
-The timing law is a quintic polynomial (smooth acceleration) or a trapezoidal speed
-profile (bang-coast-bang acceleration). The speed limit bounds ``|dp/dt|`` everywhere;
-the acceleration limit bounds the tangential acceleration (exactly ``|d2p/dt2|`` on a
-line; on the curves the centripetal part, up to ``speed^2 / r``, comes on top).
+The timing law is a quintic polynomial (smooth acceleration), a trapezoidal speed
+profile (bang-coast-bang acceleration) or a jerk-limited "S-curve" (:mod:`hexapod.scurve`:
+the fastest move under speed, acceleration and jerk limits). The speed limit bounds
+``|dp/dt|`` everywhere; the acceleration limit bounds the tangential acceleration
+(exactly ``|d2p/dt2|`` on a line; on the curves the centripetal part, up to
+``speed^2 / r``, comes on top); the jerk limit the tangential jerk.
+
+Given a ``peak_acceleration``, the motion so timed is then slowed down or sped up as a
+whole (``s(t) -> s(t / k)``: speeds scale by ``1 / k``, accelerations by ``1 / k^2``) until
+its largest ``|d2p/dt2|`` (tangential and centripetal together) is that value: a circle
+or a lemniscate "at 50 m/s^2".
 
 Conventions (``docs/math.md``): the twist ``(v, w)`` is the velocity of the platform
 frame's origin and the angular velocity, both in the base frame; the acceleration is
@@ -24,15 +31,18 @@ their time derivative. Units are SI (m, rad, s).
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
 from hexapod.exceptions import TrajectoryError
+from hexapod.scurve import SCurve
 from hexapod.se3 import exp_so3, log_so3
 
 #: Timing laws.
-PROFILES = ("quintic", "trapezoidal")
+PROFILES = ("quintic", "trapezoidal", "s-curve")
+#: Samples per motion where the peak acceleration is searched (``peak_acceleration``).
+PEAK_SAMPLES = 20_001
 #: Path shapes.
 SHAPES = ("line", "circle", "lemniscate")
 #: Planes of the closed curves: the base-frame axes ``(e1, e2)`` spanning them.
@@ -49,26 +59,35 @@ class TimingLaw:
     rest at both ends.
 
     Attributes:
-        kind: ``"quintic"`` or ``"trapezoidal"``.
+        kind: ``"quintic"``, ``"trapezoidal"`` or ``"s-curve"``.
         duration: Time from start to end [s].
         ramp: Duration of the acceleration (and deceleration) phase of the trapezoid [s].
         peak: Peak ``ds/dt`` of the trapezoid [1/s].
+        curve: The S-curve of ``s`` (kind ``"s-curve"``).
+        stretch: The law is ``s(t / stretch)`` of the one fitted (1: as fitted).
     """
 
     kind: str
     duration: float
     ramp: float = 0.0
     peak: float = 0.0
+    curve: SCurve | None = None
+    stretch: float = 1.0
 
     @staticmethod
-    def fit(kind: str, speed: float, acceleration: float) -> TimingLaw:
-        """The fastest law of ``kind`` with ``|ds/dt| <= speed`` and ``|d2s/dt2| <=
-        acceleration`` (normalised limits [1/s], [1/s^2]; ``inf`` for no motion)."""
+    def fit(kind: str, speed: float, acceleration: float, jerk: float = math.inf
+            ) -> TimingLaw:
+        """The fastest law of ``kind`` with ``|ds/dt| <= speed``, ``|d2s/dt2| <=
+        acceleration`` and (S-curve) ``|d3s/dt3| <= jerk`` (normalised limits [1/s],
+        [1/s^2], [1/s^3]; ``inf`` for no motion)."""
         if kind not in PROFILES:
             raise TrajectoryError("profile", f"expected one of {', '.join(PROFILES)}, "
                                   f"got {kind!r}")
         if math.isinf(speed) and math.isinf(acceleration):
             return TimingLaw(kind, 0.0)
+        if kind == "s-curve":
+            curve = SCurve.fit(1.0, speed, acceleration, jerk)
+            return TimingLaw(kind, curve.duration, curve=curve)
         if kind == "quintic":
             duration = max(_QUINTIC_PEAK_SPEED / speed,
                            math.sqrt(_QUINTIC_PEAK_ACCELERATION / acceleration))
@@ -79,12 +98,37 @@ class TimingLaw:
         peak = math.sqrt(acceleration)  # a triangle: accelerate, then brake at once
         return TimingLaw(kind, 2.0 / peak, 1.0 / peak, peak)
 
+    def corners(self) -> np.ndarray:
+        """The times where ``d2s/dt2`` (trapezoid) or ``d3s/dt3`` (S-curve) jumps [s]."""
+        T = self.duration / self.stretch
+        if self.curve is not None:
+            tj, ta = self.curve.jerk_time, self.curve.ramp
+            at = np.array([tj, ta - tj, ta, T - ta, T - ta + tj, T - tj])
+        elif self.kind == "trapezoidal":
+            at = np.array([self.ramp, T - self.ramp])
+        else:
+            at = np.zeros(0)
+        return at * self.stretch  # type: ignore[no-any-return]
+
+    def stretched(self, factor: float) -> TimingLaw:
+        """The same law ``factor`` times slower (``s(t / factor)``; ``factor > 0``)."""
+        return TimingLaw(self.kind, self.duration * factor, self.ramp, self.peak, self.curve,
+                         self.stretch * factor)
+
     def __call__(self, t: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """``s``, ``ds/dt`` [1/s] and ``d2s/dt2`` [1/s^2] at times ``t`` [s] (any shape)."""
         t = np.asarray(t, dtype=float)
+        if self.stretch != 1.0:
+            k = self.stretch
+            s, sd, sdd = replace(self, duration=self.duration / k, stretch=1.0)(t / k)
+            outside = (t <= 0.0) | (t >= self.duration)
+            return (np.where(t >= self.duration, 1.0, s), np.where(outside, 0.0, sd / k),
+                    np.where(outside, 0.0, sdd / (k * k)))
         T = self.duration
         if T <= 0.0:
             return (np.where(t >= 0.0, 1.0, 0.0), np.zeros_like(t), np.zeros_like(t))
+        if self.curve is not None:
+            return self.curve(t)
         if self.kind == "quintic":
             u = np.clip(t / T, 0.0, 1.0)
             inside = (t > 0.0) & (t < T)
@@ -163,6 +207,10 @@ class PoseTrajectory:
         radius: Radius of the circle, half-width of the lemniscate [m].
         laps: Turns of a closed curve (a positive integer: it ends where it started).
         plane: ``"xy"``, ``"xz"`` or ``"yz"``: the plane of a closed curve.
+        jerk: Largest tangential jerk [m/s^3] (the ``"s-curve"`` profile).
+        angular_jerk: Largest angular jerk of a line [rad/s^3] (``"s-curve"``).
+        peak_acceleration: The largest ``|d2p/dt2|`` of the motion [m/s^2]: the timed
+            motion scaled in time to reach it exactly (module docstring); None: as timed.
 
     Raises:
         TrajectoryError: Naming the parameter at fault.
@@ -173,7 +221,9 @@ class PoseTrajectory:
                  goal_rotation: np.ndarray | None = None,
                  goal_translation: np.ndarray | None = None,
                  angular_speed: float | None = None, angular_acceleration: float | None = None,
-                 radius: float | None = None, laps: int = 1, plane: str = "xy") -> None:
+                 radius: float | None = None, laps: int = 1, plane: str = "xy",
+                 jerk: float | None = None, angular_jerk: float | None = None,
+                 peak_acceleration: float | None = None) -> None:
         if shape not in SHAPES:
             raise TrajectoryError("shape", f"expected one of {', '.join(SHAPES)}, got {shape!r}")
         if profile not in PROFILES:
@@ -189,6 +239,7 @@ class PoseTrajectory:
         self.profile = profile
         self.speed = _positive(speed, "speed")
         self.acceleration = _positive(acceleration, "acceleration")
+        self.jerk = _positive(jerk, "jerk") if profile == "s-curve" else math.inf
         self._R0 = R0
         self._p0 = p0
         inf = math.inf
@@ -200,16 +251,20 @@ class PoseTrajectory:
             self._axis_angle = log_so3(R0.T @ R1)  # body-frame rotation vector
             length = float(np.linalg.norm(self._delta))
             angle = float(np.linalg.norm(self._axis_angle))
-            speeds, accels = [inf], [inf]
+            speeds, accels, jerks = [inf], [inf], [inf]
             if length > 0.0:
                 speeds.append(self.speed / length)
                 accels.append(self.acceleration / length)
+                jerks.append(self.jerk / length)
             if angle > 0.0:
                 speeds.append(_positive(angular_speed, "angular_speed") / angle)
                 accels.append(_positive(angular_acceleration, "angular_acceleration") / angle)
-            self.timing = TimingLaw.fit(profile, min(speeds), min(accels))
+                if profile == "s-curve":
+                    jerks.append(_positive(angular_jerk, "angular_jerk") / angle)
+            self.timing = TimingLaw.fit(profile, min(speeds), min(accels), min(jerks))
             self.end_rotation = R0 @ exp_so3(self._axis_angle)
             self.end_translation = p0 + self._delta
+            self._scale_to(peak_acceleration)
             return
         self.radius = _positive(radius, "radius")
         if isinstance(laps, bool) or not isinstance(laps, int | np.integer) or laps < 1:
@@ -222,9 +277,42 @@ class PoseTrajectory:
         self._phi_total = 2.0 * math.pi * int(laps)
         # the largest |dp/dphi|: r on the circle, r sqrt(2) on the lemniscate (at phi = 0)
         peak = self.radius * (1.0 if shape == "circle" else math.sqrt(2.0)) * self._phi_total
-        self.timing = TimingLaw.fit(profile, self.speed / peak, self.acceleration / peak)
+        self.timing = TimingLaw.fit(profile, self.speed / peak, self.acceleration / peak,
+                                    self.jerk / peak)
         self.end_rotation = R0.copy()
         self.end_translation = p0.copy()
+        self._scale_to(peak_acceleration)
+
+    def _scale_to(self, peak_acceleration: float | None) -> None:
+        """Scale the timing in time so that the largest ``|d2p/dt2|`` is
+        ``peak_acceleration`` (None: leave it)."""
+        if peak_acceleration is None:
+            return
+        target = _positive(peak_acceleration, "peak_acceleration")
+        if self.duration <= 0.0:
+            return  # no motion: nothing to scale
+        reached = self.peak_acceleration()
+        if reached <= 0.0:
+            raise TrajectoryError("peak_acceleration", "the path has no translation to "
+                                  "accelerate (a pure rotation)")
+        self.timing = self.timing.stretched(math.sqrt(reached / target))
+
+    def peak_acceleration(self) -> float:
+        """The largest ``|d2p/dt2|`` of the platform origin [m/s^2] (sampled at
+        :data:`PEAK_SAMPLES` instants over the motion and on both sides of the timing
+        law's corners)."""
+        corners = self.timing.corners()
+        grid = np.linspace(0.0, self.duration, PEAK_SAMPLES)
+        times = np.concatenate([grid, corners * (1 - 1e-12), corners * (1 + 1e-12)])
+        norms = np.linalg.norm(self.at(times).acceleration, axis=1)
+        k = int(np.argmax(norms))
+        if k < PEAK_SAMPLES:  # a smooth maximum: refined around its sample
+            step = grid[1] - grid[0]
+            fine = np.linspace(max(grid[k] - step, 0.0), min(grid[k] + step, self.duration),
+                               PEAK_SAMPLES)
+            return max(float(norms[k]), float(np.max(np.linalg.norm(
+                self.at(fine).acceleration, axis=1))))
+        return float(norms[k])
 
     @property
     def duration(self) -> float:

@@ -15,7 +15,10 @@ hit an end stop) or the state is not finite.
 The controller sees the encoders: true lengths plus the joint offsets, quantised to the
 encoder resolution. The plant gives each trial's result row its largest drive force, the
 time any drive spent at its force limit and the drive tracking error (velocity setpoint
-minus realised leg velocity), and its recorded series the drives' forces.
+minus realised leg velocity), and its recorded series the drives' forces. A scenario with
+a ``[payload]`` also gets each leg's time at its force limit (s and fraction of the time
+run) and the fraction of the time run that any leg spent there (:data:`SATURATION_COLUMNS`;
+the rows of the other scenarios are unchanged).
 """
 
 from __future__ import annotations
@@ -36,6 +39,8 @@ log = logging.getLogger(__name__)
 
 #: A leg beyond its stroke by more than this has hit its end stop [m].
 END_STOP = 1e-4
+#: The saturation columns of the rows of a scenario with a ``[payload]``.
+SATURATION_COLUMNS = ("saturation_legs_s", "saturation_legs_fraction", "saturation_fraction")
 
 
 class DynamicPlant:
@@ -59,6 +64,10 @@ class DynamicPlant:
         geometries = [s.world.geometry for s in group]
         self.stroke, self.max_speed = geometries[0].stroke, geometries[0].max_speed
         self.robots = DynamicRobots(geometries, R, t, base_points, platform_points)
+        #: Whether the rows get :data:`SATURATION_COLUMNS` (a scenario with a payload).
+        self.per_leg = getattr(sc, "payload", None) is not None
+        #: (N,) periods each trial has run.
+        self.periods = np.zeros(len(group), dtype=int)
 
     def use_actuation(self, actuation: Actuation, label: str) -> None:
         """Drive the legs in the mode of ``actuation``: force (torque) mode for leg
@@ -90,6 +99,7 @@ class DynamicPlant:
         else:
             setpoints = np.where(np.isfinite(velocities), velocities, 0.0)
         diverged = robots.advance(run, setpoints, self.h, self.steps)
+        self.periods[run] += 1
         q = robots.period_lengths[run]
         lo, hi = self.stroke
         out = ~np.all((q > lo - END_STOP) & (q < hi + END_STOP), axis=1) & ~diverged
@@ -118,7 +128,22 @@ class DynamicPlant:
             "drive_tracking_rms_mm_s": (float(np.sqrt(r.track_sq[row] / count) * 1e3)
                                         if count else None),
             "drive_tracking_max_mm_s": float(r.track_max[row] * 1e3) if count else None,
+            **(self._saturation(row) if self.per_leg else {}),
         }
+
+    def _saturation(self, row: int) -> dict[str, Any]:
+        """:data:`SATURATION_COLUMNS` of one trial: each leg's time at its force limit [s]
+        and its fraction of the time run, and the fraction any leg spent there."""
+        legs = self.robots.saturated_legs[row]
+        run = self.periods[row] * self.dt
+        share = (lambda x: float(x / run) if run > 0 else None)  # noqa: E731
+        return {"saturation_legs_s": [float(x) for x in legs],
+                "saturation_legs_fraction": [share(x) for x in legs],
+                "saturation_fraction": share(self.robots.saturated_time[row])}
+
+    def saturated_time(self, rows: np.ndarray) -> np.ndarray:
+        """The time (n,) [s] any drive of ``rows`` has spent at its force limit so far."""
+        return self.robots.saturated_time[rows].copy()
 
     def drive_forces(self, rows: np.ndarray) -> np.ndarray:
         """The drives' forces (n, 6) [N] of ``rows`` at the end of the last period."""

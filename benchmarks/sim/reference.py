@@ -28,7 +28,11 @@ def trajectory(task: SimTask, start_rotation: np.ndarray, start_translation: np.
         goal_rotation=goal_rotation, goal_translation=goal_translation,
         angular_speed=float(np.deg2rad(task.angular_speed_deg_s)),
         angular_acceleration=float(np.deg2rad(task.angular_acceleration_deg_s2)),
-        radius=1e-3 * task.radius_mm, laps=task.laps, plane=task.plane)
+        radius=1e-3 * task.radius_mm, laps=task.laps, plane=task.plane,
+        jerk=1e-3 * task.jerk_mm_s3,
+        angular_jerk=float(np.deg2rad(task.angular_jerk_deg_s3)),
+        peak_acceleration=(1e-3 * task.peak_acceleration_mm_s2
+                           if task.peak_acceleration_mm_s2 > 0 else None))
 
 
 def trajectory_end(task: SimTask, start_rotation: np.ndarray,

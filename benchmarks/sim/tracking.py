@@ -8,7 +8,12 @@ In the dynamic world it also gives the RMS drive force of the trial
 first period to the last (the values the trial's recorded series ``leg_forces`` holds),
 ``sqrt(mean over periods and legs of f^2)``; the peak force and the time at a force
 limit come from the plant, over every physics step
-(:meth:`benchmarks.sim.dynamic_plant.DynamicPlant.row_figures`)."""
+(:meth:`benchmarks.sim.dynamic_plant.DynamicPlant.row_figures`).
+
+With a ``[payload]`` (a scenario about the drives' limits) it also gives the tracking error
+while saturated: the position error at the end of every control period in which a drive
+was at its force limit (``saturated_periods``, ``tracking_saturated_rms_mm``,
+``tracking_saturated_max_mm``; None without such a period)."""
 
 from __future__ import annotations
 
@@ -51,11 +56,20 @@ class Tracker:
         self.drive_forces: Callable[[np.ndarray], np.ndarray] | None = None
         self.sum_f2 = np.zeros(n)
         self.count_f = np.zeros(n, dtype=int)
+        #: The plant's time at a force limit (n,) [s] of some rows (a payload scenario).
+        self.saturation: Callable[[np.ndarray], np.ndarray] | None = None
+        self.per_leg = getattr(sc, "payload", None) is not None
+        self.sat_seen = np.zeros(n)
+        self.sat_count = np.zeros(n, dtype=int)
+        self.sat_dp2 = np.zeros(n)
+        self.sat_max = np.zeros(n)
 
     def follow(self, plant: Any) -> None:
         """Sample the drive forces of ``plant`` at every period (a plant without
         ``drive_forces``, the kinematic world's, gives none)."""
         self.drive_forces = getattr(plant, "drive_forces", None)
+        if self.per_leg:
+            self.saturation = getattr(plant, "saturated_time", None)
 
     def add(self, step: int, idx: np.ndarray, dp: np.ndarray, da: np.ndarray) -> None:
         """One period of the rows ``idx``: position errors ``dp`` [m], orientation errors
@@ -73,6 +87,14 @@ class Tracker:
             f = np.asarray(self.drive_forces(idx), dtype=float)
             self.sum_f2[idx] += np.sum(f**2, axis=1)
             self.count_f[idx] += f.shape[1]
+        if self.saturation is not None:
+            seen = self.saturation(idx)
+            hit = seen > self.sat_seen[idx]
+            self.sat_seen[idx] = seen
+            rows = idx[hit]
+            self.sat_count[rows] += 1
+            self.sat_dp2[rows] += dp[hit] ** 2
+            self.sat_max[rows] = np.maximum(self.sat_max[rows], dp[hit])
 
     def row(self, m: int) -> dict[str, Any]:
         """The metrics of row ``m`` for its result row."""
@@ -85,8 +107,16 @@ class Tracker:
             settle = max(0.0, (last + 1) * self.dt - end) if last >= 0 else 0.0
         forces = ({"rms_leg_force_n": float(np.sqrt(self.sum_f2[m] / self.count_f[m]))}
                   if self.count_f[m] else {})
+        saturated: dict[str, Any] = {}
+        if self.saturation is not None:
+            k = int(self.sat_count[m])
+            saturated = {"saturated_periods": k,
+                         "tracking_saturated_rms_mm": (float(np.sqrt(self.sat_dp2[m] / k) * 1e3)
+                                                       if k else None),
+                         "tracking_saturated_max_mm": float(self.sat_max[m] * 1e3) if k
+                         else None}
         return {
-            **forces,
+            **forces, **saturated,
             "trajectory_duration_s": end,
             "tracking_rms_position_mm": float(np.sqrt(self.sum_dp2[m] / c) * 1e3),
             "tracking_max_position_mm": float(self.max_dp[m] * 1e3),

@@ -13,6 +13,7 @@ import numpy as np
 
 from benchmarks.sim.inputs import SimCalibrationError, SimScenario
 from hexapod import HexapodGeometry, Transform, forward_kinematics_batch
+from hexapod.dynamics.payload import Payload, model_payload, with_payload
 from hexapod.geometry import preset as geometry_preset
 from hexapod.kinematics import inverse_kinematics
 from hexapod.se3 import exp_so3
@@ -165,11 +166,16 @@ def make_trials(sc: SimScenario, trials: list[int], nominal: HexapodGeometry, ca
             max_angle=np.deg2rad(task.max_angle_deg), margin=1e-3 * task.margin_mm)
         poses = dict(zip(ok, many, strict=True))
     base_points = camera.camera_from_base.apply(nominal.base_points)
-    start_lengths = _start_lengths(drawn, poses)
     model = nominal  # the controllers' model: [robot] model's inertia and drives, if given
     model_data = getattr(sc, "model_data", None)  # a study's [robot] model, if any
     if model_data is not None:
         model = nominal.replace(inertia=model_data.inertia, drives=model_data.drives)
+    payload = sc.payload.body(sc.source) if sc.payload is not None else None
+    if payload is not None and not payload.empty:  # (no payload: not a bit changes)
+        drawn = _loaded(drawn, payload)
+        model = model.replace(inertia=with_payload(
+            model.inertia, model_payload(payload, ce.payload_mass_percent)))
+    start_lengths = _start_lengths(drawn, poses)
     out: list[TrialSetup | Exception] = []
     for k, trial in enumerate(trials):
         d = drawn[k]
@@ -200,6 +206,23 @@ def make_trials(sc: SimScenario, trials: list[int], nominal: HexapodGeometry, ca
                                   R_s, t_s, R_g, t_g, q_s, shared, calibration))
         except Exception as exc:  # that trial's failure
             out.append(exc)
+    return out
+
+
+def _loaded(drawn: list[Any], payload: Payload) -> list[Any]:
+    """The drawn worlds with ``payload`` fixed to their true platforms (a robot shared by
+    several worlds stays shared: loaded once)."""
+    loaded: dict[int, HexapodGeometry] = {}
+    out: list[Any] = []
+    for d in drawn:
+        if isinstance(d, Exception):
+            out.append(d)
+            continue
+        rng, world, ce, shared = d
+        g = world.geometry
+        if id(g) not in loaded:
+            loaded[id(g)] = g.replace(inertia=with_payload(g.inertia, payload))
+        out.append((rng, replace(world, geometry=loaded[id(g)]), ce, shared))
     return out
 
 

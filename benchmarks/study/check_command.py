@@ -418,6 +418,7 @@ def cmd_check(args: argparse.Namespace) -> int:
     """
     import sys
 
+    from benchmarks.study.payload_check import describe_payload
     from benchmarks.study.preflight import preflight, refusal
     from benchmarks.study.trajectory_check import describe_trajectory
 
@@ -434,6 +435,7 @@ def cmd_check(args: argparse.Namespace) -> int:
         check = pre.checks[0]
         setup, report = check.setup, check.report
         extra = describe_trajectory(check.trajectory, check.scenario)
+        extra += describe_payload(check.payload, check.scenario)
         refused = refusal(check)
     else:
         setup = load_setup(args.file)

@@ -172,6 +172,10 @@ def settings(sc: Any) -> dict[str, str]:
                  else GOAL_TEXT[sc.task.goal]),
         "trials": f"{sc.trials} per sweep point and controller, seed {sc.seed}",
     }
+    if getattr(sc, "payload", None) is not None:
+        p = sc.payload
+        out["payload"] = (f"{p.mass_kg:g} kg, centre of mass {list(p.com_mm)} mm (platform "
+                          f"frame), inertia {list(p.inertia_kg_m2)} kg m^2")
     for key, values in sc.sweep_axes.items():
         out[f"swept {key}"] = ", ".join(f"{v:g}" if isinstance(v, float) else str(v)
                                         for v in values)

@@ -27,6 +27,9 @@ _NON_SWEEP = {
     # the dynamic world's drive figures (benchmarks.sim.dynamic_plant)
     "max_leg_force_n", "saturation_time_s", "drive_tracking_rms_mm_s",
     "drive_tracking_max_mm_s",
+    # with a [payload]: the saturation per leg and the tracking while saturated
+    "saturation_legs_s", "saturation_legs_fraction", "saturation_fraction",
+    "saturated_periods", "tracking_saturated_rms_mm", "tracking_saturated_max_mm",
 }
 
 

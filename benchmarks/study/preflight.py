@@ -17,7 +17,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from typing import Any
 
-from benchmarks.exceptions import SetupError
+from benchmarks.exceptions import ScenarioError, SetupError
 from benchmarks.study.setup_check import Problem
 
 
@@ -30,6 +30,8 @@ class StudyCheck:
         setup: What ``check`` describes (:class:`benchmarks.study.check_command.Setup`).
         report: The setup's measurements (:class:`~benchmarks.study.setup_check.SetupReport`).
         trajectory: A trajectory task's references, per sweep point.
+        payload: A payload's leg forces, per sweep point
+            (:mod:`benchmarks.study.payload_check`).
         problems: Every problem (the setup's, then the trajectory's).
     """
 
@@ -37,6 +39,7 @@ class StudyCheck:
     setup: Any = None
     report: Any = None
     trajectory: list[Any] = field(default_factory=list)
+    payload: list[Any] = field(default_factory=list)
     problems: list[Problem] = field(default_factory=list)
 
     @property
@@ -84,6 +87,10 @@ def preflight(scenarios: list[Any], allow_foreign_calibration: bool = False,
     for sc in scenarios:
         if sc.world == "dynamic":  # (--world dynamic may make a kinematic file dynamic)
             check_physics_dt(sc.dt, sc.physics_dt, sc.source)
+        elif getattr(sc, "payload", None) is not None:
+            raise ScenarioError(sc.source, "a payload has weight and inertia only in the "
+                                "dynamic world: set [robot] world = \"dynamic\" (or run "
+                                "with --world dynamic)", key="payload")
         resolved, notes = check_controllers(sc)
         warnings += notes
         warnings += check_scenario_calibration(resolved, allow_foreign_calibration)
@@ -98,6 +105,7 @@ def measure_study(check: StudyCheck) -> None:
     """Measure one resolved scenario: its setup and, for a trajectory task, its plan's
     references (fills ``check``)."""
     from benchmarks.study.check_command import examine, scenario_setup
+    from benchmarks.study.payload_check import payload_facts
     from benchmarks.study.trajectory_check import trajectory_facts
 
     check.setup = scenario_setup(check.scenario)
@@ -107,6 +115,9 @@ def measure_study(check: StudyCheck) -> None:
         check.trajectory = trajectory_facts(check.scenario)
         for facts in check.trajectory:
             check.problems += facts.problems
+        check.payload = payload_facts(check.scenario)
+        for pf in check.payload:
+            check.problems += pf.problems
 
 
 def refusal(check: StudyCheck) -> SetupError | None:

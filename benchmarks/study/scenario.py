@@ -44,6 +44,7 @@ from benchmarks.study.scenario_model import (
     TaskConfig,
     check_range,
 )
+from benchmarks.study.scenario_payload import PAYLOAD_KEYS, PayloadConfig, check_payload
 from hexapod.config import load_toml, suggest
 from hexapod.exceptions import ConfigFileError
 from hexapod.trajectory import PLANES, PROFILES, SHAPES
@@ -57,7 +58,7 @@ __all__ = [
 
 _TOP = ("name", "description", "seed", "trials", "controllers", "controller_options", "robot",
         "camera", "sensor", "noise", "calibration_error", "calibration", "task", "reference",
-        "clock", "drives")
+        "clock", "drives", "payload")
 
 
 def _section(table: dict[str, Any], key: str, path: str) -> dict[str, Any]:
@@ -318,6 +319,11 @@ def parse_scenario(table: dict[str, Any], path: str = "<dict>") -> Scenario:
                              CLOCK_KEYS, None, sweep)
     drives = _parse_dataclass(DrivesConfig, _section(table, "drives", path), path, "drives",
                               DRIVES_KEYS, None, sweep)
+    payload = None
+    if "payload" in table:
+        payload = _parse_dataclass(PayloadConfig, _section(table, "payload", path), path,
+                                   "payload", PAYLOAD_KEYS, None, sweep)
+        check_payload(payload, sweep, path)
     if sensor != "image" and max(sweep.get("clock.exposure_ms", [clock.exposure_ms])) > 0:
         raise ScenarioError(path, "motion blur needs rendered images ([sensor] kind = "
                             "\"image\")", key="clock.exposure_ms")
@@ -339,7 +345,7 @@ def parse_scenario(table: dict[str, Any], path: str = "<dict>") -> Scenario:
         world=world, physics_dt=physics_dt,
         teach_frames=teach_frames, image=image,
         noise=noise, calibration_error=cal_err, calibration=cal, task=task, clock=clock,
-        drives=drives,
+        drives=drives, payload=payload,
         reference=reference, sweep_axes=sweep, source=path, geometry_data=geometry_data,
         camera_data=camera_data, calibration_points=points, controller_options=dict(defaults),
         robot_model=robot_model, model_data=model_data,

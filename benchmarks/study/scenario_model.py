@@ -9,6 +9,9 @@ from pathlib import Path
 from typing import Any
 
 from benchmarks.exceptions import ScenarioError
+from benchmarks.study.scenario_payload import PayloadConfig
+from benchmarks.study.scenario_ranges import RANGES as RANGES
+from benchmarks.study.scenario_ranges import check_range
 from hexapod.exceptions import ConfigFileError
 from vision.calibration import MIN_SINGULAR_RATIO, WARN_SINGULAR_RATIO
 
@@ -21,7 +24,7 @@ CALIBRATION_ERROR_KEYS = ("scale", "base_points_mm", "platform_points_mm", "join
                           "inertia_percent", "model_mass_error_percent",
                           "model_inertia_error_percent", "model_friction_error_percent",
                           "model_rotor_inertia_error_percent",
-                          "model_drive_bandwidth_error_percent")
+                          "model_drive_bandwidth_error_percent", "payload_mass_percent")
 #: The controllers' model's systematic errors [%] (not random, not multiplied by ``scale``):
 #: the true robot's value is the robot file's divided by ``1 + e / 100``.
 MODEL_ERROR_KEYS = ("model_mass_error_percent", "model_inertia_error_percent",
@@ -31,92 +34,22 @@ MODEL_ERROR_KEYS = ("model_mass_error_percent", "model_inertia_error_percent",
 WORLDS = ("kinematic", "dynamic")
 
 
-#: Allowed range of every numeric key: ``(low, high, low_inclusive, high_inclusive)``.
-#: A value that parses but cannot describe a study (a negative seed, a 1e308 mm error,
-#: a 1e9 deg noise) is refused when the file is loaded, naming the key and the range.
-RANGES: dict[str, tuple[float, float, bool, bool]] = {
-    "seed": (0, 2**63 - 1, True, True),
-    "trials": (1, 10_000_000, True, True),
-    "robot.dt": (0.0, 1.0, False, True),
-    "robot.physics_dt": (1e-6, 0.1, True, True),
-    "sensor.teach_frames": (1, 1000, True, True),
-    "sensor.blur_px": (0.0, 20.0, True, True),
-    "sensor.noise_std": (0.0, 255.0, True, True),
-    "noise.amplitude_deg": (0.0, 90.0, True, True),
-    "noise.pixel_sigma_px": (0.0, 100.0, True, True),
-    "noise.points_per_edge": (2, 10_000, True, True),
-    "noise.outlier_fraction": (0.0, 1.0, True, False),
-    "noise.dropout_probability": (0.0, 1.0, True, True),
-    "calibration_error.scale": (0.0, 100.0, True, True),
-    "calibration_error.base_points_mm": (0.0, 100.0, True, True),
-    "calibration_error.platform_points_mm": (0.0, 100.0, True, True),
-    "calibration_error.joint_offsets_mm": (0.0, 100.0, True, True),
-    "calibration_error.camera_pose_mm": (0.0, 1000.0, True, True),
-    "calibration_error.camera_pose_deg": (0.0, 45.0, True, True),
-    "calibration_error.intrinsics_percent": (0.0, 50.0, True, True),
-    "calibration_error.leg_radius_percent": (0.0, 50.0, True, True),
-    "calibration_error.distortion_percent": (0.0, 100.0, True, True),
-    "calibration_error.mass_percent": (0.0, 50.0, True, True),
-    "calibration_error.inertia_percent": (0.0, 50.0, True, True),
-    "calibration_error.model_mass_error_percent": (-50.0, 100.0, True, True),
-    "calibration_error.model_inertia_error_percent": (-50.0, 100.0, True, True),
-    "calibration_error.model_friction_error_percent": (-50.0, 100.0, True, True),
-    "calibration_error.model_rotor_inertia_error_percent": (-50.0, 100.0, True, True),
-    "calibration_error.model_drive_bandwidth_error_percent": (-50.0, 100.0, True, True),
-    "calibration.noise_deg": (0.0, 90.0, True, True),
-    "calibration.warn_singular_ratio": (0.0, 1.0, True, False),
-    "calibration.min_singular_ratio": (0.0, 1.0, True, False),
-    "task.max_steps": (1, 10_000_000, True, True),
-    "task.position_tolerance_mm": (0.0, 1000.0, False, True),
-    "task.orientation_tolerance_deg": (0.0, 180.0, False, True),
-    "task.margin_mm": (0.0, 1000.0, True, True),
-    "task.max_translation_mm": (0.0, 10_000.0, True, True),
-    "task.max_angle_deg": (0.0, 90.0, True, True),
-    "task.settle_steps": (1, 10_000_000, True, True),
-    "task.speed_mm_s": (0.0, 10_000.0, False, True),
-    "task.acceleration_mm_s2": (0.0, 1_000_000.0, False, True),
-    "task.angular_speed_deg_s": (0.0, 10_000.0, False, True),
-    "task.angular_acceleration_deg_s2": (0.0, 1_000_000.0, False, True),
-    "task.radius_mm": (0.0, 1000.0, False, True),
-    "task.laps": (1, 1000, True, True),
-    "clock.frame_rate_hz": (0.0, 100_000.0, True, True),
-    "clock.latency_ms": (0.0, 10_000.0, True, True),
-    "clock.latency_frames": (0.0, 1000.0, True, True),
-    "clock.jitter_ms": (0.0, 1000.0, True, True),
-    "clock.exposure_ms": (0.0, 1000.0, True, True),
-    "clock.exposure_samples": (1, 256, True, True),
-    "drives.velocity_bandwidth_hz": (0.0, 100_000.0, True, True),
-}
 #: Keys of [clock] (the camera's clock), every one sweepable.
 CLOCK_KEYS = ("frame_rate_hz", "latency_ms", "latency_frames", "jitter_ms", "exposure_ms")
 #: Keys of [drives] (the robot's drives, world and controllers alike), every one sweepable.
 DRIVES_KEYS = ("velocity_bandwidth_hz",)
 #: Keys of [task] that may be swept (trajectory tasks).
-TASK_KEYS = ("speed_mm_s", "acceleration_mm_s2", "goal")
+TASK_KEYS = ("speed_mm_s", "acceleration_mm_s2", "jerk_mm_s3", "peak_acceleration_mm_s2",
+             "goal")
 #: The values of ``[task] goal`` (:data:`benchmarks.sim.goal.GOAL_SETTINGS`, which the
 #: simulator defines; repeated here so that reading a scenario does not import it, and
 #: checked equal by the tests).
 GOAL_SETTINGS = ("mixed", "taught", "cartesian")
 #: Calibration errors that are not standard deviations: not multiplied by ``scale``.
-UNSCALED = ("scale", "distortion_percent", *MODEL_ERROR_KEYS)
+UNSCALED = ("scale", "distortion_percent", *MODEL_ERROR_KEYS, "payload_mass_percent")
 #: The calibration-error keys in millimetres or degrees whose standard deviation, times
 #: ``scale``, must stay within the range of the key itself (the effective error).
 SCALED_ERROR_KEYS = tuple(k for k in CALIBRATION_ERROR_KEYS if k not in UNSCALED)
-
-
-def check_range(value: Any, key: str, path: str) -> None:
-    """Refuse a number outside :data:`RANGES` (``key`` is the dotted key).
-
-    Raises:
-        ScenarioError: Naming the file, the key, the value and the allowed range.
-    """
-    if key not in RANGES or isinstance(value, bool) or not isinstance(value, int | float):
-        return
-    lo, hi, lo_in, hi_in = RANGES[key]
-    ok = (value >= lo if lo_in else value > lo) and (value <= hi if hi_in else value < hi)
-    if not ok:
-        interval = f"{'[' if lo_in else '('}{lo:g}, {hi:g}{']' if hi_in else ')'}"
-        raise ScenarioError(path, f"{value!r} is out of the allowed range {interval}", key=key)
 
 
 @dataclass(frozen=True)
@@ -195,6 +128,9 @@ class CalibrationErrorConfig:
         model_drive_bandwidth_error_percent: Likewise for the bandwidth of the drives'
             velocity loops [%] (what the drive-aware predictive controllers and the
             ``leg_rate_feedforward`` option model).
+        payload_mass_percent: The controllers' model of the ``[payload]``: its mass
+            (and inertia) the true one's times ``1 + e / 100`` [%] (-100: unknown to
+            them). Not random, not multiplied by ``scale``; the true world is unchanged.
         scale: Multiplies every standard deviation above (sweep it to grow all
             errors together).
     """
@@ -215,6 +151,7 @@ class CalibrationErrorConfig:
     model_friction_error_percent: float = 0.0
     model_rotor_inertia_error_percent: float = 0.0
     model_drive_bandwidth_error_percent: float = 0.0
+    payload_mass_percent: float = 0.0
 
     def at_scale(self) -> CalibrationErrorConfig:
         """The errors at the scale: every key but :data:`UNSCALED` times ``scale``."""
@@ -223,9 +160,10 @@ class CalibrationErrorConfig:
 
     def nominal_world(self) -> bool:
         """Whether no error moves the true world away from the nominal one (every trial
-        then shares it: ``distortion_percent`` changes only the camera model)."""
+        then shares it: ``distortion_percent`` and ``payload_mass_percent`` change only
+        the controllers' models)."""
         return all(getattr(self, k) == 0.0 for k in self.__dataclass_fields__
-                   if k not in ("scale", "distortion_percent"))
+                   if k not in ("scale", "distortion_percent", "payload_mass_percent"))
 
 
 @dataclass(frozen=True)
@@ -337,11 +275,16 @@ class TaskConfig:
         shape: Trajectory task: ``"line"`` (start to goal), ``"circle"`` or
             ``"lemniscate"`` (through the start, ``laps`` times); see
             :mod:`hexapod.trajectory`.
-        profile: Trajectory timing law: ``"quintic"`` or ``"trapezoidal"``.
+        profile: Trajectory timing law: ``"quintic"``, ``"trapezoidal"`` or ``"s-curve"``
+            (jerk-limited, :mod:`hexapod.scurve`).
         speed_mm_s: Largest platform speed along the trajectory [mm/s].
         acceleration_mm_s2: Largest tangential acceleration [mm/s^2].
         angular_speed_deg_s: Largest angular speed of a line [deg/s].
         angular_acceleration_deg_s2: Largest angular acceleration of a line [deg/s^2].
+        jerk_mm_s3: Largest tangential jerk [mm/s^3] (the ``"s-curve"`` profile).
+        angular_jerk_deg_s3: Largest angular jerk of a line [deg/s^3] (``"s-curve"``).
+        peak_acceleration_mm_s2: The motion scaled in time until its largest
+            acceleration ``|d2p/dt2|`` is this [mm/s^2] (0: as the limits time it).
         radius_mm: Radius of the circle, half-width of the lemniscate [mm].
         laps: Turns of a closed curve.
         plane: Plane of a closed curve in the base frame: ``"xy"``, ``"xz"``, ``"yz"``.
@@ -371,6 +314,9 @@ class TaskConfig:
     acceleration_mm_s2: float = 500.0
     angular_speed_deg_s: float = 10.0
     angular_acceleration_deg_s2: float = 50.0
+    jerk_mm_s3: float = 10_000.0
+    angular_jerk_deg_s3: float = 1000.0
+    peak_acceleration_mm_s2: float = 0.0
     radius_mm: float = 20.0
     laps: int = 1
     plane: str = "xy"
@@ -406,6 +352,7 @@ class Scenario:
         task: Task settings.
         clock: The camera's clock (frame rate, latency, jitter).
         drives: Changes to the robot's drives (:class:`DrivesConfig`).
+        payload: A payload fixed to the true platform (``[payload]``; None: none).
         reference: Figures of the reproduced seed (free-form table for the report).
         sweep: The swept keys of this point, e.g. ``{"noise.amplitude_deg": 0.05}``.
         source: File it was read from.
@@ -446,6 +393,7 @@ class Scenario:
     task: TaskConfig = TaskConfig()
     clock: ClockConfig = ClockConfig()
     drives: DrivesConfig = DrivesConfig()
+    payload: PayloadConfig | None = None
     reference: dict[str, Any] = field(default_factory=dict)
     sweep: dict[str, Any] = field(default_factory=dict)
     sweep_axes: dict[str, list[Any]] = field(default_factory=dict)

@@ -239,6 +239,9 @@ def tracking_section(out_dir: Path, scenario: str, rows: list[dict[str, Any]],
     lines += ["| " + " | ".join(header) + " |", "|" + "---|" * len(header)]
     lines += ["| " + " | ".join(r) + " |" for r in table]
     lines.append("")
+    from benchmarks.study.saturation_report import saturation_section
+
+    lines += saturation_section(rows)
     for p in points:
         img = tracking_plot(out_dir, scenario, p)
         if img:

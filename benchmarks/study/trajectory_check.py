@@ -37,6 +37,9 @@ class TrajectoryFacts:
             (a ``margin_mm`` at least this large keeps every sampled path inside).
         hits: Sampled starts whose reference takes a leg out of its stroke.
         worst: ``(leg, length_mm, limit_mm)`` of the deepest such excursion, or None.
+        leg_speed_mm_s: Largest leg speed along the references [mm/s] (the reference's
+            twist through the true robot's inverse Jacobian).
+        max_speed_mm_s: The robot's leg speed limit [mm/s].
     """
 
     sweep: dict[str, Any]
@@ -46,6 +49,8 @@ class TrajectoryFacts:
     travel_mm: float
     hits: int
     worst: tuple[int, float, float] | None = None
+    leg_speed_mm_s: float = 0.0
+    max_speed_mm_s: float = float("inf")
     problems: list[Problem] = field(default_factory=list)
 
     @property
@@ -66,7 +71,9 @@ def _point(sc: Any, samples: int) -> TrajectoryFacts | None:
                                      camera) if not isinstance(s, Exception)]
     if not setups:
         return None
-    durations, travel, hits = [], 0.0, 0
+    from hexapod.kinematics import inverse_jacobian, leg_directions
+
+    durations, travel, hits, speed = [], 0.0, 0, 0.0
     worst: tuple[float, int, float, float] | None = None  # (depth, leg, q, limit)
     for s in setups:
         ref = trial_reference(sc, s)
@@ -77,6 +84,11 @@ def _point(sc: Any, samples: int) -> TrajectoryFacts | None:
         g = s.world.geometry
         q = inverse_kinematics(g, sample.rotation, sample.translation)  # (T, 6) [m]
         travel = max(travel, float(np.max(np.abs(q - q[0]))))
+        w = sample.angular_velocity  # the twist at the base origin: v - w x t
+        tw = np.concatenate([sample.velocity - np.cross(w, sample.translation), w], axis=1)
+        J = inverse_jacobian(g.base_points, leg_directions(g, sample.rotation,
+                                                            sample.translation))
+        speed = max(speed, float(np.max(np.abs(np.einsum("tij,tj->ti", J, tw)))))
         below, above = g.q_min - q, q - g.q_max
         depth = np.maximum(below, above)
         if np.any(depth >= 0):
@@ -89,7 +101,8 @@ def _point(sc: Any, samples: int) -> TrajectoryFacts | None:
     return TrajectoryFacts(
         dict(sc.sweep), len(setups), (min(durations), max(durations)),
         sc.task.max_steps * sc.dt, travel * 1e3, hits,
-        None if worst is None else (worst[1], worst[2] * 1e3, worst[3] * 1e3))
+        None if worst is None else (worst[1], worst[2] * 1e3, worst[3] * 1e3),
+        speed * 1e3, setups[0].world.geometry.max_speed * 1e3)
 
 
 def trajectory_facts(sc: Any, samples: int = SAMPLED_STARTS) -> list[TrajectoryFacts]:
@@ -122,6 +135,13 @@ def trajectory_facts(sc: Any, samples: int = SAMPLED_STARTS) -> list[TrajectoryF
                     f"max_translation_mm) {where}")
             facts.problems.append(Problem(
                 "error" if facts.hits == facts.sampled else "warning", text))
+        if facts.leg_speed_mm_s > facts.max_speed_mm_s * (1 + 1e-9):
+            facts.problems.append(Problem("warning", (
+                f"the {task.shape} reference moves a leg at up to {facts.leg_speed_mm_s:.1f} "
+                f"mm/s, above the robot's leg speed limit {facts.max_speed_mm_s:g} mm/s (the "
+                "commands are clamped to it: no controller can follow the reference); slow "
+                "it down ([task] speed_mm_s, peak_acceleration_mm_s2, radius_mm) "
+                f"{where}")))
         hi = facts.duration_s[1]
         if hi > facts.run_time_s:
             facts.problems.append(Problem("warning", (

@@ -94,6 +94,8 @@ class DynamicRobots:
         self.forces = self.drives.integral.copy()
         #: (n,) time any drive of the row spent at its force limit [s].
         self.saturated_time = np.zeros(n)
+        #: (n, 6) time each drive spent at its force limit [s].
+        self.saturated_legs = np.zeros((n, 6))
         #: (n,) sum of the squared drive tracking errors [m^2/s^2] and their count.
         self.track_sq = np.zeros(n)
         self.track_count = np.zeros(n)
@@ -113,6 +115,7 @@ class DynamicRobots:
         self.drives.integral = column(self.table, "integral")
         self.forces = column(self.table, "motor")
         self.saturated_time = column(self.table, "saturated_time")
+        self.saturated_legs = column(self.table, "saturated_legs")
         self.track_sq = column(self.table, "track_sq")
         self.track_max = column(self.table, "track_max")
         self.force_max = column(self.table, "force_max")

@@ -35,7 +35,8 @@ LAYOUT = Layout([("R", 9), ("t", 3), ("twist", 6), ("integral", 6), ("setpoint",
                  ("A", 18), ("E", 18), ("p", mech.N_PARAMETERS), ("kp", 6), ("ki", 6),
                  ("limit", 6), ("rotor", 6), ("viscous", 6), ("coulomb", 6), ("h", 1),
                  ("force_mode", 1), ("motor", 6), ("saturated_time", 1), ("track_sq", 1),
-                 ("track_max", 1), ("force_max", 1), ("q", 6)], "dynamic robot row")
+                 ("track_max", 1), ("force_max", 1), ("q", 6), ("saturated_legs", 6)],
+                "dynamic robot row")
 #: Length of a row.
 WIDTH = LAYOUT.size
 
@@ -111,6 +112,7 @@ def _step_expression() -> tuple[ca.SX, ca.SX]:
     out[LAYOUT["integral"]] = new_integral
     out[LAYOUT["motor"]] = motor
     out[LAYOUT["saturated_time"]] = get("saturated_time") + h * any_sat
+    out[LAYOUT["saturated_legs"]] = get("saturated_legs") + h * saturated
     out[LAYOUT["track_sq"]] = get("track_sq") + ca.sumsqr(track)
     out[LAYOUT["track_max"]] = ca.fmax(get("track_max"), ca.mmax(track))
     out[LAYOUT["force_max"]] = ca.fmax(get("force_max"), ca.mmax(ca.fabs(motor)))
@@ -191,7 +193,7 @@ def new_table(robots: Any) -> np.ndarray:
     x[:, L["p"]] = robots.parameters
     for key, arr in (("kp", d.kp), ("ki", d.ki), ("limit", d.force_limit),
                      ("rotor", robots.rotor), ("viscous", d.viscous), ("coulomb", d.coulomb),
-                     ("motor", robots.forces)):
+                     ("motor", robots.forces), ("saturated_legs", robots.saturated_legs)):
         x[:, L[key]] = arr
     for key, arr in (("saturated_time", robots.saturated_time), ("track_sq", robots.track_sq),
                      ("track_max", robots.track_max), ("force_max", robots.force_max)):

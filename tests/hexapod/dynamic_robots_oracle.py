@@ -49,4 +49,5 @@ def step_reference(robots: DynamicRobots, rows: np.ndarray, setpoints: np.ndarra
         robots.track_count[rows] += 6
         robots.track_max[rows] = np.maximum(robots.track_max[rows], err.max(axis=1))
     robots.saturated_time[rows] += h * np.any(f.saturated, axis=1)
+    robots.saturated_legs[rows] += h * f.saturated
     robots.force_max[rows] = np.maximum(robots.force_max[rows], np.abs(f.motor).max(axis=1))

@@ -26,7 +26,8 @@ def _robots(n: int, mode: str = "velocity", seed: int = 3, **drive: float
 def _state(r: DynamicRobots) -> np.ndarray:
     return np.concatenate([r.R.reshape(r.n, 9), r.t, r.twist, r.drives.integral, r.forces,
                            r.saturated_time[:, None], r.track_sq[:, None],
-                           r.track_max[:, None], r.force_max[:, None]], axis=1)
+                           r.track_max[:, None], r.force_max[:, None], r.saturated_legs],
+                          axis=1)
 
 
 @pytest.mark.parametrize("mode", ["velocity", "force"])
@@ -48,6 +49,10 @@ def test_the_compiled_period_equals_the_numpy_steps(mode: str) -> None:
     scale = np.maximum(np.abs(sb).max(axis=0), 1e-6)
     np.testing.assert_array_less(np.abs(sa - sb) / scale, 1e-9)
     assert np.any(a.saturated_time > 0) and np.any(np.abs(a.twist) > 1e-3)
+    # a leg's time at its limit is at most the row's (any leg's), the largest equal to it
+    # when one leg saturates alone
+    assert np.all(a.saturated_legs <= a.saturated_time[:, None] + 1e-15)
+    assert np.any(a.saturated_legs > 0) and np.any(a.saturated_legs == 0)
 
 
 @pytest.mark.slow

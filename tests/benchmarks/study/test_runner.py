@@ -173,7 +173,10 @@ END_TO_END_STEPS = {"camera-latency": 30, "fisheye-close": 40, "quick-dynamic": 
                     "calibration-map": 30, "andreff2006-images-distorted": 40,
                     "camera-latency-p2p": 40,
                     "inertia-error": 40, "paccot2008-tracking": 40, "mpc-drives": 20,
-                    "mpc-drives-tracking": 20}
+                    "mpc-drives-tracking": 20,
+                    # (5: its 85 kg point sags onto an end stop within 0.4 s: the drives
+                    # cannot hold it, the failure the study measures)
+                    "payload-saturation": 5}
 
 
 @pytest.mark.slow

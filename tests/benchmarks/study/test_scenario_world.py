@@ -18,7 +18,8 @@ def test_the_kinematic_world_is_the_default_of_every_builtin_but_the_dynamic_one
     for name in builtin_scenarios():
         sc = load_scenario(name)
         dynamic = "dynamic" in name or name in ("inertia-error", "paccot2008-tracking",
-                                                "mpc-drives", "mpc-drives-tracking")
+                                                "mpc-drives", "mpc-drives-tracking",
+                                                "payload-saturation")
         assert sc.world == ("dynamic" if dynamic else "kinematic"), name
         assert sc.physics_dt == 0.001
 
