@@ -35,11 +35,14 @@ from scipy.linalg.lapack import dsyevd as _eigenvalues
 
 from controllers.base import (
     Command,
+    CommandBatch,
     Controller,
     ControllerContext,
     Goal,
     Observation,
+    ObservationBatch,
 )
+from controllers.ctc_rows import evaluate_rows, rank_condition
 from controllers.law_tools import goal_lengths
 from controllers.solvers import compiled_ctc
 from controllers.solvers.computed_torque import (
@@ -71,7 +74,7 @@ GRID_TIME_TOLERANCE = 1e-9
 FK_MAX_CALLS = 16
 #: Where the compiled step's blocks lie in its rows (:data:`compiled_ctc.INPUTS`,
 #: :data:`compiled_ctc.OUTPUTS`), looked up once.
-_DESIRED = compiled_ctc.INPUTS["desired"]
+_DESIRED, _POSE_IN = compiled_ctc.INPUTS["desired"], compiled_ctc.INPUTS["pose"]
 _POSE_OUT, _FACTOR, _FORCES = (compiled_ctc.OUTPUTS[k] for k in ("pose", "factor", "forces"))
 _RESIDUAL, _SOLVED = (compiled_ctc.OUTPUTS.index(k) for k in ("fk_residual", "solved"))
 
@@ -287,6 +290,83 @@ class ComputedTorqueController(Controller):
         self.numpy_steps += 1
         d = desired.copy()
         return self._numpy_step(q, qd, d[0:6], d[6:12], d[12:18])
+
+    def step_arrays(self, observations: ObservationBatch, out: CommandBatch) -> np.ndarray:
+        """The rows whose readings are finite through the compiled step in one C call
+        (:func:`~controllers.ctc_rows.evaluate_rows`); returns the other rows and those
+        whose result is not accepted (left to the trial's own step, which says why)."""
+        obs = observations
+        n = len(obs)
+        if obs.q_dot is None:
+            return np.arange(n)
+        t = np.asarray(obs.t, dtype=float)
+        q_all = np.asarray(obs.lengths, dtype=float)
+        qd_all = np.asarray(obs.q_dot, dtype=float)
+        finite = np.isfinite(t) & np.isfinite(q_all).all(axis=1) & np.isfinite(qd_all).all(
+            axis=1)
+        insts = self.trial_instances
+        trials = np.asarray(obs.trials, dtype=int).tolist()
+        rows: list[int] = []
+        for k in np.flatnonzero(finite).tolist():
+            inst = insts[trials[k]]
+            if isinstance(inst, ComputedTorqueController) and inst._prepare_row(
+                    float(t[k]), q_all[k], qd_all[k]):
+                rows.append(k)
+        slow = np.ones(n, dtype=bool)
+        if not rows:
+            return np.arange(n)
+        bound = self._bound
+        assert bound is not None
+        X = np.stack([insts[trials[k]]._bound.x for k in rows])
+        Y, converged = evaluate_rows(bound.function, X, _POSE_IN, _POSE_OUT, _RESIDUAL,
+                                     FK_TOLERANCE, FK_MAX_CALLS)
+        for j, k in enumerate(rows):
+            if converged[j] and insts[trials[k]]._finish_row(Y[j], q_all[k], out, k):
+                slow[k] = False
+        return np.flatnonzero(slow)
+
+    def _prepare_row(self, t: float, q: np.ndarray, qd: np.ndarray) -> bool:
+        """Write this period's readings, reference and pose guess into the input row
+        (False: the trial's own step decides, e.g. the nominal model fails)."""
+        if self._ctx is None or self._model is None or self._bound is None:
+            return False
+        row = self._bound.inputs
+        row["q"][:] = q
+        row["q_dot"][:] = qd
+        if self._start is None:  # the fixed goal's quintic starts here
+            T = QUINTIC_PEAK_SPEED * float(np.abs(self._q_star - q).max()) / \
+                self._ctx.max_speed if self.smooth_goal else 0.0
+            self._start = (t, T, q.tolist(), (self._q_star - q).tolist())
+        try:
+            self._desired_into(t, row["desired"])
+        except Exception:  # the trial's own step refuses with the reason
+            return False
+        if not self._guess_in_row:
+            pose = self._pose
+            R0, p0 = home_pose(self._ctx.geometry) if pose is None else pose
+            row["pose"][0:9] = R0.T.ravel()
+            row["pose"][9:12] = p0
+            self._guess_in_row = True
+        return True
+
+    def _finish_row(self, y: np.ndarray, q: np.ndarray, out: CommandBatch, k: int) -> bool:
+        """Take the compiled step's output row ``y`` as row ``k`` of ``out`` when it is
+        accepted (solved, finite, ``K`` of full rank); False to leave the row to the
+        trial's own step."""
+        if y[_SOLVED] != 1.0 or not math.isfinite(y.dot(y)):
+            return False
+        if rank_condition(y[_FACTOR], self.solver.threshold) is None:
+            return False
+        assert self._bound is not None
+        pose = y[_POSE_OUT].copy()
+        self._bound.x[_POSE_IN] = pose  # the next step's guess
+        self._pose_row, self._guess_in_row = pose, True
+        self.compiled_steps += 1
+        e = self._bound.x[_DESIRED][0:6] - q
+        assert out.forces is not None
+        out.forces[k] = y[_FORCES]
+        out.error_norm[k] = math.sqrt(e.dot(e))
+        return True
 
     def _compiled_step(self, q: np.ndarray, qd: np.ndarray, q_s: np.ndarray,
                        qd_s: np.ndarray, qdd_s: np.ndarray) -> Command | None:

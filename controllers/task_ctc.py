@@ -31,14 +31,23 @@ from typing import Any
 
 import numpy as np
 
-from controllers.base import Command, Controller, ControllerContext, Goal, Observation
+from controllers.base import (
+    Command,
+    CommandBatch,
+    Controller,
+    ControllerContext,
+    Goal,
+    Observation,
+    ObservationBatch,
+)
+from controllers.ctc_rows import evaluate_rows
 from controllers.exceptions import ContextError
 from controllers.solvers.computed_torque import (
     ComputedTorqueSolver,
     SecondOrderGains,
     task_in_model_twist,
 )
-from controllers.task_ctc_compiled import CompiledTaskStep
+from controllers.task_ctc_compiled import FK_MAX_CALLS, CompiledTaskStep
 from controllers.tasks.base import Task, TaskState
 from hexapod.actuation import Actuation
 from hexapod.dynamics import DynamicModel
@@ -269,6 +278,65 @@ class TaskComputedTorque(Controller):
             return self._command(t, m, qd)
         except Exception as exc:  # the nominal model failed here: refuse with its reason
             return self.refuse(f"nominal model failed: {exc}")
+
+    def step_arrays(self, observations: ObservationBatch, out: CommandBatch) -> np.ndarray:
+        """The rows of started trials with finite readings through the compiled step in
+        one C call (:func:`~controllers.ctc_rows.evaluate_rows`); returns the other rows
+        and those whose result is not accepted (left to the trial's own step, which
+        says why)."""
+        obs = observations
+        n = len(obs)
+        if obs.q_dot is None:
+            return np.arange(n)
+        t = np.asarray(obs.t, dtype=float)
+        q_all = np.asarray(obs.lengths, dtype=float)
+        qd_all = np.asarray(obs.q_dot, dtype=float)
+        finite = np.isfinite(t) & np.isfinite(q_all).all(axis=1) & np.isfinite(qd_all).all(
+            axis=1)
+        insts = self.trial_instances
+        trials = np.asarray(obs.trials, dtype=int).tolist()
+        rows: list[int] = []
+        steps: list[CompiledTaskStep] = []
+        used: list[np.ndarray | None] = []
+        for k in np.flatnonzero(finite).tolist():
+            inst = insts[trials[k]]
+            step = getattr(inst, "compiled", None)
+            if step is None or not inst._started or inst.model is None:
+                continue
+            step.views["q"][:] = q_all[k]
+            step.views["q_dot"][:] = qd_all[k]
+            try:
+                prepared = step.prepare(inst, obs.item(k), float(t[k]) - inst._t0)
+            except Exception:  # the trial's own step refuses with the reason
+                continue
+            if prepared is None:
+                continue
+            rows.append(k)
+            steps.append(step)
+            used.append(prepared[0])
+        if not rows:
+            return np.arange(n)
+        first = steps[0]
+        X = np.stack([step.row for step in steps])
+        Y, converged = evaluate_rows(first.function, X, first.inputs["pose"],
+                                     first.outputs["pose"], first.outputs.index("fk_residual"),
+                                     first.tolerance, FK_MAX_CALLS)
+        forces = first.outputs["forces"]
+        slow = np.ones(n, dtype=bool)
+        assert out.forces is not None
+        for j, k in enumerate(rows):
+            if not converged[j]:
+                continue
+            inst = insts[trials[k]]
+            accepted = steps[j].accept(inst, Y[j], used[j])
+            if accepted is None:
+                continue
+            e = accepted[0]
+            out.forces[k] = Y[j, forces]
+            out.error_norm[k] = math.sqrt(e.dot(e))
+            inst.compiled_steps += 1
+            slow[k] = False
+        return np.flatnonzero(slow)
 
     def encoder_pose(self, q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """The nominal forward kinematics of the lengths ``q`` [m] (warm-started at the

@@ -1,0 +1,72 @@
+"""The compiled computed-torque steps over the rows of a batch: one C call for every row
+(:meth:`hexapod.compiled.CompiledFunction.batch`), the forward kinematics' (or the
+rigid fit's) further Newton calls for the rows that have not converged, and each row's
+acceptance test (converged, inverse solve solved, every value finite, full rank).
+
+The computed-torque family (``computed-torque``, ``cartesian-ctc``, ``vision-ctc``,
+``leg-edge-ctc``, ``leg-direction-ctc``) keeps one state per trial (the pose guess, the
+reference's start); each trial's instance writes its row (:meth:`prepare_row` of the
+laws), :func:`evaluate_rows` evaluates the rows together, and the instance takes its
+result (:meth:`finish_row`). A row whose result is not accepted is left to its trial's
+own step, which says why (the same compiled function on the same row: the same
+numbers).
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from scipy.linalg.lapack import dsyevd as _eigenvalues
+
+from hexapod.compiled import CompiledFunction
+
+
+def evaluate_rows(function: CompiledFunction, X: np.ndarray, pose_in: slice, pose_out: slice,
+                  residual: int, tolerance: float, max_calls: int) -> tuple[np.ndarray,
+                                                                            np.ndarray]:
+    """The compiled step of every row of ``X`` (n, n_in), called again from the pose
+    reached on the rows whose pose residual is not below ``tolerance`` (as the per-trial
+    steps do), at most ``max_calls`` calls in all.
+
+    Args:
+        function: The compiled step.
+        X: (n, n_in) input rows; their ``pose_in`` block is overwritten on the rows
+            called again.
+        pose_in: The pose guess's block in an input row.
+        pose_out: The pose's block in an output row.
+        residual: The index of the pose residual in an output row.
+        tolerance: Residual below which the pose has converged.
+        max_calls: Calls of the step per row at most.
+
+    Returns:
+        (n, n_out) the output rows and (n,) the mask of the rows whose pose converged.
+    """
+    Y = function.batch(X)
+    calls = 1
+    with np.errstate(invalid="ignore"):
+        pending = np.flatnonzero(~(Y[:, residual] < tolerance))
+        while len(pending) and calls < max_calls:
+            pending = pending[np.isfinite(Y[pending, residual])]
+            if not len(pending):
+                break
+            X[pending, pose_in] = Y[pending, pose_out]
+            Y[pending] = function.batch(X[pending])
+            calls += 1
+            pending = pending[~(Y[pending, residual] < tolerance)]
+        converged = Y[:, residual] < tolerance
+    return Y, converged  # type: ignore[return-value]
+
+
+def rank_condition(factor: np.ndarray, threshold: float) -> float | None:
+    """The condition number of a Jacobian from ``L^T L`` (36,), or None when it is
+    rank-deficient (its smallest squared singular value, an eigenvalue of ``L^T L`` by
+    LAPACK ``syevd``, not above ``threshold^2`` times the largest)."""
+    w, _, info = _eigenvalues(factor.reshape(6, 6), 0)  # compute_v=0 (by position)
+    w_min, w_max = float(w[0]), float(w[-1])
+    if info != 0 or not (w_max > 0 and w_min > threshold**2 * w_max):
+        return None
+    return math.sqrt(w_max) / math.sqrt(w_min)
+
+
+__all__ = ["evaluate_rows", "rank_condition"]
