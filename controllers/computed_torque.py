@@ -24,6 +24,17 @@ controller context's NOMINAL geometry, inertia and drives, never the world's tru
 The force is held over the control period: the design is continuous, so ``omega_n dt``
 must stay small. The default ``omega_n = 2 pi * 2 Hz`` with ``zeta = 1`` gives
 ``omega_n dt = 0.25`` at the 20 ms period.
+
+Options beyond the gains: integral action ``integral_gain`` ``Ki`` [1/s] (default 0:
+none), ``a = ... + Kp (e + Ki int e dt)`` with ``e = q* - q``, the integral held while a
+leg's force is over the nominal drive's limit (anti-windup; with an exact model the
+error obeys ``e_ddd + Kd e_dd + Kp e_d + Kp Ki e = 0``, stable for
+``Ki < Kd = 2 zeta omega_n``); and what is commanded over that limit, ``saturation``
+(:mod:`controllers.solvers.saturation`: ``"clip"`` per leg, the default and what the
+drives do, ``"scale"`` or ``"qp"``).
+
+One step over a batch (:meth:`ComputedTorqueController.step_arrays`): the rows through the
+compiled step in one C call (:mod:`controllers.ctc_rows`).
 """
 
 from __future__ import annotations
@@ -48,7 +59,14 @@ from controllers.solvers import compiled_ctc
 from controllers.solvers.computed_torque import (
     ComputedTorqueSolver,
     SecondOrderGains,
+    checked_integral_gain,
     drive_forces,
+)
+from controllers.solvers.saturation import (
+    checked_strategy,
+    over_limit,
+    saturated,
+    zero_acceleration_forces,
 )
 from controllers.task_ctc import encoder_readings, finite_readings
 from hexapod.actuation import Actuation
@@ -87,6 +105,12 @@ class ComputedTorqueController(Controller):
         damping: Its damping ratio ``zeta``.
         smooth_goal: Reach a fixed goal along the leg-space quintic (False: a step of
             ``q*`` to the goal, the error's free response).
+        integral_gain: Integral action Ki [1/s] on the leg error (default 0: none).
+            Stable below ``2 zeta omega_n``; the integral is held while a leg's force is
+            over its limit (anti-windup).
+        saturation: Forces over the drives' limit: "clip", "scale" or "qp" (default
+            "clip"). Each leg clipped (as the drives do), the force vector scaled, or the
+            acceleration scaled (:mod:`controllers.solvers.saturation`).
     """
 
     name = "computed-torque"
@@ -96,8 +120,14 @@ class ComputedTorqueController(Controller):
     tracks_reference = True
 
     def __init__(self, natural_frequency: float = NATURAL_FREQUENCY_HZ,
-                 damping: float = DAMPING, smooth_goal: bool = True) -> None:
+                 damping: float = DAMPING, smooth_goal: bool = True,
+                 integral_gain: float = 0.0, saturation: str = "clip") -> None:
         gains = SecondOrderGains.checked(self.name, natural_frequency, damping)
+        self.integral_gain = checked_integral_gain(self.name, integral_gain)
+        self.saturation = checked_strategy(self.name, saturation)
+        #: ``int (q* - q) dt`` [m s] (integral action) and the nominal force limits [N].
+        self._integral = np.zeros(6)
+        self._limit = np.full(6, np.inf)
         self.solver = ComputedTorqueSolver(gains)
         self.kp = gains.kp
         self.kd = gains.kd
@@ -169,6 +199,8 @@ class ComputedTorqueController(Controller):
         self._ctx = context
         self._model = DynamicModel(context.geometry)
         self._pose = None
+        self._integral = np.zeros(6)
+        self._limit = np.asarray(context.geometry.drives.force_limit, dtype=float)
         if self._bound is None:
             self._bound = compiled_ctc.joint_step(INVERSE_TOLERANCE).bind()
         row = self._bound.inputs
@@ -283,13 +315,44 @@ class ComputedTorqueController(Controller):
             self._desired_into(t, desired)
         except Exception as exc:  # the nominal model failed here: refuse with its reason
             return self._refuse(f"nominal model failed: {exc}")
+        self._add_integral(desired)
         fast = self._compiled_core(q)
         if fast is not None:
             self.compiled_steps += 1
+            assert fast.forces is not None and self._pose_row is not None
+            fast.forces = self._limited(fast.forces, self._pose_row, qd, desired[6:12],
+                                        fast.error)
             return fast
         self.numpy_steps += 1
         d = desired.copy()
-        return self._numpy_step(q, qd, d[0:6], d[6:12], d[12:18])
+        cmd = self._numpy_step(q, qd, d[0:6], d[6:12], d[12:18])
+        if cmd.reason is None and cmd.forces is not None and self._pose_set is not None:
+            R, p = self._pose_set
+            cmd.forces = self._limited(cmd.forces, np.concatenate([R.T.ravel(), p]), qd,
+                                       d[6:12], cmd.error)
+        return cmd
+
+    def _add_integral(self, desired: np.ndarray) -> None:
+        """The integral action folded into the desired leg acceleration ``q_ddot*``
+        (``+ Kp Ki int (q* - q) dt``; nothing without it)."""
+        if self.integral_gain:
+            desired[12:18] += self.kp * self.integral_gain * self._integral
+
+    def _limited(self, forces: np.ndarray, pose: np.ndarray, qd: np.ndarray,
+                 qd_s: np.ndarray, error: np.ndarray | None) -> np.ndarray:
+        """The forces [N] of an accepted step under the saturation strategy; the
+        integral of the leg error ``error`` (``q* - q`` [m]) advanced by the period
+        unless a leg's force is over its limit (anti-windup)."""
+        over = over_limit(forces, self._limit)
+        if self.integral_gain and not over and error is not None:
+            self._integral += error * self._dt
+        if not over:
+            return forces
+        bias = None
+        if self.saturation == "qp":
+            assert self._model is not None
+            bias = zero_acceleration_forces(self._model, pose, qd, coulomb_velocity=qd_s)
+        return saturated(self.saturation, forces, self._limit, bias)
 
     def step_arrays(self, observations: ObservationBatch, out: CommandBatch) -> np.ndarray:
         """The rows whose readings are finite through the compiled step in one C call
@@ -321,7 +384,7 @@ class ComputedTorqueController(Controller):
         Y, converged = evaluate_rows(bound.function, X, _POSE_IN, _POSE_OUT, _RESIDUAL,
                                      FK_TOLERANCE, FK_MAX_CALLS)
         for j, k in enumerate(rows):
-            if converged[j] and insts[trials[k]]._finish_row(Y[j], q_all[k], out, k):
+            if converged[j] and insts[trials[k]]._finish_row(Y[j], q_all[k], qd_all[k], out, k):
                 slow[k] = False
         return np.flatnonzero(slow)
 
@@ -337,10 +400,12 @@ class ComputedTorqueController(Controller):
             T = QUINTIC_PEAK_SPEED * float(np.abs(self._q_star - q).max()) / \
                 self._ctx.max_speed if self.smooth_goal else 0.0
             self._start = (t, T, q.tolist(), (self._q_star - q).tolist())
+        desired = self._desired_row
         try:
-            self._desired_into(t, row["desired"])
+            self._desired_into(t, desired)
         except Exception:  # the trial's own step refuses with the reason
             return False
+        self._add_integral(desired)
         if not self._guess_in_row:
             pose = self._pose
             R0, p0 = home_pose(self._ctx.geometry) if pose is None else pose
@@ -349,7 +414,8 @@ class ComputedTorqueController(Controller):
             self._guess_in_row = True
         return True
 
-    def _finish_row(self, y: np.ndarray, q: np.ndarray, out: CommandBatch, k: int) -> bool:
+    def _finish_row(self, y: np.ndarray, q: np.ndarray, qd: np.ndarray, out: CommandBatch,
+                    k: int) -> bool:
         """Take the compiled step's output row ``y`` as row ``k`` of ``out`` when it is
         accepted (solved, finite, ``K`` of full rank); False to leave the row to the
         trial's own step."""
@@ -362,9 +428,10 @@ class ComputedTorqueController(Controller):
         self._bound.x[_POSE_IN] = pose  # the next step's guess
         self._pose_row, self._guess_in_row = pose, True
         self.compiled_steps += 1
-        e = self._bound.x[_DESIRED][0:6] - q
+        desired = self._bound.x[_DESIRED]
+        e = desired[0:6] - q
         assert out.forces is not None
-        out.forces[k] = y[_FORCES]
+        out.forces[k] = self._limited(y[_FORCES], pose, qd, desired[6:12], e)
         out.error_norm[k] = math.sqrt(e.dot(e))
         return True
 

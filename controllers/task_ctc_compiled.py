@@ -102,6 +102,8 @@ class CompiledTaskStep:
         self.views = self.bound.inputs
         #: The guess whose pose the ``pose`` block holds (``_NO_GUESS``: none).
         self._guess_of: object = _NO_GUESS
+        #: The task rows the last prepared step uses (None: all).
+        self.used: np.ndarray | None = None
 
     def __getstate__(self) -> dict[str, object]:
         """Picklable: the compiled function and its binding (ctypes) are left out, the
@@ -188,6 +190,9 @@ class CompiledTaskStep:
         rows = prepared[0]
         if rows is not None and int(rows.sum()) < 6:
             return None
+        if law.integral_gain:
+            self.views["integral"][:] = law.integral_term(self.views["integral"].size)
+        self.used = rows
         return prepared
 
     def accept(self, law: TaskComputedTorque, y: np.ndarray, rows: np.ndarray | None
