@@ -463,14 +463,17 @@ class TaskComputedTorque(Controller):
 
 def encoder_readings(observation: Observation) -> tuple[float, np.ndarray, np.ndarray] | str:
     """The time [s], lengths [m] and leg velocities [m/s] of an observation, or why they
-    cannot be used (missing leg velocities, a non-finite value)."""
+    cannot be used (missing leg velocities, not 6 values, a non-finite value)."""
     t = float(observation.t)
     q = np.asarray(observation.lengths, dtype=float)
     if observation.q_dot is None:
         return ("needs the measured leg velocities (Observation.q_dot), which only the "
                 "dynamic world gives")
     qd = np.asarray(observation.q_dot, dtype=float)
-    if math.isfinite(t) and q.size and qd.size and math.isfinite(float(q @ q + qd @ qd)):
+    if q.shape != (6,) or qd.shape != (6,):
+        return (f"lengths and leg velocities: expected 6 values each, got shapes {q.shape} "
+                f"and {qd.shape}")
+    if math.isfinite(t) and math.isfinite(float(q @ q + qd @ qd)):
         return t, q, qd  # every value finite (a NaN or inf makes the sum of squares so)
     for what, x in (("time", np.array([t])), ("lengths", q), ("leg velocities", qd)):
         if x.size == 0 or not np.isfinite(x).all():
