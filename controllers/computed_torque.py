@@ -42,7 +42,6 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from scipy.linalg.lapack import dsyevd as _eigenvalues
 
 from controllers.base import (
     Command,
@@ -53,14 +52,13 @@ from controllers.base import (
     Observation,
     ObservationBatch,
 )
-from controllers.ctc_rows import evaluate_rows, rank_condition
+from controllers.ctc_rows import evaluate_rows, rank_condition, refusal
 from controllers.law_tools import goal_lengths
 from controllers.solvers import compiled_ctc
 from controllers.solvers.computed_torque import (
     ComputedTorqueSolver,
     SecondOrderGains,
     checked_integral_gain,
-    drive_forces,
 )
 from controllers.solvers.saturation import (
     checked_strategy,
@@ -73,7 +71,6 @@ from hexapod.actuation import Actuation
 from hexapod.compiled import BoundCall, CompilationError
 from hexapod.dynamics import DynamicModel
 from hexapod.dynamics.model import INVERSE_TOLERANCE
-from hexapod.fk import forward_kinematics
 from hexapod.kinematics import inverse_kinematics
 from hexapod.workspace import home_pose
 
@@ -88,7 +85,7 @@ FK_TOLERANCE = 1e-12
 #: How far from ``k dt`` an observation's time may be to use the reference's grid [s].
 GRID_TIME_TOLERANCE = 1e-9
 #: Calls of the compiled step (``compiled_ctc.FK_CALLS`` x 3 Newton iterations each)
-#: before the numpy path takes over (as its budget of 50 iterations).
+#: before the step is refused (as the 50 iterations of :func:`hexapod.fk.forward_kinematics`).
 FK_MAX_CALLS = 16
 #: Where the compiled step's blocks lie in its rows (:data:`compiled_ctc.INPUTS`,
 #: :data:`compiled_ctc.OUTPUTS`), looked up once.
@@ -152,9 +149,8 @@ class ComputedTorqueController(Controller):
         #: The control period [s] and the time after which the reference is at rest [s].
         self._dt = 0.0
         self._t_end = math.inf
-        #: Steps taken by the compiled path and by the numpy path (diagnostics).
+        #: Commands given by the compiled step (diagnostics).
         self.compiled_steps = 0
-        self.numpy_steps = 0
 
     @property
     def _pose(self) -> tuple[np.ndarray, np.ndarray] | None:
@@ -316,20 +312,12 @@ class ComputedTorqueController(Controller):
         except Exception as exc:  # the nominal model failed here: refuse with its reason
             return self._refuse(f"nominal model failed: {exc}")
         self._add_integral(desired)
-        fast = self._compiled_core(q)
-        if fast is not None:
-            self.compiled_steps += 1
-            assert fast.forces is not None and self._pose_row is not None
-            fast.forces = self._limited(fast.forces, self._pose_row, qd, desired[6:12],
-                                        fast.error)
-            return fast
-        self.numpy_steps += 1
-        d = desired.copy()
-        cmd = self._numpy_step(q, qd, d[0:6], d[6:12], d[12:18])
-        if cmd.reason is None and cmd.forces is not None and self._pose_set is not None:
-            R, p = self._pose_set
-            cmd.forces = self._limited(cmd.forces, np.concatenate([R.T.ravel(), p]), qd,
-                                       d[6:12], cmd.error)
+        cmd = self._compiled_core(q)
+        if isinstance(cmd, str):
+            return self._refuse(cmd)
+        self.compiled_steps += 1
+        assert cmd.forces is not None and self._pose_row is not None
+        cmd.forces = self._limited(cmd.forces, self._pose_row, qd, desired[6:12], cmd.error)
         return cmd
 
     def _add_integral(self, desired: np.ndarray) -> None:
@@ -436,21 +424,23 @@ class ComputedTorqueController(Controller):
         return True
 
     def _compiled_step(self, q: np.ndarray, qd: np.ndarray, q_s: np.ndarray,
-                       qd_s: np.ndarray, qdd_s: np.ndarray) -> Command | None:
-        """The step by :func:`compiled_ctc.joint_step` (rounding-level equal to
-        :meth:`_numpy_step`), or None off its happy path (FK not converged from the
-        previous pose, ``K`` rank-deficient, a singular inverse solve, a non-finite
-        value): the numpy path then decides, with its reasons."""
+                       qd_s: np.ndarray, qdd_s: np.ndarray) -> Command:
+        """The step by :func:`compiled_ctc.joint_step` from these readings and this
+        reference (a refusal with its reason off its happy path)."""
         assert self._bound is not None
         row = self._bound.inputs
         row["q"][:] = q
         row["q_dot"][:] = qd
         row["desired"][:] = (q_s, qd_s, qdd_s)
-        return self._compiled_core(q)
+        out = self._compiled_core(q)
+        return self._refuse(out) if isinstance(out, str) else out
 
-    def _compiled_core(self, q: np.ndarray) -> Command | None:
+    def _compiled_core(self, q: np.ndarray) -> Command | str:
         """:meth:`_compiled_step` with ``q``, ``q_dot`` and ``(q*, q_dot*, q_ddot*)``
-        already in the input row."""
+        already in the input row; off the happy path (FK not converged from the previous
+        pose within ``FK_MAX_CALLS`` calls, a singular inverse solve, a non-finite
+        value, ``K`` rank-deficient) the reason (:func:`~controllers.ctc_rows.refusal`),
+        the pose guess left as it was."""
         assert self._ctx is not None and self._bound is not None
         bound = self._bound
         pose_in, y, call = bound.inputs["pose"], bound.y, bound.call
@@ -466,54 +456,24 @@ class ComputedTorqueController(Controller):
         while not y[_RESIDUAL] < FK_TOLERANCE:  # Newton from the pose reached, as FK does
             self._guess_in_row = False
             if calls >= FK_MAX_CALLS or not math.isfinite(y[_RESIDUAL]):
-                return None
+                break
             pose_in[:] = y[_POSE_OUT]
             if call():
                 raise CompilationError(f"{bound.function.name}: the compiled function failed")
             calls += 1
-        if y[_SOLVED] != 1.0 or not math.isfinite(y.dot(y)):  # (the same ddot as y @ y)
-            return None
-        # the squared singular values of K: the eigenvalues of K^T K (LAPACK syevd)
-        w, _, info = _eigenvalues(y[_FACTOR].reshape(6, 6), 0)  # compute_v=0 (by position)
-        w_min, w_max = float(w[0]), float(w[-1])
-        if info != 0 or not (w_max > 0 and w_min > self.solver.threshold**2 * w_max):
-            return None
+        reason = refusal(y, bool(y[_RESIDUAL] < FK_TOLERANCE), float(y[_RESIDUAL]), _SOLVED,
+                         _FACTOR, self.solver.threshold)
+        if reason is not None:
+            return reason
+        condition = rank_condition(y[_FACTOR], self.solver.threshold)
+        assert condition is not None
         out = y.copy()
         pose_in[:] = out[_POSE_OUT]  # the next step's guess
         self._pose_row, self._guess_in_row = out[_POSE_OUT], True
         e = bound.x[_DESIRED][0:6] - q
         return Command(np.zeros(6), error=e, error_norm=math.sqrt(e.dot(e)), rank=6,
-                       condition=math.sqrt(w_max) / math.sqrt(w_min), features_used=6,
-                       active_constraints=[], notes=[], actuation=Actuation.FORCE,
-                       forces=out[_FORCES])
-
-    def _numpy_step(self, q: np.ndarray, qd: np.ndarray, q_s: np.ndarray,
-                    qd_s: np.ndarray, qdd_s: np.ndarray) -> Command:
-        """The step by numpy around the model's separate compiled calls (the reference
-        path)."""
-        assert self._ctx is not None and self._model is not None
-        try:
-            fk = forward_kinematics(self._ctx.geometry, q, guess=self._pose,
-                                    check_stroke=False)
-            R, p = fk.rotation, fk.translation
-            K = self._model.terms_batch(R[None], p[None], np.zeros((1, 6)))[2][0]
-            twist = np.linalg.solve(K, qd)
-            bias = self._model.legs_batch(R[None], p[None], twist[None])[1][0]
-            e = q_s - q
-            sol = self.solver.acceleration(-e, K, bias, twist, error_t=-qd_s,
-                                           error_tt=-qdd_s)
-            if sol.reason is not None:
-                return self._refuse(sol.reason)
-            a = K @ sol.acc + bias
-            f = self._model.inverse(R, p, twist, sol.acc) + drive_forces(self._model, a, qd,
-                                                                         qd_s)
-        except Exception as exc:  # the nominal model failed here: refuse with its reason
-            return self._refuse(f"nominal model failed: {exc}")
-        if not np.all(np.isfinite(f)):
-            return self._refuse(f"non-finite leg forces {f}")
-        self._pose = (R, p)
-        return Command.of_forces(f, error=e, error_norm=float(np.linalg.norm(e)),
-                                 rank=sol.rank, condition=sol.condition, features_used=6)
+                       condition=condition, features_used=6, active_constraints=[], notes=[],
+                       actuation=Actuation.FORCE, forces=out[_FORCES])
 
     def _refuse(self, problem: str) -> Command:
         return Command.refuse(f"{self.name}: {problem}", actuation=Actuation.FORCE)

@@ -69,4 +69,35 @@ def rank_condition(factor: np.ndarray, threshold: float) -> float | None:
     return math.sqrt(w_max) / math.sqrt(w_min)
 
 
-__all__ = ["evaluate_rows", "rank_condition"]
+def refusal(y: np.ndarray, converged: bool, residual: float, solved: int, factor: slice,
+            threshold: float, pose_name: str = "forward kinematics of the lengths"
+            ) -> str | None:
+    """Why a compiled step's output row ``y`` is not a command (None: it is), from its
+    status outputs: the pose not converged, the inverse dynamics' solve not solved, a
+    non-finite value, a rank-deficient Jacobian (the eigenvalues of ``L^T L``).
+
+    Args:
+        y: The output row.
+        converged: Whether its pose converged (:func:`evaluate_rows`).
+        residual: Its pose residual.
+        solved: The index of the ``solved`` flag in the row.
+        factor: The block of ``L^T L`` (36) in the row.
+        threshold: Relative singular-value threshold of the rank test.
+        pose_name: What found the pose (named by the refusal).
+    """
+    if not converged:
+        return (f"nominal model failed: {pose_name} did not converge (residual "
+                f"{residual:.3g})")
+    if not math.isfinite(y.dot(y)):
+        bad = "leg forces" if np.isfinite(y[factor]).all() else "Jacobian"
+        return f"non-finite {bad} (numerical failure)"
+    if y[solved] != 1.0:
+        return "nominal model failed: singular inverse Jacobian (the inverse dynamics' solve)"
+    if rank_condition(y[factor], threshold) is None:
+        w = np.linalg.eigvalsh(y[factor].reshape(6, 6))
+        cond = math.sqrt(w[-1] / w[0]) if w[0] > 0 else math.inf
+        return f"Jacobian of rank < 6 (condition {cond:.3g})"
+    return None
+
+
+__all__ = ["evaluate_rows", "rank_condition", "refusal"]
