@@ -52,7 +52,7 @@ from controllers.base import (
     Observation,
     ObservationBatch,
 )
-from controllers.ctc_rows import evaluate_rows, rank_condition, refusal
+from controllers.ctc_rows import evaluate_rows, finite_readings_rows, rank_condition, refusal
 from controllers.law_tools import goal_lengths
 from controllers.solvers import compiled_ctc
 from controllers.solvers.computed_torque import (
@@ -302,10 +302,8 @@ class ComputedTorqueController(Controller):
             row["q_dot"][:] = qd
         else:
             t, q, qd = fast_readings
-        if self._start is None:  # the fixed goal's quintic starts here
-            T = QUINTIC_PEAK_SPEED * float(np.abs(self._q_star - q).max()) / \
-                self._ctx.max_speed if self.smooth_goal else 0.0
-            self._start = (t, T, q.tolist(), (self._q_star - q).tolist())
+        if self._start is None:
+            self._start_quintic(t, q)
         desired = self._desired_row
         try:
             self._desired_into(t, desired)
@@ -319,6 +317,13 @@ class ComputedTorqueController(Controller):
         assert cmd.forces is not None and self._pose_row is not None
         cmd.forces = self._limited(cmd.forces, self._pose_row, qd, desired[6:12], cmd.error)
         return cmd
+
+    def _start_quintic(self, t: float, q: np.ndarray) -> None:
+        """Start the fixed goal's quintic at ``t`` [s] from the lengths ``q`` [m]."""
+        assert self._ctx is not None
+        T = QUINTIC_PEAK_SPEED * float(np.abs(self._q_star - q).max()) / \
+            self._ctx.max_speed if self.smooth_goal else 0.0
+        self._start = (t, T, q.tolist(), (self._q_star - q).tolist())
 
     def _add_integral(self, desired: np.ndarray) -> None:
         """The integral action folded into the desired leg acceleration ``q_ddot*``
@@ -348,31 +353,22 @@ class ComputedTorqueController(Controller):
         whose result is not accepted (left to the trial's own step, which says why)."""
         obs = observations
         n = len(obs)
-        if obs.q_dot is None:
+        readings = finite_readings_rows(obs, self.trial_instances)
+        if readings is None:
             return np.arange(n)
-        t = np.asarray(obs.t, dtype=float)
-        q_all = np.asarray(obs.lengths, dtype=float)
-        qd_all = np.asarray(obs.q_dot, dtype=float)
-        finite = np.isfinite(t) & np.isfinite(q_all).all(axis=1) & np.isfinite(qd_all).all(
-            axis=1)
-        insts = self.trial_instances
-        trials = np.asarray(obs.trials, dtype=int).tolist()
-        rows: list[int] = []
-        for k in np.flatnonzero(finite).tolist():
-            inst = insts[trials[k]]
-            if isinstance(inst, ComputedTorqueController) and inst._prepare_row(
-                    float(t[k]), q_all[k], qd_all[k]):
-                rows.append(k)
+        t, q_all, qd_all, finite = readings
+        rows = [(k, inst) for k, inst in finite if isinstance(inst, ComputedTorqueController)
+                and inst._prepare_row(float(t[k]), q_all[k], qd_all[k])]
         slow = np.ones(n, dtype=bool)
         if not rows:
             return np.arange(n)
         bound = self._bound
         assert bound is not None
-        X = np.stack([insts[trials[k]]._bound.x for k in rows])
+        X = np.stack([inst._bound.x for _, inst in rows])
         Y, converged = evaluate_rows(bound.function, X, _POSE_IN, _POSE_OUT, _RESIDUAL,
                                      FK_TOLERANCE, FK_MAX_CALLS)
-        for j, k in enumerate(rows):
-            if converged[j] and insts[trials[k]]._finish_row(Y[j], q_all[k], qd_all[k], out, k):
+        for j, (k, inst) in enumerate(rows):
+            if converged[j] and inst._finish_row(Y[j], q_all[k], qd_all[k], out, k):
                 slow[k] = False
         return np.flatnonzero(slow)
 
@@ -384,10 +380,8 @@ class ComputedTorqueController(Controller):
         row = self._bound.inputs
         row["q"][:] = q
         row["q_dot"][:] = qd
-        if self._start is None:  # the fixed goal's quintic starts here
-            T = QUINTIC_PEAK_SPEED * float(np.abs(self._q_star - q).max()) / \
-                self._ctx.max_speed if self.smooth_goal else 0.0
-            self._start = (t, T, q.tolist(), (self._q_star - q).tolist())
+        if self._start is None:
+            self._start_quintic(t, q)
         desired = self._desired_row
         try:
             self._desired_into(t, desired)

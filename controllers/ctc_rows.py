@@ -15,11 +15,32 @@ numbers).
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
+from typing import Any
 
 import numpy as np
 from scipy.linalg.lapack import dsyevd as _eigenvalues
 
+from controllers.data import ObservationBatch
 from hexapod.compiled import CompiledFunction
+
+
+def finite_readings_rows(observations: ObservationBatch, instances: Sequence[Any]
+                         ) -> tuple[np.ndarray, np.ndarray, np.ndarray,
+                                    list[tuple[int, Any]]] | None:
+    """The times (n,) [s], lengths and leg velocities (n, 6) [m, m/s] of a batch, and the
+    rows whose readings are all finite with their trial's instance (of ``instances``);
+    None without leg velocities."""
+    if observations.q_dot is None:
+        return None
+    t = np.asarray(observations.t, dtype=float)
+    q = np.asarray(observations.lengths, dtype=float)
+    qd = np.asarray(observations.q_dot, dtype=float)
+    finite = np.isfinite(t) & np.isfinite(q).all(axis=1) & np.isfinite(qd).all(axis=1)
+    trials = np.asarray(observations.trials, dtype=int)
+    rows = np.flatnonzero(finite).tolist()
+    return t, q, qd, [(k, instances[j]) for k, j in zip(rows, trials[rows].tolist(),
+                                                          strict=True)]
 
 
 def evaluate_rows(function: CompiledFunction, X: np.ndarray, pose_in: slice, pose_out: slice,
@@ -100,4 +121,4 @@ def refusal(y: np.ndarray, converged: bool, residual: float, solved: int, factor
     return None
 
 
-__all__ = ["evaluate_rows", "rank_condition", "refusal"]
+__all__ = ["evaluate_rows", "finite_readings_rows", "rank_condition", "refusal"]

@@ -40,7 +40,7 @@ from controllers.base import (
     Observation,
     ObservationBatch,
 )
-from controllers.ctc_rows import evaluate_rows
+from controllers.ctc_rows import evaluate_rows, finite_readings_rows
 from controllers.exceptions import ContextError
 from controllers.solvers.computed_torque import (
     ComputedTorqueSolver,
@@ -313,20 +313,14 @@ class TaskComputedTorque(Controller):
         says why)."""
         obs = observations
         n = len(obs)
-        if obs.q_dot is None:
+        readings = finite_readings_rows(obs, self.trial_instances)
+        if readings is None:
             return np.arange(n)
-        t = np.asarray(obs.t, dtype=float)
-        q_all = np.asarray(obs.lengths, dtype=float)
-        qd_all = np.asarray(obs.q_dot, dtype=float)
-        finite = np.isfinite(t) & np.isfinite(q_all).all(axis=1) & np.isfinite(qd_all).all(
-            axis=1)
-        insts = self.trial_instances
-        trials = np.asarray(obs.trials, dtype=int).tolist()
-        rows: list[int] = []
+        t, q_all, qd_all, finite = readings
+        rows: list[tuple[int, TaskComputedTorque]] = []
         steps: list[CompiledTaskStep] = []
         used: list[np.ndarray | None] = []
-        for k in np.flatnonzero(finite).tolist():
-            inst = insts[trials[k]]
+        for k, inst in finite:
             step = getattr(inst, "compiled", None)
             if step is None or not inst._started or inst.model is None:
                 continue
@@ -338,7 +332,7 @@ class TaskComputedTorque(Controller):
                 continue
             if prepared is None:
                 continue
-            rows.append(k)
+            rows.append((k, inst))
             steps.append(step)
             used.append(prepared[0])
         if not rows:
@@ -351,10 +345,9 @@ class TaskComputedTorque(Controller):
         forces, pose_out, error = (first.outputs[b] for b in ("forces", "pose", "error"))
         slow = np.ones(n, dtype=bool)
         assert out.forces is not None
-        for j, k in enumerate(rows):
+        for j, (k, inst) in enumerate(rows):
             if not converged[j]:
                 continue
-            inst = insts[trials[k]]
             accepted = steps[j].accept(inst, Y[j], used[j])
             if accepted is None:
                 continue
