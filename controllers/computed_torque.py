@@ -52,7 +52,14 @@ from controllers.base import (
     Observation,
     ObservationBatch,
 )
-from controllers.ctc_rows import evaluate_rows, finite_readings_rows, rank_condition, refusal
+from controllers.ctc_rows import (
+    accepted_rows,
+    evaluate_rows,
+    finite_readings_rows,
+    over_limits,
+    rank_condition,
+    refusal,
+)
 from controllers.law_tools import goal_lengths
 from controllers.solvers import compiled_ctc
 from controllers.solvers.computed_torque import (
@@ -332,11 +339,13 @@ class ComputedTorqueController(Controller):
             desired[12:18] += self.kp * self.integral_gain * self._integral
 
     def _limited(self, forces: np.ndarray, pose: np.ndarray, qd: np.ndarray,
-                 qd_s: np.ndarray, error: np.ndarray | None) -> np.ndarray:
+                 qd_s: np.ndarray, error: np.ndarray | None, over: bool | None = None
+                 ) -> np.ndarray:
         """The forces [N] of an accepted step under the saturation strategy; the
         integral of the leg error ``error`` (``q* - q`` [m]) advanced by the period
-        unless a leg's force is over its limit (anti-windup)."""
-        over = over_limit(forces, self._limit)
+        unless a leg's force is over its limit (anti-windup; ``over`` when known)."""
+        if over is None:
+            over = over_limit(forces, self._limit)
         if self.integral_gain and not over and error is not None:
             self._integral += error * self._dt
         if not over:
@@ -367,8 +376,14 @@ class ComputedTorqueController(Controller):
         X = np.stack([inst._bound.x for _, inst in rows])
         Y, converged = evaluate_rows(bound.function, X, _POSE_IN, _POSE_OUT, _RESIDUAL,
                                      FK_TOLERANCE, FK_MAX_CALLS)
-        for j, (k, inst) in enumerate(rows):
-            if converged[j] and inst._finish_row(Y[j], q_all[k], qd_all[k], out, k):
+        accepted = np.flatnonzero(accepted_rows(Y, converged, _SOLVED, _FACTOR,
+                                                self.solver.threshold))
+        if len(accepted):
+            over = over_limits(Y[accepted, _FORCES],
+                               np.stack([rows[j][1]._limit for j in accepted.tolist()]))
+            for j, o in zip(accepted.tolist(), over.tolist(), strict=True):
+                k, inst = rows[j]
+                inst._take_row(Y[j], q_all[k], qd_all[k], out, k, o)
                 slow[k] = False
         return np.flatnonzero(slow)
 
@@ -396,15 +411,10 @@ class ComputedTorqueController(Controller):
             self._guess_in_row = True
         return True
 
-    def _finish_row(self, y: np.ndarray, q: np.ndarray, qd: np.ndarray, out: CommandBatch,
-                    k: int) -> bool:
-        """Take the compiled step's output row ``y`` as row ``k`` of ``out`` when it is
-        accepted (solved, finite, ``K`` of full rank); False to leave the row to the
-        trial's own step."""
-        if y[_SOLVED] != 1.0 or not math.isfinite(y.dot(y)):
-            return False
-        if rank_condition(y[_FACTOR], self.solver.threshold) is None:
-            return False
+    def _take_row(self, y: np.ndarray, q: np.ndarray, qd: np.ndarray, out: CommandBatch,
+                  k: int, over: bool) -> None:
+        """Take the compiled step's accepted output row ``y`` as row ``k`` of ``out``
+        (``over``: a leg's force is over its limit); its pose is the next guess."""
         assert self._bound is not None
         pose = y[_POSE_OUT].copy()
         self._bound.x[_POSE_IN] = pose  # the next step's guess
@@ -413,9 +423,8 @@ class ComputedTorqueController(Controller):
         desired = self._bound.x[_DESIRED]
         e = desired[0:6] - q
         assert out.forces is not None
-        out.forces[k] = self._limited(y[_FORCES], pose, qd, desired[6:12], e)
+        out.forces[k] = self._limited(y[_FORCES], pose, qd, desired[6:12], e, over)
         out.error_norm[k] = math.sqrt(e.dot(e))
-        return True
 
     def _compiled_step(self, q: np.ndarray, qd: np.ndarray, q_s: np.ndarray,
                        qd_s: np.ndarray, qdd_s: np.ndarray) -> Command:

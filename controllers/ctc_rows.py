@@ -90,6 +90,30 @@ def rank_condition(factor: np.ndarray, threshold: float) -> float | None:
     return math.sqrt(w_max) / math.sqrt(w_min)
 
 
+def accepted_rows(Y: np.ndarray, converged: np.ndarray, solved: int, factor: slice,
+                  threshold: float) -> np.ndarray:
+    """(n,) the output rows ``Y`` (n, n_out) that are commands: converged, ``solved``,
+    every value finite (their sum of squares finite, as :func:`refusal` checks one row)
+    and ``L^T L`` of full rank. The rank test of :func:`rank_condition` (LAPACK ``syevd``
+    row by row) decides every row whose eigenvalues, computed for all the rows at once
+    (``numpy.linalg.eigvalsh``), are not clearly above its threshold (four times it)."""
+    with np.errstate(invalid="ignore", over="ignore"):
+        ok = converged & (Y[:, solved] == 1.0) & np.isfinite(np.einsum("ij,ij->i", Y, Y))
+    idx = np.flatnonzero(ok)
+    if len(idx):
+        w = np.linalg.eigvalsh(Y[idx, factor].reshape(-1, 6, 6))
+        clear = (w[:, -1] > 0) & (w[:, 0] > 4.0 * threshold**2 * w[:, -1])
+        for j in idx[~clear].tolist():
+            ok[j] = rank_condition(Y[j, factor], threshold) is not None
+    return ok  # type: ignore[no-any-return]
+
+
+def over_limits(forces: np.ndarray, limits: np.ndarray) -> np.ndarray:
+    """(m,) the rows of ``forces`` (m, 6) [N] with a leg over its limit (``limits``
+    (m, 6) [N]; a NaN is not over)."""
+    return (np.abs(forces) > limits).any(axis=1)  # type: ignore[no-any-return]
+
+
 def refusal(y: np.ndarray, converged: bool, residual: float, solved: int, factor: slice,
             threshold: float, pose_name: str = "forward kinematics of the lengths"
             ) -> str | None:
@@ -121,4 +145,5 @@ def refusal(y: np.ndarray, converged: bool, residual: float, solved: int, factor
     return None
 
 
-__all__ = ["evaluate_rows", "finite_readings_rows", "rank_condition", "refusal"]
+__all__ = ["accepted_rows", "evaluate_rows", "finite_readings_rows", "over_limits",
+           "rank_condition", "refusal"]

@@ -40,7 +40,12 @@ from controllers.base import (
     Observation,
     ObservationBatch,
 )
-from controllers.ctc_rows import evaluate_rows, finite_readings_rows
+from controllers.ctc_rows import (
+    accepted_rows,
+    evaluate_rows,
+    finite_readings_rows,
+    over_limits,
+)
 from controllers.exceptions import ContextError
 from controllers.solvers.computed_torque import (
     ComputedTorqueSolver,
@@ -345,15 +350,18 @@ class TaskComputedTorque(Controller):
         forces, pose_out, error = (first.outputs[b] for b in ("forces", "pose", "error"))
         slow = np.ones(n, dtype=bool)
         assert out.forces is not None
-        for j, (k, inst) in enumerate(rows):
-            if not converged[j]:
-                continue
-            accepted = steps[j].accept(inst, Y[j], used[j])
-            if accepted is None:
-                continue
-            e = accepted[0]
+        accepted = np.flatnonzero(accepted_rows(Y, converged, first.outputs.index("solved"),
+                                                first.outputs["factor"],
+                                                self.solver.threshold))
+        if not len(accepted):
+            return np.flatnonzero(slow)
+        over = over_limits(Y[accepted, forces],
+                           np.stack([rows[j][1].force_limit for j in accepted.tolist()]))
+        for j, o in zip(accepted.tolist(), over.tolist(), strict=True):
+            k, inst = rows[j]
+            e = steps[j].take(inst, Y[j], used[j])
             out.forces[k] = inst.limited(Y[j, forces], Y[j, pose_out], qd_all[k],
-                                         Y[j, error], used[j])
+                                         Y[j, error], used[j], o)
             out.error_norm[k] = math.sqrt(e.dot(e))
             inst.compiled_steps += 1
             slow[k] = False
@@ -367,7 +375,8 @@ class TaskComputedTorque(Controller):
         return self.gains.kp * self.integral_gain * self.integral  # type: ignore[no-any-return]
 
     def limited(self, forces: np.ndarray, pose: np.ndarray, qd: np.ndarray,
-                error: np.ndarray, used: np.ndarray | None) -> np.ndarray:
+                error: np.ndarray, used: np.ndarray | None, over: bool | None = None
+                ) -> np.ndarray:
         """The forces [N] of an accepted step under the saturation strategy; the
         integral of the task error ``error`` (m,) over the rows ``used`` (None: all)
         advanced by the period unless a leg's force is over its limit (anti-windup).
@@ -378,8 +387,10 @@ class TaskComputedTorque(Controller):
             qd: (6,) measured leg velocities [m/s].
             error: (m,) the task error of every row.
             used: (m,) the rows used, or None.
+            over: Whether a leg's force is over its limit (None: found here).
         """
-        over = over_limit(forces, self.force_limit)
+        if over is None:
+            over = over_limit(forces, self.force_limit)
         if self.integral_gain and not over:
             assert self.context is not None
             if len(self.integral) != len(error):

@@ -208,11 +208,17 @@ class CompiledTaskStep:
         w_min, w_max = float(w[0]), float(w[-1])
         if info != 0 or not (w_max > 0 and w_min > law.solver.threshold**2 * w_max):
             return None
+        return self.take(law, y, rows), math.sqrt(w_max / w_min)
+
+    def take(self, law: TaskComputedTorque, y: np.ndarray, rows: np.ndarray | None
+             ) -> np.ndarray:
+        """The task error (of the rows used) of an accepted output row ``y``, its pose
+        taken as the next guess."""
         pose = y[self._pose].copy()
         self.views["pose"][:] = pose  # the next step's guess
         law.guess = self._guess_of = (pose[0:9].reshape(3, 3).T, pose[9:12])
         e = y[self._error]
-        return (e.copy() if rows is None else e[rows]), math.sqrt(w_max / w_min)
+        return e.copy() if rows is None else e[rows]  # type: ignore[no-any-return]
 
 
 __all__ = ["FIT_TOLERANCE", "FK_MAX_CALLS", "FK_TOLERANCE", "CompiledTaskStep"]
