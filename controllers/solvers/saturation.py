@@ -50,7 +50,8 @@ def checked_strategy(controller: str, strategy: object) -> str:
 
 def over_limit(forces: np.ndarray, limit: np.ndarray) -> bool:
     """Whether a leg's force (6,) [N] is over its limit (6,) [N] (a NaN is not)."""
-    return bool(np.any(np.abs(forces) > limit))
+    lim = limit.tolist()
+    return any(abs(f) > m for f, m in zip(forces.tolist(), lim, strict=True))
 
 
 def clipped(forces: np.ndarray, limit: np.ndarray) -> np.ndarray:
