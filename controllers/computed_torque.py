@@ -132,6 +132,7 @@ class ComputedTorqueController(Controller):
         #: ``int (q* - q) dt`` [m s] (integral action) and the nominal force limits [N].
         self._integral = np.zeros(6)
         self._limit = np.full(6, np.inf)
+        self._limit_list = self._limit.tolist()
         self.solver = ComputedTorqueSolver(gains)
         self.kp = gains.kp
         self.kd = gains.kd
@@ -204,6 +205,7 @@ class ComputedTorqueController(Controller):
         self._pose = None
         self._integral = np.zeros(6)
         self._limit = np.asarray(context.geometry.drives.force_limit, dtype=float)
+        self._limit_list = self._limit.tolist()
         if self._bound is None:
             self._bound = compiled_ctc.joint_step(INVERSE_TOLERANCE).bind()
         row = self._bound.inputs
@@ -345,7 +347,7 @@ class ComputedTorqueController(Controller):
         integral of the leg error ``error`` (``q* - q`` [m]) advanced by the period
         unless a leg's force is over its limit (anti-windup; ``over`` when known)."""
         if over is None:
-            over = over_limit(forces, self._limit)
+            over = over_limit(forces, self._limit_list)
         if self.integral_gain and not over and error is not None:
             self._integral += error * self._dt
         if not over:
@@ -373,7 +375,7 @@ class ComputedTorqueController(Controller):
             return np.arange(n)
         bound = self._bound
         assert bound is not None
-        X = np.stack([inst._bound.x for _, inst in rows])
+        X = np.stack([inst._bound.x for _, inst in rows])  # type: ignore[union-attr]
         Y, converged = evaluate_rows(bound.function, X, _POSE_IN, _POSE_OUT, _RESIDUAL,
                                      FK_TOLERANCE, FK_MAX_CALLS)
         accepted = np.flatnonzero(accepted_rows(Y, converged, _SOLVED, _FACTOR,
@@ -464,12 +466,15 @@ class ComputedTorqueController(Controller):
             if call():
                 raise CompilationError(f"{bound.function.name}: the compiled function failed")
             calls += 1
-        reason = refusal(y, bool(y[_RESIDUAL] < FK_TOLERANCE), float(y[_RESIDUAL]), _SOLVED,
-                         _FACTOR, self.solver.threshold)
-        if reason is not None:
+        condition = None
+        converged = y[_RESIDUAL] < FK_TOLERANCE
+        if converged and y[_SOLVED] == 1.0 and math.isfinite(y.dot(y)):  # (ddot: y @ y)
+            condition = rank_condition(y[_FACTOR], self.solver.threshold)
+        if condition is None:
+            reason = refusal(y, bool(converged), float(y[_RESIDUAL]), _SOLVED, _FACTOR,
+                             self.solver.threshold)
+            assert reason is not None
             return reason
-        condition = rank_condition(y[_FACTOR], self.solver.threshold)
-        assert condition is not None
         out = y.copy()
         pose_in[:] = out[_POSE_OUT]  # the next step's guess
         self._pose_row, self._guess_in_row = out[_POSE_OUT], True

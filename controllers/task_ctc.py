@@ -165,6 +165,7 @@ class TaskComputedTorque(Controller):
         self.integral = np.zeros(0)
         #: The nominal drives' force limits [N].
         self.force_limit = np.full(6, np.inf)
+        self.force_limit_list = self.force_limit.tolist()
         self.solver = ComputedTorqueSolver(self.gains)
         if not isinstance(smooth_goal, bool | np.bool_):
             raise ContextError(self.name, "smooth_goal", f"must be true or false, got "
@@ -194,6 +195,7 @@ class TaskComputedTorque(Controller):
         self.guess = None
         self.integral = np.zeros(0)
         self.force_limit = np.asarray(context.geometry.drives.force_limit, dtype=float)
+        self.force_limit_list = self.force_limit.tolist()
         self._pose_grid = None
         self.prepare(context)
         self.retarget_trial(context.goal)
@@ -295,11 +297,10 @@ class TaskComputedTorque(Controller):
                     cmd = compiled.step_written(self, observation, t - self._t0)
                 if cmd is not None:
                     self.compiled_steps += 1
-                    out = compiled.outputs
                     y = compiled.bound.y
                     assert cmd.forces is not None
-                    cmd.forces = self.limited(cmd.forces, y[out["pose"]], qd, y[out["error"]],
-                                              compiled.used)
+                    cmd.forces = self.limited(cmd.forces, y[compiled.pose_block], qd,
+                                              y[compiled.error_block], compiled.used)
                     return cmd
             self.numpy_steps += 1
             m = self.measure(observation, q, qd)
@@ -390,7 +391,7 @@ class TaskComputedTorque(Controller):
             over: Whether a leg's force is over its limit (None: found here).
         """
         if over is None:
-            over = over_limit(forces, self.force_limit)
+            over = over_limit(forces, self.force_limit_list)
         if self.integral_gain and not over:
             assert self.context is not None
             if len(self.integral) != len(error):

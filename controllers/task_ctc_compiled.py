@@ -88,6 +88,8 @@ class CompiledTaskStep:
         self._error = out["error"]
         self._forces = out["forces"]
         self._pose = out["pose"]
+        #: The output blocks of the pose and of the task error.
+        self.pose_block, self.error_block = self._pose, self._error
         #: Pose residual below which the pose has converged.
         self.tolerance = FK_TOLERANCE if self.fk else FIT_TOLERANCE
         law.compiled_constants(self)

@@ -48,9 +48,10 @@ def checked_strategy(controller: str, strategy: object) -> str:
     return str(strategy)
 
 
-def over_limit(forces: np.ndarray, limit: np.ndarray) -> bool:
-    """Whether a leg's force (6,) [N] is over its limit (6,) [N] (a NaN is not)."""
-    lim = limit.tolist()
+def over_limit(forces: np.ndarray, limit: np.ndarray | list[float]) -> bool:
+    """Whether a leg's force (6,) [N] is over its limit (6,) [N] (a NaN is not; the
+    limits may be given as a list, the per-step callers' cached one)."""
+    lim = limit.tolist() if isinstance(limit, np.ndarray) else limit
     return any(abs(f) > m for f, m in zip(forces.tolist(), lim, strict=True))
 
 
