@@ -189,6 +189,17 @@ class ComputedTorqueController(Controller):
             self._bound.x[:] = row
 
     @property
+    def input_row(self) -> np.ndarray:
+        """The compiled step's input row (n_in,) (the bound one, written in place)."""
+        assert self._bound is not None
+        return self._bound.x
+
+    @property
+    def force_limit(self) -> np.ndarray:
+        """(6,) the nominal drives' force limits [N] (inf before a reset)."""
+        return self._limit
+
+    @property
     def _desired_row(self) -> np.ndarray:
         """The input row's ``(q*, q_dot*, q_ddot*)`` (18,) (a view)."""
         assert self._bound is not None
@@ -369,27 +380,27 @@ class ComputedTorqueController(Controller):
             return np.arange(n)
         t, q_all, qd_all, finite = readings
         rows = [(k, inst) for k, inst in finite if isinstance(inst, ComputedTorqueController)
-                and inst._prepare_row(float(t[k]), q_all[k], qd_all[k])]
+                and inst.prepare_row(float(t[k]), q_all[k], qd_all[k])]
         slow = np.ones(n, dtype=bool)
         if not rows:
             return np.arange(n)
         bound = self._bound
         assert bound is not None
-        X = np.stack([inst._bound.x for _, inst in rows])  # type: ignore[union-attr]
+        X = np.stack([inst.input_row for _, inst in rows])
         Y, converged = evaluate_rows(bound.function, X, _POSE_IN, _POSE_OUT, _RESIDUAL,
                                      FK_TOLERANCE, FK_MAX_CALLS)
         accepted = np.flatnonzero(accepted_rows(Y, converged, _SOLVED, _FACTOR,
                                                 self.solver.threshold))
         if len(accepted):
             over = over_limits(Y[accepted, _FORCES],
-                               np.stack([rows[j][1]._limit for j in accepted.tolist()]))
+                               np.stack([rows[j][1].force_limit for j in accepted.tolist()]))
             for j, o in zip(accepted.tolist(), over.tolist(), strict=True):
                 k, inst = rows[j]
-                inst._take_row(Y[j], q_all[k], qd_all[k], out, k, o)
+                inst.take_row(Y[j], q_all[k], qd_all[k], out, k, o)
                 slow[k] = False
         return np.flatnonzero(slow)
 
-    def _prepare_row(self, t: float, q: np.ndarray, qd: np.ndarray) -> bool:
+    def prepare_row(self, t: float, q: np.ndarray, qd: np.ndarray) -> bool:
         """Write this period's readings, reference and pose guess into the input row
         (False: the trial's own step decides, e.g. the nominal model fails)."""
         if self._ctx is None or self._model is None or self._bound is None:
@@ -413,7 +424,7 @@ class ComputedTorqueController(Controller):
             self._guess_in_row = True
         return True
 
-    def _take_row(self, y: np.ndarray, q: np.ndarray, qd: np.ndarray, out: CommandBatch,
+    def take_row(self, y: np.ndarray, q: np.ndarray, qd: np.ndarray, out: CommandBatch,
                   k: int, over: bool) -> None:
         """Take the compiled step's accepted output row ``y`` as row ``k`` of ``out``
         (``over``: a leg's force is over its limit); its pose is the next guess."""

@@ -201,6 +201,17 @@ class TaskComputedTorque(Controller):
         self.retarget_trial(context.goal)
         self.compiled = None if self.compiled_kind is None else CompiledTaskStep(self)
 
+    @property
+    def started(self) -> bool:
+        """Whether the law follows its reference (a fixed goal's line starts at the
+        first step)."""
+        return self._started
+
+    @property
+    def reference_start(self) -> float:
+        """The observation time [s] at which the reference's clock is 0."""
+        return self._t0
+
     def prepare(self, context: ControllerContext) -> None:
         """Per-trial checks and constants of a subclass (nothing by default)."""
 
@@ -328,12 +339,12 @@ class TaskComputedTorque(Controller):
         used: list[np.ndarray | None] = []
         for k, inst in finite:
             step = getattr(inst, "compiled", None)
-            if step is None or not inst._started or inst.model is None:
+            if step is None or not inst.started or inst.model is None:
                 continue
             step.views["q"][:] = q_all[k]
             step.views["q_dot"][:] = qd_all[k]
             try:
-                prepared = step.prepare(inst, obs.item(k), float(t[k]) - inst._t0)
+                prepared = step.prepare(inst, obs.item(k), float(t[k]) - inst.reference_start)
             except Exception:  # the trial's own step refuses with the reason
                 continue
             if prepared is None:
