@@ -24,6 +24,17 @@ controller context's NOMINAL geometry, inertia and drives, never the world's tru
 The force is held over the control period: the design is continuous, so ``omega_n dt``
 must stay small. The default ``omega_n = 2 pi * 2 Hz`` with ``zeta = 1`` gives
 ``omega_n dt = 0.25`` at the 20 ms period.
+
+Options beyond the gains: integral action ``integral_gain`` ``Ki`` [1/s] (default 0:
+none), ``a = ... + Kp (e + Ki int e dt)`` with ``e = q* - q``, the integral held while a
+leg's force is over the nominal drive's limit (anti-windup; with an exact model the
+error obeys ``e_ddd + Kd e_dd + Kp e_d + Kp Ki e = 0``, stable for
+``Ki < Kd = 2 zeta omega_n``); and what is commanded over that limit, ``saturation``
+(:mod:`controllers.solvers.saturation`: ``"clip"`` per leg, the default and what the
+drives do, ``"scale"`` or ``"qp"``).
+
+One step over a batch (:meth:`ComputedTorqueController.step_arrays`): the rows through the
+compiled step in one C call (:mod:`controllers.ctc_rows`).
 """
 
 from __future__ import annotations
@@ -31,28 +42,42 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from scipy.linalg.lapack import dsyevd as _eigenvalues
 
 from controllers.base import (
     Command,
+    CommandBatch,
     Controller,
     ControllerContext,
     Goal,
     Observation,
+    ObservationBatch,
+)
+from controllers.ctc_rows import (
+    accepted_rows,
+    evaluate_rows,
+    finite_readings_rows,
+    over_limits,
+    rank_condition,
+    refusal,
 )
 from controllers.law_tools import goal_lengths
 from controllers.solvers import compiled_ctc
 from controllers.solvers.computed_torque import (
     ComputedTorqueSolver,
     SecondOrderGains,
-    drive_forces,
+    checked_integral_gain,
+)
+from controllers.solvers.saturation import (
+    checked_strategy,
+    over_limit,
+    saturated,
+    zero_acceleration_forces,
 )
 from controllers.task_ctc import encoder_readings, finite_readings
 from hexapod.actuation import Actuation
 from hexapod.compiled import BoundCall, CompilationError
 from hexapod.dynamics import DynamicModel
 from hexapod.dynamics.model import INVERSE_TOLERANCE
-from hexapod.fk import forward_kinematics
 from hexapod.kinematics import inverse_kinematics
 from hexapod.workspace import home_pose
 
@@ -67,11 +92,11 @@ FK_TOLERANCE = 1e-12
 #: How far from ``k dt`` an observation's time may be to use the reference's grid [s].
 GRID_TIME_TOLERANCE = 1e-9
 #: Calls of the compiled step (``compiled_ctc.FK_CALLS`` x 3 Newton iterations each)
-#: before the numpy path takes over (as its budget of 50 iterations).
+#: before the step is refused (as the 50 iterations of :func:`hexapod.fk.forward_kinematics`).
 FK_MAX_CALLS = 16
 #: Where the compiled step's blocks lie in its rows (:data:`compiled_ctc.INPUTS`,
 #: :data:`compiled_ctc.OUTPUTS`), looked up once.
-_DESIRED = compiled_ctc.INPUTS["desired"]
+_DESIRED, _POSE_IN = compiled_ctc.INPUTS["desired"], compiled_ctc.INPUTS["pose"]
 _POSE_OUT, _FACTOR, _FORCES = (compiled_ctc.OUTPUTS[k] for k in ("pose", "factor", "forces"))
 _RESIDUAL, _SOLVED = (compiled_ctc.OUTPUTS.index(k) for k in ("fk_residual", "solved"))
 
@@ -84,6 +109,12 @@ class ComputedTorqueController(Controller):
         damping: Its damping ratio ``zeta``.
         smooth_goal: Reach a fixed goal along the leg-space quintic (False: a step of
             ``q*`` to the goal, the error's free response).
+        integral_gain: Integral action Ki [1/s] on the leg error (default 0: none).
+            Stable below ``2 zeta omega_n``; the integral is held while a leg's force is
+            over its limit (anti-windup).
+        saturation: Forces over the drives' limit: "clip", "scale" or "qp" (default
+            "clip"). Each leg clipped (as the drives do), the force vector scaled, or the
+            acceleration scaled (:mod:`controllers.solvers.saturation`).
     """
 
     name = "computed-torque"
@@ -93,8 +124,15 @@ class ComputedTorqueController(Controller):
     tracks_reference = True
 
     def __init__(self, natural_frequency: float = NATURAL_FREQUENCY_HZ,
-                 damping: float = DAMPING, smooth_goal: bool = True) -> None:
+                 damping: float = DAMPING, smooth_goal: bool = True,
+                 integral_gain: float = 0.0, saturation: str = "clip") -> None:
         gains = SecondOrderGains.checked(self.name, natural_frequency, damping)
+        self.integral_gain = checked_integral_gain(self.name, integral_gain)
+        self.saturation = checked_strategy(self.name, saturation)
+        #: ``int (q* - q) dt`` [m s] (integral action) and the nominal force limits [N].
+        self._integral = np.zeros(6)
+        self._limit = np.full(6, np.inf)
+        self._limit_list = self._limit.tolist()
         self.solver = ComputedTorqueSolver(gains)
         self.kp = gains.kp
         self.kd = gains.kd
@@ -119,9 +157,8 @@ class ComputedTorqueController(Controller):
         #: The control period [s] and the time after which the reference is at rest [s].
         self._dt = 0.0
         self._t_end = math.inf
-        #: Steps taken by the compiled path and by the numpy path (diagnostics).
+        #: Commands given by the compiled step (diagnostics).
         self.compiled_steps = 0
-        self.numpy_steps = 0
 
     @property
     def _pose(self) -> tuple[np.ndarray, np.ndarray] | None:
@@ -152,6 +189,17 @@ class ComputedTorqueController(Controller):
             self._bound.x[:] = row
 
     @property
+    def input_row(self) -> np.ndarray:
+        """The compiled step's input row (n_in,) (the bound one, written in place)."""
+        assert self._bound is not None
+        return self._bound.x
+
+    @property
+    def force_limit(self) -> np.ndarray:
+        """(6,) the nominal drives' force limits [N] (inf before a reset)."""
+        return self._limit
+
+    @property
     def _desired_row(self) -> np.ndarray:
         """The input row's ``(q*, q_dot*, q_ddot*)`` (18,) (a view)."""
         assert self._bound is not None
@@ -166,6 +214,9 @@ class ComputedTorqueController(Controller):
         self._ctx = context
         self._model = DynamicModel(context.geometry)
         self._pose = None
+        self._integral = np.zeros(6)
+        self._limit = np.asarray(context.geometry.drives.force_limit, dtype=float)
+        self._limit_list = self._limit.tolist()
         if self._bound is None:
             self._bound = compiled_ctc.joint_step(INVERSE_TOLERANCE).bind()
         row = self._bound.inputs
@@ -271,39 +322,141 @@ class ComputedTorqueController(Controller):
             row["q_dot"][:] = qd
         else:
             t, q, qd = fast_readings
-        if self._start is None:  # the fixed goal's quintic starts here
-            T = QUINTIC_PEAK_SPEED * float(np.abs(self._q_star - q).max()) / \
-                self._ctx.max_speed if self.smooth_goal else 0.0
-            self._start = (t, T, q.tolist(), (self._q_star - q).tolist())
+        if self._start is None:
+            self._start_quintic(t, q)
         desired = self._desired_row
         try:
             self._desired_into(t, desired)
         except Exception as exc:  # the nominal model failed here: refuse with its reason
             return self._refuse(f"nominal model failed: {exc}")
-        fast = self._compiled_core(q)
-        if fast is not None:
-            self.compiled_steps += 1
-            return fast
-        self.numpy_steps += 1
-        d = desired.copy()
-        return self._numpy_step(q, qd, d[0:6], d[6:12], d[12:18])
+        self._add_integral(desired)
+        cmd = self._compiled_core(q)
+        if isinstance(cmd, str):
+            return self._refuse(cmd)
+        self.compiled_steps += 1
+        assert cmd.forces is not None and self._pose_row is not None
+        cmd.forces = self._limited(cmd.forces, self._pose_row, qd, desired[6:12], cmd.error)
+        return cmd
+
+    def _start_quintic(self, t: float, q: np.ndarray) -> None:
+        """Start the fixed goal's quintic at ``t`` [s] from the lengths ``q`` [m]."""
+        assert self._ctx is not None
+        T = QUINTIC_PEAK_SPEED * float(np.abs(self._q_star - q).max()) / \
+            self._ctx.max_speed if self.smooth_goal else 0.0
+        self._start = (t, T, q.tolist(), (self._q_star - q).tolist())
+
+    def _add_integral(self, desired: np.ndarray) -> None:
+        """The integral action folded into the desired leg acceleration ``q_ddot*``
+        (``+ Kp Ki int (q* - q) dt``; nothing without it)."""
+        if self.integral_gain:
+            desired[12:18] += self.kp * self.integral_gain * self._integral
+
+    def _limited(self, forces: np.ndarray, pose: np.ndarray, qd: np.ndarray,
+                 qd_s: np.ndarray, error: np.ndarray | None, over: bool | None = None
+                 ) -> np.ndarray:
+        """The forces [N] of an accepted step under the saturation strategy; the
+        integral of the leg error ``error`` (``q* - q`` [m]) advanced by the period
+        unless a leg's force is over its limit (anti-windup; ``over`` when known)."""
+        if over is None:
+            over = over_limit(forces, self._limit_list)
+        if self.integral_gain and not over and error is not None:
+            self._integral += error * self._dt
+        if not over:
+            return forces
+        bias = None
+        if self.saturation == "qp":
+            assert self._model is not None
+            bias = zero_acceleration_forces(self._model, pose, qd, coulomb_velocity=qd_s)
+        return saturated(self.saturation, forces, self._limit, bias)
+
+    def step_arrays(self, observations: ObservationBatch, out: CommandBatch) -> np.ndarray:
+        """The rows whose readings are finite through the compiled step in one C call
+        (:func:`~controllers.ctc_rows.evaluate_rows`); returns the other rows and those
+        whose result is not accepted (left to the trial's own step, which says why)."""
+        obs = observations
+        n = len(obs)
+        readings = finite_readings_rows(obs, self.trial_instances)
+        if readings is None:
+            return np.arange(n)
+        t, q_all, qd_all, finite = readings
+        rows = [(k, inst) for k, inst in finite if isinstance(inst, ComputedTorqueController)
+                and inst.prepare_row(float(t[k]), q_all[k], qd_all[k])]
+        slow = np.ones(n, dtype=bool)
+        if not rows:
+            return np.arange(n)
+        bound = self._bound
+        assert bound is not None
+        X = np.stack([inst.input_row for _, inst in rows])
+        Y, converged = evaluate_rows(bound.function, X, _POSE_IN, _POSE_OUT, _RESIDUAL,
+                                     FK_TOLERANCE, FK_MAX_CALLS)
+        accepted = np.flatnonzero(accepted_rows(Y, converged, _SOLVED, _FACTOR,
+                                                self.solver.threshold))
+        if len(accepted):
+            over = over_limits(Y[accepted, _FORCES],
+                               np.stack([rows[j][1].force_limit for j in accepted.tolist()]))
+            for j, o in zip(accepted.tolist(), over.tolist(), strict=True):
+                k, inst = rows[j]
+                inst.take_row(Y[j], q_all[k], qd_all[k], out, k, o)
+                slow[k] = False
+        return np.flatnonzero(slow)
+
+    def prepare_row(self, t: float, q: np.ndarray, qd: np.ndarray) -> bool:
+        """Write this period's readings, reference and pose guess into the input row
+        (False: the trial's own step decides, e.g. the nominal model fails)."""
+        if self._ctx is None or self._model is None or self._bound is None:
+            return False
+        row = self._bound.inputs
+        row["q"][:] = q
+        row["q_dot"][:] = qd
+        if self._start is None:
+            self._start_quintic(t, q)
+        desired = self._desired_row
+        try:
+            self._desired_into(t, desired)
+        except Exception:  # the trial's own step refuses with the reason
+            return False
+        self._add_integral(desired)
+        if not self._guess_in_row:
+            pose = self._pose
+            R0, p0 = home_pose(self._ctx.geometry) if pose is None else pose
+            row["pose"][0:9] = R0.T.ravel()
+            row["pose"][9:12] = p0
+            self._guess_in_row = True
+        return True
+
+    def take_row(self, y: np.ndarray, q: np.ndarray, qd: np.ndarray, out: CommandBatch,
+                  k: int, over: bool) -> None:
+        """Take the compiled step's accepted output row ``y`` as row ``k`` of ``out``
+        (``over``: a leg's force is over its limit); its pose is the next guess."""
+        assert self._bound is not None
+        pose = y[_POSE_OUT].copy()
+        self._bound.x[_POSE_IN] = pose  # the next step's guess
+        self._pose_row, self._guess_in_row = pose, True
+        self.compiled_steps += 1
+        desired = self._bound.x[_DESIRED]
+        e = desired[0:6] - q
+        assert out.forces is not None
+        out.forces[k] = self._limited(y[_FORCES], pose, qd, desired[6:12], e, over)
+        out.error_norm[k] = math.sqrt(e.dot(e))
 
     def _compiled_step(self, q: np.ndarray, qd: np.ndarray, q_s: np.ndarray,
-                       qd_s: np.ndarray, qdd_s: np.ndarray) -> Command | None:
-        """The step by :func:`compiled_ctc.joint_step` (rounding-level equal to
-        :meth:`_numpy_step`), or None off its happy path (FK not converged from the
-        previous pose, ``K`` rank-deficient, a singular inverse solve, a non-finite
-        value): the numpy path then decides, with its reasons."""
+                       qd_s: np.ndarray, qdd_s: np.ndarray) -> Command:
+        """The step by :func:`compiled_ctc.joint_step` from these readings and this
+        reference (a refusal with its reason off its happy path)."""
         assert self._bound is not None
         row = self._bound.inputs
         row["q"][:] = q
         row["q_dot"][:] = qd
         row["desired"][:] = (q_s, qd_s, qdd_s)
-        return self._compiled_core(q)
+        out = self._compiled_core(q)
+        return self._refuse(out) if isinstance(out, str) else out
 
-    def _compiled_core(self, q: np.ndarray) -> Command | None:
+    def _compiled_core(self, q: np.ndarray) -> Command | str:
         """:meth:`_compiled_step` with ``q``, ``q_dot`` and ``(q*, q_dot*, q_ddot*)``
-        already in the input row."""
+        already in the input row; off the happy path (FK not converged from the previous
+        pose within ``FK_MAX_CALLS`` calls, a singular inverse solve, a non-finite
+        value, ``K`` rank-deficient) the reason (:func:`~controllers.ctc_rows.refusal`),
+        the pose guess left as it was."""
         assert self._ctx is not None and self._bound is not None
         bound = self._bound
         pose_in, y, call = bound.inputs["pose"], bound.y, bound.call
@@ -319,54 +472,27 @@ class ComputedTorqueController(Controller):
         while not y[_RESIDUAL] < FK_TOLERANCE:  # Newton from the pose reached, as FK does
             self._guess_in_row = False
             if calls >= FK_MAX_CALLS or not math.isfinite(y[_RESIDUAL]):
-                return None
+                break
             pose_in[:] = y[_POSE_OUT]
             if call():
                 raise CompilationError(f"{bound.function.name}: the compiled function failed")
             calls += 1
-        if y[_SOLVED] != 1.0 or not math.isfinite(y.dot(y)):  # (the same ddot as y @ y)
-            return None
-        # the squared singular values of K: the eigenvalues of K^T K (LAPACK syevd)
-        w, _, info = _eigenvalues(y[_FACTOR].reshape(6, 6), 0)  # compute_v=0 (by position)
-        w_min, w_max = float(w[0]), float(w[-1])
-        if info != 0 or not (w_max > 0 and w_min > self.solver.threshold**2 * w_max):
-            return None
+        condition = None
+        converged = y[_RESIDUAL] < FK_TOLERANCE
+        if converged and y[_SOLVED] == 1.0 and math.isfinite(y.dot(y)):  # (ddot: y @ y)
+            condition = rank_condition(y[_FACTOR], self.solver.threshold)
+        if condition is None:
+            reason = refusal(y, bool(converged), float(y[_RESIDUAL]), _SOLVED, _FACTOR,
+                             self.solver.threshold)
+            assert reason is not None
+            return reason
         out = y.copy()
         pose_in[:] = out[_POSE_OUT]  # the next step's guess
         self._pose_row, self._guess_in_row = out[_POSE_OUT], True
         e = bound.x[_DESIRED][0:6] - q
         return Command(np.zeros(6), error=e, error_norm=math.sqrt(e.dot(e)), rank=6,
-                       condition=math.sqrt(w_max) / math.sqrt(w_min), features_used=6,
-                       active_constraints=[], notes=[], actuation=Actuation.FORCE,
-                       forces=out[_FORCES])
-
-    def _numpy_step(self, q: np.ndarray, qd: np.ndarray, q_s: np.ndarray,
-                    qd_s: np.ndarray, qdd_s: np.ndarray) -> Command:
-        """The step by numpy around the model's separate compiled calls (the reference
-        path)."""
-        assert self._ctx is not None and self._model is not None
-        try:
-            fk = forward_kinematics(self._ctx.geometry, q, guess=self._pose,
-                                    check_stroke=False)
-            R, p = fk.rotation, fk.translation
-            K = self._model.terms_batch(R[None], p[None], np.zeros((1, 6)))[2][0]
-            twist = np.linalg.solve(K, qd)
-            bias = self._model.legs_batch(R[None], p[None], twist[None])[1][0]
-            e = q_s - q
-            sol = self.solver.acceleration(-e, K, bias, twist, error_t=-qd_s,
-                                           error_tt=-qdd_s)
-            if sol.reason is not None:
-                return self._refuse(sol.reason)
-            a = K @ sol.acc + bias
-            f = self._model.inverse(R, p, twist, sol.acc) + drive_forces(self._model, a, qd,
-                                                                         qd_s)
-        except Exception as exc:  # the nominal model failed here: refuse with its reason
-            return self._refuse(f"nominal model failed: {exc}")
-        if not np.all(np.isfinite(f)):
-            return self._refuse(f"non-finite leg forces {f}")
-        self._pose = (R, p)
-        return Command.of_forces(f, error=e, error_norm=float(np.linalg.norm(e)),
-                                 rank=sol.rank, condition=sol.condition, features_used=6)
+                       condition=condition, features_used=6, active_constraints=[], notes=[],
+                       actuation=Actuation.FORCE, forces=out[_FORCES])
 
     def _refuse(self, problem: str) -> Command:
         return Command.refuse(f"{self.name}: {problem}", actuation=Actuation.FORCE)

@@ -31,14 +31,35 @@ from typing import Any
 
 import numpy as np
 
-from controllers.base import Command, Controller, ControllerContext, Goal, Observation
+from controllers.base import (
+    Command,
+    CommandBatch,
+    Controller,
+    ControllerContext,
+    Goal,
+    Observation,
+    ObservationBatch,
+)
+from controllers.ctc_rows import (
+    accepted_rows,
+    evaluate_rows,
+    finite_readings_rows,
+    over_limits,
+)
 from controllers.exceptions import ContextError
 from controllers.solvers.computed_torque import (
     ComputedTorqueSolver,
     SecondOrderGains,
+    checked_integral_gain,
     task_in_model_twist,
 )
-from controllers.task_ctc_compiled import CompiledTaskStep
+from controllers.solvers.saturation import (
+    checked_strategy,
+    over_limit,
+    saturated,
+    zero_acceleration_forces,
+)
+from controllers.task_ctc_compiled import FK_MAX_CALLS, CompiledTaskStep
 from controllers.tasks.base import Task, TaskState
 from hexapod.actuation import Actuation
 from hexapod.dynamics import DynamicModel
@@ -111,12 +132,18 @@ def _log(R: np.ndarray) -> np.ndarray:
 
 class TaskComputedTorque(Controller):
     """Computed torque on a task (see the module docstring). Subclasses set ``name``,
-    ``features`` and implement :meth:`measure`, :meth:`goal_pose` and :meth:`tasks_at`.
+    ``features`` and implement :meth:`measure`, :meth:`goal_pose` and :meth:`desired_at`.
 
     Args:
         natural_frequency: ``f_n`` [Hz] of the task error's second-order response.
         damping: Its damping ratio ``zeta``.
         smooth_goal: Reach a fixed goal along the quintic line (False: a step).
+        integral_gain: Integral action Ki [1/s] on the task error (default 0: none).
+            Stable below ``2 zeta omega_n``; the integral is held while a leg's force is
+            over its limit (anti-windup).
+        saturation: Forces over the drives' limit: "clip", "scale" or "qp" (default
+            "clip"). Each leg clipped (as the drives do), the force vector scaled, or the
+            acceleration scaled (:mod:`controllers.solvers.saturation`).
     """
 
     actuation = Actuation.FORCE
@@ -129,8 +156,16 @@ class TaskComputedTorque(Controller):
     compiled_fk = True
 
     def __init__(self, natural_frequency: float = NATURAL_FREQUENCY_HZ,
-                 damping: float = DAMPING, smooth_goal: bool = True) -> None:
+                 damping: float = DAMPING, smooth_goal: bool = True,
+                 integral_gain: float = 0.0, saturation: str = "clip") -> None:
         self.gains = SecondOrderGains.checked(self.name, natural_frequency, damping)
+        self.integral_gain = checked_integral_gain(self.name, integral_gain)
+        self.saturation = checked_strategy(self.name, saturation)
+        #: ``int e dt`` of each task row (integral action; sized at the first step).
+        self.integral = np.zeros(0)
+        #: The nominal drives' force limits [N].
+        self.force_limit = np.full(6, np.inf)
+        self.force_limit_list = self.force_limit.tolist()
         self.solver = ComputedTorqueSolver(self.gains)
         if not isinstance(smooth_goal, bool | np.bool_):
             raise ContextError(self.name, "smooth_goal", f"must be true or false, got "
@@ -158,10 +193,24 @@ class TaskComputedTorque(Controller):
         self.context = context
         self.model = DynamicModel(context.geometry)
         self.guess = None
+        self.integral = np.zeros(0)
+        self.force_limit = np.asarray(context.geometry.drives.force_limit, dtype=float)
+        self.force_limit_list = self.force_limit.tolist()
         self._pose_grid = None
         self.prepare(context)
         self.retarget_trial(context.goal)
         self.compiled = None if self.compiled_kind is None else CompiledTaskStep(self)
+
+    @property
+    def started(self) -> bool:
+        """Whether the law follows its reference (a fixed goal's line starts at the
+        first step)."""
+        return self._started
+
+    @property
+    def reference_start(self) -> float:
+        """The observation time [s] at which the reference's clock is 0."""
+        return self._t0
 
     def prepare(self, context: ControllerContext) -> None:
         """Per-trial checks and constants of a subclass (nothing by default)."""
@@ -259,6 +308,10 @@ class TaskComputedTorque(Controller):
                     cmd = compiled.step_written(self, observation, t - self._t0)
                 if cmd is not None:
                     self.compiled_steps += 1
+                    y = compiled.bound.y
+                    assert cmd.forces is not None
+                    cmd.forces = self.limited(cmd.forces, y[compiled.pose_block], qd,
+                                              y[compiled.error_block], compiled.used)
                     return cmd
             self.numpy_steps += 1
             m = self.measure(observation, q, qd)
@@ -269,6 +322,100 @@ class TaskComputedTorque(Controller):
             return self._command(t, m, qd)
         except Exception as exc:  # the nominal model failed here: refuse with its reason
             return self.refuse(f"nominal model failed: {exc}")
+
+    def step_arrays(self, observations: ObservationBatch, out: CommandBatch) -> np.ndarray:
+        """The rows of started trials with finite readings through the compiled step in
+        one C call (:func:`~controllers.ctc_rows.evaluate_rows`); returns the other rows
+        and those whose result is not accepted (left to the trial's own step, which
+        says why)."""
+        obs = observations
+        n = len(obs)
+        readings = finite_readings_rows(obs, self.trial_instances)
+        if readings is None:
+            return np.arange(n)
+        t, q_all, qd_all, finite = readings
+        rows: list[tuple[int, TaskComputedTorque]] = []
+        steps: list[CompiledTaskStep] = []
+        used: list[np.ndarray | None] = []
+        for k, inst in finite:
+            step = getattr(inst, "compiled", None)
+            if step is None or not inst.started or inst.model is None:
+                continue
+            step.views["q"][:] = q_all[k]
+            step.views["q_dot"][:] = qd_all[k]
+            try:
+                prepared = step.prepare(inst, obs.item(k), float(t[k]) - inst.reference_start)
+            except Exception:  # the trial's own step refuses with the reason
+                continue
+            if prepared is None:
+                continue
+            rows.append((k, inst))
+            steps.append(step)
+            used.append(prepared[0])
+        if not rows:
+            return np.arange(n)
+        first = steps[0]
+        X = np.stack([step.row for step in steps])
+        Y, converged = evaluate_rows(first.function, X, first.inputs["pose"],
+                                     first.outputs["pose"], first.outputs.index("fk_residual"),
+                                     first.tolerance, FK_MAX_CALLS)
+        forces, pose_out, error = (first.outputs[b] for b in ("forces", "pose", "error"))
+        slow = np.ones(n, dtype=bool)
+        assert out.forces is not None
+        accepted = np.flatnonzero(accepted_rows(Y, converged, first.outputs.index("solved"),
+                                                first.outputs["factor"],
+                                                self.solver.threshold))
+        if not len(accepted):
+            return np.flatnonzero(slow)
+        over = over_limits(Y[accepted, forces],
+                           np.stack([rows[j][1].force_limit for j in accepted.tolist()]))
+        for j, o in zip(accepted.tolist(), over.tolist(), strict=True):
+            k, inst = rows[j]
+            e = steps[j].take(inst, Y[j], used[j])
+            out.forces[k] = inst.limited(Y[j, forces], Y[j, pose_out], qd_all[k],
+                                         Y[j, error], used[j], o)
+            out.error_norm[k] = math.sqrt(e.dot(e))
+            inst.compiled_steps += 1
+            slow[k] = False
+        return np.flatnonzero(slow)
+
+    def integral_term(self, m: int) -> np.ndarray:
+        """(m,) ``Kp Ki int e dt`` of the task rows (the integral action's share of the
+        desired ``e_ddot``, subtracted from it)."""
+        if len(self.integral) != m:
+            self.integral = np.zeros(m)
+        return self.gains.kp * self.integral_gain * self.integral  # type: ignore[no-any-return]
+
+    def limited(self, forces: np.ndarray, pose: np.ndarray, qd: np.ndarray,
+                error: np.ndarray, used: np.ndarray | None, over: bool | None = None
+                ) -> np.ndarray:
+        """The forces [N] of an accepted step under the saturation strategy; the
+        integral of the task error ``error`` (m,) over the rows ``used`` (None: all)
+        advanced by the period unless a leg's force is over its limit (anti-windup).
+
+        Args:
+            forces: (6,) the control law's forces [N].
+            pose: (12,) the pose of the step (``R`` column-major, ``t`` [m]).
+            qd: (6,) measured leg velocities [m/s].
+            error: (m,) the task error of every row.
+            used: (m,) the rows used, or None.
+            over: Whether a leg's force is over its limit (None: found here).
+        """
+        if over is None:
+            over = over_limit(forces, self.force_limit_list)
+        if self.integral_gain and not over:
+            assert self.context is not None
+            if len(self.integral) != len(error):
+                self.integral = np.zeros(len(error))
+            step = np.where(np.isfinite(error), error, 0.0) * float(self.context.dt)
+            self.integral += step if used is None else np.where(used, step, 0.0)
+        if not over:
+            return forces
+        bias = None
+        if self.saturation == "qp":
+            assert self.model is not None and self.context is not None
+            bias = zero_acceleration_forces(self.model, pose, qd, hold=float(self.context.dt))
+        return saturated(self.saturation, forces, self.force_limit, bias)
 
     def encoder_pose(self, q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """The nominal forward kinematics of the lengths ``q`` [m] (warm-started at the
@@ -299,6 +446,9 @@ class TaskComputedTorque(Controller):
         if rate is not None and acc is not None:
             e_t, e_tt = (x[0] for x in task.reference_terms(m.state, twist_task[None],
                                                             rate[None], acc[None]))
+        if self.integral_gain:  # - Kp Ki int e dt in the desired e_ddot
+            term = self.integral_term(len(e))
+            e_tt = term if e_tt is None else e_tt + term
         rows = np.all(np.isfinite(L), axis=1) & np.isfinite(e) & np.isfinite(ldot)
         if e_t is not None and e_tt is not None:
             rows &= np.isfinite(e_t) & np.isfinite(e_tt)
@@ -314,6 +464,8 @@ class TaskComputedTorque(Controller):
                                   inverse_jacobian=m.inverse_jacobian)
         if not np.all(np.isfinite(f)):
             return self.refuse(f"non-finite leg forces {f}")
+        f = self.limited(f, np.concatenate([m.rotation.T.ravel(), m.translation]), qd, e,
+                         rows)
         notes = [] if m.note is None else [m.note]
         return Command.of_forces(f, error=e[rows], error_norm=float(np.linalg.norm(e[rows])),
                                  rank=sol.rank, condition=sol.condition,
@@ -327,14 +479,17 @@ class TaskComputedTorque(Controller):
 
 def encoder_readings(observation: Observation) -> tuple[float, np.ndarray, np.ndarray] | str:
     """The time [s], lengths [m] and leg velocities [m/s] of an observation, or why they
-    cannot be used (missing leg velocities, a non-finite value)."""
+    cannot be used (missing leg velocities, not 6 values, a non-finite value)."""
     t = float(observation.t)
     q = np.asarray(observation.lengths, dtype=float)
     if observation.q_dot is None:
         return ("needs the measured leg velocities (Observation.q_dot), which only the "
                 "dynamic world gives")
     qd = np.asarray(observation.q_dot, dtype=float)
-    if math.isfinite(t) and q.size and qd.size and math.isfinite(float(q @ q + qd @ qd)):
+    if q.shape != (6,) or qd.shape != (6,):
+        return (f"lengths and leg velocities: expected 6 values each, got shapes {q.shape} "
+                f"and {qd.shape}")
+    if math.isfinite(t) and math.isfinite(float(q @ q + qd @ qd)):
         return t, q, qd  # every value finite (a NaN or inf makes the sum of squares so)
     for what, x in (("time", np.array([t])), ("lengths", q), ("leg velocities", qd)):
         if x.size == 0 or not np.isfinite(x).all():

@@ -88,7 +88,10 @@ class CompiledTaskStep:
         self._error = out["error"]
         self._forces = out["forces"]
         self._pose = out["pose"]
-        self._tolerance = FK_TOLERANCE if self.fk else FIT_TOLERANCE
+        #: The output blocks of the pose and of the task error.
+        self.pose_block, self.error_block = self._pose, self._error
+        #: Pose residual below which the pose has converged.
+        self.tolerance = FK_TOLERANCE if self.fk else FIT_TOLERANCE
         law.compiled_constants(self)
 
     def _bind(self, row: np.ndarray) -> None:
@@ -101,6 +104,8 @@ class CompiledTaskStep:
         self.views = self.bound.inputs
         #: The guess whose pose the ``pose`` block holds (``_NO_GUESS``: none).
         self._guess_of: object = _NO_GUESS
+        #: The task rows the last prepared step uses (None: all).
+        self.used: np.ndarray | None = None
 
     def __getstate__(self) -> dict[str, object]:
         """Picklable: the compiled function and its binding (ctypes) are left out, the
@@ -143,23 +148,16 @@ class CompiledTaskStep:
     def step_written(self, law: TaskComputedTorque, observation: Observation, tr: float
                      ) -> Command | None:
         """:meth:`step` with ``q`` and ``q_dot`` already in the row."""
-        guess = law.guess
-        if guess is not self._guess_of:  # else the pose block holds its pose already
-            R0, t0 = guess if guess is not None else self.home
-            self.set_pose(R0, t0)
-            self._guess_of = guess
-        prepared = law.compiled_inputs(self, observation, tr, self.views["q"])
+        prepared = self.prepare(law, observation, tr)
         if prepared is None:
             return None
         rows, note = prepared
-        if rows is not None and int(rows.sum()) < 6:
-            return None
         bound = self.bound
         pose_in, y, call = self.views["pose"], bound.y, bound.call
         pose_out = self._pose
         if call():
             raise CompilationError(f"{self.function.name}: the compiled function failed")
-        residual, tolerance = self._residual, self._tolerance
+        residual, tolerance = self._residual, self.tolerance
         calls = 1
         while not y[residual] < tolerance:
             self._guess_of = _NO_GUESS
@@ -169,6 +167,42 @@ class CompiledTaskStep:
             if call():
                 raise CompilationError(f"{self.function.name}: the compiled function failed")
             calls += 1
+        accepted = self.accept(law, y, rows)
+        if accepted is None:
+            return None
+        e, condition = accepted
+        return Command(np.zeros(6), error=e, error_norm=math.sqrt(e.dot(e)), rank=6,
+                       condition=condition, features_used=len(e), active_constraints=[],
+                       notes=[] if note is None else [note], actuation=Actuation.FORCE,
+                       forces=y[self._forces].copy())
+
+    def prepare(self, law: TaskComputedTorque, observation: Observation, tr: float
+                ) -> tuple[np.ndarray | None, str | None] | None:
+        """Write the pose guess, the law's measurement and the reference at ``tr`` into
+        the row (``q`` and ``q_dot`` there already); the task rows to use (None: all) and
+        a note, or None off the happy path (no measurement, fewer than six rows)."""
+        guess = law.guess
+        if guess is not self._guess_of:  # else the pose block holds its pose already
+            R0, t0 = guess if guess is not None else self.home
+            self.set_pose(R0, t0)
+            self._guess_of = guess
+        prepared = law.compiled_inputs(self, observation, tr, self.views["q"])
+        if prepared is None:
+            return None
+        rows = prepared[0]
+        if rows is not None and int(rows.sum()) < 6:
+            return None
+        if law.integral_gain:
+            self.views["integral"][:] = law.integral_term(self.views["integral"].size)
+        self.used = rows
+        return prepared
+
+    def accept(self, law: TaskComputedTorque, y: np.ndarray, rows: np.ndarray | None
+               ) -> tuple[np.ndarray, float] | None:
+        """The task error (of the rows used) and the condition number of a converged
+        output row ``y`` when it is a command (inverse solve solved, every value finite,
+        full rank), and the pose it found taken as the next guess; None otherwise (the
+        row is left as it is)."""
         if y[self._solved] != 1.0 or not math.isfinite(y.dot(y)):  # (the ddot of y @ y)
             return None
         # the squared singular values of the masked Jacobian (LAPACK syevd of L^T L)
@@ -176,15 +210,17 @@ class CompiledTaskStep:
         w_min, w_max = float(w[0]), float(w[-1])
         if info != 0 or not (w_max > 0 and w_min > law.solver.threshold**2 * w_max):
             return None
-        pose = y[pose_out].copy()
-        pose_in[:] = pose  # the next step's guess
+        return self.take(law, y, rows), math.sqrt(w_max / w_min)
+
+    def take(self, law: TaskComputedTorque, y: np.ndarray, rows: np.ndarray | None
+             ) -> np.ndarray:
+        """The task error (of the rows used) of an accepted output row ``y``, its pose
+        taken as the next guess."""
+        pose = y[self._pose].copy()
+        self.views["pose"][:] = pose  # the next step's guess
         law.guess = self._guess_of = (pose[0:9].reshape(3, 3).T, pose[9:12])
         e = y[self._error]
-        e = e.copy() if rows is None else e[rows]
-        return Command(np.zeros(6), error=e, error_norm=math.sqrt(e.dot(e)), rank=6,
-                       condition=math.sqrt(w_max / w_min), features_used=len(e),
-                       active_constraints=[], notes=[] if note is None else [note],
-                       actuation=Actuation.FORCE, forces=y[self._forces].copy())
+        return e.copy() if rows is None else e[rows]  # type: ignore[no-any-return]
 
 
 __all__ = ["FIT_TOLERANCE", "FK_MAX_CALLS", "FK_TOLERANCE", "CompiledTaskStep"]

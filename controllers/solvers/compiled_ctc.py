@@ -20,9 +20,10 @@ expressions (:func:`hexapod.fk.newton_function` and
   reflected inertia, viscous and Coulomb terms (:func:`~controllers.solvers.
   computed_torque.drive_forces`).
 
-The caller keeps the numpy path for everything off the happy path (FK not converged,
-a rank-deficient ``K``, a singular inverse solve, a non-finite value): there the
-compiled result is discarded and the reference path decides.
+It is the law's only step: off the happy path (FK not converged, a rank-deficient
+``K``, a singular inverse solve, a non-finite value) the caller refuses with the reason
+its status outputs give (:func:`controllers.ctc_rows.refusal`); the numpy step it
+replaced is the tests' oracle (``tests/controllers/ctc_oracles.py``).
 
 Input row (:data:`INPUTS`): the ``pose`` guess ``R`` (9, column-major), ``t`` (3);
 ``q``, ``q_dot`` (6 each); ``desired``: ``q*``, ``q_dot*``, ``q_ddot*`` (3 x 6); the

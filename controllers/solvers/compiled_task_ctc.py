@@ -43,7 +43,8 @@ directions of the normals instead, ``unit(n_2 x n_1)``; for the directions kind 
 ``directions`` (6 x 3)), the task frame's ``base`` points ``A_i`` (6 x 3), the row
 ``mask`` (1 or 0), the ``frame`` from the base (``R`` row-major, ``p``: 12) and the
 ``reference_features``: the desired features, their rate and their acceleration (``m``
-each).
+each); last, the ``integral`` term (``m``: ``Kp Ki`` times the integral of the error,
+subtracted from the desired ``e_ddot``; zeros without integral action).
 
 Outputs: ``pose`` (12, as the input), ``K`` (36, column-major), ``fk_residual`` (max
 absolute length residual [m]), ``forces`` (6) [N], ``solved`` (1.0 when the inverse
@@ -108,7 +109,8 @@ def layout(kind: str, fk: bool = True) -> tuple[Layout, Layout]:
     out = (("pose", 12), ("K", 36), ("fk_residual", 1), ("forces", 6), ("solved", 1),
            ("error", m), ("factor", (6, 6)))
     name = f"task computed-torque {kind} {'fk' if fk else 'pose'}"
-    return Layout(_COMMON + extra, name + " input"), Layout(out, name + " output")
+    return (Layout((*_COMMON, *extra, ("integral", m)), name + " input"),
+            Layout(out, name + " output"))
 
 
 def _row_major(R: ca.SX) -> ca.SX:
@@ -269,7 +271,7 @@ def _build(kind: str, fk: bool, inverse_tolerance: float) -> ca.Function:
         e, L, ldot, e_t, e_tt = _feature_task(kind, v, q, tau_s)
     L_model = L @ G
     ldot = ldot + L @ gdot
-    rhs = -kd * (L_model @ twist + e_t) - kp * e - ldot - e_tt
+    rhs = -kd * (L_model @ twist + e_t) - kp * e - ldot - e_tt - v["integral"]
     if kind == "pose":
         acc = ca.solve(L_model, rhs)
         factor = L_model

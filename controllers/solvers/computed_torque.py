@@ -92,6 +92,18 @@ class SecondOrderGains:
         return 2 * self.damping * self.omega
 
 
+def checked_integral_gain(controller: str, integral_gain: float) -> float:
+    """A validated integral gain ``Ki`` [1/s] (0: no integral action).
+
+    Raises:
+        ContextError: Naming the option when it is negative or not finite.
+    """
+    ki = float(integral_gain)
+    if not (math.isfinite(ki) and ki >= 0):
+        raise ContextError(controller, "integral_gain", f"must be >= 0 and finite, got {ki}")
+    return ki
+
+
 @dataclass
 class Acceleration:
     """The solver's platform acceleration and its diagnostics.
@@ -262,6 +274,7 @@ __all__ = [
     "Acceleration",
     "ComputedTorqueSolver",
     "SecondOrderGains",
+    "checked_integral_gain",
     "drive_forces",
     "reference_terms",
     "task_in_model_twist",

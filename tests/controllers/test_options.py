@@ -97,7 +97,7 @@ def test_the_docs_table_is_the_real_output(capsys: pytest.CaptureFixture[str]) -
     block = doc[doc.index("$ hexapod-bench list --options vision-ctc"):]
     rows = [line for line in block[:block.index("```")].splitlines()
             if line.startswith("│")]
-    assert len(rows) == 3
+    assert len(rows) == 5
     assert main(["list", "--options", "vision-ctc"]) == 0
     out = capsys.readouterr().out.splitlines()
     assert rows == [line for line in out if line.startswith("│")]

@@ -18,6 +18,7 @@ import pytest
 from controllers import BUILTINS, registry
 from controllers.base import ENTRY_POINT_GROUP, Command, Observation
 from controllers.exceptions import PluginLoadError, UnknownControllerError
+from hexapod.actuation import Actuation
 from tests.controllers.controller_world import World, make_camera
 
 PLUGIN = "test-saturated-joints"
@@ -236,3 +237,116 @@ def test_malformed_observation_never_raises(name: str, world: World,
         if obs.lengths.shape != (6,) or ctrl.features - {"lengths"}:
             assert not cmd.ok and cmd.reason
             assert np.array_equal(cmd.velocities, np.zeros(6))
+
+
+# ----------------------------------------------------------------------------- force laws
+#: Every registered controller that commands leg forces (the dynamic world's force-mode
+#: drives): the same contract, with the measured leg velocities they need.
+FORCE_NAMES = [n for n in registry.names()
+               if getattr(registry.create(n), "actuation", None) is Actuation.FORCE]
+
+
+def _at_rest(obs: Observation) -> Observation:
+    """``obs`` with the leg velocities of a robot at rest (zeros)."""
+    obs.q_dot = np.zeros(6)
+    return obs
+
+
+def _force_controller(name: str, world: World, goal: tuple):  # type: ignore[no-untyped-def]
+    ctrl = registry.create(name)
+    ctrl.reset(world.context(world.goal(*goal), 0.02))
+    return ctrl
+
+
+def _check_forces(cmd: Command) -> None:
+    assert isinstance(cmd, Command)
+    assert cmd.actuation is Actuation.FORCE
+    f = np.asarray(cmd.forces)
+    assert f.shape == (6,)
+    assert np.all(np.isfinite(f))
+    assert np.isfinite(cmd.error_norm)
+
+
+def test_the_force_laws_are_found() -> None:
+    assert {"computed-torque", "cartesian-ctc", "vision-ctc", "leg-edge-ctc",
+            "leg-direction-ctc"} <= set(FORCE_NAMES)
+
+
+@pytest.mark.parametrize("name", FORCE_NAMES)
+def test_force_shapes_and_motion(name: str, world: World) -> None:
+    start, goal = _poses(world)
+    ctrl = _force_controller(name, world, goal)
+    cmd = ctrl.step(_at_rest(world.observation(*start)))
+    _check_forces(cmd)
+    assert cmd.ok, cmd.reason  # (a smooth goal starts where the robot is: no error yet)
+    assert np.abs(np.asarray(cmd.forces)).max() > 0
+
+
+@pytest.mark.parametrize("name", FORCE_NAMES)
+def test_force_laws_at_the_goal_hold_it(name: str, world: World) -> None:
+    """At the goal, at rest: a zero error, and the same holding forces every period."""
+    _, goal = _poses(world)
+    ctrl = _force_controller(name, world, goal)
+    forces = []
+    for k in range(3):
+        cmd = ctrl.step(_at_rest(world.observation(*goal, time=0.02 * k)))
+        _check_forces(cmd)
+        assert cmd.ok, cmd.reason
+        assert cmd.error_norm < 1e-9
+        forces.append(np.asarray(cmd.forces))
+    np.testing.assert_allclose(forces[1], forces[0], rtol=1e-9, atol=1e-9)
+    np.testing.assert_allclose(forces[2], forces[0], rtol=1e-9, atol=1e-9)
+
+
+@pytest.mark.parametrize("field", ["lengths", "normals", "directions", "t", "q_dot"])
+@pytest.mark.parametrize("name", FORCE_NAMES)
+def test_force_laws_refuse_a_nan(name: str, field: str, world: World) -> None:
+    start, goal = _poses(world)
+    ctrl = _force_controller(name, world, goal)
+    obs = _at_rest(world.observation(*start))
+    if field == "t":
+        obs.t = float("nan")
+    else:
+        value = np.array(getattr(obs, field), dtype=float)
+        value.flat[4] = np.nan
+        setattr(obs, field, value)
+    cmd = ctrl.step(obs)
+    _check_forces(cmd)
+    if field in ("lengths", "t", "q_dot"):
+        assert not cmd.ok and cmd.reason
+        assert np.array_equal(np.asarray(cmd.forces), np.zeros(6))
+    elif field in ctrl.features:  # refused, or the leg left out, visibly
+        clean = _force_controller(name, world, goal).step(_at_rest(world.observation(*start)))
+        assert (not cmd.ok and cmd.reason and not np.any(np.asarray(cmd.forces))) or \
+            cmd.features_used < clean.features_used or cmd.notes != clean.notes, cmd
+    else:  # a field the controller does not use must not stop it
+        assert cmd.ok, cmd.reason
+
+
+@pytest.mark.parametrize("name", FORCE_NAMES)
+def test_force_laws_without_leg_velocities_say_so(name: str, world: World) -> None:
+    start, goal = _poses(world)
+    ctrl = _force_controller(name, world, goal)
+    cmd = ctrl.step(world.observation(*start))  # no q_dot: a kinematic world's
+    _check_forces(cmd)
+    assert not cmd.ok and "leg velocities" in (cmd.reason or "")
+
+
+@pytest.mark.parametrize("name", FORCE_NAMES)
+def test_force_laws_never_raise_on_malformed_observations(name: str, world: World) -> None:
+    start, goal = _poses(world)
+    ctrl = _force_controller(name, world, goal)
+    good = world.observation(*start)
+    bad = [Observation(0.0, np.full(5, 0.4), q_dot=np.zeros(6)),
+           Observation(0.0, good.lengths, normals=np.zeros((6, 3)), lines=np.zeros((6, 3)),
+                       directions=np.zeros((6, 2, 3)), q_dot=np.zeros(6)),
+           Observation(0.0, good.lengths, normals=np.full((6, 2, 3), np.inf),
+                       directions=np.full((6, 3), np.inf), q_dot=np.zeros(6)),
+           Observation(0.0, good.lengths, q_dot=np.zeros(5))]
+    for obs in bad:
+        cmd = ctrl.step(obs)
+        _check_forces(cmd)
+        if obs.lengths.shape != (6,) or ctrl.features - {"lengths"} or \
+                np.shape(obs.q_dot) != (6,):
+            assert not cmd.ok and cmd.reason
+            assert np.array_equal(np.asarray(cmd.forces), np.zeros(6))

@@ -29,7 +29,7 @@ from scipy.linalg.lapack import dsyevd
 from controllers import registry
 from controllers.base import Command, Observation
 from controllers.cartesian_ctc import _every_direction, all_seen, directions_seen
-from controllers.solvers.compiled_task_ctc import layout, task_step
+from controllers.solvers.compiled_task_ctc import ROWS, layout, task_step
 from controllers.task_ctc import TaskComputedTorque, encoder_readings, finite_readings
 from controllers.task_ctc_compiled import FIT_TOLERANCE, FK_MAX_CALLS, FK_TOLERANCE
 from hexapod import deltalab, sample_poses
@@ -131,6 +131,7 @@ def _oracle(law: TaskComputedTorque, obs: Observation,
             ref = law.feature_reference(tr)  # type: ignore[attr-defined]
             assert np.isfinite(ref).all()
             fields["reference_features"] = np.asarray(ref).ravel()
+    fields["integral"] = np.zeros(ROWS[kind])  # no integral action
     assert set(fields) == set(inputs)
     for name, value in fields.items():
         row[inputs[name]] = value
@@ -146,7 +147,8 @@ def _oracle(law: TaskComputedTorque, obs: Observation,
     w, _, info = dsyevd(y[outputs["factor"]].reshape(6, 6), compute_v=0)
     assert info == 0
     e = y[outputs["error"]]
-    return Command.of_forces(y[outputs["forces"]], error=e, rank=6,
+    limit = np.asarray(d.force_limit, dtype=float)  # the default saturation: clip per leg
+    return Command.of_forces(np.clip(y[outputs["forces"]], -limit, limit), error=e, rank=6,
                              error_norm=math.sqrt(float(e @ e)),
                              condition=math.sqrt(float(w[-1] / w[0])),
                              features_used=len(e)), calls

@@ -20,8 +20,9 @@ BAD = {
         'controllers = [{name = "vision-ctc", natural_frequncy = 3.0}]\n'
         '[robot]\nworld = "dynamic"\n',
         "key 'controllers[0].natural_frequncy': controller 'vision-ctc' has no option "
-        "'natural_frequncy'; its options: natural_frequency, damping, smooth_goal "
-        "(hexapod-bench list --options vision-ctc) (did you mean 'natural_frequency'?)"),
+        "'natural_frequncy'; its options: natural_frequency, damping, smooth_goal, "
+        "integral_gain, saturation (hexapod-bench list --options vision-ctc) (did you mean "
+        "'natural_frequency'?)"),
     "[controller_options] typo": (
         'controllers = ["leg-edge", "joint-space"]\n[controller_options]\n'
         "adaptve_gain = [5.0, 1.0, 30.0]\n",

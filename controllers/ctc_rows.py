@@ -1,0 +1,149 @@
+"""The compiled computed-torque steps over the rows of a batch: one C call for every row
+(:meth:`hexapod.compiled.CompiledFunction.batch`), the forward kinematics' (or the
+rigid fit's) further Newton calls for the rows that have not converged, and each row's
+acceptance test (converged, inverse solve solved, every value finite, full rank).
+
+The computed-torque family (``computed-torque``, ``cartesian-ctc``, ``vision-ctc``,
+``leg-edge-ctc``, ``leg-direction-ctc``) keeps one state per trial (the pose guess, the
+reference's start); each trial's instance writes its row (:meth:`prepare_row` of the
+laws), :func:`evaluate_rows` evaluates the rows together, and the instance takes its
+result (:meth:`finish_row`). A row whose result is not accepted is left to its trial's
+own step, which says why (the same compiled function on the same row: the same
+numbers).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from typing import Any
+
+import numpy as np
+from scipy.linalg.lapack import dsyevd as _eigenvalues
+
+from controllers.data import ObservationBatch
+from hexapod.compiled import CompiledFunction
+
+
+def finite_readings_rows(observations: ObservationBatch, instances: Sequence[Any]
+                         ) -> tuple[np.ndarray, np.ndarray, np.ndarray,
+                                    list[tuple[int, Any]]] | None:
+    """The times (n,) [s], lengths and leg velocities (n, 6) [m, m/s] of a batch, and the
+    rows whose readings are all finite with their trial's instance (of ``instances``);
+    None without leg velocities."""
+    if observations.q_dot is None:
+        return None
+    t = np.asarray(observations.t, dtype=float)
+    q = np.asarray(observations.lengths, dtype=float)
+    qd = np.asarray(observations.q_dot, dtype=float)
+    finite = np.isfinite(t) & np.isfinite(q).all(axis=1) & np.isfinite(qd).all(axis=1)
+    trials = np.asarray(observations.trials, dtype=int)
+    rows = np.flatnonzero(finite).tolist()
+    return t, q, qd, [(k, instances[j]) for k, j in zip(rows, trials[rows].tolist(),
+                                                          strict=True)]
+
+
+def evaluate_rows(function: CompiledFunction, X: np.ndarray, pose_in: slice, pose_out: slice,
+                  residual: int, tolerance: float, max_calls: int) -> tuple[np.ndarray,
+                                                                            np.ndarray]:
+    """The compiled step of every row of ``X`` (n, n_in), called again from the pose
+    reached on the rows whose pose residual is not below ``tolerance`` (as the per-trial
+    steps do), at most ``max_calls`` calls in all.
+
+    Args:
+        function: The compiled step.
+        X: (n, n_in) input rows; their ``pose_in`` block is overwritten on the rows
+            called again.
+        pose_in: The pose guess's block in an input row.
+        pose_out: The pose's block in an output row.
+        residual: The index of the pose residual in an output row.
+        tolerance: Residual below which the pose has converged.
+        max_calls: Calls of the step per row at most.
+
+    Returns:
+        (n, n_out) the output rows and (n,) the mask of the rows whose pose converged.
+    """
+    Y = function.batch(X)
+    calls = 1
+    with np.errstate(invalid="ignore"):
+        pending = np.flatnonzero(~(Y[:, residual] < tolerance))
+        while len(pending) and calls < max_calls:
+            pending = pending[np.isfinite(Y[pending, residual])]
+            if not len(pending):
+                break
+            X[pending, pose_in] = Y[pending, pose_out]
+            Y[pending] = function.batch(X[pending])
+            calls += 1
+            pending = pending[~(Y[pending, residual] < tolerance)]
+        converged = Y[:, residual] < tolerance
+    return Y, converged  # type: ignore[return-value]
+
+
+def rank_condition(factor: np.ndarray, threshold: float) -> float | None:
+    """The condition number of a Jacobian from ``L^T L`` (36,), or None when it is
+    rank-deficient (its smallest squared singular value, an eigenvalue of ``L^T L`` by
+    LAPACK ``syevd``, not above ``threshold^2`` times the largest)."""
+    w, _, info = _eigenvalues(factor.reshape(6, 6), 0)  # compute_v=0 (by position)
+    w_min, w_max = float(w[0]), float(w[-1])
+    if info != 0 or not (w_max > 0 and w_min > threshold**2 * w_max):
+        return None
+    return math.sqrt(w_max) / math.sqrt(w_min)
+
+
+def accepted_rows(Y: np.ndarray, converged: np.ndarray, solved: int, factor: slice,
+                  threshold: float) -> np.ndarray:
+    """(n,) the output rows ``Y`` (n, n_out) that are commands: converged, ``solved``,
+    every value finite (their sum of squares finite, as :func:`refusal` checks one row)
+    and ``L^T L`` of full rank. The rank test of :func:`rank_condition` (LAPACK ``syevd``
+    row by row) decides every row whose eigenvalues, computed for all the rows at once
+    (``numpy.linalg.eigvalsh``), are not clearly above its threshold (four times it)."""
+    with np.errstate(invalid="ignore", over="ignore"):
+        ok = converged & (Y[:, solved] == 1.0) & np.isfinite(np.einsum("ij,ij->i", Y, Y))
+    idx = np.flatnonzero(ok)
+    if len(idx):
+        w = np.linalg.eigvalsh(Y[idx, factor].reshape(-1, 6, 6))
+        clear = (w[:, -1] > 0) & (w[:, 0] > 4.0 * threshold**2 * w[:, -1])
+        for j in idx[~clear].tolist():
+            ok[j] = rank_condition(Y[j, factor], threshold) is not None
+    return ok  # type: ignore[no-any-return]
+
+
+def over_limits(forces: np.ndarray, limits: np.ndarray) -> np.ndarray:
+    """(m,) the rows of ``forces`` (m, 6) [N] with a leg over its limit (``limits``
+    (m, 6) [N]; a NaN is not over)."""
+    return (np.abs(forces) > limits).any(axis=1)  # type: ignore[no-any-return]
+
+
+def refusal(y: np.ndarray, converged: bool, residual: float, solved: int, factor: slice,
+            threshold: float, pose_name: str = "forward kinematics of the lengths"
+            ) -> str | None:
+    """Why a compiled step's output row ``y`` is not a command (None: it is), from its
+    status outputs: the pose not converged, the inverse dynamics' solve not solved, a
+    non-finite value, a rank-deficient Jacobian (the eigenvalues of ``L^T L``).
+
+    Args:
+        y: The output row.
+        converged: Whether its pose converged (:func:`evaluate_rows`).
+        residual: Its pose residual.
+        solved: The index of the ``solved`` flag in the row.
+        factor: The block of ``L^T L`` (36) in the row.
+        threshold: Relative singular-value threshold of the rank test.
+        pose_name: What found the pose (named by the refusal).
+    """
+    if not converged:
+        return (f"nominal model failed: {pose_name} did not converge (residual "
+                f"{residual:.3g})")
+    if not math.isfinite(y.dot(y)):
+        bad = "leg forces" if np.isfinite(y[factor]).all() else "Jacobian"
+        return f"non-finite {bad} (numerical failure)"
+    if y[solved] != 1.0:
+        return "nominal model failed: singular inverse Jacobian (the inverse dynamics' solve)"
+    if rank_condition(y[factor], threshold) is None:
+        w = np.linalg.eigvalsh(y[factor].reshape(6, 6))
+        cond = math.sqrt(w[-1] / w[0]) if w[0] > 0 else math.inf
+        return f"Jacobian of rank < 6 (condition {cond:.3g})"
+    return None
+
+
+__all__ = ["accepted_rows", "evaluate_rows", "finite_readings_rows", "over_limits",
+           "rank_condition", "refusal"]

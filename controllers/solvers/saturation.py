@@ -1,0 +1,149 @@
+"""What a force controller does when its leg forces exceed the drives' limits.
+
+The computed-torque laws compute the forces of the designed error dynamics
+(:mod:`controllers.solvers.computed_torque`); a force-mode drive delivers at most its
+``force_limit`` and clips each leg on its own (:mod:`hexapod.dynamics.drive_model`). The
+option ``saturation`` says what the controller commands instead when a leg's force is
+over the NOMINAL limit (``context.geometry.drives.force_limit``):
+
+- ``"clip"`` (default, what the drives do anyway): each leg clipped to ``[-limit, limit]``
+  on its own; the direction of the force vector changes where a leg saturates;
+- ``"scale"``: the whole vector scaled by ``s = min_i limit_i / |f_i|`` so that the most
+  loaded leg is at its limit, the direction of the force vector kept;
+- ``"qp"``: the direction of the task acceleration kept: with ``f_0`` the forces the
+  nominal model needs at zero platform acceleration (gravity, velocity terms, friction)
+  and ``f`` those of the commanded acceleration, the forces ``f_0 + s (f - f_0)`` of the
+  acceleration scaled by ``s``, with ``s`` the solution of the one-variable QP
+  ``min (1 - s)^2`` subject to ``-limit <= f_0 + s (f - f_0) <= limit``, ``0 <= s <= 1``
+  (closed form: the largest feasible ``s``). When ``f_0`` alone is over a limit (no
+  ``s`` is feasible) the forces are clipped as ``"clip"``.
+
+Rows under every limit are returned unchanged (the same numbers, bit for bit).
+"""
+
+from __future__ import annotations
+
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+from controllers.exceptions import ContextError
+
+if TYPE_CHECKING:
+    from hexapod.dynamics import DynamicModel
+
+#: The strategies (module docstring).
+STRATEGIES = ("clip", "scale", "qp")
+
+
+def checked_strategy(controller: str, strategy: object) -> str:
+    """``strategy`` if it is one of :data:`STRATEGIES`.
+
+    Raises:
+        ContextError: Naming the option and the strategies.
+    """
+    if strategy not in STRATEGIES:
+        raise ContextError(controller, "saturation", f"expected one of "
+                           f"{', '.join(map(repr, STRATEGIES))}, got {strategy!r}")
+    return str(strategy)
+
+
+def over_limit(forces: np.ndarray, limit: np.ndarray | list[float]) -> bool:
+    """Whether a leg's force (6,) [N] is over its limit (6,) [N] (a NaN is not; the
+    limits may be given as a list, the per-step callers' cached one)."""
+    lim = limit.tolist() if isinstance(limit, np.ndarray) else limit
+    return any(abs(f) > m for f, m in zip(forces.tolist(), lim, strict=True))
+
+
+def clipped(forces: np.ndarray, limit: np.ndarray) -> np.ndarray:
+    """Each leg's force [N] clipped to ``[-limit, limit]`` on its own."""
+    return np.clip(forces, -limit, limit)  # type: ignore[no-any-return]
+
+
+def scaled(forces: np.ndarray, limit: np.ndarray) -> np.ndarray:
+    """The force vector [N] scaled by ``min(1, min_i limit_i / |f_i|)`` (its direction
+    kept)."""
+    f = np.asarray(forces, dtype=float)
+    a = np.abs(f)
+    over = a > limit
+    if not over.any():
+        return f
+    return f * float(np.min(limit[over] / a[over]))  # type: ignore[no-any-return]
+
+
+def acceleration_fraction(forces: np.ndarray, bias: np.ndarray, limit: np.ndarray
+                          ) -> float | None:
+    """The largest ``s`` in ``[0, 1]`` with ``|bias + s (forces - bias)| <= limit`` on every
+    leg (the solution of ``min (1 - s)^2`` over that interval), or None when even
+    ``s = 0`` is not feasible (``bias`` over a limit).
+
+    Args:
+        forces: (6,) forces of the commanded acceleration [N].
+        bias: (6,) forces at zero platform acceleration [N].
+        limit: (6,) the drives' limits [N], positive.
+    """
+    f0 = np.asarray(bias, dtype=float)
+    g = np.asarray(forces, dtype=float) - f0
+    if np.any(np.abs(f0) > limit) or not np.all(np.isfinite(g)):
+        return None
+    s = 1.0
+    for gi, f0i, li in zip(g.tolist(), f0.tolist(), limit.tolist(), strict=True):
+        if gi > 0.0:
+            s = min(s, (li - f0i) / gi)
+        elif gi < 0.0:
+            s = min(s, (-li - f0i) / gi)
+    return max(s, 0.0)
+
+
+def saturated(strategy: str, forces: np.ndarray, limit: np.ndarray,
+              bias: np.ndarray | None = None) -> np.ndarray:
+    """The forces [N] the controller commands under ``strategy`` (module docstring).
+
+    Args:
+        strategy: One of :data:`STRATEGIES`.
+        forces: (6,) the forces of the control law [N].
+        limit: (6,) the nominal drives' limits [N].
+        bias: (6,) the forces at zero platform acceleration [N] (``"qp"`` only; needed
+            when a leg is over its limit).
+    """
+    if not over_limit(forces, limit):
+        return forces
+    if strategy == "scale":
+        return scaled(forces, limit)
+    if strategy == "qp":
+        if bias is None:
+            raise ValueError("saturation 'qp': the forces at zero acceleration are needed")
+        s = acceleration_fraction(forces, bias, limit)
+        if s is not None:
+            return clipped(bias + s * (forces - bias), limit)  # (rounding at the limit)
+    return clipped(forces, limit)
+
+
+def zero_acceleration_forces(model: DynamicModel, pose: np.ndarray, q_dot: np.ndarray,
+                             coulomb_velocity: np.ndarray | None = None, hold: float = 0.0
+                             ) -> np.ndarray:
+    """The nominal forces [N] at zero platform acceleration (``f_0`` of ``"qp"``): the
+    mechanism's gravity and velocity terms at the twist ``K^-1 q_dot``, the drives'
+    reflected inertia at the legs' bias acceleration ``K_dot tau``, their viscous and
+    Coulomb friction (:meth:`~controllers.solvers.computed_torque.ComputedTorqueSolver.
+    forces` with a zero acceleration).
+
+    Args:
+        model: The NOMINAL dynamic model.
+        pose: (12,) ``R`` (column-major) and ``t`` [m], as the compiled steps give it.
+        q_dot: (6,) measured leg velocities [m/s].
+        coulomb_velocity: As :meth:`ComputedTorqueSolver.forces` (None: ``q_dot + hold a``).
+        hold: The control period [s].
+    """
+    from controllers.solvers.computed_torque import ComputedTorqueSolver
+
+    R, t = pose[0:9].reshape(3, 3).T, pose[9:12]
+    K = model.terms_batch(R[None], t[None], np.zeros((1, 6)))[2][0]
+    twist = np.linalg.solve(K, q_dot)
+    f, _ = ComputedTorqueSolver.forces(model, R, t, twist, np.zeros(6), q_dot,
+                                       coulomb_velocity, hold)
+    return f
+
+
+__all__ = ["STRATEGIES", "acceleration_fraction", "checked_strategy", "clipped",
+           "over_limit", "saturated", "scaled", "zero_acceleration_forces"]

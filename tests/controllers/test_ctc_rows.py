@@ -1,0 +1,91 @@
+"""The computed-torque family over a batch (:mod:`controllers.ctc_rows`): every row of a
+batch tracking a reference goes through the one compiled call (``step_arrays`` leaves no
+row to the trials' own steps), with the commands of the per-trial step to the last bit,
+trial by trial; a row the compiled step cannot finish is left to its trial's step."""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+import pytest
+
+from controllers import registry
+from controllers.base import CommandBatch, ObservationBatch
+from hexapod import HexapodGeometry
+from hexapod.actuation import Actuation
+from hexapod.dynamics.robots import DynamicRobots
+from tests.controllers.ctc_world import DT, CtcWorld, ideal_drives, line_reference
+
+LAWS = ("computed-torque", "cartesian-ctc", "vision-ctc", "leg-edge-ctc",
+        "leg-direction-ctc")
+
+
+def _batch(world: CtcWorld, robots: DynamicRobots, t: float) -> ObservationBatch:
+    """The observations of the robots' rows at ``t`` [s] as one batch."""
+    rows = []
+    for k in range(len(robots.R)):
+        one = DynamicRobots([world.truth], robots.R[k:k + 1].copy(), robots.t[k:k + 1].copy())
+        one.twist[:] = robots.twist[k:k + 1]
+        rows.append(ObservationBatch.of(world.observation(one, t)))
+    def stacked(field: str) -> np.ndarray | None:
+        values = [getattr(r, field) for r in rows]
+        return None if values[0] is None else np.concatenate(values)
+
+    return ObservationBatch(
+        np.arange(len(rows)), np.array([t] * len(rows)),
+        *(stacked(f) for f in ("lengths", "normals", "lines", "directions", "edge_visible",
+                               "direction_visible")),
+        None, stacked("q_dot"))
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("name", LAWS)
+def test_every_row_in_one_call_and_equal_to_the_trials_steps(geometry: HexapodGeometry,
+                                                             name: str) -> None:
+    truth = ideal_drives(geometry)
+    world = CtcWorld.make(truth)
+    R0, t0, R1, t1, ref = line_reference(truth, "quintic", (0.5, -0.3, 0.4))
+    ctx = world.context(world.goal(R1, t1), reference=ref)
+    n = 3
+    starts = [(R0, t0 + np.array([0.0, 0.001 * k, 0.0])) for k in range(n)]
+    robots = DynamicRobots([truth] * n, np.array([s[0] for s in starts]),
+                           np.array([s[1] for s in starts]))
+    robots.drives.mode = "force"
+    batch = registry.create(name)
+    batch.reset_batch([ctx] * n)
+    singles = [registry.create(name) for _ in range(n)]
+    for s in singles:
+        s.reset(ctx)
+    for k in range(8):
+        obs = _batch(world, robots, k * DT)
+        out = CommandBatch.zeros(n, Actuation.FORCE)
+        left = batch.step_arrays(obs, out)
+        assert left.tolist() == [], f"step {k}: rows {left.tolist()} left to the trials"
+        assert out.forces is not None
+        for j, s in enumerate(singles):
+            cmd = s.step(obs.item(j))
+            assert cmd.reason is None
+            assert out.forces[j].tobytes() == np.asarray(cmd.forces).tobytes()
+            assert out.error_norm[j] == cmd.error_norm
+        assert not robots.advance(np.arange(n), out.forces, DT / 20, 20).any()
+
+
+@pytest.mark.slow
+def test_a_row_without_leg_rates_is_left_to_its_trial(geometry: HexapodGeometry) -> None:
+    truth = ideal_drives(geometry)
+    world = CtcWorld.make(truth)
+    R0, t0, R1, t1, ref = line_reference(truth, "quintic", (0.5, -0.3, 0.4))
+    ctx = world.context(world.goal(R1, t1), reference=ref)
+    robots = DynamicRobots([truth] * 2, np.array([R0, R0]), np.array([t0, t0]))
+    obs = _batch(world, robots, 0.0)
+    assert obs.q_dot is not None
+    obs = dataclasses.replace(obs, q_dot=obs.q_dot.copy())
+    obs.q_dot[1, 2] = np.nan
+    law = registry.create("computed-torque")
+    law.reset_batch([ctx, ctx])
+    out = CommandBatch.zeros(2, Actuation.FORCE)
+    assert law.step_arrays(obs, out).tolist() == [1]
+    full = law.step_batch(obs)
+    assert full.reasons[0] is None
+    assert full.reasons[1] is not None and "leg velocities" in full.reasons[1]
