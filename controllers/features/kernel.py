@@ -2,7 +2,7 @@
 compiled to C like the built-in cores (:mod:`controllers.law_kernel`).
 
 The same generic law as the built-ins, on the feature's own block: per leg the error and
-interaction ``(e_i, L_i)`` of :meth:`LegFeature.block <controllers.features.feature.LegFeature.block>`,
+interaction ``(e_i, L_i)`` of :meth:`~controllers.features.feature.LegFeature.block`,
 weighted (0: the leg is left out exactly), accumulated into ``N = L^T W L`` and
 ``b = L^T W e`` (:class:`~controllers.law_algebra.WeightedNormal`), then the shared law
 tail (:func:`~controllers.law_algebra.law_tail`: adaptive gain, rank and condition,
