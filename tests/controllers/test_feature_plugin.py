@@ -20,8 +20,8 @@ from controllers.base import ObservationBatch
 from controllers.exceptions import ContextError, OptionError
 from controllers.features import FeatureTask
 from controllers.law_kernel import LawKernel
-from controllers.tracking import TrackingController
 from controllers.tasks import TaskState
+from controllers.tracking import TrackingController
 from hexapod import HexapodGeometry
 from hexapod.actuation import Actuation
 from hexapod.compiled import CompiledFunction
@@ -44,9 +44,11 @@ def _goal_pose(geometry: HexapodGeometry) -> tuple[np.ndarray, np.ndarray]:
     return R0 @ exp_so3(np.deg2rad([2.0, -1.5, 1.0])), t0 + np.array([0.01, -0.008, 0.006])
 
 
+@pytest.mark.slow
 def test_one_file_gives_four_controllers_by_module_path() -> None:
     """The plugin file alone names the four controllers; the registry builds them from
-    their ``module:attr`` path like any plugin."""
+    their ``module:attr`` path like any plugin (slow: the registry looks up the
+    distribution of a module named on the command line, about 2 s)."""
     names = {c.name for c in JOINTS.all()}
     assert names == {"platform-joint-pinv", "platform-joint-qp", "platform-joint-mpc",
                      "platform-joint-ctc"}
@@ -148,15 +150,15 @@ def test_bad_goal_and_options_are_named(world: World) -> None:
     R1, t1 = _goal_pose(world.geometry)
     goal = world.goal(R1, t1)
     ctrl = JOINTS.pinv()
-    with pytest.raises(ContextError, match="goal.lengths"):
+    with pytest.raises(ContextError, match=r"goal\.lengths"):
         ctrl.reset(world.context(dataclasses.replace(goal, lengths=None), 0.02))
-    with pytest.raises(ContextError, match="goal.directions"):
+    with pytest.raises(ContextError, match=r"goal\.directions"):
         ctrl.reset(world.context(dataclasses.replace(goal, directions=None), 0.02))
     with pytest.raises(OptionError, match="model"):
         JOINTS.mpc(model="global")
     with pytest.raises(OptionError, match="interaction"):
         JOINTS.qp(interaction="mean")
-    with pytest.raises(ContextError, match="goal.lengths"):
+    with pytest.raises(ContextError, match=r"goal\.lengths"):
         JOINTS.ctc().reset(world.context(dataclasses.replace(goal, lengths=None), 0.02))
 
 
