@@ -12,12 +12,12 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from controllers.features.ctc import FeatureCTC
+from controllers.features.ctc import FeatureComputedTorque
 from controllers.features.feature import FeatureTask, LegFeature
 from controllers.features.kernel import feature_law_kernel
 from controllers.features.laws import FeatureLaw, FeatureMPC, FeatureQPLaw
 
-__all__ = ["FeatureCTC", "FeatureControllers", "FeatureLaw", "FeatureMPC", "FeatureQPLaw",
+__all__ = ["FeatureComputedTorque", "FeatureControllers", "FeatureLaw", "FeatureMPC", "FeatureQPLaw",
            "FeatureTask", "LegFeature", "controllers_for", "feature_law_kernel"]
 
 
@@ -29,7 +29,7 @@ class FeatureControllers:
     pinv: type[FeatureLaw]
     qp: type[FeatureQPLaw]
     mpc: type[FeatureMPC]
-    ctc: type[FeatureCTC]
+    ctc: type[FeatureComputedTorque]
 
     def all(self) -> tuple[type, ...]:
         """The four classes."""
@@ -58,4 +58,4 @@ def controllers_for(feature: LegFeature, module: str | None = None) -> FeatureCo
         pinv=make(FeatureLaw, "pinv", "PseudoInverse", {}),
         qp=qp,
         mpc=make(FeatureMPC, "mpc", "MPC", {"law_class": qp}),
-        ctc=make(FeatureCTC, "ctc", "ComputedTorque", {}))
+        ctc=make(FeatureComputedTorque, "ctc", "ComputedTorque", {}))

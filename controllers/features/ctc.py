@@ -32,7 +32,7 @@ from controllers.tasks import Task
 _DUMMY = np.array([0.0, 0.0, 1.0])
 
 
-class FeatureCTC(LegDirectionCTC):
+class FeatureComputedTorque(LegDirectionCTC):
     """Computed torque on a leg feature (see the module docstring); the class's
     ``feature`` is set by :func:`~controllers.features.controllers_for`.
 

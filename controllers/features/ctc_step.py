@@ -40,7 +40,7 @@ from hexapod.dynamics.model import INVERSE_TOLERANCE
 from hexapod.workspace import home_pose
 
 if TYPE_CHECKING:
-    from controllers.features.ctc import FeatureCTC
+    from controllers.features.ctc import FeatureComputedTorque
 
 
 def ctc_layouts(feature: LegFeature) -> tuple[Layout, Layout]:
@@ -115,7 +115,7 @@ class FeatureTaskStep(CompiledTaskStep):
         law: The law, reset (its context and nominal model built).
     """
 
-    def __init__(self, law: FeatureCTC) -> None:
+    def __init__(self, law: FeatureComputedTorque) -> None:
         assert law.context is not None and law.model is not None
         self.feature = law.feature
         self.kind = law.feature.name
