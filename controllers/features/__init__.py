@@ -17,8 +17,8 @@ from controllers.features.feature import FeatureTask, LegFeature
 from controllers.features.kernel import feature_law_kernel
 from controllers.features.laws import FeatureLaw, FeatureMPC, FeatureQPLaw
 
-__all__ = ["FeatureComputedTorque", "FeatureControllers", "FeatureLaw", "FeatureMPC", "FeatureQPLaw",
-           "FeatureTask", "LegFeature", "controllers_for", "feature_law_kernel"]
+__all__ = ["FeatureComputedTorque", "FeatureControllers", "FeatureLaw", "FeatureMPC",
+           "FeatureQPLaw", "FeatureTask", "LegFeature", "controllers_for", "feature_law_kernel"]
 
 
 @dataclass(frozen=True)
