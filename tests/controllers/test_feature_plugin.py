@@ -226,3 +226,22 @@ def test_computed_torque_tracks_a_line_with_a_rotation(ctc_world: CtcWorld) -> N
     assert pos.max() < 30e-6, pos.max()
     assert ang.max() < np.deg2rad(0.005), np.rad2deg(ang.max())
     assert pos[-1] < 2e-6 and ang[-1] < np.deg2rad(1e-4)
+
+
+def test_a_hidden_leg_is_left_out(world: World) -> None:
+    """Leg 2 never seen (NaN direction, marked hidden): the law steps on the five others
+    (its rows weight 0 in the compiled core, its direction for ``J_inv`` from the goal's
+    approximation then the estimate) and still reaches the goal."""
+    R1, t1 = _goal_pose(world.geometry)
+    ctrl = JOINTS.pinv(gain=2.0)
+    ctrl.reset(world.context(world.goal(R1, t1), 0.02))
+
+    def hide(obs, k):  # type: ignore[no-untyped-def]
+        obs.directions = obs.directions.copy()
+        obs.directions[2] = np.nan
+        obs.direction_visible = np.arange(6) != 2
+
+    run = closed_loop(world, ctrl, home_pose(world.geometry), (R1, t1), 0.02, 200, hide=hide)
+    assert "using 5 of 6 legs" in run.commands[0].notes
+    assert run.commands[0].features_used == 15
+    assert run.position_errors[-1] < 10e-6, run.position_errors[-1]
