@@ -15,6 +15,7 @@ controller.MPCLaw`, whose local problem depends on the tasks only through ``L^T 
 
 from __future__ import annotations
 
+import functools
 from collections.abc import Sequence
 from typing import Any, ClassVar
 
@@ -127,16 +128,16 @@ class FeatureQPLaw(FeatureLaw):
 
 
 class FeatureMPC(MPCLaw):
-    """Predictive control of a leg feature with the local model (see :class:`MPCLaw` for
-    the options; ``model`` must be ``"local"``: the global model predicts the built-in
-    features from a pose)."""
+    """Predictive control of a leg feature with the local model (the options of
+    :class:`~controllers.mpc.controller.MPCLaw`; ``model`` must be ``"local"``: the
+    global model predicts the built-in features from a pose)."""
 
+    @functools.wraps(MPCLaw.__init__)
     def __init__(self, *args: Any, **options: Any) -> None:
-        model = options.get("model", args[1] if len(args) > 1 else "local")
-        if model != "local":
-            raise OptionError(self.name, "model", f"a feature's predictive controller has the "
-                              f"local model only, got {model!r}")
         super().__init__(*args, **options)
+        if self.model != "local":
+            raise OptionError(self.name, "model", f"a feature's predictive controller has the "
+                              f"local model only, got {self.model!r}")
 
     def _feature_kind(self) -> str:
         # The local problem reads the tasks through N, b and J_inv only: the leg-direction

@@ -245,3 +245,17 @@ def test_a_hidden_leg_is_left_out(world: World) -> None:
     assert "using 5 of 6 legs" in run.commands[0].notes
     assert run.commands[0].features_used == 15
     assert run.position_errors[-1] < 10e-6, run.position_errors[-1]
+
+
+def test_options_are_the_built_in_laws() -> None:
+    """Each generated controller declares the options of the built-in law of its solver
+    (``hexapod-bench list --options``, the scenario checks)."""
+    from controllers.options import option_table
+
+    expected = {"pinv": {"gain", "adaptive_gain", "threshold", "damping", "compiled"},
+                "qp": {"gain", "stroke_margin", "max_speed", "regularization"},
+                "mpc": {"horizon", "model", "effort_weight", "max_iter", "drive_model"},
+                "ctc": {"natural_frequency", "damping", "smooth_goal"}}
+    for which, names in expected.items():
+        table = option_table(getattr(JOINTS, which))
+        assert names <= set(table.names), (which, table.names)
