@@ -132,7 +132,7 @@ class FeatureMPC(MPCLaw):
     :class:`~controllers.mpc.controller.MPCLaw`; ``model`` must be ``"local"``: the
     global model predicts the built-in features from a pose)."""
 
-    @functools.wraps(MPCLaw.__init__)
+    @functools.wraps(MPCLaw.__init__)  # type: ignore[misc]  # (its declared options)
     def __init__(self, *args: Any, **options: Any) -> None:
         super().__init__(*args, **options)
         if self.model != "local":
