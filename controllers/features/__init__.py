@@ -13,9 +13,9 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 from controllers.features.ctc import FeatureComputedTorque
-from controllers.features.feature import FeatureTask, LegFeature
-from controllers.features.kernel import feature_law_kernel
 from controllers.features.laws import FeatureLaw, FeatureMPC, FeatureQPLaw
+from controllers.law_kernel import feature_law_kernel
+from controllers.tasks.leg_feature import FeatureTask, LegFeature
 
 __all__ = ["FeatureComputedTorque", "FeatureControllers", "FeatureLaw", "FeatureMPC",
            "FeatureQPLaw", "FeatureTask", "LegFeature", "controllers_for", "feature_law_kernel"]

@@ -1,4 +1,4 @@
-"""Computed torque on a :class:`~controllers.features.feature.LegFeature` (``<name>-ctc``).
+"""Computed torque on a :class:`~controllers.tasks.leg_feature.LegFeature` (``<name>-ctc``).
 
 The law of ``leg-direction-ctc`` (:class:`~controllers.feature_ctc.LegDirectionCTC`: the
 encoders' pose and twist for the NOMINAL dynamic model, the legs seen by the camera,
@@ -9,7 +9,7 @@ reference pose trajectory seen by the estimated camera, with its rate and accele
 by automatic differentiation (:attr:`LegFeature.motion_function`), anchored at the taught
 value (``s* = s_taught + s_model(t) - s_model(end)``). Each period is one call of the
 feature's compiled step (:mod:`controllers.features.ctc_step`); off its happy path the
-numpy task (:class:`~controllers.features.feature.FeatureTask`) decides, as for the
+numpy task (:class:`~controllers.tasks.leg_feature.FeatureTask`) decides, as for the
 built-ins.
 """
 
@@ -25,8 +25,8 @@ from controllers.cartesian_ctc import all_seen, directions_seen
 from controllers.exceptions import ContextError
 from controllers.feature_ctc import LegDirectionCTC
 from controllers.features.ctc_step import FeatureTaskStep
-from controllers.features.feature import FeatureTask, LegFeature
 from controllers.tasks import Task
+from controllers.tasks.leg_feature import FeatureTask, LegFeature
 
 #: A unit vector standing in for a hidden leg's direction (its rows are not used).
 _DUMMY = np.array([0.0, 0.0, 1.0])

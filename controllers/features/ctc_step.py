@@ -1,4 +1,4 @@
-"""The computed-torque step of a :class:`~controllers.features.feature.LegFeature` as one
+"""The computed-torque step of a :class:`~controllers.tasks.leg_feature.LegFeature` as one
 compiled function, composed like the built-in task steps
 (:mod:`controllers.solvers.compiled_task_ctc`) from the same symbolic parts:
 
@@ -26,7 +26,6 @@ from typing import TYPE_CHECKING
 import casadi as ca
 import numpy as np
 
-from controllers.features.feature import LegFeature
 from controllers.solvers.compiled_ctc import (
     sx_encoder_pose,
     sx_mechanism_forces,
@@ -34,6 +33,7 @@ from controllers.solvers.compiled_ctc import (
 )
 from controllers.solvers.compiled_task_ctc import _COMMON, FK_CALLS, _model_twist
 from controllers.task_ctc_compiled import FK_TOLERANCE, CompiledTaskStep
+from controllers.tasks.leg_feature import LegFeature
 from hexapod.compiled import CompiledFunction, Layout
 from hexapod.dynamics.drive_model import COULOMB_SMOOTHING
 from hexapod.dynamics.model import INVERSE_TOLERANCE

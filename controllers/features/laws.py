@@ -1,10 +1,10 @@
-"""The first-order controllers of a :class:`~controllers.features.feature.LegFeature`:
+"""The first-order controllers of a :class:`~controllers.tasks.leg_feature.LegFeature`:
 pseudo-inverse, limit QP and predictive, through the feature's compiled core.
 
 A feature law is the built-in leg-direction law (:class:`~controllers.leg_direction.
 LegDirectionController`: its reading of observations, visibility, dead reckoning of
 hidden legs, batched rows through the lean compiled core) whose compiled core is the
-feature's (:func:`~controllers.features.kernel.feature_law_kernel`) and whose desired
+feature's (:func:`~controllers.law_kernel.feature_law_kernel`) and whose desired
 value is the feature of the goal's legs (``goal.directions`` and ``goal.lengths``). The
 solver makes the controller: the damped pseudo-inverse (``-pinv``), the limit QP of
 the built-in QP laws (``-qp``, :class:`~controllers.solvers.limit_qp.LimitQPSolver`),
@@ -23,11 +23,11 @@ import numpy as np
 
 from controllers.base import ControllerContext, GoalBatch
 from controllers.exceptions import ContextError, OptionError
-from controllers.features.feature import LegFeature
-from controllers.features.kernel import feature_law_kernel
+from controllers.law_kernel import feature_law_kernel
 from controllers.leg_direction import LegDirectionController
 from controllers.mpc.controller import MPCLaw
 from controllers.solvers.limit_qp import LimitQPSolver
+from controllers.tasks.leg_feature import LegFeature
 
 
 class FeatureLaw(LegDirectionController):
@@ -37,7 +37,7 @@ class FeatureLaw(LegDirectionController):
     Args:
         gain: Constant gain ``lambda`` [1/s].
         adaptive_gain: ``(lambda0, lambda_inf, lambda0')`` (overrides ``gain``).
-        interaction: ``"current"`` (the only one of a feature law).
+        interaction: ``"current"``, ``"desired"`` (at the legs' goal state) or ``"mean"``.
         threshold: Relative singular-value threshold (rank test).
         damping: Pseudo-inverse damping.
         compiled: Evaluate the feature's core compiled to C (False: the CasADi virtual
@@ -50,10 +50,6 @@ class FeatureLaw(LegDirectionController):
     def __init__(self, gain: float = 1.0, adaptive_gain: Sequence[float] | None = None,
                  interaction: str = "current", threshold: float = 1e-6,
                  damping: float = 0.0, compiled: bool = True) -> None:
-        if interaction != "current":
-            raise OptionError(self.name, "interaction",
-                              f"a feature law evaluates L at the current features only, got "
-                              f"{interaction!r}")
         super().__init__(gain, adaptive_gain, interaction, threshold, damping, compiled)
         self._f_star = np.zeros((6, self.feature.rows))
 
@@ -87,8 +83,11 @@ class FeatureLaw(LegDirectionController):
         self._goal_visible = vis
         self._fill = us
         self._goal_all_visible = bool(vis.all())
-        kernel = self._reuse_kernel(lambda: feature_law_kernel(self.feature, self.compiled))
+        kernel = self._reuse_kernel(lambda: feature_law_kernel(self.feature, self.interaction,
+                                                               self.compiled))
         kernel.set("desired", self._f_star)
+        if "desired_directions" in kernel.inputs:  # the legs' goal state (DESIRED / MEAN)
+            kernel.set("desired_directions", us)
         kernel.set("base_points", self._A)
         kernel.set("weights", vis)
         self.kernel = kernel

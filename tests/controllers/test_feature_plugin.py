@@ -157,7 +157,7 @@ def test_bad_goal_and_options_are_named(world: World) -> None:
     with pytest.raises(OptionError, match="model"):
         JOINTS.mpc(model="global")
     with pytest.raises(OptionError, match="interaction"):
-        JOINTS.qp(interaction="mean")
+        JOINTS.qp(interaction="sideways")
     with pytest.raises(ContextError, match=r"goal\.lengths"):
         JOINTS.ctc().reset(world.context(dataclasses.replace(goal, lengths=None), 0.02))
 
@@ -259,3 +259,15 @@ def test_options_are_the_built_in_laws() -> None:
     for which, names in expected.items():
         table = option_table(getattr(JOINTS, which))
         assert names <= set(table.names), (which, table.names)
+
+
+@pytest.mark.parametrize("interaction", ["desired", "mean"])
+def test_desired_and_mean_interactions_converge(world: World, interaction: str) -> None:
+    """``L`` at the legs' goal state (the goal's directions and lengths), or the mean of
+    both: the same goal reached, through the feature's core of that interaction."""
+    R1, t1 = _goal_pose(world.geometry)
+    ctrl = JOINTS.pinv(gain=2.0, interaction=interaction)
+    ctrl.reset(world.context(world.goal(R1, t1), 0.02))
+    assert ctrl.kernel.function.name == f"hexapod_platform_joint_law_{interaction}"
+    run = closed_loop(world, ctrl, home_pose(world.geometry), (R1, t1), 0.02, 200)
+    assert run.position_errors[-1] < 10e-6, run.position_errors[-1]

@@ -1,27 +1,31 @@
-"""A leg feature as a plugin defines it: one CasADi expression per leg, in one place.
+"""A leg feature defined once, as a CasADi expression: the built-in leg directions and a
+plugin's own feature alike.
 
 A :class:`LegFeature` is a function of ONE leg seen in the camera frame: its unit
 direction ``u_i``, its length ``q_i`` and its (estimated) base point ``A_i``, e.g. the
-platform joint ``B_i = A_i + q_i u_i`` (``tests/controllers/plugin_feature_joints.py``),
-the leg direction ``u_i`` or the length ``q_i``. The feature is written ONCE, symbolically
-(:meth:`LegFeature.value`, optionally :meth:`LegFeature.error`); everything the
-controllers need is derived from it by automatic differentiation (CasADi):
+leg direction ``u_i`` (:data:`controllers.tasks.leg_direction.LEG_DIRECTIONS`), the
+platform joint ``B_i = A_i + q_i u_i`` (``tests/controllers/plugin_feature_joints.py``)
+or the length ``q_i``. The feature is written ONCE, symbolically (:meth:`LegFeature.value`,
+optionally :meth:`LegFeature.error`, and :meth:`LegFeature.block` where a closed form
+exists); everything the controllers need is derived from it by automatic
+differentiation (CasADi):
 
 - the desired value from a goal's leg directions and lengths (:meth:`LegFeature.desired`);
 - the block of one leg, error ``e`` and interaction ``L`` with ``e_dot = L tau`` (the
   leg moving with the platform twist ``tau = (v, w)`` by
-  :func:`~controllers.tasks.base.leg_rates`, ``docs/math.md`` §3): :meth:`LegFeature.block`;
+  :func:`~controllers.tasks.base.leg_rates`, ``docs/math.md`` §3): :meth:`LegFeature.block`,
+  from which :func:`controllers.law_kernel.feature_law_function` generates the law core
+  (the built-in leg-direction law's included);
 - the second-order term ``L_dot tau`` and the reference terms ``e_t``, ``e_tt`` of a
   moving desired value (:func:`~controllers.tasks.base.second_order_function`,
   :func:`~controllers.tasks.base.reference_function`);
 - the feature along a pose trajectory with its rate and acceleration (the computed-torque
-  reference, :meth:`LegFeature.motion_function`).
+  reference, :attr:`LegFeature.motion_function`).
 
 From a feature, :func:`controllers.features.controllers_for` builds the pseudo-inverse,
-limit-QP, predictive and computed-torque controllers, each through a compiled kernel
-(:mod:`controllers.features.kernel`, :mod:`controllers.features.ctc_step`), and
-:class:`FeatureTask` is its numpy :class:`~controllers.tasks.base.Task` (the
-computed-torque law's fallback path and the tests' oracle).
+limit-QP, predictive and computed-torque controllers, and :class:`FeatureTask` is its
+numpy :class:`~controllers.tasks.base.Task` (the computed-torque law's fallback path and
+the tests' oracle).
 """
 
 from __future__ import annotations
@@ -73,6 +77,17 @@ class LegFeature(ABC):
         """The error (``rows``, 1) of a feature ``f`` towards ``f_star`` (``f - f*``)."""
         return f - f_star
 
+    #: Law-core inputs giving the legs' desired state, where the DESIRED or MEAN
+    #: interaction evaluates ``L`` (:meth:`desired_state`).
+    desired_state_inputs: tuple[tuple[str, int], ...] = (("desired_directions", 18),
+                                                         ("desired_lengths", 6))
+
+    def desired_state(self, inputs: dict[str, ca.SX], leg: int) -> tuple[ca.SX, ca.SX]:
+        """The desired direction (3, 1) and length of leg ``leg`` from the law core's
+        inputs (by name: :attr:`desired_state_inputs`)."""
+        return (inputs["desired_directions"][3 * leg:3 * leg + 3],
+                inputs["desired_lengths"][leg])
+
     # ------------------------------------------------------------------ derived
     def _leg_error(self, s: ca.SX, p: ca.SX) -> ca.SX:
         """Error of the leg state ``s = (u, q)`` with parameters ``p = (A, f*)``."""
@@ -90,19 +105,28 @@ class LegFeature(ABC):
         return ca.Function(f"{self.c_name}_value", [u, q, A], [self.value(u, q, A)])
 
     @cached_property
-    def block_function(self) -> ca.Function:
-        """``(u, q, A, f*) -> (e, L)`` of one leg: ``L`` (rows, 6), ``e_dot = L tau``."""
+    def _derived_block(self) -> ca.Function:
+        """``(u, q, A, f*) -> (e, L)`` by automatic differentiation of :meth:`error`."""
         u, A, fs = ca.SX.sym("u", 3), ca.SX.sym("A", 3), ca.SX.sym("f_star", self.rows)
         q, tau = ca.SX.sym("q"), ca.SX.sym("tau", 6)
         s, p = ca.vertcat(u, q), ca.vertcat(A, fs)
         e = self._leg_error(s, p)
         L = ca.jacobian(ca.jtimes(e, s, self._leg_rate(s, p, tau)), tau)
-        return ca.Function(f"{self.c_name}_block", [u, q, A, fs], [e, L])
+        return ca.Function(f"{self.c_name}_derived_block", [u, q, A, fs], [e, L])
 
     def block(self, u: ca.SX, q: ca.SX, A: ca.SX, f_star: ca.SX) -> tuple[ca.SX, ca.SX]:
-        """Error (rows, 1) and interaction (rows, 6) of one leg (symbolic)."""
-        e, L = self.block_function(u, q, A, f_star)
+        """Error (rows, 1) and interaction (rows, 6) of one leg (symbolic): by automatic
+        differentiation of :meth:`error` along the leg's motion; a feature with a closed
+        form may return it instead (the same values)."""
+        e, L = self._derived_block(u, q, A, f_star)
         return e, L
+
+    @cached_property
+    def block_function(self) -> ca.Function:
+        """``(u, q, A, f*) -> (e, L)`` of :meth:`block`: ``L`` (rows, 6), ``e_dot = L tau``."""
+        u, A, fs = ca.SX.sym("u", 3), ca.SX.sym("A", 3), ca.SX.sym("f_star", self.rows)
+        q = ca.SX.sym("q")
+        return ca.Function(f"{self.c_name}_block", [u, q, A, fs], list(self.block(u, q, A, fs)))
 
     @cached_property
     def second_order(self) -> ca.Function:
