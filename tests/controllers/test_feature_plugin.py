@@ -271,3 +271,33 @@ def test_desired_and_mean_interactions_converge(world: World, interaction: str) 
     assert ctrl.kernel.function.name == f"hexapod_platform_joint_law_{interaction}"
     run = closed_loop(world, ctrl, home_pose(world.geometry), (R1, t1), 0.02, 200)
     assert run.position_errors[-1] < 10e-6, run.position_errors[-1]
+
+
+def test_computed_torque_with_hidden_legs(ctc_world: CtcWorld) -> None:
+    """Leg 4 hidden all along: its rows are masked in the compiled step and the goal is
+    reached; four legs hidden (two left, 6 rows of rank < 6): a refusal naming the rank."""
+    R0, t0 = home_pose(ctc_world.truth)
+    goal = t0 + np.array([0.002, -0.001, 0.0015])
+    ctrl = JOINTS.ctc(smooth_goal=False)
+    ctrl.reset(ctc_world.context(ctc_world.goal(R0, goal)))
+
+    def hide(legs: np.ndarray):  # type: ignore[no-untyped-def]
+        def edit(obs, k):  # type: ignore[no-untyped-def]
+            u = np.array(obs.directions)
+            u[legs] = np.nan
+            return dataclasses.replace(obs, directions=u, normals=None,
+                                       direction_visible=~legs)
+        return edit
+
+    one = np.arange(6) == 4
+    p, _, cmds = ctc_world.run(ctrl, (R0, t0), 150, edit=hide(one))
+    assert np.linalg.norm(p[-1] - goal) < 1e-6
+    assert cmds[-1].features_used == 15
+    assert ctrl.compiled_steps == 149
+    few = np.array([True, True, False, True, False, True])
+    from hexapod.dynamics.robots import DynamicRobots
+
+    robot = DynamicRobots([ctc_world.truth], R0[None].copy(), t0[None].copy())
+    cmd = ctrl.step(hide(few)(ctc_world.observation(robot, 150 * DT), 0))
+    assert cmd.reason is not None and "rank" in cmd.reason, cmd.reason
+    np.testing.assert_array_equal(cmd.values, np.zeros(6))
