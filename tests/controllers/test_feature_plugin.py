@@ -103,7 +103,7 @@ def test_first_order_controllers_converge_through_the_compiled_core(
     10 um in 200 periods, every step through the feature's compiled core (the MPC through
     the compiled local problem, never falling back)."""
     cls = getattr(JOINTS, which)
-    ctrl = cls(gain=2.0, horizon=5) if which == "mpc" else cls(gain=2.0)
+    ctrl = cls(gain=2.0)  # (the MPC: horizon 10, the compiled problem of leg-direction-mpc)
     R1, t1 = _goal_pose(world.geometry)
     ctrl.reset(world.context(world.goal(R1, t1), 0.02))
     law = ctrl.law if which == "mpc" else ctrl
