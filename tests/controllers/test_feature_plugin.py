@@ -11,6 +11,8 @@ from __future__ import annotations
 
 import dataclasses
 import math
+from collections.abc import Iterator
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -301,3 +303,34 @@ def test_computed_torque_with_hidden_legs(ctc_world: CtcWorld) -> None:
     cmd = ctrl.step(hide(few)(ctc_world.observation(robot, 150 * DT), 0))
     assert cmd.reason is not None and "rank" in cmd.reason, cmd.reason
     np.testing.assert_array_equal(cmd.values, np.zeros(6))
+
+
+@pytest.fixture
+def registered() -> Iterator[None]:
+    """The plugin's controllers registered under their names (removed after)."""
+    saved = (dict(registry._factories), dict(registry._info))
+    for cls in JOINTS.all():
+        registry.register(cls.name, cls, "tests", "0")
+    try:
+        yield
+    finally:
+        registry._factories, registry._info = saved
+
+
+@pytest.mark.parametrize("camera", ["perspective", "unified"])
+@pytest.mark.parametrize("which", ["pinv", "qp", "mpc"])
+def test_registry_contract(which: str, camera: str, other_geometry: HexapodGeometry,
+                           registered: None) -> None:
+    """The registry-generated contract checks of ``test_registry.py`` (shapes and motion,
+    zero error, NaN in each field, malformed observations) on the plugin's velocity
+    controllers, registered as a plugin's are."""
+    from tests.controllers import test_registry as contract
+
+    name = getattr(JOINTS, which).name
+    world = World(other_geometry, make_camera(camera, other_geometry))
+    contract.test_shapes_and_motion(name, world, Path())
+    contract.test_zero_error_gives_zero_command(name, world, Path())
+    for field in ("lengths", "normals", "lines", "directions", "t"):
+        contract.test_nan_observation_gives_zero_command_with_reason(name, field, world,
+                                                                     Path())
+    contract.test_malformed_observation_never_raises(name, world, Path())
