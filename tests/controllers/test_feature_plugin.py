@@ -334,3 +334,15 @@ def test_registry_contract(which: str, camera: str, other_geometry: HexapodGeome
         contract.test_nan_observation_gives_zero_command_with_reason(name, field, world,
                                                                      Path())
     contract.test_malformed_observation_never_raises(name, world, Path())
+
+
+@pytest.mark.parametrize("which", ["pinv", "qp", "mpc"])
+def test_tracking_a_batch(which: str, registered: None) -> None:
+    """``test_tracking.py``'s batch check on the plugin's controllers: four trials tracking
+    circles (a new goal each period, hidden features at random, a NaN time, a trial
+    missing from some steps) through one :class:`TrackingController` over the batch give
+    the commands of one per trial stepped alone, to the last bit."""
+    from tests.controllers import test_tracking as tracking
+
+    tracking.test_tracking_a_batch_gives_the_rows_of_one_tracking_controller_per_trial(
+        getattr(JOINTS, which).name, {})
