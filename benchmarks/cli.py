@@ -117,6 +117,7 @@ PERF_MODULES = {
     "study": "benchmarks.perf.study",
     "dynamics": "benchmarks.perf.dynamics",
     "dynamic-world": "benchmarks.perf.dynamic_world",
+    "features": "benchmarks.perf.features",
 }
 
 

@@ -3,7 +3,9 @@
 A ``step`` of a vision law is a few hundred floating-point operations spread
 over some sixty numpy calls; on this scale the cost is the calls, not the
 arithmetic. The core is therefore written once as a CasADi SX expression, from the
-tasks' own block definitions (:func:`controllers.tasks.leg_direction.direction_block`,
+tasks' own block definitions (the leg features' :meth:`~controllers.tasks.leg_feature.
+LegFeature.block` through :func:`feature_law_function`, the built-in leg directions'
+included: :func:`controllers.tasks.leg_direction.direction_block`,
 :func:`controllers.tasks.leg_edge.edge_block`,
 :func:`controllers.tasks.joint_length.inverse_jacobian_row`), generated to C, compiled
 by the system C compiler and called through :mod:`ctypes` on preallocated buffers by
@@ -55,15 +57,17 @@ from controllers.law_algebra import (
     jacobi_eigen,
     law_tail,
 )
-from controllers.tasks.leg_direction import direction_block
+from controllers.tasks.leg_direction import LEG_DIRECTIONS
 from controllers.tasks.leg_edge import edge_block, leg_direction_of_edges, normal_of_line
+from controllers.tasks.leg_feature import LegFeature
 from hexapod.compiled import CompiledFunction, Layout
 
 __all__ = [
     "DIRECTION_INPUTS", "EDGE_INPUTS", "JACOBI_SWEEPS", "LAW_INPUTS", "LAW_OUTPUTS",
     "LAW_SWEEPS", "LawKernel", "LawResult", "cholesky_solve", "direction_inputs",
-    "direction_kernel", "edge_inputs", "edge_law_kernel", "full_rank_certificate",
-    "jacobi_eigen", "law_layouts", "law_tail",
+    "direction_kernel", "edge_inputs", "edge_law_kernel", "feature_inputs",
+    "feature_law_function", "feature_law_kernel", "full_rank_certificate", "jacobi_eigen",
+    "law_layouts", "law_tail",
 ]
 
 #: Where a core evaluates the interaction matrix (:data:`controllers.law_tools.INTERACTIONS`).
@@ -77,13 +81,23 @@ LAW_INPUTS = (("gain", 3), ("threshold2", 1), ("damping2", 1))
 _LEG_INPUTS = (("leg_directions", 18), ("measured", 6))
 
 
+def feature_inputs(feature: LegFeature, interaction: str = "current"
+                   ) -> tuple[tuple[str, int], ...]:
+    """The law core's block of a leg feature: measured ``u`` (6 x 3), the desired feature
+    (6 x rows), ``A`` (6 x 3), ``q``, the weights (6), :data:`_LEG_INPUTS`, and for the
+    DESIRED / MEAN interaction the legs' desired state
+    (:attr:`~controllers.tasks.leg_feature.LegFeature.desired_state_inputs`)."""
+    block = (("features", 18), ("desired", 6 * feature.rows), ("base_points", 18),
+             ("lengths", 6), ("weights", 6), *_LEG_INPUTS)
+    return block if interaction == "current" else (*block, *feature.desired_state_inputs)
+
+
 def direction_inputs(interaction: str = "current") -> tuple[tuple[str, int], ...]:
-    """The direction law's feature block: measured ``u`` (6 x 3), desired ``u*``, ``A``
-    (6 x 3), ``q``, the weights (6), :data:`_LEG_INPUTS`, and for the DESIRED / MEAN
-    interaction the lengths ``q*`` where it is evaluated."""
-    block = (("features", 18), ("desired", 18), ("base_points", 18), ("lengths", 6),
-             ("weights", 6), *_LEG_INPUTS)
-    return block if interaction == "current" else (*block, ("desired_lengths", 6))
+    """The direction law's feature block (:func:`feature_inputs` of
+    :data:`~controllers.tasks.leg_direction.LEG_DIRECTIONS`): measured ``u`` (6 x 3),
+    desired ``u*``, ``A`` (6 x 3), ``q``, the weights (6), :data:`_LEG_INPUTS`, and for
+    the DESIRED / MEAN interaction the lengths ``q*`` where it is evaluated."""
+    return feature_inputs(LEG_DIRECTIONS, interaction)
 
 
 def edge_inputs(interaction: str = "current") -> tuple[tuple[str, int], ...]:
@@ -136,32 +150,55 @@ def _leg_directions(v: dict[str, ca.SX], measured: list[ca.SX]) -> list[ca.SX]:
                                                                          strict=True))]
 
 
-def _direction_function(interaction: str = "current", lean: bool = False) -> ca.Function:
-    """Leg-direction law: ``e_i = u_i x u_i*``, ``L_i = -[u_i*]_x M_i`` (docs/math.md §3, §6)."""
+def feature_law_function(feature: LegFeature, interaction: str = "current",
+                         lean: bool = False, name: str | None = None) -> ca.Function:
+    """The law core of a leg feature (the leg-direction law's is that of
+    :data:`~controllers.tasks.leg_direction.LEG_DIRECTIONS`): per leg the feature's block
+    ``(e_i, L_i)`` (:meth:`~controllers.tasks.leg_feature.LegFeature.block`; for the
+    DESIRED / MEAN interaction ``L_i`` at the legs' desired state, or the mean),
+    weighted into ``N`` and ``b``, then :func:`law_tail`.
+
+    Args:
+        feature: The feature.
+        interaction: Where ``L`` is evaluated (:data:`CORE_INTERACTIONS`).
+        lean: The batched laws' core (:func:`law_tail`).
+        name: The function's name (default from the feature's).
+    """
     _check_interaction(interaction)
-    inputs = law_layouts(direction_inputs(interaction), 18, "direction law")[0]
+    r = feature.rows
+    inputs = law_layouts(feature_inputs(feature, interaction), 6 * r, f"{feature.name} law")[0]
     x = ca.SX.sym("x", inputs.size)
     v = inputs.split(x)
     u = _rows(v["features"], 6)
-    us = _rows(v["desired"], 6)
+    star = [v["desired"][r * i:r * i + r] for i in range(6)]
     A = _rows(v["base_points"], 6)
     q = [v["lengths"][i] for i in range(6)]
     w = v["weights"]
     acc = WeightedNormal()
     errors = []
     for i in range(6):
-        ei, L = direction_block(u[i], us[i], A[i], q[i])
+        ei, L = feature.block(u[i], q[i], A[i], star[i])
         if interaction != "current":
-            _, Ld = direction_block(us[i], us[i], A[i], v["desired_lengths"][i])
+            us, qs = feature.desired_state(v, i)
+            _, Ld = feature.block(us, qs, A[i], star[i])
             L = Ld if interaction == "desired" else 0.5 * (Ld + L)
         acc.add_dense(ei, L, w[i])
         errors.append(ei)
     directions = _leg_directions(v, u)
     tail = law_tail(ca.vertcat(*acc.used_errors), acc.N, acc.b, directions, A,
                     x[inputs["gain"].start:], lean)
-    name = "hexapod_direction_law_w" + ("" if interaction == "current" else f"_{interaction}")
-    name += "_lean" if lean else ""
+    if name is None:
+        name = f"hexapod_{feature.c_name}_law" + (
+            "" if interaction == "current" else f"_{interaction}") + ("_lean" if lean else "")
     return ca.Function(name, [x], [ca.vertcat(*errors, *tail, *directions)])
+
+
+def _direction_function(interaction: str = "current", lean: bool = False) -> ca.Function:
+    """Leg-direction law: ``e_i = u_i x u_i*``, ``L_i = -[u_i*]_x M_i`` (docs/math.md §3, §6),
+    the core of :data:`~controllers.tasks.leg_direction.LEG_DIRECTIONS`."""
+    name = "hexapod_direction_law_w" + ("" if interaction == "current" else f"_{interaction}")
+    return feature_law_function(LEG_DIRECTIONS, interaction, lean,
+                                name + ("_lean" if lean else ""))
 
 
 def _edge_function(use_lines: bool, interaction: str = "current",
@@ -345,3 +382,31 @@ def edge_law_kernel(use_lines: bool, interaction: str = "current",
     _check_interaction(interaction)
     return LawKernel(_edge_compiled(use_lines, interaction, False, compiled),
                      lambda: _edge_compiled(use_lines, interaction, True, compiled))
+
+
+def _feature_compiled(feature: LegFeature, interaction: str, lean: bool,
+                      compiled: bool) -> CompiledFunction:
+    """The compiled core of a feature (kept on the feature: its instances share it)."""
+    cache = feature.__dict__.setdefault("_compiled_cores", {})
+    key = ("law", interaction, lean, compiled)
+    if key not in cache:
+        inputs, outputs = law_layouts(feature_inputs(feature, interaction), 6 * feature.rows,
+                                      f"{feature.name} law")
+        cache[key] = CompiledFunction(feature_law_function(feature, interaction, lean),
+                                      compiled, inputs, outputs)
+    return cache[key]  # type: ignore[no-any-return]
+
+
+def feature_law_kernel(feature: LegFeature, interaction: str = "current",
+                       compiled: bool = True) -> LawKernel:
+    """A kernel of a leg feature's law (its own input buffer; the compiled code is kept
+    on the feature and cached on disk by content hash).
+
+    Args:
+        feature: The feature.
+        interaction: Where the interaction matrix is evaluated (:data:`CORE_INTERACTIONS`).
+        compiled: C code (False: the CasADi virtual machine evaluates the same core).
+    """
+    _check_interaction(interaction)
+    return LawKernel(_feature_compiled(feature, interaction, False, compiled),
+                     lambda: _feature_compiled(feature, interaction, True, compiled))

@@ -10,14 +10,18 @@ tasks. Every method is batched over a leading trial axis.
 - :class:`LegDirectionTask`: ``u x u*`` (seeds 001/003);
 - :class:`LegEdgeTask`: ``n x n*`` or ``l x l*`` (seeds 002/003);
 - :class:`JointLengthTask`: ``q - q*``;
-- :class:`PlatformPoseTask`: ``(t - t*, log(R R*^T))``.
+- :class:`PlatformPoseTask`: ``(t - t*, log(R R*^T))``;
+- :class:`LegFeature`: any feature of each leg written once as a CasADi expression (the
+  leg directions :data:`~controllers.tasks.leg_direction.LEG_DIRECTIONS`, a plugin's
+  own), with :class:`FeatureTask` its task (``docs/plugins.md``, "Adding a feature").
 """
 
 from controllers.tasks.base import Task, TaskState
 from controllers.tasks.joint_length import JointLengthTask
 from controllers.tasks.leg_direction import LegDirectionTask
 from controllers.tasks.leg_edge import LegEdgeTask
+from controllers.tasks.leg_feature import FeatureTask, LegFeature
 from controllers.tasks.platform_pose import PlatformPoseTask
 
-__all__ = ["JointLengthTask", "LegDirectionTask", "LegEdgeTask", "PlatformPoseTask", "Task",
-           "TaskState"]
+__all__ = ["FeatureTask", "JointLengthTask", "LegDirectionTask", "LegEdgeTask", "LegFeature",
+           "PlatformPoseTask", "Task", "TaskState"]

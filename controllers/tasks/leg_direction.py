@@ -24,6 +24,7 @@ from controllers.tasks.base import (
     reference_function,
     sx_skew,
 )
+from controllers.tasks.leg_feature import LegFeature
 
 
 def direction_block(u: ca.SX, desired: ca.SX, base_point: ca.SX, length: ca.SX
@@ -125,3 +126,30 @@ class LegDirectionTask(Task):
         e_t, e_tt = evaluate_reference(reference_block(), s.reshape(6 * n, 4), p, tau, pd,
                                        pdd)
         return e_t.reshape(n, 18), e_tt.reshape(n, 18)
+
+
+class LegDirections(LegFeature):
+    """The leg directions as a :class:`~controllers.tasks.leg_feature.LegFeature`:
+    ``f_i = u_i``, error ``u_i x u_i*``, block :func:`direction_block` (the closed form);
+    the desired state of the DESIRED / MEAN interaction is ``(u_i*, q_i*)``, the desired
+    feature itself and the goal lengths."""
+
+    name = "leg-direction"
+    rows = 3
+    desired_state_inputs = (("desired_lengths", 6),)
+
+    def value(self, u: ca.SX, q: ca.SX, A: ca.SX) -> ca.SX:
+        return u
+
+    def error(self, f: ca.SX, f_star: ca.SX) -> ca.SX:
+        return ca.cross(f, f_star)
+
+    def block(self, u: ca.SX, q: ca.SX, A: ca.SX, f_star: ca.SX) -> tuple[ca.SX, ca.SX]:
+        return direction_block(u, f_star, A, q)
+
+    def desired_state(self, inputs: dict[str, ca.SX], leg: int) -> tuple[ca.SX, ca.SX]:
+        return inputs["desired"][3 * leg:3 * leg + 3], inputs["desired_lengths"][leg]
+
+
+#: The leg directions (the feature of ``leg-direction``'s compiled law core).
+LEG_DIRECTIONS = LegDirections()

@@ -1,0 +1,144 @@
+"""The first-order controllers of a :class:`~controllers.tasks.leg_feature.LegFeature`:
+pseudo-inverse, limit QP and predictive, through the feature's compiled core.
+
+A feature law is the built-in leg-direction law (:class:`~controllers.leg_direction.
+LegDirectionController`: its reading of observations, visibility, dead reckoning of
+hidden legs, batched rows through the lean compiled core) whose compiled core is the
+feature's (:func:`~controllers.law_kernel.feature_law_kernel`) and whose desired
+value is the feature of the goal's legs (``goal.directions`` and ``goal.lengths``). The
+solver makes the controller: the damped pseudo-inverse (``-pinv``), the limit QP of
+the built-in QP laws (``-qp``, :class:`~controllers.solvers.limit_qp.LimitQPSolver`),
+or the predictive controller with the local model (``-mpc``, :class:`~controllers.mpc.
+controller.MPCLaw`, whose local problem depends on the tasks only through ``L^T L``,
+``L^T e`` and ``J_inv``: the built-in compiled problem serves every feature).
+"""
+
+from __future__ import annotations
+
+import functools
+from collections.abc import Sequence
+from typing import Any, ClassVar
+
+import numpy as np
+
+from controllers.base import ControllerContext, GoalBatch
+from controllers.exceptions import ContextError, OptionError
+from controllers.law_kernel import feature_law_kernel
+from controllers.leg_direction import LegDirectionController
+from controllers.mpc.controller import MPCLaw
+from controllers.solvers.limit_qp import LimitQPSolver
+from controllers.tasks.leg_feature import LegFeature
+
+
+class FeatureLaw(LegDirectionController):
+    """``tau = -lambda L^+ e`` on a leg feature (``q_dot = J_inv tau``); the class's
+    ``feature`` is set by :func:`~controllers.features.controllers_for`.
+
+    Args:
+        gain: Constant gain ``lambda`` [1/s].
+        adaptive_gain: ``(lambda0, lambda_inf, lambda0')`` (overrides ``gain``).
+        interaction: ``"current"``, ``"desired"`` (at the legs' goal state) or ``"mean"``.
+        threshold: Relative singular-value threshold (rank test).
+        damping: Pseudo-inverse damping.
+        compiled: Evaluate the feature's core compiled to C (False: the CasADi virtual
+            machine evaluates the same expression, slower).
+    """
+
+    #: The feature (set on the generated class).
+    feature: ClassVar[LegFeature]
+
+    def __init__(self, gain: float = 1.0, adaptive_gain: Sequence[float] | None = None,
+                 interaction: str = "current", threshold: float = 1e-6,
+                 damping: float = 0.0, compiled: bool = True) -> None:
+        super().__init__(gain, adaptive_gain, interaction, threshold, damping, compiled)
+        self._f_star = np.zeros((6, self.feature.rows))
+
+    def _reset_features(self, context: ControllerContext) -> None:
+        """The desired feature: the feature of the goal's legs (directions, lengths)."""
+        goal = context.goal
+        if goal.directions is None:
+            raise ContextError(self.name, "goal.directions", "missing")
+        us = np.asarray(goal.directions, dtype=float)
+        if us.shape != (6, 3):
+            raise ContextError(self.name, "goal.directions",
+                               f"expected shape (6, 3), got {us.shape}")
+        if self._q_star is None:
+            raise ContextError(self.name, "goal.lengths",
+                               f"missing (the desired {self.feature.name} needs the goal's "
+                               "leg lengths)")
+        vis = np.all(np.isfinite(us), axis=1)
+        if not vis.any():
+            raise ContextError(self.name, "goal.directions", "no finite desired direction")
+        us = np.where(vis[:, None], us, np.array([0.0, 0.0, 1.0]))
+        norms = np.linalg.norm(us[vis], axis=1)
+        if np.any(np.abs(norms - 1.0) > 1e-6):
+            raise ContextError(self.name, "goal.directions", f"not unit vectors: norms {norms}")
+        f_star = self.feature.desired(us, self._q_star, self._A)
+        if not np.all(np.isfinite(f_star[vis])):
+            bad = np.flatnonzero(~np.all(np.isfinite(f_star), axis=1) & vis)
+            raise ContextError(self.name, "goal", f"the desired {self.feature.name} of legs "
+                               f"{bad.tolist()} is not finite: {f_star[bad]}")
+        self._f_star = np.where(vis[:, None], f_star, 0.0)
+        self._u_star = np.where(vis[:, None], us, 0.0)
+        self._goal_visible = vis
+        self._fill = us
+        self._goal_all_visible = bool(vis.all())
+        kernel = self._reuse_kernel(lambda: feature_law_kernel(self.feature, self.interaction,
+                                                               self.compiled))
+        kernel.set("desired", self._f_star)
+        if "desired_directions" in kernel.inputs:  # the legs' goal state (DESIRED / MEAN)
+            kernel.set("desired_directions", us)
+        kernel.set("base_points", self._A)
+        kernel.set("weights", vis)
+        self.kernel = kernel
+        self._k_features = kernel.inputs["features"].reshape(6, 3)
+
+    def desired_features(self) -> np.ndarray:
+        """(6, rows) the desired feature (zeros where unknown)."""
+        return np.asarray(self._f_star, dtype=float)
+
+    def _batch_desired(self, goals: GoalBatch) -> tuple[np.ndarray | None, np.ndarray]:
+        """No shortcut: each new goal is read by its trial's instance."""
+        return None, np.zeros(len(goals), dtype=bool)
+
+
+class FeatureQPLaw(FeatureLaw):
+    """The feature's law as the limit QP (stroke with a margin, leg speeds; OSQP).
+
+    Takes the options of :class:`FeatureLaw` and the QP options ``regularization``,
+    ``stroke_margin`` [m], ``max_speed`` [m/s], ``eps_abs``, ``eps_rel``, ``max_iter``,
+    ``shortcut``.
+    """
+
+    OPTION_DOCS = (LimitQPSolver,)
+
+    def __init__(self, gain: float = 1.0, adaptive_gain: Sequence[float] | None = None,
+                 interaction: str = "current", threshold: float = 1e-6, damping: float = 0.0,
+                 regularization: float = 1e-12, stroke_margin: float | None = None,
+                 max_speed: float | None = None, eps_abs: float = 1e-6, eps_rel: float = 1e-6,
+                 max_iter: int = 4000, shortcut: bool | None = None,
+                 compiled: bool = True) -> None:
+        FeatureLaw.__init__(self, gain, adaptive_gain, interaction, threshold, damping,
+                            compiled)
+        if damping:
+            raise OptionError(self.name, "damping", "use 'regularization' with the QP law")
+        self.solver = LimitQPSolver(self.name, self.threshold, regularization, stroke_margin,
+                                    max_speed, eps_abs, eps_rel, max_iter, shortcut)
+
+
+class FeatureMPC(MPCLaw):
+    """Predictive control of a leg feature with the local model (the options of
+    :class:`~controllers.mpc.controller.MPCLaw`; ``model`` must be ``"local"``: the
+    global model predicts the built-in features from a pose)."""
+
+    @functools.wraps(MPCLaw.__init__)  # type: ignore[misc]  # (its declared options)
+    def __init__(self, *args: Any, **options: Any) -> None:
+        super().__init__(*args, **options)
+        if self.model != "local":
+            raise OptionError(self.name, "model", f"a feature's predictive controller has the "
+                              f"local model only, got {self.model!r}")
+
+    def _feature_kind(self) -> str:
+        # The local problem reads the tasks through N, b and J_inv only: the leg-direction
+        # structure is the one of every per-leg feature (same compiled problem).
+        return "directions"

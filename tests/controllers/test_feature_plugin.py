@@ -1,0 +1,348 @@
+"""A feature added as a plugin (``tests/controllers/plugin_feature_joints.py``: the platform
+joints ``B_i = A_i + q_i u_i`` in the camera frame, one file) gets the pseudo-inverse, QP,
+MPC and computed-torque controllers (:func:`controllers.features.controllers_for`), each
+stepping through a kernel compiled to C from the feature's own expression.
+
+Oracles: the true kinematics of the test worlds (the joints' motion under a twist, the
+closed loops' true poses), never the feature's derivative formulas.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from collections.abc import Iterator
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from controllers import registry
+from controllers.base import ObservationBatch
+from controllers.exceptions import ContextError, OptionError
+from controllers.features import FeatureTask
+from controllers.law_kernel import LawKernel
+from controllers.tasks import TaskState
+from controllers.tracking import TrackingController
+from hexapod import HexapodGeometry
+from hexapod.actuation import Actuation
+from hexapod.compiled import CompiledFunction
+from hexapod.se3 import exp_so3, pose_error
+from hexapod.workspace import home_pose
+from tests.controllers.controller_world import World, closed_loop, make_camera
+from tests.controllers.ctc_world import DT, CtcWorld, ideal_drives, line_reference
+from tests.controllers.plugin_feature_joints import JOINTS, PlatformJoints
+
+PLUGIN = "tests.controllers.plugin_feature_joints"
+
+
+@pytest.fixture
+def world(geometry: HexapodGeometry) -> World:
+    return World(geometry, make_camera("perspective", geometry))
+
+
+def _goal_pose(geometry: HexapodGeometry) -> tuple[np.ndarray, np.ndarray]:
+    R0, t0 = home_pose(geometry)
+    return R0 @ exp_so3(np.deg2rad([2.0, -1.5, 1.0])), t0 + np.array([0.01, -0.008, 0.006])
+
+
+@pytest.mark.slow
+def test_one_file_gives_four_controllers_by_module_path() -> None:
+    """The plugin file alone names the four controllers; the registry builds them from
+    their ``module:attr`` path like any plugin (slow: the registry looks up the
+    distribution of a module named on the command line, about 2 s)."""
+    names = {c.name for c in JOINTS.all()}
+    assert names == {"platform-joint-pinv", "platform-joint-qp", "platform-joint-mpc",
+                     "platform-joint-ctc"}
+    for attr, actuation in (("PlatformJointPinv", Actuation.VELOCITY),
+                            ("PlatformJointQP", Actuation.VELOCITY),
+                            ("PlatformJointMPC", Actuation.VELOCITY),
+                            ("PlatformJointCTC", Actuation.FORCE)):
+        ctrl = registry.create(f"{PLUGIN}:{attr}")
+        assert ctrl.actuation is actuation
+        assert isinstance(ctrl.feature if attr != "PlatformJointMPC" else ctrl.law.feature,
+                          PlatformJoints)
+
+
+def test_interaction_is_the_joints_true_motion(world: World) -> None:
+    """``L tau`` of the feature's task is the true velocity of the joints seen in the camera
+    (finite differences of the true legs moved by the twist)."""
+    R, t = _goal_pose(world.geometry)
+    legs = world.legs(R, t)
+    state = TaskState(legs.base_points[None], legs.directions[None], legs.lengths[None])
+    task = FeatureTask(PlatformJoints(), np.zeros((6, 3)))
+    rng = np.random.default_rng(3)
+    for _ in range(3):
+        tau = rng.normal(size=6) * np.array([0.01, 0.01, 0.01, 0.05, 0.05, 0.05])
+        h = 1e-6
+        Rp, tp = world.move(R, t, tau, h)
+        Rm, tm = world.move(R, t, tau, -h)
+        joints = [(lg.base_points + lg.lengths[:, None] * lg.directions).ravel()
+                  for lg in (world.legs(Rp, tp), world.legs(Rm, tm))]
+        true_rate = (joints[0] - joints[1]) / (2 * h)
+        np.testing.assert_allclose(task.jacobian(state)[0] @ tau, true_rate, atol=1e-9)
+        # and the error is the joints' offset from the desired ones (zeros here)
+        B = legs.base_points + legs.lengths[:, None] * legs.directions
+        np.testing.assert_allclose(task.error(state)[0], B.ravel(), atol=1e-15)
+
+
+def _count_kernel_calls(monkeypatch: pytest.MonkeyPatch) -> list[int]:
+    calls = [0]
+    evaluate = LawKernel.evaluate
+
+    def counted(self: LawKernel):  # type: ignore[no-untyped-def]
+        calls[0] += 1
+        return evaluate(self)
+
+    monkeypatch.setattr(LawKernel, "evaluate", counted)
+    return calls
+
+
+@pytest.mark.parametrize("which", ["pinv", "qp", "mpc"])
+def test_first_order_controllers_converge_through_the_compiled_core(
+        world: World, which: str, monkeypatch: pytest.MonkeyPatch) -> None:
+    """From home to a goal 14 mm and 2.7 degrees away: the true position error falls below
+    10 um in 200 periods, every step through the feature's compiled core (the MPC through
+    the compiled local problem, never falling back)."""
+    cls = getattr(JOINTS, which)
+    ctrl = cls(gain=2.0)  # (the MPC: horizon 10, the compiled problem of leg-direction-mpc)
+    R1, t1 = _goal_pose(world.geometry)
+    ctrl.reset(world.context(world.goal(R1, t1), 0.02))
+    law = ctrl.law if which == "mpc" else ctrl
+    kernel = law.kernel
+    assert isinstance(kernel.function, CompiledFunction) and kernel.compiled
+    assert kernel.function.name == "hexapod_platform_joint_law"
+    calls = _count_kernel_calls(monkeypatch)
+    run = closed_loop(world, ctrl, home_pose(world.geometry), (R1, t1), 0.02, 200)
+    assert run.position_errors[0] > 0.014
+    assert run.position_errors[-1] < 10e-6, run.position_errors[-1]
+    assert run.error_norms[-1] < 0.01 * run.error_norms[0]
+    assert calls[0] == 200  # one compiled call per step
+    if which == "mpc":
+        assert ctrl._kernel.compiled and ctrl.stats.steps == 200
+        assert ctrl.stats.fallbacks == 0
+
+
+def test_batch_rows_equal_the_trials_own_steps(world: World) -> None:
+    """A batch of trials (the lean compiled core over the rows in C) commands what each
+    trial's own step commands."""
+    g = world.geometry
+    R1, t1 = _goal_pose(g)
+    ctx = world.context(world.goal(R1, t1), 0.02)
+    Rs, ts = world.poses(4, np.random.default_rng(5))
+    obs = [dataclasses.replace(world.observation(R, t), t=0.0) for R, t in zip(Rs, ts,
+                                                                              strict=True)]
+    batch_ctrl = JOINTS.pinv(gain=2.0)
+    batch_ctrl.reset_batch([ctx] * 4)
+    batch = ObservationBatch(
+        trials=np.arange(4), t=np.zeros(4), lengths=np.stack([o.lengths for o in obs]),
+        normals=None, lines=None, directions=np.stack([o.directions for o in obs]),
+        edge_visible=np.ones((4, 6, 2), bool), direction_visible=np.ones((4, 6), bool))
+    out = batch_ctrl.step_batch(batch)
+    assert batch_ctrl._core_rows.function is not None  # the rows went through the lean core
+    for k, o in enumerate(obs):
+        one = JOINTS.pinv(gain=2.0)
+        one.reset(ctx)
+        cmd = one.step(o)
+        np.testing.assert_allclose(out.command(k).velocities, cmd.velocities, rtol=1e-12,
+                                   atol=1e-15)
+
+
+def test_bad_goal_and_options_are_named(world: World) -> None:
+    R1, t1 = _goal_pose(world.geometry)
+    goal = world.goal(R1, t1)
+    ctrl = JOINTS.pinv()
+    with pytest.raises(ContextError, match=r"goal\.lengths"):
+        ctrl.reset(world.context(dataclasses.replace(goal, lengths=None), 0.02))
+    with pytest.raises(ContextError, match=r"goal\.directions"):
+        ctrl.reset(world.context(dataclasses.replace(goal, directions=None), 0.02))
+    with pytest.raises(OptionError, match="model"):
+        JOINTS.mpc(model="global")
+    with pytest.raises(OptionError, match="interaction"):
+        JOINTS.qp(interaction="sideways")
+    with pytest.raises(ContextError, match=r"goal\.lengths"):
+        JOINTS.ctc().reset(world.context(dataclasses.replace(goal, lengths=None), 0.02))
+
+
+@pytest.fixture
+def ctc_world(geometry: HexapodGeometry) -> CtcWorld:
+    return CtcWorld.make(ideal_drives(geometry))
+
+
+@pytest.mark.parametrize("smooth", [False, True])
+def test_computed_torque_converges_through_its_compiled_step(ctc_world: CtcWorld,
+                                                             smooth: bool) -> None:
+    """On the dynamic world (forces, perfect model): a 2.7 mm goal reached to 1 um within
+    150 periods, a step or along the quintic line; every step after the first (which
+    starts the reference) by the feature's compiled step."""
+    R0, t0 = home_pose(ctc_world.truth)
+    step = np.array([0.002, -0.001, 0.0015])
+    ctrl = JOINTS.ctc(smooth_goal=smooth)
+    ctrl.reset(ctc_world.context(ctc_world.goal(R0, t0 + step)))
+    assert ctrl.compiled is not None and ctrl.compiled.function.compiled
+    assert ctrl.compiled.function.name == "hexapod_ctc_platform_joint_step"
+    p, _, cmds = ctc_world.run(ctrl, (R0, t0), 150)
+    err = np.linalg.norm(p - (t0 + step), axis=1)
+    assert err[-1] < 1e-6, err[-1]
+    assert ctrl.compiled_steps == 149 and ctrl.numpy_steps == 1
+    assert all(np.all(np.isfinite(c.forces)) for c in cmds)
+
+
+def test_computed_torque_compiled_step_equals_the_numpy_task(ctc_world: CtcWorld) -> None:
+    """The compiled step's forces are the numpy task path's (the feature's
+    :class:`FeatureTask`, evaluated by CasADi's virtual machine) to rounding, on a moving
+    reference (the smooth line: the reference terms ``e_t``, ``e_tt`` in play)."""
+    R0, t0 = home_pose(ctc_world.truth)
+    goal = ctc_world.goal(R0, t0 + np.array([0.003, 0.001, -0.002]))
+    fast, slow = JOINTS.ctc(), JOINTS.ctc()
+    fast.reset(ctc_world.context(goal))
+    slow.reset(ctc_world.context(goal))
+    slow.compiled = None  # the numpy path only
+    from hexapod.dynamics.robots import DynamicRobots
+
+    robot = DynamicRobots([ctc_world.truth], R0[None].copy(), t0[None].copy())
+    robot.drives.mode = "force"
+    rows = np.arange(1)
+    for k in range(20):
+        obs = ctc_world.observation(robot, k * DT)
+        a, b = fast.step(obs), slow.step(obs)
+        assert a.reason is None and b.reason is None
+        np.testing.assert_allclose(a.forces, b.forces, rtol=1e-8, atol=1e-9)
+        robot.advance(rows, np.asarray(a.forces)[None], DT / 10, 10)
+    assert fast.compiled_steps == 19 and slow.numpy_steps == 20
+
+
+def test_computed_torque_tracks_a_line_with_a_rotation(ctc_world: CtcWorld) -> None:
+    """A 12 mm line with a 2 degree rotation through the study's tracking wrapper: the
+    feature's reference, its rate and acceleration (automatic differentiation along the
+    pose trajectory) keep the true pose within the bounds the built-in computed-torque
+    laws meet (``test_ctc_laws.py``: 30 um, 0.005 degree; measured 20.5 um, 0.0035 degree
+    as ``leg-direction-ctc``)."""
+    R0, t0, R1, t1, ref = line_reference(ctc_world.truth, "trapezoidal", (1.2, -1.0, 1.2))
+    ctrl = TrackingController(JOINTS.ctc())
+    ctrl.reset(ctc_world.context(ctc_world.goal(R1, t1), ref))
+    steps = math.ceil(ref.duration / DT) + 25
+    p, R, _ = ctc_world.run(ctrl, (R0, t0), steps)
+    sample = ref.at(DT * np.arange(steps + 1))
+    pos, ang = pose_error(R, p, sample.rotation, sample.translation)
+    assert pos.max() < 30e-6, pos.max()
+    assert ang.max() < np.deg2rad(0.005), np.rad2deg(ang.max())
+    assert pos[-1] < 2e-6 and ang[-1] < np.deg2rad(1e-4)
+
+
+def test_a_hidden_leg_is_left_out(world: World) -> None:
+    """Leg 2 never seen (NaN direction, marked hidden): the law steps on the five others
+    (its rows weight 0 in the compiled core, its direction for ``J_inv`` from the goal's
+    approximation then the estimate) and still reaches the goal."""
+    R1, t1 = _goal_pose(world.geometry)
+    ctrl = JOINTS.pinv(gain=2.0)
+    ctrl.reset(world.context(world.goal(R1, t1), 0.02))
+
+    def hide(obs, k):  # type: ignore[no-untyped-def]
+        obs.directions = obs.directions.copy()
+        obs.directions[2] = np.nan
+        obs.direction_visible = np.arange(6) != 2
+
+    run = closed_loop(world, ctrl, home_pose(world.geometry), (R1, t1), 0.02, 200, hide=hide)
+    assert "using 5 of 6 legs" in run.commands[0].notes
+    assert run.commands[0].features_used == 15
+    assert run.position_errors[-1] < 10e-6, run.position_errors[-1]
+
+
+def test_options_are_the_built_in_laws() -> None:
+    """Each generated controller declares the options of the built-in law of its solver
+    (``hexapod-bench list --options``, the scenario checks)."""
+    from controllers.options import option_table
+
+    expected = {"pinv": {"gain", "adaptive_gain", "threshold", "damping", "compiled"},
+                "qp": {"gain", "stroke_margin", "max_speed", "regularization"},
+                "mpc": {"horizon", "model", "effort_weight", "max_iter", "drive_model"},
+                "ctc": {"natural_frequency", "damping", "smooth_goal"}}
+    for which, names in expected.items():
+        table = option_table(getattr(JOINTS, which))
+        assert names <= set(table.names), (which, table.names)
+
+
+@pytest.mark.parametrize("interaction", ["desired", "mean"])
+def test_desired_and_mean_interactions_converge(world: World, interaction: str) -> None:
+    """``L`` at the legs' goal state (the goal's directions and lengths), or the mean of
+    both: the same goal reached, through the feature's core of that interaction."""
+    R1, t1 = _goal_pose(world.geometry)
+    ctrl = JOINTS.pinv(gain=2.0, interaction=interaction)
+    ctrl.reset(world.context(world.goal(R1, t1), 0.02))
+    assert ctrl.kernel.function.name == f"hexapod_platform_joint_law_{interaction}"
+    run = closed_loop(world, ctrl, home_pose(world.geometry), (R1, t1), 0.02, 200)
+    assert run.position_errors[-1] < 10e-6, run.position_errors[-1]
+
+
+def test_computed_torque_with_hidden_legs(ctc_world: CtcWorld) -> None:
+    """Leg 4 hidden all along: its rows are masked in the compiled step and the goal is
+    reached; four legs hidden (two left, 6 rows of rank < 6): a refusal naming the rank."""
+    R0, t0 = home_pose(ctc_world.truth)
+    goal = t0 + np.array([0.002, -0.001, 0.0015])
+    ctrl = JOINTS.ctc(smooth_goal=False)
+    ctrl.reset(ctc_world.context(ctc_world.goal(R0, goal)))
+
+    def hide(legs: np.ndarray):  # type: ignore[no-untyped-def]
+        def edit(obs, k):  # type: ignore[no-untyped-def]
+            u = np.array(obs.directions)
+            u[legs] = np.nan
+            return dataclasses.replace(obs, directions=u, normals=None,
+                                       direction_visible=~legs)
+        return edit
+
+    one = np.arange(6) == 4
+    p, _, cmds = ctc_world.run(ctrl, (R0, t0), 150, edit=hide(one))
+    assert np.linalg.norm(p[-1] - goal) < 1e-6
+    assert cmds[-1].features_used == 15
+    assert ctrl.compiled_steps == 149
+    few = np.array([True, True, False, True, False, True])
+    from hexapod.dynamics.robots import DynamicRobots
+
+    robot = DynamicRobots([ctc_world.truth], R0[None].copy(), t0[None].copy())
+    cmd = ctrl.step(hide(few)(ctc_world.observation(robot, 150 * DT), 0))
+    assert cmd.reason is not None and "rank" in cmd.reason, cmd.reason
+    np.testing.assert_array_equal(cmd.values, np.zeros(6))
+
+
+@pytest.fixture
+def registered() -> Iterator[None]:
+    """The plugin's controllers registered under their names (removed after)."""
+    saved = (dict(registry._factories), dict(registry._info))
+    for cls in JOINTS.all():
+        registry.register(cls.name, cls, "tests", "0")
+    try:
+        yield
+    finally:
+        registry._factories, registry._info = saved
+
+
+@pytest.mark.parametrize("camera", ["perspective", "unified"])
+@pytest.mark.parametrize("which", ["pinv", "qp", "mpc"])
+def test_registry_contract(which: str, camera: str, other_geometry: HexapodGeometry,
+                           registered: None) -> None:
+    """The registry-generated contract checks of ``test_registry.py`` (shapes and motion,
+    zero error, NaN in each field, malformed observations) on the plugin's velocity
+    controllers, registered as a plugin's are."""
+    from tests.controllers import test_registry as contract
+
+    name = getattr(JOINTS, which).name
+    world = World(other_geometry, make_camera(camera, other_geometry))
+    contract.test_shapes_and_motion(name, world, Path())
+    contract.test_zero_error_gives_zero_command(name, world, Path())
+    for field in ("lengths", "normals", "lines", "directions", "t"):
+        contract.test_nan_observation_gives_zero_command_with_reason(name, field, world,
+                                                                     Path())
+    contract.test_malformed_observation_never_raises(name, world, Path())
+
+
+@pytest.mark.parametrize("which", ["pinv", "qp", "mpc"])
+def test_tracking_a_batch(which: str, registered: None) -> None:
+    """``test_tracking.py``'s batch check on the plugin's controllers: four trials tracking
+    circles (a new goal each period, hidden features at random, a NaN time, a trial
+    missing from some steps) through one :class:`TrackingController` over the batch give
+    the commands of one per trial stepped alone, to the last bit."""
+    from tests.controllers import test_tracking as tracking
+
+    tracking.test_tracking_a_batch_gives_the_rows_of_one_tracking_controller_per_trial(
+        getattr(JOINTS, which).name, {})
