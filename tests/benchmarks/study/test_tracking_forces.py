@@ -119,6 +119,7 @@ def test_table_cells_are_the_groups_medians_and_worst(run: tuple[Path, list[dict
     assert (out / "forces_p0_forces.png").stat().st_size > 1000
 
 
+@pytest.mark.slow
 def test_the_forces_figure_draws_the_recorded_forces(run: tuple[Path, list[dict]]) -> None:
     out, _ = run
     fig = forces_figure(out, "forces", 0)
