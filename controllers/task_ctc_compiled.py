@@ -10,7 +10,9 @@ law's numpy path (:meth:`controllers.task_ctc.TaskComputedTorque._command`, the
 reference, tested equal) then decides, with its reasons.
 
 A law gives the compiled path its kind and pose source (``compiled_kind``,
-``compiled_fk``), its constants (``compiled_constants(step)``) and, each period, its
+``compiled_fk``; or a subclass of the step its own compiled function of the same
+layouts, :meth:`CompiledTaskStep.make_function`, as a plugin feature's step does), its
+constants (``compiled_constants(step)``) and, each period, its
 measurement and reference (``compiled_inputs(step, observation, tr, q)``, returning the
 rows to use or None, and a note).
 
@@ -31,9 +33,9 @@ from numpy.typing import ArrayLike
 from scipy.linalg.lapack import dsyevd as _eigenvalues
 
 from controllers.base import Command, Observation
-from controllers.solvers.compiled_task_ctc import layout, task_step
+from controllers.solvers.compiled_task_ctc import task_step
 from hexapod.actuation import Actuation
-from hexapod.compiled import BoundCall, CompilationError
+from hexapod.compiled import BoundCall, CompilationError, CompiledFunction
 from hexapod.dynamics.model import INVERSE_TOLERANCE
 from hexapod.workspace import home_pose
 
@@ -60,17 +62,27 @@ class CompiledTaskStep:
     :attr:`_guess_of` when that is the law's ``guess`` (else it is rewritten). What the
     command keeps of the output row is copied (the next call overwrites it).
 
+    A subclass may step another compiled function with the blocks of the built-in steps
+    (:func:`~controllers.solvers.compiled_task_ctc.task_layouts`): it overrides
+    :meth:`make_function` and passes its ``kind`` (a plugin feature's step,
+    :class:`controllers.features.ctc_step.FeatureTaskStep`).
+
     Args:
         law: The law, reset (its context and nominal model built).
+        kind: The step's kind (default: the law's ``compiled_kind``).
+        fk: The pose from the encoders by Newton steps (default: the law's
+            ``compiled_fk``); else by the rigid fit (its tolerance).
     """
 
-    def __init__(self, law: TaskComputedTorque) -> None:
+    def __init__(self, law: TaskComputedTorque, kind: str | None = None,
+                 fk: bool | None = None) -> None:
         assert law.context is not None and law.model is not None
-        assert law.compiled_kind is not None
-        self.kind: str = law.compiled_kind
-        self.fk: bool = law.compiled_fk
-        self.function = task_step(self.kind, self.fk, INVERSE_TOLERANCE)
-        self.inputs, self.outputs = layout(self.kind, self.fk)
+        kind = law.compiled_kind if kind is None else kind
+        assert kind is not None
+        self.kind: str = kind
+        self.fk: bool = law.compiled_fk if fk is None else bool(fk)
+        self.function = self.make_function()
+        self.inputs, self.outputs = self.function.inputs, self.function.outputs
         self._bind(np.zeros(self.function.n_in))
         g = law.context.geometry
         d = g.drives
@@ -93,6 +105,11 @@ class CompiledTaskStep:
         #: Pose residual below which the pose has converged.
         self.tolerance = FK_TOLERANCE if self.fk else FIT_TOLERANCE
         law.compiled_constants(self)
+
+    def make_function(self) -> CompiledFunction:
+        """The compiled step of :attr:`kind` and :attr:`fk` (a subclass's hook: another
+        function of the same blocks; called again on unpickling)."""
+        return task_step(self.kind, self.fk, INVERSE_TOLERANCE)
 
     def _bind(self, row: np.ndarray) -> None:
         """Bind the compiled function to its own rows, the input row a copy of ``row``."""
@@ -119,7 +136,7 @@ class CompiledTaskStep:
     def __setstate__(self, state: dict[str, object]) -> None:
         row = state.pop("_row")
         self.__dict__.update(state)
-        self.function = task_step(self.kind, self.fk, INVERSE_TOLERANCE)
+        self.function = self.make_function()
         assert isinstance(row, np.ndarray)
         self._bind(row)
 

@@ -9,14 +9,16 @@ compiled function, composed like the built-in task steps
 - per leg the feature's error and interaction (:meth:`LegFeature.block`), ``L_dot tau``
   (:attr:`LegFeature.second_order`) and the reference's ``e_t``, ``e_tt``
   (:attr:`LegFeature.reference`), all by automatic differentiation of the feature;
-- ``tau_dot`` the least-squares solution over the rows whose ``mask`` is 1, the leg
-  forces with the drives' terms (:func:`~controllers.solvers.compiled_ctc.
-  sx_mechanism_forces`).
+- the desired ``e_ddot`` less the ``integral`` term (the law's integral action),
+  ``tau_dot`` the least-squares solution over the rows whose ``mask`` is 1, the leg
+  forces with the drives' terms (:func:`~controllers.solvers.compiled_task_ctc.
+  sx_task_outputs`, the built-in steps' own).
 
 The input and output layouts are those of the built-in direction kind
-(:func:`controllers.solvers.compiled_task_ctc.layout`) with ``m = 6 rows`` task rows,
-so the step is driven by :class:`~controllers.task_ctc_compiled.CompiledTaskStep`
-(:class:`FeatureTaskStep`).
+(:func:`controllers.solvers.compiled_task_ctc.task_layouts`) with ``m = 6 rows`` task
+rows, so the step is driven by :class:`~controllers.task_ctc_compiled.CompiledTaskStep`
+(:class:`FeatureTaskStep` gives it the feature's function), its integral action and
+saturation strategies included.
 """
 
 from __future__ import annotations
@@ -24,20 +26,18 @@ from __future__ import annotations
 from typing import TYPE_CHECKING
 
 import casadi as ca
-import numpy as np
 
-from controllers.solvers.compiled_ctc import (
-    sx_encoder_pose,
-    sx_mechanism_forces,
-    sx_model_state,
+from controllers.solvers.compiled_ctc import sx_encoder_pose, sx_model_state
+from controllers.solvers.compiled_task_ctc import (
+    FK_CALLS,
+    model_twist,
+    sx_task_outputs,
+    task_layouts,
 )
-from controllers.solvers.compiled_task_ctc import _COMMON, FK_CALLS, _model_twist
-from controllers.task_ctc_compiled import FK_TOLERANCE, CompiledTaskStep
+from controllers.task_ctc_compiled import CompiledTaskStep
 from controllers.tasks.leg_feature import LegFeature
 from hexapod.compiled import CompiledFunction, Layout
-from hexapod.dynamics.drive_model import COULOMB_SMOOTHING
 from hexapod.dynamics.model import INVERSE_TOLERANCE
-from hexapod.workspace import home_pose
 
 if TYPE_CHECKING:
     from controllers.features.ctc import FeatureComputedTorque
@@ -48,10 +48,7 @@ def ctc_layouts(feature: LegFeature) -> tuple[Layout, Layout]:
     m = 6 * feature.rows
     extra = (("directions", (6, 3)), ("base", (6, 3)), ("mask", m), ("frame", 12),
              ("reference_features", (3, m)))
-    out = (("pose", 12), ("K", 36), ("fk_residual", 1), ("forces", 6), ("solved", 1),
-           ("error", m), ("factor", (6, 6)))
-    name = f"computed-torque {feature.name}"
-    return Layout(_COMMON + extra, name + " input"), Layout(out, name + " output")
+    return task_layouts(f"computed-torque {feature.name}", extra, m)
 
 
 def ctc_function(feature: LegFeature, inverse_tolerance: float = INVERSE_TOLERANCE
@@ -60,11 +57,11 @@ def ctc_function(feature: LegFeature, inverse_tolerance: float = INVERSE_TOLERAN
     inputs = ctc_layouts(feature)[0]
     x = ca.SX.sym("x", inputs.size)
     v = inputs.split(x)
-    q, qd, points = v["q"], v["q_dot"], v["points"]
-    kp, kd, hold = v["gains"][0], v["gains"][1], v["gains"][2]
+    q, points = v["q"], v["points"]
     R_t, residual = sx_encoder_pose(v["pose"], q, points, FK_CALLS)
-    K, twist, M, h, bias = sx_model_state(R_t, qd, points, v["params"])
-    G, gdot = _model_twist(R_t[9:12], twist, v["frame"])
+    state = sx_model_state(R_t, v["q_dot"], points, v["params"])
+    twist = state[1]
+    G, gdot = model_twist(R_t[9:12], twist, v["frame"])
     tau_s = G @ twist
     r, m = feature.rows, 6 * feature.rows
     ref = v["reference_features"]
@@ -83,18 +80,10 @@ def ctc_function(feature: LegFeature, inverse_tolerance: float = INVERSE_TOLERAN
         ldots.append(feature.second_order(s, p, tau_s))
         ets.append(e_t)
         etts.append(e_tt)
-    e, L = ca.vertcat(*es), ca.vertcat(*Ls)
-    L_model = L @ G
-    ldot = ca.vertcat(*ldots) + L @ gdot
-    rhs = -kd * (L_model @ twist + ca.vertcat(*ets)) - kp * e - ldot - ca.vertcat(*etts)
-    mask = v["mask"]
-    Q, factor = ca.qr(L_model * ca.repmat(mask, 1, 6))
-    acc = ca.solve(factor, Q.T @ (mask * rhs))
-    a, f, solved = sx_mechanism_forces(K, M, h, bias, acc, inverse_tolerance)
-    f = f + v["rotor"] * a + v["viscous"] * qd + v["coulomb"] * ca.tanh(
-        (qd + hold * a) / COULOMB_SMOOTHING)
-    out = ca.vertcat(R_t, ca.reshape(K, 36, 1), ca.mmax(ca.fabs(residual)), f, solved, e,
-                     ca.reshape(factor.T @ factor, 36, 1))
+    L = ca.vertcat(*Ls)
+    out = sx_task_outputs(v, R_t, ca.mmax(ca.fabs(residual)), state, ca.vertcat(*es), L @ G,
+                          ca.vertcat(*ldots) + L @ gdot, ca.vertcat(*ets), ca.vertcat(*etts),
+                          v["mask"], inverse_tolerance)
     return ca.Function(f"hexapod_ctc_{feature.c_name}_step", [x], [ca.cse(ca.densify(out))])
 
 
@@ -109,42 +98,18 @@ def feature_ctc_step(feature: LegFeature, compiled: bool = True) -> CompiledFunc
 
 
 class FeatureTaskStep(CompiledTaskStep):
-    """:class:`~controllers.task_ctc_compiled.CompiledTaskStep` on a feature's step.
+    """:class:`~controllers.task_ctc_compiled.CompiledTaskStep` on a feature's step (its
+    :meth:`make_function` hook; the pose from the encoders).
 
     Args:
         law: The law, reset (its context and nominal model built).
     """
 
     def __init__(self, law: FeatureComputedTorque) -> None:
-        assert law.context is not None and law.model is not None
+        #: The feature whose step this is.
         self.feature = law.feature
-        self.kind = law.feature.name
-        self.fk = True
-        self.function = feature_ctc_step(self.feature)
-        self.inputs, self.outputs = ctc_layouts(self.feature)
-        self._bind(np.zeros(self.function.n_in))
-        g = law.context.geometry
-        d = g.drives
-        self.set("points", (g.base_points, g.platform_points))
-        self.set("params", law.model.parameters)
-        self.set("rotor", d.rotor_inertia)
-        self.set("viscous", d.viscous)
-        self.set("coulomb", d.coulomb)
-        self.set("gains", (law.gains.kp, law.gains.kd, float(law.context.dt)))
-        self.home = home_pose(g)
-        out = self.outputs
-        self._residual = out.index("fk_residual")
-        self._solved = out.index("solved")
-        self._factor = out["factor"]
-        self._error = out["error"]
-        self._forces = out["forces"]
-        self._pose = out["pose"]
-        self._tolerance = FK_TOLERANCE
-        law.compiled_constants(self)
+        super().__init__(law, kind=law.feature.name, fk=True)
 
-    def __setstate__(self, state: dict[str, object]) -> None:
-        row = state.pop("_row")
-        self.__dict__.update(state)
-        self.function = feature_ctc_step(self.feature)
-        assert isinstance(row, np.ndarray)
-        self._bind(row)
+    def make_function(self) -> CompiledFunction:
+        """The feature's compiled step (:func:`feature_ctc_step`)."""
+        return feature_ctc_step(self.feature)

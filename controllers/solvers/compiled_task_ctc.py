@@ -55,6 +55,7 @@ eigenvalues are its squared singular values).
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from functools import lru_cache
 
 import casadi as ca
@@ -74,14 +75,16 @@ from controllers.tasks.leg_edge import leg_direction_of_edges
 from controllers.tasks.leg_edge import reference_block as edge_reference
 from controllers.tasks.leg_edge import second_order_block as edge_second_order
 from controllers.tasks.platform_pose import pose_error, pose_rate
-from hexapod.compiled import CompiledFunction, Layout
+from hexapod.compiled import CompiledFunction, Layout, Shape
 from hexapod.dynamics.drive_model import COULOMB_SMOOTHING
 from hexapod.dynamics.model import INVERSE_TOLERANCE
 
 #: Task kinds and their number of rows.
 ROWS = {"pose": 6, "edges": 36, "directions": 18}
 
-_COMMON = (("pose", 12), ("q", 6), ("q_dot", 6), *MODEL_BLOCKS, ("gains", 3))
+#: The input blocks every task step starts with (module docstring): the pose guess, the
+#: readings, the model's constants and the gains.
+COMMON_INPUTS = (("pose", 12), ("q", 6), ("q_dot", 6), *MODEL_BLOCKS, ("gains", 3))
 #: A reference pose row: ``R*`` (row-major), ``t*``, the twist and its rate.
 REFERENCE = Layout([("R", (3, 3)), ("t", 3), ("twist", 6), ("twist_rate", 6)],
                    "reference pose")
@@ -91,6 +94,19 @@ REFERENCE = Layout([("R", (3, 3)), ("t", 3), ("twist", 6), ("twist_rate", 6)],
 FK_CALLS = 2
 #: Newton steps of the rigid fit per call.
 FIT_ITERATIONS = 4
+
+
+def task_layouts(name: str, extra: Sequence[tuple[str, Shape]], m: int
+                 ) -> tuple[Layout, Layout]:
+    """The input and output layouts of a task step of ``m`` task rows (module docstring):
+    :data:`COMMON_INPUTS`, the task's own blocks ``extra``, then the ``integral`` term
+    (``m``); the outputs ``pose``, ``K``, ``fk_residual``, ``forces``, ``solved``,
+    ``error`` (``m``) and ``factor``. A plugin's step (:mod:`controllers.features.ctc_step`)
+    has them too, so :class:`~controllers.task_ctc_compiled.CompiledTaskStep` drives it."""
+    out = (("pose", 12), ("K", 36), ("fk_residual", 1), ("forces", 6), ("solved", 1),
+           ("error", m), ("factor", (6, 6)))
+    return (Layout((*COMMON_INPUTS, *extra, ("integral", m)), name + " input"),
+            Layout(out, name + " output"))
 
 
 @lru_cache(maxsize=4)
@@ -106,21 +122,19 @@ def layout(kind: str, fk: bool = True) -> tuple[Layout, Layout]:
     extra = (("reference", REFERENCE.size), *visual) if kind == "pose" else (
         *features, ("base", (6, 3)), ("mask", m), ("frame", 12),
         ("reference_features", (3, m)))
-    out = (("pose", 12), ("K", 36), ("fk_residual", 1), ("forces", 6), ("solved", 1),
-           ("error", m), ("factor", (6, 6)))
-    name = f"task computed-torque {kind} {'fk' if fk else 'pose'}"
-    return (Layout((*_COMMON, *extra, ("integral", m)), name + " input"),
-            Layout(out, name + " output"))
+    return task_layouts(f"task computed-torque {kind} {'fk' if fk else 'pose'}", extra, m)
 
 
 def _row_major(R: ca.SX) -> ca.SX:
     return ca.reshape(R.T, 9, 1)
 
 
-def _model_twist(translation: ca.SX, twist: ca.SX, frame: ca.SX | None
-                 ) -> tuple[ca.SX, ca.SX]:
+def model_twist(translation: ca.SX, twist: ca.SX, frame: ca.SX | None
+                ) -> tuple[ca.SX, ca.SX]:
     """``G`` (6, 6) and ``G_dot tau`` (6) of
-    :func:`~controllers.solvers.computed_torque.task_in_model_twist`."""
+    :func:`~controllers.solvers.computed_torque.task_in_model_twist`: the task's twist is
+    ``G twist`` (``twist`` the model's, about the platform's origin at ``translation``;
+    ``frame`` the task frame from the base, ``R`` row-major, ``p``: 12, or None)."""
     G = ca.SX.eye(6)
     G[0:3, 3:6] = ca.skew(translation)
     gdot = ca.vertcat(ca.cross(twist[0:3], twist[3:6]), ca.SX.zeros(3))
@@ -252,8 +266,6 @@ def _build(kind: str, fk: bool, inverse_tolerance: float) -> ca.Function:
     x = ca.SX.sym("x", inputs.size)
     v = inputs.split(x)
     q, qd, points = v["q"], v["q_dot"], v["points"]
-    rotor, viscous, coulomb = v["rotor"], v["viscous"], v["coulomb"]
-    kp, kd, hold = v["gains"][0], v["gains"][1], v["gains"][2]
     if fk:
         R_t, residual = sx_encoder_pose(v["pose"], q, points, FK_CALLS)
         fk_residual = ca.mmax(ca.fabs(residual))
@@ -263,29 +275,58 @@ def _build(kind: str, fk: bool, inverse_tolerance: float) -> ca.Function:
     K, twist, M, h, bias = sx_model_state(R_t, qd, points, v["params"])
     R, t = ca.reshape(R_t[0:9], 3, 3), R_t[9:12]
     frame = None if kind == "pose" else v["frame"]  # the task's frame
-    G, gdot = _model_twist(t, twist, frame)
+    G, gdot = model_twist(t, twist, frame)
     tau_s = G @ twist
     if kind == "pose":
         e, L, ldot, e_t, e_tt = _pose_task(R, t, tau_s, v["reference"])
     else:
         e, L, ldot, e_t, e_tt = _feature_task(kind, v, q, tau_s)
-    L_model = L @ G
-    ldot = ldot + L @ gdot
+    out = sx_task_outputs(v, R_t, fk_residual, (K, twist, M, h, bias), e, L @ G,
+                          ldot + L @ gdot, e_t, e_tt, None if kind == "pose" else v["mask"],
+                          inverse_tolerance)
+    return ca.Function(f"hexapod_ctc_{kind}_{'fk' if fk else 'pose'}_step", [x],
+                       [ca.cse(ca.densify(out))])
+
+
+def sx_task_outputs(v: dict[str, ca.SX], R_t: ca.SX, fk_residual: ca.SX,
+                    state: tuple[ca.SX, ca.SX, ca.SX, ca.SX, ca.SX], e: ca.SX, L_model: ca.SX,
+                    ldot: ca.SX, e_t: ca.SX, e_tt: ca.SX, mask: ca.SX | None,
+                    inverse_tolerance: float) -> ca.SX:
+    """The output row of a task step (:func:`task_layouts`) from its task terms: the
+    desired ``e_ddot = -Kd e_dot - Kp e - integral``, ``tau_dot`` from it (a plain solve,
+    or least squares over the rows whose ``mask`` is 1), the leg forces with the drives'
+    terms.
+
+    Args:
+        v: The input row's blocks (``q_dot``, ``gains``, the drives', ``integral``).
+        R_t: The pose (``R`` column-major, ``t``: 12).
+        fk_residual: The pose's residual (1).
+        state: ``K``, the model's twist, ``M``, ``h`` and ``K_dot tau``
+            (:func:`~controllers.solvers.compiled_ctc.sx_model_state`).
+        e: The task error (m).
+        L_model: The task Jacobian for the model's twist (m, 6).
+        ldot: ``L_dot tau`` for the model's twist (m).
+        e_t: ``e_t`` of the reference (m).
+        e_tt: ``e_tt`` of the reference (m).
+        mask: The rows' mask (m; None: the square task solved as it is).
+        inverse_tolerance: As :func:`task_step`'s.
+    """
+    K, twist, M, h, bias = state
+    qd = v["q_dot"]
+    kp, kd, hold = v["gains"][0], v["gains"][1], v["gains"][2]
     rhs = -kd * (L_model @ twist + e_t) - kp * e - ldot - e_tt - v["integral"]
-    if kind == "pose":
+    if mask is None:
         acc = ca.solve(L_model, rhs)
         factor = L_model
     else:
-        mask = v["mask"]
         Lw = L_model * ca.repmat(mask, 1, 6)
         Q, factor = ca.qr(Lw)
         acc = ca.solve(factor, Q.T @ (mask * rhs))
     a, f, solved = sx_mechanism_forces(K, M, h, bias, acc, inverse_tolerance)
-    f = f + rotor * a + viscous * qd + coulomb * ca.tanh((qd + hold * a) / COULOMB_SMOOTHING)
-    out = ca.vertcat(R_t, ca.reshape(K, 36, 1), fk_residual, f, solved, e,
-                     ca.reshape(factor.T @ factor, 36, 1))
-    return ca.Function(f"hexapod_ctc_{kind}_{'fk' if fk else 'pose'}_step", [x],
-                       [ca.cse(ca.densify(out))])
+    f = f + v["rotor"] * a + v["viscous"] * qd + v["coulomb"] * ca.tanh(
+        (qd + hold * a) / COULOMB_SMOOTHING)
+    return ca.vertcat(R_t, ca.reshape(K, 36, 1), fk_residual, f, solved, e,
+                      ca.reshape(factor.T @ factor, 36, 1))
 
 
 @lru_cache(maxsize=8)
@@ -312,4 +353,5 @@ def task_step(kind: str, fk: bool, inverse_tolerance: float = INVERSE_TOLERANCE
                             outputs=outputs)
 
 
-__all__ = ["FIT_ITERATIONS", "REFERENCE", "ROWS", "layout", "task_step"]
+__all__ = ["COMMON_INPUTS", "FIT_ITERATIONS", "FK_CALLS", "REFERENCE", "ROWS", "layout",
+           "model_twist", "sx_task_outputs", "task_layouts", "task_step"]

@@ -9,6 +9,7 @@ closed loops' true poses), never the feature's derivative formulas.
 
 from __future__ import annotations
 
+import copy
 import dataclasses
 import math
 from collections.abc import Iterator
@@ -188,13 +189,16 @@ def test_computed_torque_converges_through_its_compiled_step(ctc_world: CtcWorld
     assert all(np.all(np.isfinite(c.forces)) for c in cmds)
 
 
-def test_computed_torque_compiled_step_equals_the_numpy_task(ctc_world: CtcWorld) -> None:
+@pytest.mark.parametrize("ki", [0.0, 5.0])
+def test_computed_torque_compiled_step_equals_the_numpy_task(ctc_world: CtcWorld,
+                                                             ki: float) -> None:
     """The compiled step's forces are the numpy task path's (the feature's
     :class:`FeatureTask`, evaluated by CasADi's virtual machine) to rounding, on a moving
-    reference (the smooth line: the reference terms ``e_t``, ``e_tt`` in play)."""
+    reference (the smooth line: the reference terms ``e_t``, ``e_tt`` in play), with and
+    without integral action (the step's ``integral`` input block)."""
     R0, t0 = home_pose(ctc_world.truth)
     goal = ctc_world.goal(R0, t0 + np.array([0.003, 0.001, -0.002]))
-    fast, slow = JOINTS.ctc(), JOINTS.ctc()
+    fast, slow = JOINTS.ctc(integral_gain=ki), JOINTS.ctc(integral_gain=ki)
     fast.reset(ctc_world.context(goal))
     slow.reset(ctc_world.context(goal))
     slow.compiled = None  # the numpy path only
@@ -210,6 +214,107 @@ def test_computed_torque_compiled_step_equals_the_numpy_task(ctc_world: CtcWorld
         np.testing.assert_allclose(a.forces, b.forces, rtol=1e-8, atol=1e-9)
         robot.advance(rows, np.asarray(a.forces)[None], DT / 10, 10)
     assert fast.compiled_steps == 19 and slow.numpy_steps == 20
+    assert bool(np.any(fast.integral != 0.0)) is bool(ki)
+    np.testing.assert_allclose(fast.integral, slow.integral, rtol=1e-8, atol=1e-12)
+
+
+def _heavy_world(truth: HexapodGeometry) -> CtcWorld:
+    """The nominal platform 30 % too heavy (as ``test_ctc_integral.py``)."""
+    return CtcWorld.make(truth, dataclasses.replace(truth, inertia=dataclasses.replace(
+        truth.inertia, platform_mass=1.3 * truth.inertia.platform_mass)))
+
+
+def test_computed_torque_integral_action_removes_a_model_error_offset(
+        geometry: HexapodGeometry) -> None:
+    """``integral_gain`` on the plugin's computed torque, as on the built-ins
+    (``test_ctc_integral.py``): the nominal platform 30 % too heavy leaves the law a
+    static error (measured 2.47 mm after 3 s); with ``Ki = 5 1/s`` after the same 3 s,
+    less than a hundredth of it (measured 0.68 um), every step after the first by the
+    feature's compiled step."""
+    truth = ideal_drives(geometry)
+    R0, t0 = home_pose(truth)
+    Rg, tg = R0 @ exp_so3(np.array([0.02, -0.01, 0.015])), t0 + np.array([0.015, -0.01, 0.008])
+    errors = []
+    for ki in (0.0, 5.0):
+        world = _heavy_world(truth)
+        ctrl = JOINTS.ctc(integral_gain=ki)
+        ctrl.reset(world.context(world.goal(Rg, tg)))
+        p, R, _ = world.run(ctrl, (R0, t0), 150)
+        errors.append(float(pose_error(R[-1], p[-1], Rg, tg)[0]))
+        assert ctrl.compiled_steps == 149 and ctrl.numpy_steps == 1
+    without, with_ = errors
+    assert without > 1e-3
+    assert with_ < 0.01 * without, (without, with_)
+
+
+def test_computed_torque_saturation_holds_the_integral(geometry: HexapodGeometry) -> None:
+    """``saturation = "scale"`` and anti-windup on the plugin's compiled step: a nominal
+    limit of 1 N (every step over it), the commanded forces scaled to it (the most
+    loaded leg at the limit, the others under it) and the integral held at zero; at
+    1 kN the forces are the law's and the integral grows."""
+    truth = ideal_drives(geometry)
+    R0, t0 = home_pose(truth)
+    goal = t0 + np.array([0.002, -0.001, 0.0015])
+    for limit, grows in ((1.0, False), (1e3, True)):
+        nominal = dataclasses.replace(truth, drives=dataclasses.replace(
+            truth.drives, force_limit=np.full(6, limit)))
+        world = CtcWorld.make(truth, nominal)
+        ctrl = JOINTS.ctc(integral_gain=5.0, saturation="scale")
+        ctrl.reset(world.context(world.goal(R0, goal)))
+        _, _, cmds = world.run(ctrl, (R0, t0), 5)
+        assert ctrl.compiled_steps == 4
+        peaks = [float(np.abs(c.forces).max()) for c in cmds[1:]]
+        if grows:  # under the limit: the law's forces
+            assert max(peaks) < limit, peaks
+        else:  # scaled: the most loaded leg at the limit, not every leg (as "clip")
+            np.testing.assert_allclose(peaks, limit, rtol=1e-12)
+            assert all(float(np.abs(c.forces).min()) < 0.99 * limit for c in cmds[1:])
+        assert bool(np.any(ctrl.integral != 0.0)) is grows
+
+
+def test_computed_torque_batch_rows_equal_the_trials_own_steps(geometry: HexapodGeometry
+                                                               ) -> None:
+    """The plugin's computed torque over a batch (``test_ctc_rows.py``'s check, with
+    integral action): every row through the one compiled call, the forces of each trial's
+    own step to the last bit; a deep copy of a trial (its step rebuilt from the feature)
+    steps as the original."""
+    from controllers.base import CommandBatch
+    from hexapod.dynamics.robots import DynamicRobots
+    from tests.controllers.test_ctc_rows import _batch
+
+    truth = ideal_drives(geometry)
+    world = _heavy_world(truth)
+    R0, t0, R1, t1, ref = line_reference(truth, "quintic", (0.5, -0.3, 0.4))
+    ctx = world.context(world.goal(R1, t1), reference=ref)
+    n = 3
+    robots = DynamicRobots([truth] * n, np.array([R0] * n),
+                           np.array([t0 + np.array([0.0, 0.001 * k, 0.0]) for k in range(n)]))
+    robots.drives.mode = "force"
+    batch = JOINTS.ctc(integral_gain=5.0)
+    batch.reset_batch([ctx] * n)
+    singles = [JOINTS.ctc(integral_gain=5.0) for _ in range(n)]
+    for one in singles:
+        one.reset(ctx)
+    for k in range(8):
+        obs = _batch(world, robots, k * DT)
+        out = CommandBatch.zeros(n, Actuation.FORCE)
+        left = batch.step_arrays(obs, out)
+        assert left.tolist() == [], f"step {k}: rows {left.tolist()} left to the trials"
+        assert out.forces is not None
+        if k == 4:
+            twin = copy.deepcopy(singles[0])
+            assert twin.compiled is not None and singles[0].compiled is not None
+            assert twin.compiled.function is singles[0].compiled.function
+            assert not np.shares_memory(twin.compiled.row, singles[0].compiled.row)
+        for j, one in enumerate(singles):
+            cmd = one.step(obs.item(j))
+            assert cmd.reason is None
+            assert out.forces[j].tobytes() == np.asarray(cmd.forces).tobytes()
+            assert out.error_norm[j] == cmd.error_norm
+            if k >= 4 and j == 0:
+                assert twin.step(obs.item(j)).forces.tobytes() == cmd.forces.tobytes()
+        assert not robots.advance(np.arange(n), out.forces, DT / 20, 20).any()
+    assert bool(np.any(singles[0].integral != 0.0))
 
 
 def test_computed_torque_tracks_a_line_with_a_rotation(ctc_world: CtcWorld) -> None:
@@ -257,7 +362,8 @@ def test_options_are_the_built_in_laws() -> None:
     expected = {"pinv": {"gain", "adaptive_gain", "threshold", "damping", "compiled"},
                 "qp": {"gain", "stroke_margin", "max_speed", "regularization"},
                 "mpc": {"horizon", "model", "effort_weight", "max_iter", "drive_model"},
-                "ctc": {"natural_frequency", "damping", "smooth_goal"}}
+                "ctc": {"natural_frequency", "damping", "smooth_goal", "integral_gain",
+                        "saturation"}}
     for which, names in expected.items():
         table = option_table(getattr(JOINTS, which))
         assert names <= set(table.names), (which, table.names)
