@@ -102,14 +102,14 @@ def payload_facts(sc: Any, samples: int = SAMPLED_STARTS) -> list[PayloadFacts]:
     the dynamic world (empty otherwise)."""
     if getattr(sc, "payload", None) is None or sc.world != "dynamic":
         return []
-    from benchmarks.study.trajectory_check import _sweep_text
+    from benchmarks.study.trajectory_check import sweep_text
 
     out = []
     for point in sc.expand():
         facts = _point(point, samples)
         if facts is None:
             continue
-        where = f"in {sc.source}" + (f" (sweep point {_sweep_text(facts.sweep)})"
+        where = f"in {sc.source}" + (f" (sweep point {sweep_text(facts.sweep)})"
                                      if facts.sweep else "")
         over = np.flatnonzero(facts.static_n > facts.limit_n)
         if over.size:

@@ -121,7 +121,7 @@ def trajectory_facts(sc: Any, samples: int = SAMPLED_STARTS) -> list[TrajectoryF
         facts = _point(point, samples)
         if facts is None:
             continue
-        where = f"in {sc.source}" + (f" (sweep point {_sweep_text(facts.sweep)})"
+        where = f"in {sc.source}" + (f" (sweep point {sweep_text(facts.sweep)})"
                                      if facts.sweep else "")
         task = point.task
         if facts.hits:
@@ -159,7 +159,7 @@ def trajectory_facts(sc: Any, samples: int = SAMPLED_STARTS) -> list[TrajectoryF
     return out
 
 
-def _sweep_text(sweep: dict[str, Any]) -> str:
+def sweep_text(sweep: dict[str, Any]) -> str:
     return ", ".join(f"{k} = {v:g}" if isinstance(v, float) else f"{k} = {v}"
                      for k, v in sweep.items())
 
@@ -176,7 +176,7 @@ def describe_trajectory(facts: list[TrajectoryFacts], sc: Any) -> list[str]:
     for f in facts:
         lo, hi = f.duration_s
         dur = f"{lo:.2f} s" if abs(hi - lo) < 5e-3 else f"{lo:.2f} to {hi:.2f} s"
-        head = f"  {_sweep_text(f.sweep)}: " if f.sweep else "  "
+        head = f"  {sweep_text(f.sweep)}: " if f.sweep else "  "
         left = f.run_time_s - hi
         after = (f"leaves {left:.2f} s after it" if left >= 0 else
                  f"ends {-left:.2f} s before it does")
