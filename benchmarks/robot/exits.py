@@ -10,7 +10,7 @@ from __future__ import annotations
 import enum
 import signal
 
-__all__ = ["ServoExit", "exit_for_signal"]
+__all__ = ["ServoExit", "SessionStop", "exit_for_signal"]
 
 
 class ServoExit(enum.IntEnum):
@@ -48,3 +48,26 @@ def exit_for_signal(signum: int) -> int:
         The exit code.
     """
     return 128 + int(signal.Signals(signum))
+
+
+class SessionStop(Exception):  # noqa: N818 (a stop request, not an error)
+    """A request to end a servo session: raised by a per-period check (a limit, the camera
+    consistency check, the blind-camera timeout, ...) and turned by the session into the
+    one shutdown (halt, confirmation, final record) and the exit code ``code``.
+
+    Args:
+        code: The exit code the session ends with.
+        reason: What happened, in words (printed and written to the final record).
+
+    Attributes:
+        code: The exit code the session ends with.
+        reason: What happened, in words.
+    """
+
+    code: ServoExit
+    reason: str
+
+    def __init__(self, code: ServoExit, reason: str) -> None:
+        super().__init__(reason)
+        self.code = ServoExit(code)
+        self.reason = reason

@@ -158,6 +158,7 @@ def servo_loop(
     settle: int = DEFAULT_SETTLE,
     on_period: Callable[[PeriodStatus], None] | None = None,
     on_pose: Callable[[np.ndarray, np.ndarray, np.ndarray | None], None] | None = None,
+    check: Callable[..., Any] | None = None,
 ) -> ServoResult:
     """Run a reset controller on a connected robot until convergence, ``max_steps`` or Ctrl-C.
 
@@ -181,6 +182,10 @@ def servo_loop(
         settle: Consecutive periods within both tolerances to stop.
         on_period: Called after every period (status line, log).
         on_pose: Called with the predicted pose and edge visibility (viewer).
+        check: Called every period before the command with ``(step, lengths, R, t,
+            normals, edge_visible)`` (the camera check,
+            :class:`benchmarks.robot.consistency.CameraCheck`); it ends the session by
+            raising :class:`~benchmarks.robot.exits.SessionStop`.
 
     Returns:
         The outcome and the link statistics.
@@ -209,6 +214,7 @@ def servo_loop(
         plant.use_actuation(declared, name)
         book = ServoBook(plant, camera, goal, tolerance, feature_tolerance, settle, res, t0,
                          declared, name, on_period, on_pose)
+        book.check_camera = check
         closed_loop(plant, camera, None, one, book, dt, np.zeros((1, 6)),
                     None if max_steps is None else max_steps - 1)
     except KeyboardInterrupt:
@@ -304,6 +310,8 @@ class ServoBook:
         self.reason: str | None = None
         self.f_err = math.nan
         self.ctrl_err = math.nan
+        #: The per-period camera check (``servo_loop``'s ``check``), or None.
+        self.check_camera: Callable[..., Any] | None = None
 
     def check(self, step: int, idx: np.ndarray) -> np.ndarray:
         """Never done before the period (the session ends after a period)."""
@@ -320,6 +328,13 @@ class ServoBook:
             if getattr(self.camera.sensor, "ended", False):
                 self.res.outcome = "camera ended"
                 self.active[:] = False
+                return np.zeros(1, dtype=bool)
+        if self.check_camera is not None:  # before the command; raises SessionStop
+            plant = self.plant
+            self.check_camera(step, plant.q[0], plant.R[0], plant.t[0],
+                              None if feats is None else feats.normals,
+                              None if feats is None else feats.edge_visible)
+        if feats is None:
             return np.zeros(1, dtype=bool)
         self.reason = None
         self.f_err = feature_error(feats, self.n_goal, self.vis_goal)

@@ -46,6 +46,14 @@ from typing import IO, Any
 import numpy as np
 
 from benchmarks.exceptions import BenchmarkError
+from benchmarks.robot.camera_policy import choose_camera, describe_camera
+from benchmarks.robot.consistency import (
+    DEFAULT_BLIND_TIMEOUT_S,
+    DEFAULT_CONSISTENCY_DEG,
+    DEFAULT_CONSISTENCY_MM,
+    CameraCheck,
+)
+from benchmarks.robot.exits import SessionStop
 from benchmarks.robot.goals import (
     DEFAULT_TEACH_FRAMES,
     GOAL_KEYS,
@@ -155,9 +163,29 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="emulator (a firmware emulator on a pseudo-terminal), serial:URL "
                         "(a device path, socket://127.0.0.1:PORT, ...), sim, a plugin's "
                         "NAME[:ARGS] or module:attr[:ARGS] (docs/backends.md)")
-    p.add_argument("--camera", default="sim",
-                   help="sim (render the legs at the pose of the measured lengths), "
-                        "video:PATH or device:N (default sim)")
+    p.add_argument("--camera",
+                   help="device:N (a camera), video:PATH (a recording: used only if it agrees "
+                        "with the encoders at start) or sim (render the legs at the pose of "
+                        "the measured lengths); required with real hardware (serial:, gcs:, "
+                        "plugins), default sim with a simulated robot (sim, emulator, "
+                        "gcs-emulator)")
+    p.add_argument("--simulated-camera-on-real-robot", action="store_true",
+                   help="allow --camera sim with real hardware (the loop then closes on "
+                        "rendered images of the measured pose, not on what the robot does)")
+    p.add_argument("--consistency-mm", type=float, default=DEFAULT_CONSISTENCY_MM,
+                   metavar="MM",
+                   help="halt (exit 5) when the platform pose seen by the camera and the one "
+                        "from the encoders are further apart than this [mm] (default "
+                        f"{DEFAULT_CONSISTENCY_MM:g}) ...")
+    p.add_argument("--consistency-deg", type=float, default=DEFAULT_CONSISTENCY_DEG,
+                   metavar="DEG",
+                   help=f"... or turned by more than this [deg] (default "
+                        f"{DEFAULT_CONSISTENCY_DEG:g})")
+    p.add_argument("--blind-timeout-s", type=float, default=DEFAULT_BLIND_TIMEOUT_S,
+                   metavar="S",
+                   help="halt (exit 5) when the camera has given no platform pose (lost "
+                        "frames, fewer than 3 legs seen) for this long [s] (default "
+                        f"{DEFAULT_BLIND_TIMEOUT_S:g})")
     p.add_argument("--controller", default="leg-edge",
                    help="controller: registry name or module:attr (default leg-edge)")
     p.add_argument("-o", "--option", action="append", default=[], metavar="KEY=VALUE",
@@ -356,6 +384,8 @@ def run(args: argparse.Namespace) -> int:
     from hexapod.backends.registry import backends
 
     backends.check(args.backend)  # a bad spec is reported before anything is opened
+    args.camera = choose_camera(args.backend, args.camera,
+                                getattr(args, "simulated_camera_on_real_robot", False))
     geometry = _geometry(args.geometry)
     camera = _camera(args.camera_file, args.camera_pose, geometry)
     start = None if args.start_mm is None else np.asarray(args.start_mm, float) * 1e-3
@@ -391,17 +421,23 @@ def run(args: argparse.Namespace) -> int:
             print(f"warning: {text}", file=sys.stderr)
     controller.reset(ControllerContext(base_points=base_points, geometry=geometry,
                                        camera=camera, dt=args.dt, goal=goal))
+    check = CameraCheck(geometry, base_points, camera.camera_from_base,
+                        args.consistency_mm * 1e-3, math.radians(args.consistency_deg),
+                        args.blind_timeout_s, args.camera,
+                        must_agree_at_start=args.camera.startswith("video:"))
     sensor = open_camera(args.camera, camera, geometry, args.seed)
     logf: IO[str] | None = None
     result: ServoResult | None = None
+    stop: SessionStop | None = None
     try:
         if args.log:
             logf = Path(args.log).open("w")  # noqa: SIM115 - closed in finally
         with _viewer(args.viz, geometry, camera, goal) as viewer, \
                 open_backend(args.backend, geometry, start) as robot:
+            seen_by = describe_camera(args.camera, args.camera_file, args.camera_pose, camera)
             status.message(f"servo: {args.controller} on {args.backend} ({robot.identity}), "
-                           f"camera {args.camera}, goal {goal_file.source}, dt "
-                           f"{args.dt * 1e3:g} ms; Ctrl-C halts the robot")
+                           f"{seen_by}, goal {goal_file.source}, dt {args.dt * 1e3:g} ms; "
+                           "Ctrl-C halts the robot")
 
             def on_period(s: PeriodStatus) -> None:
                 status(s)
@@ -416,12 +452,21 @@ def run(args: argparse.Namespace) -> int:
 
             result = servo_loop(robot, sensor, controller, goal, geometry, args.dt,
                                 args.max_steps, args.tolerance_mm * 1e-3,
-                                args.feature_tolerance, args.settle, on_period, on_pose)
+                                args.feature_tolerance, args.settle, on_period, on_pose,
+                                check)
+    except SessionStop as exc:  # raised inside the backend's context: the robot is halted
+        stop = exc
     finally:
         status.final(result.last if result is not None else None)
         sensor.close()
         if logf is not None:
             logf.close()
+    if stop is not None:
+        status.message(f"stopped ({stop.code.name.lower()}, exit {int(stop.code)}): "
+                       f"{stop.reason}; the robot was halted\n{check.summary()}")
+        return int(stop.code)
+    assert result is not None
+    status.message(check.summary())
     status.message(result.summary() + ("; the robot was halted" if result.outcome
                                        == "interrupted" else ""))
     if result.outcome == "converged":
