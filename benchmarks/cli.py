@@ -1,5 +1,5 @@
 """``hexapod-bench``: list, check, run, report, compare, export, reproduce, perf, calibrate,
-identify, viz, servo, warm.
+identify, viz, servo, conformance, warm.
 
 Examples::
 
@@ -12,6 +12,7 @@ Examples::
     hexapod-bench compare runs/tahri
     hexapod-bench export runs/tahri --parquet tahri.parquet
     hexapod-bench reproduce seed001 --quick
+    hexapod-bench conformance emulator
 """
 
 from __future__ import annotations
@@ -243,6 +244,15 @@ def build_parser() -> argparse.ArgumentParser:
                                      "records a goal")
     servo.add_arguments(s)
     s.set_defaults(func=servo.run)
+
+    from benchmarks.robot import conformance_command
+
+    s = sub.add_parser("conformance", help="check a robot backend against the simulator "
+                                           "(exit 0: conforms, 1: a check failed)",
+                       description=conformance_command.__doc__.split("\n\n")[0]
+                       if conformance_command.__doc__ else None)
+    conformance_command.add_arguments(s)
+    s.set_defaults(func=conformance_command.run)
 
     s = sub.add_parser("viz", help="replay a recorded trial (MeshCat, or --html FILE)")
     s.add_argument("dir", help="a run directory")
