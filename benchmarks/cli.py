@@ -254,8 +254,10 @@ def build_parser() -> argparse.ArgumentParser:
     conformance_command.add_arguments(s)
     s.set_defaults(func=conformance_command.run)
 
-    s = sub.add_parser("viz", help="replay a recorded trial (MeshCat, or --html FILE)")
-    s.add_argument("dir", help="a run directory")
+    s = sub.add_parser("viz", help="replay a recorded trial or a servo session (MeshCat, or "
+                                   "--html FILE)")
+    s.add_argument("dir", help="a run directory, or a servo session log (servo --log "
+                               "FILE.jsonl) or the directory holding it")
     s.add_argument("--trial", type=int, default=0)
     s.add_argument("--controller", help="controller label")
     s.add_argument("--scenario", help="scenario name (when the run has several)")
@@ -269,6 +271,17 @@ def build_parser() -> argparse.ArgumentParser:
                         "hexapod-bench did not write it")
     s.add_argument("--hold", type=float, default=5.0,
                    help="live view: seconds to keep the server after the replay")
+    session = s.add_argument_group("servo session (the options the session was run with)")
+    session.add_argument("--geometry", default="deltalab",
+                         help="nominal robot: a geometry TOML file or a preset (default "
+                              "deltalab)")
+    session.add_argument("--camera-file", default="front",
+                         help="camera model drawn (default front)")
+    session.add_argument("--camera-pose", metavar="PRESET|TOML",
+                         help="with a calibration file: the camera's pose")
+    session.add_argument("--goal", metavar="FILE",
+                         help="the session's goal file (the errors are measured to it; "
+                              "default: to the last period's pose)")
     s.set_defaults(func=cmd_viz)
 
     from benchmarks.study.check_command import cmd_check
