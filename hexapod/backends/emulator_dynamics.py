@@ -11,6 +11,12 @@ the drives' lag, their force limit and friction, and gravity.
 The state advances lazily: when the board is asked (a command, the watchdog), the axes
 are integrated over the time elapsed since, in whole physics steps (the remainder is
 carried to the next call), with the setpoints held meanwhile, as they were.
+
+An idle emulator costs nothing: the robot starts at rest, and comes to rest again once
+it has held the same setpoints for :data:`REST_AFTER` seconds with every leg slower than
+:data:`REST_SPEED` and within :data:`REST_ERROR` of its setpoint (the drives' integral
+action has then nothing left to do but sub-micrometre creep); at rest the physics steps
+are skipped until the setpoints change.
 """
 
 from __future__ import annotations
@@ -31,6 +37,12 @@ POSITION_BANDWIDTH_HZ = 10.0
 #: Longest catch-up integrated at once [s]; a longer silence jumps (the robot is at
 #: rest under its position loop long before).
 MAX_CATCH_UP = 5.0
+#: At rest: every leg slower than this [m/s] ...
+REST_SPEED = 1e-6
+#: ... and within this of its position setpoint [m] ...
+REST_ERROR = 5e-7
+#: ... for this long, the setpoints unchanged [s].
+REST_AFTER = 0.5
 
 
 class DynamicAxes:
@@ -66,6 +78,7 @@ class DynamicAxes:
         self.lengths = self.robots.lengths(self._rows)[0]
         self._resting = True
         self._rest = np.array(lengths, dtype=float)
+        self._still_for = 0.0
         self._warm_up()
 
     def _warm_up(self) -> None:
@@ -109,10 +122,35 @@ class DynamicAxes:
 
     def move(self, setpoints: np.ndarray, speed: float, dt: float) -> np.ndarray:
         """Integrate ``dt`` [s] with the position setpoints (6,) [m] held, the position
-        loop's velocity limited to ``speed`` [m/s]; returns the leg lengths (6,) [m]."""
-        for _ in range(self.steps_for(dt)):
+        loop's velocity limited to ``speed`` [m/s]; returns the leg lengths (6,) [m].
+        Once the robot has come to rest at these setpoints (module docstring), nothing
+        is integrated until they change."""
+        return self.hold(setpoints, speed, self.steps_for(dt))
+
+    def hold(self, setpoints: np.ndarray, speed: float, steps: int) -> np.ndarray:
+        """``steps`` physics steps with the position setpoints (6,) [m] held (:meth:`move`
+        for a number of steps); returns the leg lengths (6,) [m]."""
+        if self._resting and np.array_equal(setpoints, self._rest):
+            return self.lengths.copy()
+        for _ in range(steps):
             self.step(setpoints, speed)
+        if steps:
+            self._watch_rest(setpoints, steps * self.h)
         return self.lengths.copy()
+
+    def _watch_rest(self, setpoints: np.ndarray, dt: float) -> None:
+        """Count how long the robot has been still at ``setpoints``; at rest after
+        :data:`REST_AFTER` seconds."""
+        if not np.array_equal(setpoints, self._rest):
+            self._rest = np.array(setpoints, dtype=float)
+            self._still_for = 0.0
+            return
+        still = (float(np.max(np.abs(setpoints - self.lengths))) <= REST_ERROR
+                 and bool(np.all(np.abs(self.leg_velocities()) <= REST_SPEED)))
+        self._still_for = self._still_for + dt if still else 0.0
+        if self._still_for >= REST_AFTER:
+            self._resting = True
+            log.debug("dynamic axes at rest at %s mm", np.round(self.lengths * 1e3, 4))
 
     def pose(self) -> tuple[np.ndarray, np.ndarray]:
         """The platform's true pose now: rotation (3, 3), position (3,) [m]."""

@@ -198,3 +198,49 @@ def test_the_gcs_console_script_takes_dynamics() -> None:
     finally:
         proc.terminate()
         proc.wait(10)
+
+
+def test_the_axes_come_to_rest_and_an_idle_emulator_integrates_nothing() -> None:
+    """Held at its setpoints, the robot comes to rest (the drives' integral action done)
+    and the physics steps stop until the setpoints change (an idle emulator costs no
+    CPU); the rest is within half a micrometre of the setpoints."""
+    from hexapod.backends import emulator_dynamics as ed
+
+    axes = ed.DynamicAxes(deltalab(), Q0)
+    target = Q0 + STEP
+    calls = 0
+    step = axes.step
+
+    def counted(setpoints: np.ndarray, speed: float) -> None:
+        nonlocal calls
+        calls += 1
+        step(setpoints, speed)
+
+    axes.step = counted  # type: ignore[method-assign]
+    assert axes._resting, "at rest where it starts"
+    axes.move(target, 0.05, 0.05)
+    t = 0.05
+    while not axes._resting and t < 10.0:
+        axes.move(target, 0.05, 0.05)
+        t += 0.05
+    assert axes._resting and 1.0 < t < 10.0, t
+    assert np.abs(axes.lengths - target).max() <= ed.REST_ERROR
+    before, lengths = calls, axes.lengths.copy()
+    for _ in range(100):  # 5 s idle
+        axes.move(target, 0.05, 0.05)
+    assert calls == before and np.array_equal(axes.lengths, lengths)
+    axes.move(target + 0.001, 0.05, 0.05)  # a new setpoint wakes it
+    assert calls == before + 50 and not axes._resting
+    assert np.all(axes.lengths > lengths)
+
+
+def test_the_gcs_platform_at_rest_integrates_nothing() -> None:
+    ctrl = _gcs(True)
+    ctrl.advance(6.0)  # the line (0.1 s), then the hunting of the integral action
+    for k in range(1, 30):
+        ctrl.advance(6.0 + 0.05 * k)
+    assert ctrl._axes is not None and ctrl._axes._resting
+    z = ctrl.coords[2]
+    assert z == pytest.approx(0.002, abs=2e-6)
+    ctrl.advance(20.0)
+    assert ctrl.coords[2] == z
