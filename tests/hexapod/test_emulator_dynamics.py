@@ -200,6 +200,7 @@ def test_the_gcs_console_script_takes_dynamics() -> None:
         proc.wait(10)
 
 
+@pytest.mark.slow
 def test_the_axes_come_to_rest_and_an_idle_emulator_integrates_nothing() -> None:
     """Held at its setpoints, the robot comes to rest (the drives' integral action done)
     and the physics steps stop until the setpoints change (an idle emulator costs no
@@ -234,6 +235,7 @@ def test_the_axes_come_to_rest_and_an_idle_emulator_integrates_nothing() -> None
     assert np.all(axes.lengths > lengths)
 
 
+@pytest.mark.slow
 def test_the_gcs_platform_at_rest_integrates_nothing() -> None:
     ctrl = _gcs(True)
     ctrl.advance(6.0)  # the line (0.1 s), then the hunting of the integral action
