@@ -246,3 +246,26 @@ def test_the_gcs_platform_at_rest_integrates_nothing() -> None:
     assert z == pytest.approx(0.002, abs=2e-6)
     ctrl.advance(20.0)
     assert ctrl.coords[2] == z
+
+
+def test_the_lean_physics_steps_give_the_same_bits_as_the_general_path() -> None:
+    """:meth:`DynamicAxes._steps` (the row kept in the compiled table) against
+    :meth:`DynamicAxes.step` one call a step: the same lengths, table and pose, bit for
+    bit, over a wandering setpoint."""
+    from hexapod.backends import emulator_dynamics as ed
+
+    def run(lean: bool) -> tuple[np.ndarray, ...]:
+        axes = ed.DynamicAxes(deltalab(), Q0)
+        if not lean:
+            def general(setpoints: np.ndarray, speed: float, n: int) -> None:
+                for _ in range(n):
+                    axes.step(setpoints, speed)
+
+            axes._steps = general  # type: ignore[method-assign]
+        out = [axes.move(Q0 + 0.003 * np.sin(0.05 * k + np.arange(6)), 0.05,
+                         0.02 + 0.001 * (k % 3)) for k in range(60)]
+        r = axes.robots
+        return np.array(out), r.table.copy(), r.R.copy(), r.t.copy(), r.track_count.copy()
+
+    for a, b in zip(run(False), run(True), strict=True):
+        assert np.array_equal(a, b)
