@@ -54,7 +54,7 @@ def run(args: argparse.Namespace) -> int:
         BenchmarkError: A bad option, or real hardware without ``--move-real-robot``.
         UnknownBackendError, BackendPluginError: A bad spec.
     """
-    from benchmarks.robot.servo import _geometry
+    from benchmarks.robot.models import robot_geometry
     from hexapod.backends.conformance import check_backend
     from hexapod.backends.registry import backends
 
@@ -68,7 +68,7 @@ def run(args: argparse.Namespace) -> int:
     if not backends.is_simulated(args.backend) and not args.move_real_robot:
         raise BenchmarkError(f"{args.backend} is real hardware: the check drives its legs "
                              "through their whole stroke; add --move-real-robot to run it")
-    geometry = _geometry(args.geometry)
+    geometry = robot_geometry(args.geometry)
 
     def factory(g: object, q: np.ndarray) -> object:
         return backends.open(args.backend, geometry, q)

@@ -112,7 +112,7 @@ def load_session(path: str | Path, geometry_spec: str = "deltalab",
             period, or lengths without a platform pose.
     """
     from benchmarks.robot.goals import load_goal
-    from benchmarks.robot.servo import _camera, _geometry
+    from benchmarks.robot.models import camera_model, robot_geometry
     from hexapod.exceptions import ForwardKinematicsError
     from hexapod.fk import forward_kinematics
     from hexapod.se3 import log_so3
@@ -120,8 +120,8 @@ def load_session(path: str | Path, geometry_spec: str = "deltalab",
 
     p = Path(path)
     rows = _rows(p)
-    geometry = _geometry(geometry_spec)
-    camera = _camera(camera_file, camera_pose, geometry)
+    geometry = robot_geometry(geometry_spec)
+    camera = camera_model(camera_file, camera_pose, geometry)
     n = len(rows)
     q = np.array([r["lengths_mm"] for r in rows], float) * 1e-3
     R, t = np.zeros((n, 3, 3)), np.zeros((n, 3))

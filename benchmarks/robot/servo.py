@@ -73,6 +73,7 @@ from benchmarks.robot.loop import (
     StatusLine,
     servo_loop,
 )
+from benchmarks.robot.models import camera_model, robot_geometry
 from benchmarks.study.outdir import OutputFile
 from hexapod.geometry import HexapodGeometry
 from hexapod.outputs import check_replace
@@ -236,34 +237,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--viz", action="store_true", help="live MeshCat view (loopback server)")
 
 
-def _geometry(spec: str) -> HexapodGeometry:
-    from hexapod.geometry import preset
-
-    if spec.endswith(".toml") or Path(spec).is_file():
-        return HexapodGeometry.from_toml(spec)
-    return preset(spec)
-
-
-def _camera(spec: str, pose_spec: str | None, geometry: HexapodGeometry) -> Any:
-    """The camera of ``--camera-file`` (and ``--camera-pose`` for an OpenCV file).
-
-    Raises:
-        BenchmarkError: An OpenCV file without a pose, or a pose for another camera.
-    """
-    from vision.cameras import load_camera
-    from vision.cameras.files.opencv import is_opencv_file
-
-    if not is_opencv_file(spec):
-        if pose_spec is not None:
-            raise BenchmarkError("--camera-pose: only with an OpenCV calibration file (a "
-                                 f"preset or a camera TOML file gives its own pose: {spec})")
-        return load_camera(spec, geometry)
-    if pose_spec is None:
-        raise BenchmarkError(f"--camera-file {spec}: an OpenCV calibration file has no pose; "
-                             "give --camera-pose front|omni or a camera TOML file whose "
-                             "[camera_from_base] places it")
-    pose = load_camera(pose_spec, geometry).camera_from_base
-    return load_camera(spec, camera_from_base=pose)
+#: The session's models (:mod:`benchmarks.robot.models`), by the names it uses.
+_geometry = robot_geometry
+_camera = camera_model
 
 
 def parse_options(items: list[str]) -> dict[str, Any]:
