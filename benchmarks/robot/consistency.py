@@ -10,11 +10,14 @@ platform pose *seen by the camera* is compared with the pose *from the encoders*
   ``u = (n2 x n1) / |n2 x n1|``), ``A_i`` the (calibrated) base points in the camera
   frame and ``q_i`` the measured lengths (the estimator of the ``cartesian-ctc``
   controller, :func:`controllers.mpc.prediction.fit_pose`), mapped to the base frame by
-  the camera's pose. The camera thus says where the legs *point*, the encoders how long
-  they are: a camera that sees another motion (a recording, a camera aimed at another
-  robot, a frame from the past) points the legs elsewhere and the fit lands away from
-  the encoder pose. Hidden legs are left out; at least :data:`MIN_LEGS` legs, not
-  collinear on the platform, are needed.
+  the camera's pose *as the base points place it* (the rigid fit of the nominal base
+  points to them: the camera file's ``camera_from_base`` for nominal base points, the
+  calibrated placement with ``--calibration``, so that a camera pose known only
+  roughly is not taken for a disagreement). The camera thus says where the legs
+  *point*, the encoders how long they are: a camera that sees another motion (a
+  recording, a camera aimed at another robot, a frame from the past) points the legs
+  elsewhere and the fit lands away from the encoder pose. Hidden legs are left out;
+  at least :data:`MIN_LEGS` legs, not collinear on the platform, are needed.
 
 The two poses further apart than ``max_distance`` (translation) or ``max_angle``
 (rotation) stop the session (:class:`~benchmarks.robot.exits.SessionStop`,
@@ -160,8 +163,8 @@ class CameraCheck:
     Args:
         geometry: The nominal robot (platform points).
         base_points: (6, 3) base points in the camera frame (the controller's: nominal
-            or calibrated) [m].
-        camera_from_base: The camera's pose (of the camera model the features are in).
+            or calibrated) [m]; they place the camera (the rigid fit of the nominal
+            base points to them).
         max_distance: Translation threshold [m] (> 0).
         max_angle: Rotation threshold [rad] (> 0).
         blind_timeout: Longest run of periods without a camera pose [s] (> 0).
@@ -175,7 +178,7 @@ class CameraCheck:
     """
 
     def __init__(self, geometry: HexapodGeometry, base_points: np.ndarray,
-                 camera_from_base: Transform, max_distance: float = DEFAULT_CONSISTENCY_MM
+                 max_distance: float = DEFAULT_CONSISTENCY_MM
                  * 1e-3, max_angle: float = math.radians(DEFAULT_CONSISTENCY_DEG),
                  blind_timeout: float = DEFAULT_BLIND_TIMEOUT_S, camera: str = "camera",
                  must_agree_at_start: bool = False,
@@ -187,9 +190,12 @@ class CameraCheck:
             if not (math.isfinite(value) and value > 0):
                 raise BenchmarkError(f"{name} must be a positive number of {unit}, got "
                                      f"{value * scale:g}")
+        from controllers.mpc.prediction import fit_pose
+
         self.base_points = np.asarray(base_points, float)
         self.platform_points = np.asarray(geometry.platform_points, float)
-        self.base_from_camera = camera_from_base.inverse()
+        R, t = fit_pose(self.base_points, np.asarray(geometry.base_points, float))
+        self.base_from_camera = Transform(R, t).inverse()
         self.max_distance, self.max_angle = float(max_distance), float(max_angle)
         self.blind_timeout = float(blind_timeout)
         self.camera = camera

@@ -397,7 +397,7 @@ def run(args: argparse.Namespace) -> int:
             print(f"warning: {text}", file=sys.stderr)
     controller.reset(ControllerContext(base_points=base_points, geometry=geometry,
                                        camera=camera, dt=args.dt, goal=goal))
-    check = CameraCheck(geometry, base_points, camera.camera_from_base,
+    check = CameraCheck(geometry, base_points,
                         args.consistency_mm * 1e-3, math.radians(args.consistency_deg),
                         args.blind_timeout_s, args.camera,
                         must_agree_at_start=args.camera.startswith("video:"))

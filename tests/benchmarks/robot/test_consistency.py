@@ -47,7 +47,7 @@ def _features(rotation: np.ndarray, translation: np.ndarray, seed: int = 0) -> F
 
 
 def _check(clock: Clock | None = None, **kw: object) -> CameraCheck:
-    return CameraCheck(G, BASE, CAM.camera_from_base, camera="test",
+    return CameraCheck(G, BASE, camera="test",
                        clock=clock or Clock(), **kw)  # type: ignore[arg-type]
 
 
@@ -163,3 +163,23 @@ def test_visual_pose_refuses_collinear_legs() -> None:
     vis[3:] = False
     why = visual_pose(f.normals, vis, MID, BASE, pts, CAM.camera_from_base.inverse())
     assert isinstance(why, str) and "collinear" in why
+
+
+def test_the_calibrated_base_points_place_the_camera() -> None:
+    """A camera whose file pose is 2 deg off: the calibrated base points (seen from where
+    it really is) place it, and the consistent image agrees; the file's pose would have
+    put the camera pose centimetres away."""
+    from hexapod.kinematics import Transform
+
+    tilt = Transform(exp_so3(np.radians([2.0, 0.0, 0.0])), np.zeros(3))
+    true_pose = Transform(tilt.rotation @ CAM.camera_from_base.rotation,
+                          tilt.rotation @ CAM.camera_from_base.translation)
+    f = SimCamera(CAM.replace(camera_from_base=true_pose), G).measure(SOL.rotation, SOL.translation)
+    assert f is not None
+    calibrated = true_pose.apply(G.base_points)
+    res = CameraCheck(G, calibrated, camera="test", clock=Clock())(
+        0, MID, SOL.rotation, SOL.translation, f.normals, f.edge_visible)
+    assert res.distance < 0.005 and res.angle < math.radians(1)
+    # the nominal base points (the file's pose, 2 deg off) see a disagreement
+    with pytest.raises(SessionStop, match="disagrees"):
+        _check()(0, MID, SOL.rotation, SOL.translation, f.normals, f.edge_visible)
