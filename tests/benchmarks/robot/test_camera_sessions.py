@@ -157,9 +157,17 @@ def test_the_simulated_camera_runs_on_a_real_robot_only_when_asked_by_name(
         assert "--simulated-camera-on-real-robot" in err
         code = servo.main(["--backend", backend, "--camera", "sim",
                            "--simulated-camera-on-real-robot", "--goal", str(goal),
-                           "-o", "gain=3", "--tolerance-mm", "0.5", "--max-steps", "150"])
+                           "-o", "gain=3", "--tolerance-mm", "0.5", "--max-steps", "150",
+                           "--log", str(tmp_path / "session.jsonl")])
     out = capsys.readouterr().out
     assert code == ServoExit.CONVERGED, out
+    # the session's log replays as a trial (hexapod-bench viz): its periods, to the goal
+    from benchmarks.robot.replay import load_session
+
+    steps = int(out.split("converged after ")[1].split()[0])
+    record = load_session(tmp_path / "session.jsonl", goal_file=str(goal))
+    assert record.frames == steps
+    assert record.arrays["position_error"][-1] < record.arrays["position_error"][0]
     assert "camera sim (simulated: images rendered at the encoders' pose; file front" in out
     assert "camera check:" in out and "largest disagreement" in out
     received = _received(log)
