@@ -342,8 +342,6 @@ def test_a_period_check_ends_the_session_with_its_code(
     """The seam of the safety checks (camera consistency, blind camera): a PeriodCheck
     called each period with the measured lengths and the features, raising
     SessionStop(SAFETY, reason), ends the session through the shutdown with exit 5."""
-    import functools
-
     from benchmarks.robot import session
     from benchmarks.robot.exits import SessionStop
 
@@ -354,8 +352,10 @@ def test_a_period_check_ends_the_session_with_its_code(
         if step == 4:
             raise SessionStop(ServoExit.SAFETY, "the camera disagrees with the encoders")
 
-    monkeypatch.setattr(servo, "run_session",
-                        functools.partial(session.run_session, checks=[check]))
+    def run_session(*args: object, checks: tuple[object, ...] = (), **kw: object) -> int:
+        return session.run_session(*args, checks=[check, *checks], **kw)  # type: ignore
+
+    monkeypatch.setattr(servo, "run_session", run_session)
     code, out = _run(tmp_path, caplog, *SLOW)
     stdout = capsys.readouterr().out
     assert code == ServoExit.SAFETY == 5, stdout
