@@ -1,10 +1,13 @@
 """The real servo loop: one controller, a robot over its serial link, a camera.
 
 ``hexapod-bench servo --backend serial:URL|emulator|gcs:tcp://HOST:PORT|NAME[:ARGS]
---camera sim|video:PATH|device:N --controller NAME --goal FILE`` runs one controller at
+--camera device:N|video:PATH|sim --controller NAME --goal FILE`` runs one controller at
 the control period until the robot converges, a limit is reached (``--max-time-s``,
-``--max-steps``, ``--max-travel-mm``, missed deadlines), the recording ends, a signal
-(SIGINT, SIGTERM, SIGHUP) or a failure; every way out goes through the same shutdown
+``--max-steps``, ``--max-travel-mm``, missed deadlines), the recording ends, the camera
+disagrees with the encoders or stays blind (:mod:`benchmarks.robot.consistency`, a
+per-period check of the session), a signal (SIGINT, SIGTERM, SIGHUP) or a failure;
+``--camera`` is required with real hardware (:mod:`benchmarks.robot.camera_policy`).
+Every way out goes through the same shutdown
 (:mod:`benchmarks.robot.session`): ``HLT``, its confirmation awaited, a summary, the
 final record, an exit code of :class:`~benchmarks.robot.exits.ServoExit`.
 
