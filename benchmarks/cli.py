@@ -1,5 +1,5 @@
 """``hexapod-bench``: list, check, run, tune, report, compare, export, reproduce, perf,
-calibrate, identify, viz, servo, warm.
+calibrate, identify, viz, servo, conformance, warm.
 
 Examples::
 
@@ -14,6 +14,7 @@ Examples::
     hexapod-bench compare runs/tahri
     hexapod-bench export runs/tahri --parquet tahri.parquet
     hexapod-bench reproduce seed001 --quick
+    hexapod-bench conformance emulator
 """
 
 from __future__ import annotations
@@ -255,8 +256,20 @@ def build_parser() -> argparse.ArgumentParser:
     servo.add_arguments(s)
     s.set_defaults(func=servo.run)
 
-    s = sub.add_parser("viz", help="replay a recorded trial (MeshCat, or --html FILE)")
-    s.add_argument("dir", help="a run directory")
+    from benchmarks.robot import conformance_command
+
+    s = sub.add_parser("conformance", help="check a robot backend against the simulator "
+                                           "(exit 0: conforms, 1: a check failed)",
+                       description=conformance_command.__doc__.split("\n\n")[0]
+                       if conformance_command.__doc__ else None)
+    conformance_command.add_arguments(s)
+    s.set_defaults(func=conformance_command.run)
+
+    s = sub.add_parser("viz", help="replay a recorded trial or a servo session (MeshCat, or "
+                                   "--html FILE)")
+    s.add_argument("dir", help="a run directory, or a servo session: its directory "
+                               "(servo-runs/..., servo --out DIR) or its log (servo.jsonl, "
+                               "servo --log FILE.jsonl)")
     s.add_argument("--trial", type=int, default=0)
     s.add_argument("--controller", help="controller label")
     s.add_argument("--scenario", help="scenario name (when the run has several)")
@@ -270,6 +283,19 @@ def build_parser() -> argparse.ArgumentParser:
                         "hexapod-bench did not write it")
     s.add_argument("--hold", type=float, default=5.0,
                    help="live view: seconds to keep the server after the replay")
+    session = s.add_argument_group("servo session (default: what its record's header "
+                                   "says the session was run with)")
+    session.add_argument("--geometry",
+                         help="nominal robot: a geometry TOML file or a preset (default the "
+                              "header's, else deltalab)")
+    session.add_argument("--camera-file",
+                         help="camera model drawn (default the header's, else front)")
+    session.add_argument("--camera-pose", metavar="PRESET|TOML",
+                         help="with a calibration file: the camera's pose (default the "
+                              "header's)")
+    session.add_argument("--goal", metavar="FILE",
+                         help="a goal file (the errors are measured to it; default the "
+                              "header's goal lengths, else the last period's pose)")
     s.set_defaults(func=cmd_viz)
 
     from benchmarks.study.check_command import cmd_check

@@ -1,10 +1,13 @@
 """The real servo loop: one controller, a robot over its serial link, a camera.
 
 ``hexapod-bench servo --backend serial:URL|emulator|gcs:tcp://HOST:PORT|NAME[:ARGS]
---camera sim|video:PATH|device:N --controller NAME --goal FILE`` runs one controller at
+--camera device:N|video:PATH|sim --controller NAME --goal FILE`` runs one controller at
 the control period until the robot converges, a limit is reached (``--max-time-s``,
-``--max-steps``, ``--max-travel-mm``, missed deadlines), the recording ends, a signal
-(SIGINT, SIGTERM, SIGHUP) or a failure; every way out goes through the same shutdown
+``--max-steps``, ``--max-travel-mm``, missed deadlines), the recording ends, the camera
+disagrees with the encoders or stays blind (:mod:`benchmarks.robot.consistency`, a
+per-period check of the session), a signal (SIGINT, SIGTERM, SIGHUP) or a failure;
+``--camera`` is required with real hardware (:mod:`benchmarks.robot.camera_policy`).
+Every way out goes through the same shutdown
 (:mod:`benchmarks.robot.session`): ``HLT``, its confirmation awaited, a summary, the
 final record, an exit code of :class:`~benchmarks.robot.exits.ServoExit`.
 
@@ -47,6 +50,13 @@ from typing import Any
 import numpy as np
 
 from benchmarks.exceptions import BenchmarkError
+from benchmarks.robot.camera_policy import choose_camera
+from benchmarks.robot.consistency import (
+    DEFAULT_BLIND_TIMEOUT_S,
+    DEFAULT_CONSISTENCY_DEG,
+    DEFAULT_CONSISTENCY_MM,
+    CameraCheck,
+)
 from benchmarks.robot.exits import ServoExit
 from benchmarks.robot.goals import (
     DEFAULT_TEACH_FRAMES,
@@ -66,6 +76,7 @@ from benchmarks.robot.limits import (
     MISSED_WINDOW,
 )
 from benchmarks.robot.loop import DEFAULT_FEATURE_TOLERANCE, DEFAULT_SETTLE, servo_loop
+from benchmarks.robot.models import camera_model, robot_geometry
 from benchmarks.robot.records import LOG_NAME, SESSIONS_DIR, session_path
 from benchmarks.robot.session import (
     DEFAULT_HALT_TIMEOUT_S,
@@ -159,9 +170,29 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                         "(a device path, socket://127.0.0.1:PORT, ...), gcs:tcp://HOST:PORT "
                         "or gcs:serial:URL (a PI GCS hexapod controller), gcs-emulator, sim, "
                         "a plugin's NAME[:ARGS] or module:attr[:ARGS] (docs/backends.md)")
-    p.add_argument("--camera", default="sim",
-                   help="sim (render the legs at the pose of the measured lengths), "
-                        "video:PATH or device:N (default sim)")
+    p.add_argument("--camera",
+                   help="device:N (a camera), video:PATH (a recording: used only if it agrees "
+                        "with the encoders at start) or sim (render the legs at the pose of "
+                        "the measured lengths); required with real hardware (serial:, gcs:, "
+                        "plugins), default sim with a simulated robot (sim, emulator, "
+                        "gcs-emulator)")
+    p.add_argument("--simulated-camera-on-real-robot", action="store_true",
+                   help="allow --camera sim with real hardware (the loop then closes on "
+                        "rendered images of the measured pose, not on what the robot does)")
+    p.add_argument("--consistency-mm", type=float, default=DEFAULT_CONSISTENCY_MM,
+                   metavar="MM",
+                   help="halt (exit 5) when the platform pose seen by the camera and the one "
+                        "from the encoders are further apart than this [mm] (default "
+                        f"{DEFAULT_CONSISTENCY_MM:g}) ...")
+    p.add_argument("--consistency-deg", type=float, default=DEFAULT_CONSISTENCY_DEG,
+                   metavar="DEG",
+                   help=f"... or turned by more than this [deg] (default "
+                        f"{DEFAULT_CONSISTENCY_DEG:g})")
+    p.add_argument("--blind-timeout-s", type=float, default=DEFAULT_BLIND_TIMEOUT_S,
+                   metavar="S",
+                   help="halt (exit 5) when the camera has given no platform pose (lost "
+                        "frames, fewer than 3 legs seen) for this long [s] (default "
+                        f"{DEFAULT_BLIND_TIMEOUT_S:g})")
     p.add_argument("--controller", default="leg-edge",
                    help="controller: registry name or module:attr (default leg-edge)")
     p.add_argument("-o", "--option", action="append", default=[], metavar="KEY=VALUE",
@@ -246,34 +277,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--viz", action="store_true", help="live MeshCat view (loopback server)")
 
 
-def _geometry(spec: str) -> HexapodGeometry:
-    from hexapod.geometry import preset
-
-    if spec.endswith(".toml") or Path(spec).is_file():
-        return HexapodGeometry.from_toml(spec)
-    return preset(spec)
-
-
-def _camera(spec: str, pose_spec: str | None, geometry: HexapodGeometry) -> Any:
-    """The camera of ``--camera-file`` (and ``--camera-pose`` for an OpenCV file).
-
-    Raises:
-        BenchmarkError: An OpenCV file without a pose, or a pose for another camera.
-    """
-    from vision.cameras import load_camera
-    from vision.cameras.files.opencv import is_opencv_file
-
-    if not is_opencv_file(spec):
-        if pose_spec is not None:
-            raise BenchmarkError("--camera-pose: only with an OpenCV calibration file (a "
-                                 f"preset or a camera TOML file gives its own pose: {spec})")
-        return load_camera(spec, geometry)
-    if pose_spec is None:
-        raise BenchmarkError(f"--camera-file {spec}: an OpenCV calibration file has no pose; "
-                             "give --camera-pose front|omni or a camera TOML file whose "
-                             "[camera_from_base] places it")
-    pose = load_camera(pose_spec, geometry).camera_from_base
-    return load_camera(spec, camera_from_base=pose)
+#: The session's models (:mod:`benchmarks.robot.models`), by the names it uses.
+_geometry = robot_geometry
+_camera = camera_model
 
 
 def parse_options(items: list[str]) -> dict[str, Any]:
@@ -387,6 +393,8 @@ def run(args: argparse.Namespace) -> int:
     from hexapod.backends.registry import backends
 
     backends.check(args.backend)  # a bad spec is reported before anything is opened
+    args.camera = choose_camera(args.backend, args.camera,
+                                getattr(args, "simulated_camera_on_real_robot", False))
     geometry = _geometry(args.geometry)
     camera = _camera(args.camera_file, args.camera_pose, geometry)
     start = None if args.start_mm is None else np.asarray(args.start_mm, float) * 1e-3
@@ -422,6 +430,10 @@ def run(args: argparse.Namespace) -> int:
             print(f"warning: {text}", file=sys.stderr)
     controller.reset(ControllerContext(base_points=base_points, geometry=geometry,
                                        camera=camera, dt=args.dt, goal=goal))
+    check = CameraCheck(geometry, base_points,
+                        args.consistency_mm * 1e-3, math.radians(args.consistency_deg),
+                        args.blind_timeout_s, args.camera,
+                        must_agree_at_start=args.camera.startswith("video:"))
     inputs = SessionInputs(geometry, camera, goal_file, goal, controller, start)
     with _viewer(args.viz, geometry, camera, goal) as viewer:
         on_pose = None
@@ -429,7 +441,7 @@ def run(args: argparse.Namespace) -> int:
             def on_pose(R: np.ndarray, t: np.ndarray, vis: np.ndarray | None) -> None:
                 viewer.display(R, t, vis)
 
-        return run_session(args, inputs, status, on_pose)
+        return run_session(args, inputs, status, on_pose, checks=[check])
 
 
 def build_parser() -> argparse.ArgumentParser:

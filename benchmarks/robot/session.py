@@ -24,6 +24,7 @@ from typing import Any
 import numpy as np
 
 from benchmarks.exceptions import BenchmarkError
+from benchmarks.robot.camera_policy import describe_camera
 from benchmarks.robot.exits import ServoExit, SessionStop, exit_for_signal
 from benchmarks.robot.limits import LimitedRobot, SessionLimits
 from benchmarks.robot.loop import PeriodCheck, servo_loop
@@ -246,7 +247,10 @@ def run_session(args: argparse.Namespace, inputs: SessionInputs, status: StatusL
         checks: Per-period safety checks (:class:`~benchmarks.robot.loop.PeriodCheck`:
             called after each image with the measured lengths and the features; a
             :class:`~benchmarks.robot.exits.SessionStop` they raise ends the session
-            through the shutdown with its code), after the signal check.
+            through the shutdown with its code), after the signal check: the camera
+            check (:class:`~benchmarks.robot.consistency.CameraCheck`). A check with a
+            ``summary()`` method has its line printed after the session's summary and
+            written to the final record (``checks``).
 
     Raises:
         OutputError: The record cannot be placed (``--out``, ``--log``), before anything
@@ -271,13 +275,13 @@ def run_session(args: argparse.Namespace, inputs: SessionInputs, status: StatusL
             robot = open_backend(args.backend, inputs.geometry, inputs.start)
             if hasattr(robot, "timeout_retries"):
                 robot.timeout_retries = args.retries
-            pose = f", pose {args.camera_pose}" if args.camera_pose else ""
+            seen_by = describe_camera(args.camera, args.camera_file, args.camera_pose,
+                                      inputs.camera)
             status.message(
-                f"servo: {args.controller} on {args.backend} ({robot.identity}), camera "
-                f"{args.camera} (file {args.camera_file}{pose}), goal {inputs.goal_file.source}"
-                f", dt {args.dt * 1e3:g} ms; speed <= {limits.max_speed * 1e3:g} mm/s, time "
-                f"<= {limits.max_time:g} s; record {log.path}; Ctrl-C, SIGTERM or SIGHUP "
-                "halt the robot")
+                f"servo: {args.controller} on {args.backend} ({robot.identity}), {seen_by}, "
+                f"goal {inputs.goal_file.source}, dt {args.dt * 1e3:g} ms; speed <= "
+                f"{limits.max_speed * 1e3:g} mm/s, time <= {limits.max_time:g} s; record "
+                f"{log.path}; Ctrl-C, SIGTERM or SIGHUP halt the robot")
             q0 = np.asarray(robot.measured_lengths(), float)
             _plan(args, q0, np.asarray(inputs.goal_file.lengths, float), limits,
                   status.message)
@@ -326,15 +330,31 @@ def run_session(args: argparse.Namespace, inputs: SessionInputs, status: StatusL
                    else halt.detail,
                    "halt_s": None if halt is None else round(halt.seconds, 6),
                    "retries": getattr(robot, "retried", None),
-                   "signals": list(guard.received), **_figures(result)})
+                   "signals": list(guard.received), "checks": _check_summaries(checks),
+                   **_figures(result)})
         try:  # the record is written: a closed terminal (SIGHUP) cannot lose it
             status.final(result.last)
-            _report(status, code, reason, result, halt, limited, moved, log, ended)
+            _report(status, code, reason, result, halt, limited, moved, log, ended,
+                    _check_summaries(checks))
             if ended is not None and code == ServoExit.INTERNAL:
                 traceback.print_exception(ended, file=sys.stderr)
         except (OSError, ValueError):
             pass
     return int(code)
+
+
+def _check_summaries(checks: Sequence[PeriodCheck]) -> list[str]:
+    """The one-line summaries of the checks that give one (``summary()``: the camera
+    check's periods checked and largest disagreement)."""
+    lines = []
+    for check in checks:
+        summary = getattr(check, "summary", None)
+        if callable(summary):
+            try:
+                lines.append(str(summary()))
+            except Exception as exc:  # a summary never hides the shutdown's report
+                lines.append(f"{type(check).__name__}: no summary ({exc})")
+    return lines
 
 
 def log_period(log: SessionLog, status: StatusLine) -> Any:
@@ -348,7 +368,8 @@ def log_period(log: SessionLog, status: StatusLine) -> Any:
 
 def _report(status: StatusLine, code: ServoExit, reason: str, result: ServoResult,
             halt: HaltReport | None, limited: LimitedRobot | None, moved: bool,
-            log: SessionLog, ended: BaseException | None) -> None:
+            log: SessionLog, ended: BaseException | None, summaries: Sequence[str] = ()
+            ) -> None:
     """What happened, the figures, whether the robot is confirmed stopped, the record."""
     say = status.message
     if code == ServoExit.REFUSED and not moved and ended is not None and not isinstance(
@@ -358,6 +379,8 @@ def _report(status: StatusLine, code: ServoExit, reason: str, result: ServoResul
         say(f"stopped: {reason} (exit {int(code)}, {code.name.lower()})")
     if result.steps or moved or code == ServoExit.CONVERGED:
         say(result.summary())
+        for line in summaries:
+            say(line)
     if halt is None:
         say("robot: not connected")
     elif halt.confirmed:

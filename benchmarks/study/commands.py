@@ -399,10 +399,23 @@ def find_record(out: Path, trial: int, controller: str | None = None,
     Raises:
         BenchmarkError: No such record (listing what is there), or an ambiguous selection.
     """
-    folder = out / "trials"
+    from benchmarks.study.outdir import META_FILE
+    from benchmarks.study.results import TRIALS_DIR
+
+    folder = out / TRIALS_DIR
     files = sorted(folder.glob("*.npz")) if folder.exists() else []
     if not files:
         recorded = _recorded_count(out)
+        if not (out / META_FILE).is_file():  # not a run directory
+            what = "no such file or directory" if not out.exists() else (
+                "neither a run directory nor a servo session log" if out.is_dir() else
+                "not a servo session log (JSON lines: a servo_session header, periods "
+                "with step, t_s, lengths_mm)")
+            raise BenchmarkError(f"{out}: {what}; viz replays a trial of a run directory "
+                                 "(hexapod-bench run --out DIR --record K) or a servo session "
+                                 "(its directory, servo-runs/<UTC time>-<controller>/ or "
+                                 "servo --out DIR, or its servo.jsonl or servo --log "
+                                 "FILE.jsonl)")
         why = " (the run used --record 0)" if recorded == 0 else ""
         raise BenchmarkError(f"{out}: no recorded trial{why}; rerun into a new --out with "
                              "--record K to keep the time series of trials 0 to K-1 of each "
@@ -445,11 +458,15 @@ def _recorded_count(out: Path) -> int | None:
 
 
 def cmd_viz(args: argparse.Namespace) -> int:
-    """Replay a recorded trial: live in MeshCat, or as a self-contained HTML file + curves."""
+    """Replay a recorded trial or a servo session (its log, or the session directory
+    holding it): live in MeshCat, or as a self-contained HTML file + curves."""
+    from benchmarks.robot.replay import find_session_log, load_session
+    from benchmarks.study.results import TRIALS_DIR
     from hexapod.visualize import HexapodViewer, load_trial, plot_trial, replay_html
 
     out = Path(args.dir)
-    path = find_record(out, args.trial, args.controller, args.scenario, args.point)
+    session = None if (out / TRIALS_DIR).is_dir() else find_session_log(out)
+    path = session or find_record(out, args.trial, args.controller, args.scenario, args.point)
     if args.html:
         from hexapod.outputs import check_replace
 
@@ -460,7 +477,12 @@ def cmd_viz(args: argparse.Namespace) -> int:
         overwrite = getattr(args, "overwrite", False)
         check_replace(html_path, overwrite)
         check_replace(png_path, overwrite)
-    record = load_trial(path)
+    if session is not None:
+        record = load_session(session, getattr(args, "geometry", None),
+                              getattr(args, "camera_file", None),
+                              getattr(args, "camera_pose", None), getattr(args, "goal", None))
+    else:
+        record = load_trial(path)
     if args.html:
         html = replay_html(record, html_path, frame=args.still)
         png = plot_trial(record, png_path)

@@ -78,6 +78,9 @@ class Backend(ABC):
     #: The command kinds it applies (leg velocities; a force-controlled robot adds
     #: :attr:`~hexapod.actuation.Actuation.FORCE` and overrides :meth:`step_forces`).
     actuations: tuple[Actuation, ...] = (Actuation.VELOCITY,)
+    #: The robot is simulated (a model, an emulator), not hardware: ``hexapod-bench
+    #: servo`` then allows ``--camera sim`` without asking (docs/servo.md).
+    simulated: bool = False
 
     @classmethod
     def open(cls, args: str, geometry: HexapodGeometry, start: np.ndarray | None = None

@@ -179,14 +179,24 @@ class GcsController:
         """Move the platform up to ``now`` [s] (straight line in the six coordinates;
         with ``dynamics`` the legs of the robot with mass follow that line)."""
         if self._axes is not None:
-            start = self._t
-            for k in range(self._axes.steps_for(now - start)):
-                commanded = self._commanded(start + (k + 1) * self._axes.h)
+            start, h = self._t, self._axes.h
+            steps = self._axes.steps_for(now - start)
+            k = 0
+            while k < steps and self._on_line(start + (k + 1) * h):
+                commanded = self._commanded(start + (k + 1) * h)
                 self._axes.step(self.lengths_of(commanded), self.geometry.max_speed)
+                k += 1
+            if k < steps:  # past the line's end: its target held (nothing to do at rest)
+                self._axes.hold(self.lengths_of(self._target), self.geometry.max_speed,
+                                steps - k)
         self._t = max(self._t, now)
         self._coords = self._commanded(now)
         if self._duration > 0 and now >= self._t0 + self._duration:
             self._duration = 0.0
+
+    def _on_line(self, now: float) -> bool:
+        """The platform is commanded along its line at ``now`` [s] (not yet at its end)."""
+        return self._duration > 0 and now < self._t0 + self._duration
 
     def _commanded(self, now: float) -> np.ndarray:
         """The commanded coordinates at ``now`` [s] on the straight line."""

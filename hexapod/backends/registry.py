@@ -116,12 +116,13 @@ class BackendRegistry:
         self._openers: dict[str, BackendOpener] = {}
         self._info: dict[str, BackendInfo] = {}
         self._needs_args: dict[str, str] = {}
+        self._simulated: set[str] = set()
         self.errors: list[BackendPluginError] = []
         self._plugins_loaded = False
 
     def register(self, name: str, target: type[Backend] | BackendOpener,
                  package: str = "hexapod-vs", version: str | None = None,
-                 needs_args: str | None = None) -> None:
+                 needs_args: str | None = None, simulated: bool | None = None) -> None:
         """Register a backend class or opener function under ``name``.
 
         Args:
@@ -130,6 +131,9 @@ class BackendRegistry:
             package: Distribution that provides it.
             version: Its version (looked up when None).
             needs_args: What ARGS it needs (a spec without them is refused early).
+            simulated: The robot is simulated (an emulator, a model), not hardware
+                (:meth:`is_simulated`); None: the target's ``simulated`` attribute, else
+                False (a plugin is real hardware unless it says otherwise).
 
         Raises:
             BackendPluginError: ``name`` breaks :func:`hexapod.outputs.check_name`, or
@@ -142,6 +146,12 @@ class BackendRegistry:
         opener = _opener(name, target, package)
         if needs_args:
             self._needs_args[name] = needs_args
+        if simulated is None:
+            simulated = bool(getattr(target, "simulated", False))
+        if simulated:
+            self._simulated.add(name)
+        else:
+            self._simulated.discard(name)
         doc = (getattr(target, "__doc__", None) or "").strip().splitlines()
         self._openers[name] = opener
         self._info[name] = BackendInfo(name, package, version or _version(package),
@@ -221,6 +231,22 @@ class BackendRegistry:
                                      f"needs arguments: {self._needs_args[name]}")
         return name
 
+    def is_simulated(self, spec: str) -> bool:
+        """Whether the robot of a spec is simulated (``sim``, ``emulator``,
+        ``gcs-emulator``, a plugin registered with ``simulated=True`` or whose class has
+        ``simulated = True``) rather than real hardware (``serial:``, ``gcs:``, any other
+        plugin). A link to an emulator through ``serial:``/``gcs:`` counts as hardware:
+        nothing on the line tells them apart.
+
+        Raises:
+            UnknownBackendError, BackendPluginError: A bad spec.
+        """
+        name, opener, _ = self.resolve(spec)
+        if name in self._openers:
+            return name in self._simulated
+        target = getattr(opener, "__self__", opener)  # a class's bound ``open``
+        return bool(getattr(target, "simulated", False))
+
     def open(self, spec: str, geometry: HexapodGeometry,
              start: np.ndarray | None = None) -> Backend:
         """Open the backend of a spec.
@@ -267,14 +293,14 @@ def _version(package: str) -> str:
 
 #: The process-wide backend registry.
 backends = BackendRegistry()
-backends.register("sim", _open_sim)
-backends.register("emulator", _open_emulator)
+backends.register("sim", _open_sim, simulated=True)
+backends.register("emulator", _open_emulator, simulated=True)
 backends.register("serial", _open_serial,
                   needs_args="serial:URL, e.g. serial:/dev/ttyUSB0 or serial:socket://HOST:PORT")
 backends.register("gcs", _open_gcs,
                   needs_args="gcs:tcp://HOST:PORT or gcs:serial:URL (a PI GCS hexapod "
                              "controller), e.g. gcs:tcp://192.168.0.10:50000")
-backends.register("gcs-emulator", _open_gcs_emulator)
+backends.register("gcs-emulator", _open_gcs_emulator, simulated=True)
 
 
 def open_backend(spec: str, geometry: HexapodGeometry,

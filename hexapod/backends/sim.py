@@ -18,6 +18,8 @@ class SimulatedRobot(Backend):
         joint_offsets: (6,) encoder offsets [m]: measured = true + offset.
     """
 
+    simulated = True
+
     def __init__(self, geometry: HexapodGeometry, lengths: np.ndarray | None = None,
                  joint_offsets: np.ndarray | None = None) -> None:
         self.geometry = geometry

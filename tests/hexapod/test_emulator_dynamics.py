@@ -198,3 +198,66 @@ def test_the_gcs_console_script_takes_dynamics() -> None:
     finally:
         proc.terminate()
         proc.wait(10)
+
+
+@pytest.mark.slow
+def test_the_axes_come_to_rest_and_an_idle_emulator_integrates_nothing() -> None:
+    """Held at its setpoints, the robot comes to rest (the drives' integral action done)
+    and the physics steps stop until the setpoints change (an idle emulator costs no
+    CPU); the rest is within half a micrometre of the setpoints."""
+    from hexapod.backends import emulator_dynamics as ed
+
+    axes = ed.DynamicAxes(deltalab(), Q0)
+    target = Q0 + STEP
+    assert axes._resting, "at rest where it starts"
+    axes.move(target, 0.05, 0.05)
+    t = 0.05
+    while not axes._resting and t < 10.0:
+        axes.move(target, 0.05, 0.05)
+        t += 0.05
+    assert axes._resting and 1.0 < t < 10.0, t
+    assert np.abs(axes.lengths - target).max() <= ed.REST_ERROR
+    table, lengths = axes.robots.table.copy(), axes.lengths.copy()
+    for _ in range(100):  # 5 s idle: not one physics step (the state's bits unchanged)
+        axes.move(target, 0.05, 0.05)
+    assert np.array_equal(axes.robots.table, table)
+    assert np.array_equal(axes.lengths, lengths)
+    axes.move(target + 0.001, 0.05, 0.05)  # a new setpoint wakes it
+    assert not axes._resting and np.all(axes.lengths > lengths)
+    assert not np.array_equal(axes.robots.table, table)
+
+
+@pytest.mark.slow
+def test_the_gcs_platform_at_rest_integrates_nothing() -> None:
+    ctrl = _gcs(True)
+    ctrl.advance(6.0)  # the line (0.1 s), then the hunting of the integral action
+    for k in range(1, 30):
+        ctrl.advance(6.0 + 0.05 * k)
+    assert ctrl._axes is not None and ctrl._axes._resting
+    z = ctrl.coords[2]
+    assert z == pytest.approx(0.002, abs=2e-6)
+    ctrl.advance(20.0)
+    assert ctrl.coords[2] == z
+
+
+def test_the_lean_physics_steps_give_the_same_bits_as_the_general_path() -> None:
+    """:meth:`DynamicAxes._steps` (the row kept in the compiled table) against
+    :meth:`DynamicAxes.step` one call a step: the same lengths, table and pose, bit for
+    bit, over a wandering setpoint."""
+    from hexapod.backends import emulator_dynamics as ed
+
+    def run(lean: bool) -> tuple[np.ndarray, ...]:
+        axes = ed.DynamicAxes(deltalab(), Q0)
+        if not lean:
+            def general(setpoints: np.ndarray, speed: float, n: int) -> None:
+                for _ in range(n):
+                    axes.step(setpoints, speed)
+
+            axes._steps = general  # type: ignore[method-assign]
+        out = [axes.move(Q0 + 0.003 * np.sin(0.05 * k + np.arange(6)), 0.05,
+                         0.02 + 0.001 * (k % 3)) for k in range(60)]
+        r = axes.robots
+        return np.array(out), r.table.copy(), r.R.copy(), r.t.copy(), r.track_count.copy()
+
+    for a, b in zip(run(False), run(True), strict=True):
+        assert np.array_equal(a, b)

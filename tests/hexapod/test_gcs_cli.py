@@ -69,8 +69,9 @@ def test_ctrl_c_on_servo_halts_the_platform(controller: str, tmp_path: Path) -> 
     # process exits if nothing halted it
     spec = f"gcs:tcp://{controller}?velocity=0.1"
     code, out, err = interrupt_servo(
-        ["--backend", spec, "--goal", str(goal), "-o", "gain=3", "--max-missed-consecutive",
-         "0", "--max-missed-fraction", "1"], log, ROOT, ENV, 60)
+        ["--backend", spec, "--camera", "sim", "--simulated-camera-on-real-robot", "--goal",
+         str(goal), "-o", "gain=3", "--max-missed-consecutive", "0", "--max-missed-fraction",
+         "1"], log, ROOT, ENV, 60)
     assert code == 130, (out, err)
     assert "stopped: SIGINT received (exit 130" in out
     assert "robot: halted and confirmed stopped" in out and "HLT confirmed" in out

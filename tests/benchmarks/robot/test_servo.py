@@ -24,6 +24,8 @@ ANY_LATE = ["--max-missed-consecutive", "0", "--max-missed-fraction", "1"]
 FAST = ["-o", "gain=3", "--tolerance-mm", "0.5", "--max-steps", "150", *ANY_LATE]
 # a port that cannot be opened: an error about it would mean the robot was contacted
 NO_ROBOT = "serial:/nonexistent/hexapod-port"
+# the simulated camera asked for by name: a real backend needs a camera (docs/servo.md)
+SIM_ON_HARDWARE = ["--camera", "sim", "--simulated-camera-on-real-robot"]
 
 
 @pytest.fixture(autouse=True)
@@ -245,7 +247,7 @@ def test_bad_goal_files_are_refused_before_the_robot_is_contacted(
         tmp_path: Path, capsys: pytest.CaptureFixture[str], text: str,
         fragments: list[str]) -> None:
     goal = _goal(tmp_path, text)
-    code = servo.main(["--backend", NO_ROBOT, "--goal", str(goal)])
+    code = servo.main(["--backend", NO_ROBOT, *SIM_ON_HARDWARE, "--goal", str(goal)])
     err = capsys.readouterr().err
     assert code == 2
     assert str(goal) in err
@@ -257,7 +259,8 @@ def test_bad_goal_files_are_refused_before_the_robot_is_contacted(
 def test_unknown_controller_suggests_the_closest(
         tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     goal = _goal(tmp_path, f"lengths_mm = {_mm(GOAL_MM)}\n")
-    code = servo.main(["--backend", NO_ROBOT, "--controller", "leg-edg", "--goal", str(goal)])
+    code = servo.main(["--backend", NO_ROBOT, *SIM_ON_HARDWARE, "--controller", "leg-edg",
+                       "--goal", str(goal)])
     err = capsys.readouterr().err
     assert code == 2
     assert "unknown controller 'leg-edg'" in err and "did you mean 'leg-edge'" in err
@@ -381,7 +384,8 @@ def test_log_never_replaces_a_users_file_but_replaces_an_earlier_log(
     goal = _goal(tmp_path, f"lengths_mm = {_mm(GOAL_MM)}\n")
     notes = tmp_path / "notes.jsonl"
     notes.write_text('{"my": "measurements"}\n')
-    code = servo.main(["--backend", NO_ROBOT, "--goal", str(goal), "--log", str(notes)])
+    code = servo.main(["--backend", NO_ROBOT, *SIM_ON_HARDWARE, "--goal", str(goal),
+                       "--log", str(notes)])
     err = capsys.readouterr().err
     assert code == 2
     assert (f"{notes}: already exists (a .jsonl file of 23 bytes, not written by hexapod-vs);"
@@ -390,7 +394,8 @@ def test_log_never_replaces_a_users_file_but_replaces_an_earlier_log(
     assert notes.read_text() == '{"my": "measurements"}\n'
     earlier = tmp_path / "earlier.jsonl"
     earlier.write_text('{"step": 0, "t_s": 0.0}\n')  # what servo --log writes
-    code = servo.main(["--backend", NO_ROBOT, "--goal", str(goal), "--log", str(earlier)])
+    code = servo.main(["--backend", NO_ROBOT, *SIM_ON_HARDWARE, "--goal", str(goal),
+                       "--log", str(earlier)])
     err = capsys.readouterr().err
     assert code == 2 and "already exists" not in err and "nonexistent" in err
 
@@ -399,7 +404,8 @@ def test_teach_never_replaces_the_features_beside_the_goal(
         tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     features = tmp_path / "taught.features.npz"
     features.write_bytes(b"someone else's features")
-    code = servo.main(["--backend", NO_ROBOT, "--goal", str(tmp_path / "taught.toml"),
+    code = servo.main(["--backend", NO_ROBOT, *SIM_ON_HARDWARE,
+                       "--goal", str(tmp_path / "taught.toml"),
                        "--teach"])
     assert code == 2
     assert f"{features}: already exists" in capsys.readouterr().err

@@ -35,6 +35,8 @@ pytestmark = [pytest.mark.realtime, pytest.mark.slow]
 ANY_LATE = ["--max-missed-consecutive", "0", "--max-missed-fraction", "1"]
 SLOW = ["-o", "gain=0.2", *ANY_LATE]  # never converges before the signal
 FAST = ["-o", "gain=3", "--tolerance-mm", "0.5", "--max-steps", "150", *ANY_LATE]
+# the emulators over a pty or TCP are real hardware to servo: the rendered camera by name
+REAL_SIM_CAMERA = ["--camera", "sim", "--simulated-camera-on-real-robot"]
 HALTED = "HLT: legs halted"  # the board emulator's log line
 GCS_HALTED = "HLT: platform halted"
 
@@ -46,7 +48,7 @@ def test_a_signal_halts_the_robot_and_exits_with_its_code(
     emu = EmulatorProc(tmp_path / "emulator.log", "--pty")
     try:
         out = tmp_path / "session"
-        proc = start_servo(["--backend", f"serial:{emu.url}", "--goal",
+        proc = start_servo([*REAL_SIM_CAMERA, "--backend", f"serial:{emu.url}", "--goal",
                             str(goal_file(tmp_path)), *SLOW], out)
         wait_periods(proc, out, 10)
         os.killpg(proc.pid, sig)
@@ -76,7 +78,8 @@ def test_the_link_killed_mid_motion_gives_the_link_exit_code_and_a_summary(
     try:
         backend = f"serial:{emu.url}" if kind == "serial" else f"gcs:{emu.url}"
         out = tmp_path / "session"
-        proc = start_servo(["--backend", backend, "--goal", str(goal_file(tmp_path)),
+        proc = start_servo([*REAL_SIM_CAMERA, "--backend", backend, "--goal",
+                            str(goal_file(tmp_path)),
                             *SLOW], out)
         wait_periods(proc, out, 10)
         emu.proc.kill()
@@ -102,7 +105,7 @@ def test_a_stalled_link_is_a_link_failure_and_the_queued_hlt_is_confirmed(
                        "--stall-ms", "2000")
     try:
         out = tmp_path / "session"
-        proc = start_servo(["--backend", f"serial:{emu.url}", "--goal",
+        proc = start_servo([*REAL_SIM_CAMERA, "--backend", f"serial:{emu.url}", "--goal",
                             str(goal_file(tmp_path)), *SLOW], out)
         rc, stdout, stderr = finish(proc, timeout=60)
         assert rc == 4, (stdout, stderr)
@@ -125,7 +128,7 @@ def test_a_second_client_is_told_the_controller_is_busy(tmp_path: Path) -> None:
     try:
         time.sleep(0.2)
         out = tmp_path / "session"
-        proc = start_servo(["--backend", f"gcs:{emu.url}", "--goal",
+        proc = start_servo([*REAL_SIM_CAMERA, "--backend", f"gcs:{emu.url}", "--goal",
                             str(goal_file(tmp_path)), *SLOW], out)
         rc, stdout, stderr = finish(proc)
         assert rc == ServoExit.REFUSED == 2, (stdout, stderr)
@@ -148,7 +151,7 @@ def test_one_dropped_reply_is_survived_by_default(
     try:
         out = tmp_path / "session"
         extra = [] if retries is None else ["--retries", retries]
-        proc = start_servo(["--backend", f"serial:{emu.url}", "--goal",
+        proc = start_servo([*REAL_SIM_CAMERA, "--backend", f"serial:{emu.url}", "--goal",
                             str(goal_file(tmp_path)), *FAST, *extra], out)
         rc, stdout, stderr = finish(proc, timeout=90)
         assert rc == code, (stdout, stderr)
@@ -342,8 +345,6 @@ def test_a_period_check_ends_the_session_with_its_code(
     """The seam of the safety checks (camera consistency, blind camera): a PeriodCheck
     called each period with the measured lengths and the features, raising
     SessionStop(SAFETY, reason), ends the session through the shutdown with exit 5."""
-    import functools
-
     from benchmarks.robot import session
     from benchmarks.robot.exits import SessionStop
 
@@ -354,8 +355,10 @@ def test_a_period_check_ends_the_session_with_its_code(
         if step == 4:
             raise SessionStop(ServoExit.SAFETY, "the camera disagrees with the encoders")
 
-    monkeypatch.setattr(servo, "run_session",
-                        functools.partial(session.run_session, checks=[check]))
+    def run_session(*args: object, checks: tuple[object, ...] = (), **kw: object) -> int:
+        return session.run_session(*args, checks=[check, *checks], **kw)  # type: ignore
+
+    monkeypatch.setattr(servo, "run_session", run_session)
     code, out = _run(tmp_path, caplog, *SLOW)
     stdout = capsys.readouterr().out
     assert code == ServoExit.SAFETY == 5, stdout

@@ -207,7 +207,8 @@ def test_servo_refuses_a_foreign_calibration_before_the_robot_is_contacted(
     _own_robot(tmp_path / "my-hexapod.toml")
     goal = tmp_path / "goal.toml"
     goal.write_text("lengths_mm = [450, 450, 450, 450, 450, 450]\n")
-    code = servo.main(["--backend", "serial:/nonexistent/port", "--goal", str(goal),
+    code = servo.main(["--backend", "serial:/nonexistent/port", "--camera", "sim",
+                       "--simulated-camera-on-real-robot", "--goal", str(goal),
                        "--geometry", str(tmp_path / "my-hexapod.toml"),
                        "--calibration", str(calibrated)])
     err = capsys.readouterr().err
