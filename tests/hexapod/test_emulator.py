@@ -294,6 +294,7 @@ def test_watchdog_trips_holds_and_latches_until_err(link: Link) -> None:
     assert link.sta().moving is True
 
 
+@pytest.mark.realtime
 def test_watchdog_fed_by_mov_does_not_trip(link: Link) -> None:
     assert link.send("WDT 60") == "OK"
     assert link.send("SVO 1") == "OK"
