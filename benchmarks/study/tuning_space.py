@@ -81,10 +81,10 @@ class Axis:
 #: gain; above it the error overshoots every period, unstable at ``2 / dt``). Computed torque
 #: (joint, Cartesian, feature space): the closed loop's natural frequency from 0.5 to
 #: 16 Hz (``omega_n dt`` up to 2 at 20 ms) and the integral gain from 0 to 4 1/s (every
-#: built-in computed-torque law takes it; a plug-in law without it has the axis skipped). The upper ends were
-#: widened after a first tuning of ``inertia-error`` chose the old ones (20 1/s, 8 Hz):
-#: a chosen value at an end of its range says the range may be too narrow (``tune``
-#: warns).
+#: built-in computed-torque law takes it; a plug-in law without it has the axis
+#: skipped). The upper ends were widened after a first tuning of ``inertia-error``
+#: chose the old ones (20 1/s, 8 Hz): a chosen value at an end of its range says the
+#: range may be too narrow (``tune`` warns).
 SEARCH_SPACE: dict[str, tuple[Axis, ...]] = {
     "velocity": (Axis("adaptive_gain", 1.0, 50.0, "log", (1.0, 0.2, 6.0), "1/s"),),
     "computed-torque": (Axis("natural_frequency", 0.5, 16.0, "log", unit="Hz"),
