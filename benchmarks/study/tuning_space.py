@@ -6,8 +6,8 @@ A search space is data (:data:`SEARCH_SPACE`, or a ``--space FILE`` that replace
 per *family* of controllers, the axes (an option, its range, linear or logarithmic, and
 for a vector option the shape it scales). A controller belongs to the first family one
 of whose options it declares (:func:`controllers.options.option_table`); an axis whose
-option the controller does not take is skipped with a message naming it (the
-computed-torque laws' ``integral_gain`` where they do not have it yet).
+option the controller does not take is skipped with a message naming it (a space file's
+axis, or a plug-in computed-torque law without ``integral_gain``).
 
 The candidates of a controller (:func:`candidates`): number 0 is the options as given
 (the scenario's, so a tuned controller is never worse than the given one on the tuning
@@ -80,11 +80,11 @@ class Axis:
 #: ``lambda0`` from 1 to 50 1/s (50 = ``1 / dt`` at 20 ms: the discrete loop's deadbeat
 #: gain; above it the error overshoots every period, unstable at ``2 / dt``). Computed torque
 #: (joint, Cartesian, feature space): the closed loop's natural frequency from 0.5 to
-#: 16 Hz (``omega_n dt`` up to 2 at 20 ms) and the integral gain from 0 to 4 1/s (an
-#: option the computed-torque laws may not have: skipped then). The upper ends were
-#: widened after a first tuning of ``inertia-error`` chose the old ones (20 1/s, 8 Hz):
-#: a chosen value at an end of its range says the range may be too narrow (``tune``
-#: warns).
+#: 16 Hz (``omega_n dt`` up to 2 at 20 ms) and the integral gain from 0 to 4 1/s (every
+#: built-in computed-torque law takes it; a plug-in law without it has the axis
+#: skipped). The upper ends were widened after a first tuning of ``inertia-error``
+#: chose the old ones (20 1/s, 8 Hz): a chosen value at an end of its range says the
+#: range may be too narrow (``tune`` warns).
 SEARCH_SPACE: dict[str, tuple[Axis, ...]] = {
     "velocity": (Axis("adaptive_gain", 1.0, 50.0, "log", (1.0, 0.2, 6.0), "1/s"),),
     "computed-torque": (Axis("natural_frequency", 0.5, 16.0, "log", unit="Hz"),

@@ -27,19 +27,44 @@ def _space(name: str, label: str | None = None, space: dict | None = None):  # t
     return controller_space(label or name, name, registry.options(name), space or SEARCH_SPACE)
 
 
+CTC_LAWS = ("computed-torque", "cartesian-ctc", "vision-ctc", "leg-edge-ctc", "leg-direction-ctc")
+
+
 def test_families_follow_the_declared_options() -> None:
     for name in ("leg-edge", "leg-direction-qp", "joint-space", "model-based", "leg-edge-mpc"):
         cs = _space(name)
         assert cs.family == "velocity" and [a.option for a in cs.axes] == ["adaptive_gain"]
-    cs = _space("computed-torque")
+    for name in CTC_LAWS:  # every computed-torque law takes integral action: both axes searched
+        cs = _space(name)
+        assert cs.family == "computed-torque", name
+        assert [a.option for a in cs.axes] == ["natural_frequency", "integral_gain"], name
+        assert cs.skipped == (), name
+
+
+def test_an_axis_the_controller_does_not_take_is_skipped_and_said() -> None:
+    space = {"computed-torque": (Axis("natural_frequency", 0.5, 16.0, "log"),
+                                 Axis("no_such_gain", 0.0, 1.0, "linear"))}
+    cs = _space("computed-torque", space=space)
     assert cs.family == "computed-torque"
-    options = registry.options("computed-torque").names
-    if "integral_gain" in options:  # the computed-torque work adds it
-        assert [a.option for a in cs.axes] == ["natural_frequency", "integral_gain"]
-    else:  # skipped, said with the controller's options
-        assert [a.option for a in cs.axes] == ["natural_frequency"]
-        assert len(cs.skipped) == 1 and "'integral_gain'" in cs.skipped[0]
-        assert "natural_frequency" in cs.skipped[0]
+    assert [a.option for a in cs.axes] == ["natural_frequency"]
+    assert len(cs.skipped) == 1 and "'no_such_gain'" in cs.skipped[0]
+    assert "natural_frequency" in cs.skipped[0]  # the controller's options, named
+
+
+def test_the_searched_integral_gain_reaches_each_computed_torque_law() -> None:
+    """The candidates' options build the laws the study steps (``registry.create`` with a
+    spec's options, as ``controllers.batch`` does): each law holds the candidate's Ki,
+    and the candidates search several values of it, not only the default 0."""
+    for name in CTC_LAWS:
+        cs = _space(name)
+        plan = candidates({}, cs.axes, 6)
+        gains = set()
+        for opts in plan[1:]:
+            law = registry.create(name, **opts)
+            assert law.integral_gain == pytest.approx(opts["integral_gain"]), name  # type: ignore[attr-defined]
+            gains.add(opts["integral_gain"])
+        assert registry.create(name, **plan[0]).integral_gain == 0.0  # type: ignore[attr-defined]
+        assert len(gains) == 5 and max(gains) > 0.0, (name, gains)
 
 
 @pytest.mark.parametrize("n", [2, 3, 6, 9])
