@@ -234,8 +234,9 @@ def test_tracks_within_binding_force_limits(geometry: HexapodGeometry) -> None:
     """A 10 mm circle at up to 100 mm/s and 3 m/s^2 with drives of 16 N (about 10 N per
     leg hold the platform against gravity): the force MPC plans within the limit and
     reaches it (the limit binds), and its largest distance to the reference is smaller
-    than that of ``leg-edge-ctc``, which clips its own commands at the limit per leg (its
-    default ``saturation = "clip"``: the limit binds for it too; both measured here)."""
+    than that of ``leg-edge-ctc``, whose commands are clipped at the limit (by the law
+    itself since its ``saturation`` option, default ``"clip"``; before it, by the drives)
+    and reach it too (both measured here)."""
     limit = 16.0
     truth = dataclasses.replace(geometry, drives=dataclasses.replace(
         geometry.drives, force_limit=np.full(6, limit)))
@@ -254,8 +255,9 @@ def test_tracks_within_binding_force_limits(geometry: HexapodGeometry) -> None:
         forces[law] = np.abs(np.array([c.forces for c in cmds]))
     assert forces[NAME].max() <= limit
     assert np.sum(forces[NAME] >= limit - 1e-9) > 0  # the limit binds
-    assert forces["leg-edge-ctc"].max() <= limit  # the computed torque clips per leg
-    assert np.sum(forces["leg-edge-ctc"] >= limit - 1e-9) > 0  # and saturates
+    # the computed torque is clipped at the limit, which binds for it too
+    assert forces["leg-edge-ctc"].max() <= limit
+    assert np.sum(forces["leg-edge-ctc"] >= limit - 1e-9) > 0
     assert worst[NAME] < worst["leg-edge-ctc"]
 
 
