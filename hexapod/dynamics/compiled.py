@@ -133,8 +133,22 @@ def symmetric_outer(a: ca.SX, k: ca.SX) -> ca.SX:
     return out
 
 
-def ldl_solve(M: ca.SX, b: ca.SX) -> ca.SX:
-    """``M^-1 b`` for a symmetric positive-definite ``M`` by an unrolled LDL^T."""
+def sx_exp_so3(w: ca.SX) -> ca.SX:
+    """The rotation matrix (3x3) of a rotation vector ``w`` (3) [rad] by Rodrigues'
+    formula, with its series below 1e-6 rad (as :func:`hexapod.se3.exp_so3`)."""
+    theta = ca.norm_2(w)
+    small = theta < 1e-6
+    th = ca.if_else(small, 1.0, theta)
+    a = ca.if_else(small, 1.0 - theta**2 / 6.0, ca.sin(th) / th)
+    b = ca.if_else(small, 0.5 - theta**2 / 24.0, (1.0 - ca.cos(th)) / th**2)
+    K = ca.skew(w)
+    return ca.SX.eye(3) + a * K + b * (K @ K)
+
+
+def ldl_factor(M: ca.SX) -> tuple[list[list[ca.SX]], list[ca.SX]]:
+    """The unrolled LDL^T factorisation ``M = L D L^T`` of a symmetric positive-definite
+    ``M`` (n x n, any units): ``L`` (n x n lists, unit lower triangle: its entries below
+    the diagonal) and the diagonal ``D`` (n, the units of ``M``)."""
     n = M.shape[0]
     L = [[ca.SX(0)] * n for _ in range(n)]
     D = [ca.SX(0)] * n
@@ -143,6 +157,14 @@ def ldl_solve(M: ca.SX, b: ca.SX) -> ca.SX:
         for i in range(j + 1, n):
             L[i][j] = (M[i, j] - sum((L[i][k] * L[j][k] * D[k] for k in range(j)),
                                      ca.SX(0))) / D[j]
+    return L, D
+
+
+def ldl_substitute(L: list[list[ca.SX]], D: list[ca.SX], b: ca.SX) -> ca.SX:
+    """``M^-1 b`` (n) from the factors of :func:`ldl_factor` and one right-hand side
+    ``b`` (n; the result has the units of ``b`` over those of ``M``): the forward,
+    diagonal and backward substitutions."""
+    n = len(D)
     y = [ca.SX(0)] * n
     for i in range(n):
         y[i] = b[i] - sum((L[i][k] * y[k] for k in range(i)), ca.SX(0))
@@ -151,6 +173,12 @@ def ldl_solve(M: ca.SX, b: ca.SX) -> ca.SX:
     for i in reversed(range(n)):
         out[i] = z[i] - sum((L[k][i] * out[k] for k in range(i + 1, n)), ca.SX(0))
     return ca.vertcat(*out)
+
+
+def ldl_solve(M: ca.SX, b: ca.SX) -> ca.SX:
+    """``M^-1 b`` for a symmetric positive-definite ``M`` by an unrolled LDL^T."""
+    L, D = ldl_factor(M)
+    return ldl_substitute(L, D, b)
 
 
 def expressions() -> tuple[ca.SX, dict[str, ca.SX]]:

@@ -45,17 +45,6 @@ def _clip(x: ca.SX, lim: ca.SX) -> ca.SX:
     return ca.fmin(ca.fmax(x, -lim), lim)
 
 
-def _exp_so3(w: ca.SX) -> ca.SX:
-    """Rodrigues' formula, with the series below 1e-6 rad (as :func:`hexapod.se3.exp_so3`)."""
-    theta = ca.norm_2(w)
-    small = theta < 1e-6
-    th = ca.if_else(small, 1.0, theta)
-    a = ca.if_else(small, 1.0 - theta**2 / 6.0, ca.sin(th) / th)
-    b = ca.if_else(small, 0.5 - theta**2 / 24.0, (1.0 - ca.cos(th)) / th**2)
-    K = ca.skew(w)
-    return ca.SX.eye(3) + a * K + b * (K @ K)
-
-
 def _step_expression() -> tuple[ca.SX, ca.SX]:
     """One physics step: the symbolic row and the next row."""
     x = ca.SX.sym("x", WIDTH)
@@ -102,7 +91,7 @@ def _step_expression() -> tuple[ca.SX, ca.SX]:
     acc = mech.ldl_solve(lhs, rhs)
     tw_new = tw + h * acc
     t_new = t + h * tw_new[0:3]
-    R_new = _exp_so3(h * tw_new[3:6]) @ R
+    R_new = mech.sx_exp_so3(h * tw_new[3:6]) @ R
     track = ca.fabs(err) * (1 - force)
     any_sat = ca.if_else(ca.sum1(saturated) > 0, 1.0, 0.0)
     out = ca.SX(x)
