@@ -69,14 +69,10 @@ def _drive_forces(g: Any, R: np.ndarray, t: np.ndarray, twist: np.ndarray,
 
 
 def _point(sc: Any, samples: int) -> PayloadFacts | None:
-    from benchmarks.sim import load_camera, load_geometry
     from benchmarks.sim.reference import trial_reference
-    from benchmarks.sim.world import make_trials
+    from benchmarks.study.trajectory_check import sampled_setups
 
-    nominal = load_geometry(sc)
-    camera = load_camera(sc, nominal)
-    setups = [s for s in make_trials(sc, list(range(min(sc.trials, samples))), nominal,
-                                     camera) if not isinstance(s, Exception)]
+    setups = sampled_setups(sc, samples)
     if not setups:
         return None
     static = np.zeros(6)

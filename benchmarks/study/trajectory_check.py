@@ -59,16 +59,24 @@ class TrajectoryFacts:
         return self.hits / self.sampled if self.sampled else 0.0
 
 
-def _point(sc: Any, samples: int) -> TrajectoryFacts | None:
+def sampled_setups(sc: Any, samples: int) -> list[Any]:
+    """The trial setups (:func:`benchmarks.sim.world.make_trials`) of the scenario's first
+    ``min(trials, samples)`` trials on its nominal robot and camera, those that could be
+    drawn (a trial whose start or goal could not be drawn is left out)."""
     from benchmarks.sim import load_camera, load_geometry
-    from benchmarks.sim.reference import trial_reference
     from benchmarks.sim.world import make_trials
-    from hexapod.kinematics import inverse_kinematics
 
     nominal = load_geometry(sc)
     camera = load_camera(sc, nominal)
-    setups = [s for s in make_trials(sc, list(range(min(sc.trials, samples))), nominal,
-                                     camera) if not isinstance(s, Exception)]
+    return [s for s in make_trials(sc, list(range(min(sc.trials, samples))), nominal,
+                                   camera) if not isinstance(s, Exception)]
+
+
+def _point(sc: Any, samples: int) -> TrajectoryFacts | None:
+    from benchmarks.sim.reference import trial_reference
+    from hexapod.kinematics import inverse_kinematics
+
+    setups = sampled_setups(sc, samples)
     if not setups:
         return None
     from hexapod.kinematics import inverse_jacobian, leg_directions
