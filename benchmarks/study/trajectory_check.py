@@ -11,12 +11,22 @@ its leg lengths on the TRUE robot of that trial are compared with the strokes.
 
 from __future__ import annotations
 
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
-from typing import Any
+from typing import Any, Protocol, TypeVar
 
 import numpy as np
 
 from benchmarks.study.setup_check import Problem
+
+
+class SweepFacts(Protocol):
+    """Facts of one sweep point: its swept values (key -> value)."""
+
+    sweep: dict[str, Any]
+
+
+FactsT = TypeVar("FactsT", bound=SweepFacts)
 
 #: Starts sampled per sweep point (the plan's first trials).
 SAMPLED_STARTS = 200
@@ -125,12 +135,7 @@ def trajectory_facts(sc: Any, samples: int = SAMPLED_STARTS) -> list[TrajectoryF
     if sc.task.kind != "trajectory":
         return []
     out = []
-    for point in sc.expand():
-        facts = _point(point, samples)
-        if facts is None:
-            continue
-        where = f"in {sc.source}" + (f" (sweep point {sweep_text(facts.sweep)})"
-                                     if facts.sweep else "")
+    for point, facts, where in sweep_facts(sc, _point, samples):
         task = point.task
         if facts.hits:
             leg, q, limit = facts.worst or (0, float("nan"), float("nan"))
@@ -170,6 +175,21 @@ def trajectory_facts(sc: Any, samples: int = SAMPLED_STARTS) -> list[TrajectoryF
 def sweep_text(sweep: dict[str, Any]) -> str:
     return ", ".join(f"{k} = {v:g}" if isinstance(v, float) else f"{k} = {v}"
                      for k, v in sweep.items())
+
+
+def sweep_facts(sc: Any, point_facts: Callable[[Any, int], FactsT | None], samples: int
+                ) -> Iterator[tuple[Any, FactsT, str]]:
+    """The facts of each sweep point of a scenario (:meth:`Scenario.expand`):
+    ``point_facts(point, samples)`` of each point that has some (not None), with the
+    point and where its problems are, for their text (``"in FILE"``, with the sweep
+    point's values when it has any), one point at a time."""
+    for point in sc.expand():
+        facts = point_facts(point, samples)
+        if facts is None:
+            continue
+        where = f"in {sc.source}" + (f" (sweep point {sweep_text(facts.sweep)})"
+                                     if facts.sweep else "")
+        yield point, facts, where
 
 
 def describe_trajectory(facts: list[TrajectoryFacts], sc: Any) -> list[str]:
