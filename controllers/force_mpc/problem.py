@@ -53,7 +53,6 @@ import numpy as np
 from controllers.mpc.prediction import sx_edge_normals
 from hexapod.compiled import CompiledFunction, Layout, Shape
 from hexapod.dynamics import compiled as mech
-from hexapod.dynamics.drive_model import COULOMB_SMOOTHING
 
 #: The state: rotation (column-major), position [m], twist [m/s, rad/s].
 STATE = Layout([("R", 9), ("t", 3), ("twist", 6)], "force-MPC state")
@@ -128,17 +127,9 @@ def step_expression() -> tuple[ca.SX, ca.SX, ca.SX, ca.SX]:
     M_joint, leg_mass, hb, K, qd, b = (ca.substitute(terms[k], sym, row) for k in (
         "M_joint", "leg_mass", "h", "K", "q_dot", "leg_bias"))
     h = m["h"]
-    xs = qd * (1 / COULOMB_SMOOTHING)
-    small = ca.fabs(xs) < 1e-8
-    secant = ca.if_else(small, 1.0, ca.tanh(xs) / ca.if_else(small, 1.0, xs))
-    d_friction = m["viscous"] + m["coulomb"] * (1 / COULOMB_SMOOTHING) * secant
-    friction = m["viscous"] * qd + m["coulomb"] * ca.tanh(xs)
+    friction, d_friction = mech.sx_drive_friction(qd, m["viscous"], m["coulomb"])
     rotor = m["rotor"]
-    leg_total = leg_mass + rotor + h * d_friction
-    lhs = M_joint
-    for i in range(6):
-        k = K[i, :].T
-        lhs += mech.symmetric_outer(leg_total[i] * k, k)
+    lhs = mech.add_leg_masses(M_joint, K, leg_mass + rotor + h * d_friction)
     rhs = K.T @ (f - friction - rotor * b) - hb
     acc = mech.ldl_solve(lhs, rhs)
     tw_new = s["twist"] + h * acc

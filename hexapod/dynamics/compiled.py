@@ -44,6 +44,7 @@ import casadi as ca
 import numpy as np
 
 from hexapod.compiled import CompiledFunction, Layout
+from hexapod.dynamics.drive_model import COULOMB_SMOOTHING
 from hexapod.dynamics.inertia import InertiaParameters
 
 #: Number of inertial parameters in a row.
@@ -143,6 +144,30 @@ def sx_exp_so3(w: ca.SX) -> ca.SX:
     b = ca.if_else(small, 0.5 - theta**2 / 24.0, (1.0 - ca.cos(th)) / th**2)
     K = ca.skew(w)
     return ca.SX.eye(3) + a * K + b * (K @ K)
+
+
+def sx_drive_friction(qd: ca.SX, viscous: ca.SX, coulomb: ca.SX) -> tuple[ca.SX, ca.SX]:
+    """The drives' friction (:class:`hexapod.dynamics.drive_model.DriveModel`) at the leg
+    rates ``qd`` (6) [m/s], viscous ``viscous`` [N s/m] and smoothed Coulomb ``coulomb``
+    [N] (``tanh(qd / COULOMB_SMOOTHING)``): the force (6) [N] and its secant slope (6)
+    [N s/m], ``force = slope * qd`` (finite at rest)."""
+    xs = qd * (1 / COULOMB_SMOOTHING)
+    small = ca.fabs(xs) < 1e-8
+    secant = ca.if_else(small, 1.0, ca.tanh(xs) / ca.if_else(small, 1.0, xs))
+    d_friction = viscous + coulomb * (1 / COULOMB_SMOOTHING) * secant
+    friction = viscous * qd + coulomb * ca.tanh(xs)
+    return friction, d_friction
+
+
+def add_leg_masses(M: ca.SX, K: ca.SX, leg_mass: ca.SX) -> ca.SX:
+    """``M + K^T diag(leg_mass) K``: the platform's mass matrix (6x6) [kg, kg m, kg m^2]
+    with a mass (6) [kg] per leg along its row of ``K`` (``q_dot = K tau``), one rank-one
+    term per leg from its upper triangle (:func:`symmetric_outer`)."""
+    out = M
+    for i in range(6):
+        k = K[i, :].T
+        out += symmetric_outer(leg_mass[i] * k, k)
+    return out
 
 
 def ldl_factor(M: ca.SX) -> tuple[list[list[ca.SX]], list[ca.SX]]:
