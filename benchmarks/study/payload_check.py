@@ -69,14 +69,10 @@ def _drive_forces(g: Any, R: np.ndarray, t: np.ndarray, twist: np.ndarray,
 
 
 def _point(sc: Any, samples: int) -> PayloadFacts | None:
-    from benchmarks.sim import load_camera, load_geometry
     from benchmarks.sim.reference import trial_reference
-    from benchmarks.sim.world import make_trials
+    from benchmarks.study.trajectory_check import sampled_setups
 
-    nominal = load_geometry(sc)
-    camera = load_camera(sc, nominal)
-    setups = [s for s in make_trials(sc, list(range(min(sc.trials, samples))), nominal,
-                                     camera) if not isinstance(s, Exception)]
+    setups = sampled_setups(sc, samples)
     if not setups:
         return None
     static = np.zeros(6)
@@ -102,15 +98,10 @@ def payload_facts(sc: Any, samples: int = SAMPLED_STARTS) -> list[PayloadFacts]:
     the dynamic world (empty otherwise)."""
     if getattr(sc, "payload", None) is None or sc.world != "dynamic":
         return []
-    from benchmarks.study.trajectory_check import sweep_text
+    from benchmarks.study.trajectory_check import sweep_facts
 
     out = []
-    for point in sc.expand():
-        facts = _point(point, samples)
-        if facts is None:
-            continue
-        where = f"in {sc.source}" + (f" (sweep point {sweep_text(facts.sweep)})"
-                                     if facts.sweep else "")
+    for _, facts, where in sweep_facts(sc, _point, samples):
         over = np.flatnonzero(facts.static_n > facts.limit_n)
         if over.size:
             leg = int(over[np.argmax(facts.static_n[over] - facts.limit_n[over])])

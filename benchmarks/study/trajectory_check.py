@@ -11,12 +11,22 @@ its leg lengths on the TRUE robot of that trial are compared with the strokes.
 
 from __future__ import annotations
 
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
-from typing import Any
+from typing import Any, Protocol, TypeVar
 
 import numpy as np
 
 from benchmarks.study.setup_check import Problem
+
+
+class SweepFacts(Protocol):
+    """Facts of one sweep point: its swept values (key -> value)."""
+
+    sweep: dict[str, Any]
+
+
+FactsT = TypeVar("FactsT", bound=SweepFacts)
 
 #: Starts sampled per sweep point (the plan's first trials).
 SAMPLED_STARTS = 200
@@ -59,16 +69,24 @@ class TrajectoryFacts:
         return self.hits / self.sampled if self.sampled else 0.0
 
 
-def _point(sc: Any, samples: int) -> TrajectoryFacts | None:
+def sampled_setups(sc: Any, samples: int) -> list[Any]:
+    """The trial setups (:func:`benchmarks.sim.world.make_trials`) of the scenario's first
+    ``min(trials, samples)`` trials on its nominal robot and camera, those that could be
+    drawn (a trial whose start or goal could not be drawn is left out)."""
     from benchmarks.sim import load_camera, load_geometry
-    from benchmarks.sim.reference import trial_reference
     from benchmarks.sim.world import make_trials
-    from hexapod.kinematics import inverse_kinematics
 
     nominal = load_geometry(sc)
     camera = load_camera(sc, nominal)
-    setups = [s for s in make_trials(sc, list(range(min(sc.trials, samples))), nominal,
-                                     camera) if not isinstance(s, Exception)]
+    return [s for s in make_trials(sc, list(range(min(sc.trials, samples))), nominal,
+                                   camera) if not isinstance(s, Exception)]
+
+
+def _point(sc: Any, samples: int) -> TrajectoryFacts | None:
+    from benchmarks.sim.reference import trial_reference
+    from hexapod.kinematics import inverse_kinematics
+
+    setups = sampled_setups(sc, samples)
     if not setups:
         return None
     from hexapod.kinematics import inverse_jacobian, leg_directions
@@ -117,12 +135,7 @@ def trajectory_facts(sc: Any, samples: int = SAMPLED_STARTS) -> list[TrajectoryF
     if sc.task.kind != "trajectory":
         return []
     out = []
-    for point in sc.expand():
-        facts = _point(point, samples)
-        if facts is None:
-            continue
-        where = f"in {sc.source}" + (f" (sweep point {sweep_text(facts.sweep)})"
-                                     if facts.sweep else "")
+    for point, facts, where in sweep_facts(sc, _point, samples):
         task = point.task
         if facts.hits:
             leg, q, limit = facts.worst or (0, float("nan"), float("nan"))
@@ -162,6 +175,21 @@ def trajectory_facts(sc: Any, samples: int = SAMPLED_STARTS) -> list[TrajectoryF
 def sweep_text(sweep: dict[str, Any]) -> str:
     return ", ".join(f"{k} = {v:g}" if isinstance(v, float) else f"{k} = {v}"
                      for k, v in sweep.items())
+
+
+def sweep_facts(sc: Any, point_facts: Callable[[Any, int], FactsT | None], samples: int
+                ) -> Iterator[tuple[Any, FactsT, str]]:
+    """The facts of each sweep point of a scenario (:meth:`Scenario.expand`):
+    ``point_facts(point, samples)`` of each point that has some (not None), with the
+    point and where its problems are, for their text (``"in FILE"``, with the sweep
+    point's values when it has any), one point at a time."""
+    for point in sc.expand():
+        facts = point_facts(point, samples)
+        if facts is None:
+            continue
+        where = f"in {sc.source}" + (f" (sweep point {sweep_text(facts.sweep)})"
+                                     if facts.sweep else "")
+        yield point, facts, where
 
 
 def describe_trajectory(facts: list[TrajectoryFacts], sc: Any) -> list[str]:

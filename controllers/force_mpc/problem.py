@@ -53,7 +53,6 @@ import numpy as np
 from controllers.mpc.prediction import sx_edge_normals
 from hexapod.compiled import CompiledFunction, Layout, Shape
 from hexapod.dynamics import compiled as mech
-from hexapod.dynamics.drive_model import COULOMB_SMOOTHING
 
 #: The state: rotation (column-major), position [m], twist [m/s, rad/s].
 STATE = Layout([("R", 9), ("t", 3), ("twist", 6)], "force-MPC state")
@@ -113,17 +112,6 @@ class ForceProblemSpec:
                       "force-MPC kernel output")
 
 
-def _exp_so3(w: ca.SX) -> ca.SX:
-    """Rodrigues' formula, with the series below 1e-6 rad (as the dynamic world's)."""
-    theta = ca.norm_2(w)
-    small = theta < 1e-6
-    th = ca.if_else(small, 1.0, theta)
-    a = ca.if_else(small, 1.0 - theta**2 / 6.0, ca.sin(th) / th)
-    b = ca.if_else(small, 0.5 - theta**2 / 24.0, (1.0 - ca.cos(th)) / th**2)
-    K = ca.skew(w)
-    return ca.SX.eye(3) + a * K + b * (K @ K)
-
-
 def step_expression() -> tuple[ca.SX, ca.SX, ca.SX, ca.SX]:
     """One integration step of the nominal robot with force-mode drives (module
     docstring): the symbols ``x`` (18), ``f`` (6), the model constants, and ``x`` after
@@ -139,22 +127,14 @@ def step_expression() -> tuple[ca.SX, ca.SX, ca.SX, ca.SX]:
     M_joint, leg_mass, hb, K, qd, b = (ca.substitute(terms[k], sym, row) for k in (
         "M_joint", "leg_mass", "h", "K", "q_dot", "leg_bias"))
     h = m["h"]
-    xs = qd * (1 / COULOMB_SMOOTHING)
-    small = ca.fabs(xs) < 1e-8
-    secant = ca.if_else(small, 1.0, ca.tanh(xs) / ca.if_else(small, 1.0, xs))
-    d_friction = m["viscous"] + m["coulomb"] * (1 / COULOMB_SMOOTHING) * secant
-    friction = m["viscous"] * qd + m["coulomb"] * ca.tanh(xs)
+    friction, d_friction = mech.sx_drive_friction(qd, m["viscous"], m["coulomb"])
     rotor = m["rotor"]
-    leg_total = leg_mass + rotor + h * d_friction
-    lhs = M_joint
-    for i in range(6):
-        k = K[i, :].T
-        lhs += mech.symmetric_outer(leg_total[i] * k, k)
+    lhs = mech.add_leg_masses(M_joint, K, leg_mass + rotor + h * d_friction)
     rhs = K.T @ (f - friction - rotor * b) - hb
     acc = mech.ldl_solve(lhs, rhs)
     tw_new = s["twist"] + h * acc
     t_new = s["t"] + h * tw_new[0:3]
-    R_new = _exp_so3(h * tw_new[3:6]) @ ca.reshape(s["R"], 3, 3)
+    R_new = mech.sx_exp_so3(h * tw_new[3:6]) @ ca.reshape(s["R"], 3, 3)
     return x, f, c, ca.vertcat(ca.reshape(R_new, 9, 1), t_new, tw_new)
 
 
@@ -188,26 +168,9 @@ def features_expression(kind: str = "edges") -> tuple[ca.SX, ca.SX, ca.SX, ca.SX
 
 def ldl_solve_columns(M: ca.SX, B: ca.SX) -> ca.SX:
     """``M^-1 B`` for a symmetric positive-definite ``M`` (n x n) and ``B`` (n x m) by one
-    unrolled LDL^T factorisation (as :func:`hexapod.dynamics.compiled.ldl_solve`)."""
-    n = M.shape[0]
-    L = [[ca.SX(0)] * n for _ in range(n)]
-    D = [ca.SX(0)] * n
-    for j in range(n):
-        D[j] = M[j, j] - sum((L[j][k] * L[j][k] * D[k] for k in range(j)), ca.SX(0))
-        for i in range(j + 1, n):
-            L[i][j] = (M[i, j] - sum((L[i][k] * L[j][k] * D[k] for k in range(j)),
-                                     ca.SX(0))) / D[j]
-    cols = []
-    for c in range(B.shape[1]):
-        y = [ca.SX(0)] * n
-        for i in range(n):
-            y[i] = B[i, c] - sum((L[i][k] * y[k] for k in range(i)), ca.SX(0))
-        z = [y[i] / D[i] for i in range(n)]
-        out = [ca.SX(0)] * n
-        for i in reversed(range(n)):
-            out[i] = z[i] - sum((L[k][i] * out[k] for k in range(i + 1, n)), ca.SX(0))
-        cols.append(ca.vertcat(*out))
-    return ca.horzcat(*cols)
+    unrolled LDL^T factorisation (:func:`hexapod.dynamics.compiled.ldl_factor`)."""
+    L, D = mech.ldl_factor(M)
+    return ca.horzcat(*(mech.ldl_substitute(L, D, B[:, c]) for c in range(B.shape[1])))
 
 
 def sensitivity_expression(substeps: int) -> tuple[ca.SX, ca.SX, ca.SX, ca.SX]:

@@ -56,6 +56,30 @@ class HaltReport:
     seconds: float = 0.0
 
 
+class HaltClock:
+    """The clock of one confirmed halt (:meth:`Backend.halt_confirmed`), started when made.
+
+    Args:
+        timeout_s: Longest wait [s].
+
+    Attributes:
+        t0: When the halt started [s] (``time.perf_counter()``).
+        deadline: When it gives up [s] (``t0 + timeout_s``).
+    """
+
+    def __init__(self, timeout_s: float) -> None:
+        self.t0 = time.perf_counter()
+        self.deadline = self.t0 + timeout_s
+
+    def report(self, confirmed: bool, detail: str) -> HaltReport:
+        """The halt's report, its ``seconds`` [s] the time since :attr:`t0`."""
+        return HaltReport(confirmed, detail, time.perf_counter() - self.t0)
+
+    def closed(self, url: str) -> HaltReport:
+        """The (unconfirmed) report of a halt on a closed link to ``url``."""
+        return self.report(False, f"{url}: the link is closed, HLT could not be sent")
+
+
 BackendT = TypeVar("BackendT", bound="Backend")
 
 

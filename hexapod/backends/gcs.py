@@ -42,6 +42,7 @@ from hexapod.backends import gcs_protocol as gp
 from hexapod.backends.base import (
     Backend,
     BackendStep,
+    HaltClock,
     HaltReport,
     clamp_velocities,
     started,
@@ -394,14 +395,10 @@ class GcsHexapod(Backend):
         Returns:
             Confirmed when ``ERR?`` answered 10.
         """
-        t0 = time.perf_counter()
-        deadline = t0 + timeout_s
-
-        def report(confirmed: bool, detail: str) -> HaltReport:
-            return HaltReport(confirmed, detail, time.perf_counter() - t0)
-
+        clock = HaltClock(timeout_s)
+        t0, deadline, report = clock.t0, clock.deadline, clock.report
         if self._closed:
-            return report(False, f"{self.url}: the link is closed, HLT could not be sent")
+            return clock.closed(self.url)
         sent = 0
         stop = str(int(gp.GcsError.STOP)).encode()
         try:

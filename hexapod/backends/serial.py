@@ -31,6 +31,7 @@ from hexapod.backends import protocol
 from hexapod.backends.base import (
     Backend,
     BackendStep,
+    HaltClock,
     HaltReport,
     clamp_velocities,
     step_command,
@@ -473,14 +474,10 @@ class SerialRobot(Backend):
         Returns:
             Confirmed when the board read back error 10 and then no leg moving.
         """
-        t0 = time.perf_counter()
-        deadline = t0 + timeout_s
-
-        def report(confirmed: bool, detail: str) -> HaltReport:
-            return HaltReport(confirmed, detail, time.perf_counter() - t0)
-
+        clock = HaltClock(timeout_s)
+        t0, deadline, report = clock.t0, clock.deadline, clock.report
         if self._closed:
-            return report(False, f"{self.url}: the link is closed, HLT could not be sent")
+            return clock.closed(self.url)
         sent = 0
         try:
             self._flush_input()

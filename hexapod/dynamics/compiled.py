@@ -44,6 +44,7 @@ import casadi as ca
 import numpy as np
 
 from hexapod.compiled import CompiledFunction, Layout
+from hexapod.dynamics.drive_model import COULOMB_SMOOTHING
 from hexapod.dynamics.inertia import InertiaParameters
 
 #: Number of inertial parameters in a row.
@@ -133,8 +134,46 @@ def symmetric_outer(a: ca.SX, k: ca.SX) -> ca.SX:
     return out
 
 
-def ldl_solve(M: ca.SX, b: ca.SX) -> ca.SX:
-    """``M^-1 b`` for a symmetric positive-definite ``M`` by an unrolled LDL^T."""
+def sx_exp_so3(w: ca.SX) -> ca.SX:
+    """The rotation matrix (3x3) of a rotation vector ``w`` (3) [rad] by Rodrigues'
+    formula, with its series below 1e-6 rad (as :func:`hexapod.se3.exp_so3`)."""
+    theta = ca.norm_2(w)
+    small = theta < 1e-6
+    th = ca.if_else(small, 1.0, theta)
+    a = ca.if_else(small, 1.0 - theta**2 / 6.0, ca.sin(th) / th)
+    b = ca.if_else(small, 0.5 - theta**2 / 24.0, (1.0 - ca.cos(th)) / th**2)
+    K = ca.skew(w)
+    return ca.SX.eye(3) + a * K + b * (K @ K)
+
+
+def sx_drive_friction(qd: ca.SX, viscous: ca.SX, coulomb: ca.SX) -> tuple[ca.SX, ca.SX]:
+    """The drives' friction (:class:`hexapod.dynamics.drive_model.DriveModel`) at the leg
+    rates ``qd`` (6) [m/s], viscous ``viscous`` [N s/m] and smoothed Coulomb ``coulomb``
+    [N] (``tanh(qd / COULOMB_SMOOTHING)``): the force (6) [N] and its secant slope (6)
+    [N s/m], ``force = slope * qd`` (finite at rest)."""
+    xs = qd * (1 / COULOMB_SMOOTHING)
+    small = ca.fabs(xs) < 1e-8
+    secant = ca.if_else(small, 1.0, ca.tanh(xs) / ca.if_else(small, 1.0, xs))
+    d_friction = viscous + coulomb * (1 / COULOMB_SMOOTHING) * secant
+    friction = viscous * qd + coulomb * ca.tanh(xs)
+    return friction, d_friction
+
+
+def add_leg_masses(M: ca.SX, K: ca.SX, leg_mass: ca.SX) -> ca.SX:
+    """``M + K^T diag(leg_mass) K``: the platform's mass matrix (6x6) [kg, kg m, kg m^2]
+    with a mass (6) [kg] per leg along its row of ``K`` (``q_dot = K tau``), one rank-one
+    term per leg from its upper triangle (:func:`symmetric_outer`)."""
+    out = M
+    for i in range(6):
+        k = K[i, :].T
+        out += symmetric_outer(leg_mass[i] * k, k)
+    return out
+
+
+def ldl_factor(M: ca.SX) -> tuple[list[list[ca.SX]], list[ca.SX]]:
+    """The unrolled LDL^T factorisation ``M = L D L^T`` of a symmetric positive-definite
+    ``M`` (n x n, any units): ``L`` (n x n lists, unit lower triangle: its entries below
+    the diagonal) and the diagonal ``D`` (n, the units of ``M``)."""
     n = M.shape[0]
     L = [[ca.SX(0)] * n for _ in range(n)]
     D = [ca.SX(0)] * n
@@ -143,6 +182,14 @@ def ldl_solve(M: ca.SX, b: ca.SX) -> ca.SX:
         for i in range(j + 1, n):
             L[i][j] = (M[i, j] - sum((L[i][k] * L[j][k] * D[k] for k in range(j)),
                                      ca.SX(0))) / D[j]
+    return L, D
+
+
+def ldl_substitute(L: list[list[ca.SX]], D: list[ca.SX], b: ca.SX) -> ca.SX:
+    """``M^-1 b`` (n) from the factors of :func:`ldl_factor` and one right-hand side
+    ``b`` (n; the result has the units of ``b`` over those of ``M``): the forward,
+    diagonal and backward substitutions."""
+    n = len(D)
     y = [ca.SX(0)] * n
     for i in range(n):
         y[i] = b[i] - sum((L[i][k] * y[k] for k in range(i)), ca.SX(0))
@@ -151,6 +198,12 @@ def ldl_solve(M: ca.SX, b: ca.SX) -> ca.SX:
     for i in reversed(range(n)):
         out[i] = z[i] - sum((L[k][i] * out[k] for k in range(i + 1, n)), ca.SX(0))
     return ca.vertcat(*out)
+
+
+def ldl_solve(M: ca.SX, b: ca.SX) -> ca.SX:
+    """``M^-1 b`` for a symmetric positive-definite ``M`` by an unrolled LDL^T."""
+    L, D = ldl_factor(M)
+    return ldl_substitute(L, D, b)
 
 
 def expressions() -> tuple[ca.SX, dict[str, ca.SX]]:

@@ -25,7 +25,6 @@ import numpy as np
 from hexapod.compiled import CompiledFunction, Layout
 from hexapod.compiled_lanes import LaneFunction
 from hexapod.dynamics import compiled as mech
-from hexapod.dynamics.drive_model import COULOMB_SMOOTHING
 
 log = logging.getLogger(__name__)
 
@@ -43,17 +42,6 @@ WIDTH = LAYOUT.size
 
 def _clip(x: ca.SX, lim: ca.SX) -> ca.SX:
     return ca.fmin(ca.fmax(x, -lim), lim)
-
-
-def _exp_so3(w: ca.SX) -> ca.SX:
-    """Rodrigues' formula, with the series below 1e-6 rad (as :func:`hexapod.se3.exp_so3`)."""
-    theta = ca.norm_2(w)
-    small = theta < 1e-6
-    th = ca.if_else(small, 1.0, theta)
-    a = ca.if_else(small, 1.0 - theta**2 / 6.0, ca.sin(th) / th)
-    b = ca.if_else(small, 0.5 - theta**2 / 24.0, (1.0 - ca.cos(th)) / th**2)
-    K = ca.skew(w)
-    return ca.SX.eye(3) + a * K + b * (K @ K)
 
 
 def _step_expression() -> tuple[ca.SX, ca.SX]:
@@ -75,11 +63,7 @@ def _step_expression() -> tuple[ca.SX, ca.SX]:
     kp, ki, lim, integral, sp = get("kp"), get("ki"), get("limit"), get("integral"), \
         get("setpoint")
     # the drives (hexapod.dynamics.drive_model.DriveModel.forces)
-    xs = qd * (1 / COULOMB_SMOOTHING)
-    small = ca.fabs(xs) < 1e-8
-    secant = ca.if_else(small, 1.0, ca.tanh(xs) / ca.if_else(small, 1.0, xs))
-    d_friction = get("viscous") + get("coulomb") * (1 / COULOMB_SMOOTHING) * secant
-    friction = get("viscous") * qd + get("coulomb") * ca.tanh(xs)
+    friction, d_friction = mech.sx_drive_friction(qd, get("viscous"), get("coulomb"))
     err = sp - qd
     u = kp * err + integral
     sat_v = ca.fabs(u) >= lim
@@ -93,16 +77,12 @@ def _step_expression() -> tuple[ca.SX, ca.SX]:
     # M + K^T diag(rotor - h slope) K: one rank-one term per leg, its mechanism's part
     # (M = M_joint + K^T diag(leg_mass) K) and the drive's added, from the upper triangle
     rotor = get("rotor")
-    leg_total = leg_mass + rotor - h * slope
-    lhs = M_joint
-    for i in range(6):
-        k = K[i, :].T
-        lhs += mech.symmetric_outer(leg_total[i] * k, k)
+    lhs = mech.add_leg_masses(M_joint, K, leg_mass + rotor - h * slope)
     rhs = K.T @ (motor - friction - rotor * b) - hb
     acc = mech.ldl_solve(lhs, rhs)
     tw_new = tw + h * acc
     t_new = t + h * tw_new[0:3]
-    R_new = _exp_so3(h * tw_new[3:6]) @ R
+    R_new = mech.sx_exp_so3(h * tw_new[3:6]) @ R
     track = ca.fabs(err) * (1 - force)
     any_sat = ca.if_else(ca.sum1(saturated) > 0, 1.0, 0.0)
     out = ca.SX(x)

@@ -12,6 +12,7 @@ in the nominal model).
 from __future__ import annotations
 
 import dataclasses
+import math
 from collections.abc import Callable
 from dataclasses import dataclass
 
@@ -125,3 +126,24 @@ def line_reference(truth: HexapodGeometry, profile: str, angles_deg: tuple[float
                          goal_rotation=R1, goal_translation=t1, angular_speed=0.03,
                          angular_acceleration=0.1)
     return R0, t0, R1, t1, ref
+
+
+def assert_tracks_the_rotated_line(world: CtcWorld, law: Controller) -> None:
+    """``law`` through the study's tracking wrapper
+    (:class:`controllers.tracking.TrackingController`) along the trapezoidal line with a
+    (1.2, -1.0, 1.2) degree rotation of :func:`line_reference`: the true pose within
+    30 um and 0.005 degree of the reference all along, and 2 um and 1e-4 degree of it at
+    the end."""
+    from controllers.tracking import TrackingController
+    from hexapod.se3 import pose_error
+
+    R0, t0, R1, t1, ref = line_reference(world.truth, "trapezoidal", (1.2, -1.0, 1.2))
+    ctrl = TrackingController(law)
+    ctrl.reset(world.context(world.goal(R1, t1), ref))
+    steps = math.ceil(ref.duration / DT) + 25
+    p, R, _ = world.run(ctrl, (R0, t0), steps)
+    sample = ref.at(DT * np.arange(steps + 1))
+    pos, ang = pose_error(R, p, sample.rotation, sample.translation)
+    assert pos.max() < 30e-6, pos.max()
+    assert ang.max() < np.deg2rad(0.005), np.rad2deg(ang.max())
+    assert pos[-1] < 2e-6 and ang[-1] < np.deg2rad(1e-4)

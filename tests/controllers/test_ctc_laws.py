@@ -19,13 +19,17 @@ from scipy.optimize import curve_fit
 from controllers import registry
 from controllers.base import Observation
 from controllers.exceptions import ContextError
-from controllers.tracking import TrackingController
 from hexapod import HexapodGeometry
 from hexapod.actuation import Actuation
-from hexapod.se3 import pose_error
 from hexapod.trajectory import PoseTrajectory
 from hexapod.workspace import home_pose
-from tests.controllers.ctc_world import DT, CtcWorld, ideal_drives, line_reference
+from tests.controllers.ctc_world import (
+    DT,
+    CtcWorld,
+    assert_tracks_the_rotated_line,
+    ideal_drives,
+    line_reference,
+)
 from tests.controllers.test_computed_torque import _sampled_design, _step_response
 
 LAWS = ("cartesian-ctc", "vision-ctc", "leg-edge-ctc", "leg-direction-ctc")
@@ -89,16 +93,7 @@ def test_tracks_a_line_with_a_rotation(world: CtcWorld, law: str) -> None:
     the study's tracking wrapper (:class:`controllers.tracking.TrackingController`), which
     passes these laws through: they sample the reference themselves, anchored at the
     taught goal."""
-    R0, t0, R1, t1, ref = line_reference(world.truth, "trapezoidal", (1.2, -1.0, 1.2))
-    ctrl = TrackingController(registry.create(law))
-    ctrl.reset(world.context(world.goal(R1, t1), ref))
-    steps = math.ceil(ref.duration / DT) + 25
-    p, R, _ = world.run(ctrl, (R0, t0), steps)
-    sample = ref.at(DT * np.arange(steps + 1))
-    pos, ang = pose_error(R, p, sample.rotation, sample.translation)
-    assert pos.max() < 30e-6, pos.max()
-    assert ang.max() < np.deg2rad(0.005), np.rad2deg(ang.max())
-    assert pos[-1] < 2e-6 and ang[-1] < np.deg2rad(1e-4)
+    assert_tracks_the_rotated_line(world, registry.create(law))
 
 
 @pytest.mark.parametrize("law", LAWS)

@@ -11,7 +11,6 @@ from __future__ import annotations
 
 import copy
 import dataclasses
-import math
 from collections.abc import Iterator
 from pathlib import Path
 
@@ -24,14 +23,19 @@ from controllers.exceptions import ContextError, OptionError
 from controllers.features import FeatureTask
 from controllers.law_kernel import LawKernel
 from controllers.tasks import TaskState
-from controllers.tracking import TrackingController
 from hexapod import HexapodGeometry
 from hexapod.actuation import Actuation
 from hexapod.compiled import CompiledFunction
 from hexapod.se3 import exp_so3, pose_error
 from hexapod.workspace import home_pose
 from tests.controllers.controller_world import World, closed_loop, make_camera
-from tests.controllers.ctc_world import DT, CtcWorld, ideal_drives, line_reference
+from tests.controllers.ctc_world import (
+    DT,
+    CtcWorld,
+    assert_tracks_the_rotated_line,
+    ideal_drives,
+    line_reference,
+)
 from tests.controllers.plugin_feature_joints import JOINTS, PlatformJoints
 
 PLUGIN = "tests.controllers.plugin_feature_joints"
@@ -323,16 +327,7 @@ def test_computed_torque_tracks_a_line_with_a_rotation(ctc_world: CtcWorld) -> N
     pose trajectory) keep the true pose within the bounds the built-in computed-torque
     laws meet (``test_ctc_laws.py``: 30 um, 0.005 degree; measured 20.5 um, 0.0035 degree
     as ``leg-direction-ctc``)."""
-    R0, t0, R1, t1, ref = line_reference(ctc_world.truth, "trapezoidal", (1.2, -1.0, 1.2))
-    ctrl = TrackingController(JOINTS.ctc())
-    ctrl.reset(ctc_world.context(ctc_world.goal(R1, t1), ref))
-    steps = math.ceil(ref.duration / DT) + 25
-    p, R, _ = ctc_world.run(ctrl, (R0, t0), steps)
-    sample = ref.at(DT * np.arange(steps + 1))
-    pos, ang = pose_error(R, p, sample.rotation, sample.translation)
-    assert pos.max() < 30e-6, pos.max()
-    assert ang.max() < np.deg2rad(0.005), np.rad2deg(ang.max())
-    assert pos[-1] < 2e-6 and ang[-1] < np.deg2rad(1e-4)
+    assert_tracks_the_rotated_line(ctc_world, JOINTS.ctc())
 
 
 def test_a_hidden_leg_is_left_out(world: World) -> None:

@@ -28,6 +28,28 @@ def goal_file(tmp_path: Path, lengths_mm: list[float] = GOAL_MM) -> Path:
     return path
 
 
+def start_pose_video(tmp_path: Path, frames: int = 8) -> Path:
+    """A video file (``start.avi``) of ``frames`` frames of deltalab seen by the front
+    camera at the emulator's initial pose (every leg at mid-stroke)."""
+    import numpy as np
+
+    from hexapod.fk import forward_kinematics
+    from hexapod.geometry import deltalab
+    from vision.cameras import front_camera
+    from vision.render import Renderer
+    from vision.sources import VideoRecorder
+
+    g = deltalab()
+    cam = front_camera(g)
+    sol = forward_kinematics(g, np.full(6, np.mean(g.stroke)))
+    image = Renderer(cam, g).render(sol.rotation, sol.translation)
+    video = tmp_path / "start.avi"
+    with VideoRecorder.for_camera(video, cam) as rec:
+        for _ in range(frames):
+            rec.write(image)
+    return video
+
+
 class EmulatorProc:
     """``python -m hexapod.backends.emulator OPTIONS --log-level INFO``, its stderr in
     ``log_path``; :attr:`url` is the first line it prints."""

@@ -13,6 +13,7 @@ import pytest
 
 from benchmarks.robot import servo
 from tests.benchmarks.robot.interrupt import interrupt_servo
+from tests.benchmarks.robot.sessions import start_pose_video
 
 #: Wall-clock periods against real emulator processes: run alone (`make test`).
 pytestmark = pytest.mark.realtime
@@ -321,20 +322,7 @@ def test_ctrl_c_halts_and_exits_130(tmp_path: Path) -> None:
 def test_video_camera_detects_the_legs_and_stops_at_the_end_of_the_file(
         tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     """--camera video:PATH through OpenCV: frames rendered at the start pose, then the end."""
-    from hexapod.fk import forward_kinematics
-    from hexapod.geometry import deltalab
-    from vision.cameras import front_camera
-    from vision.render import Renderer
-    from vision.sources import VideoRecorder
-
-    g = deltalab()
-    cam = front_camera(g)
-    sol = forward_kinematics(g, np.full(6, np.mean(g.stroke)))
-    image = Renderer(cam, g).render(sol.rotation, sol.translation)
-    video = tmp_path / "start.avi"
-    with VideoRecorder.for_camera(video, cam) as rec:
-        for _ in range(8):
-            rec.write(image)
+    video = start_pose_video(tmp_path)
     goal = _goal(tmp_path, f"lengths_mm = {_mm(GOAL_MM)}\n")
     log = tmp_path / "servo.jsonl"
     code = servo.main(["--backend", "emulator", "--camera", f"video:{video}", "--goal",

@@ -24,6 +24,7 @@ from tests.benchmarks.robot.sessions import (
     finish,
     goal_file,
     periods,
+    start_pose_video,
     start_servo,
     wait_periods,
 )
@@ -181,20 +182,7 @@ def _run(tmp_path: Path, caplog: pytest.LogCaptureFixture, *args: str,
 def test_the_end_of_a_recording_halts_with_the_limit_code(
         tmp_path: Path, caplog: pytest.LogCaptureFixture,
         capsys: pytest.CaptureFixture[str]) -> None:
-    from hexapod.fk import forward_kinematics
-    from hexapod.geometry import deltalab
-    from vision.cameras import front_camera
-    from vision.render import Renderer
-    from vision.sources import VideoRecorder
-
-    g = deltalab()
-    cam = front_camera(g)
-    sol = forward_kinematics(g, np.full(6, np.mean(g.stroke)))
-    image = Renderer(cam, g).render(sol.rotation, sol.translation)
-    video = tmp_path / "start.avi"
-    with VideoRecorder.for_camera(video, cam) as rec:
-        for _ in range(8):
-            rec.write(image)
+    video = start_pose_video(tmp_path)
     code, out = _run(tmp_path, caplog, "--camera", f"video:{video}", "--max-steps", "50")
     stdout = capsys.readouterr().out
     assert code == ServoExit.LIMIT == 3, stdout
