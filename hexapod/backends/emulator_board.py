@@ -33,7 +33,8 @@ from hexapod.geometry import HexapodGeometry
 
 logger = logging.getLogger(__name__)
 
-__all__ = ["ARRIVED", "HALTED_ERROR", "HALTED_SPEED", "STROKE_TOL", "Board", "BoardConfig", "Emulator"]
+__all__ = ["ARRIVED", "HALTED_ERROR", "HALTED_SPEED", "STROKE_TOL", "Board", "BoardConfig",
+           "Emulator"]
 
 #: A leg within this distance of its setpoint has arrived [m] (half the protocol resolution).
 ARRIVED = 0.5e-6

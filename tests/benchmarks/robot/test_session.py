@@ -59,8 +59,14 @@ def test_a_signal_halts_the_robot_and_exits_with_its_code(
         assert "robot: halted and confirmed stopped" in stdout
         assert "missed periods" in stdout
         assert "Traceback" not in stderr
-        assert HALTED in emu.log()
+        log = emu.log()
+        assert HALTED in log
+        # the watchdog is armed with the first MOV: it never tripped before the HLT,
+        # however long the first period took (it may trip after, the host gone)
+        assert "watchdog tripped" not in log[:log.index(HALTED)]
+        assert "board watchdog: never tripped" in stdout
         rec = final(out)
+        assert rec["watchdog_trips"] == rec["watchdog_clears"] == 0
         assert rec["exit_code"] == code and rec["reason"] == f"{sig.name} received"
         assert rec["halt_confirmed"] is True and rec["moved"] is True
         assert rec["signals"] == [sig.name]
@@ -162,6 +168,11 @@ def test_one_dropped_reply_is_survived_by_default(
         assert rec["halt_confirmed"] is True
         if code == 0:
             assert rec["retries"] >= 1 and "converged after" in stdout
+            # each lost reply (a 200 ms wait) tripped the 100 ms watchdog: seen and counted
+            trips = rec["watchdog_trips"]
+            assert trips == rec["watchdog_clears"] >= 1
+            assert stderr.count("the board's watchdog tripped") == trips
+            assert f"board watchdog: tripped {trips} time(s) during motion" in stdout
         else:
             assert "no reply" in rec["exception"] or "within" in rec["exception"]
     finally:
