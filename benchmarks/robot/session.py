@@ -389,8 +389,10 @@ def _report(status: StatusLine, code: ServoExit, reason: str, result: ServoResul
     say = status.message
     if code == ServoExit.REFUSED and not moved and ended is not None and not isinstance(
             ended, SessionStop):
-        print(f"hexapod-bench servo: error: {reason}", file=sys.stderr)
-    if code != ServoExit.CONVERGED:
+        # refused before moving: one message, on stderr like every refusal of bad input
+        print(f"hexapod-bench servo: error: {reason} (exit {int(code)}, refused)",
+              file=sys.stderr)
+    elif code != ServoExit.CONVERGED:
         say(f"stopped: {reason} (exit {int(code)}, {code.name.lower()})")
     if result.steps or moved or code == ServoExit.CONVERGED:
         say(result.summary())

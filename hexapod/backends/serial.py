@@ -122,6 +122,7 @@ class SerialRobot(Backend):
         self.emulator: Any = None
         self._last_mov = -np.inf
         self._closed = False
+        self._halt_done = False  # a confirmed halt, nothing sent since: close() skips HLT
         self.exchanges: list[float] = []
         self.retried = 0
         self.watchdog_trips = 0
@@ -206,6 +207,7 @@ class SerialRobot(Backend):
         """
         if self._closed:
             raise SerialLinkError(self.url, "the port is closed", payload)
+        self._halt_done = False
         framed = protocol.frame(payload)
         garbled = timeouts = 0
         while True:
@@ -543,6 +545,7 @@ class SerialRobot(Backend):
                 except (SerialTimeoutError, ProtocolError, RobotFaultError):
                     continue  # a stale reply (an earlier ERR?'s), or none yet
                 if not st.moving:
+                    self._halt_done = True
                     return report(True, f"{self.url}: HLT sent, {read_back}, STA? moving=0")
                 moving = True
                 time.sleep(0.005)
@@ -558,7 +561,7 @@ class SerialRobot(Backend):
             logger.warning("%s: HLT not acknowledged", self.url)
 
     def _shutdown(self, halt: bool) -> None:
-        if halt:
+        if halt and not self._halt_done:  # a confirmed halt is not sent again
             self._try_halt()
         if self._closed:
             return

@@ -402,6 +402,10 @@ def test_halt_confirmed_reads_back_the_halt_and_the_still_legs(
     assert report.confirmed, report
     assert "ERR? 10 halted by command" in report.detail and "STA? moving=0" in report.detail
     assert not emulator.status().moving
+    sent = emulator.board.commands
+    robot.close()  # confirmed and nothing sent since: close() does not halt again
+    time.sleep(0.1)  # the emulator's thread would have read an HLT by now
+    assert emulator.board.commands == sent and emulator.board.last_command == "STA?"
 
 
 def test_halt_queued_during_a_stall_is_confirmed_when_it_ends(

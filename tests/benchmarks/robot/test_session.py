@@ -64,6 +64,7 @@ def test_a_signal_halts_the_robot_and_exits_with_its_code(
         # the watchdog is armed with the first MOV: it never tripped before the HLT,
         # however long the first period took (it may trip after, the host gone)
         assert "watchdog tripped" not in log[:log.index(HALTED)]
+        assert log.count(HALTED) == 1  # confirmed once: closing does not halt again
         assert "board watchdog: never tripped" in stdout
         rec = final(out)
         assert rec["watchdog_trips"] == rec["watchdog_clears"] == 0
@@ -140,6 +141,10 @@ def test_a_second_client_is_told_the_controller_is_busy(tmp_path: Path) -> None:
         rc, stdout, stderr = finish(proc)
         assert rc == ServoExit.REFUSED == 2, (stdout, stderr)
         assert "busy with another client" in stderr and "refused the connection" in stderr
+        # one message, once; no HLT tried on a connection that never came up
+        assert (stdout + stderr).count("busy with another client") == 1, (stdout, stderr)
+        assert "HLT" not in stderr and "Broken pipe" not in stderr
+        assert "robot: not connected" in stdout
         assert "refused a connection" in emu.log()
         rec = final(out)
         assert rec["exit_code"] == 2 and rec["moved"] is False
