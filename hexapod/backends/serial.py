@@ -189,7 +189,9 @@ class SerialRobot(Backend):
             try:
                 chunk = self._port.read(max(1, self._port.in_waiting))
             except (serial.SerialException, OSError) as exc:
-                raise SerialDisconnectedError(self.url, f"read failed: {exc}", command) from exc
+                text = str(exc)  # pyserial's socket:// already says "read failed: ..."
+                problem = text if text.startswith("read failed") else f"read failed: {text}"
+                raise SerialDisconnectedError(self.url, problem, command) from exc
             self._buf += chunk
 
     def _flush_input(self) -> None:
@@ -231,7 +233,7 @@ class SerialRobot(Backend):
                 timeouts += 1
                 if timeouts > self.timeout_retries:
                     raise
-                logger.warning("%s: %s, retry %d/%d", self.url, exc, timeouts,
+                logger.warning("%s, retry %d/%d", exc, timeouts,
                                self.timeout_retries)
             self.retried += 1
             self._flush_input()
