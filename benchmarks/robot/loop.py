@@ -219,7 +219,7 @@ class ServoCamera:
 class ServoBook:
     """The servo session's book (:class:`benchmarks.sim.loop.LoopBook`, one row): a lost
     frame or a refused or invalid command moves nothing that period (zeros are sent, so
-    the robot's watchdog never trips); the session converges after ``settle`` periods
+    the robot's watchdog stays fed); the session converges after ``settle`` periods
     within both tolerances, ends with the camera's video; every period gives its
     :class:`PeriodStatus`. The per-period ``checks`` run after each image; the time
     limit and the deadline policy after each period (both end the session with a
