@@ -162,6 +162,7 @@ class CameraCheck:
     """The servo session's camera check (module docstring), one of its per-period checks
     (``run_session(..., checks=[...])``): called once a period with the measured
     lengths and the camera's features, it ends the session through the one shutdown.
+    Not called once a recording has ended (:attr:`needs_image`).
 
     Args:
         geometry: The nominal robot (platform points).
@@ -179,6 +180,9 @@ class CameraCheck:
     Raises:
         BenchmarkError: A threshold or timeout that is not positive and finite.
     """
+
+    #: Skipped by the loop once the camera has ended (no image is not a blind period).
+    needs_image = True
 
     def __init__(self, geometry: HexapodGeometry, base_points: np.ndarray,
                  max_distance: float = DEFAULT_CONSISTENCY_MM

@@ -37,7 +37,10 @@ class PeriodCheck(Protocol):
     encoders, a blind-camera timeout, ...): called every period right after the image,
     before the controller runs; it ends the session by raising
     :class:`~benchmarks.robot.exits.SessionStop` ``(code, reason)`` (the session then
-    halts the robot, writes the final record and exits with ``code``)."""
+    halts the robot, writes the final record and exits with ``code``). A check whose
+    ``needs_image`` attribute is true (the camera check) is not called in the period
+    where the camera reports its end (a recording's last frame is past: not a lost
+    frame, and the session ends)."""
 
     def __call__(self, step: int, lengths: np.ndarray, features: Any) -> None:
         """Check one period.
@@ -216,7 +219,7 @@ class ServoCamera:
 class ServoBook:
     """The servo session's book (:class:`benchmarks.sim.loop.LoopBook`, one row): a lost
     frame or a refused or invalid command moves nothing that period (zeros are sent, so
-    the robot's watchdog never trips); the session converges after ``settle`` periods
+    the robot's watchdog stays fed); the session converges after ``settle`` periods
     within both tolerances, ends with the camera's video; every period gives its
     :class:`PeriodStatus`. The per-period ``checks`` run after each image; the time
     limit and the deadline policy after each period (both end the session with a
@@ -258,11 +261,13 @@ class ServoBook:
         self.ctrl_err = math.nan
         self.controller_s = 0.0
         self.plant.use_actuation(self.declared, self.name)
+        ended = feats is None and bool(getattr(self.camera.sensor, "ended", False))
         for check in self.checks:
-            check(step, self.plant.q[0].copy(), feats)
+            if not (ended and getattr(check, "needs_image", False)):
+                check(step, self.plant.q[0].copy(), feats)
         if feats is None:
             self.reason, self.f_err = "lost camera frame", math.nan
-            if getattr(self.camera.sensor, "ended", False):
+            if ended:
                 self.res.outcome = "camera ended"
                 self.active[:] = False
             return np.zeros(1, dtype=bool)

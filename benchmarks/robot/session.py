@@ -330,17 +330,32 @@ def run_session(args: argparse.Namespace, inputs: SessionInputs, status: StatusL
                    else halt.detail,
                    "halt_s": None if halt is None else round(halt.seconds, 6),
                    "retries": getattr(robot, "retried", None),
+                   "watchdog_trips": getattr(robot, "watchdog_trips", None),
+                   "watchdog_clears": getattr(robot, "watchdog_rearms", None),
                    "signals": list(guard.received), "checks": _check_summaries(checks),
                    **_figures(result)})
         try:  # the record is written: a closed terminal (SIGHUP) cannot lose it
             status.final(result.last)
             _report(status, code, reason, result, halt, limited, moved, log, ended,
-                    _check_summaries(checks))
+                    [*_check_summaries(checks), *_watchdog_line(robot, moved)])
             if ended is not None and code == ServoExit.INTERNAL:
                 traceback.print_exception(ended, file=sys.stderr)
         except (OSError, ValueError):
             pass
     return int(code)
+
+
+def _watchdog_line(robot: Any, moved: bool) -> list[str]:
+    """The summary's line on the board's watchdog (a backend that counts its trips: the
+    serial board), for a session that moved the robot; none otherwise."""
+    trips = getattr(robot, "watchdog_trips", None)
+    if not moved or not isinstance(trips, int):
+        return []
+    if trips == 0:
+        return ["board watchdog: never tripped"]
+    cleared = getattr(robot, "watchdog_rearms", 0)
+    return [f"board watchdog: tripped {trips} time(s) during motion (the legs held each "
+            f"time; {cleared} cleared with ERR? and the MOV sent again)"]
 
 
 def _check_summaries(checks: Sequence[PeriodCheck]) -> list[str]:
@@ -374,8 +389,10 @@ def _report(status: StatusLine, code: ServoExit, reason: str, result: ServoResul
     say = status.message
     if code == ServoExit.REFUSED and not moved and ended is not None and not isinstance(
             ended, SessionStop):
-        print(f"hexapod-bench servo: error: {reason}", file=sys.stderr)
-    if code != ServoExit.CONVERGED:
+        # refused before moving: one message, on stderr like every refusal of bad input
+        print(f"hexapod-bench servo: error: {reason} (exit {int(code)}, refused)",
+              file=sys.stderr)
+    elif code != ServoExit.CONVERGED:
         say(f"stopped: {reason} (exit {int(code)}, {code.name.lower()})")
     if result.steps or moved or code == ServoExit.CONVERGED:
         say(result.summary())

@@ -33,10 +33,17 @@ from hexapod.geometry import HexapodGeometry
 
 logger = logging.getLogger(__name__)
 
-__all__ = ["ARRIVED", "STROKE_TOL", "Board", "BoardConfig", "Emulator"]
+__all__ = ["ARRIVED", "HALTED_ERROR", "HALTED_SPEED", "STROKE_TOL", "Board", "BoardConfig",
+           "Emulator"]
 
 #: A leg within this distance of its setpoint has arrived [m] (half the protocol resolution).
 ARRIVED = 0.5e-6
+#: With ``dynamics``, after ``HLT`` (until the next accepted ``MOV`` or ``SVO``): every leg
+#: within this of where it was halted [m] ...
+HALTED_ERROR = 20e-6
+#: ... and slower than this [m/s] reports ``moving=0`` (the position loop then settles the
+#: last micrometres over one to three seconds; a host confirming a halt need not wait).
+HALTED_SPEED = 1e-4
 #: Tolerance of the stroke check [m] (setpoints are read with 1 um resolution).
 STROKE_TOL = 1e-9
 
@@ -144,6 +151,7 @@ class Board:
         self._last_mov = now
         self._t = now
         self._axes = None
+        self._halted = False  # HLT received, no MOV or SVO since (the band of moving)
         if config.dynamics is not None:
             from hexapod.backends.emulator_dynamics import DynamicAxes
 
@@ -153,10 +161,12 @@ class Board:
     @property
     def moving(self) -> bool:
         """At least one leg is away from its setpoint (with ``dynamics``: by more than
-        :data:`ARRIVED`, or still moving faster than 1 um/s)."""
+        :data:`ARRIVED`, or still moving faster than 1 um/s; after ``HLT``, by more than
+        :data:`HALTED_ERROR` or faster than :data:`HALTED_SPEED`)."""
         if self._axes is not None:
-            return bool(np.any(np.abs(self.setpoints - self.lengths) > ARRIVED)
-                        or np.any(np.abs(self._axes.leg_velocities()) > 1e-6))
+            error, speed = (HALTED_ERROR, HALTED_SPEED) if self._halted else (ARRIVED, 1e-6)
+            return bool(np.any(np.abs(self.setpoints - self.lengths) > error)
+                        or np.any(np.abs(self._axes.leg_velocities()) > speed))
         return bool(np.any(self.setpoints != self.lengths))
 
     def trip_time(self) -> float | None:
@@ -171,6 +181,7 @@ class Board:
         if trip is not None and trip <= now:
             self._move(trip)
             self.setpoints = self.lengths.copy()
+            self._halted = True  # stopped like an HLT
             self.watchdog_latched = True
             self._set_error(ErrorCode.WATCHDOG, f"watchdog: no valid MOV within "
                                                 f"{self.watchdog * 1e3:.0f} ms")
@@ -279,6 +290,7 @@ class Board:
             return self._err(ErrorCode.SYNTAX, "SVO 0 or SVO 1")
         on = args[0] == "1"
         self.setpoints = self.lengths.copy()  # servo on or off: hold where it is
+        self._halted = False
         if on and not self.servo:
             self._last_mov = now  # the watchdog starts now
         self.servo = on
@@ -302,6 +314,7 @@ class Board:
             return self._err(ErrorCode.OUTSIDE_STROKE,
                              f"l{i + 1}={args[i]} not in [{lo * 1e3:.3f}, {hi * 1e3:.3f}]")
         self.setpoints = np.clip(q, lo, hi)
+        self._halted = False
         self._last_mov = now
         return "OK"
 
@@ -348,6 +361,7 @@ class Board:
         if args:
             return self._err(ErrorCode.SYNTAX, "HLT takes no argument")
         self.setpoints = self.lengths.copy()
+        self._halted = True
         self._set_error(ErrorCode.HALTED)
         logger.info("HLT: legs halted at %s mm", np.round(self.lengths * 1e3, 3).tolist())
         return "OK"

@@ -102,6 +102,7 @@ class GcsHexapod(Backend):
         self.timeout = self.options.timeout
         self._on_close = on_close
         self._closed = False
+        self._halt_done = False  # a confirmed halt, nothing sent since: close() skips HLT
         self._rate: RateLimiter | None = None
         self.exchanges: deque[float] = deque(maxlen=100_000)
         self.vmo_checks = self.vmo_refusals = 0
@@ -119,6 +120,11 @@ class GcsHexapod(Backend):
             raise
         try:
             self._connect()
+        except GcsDisconnectedError:
+            # closed before or while answering (busy with another client, refused): the
+            # link is gone, an HLT could not be sent (it would only fail on a broken pipe)
+            self._shutdown(halt=False)
+            raise
         except BaseException:
             self._shutdown(halt=True)
             raise
@@ -163,6 +169,7 @@ class GcsHexapod(Backend):
         if self._closed:
             raise GcsDisconnectedError(self.url, "the link is closed", text)
         t0 = time.perf_counter()
+        self._halt_done = False
         self._link.write(gp.encode(*text.split("\n")), text)
         if self.transcript is not None:
             self.transcript += [f"> {ln}" for ln in text.split("\n")]
@@ -418,6 +425,7 @@ class GcsHexapod(Backend):
                 except GcsTimeoutError:
                     continue
                 if answer.strip() == stop:
+                    self._halt_done = True
                     return report(True, f"{self.url}: HLT confirmed (ERR? answered 10, "
                                         "stopped by command)")
         except GcsLinkError as exc:
@@ -441,7 +449,7 @@ class GcsHexapod(Backend):
             logger.warning("%s: could not stop the robot: %s", self.url, exc)
 
     def _shutdown(self, halt: bool) -> None:
-        if halt:
+        if halt and not self._halt_done:  # a confirmed halt is not sent again
             self._try_halt()
         if self._closed:
             return

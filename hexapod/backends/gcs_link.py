@@ -141,7 +141,9 @@ class SerialTransport(Transport):
             self._port.timeout = max(timeout, 0.0)
             data: bytes = self._port.read(max(1, self._port.in_waiting))
         except (serial.SerialException, OSError) as exc:
-            raise GcsDisconnectedError(self.url, f"read failed: {exc}") from exc
+            text = str(exc)  # pyserial's socket:// already says "read failed: ..."
+            problem = text if text.startswith("read failed") else f"read failed: {text}"
+            raise GcsDisconnectedError(self.url, problem) from exc
         return data
 
     def close(self) -> None:

@@ -61,7 +61,10 @@ class SerialRobot(Backend):
     """A robot controller board over a serial link (or the emulator).
 
     On open: ``*IDN?``, ``LIM?`` (stroke and speed limit), ``ERR?`` (clears a stale
-    error), ``WDT``, ``SVO 1``, ``POS?``.
+    error), ``WDT``, ``SVO 0``, ``POS?``: the legs hold where they are and the board's
+    watchdog is disarmed while the host prepares its first period (which may take longer
+    than the watchdog period). ``SVO 1`` (which arms the watchdog) is sent just before
+    the first ``MOV``.
 
     Args:
         url: Device path, ``socket://127.0.0.1:PORT`` or any pyserial URL.
@@ -73,8 +76,10 @@ class SerialRobot(Backend):
             (0 by default: a silent device is an error).
         rearm_watchdog: When a MOV is refused because the watchdog tripped while the
             host was idle longer than the watchdog period (e.g. between :meth:`reset`
-            and the first :meth:`step`), clear it with ``ERR?`` and send the MOV again.
-            If False, or if the host was not idle that long, raise :class:`WatchdogError`.
+            and the first :meth:`step`), clear it with ``ERR?`` and send the MOV again
+            (logged as a warning and counted: :attr:`watchdog_trips`,
+            :attr:`watchdog_rearms`). If False, or if the host was not idle that long,
+            raise :class:`WatchdogError`.
         on_close: Called once after the port is closed (e.g. to stop an emulator).
 
     Attributes:
@@ -82,6 +87,8 @@ class SerialRobot(Backend):
         stroke: (q_min, q_max) [m], from ``LIM?``.
         max_speed: Leg speed limit [m/s], from ``LIM?``.
         exchanges: Round-trip times of every successful exchange [s] (for statistics).
+        watchdog_trips: ``MOV`` s refused because the board's watchdog had tripped.
+        watchdog_rearms: Of those, the trips cleared with ``ERR?`` (the ``MOV`` sent again).
     """
 
     def __init__(
@@ -115,9 +122,12 @@ class SerialRobot(Backend):
         self.emulator: Any = None
         self._last_mov = -np.inf
         self._closed = False
+        self._halt_done = False  # a confirmed halt, nothing sent since: close() skips HLT
         self.exchanges: list[float] = []
         self.retried = 0
+        self.watchdog_trips = 0
         self.watchdog_rearms = 0
+        self._armed = False  # SVO 1 sent: the board's watchdog runs
         try:
             self._port = serial.serial_for_url(url, baudrate=baudrate, timeout=self.timeout,
                                                write_timeout=self.timeout)
@@ -136,8 +146,8 @@ class SerialRobot(Backend):
             if code:
                 logger.info("%s: cleared a pending error %d (%s)", url, code, text)
             protocol.parse_ok(self._exchange(protocol.wdt(self.watchdog)), "WDT")
-            protocol.parse_ok(self._exchange("SVO 1"), "SVO 1")
-            self._last_mov = time.perf_counter()
+            # servo off until the first MOV: the watchdog cannot trip before it
+            protocol.parse_ok(self._exchange("SVO 0"), "SVO 0")
             self._q = protocol.parse_pos(self._exchange("POS?"))
         except BaseException:
             self._shutdown(halt=True)
@@ -179,7 +189,9 @@ class SerialRobot(Backend):
             try:
                 chunk = self._port.read(max(1, self._port.in_waiting))
             except (serial.SerialException, OSError) as exc:
-                raise SerialDisconnectedError(self.url, f"read failed: {exc}", command) from exc
+                text = str(exc)  # pyserial's socket:// already says "read failed: ..."
+                problem = text if text.startswith("read failed") else f"read failed: {text}"
+                raise SerialDisconnectedError(self.url, problem, command) from exc
             self._buf += chunk
 
     def _flush_input(self) -> None:
@@ -197,6 +209,7 @@ class SerialRobot(Backend):
         """
         if self._closed:
             raise SerialLinkError(self.url, "the port is closed", payload)
+        self._halt_done = False
         framed = protocol.frame(payload)
         garbled = timeouts = 0
         while True:
@@ -220,7 +233,7 @@ class SerialRobot(Backend):
                 timeouts += 1
                 if timeouts > self.timeout_retries:
                     raise
-                logger.warning("%s: %s, retry %d/%d", self.url, exc, timeouts,
+                logger.warning("%s, retry %d/%d", exc, timeouts,
                                self.timeout_retries)
             self.retried += 1
             self._flush_input()
@@ -304,18 +317,30 @@ class SerialRobot(Backend):
         self.max_speed = self._guarded(go)
 
     # ------------------------------------------------------------------ motion
+    def _arm(self) -> None:
+        """``SVO 1`` before the first ``MOV``: the legs hold where they are, and the
+        board's watchdog starts now, one exchange before the ``MOV`` that feeds it."""
+        if not self._armed:
+            self._checked("SVO 1", protocol.parse_ok)
+            self._armed = True
+            self._last_mov = time.perf_counter()
+
     def _send_mov(self, setpoints: np.ndarray) -> None:
+        self._arm()
         payload = protocol.mov(setpoints)
         try:
             self._checked(payload, protocol.parse_ok)
-        except WatchdogError as exc:
+        except WatchdogError:
+            self.watchdog_trips += 1
             idle = time.perf_counter() - self._last_mov
             if not self.rearm_watchdog or idle <= self.watchdog:
                 raise
             code, text = self._read_error()
             self.watchdog_rearms += 1
-            logger.info("%s: watchdog tripped while idle %.0f ms (%s); cleared (%d %s)",
-                        self.url, idle * 1e3, exc.text, code, text)
+            logger.warning("%s: the board's watchdog tripped (no MOV for %.0f ms, more than "
+                           "its %.0f ms; the legs held): cleared with ERR? (%d %s) and the "
+                           "MOV sent again (trip %d)", self.url, idle * 1e3,
+                           self.watchdog * 1e3, code, text, self.watchdog_trips)
             self._checked(payload, protocol.parse_ok)
         self._last_mov = time.perf_counter()
 
@@ -522,6 +547,7 @@ class SerialRobot(Backend):
                 except (SerialTimeoutError, ProtocolError, RobotFaultError):
                     continue  # a stale reply (an earlier ERR?'s), or none yet
                 if not st.moving:
+                    self._halt_done = True
                     return report(True, f"{self.url}: HLT sent, {read_back}, STA? moving=0")
                 moving = True
                 time.sleep(0.005)
@@ -537,7 +563,7 @@ class SerialRobot(Backend):
             logger.warning("%s: HLT not acknowledged", self.url)
 
     def _shutdown(self, halt: bool) -> None:
-        if halt:
+        if halt and not self._halt_done:  # a confirmed halt is not sent again
             self._try_halt()
         if self._closed:
             return
@@ -571,4 +597,5 @@ class SerialRobot(Backend):
             return {"exchanges": 0}
         return {"exchanges": int(rtt.size), "median_s": float(np.median(rtt)),
                 "p99_s": float(np.percentile(rtt, 99)), "max_s": float(rtt.max()),
-                "retries": self.retried, "watchdog_rearms": self.watchdog_rearms}
+                "retries": self.retried, "watchdog_trips": self.watchdog_trips,
+                "watchdog_rearms": self.watchdog_rearms}

@@ -261,3 +261,50 @@ def test_the_lean_physics_steps_give_the_same_bits_as_the_general_path() -> None
 
     for a, b in zip(run(False), run(True), strict=True):
         assert np.array_equal(a, b)
+
+
+def _halt_after_motion(speed: float) -> tuple[Board, float]:
+    """A dynamic board driven 0.6 s at ``speed`` [m/s] in 20 ms MOVs (legs alternately
+    lengthening and shortening), then halted; returns it and the time of the HLT [s]."""
+    g = deltalab()
+    q = np.full(6, 0.4157)
+    board = Board(BoardConfig.from_geometry(g, q, watchdog=1.0, dynamics=g), 0.0)
+    assert board.handle("SVO 1", 0.0) == "OK"
+    t = 0.0
+    for _ in range(30):
+        q = q + np.array([1, -1, 1, -1, 1, -1]) * speed * 0.02
+        assert board.handle("MOV " + " ".join(protocol.format_mm(x) for x in q), t) == "OK"
+        t += 0.02
+        board.advance(t)
+    assert board.moving
+    assert board.handle("HLT", t) == "OK"
+    return board, t
+
+
+@pytest.mark.parametrize("speed", [0.005, 0.05])
+def test_a_halted_dynamic_axis_reports_stopped_within_the_halt_band(speed: float) -> None:
+    """After HLT the position loop's creep (micrometres, for seconds) is not motion: STA?
+    answers moving=0 once every leg is within HALTED_ERROR of the halt position and slower
+    than HALTED_SPEED, which took 0.01-0.17 s here (1.1-2.9 s with the arrival band of a
+    MOV, ARRIVED and 1 um/s); it stays 0, and the next MOV uses the strict band again."""
+    from hexapod.backends.emulator_board import HALTED_ERROR, HALTED_SPEED
+
+    board, t_hlt = _halt_after_motion(speed)
+    halted_at = board.setpoints.copy()
+    t, stopped_at = t_hlt, None
+    while t < t_hlt + 3.0:
+        t += 0.002
+        board.advance(t)
+        sta = protocol.parse_sta(board.handle("STA?", t))
+        if stopped_at is None and not sta.moving:
+            stopped_at = t - t_hlt
+            assert np.abs(board.lengths - halted_at).max() <= HALTED_ERROR
+            assert np.abs(board._axes.leg_velocities()).max() <= HALTED_SPEED  # type: ignore[union-attr]
+        elif stopped_at is not None:
+            assert not sta.moving, f"moving again {t - t_hlt:.3f} s after the HLT"
+    assert stopped_at is not None and stopped_at < 0.5, stopped_at
+    # a new MOV, 1 um away: moving until it has arrived within ARRIVED (not the halt band)
+    target = board.lengths + 1e-6
+    board.handle("ERR?", t)  # the 1 s watchdog tripped meanwhile (STA? does not feed it)
+    assert board.handle("MOV " + " ".join(protocol.format_mm(x) for x in target), t) == "OK"
+    assert protocol.parse_sta(board.handle("STA?", t)).moving

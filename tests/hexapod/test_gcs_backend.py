@@ -329,6 +329,8 @@ def test_halt_confirmed_reads_error_10(robot: GcsHexapod, emulator: GcsEmulator)
     report = robot.halt_confirmed(2.0)
     assert report.confirmed and "ERR? answered 10" in report.detail, report
     assert not emulator.moving()
+    robot.close()  # confirmed and nothing sent since: close() does not halt again
+    assert emulator.history().count("HLT") == 1, emulator.history()
 
 
 @pytest.mark.realtime
@@ -343,7 +345,12 @@ def test_halt_queued_during_a_stall_is_confirmed(robot: GcsHexapod,
 
 @pytest.mark.realtime
 def test_a_second_client_is_told_the_controller_is_busy(
-        robot: GcsHexapod, emulator: GcsEmulator, geometry: HexapodGeometry) -> None:
-    with pytest.raises(GcsDisconnectedError, match="busy with another client"):
+        robot: GcsHexapod, emulator: GcsEmulator, geometry: HexapodGeometry,
+        caplog: pytest.LogCaptureFixture) -> None:
+    t0 = time.perf_counter()
+    with caplog.at_level("WARNING", logger="hexapod.backends.gcs"), \
+            pytest.raises(GcsDisconnectedError, match="busy with another client"):
         GcsHexapod(emulator.url, geometry)
+    # the connection never came up: no HLT tried on it (no broken pipe, no 0.5 s wait)
+    assert "HLT" not in caplog.text and time.perf_counter() - t0 < 0.4
     assert robot.measured_lengths().shape == (6,)  # the first client is still served

@@ -63,9 +63,12 @@ def test_open_reads_identity_and_limits_from_the_board(other_geometry: HexapodGe
             assert r.stroke == other_geometry.stroke == (0.38, 0.56)
             assert r.max_speed == other_geometry.max_speed
             st = emu.status()
-            assert st.servo and not st.watchdog and st.error == 0
+            # servo off until the first MOV: the legs hold, the watchdog is disarmed
+            assert not st.servo and not st.watchdog and st.error == 0
             assert emu.board.watchdog == 0.25
             np.testing.assert_allclose(r.measured_lengths(), other_geometry.q_mid, atol=1e-9)
+            r.step(np.zeros(6), DT)
+            assert emu.status().servo  # SVO 1 came with the first MOV
         assert not r.is_open
     finally:
         emu.stop()
@@ -169,6 +172,7 @@ def test_servo_off_is_mapped_and_halts(robot: SerialRobot, emulator: Emulator) -
 
 
 def test_outside_stroke_reply_is_mapped(robot: SerialRobot) -> None:
+    robot.reset(Q0)  # the servo on (the first motion command turns it on)
     with pytest.raises(OutsideStrokeError) as info:
         robot._guarded(lambda: robot._checked("MOV 400 400 400 400 400 999",
                                               protocol.parse_ok))
@@ -180,8 +184,26 @@ def test_watchdog_trip_while_idle_is_rearmed(robot: SerialRobot, emulator: Emula
     time.sleep(0.15)  # idle longer than the 100 ms watchdog
     assert emulator.status().watchdog
     st = robot.step(np.full(6, 0.01), DT)
-    assert robot.watchdog_rearms == 1
+    assert robot.watchdog_trips == robot.watchdog_rearms == 1
     np.testing.assert_allclose(st.lengths, q + 0.01 * DT, atol=2e-6)
+
+
+def test_a_slow_first_period_after_open_does_not_trip_the_watchdog(
+        robot: SerialRobot, emulator: Emulator, caplog: pytest.LogCaptureFixture) -> None:
+    """Opened, then 0.3 s (three watchdog periods) before the first step, as a session's
+    first image and controller call may take: the watchdog is armed with the first MOV,
+    so it never trips; a trip in motion is counted and warned about."""
+    time.sleep(0.3)
+    assert not emulator.status().watchdog
+    robot.step(np.zeros(6), DT)
+    st = emulator.status()
+    assert st.servo and not st.watchdog and st.error == 0
+    assert robot.watchdog_trips == 0
+    time.sleep(0.15)  # a stall of the host in motion: the watchdog trips
+    with caplog.at_level("WARNING", logger="hexapod.backends.serial"):
+        robot.step(np.zeros(6), DT)
+    assert robot.watchdog_trips == robot.watchdog_rearms == 1
+    assert "watchdog tripped" in caplog.text and "trip 1" in caplog.text
 
 
 def test_watchdog_trip_raises_without_rearm(emulator: Emulator) -> None:
@@ -380,6 +402,10 @@ def test_halt_confirmed_reads_back_the_halt_and_the_still_legs(
     assert report.confirmed, report
     assert "ERR? 10 halted by command" in report.detail and "STA? moving=0" in report.detail
     assert not emulator.status().moving
+    sent = emulator.board.commands
+    robot.close()  # confirmed and nothing sent since: close() does not halt again
+    time.sleep(0.1)  # the emulator's thread would have read an HLT by now
+    assert emulator.board.commands == sent and emulator.board.last_command == "STA?"
 
 
 def test_halt_queued_during_a_stall_is_confirmed_when_it_ends(

@@ -329,7 +329,8 @@ def test_video_camera_detects_the_legs_and_stops_at_the_end_of_the_file(
                        str(goal), "--log", str(log), "--max-steps", "50", *ANY_LATE])
     out = capsys.readouterr().out
     assert code == 3, out
-    assert "camera ended after 8 periods" in out
+    assert "stopped: the recording video:" in out and "ended after 8 periods" in out
+    assert "stopped after 8 periods" in out  # the summary in user words (not "camera ended")
     lines = _periods(log)
     assert len(lines) == 8
     assert all(r["visible_edges"] == 12 and r["reason"] is None for r in lines)

@@ -59,8 +59,15 @@ def test_a_signal_halts_the_robot_and_exits_with_its_code(
         assert "robot: halted and confirmed stopped" in stdout
         assert "missed periods" in stdout
         assert "Traceback" not in stderr
-        assert HALTED in emu.log()
+        log = emu.log()
+        assert HALTED in log
+        # the watchdog is armed with the first MOV: it never tripped before the HLT,
+        # however long the first period took (it may trip after, the host gone)
+        assert "watchdog tripped" not in log[:log.index(HALTED)]
+        assert log.count(HALTED) == 1  # confirmed once: closing does not halt again
+        assert "board watchdog: never tripped" in stdout
         rec = final(out)
+        assert rec["watchdog_trips"] == rec["watchdog_clears"] == 0
         assert rec["exit_code"] == code and rec["reason"] == f"{sig.name} received"
         assert rec["halt_confirmed"] is True and rec["moved"] is True
         assert rec["signals"] == [sig.name]
@@ -69,15 +76,16 @@ def test_a_signal_halts_the_robot_and_exits_with_its_code(
         emu.stop()
 
 
-@pytest.mark.parametrize("kind", ["serial", "gcs"])
+@pytest.mark.parametrize("kind", ["serial", "serial-tcp", "gcs"])
 def test_the_link_killed_mid_motion_gives_the_link_exit_code_and_a_summary(
         tmp_path: Path, kind: str) -> None:
     """kill -9 of the emulator: exit 4 (not 2, "refused before moving"), the summary,
     and the robot NOT confirmed stopped, with how far the last MOV could take it."""
-    options = ["--pty"] if kind == "serial" else ["--gcs", "--tcp", "127.0.0.1:0"]
+    options = {"serial": ["--pty"], "serial-tcp": ["--tcp", "127.0.0.1:0"],
+               "gcs": ["--gcs", "--tcp", "127.0.0.1:0"]}[kind]
     emu = EmulatorProc(tmp_path / "emulator.log", *options)
     try:
-        backend = f"serial:{emu.url}" if kind == "serial" else f"gcs:{emu.url}"
+        backend = f"gcs:{emu.url}" if kind == "gcs" else f"serial:{emu.url}"
         out = tmp_path / "session"
         proc = start_servo([*REAL_SIM_CAMERA, "--backend", backend, "--goal",
                             str(goal_file(tmp_path)),
@@ -91,6 +99,8 @@ def test_the_link_killed_mid_motion_gives_the_link_exit_code_and_a_summary(
         assert "after" in stdout and "missed periods" in stdout  # the summary
         assert "robot: NOT confirmed stopped" in stdout
         assert "the last MOV asked for at most" in stdout
+        stopped = next(line for line in stdout.splitlines() if line.startswith("stopped:"))
+        assert stopped.count("read failed") <= 1 and stopped.count(emu.url) <= 1, stopped
         rec = final(out)
         assert rec["exit_code"] == 4 and rec["halt_confirmed"] is False
         assert rec["exception"] is not None and rec["periods"] >= 10
@@ -134,6 +144,10 @@ def test_a_second_client_is_told_the_controller_is_busy(tmp_path: Path) -> None:
         rc, stdout, stderr = finish(proc)
         assert rc == ServoExit.REFUSED == 2, (stdout, stderr)
         assert "busy with another client" in stderr and "refused the connection" in stderr
+        # one message, once; no HLT tried on a connection that never came up
+        assert (stdout + stderr).count("busy with another client") == 1, (stdout, stderr)
+        assert "HLT" not in stderr and "Broken pipe" not in stderr
+        assert "robot: not connected" in stdout
         assert "refused a connection" in emu.log()
         rec = final(out)
         assert rec["exit_code"] == 2 and rec["moved"] is False
@@ -162,6 +176,13 @@ def test_one_dropped_reply_is_survived_by_default(
         assert rec["halt_confirmed"] is True
         if code == 0:
             assert rec["retries"] >= 1 and "converged after" in stdout
+            # each lost reply (a 200 ms wait) tripped the 100 ms watchdog: seen and counted
+            trips = rec["watchdog_trips"]
+            assert trips == rec["watchdog_clears"] >= 1
+            assert stderr.count("the board's watchdog tripped") == trips
+            assert f"board watchdog: tripped {trips} time(s) during motion" in stdout
+            retried = [line for line in stderr.splitlines() if "retry 1/1" in line]
+            assert retried and all(line.count(emu.url) == 1 for line in retried), retried
         else:
             assert "no reply" in rec["exception"] or "within" in rec["exception"]
     finally:
@@ -195,6 +216,10 @@ def test_the_end_of_a_recording_halts_with_the_limit_code(
     # the end of the file is not a lost frame: the summary agrees with the rows
     assert rec["lost_frames"] == sum(r["lost_frames"] for r in rows) == 0
     assert "0 lost frames" in stdout
+    assert "stopped after 8 periods" in stdout  # the summary in user words
+    # nor does the camera check call it one (it checked every period with an image)
+    assert "lost frame" not in caplog.text and "no camera pose" not in caplog.text
+    assert rec["checks"][0].startswith("camera check: 8 periods checked"), rec["checks"]
 
 
 def test_the_time_limit_halts_with_the_limit_code(
