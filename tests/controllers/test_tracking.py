@@ -234,6 +234,7 @@ def _tracking_contexts(world: World, n: int) -> list[ControllerContext]:
     return out
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize(("law", "options"), [
     ("leg-edge", {}),
     ("leg-direction", {}),

@@ -89,6 +89,7 @@ def test_a_wrong_shape_names_the_controller_and_the_shapes(engine: str,
         assert "broadcast" not in r["failure"]
 
 
+@pytest.mark.slow
 def test_a_failed_batch_is_reported_and_not_rerun(tmp_path: Path) -> None:
     plugins.BATCH_CALLS.clear()
     rows = _rows(tmp_path, [BATCH, JOINTS], trials=3)
