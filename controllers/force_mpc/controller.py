@@ -60,11 +60,12 @@ BOUND_TOLERANCE = 1e-4
 #: the first force of an unconverged plan: a full Gauss-Newton step from the shifted
 #: plan, its sensitivities frozen at the warm start's periods (the Coulomb friction
 #: smoothed), is far from the nonlinear rollout along it (predicted feature error at
-#: the horizon's end of order 1 where the converged plan's is 1e-2), and with the
+#: the horizon's end of order 1, after three QPs 2e-2 to 4e-2), and with the
 #: camera's noise and 1 mm calibration errors such plans grew on their end stages to
 #: the force limits, which then bent the first force; the forces oscillated with
 #: growing amplitude (payload-saturation, 0 kg: 2 of 200 trials on an end stop).
-#: Iterating to convergence removes it; 3 is the most whose worst case (every step
+#: Three QPs remove it (held-out trials: docs/dynamic-world.md; they seldom meet the
+#: convergence test there and all three run); 3 is the most whose worst case (every step
 #: paying all 3, as in ``python -m benchmarks.perf.controllers``) stays within the
 #: 2 ms step-time goal (docs/dynamic-world.md).
 MAX_ITER = 3
