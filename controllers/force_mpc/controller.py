@@ -17,8 +17,9 @@ Each period (receding horizon, force-mode drives):
    the previous plan shifted by one period (warm start), solved first without its
    bounds (the minimiser ``-H^-1 g``, the QP's optimum when it holds them), else by
    DAQP generated to C (:func:`controllers.mpc.solver.compiled_qp`): the force limits
-   ``|f_k| <= f_max`` of the nominal drives; ``max_iter`` such iterations (1: the
-   real-time iteration);
+   ``|f_k| <= f_max`` of the nominal drives; repeated from the new plan until the
+   first force has converged (its step within 0.1 % of it, or 1 mN), at most
+   ``max_iter`` times (default :data:`MAX_ITER`; 1: the real-time iteration);
 5. apply ``f_0``.
 
 A failed solve (a non-finite QP, DAQP not optimal, a first force out of its bounds)
@@ -55,6 +56,19 @@ from hexapod.fk import forward_kinematics
 #: (DAQP's solutions were seen up to 4e-5 beyond it in the perf runs: 0.008 N at
 #: 200 N); the plan is then clipped onto the bounds.
 BOUND_TOLERANCE = 1e-4
+#: Default cap of the Gauss-Newton QPs per period. One (the real-time iteration) applied
+#: the first force of an unconverged plan: a full Gauss-Newton step from the shifted
+#: plan, its sensitivities frozen at the warm start's periods (the Coulomb friction
+#: smoothed), is far from the nonlinear rollout along it (predicted feature error at
+#: the horizon's end of order 1, after three QPs 2e-2 to 4e-2), and with the
+#: camera's noise and 1 mm calibration errors such plans grew on their end stages to
+#: the force limits, which then bent the first force; the forces oscillated with
+#: growing amplitude (payload-saturation, 0 kg: 2 of 200 trials on an end stop).
+#: Three QPs remove it (held-out trials: docs/dynamic-world.md; they seldom meet the
+#: convergence test there and all three run); five gained nothing more there, and with
+#: three the worst case (every step paying all of them, as in ``python -m
+#: benchmarks.perf.controllers``) took 1.24 ms, within the 2 ms step-time goal.
+MAX_ITER = 3
 
 
 class ForceMPCLaw(Controller):
@@ -71,7 +85,8 @@ class ForceMPCLaw(Controller):
         terminal_weight: Weight of the feature error of stage ``N``.
         rate_weight: Weight of the force rate ``sum_k |f_k - f_{k-1}|^2`` [1/N^2].
         effort_weight: Weight of the forces ``sum_k |f_k|^2`` [1/N^2].
-        max_iter: Gauss-Newton QPs per period (1: the real-time iteration).
+        max_iter: Most Gauss-Newton QPs per period (stopping once the first force has
+            converged; 1: the real-time iteration).
         natural_frequency: ``f_n`` [Hz] of the fallback ``leg-edge-ctc`` law.
         damping: Damping ratio of the fallback law.
         smooth_goal: Reach a fixed goal along the features of a quintic line (False:
@@ -92,7 +107,7 @@ class ForceMPCLaw(Controller):
 
     def __init__(self, horizon: int = 10, substeps: int = 4, error_weight: float = 1.0,
                  terminal_weight: float = 1.0, rate_weight: float = 1e-8,
-                 effort_weight: float = 0.0, max_iter: int = 1,
+                 effort_weight: float = 0.0, max_iter: int = MAX_ITER,
                  natural_frequency: float = NATURAL_FREQUENCY_HZ, damping: float = DAMPING,
                  smooth_goal: bool = True, friction_smoothing: float = 3e-3,
                  compiled: bool = True) -> None:

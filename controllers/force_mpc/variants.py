@@ -11,7 +11,7 @@ from controllers.base import ControllerContext, Observation
 from controllers.cartesian_ctc import CartesianCTC
 from controllers.exceptions import ContextError
 from controllers.feature_ctc import LegEdgeCTC
-from controllers.force_mpc.controller import ForceMPCLaw
+from controllers.force_mpc.controller import MAX_ITER, ForceMPCLaw
 from controllers.force_mpc.problem import NS
 from controllers.task_ctc import DAMPING, NATURAL_FREQUENCY_HZ
 
@@ -115,7 +115,7 @@ class PoseForceMPC(ForceMPCLaw):
 
     def __init__(self, horizon: int = 10, substeps: int = 4, error_weight: float = 1.0,
                  terminal_weight: float = 1.0, rate_weight: float = POSE_RATE_WEIGHT,
-                 effort_weight: float = 0.0, max_iter: int = 1,
+                 effort_weight: float = 0.0, max_iter: int = MAX_ITER,
                  natural_frequency: float = NATURAL_FREQUENCY_HZ, damping: float = DAMPING,
                  smooth_goal: bool = True, friction_smoothing: float = 3e-3,
                  compiled: bool = True) -> None:
