@@ -161,8 +161,7 @@ class FeatureCTC(TaskComputedTorque):
         if self._grid is None or self._grid[0] is not ref:
             n = int(np.ceil(float(ref.duration) / dt)) + 2
             rows = self.feature_rows(dt * np.arange(n))
-            clean = [_sanitised(r) for r in rows]
-            self._grid = (ref, rows, [c[0] for c in clean], [c[1] for c in clean])
+            self._grid = (ref, rows, *_sanitised_rows(rows))
         return min(k, len(self._grid[1]) - 1)
 
     def feature_rows(self, times: np.ndarray) -> np.ndarray:
@@ -309,6 +308,18 @@ def _sanitised(ref: np.ndarray) -> tuple[np.ndarray, np.ndarray | None]:
     out = np.where(known, ref, 0.0)
     out[0] = np.where(known, out[0], np.tile(_DUMMY, known.size // 3))
     return out.ravel(), known
+
+
+def _sanitised_rows(rows: np.ndarray) -> tuple[list[np.ndarray], list[np.ndarray | None]]:
+    """:func:`_sanitised` of every row of ``rows`` (n, 3, m) at once: the n sanitised
+    rows (3 m,) (views of one array) and their rows kept (None: all)."""
+    n, _, m = rows.shape
+    known = np.repeat(np.isfinite(rows).reshape(n, 3, -1, 3).all(axis=(1, 3)), 3, axis=1)
+    out = np.where(known[:, None, :], rows, 0.0)
+    out[:, 0] = np.where(known, out[:, 0], np.tile(_DUMMY, m // 3))
+    every = known.all(axis=1).tolist()
+    return list(out.reshape(n, 3 * m)), [None if e else k for e, k in zip(every, known,
+                                                                          strict=True)]
 
 
 class LegEdgeCTC(FeatureCTC):
