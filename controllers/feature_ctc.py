@@ -317,9 +317,8 @@ def _sanitised_rows(rows: np.ndarray) -> tuple[list[np.ndarray], list[np.ndarray
     known = np.repeat(np.isfinite(rows).reshape(n, 3, -1, 3).all(axis=(1, 3)), 3, axis=1)
     out = np.where(known[:, None, :], rows, 0.0)
     out[:, 0] = np.where(known, out[:, 0], np.tile(_DUMMY, m // 3))
-    every = known.all(axis=1).tolist()
-    return list(out.reshape(n, 3 * m)), [None if e else k for e, k in zip(every, known,
-                                                                          strict=True)]
+    every = np.all(known, axis=1)
+    return list(out.reshape(n, 3 * m)), [None if every[i] else known[i] for i in range(n)]
 
 
 class LegEdgeCTC(FeatureCTC):

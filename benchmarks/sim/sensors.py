@@ -110,9 +110,11 @@ class GeometricSensor:
         #: Each world's true :attr:`~vision.cameras.perspective.PerspectiveCamera.
         #: normal_to_line_matrix` (every true camera perspective; else None): the image
         #: lines of every row in one call.
-        self._line_maps = (np.stack([w.camera.normal_to_line_matrix for w in self.worlds])
-                           if all(isinstance(w.camera, PerspectiveCamera)
-                                  for w in self.worlds) else None)
+        true_cameras = [w.camera for w in self.worlds]
+        self._line_maps = (np.stack([c.normal_to_line_matrix for c in true_cameras
+                                     if isinstance(c, PerspectiveCamera)])
+                           if all(isinstance(c, PerspectiveCamera) for c in true_cameras)
+                           else None)
         self.rngs = list(rngs)
         self.detect_times: list[float] = []
 
