@@ -15,11 +15,12 @@ ESTIMATED base points ``A_i`` and camera pose (``vision-ctc``).
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 
 import numpy as np
 from scipy.linalg.lapack import dgesdd as _svd
 
-from controllers.base import ControllerContext, Goal, Observation
+from controllers.base import ControllerContext, Goal, Observation, ObservationBatch
 from controllers.solvers.compiled_task_ctc import REFERENCE
 from controllers.task_ctc import (
     CompiledTaskStep,
@@ -90,11 +91,43 @@ class CartesianCTC(TaskComputedTorque):
 
     def reference_input(self, step: CompiledTaskStep, tr: float) -> None:
         """The reference row at ``tr`` (the fixed goal at rest without a reference)."""
+        step.set("reference", self.reference_row(tr))
+
+    def reference_row(self, tr: float) -> np.ndarray:
+        """(24,) the reference at ``tr`` [s] as the compiled step takes it: ``R*``
+        (row-major), ``t*``, twist, twist rate (:meth:`pose_reference`; without a
+        reference the fixed goal at rest)."""
         if self.reference is None:
             R, t = self.goal_pose()
-            step.set("reference", np.concatenate([R.ravel(), t, np.zeros(12)]))
-        else:
-            step.set("reference", self.pose_reference(tr))
+            return np.concatenate([R.ravel(), t, np.zeros(12)])
+        return self.pose_reference(tr)
+
+    def batch_inputs(self, step: CompiledTaskStep, X: np.ndarray,
+                     observations: ObservationBatch, rows: np.ndarray,
+                     instances: Sequence[TaskComputedTorque], tr: np.ndarray) -> np.ndarray:
+        """:meth:`compiled_inputs`' common case for many trials at once (see
+        :meth:`TaskComputedTorque.batch_inputs`): the measurement of the rows
+        :meth:`batch_features` takes, then each one's reference row (an integral
+        action: the row is left to :meth:`compiled_inputs`)."""
+        fast = self.batch_features(step, X, observations, rows)
+        reference = step.inputs["reference"]
+        for j in np.flatnonzero(fast).tolist():
+            inst = instances[j]
+            if not isinstance(inst, CartesianCTC) or inst.integral_gain:
+                fast[j] = False
+                continue
+            try:
+                X[j, reference] = inst.reference_row(float(tr[j]))
+            except Exception:  # the trial's own compiled_inputs meets it again
+                fast[j] = False
+        return fast
+
+    def batch_features(self, step: CompiledTaskStep, X: np.ndarray,
+                       observations: ObservationBatch, rows: np.ndarray) -> np.ndarray:
+        """Write the measurement of the batch rows ``rows`` into ``X`` where
+        :meth:`compiled_inputs` takes it as it is; their (m,) mask (every row: the pose
+        comes from the encoders, in the row already)."""
+        return np.ones(len(rows), dtype=bool)
 
 
 class VisionCTC(CartesianCTC):
@@ -217,6 +250,21 @@ class VisionCTC(CartesianCTC):
         step.row[step.inputs["directions"]] = u.ravel()
         self.reference_input(step, tr)
         return None, None
+
+    def batch_features(self, step: CompiledTaskStep, X: np.ndarray,
+                       observations: ObservationBatch, rows: np.ndarray) -> np.ndarray:
+        """The rows with six (6, 3) directions given, all marked seen and finite (as
+        :func:`_every_direction`): their directions."""
+        u = observations.directions
+        if u is None or np.shape(u)[1:] != (6, 3):
+            return np.zeros(len(rows), dtype=bool)
+        u = np.asarray(u, dtype=float)[rows].reshape(len(rows), 18)
+        seen = np.asarray(observations.direction_visible)[rows].reshape(
+            len(rows), -1).all(axis=1)
+        with np.errstate(invalid="ignore", over="ignore"):
+            fast: np.ndarray = seen & np.isfinite(u.sum(axis=1))
+        X[fast, step.inputs["directions"]] = u[fast]
+        return fast
 
     def compiled_constants(self, step: CompiledTaskStep) -> None:
         """The estimated base points (camera frame) and camera pose."""

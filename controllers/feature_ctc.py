@@ -26,11 +26,12 @@ independent rows give a refusal with the reason.
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from dataclasses import replace
 
 import numpy as np
 
-from controllers.base import ControllerContext, Goal, Observation
+from controllers.base import ControllerContext, Goal, Observation, ObservationBatch
 from controllers.cartesian_ctc import all_seen, directions_seen, pose_measurement
 from controllers.exceptions import ContextError
 from controllers.solvers.reference_motion import feature_motion, layouts
@@ -160,8 +161,7 @@ class FeatureCTC(TaskComputedTorque):
         if self._grid is None or self._grid[0] is not ref:
             n = int(np.ceil(float(ref.duration) / dt)) + 2
             rows = self.feature_rows(dt * np.arange(n))
-            clean = [_sanitised(r) for r in rows]
-            self._grid = (ref, rows, [c[0] for c in clean], [c[1] for c in clean])
+            self._grid = (ref, rows, *_sanitised_rows(rows))
         return min(k, len(self._grid[1]) - 1)
 
     def feature_rows(self, times: np.ndarray) -> np.ndarray:
@@ -245,6 +245,41 @@ class FeatureCTC(TaskComputedTorque):
         row[inputs["reference_features"]] = ref
         return every, None
 
+    def batch_inputs(self, step: CompiledTaskStep, X: np.ndarray,
+                     observations: ObservationBatch, rows: np.ndarray,
+                     instances: Sequence[TaskComputedTorque], tr: np.ndarray) -> np.ndarray:
+        """:meth:`compiled_inputs`' common case for many trials at once (see
+        :meth:`TaskComputedTorque.batch_inputs`): the features of every row whose
+        features are all seen and finite (:meth:`batch_features`), then each row's
+        reference from its grid when it is on the grid with every row known (a
+        feature the model's camera does not see, a reference off the grid or an
+        integral action: the row is left to :meth:`compiled_inputs`)."""
+        fast = self.batch_features(step, X, observations, rows)
+        reference = step.inputs["reference_features"]
+        for j in np.flatnonzero(fast).tolist():
+            inst = instances[j]
+            if not isinstance(inst, FeatureCTC) or inst.integral_gain or inst.reference is None:
+                fast[j] = False
+                continue
+            try:
+                i = inst._grid_index(float(tr[j]))
+            except Exception:  # the trial's own compiled_inputs meets it again
+                i = None
+            grid = inst._grid
+            if i is None or grid is None or grid[3][i] is not None:
+                fast[j] = False
+                continue
+            X[j, reference] = grid[2][i]
+        X[fast, step.inputs["mask"]] = 1.0
+        return fast
+
+    def batch_features(self, step: CompiledTaskStep, X: np.ndarray,
+                       observations: ObservationBatch, rows: np.ndarray) -> np.ndarray:
+        """Write the features of the batch rows ``rows`` into ``X`` where
+        :meth:`compiled_features` would give them all seen (the same blocks and numbers
+        as :meth:`compiled_inputs`); their (m,) mask (none by default)."""
+        return np.zeros(len(rows), dtype=bool)
+
     def _anchored(self, times: np.ndarray) -> np.ndarray:
         """(m, ...) the nominal features of the reference at ``times``, anchored at the
         taught goal."""
@@ -273,6 +308,17 @@ def _sanitised(ref: np.ndarray) -> tuple[np.ndarray, np.ndarray | None]:
     out = np.where(known, ref, 0.0)
     out[0] = np.where(known, out[0], np.tile(_DUMMY, known.size // 3))
     return out.ravel(), known
+
+
+def _sanitised_rows(rows: np.ndarray) -> tuple[list[np.ndarray], list[np.ndarray | None]]:
+    """:func:`_sanitised` of every row of ``rows`` (n, 3, m) at once: the n sanitised
+    rows (3 m,) (views of one array) and their rows kept (None: all)."""
+    n, _, m = rows.shape
+    known = np.repeat(np.isfinite(rows).reshape(n, 3, -1, 3).all(axis=(1, 3)), 3, axis=1)
+    out = np.where(known[:, None, :], rows, 0.0)
+    out[:, 0] = np.where(known, out[:, 0], np.tile(_DUMMY, m // 3))
+    every = np.all(known, axis=1)
+    return list(out.reshape(n, 3 * m)), [None if every[i] else known[i] for i in range(n)]
 
 
 class LegEdgeCTC(FeatureCTC):
@@ -310,6 +356,20 @@ class LegEdgeCTC(FeatureCTC):
                 return _OF_NORMALS, n, _EVERY_EDGE
         return self.features_seen(observation)
 
+    def batch_features(self, step: CompiledTaskStep, X: np.ndarray,
+                       observations: ObservationBatch, rows: np.ndarray) -> np.ndarray:
+        """Every edge seen and finite: the normals, the directions left to the compiled
+        step (as :meth:`compiled_features` and ``_OF_NORMALS``)."""
+        if observations.normals is None:
+            return np.zeros(len(rows), dtype=bool)
+        n = np.asarray(observations.normals, dtype=float)[rows].reshape(len(rows), 36)
+        seen = np.asarray(observations.edge_visible)[rows].reshape(len(rows), -1).all(axis=1)
+        with np.errstate(invalid="ignore", over="ignore"):
+            fast: np.ndarray = seen & np.isfinite(n.sum(axis=1))
+        X[fast, step.inputs["normals"]] = n[fast]
+        X[fast, step.inputs.index("of_normals")] = 1.0
+        return fast
+
     def make_task(self, desired: np.ndarray) -> Task:
         return LegEdgeTask(desired, "normals")
 
@@ -340,6 +400,19 @@ class LegDirectionCTC(FeatureCTC):
             if all_seen(observation.direction_visible) and math.isfinite(u.sum()):
                 return u, None, _EVERY_LEG
         return self.features_seen(observation)
+
+    def batch_features(self, step: CompiledTaskStep, X: np.ndarray,
+                       observations: ObservationBatch, rows: np.ndarray) -> np.ndarray:
+        """Every direction given, seen and finite: them (as :meth:`compiled_features`)."""
+        if observations.directions is None:
+            return np.zeros(len(rows), dtype=bool)
+        u = np.asarray(observations.directions, dtype=float)[rows].reshape(len(rows), 18)
+        seen = np.asarray(observations.direction_visible)[rows].reshape(
+            len(rows), -1).all(axis=1)
+        with np.errstate(invalid="ignore", over="ignore"):
+            fast: np.ndarray = seen & np.isfinite(u.sum(axis=1))
+        X[fast, step.inputs["directions"]] = u[fast]
+        return fast
 
     def make_task(self, desired: np.ndarray) -> Task:
         return LegDirectionTask(desired)

@@ -26,6 +26,7 @@ from __future__ import annotations
 
 import math
 from abc import abstractmethod
+from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Any
 
@@ -225,6 +226,26 @@ class TaskComputedTorque(Controller):
         note, or None to leave the period to the numpy path (the default)."""
         return None
 
+    def batch_inputs(self, step: CompiledTaskStep, X: np.ndarray,
+                     observations: ObservationBatch, rows: np.ndarray,
+                     instances: Sequence[TaskComputedTorque], tr: np.ndarray) -> np.ndarray:
+        """:meth:`compiled_inputs` of many trials at once, in its common case (every
+        feature seen, the reference on its grid, all its rows known, no integral
+        action): writes this period's measurement and reference into the input rows
+        ``X`` (m, n_in) (``q``, ``q_dot`` and the pose guess there already) of the rows
+        in that case and returns their (m,) mask; the others are left to each trial's
+        :meth:`compiled_inputs` (which writes the same numbers). None by default.
+
+        Args:
+            step: The compiled step of the first instance (the layout of ``X``).
+            X: The input rows, one per instance.
+            observations: The batch; row ``rows[j]`` is ``instances[j]``'s.
+            rows: (m,) the batch rows of the instances.
+            instances: The trials' instances (started, with a compiled step).
+            tr: (m,) the times on each instance's reference clock [s].
+        """
+        return np.zeros(len(rows), dtype=bool)
+
     def retarget_trial(self, goal: Goal) -> None:
         """A new fixed goal (ignored when tracking ``context.reference``)."""
         ctx = self.context
@@ -334,12 +355,29 @@ class TaskComputedTorque(Controller):
         if readings is None:
             return np.arange(n)
         t, q_all, qd_all, finite = readings
-        rows: list[tuple[int, TaskComputedTorque]] = []
-        steps: list[CompiledTaskStep] = []
+        candidates = [(k, inst) for k, inst in finite
+                      if getattr(inst, "compiled", None) is not None and inst.started
+                      and inst.model is not None]
+        if not candidates:
+            return np.arange(n)
+        for _, inst in candidates:
+            inst.compiled.write_guess(inst)
+        ks = np.array([k for k, _ in candidates], dtype=int)
+        instances = [inst for _, inst in candidates]
+        first = instances[0].compiled
+        X = np.stack([inst.compiled.row for inst in instances])
+        X[:, first.inputs["q"]] = q_all[ks]
+        X[:, first.inputs["q_dot"]] = qd_all[ks]
+        tr = t[ks] - np.array([inst.reference_start for inst in instances])
+        fast = self.batch_inputs(first, X, obs, ks, instances, tr)
+        keep: list[int] = []
         used: list[np.ndarray | None] = []
-        for k, inst in finite:
-            step = getattr(inst, "compiled", None)
-            if step is None or not inst.started or inst.model is None:
+        for j, (k, inst) in enumerate(candidates):
+            step = inst.compiled
+            if fast[j]:
+                step.used = None
+                keep.append(j)
+                used.append(None)
                 continue
             step.views["q"][:] = q_all[k]
             step.views["q_dot"][:] = qd_all[k]
@@ -349,13 +387,15 @@ class TaskComputedTorque(Controller):
                 continue
             if prepared is None:
                 continue
-            rows.append((k, inst))
-            steps.append(step)
+            X[j] = step.row
+            keep.append(j)
             used.append(prepared[0])
-        if not rows:
+        if not keep:
             return np.arange(n)
-        first = steps[0]
-        X = np.stack([step.row for step in steps])
+        rows = [candidates[j] for j in keep]
+        steps = [instances[j].compiled for j in keep]
+        if len(keep) < len(candidates):
+            X = X[keep]
         Y, converged = evaluate_rows(first.function, X, first.inputs["pose"],
                                      first.outputs["pose"], first.outputs.index("fk_residual"),
                                      first.tolerance, FK_MAX_CALLS)

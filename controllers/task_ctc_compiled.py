@@ -198,11 +198,7 @@ class CompiledTaskStep:
         """Write the pose guess, the law's measurement and the reference at ``tr`` into
         the row (``q`` and ``q_dot`` there already); the task rows to use (None: all) and
         a note, or None off the happy path (no measurement, fewer than six rows)."""
-        guess = law.guess
-        if guess is not self._guess_of:  # else the pose block holds its pose already
-            R0, t0 = guess if guess is not None else self.home
-            self.set_pose(R0, t0)
-            self._guess_of = guess
+        self.write_guess(law)
         prepared = law.compiled_inputs(self, observation, tr, self.views["q"])
         if prepared is None:
             return None
@@ -213,6 +209,15 @@ class CompiledTaskStep:
             self.views["integral"][:] = law.integral_term(self.views["integral"].size)
         self.used = rows
         return prepared
+
+    def write_guess(self, law: TaskComputedTorque) -> None:
+        """Write the law's pose guess (the home pose without one) into the row's ``pose``
+        block, unless the block holds it already."""
+        guess = law.guess
+        if guess is not self._guess_of:  # else the pose block holds its pose already
+            R0, t0 = guess if guess is not None else self.home
+            self.set_pose(R0, t0)
+            self._guess_of = guess
 
     def accept(self, law: TaskComputedTorque, y: np.ndarray, rows: np.ndarray | None
                ) -> tuple[np.ndarray, float] | None:

@@ -21,6 +21,7 @@ from benchmarks.sim.world import TrialSetup, World, trial_rng
 from controllers.base import Goal, ObservationBatch
 from hexapod.kinematics import inverse_kinematics
 from vision.cameras import Camera
+from vision.cameras.perspective import PerspectiveCamera, normals_to_lines
 from vision.fast_observe import WorldParams, observe_batch
 from vision.legs import LegObservation, directions_from_edges
 
@@ -106,6 +107,14 @@ class GeometricSensor:
                                        for w in self.worlds])
         self._group_camera = {g: self.worlds[k].camera for k, g in
                               reversed(list(enumerate(self._camera_group)))}
+        #: Each world's true :attr:`~vision.cameras.perspective.PerspectiveCamera.
+        #: normal_to_line_matrix` (every true camera perspective; else None): the image
+        #: lines of every row in one call.
+        true_cameras = [w.camera for w in self.worlds]
+        self._line_maps = (np.stack([c.normal_to_line_matrix for c in true_cameras
+                                     if isinstance(c, PerspectiveCamera)])
+                           if all(isinstance(c, PerspectiveCamera) for c in true_cameras)
+                           else None)
         self.rngs = list(rngs)
         self.detect_times: list[float] = []
 
@@ -132,9 +141,12 @@ class GeometricSensor:
         """Features of the worlds ``items`` at poses (n, 3, 3), (n, 3), one generator
         each (anything when :func:`draws_noise` is False)."""
         obs = observe_batch(self.params, rotations, translations, items)
-        groups = self._camera_group[items]
-        cameras = [(np.flatnonzero(groups == g), self._group_camera[int(g)])
-                   for g in np.unique(groups)]
+        line_maps = None if self._line_maps is None else self._line_maps[items]
+        cameras: list[tuple[np.ndarray, Any]] = []
+        if line_maps is None:
+            groups = self._camera_group[items]
+            cameras = [(np.flatnonzero(groups == g), self._group_camera[int(g)])
+                       for g in np.unique(groups)]
 
         def item(k: int) -> tuple[LegObservation, Any]:
             world = self.worlds[int(items[k])]
@@ -142,7 +154,7 @@ class GeometricSensor:
                                     float(self.params.platform_radius[items[k]])), world.camera
 
         return noisy_features(self.sc, obs.normals, obs.edge_visible, rngs, apply_noise,
-                              self.est, cameras, item)
+                              self.est, cameras, item, line_maps)
 
     def goals(self, setups: list[TrialSetup]) -> list[Goal]:
         """The goals of the trials of the rows (:func:`trial_goal` with one taught frame)
@@ -192,7 +204,8 @@ def draws_noise(sc: SimScenario, apply_noise: bool) -> bool:
 def noisy_features(sc: SimScenario, normals: np.ndarray, visible: np.ndarray,
                    rngs: Sequence[Any], apply_noise: bool, estimated: Any,
                    cameras: list[tuple[np.ndarray, Any]],
-                   item: Callable[[int], tuple[Any, Any]]) -> ObservationBatch:
+                   item: Callable[[int], tuple[Any, Any]],
+                   line_maps: np.ndarray | None = None) -> ObservationBatch:
     """The scenario's noise on true edges, and the features the controllers receive.
 
     Rotation noise perturbs each true edge normal; the perspective image lines follow
@@ -207,9 +220,13 @@ def noisy_features(sc: SimScenario, normals: np.ndarray, visible: np.ndarray,
         rngs: One generator per row (anything when :func:`draws_noise` is False).
         apply_noise: Whether the noise applies.
         estimated: The estimated camera (the same for every row).
-        cameras: ``(rows, true camera)`` groups covering every row.
+        cameras: ``(rows, true camera)`` groups covering every row (unused with
+            ``line_maps``).
         item: Row -> (its :class:`vision.legs.LegObservation`, its true camera), for the
             pixel noise.
+        line_maps: (n, 3, 3) each row's true perspective camera's
+            ``normal_to_line_matrix``: the image lines of every row in one call
+            (:func:`vision.cameras.perspective.normals_to_lines`; None: by ``cameras``).
 
     Returns:
         The camera's batch (:func:`camera_batch`; ``lines`` None for a unified camera).
@@ -241,6 +258,9 @@ def noisy_features(sc: SimScenario, normals: np.ndarray, visible: np.ndarray,
         if noise.model == "pixel" and apply_noise:
             # fitted with the estimated camera already; the image line is the true one
             lines = estimated.normal_to_line(normals)
+        elif line_maps is not None:
+            lines = normals_to_lines(normals, line_maps)
+            normals = estimated.line_to_normal(lines)
         else:
             lines = np.empty_like(normals)
             for rows, cam in cameras:

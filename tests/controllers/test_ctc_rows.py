@@ -89,3 +89,61 @@ def test_a_row_without_leg_rates_is_left_to_its_trial(geometry: HexapodGeometry)
     full = law.step_batch(obs)
     assert full.reasons[0] is None
     assert full.reasons[1] is not None and "leg velocities" in full.reasons[1]
+
+
+#: Per law: the rows its batched inputs take at each of 5 steps (row 1 hides leg 4's
+#: second edge and so its direction from the third step; the pose laws' pose comes
+#: from the encoders, vision-ctc's from the six legs: its row 1 goes to its numpy step).
+FAST_ROWS = {"leg-edge-ctc": [[0, 1, 2]] * 2 + [[0, 2]] * 3,
+             "leg-direction-ctc": [[0, 1, 2]] * 2 + [[0, 2]] * 3,
+             "vision-ctc": [[0, 1, 2]] * 2 + [[0, 2]] * 3,
+             "cartesian-ctc": [[0, 1, 2]] * 5}
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("name", sorted(FAST_ROWS))
+def test_batched_inputs_take_the_common_rows_the_others_row_by_row(
+        geometry: HexapodGeometry, name: str) -> None:
+    """The task laws' batched inputs (``batch_inputs``): the rows in the common case
+    are written at once, a row with a hidden leg by its trial's ``compiled_inputs``
+    (masked rows) or its numpy step; every command is the trial's own step to the last
+    bit."""
+    truth = ideal_drives(geometry)
+    world = CtcWorld.make(truth)
+    R0, t0, R1, t1, ref = line_reference(truth, "quintic", (0.5, -0.3, 0.4))
+    ctx = world.context(world.goal(R1, t1), reference=ref)
+    n = 3
+    robots = DynamicRobots([truth] * n, np.array([R0] * n),
+                           np.array([t0 + np.array([0.0, 0.001 * k, 0.0]) for k in range(n)]))
+    robots.drives.mode = "force"
+    batch = registry.create(name)
+    batch.reset_batch([ctx] * n)
+    singles = [registry.create(name) for _ in range(n)]
+    for s in singles:
+        s.reset(ctx)
+    fast_rows: list[list[int]] = []
+    inner = type(batch).batch_inputs
+
+    def spy(self, step, X, observations, rows, instances, tr):  # type: ignore[no-untyped-def]
+        fast = inner(self, step, X, observations, rows, instances, tr)
+        fast_rows.append(rows[fast].tolist())
+        return fast
+
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setattr(type(batch), "batch_inputs", spy)
+        for k in range(5):
+            obs = _batch(world, robots, k * DT)
+            if k >= 2:
+                obs = dataclasses.replace(obs, edge_visible=obs.edge_visible.copy(),
+                                          direction_visible=obs.direction_visible.copy())
+                obs.edge_visible[1, 4, 1] = False
+                obs.direction_visible[1, 4] = False
+            out = batch.step_batch(obs)
+            assert out.forces is not None
+            for j, s in enumerate(singles):
+                cmd = s.step(obs.item(j))
+                assert cmd.reason is None and out.reasons[j] is None
+                assert out.forces[j].tobytes() == np.asarray(cmd.forces).tobytes()
+                assert out.error_norm[j] == cmd.error_norm
+            assert not robots.advance(np.arange(n), out.forces, DT / 20, 20).any()
+    assert fast_rows == FAST_ROWS[name]

@@ -96,3 +96,30 @@ def test_extremal_configurations_margin_and_unreachable(geometry: HexapodGeometr
     np.testing.assert_allclose(
         inverse_kinematics(other_geometry, other.rotations[ok], other.translations[ok]),
         other.lengths[ok], atol=1e-10)
+
+
+def test_home_height_bisection_is_inverse_kinematics_bisection_bitwise(geometry) -> None:
+    """Each halving of the home height's bisection gives the mean leg length that
+    :func:`inverse_kinematics` gives at the level pose, to the last bit (on robots with
+    perturbed joint points, as a study's trials have)."""
+    import dataclasses
+
+    from hexapod.workspace import _bisect_home_height
+
+    def reference(g) -> float:  # the plain bisection through inverse_kinematics
+        lo, hi = 1e-3, 4.0 * g.q_max
+        for _ in range(100):
+            mid = 0.5 * (lo + hi)
+            q = inverse_kinematics(g, np.eye(3), np.array([0.0, 0.0, mid]))
+            lo, hi = (mid, hi) if q.mean() < g.q_mid else (lo, mid)
+        return 0.5 * (lo + hi)
+
+    rng = np.random.default_rng(7)
+    for _ in range(20):
+        g = dataclasses.replace(
+            geometry, base_points=geometry.base_points + rng.normal(scale=1e-3, size=(6, 3)),
+            platform_points=geometry.platform_points + rng.normal(scale=1e-3, size=(6, 3)))
+        h = _bisect_home_height(g)
+        assert h == reference(g)
+        assert inverse_kinematics(g, np.eye(3), np.array([0.0, 0.0, h])).mean() == \
+            pytest.approx(g.q_mid, abs=1e-12)

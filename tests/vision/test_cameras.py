@@ -403,6 +403,26 @@ def test_line_matrix_is_the_normalisation_of_K() -> None:
     assert np.allclose(cam.pixels_to_line_coordinates(pix), norm[:, :2] / norm[:, 2:])
 
 
+def test_normals_to_lines_is_each_rows_normal_to_line_bitwise(
+        rng: np.random.Generator) -> None:
+    """The batched image lines (every row through its own camera, as the simulator's
+    sensor takes them) are the per-camera ``normal_to_line`` to the last bit, NaN rows
+    included; a matrix per row is required."""
+    from vision.cameras.perspective import normals_to_lines
+
+    cams = [PerspectiveCamera(_K(fx=700.0 + 50 * k, cy=240.0 + k), 1024, 780,
+                              _random_pose(rng)) for k in range(5)]
+    n = rng.normal(size=(5, 6, 2, 3))
+    n /= np.linalg.norm(n, axis=-1, keepdims=True)
+    n[2, 3, 1] = np.nan
+    out = normals_to_lines(n, np.stack([c.normal_to_line_matrix for c in cams]))
+    expected = np.stack([c.normal_to_line(n[k]) for k, c in enumerate(cams)])
+    assert np.array_equal(out, expected, equal_nan=True)
+    assert np.isnan(out[2, 3, 1]).all() and np.isfinite(out[2, 3, 0]).all()
+    with pytest.raises(CameraError, match="matrices"):
+        normals_to_lines(n, np.stack([c.normal_to_line_matrix for c in cams[:4]]))
+
+
 def test_packaged_preset_files_match_the_presets() -> None:
     data = Path(__file__).resolve().parents[2] / "vision" / "data"
     for name, factory in (("front", front_camera), ("omni", omni_camera)):

@@ -28,6 +28,7 @@ from vision.cameras.distortion import RadialTangential, parse_coefficients
 from vision.cameras.distortion_full import OpenCVLens, check_tilt, needs_full_model
 from vision.cameras.fields import CameraFields
 from vision.cameras.lens import Lens
+from vision.exceptions import CameraError
 
 #: OpenCV's coefficient-vector lengths and the terms they end with.
 OPENCV_LENGTHS = (4, 5, 8, 12, 14)
@@ -125,6 +126,12 @@ class PerspectiveCamera(Camera):
         n = as_points(n, "n")
         return unit(n @ self._line_matrix_inv_T.T)
 
+    @property
+    def normal_to_line_matrix(self) -> np.ndarray:
+        """(3, 3) ``M`` of :meth:`normal_to_line`, ``l = n M / |n M|`` (``M = Kt^-1``, a
+        read-only view; :func:`normals_to_lines` takes one per row)."""
+        return self._line_matrix_inv_T.T  # type: ignore[no-any-return]
+
     def line_to_normal(self, l: np.ndarray) -> np.ndarray:
         """Inverse of :meth:`normal_to_line`: ``n = Kt^T l / |Kt^T l|``."""
         l = as_points(l, "l")
@@ -163,3 +170,25 @@ class PerspectiveCamera(Camera):
                           K[1, 1] * m[..., 1] + K[1, 2]], axis=-1)
         return np.stack([(p[..., 0] - 0.5 * self.width) / self.width,
                          (p[..., 1] - 0.5 * self.height) / self.width], axis=-1)
+
+
+def normals_to_lines(normals: np.ndarray, matrices: np.ndarray) -> np.ndarray:
+    """:meth:`PerspectiveCamera.normal_to_line` of each row through its own camera, in one
+    call: the same numbers as row by row.
+
+    Args:
+        normals: (n, ..., 3) interpretation-plane normals of row ``k`` seen by camera ``k``.
+        matrices: (n, 3, 3) each camera's :attr:`PerspectiveCamera.normal_to_line_matrix`.
+
+    Returns:
+        (n, ..., 3) unit lines in normalised pixel coordinates.
+
+    Raises:
+        CameraError: ``matrices`` is not one (3, 3) per row.
+    """
+    n = as_points(normals, "normals")
+    M = np.asarray(matrices, dtype=float)
+    if M.shape != (len(n), 3, 3):
+        raise CameraError("matrices", f"expected shape ({len(n)}, 3, 3) (one per row of the "
+                          f"normals {n.shape}), got {M.shape}")
+    return unit(np.matmul(n, M.reshape(len(n), *([1] * (n.ndim - 3)), 3, 3)))
