@@ -191,6 +191,14 @@ class FeatureCTC(TaskComputedTorque):
         seen = np.isfinite(self._anchored(times).reshape(len(times), size))
         return np.where(seen[:, None, :], out, np.nan)
 
+    def grid_reference(self, tr: float) -> tuple[np.ndarray, np.ndarray | None] | None:
+        """:meth:`compiled_reference` at ``tr`` [s] read from the control grid, or None
+        when ``tr`` is off the grid (the caller then computes it)."""
+        i = self._grid_index(tr)
+        if i is None or self._grid is None:
+            return None
+        return self._grid[2][i], self._grid[3][i]
+
     def compiled_reference(self, tr: float) -> tuple[np.ndarray, np.ndarray | None]:
         """(3 m,) :meth:`feature_reference` at ``tr`` for the compiled step, the features
         the model's camera does not see (NaN) replaced by finite stand-ins, and the rows
@@ -262,14 +270,13 @@ class FeatureCTC(TaskComputedTorque):
                 fast[j] = False
                 continue
             try:
-                i = inst._grid_index(float(tr[j]))
+                on_grid = inst.grid_reference(float(tr[j]))
             except Exception:  # the trial's own compiled_inputs meets it again
-                i = None
-            grid = inst._grid
-            if i is None or grid is None or grid[3][i] is not None:
+                on_grid = None
+            if on_grid is None or on_grid[1] is not None:
                 fast[j] = False
                 continue
-            X[j, reference] = grid[2][i]
+            X[j, reference] = on_grid[0]
         X[fast, step.inputs["mask"]] = 1.0
         return fast
 
