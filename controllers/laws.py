@@ -26,6 +26,9 @@ the same core after :meth:`VisionLaw._select` has chosen the used features (weig
 the hidden ones weight 0) and the directions of the legs it cannot measure
 (dead-reckoned or approximated). The numpy formulas of :mod:`controllers.interaction`
 are the tests' oracle (``tests/controllers/numpy_law.py``).
+
+The batch side (one instance per trial, the compiled core over the common rows) is
+:class:`~controllers.law_batch.VisionLawBatch`'s, the base of :class:`VisionLaw`.
 """
 
 from __future__ import annotations
@@ -40,13 +43,9 @@ import numpy as np
 
 from controllers.base import (
     Command,
-    CommandBatch,
-    Controller,
     ControllerContext,
     Goal,
-    GoalBatch,
     Observation,
-    ObservationBatch,
 )
 from controllers.estimators import (
     LegDirectionEstimate,
@@ -56,8 +55,8 @@ from controllers.estimators import (
     unknown_direction_reason,
 )
 from controllers.exceptions import ContextError, OptionError
+from controllers.law_batch import VisionLawBatch
 from controllers.law_kernel import LawKernel
-from controllers.law_rows import KernelRows
 from controllers.law_tools import (
     INTERACTIONS,
     Gain,
@@ -72,7 +71,6 @@ from controllers.law_tools import (
     solve_normal,
     solve_normal_damped,
 )
-from controllers.leg_rate import LegRateFeedForward
 from controllers.solvers.base import Solver
 from controllers.solvers.pseudo_inverse import DampedPseudoInverse
 
@@ -85,7 +83,7 @@ __all__ = [
 log = logging.getLogger(__name__)
 
 
-class VisionLaw(LegRateFeedForward, Controller):
+class VisionLaw(VisionLawBatch):
     """Base of the image-based laws: ``tau = -lambda L^+ e``, ``q_dot = J_inv tau``.
 
     Subclasses implement :meth:`_reset_features` (read the goal, set the compiled core
@@ -377,111 +375,6 @@ class VisionLaw(LegRateFeedForward, Controller):
         return self._command(self.solver.solve(ts.normal, ts.gradient, ts.gain, q, J,
                                                ts.compiled),
                              J, e, ts.error_norm, e.shape[0], q, ts.notes)
-
-    # ----------------------------------------------------------------- the batch
-    def _batch_features(self, obs: ObservationBatch) -> tuple[np.ndarray | None,
-                                                               np.ndarray | None]:
-        """The rows' measured features for the compiled core, (n, F), and the mask (n,)
-        of rows whose features are all visible. (None, None): no compiled core."""
-        return None, None
-
-    def _batch_desired(self, goals: GoalBatch) -> tuple[np.ndarray | None, np.ndarray]:
-        """The compiled core's desired-feature input of each goal, (m, D), and the mask
-        (m,) of goals that the law would read into exactly that with its compiled core
-        (every feature visible and finite, the CURRENT interaction). (None, mask): no
-        such shortcut; every goal then goes through its instance's ``retarget_trial``."""
-        return None, np.zeros(len(goals), dtype=bool)
-
-    def _batch_reset_extra(self) -> None:
-        """Per-trial constants of subclasses (the solver's are gathered by
-        :meth:`~controllers.solvers.base.Solver.batch_reset`)."""
-
-    def reset_batch(self, contexts: Sequence[ControllerContext]) -> None:
-        """One instance per context (this one first, the others built with its options),
-        each reset with its context; their estimates become rows of one batch estimate
-        and their compiled cores' inputs rows of one array.
-
-        Raises:
-            ContextError: A context the law cannot use (as :meth:`reset_trial`).
-        """
-        super().reset_batch(contexts)
-        trials = self.trial_instances
-        #: The estimates of every trial (the instances' estimates are its rows).
-        self.batch_estimate = LegDirectionEstimate.fresh(len(trials))
-        for k, inst in enumerate(trials):
-            inst.estimate = self.batch_estimate.row(k)
-        self._core_rows = KernelRows(len(trials))
-        for k, inst in enumerate(trials):
-            self._core_rows.take(k, inst.kernel if inst.batch_core else None)
-        #: Goals given to ``retarget_batch`` not yet read by the trial's instance.
-        self._pending: dict[int, tuple[GoalBatch, int]] = {}
-        self.solver.batch_reset([t.solver for t in trials])
-        self._batch_reset_extra()
-        self.batch_reset_leg_rate(trials)
-
-    def retarget_batch(self, trials: np.ndarray, goals: GoalBatch) -> None:
-        """New goals for some trials (row ``j`` of ``goals`` for trial ``trials[j]``),
-        keeping their state, as each instance's :meth:`retarget_trial`.
-
-        In a batch of many trials, a goal that the compiled core takes as it is
-        (:meth:`_batch_desired`) is written into the batch's inputs at once and read by
-        the instance only when that trial next needs it (a row the core cannot finish);
-        any other goal, and the goal of a batch of one, is read by the instance now.
-
-        Raises:
-            ContextError: A goal the law cannot use, or no reset yet.
-        """
-        if not self.trial_instances:
-            raise ContextError(self.name, "context", "retarget(goal) before reset(context)")
-        trials = np.asarray(trials, dtype=int)
-        desired, quick = self._batch_desired(goals)
-        if desired is not None and len(self.trial_instances) > 1:  # (one reads it now)
-            quick = self._core_rows.write_desired(trials, desired, quick)
-            for j in np.flatnonzero(quick).tolist():
-                self._pending[int(trials[j])] = (goals, j)
-        else:
-            quick = np.zeros(len(trials), dtype=bool)
-        for j in np.flatnonzero(~quick).tolist():
-            k = int(trials[j])
-            self._pending.pop(k, None)
-            self._retarget_instance(k, goals.item(j))
-
-    def _retarget_instance(self, trial: int, goal: Goal) -> None:
-        inst = self.trial_instances[trial]
-        inst.retarget_trial(goal)
-        self._core_rows.take(trial, inst.kernel if inst.batch_core else None)
-
-    def step_arrays(self, observations: ObservationBatch, out: CommandBatch) -> np.ndarray:
-        """The common case of the rows through the compiled core as arrays; returns the
-        other rows (see the module docstring)."""
-        obs = observations
-        n = len(obs)
-        trials = np.asarray(obs.trials, dtype=int)
-        slow = np.ones(n, dtype=bool)
-        rows_core = self._core_rows
-        feats, visible = (self._batch_features(obs) if rows_core.function is not None
-                          else (None, None))
-        if feats is not None and visible is not None:
-            q = np.asarray(obs.lengths, dtype=float)
-            with np.errstate(invalid="ignore"):
-                fast = (rows_core.ready[trials] & visible & np.isfinite(feats).all(axis=1)
-                        & np.isfinite(q).all(axis=1) & (q.min(axis=1) > 0)
-                        & np.isfinite(np.asarray(obs.t, dtype=float)))
-            rows = np.flatnonzero(fast)
-            if len(rows):
-                done = rows_core.step(rows, trials[rows], feats[rows], q[rows],
-                                      self.solver, self.batch_estimate, out)
-                slow[rows[done]] = False
-                self.feed_rows(rows[done], trials[rows[done]], obs, out)
-        return np.flatnonzero(slow)
-
-    def step_row(self, trial: int, observation: Observation) -> Command:
-        """One row by its trial's instance, which first reads a goal given to
-        :meth:`retarget_batch` that it has not read yet."""
-        pending = self._pending.pop(trial, None) if self._pending else None
-        if pending is not None:
-            self._retarget_instance(trial, pending[0].item(pending[1]))
-        return self.trial_instances[trial].step_trial(observation)  # type: ignore[no-any-return]
 
     def _command(self, solved: tuple[np.ndarray, int, float, list[str], str | None,
                                      np.ndarray | None],

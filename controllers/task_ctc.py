@@ -20,6 +20,9 @@ observation's time) or, for a fixed goal, a straight line from the pose measured
 first step to the goal pose with a quintic timing, slow enough that no leg's nominal
 speed exceeds the speed limit (``smooth_goal``; off: the goal is a step, the error's
 free response).
+
+The checked readings, goal pose, camera and base points, and that line are
+:mod:`controllers.task_ctc_inputs`' (re-exported here).
 """
 
 from __future__ import annotations
@@ -61,21 +64,23 @@ from controllers.solvers.saturation import (
     zero_acceleration_forces,
 )
 from controllers.task_ctc_compiled import FK_MAX_CALLS, CompiledTaskStep
+from controllers.task_ctc_inputs import QUINTIC_PEAK_ACCELERATION as QUINTIC_PEAK_ACCELERATION
+from controllers.task_ctc_inputs import QUINTIC_PEAK_SPEED as QUINTIC_PEAK_SPEED
+from controllers.task_ctc_inputs import camera_and_base_points as camera_and_base_points
+from controllers.task_ctc_inputs import encoder_readings as encoder_readings
+from controllers.task_ctc_inputs import finite_readings as finite_readings
+from controllers.task_ctc_inputs import goal_pose_of as goal_pose_of
+from controllers.task_ctc_inputs import line_to as line_to
 from controllers.tasks.base import Task, TaskState
 from hexapod.actuation import Actuation
 from hexapod.dynamics import DynamicModel
 from hexapod.fk import forward_kinematics
-from hexapod.kinematics import Transform, inverse_kinematics
-from hexapod.trajectory import PoseTrajectory
+from hexapod.kinematics import Transform
 
 #: Default natural frequency of the task error [Hz] (``omega_n dt = 0.25`` at 20 ms).
 NATURAL_FREQUENCY_HZ = 2.0
 #: Default damping ratio.
 DAMPING = 1.0
-#: Peak of the quintic's speed over its mean speed.
-QUINTIC_PEAK_SPEED = 15.0 / 8.0
-#: Peak of the quintic's acceleration times ``T^2`` over the distance.
-QUINTIC_PEAK_ACCELERATION = 10.0 / math.sqrt(3.0)
 
 
 @dataclass
@@ -101,34 +106,6 @@ class Measured:
     rows: np.ndarray | None = None
     note: str | None = None
     inverse_jacobian: np.ndarray | None = None
-
-
-def line_to(context: ControllerContext, R0: np.ndarray, t0: np.ndarray, R1: np.ndarray,
-            t1: np.ndarray) -> PoseTrajectory:
-    """A quintic line from ``(R0, t0)`` to ``(R1, t1)`` (base frame) timed so that no leg's
-    nominal speed exceeds ``context.max_speed`` (the peak of the quintic is 15/8 of the
-    mean)."""
-    dq = inverse_kinematics(context.geometry, R1, t1) - inverse_kinematics(
-        context.geometry, R0, t0)
-    T = max(QUINTIC_PEAK_SPEED * float(np.abs(dq).max()) / context.max_speed, 1e-3)
-    length = float(np.linalg.norm(t1 - t0))
-    angle = float(np.linalg.norm(_log(R0.T @ R1)))
-
-    def limits(d: float) -> tuple[float, float]:  # speed and acceleration giving T
-        if d <= 0.0:
-            return 1.0, 1.0
-        return QUINTIC_PEAK_SPEED * d / T, 2.0 * QUINTIC_PEAK_ACCELERATION * d / T**2
-
-    v, a = limits(length)
-    w, alpha = limits(angle)
-    return PoseTrajectory("line", "quintic", R0, t0, v, a, goal_rotation=R1,
-                          goal_translation=t1, angular_speed=w, angular_acceleration=alpha)
-
-
-def _log(R: np.ndarray) -> np.ndarray:
-    from hexapod.se3 import log_so3
-
-    return log_so3(R)  # type: ignore[no-any-return]
 
 
 class TaskComputedTorque(Controller):
@@ -517,85 +494,7 @@ class TaskComputedTorque(Controller):
                               actuation=Actuation.FORCE)
 
 
-def encoder_readings(observation: Observation) -> tuple[float, np.ndarray, np.ndarray] | str:
-    """The time [s], lengths [m] and leg velocities [m/s] of an observation, or why they
-    cannot be used (missing leg velocities, not 6 values, a non-finite value)."""
-    t = float(observation.t)
-    q = np.asarray(observation.lengths, dtype=float)
-    if observation.q_dot is None:
-        return ("needs the measured leg velocities (Observation.q_dot), which only the "
-                "dynamic world gives")
-    qd = np.asarray(observation.q_dot, dtype=float)
-    if q.shape != (6,) or qd.shape != (6,):
-        return (f"lengths and leg velocities: expected 6 values each, got shapes {q.shape} "
-                f"and {qd.shape}")
-    if math.isfinite(t) and math.isfinite(float(q @ q + qd @ qd)):
-        return t, q, qd  # every value finite (a NaN or inf makes the sum of squares so)
-    for what, x in (("time", np.array([t])), ("lengths", q), ("leg velocities", qd)):
-        if x.size == 0 or not np.isfinite(x).all():
-            return f"measured {what} not finite: {x}"
-    return t, q, qd
-
-
-def finite_readings(observation: Observation, q_row: np.ndarray, qd_row: np.ndarray
-                    ) -> tuple[float, np.ndarray, np.ndarray] | None:
-    """The common case of :func:`encoder_readings`: a finite time [s] and finite (6,)
-    lengths [m] and leg velocities [m/s], written into a compiled step's input row (its
-    views ``q_row`` and ``qd_row``); None otherwise (missing, another shape, a
-    non-finite value, or a sum of squares that overflows), where
-    :func:`encoder_readings` decides. When both answer, they answer the same."""
-    qd = observation.q_dot
-    if qd is None:
-        return None
-    q = np.asarray(observation.lengths, dtype=float)
-    qd = np.asarray(qd, dtype=float)
-    if q.shape != (6,) or qd.shape != (6,):
-        return None
-    t = float(observation.t)
-    q_row[:] = q
-    qd_row[:] = qd
-    # a NaN or inf makes the sums so
-    if math.isfinite(t) and math.isfinite(q_row.dot(q_row) + qd_row.dot(qd_row)):
-        return t, q, qd
-    return None
-
-
 def _with_goal(context: ControllerContext, goal: Goal) -> ControllerContext:
     from dataclasses import replace
 
     return replace(context, goal=goal)
-
-
-def camera_and_base_points(controller: str, context: ControllerContext
-                           ) -> tuple[Transform, np.ndarray]:
-    """The estimated camera pose ``camera_from_base`` and base points (6, 3) [m].
-
-    Raises:
-        ContextError: No camera pose, or base points not (6, 3) finite.
-    """
-    cam = getattr(context.camera, "camera_from_base", None)
-    if not isinstance(cam, Transform):
-        raise ContextError(controller, "camera", "needs the estimated camera with its "
-                           "camera_from_base pose")
-    A = np.asarray(context.base_points, dtype=float)
-    if A.shape != (6, 3) or not np.all(np.isfinite(A)):
-        raise ContextError(controller, "base_points", f"expected (6, 3) finite, got {A}")
-    return cam, A
-
-
-def goal_pose_of(controller: str, goal: Goal) -> tuple[np.ndarray, np.ndarray]:
-    """``goal.rotation`` and ``goal.translation``, checked.
-
-    Raises:
-        ContextError: Missing or not finite.
-    """
-    if goal.rotation is None or goal.translation is None:
-        raise ContextError(controller, "goal.rotation/translation", "missing")
-    R = np.asarray(goal.rotation, dtype=float)
-    t = np.asarray(goal.translation, dtype=float)
-    if R.shape != (3, 3) or t.shape != (3,) or not (np.all(np.isfinite(R))
-                                                    and np.all(np.isfinite(t))):
-        raise ContextError(controller, "goal.rotation/translation",
-                           f"expected a finite (3, 3) rotation and (3,) position, got "
-                           f"{R.shape} and {t.shape}")
-    return R, t

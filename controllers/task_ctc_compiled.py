@@ -18,7 +18,7 @@ rows to use or None, and a note).
 
 The C function runs on the step's own bound input and output rows
 (:meth:`hexapod.compiled.CompiledFunction.bind`): the law writes into :attr:`CompiledTaskStep.row`
-in place (the readings too, :func:`controllers.task_ctc.finite_readings`), the pose guess
+in place (the readings too, :func:`controllers.task_ctc_inputs.finite_readings`), the pose guess
 stays in the row while it is the law's ``guess``, and the command copies what it keeps of
 the output row.
 """
