@@ -28,7 +28,7 @@ the hidden ones weight 0) and the directions of the legs it cannot measure
 are the tests' oracle (``tests/controllers/numpy_law.py``).
 
 The batch side (one instance per trial, the compiled core over the common rows) is
-:class:`~controllers.law_batch.VisionLawBatch`'s, the base of :class:`VisionLaw`.
+:class:`~controllers.law_steps.VisionLawBatch`'s, the base of :class:`VisionLaw`.
 """
 
 from __future__ import annotations
@@ -55,8 +55,8 @@ from controllers.estimators import (
     unknown_direction_reason,
 )
 from controllers.exceptions import ContextError, OptionError
-from controllers.law_batch import VisionLawBatch
 from controllers.law_kernel import LawKernel
+from controllers.law_steps import VisionLawBatch
 from controllers.law_tools import (
     INTERACTIONS,
     Gain,
