@@ -27,7 +27,7 @@ Each is checked against finite differences of the true kinematics
 from __future__ import annotations
 
 from abc import ABC, abstractmethod
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 
 import casadi as ca
@@ -115,6 +115,21 @@ class Task(ABC):
         """
         raise NotImplementedError(f"{self.name}: no moving reference")
 
+
+
+class LegBlockTask(Task):
+    """A task whose error and Jacobian are one block (:attr:`block` rows) per leg, the
+    block's function mapped over the six legs of every row (:meth:`_blocks`)."""
+
+    @abstractmethod
+    def _blocks(self, state: TaskState) -> Sequence[np.ndarray]:
+        """The errors and Jacobians of every leg's block (any shape, in leg order)."""
+
+    def error(self, state: TaskState) -> np.ndarray:
+        return np.reshape(self._blocks(state)[0], (len(state), 6 * self.block))
+
+    def jacobian(self, state: TaskState) -> np.ndarray:
+        return np.reshape(self._blocks(state)[1], (len(state), 6 * self.block, 6))
 
 def leg_rates(u: ca.SX, A: ca.SX, q: ca.SX, tau: ca.SX) -> tuple[ca.SX, ca.SX]:
     """``u_dot`` and ``q_dot`` of a leg moved by the platform twist (``docs/math.md`` §3):
