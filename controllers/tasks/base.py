@@ -34,6 +34,7 @@ import casadi as ca
 import numpy as np
 
 from controllers.interaction import cross
+from vision.legs import leg_edges
 
 
 @dataclass(frozen=True)
@@ -58,6 +59,28 @@ class TaskState:
 
     def __len__(self) -> int:
         return int(self.lengths.shape[0])
+
+    @staticmethod
+    def at_pose(base_points: np.ndarray, platform_points: np.ndarray, rotation: np.ndarray,
+                translation: np.ndarray, leg_radius: float) -> TaskState:
+        """The exact state of robots at platform poses (the reference of the tests).
+
+        Args:
+            base_points: (6, 3) or (n, 6, 3) ``A_i`` in the task frame [m].
+            platform_points: (6, 3) ``E_i`` in the platform frame [m].
+            rotation: (n, 3, 3) platform orientations in the task frame.
+            translation: (n, 3) platform positions in the task frame [m].
+            leg_radius: Leg radius [m] (for the edge normals).
+        """
+        R = np.asarray(rotation, dtype=float)
+        t = np.asarray(translation, dtype=float)
+        A = np.broadcast_to(np.asarray(base_points, dtype=float), (len(R), 6, 3))
+        B = np.einsum("nij,kj->nki", R, platform_points) + t[:, None, :]
+        d = B - A
+        q = np.sqrt(np.einsum("nki,nki->nk", d, d))
+        u = d / q[..., None]
+        normals, _ = leg_edges(A, u, leg_radius)
+        return TaskState(np.array(A), u, q, normals, R, t)
 
 
 class Task(ABC):

@@ -24,33 +24,9 @@ from hexapod.geometry import HexapodGeometry
 from hexapod.se3 import exp_so3, integrate_pose
 from hexapod.workspace import home_pose
 from vision.cameras import front_camera
-from vision.legs import leg_edges
 
 H = 1e-5  # time step of the central differences [s]
 N = 5  # poses (a batch of trials)
-
-
-def _state_at_pose(base_points: np.ndarray, platform_points: np.ndarray,
-                   rotation: np.ndarray, translation: np.ndarray, leg_radius: float
-                   ) -> TaskState:
-    """The exact state of robots at platform poses (the reference of these tests).
-
-    Args:
-        base_points: (6, 3) or (n, 6, 3) ``A_i`` in the task frame [m].
-        platform_points: (6, 3) ``E_i`` in the platform frame [m].
-        rotation: (n, 3, 3) platform orientations in the task frame.
-        translation: (n, 3) platform positions in the task frame [m].
-        leg_radius: Leg radius [m] (for the edge normals).
-    """
-    R = np.asarray(rotation, dtype=float)
-    t = np.asarray(translation, dtype=float)
-    A = np.broadcast_to(np.asarray(base_points, dtype=float), (len(R), 6, 3))
-    B = np.einsum("nij,kj->nki", R, platform_points) + t[:, None, :]
-    d = B - A
-    q = np.sqrt(np.einsum("nki,nki->nk", d, d))
-    u = d / q[..., None]
-    normals, _ = leg_edges(A, u, leg_radius)
-    return TaskState(np.array(A), u, q, normals, R, t)
 
 
 def _world(geometry: HexapodGeometry, rng: np.random.Generator
@@ -79,7 +55,7 @@ def _setup(kind: str, geometry: HexapodGeometry, rng: np.random.Generator
 
     def at(dt: float) -> TaskState:
         Rm, tm = integrate_pose(R, t, twist, dt)
-        return _state_at_pose(A, E, Rm, tm, geometry.leg_radius)
+        return TaskState.at_pose(A, E, Rm, tm, geometry.leg_radius)
 
     return task, at, twist
 
@@ -91,7 +67,7 @@ def _tasks(geometry: HexapodGeometry, A: np.ndarray, E: np.ndarray, rng: np.rand
     R0, t0 = home_pose(geometry)
     Rg = cam.camera_from_base.rotation @ exp_so3(rng.uniform(-0.05, 0.05, 3)) @ R0
     tg = cam.camera_from_base.apply(t0 + rng.uniform(-0.01, 0.01, 3))
-    goal = _state_at_pose(A, E, Rg[None], tg[None], geometry.leg_radius)
+    goal = TaskState.at_pose(A, E, Rg[None], tg[None], geometry.leg_radius)
     assert goal.normals is not None
     K = np.asarray(cam.line_matrix, float)
     lines_goal = goal.normals[0] @ np.linalg.inv(K)  # rows (K^-T n)^T
@@ -149,11 +125,11 @@ def test_a_task_is_batched_row_by_row(geometry: HexapodGeometry,
                                       rng: np.random.Generator) -> None:
     """Row k of a batch is the task evaluated on trial k alone."""
     A, E, R, t, twist = _world(geometry, rng)
-    s = _state_at_pose(A, E, R, t, geometry.leg_radius)
+    s = TaskState.at_pose(A, E, R, t, geometry.leg_radius)
     for task in _tasks(geometry, A, E, rng).values():
         batch = (task.error(s), task.jacobian(s), task.jacobian_dot_twist(s, twist))
         for k in (0, N - 1):
-            one = _state_at_pose(A, E, R[k:k + 1], t[k:k + 1], geometry.leg_radius)
+            one = TaskState.at_pose(A, E, R[k:k + 1], t[k:k + 1], geometry.leg_radius)
             single = (task.error(one), task.jacobian(one),
                       task.jacobian_dot_twist(one, twist[k:k + 1]))
             for b, x in zip(batch, single, strict=True):
@@ -166,7 +142,7 @@ def test_the_direction_task_is_the_compiled_cores_definition(geometry: HexapodGe
     (``direction_block``): the core's error and ``J_inv`` are the tasks' to the last bit,
     its ``N = L^T L`` the task's to rounding; the numpy oracle agrees to rounding."""
     A, E, R, t, _ = _world(geometry, rng)
-    s = _state_at_pose(A, E, R, t, geometry.leg_radius)
+    s = TaskState.at_pose(A, E, R, t, geometry.leg_radius)
     task = _tasks(geometry, A, E, rng)["directions"]
     kernel = direction_kernel()
     kernel.set("desired", task.desired)
@@ -192,7 +168,7 @@ def test_the_edge_tasks_agree_with_the_numpy_oracle(geometry: HexapodGeometry,
     """The edge tasks' CasADi blocks against the numpy rank-one blocks of
     ``controllers.interaction`` (rounding)."""
     A, E, R, t, _ = _world(geometry, rng)
-    s = _state_at_pose(A, E, R, t, geometry.leg_radius)
+    s = TaskState.at_pose(A, E, R, t, geometry.leg_radius)
     tasks = _tasks(geometry, A, E, rng)
     assert s.normals is not None
     u2 = np.repeat(s.directions, 2, axis=-2).reshape(-1, 3)
