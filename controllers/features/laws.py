@@ -99,10 +99,8 @@ class FeatureQPLaw(FeatureLaw):
                  compiled: bool = True) -> None:
         FeatureLaw.__init__(self, gain, adaptive_gain, interaction, threshold, damping,
                             compiled)
-        if damping:
-            raise OptionError(self.name, "damping", "use 'regularization' with the QP law")
         self.solver = LimitQPSolver(self.name, self.threshold, regularization, stroke_margin,
-                                    max_speed, eps_abs, eps_rel, max_iter, shortcut)
+                                    max_speed, eps_abs, eps_rel, max_iter, shortcut, damping)
 
 
 class FeatureMPC(MPCLaw):
