@@ -290,10 +290,6 @@ def inverse_jacobian_into(out: np.ndarray, base_points: np.ndarray,
     return out
 
 
-def _unit_rows(x: np.ndarray) -> np.ndarray:
-    return x / np.sqrt(np.einsum("...k,...k->...", x, x))[..., None]
-
-
 # --------------------------------------------------------------------------- the law
 @dataclass
 class Selection:
