@@ -19,7 +19,7 @@ mapped over the rows), the compiled law cores (:mod:`controllers.law_kernel` gen
 its C from the same expressions) and the second-order term, generated from the block's
 error and the state's motion, ``L_dot tau = d/ds (L(s) tau) s_dot(s, tau)``
 (:func:`second_order_function`), so it is never written by hand. The numpy functions of
-:mod:`controllers.interaction` are the test oracle and the laws' general path.
+``tests/controllers/interaction_oracle.py`` are the test oracle.
 Each is checked against finite differences of the true kinematics
 (``tests/controllers/test_tasks.py``).
 """
