@@ -266,11 +266,6 @@ class Controller(RemembersOptions, ABC):
         assert self.trial_context is not None
         self.reset_trial(replace(self.trial_context, goal=goal))
 
-    @property
-    def batch_size(self) -> int:
-        """Trials of the batch (after a reset)."""
-        return len(self.trial_instances)
-
 
 class FailedReset:
     """The place of a trial whose reset raised (:meth:`Controller.reset_batch`): its

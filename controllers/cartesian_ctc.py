@@ -255,14 +255,9 @@ class VisionCTC(CartesianCTC):
                        observations: ObservationBatch, rows: np.ndarray) -> np.ndarray:
         """The rows with six (6, 3) directions given, all marked seen and finite (as
         :func:`_every_direction`): their directions."""
-        u = observations.directions
-        if u is None or np.shape(u)[1:] != (6, 3):
+        if observations.directions is None or np.shape(observations.directions)[1:] != (6, 3):
             return np.zeros(len(rows), dtype=bool)
-        u = np.asarray(u, dtype=float)[rows].reshape(len(rows), 18)
-        seen = np.asarray(observations.direction_visible)[rows].reshape(
-            len(rows), -1).all(axis=1)
-        with np.errstate(invalid="ignore", over="ignore"):
-            fast: np.ndarray = seen & np.isfinite(u.sum(axis=1))
+        u, fast = seen_rows(observations.directions, observations.direction_visible, rows)
         X[fast, step.inputs["directions"]] = u[fast]
         return fast
 
@@ -301,6 +296,26 @@ def all_seen(visible: np.ndarray | None) -> bool:
     if visible is None:
         return True
     return bool(visible.all() if isinstance(visible, np.ndarray) else np.all(visible))
+
+
+def every_seen(values: np.ndarray | None, visible: np.ndarray | None) -> np.ndarray | None:
+    """``values`` as a float array when given, all marked seen (:func:`all_seen`) and
+    finite; else None."""
+    if values is None:
+        return None
+    x = np.asarray(values, dtype=float)
+    return x if all_seen(visible) and math.isfinite(x.sum()) else None
+
+
+def seen_rows(values: np.ndarray, visible: np.ndarray, rows: np.ndarray
+              ) -> tuple[np.ndarray, np.ndarray]:
+    """The rows ``rows`` of a batch's feature field, one flat row each, and which of them
+    are all marked seen and finite (:func:`every_seen` per row)."""
+    x = np.asarray(values, dtype=float)[rows].reshape(len(rows), -1)
+    seen = np.asarray(visible)[rows].reshape(len(rows), -1).all(axis=1)
+    with np.errstate(invalid="ignore", over="ignore"):
+        fast: np.ndarray = seen & np.isfinite(x.sum(axis=1))
+    return x, fast
 
 
 def _every_direction(observation: Observation) -> np.ndarray | None:

@@ -59,7 +59,20 @@ class Observation:
 
 
 @dataclass
-class Goal:
+class _GoalFields:
+    """The fields of :class:`Goal`, which :class:`GoalBatch` has with a row axis."""
+
+    normals: np.ndarray | None = None
+    lines: np.ndarray | None = None
+    directions: np.ndarray | None = None
+    lengths: np.ndarray | None = None
+    rotation: np.ndarray | None = None
+    translation: np.ndarray | None = None
+    edge_visible: np.ndarray | None = None
+
+
+@dataclass
+class Goal(_GoalFields):
     """The desired configuration, as features and (for the baselines) as a pose.
 
     Attributes:
@@ -71,14 +84,6 @@ class Goal:
         translation: (3,) desired platform position in the nominal base frame [m].
         edge_visible: (6, 2) which desired edges were observed.
     """
-
-    normals: np.ndarray | None = None
-    lines: np.ndarray | None = None
-    directions: np.ndarray | None = None
-    lengths: np.ndarray | None = None
-    rotation: np.ndarray | None = None
-    translation: np.ndarray | None = None
-    edge_visible: np.ndarray | None = None
 
 
 @dataclass
@@ -301,7 +306,7 @@ TRIAL_ZERO.flags.writeable = False
 
 
 @dataclass
-class GoalBatch:
+class GoalBatch(_GoalFields):
     """Goals of several trials: :class:`Goal` fields with a leading row axis (m, ...),
     for ``retarget_batch(trials, goals)`` (the goal of each period of a trajectory task,
     :mod:`controllers.tracking`). A field is None when no row has it.
@@ -315,14 +320,6 @@ class GoalBatch:
         translation: (m, 3) [m] or None.
         edge_visible: (m, 6, 2) bool or None.
     """
-
-    normals: np.ndarray | None = None
-    lines: np.ndarray | None = None
-    directions: np.ndarray | None = None
-    lengths: np.ndarray | None = None
-    rotation: np.ndarray | None = None
-    translation: np.ndarray | None = None
-    edge_visible: np.ndarray | None = None
 
     def __len__(self) -> int:
         for name in GOAL_FIELDS:

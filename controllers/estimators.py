@@ -23,10 +23,7 @@ from typing import Any
 import numpy as np
 
 from controllers.interaction import direction_interaction
-
-
-def _unit_rows(x: np.ndarray) -> np.ndarray:
-    return x / np.sqrt(np.einsum("...k,...k->...", x, x))[..., None]
+from controllers.tasks.base import unit
 
 
 @dataclass
@@ -98,7 +95,7 @@ class LegDirectionEstimate:
             return
         u = self.directions[hidden]
         M = direction_interaction(base_points[hidden], u, self.lengths[hidden])
-        self.directions[hidden] = _unit_rows(u + dt * (M @ self.twist))
+        self.directions[hidden] = unit(u + dt * (M @ self.twist))
 
 
 @dataclass

@@ -25,14 +25,13 @@ independent rows give a refusal with the reason.
 
 from __future__ import annotations
 
-import math
 from collections.abc import Sequence
 from dataclasses import replace
 
 import numpy as np
 
 from controllers.base import ControllerContext, Goal, Observation, ObservationBatch
-from controllers.cartesian_ctc import all_seen, directions_seen, pose_measurement
+from controllers.cartesian_ctc import directions_seen, every_seen, pose_measurement, seen_rows
 from controllers.exceptions import ContextError
 from controllers.solvers.reference_motion import feature_motion, layouts
 from controllers.task_ctc import (
@@ -357,11 +356,8 @@ class LegEdgeCTC(FeatureCTC):
                           ) -> tuple[np.ndarray, np.ndarray | None, np.ndarray] | str:
         """Every edge seen: the normals, the directions left to the compiled step
         (``_OF_NORMALS``); else :meth:`features_seen`."""
-        if observation.normals is not None:
-            n = np.asarray(observation.normals, dtype=float)
-            if all_seen(observation.edge_visible) and math.isfinite(n.sum()):
-                return _OF_NORMALS, n, _EVERY_EDGE
-        return self.features_seen(observation)
+        n = every_seen(observation.normals, observation.edge_visible)
+        return self.features_seen(observation) if n is None else (_OF_NORMALS, n, _EVERY_EDGE)
 
     def batch_features(self, step: CompiledTaskStep, X: np.ndarray,
                        observations: ObservationBatch, rows: np.ndarray) -> np.ndarray:
@@ -369,10 +365,7 @@ class LegEdgeCTC(FeatureCTC):
         step (as :meth:`compiled_features` and ``_OF_NORMALS``)."""
         if observations.normals is None:
             return np.zeros(len(rows), dtype=bool)
-        n = np.asarray(observations.normals, dtype=float)[rows].reshape(len(rows), 36)
-        seen = np.asarray(observations.edge_visible)[rows].reshape(len(rows), -1).all(axis=1)
-        with np.errstate(invalid="ignore", over="ignore"):
-            fast: np.ndarray = seen & np.isfinite(n.sum(axis=1))
+        n, fast = seen_rows(observations.normals, observations.edge_visible, rows)
         X[fast, step.inputs["normals"]] = n[fast]
         X[fast, step.inputs.index("of_normals")] = 1.0
         return fast
@@ -402,22 +395,15 @@ class LegDirectionCTC(FeatureCTC):
                           ) -> tuple[np.ndarray, np.ndarray | None, np.ndarray] | str:
         """Every direction given and seen: them (:meth:`features_seen`'s result without
         its general checks); else :meth:`features_seen`."""
-        if observation.directions is not None:
-            u = np.asarray(observation.directions, dtype=float)
-            if all_seen(observation.direction_visible) and math.isfinite(u.sum()):
-                return u, None, _EVERY_LEG
-        return self.features_seen(observation)
+        u = every_seen(observation.directions, observation.direction_visible)
+        return self.features_seen(observation) if u is None else (u, None, _EVERY_LEG)
 
     def batch_features(self, step: CompiledTaskStep, X: np.ndarray,
                        observations: ObservationBatch, rows: np.ndarray) -> np.ndarray:
         """Every direction given, seen and finite: them (as :meth:`compiled_features`)."""
         if observations.directions is None:
             return np.zeros(len(rows), dtype=bool)
-        u = np.asarray(observations.directions, dtype=float)[rows].reshape(len(rows), 18)
-        seen = np.asarray(observations.direction_visible)[rows].reshape(
-            len(rows), -1).all(axis=1)
-        with np.errstate(invalid="ignore", over="ignore"):
-            fast: np.ndarray = seen & np.isfinite(u.sum(axis=1))
+        u, fast = seen_rows(observations.directions, observations.direction_visible, rows)
         X[fast, step.inputs["directions"]] = u[fast]
         return fast
 

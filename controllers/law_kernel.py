@@ -30,7 +30,7 @@ call, a few microseconds, computes:
   that is 0 exactly when every entry is finite).
 
 Every case of the laws (hidden features, every interaction choice) is computed here;
-the numpy formulas of :mod:`controllers.interaction` are the tests' oracle
+the numpy formulas of ``tests/controllers/interaction_oracle.py`` are the tests' oracle
 (``tests/controllers/numpy_law.py``, ``tests/controllers/test_law_kernel.py``).
 
 Input: the feature block (:func:`direction_inputs`, :func:`edge_inputs`), then the law

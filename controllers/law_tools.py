@@ -93,6 +93,30 @@ def goal_lengths(controller: str, goal: Any) -> np.ndarray:
     return qs
 
 
+def goal_directions(controller: str, goal: Any) -> tuple[np.ndarray, np.ndarray]:
+    """``goal.directions`` checked: (6, 3) unit vectors, the non-finite (hidden) ones
+    replaced by ``+z`` (keeps the arithmetic finite), and (6,) which were finite.
+
+    Raises:
+        ContextError: Missing, not (6, 3), none finite, or a finite one not of unit norm.
+    """
+    from controllers.exceptions import ContextError
+
+    if goal.directions is None:
+        raise ContextError(controller, "goal.directions", "missing")
+    us = np.asarray(goal.directions, dtype=float)
+    if us.shape != (6, 3):
+        raise ContextError(controller, "goal.directions", f"expected shape (6, 3), got {us.shape}")
+    vis = np.all(np.isfinite(us), axis=1)
+    if not vis.any():
+        raise ContextError(controller, "goal.directions", "no finite desired direction")
+    us = np.where(vis[:, None], us, np.array([0.0, 0.0, 1.0]))
+    norms = np.linalg.norm(us[vis], axis=1)
+    if np.any(np.abs(norms - 1.0) > 1e-6):
+        raise ContextError(controller, "goal.directions", f"not unit vectors: norms {norms}")
+    return us, vis
+
+
 def check_choice(controller: str, option: str, value: Any, choices: Sequence[str]) -> str:
     """Validate a string option against its choices (suggesting the closest).
 
@@ -264,10 +288,6 @@ def inverse_jacobian_into(out: np.ndarray, base_points: np.ndarray,
     out[:, :3] = directions
     out[:, 3:] = cross(base_points, directions)
     return out
-
-
-def _unit_rows(x: np.ndarray) -> np.ndarray:
-    return x / np.sqrt(np.einsum("...k,...k->...", x, x))[..., None]
 
 
 # --------------------------------------------------------------------------- the law

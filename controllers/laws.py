@@ -24,8 +24,9 @@ over all its rows in one C loop (:class:`~controllers.law_rows.KernelRows`). Any
 row is stepped by its instance (:meth:`VisionLaw.step_trial`): the features go through
 the same core after :meth:`VisionLaw._select` has chosen the used features (weight 1,
 the hidden ones weight 0) and the directions of the legs it cannot measure
-(dead-reckoned or approximated). The numpy formulas of :mod:`controllers.interaction`
-are the tests' oracle (``tests/controllers/numpy_law.py``).
+(dead-reckoned or approximated). The numpy formulas of
+``tests/controllers/interaction_oracle.py`` are the tests' oracle
+(``tests/controllers/numpy_law.py``).
 
 The batch side (one instance per trial, the compiled core over the common rows) is
 :class:`~controllers.law_steps.VisionLawBatch`'s, the base of :class:`VisionLaw`.

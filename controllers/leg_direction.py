@@ -9,13 +9,13 @@ step, for every interaction choice; hidden legs are its zero-weight rows.
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 
 import numpy as np
 
 from controllers.base import ControllerContext, GoalBatch, Observation, ObservationBatch
-from controllers.exceptions import ContextError
-from controllers.law_kernel import direction_kernel
+from controllers.law_kernel import LawKernel, direction_kernel
+from controllers.law_tools import goal_directions
 from controllers.laws import Selection, VisionLaw
 
 
@@ -47,27 +47,28 @@ class LegDirectionController(VisionLaw):
         self._goal_visible = np.ones(6, dtype=bool)
 
     def _reset_features(self, context: ControllerContext) -> None:
-        d = context.goal.directions
-        if d is None:
-            raise ContextError(self.name, "goal.directions", "missing")
-        us = np.asarray(d, dtype=float)
-        if us.shape != (6, 3):
-            raise ContextError(self.name, "goal.directions", f"expected shape (6, 3), got "
-                                                             f"{us.shape}")
-        vis = np.all(np.isfinite(us), axis=1)
-        if not vis.any():
-            raise ContextError(self.name, "goal.directions", "no finite desired direction")
-        us = np.where(vis[:, None], us, 0.0)
-        norms = np.linalg.norm(us[vis], axis=1)
-        if np.any(np.abs(norms - 1.0) > 1e-6):
-            raise ContextError(self.name, "goal.directions", f"not unit vectors: norms {norms}")
-        self._u_star = us
+        us, vis = goal_directions(self.name, context.goal)
+        self._u_star = np.where(vis[:, None], us, 0.0)
+        self._install_goal(self._u_star, us, vis,
+                           lambda: direction_kernel(self.interaction, self.compiled))
+
+    def _install_goal(self, desired: np.ndarray, us: np.ndarray, vis: np.ndarray,
+                      make: Callable[[], LawKernel]) -> None:
+        """Set the goal's visibility and the compiled core's goal inputs.
+
+        Args:
+            desired: The core's desired feature (zeros where unknown).
+            us: (6, 3) desired leg directions (``+z`` where unknown: the fill of hidden ones).
+            vis: (6,) which desired directions are known.
+            make: Builds the core when no kept one is reused.
+        """
         self._goal_visible = vis
-        # Fill value for hidden directions: the desired ones (keeps the arithmetic finite).
-        self._fill = np.where(vis[:, None], us, np.array([0.0, 0.0, 1.0]))
+        self._fill = us
         self._goal_all_visible = bool(vis.all())
-        kernel = self._reuse_kernel(lambda: direction_kernel(self.interaction, self.compiled))
-        kernel.set("desired", us)
+        kernel = self._reuse_kernel(make)
+        kernel.set("desired", desired)
+        if "desired_directions" in kernel.inputs:  # the legs' goal state (DESIRED / MEAN)
+            kernel.set("desired_directions", us)
         kernel.set("base_points", self._A)
         kernel.set("weights", vis)
         self.kernel = kernel

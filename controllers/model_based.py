@@ -298,17 +298,15 @@ class ModelBasedController(Controller):
 
     def retarget_batch(self, trials: np.ndarray, goals: GoalBatch) -> None:
         """New goals of some trials (row ``j`` for trial ``trials[j]``): each instance's
-        :meth:`retarget_trial`, the batch's servo inputs updated.
+        :meth:`retarget_trial` (:meth:`Controller.retarget_batch`), the batch's servo inputs
+        updated.
 
         Raises:
             ContextError: A goal the law cannot use.
         """
-        if not self.trial_instances:
-            raise ContextError(self.name, "context", "retarget(goal) before reset(context)")
-        for j, k in enumerate(np.asarray(trials, dtype=int).tolist()):
-            inst = self.trial_instances[k]
-            inst.retarget_trial(goals.item(j))
-            self._b_X[k] = inst.servo_input
+        super().retarget_batch(trials, goals)
+        for k in np.asarray(trials, dtype=int).tolist():
+            self._b_X[k] = self.trial_instances[k].servo_input
 
     def step_arrays(self, observations: ObservationBatch, out: CommandBatch) -> np.ndarray:
         """Forward kinematics of every row in one batch (warm-started per trial), the

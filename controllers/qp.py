@@ -9,7 +9,6 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 
-from controllers.exceptions import OptionError
 from controllers.leg_direction import LegDirectionController
 from controllers.leg_edge import LegEdgeController
 from controllers.solvers.limit_qp import LimitQPSolver, StrokeWindow, velocity_bounds
@@ -41,10 +40,8 @@ class LegEdgeQPController(LegEdgeController):
                  leg_rate_feedforward: bool = False) -> None:
         LegEdgeController.__init__(self, gain, adaptive_gain, interaction, threshold, damping,
                                    edge_feature, compiled, leg_rate_feedforward)
-        if damping:
-            raise OptionError(self.name, "damping", "use 'regularization' with the QP law")
         self.solver = LimitQPSolver(self.name, self.threshold, regularization, stroke_margin,
-                                    max_speed, eps_abs, eps_rel, max_iter, shortcut)
+                                    max_speed, eps_abs, eps_rel, max_iter, shortcut, damping)
 
 
 class LegDirectionQPController(LegDirectionController):
@@ -68,7 +65,5 @@ class LegDirectionQPController(LegDirectionController):
                  leg_rate_feedforward: bool = False) -> None:
         LegDirectionController.__init__(self, gain, adaptive_gain, interaction, threshold,
                                         damping, compiled, leg_rate_feedforward)
-        if damping:
-            raise OptionError(self.name, "damping", "use 'regularization' with the QP law")
         self.solver = LimitQPSolver(self.name, self.threshold, regularization, stroke_margin,
-                                    max_speed, eps_abs, eps_rel, max_iter, shortcut)
+                                    max_speed, eps_abs, eps_rel, max_iter, shortcut, damping)

@@ -33,6 +33,7 @@ from __future__ import annotations
 
 import argparse
 import time
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
@@ -145,45 +146,37 @@ def dynamics_figures(n: int = 1000, repeats: int = 30, seed: int = 0,
     us = float(np.median(times)) * 1e6
     figures.append(DynamicsFigure("compiled single", us, base_us / us,
                                   _relative(acc_single, acc_ref)))
-    times = []
-    for _ in range(repeats):
-        t0 = time.perf_counter()
-        acc_batch = forward.batch(rows)
-        times.append((time.perf_counter() - t0) / n)
-    us = float(np.median(times)) * 1e6
-    figures.append(DynamicsFigure(f"compiled batch of {n}", us, base_us / us,
-                                  _relative(acc_batch, acc_ref)))
+    figures.append(_batch_figure(f"compiled batch of {n}", lambda: forward.batch(rows), n,
+                                 repeats, base_us, acc_ref))
     drive_rows = np.concatenate([rows, np.zeros((n, 12))], axis=1)
     drives = dyn_compiled.compiled("forward_drives")
-    times = []
-    for _ in range(repeats):
-        t0 = time.perf_counter()
-        acc_drives = drives.batch(drive_rows)[:, :6]
-        times.append((time.perf_counter() - t0) / n)
-    us = float(np.median(times)) * 1e6
-    figures.append(DynamicsFigure(f"compiled forward_drives batch of {n}", us, base_us / us,
-                                  _relative(acc_drives, acc_ref)))
+    figures.append(_batch_figure(f"compiled forward_drives batch of {n}",
+                                 lambda: drives.batch(drive_rows)[:, :6], n, repeats, base_us,
+                                 acc_ref))
     inverse_rows = rows.copy()
     inverse_rows[:, 18:24] = acc_ref
     inverse = dyn_compiled.compiled("inverse")
-    times = []
-    for _ in range(repeats):
-        t0 = time.perf_counter()
-        f_back = inverse.batch(inverse_rows)[:, :6]
-        times.append((time.perf_counter() - t0) / n)
-    us = float(np.median(times)) * 1e6
-    figures.append(DynamicsFigure(f"compiled inverse batch of {n} (forces)", us,
-                                  base_us / us, _relative(f_back, forces)))
-    times = []
-    for _ in range(repeats):
-        t0 = time.perf_counter()
-        acc_model = dyn.forward_batch(R, t, twist, forces)
-        times.append((time.perf_counter() - t0) / n)
-    us = float(np.median(times)) * 1e6
-    figures.append(DynamicsFigure(f"DynamicModel.forward_batch ({n})", us, base_us / us,
-                                  _relative(acc_model, acc_ref)))
+    figures.append(_batch_figure(f"compiled inverse batch of {n} (forces)",
+                                 lambda: inverse.batch(inverse_rows)[:, :6], n, repeats,
+                                 base_us, forces))
+    figures.append(_batch_figure(f"DynamicModel.forward_batch ({n})",
+                                 lambda: dyn.forward_batch(R, t, twist, forces), n, repeats,
+                                 base_us, acc_ref))
     return figures
 
+
+
+def _batch_figure(label: str, call: Callable[[], np.ndarray], n: int, repeats: int,
+                  base_us: float, reference: np.ndarray) -> DynamicsFigure:
+    """Time ``call`` (a batch of ``n`` states) ``repeats`` times: the median per state [us],
+    the speed-up over ``base_us`` and the result's largest relative error to ``reference``."""
+    times = []
+    for _ in range(repeats):
+        t0 = time.perf_counter()
+        out = call()
+        times.append((time.perf_counter() - t0) / n)
+    us = float(np.median(times)) * 1e6
+    return DynamicsFigure(label, us, base_us / us, _relative(out, reference))
 
 def _rk4_step(dyn: DynamicModel, R: np.ndarray, t: np.ndarray, tw: np.ndarray, dt: float
               ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

@@ -27,11 +27,6 @@ from vision.legs import LegObservation, directions_from_edges
 
 log = logging.getLogger(__name__)
 
-#: The fields of an :class:`ObservationBatch` a camera gives.
-CAMERA_FIELDS = ("normals", "lines", "directions", "edge_visible", "direction_visible",
-                 "image_t")
-
-
 def camera_batch(normals: np.ndarray, lines: np.ndarray | None, directions: np.ndarray,
                  edge_visible: np.ndarray, direction_visible: np.ndarray
                  ) -> ObservationBatch:

@@ -64,11 +64,6 @@ class World:
     camera: Camera
     joint_offsets: np.ndarray
 
-    @property
-    def shared_key(self) -> tuple[int, int] | None:
-        """Identity of a world shared by several trials (None when it is trial-specific)."""
-        return None
-
 
 @dataclass
 class TrialSetup:

@@ -24,6 +24,7 @@ import numpy as np
 from controllers.base import ControllerContext, GoalBatch
 from controllers.exceptions import ContextError, OptionError
 from controllers.law_kernel import feature_law_kernel
+from controllers.law_tools import goal_directions
 from controllers.leg_direction import LegDirectionController
 from controllers.mpc.controller import MPCLaw
 from controllers.solvers.limit_qp import LimitQPSolver
@@ -55,24 +56,11 @@ class FeatureLaw(LegDirectionController):
 
     def _reset_features(self, context: ControllerContext) -> None:
         """The desired feature: the feature of the goal's legs (directions, lengths)."""
-        goal = context.goal
-        if goal.directions is None:
-            raise ContextError(self.name, "goal.directions", "missing")
-        us = np.asarray(goal.directions, dtype=float)
-        if us.shape != (6, 3):
-            raise ContextError(self.name, "goal.directions",
-                               f"expected shape (6, 3), got {us.shape}")
+        us, vis = goal_directions(self.name, context.goal)
         if self._q_star is None:
             raise ContextError(self.name, "goal.lengths",
                                f"missing (the desired {self.feature.name} needs the goal's "
                                "leg lengths)")
-        vis = np.all(np.isfinite(us), axis=1)
-        if not vis.any():
-            raise ContextError(self.name, "goal.directions", "no finite desired direction")
-        us = np.where(vis[:, None], us, np.array([0.0, 0.0, 1.0]))
-        norms = np.linalg.norm(us[vis], axis=1)
-        if np.any(np.abs(norms - 1.0) > 1e-6):
-            raise ContextError(self.name, "goal.directions", f"not unit vectors: norms {norms}")
         f_star = self.feature.desired(us, self._q_star, self._A)
         if not np.all(np.isfinite(f_star[vis])):
             bad = np.flatnonzero(~np.all(np.isfinite(f_star), axis=1) & vis)
@@ -80,18 +68,9 @@ class FeatureLaw(LegDirectionController):
                                f"{bad.tolist()} is not finite: {f_star[bad]}")
         self._f_star = np.where(vis[:, None], f_star, 0.0)
         self._u_star = np.where(vis[:, None], us, 0.0)
-        self._goal_visible = vis
-        self._fill = us
-        self._goal_all_visible = bool(vis.all())
-        kernel = self._reuse_kernel(lambda: feature_law_kernel(self.feature, self.interaction,
-                                                               self.compiled))
-        kernel.set("desired", self._f_star)
-        if "desired_directions" in kernel.inputs:  # the legs' goal state (DESIRED / MEAN)
-            kernel.set("desired_directions", us)
-        kernel.set("base_points", self._A)
-        kernel.set("weights", vis)
-        self.kernel = kernel
-        self._k_features = kernel.inputs["features"].reshape(6, 3)
+        self._install_goal(self._f_star, us, vis,
+                           lambda: feature_law_kernel(self.feature, self.interaction,
+                                                      self.compiled))
 
     def desired_features(self) -> np.ndarray:
         """(6, rows) the desired feature (zeros where unknown)."""
@@ -120,10 +99,8 @@ class FeatureQPLaw(FeatureLaw):
                  compiled: bool = True) -> None:
         FeatureLaw.__init__(self, gain, adaptive_gain, interaction, threshold, damping,
                             compiled)
-        if damping:
-            raise OptionError(self.name, "damping", "use 'regularization' with the QP law")
         self.solver = LimitQPSolver(self.name, self.threshold, regularization, stroke_margin,
-                                    max_speed, eps_abs, eps_rel, max_iter, shortcut)
+                                    max_speed, eps_abs, eps_rel, max_iter, shortcut, damping)
 
 
 class FeatureMPC(MPCLaw):

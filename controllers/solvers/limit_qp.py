@@ -86,6 +86,8 @@ class LimitQPSolver(Solver):
         max_iter: OSQP iteration budget.
         shortcut: Skip OSQP when the unconstrained optimum satisfies every bound (None:
             only with the default OSQP settings, so that chosen settings take effect).
+        damping: The law's pseudo-inverse damping option, refused unless 0 (the QP has
+            ``regularization``).
 
     Raises:
         OptionError: An option out of range, named.
@@ -94,8 +96,11 @@ class LimitQPSolver(Solver):
     def __init__(self, controller: str, threshold: float = 1e-6,
                  regularization: float = 1e-12, stroke_margin: float | None = None,
                  max_speed: float | None = None, eps_abs: float = 1e-6, eps_rel: float = 1e-6,
-                 max_iter: int = 4000, shortcut: bool | None = None) -> None:
+                 max_iter: int = 4000, shortcut: bool | None = None,
+                 damping: float = 0.0) -> None:
         name = controller
+        if damping:
+            raise OptionError(name, "damping", "use 'regularization' with the QP law")
         if shortcut is None:  # auto: OSQP always runs when its settings were chosen
             shortcut = (eps_abs, eps_rel, max_iter) == OSQP_DEFAULTS
         self.threshold = threshold

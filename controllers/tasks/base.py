@@ -19,7 +19,7 @@ mapped over the rows), the compiled law cores (:mod:`controllers.law_kernel` gen
 its C from the same expressions) and the second-order term, generated from the block's
 error and the state's motion, ``L_dot tau = d/ds (L(s) tau) s_dot(s, tau)``
 (:func:`second_order_function`), so it is never written by hand. The numpy functions of
-:mod:`controllers.interaction` are the test oracle and the laws' general path.
+``tests/controllers/interaction_oracle.py`` are the test oracle.
 Each is checked against finite differences of the true kinematics
 (``tests/controllers/test_tasks.py``).
 """
@@ -27,7 +27,7 @@ Each is checked against finite differences of the true kinematics
 from __future__ import annotations
 
 from abc import ABC, abstractmethod
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 
 import casadi as ca
@@ -115,6 +115,21 @@ class Task(ABC):
         """
         raise NotImplementedError(f"{self.name}: no moving reference")
 
+
+
+class LegBlockTask(Task):
+    """A task whose error and Jacobian are one block (:attr:`block` rows) per leg, the
+    block's function mapped over the six legs of every row (:meth:`_blocks`)."""
+
+    @abstractmethod
+    def _blocks(self, state: TaskState) -> Sequence[np.ndarray]:
+        """The errors and Jacobians of every leg's block (any shape, in leg order)."""
+
+    def error(self, state: TaskState) -> np.ndarray:
+        return np.reshape(self._blocks(state)[0], (len(state), 6 * self.block))
+
+    def jacobian(self, state: TaskState) -> np.ndarray:
+        return np.reshape(self._blocks(state)[1], (len(state), 6 * self.block, 6))
 
 def leg_rates(u: ca.SX, A: ca.SX, q: ca.SX, tau: ca.SX) -> tuple[ca.SX, ca.SX]:
     """``u_dot`` and ``q_dot`` of a leg moved by the platform twist (``docs/math.md`` §3):

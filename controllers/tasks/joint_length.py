@@ -12,7 +12,13 @@ from functools import lru_cache
 import casadi as ca
 import numpy as np
 
-from controllers.tasks.base import Task, TaskState, evaluate_legs, leg_second_order, map_blocks
+from controllers.tasks.base import (
+    LegBlockTask,
+    TaskState,
+    evaluate_legs,
+    leg_second_order,
+    map_blocks,
+)
 
 
 def inverse_jacobian_row(u: ca.SX, base_point: ca.SX) -> ca.SX:
@@ -47,7 +53,7 @@ def _second_order() -> ca.Function:
                             lambda s, p: joint_length_block(s[3], p[3], s[:3], p[:3])[0])
 
 
-class JointLengthTask(Task):
+class JointLengthTask(LegBlockTask):
     """The six leg lengths towards their desired values.
 
     Args:
@@ -65,12 +71,6 @@ class JointLengthTask(Task):
         return map_blocks(block_function(), state.lengths.reshape(-1),
                           np.broadcast_to(self.desired, (n, 6)).reshape(-1),
                           state.directions.reshape(-1, 3), state.base_points.reshape(-1, 3))
-
-    def error(self, state: TaskState) -> np.ndarray:
-        return self._blocks(state)[0].reshape(len(state), 6)
-
-    def jacobian(self, state: TaskState) -> np.ndarray:
-        return self._blocks(state)[1].reshape(len(state), 6, 6)
 
     def jacobian_dot_twist(self, state: TaskState, twist: np.ndarray) -> np.ndarray:
         n = len(state)

@@ -14,7 +14,7 @@ import casadi as ca
 import numpy as np
 
 from controllers.tasks.base import (
-    Task,
+    LegBlockTask,
     TaskState,
     evaluate_legs,
     evaluate_reference,
@@ -80,7 +80,7 @@ def reference_block() -> ca.Function:
         lambda s, p, tau: ca.vertcat(*leg_rates(s[:3], p[:3], s[3], tau)))
 
 
-class LegDirectionTask(Task):
+class LegDirectionTask(LegBlockTask):
     """The six leg directions towards their desired values.
 
     Args:
@@ -100,12 +100,6 @@ class LegDirectionTask(Task):
         return map_blocks(block_function(), state.directions.reshape(-1, 3),
                           self._star(n).reshape(-1, 3), state.base_points.reshape(-1, 3),
                           state.lengths.reshape(-1))
-
-    def error(self, state: TaskState) -> np.ndarray:
-        return self._blocks(state)[0].reshape(len(state), 18)
-
-    def jacobian(self, state: TaskState) -> np.ndarray:
-        return self._blocks(state)[1].reshape(len(state), 18, 6)
 
     def jacobian_dot_twist(self, state: TaskState, twist: np.ndarray) -> np.ndarray:
         n = len(state)

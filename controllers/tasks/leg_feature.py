@@ -37,7 +37,7 @@ import casadi as ca
 import numpy as np
 
 from controllers.tasks.base import (
-    Task,
+    LegBlockTask,
     TaskState,
     evaluate_legs,
     leg_rates,
@@ -195,7 +195,7 @@ class LegFeature(ABC):
         return np.asarray(out, dtype=float).T.reshape(n, 6, self.rows)
 
 
-class FeatureTask(Task):
+class FeatureTask(LegBlockTask):
     """A :class:`LegFeature` of the six legs towards a desired value, as a
     :class:`~controllers.tasks.base.Task` (the numpy path of the computed torque).
 
@@ -225,12 +225,6 @@ class FeatureTask(Task):
         e = np.asarray(e, dtype=float).T.reshape(n, 6 * r)
         L = np.asarray(L, dtype=float).reshape(r, 6 * n, 6).transpose(1, 0, 2)
         return e, L.reshape(n, 6 * r, 6)
-
-    def error(self, state: TaskState) -> np.ndarray:
-        return self._blocks(state)[0]
-
-    def jacobian(self, state: TaskState) -> np.ndarray:
-        return self._blocks(state)[1]
 
     def jacobian_dot_twist(self, state: TaskState, twist: np.ndarray) -> np.ndarray:
         out = evaluate_legs(self.feature.second_order, state, self._params(state), twist)

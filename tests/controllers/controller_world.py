@@ -2,7 +2,7 @@
 
 Features are computed from the TRUE kinematics and camera (``legs_in_frame``,
 ``vision.legs.leg_edges``, ``camera.normal_to_line``), never from the formulas
-of :mod:`controllers.interaction`.
+of ``tests/controllers/interaction_oracle.py``.
 """
 
 from __future__ import annotations

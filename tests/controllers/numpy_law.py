@@ -2,7 +2,7 @@
 
 The laws compute every step with their compiled core (:mod:`controllers.law_kernel`,
 generated from the tasks' CasADi blocks). This module computes the same tasks with the
-numpy formulas of :mod:`controllers.interaction` (an independent implementation, itself
+numpy formulas of :mod:`tests.controllers.interaction_oracle` (an independent implementation, itself
 tested against finite differences of the true kinematics) and the LAPACK solve of
 :func:`controllers.law_tools.solve_normal`: :func:`numpy_law` is a law whose
 :meth:`~controllers.laws.VisionLaw.tasks` is replaced by :func:`numpy_tasks`. The
@@ -23,7 +23,10 @@ import numpy as np
 from controllers import registry
 from controllers.base import Command, Observation
 from controllers.estimators import model_directions_note, unknown_direction_reason
-from controllers.interaction import (
+from controllers.law_tools import inverse_jacobian_into
+from controllers.laws import TaskStep
+from controllers.leg_edge import LegEdgeController
+from tests.controllers.interaction_oracle import (
     cross,
     direction_task,
     edge_line_factors,
@@ -31,9 +34,6 @@ from controllers.interaction import (
     edge_normal_factors,
     edge_normal_task,
 )
-from controllers.law_tools import inverse_jacobian_into
-from controllers.laws import TaskStep
-from controllers.leg_edge import LegEdgeController
 
 
 def _unit(x: np.ndarray) -> np.ndarray:

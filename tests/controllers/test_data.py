@@ -1,5 +1,6 @@
-"""GoalBatch mirrors Goal field by field: a field added to one and not the other (or to
-GOAL_FIELDS) would silently drop out of the batched retarget; this keeps them in step."""
+"""GoalBatch mirrors Goal field by field (both take their fields from one base): a field
+added to one and not the other (or to GOAL_FIELDS) would silently drop out of the batched
+retarget; this keeps them in step."""
 
 from __future__ import annotations
 

@@ -14,7 +14,10 @@ from collections.abc import Callable
 import numpy as np
 import pytest
 
-from controllers.interaction import (
+from controllers.laws import inverse_jacobian_into
+from hexapod.kinematics import inverse_jacobian
+from tests.controllers.controller_world import World, make_camera
+from tests.controllers.interaction_oracle import (
     direction_interaction,
     direction_task,
     edge_interaction,
@@ -23,9 +26,6 @@ from controllers.interaction import (
     edge_rank_one,
     line_jacobian,
 )
-from controllers.laws import inverse_jacobian_into
-from hexapod.kinematics import inverse_jacobian
-from tests.controllers.controller_world import World, make_camera
 from vision.legs import leg_edges
 
 H_STEP = 1e-6

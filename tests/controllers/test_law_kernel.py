@@ -10,7 +10,6 @@ import numpy as np
 import pytest
 
 from controllers import registry
-from controllers.interaction import direction_task
 from controllers.law_kernel import (
     DIRECTION_INPUTS,
     LawKernel,
@@ -24,6 +23,7 @@ from controllers.laws import Gain, solve_normal_damped
 from controllers.qp import LimitQP
 from hexapod.compiled import CompiledFunction
 from tests.controllers.controller_world import World, make_camera
+from tests.controllers.interaction_oracle import direction_task
 from tests.controllers.numpy_law import numpy_law
 
 LAWS = ["leg-direction", "leg-edge", "leg-direction-qp", "leg-edge-qp"]
@@ -412,7 +412,7 @@ def test_compiled_refinement_equals_numpy(rng: np.random.Generator) -> None:
 
 def test_weighted_rows_are_the_weighted_least_squares(rng: np.random.Generator) -> None:
     """Weights w_i: N = sum w_i L_i^T L_i and b = sum w_i L_i^T e_i with the numpy blocks of
-    controllers.interaction; a zero weight leaves the block out of the error norm, the
+    interaction_oracle; a zero weight leaves the block out of the error norm, the
     gain and the rank too, even when that block is not finite."""
     kernel = direction_kernel()
     u = rng.normal(size=(6, 3)) + np.array([0.0, 0.0, 3.0])

@@ -11,10 +11,15 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from controllers.interaction import cross, direction_task, edge_line_task, edge_normal_task
 from controllers.mpc.prediction import GlobalModel, LocalModel, fit_pose
 from hexapod.kinematics import inverse_jacobian
 from tests.controllers.controller_world import World, make_camera
+from tests.controllers.interaction_oracle import (
+    cross,
+    direction_task,
+    edge_line_task,
+    edge_normal_task,
+)
 
 DT = 0.02
 #: Global model vs the true world, zero calibration error: features (unit vectors) and
@@ -110,7 +115,7 @@ def test_global_model_sees_a_wrong_twist(other_geometry, rng: np.random.Generato
 def _local_model(world: World, kind: str, R: np.ndarray, t: np.ndarray
                  ) -> tuple[LocalModel, np.ndarray, np.ndarray, np.ndarray]:
     """The local model at (R, t) towards a goal, from the interaction matrices of
-    controllers.interaction (the classical laws' L)."""
+    tests/controllers/interaction_oracle.py (the classical laws' L)."""
     f = world.features(R, t)
     A, u, q = f["base_points"], f["directions"], f["lengths"]
     Rg, tg = world.poses(1, np.random.default_rng(5))

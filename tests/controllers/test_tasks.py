@@ -10,7 +10,6 @@ from collections.abc import Callable
 import numpy as np
 import pytest
 
-from controllers.interaction import direction_task, edge_line_task, edge_normal_task
 from controllers.law_kernel import direction_kernel
 from controllers.tasks import (
     JointLengthTask,
@@ -23,6 +22,7 @@ from controllers.tasks import (
 from hexapod.geometry import HexapodGeometry
 from hexapod.se3 import exp_so3, integrate_pose
 from hexapod.workspace import home_pose
+from tests.controllers.interaction_oracle import direction_task, edge_line_task, edge_normal_task
 from vision.cameras import front_camera
 
 H = 1e-5  # time step of the central differences [s]
@@ -166,7 +166,7 @@ def test_the_direction_task_is_the_compiled_cores_definition(geometry: HexapodGe
 def test_the_edge_tasks_agree_with_the_numpy_oracle(geometry: HexapodGeometry,
                                                     rng: np.random.Generator) -> None:
     """The edge tasks' CasADi blocks against the numpy rank-one blocks of
-    ``controllers.interaction`` (rounding)."""
+    ``tests/controllers/interaction_oracle.py`` (rounding)."""
     A, E, R, t, _ = _world(geometry, rng)
     s = TaskState.at_pose(A, E, R, t, geometry.leg_radius)
     tasks = _tasks(geometry, A, E, rng)
