@@ -16,9 +16,9 @@ dynamics) is the tests' oracle (``tests/controllers/task_ctc_oracles.py``).
 
 The reference is the trajectory of ``context.reference`` (base frame, sampled at the
 observation's time) or, for a fixed goal, a straight line from the pose measured at the
-first step (the pose of a compiled step towards the goal at rest) to the goal pose with a quintic timing, slow enough that no leg's nominal
-speed exceeds the speed limit (``smooth_goal``; off: the goal is a step, the error's
-free response).
+first step (the pose of a compiled step towards the goal at rest) to the goal pose with
+a quintic timing, slow enough that no leg's nominal speed exceeds the speed limit
+(``smooth_goal``; off: the goal is a step, the error's free response).
 
 The checked readings, goal pose, camera and base points, and that line are
 :mod:`controllers.task_ctc_inputs`' (re-exported here).

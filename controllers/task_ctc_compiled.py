@@ -32,8 +32,10 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 from numpy.typing import ArrayLike
+from scipy.linalg.lapack import dsyevd as _eigenvalues
+
 from controllers.base import Command, Observation
-from controllers.ctc_rows import rank_condition, refusal
+from controllers.ctc_rows import refusal
 from controllers.solvers.compiled_task_ctc import FIT_TOLERANCE, FK_TOLERANCE, task_step
 from hexapod.actuation import Actuation
 from hexapod.compiled import BoundCall, CompilationError, CompiledFunction
@@ -228,11 +230,13 @@ class CompiledTaskStep:
         None otherwise (the row is left as it is)."""
         if y[self._status] != 0.0:
             return None
-        # the squared singular values of the masked Jacobian (LAPACK syevd of L^T L)
-        condition = rank_condition(y[self._factor], law.solver.threshold)
-        if condition is None:
+        # the squared singular values of the masked Jacobian (LAPACK syevd of L^T L; the
+        # test of controllers.ctc_rows.rank_condition, the condition as sqrt(max / min))
+        w, _, info = _eigenvalues(y[self._factor].reshape(6, 6), 0)  # (compute_v=0)
+        w_min, w_max = float(w[0]), float(w[-1])
+        if info != 0 or not (w_max > 0 and w_min > law.solver.threshold**2 * w_max):
             return None
-        return self.take(law, y, rows), condition
+        return self.take(law, y, rows), math.sqrt(w_max / w_min)
 
     def take(self, law: TaskComputedTorque, y: np.ndarray, rows: np.ndarray | None
              ) -> np.ndarray:

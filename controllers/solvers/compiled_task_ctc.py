@@ -28,9 +28,12 @@ does for the joint-space law:
   terms at the velocity the legs reach over the period ``hold``
   (:meth:`~controllers.solvers.computed_torque.ComputedTorqueSolver.forces`).
 
-The caller keeps the numpy path (the reference) for everything off the happy path: FK
-not converged, a rank-deficient Jacobian (its singular values are those of the output
-``factor``), a singular inverse solve, a non-finite value.
+It is the laws' only step: off the happy path they refuse with the reason of the
+output ``status`` (:mod:`controllers.ctc_status`: too few rows in the ``mask`` or legs
+``seen``, the pose not converged, a non-finite value, a singular inverse solve) or of
+the rank test of the output ``factor`` (whose eigenvalues are the squared singular
+values of the Jacobian, by LAPACK in the caller). The numpy step they replaced is the
+tests' oracle (``tests/controllers/task_ctc_oracles.py``).
 
 Inputs (:func:`layout`): ``pose`` (``R`` column-major, ``t``: the FK guess, or the
 measured pose), ``q``, ``q_dot`` (6 each), ``points`` (``A`` then ``E``, base frame,
@@ -49,8 +52,10 @@ subtracted from the desired ``e_ddot``; zeros without integral action).
 Outputs: ``pose`` (12, as the input), ``K`` (36, column-major), ``fk_residual`` (max
 absolute length residual [m]), ``forces`` (6) [N], ``solved`` (1.0 when the inverse
 solve's residual is below the tolerance, as :mod:`controllers.solvers.compiled_ctc`),
-``error`` (m) and ``factor`` (6 x 6: ``L^T L`` of the masked model Jacobian, whose
-eigenvalues are its squared singular values).
+``error`` (m), ``factor`` (6 x 6: ``L^T L`` of the masked model Jacobian, whose
+eigenvalues are its squared singular values) and ``status``
+(:func:`~controllers.solvers.compiled_ctc.sx_status`: 0 or a code of
+:class:`controllers.ctc_status.Status`).
 """
 
 from __future__ import annotations
@@ -175,14 +180,14 @@ def _rigid_fit(R0: ca.SX, q: ca.SX, u: ca.SX, A: ca.SX, E: ca.SX, frame: ca.SX,
     """
     Rbc = ca.reshape(frame[0:9], 3, 3).T
     pbc = frame[9:12]
-    w = [seen[i] for i in range(6)]
-    B = [ca.if_else(w[i], A[3 * i:3 * i + 3] + q[i] * u[3 * i:3 * i + 3], ca.SX.zeros(3))
+    wt = [seen[i] for i in range(6)]
+    B = [ca.if_else(wt[i], A[3 * i:3 * i + 3] + q[i] * u[3 * i:3 * i + 3], ca.SX.zeros(3))
          for i in range(6)]
     P = [E[3 * i:3 * i + 3] for i in range(6)]
-    n = sum(w, ca.SX(0.0))
-    bc = sum((w[i] * B[i] for i in range(6)), ca.SX.zeros(3)) / n
-    mc = sum((w[i] * P[i] for i in range(6)), ca.SX.zeros(3)) / n
-    C = sum((w[i] * ((B[i] - bc) @ (P[i] - mc).T) for i in range(6)), ca.SX.zeros(3, 3))
+    n = sum(wt, ca.SX(0.0))
+    bc = sum((wt[i] * B[i] for i in range(6)), ca.SX.zeros(3)) / n
+    mc = sum((wt[i] * P[i] for i in range(6)), ca.SX.zeros(3)) / n
+    C = sum((wt[i] * ((B[i] - bc) @ (P[i] - mc).T) for i in range(6)), ca.SX.zeros(3, 3))
     Rc = Rbc.T @ ca.reshape(R0[0:9], 3, 3)
     size = ca.SX(0.0)
     for _ in range(FIT_ITERATIONS):
@@ -378,5 +383,5 @@ def task_step(kind: str, fk: bool, inverse_tolerance: float = INVERSE_TOLERANCE
                             outputs=outputs)
 
 
-__all__ = ["COMMON_INPUTS", "FIT_ITERATIONS", "FIT_TOLERANCE", "FK_CALLS", "REFERENCE", "ROWS", "layout",
-           "model_twist", "sx_task_outputs", "task_layouts", "task_step"]
+__all__ = ["COMMON_INPUTS", "FIT_ITERATIONS", "FIT_TOLERANCE", "FK_CALLS", "REFERENCE", "ROWS",
+           "layout", "model_twist", "sx_task_outputs", "task_layouts", "task_step"]

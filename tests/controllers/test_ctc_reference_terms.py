@@ -27,8 +27,8 @@ from hexapod.kinematics import legs_in_frame
 from hexapod.se3 import log_so3
 from hexapod.trajectory import PoseTrajectory
 from tests.controllers.ctc_world import CtcWorld, perturbed
-from vision.legs import leg_edges
 from tests.controllers.task_ctc_oracles import numpy_desired_at, numpy_measure
+from vision.legs import leg_edges
 
 LAWS = ("cartesian-ctc", "vision-ctc", "leg-edge-ctc", "leg-direction-ctc")
 
