@@ -150,6 +150,8 @@ class VisionCTC(CartesianCTC):
         """
         cam, _ = camera_and_base_points(self.name, context)
         self._base_from_camera = cam.inverse()
+        #: Whether each set of legs seen is collinear on the platform (by its mask).
+        self._collinear_sets: dict[bytes, bool] = {}
         self._offset: Transform | None = None
         taught = self._taught(context.goal)
         if context.reference is not None and taught is not None:
@@ -230,11 +232,16 @@ class VisionCTC(CartesianCTC):
     def _collinear(self, seen: np.ndarray) -> bool:
         """Whether the platform points of the legs ``seen`` (6,) are collinear (their
         second singular value about their centroid below :data:`SPREAD` times the
-        platform's radius): no pose fits them."""
-        assert self.context is not None
-        E = np.asarray(self.context.geometry.platform_points)
-        s = np.linalg.svd(E[seen] - E[seen].mean(axis=0), compute_uv=False)
-        return bool(s[1] < SPREAD * float(np.linalg.norm(E, axis=1).max()))
+        platform's radius): no pose fits them. Found once per set of legs."""
+        key = np.asarray(seen, dtype=bool).tobytes()
+        known = self._collinear_sets.get(key)
+        if known is None:
+            assert self.context is not None
+            E = np.asarray(self.context.geometry.platform_points)
+            s = np.linalg.svd(E[seen] - E[seen].mean(axis=0), compute_uv=False)
+            known = bool(s[1] < SPREAD * float(np.linalg.norm(E, axis=1).max()))
+            self._collinear_sets[key] = known
+        return known
 
     def batch_features(self, step: CompiledTaskStep, X: np.ndarray,
                        observations: ObservationBatch, rows: np.ndarray) -> np.ndarray:
