@@ -243,8 +243,11 @@ class TaskComputedTorque(Controller):
     def step_trial(self, observation: Observation) -> Command:
         """The leg forces of this period [N], or a refusal (zeros) with its reason."""
         compiled = self.compiled
-        if self.context is None or self.model is None or compiled is None:
+        if self.context is None or self.model is None:
             return self.refuse("reset(context) was not called")
+        if compiled is None:
+            return self.refuse("no compiled step (compiled_kind is None and the law made "
+                               "none at reset)")
         # the common case writes the readings into the compiled step's row itself
         fast = finite_readings(observation, compiled.views["q"], compiled.views["q_dot"])
         if fast is None:  # encoder_readings decides (its reasons), off the common case

@@ -235,3 +235,23 @@ def test_the_compiled_rigid_fit_from_the_exact_pose_takes_a_zero_step() -> None:
     assert y[outputs["fk_residual"]][0] < 1e-8
     np.testing.assert_array_equal(y[outputs["pose"]],
                                   np.concatenate([np.eye(3).ravel(), np.zeros(3)]))
+
+
+def test_a_law_without_a_compiled_step_refuses_naming_it() -> None:
+    """A subclass that neither names a kind nor makes its own step has no step at all
+    (there is no numpy path): every period is refused with that reason."""
+    from controllers.cartesian_ctc import CartesianCTC
+
+    class NoStep(CartesianCTC):
+        name = "no-step-ctc"
+        compiled_kind = None
+
+    law, world = _law("cartesian-ctc")
+    ctx = law.context
+    bare = NoStep()
+    bare.reset(ctx)
+    s = law.reference.at(np.array([0.0]))
+    cmd = bare.step(_observation(world, s.rotation[0], s.translation[0], s.twist[0], 0.0))
+    assert cmd.reason == ("no-step-ctc: no compiled step (compiled_kind is None and the law "
+                          "made none at reset)")
+    assert not np.any(np.asarray(cmd.forces))
