@@ -21,15 +21,13 @@ import numpy as np
 from scipy.linalg.lapack import dgesdd as _svd
 
 from controllers.base import ControllerContext, Goal, Observation, ObservationBatch
-from controllers.solvers.compiled_task_ctc import REFERENCE
+from controllers.ctc_status import Status, status_reason
 from controllers.task_ctc import (
     CompiledTaskStep,
-    Measured,
     TaskComputedTorque,
     camera_and_base_points,
     goal_pose_of,
 )
-from controllers.tasks import PlatformPoseTask, Task, TaskState
 from hexapod.kinematics import Transform
 
 #: Smallest second singular value of the seen platform points about their centroid,
@@ -67,24 +65,8 @@ class CartesianCTC(TaskComputedTorque):
         """The fixed goal pose."""
         return self._goal
 
-    def measure(self, observation: Observation, q: np.ndarray, q_dot: np.ndarray
-                ) -> Measured | str:
-        """The nominal forward kinematics of the encoders and ``K^-1 q_dot``."""
-        assert self.context is not None and self.model is not None
-        R, t = self.encoder_pose(q)
-        return pose_measurement(self.model, R, t, q, q_dot)
-
-    def desired_at(self, tr: float | None
-                   ) -> tuple[Task, np.ndarray | None, np.ndarray | None]:
-        """The pose task towards the reference at ``tr`` with its twist and twist rate
-        (or the fixed goal, at rest)."""
-        if tr is None or self.reference is None:
-            return PlatformPoseTask(*self.goal_pose()), None, None
-        ref = REFERENCE.views(self.pose_reference(tr))
-        return PlatformPoseTask(ref["R"], ref["t"]), ref["twist"], ref["twist_rate"]
-
     def compiled_inputs(self, step: CompiledTaskStep, observation: Observation, tr: float,
-                        q: np.ndarray) -> tuple[np.ndarray | None, str | None] | None:
+                        q: np.ndarray) -> tuple[np.ndarray | None, str | None] | str:
         """The reference (the pose comes from the encoders in the compiled step)."""
         self.reference_input(step, tr)
         return None, None
@@ -168,6 +150,8 @@ class VisionCTC(CartesianCTC):
         """
         cam, _ = camera_and_base_points(self.name, context)
         self._base_from_camera = cam.inverse()
+        #: Whether each set of legs seen is collinear on the platform (by its mask).
+        self._collinear_sets: dict[bytes, bool] = {}
         self._offset: Transform | None = None
         taught = self._taught(context.goal)
         if context.reference is not None and taught is not None:
@@ -194,32 +178,17 @@ class VisionCTC(CartesianCTC):
         seen = seen & np.isfinite(q)
         n = int(seen.sum())
         if n < 3:
-            return f"only {n} legs seen (legs {np.flatnonzero(seen).tolist()}): the pose " \
-                "needs at least 3"
+            return status_reason(Status.TOO_FEW_LEGS, legs=np.flatnonzero(seen).tolist())
         A = np.asarray(self.context.base_points)
         E = np.asarray(self.context.geometry.platform_points)
         if n < 6:
+            if self._collinear(seen):
+                return status_reason(Status.COLLINEAR_LEGS,
+                                     legs=np.flatnonzero(seen).tolist())
             A, q, u, E = A[seen], q[seen], u[seen], E[seen]
-            s = np.linalg.svd(E - E.mean(axis=0), compute_uv=False)
-            if s[1] < SPREAD * float(np.linalg.norm(E, axis=1).max()):
-                return f"the {n} legs seen are collinear on the platform: no pose"
         Rc, tc = rigid_fit(A + q[:, None] * u, E)
         bc = self._base_from_camera
         return bc.rotation @ Rc, bc.rotation @ tc + bc.translation
-
-    def measure(self, observation: Observation, q: np.ndarray, q_dot: np.ndarray
-                ) -> Measured | str:
-        """The visual pose and ``K(x)^-1 q_dot``."""
-        assert self.model is not None
-        u, seen = directions_seen(observation.directions, observation.normals,
-                                  observation.direction_visible, observation.edge_visible)
-        pose = self._visual_pose(q, u, seen)
-        if isinstance(pose, str):
-            return pose
-        m = pose_measurement(self.model, pose[0], pose[1], q, q_dot)
-        if not np.all(seen):
-            m.note = f"pose from legs {np.flatnonzero(seen).tolist()}"
-        return m
 
     def anchor(self, R: np.ndarray, t: np.ndarray, twist: np.ndarray, twist_rate: np.ndarray
                ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
@@ -237,19 +206,42 @@ class VisionCTC(CartesianCTC):
         return (D @ R, t @ D.T + self._offset.translation, turn(twist), turn(twist_rate))
 
     def compiled_inputs(self, step: CompiledTaskStep, observation: Observation, tr: float,
-                        q: np.ndarray) -> tuple[np.ndarray | None, str | None] | None:
-        """The leg directions seen (the compiled step fits the pose to the six legs; a
-        hidden one leaves the period to the numpy path) and the reference."""
+                        q: np.ndarray) -> tuple[np.ndarray | None, str | None] | str:
+        """The leg directions seen and which legs the compiled step fits the pose to (the
+        legs seen; fewer than three: its status says so; collinear ones on the platform
+        give no pose: the reason), and the reference."""
         u = _every_direction(observation)
-        if u is None:  # directions_seen decides, off the common case
+        note = None
+        if u is not None:
+            step.views["seen"][:] = 1.0
+        else:  # directions_seen decides, off the common case
             u, seen = directions_seen(observation.directions, observation.normals,
                                       observation.direction_visible,
                                       observation.edge_visible)
+            step.views["seen"][:] = seen
             if not seen.all():
-                return None
+                legs = np.flatnonzero(seen).tolist()
+                if len(legs) >= 3 and self._collinear(seen):
+                    return status_reason(Status.COLLINEAR_LEGS, legs=legs)
+                u = np.where(seen[:, None], u, 0.0)  # a hidden leg's stand-in (not read)
+                note = f"pose from legs {legs}"
         step.row[step.inputs["directions"]] = u.ravel()
         self.reference_input(step, tr)
-        return None, None
+        return None, note
+
+    def _collinear(self, seen: np.ndarray) -> bool:
+        """Whether the platform points of the legs ``seen`` (6,) are collinear (their
+        second singular value about their centroid below :data:`SPREAD` times the
+        platform's radius): no pose fits them. Found once per set of legs."""
+        key = np.asarray(seen, dtype=bool).tobytes()
+        known = self._collinear_sets.get(key)
+        if known is None:
+            assert self.context is not None
+            E = np.asarray(self.context.geometry.platform_points)
+            s = np.linalg.svd(E[seen] - E[seen].mean(axis=0), compute_uv=False)
+            known = bool(s[1] < SPREAD * float(np.linalg.norm(E, axis=1).max()))
+            self._collinear_sets[key] = known
+        return known
 
     def batch_features(self, step: CompiledTaskStep, X: np.ndarray,
                        observations: ObservationBatch, rows: np.ndarray) -> np.ndarray:
@@ -259,6 +251,7 @@ class VisionCTC(CartesianCTC):
             return np.zeros(len(rows), dtype=bool)
         u, fast = seen_rows(observations.directions, observations.direction_visible, rows)
         X[fast, step.inputs["directions"]] = u[fast]
+        X[fast, step.inputs["seen"]] = 1.0
         return fast
 
     def compiled_constants(self, step: CompiledTaskStep) -> None:
@@ -355,15 +348,3 @@ def rigid_fit(points: np.ndarray, model_points: np.ndarray) -> tuple[np.ndarray,
         U[:, 2] = -U[:, 2]
         R = U @ Vt
     return R, pc - R @ mc
-
-
-def pose_measurement(model: object, R: np.ndarray, t: np.ndarray, q: np.ndarray,
-                     q_dot: np.ndarray) -> Measured:
-    """The pose task's measurement at ``(R, t)``: twist ``K^-1 q_dot`` (nominal ``K``)."""
-    K = model.terms_batch(R[None], t[None], np.zeros((1, 6)))[2][0]  # type: ignore[attr-defined]
-    twist = np.linalg.solve(K, q_dot)
-    # the pose task reads the pose only (base points and directions unused)
-    state = TaskState(np.zeros((1, 6, 3)), np.zeros((1, 6, 3)), q[None], None, R[None],
-                      t[None])
-    return Measured(R, t, twist, state, inverse_jacobian=K)
-

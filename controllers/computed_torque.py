@@ -88,7 +88,7 @@ QUINTIC_PEAK_SPEED = 15.0 / 8.0
 #: Default damping ratio of the leg error.
 DAMPING = 1.0
 #: Forward-kinematics tolerance on the length residual [m] (as :func:`forward_kinematics`).
-FK_TOLERANCE = 1e-12
+FK_TOLERANCE = compiled_ctc.FK_TOLERANCE
 #: How far from ``k dt`` an observation's time may be to use the reference's grid [s].
 GRID_TIME_TOLERANCE = 1e-9
 #: Calls of the compiled step (``compiled_ctc.FK_CALLS`` x 3 Newton iterations each)
@@ -98,7 +98,7 @@ FK_MAX_CALLS = 16
 #: :data:`compiled_ctc.OUTPUTS`), looked up once.
 _DESIRED, _POSE_IN = compiled_ctc.INPUTS["desired"], compiled_ctc.INPUTS["pose"]
 _POSE_OUT, _FACTOR, _FORCES = (compiled_ctc.OUTPUTS[k] for k in ("pose", "factor", "forces"))
-_RESIDUAL, _SOLVED = (compiled_ctc.OUTPUTS.index(k) for k in ("fk_residual", "solved"))
+_RESIDUAL, _STATUS = (compiled_ctc.OUTPUTS.index(k) for k in ("fk_residual", "status"))
 
 
 class ComputedTorqueController(Controller):
@@ -387,10 +387,9 @@ class ComputedTorqueController(Controller):
         bound = self._bound
         assert bound is not None
         X = np.stack([inst.input_row for _, inst in rows])
-        Y, converged = evaluate_rows(bound.function, X, _POSE_IN, _POSE_OUT, _RESIDUAL,
-                                     FK_TOLERANCE, FK_MAX_CALLS)
-        accepted = np.flatnonzero(accepted_rows(Y, converged, _SOLVED, _FACTOR,
-                                                self.solver.threshold))
+        Y, _ = evaluate_rows(bound.function, X, _POSE_IN, _POSE_OUT, _RESIDUAL,
+                             FK_TOLERANCE, FK_MAX_CALLS)
+        accepted = np.flatnonzero(accepted_rows(Y, _STATUS, _FACTOR, self.solver.threshold))
         if len(accepted):
             over = over_limits(Y[accepted, _FORCES],
                                np.stack([rows[j][1].force_limit for j in accepted.tolist()]))
@@ -455,7 +454,8 @@ class ComputedTorqueController(Controller):
         """:meth:`_compiled_step` with ``q``, ``q_dot`` and ``(q*, q_dot*, q_ddot*)``
         already in the input row; off the happy path (FK not converged from the previous
         pose within ``FK_MAX_CALLS`` calls, a singular inverse solve, a non-finite
-        value, ``K`` rank-deficient) the reason (:func:`~controllers.ctc_rows.refusal`),
+        value, ``K`` rank-deficient) the reason its status gives
+        (:func:`~controllers.ctc_rows.refusal`),
         the pose guess left as it was."""
         assert self._ctx is not None and self._bound is not None
         bound = self._bound
@@ -478,12 +478,10 @@ class ComputedTorqueController(Controller):
                 raise CompilationError(f"{bound.function.name}: the compiled function failed")
             calls += 1
         condition = None
-        converged = y[_RESIDUAL] < FK_TOLERANCE
-        if converged and y[_SOLVED] == 1.0 and math.isfinite(y.dot(y)):  # (ddot: y @ y)
+        if y[_STATUS] == 0.0:  # the kernel's status (controllers.ctc_status), then the rank
             condition = rank_condition(y[_FACTOR], self.solver.threshold)
         if condition is None:
-            reason = refusal(y, bool(converged), float(y[_RESIDUAL]), _SOLVED, _FACTOR,
-                             self.solver.threshold)
+            reason = refusal(y, _STATUS, _RESIDUAL, _FACTOR, self.solver.threshold)
             assert reason is not None
             return reason
         out = y.copy()

@@ -7,8 +7,9 @@ The computed-torque family (``computed-torque``, ``cartesian-ctc``, ``vision-ctc
 ``leg-edge-ctc``, ``leg-direction-ctc``) keeps one state per trial (the pose guess, the
 reference's start); each trial's instance writes its row (:meth:`prepare_row` of the
 laws), :func:`evaluate_rows` evaluates the rows together, and the instance takes its
-result (:meth:`finish_row`). A row whose result is not accepted is left to its trial's
-own step, which says why (the same compiled function on the same row: the same
+result (:meth:`finish_row`). A row whose result is not accepted (its ``status``,
+:mod:`controllers.ctc_status`, or the rank test) is left to its trial's own step, which
+refuses it with the reason (the same compiled function on the same row: the same
 numbers).
 """
 
@@ -21,6 +22,7 @@ from typing import Any
 import numpy as np
 from scipy.linalg.lapack import dsyevd as _eigenvalues
 
+from controllers.ctc_status import Status, status_reason
 from controllers.data import ObservationBatch
 from hexapod.compiled import CompiledFunction
 
@@ -90,15 +92,14 @@ def rank_condition(factor: np.ndarray, threshold: float) -> float | None:
     return math.sqrt(w_max) / math.sqrt(w_min)
 
 
-def accepted_rows(Y: np.ndarray, converged: np.ndarray, solved: int, factor: slice,
-                  threshold: float) -> np.ndarray:
-    """(n,) the output rows ``Y`` (n, n_out) that are commands: converged, ``solved``,
-    every value finite (their sum of squares finite, as :func:`refusal` checks one row)
-    and ``L^T L`` of full rank. The rank test of :func:`rank_condition` (LAPACK ``syevd``
-    row by row) decides every row whose eigenvalues, computed for all the rows at once
-    (``numpy.linalg.eigvalsh``), are not clearly above its threshold (four times it)."""
-    with np.errstate(invalid="ignore", over="ignore"):
-        ok = converged & (Y[:, solved] == 1.0) & np.isfinite(np.einsum("ij,ij->i", Y, Y))
+def accepted_rows(Y: np.ndarray, status: int, factor: slice, threshold: float) -> np.ndarray:
+    """(n,) the output rows ``Y`` (n, n_out) that are commands: their kernel's ``status``
+    0 (converged, solved, every value finite, enough rows or legs seen:
+    :mod:`controllers.ctc_status`) and ``L^T L`` of full rank. The rank test of
+    :func:`rank_condition` (LAPACK ``syevd`` row by row) decides every row whose
+    eigenvalues, computed for all the rows at once (``numpy.linalg.eigvalsh``), are not
+    clearly above its threshold (four times it)."""
+    ok = Y[:, status] == 0.0
     idx = np.flatnonzero(ok)
     if len(idx):
         w = np.linalg.eigvalsh(Y[idx, factor].reshape(-1, 6, 6))
@@ -114,35 +115,38 @@ def over_limits(forces: np.ndarray, limits: np.ndarray) -> np.ndarray:
     return (np.abs(forces) > limits).any(axis=1)  # type: ignore[no-any-return]
 
 
-def refusal(y: np.ndarray, converged: bool, residual: float, solved: int, factor: slice,
-            threshold: float, pose_name: str = "forward kinematics of the lengths"
-            ) -> str | None:
-    """Why a compiled step's output row ``y`` is not a command (None: it is), from its
-    status outputs: the pose not converged, the inverse dynamics' solve not solved, a
-    non-finite value, a rank-deficient Jacobian (the eigenvalues of ``L^T L``).
+def refusal(y: np.ndarray, status: int, residual: int, factor: slice, threshold: float,
+            pose_name: str = "forward kinematics of the lengths",
+            inputs: dict[str, np.ndarray] | None = None) -> str | None:
+    """Why a compiled step's output row ``y`` is not a command (None: it is): its
+    ``status`` output (:class:`~controllers.ctc_status.Status`), then the rank test of
+    the Jacobian (``RANK_DEFICIENT``), worded by :func:`~controllers.ctc_status.
+    status_reason`.
 
     Args:
         y: The output row.
-        converged: Whether its pose converged (:func:`evaluate_rows`).
-        residual: Its pose residual.
-        solved: The index of the ``solved`` flag in the row.
+        status: The index of the ``status`` code in the row.
+        residual: The index of the pose residual in the row.
         factor: The block of ``L^T L`` (36) in the row.
         threshold: Relative singular-value threshold of the rank test.
         pose_name: What found the pose (named by the refusal).
+        inputs: The input row's views by block (``mask``, ``seen``: the rows and legs a
+            refusal for too few of them counts), or None.
     """
-    if not converged:
-        return (f"nominal model failed: {pose_name} did not converge (residual "
-                f"{residual:.3g})")
-    if not math.isfinite(y.dot(y)):
-        bad = "leg forces" if np.isfinite(y[factor]).all() else "Jacobian"
-        return f"non-finite {bad} (numerical failure)"
-    if y[solved] != 1.0:
-        return "nominal model failed: singular inverse Jacobian (the inverse dynamics' solve)"
-    if rank_condition(y[factor], threshold) is None:
+    code = int(y[status])
+    if code == Status.OK:
+        if rank_condition(y[factor], threshold) is not None:
+            return None
         w = np.linalg.eigvalsh(y[factor].reshape(6, 6))
         cond = math.sqrt(w[-1] / w[0]) if w[0] > 0 else math.inf
-        return f"Jacobian of rank < 6 (condition {cond:.3g})"
-    return None
+        return status_reason(Status.RANK_DEFICIENT, condition=cond)
+    views = {} if inputs is None else inputs
+    mask, seen = views.get("mask"), views.get("seen")
+    return status_reason(
+        code, residual=float(y[residual]), pose_name=pose_name,
+        non_finite="leg forces" if np.isfinite(y[factor]).all() else "Jacobian",
+        rows=0 if mask is None else int(np.sum(mask == 1.0)),
+        legs=None if seen is None else np.flatnonzero(seen == 1.0).tolist())
 
 
 __all__ = ["accepted_rows", "evaluate_rows", "finite_readings_rows", "over_limits",

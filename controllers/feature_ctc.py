@@ -31,17 +31,16 @@ from dataclasses import replace
 import numpy as np
 
 from controllers.base import ControllerContext, Goal, Observation, ObservationBatch
-from controllers.cartesian_ctc import directions_seen, every_seen, pose_measurement, seen_rows
+from controllers.cartesian_ctc import directions_seen, every_seen, seen_rows
 from controllers.exceptions import ContextError
 from controllers.solvers.reference_motion import feature_motion, layouts
 from controllers.task_ctc import (
     CompiledTaskStep,
-    Measured,
     TaskComputedTorque,
     camera_and_base_points,
     goal_pose_of,
 )
-from controllers.tasks import LegDirectionTask, LegEdgeTask, Task, TaskState
+from controllers.tasks import LegDirectionTask, LegEdgeTask, Task
 from controllers.tracking import anchor_goals, reference_goals
 from vision.legs import directions_from_edges
 
@@ -100,21 +99,6 @@ class FeatureCTC(TaskComputedTorque):
         assert self.context is not None
         return goal_pose_of(self.name, self.context.goal)
 
-    def measure(self, observation: Observation, q: np.ndarray, q_dot: np.ndarray
-                ) -> Measured | str:
-        """Encoders' pose and twist; the seen features as the task state."""
-        assert self.context is not None and self.model is not None
-        R, t = self.encoder_pose(q)
-        m = pose_measurement(self.model, R, t, q, q_dot)
-        feats = self.features_seen(observation)
-        if isinstance(feats, str):
-            return feats
-        u, normals, rows = feats
-        m.state = TaskState(self._A[None], u[None], q[None],
-                            None if normals is None else normals[None])
-        m.frame, m.rows = self._frame, rows
-        return m
-
     def features_seen(self, observation: Observation
                       ) -> tuple[np.ndarray, np.ndarray | None, np.ndarray] | str:
         """Directions (6, 3), normals (6, 2, 3) or None, and the rows to use."""
@@ -126,17 +110,9 @@ class FeatureCTC(TaskComputedTorque):
         return self.features_seen(observation)
 
     def make_task(self, desired: np.ndarray) -> Task:
-        """The task towards ``desired`` features."""
+        """The task towards ``desired`` features (the numpy task: the tests' oracle of the
+        compiled step and the reference terms' checks)."""
         raise NotImplementedError
-
-    def desired_at(self, tr: float | None
-                   ) -> tuple[Task, np.ndarray | None, np.ndarray | None]:
-        """The task towards the anchored model features at ``tr`` with their rate and
-        acceleration, or the taught goal at rest."""
-        if tr is None or self.reference is None:
-            return self.make_task(self._taught), None, None
-        s, s_dot, s_ddot = (x.reshape(self._taught.shape) for x in self.feature_reference(tr))
-        return self.make_task(s), s_dot, s_ddot
 
     def feature_reference(self, tr: float) -> np.ndarray:
         """(3, m) the anchored model features at ``tr`` [s], their rate and acceleration
@@ -220,12 +196,13 @@ class FeatureCTC(TaskComputedTorque):
                                           self._frame.translation]))
 
     def compiled_inputs(self, step: CompiledTaskStep, observation: Observation, tr: float,
-                        q: np.ndarray) -> tuple[np.ndarray | None, str | None] | None:
-        """The features seen and the rows to use (None: every row, all seen and known);
-        the reference at ``tr``."""
+                        q: np.ndarray) -> tuple[np.ndarray | None, str | None] | str:
+        """The features seen and the rows to use (None: every row, all seen and known;
+        fewer than six: the step's status says so); the reference at ``tr``; or why
+        there are no features."""
         feats = self.compiled_features(observation)
         if isinstance(feats, str):
-            return None
+            return feats
         u, normals, rows = feats
         row, inputs = step.row, step.inputs
         if normals is None:

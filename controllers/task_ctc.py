@@ -1,25 +1,24 @@
 """Computed torque on a task: the shared loop of ``cartesian-ctc``, ``vision-ctc``,
 ``leg-edge-ctc`` and ``leg-direction-ctc``.
 
-Each period a :class:`TaskComputedTorque` subclass measures a platform pose and twist for
-the NOMINAL dynamic model and a task state (:meth:`TaskComputedTorque.measure`), builds
-its task towards the reference at the observation's time with the desired value's rate
-and acceleration (:meth:`TaskComputedTorque.desired_at`: the trajectory's own twist and
-twist rate, :meth:`hexapod.trajectory.PoseTrajectory.at`), and the
-:class:`~controllers.solvers.computed_torque.ComputedTorqueSolver` turns the task's
-error, Jacobian and ``L_dot tau``, plus the reference's own motion ``e_t``, ``e_tt``
-(:meth:`controllers.tasks.Task.reference_terms`, analytic), into leg forces held over
-the period.
-
-That numpy path is the reference and the fallback: on the happy path the whole step is
-one compiled C function (:class:`controllers.task_ctc_compiled.CompiledTaskStep`,
-:mod:`controllers.solvers.compiled_task_ctc`), equal to it to rounding.
+Each period a :class:`TaskComputedTorque` subclass writes its measurement (the features
+seen, or the legs the visual pose is fitted to) and the reference at the observation's
+time with its rate and acceleration into the input row of its compiled step
+(:meth:`TaskComputedTorque.compiled_inputs`), and the step, one C function
+(:class:`controllers.task_ctc_compiled.CompiledTaskStep`,
+:mod:`controllers.solvers.compiled_task_ctc`), finds the pose and twist for the NOMINAL
+dynamic model, the task's error, Jacobian and ``L_dot tau``, the reference's own motion
+``e_t``, ``e_tt``, solves for the platform acceleration and gives the leg forces held
+over the period. It is the law's only step: off its happy path the law refuses with
+the reason of the row's status (:mod:`controllers.ctc_status`). The numpy step it
+replaced (the tasks' numpy error and Jacobian, an SVD solve, the model's inverse
+dynamics) is the tests' oracle (``tests/controllers/task_ctc_oracles.py``).
 
 The reference is the trajectory of ``context.reference`` (base frame, sampled at the
 observation's time) or, for a fixed goal, a straight line from the pose measured at the
-first step to the goal pose with a quintic timing, slow enough that no leg's nominal
-speed exceeds the speed limit (``smooth_goal``; off: the goal is a step, the error's
-free response).
+first step (the pose of a compiled step towards the goal at rest) to the goal pose with
+a quintic timing, slow enough that no leg's nominal speed exceeds the speed limit
+(``smooth_goal``; off: the goal is a step, the error's free response).
 
 The checked readings, goal pose, camera and base points, and that line are
 :mod:`controllers.task_ctc_inputs`' (re-exported here).
@@ -30,7 +29,6 @@ from __future__ import annotations
 import math
 from abc import abstractmethod
 from collections.abc import Sequence
-from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
@@ -55,7 +53,6 @@ from controllers.solvers.computed_torque import (
     ComputedTorqueSolver,
     SecondOrderGains,
     checked_integral_gain,
-    task_in_model_twist,
 )
 from controllers.solvers.saturation import (
     checked_strategy,
@@ -71,11 +68,8 @@ from controllers.task_ctc_inputs import encoder_readings as encoder_readings
 from controllers.task_ctc_inputs import finite_readings as finite_readings
 from controllers.task_ctc_inputs import goal_pose_of as goal_pose_of
 from controllers.task_ctc_inputs import line_to as line_to
-from controllers.tasks.base import Task, TaskState
 from hexapod.actuation import Actuation
 from hexapod.dynamics import DynamicModel
-from hexapod.fk import forward_kinematics
-from hexapod.kinematics import Transform
 
 #: Default natural frequency of the task error [Hz] (``omega_n dt = 0.25`` at 20 ms).
 NATURAL_FREQUENCY_HZ = 2.0
@@ -83,34 +77,10 @@ NATURAL_FREQUENCY_HZ = 2.0
 DAMPING = 1.0
 
 
-@dataclass
-class Measured:
-    """What a law measured this period.
-
-    Attributes:
-        rotation: (3, 3) platform orientation for the dynamic model (base frame).
-        translation: (3,) platform position [m].
-        twist: (6,) model twist ``(v [m/s], w [rad/s])`` (base frame, origin velocity).
-        state: The task state (one row), in the task's frame.
-        frame: The task's frame from the base (None: the base frame itself).
-        rows: (m,) bool, the task rows to use (None: all).
-        note: A diagnostic (e.g. legs left out).
-        inverse_jacobian: (6, 6) nominal ``K`` at the pose, or None.
-    """
-
-    rotation: np.ndarray
-    translation: np.ndarray
-    twist: np.ndarray
-    state: TaskState
-    frame: Transform | None = None
-    rows: np.ndarray | None = None
-    note: str | None = None
-    inverse_jacobian: np.ndarray | None = None
-
-
 class TaskComputedTorque(Controller):
     """Computed torque on a task (see the module docstring). Subclasses set ``name``,
-    ``features`` and implement :meth:`measure`, :meth:`goal_pose` and :meth:`desired_at`.
+    ``features``, ``compiled_kind`` (or make their own compiled step at reset) and
+    implement :meth:`goal_pose` and :meth:`compiled_inputs`.
 
     Args:
         natural_frequency: ``f_n`` [Hz] of the task error's second-order response.
@@ -128,7 +98,7 @@ class TaskComputedTorque(Controller):
     #: Samples ``context.reference`` itself (:mod:`controllers.tracking` passes it through).
     tracks_reference = True
     #: Task kind of the compiled step (:mod:`controllers.solvers.compiled_task_ctc`; None:
-    #: the numpy path only).
+    #: the subclass makes its own step at reset).
     compiled_kind: str | None = None
     #: The compiled step finds the pose from the encoders (else it is given).
     compiled_fk = True
@@ -156,11 +126,10 @@ class TaskComputedTorque(Controller):
         self._started = False
         self.guess: tuple[np.ndarray, np.ndarray] | None = None
         self._pose_grid: tuple[Any, np.ndarray] | None = None
-        #: The compiled step (None: the numpy path only).
+        #: The compiled step (None: not reset).
         self.compiled: CompiledTaskStep | None = None
-        #: Steps taken by the compiled path and by the numpy path (diagnostics).
+        #: Commands of the compiled step (diagnostics).
         self.compiled_steps = 0
-        self.numpy_steps = 0
 
     def reset_trial(self, context: ControllerContext) -> None:
         """Build the nominal model; take the reference or the goal.
@@ -196,12 +165,12 @@ class TaskComputedTorque(Controller):
     def compiled_constants(self, step: CompiledTaskStep) -> None:
         """Write the law's constant inputs of the compiled step (nothing by default)."""
 
+    @abstractmethod
     def compiled_inputs(self, step: CompiledTaskStep, observation: Observation, tr: float,
-                        q: np.ndarray) -> tuple[np.ndarray | None, str | None] | None:
+                        q: np.ndarray) -> tuple[np.ndarray | None, str | None] | str:
         """Write this period's measurement and reference (``tr`` [s] on the reference's
-        clock) into the compiled step's row; the task rows to use (None: all) and a
-        note, or None to leave the period to the numpy path (the default)."""
-        return None
+        clock; without a reference the fixed goal at rest) into the compiled step's row;
+        the task rows to use (None: all) and a note, or why there is no measurement."""
 
     def batch_inputs(self, step: CompiledTaskStep, X: np.ndarray,
                      observations: ObservationBatch, rows: np.ndarray,
@@ -242,18 +211,6 @@ class TaskComputedTorque(Controller):
     def goal_pose(self) -> tuple[np.ndarray, np.ndarray]:
         """The fixed goal's pose (base frame), the end of the smooth line."""
 
-    @abstractmethod
-    def measure(self, observation: Observation, q: np.ndarray, q_dot: np.ndarray
-                ) -> Measured | str:
-        """This period's measurement, or why there is none."""
-
-    @abstractmethod
-    def desired_at(self, tr: float | None
-                   ) -> tuple[Task, np.ndarray | None, np.ndarray | None]:
-        """The task towards the reference at ``tr`` [s] of the reference's clock (None:
-        the fixed goal itself), with its desired value's rate and acceleration (None: at
-        rest; for a pose task the reference's twist and twist rate)."""
-
     def pose_reference(self, tr: float) -> np.ndarray:
         """(24,) the reference at ``tr`` [s]: ``R*`` (row-major), ``t*``, twist, twist rate
         (base frame, :meth:`anchor`). The control grid ``k dt`` is sampled once per
@@ -285,39 +242,37 @@ class TaskComputedTorque(Controller):
 
     def step_trial(self, observation: Observation) -> Command:
         """The leg forces of this period [N], or a refusal (zeros) with its reason."""
+        compiled = self.compiled
         if self.context is None or self.model is None:
             return self.refuse("reset(context) was not called")
-        compiled = self.compiled if self._started else None
+        if compiled is None:
+            return self.refuse("no compiled step (compiled_kind is None and the law made "
+                               "none at reset)")
         # the common case writes the readings into the compiled step's row itself
-        fast = None if compiled is None else finite_readings(
-            observation, compiled.views["q"], compiled.views["q_dot"])
+        fast = finite_readings(observation, compiled.views["q"], compiled.views["q_dot"])
         if fast is None:  # encoder_readings decides (its reasons), off the common case
             readings = encoder_readings(observation)
             if isinstance(readings, str):
                 return self.refuse(readings)
             t, q, qd = readings
+            compiled.views["q"][:] = q
+            compiled.views["q_dot"][:] = qd
         else:
             t, q, qd = fast
         try:
-            if compiled is not None:
-                if fast is None:
-                    cmd = compiled.step(self, observation, t - self._t0, q, qd)
-                else:
-                    cmd = compiled.step_written(self, observation, t - self._t0)
-                if cmd is not None:
-                    self.compiled_steps += 1
-                    y = compiled.bound.y
-                    assert cmd.forces is not None
-                    cmd.forces = self.limited(cmd.forces, y[compiled.pose_block], qd,
-                                              y[compiled.error_block], compiled.used)
-                    return cmd
-            self.numpy_steps += 1
-            m = self.measure(observation, q, qd)
-            if isinstance(m, str):
-                return self.refuse(m)
             if not self._started:
-                self._start(t, m)
-            return self._command(t, m, qd)
+                problem = self._start(observation, t)
+                if problem is not None:
+                    return self.refuse(problem)
+            cmd = compiled.step_written(self, observation, t - self._t0)
+            if isinstance(cmd, str):
+                return self.refuse(cmd)
+            self.compiled_steps += 1
+            y = compiled.bound.y
+            assert cmd.forces is not None
+            cmd.forces = self.limited(cmd.forces, y[compiled.pose_block], qd,
+                                      y[compiled.error_block], compiled.used)
+            return cmd
         except Exception as exc:  # the nominal model failed here: refuse with its reason
             return self.refuse(f"nominal model failed: {exc}")
 
@@ -325,7 +280,7 @@ class TaskComputedTorque(Controller):
         """The rows of started trials with finite readings through the compiled step in
         one C call (:func:`~controllers.ctc_rows.evaluate_rows`); returns the other rows
         and those whose result is not accepted (left to the trial's own step, which
-        says why)."""
+        refuses them with the reason of their status)."""
         obs = observations
         n = len(obs)
         readings = finite_readings_rows(obs, self.trial_instances)
@@ -362,7 +317,7 @@ class TaskComputedTorque(Controller):
                 prepared = step.prepare(inst, obs.item(k), float(t[k]) - inst.reference_start)
             except Exception:  # the trial's own step refuses with the reason
                 continue
-            if prepared is None:
+            if isinstance(prepared, str):
                 continue
             X[j] = step.row
             keep.append(j)
@@ -373,13 +328,13 @@ class TaskComputedTorque(Controller):
         steps = [instances[j].compiled for j in keep]
         if len(keep) < len(candidates):
             X = X[keep]
-        Y, converged = evaluate_rows(first.function, X, first.inputs["pose"],
-                                     first.outputs["pose"], first.outputs.index("fk_residual"),
-                                     first.tolerance, FK_MAX_CALLS)
+        Y, _ = evaluate_rows(first.function, X, first.inputs["pose"], first.outputs["pose"],
+                             first.outputs.index("fk_residual"), first.tolerance,
+                             FK_MAX_CALLS)
         forces, pose_out, error = (first.outputs[b] for b in ("forces", "pose", "error"))
         slow = np.ones(n, dtype=bool)
         assert out.forces is not None
-        accepted = np.flatnonzero(accepted_rows(Y, converged, first.outputs.index("solved"),
+        accepted = np.flatnonzero(accepted_rows(Y, first.outputs.index("status"),
                                                 first.outputs["factor"],
                                                 self.solver.threshold))
         if not len(accepted):
@@ -434,59 +389,19 @@ class TaskComputedTorque(Controller):
             bias = zero_acceleration_forces(self.model, pose, qd, hold=float(self.context.dt))
         return saturated(self.saturation, forces, self.force_limit, bias)
 
-    def encoder_pose(self, q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """The nominal forward kinematics of the lengths ``q`` [m] (warm-started at the
-        last one)."""
-        assert self.context is not None
-        fk = forward_kinematics(self.context.geometry, q, guess=self.guess,
-                                check_stroke=False)
-        self.guess = (fk.rotation, fk.translation)
-        return fk.rotation, fk.translation
-
-    def _start(self, t: float, m: Measured) -> None:
-        self._started, self._t0 = True, t
+    def _start(self, observation: Observation, t: float) -> str | None:
+        """Start following the fixed goal at ``t`` [s]: with a smooth goal, the line from
+        the pose of a compiled step towards the goal at rest (the pose the law measures
+        now; its command is not used); None, or why there is no pose."""
         if self.smooth_goal:
-            assert self.context is not None
-            self.reference = line_to(self.context, m.rotation, m.translation,
-                                     *self.goal_pose())
-
-    def _command(self, t: float, m: Measured, qd: np.ndarray) -> Command:
-        """The numpy path (the reference of the compiled one, and its fallback)."""
-        assert self.model is not None and self.context is not None
-        task, rate, acc = self.desired_at(None if self.reference is None
-                                          else t - self._t0)
-        e = task.error(m.state)[0]
-        L_task = task.jacobian(m.state)[0]
-        L, twist_task, gdot = task_in_model_twist(L_task, m.translation, m.twist, m.frame)
-        ldot = task.jacobian_dot_twist(m.state, twist_task[None])[0] + gdot
-        e_t = e_tt = None
-        if rate is not None and acc is not None:
-            e_t, e_tt = (x[0] for x in task.reference_terms(m.state, twist_task[None],
-                                                            rate[None], acc[None]))
-        if self.integral_gain:  # - Kp Ki int e dt in the desired e_ddot
-            term = self.integral_term(len(e))
-            e_tt = term if e_tt is None else e_tt + term
-        rows = np.all(np.isfinite(L), axis=1) & np.isfinite(e) & np.isfinite(ldot)
-        if e_t is not None and e_tt is not None:
-            rows &= np.isfinite(e_t) & np.isfinite(e_tt)
-        if m.rows is not None:
-            rows &= m.rows
-        sol = self.solver.acceleration(
-            e[rows], L[rows], ldot[rows], m.twist, None if e_t is None else e_t[rows],
-            None if e_tt is None else e_tt[rows])
-        if sol.reason is not None:
-            return self.refuse(sol.reason, e[rows])
-        f, _ = self.solver.forces(self.model, m.rotation, m.translation, m.twist, sol.acc,
-                                  qd, hold=float(self.context.dt),
-                                  inverse_jacobian=m.inverse_jacobian)
-        if not np.all(np.isfinite(f)):
-            return self.refuse(f"non-finite leg forces {f}")
-        f = self.limited(f, np.concatenate([m.rotation.T.ravel(), m.translation]), qd, e,
-                         rows)
-        notes = [] if m.note is None else [m.note]
-        return Command.of_forces(f, error=e[rows], error_norm=float(np.linalg.norm(e[rows])),
-                                 rank=sol.rank, condition=sol.condition,
-                                 features_used=int(rows.sum()), notes=notes)
+            assert self.compiled is not None and self.context is not None
+            found = self.compiled.step_written(self, observation, 0.0)
+            if isinstance(found, str):
+                return found
+            assert self.guess is not None  # the pose of the accepted step
+            self.reference = line_to(self.context, *self.guess, *self.goal_pose())
+        self._started, self._t0 = True, t
+        return None
 
     def refuse(self, problem: str, error: np.ndarray | None = None) -> Command:
         """A zero force command with the reason."""

@@ -3,18 +3,20 @@
 :class:`CompiledTaskStep` fills the input row of the law's compiled step
 (:func:`controllers.solvers.compiled_task_ctc.task_step`: the pose, the dynamics, the
 task, the reference's terms, the solve and the leg forces in one C call), calls it and
-reads the command. It answers None off the happy path (the law's measurement has no
-answer, forward kinematics not converged from the last pose, a rank-deficient task
-Jacobian, a singular inverse solve, a non-finite value, fewer than six rows): the
-law's numpy path (:meth:`controllers.task_ctc.TaskComputedTorque._command`, the
-reference, tested equal) then decides, with its reasons.
+reads the command. Off the happy path it answers why not: the law's measurement has
+no answer (features missing, the legs seen collinear), or the row's ``status``
+(:mod:`controllers.ctc_status`: fewer than six rows or three legs seen, the pose not
+converged from the last one, a singular inverse solve, a non-finite value) or the rank
+test of the task Jacobian says so (:func:`controllers.ctc_rows.refusal` words it). The
+law refuses with that reason: there is no other step (the numpy step it replaced is
+the tests' oracle, ``tests/controllers/task_ctc_oracles.py``).
 
 A law gives the compiled path its kind and pose source (``compiled_kind``,
 ``compiled_fk``; or a subclass of the step its own compiled function of the same
 layouts, :meth:`CompiledTaskStep.make_function`, as a plugin feature's step does), its
 constants (``compiled_constants(step)``) and, each period, its
 measurement and reference (``compiled_inputs(step, observation, tr, q)``, returning the
-rows to use or None, and a note).
+rows to use or None and a note, or why there is no measurement).
 
 The C function runs on the step's own bound input and output rows
 (:meth:`hexapod.compiled.CompiledFunction.bind`): the law writes into :attr:`CompiledTaskStep.row`
@@ -33,7 +35,8 @@ from numpy.typing import ArrayLike
 from scipy.linalg.lapack import dsyevd as _eigenvalues
 
 from controllers.base import Command, Observation
-from controllers.solvers.compiled_task_ctc import task_step
+from controllers.ctc_rows import refusal
+from controllers.solvers.compiled_task_ctc import FIT_TOLERANCE, FK_TOLERANCE, task_step
 from hexapod.actuation import Actuation
 from hexapod.compiled import BoundCall, CompilationError, CompiledFunction
 from hexapod.dynamics.model import INVERSE_TOLERANCE
@@ -42,13 +45,9 @@ from hexapod.workspace import home_pose
 if TYPE_CHECKING:
     from controllers.task_ctc import TaskComputedTorque
 
-#: Forward-kinematics tolerance on the length residual [m] (as :func:`forward_kinematics`).
-FK_TOLERANCE = 1e-12
-#: Calls of the compiled step (3 Newton iterations each) before the numpy path takes over.
+#: Calls of the compiled step (3 Newton iterations each) before the step is refused (as
+#: the 50 iterations of :func:`hexapod.fk.forward_kinematics`).
 FK_MAX_CALLS = 16
-#: Size of the rigid fit's last Newton step [rad] below which it has converged (the
-#: next would be of its square: the fit is exact to rounding).
-FIT_TOLERANCE = 1e-8
 #: No pose in the input row (``CompiledTaskStep._guess_of`` matches no guess).
 _NO_GUESS = object()
 
@@ -95,7 +94,7 @@ class CompiledTaskStep:
         self.home = home_pose(g)
         out = self.outputs
         self._residual = out.index("fk_residual")
-        self._solved = out.index("solved")
+        self._status = out.index("status")
         self._factor = out["factor"]
         self._error = out["error"]
         self._forces = out["forces"]
@@ -104,6 +103,9 @@ class CompiledTaskStep:
         self.pose_block, self.error_block = self._pose, self._error
         #: Pose residual below which the pose has converged.
         self.tolerance = FK_TOLERANCE if self.fk else FIT_TOLERANCE
+        #: What finds the pose (a refusal names it).
+        self.pose_name = "forward kinematics of the lengths" if self.fk else \
+            "the rigid fit of the legs seen"
         law.compiled_constants(self)
 
     def make_function(self) -> CompiledFunction:
@@ -153,8 +155,8 @@ class CompiledTaskStep:
         self._guess_of = _NO_GUESS
 
     def step(self, law: TaskComputedTorque, observation: Observation, tr: float,
-             q: np.ndarray, qd: np.ndarray) -> Command | None:
-        """The command of this period, or None off the happy path.
+             q: np.ndarray, qd: np.ndarray) -> Command | str:
+        """The command of this period, or why there is none.
 
         ``q`` [m] and ``qd`` [m/s] are written into the row (blocks ``q`` and ``q_dot``;
         :meth:`step_written` when they are there already)."""
@@ -163,11 +165,11 @@ class CompiledTaskStep:
         return self.step_written(law, observation, tr)
 
     def step_written(self, law: TaskComputedTorque, observation: Observation, tr: float
-                     ) -> Command | None:
+                     ) -> Command | str:
         """:meth:`step` with ``q`` and ``q_dot`` already in the row."""
         prepared = self.prepare(law, observation, tr)
-        if prepared is None:
-            return None
+        if isinstance(prepared, str):
+            return prepared
         rows, note = prepared
         bound = self.bound
         pose_in, y, call = self.views["pose"], bound.y, bound.call
@@ -179,14 +181,17 @@ class CompiledTaskStep:
         while not y[residual] < tolerance:
             self._guess_of = _NO_GUESS
             if calls >= FK_MAX_CALLS or not math.isfinite(y[residual]):
-                return None
+                break
             pose_in[:] = y[pose_out]
             if call():
                 raise CompilationError(f"{self.function.name}: the compiled function failed")
             calls += 1
         accepted = self.accept(law, y, rows)
         if accepted is None:
-            return None
+            reason = refusal(y, self._status, residual, self._factor, law.solver.threshold,
+                             self.pose_name, self.views)
+            assert reason is not None
+            return reason
         e, condition = accepted
         return Command(np.zeros(6), error=e, error_norm=math.sqrt(e.dot(e)), rank=6,
                        condition=condition, features_used=len(e), active_constraints=[],
@@ -194,17 +199,15 @@ class CompiledTaskStep:
                        forces=y[self._forces].copy())
 
     def prepare(self, law: TaskComputedTorque, observation: Observation, tr: float
-                ) -> tuple[np.ndarray | None, str | None] | None:
+                ) -> tuple[np.ndarray | None, str | None] | str:
         """Write the pose guess, the law's measurement and the reference at ``tr`` into
         the row (``q`` and ``q_dot`` there already); the task rows to use (None: all) and
-        a note, or None off the happy path (no measurement, fewer than six rows)."""
+        a note, or why there is no measurement."""
         self.write_guess(law)
         prepared = law.compiled_inputs(self, observation, tr, self.views["q"])
-        if prepared is None:
-            return None
+        if isinstance(prepared, str):
+            return prepared
         rows = prepared[0]
-        if rows is not None and int(rows.sum()) < 6:
-            return None
         if law.integral_gain:
             self.views["integral"][:] = law.integral_term(self.views["integral"].size)
         self.used = rows
@@ -221,13 +224,14 @@ class CompiledTaskStep:
 
     def accept(self, law: TaskComputedTorque, y: np.ndarray, rows: np.ndarray | None
                ) -> tuple[np.ndarray, float] | None:
-        """The task error (of the rows used) and the condition number of a converged
-        output row ``y`` when it is a command (inverse solve solved, every value finite,
-        full rank), and the pose it found taken as the next guess; None otherwise (the
-        row is left as it is)."""
-        if y[self._solved] != 1.0 or not math.isfinite(y.dot(y)):  # (the ddot of y @ y)
+        """The task error (of the rows used) and the condition number of an output row
+        ``y`` when it is a command (its status 0: converged, enough rows, solved, every
+        value finite; and full rank), and the pose it found taken as the next guess;
+        None otherwise (the row is left as it is)."""
+        if y[self._status] != 0.0:
             return None
-        # the squared singular values of the masked Jacobian (LAPACK syevd of L^T L)
+        # the squared singular values of the masked Jacobian (LAPACK syevd of L^T L; the
+        # test of controllers.ctc_rows.rank_condition, the condition as sqrt(max / min))
         w, _, info = _eigenvalues(y[self._factor].reshape(6, 6), 0)  # (compute_v=0)
         w_min, w_max = float(w[0]), float(w[-1])
         if info != 0 or not (w_max > 0 and w_min > law.solver.threshold**2 * w_max):

@@ -9,8 +9,8 @@ reference pose trajectory seen by the estimated camera, with its rate and accele
 by automatic differentiation (:attr:`LegFeature.motion_function`), anchored at the taught
 value (``s* = s_taught + s_model(t) - s_model(end)``). Each period is one call of the
 feature's compiled step (:mod:`controllers.features.ctc_step`); off its happy path the
-numpy task (:class:`~controllers.tasks.leg_feature.FeatureTask`) decides, as for the
-built-ins.
+law refuses with the reason of the row's status (:mod:`controllers.ctc_status`), as the
+built-ins do.
 """
 
 from __future__ import annotations
@@ -104,11 +104,11 @@ class FeatureComputedTorque(LegDirectionCTC):
         self._rows_all.flags.writeable = False
 
     def compiled_inputs(self, step: object, observation: Observation, tr: float,
-                        q: np.ndarray) -> tuple[np.ndarray | None, str | None] | None:
+                        q: np.ndarray) -> tuple[np.ndarray | None, str | None] | str:
         """As the built-in law's, every row in use when every leg is seen."""
         feats = self.compiled_features(observation)
         if isinstance(feats, str):
-            return None
+            return feats
         u, _, rows = feats
         row, inputs = step.row, step.inputs  # type: ignore[attr-defined]
         row[inputs["directions"]] = u.ravel()

@@ -37,7 +37,9 @@ for the rank test), the ``forces`` (6) [N], the max absolute FK length residual
 ``fk_residual`` [m] (the caller calls again from the pose reached while it is not below
 its tolerance, as :func:`hexapod.fk.forward_kinematics` does), and ``solved``: 1.0 when
 the inverse solve's residual is below ``inverse_tolerance`` relative to its right-hand
-side (else 0.0; NaN compares false).
+side (else 0.0; NaN compares false); the ``status`` of the step (:func:`sx_status`:
+0, or the code of :class:`controllers.ctc_status.Status` that says why it is not a
+command, whose reason :func:`controllers.ctc_rows.refusal` words).
 """
 
 from __future__ import annotations
@@ -46,6 +48,7 @@ from functools import lru_cache
 
 import casadi as ca
 
+from controllers.ctc_status import Status
 from hexapod.compiled import CompiledFunction, Layout
 from hexapod.dynamics import compiled as dyn
 from hexapod.dynamics.drive_model import COULOMB_SMOOTHING
@@ -63,7 +66,12 @@ INPUTS = Layout([("pose", 12), ("q", 6), ("q_dot", 6), ("desired", (3, 6)), *MOD
                  ("gains", 2)], "joint-space computed-torque input")
 #: Its output row.
 OUTPUTS = Layout([("pose", 12), ("factor", (6, 6)), ("forces", 6), ("fk_residual", 1),
-                  ("solved", 1)], "joint-space computed-torque output")
+                  ("solved", 1), ("status", 1)], "joint-space computed-torque output")
+#: Forward-kinematics tolerance on the length residual [m] (as :func:`forward_kinematics`):
+#: the step's status is ``NOT_CONVERGED`` above it.
+FK_TOLERANCE = 1e-12
+#: Largest finite double: a sum of squares not above it is finite (NaN compares false).
+_DBL_MAX = 1.7976931348623157e308
 
 
 def sx_encoder_pose(pose: ca.SX, q: ca.SX, points: ca.SX, calls: int
@@ -106,6 +114,23 @@ def sx_mechanism_forces(K: ca.SX, M: ca.SX, h: ca.SX, bias: ca.SX, acc: ca.SX,
     return a, f, solved
 
 
+def sx_status(fk_residual: ca.SX, tolerance: float, solved: ca.SX, values: ca.SX,
+              problem: ca.SX | None = None) -> ca.SX:
+    """The step's status code (:class:`controllers.ctc_status.Status`, as a double): the
+    input's own ``problem`` code when not 0 (too few rows or legs seen), else
+    ``NOT_CONVERGED`` when the pose's residual is not below ``tolerance``, ``NON_FINITE``
+    when a value of ``values`` is not finite (their sum of squares, as
+    :func:`controllers.ctc_rows.refusal` checked it), ``SINGULAR_INVERSE`` when the
+    inverse dynamics' solve is not ``solved``, else 0 (the rank test of the Jacobian is
+    the caller's, by LAPACK: :func:`controllers.ctc_rows.rank_condition`)."""
+    status = ca.if_else(solved == 1.0, 0.0, float(Status.SINGULAR_INVERSE))
+    status = ca.if_else(ca.dot(values, values) <= _DBL_MAX, status, float(Status.NON_FINITE))
+    status = ca.if_else(fk_residual < tolerance, status, float(Status.NOT_CONVERGED))
+    if problem is not None:
+        status = ca.if_else(problem == 0.0, status, problem)
+    return status
+
+
 def _build(inverse_tolerance: float) -> ca.Function:
     x = ca.SX.sym("x", INPUTS.size)
     v = INPUTS.split(x)
@@ -121,6 +146,7 @@ def _build(inverse_tolerance: float) -> ca.Function:
         qd_s / COULOMB_SMOOTHING)
     fk_residual = ca.mmax(ca.fabs(residual))
     out = ca.vertcat(R_t, ca.reshape(K.T @ K, 36, 1), f, fk_residual, inverse_solved)
+    out = ca.vertcat(out, sx_status(fk_residual, FK_TOLERANCE, inverse_solved, out))
     return ca.Function("hexapod_ctc_joint_step", [x], [ca.cse(out)])
 
 
@@ -135,5 +161,5 @@ def joint_step(inverse_tolerance: float = INVERSE_TOLERANCE) -> CompiledFunction
     return CompiledFunction(_build(float(inverse_tolerance)), inputs=INPUTS, outputs=OUTPUTS)
 
 
-__all__ = ["FK_CALLS", "INPUTS", "MODEL_BLOCKS", "OUTPUTS", "joint_step", "sx_encoder_pose",
-           "sx_mechanism_forces", "sx_model_state"]
+__all__ = ["FK_CALLS", "FK_TOLERANCE", "INPUTS", "MODEL_BLOCKS", "OUTPUTS", "joint_step",
+           "sx_encoder_pose", "sx_mechanism_forces", "sx_model_state", "sx_status"]

@@ -28,9 +28,12 @@ does for the joint-space law:
   terms at the velocity the legs reach over the period ``hold``
   (:meth:`~controllers.solvers.computed_torque.ComputedTorqueSolver.forces`).
 
-The caller keeps the numpy path (the reference) for everything off the happy path: FK
-not converged, a rank-deficient Jacobian (its singular values are those of the output
-``factor``), a singular inverse solve, a non-finite value.
+It is the laws' only step: off the happy path they refuse with the reason of the
+output ``status`` (:mod:`controllers.ctc_status`: too few rows in the ``mask`` or legs
+``seen``, the pose not converged, a non-finite value, a singular inverse solve) or of
+the rank test of the output ``factor`` (whose eigenvalues are the squared singular
+values of the Jacobian, by LAPACK in the caller). The numpy step they replaced is the
+tests' oracle (``tests/controllers/task_ctc_oracles.py``).
 
 Inputs (:func:`layout`): ``pose`` (``R`` column-major, ``t``: the FK guess, or the
 measured pose), ``q``, ``q_dot`` (6 each), ``points`` (``A`` then ``E``, base frame,
@@ -49,8 +52,10 @@ subtracted from the desired ``e_ddot``; zeros without integral action).
 Outputs: ``pose`` (12, as the input), ``K`` (36, column-major), ``fk_residual`` (max
 absolute length residual [m]), ``forces`` (6) [N], ``solved`` (1.0 when the inverse
 solve's residual is below the tolerance, as :mod:`controllers.solvers.compiled_ctc`),
-``error`` (m) and ``factor`` (6 x 6: ``L^T L`` of the masked model Jacobian, whose
-eigenvalues are its squared singular values).
+``error`` (m), ``factor`` (6 x 6: ``L^T L`` of the masked model Jacobian, whose
+eigenvalues are its squared singular values) and ``status``
+(:func:`~controllers.solvers.compiled_ctc.sx_status`: 0 or a code of
+:class:`controllers.ctc_status.Status`).
 """
 
 from __future__ import annotations
@@ -60,11 +65,14 @@ from functools import lru_cache
 
 import casadi as ca
 
+from controllers.ctc_status import Status
 from controllers.solvers.compiled_ctc import (
+    FK_TOLERANCE,
     MODEL_BLOCKS,
     sx_encoder_pose,
     sx_mechanism_forces,
     sx_model_state,
+    sx_status,
 )
 from controllers.tasks.base import reference_function, second_order_function
 from controllers.tasks.leg_direction import block_function as direction_block_function
@@ -94,6 +102,9 @@ REFERENCE = Layout([("R", (3, 3)), ("t", 3), ("twist", 6), ("twist_rate", 6)],
 FK_CALLS = 2
 #: Newton steps of the rigid fit per call.
 FIT_ITERATIONS = 4
+#: Size of the rigid fit's last Newton step [rad] below which it has converged (the
+#: next would be of its square: the fit is exact to rounding).
+FIT_TOLERANCE = 1e-8
 
 
 def task_layouts(name: str, extra: Sequence[tuple[str, Shape]], m: int
@@ -101,10 +112,11 @@ def task_layouts(name: str, extra: Sequence[tuple[str, Shape]], m: int
     """The input and output layouts of a task step of ``m`` task rows (module docstring):
     :data:`COMMON_INPUTS`, the task's own blocks ``extra``, then the ``integral`` term
     (``m``); the outputs ``pose``, ``K``, ``fk_residual``, ``forces``, ``solved``,
-    ``error`` (``m``) and ``factor``. A plugin's step (:mod:`controllers.features.ctc_step`)
+    ``error`` (``m``), ``factor`` and ``status`` (:func:`~controllers.solvers.
+    compiled_ctc.sx_status`). A plugin's step (:mod:`controllers.features.ctc_step`)
     has them too, so :class:`~controllers.task_ctc_compiled.CompiledTaskStep` drives it."""
     out = (("pose", 12), ("K", 36), ("fk_residual", 1), ("forces", 6), ("solved", 1),
-           ("error", m), ("factor", (6, 6)))
+           ("error", m), ("factor", (6, 6)), ("status", 1))
     return (Layout((*COMMON_INPUTS, *extra, ("integral", m)), name + " input"),
             Layout(out, name + " output"))
 
@@ -113,10 +125,12 @@ def task_layouts(name: str, extra: Sequence[tuple[str, Shape]], m: int
 def layout(kind: str, fk: bool = True) -> tuple[Layout, Layout]:
     """The input and output layouts of a kind (module docstring); the visual pose
     (``fk=False``) takes the legs' ``directions`` (6 x 3), the estimated ``base`` points
-    (6 x 3, camera frame) and the ``frame`` (the base from the camera, ``R`` row-major,
-    ``p``: 12) after the reference."""
+    (6 x 3, camera frame), the ``frame`` (the base from the camera, ``R`` row-major,
+    ``p``: 12) and the legs ``seen`` (6: 1.0 for a leg the fit takes, 0.0 for a hidden
+    one) after the reference."""
     m = ROWS[kind]
-    visual = (("directions", (6, 3)), ("base", (6, 3)), ("frame", 12)) if not fk else ()
+    visual = (("directions", (6, 3)), ("base", (6, 3)), ("frame", 12), ("seen", 6)) \
+        if not fk else ()
     features = (("normals", (6, 2, 3)), ("directions", (6, 3)), ("of_normals", 1)) \
         if kind == "edges" else (("directions", (6, 3)),)
     extra = (("reference", REFERENCE.size), *visual) if kind == "pose" else (
@@ -149,11 +163,14 @@ def model_twist(translation: ca.SX, twist: ca.SX, frame: ca.SX | None
     return G, gdot
 
 
-def _rigid_fit(R0: ca.SX, q: ca.SX, u: ca.SX, A: ca.SX, E: ca.SX, frame: ca.SX
-               ) -> tuple[ca.SX, ca.SX]:
+def _rigid_fit(R0: ca.SX, q: ca.SX, u: ca.SX, A: ca.SX, E: ca.SX, frame: ca.SX,
+               seen: ca.SX) -> tuple[ca.SX, ca.SX]:
     """The pose (``R`` column-major, ``t``: 12, base frame) of the rigid fit
-    ``min sum_i |R_c E_i + t_c - B_i|^2`` of the platform points ``E`` to the joints
-    ``B_i = A_i + q_i u_i`` (camera frame), and the size of the last step [rad].
+    ``min sum_i w_i |R_c E_i + t_c - B_i|^2`` of the platform points ``E`` to the joints
+    ``B_i = A_i + q_i u_i`` (camera frame) of the legs seen (``w_i``: ``seen``, 1.0 or
+    0.0; a hidden leg's joint is never read, a NaN there stays out), and the size of
+    the last step [rad]. With every leg seen the numbers are those of the plain fit
+    (a weight of 1.0 multiplies exactly, the sum of the weights is 6.0).
 
     With ``t_c = B_mean - R_c E_mean`` the fit maximises ``tr(R_c^T C)``,
     ``C = sum (B_i - B_mean)(E_i - E_mean)^T`` (Kabsch); a Newton step on
@@ -163,11 +180,14 @@ def _rigid_fit(R0: ca.SX, q: ca.SX, u: ca.SX, A: ca.SX, E: ca.SX, frame: ca.SX
     """
     Rbc = ca.reshape(frame[0:9], 3, 3).T
     pbc = frame[9:12]
-    B = [A[3 * i:3 * i + 3] + q[i] * u[3 * i:3 * i + 3] for i in range(6)]
+    wt = [seen[i] for i in range(6)]
+    B = [ca.if_else(wt[i], A[3 * i:3 * i + 3] + q[i] * u[3 * i:3 * i + 3], ca.SX.zeros(3))
+         for i in range(6)]
     P = [E[3 * i:3 * i + 3] for i in range(6)]
-    bc = sum(B, ca.SX.zeros(3)) / 6.0
-    mc = sum(P, ca.SX.zeros(3)) / 6.0
-    C = sum(((b - bc) @ (p - mc).T for b, p in zip(B, P, strict=True)), ca.SX.zeros(3, 3))
+    n = sum(wt, ca.SX(0.0))
+    bc = sum((wt[i] * B[i] for i in range(6)), ca.SX.zeros(3)) / n
+    mc = sum((wt[i] * P[i] for i in range(6)), ca.SX.zeros(3)) / n
+    C = sum((wt[i] * ((B[i] - bc) @ (P[i] - mc).T) for i in range(6)), ca.SX.zeros(3, 3))
     Rc = Rbc.T @ ca.reshape(R0[0:9], 3, 3)
     size = ca.SX(0.0)
     for _ in range(FIT_ITERATIONS):
@@ -269,9 +289,11 @@ def _build(kind: str, fk: bool, inverse_tolerance: float) -> ca.Function:
     if fk:
         R_t, residual = sx_encoder_pose(v["pose"], q, points, FK_CALLS)
         fk_residual = ca.mmax(ca.fabs(residual))
+        problem = None
     else:
         R_t, fk_residual = _rigid_fit(v["pose"], q, v["directions"], v["base"],
-                                      points[18:36], v["frame"])
+                                      points[18:36], v["frame"], v["seen"])
+        problem = ca.if_else(ca.sum1(v["seen"]) < 3, float(Status.TOO_FEW_LEGS), 0.0)
     K, twist, M, h, bias = sx_model_state(R_t, qd, points, v["params"])
     R, t = ca.reshape(R_t[0:9], 3, 3), R_t[9:12]
     frame = None if kind == "pose" else v["frame"]  # the task's frame
@@ -283,7 +305,7 @@ def _build(kind: str, fk: bool, inverse_tolerance: float) -> ca.Function:
         e, L, ldot, e_t, e_tt = _feature_task(kind, v, q, tau_s)
     out = sx_task_outputs(v, R_t, fk_residual, (K, twist, M, h, bias), e, L @ G,
                           ldot + L @ gdot, e_t, e_tt, None if kind == "pose" else v["mask"],
-                          inverse_tolerance)
+                          inverse_tolerance, FK_TOLERANCE if fk else FIT_TOLERANCE, problem)
     return ca.Function(f"hexapod_ctc_{kind}_{'fk' if fk else 'pose'}_step", [x],
                        [ca.cse(ca.densify(out))])
 
@@ -291,11 +313,13 @@ def _build(kind: str, fk: bool, inverse_tolerance: float) -> ca.Function:
 def sx_task_outputs(v: dict[str, ca.SX], R_t: ca.SX, fk_residual: ca.SX,
                     state: tuple[ca.SX, ca.SX, ca.SX, ca.SX, ca.SX], e: ca.SX, L_model: ca.SX,
                     ldot: ca.SX, e_t: ca.SX, e_tt: ca.SX, mask: ca.SX | None,
-                    inverse_tolerance: float) -> ca.SX:
+                    inverse_tolerance: float, tolerance: float = FK_TOLERANCE,
+                    problem: ca.SX | None = None) -> ca.SX:
     """The output row of a task step (:func:`task_layouts`) from its task terms: the
     desired ``e_ddot = -Kd e_dot - Kp e - integral``, ``tau_dot`` from it (a plain solve,
     or least squares over the rows whose ``mask`` is 1), the leg forces with the drives'
-    terms.
+    terms, and the row's status (:func:`~controllers.solvers.compiled_ctc.sx_status`;
+    ``TOO_FEW_ROWS`` when fewer than six rows are in the ``mask``).
 
     Args:
         v: The input row's blocks (``q_dot``, ``gains``, the drives', ``integral``).
@@ -310,6 +334,8 @@ def sx_task_outputs(v: dict[str, ca.SX], R_t: ca.SX, fk_residual: ca.SX,
         e_tt: ``e_tt`` of the reference (m).
         mask: The rows' mask (m; None: the square task solved as it is).
         inverse_tolerance: As :func:`task_step`'s.
+        tolerance: The pose's residual below which it has converged.
+        problem: The input's own status code (0: none), or None.
     """
     K, twist, M, h, bias = state
     qd = v["q_dot"]
@@ -325,8 +351,12 @@ def sx_task_outputs(v: dict[str, ca.SX], R_t: ca.SX, fk_residual: ca.SX,
     a, f, solved = sx_mechanism_forces(K, M, h, bias, acc, inverse_tolerance)
     f = f + v["rotor"] * a + v["viscous"] * qd + v["coulomb"] * ca.tanh(
         (qd + hold * a) / COULOMB_SMOOTHING)
-    return ca.vertcat(R_t, ca.reshape(K, 36, 1), fk_residual, f, solved, e,
-                      ca.reshape(factor.T @ factor, 36, 1))
+    if mask is not None:
+        few = ca.if_else(ca.sum1(mask) < 6, float(Status.TOO_FEW_ROWS), 0.0)
+        problem = few if problem is None else ca.if_else(problem == 0.0, few, problem)
+    out = ca.vertcat(R_t, ca.reshape(K, 36, 1), fk_residual, f, solved, e,
+                     ca.reshape(factor.T @ factor, 36, 1))
+    return ca.vertcat(out, sx_status(fk_residual, tolerance, solved, out, problem))
 
 
 @lru_cache(maxsize=8)
@@ -353,5 +383,5 @@ def task_step(kind: str, fk: bool, inverse_tolerance: float = INVERSE_TOLERANCE
                             outputs=outputs)
 
 
-__all__ = ["COMMON_INPUTS", "FIT_ITERATIONS", "FK_CALLS", "REFERENCE", "ROWS", "layout",
-           "model_twist", "sx_task_outputs", "task_layouts", "task_step"]
+__all__ = ["COMMON_INPUTS", "FIT_ITERATIONS", "FIT_TOLERANCE", "FK_CALLS", "REFERENCE", "ROWS",
+           "layout", "model_twist", "sx_task_outputs", "task_layouts", "task_step"]

@@ -27,6 +27,7 @@ from hexapod.kinematics import legs_in_frame
 from hexapod.se3 import log_so3
 from hexapod.trajectory import PoseTrajectory
 from tests.controllers.ctc_world import CtcWorld, perturbed
+from tests.controllers.task_ctc_oracles import numpy_desired_at, numpy_measure
 from vision.legs import leg_edges
 
 LAWS = ("cartesian-ctc", "vision-ctc", "leg-edge-ctc", "leg-direction-ctc")
@@ -61,7 +62,7 @@ def _measured(law: TaskComputedTorque, world: CtcWorld, rng: np.random.Generator
     qd = DynamicModel(world.truth).legs_batch(R, t, twist[None])[0][0]
     obs = Observation(0.0, legs.lengths, normals=normals, directions=legs.directions,
                       q_dot=qd)
-    m = law.measure(obs, np.asarray(obs.lengths), qd)
+    m = numpy_measure(law, obs, np.asarray(obs.lengths), qd)
     assert not isinstance(m, str)
     _, tau_s, _ = task_in_model_twist(np.zeros((1, 6)), m.translation, m.twist, m.frame)
     return m, tau_s
@@ -75,13 +76,13 @@ def test_analytic_reference_terms_match_central_differences(name: str, shape: st
     duration = float(law.reference.duration)
     for tr in (0.13 * duration, 0.5 * duration + 0.0071, 0.81 * duration):
         m, tau_s = _measured(law, world, rng)
-        task, rate, acc = law.desired_at(tr)
+        task, rate, acc = numpy_desired_at(law, tr)
         assert rate is not None and acc is not None
         e_t, e_tt = (x[0] for x in task.reference_terms(m.state, tau_s[None], rate[None],
                                                         acc[None]))
         gaps = []
         for h in (2e-3, 1e-3):
-            c_t, c_tt = reference_terms(lambda k, h=h, tr=tr: law.desired_at(tr + k * h)[0],
+            c_t, c_tt = reference_terms(lambda k, h=h, tr=tr: numpy_desired_at(law, tr + k * h)[0],
                                         m.state, tau_s, step=h)
             gaps.append((np.abs(e_t - c_t).max(), np.abs(e_tt - c_tt).max()))
         (gt2, gtt2), (gt1, gtt1) = gaps

@@ -147,3 +147,55 @@ def test_batched_inputs_take_the_common_rows_the_others_row_by_row(
                 assert out.error_norm[j] == cmd.error_norm
             assert not robots.advance(np.arange(n), out.forces, DT / 20, 20).any()
     assert fast_rows == FAST_ROWS[name]
+
+
+def _hide(obs: ObservationBatch, row: int, leg: int) -> ObservationBatch:
+    """The batch with leg ``leg`` of row ``row`` hidden (its features NaN, not visible)."""
+    normals, directions = np.array(obs.normals), np.array(obs.directions)
+    edges, legs = np.array(obs.edge_visible), np.array(obs.direction_visible)
+    normals[row, leg] = np.nan
+    directions[row, leg] = np.nan
+    edges[row, leg] = False
+    legs[row, leg] = False
+    return dataclasses.replace(obs, normals=normals, directions=directions,
+                               edge_visible=edges, direction_visible=legs)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("name", ["vision-ctc", "leg-edge-ctc"])
+def test_rows_with_a_hidden_leg_go_through_the_one_call(geometry: HexapodGeometry,
+                                                         name: str) -> None:
+    """A hidden leg in a row every other period (``vision-ctc``: the fit to five legs;
+    ``leg-edge-ctc``: its rows masked): no row left to the trials, the forces of each
+    trial's own step to the last bit, and the rows after a hidden one (their input row
+    written in the batch's common case) too."""
+    truth = ideal_drives(geometry)
+    world = CtcWorld.make(truth)
+    R0, t0, R1, t1, ref = line_reference(truth, "quintic", (0.5, -0.3, 0.4))
+    ctx = world.context(world.goal(R1, t1), reference=ref)
+    n = 3
+    robots = DynamicRobots([truth] * n, np.array([R0] * n),
+                           np.array([t0 + np.array([0.0, 0.001 * k, 0.0]) for k in range(n)]))
+    robots.drives.mode = "force"
+    batch = registry.create(name)
+    batch.reset_batch([ctx] * n)
+    singles = [registry.create(name) for _ in range(n)]
+    for s in singles:
+        s.reset(ctx)
+    notes = 0
+    for k in range(8):
+        obs = _batch(world, robots, k * DT)
+        if k % 2:
+            obs = _hide(obs, k % n, k % 6)
+        out = CommandBatch.zeros(n, Actuation.FORCE)
+        left = batch.step_arrays(obs, out)
+        assert left.tolist() == [], f"step {k}: rows {left.tolist()} left to the trials"
+        assert out.forces is not None
+        for j, s in enumerate(singles):
+            cmd = s.step(obs.item(j))
+            assert cmd.reason is None, cmd.reason
+            notes += bool(cmd.notes)
+            assert out.forces[j].tobytes() == np.asarray(cmd.forces).tobytes()
+            assert out.error_norm[j] == cmd.error_norm
+        assert not robots.advance(np.arange(n), out.forces, DT / 20, 20).any()
+    assert notes == (4 if name == "vision-ctc" else 0)  # "pose from legs [...]"

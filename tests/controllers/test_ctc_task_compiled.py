@@ -1,13 +1,14 @@
-"""The compiled task-space computed-torque step against the numpy path it replaces.
+"""The compiled task-space computed-torque step against the numpy step it replaced.
 
 :func:`controllers.solvers.compiled_task_ctc.task_step` composes the pose (forward
-kinematics or the given visual pose), the dynamics, the task, the reference's terms, the
-solve and the leg forces into one C function per task kind; the numpy path
-(:meth:`TaskComputedTorque._command`: the tasks' numpy error and Jacobian, an SVD
-solve, :meth:`DynamicModel.inverse`) is the reference. They must agree to rounding on
-random states (a calibration error between the truth and the nominal model, a moving
-reference on and off the control grid, hidden legs), and the law must fall back to the
-numpy path (and its refusal) off the compiled path's happy path.
+kinematics or the rigid fit of the legs seen), the dynamics, the task, the reference's
+terms, the solve and the leg forces into one C function per task kind, the laws' only
+step; the numpy step (``tests/controllers/task_ctc_oracles.py``: the tasks' numpy error
+and Jacobian, an SVD solve, :meth:`DynamicModel.inverse`) is the oracle. They must
+agree to rounding on random states (a calibration error between the truth and the
+nominal model, a moving reference on and off the control grid, hidden legs, a fixed
+goal's first step), and off the happy path the law refuses with the reason of the
+step's status.
 """
 
 from __future__ import annotations
@@ -23,6 +24,7 @@ from hexapod.dynamics import DynamicModel
 from hexapod.kinematics import legs_in_frame
 from hexapod.trajectory import PoseTrajectory
 from tests.controllers.ctc_world import DT, CtcWorld, perturbed
+from tests.controllers.task_ctc_oracles import numpy_law_step, numpy_measure, numpy_task_step
 from vision.legs import leg_edges
 
 LAWS = ("cartesian-ctc", "vision-ctc", "leg-edge-ctc", "leg-direction-ctc")
@@ -64,16 +66,16 @@ def _both(law: TaskComputedTorque, obs: Observation,
     assert law.compiled is not None
     q, qd = np.asarray(obs.lengths), np.asarray(obs.q_dot)
     law.guess = guess
-    fast = law.compiled.step(law, obs, obs.t - law._t0, q, qd)
+    fast = law.compiled.step(law, obs, obs.t - law.reference_start, q, qd)
     law.guess = guess
-    m = law.measure(obs, q, qd)
+    m = numpy_measure(law, obs, q, qd)
     assert not isinstance(m, str)
-    slow = law._command(obs.t, m, qd)
+    slow = numpy_task_step(law, obs.t, m, qd)
     return fast, slow
 
 
 def _assert_equal(fast: object, slow: object) -> None:
-    assert fast is not None, "the compiled path refused a regular state"
+    assert not isinstance(fast, str), f"the compiled step refused a regular state: {fast}"
     assert fast.reason is None and slow.reason is None, (fast.reason, slow.reason)
     f_fast, f_slow = np.asarray(fast.forces), np.asarray(slow.forces)
     scale = float(np.abs(f_slow).max())
@@ -112,7 +114,7 @@ def test_compiled_step_equals_the_numpy_path_on_random_states(name: str) -> None
 
 
 @pytest.mark.parametrize("name", ["vision-ctc", "leg-edge-ctc", "leg-direction-ctc"])
-def test_hidden_legs_agree_and_too_few_fall_back(name: str) -> None:
+def test_hidden_legs_agree_and_too_few_are_refused(name: str) -> None:
     law, world = _law(name)
     R, t = sample_poses(world.truth, 1, rng=np.random.default_rng(5), max_translation=0.02)
     twist = np.array([0.01, -0.005, 0.002, 0.05, -0.03, 0.02])
@@ -123,23 +125,31 @@ def test_hidden_legs_agree_and_too_few_fall_back(name: str) -> None:
                          q_dot=obs.q_dot, edge_visible=visible,
                          direction_visible=visible.all(axis=1))
     fast, slow = _both(law, hidden, (R[0], t[0]))
-    if name == "vision-ctc":  # the compiled fit takes six legs; the numpy path fits five
-        assert fast is None and slow.reason is None
-        assert slow.notes == ["pose from legs [0, 1, 3, 4, 5]"]
+    _assert_equal(fast, slow)
+    if name == "vision-ctc":  # the pose fitted to the five legs seen
+        assert fast.notes == ["pose from legs [0, 1, 3, 4, 5]"]
+        assert fast.features_used == 6
     else:
-        _assert_equal(fast, slow)
         assert fast.features_used == {"leg-edge-ctc": 30, "leg-direction-ctc": 15}[name]
-    # one leg seen: the compiled path declines; the law's step refuses with the reason
+    # one leg seen: the step's status refuses it, with the reason the numpy step gives
     visible[1:] = False
     few = Observation(obs.t, obs.lengths, normals=obs.normals, directions=obs.directions,
                       q_dot=obs.q_dot, edge_visible=visible,
                       direction_visible=visible.all(axis=1))
     assert law.compiled is not None
     q, qd = np.asarray(few.lengths), np.asarray(few.q_dot)
-    assert law.compiled.step(law, few, few.t, q, qd) is None
-    before = law.numpy_steps
+    reason = law.compiled.step(law, few, few.t, q, qd)
+    assert isinstance(reason, str)
+    slow = numpy_law_step(law, few)
+    assert slow.reason is not None
+    if name == "vision-ctc":  # the same words
+        assert reason == "only 1 legs seen (legs [0]): the pose needs at least 3"
+        assert slow.reason == f"vision-ctc: {reason}"
+    else:
+        assert "rank < 6" in reason and "rank 2 < 6" in slow.reason, (reason, slow.reason)
+    before = law.compiled_steps
     cmd = law.step(few)
-    assert cmd.reason is not None and law.numpy_steps == before + 1
+    assert cmd.reason == f"{name}: {reason}" and law.compiled_steps == before
     assert not np.any(np.asarray(cmd.forces))
 
 
@@ -156,22 +166,34 @@ def test_the_step_takes_the_compiled_path_on_a_regular_trajectory(name: str) -> 
     # (a zero step once made 0/0 in the rigid fit)
     for _ in range(5):
         assert law.step(obs).reason is None
-    assert law.compiled_steps == 25 and law.numpy_steps == 0
+    assert law.compiled_steps == 25
 
 
-def test_fixed_goal_after_the_first_step_is_compiled_and_equal() -> None:
+@pytest.mark.parametrize("name", LAWS)
+def test_a_fixed_goal_first_step_is_compiled_and_equal(name: str) -> None:
+    """The first step of a fixed goal (the line starts at the pose the step measures)
+    through the compiled step equals the numpy step's, and so does a later one."""
     truth = deltalab()
-    world = CtcWorld.make(truth)
+    world = CtcWorld.make(truth, perturbed(truth, 1e-3, 4))
     R, t = sample_poses(truth, 2, rng=np.random.default_rng(8), max_translation=0.01)
+    twist = np.array([0.004, -0.002, 0.001, 0.02, -0.01, 0.015])
     for smooth in (True, False):
-        law = registry.create("leg-edge-ctc", smooth_goal=smooth)
-        assert isinstance(law, TaskComputedTorque)
-        law.reset(world.context(world.goal(R[1], t[1])))
-        first = law.step(_observation(world, R[0], t[0], np.zeros(6), 0.0))
-        assert first.reason is None and law.numpy_steps == 1  # the line starts there
-        obs = _observation(world, R[0], t[0], np.full(6, 0.01), 0.2)
-        fast, slow = _both(law, obs, (R[0], t[0]))
-        _assert_equal(fast, slow)
+        fast, slow = (registry.create(name, smooth_goal=smooth) for _ in range(2))
+        assert isinstance(fast, TaskComputedTorque) and isinstance(slow, TaskComputedTorque)
+        for law in (fast, slow):
+            law.reset(world.context(world.goal(R[1], t[1])))
+        obs = _observation(world, R[0], t[0], twist, 0.1)
+        first, oracle = fast.step(obs), numpy_law_step(slow, obs)
+        _assert_equal(first, oracle)
+        assert fast.started and fast.reference_start == 0.1 == slow.reference_start
+        if smooth:  # the same line, from the pose each measured
+            a, b = fast.reference.at(np.array([0.3])), slow.reference.at(np.array([0.3]))
+            np.testing.assert_allclose(a.translation, b.translation, rtol=0, atol=1e-11)
+            np.testing.assert_allclose(a.rotation, b.rotation, rtol=0, atol=1e-11)
+        else:
+            assert fast.reference is None
+        later = _observation(world, R[0], t[0], np.full(6, 0.01), 0.3)
+        _assert_equal(*_both(fast, later, (R[0], t[0])))
 
 
 def test_rigid_fit_equals_the_kabsch_fit_of_the_predictive_controller() -> None:
@@ -208,7 +230,28 @@ def test_the_compiled_rigid_fit_from_the_exact_pose_takes_a_zero_step() -> None:
     x[inputs["points"]][18:] = E.ravel()
     x[inputs["directions"]] = E.ravel()  # B = A + q u = E with A = 0, q = 1
     x[inputs["frame"]] = np.concatenate([np.eye(3).ravel(), np.zeros(3)])
+    x[inputs["seen"]] = 1.0  # every leg
     y = task_step("pose", False).single(x)
     assert y[outputs["fk_residual"]][0] < 1e-8
     np.testing.assert_array_equal(y[outputs["pose"]],
                                   np.concatenate([np.eye(3).ravel(), np.zeros(3)]))
+
+
+def test_a_law_without_a_compiled_step_refuses_naming_it() -> None:
+    """A subclass that neither names a kind nor makes its own step has no step at all
+    (there is no numpy path): every period is refused with that reason."""
+    from controllers.cartesian_ctc import CartesianCTC
+
+    class NoStep(CartesianCTC):
+        name = "no-step-ctc"
+        compiled_kind = None
+
+    law, world = _law("cartesian-ctc")
+    ctx = law.context
+    bare = NoStep()
+    bare.reset(ctx)
+    s = law.reference.at(np.array([0.0]))
+    cmd = bare.step(_observation(world, s.rotation[0], s.translation[0], s.twist[0], 0.0))
+    assert cmd.reason == ("no-step-ctc: no compiled step (compiled_kind is None and the law "
+                          "made none at reset)")
+    assert not np.any(np.asarray(cmd.forces))

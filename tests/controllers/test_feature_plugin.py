@@ -37,6 +37,7 @@ from tests.controllers.ctc_world import (
     line_reference,
 )
 from tests.controllers.plugin_feature_joints import JOINTS, PlatformJoints
+from tests.controllers.task_ctc_oracles import numpy_law_step
 
 PLUGIN = "tests.controllers.plugin_feature_joints"
 
@@ -178,8 +179,8 @@ def ctc_world(geometry: HexapodGeometry) -> CtcWorld:
 def test_computed_torque_converges_through_its_compiled_step(ctc_world: CtcWorld,
                                                              smooth: bool) -> None:
     """On the dynamic world (forces, perfect model): a 2.7 mm goal reached to 1 um within
-    150 periods, a step or along the quintic line; every step after the first (which
-    starts the reference) by the feature's compiled step."""
+    150 periods, a step or along the quintic line; every step by the feature's compiled
+    step (the first one starts the reference at the pose it measures)."""
     R0, t0 = home_pose(ctc_world.truth)
     step = np.array([0.002, -0.001, 0.0015])
     ctrl = JOINTS.ctc(smooth_goal=smooth)
@@ -189,15 +190,16 @@ def test_computed_torque_converges_through_its_compiled_step(ctc_world: CtcWorld
     p, _, cmds = ctc_world.run(ctrl, (R0, t0), 150)
     err = np.linalg.norm(p - (t0 + step), axis=1)
     assert err[-1] < 1e-6, err[-1]
-    assert ctrl.compiled_steps == 149 and ctrl.numpy_steps == 1
+    assert ctrl.compiled_steps == 150
     assert all(np.all(np.isfinite(c.forces)) for c in cmds)
 
 
 @pytest.mark.parametrize("ki", [0.0, 5.0])
 def test_computed_torque_compiled_step_equals_the_numpy_task(ctc_world: CtcWorld,
                                                              ki: float) -> None:
-    """The compiled step's forces are the numpy task path's (the feature's
-    :class:`FeatureTask`, evaluated by CasADi's virtual machine) to rounding, on a moving
+    """The compiled step's forces are the numpy oracle's (``task_ctc_oracles.py``: the
+    feature's :class:`FeatureTask`, evaluated by CasADi's virtual machine) to rounding,
+    from the first step (the line started at the pose each measures), on a moving
     reference (the smooth line: the reference terms ``e_t``, ``e_tt`` in play), with and
     without integral action (the step's ``integral`` input block)."""
     R0, t0 = home_pose(ctc_world.truth)
@@ -205,7 +207,6 @@ def test_computed_torque_compiled_step_equals_the_numpy_task(ctc_world: CtcWorld
     fast, slow = JOINTS.ctc(integral_gain=ki), JOINTS.ctc(integral_gain=ki)
     fast.reset(ctc_world.context(goal))
     slow.reset(ctc_world.context(goal))
-    slow.compiled = None  # the numpy path only
     from hexapod.dynamics.robots import DynamicRobots
 
     robot = DynamicRobots([ctc_world.truth], R0[None].copy(), t0[None].copy())
@@ -213,11 +214,11 @@ def test_computed_torque_compiled_step_equals_the_numpy_task(ctc_world: CtcWorld
     rows = np.arange(1)
     for k in range(20):
         obs = ctc_world.observation(robot, k * DT)
-        a, b = fast.step(obs), slow.step(obs)
+        a, b = fast.step(obs), numpy_law_step(slow, obs)
         assert a.reason is None and b.reason is None
         np.testing.assert_allclose(a.forces, b.forces, rtol=1e-8, atol=1e-9)
         robot.advance(rows, np.asarray(a.forces)[None], DT / 10, 10)
-    assert fast.compiled_steps == 19 and slow.numpy_steps == 20
+    assert fast.compiled_steps == 20 and slow.compiled_steps == 0
     assert bool(np.any(fast.integral != 0.0)) is bool(ki)
     np.testing.assert_allclose(fast.integral, slow.integral, rtol=1e-8, atol=1e-12)
 
@@ -233,8 +234,8 @@ def test_computed_torque_integral_action_removes_a_model_error_offset(
     """``integral_gain`` on the plugin's computed torque, as on the built-ins
     (``test_ctc_integral.py``): the nominal platform 30 % too heavy leaves the law a
     static error (measured 2.47 mm after 3 s); with ``Ki = 5 1/s`` after the same 3 s,
-    less than a hundredth of it (measured 0.68 um), every step after the first by the
-    feature's compiled step."""
+    less than a hundredth of it (measured 0.68 um), every step by the feature's compiled
+    step."""
     truth = ideal_drives(geometry)
     R0, t0 = home_pose(truth)
     Rg, tg = R0 @ exp_so3(np.array([0.02, -0.01, 0.015])), t0 + np.array([0.015, -0.01, 0.008])
@@ -245,7 +246,7 @@ def test_computed_torque_integral_action_removes_a_model_error_offset(
         ctrl.reset(world.context(world.goal(Rg, tg)))
         p, R, _ = world.run(ctrl, (R0, t0), 150)
         errors.append(float(pose_error(R[-1], p[-1], Rg, tg)[0]))
-        assert ctrl.compiled_steps == 149 and ctrl.numpy_steps == 1
+        assert ctrl.compiled_steps == 150
     without, with_ = errors
     assert without > 1e-3
     assert with_ < 0.01 * without, (without, with_)
@@ -266,12 +267,13 @@ def test_computed_torque_saturation_holds_the_integral(geometry: HexapodGeometry
         ctrl = JOINTS.ctc(integral_gain=5.0, saturation="scale")
         ctrl.reset(world.context(world.goal(R0, goal)))
         _, _, cmds = world.run(ctrl, (R0, t0), 5)
-        assert ctrl.compiled_steps == 4
-        peaks = [float(np.abs(c.forces).max()) for c in cmds[1:]]
+        assert ctrl.compiled_steps == 5
+        peaks = [float(np.abs(c.forces).max()) for c in cmds]
         if grows:  # under the limit: the law's forces
             assert max(peaks) < limit, peaks
         else:  # scaled: the most loaded leg at the limit, not every leg (as "clip")
             np.testing.assert_allclose(peaks, limit, rtol=1e-12)
+            # (the first step, at rest at home, loads the six legs alike)
             assert all(float(np.abs(c.forces).min()) < 0.99 * limit for c in cmds[1:])
         assert bool(np.any(ctrl.integral != 0.0)) is grows
 
@@ -396,7 +398,7 @@ def test_computed_torque_with_hidden_legs(ctc_world: CtcWorld) -> None:
     p, _, cmds = ctc_world.run(ctrl, (R0, t0), 150, edit=hide(one))
     assert np.linalg.norm(p[-1] - goal) < 1e-6
     assert cmds[-1].features_used == 15
-    assert ctrl.compiled_steps == 149
+    assert ctrl.compiled_steps == 150
     few = np.array([True, True, False, True, False, True])
     from hexapod.dynamics.robots import DynamicRobots
 

@@ -112,6 +112,7 @@ def _oracle(law: TaskComputedTorque, obs: Observation,
             fields["directions"] = np.asarray(obs.directions).ravel()
             fields["base"] = np.asarray(ctx.base_points).ravel()
             fields["frame"] = np.concatenate([bc.rotation.ravel(), bc.translation])
+            fields["seen"] = np.ones(6)  # every leg seen
     else:
         cam = ctx.camera.camera_from_base  # type: ignore[union-attr]
         m = 36 if kind == "edges" else 18
@@ -171,7 +172,7 @@ def test_every_step_equals_a_fresh_row_from_its_guess(name: str, tracking: bool)
     obs, Rs, ts = _observations(world, 25, seed=5)
     kept: list[tuple[Command, Command]] = []
     calls = []
-    law.step(obs[0])  # a fixed goal's first step is the numpy path's (it starts there)
+    law.step(obs[0])  # a fixed goal's first step starts the line (two compiled calls)
     assert law.compiled is not None
     bound, made = law.compiled.bound, [0]
     call = bound.call
@@ -185,17 +186,20 @@ def test_every_step_equals_a_fresh_row_from_its_guess(name: str, tracking: bool)
         if k % 6 == 2:  # a guess set from outside (as the tests and the numpy path do)
             law.guess = _far_guess(Rs[k + 1], ts[k + 1])
         if k % 6 == 0 and not law.compiled_fk:  # the fit's loop, then forces that
-            # overflow: the numpy path's command, the guess left as it was (the row not)
+            # overflow: refused (status NON_FINITE), the guess left as it was (the row not)
             law.guess = _far_guess(Rs[k + 1], ts[k + 1])
             huge = Observation(o.t, o.lengths, normals=o.normals, directions=o.directions,
                                q_dot=o.q_dot * 1e200)
             with np.errstate(all="ignore"):
-                assert np.isfinite(np.asarray(law.step(huge).forces)).all()
+                refused = law.step(huge)
+            assert refused.reason is not None and "non-finite" in refused.reason
+            assert np.isfinite(np.asarray(refused.forces)).all()
         if k % 6 == 4:  # a refusal in between: the guess in the row must stay right
             bad = Observation(o.t, o.lengths, normals=o.normals, directions=o.directions,
                               q_dot=np.full(6, np.nan))
             assert law.step(bad).reason is not None
-        if k % 6 == 5:  # a hidden leg (vision-ctc: a numpy step; feature laws: masked rows)
+        if k % 6 == 5:  # a hidden leg (vision-ctc: the fit to five legs; feature laws:
+            # masked rows)
             visible = np.ones((6, 2), bool)
             visible[1, 1] = False
             hidden = Observation(o.t, o.lengths, normals=o.normals, directions=o.directions,
@@ -212,7 +216,9 @@ def test_every_step_equals_a_fresh_row_from_its_guess(name: str, tracking: bool)
         calls.append(n)
     for cmd, expected in kept:  # compared after every step: nothing shared with later ones
         _same(cmd, expected)
-    assert max(calls) >= 2 and calls.count(1) > len(calls) // 2  # both paths taken
+    # both paths taken: the pose of the last step in the row (one call) and a guess
+    # rewritten (more)
+    assert max(calls) >= 2 and 1 in calls, calls
 
 
 def _replayed(name: str, observations: list[Observation]) -> TaskComputedTorque:
