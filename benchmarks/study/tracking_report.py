@@ -137,12 +137,10 @@ def tracking_plot(out_dir: Path, scenario: str, point: int) -> str | None:
     files = sorted((out_dir / TRIALS_DIR).glob(f"{scenario}__p{point}__*__00000.npz"))
     if not files:
         return None
-    import matplotlib
+    from benchmarks.study.plots import TWO_LINEAR_PANELS, figure, save_figure
 
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    fig, axes = plt.subplots(1, 2, figsize=(10, 3.5))
+    fig = figure((10, 3.5))
+    axes = fig.subplots(1, 2)
     for f in files:
         with np.load(f) as rec:
             t = np.asarray(rec["t"], float)
@@ -156,11 +154,7 @@ def tracking_plot(out_dir: Path, scenario: str, point: int) -> str | None:
         ax.set_xlabel("time [s]")
         ax.grid(True, alpha=0.3)
         ax.legend(fontsize=7)
-    fig.tight_layout()
-    name = f"{scenario}_p{point}_tracking.png"
-    fig.savefig(out_dir / name, dpi=90)
-    plt.close(fig)
-    return name
+    return save_figure(fig, out_dir, f"{scenario}_p{point}_tracking.png", TWO_LINEAR_PANELS)
 
 
 def forces_figure(out_dir: Path, scenario: str, point: int) -> Any:
@@ -177,13 +171,10 @@ def forces_figure(out_dir: Path, scenario: str, point: int) -> Any:
                                np.asarray(rec["force_limit"], float)))
     if not traces:
         return None
-    import matplotlib
+    from benchmarks.study.plots import figure
 
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    fig, axes = plt.subplots(1, len(traces), figsize=(3.6 * len(traces) + 1, 3.3),
-                             squeeze=False, sharey=True)
+    fig = figure((3.6 * len(traces) + 1, 3.3))
+    axes = fig.subplots(1, len(traces), squeeze=False, sharey=True)
     for ax, (controller, t, forces, limit) in zip(axes[0], traces, strict=True):
         for leg in range(forces.shape[1]):
             ax.plot(t, forces[:, leg], lw=0.9, label=f"leg {leg}")
@@ -206,12 +197,9 @@ def forces_plot(out_dir: Path, scenario: str, point: int) -> str | None:
     fig = forces_figure(out_dir, scenario, point)
     if fig is None:
         return None
-    import matplotlib.pyplot as plt
+    from benchmarks.study.plots import AS_IS, save_figure
 
-    name = f"{scenario}_p{point}_forces.png"
-    fig.savefig(out_dir / name, dpi=90)
-    plt.close(fig)
-    return name
+    return save_figure(fig, out_dir, f"{scenario}_p{point}_forces.png", AS_IS)
 
 
 def tracking_section(out_dir: Path, scenario: str, rows: list[dict[str, Any]],

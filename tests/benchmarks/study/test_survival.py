@@ -3,6 +3,7 @@ tolerance, against scipy.stats and cases worked by hand."""
 
 from __future__ import annotations
 
+import itertools
 import math
 import warnings
 from pathlib import Path
@@ -107,7 +108,7 @@ def test_kaplan_meier_band_and_logrank_are_scipy_bit_for_bit() -> None:
         low, high = survival.log_log_band(curve, 0.95)
         assert np.array_equal(low, band.low.probabilities, equal_nan=True)
         assert np.array_equal(high, band.high.probabilities, equal_nan=True)
-    for (da, ca, capa), (db, cb, capb) in zip(groups[:-1], groups[1:], strict=True):
+    for (da, ca, capa), (db, cb, capb) in itertools.pairwise(groups):
         a, b = _rows(da, ca, cap=capa), _rows(db, cb, cap=capb)
         if not da and not db:
             continue
