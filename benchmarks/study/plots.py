@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import logging
 from collections import defaultdict
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -143,22 +144,78 @@ def representative(points: list[int]) -> list[int]:
     return [points[i] for i in sorted(set(idx.tolist()))]
 
 
-def time_series(out_dir: Path, scenario: str, point: int) -> str | None:
-    """Error norm and position error versus time of the recorded trial 0 of each controller."""
-    files = sorted((out_dir / TRIALS_DIR).glob(f"{scenario}__p{point}__*__00000.npz"))
-    if not files:
-        return None
-    fig = figure((10, 3.5))
-    axes = fig.subplots(1, 2)
-    for f in files:
+#: One controller's curves in a figure of line panels: its label, and an ``(x, y)`` pair
+#: per panel.
+Curves = tuple[str, list[tuple[np.ndarray, np.ndarray]]]
+
+
+def trial0_files(out_dir: Path, scenario: str, point: int) -> list[Path]:
+    """The recorded trial 0 of every controller at one sweep point, sorted by name."""
+    return sorted((out_dir / TRIALS_DIR).glob(f"{scenario}__p{point}__*__00000.npz"))
+
+
+def line_figures(out_dir: Path, points: list[int], curves_of: Callable[[int], list[Curves]],
+                 draw: Callable[[list[Curves]], tuple[Any, list[list[Any]]]],
+                 name_of: Callable[[int], str], layout: Margins) -> dict[int, str]:
+    """One figure of line panels per sweep point, drawn once and redrawn for the next
+    points with the new data in its lines (the same controllers, so the same legend):
+    the axes, ticks and texts are made once (a third of a figure's time), and the image is
+    pixel for pixel the one a new figure would give (axes limits rescaled to the data).
+
+    Args:
+        out_dir: The results directory.
+        points: The sweep points.
+        curves_of: A point's curves (none: no figure for it).
+        draw: A new figure of curves and its lines (per panel, in the order of the
+            curves).
+        name_of: A point's file name.
+        layout: The figure's margins.
+
+    Returns:
+        The Markdown link target of each point's figure.
+    """
+    out: dict[int, str] = {}
+    fig, lines, labels = None, [[]], [""]
+    for point in points:
+        curves = curves_of(point)
+        if not curves:
+            continue
+        if fig is None or [c[0] for c in curves] != labels:
+            fig, lines = draw(curves)
+            labels = [c[0] for c in curves]
+        else:
+            for panel, panel_lines in enumerate(lines):
+                for line, (_, data) in zip(panel_lines, curves, strict=True):
+                    line.set_data(*data[panel])
+            for ax in fig.axes:
+                ax.relim()
+                ax.autoscale_view()
+        out[point] = save_figure(fig, out_dir, name_of(point), layout)
+    return out
+
+
+def _error_curves(out_dir: Path, scenario: str, point: int) -> list[Curves]:
+    """Error norm (its positive values) and position error [mm] (floored at 1e-6 for the
+    log axis) of each controller's trial 0."""
+    curves = []
+    for f in trial0_files(out_dir, scenario, point):
         with np.load(f) as rec:
-            label = str(rec["controller"])
             err = np.asarray(rec["error_norm"], float)
             t = np.asarray(rec["t"], float)
             ok = np.isfinite(err) & (err > 0)
-            axes[0].semilogy(t[ok], err[ok], label=label)
-            axes[1].semilogy(t, np.maximum(np.asarray(rec["position_error"]) * 1e3, 1e-6),
-                             label=label)
+            curves.append((str(rec["controller"]), [
+                (t[ok], err[ok]),
+                (t, np.maximum(np.asarray(rec["position_error"]) * 1e3, 1e-6))]))
+    return curves
+
+
+def _draw_error_curves(curves: list[Curves]) -> tuple[Any, list[list[Any]]]:
+    fig = figure((10, 3.5))
+    axes = fig.subplots(1, 2)
+    lines: list[list[Any]] = [[], []]
+    for label, data in curves:
+        for panel, (x, y) in enumerate(data):
+            lines[panel] += axes[panel].semilogy(x, y, label=label)
     axes[0].set_title("feature error norm (trial 0)")
     axes[0].set_xlabel("time [s]")
     axes[1].set_title("position error [mm] (trial 0)")
@@ -166,7 +223,15 @@ def time_series(out_dir: Path, scenario: str, point: int) -> str | None:
     for ax in axes:
         ax.grid(True, which="both", alpha=0.3)
         ax.legend(fontsize=7)
-    return save_figure(fig, out_dir, f"{scenario}_p{point}_timeseries.png", TWO_LOG_PANELS)
+    return fig, lines
+
+
+def time_series(out_dir: Path, scenario: str, points: list[int]) -> dict[int, str]:
+    """Error norm and position error versus time of the recorded trial 0 of each
+    controller, a figure per sweep point (those with a recorded trial)."""
+    return line_figures(out_dir, points, lambda p: _error_curves(out_dir, scenario, p),
+                        _draw_error_curves, lambda p: f"{scenario}_p{p}_timeseries.png",
+                        TWO_LOG_PANELS)
 
 
 def _label(s: Summary) -> str:

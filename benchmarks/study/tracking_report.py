@@ -131,30 +131,48 @@ def tracking_rows(rows: list[dict[str, Any]], with_intervals: bool = True
     return out
 
 
-def tracking_plot(out_dir: Path, scenario: str, point: int) -> str | None:
-    """The position error from the reference against time, linear scale, of the recorded
-    trial 0 of every controller at one sweep point."""
-    files = sorted((out_dir / TRIALS_DIR).glob(f"{scenario}__p{point}__*__00000.npz"))
-    if not files:
-        return None
-    from benchmarks.study.plots import TWO_LINEAR_PANELS, figure, save_figure
+def _tracking_curves(out_dir: Path, scenario: str, point: int) -> list[Any]:
+    """Position [mm] and orientation [deg] errors from the reference of each controller's
+    trial 0."""
+    from benchmarks.study.plots import trial0_files
+
+    curves = []
+    for f in trial0_files(out_dir, scenario, point):
+        with np.load(f) as rec:
+            t = np.asarray(rec["t"], float)
+            curves.append((str(rec["controller"]), [
+                (t, np.asarray(rec["position_error"], float) * 1e3),
+                (t, np.rad2deg(np.asarray(rec["orientation_error"], float)))]))
+    return curves
+
+
+def _draw_tracking(curves: list[Any]) -> tuple[Any, list[list[Any]]]:
+    from benchmarks.study.plots import figure
 
     fig = figure((10, 3.5))
     axes = fig.subplots(1, 2)
-    for f in files:
-        with np.load(f) as rec:
-            t = np.asarray(rec["t"], float)
-            axes[0].plot(t, np.asarray(rec["position_error"], float) * 1e3,
-                         label=str(rec["controller"]))
-            axes[1].plot(t, np.rad2deg(np.asarray(rec["orientation_error"], float)),
-                         label=str(rec["controller"]))
+    lines: list[list[Any]] = [[], []]
+    for label, data in curves:
+        for panel, (x, y) in enumerate(data):
+            lines[panel] += axes[panel].plot(x, y, label=label)
     axes[0].set_title("tracking error, position [mm] (trial 0)")
     axes[1].set_title("tracking error, orientation [deg] (trial 0)")
     for ax in axes:
         ax.set_xlabel("time [s]")
         ax.grid(True, alpha=0.3)
         ax.legend(fontsize=7)
-    return save_figure(fig, out_dir, f"{scenario}_p{point}_tracking.png", TWO_LINEAR_PANELS)
+    return fig, lines
+
+
+def tracking_plots(out_dir: Path, scenario: str, points: list[int]) -> dict[int, str]:
+    """The position error from the reference against time, linear scale, of the recorded
+    trial 0 of every controller, a figure per sweep point (those with a recorded
+    trial)."""
+    from benchmarks.study.plots import TWO_LINEAR_PANELS, line_figures
+
+    return line_figures(out_dir, points, lambda p: _tracking_curves(out_dir, scenario, p),
+                        _draw_tracking, lambda p: f"{scenario}_p{p}_tracking.png",
+                        TWO_LINEAR_PANELS)
 
 
 def forces_figure(out_dir: Path, scenario: str, point: int) -> Any:
@@ -230,15 +248,13 @@ def tracking_section(out_dir: Path, scenario: str, rows: list[dict[str, Any]],
     from benchmarks.study.saturation_report import saturation_section
 
     lines += saturation_section(rows)
-    for p in points:
-        img = tracking_plot(out_dir, scenario, p)
-        if img:
-            sweep = next((format_sweep(sweep_values(r)) for r in rows
-                          if int(r.get("point", 0)) == p), "")
-            lines += [f"Tracking error versus time (sweep: {sweep}):", "",
-                      f"![tracking error]({img})", ""]
-            forces = forces_plot(out_dir, scenario, p)
-            if forces:
-                lines += [f"Drive forces versus time (sweep: {sweep}):", "",
-                          f"![drive forces]({forces})", ""]
+    for p, img in tracking_plots(out_dir, scenario, points).items():
+        sweep = next((format_sweep(sweep_values(r)) for r in rows
+                      if int(r.get("point", 0)) == p), "")
+        lines += [f"Tracking error versus time (sweep: {sweep}):", "",
+                  f"![tracking error]({img})", ""]
+        forces = forces_plot(out_dir, scenario, p)
+        if forces:
+            lines += [f"Drive forces versus time (sweep: {sweep}):", "",
+                      f"![drive forces]({forces})", ""]
     return lines
