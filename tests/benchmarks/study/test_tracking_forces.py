@@ -13,10 +13,10 @@ import pytest
 
 from benchmarks.cli import main as cli_main
 from benchmarks.study.results import read_results
+from benchmarks.study.tracking_figures import forces_figure
 from benchmarks.study.tracking_report import (
     FORCE_HEADER,
     HEADER,
-    forces_figure,
     tracking_header,
     tracking_rows,
 )
