@@ -175,7 +175,9 @@ def line_figures(out_dir: Path, points: list[int], curves_of: Callable[[int], li
         The Markdown link target of each point's figure.
     """
     out: dict[int, str] = {}
-    fig, lines, labels = None, [[]], [""]
+    fig: Any = None
+    lines: list[list[Any]] = []
+    labels: list[str] = []
     for point in points:
         curves = curves_of(point)
         if not curves:

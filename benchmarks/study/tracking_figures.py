@@ -22,6 +22,8 @@ from benchmarks.study.plots import (
     trial0_files,
 )
 
+#: The forces figure's layout (fractions of the figure; ``subplots_adjust``).
+FORCES_LAYOUT = {"left": 0.06, "right": 0.98, "bottom": 0.15, "top": 0.9, "wspace": 0.12}
 #: A controller's recorded forces: its label, the times [s], the forces [N] (period x
 #: leg) and the drives' force limits [N].
 Trace = tuple[str, np.ndarray, np.ndarray, np.ndarray]
@@ -112,7 +114,7 @@ def _draw_forces(traces: list[Trace]) -> _ForcePanels:
         ax.set_xlabel("time [s]")
         ax.grid(True, alpha=0.3)
     axes[0].legend(fontsize=6, ncol=2)
-    fig.subplots_adjust(left=0.06, right=0.98, bottom=0.15, top=0.9, wspace=0.12)
+    fig.subplots_adjust(**FORCES_LAYOUT)
     return _ForcePanels(fig, axes, legs, limits, [(c, f.shape[1]) for c, _, f, _ in traces])
 
 
@@ -128,6 +130,7 @@ def _redraw_forces(panels: _ForcePanels, traces: list[Trace]) -> None:
         ax.relim()
     for ax in panels.axes:  # the shared y axis: every panel's data first
         ax.autoscale_view()
+    panels.fig.subplots_adjust(**FORCES_LAYOUT)  # undone if the last one was laid out tightly
 
 
 def forces_figure(out_dir: Path, scenario: str, point: int) -> Any:
