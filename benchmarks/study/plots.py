@@ -5,10 +5,12 @@ final errors per controller.
 Figures are drawn on :func:`figure` (a ``matplotlib.figure.Figure`` on its own Agg
 canvas: no pyplot, no global figure list to close) and written by :func:`save_figure`,
 with fixed margins in inches for the figures whose labels have known sizes: a
-``tight_layout`` costs as much as drawing the figure once more (half of a report's time
-went into it), and the same margins do for every run. A figure whose text reaches the
-edge of the image with those margins (an unusually wide tick label) is laid out again
-with ``tight_layout`` and saved anew.
+``tight_layout`` lays out every tick label once more before the drawing does (about 40 %
+of a figure's time), and the same margins do for every run. A figure whose text reaches
+the edge of the image with those margins (an unusually wide tick label) is laid out again
+with ``tight_layout`` and saved anew. The figures of every sweep point of one kind are
+one figure redrawn with each point's data (:func:`line_figures`): its axes, ticks and
+texts are made once.
 """
 
 from __future__ import annotations
@@ -18,7 +20,7 @@ from collections import defaultdict
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import Any, Final, Literal
 
 import numpy as np
 
@@ -64,9 +66,9 @@ class Margins:
 
 
 #: ``save_figure``'s layout for a figure the caller laid out (``subplots_adjust``).
-AS_IS = "as-is"
+AS_IS: Final = "as-is"
 #: ``save_figure``'s layout computed from the drawn text (``tight_layout``, slower).
-TIGHT = "tight"
+TIGHT: Final = "tight"
 #: Two panels side by side, log y axes with titles (error versus time).
 TWO_LOG_PANELS = Margins(left=0.72, right=0.15, bottom=0.59, top=0.36, gap=0.64)
 #: Two panels side by side, linear y axes with titles (tracking error versus time).
@@ -109,7 +111,8 @@ def _ink_at_edges(fig: Any) -> bool:
     return bool(np.any(edges != face))
 
 
-def save_figure(fig: Any, out_dir: Path, name: str, layout: Margins | str = TIGHT) -> str:
+def save_figure(fig: Any, out_dir: Path, name: str,
+                layout: Margins | Literal["as-is", "tight"] = TIGHT) -> str:
     """Lay out and save a figure as ``out_dir/name`` (checked to stay inside, marked as
     the project's) at :data:`DPI`; return its Markdown link target (``./`` before a name
     with ``:``, which a Markdown reader would take for a URL scheme).
