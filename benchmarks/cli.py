@@ -151,8 +151,20 @@ def cmd_warm(args: argparse.Namespace) -> int:
     return 0
 
 
-def build_parser() -> argparse.ArgumentParser:
-    """The argument parser of ``hexapod-bench``."""
+def command_word(argv: list[str]) -> str | None:
+    """The subcommand named on a command line (its first word not an option), if any."""
+    return next((a for a in argv if not a.startswith("-")), None)
+
+
+def build_parser(commands: set[str] | None = None) -> argparse.ArgumentParser:
+    """The argument parser of ``hexapod-bench``.
+
+    Args:
+        commands: The subcommands whose arguments are needed (:func:`main`: the one on
+            the command line); ``None``: every subcommand's. A subcommand whose
+            definition imports heavy modules (``servo``) is otherwise only listed by
+            name and help.
+    """
     p = argparse.ArgumentParser(prog="hexapod-bench", description=__doc__.split("\n")[0],
                                 formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("-v", "--verbose", action="store_true", help="log at INFO level")
@@ -248,13 +260,16 @@ def build_parser() -> argparse.ArgumentParser:
     identify_command.add_arguments(s)
     s.set_defaults(func=identify_command.run)
 
-    from benchmarks.robot import servo
+    servo_help = ("run one controller on a robot (serial link or emulator) with a camera, "
+                  "until convergence or Ctrl-C; --teach records a goal")
+    if commands is None or "servo" in commands:
+        from benchmarks.robot import servo  # the servo loop, controllers, cameras: ~1 s
 
-    s = sub.add_parser("servo", help="run one controller on a robot (serial link or emulator) "
-                                     "with a camera, until convergence or Ctrl-C; --teach "
-                                     "records a goal")
-    servo.add_arguments(s)
-    s.set_defaults(func=servo.run)
+        s = sub.add_parser("servo", help=servo_help)
+        servo.add_arguments(s)
+        s.set_defaults(func=servo.run)
+    else:  # named in the list of commands only: another command was asked for
+        sub.add_parser("servo", help=servo_help, add_help=False)
 
     from benchmarks.robot import conformance_command
 
@@ -349,9 +364,11 @@ def build_parser() -> argparse.ArgumentParser:
 
 def main(argv: list[str] | None = None) -> int:
     """Entry point of ``hexapod-bench``."""
-    parser = build_parser()
-    args = parser.parse_args(argv)
-    args.argv = list(sys.argv[1:] if argv is None else argv)  # run.json's commands
+    words = list(sys.argv[1:] if argv is None else argv)
+    word = command_word(words)
+    parser = build_parser({word} if word else set())
+    args = parser.parse_args(words)
+    args.argv = words  # run.json's commands
     logging.basicConfig(level=logging.INFO if args.verbose else logging.WARNING,
                         format="%(levelname)s %(name)s: %(message)s")
     os.environ.setdefault("PYTHONWARNINGS", "ignore")

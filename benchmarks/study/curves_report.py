@@ -14,7 +14,7 @@ import numpy as np
 from benchmarks.study import stats, survival
 from benchmarks.study.exact import format_p
 from benchmarks.study.metrics import format_sweep
-from benchmarks.study.plots import pyplot, save_figure
+from benchmarks.study.plots import LABELLED_TITLED_PANELS, figure, save_figure
 
 
 def _md_table(header: list[str], rows: list[list[str]]) -> str:
@@ -84,8 +84,8 @@ def _km_plot(out_dir: Path, scenario: str,
              sweeps: dict[int, dict[str, Any]]) -> str | None:
     if not points:
         return None
-    plt = pyplot()
-    fig, axes = plt.subplots(1, len(points), figsize=(5 * len(points), 3.6), squeeze=False)
+    fig = figure((5 * len(points), 3.6))
+    axes = fig.subplots(1, len(points), squeeze=False)
     for ax, p in zip(axes[0], points, strict=True):
         for label, km in sorted(kms[p].items()):
             if km.steps.size:
@@ -97,8 +97,8 @@ def _km_plot(out_dir: Path, scenario: str,
         ax.set_title(format_sweep(sweeps.get(p, {})), fontsize=8)
         ax.grid(True, alpha=0.3)
         ax.legend(fontsize=7)
-    fig.tight_layout()
-    return save_figure(plt, fig, out_dir, f"{scenario}_time_to_converge.png")
+    return save_figure(fig, out_dir, f"{scenario}_time_to_converge.png",
+                       LABELLED_TITLED_PANELS)
 
 
 def tolerance_section(rows: list[dict[str, Any]], sweeps: dict[int, dict[str, Any]]

@@ -1,12 +1,26 @@
-"""The report's figures (PNG, matplotlib's Agg backend): error versus time of a recorded
+"""The report's figures (PNG, matplotlib's Agg canvas): error versus time of a recorded
 trial, sweeps along one axis, convergence maps over two axes, and the distribution of the
-final errors per controller."""
+final errors per controller.
+
+Figures are drawn on :func:`figure` (a ``matplotlib.figure.Figure`` on its own Agg
+canvas: no pyplot, no global figure list to close) and written by :func:`save_figure`,
+with fixed margins in inches for the figures whose labels have known sizes: a
+``tight_layout`` lays out every tick label once more before the drawing does (about 40 %
+of a figure's time), and the same margins do for every run. A figure whose text reaches
+the edge of the image with those margins (an unusually wide tick label) is laid out again
+with ``tight_layout`` and saved anew. The figures of every sweep point of one kind are
+one figure redrawn with each point's data (:func:`line_figures`): its axes, ticks and
+texts are made once.
+"""
 
 from __future__ import annotations
 
+import logging
 from collections import defaultdict
+from collections.abc import Callable
+from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import Any, Final, Literal
 
 import numpy as np
 
@@ -15,28 +29,113 @@ from benchmarks.study.results import TRIALS_DIR
 from benchmarks.study.stats import wilson_intervals
 from hexapod.outputs import PNG_METADATA, inside
 
+log = logging.getLogger(__name__)
+
 #: Sweep points whose recorded trial gets an error-versus-time figure, at most.
 MAX_TIME_SERIES = 4
+#: Resolution of the report's PNG files [dots per inch] (the figures are drawn at it).
+DPI = 90
 
 
-def pyplot() -> Any:
-    """matplotlib.pyplot on the Agg backend (imported on first use)."""
-    import matplotlib
+@dataclass(frozen=True)
+class Margins:
+    """Fixed margins of a figure's grid of panels [inches] (tick labels, axis labels and
+    titles fit in them), and the gap between two panels of a row [inches].
 
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    Attributes:
+        left: Left of the first panel (its y tick labels and y label).
+        right: Right of the last panel.
+        bottom: Below the panels (x tick labels and x label).
+        top: Above the panels (titles).
+        gap: Between two panels of a row (the y tick labels of the right one).
+    """
 
-    return plt
+    left: float
+    right: float
+    bottom: float
+    top: float
+    gap: float = 0.0
+
+    def fractions(self, width: float, height: float, columns: int) -> dict[str, float]:
+        """``subplots_adjust`` keywords for a figure of ``width`` x ``height`` inches
+        with ``columns`` panels per row (``wspace``: the gap over a panel's width)."""
+        panel = (width - self.left - self.right - (columns - 1) * self.gap) / columns
+        return {"left": self.left / width, "right": 1 - self.right / width,
+                "bottom": self.bottom / height, "top": 1 - self.top / height,
+                "wspace": self.gap / panel if columns > 1 else 0.2}
 
 
-def save_figure(plt: Any, fig: Any, out_dir: Path, name: str) -> str:
-    """Save a figure as ``out_dir/name`` (checked to stay inside, marked as the project's)
-    and return its Markdown link target (``./`` before a name with ``:``, which a
-    Markdown reader would take for a URL scheme)."""
-    try:
-        fig.savefig(inside(out_dir, name), dpi=90, metadata=PNG_METADATA)
-    finally:
-        plt.close(fig)
+#: ``save_figure``'s layout for a figure the caller laid out (``subplots_adjust``).
+AS_IS: Final = "as-is"
+#: ``save_figure``'s layout computed from the drawn text (``tight_layout``, slower).
+TIGHT: Final = "tight"
+#: Two panels side by side, log y axes with titles (error versus time).
+TWO_LOG_PANELS = Margins(left=0.72, right=0.15, bottom=0.59, top=0.36, gap=0.64)
+#: Two panels side by side, linear y axes with titles (tracking error versus time).
+TWO_LINEAR_PANELS = Margins(left=0.64, right=0.15, bottom=0.59, top=0.36, gap=0.6)
+#: Two panels with y labels, no titles (the sweep figure).
+TWO_LABELLED_PANELS = Margins(left=0.78, right=0.15, bottom=0.59, top=0.15, gap=0.84)
+#: One panel with a y label and no title (the error CDF).
+ONE_LABELLED_PANEL = Margins(left=0.72, right=0.15, bottom=0.61, top=0.17)
+#: Panels with y labels and titles (time to converge, performance profiles).
+LABELLED_TITLED_PANELS = Margins(left=0.72, right=0.25, bottom=0.61, top=0.36, gap=0.74)
+
+
+def figure(figsize: tuple[float, float]) -> Any:
+    """A new figure of ``figsize`` inches on its own Agg canvas at :data:`DPI`
+    (matplotlib imported on first use; nothing to close: it goes with its last
+    reference)."""
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+    from matplotlib.figure import Figure
+
+    fig = Figure(figsize=figsize, dpi=DPI)
+    FigureCanvasAgg(fig)
+    return fig
+
+
+def _columns(fig: Any) -> int:
+    """Panels per row of the figure's grid (1 without a grid)."""
+    for ax in fig.axes:
+        spec = ax.get_subplotspec()
+        if spec is not None:
+            return int(spec.get_gridspec().ncols)
+    return 1
+
+
+def _ink_at_edges(fig: Any) -> bool:
+    """Whether the drawn image has anything but the background on its outermost pixels
+    (text cut by the edge: margins too small for this figure's labels)."""
+    img = np.asarray(fig.canvas.buffer_rgba())
+    edges = np.concatenate([img[0], img[-1], img[:, 0], img[:, -1]])
+    face = (np.asarray(fig.get_facecolor()) * 255).round().astype(np.uint8)
+    return bool(np.any(edges != face))
+
+
+def save_figure(fig: Any, out_dir: Path, name: str,
+                layout: Margins | Literal["as-is", "tight"] = TIGHT) -> str:
+    """Lay out and save a figure as ``out_dir/name`` (checked to stay inside, marked as
+    the project's) at :data:`DPI`; return its Markdown link target (``./`` before a name
+    with ``:``, which a Markdown reader would take for a URL scheme).
+
+    Args:
+        fig: A figure of :func:`figure`.
+        out_dir: The results directory.
+        name: The file name.
+        layout: :class:`Margins` (fixed, in inches; laid out again with
+            ``tight_layout`` if text reaches the image's edge), :data:`AS_IS` (the
+            caller's ``subplots_adjust``, the same check) or :data:`TIGHT`.
+    """
+    path = inside(out_dir, name)
+    if layout == TIGHT:
+        fig.tight_layout()
+    elif isinstance(layout, Margins):
+        width, height = fig.get_size_inches()
+        fig.subplots_adjust(**layout.fractions(float(width), float(height), _columns(fig)))
+    fig.savefig(path, dpi=DPI, metadata=PNG_METADATA)
+    if layout != TIGHT and _ink_at_edges(fig):
+        log.debug("%s: text at the edge with fixed margins; laid out tightly", name)
+        fig.tight_layout()
+        fig.savefig(path, dpi=DPI, metadata=PNG_METADATA)
     return f"./{name}" if ":" in name else name
 
 
@@ -48,22 +147,80 @@ def representative(points: list[int]) -> list[int]:
     return [points[i] for i in sorted(set(idx.tolist()))]
 
 
-def time_series(out_dir: Path, scenario: str, point: int) -> str | None:
-    """Error norm and position error versus time of the recorded trial 0 of each controller."""
-    files = sorted((out_dir / TRIALS_DIR).glob(f"{scenario}__p{point}__*__00000.npz"))
-    if not files:
-        return None
-    plt = pyplot()
-    fig, axes = plt.subplots(1, 2, figsize=(10, 3.5))
-    for f in files:
+#: One controller's curves in a figure of line panels: its label, and an ``(x, y)`` pair
+#: per panel.
+Curves = tuple[str, list[tuple[np.ndarray, np.ndarray]]]
+
+
+def trial0_files(out_dir: Path, scenario: str, point: int) -> list[Path]:
+    """The recorded trial 0 of every controller at one sweep point, sorted by name."""
+    return sorted((out_dir / TRIALS_DIR).glob(f"{scenario}__p{point}__*__00000.npz"))
+
+
+def line_figures(out_dir: Path, points: list[int], curves_of: Callable[[int], list[Curves]],
+                 draw: Callable[[list[Curves]], tuple[Any, list[list[Any]]]],
+                 name_of: Callable[[int], str], layout: Margins) -> dict[int, str]:
+    """One figure of line panels per sweep point, drawn once and redrawn for the next
+    points with the new data in its lines (the same controllers, so the same legend):
+    the axes, ticks and texts are made once (a third of a figure's time), and the image is
+    pixel for pixel the one a new figure would give (axes limits rescaled to the data).
+
+    Args:
+        out_dir: The results directory.
+        points: The sweep points.
+        curves_of: A point's curves (none: no figure for it).
+        draw: A new figure of curves and its lines (per panel, in the order of the
+            curves).
+        name_of: A point's file name.
+        layout: The figure's margins.
+
+    Returns:
+        The Markdown link target of each point's figure.
+    """
+    out: dict[int, str] = {}
+    fig: Any = None
+    lines: list[list[Any]] = []
+    labels: list[str] = []
+    for point in points:
+        curves = curves_of(point)
+        if not curves:
+            continue
+        if fig is None or [c[0] for c in curves] != labels:
+            fig, lines = draw(curves)
+            labels = [c[0] for c in curves]
+        else:
+            for panel, panel_lines in enumerate(lines):
+                for line, (_, data) in zip(panel_lines, curves, strict=True):
+                    line.set_data(*data[panel])
+            for ax in fig.axes:
+                ax.relim()
+                ax.autoscale_view()
+        out[point] = save_figure(fig, out_dir, name_of(point), layout)
+    return out
+
+
+def _error_curves(out_dir: Path, scenario: str, point: int) -> list[Curves]:
+    """Error norm (its positive values) and position error [mm] (floored at 1e-6 for the
+    log axis) of each controller's trial 0."""
+    curves = []
+    for f in trial0_files(out_dir, scenario, point):
         with np.load(f) as rec:
-            label = str(rec["controller"])
             err = np.asarray(rec["error_norm"], float)
             t = np.asarray(rec["t"], float)
             ok = np.isfinite(err) & (err > 0)
-            axes[0].semilogy(t[ok], err[ok], label=label)
-            axes[1].semilogy(t, np.maximum(np.asarray(rec["position_error"]) * 1e3, 1e-6),
-                             label=label)
+            curves.append((str(rec["controller"]), [
+                (t[ok], err[ok]),
+                (t, np.maximum(np.asarray(rec["position_error"]) * 1e3, 1e-6))]))
+    return curves
+
+
+def _draw_error_curves(curves: list[Curves]) -> tuple[Any, list[list[Any]]]:
+    fig = figure((10, 3.5))
+    axes = fig.subplots(1, 2)
+    lines: list[list[Any]] = [[], []]
+    for label, data in curves:
+        for panel, (x, y) in enumerate(data):
+            lines[panel] += axes[panel].semilogy(x, y, label=label)
     axes[0].set_title("feature error norm (trial 0)")
     axes[0].set_xlabel("time [s]")
     axes[1].set_title("position error [mm] (trial 0)")
@@ -71,9 +228,15 @@ def time_series(out_dir: Path, scenario: str, point: int) -> str | None:
     for ax in axes:
         ax.grid(True, which="both", alpha=0.3)
         ax.legend(fontsize=7)
-    fig.tight_layout()
-    name = f"{scenario}_p{point}_timeseries.png"
-    return save_figure(plt, fig, out_dir, name)
+    return fig, lines
+
+
+def time_series(out_dir: Path, scenario: str, points: list[int]) -> dict[int, str]:
+    """Error norm and position error versus time of the recorded trial 0 of each
+    controller, a figure per sweep point (those with a recorded trial)."""
+    return line_figures(out_dir, points, lambda p: _error_curves(out_dir, scenario, p),
+                        _draw_error_curves, lambda p: f"{scenario}_p{p}_timeseries.png",
+                        TWO_LOG_PANELS)
 
 
 def _label(s: Summary) -> str:
@@ -88,8 +251,8 @@ def sweeps(out_dir: Path, scenario: str, summaries: list[Summary]) -> list[str]:
     if len(axes_keys) != 1:
         return []
     key = axes_keys[0]
-    plt = pyplot()
-    fig, (a0, a1) = plt.subplots(1, 2, figsize=(10, 3.5))
+    fig = figure((10, 3.5))
+    a0, a1 = fig.subplots(1, 2)
     by_ctrl: dict[str, list[Summary]] = defaultdict(list)
     for s in summaries:
         by_ctrl[_label(s)].append(s)
@@ -107,9 +270,7 @@ def sweeps(out_dir: Path, scenario: str, summaries: list[Summary]) -> list[str]:
         ax.set_xlabel(key)
         ax.grid(True, which="both", alpha=0.3)
         ax.legend(fontsize=7)
-    fig.tight_layout()
-    name = f"{scenario}_sweep_{key}.png"
-    return [save_figure(plt, fig, out_dir, name)]
+    return [save_figure(fig, out_dir, f"{scenario}_sweep_{key}.png", TWO_LABELLED_PANELS)]
 
 
 def heat_maps(out_dir: Path, scenario: str, summaries: list[Summary]) -> str | None:
@@ -126,10 +287,10 @@ def heat_maps(out_dir: Path, scenario: str, summaries: list[Summary]) -> str | N
     for s in summaries:
         by_ctrl[_label(s)][(s.sweep[y_key], s.sweep[x_key])] = s
     ctrls = list(by_ctrl)
-    plt = pyplot()
     from matplotlib.colors import LogNorm
 
-    fig, axes = plt.subplots(2, len(ctrls), figsize=(4.2 * len(ctrls) + 1, 8.5), squeeze=False)
+    fig = figure((4.2 * len(ctrls) + 1, 8.5))
+    axes = fig.subplots(2, len(ctrls), squeeze=False)
     errors = np.array([s.position_median_mm for s in summaries], float)
     finite = errors[np.isfinite(errors) & (errors > 0)]
     lo = max(float(finite.min()), 1e-4) if finite.size else 1e-3
@@ -168,9 +329,7 @@ def heat_maps(out_dir: Path, scenario: str, summaries: list[Summary]) -> str | N
             ax.set_ylabel(y_key)
             ax.set_title(f"{ctrl}: {title}", fontsize=9)
             fig.colorbar(im, ax=ax, fraction=0.046)
-    fig.tight_layout()
-    name = f"{scenario}_map.png"
-    return save_figure(plt, fig, out_dir, name)
+    return save_figure(fig, out_dir, f"{scenario}_map.png", TIGHT)  # colour bars: tight
 
 
 def error_cdf(out_dir: Path, scenario: str, rows: list[dict[str, Any]]) -> str | None:
@@ -189,8 +348,8 @@ def error_cdf(out_dir: Path, scenario: str, rows: list[dict[str, Any]]) -> str |
             by_ctrl[label].append(max(float(e), 1e-9))
     if not by_ctrl:
         return None
-    plt = pyplot()
-    fig, ax = plt.subplots(figsize=(6.5, 4))
+    fig = figure((6.5, 4))
+    ax = fig.subplots()
     for label in sorted(by_ctrl):
         e = np.sort(by_ctrl[label])
         k = np.arange(1, len(e) + 1)
@@ -205,6 +364,4 @@ def error_cdf(out_dir: Path, scenario: str, rows: list[dict[str, Any]]) -> str |
     ax.set_ylabel("fraction of trials within")
     ax.grid(True, which="both", alpha=0.3)
     ax.legend(fontsize=7)
-    fig.tight_layout()
-    name = f"{scenario}_error_cdf.png"
-    return save_figure(plt, fig, out_dir, name)
+    return save_figure(fig, out_dir, f"{scenario}_error_cdf.png", ONE_LABELLED_PANEL)

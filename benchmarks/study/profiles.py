@@ -81,10 +81,10 @@ def plot_profiles(out_dir: Path, scenario: str, rows: list[dict[str, Any]]) -> s
         if len(ctrls) < 2 or costs.shape[0] == 0:
             return None
         panels.append((title, ctrls, ratios(costs)))
-    from benchmarks.study.plots import pyplot
+    from benchmarks.study.plots import LABELLED_TITLED_PANELS, figure, save_figure
 
-    plt = pyplot()
-    fig, axes = plt.subplots(1, 2, figsize=(11, 3.8))
+    fig = figure((11, 3.8))
+    axes = fig.subplots(1, 2)
     for ax, (title, ctrls, r) in zip(axes, panels, strict=True):
         finite = r[np.isfinite(r)]
         top = max(2.0, float(finite.max()) * 1.05) if finite.size else 2.0
@@ -101,11 +101,7 @@ def plot_profiles(out_dir: Path, scenario: str, rows: list[dict[str, Any]]) -> s
         ax.set_title(f"{title}, {r.shape[0]} trials", fontsize=9)
         ax.grid(True, which="both", alpha=0.3)
         ax.legend(fontsize=7, loc="lower right")
-    fig.tight_layout()
-    name = f"{scenario}_profiles.png"
-    fig.savefig(out_dir / name, dpi=90)
-    plt.close(fig)
-    return name
+    return save_figure(fig, out_dir, f"{scenario}_profiles.png", LABELLED_TITLED_PANELS)
 
 
 def profile_note(n_ctrls: int) -> str:

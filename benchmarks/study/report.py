@@ -229,12 +229,10 @@ def write_report(out_dir: Path, overwrite: bool = False) -> Path:
         points = sorted({s.point for s in ss})
         lines += tracking_section(out_dir, name, [r for r in rows if r["scenario"] == name],
                                   plots.representative(points))
-        for p in plots.representative(points):
-            img = plots.time_series(out_dir, name, p)
-            if img:
-                sweep = format_sweep(next(s.sweep for s in ss if s.point == p))
-                lines += [f"Error versus time, representative trial (sweep: {sweep}):", "",
-                          f"![time series]({img})", ""]
+        for p, img in plots.time_series(out_dir, name, plots.representative(points)).items():
+            sweep = format_sweep(next(s.sweep for s in ss if s.point == p))
+            lines += [f"Error versus time, representative trial (sweep: {sweep}):", "",
+                      f"![time series]({img})", ""]
         for img in plots.sweeps(out_dir, name, ss):
             lines += [f"![sweep]({img})", ""]
         heat = plots.heat_maps(out_dir, name, ss)

@@ -2,7 +2,8 @@
 every sweep point (:mod:`benchmarks.sim.tracking`), and the tracking error against time
 of the recorded trial. In the dynamic world the table also gives the drives' forces (the
 peak over every physics step, the RMS over the control instants, the time at a force
-limit) and a second figure their forces against time."""
+limit) and a second figure their forces against time (the figures:
+:mod:`benchmarks.study.tracking_figures`)."""
 
 from __future__ import annotations
 
@@ -18,7 +19,6 @@ from benchmarks.study.metrics import format_sweep, sweep_values
 
 log = logging.getLogger(__name__)
 
-TRIALS_DIR = "trials"
 #: Columns of the tracking table (medians with their 95 % intervals in the report).
 HEADER = ["sweep", "controller", "trials", "failed", "RMS mm (median)", "RMS mm (p95)",
           "max mm (median)", "max mm (worst)", "RMS deg (median)", "settled",
@@ -131,89 +131,6 @@ def tracking_rows(rows: list[dict[str, Any]], with_intervals: bool = True
     return out
 
 
-def tracking_plot(out_dir: Path, scenario: str, point: int) -> str | None:
-    """The position error from the reference against time, linear scale, of the recorded
-    trial 0 of every controller at one sweep point."""
-    files = sorted((out_dir / TRIALS_DIR).glob(f"{scenario}__p{point}__*__00000.npz"))
-    if not files:
-        return None
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    fig, axes = plt.subplots(1, 2, figsize=(10, 3.5))
-    for f in files:
-        with np.load(f) as rec:
-            t = np.asarray(rec["t"], float)
-            axes[0].plot(t, np.asarray(rec["position_error"], float) * 1e3,
-                         label=str(rec["controller"]))
-            axes[1].plot(t, np.rad2deg(np.asarray(rec["orientation_error"], float)),
-                         label=str(rec["controller"]))
-    axes[0].set_title("tracking error, position [mm] (trial 0)")
-    axes[1].set_title("tracking error, orientation [deg] (trial 0)")
-    for ax in axes:
-        ax.set_xlabel("time [s]")
-        ax.grid(True, alpha=0.3)
-        ax.legend(fontsize=7)
-    fig.tight_layout()
-    name = f"{scenario}_p{point}_tracking.png"
-    fig.savefig(out_dir / name, dpi=90)
-    plt.close(fig)
-    return name
-
-
-def forces_figure(out_dir: Path, scenario: str, point: int) -> Any:
-    """The drives' forces against time of the recorded trial 0 of every controller at one
-    sweep point, one panel per controller (six legs, the force limits dashed when a force
-    exceeds half of them); None
-    without a recorded trial with forces (the kinematic world)."""
-    traces = []
-    for f in sorted((out_dir / TRIALS_DIR).glob(f"{scenario}__p{point}__*__00000.npz")):
-        with np.load(f) as rec:
-            if "leg_forces" in rec:
-                traces.append((str(rec["controller"]), np.asarray(rec["t"], float),
-                               np.asarray(rec["leg_forces"], float),
-                               np.asarray(rec["force_limit"], float)))
-    if not traces:
-        return None
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    fig, axes = plt.subplots(1, len(traces), figsize=(3.6 * len(traces) + 1, 3.3),
-                             squeeze=False, sharey=True)
-    for ax, (controller, t, forces, limit) in zip(axes[0], traces, strict=True):
-        for leg in range(forces.shape[1]):
-            ax.plot(t, forces[:, leg], lw=0.9, label=f"leg {leg}")
-        lim = float(np.min(limit))
-        if np.abs(forces).max() > 0.5 * lim:  # the limits drawn when the forces near them
-            for sign in (1.0, -1.0):
-                ax.axhline(sign * lim, color="k", ls="--", lw=0.7)
-            ax.set_title(f"{controller}: drive forces [N]", fontsize=9)
-        else:
-            ax.set_title(f"{controller}: drive forces [N] (limit {lim:g})", fontsize=9)
-        ax.set_xlabel("time [s]")
-        ax.grid(True, alpha=0.3)
-    axes[0][0].legend(fontsize=6, ncol=2)
-    fig.subplots_adjust(left=0.06, right=0.98, bottom=0.15, top=0.9, wspace=0.12)
-    return fig
-
-
-def forces_plot(out_dir: Path, scenario: str, point: int) -> str | None:
-    """:func:`forces_figure` saved beside the tracking-error plot; its file name."""
-    fig = forces_figure(out_dir, scenario, point)
-    if fig is None:
-        return None
-    import matplotlib.pyplot as plt
-
-    name = f"{scenario}_p{point}_forces.png"
-    fig.savefig(out_dir / name, dpi=90)
-    plt.close(fig)
-    return name
-
-
 def tracking_section(out_dir: Path, scenario: str, rows: list[dict[str, Any]],
                      points: list[int]) -> list[str]:
     """The Markdown lines of the section (none for a scenario without trajectories).
@@ -242,15 +159,16 @@ def tracking_section(out_dir: Path, scenario: str, rows: list[dict[str, Any]],
     from benchmarks.study.saturation_report import saturation_section
 
     lines += saturation_section(rows)
-    for p in points:
-        img = tracking_plot(out_dir, scenario, p)
-        if img:
-            sweep = next((format_sweep(sweep_values(r)) for r in rows
-                          if int(r.get("point", 0)) == p), "")
-            lines += [f"Tracking error versus time (sweep: {sweep}):", "",
-                      f"![tracking error]({img})", ""]
-            forces = forces_plot(out_dir, scenario, p)
-            if forces:
-                lines += [f"Drive forces versus time (sweep: {sweep}):", "",
-                          f"![drive forces]({forces})", ""]
+    from benchmarks.study.tracking_figures import forces_plots, tracking_plots
+
+    force_images = forces_plots(out_dir, scenario, points)
+    for p, img in tracking_plots(out_dir, scenario, points).items():
+        sweep = next((format_sweep(sweep_values(r)) for r in rows
+                      if int(r.get("point", 0)) == p), "")
+        lines += [f"Tracking error versus time (sweep: {sweep}):", "",
+                  f"![tracking error]({img})", ""]
+        forces = force_images.get(p)
+        if forces:
+            lines += [f"Drive forces versus time (sweep: {sweep}):", "",
+                      f"![drive forces]({forces})", ""]
     return lines

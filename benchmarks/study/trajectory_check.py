@@ -84,12 +84,11 @@ def sampled_setups(sc: Any, samples: int) -> list[Any]:
 
 def _point(sc: Any, samples: int) -> TrajectoryFacts | None:
     from benchmarks.sim.reference import trial_reference
-    from hexapod.kinematics import inverse_kinematics
+    from hexapod.kinematics import inverse_jacobian, leg_vectors
 
     setups = sampled_setups(sc, samples)
     if not setups:
         return None
-    from hexapod.kinematics import inverse_jacobian, leg_directions
 
     durations, travel, hits, speed = [], 0.0, 0, 0.0
     worst: tuple[float, int, float, float] | None = None  # (depth, leg, q, limit)
@@ -100,12 +99,12 @@ def _point(sc: Any, samples: int) -> TrajectoryFacts | None:
         times = np.append(np.arange(0.0, ref.duration, sc.dt), ref.duration)
         sample = ref.at(times)
         g = s.world.geometry
-        q = inverse_kinematics(g, sample.rotation, sample.translation)  # (T, 6) [m]
+        legs = leg_vectors(g, sample.rotation, sample.translation)  # (T, 6, 3) [m]
+        q = np.linalg.norm(legs, axis=-1)  # the leg lengths (inverse kinematics) [m]
         travel = max(travel, float(np.max(np.abs(q - q[0]))))
         w = sample.angular_velocity  # the twist at the base origin: v - w x t
         tw = np.concatenate([sample.velocity - np.cross(w, sample.translation), w], axis=1)
-        J = inverse_jacobian(g.base_points, leg_directions(g, sample.rotation,
-                                                            sample.translation))
+        J = inverse_jacobian(g.base_points, legs / q[..., None])  # the leg directions
         speed = max(speed, float(np.max(np.abs(np.einsum("tij,tj->ti", J, tw)))))
         below, above = g.q_min - q, q - g.q_max
         depth = np.maximum(below, above)

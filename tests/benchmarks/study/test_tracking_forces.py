@@ -13,10 +13,10 @@ import pytest
 
 from benchmarks.cli import main as cli_main
 from benchmarks.study.results import read_results
+from benchmarks.study.tracking_figures import forces_figure
 from benchmarks.study.tracking_report import (
     FORCE_HEADER,
     HEADER,
-    forces_figure,
     tracking_header,
     tracking_rows,
 )
@@ -123,23 +123,18 @@ def test_table_cells_are_the_groups_medians_and_worst(run: tuple[Path, list[dict
 def test_the_forces_figure_draws_the_recorded_forces(run: tuple[Path, list[dict]]) -> None:
     out, _ = run
     fig = forces_figure(out, "forces", 0)
-    try:
-        assert len(fig.axes) == 2
-        for ax in fig.axes:
-            controller = ax.get_title().split(":")[0]
-            rec = _recorded(out, controller)
-            legs = [ln for ln in ax.get_lines() if ln.get_label().startswith("leg ")]
-            assert len(legs) == 6
-            for i, ln in enumerate(legs):
-                np.testing.assert_array_equal(ln.get_xdata(), rec["t"])
-                np.testing.assert_array_equal(ln.get_ydata(), rec["leg_forces"][:, i])
-            limits = sorted(float(ln.get_ydata()[0]) for ln in ax.get_lines()
-                            if ln.get_linestyle() == "--")
-            assert limits == [-LIMIT, LIMIT]
-    finally:
-        import matplotlib.pyplot as plt
-
-        plt.close(fig)
+    assert len(fig.axes) == 2
+    for ax in fig.axes:
+        controller = ax.get_title().split(":")[0]
+        rec = _recorded(out, controller)
+        legs = [ln for ln in ax.get_lines() if ln.get_label().startswith("leg ")]
+        assert len(legs) == 6
+        for i, ln in enumerate(legs):
+            np.testing.assert_array_equal(ln.get_xdata(), rec["t"])
+            np.testing.assert_array_equal(ln.get_ydata(), rec["leg_forces"][:, i])
+        limits = sorted(float(ln.get_ydata()[0]) for ln in ax.get_lines()
+                        if ln.get_linestyle() == "--")
+        assert limits == [-LIMIT, LIMIT]
 
 
 def test_kinematic_rows_have_no_force_columns() -> None:

@@ -1,0 +1,159 @@
+"""The figures of the report's section on trajectory tasks
+(:mod:`benchmarks.study.tracking_report`): the tracking error against time of the recorded
+trial 0 of every controller and, in the dynamic world, the drives' forces, a figure of
+each per sweep point. A figure is drawn once and redrawn with the next points' data
+(:func:`benchmarks.study.plots.line_figures`): the image is the one a new figure gives."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from benchmarks.study.plots import (
+    AS_IS,
+    TWO_LINEAR_PANELS,
+    Curves,
+    figure,
+    line_figures,
+    save_figure,
+    trial0_files,
+)
+
+#: The forces figure's layout (fractions of the figure; ``subplots_adjust``).
+FORCES_LAYOUT = {"left": 0.06, "right": 0.98, "bottom": 0.15, "top": 0.9, "wspace": 0.12}
+#: A controller's recorded forces: its label, the times [s], the forces [N] (period x
+#: leg) and the drives' force limits [N].
+Trace = tuple[str, np.ndarray, np.ndarray, np.ndarray]
+
+
+def _tracking_curves(out_dir: Path, scenario: str, point: int) -> list[Curves]:
+    """Position [mm] and orientation [deg] errors from the reference of each controller's
+    trial 0."""
+    curves = []
+    for f in trial0_files(out_dir, scenario, point):
+        with np.load(f) as rec:
+            t = np.asarray(rec["t"], float)
+            curves.append((str(rec["controller"]), [
+                (t, np.asarray(rec["position_error"], float) * 1e3),
+                (t, np.rad2deg(np.asarray(rec["orientation_error"], float)))]))
+    return curves
+
+
+def _draw_tracking(curves: list[Curves]) -> tuple[Any, list[list[Any]]]:
+    fig = figure((10, 3.5))
+    axes = fig.subplots(1, 2)
+    lines: list[list[Any]] = [[], []]
+    for label, data in curves:
+        for panel, (x, y) in enumerate(data):
+            lines[panel] += axes[panel].plot(x, y, label=label)
+    axes[0].set_title("tracking error, position [mm] (trial 0)")
+    axes[1].set_title("tracking error, orientation [deg] (trial 0)")
+    for ax in axes:
+        ax.set_xlabel("time [s]")
+        ax.grid(True, alpha=0.3)
+        ax.legend(fontsize=7)
+    return fig, lines
+
+
+def tracking_plots(out_dir: Path, scenario: str, points: list[int]) -> dict[int, str]:
+    """The position and orientation errors from the reference against time, linear
+    scale, of the recorded trial 0 of every controller, a figure per sweep point (those
+    with a recorded trial); the file name of each."""
+    return line_figures(out_dir, points, lambda p: _tracking_curves(out_dir, scenario, p),
+                        _draw_tracking, lambda p: f"{scenario}_p{p}_tracking.png",
+                        TWO_LINEAR_PANELS)
+
+
+def force_traces(out_dir: Path, scenario: str, point: int) -> list[Trace]:
+    """The recorded forces of every controller's trial 0 at one sweep point (none in the
+    kinematic world)."""
+    traces = []
+    for f in trial0_files(out_dir, scenario, point):
+        with np.load(f) as rec:
+            if "leg_forces" in rec:
+                traces.append((str(rec["controller"]), np.asarray(rec["t"], float),
+                               np.asarray(rec["leg_forces"], float),
+                               np.asarray(rec["force_limit"], float)))
+    return traces
+
+
+@dataclass
+class _ForcePanels:
+    """A forces figure and its lines: a panel per controller, a line per leg, the dashed
+    force limits when drawn."""
+
+    fig: Any
+    axes: list[Any]
+    legs: list[list[Any]]
+    limits: list[list[Any]]
+    shape: list[tuple[str, int]]  # each panel's controller and number of legs
+
+
+def _limits(ax: Any, controller: str, forces: np.ndarray, limit: np.ndarray) -> list[Any]:
+    """The panel's title, and its force limits dashed when a force exceeds half of them
+    (the lines drawn)."""
+    lim = float(np.min(limit))
+    if np.abs(forces).max() > 0.5 * lim:  # the limits drawn when the forces near them
+        ax.set_title(f"{controller}: drive forces [N]", fontsize=9)
+        return [ax.axhline(sign * lim, color="k", ls="--", lw=0.7) for sign in (1.0, -1.0)]
+    ax.set_title(f"{controller}: drive forces [N] (limit {lim:g})", fontsize=9)
+    return []
+
+
+def _draw_forces(traces: list[Trace]) -> _ForcePanels:
+    fig = figure((3.6 * len(traces) + 1, 3.3))
+    axes = list(fig.subplots(1, len(traces), squeeze=False, sharey=True)[0])
+    legs, limits = [], []
+    for ax, (controller, t, forces, limit) in zip(axes, traces, strict=True):
+        legs.append([ax.plot(t, forces[:, leg], lw=0.9, label=f"leg {leg}")[0]
+                     for leg in range(forces.shape[1])])
+        limits.append(_limits(ax, controller, forces, limit))
+        ax.set_xlabel("time [s]")
+        ax.grid(True, alpha=0.3)
+    axes[0].legend(fontsize=6, ncol=2)
+    fig.subplots_adjust(**FORCES_LAYOUT)
+    return _ForcePanels(fig, axes, legs, limits, [(c, f.shape[1]) for c, _, f, _ in traces])
+
+
+def _redraw_forces(panels: _ForcePanels, traces: list[Trace]) -> None:
+    """Put another point's forces (the same controllers and legs) in the figure."""
+    for i, (controller, t, forces, limit) in enumerate(traces):
+        for leg, line in enumerate(panels.legs[i]):
+            line.set_data(t, forces[:, leg])
+        for line in panels.limits[i]:
+            line.remove()
+        panels.limits[i] = _limits(panels.axes[i], controller, forces, limit)
+    for ax in panels.axes:
+        ax.relim()
+    for ax in panels.axes:  # the shared y axis: every panel's data first
+        ax.autoscale_view()
+    panels.fig.subplots_adjust(**FORCES_LAYOUT)  # undone if the last one was laid out tightly
+
+
+def forces_figure(out_dir: Path, scenario: str, point: int) -> Any:
+    """The drives' forces against time of the recorded trial 0 of every controller at one
+    sweep point, one panel per controller (six legs, the force limits dashed when a force
+    exceeds half of them); None without a recorded trial with forces (the kinematic
+    world)."""
+    traces = force_traces(out_dir, scenario, point)
+    return _draw_forces(traces).fig if traces else None
+
+
+def forces_plots(out_dir: Path, scenario: str, points: list[int]) -> dict[int, str]:
+    """:func:`forces_figure` of each sweep point saved beside its tracking-error plot (one
+    figure redrawn with each point's forces); the file name of each."""
+    out: dict[int, str] = {}
+    panels = None
+    for point in points:
+        traces = force_traces(out_dir, scenario, point)
+        if not traces:
+            continue
+        if panels is None or panels.shape != [(c, f.shape[1]) for c, _, f, _ in traces]:
+            panels = _draw_forces(traces)
+        else:
+            _redraw_forces(panels, traces)
+        out[point] = save_figure(panels.fig, out_dir, f"{scenario}_p{point}_forces.png", AS_IS)
+    return out

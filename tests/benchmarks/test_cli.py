@@ -1,0 +1,43 @@
+"""The command line's start-up: a command builds the arguments it needs, and neither the
+servo loop nor the closed-chain model is imported to parse another command."""
+
+from __future__ import annotations
+
+import argparse
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+from benchmarks.cli import build_parser, command_word
+
+ROOT = Path(__file__).resolve().parents[2]
+
+
+def _choices(parser: argparse.ArgumentParser) -> dict[str, argparse.ArgumentParser]:
+    (sub,) = [a for a in parser._actions if isinstance(a, argparse._SubParsersAction)]
+    return dict(sub.choices)
+
+
+def test_the_command_word_is_the_first_word_not_an_option() -> None:
+    assert command_word(["-v", "run", "quick", "--out", "o"]) == "run"
+    assert command_word(["--help"]) is None
+    assert command_word([]) is None
+
+
+def test_servo_is_listed_but_built_only_when_asked_for() -> None:
+    listed = _choices(build_parser({"run"}))["servo"]
+    assert not any(a.dest == "backend" for a in listed._actions)  # a name and a help line
+    full = _choices(build_parser({"servo"}))["servo"]
+    assert any(a.dest == "backend" for a in full._actions)
+    assert any(a.dest == "backend" for a in _choices(build_parser())["servo"]._actions)
+
+
+def test_parsing_run_imports_neither_the_servo_loop_nor_pinocchio() -> None:
+    code = ("import sys, benchmarks.cli as c; "
+            "c.build_parser({'run'}).parse_args(['run', 'quick', '--out', 'o']); "
+            "print(sorted(m for m in ('benchmarks.robot.servo', 'pinocchio', 'casadi', "
+            "'matplotlib', 'scipy.stats') if m in sys.modules))")
+    out = subprocess.run([sys.executable, "-c", code], cwd=ROOT, capture_output=True,
+                         text=True, check=True, env={**os.environ, "PYTHONPATH": str(ROOT)})
+    assert out.stdout.strip() == "[]"
