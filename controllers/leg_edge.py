@@ -56,7 +56,7 @@ class LegEdgeController(VisionLaw):
     """
 
     name = "leg-edge"
-    features = frozenset({"lengths", "normals"})
+    features = frozenset({"lengths", EDGE_NORMALS.field})  # the edge feature's, at reset
     unit = "edges"
 
     def __init__(self, gain: float = 1.0, adaptive_gain: Sequence[float] | None = None,

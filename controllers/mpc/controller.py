@@ -43,6 +43,7 @@ from controllers.mpc.solver import (
 from controllers.qp import LegDirectionQPController, LegEdgeQPController, velocity_bounds
 from controllers.tasks.feature_kind import BuiltinFeature
 from controllers.tasks.leg_direction import LEG_DIRECTIONS
+from controllers.tasks.leg_edge import EDGE_NORMALS
 from hexapod.compiled import CompiledFunction
 
 log = logging.getLogger(__name__)
@@ -461,7 +462,7 @@ class LegEdgeMPCController(MPCLaw):
     """
 
     name = "leg-edge-mpc"
-    features = frozenset({"lengths", "normals"})
+    features = frozenset({"lengths", EDGE_NORMALS.field})  # the law's, at reset
     law_class = LegEdgeQPController
     unit = "edges"
 
