@@ -73,6 +73,11 @@ class BuiltinFeature:
     def __repr__(self) -> str:
         return f"<feature {self.kind}>"
 
+    def __reduce__(self) -> tuple[Any, tuple[str]]:
+        """Pickled by reference: the one object of its kind in every process (the
+        controllers, steps and problem specs that hold it compare and cache by it)."""
+        return builtin_feature, (self.kind,)
+
     def _unsupported(self, what: str) -> ValueError:
         return ValueError(f"feature {self.kind!r}: no {what}")
 
@@ -131,3 +136,18 @@ class BuiltinFeature:
     def task_of(self, desired: np.ndarray, **options: Any) -> Any:
         """The numpy :class:`~controllers.tasks.base.Task` towards ``desired``."""
         raise self._unsupported("task")
+
+
+def builtin_feature(kind: str) -> BuiltinFeature:
+    """The built-in feature object named ``kind`` (its name in the kernels).
+
+    Raises:
+        ValueError: No built-in feature has that name (naming the choices).
+    """
+    from controllers.tasks import BUILTIN_FEATURES
+
+    for feature in BUILTIN_FEATURES:
+        if feature.kind == kind:
+            return feature
+    raise ValueError(f"feature: expected one of "
+                     f"{', '.join(f.kind for f in BUILTIN_FEATURES)}, got {kind!r}")

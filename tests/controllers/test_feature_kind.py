@@ -4,6 +4,8 @@ and CasADi) and their refusals."""
 
 from __future__ import annotations
 
+import pickle
+
 import casadi as ca
 import numpy as np
 import pytest
@@ -19,8 +21,10 @@ from controllers.tasks import (
     EDGE_NORMALS,
     LEG_DIRECTIONS,
     PLATFORM_POSE,
+    EdgeFeature,
     LegEdgeTask,
 )
+from controllers.tasks.feature_kind import builtin_feature
 from controllers.tasks.leg_edge import edge_feature
 from hexapod import deltalab
 from hexapod.se3 import exp_so3
@@ -99,3 +103,17 @@ def test_a_feature_refuses_what_it_does_not_have() -> None:
         PLATFORM_POSE.sx_of_legs([], [], 0.01)
     with pytest.raises(ValueError, match="'lines' needs the camera's line_matrix"):
         EDGE_LINES.line_inv_t(None)
+
+
+def test_a_feature_is_pickled_by_reference() -> None:
+    """One object per kind in every process: what holds it (a controller, a compiled
+    step, a problem spec) compares and caches by it."""
+    for feature in BUILTIN_FEATURES:
+        if isinstance(feature, EdgeFeature):
+            assert feature.block_function is not None  # cached: must not travel
+        assert pickle.loads(pickle.dumps(feature)) is feature
+        assert len(pickle.dumps(feature)) < 200
+    spec = ForceProblemSpec(2, 1, PLATFORM_POSE)
+    assert pickle.loads(pickle.dumps(spec)) == spec
+    with pytest.raises(ValueError, match="expected one of normals, lines"):
+        builtin_feature("pixels")
