@@ -149,9 +149,7 @@ class LegEdgeController(VisionLaw):
         fill = np.empty((6, 2, 3))
         fill[:, 0] = np.where(vis[:, 0, None], n_star[:, 0], [1.0, 0.0, 0.0])
         fill[:, 1] = np.where(vis[:, 1, None], n_star[:, 1], [0.0, 1.0, 0.0])
-        self._fill = fill
-        if self.edge.lines:
-            self._l_fill = _unit(fill @ self._K_inv_t.T)
+        self._feature_fill = self.edge.features_of(fill, self._K_inv_t)
         self._goal_all_visible = bool(self._goal_visible.all())
         kernel = self._reuse_kernel(
             lambda: edge_law_kernel(self.edge, self.interaction, self.compiled))
@@ -177,10 +175,8 @@ class LegEdgeController(VisionLaw):
     # ----------------------------------------------------------------- step
     def _select(self, obs: Observation, q: np.ndarray) -> Selection:
         vis = np.asarray(obs.edge_visible, dtype=bool) & self._goal_visible
-        if self.edge.lines:
-            feat = np.where(vis[..., None], np.asarray(obs.lines, dtype=float), self._l_fill)
-        else:
-            feat = np.where(vis[..., None], np.asarray(obs.normals, dtype=float), self._fill)
+        feat = np.where(vis[..., None], np.asarray(getattr(obs, self.edge.field), dtype=float),
+                        self._feature_fill)
         both: np.ndarray = np.all(vis, axis=1)
         est = self.estimate
         est.predict_hidden(~both, self._A, self._dt)
@@ -191,7 +187,7 @@ class LegEdgeController(VisionLaw):
         # visible edge if it has one (exact at the goal).
         approx: np.ndarray = ~known & np.isfinite(self._u_star_known[:, 0])
         if approx.any():
-            n = _unit(feat @ self._K) if self.edge.lines else feat
+            n = self.edge.normals_of(feat, self._K)
             us = self._u_star
             one: np.ndarray = np.any(vis, axis=1) & ~both
             n_vis = np.where(vis[:, 0, None], n[:, 0], n[:, 1])

@@ -211,6 +211,16 @@ class EdgeFeature(BuiltinFeature):
             n = n / np.linalg.norm(n, axis=-1, keepdims=True)
         return n.reshape(12, 3)  # type: ignore[no-any-return]
 
+    def features_of(self, normals: np.ndarray, line_matrix_inv_t: np.ndarray) -> np.ndarray:
+        """(..., 3) the features of edge normals (..., 3): the normals, or their unit
+        lines ``K^-T n / |K^-T n|`` (numpy; ``line_matrix_inv_t`` is ``K^-T``)."""
+        return unit(normals @ line_matrix_inv_t.T) if self.lines else normals
+
+    def normals_of(self, features: np.ndarray, line_matrix: np.ndarray) -> np.ndarray:
+        """(..., 3) the edge normals of features (..., 3): the normals themselves, or the
+        unit normals ``K^T l / |K^T l|`` of lines (numpy; rows ``(K^T l)^T = l^T K``)."""
+        return unit(features @ line_matrix) if self.lines else features
+
     def line_inv_t(self, line_matrix: np.ndarray | None) -> np.ndarray:
         if self.lines:
             return np.linalg.inv(self._checked(line_matrix)).T  # type: ignore[no-any-return]
