@@ -28,6 +28,7 @@ from controllers.task_ctc import (
     camera_and_base_points,
     goal_pose_of,
 )
+from controllers.tasks.platform_pose import PLATFORM_POSE
 from hexapod.kinematics import Transform
 
 #: Smallest second singular value of the seen platform points about their centroid,
@@ -55,7 +56,7 @@ class CartesianCTC(TaskComputedTorque):
 
     name = "cartesian-ctc"
     features = frozenset({"lengths"})
-    compiled_kind = "pose"
+    compiled_kind = PLATFORM_POSE
 
     def take_goal(self, goal: Goal) -> None:
         """The fixed goal pose (``goal.rotation``, ``goal.translation``)."""

@@ -19,6 +19,11 @@ log = logging.getLogger(__name__)
 
 #: Feature names a controller may declare in ``Controller.features``.
 FEATURES = ("lengths", "normals", "lines", "directions")
+#: The observed unit-vector feature fields: name, shape of one trial's, visibility mask
+#: (the ``field``, ``shape`` and ``visibility`` of the built-in feature objects,
+#: :mod:`controllers.tasks.feature_kind`).
+FEATURE_FIELDS = (("normals", (6, 2, 3), "edge_visible"), ("lines", (6, 2, 3), "edge_visible"),
+                  ("directions", (6, 3), "direction_visible"))
 
 
 @dataclass
@@ -445,11 +450,10 @@ def observation_problem(obs: Observation, features: frozenset[str]) -> str | Non
         return f"lengths: leg {int(bad[0])} is {q[bad[0]]} (not finite)"
     if not np.isfinite(obs.t):
         return f"time is {obs.t} (not finite)"
-    for name, shape, mask in (("normals", (6, 2, 3), obs.edge_visible),
-                              ("lines", (6, 2, 3), obs.edge_visible),
-                              ("directions", (6, 3), obs.direction_visible)):
+    for name, shape, mask_field in FEATURE_FIELDS:
         if name not in features:
             continue
+        mask = getattr(obs, mask_field)
         value = getattr(obs, name)
         if value is None:
             return f"{name}: not measured by this sensor"

@@ -40,7 +40,10 @@ from controllers.task_ctc import (
     camera_and_base_points,
     goal_pose_of,
 )
-from controllers.tasks import LegDirectionTask, LegEdgeTask, Task
+from controllers.tasks import Task
+from controllers.tasks.feature_kind import BuiltinFeature
+from controllers.tasks.leg_direction import LEG_DIRECTIONS
+from controllers.tasks.leg_edge import EDGE_NORMALS
 from controllers.tracking import anchor_goals, reference_goals
 from vision.legs import directions_from_edges
 
@@ -66,8 +69,9 @@ class FeatureCTC(TaskComputedTorque):
             taught features as a step).
     """
 
-    #: The goal field holding the taught features.
-    key = "normals"
+    #: The built-in feature object (its goal field holds the taught features; the
+    #: reference and the task are its own).
+    observed_feature: BuiltinFeature = EDGE_NORMALS
 
     def prepare(self, context: ControllerContext) -> None:
         """Check the estimated camera pose and base points.
@@ -109,10 +113,17 @@ class FeatureCTC(TaskComputedTorque):
         """:meth:`features_seen` for the compiled step (the same by default)."""
         return self.features_seen(observation)
 
+    @property
+    def key(self) -> str:
+        """The goal (and observation) field of the taught features."""
+        assert self.observed_feature.field is not None
+        return self.observed_feature.field
+
     def make_task(self, desired: np.ndarray) -> Task:
-        """The task towards ``desired`` features (the numpy task: the tests' oracle of the
-        compiled step and the reference terms' checks)."""
-        raise NotImplementedError
+        """The task towards ``desired`` features (the feature's numpy task: the tests'
+        oracle of the compiled step and the reference terms' checks)."""
+        task: Task = self.observed_feature.task_of(desired)
+        return task
 
     def feature_reference(self, tr: float) -> np.ndarray:
         """(3, m) the anchored model features at ``tr`` [s], their rate and acceleration
@@ -144,8 +155,8 @@ class FeatureCTC(TaskComputedTorque):
         the model's camera does not see the feature (:meth:`_anchored`)."""
         ctx = self.context
         assert ctx is not None and self.reference is not None
-        kind = "normals" if self.key == "normals" else "directions"
-        size = 36 if kind == "normals" else 18
+        feature = self.observed_feature
+        size = feature.task_rows
         end = float(self.reference.duration) + 1.0
         model_end = np.asarray(reference_goals(replace(ctx, reference=self.reference),
                                                np.array([end]))[self.key][0]).reshape(-1, 3)
@@ -153,7 +164,7 @@ class FeatureCTC(TaskComputedTorque):
         taught = np.where(np.all(np.isfinite(taught), axis=-1)[:, None], taught, model_end)
         g = ctx.geometry
         cam = self._frame
-        inputs = layouts(kind)[0]
+        inputs = layouts(feature)[0]
         rows = np.empty((len(times), inputs.size))
         v = inputs.views(rows)
         v["reference"][:] = self.pose_rows(times)
@@ -162,7 +173,7 @@ class FeatureCTC(TaskComputedTorque):
         v["frame"][:] = np.concatenate([cam.rotation.ravel(), cam.translation])
         v["points"][:] = (g.base_points, g.platform_points)
         v["radius"][:] = g.leg_radius
-        out = feature_motion(kind).batch(rows).reshape(len(times), 3, size)
+        out = feature_motion(feature).batch(rows).reshape(len(times), 3, size)
         seen = np.isfinite(self._anchored(times).reshape(len(times), size))
         return np.where(seen[:, None, :], out, np.nan)
 
@@ -309,9 +320,9 @@ class LegEdgeCTC(FeatureCTC):
     docstring)."""
 
     name = "leg-edge-ctc"
-    features = frozenset({"lengths", "normals"})
-    key = "normals"
-    compiled_kind = "edges"
+    features = frozenset({"lengths", EDGE_NORMALS.field})
+    observed_feature = EDGE_NORMALS
+    compiled_kind = EDGE_NORMALS
 
     def features_seen(self, observation: Observation
                       ) -> tuple[np.ndarray, np.ndarray | None, np.ndarray] | str:
@@ -347,17 +358,14 @@ class LegEdgeCTC(FeatureCTC):
         X[fast, step.inputs.index("of_normals")] = 1.0
         return fast
 
-    def make_task(self, desired: np.ndarray) -> Task:
-        return LegEdgeTask(desired, "normals")
-
 
 class LegDirectionCTC(FeatureCTC):
     """Computed torque on the leg directions (``e = u x u*``; see the module docstring)."""
 
     name = "leg-direction-ctc"
-    features = frozenset({"lengths", "directions"})
-    key = "directions"
-    compiled_kind = "directions"
+    features = frozenset({"lengths", LEG_DIRECTIONS.field})
+    observed_feature = LEG_DIRECTIONS
+    compiled_kind: BuiltinFeature | None = LEG_DIRECTIONS
 
     def features_seen(self, observation: Observation
                       ) -> tuple[np.ndarray, np.ndarray | None, np.ndarray] | str:
@@ -384,5 +392,3 @@ class LegDirectionCTC(FeatureCTC):
         X[fast, step.inputs["directions"]] = u[fast]
         return fast
 
-    def make_task(self, desired: np.ndarray) -> Task:
-        return LegDirectionTask(desired)

@@ -58,7 +58,7 @@ from controllers.law_algebra import (
     law_tail,
 )
 from controllers.tasks.leg_direction import LEG_DIRECTIONS
-from controllers.tasks.leg_edge import edge_block, leg_direction_of_edges, normal_of_line
+from controllers.tasks.leg_edge import EdgeFeature, edge_block, leg_direction_of_edges
 from controllers.tasks.leg_feature import LegFeature
 from hexapod.compiled import CompiledFunction, Layout
 
@@ -201,9 +201,12 @@ def _direction_function(interaction: str = "current", lean: bool = False) -> ca.
                                 name + ("_lean" if lean else ""))
 
 
-def _edge_function(use_lines: bool, interaction: str = "current",
+def _edge_function(feature: EdgeFeature, interaction: str = "current",
                    lean: bool = False) -> ca.Function:
-    """Leg-edge law on pixel lines or normals (rank-one blocks, ``docs/math.md`` §6)."""
+    """Leg-edge law on pixel lines or normals (rank-one blocks, ``docs/math.md`` §6): the
+    edge feature's measured normal and line matrices
+    (:meth:`~controllers.tasks.leg_edge.EdgeFeature.sx_normal`,
+    :meth:`~controllers.tasks.leg_edge.EdgeFeature.line_matrices`)."""
     _check_interaction(interaction)
     inputs = law_layouts(edge_inputs(interaction), 36, "edge law")[0]
     x = ca.SX.sym("x", inputs.size)
@@ -212,11 +215,11 @@ def _edge_function(use_lines: bool, interaction: str = "current",
     star = _rows(v["desired"], 12)
     Kt = ca.reshape(v["K"], 3, 3)  # column-major read of a row-major K: K^T
     Kinv_t = ca.reshape(v["K_inv"], 3, 3)  # (K^-1)^T
-    lines = (Kt, Kinv_t) if use_lines else (None, None)
+    lines = feature.line_matrices(Kt, Kinv_t)
     A = _rows(v["base_points"], 6)
     q = [v["lengths"][i] for i in range(6)]
     w = v["weights"]
-    n = [normal_of_line(f, Kt) if use_lines else f for f in feat]
+    n = [feature.sx_normal(f, Kt) for f in feat]
     u = _leg_directions(v, [leg_direction_of_edges(n[2 * i], n[2 * i + 1])
                             for i in range(6)])
     acc = WeightedNormal()
@@ -243,7 +246,7 @@ def _edge_function(use_lines: bool, interaction: str = "current",
             acc.add_dense(ek, 0.5 * (ad @ gd.T + a @ g.T), w[k])
     tail = law_tail(ca.vertcat(*acc.used_errors), acc.N, acc.b, u, A,
                     x[inputs["gain"].start:], lean)
-    name = "hexapod_edge_law_" + ("lines" if use_lines else "normals") + "_w"
+    name = "hexapod_edge_law_" + feature.kind + "_w"
     name += ("" if interaction == "current" else f"_{interaction}") + ("_lean" if lean else "")
     return ca.Function(name, [x], [ca.vertcat(*errors, *tail, *u)])
 
@@ -351,10 +354,10 @@ def _direction_compiled(interaction: str = "current", lean: bool = False,
 
 
 @lru_cache(maxsize=24)
-def _edge_compiled(use_lines: bool, interaction: str = "current", lean: bool = False,
+def _edge_compiled(feature: EdgeFeature, interaction: str = "current", lean: bool = False,
                    compiled: bool = True) -> CompiledFunction:
     inputs, outputs = law_layouts(edge_inputs(interaction), 36, "edge law")
-    return CompiledFunction(_edge_function(use_lines, interaction, lean), compiled, inputs,
+    return CompiledFunction(_edge_function(feature, interaction, lean), compiled, inputs,
                             outputs)
 
 
@@ -370,18 +373,19 @@ def direction_kernel(interaction: str = "current", compiled: bool = True) -> Law
                      lambda: _direction_compiled(interaction, True, compiled))
 
 
-def edge_law_kernel(use_lines: bool, interaction: str = "current",
+def edge_law_kernel(feature: EdgeFeature, interaction: str = "current",
                     compiled: bool = True) -> LawKernel:
-    """A kernel of the leg-edge law on pixel lines (True) or normals (False).
+    """A kernel of the leg-edge law on pixel lines or normals.
 
     Args:
-        use_lines: Pixel lines (True) or normals (False).
+        feature: :data:`~controllers.tasks.leg_edge.EDGE_LINES` or
+            :data:`~controllers.tasks.leg_edge.EDGE_NORMALS`.
         interaction: Where the interaction matrix is evaluated (:data:`CORE_INTERACTIONS`).
         compiled: C code (False: the CasADi virtual machine evaluates the same core).
     """
     _check_interaction(interaction)
-    return LawKernel(_edge_compiled(use_lines, interaction, False, compiled),
-                     lambda: _edge_compiled(use_lines, interaction, True, compiled))
+    return LawKernel(_edge_compiled(feature, interaction, False, compiled),
+                     lambda: _edge_compiled(feature, interaction, True, compiled))
 
 
 def _feature_compiled(feature: LegFeature, interaction: str, lean: bool,

@@ -14,14 +14,11 @@ from typing import Any
 import numpy as np
 
 from controllers.base import Observation, usable_observation_problem
+from controllers.data import FEATURE_FIELDS
 from controllers.exceptions import OptionError
 from controllers.interaction import cross
 
 log = logging.getLogger(__name__)
-
-#: Feature fields checked by the fast path: name, shape, visibility mask.
-_FAST_FIELDS = (("normals", (6, 2, 3), "edge_visible"), ("lines", (6, 2, 3), "edge_visible"),
-                ("directions", (6, 3), "direction_visible"))
 
 #: Where the interaction matrix is evaluated (ViSP's CURRENT, DESIRED, MEAN).
 INTERACTIONS = ("current", "desired", "mean")
@@ -39,7 +36,7 @@ def check_observation(obs: Observation, features: frozenset[str]) -> str | None:
         q = obs.lengths
         if (type(q) is np.ndarray and q.shape == (6,) and math.isfinite(obs.t)
                 and math.isfinite(q.sum())):
-            for name, shape, mask in _FAST_FIELDS:
+            for name, shape, mask in FEATURE_FIELDS:
                 if name not in features:
                     continue
                 arr = getattr(obs, name)

@@ -30,6 +30,7 @@ from controllers.interaction import (
 )
 from controllers.law_kernel import edge_law_kernel
 from controllers.laws import Selection, VisionLaw, check_choice
+from controllers.tasks.leg_edge import EDGE_KINDS, EDGE_LINES, EDGE_NORMALS, EdgeFeature
 
 #: Values of the ``edge_feature`` option.
 EDGE_FEATURES = ("auto", "lines", "normals")
@@ -55,7 +56,7 @@ class LegEdgeController(VisionLaw):
     """
 
     name = "leg-edge"
-    features = frozenset({"lengths", "normals"})
+    features = frozenset({"lengths", EDGE_NORMALS.field})  # the edge feature's, at reset
     unit = "edges"
 
     def __init__(self, gain: float = 1.0, adaptive_gain: Sequence[float] | None = None,
@@ -66,9 +67,9 @@ class LegEdgeController(VisionLaw):
                          leg_rate_feedforward)
         self.compiled = bool(compiled)
         self.edge_feature = check_choice(self.name, "edge_feature", edge_feature, EDGE_FEATURES)
-        if edge_feature == "lines":
-            self.features = frozenset({"lengths", "lines"})
-        self.use_lines = edge_feature == "lines"
+        #: The edge feature object (``"auto"``: the camera's, chosen at reset).
+        self.edge: EdgeFeature = EDGE_KINDS.get(edge_feature, EDGE_NORMALS)
+        self.features = frozenset({"lengths", self.edge.field})
         self._K = np.eye(3)
         self._K_inv_t = np.eye(3)
 
@@ -77,8 +78,8 @@ class LegEdgeController(VisionLaw):
         cam: Any = context.camera
         kind = getattr(cam, "kind", None)
         if self.edge_feature == "auto":
-            self.use_lines = kind == "perspective"
-        if self.use_lines:
+            self.edge = EDGE_LINES if kind == "perspective" else EDGE_NORMALS
+        if self.edge.lines:
             if kind != "perspective" or getattr(cam, "line_matrix", None) is None:
                 raise ContextError(self.name, "camera",
                                    f"pixel lines need a perspective camera with a line_matrix, "
@@ -88,7 +89,7 @@ class LegEdgeController(VisionLaw):
                 raise ContextError(self.name, "camera.line_matrix", "not an invertible 3x3 matrix")
             self._K = K
             self._K_inv_t = np.linalg.inv(K).T
-        self.features = frozenset({"lengths", "lines" if self.use_lines else "normals"})
+        self.features = frozenset({"lengths", self.edge.field})
         self._A2 = np.repeat(self._A, 2, axis=0)
         self._retarget_features(context)
 
@@ -103,7 +104,7 @@ class LegEdgeController(VisionLaw):
                                    f"expected shape (6, 2), got {gv.shape}")
             vis &= gv
         n_star = self._goal_array(goal.normals, "goal.normals")
-        if self.use_lines:
+        if self.edge.lines:
             l_goal = self._goal_array(goal.lines, "goal.lines")
             if l_goal is not None:
                 l_star = l_goal
@@ -148,13 +149,11 @@ class LegEdgeController(VisionLaw):
         fill = np.empty((6, 2, 3))
         fill[:, 0] = np.where(vis[:, 0, None], n_star[:, 0], [1.0, 0.0, 0.0])
         fill[:, 1] = np.where(vis[:, 1, None], n_star[:, 1], [0.0, 1.0, 0.0])
-        self._fill = fill
-        if self.use_lines:
-            self._l_fill = _unit(fill @ self._K_inv_t.T)
+        self._feature_fill = self.edge.features_of(fill, self._K_inv_t)
         self._goal_all_visible = bool(self._goal_visible.all())
         kernel = self._reuse_kernel(
-            lambda: edge_law_kernel(self.use_lines, self.interaction, self.compiled))
-        kernel.set("desired", self._l_star if self.use_lines else self._n_star)
+            lambda: edge_law_kernel(self.edge, self.interaction, self.compiled))
+        kernel.set("desired", self._l_star if self.edge.lines else self._n_star)
         kernel.set("K", self._K)
         kernel.set("K_inv", self._K_inv_t.T)
         kernel.set("base_points", self._A)
@@ -176,10 +175,8 @@ class LegEdgeController(VisionLaw):
     # ----------------------------------------------------------------- step
     def _select(self, obs: Observation, q: np.ndarray) -> Selection:
         vis = np.asarray(obs.edge_visible, dtype=bool) & self._goal_visible
-        if self.use_lines:
-            feat = np.where(vis[..., None], np.asarray(obs.lines, dtype=float), self._l_fill)
-        else:
-            feat = np.where(vis[..., None], np.asarray(obs.normals, dtype=float), self._fill)
+        feat = np.where(vis[..., None], np.asarray(getattr(obs, self.edge.field), dtype=float),
+                        self._feature_fill)
         both: np.ndarray = np.all(vis, axis=1)
         est = self.estimate
         est.predict_hidden(~both, self._A, self._dt)
@@ -190,7 +187,7 @@ class LegEdgeController(VisionLaw):
         # visible edge if it has one (exact at the goal).
         approx: np.ndarray = ~known & np.isfinite(self._u_star_known[:, 0])
         if approx.any():
-            n = _unit(feat @ self._K) if self.use_lines else feat
+            n = self.edge.normals_of(feat, self._K)
             us = self._u_star
             one: np.ndarray = np.any(vis, axis=1) & ~both
             n_vis = np.where(vis[:, 0, None], n[:, 0], n[:, 1])
@@ -210,32 +207,37 @@ class LegEdgeController(VisionLaw):
         return Selection(feat.reshape(12, 3), vis.reshape(12), both, legs, notes)
 
     @property
+    def use_lines(self) -> bool:
+        """The feature is the image lines (:data:`~controllers.tasks.leg_edge.EDGE_LINES`)."""
+        return self.edge.lines
+
+    @property
     def line_matrix(self) -> np.ndarray:
         """(3, 3) the matrix mapping normals to image lines (identity for normals)."""
         return self._K
 
     def desired_features(self) -> np.ndarray:
         """(12, 3) the desired lines or normals (zeros where unknown)."""
-        star = self._l_star if self.use_lines else self._n_star
+        star = self._l_star if self.edge.lines else self._n_star
         return np.asarray(star, dtype=float).reshape(12, 3)
 
     def measured_features(self, obs: Observation) -> tuple[np.ndarray, np.ndarray]:
         """(12, 3) measured lines or normals and (12,) which are usable."""
         vis = (np.asarray(obs.edge_visible, dtype=bool) & self._goal_visible).reshape(12)
-        feats = obs.lines if self.use_lines else obs.normals
+        feats = getattr(obs, self.edge.field)
         return np.asarray(feats, dtype=float).reshape(12, 3), vis
 
     def _batch_reset_extra(self) -> None:
         super()._batch_reset_extra()
-        uses = {t.use_lines for t in self.trial_instances}
-        self._batch_uses_lines: bool | None = uses.pop() if len(uses) == 1 else None
+        edges = {t.edge for t in self.trial_instances}
+        self._batch_edge: EdgeFeature | None = edges.pop() if len(edges) == 1 else None
 
     def _batch_features(self, obs: ObservationBatch) -> tuple[np.ndarray | None,
                                                                np.ndarray | None]:
-        uses = self._batch_uses_lines
-        if uses is None:
+        edge = self._batch_edge
+        if edge is None:
             return None, None
-        arr = obs.lines if uses else obs.normals
+        arr = getattr(obs, edge.field)
         if arr is None:
             return None, None
         n = len(obs)
@@ -247,20 +249,19 @@ class LegEdgeController(VisionLaw):
         edge of the goal is visible and finite (and the goal gives both its lines and its
         normals in pixel-line mode): what :meth:`_retarget_features` reads then."""
         m = len(goals)
-        uses = getattr(self, "_batch_uses_lines", None)
+        edge: EdgeFeature | None = getattr(self, "_batch_edge", None)
         n_star = goals.normals
-        if (uses is None or not self.compiled or self.interaction != "current"
-                or n_star is None or (uses and goals.lines is None)):
+        star = None if edge is None else getattr(goals, edge.field)
+        if (edge is None or not self.compiled or self.interaction != "current"
+                or n_star is None or star is None):
             return None, np.zeros(m, dtype=bool)
-        star = goals.lines if uses else n_star
-        assert star is not None
         vis_shape = (m, 6, 2) if goals.edge_visible is None else np.shape(goals.edge_visible)
         if (np.shape(n_star) != (m, 6, 2, 3) or np.shape(star) != (m, 6, 2, 3)
                 or vis_shape != (m, 6, 2)):
             return None, np.zeros(m, dtype=bool)  # the instances say what is wrong
         with np.errstate(invalid="ignore"):
             ok = np.isfinite(n_star).reshape(m, 36).all(axis=1)
-            if uses:
+            if edge.lines:
                 ok &= np.isfinite(star).reshape(m, 36).all(axis=1)
         if goals.edge_visible is not None:
             ok &= np.asarray(goals.edge_visible, dtype=bool).reshape(m, 12).all(axis=1)
@@ -271,6 +272,6 @@ class LegEdgeController(VisionLaw):
         if not (self._goal_all_visible and (vis.all() if type(vis) is np.ndarray
                                             else np.all(np.asarray(vis, dtype=bool)))):
             return False
-        self._k_features[...] = obs.lines if self.use_lines else obs.normals
+        self._k_features[...] = getattr(obs, self.edge.field)
         self._common_inputs(q)
         return True

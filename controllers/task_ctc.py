@@ -68,6 +68,7 @@ from controllers.task_ctc_inputs import encoder_readings as encoder_readings
 from controllers.task_ctc_inputs import finite_readings as finite_readings
 from controllers.task_ctc_inputs import goal_pose_of as goal_pose_of
 from controllers.task_ctc_inputs import line_to as line_to
+from controllers.tasks.feature_kind import BuiltinFeature
 from hexapod.actuation import Actuation
 from hexapod.dynamics import DynamicModel
 
@@ -97,9 +98,9 @@ class TaskComputedTorque(Controller):
     actuation = Actuation.FORCE
     #: Samples ``context.reference`` itself (:mod:`controllers.tracking` passes it through).
     tracks_reference = True
-    #: Task kind of the compiled step (:mod:`controllers.solvers.compiled_task_ctc`; None:
-    #: the subclass makes its own step at reset).
-    compiled_kind: str | None = None
+    #: The feature object of the compiled step (:mod:`controllers.solvers.compiled_task_ctc`;
+    #: None: the subclass makes its own step at reset).
+    compiled_kind: BuiltinFeature | None = None
     #: The compiled step finds the pose from the encoders (else it is given).
     compiled_fk = True
 

@@ -28,7 +28,7 @@ the output row.
 from __future__ import annotations
 
 import math
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from numpy.typing import ArrayLike
@@ -68,17 +68,18 @@ class CompiledTaskStep:
 
     Args:
         law: The law, reset (its context and nominal model built).
-        kind: The step's kind (default: the law's ``compiled_kind``).
+        kind: The step's feature object (default: the law's ``compiled_kind``; a
+            subclass's own step may name it by a string).
         fk: The pose from the encoders by Newton steps (default: the law's
             ``compiled_fk``); else by the rigid fit (its tolerance).
     """
 
-    def __init__(self, law: TaskComputedTorque, kind: str | None = None,
+    def __init__(self, law: TaskComputedTorque, kind: Any = None,
                  fk: bool | None = None) -> None:
         assert law.context is not None and law.model is not None
         kind = law.compiled_kind if kind is None else kind
         assert kind is not None
-        self.kind: str = kind
+        self.kind: Any = kind
         self.fk: bool = law.compiled_fk if fk is None else bool(fk)
         self.function = self.make_function()
         self.inputs, self.outputs = self.function.inputs, self.function.outputs

@@ -56,6 +56,7 @@ from controllers.base import (
     ObservationBatch,
 )
 from controllers.batch import actuation_of
+from controllers.data import FEATURE_FIELDS
 from controllers.exceptions import ContextError
 
 log = logging.getLogger(__name__)
@@ -104,7 +105,7 @@ def anchor_goals(goals: dict[str, Any], taught: Goal) -> None:
     """Anchor the model's features at the taught goal (in place): ``s* = s_taught +
     s_model(t) - s_model(end)``, unit vectors renormalised; the model's last sample is
     the end pose. A feature the goal did not see stays the model's."""
-    for key in ("normals", "lines", "directions"):
+    for key, _, _ in FEATURE_FIELDS:
         model = goals.get(key)
         value = getattr(taught, key, None)
         if model is None or value is None:

@@ -207,7 +207,7 @@ def edge_interaction_ratio(obs: Any) -> tuple[float, float]:
     """Smallest / largest singular value, and condition number, of the edge interaction
     ``L`` (``docs/math.md`` section 6) of the visible edges of one observation."""
     from controllers.tasks.base import map_blocks
-    from controllers.tasks.leg_edge import block_function
+    from controllers.tasks.leg_edge import EDGE_NORMALS
 
     vis = np.asarray(obs.edge_visible, bool)
     if not vis.any():
@@ -215,7 +215,7 @@ def edge_interaction_ratio(obs: Any) -> tuple[float, float]:
     legs, _ = np.nonzero(vis)
     n = obs.normals[vis]
     eye = np.broadcast_to(np.eye(3).reshape(1, 9), (len(n), 9))  # unused for normals
-    _, L = map_blocks(block_function("normals"), n, n, obs.directions[legs],
+    _, L = map_blocks(EDGE_NORMALS.block_function, n, n, obs.directions[legs],
                       obs.base_points[legs], obs.lengths[legs], eye, eye)
     s = np.linalg.svd(L.reshape(-1, 6), compute_uv=False)
     ratio = float(s[-1] / s[0]) if s[0] > 0 else 0.0

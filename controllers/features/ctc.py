@@ -47,7 +47,7 @@ class FeatureComputedTorque(LegDirectionCTC):
     #: The feature (set on the generated class).
     feature: ClassVar[LegFeature]
     #: The built-in compiled steps are per kind; this law's is the feature's own.
-    compiled_kind = None  # type: ignore[assignment]  # (the base declares str | None)
+    compiled_kind = None
 
     def reset_trial(self, context: ControllerContext) -> None:
         """As the built-in law, with the feature's compiled step.

@@ -46,6 +46,8 @@ from controllers.task_ctc import (
     TaskComputedTorque,
     encoder_readings,
 )
+from controllers.tasks.feature_kind import BuiltinFeature
+from controllers.tasks.leg_edge import EDGE_NORMALS
 from hexapod.actuation import Actuation
 from hexapod.compiled import BoundCall
 from hexapod.dynamics.compiled import parameter_row
@@ -73,7 +75,7 @@ MAX_ITER = 3
 
 class ForceMPCLaw(Controller):
     """Base of the force-level predictive controllers (see the module docstring): the
-    subclasses say which features (:attr:`kind`), which law they hold
+    subclasses say which features (:attr:`feature`), which law they hold
     (:attr:`law_class`), and read the features and the reference.
 
     Args:
@@ -97,8 +99,10 @@ class ForceMPCLaw(Controller):
             and ``casadi.conic``; the same results, much slower).
     """
 
-    #: The features of the predictive problem (:data:`controllers.force_mpc.problem.FEATURES`).
-    kind = "edges"
+    #: The features of the predictive problem (a feature object with a force-MPC
+    #: problem: :data:`~controllers.tasks.leg_edge.EDGE_NORMALS`,
+    #: :data:`~controllers.tasks.platform_pose.PLATFORM_POSE`).
+    feature: BuiltinFeature = EDGE_NORMALS
     #: The computed-torque law of the same features: reference, goal and fallback.
     law_class: type[TaskComputedTorque] = LegEdgeCTC
     actuation = Actuation.FORCE
@@ -135,7 +139,7 @@ class ForceMPCLaw(Controller):
         #: The fallback law, whose reference and goal this controller tracks.
         self.law: Any = self.law_class(natural_frequency=natural_frequency, damping=damping,
                                        smooth_goal=smooth_goal)
-        self.spec = ForceProblemSpec(horizon, substeps, self.kind)
+        self.spec = ForceProblemSpec(horizon, substeps, self.feature)
         self.stats = SolveStats()
         self.context: ControllerContext | None = None
         self._bound: BoundCall | None = None

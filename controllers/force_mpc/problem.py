@@ -28,7 +28,8 @@ integration of the nominal robot, to rounding.
 
 with the predicted edge normals ``s_k = s_obs + s(x_k) - s(x_0)`` (camera frame: the
 normals seen now, moved by the model's change; hidden edges weigh 0; the pose variant,
-``kind = "pose"``: ``s = (t, R column-major)``, base frame, the rows weighted), the
+the feature :data:`~controllers.tasks.platform_pose.PLATFORM_POSE`: ``s = (t, R
+column-major)``, base frame, the rows weighted), the
 reference ``s*_k`` (the goal features, or the anchored reference at ``t + k dt``) and
 ``f_{-1}`` the force applied last period.
 
@@ -51,6 +52,8 @@ import casadi as ca
 import numpy as np
 
 from controllers.mpc.prediction import sx_edge_normals
+from controllers.tasks.feature_kind import BuiltinFeature
+from controllers.tasks.leg_edge import EDGE_NORMALS
 from hexapod.compiled import CompiledFunction, Layout, Shape
 from hexapod.dynamics import compiled as mech
 
@@ -60,9 +63,6 @@ STATE = Layout([("R", 9), ("t", 3), ("twist", 6)], "force-MPC state")
 NX = STATE.size
 #: The features: twelve edge normals (six legs, two edges, three components).
 NS = 36
-#: Number of features of each kind: the edge normals (camera frame), or the platform
-#: pose ``(t [m], R column-major)`` (base frame, the pose variant).
-FEATURES = {"edges": NS, "pose": 12}
 #: The nominal model's constants of a step: base and platform points [m] (base frame),
 #: the 19 inertial parameters, the drives' rotor inertia [kg], viscous [N s/m] and
 #: Coulomb [N] friction, and the step ``h`` [s].
@@ -81,17 +81,19 @@ class ForceProblemSpec:
     Attributes:
         horizon: ``N`` periods.
         substeps: Integration steps per period.
-        kind: The features: ``"edges"`` (the edge normals) or ``"pose"``.
+        feature: The features: :data:`~controllers.tasks.leg_edge.EDGE_NORMALS` (the
+            edge normals, camera frame) or :data:`~controllers.tasks.platform_pose.
+            PLATFORM_POSE` (``(t [m], R column-major)``, base frame).
     """
 
     horizon: int
     substeps: int
-    kind: str = "edges"
+    feature: BuiltinFeature = EDGE_NORMALS
 
     @property
     def features(self) -> int:
         """Number of features of a stage."""
-        return FEATURES[self.kind]
+        return self.feature.stage_features
 
     def input_layout(self) -> Layout:
         """The kernel's input row."""
@@ -138,9 +140,11 @@ def step_expression() -> tuple[ca.SX, ca.SX, ca.SX, ca.SX]:
     return x, f, c, ca.vertcat(ca.reshape(R_new, 9, 1), t_new, tw_new)
 
 
-def features_expression(kind: str = "edges") -> tuple[ca.SX, ca.SX, ca.SX, ca.SX, ca.SX]:
+def features_expression(feature: BuiltinFeature = EDGE_NORMALS
+                        ) -> tuple[ca.SX, ca.SX, ca.SX, ca.SX, ca.SX]:
     """The features of the nominal robot at a state: the edge normals (36, camera
-    frame), or for ``kind = "pose"`` the pose ``(t, R column-major)`` (12, base frame);
+    frame), or for the pose the pose ``(t, R column-major)`` (12, base frame), by
+    :meth:`~controllers.tasks.feature_kind.BuiltinFeature.sx_stage_features`;
     the symbols ``x``, the model constants and the camera constants, the features and
     the leg lengths (6) [m]."""
     x = ca.SX.sym("x", NX)
@@ -161,9 +165,8 @@ def features_expression(kind: str = "edges") -> tuple[ca.SX, ca.SX, ca.SX, ca.SX
         lengths.append(q)
         n1, n2 = sx_edge_normals(Ac[:, i], Rc @ (d / q), k["radius"])
         normals += [n1, n2]
-    if kind == "pose":
-        return x, c, cam, ca.vertcat(s["t"], s["R"]), ca.vertcat(*lengths)
-    return x, c, cam, ca.vertcat(*normals), ca.vertcat(*lengths)
+    return (x, c, cam, feature.sx_stage_features(s["t"], s["R"], normals),
+            ca.vertcat(*lengths))
 
 
 def ldl_solve_columns(M: ca.SX, B: ca.SX) -> ca.SX:
@@ -239,10 +242,10 @@ def _period_function(substeps: int) -> ca.Function:
     return ca.Function("force_mpc_period", [xs, fs, cs], [xk, Ak, Bk, qd])
 
 
-def _features_function(kind: str = "edges") -> ca.Function:
+def _features_function(feature: BuiltinFeature = EDGE_NORMALS) -> ca.Function:
     """``(x, c, cam) -> (s, ds/dxi, lengths)``: the features, their Jacobian (m x 6) in the
     pose's left perturbation ``xi = (delta t, delta phi)`` and the leg lengths [m]."""
-    x, c, cam, s, q = features_expression(kind)
+    x, c, cam, s, q = features_expression(feature)
     xi = ca.SX.sym("xi", 6)
     st = STATE.split(x)
     R = ca.reshape(st["R"], 3, 3)
@@ -261,7 +264,7 @@ def kernel_function(spec: ForceProblemSpec) -> ca.Function:
     N, n, ns = spec.horizon, 6 * spec.horizon, spec.features
     lay = spec.input_layout()
     period = _period_function(spec.substeps)
-    feats = _features_function(spec.kind)
+    feats = _features_function(spec.feature)
     v = ca.MX.sym("v", lay.size)
     P = lay.split(v)
     c = ca.vertcat(*(P[f"model_{b}"] for b in MODEL))
@@ -311,7 +314,7 @@ def kernel_function(spec: ForceProblemSpec) -> ca.Function:
     cost = cost + 0.5 * w_rate * ca.dot(dr, dr) + 0.5 * w_effort * ca.dot(U, U)
     out = ca.vertcat(ca.reshape(ca.densify(H), n * n, 1), g, cost, *states, *features,
                      *lengths, *rates)
-    name = "hexapod_force_mpc" if spec.kind == "edges" else f"hexapod_force_{spec.kind}_mpc"
+    name = spec.feature.force_mpc_name
     return ca.Function(f"{name}_{N}_{spec.substeps}", [v], [out])
 
 

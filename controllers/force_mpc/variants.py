@@ -14,6 +14,8 @@ from controllers.feature_ctc import LegEdgeCTC
 from controllers.force_mpc.controller import MAX_ITER, ForceMPCLaw
 from controllers.force_mpc.problem import NS
 from controllers.task_ctc import DAMPING, NATURAL_FREQUENCY_HZ
+from controllers.tasks.leg_edge import EDGE_NORMALS
+from controllers.tasks.platform_pose import PLATFORM_POSE
 
 #: Default force-rate weight of the pose variant [1/N^2] (see :class:`PoseForceMPC`). The
 #: ratio of the two features' squared sensitivities to a translation of the platform at
@@ -29,8 +31,8 @@ class LegEdgeForceMPC(ForceMPCLaw):
     """Force-level predictive control on the leg edges (see the module docstring)."""
 
     name = "leg-edge-force-mpc"
-    features = frozenset({"lengths", "normals"})
-    kind = "edges"
+    features = frozenset({"lengths", EDGE_NORMALS.field})
+    feature = EDGE_NORMALS
     law_class = LegEdgeCTC
 
     def camera_constants(self, context: ControllerContext, v: dict[str, np.ndarray]) -> None:
@@ -110,7 +112,7 @@ class PoseForceMPC(ForceMPCLaw):
 
     name = "pose-force-mpc"
     features = frozenset({"lengths"})
-    kind = "pose"
+    feature = PLATFORM_POSE
     law_class = CartesianCTC
 
     def __init__(self, horizon: int = 10, substeps: int = 4, error_weight: float = 1.0,

@@ -41,6 +41,9 @@ from controllers.mpc.solver import (
     run_sqp,
 )
 from controllers.qp import LegDirectionQPController, LegEdgeQPController, velocity_bounds
+from controllers.tasks.feature_kind import BuiltinFeature
+from controllers.tasks.leg_direction import LEG_DIRECTIONS
+from controllers.tasks.leg_edge import EDGE_NORMALS
 from hexapod.compiled import CompiledFunction
 
 log = logging.getLogger(__name__)
@@ -185,12 +188,12 @@ class MPCLaw(Controller):
         law.reset_trial(context)
         self.features = law.features
         self.context = context
-        self._kind = self._feature_kind()
+        self._feature = self.predicted_feature()
         cam: Any = context.camera
         visibility = self.visibility and getattr(cam, "kind", None) == "perspective"
         if self.visibility and not visibility:
             log.info("%s: visibility constraint ignored (needs a perspective camera)", self.name)
-        self._spec = ProblemSpec(self._kind, self.model, self.horizon, self.max_tilt is not None,
+        self._spec = ProblemSpec(self._feature, self.model, self.horizon, self.max_tilt is not None,
                                  visibility, self.drive_model == "lag")
         self._kernel: CompiledFunction | VirtualMachineKernel
         if self.compiled:
@@ -222,7 +225,7 @@ class MPCLaw(Controller):
         w[-1] = self.terminal_weight
         self._vec[sl["w"]] = w
         if "Kit" in self._lay:
-            Kit = np.linalg.inv(law.line_matrix).T if self._kind == "lines" else np.eye(3)
+            Kit = self._feature.line_inv_t(getattr(law, "line_matrix", None))
             self._vec[sl["Kit"]] = Kit.reshape(-1)
         if self._spec.tilt:
             R_cb, _ = fit_pose(A, geo.base_points)  # base orientation seen from the estimates
@@ -262,8 +265,9 @@ class MPCLaw(Controller):
         self.context = self.law.context
         self._star = self.law.desired_features()
 
-    def _feature_kind(self) -> str:
-        return "directions"
+    def predicted_feature(self) -> BuiltinFeature:
+        """The feature the problem predicts (the fallback law's; read at reset)."""
+        return LEG_DIRECTIONS
 
     # ----------------------------------------------------------------- step
     def step_trial(self, observation: Observation) -> Command:
@@ -428,8 +432,6 @@ class MPCLaw(Controller):
 
     def _model_features(self, R: np.ndarray, t: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Features (nf, 3) and lengths (6,) of the model at the fitted pose."""
-        from vision.legs import leg_edges
-
         law = self.law
         geo = self.context.geometry if self.context is not None else None
         assert geo is not None
@@ -437,13 +439,8 @@ class MPCLaw(Controller):
         d = geo.platform_points @ R.T + t - A
         qm = np.sqrt(np.einsum("ij,ij->i", d, d))
         u = d / qm[:, None]
-        if self._kind == "directions":
-            return u, qm
-        n, _ = leg_edges(A, u, geo.leg_radius)
-        if self._kind == "lines":
-            n = n @ np.linalg.inv(law.line_matrix)  # rows: (K^-T n)^T
-            n = n / np.linalg.norm(n, axis=-1, keepdims=True)
-        return n.reshape(12, 3), qm
+        return (self._feature.model_features(A, u, geo.leg_radius,
+                                             getattr(law, "line_matrix", None)), qm)
 
     def _fallback(self, obs: Observation, reason: str) -> Command:
         """The QP law's command, carrying the reason."""
@@ -465,14 +462,14 @@ class LegEdgeMPCController(MPCLaw):
     """
 
     name = "leg-edge-mpc"
-    features = frozenset({"lengths", "normals"})
+    features = frozenset({"lengths", EDGE_NORMALS.field})  # the law's, at reset
     law_class = LegEdgeQPController
     unit = "edges"
 
-    def _feature_kind(self) -> str:
+    def predicted_feature(self) -> BuiltinFeature:
         law = self.law
         assert isinstance(law, LegEdgeQPController)
-        return "lines" if law.use_lines else "normals"
+        return law.edge
 
 
 class LegDirectionMPCController(MPCLaw):

@@ -35,15 +35,17 @@ import casadi as ca
 import numpy as np
 
 from controllers.tasks.base import sx_skew
-from controllers.tasks.leg_edge import line_of_normal
+from controllers.tasks.feature_kind import BuiltinFeature
+from controllers.tasks.leg_direction import LEG_DIRECTIONS
+from controllers.tasks.leg_edge import EDGE_LINES, EDGE_NORMALS, sx_edge_normals
 
-#: Feature kinds: image lines (perspective edges), edge normals, leg directions.
-FEATURE_KINDS = ("lines", "normals", "directions")
+#: The features the predictive controllers predict: image lines (perspective edges),
+#: edge normals, leg directions.
+FEATURE_KINDS = (EDGE_LINES, EDGE_NORMALS, LEG_DIRECTIONS)
 
-
-def feature_count(kind: str) -> int:
-    """Number of unit-vector features of a kind (12 edges or 6 legs)."""
-    return 6 if kind == "directions" else 12
+__all__ = ["FEATURE_KINDS", "GlobalModel", "LocalModel", "fit_pose",
+           "platform_points_from_legs", "sx_edge_normals", "sx_exp_se3", "sx_features",
+           "sx_legs", "sx_limb_ends", "sx_pixel", "sx_step_pose"]
 
 
 # --------------------------------------------------------------------------- numpy
@@ -125,36 +127,19 @@ def sx_legs(R: ca.SX, t: ca.SX, A: list[ca.SX], E: list[ca.SX]
     return qs, us, Bs
 
 
-def sx_edge_normals(A: ca.SX, u: ca.SX, r: ca.SX | float) -> tuple[ca.SX, ca.SX]:
-    """The two edge normals of a leg (``docs/math.md`` section 4, ``vision/legs.py`` order)."""
-    h = ca.cross(A, u)
-    hn = ca.sqrt(ca.dot(h, h))
-    hh = h / hn
-    w = ca.cross(u, hh)
-    s = r / hn
-    c = ca.sqrt(1 - s * s)
-    return c * hh - s * w, -c * hh - s * w
-
-
-def sx_features(kind: str, us: list[ca.SX], A: list[ca.SX], r: ca.SX | float,
+def sx_features(feature: BuiltinFeature, us: list[ca.SX], A: list[ca.SX], r: ca.SX | float,
                 line_inv_t: ca.SX | None) -> list[ca.SX]:
-    """Predicted unit features: directions (6), edge normals (12) or image lines (12).
+    """Predicted unit features: directions (6), edge normals (12) or image lines (12)
+    (the feature's :meth:`~controllers.tasks.feature_kind.BuiltinFeature.sx_of_legs`).
 
     Args:
-        kind: One of :data:`FEATURE_KINDS`.
+        feature: One of :data:`FEATURE_KINDS`.
         us: Six (3, 1) leg directions.
         A: Six (3, 1) base points [m].
         r: Leg radius [m].
         line_inv_t: ``Kt^-T`` (3, 3) for lines (``Kt`` the camera's ``line_matrix``).
     """
-    if kind == "directions":
-        return list(us)
-    out = []
-    for Ai, ui in zip(A, us, strict=True):
-        for n in sx_edge_normals(Ai, ui, r):
-            out.append(line_of_normal(n, line_inv_t)
-                       if line_inv_t is not None and kind == "lines" else n)
-    return out
+    return feature.sx_of_legs(us, A, r, line_inv_t)
 
 
 def sx_limb_ends(A: ca.SX, B: ca.SX, n: ca.SX, r: ca.SX | float) -> tuple[ca.SX, ca.SX]:
@@ -170,7 +155,7 @@ def sx_pixel(X: ca.SX, K: ca.SX) -> ca.SX:
 
 # --------------------------------------------------------------------------- models
 @lru_cache(maxsize=16)
-def _rollout_function(kind: str, steps: int) -> ca.Function:
+def _rollout_function(feature: BuiltinFeature, steps: int) -> ca.Function:
     """Features and lengths after each of ``steps`` periods (global model), one SX function.
 
     Inputs: ``R0`` (3, 3), ``t0`` (3), ``taus`` (6, steps), ``dt``, ``A`` (3, 6),
@@ -191,11 +176,11 @@ def _rollout_function(kind: str, steps: int) -> ca.Function:
     Rk, tk = R, t
     for k in range(steps + 1):
         q, u, _ = sx_legs(Rk, tk, A, E)
-        feats.append(ca.vertcat(*sx_features(kind, u, A, r, Kit)))
+        feats.append(ca.vertcat(*feature.sx_of_legs(u, A, r, Kit)))
         lens.append(ca.vertcat(*q))
         if k < steps:
             Rk, tk = sx_step_pose(Rk, tk, taus[:, k], dt)
-    return ca.Function(f"mpc_rollout_{kind}_{steps}", [R, t, taus, dt, Am, Em, r, Kit],
+    return ca.Function(f"mpc_rollout_{feature.kind}_{steps}", [R, t, taus, dt, Am, Em, r, Kit],
                        [ca.horzcat(*feats), ca.horzcat(*lens)])
 
 
@@ -204,14 +189,14 @@ class GlobalModel:
     """The global prediction model: pose fit, SE(3) integration, features by the camera model.
 
     Attributes:
-        kind: One of :data:`FEATURE_KINDS`.
+        feature: One of :data:`FEATURE_KINDS`.
         base_points: (6, 3) estimated ``A_i`` in the camera frame [m].
         platform_points: (6, 3) nominal ``eB_i`` in the platform frame [m].
         radius: Nominal leg radius [m].
         line_matrix: ``Kt`` (3, 3) of the estimated perspective camera (lines only).
     """
 
-    kind: str
+    feature: BuiltinFeature
     base_points: np.ndarray
     platform_points: np.ndarray
     radius: float
@@ -220,9 +205,9 @@ class GlobalModel:
     @property
     def line_inv_t(self) -> np.ndarray:
         """``Kt^-T`` (identity when the features are not lines)."""
-        if self.kind != "lines" or self.line_matrix is None:
+        if self.line_matrix is None:
             return np.eye(3)
-        return np.linalg.inv(self.line_matrix).T
+        return self.feature.line_inv_t(self.line_matrix)
 
     def fit(self, lengths: np.ndarray, directions: np.ndarray,
             known: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
@@ -252,10 +237,10 @@ class GlobalModel:
             Features (k + 1, nf, 3) and lengths (k + 1, 6) [m], index 0 at the given pose.
         """
         taus = np.atleast_2d(np.asarray(taus, dtype=float))
-        f = _rollout_function(self.kind, len(taus))
+        f = _rollout_function(self.feature, len(taus))
         feats, lens = f(rotation, translation, taus.T, dt, self.base_points.T,
                         self.platform_points.T, self.radius, self.line_inv_t)
-        nf = feature_count(self.kind)
+        nf = self.feature.units
         return (np.asarray(feats).T.reshape(len(taus) + 1, nf, 3),
                 np.asarray(lens).T.reshape(len(taus) + 1, 6))
 

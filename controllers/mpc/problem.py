@@ -68,7 +68,6 @@ import casadi as ca
 import numpy as np
 
 from controllers.mpc.prediction import (
-    feature_count,
     sx_edge_normals,
     sx_exp_se3,
     sx_features,
@@ -77,6 +76,7 @@ from controllers.mpc.prediction import (
     sx_pixel,
 )
 from controllers.tasks.base import sx_skew
+from controllers.tasks.feature_kind import BuiltinFeature
 from hexapod.compiled import CompiledFunction, Layout
 
 log = logging.getLogger(__name__)
@@ -90,7 +90,8 @@ class ProblemSpec:
     """The structure of one problem (what the compiled kernel depends on).
 
     Attributes:
-        kind: Feature kind (``"lines"``, ``"normals"``, ``"directions"``).
+        feature: The predicted feature (one of
+            :data:`~controllers.mpc.prediction.FEATURE_KINDS`).
         model: ``"local"`` or ``"global"``.
         horizon: ``N`` periods.
         tilt: Whether the tilt rows exist.
@@ -99,7 +100,7 @@ class ProblemSpec:
             velocity follows its setpoint as a first-order lag; see the module docstring).
     """
 
-    kind: str
+    feature: BuiltinFeature
     model: str
     horizon: int
     tilt: bool
@@ -118,7 +119,7 @@ class ProblemSpec:
 
     def input_layout(self) -> Layout:
         """Layout of the kernel input (see :func:`_kernel_function`)."""
-        nf = feature_count(self.kind)
+        nf = self.feature.units
         N = self.horizon
         fields: list[tuple[str, int]] = [
             ("U", 6 * N), ("dt", 1), ("ref", N), ("w", N), ("effort", 1), ("reg", 1),
@@ -135,7 +136,7 @@ class ProblemSpec:
             fields += [("K", 9), ("box", 4)]
         if self.drives:
             fields += [("J0i", 36), ("alag", 6), ("clag", 6), ("v0", 6)]
-        return Layout(fields, f"MPC {self.kind} {self.model} input")
+        return Layout(fields, f"MPC {self.feature.kind} {self.model} input")
 
     def output_layout(self) -> Layout:
         """Layout of the kernel output: cost, ``H`` (row-major), ``g``, ``C`` (row-major),
@@ -143,7 +144,7 @@ class ProblemSpec:
         n = 6 * self.horizon
         m = self.rows
         return Layout([("cost", 1), ("H", n * n), ("g", n), ("C", m * n), ("lba", m),
-                       ("uba", m), ("values", m)], f"MPC {self.kind} {self.model} output")
+                       ("uba", m), ("values", m)], f"MPC {self.feature.kind} {self.model} output")
 
     def row_names(self) -> list[str]:
         """A name per constraint row (for ``Command.active_constraints``)."""
@@ -204,7 +205,7 @@ def _pose_function(spec: ProblemSpec) -> ca.Function:
     outs_res: list[ca.SX] = []
     if spec.model == "global":
         Kit = _mat(P["Kit"], 3, 3)
-        feats = sx_features(spec.kind, u, A, r, Kit)
+        feats = sx_features(spec.feature, u, A, r, Kit)
         star = P["star"]
         off = P["offset"]
         res = ca.vertcat(*[ca.cross(f + off[3 * j:3 * j + 3], star[3 * j:3 * j + 3])
@@ -326,7 +327,7 @@ def _kernel_function(spec: ProblemSpec) -> ca.Function:
     lag = _drive_blocks(P, N, dt) if spec.drives else None
     if spec.model == "global":
         e0 = P["e0"]
-        wrow = ca.vertcat(*[ca.repmat(P["wf"][j], 3, 1) for j in range(feature_count(spec.kind))])
+        wrow = ca.vertcat(*[ca.repmat(P["wf"][j], 3, 1) for j in range(spec.feature.units)])
         R, t = R0, t0
         D: list[Any] = []
         for k in range(1, N + 1):
@@ -413,7 +414,7 @@ def _kernel_function(spec: ProblemSpec) -> ca.Function:
     uba = ca.vertcat(*hi_c) - vals_all
     out = ca.densify(ca.vertcat(cost, ca.vec(H.T), ca.vertcat(*gb), ca.vec(C.T), lba, uba,
                                    vals_all))
-    name = f"hexapod_mpc_{spec.kind}_{spec.model}_{N}{'_t' if spec.tilt else ''}" \
+    name = f"hexapod_mpc_{spec.feature.kind}_{spec.model}_{N}{'_t' if spec.tilt else ''}" \
            f"{'_v' if spec.visibility else ''}{'_d' if spec.drives else ''}"
     return ca.Function(name, [v], [out])
 

@@ -1,9 +1,11 @@
-"""The task-space computed-torque step as one compiled CasADi function per task kind.
+"""The task-space computed-torque step as one compiled CasADi function per feature.
 
 :class:`~controllers.task_ctc.TaskComputedTorque` (``cartesian-ctc``, ``vision-ctc``,
 ``leg-edge-ctc``, ``leg-direction-ctc``) evaluates its task, the nominal model and the
 solver in Python and numpy around many small calls. This module composes the SAME
-symbolic definitions into one function per task kind, generated to C by
+symbolic definitions into one function per feature (a
+:class:`~controllers.tasks.feature_kind.BuiltinFeature` object, which owns its task's
+blocks: :meth:`~controllers.tasks.feature_kind.BuiltinFeature.sx_ctc_task`), generated to C by
 :class:`hexapod.compiled.CompiledFunction`, as :mod:`controllers.solvers.compiled_ctc`
 does for the joint-space law:
 
@@ -39,10 +41,10 @@ Inputs (:func:`layout`): ``pose`` (``R`` column-major, ``t``: the FK guess, or t
 measured pose), ``q``, ``q_dot`` (6 each), ``points`` (``A`` then ``E``, base frame,
 point after point, 2 x 6 x 3), the 19 inertial ``params``, the drives' ``rotor``,
 ``viscous``, ``coulomb`` (6 each), ``gains`` (``Kp``, ``Kd``, ``hold`` [s]); for the
-pose kind the ``reference`` (:data:`REFERENCE`: ``R*`` row-major, ``t*``, twist, twist
-rate); for the feature kinds the measured features (for the edges the ``normals``
+pose the ``reference`` (:data:`REFERENCE`: ``R*`` row-major, ``t*``, twist, twist
+rate); for the leg features the measured features (for the edge normals the ``normals``
 (6 x 2 x 3), the leg ``directions`` (6 x 3) and ``of_normals``, 1.0 to take the
-directions of the normals instead, ``unit(n_2 x n_1)``; for the directions kind the
+directions of the normals instead, ``unit(n_2 x n_1)``; for the directions the
 ``directions`` (6 x 3)), the task frame's ``base`` points ``A_i`` (6 x 3), the row
 ``mask`` (1 or 0), the ``frame`` from the base (``R`` row-major, ``p``: 12) and the
 ``reference_features``: the desired features, their rate and their acceleration (``m``
@@ -74,28 +76,15 @@ from controllers.solvers.compiled_ctc import (
     sx_model_state,
     sx_status,
 )
-from controllers.tasks.base import reference_function, second_order_function
-from controllers.tasks.leg_direction import block_function as direction_block_function
-from controllers.tasks.leg_direction import reference_block as direction_reference
-from controllers.tasks.leg_direction import second_order_block as direction_second_order
-from controllers.tasks.leg_edge import block_function as edge_block_function
-from controllers.tasks.leg_edge import leg_direction_of_edges
-from controllers.tasks.leg_edge import reference_block as edge_reference
-from controllers.tasks.leg_edge import second_order_block as edge_second_order
-from controllers.tasks.platform_pose import pose_error, pose_rate
+from controllers.tasks.feature_kind import BuiltinFeature
+from controllers.tasks.platform_pose import REFERENCE
 from hexapod.compiled import CompiledFunction, Layout, Shape
 from hexapod.dynamics.drive_model import COULOMB_SMOOTHING
 from hexapod.dynamics.model import INVERSE_TOLERANCE
 
-#: Task kinds and their number of rows.
-ROWS = {"pose": 6, "edges": 36, "directions": 18}
-
 #: The input blocks every task step starts with (module docstring): the pose guess, the
 #: readings, the model's constants and the gains.
 COMMON_INPUTS = (("pose", 12), ("q", 6), ("q_dot", 6), *MODEL_BLOCKS, ("gains", 3))
-#: A reference pose row: ``R*`` (row-major), ``t*``, the twist and its rate.
-REFERENCE = Layout([("R", (3, 3)), ("t", 3), ("twist", 6), ("twist_rate", 6)],
-                   "reference pose")
 
 
 #: Calls of the compiled forward-kinematics Newton steps (3 iterations each) per call.
@@ -122,21 +111,18 @@ def task_layouts(name: str, extra: Sequence[tuple[str, Shape]], m: int
 
 
 @lru_cache(maxsize=4)
-def layout(kind: str, fk: bool = True) -> tuple[Layout, Layout]:
-    """The input and output layouts of a kind (module docstring); the visual pose
-    (``fk=False``) takes the legs' ``directions`` (6 x 3), the estimated ``base`` points
-    (6 x 3, camera frame), the ``frame`` (the base from the camera, ``R`` row-major,
-    ``p``: 12) and the legs ``seen`` (6: 1.0 for a leg the fit takes, 0.0 for a hidden
-    one) after the reference."""
-    m = ROWS[kind]
-    visual = (("directions", (6, 3)), ("base", (6, 3)), ("frame", 12), ("seen", 6)) \
-        if not fk else ()
-    features = (("normals", (6, 2, 3)), ("directions", (6, 3)), ("of_normals", 1)) \
-        if kind == "edges" else (("directions", (6, 3)),)
-    extra = (("reference", REFERENCE.size), *visual) if kind == "pose" else (
-        *features, ("base", (6, 3)), ("mask", m), ("frame", 12),
-        ("reference_features", (3, m)))
-    return task_layouts(f"task computed-torque {kind} {'fk' if fk else 'pose'}", extra, m)
+def layout(feature: BuiltinFeature, fk: bool = True) -> tuple[Layout, Layout]:
+    """The input and output layouts of a feature's step (module docstring): the
+    feature's blocks (:meth:`~controllers.tasks.feature_kind.BuiltinFeature.ctc_blocks`),
+    and for a task in the camera frame the ``base`` points, the row ``mask``, the
+    ``frame`` and the ``reference_features``."""
+    m = feature.task_rows
+    extra = feature.ctc_blocks(fk)
+    if feature.camera_task:
+        extra = (*extra, ("base", (6, 3)), ("mask", m), ("frame", 12),
+                 ("reference_features", (3, m)))
+    return task_layouts(f"task computed-torque {feature.ctc_name} {'fk' if fk else 'pose'}",
+                        extra, m)
 
 
 def _row_major(R: ca.SX) -> ca.SX:
@@ -205,84 +191,8 @@ def _rigid_fit(R0: ca.SX, q: ca.SX, u: ca.SX, A: ca.SX, E: ca.SX, frame: ca.SX,
     return ca.vertcat(ca.reshape(Rbc @ Rc, 9, 1), Rbc @ tc + pbc), size
 
 
-def _pose_block() -> ca.Function:
-    """``(s, p) -> (e, L)`` of the pose task, ``L`` the derivative of ``e`` along
-    :func:`~controllers.tasks.platform_pose.pose_rate` (its module's closed form)."""
-    s, p, tau = ca.SX.sym("s", 12), ca.SX.sym("p", 12), ca.SX.sym("tau", 6)
-    e = pose_error(s, p)
-    L = ca.jacobian(ca.jtimes(e, s, pose_rate(s, p, tau)), tau)
-    return ca.Function("pose_block", [s, p], [e, L])
-
-
-def _pose_task(R: ca.SX, t: ca.SX, tau_s: ca.SX, ref: ca.SX
-               ) -> tuple[ca.SX, ca.SX, ca.SX, ca.SX, ca.SX]:
-    """Error, Jacobian (spatial twist), ``L_dot tau_s``, ``e_t``, ``e_tt`` of the pose task."""
-    s = ca.vertcat(_row_major(R), t)
-    Rs = ca.reshape(ref[0:9], 3, 3).T
-    p = ref[0:12]
-    w, alpha = ref[15:18], ref[21:24]
-    W = ca.skew(w)
-    pd = ca.vertcat(_row_major(W @ Rs), ref[12:15])
-    pdd = ca.vertcat(_row_major((ca.skew(alpha) + W @ W) @ Rs), ref[18:21])
-    e, L = _pose_block()(s, p)
-    ldot = second_order_function("pose_second_order", 12, 12, pose_error, pose_rate)(
-        s, p, tau_s)
-    e_t, e_tt = reference_function("pose_reference", 12, 12, pose_error, pose_rate)(
-        s, p, tau_s, pd, pdd)
-    return e, L, ldot, e_t, e_tt
-
-
-def _feature_task(kind: str, v: dict[str, ca.SX], q: ca.SX, tau_s: ca.SX
-                  ) -> tuple[ca.SX, ca.SX, ca.SX, ca.SX, ca.SX]:
-    """Error, Jacobian (spatial twist of the frame), ``L_dot tau_s``, ``e_t``, ``e_tt`` of
-    the edge or direction task (``v``: the input's blocks), block after block."""
-    A, directions = v["base"], v["directions"]
-    ref = v["reference_features"]
-    m = ref.shape[0] // 3
-    des, rate, acc = ref[0:m], ref[m:2 * m], ref[2 * m:3 * m]
-    es, Ls, ldots, ets, etts = [], [], [], [], []
-    eye = ca.reshape(ca.SX.eye(3), 9, 1)
-    zeros3 = ca.SX.zeros(3)
-    for i in range(6):
-        Ai, qi = A[3 * i:3 * i + 3], q[i]
-        if kind == "edges":
-            normals = v["normals"]
-            n1, n2 = normals[6 * i:6 * i + 3], normals[6 * i + 3:6 * i + 6]
-            ui = ca.if_else(v["of_normals"][0], leg_direction_of_edges(n1, n2),
-                            directions[3 * i:3 * i + 3])
-            for j, n in enumerate((n1, n2)):
-                k = 6 * i + 3 * j
-                ns = des[k:k + 3]
-                e, L = edge_block_function("normals")(n, ns, ui, Ai, qi, ca.SX.eye(3),
-                                                      ca.SX.eye(3))
-                s = ca.vertcat(n, ui, qi)
-                p = ca.vertcat(Ai, ns, eye)
-                es.append(e)
-                Ls.append(L)
-                ldots.append(edge_second_order("normals")(s, p, tau_s))
-                e_t, e_tt = edge_reference("normals")(
-                    s, p, tau_s, ca.vertcat(zeros3, rate[k:k + 3], ca.SX.zeros(9)),
-                    ca.vertcat(zeros3, acc[k:k + 3], ca.SX.zeros(9)))
-                ets.append(e_t)
-                etts.append(e_tt)
-        else:
-            ui, us = directions[3 * i:3 * i + 3], des[3 * i:3 * i + 3]
-            e, L = direction_block_function()(ui, us, Ai, qi)
-            s, p = ca.vertcat(ui, qi), ca.vertcat(Ai, us)
-            es.append(e)
-            Ls.append(L)
-            ldots.append(direction_second_order()(s, p, tau_s))
-            e_t, e_tt = direction_reference()(
-                s, p, tau_s, ca.vertcat(zeros3, rate[3 * i:3 * i + 3]),
-                ca.vertcat(zeros3, acc[3 * i:3 * i + 3]))
-            ets.append(e_t)
-            etts.append(e_tt)
-    return (ca.vertcat(*es), ca.vertcat(*Ls), ca.vertcat(*ldots), ca.vertcat(*ets),
-            ca.vertcat(*etts))
-
-
-def _build(kind: str, fk: bool, inverse_tolerance: float) -> ca.Function:
-    inputs = layout(kind, fk)[0]
+def _build(feature: BuiltinFeature, fk: bool, inverse_tolerance: float) -> ca.Function:
+    inputs = layout(feature, fk)[0]
     x = ca.SX.sym("x", inputs.size)
     v = inputs.split(x)
     q, qd, points = v["q"], v["q_dot"], v["points"]
@@ -296,17 +206,14 @@ def _build(kind: str, fk: bool, inverse_tolerance: float) -> ca.Function:
         problem = ca.if_else(ca.sum1(v["seen"]) < 3, float(Status.TOO_FEW_LEGS), 0.0)
     K, twist, M, h, bias = sx_model_state(R_t, qd, points, v["params"])
     R, t = ca.reshape(R_t[0:9], 3, 3), R_t[9:12]
-    frame = None if kind == "pose" else v["frame"]  # the task's frame
+    frame = v["frame"] if feature.camera_task else None  # the task's frame
     G, gdot = model_twist(t, twist, frame)
     tau_s = G @ twist
-    if kind == "pose":
-        e, L, ldot, e_t, e_tt = _pose_task(R, t, tau_s, v["reference"])
-    else:
-        e, L, ldot, e_t, e_tt = _feature_task(kind, v, q, tau_s)
+    e, L, ldot, e_t, e_tt = feature.sx_ctc_task(v, q, R, t, tau_s)
     out = sx_task_outputs(v, R_t, fk_residual, (K, twist, M, h, bias), e, L @ G,
-                          ldot + L @ gdot, e_t, e_tt, None if kind == "pose" else v["mask"],
+                          ldot + L @ gdot, e_t, e_tt, v["mask"] if feature.camera_task else None,
                           inverse_tolerance, FK_TOLERANCE if fk else FIT_TOLERANCE, problem)
-    return ca.Function(f"hexapod_ctc_{kind}_{'fk' if fk else 'pose'}_step", [x],
+    return ca.Function(f"hexapod_ctc_{feature.ctc_name}_{'fk' if fk else 'pose'}_step", [x],
                        [ca.cse(ca.densify(out))])
 
 
@@ -360,28 +267,33 @@ def sx_task_outputs(v: dict[str, ca.SX], R_t: ca.SX, fk_residual: ca.SX,
 
 
 @lru_cache(maxsize=8)
-def task_step(kind: str, fk: bool, inverse_tolerance: float = INVERSE_TOLERANCE
-              ) -> CompiledFunction:
-    """The compiled step of a task kind (built and compiled on first use; cached on disk).
+def task_step(feature: BuiltinFeature, fk: bool,
+              inverse_tolerance: float = INVERSE_TOLERANCE) -> CompiledFunction:
+    """The compiled step of a feature's task (built and compiled on first use; cached on
+    disk).
 
     Args:
-        kind: ``"pose"``, ``"edges"`` (edge normals) or ``"directions"``.
+        feature: :data:`~controllers.tasks.platform_pose.PLATFORM_POSE`,
+            :data:`~controllers.tasks.leg_edge.EDGE_NORMALS` or
+            :data:`~controllers.tasks.leg_direction.LEG_DIRECTIONS`.
         fk: The pose from the encoder lengths by Newton steps from the input pose (else
-            the rigid fit to the legs seen, from the input pose; the pose kind only).
+            the rigid fit to the legs seen, from the input pose; the pose only).
         inverse_tolerance: Relative residual of the inverse solve above which ``K`` is
             taken as singular.
 
     Raises:
-        ValueError: An unknown kind.
+        ValueError: A feature without a compiled step, or the rigid fit asked of one
+            whose pose comes from the encoders.
     """
-    if kind not in ROWS:
-        raise ValueError(f"kind: expected one of {', '.join(ROWS)}, got {kind!r}")
-    if not fk and kind != "pose":
-        raise ValueError(f"kind {kind!r}: the pose comes from the encoders (fk=True)")
-    inputs, outputs = layout(kind, bool(fk))
-    return CompiledFunction(_build(kind, bool(fk), float(inverse_tolerance)), inputs=inputs,
-                            outputs=outputs)
+    if feature.ctc_name is None:
+        raise ValueError(f"feature {feature.kind!r}: no compiled computed-torque step")
+    if not fk and not feature.visual_pose:
+        raise ValueError(f"feature {feature.kind!r}: the pose comes from the encoders "
+                         "(fk=True)")
+    inputs, outputs = layout(feature, bool(fk))
+    return CompiledFunction(_build(feature, bool(fk), float(inverse_tolerance)),
+                            inputs=inputs, outputs=outputs)
 
 
-__all__ = ["COMMON_INPUTS", "FIT_ITERATIONS", "FIT_TOLERANCE", "FK_CALLS", "REFERENCE", "ROWS",
-           "layout", "model_twist", "sx_task_outputs", "task_layouts", "task_step"]
+__all__ = ["COMMON_INPUTS", "FIT_ITERATIONS", "FIT_TOLERANCE", "FK_CALLS", "REFERENCE", "layout",
+           "model_twist", "sx_task_outputs", "task_layouts", "task_step"]

@@ -28,30 +28,32 @@ from functools import lru_cache
 
 import casadi as ca
 
-from controllers.mpc.prediction import sx_edge_normals
-from controllers.solvers.compiled_task_ctc import REFERENCE
 from controllers.tasks.base import sx_unit
+from controllers.tasks.feature_kind import BuiltinFeature
+from controllers.tasks.leg_direction import LEG_DIRECTIONS
+from controllers.tasks.leg_edge import EDGE_NORMALS
+from controllers.tasks.platform_pose import REFERENCE
 from hexapod.compiled import CompiledFunction, Layout
 
-#: Rows of each feature kind.
-ROWS = {"normals": 36, "directions": 18}
+#: The features a reference is computed for (the feature computed-torque laws').
+FEATURES = (EDGE_NORMALS, LEG_DIRECTIONS)
 
 
 @lru_cache(maxsize=2)
-def layouts(kind: str) -> tuple[Layout, Layout]:
-    """The input and output layouts of a kind's function (module docstring)."""
-    m = ROWS[kind]
+def layouts(feature: BuiltinFeature) -> tuple[Layout, Layout]:
+    """The input and output layouts of a feature's function (module docstring)."""
+    m, kind = feature.task_rows, feature.kind
     return (Layout([("reference", REFERENCE.size), ("taught", m), ("end", m), ("frame", 12),
                     ("points", (2, 6, 3)), ("radius", 1)], f"{kind} reference input"),
             Layout([("features", m), ("rate", m), ("acceleration", m)],
                    f"{kind} reference output"))
 
 
-def model_features(kind: str, R: ca.SX, t: ca.SX, frame: ca.SX, A: ca.SX, E: ca.SX,
-                   radius: ca.SX) -> ca.SX:
+def model_features(feature: BuiltinFeature, R: ca.SX, t: ca.SX, frame: ca.SX, A: ca.SX,
+                   E: ca.SX, radius: ca.SX) -> ca.SX:
     """The features (``m``) of the robot at ``(R, t)`` (base frame) seen from ``frame``
     (``R`` row-major, ``p``), as :func:`vision.legs.observe_legs` computes them (all
-    edges existing)."""
+    edges existing; :meth:`~controllers.tasks.feature_kind.BuiltinFeature.sx_of_legs`)."""
     Rf = ca.reshape(frame[0:9], 3, 3).T
     pf = frame[9:12]
     out: list[ca.SX] = []
@@ -59,16 +61,13 @@ def model_features(kind: str, R: ca.SX, t: ca.SX, frame: ca.SX, A: ca.SX, E: ca.
         Ai, Ei = A[3 * i:3 * i + 3], E[3 * i:3 * i + 3]
         u = sx_unit(R @ Ei + t - Ai)
         Ac, uc = Rf @ Ai + pf, Rf @ u
-        if kind == "normals":
-            out.extend(sx_edge_normals(Ac, uc, radius))
-        else:
-            out.append(uc)
+        out.extend(feature.sx_of_legs([uc], [Ac], radius))
     return ca.vertcat(*out)
 
 
-def _build(kind: str) -> ca.Function:
-    m = ROWS[kind]
-    inputs = layouts(kind)[0]
+def _build(feature: BuiltinFeature) -> ca.Function:
+    m = feature.task_rows
+    inputs = layouts(feature)[0]
     x = ca.SX.sym("x", inputs.size)
     v = inputs.split(x)
     frame, points, radius = v["frame"], v["points"], v["radius"][0]
@@ -76,7 +75,7 @@ def _build(kind: str) -> ca.Function:
     P = ca.SX.sym("P", 12)  # (R* row-major, t*)
     d1, d2 = ca.SX.sym("d1", 12), ca.SX.sym("d2", 12)
     R = ca.reshape(P[0:9], 3, 3).T
-    model = model_features(kind, R, P[9:12], frame, A, E, radius)
+    model = model_features(feature, R, P[9:12], frame, A, E, radius)
     shifted = taught + model - end
     s = ca.vertcat(*[sx_unit(shifted[3 * j:3 * j + 3]) for j in range(m // 3)])
     sd = ca.jtimes(s, P, d1)
@@ -89,20 +88,20 @@ def _build(kind: str) -> ca.Function:
     p_ddot = ca.vertcat(ca.reshape(((ca.skew(ref["twist_rate"][3:6]) + W @ W) @ Rs).T, 9, 1),
                         ref["twist_rate"][0:3])
     out = chain(ca.vertcat(ref["R"], ref["t"]), p_dot, p_ddot, x)
-    return ca.Function(f"hexapod_feature_reference_{kind}", [x],
+    return ca.Function(f"hexapod_feature_reference_{feature.kind}", [x],
                        [ca.cse(ca.densify(ca.vertcat(*out)))])
 
 
 @lru_cache(maxsize=2)
-def feature_motion(kind: str) -> CompiledFunction:
+def feature_motion(feature: BuiltinFeature) -> CompiledFunction:
     """``s*``, ``s*_dot``, ``s*_ddot`` of the anchored model features (module docstring).
 
     Args:
-        kind: ``"normals"`` or ``"directions"``.
+        feature: :data:`~controllers.tasks.leg_edge.EDGE_NORMALS` or
+            :data:`~controllers.tasks.leg_direction.LEG_DIRECTIONS` (:data:`FEATURES`).
     """
-    if kind not in ROWS:
-        raise ValueError(f"kind: expected one of {', '.join(ROWS)}, got {kind!r}")
-    return CompiledFunction(_build(kind), inputs=layouts(kind)[0], outputs=layouts(kind)[1])
+    return CompiledFunction(_build(feature), inputs=layouts(feature)[0],
+                            outputs=layouts(feature)[1])
 
 
-__all__ = ["ROWS", "feature_motion", "layouts", "model_features"]
+__all__ = ["FEATURES", "feature_motion", "layouts", "model_features"]

@@ -9,6 +9,7 @@
 from __future__ import annotations
 
 from functools import lru_cache
+from typing import Any
 
 import casadi as ca
 import numpy as np
@@ -24,7 +25,9 @@ from controllers.tasks.base import (
     reference_function,
     sx_skew,
 )
+from controllers.tasks.feature_kind import BuiltinFeature
 from controllers.tasks.leg_feature import LegFeature
+from hexapod.compiled import Shape
 
 
 def direction_block(u: ca.SX, desired: ca.SX, base_point: ca.SX, length: ca.SX
@@ -122,15 +125,22 @@ class LegDirectionTask(LegBlockTask):
         return e_t.reshape(n, 18), e_tt.reshape(n, 18)
 
 
-class LegDirections(LegFeature):
-    """The leg directions as a :class:`~controllers.tasks.leg_feature.LegFeature`:
-    ``f_i = u_i``, error ``u_i x u_i*``, block :func:`direction_block` (the closed form);
-    the desired state of the DESIRED / MEAN interaction is ``(u_i*, q_i*)``, the desired
-    feature itself and the goal lengths."""
+class LegDirections(LegFeature, BuiltinFeature):
+    """The leg directions as a :class:`~controllers.tasks.leg_feature.LegFeature` (the
+    shape of a plugin's feature) and a built-in feature object
+    (:class:`~controllers.tasks.feature_kind.BuiltinFeature`): ``f_i = u_i``, error
+    ``u_i x u_i*``, block :func:`direction_block` (the closed form); the desired state of
+    the DESIRED / MEAN interaction is ``(u_i*, q_i*)``, the desired feature itself and
+    the goal lengths. Read from ``Observation.directions``."""
 
     name = "leg-direction"
     rows = 3
     desired_state_inputs = (("desired_lengths", 6),)
+    kind = field = ctc_name = "directions"
+    visibility = "direction_visible"
+    shape = (6, 3)
+    units = 6
+    task_rows = 18
 
     def value(self, u: ca.SX, q: ca.SX, A: ca.SX) -> ca.SX:
         return u
@@ -143,6 +153,49 @@ class LegDirections(LegFeature):
 
     def desired_state(self, inputs: dict[str, ca.SX], leg: int) -> tuple[ca.SX, ca.SX]:
         return inputs["desired"][3 * leg:3 * leg + 3], inputs["desired_lengths"][leg]
+
+    def task_of(self, desired: np.ndarray, **options: Any) -> LegDirectionTask:
+        return LegDirectionTask(desired)
+
+    # ------------------------------------------------------------------ prediction
+    def sx_of_legs(self, us: list[ca.SX], A: list[ca.SX], radius: ca.SX | float,
+                   line_inv_t: ca.SX | None = None) -> list[ca.SX]:
+        return list(us)
+
+    def model_features(self, base_points: np.ndarray, directions: np.ndarray, radius: float,
+                       line_matrix: np.ndarray | None) -> np.ndarray:
+        return directions
+
+    # ------------------------------------------------------------------ computed torque
+    def ctc_blocks(self, fk: bool) -> tuple[tuple[str, Shape], ...]:
+        """The measured leg ``directions`` (6 x 3)."""
+        return (("directions", (6, 3)),)
+
+    def sx_ctc_task(self, v: dict[str, ca.SX], q: ca.SX, R: ca.SX, t: ca.SX, tau_s: ca.SX
+                    ) -> tuple[ca.SX, ca.SX, ca.SX, ca.SX, ca.SX]:
+        """Leg after leg (:func:`block_function`, :func:`second_order_block`,
+        :func:`reference_block`)."""
+        A, directions = v["base"], v["directions"]
+        ref = v["reference_features"]
+        m = ref.shape[0] // 3
+        des, rate, acc = ref[0:m], ref[m:2 * m], ref[2 * m:3 * m]
+        es, Ls, ldots, ets, etts = [], [], [], [], []
+        zeros3 = ca.SX.zeros(3)
+        for i in range(6):
+            Ai, qi = A[3 * i:3 * i + 3], q[i]
+            ui, us = directions[3 * i:3 * i + 3], des[3 * i:3 * i + 3]
+            e, L = block_function()(ui, us, Ai, qi)
+            s, p = ca.vertcat(ui, qi), ca.vertcat(Ai, us)
+            es.append(e)
+            Ls.append(L)
+            ldots.append(second_order_block()(s, p, tau_s))
+            e_t, e_tt = reference_block()(
+                s, p, tau_s, ca.vertcat(zeros3, rate[3 * i:3 * i + 3]),
+                ca.vertcat(zeros3, acc[3 * i:3 * i + 3]))
+            ets.append(e_t)
+            etts.append(e_tt)
+        return (ca.vertcat(*es), ca.vertcat(*Ls), ca.vertcat(*ldots), ca.vertcat(*ets),
+                ca.vertcat(*etts))
 
 
 #: The leg directions (the feature of ``leg-direction``'s compiled law core).

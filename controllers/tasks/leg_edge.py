@@ -5,15 +5,19 @@
   ``L = -[l*]_x J_l H M_i``.
 
 :func:`edge_block` is the one definition of an edge's block (the rank-one ``L = a g^T``
-of ``docs/math.md``; the motion of a normal is ``n_dot = H M_i tau = -z (g^T tau)``): the
-task evaluates it (:func:`block_function`), the compiled law cores are generated from it
-(:mod:`controllers.law_kernel`), and the second-order term differentiates its error.
+of ``docs/math.md``; the motion of a normal is ``n_dot = H M_i tau = -z (g^T tau)``).
+The two edge features are objects, :data:`EDGE_NORMALS` and :data:`EDGE_LINES`
+(:class:`EdgeFeature`, a :class:`~controllers.tasks.feature_kind.BuiltinFeature`): each
+owns its blocks (:attr:`EdgeFeature.block_function`, its second-order and reference
+terms, which differentiate its error), its prediction from the legs and its part of the
+compiled computed-torque step; the task evaluates them, the compiled law cores
+(:mod:`controllers.law_kernel`) are generated from the same :func:`edge_block`.
 """
 
 from __future__ import annotations
 
-from collections.abc import Callable
-from functools import lru_cache
+from functools import cached_property
+from typing import Any
 
 import casadi as ca
 import numpy as np
@@ -30,9 +34,8 @@ from controllers.tasks.base import (
     sx_unit,
     unit,
 )
-
-#: Edge feature kinds.
-EDGE_KINDS = ("normals", "lines")
+from controllers.tasks.feature_kind import BuiltinFeature
+from hexapod.compiled import Shape
 
 
 def line_of_normal(normal: ca.SX, line_matrix_inv_t: ca.SX) -> ca.SX:
@@ -96,19 +99,15 @@ def edge_block(feature: ca.SX, desired: ca.SX, normal: ca.SX, u: ca.SX, base_poi
     return e, ca.cross(desired, z), g
 
 
-@lru_cache(maxsize=2)
-def block_function(kind: str) -> ca.Function:
-    """``(n, f*, u, A, q, K^T, K^-T) -> (e, L)`` of :func:`edge_block` on the edge normal
-    ``n`` (the feature is ``n``, or its line :func:`line_of_normal`; ``L = a g^T``, (3, 6);
-    the line matrices are unused for normals)."""
-    n, fs, u, A = (ca.SX.sym(k, 3) for k in ("n", "f_star", "u", "A"))
-    q = ca.SX.sym("q")
-    Kt, Kit = ca.SX.sym("Kt", 3, 3), ca.SX.sym("Kit", 3, 3)
-    if kind == "lines":
-        e, a, g = edge_block(line_of_normal(n, Kit), fs, n, u, A, q, 1.0 / q, Kt, Kit)
-    else:
-        e, a, g = edge_block(n, fs, n, u, A, q, 1.0 / q)
-    return ca.Function(f"leg_edge_{kind}_block", [n, fs, u, A, q, Kt, Kit], [e, a @ g.T])
+def sx_edge_normals(A: ca.SX, u: ca.SX, r: ca.SX | float) -> tuple[ca.SX, ca.SX]:
+    """The two edge normals of a leg (``docs/math.md`` section 4, ``vision/legs.py`` order)."""
+    h = ca.cross(A, u)
+    hn = ca.sqrt(ca.dot(h, h))
+    hh = h / hn
+    w = ca.cross(u, hh)
+    s = r / hn
+    c = ca.sqrt(1 - s * s)
+    return c * hh - s * w, -c * hh - s * w
 
 
 def _edge_state_rate(s: ca.SX, p: ca.SX, tau: ca.SX) -> ca.SX:
@@ -119,56 +118,219 @@ def _edge_state_rate(s: ca.SX, p: ca.SX, tau: ca.SX) -> ca.SX:
     return ca.vertcat(-z * ca.dot(g, tau), udot, qdot)
 
 
-def _error(kind: str) -> Callable[[ca.SX, ca.SX], ca.SX]:
-    # state (n, u, q), parameters (A, desired, K^-T row-major)
-    def error(s: ca.SX, p: ca.SX) -> ca.SX:
-        n = s[:3]
-        f = line_of_normal(n, ca.reshape(p[6:15], 3, 3).T) if kind == "lines" else n
-        return ca.cross(f, p[3:6])
+class EdgeFeature(BuiltinFeature):
+    """The leg edges (two per leg, ``(6, 2)`` order) as one feature: edge normals
+    (:data:`EDGE_NORMALS`, ``f = n``) or unit image lines (:data:`EDGE_LINES`,
+    ``f = l = K^-T n / |K^-T n|``); both are measured through the edge normal ``n`` and
+    share :func:`edge_block`.
 
-    return error
+    Args:
+        kind: ``"normals"`` or ``"lines"`` (the observation field, and the name in the
+            kernels').
+        lines: The feature is the image line of the normal (the line matrices are used).
+    """
+
+    units = 12
+    task_rows = 36
+    shape = (6, 2, 3)
+    visibility = "edge_visible"
+    field: str
+
+    def __init__(self, kind: str, lines: bool) -> None:
+        self.kind = self.field = kind
+        self.lines = lines
+        # the computed-torque steps and the force MPC are written on the normals
+        self.ctc_name = None if lines else "edges"
+        self.force_mpc_name = None if lines else "hexapod_force_mpc"
+        self.stage_features = 0 if lines else 36
+
+    # ------------------------------------------------------------------ blocks
+    def sx_feature(self, normal: ca.SX, line_matrix_inv_t: ca.SX) -> ca.SX:
+        """The feature of an edge normal: the normal, or its line :func:`line_of_normal`."""
+        return line_of_normal(normal, line_matrix_inv_t) if self.lines else normal
+
+    def sx_normal(self, feature: ca.SX, line_matrix_t: ca.SX) -> ca.SX:
+        """The edge normal of a measured feature: itself, or :func:`normal_of_line`."""
+        return normal_of_line(feature, line_matrix_t) if self.lines else feature
+
+    def line_matrices(self, line_matrix_t: ca.SX, line_matrix_inv_t: ca.SX
+                      ) -> tuple[ca.SX, ca.SX] | tuple[None, None]:
+        """The line matrices :func:`edge_block` takes (None for the normals)."""
+        return (line_matrix_t, line_matrix_inv_t) if self.lines else (None, None)
+
+    @cached_property
+    def block_function(self) -> ca.Function:
+        """``(n, f*, u, A, q, K^T, K^-T) -> (e, L)`` of :func:`edge_block` on the edge
+        normal ``n`` (the feature is ``n``, or its line :func:`line_of_normal`;
+        ``L = a g^T``, (3, 6); the line matrices are unused for normals)."""
+        n, fs, u, A = (ca.SX.sym(k, 3) for k in ("n", "f_star", "u", "A"))
+        q = ca.SX.sym("q")
+        Kt, Kit = ca.SX.sym("Kt", 3, 3), ca.SX.sym("Kit", 3, 3)
+        e, a, g = edge_block(self.sx_feature(n, Kit), fs, n, u, A, q, 1.0 / q,
+                             *self.line_matrices(Kt, Kit))
+        return ca.Function(f"leg_edge_{self.kind}_block", [n, fs, u, A, q, Kt, Kit],
+                           [e, a @ g.T])
+
+    def _error(self, s: ca.SX, p: ca.SX) -> ca.SX:
+        # state (n, u, q), parameters (A, desired, K^-T row-major)
+        return ca.cross(self.sx_feature(s[:3], ca.reshape(p[6:15], 3, 3).T), p[3:6])
+
+    @cached_property
+    def second_order_block(self) -> ca.Function:
+        """``(s, p, tau) -> L_dot tau`` of one edge (layout of :attr:`reference_block`)."""
+        return second_order_function(f"leg_edge_{self.kind}_second_order", 7, 15,
+                                     self._error, _edge_state_rate)
+
+    @cached_property
+    def reference_block(self) -> ca.Function:
+        """:func:`~controllers.tasks.base.reference_function` of one edge: state
+        ``(n, u, q)`` (7), parameters ``(A, f*, K^-T row-major)`` (15)."""
+        return reference_function(f"leg_edge_{self.kind}_reference", 7, 15, self._error,
+                                  _edge_state_rate)
+
+    def task_of(self, desired: np.ndarray, **options: Any) -> LegEdgeTask:
+        return LegEdgeTask(desired, self, **options)
+
+    # ------------------------------------------------------------------ prediction
+    def sx_of_legs(self, us: list[ca.SX], A: list[ca.SX], radius: ca.SX | float,
+                   line_inv_t: ca.SX | None = None) -> list[ca.SX]:
+        out = []
+        for Ai, ui in zip(A, us, strict=True):
+            for n in sx_edge_normals(Ai, ui, radius):
+                out.append(line_of_normal(n, line_inv_t)
+                           if line_inv_t is not None and self.lines else n)
+        return out
+
+    def model_features(self, base_points: np.ndarray, directions: np.ndarray, radius: float,
+                       line_matrix: np.ndarray | None) -> np.ndarray:
+        from vision.legs import leg_edges
+
+        n, _ = leg_edges(base_points, directions, radius)
+        if self.lines:
+            n = n @ np.linalg.inv(self._checked(line_matrix))  # rows: (K^-T n)^T
+            n = n / np.linalg.norm(n, axis=-1, keepdims=True)
+        return n.reshape(12, 3)  # type: ignore[no-any-return]
+
+    def features_of(self, normals: np.ndarray, line_matrix_inv_t: np.ndarray) -> np.ndarray:
+        """(..., 3) the features of edge normals (..., 3): the normals, or their unit
+        lines ``K^-T n / |K^-T n|`` (numpy; ``line_matrix_inv_t`` is ``K^-T``)."""
+        return unit(normals @ line_matrix_inv_t.T) if self.lines else normals
+
+    def normals_of(self, features: np.ndarray, line_matrix: np.ndarray) -> np.ndarray:
+        """(..., 3) the edge normals of features (..., 3): the normals themselves, or the
+        unit normals ``K^T l / |K^T l|`` of lines (numpy; rows ``(K^T l)^T = l^T K``)."""
+        return unit(features @ line_matrix) if self.lines else features
+
+    def line_inv_t(self, line_matrix: np.ndarray | None) -> np.ndarray:
+        if self.lines:
+            return np.linalg.inv(self._checked(line_matrix)).T  # type: ignore[no-any-return]
+        return np.eye(3)
+
+    def _checked(self, line_matrix: np.ndarray | None) -> np.ndarray:
+        if line_matrix is None:
+            raise ValueError(f"feature {self.kind!r} needs the camera's line_matrix")
+        return line_matrix
+
+    # ------------------------------------------------------------------ computed torque
+    def ctc_blocks(self, fk: bool) -> tuple[tuple[str, Shape], ...]:
+        """The normals (6 x 2 x 3), the leg ``directions`` (6 x 3) and ``of_normals``
+        (1.0: the directions of the normals, ``unit(n_2 x n_1)``)."""
+        if self.lines:
+            raise self._unsupported("compiled computed-torque step")
+        return (("normals", (6, 2, 3)), ("directions", (6, 3)), ("of_normals", 1))
+
+    def sx_ctc_task(self, v: dict[str, ca.SX], q: ca.SX, R: ca.SX, t: ca.SX, tau_s: ca.SX
+                    ) -> tuple[ca.SX, ca.SX, ca.SX, ca.SX, ca.SX]:
+        """Edge after edge (the normals' blocks, :attr:`block_function`)."""
+        if self.lines:
+            raise self._unsupported("compiled computed-torque step")
+        A, directions = v["base"], v["directions"]
+        des, rate, acc = _reference_parts(v)
+        es, Ls, ldots, ets, etts = [], [], [], [], []
+        eye = ca.reshape(ca.SX.eye(3), 9, 1)
+        zeros3 = ca.SX.zeros(3)
+        for i in range(6):
+            Ai, qi = A[3 * i:3 * i + 3], q[i]
+            normals = v["normals"]
+            n1, n2 = normals[6 * i:6 * i + 3], normals[6 * i + 3:6 * i + 6]
+            ui = ca.if_else(v["of_normals"][0], leg_direction_of_edges(n1, n2),
+                            directions[3 * i:3 * i + 3])
+            for j, n in enumerate((n1, n2)):
+                k = 6 * i + 3 * j
+                ns = des[k:k + 3]
+                e, L = self.block_function(n, ns, ui, Ai, qi, ca.SX.eye(3), ca.SX.eye(3))
+                s = ca.vertcat(n, ui, qi)
+                p = ca.vertcat(Ai, ns, eye)
+                es.append(e)
+                Ls.append(L)
+                ldots.append(self.second_order_block(s, p, tau_s))
+                e_t, e_tt = self.reference_block(
+                    s, p, tau_s, ca.vertcat(zeros3, rate[k:k + 3], ca.SX.zeros(9)),
+                    ca.vertcat(zeros3, acc[k:k + 3], ca.SX.zeros(9)))
+                ets.append(e_t)
+                etts.append(e_tt)
+        return (ca.vertcat(*es), ca.vertcat(*Ls), ca.vertcat(*ldots), ca.vertcat(*ets),
+                ca.vertcat(*etts))
+
+    # ------------------------------------------------------------------ force MPC
+    def sx_stage_features(self, t: ca.SX, R_column_major: ca.SX, normals: list[ca.SX]
+                          ) -> ca.SX:
+        if self.lines:
+            raise self._unsupported("force-MPC features")
+        return ca.vertcat(*normals)
 
 
-@lru_cache(maxsize=2)
-def _second_order(kind: str) -> ca.Function:
-    return second_order_function(f"leg_edge_{kind}_second_order", 7, 15, _error(kind),
-                                 _edge_state_rate)
+def _reference_parts(v: dict[str, ca.SX]) -> tuple[ca.SX, ca.SX, ca.SX]:
+    """The desired features, their rate and acceleration of a computed-torque step's
+    ``reference_features`` input."""
+    ref = v["reference_features"]
+    m = ref.shape[0] // 3
+    return ref[0:m], ref[m:2 * m], ref[2 * m:3 * m]
 
 
-@lru_cache(maxsize=2)
-def reference_block(kind: str) -> ca.Function:
-    """:func:`~controllers.tasks.base.reference_function` of one edge: state
-    ``(n, u, q)`` (7), parameters ``(A, f*, K^-T row-major)`` (15)."""
-    return reference_function(f"leg_edge_{kind}_reference", 7, 15, _error(kind),
-                              _edge_state_rate)
+#: The leg edges as interpretation-plane normals (any camera).
+EDGE_NORMALS = EdgeFeature("normals", lines=False)
+#: The leg edges as unit image lines (a perspective camera's ``line_matrix``).
+EDGE_LINES = EdgeFeature("lines", lines=True)
+#: The edge features by their option value (``edge_feature``, ``LegEdgeTask``'s kind).
+EDGE_KINDS = {f.kind: f for f in (EDGE_NORMALS, EDGE_LINES)}
 
 
-@lru_cache(maxsize=2)
-def second_order_block(kind: str) -> ca.Function:
-    """``(s, p, tau) -> L_dot tau`` of one edge (layout of :func:`reference_block`)."""
-    return _second_order(kind)
+def edge_feature(kind: str | EdgeFeature) -> EdgeFeature:
+    """The edge feature of an option value (``"normals"`` or ``"lines"``), or the
+    feature itself.
+
+    Raises:
+        ValueError: Another value (naming it and the choices).
+    """
+    if isinstance(kind, EdgeFeature):
+        return kind
+    try:
+        return EDGE_KINDS[kind]
+    except (KeyError, TypeError):
+        raise ValueError(f"kind: expected one of {', '.join(EDGE_KINDS)}, "
+                         f"got {kind!r}") from None
 
 
 class LegEdgeTask(Task):
     """The twelve leg edges (two per leg, ``(6, 2)`` order) towards their desired values.
 
     Args:
-        desired: (6, 2, 3) or (n, 6, 2, 3) desired normals (``kind="normals"``) or
-            unit image lines (``kind="lines"``).
-        kind: ``"normals"`` or ``"lines"``.
+        desired: (6, 2, 3) or (n, 6, 2, 3) desired normals (:data:`EDGE_NORMALS`) or
+            unit image lines (:data:`EDGE_LINES`).
+        kind: The edge feature, or its name (``"normals"`` or ``"lines"``).
         line_matrix: (3, 3) ``K`` of the perspective camera (lines only).
     """
 
     name = "leg-edges"
 
-    def __init__(self, desired: np.ndarray, kind: str = "normals",
+    def __init__(self, desired: np.ndarray, kind: str | EdgeFeature = "normals",
                  line_matrix: np.ndarray | None = None) -> None:
-        if kind not in EDGE_KINDS:
-            raise ValueError(f"kind: expected one of {', '.join(EDGE_KINDS)}, got {kind!r}")
-        if kind == "lines" and line_matrix is None:
-            raise ValueError("kind 'lines' needs the camera's line_matrix")
+        feature = edge_feature(kind)
+        if feature.lines and line_matrix is None:
+            raise ValueError(f"kind {feature.kind!r} needs the camera's line_matrix")
         self.desired = np.asarray(desired, dtype=float)
-        self.kind = kind
+        self.feature = feature
         self.line_matrix = np.eye(3) if line_matrix is None else np.asarray(line_matrix, float)
         self.line_matrix_inv_t = np.linalg.inv(self.line_matrix).T
 
@@ -176,7 +338,7 @@ class LegEdgeTask(Task):
         """(n, 6, 2, 3) the measured features of the state: its normals, or their lines."""
         if state.normals is None:
             raise ValueError("LegEdgeTask needs the state's normals")
-        if self.kind == "lines":
+        if self.feature.lines:
             return unit(state.normals @ self.line_matrix_inv_t.T)
         return state.normals
 
@@ -189,7 +351,7 @@ class LegEdgeTask(Task):
         k = 12 * n
         Kt = np.broadcast_to(self.line_matrix.T.reshape(1, 9, order="F"), (k, 9))
         Kit = np.broadcast_to(self.line_matrix_inv_t.reshape(1, 9, order="F"), (k, 9))
-        return map_blocks(block_function(self.kind), normals,
+        return map_blocks(self.feature.block_function, normals,
                           self._star(n).reshape(-1, 3), u2, A2, q2, Kt, Kit)
 
     def error(self, state: TaskState) -> np.ndarray:
@@ -222,7 +384,7 @@ class LegEdgeTask(Task):
 
     def jacobian_dot_twist(self, state: TaskState, twist: np.ndarray) -> np.ndarray:
         s, p, tau = self._edge_rows(state, twist)
-        return evaluate_blocks(_second_order(self.kind), s, p, tau).reshape(len(state), 36)
+        return evaluate_blocks(self.feature.second_order_block, s, p, tau).reshape(len(state), 36)
 
     def reference_terms(self, state: TaskState, twist: np.ndarray, rate: np.ndarray,
                         acceleration: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -233,5 +395,5 @@ class LegEdgeTask(Task):
         pd, pdd = (np.zeros((12 * n, 15)) for _ in range(2))
         pd[:, 3:6] = np.asarray(rate, float).reshape(-1, 3)
         pdd[:, 3:6] = np.asarray(acceleration, float).reshape(-1, 3)
-        e_t, e_tt = evaluate_reference(reference_block(self.kind), s, p, tau, pd, pdd)
+        e_t, e_tt = evaluate_reference(self.feature.reference_block, s, p, tau, pd, pdd)
         return e_t.reshape(n, 36), e_tt.reshape(n, 36)

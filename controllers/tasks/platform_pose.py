@@ -22,6 +22,8 @@ from controllers.tasks.base import (
     reference_function,
     second_order_function,
 )
+from controllers.tasks.feature_kind import BuiltinFeature
+from hexapod.compiled import Layout, Shape
 from hexapod.se3 import log_so3, skew
 
 
@@ -154,3 +156,71 @@ class PlatformPoseTask(Task):
                               np.asarray(acceleration, float).reshape(n, 6))
         return evaluate_reference(_reference(), s, p,
                                   np.asarray(twist, float).reshape(n, 6), pd, pdd)
+
+
+#: A reference pose row: ``R*`` (row-major), ``t*``, the twist and its rate (the pose
+#: task's input of a compiled computed-torque step).
+REFERENCE = Layout([("R", (3, 3)), ("t", 3), ("twist", 6), ("twist_rate", 6)],
+                   "reference pose")
+
+
+def _row_major(R: ca.SX) -> ca.SX:
+    return ca.reshape(R.T, 9, 1)
+
+
+def _pose_block() -> ca.Function:
+    """``(s, p) -> (e, L)`` of the pose task, ``L`` the derivative of ``e`` along
+    :func:`pose_rate` (the module's closed form)."""
+    s, p, tau = ca.SX.sym("s", 12), ca.SX.sym("p", 12), ca.SX.sym("tau", 6)
+    e = pose_error(s, p)
+    L = ca.jacobian(ca.jtimes(e, s, pose_rate(s, p, tau)), tau)
+    return ca.Function("pose_block", [s, p], [e, L])
+
+
+class PlatformPose(BuiltinFeature):
+    """The platform pose as a feature object
+    (:class:`~controllers.tasks.feature_kind.BuiltinFeature`): the square pose task of
+    ``cartesian-ctc`` and ``vision-ctc`` (base frame, no hidden rows) and the features of
+    ``pose-force-mpc`` (``(t, R column-major)``, 12)."""
+
+    kind = ctc_name = "pose"
+    task_rows = 6
+    camera_task = False
+    visual_pose = True
+    force_mpc_name = "hexapod_force_pose_mpc"
+    stage_features = 12
+
+    def ctc_blocks(self, fk: bool) -> tuple[tuple[str, Shape], ...]:
+        """The ``reference`` pose row (:data:`REFERENCE`); for the visual pose
+        (``fk=False``) the legs' ``directions`` (6 x 3), the estimated ``base`` points
+        (6 x 3, camera frame), the ``frame`` (the base from the camera, ``R``
+        row-major, ``p``: 12) and the legs ``seen`` (6: 1.0 for a leg the fit takes, 0.0
+        for a hidden one)."""
+        visual = (("directions", (6, 3)), ("base", (6, 3)), ("frame", 12), ("seen", 6)) \
+            if not fk else ()
+        return (("reference", REFERENCE.size), *visual)
+
+    def sx_ctc_task(self, v: dict[str, ca.SX], q: ca.SX, R: ca.SX, t: ca.SX, tau_s: ca.SX
+                    ) -> tuple[ca.SX, ca.SX, ca.SX, ca.SX, ca.SX]:
+        ref = v["reference"]
+        s = ca.vertcat(_row_major(R), t)
+        Rs = ca.reshape(ref[0:9], 3, 3).T
+        p = ref[0:12]
+        w, alpha = ref[15:18], ref[21:24]
+        W = ca.skew(w)
+        pd = ca.vertcat(_row_major(W @ Rs), ref[12:15])
+        pdd = ca.vertcat(_row_major((ca.skew(alpha) + W @ W) @ Rs), ref[18:21])
+        e, L = _pose_block()(s, p)
+        ldot = second_order_function("pose_second_order", 12, 12, pose_error, pose_rate)(
+            s, p, tau_s)
+        e_t, e_tt = reference_function("pose_reference", 12, 12, pose_error, pose_rate)(
+            s, p, tau_s, pd, pdd)
+        return e, L, ldot, e_t, e_tt
+
+    def sx_stage_features(self, t: ca.SX, R_column_major: ca.SX, normals: list[ca.SX]
+                          ) -> ca.SX:
+        return ca.vertcat(t, R_column_major)
+
+
+#: The platform pose.
+PLATFORM_POSE = PlatformPose()

@@ -221,17 +221,18 @@ def test_the_compiled_rigid_fit_from_the_exact_pose_takes_a_zero_step() -> None:
     symmetric, the Newton step is exactly zero and the pose stays the identity (the
     step's Rodrigues coefficients once made 0/0 there)."""
     from controllers.solvers.compiled_task_ctc import layout, task_step
+    from controllers.tasks import PLATFORM_POSE
 
-    inputs, outputs = layout("pose", False)
+    inputs, outputs = layout(PLATFORM_POSE, False)
     E = deltalab().platform_points
-    x = np.zeros(task_step("pose", False).n_in)
+    x = np.zeros(task_step(PLATFORM_POSE, False).n_in)
     x[inputs["pose"]] = np.concatenate([np.eye(3).ravel(), np.zeros(3)])
     x[inputs["q"]] = 1.0
     x[inputs["points"]][18:] = E.ravel()
     x[inputs["directions"]] = E.ravel()  # B = A + q u = E with A = 0, q = 1
     x[inputs["frame"]] = np.concatenate([np.eye(3).ravel(), np.zeros(3)])
     x[inputs["seen"]] = 1.0  # every leg
-    y = task_step("pose", False).single(x)
+    y = task_step(PLATFORM_POSE, False).single(x)
     assert y[outputs["fk_residual"]][0] < 1e-8
     np.testing.assert_array_equal(y[outputs["pose"]],
                                   np.concatenate([np.eye(3).ravel(), np.zeros(3)]))

@@ -11,7 +11,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from controllers.mpc.prediction import GlobalModel, LocalModel, fit_pose
+from controllers.mpc.prediction import FEATURE_KINDS, GlobalModel, LocalModel, fit_pose
 from hexapod.kinematics import inverse_jacobian
 from tests.controllers.controller_world import World, make_camera
 from tests.controllers.interaction_oracle import (
@@ -55,7 +55,8 @@ def _global_model(world: World, kind: str, R: np.ndarray, t: np.ndarray
                   ) -> tuple[GlobalModel, np.ndarray, np.ndarray]:
     f = world.features(R, t)
     cam = world.camera
-    model = GlobalModel(kind, world.context(world.goal(R, t), DT).base_points,
+    feature = {f.kind: f for f in FEATURE_KINDS}[kind]
+    model = GlobalModel(feature, world.context(world.goal(R, t), DT).base_points,
                         world.geometry.platform_points, world.geometry.leg_radius,
                         getattr(cam, "line_matrix", None))
     Rc, tc = model.fit(f["lengths"], f["directions"])

@@ -29,7 +29,7 @@ from scipy.linalg.lapack import dsyevd
 from controllers import registry
 from controllers.base import Command, Observation
 from controllers.cartesian_ctc import _every_direction, all_seen, directions_seen
-from controllers.solvers.compiled_task_ctc import ROWS, layout, task_step
+from controllers.solvers.compiled_task_ctc import layout, task_step
 from controllers.task_ctc import TaskComputedTorque, encoder_readings, finite_readings
 from controllers.task_ctc_compiled import FIT_TOLERANCE, FK_MAX_CALLS, FK_TOLERANCE
 from hexapod import deltalab, sample_poses
@@ -87,9 +87,10 @@ def _oracle(law: TaskComputedTorque, obs: Observation,
     ctx = law.context
     assert ctx is not None and law.compiled_kind is not None
     g, d = ctx.geometry, ctx.geometry.drives
-    kind, fk = law.compiled_kind, law.compiled_fk
-    inputs, outputs = layout(kind, fk)
-    fn = task_step(kind, fk)
+    feature, fk = law.compiled_kind, law.compiled_fk
+    kind = feature.ctc_name  # the oracle writes the row by hand, block by block
+    inputs, outputs = layout(feature, fk)
+    fn = task_step(feature, fk)
     row = np.full(fn.n_in, np.nan)  # every field must be written
     R0, t0 = home_pose(g) if guess is None else guess
     tr = obs.t - law._t0
@@ -132,7 +133,7 @@ def _oracle(law: TaskComputedTorque, obs: Observation,
             ref = law.feature_reference(tr)  # type: ignore[attr-defined]
             assert np.isfinite(ref).all()
             fields["reference_features"] = np.asarray(ref).ravel()
-    fields["integral"] = np.zeros(ROWS[kind])  # no integral action
+    fields["integral"] = np.zeros({"pose": 6, "edges": 36, "directions": 18}[str(kind)])
     assert set(fields) == set(inputs)
     for name, value in fields.items():
         row[inputs[name]] = value

@@ -72,6 +72,7 @@ def _kernels() -> Iterator[tuple[str, Callable[[], Any]]]:
         osqp_limits,
         reference_motion,
     )
+    from controllers.tasks import EDGE_LINES, EDGE_NORMALS, LEG_DIRECTIONS, PLATFORM_POSE
     from hexapod import fk
     from hexapod.dynamics import compiled as dyn
     from hexapod.dynamics import robots_compiled
@@ -81,10 +82,10 @@ def _kernels() -> Iterator[tuple[str, Callable[[], Any]]]:
         yield f"dynamics {name}", lambda name=name: dyn.compiled(name)
     yield "dynamic robots' period", lambda: robots_compiled.period_function(2)
     yield "joint-space ctc", compiled_ctc.joint_step
-    for kind, fk_pose in (("pose", True), ("pose", False), ("edges", True),
-                          ("directions", True)):
+    for kind, fk_pose in ((PLATFORM_POSE, True), (PLATFORM_POSE, False), (EDGE_NORMALS, True),
+                          (LEG_DIRECTIONS, True)):
         yield f"task ctc {kind}", lambda k=kind, f=fk_pose: compiled_task_ctc.task_step(k, f)
-    for kind in reference_motion.ROWS:
+    for kind in reference_motion.FEATURES:
         yield f"reference motion {kind}", lambda k=kind: reference_motion.feature_motion(k)
     yield "QP refinement", osqp_limits.refine_kernel
     yield "pose servo", model_based.pose_servo_kernel
@@ -92,9 +93,9 @@ def _kernels() -> Iterator[tuple[str, Callable[[], Any]]]:
         yield f"direction law {interaction}", lambda i=interaction: law_kernel.direction_kernel(
             i).function
         yield f"edge law {interaction}", lambda i=interaction: law_kernel.edge_law_kernel(
-            True, i).function
-    for spec in (ProblemSpec("lines", "local", 2, False, False),
-                 ProblemSpec("normals", "global", 2, True, True, True)):
+            EDGE_LINES, i).function
+    for spec in (ProblemSpec(EDGE_LINES, "local", 2, False, False),
+                 ProblemSpec(EDGE_NORMALS, "global", 2, True, True, True)):
         yield f"MPC {spec}", lambda s=spec: problem_kernel(s)
     yield "DAQP", lambda: CompiledQP(12, 30).function
 
