@@ -67,7 +67,7 @@ def test_the_kernels_keep_their_names() -> None:
     assert names[-8:] == ["normals", "directions", "of_normals", "base", "mask", "frame",
                           "reference_features", "integral"]
     pose = list(compiled_task_ctc.layout(PLATFORM_POSE, False)[0])
-    assert pose[-5:] == ["reference", "directions", "base", "frame", "integral"]
+    assert pose[-6:] == ["reference", "directions", "base", "frame", "seen", "integral"]
 
 
 @pytest.mark.parametrize("feature", FEATURE_KINDS, ids=lambda f: f.kind)
