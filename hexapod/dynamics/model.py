@@ -174,8 +174,8 @@ class DynamicModel:
         so that
         ``q_ddot = K acc + K_dot twist``."""
         n = np.shape(t)[0]
-        y = _c.compiled("terms").batch(self.rows(R, t, twist, np.zeros((n, 6)), **overrides))
-        v = _c.OUTPUTS["terms"].views(self._checked(y, "terms"))
+        y = _c.compiled("legs").batch(self.rows(R, t, twist, np.zeros((n, 6)), **overrides))
+        v = _c.OUTPUTS["legs"].views(self._checked(y, "legs"))
         return v["q_dot"], v["leg_bias"]
 
     def forward_drives_batch(self, R: np.ndarray, t: np.ndarray, twist: np.ndarray,
