@@ -68,7 +68,8 @@ OUTPUTS = {
                      ("potential", 1), ("q_dot", 6), ("leg_bias", 6)], "dynamics terms output"),
     "forward_drives": Layout([("acc", 6), ("q_dot", 6), ("q_ddot", 6)],
                              "forward dynamics with drives output"),
-    "legs": Layout([("q_dot", 6), ("leg_bias", 6)], "leg rates output")}
+    "legs": Layout([("q_dot", 6), ("leg_bias", 6)], "leg rates output"),
+    "jacobian": Layout([("K", (6, 6))], "inverse Jacobian output")}
 
 
 def parameter_row(inertia: InertiaParameters) -> np.ndarray:
@@ -301,6 +302,8 @@ def _build(name: str) -> ca.Function:
     if name == "legs":  # the leg rates of "terms" alone: its nodes, the same numbers
         return ca.Function("hexapod_dyn_legs", [x], [ca.cse(ca.vertcat(e["q_dot"],
                                                                        e["leg_bias"]))])
+    if name == "jacobian":  # K of "terms" alone (column-major): its nodes, the same numbers
+        return ca.Function("hexapod_dyn_jacobian", [x], [ca.cse(ca.reshape(K, 36, 1))])
     if name == "forward_drives":
         # Leg-space masses: a (moves with the leg, e.g. reflected rotor inertia) and b
         # (an implicit velocity-dependent force, -dt d(force)/d(q_dot), without the bias).
@@ -312,13 +315,13 @@ def _build(name: str) -> ca.Function:
         return ca.Function("hexapod_dyn_forward_drives", [ca.vertcat(x, extra)],
                            [ca.cse(ca.vertcat(acc, e["q_dot"], K @ acc + leg_bias))])
     raise ValueError(f"unknown compiled dynamics function {name!r}; expected one of "
-                     "forward, inverse, terms, legs, forward_drives")
+                     "forward, inverse, terms, legs, jacobian, forward_drives")
 
 
 @lru_cache(maxsize=8)
 def compiled(name: str) -> CompiledFunction:
     """One of the compiled functions (``"forward"``, ``"inverse"``, ``"terms"``, ``"legs"``,
-    ``"forward_drives"``), built and compiled on first use (the C library is cached
+    ``"jacobian"``, ``"forward_drives"``), built and compiled on first use (the C library is cached
     on disk by :mod:`hexapod.compiled`)."""
     inputs = DRIVES_INPUTS if name == "forward_drives" else INPUTS
     return CompiledFunction(_build(name), inputs=inputs, outputs=OUTPUTS[name])

@@ -294,11 +294,12 @@ def test_leg_rates_and_bias_are_derivatives_of_leg_lengths(geometry: HexapodGeom
         assert np.abs(bias[k]).max() > 1e-3
 
 
-def test_leg_rates_kernel_is_the_terms_kernels_leg_rates_bitwise(
+def test_leg_rates_and_jacobian_kernels_are_the_terms_kernels_bitwise(
         geometry: HexapodGeometry, rng: np.random.Generator) -> None:
     """legs_batch evaluates the leg rates and their bias alone (the "legs" kernel, a
-    tenth of the "terms" kernel): the same numbers as the "terms" kernel's, to the last
-    bit, on the model's robot and on per-state robots (a study's true worlds)."""
+    tenth of the "terms" kernel) and jacobian_batch the inverse Jacobian alone: the
+    same numbers as the "terms" kernel's, to the last bit, on the model's robot and on
+    per-state robots (a study's true worlds)."""
     from hexapod.dynamics import compiled as dyn_compiled
 
     dyn = DynamicModel(geometry)
@@ -312,6 +313,9 @@ def test_leg_rates_kernel_is_the_terms_kernels_leg_rates_bitwise(
         assert q_dot.tobytes() == np.ascontiguousarray(terms["q_dot"]).tobytes()
         assert bias.tobytes() == np.ascontiguousarray(terms["leg_bias"]).tobytes()
         assert np.abs(q_dot).max() > 1e-3
+        K = dyn.jacobian_batch(R, t, **overrides)  # K alone, from the pose (any twist)
+        assert K.tobytes() == np.ascontiguousarray(dyn.terms_batch(R, t, twist,
+                                                                   **overrides)[2]).tobytes()
 
 
 def test_implicit_mass_takes_a_damping_force_implicitly(geometry: HexapodGeometry,
