@@ -372,94 +372,33 @@ class ComputedTorqueController(Controller):
     def step_arrays(self, observations: ObservationBatch, out: CommandBatch) -> np.ndarray:
         """The rows whose readings are finite through the compiled step in one C call
         (:func:`~controllers.ctc_rows.evaluate_rows`); returns the other rows and those
-        whose result is not accepted (left to the trial's own step, which says why).
-
-        The common row (a reference on its control grid, the pose guess in the row, no
-        integral action) is written and taken as arrays, the trial's input row updated
-        in one copy; the others through :meth:`prepare_row` and :meth:`take_row`. Both
-        give the same input rows, so the same numbers."""
+        whose result is not accepted (left to the trial's own step, which says why)."""
         obs = observations
         n = len(obs)
         readings = finite_readings_rows(obs, self.trial_instances)
         if readings is None:
             return np.arange(n)
         t, q_all, qd_all, finite = readings
-        ks: list[int] = []
-        insts: list[ComputedTorqueController] = []
-        grid_rows: list[np.ndarray | None] = []  # the desired row of a common row
-        for k, inst in finite:
-            if not isinstance(inst, ComputedTorqueController):
-                continue
-            desired = inst._grid_row(float(t[k]), q_all[k])
-            if desired is None and not inst.prepare_row(float(t[k]), q_all[k], qd_all[k]):
-                continue
-            ks.append(k)
-            insts.append(inst)
-            grid_rows.append(desired)
+        rows = [(k, inst) for k, inst in finite if isinstance(inst, ComputedTorqueController)
+                and inst.prepare_row(float(t[k]), q_all[k], qd_all[k])]
         slow = np.ones(n, dtype=bool)
-        if not ks:
+        if not rows:
             return np.arange(n)
         bound = self._bound
         assert bound is not None
-        X = np.stack([inst.input_row for inst in insts])
-        common = np.array([g is not None for g in grid_rows])
-        if common.any():
-            rows_k = np.asarray(ks)[common]
-            X[common, compiled_ctc.INPUTS["q"]] = q_all[rows_k]
-            X[common, compiled_ctc.INPUTS["q_dot"]] = qd_all[rows_k]
-            X[common, _DESIRED] = np.stack([g for g in grid_rows if g is not None])
-        prepared = X.copy()  # evaluate_rows writes the guesses of the rows called again
+        X = np.stack([inst.input_row for _, inst in rows])
         Y, converged = evaluate_rows(bound.function, X, _POSE_IN, _POSE_OUT, _RESIDUAL,
                                      FK_TOLERANCE, FK_MAX_CALLS)
-        ok = accepted_rows(Y, converged, _SOLVED, _FACTOR, self.solver.threshold)
-        for j in np.flatnonzero(common & ~ok).tolist():  # as prepare_row leaves its row
-            insts[j].input_row[:] = prepared[j]
-        accepted = np.flatnonzero(ok)
-        if not len(accepted):
-            return np.flatnonzero(slow)
-        over = over_limits(Y[accepted, _FORCES],
-                           np.stack([insts[j].force_limit for j in accepted.tolist()]))
-        errors = prepared[accepted, _DESIRED.start:_DESIRED.start + 6] - q_all[
-            np.asarray(ks)[accepted]]
-        assert out.forces is not None
-        for j, o, e in zip(accepted.tolist(), over.tolist(), errors, strict=True):
-            k, inst = ks[j], insts[j]
-            if common[j] and not o:  # take_row's numbers, without its reads of the row
-                row = inst.input_row
-                row[:] = prepared[j]
-                pose = Y[j, _POSE_OUT].copy()
-                row[_POSE_IN] = pose
-                inst._pose_row, inst._guess_in_row = pose, True
-                inst.compiled_steps += 1
-                out.forces[k] = Y[j, _FORCES]
-                out.error_norm[k] = math.sqrt(e.dot(e))
-            else:
-                if common[j]:
-                    inst.input_row[:] = prepared[j]
+        accepted = np.flatnonzero(accepted_rows(Y, converged, _SOLVED, _FACTOR,
+                                                self.solver.threshold))
+        if len(accepted):
+            over = over_limits(Y[accepted, _FORCES],
+                               np.stack([rows[j][1].force_limit for j in accepted.tolist()]))
+            for j, o in zip(accepted.tolist(), over.tolist(), strict=True):
+                k, inst = rows[j]
                 inst.take_row(Y[j], q_all[k], qd_all[k], out, k, o)
-            slow[k] = False
+                slow[k] = False
         return np.flatnonzero(slow)
-
-    def _grid_row(self, t: float, q: np.ndarray) -> np.ndarray | None:
-        """The reference's ``(q*, q_dot*, q_ddot*)`` row (18,) at ``t`` [s] when this
-        period is the common case of :meth:`step_arrays` (reset, a reference read on its
-        control grid, the pose guess in the input row, no integral action); else None
-        (:meth:`prepare_row` writes the row)."""
-        ctx = self._ctx
-        if (ctx is None or ctx.reference is None or self._model is None or self._bound is None
-                or self.integral_gain or not self._guess_in_row):
-            return None
-        if self._start is None:
-            self._start_quintic(t, q)  # as prepare_row does (unused with a reference)
-        grid, dt = self._grid, self._dt
-        if not len(grid):
-            return None
-        if t > self._t_end:  # at rest at the end, as the grid's last instant
-            return grid[-1]  # type: ignore[no-any-return]
-        k = round(t / dt)
-        if 0 <= k < len(grid) and abs(t - k * dt) <= GRID_TIME_TOLERANCE:
-            return grid[k]  # type: ignore[no-any-return]
-        return None
 
     def prepare_row(self, t: float, q: np.ndarray, qd: np.ndarray) -> bool:
         """Write this period's readings, reference and pose guess into the input row
