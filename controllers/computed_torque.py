@@ -276,7 +276,7 @@ class ComputedTorqueController(Controller):
         R, p, tw, acc = ref.rotation, ref.translation, ref.twist, ref.twist_rate
         out = np.empty((len(times), 3, 6))
         out[:, 0] = inverse_kinematics(ctx.geometry, R, p)  # batched: the same numbers
-        K = model.terms_batch(R, p, tw)[2]
+        K = model.jacobian_batch(R, p)
         rate, bias = model.legs_batch(R, p, tw)
         out[:, 1] = rate
         out[:, 2] = np.einsum("nij,nj->ni", K, acc) + bias

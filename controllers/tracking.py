@@ -85,11 +85,11 @@ def reference_goals(context: ControllerContext, times: np.ndarray) -> dict[str, 
         "lengths": inverse_kinematics(context.geometry, sample.rotation, sample.translation)}
     camera = context.camera
     if camera is not None:
-        from vision.legs import directions_from_edges, observe_legs
+        from vision.legs import directions_from_edges, observe_edges
 
-        seen = observe_legs(camera, context.geometry, sample.rotation, sample.translation)
-        visible = np.asarray(seen.edge_visible, dtype=bool)
-        normals = np.where(visible[..., None], seen.normals, np.nan)
+        seen, visible = observe_edges(camera, context.geometry, sample.rotation,
+                                      sample.translation)
+        normals = np.where(visible[..., None], seen, np.nan)
         with np.errstate(invalid="ignore"):
             out["lines"] = (camera.normal_to_line(normals)
                             if getattr(camera, "kind", None) == "perspective" else None)

@@ -96,7 +96,8 @@ class DynamicsError(HexapodError, ValueError):
     hold or move the platform, or a singular mass matrix).
 
     Attributes:
-        what: The computation (``"forward"``, ``"inverse"``, ``"terms"``).
+        what: The computation (``"forward"``, ``"inverse"``, ``"terms"``, ``"legs"``,
+            ``"jacobian"``).
         item: Index of the first offending state in the batch.
     """
 

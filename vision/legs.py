@@ -35,6 +35,7 @@ __all__ = [
     "leg_edges",
     "limb_points",
     "observation_edge_points",
+    "observe_edges",
     "observe_legs",
     "observe_legs_numpy",
     "occluded_by_disc",
@@ -280,6 +281,34 @@ def observe_legs(
         platform_centre=obs.platform_centre.reshape(*lead, 3),
         platform_normal=obs.platform_normal.reshape(*lead, 3),
         platform_radius=float(params.platform_radius[0]), radius=float(r))
+
+
+def observe_edges(camera: Camera, geometry: HexapodGeometry, rotation: np.ndarray,
+                  translation: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The edge normals (..., 6, 2, 3) and their visibility (..., 6, 2) of
+    :func:`observe_legs` (default sampling, occlusions tested), the same numbers,
+    without the rest of its observation (the image segments and lines, which cost about
+    as much as the compiled core: a reference sampled on a control grid needs only
+    these two)."""
+    from vision import fast_observe
+
+    if (not fast_observe.compiled() or getattr(camera, "kind", None) not in (
+            "perspective", "unified") or not fast_observe.supported(camera)):
+        seen = observe_legs(camera, geometry, rotation, translation)
+        return np.asarray(seen.normals), np.asarray(seen.edge_visible, dtype=bool)
+    R = np.asarray(rotation, float)
+    t = np.asarray(translation, float)
+    lead = R.shape[:-2]
+    if t.shape != (*lead, 3):
+        from hexapod.exceptions import ShapeError
+
+        raise ShapeError("translation", f"shape {(*lead, 3)}", t.shape)
+    params = fast_observe.WorldParams.from_worlds([geometry], [camera])
+    n = int(np.prod(lead, dtype=int))
+    obs = fast_observe.observe_batch(params, R.reshape(n, 3, 3), t.reshape(n, 3),
+                                     np.zeros(n, dtype=int), DEFAULT_VISIBILITY_SAMPLES,
+                                     DEFAULT_MIN_VISIBLE_FRACTION, True)
+    return obs.normals.reshape(*lead, 6, 2, 3), obs.edge_visible.reshape(*lead, 6, 2)
 
 
 def observe_legs_numpy(

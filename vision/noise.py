@@ -15,9 +15,55 @@ arrays with any leading batch shape.
 
 from __future__ import annotations
 
+import ctypes
+import logging
+import os
+import subprocess
+from importlib import resources
+from pathlib import Path
+from typing import Any
+
 import numpy as np
 
 from hexapod.se3 import exp_so3
+
+log = logging.getLogger(__name__)
+
+#: The compiled draws of :func:`rotation_noise_batch` (``vision/csrc/noise_draws.c``),
+#: once tried: the function, or None (no compiler, no numpy ``libnpyrandom.a``).
+_draws: list[Any] = []
+
+
+def _compiled_draws() -> Any:
+    """``hexapod_rotation_draws`` of ``vision/csrc/noise_draws.c`` linked with numpy's
+    own ``libnpyrandom.a`` (compiled on first use, cached), or None: the Python loop
+    over the generators is used then (the same numbers, about three times slower)."""
+    if _draws:
+        return _draws[0]
+    from hexapod.compiled import CompilationError, build_shared_library
+
+    _draws.append(None)
+    if os.environ.get("HEXAPOD_NO_COMPILE", "") not in ("", "0"):
+        return None
+    archive = Path(np.random.__file__).parent / "lib" / "libnpyrandom.a"
+    if not archive.is_file():
+        log.info("no %s: the rotation noise draws in Python", archive)
+        return None
+    code = resources.files("vision").joinpath("csrc", "noise_draws.c").read_text()
+    try:
+        path = build_shared_library(
+            "vision_noise_draws", code,
+            ("-O2", "-Wl,--whole-archive", str(archive), "-Wl,--no-whole-archive", "-lm"),
+            key=code + np.__version__ + str(archive))
+        f = ctypes.CDLL(str(path)).hexapod_rotation_draws
+    except (OSError, subprocess.SubprocessError, CompilationError, AttributeError) as exc:
+        log.info("the rotation noise draws in Python (no compiled draws: %s)", exc)
+        return None
+    f.argtypes = [ctypes.c_void_p, ctypes.c_int64, ctypes.c_int64, ctypes.c_void_p,
+                  ctypes.c_void_p]
+    f.restype = None
+    _draws[0] = f
+    return f
 
 
 def _rng(rng: np.random.Generator | int | None) -> np.random.Generator:
@@ -121,9 +167,21 @@ def rotation_noise_batch(
     shape = v.shape[1:-1]
     axes = np.empty((len(rngs), *shape, 3))
     fractions = np.empty((len(rngs), *shape))
-    for k, g in enumerate(rngs):
-        axes[k] = g.normal(size=(*shape, 3))
-        fractions[k] = g.uniform(0.0, 1.0, size=shape)
+    # The draws of normal(size=...) and uniform(0, 1, size=...): the same numbers (loc 0,
+    # scale 1; low 0, range 1) by numpy's own fill functions, every generator in one C
+    # call when compiled, else written in place generator by generator (one
+    # trial-step's noise, in the hot loop of every study).
+    draws = _compiled_draws()
+    if draws is not None and all(type(g) is np.random.Generator for g in rngs):
+        m = int(np.prod(shape, dtype=int))
+        pointers = np.array([g.bit_generator.ctypes.bit_generator.value for g in rngs],
+                            dtype=np.uintp)
+        draws(pointers.ctypes.data, len(rngs), m, axes.ctypes.data, fractions.ctypes.data)
+    else:
+        for g, ax, fr in zip(rngs, axes.reshape(len(rngs), -1),
+                             fractions.reshape(len(rngs), -1), strict=True):
+            g.standard_normal(out=ax)
+            g.random(out=fr)
     n = np.linalg.norm(axes, axis=-1, keepdims=True)
     bad = n[..., 0] < 1e-12
     if np.any(bad):

@@ -67,7 +67,9 @@ OUTPUTS = {
     "terms": Layout([("M", (6, 6)), ("h", 6), ("K", (6, 6)), ("kinetic", 1),
                      ("potential", 1), ("q_dot", 6), ("leg_bias", 6)], "dynamics terms output"),
     "forward_drives": Layout([("acc", 6), ("q_dot", 6), ("q_ddot", 6)],
-                             "forward dynamics with drives output")}
+                             "forward dynamics with drives output"),
+    "legs": Layout([("q_dot", 6), ("leg_bias", 6)], "leg rates output"),
+    "jacobian": Layout([("K", (6, 6))], "inverse Jacobian output")}
 
 
 def parameter_row(inertia: InertiaParameters) -> np.ndarray:
@@ -297,6 +299,11 @@ def _build(name: str) -> ca.Function:
         return ca.Function("hexapod_dyn_terms", [x], [ca.cse(ca.vertcat(
             ca.reshape(M, 36, 1), h, ca.reshape(K, 36, 1), e["kinetic"], e["potential"],
             e["q_dot"], e["leg_bias"]))])
+    if name == "legs":  # the leg rates of "terms" alone: its nodes, the same numbers
+        return ca.Function("hexapod_dyn_legs", [x], [ca.cse(ca.vertcat(e["q_dot"],
+                                                                       e["leg_bias"]))])
+    if name == "jacobian":  # K of "terms" alone (column-major): its nodes, the same numbers
+        return ca.Function("hexapod_dyn_jacobian", [x], [ca.cse(ca.reshape(K, 36, 1))])
     if name == "forward_drives":
         # Leg-space masses: a (moves with the leg, e.g. reflected rotor inertia) and b
         # (an implicit velocity-dependent force, -dt d(force)/d(q_dot), without the bias).
@@ -308,13 +315,13 @@ def _build(name: str) -> ca.Function:
         return ca.Function("hexapod_dyn_forward_drives", [ca.vertcat(x, extra)],
                            [ca.cse(ca.vertcat(acc, e["q_dot"], K @ acc + leg_bias))])
     raise ValueError(f"unknown compiled dynamics function {name!r}; expected one of "
-                     "forward, inverse, terms, forward_drives")
+                     "forward, inverse, terms, legs, jacobian, forward_drives")
 
 
 @lru_cache(maxsize=8)
 def compiled(name: str) -> CompiledFunction:
-    """One of the compiled functions (``"forward"``, ``"inverse"``, ``"terms"``,
-    ``"forward_drives"``), built and compiled on first use (the C library is cached
+    """One of the compiled functions (``"forward"``, ``"inverse"``, ``"terms"``, ``"legs"``,
+    ``"jacobian"``, ``"forward_drives"``), built and compiled on first use (the C library is cached
     on disk by :mod:`hexapod.compiled`)."""
     inputs = DRIVES_INPUTS if name == "forward_drives" else INPUTS
     return CompiledFunction(_build(name), inputs=inputs, outputs=OUTPUTS[name])
@@ -334,13 +341,18 @@ def pack(R: np.ndarray, t: np.ndarray, twist: np.ndarray, u: np.ndarray,
         platform_points: (6, 3) or (N, 6, 3) ``eB_i`` [m].
         parameters: (19,) or (N, 19) rows of :func:`parameter_row`.
     """
-    rows = np.empty((t.shape[0], ROW))
-    v = INPUTS.views(rows)
-    v["R"][:] = np.swapaxes(R, -1, -2)
-    v["t"][:] = t
-    v["twist"][:] = twist
-    v["u"][:] = u
-    v["A"][:] = base_points
-    v["E"][:] = platform_points
-    v["params"][:] = parameters
+    n = t.shape[0]
+    rows = np.empty((n, ROW))
+    s = _PACK_SLICES  # the blocks' slices (INPUTS), looked up once: a call per period
+    rows[:, s[0]].reshape(n, 3, 3)[:] = np.swapaxes(R, -1, -2)
+    rows[:, s[1]] = t
+    rows[:, s[2]] = twist
+    rows[:, s[3]] = u
+    rows[:, s[4]].reshape(n, 6, 3)[:] = base_points
+    rows[:, s[5]].reshape(n, 6, 3)[:] = platform_points
+    rows[:, s[6]] = parameters
     return rows
+
+
+#: The slices of :func:`pack`'s blocks in an input row.
+_PACK_SLICES = tuple(INPUTS[b] for b in ("R", "t", "twist", "u", "A", "E", "params"))

@@ -167,6 +167,16 @@ class DynamicModel:
         K = np.swapaxes(v["K"], -1, -2)
         return M, v["h"], K, v["kinetic"][:, 0], v["potential"][:, 0]
 
+    def jacobian_batch(self, R: np.ndarray, t: np.ndarray, **overrides: np.ndarray
+                       ) -> np.ndarray:
+        """The inverse Jacobian ``K`` (N, 6, 6) (``q_dot = K twist``) of :meth:`terms_batch`
+        alone (the "jacobian" kernel: the same numbers, without the mass matrix)."""
+        n = np.shape(t)[0]
+        y = _c.compiled("jacobian").batch(self.rows(R, t, np.zeros((n, 6)), np.zeros((n, 6)),
+                                                    **overrides))
+        v = _c.OUTPUTS["jacobian"].views(self._checked(y, "jacobian"))
+        return np.swapaxes(v["K"], -1, -2)  # (column-major blocks)
+
     def legs_batch(self, R: np.ndarray, t: np.ndarray, twist: np.ndarray,
                    **overrides: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Leg rates ``q_dot = K twist`` (N, 6) [m/s] and the leg accelerations at zero
@@ -174,8 +184,8 @@ class DynamicModel:
         so that
         ``q_ddot = K acc + K_dot twist``."""
         n = np.shape(t)[0]
-        y = _c.compiled("terms").batch(self.rows(R, t, twist, np.zeros((n, 6)), **overrides))
-        v = _c.OUTPUTS["terms"].views(self._checked(y, "terms"))
+        y = _c.compiled("legs").batch(self.rows(R, t, twist, np.zeros((n, 6)), **overrides))
+        v = _c.OUTPUTS["legs"].views(self._checked(y, "legs"))
         return v["q_dot"], v["leg_bias"]
 
     def forward_drives_batch(self, R: np.ndarray, t: np.ndarray, twist: np.ndarray,

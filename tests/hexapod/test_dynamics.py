@@ -294,6 +294,30 @@ def test_leg_rates_and_bias_are_derivatives_of_leg_lengths(geometry: HexapodGeom
         assert np.abs(bias[k]).max() > 1e-3
 
 
+def test_leg_rates_and_jacobian_kernels_are_the_terms_kernels_bitwise(
+        geometry: HexapodGeometry, rng: np.random.Generator) -> None:
+    """legs_batch evaluates the leg rates and their bias alone (the "legs" kernel, a
+    tenth of the "terms" kernel) and jacobian_batch the inverse Jacobian alone: the
+    same numbers as the "terms" kernel's, to the last bit, on the model's robot and on
+    per-state robots (a study's true worlds)."""
+    from hexapod.dynamics import compiled as dyn_compiled
+
+    dyn = DynamicModel(geometry)
+    R, t, twist, _ = _states(geometry, 40, rng)
+    A = geometry.base_points + rng.normal(scale=1e-3, size=(40, 6, 3))
+    E = geometry.platform_points + rng.normal(scale=1e-3, size=(40, 6, 3))
+    for overrides in ({}, {"base_points": A, "platform_points": E}):
+        q_dot, bias = dyn.legs_batch(R, t, twist, **overrides)
+        terms = dyn_compiled.OUTPUTS["terms"].views(dyn_compiled.compiled("terms").batch(
+            dyn.rows(R, t, twist, np.zeros((40, 6)), **overrides)))
+        assert q_dot.tobytes() == np.ascontiguousarray(terms["q_dot"]).tobytes()
+        assert bias.tobytes() == np.ascontiguousarray(terms["leg_bias"]).tobytes()
+        assert np.abs(q_dot).max() > 1e-3
+        K = dyn.jacobian_batch(R, t, **overrides)  # K alone, from the pose (any twist)
+        assert K.tobytes() == np.ascontiguousarray(dyn.terms_batch(R, t, twist,
+                                                                   **overrides)[2]).tobytes()
+
+
 def test_implicit_mass_takes_a_damping_force_implicitly(geometry: HexapodGeometry,
                                                         rng: np.random.Generator) -> None:
     """With b = c dt, the acceleration is the fixed point of the damping force taken at

@@ -123,3 +123,33 @@ def test_home_height_bisection_is_inverse_kinematics_bisection_bitwise(geometry)
         assert h == reference(g)
         assert inverse_kinematics(g, np.eye(3), np.array([0.0, 0.0, h])).mean() == \
             pytest.approx(g.q_mid, abs=1e-12)
+
+
+def test_remembered_home_heights_of_many_robots_are_each_robots_bisection(
+        geometry, monkeypatch: pytest.MonkeyPatch) -> None:
+    """remember_home_heights bisects many robots together and gives each the height of
+    its own bisection, to the last bit, on the instance (more robots than the cache
+    holds) and in the cache; a robot already known is not bisected again."""
+    import dataclasses
+
+    from hexapod import workspace
+
+    rng = np.random.default_rng(11)
+    robots = [dataclasses.replace(
+        geometry, base_points=geometry.base_points + rng.normal(scale=s, size=(6, 3)),
+        platform_points=geometry.platform_points + rng.normal(scale=s, size=(6, 3)))
+        for s in rng.uniform(0.0, 3e-3, 12)]
+    robots.append(dataclasses.replace(robots[0]))  # the same robot, another instance
+    alone = [workspace._bisect_home_height(g) for g in robots]
+    monkeypatch.setattr(workspace, "_HOME_HEIGHTS", {})
+    monkeypatch.setattr(workspace, "HOME_CACHE_SIZE", 5)
+    workspace.remember_home_heights(robots)
+    assert [g.__dict__.get("home_height") for g in robots] == alone
+    assert alone[-1] == alone[0] and len(workspace._HOME_HEIGHTS) <= 5
+    calls: list[int] = []
+    monkeypatch.setattr(workspace, "_bisect_home_heights",
+                        lambda gs: calls.append(len(gs)) or np.zeros(len(gs)))
+    last = dataclasses.replace(robots[-2])  # a new instance of the last robot remembered
+    workspace.remember_home_heights([*robots, last])
+    assert calls == [] and last.__dict__["home_height"] == alone[-2]
+    assert all(g.home_height == h for g, h in zip(robots, alone, strict=True))

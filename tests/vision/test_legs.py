@@ -18,6 +18,7 @@ from vision.legs import (
     leg_edges,
     limb_points,
     observation_edge_points,
+    observe_edges,
     observe_legs,
     occluded_by_disc,
     occluded_by_legs,
@@ -138,6 +139,25 @@ def test_observation_shapes_and_batching(geometry, rng: np.random.Generator) -> 
     assert np.allclose(batch.lines, cam.normal_to_line(batch.normals))
     with pytest.raises(ValueError):
         observe_legs(cam, geometry, R, t, min_visible_fraction=0.0)
+
+
+def test_observe_edges_is_observe_legs_normals_and_visibility(
+        geometry, other_geometry, rng: np.random.Generator) -> None:
+    """observe_edges gives observe_legs' edge normals and visibility to the last bit
+    (perspective and unified cameras, poses where some edges are hidden), with the batch
+    shape of the poses."""
+    hidden = 0
+    for g in (geometry, other_geometry):
+        R, t = sample_poses(g, 60, rng, max_translation=0.05, max_angle=0.3)
+        R, t = R.reshape(3, 20, 3, 3), t.reshape(3, 20, 3)
+        for cam in (front_camera(g), omni_camera(g), _camera_at([0.0, 0.3, 0.1], [0, 0, 0.2])):
+            seen = observe_legs(cam, g, R, t)
+            normals, visible = observe_edges(cam, g, R, t)
+            assert normals.shape == (3, 20, 6, 2, 3) and visible.shape == (3, 20, 6, 2)
+            assert visible.dtype == bool and np.array_equal(visible, seen.edge_visible)
+            assert normals.tobytes() == np.asarray(seen.normals, float).tobytes()
+            hidden += int((~visible).sum())
+    assert hidden > 0  # the visibility was exercised, not only all-visible poses
 
 
 def test_camera_inside_a_leg_sees_no_edge_of_it(geometry) -> None:

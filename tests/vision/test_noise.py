@@ -149,3 +149,35 @@ def test_rotation_noise_batch_equals_the_row_by_row_noise() -> None:
     rows = np.array([rotation_noise(v[k], a, np.random.default_rng([5, k])) for k in range(7)])
     assert np.array_equal(batch, rows)
     assert np.abs(batch - v).max() > 1e-4  # the noise is there
+
+
+@pytest.mark.parametrize("shape", [(9, 6, 2, 3), (5, 6, 3), (4, 3)])
+def test_rotation_noise_batch_compiled_draws_are_numpys(shape: tuple[int, ...],
+                                                        monkeypatch: pytest.MonkeyPatch) -> None:
+    """The compiled draws (numpy's own fill functions, every generator in one C call)
+    give the Python loop's numbers to the last bit and leave the generators in the same
+    states, with a generator repeated (as a goal's frames share one) and a row of one
+    vector; the compiled path is really taken."""
+    from vision import noise
+
+    assert noise._compiled_draws() is not None  # the test machines compile C kernels
+    rng = np.random.default_rng(1)
+    v = rng.normal(size=shape)
+    v /= np.linalg.norm(v, axis=-1, keepdims=True)
+
+    def generators() -> list[np.random.Generator]:
+        gens = [np.random.default_rng([3, k]) for k in range(shape[0] - 1)]
+        return [*gens, gens[0]]  # the first generator draws twice, in row order
+
+    compiled_rngs, python_rngs = generators(), generators()
+    calls: list[int] = []
+    draws = noise._compiled_draws()
+    monkeypatch.setattr(noise, "_draws", [lambda *a: calls.append(a[1]) or draws(*a)])
+    compiled = noise.rotation_noise_batch(v, 0.01, compiled_rngs)
+    assert calls == [shape[0]]
+    monkeypatch.setattr(noise, "_draws", [None])
+    python = noise.rotation_noise_batch(v, 0.01, python_rngs)
+    assert compiled.tobytes() == python.tobytes()
+    assert np.abs(compiled - v).max() > 1e-4  # the noise is there
+    for a, b in zip(compiled_rngs, python_rngs, strict=True):
+        assert a.bit_generator.state == b.bit_generator.state
