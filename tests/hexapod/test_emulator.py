@@ -446,6 +446,7 @@ def test_from_geometry(other_geometry: object) -> None:
 
 
 # ----------------------------------------------------------------------------- command line
+@pytest.mark.realtime
 @pytest.mark.slow
 def test_cli_pty_prints_the_device_then_serves(tmp_path: object) -> None:
     with emulator_process("--pty", "--lengths", "400", "--speed", "30", "--watchdog", "200",
@@ -461,6 +462,7 @@ def test_cli_pty_prints_the_device_then_serves(tmp_path: object) -> None:
         assert proc.wait(10) == 0
 
 
+@pytest.mark.realtime
 @pytest.mark.slow
 def test_cli_tcp_and_faults() -> None:
     with emulator_process("--tcp", "127.0.0.1:0", "--geometry", "deltalab", "--latency", "20",

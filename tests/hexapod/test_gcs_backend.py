@@ -264,6 +264,7 @@ def test_killed_emulator_process_mid_run(geometry: HexapodGeometry) -> None:
         r.close()
 
 
+@pytest.mark.realtime
 def test_ctrl_c_during_an_exchange_halts_and_closes(
         robot: GcsHexapod, emulator: GcsEmulator) -> None:
     main = threading.main_thread().ident

@@ -346,6 +346,7 @@ def test_disconnect_fault_closes_the_socket(geometry: HexapodGeometry) -> None:
 
 
 # ----------------------------------------------------------------------------- command line
+@pytest.mark.realtime
 def test_cli_gcs_tcp() -> None:
     with emulator_process("--gcs", "--tcp", "127.0.0.1:0", "--pose", "1", "2", "3", "0.5",
                           "0", "0", "--velocity", "25") as (proc, url):
@@ -360,6 +361,7 @@ def test_cli_gcs_tcp() -> None:
         assert proc.wait(10) == 0
 
 
+@pytest.mark.realtime
 def test_cli_gcs_pty() -> None:
     with emulator_process("--gcs", "--pty", "--lengths", "400") as (proc, url):
         assert url.startswith("serial:/dev/")
