@@ -79,14 +79,8 @@ class LegEdgeController(VisionLaw):
         kind = getattr(cam, "kind", None)
         if self.edge_feature == "auto":
             self.edge = EDGE_LINES if kind == "perspective" else EDGE_NORMALS
-        if self.edge.lines:
-            if kind != "perspective" or getattr(cam, "line_matrix", None) is None:
-                raise ContextError(self.name, "camera",
-                                   f"pixel lines need a perspective camera with a line_matrix, "
-                                   f"got {kind!r}")
-            K = np.asarray(cam.line_matrix, dtype=float)
-            if K.shape != (3, 3) or not np.all(np.isfinite(K)) or abs(np.linalg.det(K)) < 1e-300:
-                raise ContextError(self.name, "camera.line_matrix", "not an invertible 3x3 matrix")
+        K = self.edge.line_matrix_of(cam, self.name)
+        if K is not None:
             self._K = K
             self._K_inv_t = np.linalg.inv(K).T
         self.features = frozenset({"lengths", self.edge.field})
@@ -103,19 +97,8 @@ class LegEdgeController(VisionLaw):
                 raise ContextError(self.name, "goal.edge_visible",
                                    f"expected shape (6, 2), got {gv.shape}")
             vis &= gv
-        n_star = self._goal_array(goal.normals, "goal.normals")
-        if self.edge.lines:
-            l_goal = self._goal_array(goal.lines, "goal.lines")
-            if l_goal is not None:
-                l_star = l_goal
-            elif n_star is not None:  # desired lines from desired normals (estimated camera)
-                l_star = _unit(n_star @ self._K_inv_t.T)
-            else:
-                raise ContextError(self.name, "goal.lines", "missing (and no goal.normals)")
-            vis &= np.all(np.isfinite(l_star), axis=-1)
-            self._l_star = np.where(vis[..., None], l_star, 0.0)
-            if n_star is None:
-                n_star = _unit(np.where(vis[..., None], l_star, np.array([0, 0, 1.0])) @ self._K)
+        l_star, n_star, vis = self.edge.desired_of(goal, vis, self._K, self._K_inv_t, self.name)
+        self._l_star = l_star
         if n_star is None:
             raise ContextError(self.name, "goal.normals", "missing")
         vis &= np.all(np.isfinite(n_star), axis=-1)
@@ -153,7 +136,7 @@ class LegEdgeController(VisionLaw):
         self._goal_all_visible = bool(self._goal_visible.all())
         kernel = self._reuse_kernel(
             lambda: edge_law_kernel(self.edge, self.interaction, self.compiled))
-        kernel.set("desired", self._l_star if self.edge.lines else self._n_star)
+        kernel.set("desired", self.edge.desired_input(self._l_star, self._n_star))
         kernel.set("K", self._K)
         kernel.set("K_inv", self._K_inv_t.T)
         kernel.set("base_points", self._A)
@@ -163,14 +146,6 @@ class LegEdgeController(VisionLaw):
             kernel.set("desired_directions", self._u_star)
         self.kernel = kernel
         self._k_features = kernel.inputs["features"].reshape(6, 2, 3)
-
-    def _goal_array(self, value: Any, field: str) -> np.ndarray | None:
-        if value is None:
-            return None
-        arr = np.asarray(value, dtype=float)
-        if arr.shape != (6, 2, 3):
-            raise ContextError(self.name, field, f"expected shape (6, 2, 3), got {arr.shape}")
-        return arr
 
     # ----------------------------------------------------------------- step
     def _select(self, obs: Observation, q: np.ndarray) -> Selection:
@@ -218,7 +193,7 @@ class LegEdgeController(VisionLaw):
 
     def desired_features(self) -> np.ndarray:
         """(12, 3) the desired lines or normals (zeros where unknown)."""
-        star = self._l_star if self.edge.lines else self._n_star
+        star = self.edge.desired_input(self._l_star, self._n_star)
         return np.asarray(star, dtype=float).reshape(12, 3)
 
     def measured_features(self, obs: Observation) -> tuple[np.ndarray, np.ndarray]:
@@ -261,8 +236,7 @@ class LegEdgeController(VisionLaw):
             return None, np.zeros(m, dtype=bool)  # the instances say what is wrong
         with np.errstate(invalid="ignore"):
             ok = np.isfinite(n_star).reshape(m, 36).all(axis=1)
-            if edge.lines:
-                ok &= np.isfinite(star).reshape(m, 36).all(axis=1)
+            ok &= np.isfinite(star).reshape(m, 36).all(axis=1)  # the normals again for normals
         if goals.edge_visible is not None:
             ok &= np.asarray(goals.edge_visible, dtype=bool).reshape(m, 12).all(axis=1)
         return np.asarray(star, dtype=float).reshape(m, 36), ok

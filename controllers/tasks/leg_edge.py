@@ -22,6 +22,7 @@ from typing import Any
 import casadi as ca
 import numpy as np
 
+from controllers.exceptions import ContextError
 from controllers.tasks.base import (
     Task,
     TaskState,
@@ -226,6 +227,77 @@ class EdgeFeature(BuiltinFeature):
             return np.linalg.inv(self._checked(line_matrix)).T  # type: ignore[no-any-return]
         return np.eye(3)
 
+    # ------------------------------------------------------------------ the law's reset
+    def line_matrix_of(self, camera: Any, who: str) -> np.ndarray | None:
+        """The (3, 3) line matrix ``K`` the feature reads ``camera`` through: the camera's
+        ``line_matrix`` for lines (checked), None for normals (any camera).
+
+        Args:
+            camera: The controller context's camera.
+            who: The controller's name (in the error).
+
+        Raises:
+            ContextError: Lines of a camera that is not perspective or has no
+                ``line_matrix`` (naming its kind), or a ``line_matrix`` that is not an
+                invertible finite 3x3 matrix.
+        """
+        if not self.lines:
+            return None
+        kind = getattr(camera, "kind", None)
+        if kind != "perspective" or getattr(camera, "line_matrix", None) is None:
+            raise ContextError(who, "camera", f"pixel lines need a perspective camera with a "
+                                              f"line_matrix, got {kind!r}")
+        K = np.asarray(camera.line_matrix, dtype=float)
+        if K.shape != (3, 3) or not np.all(np.isfinite(K)) or abs(np.linalg.det(K)) < 1e-300:
+            raise ContextError(who, "camera.line_matrix", "not an invertible 3x3 matrix")
+        return K
+
+    def desired_of(self, goal: Any, visible: np.ndarray, line_matrix: np.ndarray,
+                   line_matrix_inv_t: np.ndarray, who: str
+                   ) -> tuple[np.ndarray | None, np.ndarray | None, np.ndarray]:
+        """A goal's desired lines and normals, each (6, 2, 3), and the edges usable.
+
+        Normals: ``(None, goal.normals, visible)`` (the law checks the normals). Lines:
+        the goal's ``lines``, else the unit lines of its ``normals`` (an estimated
+        camera), zero where not ``visible`` or not finite; the goal's normals, else the
+        unit normals of those lines; ``visible`` less the non-finite lines.
+
+        Args:
+            goal: The :class:`~controllers.base.Goal` (its ``normals`` and ``lines``).
+            visible: (6, 2) edges the goal shows.
+            line_matrix: ``K`` (3, 3) of the camera (:meth:`line_matrix_of`).
+            line_matrix_inv_t: ``K^-T`` (3, 3).
+            who: The controller's name (in the errors).
+
+        Raises:
+            ContextError: A goal field of another shape than (6, 2, 3), or lines wanted
+                and the goal gives neither lines nor normals.
+        """
+        normals = goal_edges(goal.normals, "goal.normals", who)
+        if not self.lines:
+            return None, normals, visible
+        lines = goal_edges(goal.lines, "goal.lines", who)
+        if lines is not None:
+            l_star = lines
+        elif normals is not None:  # desired lines from desired normals (estimated camera)
+            l_star = unit(normals @ line_matrix_inv_t.T)
+        else:
+            raise ContextError(who, "goal.lines", "missing (and no goal.normals)")
+        visible = visible & np.all(np.isfinite(l_star), axis=-1)
+        l_star = np.where(visible[..., None], l_star, 0.0)
+        if normals is None:
+            normals = unit(np.where(visible[..., None], l_star, np.array([0, 0, 1.0]))
+                           @ line_matrix)
+        return l_star, normals, visible
+
+    def desired_input(self, lines: np.ndarray | None, normals: np.ndarray) -> np.ndarray:
+        """The desired features the law core takes: ``lines`` of the lines feature (of
+        :meth:`desired_of`), ``normals`` of the normals feature."""
+        if self.lines:
+            assert lines is not None, "desired lines of the lines feature"
+            return lines
+        return normals
+
     def _checked(self, line_matrix: np.ndarray | None) -> np.ndarray:
         if line_matrix is None:
             raise ValueError(f"feature {self.kind!r} needs the camera's line_matrix")
@@ -278,6 +350,21 @@ class EdgeFeature(BuiltinFeature):
         if self.lines:
             raise self._unsupported("force-MPC features")
         return ca.vertcat(*normals)
+
+
+def goal_edges(value: Any, field: str, who: str) -> np.ndarray | None:
+    """A goal's (6, 2, 3) edge field as floats (None when it has none).
+
+    Raises:
+        ContextError: Another shape (naming the controller ``who``, the field and the
+            shape).
+    """
+    if value is None:
+        return None
+    arr = np.asarray(value, dtype=float)
+    if arr.shape != (6, 2, 3):
+        raise ContextError(who, field, f"expected shape (6, 2, 3), got {arr.shape}")
+    return arr
 
 
 def _reference_parts(v: dict[str, ca.SX]) -> tuple[ca.SX, ca.SX, ca.SX]:

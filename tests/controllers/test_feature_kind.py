@@ -5,12 +5,14 @@ and CasADi) and their refusals."""
 from __future__ import annotations
 
 import pickle
+from types import SimpleNamespace
 
 import casadi as ca
 import numpy as np
 import pytest
 
 from controllers.data import FEATURE_FIELDS
+from controllers.exceptions import ContextError
 from controllers.force_mpc.problem import ForceProblemSpec, kernel_function
 from controllers.law_kernel import _edge_function
 from controllers.mpc.prediction import FEATURE_KINDS
@@ -117,3 +119,70 @@ def test_a_feature_is_pickled_by_reference() -> None:
     assert pickle.loads(pickle.dumps(spec)) == spec
     with pytest.raises(ValueError, match="expected one of normals, lines"):
         builtin_feature("pixels")
+
+
+def _goal_edges() -> tuple[np.ndarray, np.ndarray]:
+    """Edge normals (6, 2, 3) of the legs at home seen from a camera under the base, and
+    a perspective line matrix."""
+    g = deltalab()
+    _, t = home_pose(g)
+    A = g.base_points + np.array([0.01, 0.02, 0.9])
+    d = g.platform_points + t - g.base_points
+    u = d / np.linalg.norm(d, axis=1, keepdims=True)
+    n = EDGE_NORMALS.model_features(A, u, g.leg_radius, None).reshape(6, 2, 3)
+    return n, np.array([[800.0, 0.0, 0.0], [0.0, 780.0, 0.0], [320.0, 240.0, 1.0]])
+
+
+def test_the_edge_feature_reads_the_camera() -> None:
+    """The lines need a perspective camera's invertible line matrix; the normals any
+    camera (the law keeps its identity)."""
+    _, K = _goal_edges()
+    perspective = SimpleNamespace(kind="perspective", line_matrix=K)
+    assert EDGE_NORMALS.line_matrix_of(SimpleNamespace(kind="unified"), "law") is None
+    np.testing.assert_array_equal(EDGE_LINES.line_matrix_of(perspective, "law"), K)
+    with pytest.raises(ContextError, match=r"law: context field 'camera'.*got 'unified'"):
+        EDGE_LINES.line_matrix_of(SimpleNamespace(kind="unified", line_matrix=K), "law")
+    singular = SimpleNamespace(kind="perspective", line_matrix=np.zeros((3, 3)))
+    with pytest.raises(ContextError, match=r"'camera.line_matrix'.*not an invertible"):
+        EDGE_LINES.line_matrix_of(singular, "law")
+
+
+def test_the_edge_feature_reads_the_goal() -> None:
+    """The desired lines come from the goal's lines, else from its normals; the normals
+    from the goal's, else from the lines; a hidden or non-finite line is zero and not
+    visible; the law core's desired input is the feature's own."""
+    n, K = _goal_edges()
+    Kit = np.linalg.inv(K).T
+    l = EDGE_LINES.features_of(n, Kit)
+    vis = np.ones((6, 2), dtype=bool)
+    vis[1, 0] = False
+    # normals: the goal's normals, the lines unread (even of a wrong shape)
+    goal = SimpleNamespace(normals=n, lines=np.zeros(3))
+    lines, normals, v = EDGE_NORMALS.desired_of(goal, vis, np.eye(3), np.eye(3), "law")
+    assert lines is None and v is vis
+    np.testing.assert_array_equal(normals, n)
+    assert EDGE_NORMALS.desired_input(None, n) is n
+    # lines from the goal's lines only: a NaN line is hidden, the normals rebuilt
+    l_nan = l.copy()
+    l_nan[4, 1] = np.nan
+    lines, normals, v = EDGE_LINES.desired_of(SimpleNamespace(normals=None, lines=l_nan),
+                                              vis, K, Kit, "law")
+    expected_vis = vis.copy()
+    expected_vis[4, 1] = False
+    np.testing.assert_array_equal(v, expected_vis)
+    assert lines is not None and normals is not None
+    np.testing.assert_array_equal(lines[~expected_vis], 0.0)
+    np.testing.assert_array_equal(lines[expected_vis], l[expected_vis])
+    np.testing.assert_allclose(normals[expected_vis], n[expected_vis], rtol=0, atol=1e-12)
+    assert EDGE_LINES.desired_input(lines, normals) is lines
+    # lines from the normals (an estimated camera): the goal's normals kept
+    lines, normals, v = EDGE_LINES.desired_of(SimpleNamespace(normals=n, lines=None),
+                                              vis, K, Kit, "law")
+    assert normals is not None and lines is not None
+    np.testing.assert_array_equal(normals, n)
+    np.testing.assert_allclose(lines[vis], l[vis], rtol=0, atol=1e-15)
+    with pytest.raises(ContextError, match=r"'goal.lines': missing \(and no goal.normals\)"):
+        EDGE_LINES.desired_of(SimpleNamespace(normals=None, lines=None), vis, K, Kit, "law")
+    with pytest.raises(ContextError, match=r"'goal.normals': expected shape \(6, 2, 3\)"):
+        EDGE_NORMALS.desired_of(SimpleNamespace(normals=n[:5], lines=None), vis, K, Kit,
+                                "law")
