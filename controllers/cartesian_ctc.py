@@ -93,16 +93,22 @@ class CartesianCTC(TaskComputedTorque):
         :meth:`batch_features` takes, then each one's reference row (an integral
         action: the row is left to :meth:`compiled_inputs`)."""
         fast = self.batch_features(step, X, observations, rows)
-        reference = step.inputs["reference"]
+        times = tr.tolist()
+        taken: list[int] = []
+        references: list[np.ndarray] = []
         for j in np.flatnonzero(fast).tolist():
             inst = instances[j]
             if not isinstance(inst, CartesianCTC) or inst.integral_gain:
                 fast[j] = False
                 continue
             try:
-                X[j, reference] = inst.reference_row(float(tr[j]))
+                references.append(inst.reference_row(times[j]))
             except Exception:  # the trial's own compiled_inputs meets it again
                 fast[j] = False
+                continue
+            taken.append(j)
+        if taken:
+            X[taken, step.inputs["reference"]] = np.stack(references)
         return fast
 
     def batch_features(self, step: CompiledTaskStep, X: np.ndarray,
