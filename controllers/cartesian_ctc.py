@@ -27,6 +27,7 @@ from controllers.task_ctc import (
     TaskComputedTorque,
     camera_and_base_points,
     goal_pose_of,
+    grid_steps,
 )
 from controllers.tasks.platform_pose import PLATFORM_POSE
 from hexapod.kinematics import Transform
@@ -94,15 +95,22 @@ class CartesianCTC(TaskComputedTorque):
         action: the row is left to :meth:`compiled_inputs`)."""
         fast = self.batch_features(step, X, observations, rows)
         times = tr.tolist()
+        idx = np.flatnonzero(fast)
+        ks = grid_steps(tr[idx], np.array([instances[j].control_period
+                                           for j in idx.tolist()])).tolist()
         taken: list[int] = []
         references: list[np.ndarray] = []
-        for j in np.flatnonzero(fast).tolist():
+        for j, k in zip(idx.tolist(), ks, strict=True):
             inst = instances[j]
             if not isinstance(inst, CartesianCTC) or inst.integral_gain:
                 fast[j] = False
                 continue
             try:
-                references.append(inst.reference_row(times[j]))
+                if k >= 0 and inst.reference is not None:  # on the grid (pose_reference)
+                    grid = inst.pose_grid()
+                    references.append(grid[min(k, len(grid) - 1)])
+                else:
+                    references.append(inst.reference_row(times[j]))
             except Exception:  # the trial's own compiled_inputs meets it again
                 fast[j] = False
                 continue

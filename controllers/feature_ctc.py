@@ -40,6 +40,7 @@ from controllers.task_ctc import (
     camera_and_base_points,
     goal_pose_of,
     grid_step,
+    grid_steps,
 )
 from controllers.tasks import Task
 from controllers.tasks.feature_kind import BuiltinFeature
@@ -144,12 +145,22 @@ class FeatureCTC(TaskComputedTorque):
         k = grid_step(tr, float(ctx.dt))
         if k < 0:
             return None
+        return min(k, len(self.reference_grid()[1]) - 1)
+
+    def reference_grid(self) -> tuple[object, np.ndarray, list[np.ndarray],
+                                      list[np.ndarray | None]]:
+        """The reference's control grid ``k dt`` up to its end and a step past it (built
+        on first use for each reference, one batched call): the reference,
+        :meth:`feature_rows` on the grid (n, 3, m) and, step by step, what
+        :meth:`compiled_reference` gives (n of (3 m,)) and the rows known (None: all)."""
+        ctx, ref = self.context, self.reference
+        assert ctx is not None and ref is not None
         if self._grid is None or self._grid[0] is not ref:
             dt = float(ctx.dt)
             n = int(np.ceil(float(ref.duration) / dt)) + 2
             rows = self.feature_rows(dt * np.arange(n))
             self._grid = (ref, rows, *_sanitised_rows(rows))
-        return min(k, len(self._grid[1]) - 1)
+        return self._grid
 
     def feature_rows(self, times: np.ndarray) -> np.ndarray:
         """(m, 3, n) rows of :meth:`feature_reference` at ``times`` (m,) [s]; NaN where
@@ -250,23 +261,28 @@ class FeatureCTC(TaskComputedTorque):
         feature the model's camera does not see, a reference off the grid or an
         integral action: the row is left to :meth:`compiled_inputs`)."""
         fast = self.batch_features(step, X, observations, rows)
-        times = tr.tolist()
+        idx = np.flatnonzero(fast)
+        ks = grid_steps(tr[idx], np.array([instances[j].control_period
+                                           for j in idx.tolist()])).tolist()
         taken: list[int] = []
         references: list[np.ndarray] = []
-        for j in np.flatnonzero(fast).tolist():
+        for j, k in zip(idx.tolist(), ks, strict=True):
             inst = instances[j]
-            if not isinstance(inst, FeatureCTC) or inst.integral_gain or inst.reference is None:
-                fast[j] = False
+            if (k < 0 or not isinstance(inst, FeatureCTC) or inst.integral_gain
+                    or inst.reference is None):
+                fast[j] = False  # off the grid: the trial's own compiled_inputs
                 continue
             try:
-                on_grid = inst.grid_reference(times[j])
+                _, grid, sanitised, known = inst.reference_grid()
             except Exception:  # the trial's own compiled_inputs meets it again
-                on_grid = None
-            if on_grid is None or on_grid[1] is not None:
+                fast[j] = False
+                continue
+            i = min(k, len(grid) - 1)
+            if known[i] is not None:
                 fast[j] = False
                 continue
             taken.append(j)
-            references.append(on_grid[0])
+            references.append(sanitised[i])
         if taken:
             X[taken, step.inputs["reference_features"]] = np.stack(references)
         X[fast, step.inputs["mask"]] = 1.0

@@ -156,6 +156,12 @@ class TaskComputedTorque(Controller):
         return self._started
 
     @property
+    def control_period(self) -> float:
+        """The control period ``dt`` [s] of the trial (the step of the reference's grid)."""
+        assert self.context is not None
+        return float(self.context.dt)
+
+    @property
     def reference_start(self) -> float:
         """The observation time [s] at which the reference's clock is 0."""
         return self._t0
@@ -429,6 +435,14 @@ def grid_step(tr: float, dt: float) -> int:
     [s]), or -1 off the grid."""
     k = round(tr / dt)
     return k if abs(tr - k * dt) < 1e-9 and k >= 0 else -1
+
+
+def grid_steps(tr: np.ndarray, dt: np.ndarray) -> np.ndarray:
+    """:func:`grid_step` of many instants ``tr`` (m,) [s] with their periods ``dt`` (m,)
+    [s] (the same numbers, element by element); (m,) int."""
+    k = np.round(tr / dt)
+    on = (np.abs(tr - k * dt) < 1e-9) & (k >= 0)
+    return np.where(on, k, -1).astype(int)  # type: ignore[no-any-return]
 
 
 def _with_goal(context: ControllerContext, goal: Goal) -> ControllerContext:
