@@ -27,6 +27,7 @@ from controllers.task_ctc import (
     TaskComputedTorque,
     camera_and_base_points,
     goal_pose_of,
+    grid_steps,
 )
 from controllers.tasks.platform_pose import PLATFORM_POSE
 from hexapod.kinematics import Transform
@@ -93,16 +94,29 @@ class CartesianCTC(TaskComputedTorque):
         :meth:`batch_features` takes, then each one's reference row (an integral
         action: the row is left to :meth:`compiled_inputs`)."""
         fast = self.batch_features(step, X, observations, rows)
-        reference = step.inputs["reference"]
-        for j in np.flatnonzero(fast).tolist():
+        times = tr.tolist()
+        idx = np.flatnonzero(fast)
+        ks = grid_steps(tr[idx], np.array([instances[j].control_period
+                                           for j in idx.tolist()])).tolist()
+        taken: list[int] = []
+        references: list[np.ndarray] = []
+        for j, k in zip(idx.tolist(), ks, strict=True):
             inst = instances[j]
             if not isinstance(inst, CartesianCTC) or inst.integral_gain:
                 fast[j] = False
                 continue
             try:
-                X[j, reference] = inst.reference_row(float(tr[j]))
+                if k >= 0 and inst.reference is not None:  # on the grid (pose_reference)
+                    grid = inst.pose_grid()
+                    references.append(grid[min(k, len(grid) - 1)])
+                else:
+                    references.append(inst.reference_row(times[j]))
             except Exception:  # the trial's own compiled_inputs meets it again
                 fast[j] = False
+                continue
+            taken.append(j)
+        if taken:
+            X[taken, step.inputs["reference"]] = np.stack(references)
         return fast
 
     def batch_features(self, step: CompiledTaskStep, X: np.ndarray,

@@ -39,6 +39,8 @@ from controllers.task_ctc import (
     TaskComputedTorque,
     camera_and_base_points,
     goal_pose_of,
+    grid_step,
+    grid_steps,
 )
 from controllers.tasks import Task
 from controllers.tasks.feature_kind import BuiltinFeature
@@ -140,15 +142,25 @@ class FeatureCTC(TaskComputedTorque):
         None off the grid."""
         ctx, ref = self.context, self.reference
         assert ctx is not None and ref is not None
-        dt = float(ctx.dt)
-        k = round(tr / dt)
-        if not (abs(tr - k * dt) < 1e-9 and k >= 0):
+        k = grid_step(tr, float(ctx.dt))
+        if k < 0:
             return None
+        return min(k, len(self.reference_grid()[1]) - 1)
+
+    def reference_grid(self) -> tuple[object, np.ndarray, list[np.ndarray],
+                                      list[np.ndarray | None]]:
+        """The reference's control grid ``k dt`` up to its end and a step past it (built
+        on first use for each reference, one batched call): the reference,
+        :meth:`feature_rows` on the grid (n, 3, m) and, step by step, what
+        :meth:`compiled_reference` gives (n of (3 m,)) and the rows known (None: all)."""
+        ctx, ref = self.context, self.reference
+        assert ctx is not None and ref is not None
         if self._grid is None or self._grid[0] is not ref:
+            dt = float(ctx.dt)
             n = int(np.ceil(float(ref.duration) / dt)) + 2
             rows = self.feature_rows(dt * np.arange(n))
             self._grid = (ref, rows, *_sanitised_rows(rows))
-        return min(k, len(self._grid[1]) - 1)
+        return self._grid
 
     def feature_rows(self, times: np.ndarray) -> np.ndarray:
         """(m, 3, n) rows of :meth:`feature_reference` at ``times`` (m,) [s]; NaN where
@@ -157,9 +169,8 @@ class FeatureCTC(TaskComputedTorque):
         assert ctx is not None and self.reference is not None
         feature = self.observed_feature
         size = feature.task_rows
-        end = float(self.reference.duration) + 1.0
-        model_end = np.asarray(reference_goals(replace(ctx, reference=self.reference),
-                                               np.array([end]))[self.key][0]).reshape(-1, 3)
+        anchored, model_end = self._anchored_and_end(times)
+        model_end = model_end.reshape(-1, 3)
         taught = self._taught.reshape(-1, 3)
         taught = np.where(np.all(np.isfinite(taught), axis=-1)[:, None], taught, model_end)
         g = ctx.geometry
@@ -174,7 +185,7 @@ class FeatureCTC(TaskComputedTorque):
         v["points"][:] = (g.base_points, g.platform_points)
         v["radius"][:] = g.leg_radius
         out = feature_motion(feature).batch(rows).reshape(len(times), 3, size)
-        seen = np.isfinite(self._anchored(times).reshape(len(times), size))
+        seen = np.isfinite(anchored.reshape(len(times), size))
         return np.where(seen[:, None, :], out, np.nan)
 
     def grid_reference(self, tr: float) -> tuple[np.ndarray, np.ndarray | None] | None:
@@ -250,20 +261,30 @@ class FeatureCTC(TaskComputedTorque):
         feature the model's camera does not see, a reference off the grid or an
         integral action: the row is left to :meth:`compiled_inputs`)."""
         fast = self.batch_features(step, X, observations, rows)
-        reference = step.inputs["reference_features"]
-        for j in np.flatnonzero(fast).tolist():
+        idx = np.flatnonzero(fast)
+        ks = grid_steps(tr[idx], np.array([instances[j].control_period
+                                           for j in idx.tolist()])).tolist()
+        taken: list[int] = []
+        references: list[np.ndarray] = []
+        for j, k in zip(idx.tolist(), ks, strict=True):
             inst = instances[j]
-            if not isinstance(inst, FeatureCTC) or inst.integral_gain or inst.reference is None:
-                fast[j] = False
+            if (k < 0 or not isinstance(inst, FeatureCTC) or inst.integral_gain
+                    or inst.reference is None):
+                fast[j] = False  # off the grid: the trial's own compiled_inputs
                 continue
             try:
-                on_grid = inst.grid_reference(float(tr[j]))
+                _, grid, sanitised, known = inst.reference_grid()
             except Exception:  # the trial's own compiled_inputs meets it again
-                on_grid = None
-            if on_grid is None or on_grid[1] is not None:
                 fast[j] = False
                 continue
-            X[j, reference] = on_grid[0]
+            i = min(k, len(grid) - 1)
+            if known[i] is not None:
+                fast[j] = False
+                continue
+            taken.append(j)
+            references.append(sanitised[i])
+        if taken:
+            X[taken, step.inputs["reference_features"]] = np.stack(references)
         X[fast, step.inputs["mask"]] = 1.0
         return fast
 
@@ -277,13 +298,19 @@ class FeatureCTC(TaskComputedTorque):
     def _anchored(self, times: np.ndarray) -> np.ndarray:
         """(m, ...) the nominal features of the reference at ``times``, anchored at the
         taught goal."""
+        return self._anchored_and_end(times)[0]
+
+    def _anchored_and_end(self, times: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """:meth:`_anchored` at ``times`` and the model's features at the reference's end
+        (a second past its duration), from one call of the model (its field only)."""
         ctx = self.context
         assert ctx is not None and self.reference is not None
         end = float(self.reference.duration) + 1.0
         goals = reference_goals(replace(ctx, reference=self.reference),
-                                np.append(times, end))
+                                np.append(times, end), fields=(self.key,))
+        model_end = np.asarray(goals[self.key][-1])
         anchor_goals(goals, replace(ctx.goal, **{self.key: self._taught}))
-        return np.asarray(goals[self.key][:-1])
+        return np.asarray(goals[self.key][:-1]), model_end
 
     def retarget_trial(self, goal: Goal) -> None:
         """A new fixed goal; with a reference the taught features anchor it."""

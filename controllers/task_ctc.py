@@ -156,6 +156,12 @@ class TaskComputedTorque(Controller):
         return self._started
 
     @property
+    def control_period(self) -> float:
+        """The control period ``dt`` [s] of the trial (the step of the reference's grid)."""
+        assert self.context is not None
+        return float(self.context.dt)
+
+    @property
     def reference_start(self) -> float:
         """The observation time [s] at which the reference's clock is 0."""
         return self._t0
@@ -216,17 +222,23 @@ class TaskComputedTorque(Controller):
         """(24,) the reference at ``tr`` [s]: ``R*`` (row-major), ``t*``, twist, twist rate
         (base frame, :meth:`anchor`). The control grid ``k dt`` is sampled once per
         reference (one batched call); other instants on demand."""
-        ctx, ref = self.context, self.reference
-        assert ctx is not None and ref is not None
-        dt = float(ctx.dt)
-        k = round(tr / dt)
-        if abs(tr - k * dt) < 1e-9 and k >= 0:
-            if self._pose_grid is None or self._pose_grid[0] is not ref:
-                n = int(np.ceil(float(ref.duration) / dt)) + 2
-                self._pose_grid = (ref, self.pose_rows(dt * np.arange(n)))
-            grid = self._pose_grid[1]
+        assert self.context is not None
+        k = grid_step(tr, float(self.context.dt))
+        if k >= 0:
+            grid = self.pose_grid()
             return grid[min(k, len(grid) - 1)]  # type: ignore[no-any-return]
         return self.pose_rows(np.array([tr]))[0]
+
+    def pose_grid(self) -> np.ndarray:
+        """(n, 24) :meth:`pose_reference` on the control grid ``k dt`` up to the
+        reference's end (and a step past it), built on first use for each reference."""
+        ctx, ref = self.context, self.reference
+        assert ctx is not None and ref is not None
+        if self._pose_grid is None or self._pose_grid[0] is not ref:
+            dt = float(ctx.dt)
+            n = int(np.ceil(float(ref.duration) / dt)) + 2
+            self._pose_grid = (ref, self.pose_rows(dt * np.arange(n)))
+        return self._pose_grid[1]
 
     def pose_rows(self, times: np.ndarray) -> np.ndarray:
         """(m, 24) rows of :meth:`pose_reference` at ``times`` (m,) [s]."""
@@ -340,16 +352,24 @@ class TaskComputedTorque(Controller):
                                                 self.solver.threshold))
         if not len(accepted):
             return np.flatnonzero(slow)
-        over = over_limits(Y[accepted, forces],
-                           np.stack([rows[j][1].force_limit for j in accepted.tolist()]))
-        for j, o in zip(accepted.tolist(), over.tolist(), strict=True):
-            k, inst = rows[j]
-            e = steps[j].take(inst, Y[j], used[j])
-            out.forces[k] = inst.limited(Y[j, forces], Y[j, pose_out], qd_all[k],
-                                         Y[j, error], used[j], o)
+        taken = [rows[j] for j in accepted.tolist()]
+        Ya = Y[accepted]
+        F, P, E = Ya[:, forces], Ya[:, pose_out], Ya[:, error]
+        R = P[:, 0:9].reshape(-1, 3, 3).transpose(0, 2, 1)  # the poses' rotations
+        ks = np.array([k for k, _ in taken], dtype=int)
+        over = over_limits(F, np.stack([inst.force_limit for _, inst in taken]))
+        # a row under the limits without integral action keeps the law's forces
+        plain = ~over & np.array([not inst.integral_gain for _, inst in taken])
+        out.forces[ks[plain]] = F[plain]
+        for i, (j, (k, inst)) in enumerate(zip(accepted.tolist(), taken, strict=True)):
+            steps[j].keep_pose(inst, P[i], R[i])
+            u = used[j]
+            e = E[i] if u is None else E[i][u]
             out.error_norm[k] = math.sqrt(e.dot(e))
             inst.compiled_steps += 1
-            slow[k] = False
+            if not plain[i]:
+                out.forces[k] = inst.limited(F[i], P[i], qd_all[k], E[i], u, bool(over[i]))
+        slow[ks] = False
         return np.flatnonzero(slow)
 
     def integral_term(self, m: int) -> np.ndarray:
@@ -408,6 +428,21 @@ class TaskComputedTorque(Controller):
         """A zero force command with the reason."""
         return Command.refuse(f"{self.name}: {problem}", error=error,
                               actuation=Actuation.FORCE)
+
+
+def grid_step(tr: float, dt: float) -> int:
+    """The step ``k`` of the control grid at ``tr`` [s] (``tr = k dt`` within 1 ns, ``dt``
+    [s]), or -1 off the grid."""
+    k = round(tr / dt)
+    return k if abs(tr - k * dt) < 1e-9 and k >= 0 else -1
+
+
+def grid_steps(tr: np.ndarray, dt: np.ndarray) -> np.ndarray:
+    """:func:`grid_step` of many instants ``tr`` (m,) [s] with their periods ``dt`` (m,)
+    [s] (the same numbers, element by element); (m,) int."""
+    k = np.round(tr / dt)
+    on = (np.abs(tr - k * dt) < 1e-9) & (k >= 0)
+    return np.where(on, k, -1).astype(int)  # type: ignore[no-any-return]
 
 
 def _with_goal(context: ControllerContext, goal: Goal) -> ControllerContext:

@@ -244,10 +244,15 @@ class CompiledTaskStep:
         """The task error (of the rows used) of an accepted output row ``y``, its pose
         taken as the next guess."""
         pose = y[self._pose].copy()
-        self.views["pose"][:] = pose  # the next step's guess
-        law.guess = self._guess_of = (pose[0:9].reshape(3, 3).T, pose[9:12])
+        self.keep_pose(law, pose, pose[0:9].reshape(3, 3).T)
         e = y[self._error]
         return e.copy() if rows is None else e[rows]  # type: ignore[no-any-return]
+
+    def keep_pose(self, law: TaskComputedTorque, pose: np.ndarray, R: np.ndarray) -> None:
+        """Take an accepted step's pose (12,) (``R`` column-major, ``t`` [m]), its rotation
+        ``R`` (3, 3), as the next step's guess (written into the row's ``pose`` block)."""
+        self.views["pose"][:] = pose
+        law.guess = self._guess_of = (R, pose[9:12])
 
 
 __all__ = ["FIT_TOLERANCE", "FK_MAX_CALLS", "FK_TOLERANCE", "CompiledTaskStep"]

@@ -38,7 +38,7 @@ from __future__ import annotations
 
 import logging
 import math
-from collections.abc import Sequence
+from collections.abc import Collection, Sequence
 from dataclasses import dataclass, replace
 from typing import Any
 
@@ -62,7 +62,8 @@ from controllers.exceptions import ContextError
 log = logging.getLogger(__name__)
 
 
-def reference_goals(context: ControllerContext, times: np.ndarray) -> dict[str, np.ndarray]:
+def reference_goals(context: ControllerContext, times: np.ndarray,
+                    fields: Collection[str] | None = None) -> dict[str, np.ndarray]:
     """The goals of a reference at ``times`` [s] from the nominal model.
 
     Args:
@@ -70,6 +71,8 @@ def reference_goals(context: ControllerContext, times: np.ndarray) -> dict[str, 
             :class:`hexapod.trajectory.ReferenceSample`), the nominal ``geometry`` and the
             estimated ``camera``.
         times: (m,) times [s].
+        fields: The goal fields wanted of ``lengths``, ``normals``, ``lines``,
+            ``directions`` and ``edge_visible`` (None: all; the others are left out).
 
     Returns:
         ``rotation`` (m, 3, 3), ``translation`` (m, 3), ``lengths`` (m, 6) [m], and when the
@@ -78,26 +81,35 @@ def reference_goals(context: ControllerContext, times: np.ndarray) -> dict[str, 
     """
     from hexapod.kinematics import inverse_kinematics
 
+    def wanted(name: str) -> bool:
+        return fields is None or name in fields
+
     ref = context.reference
     sample = ref.at(times)
-    out: dict[str, Any] = {
-        "rotation": sample.rotation, "translation": sample.translation,
-        "lengths": inverse_kinematics(context.geometry, sample.rotation, sample.translation)}
+    out: dict[str, Any] = {"rotation": sample.rotation, "translation": sample.translation}
+    if wanted("lengths"):
+        out["lengths"] = inverse_kinematics(context.geometry, sample.rotation,
+                                            sample.translation)
     camera = context.camera
-    if camera is not None:
+    if camera is not None and any(wanted(f) for f in ("normals", "lines", "directions",
+                                                      "edge_visible")):
         from vision.legs import directions_from_edges, observe_edges
 
         seen, visible = observe_edges(camera, context.geometry, sample.rotation,
                                       sample.translation)
         normals = np.where(visible[..., None], seen, np.nan)
         with np.errstate(invalid="ignore"):
-            out["lines"] = (camera.normal_to_line(normals)
-                            if getattr(camera, "kind", None) == "perspective" else None)
-            both = np.asarray(visible.all(axis=-1))
-            out["directions"] = np.where(both[..., None], directions_from_edges(normals),
-                                         np.nan)
-        out["normals"] = normals
-        out["edge_visible"] = visible
+            if wanted("lines"):
+                out["lines"] = (camera.normal_to_line(normals)
+                                if getattr(camera, "kind", None) == "perspective" else None)
+            if wanted("directions"):
+                both = np.asarray(visible.all(axis=-1))
+                out["directions"] = np.where(both[..., None], directions_from_edges(normals),
+                                             np.nan)
+        if wanted("normals"):
+            out["normals"] = normals
+        if wanted("edge_visible"):
+            out["edge_visible"] = visible
     return out
 
 

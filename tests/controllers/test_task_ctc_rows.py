@@ -30,7 +30,13 @@ from controllers import registry
 from controllers.base import Command, Observation
 from controllers.cartesian_ctc import _every_direction, all_seen, directions_seen
 from controllers.solvers.compiled_task_ctc import layout, task_step
-from controllers.task_ctc import TaskComputedTorque, encoder_readings, finite_readings
+from controllers.task_ctc import (
+    TaskComputedTorque,
+    encoder_readings,
+    finite_readings,
+    grid_step,
+    grid_steps,
+)
 from controllers.task_ctc_compiled import FIT_TOLERANCE, FK_MAX_CALLS, FK_TOLERANCE
 from hexapod import deltalab, sample_poses
 from hexapod.dynamics import DynamicModel
@@ -304,3 +310,17 @@ def test_the_common_case_checks_answer_as_the_general_ones() -> None:
         assert all_seen(v.edge_visible) == bool(np.all(v.edge_visible))
     assert accepted == [5, 8]  # the plain, the unusual-but-fine and the refused
     assert all_seen(None)
+
+
+def test_grid_steps_are_the_grid_step_of_each_instant() -> None:
+    """The batched steps' control-grid steps (one numpy call) are those of the per-trial
+    step, on the grid, within and past its 1 ns tolerance, before its start and at
+    half steps."""
+    rng = np.random.default_rng(7)
+    k = rng.integers(-3, 500, 600)
+    offset = rng.choice([0.0, 1e-12, -1e-12, 5e-10, -5e-10, 2e-9, -2e-9, 0.5 * DT, 0.01], 600)
+    tr = k * DT + offset
+    dt = np.full(len(tr), DT)
+    expected = [grid_step(x, DT) for x in tr.tolist()]
+    assert grid_steps(tr, dt).tolist() == expected
+    assert -1 in expected and max(expected) > 400  # off and on the grid both met
