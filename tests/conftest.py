@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import signal
+
 import numpy as np
 import pytest
 
@@ -15,6 +17,19 @@ def pytest_addoption(parser: pytest.Parser) -> None:
     parser.addoption("--unmarked-budget", type=float, default=None, metavar="SECONDS",
                      help="fail a test not marked slow whose setup and call take longer "
                           "(`make quick` uses 2 s, so that the quick tier stays quick)")
+
+
+def pytest_configure(config: pytest.Config) -> None:
+    """Ctrl-C as a terminal gives it, however the suite was started.
+
+    A background job of a non-interactive shell (``make test &``, ``nohup``) starts with
+    SIGINT ignored, and ignored signals stay ignored in every child process. The tests
+    that interrupt an exchange, a run or an emulator with SIGINT would then check
+    nothing real, so the suite puts Python's own handler back (children get the
+    default action on exec).
+    """
+    if signal.getsignal(signal.SIGINT) == signal.SIG_IGN:
+        signal.signal(signal.SIGINT, signal.default_int_handler)
 
 
 @pytest.hookimpl(wrapper=True)
