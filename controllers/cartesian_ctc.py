@@ -27,7 +27,7 @@ from controllers.task_ctc import (
     TaskComputedTorque,
     camera_and_base_points,
     goal_pose_of,
-    grid_steps,
+    rows_on_grid,
 )
 from controllers.tasks.platform_pose import PLATFORM_POSE
 from hexapod.kinematics import Transform
@@ -95,9 +95,7 @@ class CartesianCTC(TaskComputedTorque):
         action: the row is left to :meth:`compiled_inputs`)."""
         fast = self.batch_features(step, X, observations, rows)
         times = tr.tolist()
-        idx = np.flatnonzero(fast)
-        ks = grid_steps(tr[idx], np.array([instances[j].control_period
-                                           for j in idx.tolist()])).tolist()
+        idx, ks = rows_on_grid(fast, instances, tr)
         taken: list[int] = []
         references: list[np.ndarray] = []
         for j, k in zip(idx.tolist(), ks, strict=True):

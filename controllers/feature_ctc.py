@@ -40,7 +40,7 @@ from controllers.task_ctc import (
     camera_and_base_points,
     goal_pose_of,
     grid_step,
-    grid_steps,
+    rows_on_grid,
 )
 from controllers.tasks import Task
 from controllers.tasks.feature_kind import BuiltinFeature
@@ -261,9 +261,7 @@ class FeatureCTC(TaskComputedTorque):
         feature the model's camera does not see, a reference off the grid or an
         integral action: the row is left to :meth:`compiled_inputs`)."""
         fast = self.batch_features(step, X, observations, rows)
-        idx = np.flatnonzero(fast)
-        ks = grid_steps(tr[idx], np.array([instances[j].control_period
-                                           for j in idx.tolist()])).tolist()
+        idx, ks = rows_on_grid(fast, instances, tr)
         taken: list[int] = []
         references: list[np.ndarray] = []
         for j, k in zip(idx.tolist(), ks, strict=True):

@@ -445,6 +445,15 @@ def grid_steps(tr: np.ndarray, dt: np.ndarray) -> np.ndarray:
     return np.where(on, k, -1).astype(int)  # type: ignore[no-any-return]
 
 
+def rows_on_grid(fast: np.ndarray, instances: Sequence[TaskComputedTorque], tr: np.ndarray
+                 ) -> tuple[np.ndarray, list[int]]:
+    """The indices of the rows ``fast`` marks (m,) and each one's step on its trial's
+    control grid at ``tr`` [s] (:func:`grid_steps`, -1 off the grid)."""
+    idx = np.flatnonzero(fast)
+    ks = grid_steps(tr[idx], np.array([instances[j].control_period for j in idx.tolist()]))
+    return idx, ks.tolist()
+
+
 def _with_goal(context: ControllerContext, goal: Goal) -> ControllerContext:
     from dataclasses import replace
 
