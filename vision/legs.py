@@ -242,27 +242,13 @@ def observe_legs(
     Returns:
         A :class:`LegObservation`.
     """
-    from vision import fast_observe
-
     _check_sampling(min_visible_fraction, n_samples)
-    if (not fast_observe.compiled() or getattr(camera, "kind", None) not in (
-            "perspective", "unified") or not fast_observe.supported(camera)):
+    fast = _compiled_observation(camera, geometry, rotation, translation, min_visible_fraction,
+                                 n_samples, platform_radius, occlusion)
+    if fast is None:
         return observe_legs_numpy(camera, geometry, rotation, translation,
                                   min_visible_fraction, n_samples, platform_radius, occlusion)
-    R = np.asarray(rotation, float)
-    t = np.asarray(translation, float)
-    lead = R.shape[:-2]
-    if t.shape != (*lead, 3):
-        from hexapod.exceptions import ShapeError
-
-        raise ShapeError("translation", f"shape {(*lead, 3)}", t.shape)
-    params = fast_observe.WorldParams.from_worlds([geometry], [camera])
-    if platform_radius is not None:
-        params.platform_radius[:] = float(platform_radius)
-    n = int(np.prod(lead, dtype=int))
-    obs = fast_observe.observe_batch(params, R.reshape(n, 3, 3), t.reshape(n, 3),
-                                     np.zeros(n, dtype=int), n_samples, min_visible_fraction,
-                                     occlusion)
+    obs, lead, params = fast
     r = geometry.leg_radius
     A = obs.base_points.reshape(*lead, 6, 3)
     u = obs.directions.reshape(*lead, 6, 3)
@@ -290,12 +276,28 @@ def observe_edges(camera: Camera, geometry: HexapodGeometry, rotation: np.ndarra
     without the rest of its observation (the image segments and lines, which cost about
     as much as the compiled core: a reference sampled on a control grid needs only
     these two)."""
+    fast = _compiled_observation(camera, geometry, rotation, translation,
+                                 DEFAULT_MIN_VISIBLE_FRACTION, DEFAULT_VISIBILITY_SAMPLES,
+                                 None, True)
+    if fast is None:
+        seen = observe_legs(camera, geometry, rotation, translation)
+        return np.asarray(seen.normals), np.asarray(seen.edge_visible, dtype=bool)
+    obs, lead, _ = fast
+    return obs.normals.reshape(*lead, 6, 2, 3), obs.edge_visible.reshape(*lead, 6, 2)
+
+
+def _compiled_observation(camera: Camera, geometry: HexapodGeometry, rotation: np.ndarray,
+                          translation: np.ndarray, min_visible_fraction: float,
+                          n_samples: int, platform_radius: float | None, occlusion: bool
+                          ) -> tuple[Any, tuple[int, ...], Any] | None:
+    """The compiled core's observation of the poses (flat), the poses' leading shape and
+    the world parameters; None where the core does not apply (not compiled, or a camera
+    model it does not cover)."""
     from vision import fast_observe
 
     if (not fast_observe.compiled() or getattr(camera, "kind", None) not in (
             "perspective", "unified") or not fast_observe.supported(camera)):
-        seen = observe_legs(camera, geometry, rotation, translation)
-        return np.asarray(seen.normals), np.asarray(seen.edge_visible, dtype=bool)
+        return None
     R = np.asarray(rotation, float)
     t = np.asarray(translation, float)
     lead = R.shape[:-2]
@@ -304,11 +306,13 @@ def observe_edges(camera: Camera, geometry: HexapodGeometry, rotation: np.ndarra
 
         raise ShapeError("translation", f"shape {(*lead, 3)}", t.shape)
     params = fast_observe.WorldParams.from_worlds([geometry], [camera])
+    if platform_radius is not None:
+        params.platform_radius[:] = float(platform_radius)
     n = int(np.prod(lead, dtype=int))
     obs = fast_observe.observe_batch(params, R.reshape(n, 3, 3), t.reshape(n, 3),
-                                     np.zeros(n, dtype=int), DEFAULT_VISIBILITY_SAMPLES,
-                                     DEFAULT_MIN_VISIBLE_FRACTION, True)
-    return obs.normals.reshape(*lead, 6, 2, 3), obs.edge_visible.reshape(*lead, 6, 2)
+                                     np.zeros(n, dtype=int), n_samples, min_visible_fraction,
+                                     occlusion)
+    return obs, lead, params
 
 
 def observe_legs_numpy(
