@@ -156,6 +156,7 @@ def test_the_controller_realises_the_pose_with_its_own_model(geometry: HexapodGe
         r.close()
 
 
+@pytest.mark.realtime
 @pytest.mark.slow
 def test_conformance_against_the_simulator(geometry: HexapodGeometry) -> None:
     # 50 ms periods: a period's motion (0.4 of the speed limit) ends 30 ms before POS?,
