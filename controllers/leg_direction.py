@@ -22,12 +22,11 @@ from controllers.laws import Selection, VisionLaw
 class LegDirectionController(VisionLaw):
     """Leg-direction law: error ``u x u*``, interaction ``-[u*]_x M`` (seeds 001/003).
 
+    The options of :class:`~controllers.laws.VisionLaw` (``gain``, ``adaptive_gain``,
+    ``interaction``, ``threshold``, ``damping``, ``leg_rate_feedforward``; documented
+    there), and:
+
     Args:
-        gain: Constant gain ``lambda`` [1/s].
-        adaptive_gain: ``(lambda0, lambda_inf, lambda0')`` (overrides ``gain``).
-        interaction: ``"current"``, ``"desired"`` or ``"mean"``.
-        threshold: Relative singular-value threshold (rank test).
-        damping: Pseudo-inverse damping.
         compiled: Evaluate the core (:mod:`controllers.law_kernel`) compiled to C (False:
             the CasADi virtual machine evaluates the same expression, slower).
     """

@@ -43,12 +43,11 @@ def _unit(x: np.ndarray) -> np.ndarray:
 class LegEdgeController(VisionLaw):
     """Leg-edge law: pixel lines (perspective camera) or normals (unified camera).
 
+    The options of :class:`~controllers.laws.VisionLaw` (``gain``, ``adaptive_gain``,
+    ``interaction``, ``threshold``, ``damping``, ``leg_rate_feedforward``; documented
+    there), and:
+
     Args:
-        gain: Constant gain ``lambda`` [1/s].
-        adaptive_gain: ``(lambda0, lambda_inf, lambda0')`` (overrides ``gain``).
-        interaction: ``"current"``, ``"desired"`` or ``"mean"``.
-        threshold: Relative singular-value threshold (rank test).
-        damping: Pseudo-inverse damping.
         edge_feature: ``"auto"`` (lines for a perspective camera, normals for a
             unified one), ``"lines"`` or ``"normals"`` (force the normals).
         compiled: Evaluate the core (:mod:`controllers.law_kernel`) compiled to C (False:

@@ -199,44 +199,54 @@ def line_figures(out_dir: Path, points: list[int], curves_of: Callable[[int], li
     return out
 
 
-def _error_curves(out_dir: Path, scenario: str, point: int) -> list[Curves]:
-    """Error norm (its positive values) and position error [mm] (floored at 1e-6 for the
-    log axis) of each controller's trial 0."""
+def trial0_curves(out_dir: Path, scenario: str, point: int,
+                  panels: Callable[[Any], list[tuple[np.ndarray, np.ndarray]]]) -> list[Curves]:
+    """The curves of every controller's recorded trial 0 at one sweep point: its label
+    and ``panels(record)``, the ``(x, y)`` pair of each panel read from its ``.npz``."""
     curves = []
     for f in trial0_files(out_dir, scenario, point):
         with np.load(f) as rec:
-            err = np.asarray(rec["error_norm"], float)
-            t = np.asarray(rec["t"], float)
-            ok = np.isfinite(err) & (err > 0)
-            curves.append((str(rec["controller"]), [
-                (t[ok], err[ok]),
-                (t, np.maximum(np.asarray(rec["position_error"]) * 1e3, 1e-6))]))
+            curves.append((str(rec["controller"]), panels(rec)))
     return curves
 
 
-def _draw_error_curves(curves: list[Curves]) -> tuple[Any, list[list[Any]]]:
+def draw_time_panels(curves: list[Curves], titles: tuple[str, str],
+                     log: bool) -> tuple[Any, list[list[Any]]]:
+    """Two panels of curves against time [s], a line per controller, titled ``titles``
+    (``log``: a logarithmic y axis, grid at the minor ticks too); the figure and its lines
+    per panel (for :func:`line_figures`)."""
     fig = figure((10, 3.5))
     axes = fig.subplots(1, 2)
     lines: list[list[Any]] = [[], []]
     for label, data in curves:
         for panel, (x, y) in enumerate(data):
-            lines[panel] += axes[panel].semilogy(x, y, label=label)
-    axes[0].set_title("feature error norm (trial 0)")
-    axes[0].set_xlabel("time [s]")
-    axes[1].set_title("position error [mm] (trial 0)")
-    axes[1].set_xlabel("time [s]")
-    for ax in axes:
-        ax.grid(True, which="both", alpha=0.3)
+            plot = axes[panel].semilogy if log else axes[panel].plot
+            lines[panel] += plot(x, y, label=label)
+    for ax, title in zip(axes, titles, strict=True):
+        ax.set_title(title)
+        ax.set_xlabel("time [s]")
+        ax.grid(True, which="both" if log else "major", alpha=0.3)
         ax.legend(fontsize=7)
     return fig, lines
+
+
+def _error_panels(rec: Any) -> list[tuple[np.ndarray, np.ndarray]]:
+    """Error norm (its positive values) and position error [mm] (floored at 1e-6 for the
+    log axis)."""
+    err = np.asarray(rec["error_norm"], float)
+    t = np.asarray(rec["t"], float)
+    ok = np.isfinite(err) & (err > 0)
+    return [(t[ok], err[ok]), (t, np.maximum(np.asarray(rec["position_error"]) * 1e3, 1e-6))]
 
 
 def time_series(out_dir: Path, scenario: str, points: list[int]) -> dict[int, str]:
     """Error norm and position error versus time of the recorded trial 0 of each
     controller, a figure per sweep point (those with a recorded trial)."""
-    return line_figures(out_dir, points, lambda p: _error_curves(out_dir, scenario, p),
-                        _draw_error_curves, lambda p: f"{scenario}_p{p}_timeseries.png",
-                        TWO_LOG_PANELS)
+    titles = ("feature error norm (trial 0)", "position error [mm] (trial 0)")
+    return line_figures(out_dir, points,
+                        lambda p: trial0_curves(out_dir, scenario, p, _error_panels),
+                        lambda curves: draw_time_panels(curves, titles, log=True),
+                        lambda p: f"{scenario}_p{p}_timeseries.png", TWO_LOG_PANELS)
 
 
 def _label(s: Summary) -> str:

@@ -15,10 +15,11 @@ import numpy as np
 from benchmarks.study.plots import (
     AS_IS,
     TWO_LINEAR_PANELS,
-    Curves,
+    draw_time_panels,
     figure,
     line_figures,
     save_figure,
+    trial0_curves,
     trial0_files,
 )
 
@@ -29,42 +30,23 @@ FORCES_LAYOUT = {"left": 0.06, "right": 0.98, "bottom": 0.15, "top": 0.9, "wspac
 Trace = tuple[str, np.ndarray, np.ndarray, np.ndarray]
 
 
-def _tracking_curves(out_dir: Path, scenario: str, point: int) -> list[Curves]:
-    """Position [mm] and orientation [deg] errors from the reference of each controller's
-    trial 0."""
-    curves = []
-    for f in trial0_files(out_dir, scenario, point):
-        with np.load(f) as rec:
-            t = np.asarray(rec["t"], float)
-            curves.append((str(rec["controller"]), [
-                (t, np.asarray(rec["position_error"], float) * 1e3),
-                (t, np.rad2deg(np.asarray(rec["orientation_error"], float)))]))
-    return curves
-
-
-def _draw_tracking(curves: list[Curves]) -> tuple[Any, list[list[Any]]]:
-    fig = figure((10, 3.5))
-    axes = fig.subplots(1, 2)
-    lines: list[list[Any]] = [[], []]
-    for label, data in curves:
-        for panel, (x, y) in enumerate(data):
-            lines[panel] += axes[panel].plot(x, y, label=label)
-    axes[0].set_title("tracking error, position [mm] (trial 0)")
-    axes[1].set_title("tracking error, orientation [deg] (trial 0)")
-    for ax in axes:
-        ax.set_xlabel("time [s]")
-        ax.grid(True, alpha=0.3)
-        ax.legend(fontsize=7)
-    return fig, lines
+def _tracking_panels(rec: Any) -> list[tuple[np.ndarray, np.ndarray]]:
+    """Position [mm] and orientation [deg] errors from the reference."""
+    t = np.asarray(rec["t"], float)
+    return [(t, np.asarray(rec["position_error"], float) * 1e3),
+            (t, np.rad2deg(np.asarray(rec["orientation_error"], float)))]
 
 
 def tracking_plots(out_dir: Path, scenario: str, points: list[int]) -> dict[int, str]:
     """The position and orientation errors from the reference against time, linear
     scale, of the recorded trial 0 of every controller, a figure per sweep point (those
     with a recorded trial); the file name of each."""
-    return line_figures(out_dir, points, lambda p: _tracking_curves(out_dir, scenario, p),
-                        _draw_tracking, lambda p: f"{scenario}_p{p}_tracking.png",
-                        TWO_LINEAR_PANELS)
+    titles = ("tracking error, position [mm] (trial 0)",
+              "tracking error, orientation [deg] (trial 0)")
+    return line_figures(out_dir, points,
+                        lambda p: trial0_curves(out_dir, scenario, p, _tracking_panels),
+                        lambda curves: draw_time_panels(curves, titles, log=False),
+                        lambda p: f"{scenario}_p{p}_tracking.png", TWO_LINEAR_PANELS)
 
 
 def force_traces(out_dir: Path, scenario: str, point: int) -> list[Trace]:
