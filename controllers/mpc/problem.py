@@ -59,13 +59,11 @@ and runs the SQP iterations.
 
 from __future__ import annotations
 
-import logging
 from dataclasses import dataclass
 from functools import lru_cache
 from typing import Any
 
 import casadi as ca
-import numpy as np
 
 from controllers.mpc.prediction import (
     sx_edge_normals,
@@ -78,8 +76,6 @@ from controllers.mpc.prediction import (
 from controllers.tasks.base import sx_skew
 from controllers.tasks.feature_kind import BuiltinFeature
 from hexapod.compiled import CompiledFunction, Layout
-
-log = logging.getLogger(__name__)
 
 #: Upper bound used for one-sided rows (the tilt cosine never exceeds 1).
 _BIG = 1e20
@@ -420,19 +416,9 @@ def _kernel_function(spec: ProblemSpec) -> ca.Function:
 
 
 @lru_cache(maxsize=32)
-def problem_kernel(spec: ProblemSpec) -> CompiledFunction:
-    """The compiled QP-data kernel of a problem structure (cached per process and on disk)."""
-    return CompiledFunction(_kernel_function(spec), inputs=spec.input_layout(),
-                            outputs=spec.output_layout())
-
-
-class VirtualMachineKernel:
-    """The same kernel evaluated by the CasADi virtual machine (no C compilation: slower
-    per call, nothing to build; option ``compiled = False``)."""
-
-    def __init__(self, spec: ProblemSpec) -> None:
-        self.function = _kernel_function(spec)
-
-    def single(self, x: np.ndarray) -> np.ndarray:
-        """Evaluate on one input vector."""
-        return np.asarray(self.function(x), dtype=float).ravel()
+def problem_kernel(spec: ProblemSpec, compile: bool = True) -> CompiledFunction:
+    """The QP-data kernel of a problem structure, compiled to C (cached per process and on
+    disk); ``compile=False``: evaluated by the CasADi virtual machine (no C compilation:
+    slower per call, nothing to build; option ``compiled = False``)."""
+    return CompiledFunction(_kernel_function(spec), compile=compile,
+                            inputs=spec.input_layout(), outputs=spec.output_layout())
