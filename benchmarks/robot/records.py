@@ -25,7 +25,7 @@ from typing import IO, Any
 from hexapod.exceptions import OutputError
 from hexapod.outputs import check_name, check_replace
 
-__all__ = ["LOG_NAME", "SESSIONS_DIR", "SessionLog", "is_servo_log", "session_path"]
+__all__ = ["LOG_NAME", "SESSIONS_DIR", "SessionLog", "is_servo_log", "mm_list", "session_path"]
 
 #: Where sessions are recorded by default (relative to the working directory).
 SESSIONS_DIR = "servo-runs"
@@ -91,6 +91,11 @@ def session_path(out: str | None, log: str | None, controller: str,
         n += 1
         d = base.with_name(f"{name}-{n}")
     return d / LOG_NAME
+
+
+def mm_list(values: Any) -> list[float]:
+    """Lengths or speeds [m, m/s] as the records write them: mm (mm/s), to 0.1 um."""
+    return [round(float(x) * 1e3, 4) for x in values]
 
 
 def _clean(value: Any) -> Any:

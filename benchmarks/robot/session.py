@@ -28,7 +28,7 @@ from benchmarks.robot.camera_policy import describe_camera
 from benchmarks.robot.exits import ServoExit, SessionStop, exit_for_signal
 from benchmarks.robot.limits import LimitedRobot, SessionLimits
 from benchmarks.robot.loop import PeriodCheck, servo_loop
-from benchmarks.robot.records import SessionLog, session_path
+from benchmarks.robot.records import SessionLog, mm_list, session_path
 from benchmarks.robot.shutdown import SignalGuard
 from benchmarks.robot.status import PeriodStatus, ServoResult, StatusLine
 from hexapod.backends.base import HaltReport
@@ -111,7 +111,7 @@ def _header(args: argparse.Namespace, inputs: SessionInputs,
             "camera_file": args.camera_file, "camera_pose": args.camera_pose,
             "controller": args.controller, "options": list(args.option),
             "goal": str(inputs.goal_file.source),
-            "goal_lengths_mm": [round(float(x) * 1e3, 4) for x in inputs.goal_file.lengths],
+            "goal_lengths_mm": mm_list(inputs.goal_file.lengths),
             "geometry": args.geometry, "dt_s": args.dt, "limits": limits.to_json(),
             "halt_timeout_s": args.halt_timeout_s, "retries": args.retries}
 
@@ -217,8 +217,7 @@ def _figures(result: ServoResult) -> dict[str, Any]:
             "rtt_median_ms": pct(result.rtts, 50), "rtt_p99_ms": pct(result.rtts, 99),
             "compute_median_ms": pct(result.compute, 50),
             "compute_p99_ms": pct(result.compute, 99),
-            "final_lengths_mm": None if last is None else [
-                round(float(x) * 1e3, 4) for x in last.lengths],
+            "final_lengths_mm": None if last is None else mm_list(last.lengths),
             "final_leg_error_mm": None if last is None else last.leg_error * 1e3,
             "final_feature_error": None if last is None else last.feature_error}
 
@@ -323,8 +322,7 @@ def run_session(args: argparse.Namespace, inputs: SessionInputs, status: StatusL
                    "traceback": "".join(traceback.format_exception(ended))
                    if failed and ended is not None else None,
                    "moved": moved, "identity": getattr(robot, "identity", None),
-                   "start_lengths_mm": None if limited is None else [
-                       round(float(x) * 1e3, 4) for x in limited.start],
+                   "start_lengths_mm": None if limited is None else mm_list(limited.start),
                    "halt_confirmed": None if halt is None else halt.confirmed,
                    "halt_detail": "the robot was not connected" if halt is None
                    else halt.detail,

@@ -403,12 +403,10 @@ class MPCLaw(Controller):
             known = np.isfinite(u[:, 0])
         if known.sum() < 3:
             return "fewer than three leg directions known: cannot reconstruct the pose"
+        assert self.context is not None
         A = law.base_points
         B = np.where(known[:, None], A + q[:, None] * np.where(known[:, None], u, 0.0), 0.0)
-        geo = self.context.geometry if self.context is not None else None
-        if geo is None:
-            return "no context"
-        R, t = fit_pose(B, geo.platform_points, known.astype(float))
+        R, t = fit_pose(B, self.context.geometry.platform_points, known.astype(float))
         if not (np.all(np.isfinite(R)) and np.all(np.isfinite(t))):
             return "pose reconstruction failed (non-finite)"
         self.pose = (R, t)
@@ -417,8 +415,8 @@ class MPCLaw(Controller):
     def _model_features(self, R: np.ndarray, t: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Features (nf, 3) and lengths (6,) of the model at the fitted pose."""
         law = self.law
-        geo = self.context.geometry if self.context is not None else None
-        assert geo is not None
+        assert self.context is not None
+        geo = self.context.geometry
         A = law.base_points
         d = geo.platform_points @ R.T + t - A
         qm = np.sqrt(np.einsum("ij,ij->i", d, d))

@@ -68,7 +68,6 @@ import casadi as ca
 from controllers.mpc.prediction import (
     sx_edge_normals,
     sx_exp_se3,
-    sx_features,
     sx_legs,
     sx_limb_ends,
     sx_pixel,
@@ -201,7 +200,7 @@ def _pose_function(spec: ProblemSpec) -> ca.Function:
     outs_res: list[ca.SX] = []
     if spec.model == "global":
         Kit = _mat(P["Kit"], 3, 3)
-        feats = sx_features(spec.feature, u, A, r, Kit)
+        feats = spec.feature.sx_of_legs(u, A, r, Kit)
         star = P["star"]
         off = P["offset"]
         res = ca.vertcat(*[ca.cross(f + off[3 * j:3 * j + 3], star[3 * j:3 * j + 3])
