@@ -38,7 +38,7 @@ from controllers.base import Command, Controller, ControllerContext, Goal, Obser
 from controllers.exceptions import ContextError
 from controllers.feature_ctc import LegEdgeCTC
 from controllers.force_mpc.problem import ForceProblemSpec, force_kernel
-from controllers.law_tools import check_count, check_number, check_weights
+from controllers.law_tools import check_count, check_horizon, check_number, check_weights
 from controllers.mpc.solver import SolveStats, compiled_qp, solve_qp
 from controllers.task_ctc import (
     DAMPING,
@@ -116,12 +116,10 @@ class ForceMPCLaw(Controller):
                  smooth_goal: bool = True, friction_smoothing: float = 3e-3,
                  compiled: bool = True) -> None:
         name = self.name
-        self.horizon = check_count(name, "horizon", horizon, 1, 50)
+        self.horizon, self.error_weight, self.terminal_weight = check_horizon(
+            name, horizon, error_weight, terminal_weight)
         self.substeps = check_count(name, "substeps", substeps, 1, 100)
         self.max_iter = check_count(name, "max_iter", max_iter, 1, 20)
-        self.error_weight, self.terminal_weight = check_weights(
-            name, ("error_weight", error_weight), ("terminal_weight", terminal_weight),
-            "no error to minimise")
         self.rate_weight, self.effort_weight = check_weights(
             name, ("rate_weight", rate_weight), ("effort_weight", effort_weight),
             "the QP needs one of them to be strictly convex")

@@ -29,7 +29,13 @@ import numpy as np
 
 from controllers.base import Command, Controller, ControllerContext, Goal, Observation
 from controllers.exceptions import ContextError, OptionError
-from controllers.law_tools import check_choice, check_count, check_number, check_weights
+from controllers.law_tools import (
+    check_choice,
+    check_count,
+    check_horizon,
+    check_number,
+    check_weights,
+)
 from controllers.mpc.drive_state import DRIVE_STATES, DriveLag, drive_lag
 from controllers.mpc.prediction import fit_pose
 from controllers.mpc.problem import ProblemSpec, problem_kernel
@@ -124,14 +130,12 @@ class MPCLaw(Controller):
             raise OptionError(name, "leg_rate_feedforward", "the one-step laws' option; the "
                               "predictive controllers model the drives with drive_model = "
                               "\"lag\" (from the measured leg velocities)")
-        self.horizon = check_count(name, "horizon", horizon, 1, 50)
+        self.horizon, self.error_weight, self.terminal_weight = check_horizon(
+            name, horizon, error_weight, terminal_weight)
         self.model = check_choice(name, "model", model, MODELS)
         self.reference = check_choice(name, "reference", reference, REFERENCES)
         self.drive_model = check_choice(name, "drive_model", drive_model, DRIVE_MODELS)
         self.drive_state = check_choice(name, "drive_state", drive_state, DRIVE_STATES)
-        self.error_weight, self.terminal_weight = check_weights(
-            name, ("error_weight", error_weight), ("terminal_weight", terminal_weight),
-            "no error to minimise")
         self.regularization, self.effort_weight = check_weights(
             name, ("regularization", regularization), ("effort_weight", effort_weight),
             "the QP needs one of them to be strictly convex")

@@ -303,8 +303,6 @@ def _kernel_function(spec: ProblemSpec) -> ca.Function:
     cost: Any = ca.MX(0)
     rows_c: list[Any] = []
     vals_c: list[Any] = []
-    lo_c: list[Any] = []
-    hi_c: list[Any] = []
     sr = spec.stage_rows
     stroke_lo = ca.repmat(P["qlo"], 6, 1)
     stroke_hi = ca.repmat(P["qhi"], 6, 1)
@@ -349,8 +347,6 @@ def _kernel_function(spec: ProblemSpec) -> ca.Function:
                     Hb[i][j] += D[i].T @ MD[j]
             rows_c.append(ca.horzcat(*[Gv @ Dj for Dj in D], ca.MX.zeros(sr, 6 * (N - k))))
             vals_c.append(vals)
-            lo_c.append(lo_s)
-            hi_c.append(hi_s)
     else:
         Nm = _mat(P["N"], 6, 6)
         b = P["b"]
@@ -382,8 +378,8 @@ def _kernel_function(spec: ProblemSpec) -> ca.Function:
                 rows_c.append(ca.horzcat(*[G0 @ S[k - 1 - j] for j in range(k)],
                                          ca.MX.zeros(sr, 6 * (N - k))))
             vals_c.append(vals0 + G0 @ s)
-            lo_c.append(lo_s)
-            hi_c.append(hi_s)
+    lo_c: list[Any] = [lo_s] * N  # the stage rows' bounds
+    hi_c: list[Any] = [hi_s] * N
     # Speed rows: J_inv,0 tau_k, the first one with the first-period stroke window.
     vmax = P["vmax"]
     for k in range(N):
