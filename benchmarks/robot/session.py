@@ -29,7 +29,7 @@ from benchmarks.robot.exits import ServoExit, SessionStop, exit_for_signal
 from benchmarks.robot.limits import LimitedRobot, SessionLimits
 from benchmarks.robot.loop import PeriodCheck, servo_loop
 from benchmarks.robot.records import SessionLog, mm_list, session_path
-from benchmarks.robot.shutdown import SignalGuard
+from benchmarks.robot.shutdown import SignalGuard, signal_name
 from benchmarks.robot.status import PeriodStatus, ServoResult, StatusLine
 from hexapod.backends.base import HaltReport
 from hexapod.exceptions import BackendError, LinkError, ProtocolError, RobotFaultError
@@ -190,13 +190,6 @@ def _halt(robot: Any, timeout_s: float) -> HaltReport:
         return HaltReport(False, f"halting failed: {type(exc).__name__}: {exc}")
 
 
-def sig_name(signum: int) -> str:
-    """A signal's name (``SIGHUP``)."""
-    import signal
-
-    return signal.Signals(signum).name
-
-
 def _last_move(limited: LimitedRobot | None) -> str:
     if limited is None or not limited.moved:
         return "no motion was commanded"
@@ -301,7 +294,7 @@ def run_session(args: argparse.Namespace, inputs: SessionInputs, status: StatusL
             if guard.pending is not None and not isinstance(ended, SessionStop):
                 # e.g. SIGHUP, then the closed terminal failing a print: the signal first
                 sig = exit_for_signal(guard.pending)
-                code, reason = sig, f"{sig_name(guard.pending)} received (then {reason})"
+                code, reason = sig, f"{signal_name(guard.pending)} received (then {reason})"
         else:
             code, reason = _outcome(result, args)
         halt: HaltReport | None = None
