@@ -37,8 +37,8 @@ FORMAT = 1
 
 
 def is_period(row: Any) -> bool:
-    """A record's line is a period (``step``, ``t_s`` and ``lengths_mm``)."""
-    return isinstance(row, dict) and {"step", "t_s", "lengths_mm"} <= set(row)
+    """A record's line is a period (``step``, ``t_s``)."""
+    return isinstance(row, dict) and {"step", "t_s"} <= set(row)
 
 
 def is_header(row: Any) -> bool:

@@ -74,7 +74,7 @@ def _rows(path: Path) -> tuple[dict[str, Any], list[dict[str, Any]], dict[str, A
             if isinstance(row, dict) and row.get("final") is True:
                 final = row
                 continue
-            if not is_period(row):
+            if not (is_period(row) and "lengths_mm" in row):
                 continue
             lengths = row["lengths_mm"]
             if not (isinstance(lengths, list) and len(lengths) == 6 and all(
