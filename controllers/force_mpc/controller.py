@@ -37,7 +37,7 @@ import numpy as np
 from controllers.base import Command, Controller, ControllerContext, Goal, Observation
 from controllers.exceptions import ContextError
 from controllers.feature_ctc import LegEdgeCTC
-from controllers.force_mpc.problem import ForceProblemSpec, force_kernel
+from controllers.force_mpc.problem import NX, STATE, ForceProblemSpec, force_kernel
 from controllers.law_tools import check_count, check_horizon, check_number, check_weights
 from controllers.mpc.solver import SolveStats, compiled_qp, solve_qp
 from controllers.task_ctc import (
@@ -158,6 +158,8 @@ class ForceMPCLaw(Controller):
         self._kernel = force_kernel(self.spec, self.compiled)
         self._bound = self._kernel.bind()
         v = self._bound.inputs
+        #: The state's blocks in the kernel input (written each step).
+        self._state = STATE.views(v["state"])
         d = g.drives
         v["model_A"][:] = g.base_points
         v["model_E"][:] = g.platform_points
@@ -225,9 +227,10 @@ class ForceMPCLaw(Controller):
         if problem is not None:
             return self._refuse(problem)
         v = self._bound.inputs
-        v["state"][0:9] = R.T.ravel()
-        v["state"][9:12] = p
-        v["state"][12:18] = twist
+        state = self._state
+        state["R"][:] = R.T.ravel()
+        state["t"][:] = p
+        state["twist"][:] = twist
         v["f_prev"][:] = self._f_prev
         v["reference"][:] = reference
         v["observed"][:] = np.where(mask, observed, 0.0)
@@ -364,7 +367,7 @@ class ForceMPCLaw(Controller):
         y = self._kernel.outputs.views(bound.y.copy())
         bound.x[:] = saved
         N = self.horizon
-        return {"states": y["states"].reshape(N, 18),
+        return {"states": y["states"].reshape(N, NX),
                 "features": y["features"].reshape(N, self.spec.features),
                 "lengths": y["lengths"].reshape(N, 6), "rates": y["rates"].reshape(N, 6),
                 "cost": float(y["cost"][0])}
