@@ -73,6 +73,49 @@ def check_number(controller: str, option: str, value: Any, minimum: float = 0.0,
     return x
 
 
+def check_count(controller: str, option: str, value: Any, minimum: int,
+                maximum: int | None = None) -> int:
+    """Validate an integer from ``minimum`` to ``maximum`` (None: no upper bound).
+
+    Raises:
+        OptionError: Not an integer (a bool is not one), or out of range.
+    """
+    if (isinstance(value, bool) or not isinstance(value, int) or value < minimum
+            or (maximum is not None and value > maximum)):
+        bound = f">= {minimum}" if maximum is None else f"from {minimum} to {maximum}"
+        raise OptionError(controller, option, f"expected an integer {bound}, got {value!r}")
+    return value
+
+
+def check_weights(controller: str, first: tuple[str, Any], second: tuple[str, Any],
+                  why: str) -> tuple[float, float]:
+    """Validate two weights ``(option, value)``: finite, >= 0, not both 0.
+
+    Raises:
+        OptionError: A weight is not a finite number >= 0, or both are 0 (naming the
+            first, with ``why``).
+    """
+    a = check_number(controller, first[0], first[1], 0.0, strict=False)
+    b = check_number(controller, second[0], second[1], 0.0, strict=False)
+    if a == 0 and b == 0:
+        raise OptionError(controller, first[0], f"{first[0]} and {second[0]} are both 0 "
+                          f"({why})")
+    return a, b
+
+
+def check_horizon(controller: str, horizon: Any, error_weight: Any, terminal_weight: Any
+                  ) -> tuple[int, float, float]:
+    """A predictive controller's horizon (1 to 50 periods) and the weights of the error
+    at its stages ``1..N-1`` and ``N`` (>= 0, not both 0).
+
+    Raises:
+        OptionError: Naming the option out of range.
+    """
+    return (check_count(controller, "horizon", horizon, 1, 50),
+            *check_weights(controller, ("error_weight", error_weight),
+                           ("terminal_weight", terminal_weight), "no error to minimise"))
+
+
 def goal_lengths(controller: str, goal: Any) -> np.ndarray:
     """``goal.lengths`` checked: a copy (6,) [m].
 

@@ -43,7 +43,7 @@ import numpy as np
 
 from benchmarks.exceptions import BenchmarkError
 from benchmarks.robot.exits import ServoExit, SessionStop
-from hexapod.exceptions import ForwardKinematicsError
+from benchmarks.robot.models import EncoderPose
 from hexapod.geometry import HexapodGeometry
 from hexapod.kinematics import Transform
 from hexapod.se3 import log_so3
@@ -211,8 +211,8 @@ class CameraCheck:
         self.checked = 0
         self.worst_distance = 0.0
         self.worst_angle = 0.0
-        self.geometry = geometry
-        self._encoder_pose: tuple[np.ndarray, np.ndarray] | None = None
+        self._encoder_pose = EncoderPose(geometry, "camera check: no encoder pose",
+                                         warn=False)
         self._seen_at: float | None = None
         self._blind_why: str | None = None
 
@@ -232,18 +232,8 @@ class CameraCheck:
             SessionStop: As :meth:`compare`.
             BenchmarkError: No encoder pose for the first lengths.
         """
-        from hexapod.fk import forward_kinematics
-
         q = np.asarray(lengths, float)
-        try:
-            sol = forward_kinematics(self.geometry, q, guess=self._encoder_pose,
-                                     check_stroke=False)
-            self._encoder_pose = (sol.rotation, sol.translation)
-        except ForwardKinematicsError as exc:
-            if self._encoder_pose is None:
-                raise BenchmarkError(f"camera check: no encoder pose for the measured "
-                                     f"lengths {np.round(q * 1e3, 3)} mm: {exc}") from None
-        R, t = self._encoder_pose
+        R, t = self._encoder_pose(q)
         self.compare(step, q, R, t, None if features is None else features.normals,
                      None if features is None else features.edge_visible)
 

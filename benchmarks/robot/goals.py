@@ -13,6 +13,7 @@ from typing import Any
 import numpy as np
 
 from benchmarks.exceptions import BenchmarkError
+from benchmarks.robot.records import mm_list
 from hexapod.config import check_keys, get_matrix, load_toml
 from hexapod.exceptions import ConfigFileError, ForwardKinematicsError
 from hexapod.geometry import HexapodGeometry
@@ -172,8 +173,7 @@ def save_goal(path: str | Path, lengths: np.ndarray, features: Features,
     npz = p.with_suffix(".features.npz")
     np.savez(npz, normals=np.asarray(features.normals, float),
              edge_visible=np.asarray(features.edge_visible, bool))
-    doc: dict[str, Any] = {"lengths_mm": [round(float(x) * 1e3, 4) for x in lengths],
-                           "features": npz.name}
+    doc: dict[str, Any] = {"lengths_mm": mm_list(lengths), "features": npz.name}
     if name:
         doc["name"] = name
     p.write_text(f"# {TEXT_MARKER}: taught by hexapod-bench servo --teach\n"

@@ -13,14 +13,13 @@ from typing import Any, Protocol
 
 import numpy as np
 
-from benchmarks.exceptions import BenchmarkError
 from benchmarks.robot.exits import ServoExit, SessionStop
 from benchmarks.robot.goals import feature_directions, feature_error, feature_lines
 from benchmarks.robot.limits import DeadlinePolicy, LimitedRobot, SessionLimits
+from benchmarks.robot.models import EncoderPose
 from benchmarks.robot.status import PeriodStatus, ServoResult
 from benchmarks.sim.sensors import camera_batch
 from controllers.base import ObservationBatch
-from hexapod.exceptions import ForwardKinematicsError
 from hexapod.geometry import HexapodGeometry
 from vision.feature_cameras import FeatureSensor, sensor_camera
 
@@ -154,30 +153,17 @@ def servo_loop(
 
 
 class _NominalPoses:
-    """The predicted pose of the robot: the nominal forward kinematics of its measured
-    lengths, seeded with the previous pose (a failure keeps the last pose, warned; with
-    no pose yet it is a :class:`BenchmarkError`)."""
+    """The plant's pose: the :class:`~benchmarks.robot.models.EncoderPose` of its measured
+    lengths, written into its arrays."""
 
     def __init__(self, geometry: HexapodGeometry, q: np.ndarray, R: np.ndarray,
                  t: np.ndarray) -> None:
-        self.geometry = geometry
         self.q, self.R, self.t = q, R, t
-        self.guess: tuple[np.ndarray, np.ndarray] | None = None
+        self.encoder_pose = EncoderPose(geometry)
         self(np.zeros(1, dtype=int))
 
     def __call__(self, run: np.ndarray) -> np.ndarray:
-        from hexapod.fk import forward_kinematics
-
-        try:
-            sol = forward_kinematics(self.geometry, self.q[0], guess=self.guess,
-                                     check_stroke=False)
-            self.guess = (sol.rotation, sol.translation)
-            self.R[0], self.t[0] = sol.rotation, sol.translation
-        except ForwardKinematicsError as exc:
-            if self.guess is None:
-                raise BenchmarkError(f"no platform pose for the measured lengths "
-                                     f"{np.round(self.q[0] * 1e3, 3)} mm: {exc}") from None
-            log.warning("forward kinematics failed (%s); keeping the last pose", exc)
+        self.R[0], self.t[0] = self.encoder_pose(self.q[0])
         return np.zeros(len(run), dtype=bool)
 
 

@@ -1,15 +1,21 @@
 """The robot and camera models a servo session (and what replays or checks one) loads
-from its options: ``--geometry``, ``--camera-file`` and ``--camera-pose``."""
+from its options (``--geometry``, ``--camera-file`` and ``--camera-pose``), and the
+platform pose the nominal robot gives the measured lengths (:class:`EncoderPose`)."""
 
 from __future__ import annotations
 
+import logging
 from pathlib import Path
 from typing import Any
+
+import numpy as np
 
 from benchmarks.exceptions import BenchmarkError
 from hexapod.geometry import HexapodGeometry
 
-__all__ = ["camera_model", "robot_geometry"]
+__all__ = ["EncoderPose", "camera_model", "robot_geometry"]
+
+log = logging.getLogger(__name__)
 
 
 def robot_geometry(spec: str) -> HexapodGeometry:
@@ -41,3 +47,42 @@ def camera_model(spec: str, pose_spec: str | None, geometry: HexapodGeometry) ->
                              "[camera_from_base] places it")
     pose = load_camera(pose_spec, geometry).camera_from_base
     return load_camera(spec, camera_from_base=pose)
+
+
+class EncoderPose:
+    """The platform pose of measured leg lengths: the nominal forward kinematics, seeded
+    with the previous pose; a failure keeps the last pose (logged when ``warn``), and
+    with no pose yet it is a :class:`BenchmarkError` starting with ``what``.
+
+    Args:
+        geometry: The nominal robot.
+        what: The start of the error's message.
+        warn: Log a warning when a failure keeps the last pose.
+    """
+
+    def __init__(self, geometry: HexapodGeometry, what: str = "no platform pose",
+                 warn: bool = True) -> None:
+        self.geometry, self.what, self.warn = geometry, what, warn
+        #: The last pose ``(R, t)`` [-, m] (None: none yet).
+        self.pose: tuple[np.ndarray, np.ndarray] | None = None
+
+    def __call__(self, lengths: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """The pose ``(R (3, 3), t (3,) [m])`` of ``lengths`` (6,) [m].
+
+        Raises:
+            BenchmarkError: No pose for the first lengths.
+        """
+        from hexapod.exceptions import ForwardKinematicsError
+        from hexapod.fk import forward_kinematics
+
+        try:
+            sol = forward_kinematics(self.geometry, lengths, guess=self.pose,
+                                     check_stroke=False)
+            self.pose = (sol.rotation, sol.translation)
+        except ForwardKinematicsError as exc:
+            if self.pose is None:
+                raise BenchmarkError(f"{self.what} for the measured lengths "
+                                     f"{np.round(lengths * 1e3, 3)} mm: {exc}") from None
+            if self.warn:
+                log.warning("forward kinematics failed (%s); keeping the last pose", exc)
+        return self.pose

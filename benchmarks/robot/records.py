@@ -25,7 +25,8 @@ from typing import IO, Any
 from hexapod.exceptions import OutputError
 from hexapod.outputs import check_name, check_replace
 
-__all__ = ["LOG_NAME", "SESSIONS_DIR", "SessionLog", "is_servo_log", "session_path"]
+__all__ = ["LOG_NAME", "SESSIONS_DIR", "SessionLog", "is_header", "is_period", "is_servo_log",
+           "mm_list", "session_path"]
 
 #: Where sessions are recorded by default (relative to the working directory).
 SESSIONS_DIR = "servo-runs"
@@ -35,16 +36,26 @@ LOG_NAME = "servo.jsonl"
 FORMAT = 1
 
 
+def is_period(row: Any) -> bool:
+    """A record's line is a period (``step``, ``t_s``)."""
+    return isinstance(row, dict) and {"step", "t_s"} <= set(row)
+
+
+def is_header(row: Any) -> bool:
+    """A record's line is the session's header."""
+    return isinstance(row, dict) and "servo_session" in row
+
+
 def is_servo_log(path: Path) -> bool:
-    """A log ``servo`` wrote: its first line is a session header, or (older logs) a
-    period (``step``, ``t_s``)."""
+    """A log ``servo`` wrote: its first line (blank lines skipped) is a session header,
+    or (older logs) a period."""
     try:
         with path.open(encoding="utf-8") as f:
-            first = json.loads(f.readline())
-    except (OSError, ValueError):
+            first = next((line for line in f if line.strip()), "")
+        row = json.loads(first)
+    except (OSError, ValueError):  # UnicodeDecodeError and JSON errors are ValueErrors
         return False
-    return isinstance(first, dict) and ("servo_session" in first
-                                        or {"step", "t_s"} <= set(first))
+    return is_header(row) or is_period(row)
 
 
 def _safe(text: str) -> str:
@@ -91,6 +102,11 @@ def session_path(out: str | None, log: str | None, controller: str,
         n += 1
         d = base.with_name(f"{name}-{n}")
     return d / LOG_NAME
+
+
+def mm_list(values: Any) -> list[float]:
+    """Lengths or speeds [m, m/s] as the records write them: mm (mm/s), to 0.1 um."""
+    return [round(float(x) * 1e3, 4) for x in values]
 
 
 def _clean(value: Any) -> Any:

@@ -29,32 +29,9 @@ from typing import Any
 import numpy as np
 
 from benchmarks.exceptions import BenchmarkError
+from benchmarks.robot.records import is_header, is_period, is_servo_log
 
-__all__ = ["find_session_log", "is_session_log", "load_session"]
-
-
-def _is_period(row: Any) -> bool:
-    return isinstance(row, dict) and {"step", "t_s", "lengths_mm"} <= set(row)
-
-
-def _is_header(row: Any) -> bool:
-    return isinstance(row, dict) and "servo_session" in row
-
-
-def is_session_log(path: Path) -> bool:
-    """A file a servo session wrote: its first line is a session header, or one of its
-    first lines a period (``step``, ``t_s`` and ``lengths_mm``: an older log)."""
-    try:
-        with path.open(encoding="utf-8") as f:
-            for _, line in zip(range(5), f, strict=False):
-                if not line.strip():
-                    continue
-                row = json.loads(line)
-                if _is_header(row) or _is_period(row):
-                    return True
-    except (OSError, UnicodeDecodeError, ValueError):
-        return False
-    return False
+__all__ = ["find_session_log", "load_session"]
 
 
 def find_session_log(path: Path) -> Path | None:
@@ -65,10 +42,10 @@ def find_session_log(path: Path) -> Path | None:
         BenchmarkError: A directory with several servo logs.
     """
     if path.is_file():
-        return path if is_session_log(path) else None
+        return path if is_servo_log(path) else None
     if not path.is_dir():
         return None
-    logs = sorted(p for p in path.glob("*.jsonl") if is_session_log(p))
+    logs = sorted(p for p in path.glob("*.jsonl") if is_servo_log(p))
     if len(logs) > 1:
         raise BenchmarkError(f"{path}: {len(logs)} servo session logs "
                              f"({', '.join(p.name for p in logs[:6])}); give the file")
@@ -91,13 +68,13 @@ def _rows(path: Path) -> tuple[dict[str, Any], list[dict[str, Any]], dict[str, A
                 if n > 1 and not line.endswith("\n"):  # cut mid-line by a crash: the rest
                     break
                 raise BenchmarkError(f"{path}, line {n}: not JSON ({exc})") from None
-            if _is_header(row) and not header and not rows:
+            if is_header(row) and not header and not rows:
                 header = row
                 continue
             if isinstance(row, dict) and row.get("final") is True:
                 final = row
                 continue
-            if not _is_period(row):
+            if not (is_period(row) and "lengths_mm" in row):
                 continue
             lengths = row["lengths_mm"]
             if not (isinstance(lengths, list) and len(lengths) == 6 and all(

@@ -57,13 +57,9 @@ from benchmarks.robot.consistency import (
     DEFAULT_CONSISTENCY_MM,
     CameraCheck,
 )
-from benchmarks.robot.exits import ServoExit
 from benchmarks.robot.goals import (
     DEFAULT_TEACH_FRAMES,
-    GOAL_KEYS,
-    ServoGoal,
     average_features,
-    feature_error,
     goal_features,
     load_goal,
     save_goal,
@@ -75,7 +71,7 @@ from benchmarks.robot.limits import (
     DEFAULT_MAX_TIME_S,
     MISSED_WINDOW,
 )
-from benchmarks.robot.loop import DEFAULT_FEATURE_TOLERANCE, DEFAULT_SETTLE, servo_loop
+from benchmarks.robot.loop import DEFAULT_FEATURE_TOLERANCE, DEFAULT_SETTLE
 from benchmarks.robot.models import camera_model, robot_geometry
 from benchmarks.robot.records import LOG_NAME, SESSIONS_DIR, session_path
 from benchmarks.robot.session import (
@@ -85,37 +81,20 @@ from benchmarks.robot.session import (
     run_session,
     session_limits,
 )
-from benchmarks.robot.status import PeriodStatus, ServoResult, StatusLine
+from benchmarks.robot.status import StatusLine
 from benchmarks.study.outdir import OutputDir, OutputFile
 from hexapod.geometry import HexapodGeometry
-from vision.feature_cameras import (
-    Features,
-    FeatureSensor,
-    SimCamera,
-    VideoCamera,
-    open_camera,
-    sensor_camera,
-)
+from vision.feature_cameras import Features, open_camera
 
 __all__ = [
     "DEFAULT_FEATURE_TOLERANCE",
     "DEFAULT_SETTLE",
     "DEFAULT_TEACH_FRAMES",
-    "GOAL_KEYS",
     "SIMULATED_BACKENDS",
-    "FeatureSensor",
     "Features",
-    "PeriodStatus",
-    "ServoExit",
-    "ServoGoal",
-    "ServoResult",
-    "SimCamera",
-    "StatusLine",
-    "VideoCamera",
     "add_arguments",
     "average_features",
     "build_parser",
-    "feature_error",
     "goal_features",
     "load_goal",
     "main",
@@ -124,8 +103,6 @@ __all__ = [
     "parse_options",
     "run",
     "save_goal",
-    "sensor_camera",
-    "servo_loop",
     "teach_tolerance",
 ]
 

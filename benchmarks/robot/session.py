@@ -28,8 +28,8 @@ from benchmarks.robot.camera_policy import describe_camera
 from benchmarks.robot.exits import ServoExit, SessionStop, exit_for_signal
 from benchmarks.robot.limits import LimitedRobot, SessionLimits
 from benchmarks.robot.loop import PeriodCheck, servo_loop
-from benchmarks.robot.records import SessionLog, session_path
-from benchmarks.robot.shutdown import SignalGuard
+from benchmarks.robot.records import SessionLog, mm_list, session_path
+from benchmarks.robot.shutdown import SignalGuard, signal_name
 from benchmarks.robot.status import PeriodStatus, ServoResult, StatusLine
 from hexapod.backends.base import HaltReport
 from hexapod.exceptions import BackendError, LinkError, ProtocolError, RobotFaultError
@@ -111,7 +111,7 @@ def _header(args: argparse.Namespace, inputs: SessionInputs,
             "camera_file": args.camera_file, "camera_pose": args.camera_pose,
             "controller": args.controller, "options": list(args.option),
             "goal": str(inputs.goal_file.source),
-            "goal_lengths_mm": [round(float(x) * 1e3, 4) for x in inputs.goal_file.lengths],
+            "goal_lengths_mm": mm_list(inputs.goal_file.lengths),
             "geometry": args.geometry, "dt_s": args.dt, "limits": limits.to_json(),
             "halt_timeout_s": args.halt_timeout_s, "retries": args.retries}
 
@@ -190,13 +190,6 @@ def _halt(robot: Any, timeout_s: float) -> HaltReport:
         return HaltReport(False, f"halting failed: {type(exc).__name__}: {exc}")
 
 
-def sig_name(signum: int) -> str:
-    """A signal's name (``SIGHUP``)."""
-    import signal
-
-    return signal.Signals(signum).name
-
-
 def _last_move(limited: LimitedRobot | None) -> str:
     if limited is None or not limited.moved:
         return "no motion was commanded"
@@ -217,8 +210,7 @@ def _figures(result: ServoResult) -> dict[str, Any]:
             "rtt_median_ms": pct(result.rtts, 50), "rtt_p99_ms": pct(result.rtts, 99),
             "compute_median_ms": pct(result.compute, 50),
             "compute_p99_ms": pct(result.compute, 99),
-            "final_lengths_mm": None if last is None else [
-                round(float(x) * 1e3, 4) for x in last.lengths],
+            "final_lengths_mm": None if last is None else mm_list(last.lengths),
             "final_leg_error_mm": None if last is None else last.leg_error * 1e3,
             "final_feature_error": None if last is None else last.feature_error}
 
@@ -302,7 +294,7 @@ def run_session(args: argparse.Namespace, inputs: SessionInputs, status: StatusL
             if guard.pending is not None and not isinstance(ended, SessionStop):
                 # e.g. SIGHUP, then the closed terminal failing a print: the signal first
                 sig = exit_for_signal(guard.pending)
-                code, reason = sig, f"{sig_name(guard.pending)} received (then {reason})"
+                code, reason = sig, f"{signal_name(guard.pending)} received (then {reason})"
         else:
             code, reason = _outcome(result, args)
         halt: HaltReport | None = None
@@ -323,8 +315,7 @@ def run_session(args: argparse.Namespace, inputs: SessionInputs, status: StatusL
                    "traceback": "".join(traceback.format_exception(ended))
                    if failed and ended is not None else None,
                    "moved": moved, "identity": getattr(robot, "identity", None),
-                   "start_lengths_mm": None if limited is None else [
-                       round(float(x) * 1e3, 4) for x in limited.start],
+                   "start_lengths_mm": None if limited is None else mm_list(limited.start),
                    "halt_confirmed": None if halt is None else halt.confirmed,
                    "halt_detail": "the robot was not connected" if halt is None
                    else halt.detail,

@@ -20,13 +20,14 @@ import numpy as np
 
 from benchmarks.robot.exits import SessionStop, exit_for_signal
 
-__all__ = ["SESSION_SIGNALS", "SignalGuard"]
+__all__ = ["SESSION_SIGNALS", "SignalGuard", "signal_name"]
 
 #: The signals that end a session through its shutdown.
 SESSION_SIGNALS = (signal.SIGINT, signal.SIGTERM, signal.SIGHUP)
 
 
-def _name(signum: int) -> str:
+def signal_name(signum: int) -> str:
+    """A signal's name (``SIGHUP``)."""
     return signal.Signals(signum).name
 
 
@@ -53,12 +54,12 @@ class SignalGuard:
         self._previous: dict[int, Any] = {}
 
     def _stop(self, signum: int) -> SessionStop:
-        return SessionStop(exit_for_signal(signum), f"{_name(signum)} received")
+        return SessionStop(exit_for_signal(signum), f"{signal_name(signum)} received")
 
     def _handle(self, signum: int, frame: FrameType | None) -> None:
-        self.received.append(_name(signum))
+        self.received.append(signal_name(signum))
         if self.shutting_down:
-            self.say(f"{_name(signum)} received during the shutdown: the robot is being "
+            self.say(f"{signal_name(signum)} received during the shutdown: the robot is being "
                      "halted first")
             return
         if self.in_loop and self.pending is None:

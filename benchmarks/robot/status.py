@@ -13,6 +13,7 @@ from typing import IO, Any
 import numpy as np
 
 from benchmarks.robot.exits import SessionStop
+from benchmarks.robot.records import mm_list
 
 __all__ = ["PLAIN_STATUS_PERIOD_S", "PeriodStatus", "ServoResult", "StatusLine"]
 
@@ -75,16 +76,13 @@ class PeriodStatus:
         def num(x: float, scale: float = 1.0) -> float | None:
             return float(x) * scale if math.isfinite(x) else None
 
-        def mm(v: np.ndarray) -> list[float]:
-            return [round(float(x) * 1e3, 4) for x in v]
-
         return {"step": self.step, "t_s": round(self.t, 6),
-                "lengths_mm": mm(self.lengths),
+                "lengths_mm": mm_list(self.lengths),
                 "leg_error_mm": num(self.leg_error, 1e3),
                 "feature_error": num(self.feature_error),
                 "controller_error": num(self.controller_error),
-                "commanded_mm_s": mm(self.velocities),
-                "applied_mm_s": mm(self.applied),
+                "commanded_mm_s": mm_list(self.velocities),
+                "applied_mm_s": mm_list(self.applied),
                 "clamped": [bool(x) for x in self.clamped],
                 "visible_edges": self.visible_edges, "reason": self.reason,
                 "lost_frame": self.lost_frame, "lost_frames": self.lost_frames,

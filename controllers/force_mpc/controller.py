@@ -16,7 +16,7 @@ Each period (receding horizon, force-mode drives):
 4. one Gauss-Newton QP of :mod:`controllers.force_mpc.problem` (compiled kernel) from
    the previous plan shifted by one period (warm start), solved first without its
    bounds (the minimiser ``-H^-1 g``, the QP's optimum when it holds them), else by
-   DAQP generated to C (:func:`controllers.mpc.solver.compiled_qp`): the force limits
+   DAQP generated to C (:func:`controllers.mpc.solver.solve_qp`, the MPC's): the force limits
    ``|f_k| <= f_max`` of the nominal drives; repeated from the new plan until the
    first force has converged (its step within 0.1 % of it, or 1 mN), at most
    ``max_iter`` times (default :data:`MAX_ITER`; 1: the real-time iteration);
@@ -35,11 +35,11 @@ from typing import Any
 import numpy as np
 
 from controllers.base import Command, Controller, ControllerContext, Goal, Observation
-from controllers.exceptions import ContextError, OptionError
+from controllers.exceptions import ContextError
 from controllers.feature_ctc import LegEdgeCTC
-from controllers.force_mpc.problem import ForceProblemSpec, force_kernel
-from controllers.law_tools import check_number
-from controllers.mpc.solver import QPResult, SolveStats, compiled_qp, solve_qp
+from controllers.force_mpc.problem import NX, STATE, ForceProblemSpec, force_kernel
+from controllers.law_tools import check_count, check_horizon, check_number, check_weights
+from controllers.mpc.solver import SolveStats, compiled_qp, solve_qp
 from controllers.task_ctc import (
     DAMPING,
     NATURAL_FREQUENCY_HZ,
@@ -116,23 +116,13 @@ class ForceMPCLaw(Controller):
                  smooth_goal: bool = True, friction_smoothing: float = 3e-3,
                  compiled: bool = True) -> None:
         name = self.name
-        for option, value, top in (("horizon", horizon, 50), ("substeps", substeps, 100),
-                                   ("max_iter", max_iter, 20)):
-            if isinstance(value, bool) or not isinstance(value, int) or not 1 <= value <= top:
-                raise OptionError(name, option, f"expected an integer from 1 to {top}, got "
-                                  f"{value!r}")
-        self.horizon, self.substeps, self.max_iter = horizon, substeps, max_iter
-        self.error_weight = check_number(name, "error_weight", error_weight, 0.0, strict=False)
-        self.terminal_weight = check_number(name, "terminal_weight", terminal_weight, 0.0,
-                                            strict=False)
-        if self.error_weight == 0 and self.terminal_weight == 0:
-            raise OptionError(name, "error_weight", "error and terminal weights are both 0")
-        self.rate_weight = check_number(name, "rate_weight", rate_weight, 0.0, strict=False)
-        self.effort_weight = check_number(name, "effort_weight", effort_weight, 0.0,
-                                          strict=False)
-        if self.rate_weight == 0 and self.effort_weight == 0:
-            raise OptionError(name, "rate_weight", "rate and effort weights are both 0 (the "
-                              "QP needs one of them to be strictly convex)")
+        self.horizon, self.error_weight, self.terminal_weight = check_horizon(
+            name, horizon, error_weight, terminal_weight)
+        self.substeps = check_count(name, "substeps", substeps, 1, 100)
+        self.max_iter = check_count(name, "max_iter", max_iter, 1, 20)
+        self.rate_weight, self.effort_weight = check_weights(
+            name, ("rate_weight", rate_weight), ("effort_weight", effort_weight),
+            "the QP needs one of them to be strictly convex")
         self.friction_smoothing = check_number(name, "friction_smoothing",
                                                friction_smoothing)
         self.compiled = bool(compiled)
@@ -168,6 +158,8 @@ class ForceMPCLaw(Controller):
         self._kernel = force_kernel(self.spec, self.compiled)
         self._bound = self._kernel.bind()
         v = self._bound.inputs
+        #: The state's blocks in the kernel input (written each step).
+        self._state = STATE.views(v["state"])
         d = g.drives
         v["model_A"][:] = g.base_points
         v["model_E"][:] = g.platform_points
@@ -182,7 +174,8 @@ class ForceMPCLaw(Controller):
                            self.effort_weight)
         self._limit = np.tile(np.asarray(d.force_limit, dtype=float), self.horizon)
         n = 6 * self.horizon
-        self._qp = compiled_qp(n, n) if self.compiled else None
+        if self.compiled:  # DAQP of this size built now
+            compiled_qp(n, n)
         self._eye = np.eye(n)
         self._dt = dt
         self.stats = SolveStats()
@@ -234,9 +227,10 @@ class ForceMPCLaw(Controller):
         if problem is not None:
             return self._refuse(problem)
         v = self._bound.inputs
-        v["state"][0:9] = R.T.ravel()
-        v["state"][9:12] = p
-        v["state"][12:18] = twist
+        state = self._state
+        state["R"][:] = R.T.ravel()
+        state["t"][:] = p
+        state["twist"][:] = twist
         v["f_prev"][:] = self._f_prev
         v["reference"][:] = reference
         v["observed"][:] = np.where(mask, observed, 0.0)
@@ -265,7 +259,7 @@ class ForceMPCLaw(Controller):
                 return self._fallback(observation, "non-finite QP data (prediction failed)")
             H = y[out["H"]].reshape(n, n)
             g = y[out["g"]]
-            res = self._qp_step(H, g, -self._limit - U, self._limit - U)
+            res = solve_qp(H, g, self._eye, -self._limit - U, self._limit - U, self.compiled)
             if res.step is None:
                 return self._fallback(observation, res.status)
             U = U + res.step
@@ -274,9 +268,7 @@ class ForceMPCLaw(Controller):
             if size <= 1e-3 * max(float(np.abs(U[:6]).max()), 1.0):
                 converged = True
                 break
-        stats.sqp_iterations = iterations
-        stats.total_sqp_iterations += iterations
-        stats.last_status = status
+        stats.solved(iterations, status)
         if not converged and self.max_iter > 1:
             stats.unconverged += 1
         lim = self._limit
@@ -295,20 +287,6 @@ class ForceMPCLaw(Controller):
         return Command.of_forces(f, error=e, error_norm=float(np.linalg.norm(e)),
                                  features_used=self.used(mask),
                                  notes=[f"force-mpc: {status}"])
-
-    def _qp_step(self, H: np.ndarray, g: np.ndarray, lo: np.ndarray, hi: np.ndarray
-                 ) -> QPResult:
-        """``min 1/2 d^T H d + g^T d`` s.t. ``lo <= d <= hi``: the unconstrained minimiser
-        when it holds the bounds, else DAQP."""
-        try:
-            d = -np.linalg.solve(H, g)
-        except np.linalg.LinAlgError:
-            d = None
-        if d is not None and np.all(d >= lo) and np.all(d <= hi):
-            return QPResult(d, "unconstrained optimum", 0, None)
-        if self._qp is not None:
-            return self._qp.solve(H, g, self._eye, lo, hi)
-        return solve_qp(H, g, self._eye, lo, hi)
 
     # ----------------------------------------------------------------- pieces
     def camera_constants(self, context: ControllerContext, v: dict[str, np.ndarray]) -> None:
@@ -358,8 +336,7 @@ class ForceMPCLaw(Controller):
 
     def _fallback(self, observation: Observation, reason: str) -> Command:
         """The held law's command this period, noting why."""
-        self.stats.fallbacks += 1
-        self.stats.reasons[reason] = self.stats.reasons.get(reason, 0) + 1
+        self.stats.fallback(reason)
         cmd = self.law.step_trial(observation)
         if cmd.reason is None and cmd.forces is not None:
             self._f_prev = np.asarray(cmd.forces, dtype=float).copy()
@@ -390,7 +367,7 @@ class ForceMPCLaw(Controller):
         y = self._kernel.outputs.views(bound.y.copy())
         bound.x[:] = saved
         N = self.horizon
-        return {"states": y["states"].reshape(N, 18),
+        return {"states": y["states"].reshape(N, NX),
                 "features": y["features"].reshape(N, self.spec.features),
                 "lengths": y["lengths"].reshape(N, 6), "rates": y["rates"].reshape(N, 6),
                 "cost": float(y["cost"][0])}

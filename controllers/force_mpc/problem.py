@@ -114,6 +114,15 @@ class ForceProblemSpec:
                       "force-MPC kernel output")
 
 
+def _mechanism(s: dict[str, ca.SX], m: dict[str, ca.SX], *names: str) -> tuple[ca.SX, ...]:
+    """The closed-chain terms ``names`` of :func:`hexapod.dynamics.compiled.
+    cached_expressions` at the state ``s`` (:data:`STATE`, split) of the nominal model
+    ``m`` (:data:`MODEL`, split)."""
+    sym, terms = mech.cached_expressions()
+    row = ca.vertcat(s["R"], s["t"], s["twist"], ca.SX.zeros(6), m["A"], m["E"], m["params"])
+    return tuple(ca.substitute(terms[k], sym, row) for k in names)
+
+
 def step_expression() -> tuple[ca.SX, ca.SX, ca.SX, ca.SX]:
     """One integration step of the nominal robot with force-mode drives (module
     docstring): the symbols ``x`` (18), ``f`` (6), the model constants, and ``x`` after
@@ -124,10 +133,8 @@ def step_expression() -> tuple[ca.SX, ca.SX, ca.SX, ca.SX]:
     c = ca.SX.sym("c", MODEL.size)
     s = STATE.split(x)
     m = MODEL.split(c)
-    sym, terms = mech.cached_expressions()
-    row = ca.vertcat(s["R"], s["t"], s["twist"], ca.SX.zeros(6), m["A"], m["E"], m["params"])
-    M_joint, leg_mass, hb, K, qd, b = (ca.substitute(terms[k], sym, row) for k in (
-        "M_joint", "leg_mass", "h", "K", "q_dot", "leg_bias"))
+    M_joint, leg_mass, hb, K, qd, b = _mechanism(s, m, "M_joint", "leg_mass", "h", "K",
+                                                 "q_dot", "leg_bias")
     h = m["h"]
     friction, d_friction = mech.sx_drive_friction(qd, m["viscous"], m["coulomb"])
     rotor = m["rotor"]
@@ -193,10 +200,7 @@ def sensitivity_expression(substeps: int) -> tuple[ca.SX, ca.SX, ca.SX, ca.SX]:
     c = ca.SX.sym("c", MODEL.size)
     s = STATE.split(x)
     m = MODEL.split(c)
-    sym, terms = mech.cached_expressions()
-    row = ca.vertcat(s["R"], s["t"], s["twist"], ca.SX.zeros(6), m["A"], m["E"], m["params"])
-    M_joint, leg_mass, K, qd = (ca.substitute(terms[k], sym, row) for k in (
-        "M_joint", "leg_mass", "K", "q_dot"))
+    M_joint, leg_mass, K, qd = _mechanism(s, m, "M_joint", "leg_mass", "K", "q_dot")
     h = m["h"]
     # the friction's slope: viscous, and the Coulomb force smoothed at ``smoothing``
     slope = m["viscous"] + m["coulomb"] / m["smoothing"] * (
@@ -233,12 +237,7 @@ def _period_function(substeps: int) -> ca.Function:
     for _ in range(substeps):
         xk = step(xk, fs, cs)
     Ak, Bk = lin(xs, cs)
-    sym, terms = mech.cached_expressions()
-    sk = STATE.split(xk)
-    mk = MODEL.split(cs)
-    row = ca.vertcat(sk["R"], sk["t"], sk["twist"], ca.SX.zeros(6), mk["A"], mk["E"],
-                     mk["params"])
-    qd = ca.substitute(terms["q_dot"], sym, row)
+    (qd,) = _mechanism(STATE.split(xk), MODEL.split(cs), "q_dot")
     return ca.Function("force_mpc_period", [xs, fs, cs], [xk, Ak, Bk, qd])
 
 

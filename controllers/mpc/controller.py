@@ -29,10 +29,16 @@ import numpy as np
 
 from controllers.base import Command, Controller, ControllerContext, Goal, Observation
 from controllers.exceptions import ContextError, OptionError
-from controllers.laws import check_choice, check_number
+from controllers.law_tools import (
+    check_choice,
+    check_count,
+    check_horizon,
+    check_number,
+    check_weights,
+)
 from controllers.mpc.drive_state import DRIVE_STATES, DriveLag, drive_lag
 from controllers.mpc.prediction import fit_pose
-from controllers.mpc.problem import ProblemSpec, VirtualMachineKernel, problem_kernel
+from controllers.mpc.problem import ProblemSpec, problem_kernel
 from controllers.mpc.solver import (
     SCREENED_VISIBILITY_ROWS,
     QPResult,
@@ -124,28 +130,15 @@ class MPCLaw(Controller):
             raise OptionError(name, "leg_rate_feedforward", "the one-step laws' option; the "
                               "predictive controllers model the drives with drive_model = "
                               "\"lag\" (from the measured leg velocities)")
-        if isinstance(horizon, bool) or not isinstance(horizon, int) or horizon < 1:
-            raise OptionError(name, "horizon", f"expected an integer >= 1, got {horizon!r}")
-        if horizon > 50:
-            raise OptionError(name, "horizon", f"at most 50 periods, got {horizon}")
-        if isinstance(max_iter, bool) or not isinstance(max_iter, int) or max_iter < 0:
-            raise OptionError(name, "max_iter", f"expected an integer >= 0, got {max_iter!r}")
-        self.horizon = horizon
+        self.horizon, self.error_weight, self.terminal_weight = check_horizon(
+            name, horizon, error_weight, terminal_weight)
         self.model = check_choice(name, "model", model, MODELS)
         self.reference = check_choice(name, "reference", reference, REFERENCES)
         self.drive_model = check_choice(name, "drive_model", drive_model, DRIVE_MODELS)
         self.drive_state = check_choice(name, "drive_state", drive_state, DRIVE_STATES)
-        self.error_weight = check_number(name, "error_weight", error_weight, 0.0, strict=False)
-        self.terminal_weight = check_number(name, "terminal_weight", terminal_weight, 0.0,
-                                            strict=False)
-        if self.error_weight == 0 and self.terminal_weight == 0:
-            raise OptionError(name, "error_weight", "error and terminal weights are both 0")
-        self.effort_weight = check_number(name, "effort_weight", effort_weight, 0.0,
-                                          strict=False)
-        self.regularization = check_number(name, "regularization", regularization, 0.0,
-                                           strict=False)
-        if self.effort_weight == 0 and self.regularization == 0:
-            raise OptionError(name, "regularization", "must be > 0 when effort_weight is 0")
+        self.regularization, self.effort_weight = check_weights(
+            name, ("regularization", regularization), ("effort_weight", effort_weight),
+            "the QP needs one of them to be strictly convex")
         self.visibility = bool(visibility)
         self.visibility_margin = check_number(name, "visibility_margin", visibility_margin,
                                               0.0, strict=False)
@@ -153,7 +146,7 @@ class MPCLaw(Controller):
             check_number(name, "max_tilt_deg", max_tilt_deg)))
         if self.max_tilt is not None and self.max_tilt >= math.pi / 2:
             raise OptionError(name, "max_tilt_deg", f"must be < 90, got {max_tilt_deg}")
-        self.max_iter = max_iter
+        self.max_iter = check_count(name, "max_iter", max_iter, 0)
         self.compiled = bool(compiled)
         self.accept_unconverged = bool(accept_unconverged)
         self.tolerance = check_number(name, "tolerance", tolerance)
@@ -195,15 +188,12 @@ class MPCLaw(Controller):
             log.info("%s: visibility constraint ignored (needs a perspective camera)", self.name)
         self._spec = ProblemSpec(self._feature, self.model, self.horizon, self.max_tilt is not None,
                                  visibility, self.drive_model == "lag")
-        self._kernel: CompiledFunction | VirtualMachineKernel
-        if self.compiled:
-            self._kernel = problem_kernel(self._spec)
-            if self._spec.visibility:  # the screened QP (see solver.solve_screened), built now
+        self._kernel: CompiledFunction = problem_kernel(self._spec, self.compiled)
+        if self.compiled:  # DAQP of this size built now (and of the screened QP: solve_qp)
+            if self._spec.visibility:
                 compiled_qp(6 * self.horizon, self._spec.rows - self.horizon * 48
                             + SCREENED_VISIBILITY_ROWS)
             compiled_qp(6 * self.horizon, self._spec.rows)
-        else:
-            self._kernel = VirtualMachineKernel(self._spec)
         self._lay = self._spec.input_layout()
         self._out = self._spec.output_layout()
         self._rows = self._spec.row_names()
@@ -373,10 +363,8 @@ class MPCLaw(Controller):
             self._kernel, self.compiled, self._vec, self._lay.slices["U"], self._out.slices, spec,
             self._U.copy(), self.max_iter, self.tolerance, self.time_limit)
         self.stats.steps += 1
-        self.stats.sqp_iterations = it
-        self.stats.total_sqp_iterations += self.stats.sqp_iterations
+        self.stats.solved(it, status)
         self.stats.qp_iterations = qp_iters
-        self.stats.last_status = status
         if last is None or last.step is None or not (
                 converged or (self.accept_unconverged and status.startswith("not converged"))):
             return status
@@ -419,12 +407,10 @@ class MPCLaw(Controller):
             known = np.isfinite(u[:, 0])
         if known.sum() < 3:
             return "fewer than three leg directions known: cannot reconstruct the pose"
+        assert self.context is not None
         A = law.base_points
         B = np.where(known[:, None], A + q[:, None] * np.where(known[:, None], u, 0.0), 0.0)
-        geo = self.context.geometry if self.context is not None else None
-        if geo is None:
-            return "no context"
-        R, t = fit_pose(B, geo.platform_points, known.astype(float))
+        R, t = fit_pose(B, self.context.geometry.platform_points, known.astype(float))
         if not (np.all(np.isfinite(R)) and np.all(np.isfinite(t))):
             return "pose reconstruction failed (non-finite)"
         self.pose = (R, t)
@@ -433,8 +419,8 @@ class MPCLaw(Controller):
     def _model_features(self, R: np.ndarray, t: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Features (nf, 3) and lengths (6,) of the model at the fitted pose."""
         law = self.law
-        geo = self.context.geometry if self.context is not None else None
-        assert geo is not None
+        assert self.context is not None
+        geo = self.context.geometry
         A = law.base_points
         d = geo.platform_points @ R.T + t - A
         qm = np.sqrt(np.einsum("ij,ij->i", d, d))
@@ -444,8 +430,7 @@ class MPCLaw(Controller):
 
     def _fallback(self, obs: Observation, reason: str) -> Command:
         """The QP law's command, carrying the reason."""
-        self.stats.fallbacks += 1
-        self.stats.reasons[reason] = self.stats.reasons.get(reason, 0) + 1
+        self.stats.fallback(reason)
         self._U[:] = 0.0
         log.debug("%s: falling back to %s: %s", self.name, self.law.name, reason)
         cmd = self.law.step_trial(obs)

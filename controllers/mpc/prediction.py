@@ -44,8 +44,8 @@ from controllers.tasks.leg_edge import EDGE_LINES, EDGE_NORMALS, sx_edge_normals
 FEATURE_KINDS = (EDGE_LINES, EDGE_NORMALS, LEG_DIRECTIONS)
 
 __all__ = ["FEATURE_KINDS", "GlobalModel", "LocalModel", "fit_pose",
-           "platform_points_from_legs", "sx_edge_normals", "sx_exp_se3", "sx_features",
-           "sx_legs", "sx_limb_ends", "sx_pixel", "sx_step_pose"]
+           "platform_points_from_legs", "sx_edge_normals", "sx_exp_se3", "sx_legs",
+           "sx_limb_ends", "sx_pixel", "sx_step_pose"]
 
 
 # --------------------------------------------------------------------------- numpy
@@ -125,21 +125,6 @@ def sx_legs(R: ca.SX, t: ca.SX, A: list[ca.SX], E: list[ca.SX]
         us.append(d / q)
         Bs.append(B)
     return qs, us, Bs
-
-
-def sx_features(feature: BuiltinFeature, us: list[ca.SX], A: list[ca.SX], r: ca.SX | float,
-                line_inv_t: ca.SX | None) -> list[ca.SX]:
-    """Predicted unit features: directions (6), edge normals (12) or image lines (12)
-    (the feature's :meth:`~controllers.tasks.feature_kind.BuiltinFeature.sx_of_legs`).
-
-    Args:
-        feature: One of :data:`FEATURE_KINDS`.
-        us: Six (3, 1) leg directions.
-        A: Six (3, 1) base points [m].
-        r: Leg radius [m].
-        line_inv_t: ``Kt^-T`` (3, 3) for lines (``Kt`` the camera's ``line_matrix``).
-    """
-    return feature.sx_of_legs(us, A, r, line_inv_t)
 
 
 def sx_limb_ends(A: ca.SX, B: ca.SX, n: ca.SX, r: ca.SX | float) -> tuple[ca.SX, ca.SX]:

@@ -59,18 +59,15 @@ and runs the SQP iterations.
 
 from __future__ import annotations
 
-import logging
 from dataclasses import dataclass
 from functools import lru_cache
 from typing import Any
 
 import casadi as ca
-import numpy as np
 
 from controllers.mpc.prediction import (
     sx_edge_normals,
     sx_exp_se3,
-    sx_features,
     sx_legs,
     sx_limb_ends,
     sx_pixel,
@@ -78,8 +75,6 @@ from controllers.mpc.prediction import (
 from controllers.tasks.base import sx_skew
 from controllers.tasks.feature_kind import BuiltinFeature
 from hexapod.compiled import CompiledFunction, Layout
-
-log = logging.getLogger(__name__)
 
 #: Upper bound used for one-sided rows (the tilt cosine never exceeds 1).
 _BIG = 1e20
@@ -205,7 +200,7 @@ def _pose_function(spec: ProblemSpec) -> ca.Function:
     outs_res: list[ca.SX] = []
     if spec.model == "global":
         Kit = _mat(P["Kit"], 3, 3)
-        feats = sx_features(spec.feature, u, A, r, Kit)
+        feats = spec.feature.sx_of_legs(u, A, r, Kit)
         star = P["star"]
         off = P["offset"]
         res = ca.vertcat(*[ca.cross(f + off[3 * j:3 * j + 3], star[3 * j:3 * j + 3])
@@ -308,8 +303,6 @@ def _kernel_function(spec: ProblemSpec) -> ca.Function:
     cost: Any = ca.MX(0)
     rows_c: list[Any] = []
     vals_c: list[Any] = []
-    lo_c: list[Any] = []
-    hi_c: list[Any] = []
     sr = spec.stage_rows
     stroke_lo = ca.repmat(P["qlo"], 6, 1)
     stroke_hi = ca.repmat(P["qhi"], 6, 1)
@@ -354,8 +347,6 @@ def _kernel_function(spec: ProblemSpec) -> ca.Function:
                     Hb[i][j] += D[i].T @ MD[j]
             rows_c.append(ca.horzcat(*[Gv @ Dj for Dj in D], ca.MX.zeros(sr, 6 * (N - k))))
             vals_c.append(vals)
-            lo_c.append(lo_s)
-            hi_c.append(hi_s)
     else:
         Nm = _mat(P["N"], 6, 6)
         b = P["b"]
@@ -387,8 +378,8 @@ def _kernel_function(spec: ProblemSpec) -> ca.Function:
                 rows_c.append(ca.horzcat(*[G0 @ S[k - 1 - j] for j in range(k)],
                                          ca.MX.zeros(sr, 6 * (N - k))))
             vals_c.append(vals0 + G0 @ s)
-            lo_c.append(lo_s)
-            hi_c.append(hi_s)
+    lo_c: list[Any] = [lo_s] * N  # the stage rows' bounds
+    hi_c: list[Any] = [hi_s] * N
     # Speed rows: J_inv,0 tau_k, the first one with the first-period stroke window.
     vmax = P["vmax"]
     for k in range(N):
@@ -420,19 +411,9 @@ def _kernel_function(spec: ProblemSpec) -> ca.Function:
 
 
 @lru_cache(maxsize=32)
-def problem_kernel(spec: ProblemSpec) -> CompiledFunction:
-    """The compiled QP-data kernel of a problem structure (cached per process and on disk)."""
-    return CompiledFunction(_kernel_function(spec), inputs=spec.input_layout(),
-                            outputs=spec.output_layout())
-
-
-class VirtualMachineKernel:
-    """The same kernel evaluated by the CasADi virtual machine (no C compilation: slower
-    per call, nothing to build; option ``compiled = False``)."""
-
-    def __init__(self, spec: ProblemSpec) -> None:
-        self.function = _kernel_function(spec)
-
-    def single(self, x: np.ndarray) -> np.ndarray:
-        """Evaluate on one input vector."""
-        return np.asarray(self.function(x), dtype=float).ravel()
+def problem_kernel(spec: ProblemSpec, compile: bool = True) -> CompiledFunction:
+    """The QP-data kernel of a problem structure, compiled to C (cached per process and on
+    disk); ``compile=False``: evaluated by the CasADi virtual machine (no C compilation:
+    slower per call, nothing to build; option ``compiled = False``)."""
+    return CompiledFunction(_kernel_function(spec), compile=compile,
+                            inputs=spec.input_layout(), outputs=spec.output_layout())

@@ -1,13 +1,13 @@
 """Solving the predictive problem: QP solvers and the Gauss-Newton SQP iterations.
 
-- QP (dense, ``6 N`` variables): first the unconstrained minimiser ``-H^-1 g`` (the
-  optimum of the strictly convex QP whenever it satisfies every row: the common case
-  away from the limits), else DAQP (dual active set, shipped with CasADi), generated
-  to C by CasADi and called through :mod:`ctypes` (:class:`CompiledQP`), or through
-  ``casadi.conic`` when no C compiler is available (:func:`solve_qp`). With the
-  visibility rows, a smaller QP keeps only the visibility rows closest to their
-  bounds and is accepted when its solution satisfies every row
-  (:func:`solve_screened`).
+- QP (dense, ``6 N`` variables; :func:`solve_qp`, shared by the force-level MPC):
+  first the unconstrained minimiser ``-H^-1 g`` (the optimum of the strictly convex QP
+  whenever it satisfies every row: the common case away from the limits), else DAQP
+  (dual active set, shipped with CasADi), generated to C by CasADi and called through
+  :mod:`ctypes` (:class:`CompiledQP`), or through ``casadi.conic`` when no C compiler
+  is available (:func:`daqp`). With the visibility rows, a smaller QP keeps only the
+  visibility rows closest to their bounds and is accepted when its solution satisfies
+  every row.
 - SQP (:func:`run_sqp`): Gauss-Newton QPs from the compiled kernel of
   :mod:`controllers.mpc.problem`, a backtracking line search on the L1 merit, a
   convergence test on the first move, an iteration limit and an optional time limit.
@@ -27,7 +27,7 @@ from pathlib import Path
 import casadi as ca
 import numpy as np
 
-from controllers.mpc.problem import ProblemSpec, VirtualMachineKernel
+from controllers.mpc.problem import ProblemSpec
 from hexapod.compiled import CompilationError, CompiledFunction, Layout
 
 log = logging.getLogger(__name__)
@@ -56,6 +56,17 @@ class SolveStats:
     total_sqp_iterations: int = 0
     last_status: str = ""
     reasons: dict[str, int] = field(default_factory=dict)
+
+    def fallback(self, reason: str) -> None:
+        """Count a step that fell back, and its reason."""
+        self.fallbacks += 1
+        self.reasons[reason] = self.reasons.get(reason, 0) + 1
+
+    def solved(self, iterations: int, status: str) -> None:
+        """Record the SQP iterations and the status of a step's solve."""
+        self.sqp_iterations = iterations
+        self.total_sqp_iterations += iterations
+        self.last_status = status
 
 
 @dataclass
@@ -165,11 +176,14 @@ def compiled_qp(variables: int, rows: int) -> CompiledQP | None:
 
 
 
-def solve_qp(H: np.ndarray, g: np.ndarray, C: np.ndarray, lba: np.ndarray,
-             uba: np.ndarray) -> QPResult:
-    """Solve ``min 1/2 d^T H d + g^T d`` s.t. ``lba <= C d <= uba`` with DAQP."""
-    n = len(g)
-    solver = qp_solver(n, len(lba))
+def daqp(H: np.ndarray, g: np.ndarray, C: np.ndarray, lba: np.ndarray, uba: np.ndarray,
+         compiled: bool) -> QPResult:
+    """Solve ``min 1/2 d^T H d + g^T d`` s.t. ``lba <= C d <= uba`` with DAQP: generated to
+    C (:func:`compiled_qp`) when ``compiled`` and it can be built, else ``casadi.conic``."""
+    qp = compiled_qp(len(g), len(lba)) if compiled else None
+    if qp is not None:
+        return qp.solve(H, g, C, lba, uba)
+    solver = qp_solver(len(g), len(lba))
     try:
         out = solver(h=H, g=g, a=C, lba=lba, uba=uba)
     except RuntimeError as exc:  # casadi reports solver errors as RuntimeError
@@ -199,9 +213,12 @@ def unconstrained(H: np.ndarray, g: np.ndarray, C: np.ndarray, lba: np.ndarray,
     return None
 
 
-def solve_screened(H: np.ndarray, g: np.ndarray, C: np.ndarray, lba: np.ndarray,
-                   uba: np.ndarray, spec: ProblemSpec, compiled: bool) -> QPResult:
-    """The QP, with the visibility rows screened when there are many of them.
+def solve_qp(H: np.ndarray, g: np.ndarray, C: np.ndarray, lba: np.ndarray, uba: np.ndarray,
+             compiled: bool, spec: ProblemSpec | None = None) -> QPResult:
+    """Solve ``min 1/2 d^T H d + g^T d`` s.t. ``lba <= C d <= uba``: the unconstrained
+    minimiser when it satisfies every row (:func:`unconstrained`), else DAQP
+    (:func:`daqp`), with the visibility rows of ``spec`` screened when there are many
+    of them.
 
     DAQP's cost grows with the number of rows (``6 N (7 + 48)`` with visibility). The
     visibility rows are first reduced to the :data:`SCREENED_VISIBILITY_ROWS` with the
@@ -209,25 +226,23 @@ def solve_screened(H: np.ndarray, g: np.ndarray, C: np.ndarray, lba: np.ndarray,
     row, it is the optimum of the full QP (same objective, larger feasible set);
     otherwise the full QP is solved.
     """
-    m = len(lba)
-    keep = screened_rows(spec, lba, uba)
+    res = unconstrained(H, g, C, lba, uba)
+    if res is not None:
+        return res
+    keep = None if spec is None else screened_rows(spec, lba, uba)
     if keep is not None:
-        qp = compiled_qp(len(g), len(keep)) if compiled else None
-        Cr = C[keep]
-        res = (qp.solve(H, g, Cr, lba[keep], uba[keep]) if qp is not None
-               else solve_qp(H, g, Cr, lba[keep], uba[keep]))
+        res = daqp(H, g, C[keep], lba[keep], uba[keep], compiled)
         if res.step is not None and res.multipliers is not None:
             v = C @ res.step
             tol = 1e-9 * (1.0 + np.abs(v))
             if (v >= lba - tol).all() and (v <= uba + tol).all():
-                lam = np.zeros(m)
+                lam = np.zeros(len(lba))
                 lam[keep] = res.multipliers
                 return QPResult(res.step, res.status + " (screened rows)", res.iterations, lam)
-    qp = compiled_qp(len(g), m) if compiled else None
-    return qp.solve(H, g, C, lba, uba) if qp is not None else solve_qp(H, g, C, lba, uba)
+    return daqp(H, g, C, lba, uba, compiled)
 
 
-#: Visibility rows kept by :func:`solve_screened` (the others are checked afterwards).
+#: Visibility rows kept by :func:`solve_qp` (the others are checked afterwards).
 SCREENED_VISIBILITY_ROWS = 48
 
 
@@ -251,7 +266,7 @@ def merit(out: np.ndarray, o: dict[str, slice], mu: float) -> tuple[float, float
     return float(out[o["cost"]][0]) + mu * viol, viol
 
 
-def run_sqp(kernel: CompiledFunction | VirtualMachineKernel, compiled: bool, vec: np.ndarray,
+def run_sqp(kernel: CompiledFunction, compiled: bool, vec: np.ndarray,
             u_slice: slice, o: dict[str, slice], spec: ProblemSpec, U: np.ndarray,
             max_iter: int, tolerance: float, time_limit: float | None
             ) -> tuple[np.ndarray, bool, str, QPResult | None, int, int]:
@@ -300,9 +315,7 @@ def run_sqp(kernel: CompiledFunction | VirtualMachineKernel, compiled: bool, vec
         H = out[o["H"]].reshape(n, n)
         C = out[o["C"]].reshape(m, n)
         lba, uba = out[o["lba"]], out[o["uba"]]
-        res = unconstrained(H, g, C, lba, uba)
-        if res is None:
-            res = solve_screened(H, g, C, lba, uba, spec, compiled)
+        res = solve_qp(H, g, C, lba, uba, compiled, spec)
         qp_iters += res.iterations
         last = res
         if res.step is None or res.multipliers is None:

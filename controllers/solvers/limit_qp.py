@@ -29,7 +29,7 @@ import numpy as np
 from controllers.base import ControllerContext
 from controllers.exceptions import OptionError
 from controllers.law_kernel import LawResult
-from controllers.law_tools import check_number, solve_normal_damped
+from controllers.law_tools import check_count, check_number, solve_normal_damped
 from controllers.solvers.base import Solved, Solver
 from controllers.solvers.osqp_limits import OSQP_DEFAULTS, LimitQP
 
@@ -113,11 +113,8 @@ class LimitQPSolver(Solver):
                           check_number(name, "max_speed", max_speed))
         tol_abs = check_number(name, "eps_abs", eps_abs)
         tol_rel = check_number(name, "eps_rel", eps_rel, 0.0, strict=False)
-        if isinstance(max_iter, bool) or not isinstance(max_iter, int) or max_iter < 1:
-            raise OptionError(name, "max_iter", f"expected a positive integer, got "
-                                                f"{max_iter!r}")
         #: The OSQP problem (set up once per reset, then updated and warm-started).
-        self.qp = LimitQP(reg, tol_abs, tol_rel, max_iter)
+        self.qp = LimitQP(reg, tol_abs, tol_rel, check_count(name, "max_iter", max_iter, 1))
         #: This trial's limits (after its reset).
         self.window = StrokeWindow(0.0, 0.0, 0.0, 1.0)
         self._lower = np.zeros(6)

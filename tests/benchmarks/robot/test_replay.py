@@ -13,7 +13,8 @@ import pytest
 from benchmarks.cli import main as cli_main
 from benchmarks.exceptions import BenchmarkError
 from benchmarks.robot.loop import PeriodStatus
-from benchmarks.robot.replay import find_session_log, is_session_log, load_session
+from benchmarks.robot.records import is_servo_log
+from benchmarks.robot.replay import find_session_log, load_session
 from hexapod.fk import forward_kinematics
 from hexapod.geometry import deltalab
 
@@ -93,7 +94,7 @@ def test_a_session_record_replays_with_its_header(tmp_path: Path) -> None:
     log = _session_record(tmp_path / "servo.jsonl")
     lines = log.read_text().splitlines()
     assert '"servo_session"' in lines[0] and '"final": true' in lines[-1]
-    assert is_session_log(log) and find_session_log(tmp_path) == log
+    assert is_servo_log(log) and find_session_log(tmp_path) == log
     rec = load_session(log)
     a = rec.arrays
     assert rec.frames == 6 and str(a["controller"]) == "leg-edge"
@@ -114,7 +115,7 @@ def test_a_session_stopped_before_its_first_period_says_why(tmp_path: Path) -> N
     log.open({"controller": "leg-edge"})
     log.final({"exit_code": 5, "reason": "the camera sim disagrees with the encoders at "
                                          "start"})
-    assert is_session_log(log.path)
+    assert is_servo_log(log.path)
     with pytest.raises(BenchmarkError, match=r"no period in this servo log \(the session "
                                              r"ended before its first period: the camera"):
         load_session(log.path)
@@ -129,7 +130,7 @@ def test_without_a_goal_the_errors_are_to_the_last_pose(tmp_path: Path) -> None:
 def test_finding_the_log(tmp_path: Path) -> None:
     (tmp_path / "session").mkdir()
     log = _log(tmp_path / "session" / "servo.jsonl")
-    assert is_session_log(log)
+    assert is_servo_log(log)
     assert find_session_log(log) == log
     assert find_session_log(tmp_path / "session") == log
     (tmp_path / "session" / "notes.jsonl").write_text('{"note": 1}\n')

@@ -12,8 +12,12 @@ import numpy as np
 import pytest
 
 from benchmarks.robot import servo
+from benchmarks.robot.goals import ServoGoal
+from benchmarks.robot.loop import servo_loop
+from benchmarks.robot.status import PeriodStatus
 from tests.benchmarks.robot.interrupt import interrupt_servo
 from tests.benchmarks.robot.sessions import start_pose_video
+from vision.feature_cameras import SimCamera
 
 #: Wall-clock periods against real emulator processes: run alone (`make test`).
 pytestmark = pytest.mark.realtime
@@ -132,7 +136,7 @@ def test_teach_averaging_reduces_the_spread_of_the_taught_normals() -> None:
     cam = front_camera(g)
     sol = forward_kinematics(g, np.array(GOAL_MM) * 1e-3)
     truth = observe_legs(cam, g, sol.rotation, sol.translation).normals
-    sensor = servo.SimCamera(cam, g, seed=5)
+    sensor = SimCamera(cam, g, seed=5)
     # the detector's inlier distance (1 px) seen from the camera
     assert servo.teach_tolerance(sensor) == pytest.approx(
         sensor.sensor.detector.outlier_px / cam.fx, rel=0.01)
@@ -175,16 +179,16 @@ def test_lost_frames_are_counted_and_command_zero() -> None:
 
     g = deltalab()
     cam = front_camera(g)
-    goal = servo.goal_features(servo.ServoGoal(np.array(GOAL_MM) * 1e-3, None, "<test>"),
+    goal = servo.goal_features(ServoGoal(np.array(GOAL_MM) * 1e-3, None, "<test>"),
                                cam, g)
     ctrl = registry.create("leg-edge", gain=3.0)
     ctrl.reset(ControllerContext(cam.camera_from_base.apply(g.base_points), g, cam, 0.02, goal))
-    sensor = servo.SimCamera(cam, g, drop_every=4)
-    seen: list[servo.PeriodStatus] = []
+    sensor = SimCamera(cam, g, drop_every=4)
+    seen: list[PeriodStatus] = []
     from hexapod.backends.serial_emulated import open_emulated_robot
 
     with open_emulated_robot(g) as robot:
-        res = servo.servo_loop(robot, sensor, ctrl, goal, g, 0.02, max_steps=12,
+        res = servo_loop(robot, sensor, ctrl, goal, g, 0.02, max_steps=12,
                                on_period=seen.append)
     assert res.outcome == "max-steps" and res.steps == 12
     lost = [s for s in seen if s.lost_frame]
@@ -195,7 +199,7 @@ def test_lost_frames_are_counted_and_command_zero() -> None:
     assert "3 lost frames" in res.summary()
 
 
-def _servo_with(ctrl: object, max_steps: int) -> tuple[object, list[servo.PeriodStatus]]:
+def _servo_with(ctrl: object, max_steps: int) -> tuple[object, list[PeriodStatus]]:
     """Run ``ctrl`` (reset here) for ``max_steps`` periods against the emulator."""
     from controllers.base import ControllerContext
     from hexapod.backends.serial_emulated import open_emulated_robot
@@ -204,13 +208,13 @@ def _servo_with(ctrl: object, max_steps: int) -> tuple[object, list[servo.Period
 
     g = deltalab()
     cam = front_camera(g)
-    goal = servo.goal_features(servo.ServoGoal(np.array(GOAL_MM) * 1e-3, None, "<test>"),
+    goal = servo.goal_features(ServoGoal(np.array(GOAL_MM) * 1e-3, None, "<test>"),
                                cam, g)
     ctrl.reset(ControllerContext(  # type: ignore[attr-defined]
         cam.camera_from_base.apply(g.base_points), g, cam, 0.02, goal))
-    seen: list[servo.PeriodStatus] = []
+    seen: list[PeriodStatus] = []
     with open_emulated_robot(g) as robot:
-        res = servo.servo_loop(robot, servo.SimCamera(cam, g), ctrl, goal, g, 0.02,
+        res = servo_loop(robot, SimCamera(cam, g), ctrl, goal, g, 0.02,
                                max_steps=max_steps, on_period=seen.append)
     return res, seen
 
@@ -429,7 +433,7 @@ def test_the_serial_board_refuses_a_force_controller_before_moving() -> None:
 
     g = deltalab()
     cam = front_camera(g)
-    goal = servo.goal_features(servo.ServoGoal(np.array(GOAL_MM) * 1e-3, None, "<test>"),
+    goal = servo.goal_features(ServoGoal(np.array(GOAL_MM) * 1e-3, None, "<test>"),
                                cam, g)
     ctrl = LegSpringForces()
     ctrl.reset(ControllerContext(cam.camera_from_base.apply(g.base_points), g, cam, 0.02, goal))
@@ -439,5 +443,5 @@ def test_the_serial_board_refuses_a_force_controller_before_moving() -> None:
         q0 = robot.measured_lengths()
         with pytest.raises(ActuationError, match="controller 'test-leg-spring-forces' commands "
                                                  r"leg forces \[N\], but the robot"):
-            servo.servo_loop(robot, servo.SimCamera(cam, g), ctrl, goal, g, 0.02, max_steps=3)
+            servo_loop(robot, SimCamera(cam, g), ctrl, goal, g, 0.02, max_steps=3)
         np.testing.assert_allclose(robot.measured_lengths(), q0, rtol=0, atol=1e-6)
