@@ -63,6 +63,12 @@ def move_normals(seen: np.ndarray, delta: np.ndarray) -> tuple[np.ndarray, np.nd
     return np.where(np.isfinite(seen), moved, seen), delta_ok
 
 
+def _finite(values: np.ndarray) -> bool:
+    """Whether every value of a small float array is finite (a Python loop over its
+    values: cheaper than a numpy reduction for the six of one reading)."""
+    return all(map(math.isfinite, values.ravel().tolist()))
+
+
 class EncoderHistory:
     """The encoder readings of one trial (times, lengths, measured rates) and the last
     pose of the nominal forward kinematics (its warm start).
@@ -91,7 +97,7 @@ class EncoderHistory:
         time that goes back starts the history afresh)."""
         q = np.asarray(observation.lengths, dtype=float)
         t = float(observation.t)
-        if q.shape == (6,) and np.all(np.isfinite(q)) and math.isfinite(t):
+        if q.shape == (6,) and _finite(q) and math.isfinite(t):
             if self.times and t <= self.times[-1]:
                 self.times.clear()
                 self.lengths.clear()
@@ -99,7 +105,7 @@ class EncoderHistory:
             self.times.append(t)
             self.lengths.append(q.copy())
             rate = None if observation.q_dot is None else np.array(observation.q_dot, float)
-            ok = rate is not None and rate.shape == (6,) and bool(np.all(np.isfinite(rate)))
+            ok = rate is not None and rate.shape == (6,) and _finite(rate)
             self.rates.append(rate if ok else None)
 
     def predicts(self, observation: Observation) -> bool:
@@ -110,9 +116,13 @@ class EncoderHistory:
                     or image_t >= t - 1e-12 or not self.times or self.times[-1] != t)
 
     def lengths_at(self, time: float) -> np.ndarray:
-        """The encoder lengths at ``time``, interpolated between readings."""
-        times = np.fromiter(self.times, dtype=float, count=len(self.times))
-        j = int(np.searchsorted(times, time, side="right")) - 1
+        """The encoder lengths at ``time``, interpolated between readings (the last
+        reading at or before ``time`` is found from the newest back: a capture instant
+        is a few periods old)."""
+        times = self.times
+        j = len(times) - 1
+        while j >= 0 and times[j] > time:
+            j -= 1
         if j < 0:
             return np.array(self.lengths[0])
         if j >= len(times) - 1:
