@@ -305,8 +305,12 @@ def checked_command(cmd: Any, name: str, actuation: Actuation) -> Command:
         CommandError: Not a :class:`Command`, not 6 leg values, or another kind than the
             controller declared (named, with the shapes or kinds).
     """
-    if type(cmd) is Command and cmd.actuation is actuation and np.shape(cmd.values) == (6,):
-        return cmd  # the common case
+    if type(cmd) is Command and cmd.actuation is actuation:  # the common case
+        values = cmd.forces if actuation is Actuation.FORCE else cmd.velocities
+        if type(values) is np.ndarray and values.shape == (6,):
+            return cmd
+        if np.shape(cmd.values) == (6,):
+            return cmd
     from controllers.exceptions import CommandError
 
     if not all(hasattr(cmd, a) for a in ("values", "reason", "actuation", "error_norm")):
