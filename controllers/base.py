@@ -192,14 +192,14 @@ class Controller(RemembersOptions, ABC):
         (:meth:`step_arrays`, for two rows or more: one row costs less by its instance),
         the others each by its trial's instance (:meth:`step_rows`)."""
         n = len(observations)
-        out = CommandBatch.zeros(n, self.actuation)
         self.crashes = {}
-        if n <= 1:  # a batch of one (the per-trial engine's): its row by its instance
-            if n:
-                out.put(0, self._row_command(0, int(observations.trials[0]),
-                                             observations.item(0)))
-            return out
-        self.step_rows(observations, self.step_arrays(observations, out), out)
+        if n == 1:  # a batch of one (the per-trial engine's): its row by its instance
+            return CommandBatch.of_row(self._row_command(0, int(observations.trials[0]),
+                                                         observations.item(0)),
+                                       self.actuation)
+        out = CommandBatch.zeros(n, self.actuation)
+        if n:
+            self.step_rows(observations, self.step_arrays(observations, out), out)
         return out
 
     def step_arrays(self, observations: ObservationBatch, out: CommandBatch) -> np.ndarray:

@@ -408,6 +408,21 @@ class CommandBatch:
         forces = np.zeros((n, 6)) if actuation is Actuation.FORCE else None
         return CommandBatch(np.zeros((n, 6)), np.zeros(n), [None] * n, actuation, forces)
 
+    @staticmethod
+    def of_row(command: Command, actuation: Actuation) -> CommandBatch:
+        """A batch of one row, ``command`` (of ``actuation``, checked by the caller): the
+        arrays :meth:`zeros` and :meth:`put` would hold, without their zeros."""
+        velocities = np.empty((1, 6))
+        velocities[0] = command.velocities
+        forces = None
+        if actuation is Actuation.FORCE:
+            forces = np.empty((1, 6))
+            forces[0] = command.values
+        error_norm = np.empty(1)
+        error_norm[0] = command.error_norm
+        return CommandBatch(velocities, error_norm, [command.reason], actuation, forces,
+                            [command])
+
     def put(self, k: int, command: Command) -> None:
         """Set row ``k`` to a per-trial :class:`Command` (of the batch's actuation), kept
         for :meth:`command`.
