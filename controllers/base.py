@@ -192,10 +192,14 @@ class Controller(RemembersOptions, ABC):
         (:meth:`step_arrays`, for two rows or more: one row costs less by its instance),
         the others each by its trial's instance (:meth:`step_rows`)."""
         n = len(observations)
-        out = CommandBatch.zeros(n, self.actuation)
         self.crashes = {}
-        rows = self.step_arrays(observations, out) if n > 1 else TRIAL_ZERO[:n]
-        self.step_rows(observations, rows, out)
+        if n == 1:  # a batch of one (the per-trial engine's): its row by its instance
+            return CommandBatch.of_row(self._row_command(0, int(observations.trials[0]),
+                                                         observations.item(0)),
+                                       self.actuation)
+        out = CommandBatch.zeros(n, self.actuation)
+        if n:
+            self.step_rows(observations, self.step_arrays(observations, out), out)
         return out
 
     def step_arrays(self, observations: ObservationBatch, out: CommandBatch) -> np.ndarray:
@@ -213,17 +217,20 @@ class Controller(RemembersOptions, ABC):
         exception in :attr:`crashes` (by position in the batch); the other rows are
         stepped as usual."""
         trials = observations.trials
-        name, actuation = self.name, self.actuation
         for k in rows.tolist():
-            try:
-                cmd = checked_command(self.step_row(int(trials[k]), observations.item(k)),
-                                      name, actuation)
-            except Exception as exc:  # that trial's failure
-                if not self.crashes:
-                    self.crashes = {}
-                self.crashes[k] = exc
-                cmd = Command.refuse(f"{type(exc).__name__}: {exc}", actuation=actuation)
-            out.put(k, cmd)
+            out.put(k, self._row_command(k, int(trials[k]), observations.item(k)))
+
+    def _row_command(self, k: int, trial: int, observation: Observation) -> Command:
+        """The checked command of row ``k`` (trial ``trial``) by its trial's instance, or
+        the refusal of its failure (the exception kept in :attr:`crashes`)."""
+        try:
+            return checked_command(self.step_row(trial, observation), self.name,
+                                   self.actuation)
+        except Exception as exc:  # that trial's failure
+            if not self.crashes:
+                self.crashes = {}
+            self.crashes[k] = exc
+            return Command.refuse(f"{type(exc).__name__}: {exc}", actuation=self.actuation)
 
     def step_row(self, trial: int, observation: Observation) -> Command:
         """The command of one row, by its trial's instance (:meth:`step_trial`)."""
@@ -298,8 +305,12 @@ def checked_command(cmd: Any, name: str, actuation: Actuation) -> Command:
         CommandError: Not a :class:`Command`, not 6 leg values, or another kind than the
             controller declared (named, with the shapes or kinds).
     """
-    if type(cmd) is Command and cmd.actuation is actuation and np.shape(cmd.values) == (6,):
-        return cmd  # the common case
+    if type(cmd) is Command and cmd.actuation is actuation:  # the common case
+        values = cmd.forces if actuation is Actuation.FORCE else cmd.velocities
+        if type(values) is np.ndarray and values.shape == (6,):
+            return cmd
+        if np.shape(cmd.values) == (6,):
+            return cmd
     from controllers.exceptions import CommandError
 
     if not all(hasattr(cmd, a) for a in ("values", "reason", "actuation", "error_norm")):

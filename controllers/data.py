@@ -259,30 +259,47 @@ class ObservationBatch:
     def of(obs: Observation) -> ObservationBatch | None:
         """The batch of one observation (trial 0; views of its arrays), or None when the
         observation is malformed (a field of the wrong shape or not numbers): the
-        per-trial adapter :meth:`Controller.step` then refuses it with the reason."""
-        fields_ = (obs.lengths, obs.edge_visible, obs.direction_visible, obs.normals,
-                   obs.lines, obs.directions, obs.q_dot)
+        per-trial adapter :meth:`Controller.step` then refuses it with the reason.
+
+        The common case (every field a float or bool array of its shape, or None) costs
+        a type, shape and kind test per field and a view each; another field is
+        converted and checked (:func:`_one_row`)."""
+        lengths, edges, seen = obs.lengths, obs.edge_visible, obs.direction_visible
+        normals, lines, directions, q_dot = obs.normals, obs.lines, obs.directions, obs.q_dot
         try:
-            rows: list[np.ndarray | None] = []
-            for v, shape, kind in zip(fields_, _SHAPES, _KINDS, strict=True):
-                if v is None:
-                    rows.append(None)
-                elif type(v) is np.ndarray and v.shape == shape and v.dtype == kind:
-                    rows.append(v[None])  # the common case: a view
-                else:
-                    break
-            if len(rows) < len(fields_):  # convert and check every field
-                rows = [_one_row(v, shape, kind)
-                        for v, shape, kind in zip(fields_, _SHAPES, _KINDS, strict=True)]
+            if (type(lengths) is _ARRAY and lengths.shape == (6,) and lengths.dtype == _FLOAT
+                    and type(edges) is _ARRAY and edges.shape == (6, 2)
+                    and edges.dtype == _BOOL
+                    and type(seen) is _ARRAY and seen.shape == (6,) and seen.dtype == _BOOL
+                    and (normals is None or (type(normals) is _ARRAY
+                                             and normals.shape == (6, 2, 3)
+                                             and normals.dtype == _FLOAT))
+                    and (lines is None or (type(lines) is _ARRAY and lines.shape == (6, 2, 3)
+                                           and lines.dtype == _FLOAT))
+                    and (directions is None or (type(directions) is _ARRAY
+                                                and directions.shape == (6, 3)
+                                                and directions.dtype == _FLOAT))
+                    and (q_dot is None or (type(q_dot) is _ARRAY and q_dot.shape == (6,)
+                                           and q_dot.dtype == _FLOAT))):
+                rows: list[np.ndarray | None] = [  # the common case: views
+                    lengths[None], edges[None], seen[None],
+                    None if normals is None else normals[None],
+                    None if lines is None else lines[None],
+                    None if directions is None else directions[None],
+                    None if q_dot is None else q_dot[None]]
+            else:  # convert and check every field
+                rows = [_one_row(v, shape, kind) for v, shape, kind in zip(
+                    (lengths, edges, seen, normals, lines, directions, q_dot), _SHAPES, _KINDS,
+                    strict=True)]
             t = np.array([float(obs.t)])
             image_t = None if obs.image_t is None else np.array([float(obs.image_t)])
         except (TypeError, ValueError):
             return None
-        lengths, edges, seen, normals, lines, directions, q_dot = rows
-        if lengths is None or edges is None or seen is None:
+        b_lengths, b_edges, b_seen, b_normals, b_lines, b_directions, b_q_dot = rows
+        if b_lengths is None or b_edges is None or b_seen is None:
             return None
-        batch = ObservationBatch(TRIAL_ZERO, t, lengths, normals, lines, directions, edges,
-                                 seen, image_t, q_dot)
+        batch = ObservationBatch(TRIAL_ZERO, t, b_lengths, b_normals, b_lines, b_directions,
+                                 b_edges, b_seen, image_t, b_q_dot)
         batch.single = obs
         return batch
 
@@ -291,6 +308,7 @@ class ObservationBatch:
 #: order (lengths, edge_visible, direction_visible, normals, lines, directions, q_dot).
 _SHAPES = ((6,), (6, 2), (6,), (6, 2, 3), (6, 2, 3), (6, 3), (6,))
 _KINDS = (np.float64, np.bool_, np.bool_, np.float64, np.float64, np.float64, np.float64)
+_ARRAY, _FLOAT, _BOOL = np.ndarray, np.dtype(np.float64), np.dtype(np.bool_)
 
 
 def _one_row(value: Any, shape: tuple[int, ...], kind: Any) -> np.ndarray | None:
@@ -389,6 +407,21 @@ class CommandBatch:
         """``n`` rows of zero commands, zero norms and no reasons, to be filled."""
         forces = np.zeros((n, 6)) if actuation is Actuation.FORCE else None
         return CommandBatch(np.zeros((n, 6)), np.zeros(n), [None] * n, actuation, forces)
+
+    @staticmethod
+    def of_row(command: Command, actuation: Actuation) -> CommandBatch:
+        """A batch of one row, ``command`` (of ``actuation``, checked by the caller): the
+        arrays :meth:`zeros` and :meth:`put` would hold, without their zeros."""
+        velocities = np.empty((1, 6))
+        velocities[0] = command.velocities
+        forces = None
+        if actuation is Actuation.FORCE:
+            forces = np.empty((1, 6))
+            forces[0] = command.values
+        error_norm = np.empty(1)
+        error_norm[0] = command.error_norm
+        return CommandBatch(velocities, error_norm, [command.reason], actuation, forces,
+                            [command])
 
     def put(self, k: int, command: Command) -> None:
         """Set row ``k`` to a per-trial :class:`Command` (of the batch's actuation), kept

@@ -45,11 +45,16 @@ from controllers.base import (
     ObservationBatch,
 )
 from controllers.batch import actuation_of
+from hexapod.fk import forward_kinematics_batch
+from hexapod.workspace import home_pose
+from vision.legs import directions_from_edges, observe_legs
 
 log = logging.getLogger(__name__)
 
 #: Encoder readings kept (control periods): more than any latency studied.
 HISTORY = 512
+#: The offsets of a pose pair's two rows (capture instant, control instant).
+_PAIR = np.array([0, 1])
 
 
 def move_normals(seen: np.ndarray, delta: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -61,6 +66,12 @@ def move_normals(seen: np.ndarray, delta: np.ndarray) -> tuple[np.ndarray, np.nd
         moved = seen + np.where(delta_ok[..., None], delta, 0.0)
         moved /= np.linalg.norm(moved, axis=-1, keepdims=True)
     return np.where(np.isfinite(seen), moved, seen), delta_ok
+
+
+def _finite(values: np.ndarray) -> bool:
+    """Whether every value of a small float array is finite (a Python loop over its
+    values: cheaper than a numpy reduction for the six of one reading)."""
+    return all(map(math.isfinite, values.ravel().tolist()))
 
 
 class EncoderHistory:
@@ -91,7 +102,7 @@ class EncoderHistory:
         time that goes back starts the history afresh)."""
         q = np.asarray(observation.lengths, dtype=float)
         t = float(observation.t)
-        if q.shape == (6,) and np.all(np.isfinite(q)) and math.isfinite(t):
+        if q.shape == (6,) and _finite(q) and math.isfinite(t):
             if self.times and t <= self.times[-1]:
                 self.times.clear()
                 self.lengths.clear()
@@ -99,7 +110,7 @@ class EncoderHistory:
             self.times.append(t)
             self.lengths.append(q.copy())
             rate = None if observation.q_dot is None else np.array(observation.q_dot, float)
-            ok = rate is not None and rate.shape == (6,) and bool(np.all(np.isfinite(rate)))
+            ok = rate is not None and rate.shape == (6,) and _finite(rate)
             self.rates.append(rate if ok else None)
 
     def predicts(self, observation: Observation) -> bool:
@@ -110,9 +121,13 @@ class EncoderHistory:
                     or image_t >= t - 1e-12 or not self.times or self.times[-1] != t)
 
     def lengths_at(self, time: float) -> np.ndarray:
-        """The encoder lengths at ``time``, interpolated between readings."""
-        times = np.fromiter(self.times, dtype=float, count=len(self.times))
-        j = int(np.searchsorted(times, time, side="right")) - 1
+        """The encoder lengths at ``time``, interpolated between readings (the last
+        reading at or before ``time`` is found from the newest back: a capture instant
+        is a few periods old)."""
+        times = self.times
+        j = len(times) - 1
+        while j >= 0 and times[j] > time:
+            j -= 1
         if j < 0:
             return np.array(self.lengths[0])
         if j >= len(times) - 1:
@@ -172,7 +187,7 @@ class LatencyCompensated(Controller):
         Raises:
             ContextError: A context the law cannot use.
         """
-        from vision import fast_observe
+        from vision import fast_observe  # (imported when first needed, not with the registry)
 
         self._contexts = list(contexts)
         self._histories = [EncoderHistory(self.use_rates) for _ in self._contexts]
@@ -217,12 +232,13 @@ class LatencyCompensated(Controller):
         trials = np.asarray(obs.trials, dtype=int)
         late: list[int] = []
         before: list[np.ndarray] = []
+        histories = self._histories
+        images = obs.image_t is not None and obs.normals is not None  # else none is late
         for j, k in enumerate(trials.tolist()):
             row = obs.item(j)
-            history = self._histories[k]
+            history = histories[k]
             history.record(row)
-            if (history.predicts(row) and obs.normals is not None
-                    and self._contexts[k].camera is not None):
+            if images and history.predicts(row) and self._contexts[k].camera is not None:
                 late.append(j)
                 before.append(history.lengths_at(float(row.image_t)))  # type: ignore[arg-type]
         if late:
@@ -235,10 +251,6 @@ class LatencyCompensated(Controller):
                    before: np.ndarray) -> ObservationBatch:
         """The batch with the features of ``rows`` moved from their capture instants
         (encoder lengths ``before``, (m, 6)) to their control instants."""
-        from hexapod.fk import forward_kinematics_batch
-        from hexapod.workspace import home_pose
-        from vision.legs import directions_from_edges
-
         tr = trials[rows]
         m = len(rows)
         q = np.empty((2 * m, 6))
@@ -265,7 +277,7 @@ class LatencyCompensated(Controller):
             self._histories[int(tr[i])].guess = (sol.rotations[2 * i + 1].copy(),
                                                  sol.translations[2 * i + 1].copy())
         rows, tr = rows[keep], tr[keep]
-        pairs = np.stack([2 * keep, 2 * keep + 1], axis=1).reshape(-1)
+        pairs = (2 * keep[:, None] + _PAIR).reshape(-1)  # (2 keep, 2 keep + 1)
         model = self._batch_model_normals(tr, sol.rotations[pairs], sol.translations[pairs])
         assert obs.normals is not None
         normals, _ = move_normals(np.asarray(obs.normals, dtype=float)[rows],
@@ -275,10 +287,10 @@ class LatencyCompensated(Controller):
         out_lines = obs.lines
         if out_lines is not None:
             out_lines = np.array(out_lines, dtype=float)
-            for i, k in enumerate(tr.tolist()):
-                camera = self._contexts[k].camera
-                if getattr(camera, "kind", None) == "perspective":
-                    with np.errstate(invalid="ignore"):
+            with np.errstate(invalid="ignore"):
+                for i, k in enumerate(tr.tolist()):
+                    camera = self._contexts[k].camera
+                    if getattr(camera, "kind", None) == "perspective":
                         out_lines[rows[i]] = camera.normal_to_line(normals[i])
         out_dirs = obs.directions
         if out_dirs is not None:
@@ -290,20 +302,20 @@ class LatencyCompensated(Controller):
         image_t = None if obs.image_t is None else np.array(obs.image_t, dtype=float)
         if image_t is not None:
             image_t[rows] = np.asarray(obs.t, dtype=float)[rows]
-        return replace(obs, normals=out_normals, lines=out_lines, directions=out_dirs,
-                       image_t=image_t)
+        return ObservationBatch(obs.trials, obs.t, obs.lengths, out_normals, out_lines,
+                                out_dirs, obs.edge_visible, obs.direction_visible, image_t,
+                                obs.q_dot)
 
     def _batch_model_normals(self, trials: np.ndarray, R: np.ndarray, t: np.ndarray
                        ) -> np.ndarray:
         """(2m, 6, 2, 3) the normals each trial's estimated camera sees of its nominal
         robot at the pose pairs ``R`` (2m, 3, 3), ``t`` (2m, 3) of ``trials`` (m,)."""
         from vision import fast_observe
-        from vision.legs import observe_legs
 
         out = np.empty((len(R), 6, 2, 3))
         pair_trials = np.repeat(trials, 2)
         groups = self._group[pair_trials]
-        for g in np.unique(groups).tolist():
+        for g in sorted(set(groups.tolist())):
             at = np.flatnonzero(groups == g)
             if g < 0:  # pair by pair, as the per-trial step
                 for i in at[0::2].tolist():
