@@ -23,9 +23,28 @@ computed-torque laws (``computed-torque``, ``cartesian-ctc``, ``vision-ctc``,
 ``leg-edge-ctc``, ``leg-direction-ctc``) use it.
 """
 
+from importlib import import_module
+from typing import TYPE_CHECKING, Any
+
 from controllers.solvers.base import Solved, Solver
-from controllers.solvers.limit_qp import LimitQPSolver, StrokeWindow, velocity_bounds
 from controllers.solvers.pseudo_inverse import DampedPseudoInverse
+
+if TYPE_CHECKING:  # imported on first access (OSQP and SciPy: __getattr__ below)
+    from controllers.solvers.limit_qp import LimitQPSolver, StrokeWindow, velocity_bounds
+
+#: Names of :mod:`controllers.solvers.limit_qp` re-exported here, imported on first
+#: access: OSQP (and the SciPy it imports) only for a law that builds a QP.
+_LIMIT_QP = ("LimitQPSolver", "StrokeWindow", "velocity_bounds")
+
+
+def __getattr__(name: str) -> Any:
+    """The limit-QP names, imported on first access (PEP 562)."""
+    if name not in _LIMIT_QP:
+        raise AttributeError(f"module 'controllers.solvers' has no attribute {name!r}")
+    value = getattr(import_module("controllers.solvers.limit_qp"), name)
+    globals()[name] = value
+    return value
+
 
 __all__ = ["DampedPseudoInverse", "LimitQPSolver", "Solved", "Solver", "StrokeWindow",
            "velocity_bounds"]
