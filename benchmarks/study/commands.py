@@ -132,7 +132,12 @@ def _run_locked(scenarios: list[Any], out: Path, args: argparse.Namespace
                 ) -> tuple[int, Any]:
     """Run the planned trials and write the report; the exit code and the rows read for
     the report (None after a live-viewer run)."""
-    from benchmarks.study.report import META_FILE, read_rows, write_report
+    from benchmarks.study.report import (
+        META_FILE,
+        import_drawing_modules,
+        read_rows,
+        write_report,
+    )
     from benchmarks.study.runner import completed_keys, plan, run_units
 
     meta_path = out / META_FILE
@@ -209,9 +214,11 @@ def _run_locked(scenarios: list[Any], out: Path, args: argparse.Namespace
                     advance(unit)
                     prog.advance(task, len(unit.trials))
 
-                run_units(units, out, args.workers, args.dask, progress=advance_bar)
+                run_units(units, out, args.workers, args.dask, progress=advance_bar,
+                          meanwhile=import_drawing_modules)
         else:
-            run_units(units, out, args.workers, args.dask, progress=advance)
+            run_units(units, out, args.workers, args.dask, progress=advance,
+                      meanwhile=import_drawing_modules)
     except KeyboardInterrupt:
         interrupted = True
         # Ctrl-C may land between a chunk's write and its progress call: count the file

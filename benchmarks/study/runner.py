@@ -146,7 +146,9 @@ def _iter_inline(units: list[WorkUnit]) -> Iterator[tuple[WorkUnit, Any]]:
         yield u, execute(u)
 
 
-def _iter_pool(units: list[WorkUnit], workers: int) -> Iterator[tuple[WorkUnit, Any]]:
+def _iter_pool(units: list[WorkUnit], workers: int,
+               meanwhile: Callable[[], None] | None = None
+               ) -> Iterator[tuple[WorkUnit, Any]]:
     import multiprocessing as mp
 
     ctx = mp.get_context("fork" if sys.platform.startswith("linux") else "spawn")
@@ -158,6 +160,9 @@ def _iter_pool(units: list[WorkUnit], workers: int) -> Iterator[tuple[WorkUnit, 
                 while queue and len(pending) < 2 * workers:
                     u = queue.pop(0)
                     pending[pool.submit(execute, u)] = u
+                if meanwhile is not None:  # the workers exist (all forked at the first
+                    meanwhile()           # submit) and have units to run
+                    meanwhile = None
                 finished, _ = wait(pending, return_when=FIRST_COMPLETED)
                 for fut in finished:
                     u = pending.pop(fut)
@@ -195,7 +200,8 @@ def _iter_dask(units: list[WorkUnit], address: str, workers: int
 
 def run_units(units: list[WorkUnit], out_dir: Path, workers: int = 1,
               dask: str | None = None,
-              progress: Callable[[WorkUnit], None] | None = None) -> int:
+              progress: Callable[[WorkUnit], None] | None = None,
+              meanwhile: Callable[[], None] | None = None) -> int:
     """Execute work units and stream their results to ``out_dir``.
 
     Args:
@@ -204,6 +210,9 @@ def run_units(units: list[WorkUnit], out_dir: Path, workers: int = 1,
         workers: Processes (1: in-process).
         dask: Dask scheduler address, or ``"local"`` for a local cluster.
         progress: Called after each finished unit.
+        meanwhile: Called once in this process while the pool's workers run their first
+            units (``run`` imports the report's drawing modules then, instead of after
+            the trials); not called in-process or with Dask.
 
     Returns:
         Number of rows written.
@@ -212,18 +221,19 @@ def run_units(units: list[WorkUnit], out_dir: Path, workers: int = 1,
         DirectoryLockedError: Another process is writing into ``out_dir``.
     """
     with run_lock(out_dir):
-        return _run_units(units, out_dir, workers, dask, progress)
+        return _run_units(units, out_dir, workers, dask, progress, meanwhile)
 
 
 def _run_units(units: list[WorkUnit], out_dir: Path, workers: int, dask: str | None,
-               progress: Callable[[WorkUnit], None] | None) -> int:
+               progress: Callable[[WorkUnit], None] | None,
+               meanwhile: Callable[[], None] | None = None) -> int:
     writer = ResultsWriter(out_dir)
     count = 0
     try:
         if dask:
             it = _iter_dask(units, dask, workers)
         elif workers > 1:
-            it = _iter_pool(units, workers)
+            it = _iter_pool(units, workers, meanwhile)
         else:
             it = _iter_inline(units)
         for unit, (rows, records) in it:
