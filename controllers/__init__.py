@@ -34,7 +34,7 @@ dataclass (:mod:`controllers.estimators`). A controller says what it commands
 
 from collections.abc import Iterator, Mapping
 from importlib import import_module
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING
 
 from controllers.base import (
     Actuation,
@@ -48,6 +48,7 @@ from controllers.base import (
     registry,
 )
 from controllers.registry import ControllerFactory
+from hexapod.lazy import lazy_names
 
 if TYPE_CHECKING:  # imported on first use (module __getattr__ below)
     from controllers.cartesian_ctc import CartesianCTC, VisionCTC
@@ -112,14 +113,8 @@ for _name, _spec in BUILTIN_SPECS.items():
     registry.register_lazy(_name, _spec)
 
 
-def __getattr__(name: str) -> Any:
-    """The built-in controller classes, imported on first access (PEP 562)."""
-    module = _LAZY_CLASSES.get(name)
-    if module is None:
-        raise AttributeError(f"module 'controllers' has no attribute {name!r}")
-    value = getattr(import_module(module), name)
-    globals()[name] = value
-    return value
+#: The built-in classes re-exported here (and the submodules), imported on first access.
+__getattr__ = lazy_names(__name__, _LAZY_CLASSES, globals())
 
 
 __all__ = [

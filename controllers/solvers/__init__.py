@@ -23,11 +23,11 @@ computed-torque laws (``computed-torque``, ``cartesian-ctc``, ``vision-ctc``,
 ``leg-edge-ctc``, ``leg-direction-ctc``) use it.
 """
 
-from importlib import import_module
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING
 
 from controllers.solvers.base import Solved, Solver
 from controllers.solvers.pseudo_inverse import DampedPseudoInverse
+from hexapod.lazy import lazy_names
 
 if TYPE_CHECKING:  # imported on first access (OSQP and SciPy: __getattr__ below)
     from controllers.solvers.limit_qp import LimitQPSolver, StrokeWindow, velocity_bounds
@@ -37,13 +37,8 @@ if TYPE_CHECKING:  # imported on first access (OSQP and SciPy: __getattr__ below
 _LIMIT_QP = ("LimitQPSolver", "StrokeWindow", "velocity_bounds")
 
 
-def __getattr__(name: str) -> Any:
-    """The limit-QP names, imported on first access (PEP 562)."""
-    if name not in _LIMIT_QP:
-        raise AttributeError(f"module 'controllers.solvers' has no attribute {name!r}")
-    value = getattr(import_module("controllers.solvers.limit_qp"), name)
-    globals()[name] = value
-    return value
+__getattr__ = lazy_names(__name__, dict.fromkeys(_LIMIT_QP, "controllers.solvers.limit_qp"),
+                         globals())
 
 
 __all__ = ["DampedPseudoInverse", "LimitQPSolver", "Solved", "Solver", "StrokeWindow",

@@ -31,10 +31,10 @@ records), :mod:`~hexapod.visualize.drawings` (the camera and edge-plane geometry
 (HTML export and curves).
 """
 
-from importlib import import_module
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING
 
 from hexapod.exceptions import RecordError, ViewerError
+from hexapod.lazy import lazy_names
 from hexapod.visualize.records import (
     CAMERA_KINDS,
     RECORD_KEYS,
@@ -56,14 +56,8 @@ _LAZY = {"plot_trial": "replay", "replay_html": "replay", "replay_trial": "repla
          "LIVE_PERIOD": "viewer", "HexapodViewer": "viewer"}
 
 
-def __getattr__(name: str) -> Any:
-    """The viewer's and the replay's names, imported on first access (PEP 562)."""
-    module = _LAZY.get(name)
-    if module is None:
-        raise AttributeError(f"module 'hexapod.visualize' has no attribute {name!r}")
-    value = getattr(import_module(f"hexapod.visualize.{module}"), name)
-    globals()[name] = value
-    return value
+__getattr__ = lazy_names(__name__, {name: f"hexapod.visualize.{module}"
+                                    for name, module in _LAZY.items()}, globals())
 
 
 __all__ = [
