@@ -32,6 +32,10 @@ dataclass (:mod:`controllers.estimators`). A controller says what it commands
 (:class:`Actuation`: leg velocities, or leg forces).
 """
 
+from collections.abc import Iterator, Mapping
+from importlib import import_module
+from typing import TYPE_CHECKING
+
 from controllers.base import (
     Actuation,
     Command,
@@ -43,43 +47,79 @@ from controllers.base import (
     observation_problem,
     registry,
 )
-from controllers.cartesian_ctc import CartesianCTC, VisionCTC
-from controllers.computed_torque import ComputedTorqueController
-from controllers.feature_ctc import LegDirectionCTC, LegEdgeCTC
-from controllers.force_mpc import LegEdgeForceMPC, PoseForceMPC
-from controllers.joint import JointSpaceController
-from controllers.latency import LatencyCompensated
-from controllers.leg_direction import LegDirectionController
-from controllers.leg_edge import LegEdgeController
-from controllers.model_based import ModelBasedController
-from controllers.mpc import LegDirectionMPCController, LegEdgeMPCController
-from controllers.qp import LegDirectionQPController, LegEdgeQPController
+from controllers.registry import ControllerFactory
+from hexapod.lazy import lazy_names
 
-#: The built-in controllers, by registry name.
-BUILTINS = {
-    "leg-direction": LegDirectionController,
-    "leg-edge": LegEdgeController,
-    "leg-edge-qp": LegEdgeQPController,
-    "leg-direction-qp": LegDirectionQPController,
-    "leg-edge-mpc": LegEdgeMPCController,
-    "leg-direction-mpc": LegDirectionMPCController,
-    "model-based": ModelBasedController,
-    "joint-space": JointSpaceController,
-    "computed-torque": ComputedTorqueController,
-    "cartesian-ctc": CartesianCTC,
-    "vision-ctc": VisionCTC,
-    "leg-edge-ctc": LegEdgeCTC,
-    "leg-direction-ctc": LegDirectionCTC,
-    "leg-edge-force-mpc": LegEdgeForceMPC,
-    "pose-force-mpc": PoseForceMPC,
-    "latency-compensated": LatencyCompensated,
+if TYPE_CHECKING:  # imported on first use (module __getattr__ below)
+    from controllers.cartesian_ctc import CartesianCTC, VisionCTC
+    from controllers.computed_torque import ComputedTorqueController
+    from controllers.feature_ctc import LegDirectionCTC, LegEdgeCTC
+    from controllers.force_mpc import LegEdgeForceMPC, PoseForceMPC
+    from controllers.joint import JointSpaceController
+    from controllers.latency import LatencyCompensated
+    from controllers.leg_direction import LegDirectionController
+    from controllers.leg_edge import LegEdgeController
+    from controllers.model_based import ModelBasedController
+    from controllers.mpc import LegDirectionMPCController, LegEdgeMPCController
+    from controllers.qp import LegDirectionQPController, LegEdgeQPController
+
+#: The built-in controllers, by registry name: the ``module:attr`` of each class. A
+#: module is imported when its controller is first used (``import controllers`` imports
+#: no MPC, computed torque, OSQP or Pinocchio for a study that steps a kinematic law).
+BUILTIN_SPECS = {
+    "leg-direction": "controllers.leg_direction:LegDirectionController",
+    "leg-edge": "controllers.leg_edge:LegEdgeController",
+    "leg-edge-qp": "controllers.qp:LegEdgeQPController",
+    "leg-direction-qp": "controllers.qp:LegDirectionQPController",
+    "leg-edge-mpc": "controllers.mpc:LegEdgeMPCController",
+    "leg-direction-mpc": "controllers.mpc:LegDirectionMPCController",
+    "model-based": "controllers.model_based:ModelBasedController",
+    "joint-space": "controllers.joint:JointSpaceController",
+    "computed-torque": "controllers.computed_torque:ComputedTorqueController",
+    "cartesian-ctc": "controllers.cartesian_ctc:CartesianCTC",
+    "vision-ctc": "controllers.cartesian_ctc:VisionCTC",
+    "leg-edge-ctc": "controllers.feature_ctc:LegEdgeCTC",
+    "leg-direction-ctc": "controllers.feature_ctc:LegDirectionCTC",
+    "leg-edge-force-mpc": "controllers.force_mpc:LegEdgeForceMPC",
+    "pose-force-mpc": "controllers.force_mpc:PoseForceMPC",
+    "latency-compensated": "controllers.latency:LatencyCompensated",
 }
 
-for _name, _factory in BUILTINS.items():
-    registry.register(_name, _factory)
+#: The module of each class re-exported here (imported on first access).
+_LAZY_CLASSES = {spec.rpartition(":")[2]: spec.partition(":")[0]
+                 for spec in BUILTIN_SPECS.values()}
+
+
+class _Builtins(Mapping[str, ControllerFactory]):
+    """:data:`BUILTINS`: the built-in controllers' classes by registry name, each
+    imported when it is looked up."""
+
+    def __getitem__(self, name: str) -> ControllerFactory:
+        module, _, attr = BUILTIN_SPECS[name].partition(":")
+        factory: ControllerFactory = getattr(import_module(module), attr)
+        return factory
+
+    def __iter__(self) -> Iterator[str]:
+        return iter(BUILTIN_SPECS)
+
+    def __len__(self) -> int:
+        return len(BUILTIN_SPECS)
+
+
+#: The built-in controllers, by registry name (a read-only mapping to their classes).
+BUILTINS: Mapping[str, ControllerFactory] = _Builtins()
+
+for _name, _spec in BUILTIN_SPECS.items():
+    registry.register_lazy(_name, _spec)
+
+
+#: The built-in classes re-exported here (and the submodules), imported on first access.
+__getattr__ = lazy_names(__name__, _LAZY_CLASSES, globals())
+
 
 __all__ = [
     "BUILTINS",
+    "BUILTIN_SPECS",
     "Actuation",
     "CartesianCTC",
     "Command",

@@ -64,6 +64,8 @@ class Registry:
     def __init__(self) -> None:
         self._factories: dict[str, ControllerFactory] = {}
         self._info: dict[str, ControllerInfo] = {}
+        #: Names registered by ``module:attr``, not imported yet: ``(spec, package)``.
+        self._lazy: dict[str, tuple[str, str]] = {}
         self.errors: list[PluginLoadError] = []
         self._plugins_loaded = False
 
@@ -84,6 +86,53 @@ class Registry:
         self._factories[name] = factory
         self._info[name] = ControllerInfo(name, package, version, describe(factory))
 
+    def register_lazy(self, name: str, spec: str, package: str = "hexapod-vs") -> None:
+        """Register the factory ``spec`` (``"module:attr"``) under ``name`` without
+        importing its module: it is imported when ``name`` is first used
+        (:meth:`factory`, :meth:`create`, :meth:`options`, :meth:`info`).
+
+        Raises:
+            PluginLoadError: ``name`` breaks :func:`hexapod.outputs.check_name`, or
+                ``spec`` is not ``module:attr``.
+        """
+        try:
+            check_name(name, "controller name")
+        except UnsafeNameError as exc:
+            raise PluginLoadError(str(name), package, exc.problem) from None
+        module, _, attr = spec.partition(":")
+        if not module or not attr:
+            raise PluginLoadError(name, package, f"{spec!r} is not 'module:attr'")
+        self._lazy[name] = (spec, package)
+
+    def _package(self, name: str) -> str | None:
+        """The package that registered ``name`` (None: not registered)."""
+        if name in self._info:
+            return self._info[name].package
+        return self._lazy[name][1] if name in self._lazy else None
+
+    def _resolve(self, name: str) -> ControllerFactory:
+        """The factory of a name registered by :meth:`register_lazy`, imported now and
+        registered (kept in the lazy table: a caller that restores the registry's tables
+        gets it imported again, from the module cache).
+
+        Raises:
+            PluginLoadError: Its module does not import, or has no such attribute, or
+                the attribute is not callable (names the controller and the spec).
+        """
+        spec, package = self._lazy[name]
+        module, _, attr = spec.partition(":")
+        try:
+            obj: Any = importlib.import_module(module)
+            for part in attr.split("."):
+                obj = getattr(obj, part)
+        except (ImportError, AttributeError) as exc:
+            raise PluginLoadError(name, package, f"{spec}: {type(exc).__name__}: {exc}"
+                                  ) from exc
+        if not callable(obj):
+            raise PluginLoadError(name, package, f"{spec} is not callable")
+        self.register(name, obj, package)
+        return obj
+
     def load_plugins(self, force: bool = False) -> None:
         """Load the entry points of the ``hexapod.controllers`` group."""
         if self._plugins_loaded and not force:
@@ -92,7 +141,7 @@ class Registry:
         for ep in metadata.entry_points(group=ENTRY_POINT_GROUP):
             dist = ep.dist.name if ep.dist is not None else "unknown"
             version = ep.dist.version if ep.dist is not None else "unknown"
-            if ep.name in self._factories and self._info[ep.name].package == dist:
+            if self._package(ep.name) == dist:
                 continue
             try:
                 factory = ep.load()
@@ -114,11 +163,14 @@ class Registry:
     def names(self) -> list[str]:
         """Registered names (plugins included), sorted."""
         self.load_plugins()
-        return sorted(self._factories)
+        return sorted(self._factories.keys() | self._lazy.keys())
 
     def info(self) -> list[ControllerInfo]:
-        """Every registered controller with its package and version."""
+        """Every registered controller with its package and version (imports the
+        modules of the built-ins not used yet: their descriptions are their docstrings)."""
         self.load_plugins()
+        for name in self._lazy.keys() - self._factories.keys():
+            self._resolve(name)
         return [self._info[n] for n in sorted(self._info)]
 
     def factory(self, name: str) -> ControllerFactory:
@@ -126,6 +178,8 @@ class Registry:
         self.load_plugins()
         if name in self._factories:
             return self._factories[name]
+        if name in self._lazy:
+            return self._resolve(name)
         if ":" in name:
             module, _, attr = name.partition(":")
             try:
@@ -140,8 +194,8 @@ class Registry:
             package, version = _module_distribution(module)
             self.register(name, obj, package, version)
             return obj
-        raise UnknownControllerError(name, list(self._factories), suggest(name,
-                                                                         self._factories))
+        known = sorted(self._factories.keys() | self._lazy.keys())
+        raise UnknownControllerError(name, known, suggest(name, known))
 
     def create(self, name: str, **options: Any) -> Controller:
         """Instantiate a controller by name with its options."""

@@ -19,17 +19,18 @@ from __future__ import annotations
 import logging
 from dataclasses import dataclass
 from functools import lru_cache
-from typing import Literal
+from typing import TYPE_CHECKING, Literal
 
 import casadi as ca
 import numpy as np
-import pinocchio as pin
 
 from hexapod.compiled import CompiledFunction, Layout
 from hexapod.exceptions import ForwardKinematicsError, ShapeError, StrokeLimitError
 from hexapod.geometry import HexapodGeometry
-from hexapod.model import HexapodModel, build_model, constraint_residual_and_jacobian
 from hexapod.workspace import home_pose
+
+if TYPE_CHECKING:  # Pinocchio (0.15 s to import) only for the "pinocchio" method
+    from hexapod.model import HexapodModel
 
 log = logging.getLogger(__name__)
 
@@ -223,6 +224,8 @@ def forward_kinematics(
     if method == "newton":
         return _fk_newton(geometry, q, R0, t0, tol, max_iterations)
     if method == "pinocchio":
+        from hexapod.model import build_model
+
         return _fk_pinocchio(model or build_model(geometry), q, R0, t0, tol, max_iterations)
     raise ValueError(f"unknown forward-kinematics method {method!r}; use 'newton' or 'pinocchio'")
 
@@ -339,6 +342,10 @@ def solve_rows(x: np.ndarray, tol: float = 1e-12, max_iterations: int = 30
 def _fk_pinocchio(hm: HexapodModel, q: np.ndarray, R: np.ndarray, t: np.ndarray,
                   tol: float, max_iterations: int) -> ForwardKinematicsResult:
     """Gauss-Newton on the loop-closure constraints with the prismatic joints fixed."""
+    import pinocchio as pin
+
+    from hexapod.model import constraint_residual_and_jacobian
+
     model = hm.model
     x = hm.configuration(R, t)
     x[hm.prismatic_q_indices()] = q

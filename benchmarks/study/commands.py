@@ -73,14 +73,15 @@ def run_studies(scenarios: list[Any], out: Path, args: argparse.Namespace) -> in
 
     # one run per results directory, from the check to the report
     with run_lock(out), summarised_warnings(not getattr(args, "verbose", False)) as repeated:
-        code = _run_locked(scenarios, out, args)
-    return _failure_epilogue(out, repeated.repeats(), code)
+        code, results = _run_locked(scenarios, out, args)
+    return _failure_epilogue(out, repeated.repeats(), code, results)
 
 
-def _failure_epilogue(out: Path, repeats: list[str], code: int) -> int:
+def _failure_epilogue(out: Path, repeats: list[str], code: int, results: Any = None) -> int:
     """Print the failures once per cause (with their counts) and the repeated warnings;
     the exit code is 1 when every trial of the results directory failed, 3 when a
-    controller failed every one of its trials (the others ran)."""
+    controller failed every one of its trials (the others ran). ``results``: the
+    directory's rows when the run read them for its report (``report.read_rows``)."""
     from benchmarks.study.failures import (
         CONTROLLER_FAILED,
         EVERY_TRIAL_FAILED,
@@ -88,9 +89,9 @@ def _failure_epilogue(out: Path, repeats: list[str], code: int) -> int:
         every_trial_failed,
         failure_summary,
     )
-    from benchmarks.study.runner import deduplicate, read_results
+    from benchmarks.study.report import read_rows
 
-    rows, _, _ = deduplicate(read_results(out))
+    rows = (results if results is not None else read_rows(out)).rows
     con = console()
     for line in repeats:
         con.print(f"warning: {line}", markup=False, highlight=False, soft_wrap=True)
@@ -127,8 +128,16 @@ def auto_chunk(scenarios: list[Any], workers: int, backend: str) -> int:
     return int(min(1000, trials, max(25, share)))
 
 
-def _run_locked(scenarios: list[Any], out: Path, args: argparse.Namespace) -> int:
-    from benchmarks.study.report import META_FILE, write_report
+def _run_locked(scenarios: list[Any], out: Path, args: argparse.Namespace
+                ) -> tuple[int, Any]:
+    """Run the planned trials and write the report; the exit code and the rows read for
+    the report (None after a live-viewer run)."""
+    from benchmarks.study.report import (
+        META_FILE,
+        import_drawing_modules,
+        read_rows,
+        write_report,
+    )
     from benchmarks.study.runner import completed_keys, plan, run_units
 
     meta_path = out / META_FILE
@@ -170,7 +179,7 @@ def _run_locked(scenarios: list[Any], out: Path, args: argparse.Namespace) -> in
     record_options(meta, getattr(args, "options_record", None))  # "tuned" or "as given"
     meta_path.write_text(json.dumps(meta, indent=2))
     if args.viz:
-        return _run_with_viz(scenarios, out, args)
+        return _run_with_viz(scenarios, out, args), None
     t0 = time.perf_counter()
     show = sys.stdout.isatty() and not args.no_progress
     interrupted = False
@@ -205,9 +214,11 @@ def _run_locked(scenarios: list[Any], out: Path, args: argparse.Namespace) -> in
                     advance(unit)
                     prog.advance(task, len(unit.trials))
 
-                run_units(units, out, args.workers, args.dask, progress=advance_bar)
+                run_units(units, out, args.workers, args.dask, progress=advance_bar,
+                          meanwhile=import_drawing_modules)
         else:
-            run_units(units, out, args.workers, args.dask, progress=advance)
+            run_units(units, out, args.workers, args.dask, progress=advance,
+                      meanwhile=import_drawing_modules)
     except KeyboardInterrupt:
         interrupted = True
         # Ctrl-C may land between a chunk's write and its progress call: count the file
@@ -218,12 +229,13 @@ def _run_locked(scenarios: list[Any], out: Path, args: argparse.Namespace) -> in
     wall = time.perf_counter() - t0
     meta["wall_time_s"] = wall
     meta_path.write_text(json.dumps(meta, indent=2))
-    report = write_report(out, getattr(args, "overwrite", False))
-    _print_summary(out, con)
+    results = read_rows(out)  # once: the report, the table and the failure summary
+    report = write_report(out, getattr(args, "overwrite", False), results)
+    _print_summary(out, con, results)
     done_text = f"{written} of {total} trials" if written != total else f"{total} trials"
     con.print(f"{done_text} in {wall:.1f} s ({executor}, {args.workers} worker(s))"
               f"{' before the interruption' if interrupted else ''}; report: {report}")
-    return 130 if interrupted else 0
+    return 130 if interrupted else 0, results
 
 
 def _keep_inputs(out: Path, scenarios: list[Any], meta: dict[str, Any],
@@ -277,18 +289,19 @@ def _run_with_viz(scenarios: list[Any], out: Path, args: argparse.Namespace) -> 
     return 0
 
 
-def _print_summary(out: Path, con: Any) -> None:
+def _print_summary(out: Path, con: Any, results: Any = None) -> None:
     """The results table of a run directory, per scenario after its task: tracking
     figures for a trajectory task, convergence and final errors for a point-to-point one
     (the failed trials counted apart and left out of the error columns); fitted to the
-    terminal's width (:mod:`benchmarks.study.fit_table`)."""
+    terminal's width (:mod:`benchmarks.study.fit_table`). ``results``: the directory's
+    rows when the caller read them (``report.read_rows``)."""
     from benchmarks.study.fit_table import print_table
     from benchmarks.study.metrics import summarize
-    from benchmarks.study.report import TABLE_HEADER, duplicate_note, summary_table_rows
-    from benchmarks.study.runner import deduplicate, read_results
+    from benchmarks.study.report import TABLE_HEADER, duplicate_note, read_rows, summary_table_rows
     from benchmarks.study.tracking_report import is_tracking, tracking_header, tracking_rows
 
-    rows, dropped, conflicting = deduplicate(read_results(out))
+    results = results if results is not None else read_rows(out)
+    rows, dropped, conflicting = results.rows, results.dropped, results.conflicting
     if dropped:
         con.print(f"[yellow]warning[/yellow]: {out / 'results.jsonl'}: "
                   f"{duplicate_note(dropped, conflicting)}")
@@ -304,8 +317,10 @@ def _print_summary(out: Path, con: Any) -> None:
                     tracking_header(rs), tracking_rows(rs, with_intervals=False),
                     keys=(0, 1), left=(0, 1), wrap=(0,))
     if point_to_point or not rows:
+        every = len(point_to_point) == len(rows)  # every row: the report's summaries
+        summaries = results.summaries() if every else summarize(point_to_point)
         print_table(con, f"Results ({out})", TABLE_HEADER,
-                    summary_table_rows(summarize(point_to_point)), keys=(0, 1, 2, 3),
+                    summary_table_rows(summaries), keys=(0, 1, 2, 3),
                     left=(0, 1, 2, 3), wrap=(1,))
 
 

@@ -5,6 +5,7 @@ from __future__ import annotations
 import json
 import logging
 from collections import defaultdict
+from dataclasses import dataclass, field
 from datetime import UTC, datetime
 from pathlib import Path
 from typing import Any
@@ -108,8 +109,54 @@ def failures_section(rows: list[dict[str, Any]]) -> list[str]:
     return [*out, ""]
 
 
-def write_report(out_dir: Path, overwrite: bool = False) -> Path:
+@dataclass
+class ResultRows:
+    """The rows of a results directory, read once (``results.jsonl`` without its duplicate
+    rows: :func:`~benchmarks.study.results.deduplicate`) for the report, the terminal's
+    table and the failure summary of ``run``.
+
+    Attributes:
+        rows: The rows, in file order.
+        dropped: Duplicate rows dropped.
+        conflicting: Dropped rows that disagree with the kept one.
+    """
+
+    rows: list[dict[str, Any]]
+    dropped: int
+    conflicting: int
+    _summaries: list[Summary] | None = field(default=None, repr=False)
+
+    def summaries(self) -> list[Summary]:
+        """:func:`~benchmarks.study.metrics.summarize` of :attr:`rows` (computed once)."""
+        if self._summaries is None:
+            self._summaries = summarize(self.rows)
+        return self._summaries
+
+
+def import_drawing_modules() -> None:
+    """Import the modules the report draws and tests with: matplotlib's figure on its
+    Agg canvas (about 0.3 s) and ``scipy.special`` (the normal distribution of the
+    Kaplan-Meier band and the log-rank test, about 0.15 s). ``run`` calls it in a thread
+    while its workers run the trials, so that the report does not wait for them after."""
+    from importlib import import_module
+
+    for module in ("matplotlib.figure", "matplotlib.backends.backend_agg", "scipy.special"):
+        import_module(module)
+
+
+def read_rows(out_dir: Path) -> ResultRows:
+    """The rows of ``out_dir/results.jsonl``, without duplicates."""
+    return ResultRows(*deduplicate(read_results(Path(out_dir))))
+
+
+def write_report(out_dir: Path, overwrite: bool = False,
+                 results: ResultRows | None = None) -> Path:
     """Write ``DIR/report.md`` (and its PNG plots) from ``DIR/results.jsonl``.
+
+    Args:
+        out_dir: The results directory.
+        overwrite: Replace a ``report.md`` the project did not write.
+        results: Its rows when the caller has read them (:func:`read_rows`).
 
     Raises:
         OutputError: ``DIR/report.md`` is a file the project did not write (and not
@@ -118,11 +165,12 @@ def write_report(out_dir: Path, overwrite: bool = False) -> Path:
     from benchmarks.study.outdir import check_report_file
 
     out_dir = Path(out_dir)
-    rows, dropped, conflicting = deduplicate(read_results(out_dir))
+    results = results if results is not None else read_rows(out_dir)
+    rows, dropped, conflicting = results.rows, results.dropped, results.conflicting
     check_report_file(out_dir, overwrite)
     if dropped:
         log.warning("%s: %s", out_dir / "results.jsonl", duplicate_note(dropped, conflicting))
-    summaries = summarize(rows)
+    summaries = results.summaries()
     meta: dict[str, Any] = {}
     if (out_dir / META_FILE).exists():
         meta = json.loads((out_dir / META_FILE).read_text())

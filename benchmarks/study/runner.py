@@ -13,6 +13,7 @@ import logging
 import os
 import platform
 import sys
+import threading
 from collections.abc import Callable, Iterator
 from concurrent.futures import FIRST_COMPLETED, Future, ProcessPoolExecutor, wait
 from dataclasses import dataclass
@@ -146,18 +147,28 @@ def _iter_inline(units: list[WorkUnit]) -> Iterator[tuple[WorkUnit, Any]]:
         yield u, execute(u)
 
 
-def _iter_pool(units: list[WorkUnit], workers: int) -> Iterator[tuple[WorkUnit, Any]]:
+def _iter_pool(units: list[WorkUnit], workers: int,
+               meanwhile: Callable[[], None] | None = None
+               ) -> Iterator[tuple[WorkUnit, Any]]:
     import multiprocessing as mp
 
     ctx = mp.get_context("fork" if sys.platform.startswith("linux") else "spawn")
     with ProcessPoolExecutor(max_workers=workers, mp_context=ctx) as pool:
         pending: dict[Future[Any], WorkUnit] = {}
         queue = list(units)
+        beside: threading.Thread | None = None
         try:
             while queue or pending:
                 while queue and len(pending) < 2 * workers:
                     u = queue.pop(0)
                     pending[pool.submit(execute, u)] = u
+                if meanwhile is not None and beside is None:
+                    # a thread, so that this one keeps collecting and submitting units;
+                    # started after the first submit: the pool forks all its workers then,
+                    # and never again, so no worker is forked with this thread running
+                    beside = threading.Thread(target=_quietly, args=(meanwhile,),
+                                              name="meanwhile", daemon=True)
+                    beside.start()
                 finished, _ = wait(pending, return_when=FIRST_COMPLETED)
                 for fut in finished:
                     u = pending.pop(fut)
@@ -167,6 +178,18 @@ def _iter_pool(units: list[WorkUnit], workers: int) -> Iterator[tuple[WorkUnit, 
                 fut.cancel()
             pool.shutdown(wait=False, cancel_futures=True)
             raise
+        finally:
+            if beside is not None:
+                beside.join()
+
+
+def _quietly(job: Callable[[], None]) -> None:
+    """Run ``job``, a preparation (the report's imports): a failure is logged, and met
+    again with its error where what it prepares is needed."""
+    try:
+        job()
+    except Exception:  # met again, with its error, where it matters (the report)
+        log.debug("preparing beside the pool failed", exc_info=True)
 
 
 def _iter_dask(units: list[WorkUnit], address: str, workers: int
@@ -195,7 +218,8 @@ def _iter_dask(units: list[WorkUnit], address: str, workers: int
 
 def run_units(units: list[WorkUnit], out_dir: Path, workers: int = 1,
               dask: str | None = None,
-              progress: Callable[[WorkUnit], None] | None = None) -> int:
+              progress: Callable[[WorkUnit], None] | None = None,
+              meanwhile: Callable[[], None] | None = None) -> int:
     """Execute work units and stream their results to ``out_dir``.
 
     Args:
@@ -204,6 +228,9 @@ def run_units(units: list[WorkUnit], out_dir: Path, workers: int = 1,
         workers: Processes (1: in-process).
         dask: Dask scheduler address, or ``"local"`` for a local cluster.
         progress: Called after each finished unit.
+        meanwhile: Called once, in a thread of this process, while the pool's workers
+            run (``run`` imports the report's drawing modules then, instead of after the
+            trials); not called in-process or with Dask. Its failure is logged (debug).
 
     Returns:
         Number of rows written.
@@ -212,18 +239,19 @@ def run_units(units: list[WorkUnit], out_dir: Path, workers: int = 1,
         DirectoryLockedError: Another process is writing into ``out_dir``.
     """
     with run_lock(out_dir):
-        return _run_units(units, out_dir, workers, dask, progress)
+        return _run_units(units, out_dir, workers, dask, progress, meanwhile)
 
 
 def _run_units(units: list[WorkUnit], out_dir: Path, workers: int, dask: str | None,
-               progress: Callable[[WorkUnit], None] | None) -> int:
+               progress: Callable[[WorkUnit], None] | None,
+               meanwhile: Callable[[], None] | None = None) -> int:
     writer = ResultsWriter(out_dir)
     count = 0
     try:
         if dask:
             it = _iter_dask(units, dask, workers)
         elif workers > 1:
-            it = _iter_pool(units, workers)
+            it = _iter_pool(units, workers, meanwhile)
         else:
             it = _iter_inline(units)
         for unit, (rows, records) in it:

@@ -23,9 +23,23 @@ computed-torque laws (``computed-torque``, ``cartesian-ctc``, ``vision-ctc``,
 ``leg-edge-ctc``, ``leg-direction-ctc``) use it.
 """
 
+from typing import TYPE_CHECKING
+
 from controllers.solvers.base import Solved, Solver
-from controllers.solvers.limit_qp import LimitQPSolver, StrokeWindow, velocity_bounds
 from controllers.solvers.pseudo_inverse import DampedPseudoInverse
+from hexapod.lazy import lazy_names
+
+if TYPE_CHECKING:  # imported on first access (OSQP and SciPy: __getattr__ below)
+    from controllers.solvers.limit_qp import LimitQPSolver, StrokeWindow, velocity_bounds
+
+#: Names of :mod:`controllers.solvers.limit_qp` re-exported here, imported on first
+#: access: OSQP (and the SciPy it imports) only for a law that builds a QP.
+_LIMIT_QP = ("LimitQPSolver", "StrokeWindow", "velocity_bounds")
+
+
+__getattr__ = lazy_names(__name__, dict.fromkeys(_LIMIT_QP, "controllers.solvers.limit_qp"),
+                         globals())
+
 
 __all__ = ["DampedPseudoInverse", "LimitQPSolver", "Solved", "Solver", "StrokeWindow",
            "velocity_bounds"]

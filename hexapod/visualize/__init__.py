@@ -31,7 +31,10 @@ records), :mod:`~hexapod.visualize.drawings` (the camera and edge-plane geometry
 (HTML export and curves).
 """
 
+from typing import TYPE_CHECKING
+
 from hexapod.exceptions import RecordError, ViewerError
+from hexapod.lazy import lazy_names
 from hexapod.visualize.records import (
     CAMERA_KINDS,
     RECORD_KEYS,
@@ -41,9 +44,21 @@ from hexapod.visualize.records import (
     save_trial,
     synthetic_record,
 )
-from hexapod.visualize.replay import plot_trial, replay_html, replay_trial
 from hexapod.visualize.server import SERVER_START_TIMEOUT, ZMQ_TIMEOUT
-from hexapod.visualize.viewer import LIVE_PERIOD, HexapodViewer
+
+if TYPE_CHECKING:  # the viewer's names load on first use (module __getattr__ below)
+    from hexapod.visualize.replay import plot_trial, replay_html, replay_trial
+    from hexapod.visualize.viewer import LIVE_PERIOD, HexapodViewer
+
+#: The names of the viewer and the replay, by module: they import the Pinocchio model
+#: (0.15 s), which writing or reading a trial record does not need.
+_LAZY = {"plot_trial": "replay", "replay_html": "replay", "replay_trial": "replay",
+         "LIVE_PERIOD": "viewer", "HexapodViewer": "viewer"}
+
+
+__getattr__ = lazy_names(__name__, {name: f"hexapod.visualize.{module}"
+                                    for name, module in _LAZY.items()}, globals())
+
 
 __all__ = [
     "CAMERA_KINDS", "LIVE_PERIOD", "RECORD_KEYS", "RECORD_SHAPES", "SERVER_START_TIMEOUT",

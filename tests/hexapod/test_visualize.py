@@ -290,3 +290,30 @@ def test_replay_in_a_real_browser(record: TrialRecord, tmp_path: Path) -> None:
     box = np.zeros_like(changed)
     box[ys.min():ys.max() + 1, xs.min():xs.max() + 1] = True
     assert (changed & box).sum() > 0.5 * changed.sum(), "the change is not where the platform is"
+
+
+def test_records_and_newton_fk_do_not_import_pinocchio(tmp_path: Path) -> None:
+    """Writing a trial record (every recorded trial of a study) and the Newton forward
+    kinematics import no Pinocchio; the viewer's names import it on first use."""
+    import sys
+
+    probe = (
+        "import sys\n"
+        "import numpy as np\n"
+        "from hexapod.fk import forward_kinematics\n"
+        "from hexapod.geometry import deltalab\n"
+        "from hexapod.kinematics import inverse_kinematics\n"
+        "from hexapod.visualize import save_trial, synthetic_record\n"
+        "from hexapod.workspace import home_pose\n"
+        "g = deltalab()\n"
+        "R, t = home_pose(g)\n"
+        "fk = forward_kinematics(g, inverse_kinematics(g, R, t), (R, t))\n"
+        "assert np.allclose(fk.translation, t)\n"
+        f"save_trial({str(tmp_path / 'r.npz')!r}, **synthetic_record(g).arrays)\n"
+        "before = 'pinocchio' in sys.modules\n"
+        "import hexapod.visualize as v\n"
+        "v.HexapodViewer\n"
+        "print(before, 'pinocchio' in sys.modules)\n")
+    out = subprocess.run([sys.executable, "-c", probe], capture_output=True, text=True,
+                         check=True)
+    assert out.stdout.split() == ["False", "True"]

@@ -65,6 +65,33 @@ def test_results_identical_across_executors_and_chunkings(tmp_path: Path) -> Non
 
 
 @pytest.mark.slow
+def test_meanwhile_is_called_once_in_this_process_by_the_pool_only(tmp_path: Path) -> None:
+    """``run`` imports the report's drawing modules while the workers run: the hook is
+    called once, in a thread of the main process (which keeps feeding the pool), and
+    joined before ``run_units`` returns; the rows are those of the in-process run, which
+    does not call it. A failing hook is a debug line, not a failed run."""
+    import os
+    import threading
+
+    units = plan([_scenario(trials=3)], chunk_size=1, record_trials=0)
+    calls: list[tuple[int, str, str]] = []
+    rows = {}
+    for workers in (1, 2):
+        out = tmp_path / f"w{workers}"
+        run_units(units, out, workers=workers,
+                  meanwhile=lambda w=workers: calls.append(
+                      (os.getpid(), threading.current_thread().name, f"w{w}")))
+        rows[workers] = _stable(read_results(out))
+    assert calls == [(os.getpid(), "meanwhile", "w2")]
+
+    def fails() -> None:
+        raise ImportError("no such drawing module")
+
+    assert run_units(units, tmp_path / "fails", workers=2, meanwhile=fails) == 12
+    assert rows[2] == rows[1] and len(rows[1]) == 2 * 2 * 3
+
+
+@pytest.mark.slow
 def test_a_crashing_trial_is_recorded_and_the_run_goes_on(tmp_path: Path) -> None:
     sc = _scenario(trials=6, controllers=[{"name": CRASH, "gain": 5.0},
                                           {"name": JOINTS, "gain": 5.0}])
