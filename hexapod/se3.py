@@ -65,17 +65,21 @@ def log_so3(R: np.ndarray) -> np.ndarray:
     """Rotation vectors (..., 3) [rad] of rotation matrices (..., 3, 3)."""
     R = np.asarray(R, dtype=float)
     cos = (np.trace(R, axis1=-2, axis2=-1) - 1.0) / 2.0
-    v = np.stack(
-        [R[..., 2, 1] - R[..., 1, 2], R[..., 0, 2] - R[..., 2, 0], R[..., 1, 0] - R[..., 0, 1]],
-        axis=-1,
-    )
+    v = np.empty((*R.shape[:-2], 3))  # filled in place: no stack (every period's book)
+    np.subtract(R[..., 2, 1], R[..., 1, 2], out=v[..., 0])
+    np.subtract(R[..., 0, 2], R[..., 2, 0], out=v[..., 1])
+    np.subtract(R[..., 1, 0], R[..., 0, 1], out=v[..., 2])
     # atan2(sin, cos) keeps full precision near 0 and pi, where arccos(cos) loses half
     # the digits (|v| = 2 sin(theta)).
-    theta = np.arctan2(0.5 * np.linalg.norm(v, axis=-1), cos)
+    theta = np.arctan2(0.5 * norms(v), cos)
     sin = np.sin(theta)
     small = sin < 1e-6
-    factor = np.where(small, 0.5 + theta**2 / 12.0, theta / (2.0 * np.where(small, 1.0, sin)))
-    w = factor[..., None] * v
+    if small.any():
+        factor = np.where(small, 0.5 + theta**2 / 12.0,
+                          theta / (2.0 * np.where(small, 1.0, sin)))
+    else:  # the other branch of the where, on sin itself
+        factor = theta / (2.0 * sin)
+    w = np.asarray(factor)[..., None] * v
     # Near pi: recover the axis from the symmetric part.
     near_pi = (theta > np.pi - 1e-3)
     if np.any(near_pi):
@@ -129,9 +133,10 @@ def pose_error(
     translation_ref: np.ndarray,
 ) -> tuple[np.ndarray, np.ndarray]:
     """Position error [m] and rotation angle error [rad] between poses (batched)."""
-    dp = np.linalg.norm(np.asarray(translation) - np.asarray(translation_ref), axis=-1)
+    d = np.asarray(translation) - np.asarray(translation_ref)
+    dp = norms(d) if d.dtype == np.float64 else np.linalg.norm(d, axis=-1)
     dR = np.swapaxes(rotation_ref, -1, -2) @ rotation
-    ang = np.linalg.norm(log_so3(dR), axis=-1)
+    ang = norms(log_so3(dR))
     return dp, ang
 
 
