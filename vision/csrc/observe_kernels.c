@@ -168,25 +168,31 @@ void hexapod_segments_imaged(const double *segments, long long n, const double *
     out[k] = all_imaged(segments + 6 * k, segments + 6 * k + 3, &box);
 }
 
+/* What hits_leg needs of leg j that does not depend on the sample: computed once per
+ * item (the same operations as when they were computed for every sample). */
+typedef struct {
+  const double *u;
+  double q, Au, Ap[3], c;
+} LegAxis;
+
+static void leg_axis(const double *A, const double *u, double q, double r, LegAxis *L) {
+  L->u = u;
+  L->q = q;
+  L->Au = dot3(A, u);
+  for (int k = 0; k < 3; ++k) L->Ap[k] = A[k] - L->Au * u[k];
+  L->c = dot3(L->Ap, L->Ap) - r * r;
+}
+
 /* Whether the open segment from the origin to P crosses leg j (vision.occlusion). */
-static int hits_leg(const double *P, const double *A, const double *u, double q, double r) {
-  double Pu = dot3(P, u), Au = dot3(A, u);
+static int hits_leg(const double *P, const LegAxis *L) {
+  const double *u = L->u;
+  double Pu = dot3(P, u), Au = L->Au, q = L->q, c = L->c;
   double Pp[3] = {P[0] - Pu * u[0], P[1] - Pu * u[1], P[2] - Pu * u[2]};
-  double Ap[3] = {A[0] - Au * u[0], A[1] - Au * u[1], A[2] - Au * u[2]};
-  double a = dot3(Pp, Pp), b = -2.0 * dot3(Pp, Ap), c = dot3(Ap, Ap) - r * r;
+  double a = dot3(Pp, Pp), b = -2.0 * dot3(Pp, L->Ap);
   double disc = b * b - 4.0 * a * c;
-  double sq = sqrt(disc > 0.0 ? disc : 0.0);
   int par = a <= 1e-300;
-  double a_safe = a > 0.0 ? a : 1.0;
-  double s1, s2;
-  if (par) {
-    s1 = c < 0.0 ? -INFINITY : INFINITY;
-    s2 = c < 0.0 ? INFINITY : -INFINITY;
-  } else {
-    s1 = (-b - sq) / (2.0 * a_safe);
-    s2 = (-b + sq) / (2.0 * a_safe);
-  }
   int hit_cyl = disc > 0.0 || par;
+  if (!hit_cyl) return 0; /* the line misses the cylinder: the intervals do not matter */
   double lo_ax, hi_ax;
   if (Pu == 0.0) {
     int inside = (-Au >= 0.0) && (-Au <= q);
@@ -197,9 +203,19 @@ static int hits_leg(const double *P, const double *A, const double *u, double q,
     lo_ax = Pu > 0.0 ? t0 : t1;
     hi_ax = Pu > 0.0 ? t1 : t0;
   }
+  double sq = sqrt(disc > 0.0 ? disc : 0.0);
+  double a_safe = a > 0.0 ? a : 1.0;
+  double s1, s2;
+  if (par) {
+    s1 = c < 0.0 ? -INFINITY : INFINITY;
+    s2 = c < 0.0 ? INFINITY : -INFINITY;
+  } else {
+    s1 = (-b - sq) / (2.0 * a_safe);
+    s2 = (-b + sq) / (2.0 * a_safe);
+  }
   double lo = fmax(fmax(s1, lo_ax), 0.0);
   double hi = fmin(fmin(s2, hi_ax), 1.0 - 1e-9);
-  return hit_cyl && lo < hi;
+  return lo < hi;
 }
 
 /* Whether the open segment from the origin to P crosses the platform disc. */
@@ -242,6 +258,8 @@ int hexapod_observe_batch(const double *params, double *out, long long n, double
     double ends[18]; /* far ends A_i + q_i u_i */
     for (int i = 0; i < 6; ++i)
       for (int k = 0; k < 3; ++k) ends[3 * i + k] = Ac[3 * i + k] + qc[i] * uc[3 * i + k];
+    LegAxis axes[6];
+    for (int l = 0; l < 6; ++l) leg_axis(Ac + 3 * l, uc + 3 * l, qc[l], r, &axes[l]);
     ImageBox box;
     image_box(cam, (int)unified, width, height, &box);
     mat_vec(Rc, t, centre);
@@ -338,7 +356,9 @@ int hexapod_observe_batch(const double *params, double *out, long long n, double
           interval[2 * e + 1] = (n_samples - 0.5) / (double)n_samples;
           continue;
         }
-        int count = 0, first = -1, last = -1;
+        int count = 0, first = -1, last = -1, near[6], n_near = 0;
+        for (int l = 0; l < 6; ++l) /* the legs the culling kept, in order */
+          if (!cull[l]) near[n_near++] = l;
         for (long long k = 0; k < n_samples; ++k) {
           double sk = (k + 0.5) / (double)n_samples;
           double P[3];
@@ -346,8 +366,8 @@ int hexapod_observe_batch(const double *params, double *out, long long n, double
             P[m] = Ac[3 * i + m] + r * nrm[m] + (sk * qc[i]) * uc[3 * i + m];
           int ok = inside || imaged(P, cam, (int)unified, width, height);
           if (ok && occlusion) {
-            for (int l = 0; l < 6 && ok; ++l)
-              if (!cull[l] && hits_leg(P, Ac + 3 * l, uc + 3 * l, qc[l], r)) ok = 0;
+            for (int l = 0; l < n_near && ok; ++l)
+              if (hits_leg(P, &axes[near[l]])) ok = 0;
             if (ok && disc_test && hits_disc(P, centre, dnormal, rho_disc)) ok = 0;
           }
           if (ok) {
