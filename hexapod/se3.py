@@ -23,10 +23,19 @@ def skew(x: np.ndarray) -> np.ndarray:
 
 
 def norms(x: np.ndarray, keepdims: bool = False) -> np.ndarray:
-    """Euclidean norms of vectors (..., n) along the last axis: ``np.linalg.norm(x,
-    axis=-1)`` operation for operation (the same bits: ``sqrt`` of ``add.reduce`` of the
-    squares), without its argument handling (hot in the simulator's every period)."""
-    return np.sqrt(np.add.reduce(x * x, axis=-1, keepdims=keepdims))  # type: ignore[no-any-return]
+    """Euclidean norms of float vectors (..., n) along the last axis: the bits of
+    ``np.linalg.norm(x, axis=-1)`` (``sqrt`` of ``add.reduce`` of the squares), without
+    its argument handling. Three-vectors (every camera noise, edge and pose error of
+    the simulator, every period) are summed as numpy's reduction of three numbers does,
+    ``(x0^2 + x1^2) + x2^2`` (``tests/hexapod/test_se3.py`` holds the two equal), in
+    three passes instead of a reduction along a short axis (four times faster)."""
+    if x.shape[-1:] != (3,):
+        return np.sqrt(np.add.reduce(x * x, axis=-1, keepdims=keepdims))  # type: ignore[no-any-return]
+    out = x[..., 0] * x[..., 0]
+    out += x[..., 1] * x[..., 1]
+    out += x[..., 2] * x[..., 2]
+    out = np.sqrt(out, out=out) if isinstance(out, np.ndarray) else np.sqrt(out)
+    return out[..., None] if keepdims else out  # type: ignore[no-any-return]
 
 
 def exp_so3(w: np.ndarray) -> np.ndarray:
