@@ -8,7 +8,9 @@ list (not CasADi's code generator): every value is a vector of :data:`LANES` dou
 registers and on the stack. Every instruction is one IEEE operation per lane, as in
 CasADi's own C (``-ffp-contract=off``: no fused multiply-add), so the results are those
 of the scalar code bit for bit; the transcendental functions (``tanh``, ``sin``, ...)
-are libm's, lane by lane.
+are libm's, lane by lane. It is compiled with ``-O3`` (no ``-march``, no
+``-ffast-math``: GCC keeps every IEEE operation; about 9 % faster than ``-O2`` on the
+dynamic world's period, the same bits).
 
 The C is compiled twice in one library, for the baseline instruction set and for AVX2
 (chosen at run time with ``__builtin_cpu_supports`` on x86-64; the same results, the
@@ -266,7 +268,7 @@ class LaneFunction:
         None (logged) when it cannot be generated or compiled."""
         try:
             code = lane_code(function, name, finish)
-            path = build_shared_library(name, code, ("-O2", "-fno-math-errno",
+            path = build_shared_library(name, code, ("-O3", "-fno-math-errno",
                                                      "-ffp-contract=off"))
             return cls(name, int(function.nnz_in(0)), ctypes.CDLL(str(path)))
         except (OSError, subprocess.SubprocessError, UnsupportedInstructionError) as exc:

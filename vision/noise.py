@@ -19,13 +19,14 @@ import ctypes
 import logging
 import os
 import subprocess
+from collections.abc import Sequence
 from importlib import resources
 from pathlib import Path
-from typing import Any
+from typing import Any, overload
 
 import numpy as np
 
-from hexapod.se3 import exp_so3
+from hexapod.se3 import exp_so3, norms
 
 log = logging.getLogger(__name__)
 
@@ -139,21 +140,71 @@ def rotation_noise(
     return out
 
 
+class Generators(Sequence[Any]):
+    """Generators of rows, with the addresses of their bit generators taken once.
+
+    :func:`rotation_noise_batch` draws every row's numbers in one C call from the rows'
+    bit generators; a caller that draws from the same generators every period (the
+    simulator's sensor) keeps them in one of these and passes :meth:`take` of the rows
+    it measures, so the addresses are not looked up again each period. It is a sequence
+    of the generators (``g[k]``, ``len(g)``) for everything else.
+
+    Args:
+        rngs: The generators, one per row (anything when nothing is drawn: the
+            addresses are then None and the draws go generator by generator).
+        pointers: True: look the addresses up here; else the addresses of ``rngs``
+            already known (:meth:`take` passes its rows'), or None.
+    """
+
+    def __init__(self, rngs: Sequence[Any], pointers: np.ndarray | bool | None = True
+                 ) -> None:
+        self.rngs = list(rngs)
+        #: (n,) each generator's ``bitgen_t`` address, or None when some row is not a
+        #: :class:`numpy.random.Generator` (the draws go generator by generator).
+        self.pointers: np.ndarray | None
+        if isinstance(pointers, np.ndarray) or pointers is None:
+            self.pointers = pointers
+        elif all(type(g) is np.random.Generator for g in self.rngs):
+            self.pointers = np.array([g.bit_generator.ctypes.bit_generator.value
+                                      for g in self.rngs], dtype=np.uintp)
+        else:
+            self.pointers = None
+
+    def __len__(self) -> int:
+        return len(self.rngs)
+
+    @overload
+    def __getitem__(self, k: int) -> Any: ...
+
+    @overload
+    def __getitem__(self, k: slice) -> list[Any]: ...
+
+    def __getitem__(self, k: int | slice) -> Any:
+        return self.rngs[k]
+
+    def take(self, rows: np.ndarray) -> Generators:
+        """The generators of ``rows`` (indices into these), their addresses with them."""
+        rngs = self.rngs
+        return Generators([rngs[k] for k in rows.tolist()],
+                          None if self.pointers is None else self.pointers[rows])
+
+
 def rotation_noise_batch(
     vectors: np.ndarray,
     max_angle_rad: float,
-    rngs: list[np.random.Generator],
+    rngs: Sequence[np.random.Generator] | Generators,
 ) -> np.ndarray:
     """:func:`rotation_noise` of ``vectors[k]`` with ``rngs[k]``, for every k at once.
 
     Each row draws exactly what :func:`rotation_noise` draws from its generator (its
     axes, then its angles), so a row's result does not depend on the other rows; the
-    arithmetic is then done for all rows together.
+    arithmetic is then done for all rows together, operation for operation as
+    :func:`rotation_noise` does it (the same bits).
 
     Args:
         vectors: (n, ..., 3) unit vectors.
         max_angle_rad: Maximal rotation angle ``a`` [rad].
-        rngs: n generators.
+        rngs: n generators (a :class:`Generators` keeps their addresses between calls).
 
     Returns:
         (n, ..., 3) perturbed vectors.
@@ -165,29 +216,34 @@ def rotation_noise_batch(
     if a < 0 or not np.isfinite(a):
         raise ValueError(f"max_angle_rad must be finite and >= 0, got {max_angle_rad}")
     shape = v.shape[1:-1]
-    axes = np.empty((len(rngs), *shape, 3))
-    fractions = np.empty((len(rngs), *shape))
+    n = len(rngs)
+    axes = np.empty((n, *shape, 3))
+    fractions = np.empty((n, *shape))
     # The draws of normal(size=...) and uniform(0, 1, size=...): the same numbers (loc 0,
     # scale 1; low 0, range 1) by numpy's own fill functions, every generator in one C
     # call when compiled, else written in place generator by generator (one
     # trial-step's noise, in the hot loop of every study).
     draws = _compiled_draws()
-    if draws is not None and all(type(g) is np.random.Generator for g in rngs):
-        m = int(np.prod(shape, dtype=int))
-        pointers = np.array([g.bit_generator.ctypes.bit_generator.value for g in rngs],
-                            dtype=np.uintp)
-        draws(pointers.ctypes.data, len(rngs), m, axes.ctypes.data, fractions.ctypes.data)
+    gens = rngs if isinstance(rngs, Generators) else Generators(rngs)
+    if draws is not None and gens.pointers is not None:
+        pointers = np.ascontiguousarray(gens.pointers, dtype=np.uintp)
+        draws(pointers.ctypes.data, n, int(np.prod(shape, dtype=int)), axes.ctypes.data,
+              fractions.ctypes.data)
     else:
-        for g, ax, fr in zip(rngs, axes.reshape(len(rngs), -1),
-                             fractions.reshape(len(rngs), -1), strict=True):
+        for g, ax, fr in zip(gens.rngs, axes.reshape(n, -1), fractions.reshape(n, -1),
+                             strict=True):
             g.standard_normal(out=ax)
             g.random(out=fr)
-    n = np.linalg.norm(axes, axis=-1, keepdims=True)
-    bad = n[..., 0] < 1e-12
-    if np.any(bad):
+    norm = norms(axes, keepdims=True)
+    bad = norm[..., 0] < 1e-12
+    if bad.any():
         axes[bad] = [0.0, 0.0, 1.0]
-        n[bad] = 1.0
-    R = exp_so3((axes / n) * (fractions * a)[..., None])
+        norm[bad] = 1.0
+    # (axes / norm) * (fractions * a), in place: random_unit_vectors, then the angles
+    axes /= norm
+    fractions *= a
+    axes *= fractions[..., None]
+    R = exp_so3(axes)
     return np.einsum("...ij,...j->...i", R, v)
 
 

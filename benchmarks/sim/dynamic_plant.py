@@ -85,8 +85,7 @@ class DynamicPlant:
         encoder count per control period (what a velocity estimate from the counts
         resolves)."""
         r = self.robots
-        rates, _ = r.model.legs_batch(r.R[rows], r.t[rows], r.twist[rows], **r.rows(rows))
-        return quantise(rates, r.resolution[rows] / self.dt)
+        return quantise(r.leg_rates(rows), r.resolution[rows] / self.dt)
 
     def advance(self, run: np.ndarray, velocities: np.ndarray, dt: float
                 ) -> dict[int, str]:

@@ -24,6 +24,7 @@ from vision.cameras import Camera
 from vision.cameras.perspective import PerspectiveCamera, normals_to_lines
 from vision.fast_observe import WorldParams, observe_batch
 from vision.legs import LegObservation, directions_from_edges
+from vision.noise import Generators
 
 log = logging.getLogger(__name__)
 
@@ -111,6 +112,9 @@ class GeometricSensor:
                            if all(isinstance(c, PerspectiveCamera) for c in true_cameras)
                            else None)
         self.rngs = list(rngs)
+        #: :attr:`rngs` with their bit generators' addresses, taken once (the rotation
+        #: noise draws every row's numbers in one C call, every period).
+        self.generators = Generators(self.rngs)
         self.detect_times: list[float] = []
 
     @classmethod
@@ -122,7 +126,7 @@ class GeometricSensor:
     def observe(self, rows: np.ndarray, rotations: np.ndarray, translations: np.ndarray
                 ) -> ObservationBatch:
         """The loop's interface: the camera's batch of ``rows`` at their true poses."""
-        return self.sample(rotations, translations, rows, [self.rngs[k] for k in rows])
+        return self.sample(rotations, translations, rows, self.generators.take(rows))
 
     def measure(self, rotations: np.ndarray, translations: np.ndarray,
                 rngs: Sequence[Any], apply_noise: bool = True) -> ObservationBatch:
@@ -233,7 +237,8 @@ def noisy_features(sc: SimScenario, normals: np.ndarray, visible: np.ndarray,
     if apply_noise and noise.model == "rotation" and noise.amplitude_deg > 0:
         from vision.noise import rotation_noise_batch
 
-        normals = rotation_noise_batch(normals, np.deg2rad(noise.amplitude_deg), list(rngs))
+        normals = rotation_noise_batch(normals, np.deg2rad(noise.amplitude_deg),
+                                       rngs if isinstance(rngs, Generators) else list(rngs))
     elif apply_noise and noise.model == "pixel":
         from vision.pixel_measure import normals_from_noisy_pixels
 

@@ -102,6 +102,8 @@ class DynamicRobots:
         #: (n,) largest drive tracking error [m/s] and largest drive force [N].
         self.track_max = np.zeros(n)
         self.force_max = np.abs(self.forces).max(axis=1)
+        #: (n, 79) the rows of :meth:`leg_rates` (built on first use).
+        self._leg_rows: np.ndarray | None = None
         self._share_table()
 
     def _share_table(self) -> None:
@@ -141,6 +143,32 @@ class DynamicRobots:
         Kinv = np.linalg.inv(K)
         joint = np.swapaxes(Kinv, -1, -2) @ M @ Kinv
         return self.rotor + np.diagonal(joint, axis1=-2, axis2=-1)  # type: ignore[no-any-return]
+
+    def leg_rates(self, rows: np.ndarray) -> np.ndarray:
+        """True leg rates ``q_dot = K twist`` (n, 6) [m/s] of ``rows`` at their present
+        state: :meth:`DynamicModel.legs_batch` with each row's own geometry and inertia,
+        its input rows copied from a table of their constants packed once (only the
+        poses and twists are written each call; the same kernel on the same inputs).
+
+        Raises:
+            ShapeError: A pose or twist of the rows is not finite (names the value).
+            DynamicsError: The kernel's result is not finite (names the row).
+        """
+        from hexapod.dynamics import compiled as _c
+        from hexapod.dynamics.model import _array
+
+        if self._leg_rows is None:  # A, E, the inertia, u = 0: constant per row
+            n = self.n
+            self._leg_rows = _c.pack(self.R, self.t, self.twist, np.zeros((n, 6)), self.A,
+                                     self.E, self.parameters)
+        x = self._leg_rows[rows]
+        s = _c.INPUTS
+        x[:, s["R"]].reshape(-1, 3, 3)[:] = np.swapaxes(_array("R", self.R[rows], (3, 3)),
+                                                        -1, -2)
+        x[:, s["t"]] = _array("t", self.t[rows], (3,))
+        x[:, s["twist"]] = _array("twist", self.twist[rows], (6,))
+        y = self.model._checked(_c.compiled("legs").batch(x), "legs")
+        return _c.OUTPUTS["legs"].view(y, "q_dot")
 
     def lengths(self, rows: np.ndarray) -> np.ndarray:
         """True leg lengths (n, 6) [m] of ``rows``."""

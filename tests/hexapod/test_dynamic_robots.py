@@ -212,3 +212,25 @@ def test_a_diverging_row_is_flagged_and_left_unchanged_its_lane_neighbours_advan
     assert bad_c.tolist() == bad.tolist()
     np.testing.assert_array_equal(_state(c), _state(a))
     np.testing.assert_array_equal(c.table[others], a.table[others])
+
+
+def test_leg_rates_are_the_models_leg_rates_bit_for_bit() -> None:
+    """The leg rates from the table packed once are legs_batch's with each row's own
+    geometry and inertia, to the last bit, for rows in any order after a period (the
+    poses and twists have moved); a non-finite twist is refused naming it."""
+    from hexapod.exceptions import ShapeError
+
+    n = 6
+    g, (_, R, t) = deltalab(), _robots(n)
+    A = g.base_points + np.random.default_rng(1).normal(scale=1e-3, size=(n, 6, 3))
+    r = DynamicRobots([g] * n, R, t, base_points=A)  # each row its own robot
+    rows = np.arange(n)
+    assert not r.advance(rows, np.random.default_rng(2).uniform(-0.05, 0.05, (n, 6)),
+                         1e-3, 20).any()
+    sub = np.array([4, 1, 5, 1])
+    expected, _ = r.model.legs_batch(r.R[sub], r.t[sub], r.twist[sub], **r.rows(sub))
+    assert np.abs(expected).max() > 1e-4  # the legs move
+    assert r.leg_rates(sub).tobytes() == expected.tobytes()
+    r.twist[1, 2] = np.nan
+    with pytest.raises(ShapeError, match="twist"):
+        r.leg_rates(sub)

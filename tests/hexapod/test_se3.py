@@ -123,3 +123,20 @@ def test_look_at() -> None:
     assert R[2, 1] < 0  # image y points down (against "up")
     with pytest.raises(ValueError, match="parallel"):
         look_at(eye, eye + np.array([0, 0, 1.0]), np.array([0.0, 0.0, 1.0]))
+
+
+@pytest.mark.parametrize("shape", [(3,), (1, 3), (7, 3), (2400, 3), (200, 6, 2, 3), (5, 4),
+                                   (2, 1)])
+def test_norms_are_numpys_norms_bit_for_bit(shape: tuple[int, ...]) -> None:
+    """norms (the simulator's hot path: three-vectors summed in three passes) gives
+    np.linalg.norm's bits, with and without keepdims, NaN and infinities included: the
+    order of numpy's reduction of three numbers is what it relies on."""
+    from hexapod.se3 import norms
+
+    rng = np.random.default_rng(len(shape) + shape[0])
+    for scale in (1e-160, 1e-3, 1.0, 1e150):
+        x = rng.normal(size=shape) * scale
+        x.reshape(-1)[:2] = [np.nan, np.inf] if x.size > 4 else x.reshape(-1)[:2]
+        assert norms(x).tobytes() == np.linalg.norm(x, axis=-1).tobytes()
+        assert norms(x, keepdims=True).tobytes() == np.linalg.norm(
+            x, axis=-1, keepdims=True).tobytes()

@@ -181,3 +181,26 @@ def test_rotation_noise_batch_compiled_draws_are_numpys(shape: tuple[int, ...],
     assert np.abs(compiled - v).max() > 1e-4  # the noise is there
     for a, b in zip(compiled_rngs, python_rngs, strict=True):
         assert a.bit_generator.state == b.bit_generator.state
+
+
+def test_rotation_noise_batch_of_generators_taken_by_rows() -> None:
+    """Generators keeps the bit generators' addresses; its rows taken (in another order,
+    one twice) draw what the list of the same generators draws, to the last bit, and a
+    batch of non-Generator rows (no addresses) draws generator by generator."""
+    from vision.noise import Generators, rotation_noise_batch
+
+    rng = np.random.default_rng(2)
+    v = rng.normal(size=(4, 6, 2, 3))
+    v /= np.linalg.norm(v, axis=-1, keepdims=True)
+    rows = np.array([2, 0, 3, 2])
+    held = Generators([np.random.default_rng([9, k]) for k in range(4)])
+    listed = [np.random.default_rng([9, k]) for k in range(4)]
+    assert held.pointers is not None and len(held) == 4
+    taken = held.take(rows)
+    assert taken.pointers is not None and taken[0] is held[2]
+    batch = rotation_noise_batch(v, 0.02, taken)
+    plain = rotation_noise_batch(v, 0.02, [listed[k] for k in rows])
+    assert batch.tobytes() == plain.tobytes()
+    assert np.abs(batch - v).max() > 1e-4
+    assert Generators([None, None]).pointers is None
+    assert Generators([None, None]).take(np.array([1])).pointers is None

@@ -13,6 +13,7 @@ from typing import Any
 import numpy as np
 
 from hexapod.kinematics import Transform
+from hexapod.se3 import norms
 from vision.exceptions import CameraError
 
 #: Tolerance on the orthonormality of a rotation matrix.
@@ -110,5 +111,8 @@ def as_pixels(pixels: Any, name: str = "pixels") -> np.ndarray:
 
 def unit(x: np.ndarray) -> np.ndarray:
     """Vectors (..., n) scaled to unit norm (NaN for zero vectors)."""
+    x = np.asarray(x)
     with np.errstate(invalid="ignore", divide="ignore"):
-        return x / np.linalg.norm(x, axis=-1, keepdims=True)
+        if x.dtype == np.float64:  # np.linalg.norm's own operations, without its checks
+            return x / norms(x, keepdims=True)  # type: ignore[no-any-return]
+        return x / np.linalg.norm(x, axis=-1, keepdims=True)  # type: ignore[no-any-return]

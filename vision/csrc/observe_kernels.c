@@ -8,7 +8,8 @@
  * solid finite cylinder nor by the platform disc).
  *
  * Leg-leg occlusion is tested point by point as in vision.occlusion (three intervals of
- * the ray parameter), after an exact culling: the segments from the projection centre to
+ * the ray parameter; the terms that do not depend on the sample computed once per leg,
+ * those that do for 16 samples at once), after an exact culling: the segments from the projection centre to
  * the samples of one edge fill a triangle (the centre, the first and the last sample) of
  * that edge's interpretation plane, so a leg whose cylinder lies entirely outside one of
  * the four half-spaces bounding that triangle (the plane itself on either side, the two
@@ -168,38 +169,66 @@ void hexapod_segments_imaged(const double *segments, long long n, const double *
     out[k] = all_imaged(segments + 6 * k, segments + 6 * k + 3, &box);
 }
 
-/* Whether the open segment from the origin to P crosses leg j (vision.occlusion). */
-static int hits_leg(const double *P, const double *A, const double *u, double q, double r) {
-  double Pu = dot3(P, u), Au = dot3(A, u);
-  double Pp[3] = {P[0] - Pu * u[0], P[1] - Pu * u[1], P[2] - Pu * u[2]};
-  double Ap[3] = {A[0] - Au * u[0], A[1] - Au * u[1], A[2] - Au * u[2]};
-  double a = dot3(Pp, Pp), b = -2.0 * dot3(Pp, Ap), c = dot3(Ap, Ap) - r * r;
-  double disc = b * b - 4.0 * a * c;
-  double sq = sqrt(disc > 0.0 ? disc : 0.0);
-  int par = a <= 1e-300;
-  double a_safe = a > 0.0 ? a : 1.0;
-  double s1, s2;
-  if (par) {
-    s1 = c < 0.0 ? -INFINITY : INFINITY;
-    s2 = c < 0.0 ? INFINITY : -INFINITY;
-  } else {
-    s1 = (-b - sq) / (2.0 * a_safe);
-    s2 = (-b + sq) / (2.0 * a_safe);
+/* What legs_hit needs of leg j that does not depend on the sample: computed once per
+ * item (the same operations as when they were computed for every sample). */
+typedef struct {
+  const double *u;
+  double q, Au, Ap[3], c;
+} LegAxis;
+
+static void leg_axis(const double *A, const double *u, double q, double r, LegAxis *L) {
+  L->u = u;
+  L->q = q;
+  L->Au = dot3(A, u);
+  for (int k = 0; k < 3; ++k) L->Ap[k] = A[k] - L->Au * u[k];
+  L->c = dot3(L->Ap, L->Ap) - r * r;
+}
+
+/* Whether the open segments from the origin to CHUNK samples cross leg l
+ * (vision.occlusion; P[m][j]: coordinate m of sample j): first the quadratic's terms of
+ * every sample, without a branch (vectorised), then the intervals of the samples whose
+ * line meets the cylinder (the others miss it whatever the intervals). */
+#define CHUNK 16
+static void legs_hit(const double P[3][CHUNK], const LegAxis *L, unsigned char *hit) {
+  const double *u = L->u;
+  double Au = L->Au, q = L->q, c = L->c;
+  double Pu[CHUNK], a[CHUNK], b[CHUNK], disc[CHUNK];
+  for (int j = 0; j < CHUNK; ++j) {
+    Pu[j] = P[0][j] * u[0] + P[1][j] * u[1] + P[2][j] * u[2];
+    double Pp0 = P[0][j] - Pu[j] * u[0], Pp1 = P[1][j] - Pu[j] * u[1],
+           Pp2 = P[2][j] - Pu[j] * u[2];
+    a[j] = Pp0 * Pp0 + Pp1 * Pp1 + Pp2 * Pp2;
+    b[j] = -2.0 * (Pp0 * L->Ap[0] + Pp1 * L->Ap[1] + Pp2 * L->Ap[2]);
+    disc[j] = b[j] * b[j] - 4.0 * a[j] * c;
   }
-  int hit_cyl = disc > 0.0 || par;
-  double lo_ax, hi_ax;
-  if (Pu == 0.0) {
-    int inside = (-Au >= 0.0) && (-Au <= q);
-    lo_ax = inside ? -INFINITY : INFINITY;
-    hi_ax = inside ? INFINITY : -INFINITY;
-  } else {
-    double t0 = Au / Pu, t1 = (Au + q) / Pu;
-    lo_ax = Pu > 0.0 ? t0 : t1;
-    hi_ax = Pu > 0.0 ? t1 : t0;
+  for (int j = 0; j < CHUNK; ++j) {
+    int par = a[j] <= 1e-300;
+    hit[j] = 0;
+    if (!(disc[j] > 0.0 || par)) continue;
+    double sq = sqrt(disc[j] > 0.0 ? disc[j] : 0.0);
+    double a_safe = a[j] > 0.0 ? a[j] : 1.0;
+    double s1, s2;
+    if (par) {
+      s1 = c < 0.0 ? -INFINITY : INFINITY;
+      s2 = c < 0.0 ? INFINITY : -INFINITY;
+    } else {
+      s1 = (-b[j] - sq) / (2.0 * a_safe);
+      s2 = (-b[j] + sq) / (2.0 * a_safe);
+    }
+    double lo_ax, hi_ax;
+    if (Pu[j] == 0.0) {
+      int inside = (-Au >= 0.0) && (-Au <= q);
+      lo_ax = inside ? -INFINITY : INFINITY;
+      hi_ax = inside ? INFINITY : -INFINITY;
+    } else {
+      double t0 = Au / Pu[j], t1 = (Au + q) / Pu[j];
+      lo_ax = Pu[j] > 0.0 ? t0 : t1;
+      hi_ax = Pu[j] > 0.0 ? t1 : t0;
+    }
+    double lo = fmax(fmax(s1, lo_ax), 0.0);
+    double hi = fmin(fmin(s2, hi_ax), 1.0 - 1e-9);
+    hit[j] = lo < hi;
   }
-  double lo = fmax(fmax(s1, lo_ax), 0.0);
-  double hi = fmin(fmin(s2, hi_ax), 1.0 - 1e-9);
-  return hit_cyl && lo < hi;
 }
 
 /* Whether the open segment from the origin to P crosses the platform disc. */
@@ -212,6 +241,12 @@ static int hits_disc(const double *P, const double *c, const double *nd, double 
   return dot3(d, d) <= rho * rho;
 }
 
+/* Compiled for the baseline instruction set and for AVX2, chosen when loaded (GCC's
+ * function multi-versioning on x86-64 Linux): the same IEEE operations, the samples'
+ * terms four at a time (no FMA: the flags keep -ffp-contract=off). */
+#if defined(__x86_64__) && defined(__linux__) && defined(__GNUC__) && !defined(__clang__)
+__attribute__((target_clones("avx2", "default")))
+#endif
 int hexapod_observe_batch(const double *params, double *out, long long n, double width,
                           double height, long long unified, long long n_samples,
                           double min_fraction, long long occlusion) {
@@ -242,6 +277,8 @@ int hexapod_observe_batch(const double *params, double *out, long long n, double
     double ends[18]; /* far ends A_i + q_i u_i */
     for (int i = 0; i < 6; ++i)
       for (int k = 0; k < 3; ++k) ends[3 * i + k] = Ac[3 * i + k] + qc[i] * uc[3 * i + k];
+    LegAxis axes[6];
+    for (int l = 0; l < 6; ++l) leg_axis(Ac + 3 * l, uc + 3 * l, qc[l], r, &axes[l]);
     ImageBox box;
     image_box(cam, (int)unified, width, height, &box);
     mat_vec(Rc, t, centre);
@@ -338,23 +375,40 @@ int hexapod_observe_batch(const double *params, double *out, long long n, double
           interval[2 * e + 1] = (n_samples - 0.5) / (double)n_samples;
           continue;
         }
-        int count = 0, first = -1, last = -1;
-        for (long long k = 0; k < n_samples; ++k) {
-          double sk = (k + 0.5) / (double)n_samples;
-          double P[3];
-          for (int m = 0; m < 3; ++m)
-            P[m] = Ac[3 * i + m] + r * nrm[m] + (sk * qc[i]) * uc[3 * i + m];
-          int ok = inside || imaged(P, cam, (int)unified, width, height);
-          if (ok && occlusion) {
-            for (int l = 0; l < 6 && ok; ++l)
-              if (!cull[l] && hits_leg(P, Ac + 3 * l, uc + 3 * l, qc[l], r)) ok = 0;
-            if (ok && disc_test && hits_disc(P, centre, dnormal, rho_disc)) ok = 0;
+        int count = 0, first = -1, last = -1, near[6], n_near = 0;
+        for (int l = 0; l < 6; ++l) /* the legs the culling kept, in order */
+          if (!cull[l]) near[n_near++] = l;
+        for (long long k0 = 0; k0 < n_samples; k0 += CHUNK) {
+          int nk = n_samples - k0 < CHUNK ? (int)(n_samples - k0) : CHUNK;
+          double P[3][CHUNK];
+          unsigned char ok[CHUNK];
+          for (int j = 0; j < CHUNK; ++j) { /* past nk: the last sample again (unused) */
+            double sk = ((j < nk ? k0 + j : k0 + nk - 1) + 0.5) / (double)n_samples;
+            for (int m = 0; m < 3; ++m)
+              P[m][j] = Ac[3 * i + m] + r * nrm[m] + (sk * qc[i]) * uc[3 * i + m];
           }
-          if (ok) {
-            ++count;
-            if (first < 0) first = (int)k;
-            last = (int)k;
+          for (int j = 0; j < nk; ++j) {
+            double X[3] = {P[0][j], P[1][j], P[2][j]};
+            ok[j] = inside || imaged(X, cam, (int)unified, width, height);
           }
+          if (occlusion) {
+            for (int l = 0; l < n_near; ++l) {
+              unsigned char hit[CHUNK];
+              legs_hit(P, &axes[near[l]], hit);
+              for (int j = 0; j < nk; ++j) ok[j] &= !hit[j];
+            }
+            if (disc_test)
+              for (int j = 0; j < nk; ++j) {
+                double X[3] = {P[0][j], P[1][j], P[2][j]};
+                if (ok[j] && hits_disc(X, centre, dnormal, rho_disc)) ok[j] = 0;
+              }
+          }
+          for (int j = 0; j < nk; ++j)
+            if (ok[j]) {
+              ++count;
+              if (first < 0) first = (int)(k0 + j);
+              last = (int)(k0 + j);
+            }
         }
         frac[e] = count / (double)n_samples;
         vis[e] = frac[e] >= min_fraction - 1e-12 ? 1.0 : 0.0;
