@@ -52,7 +52,7 @@ from controllers.base import (
     Observation,
     ObservationBatch,
 )
-from controllers.ctc_rows import newton_calls, rank_condition, refusal
+from controllers.ctc_rows import newton_calls, rank_condition, refusal, stale
 from controllers.joint_ctc_rows import (
     DESIRED,
     FACTOR,
@@ -67,7 +67,6 @@ from controllers.joint_ctc_rows import (
     STATUS,
     JointRows,
     quintic_rows,
-    stale,
 )
 from controllers.law_tools import goal_lengths
 from controllers.solvers import compiled_ctc

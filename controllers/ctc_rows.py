@@ -199,5 +199,11 @@ def refusal(y: np.ndarray, status: int, residual: int, factor: slice, threshold:
         legs=None if seen is None else np.flatnonzero(seen == 1.0).tolist())
 
 
+def stale(rows: Any, laws: list[Any]) -> bool:
+    """Whether a batch's arrays ``rows`` (None: none yet) were built for another list of
+    trial instances than ``laws`` (a reset makes a new list)."""
+    return rows is None or getattr(rows, "laws", None) is not laws
+
+
 __all__ = ["accepted_rows", "clear_rank", "evaluate_rows", "finite_readings_rows",
-           "newton_calls", "norms", "over_limits", "rank_condition", "refusal"]
+           "newton_calls", "norms", "over_limits", "rank_condition", "refusal", "stale"]

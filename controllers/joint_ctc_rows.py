@@ -21,7 +21,7 @@ saturation other than clipping.
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -212,10 +212,5 @@ class JointRows:
         return np.flatnonzero(slow)
 
 
-def stale(rows: Any, laws: list[Any]) -> bool:
-    """Whether ``rows`` (a :class:`JointRows` or None) is not the batch of ``laws``."""
-    return rows is None or rows.laws is not laws
-
-
 __all__ = ["FK_MAX_CALLS", "GRID_TIME_TOLERANCE", "QUINTIC_PEAK_SPEED", "QUINTIC_SIZE",
-           "JointRows", "quintic_rows", "stale"]
+           "JointRows", "quintic_rows"]
