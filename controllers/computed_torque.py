@@ -40,18 +40,12 @@ compiled step in one C call (:mod:`controllers.ctc_rows`).
 from __future__ import annotations
 
 import math
+from typing import TYPE_CHECKING
 
 import numpy as np
 
-from controllers.base import (
-    Command,
-    CommandBatch,
-    Controller,
-    ControllerContext,
-    Goal,
-    Observation,
-    ObservationBatch,
-)
+from controllers.base import Command
+from controllers.ctc_law import DAMPING, NATURAL_FREQUENCY_HZ, ComputedTorqueLaw
 from controllers.ctc_rows import newton_calls, rank_condition, refusal, stale
 from controllers.joint_ctc_rows import (
     DESIRED,
@@ -66,63 +60,56 @@ from controllers.joint_ctc_rows import (
     RESIDUAL,
     STATUS,
     JointRows,
+    JointState,
     quintic_rows,
 )
 from controllers.law_tools import goal_lengths
 from controllers.solvers import compiled_ctc
-from controllers.solvers.computed_torque import CTCOptions
 from controllers.solvers.saturation import over_limit, zero_acceleration_forces
 from controllers.task_ctc import encoder_readings, finite_readings
 from hexapod.actuation import Actuation
-from hexapod.compiled import BoundCall, CompiledFunction
+from hexapod.compiled import BoundCall
 from hexapod.dynamics import DynamicModel
 from hexapod.dynamics.model import INVERSE_TOLERANCE
 from hexapod.kinematics import inverse_kinematics
 from hexapod.workspace import home_pose
 
-#: Default natural frequency of the leg error [Hz].
-NATURAL_FREQUENCY_HZ = 2.0
-#: Default damping ratio of the leg error.
-DAMPING = 1.0
+if TYPE_CHECKING:
+    from controllers.data import (
+        CommandBatch,
+        ControllerContext,
+        Goal,
+        Observation,
+        ObservationBatch,
+    )
+
 #: Forward-kinematics tolerance on the length residual [m] (as :func:`forward_kinematics`).
 FK_TOLERANCE = compiled_ctc.FK_TOLERANCE
 __all__ = ["DAMPING", "FK_MAX_CALLS", "FK_TOLERANCE", "GRID_TIME_TOLERANCE",
            "NATURAL_FREQUENCY_HZ", "QUINTIC_PEAK_SPEED", "ComputedTorqueController"]
 
 
-class ComputedTorqueController(Controller):
+class ComputedTorqueController(ComputedTorqueLaw):
     """Joint-space computed torque (see the module docstring).
 
     Args:
         natural_frequency: ``f_n`` [Hz] of the leg error's second-order response.
-        damping: Its damping ratio ``zeta``.
         smooth_goal: Reach a fixed goal along the leg-space quintic (False: a step of
             ``q*`` to the goal, the error's free response).
         integral_gain: Integral action Ki [1/s] on the leg error (default 0: none).
-            Stable below ``2 zeta omega_n``; the integral is held while a leg's force is
-            over its limit (anti-windup).
-        saturation: Forces over the drives' limit: "clip", "scale" or "qp" (default
-            "clip"). Each leg clipped (as the drives do), the force vector scaled, or the
-            acceleration scaled (:mod:`controllers.solvers.saturation`).
+            Held while a leg's force is over its limit.
+
+    The other options (``damping``, ``saturation``) are
+    :class:`~controllers.ctc_law.ComputedTorqueLaw`'s.
     """
 
     name = "computed-torque"
     features = frozenset({"lengths"})
-    actuation = Actuation.FORCE
-    #: Samples ``context.reference`` itself (:mod:`controllers.tracking` passes it through).
-    tracks_reference = True
 
-    def __init__(self, natural_frequency: float = NATURAL_FREQUENCY_HZ,
-                 damping: float = DAMPING, smooth_goal: bool = True,
-                 integral_gain: float = 0.0, saturation: str = "clip") -> None:
-        self.ctc_options = CTCOptions(self.name, natural_frequency, damping, integral_gain,
-                                  saturation)
-        self.integral_gain = self.ctc_options.integral_gain
-        self.saturation = self.ctc_options.saturation
-        self.solver = self.ctc_options.solver
-        self.kp = self.ctc_options.gains.kp
-        self.kd = self.ctc_options.gains.kd
-        self.smooth_goal = bool(smooth_goal)
+    def init_state(self) -> None:
+        """The trial's state before its first reset."""
+        self.kp = self.gains.kp
+        self.kd = self.gains.kd
         self._ctx: ControllerContext | None = None
         self._model: DynamicModel | None = None
         #: The trial's state, its own arrays or views of its batch's (:meth:`adopt`):
@@ -204,42 +191,17 @@ class ComputedTorqueController(Controller):
         return self._bound.x
 
     @property
-    def compiled_function(self) -> CompiledFunction:
-        """The compiled step (:func:`~controllers.solvers.compiled_ctc.joint_step`)."""
-        assert self._bound is not None
-        return self._bound.function
-
-    @property
     def force_limit(self) -> np.ndarray:
         """(6,) the nominal drives' force limits [N] (inf before a reset)."""
         return self._limit
 
-    @property
-    def integral(self) -> np.ndarray:
-        """(6,) ``int (q* - q) dt`` [m s] of the integral action."""
-        return self._integral
-
-    @property
-    def quintic(self) -> np.ndarray:
-        """(21,) the fixed goal's quintic (:data:`~controllers.joint_ctc_rows.QUINTIC_SIZE`)."""
-        return self._quintic
-
-    @property
-    def control_period(self) -> float:
-        """The trial's control period ``dt`` [s]."""
-        return self._dt
-
-    @property
-    def reference_end(self) -> float:
-        """The time [s] after which the reference is at rest (inf without one)."""
-        return self._t_end
-
-    @property
-    def reference_grid(self) -> np.ndarray | None:
-        """(N, 18) the reference's ``(q*, q_dot*, q_ddot*)`` on the control grid, or
-        None for a fixed goal."""
-        ctx = self._ctx
-        return None if ctx is None or ctx.reference is None else self._grid
+    def batch_state(self) -> JointState:
+        """This trial's state for its batch (:class:`~controllers.joint_ctc_rows.
+        JointRows`, which gives back views of its arrays, :meth:`adopt`)."""
+        assert self._bound is not None and self._ctx is not None
+        grid = None if self._ctx.reference is None else self._grid
+        return JointState(self._bound.x, self._integral, self._quintic, self._steps,
+                          self._limit, self._dt, self._t_end, grid, self._bound.function)
 
     def reset_trial(self, context: ControllerContext) -> None:
         """Build the nominal model; read the reference or ``goal.lengths``.

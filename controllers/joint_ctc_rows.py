@@ -21,13 +21,14 @@ saturation other than clipping.
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, NamedTuple
 
 import numpy as np
 
 from controllers.ctc_rows import accepted_rows, evaluate_rows, norms, over_limits
 from controllers.data import CommandBatch, ObservationBatch
 from controllers.solvers import compiled_ctc
+from hexapod.compiled import CompiledFunction
 
 if TYPE_CHECKING:
     from controllers.computed_torque import ComputedTorqueController
@@ -80,6 +81,32 @@ def quintic_rows(t: np.ndarray, rows: np.ndarray) -> np.ndarray:
     return out
 
 
+class JointState(NamedTuple):
+    """One trial's state as its batch takes it (its own arrays, copied into the batch's).
+
+    Attributes:
+        row: (n_in,) the compiled step's input row.
+        integral: (6,) ``int (q* - q) dt`` [m s].
+        quintic: (21,) the fixed goal's quintic (:data:`QUINTIC_SIZE`).
+        steps: (1,) the commands of the compiled step.
+        limit: (6,) the nominal force limits [N].
+        dt: The control period [s].
+        t_end: The time after which the reference is at rest [s] (inf: none).
+        grid: (N, 18) the reference's legs on the control grid, None for a fixed goal.
+        function: The compiled step.
+    """
+
+    row: np.ndarray
+    integral: np.ndarray
+    quintic: np.ndarray
+    steps: np.ndarray
+    limit: np.ndarray
+    dt: float
+    t_end: float
+    grid: np.ndarray | None
+    function: CompiledFunction
+
+
 class JointRows:
     """The arrays of a batch of computed-torque trials (see the module docstring); each
     instance's state becomes views of them.
@@ -90,21 +117,22 @@ class JointRows:
 
     def __init__(self, laws: list[ComputedTorqueController]) -> None:
         self.laws = laws
-        self.function = laws[0].compiled_function
+        states = [law.batch_state() for law in laws]
+        self.function = states[0].function
         n = len(laws)
-        self.X = np.stack([law.input_row for law in laws])
-        self.integral = np.stack([law.integral for law in laws])
-        self.quintic = np.stack([law.quintic for law in laws])
-        self.steps = np.array([law.compiled_steps for law in laws], dtype=np.int64)
-        self.limit = np.stack([law.force_limit for law in laws])
+        self.X = np.stack([st.row for st in states])
+        self.integral = np.stack([st.integral for st in states])
+        self.quintic = np.stack([st.quintic for st in states])
+        self.steps = np.concatenate([st.steps for st in states])
+        self.limit = np.stack([st.limit for st in states])
         for k, law in enumerate(laws):
             law.adopt(self.X[k], self.integral[k], self.quintic[k], self.steps[k:k + 1])
-        self.dt = np.array([law.control_period for law in laws])
-        self.t_end = np.array([law.reference_end for law in laws])
-        self.tracking = np.array([law.reference_grid is not None for law in laws])
-        grids = [law.reference_grid for law in laws if law.reference_grid is not None]
-        self.grid_len = np.array([0 if g is None else len(g) for g in
-                                  (law.reference_grid for law in laws)], dtype=int)
+        self.dt = np.array([st.dt for st in states])
+        self.t_end = np.array([st.t_end for st in states])
+        self.tracking = np.array([st.grid is not None for st in states])
+        grids = [st.grid for st in states if st.grid is not None]
+        self.grid_len = np.array([0 if st.grid is None else len(st.grid) for st in states],
+                                 dtype=int)
         #: (1 or n, S, 18) the grids, one shared when they are equal (index 0).
         self.shared = bool(grids) and all(g is grids[0] or np.array_equal(g, grids[0])
                                           for g in grids)
@@ -113,8 +141,8 @@ class JointRows:
         else:
             size = max((len(g) for g in grids), default=1)
             self.grids = np.zeros((n, max(size, 1), 18))
-            for k, law in enumerate(laws):
-                g = law.reference_grid
+            for k, st in enumerate(states):
+                g = st.grid
                 if g is not None and len(g):
                     self.grids[k, :len(g)] = g
                     self.grids[k, len(g):] = g[-1]
@@ -213,4 +241,4 @@ class JointRows:
 
 
 __all__ = ["FK_MAX_CALLS", "GRID_TIME_TOLERANCE", "QUINTIC_PEAK_SPEED", "QUINTIC_SIZE",
-           "JointRows", "quintic_rows"]
+           "JointRows", "JointState", "quintic_rows"]

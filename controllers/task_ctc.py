@@ -34,15 +34,15 @@ import numpy as np
 from controllers.base import (
     Command,
     CommandBatch,
-    Controller,
     ControllerContext,
     Goal,
     Observation,
     ObservationBatch,
 )
+from controllers.ctc_law import DAMPING as DAMPING
+from controllers.ctc_law import NATURAL_FREQUENCY_HZ as NATURAL_FREQUENCY_HZ
+from controllers.ctc_law import ComputedTorqueLaw
 from controllers.ctc_rows import stale
-from controllers.exceptions import ContextError
-from controllers.solvers.computed_torque import CTCOptions
 from controllers.solvers.saturation import over_limit, zero_acceleration_forces
 from controllers.task_ctc_compiled import CompiledTaskStep
 from controllers.task_ctc_inputs import QUINTIC_PEAK_ACCELERATION as QUINTIC_PEAK_ACCELERATION
@@ -57,56 +57,28 @@ from controllers.tasks.feature_kind import BuiltinFeature
 from hexapod.actuation import Actuation
 from hexapod.dynamics import DynamicModel
 
-#: Default natural frequency of the task error [Hz] (``omega_n dt = 0.25`` at 20 ms).
-NATURAL_FREQUENCY_HZ = 2.0
-#: Default damping ratio.
-DAMPING = 1.0
 
-
-class TaskComputedTorque(Controller):
+class TaskComputedTorque(ComputedTorqueLaw):
     """Computed torque on a task (see the module docstring). Subclasses set ``name``,
     ``features``, ``compiled_kind`` (or make their own compiled step at reset) and
     implement :meth:`goal_pose` and :meth:`compiled_inputs`.
 
-    Args:
-        natural_frequency: ``f_n`` [Hz] of the task error's second-order response.
-        damping: Its damping ratio ``zeta``.
-        smooth_goal: Reach a fixed goal along the quintic line (False: a step).
-        integral_gain: Integral action Ki [1/s] on the task error (default 0: none).
-            Stable below ``2 zeta omega_n``; the integral is held while a leg's force is
-            over its limit (anti-windup).
-        saturation: Forces over the drives' limit: "clip", "scale" or "qp" (default
-            "clip"). Each leg clipped (as the drives do), the force vector scaled, or the
-            acceleration scaled (:mod:`controllers.solvers.saturation`).
+    The options are :class:`~controllers.ctc_law.ComputedTorqueLaw`'s, on the task error.
     """
 
-    actuation = Actuation.FORCE
-    #: Samples ``context.reference`` itself (:mod:`controllers.tracking` passes it through).
-    tracks_reference = True
     #: The feature object of the compiled step (:mod:`controllers.solvers.compiled_task_ctc`;
     #: None: the subclass makes its own step at reset).
     compiled_kind: BuiltinFeature | None = None
     #: The compiled step finds the pose from the encoders (else it is given).
     compiled_fk = True
 
-    def __init__(self, natural_frequency: float = NATURAL_FREQUENCY_HZ,
-                 damping: float = DAMPING, smooth_goal: bool = True,
-                 integral_gain: float = 0.0, saturation: str = "clip") -> None:
-        self.ctc_options = CTCOptions(self.name, natural_frequency, damping, integral_gain,
-                                      saturation)
-        self.gains = self.ctc_options.gains
-        self.integral_gain = self.ctc_options.integral_gain
-        self.saturation = self.ctc_options.saturation
+    def init_state(self) -> None:
+        """The trial's state before its first reset."""
         #: ``int e dt`` of each task row (integral action; sized at the first step).
         self.integral = np.zeros(0)
         #: The nominal drives' force limits [N].
         self.force_limit = np.full(6, np.inf)
         self.force_limit_list = self.force_limit.tolist()
-        self.solver = self.ctc_options.solver
-        if not isinstance(smooth_goal, bool | np.bool_):
-            raise ContextError(self.name, "smooth_goal", f"must be true or false, got "
-                               f"{smooth_goal!r}")
-        self.smooth_goal = bool(smooth_goal)
         self.context: ControllerContext | None = None
         self.model: DynamicModel | None = None
         #: The reference clock (:mod:`controllers.task_ctc_rows`: started, the time at
