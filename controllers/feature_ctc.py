@@ -261,7 +261,8 @@ class FeatureCTC(TaskComputedTorque):
         if self.reference is None:
             return None
         _, _, sanitised, known = self.reference_grid()
-        return sanitised, known.all(axis=1)
+        every: np.ndarray = np.all(known, axis=1)
+        return sanitised, every
 
     def batch_inputs(self, rows_batch: TaskRows, X: np.ndarray,
                      observations: ObservationBatch, rows: np.ndarray, trials: np.ndarray,

@@ -73,6 +73,11 @@ class CompiledTaskStep:
             ``compiled_fk``); else by the rigid fit (its tolerance).
     """
 
+    #: The input row, its guess flag (1,) and its command count (1,) (:meth:`_bind`).
+    row: np.ndarray
+    guessed: np.ndarray
+    steps: np.ndarray
+
     def __init__(self, law: TaskComputedTorque, kind: Any = None,
                  fk: bool | None = None) -> None:
         assert law.context is not None and law.model is not None
@@ -145,10 +150,11 @@ class CompiledTaskStep:
         return state
 
     def __setstate__(self, state: dict[str, object]) -> None:
-        row, guessed, steps = state.pop("_arrays")  # type: ignore[misc]
+        arrays = state.pop("_arrays")
+        assert isinstance(arrays, tuple)
         self.__dict__.update(state)
         self.function = self.make_function()
-        self._bind(row, guessed, steps)
+        self._bind(*arrays)
 
     @property
     def guess(self) -> tuple[np.ndarray, np.ndarray] | None:
