@@ -95,11 +95,10 @@ class CartesianCTC(TaskComputedTorque):
         """:meth:`compiled_inputs`' common case for many trials at once (see
         :meth:`TaskComputedTorque.batch_inputs`): the measurement of the rows
         :meth:`batch_features` takes, then each one's reference row from its grid (off
-        the grid or without a reference: :meth:`reference_row`; an integral action: the
-        row is left to :meth:`compiled_inputs`)."""
+        the grid or without a reference: :meth:`reference_row`)."""
         step = rows_batch.step_of
         assert step is not None
-        fast = self.batch_features(step, X, observations, rows) & rows_batch.plain[trials]
+        fast = self.batch_features(step, X, observations, rows)
         references, on = rows_batch.references(trials, tr)
         block = step.inputs["reference"]
         if (fast & on).any():

@@ -271,11 +271,11 @@ class FeatureCTC(TaskComputedTorque):
         :meth:`TaskComputedTorque.batch_inputs`): the features of every row whose
         features are all seen and finite (:meth:`batch_features`), then each row's
         reference from its grid when it is on the grid with every row known (a
-        feature the model's camera does not see, a reference off the grid or an
-        integral action: the row is left to :meth:`compiled_inputs`)."""
+        feature the model's camera does not see or a reference off the grid: the row is
+        left to :meth:`compiled_inputs`)."""
         step = rows_batch.step_of
         assert step is not None
-        fast = self.batch_features(step, X, observations, rows) & rows_batch.plain[trials]
+        fast = self.batch_features(step, X, observations, rows)
         references, on = rows_batch.references(trials, tr)
         fast &= on
         if not fast.any():

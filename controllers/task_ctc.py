@@ -193,8 +193,9 @@ class TaskComputedTorque(ComputedTorqueLaw):
                      observations: ObservationBatch, rows: np.ndarray, trials: np.ndarray,
                      tr: np.ndarray) -> np.ndarray:
         """:meth:`compiled_inputs` of many trials at once, in its common case (every
-        feature seen, the reference on its grid, all its rows known, no integral
-        action): writes this period's measurement and reference into the input rows
+        feature seen, the reference on its grid, all its rows known; the integral
+        action's term is the batch's): writes this period's measurement and reference
+        into the input rows
         ``X`` (m, n_in) (``q``, ``q_dot`` and the pose guess there already) of the rows
         in that case and returns their (m,) mask; the others are left to each trial's
         :meth:`compiled_inputs` (which writes the same numbers). None by default.

@@ -18,8 +18,8 @@ compiled step evaluates every row in one C call (:func:`~controllers.ctc_rows.
 evaluate_rows`), the rows are screened at once (:func:`~controllers.ctc_rows.
 accepted_rows`), and the forces, error norms and next guesses are written as array
 slices. Python per row only for rare rows: a measurement not in the common case (a
-feature hidden, an instant off the grid, an integral action), a reference grid built
-(once per reference), forces over a limit.
+feature hidden, an instant off the grid), a reference grid built (once per reference),
+forces over a limit.
 """
 
 from __future__ import annotations
@@ -78,8 +78,10 @@ class TaskRows:
         self.limit = np.stack([law.force_limit for law in laws])
         self.dt = np.array([law.control_period if law.context is not None else 1.0
                             for law in laws])
-        #: Rows without integral action (their common case is written as arrays).
+        #: Rows without integral action, and each trial's ``int e dt`` of its task rows.
         self.plain = np.array([not law.integral_gain for law in laws], dtype=bool)
+        size = 0 if self.step_of is None else self.step_of.views["integral"].size
+        self.integral = np.zeros((n, size))
         for k, law in enumerate(laws):
             law.adopt_clock(self.clock[k])
             step = law.compiled
@@ -89,6 +91,9 @@ class TaskRows:
             self.guessed[k] = step.guessed[0]
             self.steps[k] = step.steps[0]
             step.adopt(self.X[k], self.guessed[k:k + 1], self.steps[k:k + 1])
+            if law.integral.shape == (size,):
+                self.integral[k] = law.integral
+            law.integral = self.integral[k]
         #: The references on the control grid (n, S, w), the grid steps with every task
         #: row known (n, S), each trial's grid length (0: none) and the version built.
         self.grids = np.zeros((n, 1, 0))
@@ -186,6 +191,10 @@ class TaskRows:
             X[j] = step.row
             if prepared[0] is not None:
                 used[j] = prepared[0]
+        gain = fast & ~self.plain[trials]  # the integral action of the rows written here
+        if gain.any():
+            kp_ki = law0.gains.kp * law0.integral_gain
+            X[gain, inputs["integral"]] = kp_ki * self.integral[trials[gain]]
         if not keep.all():
             if used:
                 index = np.cumsum(keep) - 1
@@ -209,18 +218,33 @@ class TaskRows:
         out.forces[ka] = F
         out.error_norm[ka] = np.sqrt(norms(E))
         over = over_limits(F, self.limit[ta])
-        plain = ~over & self.plain[ta]
-        for i in np.flatnonzero(~plain).tolist():  # a limit or an integral: the law's
-            u = used.get(int(a[i]))
+        position = {j: i for i, j in enumerate(a.tolist())}  # accepted row of a row
+        used_a = {position[j]: u for j, u in used.items() if j in position}
+        self._integrate(ta, E, over, used_a)
+        for i in np.flatnonzero(over).tolist():  # over a limit: the law's strategy
             out.forces[ka[i]] = self.laws[int(ta[i])].limited(
-                F[i], P[i], qd_all[ka[i]], E[i], u, bool(over[i]))
-        for j, u in used.items():  # the norms of the rows used
-            i = int(np.searchsorted(a, j))
-            if i < len(a) and a[i] == j:
-                e = E[i][u]
-                out.error_norm[ka[i]] = math.sqrt(e.dot(e))
+                F[i], P[i], qd_all[ka[i]], E[i], used.get(int(a[i])), True)
+        for i, u in used_a.items():  # the norms of the rows used
+            e = E[i][u]
+            out.error_norm[ka[i]] = math.sqrt(e.dot(e))
         slow[ka] = False
         return np.flatnonzero(slow)
+
+    def _integrate(self, ta: np.ndarray, E: np.ndarray, over: np.ndarray,
+                   used: dict[int, np.ndarray]) -> None:
+        """Advance ``int e dt`` of the accepted rows' trials ``ta`` with integral action
+        by their task errors ``E`` (m, k), the non-finite ones as 0 and only the rows
+        used (``used``: by accepted row, where not all), held where a force is ``over``
+        its limit (anti-windup; as the law's ``limited``, the same numbers)."""
+        go = np.flatnonzero(~self.plain[ta] & ~over)
+        if not len(go):
+            return
+        step = np.where(np.isfinite(E[go]), E[go], 0.0) * self.dt[ta[go]][:, None]
+        for r, i in enumerate(go.tolist()):
+            u = used.get(i)
+            if u is not None:
+                step[r] = np.where(u, step[r], 0.0)
+        self.integral[ta[go]] += step
 
 
 __all__ = ["FK_MAX_CALLS", "START", "STARTED", "VERSION", "TaskRows", "grid_steps"]

@@ -39,6 +39,13 @@ def _batch(world: CtcWorld, robots: DynamicRobots, t: float) -> ObservationBatch
         None, stacked("q_dot"))
 
 
+def _rows_of(obs: ObservationBatch, idx: np.ndarray) -> ObservationBatch:
+    """The rows ``idx`` of a batch."""
+    return dataclasses.replace(obs, **{f.name: None if getattr(obs, f.name) is None
+                                       else np.asarray(getattr(obs, f.name))[idx]
+                                       for f in dataclasses.fields(obs) if f.init})
+
+
 @pytest.mark.slow
 @pytest.mark.parametrize("name", LAWS)
 def test_every_row_in_one_call_and_equal_to_the_trials_steps(geometry: HexapodGeometry,

@@ -6,20 +6,17 @@ different references (stacked grids) and rows stepped by their trial's own step.
 
 from __future__ import annotations
 
-import dataclasses
-
 import numpy as np
 import pytest
 
 from controllers import registry
-from controllers.base import ObservationBatch
 from controllers.computed_torque import ComputedTorqueController
 from controllers.data import GoalBatch
 from controllers.joint_ctc_rows import QUINTIC_SIZE, JointRows, quintic_rows
 from hexapod import HexapodGeometry
 from hexapod.dynamics.robots import DynamicRobots
 from tests.controllers.ctc_world import DT, CtcWorld, ideal_drives, line_reference
-from tests.controllers.test_ctc_rows import _batch
+from tests.controllers.test_ctc_rows import _batch, _rows_of
 
 
 def _quintic_oracle(t: float, row: np.ndarray) -> np.ndarray:
@@ -113,10 +110,3 @@ def test_the_batch_steps_as_its_trials_do_through_their_own_steps(
         assert inst.compiled_steps == s.compiled_steps
         assert inst.input_row.base is rows.X  # the trial's row is the batch's
         np.testing.assert_array_equal(inst._integral, s._integral)
-
-
-def _rows_of(obs: ObservationBatch, idx: np.ndarray) -> ObservationBatch:
-    """The rows ``idx`` of a batch."""
-    return dataclasses.replace(obs, **{f.name: None if getattr(obs, f.name) is None
-                                       else np.asarray(getattr(obs, f.name))[idx]
-                                       for f in dataclasses.fields(obs) if f.init})
