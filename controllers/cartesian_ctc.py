@@ -15,7 +15,6 @@ ESTIMATED base points ``A_i`` and camera pose (``vision-ctc``).
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
 
 import numpy as np
 from scipy.linalg.lapack import dgesdd as _svd
@@ -27,8 +26,8 @@ from controllers.task_ctc import (
     TaskComputedTorque,
     camera_and_base_points,
     goal_pose_of,
-    rows_on_grid,
 )
+from controllers.task_ctc_rows import TaskRows
 from controllers.tasks.platform_pose import PLATFORM_POSE
 from hexapod.kinematics import Transform
 
@@ -86,35 +85,30 @@ class CartesianCTC(TaskComputedTorque):
             return np.concatenate([R.ravel(), t, np.zeros(12)])
         return self.pose_reference(tr)
 
-    def batch_inputs(self, step: CompiledTaskStep, X: np.ndarray,
-                     observations: ObservationBatch, rows: np.ndarray,
-                     instances: Sequence[TaskComputedTorque], tr: np.ndarray) -> np.ndarray:
+    def batch_grid(self) -> tuple[np.ndarray, np.ndarray | None] | None:
+        """The reference on the control grid (:meth:`pose_grid`), every row known."""
+        return None if self.reference is None else (self.pose_grid(), None)
+
+    def batch_inputs(self, rows_batch: TaskRows, X: np.ndarray,
+                     observations: ObservationBatch, rows: np.ndarray, trials: np.ndarray,
+                     tr: np.ndarray) -> np.ndarray:
         """:meth:`compiled_inputs`' common case for many trials at once (see
         :meth:`TaskComputedTorque.batch_inputs`): the measurement of the rows
-        :meth:`batch_features` takes, then each one's reference row (an integral
-        action: the row is left to :meth:`compiled_inputs`)."""
+        :meth:`batch_features` takes, then each one's reference row from its grid (off
+        the grid or without a reference: :meth:`reference_row`)."""
+        step = rows_batch.step_of
+        assert step is not None
         fast = self.batch_features(step, X, observations, rows)
-        times = tr.tolist()
-        idx, ks = rows_on_grid(fast, instances, tr)
-        taken: list[int] = []
-        references: list[np.ndarray] = []
-        for j, k in zip(idx.tolist(), ks, strict=True):
-            inst = instances[j]
-            if not isinstance(inst, CartesianCTC) or inst.integral_gain:
-                fast[j] = False
-                continue
+        references, on = rows_batch.references(trials, tr)
+        block = step.inputs["reference"]
+        if (fast & on).any():
+            X[fast & on, block] = references[fast & on]
+        for j in np.flatnonzero(fast & ~on).tolist():  # off the grid: on demand
+            law = rows_batch.laws[int(trials[j])]
             try:
-                if k >= 0 and inst.reference is not None:  # on the grid (pose_reference)
-                    grid = inst.pose_grid()
-                    references.append(grid[min(k, len(grid) - 1)])
-                else:
-                    references.append(inst.reference_row(times[j]))
+                X[j, block] = law.reference_row(float(tr[j]))  # type: ignore[attr-defined]
             except Exception:  # the trial's own compiled_inputs meets it again
                 fast[j] = False
-                continue
-            taken.append(j)
-        if taken:
-            X[taken, step.inputs["reference"]] = np.stack(references)
         return fast
 
     def batch_features(self, step: CompiledTaskStep, X: np.ndarray,

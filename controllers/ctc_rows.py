@@ -24,7 +24,7 @@ from scipy.linalg.lapack import dsyevd as _eigenvalues
 
 from controllers.ctc_status import Status, status_reason
 from controllers.data import ObservationBatch
-from hexapod.compiled import CompiledFunction
+from hexapod.compiled import BoundCall, CompilationError, CompiledFunction
 
 
 def finite_readings_rows(observations: ObservationBatch, instances: Sequence[Any]
@@ -96,17 +96,67 @@ def accepted_rows(Y: np.ndarray, status: int, factor: slice, threshold: float) -
     """(n,) the output rows ``Y`` (n, n_out) that are commands: their kernel's ``status``
     0 (converged, solved, every value finite, enough rows or legs seen:
     :mod:`controllers.ctc_status`) and ``L^T L`` of full rank. The rank test of
-    :func:`rank_condition` (LAPACK ``syevd`` row by row) decides every row whose
-    eigenvalues, computed for all the rows at once (``numpy.linalg.eigvalsh``), are not
-    clearly above its threshold (four times it)."""
+    :func:`rank_condition` (LAPACK ``syevd`` row by row) decides every row that is not
+    clearly above its threshold (four times it) by a screen of all the rows at once: a
+    lower bound of the smallest eigenvalue from a Cholesky factor (:func:`clear_rank`),
+    else the eigenvalues themselves (``numpy.linalg.eigvalsh``)."""
     ok = Y[:, status] == 0.0
     idx = np.flatnonzero(ok)
     if len(idx):
-        w = np.linalg.eigvalsh(Y[idx, factor].reshape(-1, 6, 6))
-        clear = (w[:, -1] > 0) & (w[:, 0] > 4.0 * threshold**2 * w[:, -1])
+        clear = clear_rank(Y[idx, factor].reshape(-1, 6, 6), 4.0 * threshold**2)
         for j in idx[~clear].tolist():
             ok[j] = rank_condition(Y[j, factor], threshold) is not None
     return ok  # type: ignore[no-any-return]
+
+
+def clear_rank(M: np.ndarray, ratio: float) -> np.ndarray:
+    """(m,) which of the symmetric positive semi-definite matrices ``M`` (m, 6, 6) have
+    their smallest eigenvalue surely above ``ratio`` times their largest (False: not
+    known). With a Cholesky factor ``M = C C^T``: ``det M = prod(diag C)^2`` and
+    ``lambda_max <= trace M``, so ``lambda_min >= det M / trace^5`` and
+    ``det M > ratio trace^6`` suffices (a loose bound: it says True only far from the
+    threshold, where the exact test agrees); when a matrix has no Cholesky factor, the
+    eigenvalues of every matrix decide (``numpy.linalg.eigvalsh``)."""
+    try:
+        C = np.linalg.cholesky(M)
+    except np.linalg.LinAlgError:
+        w = np.linalg.eigvalsh(M)
+        return (w[:, -1] > 0) & (w[:, 0] > ratio * w[:, -1])  # type: ignore[no-any-return]
+    d = np.diagonal(C, axis1=1, axis2=2)
+    det = np.prod(d * d, axis=1)
+    trace = np.trace(M, axis1=1, axis2=2)
+    with np.errstate(over="ignore", invalid="ignore"):
+        return (trace > 0) & (det > ratio * trace**6)  # type: ignore[no-any-return]
+
+
+def norms(e: np.ndarray) -> np.ndarray:
+    """(m,) the squared norms of the rows of ``e`` (m, k): each row's own ``e @ e`` (the
+    dot product of a vector, as the per-trial steps compute it: the same numbers)."""
+    return np.matmul(e[:, None, :], e[:, :, None])[:, 0, 0]  # type: ignore[no-any-return]
+
+
+def newton_calls(bound: BoundCall, pose_in: np.ndarray, pose_out: slice, residual: int,
+                 tolerance: float, max_calls: int) -> bool:
+    """Evaluate a bound compiled step, then again from the pose reached while its pose
+    residual is not below ``tolerance`` (finite, at most ``max_calls`` calls in all);
+    whether the input pose ``pose_in`` (its bound row's view) was moved.
+
+    Raises:
+        CompilationError: The compiled function failed.
+    """
+    y, call = bound.y, bound.call
+    if call():
+        raise CompilationError(f"{bound.function.name}: the compiled function failed")
+    calls, moved = 1, False
+    while not y[residual] < tolerance:  # Newton from the pose reached, as FK does
+        if calls >= max_calls or not math.isfinite(y[residual]):
+            break
+        pose_in[:] = y[pose_out]
+        moved = True
+        if call():
+            raise CompilationError(f"{bound.function.name}: the compiled function failed")
+        calls += 1
+    return moved
 
 
 def over_limits(forces: np.ndarray, limits: np.ndarray) -> np.ndarray:
@@ -149,5 +199,11 @@ def refusal(y: np.ndarray, status: int, residual: int, factor: slice, threshold:
         legs=None if seen is None else np.flatnonzero(seen == 1.0).tolist())
 
 
-__all__ = ["accepted_rows", "evaluate_rows", "finite_readings_rows", "over_limits",
-           "rank_condition", "refusal"]
+def stale(rows: Any, laws: list[Any]) -> bool:
+    """Whether a batch's arrays ``rows`` (None: none yet) were built for another list of
+    trial instances than ``laws`` (a reset makes a new list)."""
+    return rows is None or getattr(rows, "laws", None) is not laws
+
+
+__all__ = ["accepted_rows", "clear_rank", "evaluate_rows", "finite_readings_rows",
+           "newton_calls", "norms", "over_limits", "rank_condition", "refusal", "stale"]

@@ -25,7 +25,6 @@ independent rows give a refusal with the reason.
 
 from __future__ import annotations
 
-from collections.abc import Sequence
 from dataclasses import replace
 
 import numpy as np
@@ -40,8 +39,8 @@ from controllers.task_ctc import (
     camera_and_base_points,
     goal_pose_of,
     grid_step,
-    rows_on_grid,
 )
+from controllers.task_ctc_rows import TaskRows
 from controllers.tasks import Task
 from controllers.tasks.feature_kind import BuiltinFeature
 from controllers.tasks.leg_direction import LEG_DIRECTIONS
@@ -85,8 +84,7 @@ class FeatureCTC(TaskComputedTorque):
         self._frame = cam
         self._A = A
         #: The reference's grid: rows (n, 3, m), sanitised rows and known rows.
-        self._grid: tuple[object, np.ndarray, list[np.ndarray], list[np.ndarray | None]] | \
-            None = None
+        self._grid: tuple[object, np.ndarray, np.ndarray, np.ndarray] | None = None
 
     def take_goal(self, goal: Goal) -> None:
         """The taught features (``goal.normals`` or ``goal.directions``).
@@ -99,6 +97,7 @@ class FeatureCTC(TaskComputedTorque):
             raise ContextError(self.name, f"goal.{self.key}", "missing (the taught features)")
         self._taught = np.asarray(value, dtype=float)
         self._grid = None  # the reference's features are anchored at the taught ones
+        self.reference_changed()
 
     def goal_pose(self) -> tuple[np.ndarray, np.ndarray]:
         """The goal pose, the end of the smooth line (nominal base frame)."""
@@ -147,12 +146,11 @@ class FeatureCTC(TaskComputedTorque):
             return None
         return min(k, len(self.reference_grid()[1]) - 1)
 
-    def reference_grid(self) -> tuple[object, np.ndarray, list[np.ndarray],
-                                      list[np.ndarray | None]]:
+    def reference_grid(self) -> tuple[object, np.ndarray, np.ndarray, np.ndarray]:
         """The reference's control grid ``k dt`` up to its end and a step past it (built
         on first use for each reference, one batched call): the reference,
         :meth:`feature_rows` on the grid (n, 3, m) and, step by step, what
-        :meth:`compiled_reference` gives (n of (3 m,)) and the rows known (None: all)."""
+        :meth:`compiled_reference` gives (n, 3 m) and the rows known (n, m)."""
         ctx, ref = self.context, self.reference
         assert ctx is not None and ref is not None
         if self._grid is None or self._grid[0] is not ref:
@@ -194,7 +192,7 @@ class FeatureCTC(TaskComputedTorque):
         i = self._grid_index(tr)
         if i is None or self._grid is None:
             return None
-        return self._grid[2][i], self._grid[3][i]
+        return self._grid_row(i)
 
     def compiled_reference(self, tr: float) -> tuple[np.ndarray, np.ndarray | None]:
         """(3 m,) :meth:`feature_reference` at ``tr`` for the compiled step, the features
@@ -203,8 +201,14 @@ class FeatureCTC(TaskComputedTorque):
         i = self._grid_index(tr)
         if i is None:
             return _sanitised(self.feature_rows(np.array([tr]))[0])
+        return self._grid_row(i)
+
+    def _grid_row(self, i: int) -> tuple[np.ndarray, np.ndarray | None]:
+        """:meth:`compiled_reference` at grid step ``i``: the sanitised row and the rows
+        known (None: all)."""
         assert self._grid is not None
-        return self._grid[2][i], self._grid[3][i]
+        known = self._grid[3][i]
+        return self._grid[2][i], None if known.all() else known
 
     def _taught_reference(self) -> tuple[np.ndarray, np.ndarray | None]:
         """The taught features at rest, as :meth:`compiled_reference`."""
@@ -251,38 +255,32 @@ class FeatureCTC(TaskComputedTorque):
         row[inputs["reference_features"]] = ref
         return every, None
 
-    def batch_inputs(self, step: CompiledTaskStep, X: np.ndarray,
-                     observations: ObservationBatch, rows: np.ndarray,
-                     instances: Sequence[TaskComputedTorque], tr: np.ndarray) -> np.ndarray:
+    def batch_grid(self) -> tuple[np.ndarray, np.ndarray | None] | None:
+        """The sanitised reference on the control grid (:meth:`reference_grid`) and the
+        grid steps whose rows are all known."""
+        if self.reference is None:
+            return None
+        _, _, sanitised, known = self.reference_grid()
+        every: np.ndarray = np.all(known, axis=1)
+        return sanitised, every
+
+    def batch_inputs(self, rows_batch: TaskRows, X: np.ndarray,
+                     observations: ObservationBatch, rows: np.ndarray, trials: np.ndarray,
+                     tr: np.ndarray) -> np.ndarray:
         """:meth:`compiled_inputs`' common case for many trials at once (see
         :meth:`TaskComputedTorque.batch_inputs`): the features of every row whose
         features are all seen and finite (:meth:`batch_features`), then each row's
         reference from its grid when it is on the grid with every row known (a
-        feature the model's camera does not see, a reference off the grid or an
-        integral action: the row is left to :meth:`compiled_inputs`)."""
+        feature the model's camera does not see or a reference off the grid: the row is
+        left to :meth:`compiled_inputs`)."""
+        step = rows_batch.step_of
+        assert step is not None
         fast = self.batch_features(step, X, observations, rows)
-        idx, ks = rows_on_grid(fast, instances, tr)
-        taken: list[int] = []
-        references: list[np.ndarray] = []
-        for j, k in zip(idx.tolist(), ks, strict=True):
-            inst = instances[j]
-            if (k < 0 or not isinstance(inst, FeatureCTC) or inst.integral_gain
-                    or inst.reference is None):
-                fast[j] = False  # off the grid: the trial's own compiled_inputs
-                continue
-            try:
-                _, grid, sanitised, known = inst.reference_grid()
-            except Exception:  # the trial's own compiled_inputs meets it again
-                fast[j] = False
-                continue
-            i = min(k, len(grid) - 1)
-            if known[i] is not None:
-                fast[j] = False
-                continue
-            taken.append(j)
-            references.append(sanitised[i])
-        if taken:
-            X[taken, step.inputs["reference_features"]] = np.stack(references)
+        references, on = rows_batch.references(trials, tr)
+        fast &= on
+        if not fast.any():
+            return fast
+        X[fast, step.inputs["reference_features"]] = references[fast]
         X[fast, step.inputs["mask"]] = 1.0
         return fast
 
@@ -329,15 +327,14 @@ def _sanitised(ref: np.ndarray) -> tuple[np.ndarray, np.ndarray | None]:
     return out.ravel(), known
 
 
-def _sanitised_rows(rows: np.ndarray) -> tuple[list[np.ndarray], list[np.ndarray | None]]:
-    """:func:`_sanitised` of every row of ``rows`` (n, 3, m) at once: the n sanitised
-    rows (3 m,) (views of one array) and their rows kept (None: all)."""
+def _sanitised_rows(rows: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`_sanitised` of every row of ``rows`` (n, 3, m) at once: the sanitised rows
+    (n, 3 m) and their rows kept (n, m)."""
     n, _, m = rows.shape
     known = np.repeat(np.isfinite(rows).reshape(n, 3, -1, 3).all(axis=(1, 3)), 3, axis=1)
     out = np.where(known[:, None, :], rows, 0.0)
     out[:, 0] = np.where(known, out[:, 0], np.tile(_DUMMY, m // 3))
-    every = np.all(known, axis=1)
-    return list(out.reshape(n, 3 * m)), [None if every[i] else known[i] for i in range(n)]
+    return out.reshape(n, 3 * m), known
 
 
 class LegEdgeCTC(FeatureCTC):

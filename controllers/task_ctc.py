@@ -26,9 +26,7 @@ The checked readings, goal pose, camera and base points, and that line are
 
 from __future__ import annotations
 
-import math
 from abc import abstractmethod
-from collections.abc import Sequence
 from typing import Any
 
 import numpy as np
@@ -36,31 +34,17 @@ import numpy as np
 from controllers.base import (
     Command,
     CommandBatch,
-    Controller,
     ControllerContext,
     Goal,
     Observation,
     ObservationBatch,
 )
-from controllers.ctc_rows import (
-    accepted_rows,
-    evaluate_rows,
-    finite_readings_rows,
-    over_limits,
-)
-from controllers.exceptions import ContextError
-from controllers.solvers.computed_torque import (
-    ComputedTorqueSolver,
-    SecondOrderGains,
-    checked_integral_gain,
-)
-from controllers.solvers.saturation import (
-    checked_strategy,
-    over_limit,
-    saturated,
-    zero_acceleration_forces,
-)
-from controllers.task_ctc_compiled import FK_MAX_CALLS, CompiledTaskStep
+from controllers.ctc_law import DAMPING as DAMPING
+from controllers.ctc_law import NATURAL_FREQUENCY_HZ as NATURAL_FREQUENCY_HZ
+from controllers.ctc_law import ComputedTorqueLaw
+from controllers.ctc_rows import stale
+from controllers.solvers.saturation import over_limit, zero_acceleration_forces
+from controllers.task_ctc_compiled import CompiledTaskStep
 from controllers.task_ctc_inputs import QUINTIC_PEAK_ACCELERATION as QUINTIC_PEAK_ACCELERATION
 from controllers.task_ctc_inputs import QUINTIC_PEAK_SPEED as QUINTIC_PEAK_SPEED
 from controllers.task_ctc_inputs import camera_and_base_points as camera_and_base_points
@@ -68,69 +52,46 @@ from controllers.task_ctc_inputs import encoder_readings as encoder_readings
 from controllers.task_ctc_inputs import finite_readings as finite_readings
 from controllers.task_ctc_inputs import goal_pose_of as goal_pose_of
 from controllers.task_ctc_inputs import line_to as line_to
+from controllers.task_ctc_rows import START, STARTED, VERSION, TaskRows
 from controllers.tasks.feature_kind import BuiltinFeature
 from hexapod.actuation import Actuation
 from hexapod.dynamics import DynamicModel
 
-#: Default natural frequency of the task error [Hz] (``omega_n dt = 0.25`` at 20 ms).
-NATURAL_FREQUENCY_HZ = 2.0
-#: Default damping ratio.
-DAMPING = 1.0
 
-
-class TaskComputedTorque(Controller):
+class TaskComputedTorque(ComputedTorqueLaw):
     """Computed torque on a task (see the module docstring). Subclasses set ``name``,
     ``features``, ``compiled_kind`` (or make their own compiled step at reset) and
     implement :meth:`goal_pose` and :meth:`compiled_inputs`.
 
-    Args:
-        natural_frequency: ``f_n`` [Hz] of the task error's second-order response.
-        damping: Its damping ratio ``zeta``.
-        smooth_goal: Reach a fixed goal along the quintic line (False: a step).
-        integral_gain: Integral action Ki [1/s] on the task error (default 0: none).
-            Stable below ``2 zeta omega_n``; the integral is held while a leg's force is
-            over its limit (anti-windup).
-        saturation: Forces over the drives' limit: "clip", "scale" or "qp" (default
-            "clip"). Each leg clipped (as the drives do), the force vector scaled, or the
-            acceleration scaled (:mod:`controllers.solvers.saturation`).
+    The options are :class:`~controllers.ctc_law.ComputedTorqueLaw`'s, on the task error.
     """
 
-    actuation = Actuation.FORCE
-    #: Samples ``context.reference`` itself (:mod:`controllers.tracking` passes it through).
-    tracks_reference = True
     #: The feature object of the compiled step (:mod:`controllers.solvers.compiled_task_ctc`;
     #: None: the subclass makes its own step at reset).
     compiled_kind: BuiltinFeature | None = None
     #: The compiled step finds the pose from the encoders (else it is given).
     compiled_fk = True
 
-    def __init__(self, natural_frequency: float = NATURAL_FREQUENCY_HZ,
-                 damping: float = DAMPING, smooth_goal: bool = True,
-                 integral_gain: float = 0.0, saturation: str = "clip") -> None:
-        self.gains = SecondOrderGains.checked(self.name, natural_frequency, damping)
-        self.integral_gain = checked_integral_gain(self.name, integral_gain)
-        self.saturation = checked_strategy(self.name, saturation)
+    def init_state(self) -> None:
+        """The trial's state before its first reset."""
         #: ``int e dt`` of each task row (integral action; sized at the first step).
         self.integral = np.zeros(0)
         #: The nominal drives' force limits [N].
         self.force_limit = np.full(6, np.inf)
         self.force_limit_list = self.force_limit.tolist()
-        self.solver = ComputedTorqueSolver(self.gains)
-        if not isinstance(smooth_goal, bool | np.bool_):
-            raise ContextError(self.name, "smooth_goal", f"must be true or false, got "
-                               f"{smooth_goal!r}")
-        self.smooth_goal = bool(smooth_goal)
         self.context: ControllerContext | None = None
         self.model: DynamicModel | None = None
-        self.reference: Any = None  # anything with at(times) and duration, base frame
-        self._t0 = 0.0
-        self._started = False
-        self.guess: tuple[np.ndarray, np.ndarray] | None = None
+        #: The reference clock (:mod:`controllers.task_ctc_rows`: started, the time at
+        #: which the reference's clock is 0 [s], the reference's version), its own or a
+        #: view of its batch's.
+        self._clock = np.zeros(3)
+        self._reference: Any = None  # anything with at(times) and duration, base frame
         self._pose_grid: tuple[Any, np.ndarray] | None = None
         #: The compiled step (None: not reset).
         self.compiled: CompiledTaskStep | None = None
-        #: Commands of the compiled step (diagnostics).
-        self.compiled_steps = 0
+        #: The batch's arrays (:class:`~controllers.task_ctc_rows.TaskRows`), built at
+        #: the first batched step after a reset (trial 0 holds them).
+        self._rows: TaskRows | None = None
 
     def reset_trial(self, context: ControllerContext) -> None:
         """Build the nominal model; take the reference or the goal.
@@ -140,7 +101,9 @@ class TaskComputedTorque(Controller):
         """
         self.context = context
         self.model = DynamicModel(context.geometry)
-        self.guess = None
+        self._rows = None
+        self._clock = np.zeros(3)
+        self.compiled = None
         self.integral = np.zeros(0)
         self.force_limit = np.asarray(context.geometry.drives.force_limit, dtype=float)
         self.force_limit_list = self.force_limit.tolist()
@@ -149,11 +112,58 @@ class TaskComputedTorque(Controller):
         self.retarget_trial(context.goal)
         self.compiled = None if self.compiled_kind is None else CompiledTaskStep(self)
 
+    def __getstate__(self) -> dict[str, object]:
+        """Picklable: the batch's arrays are left out (its own clock kept)."""
+        state = self.__dict__.copy()
+        state["_rows"] = None
+        state["_clock"] = np.array(self._clock)
+        return state
+
+    @property
+    def reference(self) -> Any:
+        """The reference followed (base frame; anything with ``at(times)`` and
+        ``duration``), or None (a fixed goal at rest)."""
+        return self._reference
+
+    @reference.setter
+    def reference(self, reference: Any) -> None:
+        self._reference = reference
+        self.reference_changed()
+
+    def reference_changed(self) -> None:
+        """Count a change of what the reference grid is built from (a batch builds its
+        grid again)."""
+        self._clock[VERSION] += 1.0
+
+    @property
+    def clock(self) -> np.ndarray:
+        """(3,) the reference clock (:mod:`controllers.task_ctc_rows`)."""
+        return self._clock
+
+    def adopt_clock(self, clock: np.ndarray) -> None:
+        """Take a view of the batch's clocks (3,) as this trial's (its values there)."""
+        self._clock = clock
+
+    @property
+    def guess(self) -> tuple[np.ndarray, np.ndarray] | None:
+        """The pose guess ``(R, t)`` of the next step (None: none found yet)."""
+        return None if self.compiled is None else self.compiled.guess
+
+    @guess.setter
+    def guess(self, pose: tuple[np.ndarray, np.ndarray] | None) -> None:
+        assert self.compiled is not None
+        self.compiled.guess = pose
+
+    @property
+    def compiled_steps(self) -> int:
+        """Commands of the compiled step (diagnostics)."""
+        return 0 if self.compiled is None else int(self.compiled.steps[0])
+
     @property
     def started(self) -> bool:
         """Whether the law follows its reference (a fixed goal's line starts at the
         first step)."""
-        return self._started
+        return bool(self._clock[STARTED])
 
     @property
     def control_period(self) -> float:
@@ -164,7 +174,7 @@ class TaskComputedTorque(Controller):
     @property
     def reference_start(self) -> float:
         """The observation time [s] at which the reference's clock is 0."""
-        return self._t0
+        return float(self._clock[START])
 
     def prepare(self, context: ControllerContext) -> None:
         """Per-trial checks and constants of a subclass (nothing by default)."""
@@ -179,25 +189,32 @@ class TaskComputedTorque(Controller):
         clock; without a reference the fixed goal at rest) into the compiled step's row;
         the task rows to use (None: all) and a note, or why there is no measurement."""
 
-    def batch_inputs(self, step: CompiledTaskStep, X: np.ndarray,
-                     observations: ObservationBatch, rows: np.ndarray,
-                     instances: Sequence[TaskComputedTorque], tr: np.ndarray) -> np.ndarray:
+    def batch_inputs(self, rows_batch: TaskRows, X: np.ndarray,
+                     observations: ObservationBatch, rows: np.ndarray, trials: np.ndarray,
+                     tr: np.ndarray) -> np.ndarray:
         """:meth:`compiled_inputs` of many trials at once, in its common case (every
-        feature seen, the reference on its grid, all its rows known, no integral
-        action): writes this period's measurement and reference into the input rows
+        feature seen, the reference on its grid, all its rows known; the integral
+        action's term is the batch's): writes this period's measurement and reference
+        into the input rows
         ``X`` (m, n_in) (``q``, ``q_dot`` and the pose guess there already) of the rows
         in that case and returns their (m,) mask; the others are left to each trial's
         :meth:`compiled_inputs` (which writes the same numbers). None by default.
 
         Args:
-            step: The compiled step of the first instance (the layout of ``X``).
-            X: The input rows, one per instance.
-            observations: The batch; row ``rows[j]`` is ``instances[j]``'s.
-            rows: (m,) the batch rows of the instances.
-            instances: The trials' instances (started, with a compiled step).
-            tr: (m,) the times on each instance's reference clock [s].
+            rows_batch: The batch's arrays (its first step's layout, the grids).
+            X: The input rows, one per batch row of ``rows``.
+            observations: The batch.
+            rows: (m,) the batch rows.
+            trials: (m,) their trials (started, with a compiled step).
+            tr: (m,) the times on each trial's reference clock [s].
         """
         return np.zeros(len(rows), dtype=bool)
+
+    def batch_grid(self) -> tuple[np.ndarray, np.ndarray | None] | None:
+        """The reference rows on the control grid (S, w) as :meth:`compiled_inputs`
+        writes them, and the grid steps whose task rows are all known (S,) (None: all),
+        for :class:`~controllers.task_ctc_rows.TaskRows`; None without a reference."""
+        return None
 
     def retarget_trial(self, goal: Goal) -> None:
         """A new fixed goal (ignored when tracking ``context.reference``)."""
@@ -205,11 +222,13 @@ class TaskComputedTorque(Controller):
         if ctx is None:
             return
         if ctx.reference is not None:
-            self.reference, self._t0, self._started = ctx.reference, 0.0, True
+            self.reference = ctx.reference
+            self._clock[STARTED], self._clock[START] = 1.0, 0.0
             return
         self.context = ctx = ctx if ctx.goal is goal else _with_goal(ctx, goal)
         self.take_goal(goal)
-        self.reference, self._started = None, False
+        self.reference = None
+        self._clock[STARTED] = 0.0
 
     def take_goal(self, goal: Goal) -> None:
         """Read what the law regulates to from a fixed goal (raises ContextError)."""
@@ -273,14 +292,14 @@ class TaskComputedTorque(Controller):
         else:
             t, q, qd = fast
         try:
-            if not self._started:
+            if not self.started:
                 problem = self._start(observation, t)
                 if problem is not None:
                     return self.refuse(problem)
-            cmd = compiled.step_written(self, observation, t - self._t0)
+            cmd = compiled.step_written(self, observation, t - self.reference_start)
             if isinstance(cmd, str):
                 return self.refuse(cmd)
-            self.compiled_steps += 1
+            compiled.steps[0] += 1
             y = compiled.bound.y
             assert cmd.forces is not None
             cmd.forces = self.limited(cmd.forces, y[compiled.pose_block], qd,
@@ -290,87 +309,13 @@ class TaskComputedTorque(Controller):
             return self.refuse(f"nominal model failed: {exc}")
 
     def step_arrays(self, observations: ObservationBatch, out: CommandBatch) -> np.ndarray:
-        """The rows of started trials with finite readings through the compiled step in
-        one C call (:func:`~controllers.ctc_rows.evaluate_rows`); returns the other rows
-        and those whose result is not accepted (left to the trial's own step, which
-        refuses them with the reason of their status)."""
-        obs = observations
-        n = len(obs)
-        readings = finite_readings_rows(obs, self.trial_instances)
-        if readings is None:
-            return np.arange(n)
-        t, q_all, qd_all, finite = readings
-        candidates = [(k, inst) for k, inst in finite
-                      if getattr(inst, "compiled", None) is not None and inst.started
-                      and inst.model is not None]
-        if not candidates:
-            return np.arange(n)
-        for _, inst in candidates:
-            inst.compiled.write_guess(inst)
-        ks = np.array([k for k, _ in candidates], dtype=int)
-        instances = [inst for _, inst in candidates]
-        first = instances[0].compiled
-        X = np.stack([inst.compiled.row for inst in instances])
-        X[:, first.inputs["q"]] = q_all[ks]
-        X[:, first.inputs["q_dot"]] = qd_all[ks]
-        tr = t[ks] - np.array([inst.reference_start for inst in instances])
-        fast = self.batch_inputs(first, X, obs, ks, instances, tr)
-        keep: list[int] = []
-        used: list[np.ndarray | None] = []
-        for j, (k, inst) in enumerate(candidates):
-            step = inst.compiled
-            if fast[j]:
-                step.used = None
-                keep.append(j)
-                used.append(None)
-                continue
-            step.views["q"][:] = q_all[k]
-            step.views["q_dot"][:] = qd_all[k]
-            try:
-                prepared = step.prepare(inst, obs.item(k), float(t[k]) - inst.reference_start)
-            except Exception:  # the trial's own step refuses with the reason
-                continue
-            if isinstance(prepared, str):
-                continue
-            X[j] = step.row
-            keep.append(j)
-            used.append(prepared[0])
-        if not keep:
-            return np.arange(n)
-        rows = [candidates[j] for j in keep]
-        steps = [instances[j].compiled for j in keep]
-        if len(keep) < len(candidates):
-            X = X[keep]
-        Y, _ = evaluate_rows(first.function, X, first.inputs["pose"], first.outputs["pose"],
-                             first.outputs.index("fk_residual"), first.tolerance,
-                             FK_MAX_CALLS)
-        forces, pose_out, error = (first.outputs[b] for b in ("forces", "pose", "error"))
-        slow = np.ones(n, dtype=bool)
-        assert out.forces is not None
-        accepted = np.flatnonzero(accepted_rows(Y, first.outputs.index("status"),
-                                                first.outputs["factor"],
-                                                self.solver.threshold))
-        if not len(accepted):
-            return np.flatnonzero(slow)
-        taken = [rows[j] for j in accepted.tolist()]
-        Ya = Y[accepted]
-        F, P, E = Ya[:, forces], Ya[:, pose_out], Ya[:, error]
-        R = P[:, 0:9].reshape(-1, 3, 3).transpose(0, 2, 1)  # the poses' rotations
-        ks = np.array([k for k, _ in taken], dtype=int)
-        over = over_limits(F, np.stack([inst.force_limit for _, inst in taken]))
-        # a row under the limits without integral action keeps the law's forces
-        plain = ~over & np.array([not inst.integral_gain for _, inst in taken])
-        out.forces[ks[plain]] = F[plain]
-        for i, (j, (k, inst)) in enumerate(zip(accepted.tolist(), taken, strict=True)):
-            steps[j].keep_pose(inst, P[i], R[i])
-            u = used[j]
-            e = E[i] if u is None else E[i][u]
-            out.error_norm[k] = math.sqrt(e.dot(e))
-            inst.compiled_steps += 1
-            if not plain[i]:
-                out.forces[k] = inst.limited(F[i], P[i], qd_all[k], E[i], u, bool(over[i]))
-        slow[ks] = False
-        return np.flatnonzero(slow)
+        """The batch's step as arrays (:meth:`~controllers.task_ctc_rows.TaskRows.step`,
+        one C call for its rows); returns the rows left to the trials' own steps (which
+        refuse them with the reason of their status)."""
+        if stale(self._rows, self.trial_instances):
+            self._rows = TaskRows(self.trial_instances)
+        assert self._rows is not None
+        return self._rows.step(observations, out, self.solver.threshold)
 
     def integral_term(self, m: int) -> np.ndarray:
         """(m,) ``Kp Ki int e dt`` of the task rows (the integral action's share of the
@@ -404,11 +349,10 @@ class TaskComputedTorque(Controller):
             self.integral += step if used is None else np.where(used, step, 0.0)
         if not over:
             return forces
-        bias = None
-        if self.saturation == "qp":
-            assert self.model is not None and self.context is not None
-            bias = zero_acceleration_forces(self.model, pose, qd, hold=float(self.context.dt))
-        return saturated(self.saturation, forces, self.force_limit, bias)
+        model, ctx = self.model, self.context
+        assert model is not None and ctx is not None
+        return self.ctc_options.saturated(forces, self.force_limit, lambda: (
+            zero_acceleration_forces(model, pose, qd, hold=float(ctx.dt))))
 
     def _start(self, observation: Observation, t: float) -> str | None:
         """Start following the fixed goal at ``t`` [s]: with a smooth goal, the line from
@@ -421,7 +365,7 @@ class TaskComputedTorque(Controller):
                 return found
             assert self.guess is not None  # the pose of the accepted step
             self.reference = line_to(self.context, *self.guess, *self.goal_pose())
-        self._started, self._t0 = True, t
+        self._clock[STARTED], self._clock[START] = 1.0, t
         return None
 
     def refuse(self, problem: str, error: np.ndarray | None = None) -> Command:
@@ -435,23 +379,6 @@ def grid_step(tr: float, dt: float) -> int:
     [s]), or -1 off the grid."""
     k = round(tr / dt)
     return k if abs(tr - k * dt) < 1e-9 and k >= 0 else -1
-
-
-def grid_steps(tr: np.ndarray, dt: np.ndarray) -> np.ndarray:
-    """:func:`grid_step` of many instants ``tr`` (m,) [s] with their periods ``dt`` (m,)
-    [s] (the same numbers, element by element); (m,) int."""
-    k = np.round(tr / dt)
-    on = (np.abs(tr - k * dt) < 1e-9) & (k >= 0)
-    return np.where(on, k, -1).astype(int)  # type: ignore[no-any-return]
-
-
-def rows_on_grid(fast: np.ndarray, instances: Sequence[TaskComputedTorque], tr: np.ndarray
-                 ) -> tuple[np.ndarray, list[int]]:
-    """The indices of the rows ``fast`` marks (m,) and each one's step on its trial's
-    control grid at ``tr`` [s] (:func:`grid_steps`, -1 off the grid)."""
-    idx = np.flatnonzero(fast)
-    ks = grid_steps(tr[idx], np.array([instances[j].control_period for j in idx.tolist()]))
-    return idx, ks.tolist()
 
 
 def _with_goal(context: ControllerContext, goal: Goal) -> ControllerContext:

@@ -19,10 +19,12 @@ measurement and reference (``compiled_inputs(step, observation, tr, q)``, return
 rows to use or None and a note, or why there is no measurement).
 
 The C function runs on the step's own bound input and output rows
-(:meth:`hexapod.compiled.CompiledFunction.bind`): the law writes into :attr:`CompiledTaskStep.row`
-in place (the readings too, :func:`controllers.task_ctc_inputs.finite_readings`), the pose guess
-stays in the row while it is the law's ``guess``, and the command copies what it keeps of
-the output row.
+(:meth:`hexapod.compiled.CompiledFunction.bind`; the input row a row of its batch's
+matrix, :mod:`controllers.task_ctc_rows`): the law writes into
+:attr:`CompiledTaskStep.row` in place (the readings too,
+:func:`controllers.task_ctc_inputs.finite_readings`), the row's ``pose`` block holds the
+pose guess (the law's ``guess``: the last pose found, the home pose before one), and the
+command copies what it keeps of the output row.
 """
 
 from __future__ import annotations
@@ -35,10 +37,10 @@ from numpy.typing import ArrayLike
 from scipy.linalg.lapack import dsyevd as _eigenvalues
 
 from controllers.base import Command, Observation
-from controllers.ctc_rows import refusal
+from controllers.ctc_rows import newton_calls, refusal
 from controllers.solvers.compiled_task_ctc import FIT_TOLERANCE, FK_TOLERANCE, task_step
 from hexapod.actuation import Actuation
-from hexapod.compiled import BoundCall, CompilationError, CompiledFunction
+from hexapod.compiled import BoundCall, CompiledFunction
 from hexapod.dynamics.model import INVERSE_TOLERANCE
 from hexapod.workspace import home_pose
 
@@ -48,8 +50,6 @@ if TYPE_CHECKING:
 #: Calls of the compiled step (3 Newton iterations each) before the step is refused (as
 #: the 50 iterations of :func:`hexapod.fk.forward_kinematics`).
 FK_MAX_CALLS = 16
-#: No pose in the input row (``CompiledTaskStep._guess_of`` matches no guess).
-_NO_GUESS = object()
 
 
 class CompiledTaskStep:
@@ -57,9 +57,8 @@ class CompiledTaskStep:
 
     The step evaluates the C function on its own bound input and output rows
     (:meth:`hexapod.compiled.CompiledFunction.bind`, no copies): the input row
-    :attr:`row` keeps its constants, and its ``pose`` block is the pose of
-    :attr:`_guess_of` when that is the law's ``guess`` (else it is rewritten). What the
-    command keeps of the output row is copied (the next call overwrites it).
+    :attr:`row` keeps its constants, and its ``pose`` block the pose guess (:attr:`guess`).
+    What the command keeps of the output row is copied (the next call overwrites it).
 
     A subclass may step another compiled function with the blocks of the built-in steps
     (:func:`~controllers.solvers.compiled_task_ctc.task_layouts`): it overrides
@@ -74,6 +73,11 @@ class CompiledTaskStep:
             ``compiled_fk``); else by the rigid fit (its tolerance).
     """
 
+    #: The input row, its guess flag (1,) and its command count (1,) (:meth:`_bind`).
+    row: np.ndarray
+    guessed: np.ndarray
+    steps: np.ndarray
+
     def __init__(self, law: TaskComputedTorque, kind: Any = None,
                  fk: bool | None = None) -> None:
         assert law.context is not None and law.model is not None
@@ -83,7 +87,7 @@ class CompiledTaskStep:
         self.fk: bool = law.compiled_fk if fk is None else bool(fk)
         self.function = self.make_function()
         self.inputs, self.outputs = self.function.inputs, self.function.outputs
-        self._bind(np.zeros(self.function.n_in))
+        self._bind(np.zeros(self.function.n_in), np.zeros(1), np.zeros(1, dtype=np.int64))
         g = law.context.geometry
         d = g.drives
         self.set("points", (g.base_points, g.platform_points))
@@ -93,6 +97,7 @@ class CompiledTaskStep:
         self.set("coulomb", d.coulomb)
         self.set("gains", (law.gains.kp, law.gains.kd, float(law.context.dt)))
         self.home = home_pose(g)
+        self.guess = None
         out = self.outputs
         self._residual = out.index("fk_residual")
         self._status = out.index("status")
@@ -114,34 +119,58 @@ class CompiledTaskStep:
         function of the same blocks; called again on unpickling)."""
         return task_step(self.kind, self.fk, INVERSE_TOLERANCE)
 
-    def _bind(self, row: np.ndarray) -> None:
-        """Bind the compiled function to its own rows, the input row a copy of ``row``."""
-        self.bound: BoundCall = self.function.bind()
-        self.bound.x[:] = row
+    def _bind(self, row: np.ndarray, guessed: np.ndarray, steps: np.ndarray) -> None:
+        """Bind the compiled function to the input row ``row`` (n_in,) (used in place:
+        its own, or a row of its batch's matrix), with the flag whether its pose block
+        holds a pose found (1,) and the count of commands (1,) (own or the batch's)."""
+        self.bound: BoundCall = self.function.bind(row)
         #: The input row (the bound one: written in place, evaluated without a copy).
         self.row = self.bound.x
         #: Its views by block (:func:`~controllers.solvers.compiled_task_ctc.layout`).
         self.views = self.bound.inputs
-        #: The guess whose pose the ``pose`` block holds (``_NO_GUESS``: none).
-        self._guess_of: object = _NO_GUESS
+        #: Whether the ``pose`` block holds a pose found (1.0) or the home pose (0.0).
+        self.guessed = guessed
+        #: Commands given by the step (the law's ``compiled_steps``).
+        self.steps = steps
         #: The task rows the last prepared step uses (None: all).
         self.used: np.ndarray | None = None
+
+    def adopt(self, row: np.ndarray, guessed: np.ndarray, steps: np.ndarray) -> None:
+        """Take views of a batch's arrays as the step's input row (n_in,), its guess flag
+        (1,) and its command count (1,) (their values copied there already)."""
+        self._bind(row, guessed, steps)
 
     def __getstate__(self) -> dict[str, object]:
         """Picklable: the compiled function and its binding (ctypes) are left out, the
         input row kept; both are rebuilt on unpickling."""
         state = self.__dict__.copy()
-        for key in ("function", "bound", "row", "views", "_guess_of"):
+        for key in ("function", "bound", "row", "views", "guessed", "steps"):
             del state[key]
-        state["_row"] = self.row.copy()
+        state["_arrays"] = (self.row.copy(), self.guessed.copy(), self.steps.copy())
         return state
 
     def __setstate__(self, state: dict[str, object]) -> None:
-        row = state.pop("_row")
+        arrays = state.pop("_arrays")
+        assert isinstance(arrays, tuple)
         self.__dict__.update(state)
         self.function = self.make_function()
-        assert isinstance(row, np.ndarray)
-        self._bind(row)
+        self._bind(*arrays)
+
+    @property
+    def guess(self) -> tuple[np.ndarray, np.ndarray] | None:
+        """The pose guess ``(R, t)`` of the next step (copies), or None before a pose is
+        found (the home pose is in the row)."""
+        if not self.guessed[0]:
+            return None
+        pose = self.views["pose"]
+        return pose[0:9].reshape(3, 3).T.copy(), pose[9:12].copy()
+
+    @guess.setter
+    def guess(self, pose: tuple[np.ndarray, np.ndarray] | None) -> None:
+        """Set the next step's pose guess (None: the home pose)."""
+        R0, t0 = self.home if pose is None else pose
+        self.set_pose(R0, t0)
+        self.guessed[0] = 0.0 if pose is None else 1.0
 
     def set(self, name: str, value: ArrayLike) -> None:
         """Write an input block (:func:`~controllers.solvers.compiled_task_ctc.layout`;
@@ -151,9 +180,8 @@ class CompiledTaskStep:
     def set_pose(self, R: np.ndarray, t: np.ndarray) -> None:
         """The input pose (the FK guess, or the measured pose)."""
         pose = self.views["pose"]
-        pose[0:9] = R.T.ravel()
+        pose[0:9] = np.asarray(R).T.ravel()
         pose[9:12] = t
-        self._guess_of = _NO_GUESS
 
     def step(self, law: TaskComputedTorque, observation: Observation, tr: float,
              q: np.ndarray, qd: np.ndarray) -> Command | str:
@@ -172,24 +200,15 @@ class CompiledTaskStep:
         if isinstance(prepared, str):
             return prepared
         rows, note = prepared
-        bound = self.bound
-        pose_in, y, call = self.views["pose"], bound.y, bound.call
-        pose_out = self._pose
-        if call():
-            raise CompilationError(f"{self.function.name}: the compiled function failed")
-        residual, tolerance = self._residual, self.tolerance
-        calls = 1
-        while not y[residual] < tolerance:
-            self._guess_of = _NO_GUESS
-            if calls >= FK_MAX_CALLS or not math.isfinite(y[residual]):
-                break
-            pose_in[:] = y[pose_out]
-            if call():
-                raise CompilationError(f"{self.function.name}: the compiled function failed")
-            calls += 1
+        pose_in, y = self.views["pose"], self.bound.y
+        guess = pose_in.copy()
+        newton_calls(self.bound, pose_in, self._pose, self._residual, self.tolerance,
+                     FK_MAX_CALLS)
         accepted = self.accept(law, y, rows)
         if accepted is None:
-            reason = refusal(y, self._status, residual, self._factor, law.solver.threshold,
+            pose_in[:] = guess  # the guess stays the last pose found
+            reason = refusal(y, self._status, self._residual, self._factor,
+                             law.solver.threshold,
                              self.pose_name, self.views)
             assert reason is not None
             return reason
@@ -201,10 +220,9 @@ class CompiledTaskStep:
 
     def prepare(self, law: TaskComputedTorque, observation: Observation, tr: float
                 ) -> tuple[np.ndarray | None, str | None] | str:
-        """Write the pose guess, the law's measurement and the reference at ``tr`` into
-        the row (``q`` and ``q_dot`` there already); the task rows to use (None: all) and
+        """Write the law's measurement and the reference at ``tr`` into the row (``q``,
+        ``q_dot`` and the pose guess there already); the task rows to use (None: all) and
         a note, or why there is no measurement."""
-        self.write_guess(law)
         prepared = law.compiled_inputs(self, observation, tr, self.views["q"])
         if isinstance(prepared, str):
             return prepared
@@ -213,15 +231,6 @@ class CompiledTaskStep:
             self.views["integral"][:] = law.integral_term(self.views["integral"].size)
         self.used = rows
         return prepared
-
-    def write_guess(self, law: TaskComputedTorque) -> None:
-        """Write the law's pose guess (the home pose without one) into the row's ``pose``
-        block, unless the block holds it already."""
-        guess = law.guess
-        if guess is not self._guess_of:  # else the pose block holds its pose already
-            R0, t0 = guess if guess is not None else self.home
-            self.set_pose(R0, t0)
-            self._guess_of = guess
 
     def accept(self, law: TaskComputedTorque, y: np.ndarray, rows: np.ndarray | None
                ) -> tuple[np.ndarray, float] | None:
@@ -243,16 +252,10 @@ class CompiledTaskStep:
              ) -> np.ndarray:
         """The task error (of the rows used) of an accepted output row ``y``, its pose
         taken as the next guess."""
-        pose = y[self._pose].copy()
-        self.keep_pose(law, pose, pose[0:9].reshape(3, 3).T)
+        self.views["pose"][:] = y[self._pose]
+        self.guessed[0] = 1.0
         e = y[self._error]
         return e.copy() if rows is None else e[rows]  # type: ignore[no-any-return]
-
-    def keep_pose(self, law: TaskComputedTorque, pose: np.ndarray, R: np.ndarray) -> None:
-        """Take an accepted step's pose (12,) (``R`` column-major, ``t`` [m]), its rotation
-        ``R`` (3, 3), as the next step's guess (written into the row's ``pose`` block)."""
-        self.views["pose"][:] = pose
-        law.guess = self._guess_of = (R, pose[9:12])
 
 
 __all__ = ["FIT_TOLERANCE", "FK_MAX_CALLS", "FK_TOLERANCE", "CompiledTaskStep"]

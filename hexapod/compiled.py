@@ -351,9 +351,11 @@ class CompiledFunction:
         """Shared, not copied: the compiled code is immutable (callers copy inputs)."""
         return self
 
-    def bind(self) -> BoundCall:
-        """Own input and output buffers evaluated in place (see :class:`BoundCall`)."""
-        return BoundCall(self)
+    def bind(self, x: np.ndarray | None = None) -> BoundCall:
+        """Own input and output buffers evaluated in place (see :class:`BoundCall`);
+        the input row ``x`` (n_in,) when given (a contiguous float64 view the caller owns,
+        e.g. one row of a batch's input matrix, evaluated without a copy)."""
+        return BoundCall(self, x)
 
     def single(self, x: np.ndarray) -> np.ndarray:
         """Evaluate on one input (n_in,) -> a fresh (n_out,) array."""
@@ -393,11 +395,23 @@ class BoundCall:
 
     Args:
         function: The compiled function (or its CasADi virtual-machine fallback).
+        x: The input row to evaluate from (n_in,), a C-contiguous float64 array the
+            caller owns (e.g. one row of a batch's input matrix); default: its own.
+
+    Raises:
+        LayoutError: ``x`` is not a writeable contiguous float64 array of ``n_in`` values.
     """
 
-    def __init__(self, function: CompiledFunction) -> None:
+    def __init__(self, function: CompiledFunction, x: np.ndarray | None = None) -> None:
         self.function = function
-        self.x = np.zeros(function.n_in)
+        if x is None:
+            x = np.zeros(function.n_in)
+        elif (x.dtype != np.float64 or x.shape != (function.n_in,)
+              or not x.flags.c_contiguous or not x.flags.writeable):
+            raise LayoutError(function.name, "the bound input row must be a writeable "
+                              f"contiguous float64 array of shape ({function.n_in},), got "
+                              f"{x.dtype} {x.shape}")
+        self.x = x
         self.y = np.zeros(function.n_out)
         #: Views of :attr:`x` and :attr:`y` by block (the function's layouts).
         self.inputs = function.inputs.views(self.x)

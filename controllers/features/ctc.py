@@ -80,6 +80,7 @@ class FeatureComputedTorque(LegDirectionCTC):
                                f"the taught {self.feature.name} of legs {bad} is not finite")
         self._taught = taught
         self._grid = None
+        self.reference_changed()
 
     def features_seen(self, observation: Observation
                       ) -> tuple[np.ndarray, np.ndarray | None, np.ndarray] | str:

@@ -39,6 +39,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from controllers.exceptions import ContextError
+from controllers.solvers.saturation import checked_strategy, saturated
 from controllers.tasks.base import Task, TaskState
 from hexapod.dynamics import DynamicModel
 from hexapod.dynamics.drive_model import COULOMB_SMOOTHING
@@ -199,6 +200,38 @@ class ComputedTorqueSolver:
         return f, a
 
 
+class CTCOptions:
+    """The checked options of a computed-torque law: its error dynamics, integral action
+    and saturation strategy, and the solver they give.
+
+    Args:
+        controller: The law's name (named by a refusal of an option).
+        natural_frequency: ``f_n`` [Hz] of the error's second-order response.
+        damping: Its damping ratio ``zeta``.
+        integral_gain: Integral action ``Ki`` [1/s] (0: none).
+        saturation: Forces over the drives' limit: "clip", "scale" or "qp"
+            (:mod:`controllers.solvers.saturation`).
+
+    Raises:
+        ContextError: Naming the option that is not valid.
+    """
+
+    def __init__(self, controller: str, natural_frequency: float, damping: float,
+                 integral_gain: float, saturation: str) -> None:
+        self.gains = SecondOrderGains.checked(controller, natural_frequency, damping)
+        self.integral_gain = checked_integral_gain(controller, integral_gain)
+        self.saturation = checked_strategy(controller, saturation)
+        self.solver = ComputedTorqueSolver(self.gains)
+
+    def saturated(self, forces: np.ndarray, limit: np.ndarray,
+                  bias: Callable[[], np.ndarray]) -> np.ndarray:
+        """The forces [N] commanded for the law's ``forces`` (6,) over a limit ``limit``
+        (6,) [N] under the strategy; ``bias()`` gives the forces at zero acceleration
+        (called for ``"qp"`` only)."""
+        return saturated(self.saturation, forces, limit,
+                         bias() if self.saturation == "qp" else None)
+
+
 def drive_forces(model: DynamicModel, a: np.ndarray, q_dot: np.ndarray,
                  coulomb_velocity: np.ndarray) -> np.ndarray:
     """The nominal drives' share [N]: reflected rotor inertia at the leg acceleration
@@ -272,6 +305,7 @@ def reference_terms(task_at: Callable[[int], Task], state: TaskState, twist: np.
 __all__ = [
     "REFERENCE_STEP",
     "Acceleration",
+    "CTCOptions",
     "ComputedTorqueSolver",
     "SecondOrderGains",
     "checked_integral_gain",

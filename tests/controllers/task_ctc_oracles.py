@@ -119,7 +119,7 @@ def numpy_desired_at(law: TaskComputedTorque, tr: float | None
 
 def numpy_start(law: TaskComputedTorque, t: float, m: Measured) -> None:
     """Start the fixed goal's reference at ``t`` from the pose measured by numpy."""
-    law._started, law._t0 = True, t
+    law.clock[0:2] = (1.0, t)
     if law.smooth_goal:
         assert law.context is not None
         law.reference = line_to(law.context, m.rotation, m.translation, *law.goal_pose())

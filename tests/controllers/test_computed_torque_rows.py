@@ -181,12 +181,12 @@ def test_desired_on_a_reference_is_its_legs_on_and_off_the_grid() -> None:
     dt = 0.02
     end = float(ref.duration)
     for t in (0.0, 3 * dt, 0.5 * end, end - 0.5 * dt, end):
-        direct = ctrl._reference_legs(np.array([t]))[0]
+        direct = ctrl.reference_legs(np.array([t]))[0]
         np.testing.assert_allclose(np.stack(ctrl.desired(t)), direct, rtol=0, atol=1e-12)
     off = 3.37 * dt  # off the grid: evaluated at that instant, not the nearest node
     np.testing.assert_array_equal(np.stack(ctrl.desired(off)),
-                                  ctrl._reference_legs(np.array([off]))[0])
+                                  ctrl.reference_legs(np.array([off]))[0])
     last = np.stack(ctrl.desired(end + 5.0))  # at rest at the end
-    np.testing.assert_allclose(last[0], ctrl._reference_legs(np.array([end]))[0][0],
+    np.testing.assert_allclose(last[0], ctrl.reference_legs(np.array([end]))[0][0],
                                rtol=0, atol=1e-12)
     assert np.abs(last[1:]).max() < 1e-12

@@ -39,6 +39,13 @@ def _batch(world: CtcWorld, robots: DynamicRobots, t: float) -> ObservationBatch
         None, stacked("q_dot"))
 
 
+def _rows_of(obs: ObservationBatch, idx: np.ndarray) -> ObservationBatch:
+    """The rows ``idx`` of a batch."""
+    return dataclasses.replace(obs, **{f.name: None if getattr(obs, f.name) is None
+                                       else np.asarray(getattr(obs, f.name))[idx]
+                                       for f in dataclasses.fields(obs) if f.init})
+
+
 @pytest.mark.slow
 @pytest.mark.parametrize("name", LAWS)
 def test_every_row_in_one_call_and_equal_to_the_trials_steps(geometry: HexapodGeometry,
@@ -199,3 +206,38 @@ def test_rows_with_a_hidden_leg_go_through_the_one_call(geometry: HexapodGeometr
             assert out.error_norm[j] == cmd.error_norm
         assert not robots.advance(np.arange(n), out.forces, DT / 20, 20).any()
     assert notes == (4 if name == "vision-ctc" else 0)  # "pose from legs [...]"
+
+
+def test_the_rank_screen_clears_only_rows_the_exact_test_accepts(
+        rng: np.random.Generator) -> None:
+    """:func:`~controllers.ctc_rows.clear_rank` says True only where the exact test
+    (:func:`~controllers.ctc_rows.rank_condition`) accepts, on ``L^T L`` of every
+    condition from well posed to beyond the threshold; the well-posed ones are cleared."""
+    from controllers.ctc_rows import clear_rank, rank_condition
+
+    threshold = 1e-6
+    mats, conditions = [], []
+    for _ in range(600):
+        Q, _ = np.linalg.qr(rng.normal(size=(6, 6)))
+        cond = 10.0 ** rng.uniform(0.0, 7.5)  # singular values of L: 1 down to 1 / cond
+        s = np.geomspace(1.0, 1.0 / cond, 6) * 10.0 ** rng.uniform(-3, 3)
+        L = (Q * s) @ np.linalg.qr(rng.normal(size=(6, 6)))[0]
+        mats.append(L.T @ L)
+        conditions.append(cond)
+    M = np.array(mats)
+    M[5] = 0.0  # no Cholesky factor: the eigenvalues decide every row
+    for screen in (clear_rank(M, 4.0 * threshold**2), clear_rank(M[6:], 4.0 * threshold**2)):
+        exact = np.array([rank_condition(m.ravel(), threshold) is not None
+                          for m in M[len(M) - len(screen):]])
+        assert not (screen & ~exact).any()
+    well = np.array(conditions[6:]) < 10.0
+    assert clear_rank(M[6:], 4.0 * threshold**2)[well].all()
+
+
+def test_the_norms_of_many_rows_are_each_rows_dot(rng: np.random.Generator) -> None:
+    from controllers.ctc_rows import norms
+
+    for m in (6, 18, 36):
+        e = rng.normal(size=(300, m)) * rng.uniform(1e-6, 1.0, (300, 1))
+        got = norms(e)
+        assert [float(x) for x in got] == [float(v.dot(v)) for v in e]

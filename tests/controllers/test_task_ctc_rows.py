@@ -35,9 +35,9 @@ from controllers.task_ctc import (
     encoder_readings,
     finite_readings,
     grid_step,
-    grid_steps,
 )
 from controllers.task_ctc_compiled import FIT_TOLERANCE, FK_MAX_CALLS, FK_TOLERANCE
+from controllers.task_ctc_rows import grid_steps
 from hexapod import deltalab, sample_poses
 from hexapod.dynamics import DynamicModel
 from hexapod.kinematics import legs_in_frame
@@ -99,7 +99,7 @@ def _oracle(law: TaskComputedTorque, obs: Observation,
     fn = task_step(feature, fk)
     row = np.full(fn.n_in, np.nan)  # every field must be written
     R0, t0 = home_pose(g) if guess is None else guess
-    tr = obs.t - law._t0
+    tr = obs.t - law.reference_start
     fields: dict[str, object] = {
         "pose": np.concatenate([R0.T.ravel(), t0]), "q": obs.lengths, "q_dot": obs.q_dot,
         "points": np.concatenate([g.base_points.ravel(), g.platform_points.ravel()]),

@@ -177,3 +177,24 @@ def test_a_warm_process_finds_its_library_without_generating_c(
     assert other.cache_key() != cold.cache_key() and len(calls) == 2
     assert len(list(tmp_path.glob("hexapod_test_cache_key_*.so"))) == 2
     np.testing.assert_allclose(other.single(x), 3.0 * np.sin(x), rtol=1e-15)
+
+
+def test_a_binding_evaluates_a_row_its_caller_owns() -> None:
+    """``bind(x)`` evaluates the caller's row in place (a row of a batch's matrix: what
+    is written there is what is evaluated); a row of the wrong size, type or layout is
+    refused naming the function."""
+    from hexapod.exceptions import LayoutError
+
+    f = CompiledFunction(_function(2.0))
+    X = np.random.default_rng(3).normal(size=(3, f.n_in))
+    bound = f.bind(X[1])
+    assert bound.x.base is X
+    assert bound.call() == 0
+    np.testing.assert_array_equal(bound.y, f.single(X[1]))
+    X[1, 0] += 1.0  # written in the matrix: evaluated
+    assert bound.call() == 0
+    np.testing.assert_array_equal(bound.y, f.single(X[1]))
+    for bad in (np.zeros(f.n_in + 1), np.zeros(f.n_in, dtype=np.float32), X[:, 0],
+                np.zeros((2, f.n_in))[:, ::2][0]):
+        with pytest.raises(LayoutError, match=f.name):
+            f.bind(bad)

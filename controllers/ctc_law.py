@@ -1,0 +1,64 @@
+"""What the computed-torque laws share (``computed-torque`` and the task laws of
+:mod:`controllers.task_ctc`): force controllers that sample their reference themselves,
+built from the same options (the error dynamics, the smooth goal, the integral action
+and the saturation strategy, :class:`~controllers.solvers.computed_torque.CTCOptions`).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from controllers.base import Controller
+from controllers.exceptions import ContextError
+from controllers.solvers.computed_torque import CTCOptions
+from hexapod.actuation import Actuation
+
+#: Default natural frequency of the error [Hz] (``omega_n dt = 0.25`` at 20 ms).
+NATURAL_FREQUENCY_HZ = 2.0
+#: Default damping ratio of the error.
+DAMPING = 1.0
+
+
+class ComputedTorqueLaw(Controller):
+    """A computed-torque law's options (see the module docstring); a subclass sets up
+    its own state in :meth:`init_state`.
+
+    Args:
+        natural_frequency: ``f_n`` [Hz] of the task error's second-order response.
+        damping: Its damping ratio ``zeta``.
+        smooth_goal: Reach a fixed goal along the quintic line (False: a step).
+        integral_gain: Integral action Ki [1/s] on the task error (default 0: none).
+            Stable below ``2 zeta omega_n``; the integral is held while a leg's force is
+            over its limit (anti-windup).
+        saturation: Forces over the drives' limit: "clip", "scale" or "qp" (default
+            "clip"). Each leg clipped (as the drives do), the force vector scaled, or the
+            acceleration scaled (:mod:`controllers.solvers.saturation`).
+
+    Raises:
+        ContextError: Naming the option that is not valid.
+    """
+
+    actuation = Actuation.FORCE
+    #: Samples ``context.reference`` itself (:mod:`controllers.tracking` passes it through).
+    tracks_reference = True
+
+    def __init__(self, natural_frequency: float = NATURAL_FREQUENCY_HZ,
+                 damping: float = DAMPING, smooth_goal: bool = True,
+                 integral_gain: float = 0.0, saturation: str = "clip") -> None:
+        self.ctc_options = CTCOptions(self.name, natural_frequency, damping, integral_gain,
+                                      saturation)
+        self.gains = self.ctc_options.gains
+        self.integral_gain = self.ctc_options.integral_gain
+        self.saturation = self.ctc_options.saturation
+        self.solver = self.ctc_options.solver
+        if not isinstance(smooth_goal, bool | np.bool_):
+            raise ContextError(self.name, "smooth_goal", f"must be true or false, got "
+                               f"{smooth_goal!r}")
+        self.smooth_goal = bool(smooth_goal)
+        self.init_state()
+
+    def init_state(self) -> None:
+        """Set up the law's state before its first reset (nothing by default)."""
+
+
+__all__ = ["DAMPING", "NATURAL_FREQUENCY_HZ", "ComputedTorqueLaw"]

@@ -1,0 +1,244 @@
+"""The batch of the joint-space computed torque (``computed-torque``) as arrays.
+
+The batch owns its trials' state (:class:`JointRows`, built from the trials' instances at
+the first batched step after a reset): the compiled step's input matrix ``X`` (n, n_in)
+with every row's constant blocks written once at reset and its pose guess, the leg
+integrals (n, 6), the fixed goals' quintics (n, 21), the command counts, the force limits
+(n, 6) and the reference's legs on the control grid, stacked (n, S, 18) or one grid
+shared when they are equal. Each instance's own rows are views of these arrays (its
+bound input row a row of ``X``), so its per-trial step
+(:meth:`~controllers.computed_torque.ComputedTorqueController.step_trial`, which refuses
+with the reason) and the batch read and write the same state.
+
+One batched step (:meth:`JointRows.step`): the readings and the desired legs are written
+into the rows by fancy indexing, the compiled step evaluates every row in one C call
+(:func:`~controllers.ctc_rows.evaluate_rows`), the rows are screened at once
+(:func:`~controllers.ctc_rows.accepted_rows`), and the forces, error norms, integrals and
+next guesses are written as array slices. Python per row only for rare rows: a fixed
+goal's first step, an instant off the reference's grid, forces over a limit with a
+saturation other than clipping.
+"""
+
+from __future__ import annotations
+
+from typing import TYPE_CHECKING, NamedTuple
+
+import numpy as np
+
+from controllers.ctc_rows import accepted_rows, evaluate_rows, norms, over_limits
+from controllers.data import CommandBatch, ObservationBatch
+from controllers.solvers import compiled_ctc
+from hexapod.compiled import CompiledFunction
+
+if TYPE_CHECKING:
+    from controllers.computed_torque import ComputedTorqueController
+
+#: How far from ``k dt`` an observation's time may be to use the reference's grid [s].
+GRID_TIME_TOLERANCE = 1e-9
+#: Calls of the compiled step (``compiled_ctc.FK_CALLS`` x 3 Newton iterations each)
+#: before the step is refused (as the 50 iterations of :func:`hexapod.fk.forward_kinematics`).
+FK_MAX_CALLS = 16
+#: Peak of the quintic's speed over its mean speed.
+QUINTIC_PEAK_SPEED = 15.0 / 8.0
+#: Where the compiled step's blocks lie in its rows (:data:`compiled_ctc.INPUTS`,
+#: :data:`compiled_ctc.OUTPUTS`), looked up once.
+DESIRED, POSE_IN = compiled_ctc.INPUTS["desired"], compiled_ctc.INPUTS["pose"]
+Q_IN, QD_IN = compiled_ctc.INPUTS["q"], compiled_ctc.INPUTS["q_dot"]
+POSE_OUT, FACTOR, FORCES = (compiled_ctc.OUTPUTS[k] for k in ("pose", "factor", "forces"))
+RESIDUAL, STATUS = (compiled_ctc.OUTPUTS.index(k) for k in ("fk_residual", "status"))
+#: The columns of a quintic's row (21,): started (1.0 or 0.0), ``t0`` [s], duration
+#: ``T`` [s], ``q0`` (6) [m], ``q* - q0`` (6) [m], ``q*`` (6) [m].
+QUINTIC_SIZE = 21
+
+
+def quintic_rows(t: np.ndarray, rows: np.ndarray) -> np.ndarray:
+    """``(q*, q_dot*, q_ddot*)`` (m, 18) of the leg-space quintics ``rows`` (m, 21)
+    (:data:`QUINTIC_SIZE`) at the times ``t`` (m,) [s]: ``q0 + s d``, ``s_dot d``,
+    ``s_ddot d`` with ``d = q* - q0`` (``q*`` at rest for a zero duration). The timing
+    ``s(x)`` is computed in Python floats, row by row (a few operations each)."""
+    m = len(t)
+    timing = np.zeros((m, 3))
+    step = np.zeros(m, dtype=bool)
+    for j, (tj, t0, T) in enumerate(zip(t.tolist(), rows[:, 1].tolist(), rows[:, 2].tolist(),
+                                         strict=True)):
+        if T <= 0.0:
+            step[j] = True
+            continue
+        x = min(max((tj - t0) / T, 0.0), 1.0)
+        s = x**3 * (10 - 15 * x + 6 * x**2)
+        if 0.0 < x < 1.0:
+            timing[j] = (s, 30 * x**2 * (1 - x) ** 2 / T, 60 * x * (1 - x) * (1 - 2 * x) / T**2)
+        else:
+            timing[j, 0] = s
+    d = rows[:, 9:15]
+    out = np.empty((m, 18))
+    out[:, 0:6] = rows[:, 3:9] + timing[:, 0:1] * d
+    out[:, 6:12] = timing[:, 1:2] * d
+    out[:, 12:18] = timing[:, 2:3] * d
+    if step.any():
+        out[step, 0:6] = rows[step, 15:21]
+        out[step, 6:18] = 0.0
+    return out
+
+
+class JointState(NamedTuple):
+    """One trial's state as its batch takes it (its own arrays, copied into the batch's).
+
+    Attributes:
+        row: (n_in,) the compiled step's input row.
+        integral: (6,) ``int (q* - q) dt`` [m s].
+        quintic: (21,) the fixed goal's quintic (:data:`QUINTIC_SIZE`).
+        steps: (1,) the commands of the compiled step.
+        limit: (6,) the nominal force limits [N].
+        dt: The control period [s].
+        t_end: The time after which the reference is at rest [s] (inf: none).
+        grid: (N, 18) the reference's legs on the control grid, None for a fixed goal.
+        function: The compiled step.
+    """
+
+    row: np.ndarray
+    integral: np.ndarray
+    quintic: np.ndarray
+    steps: np.ndarray
+    limit: np.ndarray
+    dt: float
+    t_end: float
+    grid: np.ndarray | None
+    function: CompiledFunction
+
+
+class JointRows:
+    """The arrays of a batch of computed-torque trials (see the module docstring); each
+    instance's state becomes views of them.
+
+    Args:
+        laws: The trials' instances (reset), in trial order.
+    """
+
+    def __init__(self, laws: list[ComputedTorqueController]) -> None:
+        self.laws = laws
+        states = [law.batch_state() for law in laws]
+        self.function = states[0].function
+        n = len(laws)
+        self.X = np.stack([st.row for st in states])
+        self.integral = np.stack([st.integral for st in states])
+        self.quintic = np.stack([st.quintic for st in states])
+        self.steps = np.concatenate([st.steps for st in states])
+        self.limit = np.stack([st.limit for st in states])
+        for k, law in enumerate(laws):
+            law.adopt(self.X[k], self.integral[k], self.quintic[k], self.steps[k:k + 1])
+        self.dt = np.array([st.dt for st in states])
+        self.t_end = np.array([st.t_end for st in states])
+        self.tracking = np.array([st.grid is not None for st in states])
+        grids = [st.grid for st in states if st.grid is not None]
+        self.grid_len = np.array([0 if st.grid is None else len(st.grid) for st in states],
+                                 dtype=int)
+        #: (1 or n, S, 18) the grids, one shared when they are equal (index 0).
+        self.shared = bool(grids) and all(g is grids[0] or np.array_equal(g, grids[0])
+                                          for g in grids)
+        if self.shared:
+            self.grids = grids[0][None]
+        else:
+            size = max((len(g) for g in grids), default=1)
+            self.grids = np.zeros((n, max(size, 1), 18))
+            for k, st in enumerate(states):
+                g = st.grid
+                if g is not None and len(g):
+                    self.grids[k, :len(g)] = g
+                    self.grids[k, len(g):] = g[-1]
+
+    def desired(self, trials: np.ndarray, t: np.ndarray, q: np.ndarray
+                ) -> tuple[np.ndarray, np.ndarray]:
+        """``(q*, q_dot*, q_ddot*)`` (m, 18) of the trials ``trials`` (m,) at ``t`` (m,)
+        [s] (a fixed goal's quintic started at its first step from the lengths ``q``
+        (m, 6) [m]), and the (m,) mask of the rows that have them (an instant off the
+        grid whose reference the nominal model cannot evaluate has none)."""
+        m = len(trials)
+        out = np.zeros((m, 18))
+        ok = np.ones(m, dtype=bool)
+        tracking = self.tracking[trials]
+        if tracking.any():
+            j = np.flatnonzero(tracking)
+            tk, dt, length = t[j], self.dt[trials[j]], self.grid_len[trials[j]]
+            k = np.rint(tk / dt)
+            end = (length > 0) & (tk > self.t_end[trials[j]])
+            on = ~end & (k >= 0) & (k < length) & (np.abs(tk - k * dt) <= GRID_TIME_TOLERANCE)
+            g = np.zeros(len(j), dtype=int) if self.shared else trials[j]
+            at = np.where(end, length - 1, np.where(on, k, 0)).astype(int)
+            out[j] = self.grids[g, at]
+            for i in np.flatnonzero(~end & ~on).tolist():  # off the grid: on demand
+                try:
+                    out[j[i]] = self.laws[int(trials[j[i]])].reference_legs(
+                        np.array([tk[i]]))[0].ravel()
+                except Exception:  # the trial's own step refuses with the reason
+                    ok[j[i]] = False
+        if not tracking.all():
+            j = np.flatnonzero(~tracking)
+            for i in j[self.quintic[trials[j], 0] == 0.0].tolist():  # a first step
+                self.laws[int(trials[i])].start_quintic(float(t[i]), q[i])
+            out[j] = quintic_rows(t[j], self.quintic[trials[j]])
+        return out, ok
+
+    def step(self, observations: ObservationBatch, out: CommandBatch, kp_ki: float,
+             threshold: float, saturation: str) -> np.ndarray:
+        """Step every row with finite readings (see the module docstring) into ``out``;
+        returns the rows left to the trials' own steps (readings missing or not
+        finite, a desired row the model cannot give, a result not accepted).
+
+        Args:
+            observations: The batch (row ``k`` of trial ``observations.trials[k]``).
+            out: The commands, written in place.
+            kp_ki: ``Kp Ki`` of the integral action (0: none).
+            threshold: The rank test's relative singular-value threshold.
+            saturation: The strategy over a force limit.
+        """
+        n = len(observations)
+        if observations.q_dot is None:
+            return np.arange(n)
+        t = np.asarray(observations.t, dtype=float)
+        q_all = np.asarray(observations.lengths, dtype=float)
+        qd_all = np.asarray(observations.q_dot, dtype=float)
+        finite = np.isfinite(t) & np.isfinite(q_all).all(axis=1) & np.isfinite(qd_all).all(axis=1)
+        rows = np.flatnonzero(finite)
+        trials = np.asarray(observations.trials, dtype=int)[rows]
+        t, q, qd = t[rows], q_all[rows], qd_all[rows]
+        X = self.X
+        X[trials, Q_IN] = q
+        X[trials, QD_IN] = qd
+        desired, ok = self.desired(trials, t, q)
+        if kp_ki:
+            desired[:, 12:18] += kp_ki * self.integral[trials]
+        X[trials, DESIRED] = desired
+        if not ok.all():
+            rows, trials, t, q, qd, desired = (a[ok] for a in (rows, trials, t, q, qd,
+                                                               desired))
+        if not len(rows):
+            return np.arange(n)
+        Y, _ = evaluate_rows(self.function, X[trials], POSE_IN, POSE_OUT, RESIDUAL,
+                             compiled_ctc.FK_TOLERANCE, FK_MAX_CALLS)
+        a = np.flatnonzero(accepted_rows(Y, STATUS, FACTOR, threshold))
+        slow = np.ones(n, dtype=bool)
+        if not len(a):
+            return np.flatnonzero(slow)
+        ka, ta, Ya = rows[a], trials[a], Y[a]
+        X[ta, POSE_IN] = Ya[:, POSE_OUT]  # the next steps' guesses
+        self.steps[ta] += 1
+        e = desired[a, 0:6] - q[a]
+        forces = Ya[:, FORCES]
+        over = over_limits(forces, self.limit[ta])
+        if kp_ki:  # anti-windup: held while a leg's force is over its limit
+            held = ~over
+            self.integral[ta[held]] += e[held] * self.dt[ta[held]][:, None]
+        assert out.forces is not None
+        out.forces[ka] = forces
+        out.error_norm[ka] = np.sqrt(norms(e))
+        for i in np.flatnonzero(over).tolist():  # over a limit: the saturation strategy
+            law = self.laws[int(ta[i])]
+            out.forces[ka[i]] = law.saturated_forces(forces[i], Ya[i, POSE_OUT], qd[a[i]],
+                                                      desired[a[i], 6:12])
+        slow[ka] = False
+        return np.flatnonzero(slow)
+
+
+__all__ = ["FK_MAX_CALLS", "GRID_TIME_TOLERANCE", "QUINTIC_PEAK_SPEED", "QUINTIC_SIZE",
+           "JointRows", "JointState", "quintic_rows"]
