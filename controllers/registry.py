@@ -120,16 +120,7 @@ class Registry:
                 the attribute is not callable (names the controller and the spec).
         """
         spec, package = self._lazy[name]
-        module, _, attr = spec.partition(":")
-        try:
-            obj: Any = importlib.import_module(module)
-            for part in attr.split("."):
-                obj = getattr(obj, part)
-        except (ImportError, AttributeError) as exc:
-            raise PluginLoadError(name, package, f"{spec}: {type(exc).__name__}: {exc}"
-                                  ) from exc
-        if not callable(obj):
-            raise PluginLoadError(name, package, f"{spec} is not callable")
+        obj = _import_spec(spec, name, package)
         self.register(name, obj, package)
         return obj
 
@@ -181,17 +172,8 @@ class Registry:
         if name in self._lazy:
             return self._resolve(name)
         if ":" in name:
-            module, _, attr = name.partition(":")
-            try:
-                obj: Any = importlib.import_module(module)
-                for part in attr.split("."):
-                    obj = getattr(obj, part)
-            except (ImportError, AttributeError) as exc:
-                raise PluginLoadError(name, "command line", f"{type(exc).__name__}: {exc}"
-                                      ) from None
-            if not callable(obj):
-                raise PluginLoadError(name, "command line", "not callable")
-            package, version = _module_distribution(module)
+            obj = _import_spec(name, name, "command line")
+            package, version = _module_distribution(name.partition(":")[0])
             self.register(name, obj, package, version)
             return obj
         known = sorted(self._factories.keys() | self._lazy.keys())
@@ -219,6 +201,27 @@ class Registry:
         """Package and version of a registered controller."""
         self.factory(name)
         return self._info[name]
+
+
+def _import_spec(spec: str, name: str, source: str) -> ControllerFactory:
+    """The callable a ``module:attr`` spec names (``attr`` may be dotted).
+
+    Raises:
+        PluginLoadError: The module does not import, has no such attribute, or the
+            attribute is not callable (names the controller ``name``, ``source`` and
+            the spec).
+    """
+    module, _, attr = spec.partition(":")
+    try:
+        obj: Any = importlib.import_module(module)
+        for part in attr.split("."):
+            obj = getattr(obj, part)
+    except (ImportError, AttributeError) as exc:
+        raise PluginLoadError(name, source, f"{spec}: {type(exc).__name__}: {exc}"
+                              ) from exc
+    if not callable(obj):
+        raise PluginLoadError(name, source, f"{spec} is not callable")
+    return obj  # type: ignore[no-any-return]
 
 
 def describe(factory: Any) -> str:
