@@ -145,12 +145,14 @@ def test_non_finite_command_is_refused_from_the_status(other_geometry,  # type: 
     ctx = world.context(world.goal(Rs[0], ts[0]), 0.02)
     for compiled in (True, False):
         ctrl = registry.create("model-based", compiled=compiled)
+        assert isinstance(ctrl, ModelBasedController)
         ctrl.reset(ctx)
         ctrl.servo_input[_IN["R_star"].start] = np.nan
         cmd = ctrl.step(world.observation(Rs[1], ts[1]))
         assert not cmd.ok and cmd.reason == "non-finite command (numerical failure)"
         assert np.array_equal(cmd.velocities, np.zeros(6))
     batch = registry.create("model-based")
+    assert isinstance(batch, ModelBasedController)
     batch.reset_batch([ctx, ctx])
     batch._b_X[1, _IN["R_star"].start] = np.nan
     out = batch.step_batch(_batch(world, Rs[1:], ts[1:]))
