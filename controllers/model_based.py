@@ -14,14 +14,19 @@ Speed: everything after the forward kinematics (pose error with ``log`` on SO(3)
 gain, twist, nominal ``J_inv``, ``q_dot``, the twist in the camera frame and the
 condition number of ``J_inv`` from the Jacobi eigenvalues of ``J_inv^T J_inv``) is
 one CasADi expression compiled to C (:func:`pose_servo_kernel`, the technique of
-:mod:`controllers.law_kernel`): one call instead of some forty numpy calls. Near a
-half-turn of orientation error (``theta > pi - 1e-3``, where ``log`` needs the
-symmetric part) the numpy path computes the command.
+:mod:`controllers.law_kernel`): one call instead of some forty numpy calls. It is the
+only computation of the command: near a half-turn of orientation error
+(``theta > pi - 1e-3``) its ``log`` takes the axis from the symmetric part of the
+rotation, as :func:`hexapod.se3.log_so3` does, and ``compiled=False`` evaluates the
+same CasADi function in its virtual machine. Its ``status`` output (0: a command,
+:data:`NON_FINITE`: a non-finite value) is the refusal reason of a row; the batch leaves
+only the rows whose forward kinematics fails (or whose lengths are not finite) to the
+trial's own step. The numpy formulas it replaced are its test oracle
+(``tests/controllers/model_based_oracle.py``).
 """
 
 from __future__ import annotations
 
-import math
 from collections.abc import Sequence
 from dataclasses import replace
 from functools import lru_cache
@@ -42,7 +47,6 @@ from controllers.base import (
 )
 from controllers.estimators import PoseEstimate
 from controllers.exceptions import ContextError
-from controllers.interaction import cross
 from controllers.law_algebra import jacobi_eigen
 from controllers.law_tools import gain_formula
 from controllers.laws import Gain, check_number, check_observation
@@ -50,8 +54,7 @@ from hexapod.compiled import CompiledFunction, Layout
 from hexapod.exceptions import HexapodError
 from hexapod.fk import forward_kinematics, forward_kinematics_batch
 from hexapod.geometry import HexapodGeometry
-from hexapod.kinematics import Transform, twist_to_frame
-from hexapod.se3 import log_so3
+from hexapod.kinematics import Transform
 from hexapod.workspace import home_pose
 
 #: Input of the compiled pose servo: R (row-major), t, R*, t*, A (6 x 3), eB (6 x 3),
@@ -59,11 +62,40 @@ from hexapod.workspace import home_pose
 SERVO_INPUTS = Layout([("R", (3, 3)), ("t", 3), ("R_star", (3, 3)), ("t_star", 3),
                        ("A", (6, 3)), ("E", (6, 3)), ("gain", 3), ("Rc", (3, 3)), ("pc", 3)],
                       "pose servo input")
-#: Output: e (6), |e|, tau (6), q_dot (6), q_dot check, camera twist (6), condition, near pi.
-SERVO_OUTPUTS = Layout([("e", 6), ("norm", 1), ("tau", 6), ("qdot", 6), ("check", 1),
-                        ("twist", 6), ("cond", 1), ("near_pi", 1)], "pose servo output")
+#: Output: e (6), |e|, tau (6), q_dot (6), camera twist (6), condition, status (0: a
+#: command; :data:`NON_FINITE`: a NaN or infinite value in ``e``, ``qdot`` or the twist).
+SERVO_OUTPUTS = Layout([("e", 6), ("norm", 1), ("tau", 6), ("qdot", 6), ("twist", 6),
+                        ("cond", 1), ("status", 1)], "pose servo output")
 _IN, _OUT = SERVO_INPUTS, SERVO_OUTPUTS
-_AT = {name: SERVO_OUTPUTS.index(name) for name in ("norm", "check", "cond", "near_pi")}
+_AT = {name: SERVO_OUTPUTS.index(name) for name in ("norm", "cond", "status")}
+#: The orientation error [rad] beyond which the axis comes from the symmetric part.
+HALF_TURN = np.pi - 1e-3
+#: Status of a row whose command is not finite.
+NON_FINITE = 1
+#: The refusal reason of each non-zero status.
+STATUS_REASONS = {NON_FINITE: "non-finite command (numerical failure)"}
+
+
+def sx_log_so3(M: ca.SX) -> ca.SX:
+    """``log(M)`` (3,) [rad] of a (3, 3) rotation, the formulas of
+    :func:`hexapod.se3.log_so3`: ``theta = atan2(|v| / 2, (tr M - 1) / 2)`` with ``v``
+    the axial vector of ``M - M^T``; ``theta / (2 sin theta) v`` (its series below
+    ``sin theta = 1e-6``); beyond :data:`HALF_TURN`, the axis is the row of
+    ``(M + M^T) / 2 - cos(theta) I`` of largest diagonal entry (the first of equal ones),
+    normalised, signed as ``v`` (``+`` where orthogonal), times ``theta``."""
+    cos = (M[0, 0] + M[1, 1] + M[2, 2] - 1.0) / 2.0
+    v = ca.vertcat(M[2, 1] - M[1, 2], M[0, 2] - M[2, 0], M[1, 0] - M[0, 1])
+    theta = ca.atan2(0.5 * ca.sqrt(ca.dot(v, v)), cos)
+    sin = ca.sin(theta)
+    small = sin < 1e-6
+    factor = ca.if_else(small, 0.5 + theta ** 2 / 12.0,
+                        theta / (2.0 * ca.if_else(small, 1.0, sin)))
+    B = (M + M.T) / 2.0 - ca.cos(theta) * ca.SX.eye(3)
+    first = ca.logic_and(B[0, 0] >= B[1, 1], B[0, 0] >= B[2, 2])
+    axis = ca.if_else(first, B[0, :].T, ca.if_else(B[1, 1] >= B[2, 2], B[1, :].T, B[2, :].T))
+    axis = axis / ca.sqrt(ca.dot(axis, axis))
+    sign = ca.if_else(ca.dot(axis, v) < 0.0, -1.0, 1.0)
+    return ca.if_else(theta > HALF_TURN, axis * (theta * sign), factor * v)
 
 
 def _pose_servo_function() -> ca.Function:
@@ -75,16 +107,7 @@ def _pose_servo_function() -> ca.Function:
     Rc = ca.reshape(x[_IN["Rc"]], 3, 3).T
     pc = x[_IN["pc"]]
     l0, linf, slope = (x[_IN["gain"]][k] for k in range(3))
-    # log_so3(R* R^T) (hexapod.se3.log_so3 away from a half-turn).
-    M = Rs @ R.T
-    cos = (M[0, 0] + M[1, 1] + M[2, 2] - 1.0) / 2.0
-    v = ca.vertcat(M[2, 1] - M[1, 2], M[0, 2] - M[2, 0], M[1, 0] - M[0, 1])
-    theta = ca.atan2(0.5 * ca.sqrt(ca.dot(v, v)), cos)
-    sin = ca.sin(theta)
-    small = sin < 1e-6
-    factor = ca.if_else(small, 0.5 + theta ** 2 / 12.0,
-                        theta / (2.0 * ca.if_else(small, 1.0, sin)))
-    rot = factor * v
+    rot = sx_log_so3(Rs @ R.T)
     dp = ts - t
     e = ca.vertcat(-dp, -rot)
     xe = ca.mmax(ca.fabs(e))
@@ -108,15 +131,24 @@ def _pose_servo_function() -> ca.Function:
     cond = ca.if_else(w_min > 0, ca.sqrt(w_max / ca.if_else(w_min > 0, w_min, 1.0)), ca.inf)
     wc = Rc @ w
     twist = ca.vertcat(Rc @ tau[:3] - ca.cross(wc, pc), wc)
-    out = ca.vertcat(e, ca.sqrt(ca.dot(e, e)), tau, qdot, ca.sum1(qdot - qdot), twist, cond,
-                     ca.if_else(theta > np.pi - 1e-3, 1.0, 0.0))
+    # |x| <= DBL_MAX is false for NaN and inf (CasADi simplifies x - x to 0: no use).
+    values = ca.vertcat(e, qdot, twist)
+    finite = ca.SX(1.0)
+    for k in range(values.numel()):
+        finite = ca.logic_and(finite, ca.fabs(values[k]) <= np.finfo(float).max)
+    status = ca.if_else(finite, 0.0, float(NON_FINITE))
+    out = ca.vertcat(e, ca.sqrt(ca.dot(e, e)), tau, qdot, twist, cond, status)
     return ca.Function("hexapod_pose_servo", [x], [out])
 
 
-@lru_cache(maxsize=1)
-def pose_servo_kernel() -> CompiledFunction:
-    """The compiled pose servo (everything after the forward kinematics)."""
-    return CompiledFunction(_pose_servo_function(), inputs=_IN, outputs=_OUT)
+@lru_cache(maxsize=2)
+def pose_servo_kernel(compiled: bool = True) -> CompiledFunction:
+    """The pose servo (everything after the forward kinematics).
+
+    Args:
+        compiled: C code (False: the CasADi virtual machine evaluates the same function).
+    """
+    return CompiledFunction(_pose_servo_function(), compiled, inputs=_IN, outputs=_OUT)
 
 
 class ModelBasedController(Controller):
@@ -128,7 +160,8 @@ class ModelBasedController(Controller):
             ``x`` the largest entry of the pose error (metres and radians).
         fk_tolerance: Forward-kinematics residual tolerance [m].
         fk_max_iterations: Forward-kinematics iteration budget.
-        compiled: Use the compiled pose servo (same result, faster).
+        compiled: The pose servo in C (False: the CasADi virtual machine evaluates the
+            same function, slower).
     """
 
     name = "model-based"
@@ -139,7 +172,7 @@ class ModelBasedController(Controller):
                  compiled: bool = True) -> None:
         self.gain = Gain.from_options(self.name, gain, adaptive_gain)
         self.compiled = bool(compiled)
-        #: The compiled pose servo (None: numpy path, or not reset).
+        #: The pose servo (None before :meth:`reset_trial`).
         self.kernel: CompiledFunction | None = None
         #: The servo's input row (constants written by :meth:`reset_trial`).
         self.servo_input = np.zeros(_IN.size)
@@ -147,7 +180,6 @@ class ModelBasedController(Controller):
         self.fk_max_iterations = int(check_number(self.name, "fk_max_iterations",
                                                   fk_max_iterations, 1.0, strict=False))
         self.context: ControllerContext | None = None
-        self._J = np.zeros((6, 6))
 
     def reset_trial(self, context: ControllerContext) -> None:
         """Read the nominal geometry and the goal pose (or the goal lengths).
@@ -168,7 +200,7 @@ class ModelBasedController(Controller):
         cam: Any = context.camera
         pose = getattr(cam, "camera_from_base", None)
         self._camera_from_base: Transform | None = pose if isinstance(pose, Transform) else None
-        self.kernel = pose_servo_kernel() if self.compiled else None
+        self.kernel = pose_servo_kernel(self.compiled)
         x = self.servo_input
         x[_IN["R_star"]] = self._R_star.reshape(9)
         x[_IN["t_star"]] = self._t_star
@@ -225,8 +257,9 @@ class ModelBasedController(Controller):
         return R, t
 
     def step_trial(self, observation: Observation) -> Command:
-        """Forward kinematics, pose error, twist, ``q_dot = J_inv(nominal) tau``."""
-        if self.context is None:
+        """Forward kinematics, then the pose servo (:func:`pose_servo_kernel`): pose error,
+        twist, ``q_dot = J_inv(nominal) tau``."""
+        if self.context is None or self.kernel is None:
             return Command.refuse(f"{self.name}: reset(context) was not called")
         problem = check_observation(observation, self.features)
         if problem is not None:
@@ -243,40 +276,18 @@ class ModelBasedController(Controller):
             return Command.refuse(f"forward kinematics failed: {exc}")
         R, t = sol.rotation, sol.translation
         est.set(R, t)
-        notes = [f"forward kinematics: {sol.iterations} iterations"]
-        if self.kernel is not None:
-            x = self.servo_input
-            x[_IN["R"]] = R.reshape(9)
-            x[_IN["t"]] = t
-            y = self.kernel.single(x)
-            if y[_AT["near_pi"]] == 0.0:
-                e = y[_OUT["e"]]
-                if y[_AT["check"]] != 0.0:
-                    return Command.refuse("non-finite command (numerical failure)", e)
-                twist = y[_OUT["twist"]] if self._camera_from_base is not None else None
-                return Command(y[_OUT["qdot"]], twist=twist, error=e,
-                               error_norm=float(y[_AT["norm"]]), rank=6,
-                               condition=float(y[_AT["cond"]]), features_used=6, notes=notes)
-        rot = log_so3(self._R_star @ R.T)
-        dp = self._t_star - t
-        e = np.concatenate([-dp, -rot])
-        lam = self.gain(float(np.abs(e).max()))
-        w = lam * rot
-        v = lam * dp - cross(w, t)
-        tau = np.concatenate([v, w])
-        # Nominal inverse Jacobian at the estimated pose (base frame).
-        legs = (self.platform_points @ R.T) + t - self.base_points
-        u = legs / np.linalg.norm(legs, axis=1, keepdims=True)
-        J = self._J
-        J[:, :3] = u
-        J[:, 3:] = cross(self.base_points, u)
-        qdot = J @ tau
-        if not np.all(np.isfinite(qdot)):
-            return Command.refuse("non-finite command (numerical failure)", e)
-        twist = (twist_to_frame(tau, self._camera_from_base)
-                 if self._camera_from_base is not None else None)
-        return Command(qdot, twist=twist, error=e, error_norm=math.sqrt(float(e @ e)), rank=6,
-                       condition=float(np.linalg.cond(J)), features_used=6, notes=notes)
+        x = self.servo_input
+        x[_IN["R"]] = R.reshape(9)
+        x[_IN["t"]] = t
+        y = self.kernel.single(x)
+        e = y[_OUT["e"]]
+        status = int(y[_AT["status"]])
+        if status:
+            return Command.refuse(STATUS_REASONS[status], e)
+        twist = y[_OUT["twist"]] if self._camera_from_base is not None else None
+        return Command(y[_OUT["qdot"]], twist=twist, error=e, error_norm=float(y[_AT["norm"]]),
+                       rank=6, condition=float(y[_AT["cond"]]), features_used=6,
+                       notes=[f"forward kinematics: {sol.iterations} iterations"])
 
     # ------------------------------------------------------------------ batch
     def reset_batch(self, contexts: Sequence[ControllerContext]) -> None:
@@ -294,7 +305,6 @@ class ModelBasedController(Controller):
         self._b_E = np.array([t.platform_points for t in trials])
         self._b_geometry = trials[0].context.geometry if trials and trials[0].context else None
         self._b_X = np.array([t.servo_input for t in trials]) if trials else np.zeros((0, _IN.size))
-        self._b_kernel = bool(trials) and all(t.kernel is not None for t in trials)
 
     def retarget_batch(self, trials: np.ndarray, goals: GoalBatch) -> None:
         """New goals of some trials (row ``j`` for trial ``trials[j]``): each instance's
@@ -310,9 +320,10 @@ class ModelBasedController(Controller):
 
     def step_arrays(self, observations: ObservationBatch, out: CommandBatch) -> np.ndarray:
         """Forward kinematics of every row in one batch (warm-started per trial), the
-        compiled pose servo in one C loop; rows the batch cannot finish exactly (failed
-        forward kinematics, a half-turn error, a non-finite command) are stepped by
-        their own instance from their previous state."""
+        pose servo in one C loop (:func:`pose_servo_kernel`), a row of non-zero status
+        refused with its reason; the rows whose forward kinematics fails (or whose
+        lengths or time are not finite) are left to their own instance's step, from
+        their previous state (its refusal and its warm start reset)."""
         obs = observations
         n = len(obs)
         trials = np.asarray(obs.trials, dtype=int)
@@ -320,8 +331,8 @@ class ModelBasedController(Controller):
         q = np.asarray(obs.lengths, dtype=float)
         with np.errstate(invalid="ignore"):
             fast = (np.isfinite(q).all(axis=1) & np.isfinite(np.asarray(obs.t, dtype=float)))
-        rows = np.flatnonzero(fast) if self._b_kernel else np.zeros(0, dtype=int)
-        if len(rows) and self._b_geometry is not None:
+        rows = np.flatnonzero(fast)
+        if len(rows) and self._b_geometry is not None and self.kernel is not None:
             tr = trials[rows]
             est = self.batch_estimate
             sol = forward_kinematics_batch(self._b_geometry, q[rows], est.rotation[tr],
@@ -332,12 +343,15 @@ class ModelBasedController(Controller):
             X = self._b_X[tr]
             X[:, _IN["R"]] = sol.rotations.reshape(-1, 9)
             X[:, _IN["t"]] = sol.translations
-            Y = pose_servo_kernel().batch(X)
-            ok = (sol.converged & (Y[:, _AT["near_pi"]] == 0.0)
-                  & (Y[:, _AT["check"]] == 0.0))
-            acc = np.flatnonzero(ok)
-            est.set(sol.rotations[acc], sol.translations[acc], tr[acc])
-            out.velocities[rows[acc]] = Y[acc][:, _OUT["qdot"]]
-            out.error_norm[rows[acc]] = Y[acc, _AT["norm"]]
-            slow[rows[acc]] = False
+            Y = self.kernel.batch(X)
+            done = np.flatnonzero(sol.converged)
+            est.set(sol.rotations[done], sol.translations[done], tr[done])
+            status = Y[done, _AT["status"]]
+            ok = done[status == 0.0]
+            out.velocities[rows[ok]] = Y[ok][:, _OUT["qdot"]]
+            out.error_norm[rows[ok]] = Y[ok, _AT["norm"]]
+            for k in done[status != 0.0].tolist():
+                refusal = Command.refuse(STATUS_REASONS[int(Y[k, _AT["status"]])], Y[k, _OUT["e"]])
+                out.put(int(rows[k]), refusal)
+            slow[rows[done]] = False
         return np.flatnonzero(slow)

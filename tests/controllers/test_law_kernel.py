@@ -329,32 +329,6 @@ def test_qp_shortcut_off_with_chosen_osqp_settings() -> None:
                            shortcut=True).solver.shortcut
 
 
-@pytest.mark.parametrize("turn", [0.0, np.pi - 1e-4])
-def test_compiled_pose_servo_equals_numpy(world: World, rng: np.random.Generator,
-                                          turn: float) -> None:
-    """Model-based: the compiled pose servo = the numpy one (which it leaves near pi)."""
-    Rs, ts = world.poses(6, rng, max_translation=0.02, max_angle=np.deg2rad(4), margin=0.03)
-    goal = world.goal(Rs[0], ts[0])
-    c, s = np.cos(turn), np.sin(turn)
-    goal.rotation = np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]]) @ Rs[0]
-    ctx = world.context(goal, 0.02)
-    fast = registry.create("model-based", adaptive_gain=(3.0, 0.5, 20.0))
-    slow = registry.create("model-based", adaptive_gain=(3.0, 0.5, 20.0), compiled=False)
-    fast.reset(ctx)
-    slow.reset(ctx)
-    for R, t in zip(Rs[1:], ts[1:], strict=True):
-        obs = world.observation(R, t)
-        a, b = fast.step(obs), slow.step(obs)
-        assert a.ok and b.ok
-        scale = np.abs(b.velocities).max()
-        np.testing.assert_allclose(a.velocities, b.velocities, rtol=1e-10, atol=1e-13 * scale)
-        np.testing.assert_allclose(a.twist, b.twist, rtol=1e-10, atol=1e-13 * scale)
-        np.testing.assert_allclose(a.error, b.error, rtol=1e-10, atol=1e-15)
-        assert a.error_norm == pytest.approx(b.error_norm, rel=1e-12)
-        assert a.condition == pytest.approx(b.condition, rel=1e-9)
-        assert a.notes == b.notes and a.rank == b.rank == 6
-
-
 def _numpy_refine(P: np.ndarray, c: np.ndarray, J: np.ndarray, lower: np.ndarray,
                   upper: np.ndarray, x: np.ndarray, y: np.ndarray, tol: float) -> np.ndarray:
     """The active-set refinement as written in numpy before it was compiled (reference)."""

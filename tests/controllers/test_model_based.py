@@ -1,0 +1,189 @@
+"""The model-based controller: its one pose servo (the CasADi kernel, in C or in the
+CasADi virtual machine) against the numpy oracle, near a half-turn too, per trial and
+in a batch; refusals from the kernel's status."""
+
+from __future__ import annotations
+
+import casadi as ca
+import numpy as np
+import pytest
+from scipy.spatial.transform import Rotation
+
+from controllers import registry
+from controllers.base import CommandBatch, ControllerContext, ObservationBatch
+from controllers.model_based import (
+    _IN,
+    HALF_TURN,
+    ModelBasedController,
+    pose_servo_kernel,
+    sx_log_so3,
+)
+from hexapod.se3 import log_so3
+from tests.controllers.controller_world import World, make_camera
+from tests.controllers.model_based_oracle import numpy_pose_servo
+
+#: Angles of the orientation error [rad]: small, ordinary, each side of the half-turn
+#: branch, close to and at pi.
+ANGLES = [0.0, 1e-9, 1e-4, 0.7, 2.5, HALF_TURN - 1e-7, HALF_TURN + 1e-7, np.pi - 1e-6,
+          np.pi - 1e-12, np.pi]
+
+
+@pytest.fixture(scope="module")
+def log_function() -> ca.Function:
+    M = ca.SX.sym("M", 3, 3)
+    return ca.Function("log", [M], [sx_log_so3(M)])
+
+
+@pytest.mark.parametrize("angle", ANGLES)
+def test_log_equals_log_so3_and_scipy(log_function: ca.Function, angle: float,
+                                      rng: np.random.Generator) -> None:
+    """The kernel's log is hexapod.se3.log_so3 to the last bit (the same formulas), and
+    scipy's rotation vector up to its sign at a half-turn (where both are the same
+    rotation)."""
+    axes = rng.normal(size=(40, 3))
+    axes[:3] = np.eye(3)  # the axes of the tie-breaking rule
+    axes /= np.linalg.norm(axes, axis=1, keepdims=True)
+    for axis in axes:
+        R = Rotation.from_rotvec(axis * angle).as_matrix()
+        w = np.asarray(log_function(R)).ravel()
+        np.testing.assert_array_equal(w, log_so3(R))
+        ref = Rotation.from_matrix(R).as_rotvec()
+        if angle > HALF_TURN and np.dot(w, ref) < 0:
+            ref = -ref
+        np.testing.assert_allclose(w, ref, atol=1e-9)
+        assert abs(np.linalg.norm(w) - angle) < 1e-9
+
+
+def _turned(world: World, rng: np.random.Generator, turn: float, n: int
+            ) -> list[tuple[ControllerContext, np.ndarray, np.ndarray]]:
+    """``n`` reachable poses ``(R, t)``, each with a context whose goal is that pose turned
+    by ``turn`` about a random axis and moved by up to 5 mm: ``(context, R, t)``."""
+    Rs, ts = world.poses(n, rng, max_translation=0.02, max_angle=np.deg2rad(4), margin=0.03)
+    cases = []
+    for R, t in zip(Rs, ts, strict=True):
+        axis = rng.normal(size=3)
+        goal = world.goal(R, t)
+        goal.rotation = Rotation.from_rotvec(axis / np.linalg.norm(axis) * turn).as_matrix() @ R
+        goal.translation = t + rng.uniform(-0.005, 0.005, 3)
+        cases.append((world.context(goal, 0.02), R, t))
+    return cases
+
+
+@pytest.mark.parametrize("camera", ["perspective", "unified"])
+@pytest.mark.parametrize("compiled", [True, False])
+@pytest.mark.parametrize("turn", [0.0, 0.3, HALF_TURN + 1e-6, np.pi - 1e-9, np.pi])
+def test_step_equals_numpy_oracle(other_geometry, rng: np.random.Generator,  # type: ignore[no-untyped-def]
+                                  camera: str, compiled: bool, turn: float) -> None:
+    """Every output of a step is the oracle's at the forward kinematics' pose (in C and in
+    the virtual machine), up to a half-turn of orientation error, the twist in the
+    camera frame."""
+    world = World(other_geometry, make_camera(camera, other_geometry))
+    for ctx, R, t in _turned(world, rng, turn, 3):
+        ctrl = registry.create("model-based", adaptive_gain=(3.0, 0.5, 20.0),
+                               compiled=compiled)
+        assert isinstance(ctrl, ModelBasedController) and ctrl.kernel is None
+        ctrl.reset(ctx)
+        assert ctrl.kernel is not None and ctrl.kernel.compiled is compiled
+        cmd = ctrl.step(world.observation(R, t))
+        assert cmd.ok, cmd.reason
+        goal = ctx.goal
+        assert goal.rotation is not None and goal.translation is not None
+        ref = numpy_pose_servo(ctrl.estimate.rotation, ctrl.estimate.translation,
+                               goal.rotation, goal.translation, ctrl.base_points,
+                               ctrl.platform_points, ctrl.gain, world.camera.camera_from_base)
+        # The half-turn branch is the one taken where the turn is beyond it.
+        assert np.linalg.norm(ref.error[3:]) == pytest.approx(turn, abs=1e-9)
+        scale = np.abs(ref.velocities).max()
+        np.testing.assert_allclose(cmd.velocities, ref.velocities, rtol=1e-10,
+                                   atol=1e-13 * scale)
+        assert cmd.twist is not None and ref.twist is not None
+        np.testing.assert_allclose(cmd.twist, ref.twist, rtol=1e-10, atol=1e-13 * scale)
+        np.testing.assert_allclose(cmd.error, ref.error, rtol=1e-10, atol=1e-15)
+        assert cmd.error_norm == pytest.approx(ref.error_norm, rel=1e-12)
+        assert cmd.condition == pytest.approx(ref.condition, rel=1e-9)
+        assert cmd.rank == 6 and cmd.notes[0].startswith("forward kinematics: ")
+
+
+def _batch(world: World, Rs: np.ndarray, ts: np.ndarray) -> ObservationBatch:
+    n = len(Rs)
+    return ObservationBatch(
+        trials=np.arange(n), t=np.zeros(n),
+        lengths=np.array([world.observation(R, t).lengths for R, t in zip(Rs, ts, strict=True)]),
+        normals=None, lines=None, directions=None, edge_visible=np.ones((n, 6, 2), bool),
+        direction_visible=np.ones((n, 6), bool))
+
+
+def test_batch_computes_every_row_with_the_kernel(other_geometry,  # type: ignore[no-untyped-def]
+                                                  rng: np.random.Generator) -> None:
+    """A batch with half-turn goals leaves no row to the trials' steps, and its commands
+    are theirs to the last bit."""
+    world = World(other_geometry, make_camera("perspective", other_geometry))
+    cases = [case for turn in (0.0, 0.5, HALF_TURN + 1e-6, np.pi)
+             for case in _turned(world, rng, turn, 1)]
+    contexts = [ctx for ctx, _, _ in cases]
+    obs = _batch(world, np.array([R for _, R, _ in cases]), np.array([t for _, _, t in cases]))
+    batch = registry.create("model-based")
+    batch.reset_batch(contexts)
+    out = CommandBatch.zeros(len(obs))
+    assert len(batch.step_arrays(obs, out)) == 0
+    for k, ctx in enumerate(contexts):
+        single = registry.create("model-based")
+        single.reset(ctx)
+        cmd = single.step(obs.item(k))
+        assert cmd.ok and out.reasons[k] is None
+        np.testing.assert_array_equal(out.velocities[k], cmd.velocities)
+        assert out.error_norm[k] == cmd.error_norm
+
+
+def test_non_finite_command_is_refused_from_the_status(other_geometry,  # type: ignore[no-untyped-def]
+                                                       rng: np.random.Generator) -> None:
+    """A NaN in the servo's input (here the goal rotation, written past the checks) gives
+    the kernel's NON_FINITE status: the step and the batch refuse the row with its
+    reason and a zero command; the other rows are commands."""
+    world = World(other_geometry, make_camera("perspective", other_geometry))
+    Rs, ts = world.poses(3, rng, max_translation=0.02, max_angle=np.deg2rad(4), margin=0.03)
+    ctx = world.context(world.goal(Rs[0], ts[0]), 0.02)
+    for compiled in (True, False):
+        ctrl = registry.create("model-based", compiled=compiled)
+        assert isinstance(ctrl, ModelBasedController)
+        ctrl.reset(ctx)
+        ctrl.servo_input[_IN["R_star"].start] = np.nan
+        cmd = ctrl.step(world.observation(Rs[1], ts[1]))
+        assert not cmd.ok and cmd.reason == "non-finite command (numerical failure)"
+        assert np.array_equal(cmd.velocities, np.zeros(6))
+    batch = registry.create("model-based")
+    assert isinstance(batch, ModelBasedController)
+    batch.reset_batch([ctx, ctx])
+    batch._b_X[1, _IN["R_star"].start] = np.nan
+    out = batch.step_batch(_batch(world, Rs[1:], ts[1:]))
+    assert out.reasons == [None, "non-finite command (numerical failure)"]
+    assert np.all(out.velocities[0] != 0.0) and np.array_equal(out.velocities[1], np.zeros(6))
+    assert np.isfinite(out.error_norm).all()
+
+
+def test_batch_leaves_failed_forward_kinematics_to_the_trial(other_geometry,  # type: ignore[no-untyped-def]
+                                                             rng: np.random.Generator) -> None:
+    """Lengths without a pose: the batch leaves that row to its trial's step, which refuses
+    it with the forward kinematics' failure and restarts from the home pose."""
+    world = World(other_geometry, make_camera("perspective", other_geometry))
+    Rs, ts = world.poses(3, rng, max_translation=0.02, max_angle=np.deg2rad(4), margin=0.03)
+    ctx = world.context(world.goal(Rs[0], ts[0]), 0.02)
+    obs = _batch(world, Rs[1:], ts[1:])
+    obs.lengths[1] *= 10.0
+    batch = registry.create("model-based")
+    batch.reset_batch([ctx, ctx])
+    assert batch.step_arrays(obs, CommandBatch.zeros(2)).tolist() == [1]
+    batch.reset_batch([ctx, ctx])
+    done = batch.step_batch(obs)
+    assert done.reasons[0] is None
+    reason = done.reasons[1]
+    assert reason is not None and reason.startswith("forward kinematics failed")
+
+
+def test_kernel_layouts() -> None:
+    """The status is the kernel's last output; compiled and virtual-machine kernels are
+    distinct cached objects of the same function."""
+    fast, slow = pose_servo_kernel(True), pose_servo_kernel(False)
+    assert fast is pose_servo_kernel(True) and slow is not fast and not slow.compiled
+    assert fast.outputs.index("status") == fast.n_out - 1
+    assert fast.function.serialize() == slow.function.serialize()
