@@ -46,6 +46,8 @@ NEWTON_OUTPUTS = Layout([("R", (3, 3)), ("t", 3), ("residual", 6)],
 #: The pose (``R`` then ``t``: the same slice in and out), each output block's slice.
 _POSE = slice(NEWTON_INPUTS["R"].start, NEWTON_INPUTS["t"].stop)
 _R_OUT, _T_OUT, _RESIDUAL = (NEWTON_OUTPUTS[k] for k in ("R", "t", "residual"))
+#: The input blocks a warm-started batch rewrites every call (:func:`set_guesses`).
+_R_IN, _T_IN, _Q_IN = (NEWTON_INPUTS[k] for k in ("R", "t", "q"))
 
 Method = Literal["newton", "pinocchio"]
 
@@ -161,8 +163,11 @@ def _pack(R: np.ndarray, t: np.ndarray, q: np.ndarray, A: np.ndarray, E: np.ndar
 
 
 def _unpack(y: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    v = NEWTON_OUTPUTS.views(y)
-    return np.swapaxes(v["R"], -1, -2), v["t"], v["residual"]
+    """The rotations (N, 3, 3), translations (N, 3) and residuals (N, 6) of output rows
+    ``y`` (N, :data:`NEWTON_OUTPUTS`) (views; the slices are the layout's, looked up
+    once: a per-period call)."""
+    return (np.swapaxes(y[:, _R_OUT].reshape(-1, 3, 3), -1, -2), y[:, _T_OUT],
+            y[:, _RESIDUAL])
 
 
 def _check_lengths(geometry: HexapodGeometry, lengths: np.ndarray, check_stroke: bool) -> None:
@@ -306,10 +311,9 @@ def pack_rows(R: np.ndarray, t: np.ndarray, q: np.ndarray, A: np.ndarray, E: np.
 def set_guesses(x: np.ndarray, R: np.ndarray, t: np.ndarray, q: np.ndarray) -> None:
     """Rewrite the guesses ``R`` (n, 3, 3), ``t`` (n, 3) [m] and the lengths ``q`` (n, 6)
     [m] of packed rows ``x`` (n, 54) (:func:`pack_rows`) in place."""
-    v = NEWTON_INPUTS.views(x)
-    v["R"][:] = np.swapaxes(R, -1, -2)
-    v["t"][:] = t
-    v["q"][:] = q
+    x[:, _R_IN] = np.swapaxes(R, -1, -2).reshape(len(x), 9)  # (column-major blocks)
+    x[:, _T_IN] = t
+    x[:, _Q_IN] = q
 
 
 def solve_rows(x: np.ndarray, tol: float = 1e-12, max_iterations: int = 30
@@ -326,12 +330,18 @@ def solve_rows(x: np.ndarray, tol: float = 1e-12, max_iterations: int = 30
     y_all[:, pose] = x[:, pose]
     y_all[:, residual] = np.inf
     while it < max_iterations and len(active):
-        y = newton.batch(x if len(active) == n else x[active])
+        every = len(active) == n  # (the first call: slices, not index copies)
+        y = newton.batch(x if every else x[active])
         it += ITERATIONS_PER_CALL
-        y_all[active] = y
         r = np.max(np.abs(y[:, residual]), axis=1)
-        res[active] = r
-        x[active, pose] = y[:, pose]
+        if every:
+            y_all[:] = y
+            res[:] = r
+            x[:, pose] = y[:, pose]
+        else:
+            y_all[active] = y
+            res[active] = r
+            x[active, pose] = y[:, pose]
         keep = np.isfinite(r) & (r >= tol)
         active = active[keep]
     rot, trans, _ = _unpack(y_all)

@@ -65,8 +65,11 @@ class Book:
     hidden: np.ndarray
     recording: np.ndarray  # (n,) bool: the rows whose series are kept
     failure: list[str | None] = field(default_factory=list)
-    tail_pos: list[list[float]] = field(default_factory=list)
-    tail_ori: list[list[float]] = field(default_factory=list)
+    #: A fixed-duration task's position [m] and orientation [rad] errors of the periods
+    #: after ``tail_start`` (column ``step - tail_start - 1``), and which were measured.
+    tail_pos: np.ndarray = field(default_factory=lambda: np.zeros((0, 0)))
+    tail_ori: np.ndarray = field(default_factory=lambda: np.zeros((0, 0)))
+    tail_seen: np.ndarray = field(default_factory=lambda: np.zeros((0, 0), dtype=bool))
     step_times: list[list[float]] = field(default_factory=list)
     series: list[dict[str, list[Any]]] = field(default_factory=list)
     tracker: Any = None  # the tracking metrics of a trajectory task
@@ -100,6 +103,7 @@ class Book:
         recording = [s.trial < record_trials for s in group]
         pos_tol = 1e-3 * sc.task.position_tolerance_mm
         ori_tol = float(np.deg2rad(sc.task.orientation_tolerance_deg))
+        tail = max(1, sc.task.max_steps // 5) if sc.task.fixed_duration else 0
         return cls(
             n=n, pos_tol=1e-3 * sc.task.position_tolerance_mm,
             ori_tol=float(np.deg2rad(sc.task.orientation_tolerance_deg)),
@@ -110,7 +114,8 @@ class Book:
             refused=np.zeros(n, dtype=int),
             hidden=np.zeros(n, dtype=int), recording=np.array(recording, dtype=bool),
             failure=[None] * n,
-            tail_pos=[[] for _ in range(n)], tail_ori=[[] for _ in range(n)],
+            tail_pos=np.zeros((n, tail)), tail_ori=np.zeros((n, tail)),
+            tail_seen=np.zeros((n, tail), dtype=bool),
             step_times=[[] for _ in range(n)],
             series=[{k: [] for k in SERIES_KEYS} if rec else {} for rec in recording],
             tracker=tracker_for(sc, group, pos_tol, ori_tol), task=sc.task, dt=sc.dt,
@@ -140,7 +145,10 @@ class Book:
         """The convergence test of one period for the active rows ``idx`` (their pose
         errors to their targets); returns which of them are done."""
         assert self.targets is not None, "Book.attach first"
-        dp, da = pose_error(self.plant.R[idx], self.plant.t[idx], *self.targets(step, idx))
+        R, t = self.plant.R, self.plant.t
+        if len(idx) < len(R):  # (every row: the arrays themselves, no copies)
+            R, t = R[idx], t[idx]
+        dp, da = pose_error(R, t, *self.targets(step, idx))
         self._errors = (dp, da)
         self.last_errors[0][idx], self.last_errors[1][idx] = dp, da
         ok = (dp < self.pos_tol) & (da < self.ori_tol)
@@ -149,10 +157,11 @@ class Book:
         self.settled[idx] = np.where(ok, self.settled[idx] + 1, 0)
         self.last_bad[idx[~ok]] = step
         task = self.task
-        if task.fixed_duration and step > self.tail_start:
-            for j, k in enumerate(idx):
-                self.tail_pos[k].append(float(dp[j]))
-                self.tail_ori[k].append(float(da[j]))
+        if task.fixed_duration and step > self.tail_start:  # (columns: no row loop)
+            col = step - self.tail_start - 1
+            self.tail_pos[idx, col] = dp
+            self.tail_ori[idx, col] = da
+            self.tail_seen[idx, col] = True
         if task.fixed_duration:
             done = np.full(len(idx), step == task.max_steps)
             self.converged[idx] = ok
@@ -306,11 +315,12 @@ class Book:
             })
             if m in self.causes and not conv:
                 row["cause"] = self.causes[m]
-            if self.tail_pos[m]:
+            seen = self.tail_seen[m] if self.tail_seen.size else None
+            if seen is not None and seen.any():
                 # the seeds' "median positioning error of the convergence tail": the last 20 %
-                row["tail_position_error_mm"] = float(np.median(self.tail_pos[m]) * 1e3)
+                row["tail_position_error_mm"] = float(np.median(self.tail_pos[m][seen]) * 1e3)
                 row["tail_orientation_error_deg"] = float(np.rad2deg(np.median(
-                    self.tail_ori[m])))
+                    self.tail_ori[m][seen])))
             if detect_times:
                 row["detect_time_ms"] = float(np.median(detect_times) * 1e3)
             if self.tracker is not None:

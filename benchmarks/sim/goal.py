@@ -126,16 +126,57 @@ def predicted_features(camera: Any, geometry: HexapodGeometry, rotation: np.ndar
             "edge_visible": visible}
 
 
-def taught_goal(m: ObservationBatch, setup: TrialSetup, sc: Any) -> Goal:
-    """The :class:`Goal` of ``"taught"``: the features of the camera's batch of one taught
-    at the goal, the encoders read there (:func:`taught_lengths`) and the pose the
+def taught_goal(m: ObservationBatch, setup: TrialSetup, sc: Any, row: int = 0) -> Goal:
+    """The :class:`Goal` of ``"taught"``: the features of row ``row`` of the camera's batch
+    taught at the goal, the encoders read there (:func:`taught_lengths`) and the pose the
     controller's model computes from them (:func:`model_pose`)."""
     q = taught_lengths(sc, setup)
     R, t = model_pose(setup.nominal_geometry, q)
-    return Goal(normals=m.normals[0],  # type: ignore[index]
-                lines=None if m.lines is None else m.lines[0],
-                directions=m.directions[0],  # type: ignore[index]
-                lengths=q, rotation=R, translation=t, edge_visible=m.edge_visible[0])
+    return Goal(lengths=q, rotation=R, translation=t, **_row_features(m, row))
+
+
+def measured_goals(m: ObservationBatch, setups: list[TrialSetup], sc: Any) -> list[Goal]:
+    """The goals of the ``"mixed"`` and ``"taught"`` settings of trials whose goal images
+    are the rows of one batch ``m`` (row ``k``: ``setups[k]``), as
+    :func:`benchmarks.sim.sensors.trial_goal` makes them one by one (the same values):
+    each goal's features are views of its row (no batch of one per trial) and, under
+    ``"mixed"``, the nominal inverse kinematics of the goal poses is one call per
+    nominal robot (elementwise: the same bits as one call per trial).
+
+    Raises:
+        ValueError: The setting is ``"cartesian"`` (nothing is measured at the goal).
+    """
+    setting = goal_setting(sc)
+    if setting == "cartesian":
+        raise ValueError("task.goal: a cartesian goal is predicted, not measured")
+    if setting == "taught":
+        return [taught_goal(m, s, sc, k) for k, s in enumerate(setups)]
+    lengths = nominal_lengths(setups)
+    return [Goal(lengths=lengths[k], rotation=s.goal_rotation, translation=s.goal_translation,
+                 **_row_features(m, k)) for k, s in enumerate(setups)]
+
+
+def nominal_lengths(setups: list[TrialSetup]) -> np.ndarray:
+    """(n, 6) the inverse kinematics of the trials' goal poses in their nominal models
+    [m], one call per model (the arithmetic is elementwise: the bits of one call per
+    trial)."""
+    out = np.empty((len(setups), 6))
+    groups: dict[int, list[int]] = {}
+    for k, s in enumerate(setups):
+        groups.setdefault(id(s.nominal_geometry), []).append(k)
+    for ks in groups.values():
+        out[ks] = inverse_kinematics(setups[ks[0]].nominal_geometry,
+                                     np.array([setups[k].goal_rotation for k in ks]),
+                                     np.array([setups[k].goal_translation for k in ks]))
+    return out
+
+
+def _row_features(m: ObservationBatch, row: int) -> dict[str, Any]:
+    """The goal features of row ``row`` of a camera's batch (views)."""
+    return {"normals": m.normals[row],  # type: ignore[index]
+            "lines": None if m.lines is None else m.lines[row],
+            "directions": m.directions[row],  # type: ignore[index]
+            "edge_visible": m.edge_visible[row]}
 
 
 def cartesian_goal(setup: TrialSetup) -> Goal:

@@ -29,14 +29,21 @@ from benchmarks.exceptions import BatchFailedError, ScenarioError
 from benchmarks.sim.actuation import drive_plant, require_actuation, world_actuation
 from benchmarks.sim.book import Book, TrialResult, failure_row
 from benchmarks.sim.clock import make_clock
+from benchmarks.sim.goal import (
+    AnchoredReference,
+    cartesian_goal,
+    goal_setting,
+    measured_goals,
+)
 from benchmarks.sim.inputs import SimScenario
 from benchmarks.sim.loop import closed_loop
 from benchmarks.sim.plant import BackendPlant, KinematicPlant, make_plant
-from benchmarks.sim.reference import Targets, task_batch_controller
+from benchmarks.sim.reference import Targets, task_batch_controller, trial_reference
 from benchmarks.sim.sensors import (
     GeometricSensor,
     RowSensor,
     make_sensor,
+    rows_generators,
     trial_goal,
 )
 from benchmarks.sim.world import (
@@ -250,11 +257,19 @@ def _stopped(sc: SimScenario, spec: Any, trials: list[int], exc: BatchFailedErro
 def _goals(sc: SimScenario, sensor: GeometricSensor, setups: list[TrialSetup]
            ) -> list[Goal | Exception]:
     """The goal of every trial (:func:`benchmarks.sim.sensors.trial_goal`): measured in one
-    batch when one frame is taught, trial by trial otherwise (and to find the trials at
-    fault when the batch fails); a trial whose goal cannot be measured has its error."""
+    batch when one frame is taught (:func:`benchmarks.sim.goal.measured_goals`), trial by
+    trial otherwise (and to find the trials at fault when the batch fails); a trial whose
+    goal cannot be measured has its error."""
     if sc.teach_frames == 1:
         try:
-            return list(sensor.goals(setups))
+            if goal_setting(sc) == "cartesian":  # nothing measured at the goal
+                return [cartesian_goal(s) for s in setups]
+            m = sensor.sample(np.array([s.goal_rotation for s in setups]),
+                              np.array([s.goal_translation for s in setups]),
+                              np.arange(len(setups)),
+                              rows_generators(sc, setups, 2, sc.noise.on_goal),
+                              apply_noise=sc.noise.on_goal)
+            return list(measured_goals(m, setups, sc))
         except Exception:  # find the trial(s) at fault below
             pass
     goals: list[Goal | Exception] = []
@@ -281,9 +296,6 @@ def trial_context(sc: SimScenario, setup: TrialSetup, goal: Any) -> ControllerCo
     """What the controllers of a trial are told: the estimated parameters and the goal
     (under ``[task] goal = "taught"``, a trajectory's reference moved to end at the
     taught goal pose, :class:`benchmarks.sim.goal.AnchoredReference`)."""
-    from benchmarks.sim.goal import AnchoredReference, goal_setting
-    from benchmarks.sim.reference import trial_reference
-
     reference: Any = trial_reference(sc, setup)
     if (reference is not None and goal_setting(sc) == "taught" and goal is not None
             and goal.rotation is not None and goal.translation is not None):

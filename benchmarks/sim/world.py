@@ -171,16 +171,22 @@ def make_trials(sc: SimScenario, trials: list[int], nominal: HexapodGeometry, ca
         model = model.replace(inertia=with_payload(
             model.inertia, model_payload(payload, ce.payload_mass_percent)))
     start_lengths = _start_lengths(drawn, poses)
+    # the same for every trial of the point: the user's camera, a fixed task's poses per robot
+    user_camera = estimated_camera(camera, ce.distortion_percent)
+    fixed: dict[int, Any] = {}
     out: list[TrialSetup | Exception] = []
     for k, trial in enumerate(trials):
         d = drawn[k]
         if isinstance(d, Exception):
             out.append(d)
             continue
-        _, world, ce, shared = d
+        _, world, _, shared = d
         try:
             if task.kind == "fixed":
-                pose = _fixed_poses(sc, world.geometry)
+                key = id(world.geometry)
+                if key not in fixed:  # (a failure is each trial's: not kept)
+                    fixed[key] = _fixed_poses(sc, world.geometry)
+                pose = tuple(a.copy() for a in fixed[key])  # (each trial its arrays)
             else:
                 pose = poses[k]
                 if isinstance(pose, Exception):
@@ -196,8 +202,7 @@ def make_trials(sc: SimScenario, trials: list[int], nominal: HexapodGeometry, ca
             calibration: dict[str, float] = {}
             if calibrate is not None:
                 points, calibration = calibrate(world, trial_rng(sc.seed, trial, 3))
-            out.append(TrialSetup(trial, world, model,
-                                  estimated_camera(camera, ce.distortion_percent), points,
+            out.append(TrialSetup(trial, world, model, user_camera, points,
                                   R_s, t_s, R_g, t_g, q_s, shared, calibration))
         except Exception as exc:  # that trial's failure
             out.append(exc)

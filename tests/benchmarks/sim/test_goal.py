@@ -323,3 +323,45 @@ def test_a_taught_encoder_baseline_ends_a_closed_curve_exactly() -> None:
         final[g] = np.array([r["final_position_error_mm"] for r in rows])
     assert np.all(final["taught"] < 1e-6), final
     assert np.all(final["mixed"] > 0.1), final
+
+
+@pytest.mark.parametrize("goal", ["mixed", "taught"])
+def test_the_batched_goals_are_the_sensors_goals_to_the_bit(
+        goal: str, monkeypatch: pytest.MonkeyPatch) -> None:
+    """The run's goals of a group (:func:`benchmarks.sim.goal.measured_goals`: views of
+    the batch's rows, the nominal inverse kinematics in one call) are those of the
+    sensor's batch of one per trial, bit for bit, each trial in its own world with
+    noise on the goal image (the batch itself: the trial-by-trial fallback raises)."""
+    from benchmarks.sim import stepper
+    from benchmarks.sim.goal import nominal_lengths
+
+    def no_fallback(*args: Any) -> Any:
+        raise AssertionError("the batched goals fell back to one trial at a time")
+
+    monkeypatch.setattr(stepper, "trial_goal", no_fallback)
+
+    sc = _scenario(goal=goal, calibration_error=MODEL_ERROR, trials=4,
+                   noise={"model": "rotation", "amplitude_deg": 0.05, "on_goal": True})
+    setups = _setups(sc, [0, 1, 2, 3])
+    sensor = GeometricSensor.of_trials(sc, setups)
+    ours = stepper._goals(sc, sensor, setups)
+    theirs = sensor.goals(setups)
+    assert all(type(g).__name__ == "Goal" for g in ours)
+    for k, (a, b) in enumerate(zip(ours, theirs, strict=True)):
+        for f in ("normals", "lines", "directions", "lengths", "rotation", "translation",
+                  "edge_visible"):
+            x, y = getattr(a, f), getattr(b, f)
+            assert (x is None) == (y is None), f"trial {k} {f}"
+            if x is not None:
+                np.testing.assert_array_equal(x, y, err_msg=f"trial {k} {f}")
+    one_by_one = np.array([inverse_kinematics(s.nominal_geometry, s.goal_rotation,
+                                              s.goal_translation) for s in setups])
+    np.testing.assert_array_equal(nominal_lengths(setups), one_by_one)
+
+
+def test_a_cartesian_goal_is_not_measured() -> None:
+    from benchmarks.sim.goal import measured_goals
+
+    sc = _scenario(goal="cartesian")
+    with pytest.raises(ValueError, match=r"task\.goal"):
+        measured_goals(None, [], sc)  # type: ignore[arg-type]
