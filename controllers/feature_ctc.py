@@ -186,14 +186,6 @@ class FeatureCTC(TaskComputedTorque):
         seen = np.isfinite(anchored.reshape(len(times), size))
         return np.where(seen[:, None, :], out, np.nan)
 
-    def grid_reference(self, tr: float) -> tuple[np.ndarray, np.ndarray | None] | None:
-        """:meth:`compiled_reference` at ``tr`` [s] read from the control grid, or None
-        when ``tr`` is off the grid (the caller then computes it)."""
-        i = self._grid_index(tr)
-        if i is None or self._grid is None:
-            return None
-        return self._grid_row(i)
-
     def compiled_reference(self, tr: float) -> tuple[np.ndarray, np.ndarray | None]:
         """(3 m,) :meth:`feature_reference` at ``tr`` for the compiled step, the features
         the model's camera does not see (NaN) replaced by finite stand-ins, and the rows

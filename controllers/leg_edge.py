@@ -83,7 +83,6 @@ class LegEdgeController(VisionLaw):
             self._K = K
             self._K_inv_t = np.linalg.inv(K).T
         self.features = frozenset({"lengths", self.edge.field})
-        self._A2 = np.repeat(self._A, 2, axis=0)
         self._retarget_features(context)
 
     def _retarget_features(self, context: ControllerContext) -> None:
