@@ -101,8 +101,12 @@ class CartesianCTC(TaskComputedTorque):
         fast = self.batch_features(step, X, observations, rows)
         references, on = rows_batch.references(trials, tr)
         block = step.inputs["reference"]
-        if (fast & on).any():
-            X[fast & on, block] = references[fast & on]
+        use = fast & on
+        if use.all():
+            X[:, block] = references
+            return fast
+        if use.any():
+            X[use, block] = references[use]
         for j in np.flatnonzero(fast & ~on).tolist():  # off the grid: on demand
             law = rows_batch.laws[int(trials[j])]
             try:
