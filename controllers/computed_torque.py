@@ -88,7 +88,7 @@ if TYPE_CHECKING:
 
 #: Forward-kinematics tolerance on the length residual [m] (as :func:`forward_kinematics`).
 FK_TOLERANCE = compiled_ctc.FK_TOLERANCE
-__all__ = ["DAMPING", "FK_MAX_CALLS", "FK_TOLERANCE", "GRID_TIME_TOLERANCE",
+__all__ = ["DAMPING", "FK_MAX_CALLS", "FK_TOLERANCE", "GRID_CHUNK", "GRID_TIME_TOLERANCE",
            "NATURAL_FREQUENCY_HZ", "QUINTIC_PEAK_SPEED", "ComputedTorqueController",
            "legs_of_poses", "sample_grids"]
 
@@ -427,24 +427,30 @@ def legs_of_poses(geometry: HexapodGeometry, model: DynamicModel, R: np.ndarray,
     by the nominal ``model``: every row on its own (the same numbers in any batch)."""
     out = np.empty((len(p), 3, 6))
     out[:, 0] = inverse_kinematics(geometry, R, p)
-    K = model.jacobian_batch(R, p)
-    rate, bias = model.legs_batch(R, p, twist)
+    K, rate, bias = model.legs_jacobian_batch(R, p, twist)
     out[:, 1] = rate
     out[:, 2] = np.einsum("nij,nj->ni", K, acc) + bias
     return out
 
 
+#: Trials whose reference grids :func:`sample_grids` evaluates together (a few
+#: thousand rows: the packed inputs stay in the cache).
+GRID_CHUNK = 16
+
+
 def sample_grids(laws: list[ComputedTorqueController]) -> None:
     """Sample the references of the (reset) trials ``laws`` on their control grids
     (:attr:`ComputedTorqueController.grid`): each reference at its own instants, then
-    the legs of every trial that shares its nominal geometry with the first of a group
-    in one evaluation (:func:`legs_of_poses`; rows are independent, so each trial's
-    grid holds the numbers of its own evaluation)."""
+    the legs of the trials that share their nominal geometry in one evaluation per
+    :data:`GRID_CHUNK` trials (:func:`legs_of_poses`; rows are independent, so each
+    trial's grid holds the numbers of its own evaluation)."""
     groups: dict[int, list[ComputedTorqueController]] = {}
     for law in laws:
         assert law._ctx is not None
         groups.setdefault(id(law._ctx.geometry), []).append(law)
-    for group in groups.values():
+    chunks = [group[k:k + GRID_CHUNK] for group in groups.values()
+              for k in range(0, len(group), GRID_CHUNK)]
+    for group in chunks:
         first = group[0]
         assert first._ctx is not None and first._model is not None
         refs = [law._ctx.reference.at(law.grid_times()) for law in group]  # type: ignore[union-attr]
