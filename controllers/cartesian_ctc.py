@@ -99,10 +99,16 @@ class CartesianCTC(TaskComputedTorque):
         step = rows_batch.step_of
         assert step is not None
         fast = self.batch_features(step, X, observations, rows)
+        if not fast.all():
+            self.batch_partly_seen(rows_batch, step, X, observations, rows, trials, fast)
         references, on = rows_batch.references(trials, tr)
         block = step.inputs["reference"]
-        if (fast & on).any():
-            X[fast & on, block] = references[fast & on]
+        use = fast & on
+        if use.all():
+            X[:, block] = references
+            return fast
+        if use.any():
+            X[use, block] = references[use]
         for j in np.flatnonzero(fast & ~on).tolist():  # off the grid: on demand
             law = rows_batch.laws[int(trials[j])]
             try:
@@ -117,6 +123,12 @@ class CartesianCTC(TaskComputedTorque):
         :meth:`compiled_inputs` takes it as it is; their (m,) mask (every row: the pose
         comes from the encoders, in the row already)."""
         return np.ones(len(rows), dtype=bool)
+
+    def batch_partly_seen(self, rows_batch: TaskRows, step: CompiledTaskStep, X: np.ndarray,
+                          observations: ObservationBatch, rows: np.ndarray,
+                          trials: np.ndarray, fast: np.ndarray) -> None:
+        """Write the measurement of rows :meth:`batch_features` left out that the batch
+        can still take (marking them in ``fast``); nothing by default."""
 
 
 class VisionCTC(CartesianCTC):
@@ -260,6 +272,34 @@ class VisionCTC(CartesianCTC):
         X[fast, step.inputs["directions"]] = u[fast]
         X[fast, step.inputs["seen"]] = 1.0
         return fast
+
+    def batch_partly_seen(self, rows_batch: TaskRows, step: CompiledTaskStep, X: np.ndarray,
+                          observations: ObservationBatch, rows: np.ndarray,
+                          trials: np.ndarray, fast: np.ndarray) -> None:
+        """The rows with some legs hidden (marked so, or a direction not finite) and at
+        least three legs seen that are not collinear on the platform: the directions
+        seen (a hidden leg's 0.0) and which legs are seen, as :meth:`compiled_inputs`
+        writes them (:func:`directions_seen`); the others (fewer than three legs, or
+        collinear ones: refused) stay with their trials' own steps."""
+        if (observations.directions is None or observations.direction_visible is None
+                or np.shape(observations.directions)[1:] != (6, 3)):
+            return
+        inputs = step.inputs
+        for j in np.flatnonzero(~fast).tolist():
+            k = int(rows[j])
+            u = np.asarray(observations.directions[k], dtype=float)
+            seen = np.asarray(observations.direction_visible[k], dtype=bool).copy()
+            with np.errstate(invalid="ignore"):
+                seen &= np.all(np.isfinite(u), axis=-1)
+            count = int(seen.sum())
+            if count < 3 or count == 6:
+                continue
+            law = rows_batch.laws[int(trials[j])]
+            if not isinstance(law, VisionCTC) or law._collinear(seen):
+                continue
+            X[j, inputs["directions"]] = np.where(seen[:, None], u, 0.0).ravel()
+            X[j, inputs["seen"]] = seen
+            fast[j] = True
 
     def compiled_constants(self, step: CompiledTaskStep) -> None:
         """The estimated base points (camera frame) and camera pose."""

@@ -75,6 +75,8 @@ from hexapod.kinematics import inverse_kinematics
 from hexapod.workspace import home_pose
 
 if TYPE_CHECKING:
+    from collections.abc import Sequence
+
     from controllers.data import (
         CommandBatch,
         ControllerContext,
@@ -82,11 +84,13 @@ if TYPE_CHECKING:
         Observation,
         ObservationBatch,
     )
+    from hexapod.geometry import HexapodGeometry
 
 #: Forward-kinematics tolerance on the length residual [m] (as :func:`forward_kinematics`).
 FK_TOLERANCE = compiled_ctc.FK_TOLERANCE
-__all__ = ["DAMPING", "FK_MAX_CALLS", "FK_TOLERANCE", "GRID_TIME_TOLERANCE",
-           "NATURAL_FREQUENCY_HZ", "QUINTIC_PEAK_SPEED", "ComputedTorqueController"]
+__all__ = ["DAMPING", "FK_MAX_CALLS", "FK_TOLERANCE", "GRID_CHUNK", "GRID_TIME_TOLERANCE",
+           "NATURAL_FREQUENCY_HZ", "QUINTIC_PEAK_SPEED", "ComputedTorqueController",
+           "legs_of_poses", "sample_grids"]
 
 
 class ComputedTorqueController(ComputedTorqueLaw):
@@ -126,8 +130,9 @@ class ComputedTorqueController(ComputedTorqueLaw):
         #: input's constant part is filled at reset; its pose block holds the pose guess
         #: (the last pose found, the home pose before one).
         self._bound: BoundCall | None = None
-        #: ``(q*, q_dot*, q_ddot*)`` of a reference on the control grid ``k dt`` (N, 18).
-        self._grid = np.zeros((0, 18))
+        #: ``(q*, q_dot*, q_ddot*)`` of a reference on the control grid ``k dt`` (N, 18)
+        #: (None: not sampled yet, :attr:`grid`).
+        self._grid: np.ndarray | None = np.zeros((0, 18))
         #: The control period [s] and the time after which the reference is at rest [s].
         self._dt = 0.0
         self._t_end = math.inf
@@ -199,7 +204,7 @@ class ComputedTorqueController(ComputedTorqueLaw):
         """This trial's state for its batch (:class:`~controllers.joint_ctc_rows.
         JointRows`, which gives back views of its arrays, :meth:`adopt`)."""
         assert self._bound is not None and self._ctx is not None
-        grid = None if self._ctx.reference is None else self._grid
+        grid = None if self._ctx.reference is None else self.grid
         return JointState(self._bound.x, self._integral, self._quintic, self._steps,
                           self._limit, self._dt, self._t_end, grid, self._bound.function)
 
@@ -234,11 +239,38 @@ class ComputedTorqueController(ComputedTorqueLaw):
         if context.reference is None:
             self._t_end = math.inf
             self.retarget_trial(context.goal)
-        else:  # the reference's legs on the control grid, in one batched evaluation
-            dt = self._dt
+        else:  # the reference's legs on the control grid: sampled by reset_batch
             self._t_end = float(context.reference.duration) + context.dt
-            steps = math.ceil(float(context.reference.duration) / dt) + 3
-            self._grid = self.reference_legs(dt * np.arange(steps)).reshape(steps, 18)
+            self._grid = None
+
+    def reset_batch(self, contexts: Sequence[ControllerContext]) -> None:
+        """Every trial reset (:meth:`reset_trial`), then the references' legs on the
+        control grids of every trial sampled together (:func:`sample_grids`: one
+        evaluation of the nominal model for the trials that share it).
+
+        Raises:
+            ContextError: A context the controller cannot use.
+            DynamicsError: The nominal model cannot evaluate a reference.
+        """
+        super().reset_batch(contexts)
+        sample_grids([inst for inst in self.trial_instances
+                      if isinstance(inst, ComputedTorqueController) and inst._grid is None])
+
+    def grid_times(self) -> np.ndarray:
+        """The control grid ``k dt`` [s] on which the reference is sampled (``ceil(T /
+        dt) + 3`` instants, ``T`` its duration)."""
+        assert self._ctx is not None and self._ctx.reference is not None
+        steps = math.ceil(float(self._ctx.reference.duration) / self._dt) + 3
+        return self._dt * np.arange(steps)  # type: ignore[no-any-return]
+
+    @property
+    def grid(self) -> np.ndarray:
+        """``(q*, q_dot*, q_ddot*)`` (N, 18) of the reference on the control grid
+        (:meth:`grid_times`; sampled here when :meth:`reset_batch` has not), (0, 18)
+        for a fixed goal."""
+        if self._grid is None:
+            self._grid = self.reference_legs(self.grid_times()).reshape(-1, 18)
+        return self._grid
 
     def retarget_trial(self, goal: Goal) -> None:
         """A new fixed goal (ignored when tracking a reference: it is sampled itself)."""
@@ -261,7 +293,7 @@ class ComputedTorqueController(ComputedTorqueLaw):
         if ctx.reference is None:
             out[:] = quintic_rows(np.array([t]), self._quintic[None])[0]
             return
-        grid, dt = self._grid, self._dt
+        grid, dt = self.grid, self._dt
         k = round(t / dt)
         if len(grid) and t > self._t_end:  # at rest at the end, as the grid's last instant
             out[:] = grid[-1]
@@ -276,14 +308,8 @@ class ComputedTorqueController(ComputedTorqueLaw):
         ctx, model = self._ctx, self._model
         assert ctx is not None and model is not None
         ref = ctx.reference.at(times)
-        R, p, tw, acc = ref.rotation, ref.translation, ref.twist, ref.twist_rate
-        out = np.empty((len(times), 3, 6))
-        out[:, 0] = inverse_kinematics(ctx.geometry, R, p)  # batched: the same numbers
-        K = model.jacobian_batch(R, p)
-        rate, bias = model.legs_batch(R, p, tw)
-        out[:, 1] = rate
-        out[:, 2] = np.einsum("nij,nj->ni", K, acc) + bias
-        return out
+        return legs_of_poses(ctx.geometry, model, ref.rotation, ref.translation, ref.twist,
+                             ref.twist_rate)
 
     def start_quintic(self, t: float, q: np.ndarray) -> None:
         """Start the fixed goal's quintic at ``t`` [s] from the lengths ``q`` [m]."""
@@ -392,3 +418,48 @@ class ComputedTorqueController(ComputedTorqueLaw):
 
     def _refuse(self, problem: str) -> Command:
         return Command.refuse(f"{self.name}: {problem}", actuation=Actuation.FORCE)
+
+
+def legs_of_poses(geometry: HexapodGeometry, model: DynamicModel, R: np.ndarray, p: np.ndarray,
+                  twist: np.ndarray, acc: np.ndarray) -> np.ndarray:
+    """``(q, q_dot, q_ddot)`` (N, 3, 6) [m, m/s, m/s^2] of platform poses ``(R, p)``
+    (N, 3, 3), (N, 3) [m] moving at ``twist`` (N, 6) with ``acc`` (N, 6) (its rate),
+    by the nominal ``model``: every row on its own (the same numbers in any batch)."""
+    out = np.empty((len(p), 3, 6))
+    out[:, 0] = inverse_kinematics(geometry, R, p)
+    K, rate, bias = model.legs_jacobian_batch(R, p, twist)
+    out[:, 1] = rate
+    out[:, 2] = np.einsum("nij,nj->ni", K, acc) + bias
+    return out
+
+
+#: Trials whose reference grids :func:`sample_grids` evaluates together (a few
+#: thousand rows: the packed inputs stay in the cache).
+GRID_CHUNK = 16
+
+
+def sample_grids(laws: list[ComputedTorqueController]) -> None:
+    """Sample the references of the (reset) trials ``laws`` on their control grids
+    (:attr:`ComputedTorqueController.grid`): each reference at its own instants, then
+    the legs of the trials that share their nominal geometry in one evaluation per
+    :data:`GRID_CHUNK` trials (:func:`legs_of_poses`; rows are independent, so each
+    trial's grid holds the numbers of its own evaluation)."""
+    groups: dict[int, list[ComputedTorqueController]] = {}
+    for law in laws:
+        assert law._ctx is not None
+        groups.setdefault(id(law._ctx.geometry), []).append(law)
+    chunks = [group[k:k + GRID_CHUNK] for group in groups.values()
+              for k in range(0, len(group), GRID_CHUNK)]
+    for group in chunks:
+        first = group[0]
+        assert first._ctx is not None and first._model is not None
+        refs = [law._ctx.reference.at(law.grid_times()) for law in group]  # type: ignore[union-attr]
+        legs = legs_of_poses(
+            first._ctx.geometry, first._model,
+            *(np.concatenate([getattr(r, f) for r in refs])
+              for f in ("rotation", "translation", "twist", "twist_rate")))
+        start = 0
+        for law, ref in zip(group, refs, strict=True):
+            size = len(ref.translation)
+            law._grid = legs[start:start + size].reshape(size, 18)
+            start += size

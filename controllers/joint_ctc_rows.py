@@ -129,6 +129,8 @@ class JointRows:
             law.adopt(self.X[k], self.integral[k], self.quintic[k], self.steps[k:k + 1])
         self.dt = np.array([st.dt for st in states])
         self.t_end = np.array([st.t_end for st in states])
+        #: (n,) each trial's index (its row of the arrays).
+        self.index = np.arange(n)
         self.tracking = np.array([st.grid is not None for st in states])
         grids = [st.grid for st in states if st.grid is not None]
         self.grid_len = np.array([0 if st.grid is None else len(st.grid) for st in states],
@@ -147,36 +149,42 @@ class JointRows:
                     self.grids[k, :len(g)] = g
                     self.grids[k, len(g):] = g[-1]
 
-    def desired(self, trials: np.ndarray, t: np.ndarray, q: np.ndarray
-                ) -> tuple[np.ndarray, np.ndarray]:
+    def desired(self, trials: np.ndarray, t: np.ndarray, q: np.ndarray,
+                at: np.ndarray | slice | None = None) -> tuple[np.ndarray, np.ndarray]:
         """``(q*, q_dot*, q_ddot*)`` (m, 18) of the trials ``trials`` (m,) at ``t`` (m,)
         [s] (a fixed goal's quintic started at its first step from the lengths ``q``
         (m, 6) [m]), and the (m,) mask of the rows that have them (an instant off the
-        grid whose reference the nominal model cannot evaluate has none)."""
+        grid whose reference the nominal model cannot evaluate has none). ``at``: the
+        trials' index into the batch's arrays (``trials``, or the slice they make)."""
         m = len(trials)
+        sel = trials if at is None else at
         out = np.zeros((m, 18))
         ok = np.ones(m, dtype=bool)
-        tracking = self.tracking[trials]
-        if tracking.any():
-            j = np.flatnonzero(tracking)
-            tk, dt, length = t[j], self.dt[trials[j]], self.grid_len[trials[j]]
+        tracking = self.tracking[sel]
+        every = bool(tracking.all())
+        if every or tracking.any():
+            j = slice(None) if every else np.flatnonzero(tracking)
+            jt = sel if every else trials[j]
+            tk, dt, length = t[j], self.dt[jt], self.grid_len[jt]
             k = np.rint(tk / dt)
-            end = (length > 0) & (tk > self.t_end[trials[j]])
+            end = (length > 0) & (tk > self.t_end[jt])
             on = ~end & (k >= 0) & (k < length) & (np.abs(tk - k * dt) <= GRID_TIME_TOLERANCE)
-            g = np.zeros(len(j), dtype=int) if self.shared else trials[j]
-            at = np.where(end, length - 1, np.where(on, k, 0)).astype(int)
-            out[j] = self.grids[g, at]
+            index = np.where(end, length - 1, np.where(on, k, 0)).astype(int)
+            if not self.shared:  # the trials' own grids, one after the other
+                index += self.grids.shape[1] * self.index[jt]
+            out[j] = self.grids.reshape(-1, 18).take(index, axis=0)
             for i in np.flatnonzero(~end & ~on).tolist():  # off the grid: on demand
+                r = i if every else int(j[i])  # type: ignore[index]
                 try:
-                    out[j[i]] = self.laws[int(trials[j[i]])].reference_legs(
+                    out[r] = self.laws[int(trials[r])].reference_legs(
                         np.array([tk[i]]))[0].ravel()
                 except Exception:  # the trial's own step refuses with the reason
-                    ok[j[i]] = False
-        if not tracking.all():
-            j = np.flatnonzero(~tracking)
-            for i in j[self.quintic[trials[j], 0] == 0.0].tolist():  # a first step
+                    ok[r] = False
+        if not every:
+            jq = np.flatnonzero(~tracking)
+            for i in jq[self.quintic[trials[jq], 0] == 0.0].tolist():  # a first step
                 self.laws[int(trials[i])].start_quintic(float(t[i]), q[i])
-            out[j] = quintic_rows(t[j], self.quintic[trials[j]])
+            out[jq] = quintic_rows(t[jq], self.quintic[trials[jq]])
         return out, ok
 
     def step(self, observations: ObservationBatch, out: CommandBatch, kp_ki: float,
@@ -184,6 +192,10 @@ class JointRows:
         """Step every row with finite readings (see the module docstring) into ``out``;
         returns the rows left to the trials' own steps (readings missing or not
         finite, a desired row the model cannot give, a result not accepted).
+
+        When every row is finite and the rows are consecutive trials (the common case),
+        the batch's arrays are read and written through one slice instead of by fancy
+        indexing (the same values).
 
         Args:
             observations: The batch (row ``k`` of trial ``observations.trials[k]``).
@@ -198,44 +210,65 @@ class JointRows:
         t = np.asarray(observations.t, dtype=float)
         q_all = np.asarray(observations.lengths, dtype=float)
         qd_all = np.asarray(observations.q_dot, dtype=float)
-        finite = np.isfinite(t) & np.isfinite(q_all).all(axis=1) & np.isfinite(qd_all).all(axis=1)
-        rows = np.flatnonzero(finite)
-        trials = np.asarray(observations.trials, dtype=int)[rows]
-        t, q, qd = t[rows], q_all[rows], qd_all[rows]
+        trials = np.asarray(observations.trials, dtype=int)
+        at: np.ndarray | slice
+        if np.isfinite(t).all() and np.isfinite(q_all).all() and np.isfinite(qd_all).all():
+            rows = np.arange(n)
+            q, qd = q_all, qd_all
+            first = int(trials[0]) if n else 0
+            at = (slice(first, first + n) if n and int(trials[-1]) == first + n - 1
+                  and bool((np.diff(trials) == 1).all()) else trials)
+        else:
+            finite = (np.isfinite(t) & np.isfinite(q_all).all(axis=1)
+                      & np.isfinite(qd_all).all(axis=1))
+            rows = np.flatnonzero(finite)
+            trials = trials[rows]
+            t, q, qd = t[rows], q_all[rows], qd_all[rows]
+            at = trials
         X = self.X
-        X[trials, Q_IN] = q
-        X[trials, QD_IN] = qd
-        desired, ok = self.desired(trials, t, q)
+        X[at, Q_IN] = q
+        X[at, QD_IN] = qd
+        desired, ok = self.desired(trials, t, q, at)
         if kp_ki:
-            desired[:, 12:18] += kp_ki * self.integral[trials]
-        X[trials, DESIRED] = desired
+            desired[:, 12:18] += kp_ki * self.integral[at]
+        X[at, DESIRED] = desired
         if not ok.all():
             rows, trials, t, q, qd, desired = (a[ok] for a in (rows, trials, t, q, qd,
                                                                desired))
+            at = trials
         if not len(rows):
             return np.arange(n)
-        Y, _ = evaluate_rows(self.function, X[trials], POSE_IN, POSE_OUT, RESIDUAL,
+        rows_in = X[at].copy() if isinstance(at, slice) else X[at]  # Newton moves its guesses
+        Y, _ = evaluate_rows(self.function, rows_in, POSE_IN, POSE_OUT, RESIDUAL,
                              compiled_ctc.FK_TOLERANCE, FK_MAX_CALLS)
-        a = np.flatnonzero(accepted_rows(Y, STATUS, FACTOR, threshold))
-        slow = np.ones(n, dtype=bool)
-        if not len(a):
-            return np.flatnonzero(slow)
-        ka, ta, Ya = rows[a], trials[a], Y[a]
+        accepted = accepted_rows(Y, STATUS, FACTOR, threshold)
+        if accepted.all():  # every row: the slices of the batch's arrays
+            ka, ta, Ya, e_rows, qd_a, desired_a = rows, at, Y, q, qd, desired
+        else:
+            a = np.flatnonzero(accepted)
+            if not len(a):
+                return np.arange(n)
+            ka, ta, Ya = rows[a], trials[a], Y[a]
+            e_rows, qd_a, desired_a = q[a], qd[a], desired[a]
         X[ta, POSE_IN] = Ya[:, POSE_OUT]  # the next steps' guesses
         self.steps[ta] += 1
-        e = desired[a, 0:6] - q[a]
+        e = desired_a[:, 0:6] - e_rows
         forces = Ya[:, FORCES]
         over = over_limits(forces, self.limit[ta])
         if kp_ki:  # anti-windup: held while a leg's force is over its limit
             held = ~over
-            self.integral[ta[held]] += e[held] * self.dt[ta[held]][:, None]
+            tt = (self.index[ta] if isinstance(ta, slice) else ta)[held]
+            self.integral[tt] += e[held] * self.dt[tt][:, None]
         assert out.forces is not None
         out.forces[ka] = forces
         out.error_norm[ka] = np.sqrt(norms(e))
-        for i in np.flatnonzero(over).tolist():  # over a limit: the saturation strategy
-            law = self.laws[int(ta[i])]
-            out.forces[ka[i]] = law.saturated_forces(forces[i], Ya[i, POSE_OUT], qd[a[i]],
-                                                      desired[a[i], 6:12])
+        if over.any():
+            tl = self.index[ta] if isinstance(ta, slice) else ta
+            for i in np.flatnonzero(over).tolist():  # over a limit: the saturation strategy
+                law = self.laws[int(tl[i])]
+                out.forces[ka[i]] = law.saturated_forces(forces[i], Ya[i, POSE_OUT], qd_a[i],
+                                                          desired_a[i, 6:12])
+        slow = np.ones(n, dtype=bool)
         slow[ka] = False
         return np.flatnonzero(slow)
 

@@ -106,15 +106,18 @@ class TaskRows:
         """The reference rows (m, w) of the trials ``trials`` (m,) at ``tr`` (m,) [s]
         on their clocks read from their grids (built for a new reference), and the (m,)
         mask of the rows read (on the grid, every task row known)."""
-        stale = np.flatnonzero(self.built[trials] != self.clock[trials, VERSION])
-        for k in np.unique(trials[stale]).tolist():  # once per reference
-            self._build(k)
+        stale = self.built[trials] != self.clock[trials, VERSION]
+        if stale.any():
+            for k in np.unique(trials[stale]).tolist():  # once per reference
+                self._build(k)
         k = grid_steps(tr, self.dt[trials])
         length = self.grid_len[trials]
         ok = (k >= 0) & (length > 0)
         at = np.where(ok, np.minimum(k, length - 1), 0)
-        ok &= self.known[trials, at]
-        return self.grids[trials, at], ok
+        at += self.grids.shape[1] * trials  # into the grids one after the other
+        ok &= self.known.reshape(-1).take(at)
+        n, size, width = self.grids.shape
+        return self.grids.reshape(n * size, width).take(at, axis=0), ok
 
     def _build(self, k: int) -> None:
         """Stack trial ``k``'s reference grid (the law's ``batch_grid``: none when it
@@ -158,9 +161,12 @@ class TaskRows:
         t = np.asarray(observations.t, dtype=float)
         q_all = np.asarray(observations.lengths, dtype=float)
         qd_all = np.asarray(observations.q_dot, dtype=float)
-        finite = np.isfinite(t) & np.isfinite(q_all).all(axis=1) & np.isfinite(qd_all).all(axis=1)
         trials_all = np.asarray(observations.trials, dtype=int)
-        finite &= self.usable[trials_all] & (self.clock[trials_all, STARTED] != 0.0)
+        finite = self.usable[trials_all] & (self.clock[trials_all, STARTED] != 0.0)
+        if not (np.isfinite(t).all() and np.isfinite(q_all).all()
+                and np.isfinite(qd_all).all()):  # off the common case: row by row
+            finite &= (np.isfinite(t) & np.isfinite(q_all).all(axis=1)
+                       & np.isfinite(qd_all).all(axis=1))
         rows = np.flatnonzero(finite)
         if not len(rows):
             return np.arange(n)

@@ -93,8 +93,11 @@ def quantise(lengths: np.ndarray, resolution: np.ndarray) -> np.ndarray:
     """Encoder readings: ``lengths`` [m] rounded to the nearest multiple of ``resolution``
     [m] per leg (a zero resolution reads exactly)."""
     res = np.asarray(resolution, float)
-    safe = np.where(res > 0, res, 1.0)
-    return np.where(res > 0, np.round(lengths / safe) * safe, lengths)  # type: ignore[no-any-return]
+    counted = res > 0
+    if counted.all():  # every leg counted (the common case): no selection
+        return np.round(lengths / res) * res  # type: ignore[no-any-return]
+    safe = np.where(counted, res, 1.0)
+    return np.where(counted, np.round(lengths / safe) * safe, lengths)  # type: ignore[no-any-return]
 
 
 @dataclass

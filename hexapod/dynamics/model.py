@@ -188,6 +188,23 @@ class DynamicModel:
         v = _c.OUTPUTS["legs"].views(self._checked(y, "legs"))
         return v["q_dot"], v["leg_bias"]
 
+    def legs_jacobian_batch(self, R: np.ndarray, t: np.ndarray, twist: np.ndarray,
+                            **overrides: np.ndarray
+                            ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """:meth:`jacobian_batch` and :meth:`legs_batch` of the same poses from one
+        packed input (the "jacobian" kernel does not read the twist: the same numbers as
+        the two calls).
+
+        Returns:
+            ``K`` (N, 6, 6), ``q_dot`` (N, 6) [m/s] and ``K_dot twist`` (N, 6) [m/s^2].
+        """
+        n = np.shape(t)[0]
+        x = self.rows(R, t, twist, np.zeros((n, 6)), **overrides)
+        K = _c.OUTPUTS["jacobian"].views(
+            self._checked(_c.compiled("jacobian").batch(x), "jacobian"))["K"]
+        legs = _c.OUTPUTS["legs"].views(self._checked(_c.compiled("legs").batch(x), "legs"))
+        return np.swapaxes(K, -1, -2), legs["q_dot"], legs["leg_bias"]
+
     def forward_drives_batch(self, R: np.ndarray, t: np.ndarray, twist: np.ndarray,
                              forces: np.ndarray, added_mass: np.ndarray,
                              implicit_mass: np.ndarray | None = None,

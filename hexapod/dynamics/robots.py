@@ -163,10 +163,12 @@ class DynamicRobots:
                                      self.E, self.parameters)
         x = self._leg_rows[rows]
         s = _c.INPUTS
-        x[:, s["R"]].reshape(-1, 3, 3)[:] = np.swapaxes(_array("R", self.R[rows], (3, 3)),
-                                                        -1, -2)
-        x[:, s["t"]] = _array("t", self.t[rows], (3,))
-        x[:, s["twist"]] = _array("twist", self.twist[rows], (6,))
+        R, t, twist = self.R[rows], self.t[rows], self.twist[rows]
+        x[:, s["R"]].reshape(-1, 3, 3)[:] = np.swapaxes(R, -1, -2)
+        x[:, s["t"]] = t
+        x[:, s["twist"]] = twist
+        if not np.isfinite(x).all():  # one check of the rows; the value named by _array
+            _array("R", R, (3, 3)), _array("t", t, (3,)), _array("twist", twist, (6,))
         y = self.model._checked(_c.compiled("legs").batch(x), "legs")
         return _c.OUTPUTS["legs"].view(y, "q_dot")
 

@@ -214,3 +214,28 @@ def test_the_dynamic_world_measures_leg_velocities() -> None:
     # quantised to one encoder count per period (1 um / 20 ms)
     counts = qd * dt / 1e-6
     np.testing.assert_allclose(counts, np.round(counts), atol=1e-6)
+
+
+def test_a_batchs_reference_grids_are_each_trials_own(geometry: HexapodGeometry) -> None:
+    """reset_batch samples every trial's reference grid together (sample_grids, by
+    chunks of GRID_CHUNK trials): each grid holds the numbers of its trial's own
+    evaluation (reference_legs on its control grid), to the last bit."""
+    from controllers import computed_torque as ct
+    from tests.controllers.ctc_world import CtcWorld, ideal_drives, line_reference
+
+    truth = ideal_drives(geometry)
+    world = CtcWorld.make(truth)
+    n = ct.GRID_CHUNK + 3  # two chunks
+    contexts = []
+    for k in range(n):  # a reference of its own per trial, of its own duration
+        _, _, R1, t1, ref = line_reference(truth, "quintic", (0.5 + 0.2 * k, -0.3, 0.4))
+        contexts.append(world.context(world.goal(R1, t1), reference=ref))
+    batch = registry.create("computed-torque")
+    batch.reset_batch(contexts)
+    sizes = set()
+    for inst in batch.trial_instances:
+        assert isinstance(inst, ComputedTorqueController) and inst._grid is not None
+        own = inst.reference_legs(inst.grid_times()).reshape(-1, 18)
+        assert inst.grid.tobytes() == own.tobytes()
+        sizes.add(len(own))
+    assert len(sizes) > 1  # grids of several lengths, stacked and split again

@@ -68,3 +68,55 @@ def test_the_batch_steps_as_its_trials_do(geometry: HexapodGeometry, name: str,
         assert inst.compiled_steps == s.compiled_steps
         assert inst.compiled.row.base is rows.X  # the trial's row is the batch's
         assert inst.integral.tobytes() == s.integral.tobytes()
+
+
+def test_vision_rows_with_hidden_legs_are_stepped_by_the_batch(
+        geometry: HexapodGeometry, monkeypatch: pytest.MonkeyPatch) -> None:
+    """Rows with a leg hidden (marked so, or its direction not finite) and at least three
+    non-collinear legs seen are computed by the batch (no per-row ``prepare``), with the
+    per-trial laws' bits; a row with two legs seen is left to its trial's own step, which
+    refuses it with the reason."""
+    from controllers.task_ctc_compiled import CompiledTaskStep
+
+    truth = ideal_drives(geometry)
+    world = CtcWorld.make(truth)
+    n = 4
+    R0, t0, R1, t1, ref = line_reference(truth, "quintic", (0.5, -0.3, 0.4))
+    contexts = [world.context(world.goal(R1, t1), reference=ref) for _ in range(n)]
+    starts = [(R0, t0 + np.array([0.0, 0.001 * k, 0.0])) for k in range(n)]
+    robots = DynamicRobots([truth] * n, np.array([s[0] for s in starts]),
+                           np.array([s[1] for s in starts]))
+    robots.drives.mode = "force"
+    batch = registry.create("vision-ctc", integral_gain=1.0)
+    batch.reset_batch(contexts)
+    singles = [registry.create("vision-ctc", integral_gain=1.0) for _ in range(n)]
+    for s, ctx in zip(singles, contexts, strict=True):
+        s.reset(ctx)
+    prepared: list[int] = []
+    original = CompiledTaskStep.prepare
+
+    def spy(self: CompiledTaskStep, law: TaskComputedTorque, *args: object) -> object:
+        prepared.append(batch.trial_instances.index(law) if law in batch.trial_instances
+                        else -1)
+        return original(self, law, *args)  # type: ignore[arg-type]
+
+    for step in range(4):
+        obs = _batch(world, robots, step * DT)
+        assert obs.directions is not None
+        obs.direction_visible[0, 2] = False  # row 0: leg 2 marked hidden
+        obs.directions[1, 4] = np.nan  # row 1: leg 4 not finite (seen: 5 legs)
+        obs.direction_visible[2, [0, 3]] = False  # row 2: four legs seen
+        obs.direction_visible[3, 1:5] = False  # row 3: two legs seen (refused)
+        prepared.clear()
+        monkeypatch.setattr(CompiledTaskStep, "prepare", spy)
+        full = batch.step_batch(obs)
+        monkeypatch.setattr(CompiledTaskStep, "prepare", original)
+        assert sorted(set(prepared)) == [3], prepared  # only the refused row by its own
+        assert full.forces is not None
+        for j, s in enumerate(singles):
+            cmd = s.step(obs.item(j))
+            assert full.reasons[j] == cmd.reason, (step, j)
+            assert full.forces[j].tobytes() == np.asarray(cmd.forces).tobytes(), (step, j)
+            assert full.error_norm[j] == cmd.error_norm
+        assert full.reasons[3] is not None and full.reasons[0:3] == [None] * 3
+        assert not robots.advance(np.arange(n), full.forces, DT / 20, 20).any()

@@ -316,6 +316,14 @@ def test_leg_rates_and_jacobian_kernels_are_the_terms_kernels_bitwise(
         K = dyn.jacobian_batch(R, t, **overrides)  # K alone, from the pose (any twist)
         assert K.tobytes() == np.ascontiguousarray(dyn.terms_batch(R, t, twist,
                                                                    **overrides)[2]).tobytes()
+        # both from one packed input (the twist given): the two calls' numbers
+        K2, q_dot2, bias2 = dyn.legs_jacobian_batch(R, t, twist, **overrides)
+        assert K2.tobytes() == K.tobytes()
+        assert q_dot2.tobytes() == q_dot.tobytes() and bias2.tobytes() == bias.tobytes()
+    bad = twist.copy()
+    bad[3, 4] = np.nan
+    with pytest.raises(ShapeError, match="twist"):  # named, as legs_batch names it
+        dyn.legs_jacobian_batch(R, t, bad)
 
 
 def test_implicit_mass_takes_a_damping_force_implicitly(geometry: HexapodGeometry,
