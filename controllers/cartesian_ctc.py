@@ -201,7 +201,7 @@ class VisionCTC(CartesianCTC):
         A = np.asarray(self.context.base_points)
         E = np.asarray(self.context.geometry.platform_points)
         if n < 6:
-            if self._collinear(seen):
+            if self.collinear(seen):
                 return status_reason(Status.COLLINEAR_LEGS,
                                      legs=np.flatnonzero(seen).tolist())
             A, q, u, E = A[seen], q[seen], u[seen], E[seen]
@@ -240,7 +240,7 @@ class VisionCTC(CartesianCTC):
             step.views["seen"][:] = seen
             if not seen.all():
                 legs = np.flatnonzero(seen).tolist()
-                if len(legs) >= 3 and self._collinear(seen):
+                if len(legs) >= 3 and self.collinear(seen):
                     return status_reason(Status.COLLINEAR_LEGS, legs=legs)
                 u = np.where(seen[:, None], u, 0.0)  # a hidden leg's stand-in (not read)
                 note = f"pose from legs {legs}"
@@ -248,7 +248,7 @@ class VisionCTC(CartesianCTC):
         self.reference_input(step, tr)
         return None, note
 
-    def _collinear(self, seen: np.ndarray) -> bool:
+    def collinear(self, seen: np.ndarray) -> bool:
         """Whether the platform points of the legs ``seen`` (6,) are collinear (their
         second singular value about their centroid below :data:`SPREAD` times the
         platform's radius): no pose fits them. Found once per set of legs."""
@@ -295,7 +295,7 @@ class VisionCTC(CartesianCTC):
             if count < 3 or count == 6:
                 continue
             law = rows_batch.laws[int(trials[j])]
-            if not isinstance(law, VisionCTC) or law._collinear(seen):
+            if not isinstance(law, VisionCTC) or law.collinear(seen):
                 continue
             X[j, inputs["directions"]] = np.where(seen[:, None], u, 0.0).ravel()
             X[j, inputs["seen"]] = seen

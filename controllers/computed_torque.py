@@ -254,7 +254,7 @@ class ComputedTorqueController(ComputedTorqueLaw):
         """
         super().reset_batch(contexts)
         sample_grids([inst for inst in self.trial_instances
-                      if isinstance(inst, ComputedTorqueController) and inst._grid is None])
+                      if isinstance(inst, ComputedTorqueController) and inst.grid_pending])
 
     def grid_times(self) -> np.ndarray:
         """The control grid ``k dt`` [s] on which the reference is sampled (``ceil(T /
@@ -262,6 +262,21 @@ class ComputedTorqueController(ComputedTorqueLaw):
         assert self._ctx is not None and self._ctx.reference is not None
         steps = math.ceil(float(self._ctx.reference.duration) / self._dt) + 3
         return self._dt * np.arange(steps)  # type: ignore[no-any-return]
+
+    @property
+    def grid_pending(self) -> bool:
+        """True after a reset to a reference, until its grid is sampled."""
+        return self._grid is None
+
+    def grid_source(self) -> tuple[ControllerContext, DynamicModel]:
+        """The context (with its reference) and the nominal model the grid is sampled
+        from (after a reset)."""
+        assert self._ctx is not None and self._model is not None
+        return self._ctx, self._model
+
+    def take_grid(self, grid: np.ndarray) -> None:
+        """Take the reference's grid (N, 18) sampled for this trial (:func:`sample_grids`)."""
+        self._grid = grid
 
     @property
     def grid(self) -> np.ndarray:
@@ -446,20 +461,19 @@ def sample_grids(laws: list[ComputedTorqueController]) -> None:
     trial's grid holds the numbers of its own evaluation)."""
     groups: dict[int, list[ComputedTorqueController]] = {}
     for law in laws:
-        assert law._ctx is not None
-        groups.setdefault(id(law._ctx.geometry), []).append(law)
+        groups.setdefault(id(law.grid_source()[0].geometry), []).append(law)
     chunks = [group[k:k + GRID_CHUNK] for group in groups.values()
               for k in range(0, len(group), GRID_CHUNK)]
     for group in chunks:
-        first = group[0]
-        assert first._ctx is not None and first._model is not None
-        refs = [law._ctx.reference.at(law.grid_times()) for law in group]  # type: ignore[union-attr]
+        ctx, model = group[0].grid_source()
+        refs = [law.grid_source()[0].reference.at(law.grid_times())  # type: ignore[union-attr]
+                for law in group]
         legs = legs_of_poses(
-            first._ctx.geometry, first._model,
+            ctx.geometry, model,
             *(np.concatenate([getattr(r, f) for r in refs])
               for f in ("rotation", "translation", "twist", "twist_rate")))
         start = 0
         for law, ref in zip(group, refs, strict=True):
             size = len(ref.translation)
-            law._grid = legs[start:start + size].reshape(size, 18)
+            law.take_grid(legs[start:start + size].reshape(size, 18))
             start += size

@@ -29,7 +29,14 @@ Method = Literal["compiled", "pinocchio"]
 INVERSE_TOLERANCE = 1e-6
 
 
-def _array(name: str, value: np.ndarray, shape: tuple[int, ...]) -> np.ndarray:
+def checked_array(name: str, value: np.ndarray, shape: tuple[int, ...]) -> np.ndarray:
+    """``value`` as floats, refused unless its trailing shape is ``shape`` and every
+    value is finite.
+
+    Raises:
+        ShapeError: The shape, or the first non-finite value with its index (names
+            ``name``).
+    """
     arr = np.asarray(value, dtype=float)
     if arr.shape[arr.ndim - len(shape):] != shape:
         raise ShapeError(name, f"shape (..., {', '.join(map(str, shape))})", arr.shape)
@@ -76,7 +83,7 @@ class DynamicModel:
         """
         if self._reference is not None:
             R, t, twist, forces = self._one(R, t, twist, forces, "forces")
-            return self._checked(self._reference.forward(R, t, twist, forces), "forward")
+            return self.checked(self._reference.forward(R, t, twist, forces), "forward")
         return self.forward_batch(*(np.asarray(x, dtype=float)[None]
                                     for x in (R, t, twist, forces)))[0]
 
@@ -85,7 +92,7 @@ class DynamicModel:
         """Leg forces (6,) [N] that give the platform the acceleration ``acc`` (6,)."""
         if self._reference is not None:
             R, t, twist, acc = self._one(R, t, twist, acc, "acc")
-            return self._checked(self._reference.inverse(R, t, twist, acc), "inverse")
+            return self.checked(self._reference.inverse(R, t, twist, acc), "inverse")
         return self.inverse_batch(*(np.asarray(x, dtype=float)[None]
                                     for x in (R, t, twist, acc)))[0]
 
@@ -111,10 +118,10 @@ class DynamicModel:
         """Validated input rows (N, 79) of the compiled functions
         (:func:`hexapod.dynamics.compiled.pack`); per-item geometry or inertial
         parameters override the model's (e.g. the true robots of a study)."""
-        R = _array("R", R, (3, 3))
-        t = _array("t", t, (3,))
-        twist = _array("twist", twist, (6,))
-        u = _array("forces/acc", u, (6,))
+        R = checked_array("R", R, (3, 3))
+        t = checked_array("t", t, (3,))
+        twist = checked_array("twist", twist, (6,))
+        u = checked_array("forces/acc", u, (6,))
         n = t.shape[0]
         if R.shape != (n, 3, 3) or twist.shape != (n, 6) or u.shape != (n, 6):
             raise ShapeError("R/t/twist", f"matching batches of {n}",
@@ -132,7 +139,7 @@ class DynamicModel:
         if self._reference is not None:
             return np.array([self.forward(*args) for args in zip(R, t, twist, forces,
                                                                  strict=True)])
-        return self._checked(_c.compiled("forward").batch(
+        return self.checked(_c.compiled("forward").batch(
             self.rows(R, t, twist, forces, **overrides)), "forward")
 
     def inverse_batch(self, R: np.ndarray, t: np.ndarray, twist: np.ndarray,
@@ -148,7 +155,7 @@ class DynamicModel:
                      + 1e-12)
         if np.any(singular):
             raise DynamicsError("inverse", int(np.argmax(singular)))
-        return self._checked(y["forces"], "inverse")
+        return self.checked(y["forces"], "inverse")
 
     def terms_batch(self, R: np.ndarray, t: np.ndarray, twist: np.ndarray,
                     **overrides: np.ndarray
@@ -162,7 +169,7 @@ class DynamicModel:
         """
         n = np.shape(t)[0]
         y = _c.compiled("terms").batch(self.rows(R, t, twist, np.zeros((n, 6)), **overrides))
-        v = _c.OUTPUTS["terms"].views(self._checked(y, "terms"))
+        v = _c.OUTPUTS["terms"].views(self.checked(y, "terms"))
         M = np.swapaxes(v["M"], -1, -2)  # (column-major blocks)
         K = np.swapaxes(v["K"], -1, -2)
         return M, v["h"], K, v["kinetic"][:, 0], v["potential"][:, 0]
@@ -174,7 +181,7 @@ class DynamicModel:
         n = np.shape(t)[0]
         y = _c.compiled("jacobian").batch(self.rows(R, t, np.zeros((n, 6)), np.zeros((n, 6)),
                                                     **overrides))
-        v = _c.OUTPUTS["jacobian"].views(self._checked(y, "jacobian"))
+        v = _c.OUTPUTS["jacobian"].views(self.checked(y, "jacobian"))
         return np.swapaxes(v["K"], -1, -2)  # (column-major blocks)
 
     def legs_batch(self, R: np.ndarray, t: np.ndarray, twist: np.ndarray,
@@ -185,7 +192,7 @@ class DynamicModel:
         ``q_ddot = K acc + K_dot twist``."""
         n = np.shape(t)[0]
         y = _c.compiled("legs").batch(self.rows(R, t, twist, np.zeros((n, 6)), **overrides))
-        v = _c.OUTPUTS["legs"].views(self._checked(y, "legs"))
+        v = _c.OUTPUTS["legs"].views(self.checked(y, "legs"))
         return v["q_dot"], v["leg_bias"]
 
     def legs_jacobian_batch(self, R: np.ndarray, t: np.ndarray, twist: np.ndarray,
@@ -201,8 +208,8 @@ class DynamicModel:
         n = np.shape(t)[0]
         x = self.rows(R, t, twist, np.zeros((n, 6)), **overrides)
         K = _c.OUTPUTS["jacobian"].views(
-            self._checked(_c.compiled("jacobian").batch(x), "jacobian"))["K"]
-        legs = _c.OUTPUTS["legs"].views(self._checked(_c.compiled("legs").batch(x), "legs"))
+            self.checked(_c.compiled("jacobian").batch(x), "jacobian"))["K"]
+        legs = _c.OUTPUTS["legs"].views(self.checked(_c.compiled("legs").batch(x), "legs"))
         return np.swapaxes(K, -1, -2), legs["q_dot"], legs["leg_bias"]
 
     def forward_drives_batch(self, R: np.ndarray, t: np.ndarray, twist: np.ndarray,
@@ -234,11 +241,11 @@ class DynamicModel:
                              "(DynamicModel(geometry) without method='pinocchio')")
         rows = self.rows(R, t, twist, forces, **overrides)
         n = rows.shape[0]
-        a = _array("added_mass", np.broadcast_to(added_mass, (n, 6)), (6,))
-        b = np.zeros((n, 6)) if implicit_mass is None else _array(
+        a = checked_array("added_mass", np.broadcast_to(added_mass, (n, 6)), (6,))
+        b = np.zeros((n, 6)) if implicit_mass is None else checked_array(
             "implicit_mass", np.broadcast_to(implicit_mass, (n, 6)), (6,))
         y = _c.compiled("forward_drives").batch(np.concatenate([rows, a, b], axis=1))
-        v = _c.OUTPUTS["forward_drives"].views(self._checked(y, "forward_drives"))
+        v = _c.OUTPUTS["forward_drives"].views(self.checked(y, "forward_drives"))
         return v["acc"], v["q_dot"], v["q_ddot"]
 
     def mass_matrix_batch(self, R: np.ndarray, t: np.ndarray) -> np.ndarray:
@@ -258,11 +265,11 @@ class DynamicModel:
     @staticmethod
     def _one(R: np.ndarray, t: np.ndarray, twist: np.ndarray, u: np.ndarray, name: str
              ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-        return (_array("R", R, (3, 3)), _array("t", t, (3,)), _array("twist", twist, (6,)),
-                _array(name, u, (6,)))
+        return (checked_array("R", R, (3, 3)), checked_array("t", t, (3,)),
+                checked_array("twist", twist, (6,)), checked_array(name, u, (6,)))
 
     @staticmethod
-    def _checked(y: np.ndarray, what: str) -> np.ndarray:
+    def checked(y: np.ndarray, what: str) -> np.ndarray:
         """Refuse non-finite results (a singular pose or mass matrix) naming the item."""
         if not np.all(np.isfinite(y)):
             bad = np.argwhere(~np.isfinite(np.atleast_2d(y)))[0]

@@ -155,7 +155,7 @@ class DynamicRobots:
             DynamicsError: The kernel's result is not finite (names the row).
         """
         from hexapod.dynamics import compiled as _c
-        from hexapod.dynamics.model import _array
+        from hexapod.dynamics.model import checked_array
 
         if self._leg_rows is None:  # A, E, the inertia, u = 0: constant per row
             n = self.n
@@ -167,9 +167,11 @@ class DynamicRobots:
         x[:, s["R"]].reshape(-1, 3, 3)[:] = np.swapaxes(R, -1, -2)
         x[:, s["t"]] = t
         x[:, s["twist"]] = twist
-        if not np.isfinite(x).all():  # one check of the rows; the value named by _array
-            _array("R", R, (3, 3)), _array("t", t, (3,)), _array("twist", twist, (6,))
-        y = self.model._checked(_c.compiled("legs").batch(x), "legs")
+        if not np.isfinite(x).all():  # one check of the rows; the value named by checked_array
+            checked_array("R", R, (3, 3))
+            checked_array("t", t, (3,))
+            checked_array("twist", twist, (6,))
+        y = self.model.checked(_c.compiled("legs").batch(x), "legs")
         return _c.OUTPUTS["legs"].view(y, "q_dot")
 
     def lengths(self, rows: np.ndarray) -> np.ndarray:
