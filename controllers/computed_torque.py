@@ -61,7 +61,7 @@ from controllers.joint_ctc_rows import (
     STATUS,
     JointRows,
     JointState,
-    quintic_rows,
+    quintic_row_into,
 )
 from controllers.law_tools import goal_lengths
 from controllers.solvers import compiled_ctc
@@ -306,7 +306,7 @@ class ComputedTorqueController(ComputedTorqueLaw):
         ctx = self._ctx
         assert ctx is not None
         if ctx.reference is None:
-            out[:] = quintic_rows(np.array([t]), self._quintic[None])[0]
+            quintic_row_into(t, self._quintic, out)
             return
         grid, dt = self.grid, self._dt
         k = round(t / dt)

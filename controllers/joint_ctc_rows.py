@@ -51,25 +51,49 @@ RESIDUAL, STATUS = (compiled_ctc.OUTPUTS.index(k) for k in ("fk_residual", "stat
 QUINTIC_SIZE = 21
 
 
+def quintic_timing(t: float, t0: float, T: float) -> tuple[float, float, float] | None:
+    """The quintic timing ``(s, s_dot, s_ddot)`` at ``t`` [s] of a motion started at
+    ``t0`` [s] lasting ``T`` [s] (``s`` from 0 to 1; rates [1/s], [1/s^2]), None for a
+    zero duration (at ``q*`` at once)."""
+    if T <= 0.0:
+        return None
+    x = min(max((t - t0) / T, 0.0), 1.0)
+    s = x**3 * (10 - 15 * x + 6 * x**2)
+    if 0.0 < x < 1.0:
+        return s, 30 * x**2 * (1 - x) ** 2 / T, 60 * x * (1 - x) * (1 - 2 * x) / T**2
+    return s, 0.0, 0.0
+
+
+def quintic_row_into(t: float, row: np.ndarray, out: np.ndarray) -> None:
+    """:func:`quintic_rows` of one quintic ``row`` (21,) at ``t`` [s], written into
+    ``out`` (18,) (the same operations on the same numbers)."""
+    timing = quintic_timing(t, float(row[1]), float(row[2]))
+    if timing is None:
+        out[0:6] = row[15:21]
+        out[6:18] = 0.0
+        return
+    s, sd, sdd = timing
+    d = row[9:15]
+    out[0:6] = row[3:9] + s * d
+    out[6:12] = sd * d
+    out[12:18] = sdd * d
+
+
 def quintic_rows(t: np.ndarray, rows: np.ndarray) -> np.ndarray:
     """``(q*, q_dot*, q_ddot*)`` (m, 18) of the leg-space quintics ``rows`` (m, 21)
     (:data:`QUINTIC_SIZE`) at the times ``t`` (m,) [s]: ``q0 + s d``, ``s_dot d``,
     ``s_ddot d`` with ``d = q* - q0`` (``q*`` at rest for a zero duration). The timing
-    ``s(x)`` is computed in Python floats, row by row (a few operations each)."""
+    (:func:`quintic_timing`) is computed in Python floats, row by row."""
     m = len(t)
     timing = np.zeros((m, 3))
     step = np.zeros(m, dtype=bool)
     for j, (tj, t0, T) in enumerate(zip(t.tolist(), rows[:, 1].tolist(), rows[:, 2].tolist(),
                                          strict=True)):
-        if T <= 0.0:
+        tm = quintic_timing(tj, t0, T)
+        if tm is None:
             step[j] = True
-            continue
-        x = min(max((tj - t0) / T, 0.0), 1.0)
-        s = x**3 * (10 - 15 * x + 6 * x**2)
-        if 0.0 < x < 1.0:
-            timing[j] = (s, 30 * x**2 * (1 - x) ** 2 / T, 60 * x * (1 - x) * (1 - 2 * x) / T**2)
         else:
-            timing[j, 0] = s
+            timing[j] = tm
     d = rows[:, 9:15]
     out = np.empty((m, 18))
     out[:, 0:6] = rows[:, 3:9] + timing[:, 0:1] * d
@@ -274,4 +298,5 @@ class JointRows:
 
 
 __all__ = ["FK_MAX_CALLS", "GRID_TIME_TOLERANCE", "QUINTIC_PEAK_SPEED", "QUINTIC_SIZE",
-           "JointRows", "JointState", "quintic_rows"]
+           "JointRows", "JointState", "quintic_row_into", "quintic_rows",
+           "quintic_timing"]

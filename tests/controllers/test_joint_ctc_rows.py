@@ -110,3 +110,25 @@ def test_the_batch_steps_as_its_trials_do_through_their_own_steps(
         assert inst.compiled_steps == s.compiled_steps
         assert inst.input_row.base is rows.X  # the trial's row is the batch's
         np.testing.assert_array_equal(inst._integral, s._integral)
+
+
+def test_one_quintic_row_is_the_batch_row_bit_for_bit() -> None:
+    """The per-trial quintic (``quintic_row_into``) gives the numbers of the batched one
+    at every phase: before the start, moving, at rest at the end, and a zero duration."""
+    from controllers.joint_ctc_rows import quintic_row_into, quintic_rows
+
+    rng = np.random.default_rng(3)
+    rows = np.zeros((4, 21))
+    rows[:, 0] = 1.0
+    rows[:, 1] = 0.2
+    rows[:, 2] = (0.5, 0.5, 0.5, 0.0)
+    rows[:, 3:9] = rng.uniform(0.4, 0.6, (4, 6))
+    rows[:, 15:21] = rng.uniform(0.4, 0.6, (4, 6))
+    rows[:, 9:15] = rows[:, 15:21] - rows[:, 3:9]
+    t = np.array([0.1, 0.37, 0.9, 0.3])
+    batch = quintic_rows(t, rows)
+    assert np.any(batch[1, 6:12] != 0.0)  # one row is moving
+    for j in range(4):
+        one = np.full(18, np.nan)
+        quintic_row_into(float(t[j]), rows[j], one)
+        assert one.tobytes() == batch[j].tobytes(), j
