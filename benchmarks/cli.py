@@ -26,8 +26,9 @@ import sys
 from typing import Any
 
 from benchmarks.exceptions import BenchmarkError
-from benchmarks.study.commands import cmd_calibrate, cmd_report, cmd_run, cmd_viz, console
+from benchmarks.study.commands import cmd_calibrate, cmd_report, cmd_run, console
 from benchmarks.study.outdir import OutputDir, OutputFile
+from benchmarks.study.viz_command import cmd_viz
 from hexapod.exceptions import HexapodError
 
 log = logging.getLogger("hexapod-bench")
