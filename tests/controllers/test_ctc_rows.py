@@ -6,6 +6,7 @@ trial by trial; a row the compiled step cannot finish is left to its trial's ste
 from __future__ import annotations
 
 import dataclasses
+from typing import Any
 
 import numpy as np
 import pytest
@@ -44,6 +45,32 @@ def _rows_of(obs: ObservationBatch, idx: np.ndarray) -> ObservationBatch:
     return dataclasses.replace(obs, **{f.name: None if getattr(obs, f.name) is None
                                        else np.asarray(getattr(obs, f.name))[idx]
                                        for f in dataclasses.fields(obs) if f.init})
+
+
+def _step_as_the_trials(batch: Any, singles: list[Any], obs: ObservationBatch, lone: bool,
+                        label: object) -> np.ndarray:
+    """Step ``batch`` on ``obs`` (with ``lone``: row 1 by its trial's own step, the other
+    rows as one batch) and assert each row's forces and error norm are those of the
+    single controller ``singles[j]`` stepped on its row, bit for bit; the forces (n, 6)."""
+    n = len(singles)
+    forces, norms = np.zeros((n, 6)), np.zeros(n)
+    if lone:
+        cmd = batch.step_row(1, obs.item(1))
+        forces[1], norms[1] = cmd.forces, cmd.error_norm
+        idx = np.array([j for j in range(n) if j != 1])
+        part = batch.step_batch(_rows_of(obs, idx))
+        assert part.forces is not None
+        forces[idx], norms[idx] = part.forces, part.error_norm
+    else:
+        full = batch.step_batch(obs)
+        assert full.forces is not None and all(r is None for r in full.reasons)
+        forces, norms = full.forces, full.error_norm
+    for j, s in enumerate(singles):
+        cmd = s.step(obs.item(j))
+        assert cmd.reason is None, cmd.reason
+        assert forces[j].tobytes() == np.asarray(cmd.forces).tobytes(), (label, j)
+        assert norms[j] == cmd.error_norm
+    return forces
 
 
 @pytest.mark.slow

@@ -16,7 +16,7 @@ from controllers.joint_ctc_rows import QUINTIC_SIZE, JointRows, quintic_rows
 from hexapod import HexapodGeometry
 from hexapod.dynamics.robots import DynamicRobots
 from tests.controllers.ctc_world import DT, CtcWorld, ideal_drives, line_reference
-from tests.controllers.test_ctc_rows import _batch, _rows_of
+from tests.controllers.test_ctc_rows import _batch, _step_as_the_trials
 
 
 def _quintic_oracle(t: float, row: np.ndarray) -> np.ndarray:
@@ -83,23 +83,8 @@ def test_the_batch_steps_as_its_trials_do_through_their_own_steps(
             goal = world.goal(robots.R[0], robots.t[0])
             batch.retarget_batch(np.array([2]), GoalBatch.of(goal))
             singles[2].retarget(goal)
-        forces, norms = np.zeros((n, 6)), np.zeros(n)
-        if step == 7:  # row 1 by its trial's own step, the others as one batch
-            cmd = batch.step_row(1, obs.item(1))
-            forces[1], norms[1] = cmd.forces, cmd.error_norm
-            idx = np.array([0, 2, 3])
-            part = batch.step_batch(_rows_of(obs, idx))
-            assert part.forces is not None
-            forces[idx], norms[idx] = part.forces, part.error_norm
-        else:
-            full = batch.step_batch(obs)
-            assert full.forces is not None and all(r is None for r in full.reasons)
-            forces, norms = full.forces, full.error_norm
-        for j, s in enumerate(singles):
-            cmd = s.step(obs.item(j))
-            assert cmd.reason is None, cmd.reason
-            assert forces[j].tobytes() == np.asarray(cmd.forces).tobytes(), (step, j)
-            assert norms[j] == cmd.error_norm
+        # at step 7, row 1 by its trial's own step, the others as one batch
+        forces = _step_as_the_trials(batch, singles, obs, step == 7, step)
         assert not robots.advance(np.arange(n), forces, DT / 20, 20).any()
     rows = batch._rows
     assert isinstance(rows, JointRows)
