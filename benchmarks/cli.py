@@ -26,9 +26,9 @@ import sys
 from typing import Any
 
 from benchmarks.exceptions import BenchmarkError
+from benchmarks.study import viz_command
 from benchmarks.study.commands import cmd_calibrate, cmd_report, cmd_run, console
-from benchmarks.study.outdir import OutputDir, OutputFile
-from benchmarks.study.viz_command import cmd_viz
+from benchmarks.study.outdir import OutputDir, OutputFile, add_command
 from hexapod.exceptions import HexapodError
 
 log = logging.getLogger("hexapod-bench")
@@ -171,14 +171,14 @@ def build_parser(commands: set[str] | None = None) -> argparse.ArgumentParser:
     p.add_argument("-v", "--verbose", action="store_true", help="log at INFO level")
     sub = p.add_subparsers(dest="command", required=True)
 
-    s = sub.add_parser("list", help="scenarios and controllers (with their source package); "
-                                    "--options NAME: a controller's options")
+    s = add_command(sub, "list", cmd_list,
+                    "scenarios and controllers (with their source package); --options NAME: a "
+                    "controller's options")
     s.add_argument("--options", metavar="NAME",
                    help="print the options of controller NAME (type, unit, default, "
                         "meaning): what a scenario may set for it")
-    s.set_defaults(func=cmd_list)
 
-    s = sub.add_parser("run", help="run scenarios (built-in names or TOML paths)")
+    s = add_command(sub, "run", cmd_run, "run scenarios (built-in names or TOML paths)")
     s.add_argument("scenarios", nargs="+", metavar="SCENARIO")
     s.add_argument("--out", required=True, action=OutputDir, help="results directory")
     s.add_argument("--trials", type=int, help="trials per sweep point and controller")
@@ -230,9 +230,9 @@ def build_parser(commands: set[str] | None = None) -> argparse.ArgumentParser:
     s.add_argument("--no-check", action="store_true",
                    help="skip the pre-flight checks of 'hexapod-bench check' (a setup where "
                         "every trial would fail is refused otherwise)")
-    s.set_defaults(func=cmd_run)
 
-    s = sub.add_parser("calibrate", help="calibrate the base points from leg observations")
+    s = add_command(sub, "calibrate", cmd_calibrate,
+                    "calibrate the base points from leg observations")
     s.add_argument("scenario", metavar="SCENARIO")
     s.add_argument("--out", required=True, action=OutputDir, help="output directory")
     s.add_argument("--configurations", help="extremal (default) or random:N")
@@ -252,107 +252,74 @@ def build_parser(commands: set[str] | None = None) -> argparse.ArgumentParser:
     s.add_argument("--observations", metavar="FILE",
                    help="calibrate from measured edge normals and leg lengths (.json/.npz) "
                         "instead of simulating the scenario's world")
-    s.set_defaults(func=cmd_calibrate)
 
     from benchmarks.identify import command as identify_command
 
-    s = sub.add_parser("identify", help="identify a robot's dynamic parameters and drive "
-                                        "gains from its own motion (docs/identification.md)")
+    s = add_command(sub, "identify", identify_command.run,
+                    "identify a robot's dynamic parameters and drive gains from its own motion "
+                    "(docs/identification.md)")
     identify_command.add_arguments(s)
-    s.set_defaults(func=identify_command.run)
 
     servo_help = ("run one controller on a robot (serial link or emulator) with a camera, "
                   "until convergence or Ctrl-C; --teach records a goal")
     if commands is None or "servo" in commands:
         from benchmarks.robot import servo  # the servo loop, controllers, cameras: ~1 s
 
-        s = sub.add_parser("servo", help=servo_help)
+        s = add_command(sub, "servo", servo.run, servo_help)
         servo.add_arguments(s)
-        s.set_defaults(func=servo.run)
     else:  # named in the list of commands only: another command was asked for
         sub.add_parser("servo", help=servo_help, add_help=False)
 
     from benchmarks.robot import conformance_command
 
-    s = sub.add_parser("conformance", help="check a robot backend against the simulator "
-                                           "(exit 0: conforms, 1: a check failed)",
-                       description=conformance_command.__doc__.split("\n\n")[0]
-                       if conformance_command.__doc__ else None)
+    s = add_command(sub, "conformance", conformance_command.run,
+                    "check a robot backend against the simulator (exit 0: conforms, 1: a check "
+                    "failed)",
+                    description=conformance_command.__doc__.split("\n\n")[0]
+                                if conformance_command.__doc__ else None)
     conformance_command.add_arguments(s)
-    s.set_defaults(func=conformance_command.run)
 
-    s = sub.add_parser("viz", help="replay a recorded trial or a servo session (MeshCat, or "
-                                   "--html FILE)")
-    s.add_argument("dir", help="a run directory, or a servo session: its directory "
-                               "(servo-runs/..., servo --out DIR) or its log (servo.jsonl, "
-                               "servo --log FILE.jsonl)")
-    s.add_argument("--trial", type=int, default=0)
-    s.add_argument("--controller", help="controller label")
-    s.add_argument("--scenario", help="scenario name (when the run has several)")
-    s.add_argument("--point", type=int, help="sweep point index")
-    s.add_argument("--html", action=OutputFile,
-                   help="write a self-contained HTML animation (+ a PNG of the curves beside "
-                        "it) instead of the live view")
-    s.add_argument("--still", type=int, help="with --html: a still of this period")
-    s.add_argument("--overwrite", action="store_true",
-                   help="with --html: replace the file (and the PNG beside it) even if "
-                        "hexapod-bench did not write it")
-    s.add_argument("--hold", type=float, default=5.0,
-                   help="live view: seconds to keep the server after the replay")
-    session = s.add_argument_group("servo session (default: what its record's header "
-                                   "says the session was run with)")
-    session.add_argument("--geometry",
-                         help="nominal robot: a geometry TOML file or a preset (default the "
-                              "header's, else deltalab)")
-    session.add_argument("--camera-file",
-                         help="camera model drawn (default the header's, else front)")
-    session.add_argument("--camera-pose", metavar="PRESET|TOML",
-                         help="with a calibration file: the camera's pose (default the "
-                              "header's)")
-    session.add_argument("--goal", metavar="FILE",
-                         help="a goal file (the errors are measured to it; default the "
-                              "header's goal lengths, else the last period's pose)")
-    s.set_defaults(func=cmd_viz)
+    viz_command.add_arguments(add_command(sub, "viz", viz_command.cmd_viz,
+                                          "replay a recorded trial or a servo session (MeshCat, "
+                                          "or --html FILE)"))
 
     from benchmarks.study.check_command import cmd_check
 
-    s = sub.add_parser("check", help="check a scenario, robot or camera file before a study "
-                                     "(exit 1: the setup cannot run)",
-                       description="Load and validate FILE (a scenario or built-in scenario "
-                                   "name, a robot geometry file or a camera file) and print "
-                                   "the home pose and leg lengths, the reachable workspace, "
-                                   "what the camera sees, the conditioning at home and the "
-                                   "problems with the key to change (docs/robot-files.md). Exit "
-                                   "code 0: the setup can run; 1: every trial would fail; "
-                                   "2: a file is invalid.")
+    s = add_command(sub, "check", cmd_check,
+                    "check a scenario, robot or camera file before a study (exit 1: the setup "
+                    "cannot run)",
+                    description="Load and validate FILE (a scenario or built-in scenario name, a "
+                                "robot geometry file or a camera file) and print the home pose "
+                                "and leg lengths, the reachable workspace, what the camera sees, "
+                                "the conditioning at home and the problems with the key to "
+                                "change (docs/robot-files.md). Exit code 0: the setup can run; "
+                                "1: every trial would fail; 2: a file is invalid.")
     s.add_argument("file", metavar="FILE")
     s.add_argument("--picture", metavar="PNG", action=OutputFile,
                    help="write an image of the robot at home seen by the camera (edges "
                         "seen in green, hidden in red; .png or .jpg)")
     s.add_argument("--overwrite", action="store_true",
                    help="replace the --picture file even if hexapod-bench did not write it")
-    s.set_defaults(func=cmd_check)
 
-    s = sub.add_parser("report", help="rebuild DIR/report.md from DIR/results.jsonl")
+    s = add_command(sub, "report", cmd_report, "rebuild DIR/report.md from DIR/results.jsonl")
     s.add_argument("dir", action=OutputDir, help="a run directory (report.md and its "
                                                  "figures are written into it)")
     s.add_argument("--overwrite", action="store_true",
                    help="replace DIR/report.md even if hexapod-bench did not write it")
-    s.set_defaults(func=cmd_report)
 
-    s = sub.add_parser("perf", help="performance and accuracy figures",
-                       description="Extra arguments go to the figure's module (see --help "
-                                   "of e.g. python -m benchmarks.perf.fk).")
+    s = add_command(sub, "perf", cmd_perf,
+                    "performance and accuracy figures",
+                    description="Extra arguments go to the figure's module (see --help of e.g. "
+                                "python -m benchmarks.perf.fk).")
     s.add_argument("what", choices=sorted(PERF_MODULES))
     s.add_argument("rest", nargs=argparse.REMAINDER, help="arguments for the figure")
-    s.set_defaults(func=cmd_perf)
 
-    s = sub.add_parser("warm", help="compile every C kernel the built-in scenarios use (once; "
-                                    "a warm cache only loads them)")
+    s = add_command(sub, "warm", cmd_warm,
+                    "compile every C kernel the built-in scenarios use (once; a warm cache only "
+                    "loads them)")
     s.add_argument("scenarios", nargs="*", metavar="SCENARIO",
                    help="built-in scenario names (default: all)")
     s.add_argument("--workers", type=int, default=2, help="processes (default 2)")
-    s.set_defaults(func=cmd_warm)
 
     from benchmarks.study.tune_command import register as register_tune
 

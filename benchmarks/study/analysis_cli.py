@@ -13,7 +13,7 @@ import time
 from pathlib import Path
 from typing import Any
 
-from benchmarks.study.outdir import OutputFile
+from benchmarks.study.outdir import OutputFile, add_command
 
 
 def cmd_export(args: argparse.Namespace) -> int:
@@ -249,29 +249,27 @@ def cmd_compare(args: argparse.Namespace) -> int:
 
 def add_analysis_commands(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
     """Register ``export``, ``compare`` and ``reproduce`` on the CLI's sub-parsers."""
-    s = sub.add_parser("export", help="write a run's trials as a table (Parquet)")
+    s = add_command(sub, "export", cmd_export, "write a run's trials as a table (Parquet)")
     s.add_argument("dir", help="a run directory")
     s.add_argument("--parquet", required=True, metavar="FILE", action=OutputFile,
                    help="output Parquet file")
     s.add_argument("--overwrite", action="store_true",
                    help="replace the --parquet file even if hexapod-bench did not write it")
-    s.set_defaults(func=cmd_export)
 
-    s = sub.add_parser("compare", help="paired tests between the controllers of a run, or "
-                                       "between two runs of the same scenarios",
-                       description="DIR: every pair of controllers (or each against "
-                                   "--baseline) on the trials both ran: McNemar's exact test "
-                                   "on convergence with Newcombe's interval, Wilcoxon's "
-                                   "signed-rank test on final error (a trajectory task: on "
-                                   "tracking RMS, max, settling time, time at a force limit) "
-                                   "with the median paired difference and its order-"
-                                   "statistic interval, the sign test on steps censored at "
-                                   "the run's length, Holm's correction; equivalence "
-                                   "within a margin by two one-sided tests (TOST); failed "
-                                   "trials left out of all but convergence and steps. "
-                                   "DIR_A DIR_B: the same trials of two runs matched (the "
-                                   "unmatched counted); regressions and rows that differ "
-                                   "listed.")
+    s = add_command(sub, "compare", cmd_compare,
+                    "paired tests between the controllers of a run, or between two runs of the "
+                    "same scenarios",
+                    description="DIR: every pair of controllers (or each against --baseline) on "
+                                "the trials both ran: McNemar's exact test on convergence with "
+                                "Newcombe's interval, Wilcoxon's signed-rank test on final error "
+                                "(a trajectory task: on tracking RMS, max, settling time, time "
+                                "at a force limit) with the median paired difference and its "
+                                "order-statistic interval, the sign test on steps censored at "
+                                "the run's length, Holm's correction; equivalence within a "
+                                "margin by two one-sided tests (TOST); failed trials left out of "
+                                "all but convergence and steps. DIR_A DIR_B: the same trials of "
+                                "two runs matched (the unmatched counted); regressions and rows "
+                                "that differ listed.")
     s.add_argument("dirs", nargs="+", metavar="DIR", help="one run directory, or two (A B)")
     s.add_argument("--baseline", metavar="NAME", help="compare each controller with this one")
     s.add_argument("--metric", action="append", metavar="NAME",
@@ -293,7 +291,6 @@ def add_analysis_commands(sub: argparse._SubParsersAction) -> None:  # type: ign
                    help="two runs: rows that differ to print (default 20)")
     s.add_argument("--check", action="store_true",
                    help="two runs: exit 1 on a regression or a row that differs")
-    s.set_defaults(func=cmd_compare)
 
     from benchmarks.study.reproduce_cli import add_reproduce_command
 

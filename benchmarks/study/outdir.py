@@ -111,6 +111,22 @@ def _calibration_source(path: Path) -> str:
     return f"; calibrated.toml made from {src}" if isinstance(src, str) and src else ""
 
 
+def add_command(sub: Any, name: str, func: Any, help: str, **kwargs: Any
+                ) -> argparse.ArgumentParser:
+    """A subcommand of ``hexapod-bench`` that runs ``func(args)``.
+
+    Args:
+        sub: The CLI's sub-parsers (``add_subparsers``).
+        name: The subcommand.
+        func: Its function of the parsed arguments (returns the exit code).
+        help: One line for ``hexapod-bench --help``.
+        **kwargs: More ``add_parser`` arguments (``description``).
+    """
+    parser: argparse.ArgumentParser = sub.add_parser(name, help=help, **kwargs)
+    parser.set_defaults(func=func)
+    return parser
+
+
 class _OutputAction(argparse.Action):
     """Stores the option's value, as argparse's default action does; the subclasses tag
     the option as an output (see :class:`OutputFile`)."""

@@ -9,7 +9,7 @@ from pathlib import Path
 from typing import Any
 
 from benchmarks.exceptions import BenchmarkError
-from benchmarks.study.outdir import OutputDir, OutputFile
+from benchmarks.study.outdir import OutputDir, OutputFile, add_command
 
 
 def _scorecard(args: argparse.Namespace) -> int:
@@ -103,8 +103,9 @@ def cmd_reproduce(args: argparse.Namespace) -> int:
 def add_reproduce_command(sub: Any) -> None:
     """Register ``reproduce`` on the CLI's sub-parsers (``sub``: what
     ``ArgumentParser.add_subparsers`` returns)."""
-    s = sub.add_parser("reproduce", help="run the studies behind the papers' figures and set "
-                                         "paper and framework side by side")
+    s = add_command(sub, "reproduce", cmd_reproduce,
+                    "run the studies behind the papers' figures and set paper and framework side "
+                    "by side")
     s.add_argument("which", nargs="?", default="all",
                    choices=("seed000", "seed001", "seed002", "seed003", "all"))
     s.add_argument("--quick", action="store_true",
@@ -135,4 +136,3 @@ def add_reproduce_command(sub: Any) -> None:
                         "(default declared,1)")
     g.add_argument("--goal-noise", metavar="LIST",
                    help="declared, on, off (default declared,on,off)")
-    s.set_defaults(func=cmd_reproduce)

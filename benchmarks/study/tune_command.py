@@ -26,6 +26,7 @@ from typing import Any
 import numpy as np
 
 from benchmarks.exceptions import ScenarioError
+from benchmarks.study.outdir import add_command
 
 #: The tuning seed is the study's plus this, unless ``--seed`` is given.
 SEED_OFFSET = 1_000_003
@@ -298,11 +299,11 @@ def _print(con: Any, scores: dict[str, list[Score]], chosen: dict[str, Score],
 
 def register(sub: Any) -> None:
     """Add ``tune`` to the subcommands."""
-    s = sub.add_parser("tune", help="matched tuning: each controller's gains chosen the same "
-                                    "way on held-out trials (docs/tuning.md)",
-                       description=__doc__.split("\n\n")[0] if __doc__ else None)
+    s = add_command(sub, "tune", cmd_tune,
+                    "matched tuning: each controller's gains chosen the same way on held-out "
+                    "trials (docs/tuning.md)",
+                    description=__doc__.split("\n\n")[0] if __doc__ else None)
     add_arguments(s)
-    s.set_defaults(func=cmd_tune)
 
 
 __all__ = ["CRITERIA", "SEED_OFFSET", "Score", "choose", "cmd_tune", "criterion_value",

@@ -9,6 +9,7 @@ import time
 from pathlib import Path
 
 from benchmarks.exceptions import BenchmarkError
+from benchmarks.study.outdir import OutputFile
 
 
 def find_record(out: Path, trial: int, controller: str | None = None,
@@ -124,3 +125,36 @@ def cmd_viz(args: argparse.Namespace) -> int:
         except KeyboardInterrupt:
             pass
     return 0
+
+
+def add_arguments(s: argparse.ArgumentParser) -> None:
+    """The arguments of ``hexapod-bench viz``."""
+    s.add_argument("dir", help="a run directory, or a servo session: its directory "
+                               "(servo-runs/..., servo --out DIR) or its log (servo.jsonl, "
+                               "servo --log FILE.jsonl)")
+    s.add_argument("--trial", type=int, default=0)
+    s.add_argument("--controller", help="controller label")
+    s.add_argument("--scenario", help="scenario name (when the run has several)")
+    s.add_argument("--point", type=int, help="sweep point index")
+    s.add_argument("--html", action=OutputFile,
+                   help="write a self-contained HTML animation (+ a PNG of the curves beside "
+                        "it) instead of the live view")
+    s.add_argument("--still", type=int, help="with --html: a still of this period")
+    s.add_argument("--overwrite", action="store_true",
+                   help="with --html: replace the file (and the PNG beside it) even if "
+                        "hexapod-bench did not write it")
+    s.add_argument("--hold", type=float, default=5.0,
+                   help="live view: seconds to keep the server after the replay")
+    session = s.add_argument_group("servo session (default: what its record's header "
+                                   "says the session was run with)")
+    session.add_argument("--geometry",
+                         help="nominal robot: a geometry TOML file or a preset (default the "
+                              "header's, else deltalab)")
+    session.add_argument("--camera-file",
+                         help="camera model drawn (default the header's, else front)")
+    session.add_argument("--camera-pose", metavar="PRESET|TOML",
+                         help="with a calibration file: the camera's pose (default the "
+                              "header's)")
+    session.add_argument("--goal", metavar="FILE",
+                         help="a goal file (the errors are measured to it; default the "
+                              "header's goal lengths, else the last period's pose)")
