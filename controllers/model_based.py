@@ -35,10 +35,10 @@ from typing import Any
 import casadi as ca
 import numpy as np
 
-from controllers.base import (
+from controllers.base import Controller
+from controllers.data import (
     Command,
     CommandBatch,
-    Controller,
     ControllerContext,
     Goal,
     GoalBatch,

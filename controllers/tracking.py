@@ -44,20 +44,20 @@ from typing import Any
 
 import numpy as np
 
-from controllers.base import (
+from controllers.base import Controller
+from controllers.batch import actuation_of
+from controllers.data import (
+    FEATURE_FIELDS,
     GOAL_FIELDS,
-    Actuation,
     Command,
     CommandBatch,
-    Controller,
     ControllerContext,
     Goal,
     GoalBatch,
     ObservationBatch,
 )
-from controllers.batch import actuation_of
-from controllers.data import FEATURE_FIELDS
 from controllers.exceptions import ContextError
+from hexapod.actuation import Actuation
 
 log = logging.getLogger(__name__)
 
