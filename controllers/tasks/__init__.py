@@ -7,7 +7,7 @@ controller of :mod:`controllers.mpc`, the computed-torque solver of
 :mod:`controllers.solvers.computed_torque`) combines
 tasks. Every method is batched over a leading trial axis.
 
-- :class:`LegDirectionTask`: ``u x u*`` (seeds 001/003);
+- ``LEG_DIRECTIONS.task_of(u*)``: ``u x u*`` (seeds 001/003), a :class:`FeatureTask`;
 - :class:`LegEdgeTask`: ``n x n*`` or ``l x l*`` (seeds 002/003);
 - :class:`JointLengthTask`: ``q - q*``;
 - :class:`PlatformPoseTask`: ``(t - t*, log(R R*^T))``;
@@ -24,7 +24,7 @@ controllers' builders take them (no kind strings).
 from controllers.tasks.base import Task, TaskState
 from controllers.tasks.feature_kind import BuiltinFeature
 from controllers.tasks.joint_length import JointLengthTask
-from controllers.tasks.leg_direction import LEG_DIRECTIONS, LegDirectionTask
+from controllers.tasks.leg_direction import LEG_DIRECTIONS
 from controllers.tasks.leg_edge import EDGE_LINES, EDGE_NORMALS, EdgeFeature, LegEdgeTask
 from controllers.tasks.leg_feature import FeatureTask, LegFeature
 from controllers.tasks.platform_pose import PLATFORM_POSE, PlatformPoseTask
@@ -33,6 +33,5 @@ from controllers.tasks.platform_pose import PLATFORM_POSE, PlatformPoseTask
 BUILTIN_FEATURES = (EDGE_NORMALS, EDGE_LINES, LEG_DIRECTIONS, PLATFORM_POSE)
 
 __all__ = ["BUILTIN_FEATURES", "EDGE_LINES", "EDGE_NORMALS", "LEG_DIRECTIONS", "PLATFORM_POSE",
-           "BuiltinFeature", "EdgeFeature", "FeatureTask", "JointLengthTask",
-           "LegDirectionTask", "LegEdgeTask", "LegFeature", "PlatformPoseTask", "Task",
-           "TaskState"]
+           "BuiltinFeature", "EdgeFeature", "FeatureTask", "JointLengthTask", "LegEdgeTask",
+           "LegFeature", "PlatformPoseTask", "Task", "TaskState"]

@@ -33,7 +33,6 @@ from dataclasses import dataclass
 import casadi as ca
 import numpy as np
 
-from controllers.interaction import cross
 from vision.legs import leg_edges
 
 
@@ -118,8 +117,8 @@ class Task(ABC):
 
 
 class LegBlockTask(Task):
-    """A task whose error and Jacobian are one block (:attr:`block` rows) per leg, the
-    block's function mapped over the six legs of every row (:meth:`_blocks`)."""
+    """A task whose error and Jacobian are :attr:`block` rows per leg, a block function
+    mapped over the legs (or edges) of every row (:meth:`_blocks`)."""
 
     @abstractmethod
     def _blocks(self, state: TaskState) -> Sequence[np.ndarray]:
@@ -179,18 +178,6 @@ def reference_function(name: str, n_state: int, n_param: int,
     return ca.Function(name, [s, p, tau, pd, pdd], [e_t, e_tt])
 
 
-def evaluate_reference(function: ca.Function, s: np.ndarray, p: np.ndarray,
-                       tau: np.ndarray, p_dot: np.ndarray, p_ddot: np.ndarray
-                       ) -> tuple[np.ndarray, np.ndarray]:
-    """A :func:`reference_function` over block rows (k, ...) -> ``e_t``, ``e_tt`` (k, out)."""
-    k = s.shape[0]
-    if k == 0:
-        z = np.zeros((0, function.size1_out(0)))
-        return z, z.copy()
-    e_t, e_tt = function.map(k)(s.T, p.T, tau.T, p_dot.T, p_ddot.T)
-    return np.asarray(e_t, dtype=float).T, np.asarray(e_tt, dtype=float).T
-
-
 def leg_second_order(name: str, n_param: int, error: Callable[[ca.SX, ca.SX], ca.SX]
                      ) -> ca.Function:
     """:func:`second_order_function` of a per-leg feature: state ``(u, q)`` (4), parameters
@@ -213,18 +200,24 @@ def evaluate_legs(function: ca.Function, state: TaskState, params: np.ndarray,
     n = len(state)
     s = np.concatenate([state.directions, state.lengths[..., None]], axis=-1)
     tau = np.repeat(np.asarray(twist, dtype=float).reshape(n, 6), 6, axis=0)
-    out = evaluate_blocks(function, s.reshape(-1, 4), params.reshape(n * 6, -1), tau)
+    out = map_blocks(function, s.reshape(-1, 4), params.reshape(n * 6, -1), tau)[0]
     return out.reshape(n, 6, -1)
 
 
-def evaluate_blocks(function: ca.Function, s: np.ndarray, p: np.ndarray, tau: np.ndarray
-                    ) -> np.ndarray:
-    """Evaluate a block function over rows (k, ...) -> (k, out) (CasADi ``map``)."""
-    k = s.shape[0]
-    if k == 0:
-        return np.zeros((0, function.size1_out(0)))
-    out = function.map(k)(s.T, p.T, tau.T)
-    return np.asarray(out, dtype=float).T
+def reference_parts(v: dict[str, ca.SX]) -> tuple[ca.SX, ca.SX, ca.SX]:
+    """The desired features, their rate and acceleration (thirds of the
+    ``reference_features`` input block of a compiled computed-torque step)."""
+    ref = v["reference_features"]
+    m = ref.shape[0] // 3
+    return ref[0:m], ref[m:2 * m], ref[2 * m:3 * m]
+
+
+def stack_blocks(blocks: Sequence[Sequence[ca.SX]]
+                 ) -> tuple[ca.SX, ca.SX, ca.SX, ca.SX, ca.SX]:
+    """The ``(e, L, L_dot tau, e_t, e_tt)`` of every block, each term stacked over the
+    blocks (a feature's part of a compiled computed-torque step)."""
+    e, L, ldot, e_t, e_tt = (ca.vertcat(*terms) for terms in zip(*blocks, strict=True))
+    return e, L, ldot, e_t, e_tt
 
 
 def sx_skew(v: ca.SX) -> ca.SX:
@@ -269,6 +262,6 @@ def unit(x: np.ndarray) -> np.ndarray:
     return x / np.sqrt(np.einsum("...k,...k->...", x, x))[..., None]
 
 
-__all__ = ["Task", "TaskState", "cross", "evaluate_blocks", "evaluate_legs",
-           "evaluate_reference", "leg_rates", "leg_second_order", "map_blocks",
-           "reference_function", "second_order_function", "sx_skew", "sx_unit", "unit"]
+__all__ = ["Task", "TaskState", "evaluate_legs", "leg_rates", "leg_second_order", "map_blocks",
+           "reference_function", "reference_parts", "second_order_function", "stack_blocks",
+           "sx_skew", "sx_unit", "unit"]

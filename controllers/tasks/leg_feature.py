@@ -41,6 +41,7 @@ from controllers.tasks.base import (
     TaskState,
     evaluate_legs,
     leg_rates,
+    map_blocks,
     reference_function,
     second_order_function,
 )
@@ -186,14 +187,6 @@ class LegFeature(ABC):
                                           np.asarray(base_points, float).T)
         return np.asarray(out, dtype=float).T.reshape(6, self.rows)
 
-    def measured(self, state: TaskState) -> np.ndarray:
-        """(n, 6, rows) the feature of a task state's legs."""
-        n = len(state)
-        out = self.value_function.map(6 * n)(
-            state.directions.reshape(-1, 3).T, state.lengths.reshape(1, -1),
-            np.broadcast_to(state.base_points, (n, 6, 3)).reshape(-1, 3).T)
-        return np.asarray(out, dtype=float).T.reshape(n, 6, self.rows)
-
 
 class FeatureTask(LegBlockTask):
     """A :class:`LegFeature` of the six legs towards a desired value, as a
@@ -216,15 +209,10 @@ class FeatureTask(LegBlockTask):
         star = np.broadcast_to(self.desired.reshape(-1, 6, r), (n, 6, r))
         return np.concatenate([A, star], axis=-1)
 
-    def _blocks(self, state: TaskState) -> tuple[np.ndarray, np.ndarray]:
-        n, r = len(state), self.feature.rows
-        p = self._params(state).reshape(6 * n, -1)
-        e, L = self.feature.block_function.map(6 * n)(
-            state.directions.reshape(-1, 3).T, state.lengths.reshape(1, -1), p[:, :3].T,
-            p[:, 3:].T)
-        e = np.asarray(e, dtype=float).T.reshape(n, 6 * r)
-        L = np.asarray(L, dtype=float).reshape(r, 6 * n, 6).transpose(1, 0, 2)
-        return e, L.reshape(n, 6 * r, 6)
+    def _blocks(self, state: TaskState) -> list[np.ndarray]:
+        p = self._params(state).reshape(6 * len(state), -1)
+        return map_blocks(self.feature.block_function, state.directions.reshape(-1, 3),
+                          state.lengths.reshape(-1), p[:, :3], p[:, 3:])
 
     def jacobian_dot_twist(self, state: TaskState, twist: np.ndarray) -> np.ndarray:
         out = evaluate_legs(self.feature.second_order, state, self._params(state), twist)
@@ -239,7 +227,5 @@ class FeatureTask(LegBlockTask):
         pd[:, 3:] = np.asarray(rate, float).reshape(-1, r)
         pdd[:, 3:] = np.asarray(acceleration, float).reshape(-1, r)
         tau = np.repeat(np.asarray(twist, float).reshape(n, 6), 6, axis=0)
-        e_t, e_tt = self.feature.reference.map(6 * n)(s.reshape(-1, 4).T, p.T, tau.T, pd.T,
-                                                      pdd.T)
-        return (np.asarray(e_t, float).T.reshape(n, 6 * r),
-                np.asarray(e_tt, float).T.reshape(n, 6 * r))
+        e_t, e_tt = map_blocks(self.feature.reference, s.reshape(-1, 4), p, tau, pd, pdd)
+        return e_t.reshape(n, 6 * r), e_tt.reshape(n, 6 * r)
