@@ -20,7 +20,6 @@ from typing import Any, final
 import numpy as np
 
 from controllers.data import (
-    FEATURES,
     GOAL_FIELDS,
     TRIAL_ZERO,
     Command,
@@ -43,8 +42,8 @@ class Controller(RemembersOptions, ABC):
     """A controller: ``reset_batch(contexts)`` once, then ``step_batch(observations)``
     every period, over the trials of a batch (``docs/plugins.md``).
 
-    Subclasses set ``name`` and ``features`` (subset of :data:`FEATURES`), say what
-    they command in ``actuation`` (leg velocities unless set to
+    Subclasses set ``name`` and ``features`` (of ``lengths``, ``normals``, ``lines``,
+    ``directions``), say what they command in ``actuation`` (leg velocities unless set to
     :attr:`~hexapod.actuation.Actuation.FORCE`). A class is its own factory: its
     constructor takes the options as keyword arguments.
 
@@ -157,7 +156,8 @@ class Controller(RemembersOptions, ABC):
             ContextError: A context the controller cannot use (where rows are computed
                 as arrays, the batch's reset fails as a whole).
         """
-        isolate = self._rows_by_instance()
+        isolate = (type(self).step_batch is Controller.step_batch  # rows by their instances
+                   and type(self).step_arrays is Controller.step_arrays)
         instances: list[Any] = []
         self.crashes = {}
         for k, ctx in enumerate(contexts):
@@ -173,12 +173,6 @@ class Controller(RemembersOptions, ABC):
             inst.trial_context = ctx
             instances.append(inst)
         self.trial_instances = instances
-
-    @classmethod
-    def _rows_by_instance(cls) -> bool:
-        """Whether every row of a batch is stepped by its trial's instance."""
-        return (cls.step_batch is Controller.step_batch
-                and cls.step_arrays is Controller.step_arrays)
 
     def step_batch(self, observations: ObservationBatch) -> CommandBatch:
         """The commands of every row: the rows the controller computes as arrays
@@ -323,7 +317,7 @@ from controllers.registry import Registry as Registry  # noqa: E402
 from controllers.registry import registry as registry  # noqa: E402
 
 __all__ = [
-    "FEATURES", "GOAL_FIELDS", "Actuation", "Command", "CommandBatch", "Controller",
+    "GOAL_FIELDS", "Actuation", "Command", "CommandBatch", "Controller",
     "ControllerContext", "FailedReset", "Goal", "GoalBatch", "Observation", "ObservationBatch",
     "checked_command", "observation_problem", "usable_observation_problem",
 ]

@@ -1,27 +1,19 @@
 """The task interface (in the manner of Pink's ``Task``) and the state tasks read.
 
-A task is a pure object: from a :class:`TaskState` (one row per trial) it gives
+A task is a pure object: from a :class:`TaskState` (one row per trial) it gives the
+error ``e``, the Jacobian ``L`` (``e_dot = L tau`` for the platform twist ``tau = (v, w)``
+in the frame of the state, at its origin), the second-order term ``L_dot tau`` (``e_ddot
+= L tau_dot + L_dot tau``) and, for a moving desired value, the reference terms ``e_t``
+and ``e_tt``.
 
-- :meth:`Task.error` ``e`` (n, m),
-- :meth:`Task.jacobian` ``L`` (n, m, 6), the interaction with the platform twist
-  ``tau = (v, w)`` (``e_dot = L tau``, twist in the frame of the state, at its origin),
-- :meth:`Task.jacobian_dot_twist` ``L_dot tau`` (n, m): the derivative of the Jacobian
-  along the motion with a constant twist, times that twist; the term a second-order
-  law (computed torque) adds to ``L tau_dot``: ``e_ddot = L tau_dot + L_dot tau``;
-- :meth:`Task.reference_terms` ``e_t`` and ``e_tt`` (n, m): what a desired value moving
-  on its own adds, ``e_dot = L tau + e_t``, ``e_ddot = L tau_dot + L_dot tau + e_tt``
-  (:func:`reference_function`, from the same block error by automatic differentiation).
-
-Each feature task defines its block once, as a CasADi expression (error and Jacobian of
-one leg or one edge: ``direction_block``, ``edge_block``, ``joint_length_block``). From
-that one definition come the task's ``error``/``jacobian`` (its ``block_function``
-mapped over the rows), the compiled law cores (:mod:`controllers.law_kernel` generates
-its C from the same expressions) and the second-order term, generated from the block's
-error and the state's motion, ``L_dot tau = d/ds (L(s) tau) s_dot(s, tau)``
-(:func:`second_order_function`), so it is never written by hand. The numpy functions of
-``tests/controllers/interaction_oracle.py`` are the test oracle.
-Each is checked against finite differences of the true kinematics
-(``tests/controllers/test_tasks.py``).
+Each feature task defines its block once, as a CasADi expression of one leg or one edge
+(``direction_block``, ``edge_block``, ``joint_length_block``): the task's error and
+Jacobian evaluate it (mapped over the rows, :func:`map_blocks`), the compiled law cores
+(:mod:`controllers.law_kernel`) are generated from it, and the second-order and reference
+terms differentiate its error (:func:`second_order_function`,
+:func:`reference_function`), never written by hand. The numpy functions of
+``tests/controllers/interaction_oracle.py`` are the test oracle; each task is checked
+against finite differences of the true kinematics (``tests/controllers/test_tasks.py``).
 """
 
 from __future__ import annotations

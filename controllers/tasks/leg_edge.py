@@ -402,13 +402,10 @@ class LegEdgeTask(LegBlockTask):
 
     def __init__(self, desired: np.ndarray, kind: str | EdgeFeature = "normals",
                  line_matrix: np.ndarray | None = None) -> None:
-        feature = edge_feature(kind)
-        if feature.lines and line_matrix is None:
-            raise ValueError(f"kind {feature.kind!r} needs the camera's line_matrix")
+        self.feature = edge_feature(kind)
+        self.line_matrix_inv_t = self.feature.line_inv_t(line_matrix)  # checked for lines
         self.desired = np.asarray(desired, dtype=float)
-        self.feature = feature
         self.line_matrix = np.eye(3) if line_matrix is None else np.asarray(line_matrix, float)
-        self.line_matrix_inv_t = np.linalg.inv(self.line_matrix).T
 
     def _star(self, n: int) -> np.ndarray:
         return np.ascontiguousarray(np.broadcast_to(self.desired, (n, 6, 2, 3)))

@@ -3,29 +3,18 @@ plugin's own feature alike.
 
 A :class:`LegFeature` is a function of ONE leg seen in the camera frame: its unit
 direction ``u_i``, its length ``q_i`` and its (estimated) base point ``A_i``, e.g. the
-leg direction ``u_i`` (:data:`controllers.tasks.leg_direction.LEG_DIRECTIONS`), the
-platform joint ``B_i = A_i + q_i u_i`` (``tests/controllers/plugin_feature_joints.py``)
-or the length ``q_i``. The feature is written ONCE, symbolically (:meth:`LegFeature.value`,
-optionally :meth:`LegFeature.error`, and :meth:`LegFeature.block` where a closed form
-exists); everything the controllers need is derived from it by automatic
-differentiation (CasADi):
-
-- the desired value from a goal's leg directions and lengths (:meth:`LegFeature.desired`);
-- the block of one leg, error ``e`` and interaction ``L`` with ``e_dot = L tau`` (the
-  leg moving with the platform twist ``tau = (v, w)`` by
-  :func:`~controllers.tasks.base.leg_rates`, ``docs/math.md`` §3): :meth:`LegFeature.block`,
-  from which :func:`controllers.law_kernel.feature_law_function` generates the law core
-  (the built-in leg-direction law's included);
-- the second-order term ``L_dot tau`` and the reference terms ``e_t``, ``e_tt`` of a
-  moving desired value (:func:`~controllers.tasks.base.second_order_function`,
-  :func:`~controllers.tasks.base.reference_function`);
-- the feature along a pose trajectory with its rate and acceleration (the computed-torque
-  reference, :attr:`LegFeature.motion_function`).
+leg direction ``u_i`` (:data:`controllers.tasks.leg_direction.LEG_DIRECTIONS`) or the
+platform joint ``B_i = A_i + q_i u_i`` (``tests/controllers/plugin_feature_joints.py``).
+The feature is written ONCE, symbolically (:meth:`LegFeature.value`, optionally
+:meth:`LegFeature.error`, and :meth:`LegFeature.block` where a closed form exists);
+everything else is derived from it by automatic differentiation: the desired value of a
+goal, the block of one leg (error and interaction, the leg moving with the platform twist
+by :func:`~controllers.tasks.base.leg_rates`, ``docs/math.md`` §3), the second-order and
+reference terms, and the feature along a pose trajectory (the computed-torque reference).
 
 From a feature, :func:`controllers.features.controllers_for` builds the pseudo-inverse,
 limit-QP, predictive and computed-torque controllers, and :class:`FeatureTask` is its
-numpy :class:`~controllers.tasks.base.Task` (the computed-torque law's fallback path and
-the tests' oracle).
+numpy :class:`~controllers.tasks.base.Task`.
 """
 
 from __future__ import annotations
