@@ -311,8 +311,6 @@ def checked_command(cmd: Any, name: str, actuation: Actuation) -> Command:
 # The registry lives in :mod:`controllers.registry` (documented there); re-exported for the
 # names users import from here.
 from controllers.registry import ENTRY_POINT_GROUP as ENTRY_POINT_GROUP  # noqa: E402
-from controllers.registry import ControllerFactory as ControllerFactory  # noqa: E402
-from controllers.registry import ControllerInfo as ControllerInfo  # noqa: E402
 from controllers.registry import Registry as Registry  # noqa: E402
 from controllers.registry import registry as registry  # noqa: E402
 

@@ -372,11 +372,6 @@ class CommandBatch:
             return np.zeros_like(self.velocities) if self.forces is None else self.forces
         return self.velocities
 
-    @property
-    def ok(self) -> np.ndarray:
-        """(n,) True where the controller produced a movement command."""
-        return np.array([r is None for r in self.reasons], dtype=bool)
-
     @staticmethod
     def zeros(n: int, actuation: Actuation = Actuation.VELOCITY) -> CommandBatch:
         """``n`` rows of zero commands, zero norms and no reasons, to be filled."""

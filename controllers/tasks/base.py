@@ -107,7 +107,6 @@ class Task(ABC):
         raise NotImplementedError(f"{self.name}: no moving reference")
 
 
-
 class LegBlockTask(Task):
     """A task whose error and Jacobian are :attr:`block` rows per leg, a block function
     mapped over the legs (or edges) of every row (:meth:`_blocks`)."""
@@ -122,6 +121,7 @@ class LegBlockTask(Task):
     def jacobian(self, state: TaskState) -> np.ndarray:
         return np.reshape(self._blocks(state)[1], (len(state), 6 * self.block, 6))
 
+
 def leg_rates(u: ca.SX, A: ca.SX, q: ca.SX, tau: ca.SX) -> tuple[ca.SX, ca.SX]:
     """``u_dot`` and ``q_dot`` of a leg moved by the platform twist (``docs/math.md`` §3):
     the platform joint ``B = A + q u`` moves at ``B_dot = v + w x B``."""
@@ -129,6 +129,11 @@ def leg_rates(u: ca.SX, A: ca.SX, q: ca.SX, tau: ca.SX) -> tuple[ca.SX, ca.SX]:
     Bdot = tau[:3] + ca.cross(tau[3:], B)
     qdot = ca.dot(u, Bdot)
     return (Bdot - qdot * u) / q, qdot
+
+
+def leg_state_rate(s: ca.SX, p: ca.SX, tau: ca.SX) -> ca.SX:
+    """``(u_dot, q_dot)`` of the leg state ``s = (u, q)``, parameters ``p = (A, ...)``."""
+    return ca.vertcat(*leg_rates(s[:3], p[:3], s[3], tau))
 
 
 def second_order_function(name: str, n_state: int, n_param: int,
@@ -174,9 +179,7 @@ def leg_second_order(name: str, n_param: int, error: Callable[[ca.SX, ca.SX], ca
                      ) -> ca.Function:
     """:func:`second_order_function` of a per-leg feature: state ``(u, q)`` (4), parameters
     ``(A, ...)`` (``n_param``, the base point first), the leg moved by :func:`leg_rates`."""
-    return second_order_function(
-        name, 4, n_param, error,
-        lambda s, p, tau: ca.vertcat(*leg_rates(s[:3], p[:3], s[3], tau)))
+    return second_order_function(name, 4, n_param, error, leg_state_rate)
 
 
 def evaluate_legs(function: ca.Function, state: TaskState, params: np.ndarray,
@@ -254,6 +257,6 @@ def unit(x: np.ndarray) -> np.ndarray:
     return x / np.sqrt(np.einsum("...k,...k->...", x, x))[..., None]
 
 
-__all__ = ["Task", "TaskState", "evaluate_legs", "leg_rates", "leg_second_order", "map_blocks",
-           "reference_function", "reference_parts", "second_order_function", "stack_blocks",
-           "sx_skew", "sx_unit", "unit"]
+__all__ = ["Task", "TaskState", "evaluate_legs", "leg_rates", "leg_second_order",
+           "leg_state_rate", "map_blocks", "reference_function", "reference_parts",
+           "second_order_function", "stack_blocks", "sx_skew", "sx_unit", "unit"]

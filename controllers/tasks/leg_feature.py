@@ -29,7 +29,7 @@ from controllers.tasks.base import (
     LegBlockTask,
     TaskState,
     evaluate_legs,
-    leg_rates,
+    leg_state_rate,
     map_blocks,
     reference_function,
     second_order_function,
@@ -83,10 +83,6 @@ class LegFeature(ABC):
         """Error of the leg state ``s = (u, q)`` with parameters ``p = (A, f*)``."""
         return self.error(self.value(s[:3], s[3], p[:3]), p[3:])
 
-    @staticmethod
-    def _leg_rate(s: ca.SX, p: ca.SX, tau: ca.SX) -> ca.SX:
-        return ca.vertcat(*leg_rates(s[:3], p[:3], s[3], tau))
-
     @cached_property
     def value_function(self) -> ca.Function:
         """``(u, q, A) -> f`` of one leg."""
@@ -101,7 +97,7 @@ class LegFeature(ABC):
         q, tau = ca.SX.sym("q"), ca.SX.sym("tau", 6)
         s, p = ca.vertcat(u, q), ca.vertcat(A, fs)
         e = self._leg_error(s, p)
-        L = ca.jacobian(ca.jtimes(e, s, self._leg_rate(s, p, tau)), tau)
+        L = ca.jacobian(ca.jtimes(e, s, leg_state_rate(s, p, tau)), tau)
         return ca.Function(f"{self.c_name}_derived_block", [u, q, A, fs], [e, L])
 
     def block(self, u: ca.SX, q: ca.SX, A: ca.SX, f_star: ca.SX) -> tuple[ca.SX, ca.SX]:
@@ -122,14 +118,14 @@ class LegFeature(ABC):
     def second_order(self) -> ca.Function:
         """``(s, p, tau) -> L_dot tau`` of one leg, ``s = (u, q)``, ``p = (A, f*)``."""
         return second_order_function(f"{self.c_name}_second_order", 4, 3 + self.rows,
-                                     self._leg_error, self._leg_rate)
+                                     self._leg_error, leg_state_rate)
 
     @cached_property
     def reference(self) -> ca.Function:
         """``(s, p, tau, p_dot, p_ddot) -> (e_t, e_tt)`` of one leg (layout of
         :attr:`second_order`)."""
         return reference_function(f"{self.c_name}_reference", 4, 3 + self.rows,
-                                  self._leg_error, self._leg_rate)
+                                  self._leg_error, leg_state_rate)
 
     @cached_property
     def c_name(self) -> str:
