@@ -6,7 +6,6 @@ and a batch of trials (:class:`Observation` / :class:`ObservationBatch`, :class:
 
 from __future__ import annotations
 
-import logging
 from dataclasses import dataclass, field, fields
 from typing import Any
 
@@ -14,8 +13,6 @@ import numpy as np
 
 from hexapod.actuation import Actuation
 from hexapod.geometry import HexapodGeometry
-
-log = logging.getLogger(__name__)
 
 #: The observed unit-vector feature fields: name, shape of one trial's, visibility mask
 #: (the ``field``, ``shape`` and ``visibility`` of the built-in feature objects,

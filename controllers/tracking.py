@@ -29,7 +29,6 @@ retargeted, no feed-forward added.
 
 from __future__ import annotations
 
-import logging
 import math
 from collections.abc import Collection, Sequence
 from dataclasses import dataclass, replace
@@ -51,8 +50,6 @@ from controllers.data import (
 )
 from controllers.exceptions import ContextError
 from hexapod.actuation import Actuation
-
-log = logging.getLogger(__name__)
 
 
 def reference_goals(context: ControllerContext, times: np.ndarray,
