@@ -292,8 +292,6 @@ def checked_command(cmd: Any, name: str, actuation: Actuation) -> Command:
         values = cmd.forces if actuation is Actuation.FORCE else cmd.velocities
         if type(values) is np.ndarray and values.shape == (6,):
             return cmd
-        if np.shape(cmd.values) == (6,):
-            return cmd
     from controllers.exceptions import CommandError
 
     if not all(hasattr(cmd, a) for a in ("values", "reason", "actuation", "error_norm")):

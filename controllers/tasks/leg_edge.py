@@ -45,12 +45,6 @@ def line_of_normal(normal: ca.SX, line_matrix_inv_t: ca.SX) -> ca.SX:
     return sx_unit(line_matrix_inv_t @ normal)
 
 
-def normal_of_line(line: ca.SX, line_matrix_t: ca.SX) -> ca.SX:
-    """The unit edge normal ``n = K^T l / |K^T l|`` of an image line (``line_matrix_t`` is
-    ``K^T``, (3, 3))."""
-    return sx_unit(line_matrix_t @ line)
-
-
 def leg_direction_of_edges(first: ca.SX, second: ca.SX) -> ca.SX:
     """The leg direction ``u = (n_2 x n_1) / |n_2 x n_1|`` of a leg's two edge normals
     (``vision/legs.py`` order)."""
@@ -151,8 +145,9 @@ class EdgeFeature(BuiltinFeature):
         return line_of_normal(normal, line_matrix_inv_t) if self.lines else normal
 
     def sx_normal(self, feature: ca.SX, line_matrix_t: ca.SX) -> ca.SX:
-        """The edge normal of a measured feature: itself, or :func:`normal_of_line`."""
-        return normal_of_line(feature, line_matrix_t) if self.lines else feature
+        """The edge normal of a measured feature: itself, or the normal of a line,
+        ``K^T l / |K^T l|`` (``line_matrix_t`` is ``K^T``)."""
+        return sx_unit(line_matrix_t @ feature) if self.lines else feature
 
     def line_matrices(self, line_matrix_t: ca.SX, line_matrix_inv_t: ca.SX
                       ) -> tuple[ca.SX, ca.SX] | tuple[None, None]:
