@@ -231,9 +231,10 @@ class ObservationBatch:
 
     def rows(self, rows: np.ndarray) -> ObservationBatch:
         """The batch of the rows ``rows`` (copies)."""
-        values = {name: getattr(self, name) for name in _BATCH_FIELDS}
-        return ObservationBatch(**{name: None if v is None else np.asarray(v)[rows]
-                                   for name, v in values.items()})
+        def take(value: Any) -> Any:
+            return None if value is None else np.asarray(value)[rows]
+
+        return ObservationBatch(**{name: take(getattr(self, name)) for name in _BATCH_FIELDS})
 
     @staticmethod
     def of(obs: Observation) -> ObservationBatch | None:
