@@ -36,18 +36,10 @@ from collections.abc import Iterator, Mapping
 from importlib import import_module
 from typing import TYPE_CHECKING
 
-from controllers.base import (
-    Actuation,
-    Command,
-    Controller,
-    ControllerContext,
-    Goal,
-    Observation,
-    Registry,
-    observation_problem,
-    registry,
-)
-from controllers.registry import ControllerFactory
+from controllers.base import Controller
+from controllers.data import Command, ControllerContext, Goal, Observation, observation_problem
+from controllers.registry import ControllerFactory, Registry, registry
+from hexapod.actuation import Actuation
 from hexapod.lazy import lazy_names
 
 if TYPE_CHECKING:  # imported on first use (module __getattr__ below)

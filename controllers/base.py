@@ -20,7 +20,6 @@ from typing import Any, final
 import numpy as np
 
 from controllers.data import (
-    FEATURES,
     GOAL_FIELDS,
     TRIAL_ZERO,
     Command,
@@ -43,8 +42,8 @@ class Controller(RemembersOptions, ABC):
     """A controller: ``reset_batch(contexts)`` once, then ``step_batch(observations)``
     every period, over the trials of a batch (``docs/plugins.md``).
 
-    Subclasses set ``name`` and ``features`` (subset of :data:`FEATURES`), say what
-    they command in ``actuation`` (leg velocities unless set to
+    Subclasses set ``name`` and ``features`` (of ``lengths``, ``normals``, ``lines``,
+    ``directions``), say what they command in ``actuation`` (leg velocities unless set to
     :attr:`~hexapod.actuation.Actuation.FORCE`). A class is its own factory: its
     constructor takes the options as keyword arguments.
 
@@ -62,12 +61,9 @@ class Controller(RemembersOptions, ABC):
     ``step(observation)`` (and maybe ``retarget(goal)``), keeps working: the base takes
     them as its per-trial methods (the batch then steps one instance per trial).
 
-    Failures of one trial stay that trial's (:meth:`step_rows`, :meth:`reset_batch`): a
-    row whose instance raises or returns a command of the wrong type, shape or kind gets
-    a refusal and its exception in :attr:`crashes` (the study ends that trial at its step
-    with it); where every row is stepped by its instance, a trial whose reset raises
-    fails at its first step with that exception. A batch step that raises as a whole
-    (an own ``step_batch``, :meth:`step_arrays`) fails the batch.
+    Failures of one trial stay that trial's (:meth:`step_rows`, :meth:`reset_batch`); a
+    batch step that raises as a whole (an own ``step_batch``, :meth:`step_arrays`) fails
+    the batch.
     """
 
     #: Registry name.
@@ -117,13 +113,11 @@ class Controller(RemembersOptions, ABC):
     @final
     def step(self, observation: Observation) -> Command:
         """The command of one observation: :meth:`step_batch` of a batch of one (never
-        raises for bad measurements). Where the batch step is the base's, a lone row is
-        stepped by its trial's instance (:meth:`step_row`): that call, directly.
+        raises for bad measurements; with the base's batch step, :meth:`step_row`).
 
         Raises:
             Exception: The trial's own failure (what its step raised, or a
-                :class:`~controllers.exceptions.CommandError` for a malformed command,
-                isolated in :attr:`crashes` by a batch step).
+                :class:`~controllers.exceptions.CommandError` for a malformed command).
         """
         if not self.trial_instances:
             return Command.refuse(f"{self.name}: reset(context) was not called",
@@ -155,16 +149,15 @@ class Controller(RemembersOptions, ABC):
         options, :meth:`clone`), each reset with its context by :meth:`reset_trial`.
 
         Where every row is stepped by its trial's instance (neither :meth:`step_batch`
-        nor :meth:`step_arrays` overridden: a per-trial plugin, a
-        :class:`~controllers.batch.ForeignController`), a trial whose reset raises is
-        that trial's failure: its place holds a :class:`FailedReset`, whose step raises
-        the exception again (the trial fails at step 0 with it; the others run).
+        nor :meth:`step_arrays` overridden), a trial whose reset raises fails alone, at
+        its first step (its place holds a :class:`FailedReset`).
 
         Raises:
             ContextError: A context the controller cannot use (where rows are computed
                 as arrays, the batch's reset fails as a whole).
         """
-        isolate = self._rows_by_instance()
+        isolate = (type(self).step_batch is Controller.step_batch  # rows by their instances
+                   and type(self).step_arrays is Controller.step_arrays)
         instances: list[Any] = []
         self.crashes = {}
         for k, ctx in enumerate(contexts):
@@ -180,12 +173,6 @@ class Controller(RemembersOptions, ABC):
             inst.trial_context = ctx
             instances.append(inst)
         self.trial_instances = instances
-
-    @classmethod
-    def _rows_by_instance(cls) -> bool:
-        """Whether every row of a batch is stepped by its trial's instance."""
-        return (cls.step_batch is Controller.step_batch
-                and cls.step_arrays is Controller.step_arrays)
 
     def step_batch(self, observations: ObservationBatch) -> CommandBatch:
         """The commands of every row: the rows the controller computes as arrays
@@ -210,12 +197,9 @@ class Controller(RemembersOptions, ABC):
     def step_rows(self, observations: ObservationBatch, rows: np.ndarray,
                   out: CommandBatch) -> None:
         """Step ``rows`` of a batch one by one (:meth:`step_row`), writing the commands
-        into ``out``.
-
-        A row whose step raises, or returns a command of the wrong type, shape or kind
-        (:func:`checked_command`), is that trial's failure: it gets a refusal and its
-        exception in :attr:`crashes` (by position in the batch); the other rows are
-        stepped as usual."""
+        into ``out``: a row whose step raises, or returns a command of the wrong type,
+        shape or kind (:func:`checked_command`), gets a refusal and its exception in
+        :attr:`crashes` (by position in the batch); the other rows are stepped as usual."""
         trials = observations.trials
         for k in rows.tolist():
             out.put(k, self._row_command(k, int(trials[k]), observations.item(k)))
@@ -276,8 +260,7 @@ class Controller(RemembersOptions, ABC):
 
 class FailedReset:
     """The place of a trial whose reset raised (:meth:`Controller.reset_batch`): its
-    step raises that exception again, so the trial fails at its first step with it
-    (nothing is rerun).
+    step raises that exception again.
 
     Args:
         exc: The reset's exception.
@@ -309,8 +292,6 @@ def checked_command(cmd: Any, name: str, actuation: Actuation) -> Command:
         values = cmd.forces if actuation is Actuation.FORCE else cmd.velocities
         if type(values) is np.ndarray and values.shape == (6,):
             return cmd
-        if np.shape(cmd.values) == (6,):
-            return cmd
     from controllers.exceptions import CommandError
 
     if not all(hasattr(cmd, a) for a in ("values", "reason", "actuation", "error_norm")):
@@ -328,13 +309,11 @@ def checked_command(cmd: Any, name: str, actuation: Actuation) -> Command:
 # The registry lives in :mod:`controllers.registry` (documented there); re-exported for the
 # names users import from here.
 from controllers.registry import ENTRY_POINT_GROUP as ENTRY_POINT_GROUP  # noqa: E402
-from controllers.registry import ControllerFactory as ControllerFactory  # noqa: E402
-from controllers.registry import ControllerInfo as ControllerInfo  # noqa: E402
 from controllers.registry import Registry as Registry  # noqa: E402
 from controllers.registry import registry as registry  # noqa: E402
 
 __all__ = [
-    "FEATURES", "GOAL_FIELDS", "Actuation", "Command", "CommandBatch", "Controller",
+    "GOAL_FIELDS", "Actuation", "Command", "CommandBatch", "Controller",
     "ControllerContext", "FailedReset", "Goal", "GoalBatch", "Observation", "ObservationBatch",
     "checked_command", "observation_problem", "usable_observation_problem",
 ]

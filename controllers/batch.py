@@ -12,15 +12,10 @@ from __future__ import annotations
 from collections.abc import Callable
 from typing import Any
 
-from controllers.base import (
-    Actuation,
-    Command,
-    Controller,
-    ControllerContext,
-    Goal,
-    Observation,
-    registry,
-)
+from controllers.base import Controller
+from controllers.data import Command, ControllerContext, Goal, Observation
+from controllers.registry import registry
+from hexapod.actuation import Actuation
 
 
 def actuation_of(controller: Any) -> Actuation:

@@ -6,7 +6,6 @@ and a batch of trials (:class:`Observation` / :class:`ObservationBatch`, :class:
 
 from __future__ import annotations
 
-import logging
 from dataclasses import dataclass, field, fields
 from typing import Any
 
@@ -15,10 +14,6 @@ import numpy as np
 from hexapod.actuation import Actuation
 from hexapod.geometry import HexapodGeometry
 
-log = logging.getLogger(__name__)
-
-#: Feature names a controller may declare in ``Controller.features``.
-FEATURES = ("lengths", "normals", "lines", "directions")
 #: The observed unit-vector feature fields: name, shape of one trial's, visibility mask
 #: (the ``field``, ``shape`` and ``visibility`` of the built-in feature objects,
 #: :mod:`controllers.tasks.feature_kind`).
@@ -195,20 +190,12 @@ class Command:
 
 @dataclass
 class ObservationBatch:
-    """Observations of several trials at one period: :class:`Observation` fields with a
-    leading trial axis (n, ...), for :meth:`Controller.step_batch`.
+    """Observations of several trials at one period, for :meth:`Controller.step_batch`:
+    the :class:`Observation` fields (but ``quality``) with a leading trial axis (n, ...),
+    a field None for every row or none, and
 
     Attributes:
         trials: (n,) indices of the trials, into the contexts given to ``reset_batch``.
-        t: (n,) times [s].
-        lengths: (n, 6) measured leg lengths [m].
-        normals: (n, 6, 2, 3) or None.
-        lines: (n, 6, 2, 3) or None.
-        directions: (n, 6, 3) or None.
-        edge_visible: (n, 6, 2) bool.
-        direction_visible: (n, 6) bool.
-        image_t: (n,) capture times of the images [s], or None (taken at ``t``).
-        q_dot: (n, 6) measured leg velocities [m/s], or None.
     """
 
     trials: np.ndarray
@@ -247,13 +234,7 @@ class ObservationBatch:
         def take(value: Any) -> Any:
             return None if value is None else np.asarray(value)[rows]
 
-        return ObservationBatch(
-            trials=np.asarray(self.trials)[rows], t=np.asarray(self.t)[rows],
-            lengths=np.asarray(self.lengths)[rows], normals=take(self.normals),
-            lines=take(self.lines), directions=take(self.directions),
-            edge_visible=np.asarray(self.edge_visible)[rows],
-            direction_visible=np.asarray(self.direction_visible)[rows],
-            image_t=take(self.image_t), q_dot=take(self.q_dot))
+        return ObservationBatch(**{name: take(getattr(self, name)) for name in _BATCH_FIELDS})
 
     @staticmethod
     def of(obs: Observation) -> ObservationBatch | None:
@@ -304,6 +285,8 @@ class ObservationBatch:
         return batch
 
 
+#: The init fields of :class:`ObservationBatch`.
+_BATCH_FIELDS = tuple(f.name for f in fields(ObservationBatch) if f.init)
 #: The shapes and kinds of the fields of one observation, in :meth:`ObservationBatch.of`'s
 #: order (lengths, edge_visible, direction_visible, normals, lines, directions, q_dot).
 _SHAPES = ((6,), (6, 2), (6,), (6, 2, 3), (6, 2, 3), (6, 3), (6,))
@@ -330,19 +313,9 @@ TRIAL_ZERO.flags.writeable = False
 
 @dataclass
 class GoalBatch(_GoalFields):
-    """Goals of several trials: :class:`Goal` fields with a leading row axis (m, ...),
-    for ``retarget_batch(trials, goals)`` (the goal of each period of a trajectory task,
-    :mod:`controllers.tracking`). A field is None when no row has it.
-
-    Attributes:
-        normals: (m, 6, 2, 3) or None.
-        lines: (m, 6, 2, 3) or None.
-        directions: (m, 6, 3) or None.
-        lengths: (m, 6) [m] or None.
-        rotation: (m, 3, 3) or None.
-        translation: (m, 3) [m] or None.
-        edge_visible: (m, 6, 2) bool or None.
-    """
+    """Goals of several trials: the :class:`Goal` fields with a leading row axis (m, ...),
+    a field None when no row has it, for ``retarget_batch(trials, goals)`` (the goal of
+    each period of a trajectory task, :mod:`controllers.tracking`)."""
 
     def __len__(self) -> int:
         for name in GOAL_FIELDS:
@@ -396,11 +369,6 @@ class CommandBatch:
         if self.actuation is Actuation.FORCE:
             return np.zeros_like(self.velocities) if self.forces is None else self.forces
         return self.velocities
-
-    @property
-    def ok(self) -> np.ndarray:
-        """(n,) True where the controller produced a movement command."""
-        return np.array([r is None for r in self.reasons], dtype=bool)
 
     @staticmethod
     def zeros(n: int, actuation: Actuation = Actuation.VELOCITY) -> CommandBatch:

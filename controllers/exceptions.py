@@ -45,36 +45,44 @@ class PluginLoadError(ControllerError):
         super().__init__(f"controller plugin '{name}' from {source} failed to load: {reason}")
 
 
-class ContextError(ControllerError, ValueError):
-    """A controller context lacks what the controller needs, or holds bad values.
+class NamedInputError(ControllerError, ValueError):
+    """A named input of a controller (a context field, an option) is missing or bad: the
+    message is ``"<controller>: <what> '<name>': <problem>"``.
 
     Attributes:
         controller: The controller name.
-        field: The missing or invalid field.
         problem: What is wrong.
     """
+
+    #: What the input is, in the message.
+    what = "input"
+
+    def __init__(self, controller: str, name: str, problem: str) -> None:
+        self.controller = controller
+        self.problem = problem
+        super().__init__(f"{controller}: {self.what} '{name}': {problem}")
+
+
+class ContextError(NamedInputError):
+    """A controller context lacks what the controller needs, or holds bad values
+    (:class:`NamedInputError`; ``field``: the missing or invalid field)."""
+
+    what = "context field"
 
     def __init__(self, controller: str, field: str, problem: str) -> None:
-        self.controller = controller
         self.field = field
-        self.problem = problem
-        super().__init__(f"{controller}: context field '{field}': {problem}")
+        super().__init__(controller, field, problem)
 
 
-class OptionError(ControllerError, ValueError):
-    """An option given to a controller is unknown or out of range.
+class OptionError(NamedInputError):
+    """An option given to a controller is unknown or out of range
+    (:class:`NamedInputError`; ``option``: the option)."""
 
-    Attributes:
-        controller: The controller name.
-        option: The option.
-        problem: What is wrong.
-    """
+    what = "option"
 
     def __init__(self, controller: str, option: str, problem: str) -> None:
-        self.controller = controller
         self.option = option
-        self.problem = problem
-        super().__init__(f"{controller}: option '{option}': {problem}")
+        super().__init__(controller, option, problem)
 
 
 class CommandError(ControllerError, ValueError):

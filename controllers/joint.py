@@ -12,9 +12,9 @@ from collections.abc import Sequence
 
 import numpy as np
 
-from controllers.base import (
+from controllers.base import Controller
+from controllers.data import (
     Command,
-    Controller,
     ControllerContext,
     Goal,
     Observation,

@@ -10,19 +10,12 @@ Pose servo (twist in the base frame, at its origin):
 ``w = lambda log(R* R^T)``, ``v = lambda (t* - t) - w x t``, so that the
 orientation error and the platform origin both decay as ``exp(-lambda t)``.
 
-Speed: everything after the forward kinematics (pose error with ``log`` on SO(3),
-gain, twist, nominal ``J_inv``, ``q_dot``, the twist in the camera frame and the
-condition number of ``J_inv`` from the Jacobi eigenvalues of ``J_inv^T J_inv``) is
-one CasADi expression compiled to C (:func:`pose_servo_kernel`, the technique of
-:mod:`controllers.law_kernel`): one call instead of some forty numpy calls. It is the
-only computation of the command: near a half-turn of orientation error
-(``theta > pi - 1e-3``) its ``log`` takes the axis from the symmetric part of the
-rotation, as :func:`hexapod.se3.log_so3` does, and ``compiled=False`` evaluates the
-same CasADi function in its virtual machine. Its ``status`` output (0: a command,
-:data:`NON_FINITE`: a non-finite value) is the refusal reason of a row; the batch leaves
-only the rows whose forward kinematics fails (or whose lengths are not finite) to the
-trial's own step. The numpy formulas it replaced are its test oracle
-(``tests/controllers/model_based_oracle.py``).
+Everything after the forward kinematics (pose error with ``log`` on SO(3) (its
+half-turn case included, :func:`sx_log_so3`), gain, twist, nominal ``J_inv``, ``q_dot``,
+the twist in the camera frame, the condition number of ``J_inv``) is one CasADi
+expression compiled to C (:func:`pose_servo_kernel`; ``compiled=False`` evaluates it in
+CasADi's virtual machine), whose ``status`` output is a row's refusal reason. The numpy
+formulas it replaced are its test oracle (``tests/controllers/model_based_oracle.py``).
 """
 
 from __future__ import annotations
@@ -30,15 +23,14 @@ from __future__ import annotations
 from collections.abc import Sequence
 from dataclasses import replace
 from functools import lru_cache
-from typing import Any
 
 import casadi as ca
 import numpy as np
 
-from controllers.base import (
+from controllers.base import Controller
+from controllers.data import (
     Command,
     CommandBatch,
-    Controller,
     ControllerContext,
     Goal,
     GoalBatch,
@@ -188,22 +180,18 @@ class ModelBasedController(Controller):
             ContextError: No goal pose and no goal lengths, or invalid values.
         """
         geo = context.geometry
-        R, t = self._goal_pose(context.goal, geo)
+        self._aim(context.goal, geo)
         self.context = context
-        self._R_star, self._t_star = R.copy(), t.copy()
+        self.kernel = pose_servo_kernel(self.compiled)
         #: The last pose of the forward kinematics (its next warm start).
         self.estimate = PoseEstimate.of(*home_pose(geo))
         #: (6, 3) nominal base points ``A_i`` [m].
         self.base_points = np.asarray(geo.base_points, dtype=float)
         #: (6, 3) nominal platform points ``E_i`` in the platform frame [m].
         self.platform_points = np.asarray(geo.platform_points, dtype=float)
-        cam: Any = context.camera
-        pose = getattr(cam, "camera_from_base", None)
+        pose = getattr(context.camera, "camera_from_base", None)
         self._camera_from_base: Transform | None = pose if isinstance(pose, Transform) else None
-        self.kernel = pose_servo_kernel(self.compiled)
         x = self.servo_input
-        x[_IN["R_star"]] = self._R_star.reshape(9)
-        x[_IN["t_star"]] = self._t_star
         x[_IN["A"]] = self.base_points.reshape(18)
         x[_IN["E"]] = self.platform_points.reshape(18)
         g = self.gain
@@ -222,11 +210,14 @@ class ModelBasedController(Controller):
         """
         if self.context is None:
             raise ContextError(self.name, "context", "retarget(goal) before reset(context)")
-        R, t = self._goal_pose(goal, self.context.geometry)
+        self._aim(goal, self.context.geometry)
         self.context = replace(self.context, goal=goal)
-        self._R_star, self._t_star = R.copy(), t.copy()
-        self.servo_input[_IN["R_star"]] = self._R_star.reshape(9)
-        self.servo_input[_IN["t_star"]] = self._t_star
+
+    def _aim(self, goal: Goal, geo: HexapodGeometry) -> None:
+        """Write the goal pose (:meth:`_goal_pose`) into the servo input."""
+        R, t = self._goal_pose(goal, geo)
+        self.servo_input[_IN["R_star"]] = R.reshape(9)
+        self.servo_input[_IN["t_star"]] = t
 
     def _goal_pose(self, goal: Goal, geo: HexapodGeometry) -> tuple[np.ndarray, np.ndarray]:
         """The goal pose: ``goal.rotation`` and ``goal.translation``, else the nominal

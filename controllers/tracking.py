@@ -4,39 +4,31 @@ feed-forward term.
 A trajectory task gives the controller a reference pose trajectory
 (``ControllerContext.reference``, a :class:`hexapod.trajectory.PoseTrajectory` in the
 base frame) instead of a fixed goal. :class:`TrackingController` wraps any controller
-built for a fixed goal:
+built for a fixed goal; every goal is computed once, at ``reset_batch``, on the control
+grid:
 
 - the goal of period ``k`` is the reference at ``t_k = k dt`` seen through the NOMINAL
   model, anchored at the taught goal: the features taught at the end pose (the
-  context's goal, measured there as for a point-to-point task) plus the change the
-  nominal model predicts between the end pose and the reference pose (edge normals,
-  image lines and leg directions as the estimated camera would see the nominal robot,
-  renormalised); the nominal inverse kinematics of the reference pose; the pose itself.
-  Nothing is taught along the path: under a calibration error the features in between
-  carry the model's error of the feature CHANGE, and the end of the path is the taught
-  goal, reached as accurately as by a point-to-point task;
-- the controller is retargeted to that goal every period, the rows whose period changed
-  in one ``retarget_batch`` (each trial's ``retarget_trial``: the built-in vision laws
-  keep their state, the dead-reckoned directions of hidden legs, the last twist, the
-  warm starts; the goal moved, the robot did not; by default a reset with the new goal,
-  the law's state starting afresh);
-- a velocity command (not a force command) gets the feed-forward
-  ``(q*(t_{k+1}) - q*(t_k)) / dt``, the nominal leg lengths' change over the coming
-  period. For a vision law it is the feature-rate
-  term ``L^+ ds*/dt`` written in joint space: with the nominal model exact, a robot on
-  the reference stays on it (tested in the kinematic world).
-
-Every time-varying goal is computed once, at ``reset_batch``, on the control grid.
+  context's goal) plus the change the nominal model predicts between the end pose and
+  the reference pose (renormalised unit vectors, :func:`anchor_goals`); the nominal
+  inverse kinematics of the reference pose; the pose itself. Nothing is taught along
+  the path: under a calibration error the features in between carry the model's error
+  of the feature CHANGE, and the end of the path is reached as accurately as by a
+  point-to-point task;
+- the controller is retargeted every period (``retarget_batch``: the built-in vision
+  laws keep their state; by default a reset with the new goal);
+- a velocity command gets the feed-forward ``(q*(t_{k+1}) - q*(t_k)) / dt``, the
+  nominal leg lengths' change over the coming period (for a vision law, the term
+  ``L^+ ds*/dt`` written in joint space: with the nominal model exact, a robot on the
+  reference stays on it).
 
 A controller that tracks ``context.reference`` itself (``tracks_reference = True``: the
-computed-torque laws, which need the reference's derivatives and sample it at their own
-instants) is passed through: reset with the trial's context (the TAUGHT goal and the
-reference), never retargeted, no feed-forward added.
+computed-torque laws) is passed through: reset with the trial's context, never
+retargeted, no feed-forward added.
 """
 
 from __future__ import annotations
 
-import logging
 import math
 from collections.abc import Collection, Sequence
 from dataclasses import dataclass, replace
@@ -44,22 +36,20 @@ from typing import Any
 
 import numpy as np
 
-from controllers.base import (
+from controllers.base import Controller
+from controllers.batch import actuation_of
+from controllers.data import (
+    FEATURE_FIELDS,
     GOAL_FIELDS,
-    Actuation,
     Command,
     CommandBatch,
-    Controller,
     ControllerContext,
     Goal,
     GoalBatch,
     ObservationBatch,
 )
-from controllers.batch import actuation_of
-from controllers.data import FEATURE_FIELDS
 from controllers.exceptions import ContextError
-
-log = logging.getLogger(__name__)
+from hexapod.actuation import Actuation
 
 
 def reference_goals(context: ControllerContext, times: np.ndarray,
@@ -159,10 +149,6 @@ class TrackingPlan:
         return Goal(**{name: None if arr is None else arr[k]
                        for name, arr in self.goals.items()})
 
-    def period(self, t: float) -> int:
-        """The period of time ``t`` [s] (finite), clipped to the grid."""
-        return min(max(round(t / self.dt), 0), self.steps - 1)
-
 
 def tracking_plan(context: ControllerContext, name: str) -> TrackingPlan:
     """The goals of ``context.reference`` on the control grid (see the module docstring).
@@ -188,24 +174,14 @@ def tracking_plan(context: ControllerContext, name: str) -> TrackingPlan:
     return TrackingPlan(dt, {key: goals.get(key) for key in GOAL_FIELDS}, q_rate)
 
 
-def tracks_itself(controller: Any) -> bool:
-    """Whether a controller samples ``context.reference`` itself (then passed through)."""
-    return bool(getattr(controller, "tracks_reference", False))
-
-
 class TrackingController(Controller):
     """Any controller made to track ``context.reference``, over a batch of trials (see
     the module docstring).
 
-    Each trial's goals on the control grid are computed once, at reset
-    (:func:`tracking_plan`), and stacked over the trials. Each period, the rows whose
-    period changed get their new goal in one call of the wrapped controller's
-    ``retarget_batch(trials, goals)`` (the vision laws write the desired features into
-    their compiled core's inputs as arrays), then one ``step_batch`` of the wrapped
-    controller, and the feed-forward of each row's period is added to the velocity
-    commands. A trial whose context has no reference is the wrapped controller's row,
-    unchanged; so is every trial of a controller that samples the reference itself
-    (``tracks_reference``).
+    Each period, the rows whose period changed get their goal in one ``retarget_batch``
+    of the wrapped controller, then one ``step_batch``, and the feed-forward of each
+    row's period is added to the velocity commands. A trial without a reference, or of
+    a controller that samples the reference itself, is the wrapped controller's row.
 
     Args:
         inner: The controller (reset and stepped through this wrapper only).
@@ -233,7 +209,7 @@ class TrackingController(Controller):
                 finite.
         """
         contexts = list(contexts)
-        itself = tracks_itself(self.inner)
+        itself = bool(getattr(self.inner, "tracks_reference", False))
         plans = [None if itself or getattr(ctx, "reference", None) is None
                  else tracking_plan(ctx, self.name) for ctx in contexts]
         self._plans = plans

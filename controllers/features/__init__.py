@@ -47,11 +47,10 @@ def controllers_for(feature: LegFeature, module: str | None = None) -> FeatureCo
     stem = "".join(part.capitalize() for part in feature.c_name.split("_"))
     mod = module or type(feature).__module__
     def make(base: type, suffix: str, kind: str, extra: dict[str, object]) -> type:
-        cls = type(f"{stem}{kind}", (base,), {
+        return type(f"{stem}{kind}", (base,), {
             "name": f"{feature.name}-{suffix}", "feature": feature, "unit": feature.unit,
             "features": frozenset({"lengths", "directions"}), "__module__": mod,
             "__doc__": base.__doc__, **extra})
-        return cls
 
     qp = make(FeatureQPLaw, "qp", "QP", {})
     return FeatureControllers(

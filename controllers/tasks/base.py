@@ -1,27 +1,19 @@
 """The task interface (in the manner of Pink's ``Task``) and the state tasks read.
 
-A task is a pure object: from a :class:`TaskState` (one row per trial) it gives
+A task is a pure object: from a :class:`TaskState` (one row per trial) it gives the
+error ``e``, the Jacobian ``L`` (``e_dot = L tau`` for the platform twist ``tau = (v, w)``
+in the frame of the state, at its origin), the second-order term ``L_dot tau`` (``e_ddot
+= L tau_dot + L_dot tau``) and, for a moving desired value, the reference terms ``e_t``
+and ``e_tt``.
 
-- :meth:`Task.error` ``e`` (n, m),
-- :meth:`Task.jacobian` ``L`` (n, m, 6), the interaction with the platform twist
-  ``tau = (v, w)`` (``e_dot = L tau``, twist in the frame of the state, at its origin),
-- :meth:`Task.jacobian_dot_twist` ``L_dot tau`` (n, m): the derivative of the Jacobian
-  along the motion with a constant twist, times that twist; the term a second-order
-  law (computed torque) adds to ``L tau_dot``: ``e_ddot = L tau_dot + L_dot tau``;
-- :meth:`Task.reference_terms` ``e_t`` and ``e_tt`` (n, m): what a desired value moving
-  on its own adds, ``e_dot = L tau + e_t``, ``e_ddot = L tau_dot + L_dot tau + e_tt``
-  (:func:`reference_function`, from the same block error by automatic differentiation).
-
-Each feature task defines its block once, as a CasADi expression (error and Jacobian of
-one leg or one edge: ``direction_block``, ``edge_block``, ``joint_length_block``). From
-that one definition come the task's ``error``/``jacobian`` (its ``block_function``
-mapped over the rows), the compiled law cores (:mod:`controllers.law_kernel` generates
-its C from the same expressions) and the second-order term, generated from the block's
-error and the state's motion, ``L_dot tau = d/ds (L(s) tau) s_dot(s, tau)``
-(:func:`second_order_function`), so it is never written by hand. The numpy functions of
-``tests/controllers/interaction_oracle.py`` are the test oracle.
-Each is checked against finite differences of the true kinematics
-(``tests/controllers/test_tasks.py``).
+Each feature task defines its block once, as a CasADi expression of one leg or one edge
+(``direction_block``, ``edge_block``, ``joint_length_block``): the task's error and
+Jacobian evaluate it (mapped over the rows, :func:`map_blocks`), the compiled law cores
+(:mod:`controllers.law_kernel`) are generated from it, and the second-order and reference
+terms differentiate its error (:func:`second_order_function`,
+:func:`reference_function`), never written by hand. The numpy functions of
+``tests/controllers/interaction_oracle.py`` are the test oracle; each task is checked
+against finite differences of the true kinematics (``tests/controllers/test_tasks.py``).
 """
 
 from __future__ import annotations
@@ -33,7 +25,6 @@ from dataclasses import dataclass
 import casadi as ca
 import numpy as np
 
-from controllers.interaction import cross
 from vision.legs import leg_edges
 
 
@@ -116,10 +107,9 @@ class Task(ABC):
         raise NotImplementedError(f"{self.name}: no moving reference")
 
 
-
 class LegBlockTask(Task):
-    """A task whose error and Jacobian are one block (:attr:`block` rows) per leg, the
-    block's function mapped over the six legs of every row (:meth:`_blocks`)."""
+    """A task whose error and Jacobian are :attr:`block` rows per leg, a block function
+    mapped over the legs (or edges) of every row (:meth:`_blocks`)."""
 
     @abstractmethod
     def _blocks(self, state: TaskState) -> Sequence[np.ndarray]:
@@ -131,6 +121,7 @@ class LegBlockTask(Task):
     def jacobian(self, state: TaskState) -> np.ndarray:
         return np.reshape(self._blocks(state)[1], (len(state), 6 * self.block, 6))
 
+
 def leg_rates(u: ca.SX, A: ca.SX, q: ca.SX, tau: ca.SX) -> tuple[ca.SX, ca.SX]:
     """``u_dot`` and ``q_dot`` of a leg moved by the platform twist (``docs/math.md`` §3):
     the platform joint ``B = A + q u`` moves at ``B_dot = v + w x B``."""
@@ -138,6 +129,11 @@ def leg_rates(u: ca.SX, A: ca.SX, q: ca.SX, tau: ca.SX) -> tuple[ca.SX, ca.SX]:
     Bdot = tau[:3] + ca.cross(tau[3:], B)
     qdot = ca.dot(u, Bdot)
     return (Bdot - qdot * u) / q, qdot
+
+
+def leg_state_rate(s: ca.SX, p: ca.SX, tau: ca.SX) -> ca.SX:
+    """``(u_dot, q_dot)`` of the leg state ``s = (u, q)``, parameters ``p = (A, ...)``."""
+    return ca.vertcat(*leg_rates(s[:3], p[:3], s[3], tau))
 
 
 def second_order_function(name: str, n_state: int, n_param: int,
@@ -179,25 +175,11 @@ def reference_function(name: str, n_state: int, n_param: int,
     return ca.Function(name, [s, p, tau, pd, pdd], [e_t, e_tt])
 
 
-def evaluate_reference(function: ca.Function, s: np.ndarray, p: np.ndarray,
-                       tau: np.ndarray, p_dot: np.ndarray, p_ddot: np.ndarray
-                       ) -> tuple[np.ndarray, np.ndarray]:
-    """A :func:`reference_function` over block rows (k, ...) -> ``e_t``, ``e_tt`` (k, out)."""
-    k = s.shape[0]
-    if k == 0:
-        z = np.zeros((0, function.size1_out(0)))
-        return z, z.copy()
-    e_t, e_tt = function.map(k)(s.T, p.T, tau.T, p_dot.T, p_ddot.T)
-    return np.asarray(e_t, dtype=float).T, np.asarray(e_tt, dtype=float).T
-
-
 def leg_second_order(name: str, n_param: int, error: Callable[[ca.SX, ca.SX], ca.SX]
                      ) -> ca.Function:
     """:func:`second_order_function` of a per-leg feature: state ``(u, q)`` (4), parameters
     ``(A, ...)`` (``n_param``, the base point first), the leg moved by :func:`leg_rates`."""
-    return second_order_function(
-        name, 4, n_param, error,
-        lambda s, p, tau: ca.vertcat(*leg_rates(s[:3], p[:3], s[3], tau)))
+    return second_order_function(name, 4, n_param, error, leg_state_rate)
 
 
 def evaluate_legs(function: ca.Function, state: TaskState, params: np.ndarray,
@@ -213,18 +195,24 @@ def evaluate_legs(function: ca.Function, state: TaskState, params: np.ndarray,
     n = len(state)
     s = np.concatenate([state.directions, state.lengths[..., None]], axis=-1)
     tau = np.repeat(np.asarray(twist, dtype=float).reshape(n, 6), 6, axis=0)
-    out = evaluate_blocks(function, s.reshape(-1, 4), params.reshape(n * 6, -1), tau)
+    out = map_blocks(function, s.reshape(-1, 4), params.reshape(n * 6, -1), tau)[0]
     return out.reshape(n, 6, -1)
 
 
-def evaluate_blocks(function: ca.Function, s: np.ndarray, p: np.ndarray, tau: np.ndarray
-                    ) -> np.ndarray:
-    """Evaluate a block function over rows (k, ...) -> (k, out) (CasADi ``map``)."""
-    k = s.shape[0]
-    if k == 0:
-        return np.zeros((0, function.size1_out(0)))
-    out = function.map(k)(s.T, p.T, tau.T)
-    return np.asarray(out, dtype=float).T
+def reference_parts(v: dict[str, ca.SX]) -> tuple[ca.SX, ca.SX, ca.SX]:
+    """The desired features, their rate and acceleration (thirds of the
+    ``reference_features`` input block of a compiled computed-torque step)."""
+    ref = v["reference_features"]
+    m = ref.shape[0] // 3
+    return ref[0:m], ref[m:2 * m], ref[2 * m:3 * m]
+
+
+def stack_blocks(blocks: Sequence[Sequence[ca.SX]]
+                 ) -> tuple[ca.SX, ca.SX, ca.SX, ca.SX, ca.SX]:
+    """The ``(e, L, L_dot tau, e_t, e_tt)`` of every block, each term stacked over the
+    blocks (a feature's part of a compiled computed-torque step)."""
+    e, L, ldot, e_t, e_tt = (ca.vertcat(*terms) for terms in zip(*blocks, strict=True))
+    return e, L, ldot, e_t, e_tt
 
 
 def sx_skew(v: ca.SX) -> ca.SX:
@@ -269,6 +257,6 @@ def unit(x: np.ndarray) -> np.ndarray:
     return x / np.sqrt(np.einsum("...k,...k->...", x, x))[..., None]
 
 
-__all__ = ["Task", "TaskState", "cross", "evaluate_blocks", "evaluate_legs",
-           "evaluate_reference", "leg_rates", "leg_second_order", "map_blocks",
-           "reference_function", "second_order_function", "sx_skew", "sx_unit", "unit"]
+__all__ = ["Task", "TaskState", "evaluate_legs", "leg_rates", "leg_second_order",
+           "leg_state_rate", "map_blocks", "reference_function", "reference_parts",
+           "second_order_function", "stack_blocks", "sx_skew", "sx_unit", "unit"]

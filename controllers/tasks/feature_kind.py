@@ -2,25 +2,18 @@
 
 Each built-in feature is one object that owns its definition: its CasADi blocks (error,
 interaction, second-order and reference terms), its size, which observation and goal
-fields it reads and how, and its name in the generated kernels' names. The modules that
-build controllers from a feature (the law cores of :mod:`controllers.law_kernel`, the
-predictive problems of :mod:`controllers.mpc` and :mod:`controllers.force_mpc`, the
-compiled computed-torque steps of :mod:`controllers.solvers.compiled_task_ctc`, the
-reference of :mod:`controllers.solvers.reference_motion`) take the object and call its
-methods; none of them switches on a kind string. A user's option value (``edge_feature =
-"lines"``) is parsed into the object once, at the controller's edge.
+fields it reads, and its name in the generated kernels' names. The modules that build
+controllers from a feature (law cores, predictive problems, computed-torque steps, the
+reference motion) call its methods; none switches on a kind string. A user's option
+value (``edge_feature = "lines"``) is parsed into the object once, at the controller's
+edge.
 
-The built-ins (``docs/architecture.md``, "Controllers"):
-
-- :data:`~controllers.tasks.leg_edge.EDGE_NORMALS` and
-  :data:`~controllers.tasks.leg_edge.EDGE_LINES`: the leg edges as interpretation-plane
-  normals or as unit image lines (:class:`~controllers.tasks.leg_edge.EdgeFeature`);
-- :data:`~controllers.tasks.leg_direction.LEG_DIRECTIONS`: the leg directions, also a
-  :class:`~controllers.tasks.leg_feature.LegFeature` (the shape of a plugin's feature);
-- :data:`~controllers.tasks.platform_pose.PLATFORM_POSE`: the platform pose.
-
-A plugin's feature is a :class:`~controllers.tasks.leg_feature.LegFeature` and gets its
-controllers from :func:`controllers.features.controllers_for` (``docs/plugins.md``).
+The built-ins (``docs/plugins.md``, "Built-in features are objects"):
+:data:`~controllers.tasks.leg_edge.EDGE_NORMALS` and
+:data:`~controllers.tasks.leg_edge.EDGE_LINES` (the leg edges as normals or image lines),
+:data:`~controllers.tasks.leg_direction.LEG_DIRECTIONS` (the leg directions, also a
+:class:`~controllers.tasks.leg_feature.LegFeature`, the shape of a plugin's feature) and
+:data:`~controllers.tasks.platform_pose.PLATFORM_POSE` (the platform pose).
 """
 
 from __future__ import annotations

@@ -24,14 +24,14 @@ import numpy as np
 
 from controllers.exceptions import ContextError
 from controllers.tasks.base import (
-    Task,
+    LegBlockTask,
     TaskState,
-    evaluate_blocks,
-    evaluate_reference,
     leg_rates,
     map_blocks,
     reference_function,
+    reference_parts,
     second_order_function,
+    stack_blocks,
     sx_unit,
     unit,
 )
@@ -43,12 +43,6 @@ def line_of_normal(normal: ca.SX, line_matrix_inv_t: ca.SX) -> ca.SX:
     """The unit image line ``l = K^-T n / |K^-T n|`` of an edge normal (``docs/math.md``
     section 5; ``line_matrix_inv_t`` is ``K^-T``, (3, 3))."""
     return sx_unit(line_matrix_inv_t @ normal)
-
-
-def normal_of_line(line: ca.SX, line_matrix_t: ca.SX) -> ca.SX:
-    """The unit edge normal ``n = K^T l / |K^T l|`` of an image line (``line_matrix_t`` is
-    ``K^T``, (3, 3))."""
-    return sx_unit(line_matrix_t @ line)
 
 
 def leg_direction_of_edges(first: ca.SX, second: ca.SX) -> ca.SX:
@@ -151,8 +145,9 @@ class EdgeFeature(BuiltinFeature):
         return line_of_normal(normal, line_matrix_inv_t) if self.lines else normal
 
     def sx_normal(self, feature: ca.SX, line_matrix_t: ca.SX) -> ca.SX:
-        """The edge normal of a measured feature: itself, or :func:`normal_of_line`."""
-        return normal_of_line(feature, line_matrix_t) if self.lines else feature
+        """The edge normal of a measured feature: itself, or the normal of a line,
+        ``K^T l / |K^T l|`` (``line_matrix_t`` is ``K^T``)."""
+        return sx_unit(line_matrix_t @ feature) if self.lines else feature
 
     def line_matrices(self, line_matrix_t: ca.SX, line_matrix_inv_t: ca.SX
                       ) -> tuple[ca.SX, ca.SX] | tuple[None, None]:
@@ -317,10 +312,10 @@ class EdgeFeature(BuiltinFeature):
         if self.lines:
             raise self._unsupported("compiled computed-torque step")
         A, directions = v["base"], v["directions"]
-        des, rate, acc = _reference_parts(v)
-        es, Ls, ldots, ets, etts = [], [], [], [], []
+        des, rate, acc = reference_parts(v)
         eye = ca.reshape(ca.SX.eye(3), 9, 1)
         zeros3 = ca.SX.zeros(3)
+        blocks = []
         for i in range(6):
             Ai, qi = A[3 * i:3 * i + 3], q[i]
             normals = v["normals"]
@@ -330,19 +325,15 @@ class EdgeFeature(BuiltinFeature):
             for j, n in enumerate((n1, n2)):
                 k = 6 * i + 3 * j
                 ns = des[k:k + 3]
-                e, L = self.block_function(n, ns, ui, Ai, qi, ca.SX.eye(3), ca.SX.eye(3))
                 s = ca.vertcat(n, ui, qi)
                 p = ca.vertcat(Ai, ns, eye)
-                es.append(e)
-                Ls.append(L)
-                ldots.append(self.second_order_block(s, p, tau_s))
-                e_t, e_tt = self.reference_block(
-                    s, p, tau_s, ca.vertcat(zeros3, rate[k:k + 3], ca.SX.zeros(9)),
-                    ca.vertcat(zeros3, acc[k:k + 3], ca.SX.zeros(9)))
-                ets.append(e_t)
-                etts.append(e_tt)
-        return (ca.vertcat(*es), ca.vertcat(*Ls), ca.vertcat(*ldots), ca.vertcat(*ets),
-                ca.vertcat(*etts))
+                blocks.append((
+                    *self.block_function(n, ns, ui, Ai, qi, ca.SX.eye(3), ca.SX.eye(3)),
+                    self.second_order_block(s, p, tau_s),
+                    *self.reference_block(s, p, tau_s,
+                                          ca.vertcat(zeros3, rate[k:k + 3], ca.SX.zeros(9)),
+                                          ca.vertcat(zeros3, acc[k:k + 3], ca.SX.zeros(9)))))
+        return stack_blocks(blocks)
 
     # ------------------------------------------------------------------ force MPC
     def sx_stage_features(self, t: ca.SX, R_column_major: ca.SX, normals: list[ca.SX]
@@ -365,14 +356,6 @@ def goal_edges(value: Any, field: str, who: str) -> np.ndarray | None:
     if arr.shape != (6, 2, 3):
         raise ContextError(who, field, f"expected shape (6, 2, 3), got {arr.shape}")
     return arr
-
-
-def _reference_parts(v: dict[str, ca.SX]) -> tuple[ca.SX, ca.SX, ca.SX]:
-    """The desired features, their rate and acceleration of a computed-torque step's
-    ``reference_features`` input."""
-    ref = v["reference_features"]
-    m = ref.shape[0] // 3
-    return ref[0:m], ref[m:2 * m], ref[2 * m:3 * m]
 
 
 #: The leg edges as interpretation-plane normals (any camera).
@@ -399,7 +382,7 @@ def edge_feature(kind: str | EdgeFeature) -> EdgeFeature:
                          f"got {kind!r}") from None
 
 
-class LegEdgeTask(Task):
+class LegEdgeTask(LegBlockTask):
     """The twelve leg edges (two per leg, ``(6, 2)`` order) towards their desired values.
 
     Args:
@@ -410,24 +393,14 @@ class LegEdgeTask(Task):
     """
 
     name = "leg-edges"
+    block = 6  # two edges of 3 rows per leg
 
     def __init__(self, desired: np.ndarray, kind: str | EdgeFeature = "normals",
                  line_matrix: np.ndarray | None = None) -> None:
-        feature = edge_feature(kind)
-        if feature.lines and line_matrix is None:
-            raise ValueError(f"kind {feature.kind!r} needs the camera's line_matrix")
+        self.feature = edge_feature(kind)
+        self.line_matrix_inv_t = self.feature.line_inv_t(line_matrix)  # checked for lines
         self.desired = np.asarray(desired, dtype=float)
-        self.feature = feature
         self.line_matrix = np.eye(3) if line_matrix is None else np.asarray(line_matrix, float)
-        self.line_matrix_inv_t = np.linalg.inv(self.line_matrix).T
-
-    def features(self, state: TaskState) -> np.ndarray:
-        """(n, 6, 2, 3) the measured features of the state: its normals, or their lines."""
-        if state.normals is None:
-            raise ValueError("LegEdgeTask needs the state's normals")
-        if self.feature.lines:
-            return unit(state.normals @ self.line_matrix_inv_t.T)
-        return state.normals
 
     def _star(self, n: int) -> np.ndarray:
         return np.ascontiguousarray(np.broadcast_to(self.desired, (n, 6, 2, 3)))
@@ -441,9 +414,6 @@ class LegEdgeTask(Task):
         return map_blocks(self.feature.block_function, normals,
                           self._star(n).reshape(-1, 3), u2, A2, q2, Kt, Kit)
 
-    def error(self, state: TaskState) -> np.ndarray:
-        return self._blocks(state)[0].reshape(len(state), 36)
-
     def _per_edge(self, state: TaskState
                   ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         """Per edge (12 n rows): the normals, and their legs' directions, base points and
@@ -454,9 +424,6 @@ class LegEdgeTask(Task):
         A2 = np.repeat(state.base_points, 2, axis=-2).reshape(-1, 3)
         q2 = np.repeat(state.lengths, 2, axis=-1).reshape(-1)
         return state.normals.reshape(-1, 3), u2, A2, q2
-
-    def jacobian(self, state: TaskState) -> np.ndarray:
-        return self._blocks(state)[1].reshape(len(state), 36, 6)
 
     def _edge_rows(self, state: TaskState, twist: np.ndarray
                    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -471,7 +438,7 @@ class LegEdgeTask(Task):
 
     def jacobian_dot_twist(self, state: TaskState, twist: np.ndarray) -> np.ndarray:
         s, p, tau = self._edge_rows(state, twist)
-        return evaluate_blocks(self.feature.second_order_block, s, p, tau).reshape(len(state), 36)
+        return map_blocks(self.feature.second_order_block, s, p, tau)[0].reshape(len(state), 36)
 
     def reference_terms(self, state: TaskState, twist: np.ndarray, rate: np.ndarray,
                         acceleration: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -482,5 +449,5 @@ class LegEdgeTask(Task):
         pd, pdd = (np.zeros((12 * n, 15)) for _ in range(2))
         pd[:, 3:6] = np.asarray(rate, float).reshape(-1, 3)
         pdd[:, 3:6] = np.asarray(acceleration, float).reshape(-1, 3)
-        e_t, e_tt = evaluate_reference(self.feature.reference_block, s, p, tau, pd, pdd)
+        e_t, e_tt = map_blocks(self.feature.reference_block, s, p, tau, pd, pdd)
         return e_t.reshape(n, 36), e_tt.reshape(n, 36)

@@ -3,29 +3,18 @@ plugin's own feature alike.
 
 A :class:`LegFeature` is a function of ONE leg seen in the camera frame: its unit
 direction ``u_i``, its length ``q_i`` and its (estimated) base point ``A_i``, e.g. the
-leg direction ``u_i`` (:data:`controllers.tasks.leg_direction.LEG_DIRECTIONS`), the
-platform joint ``B_i = A_i + q_i u_i`` (``tests/controllers/plugin_feature_joints.py``)
-or the length ``q_i``. The feature is written ONCE, symbolically (:meth:`LegFeature.value`,
-optionally :meth:`LegFeature.error`, and :meth:`LegFeature.block` where a closed form
-exists); everything the controllers need is derived from it by automatic
-differentiation (CasADi):
-
-- the desired value from a goal's leg directions and lengths (:meth:`LegFeature.desired`);
-- the block of one leg, error ``e`` and interaction ``L`` with ``e_dot = L tau`` (the
-  leg moving with the platform twist ``tau = (v, w)`` by
-  :func:`~controllers.tasks.base.leg_rates`, ``docs/math.md`` §3): :meth:`LegFeature.block`,
-  from which :func:`controllers.law_kernel.feature_law_function` generates the law core
-  (the built-in leg-direction law's included);
-- the second-order term ``L_dot tau`` and the reference terms ``e_t``, ``e_tt`` of a
-  moving desired value (:func:`~controllers.tasks.base.second_order_function`,
-  :func:`~controllers.tasks.base.reference_function`);
-- the feature along a pose trajectory with its rate and acceleration (the computed-torque
-  reference, :attr:`LegFeature.motion_function`).
+leg direction ``u_i`` (:data:`controllers.tasks.leg_direction.LEG_DIRECTIONS`) or the
+platform joint ``B_i = A_i + q_i u_i`` (``tests/controllers/plugin_feature_joints.py``).
+The feature is written ONCE, symbolically (:meth:`LegFeature.value`, optionally
+:meth:`LegFeature.error`, and :meth:`LegFeature.block` where a closed form exists);
+everything else is derived from it by automatic differentiation: the desired value of a
+goal, the block of one leg (error and interaction, the leg moving with the platform twist
+by :func:`~controllers.tasks.base.leg_rates`, ``docs/math.md`` §3), the second-order and
+reference terms, and the feature along a pose trajectory (the computed-torque reference).
 
 From a feature, :func:`controllers.features.controllers_for` builds the pseudo-inverse,
 limit-QP, predictive and computed-torque controllers, and :class:`FeatureTask` is its
-numpy :class:`~controllers.tasks.base.Task` (the computed-torque law's fallback path and
-the tests' oracle).
+numpy :class:`~controllers.tasks.base.Task`.
 """
 
 from __future__ import annotations
@@ -40,7 +29,8 @@ from controllers.tasks.base import (
     LegBlockTask,
     TaskState,
     evaluate_legs,
-    leg_rates,
+    leg_state_rate,
+    map_blocks,
     reference_function,
     second_order_function,
 )
@@ -93,10 +83,6 @@ class LegFeature(ABC):
         """Error of the leg state ``s = (u, q)`` with parameters ``p = (A, f*)``."""
         return self.error(self.value(s[:3], s[3], p[:3]), p[3:])
 
-    @staticmethod
-    def _leg_rate(s: ca.SX, p: ca.SX, tau: ca.SX) -> ca.SX:
-        return ca.vertcat(*leg_rates(s[:3], p[:3], s[3], tau))
-
     @cached_property
     def value_function(self) -> ca.Function:
         """``(u, q, A) -> f`` of one leg."""
@@ -111,7 +97,7 @@ class LegFeature(ABC):
         q, tau = ca.SX.sym("q"), ca.SX.sym("tau", 6)
         s, p = ca.vertcat(u, q), ca.vertcat(A, fs)
         e = self._leg_error(s, p)
-        L = ca.jacobian(ca.jtimes(e, s, self._leg_rate(s, p, tau)), tau)
+        L = ca.jacobian(ca.jtimes(e, s, leg_state_rate(s, p, tau)), tau)
         return ca.Function(f"{self.c_name}_derived_block", [u, q, A, fs], [e, L])
 
     def block(self, u: ca.SX, q: ca.SX, A: ca.SX, f_star: ca.SX) -> tuple[ca.SX, ca.SX]:
@@ -132,14 +118,14 @@ class LegFeature(ABC):
     def second_order(self) -> ca.Function:
         """``(s, p, tau) -> L_dot tau`` of one leg, ``s = (u, q)``, ``p = (A, f*)``."""
         return second_order_function(f"{self.c_name}_second_order", 4, 3 + self.rows,
-                                     self._leg_error, self._leg_rate)
+                                     self._leg_error, leg_state_rate)
 
     @cached_property
     def reference(self) -> ca.Function:
         """``(s, p, tau, p_dot, p_ddot) -> (e_t, e_tt)`` of one leg (layout of
         :attr:`second_order`)."""
         return reference_function(f"{self.c_name}_reference", 4, 3 + self.rows,
-                                  self._leg_error, self._leg_rate)
+                                  self._leg_error, leg_state_rate)
 
     @cached_property
     def c_name(self) -> str:
@@ -186,14 +172,6 @@ class LegFeature(ABC):
                                           np.asarray(base_points, float).T)
         return np.asarray(out, dtype=float).T.reshape(6, self.rows)
 
-    def measured(self, state: TaskState) -> np.ndarray:
-        """(n, 6, rows) the feature of a task state's legs."""
-        n = len(state)
-        out = self.value_function.map(6 * n)(
-            state.directions.reshape(-1, 3).T, state.lengths.reshape(1, -1),
-            np.broadcast_to(state.base_points, (n, 6, 3)).reshape(-1, 3).T)
-        return np.asarray(out, dtype=float).T.reshape(n, 6, self.rows)
-
 
 class FeatureTask(LegBlockTask):
     """A :class:`LegFeature` of the six legs towards a desired value, as a
@@ -216,15 +194,10 @@ class FeatureTask(LegBlockTask):
         star = np.broadcast_to(self.desired.reshape(-1, 6, r), (n, 6, r))
         return np.concatenate([A, star], axis=-1)
 
-    def _blocks(self, state: TaskState) -> tuple[np.ndarray, np.ndarray]:
-        n, r = len(state), self.feature.rows
-        p = self._params(state).reshape(6 * n, -1)
-        e, L = self.feature.block_function.map(6 * n)(
-            state.directions.reshape(-1, 3).T, state.lengths.reshape(1, -1), p[:, :3].T,
-            p[:, 3:].T)
-        e = np.asarray(e, dtype=float).T.reshape(n, 6 * r)
-        L = np.asarray(L, dtype=float).reshape(r, 6 * n, 6).transpose(1, 0, 2)
-        return e, L.reshape(n, 6 * r, 6)
+    def _blocks(self, state: TaskState) -> list[np.ndarray]:
+        p = self._params(state).reshape(6 * len(state), -1)
+        return map_blocks(self.feature.block_function, state.directions.reshape(-1, 3),
+                          state.lengths.reshape(-1), p[:, :3], p[:, 3:])
 
     def jacobian_dot_twist(self, state: TaskState, twist: np.ndarray) -> np.ndarray:
         out = evaluate_legs(self.feature.second_order, state, self._params(state), twist)
@@ -239,7 +212,5 @@ class FeatureTask(LegBlockTask):
         pd[:, 3:] = np.asarray(rate, float).reshape(-1, r)
         pdd[:, 3:] = np.asarray(acceleration, float).reshape(-1, r)
         tau = np.repeat(np.asarray(twist, float).reshape(n, 6), 6, axis=0)
-        e_t, e_tt = self.feature.reference.map(6 * n)(s.reshape(-1, 4).T, p.T, tau.T, pd.T,
-                                                      pdd.T)
-        return (np.asarray(e_t, float).T.reshape(n, 6 * r),
-                np.asarray(e_tt, float).T.reshape(n, 6 * r))
+        e_t, e_tt = map_blocks(self.feature.reference, s.reshape(-1, 4), p, tau, pd, pdd)
+        return e_t.reshape(n, 6 * r), e_tt.reshape(n, 6 * r)

@@ -17,8 +17,7 @@ import numpy as np
 from controllers.tasks.base import (
     Task,
     TaskState,
-    evaluate_blocks,
-    evaluate_reference,
+    map_blocks,
     reference_function,
     second_order_function,
 )
@@ -141,8 +140,8 @@ class PlatformPoseTask(Task):
 
     def jacobian_dot_twist(self, state: TaskState, twist: np.ndarray) -> np.ndarray:
         s, p = self._rows(state)
-        return evaluate_blocks(_second_order(), s, p,
-                               np.asarray(twist, float).reshape(len(s), 6))
+        tau = np.asarray(twist, float).reshape(len(s), 6)
+        return map_blocks(_second_order(), s, p, tau)[0].reshape(len(s), 6)
 
     def reference_terms(self, state: TaskState, twist: np.ndarray, rate: np.ndarray,
                         acceleration: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -154,8 +153,9 @@ class PlatformPoseTask(Task):
         Rs = np.broadcast_to(self.rotation, (n, 3, 3))
         pd, pdd = pose_motion(Rs, np.asarray(rate, float).reshape(n, 6),
                               np.asarray(acceleration, float).reshape(n, 6))
-        return evaluate_reference(_reference(), s, p,
-                                  np.asarray(twist, float).reshape(n, 6), pd, pdd)
+        e_t, e_tt = map_blocks(_reference(), s, p, np.asarray(twist, float).reshape(n, 6), pd,
+                               pdd)
+        return e_t.reshape(n, 6), e_tt.reshape(n, 6)
 
 
 #: A reference pose row: ``R*`` (row-major), ``t*``, the twist and its rate (the pose
@@ -211,11 +211,8 @@ class PlatformPose(BuiltinFeature):
         pd = ca.vertcat(_row_major(W @ Rs), ref[12:15])
         pdd = ca.vertcat(_row_major((ca.skew(alpha) + W @ W) @ Rs), ref[18:21])
         e, L = _pose_block()(s, p)
-        ldot = second_order_function("pose_second_order", 12, 12, pose_error, pose_rate)(
-            s, p, tau_s)
-        e_t, e_tt = reference_function("pose_reference", 12, 12, pose_error, pose_rate)(
-            s, p, tau_s, pd, pdd)
-        return e, L, ldot, e_t, e_tt
+        e_t, e_tt = _reference()(s, p, tau_s, pd, pdd)
+        return e, L, _second_order()(s, p, tau_s), e_t, e_tt
 
     def sx_stage_features(self, t: ca.SX, R_column_major: ca.SX, normals: list[ca.SX]
                           ) -> ca.SX:

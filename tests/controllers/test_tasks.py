@@ -12,8 +12,8 @@ import pytest
 
 from controllers.law_kernel import direction_kernel
 from controllers.tasks import (
+    LEG_DIRECTIONS,
     JointLengthTask,
-    LegDirectionTask,
     LegEdgeTask,
     PlatformPoseTask,
     Task,
@@ -73,7 +73,7 @@ def _tasks(geometry: HexapodGeometry, A: np.ndarray, E: np.ndarray, rng: np.rand
     lines_goal = goal.normals[0] @ np.linalg.inv(K)  # rows (K^-T n)^T
     lines_goal /= np.linalg.norm(lines_goal, axis=-1, keepdims=True)
     return {
-        "directions": LegDirectionTask(goal.directions[0]),
+        "directions": LEG_DIRECTIONS.task_of(goal.directions[0]),
         "normals": LegEdgeTask(goal.normals[0]),
         "lines": LegEdgeTask(lines_goal, "lines", K),
         "lengths": JointLengthTask(goal.lengths[0]),
@@ -178,7 +178,7 @@ def test_the_edge_tasks_agree_with_the_numpy_oracle(geometry: HexapodGeometry,
     for kind in ("normals", "lines"):
         task = tasks[kind]
         assert isinstance(task, LegEdgeTask)
-        f = task.features(s).reshape(-1, 3)
+        f = task.feature.features_of(s.normals, task.line_matrix_inv_t).reshape(-1, 3)
         star = np.broadcast_to(task.desired, (N, 6, 2, 3)).reshape(-1, 3)
         if kind == "lines":
             L_np = edge_line_task(f, star, n12, u2, A2, q2, task.line_matrix,
