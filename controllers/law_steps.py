@@ -31,8 +31,13 @@ from controllers.exceptions import ContextError
 from controllers.law_rows import KernelRows
 from controllers.leg_rate import LegRateFeedForward
 from controllers.solvers.base import Solver
+from controllers.tasks.leg_direction import LegDirections
+from controllers.tasks.leg_edge import EdgeFeature
 
-__all__ = ["VisionLawBatch"]
+__all__ = ["ObservedFeature", "VisionLawBatch"]
+
+#: What a vision law reads from an observation (its field, visibility mask and shape).
+ObservedFeature = EdgeFeature | LegDirections
 
 
 class VisionLawBatch(LegRateFeedForward, Controller):
@@ -40,13 +45,23 @@ class VisionLawBatch(LegRateFeedForward, Controller):
     :class:`~controllers.laws.VisionLaw`, which sets :attr:`solver`)."""
 
     solver: Solver
+    #: What every trial of the batch reads from an observation (None: not the same
+    #: feature, the trials step alone), set by :meth:`reset_batch`.
+    batch_feature: ObservedFeature | None = None
 
     # ----------------------------------------------------------------- the batch
     def _batch_features(self, obs: ObservationBatch) -> tuple[np.ndarray | None,
                                                                np.ndarray | None]:
         """The rows' measured features for the compiled core, (n, F), and the mask (n,)
-        of rows whose features are all visible. (None, None): no compiled core."""
-        return None, None
+        of rows whose features are all visible. (None, None): none to step as arrays."""
+        seen = self.batch_feature
+        arr = None if seen is None else getattr(obs, seen.field)
+        if seen is None or arr is None:
+            return None, None
+        n = len(obs)
+        vis = np.all(np.asarray(getattr(obs, seen.visibility), dtype=bool).reshape(n, seen.units),
+                     axis=1)
+        return np.asarray(arr, dtype=float).reshape(n, 3 * seen.units), vis
 
     def _batch_desired(self, goals: GoalBatch) -> tuple[np.ndarray | None, np.ndarray]:
         """The compiled core's desired-feature input of each goal, (m, D), and the mask
@@ -54,10 +69,6 @@ class VisionLawBatch(LegRateFeedForward, Controller):
         (every feature visible and finite, the CURRENT interaction). (None, mask): no
         such shortcut; every goal then goes through its instance's ``retarget_trial``."""
         return None, np.zeros(len(goals), dtype=bool)
-
-    def _batch_reset_extra(self) -> None:
-        """Per-trial constants of subclasses (the solver's are gathered by
-        :meth:`~controllers.solvers.base.Solver.batch_reset`)."""
 
     def reset_batch(self, contexts: Sequence[ControllerContext]) -> None:
         """One instance per context (this one first, the others built with its options),
@@ -79,7 +90,8 @@ class VisionLawBatch(LegRateFeedForward, Controller):
         #: Goals given to ``retarget_batch`` not yet read by the trial's instance.
         self._pending: dict[int, tuple[GoalBatch, int]] = {}
         self.solver.batch_reset([t.solver for t in trials])
-        self._batch_reset_extra()
+        seen = {t.observed_feature for t in trials}
+        self.batch_feature = seen.pop() if len(seen) == 1 else None
         self.batch_reset_leg_rate(trials)
 
     def retarget_batch(self, trials: np.ndarray, goals: GoalBatch) -> None:
