@@ -5,7 +5,6 @@ with a singular-value threshold and damping, and what a law gives its compiled c
 
 from __future__ import annotations
 
-import logging
 import math
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
@@ -16,8 +15,6 @@ import numpy as np
 from controllers.base import Observation, usable_observation_problem
 from controllers.data import FEATURE_FIELDS
 from controllers.exceptions import ContextError, OptionError
-
-log = logging.getLogger(__name__)
 
 #: Where the interaction matrix is evaluated (ViSP's CURRENT, DESIRED, MEAN).
 INTERACTIONS = ("current", "desired", "mean")
@@ -198,10 +195,8 @@ def gain_formula(x: Any, at_zero: Any, at_infinity: Any, slope_at_zero: Any,
 
 @dataclass(frozen=True)
 class Gain:
-    """Constant or adaptive gain (ViSP's ``vpAdaptiveGain``), ``docs/math.md`` section 6.
-
-    ``lambda(x) = (at_zero - at_infinity) exp(-slope_at_zero x / (at_zero - at_infinity))
-    + at_infinity`` with ``x = |e|_inf``; constant when ``at_zero == at_infinity``.
+    """Constant (``at_zero == at_infinity``) or adaptive gain (ViSP's ``vpAdaptiveGain``):
+    :func:`gain_formula` of ``x = |e|_inf``.
 
     Attributes:
         at_zero: ``lambda0``, gain for a vanishing error [1/s].
@@ -213,11 +208,6 @@ class Gain:
     at_zero: float
     at_infinity: float
     slope_at_zero: float = 0.0
-
-    @staticmethod
-    def constant(value: float) -> Gain:
-        """A constant gain [1/s]."""
-        return Gain(value, value, 0.0)
 
     def __call__(self, x: float) -> float:
         """Gain [1/s] for the error size ``x = |e|_inf`` (:func:`gain_formula`)."""
@@ -238,7 +228,8 @@ class Gain:
             OptionError: Naming the option at fault.
         """
         if adaptive_gain is None:
-            return Gain.constant(check_number(controller, "gain", gain))
+            value = check_number(controller, "gain", gain)
+            return Gain(value, value, 0.0)
         try:
             values = [float(x) for x in adaptive_gain]
         except (TypeError, ValueError):

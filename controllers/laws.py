@@ -14,7 +14,6 @@ The numpy formulas of ``tests/controllers/interaction_oracle.py`` are the tests'
 
 from __future__ import annotations
 
-import logging
 import math
 from abc import abstractmethod
 from collections.abc import Sequence
@@ -43,8 +42,6 @@ from controllers.solvers.pseudo_inverse import DampedPseudoInverse
 
 #: Re-exported for the laws that import them from here.
 __all__ = ["Gain", "VisionLaw", "check_number", "check_observation"]
-
-log = logging.getLogger(__name__)
 
 
 class VisionLaw(VisionLawBatch):

@@ -106,14 +106,15 @@ class LegEdgeController(VisionLaw):
         self._goal_visible = vis
         # Desired directions (DESIRED / MEAN interaction): from the two desired edges,
         # else from goal.directions.
-        us = _unit(cross(n_star[:, 1], n_star[:, 0])) if vis.all() else np.full((6, 3), np.nan)
-        if not vis.all():
+        if vis.all():
+            us = _unit(cross(n_star[:, 1], n_star[:, 0]))
+        else:
+            us = np.full((6, 3), np.nan)
             both = vis.all(axis=1)
             with np.errstate(invalid="ignore", divide="ignore"):
                 us[both] = _unit(cross(n_star[both, 1], n_star[both, 0]))
-        if goal.directions is not None and not vis.all():
-            gd = np.asarray(goal.directions, dtype=float)
-            if gd.shape == (6, 3):
+            gd = None if goal.directions is None else np.asarray(goal.directions, dtype=float)
+            if gd is not None and gd.shape == (6, 3):
                 missing = ~np.isfinite(us[:, 0]) & np.all(np.isfinite(gd), axis=1)
                 us[missing] = gd[missing]
         if self.interaction != "current":

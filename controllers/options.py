@@ -62,11 +62,6 @@ class OptionSpec:
     unit: str = ""
     meaning: str = ""
 
-    @property
-    def required(self) -> bool:
-        """No default: the option must be given."""
-        return self.default is REQUIRED
-
 
 @dataclass(frozen=True)
 class OptionTable:

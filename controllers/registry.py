@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import importlib
 import importlib.metadata as metadata
+import inspect
 import logging
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -227,8 +228,6 @@ def _import_spec(spec: str, name: str, source: str) -> ControllerFactory:
 def describe(factory: Any) -> str:
     """The first sentence of a factory's docstring, whole (its first paragraph may span
     several lines)."""
-    import inspect
-
     doc = inspect.cleandoc(getattr(factory, "__doc__", None) or "")
     paragraph = " ".join(doc.split("\n\n")[0].split())
     return first_sentence(paragraph)

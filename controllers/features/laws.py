@@ -33,9 +33,10 @@ from controllers.tasks.leg_direction import LEG_DIRECTIONS
 
 class FeatureLaw(LegDirectionController):
     """``tau = -lambda L^+ e`` on a leg feature (``q_dot = J_inv tau``); the class's
-    ``feature`` is set by :func:`~controllers.features.controllers_for`. The options of
-    :class:`~controllers.laws.VisionLaw` (the DESIRED interaction at the legs' goal state)
-    but ``leg_rate_feedforward``.
+    ``feature`` is set by :func:`~controllers.features.controllers_for`.
+
+    The options of :class:`~controllers.laws.VisionLaw` (the DESIRED interaction at the
+    legs' goal state) but ``leg_rate_feedforward``.
     """
 
     def __init__(self, gain: float = 1.0, adaptive_gain: Sequence[float] | None = None,
@@ -71,9 +72,7 @@ class FeatureLaw(LegDirectionController):
 class FeatureQPLaw(FeatureLaw):
     """The feature's law as the limit QP (stroke with a margin, leg speeds; OSQP).
 
-    Takes the options of :class:`FeatureLaw` and the QP options ``regularization``,
-    ``stroke_margin`` [m], ``max_speed`` [m/s], ``eps_abs``, ``eps_rel``, ``max_iter``,
-    ``shortcut``.
+    The options of :class:`FeatureLaw` and :class:`~controllers.solvers.limit_qp.LimitQPSolver`.
     """
 
     OPTION_DOCS = (LimitQPSolver,)

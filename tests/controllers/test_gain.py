@@ -12,7 +12,7 @@ import pytest
 
 from controllers.law_tools import Gain, gain_formula
 
-GAINS = [Gain(4.0, 0.5, 30.0), Gain(2.0, 1.0, 0.3), Gain.constant(1.5)]
+GAINS = [Gain(4.0, 0.5, 30.0), Gain(2.0, 1.0, 0.3), Gain(1.5, 1.5, 0.0)]
 
 
 @pytest.mark.parametrize("gain", GAINS)

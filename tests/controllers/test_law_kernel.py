@@ -13,7 +13,7 @@ from controllers import registry
 from controllers.law_algebra import full_rank_certificate, jacobi_eigen
 from controllers.law_kernel import LawKernel, feature_law_function, feature_law_kernel, law_layouts
 from controllers.law_tools import Gain, solve_normal_damped
-from controllers.qp import LimitQP
+from controllers.solvers.osqp_limits import LimitQP
 from controllers.tasks.leg_direction import LEG_DIRECTIONS
 from hexapod.compiled import CompiledFunction
 from tests.controllers.controller_world import World, make_camera
