@@ -271,36 +271,33 @@ class VisionLaw(VisionLawBatch):
         est = self.estimate
         kernel = self.kernel
         assert kernel is not None, "reset() sets the compiled core"
-        if self._load_kernel(observation, q):
+        common = self._load_kernel(observation, q)
+        if common:
             r = kernel.evaluate()
             est.halted()  # until a command is actually sent
             est.measured_all(r.directions)
-            if not (math.isfinite(r.error_norm) and math.isfinite(r.n_sum)):
-                return Command.refuse("non-finite error or interaction matrix (degenerate "
-                                      "features)", r.error)
-            return TaskStep(r.error, r.error_norm, r.N, r.b, r.gain, r.J, [], r)
-        sel = self._select(observation, q)  # dead-reckons hidden legs with the last twist
-        est.halted()  # until a command is actually sent
-        inputs = kernel.inputs
-        inputs["features"][:] = sel.features.reshape(-1)
-        inputs["lengths"][:] = q
-        inputs["weights"][:] = sel.used
-        inputs["measured"][:] = sel.measured
-        inputs["leg_directions"][:] = sel.leg_directions.reshape(-1)
-        if "desired_lengths" in inputs:
-            inputs["desired_lengths"][:] = self._desired_lengths(q)
-        self._kernel_selected = True
-        r = kernel.evaluate()
-        m = sel.measured
-        est.directions[m] = r.directions[m]
-        est.in_use[m] = r.directions[m]
-        e = r.error.reshape(len(sel.used), -1)[sel.used].reshape(-1)
+            e, notes = r.error, []
+        else:
+            sel = self._select(observation, q)  # dead-reckons hidden legs with the last twist
+            est.halted()  # until a command is actually sent
+            inputs = kernel.inputs
+            inputs["features"][:] = sel.features.reshape(-1)
+            inputs["lengths"][:] = q
+            inputs["weights"][:] = sel.used
+            inputs["measured"][:] = sel.measured
+            inputs["leg_directions"][:] = sel.leg_directions.reshape(-1)
+            if "desired_lengths" in inputs:
+                inputs["desired_lengths"][:] = self._desired_lengths(q)
+            self._kernel_selected = True
+            r = kernel.evaluate()
+            m = sel.measured
+            est.directions[m] = r.directions[m]
+            est.in_use[m] = r.directions[m]
+            e, notes = r.error.reshape(len(sel.used), -1)[sel.used].reshape(-1), sel.notes
         if not (math.isfinite(r.error_norm) and math.isfinite(r.n_sum)):
             return Command.refuse("non-finite error or interaction matrix (degenerate features)",
                                   e)
-        notes = sel.notes
-        unknown = np.flatnonzero(~np.isfinite(est.in_use[:, 0]))
-        if len(unknown):
+        if not common and len(unknown := np.flatnonzero(~np.isfinite(est.in_use[:, 0]))):
             model = self._model_directions(q)
             if model is None:
                 return Command.refuse(
@@ -308,7 +305,7 @@ class VisionLaw(VisionLawBatch):
                     "desired direction, no nominal model prediction): cannot build the "
                     "inverse Jacobian", e)
             est.in_use[unknown] = model[unknown]
-            inputs["leg_directions"][:] = est.in_use.reshape(-1)
+            kernel.inputs["leg_directions"][:] = est.in_use.reshape(-1)
             r = kernel.evaluate()
             notes.append("nominal-model directions (forward kinematics of the measured "
                          "lengths) for never-seen legs " + _legs(unknown))
