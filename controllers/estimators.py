@@ -1,18 +1,12 @@
-"""What a control law carries from one period to the next, as explicit dataclasses.
+"""What a control law carries from one period to the next (a task,
+:mod:`controllers.tasks`, is a pure function of the current measurements): the leg
+directions the vision laws know (:class:`LegDirectionEstimate`, ``docs/math.md``
+section 6) and the platform pose that warm-starts a forward kinematics
+(:class:`PoseEstimate`).
 
-A task (:mod:`controllers.tasks`) is a pure function of the current measurements;
-what it needs from the past lives here, one row per trial:
-
-- :class:`LegDirectionEstimate`: the leg directions the vision laws know (measured,
-  or dead-reckoned for hidden legs, ``docs/math.md`` section 6), the directions the
-  inverse Jacobian uses this period, and the last commanded twist and lengths that
-  the dead reckoning integrates;
-- :class:`PoseEstimate`: the platform pose that warm-starts the forward kinematics
-  (the model-based law, and the nominal-model directions of never-seen legs).
-
-Every array has a leading trial axis when the estimate holds a batch; :meth:`row`
-gives one trial's estimate as views into the batch (no leading axis), so that a
-trial stepped alone and the same trial stepped in its batch write the same memory.
+Every array has a leading trial axis when the estimate holds a batch; ``row(k)`` gives
+one trial's estimate as views into the batch, so that a trial stepped alone and the
+same trial stepped in its batch write the same memory.
 """
 
 from __future__ import annotations

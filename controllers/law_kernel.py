@@ -1,31 +1,23 @@
 """The per-step numeric core of the vision laws, compiled to C (one call per step).
 
-A step of a vision law is a few hundred floating-point operations spread over some sixty
-numpy calls; at this scale the cost is the calls. The core is therefore written once as a
-CasADi SX expression from the tasks' own blocks (a leg feature's
+A law's step is a few hundred floating-point operations spread over some sixty numpy
+calls; at this scale the cost is the calls. The core is therefore one CasADi SX
+expression built from the tasks' own blocks (a leg feature's
 :meth:`~controllers.tasks.leg_feature.LegFeature.block`, the leg directions' included;
-:func:`controllers.tasks.leg_edge.edge_block`;
-:func:`controllers.tasks.joint_length.inverse_jacobian_row`), generated to C and called
-on preallocated buffers by :class:`hexapod.compiled.CompiledFunction` (the CasADi
-virtual machine evaluates the same expression when there is no compiler). One call
-computes:
+:func:`controllers.tasks.leg_edge.edge_block`), generated to C and called on
+preallocated buffers by :class:`hexapod.compiled.CompiledFunction` (the CasADi virtual
+machine evaluates it when there is no compiler). One call gives the stacked error and
+the weighted normal equations ``N = L^T W L``, ``b = L^T W e`` with ``L`` at the
+current, desired or mean features (a feature of weight zero, hidden now or in the goal,
+is left out exactly), the leg directions (measured, or the law's estimate where a leg is
+not ``measured``), and the law part every feature shares
+(:func:`~controllers.law_algebra.law_tail`: gain, rank, damped solve, ``J_inv``,
+``q_dot``, finiteness checks).
 
-- the feature part: the stacked error ``e`` and the weighted normal equations
-  ``N = L^T W L``, ``b = L^T W e`` (``docs/math.md`` section 6;
-  :class:`~controllers.law_algebra.WeightedNormal`), with the interaction matrix at the
-  current features (CURRENT), the desired ones (DESIRED) or their mean (MEAN). A feature
-  of weight zero (hidden now or in the goal) is left out exactly;
-- the leg directions: measured (from the features) or given by the law's estimate, per
-  leg (input ``measured``);
-- the law part every feature shares (:func:`~controllers.law_algebra.law_tail`): gain,
-  rank, condition, damped solve, ``J_inv`` (``docs/math.md`` section 3), ``q_dot`` and
-  the finiteness checks.
-
-The numpy formulas of ``tests/controllers/interaction_oracle.py`` are the tests' oracle
-(``tests/controllers/numpy_law.py``). Input: the feature block (:func:`feature_inputs`),
-then :data:`LAW_INPUTS`. Output: the feature error (every feature, used or not),
-:data:`LAW_OUTPUTS`, the leg directions (18) the inverse Jacobian used
-(:func:`law_layouts`).
+Input: the feature block (:func:`feature_inputs`), then :data:`LAW_INPUTS`. Output: the
+feature error (every feature, used or not), :data:`LAW_OUTPUTS`, the leg directions (18)
+the inverse Jacobian used (:func:`law_layouts`). The numpy formulas of
+``tests/controllers/interaction_oracle.py`` are the tests' oracle.
 """
 
 from __future__ import annotations

@@ -90,23 +90,14 @@ class KernelRows:
             self.ready[trials[rows]] = True
         return quick  # type: ignore[no-any-return]
 
-    def accepted(self, Y: np.ndarray) -> np.ndarray:
-        """(m,) the results that are a command as they are: a finite error and
-        interaction matrix, rank 6, a finite command (the refusals and the non-finite
-        cases are left to the trial's own step, which says why)."""
-        o = self.outputs
-        with np.errstate(invalid="ignore"):
-            return (np.isfinite(Y[:, o["error_norm"].start])  # type: ignore[no-any-return]
-                    & np.isfinite(Y[:, o["n_sum"].start])
-                    & (Y[:, o["rank"].start] >= 6) & (Y[:, o["qdot_check"].start] == 0.0))
-
     def step(self, rows: np.ndarray, trials: np.ndarray, features: np.ndarray,
              lengths: np.ndarray, solver: Solver, estimate: LegDirectionEstimate,
              out: CommandBatch) -> np.ndarray:
         """The lean core over the batch rows ``rows`` of ``trials`` with their measured
-        ``features`` and ``lengths`` [m]; the rows whose result is the command
-        (:meth:`accepted`, and ``solver.batch_accept``) update the batch's ``estimate``
-        as a commanded step and fill ``out``.
+        ``features`` and ``lengths`` [m]; the rows whose result is the command (a finite
+        error and interaction matrix, rank 6, a finite command, and
+        ``solver.batch_accept``) update the batch's ``estimate`` as a commanded step and
+        fill ``out`` (the others are left to the trial's own step, which says why).
 
         Returns:
             (m,) the rows filled.
@@ -117,7 +108,10 @@ class KernelRows:
         assert self.function is not None
         Y = self.function.batch(X)
         o = self.outputs
-        ok = self.accepted(Y) & solver.batch_accept(trials, lengths, Y[:, o["qdot"]])
+        with np.errstate(invalid="ignore"):
+            ok = (np.isfinite(Y[:, o["error_norm"].start]) & np.isfinite(Y[:, o["n_sum"].start])
+                  & (Y[:, o["rank"].start] >= 6) & (Y[:, o["qdot_check"].start] == 0.0))
+        ok &= solver.batch_accept(trials, lengths, Y[:, o["qdot"]])
         if ok.all():  # the common case: no row copies
             Ya, tr, qa, ra = Y, trials, lengths, rows
         else:
@@ -159,10 +153,9 @@ class VisionLawBatch(LegRateFeedForward, Controller):
         trials = self.trial_instances
         #: The estimates of every trial (the instances' estimates are its rows).
         self.batch_estimate = LegDirectionEstimate.fresh(len(trials))
-        for k, inst in enumerate(trials):
-            inst.estimate = self.batch_estimate.row(k)
         self._core_rows = KernelRows(len(trials))
         for k, inst in enumerate(trials):
+            inst.estimate = self.batch_estimate.row(k)
             self._core_rows.take(k, inst.kernel if inst.batch_core else None)
         #: Goals given to ``retarget_batch`` not yet read by the trial's instance.
         self._pending: dict[int, tuple[GoalBatch, int]] = {}

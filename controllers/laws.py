@@ -126,7 +126,8 @@ class VisionLaw(VisionLawBatch):
         self.dt = dt
         self.estimate = LegDirectionEstimate.fresh()
         self.model_pose = None
-        self._q_star: np.ndarray | None = self._goal_lengths(context.goal)
+        self._q_star: np.ndarray | None = (None if context.goal.lengths is None
+                                           else goal_lengths(self.name, context.goal))
         self.kernel = None
         self._spare_kernel = None
         self._kernel_selected = False
@@ -151,7 +152,7 @@ class VisionLaw(VisionLawBatch):
         if self.context is None:
             raise ContextError(self.name, "context", "retarget(goal) before reset(context)")
         context = replace(self.context, goal=goal)
-        q_star = self._goal_lengths(goal)
+        q_star = None if goal.lengths is None else goal_lengths(self.name, goal)
         state = dict(vars(self))  # what _retarget_features may change
         self._q_star = q_star
         self._unselect_kernel()  # a reused core starts from the common case's inputs
@@ -166,10 +167,6 @@ class VisionLaw(VisionLawBatch):
             self._spare_kernel = None
         self.context = context
         self._configure_kernel()
-
-    def _goal_lengths(self, goal: Goal) -> np.ndarray | None:
-        """``goal.lengths`` checked, None when the goal has none."""
-        return None if goal.lengths is None else goal_lengths(self.name, goal)
 
     def _configure_kernel(self) -> None:
         """Write the goal lengths (DESIRED/MEAN cores), the gain, threshold and damping into

@@ -43,13 +43,9 @@ class LegDirectionController(VisionLaw):
         self._install_goal(self._u_star, us, vis)
 
     def _install_goal(self, desired: np.ndarray, us: np.ndarray, vis: np.ndarray) -> None:
-        """Set the goal's visibility and the compiled core's goal inputs.
-
-        Args:
-            desired: The core's desired feature (zeros where unknown).
-            us: (6, 3) desired leg directions (``+z`` where unknown: the fill of hidden ones).
-            vis: (6,) which desired directions are known.
-        """
+        """Set the goal's visible legs ``vis`` (6,), the fill of hidden legs ``us`` (the
+        desired directions, ``+z`` where unknown) and the core's goal inputs (``desired``
+        zero where unknown)."""
         self._goal_visible = vis
         self._fill = us
         # (the legs' goal state of the DESIRED / MEAN interaction, where the core has it)

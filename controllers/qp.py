@@ -1,9 +1,6 @@
-"""The limit-QP laws: the leg-edge and leg-direction tasks with the limit QP solver
-(:mod:`controllers.solvers.limit_qp`: stroke, with a margin, and leg-speed limits, OSQP),
-``docs/math.md`` section 6. A (task, solver) pair each: the controller is the task's
-law with :class:`~controllers.solvers.limit_qp.LimitQPSolver` in place of the damped
-pseudo-inverse.
-"""
+"""The limit-QP laws (``docs/math.md`` section 6): the leg-edge and leg-direction laws
+with :class:`~controllers.solvers.limit_qp.LimitQPSolver` (stroke, with a margin, and
+leg-speed limits, OSQP) in place of the damped pseudo-inverse."""
 
 from __future__ import annotations
 

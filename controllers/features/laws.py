@@ -1,16 +1,12 @@
 """The first-order controllers of a :class:`~controllers.tasks.leg_feature.LegFeature`:
-pseudo-inverse, limit QP and predictive, through the feature's compiled core.
+pseudo-inverse (``-pinv``), limit QP (``-qp``) and predictive (``-mpc``).
 
-A feature law is the built-in leg-direction law (:class:`~controllers.leg_direction.
-LegDirectionController`: its reading of observations, visibility, dead reckoning of
-hidden legs, batched rows through the lean compiled core) whose compiled core is the
-feature's (:func:`~controllers.law_kernel.feature_law_kernel`) and whose desired
-value is the feature of the goal's legs (``goal.directions`` and ``goal.lengths``). The
-solver makes the controller: the damped pseudo-inverse (``-pinv``), the limit QP of
-the built-in QP laws (``-qp``, :class:`~controllers.solvers.limit_qp.LimitQPSolver`),
-or the predictive controller with the local model (``-mpc``, :class:`~controllers.mpc.
-controller.MPCLaw`, whose local problem depends on the tasks only through ``L^T L``,
-``L^T e`` and ``J_inv``: the built-in compiled problem serves every feature).
+A feature law is the built-in leg-direction law (its reading of observations, hidden
+legs, batched rows) with the feature's compiled core
+(:func:`~controllers.law_kernel.feature_law_kernel`) and the feature of the goal's legs
+as its desired value. The predictive controller's local problem reads the tasks through
+``L^T L``, ``L^T e`` and ``J_inv`` only: the built-in compiled problem serves every
+feature.
 """
 
 from __future__ import annotations
