@@ -135,10 +135,9 @@ class VisionLawBatch(LegRateFeedForward, Controller):
 
     # ----------------------------------------------------------------- the batch
     def _batch_desired(self, goals: GoalBatch) -> tuple[np.ndarray | None, np.ndarray]:
-        """The compiled core's desired-feature input of each goal, (m, D), and the mask
-        (m,) of goals that the law would read into exactly that with its compiled core
-        (every feature visible and finite, the CURRENT interaction). (None, mask): no
-        such shortcut; every goal then goes through its instance's ``retarget_trial``."""
+        """The compiled core's desired input of each goal (m, D), and the mask (m,) of the
+        goals the law would read into exactly that (None, mask: every goal goes through
+        its instance's ``retarget_trial``)."""
         return None, np.zeros(len(goals), dtype=bool)
 
     def reset_batch(self, contexts: Sequence[ControllerContext]) -> None:
@@ -166,12 +165,9 @@ class VisionLawBatch(LegRateFeedForward, Controller):
 
     def retarget_batch(self, trials: np.ndarray, goals: GoalBatch) -> None:
         """New goals for some trials (row ``j`` of ``goals`` for trial ``trials[j]``),
-        keeping their state, as each instance's :meth:`retarget_trial`.
-
-        In a batch of many trials, a goal that the compiled core takes as it is
-        (:meth:`_batch_desired`) is written into the batch's inputs at once and read by
-        the instance only when that trial next needs it (a row the core cannot finish);
-        any other goal, and the goal of a batch of one, is read by the instance now.
+        keeping their state, as each instance's :meth:`retarget_trial`; in a batch of
+        many trials, a goal the compiled core takes as it is (:meth:`_batch_desired`) is
+        read by the instance only when that trial next needs it (module docstring).
 
         Raises:
             ContextError: A goal the law cannot use, or no reset yet.
