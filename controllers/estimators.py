@@ -1,24 +1,17 @@
-"""What a control law carries from one period to the next, as explicit dataclasses.
+"""What a control law carries from one period to the next (a task,
+:mod:`controllers.tasks`, is a pure function of the current measurements): the leg
+directions the vision laws know (:class:`LegDirectionEstimate`, ``docs/math.md``
+section 6) and the platform pose that warm-starts a forward kinematics
+(:class:`PoseEstimate`).
 
-A task (:mod:`controllers.tasks`) is a pure function of the current measurements;
-what it needs from the past lives here, one row per trial:
-
-- :class:`LegDirectionEstimate`: the leg directions the vision laws know (measured,
-  or dead-reckoned for hidden legs, ``docs/math.md`` section 6), the directions the
-  inverse Jacobian uses this period, and the last commanded twist and lengths that
-  the dead reckoning integrates;
-- :class:`PoseEstimate`: the platform pose that warm-starts the forward kinematics
-  (the model-based law, and the nominal-model directions of never-seen legs).
-
-Every array has a leading trial axis when the estimate holds a batch; :meth:`row`
-gives one trial's estimate as views into the batch (no leading axis), so that a
-trial stepped alone and the same trial stepped in its batch write the same memory.
+Every array has a leading trial axis when the estimate holds a batch; ``row(k)`` gives
+one trial's estimate as views into the batch, so that a trial stepped alone and the
+same trial stepped in its batch write the same memory.
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Any
 
 import numpy as np
 
@@ -135,44 +128,3 @@ class PoseEstimate:
 
 __all__ = ["LegDirectionEstimate", "PoseEstimate"]
 
-
-# --------------------------------------------------------------------------- the model
-def model_directions(context: Any, q: np.ndarray, guess: PoseEstimate | None
-                     ) -> tuple[np.ndarray | None, PoseEstimate | None]:
-    """Leg directions (6, 3) in the camera frame predicted by the nominal model, and the
-    pose found (the next warm start).
-
-    Forward kinematics of the measured lengths ``q`` [m] with the nominal geometry
-    (warm-started at ``guess``), seen through the estimated ``camera_from_base``. Used
-    only where a leg has never been observed and the goal image does not show it
-    either: the inverse Jacobian needs every direction, and an approximate one only
-    slows the convergence (the error itself never involves the model). (None, None)
-    when the context has no camera pose or the forward kinematics fails.
-    """
-    pose = getattr(getattr(context, "camera", None), "camera_from_base", None)
-    if context is None or pose is None:
-        return None, None
-    from hexapod.exceptions import HexapodError
-    from hexapod.fk import forward_kinematics
-    from hexapod.kinematics import legs_in_frame
-
-    try:
-        sol = forward_kinematics(context.geometry, q, check_stroke=False,
-                                 guess=None if guess is None else guess.pose)
-    except HexapodError:
-        return None, None
-    found = PoseEstimate(sol.rotation, sol.translation)
-    return legs_in_frame(context.geometry, sol.rotation, sol.translation,
-                         pose).directions, found
-
-
-def unknown_direction_reason(unknown: np.ndarray) -> str:
-    """Why a law refuses when the legs ``unknown`` have no direction at all."""
-    return (f"direction of leg {int(unknown[0])} unknown (hidden since reset, no desired "
-            "direction, no nominal model prediction): cannot build the inverse Jacobian")
-
-
-def model_directions_note(unknown: np.ndarray) -> str:
-    """The note of a step that used the nominal model's directions for ``unknown``."""
-    return ("nominal-model directions (forward kinematics of the measured lengths) for "
-            "never-seen legs " + ", ".join(str(int(i)) for i in unknown))

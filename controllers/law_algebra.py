@@ -6,6 +6,8 @@ inverse Jacobian, ``q_dot``)."""
 
 from __future__ import annotations
 
+from collections.abc import Callable
+
 import casadi as ca
 
 from controllers.law_tools import gain_formula
@@ -18,21 +20,29 @@ JACOBI_SWEEPS = 8
 LAW_SWEEPS = 6
 
 
-def cholesky_solve(M: list[list[ca.SX]], rhs: list[ca.SX]) -> list[ca.SX]:
-    """``M^-1 rhs`` for a symmetric positive definite 6 x 6 ``M`` (unrolled Cholesky;
-    NaN when ``M`` is not positive definite)."""
-    n = len(rhs)
+def _cholesky(M: list[list[ca.SX]], pivot: Callable[[ca.SX], ca.SX]) -> list[list[ca.SX]]:
+    """The lower Cholesky factor of a symmetric ``M`` (unrolled), each diagonal entry
+    ``pivot(d)`` of the remaining pivot ``d``."""
+    n = len(M)
     L: list[list[ca.SX]] = [[ca.SX(0.0)] * n for _ in range(n)]
     for j in range(n):
         d = M[j][j]
         for k in range(j):
             d = d - L[j][k] * L[j][k]
-        L[j][j] = ca.sqrt(d)
+        L[j][j] = pivot(d)
         for i in range(j + 1, n):
             v = M[i][j]
             for k in range(j):
                 v = v - L[i][k] * L[j][k]
             L[i][j] = v / L[j][j]
+    return L
+
+
+def cholesky_solve(M: list[list[ca.SX]], rhs: list[ca.SX]) -> list[ca.SX]:
+    """``M^-1 rhs`` for a symmetric positive definite 6 x 6 ``M`` (unrolled Cholesky;
+    NaN when ``M`` is not positive definite)."""
+    n = len(rhs)
+    L = _cholesky(M, ca.sqrt)
     z: list[ca.SX] = []
     for i in range(n):
         v = rhs[i]
@@ -109,20 +119,14 @@ def full_rank_certificate(N: ca.SX, thr2: ca.SX) -> ca.SX:
     """
     fro = ca.sqrt(ca.sum1(ca.reshape(N * N, 36, 1)))
     c = (2.0 * thr2 + 1e-10) * fro
-    L: list[list[ca.SX]] = [[ca.SX(0.0)] * 6 for _ in range(6)]
-    ok = fro > 0
-    for j in range(6):
-        d = N[j, j] - c
-        for k in range(j):
-            d = d - L[j][k] * L[j][k]
-        ok = ca.logic_and(ok, d > 0)
-        L[j][j] = ca.sqrt(ca.if_else(d > 0, d, 1.0))
-        for i in range(j + 1, 6):
-            v = N[i, j]
-            for k in range(j):
-                v = v - L[i][k] * L[j][k]
-            L[i][j] = v / L[j][j]
-    return ca.if_else(ok, 1.0, 0.0)
+    ok = [fro > 0]
+
+    def pivot(d: ca.SX) -> ca.SX:
+        ok[0] = ca.logic_and(ok[0], d > 0)
+        return ca.sqrt(ca.if_else(d > 0, d, 1.0))
+
+    _cholesky([[N[i, j] - c if i == j else N[i, j] for j in range(6)] for i in range(6)], pivot)
+    return ca.if_else(ok[0], 1.0, 0.0)
 
 
 def law_tail(e: ca.SX, N: ca.SX, b: ca.SX, directions: list[ca.SX], base_points: list[ca.SX],
@@ -185,18 +189,6 @@ def law_tail(e: ca.SX, N: ca.SX, b: ca.SX, directions: list[ca.SX], base_points:
             ca.sum1(qdot - qdot), ca.reshape(N.T, 36, 1), b, ca.reshape(J.T, 36, 1)]
 
 
-def upper_zeros() -> list[list[ca.SX]]:
-    """The upper triangle of a 6 x 6 accumulator (``N = L^T L`` is symmetric: each sum is
-    built once)."""
-    return [[ca.SX(0.0) for _ in range(6)] for _ in range(6)]
-
-
-def symmetric_of_upper(upper: list[list[ca.SX]]) -> ca.SX:
-    """The symmetric 6 x 6 matrix of an upper triangle."""
-    return ca.vertcat(*[ca.horzcat(*[upper[min(i, j)][max(i, j)] for j in range(6)])
-                        for i in range(6)])
-
-
 class WeightedNormal:
     """``N = sum_k w_k L_k^T L_k`` and ``b = sum_k w_k L_k^T e_k`` over weighted blocks.
 
@@ -208,7 +200,8 @@ class WeightedNormal:
     """
 
     def __init__(self) -> None:
-        self.upper = upper_zeros()
+        #: The upper triangle of ``N`` (symmetric: each sum is built once).
+        self.upper = [[ca.SX(0.0) for _ in range(6)] for _ in range(6)]
         self.b = ca.SX.zeros(6, 1)
         #: The blocks' errors with the unused ones replaced by zeros.
         self.used_errors: list[ca.SX] = []
@@ -241,4 +234,5 @@ class WeightedNormal:
     @property
     def N(self) -> ca.SX:
         """``N`` (6, 6)."""
-        return symmetric_of_upper(self.upper)
+        return ca.vertcat(*[ca.horzcat(*[self.upper[min(i, j)][max(i, j)] for j in range(6)])
+                            for i in range(6)])

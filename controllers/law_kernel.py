@@ -1,42 +1,23 @@
 """The per-step numeric core of the vision laws, compiled to C (one call per step).
 
-A ``step`` of a vision law is a few hundred floating-point operations spread
-over some sixty numpy calls; on this scale the cost is the calls, not the
-arithmetic. The core is therefore written once as a CasADi SX expression, from the
-tasks' own block definitions (the leg features' :meth:`~controllers.tasks.leg_feature.
-LegFeature.block` through :func:`feature_law_function`, the built-in leg directions'
-included: :func:`controllers.tasks.leg_direction.direction_block`,
-:func:`controllers.tasks.leg_edge.edge_block`,
-:func:`controllers.tasks.joint_length.inverse_jacobian_row`), generated to C, compiled
-by the system C compiler and called through :mod:`ctypes` on preallocated buffers by
-:class:`hexapod.compiled.CompiledFunction` (the technique of :mod:`hexapod.fk`; the
-CasADi virtual machine evaluates the same expression when there is no compiler). One
-call, a few microseconds, computes:
+A law's step is a few hundred floating-point operations spread over some sixty numpy
+calls; at this scale the cost is the calls. The core is therefore one CasADi SX
+expression built from the tasks' own blocks (a leg feature's
+:meth:`~controllers.tasks.leg_feature.LegFeature.block`, the leg directions' included;
+:func:`controllers.tasks.leg_edge.edge_block`), generated to C and called on
+preallocated buffers by :class:`hexapod.compiled.CompiledFunction` (the CasADi virtual
+machine evaluates it when there is no compiler). One call gives the stacked error and
+the weighted normal equations ``N = L^T W L``, ``b = L^T W e`` with ``L`` at the
+current, desired or mean features (a feature of weight zero, hidden now or in the goal,
+is left out exactly), the leg directions (measured, or the law's estimate where a leg is
+not ``measured``), and the law part every feature shares
+(:func:`~controllers.law_algebra.law_tail`: gain, rank, damped solve, ``J_inv``,
+``q_dot``, finiteness checks).
 
-- the feature part (one per feature kind): the stacked error ``e`` and the weighted
-  normal equations ``N = L^T W L``, ``b = L^T W e`` (``docs/math.md`` section 6;
-  :class:`~controllers.law_algebra.WeightedNormal`), with the interaction matrix at the
-  current features (CURRENT), at the desired ones (DESIRED) or their mean (MEAN): one
-  core per choice. A feature of weight zero (hidden now or in the goal) is left out
-  exactly: nothing of it reaches ``N``, ``b``, the error norm, the gain or the rank;
-- the leg directions: measured (from the features), or given by the law's estimate
-  (dead-reckoned or approximated for hidden legs), per leg (input ``measured``);
-- the law part, shared by every feature kind (:func:`~controllers.law_algebra.law_tail`):
-  the adaptive gain ``lambda(|e|_inf)``, the rank and condition number of ``N``, the
-  damped solution ``tau = -lambda (N + d2 I)^-1 b`` at full rank
-  (:func:`controllers.law_tools.solve_normal`), the inverse Jacobian ``J_inv``
-  (``docs/math.md`` section 3), ``q_dot = J_inv tau`` and the finiteness checks of
-  :meth:`controllers.laws.VisionLaw.step` (error norm, sum of ``N``, a ``q_dot`` check
-  that is 0 exactly when every entry is finite).
-
-Every case of the laws (hidden features, every interaction choice) is computed here;
-the numpy formulas of ``tests/controllers/interaction_oracle.py`` are the tests' oracle
-(``tests/controllers/numpy_law.py``, ``tests/controllers/test_law_kernel.py``).
-
-Input: the feature block (:func:`direction_inputs`, :func:`edge_inputs`), then the law
-parameters :data:`LAW_INPUTS`. Output: the feature error (every feature, used or not),
-then :data:`LAW_OUTPUTS`, then the leg directions (18) the inverse Jacobian used (the
-:class:`~hexapod.compiled.Layout` pair of :func:`law_layouts`).
+Input: the feature block (:func:`feature_inputs`), then :data:`LAW_INPUTS`. Output: the
+feature error (every feature, used or not), :data:`LAW_OUTPUTS`, the leg directions (18)
+the inverse Jacobian used (:func:`law_layouts`). The numpy formulas of
+``tests/controllers/interaction_oracle.py`` are the tests' oracle.
 """
 
 from __future__ import annotations
@@ -48,92 +29,66 @@ from functools import lru_cache
 import casadi as ca
 import numpy as np
 
-from controllers.law_algebra import (
-    JACOBI_SWEEPS,
-    LAW_SWEEPS,
-    WeightedNormal,
-    cholesky_solve,
-    full_rank_certificate,
-    jacobi_eigen,
-    law_tail,
-)
-from controllers.tasks.leg_direction import LEG_DIRECTIONS
+from controllers.law_algebra import WeightedNormal, law_tail
+from controllers.law_tools import INTERACTIONS
 from controllers.tasks.leg_edge import EdgeFeature, edge_block, leg_direction_of_edges
 from controllers.tasks.leg_feature import LegFeature
 from hexapod.compiled import CompiledFunction, Layout
 
-__all__ = [
-    "DIRECTION_INPUTS", "EDGE_INPUTS", "JACOBI_SWEEPS", "LAW_INPUTS", "LAW_OUTPUTS",
-    "LAW_SWEEPS", "LawKernel", "LawResult", "cholesky_solve", "direction_inputs",
-    "direction_kernel", "edge_inputs", "edge_law_kernel", "feature_inputs",
-    "feature_law_function", "feature_law_kernel", "full_rank_certificate", "jacobi_eigen",
-    "law_layouts", "law_tail",
-]
-
-#: Where a core evaluates the interaction matrix (:data:`controllers.law_tools.INTERACTIONS`).
-CORE_INTERACTIONS = ("current", "desired", "mean")
 #: Law parameters after the feature block: gain ``(lambda0, lambda_inf, lambda0')``,
 #: squared threshold, squared damping (or the QP regularization).
 LAW_INPUTS = (("gain", 3), ("threshold2", 1), ("damping2", 1))
-#: Per-leg inputs of every core: the weight of each feature (0: left out), the leg
-#: directions the law knows (used where a leg is not ``measured``), and ``measured``
-#: (1: the leg's direction comes from this period's features).
+#: Per-leg inputs of every core: the leg directions the law knows (used where a leg is
+#: not ``measured``), and ``measured`` (1: the leg's direction comes from the features).
 _LEG_INPUTS = (("leg_directions", 18), ("measured", 6))
-
-
-def feature_inputs(feature: LegFeature, interaction: str = "current"
-                   ) -> tuple[tuple[str, int], ...]:
-    """The law core's block of a leg feature: measured ``u`` (6 x 3), the desired feature
-    (6 x rows), ``A`` (6 x 3), ``q``, the weights (6), :data:`_LEG_INPUTS`, and for the
-    DESIRED / MEAN interaction the legs' desired state
-    (:attr:`~controllers.tasks.leg_feature.LegFeature.desired_state_inputs`)."""
-    block = (("features", 18), ("desired", 6 * feature.rows), ("base_points", 18),
-             ("lengths", 6), ("weights", 6), *_LEG_INPUTS)
-    return block if interaction == "current" else (*block, *feature.desired_state_inputs)
-
-
-def direction_inputs(interaction: str = "current") -> tuple[tuple[str, int], ...]:
-    """The direction law's feature block (:func:`feature_inputs` of
-    :data:`~controllers.tasks.leg_direction.LEG_DIRECTIONS`): measured ``u`` (6 x 3),
-    desired ``u*``, ``A`` (6 x 3), ``q``, the weights (6), :data:`_LEG_INPUTS`, and for
-    the DESIRED / MEAN interaction the lengths ``q*`` where it is evaluated."""
-    return feature_inputs(LEG_DIRECTIONS, interaction)
-
-
-def edge_inputs(interaction: str = "current") -> tuple[tuple[str, int], ...]:
-    """The edge law's feature block: features (12 x 3 lines or normals), desired, ``K``,
-    ``K^-1`` (row-major; identities for normals), ``A`` (6 x 3), ``q``, the weights (12),
-    :data:`_LEG_INPUTS`, and for the DESIRED / MEAN interaction the desired normals
-    (12 x 3), leg directions ``u*`` (6 x 3) and lengths ``q*``."""
-    block = (("features", 36), ("desired", 36), ("K", 9), ("K_inv", 9), ("base_points", 18),
-             ("lengths", 6), ("weights", 12), *_LEG_INPUTS)
-    if interaction == "current":
-        return block
-    return (*block, ("desired_normals", 36), ("desired_directions", 18),
-            ("desired_lengths", 6))
-
-
-#: The CURRENT-interaction layouts.
-DIRECTION_INPUTS = direction_inputs()
-EDGE_INPUTS = edge_inputs()
 #: After the error: ``|e|``, sum of ``N``, rank, condition, gain, ``tau`` (6), ``q_dot`` (6),
 #: finiteness check of ``q_dot``, ``N`` (36, row-major), ``b`` (6), ``J_inv`` (36).
 LAW_OUTPUTS = (("error_norm", 1), ("n_sum", 1), ("rank", 1), ("condition", 1), ("gain", 1),
                ("tau", 6), ("qdot", 6), ("qdot_check", 1), ("N", 36), ("b", 6), ("J", 36))
 
+#: A feature a law core is built for: a leg feature or the leg edges.
+Feature = LegFeature | EdgeFeature
 
-def law_layouts(feature_inputs: Sequence[tuple[str, int]], n_error: int, name: str
-                ) -> tuple[Layout, Layout]:
-    """The input layout (the feature block, then :data:`LAW_INPUTS`) and the output
-    layout (the error (``n_error``), :data:`LAW_OUTPUTS`, the leg directions (18)) of a
-    law core."""
-    return (Layout([*feature_inputs, *LAW_INPUTS], f"{name} input"),
+
+def feature_inputs(feature: Feature, interaction: str = "current"
+                   ) -> tuple[tuple[str, int], ...]:
+    """The feature block of a law core's input.
+
+    A leg feature: measured ``u`` (6 x 3), the desired feature (6 x rows), ``A`` (6 x 3),
+    ``q``, the weights (6), :data:`_LEG_INPUTS`, and for the DESIRED / MEAN interaction the
+    legs' desired state (:attr:`~controllers.tasks.leg_feature.LegFeature.
+    desired_state_inputs`). The edges: the 12 lines or normals, desired, ``K``, ``K^-1``
+    (row-major; identities for normals), ``A``, ``q``, the weights (12),
+    :data:`_LEG_INPUTS`, and for DESIRED / MEAN the desired normals (12 x 3), leg
+    directions ``u*`` (6 x 3) and lengths ``q*``.
+    """
+    if isinstance(feature, EdgeFeature):
+        block: tuple[tuple[str, int], ...] = (
+            ("features", 36), ("desired", 36), ("K", 9), ("K_inv", 9), ("base_points", 18),
+            ("lengths", 6), ("weights", 12), *_LEG_INPUTS)
+        goal_state: tuple[tuple[str, int], ...] = (
+            ("desired_normals", 36), ("desired_directions", 18), ("desired_lengths", 6))
+    else:
+        block = (("features", 18), ("desired", 6 * feature.rows), ("base_points", 18),
+                 ("lengths", 6), ("weights", 6), *_LEG_INPUTS)
+        goal_state = feature.desired_state_inputs
+    return block if interaction == "current" else (*block, *goal_state)
+
+
+def law_layouts(feature: Feature, interaction: str = "current") -> tuple[Layout, Layout]:
+    """The input layout (:func:`feature_inputs`, then :data:`LAW_INPUTS`) and the output
+    layout (the error, :data:`LAW_OUTPUTS`, the leg directions (18)) of a law core."""
+    if isinstance(feature, EdgeFeature):
+        name, n_error = "edge law", 36
+    else:
+        name, n_error = f"{feature.name} law", 6 * feature.rows
+    return (Layout([*feature_inputs(feature, interaction), *LAW_INPUTS], f"{name} input"),
             Layout([("error", n_error), *LAW_OUTPUTS, ("directions", 18)], f"{name} output"))
 
 
 def _check_interaction(interaction: str) -> None:
-    if interaction not in CORE_INTERACTIONS:
-        raise ValueError(f"interaction: expected one of {', '.join(CORE_INTERACTIONS)}, "
+    if interaction not in INTERACTIONS:
+        raise ValueError(f"interaction: expected one of {', '.join(INTERACTIONS)}, "
                          f"got {interaction!r}")
 
 
@@ -151,7 +106,7 @@ def _leg_directions(v: dict[str, ca.SX], measured: list[ca.SX]) -> list[ca.SX]:
 
 
 def feature_law_function(feature: LegFeature, interaction: str = "current",
-                         lean: bool = False, name: str | None = None) -> ca.Function:
+                         lean: bool = False) -> ca.Function:
     """The law core of a leg feature (the leg-direction law's is that of
     :data:`~controllers.tasks.leg_direction.LEG_DIRECTIONS`): per leg the feature's block
     ``(e_i, L_i)`` (:meth:`~controllers.tasks.leg_feature.LegFeature.block`; for the
@@ -160,13 +115,12 @@ def feature_law_function(feature: LegFeature, interaction: str = "current",
 
     Args:
         feature: The feature.
-        interaction: Where ``L`` is evaluated (:data:`CORE_INTERACTIONS`).
+        interaction: Where ``L`` is evaluated (``"current"``, ``"desired"``, ``"mean"``).
         lean: The batched laws' core (:func:`law_tail`).
-        name: The function's name (default from the feature's).
     """
     _check_interaction(interaction)
     r = feature.rows
-    inputs = law_layouts(feature_inputs(feature, interaction), 6 * r, f"{feature.name} law")[0]
+    inputs = law_layouts(feature, interaction)[0]
     x = ca.SX.sym("x", inputs.size)
     v = inputs.split(x)
     u = _rows(v["features"], 6)
@@ -187,18 +141,9 @@ def feature_law_function(feature: LegFeature, interaction: str = "current",
     directions = _leg_directions(v, u)
     tail = law_tail(ca.vertcat(*acc.used_errors), acc.N, acc.b, directions, A,
                     x[inputs["gain"].start:], lean)
-    if name is None:
-        name = f"hexapod_{feature.c_name}_law" + (
-            "" if interaction == "current" else f"_{interaction}") + ("_lean" if lean else "")
+    name = f"hexapod_{feature.c_name}_law" + (
+        "" if interaction == "current" else f"_{interaction}") + ("_lean" if lean else "")
     return ca.Function(name, [x], [ca.vertcat(*errors, *tail, *directions)])
-
-
-def _direction_function(interaction: str = "current", lean: bool = False) -> ca.Function:
-    """Leg-direction law: ``e_i = u_i x u_i*``, ``L_i = -[u_i*]_x M_i`` (docs/math.md §3, §6),
-    the core of :data:`~controllers.tasks.leg_direction.LEG_DIRECTIONS`."""
-    name = "hexapod_direction_law_w" + ("" if interaction == "current" else f"_{interaction}")
-    return feature_law_function(LEG_DIRECTIONS, interaction, lean,
-                                name + ("_lean" if lean else ""))
 
 
 def _edge_function(feature: EdgeFeature, interaction: str = "current",
@@ -207,8 +152,7 @@ def _edge_function(feature: EdgeFeature, interaction: str = "current",
     edge feature's measured normal and line matrices
     (:meth:`~controllers.tasks.leg_edge.EdgeFeature.sx_normal`,
     :meth:`~controllers.tasks.leg_edge.EdgeFeature.line_matrices`)."""
-    _check_interaction(interaction)
-    inputs = law_layouts(edge_inputs(interaction), 36, "edge law")[0]
+    inputs = law_layouts(feature, interaction)[0]
     x = ca.SX.sym("x", inputs.size)
     v = inputs.split(x)
     feat = _rows(v["features"], 12)
@@ -324,11 +268,6 @@ class LawKernel:
         """The lean core (the batched laws' one; :attr:`function` without a lean one)."""
         return self.function if self._lean is None else self._lean()
 
-    @property
-    def compiled(self) -> bool:
-        """True when the C code is used (False: CasADi virtual machine)."""
-        return self.function.compiled
-
     def set(self, name: str, value: np.ndarray | float | Sequence[float]) -> None:
         """Write an input (any shape with the right number of values)."""
         self.inputs[name][:] = np.asarray(value, dtype=float).reshape(-1)
@@ -346,71 +285,32 @@ class LawKernel:
             directions=y[o["directions"]].reshape(6, 3))
 
 
-@lru_cache(maxsize=12)
-def _direction_compiled(interaction: str = "current", lean: bool = False,
-                        compiled: bool = True) -> CompiledFunction:
-    inputs, outputs = law_layouts(direction_inputs(interaction), 18, "direction law")
-    return CompiledFunction(_direction_function(interaction, lean), compiled, inputs, outputs)
+@lru_cache(maxsize=64)
+def _compiled_core(feature: Feature, interaction: str, lean: bool, compiled: bool
+                   ) -> CompiledFunction:
+    """The compiled core of a feature (shared by its kernels; cached on disk by content
+    hash)."""
+    make = _edge_function if isinstance(feature, EdgeFeature) else feature_law_function
+    return CompiledFunction(make(feature, interaction, lean),  # type: ignore[arg-type]
+                            compiled, *law_layouts(feature, interaction))
 
 
-@lru_cache(maxsize=24)
-def _edge_compiled(feature: EdgeFeature, interaction: str = "current", lean: bool = False,
-                   compiled: bool = True) -> CompiledFunction:
-    inputs, outputs = law_layouts(edge_inputs(interaction), 36, "edge law")
-    return CompiledFunction(_edge_function(feature, interaction, lean), compiled, inputs,
-                            outputs)
-
-
-def direction_kernel(interaction: str = "current", compiled: bool = True) -> LawKernel:
-    """A kernel of the leg-direction law (its own input buffer; shared compiled code).
-
-    Args:
-        interaction: Where the interaction matrix is evaluated (:data:`CORE_INTERACTIONS`).
-        compiled: C code (False: the CasADi virtual machine evaluates the same core).
-    """
-    _check_interaction(interaction)
-    return LawKernel(_direction_compiled(interaction, False, compiled),
-                     lambda: _direction_compiled(interaction, True, compiled))
-
-
-def edge_law_kernel(feature: EdgeFeature, interaction: str = "current",
-                    compiled: bool = True) -> LawKernel:
-    """A kernel of the leg-edge law on pixel lines or normals.
-
-    Args:
-        feature: :data:`~controllers.tasks.leg_edge.EDGE_LINES` or
-            :data:`~controllers.tasks.leg_edge.EDGE_NORMALS`.
-        interaction: Where the interaction matrix is evaluated (:data:`CORE_INTERACTIONS`).
-        compiled: C code (False: the CasADi virtual machine evaluates the same core).
-    """
-    _check_interaction(interaction)
-    return LawKernel(_edge_compiled(feature, interaction, False, compiled),
-                     lambda: _edge_compiled(feature, interaction, True, compiled))
-
-
-def _feature_compiled(feature: LegFeature, interaction: str, lean: bool,
-                      compiled: bool) -> CompiledFunction:
-    """The compiled core of a feature (kept on the feature: its instances share it)."""
-    cache = feature.__dict__.setdefault("_compiled_cores", {})
-    key = ("law", interaction, lean, compiled)
-    if key not in cache:
-        inputs, outputs = law_layouts(feature_inputs(feature, interaction), 6 * feature.rows,
-                                      f"{feature.name} law")
-        cache[key] = CompiledFunction(feature_law_function(feature, interaction, lean),
-                                      compiled, inputs, outputs)
-    return cache[key]  # type: ignore[no-any-return]
-
-
-def feature_law_kernel(feature: LegFeature, interaction: str = "current",
+def feature_law_kernel(feature: Feature, interaction: str = "current",
                        compiled: bool = True) -> LawKernel:
-    """A kernel of a leg feature's law (its own input buffer; the compiled code is kept
-    on the feature and cached on disk by content hash).
+    """A kernel of a feature's law (its own input buffer; shared compiled code).
 
     Args:
-        feature: The feature.
-        interaction: Where the interaction matrix is evaluated (:data:`CORE_INTERACTIONS`).
+        feature: A leg feature (the leg-direction law's is
+            :data:`~controllers.tasks.leg_direction.LEG_DIRECTIONS`) or the leg edges
+            (:data:`~controllers.tasks.leg_edge.EDGE_LINES` or
+            :data:`~controllers.tasks.leg_edge.EDGE_NORMALS`).
+        interaction: Where the interaction matrix is evaluated (``"current"``,
+            ``"desired"``, ``"mean"``).
         compiled: C code (False: the CasADi virtual machine evaluates the same core).
+
+    Raises:
+        ValueError: An unknown interaction.
     """
     _check_interaction(interaction)
-    return LawKernel(_feature_compiled(feature, interaction, False, compiled),
-                     lambda: _feature_compiled(feature, interaction, True, compiled))
+    return LawKernel(_compiled_core(feature, interaction, False, compiled),
+                     lambda: _compiled_core(feature, interaction, True, compiled))

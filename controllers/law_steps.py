@@ -1,13 +1,12 @@
-"""The batch side of :class:`~controllers.laws.VisionLaw`: one instance per trial, the
-compiled core over the rows of the common case.
+"""The batch side of :class:`~controllers.laws.VisionLaw` (which derives from
+:class:`VisionLawBatch` and sets the law, its solver and its core).
 
-:class:`VisionLawBatch` resets one instance of the law per context (their estimates
-rows of one batch estimate, their compiled cores' inputs rows of one
-:class:`~controllers.law_rows.KernelRows`), retargets them (a goal the compiled core
-takes as it is written into the batch's inputs at once, read by the instance when it
-next needs it) and steps the common rows in one C loop, leaving the others to their
-instances (:meth:`VisionLawBatch.step_row`). :class:`~controllers.laws.VisionLaw`
-(:mod:`controllers.laws`) derives from it and sets the law, its solver and its core.
+:class:`VisionLawBatch` resets one instance of the law per context (their estimates rows
+of one batch estimate, their compiled cores' inputs rows of one :class:`KernelRows`),
+retargets them (a goal the compiled core takes as it is written into the batch's inputs
+at once, read by the instance when it next needs it) and steps the common rows in one C
+loop through the lean core, leaving the others to their instances
+(:meth:`VisionLawBatch.step_row`).
 """
 
 from __future__ import annotations
@@ -28,11 +27,101 @@ from controllers.base import (
 )
 from controllers.estimators import LegDirectionEstimate
 from controllers.exceptions import ContextError
-from controllers.law_rows import KernelRows
+from controllers.law_kernel import LawKernel
 from controllers.leg_rate import LegRateFeedForward
 from controllers.solvers.base import Solver
+from controllers.tasks.leg_direction import LegDirections
+from controllers.tasks.leg_edge import EdgeFeature
+from hexapod.compiled import CompiledFunction, Layout
 
-__all__ = ["VisionLawBatch"]
+__all__ = ["KernelRows", "ObservedFeature", "VisionLawBatch"]
+
+#: What a vision law reads from an observation (its field, visibility mask and shape).
+ObservedFeature = EdgeFeature | LegDirections
+
+
+class KernelRows:
+    """The inputs of the compiled cores of a batch's trials, one row per trial, and the
+    lean core that evaluates any rows of them in one C loop.
+
+    Args:
+        n: Trials of the batch.
+    """
+
+    def __init__(self, n: int) -> None:
+        #: The lean core (None until a trial has a compiled core).
+        self.function: CompiledFunction | None = None
+        #: Where each named input lies in a row, and each named output in a result (the
+        #: lean core's layouts; empty until a trial has a compiled core).
+        self.slices: Layout = Layout((), "law core input")
+        self.outputs: Layout = Layout((), "law core output")
+        self.n = n
+        self.X = np.zeros((0, 0))
+        #: (n,) the trials whose row holds its core's inputs (the lean core may step them).
+        self.ready = np.zeros(n, dtype=bool)
+        #: (n,) the rows holding a core's constants (a retarget may write its desired
+        #: features alone).
+        self.filled = np.zeros(n, dtype=bool)
+
+    def take(self, trial: int, kernel: LawKernel | None) -> None:
+        """Copy a trial's core inputs into its row (None: the trial has no lean core)."""
+        self.ready[trial] = kernel is not None
+        if kernel is None:
+            return
+        if self.function is None:
+            self.function = kernel.lean_function
+            self.slices = kernel.slices
+            self.outputs = kernel.outputs
+            self.X = np.zeros((self.n, kernel.function.n_in))
+        self.X[trial] = kernel.input_vector
+        self.filled[trial] = True
+
+    def write_desired(self, trials: np.ndarray, desired: np.ndarray, quick: np.ndarray
+                      ) -> np.ndarray:
+        """Write the desired features ``desired`` (m, D) of the goals ``quick`` (m,) into
+        the rows of ``trials`` (m,) that hold their constants; returns the mask of the
+        goals written."""
+        if self.function is None:
+            return np.zeros(len(trials), dtype=bool)
+        quick = quick & self.filled[trials]
+        rows = np.flatnonzero(quick)
+        if len(rows):
+            self.X[trials[rows], self.slices["desired"]] = desired[rows]
+            self.ready[trials[rows]] = True
+        return quick  # type: ignore[no-any-return]
+
+    def step(self, rows: np.ndarray, trials: np.ndarray, features: np.ndarray,
+             lengths: np.ndarray, solver: Solver, estimate: LegDirectionEstimate,
+             out: CommandBatch) -> np.ndarray:
+        """The lean core over the batch rows ``rows`` of ``trials`` with their measured
+        ``features`` and ``lengths`` [m]; the rows whose result is the command (a finite
+        error and interaction matrix, rank 6, a finite command, and
+        ``solver.batch_accept``) update the batch's ``estimate`` as a commanded step and
+        fill ``out`` (the others are left to the trial's own step, which says why).
+
+        Returns:
+            (m,) the rows filled.
+        """
+        X = self.X[trials]
+        X[:, self.slices["features"]] = features
+        X[:, self.slices["lengths"]] = lengths
+        assert self.function is not None
+        Y = self.function.batch(X)
+        o = self.outputs
+        with np.errstate(invalid="ignore"):
+            ok = (np.isfinite(Y[:, o["error_norm"].start]) & np.isfinite(Y[:, o["n_sum"].start])
+                  & (Y[:, o["rank"].start] >= 6) & (Y[:, o["qdot_check"].start] == 0.0))
+        ok &= solver.batch_accept(trials, lengths, Y[:, o["qdot"]])
+        if ok.all():  # the common case: no row copies
+            Ya, tr, qa, ra = Y, trials, lengths, rows
+        else:
+            acc = np.flatnonzero(ok)
+            Ya, tr, qa, ra = Y[acc], trials[acc], lengths[acc], rows[acc]
+        estimate.measured_all(Ya[:, o["directions"]].reshape(-1, 6, 3), tr)
+        estimate.commanded(Ya[:, o["tau"]], qa, tr)
+        out.velocities[ra] = Ya[:, o["qdot"]]
+        out.error_norm[ra] = Ya[:, o["error_norm"].start]
+        return ok  # type: ignore[no-any-return]
 
 
 class VisionLawBatch(LegRateFeedForward, Controller):
@@ -40,24 +129,16 @@ class VisionLawBatch(LegRateFeedForward, Controller):
     :class:`~controllers.laws.VisionLaw`, which sets :attr:`solver`)."""
 
     solver: Solver
+    #: What every trial of the batch reads from an observation (None: not the same
+    #: feature, the trials step alone), set by :meth:`reset_batch`.
+    batch_feature: ObservedFeature | None = None
 
     # ----------------------------------------------------------------- the batch
-    def _batch_features(self, obs: ObservationBatch) -> tuple[np.ndarray | None,
-                                                               np.ndarray | None]:
-        """The rows' measured features for the compiled core, (n, F), and the mask (n,)
-        of rows whose features are all visible. (None, None): no compiled core."""
-        return None, None
-
     def _batch_desired(self, goals: GoalBatch) -> tuple[np.ndarray | None, np.ndarray]:
-        """The compiled core's desired-feature input of each goal, (m, D), and the mask
-        (m,) of goals that the law would read into exactly that with its compiled core
-        (every feature visible and finite, the CURRENT interaction). (None, mask): no
-        such shortcut; every goal then goes through its instance's ``retarget_trial``."""
+        """The compiled core's desired input of each goal (m, D), and the mask (m,) of the
+        goals the law would read into exactly that (None, mask: every goal goes through
+        its instance's ``retarget_trial``)."""
         return None, np.zeros(len(goals), dtype=bool)
-
-    def _batch_reset_extra(self) -> None:
-        """Per-trial constants of subclasses (the solver's are gathered by
-        :meth:`~controllers.solvers.base.Solver.batch_reset`)."""
 
     def reset_batch(self, contexts: Sequence[ControllerContext]) -> None:
         """One instance per context (this one first, the others built with its options),
@@ -71,25 +152,22 @@ class VisionLawBatch(LegRateFeedForward, Controller):
         trials = self.trial_instances
         #: The estimates of every trial (the instances' estimates are its rows).
         self.batch_estimate = LegDirectionEstimate.fresh(len(trials))
-        for k, inst in enumerate(trials):
-            inst.estimate = self.batch_estimate.row(k)
         self._core_rows = KernelRows(len(trials))
         for k, inst in enumerate(trials):
+            inst.estimate = self.batch_estimate.row(k)
             self._core_rows.take(k, inst.kernel if inst.batch_core else None)
         #: Goals given to ``retarget_batch`` not yet read by the trial's instance.
         self._pending: dict[int, tuple[GoalBatch, int]] = {}
         self.solver.batch_reset([t.solver for t in trials])
-        self._batch_reset_extra()
+        seen = {t.observed_feature for t in trials}
+        self.batch_feature = seen.pop() if len(seen) == 1 else None
         self.batch_reset_leg_rate(trials)
 
     def retarget_batch(self, trials: np.ndarray, goals: GoalBatch) -> None:
         """New goals for some trials (row ``j`` of ``goals`` for trial ``trials[j]``),
-        keeping their state, as each instance's :meth:`retarget_trial`.
-
-        In a batch of many trials, a goal that the compiled core takes as it is
-        (:meth:`_batch_desired`) is written into the batch's inputs at once and read by
-        the instance only when that trial next needs it (a row the core cannot finish);
-        any other goal, and the goal of a batch of one, is read by the instance now.
+        keeping their state, as each instance's :meth:`retarget_trial`; in a batch of
+        many trials, a goal the compiled core takes as it is (:meth:`_batch_desired`) is
+        read by the instance only when that trial next needs it (module docstring).
 
         Raises:
             ContextError: A goal the law cannot use, or no reset yet.
@@ -122,9 +200,12 @@ class VisionLawBatch(LegRateFeedForward, Controller):
         trials = np.asarray(obs.trials, dtype=int)
         slow = np.ones(n, dtype=bool)
         rows_core = self._core_rows
-        feats, visible = (self._batch_features(obs) if rows_core.function is not None
-                          else (None, None))
-        if feats is not None and visible is not None:
+        seen = self.batch_feature  # the rows' measured features, where all are visible
+        arr = None if seen is None else getattr(obs, seen.field)
+        if rows_core.function is not None and seen is not None and arr is not None:
+            feats = np.asarray(arr, dtype=float).reshape(n, 3 * seen.units)
+            visible = np.all(np.asarray(getattr(obs, seen.visibility), dtype=bool)
+                             .reshape(n, seen.units), axis=1)
             q = np.asarray(obs.lengths, dtype=float)
             with np.errstate(invalid="ignore"):
                 fast = (rows_core.ready[trials] & visible & np.isfinite(feats).all(axis=1)

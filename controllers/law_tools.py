@@ -1,11 +1,10 @@
 """The pieces the control laws are built from (``docs/math.md`` section 6): observation
-checks, option checks, the constant or adaptive :class:`Gain`, the least-squares solves
-with a singular-value threshold and damping, the inverse Jacobian, and the feature
-:class:`Selection` a law gives its compiled core when a feature is hidden."""
+checks, option checks, the constant or adaptive :class:`Gain`, the least-squares solve
+with a singular-value threshold and damping, and what a law gives its compiled core
+(:class:`Selection`) and its solver (:class:`TaskStep`)."""
 
 from __future__ import annotations
 
-import logging
 import math
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
@@ -15,10 +14,7 @@ import numpy as np
 
 from controllers.base import Observation, usable_observation_problem
 from controllers.data import FEATURE_FIELDS
-from controllers.exceptions import OptionError
-from controllers.interaction import cross
-
-log = logging.getLogger(__name__)
+from controllers.exceptions import ContextError, OptionError
 
 #: Where the interaction matrix is evaluated (ViSP's CURRENT, DESIRED, MEAN).
 INTERACTIONS = ("current", "desired", "mean")
@@ -122,8 +118,6 @@ def goal_lengths(controller: str, goal: Any) -> np.ndarray:
     Raises:
         ContextError: Missing, or not 6 positive finite lengths.
     """
-    from controllers.exceptions import ContextError
-
     if goal.lengths is None:
         raise ContextError(controller, "goal.lengths", "missing")
     qs = np.array(goal.lengths, dtype=float)
@@ -140,8 +134,6 @@ def goal_directions(controller: str, goal: Any) -> tuple[np.ndarray, np.ndarray]
     Raises:
         ContextError: Missing, not (6, 3), none finite, or a finite one not of unit norm.
     """
-    from controllers.exceptions import ContextError
-
     if goal.directions is None:
         raise ContextError(controller, "goal.directions", "missing")
     us = np.asarray(goal.directions, dtype=float)
@@ -203,10 +195,8 @@ def gain_formula(x: Any, at_zero: Any, at_infinity: Any, slope_at_zero: Any,
 
 @dataclass(frozen=True)
 class Gain:
-    """Constant or adaptive gain (ViSP's ``vpAdaptiveGain``), ``docs/math.md`` section 6.
-
-    ``lambda(x) = (at_zero - at_infinity) exp(-slope_at_zero x / (at_zero - at_infinity))
-    + at_infinity`` with ``x = |e|_inf``; constant when ``at_zero == at_infinity``.
+    """Constant (``at_zero == at_infinity``) or adaptive gain (ViSP's ``vpAdaptiveGain``):
+    :func:`gain_formula` of ``x = |e|_inf``.
 
     Attributes:
         at_zero: ``lambda0``, gain for a vanishing error [1/s].
@@ -218,16 +208,6 @@ class Gain:
     at_zero: float
     at_infinity: float
     slope_at_zero: float = 0.0
-
-    @staticmethod
-    def constant(value: float) -> Gain:
-        """A constant gain [1/s]."""
-        return Gain(value, value, 0.0)
-
-    @property
-    def is_constant(self) -> bool:
-        """True when the gain does not depend on the error."""
-        return self.at_zero == self.at_infinity
 
     def __call__(self, x: float) -> float:
         """Gain [1/s] for the error size ``x = |e|_inf`` (:func:`gain_formula`)."""
@@ -248,7 +228,8 @@ class Gain:
             OptionError: Naming the option at fault.
         """
         if adaptive_gain is None:
-            return Gain.constant(check_number(controller, "gain", gain))
+            value = check_number(controller, "gain", gain)
+            return Gain(value, value, 0.0)
         try:
             values = [float(x) for x in adaptive_gain]
         except (TypeError, ValueError):
@@ -273,40 +254,22 @@ class Gain:
 
 
 # --------------------------------------------------------------------------- algebra
-def solve_least_squares(
-    L: np.ndarray, e: np.ndarray, threshold: float = 1e-6, damping: float = 0.0
-) -> tuple[np.ndarray, int, float]:
-    """``x = L^+ e`` (damped) through the eigen-decomposition of the 6x6 ``L^T L``.
-
-    Singular values ``s`` of ``L`` below ``threshold * s_max`` count as zero
-    (their directions are left out of ``x``); the others give
-    ``x = V diag(1 / (s^2 + damping^2)) V^T L^T e``. Cheaper than
-    :func:`numpy.linalg.pinv` on a 36x6 matrix and gives the rank and the
-    condition number on the way.
+def solve_normal_damped(N: np.ndarray, b: np.ndarray, threshold: float, damping2: float
+                        ) -> tuple[np.ndarray, int, float]:
+    """``x = (L^T L + mu^2 I)^+ L^T e`` from the normal equations, through the
+    eigen-decomposition of the 6x6 ``N``: ``sum_j (v_j^T b) / (w_j + damping2) v_j`` over
+    the eigenvalues ``w_j > threshold^2 w_max`` (the singular values of ``L`` below
+    ``threshold * s_max`` count as zero; cheaper than :func:`numpy.linalg.pinv`).
 
     Args:
-        L: (m, 6).
-        e: (m,).
+        N: (6, 6) ``L^T L``.
+        b: (6,) ``L^T e``.
         threshold: Relative singular-value threshold.
-        damping: Damping ``mu`` (0: plain pseudo-inverse).
+        damping2: Squared damping ``mu^2`` (or the QP laws' regularization ``eps``).
 
     Returns:
         ``x`` (6,), the rank, and the condition number ``s_max / s_min`` (inf when singular).
     """
-    return solve_normal(L.T @ L, L.T @ e, threshold, damping)
-
-
-def solve_normal(N: np.ndarray, b: np.ndarray, threshold: float = 1e-6, damping: float = 0.0
-                 ) -> tuple[np.ndarray, int, float]:
-    """:func:`solve_least_squares` from the normal equations ``N = L^T L``, ``b = L^T e``."""
-    return solve_normal_damped(N, b, threshold, damping * damping)
-
-
-def solve_normal_damped(N: np.ndarray, b: np.ndarray, threshold: float, damping2: float
-                        ) -> tuple[np.ndarray, int, float]:
-    """:func:`solve_normal` with the squared damping ``mu^2`` given directly (or the
-    regularization ``eps`` of the QP laws): ``sum_j (v_j^T b) / (w_j + damping2) v_j``
-    over the eigenvalues ``w_j > threshold^2 w_max``."""
     w, V = np.linalg.eigh(N)
     w_max = w[-1]
     if not w_max > 0:
@@ -320,14 +283,6 @@ def solve_normal_damped(N: np.ndarray, b: np.ndarray, threshold: float, damping2
     else:
         c = np.where(keep, c / np.where(keep, w + damping2, 1.0), 0.0)
     return V @ c, rank, cond
-
-
-def inverse_jacobian_into(out: np.ndarray, base_points: np.ndarray,
-                          directions: np.ndarray) -> np.ndarray:
-    """Fill ``out`` (6, 6) with ``J_inv`` rows ``[u_i^T, (A_i x u_i)^T]`` (``docs/math.md`` §3)."""
-    out[:, :3] = directions
-    out[:, 3:] = cross(base_points, directions)
-    return out
 
 
 # --------------------------------------------------------------------------- the law

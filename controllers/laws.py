@@ -1,63 +1,32 @@
-"""Control-law machinery shared by the vision controllers (``docs/math.md`` section 6).
+"""The image-based laws' per-trial side (``docs/math.md`` section 6): a feature (leg
+directions, leg edges) gives an error and an interaction matrix; :class:`VisionLaw`
+combines them once for every feature (gain, solver, hidden features, diagnostics):
+``tau = -lambda L^+ e``, ``q_dot = J_inv tau``.
 
-In the spirit of Pink's tasks: a feature (leg directions, leg edges) provides
-an error and an interaction matrix; the law that combines them (gain,
-pseudo-inverse or QP, missing features, diagnostics) is written once, here, in
-:class:`VisionLaw`.
-
-- :class:`Gain`: constant or adaptive gain
-  ``lambda(x) = (l0 - linf) exp(-l0' x / (l0 - linf)) + linf`` with ``x = |e|_inf``.
-- :func:`solve_least_squares`: ``L^+ e`` through the 6x6 normal matrix with a
-  singular-value threshold (rank) and an optional damping.
-- :class:`VisionLaw`: the classical law ``tau = -lambda L^+ e``,
-  ``q_dot = J_inv tau``, with the interaction matrix at the CURRENT, DESIRED or
-  MEAN features, feature selection by visibility with a rank check, and
-  dead-reckoning of the direction of hidden legs (needed by ``J_inv``).
-
-One step, over a batch of trials (:meth:`VisionLaw.step_batch`): each trial keeps its
-own instance of the law (``trial_instances``, this one the first; its estimate a row of
-the batch's), so that every case keeps exactly the per-trial behaviour. The common case
-(every feature visible and finite, now and in the goal, a full-rank interaction matrix,
-a solver that takes the classical solution as it is) goes through the law's lean
-compiled core (:mod:`controllers.law_kernel`, generated from the tasks' CasADi blocks)
-over all its rows in one C loop (:class:`~controllers.law_rows.KernelRows`). Any other
-row is stepped by its instance (:meth:`VisionLaw.step_trial`): the features go through
-the same core after :meth:`VisionLaw._select` has chosen the used features (weight 1,
-the hidden ones weight 0) and the directions of the legs it cannot measure
-(dead-reckoned or approximated). The numpy formulas of
-``tests/controllers/interaction_oracle.py`` are the tests' oracle
+A step goes through the law's compiled core (:mod:`controllers.law_kernel`): directly when
+every feature is visible now and in the goal, else after :meth:`VisionLaw._select` has
+chosen the used features (weight 1, the hidden ones 0) and the directions of the legs it
+cannot measure (dead-reckoned or approximated). The batch side (one instance per trial,
+the lean core over the common rows) is :class:`~controllers.law_steps.VisionLawBatch`'s.
+The numpy formulas of ``tests/controllers/interaction_oracle.py`` are the tests' oracle
 (``tests/controllers/numpy_law.py``).
-
-The batch side (one instance per trial, the compiled core over the common rows) is
-:class:`~controllers.law_steps.VisionLawBatch`'s, the base of :class:`VisionLaw`.
 """
 
 from __future__ import annotations
 
-import logging
 import math
 from abc import abstractmethod
-from collections.abc import Callable, Sequence
+from collections.abc import Sequence
 from dataclasses import replace
+from typing import Any
 
 import numpy as np
 
-from controllers.base import (
-    Command,
-    ControllerContext,
-    Goal,
-    Observation,
-)
-from controllers.estimators import (
-    LegDirectionEstimate,
-    PoseEstimate,
-    model_directions,
-    model_directions_note,
-    unknown_direction_reason,
-)
+from controllers.base import Command, ControllerContext, Goal, Observation
+from controllers.estimators import LegDirectionEstimate, PoseEstimate
 from controllers.exceptions import ContextError, OptionError
-from controllers.law_kernel import LawKernel
-from controllers.law_steps import VisionLawBatch
+from controllers.law_kernel import Feature, LawKernel, feature_law_kernel
+from controllers.law_steps import ObservedFeature, VisionLawBatch
 from controllers.law_tools import (
     INTERACTIONS,
     Gain,
@@ -67,31 +36,21 @@ from controllers.law_tools import (
     check_number,
     check_observation,
     goal_lengths,
-    inverse_jacobian_into,
-    solve_least_squares,
-    solve_normal,
-    solve_normal_damped,
 )
 from controllers.solvers.base import Solver
 from controllers.solvers.pseudo_inverse import DampedPseudoInverse
 
-__all__ = [
-    "INTERACTIONS", "Gain", "Selection", "TaskStep", "VisionLaw", "check_choice", "check_number",
-    "check_observation", "inverse_jacobian_into", "solve_least_squares", "solve_normal",
-    "solve_normal_damped",
-]
-
-log = logging.getLogger(__name__)
+#: Re-exported for the laws that import them from here.
+__all__ = ["Gain", "VisionLaw", "check_number", "check_observation"]
 
 
 class VisionLaw(VisionLawBatch):
     """Base of the image-based laws: ``tau = -lambda L^+ e``, ``q_dot = J_inv tau``.
 
-    Subclasses implement :meth:`_reset_features` (read the goal, set the compiled core
-    :attr:`kernel`), :meth:`_load_kernel` (the common case) and :meth:`_select` (the used
-    features and the leg directions when a feature is hidden). The solver
-    (:attr:`solver`, the damped pseudo-inverse by default) turns the tasks into a twist:
-    the QP laws set the limit QP there.
+    Subclasses set :attr:`observed_feature` and implement :meth:`_reset_features` (read
+    the goal, then :meth:`_install_kernel`) and :meth:`_select` (the used features and the
+    leg directions when a feature is hidden). The solver (:attr:`solver`, the damped
+    pseudo-inverse by default) turns the tasks into a twist: the QP laws set the limit QP.
 
     Args:
         gain: Constant gain ``lambda`` [1/s].
@@ -101,6 +60,8 @@ class VisionLaw(VisionLawBatch):
             singular value counts as zero, and a stacked interaction matrix of rank
             < 6 makes the law refuse to move.
         damping: Damping ``mu`` of the pseudo-inverse ``(L^T L + mu^2 I)^-1 L^T``.
+        compiled: Evaluate the core (:mod:`controllers.law_kernel`) compiled to C (False:
+            the CasADi virtual machine evaluates the same expression, slower).
         leg_rate_feedforward: Feed the measured leg velocities forward through the nominal
             drives' lag (:mod:`controllers.leg_rate`): the setpoint ``u = q_dot +
             kappa (q_dot - v)`` that moves each leg by ``dt q_dot`` over the period
@@ -109,10 +70,15 @@ class VisionLaw(VisionLawBatch):
 
     #: What a feature block is called in the notes ("legs", "edges").
     unit = "features"
+    #: What the law reads from an observation (its field, visibility mask and shape).
+    observed_feature: ObservedFeature
+    #: The features visible in the goal (set by :meth:`_reset_features`).
+    _goal_visible: np.ndarray
 
     def __init__(self, gain: float = 1.0, adaptive_gain: Sequence[float] | None = None,
                  interaction: str = "current", threshold: float = 1e-6,
-                 damping: float = 0.0, leg_rate_feedforward: bool = False) -> None:
+                 damping: float = 0.0, compiled: bool = True,
+                 leg_rate_feedforward: bool = False) -> None:
         self.gain = Gain.from_options(self.name, gain, adaptive_gain)
         self.init_leg_rate(leg_rate_feedforward)
         self.interaction = check_choice(self.name, "interaction", interaction, INTERACTIONS)
@@ -120,19 +86,21 @@ class VisionLaw(VisionLawBatch):
         if self.threshold >= 1.0:
             raise OptionError(self.name, "threshold", f"must be < 1, got {self.threshold}")
         self.damping = check_number(self.name, "damping", damping, 0.0, strict=False)
+        self.compiled = bool(compiled)
         #: What turns the tasks into a twist (the QP laws put the limit QP here).
         self.solver: Solver = DampedPseudoInverse(self.threshold, self.damping)
         self.context: ControllerContext | None = None
-        self._A = np.zeros((6, 3))
-        self._dt = 0.0
+        #: (6, 3) the estimated base points ``A_i`` in the camera frame [m] (after reset).
+        self.base_points = np.zeros((6, 3))
+        #: Control period [s] (after reset).
+        self.dt = 0.0
         #: The leg directions known between periods (a row of the batch's estimate when
         #: stepped in a batch).
         self.estimate = LegDirectionEstimate.fresh()
         #: Last nominal-model pose (warm start of the forward kinematics that predicts
         #: the directions of never-seen legs), None before the first.
         self.model_pose: PoseEstimate | None = None
-        #: The compiled core (:mod:`controllers.law_kernel`), set by the subclass in
-        #: :meth:`_reset_features`.
+        #: The compiled core (:mod:`controllers.law_kernel`), set by :meth:`_install_kernel`.
         self.kernel: LawKernel | None = None
         self._spare_kernel: LawKernel | None = None
         #: The kernel's weights and ``measured`` inputs were set by :meth:`_select`
@@ -154,16 +122,15 @@ class VisionLaw(VisionLawBatch):
         if not (math.isfinite(dt) and dt > 0):
             raise ContextError(self.name, "dt", f"must be positive and finite, got {dt}")
         self.context = context
-        self._A = A.copy()
-        self._dt = dt
+        self.base_points = A.copy()
+        self.dt = dt
         self.estimate = LegDirectionEstimate.fresh()
         self.model_pose = None
-        self._q_star: np.ndarray | None = self._goal_lengths(context.goal)
+        self._q_star: np.ndarray | None = (None if context.goal.lengths is None
+                                           else goal_lengths(self.name, context.goal))
         self.kernel = None
         self._spare_kernel = None
         self._kernel_selected = False
-        #: Every feature is visible in the goal (set by :meth:`_reset_features`).
-        self._goal_all_visible = True
         self._reset_features(context)
         self.solver.reset(context, self.name, dt)
         self._configure_kernel()
@@ -174,10 +141,9 @@ class VisionLaw(VisionLawBatch):
         period of a trajectory task, :mod:`controllers.tracking`).
 
         The desired features and lengths become the goal's, exactly as :meth:`reset_trial`
-        would set them; the leg-direction estimate (the dead-reckoned directions of
-        hidden legs and the last commanded twist), the forward-kinematics warm start and
+        would set them; the leg-direction estimate, the forward-kinematics warm start and
         the solver's state stay: the goal moved, the robot did not. The compiled core is
-        kept (its desired features rewritten) when the new goal still allows it.
+        kept (its desired features rewritten).
 
         Raises:
             ContextError: :meth:`reset_trial` was not called, or the goal is invalid (as in
@@ -186,25 +152,21 @@ class VisionLaw(VisionLawBatch):
         if self.context is None:
             raise ContextError(self.name, "context", "retarget(goal) before reset(context)")
         context = replace(self.context, goal=goal)
-        q_star = self._goal_lengths(goal)
-        state = self._goal_state()
+        q_star = None if goal.lengths is None else goal_lengths(self.name, goal)
+        state = dict(vars(self))  # what _retarget_features may change
         self._q_star = q_star
         self._unselect_kernel()  # a reused core starts from the common case's inputs
         self._spare_kernel, self.kernel = self.kernel, None
         try:
             self._retarget_features(context)
         except ContextError:
-            self._restore_goal_state(state)
+            vars(self).clear()
+            vars(self).update(state)
             raise
         finally:
             self._spare_kernel = None
         self.context = context
         self._configure_kernel()
-
-    def _goal_lengths(self, goal: Goal) -> np.ndarray | None:
-        """``goal.lengths`` checked (None when the goal has none; ContextError when not 6
-        positive finite lengths)."""
-        return None if goal.lengths is None else goal_lengths(self.name, goal)
 
     def _configure_kernel(self) -> None:
         """Write the goal lengths (DESIRED/MEAN cores), the gain, threshold and damping into
@@ -212,7 +174,7 @@ class VisionLaw(VisionLawBatch):
         kernel = self.kernel
         if kernel is None:
             raise TypeError(f"{self.name}: _reset_features must set the compiled core "
-                            "(self.kernel)")
+                            "(self._install_kernel)")
         g = self.gain
         self._k_lengths: np.ndarray = kernel.inputs["lengths"]
         self._k_desired_lengths: np.ndarray | None = None
@@ -225,34 +187,27 @@ class VisionLaw(VisionLawBatch):
         kernel.set("threshold2", self.threshold * self.threshold)
         kernel.set("damping2", self.solver.damping2)
 
-    def _reuse_kernel(self, make: Callable[[], LawKernel]) -> LawKernel:
-        """The compiled core for :meth:`_reset_features`: the one kept by
-        :meth:`retarget_trial` (same law, same camera), else ``make()``."""
-        spare, self._spare_kernel = self._spare_kernel, None
-        return spare if spare is not None else make()
+    def _install_kernel(self, feature: Feature, **goal: Any) -> None:
+        """Set the compiled core of ``feature`` (the one kept by :meth:`retarget_trial`, else
+        a new one) with the goal's inputs: ``goal`` (those the core has), the base points
+        and the weights ``self._goal_visible`` (the goal's visible features)."""
+        kernel, self._spare_kernel = self._spare_kernel, None
+        if kernel is None:
+            kernel = feature_law_kernel(feature, self.interaction, self.compiled)
+        for name, value in goal.items():
+            if name in kernel.inputs:
+                kernel.set(name, value)
+        kernel.set("base_points", self.base_points)
+        kernel.set("weights", self._goal_visible)
+        self.kernel = kernel
+        self._k_features = kernel.inputs["features"].reshape(self.observed_feature.shape)
+        #: Every feature is visible in the goal.
+        self._goal_all_visible = bool(self._goal_visible.all())
 
     def _retarget_features(self, context: ControllerContext) -> None:
         """Read the desired features of a new goal (:meth:`retarget_trial`); subclasses skip
         what does not depend on the goal."""
         self._reset_features(context)
-
-    def _goal_state(self) -> dict[str, object]:
-        """What :meth:`_retarget_features` may change (restored when it fails)."""
-        return dict(vars(self))
-
-    def _restore_goal_state(self, state: dict[str, object]) -> None:
-        vars(self).clear()
-        vars(self).update(state)
-
-    @property
-    def base_points(self) -> np.ndarray:
-        """(6, 3) the estimated base points ``A_i`` in the camera frame [m] (after reset)."""
-        return self._A
-
-    @property
-    def dt(self) -> float:
-        """Control period [s] (after reset)."""
-        return self._dt
 
     def desired_features(self) -> np.ndarray:
         """(nf, 3) the desired features, one row per feature (zeros where unknown)."""
@@ -261,32 +216,31 @@ class VisionLaw(VisionLawBatch):
     def measured_features(self, obs: Observation) -> tuple[np.ndarray, np.ndarray]:
         """(nf, 3) the measured features of an observation and (nf,) which are usable
         (observed now and in the goal)."""
-        raise NotImplementedError
+        seen = self.observed_feature
+        vis = np.asarray(getattr(obs, seen.visibility), dtype=bool) & self._goal_visible
+        return (np.asarray(getattr(obs, seen.field), dtype=float).reshape(seen.units, 3),
+                vis.reshape(seen.units))
 
     @abstractmethod
     def _reset_features(self, context: ControllerContext) -> None:
-        """Read and validate the desired features."""
+        """Read and validate the desired features, then :meth:`_install_kernel`."""
 
     def _select(self, obs: Observation, q: np.ndarray) -> Selection:
         """The used features and the leg directions when a feature is hidden (the
         compiled core computes the rest).
 
-        Must also update ``self.estimate`` (:class:`LegDirectionEstimate`): dead-reckon
-        the hidden legs with the last twist, write the legs observed this step and the
-        directions ``J_inv`` uses (``in_use``: dead-reckoned, an approximation from the
-        goal for legs never seen, NaN when unknown), except the directions of the legs
-        it marks ``measured`` (the core measures them; :meth:`tasks` writes them).
+        Must also update ``self.estimate``: dead-reckon the hidden legs with the last
+        twist, write the legs observed this step and the directions ``J_inv`` uses
+        (``in_use``: dead-reckoned, approximated from the goal for legs never seen, NaN
+        when unknown), except those of the legs it marks ``measured`` (the core's).
         """
         raise NotImplementedError
 
     # ----------------------------------------------------------------- step
-    def _check(self, obs: Observation) -> str | None:
-        return check_observation(obs, self.features)
-
     def checked_lengths(self, observation: Observation) -> np.ndarray | Command:
         """The measured lengths (6,) [m], or the refusal of an unusable observation (then
         nothing is commanded this period: the estimate's twist is zeroed)."""
-        problem = self._check(observation)
+        problem = check_observation(observation, self.features)
         if problem is not None:
             self.estimate.halted()  # no motion commanded
             return Command.refuse(problem)
@@ -300,15 +254,12 @@ class VisionLaw(VisionLawBatch):
         """This period's tasks for a solver, or the refusal of why none can be built.
 
         The part of a step every solver shares (the pseudo-inverse of :meth:`step_trial`, the
-        limit QP, the predictive controller): the features of a usable observation
-        (:meth:`checked_lengths`) go through the compiled core (:mod:`controllers.law_kernel`):
-        directly when every feature is visible now and in the goal
-        (:meth:`_load_kernel`), else after :meth:`_select` has chosen the used features
-        (weight 1, the others weight 0) and the directions of the legs not measured
-        (dead-reckoned, approximated). The estimate is updated (measured and
-        dead-reckoned directions, nothing commanded yet), and the inverse Jacobian is
-        built, with the nominal model's directions for legs never seen (then written to
-        ``estimate.in_use``).
+        limit QP, the predictive controller): the features of a usable observation go
+        through the compiled core, directly when every feature is visible now and in the
+        goal (:meth:`_load_kernel`), else after :meth:`_select`. The estimate is updated
+        (measured and dead-reckoned directions, nothing commanded yet), and the inverse
+        Jacobian is built, with the nominal model's directions for legs never seen (then
+        written to ``estimate.in_use``).
 
         Args:
             observation: The observation.
@@ -317,43 +268,44 @@ class VisionLaw(VisionLawBatch):
         est = self.estimate
         kernel = self.kernel
         assert kernel is not None, "reset() sets the compiled core"
-        if self._load_kernel(observation, q):
+        common = self._load_kernel(observation, q)
+        if common:
             r = kernel.evaluate()
             est.halted()  # until a command is actually sent
             est.measured_all(r.directions)
-            if not (math.isfinite(r.error_norm) and math.isfinite(r.n_sum)):
-                return Command.refuse("non-finite error or interaction matrix (degenerate "
-                                      "features)", r.error)
-            return TaskStep(r.error, r.error_norm, r.N, r.b, r.gain, r.J, [], r)
-        sel = self._select(observation, q)  # dead-reckons hidden legs with the last twist
-        est.halted()  # until a command is actually sent
-        inputs = kernel.inputs
-        inputs["features"][:] = sel.features.reshape(-1)
-        inputs["lengths"][:] = q
-        inputs["weights"][:] = sel.used
-        inputs["measured"][:] = sel.measured
-        inputs["leg_directions"][:] = sel.leg_directions.reshape(-1)
-        if "desired_lengths" in inputs:
-            inputs["desired_lengths"][:] = self._desired_lengths(q)
-        self._kernel_selected = True
-        r = kernel.evaluate()
-        m = sel.measured
-        est.directions[m] = r.directions[m]
-        est.in_use[m] = r.directions[m]
-        e = r.error.reshape(len(sel.used), -1)[sel.used].reshape(-1)
+            e, notes = r.error, []
+        else:
+            sel = self._select(observation, q)  # dead-reckons hidden legs with the last twist
+            est.halted()  # until a command is actually sent
+            inputs = kernel.inputs
+            inputs["features"][:] = sel.features.reshape(-1)
+            inputs["lengths"][:] = q
+            inputs["weights"][:] = sel.used
+            inputs["measured"][:] = sel.measured
+            inputs["leg_directions"][:] = sel.leg_directions.reshape(-1)
+            if "desired_lengths" in inputs:
+                inputs["desired_lengths"][:] = self._desired_lengths(q)
+            self._kernel_selected = True
+            r = kernel.evaluate()
+            m = sel.measured
+            est.directions[m] = r.directions[m]
+            est.in_use[m] = r.directions[m]
+            e, notes = r.error.reshape(len(sel.used), -1)[sel.used].reshape(-1), sel.notes
         if not (math.isfinite(r.error_norm) and math.isfinite(r.n_sum)):
             return Command.refuse("non-finite error or interaction matrix (degenerate features)",
                                   e)
-        notes = sel.notes
-        unknown = np.flatnonzero(~np.isfinite(est.in_use[:, 0]))
-        if len(unknown):
+        if not common and len(unknown := np.flatnonzero(~np.isfinite(est.in_use[:, 0]))):
             model = self._model_directions(q)
             if model is None:
-                return Command.refuse(unknown_direction_reason(unknown), e)
+                return Command.refuse(
+                    f"direction of leg {int(unknown[0])} unknown (hidden since reset, no "
+                    "desired direction, no nominal model prediction): cannot build the "
+                    "inverse Jacobian", e)
             est.in_use[unknown] = model[unknown]
-            inputs["leg_directions"][:] = est.in_use.reshape(-1)
+            kernel.inputs["leg_directions"][:] = est.in_use.reshape(-1)
             r = kernel.evaluate()
-            notes.append(model_directions_note(unknown))
+            notes.append("nominal-model directions (forward kinematics of the measured "
+                         "lengths) for never-seen legs " + _legs(unknown))
         return TaskStep(e, r.error_norm, r.N, r.b, r.gain, r.J, notes, r)
 
     def step_trial(self, observation: Observation) -> Command:
@@ -402,19 +354,18 @@ class VisionLaw(VisionLawBatch):
     def _load_kernel(self, obs: Observation, q: np.ndarray) -> bool:
         """Write the measured features and lengths into ``self.kernel`` when every
         feature is visible, now and in the goal (the common case: every weight one,
-        every leg direction measured).
-
-        Returns:
-            False to take :meth:`_select`.
-        """
-        return False
-
-    def _common_inputs(self, q: np.ndarray) -> None:
-        """The inputs of the common case besides the features (:meth:`_load_kernel`)."""
+        every leg direction measured); False to take :meth:`_select`."""
+        seen = self.observed_feature
+        vis = getattr(obs, seen.visibility)
+        if not (self._goal_all_visible and (vis.all() if type(vis) is np.ndarray
+                                            else np.all(np.asarray(vis, dtype=bool)))):
+            return False
+        self._k_features[...] = getattr(obs, seen.field)
         self._unselect_kernel()
         self._k_lengths[...] = q
         if self._k_desired_lengths is not None:  # q* unknown: the measured lengths
             self._k_desired_lengths[...] = q
+        return True
 
     def _unselect_kernel(self) -> None:
         """Give the core back the common case's weights and ``measured`` inputs (ones)
@@ -435,18 +386,51 @@ class VisionLaw(VisionLawBatch):
                 and (self._q_star is not None or "desired_lengths" not in k.inputs))
 
     def _model_directions(self, q: np.ndarray) -> np.ndarray | None:
-        """Leg directions (6, 3) in the camera frame predicted by the nominal model
-        (:func:`~controllers.estimators.model_directions`), warm-started by and updating
-        :attr:`model_pose`."""
-        directions, pose = model_directions(self.context, q, self.model_pose)
-        if pose is not None:
-            self.model_pose = pose
-        return directions
+        """Leg directions (6, 3) in the camera frame predicted by the nominal model, or None
+        (no camera pose, or the forward kinematics fails).
+
+        Forward kinematics of the measured lengths ``q`` [m] with the nominal geometry
+        (warm-started at and updating :attr:`model_pose`), seen through the estimated
+        ``camera_from_base``. Used only for legs never observed (hidden in the goal too):
+        ``J_inv`` needs every direction, and an approximate one only slows the convergence
+        (the error never involves the model).
+        """
+        context = self.context
+        pose = getattr(getattr(context, "camera", None), "camera_from_base", None)
+        if context is None or pose is None:
+            return None
+        from hexapod.exceptions import HexapodError
+        from hexapod.fk import forward_kinematics
+        from hexapod.kinematics import legs_in_frame
+
+        guess = self.model_pose
+        try:
+            sol = forward_kinematics(context.geometry, q, check_stroke=False,
+                                     guess=None if guess is None else guess.pose)
+        except HexapodError:
+            return None
+        self.model_pose = PoseEstimate(sol.rotation, sol.translation)
+        return legs_in_frame(context.geometry, sol.rotation, sol.translation,
+                             pose).directions  # type: ignore[no-any-return]
 
     # ----------------------------------------------------------------- helpers
     def _desired_lengths(self, q: np.ndarray) -> np.ndarray:
         """``q*`` for the DESIRED/MEAN interaction: the goal lengths, else the measured ones."""
         return q if self._q_star is None else self._q_star
 
-    def _usage_note(self, used: np.ndarray, total: int) -> str:
-        return f"using {int(np.count_nonzero(used))} of {total} {self.unit}"
+    def _notes(self, used: np.ndarray, predicted: np.ndarray, approximated: np.ndarray,
+               hidden: str = "hidden") -> list[str]:
+        """The notes of a step with hidden features: how many are used, and the legs
+        (boolean masks) whose direction is predicted or the desired one."""
+        notes = [f"using {int(np.count_nonzero(used))} of {used.size} {self.unit}"]
+        if predicted.any():
+            notes.append(f"predicted directions of {hidden} legs " + _legs(predicted))
+        if approximated.any():
+            notes.append("desired direction used for never-seen legs " + _legs(approximated))
+        return notes
+
+
+def _legs(legs: np.ndarray) -> str:
+    """The legs of a mask or of indices, as ``"1, 4"``."""
+    index = np.flatnonzero(legs) if legs.dtype == bool else legs
+    return ", ".join(str(int(i)) for i in index)

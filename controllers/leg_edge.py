@@ -11,7 +11,7 @@ Features (``docs/math.md`` section 6), two per leg, stacked over the visible edg
 The leg direction used by ``H``, ``M_i`` and ``J_inv`` is rebuilt from the two
 edges of the leg, ``u = (n2 x n1) / |n2 x n1|`` (``vision/legs.py`` convention).
 
-One call of the compiled core (:func:`controllers.law_kernel.edge_law_kernel`, generated
+One call of the compiled core (:func:`controllers.law_kernel.feature_law_kernel`, generated
 from the task's block :func:`controllers.tasks.leg_edge.edge_block`) computes the step,
 for every interaction choice; hidden edges are its zero-weight rows.
 """
@@ -23,13 +23,11 @@ from typing import Any
 
 import numpy as np
 
-from controllers.base import ControllerContext, GoalBatch, Observation, ObservationBatch
+from controllers.base import ControllerContext, GoalBatch, Observation
 from controllers.exceptions import ContextError
-from controllers.interaction import (
-    cross,
-)
-from controllers.law_kernel import edge_law_kernel
-from controllers.laws import Selection, VisionLaw, check_choice
+from controllers.interaction import cross
+from controllers.law_tools import Selection, check_choice
+from controllers.laws import VisionLaw
 from controllers.tasks.leg_edge import EDGE_KINDS, EDGE_LINES, EDGE_NORMALS, EdgeFeature
 
 #: Values of the ``edge_feature`` option.
@@ -44,14 +42,12 @@ class LegEdgeController(VisionLaw):
     """Leg-edge law: pixel lines (perspective camera) or normals (unified camera).
 
     The options of :class:`~controllers.laws.VisionLaw` (``gain``, ``adaptive_gain``,
-    ``interaction``, ``threshold``, ``damping``, ``leg_rate_feedforward``; documented
-    there), and:
+    ``interaction``, ``threshold``, ``damping``, ``compiled``, ``leg_rate_feedforward``;
+    documented there), and:
 
     Args:
         edge_feature: ``"auto"`` (lines for a perspective camera, normals for a
             unified one), ``"lines"`` or ``"normals"`` (force the normals).
-        compiled: Evaluate the core (:mod:`controllers.law_kernel`) compiled to C (False:
-            the CasADi virtual machine evaluates the same expression, slower).
     """
 
     name = "leg-edge"
@@ -62,14 +58,15 @@ class LegEdgeController(VisionLaw):
                  interaction: str = "current", threshold: float = 1e-6, damping: float = 0.0,
                  edge_feature: str = "auto", compiled: bool = True,
                  leg_rate_feedforward: bool = False) -> None:
-        super().__init__(gain, adaptive_gain, interaction, threshold, damping,
+        super().__init__(gain, adaptive_gain, interaction, threshold, damping, compiled,
                          leg_rate_feedforward)
-        self.compiled = bool(compiled)
         self.edge_feature = check_choice(self.name, "edge_feature", edge_feature, EDGE_FEATURES)
         #: The edge feature object (``"auto"``: the camera's, chosen at reset).
         self.edge: EdgeFeature = EDGE_KINDS.get(edge_feature, EDGE_NORMALS)
+        self.observed_feature = self.edge
         self.features = frozenset({"lengths", self.edge.field})
-        self._K = np.eye(3)
+        #: (3, 3) the matrix mapping normals to image lines (identity for normals).
+        self.line_matrix = np.eye(3)
         self._K_inv_t = np.eye(3)
 
     # ----------------------------------------------------------------- reset
@@ -78,9 +75,10 @@ class LegEdgeController(VisionLaw):
         kind = getattr(cam, "kind", None)
         if self.edge_feature == "auto":
             self.edge = EDGE_LINES if kind == "perspective" else EDGE_NORMALS
+        self.observed_feature = self.edge
         K = self.edge.line_matrix_of(cam, self.name)
         if K is not None:
-            self._K = K
+            self.line_matrix = K
             self._K_inv_t = np.linalg.inv(K).T
         self.features = frozenset({"lengths", self.edge.field})
         self._retarget_features(context)
@@ -95,7 +93,8 @@ class LegEdgeController(VisionLaw):
                 raise ContextError(self.name, "goal.edge_visible",
                                    f"expected shape (6, 2), got {gv.shape}")
             vis &= gv
-        l_star, n_star, vis = self.edge.desired_of(goal, vis, self._K, self._K_inv_t, self.name)
+        l_star, n_star, vis = self.edge.desired_of(goal, vis, self.line_matrix, self._K_inv_t,
+                                                   self.name)
         self._l_star = l_star
         if n_star is None:
             raise ContextError(self.name, "goal.normals", "missing")
@@ -107,14 +106,15 @@ class LegEdgeController(VisionLaw):
         self._goal_visible = vis
         # Desired directions (DESIRED / MEAN interaction): from the two desired edges,
         # else from goal.directions.
-        us = _unit(cross(n_star[:, 1], n_star[:, 0])) if vis.all() else np.full((6, 3), np.nan)
-        if not vis.all():
+        if vis.all():
+            us = _unit(cross(n_star[:, 1], n_star[:, 0]))
+        else:
+            us = np.full((6, 3), np.nan)
             both = vis.all(axis=1)
             with np.errstate(invalid="ignore", divide="ignore"):
                 us[both] = _unit(cross(n_star[both, 1], n_star[both, 0]))
-        if goal.directions is not None and not vis.all():
-            gd = np.asarray(goal.directions, dtype=float)
-            if gd.shape == (6, 3):
+            gd = None if goal.directions is None else np.asarray(goal.directions, dtype=float)
+            if gd is not None and gd.shape == (6, 3):
                 missing = ~np.isfinite(us[:, 0]) & np.all(np.isfinite(gd), axis=1)
                 us[missing] = gd[missing]
         if self.interaction != "current":
@@ -131,19 +131,9 @@ class LegEdgeController(VisionLaw):
         fill[:, 0] = np.where(vis[:, 0, None], n_star[:, 0], [1.0, 0.0, 0.0])
         fill[:, 1] = np.where(vis[:, 1, None], n_star[:, 1], [0.0, 1.0, 0.0])
         self._feature_fill = self.edge.features_of(fill, self._K_inv_t)
-        self._goal_all_visible = bool(self._goal_visible.all())
-        kernel = self._reuse_kernel(
-            lambda: edge_law_kernel(self.edge, self.interaction, self.compiled))
-        kernel.set("desired", self.edge.desired_input(self._l_star, self._n_star))
-        kernel.set("K", self._K)
-        kernel.set("K_inv", self._K_inv_t.T)
-        kernel.set("base_points", self._A)
-        kernel.set("weights", self._goal_visible)
-        if self.interaction != "current":
-            kernel.set("desired_normals", self._n_star)
-            kernel.set("desired_directions", self._u_star)
-        self.kernel = kernel
-        self._k_features = kernel.inputs["features"].reshape(6, 2, 3)
+        self._install_kernel(self.edge, desired=self.edge.desired_input(self._l_star, n_star),
+                             K=self.line_matrix, K_inv=self._K_inv_t.T, desired_normals=n_star,
+                             desired_directions=self._u_star)
 
     # ----------------------------------------------------------------- step
     def _select(self, obs: Observation, q: np.ndarray) -> Selection:
@@ -152,7 +142,7 @@ class LegEdgeController(VisionLaw):
                         self._feature_fill)
         both: np.ndarray = np.all(vis, axis=1)
         est = self.estimate
-        est.predict_hidden(~both, self._A, self._dt)
+        est.predict_hidden(~both, self.base_points, self.dt)
         est.observed[:] = both
         known = np.isfinite(est.directions[:, 0]) | both
         legs = np.where(known[:, None], est.directions, np.nan)  # the core measures `both`
@@ -160,7 +150,7 @@ class LegEdgeController(VisionLaw):
         # visible edge if it has one (exact at the goal).
         approx: np.ndarray = ~known & np.isfinite(self._u_star_known[:, 0])
         if approx.any():
-            n = self.edge.normals_of(feat, self._K)
+            n = self.edge.normals_of(feat, self.line_matrix)
             us = self._u_star
             one: np.ndarray = np.any(vis, axis=1) & ~both
             n_vis = np.where(vis[:, 0, None], n[:, 0], n[:, 1])
@@ -169,14 +159,7 @@ class LegEdgeController(VisionLaw):
             legs = np.where(approx[:, None], proj, legs)
         est.in_use[:] = legs
         vis = vis & (known | approx)[:, None]
-        notes = [self._usage_note(vis, 12)]
-        predicted = np.flatnonzero(~both & known)
-        if len(predicted):
-            notes.append("predicted directions of partly hidden legs "
-                         + ", ".join(str(int(i)) for i in predicted))
-        if approx.any():
-            notes.append("desired direction used for never-seen legs "
-                         + ", ".join(str(int(i)) for i in np.flatnonzero(approx)))
+        notes = self._notes(vis, ~both & known, approx, "partly hidden")
         return Selection(feat.reshape(12, 3), vis.reshape(12), both, legs, notes)
 
     @property
@@ -184,45 +167,17 @@ class LegEdgeController(VisionLaw):
         """The feature is the image lines (:data:`~controllers.tasks.leg_edge.EDGE_LINES`)."""
         return self.edge.lines
 
-    @property
-    def line_matrix(self) -> np.ndarray:
-        """(3, 3) the matrix mapping normals to image lines (identity for normals)."""
-        return self._K
-
     def desired_features(self) -> np.ndarray:
         """(12, 3) the desired lines or normals (zeros where unknown)."""
         star = self.edge.desired_input(self._l_star, self._n_star)
         return np.asarray(star, dtype=float).reshape(12, 3)
-
-    def measured_features(self, obs: Observation) -> tuple[np.ndarray, np.ndarray]:
-        """(12, 3) measured lines or normals and (12,) which are usable."""
-        vis = (np.asarray(obs.edge_visible, dtype=bool) & self._goal_visible).reshape(12)
-        feats = getattr(obs, self.edge.field)
-        return np.asarray(feats, dtype=float).reshape(12, 3), vis
-
-    def _batch_reset_extra(self) -> None:
-        super()._batch_reset_extra()
-        edges = {t.edge for t in self.trial_instances}
-        self._batch_edge: EdgeFeature | None = edges.pop() if len(edges) == 1 else None
-
-    def _batch_features(self, obs: ObservationBatch) -> tuple[np.ndarray | None,
-                                                               np.ndarray | None]:
-        edge = self._batch_edge
-        if edge is None:
-            return None, None
-        arr = getattr(obs, edge.field)
-        if arr is None:
-            return None, None
-        n = len(obs)
-        vis = np.all(np.asarray(obs.edge_visible, dtype=bool).reshape(n, 12), axis=1)
-        return np.asarray(arr, dtype=float).reshape(n, 36), vis
 
     def _batch_desired(self, goals: GoalBatch) -> tuple[np.ndarray | None, np.ndarray]:
         """The goals' lines (or normals) as the compiled core's desired input, where every
         edge of the goal is visible and finite (and the goal gives both its lines and its
         normals in pixel-line mode): what :meth:`_retarget_features` reads then."""
         m = len(goals)
-        edge: EdgeFeature | None = getattr(self, "_batch_edge", None)
+        edge = self.batch_feature
         n_star = goals.normals
         star = None if edge is None else getattr(goals, edge.field)
         if (edge is None or not self.compiled or self.interaction != "current"
@@ -238,12 +193,3 @@ class LegEdgeController(VisionLaw):
         if goals.edge_visible is not None:
             ok &= np.asarray(goals.edge_visible, dtype=bool).reshape(m, 12).all(axis=1)
         return np.asarray(star, dtype=float).reshape(m, 36), ok
-
-    def _load_kernel(self, obs: Observation, q: np.ndarray) -> bool:
-        vis = obs.edge_visible
-        if not (self._goal_all_visible and (vis.all() if type(vis) is np.ndarray
-                                            else np.all(np.asarray(vis, dtype=bool)))):
-            return False
-        self._k_features[...] = getattr(obs, self.edge.field)
-        self._common_inputs(q)
-        return True

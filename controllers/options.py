@@ -28,11 +28,6 @@ class RemembersOptions:
         obj._options = (args, dict(kwargs))
         return obj
 
-    @property
-    def options(self) -> dict[str, Any]:
-        """The keyword options given to the constructor (positional ones not included)."""
-        return dict(self._options[1])
-
     def clone(self: T) -> T:
         """A new instance with the same options, not reset."""
         args, kwargs = self._options
@@ -61,11 +56,6 @@ class OptionSpec:
     default: Any = None
     unit: str = ""
     meaning: str = ""
-
-    @property
-    def required(self) -> bool:
-        """No default: the option must be given."""
-        return self.default is REQUIRED
 
 
 @dataclass(frozen=True)

@@ -1,9 +1,6 @@
-"""The limit-QP laws: the leg-edge and leg-direction tasks with the limit QP solver
-(:mod:`controllers.solvers.limit_qp`: stroke, with a margin, and leg-speed limits, OSQP),
-``docs/math.md`` section 6. A (task, solver) pair each: the controller is the task's
-law with :class:`~controllers.solvers.limit_qp.LimitQPSolver` in place of the damped
-pseudo-inverse.
-"""
+"""The limit-QP laws (``docs/math.md`` section 6): the leg-edge and leg-direction laws
+with :class:`~controllers.solvers.limit_qp.LimitQPSolver` (stroke, with a margin, and
+leg-speed limits, OSQP) in place of the damped pseudo-inverse."""
 
 from __future__ import annotations
 
@@ -11,25 +8,20 @@ from collections.abc import Sequence
 
 from controllers.leg_direction import LegDirectionController
 from controllers.leg_edge import LegEdgeController
-from controllers.solvers.limit_qp import LimitQPSolver, StrokeWindow, velocity_bounds
-from controllers.solvers.osqp_limits import LimitQP, refine_kernel
+from controllers.solvers.limit_qp import LimitQPSolver, velocity_bounds
 
-__all__ = ["LegDirectionQPController", "LegEdgeQPController", "LimitQP", "LimitQPSolver",
-           "StrokeWindow", "refine_kernel", "velocity_bounds"]
+__all__ = ["LegDirectionQPController", "LegEdgeQPController", "velocity_bounds"]
 
 
 class LegEdgeQPController(LegEdgeController):
     """Leg-edge law as a QP with stroke (with a margin) and leg-speed limits (OSQP).
 
-    Takes the options of :class:`~controllers.leg_edge.LegEdgeController` and the
-    QP options ``regularization``, ``stroke_margin`` [m], ``max_speed`` [m/s],
-    ``eps_abs``, ``eps_rel``, ``max_iter``, and ``shortcut`` (skip OSQP when the
-    unconstrained optimum satisfies every bound, see :meth:`LimitQPSolver.solve`; default:
-    only with the default OSQP settings, so that chosen settings always take effect).
+    Takes the options of :class:`~controllers.leg_edge.LegEdgeController` and those of
+    :class:`~controllers.solvers.limit_qp.LimitQPSolver` (documented there).
     """
 
     name = "leg-edge-qp"
-    OPTION_DOCS = (LimitQPSolver,)  # documents the QP options (list --options)
+    OPTION_DOCS = (LimitQPSolver,)
 
     def __init__(self, gain: float = 1.0, adaptive_gain: Sequence[float] | None = None,
                  interaction: str = "current", threshold: float = 1e-6, damping: float = 0.0,
@@ -47,15 +39,12 @@ class LegEdgeQPController(LegEdgeController):
 class LegDirectionQPController(LegDirectionController):
     """Leg-direction law as a QP with stroke (with a margin) and leg-speed limits (OSQP).
 
-    Takes the options of :class:`~controllers.leg_direction.LegDirectionController`
-    and the QP options ``regularization``, ``stroke_margin`` [m], ``max_speed``
-    [m/s], ``eps_abs``, ``eps_rel``, ``max_iter``, and ``shortcut`` (skip OSQP when
-    the unconstrained optimum satisfies every bound, see :meth:`LimitQPSolver.solve`;
-    default: only with the default OSQP settings).
+    Takes the options of :class:`~controllers.leg_direction.LegDirectionController` and
+    those of :class:`~controllers.solvers.limit_qp.LimitQPSolver` (documented there).
     """
 
     name = "leg-direction-qp"
-    OPTION_DOCS = (LimitQPSolver,)  # documents the QP options (list --options)
+    OPTION_DOCS = (LimitQPSolver,)
 
     def __init__(self, gain: float = 1.0, adaptive_gain: Sequence[float] | None = None,
                  interaction: str = "current", threshold: float = 1e-6, damping: float = 0.0,

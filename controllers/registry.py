@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import importlib
 import importlib.metadata as metadata
+import inspect
 import logging
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -104,12 +105,6 @@ class Registry:
             raise PluginLoadError(name, package, f"{spec!r} is not 'module:attr'")
         self._lazy[name] = (spec, package)
 
-    def _package(self, name: str) -> str | None:
-        """The package that registered ``name`` (None: not registered)."""
-        if name in self._info:
-            return self._info[name].package
-        return self._lazy[name][1] if name in self._lazy else None
-
     def _resolve(self, name: str) -> ControllerFactory:
         """The factory of a name registered by :meth:`register_lazy`, imported now and
         registered (kept in the lazy table: a caller that restores the registry's tables
@@ -132,7 +127,9 @@ class Registry:
         for ep in metadata.entry_points(group=ENTRY_POINT_GROUP):
             dist = ep.dist.name if ep.dist is not None else "unknown"
             version = ep.dist.version if ep.dist is not None else "unknown"
-            if self._package(ep.name) == dist:
+            registered = (self._info[ep.name].package if ep.name in self._info
+                          else self._lazy.get(ep.name, ("", None))[1])
+            if registered == dist:
                 continue
             try:
                 factory = ep.load()
@@ -227,8 +224,6 @@ def _import_spec(spec: str, name: str, source: str) -> ControllerFactory:
 def describe(factory: Any) -> str:
     """The first sentence of a factory's docstring, whole (its first paragraph may span
     several lines)."""
-    import inspect
-
     doc = inspect.cleandoc(getattr(factory, "__doc__", None) or "")
     paragraph = " ".join(doc.split("\n\n")[0].split())
     return first_sentence(paragraph)

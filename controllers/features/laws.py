@@ -1,60 +1,44 @@
 """The first-order controllers of a :class:`~controllers.tasks.leg_feature.LegFeature`:
-pseudo-inverse, limit QP and predictive, through the feature's compiled core.
+pseudo-inverse (``-pinv``), limit QP (``-qp``) and predictive (``-mpc``).
 
-A feature law is the built-in leg-direction law (:class:`~controllers.leg_direction.
-LegDirectionController`: its reading of observations, visibility, dead reckoning of
-hidden legs, batched rows through the lean compiled core) whose compiled core is the
-feature's (:func:`~controllers.law_kernel.feature_law_kernel`) and whose desired
-value is the feature of the goal's legs (``goal.directions`` and ``goal.lengths``). The
-solver makes the controller: the damped pseudo-inverse (``-pinv``), the limit QP of
-the built-in QP laws (``-qp``, :class:`~controllers.solvers.limit_qp.LimitQPSolver`),
-or the predictive controller with the local model (``-mpc``, :class:`~controllers.mpc.
-controller.MPCLaw`, whose local problem depends on the tasks only through ``L^T L``,
-``L^T e`` and ``J_inv``: the built-in compiled problem serves every feature).
+A feature law is the built-in leg-direction law (its reading of observations, hidden
+legs, batched rows) with the feature's compiled core
+(:func:`~controllers.law_kernel.feature_law_kernel`) and the feature of the goal's legs
+as its desired value. The predictive controller's local problem reads the tasks through
+``L^T L``, ``L^T e`` and ``J_inv`` only: the built-in compiled problem serves every
+feature.
 """
 
 from __future__ import annotations
 
 import functools
 from collections.abc import Sequence
-from typing import Any, ClassVar
+from typing import Any
 
 import numpy as np
 
 from controllers.base import ControllerContext, GoalBatch
 from controllers.exceptions import ContextError, OptionError
-from controllers.law_kernel import feature_law_kernel
 from controllers.law_tools import goal_directions
 from controllers.leg_direction import LegDirectionController
 from controllers.mpc.controller import MPCLaw
 from controllers.solvers.limit_qp import LimitQPSolver
 from controllers.tasks.feature_kind import BuiltinFeature
 from controllers.tasks.leg_direction import LEG_DIRECTIONS
-from controllers.tasks.leg_feature import LegFeature
 
 
 class FeatureLaw(LegDirectionController):
     """``tau = -lambda L^+ e`` on a leg feature (``q_dot = J_inv tau``); the class's
     ``feature`` is set by :func:`~controllers.features.controllers_for`.
 
-    Args:
-        gain: Constant gain ``lambda`` [1/s].
-        adaptive_gain: ``(lambda0, lambda_inf, lambda0')`` (overrides ``gain``).
-        interaction: ``"current"``, ``"desired"`` (at the legs' goal state) or ``"mean"``.
-        threshold: Relative singular-value threshold (rank test).
-        damping: Pseudo-inverse damping.
-        compiled: Evaluate the feature's core compiled to C (False: the CasADi virtual
-            machine evaluates the same expression, slower).
+    The options of :class:`~controllers.laws.VisionLaw` (the DESIRED interaction at the
+    legs' goal state) but ``leg_rate_feedforward``.
     """
-
-    #: The feature (set on the generated class).
-    feature: ClassVar[LegFeature]
 
     def __init__(self, gain: float = 1.0, adaptive_gain: Sequence[float] | None = None,
                  interaction: str = "current", threshold: float = 1e-6,
                  damping: float = 0.0, compiled: bool = True) -> None:
         super().__init__(gain, adaptive_gain, interaction, threshold, damping, compiled)
-        self._f_star = np.zeros((6, self.feature.rows))
 
     def _reset_features(self, context: ControllerContext) -> None:
         """The desired feature: the feature of the goal's legs (directions, lengths)."""
@@ -63,16 +47,14 @@ class FeatureLaw(LegDirectionController):
             raise ContextError(self.name, "goal.lengths",
                                f"missing (the desired {self.feature.name} needs the goal's "
                                "leg lengths)")
-        f_star = self.feature.desired(us, self._q_star, self._A)
+        f_star = self.feature.desired(us, self._q_star, self.base_points)
         if not np.all(np.isfinite(f_star[vis])):
             bad = np.flatnonzero(~np.all(np.isfinite(f_star), axis=1) & vis)
             raise ContextError(self.name, "goal", f"the desired {self.feature.name} of legs "
                                f"{bad.tolist()} is not finite: {f_star[bad]}")
         self._f_star = np.where(vis[:, None], f_star, 0.0)
         self._u_star = np.where(vis[:, None], us, 0.0)
-        self._install_goal(self._f_star, us, vis,
-                           lambda: feature_law_kernel(self.feature, self.interaction,
-                                                      self.compiled))
+        self._install_goal(self._f_star, us, vis)
 
     def desired_features(self) -> np.ndarray:
         """(6, rows) the desired feature (zeros where unknown)."""
@@ -86,9 +68,7 @@ class FeatureLaw(LegDirectionController):
 class FeatureQPLaw(FeatureLaw):
     """The feature's law as the limit QP (stroke with a margin, leg speeds; OSQP).
 
-    Takes the options of :class:`FeatureLaw` and the QP options ``regularization``,
-    ``stroke_margin`` [m], ``max_speed`` [m/s], ``eps_abs``, ``eps_rel``, ``max_iter``,
-    ``shortcut``.
+    The options of :class:`FeatureLaw` and :class:`~controllers.solvers.limit_qp.LimitQPSolver`.
     """
 
     OPTION_DOCS = (LimitQPSolver,)

@@ -1,7 +1,7 @@
 """Solvers: what turns one period's tasks into a command.
 
 In the manner of Pink's solver: a task (:mod:`controllers.tasks`, or the stacked
-:class:`~controllers.laws.TaskStep` a vision law builds from them) says what to regulate;
+:class:`~controllers.law_tools.TaskStep` a vision law builds from them) says what to regulate;
 a solver says how. A controller is a (task, solver) pair: ``leg-edge`` is the leg-edge
 task with :class:`DampedPseudoInverse`, ``leg-edge-qp`` the same task with
 :class:`LimitQPSolver`, ``leg-edge-mpc`` the predictive controller
@@ -14,13 +14,9 @@ task with :class:`DampedPseudoInverse`, ``leg-edge-qp`` the same task with
 - the predictive controller: :mod:`controllers.mpc` (horizon, SQP, DAQP), which takes
   the tasks of its fallback law (:meth:`~controllers.laws.VisionLaw.tasks`).
 
-The computed-torque solver (:mod:`~controllers.solvers.computed_torque`, second order,
-commanding leg forces): from a task's ``error``, ``jacobian`` and ``jacobian_dot_twist``
-(``e_ddot = L tau_dot + L_dot tau``) it chooses the platform acceleration giving the
-designed second-order error dynamics and maps it through the nominal dynamic model to
-leg forces (``actuation = Actuation.FORCE``, :mod:`hexapod.actuation`); the
-computed-torque laws (``computed-torque``, ``cartesian-ctc``, ``vision-ctc``,
-``leg-edge-ctc``, ``leg-direction-ctc``) use it.
+The computed-torque solver (:mod:`~controllers.solvers.computed_torque`) is second
+order: from a task's error dynamics it chooses the platform acceleration and maps it
+through the nominal dynamic model to leg forces (the ``*-ctc`` laws).
 """
 
 from typing import TYPE_CHECKING

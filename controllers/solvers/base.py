@@ -1,10 +1,7 @@
-"""The solver interface: a solver turns one period's tasks into a twist.
-
-A solver takes the stacked tasks of a period (:class:`~controllers.laws.TaskStep`: the
-error, ``L^T L``, ``L^T e``, the gain, the inverse Jacobian) and the measured lengths,
-never the controller that built them; it returns the twist and its diagnostics, and
-may touch the final leg velocities (:meth:`Solver.finish`). Per-trial constants it
-derives from the context (the QP's stroke window) come from :meth:`Solver.reset`.
+"""The solver interface: a solver turns one period's stacked tasks
+(:class:`~controllers.law_tools.TaskStep`: ``L^T L``, ``L^T e``, the gain, ``J_inv``) and
+the measured lengths into a twist and its diagnostics, never seeing the controller that
+built them; per-trial constants (the QP's stroke window) come from :meth:`Solver.reset`.
 """
 
 from __future__ import annotations

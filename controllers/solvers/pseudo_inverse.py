@@ -7,7 +7,7 @@ from __future__ import annotations
 import numpy as np
 
 from controllers.law_kernel import LawResult
-from controllers.law_tools import solve_normal
+from controllers.law_tools import solve_normal_damped
 from controllers.solvers.base import Solved, Solver
 
 
@@ -34,6 +34,6 @@ class DampedPseudoInverse(Solver):
         if pre is not None:
             qdot = self.finish(pre.qdot) if pre.qdot_finite else None
             return pre.tau, pre.rank, pre.condition, [], None, qdot
-        x, rank, cond = solve_normal(N, b, self.threshold, self.damping)
+        x, rank, cond = solve_normal_damped(N, b, self.threshold, self.damping2)
         x *= -lam
         return x, rank, cond, [], None, None

@@ -4,7 +4,7 @@ The laws compute every step with their compiled core (:mod:`controllers.law_kern
 generated from the tasks' CasADi blocks). This module computes the same tasks with the
 numpy formulas of :mod:`tests.controllers.interaction_oracle` (an independent implementation, itself
 tested against finite differences of the true kinematics) and the LAPACK solve of
-:func:`controllers.law_tools.solve_normal`: :func:`numpy_law` is a law whose
+:func:`controllers.law_tools.solve_normal_damped`: :func:`numpy_law` is a law whose
 :meth:`~controllers.laws.VisionLaw.tasks` is replaced by :func:`numpy_tasks`. The
 feature selection and the estimate (which features are used, dead-reckoned and
 approximated directions) are the law's own (``_select``): what is checked is the
@@ -22,10 +22,9 @@ import numpy as np
 
 from controllers import registry
 from controllers.base import Command, Observation
-from controllers.estimators import model_directions_note, unknown_direction_reason
-from controllers.law_tools import inverse_jacobian_into
-from controllers.laws import TaskStep
+from controllers.law_tools import TaskStep
 from controllers.leg_edge import LegEdgeController
+from hexapod.kinematics import inverse_jacobian
 from tests.controllers.interaction_oracle import (
     cross,
     direction_task,
@@ -166,12 +165,16 @@ def numpy_tasks(law: Any, observation: Observation, q: np.ndarray) -> TaskStep |
     if len(unknown):
         model = law._model_directions(q)
         if model is None:
-            return Command.refuse(unknown_direction_reason(unknown), e)
+            return Command.refuse(
+                f"direction of leg {int(unknown[0])} unknown (hidden since reset, no "
+                "desired direction, no nominal model prediction): cannot build the "
+                "inverse Jacobian", e)
         u = u.copy()
         u[unknown] = model[unknown]
         est.in_use[:] = u
-        st.notes.append(model_directions_note(unknown))
-    J = inverse_jacobian_into(np.zeros((6, 6)), law.base_points, u)
+        st.notes.append("nominal-model directions (forward kinematics of the measured "
+                        "lengths) for never-seen legs " + ", ".join(map(str, unknown)))
+    J = inverse_jacobian(law.base_points, u)
     lam = law.gain(float(np.abs(e).max()) if e.size else 0.0)
     return TaskStep(e, error_norm, N, b, lam, J, st.notes, None)
 

@@ -116,7 +116,7 @@ def test_first_order_controllers_converge_through_the_compiled_core(
     ctrl.reset(world.context(world.goal(R1, t1), 0.02))
     law = ctrl.law if which == "mpc" else ctrl
     kernel = law.kernel
-    assert isinstance(kernel.function, CompiledFunction) and kernel.compiled
+    assert isinstance(kernel.function, CompiledFunction) and kernel.function.compiled
     assert kernel.function.name == "hexapod_platform_joint_law"
     calls = _count_kernel_calls(monkeypatch)
     run = closed_loop(world, ctrl, home_pose(world.geometry), (R1, t1), 0.02, 200)

@@ -12,7 +12,7 @@ import pytest
 
 from controllers.law_tools import Gain, gain_formula
 
-GAINS = [Gain(4.0, 0.5, 30.0), Gain(2.0, 1.0, 0.3), Gain.constant(1.5)]
+GAINS = [Gain(4.0, 0.5, 30.0), Gain(2.0, 1.0, 0.3), Gain(1.5, 1.5, 0.0)]
 
 
 @pytest.mark.parametrize("gain", GAINS)
@@ -30,7 +30,7 @@ def test_the_gain_has_its_defining_properties(gain: Gain) -> None:
     assert abs(gain(1e6) - gain.at_infinity) < 1e-12
     h = 1e-6
     slope = (gain(h) - gain(0.0)) / h  # one-sided at the boundary x = 0
-    expected = 0.0 if gain.is_constant else -gain.slope_at_zero
+    expected = 0.0 if gain.at_zero == gain.at_infinity else -gain.slope_at_zero
     assert slope == pytest.approx(expected, rel=1e-4, abs=1e-9)
     xs = np.linspace(0.0, 10.0, 50)
     values = np.array([gain(x) for x in xs])

@@ -10,17 +10,11 @@ import numpy as np
 import pytest
 
 from controllers import registry
-from controllers.law_kernel import (
-    DIRECTION_INPUTS,
-    LawKernel,
-    _direction_function,
-    direction_kernel,
-    full_rank_certificate,
-    jacobi_eigen,
-    law_layouts,
-)
-from controllers.laws import Gain, solve_normal_damped
-from controllers.qp import LimitQP
+from controllers.law_algebra import full_rank_certificate, jacobi_eigen
+from controllers.law_kernel import LawKernel, feature_law_function, feature_law_kernel, law_layouts
+from controllers.law_tools import Gain, solve_normal_damped
+from controllers.solvers.osqp_limits import LimitQP
+from controllers.tasks.leg_direction import LEG_DIRECTIONS
 from hexapod.compiled import CompiledFunction
 from tests.controllers.controller_world import World, make_camera
 from tests.controllers.interaction_oracle import direction_task
@@ -264,11 +258,11 @@ def test_lean_core_equals_the_full_core_where_it_certifies(world: World, name: s
 def test_virtual_machine_fallback_equals_c(monkeypatch: pytest.MonkeyPatch,
                                            rng: np.random.Generator) -> None:
     """Without a C compiler the CasADi VM evaluates the same core."""
-    layouts = law_layouts(DIRECTION_INPUTS, 18, "direction law")
-    c_kernel = LawKernel(CompiledFunction(_direction_function(), True, *layouts))
+    layouts = law_layouts(LEG_DIRECTIONS)
+    c_kernel = LawKernel(CompiledFunction(feature_law_function(LEG_DIRECTIONS), True, *layouts))
     monkeypatch.setenv("CC", "/nonexistent/cc")
-    vm_kernel = LawKernel(CompiledFunction(_direction_function(), True, *layouts))
-    assert c_kernel.compiled and not vm_kernel.compiled
+    vm_kernel = LawKernel(CompiledFunction(feature_law_function(LEG_DIRECTIONS), True, *layouts))
+    assert c_kernel.function.compiled and not vm_kernel.function.compiled
     u = rng.normal(size=(6, 3))
     u /= np.linalg.norm(u, axis=1, keepdims=True)
     us = u + 0.05 * rng.normal(size=(6, 3))
@@ -388,7 +382,7 @@ def test_weighted_rows_are_the_weighted_least_squares(rng: np.random.Generator) 
     """Weights w_i: N = sum w_i L_i^T L_i and b = sum w_i L_i^T e_i with the numpy blocks of
     interaction_oracle; a zero weight leaves the block out of the error norm, the
     gain and the rank too, even when that block is not finite."""
-    kernel = direction_kernel()
+    kernel = feature_law_kernel(LEG_DIRECTIONS)
     u = rng.normal(size=(6, 3)) + np.array([0.0, 0.0, 3.0])
     u /= np.linalg.norm(u, axis=1, keepdims=True)
     us = u + 0.05 * rng.normal(size=(6, 3))

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from controllers import registry
-from controllers.qp import LimitQP
+from controllers.solvers.osqp_limits import LimitQP
 from hexapod.kinematics import inverse_jacobian
 from tests.controllers.controller_world import World, closed_loop, make_camera
 

@@ -10,7 +10,7 @@ from collections.abc import Callable
 import numpy as np
 import pytest
 
-from controllers.law_kernel import direction_kernel
+from controllers.law_kernel import feature_law_kernel
 from controllers.tasks import (
     LEG_DIRECTIONS,
     JointLengthTask,
@@ -19,6 +19,7 @@ from controllers.tasks import (
     Task,
     TaskState,
 )
+from controllers.tasks.leg_direction import LEG_DIRECTIONS
 from hexapod.geometry import HexapodGeometry
 from hexapod.se3 import exp_so3, integrate_pose
 from hexapod.workspace import home_pose
@@ -144,7 +145,7 @@ def test_the_direction_task_is_the_compiled_cores_definition(geometry: HexapodGe
     A, E, R, t, _ = _world(geometry, rng)
     s = TaskState.at_pose(A, E, R, t, geometry.leg_radius)
     task = _tasks(geometry, A, E, rng)["directions"]
-    kernel = direction_kernel()
+    kernel = feature_law_kernel(LEG_DIRECTIONS)
     kernel.set("desired", task.desired)
     kernel.set("base_points", A)
     kernel.set("gain", (1.0, 1.0, 0.0))

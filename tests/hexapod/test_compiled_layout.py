@@ -90,9 +90,9 @@ def _kernels() -> Iterator[tuple[str, Callable[[], Any]]]:
     yield "QP refinement", osqp_limits.refine_kernel
     yield "pose servo", model_based.pose_servo_kernel
     for interaction in ("current", "mean"):
-        yield f"direction law {interaction}", lambda i=interaction: law_kernel.direction_kernel(
-            i).function
-        yield f"edge law {interaction}", lambda i=interaction: law_kernel.edge_law_kernel(
+        yield f"direction law {interaction}", lambda i=interaction: law_kernel.feature_law_kernel(
+            LEG_DIRECTIONS, i).function
+        yield f"edge law {interaction}", lambda i=interaction: law_kernel.feature_law_kernel(
             EDGE_LINES, i).function
     for spec in (ProblemSpec(EDGE_LINES, "local", 2, False, False),
                  ProblemSpec(EDGE_NORMALS, "global", 2, True, True, True)):
@@ -144,8 +144,8 @@ def _clear_caches() -> None:
     for cached in (fk.newton_kernel, dyn.compiled, robots_compiled.period_function,
                    compiled_ctc.joint_step, compiled_task_ctc.task_step,
                    reference_motion.feature_motion, osqp_limits.refine_kernel,
-                   model_based.pose_servo_kernel, law_kernel._direction_compiled,
-                   law_kernel._edge_compiled, problem.problem_kernel):
+                   model_based.pose_servo_kernel, law_kernel._compiled_core,
+                   problem.problem_kernel):
         cached.cache_clear()
 
 

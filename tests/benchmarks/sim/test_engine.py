@@ -14,7 +14,7 @@ from benchmarks.sim import run_trials
 from benchmarks.study.calibration import calibration_hook
 from benchmarks.study.scenario import ControllerSpec, builtin_scenarios, load_scenario
 from controllers.batch import batch_controller
-from controllers.law_rows import KernelRows
+from controllers.law_steps import KernelRows
 from tests.benchmarks.plugins import ProportionalJoints
 
 #: Fields that legitimately differ between the two paths (the controller's timing).
