@@ -19,7 +19,6 @@ from controllers.tasks import (
     Task,
     TaskState,
 )
-from controllers.tasks.leg_direction import LEG_DIRECTIONS
 from hexapod.geometry import HexapodGeometry
 from hexapod.se3 import exp_so3, integrate_pose
 from hexapod.workspace import home_pose
