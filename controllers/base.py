@@ -30,7 +30,6 @@ from controllers.data import (
     Observation,
     ObservationBatch,
     observation_problem,
-    usable_observation_problem,
 )
 from controllers.options import RemembersOptions
 from hexapod.actuation import Actuation
@@ -126,7 +125,7 @@ class Controller(RemembersOptions, ABC):
             return self.step_row(0, observation)
         batch = ObservationBatch.of(observation)
         if batch is None:
-            problem = usable_observation_problem(observation, self.features)
+            problem = observation_problem(observation, self.features)
             return Command.refuse(problem or "malformed observation", actuation=self.actuation)
         out = self.step_batch(batch)
         crash = self.crashes.get(0)
@@ -315,5 +314,5 @@ from controllers.registry import registry as registry  # noqa: E402
 __all__ = [
     "GOAL_FIELDS", "Actuation", "Command", "CommandBatch", "Controller",
     "ControllerContext", "FailedReset", "Goal", "GoalBatch", "Observation", "ObservationBatch",
-    "checked_command", "observation_problem", "usable_observation_problem",
+    "checked_command", "observation_problem",
 ]

@@ -438,11 +438,19 @@ class CommandBatch:
 
 
 def observation_problem(obs: Observation, features: frozenset[str]) -> str | None:
-    """Return why an observation cannot be used (None if it can).
+    """Return why an observation cannot be used (None if it can): what every controller's
+    ``step`` checks before computing.
 
     Checks that the needed fields exist with the right shapes, and that every
-    value flagged visible is finite.
+    value flagged visible is finite; a malformed observation (wrong types) is a reason too.
     """
+    try:
+        return _observation_problem(obs, features)
+    except (TypeError, ValueError) as exc:
+        return f"malformed observation: {exc}"
+
+
+def _observation_problem(obs: Observation, features: frozenset[str]) -> str | None:
     q = np.asarray(obs.lengths, dtype=float)
     if q.shape != (6,):
         return f"lengths: expected 6 values, got shape {q.shape}"
@@ -467,12 +475,3 @@ def observation_problem(obs: Observation, features: frozenset[str]) -> str | Non
         if len(bad_idx):
             return f"{name}: visible feature {tuple(int(x) for x in bad_idx[0])} is not finite"
     return None
-
-
-def usable_observation_problem(obs: Observation, features: frozenset[str]) -> str | None:
-    """:func:`observation_problem`, with a malformed observation (wrong types) reported as
-    a reason too: what every controller's ``step`` checks before computing."""
-    try:
-        return observation_problem(obs, features)
-    except (TypeError, ValueError) as exc:
-        return f"malformed observation: {exc}"

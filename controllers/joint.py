@@ -18,7 +18,7 @@ from controllers.data import (
     ControllerContext,
     Goal,
     Observation,
-    usable_observation_problem,
+    observation_problem,
 )
 from controllers.law_tools import goal_lengths
 from controllers.laws import Gain
@@ -61,7 +61,7 @@ class JointSpaceController(Controller):
         trial's number: every row of a batch is stepped so)."""
         if self._q_star is None:
             return Command.refuse(f"{self.name}: reset(context) was not called")
-        problem = usable_observation_problem(observation, self.features)
+        problem = observation_problem(observation, self.features)
         if problem is not None:
             return Command.refuse(problem)
         e = np.asarray(observation.lengths, dtype=float) - self._q_star

@@ -12,7 +12,7 @@ from typing import Any
 
 import numpy as np
 
-from controllers.base import Observation, usable_observation_problem
+from controllers.base import Observation, observation_problem
 from controllers.data import FEATURE_FIELDS
 from controllers.exceptions import ContextError, OptionError
 
@@ -22,7 +22,7 @@ INTERACTIONS = ("current", "desired", "mean")
 
 # --------------------------------------------------------------------------- observations
 def check_observation(obs: Observation, features: frozenset[str]) -> str | None:
-    """:func:`controllers.base.usable_observation_problem`, with a fast path.
+    """:func:`controllers.base.observation_problem`, with a fast path.
 
     The common case (float arrays of the right shapes, everything visible and
     finite) is recognised with a few calls: a finite sum means finite entries. Any
@@ -44,7 +44,7 @@ def check_observation(obs: Observation, features: frozenset[str]) -> str | None:
                 return None
     except (TypeError, ValueError, AttributeError):
         pass
-    return usable_observation_problem(obs, features)
+    return observation_problem(obs, features)
 
 
 # --------------------------------------------------------------------------- options
