@@ -14,6 +14,8 @@ import numpy as np
 
 from benchmarks.exceptions import BenchmarkError
 from benchmarks.robot.records import mm_list
+from benchmarks.sim.sensors import edge_batch
+from controllers.base import ObservationBatch
 from hexapod.config import check_keys, get_matrix, load_toml
 from hexapod.exceptions import ConfigFileError, ForwardKinematicsError
 from hexapod.geometry import HexapodGeometry
@@ -181,20 +183,15 @@ def save_goal(path: str | Path, lengths: np.ndarray, features: Features,
     return npz
 
 
-def feature_directions(f: Features) -> tuple[np.ndarray, np.ndarray]:
-    from vision.legs import directions_from_edges
-
-    both = np.all(f.edge_visible, axis=-1)
-    with np.errstate(invalid="ignore", divide="ignore"):
-        u = directions_from_edges(np.where(f.edge_visible[..., None], f.normals, np.nan))
-    return np.where(both[:, None], u, np.nan), both
-
-
-def feature_lines(camera: Any, normals: np.ndarray) -> np.ndarray | None:
-    if getattr(camera, "kind", "") != "perspective":
-        return None
-    with np.errstate(invalid="ignore", divide="ignore"):
-        return np.asarray(camera.normal_to_line(normals), float)
+def feature_batch(camera: Any, features: Features) -> ObservationBatch:
+    """The camera's batch of one of ``features`` (:func:`benchmarks.sim.sensors.edge_batch`;
+    image lines only for a camera of kind ``perspective``)."""
+    normals = np.asarray(features.normals, float)[None]
+    lines = None
+    if getattr(camera, "kind", "") == "perspective":
+        with np.errstate(invalid="ignore", divide="ignore"):
+            lines = np.asarray(camera.normal_to_line(normals), float)
+    return edge_batch(normals, lines, np.asarray(features.edge_visible, bool)[None])
 
 
 def goal_features(goal: ServoGoal, camera: Any, geometry: HexapodGeometry) -> Any:
@@ -224,9 +221,10 @@ def goal_features(goal: ServoGoal, camera: Any, geometry: HexapodGeometry) -> An
                          visible)
     if feats.visible_count == 0:
         raise BenchmarkError(f"{goal.source}: the camera sees no leg edge at the goal")
-    directions, _ = feature_directions(feats)
-    return Goal(normals=feats.normals, lines=feature_lines(camera, feats.normals),
-                directions=directions, lengths=goal.lengths.copy(), rotation=sol.rotation,
+    seen = feature_batch(camera, feats)
+    return Goal(normals=feats.normals, lines=None if seen.lines is None else seen.lines[0],
+                directions=seen.directions[0],  # type: ignore[index]
+                lengths=goal.lengths.copy(), rotation=sol.rotation,
                 translation=sol.translation, edge_visible=feats.edge_visible)
 
 

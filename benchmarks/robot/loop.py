@@ -14,11 +14,11 @@ from typing import Any, Protocol
 import numpy as np
 
 from benchmarks.robot.exits import ServoExit, SessionStop
-from benchmarks.robot.goals import feature_directions, feature_error, feature_lines
+from benchmarks.robot.goals import feature_batch, feature_error
 from benchmarks.robot.limits import DeadlinePolicy, LimitedRobot, SessionLimits
 from benchmarks.robot.models import EncoderPose
 from benchmarks.robot.status import PeriodStatus, ServoResult
-from benchmarks.sim.sensors import camera_batch
+from benchmarks.sim.sensors import edge_batch
 from controllers.base import ObservationBatch
 from hexapod.geometry import HexapodGeometry
 from vision.feature_cameras import FeatureSensor, sensor_camera
@@ -192,14 +192,9 @@ class ServoCamera:
         self.seconds = time.perf_counter() - t0
         self.features = feats
         if feats is None:
-            return camera_batch(np.full((1, 6, 2, 3), np.nan), None, np.full((1, 6, 3), np.nan),
-                                np.zeros((1, 6, 2), dtype=bool), np.zeros((1, 6), dtype=bool))
-        directions, both = feature_directions(feats)
-        lines = feature_lines(self.camera, feats.normals)
-        return camera_batch(np.asarray(feats.normals)[None],
-                            None if lines is None else np.asarray(lines)[None],
-                            np.asarray(directions)[None], np.asarray(feats.edge_visible)[None],
-                            np.asarray(both)[None])
+            return edge_batch(np.full((1, 6, 2, 3), np.nan), None,
+                              np.zeros((1, 6, 2), dtype=bool))
+        return feature_batch(self.camera, feats)
 
 
 class ServoBook:

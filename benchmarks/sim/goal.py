@@ -112,18 +112,17 @@ def predicted_features(camera: Any, geometry: HexapodGeometry, rotation: np.ndar
     predicts hidden is NaN, as a hidden edge is in a taught goal: a law that needs it
     says so itself (an encoder law does not).
     """
-    from vision.legs import directions_from_edges, observe_legs
+    from benchmarks.sim.sensors import edge_batch
+    from vision.legs import observe_legs
 
     seen = observe_legs(camera, geometry, np.asarray(rotation, float),
                         np.asarray(translation, float))
     visible = np.asarray(seen.edge_visible, dtype=bool)
     normals = np.where(visible[..., None], np.asarray(seen.normals, float), np.nan)
-    both = np.asarray(visible.all(axis=-1))
     with np.errstate(invalid="ignore"):
-        lines = (camera.normal_to_line(normals) if camera.family == "perspective" else None)
-        directions = np.where(both[..., None], directions_from_edges(normals), np.nan)
-    return {"normals": normals, "lines": lines, "directions": directions,
-            "edge_visible": visible}
+        lines = (camera.normal_to_line(normals)[None] if camera.family == "perspective"
+                 else None)
+    return _row_features(edge_batch(normals[None], lines, visible[None]), 0)
 
 
 def taught_goal(m: ObservationBatch, setup: TrialSetup, sc: Any, row: int = 0) -> Goal:

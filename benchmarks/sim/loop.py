@@ -39,7 +39,6 @@ from typing import Any, Protocol
 import numpy as np
 
 from benchmarks.sim.clock import CameraClock, clocked_measure
-from benchmarks.sim.sensors import take
 from controllers.base import CommandBatch, ObservationBatch
 
 
@@ -124,7 +123,7 @@ def closed_loop(plant: Any, sensor: Any, clock: CameraClock | None, controller: 
         rows = np.arange(len(idx)) if every else np.flatnonzero(~done & seen)
         if len(rows):
             tr = idx if every else idx[rows]
-            batch = replace(obs if every else take(obs, rows), trials=tr,
+            batch = replace(obs if every else obs.rows(rows), trials=tr,
                             t=np.full(len(rows), step * dt),
                             lengths=plant.measured_lengths(tr, offsets[tr]),
                             q_dot=plant.measured_rates(tr))

@@ -15,7 +15,7 @@ from typing import Any
 
 import numpy as np
 
-from benchmarks.sim.goal import cartesian_goal, goal_setting, taught_goal
+from benchmarks.sim.goal import cartesian_goal, goal_setting, measured_goals
 from benchmarks.sim.inputs import SimScenario
 from benchmarks.sim.world import TrialSetup, World, trial_rng
 from controllers.base import Goal, ObservationBatch
@@ -49,25 +49,17 @@ def camera_batch(normals: np.ndarray, lines: np.ndarray | None, directions: np.n
                             direction_visible=direction_visible)
 
 
-def take(obs: ObservationBatch, rows: np.ndarray) -> ObservationBatch:
-    """Rows ``rows`` of a batch (every array field indexed,
-    :meth:`~controllers.data.ObservationBatch.rows`; passing every dataclass field to the
-    constructor failed on ``single``, not an init field, so every call raised)."""
-    return obs.rows(np.asarray(rows))
-
-
-def goal_of(m: ObservationBatch, setup: TrialSetup) -> Goal:
-    """The :class:`Goal` of a trial under the ``"mixed"`` goal setting, from the camera's
-    batch of one taught at its goal pose (the pose and its nominal inverse kinematics for
-    the model-based baselines)."""
-    return Goal(
-        normals=m.normals[0],  # type: ignore[index]
-        lines=None if m.lines is None else m.lines[0],
-        directions=m.directions[0],  # type: ignore[index]
-        lengths=inverse_kinematics(setup.nominal_geometry, setup.goal_rotation,
-                                   setup.goal_translation),
-        rotation=setup.goal_rotation, translation=setup.goal_translation,
-        edge_visible=m.edge_visible[0])
+def edge_batch(normals: np.ndarray, lines: np.ndarray | None, visible: np.ndarray
+               ) -> ObservationBatch:
+    """The camera's batch (:func:`camera_batch`) of ``n`` rows' edges: normals (n, 6, 2, 3),
+    image lines or None, visibility (n, 6, 2); a leg's direction where both its edges are
+    seen, NaN elsewhere."""
+    both = np.asarray(visible.all(axis=-1))
+    with np.errstate(invalid="ignore", divide="ignore"):
+        directions = directions_from_edges(normals)
+    if not both.all():
+        directions = np.where(both[..., None], directions, np.nan)
+    return camera_batch(normals, lines, directions, visible, both)
 
 
 class GeometricSensor:
@@ -155,22 +147,6 @@ class GeometricSensor:
 
         return noisy_features(self.sc, obs.normals, obs.edge_visible, rngs, apply_noise,
                               self.est, cameras, item, line_maps)
-
-    def goals(self, setups: list[TrialSetup]) -> list[Goal]:
-        """The goals of the trials of the rows (:func:`trial_goal` with one taught frame)
-        in one batch."""
-        sc = self.sc
-        setting = goal_setting(sc)
-        if setting == "cartesian":  # nothing measured at the goal
-            return [cartesian_goal(s) for s in setups]
-        R = np.array([s.goal_rotation for s in setups])
-        t = np.array([s.goal_translation for s in setups])
-        m = self.sample(R, t, np.arange(len(setups)),
-                        rows_generators(sc, setups, 2, sc.noise.on_goal),
-                        apply_noise=sc.noise.on_goal)
-        if setting == "taught":
-            return [taught_goal(take(m, np.array([k])), s, sc) for k, s in enumerate(setups)]
-        return [goal_of(take(m, np.array([k])), s) for k, s in enumerate(setups)]
 
     def measure_goal(self, rotation: np.ndarray, translation: np.ndarray,
                      rng: np.random.Generator, frames: int = 1, apply_noise: bool = True
@@ -267,12 +243,7 @@ def noisy_features(sc: SimScenario, normals: np.ndarray, visible: np.ndarray,
             for rows, cam in cameras:
                 lines[rows] = cam.normal_to_line(normals[rows])
             normals = estimated.line_to_normal(lines)
-    both = np.asarray(visible.all(axis=-1))
-    with np.errstate(invalid="ignore"):
-        directions = directions_from_edges(normals)
-    if not all_visible:
-        directions = np.where(both[..., None], directions, np.nan)
-    return camera_batch(normals, lines, directions, visible, both)
+    return edge_batch(normals, lines, visible)
 
 
 def _average_frames(m: ObservationBatch, perspective_camera: Any | None,
@@ -295,12 +266,7 @@ def _average_frames(m: ObservationBatch, perspective_camera: Any | None,
     if perspective_camera is not None:
         with np.errstate(invalid="ignore"):
             lines = perspective_camera.normal_to_line(normals)[None]
-    both = np.asarray(visible.all(axis=-1))
-    with np.errstate(invalid="ignore"):
-        directions = directions_from_edges(normals)
-    return camera_batch(normals[None], lines,
-                        np.where(both[..., None], directions, np.nan)[None], visible[None],
-                        both[None])
+    return edge_batch(normals[None], lines, visible[None])
 
 
 def trial_goal(sensor: GeometricSensor | Any, setup: TrialSetup, sc: SimScenario) -> Goal:
@@ -331,7 +297,7 @@ def trial_goal(sensor: GeometricSensor | Any, setup: TrialSetup, sc: SimScenario
     rng = trial_rng(sc.seed, setup.trial, 2)
     m = sensor.measure_goal(setup.goal_rotation, setup.goal_translation, rng,
                             frames=sc.teach_frames, apply_noise=sc.noise.on_goal)
-    return taught_goal(m, setup, sc) if setting == "taught" else goal_of(m, setup)
+    return measured_goals(m, [setup], sc)[0]
 
 
 def make_sensor(sc: SimScenario, setup: TrialSetup) -> Any:
@@ -397,13 +363,8 @@ class _ImageSensorAdapter:
         if est.family == "perspective":
             with np.errstate(invalid="ignore"):
                 lines = est.normal_to_line(n)
-        both = np.asarray(vis.all(axis=-1))
-        with np.errstate(invalid="ignore"):
-            directions = directions_from_edges(n)
-        m_all = camera_batch(n, lines, np.where(both[..., None], directions, np.nan), vis,
-                             both)
         tolerance = self.sensor.detector.outlier_px * radians_per_pixel(est)
-        return _average_frames(m_all, est if est.family == "perspective" else None, tolerance)
+        return _average_frames(edge_batch(n, lines, vis), est if est.family == "perspective" else None, tolerance)
 
     def measure(self, rotations: np.ndarray, translations: np.ndarray,
                 rngs: list[np.random.Generator], apply_noise: bool = True
@@ -422,14 +383,9 @@ class _ImageSensorAdapter:
             out["normals"].append(m.normals)
             out["lines"].append(m.lines)
             out["edge_visible"].append(m.edge_visible)
-        normals = np.array(out["normals"], float)
-        visible = np.array(out["edge_visible"], bool)
-        both = np.asarray(visible.all(axis=-1))
-        with np.errstate(invalid="ignore"):
-            directions = directions_from_edges(normals)
         lines = None if out["lines"][0] is None else np.array(out["lines"], float)
-        return camera_batch(normals, lines, np.where(both[..., None], directions, np.nan),
-                            visible, both)
+        return edge_batch(np.array(out["normals"], float), lines,
+                          np.array(out["edge_visible"], bool))
 
 
 class RowSensor:

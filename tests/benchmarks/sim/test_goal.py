@@ -24,6 +24,7 @@ from benchmarks.sim.goal import (
 )
 from benchmarks.sim.reference import trial_reference
 from benchmarks.sim.sensors import GeometricSensor, trial_goal
+from benchmarks.sim.stepper import group_goals
 from benchmarks.sim.world import load_camera, load_geometry, make_trials
 from benchmarks.study import scenario_model
 from benchmarks.study.scenario import parse_scenario
@@ -113,7 +114,7 @@ def test_the_goals_of_each_setting() -> None:
         sc = _scenario(goal=g, calibration_error=MODEL_ERROR)
         s = _setups(sc, [1])[0]
         goals[g] = trial_goal(GeometricSensor(sc, s.world, s.estimated_camera), s, sc)
-        batched = GeometricSensor.of_trials(sc, [s]).goals([s])[0]
+        batched = group_goals(sc, GeometricSensor.of_trials(sc, [s]), [s])[0]
         for f in ("normals", "lengths", "rotation", "translation", "directions"):
             np.testing.assert_allclose(getattr(batched, f), getattr(goals[g], f),
                                        atol=1e-12, err_msg=f"{g} {f}")
@@ -329,9 +330,10 @@ def test_a_taught_encoder_baseline_ends_a_closed_curve_exactly() -> None:
 def test_the_batched_goals_are_the_sensors_goals_to_the_bit(
         goal: str, monkeypatch: pytest.MonkeyPatch) -> None:
     """The run's goals of a group (:func:`benchmarks.sim.goal.measured_goals`: views of
-    the batch's rows, the nominal inverse kinematics in one call) are those of the
-    sensor's batch of one per trial, bit for bit, each trial in its own world with
-    noise on the goal image (the batch itself: the trial-by-trial fallback raises)."""
+    the batch's rows, the nominal inverse kinematics in one call) are the per-trial
+    engine's (:func:`benchmarks.sim.sensors.trial_goal`, a sensor per trial), bit for
+    bit, each trial in its own world with noise on the goal image (the batch itself:
+    the trial-by-trial fallback raises)."""
     from benchmarks.sim import stepper
     from benchmarks.sim.goal import nominal_lengths
 
@@ -344,8 +346,9 @@ def test_the_batched_goals_are_the_sensors_goals_to_the_bit(
                    noise={"model": "rotation", "amplitude_deg": 0.05, "on_goal": True})
     setups = _setups(sc, [0, 1, 2, 3])
     sensor = GeometricSensor.of_trials(sc, setups)
-    ours = stepper._goals(sc, sensor, setups)
-    theirs = sensor.goals(setups)
+    ours = stepper.group_goals(sc, sensor, setups)
+    theirs = [trial_goal(GeometricSensor(sc, s.world, s.estimated_camera), s, sc)
+              for s in setups]
     assert all(type(g).__name__ == "Goal" for g in ours)
     for k, (a, b) in enumerate(zip(ours, theirs, strict=True)):
         for f in ("normals", "lines", "directions", "lengths", "rotation", "translation",
