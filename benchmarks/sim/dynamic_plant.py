@@ -28,6 +28,7 @@ from typing import Any
 
 import numpy as np
 
+from benchmarks.sim.plant import Plant
 from benchmarks.sim.world import TrialSetup
 from hexapod.actuation import Actuation
 from hexapod.backends.base import clamp_velocities
@@ -43,7 +44,7 @@ END_STOP = 1e-4
 SATURATION_COLUMNS = ("saturation_legs_s", "saturation_legs_fraction", "saturation_fraction")
 
 
-class DynamicPlant:
+class DynamicPlant(Plant):
     """The dynamic world of a group of trials (see the module docstring).
 
     Args:

@@ -19,7 +19,6 @@ from benchmarks.sim.goal import cartesian_goal, goal_setting, measured_goals
 from benchmarks.sim.inputs import SimScenario
 from benchmarks.sim.world import TrialSetup, World, trial_rng
 from controllers.base import Goal, ObservationBatch
-from hexapod.kinematics import inverse_kinematics
 from vision.cameras import Camera
 from vision.cameras.perspective import PerspectiveCamera, normals_to_lines
 from vision.fast_observe import WorldParams, observe_batch
@@ -364,7 +363,8 @@ class _ImageSensorAdapter:
             with np.errstate(invalid="ignore"):
                 lines = est.normal_to_line(n)
         tolerance = self.sensor.detector.outlier_px * radians_per_pixel(est)
-        return _average_frames(edge_batch(n, lines, vis), est if est.family == "perspective" else None, tolerance)
+        return _average_frames(edge_batch(n, lines, vis),
+                               est if est.family == "perspective" else None, tolerance)
 
     def measure(self, rotations: np.ndarray, translations: np.ndarray,
                 rngs: list[np.random.Generator], apply_noise: bool = True

@@ -26,7 +26,7 @@ from typing import Any, TypeVar
 import numpy as np
 
 from benchmarks.exceptions import BatchFailedError, ScenarioError
-from benchmarks.sim.actuation import drive_plant, require_actuation, world_actuation
+from benchmarks.sim.actuation import world_actuation
 from benchmarks.sim.book import Book, TrialResult, failure_row
 from benchmarks.sim.clock import make_clock
 from benchmarks.sim.goal import (
@@ -37,7 +37,7 @@ from benchmarks.sim.goal import (
 )
 from benchmarks.sim.inputs import SimScenario
 from benchmarks.sim.loop import closed_loop
-from benchmarks.sim.plant import BackendPlant, KinematicPlant, make_plant
+from benchmarks.sim.plant import BackendPlant, KinematicPlant, Plant, make_plant
 from benchmarks.sim.reference import Targets, task_batch_controller, trial_reference
 from benchmarks.sim.sensors import (
     GeometricSensor,
@@ -57,6 +57,7 @@ from benchmarks.sim.world import (
 from controllers.base import ControllerContext, Goal
 from controllers.batch import actuation_of
 from hexapod import HexapodGeometry
+from hexapod.actuation import check_actuation
 from hexapod.backends.base import Backend
 
 log = logging.getLogger(__name__)
@@ -210,10 +211,9 @@ class _Unit:
               sensor: GeometricSensor | RowSensor) -> list[TrialResult]:
         sc, spec = self.sc, self.spec
         controller = task_batch_controller(sc, spec, self.batched)
-        if self.backend_factory is None:
-            actuation = require_actuation(controller, spec.label, *world_actuation(sc))
-        else:  # a backend says itself what it applies (Backend.apply)
-            actuation = actuation_of(controller)
+        actuation = actuation_of(controller)
+        if self.backend_factory is None:  # (a backend says itself what it applies)
+            check_actuation(actuation, *world_actuation(sc), spec.label)
         controller.reset_batch(contexts)
         q = np.array([s.start_lengths for s in group])
         R = np.array([s.start_rotation for s in group])
@@ -227,15 +227,15 @@ class _Unit:
         opened: list[Backend] = []
         try:
             if self.backend_factory is None:
-                plant: Any = make_plant(sc, group, q, R, t, A, E)
+                plant: Plant = make_plant(sc, group, q, R, t, A, E)
             else:
                 for s in group:
                     opened.append(self.backend_factory(g, s.start_lengths + s.world.joint_offsets))
                 poses = KinematicPlant(q, R, t, A, E, g.stroke, g.max_speed)
                 plant = BackendPlant(opened, q, R, t, offsets, poses.solve_poses)
-            drive_plant(plant, actuation, spec.label)
-            book = Book.new(sc, group, self.record_trials)
-            book.attach(plant, Targets(sc, group), actuation, spec.label, self.on_step)
+            plant.use_actuation(actuation, spec.label)
+            book = Book(sc, group, self.record_trials, plant, Targets(sc, group), actuation,
+                        spec.label, self.on_step)
             closed_loop(plant, sensor, make_clock(sc, group, q, R, t, A, E), controller,
                         book, sc.dt, offsets, sc.task.max_steps)
         finally:
