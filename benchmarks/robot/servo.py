@@ -72,7 +72,7 @@ from benchmarks.robot.limits import (
     MISSED_WINDOW,
 )
 from benchmarks.robot.loop import DEFAULT_FEATURE_TOLERANCE, DEFAULT_SETTLE
-from benchmarks.robot.models import camera_model, robot_geometry
+from benchmarks.robot.models import add_robot_arguments, camera_model, check_dt, robot_geometry
 from benchmarks.robot.records import LOG_NAME, SESSIONS_DIR, session_path
 from benchmarks.robot.session import (
     DEFAULT_HALT_TIMEOUT_S,
@@ -86,27 +86,6 @@ from benchmarks.study.outdir import OutputDir, OutputFile
 from hexapod.geometry import HexapodGeometry
 from vision.feature_cameras import Features, open_camera
 
-__all__ = [
-    "DEFAULT_FEATURE_TOLERANCE",
-    "DEFAULT_SETTLE",
-    "DEFAULT_TEACH_FRAMES",
-    "SIMULATED_BACKENDS",
-    "Features",
-    "add_arguments",
-    "average_features",
-    "build_parser",
-    "goal_features",
-    "load_goal",
-    "main",
-    "open_backend",
-    "open_camera",
-    "parse_options",
-    "run",
-    "save_goal",
-    "teach_tolerance",
-]
-
-log = logging.getLogger(__name__)
 
 def open_backend(spec: str, geometry: HexapodGeometry,
                  start: np.ndarray | None = None) -> Any:
@@ -194,14 +173,12 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--camera-pose", metavar="PRESET|TOML",
                    help="with a calibration file: the camera's pose, a preset's placement "
                         "(front, omni, fisheye) or a camera TOML file's camera_from_base")
-    p.add_argument("--geometry", default="deltalab",
-                   help="nominal robot: a geometry TOML file or a preset (default deltalab)")
+    add_robot_arguments(p)
     p.add_argument("--calibration", metavar="FILE",
                    help="calibrated.toml: the controller uses these base points (camera "
                         "frame) instead of the nominal ones")
     p.add_argument("--allow-foreign-calibration", action="store_true",
                    help="use a --calibration made with another robot or camera (warned)")
-    p.add_argument("--dt", type=float, default=0.02, help="control period [s] (default 0.02)")
     lim = p.add_argument_group("limits (reaching one halts the robot, exit 3)")
     lim.add_argument("--max-steps", type=int,
                      help="stop after N periods (default: no period budget)")
@@ -254,11 +231,6 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--viz", action="store_true", help="live MeshCat view (loopback server)")
 
 
-#: The session's models (:mod:`benchmarks.robot.models`), by the names it uses.
-_geometry = robot_geometry
-_camera = camera_model
-
-
 def parse_options(items: list[str]) -> dict[str, Any]:
     """Controller options from ``KEY=VALUE`` strings (VALUE read as TOML, else a string).
 
@@ -281,8 +253,7 @@ def parse_options(items: list[str]) -> dict[str, Any]:
 
 
 def _check_args(args: argparse.Namespace) -> None:
-    if not (math.isfinite(args.dt) and args.dt > 0):
-        raise BenchmarkError(f"--dt must be a positive period in seconds, got {args.dt}")
+    check_dt(args.dt)
     if args.max_steps is not None and args.max_steps < 1:
         raise BenchmarkError(f"--max-steps must be >= 1, got {args.max_steps}")
     if not args.tolerance_mm > 0 or not args.feature_tolerance > 0:
@@ -372,8 +343,8 @@ def run(args: argparse.Namespace) -> int:
     backends.check(args.backend)  # a bad spec is reported before anything is opened
     args.camera = choose_camera(args.backend, args.camera,
                                 getattr(args, "simulated_camera_on_real_robot", False))
-    geometry = _geometry(args.geometry)
-    camera = _camera(args.camera_file, args.camera_pose, geometry)
+    geometry = robot_geometry(args.geometry)
+    camera = camera_model(args.camera_file, args.camera_pose, geometry)
     start = None if args.start_mm is None else np.asarray(args.start_mm, float) * 1e-3
     if start is not None:
         bad = [i + 1 for i, x in enumerate(start)
