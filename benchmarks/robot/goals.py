@@ -4,7 +4,6 @@ the nominal model; the feature error the loop's convergence test reads."""
 
 from __future__ import annotations
 
-import logging
 import math
 from dataclasses import dataclass
 from pathlib import Path
@@ -21,8 +20,6 @@ from hexapod.exceptions import ConfigFileError, ForwardKinematicsError
 from hexapod.geometry import HexapodGeometry
 from hexapod.outputs import TEXT_MARKER
 from vision.feature_cameras import Features, sensor_camera
-
-log = logging.getLogger(__name__)
 
 #: Keys a goal file may have.
 GOAL_KEYS = ("lengths_mm", "features", "name")

@@ -35,6 +35,7 @@ from collections.abc import Callable
 import numpy as np
 
 from benchmarks.sim.inputs import SimScenario
+from benchmarks.sim.sensors import camera_batch
 from benchmarks.sim.world import TrialSetup, trial_rng
 from controllers.base import ObservationBatch
 from hexapod.fk import pack_rows, set_guesses, solve_rows
@@ -59,14 +60,6 @@ def clock_active(sc: SimScenario) -> bool:
                               or c.jitter_ms > 0 or c.exposure_ms > 0)
 
 
-def latency_s(sc: SimScenario) -> float:
-    """The scenario's image latency [s] (frames counted at the frame rate, or at the
-    control rate when the camera is triggered by the controller)."""
-    c = sc.clock
-    period = 1.0 / c.frame_rate_hz if c.frame_rate_hz > 0 else sc.dt
-    return 1e-3 * c.latency_ms + c.latency_frames * period
-
-
 class CameraClock:
     """The frames of a group of trials (index = row of the group).
 
@@ -86,8 +79,9 @@ class CameraClock:
         n = len(group)
         self.dt = sc.dt
         self.q, self.R, self.t = q, R, t
+        # (a camera triggered by the controller: frames counted at the control rate)
         self.period = 1.0 / c.frame_rate_hz if c.frame_rate_hz > 0 else sc.dt
-        self.latency = latency_s(sc)
+        self.latency = 1e-3 * c.latency_ms + c.latency_frames * self.period
         run = sc.task.max_steps * sc.dt
         before = math.ceil(self.latency / self.period) + 2  # frames captured before 0
         count = before + math.ceil(run / self.period) + 2
@@ -140,10 +134,8 @@ class CameraClock:
             self._store(rows, m, len(self.q))
             self.frame[rows] = newest[new]
         frame = {k: (None if v is None else v[idx]) for k, v in self.cache.items()}
-        return ObservationBatch(trials=np.arange(len(idx)), t=np.zeros(len(idx)),
-                                lengths=np.full((len(idx), 6), np.nan),
-                                image_t=self.capture[idx, self.frame[idx]] - 0.5 * self.exposure,
-                                **frame)  # type: ignore[arg-type]
+        return camera_batch(**frame,  # type: ignore[arg-type]
+                            image_t=self.capture[idx, self.frame[idx]] - 0.5 * self.exposure)
 
     def _exposed_poses(self, rows: np.ndarray, c: np.ndarray, step: int
                        ) -> tuple[np.ndarray, np.ndarray]:

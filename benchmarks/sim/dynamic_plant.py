@@ -23,7 +23,6 @@ the rows of the other scenarios are unchanged).
 
 from __future__ import annotations
 
-import logging
 from typing import Any
 
 import numpy as np
@@ -35,8 +34,6 @@ from hexapod.backends.base import clamp_velocities
 from hexapod.dynamics.drive_model import quantise
 from hexapod.dynamics.robots import DynamicRobots
 from hexapod.exceptions import ActuationError
-
-log = logging.getLogger(__name__)
 
 #: A leg beyond its stroke by more than this has hit its end stop [m].
 END_STOP = 1e-4

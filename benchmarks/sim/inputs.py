@@ -50,11 +50,6 @@ class SimPayload(Protocol):
         ...
 
 
-#: The names the simulator's modules give the sections it reads as they are.
-SimTask = TaskConfig
-SimCalibrationError = CalibrationErrorConfig
-
-
 class SimScenario(Protocol):
     """One point of a study, as the simulator reads it."""
 

@@ -21,7 +21,6 @@ The plants change the caller's arrays ``q``, ``R`` and ``t`` in place (rows ``ru
 
 from __future__ import annotations
 
-import logging
 from collections.abc import Callable, Sequence
 from typing import Any
 
@@ -30,8 +29,6 @@ import numpy as np
 from hexapod.actuation import Actuation
 from hexapod.backends.base import Backend, clamp_velocities
 from hexapod.fk import pack_rows, set_guesses, solve_rows
-
-log = logging.getLogger(__name__)
 
 #: The failure of a trial whose true pose cannot be found from its leg lengths.
 FK_FAILURE = "forward kinematics of the true robot failed (singularity?)"

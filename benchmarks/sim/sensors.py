@@ -9,7 +9,6 @@ closed loop (:mod:`benchmarks.sim.loop`) adds the rows' trials, time and encoder
 
 from __future__ import annotations
 
-import logging
 from collections.abc import Callable, Sequence
 from typing import Any
 
@@ -25,11 +24,10 @@ from vision.fast_observe import WorldParams, observe_batch
 from vision.legs import LegObservation, directions_from_edges
 from vision.noise import Generators
 
-log = logging.getLogger(__name__)
 
 def camera_batch(normals: np.ndarray, lines: np.ndarray | None, directions: np.ndarray,
-                 edge_visible: np.ndarray, direction_visible: np.ndarray
-                 ) -> ObservationBatch:
+                 edge_visible: np.ndarray, direction_visible: np.ndarray,
+                 image_t: np.ndarray | None = None) -> ObservationBatch:
     """The camera's part of the observations of ``n`` rows: the features and their
     visibility; ``trials`` ``0..n-1``, ``t`` zeros and ``lengths`` NaN until the loop
     adds the rows, the time and the encoders' readings.
@@ -40,12 +38,13 @@ def camera_batch(normals: np.ndarray, lines: np.ndarray | None, directions: np.n
         directions: (n, 6, 3) leg directions (NaN where an edge is hidden).
         edge_visible: (n, 6, 2) bool.
         direction_visible: (n, 6) bool.
+        image_t: (n,) capture times [s] (a camera clock's), or None.
     """
     n = len(normals)
     return ObservationBatch(trials=np.arange(n), t=np.zeros(n),
                             lengths=np.full((n, 6), np.nan), normals=normals, lines=lines,
                             directions=directions, edge_visible=edge_visible,
-                            direction_visible=direction_visible)
+                            direction_visible=direction_visible, image_t=image_t)
 
 
 def edge_batch(normals: np.ndarray, lines: np.ndarray | None, visible: np.ndarray
