@@ -17,8 +17,6 @@ import numpy as np
 
 from benchmarks.exceptions import BenchmarkError
 
-__all__ = ["ALLOW_SIMULATED_FLAG", "choose_camera", "describe_camera"]
-
 #: The option that allows ``--camera sim`` on real hardware.
 ALLOW_SIMULATED_FLAG = "--simulated-camera-on-real-robot"
 

@@ -10,8 +10,6 @@ from __future__ import annotations
 import enum
 import signal
 
-__all__ = ["ServoExit", "SessionStop", "exit_for_signal"]
-
 
 class ServoExit(enum.IntEnum):
     """Exit codes of a servo session.

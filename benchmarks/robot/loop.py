@@ -76,15 +76,11 @@ def servo_loop(
     result: ServoResult | None = None,
 ) -> ServoResult:
     """Run a reset controller on a connected robot until convergence, a limit, a stop
-    request or Ctrl-C.
-
-    The session is the simulator's closed loop (:func:`benchmarks.sim.loop.closed_loop`)
-    with a batch of one: the robot is a :class:`~benchmarks.sim.plant.BackendPlant` (the
-    pose is the nominal forward kinematics of the measured lengths), the camera a
+    request or Ctrl-C (the outcome ``"interrupted"``; a
+    :class:`~benchmarks.robot.exits.SessionStop`: ``"stopped"``, ``result.stop``); any
+    other exception propagates, ``result`` (when given) holding the periods run. The
+    robot is a :class:`~benchmarks.sim.plant.BackendPlant`, the camera a
     :class:`ServoCamera`, the book a :class:`ServoBook`. The caller halts the robot.
-    Ctrl-C (``KeyboardInterrupt``) is reported as the outcome ``"interrupted"``, a
-    :class:`~benchmarks.robot.exits.SessionStop` as ``"stopped"`` (``result.stop``); any
-    other exception propagates, ``result`` (when given) holding the periods run.
 
     Args:
         robot: A connected backend (``measured_lengths()``, ``apply(v, kind, dt, name)``).

@@ -1,17 +1,8 @@
-"""The record of every servo session: one JSON Lines file, written whatever happens.
-
-By default a session writes ``servo-runs/<UTC timestamp>-<controller>/servo.jsonl`` (a new
-directory, never an existing one); ``--out DIR`` names the directory (absent or empty);
-``--log FILE.jsonl`` names the file itself (an earlier servo log is replaced, any other
-file refused). The file holds (``docs/servo.md``, "The session record"):
-
-1. a header ``{"servo_session": 1, ...}``: the command, backend, camera (file and pose),
-   controller, goal, period and limits;
-2. one line per period (:meth:`~benchmarks.robot.loop.PeriodStatus.to_json`), flushed
-   each period (readable live, complete after a crash);
-3. the final record ``{"final": true, "exit_code", "reason", "exception",
-   "halt_confirmed", "missed_periods", ...}``, written on every exit path once the file
-   exists.
+"""The record of every servo session: one JSON Lines file, written whatever happens
+(``docs/servo.md``, "The session record"): a header ``{"servo_session": 1, ...}``, one
+line per period (:meth:`~benchmarks.robot.status.PeriodStatus.to_json`, flushed each
+period) and the final record ``{"final": true, ...}``, written on every exit path once
+the file exists. Where it goes: :func:`session_path`.
 """
 
 from __future__ import annotations
@@ -24,9 +15,6 @@ from typing import IO, Any
 
 from hexapod.exceptions import OutputError
 from hexapod.outputs import check_name, check_replace
-
-__all__ = ["LOG_NAME", "SESSIONS_DIR", "SessionLog", "is_header", "is_period", "is_servo_log",
-           "mm_list", "session_path"]
 
 #: Where sessions are recorded by default (relative to the working directory).
 SESSIONS_DIR = "servo-runs"

@@ -1,22 +1,14 @@
-"""Replaying a servo session: its record (``servo-runs/.../servo.jsonl``, ``--out DIR``'s
-or ``--log FILE.jsonl``) as a trial record, which ``hexapod-bench viz`` replays as it
-replays a recorded trial (MeshCat, or ``--html FILE`` with the curves beside it).
+"""Replaying a servo session: its record (:mod:`benchmarks.robot.records`) as a trial
+record, which ``hexapod-bench viz`` replays as it replays a recorded trial.
 
-A session record has one JSON object a line (:mod:`benchmarks.robot.records`): the
-header ``{"servo_session": 1, ...}``, one line per period (``step``, ``t_s``,
-``lengths_mm``, ``feature_error``, ``applied_mm_s``, ``commanded_mm_s``,
-``visible_edges``, ...: :meth:`benchmarks.robot.status.PeriodStatus.to_json`) and the
-final record ``{"final": true, ...}``; the header and the final record are not periods
-and are not replayed (older logs without a header, whose periods carry
-``velocities_mm_s``, replay too). The platform pose of a period is the nominal forward
-kinematics of its measured lengths (what the session itself used). The robot, the
-camera and the goal are the header's (``geometry``, ``camera_file``, ``camera_pose``,
-``goal_lengths_mm``) unless given (viz's ``--geometry``, ``--camera-file``,
-``--camera-pose``, ``--goal``); without a header, ``deltalab``, ``front`` and the last
-period's pose. The velocities shown are the applied ones (after the speed cap and the
-clamps), else the commanded ones. The log says how many edges were seen, not which: a
-period with none shows every edge hidden, any other every edge seen (an
-``edge_visible`` field, when a log has it, is used as it is).
+The periods are replayed (not the header or the final record; older logs without a
+header, whose periods carry ``velocities_mm_s``, too), each at the nominal forward
+kinematics of its measured lengths (what the session used), with the applied
+velocities, else the commanded ones. The robot, camera and goal are the header's unless
+given (viz's ``--geometry``, ``--camera-file``, ``--camera-pose``, ``--goal``); without a
+header, ``deltalab``, ``front`` and the last period's pose. The log says how many edges
+were seen, not which: a period with none shows every edge hidden, any other every edge
+seen (an ``edge_visible`` field, when a log has it, is used as it is).
 """
 
 from __future__ import annotations
@@ -30,8 +22,6 @@ import numpy as np
 
 from benchmarks.exceptions import BenchmarkError
 from benchmarks.robot.records import is_header, is_period, is_servo_log
-
-__all__ = ["find_session_log", "load_session"]
 
 
 def find_session_log(path: Path) -> Path | None:

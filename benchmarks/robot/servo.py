@@ -1,39 +1,20 @@
 """The real servo loop: one controller, a robot over its serial link, a camera.
 
-``hexapod-bench servo --backend serial:URL|emulator|gcs:tcp://HOST:PORT|NAME[:ARGS]
---camera device:N|video:PATH|sim --controller NAME --goal FILE`` runs one controller at
-the control period until the robot converges, a limit is reached (``--max-time-s``,
-``--max-steps``, ``--max-travel-mm``, missed deadlines), the recording ends, the camera
-disagrees with the encoders or stays blind (:mod:`benchmarks.robot.consistency`, a
-per-period check of the session), a signal (SIGINT, SIGTERM, SIGHUP) or a failure;
-``--camera`` is required with real hardware (:mod:`benchmarks.robot.camera_policy`).
-Every way out goes through the same shutdown
-(:mod:`benchmarks.robot.session`): ``HLT``, its confirmation awaited, a summary, the
-final record, an exit code of :class:`~benchmarks.robot.exits.ServoExit`.
+``hexapod-bench servo --backend SPEC --camera SPEC --controller NAME --goal FILE`` runs one
+controller at the control period until the robot converges, a limit is reached, the
+recording ends, the camera disagrees with the encoders or stays blind
+(:mod:`benchmarks.robot.consistency`), a signal or a failure; every way out goes through
+the session's one shutdown (:mod:`benchmarks.robot.session`: ``HLT``, its confirmation, a
+summary, the final record, an exit code of :class:`~benchmarks.robot.exits.ServoExit`).
+Each period (:mod:`benchmarks.robot.loop`): the measured lengths give the predicted pose,
+the camera an image and its edges, the controller leg velocities (zero when refused or
+without an image), the backend streams them and reads the lengths back.
 
-Each period:
-
-1. the lengths measured by the board at the end of the previous period give the
-   predicted platform pose (forward kinematics of the nominal model);
-2. the camera gives an image (``--camera sim`` renders the legs at that pose, so the
-   whole loop can be tried against the emulator); the edge detector, seeded by the
-   prediction (and by the last measured normals when every edge was found), gives
-   the edge normals;
-3. the controller turns the :class:`~controllers.base.Observation` into leg
-   velocities; a refused command (``Command.reason``) or a lost frame commands zero;
-4. the backend streams the setpoints (``MOV``), waits for the end of the period
-   and reads the lengths back (``POS?``).
-
-The goal file (TOML, see ``docs/servo.md``) holds the goal configuration taught on
-the robot, ``lengths_mm = [6 values]``; the desired features are then predicted
-from the nominal model at the forward kinematics of those lengths, seen by the
-(estimated) camera. ``features = "goal.npz"`` (written by ``--teach``) gives the
-features measured at the goal instead, which a real camera needs (the model's
-prediction carries the calibration errors); ``--teach`` averages them over a burst of
-``--teach-frames`` frames of the still robot.
-
-SI units inside (metres, seconds); millimetres at the user's edges (goal file,
-status line, log).
+The goal file (TOML) holds the goal configuration taught on the robot,
+``lengths_mm = [6 values]``, and optionally ``features = "goal.npz"`` (written by
+``--teach``, averaged over ``--teach-frames`` frames of the still robot); without them
+the desired features are predicted from the nominal model (``docs/servo.md``). SI units
+inside; millimetres at the user's edges.
 """
 
 from __future__ import annotations

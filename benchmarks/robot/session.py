@@ -35,8 +35,6 @@ from hexapod.backends.base import HaltReport
 from hexapod.exceptions import BackendError, LinkError, ProtocolError, RobotFaultError
 from hexapod.geometry import HexapodGeometry
 
-__all__ = ["SessionInputs", "run_session", "session_limits"]
-
 #: Default ``--halt-timeout-s`` [s]: how long the shutdown waits for the robot to
 #: confirm its stop (longer than a 2 s stall of the link plus the time to detect it).
 DEFAULT_HALT_TIMEOUT_S = 3.0
@@ -236,13 +234,9 @@ def run_session(args: argparse.Namespace, inputs: SessionInputs, status: StatusL
         inputs: What was checked before anything is opened.
         status: The status line.
         on_pose: The viewer's hook (``--viz``), or None.
-        checks: Per-period safety checks (:class:`~benchmarks.robot.loop.PeriodCheck`:
-            called after each image with the measured lengths and the features; a
-            :class:`~benchmarks.robot.exits.SessionStop` they raise ends the session
-            through the shutdown with its code), after the signal check: the camera
-            check (:class:`~benchmarks.robot.consistency.CameraCheck`). A check with a
-            ``summary()`` method has its line printed after the session's summary and
-            written to the final record (``checks``).
+        checks: Per-period safety checks (:class:`~benchmarks.robot.loop.PeriodCheck`),
+            after the signal check: the camera check. A check with a ``summary()`` method
+            has its line printed after the session's summary and in the final record.
 
     Raises:
         OutputError: The record cannot be placed (``--out``, ``--log``), before anything

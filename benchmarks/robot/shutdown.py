@@ -20,8 +20,6 @@ import numpy as np
 
 from benchmarks.robot.exits import SessionStop, exit_for_signal
 
-__all__ = ["SESSION_SIGNALS", "SignalGuard", "signal_name"]
-
 #: The signals that end a session through its shutdown.
 SESSION_SIGNALS = (signal.SIGINT, signal.SIGTERM, signal.SIGHUP)
 
@@ -70,11 +68,7 @@ class SignalGuard:
 
     def __call__(self, step: int, lengths: np.ndarray, features: Any) -> None:
         """A per-period check (:class:`~benchmarks.robot.loop.PeriodCheck`): a pending
-        signal ends the session.
-
-        Raises:
-            SessionStop: A signal was received.
-        """
+        signal ends the session (:class:`SessionStop`)."""
         if self.pending is not None and not self.shutting_down:
             raise self._stop(self.pending)
 

@@ -15,8 +15,6 @@ import numpy as np
 from benchmarks.robot.exits import SessionStop
 from benchmarks.robot.records import mm_list
 
-__all__ = ["PLAIN_STATUS_PERIOD_S", "PeriodStatus", "ServoResult", "StatusLine"]
-
 #: Plain status lines (stdout not a terminal) are printed every this many seconds.
 PLAIN_STATUS_PERIOD_S = 1.0
 

@@ -63,14 +63,7 @@ def edge_batch(normals: np.ndarray, lines: np.ndarray | None, visible: np.ndarra
 class GeometricSensor:
     """Features from the true geometry plus the scenario's noise model, for rows each in
     its own world (one C call for the legs, edges and visibility of every row,
-    :func:`vision.fast_observe.observe_batch`).
-
-    Rotation noise perturbs each true edge normal; the perspective image lines
-    follow from the noisy normals through the TRUE camera, and the normals the
-    controller receives are recomputed from those lines with the ESTIMATED
-    intrinsics (so an intrinsics error reaches the controller as it would).
-    Pixel noise samples points along each visible edge, perturbs them and fits
-    the normal on the points lifted with the estimated camera.
+    :func:`vision.fast_observe.observe_batch`), with the noise of :func:`noisy_features`.
 
     Args:
         sc: The scenario (its noise).
@@ -184,8 +177,9 @@ def noisy_features(sc: SimScenario, normals: np.ndarray, visible: np.ndarray,
 
     Rotation noise perturbs each true edge normal; the perspective image lines follow
     from the noisy normals through the TRUE camera, and the normals the controller
-    receives are recomputed from those lines with the ESTIMATED intrinsics. Pixel noise
-    fits each normal on noisy edge points lifted with the estimated camera. Every row
+    receives are recomputed from those lines with the ESTIMATED intrinsics (so an
+    intrinsics error reaches the controller as it would). Pixel noise fits each normal
+    on noisy points along the visible edge, lifted with the estimated camera. Every row
     draws from its own generator, so a row's features do not depend on the others.
 
     Args:
@@ -269,17 +263,11 @@ def _average_frames(m: ObservationBatch, perspective_camera: Any | None,
 
 def trial_goal(sensor: GeometricSensor | Any, setup: TrialSetup, sc: SimScenario) -> Goal:
     """What the controllers are told about the goal of a trial, by the scenario's goal
-    setting (:mod:`benchmarks.sim.goal`).
-
-    Under ``"mixed"`` (the default) and ``"taught"`` the desired features are taught by
-    showing: the sensor measures the TRUE goal pose ``sc.teach_frames`` times (with the
-    scenario's noise when ``[noise] on_goal``; an image sensor renders and detects each
-    frame) and the normals are averaged (:func:`vision.estimate.average_normals`). Under
-    ``"mixed"`` the pose and its nominal inverse kinematics are for the encoder and pose
-    laws; under ``"taught"`` the encoders read at the goal and the model's pose of them
-    (:func:`benchmarks.sim.goal.taught_goal`). Under ``"cartesian"`` nothing is measured:
-    every field is predicted from the controller's model
-    (:func:`benchmarks.sim.goal.cartesian_goal`).
+    setting (:mod:`benchmarks.sim.goal`): under ``"mixed"`` and ``"taught"`` the sensor
+    measures the TRUE goal pose ``sc.teach_frames`` times (with the scenario's noise when
+    ``[noise] on_goal``) and the normals are averaged
+    (:func:`benchmarks.sim.goal.measured_goals`); under ``"cartesian"`` nothing is
+    measured (:func:`benchmarks.sim.goal.cartesian_goal`).
 
     Args:
         sensor: The trial's sensor (:func:`make_sensor`).
@@ -332,17 +320,12 @@ class _ImageSensorAdapter:
                      rng: np.random.Generator, frames: int = 1, apply_noise: bool = True
                      ) -> ObservationBatch:
         """``frames`` rendered images of the goal pose, their normals averaged: the first
-        frame detected from the model's prediction (alignment, then refine), the next ones
-        tracked from the previous frame, as the run will track them (and as ``servo
-        --teach`` does). Detecting every frame afresh left the taught edges about 0.1 px
-        from where tracking finds them at the same pose, an offset no pose can remove:
-        through a strong lens with a 1 % intrinsics error it held the edge law 0.2-0.4 mm
-        from the goal in 3 of 20 trials of andreff2006-images-distorted. A frame whose
-        edge is farther from the median of the frames than the detector's inlier
-        distance (``outlier_px``, turned into an angle by
-        :func:`vision.estimate.radians_per_pixel`) does not count for that edge: the
-        detector locked onto something else in that frame.
-
+        frame detected from the model's prediction, the next ones tracked from the
+        previous frame, as the run tracks them (and as ``servo --teach`` does: detecting
+        each frame afresh left the taught edges 0.1 px from where tracking finds them,
+        which held the edge law 0.2-0.4 mm from the goal in 3 of 20 trials of
+        andreff2006-images-distorted). A frame farther from the median than the
+        detector's inlier distance (``outlier_px``) does not count for that edge.
         ``rng`` and ``apply_noise`` are unused: the pixel noise is the renderer's.
         """
         from vision.estimate import radians_per_pixel
