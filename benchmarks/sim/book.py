@@ -36,6 +36,8 @@ SERIES_KEYS = ("t", "lengths", "rotations", "translations", "edge_visible", "err
                "position_error", "orientation_error", "velocities")
 #: The series whose values are arrays of the loop's (copied when recorded).
 COPIED = ("lengths", "rotations", "translations", "edge_visible", "velocities")
+#: A live view's callback ``(trial, rotation, translation, edge_visible)``.
+OnStep = Callable[[int, np.ndarray, np.ndarray, np.ndarray], None]
 
 
 @dataclass
@@ -58,14 +60,13 @@ class Book:
         targets: ``(step, rows) -> (R, t)``: the pose each row is measured against.
         actuation: What the controller declared it commands.
         label: The controller's label.
-        on_step: A live view's callback ``(trial, rotation, translation, edge_visible)``.
+        on_step: A live view's callback (:data:`OnStep`).
     """
 
     def __init__(self, sc: SimScenario, group: list[TrialSetup], record_trials: int,
                  plant: Any, targets: Callable[[int, np.ndarray], tuple[np.ndarray, np.ndarray]],
                  actuation: Actuation, label: str,
-                 on_step: Callable[[int, np.ndarray, np.ndarray, np.ndarray], None] | None
-                 ) -> None:
+                 on_step: OnStep | None) -> None:
         from benchmarks.sim.tracking import tracker_for
 
         n = self.n = len(group)

@@ -1,22 +1,11 @@
 """The plant seam: the robot between two control periods, for the one closed loop
-(:func:`benchmarks.sim.loop.closed_loop`).
-
-A plant owns nothing of the controller: it receives the commands of the rows that still
-run and moves the state (leg lengths ``q``, platform pose ``R``, ``t``) over one control
-period.
-
-- :class:`KinematicPlant` (``[robot] world = "kinematic"``, the default): today's world,
-  massless and ideal. The command is clamped to the stroke and speed limits and
-  integrated exactly over the period; the new pose is the forward kinematics of the true
-  robot, warm-started at the previous pose.
-- :class:`~benchmarks.sim.dynamic_plant.DynamicPlant` (``world = "dynamic"``): the true
-  robot's dynamics and drives integrated at ``physics_dt`` (its own module).
-- :class:`BackendPlant`: robots behind backends (a real robot over its link, an emulator,
-  a backend plugin), one per row; each applies its row's command and paces the period,
-  the poses follow from the lengths they measure (a study's ``--backend``, and the servo
-  session's robot, a batch of one).
-
-The plants change the caller's arrays ``q``, ``R`` and ``t`` in place (rows ``run``).
+(:func:`benchmarks.sim.loop.closed_loop`). A plant owns nothing of the controller: it
+moves the state of the rows that still run (leg lengths ``q``, platform pose ``R``,
+``t``: the caller's arrays, changed in place) over one control period with their
+commands. :class:`KinematicPlant` (``[robot] world = "kinematic"``, the default) is the
+massless ideal robot, :class:`~benchmarks.sim.dynamic_plant.DynamicPlant` the true
+robot's dynamics and drives, :class:`BackendPlant` robots behind backends (a study's
+``--backend``, the servo session's robot).
 """
 
 from __future__ import annotations

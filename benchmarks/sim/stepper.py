@@ -21,13 +21,14 @@ from __future__ import annotations
 
 import logging
 from collections.abc import Callable
+from dataclasses import dataclass
 from typing import Any, TypeVar
 
 import numpy as np
 
 from benchmarks.exceptions import BatchFailedError, ScenarioError
 from benchmarks.sim.actuation import world_actuation
-from benchmarks.sim.book import Book, TrialResult, failure_row
+from benchmarks.sim.book import Book, OnStep, TrialResult, failure_row
 from benchmarks.sim.clock import make_clock
 from benchmarks.sim.goal import (
     AnchoredReference,
@@ -47,8 +48,8 @@ from benchmarks.sim.sensors import (
     trial_goal,
 )
 from benchmarks.sim.world import (
+    Calibrate,
     TrialSetup,
-    World,
     load_camera,
     load_geometry,
     make_trials,
@@ -68,6 +69,8 @@ ENGINES = ("batched", "per-trial")
 
 #: The scenario type a caller passes (its sensor factory receives it).
 S = TypeVar("S", bound=SimScenario)
+#: Builds the backend of a trial from its true geometry and start lengths [m].
+BackendFactory = Callable[[HexapodGeometry, np.ndarray], Backend]
 
 
 def run_trials(
@@ -75,22 +78,15 @@ def run_trials(
     controller_index: int,
     trials: list[int],
     record_trials: int = 0,
-    backend_factory: Callable[[HexapodGeometry, np.ndarray], Backend] | None = None,
-    calibrate: Callable[[World, np.random.Generator], tuple[np.ndarray, dict[str, float]]]
-    | None = None,
-    on_step: Callable[[int, np.ndarray, np.ndarray, np.ndarray], None] | None = None,
+    backend_factory: BackendFactory | None = None,
+    calibrate: Calibrate | None = None,
+    on_step: OnStep | None = None,
     sensor_factory: Callable[[S, TrialSetup], Any] | None = None,
     engine: str = "batched",
 ) -> list[TrialResult]:
-    """Run trials of one scenario point with one controller.
-
-    Every group of trials runs through :func:`benchmarks.sim.loop.closed_loop`. With the
-    geometric sensor and the simulated backend, the ``batched`` engine steps every trial
-    as one batch (the controller's ``step_batch``). Otherwise, or with
-    ``engine="per-trial"``, trials whose world is the nominal one are stepped together
-    with one controller object per trial, the others one by one (see the module
-    docstring). A crash in a trial is recorded as its failure. Both engines give the
-    same rows.
+    """Run trials of one scenario point with one controller, in groups by engine (the
+    module docstring); a crash in a trial is recorded as its failure. Both engines give
+    the same rows.
 
     Args:
         sc: An expanded scenario (one sweep point).
@@ -100,7 +96,7 @@ def run_trials(
         backend_factory: Builds a backend for a trial from the true geometry and
             start lengths (default: exact integration of the clamped command).
         calibrate: Optional calibration run per trial (returns estimated base points).
-        on_step: Callback ``(trial, rotation, translation, edge_visible)`` for a live view.
+        on_step: A live view's callback (:data:`benchmarks.sim.book.OnStep`).
         sensor_factory: Builds the sensor of a group of trials from the scenario and its
             first trial (default :func:`make_sensor`; studies swap sensors with it). The
             sensor has ``measure`` and ``measure_goal`` like :class:`GeometricSensor`.
@@ -133,29 +129,25 @@ def run_trials(
     else:
         shared = [s for s in setups if s.shared and backend_factory is None]
         groups = ([shared] if shared else []) + [[s] for s in setups if s not in shared]
-    unit = _Unit(sc, controller_index, record_trials, batched, backend_factory, on_step,
-                 sensor_factory)
+    unit = _Unit(sc, spec, record_trials, batched, backend_factory, on_step,
+                 sensor_factory or make_sensor)
     for group in groups:
         for res in unit.isolated(group):
             results[res.row["trial"]] = res
     return [results[k] for k in trials]
 
 
+@dataclass
 class _Unit:
     """How the groups of a work unit run (the arguments of :func:`run_trials`)."""
 
-    def __init__(self, sc: SimScenario, controller_index: int, record_trials: int,
-                 batched: bool,
-                 backend_factory: Callable[[HexapodGeometry, np.ndarray], Backend] | None,
-                 on_step: Callable[[int, np.ndarray, np.ndarray, np.ndarray], None] | None,
-                 sensor_factory: Callable[[Any, TrialSetup], Any] | None) -> None:
-        self.sc = sc
-        self.spec = sc.controllers[controller_index]
-        self.record_trials = record_trials
-        self.batched = batched
-        self.backend_factory = backend_factory
-        self.on_step = on_step
-        self.sensor_factory = sensor_factory or make_sensor
+    sc: SimScenario
+    spec: Any
+    record_trials: int
+    batched: bool
+    backend_factory: BackendFactory | None
+    on_step: OnStep | None
+    sensor_factory: Callable[[Any, TrialSetup], Any]
 
     def isolated(self, group: list[TrialSetup]) -> list[TrialResult]:
         """The results of a group; when it fails before its first step (a reset, a

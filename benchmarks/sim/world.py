@@ -114,10 +114,13 @@ def _perturb_camera(camera: Camera, z_rot: np.ndarray, z_pos: np.ndarray, z_k: n
     return camera.replace(K=K, camera_from_base=new_T)
 
 
+#: A calibration run per trial: ``(world, rng) -> (estimated base points (6, 3) [m],
+#: summary)``.
+Calibrate = Callable[[World, np.random.Generator], tuple[np.ndarray, dict[str, float]]]
+
+
 def make_trial(sc: SimScenario, trial: int, nominal: HexapodGeometry, camera: Camera,
-               calibrate: Callable[[World, np.random.Generator], tuple[np.ndarray,
-                                                                       dict[str, float]]]
-               | None = None) -> TrialSetup:
+               calibrate: Calibrate | None = None) -> TrialSetup:
     """Draw the truth, start and goal of one trial from ``(seed, trial)``.
 
     The standard-normal draws are made in a fixed order whatever the scenario's
@@ -130,9 +133,7 @@ def make_trial(sc: SimScenario, trial: int, nominal: HexapodGeometry, camera: Ca
 
 
 def make_trials(sc: SimScenario, trials: list[int], nominal: HexapodGeometry, camera: Camera,
-                calibrate: Callable[[World, np.random.Generator], tuple[np.ndarray,
-                                                                        dict[str, float]]]
-                | None = None) -> list[TrialSetup | Exception]:
+                calibrate: Calibrate | None = None) -> list[TrialSetup | Exception]:
     """:func:`make_trial` for many trials: the same setups, to the last bit, the random
     poses of all of them drawn in one batch (:func:`hexapod.workspace.sample_poses_many`).
 
