@@ -1,30 +1,18 @@
-"""The camera's clock: frames at their own rate, delivered after a latency, with
-timestamp jitter; the encoders are read at every control period.
+"""The camera's clock (``[clock]``, ``docs/scenarios.md``, "The camera's clock"): frames at
+their own rate, delivered after a latency, with timestamp jitter; the encoders are read
+at every control period.
 
-Frame ``k`` is captured at ``c_k = k / frame_rate + j_k`` (``j_k`` the jitter: normal
-with standard deviation ``jitter_ms``, clipped to +-0.45 frame so that frames stay in
-order, drawn from the trial's stream 5) and reaches the controller at ``c_k + latency``
-(``latency_ms / 1000 + latency_frames / frame_rate``). At the control instant
-``tau = step dt`` the controller gets the newest frame delivered by then, with its
-capture time as the observation's ``image_t``; the same frame is given again until the
-next one arrives. The camera runs before the task starts: frames captured before 0 see
-the robot at rest at its start pose.
-
-The image shows the true robot at ``c_k``. In the kinematic world the legs move at a
-constant (clamped) speed within a period, so the true lengths at ``c_k`` are the linear
-interpolation of the two control instants around it, exactly, and the pose is the
-forward kinematics of the true robot, warm-started at the earlier instant (a frame
-captured on a control instant takes that instant's pose, bit for bit).
-
-With an exposure time ``T`` (``exposure_ms``, rendered images only) frame ``k`` is
-exposed over ``[c_k - T, c_k]``: the sensor gets the true poses at the midpoints of
-``exposure_samples`` equal slices of it and averages their images
-(:func:`vision.exposure.render_exposed`), and ``image_t`` is ``c_k - T / 2``, the middle
-of the exposure. The frame is still delivered at ``c_k + latency``.
-
-Without a ``[clock]`` table (or with ``frame_rate_hz = 0`` and no latency or jitter)
-the camera is triggered at every control instant and its image arrives at once: the
-measurement is exactly the one the engines made before the clock existed.
+Frame ``k`` is captured at ``c_k = k / frame_rate + j_k`` (the jitter ``j_k``: normal,
+``jitter_ms``, clipped to +-0.45 frame so that frames stay in order, drawn from the
+trial's stream 5) and delivered at ``c_k + latency``; at ``tau = step dt`` the controller
+gets the newest frame delivered (again until the next), its capture time as ``image_t``.
+The image shows the true robot at ``c_k``: the true lengths interpolated between the two
+control instants around it (exact in the kinematic world) and their forward kinematics,
+warm-started at the earlier instant (a frame on a control instant takes that instant's
+pose, bit for bit); frames before 0 see the start pose. With an exposure ``T`` the
+sensor gets the poses at the midpoints of ``exposure_samples`` slices of
+``[c_k - T, c_k]`` and ``image_t`` is ``c_k - T / 2``. Without a clock (or a camera at
+the control rate without latency) the measurement is the one the engines make without.
 """
 
 from __future__ import annotations

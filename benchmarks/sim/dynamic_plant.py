@@ -1,24 +1,14 @@
-"""The dynamic world: the TRUE robot's mechanism, drives and encoders between control periods.
+"""The dynamic world: the TRUE robot's mechanism, drives and encoders between control periods
+(``[robot] world = "dynamic"``, ``docs/dynamic-world.md``).
 
-``[robot] world = "dynamic"`` (``docs/dynamic-world.md``). Every trial's true robot (its own
-geometry, inertia and drives, :mod:`benchmarks.sim.world`) is integrated over a control
-period ``dt`` in ``dt / physics_dt`` steps by :class:`hexapod.dynamics.robots.DynamicRobots`
-(linearly implicit Euler in the twist, semi-implicit Euler on SE(3) for the pose; the
-legs follow). In velocity mode the drives' setpoints are the controller's leg velocities
-clamped to the stroke and speed limits as the kinematic world clamps them; in force mode
-they are leg forces.
-
-A trial starts at rest, its drives holding the platform against gravity. Its world fails
-when, at the end of a period, a leg is beyond its stroke by more than :data:`END_STOP` (it
-hit an end stop) or the state is not finite.
-
-The controller sees the encoders: true lengths plus the joint offsets, quantised to the
-encoder resolution. The plant gives each trial's result row its largest drive force, the
-time any drive spent at its force limit and the drive tracking error (velocity setpoint
-minus realised leg velocity), and its recorded series the drives' forces. A scenario with
-a ``[payload]`` also gets each leg's time at its force limit (s and fraction of the time
-run) and the fraction of the time run that any leg spent there (:data:`SATURATION_COLUMNS`;
-the rows of the other scenarios are unchanged).
+Every trial's true robot is integrated over a control period in ``dt / physics_dt``
+steps by :class:`hexapod.dynamics.robots.DynamicRobots`, from rest with its drives
+holding the platform against gravity; the drives' setpoints are the controller's leg
+velocities clamped as the kinematic world clamps them, or leg forces in force mode. A
+trial's world fails when a leg ends a period beyond its stroke by more than
+:data:`END_STOP` (an end stop) or the state is not finite. The controller sees the
+encoders (true lengths plus the joint offsets, quantised to the encoder resolution); the
+rows get the drive figures (:meth:`DynamicPlant.row_figures`), the series the forces.
 """
 
 from __future__ import annotations

@@ -1,26 +1,15 @@
 """What the controllers are told about a trial's goal: the scenario's goal setting
-(``[task] goal``, ``docs/scenarios.md`` "Fairness").
+(``[task] goal``, ``docs/scenarios.md``, "Fairness"), stated in the rows (``goal``).
 
-Three settings, each stated in the rows (``goal`` column) and the run's settings:
-
-- ``"mixed"`` (the default, the legacy setting every table before issue 36 used): the
-  vision laws get the features measured at the TRUE goal (taught by showing, with the
-  scenario's noise when ``[noise] on_goal``, averaged over ``teach_frames``); the encoder
-  and pose laws get the goal pose and its NOMINAL inverse kinematics. The two families
-  do not get the same information: a taught image is relative positioning, a nominal
-  inverse kinematics absolute positioning through the model's error.
-- ``"taught"``: the robot is brought to the goal and every sensor is recorded there: the
-  images (as in ``mixed``) and the encoders (the true lengths at the true goal plus the
-  joint offsets, quantised to the encoder resolution in the dynamic world; the encoders
-  of the simulation have no noise, so averaging ``teach_frames`` readings of a still
-  robot gives one reading). The pose laws get the pose their model computes from the
-  taught lengths (forward kinematics of the controller's model). A trajectory task's
-  reference is moved to end at that pose, its displacements kept
-  (:class:`AnchoredReference`).
-- ``"cartesian"``: the goal is a pose in the base frame; every family predicts its goal
-  from its model: the features of that pose seen by the estimated camera with the
-  controller's base points (as ``hexapod-bench servo`` predicts them from a goal file
-  without taught features), the lengths by the model's inverse kinematics.
+- ``"mixed"`` (the default): the vision laws get the features measured at the TRUE goal
+  (taught by showing, averaged over ``teach_frames``), the encoder and pose laws the
+  goal pose and its NOMINAL inverse kinematics;
+- ``"taught"``: the images and the encoders recorded at the true goal (the true lengths
+  plus the joint offsets, quantised in the dynamic world); the pose laws get the pose
+  their model computes from the taught lengths, and a trajectory's reference is moved to
+  end there (:class:`AnchoredReference`);
+- ``"cartesian"``: a pose in the base frame; every family predicts its goal from its
+  model (the features through the estimated camera, the lengths by inverse kinematics).
 """
 
 from __future__ import annotations
