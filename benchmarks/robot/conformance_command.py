@@ -1,15 +1,9 @@
 """``hexapod-bench conformance BACKEND_SPEC``: the backend conformance check
-(:func:`hexapod.backends.conformance.check_backend`) from the command line.
-
-It drives the backend and the exact simulator with the same commands and prints the
-figures of :class:`~hexapod.backends.conformance.ConformanceReport`: the periods driven,
-the largest deviation of the measured lengths from the simulator's over the smooth
-motion (against the tolerance), and one line per failed check. Exit 0 when every check
-passes, 1 when one fails, 2 for a bad spec or option.
-
-The check moves the legs through their whole stroke, at ten times the speed limit
-(which the backend must clamp): on real hardware (a backend the registry does not mark
-as simulated) it runs only with ``--move-real-robot``.
+(:func:`hexapod.backends.conformance.check_backend`) from the command line: the backend
+and the exact simulator driven with the same commands, the figures of
+:class:`~hexapod.backends.conformance.ConformanceReport` printed. It drives the legs
+through their whole stroke at ten times the speed limit: on real hardware only with
+``--move-real-robot``.
 """
 
 from __future__ import annotations

@@ -64,10 +64,6 @@ class SessionStop(Exception):  # noqa: N818 (a stop request, not an error)
     Args:
         code: The exit code the session ends with.
         reason: What happened, in words (printed and written to the final record).
-
-    Attributes:
-        code: The exit code the session ends with.
-        reason: What happened, in words.
     """
 
     code: ServoExit

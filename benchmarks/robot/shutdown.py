@@ -1,11 +1,5 @@
-"""The signals of a servo session: SIGINT, SIGTERM and SIGHUP all end in its one shutdown.
-
-:class:`SignalGuard` installs its handlers for the session's duration (the previous ones
-are restored after). Outside the loop (connecting, the ``--confirm`` question) a signal
-stops the session at once; inside the loop the first signal is taken at the next period
-(no exchange with the robot is cut in the middle) and a second one at once. During the
-shutdown (halt, confirmation, final record) signals are only noted: a second Ctrl-C or a
-``kill`` never skips the halt.
+"""The signals of a servo session: SIGINT, SIGTERM and SIGHUP all end in its one shutdown
+(:class:`SignalGuard`).
 """
 
 from __future__ import annotations
@@ -31,7 +25,10 @@ def signal_name(signum: int) -> str:
 
 class SignalGuard:
     """SIGINT, SIGTERM and SIGHUP turned into a :class:`SessionStop` with their exit code
-    (130, 143, 129), for the duration of a ``with`` block.
+    (130, 143, 129), for the duration of a ``with`` block (the previous handlers are
+    restored after). Outside the loop a signal stops the session at once; inside it the
+    first signal is taken at the next period (no exchange with the robot is cut) and a
+    second one at once; during the shutdown signals are only noted (never skip the halt).
 
     Args:
         say: Shows a line to the user (during the shutdown).
