@@ -136,16 +136,20 @@ def load_session(path: str | Path, geometry_spec: str | None = None,
     n = len(rows)
     q = np.array([r["lengths_mm"] for r in rows], float) * 1e-3
     R, t = np.zeros((n, 3, 3)), np.zeros((n, 3))
+
+    def pose(lengths: np.ndarray, where: str, what: str, guess: Any = None) -> Any:
+        try:
+            sol = forward_kinematics(geometry, lengths, guess=guess, check_stroke=False)
+        except ForwardKinematicsError as exc:
+            raise BenchmarkError(f"{p}{where}: no platform pose for the {what} mm of "
+                                 f"--geometry {geometry_spec}: {exc}") from None
+        return sol.rotation, sol.translation
+
     guess = None
     for k in range(n):
-        try:
-            sol = forward_kinematics(geometry, q[k], guess=guess, check_stroke=False)
-        except ForwardKinematicsError as exc:
-            raise BenchmarkError(f"{p}, period {rows[k]['step']}: no platform pose for the "
-                                 f"lengths {rows[k]['lengths_mm']} mm of --geometry "
-                                 f"{geometry_spec}: {exc}") from None
-        R[k], t[k] = sol.rotation, sol.translation
-        guess = (sol.rotation, sol.translation)
+        guess = pose(q[k], f", period {rows[k]['step']}", f"lengths {rows[k]['lengths_mm']}",
+                     guess)
+        R[k], t[k] = guess
     goal_q = None
     if goal_file is not None:
         goal_q = load_goal(goal_file, geometry).lengths
@@ -155,13 +159,7 @@ def load_session(path: str | Path, geometry_spec: str | None = None,
             raise BenchmarkError(f"{p}, line 1: goal_lengths_mm must be 6 finite numbers "
                                  f"[mm], got {header['goal_lengths_mm']!r}")
     if goal_q is not None:
-        try:
-            goal = forward_kinematics(geometry, goal_q, check_stroke=False)
-        except ForwardKinematicsError as exc:
-            raise BenchmarkError(f"{p}: no platform pose for the goal lengths "
-                                 f"{np.round(goal_q * 1e3, 3).tolist()} mm of --geometry "
-                                 f"{geometry_spec}: {exc}") from None
-        Rg, tg = goal.rotation, goal.translation
+        Rg, tg = pose(goal_q, "", f"goal lengths {np.round(goal_q * 1e3, 3).tolist()}")
     else:
         Rg, tg = R[-1], t[-1]
     vis = np.ones((n, 6, 2), bool)

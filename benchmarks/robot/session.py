@@ -291,18 +291,13 @@ def run_session(args: argparse.Namespace, inputs: SessionInputs, status: StatusL
                 code, reason = sig, f"{signal_name(guard.pending)} received (then {reason})"
         else:
             code, reason = _outcome(result, args)
-        halt: HaltReport | None = None
-        if robot is not None:
-            halt = _halt(robot, args.halt_timeout_s)
-            try:
-                robot.close()
-            except Exception as exc:
-                reason += f"; closing the robot failed: {exc}"
-        if sensor is not None:
-            try:
-                sensor.close()
-            except Exception as exc:
-                reason += f"; closing the camera failed: {exc}"
+        halt = None if robot is None else _halt(robot, args.halt_timeout_s)
+        for what, opened in (("robot", robot), ("camera", sensor)):
+            if opened is not None:
+                try:
+                    opened.close()
+                except Exception as exc:
+                    reason += f"; closing the {what} failed: {exc}"
         failed = ended is not None and not isinstance(ended, SessionStop)
         log.final({"exit_code": int(code), "exit": code.name.lower(), "reason": reason,
                    "exception": f"{type(ended).__name__}: {ended}" if failed else None,
