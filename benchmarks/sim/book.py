@@ -69,7 +69,7 @@ class Book:
                  on_step: OnStep | None) -> None:
         from benchmarks.sim.tracking import tracker_for
 
-        n = self.n = len(group)
+        n = len(group)
         task = self.task = sc.task
         self.pos_tol = 1e-3 * task.position_tolerance_mm
         self.ori_tol = float(np.deg2rad(task.orientation_tolerance_deg))

@@ -18,7 +18,7 @@ from typing import Any
 
 import numpy as np
 
-from benchmarks.sim.world import TrialSetup
+from benchmarks.sim.world import TrialSetup, inverse_kinematics_by_robot
 from controllers.base import Goal, ObservationBatch
 from hexapod.geometry import HexapodGeometry
 from hexapod.kinematics import inverse_kinematics
@@ -139,24 +139,11 @@ def measured_goals(m: ObservationBatch, setups: list[TrialSetup], sc: Any) -> li
         raise ValueError("task.goal: a cartesian goal is predicted, not measured")
     if setting == "taught":
         return [taught_goal(m, s, sc, k) for k, s in enumerate(setups)]
-    lengths = nominal_lengths(setups)
+    lengths = inverse_kinematics_by_robot([s.nominal_geometry for s in setups],
+                                          np.array([s.goal_rotation for s in setups]),
+                                          np.array([s.goal_translation for s in setups]))
     return [Goal(lengths=lengths[k], rotation=s.goal_rotation, translation=s.goal_translation,
                  **_row_features(m, k)) for k, s in enumerate(setups)]
-
-
-def nominal_lengths(setups: list[TrialSetup]) -> np.ndarray:
-    """(n, 6) the inverse kinematics of the trials' goal poses in their nominal models
-    [m], one call per model (the arithmetic is elementwise: the bits of one call per
-    trial)."""
-    out = np.empty((len(setups), 6))
-    groups: dict[int, list[int]] = {}
-    for k, s in enumerate(setups):
-        groups.setdefault(id(s.nominal_geometry), []).append(k)
-    for ks in groups.values():
-        out[ks] = inverse_kinematics(setups[ks[0]].nominal_geometry,
-                                     np.array([setups[k].goal_rotation for k in ks]),
-                                     np.array([setups[k].goal_translation for k in ks]))
-    return out
 
 
 def _row_features(m: ObservationBatch, row: int) -> dict[str, Any]:

@@ -226,17 +226,24 @@ def _loaded(drawn: list[Any], payload: Payload) -> list[Any]:
 
 
 def _start_lengths(drawn: list[Any], poses: dict[int, Any]) -> dict[int, np.ndarray]:
-    """The true start leg lengths of the trials with random poses, one batch per robot
-    (the same bits as one call per trial: the arithmetic is elementwise)."""
+    """The true start leg lengths of the trials with random poses."""
+    ks = [k for k, pose in poses.items() if not isinstance(pose, Exception)]
+    q = inverse_kinematics_by_robot([drawn[k][1].geometry for k in ks],
+                                    np.array([poses[k][0][0] for k in ks]),
+                                    np.array([poses[k][1][0] for k in ks]))
+    return dict(zip(ks, q, strict=True))
+
+
+def inverse_kinematics_by_robot(geometries: list[HexapodGeometry], rotations: np.ndarray,
+                                translations: np.ndarray) -> np.ndarray:
+    """(n, 6) the leg lengths [m] of poses (n, 3, 3), (n, 3) [m] each in its robot, one
+    call per robot (the arithmetic is elementwise: the bits of one call per pose)."""
+    out = np.empty((len(geometries), 6))
     groups: dict[int, list[int]] = {}
-    for k, pose in poses.items():
-        if not isinstance(pose, Exception):
-            groups.setdefault(id(drawn[k][1].geometry), []).append(k)
-    out: dict[int, np.ndarray] = {}
+    for k, g in enumerate(geometries):
+        groups.setdefault(id(g), []).append(k)
     for ks in groups.values():
-        q = inverse_kinematics(drawn[ks[0]][1].geometry, np.array([poses[k][0][0] for k in ks]),
-                               np.array([poses[k][1][0] for k in ks]))
-        out.update(zip(ks, q, strict=True))
+        out[ks] = inverse_kinematics(geometries[ks[0]], rotations[ks], translations[ks])
     return out
 
 

@@ -335,7 +335,7 @@ def test_the_batched_goals_are_the_sensors_goals_to_the_bit(
     bit, each trial in its own world with noise on the goal image (the batch itself:
     the trial-by-trial fallback raises)."""
     from benchmarks.sim import stepper
-    from benchmarks.sim.goal import nominal_lengths
+    from benchmarks.sim.world import inverse_kinematics_by_robot
 
     def no_fallback(*args: Any) -> Any:
         raise AssertionError("the batched goals fell back to one trial at a time")
@@ -359,7 +359,9 @@ def test_the_batched_goals_are_the_sensors_goals_to_the_bit(
                 np.testing.assert_array_equal(x, y, err_msg=f"trial {k} {f}")
     one_by_one = np.array([inverse_kinematics(s.nominal_geometry, s.goal_rotation,
                                               s.goal_translation) for s in setups])
-    np.testing.assert_array_equal(nominal_lengths(setups), one_by_one)
+    np.testing.assert_array_equal(inverse_kinematics_by_robot(
+        [s.nominal_geometry for s in setups], np.array([s.goal_rotation for s in setups]),
+        np.array([s.goal_translation for s in setups])), one_by_one)
 
 
 def test_a_cartesian_goal_is_not_measured() -> None:
