@@ -118,7 +118,6 @@ class SessionLog:
     def __init__(self, path: Path) -> None:
         self.path = Path(path)
         self._f: IO[str] | None = None
-        self.periods = 0
         self.finished = False
 
     def open(self, header: dict[str, Any]) -> SessionLog:
@@ -132,26 +131,22 @@ class SessionLog:
             self._f = self.path.open("w", encoding="utf-8")
         except OSError as exc:
             raise OutputError(str(self.path), f"cannot be written: {exc}") from None
-        self._write({"servo_session": FORMAT, **header})
+        self.write({"servo_session": FORMAT, **header})
         return self
 
-    def _write(self, record: dict[str, Any]) -> None:
+    def write(self, record: dict[str, Any]) -> None:
+        """One line (a period's), flushed."""
         if self._f is None:
             return
         self._f.write(json.dumps(_clean(record)) + "\n")
         self._f.flush()  # readable live (tail -f), and complete after a crash
-
-    def period(self, record: dict[str, Any]) -> None:
-        """One period's line."""
-        self.periods += 1
-        self._write(record)
 
     def final(self, record: dict[str, Any]) -> None:
         """The final record, then close (idempotent)."""
         if self.finished:
             return
         self.finished = True
-        self._write({"final": True, **record})
+        self.write({"final": True, **record})
         if self._f is not None:
             self._f.close()
             self._f = None

@@ -109,8 +109,7 @@ def load_session(path: str | Path, geometry_spec: str | None = None,
             to the last period's pose).
 
     Returns:
-        The record (``scenario`` = ``servo session`` and the log's name, ``controller`` =
-        the header's controller, else ``servo``).
+        The record (``scenario``: ``servo session`` and the log's name).
 
     Raises:
         BenchmarkError: A line that is not JSON, a period without six finite lengths, no

@@ -356,7 +356,7 @@ def log_period(log: SessionLog, status: StatusLine) -> Any:
     """The loop's ``on_period``: the status line and the log line."""
     def on_period(s: PeriodStatus) -> None:
         status(s)
-        log.period(s.to_json())
+        log.write(s.to_json())
 
     return on_period
 

@@ -67,7 +67,7 @@ class Book:
                  plant: Any, targets: Callable[[int, np.ndarray], tuple[np.ndarray, np.ndarray]],
                  actuation: Actuation, label: str,
                  on_step: OnStep | None) -> None:
-        from benchmarks.sim.tracking import tracker_for
+        from benchmarks.sim.tracking import Tracker
 
         n = len(group)
         task = self.task = sc.task
@@ -94,7 +94,8 @@ class Book:
         self.tail_seen = np.zeros((n, tail), dtype=bool)
         self.series: list[dict[str, list[Any]]] = [
             {k: [] for k in SERIES_KEYS} if rec else {} for rec in self.recording]
-        self.tracker = tracker_for(sc, group, self.pos_tol, self.ori_tol)
+        self.tracker = (Tracker(sc, group, self.pos_tol, self.ori_tol)
+                        if task.kind == "trajectory" else None)  # a trajectory's metrics
         self.dt = sc.dt
         g = group[0].world.geometry
         self.stroke, self.max_speed = g.stroke, g.max_speed  # the true legs' limits [m, m/s]

@@ -173,22 +173,3 @@ class CameraClock:
             t[j[ok]] = sol.translations[ok]
         return R, t
 
-
-def make_clock(sc: SimScenario, group: list[TrialSetup], q: np.ndarray, R: np.ndarray,
-               t: np.ndarray, base_points: np.ndarray, platform_points: np.ndarray
-               ) -> CameraClock | None:
-    """The camera clock of a group of trials, or None when the camera has none."""
-    if not clock_active(sc):
-        return None
-    return CameraClock(sc, group, q, R, t, base_points, platform_points)
-
-
-def clocked_measure(clock: CameraClock | None, step: int, idx: np.ndarray,
-                    state: tuple[np.ndarray, np.ndarray], measure: Measure
-                    ) -> ObservationBatch:
-    """The camera's batch of the rows ``idx`` at control step ``step``: the sensor at the
-    rows' current poses without a clock (``image_t`` None), else through
-    :meth:`CameraClock.measure`."""
-    if clock is None:
-        return measure(idx, state[0][idx], state[1][idx])
-    return clock.measure(step, idx, measure)

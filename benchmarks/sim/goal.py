@@ -190,11 +190,6 @@ class AnchoredReference:
         #: ``t_goal - t_end`` [m], added to every position.
         self.translation_offset = np.asarray(translation, float) - end.translation[0]
 
-    @property
-    def duration(self) -> float:
-        """The reference's duration [s]."""
-        return float(self.reference.duration)
-
     def at(self, t: float | np.ndarray) -> ReferenceSample:
         """The moved reference at times ``t`` [s]."""
         s = self.reference.at(t)

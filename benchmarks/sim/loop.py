@@ -30,7 +30,7 @@ from typing import Any, Protocol
 
 import numpy as np
 
-from benchmarks.sim.clock import CameraClock, clocked_measure
+from benchmarks.sim.clock import CameraClock
 from controllers.base import CommandBatch, ObservationBatch
 
 
@@ -106,7 +106,8 @@ def closed_loop(plant: Any, sensor: Any, clock: CameraClock | None, controller: 
             break
         begun = step + 1
         done = book.check(step, idx)
-        obs = clocked_measure(clock, step, idx, (plant.R, plant.t), sensor.observe)
+        obs = (sensor.observe(idx, plant.R[idx], plant.t[idx]) if clock is None
+               else clock.measure(step, idx, sensor.observe))
         seen = book.observed(step, idx, obs)
         done |= ~book.active[idx]
         values = np.zeros((len(idx), 6))

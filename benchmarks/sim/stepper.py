@@ -1,20 +1,13 @@
-"""Closed-loop trials: true world -> sensor -> controller -> plant -> true world.
-
-One trial (``docs/architecture.md``, the loop; :mod:`benchmarks.sim.loop`, the one closed
-loop): the true world (true geometry, true camera, true pose) produces observations through
-:mod:`vision` (geometric features + noise, or rendered images + detection); the
-controller, built from the ESTIMATED parameters, returns leg commands; the plant
-(kinematic, dynamic, or a robot behind a backend) applies them for ``dt``. Every work unit
-runs through the one loop, :func:`benchmarks.sim.loop.closed_loop`.
+"""Closed-loop trials: a work unit (one scenario point, one controller, some trials) run
+through the one closed loop (:func:`benchmarks.sim.loop.closed_loop`).
 
 With the geometric sensor and the simulated robot, the ``batched`` engine steps every
-trial of the unit as one batch, whatever their worlds (a calibration error gives each
-trial its own robot and camera), through the controller's ``step_batch``. Otherwise, or
-with ``engine="per-trial"``, the trials whose world is the nominal one are stepped
-together through one controller object per trial, each a batch of one
-(:class:`controllers.batch.ForeignController`), and one sensor of their world, the others
-one by one. Each trial has its own random streams seeded from ``(scenario seed, trial
-index)``, so a trial's result does not depend on which other trials run beside it.
+trial of the unit as one batch, whatever their worlds, through the controller's
+``step_batch``. Otherwise, or with ``engine="per-trial"``, the trials whose world is the
+nominal one are stepped together through one controller object per trial, each a batch
+of one (:class:`controllers.batch.ForeignController`), the others one by one. Each trial
+has its own random streams seeded from ``(scenario seed, trial index)``, so its result
+does not depend on which other trials run beside it.
 """
 
 from __future__ import annotations
@@ -29,7 +22,7 @@ import numpy as np
 from benchmarks.exceptions import BatchFailedError, ScenarioError
 from benchmarks.sim.actuation import world_actuation
 from benchmarks.sim.book import Book, OnStep, TrialResult, failure_row
-from benchmarks.sim.clock import make_clock
+from benchmarks.sim.clock import CameraClock, clock_active
 from benchmarks.sim.goal import (
     AnchoredReference,
     cartesian_goal,
@@ -228,8 +221,9 @@ class _Unit:
             plant.use_actuation(actuation, spec.label)
             book = Book(sc, group, self.record_trials, plant, Targets(sc, group), actuation,
                         spec.label, self.on_step)
-            closed_loop(plant, sensor, make_clock(sc, group, q, R, t, A, E), controller,
-                        book, sc.dt, offsets, sc.task.max_steps)
+            clock = CameraClock(sc, group, q, R, t, A, E) if clock_active(sc) else None
+            closed_loop(plant, sensor, clock, controller, book, sc.dt, offsets,
+                        sc.task.max_steps)
         finally:
             _close_all(opened)
         return book.results(sc, spec, group, R, t, sensor.detect_times, plant.row_figures)

@@ -116,10 +116,3 @@ class Tracker:
             "settling_time_s": settle,
         }
 
-
-def tracker_for(sc: SimScenario, group: list[TrialSetup], pos_tol: float, ori_tol: float
-                ) -> Tracker | None:
-    """A :class:`Tracker` for a trajectory task, None otherwise."""
-    if sc.task.kind != "trajectory":
-        return None
-    return Tracker(sc, group, pos_tol, ori_tol)
