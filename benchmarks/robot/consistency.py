@@ -31,7 +31,7 @@ from benchmarks.robot.exits import ServoExit, SessionStop
 from benchmarks.robot.models import EncoderPose
 from hexapod.geometry import HexapodGeometry
 from hexapod.kinematics import Transform
-from hexapod.se3 import log_so3
+from hexapod.se3 import log_so3, pose_error
 
 log = logging.getLogger(__name__)
 
@@ -110,13 +110,6 @@ def visual_pose(normals: np.ndarray | None, edge_visible: np.ndarray | None,
     Rc, tc = fit_pose(A + q[seen, None] * u[seen], E)
     bc = base_from_camera
     return bc.rotation @ Rc, bc.rotation @ tc + bc.translation, legs
-
-
-def pose_distance(R1: np.ndarray, t1: np.ndarray, R2: np.ndarray, t2: np.ndarray
-                  ) -> tuple[float, float]:
-    """Translation [m] and rotation angle [rad] between two poses."""
-    return (float(np.linalg.norm(np.asarray(t1) - np.asarray(t2))),
-            float(np.linalg.norm(log_so3(np.asarray(R1) @ np.asarray(R2).T))))
 
 
 def format_pose(R: np.ndarray, t: np.ndarray) -> str:
@@ -233,7 +226,7 @@ class CameraCheck:
         if isinstance(pose, str):
             return self._blind(step, now, pose)
         Rv, tv, legs = pose
-        dist, angle = pose_distance(Rv, tv, rotation, translation)
+        dist, angle = (float(x) for x in pose_error(Rv, tv, rotation, translation))
         self.checked += 1
         self.worst_distance = max(self.worst_distance, dist)
         self.worst_angle = max(self.worst_angle, angle)
