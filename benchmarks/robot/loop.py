@@ -32,14 +32,11 @@ DEFAULT_FEATURE_TOLERANCE = 2e-3
 
 
 class PeriodCheck(Protocol):
-    """A per-period safety check of a session (the camera's consistency with the
-    encoders, a blind-camera timeout, ...): called every period right after the image,
-    before the controller runs; it ends the session by raising
-    :class:`~benchmarks.robot.exits.SessionStop` ``(code, reason)`` (the session then
-    halts the robot, writes the final record and exits with ``code``). A check whose
-    ``needs_image`` attribute is true (the camera check) is not called in the period
-    where the camera reports its end (a recording's last frame is past: not a lost
-    frame, and the session ends)."""
+    """A per-period safety check of a session (the camera check, the signals): called
+    every period right after the image, before the controller runs; it ends the session
+    (through its one shutdown) by raising :class:`~benchmarks.robot.exits.SessionStop`.
+    A check whose ``needs_image`` attribute is true is not called in the period where
+    the camera reports its end (a recording's end is not a lost frame)."""
 
     def __call__(self, step: int, lengths: np.ndarray, features: Any) -> None:
         """Check one period.

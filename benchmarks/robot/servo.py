@@ -304,14 +304,10 @@ def _teach(args: argparse.Namespace, geometry: HexapodGeometry, camera: Any,
 
 
 def run(args: argparse.Namespace) -> int:
-    """``hexapod-bench servo``: the session (or ``--teach``); returns the exit code.
-
-    Exit codes: :class:`~benchmarks.robot.exits.ServoExit` (0 converged or taught, 1
-    internal error, 2 refused before moving, 3 a limit, 4 the link failed during
-    motion, 5 a safety stop, 130 SIGINT, 143 SIGTERM, 129 SIGHUP). Bad inputs found
-    before anything is opened raise (the CLI maps them to 2); from the session record's
-    creation on, every way out goes through :func:`~benchmarks.robot.session.run_session`'s
-    shutdown.
+    """``hexapod-bench servo``: the session (or ``--teach``); returns the exit code
+    (:class:`~benchmarks.robot.exits.ServoExit`). Bad inputs found before anything is
+    opened raise (the CLI maps them to 2); from the session record's creation on, every
+    way out goes through :func:`~benchmarks.robot.session.run_session`'s shutdown.
     """
     import controllers  # noqa: F401 - registers the built-ins
     from benchmarks.study.calibration import read_calibrated_file

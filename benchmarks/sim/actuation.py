@@ -35,8 +35,8 @@ def world_actuation(sc: Any) -> tuple[tuple[Actuation, ...], str]:
     return (Actuation.VELOCITY,), "the kinematic world"
 
 
-def require_batch(commands: CommandBatch, declared: Actuation, label: str,
-                  rows: int | None = None) -> None:
+def require_batch(commands: CommandBatch, declared: Actuation, label: str, rows: int
+                  ) -> None:
     """Refuse a batch of another kind than its controller declared, or of another shape
     than ``(rows, 6)``.
 
@@ -44,14 +44,12 @@ def require_batch(commands: CommandBatch, declared: Actuation, label: str,
         ActuationError: ``commands.actuation`` is not ``declared``.
         CommandError: The values are not one row of 6 leg values per observed trial.
     """
-    if rows is not None:
-        shape = np.shape(commands.values)
-        if shape != (rows, 6):
-            from controllers.exceptions import CommandError
+    shape = np.shape(commands.values)
+    if shape != (rows, 6):
+        from controllers.exceptions import CommandError
 
-            raise CommandError(label, f"returned commands of shape {shape} for {rows} "
-                                      f"trials; expected ({rows}, 6): one row of 6 leg "
-                                      "values per trial")
+        raise CommandError(label, f"returned commands of shape {shape} for {rows} trials; "
+                                  f"expected ({rows}, 6): one row of 6 leg values per trial")
     if commands.actuation is not declared:
         check_actuation(commands.actuation, (declared,),
                         f"a study whose controller declared {declared.quantity}", label)

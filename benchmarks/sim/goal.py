@@ -170,10 +170,9 @@ class AnchoredReference:
     the goal: ``t' = t - t_end + t_goal``, ``R' = R R_end^T R_goal`` (the base-frame
     rotation from the end to the sample, applied to the goal orientation). Velocities,
     angular velocities (base frame) and their rates are the reference's: the path is
-    the same motion, started from where the model says the taught goal is. (Turning the
-    whole path by the goal's rotation error would also turn its shape: on a 15 mm circle
-    a 0.4 deg error moves the path by 0.1 mm.) The time axis and every other attribute
-    are the reference's.
+    the same motion, started from where the model says the taught goal is (turning the
+    whole path would turn its shape). The time axis and every other attribute are the
+    reference's.
 
     Args:
         reference: Has ``duration`` [s] and ``at(times)`` -> :class:`ReferenceSample`.

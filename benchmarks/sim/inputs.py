@@ -34,13 +34,6 @@ class SimController(Protocol):
 class SimPayload(Protocol):
     """A payload fixed to the true platform (``[payload]``)."""
 
-    @property
-    def mass_kg(self) -> float: ...
-    @property
-    def com_mm(self) -> tuple[float, ...]: ...
-    @property
-    def inertia_kg_m2(self) -> tuple[float, ...]: ...
-
     def body(self, source: str | None = None) -> Any:
         """The :class:`hexapod.dynamics.payload.Payload` (SI units)."""
         ...
