@@ -218,9 +218,9 @@ def goal_features(goal: ServoGoal, camera: Any, geometry: HexapodGeometry) -> An
                          visible)
     if feats.visible_count == 0:
         raise BenchmarkError(f"{goal.source}: the camera sees no leg edge at the goal")
-    seen = feature_batch(camera, feats)
-    return Goal(normals=feats.normals, lines=None if seen.lines is None else seen.lines[0],
-                directions=seen.directions[0],  # type: ignore[index]
+    batch = feature_batch(camera, feats)
+    return Goal(normals=feats.normals, lines=None if batch.lines is None else batch.lines[0],
+                directions=batch.directions[0],  # type: ignore[index]
                 lengths=goal.lengths.copy(), rotation=sol.rotation,
                 translation=sol.translation, edge_visible=feats.edge_visible)
 

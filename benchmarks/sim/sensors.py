@@ -94,10 +94,9 @@ class GeometricSensor:
                                      if isinstance(c, PerspectiveCamera)])
                            if all(isinstance(c, PerspectiveCamera) for c in true_cameras)
                            else None)
-        self.rngs = list(rngs)
-        #: :attr:`rngs` with their bit generators' addresses, taken once (the rotation
-        #: noise draws every row's numbers in one C call, every period).
-        self.generators = Generators(self.rngs)
+        #: The rows' generators with their bit generators' addresses, taken once (the
+        #: rotation noise draws every row's numbers in one C call, every period).
+        self.generators = Generators(list(rngs))
         self.detect_times: list[float] = []
 
     @classmethod
