@@ -47,13 +47,9 @@ class ServoGoal:
 
 def average_features(frames: list[Features], max_deviation: float | None = None
                      ) -> Features:
-    """The features of a burst of frames of a still scene, averaged (``--teach``).
-
-    Each edge normal is the renormalised sum of its sign-aligned unit normals over the
-    frames where the edge was found (:func:`vision.estimate.average_normals`); a frame
-    farther than ``max_deviation`` [rad] from the median of the frames does not count
-    for that edge, and an edge kept in fewer than half of the frames is reported
-    missing.
+    """The features of a burst of frames of a still scene, averaged (``--teach``) by
+    :func:`vision.estimate.average_normals` (a frame farther than ``max_deviation``
+    [rad] from the median does not count for that edge).
 
     Raises:
         BenchmarkError: No frame.

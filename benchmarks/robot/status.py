@@ -36,9 +36,8 @@ class PeriodStatus:
         lost_frame: The camera gave no image this period.
         rtt: Time spent communicating with the robot (the link time) [s].
         missed: This period was late.
-        missed_total: Late periods so far.
-        lost_total: Lost frames so far.
-        refused_total: Refused commands so far.
+        missed_total, lost_total, refused_total: Late periods, lost frames and refused
+            commands so far.
         applied: (6,) the velocities the robot applied [m/s] (after the session's speed
             cap and the backend's stroke and speed clamps).
         clamped: (6,) legs whose command was clamped (speed cap, stroke, speed limit).
