@@ -125,10 +125,8 @@ def _legs(legs: tuple[int, ...]) -> str:
 
 
 class CameraCheck:
-    """The servo session's camera check (module docstring), one of its per-period checks
-    (``run_session(..., checks=[...])``): called once a period with the measured
-    lengths and the camera's features, it ends the session through the one shutdown.
-    Not called once a recording has ended (:attr:`needs_image`).
+    """The servo session's camera check (module docstring), a per-period check
+    (:class:`~benchmarks.robot.loop.PeriodCheck`) not called once a recording has ended.
 
     Args:
         geometry: The nominal robot (platform points).

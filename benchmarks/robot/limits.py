@@ -69,10 +69,9 @@ class LimitedRobot:
     """A connected backend behind the session's limits (what the loop's plant drives).
 
     Every period's command is capped to :attr:`SessionLimits.max_speed` (the capped legs
-    are reported clamped) and, when a leg would leave the travel box around the start
-    lengths, refused before anything is sent (:class:`SessionStop`, exit 3). The link
-    time of each period is the backend's ``round_trip_s``. Other attributes are the
-    backend's.
+    are reported clamped) and refused before anything is sent when a leg would leave the
+    travel box around the start lengths (:class:`SessionStop`, exit 3). Other attributes
+    are the backend's.
 
     Args:
         robot: The connected backend.

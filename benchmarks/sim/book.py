@@ -204,11 +204,8 @@ class Book:
         return mask
 
     def stopped(self, step: int, exc: Exception) -> BaseException:
-        """The exception the loop raises when the controller's batch failed as a whole at
-        ``step`` (``step_batch`` raised, or its commands were refused by
-        :meth:`commanded`): a :class:`~benchmarks.exceptions.BatchFailedError` with the
-        last errors of every row (each trial of the group gets a failure row saying so;
-        nothing is rerun)."""
+        """A :class:`~benchmarks.exceptions.BatchFailedError` with the last errors of every
+        row (each trial of the group gets a failure row saying so; nothing is rerun)."""
         return BatchFailedError(step, self.last_errors, exc)
 
     def period(self, step: int, idx: np.ndarray, done: np.ndarray, obs: ObservationBatch,

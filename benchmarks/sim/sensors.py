@@ -187,13 +187,10 @@ def noisy_features(sc: SimScenario, normals: np.ndarray, visible: np.ndarray,
         rngs: One generator per row (anything when :func:`draws_noise` is False).
         apply_noise: Whether the noise applies.
         estimated: The estimated camera (the same for every row).
-        cameras: ``(rows, true camera)`` groups covering every row (unused with
-            ``line_maps``).
-        item: Row -> (its :class:`vision.legs.LegObservation`, its true camera), for the
-            pixel noise.
-        line_maps: (n, 3, 3) each row's true perspective camera's
-            ``normal_to_line_matrix``: the image lines of every row in one call
-            (:func:`vision.cameras.perspective.normals_to_lines`; None: by ``cameras``).
+        cameras: ``(rows, true camera)`` groups covering every row (without ``line_maps``).
+        item: Row -> (its :class:`vision.legs.LegObservation`, its true camera) (pixels).
+        line_maps: (n, 3, 3) each row's true ``normal_to_line_matrix`` (every camera
+            perspective: the lines of every row in one call), or None.
 
     Returns:
         The camera's batch (:func:`camera_batch`; ``lines`` None for a unified camera).
