@@ -167,7 +167,7 @@ class _Unit:
         sensor: GeometricSensor | RowSensor
         if self.batched:
             sensor = GeometricSensor.of_trials(sc, setups)
-            goals = group_goals(sc, sensor, setups)
+            goals = _goals(sc, sensor, setups)
         else:
             sensor = RowSensor(self.sensor_factory(sc, setups[0]),
                                [trial_rng(sc.seed, s.trial, 1) for s in setups])
@@ -240,7 +240,7 @@ def _stopped(sc: SimScenario, spec: Any, trials: list[int], exc: BatchFailedErro
             for j, trial in enumerate(trials)]
 
 
-def group_goals(sc: SimScenario, sensor: GeometricSensor, setups: list[TrialSetup]
+def _goals(sc: SimScenario, sensor: GeometricSensor, setups: list[TrialSetup]
            ) -> list[Goal | Exception]:
     """The goal of every trial (:func:`benchmarks.sim.sensors.trial_goal`): measured in one
     batch when one frame is taught (:func:`benchmarks.sim.goal.measured_goals`), trial by

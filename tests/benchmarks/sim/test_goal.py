@@ -24,7 +24,6 @@ from benchmarks.sim.goal import (
 )
 from benchmarks.sim.reference import trial_reference
 from benchmarks.sim.sensors import GeometricSensor, trial_goal
-from benchmarks.sim.stepper import group_goals
 from benchmarks.sim.world import load_camera, load_geometry, make_trials
 from benchmarks.study import scenario_model
 from benchmarks.study.scenario import parse_scenario
@@ -109,12 +108,14 @@ def test_the_goals_of_each_setting() -> None:
     the encoders at the goal and the model's pose of them; ``cartesian`` the true goal
     pose, its nominal inverse kinematics (as ``mixed``) and the features the model
     predicts, which differ from the measured ones by the model's error."""
+    from benchmarks.sim import stepper
+
     goals = {}
     for g in GOAL_SETTINGS:
         sc = _scenario(goal=g, calibration_error=MODEL_ERROR)
         s = _setups(sc, [1])[0]
         goals[g] = trial_goal(GeometricSensor(sc, s.world, s.estimated_camera), s, sc)
-        batched = group_goals(sc, GeometricSensor.of_trials(sc, [s]), [s])[0]
+        batched = stepper._goals(sc, GeometricSensor.of_trials(sc, [s]), [s])[0]
         for f in ("normals", "lengths", "rotation", "translation", "directions"):
             np.testing.assert_allclose(getattr(batched, f), getattr(goals[g], f),
                                        atol=1e-12, err_msg=f"{g} {f}")
@@ -346,7 +347,7 @@ def test_the_batched_goals_are_the_sensors_goals_to_the_bit(
                    noise={"model": "rotation", "amplitude_deg": 0.05, "on_goal": True})
     setups = _setups(sc, [0, 1, 2, 3])
     sensor = GeometricSensor.of_trials(sc, setups)
-    ours = stepper.group_goals(sc, sensor, setups)
+    ours = stepper._goals(sc, sensor, setups)
     theirs = [trial_goal(GeometricSensor(sc, s.world, s.estimated_camera), s, sc)
               for s in setups]
     assert all(type(g).__name__ == "Goal" for g in ours)
