@@ -1,12 +1,5 @@
-"""No silent simulation: which camera a servo session may use, and how the banner names it.
-
-A *real* robot is any backend the registry does not mark as simulated
-(:meth:`hexapod.backends.registry.BackendRegistry.is_simulated`): ``serial:URL``,
-``gcs:...`` and plugins, unless a plugin declares ``simulated = True``. With a real robot
-``--camera`` must be given; ``--camera sim`` (images rendered at the pose of the measured
-lengths, which always agree with the encoders) is refused unless the user asks for it by
-name with ``--simulated-camera-on-real-robot``. With a simulated robot (``sim``,
-``emulator``, ``gcs-emulator``) the camera defaults to ``sim``.
+"""No silent simulation: which camera a servo session may use (:func:`choose_camera`), and
+how the banner names it (:func:`describe_camera`).
 """
 
 from __future__ import annotations
@@ -17,14 +10,15 @@ import numpy as np
 
 from benchmarks.exceptions import BenchmarkError
 
-__all__ = ["ALLOW_SIMULATED_FLAG", "choose_camera", "describe_camera"]
-
 #: The option that allows ``--camera sim`` on real hardware.
 ALLOW_SIMULATED_FLAG = "--simulated-camera-on-real-robot"
 
 
 def choose_camera(backend: str, camera: str | None, allow_simulated: bool) -> str:
-    """The ``--camera`` spec a session uses.
+    """The ``--camera`` spec a session uses: a real robot (a backend the registry does not
+    mark simulated, :meth:`hexapod.backends.registry.BackendRegistry.is_simulated`) needs
+    ``--camera``, and ``sim`` (images rendered at the encoders' pose) only with
+    ``--simulated-camera-on-real-robot``.
 
     Args:
         backend: The ``--backend`` spec (already checked).

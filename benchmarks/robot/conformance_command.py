@@ -1,15 +1,9 @@
 """``hexapod-bench conformance BACKEND_SPEC``: the backend conformance check
-(:func:`hexapod.backends.conformance.check_backend`) from the command line.
-
-It drives the backend and the exact simulator with the same commands and prints the
-figures of :class:`~hexapod.backends.conformance.ConformanceReport`: the periods driven,
-the largest deviation of the measured lengths from the simulator's over the smooth
-motion (against the tolerance), and one line per failed check. Exit 0 when every check
-passes, 1 when one fails, 2 for a bad spec or option.
-
-The check moves the legs through their whole stroke, at ten times the speed limit
-(which the backend must clamp): on real hardware (a backend the registry does not mark
-as simulated) it runs only with ``--move-real-robot``.
+(:func:`hexapod.backends.conformance.check_backend`) from the command line: the backend
+and the exact simulator driven with the same commands, the figures of
+:class:`~hexapod.backends.conformance.ConformanceReport` printed. It drives the legs
+through their whole stroke at ten times the speed limit: on real hardware only with
+``--move-real-robot``.
 """
 
 from __future__ import annotations
@@ -20,8 +14,7 @@ import math
 import numpy as np
 
 from benchmarks.exceptions import BenchmarkError
-
-__all__ = ["DEFAULT_TOLERANCE_UM", "add_arguments", "run"]
+from benchmarks.robot.models import add_robot_arguments, check_dt, robot_geometry
 
 #: Default tolerance on the measured lengths [um]: the serial protocol carries
 #: micrometres (the emulator drifts 3.5 um from the exact simulator over 50 periods).
@@ -33,13 +26,11 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("backend", metavar="BACKEND_SPEC",
                    help="the backend to check: emulator, gcs-emulator, sim, serial:URL, "
                         "gcs:tcp://HOST:PORT, a plugin's NAME[:ARGS] or module:attr[:ARGS]")
-    p.add_argument("--geometry", default="deltalab",
-                   help="nominal robot: a geometry TOML file or a preset (default deltalab)")
+    add_robot_arguments(p)
     p.add_argument("--tolerance-um", type=float, default=DEFAULT_TOLERANCE_UM, metavar="UM",
                    help="largest allowed deviation of the measured lengths from the "
                         f"simulator's over the smooth motion [um] (default "
                         f"{DEFAULT_TOLERANCE_UM:g})")
-    p.add_argument("--dt", type=float, default=0.02, help="control period [s] (default 0.02)")
     p.add_argument("--periods", type=int, default=25,
                    help="periods of the smooth motion (default 25)")
     p.add_argument("--move-real-robot", action="store_true",
@@ -54,14 +45,12 @@ def run(args: argparse.Namespace) -> int:
         BenchmarkError: A bad option, or real hardware without ``--move-real-robot``.
         UnknownBackendError, BackendPluginError: A bad spec.
     """
-    from benchmarks.robot.models import robot_geometry
     from hexapod.backends.conformance import check_backend
     from hexapod.backends.registry import backends
 
     if not (math.isfinite(args.tolerance_um) and args.tolerance_um >= 0):
         raise BenchmarkError(f"--tolerance-um must be >= 0, got {args.tolerance_um}")
-    if not (math.isfinite(args.dt) and args.dt > 0):
-        raise BenchmarkError(f"--dt must be a positive period in seconds, got {args.dt}")
+    check_dt(args.dt)
     if args.periods < 1:
         raise BenchmarkError(f"--periods must be >= 1, got {args.periods}")
     name = backends.check(args.backend)

@@ -1,33 +1,18 @@
-"""The camera must agree with the encoders: the servo session's per-period camera check.
+"""The camera must agree with the encoders: the servo session's per-period camera check
+(``docs/servo.md``, "The camera must agree with the encoders").
 
-At the start of a session (period 0, before any command) and at every period, the
-platform pose *seen by the camera* is compared with the pose *from the encoders*:
-
-- the **encoder pose** is the nominal forward kinematics of the measured leg lengths
-  (what the loop already computes);
-- the **camera pose** is the rigid fit of the platform points to ``A_i + q_i u_i``, where
-  ``u_i`` are the leg directions of the edges the camera found (both edges of a leg,
-  ``u = (n2 x n1) / |n2 x n1|``), ``A_i`` the (calibrated) base points in the camera
-  frame and ``q_i`` the measured lengths (the estimator of the ``cartesian-ctc``
-  controller, :func:`controllers.mpc.prediction.fit_pose`), mapped to the base frame by
-  the camera's pose *as the base points place it* (the rigid fit of the nominal base
-  points to them: the camera file's ``camera_from_base`` for nominal base points, the
-  calibrated placement with ``--calibration``, so that a camera pose known only
-  roughly is not taken for a disagreement). The camera thus says where the legs
-  *point*, the encoders how long they are: a camera that sees another motion (a
-  recording, a camera aimed at another robot, a frame from the past) points the legs
-  elsewhere and the fit lands away from the encoder pose. Hidden legs are left out;
-  at least :data:`MIN_LEGS` legs, not collinear on the platform, are needed.
-
-The two poses further apart than ``max_distance`` (translation) or ``max_angle``
-(rotation) stop the session (:class:`~benchmarks.robot.exits.SessionStop`,
-``ServoExit.SAFETY``) with both poses in the message. A period without a pose (a lost
-frame, fewer than three legs seen) is *blind*; blind for ``blind_timeout`` seconds in a
-row stops the session (``SAFETY``). A recording (``--camera video:``) must agree at the
-start: a first frame that gives no pose is refused (``ServoExit.REFUSED``), before any
-command.
-
-SI units inside (metres, radians, seconds); millimetres and degrees in the messages.
+At the start (period 0, before any command) and at every period, the platform pose
+*from the encoders* (the nominal forward kinematics of the measured lengths) is compared
+with the pose *seen by the camera*: the rigid fit of the platform points to
+``A_i + q_i u_i`` (:func:`visual_pose`: ``u_i`` the directions of the legs whose both
+edges were found, ``A_i`` the base points in the camera frame, ``q_i`` the measured
+lengths), mapped to the base frame by the camera's pose as the (calibrated) base points
+place it. The camera says where the legs *point*, the encoders how long they are: a
+camera that sees another motion points the legs elsewhere. Poses further apart than
+``max_distance`` or ``max_angle`` stop the session (``ServoExit.SAFETY``); so does a
+camera *blind* (no pose: a lost frame, fewer than :data:`MIN_LEGS` legs, collinear legs)
+for ``blind_timeout``; a recording whose first frame gives no pose is refused
+(``ServoExit.REFUSED``). SI units inside; millimetres and degrees in the messages.
 """
 
 from __future__ import annotations
@@ -46,19 +31,7 @@ from benchmarks.robot.exits import ServoExit, SessionStop
 from benchmarks.robot.models import EncoderPose
 from hexapod.geometry import HexapodGeometry
 from hexapod.kinematics import Transform
-from hexapod.se3 import log_so3
-
-__all__ = [
-    "DEFAULT_BLIND_TIMEOUT_S",
-    "DEFAULT_CONSISTENCY_DEG",
-    "DEFAULT_CONSISTENCY_MM",
-    "MIN_LEGS",
-    "CameraCheck",
-    "CheckResult",
-    "format_pose",
-    "pose_distance",
-    "visual_pose",
-]
+from hexapod.se3 import log_so3, pose_error
 
 log = logging.getLogger(__name__)
 
@@ -139,13 +112,6 @@ def visual_pose(normals: np.ndarray | None, edge_visible: np.ndarray | None,
     return bc.rotation @ Rc, bc.rotation @ tc + bc.translation, legs
 
 
-def pose_distance(R1: np.ndarray, t1: np.ndarray, R2: np.ndarray, t2: np.ndarray
-                  ) -> tuple[float, float]:
-    """Translation [m] and rotation angle [rad] between two poses."""
-    return (float(np.linalg.norm(np.asarray(t1) - np.asarray(t2))),
-            float(np.linalg.norm(log_so3(np.asarray(R1) @ np.asarray(R2).T))))
-
-
 def format_pose(R: np.ndarray, t: np.ndarray) -> str:
     """``x y z`` [mm] and the rotation vector [deg], for a message."""
     w = np.degrees(log_so3(np.asarray(R)))
@@ -159,10 +125,8 @@ def _legs(legs: tuple[int, ...]) -> str:
 
 
 class CameraCheck:
-    """The servo session's camera check (module docstring), one of its per-period checks
-    (``run_session(..., checks=[...])``): called once a period with the measured
-    lengths and the camera's features, it ends the session through the one shutdown.
-    Not called once a recording has ended (:attr:`needs_image`).
+    """The servo session's camera check (module docstring), a per-period check
+    (:class:`~benchmarks.robot.loop.PeriodCheck`) not called once a recording has ended.
 
     Args:
         geometry: The nominal robot (platform points).
@@ -217,16 +181,9 @@ class CameraCheck:
         self._blind_why: str | None = None
 
     def __call__(self, step: int, lengths: np.ndarray, features: Any) -> None:
-        """The session's per-period check (:class:`~benchmarks.robot.loop.PeriodCheck`,
-        run after each image, before the command): the encoder pose is the nominal
-        forward kinematics of ``lengths`` (seeded with the previous period's, as the
-        loop's prediction; a failure keeps the last pose), then :meth:`compare`.
-
-        Args:
-            step: The period (0: the start check).
-            lengths: (6,) leg lengths measured when the image was taken [m].
-            features: This period's :class:`~vision.feature_cameras.Features` (None: a
-                lost frame).
+        """The session's per-period check (:class:`~benchmarks.robot.loop.PeriodCheck`):
+        :meth:`compare` against the encoder pose of ``lengths``
+        (:class:`~benchmarks.robot.models.EncoderPose`).
 
         Raises:
             SessionStop: As :meth:`compare`.
@@ -267,7 +224,7 @@ class CameraCheck:
         if isinstance(pose, str):
             return self._blind(step, now, pose)
         Rv, tv, legs = pose
-        dist, angle = pose_distance(Rv, tv, rotation, translation)
+        dist, angle = (float(x) for x in pose_error(Rv, tv, rotation, translation))
         self.checked += 1
         self.worst_distance = max(self.worst_distance, dist)
         self.worst_angle = max(self.worst_angle, angle)

@@ -10,8 +10,6 @@ from __future__ import annotations
 import enum
 import signal
 
-__all__ = ["ServoExit", "SessionStop", "exit_for_signal"]
-
 
 class ServoExit(enum.IntEnum):
     """Exit codes of a servo session.
@@ -66,10 +64,6 @@ class SessionStop(Exception):  # noqa: N818 (a stop request, not an error)
     Args:
         code: The exit code the session ends with.
         reason: What happened, in words (printed and written to the final record).
-
-    Attributes:
-        code: The exit code the session ends with.
-        reason: What happened, in words.
     """
 
     code: ServoExit

@@ -4,7 +4,6 @@ the nominal model; the feature error the loop's convergence test reads."""
 
 from __future__ import annotations
 
-import logging
 import math
 from dataclasses import dataclass
 from pathlib import Path
@@ -14,13 +13,13 @@ import numpy as np
 
 from benchmarks.exceptions import BenchmarkError
 from benchmarks.robot.records import mm_list
+from benchmarks.sim.sensors import edge_batch
+from controllers.base import ObservationBatch
 from hexapod.config import check_keys, get_matrix, load_toml
 from hexapod.exceptions import ConfigFileError, ForwardKinematicsError
 from hexapod.geometry import HexapodGeometry
 from hexapod.outputs import TEXT_MARKER
 from vision.feature_cameras import Features, sensor_camera
-
-log = logging.getLogger(__name__)
 
 #: Keys a goal file may have.
 GOAL_KEYS = ("lengths_mm", "features", "name")
@@ -48,13 +47,9 @@ class ServoGoal:
 
 def average_features(frames: list[Features], max_deviation: float | None = None
                      ) -> Features:
-    """The features of a burst of frames of a still scene, averaged (``--teach``).
-
-    Each edge normal is the renormalised sum of its sign-aligned unit normals over the
-    frames where the edge was found (:func:`vision.estimate.average_normals`); a frame
-    farther than ``max_deviation`` [rad] from the median of the frames does not count
-    for that edge, and an edge kept in fewer than half of the frames is reported
-    missing.
+    """The features of a burst of frames of a still scene, averaged (``--teach``) by
+    :func:`vision.estimate.average_normals` (a frame farther than ``max_deviation``
+    [rad] from the median does not count for that edge).
 
     Raises:
         BenchmarkError: No frame.
@@ -181,20 +176,15 @@ def save_goal(path: str | Path, lengths: np.ndarray, features: Features,
     return npz
 
 
-def feature_directions(f: Features) -> tuple[np.ndarray, np.ndarray]:
-    from vision.legs import directions_from_edges
-
-    both = np.all(f.edge_visible, axis=-1)
-    with np.errstate(invalid="ignore", divide="ignore"):
-        u = directions_from_edges(np.where(f.edge_visible[..., None], f.normals, np.nan))
-    return np.where(both[:, None], u, np.nan), both
-
-
-def feature_lines(camera: Any, normals: np.ndarray) -> np.ndarray | None:
-    if getattr(camera, "kind", "") != "perspective":
-        return None
-    with np.errstate(invalid="ignore", divide="ignore"):
-        return np.asarray(camera.normal_to_line(normals), float)
+def feature_batch(camera: Any, features: Features) -> ObservationBatch:
+    """The camera's batch of one of ``features`` (:func:`benchmarks.sim.sensors.edge_batch`;
+    image lines only for a camera of kind ``perspective``)."""
+    normals = np.asarray(features.normals, float)[None]
+    lines = None
+    if getattr(camera, "kind", "") == "perspective":
+        with np.errstate(invalid="ignore", divide="ignore"):
+            lines = np.asarray(camera.normal_to_line(normals), float)
+    return edge_batch(normals, lines, np.asarray(features.edge_visible, bool)[None])
 
 
 def goal_features(goal: ServoGoal, camera: Any, geometry: HexapodGeometry) -> Any:
@@ -224,9 +214,10 @@ def goal_features(goal: ServoGoal, camera: Any, geometry: HexapodGeometry) -> An
                          visible)
     if feats.visible_count == 0:
         raise BenchmarkError(f"{goal.source}: the camera sees no leg edge at the goal")
-    directions, _ = feature_directions(feats)
-    return Goal(normals=feats.normals, lines=feature_lines(camera, feats.normals),
-                directions=directions, lengths=goal.lengths.copy(), rotation=sol.rotation,
+    batch = feature_batch(camera, feats)
+    return Goal(normals=feats.normals, lines=None if batch.lines is None else batch.lines[0],
+                directions=batch.directions[0],  # type: ignore[index]
+                lengths=goal.lengths.copy(), rotation=sol.rotation,
                 translation=sol.translation, edge_visible=feats.edge_visible)
 
 

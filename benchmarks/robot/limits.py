@@ -1,14 +1,5 @@
-"""The limits a lab sets on a servo session, and the deadline policy.
-
-- :class:`SessionLimits`: leg speed, leg travel from the start lengths, session time,
-  period budget, missed-deadline policy (``--max-speed-mm-s``, ``--max-travel-mm``,
-  ``--max-time-s``, ``--max-steps``, ``--max-missed-consecutive``,
-  ``--max-missed-fraction``);
-- :class:`LimitedRobot`: the robot as the loop sees it: every command capped to the
-  speed limit and refused beyond the travel limit *before* it is sent, the link time of
-  every period measured;
-- :class:`DeadlinePolicy`: missed periods counted, warned at most once a second, and the
-  session stopped after too many in a row or too large a fraction of a window.
+"""The limits a lab sets on a servo session (:class:`SessionLimits`), the robot behind
+them (:class:`LimitedRobot`) and the missed-deadline policy (:class:`DeadlinePolicy`).
 
 Reaching a limit raises :class:`~benchmarks.robot.exits.SessionStop` with
 :attr:`~benchmarks.robot.exits.ServoExit.LIMIT` and says which limit; the session's one
@@ -28,16 +19,6 @@ import numpy as np
 
 from benchmarks.robot.exits import ServoExit, SessionStop
 from hexapod.actuation import Actuation
-
-__all__ = [
-    "DEFAULT_MAX_MISSED_CONSECUTIVE",
-    "DEFAULT_MAX_MISSED_FRACTION",
-    "DEFAULT_MAX_TIME_S",
-    "MISSED_WINDOW",
-    "DeadlinePolicy",
-    "LimitedRobot",
-    "SessionLimits",
-]
 
 #: Default ``--max-time-s`` [s]: a session never runs unattended for ever.
 DEFAULT_MAX_TIME_S = 60.0
@@ -88,10 +69,9 @@ class LimitedRobot:
     """A connected backend behind the session's limits (what the loop's plant drives).
 
     Every period's command is capped to :attr:`SessionLimits.max_speed` (the capped legs
-    are reported clamped) and, when a leg would leave the travel box around the start
-    lengths, refused before anything is sent (:class:`SessionStop`, exit 3). The link
-    time of each period is the backend's ``round_trip_s``. Other attributes are the
-    backend's.
+    are reported clamped) and refused before anything is sent when a leg would leave the
+    travel box around the start lengths (:class:`SessionStop`, exit 3). Other attributes
+    are the backend's.
 
     Args:
         robot: The connected backend.

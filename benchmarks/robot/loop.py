@@ -14,11 +14,11 @@ from typing import Any, Protocol
 import numpy as np
 
 from benchmarks.robot.exits import ServoExit, SessionStop
-from benchmarks.robot.goals import feature_directions, feature_error, feature_lines
+from benchmarks.robot.goals import feature_batch, feature_error
 from benchmarks.robot.limits import DeadlinePolicy, LimitedRobot, SessionLimits
 from benchmarks.robot.models import EncoderPose
 from benchmarks.robot.status import PeriodStatus, ServoResult
-from benchmarks.sim.sensors import camera_batch
+from benchmarks.sim.sensors import edge_batch
 from controllers.base import ObservationBatch
 from hexapod.geometry import HexapodGeometry
 from vision.feature_cameras import FeatureSensor, sensor_camera
@@ -32,14 +32,11 @@ DEFAULT_FEATURE_TOLERANCE = 2e-3
 
 
 class PeriodCheck(Protocol):
-    """A per-period safety check of a session (the camera's consistency with the
-    encoders, a blind-camera timeout, ...): called every period right after the image,
-    before the controller runs; it ends the session by raising
-    :class:`~benchmarks.robot.exits.SessionStop` ``(code, reason)`` (the session then
-    halts the robot, writes the final record and exits with ``code``). A check whose
-    ``needs_image`` attribute is true (the camera check) is not called in the period
-    where the camera reports its end (a recording's last frame is past: not a lost
-    frame, and the session ends)."""
+    """A per-period safety check of a session (the camera check, the signals): called
+    every period right after the image, before the controller runs; it ends the session
+    (through its one shutdown) by raising :class:`~benchmarks.robot.exits.SessionStop`.
+    A check whose ``needs_image`` attribute is true is not called in the period where
+    the camera reports its end (a recording's end is not a lost frame)."""
 
     def __call__(self, step: int, lengths: np.ndarray, features: Any) -> None:
         """Check one period.
@@ -76,15 +73,11 @@ def servo_loop(
     result: ServoResult | None = None,
 ) -> ServoResult:
     """Run a reset controller on a connected robot until convergence, a limit, a stop
-    request or Ctrl-C.
-
-    The session is the simulator's closed loop (:func:`benchmarks.sim.loop.closed_loop`)
-    with a batch of one: the robot is a :class:`~benchmarks.sim.plant.BackendPlant` (the
-    pose is the nominal forward kinematics of the measured lengths), the camera a
+    request or Ctrl-C (the outcome ``"interrupted"``; a
+    :class:`~benchmarks.robot.exits.SessionStop`: ``"stopped"``, ``result.stop``); any
+    other exception propagates, ``result`` (when given) holding the periods run. The
+    robot is a :class:`~benchmarks.sim.plant.BackendPlant`, the camera a
     :class:`ServoCamera`, the book a :class:`ServoBook`. The caller halts the robot.
-    Ctrl-C (``KeyboardInterrupt``) is reported as the outcome ``"interrupted"``, a
-    :class:`~benchmarks.robot.exits.SessionStop` as ``"stopped"`` (``result.stop``); any
-    other exception propagates, ``result`` (when given) holding the periods run.
 
     Args:
         robot: A connected backend (``measured_lengths()``, ``apply(v, kind, dt, name)``).
@@ -192,14 +185,9 @@ class ServoCamera:
         self.seconds = time.perf_counter() - t0
         self.features = feats
         if feats is None:
-            return camera_batch(np.full((1, 6, 2, 3), np.nan), None, np.full((1, 6, 3), np.nan),
-                                np.zeros((1, 6, 2), dtype=bool), np.zeros((1, 6), dtype=bool))
-        directions, both = feature_directions(feats)
-        lines = feature_lines(self.camera, feats.normals)
-        return camera_batch(np.asarray(feats.normals)[None],
-                            None if lines is None else np.asarray(lines)[None],
-                            np.asarray(directions)[None], np.asarray(feats.edge_visible)[None],
-                            np.asarray(both)[None])
+            return edge_batch(np.full((1, 6, 2, 3), np.nan), None,
+                              np.zeros((1, 6, 2), dtype=bool))
+        return feature_batch(self.camera, feats)
 
 
 class ServoBook:

@@ -4,7 +4,9 @@ platform pose the nominal robot gives the measured lengths (:class:`EncoderPose`
 
 from __future__ import annotations
 
+import argparse
 import logging
+import math
 from pathlib import Path
 from typing import Any
 
@@ -13,9 +15,25 @@ import numpy as np
 from benchmarks.exceptions import BenchmarkError
 from hexapod.geometry import HexapodGeometry
 
-__all__ = ["EncoderPose", "camera_model", "robot_geometry"]
-
 log = logging.getLogger(__name__)
+
+
+def add_robot_arguments(p: argparse.ArgumentParser) -> None:
+    """Add ``--geometry`` and ``--dt`` (the nominal robot, the control period) to a
+    parser (``servo``, ``conformance``)."""
+    p.add_argument("--geometry", default="deltalab",
+                   help="nominal robot: a geometry TOML file or a preset (default deltalab)")
+    p.add_argument("--dt", type=float, default=0.02, help="control period [s] (default 0.02)")
+
+
+def check_dt(dt: float) -> None:
+    """Refuse a ``--dt`` [s] that is not a positive period.
+
+    Raises:
+        BenchmarkError: Naming the value.
+    """
+    if not (math.isfinite(dt) and dt > 0):
+        raise BenchmarkError(f"--dt must be a positive period in seconds, got {dt}")
 
 
 def robot_geometry(spec: str) -> HexapodGeometry:

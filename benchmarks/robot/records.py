@@ -1,17 +1,8 @@
-"""The record of every servo session: one JSON Lines file, written whatever happens.
-
-By default a session writes ``servo-runs/<UTC timestamp>-<controller>/servo.jsonl`` (a new
-directory, never an existing one); ``--out DIR`` names the directory (absent or empty);
-``--log FILE.jsonl`` names the file itself (an earlier servo log is replaced, any other
-file refused). The file holds (``docs/servo.md``, "The session record"):
-
-1. a header ``{"servo_session": 1, ...}``: the command, backend, camera (file and pose),
-   controller, goal, period and limits;
-2. one line per period (:meth:`~benchmarks.robot.loop.PeriodStatus.to_json`), flushed
-   each period (readable live, complete after a crash);
-3. the final record ``{"final": true, "exit_code", "reason", "exception",
-   "halt_confirmed", "missed_periods", ...}``, written on every exit path once the file
-   exists.
+"""The record of every servo session: one JSON Lines file, written whatever happens
+(``docs/servo.md``, "The session record"): a header ``{"servo_session": 1, ...}``, one
+line per period (:meth:`~benchmarks.robot.status.PeriodStatus.to_json`, flushed each
+period) and the final record ``{"final": true, ...}``, written on every exit path once
+the file exists. Where it goes: :func:`session_path`.
 """
 
 from __future__ import annotations
@@ -24,9 +15,6 @@ from typing import IO, Any
 
 from hexapod.exceptions import OutputError
 from hexapod.outputs import check_name, check_replace
-
-__all__ = ["LOG_NAME", "SESSIONS_DIR", "SessionLog", "is_header", "is_period", "is_servo_log",
-           "mm_list", "session_path"]
 
 #: Where sessions are recorded by default (relative to the working directory).
 SESSIONS_DIR = "servo-runs"
@@ -130,7 +118,6 @@ class SessionLog:
     def __init__(self, path: Path) -> None:
         self.path = Path(path)
         self._f: IO[str] | None = None
-        self.periods = 0
         self.finished = False
 
     def open(self, header: dict[str, Any]) -> SessionLog:
@@ -144,26 +131,22 @@ class SessionLog:
             self._f = self.path.open("w", encoding="utf-8")
         except OSError as exc:
             raise OutputError(str(self.path), f"cannot be written: {exc}") from None
-        self._write({"servo_session": FORMAT, **header})
+        self.write({"servo_session": FORMAT, **header})
         return self
 
-    def _write(self, record: dict[str, Any]) -> None:
+    def write(self, record: dict[str, Any]) -> None:
+        """One line (a period's), flushed."""
         if self._f is None:
             return
         self._f.write(json.dumps(_clean(record)) + "\n")
         self._f.flush()  # readable live (tail -f), and complete after a crash
-
-    def period(self, record: dict[str, Any]) -> None:
-        """One period's line."""
-        self.periods += 1
-        self._write(record)
 
     def final(self, record: dict[str, Any]) -> None:
         """The final record, then close (idempotent)."""
         if self.finished:
             return
         self.finished = True
-        self._write({"final": True, **record})
+        self.write({"final": True, **record})
         if self._f is not None:
             self._f.close()
             self._f = None

@@ -1,22 +1,14 @@
-"""Replaying a servo session: its record (``servo-runs/.../servo.jsonl``, ``--out DIR``'s
-or ``--log FILE.jsonl``) as a trial record, which ``hexapod-bench viz`` replays as it
-replays a recorded trial (MeshCat, or ``--html FILE`` with the curves beside it).
+"""Replaying a servo session: its record (:mod:`benchmarks.robot.records`) as a trial
+record, which ``hexapod-bench viz`` replays as it replays a recorded trial.
 
-A session record has one JSON object a line (:mod:`benchmarks.robot.records`): the
-header ``{"servo_session": 1, ...}``, one line per period (``step``, ``t_s``,
-``lengths_mm``, ``feature_error``, ``applied_mm_s``, ``commanded_mm_s``,
-``visible_edges``, ...: :meth:`benchmarks.robot.status.PeriodStatus.to_json`) and the
-final record ``{"final": true, ...}``; the header and the final record are not periods
-and are not replayed (older logs without a header, whose periods carry
-``velocities_mm_s``, replay too). The platform pose of a period is the nominal forward
-kinematics of its measured lengths (what the session itself used). The robot, the
-camera and the goal are the header's (``geometry``, ``camera_file``, ``camera_pose``,
-``goal_lengths_mm``) unless given (viz's ``--geometry``, ``--camera-file``,
-``--camera-pose``, ``--goal``); without a header, ``deltalab``, ``front`` and the last
-period's pose. The velocities shown are the applied ones (after the speed cap and the
-clamps), else the commanded ones. The log says how many edges were seen, not which: a
-period with none shows every edge hidden, any other every edge seen (an
-``edge_visible`` field, when a log has it, is used as it is).
+The periods are replayed (not the header or the final record; older logs without a
+header, whose periods carry ``velocities_mm_s``, too), each at the nominal forward
+kinematics of its measured lengths (what the session used), with the applied
+velocities, else the commanded ones. The robot, camera and goal are the header's unless
+given (viz's ``--geometry``, ``--camera-file``, ``--camera-pose``, ``--goal``); without a
+header, ``deltalab``, ``front`` and the last period's pose. The log says how many edges
+were seen, not which: a period with none shows every edge hidden, any other every edge
+seen (an ``edge_visible`` field, when a log has it, is used as it is).
 """
 
 from __future__ import annotations
@@ -30,8 +22,6 @@ import numpy as np
 
 from benchmarks.exceptions import BenchmarkError
 from benchmarks.robot.records import is_header, is_period, is_servo_log
-
-__all__ = ["find_session_log", "load_session"]
 
 
 def find_session_log(path: Path) -> Path | None:
@@ -119,8 +109,7 @@ def load_session(path: str | Path, geometry_spec: str | None = None,
             to the last period's pose).
 
     Returns:
-        The record (``scenario`` = ``servo session`` and the log's name, ``controller`` =
-        the header's controller, else ``servo``).
+        The record (``scenario``: ``servo session`` and the log's name).
 
     Raises:
         BenchmarkError: A line that is not JSON, a period without six finite lengths, no
@@ -146,16 +135,20 @@ def load_session(path: str | Path, geometry_spec: str | None = None,
     n = len(rows)
     q = np.array([r["lengths_mm"] for r in rows], float) * 1e-3
     R, t = np.zeros((n, 3, 3)), np.zeros((n, 3))
+
+    def pose(lengths: np.ndarray, where: str, what: str, guess: Any = None) -> Any:
+        try:
+            sol = forward_kinematics(geometry, lengths, guess=guess, check_stroke=False)
+        except ForwardKinematicsError as exc:
+            raise BenchmarkError(f"{p}{where}: no platform pose for the {what} mm of "
+                                 f"--geometry {geometry_spec}: {exc}") from None
+        return sol.rotation, sol.translation
+
     guess = None
     for k in range(n):
-        try:
-            sol = forward_kinematics(geometry, q[k], guess=guess, check_stroke=False)
-        except ForwardKinematicsError as exc:
-            raise BenchmarkError(f"{p}, period {rows[k]['step']}: no platform pose for the "
-                                 f"lengths {rows[k]['lengths_mm']} mm of --geometry "
-                                 f"{geometry_spec}: {exc}") from None
-        R[k], t[k] = sol.rotation, sol.translation
-        guess = (sol.rotation, sol.translation)
+        guess = pose(q[k], f", period {rows[k]['step']}", f"lengths {rows[k]['lengths_mm']}",
+                     guess)
+        R[k], t[k] = guess
     goal_q = None
     if goal_file is not None:
         goal_q = load_goal(goal_file, geometry).lengths
@@ -165,13 +158,7 @@ def load_session(path: str | Path, geometry_spec: str | None = None,
             raise BenchmarkError(f"{p}, line 1: goal_lengths_mm must be 6 finite numbers "
                                  f"[mm], got {header['goal_lengths_mm']!r}")
     if goal_q is not None:
-        try:
-            goal = forward_kinematics(geometry, goal_q, check_stroke=False)
-        except ForwardKinematicsError as exc:
-            raise BenchmarkError(f"{p}: no platform pose for the goal lengths "
-                                 f"{np.round(goal_q * 1e3, 3).tolist()} mm of --geometry "
-                                 f"{geometry_spec}: {exc}") from None
-        Rg, tg = goal.rotation, goal.translation
+        Rg, tg = pose(goal_q, "", f"goal lengths {np.round(goal_q * 1e3, 3).tolist()}")
     else:
         Rg, tg = R[-1], t[-1]
     vis = np.ones((n, 6, 2), bool)

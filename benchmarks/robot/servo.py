@@ -1,39 +1,20 @@
 """The real servo loop: one controller, a robot over its serial link, a camera.
 
-``hexapod-bench servo --backend serial:URL|emulator|gcs:tcp://HOST:PORT|NAME[:ARGS]
---camera device:N|video:PATH|sim --controller NAME --goal FILE`` runs one controller at
-the control period until the robot converges, a limit is reached (``--max-time-s``,
-``--max-steps``, ``--max-travel-mm``, missed deadlines), the recording ends, the camera
-disagrees with the encoders or stays blind (:mod:`benchmarks.robot.consistency`, a
-per-period check of the session), a signal (SIGINT, SIGTERM, SIGHUP) or a failure;
-``--camera`` is required with real hardware (:mod:`benchmarks.robot.camera_policy`).
-Every way out goes through the same shutdown
-(:mod:`benchmarks.robot.session`): ``HLT``, its confirmation awaited, a summary, the
-final record, an exit code of :class:`~benchmarks.robot.exits.ServoExit`.
+``hexapod-bench servo --backend SPEC --camera SPEC --controller NAME --goal FILE`` runs one
+controller at the control period until the robot converges, a limit is reached, the
+recording ends, the camera disagrees with the encoders or stays blind
+(:mod:`benchmarks.robot.consistency`), a signal or a failure; every way out goes through
+the session's one shutdown (:mod:`benchmarks.robot.session`: ``HLT``, its confirmation, a
+summary, the final record, an exit code of :class:`~benchmarks.robot.exits.ServoExit`).
+Each period (:mod:`benchmarks.robot.loop`): the measured lengths give the predicted pose,
+the camera an image and its edges, the controller leg velocities (zero when refused or
+without an image), the backend streams them and reads the lengths back.
 
-Each period:
-
-1. the lengths measured by the board at the end of the previous period give the
-   predicted platform pose (forward kinematics of the nominal model);
-2. the camera gives an image (``--camera sim`` renders the legs at that pose, so the
-   whole loop can be tried against the emulator); the edge detector, seeded by the
-   prediction (and by the last measured normals when every edge was found), gives
-   the edge normals;
-3. the controller turns the :class:`~controllers.base.Observation` into leg
-   velocities; a refused command (``Command.reason``) or a lost frame commands zero;
-4. the backend streams the setpoints (``MOV``), waits for the end of the period
-   and reads the lengths back (``POS?``).
-
-The goal file (TOML, see ``docs/servo.md``) holds the goal configuration taught on
-the robot, ``lengths_mm = [6 values]``; the desired features are then predicted
-from the nominal model at the forward kinematics of those lengths, seen by the
-(estimated) camera. ``features = "goal.npz"`` (written by ``--teach``) gives the
-features measured at the goal instead, which a real camera needs (the model's
-prediction carries the calibration errors); ``--teach`` averages them over a burst of
-``--teach-frames`` frames of the still robot.
-
-SI units inside (metres, seconds); millimetres at the user's edges (goal file,
-status line, log).
+The goal file (TOML) holds the goal configuration taught on the robot,
+``lengths_mm = [6 values]``, and optionally ``features = "goal.npz"`` (written by
+``--teach``, averaged over ``--teach-frames`` frames of the still robot); without them
+the desired features are predicted from the nominal model (``docs/servo.md``). SI units
+inside; millimetres at the user's edges.
 """
 
 from __future__ import annotations
@@ -72,7 +53,7 @@ from benchmarks.robot.limits import (
     MISSED_WINDOW,
 )
 from benchmarks.robot.loop import DEFAULT_FEATURE_TOLERANCE, DEFAULT_SETTLE
-from benchmarks.robot.models import camera_model, robot_geometry
+from benchmarks.robot.models import add_robot_arguments, camera_model, check_dt, robot_geometry
 from benchmarks.robot.records import LOG_NAME, SESSIONS_DIR, session_path
 from benchmarks.robot.session import (
     DEFAULT_HALT_TIMEOUT_S,
@@ -86,27 +67,6 @@ from benchmarks.study.outdir import OutputDir, OutputFile
 from hexapod.geometry import HexapodGeometry
 from vision.feature_cameras import Features, open_camera
 
-__all__ = [
-    "DEFAULT_FEATURE_TOLERANCE",
-    "DEFAULT_SETTLE",
-    "DEFAULT_TEACH_FRAMES",
-    "SIMULATED_BACKENDS",
-    "Features",
-    "add_arguments",
-    "average_features",
-    "build_parser",
-    "goal_features",
-    "load_goal",
-    "main",
-    "open_backend",
-    "open_camera",
-    "parse_options",
-    "run",
-    "save_goal",
-    "teach_tolerance",
-]
-
-log = logging.getLogger(__name__)
 
 def open_backend(spec: str, geometry: HexapodGeometry,
                  start: np.ndarray | None = None) -> Any:
@@ -194,14 +154,12 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--camera-pose", metavar="PRESET|TOML",
                    help="with a calibration file: the camera's pose, a preset's placement "
                         "(front, omni, fisheye) or a camera TOML file's camera_from_base")
-    p.add_argument("--geometry", default="deltalab",
-                   help="nominal robot: a geometry TOML file or a preset (default deltalab)")
+    add_robot_arguments(p)
     p.add_argument("--calibration", metavar="FILE",
                    help="calibrated.toml: the controller uses these base points (camera "
                         "frame) instead of the nominal ones")
     p.add_argument("--allow-foreign-calibration", action="store_true",
                    help="use a --calibration made with another robot or camera (warned)")
-    p.add_argument("--dt", type=float, default=0.02, help="control period [s] (default 0.02)")
     lim = p.add_argument_group("limits (reaching one halts the robot, exit 3)")
     lim.add_argument("--max-steps", type=int,
                      help="stop after N periods (default: no period budget)")
@@ -254,11 +212,6 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--viz", action="store_true", help="live MeshCat view (loopback server)")
 
 
-#: The session's models (:mod:`benchmarks.robot.models`), by the names it uses.
-_geometry = robot_geometry
-_camera = camera_model
-
-
 def parse_options(items: list[str]) -> dict[str, Any]:
     """Controller options from ``KEY=VALUE`` strings (VALUE read as TOML, else a string).
 
@@ -281,8 +234,7 @@ def parse_options(items: list[str]) -> dict[str, Any]:
 
 
 def _check_args(args: argparse.Namespace) -> None:
-    if not (math.isfinite(args.dt) and args.dt > 0):
-        raise BenchmarkError(f"--dt must be a positive period in seconds, got {args.dt}")
+    check_dt(args.dt)
     if args.max_steps is not None and args.max_steps < 1:
         raise BenchmarkError(f"--max-steps must be >= 1, got {args.max_steps}")
     if not args.tolerance_mm > 0 or not args.feature_tolerance > 0:
@@ -352,14 +304,10 @@ def _teach(args: argparse.Namespace, geometry: HexapodGeometry, camera: Any,
 
 
 def run(args: argparse.Namespace) -> int:
-    """``hexapod-bench servo``: the session (or ``--teach``); returns the exit code.
-
-    Exit codes: :class:`~benchmarks.robot.exits.ServoExit` (0 converged or taught, 1
-    internal error, 2 refused before moving, 3 a limit, 4 the link failed during
-    motion, 5 a safety stop, 130 SIGINT, 143 SIGTERM, 129 SIGHUP). Bad inputs found
-    before anything is opened raise (the CLI maps them to 2); from the session record's
-    creation on, every way out goes through :func:`~benchmarks.robot.session.run_session`'s
-    shutdown.
+    """``hexapod-bench servo``: the session (or ``--teach``); returns the exit code
+    (:class:`~benchmarks.robot.exits.ServoExit`). Bad inputs found before anything is
+    opened raise (the CLI maps them to 2); from the session record's creation on, every
+    way out goes through :func:`~benchmarks.robot.session.run_session`'s shutdown.
     """
     import controllers  # noqa: F401 - registers the built-ins
     from benchmarks.study.calibration import read_calibrated_file
@@ -372,8 +320,8 @@ def run(args: argparse.Namespace) -> int:
     backends.check(args.backend)  # a bad spec is reported before anything is opened
     args.camera = choose_camera(args.backend, args.camera,
                                 getattr(args, "simulated_camera_on_real_robot", False))
-    geometry = _geometry(args.geometry)
-    camera = _camera(args.camera_file, args.camera_pose, geometry)
+    geometry = robot_geometry(args.geometry)
+    camera = camera_model(args.camera_file, args.camera_pose, geometry)
     start = None if args.start_mm is None else np.asarray(args.start_mm, float) * 1e-3
     if start is not None:
         bad = [i + 1 for i, x in enumerate(start)

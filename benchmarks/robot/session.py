@@ -35,8 +35,6 @@ from hexapod.backends.base import HaltReport
 from hexapod.exceptions import BackendError, LinkError, ProtocolError, RobotFaultError
 from hexapod.geometry import HexapodGeometry
 
-__all__ = ["SessionInputs", "run_session", "session_limits"]
-
 #: Default ``--halt-timeout-s`` [s]: how long the shutdown waits for the robot to
 #: confirm its stop (longer than a 2 s stall of the link plus the time to detect it).
 DEFAULT_HALT_TIMEOUT_S = 3.0
@@ -236,13 +234,9 @@ def run_session(args: argparse.Namespace, inputs: SessionInputs, status: StatusL
         inputs: What was checked before anything is opened.
         status: The status line.
         on_pose: The viewer's hook (``--viz``), or None.
-        checks: Per-period safety checks (:class:`~benchmarks.robot.loop.PeriodCheck`:
-            called after each image with the measured lengths and the features; a
-            :class:`~benchmarks.robot.exits.SessionStop` they raise ends the session
-            through the shutdown with its code), after the signal check: the camera
-            check (:class:`~benchmarks.robot.consistency.CameraCheck`). A check with a
-            ``summary()`` method has its line printed after the session's summary and
-            written to the final record (``checks``).
+        checks: Per-period safety checks (:class:`~benchmarks.robot.loop.PeriodCheck`),
+            after the signal check: the camera check. A check with a ``summary()`` method
+            has its line printed after the session's summary and in the final record.
 
     Raises:
         OutputError: The record cannot be placed (``--out``, ``--log``), before anything
@@ -297,18 +291,13 @@ def run_session(args: argparse.Namespace, inputs: SessionInputs, status: StatusL
                 code, reason = sig, f"{signal_name(guard.pending)} received (then {reason})"
         else:
             code, reason = _outcome(result, args)
-        halt: HaltReport | None = None
-        if robot is not None:
-            halt = _halt(robot, args.halt_timeout_s)
-            try:
-                robot.close()
-            except Exception as exc:
-                reason += f"; closing the robot failed: {exc}"
-        if sensor is not None:
-            try:
-                sensor.close()
-            except Exception as exc:
-                reason += f"; closing the camera failed: {exc}"
+        halt = None if robot is None else _halt(robot, args.halt_timeout_s)
+        for what, opened in (("robot", robot), ("camera", sensor)):
+            if opened is not None:
+                try:
+                    opened.close()
+                except Exception as exc:
+                    reason += f"; closing the {what} failed: {exc}"
         failed = ended is not None and not isinstance(ended, SessionStop)
         log.final({"exit_code": int(code), "exit": code.name.lower(), "reason": reason,
                    "exception": f"{type(ended).__name__}: {ended}" if failed else None,
@@ -367,7 +356,7 @@ def log_period(log: SessionLog, status: StatusLine) -> Any:
     """The loop's ``on_period``: the status line and the log line."""
     def on_period(s: PeriodStatus) -> None:
         status(s)
-        log.period(s.to_json())
+        log.write(s.to_json())
 
     return on_period
 

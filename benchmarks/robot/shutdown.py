@@ -1,11 +1,5 @@
-"""The signals of a servo session: SIGINT, SIGTERM and SIGHUP all end in its one shutdown.
-
-:class:`SignalGuard` installs its handlers for the session's duration (the previous ones
-are restored after). Outside the loop (connecting, the ``--confirm`` question) a signal
-stops the session at once; inside the loop the first signal is taken at the next period
-(no exchange with the robot is cut in the middle) and a second one at once. During the
-shutdown (halt, confirmation, final record) signals are only noted: a second Ctrl-C or a
-``kill`` never skips the halt.
+"""The signals of a servo session: SIGINT, SIGTERM and SIGHUP all end in its one shutdown
+(:class:`SignalGuard`).
 """
 
 from __future__ import annotations
@@ -20,8 +14,6 @@ import numpy as np
 
 from benchmarks.robot.exits import SessionStop, exit_for_signal
 
-__all__ = ["SESSION_SIGNALS", "SignalGuard", "signal_name"]
-
 #: The signals that end a session through its shutdown.
 SESSION_SIGNALS = (signal.SIGINT, signal.SIGTERM, signal.SIGHUP)
 
@@ -33,7 +25,10 @@ def signal_name(signum: int) -> str:
 
 class SignalGuard:
     """SIGINT, SIGTERM and SIGHUP turned into a :class:`SessionStop` with their exit code
-    (130, 143, 129), for the duration of a ``with`` block.
+    (130, 143, 129), for the duration of a ``with`` block (the previous handlers are
+    restored after). Outside the loop a signal stops the session at once; inside it the
+    first signal is taken at the next period (no exchange with the robot is cut) and a
+    second one at once; during the shutdown signals are only noted (never skip the halt).
 
     Args:
         say: Shows a line to the user (during the shutdown).
@@ -70,11 +65,7 @@ class SignalGuard:
 
     def __call__(self, step: int, lengths: np.ndarray, features: Any) -> None:
         """A per-period check (:class:`~benchmarks.robot.loop.PeriodCheck`): a pending
-        signal ends the session.
-
-        Raises:
-            SessionStop: A signal was received.
-        """
+        signal ends the session (:class:`SessionStop`)."""
         if self.pending is not None and not self.shutting_down:
             raise self._stop(self.pending)
 

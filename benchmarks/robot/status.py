@@ -15,8 +15,6 @@ import numpy as np
 from benchmarks.robot.exits import SessionStop
 from benchmarks.robot.records import mm_list
 
-__all__ = ["PLAIN_STATUS_PERIOD_S", "PeriodStatus", "ServoResult", "StatusLine"]
-
 #: Plain status lines (stdout not a terminal) are printed every this many seconds.
 PLAIN_STATUS_PERIOD_S = 1.0
 
@@ -38,9 +36,8 @@ class PeriodStatus:
         lost_frame: The camera gave no image this period.
         rtt: Time spent communicating with the robot (the link time) [s].
         missed: This period was late.
-        missed_total: Late periods so far.
-        lost_total: Lost frames so far.
-        refused_total: Refused commands so far.
+        missed_total, lost_total, refused_total: Late periods, lost frames and refused
+            commands so far.
         applied: (6,) the velocities the robot applied [m/s] (after the session's speed
             cap and the backend's stroke and speed clamps).
         clamped: (6,) legs whose command was clamped (speed cap, stroke, speed limit).
@@ -133,25 +130,16 @@ class ServoResult:
     compute: list[float] = field(default_factory=list)
     stop: SessionStop | None = None
 
-    @property
-    def converged(self) -> bool:
-        """The loop stopped at convergence."""
-        return self.outcome == "converged"
-
-    @property
-    def rate_hz(self) -> float:
-        """Achieved loop rate [Hz]."""
-        return self.steps / self.wall_s if self.wall_s > 0 else math.nan
-
     def summary(self) -> str:
         """One line for the user (mm, ms, Hz): ``converged after N periods ...`` or
         ``stopped after N periods ...`` (why is the ``stopped:`` line's, not the internal
         :attr:`outcome`)."""
         rt = np.array(self.rtts) * 1e3 if self.rtts else np.array([math.nan])
         ct = np.array(self.compute) * 1e3 if self.compute else np.array([math.nan])
-        verdict = "converged" if self.converged else "stopped"
+        verdict = "converged" if self.outcome == "converged" else "stopped"
+        rate_hz = self.steps / self.wall_s if self.wall_s > 0 else math.nan
         s = (f"{verdict} after {self.steps} periods ({self.wall_s:.2f} s, "
-             f"{self.rate_hz:.1f} Hz): {self.missed} missed periods, {self.lost_frames} lost "
+             f"{rate_hz:.1f} Hz): {self.missed} missed periods, {self.lost_frames} lost "
              f"frames, {self.refused} refused commands; compute median {np.median(ct):.2f} "
              f"ms, p99 {np.percentile(ct, 99):.2f} ms; RTT median {np.median(rt):.2f} ms, "
              f"p99 {np.percentile(rt, 99):.2f} ms")

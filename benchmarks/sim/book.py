@@ -9,7 +9,7 @@ import logging
 import statistics
 import traceback
 from collections.abc import Callable
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
@@ -36,6 +36,8 @@ SERIES_KEYS = ("t", "lengths", "rotations", "translations", "edge_visible", "err
                "position_error", "orientation_error", "velocities")
 #: The series whose values are arrays of the loop's (copied when recorded).
 COPIED = ("lengths", "rotations", "translations", "edge_visible", "velocities")
+#: A live view's callback ``(trial, rotation, translation, edge_visible)``.
+OnStep = Callable[[int, np.ndarray, np.ndarray, np.ndarray], None]
 
 
 @dataclass
@@ -46,105 +48,74 @@ class TrialResult:
     series: dict[str, np.ndarray] | None = None
 
 
-@dataclass
 class Book:
-    """Per-trial bookkeeping arrays of a group of ``n`` trials (index = row of the group),
-    and the loop's hooks (:meth:`attach` first)."""
+    """Per-trial bookkeeping arrays of a group of trials (index = row of the group).
 
-    n: int
-    pos_tol: float
-    ori_tol: float
-    tail_start: int
-    active: np.ndarray
-    steps: np.ndarray
-    settled: np.ndarray
-    last_bad: np.ndarray
-    converged: np.ndarray
-    violations: np.ndarray
-    refused: np.ndarray
-    hidden: np.ndarray
-    recording: np.ndarray  # (n,) bool: the rows whose series are kept
-    failure: list[str | None] = field(default_factory=list)
-    #: A fixed-duration task's position [m] and orientation [rad] errors of the periods
-    #: after ``tail_start`` (column ``step - tail_start - 1``), and which were measured.
-    tail_pos: np.ndarray = field(default_factory=lambda: np.zeros((0, 0)))
-    tail_ori: np.ndarray = field(default_factory=lambda: np.zeros((0, 0)))
-    tail_seen: np.ndarray = field(default_factory=lambda: np.zeros((0, 0), dtype=bool))
-    step_times: list[list[float]] = field(default_factory=list)
-    series: list[dict[str, list[Any]]] = field(default_factory=list)
-    tracker: Any = None  # the tracking metrics of a trajectory task
-    task: Any = None  # the scenario's task
-    dt: float = 0.0  # the control period [s]
-    stroke: tuple[float, float] = (0.0, 0.0)  # the true legs' stroke [m]
-    max_speed: float = 0.0  # the true legs' speed limit [m/s]
-    trials: list[int] = field(default_factory=list)  # the trial index of each row
-    # set by attach: the loop's world
-    plant: Any = None
-    targets: Callable[[int, np.ndarray], tuple[np.ndarray, np.ndarray]] | None = None
-    actuation: Actuation = Actuation.VELOCITY
-    label: str = ""
-    on_step: Callable[[int, np.ndarray, np.ndarray, np.ndarray], None] | None = None
-    batch_times: list[float] = field(default_factory=list)  # controller time per row [s]
-    stepped: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=int))
-    _errors: tuple[np.ndarray, np.ndarray] | None = None  # this period's pose errors
-    scenario: str = ""  # the scenario's name (log lines)
-    causes: dict[int, str] = field(default_factory=dict)  # a crash's cause, user's terms
-    #: The last position [m] and orientation [rad] errors of every row (NaN before its
-    #: first period): a batch that fails as a whole reports them.
-    last_errors: tuple[np.ndarray, np.ndarray] = field(
-        default_factory=lambda: (np.zeros(0), np.zeros(0)))
+    Args:
+        sc: The scenario (its task, period and name).
+        group: The trials.
+        record_trials: Trials with an index below this keep their time series.
+        plant: The loop's plant (its true state; the tracking metrics sample its drive
+            forces).
+        targets: ``(step, rows) -> (R, t)``: the pose each row is measured against.
+        actuation: What the controller declared it commands.
+        label: The controller's label.
+        on_step: A live view's callback (:data:`OnStep`).
+    """
 
-    @classmethod
-    def new(cls, sc: SimScenario, group: list[TrialSetup], record_trials: int) -> Book:
-        """Fresh bookkeeping of a group."""
-        from benchmarks.sim.tracking import tracker_for
+    def __init__(self, sc: SimScenario, group: list[TrialSetup], record_trials: int,
+                 plant: Any, targets: Callable[[int, np.ndarray], tuple[np.ndarray, np.ndarray]],
+                 actuation: Actuation, label: str,
+                 on_step: OnStep | None) -> None:
+        from benchmarks.sim.tracking import Tracker
 
         n = len(group)
-        recording = [s.trial < record_trials for s in group]
-        pos_tol = 1e-3 * sc.task.position_tolerance_mm
-        ori_tol = float(np.deg2rad(sc.task.orientation_tolerance_deg))
-        tail = max(1, sc.task.max_steps // 5) if sc.task.fixed_duration else 0
-        return cls(
-            n=n, pos_tol=1e-3 * sc.task.position_tolerance_mm,
-            ori_tol=float(np.deg2rad(sc.task.orientation_tolerance_deg)),
-            tail_start=sc.task.max_steps - max(1, sc.task.max_steps // 5),
-            active=np.ones(n, dtype=bool), steps=np.zeros(n, dtype=int),
-            settled=np.zeros(n, dtype=int), last_bad=np.full(n, -1),
-            converged=np.zeros(n, dtype=bool), violations=np.zeros(n, dtype=int),
-            refused=np.zeros(n, dtype=int),
-            hidden=np.zeros(n, dtype=int), recording=np.array(recording, dtype=bool),
-            failure=[None] * n,
-            tail_pos=np.zeros((n, tail)), tail_ori=np.zeros((n, tail)),
-            tail_seen=np.zeros((n, tail), dtype=bool),
-            step_times=[[] for _ in range(n)],
-            series=[{k: [] for k in SERIES_KEYS} if rec else {} for rec in recording],
-            tracker=tracker_for(sc, group, pos_tol, ori_tol), task=sc.task, dt=sc.dt,
-            stroke=group[0].world.geometry.stroke if group else (0.0, 0.0),
-            max_speed=group[0].world.geometry.max_speed if group else 0.0,
-            trials=[s.trial for s in group], stepped=np.zeros(n, dtype=int),
-            scenario=sc.name, last_errors=(np.full(n, np.nan), np.full(n, np.nan)))
-
-    def attach(self, plant: Any, targets: Callable[[int, np.ndarray],
-                                                   tuple[np.ndarray, np.ndarray]],
-               actuation: Actuation, label: str,
-               on_step: Callable[[int, np.ndarray, np.ndarray, np.ndarray], None] | None
-               ) -> None:
-        """The loop's world: the plant (its true state; the tracking metrics sample its
-        drive forces), the pose each row is measured against at each step, what the
-        controller ``label`` declared it commands, and a live view's callback
-        ``(trial, rotation, translation, edge_visible)``."""
-        self.plant = plant
-        self.targets = targets
-        self.actuation = actuation
-        self.label = label
-        self.on_step = on_step
+        task = self.task = sc.task
+        self.pos_tol = 1e-3 * task.position_tolerance_mm
+        self.ori_tol = float(np.deg2rad(task.orientation_tolerance_deg))
+        tail = max(1, task.max_steps // 5)
+        self.tail_start = task.max_steps - tail
+        if not task.fixed_duration:
+            tail = 0
+        self.active = np.ones(n, dtype=bool)
+        self.steps = np.zeros(n, dtype=int)
+        self.settled = np.zeros(n, dtype=int)
+        self.last_bad = np.full(n, -1)
+        self.converged = np.zeros(n, dtype=bool)
+        self.violations = np.zeros(n, dtype=int)
+        self.refused = np.zeros(n, dtype=int)
+        self.hidden = np.zeros(n, dtype=int)
+        #: (n,) bool: the rows whose series are kept.
+        self.recording = np.array([s.trial < record_trials for s in group], dtype=bool)
+        self.failure: list[str | None] = [None] * n
+        #: A fixed-duration task's position [m] and orientation [rad] errors of the periods
+        #: after ``tail_start`` (column ``step - tail_start - 1``), and which were measured.
+        self.tail_pos, self.tail_ori = np.zeros((n, tail)), np.zeros((n, tail))
+        self.tail_seen = np.zeros((n, tail), dtype=bool)
+        self.series: list[dict[str, list[Any]]] = [
+            {k: [] for k in SERIES_KEYS} if rec else {} for rec in self.recording]
+        self.tracker = (Tracker(sc, group, self.pos_tol, self.ori_tol)
+                        if task.kind == "trajectory" else None)  # a trajectory's metrics
+        self.dt = sc.dt
+        g = group[0].world.geometry
+        self.stroke, self.max_speed = g.stroke, g.max_speed  # the true legs' limits [m, m/s]
+        self.trials = [s.trial for s in group]  # the trial index of each row
+        self.batch_times: list[float] = []  # controller time per row [s], every period
+        self.stepped = np.zeros(n, dtype=int)  # periods each row was commanded
+        self.scenario = sc.name  # (log lines)
+        self.causes: dict[int, str] = {}  # a crash's cause, in the user's terms
+        #: The last position [m] and orientation [rad] errors of every row (NaN before its
+        #: first period): a batch that fails as a whole reports them.
+        self.last_errors = (np.full(n, np.nan), np.full(n, np.nan))
+        self._errors: tuple[np.ndarray, np.ndarray] | None = None  # this period's errors
+        self.plant, self.targets = plant, targets
+        self.actuation, self.label, self.on_step = actuation, label, on_step
         if self.tracker is not None:
             self.tracker.follow(plant)
 
     def check(self, step: int, idx: np.ndarray) -> np.ndarray:
         """The convergence test of one period for the active rows ``idx`` (their pose
         errors to their targets); returns which of them are done."""
-        assert self.targets is not None, "Book.attach first"
         R, t = self.plant.R, self.plant.t
         if len(idx) < len(R):  # (every row: the arrays themselves, no copies)
             R, t = R[idx], t[idx]
@@ -228,21 +199,13 @@ class Book:
             r = int(rows[j])
             mask[j] = True
             self.failure[r] = f"{label} failed at step {step}: {type(exc).__name__}: {exc}"
-            self.causes[r] = user_message(exc)
-            trial = self.trials[r]
-            log.warning("trial %s/%s/%d failed at step %d: %s", scenario, label, trial, step,
-                        self.causes[r], extra={"cause": self.causes[r]})
-            if not isinstance(exc, HexapodError | VisionError | ControllerError):
-                log.info("traceback of trial %s/%s/%d:\n%s", scenario, label, trial,
-                         "".join(traceback.format_exception(exc)))
+            self.causes[r] = log_failure(scenario, label, self.trials[r], exc,
+                                         f" at step {step}")
         return mask
 
     def stopped(self, step: int, exc: Exception) -> BaseException:
-        """The exception the loop raises when the controller's batch failed as a whole at
-        ``step`` (``step_batch`` raised, or its commands were refused by
-        :meth:`commanded`): a :class:`~benchmarks.exceptions.BatchFailedError` with the
-        last errors of every row (each trial of the group gets a failure row saying so;
-        nothing is rerun)."""
+        """A :class:`~benchmarks.exceptions.BatchFailedError` with the last errors of every
+        row (each trial of the group gets a failure row saying so; nothing is rerun)."""
         return BatchFailedError(step, self.last_errors, exc)
 
     def period(self, step: int, idx: np.ndarray, done: np.ndarray, obs: ObservationBatch,
@@ -280,10 +243,7 @@ class Book:
                 figures: Callable[[int], dict[str, Any]] | None = None) -> list[TrialResult]:
         """The result rows (and recorded series) of the group at the final poses
         (``figures``: a plant's extra figures of row ``m``)."""
-        if self.batch_times:  # a row is commanded from step 0 until it is done
-            per_row = np.array(self.batch_times)
-            for m in range(self.n):
-                self.step_times[m] = per_row[:self.stepped[m]].tolist()
+        per_row = np.array(self.batch_times)  # a row is commanded from step 0 until done
         R_goal = np.array([s.goal_rotation for s in group])
         t_goal = np.array([s.goal_translation for s in group])
         dp, da = pose_error(R, t, R_goal, t_goal)
@@ -302,7 +262,7 @@ class Book:
                 fail = unconverged_reason(sc.task, float(dp[m] * 1e3),
                                           float(np.rad2deg(da[m])))
             settle = int(self.last_bad[m] + 1) if sc.task.fixed_duration else int(self.steps[m])
-            times = self.step_times[m]
+            times = per_row[:self.stepped[m]].tolist()
             row.update({
                 "converged": conv,
                 "steps": settle,
@@ -388,13 +348,20 @@ def failure_row(sc: SimScenario, spec: Any, trial: int, exc: BaseException,
                                         else None),
         "stroke_violations": 0, "step_time_us": None,
         "failure": (f"{batch}: " if batch else "") + f"{type(exc).__name__}: {exc}",
-        "cause": user_message(exc),
+        "cause": log_failure(sc.name, spec.label, trial, exc),
     })
-    # one line in the user's terms (the command line prints each cause once and counts
-    # the repeats); the traceback of an unexpected error only with -v (INFO)
-    log.warning("trial %s/%s/%d failed: %s", sc.name, spec.label, trial, row["cause"],
-                extra={"cause": row["cause"]})
-    if not isinstance(exc, HexapodError | VisionError | ControllerError):
-        log.info("traceback of trial %s/%s/%d:\n%s", sc.name, spec.label, trial,
-                 "".join(traceback.format_exception(exc)))
     return row
+
+
+def log_failure(scenario: str, label: str, trial: int, exc: BaseException, when: str = ""
+                ) -> str:
+    """Log a trial's failure in one line in the user's terms (the command line prints
+    each cause once and counts the repeats), the traceback of an unexpected error only
+    with -v (INFO); returns that cause (:func:`benchmarks.exceptions.user_message`)."""
+    cause = user_message(exc)
+    log.warning("trial %s/%s/%d failed%s: %s", scenario, label, trial, when, cause,
+                extra={"cause": cause})
+    if not isinstance(exc, HexapodError | VisionError | ControllerError):
+        log.info("traceback of trial %s/%s/%d:\n%s", scenario, label, trial,
+                 "".join(traceback.format_exception(exc)))
+    return cause

@@ -1,30 +1,18 @@
-"""The camera's clock: frames at their own rate, delivered after a latency, with
-timestamp jitter; the encoders are read at every control period.
+"""The camera's clock (``[clock]``, ``docs/scenarios.md``, "The camera's clock"): frames at
+their own rate, delivered after a latency, with timestamp jitter; the encoders are read
+at every control period.
 
-Frame ``k`` is captured at ``c_k = k / frame_rate + j_k`` (``j_k`` the jitter: normal
-with standard deviation ``jitter_ms``, clipped to +-0.45 frame so that frames stay in
-order, drawn from the trial's stream 5) and reaches the controller at ``c_k + latency``
-(``latency_ms / 1000 + latency_frames / frame_rate``). At the control instant
-``tau = step dt`` the controller gets the newest frame delivered by then, with its
-capture time as the observation's ``image_t``; the same frame is given again until the
-next one arrives. The camera runs before the task starts: frames captured before 0 see
-the robot at rest at its start pose.
-
-The image shows the true robot at ``c_k``. In the kinematic world the legs move at a
-constant (clamped) speed within a period, so the true lengths at ``c_k`` are the linear
-interpolation of the two control instants around it, exactly, and the pose is the
-forward kinematics of the true robot, warm-started at the earlier instant (a frame
-captured on a control instant takes that instant's pose, bit for bit).
-
-With an exposure time ``T`` (``exposure_ms``, rendered images only) frame ``k`` is
-exposed over ``[c_k - T, c_k]``: the sensor gets the true poses at the midpoints of
-``exposure_samples`` equal slices of it and averages their images
-(:func:`vision.exposure.render_exposed`), and ``image_t`` is ``c_k - T / 2``, the middle
-of the exposure. The frame is still delivered at ``c_k + latency``.
-
-Without a ``[clock]`` table (or with ``frame_rate_hz = 0`` and no latency or jitter)
-the camera is triggered at every control instant and its image arrives at once: the
-measurement is exactly the one the engines made before the clock existed.
+Frame ``k`` is captured at ``c_k = k / frame_rate + j_k`` (the jitter ``j_k``: normal,
+``jitter_ms``, clipped to +-0.45 frame so that frames stay in order, drawn from the
+trial's stream 5) and delivered at ``c_k + latency``; at ``tau = step dt`` the controller
+gets the newest frame delivered (again until the next), its capture time as ``image_t``.
+The image shows the true robot at ``c_k``: the true lengths interpolated between the two
+control instants around it (exact in the kinematic world) and their forward kinematics,
+warm-started at the earlier instant (a frame on a control instant takes that instant's
+pose, bit for bit); frames before 0 see the start pose. With an exposure ``T`` the
+sensor gets the poses at the midpoints of ``exposure_samples`` slices of
+``[c_k - T, c_k]`` and ``image_t`` is ``c_k - T / 2``. Without a clock (or a camera at
+the control rate without latency) the measurement is the one the engines make without.
 """
 
 from __future__ import annotations
@@ -35,6 +23,7 @@ from collections.abc import Callable
 import numpy as np
 
 from benchmarks.sim.inputs import SimScenario
+from benchmarks.sim.sensors import camera_batch
 from benchmarks.sim.world import TrialSetup, trial_rng
 from controllers.base import ObservationBatch
 from hexapod.fk import pack_rows, set_guesses, solve_rows
@@ -59,14 +48,6 @@ def clock_active(sc: SimScenario) -> bool:
                               or c.jitter_ms > 0 or c.exposure_ms > 0)
 
 
-def latency_s(sc: SimScenario) -> float:
-    """The scenario's image latency [s] (frames counted at the frame rate, or at the
-    control rate when the camera is triggered by the controller)."""
-    c = sc.clock
-    period = 1.0 / c.frame_rate_hz if c.frame_rate_hz > 0 else sc.dt
-    return 1e-3 * c.latency_ms + c.latency_frames * period
-
-
 class CameraClock:
     """The frames of a group of trials (index = row of the group).
 
@@ -86,8 +67,9 @@ class CameraClock:
         n = len(group)
         self.dt = sc.dt
         self.q, self.R, self.t = q, R, t
+        # (a camera triggered by the controller: frames counted at the control rate)
         self.period = 1.0 / c.frame_rate_hz if c.frame_rate_hz > 0 else sc.dt
-        self.latency = latency_s(sc)
+        self.latency = 1e-3 * c.latency_ms + c.latency_frames * self.period
         run = sc.task.max_steps * sc.dt
         before = math.ceil(self.latency / self.period) + 2  # frames captured before 0
         count = before + math.ceil(run / self.period) + 2
@@ -140,10 +122,8 @@ class CameraClock:
             self._store(rows, m, len(self.q))
             self.frame[rows] = newest[new]
         frame = {k: (None if v is None else v[idx]) for k, v in self.cache.items()}
-        return ObservationBatch(trials=np.arange(len(idx)), t=np.zeros(len(idx)),
-                                lengths=np.full((len(idx), 6), np.nan),
-                                image_t=self.capture[idx, self.frame[idx]] - 0.5 * self.exposure,
-                                **frame)  # type: ignore[arg-type]
+        return camera_batch(**frame,  # type: ignore[arg-type]
+                            image_t=self.capture[idx, self.frame[idx]] - 0.5 * self.exposure)
 
     def _exposed_poses(self, rows: np.ndarray, c: np.ndarray, step: int
                        ) -> tuple[np.ndarray, np.ndarray]:
@@ -193,22 +173,3 @@ class CameraClock:
             t[j[ok]] = sol.translations[ok]
         return R, t
 
-
-def make_clock(sc: SimScenario, group: list[TrialSetup], q: np.ndarray, R: np.ndarray,
-               t: np.ndarray, base_points: np.ndarray, platform_points: np.ndarray
-               ) -> CameraClock | None:
-    """The camera clock of a group of trials, or None when the camera has none."""
-    if not clock_active(sc):
-        return None
-    return CameraClock(sc, group, q, R, t, base_points, platform_points)
-
-
-def clocked_measure(clock: CameraClock | None, step: int, idx: np.ndarray,
-                    state: tuple[np.ndarray, np.ndarray], measure: Measure
-                    ) -> ObservationBatch:
-    """The camera's batch of the rows ``idx`` at control step ``step``: the sensor at the
-    rows' current poses without a clock (``image_t`` None), else through
-    :meth:`CameraClock.measure`."""
-    if clock is None:
-        return measure(idx, state[0][idx], state[1][idx])
-    return clock.measure(step, idx, measure)

@@ -1,33 +1,23 @@
-"""The dynamic world: the TRUE robot's mechanism, drives and encoders between control periods.
+"""The dynamic world: the TRUE robot's mechanism, drives and encoders between control periods
+(``[robot] world = "dynamic"``, ``docs/dynamic-world.md``).
 
-``[robot] world = "dynamic"`` (``docs/dynamic-world.md``). Every trial's true robot (its own
-geometry, inertia and drives, :mod:`benchmarks.sim.world`) is integrated over a control
-period ``dt`` in ``dt / physics_dt`` steps by :class:`hexapod.dynamics.robots.DynamicRobots`
-(linearly implicit Euler in the twist, semi-implicit Euler on SE(3) for the pose; the
-legs follow). In velocity mode the drives' setpoints are the controller's leg velocities
-clamped to the stroke and speed limits as the kinematic world clamps them; in force mode
-they are leg forces.
-
-A trial starts at rest, its drives holding the platform against gravity. Its world fails
-when, at the end of a period, a leg is beyond its stroke by more than :data:`END_STOP` (it
-hit an end stop) or the state is not finite.
-
-The controller sees the encoders: true lengths plus the joint offsets, quantised to the
-encoder resolution. The plant gives each trial's result row its largest drive force, the
-time any drive spent at its force limit and the drive tracking error (velocity setpoint
-minus realised leg velocity), and its recorded series the drives' forces. A scenario with
-a ``[payload]`` also gets each leg's time at its force limit (s and fraction of the time
-run) and the fraction of the time run that any leg spent there (:data:`SATURATION_COLUMNS`;
-the rows of the other scenarios are unchanged).
+Every trial's true robot is integrated over a control period in ``dt / physics_dt``
+steps by :class:`hexapod.dynamics.robots.DynamicRobots`, from rest with its drives
+holding the platform against gravity; the drives' setpoints are the controller's leg
+velocities clamped as the kinematic world clamps them, or leg forces in force mode. A
+trial's world fails when a leg ends a period beyond its stroke by more than
+:data:`END_STOP` (an end stop) or the state is not finite. The controller sees the
+encoders (true lengths plus the joint offsets, quantised to the encoder resolution); the
+rows get the drive figures (:meth:`DynamicPlant.row_figures`), the series the forces.
 """
 
 from __future__ import annotations
 
-import logging
 from typing import Any
 
 import numpy as np
 
+from benchmarks.sim.plant import Plant
 from benchmarks.sim.world import TrialSetup
 from hexapod.actuation import Actuation
 from hexapod.backends.base import clamp_velocities
@@ -35,15 +25,13 @@ from hexapod.dynamics.drive_model import quantise
 from hexapod.dynamics.robots import DynamicRobots
 from hexapod.exceptions import ActuationError
 
-log = logging.getLogger(__name__)
-
 #: A leg beyond its stroke by more than this has hit its end stop [m].
 END_STOP = 1e-4
 #: The saturation columns of the rows of a scenario with a ``[payload]``.
 SATURATION_COLUMNS = ("saturation_legs_s", "saturation_legs_fraction", "saturation_fraction")
 
 
-class DynamicPlant:
+class DynamicPlant(Plant):
     """The dynamic world of a group of trials (see the module docstring).
 
     Args:

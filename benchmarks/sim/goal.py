@@ -1,26 +1,15 @@
 """What the controllers are told about a trial's goal: the scenario's goal setting
-(``[task] goal``, ``docs/scenarios.md`` "Fairness").
+(``[task] goal``, ``docs/scenarios.md``, "Fairness"), stated in the rows (``goal``).
 
-Three settings, each stated in the rows (``goal`` column) and the run's settings:
-
-- ``"mixed"`` (the default, the legacy setting every table before issue 36 used): the
-  vision laws get the features measured at the TRUE goal (taught by showing, with the
-  scenario's noise when ``[noise] on_goal``, averaged over ``teach_frames``); the encoder
-  and pose laws get the goal pose and its NOMINAL inverse kinematics. The two families
-  do not get the same information: a taught image is relative positioning, a nominal
-  inverse kinematics absolute positioning through the model's error.
-- ``"taught"``: the robot is brought to the goal and every sensor is recorded there: the
-  images (as in ``mixed``) and the encoders (the true lengths at the true goal plus the
-  joint offsets, quantised to the encoder resolution in the dynamic world; the encoders
-  of the simulation have no noise, so averaging ``teach_frames`` readings of a still
-  robot gives one reading). The pose laws get the pose their model computes from the
-  taught lengths (forward kinematics of the controller's model). A trajectory task's
-  reference is moved to end at that pose, its displacements kept
-  (:class:`AnchoredReference`).
-- ``"cartesian"``: the goal is a pose in the base frame; every family predicts its goal
-  from its model: the features of that pose seen by the estimated camera with the
-  controller's base points (as ``hexapod-bench servo`` predicts them from a goal file
-  without taught features), the lengths by the model's inverse kinematics.
+- ``"mixed"`` (the default): the vision laws get the features measured at the TRUE goal
+  (taught by showing, averaged over ``teach_frames``), the encoder and pose laws the
+  goal pose and its NOMINAL inverse kinematics;
+- ``"taught"``: the images and the encoders recorded at the true goal (the true lengths
+  plus the joint offsets, quantised in the dynamic world); the pose laws get the pose
+  their model computes from the taught lengths, and a trajectory's reference is moved to
+  end there (:class:`AnchoredReference`);
+- ``"cartesian"``: a pose in the base frame; every family predicts its goal from its
+  model (the features through the estimated camera, the lengths by inverse kinematics).
 """
 
 from __future__ import annotations
@@ -29,7 +18,7 @@ from typing import Any
 
 import numpy as np
 
-from benchmarks.sim.world import TrialSetup
+from benchmarks.sim.world import TrialSetup, inverse_kinematics_by_robot
 from controllers.base import Goal, ObservationBatch
 from hexapod.geometry import HexapodGeometry
 from hexapod.kinematics import inverse_kinematics
@@ -112,18 +101,17 @@ def predicted_features(camera: Any, geometry: HexapodGeometry, rotation: np.ndar
     predicts hidden is NaN, as a hidden edge is in a taught goal: a law that needs it
     says so itself (an encoder law does not).
     """
-    from vision.legs import directions_from_edges, observe_legs
+    from benchmarks.sim.sensors import edge_batch
+    from vision.legs import observe_legs
 
     seen = observe_legs(camera, geometry, np.asarray(rotation, float),
                         np.asarray(translation, float))
     visible = np.asarray(seen.edge_visible, dtype=bool)
     normals = np.where(visible[..., None], np.asarray(seen.normals, float), np.nan)
-    both = np.asarray(visible.all(axis=-1))
     with np.errstate(invalid="ignore"):
-        lines = (camera.normal_to_line(normals) if camera.family == "perspective" else None)
-        directions = np.where(both[..., None], directions_from_edges(normals), np.nan)
-    return {"normals": normals, "lines": lines, "directions": directions,
-            "edge_visible": visible}
+        lines = (camera.normal_to_line(normals)[None] if camera.family == "perspective"
+                 else None)
+    return _row_features(edge_batch(normals[None], lines, visible[None]), 0)
 
 
 def taught_goal(m: ObservationBatch, setup: TrialSetup, sc: Any, row: int = 0) -> Goal:
@@ -151,24 +139,11 @@ def measured_goals(m: ObservationBatch, setups: list[TrialSetup], sc: Any) -> li
         raise ValueError("task.goal: a cartesian goal is predicted, not measured")
     if setting == "taught":
         return [taught_goal(m, s, sc, k) for k, s in enumerate(setups)]
-    lengths = nominal_lengths(setups)
+    lengths = inverse_kinematics_by_robot([s.nominal_geometry for s in setups],
+                                          np.array([s.goal_rotation for s in setups]),
+                                          np.array([s.goal_translation for s in setups]))
     return [Goal(lengths=lengths[k], rotation=s.goal_rotation, translation=s.goal_translation,
                  **_row_features(m, k)) for k, s in enumerate(setups)]
-
-
-def nominal_lengths(setups: list[TrialSetup]) -> np.ndarray:
-    """(n, 6) the inverse kinematics of the trials' goal poses in their nominal models
-    [m], one call per model (the arithmetic is elementwise: the bits of one call per
-    trial)."""
-    out = np.empty((len(setups), 6))
-    groups: dict[int, list[int]] = {}
-    for k, s in enumerate(setups):
-        groups.setdefault(id(s.nominal_geometry), []).append(k)
-    for ks in groups.values():
-        out[ks] = inverse_kinematics(setups[ks[0]].nominal_geometry,
-                                     np.array([setups[k].goal_rotation for k in ks]),
-                                     np.array([setups[k].goal_translation for k in ks]))
-    return out
 
 
 def _row_features(m: ObservationBatch, row: int) -> dict[str, Any]:
@@ -195,10 +170,9 @@ class AnchoredReference:
     the goal: ``t' = t - t_end + t_goal``, ``R' = R R_end^T R_goal`` (the base-frame
     rotation from the end to the sample, applied to the goal orientation). Velocities,
     angular velocities (base frame) and their rates are the reference's: the path is
-    the same motion, started from where the model says the taught goal is. (Turning the
-    whole path by the goal's rotation error would also turn its shape: on a 15 mm circle
-    a 0.4 deg error moves the path by 0.1 mm.) The time axis and every other attribute
-    are the reference's.
+    the same motion, started from where the model says the taught goal is (turning the
+    whole path would turn its shape). The time axis and every other attribute are the
+    reference's.
 
     Args:
         reference: Has ``duration`` [s] and ``at(times)`` -> :class:`ReferenceSample`.
@@ -214,11 +188,6 @@ class AnchoredReference:
         self.rotation_offset = end.rotation[0].T @ np.asarray(rotation, float)
         #: ``t_goal - t_end`` [m], added to every position.
         self.translation_offset = np.asarray(translation, float) - end.translation[0]
-
-    @property
-    def duration(self) -> float:
-        """The reference's duration [s]."""
-        return float(self.reference.duration)
 
     def at(self, t: float | np.ndarray) -> ReferenceSample:
         """The moved reference at times ``t`` [s]."""

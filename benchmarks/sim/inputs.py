@@ -1,12 +1,8 @@
-"""What the simulator reads of a study: its typed inputs.
-
-The simulator does not know the study (``benchmarks/sim/`` imports nothing of
-``benchmarks/study/``): the sections it reads as they are (task, noise, clock, image,
-drives, calibration error) are the dataclasses of :mod:`benchmarks.scenario_sections`,
-which the study's scenario holds too; the rest of one point of a scenario it declares
-here, field by field, as protocols that the study's
-:class:`benchmarks.study.scenario.Scenario` provides. mypy checks the study's types
-against them where the study calls the simulator.
+"""What the simulator reads of a study: its typed inputs. The simulator imports nothing
+of ``benchmarks/study/``: it reads the sections of :mod:`benchmarks.scenario_sections` as
+they are and declares the rest of a scenario point here, as protocols that the study's
+:class:`benchmarks.study.scenario.Scenario` provides (checked by mypy where the study
+calls the simulator).
 """
 
 from __future__ import annotations
@@ -38,21 +34,9 @@ class SimController(Protocol):
 class SimPayload(Protocol):
     """A payload fixed to the true platform (``[payload]``)."""
 
-    @property
-    def mass_kg(self) -> float: ...
-    @property
-    def com_mm(self) -> tuple[float, ...]: ...
-    @property
-    def inertia_kg_m2(self) -> tuple[float, ...]: ...
-
     def body(self, source: str | None = None) -> Any:
         """The :class:`hexapod.dynamics.payload.Payload` (SI units)."""
         ...
-
-
-#: The names the simulator's modules give the sections it reads as they are.
-SimTask = TaskConfig
-SimCalibrationError = CalibrationErrorConfig
 
 
 class SimScenario(Protocol):

@@ -1,31 +1,23 @@
 """The one closed loop: plant -> camera -> controller batch -> plant, every period.
 
 Every run of a controller goes through :func:`closed_loop`: the simulated studies (every
-trial of a work unit as one batch, in the kinematic or the dynamic world, with geometric
-features or rendered images, with or without a camera clock), a study on robots behind
-backends (:class:`~benchmarks.sim.plant.BackendPlant`) and the real servo session
-(``hexapod-bench servo``, a batch of one). What differs between them is a component:
-
-- the **plant** (:mod:`benchmarks.sim.plant`): ``advance`` moves the rows over a period,
-  ``measured_lengths`` and ``measured_rates`` are the encoders; its arrays ``R``, ``t``
-  are the poses the camera sees;
-- the **sensor**: ``observe(rows, R, t)`` returns the camera's
-  :class:`~controllers.base.ObservationBatch` of those rows
-  (:func:`benchmarks.sim.sensors.camera_batch`);
-- the **clock** (:class:`benchmarks.sim.clock.CameraClock`, or None: an image at every
-  control instant);
-- the **controller batch**: ``step_batch(ObservationBatch) -> CommandBatch`` (a
-  trial's own crash is isolated to its row, the controller's ``crashes``; a batch that
-  raises or returns commands of the wrong shape or kind stops the loop with the
-  exception of the book's :meth:`LoopBook.stopped`);
-- the **book** (:class:`LoopBook`): when a row is done, what happens to a command, what
-  is recorded (:class:`benchmarks.sim.book.Book` for a study,
-  :class:`benchmarks.robot.loop.ServoBook` for the servo session).
+trial of a work unit as one batch, in either world, with geometric features or rendered
+images, with or without a camera clock), a study on robots behind backends and the real
+servo session (a batch of one). What differs between them is a component: the **plant**
+(:class:`benchmarks.sim.plant.Plant`: it moves the rows, its encoders, its poses ``R``,
+``t`` are what the camera sees), the **sensor** (``observe(rows, R, t)``: the camera's
+:class:`~controllers.base.ObservationBatch`), the **clock**
+(:class:`benchmarks.sim.clock.CameraClock`, or None: an image at every control instant),
+the **controller batch** (``step_batch``: a trial's own crash is isolated to its row,
+the controller's ``crashes``) and the **book** (:class:`LoopBook`: when a row is done,
+what happens to a command, what is recorded; :class:`benchmarks.sim.book.Book` for a
+study, :class:`benchmarks.robot.loop.ServoBook` for the servo session).
 
 One period of the active rows ``idx``: the book says which rows are done, the camera
 measures every active row, the rows that are not done and have an image are stepped as
-one batch, the book accounts the commands, and the rows still running are advanced by the
-plant with their commands (zeros where there is none).
+one batch, the book accounts the commands (a batch refused as a whole stops the loop
+with :meth:`LoopBook.stopped`'s exception), and the plant advances the rows still
+running with their commands (zeros where there is none).
 """
 
 from __future__ import annotations
@@ -38,8 +30,7 @@ from typing import Any, Protocol
 
 import numpy as np
 
-from benchmarks.sim.clock import CameraClock, clocked_measure
-from benchmarks.sim.sensors import take
+from benchmarks.sim.clock import CameraClock
 from controllers.base import CommandBatch, ObservationBatch
 
 
@@ -115,7 +106,8 @@ def closed_loop(plant: Any, sensor: Any, clock: CameraClock | None, controller: 
             break
         begun = step + 1
         done = book.check(step, idx)
-        obs = clocked_measure(clock, step, idx, (plant.R, plant.t), sensor.observe)
+        obs = (sensor.observe(idx, plant.R[idx], plant.t[idx]) if clock is None
+               else clock.measure(step, idx, sensor.observe))
         seen = book.observed(step, idx, obs)
         done |= ~book.active[idx]
         values = np.zeros((len(idx), 6))
@@ -124,7 +116,7 @@ def closed_loop(plant: Any, sensor: Any, clock: CameraClock | None, controller: 
         rows = np.arange(len(idx)) if every else np.flatnonzero(~done & seen)
         if len(rows):
             tr = idx if every else idx[rows]
-            batch = replace(obs if every else take(obs, rows), trials=tr,
+            batch = replace(obs if every else obs.rows(rows), trials=tr,
                             t=np.full(len(rows), step * dt),
                             lengths=plant.measured_lengths(tr, offsets[tr]),
                             q_dot=plant.measured_rates(tr))

@@ -1,29 +1,17 @@
 """The plant seam: the robot between two control periods, for the one closed loop
-(:func:`benchmarks.sim.loop.closed_loop`).
-
-A plant owns nothing of the controller: it receives the commands of the rows that still
-run and moves the state (leg lengths ``q``, platform pose ``R``, ``t``) over one control
-period.
-
-- :class:`KinematicPlant` (``[robot] world = "kinematic"``, the default): today's world,
-  massless and ideal. The command is clamped to the stroke and speed limits and
-  integrated exactly over the period; the new pose is the forward kinematics of the true
-  robot, warm-started at the previous pose.
-- :class:`~benchmarks.sim.dynamic_plant.DynamicPlant` (``world = "dynamic"``): the true
-  robot's dynamics and drives integrated at ``physics_dt`` (its own module).
-- :class:`BackendPlant`: robots behind backends (a real robot over its link, an emulator,
-  a backend plugin), one per row; each applies its row's command and paces the period,
-  the poses follow from the lengths they measure (a study's ``--backend``, and the servo
-  session's robot, a batch of one).
-
-The plants change the caller's arrays ``q``, ``R`` and ``t`` in place (rows ``run``).
+(:func:`benchmarks.sim.loop.closed_loop`). A plant owns nothing of the controller: it
+moves the state of the rows that still run (leg lengths ``q``, platform pose ``R``,
+``t``: the caller's arrays, changed in place) over one control period with their
+commands. :class:`KinematicPlant` (``[robot] world = "kinematic"``, the default) is the
+massless ideal robot, :class:`~benchmarks.sim.dynamic_plant.DynamicPlant` the true
+robot's dynamics and drives, :class:`BackendPlant` robots behind backends (a study's
+``--backend``, the servo session's robot).
 """
 
 from __future__ import annotations
 
-import logging
 from collections.abc import Callable, Sequence
-from typing import Any, Protocol
+from typing import Any
 
 import numpy as np
 
@@ -31,14 +19,13 @@ from hexapod.actuation import Actuation
 from hexapod.backends.base import Backend, clamp_velocities
 from hexapod.fk import pack_rows, set_guesses, solve_rows
 
-log = logging.getLogger(__name__)
-
 #: The failure of a trial whose true pose cannot be found from its leg lengths.
 FK_FAILURE = "forward kinematics of the true robot failed (singularity?)"
 
 
-class Plant(Protocol):
-    """The robot between control periods (see the module docstring).
+class Plant:
+    """The robot between control periods (see the module docstring); the kinematic
+    world's encoders and figures, which the other plants override.
 
     Attributes:
         q: (N, 6) leg lengths [m] of every row (the plant changes them).
@@ -63,27 +50,32 @@ class Plant(Protocol):
             The rows (indices into the caller's arrays) whose world failed this period,
             with the reason (their state is left at the last good one).
         """
-        ...
+        raise NotImplementedError
+
+    def use_actuation(self, actuation: Actuation, label: str) -> None:
+        """Apply what the controller ``label`` commands (the kinematic world integrates
+        leg velocities: nothing to switch)."""
 
     def measured_lengths(self, rows: np.ndarray, offsets: np.ndarray) -> np.ndarray:
         """The encoder readings of ``rows``: true lengths plus ``offsets`` (n, 6) [m]."""
-        ...
+        return self.q[rows] + offsets  # type: ignore[no-any-return]
 
     def measured_rates(self, rows: np.ndarray) -> np.ndarray | None:
-        """The measured leg velocities of ``rows`` (n, 6) [m/s], or None (kinematic)."""
-        ...
+        """The measured leg velocities of ``rows`` (n, 6) [m/s], or None (none measured:
+        ``Observation.q_dot`` None)."""
+        return None
 
     def row_figures(self, row: int) -> dict[str, Any]:
         """Extra figures of one trial for its result row (none in the kinematic world)."""
-        ...
+        return {}
 
     def series(self, row: int) -> dict[str, np.ndarray]:
         """Extra values of one trial this period, for its recorded series (none in the
         kinematic world)."""
-        ...
+        return {}
 
 
-class KinematicPlant:
+class KinematicPlant(Plant):
     """The massless ideal robot: leg lengths integrate the clamped command exactly.
 
     Args:
@@ -126,24 +118,8 @@ class KinematicPlant:
         self.t[okk] = sol.translations[~bad]
         return bad  # type: ignore[no-any-return]
 
-    def measured_lengths(self, rows: np.ndarray, offsets: np.ndarray) -> np.ndarray:
-        """See :meth:`Plant.measured_lengths` (ideal encoders)."""
-        return self.q[rows] + offsets  # type: ignore[no-any-return]
 
-    def row_figures(self, row: int) -> dict[str, Any]:
-        """See :meth:`Plant.row_figures`: nothing."""
-        return {}
-
-    def measured_rates(self, rows: np.ndarray) -> np.ndarray | None:
-        """The kinematic world measures no leg velocities (``Observation.q_dot`` None)."""
-        return None
-
-    def series(self, row: int) -> dict[str, np.ndarray]:
-        """See :meth:`Plant.series`: nothing."""
-        return {}
-
-
-class BackendPlant:
+class BackendPlant(Plant):
     """Robots behind backends, one per row: each backend applies its row's command over
     the period (and paces it), the lengths are what it measures, the poses follow.
 
@@ -176,7 +152,7 @@ class BackendPlant:
         self.last: list[Any] = [None] * n
 
     def use_actuation(self, actuation: Actuation, label: str) -> None:
-        """Apply what the controller ``label`` commands (each backend checks it)."""
+        """See :meth:`Plant.use_actuation` (each backend checks it)."""
         self.actuation = actuation
         self.label = label
 
@@ -192,14 +168,6 @@ class BackendPlant:
         bad = self.solve_poses(run)  # the backends moved the legs: the poses follow
         return dict.fromkeys(run[bad].tolist(), FK_FAILURE)
 
-    def measured_lengths(self, rows: np.ndarray, offsets: np.ndarray) -> np.ndarray:
-        """See :meth:`Plant.measured_lengths` (what the backends measured)."""
-        return self.q[rows] + offsets  # type: ignore[no-any-return]
-
-    def measured_rates(self, rows: np.ndarray) -> np.ndarray | None:
-        """Backends report no leg velocities."""
-        return None
-
     def row_figures(self, row: int) -> dict[str, Any]:
         """The link's figures of one row: round-trip median and p99 [ms], late periods."""
         if not self.rtts[row]:
@@ -208,10 +176,6 @@ class BackendPlant:
         return {"rtt_median_ms": float(np.median(arr)),
                 "rtt_p99_ms": float(np.percentile(arr, 99)),
                 "missed_periods": int(self.missed[row])}
-
-    def series(self, row: int) -> dict[str, np.ndarray]:
-        """See :meth:`Plant.series`: nothing."""
-        return {}
 
 
 def make_plant(sc: Any, group: list[Any], q: np.ndarray, R: np.ndarray, t: np.ndarray,

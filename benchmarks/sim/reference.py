@@ -12,13 +12,14 @@ from typing import Any
 
 import numpy as np
 
-from benchmarks.sim.inputs import SimScenario, SimTask
+from benchmarks.scenario_sections import TaskConfig
+from benchmarks.sim.inputs import SimScenario
 from benchmarks.sim.world import TrialSetup
 from controllers.batch import ForeignController, batch_controller
 from hexapod.trajectory import PoseTrajectory
 
 
-def trajectory(task: SimTask, start_rotation: np.ndarray, start_translation: np.ndarray,
+def trajectory(task: TaskConfig, start_rotation: np.ndarray, start_translation: np.ndarray,
                goal_rotation: np.ndarray, goal_translation: np.ndarray) -> PoseTrajectory:
     """The reference of a trajectory task from a trial's start (and, for a line, goal)
     pose, with the task's limits in SI units."""
@@ -35,7 +36,7 @@ def trajectory(task: SimTask, start_rotation: np.ndarray, start_translation: np.
                            if task.peak_acceleration_mm_s2 > 0 else None))
 
 
-def trajectory_end(task: SimTask, start_rotation: np.ndarray,
+def trajectory_end(task: TaskConfig, start_rotation: np.ndarray,
                    start_translation: np.ndarray, goal_rotation: np.ndarray,
                    goal_translation: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """The goal pose of a trial of ``task``: where its reference ends (the start pose

@@ -9,28 +9,25 @@ closed loop (:mod:`benchmarks.sim.loop`) adds the rows' trials, time and encoder
 
 from __future__ import annotations
 
-import logging
 from collections.abc import Callable, Sequence
 from typing import Any
 
 import numpy as np
 
-from benchmarks.sim.goal import cartesian_goal, goal_setting, taught_goal
+from benchmarks.sim.goal import cartesian_goal, goal_setting, measured_goals
 from benchmarks.sim.inputs import SimScenario
 from benchmarks.sim.world import TrialSetup, World, trial_rng
 from controllers.base import Goal, ObservationBatch
-from hexapod.kinematics import inverse_kinematics
 from vision.cameras import Camera
 from vision.cameras.perspective import PerspectiveCamera, normals_to_lines
 from vision.fast_observe import WorldParams, observe_batch
 from vision.legs import LegObservation, directions_from_edges
 from vision.noise import Generators
 
-log = logging.getLogger(__name__)
 
 def camera_batch(normals: np.ndarray, lines: np.ndarray | None, directions: np.ndarray,
-                 edge_visible: np.ndarray, direction_visible: np.ndarray
-                 ) -> ObservationBatch:
+                 edge_visible: np.ndarray, direction_visible: np.ndarray,
+                 image_t: np.ndarray | None = None) -> ObservationBatch:
     """The camera's part of the observations of ``n`` rows: the features and their
     visibility; ``trials`` ``0..n-1``, ``t`` zeros and ``lengths`` NaN until the loop
     adds the rows, the time and the encoders' readings.
@@ -41,46 +38,32 @@ def camera_batch(normals: np.ndarray, lines: np.ndarray | None, directions: np.n
         directions: (n, 6, 3) leg directions (NaN where an edge is hidden).
         edge_visible: (n, 6, 2) bool.
         direction_visible: (n, 6) bool.
+        image_t: (n,) capture times [s] (a camera clock's), or None.
     """
     n = len(normals)
     return ObservationBatch(trials=np.arange(n), t=np.zeros(n),
                             lengths=np.full((n, 6), np.nan), normals=normals, lines=lines,
                             directions=directions, edge_visible=edge_visible,
-                            direction_visible=direction_visible)
+                            direction_visible=direction_visible, image_t=image_t)
 
 
-def take(obs: ObservationBatch, rows: np.ndarray) -> ObservationBatch:
-    """Rows ``rows`` of a batch (every array field indexed,
-    :meth:`~controllers.data.ObservationBatch.rows`; passing every dataclass field to the
-    constructor failed on ``single``, not an init field, so every call raised)."""
-    return obs.rows(np.asarray(rows))
-
-
-def goal_of(m: ObservationBatch, setup: TrialSetup) -> Goal:
-    """The :class:`Goal` of a trial under the ``"mixed"`` goal setting, from the camera's
-    batch of one taught at its goal pose (the pose and its nominal inverse kinematics for
-    the model-based baselines)."""
-    return Goal(
-        normals=m.normals[0],  # type: ignore[index]
-        lines=None if m.lines is None else m.lines[0],
-        directions=m.directions[0],  # type: ignore[index]
-        lengths=inverse_kinematics(setup.nominal_geometry, setup.goal_rotation,
-                                   setup.goal_translation),
-        rotation=setup.goal_rotation, translation=setup.goal_translation,
-        edge_visible=m.edge_visible[0])
+def edge_batch(normals: np.ndarray, lines: np.ndarray | None, visible: np.ndarray
+               ) -> ObservationBatch:
+    """The camera's batch (:func:`camera_batch`) of ``n`` rows' edges: normals (n, 6, 2, 3),
+    image lines or None, visibility (n, 6, 2); a leg's direction where both its edges are
+    seen, NaN elsewhere."""
+    both = np.asarray(visible.all(axis=-1))
+    with np.errstate(invalid="ignore", divide="ignore"):
+        directions = directions_from_edges(normals)
+    if not both.all():
+        directions = np.where(both[..., None], directions, np.nan)
+    return camera_batch(normals, lines, directions, visible, both)
 
 
 class GeometricSensor:
     """Features from the true geometry plus the scenario's noise model, for rows each in
     its own world (one C call for the legs, edges and visibility of every row,
-    :func:`vision.fast_observe.observe_batch`).
-
-    Rotation noise perturbs each true edge normal; the perspective image lines
-    follow from the noisy normals through the TRUE camera, and the normals the
-    controller receives are recomputed from those lines with the ESTIMATED
-    intrinsics (so an intrinsics error reaches the controller as it would).
-    Pixel noise samples points along each visible edge, perturbs them and fits
-    the normal on the points lifted with the estimated camera.
+    :func:`vision.fast_observe.observe_batch`), with the noise of :func:`noisy_features`.
 
     Args:
         sc: The scenario (its noise).
@@ -111,10 +94,9 @@ class GeometricSensor:
                                      if isinstance(c, PerspectiveCamera)])
                            if all(isinstance(c, PerspectiveCamera) for c in true_cameras)
                            else None)
-        self.rngs = list(rngs)
-        #: :attr:`rngs` with their bit generators' addresses, taken once (the rotation
-        #: noise draws every row's numbers in one C call, every period).
-        self.generators = Generators(self.rngs)
+        #: The rows' generators with their bit generators' addresses, taken once (the
+        #: rotation noise draws every row's numbers in one C call, every period).
+        self.generators = Generators(list(rngs))
         self.detect_times: list[float] = []
 
     @classmethod
@@ -156,22 +138,6 @@ class GeometricSensor:
         return noisy_features(self.sc, obs.normals, obs.edge_visible, rngs, apply_noise,
                               self.est, cameras, item, line_maps)
 
-    def goals(self, setups: list[TrialSetup]) -> list[Goal]:
-        """The goals of the trials of the rows (:func:`trial_goal` with one taught frame)
-        in one batch."""
-        sc = self.sc
-        setting = goal_setting(sc)
-        if setting == "cartesian":  # nothing measured at the goal
-            return [cartesian_goal(s) for s in setups]
-        R = np.array([s.goal_rotation for s in setups])
-        t = np.array([s.goal_translation for s in setups])
-        m = self.sample(R, t, np.arange(len(setups)),
-                        rows_generators(sc, setups, 2, sc.noise.on_goal),
-                        apply_noise=sc.noise.on_goal)
-        if setting == "taught":
-            return [taught_goal(take(m, np.array([k])), s, sc) for k, s in enumerate(setups)]
-        return [goal_of(take(m, np.array([k])), s) for k, s in enumerate(setups)]
-
     def measure_goal(self, rotation: np.ndarray, translation: np.ndarray,
                      rng: np.random.Generator, frames: int = 1, apply_noise: bool = True
                      ) -> ObservationBatch:
@@ -210,8 +176,9 @@ def noisy_features(sc: SimScenario, normals: np.ndarray, visible: np.ndarray,
 
     Rotation noise perturbs each true edge normal; the perspective image lines follow
     from the noisy normals through the TRUE camera, and the normals the controller
-    receives are recomputed from those lines with the ESTIMATED intrinsics. Pixel noise
-    fits each normal on noisy edge points lifted with the estimated camera. Every row
+    receives are recomputed from those lines with the ESTIMATED intrinsics (so an
+    intrinsics error reaches the controller as it would). Pixel noise fits each normal
+    on noisy points along the visible edge, lifted with the estimated camera. Every row
     draws from its own generator, so a row's features do not depend on the others.
 
     Args:
@@ -220,13 +187,10 @@ def noisy_features(sc: SimScenario, normals: np.ndarray, visible: np.ndarray,
         rngs: One generator per row (anything when :func:`draws_noise` is False).
         apply_noise: Whether the noise applies.
         estimated: The estimated camera (the same for every row).
-        cameras: ``(rows, true camera)`` groups covering every row (unused with
-            ``line_maps``).
-        item: Row -> (its :class:`vision.legs.LegObservation`, its true camera), for the
-            pixel noise.
-        line_maps: (n, 3, 3) each row's true perspective camera's
-            ``normal_to_line_matrix``: the image lines of every row in one call
-            (:func:`vision.cameras.perspective.normals_to_lines`; None: by ``cameras``).
+        cameras: ``(rows, true camera)`` groups covering every row (without ``line_maps``).
+        item: Row -> (its :class:`vision.legs.LegObservation`, its true camera) (pixels).
+        line_maps: (n, 3, 3) each row's true ``normal_to_line_matrix`` (every camera
+            perspective: the lines of every row in one call), or None.
 
     Returns:
         The camera's batch (:func:`camera_batch`; ``lines`` None for a unified camera).
@@ -267,12 +231,7 @@ def noisy_features(sc: SimScenario, normals: np.ndarray, visible: np.ndarray,
             for rows, cam in cameras:
                 lines[rows] = cam.normal_to_line(normals[rows])
             normals = estimated.line_to_normal(lines)
-    both = np.asarray(visible.all(axis=-1))
-    with np.errstate(invalid="ignore"):
-        directions = directions_from_edges(normals)
-    if not all_visible:
-        directions = np.where(both[..., None], directions, np.nan)
-    return camera_batch(normals, lines, directions, visible, both)
+    return edge_batch(normals, lines, visible)
 
 
 def _average_frames(m: ObservationBatch, perspective_camera: Any | None,
@@ -295,27 +254,16 @@ def _average_frames(m: ObservationBatch, perspective_camera: Any | None,
     if perspective_camera is not None:
         with np.errstate(invalid="ignore"):
             lines = perspective_camera.normal_to_line(normals)[None]
-    both = np.asarray(visible.all(axis=-1))
-    with np.errstate(invalid="ignore"):
-        directions = directions_from_edges(normals)
-    return camera_batch(normals[None], lines,
-                        np.where(both[..., None], directions, np.nan)[None], visible[None],
-                        both[None])
+    return edge_batch(normals[None], lines, visible[None])
 
 
 def trial_goal(sensor: GeometricSensor | Any, setup: TrialSetup, sc: SimScenario) -> Goal:
     """What the controllers are told about the goal of a trial, by the scenario's goal
-    setting (:mod:`benchmarks.sim.goal`).
-
-    Under ``"mixed"`` (the default) and ``"taught"`` the desired features are taught by
-    showing: the sensor measures the TRUE goal pose ``sc.teach_frames`` times (with the
-    scenario's noise when ``[noise] on_goal``; an image sensor renders and detects each
-    frame) and the normals are averaged (:func:`vision.estimate.average_normals`). Under
-    ``"mixed"`` the pose and its nominal inverse kinematics are for the encoder and pose
-    laws; under ``"taught"`` the encoders read at the goal and the model's pose of them
-    (:func:`benchmarks.sim.goal.taught_goal`). Under ``"cartesian"`` nothing is measured:
-    every field is predicted from the controller's model
-    (:func:`benchmarks.sim.goal.cartesian_goal`).
+    setting (:mod:`benchmarks.sim.goal`): under ``"mixed"`` and ``"taught"`` the sensor
+    measures the TRUE goal pose ``sc.teach_frames`` times (with the scenario's noise when
+    ``[noise] on_goal``) and the normals are averaged
+    (:func:`benchmarks.sim.goal.measured_goals`); under ``"cartesian"`` nothing is
+    measured (:func:`benchmarks.sim.goal.cartesian_goal`).
 
     Args:
         sensor: The trial's sensor (:func:`make_sensor`).
@@ -331,7 +279,7 @@ def trial_goal(sensor: GeometricSensor | Any, setup: TrialSetup, sc: SimScenario
     rng = trial_rng(sc.seed, setup.trial, 2)
     m = sensor.measure_goal(setup.goal_rotation, setup.goal_translation, rng,
                             frames=sc.teach_frames, apply_noise=sc.noise.on_goal)
-    return taught_goal(m, setup, sc) if setting == "taught" else goal_of(m, setup)
+    return measured_goals(m, [setup], sc)[0]
 
 
 def make_sensor(sc: SimScenario, setup: TrialSetup) -> Any:
@@ -368,17 +316,12 @@ class _ImageSensorAdapter:
                      rng: np.random.Generator, frames: int = 1, apply_noise: bool = True
                      ) -> ObservationBatch:
         """``frames`` rendered images of the goal pose, their normals averaged: the first
-        frame detected from the model's prediction (alignment, then refine), the next ones
-        tracked from the previous frame, as the run will track them (and as ``servo
-        --teach`` does). Detecting every frame afresh left the taught edges about 0.1 px
-        from where tracking finds them at the same pose, an offset no pose can remove:
-        through a strong lens with a 1 % intrinsics error it held the edge law 0.2-0.4 mm
-        from the goal in 3 of 20 trials of andreff2006-images-distorted. A frame whose
-        edge is farther from the median of the frames than the detector's inlier
-        distance (``outlier_px``, turned into an angle by
-        :func:`vision.estimate.radians_per_pixel`) does not count for that edge: the
-        detector locked onto something else in that frame.
-
+        frame detected from the model's prediction, the next ones tracked from the
+        previous frame, as the run tracks them (and as ``servo --teach`` does: detecting
+        each frame afresh left the taught edges 0.1 px from where tracking finds them,
+        which held the edge law 0.2-0.4 mm from the goal in 3 of 20 trials of
+        andreff2006-images-distorted). A frame farther from the median than the
+        detector's inlier distance (``outlier_px``) does not count for that edge.
         ``rng`` and ``apply_noise`` are unused: the pixel noise is the renderer's.
         """
         from vision.estimate import radians_per_pixel
@@ -397,13 +340,9 @@ class _ImageSensorAdapter:
         if est.family == "perspective":
             with np.errstate(invalid="ignore"):
                 lines = est.normal_to_line(n)
-        both = np.asarray(vis.all(axis=-1))
-        with np.errstate(invalid="ignore"):
-            directions = directions_from_edges(n)
-        m_all = camera_batch(n, lines, np.where(both[..., None], directions, np.nan), vis,
-                             both)
         tolerance = self.sensor.detector.outlier_px * radians_per_pixel(est)
-        return _average_frames(m_all, est if est.family == "perspective" else None, tolerance)
+        return _average_frames(edge_batch(n, lines, vis),
+                               est if est.family == "perspective" else None, tolerance)
 
     def measure(self, rotations: np.ndarray, translations: np.ndarray,
                 rngs: list[np.random.Generator], apply_noise: bool = True
@@ -422,14 +361,9 @@ class _ImageSensorAdapter:
             out["normals"].append(m.normals)
             out["lines"].append(m.lines)
             out["edge_visible"].append(m.edge_visible)
-        normals = np.array(out["normals"], float)
-        visible = np.array(out["edge_visible"], bool)
-        both = np.asarray(visible.all(axis=-1))
-        with np.errstate(invalid="ignore"):
-            directions = directions_from_edges(normals)
         lines = None if out["lines"][0] is None else np.array(out["lines"], float)
-        return camera_batch(normals, lines, np.where(both[..., None], directions, np.nan),
-                            visible, both)
+        return edge_batch(np.array(out["normals"], float), lines,
+                          np.array(out["edge_visible"], bool))
 
 
 class RowSensor:

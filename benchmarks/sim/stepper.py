@@ -1,34 +1,28 @@
-"""Closed-loop trials: true world -> sensor -> controller -> plant -> true world.
-
-One trial (``docs/architecture.md``, the loop; :mod:`benchmarks.sim.loop`, the one closed
-loop): the true world (true geometry, true camera, true pose) produces observations through
-:mod:`vision` (geometric features + noise, or rendered images + detection); the
-controller, built from the ESTIMATED parameters, returns leg commands; the plant
-(kinematic, dynamic, or a robot behind a backend) applies them for ``dt``. Every work unit
-runs through the one loop, :func:`benchmarks.sim.loop.closed_loop`.
+"""Closed-loop trials: a work unit (one scenario point, one controller, some trials) run
+through the one closed loop (:func:`benchmarks.sim.loop.closed_loop`).
 
 With the geometric sensor and the simulated robot, the ``batched`` engine steps every
-trial of the unit as one batch, whatever their worlds (a calibration error gives each
-trial its own robot and camera), through the controller's ``step_batch``. Otherwise, or
-with ``engine="per-trial"``, the trials whose world is the nominal one are stepped
-together through one controller object per trial, each a batch of one
-(:class:`controllers.batch.ForeignController`), and one sensor of their world, the others
-one by one. Each trial has its own random streams seeded from ``(scenario seed, trial
-index)``, so a trial's result does not depend on which other trials run beside it.
+trial of the unit as one batch, whatever their worlds, through the controller's
+``step_batch``. Otherwise, or with ``engine="per-trial"``, the trials whose world is the
+nominal one are stepped together through one controller object per trial, each a batch
+of one (:class:`controllers.batch.ForeignController`), the others one by one. Each trial
+has its own random streams seeded from ``(scenario seed, trial index)``, so its result
+does not depend on which other trials run beside it.
 """
 
 from __future__ import annotations
 
 import logging
 from collections.abc import Callable
+from dataclasses import dataclass
 from typing import Any, TypeVar
 
 import numpy as np
 
 from benchmarks.exceptions import BatchFailedError, ScenarioError
-from benchmarks.sim.actuation import drive_plant, require_actuation, world_actuation
-from benchmarks.sim.book import Book, TrialResult, failure_row
-from benchmarks.sim.clock import make_clock
+from benchmarks.sim.actuation import world_actuation
+from benchmarks.sim.book import Book, OnStep, TrialResult, failure_row
+from benchmarks.sim.clock import CameraClock, clock_active
 from benchmarks.sim.goal import (
     AnchoredReference,
     cartesian_goal,
@@ -37,7 +31,7 @@ from benchmarks.sim.goal import (
 )
 from benchmarks.sim.inputs import SimScenario
 from benchmarks.sim.loop import closed_loop
-from benchmarks.sim.plant import BackendPlant, KinematicPlant, make_plant
+from benchmarks.sim.plant import BackendPlant, KinematicPlant, Plant, make_plant
 from benchmarks.sim.reference import Targets, task_batch_controller, trial_reference
 from benchmarks.sim.sensors import (
     GeometricSensor,
@@ -47,8 +41,8 @@ from benchmarks.sim.sensors import (
     trial_goal,
 )
 from benchmarks.sim.world import (
+    Calibrate,
     TrialSetup,
-    World,
     load_camera,
     load_geometry,
     make_trials,
@@ -57,6 +51,7 @@ from benchmarks.sim.world import (
 from controllers.base import ControllerContext, Goal
 from controllers.batch import actuation_of
 from hexapod import HexapodGeometry
+from hexapod.actuation import check_actuation
 from hexapod.backends.base import Backend
 
 log = logging.getLogger(__name__)
@@ -67,6 +62,8 @@ ENGINES = ("batched", "per-trial")
 
 #: The scenario type a caller passes (its sensor factory receives it).
 S = TypeVar("S", bound=SimScenario)
+#: Builds the backend of a trial from its true geometry and start lengths [m].
+BackendFactory = Callable[[HexapodGeometry, np.ndarray], Backend]
 
 
 def run_trials(
@@ -74,22 +71,15 @@ def run_trials(
     controller_index: int,
     trials: list[int],
     record_trials: int = 0,
-    backend_factory: Callable[[HexapodGeometry, np.ndarray], Backend] | None = None,
-    calibrate: Callable[[World, np.random.Generator], tuple[np.ndarray, dict[str, float]]]
-    | None = None,
-    on_step: Callable[[int, np.ndarray, np.ndarray, np.ndarray], None] | None = None,
+    backend_factory: BackendFactory | None = None,
+    calibrate: Calibrate | None = None,
+    on_step: OnStep | None = None,
     sensor_factory: Callable[[S, TrialSetup], Any] | None = None,
     engine: str = "batched",
 ) -> list[TrialResult]:
-    """Run trials of one scenario point with one controller.
-
-    Every group of trials runs through :func:`benchmarks.sim.loop.closed_loop`. With the
-    geometric sensor and the simulated backend, the ``batched`` engine steps every trial
-    as one batch (the controller's ``step_batch``). Otherwise, or with
-    ``engine="per-trial"``, trials whose world is the nominal one are stepped together
-    with one controller object per trial, the others one by one (see the module
-    docstring). A crash in a trial is recorded as its failure. Both engines give the
-    same rows.
+    """Run trials of one scenario point with one controller, in groups by engine (the
+    module docstring); a crash in a trial is recorded as its failure. Both engines give
+    the same rows.
 
     Args:
         sc: An expanded scenario (one sweep point).
@@ -99,7 +89,7 @@ def run_trials(
         backend_factory: Builds a backend for a trial from the true geometry and
             start lengths (default: exact integration of the clamped command).
         calibrate: Optional calibration run per trial (returns estimated base points).
-        on_step: Callback ``(trial, rotation, translation, edge_visible)`` for a live view.
+        on_step: A live view's callback (:data:`benchmarks.sim.book.OnStep`).
         sensor_factory: Builds the sensor of a group of trials from the scenario and its
             first trial (default :func:`make_sensor`; studies swap sensors with it). The
             sensor has ``measure`` and ``measure_goal`` like :class:`GeometricSensor`.
@@ -132,29 +122,25 @@ def run_trials(
     else:
         shared = [s for s in setups if s.shared and backend_factory is None]
         groups = ([shared] if shared else []) + [[s] for s in setups if s not in shared]
-    unit = _Unit(sc, controller_index, record_trials, batched, backend_factory, on_step,
-                 sensor_factory)
+    unit = _Unit(sc, spec, record_trials, batched, backend_factory, on_step,
+                 sensor_factory or make_sensor)
     for group in groups:
         for res in unit.isolated(group):
             results[res.row["trial"]] = res
     return [results[k] for k in trials]
 
 
+@dataclass
 class _Unit:
     """How the groups of a work unit run (the arguments of :func:`run_trials`)."""
 
-    def __init__(self, sc: SimScenario, controller_index: int, record_trials: int,
-                 batched: bool,
-                 backend_factory: Callable[[HexapodGeometry, np.ndarray], Backend] | None,
-                 on_step: Callable[[int, np.ndarray, np.ndarray, np.ndarray], None] | None,
-                 sensor_factory: Callable[[Any, TrialSetup], Any] | None) -> None:
-        self.sc = sc
-        self.spec = sc.controllers[controller_index]
-        self.record_trials = record_trials
-        self.batched = batched
-        self.backend_factory = backend_factory
-        self.on_step = on_step
-        self.sensor_factory = sensor_factory or make_sensor
+    sc: SimScenario
+    spec: Any
+    record_trials: int
+    batched: bool
+    backend_factory: BackendFactory | None
+    on_step: OnStep | None
+    sensor_factory: Callable[[Any, TrialSetup], Any]
 
     def isolated(self, group: list[TrialSetup]) -> list[TrialResult]:
         """The results of a group; when it fails before its first step (a reset, a
@@ -210,10 +196,9 @@ class _Unit:
               sensor: GeometricSensor | RowSensor) -> list[TrialResult]:
         sc, spec = self.sc, self.spec
         controller = task_batch_controller(sc, spec, self.batched)
-        if self.backend_factory is None:
-            actuation = require_actuation(controller, spec.label, *world_actuation(sc))
-        else:  # a backend says itself what it applies (Backend.apply)
-            actuation = actuation_of(controller)
+        actuation = actuation_of(controller)
+        if self.backend_factory is None:  # (a backend says itself what it applies)
+            check_actuation(actuation, *world_actuation(sc), spec.label)
         controller.reset_batch(contexts)
         q = np.array([s.start_lengths for s in group])
         R = np.array([s.start_rotation for s in group])
@@ -227,17 +212,18 @@ class _Unit:
         opened: list[Backend] = []
         try:
             if self.backend_factory is None:
-                plant: Any = make_plant(sc, group, q, R, t, A, E)
+                plant: Plant = make_plant(sc, group, q, R, t, A, E)
             else:
                 for s in group:
                     opened.append(self.backend_factory(g, s.start_lengths + s.world.joint_offsets))
                 poses = KinematicPlant(q, R, t, A, E, g.stroke, g.max_speed)
                 plant = BackendPlant(opened, q, R, t, offsets, poses.solve_poses)
-            drive_plant(plant, actuation, spec.label)
-            book = Book.new(sc, group, self.record_trials)
-            book.attach(plant, Targets(sc, group), actuation, spec.label, self.on_step)
-            closed_loop(plant, sensor, make_clock(sc, group, q, R, t, A, E), controller,
-                        book, sc.dt, offsets, sc.task.max_steps)
+            plant.use_actuation(actuation, spec.label)
+            book = Book(sc, group, self.record_trials, plant, Targets(sc, group), actuation,
+                        spec.label, self.on_step)
+            clock = CameraClock(sc, group, q, R, t, A, E) if clock_active(sc) else None
+            closed_loop(plant, sensor, clock, controller, book, sc.dt, offsets,
+                        sc.task.max_steps)
         finally:
             _close_all(opened)
         return book.results(sc, spec, group, R, t, sensor.detect_times, plant.row_figures)

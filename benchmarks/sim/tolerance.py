@@ -29,7 +29,7 @@ def unconverged_reason(task: Any, position_mm: float, orientation_deg: float) ->
     """Why a trial that ran out of steps did not converge.
 
     Args:
-        task: The scenario's :class:`~benchmarks.sim.inputs.SimTask`.
+        task: The scenario's :class:`~benchmarks.scenario_sections.TaskConfig`.
         position_mm: Final position error [mm].
         orientation_deg: Final orientation error [deg].
 

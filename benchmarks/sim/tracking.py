@@ -1,19 +1,10 @@
-"""Tracking metrics of a trajectory task: RMS and largest error of the TRUE pose from
-the reference while it moves, the error when it stops, and the settling time after it
-(the time from the reference's end until the pose stays within the task's
-tolerances). Fed by :meth:`benchmarks.sim.book.Book.check` every period.
-
-In the dynamic world it also gives the RMS drive force of the trial
-(``rms_leg_force_n``): the six drives' forces sampled at every control instant, from the
-first period to the last (the values the trial's recorded series ``leg_forces`` holds),
-``sqrt(mean over periods and legs of f^2)``; the peak force and the time at a force
-limit come from the plant, over every physics step
-(:meth:`benchmarks.sim.dynamic_plant.DynamicPlant.row_figures`).
-
-With a ``[payload]`` (a scenario about the drives' limits) it also gives the tracking error
-while saturated: the position error at the end of every control period in which a drive
-was at its force limit (``saturated_periods``, ``tracking_saturated_rms_mm``,
-``tracking_saturated_max_mm``; None without such a period)."""
+"""Tracking metrics of a trajectory task (``docs/scenarios.md``, "Trajectory tasks";
+``docs/dynamic-world.md``): RMS and largest error of the TRUE pose from the reference
+while it moves, and the settling time after its end (until the pose stays within the
+tolerances), fed by :meth:`benchmarks.sim.book.Book.check` every period; in the dynamic
+world the RMS drive force at the control instants (``rms_leg_force_n``), and with a
+``[payload]`` the position error of the periods in which a drive was at its force limit
+(``saturated_periods``, ``tracking_saturated_rms_mm``, ``tracking_saturated_max_mm``)."""
 
 from __future__ import annotations
 
@@ -125,10 +116,3 @@ class Tracker:
             "settling_time_s": settle,
         }
 
-
-def tracker_for(sc: SimScenario, group: list[TrialSetup], pos_tol: float, ori_tol: float
-                ) -> Tracker | None:
-    """A :class:`Tracker` for a trajectory task, None otherwise."""
-    if sc.task.kind != "trajectory":
-        return None
-    return Tracker(sc, group, pos_tol, ori_tol)

@@ -4,14 +4,13 @@ the nominal parameters the controllers are told."""
 
 from __future__ import annotations
 
-import logging
 from collections.abc import Callable
 from dataclasses import dataclass, field, replace
 from typing import Any
 
 import numpy as np
 
-from benchmarks.sim.inputs import SimCalibrationError, SimScenario
+from benchmarks.sim.inputs import SimScenario
 from hexapod import HexapodGeometry, Transform, forward_kinematics_batch
 from hexapod.dynamics.payload import Payload, model_payload, with_payload
 from hexapod.geometry import preset as geometry_preset
@@ -19,8 +18,6 @@ from hexapod.kinematics import inverse_kinematics
 from hexapod.se3 import exp_so3
 from hexapod.workspace import sample_poses_many
 from vision.cameras import Camera, camera_preset
-
-log = logging.getLogger(__name__)
 
 
 def load_geometry(scenario: SimScenario) -> HexapodGeometry:
@@ -117,10 +114,13 @@ def _perturb_camera(camera: Camera, z_rot: np.ndarray, z_pos: np.ndarray, z_k: n
     return camera.replace(K=K, camera_from_base=new_T)
 
 
+#: A calibration run per trial: ``(world, rng) -> (estimated base points (6, 3) [m],
+#: summary)``.
+Calibrate = Callable[[World, np.random.Generator], tuple[np.ndarray, dict[str, float]]]
+
+
 def make_trial(sc: SimScenario, trial: int, nominal: HexapodGeometry, camera: Camera,
-               calibrate: Callable[[World, np.random.Generator], tuple[np.ndarray,
-                                                                       dict[str, float]]]
-               | None = None) -> TrialSetup:
+               calibrate: Calibrate | None = None) -> TrialSetup:
     """Draw the truth, start and goal of one trial from ``(seed, trial)``.
 
     The standard-normal draws are made in a fixed order whatever the scenario's
@@ -133,9 +133,7 @@ def make_trial(sc: SimScenario, trial: int, nominal: HexapodGeometry, camera: Ca
 
 
 def make_trials(sc: SimScenario, trials: list[int], nominal: HexapodGeometry, camera: Camera,
-                calibrate: Callable[[World, np.random.Generator], tuple[np.ndarray,
-                                                                        dict[str, float]]]
-                | None = None) -> list[TrialSetup | Exception]:
+                calibrate: Calibrate | None = None) -> list[TrialSetup | Exception]:
     """:func:`make_trial` for many trials: the same setups, to the last bit, the random
     poses of all of them drawn in one batch (:func:`hexapod.workspace.sample_poses_many`).
 
@@ -143,7 +141,8 @@ def make_trials(sc: SimScenario, trials: list[int], nominal: HexapodGeometry, ca
         Per trial, its setup or the exception that :func:`make_trial` raises for it
         (that trial's failure).
     """
-    ce, shared = _scaled_error(sc)
+    ce = sc.calibration_error.at_scale()
+    shared = ce.nominal_world()  # no error: every trial shares the nominal world
     drawn: list[tuple[np.random.Generator, World, Any, bool] | Exception] = []
     for trial in trials:
         try:
@@ -227,25 +226,25 @@ def _loaded(drawn: list[Any], payload: Payload) -> list[Any]:
 
 
 def _start_lengths(drawn: list[Any], poses: dict[int, Any]) -> dict[int, np.ndarray]:
-    """The true start leg lengths of the trials with random poses, one batch per robot
-    (the same bits as one call per trial: the arithmetic is elementwise)."""
+    """The true start leg lengths of the trials with random poses."""
+    ks = [k for k, pose in poses.items() if not isinstance(pose, Exception)]
+    q = inverse_kinematics_by_robot([drawn[k][1].geometry for k in ks],
+                                    np.array([poses[k][0][0] for k in ks]),
+                                    np.array([poses[k][1][0] for k in ks]))
+    return dict(zip(ks, q, strict=True))
+
+
+def inverse_kinematics_by_robot(geometries: list[HexapodGeometry], rotations: np.ndarray,
+                                translations: np.ndarray) -> np.ndarray:
+    """(n, 6) the leg lengths [m] of poses (n, 3, 3), (n, 3) [m] each in its robot, one
+    call per robot (the arithmetic is elementwise: the bits of one call per pose)."""
+    out = np.empty((len(geometries), 6))
     groups: dict[int, list[int]] = {}
-    for k, pose in poses.items():
-        if not isinstance(pose, Exception):
-            groups.setdefault(id(drawn[k][1].geometry), []).append(k)
-    out: dict[int, np.ndarray] = {}
+    for k, g in enumerate(geometries):
+        groups.setdefault(id(g), []).append(k)
     for ks in groups.values():
-        q = inverse_kinematics(drawn[ks[0]][1].geometry, np.array([poses[k][0][0] for k in ks]),
-                               np.array([poses[k][1][0] for k in ks]))
-        out.update(zip(ks, q, strict=True))
+        out[ks] = inverse_kinematics(geometries[ks[0]], rotations[ks], translations[ks])
     return out
-
-
-def _scaled_error(sc: SimScenario) -> tuple[SimCalibrationError, bool]:
-    """The scenario's calibration error at its scale, and whether it is zero (every
-    trial then shares the nominal world)."""
-    ce = sc.calibration_error.at_scale()
-    return ce, ce.nominal_world()
 
 
 def _draw_world(sc: SimScenario, trial: int, nominal: HexapodGeometry, camera: Camera, ce: Any,
@@ -292,14 +291,8 @@ def perturbed_inertia(inertia: Any, mass_percent: float, inertia_percent: float,
     a tensor stays positive definite and within the triangle inequality). Six standard
     normals drawn from ``rng``, in a fixed order, whatever the magnitudes."""
     z = rng.standard_normal(6)
-    fm = np.exp(1e-2 * mass_percent * z[:3])
-    fi = np.exp(1e-2 * inertia_percent * z[3:])
-    return inertia.replace(
-        platform_mass=inertia.platform_mass * fm[0], body_mass=inertia.body_mass * fm[1],
-        rod_mass=inertia.rod_mass * fm[2],
-        platform_inertia=np.asarray(inertia.platform_inertia) * fi[0],
-        body_inertia=np.asarray(inertia.body_inertia) * fi[1],
-        rod_inertia=np.asarray(inertia.rod_inertia) * fi[2])
+    return _scaled_inertia(inertia, np.exp(1e-2 * mass_percent * z[:3]),
+                           np.exp(1e-2 * inertia_percent * z[3:]))
 
 
 def model_error_inertia(inertia: Any, mass_error_percent: float,
@@ -310,12 +303,18 @@ def model_error_inertia(inertia: Any, mass_error_percent: float,
     truth times those factors)."""
     fm = 1.0 / (1.0 + 1e-2 * mass_error_percent)
     fi = 1.0 / (1.0 + 1e-2 * inertia_error_percent)
+    return _scaled_inertia(inertia, (fm, fm, fm), (fi, fi, fi))
+
+
+def _scaled_inertia(inertia: Any, mass: Any, rotational: Any) -> Any:
+    """``inertia`` with the platform's, leg body's and leg rod's masses times ``mass[0..2]``
+    and their rotational inertias times ``rotational[0..2]``."""
     return inertia.replace(
-        platform_mass=inertia.platform_mass * fm, body_mass=inertia.body_mass * fm,
-        rod_mass=inertia.rod_mass * fm,
-        platform_inertia=np.asarray(inertia.platform_inertia) * fi,
-        body_inertia=np.asarray(inertia.body_inertia) * fi,
-        rod_inertia=np.asarray(inertia.rod_inertia) * fi)
+        platform_mass=inertia.platform_mass * mass[0], body_mass=inertia.body_mass * mass[1],
+        rod_mass=inertia.rod_mass * mass[2],
+        platform_inertia=np.asarray(inertia.platform_inertia) * rotational[0],
+        body_inertia=np.asarray(inertia.body_inertia) * rotational[1],
+        rod_inertia=np.asarray(inertia.rod_inertia) * rotational[2])
 
 
 def model_error_drives(drives: Any, friction_error_percent: float,

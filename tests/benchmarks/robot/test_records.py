@@ -40,7 +40,7 @@ def test_out_must_be_new_or_empty(tmp_path: Path) -> None:
 
 def test_the_log_holds_header_periods_and_final(tmp_path: Path) -> None:
     log = SessionLog(tmp_path / "d" / "servo.jsonl").open({"backend": "sim"})
-    log.period({"step": 0, "t_s": 0.0, "x": float("nan")})
+    log.write({"step": 0, "t_s": 0.0, "x": float("nan")})
     log.final({"exit_code": 3})
     log.final({"exit_code": 4})  # once only
     lines = [json.loads(x) for x in log.path.read_text().splitlines()]

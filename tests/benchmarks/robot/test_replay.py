@@ -78,7 +78,7 @@ def _session_record(path: Path, periods: int = 6) -> Path:
               "goal": "elsewhere/goal.toml", "goal_lengths_mm": GOAL_MM})
     for k in range(periods):
         q = START + (goal - START) * k / (periods - 1)
-        log.period(PeriodStatus(
+        log.write(PeriodStatus(
             step=k, t=0.02 * k, lengths=q, leg_error=float(np.abs(q - goal).max()),
             feature_error=0.01, controller_error=0.1, velocities=np.full(6, 0.002 * k),
             visible_edges=12, reason=None, lost_frame=False, rtt=0.001, missed=False,

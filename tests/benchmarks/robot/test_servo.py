@@ -14,6 +14,7 @@ import pytest
 from benchmarks.robot import servo
 from benchmarks.robot.goals import ServoGoal
 from benchmarks.robot.loop import servo_loop
+from benchmarks.robot.models import robot_geometry
 from benchmarks.robot.status import PeriodStatus
 from tests.benchmarks.robot.interrupt import interrupt_servo
 from tests.benchmarks.robot.sessions import start_pose_video
@@ -92,7 +93,7 @@ def test_teach_then_servo_to_the_taught_features(
     code = servo.main(["--backend", "emulator", "--goal", str(goal), "--teach",
                        "--start-mm", *[str(x) for x in GOAL_MM]])
     assert code == 0, capsys.readouterr()
-    taught = servo.load_goal(goal, servo._geometry("deltalab"))
+    taught = servo.load_goal(goal, robot_geometry("deltalab"))
     assert np.allclose(taught.lengths * 1e3, GOAL_MM, atol=1e-3)
     assert taught.features is not None and taught.features.visible_count == 12
     assert (tmp_path / "taught.features.npz").is_file()
@@ -116,7 +117,7 @@ def test_teach_averages_a_burst_of_frames_through_the_cli(
     out = capsys.readouterr().out
     assert code == 0, out
     assert "normals averaged over 4 of 4 frames" in out
-    taught = servo.load_goal(goal, servo._geometry("deltalab"))
+    taught = servo.load_goal(goal, robot_geometry("deltalab"))
     assert taught.features is not None and taught.features.visible_count == 12
 
 

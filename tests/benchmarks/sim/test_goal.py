@@ -108,12 +108,14 @@ def test_the_goals_of_each_setting() -> None:
     the encoders at the goal and the model's pose of them; ``cartesian`` the true goal
     pose, its nominal inverse kinematics (as ``mixed``) and the features the model
     predicts, which differ from the measured ones by the model's error."""
+    from benchmarks.sim import stepper
+
     goals = {}
     for g in GOAL_SETTINGS:
         sc = _scenario(goal=g, calibration_error=MODEL_ERROR)
         s = _setups(sc, [1])[0]
         goals[g] = trial_goal(GeometricSensor(sc, s.world, s.estimated_camera), s, sc)
-        batched = GeometricSensor.of_trials(sc, [s]).goals([s])[0]
+        batched = stepper._goals(sc, GeometricSensor.of_trials(sc, [s]), [s])[0]
         for f in ("normals", "lengths", "rotation", "translation", "directions"):
             np.testing.assert_allclose(getattr(batched, f), getattr(goals[g], f),
                                        atol=1e-12, err_msg=f"{g} {f}")
@@ -329,11 +331,12 @@ def test_a_taught_encoder_baseline_ends_a_closed_curve_exactly() -> None:
 def test_the_batched_goals_are_the_sensors_goals_to_the_bit(
         goal: str, monkeypatch: pytest.MonkeyPatch) -> None:
     """The run's goals of a group (:func:`benchmarks.sim.goal.measured_goals`: views of
-    the batch's rows, the nominal inverse kinematics in one call) are those of the
-    sensor's batch of one per trial, bit for bit, each trial in its own world with
-    noise on the goal image (the batch itself: the trial-by-trial fallback raises)."""
+    the batch's rows, the nominal inverse kinematics in one call) are the per-trial
+    engine's (:func:`benchmarks.sim.sensors.trial_goal`, a sensor per trial), bit for
+    bit, each trial in its own world with noise on the goal image (the batch itself:
+    the trial-by-trial fallback raises)."""
     from benchmarks.sim import stepper
-    from benchmarks.sim.goal import nominal_lengths
+    from benchmarks.sim.world import inverse_kinematics_by_robot
 
     def no_fallback(*args: Any) -> Any:
         raise AssertionError("the batched goals fell back to one trial at a time")
@@ -345,7 +348,8 @@ def test_the_batched_goals_are_the_sensors_goals_to_the_bit(
     setups = _setups(sc, [0, 1, 2, 3])
     sensor = GeometricSensor.of_trials(sc, setups)
     ours = stepper._goals(sc, sensor, setups)
-    theirs = sensor.goals(setups)
+    theirs = [trial_goal(GeometricSensor(sc, s.world, s.estimated_camera), s, sc)
+              for s in setups]
     assert all(type(g).__name__ == "Goal" for g in ours)
     for k, (a, b) in enumerate(zip(ours, theirs, strict=True)):
         for f in ("normals", "lines", "directions", "lengths", "rotation", "translation",
@@ -356,7 +360,9 @@ def test_the_batched_goals_are_the_sensors_goals_to_the_bit(
                 np.testing.assert_array_equal(x, y, err_msg=f"trial {k} {f}")
     one_by_one = np.array([inverse_kinematics(s.nominal_geometry, s.goal_rotation,
                                               s.goal_translation) for s in setups])
-    np.testing.assert_array_equal(nominal_lengths(setups), one_by_one)
+    np.testing.assert_array_equal(inverse_kinematics_by_robot(
+        [s.nominal_geometry for s in setups], np.array([s.goal_rotation for s in setups]),
+        np.array([s.goal_translation for s in setups])), one_by_one)
 
 
 def test_a_cartesian_goal_is_not_measured() -> None:
