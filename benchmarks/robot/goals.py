@@ -178,10 +178,11 @@ def save_goal(path: str | Path, lengths: np.ndarray, features: Features,
 
 def feature_batch(camera: Any, features: Features) -> ObservationBatch:
     """The camera's batch of one of ``features`` (:func:`benchmarks.sim.sensors.edge_batch`;
-    image lines only for a camera of kind ``perspective``)."""
+    image lines for a camera of the perspective family, fisheye included, as in the
+    simulator)."""
     normals = np.asarray(features.normals, float)[None]
     lines = None
-    if getattr(camera, "kind", "") == "perspective":
+    if getattr(camera, "family", "") == "perspective":
         with np.errstate(invalid="ignore", divide="ignore"):
             lines = np.asarray(camera.normal_to_line(normals), float)
     return edge_batch(normals, lines, np.asarray(features.edge_visible, bool)[None])
