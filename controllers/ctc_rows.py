@@ -136,10 +136,11 @@ def norms(e: np.ndarray) -> np.ndarray:
 
 
 def newton_calls(bound: BoundCall, pose_in: np.ndarray, pose_out: slice, residual: int,
-                 tolerance: float, max_calls: int) -> bool:
+                 tolerance: float, max_calls: int) -> np.ndarray | None:
     """Evaluate a bound compiled step, then again from the pose reached while its pose
     residual is not below ``tolerance`` (finite, at most ``max_calls`` calls in all);
-    whether the input pose ``pose_in`` (its bound row's view) was moved.
+    the input pose ``pose_in`` (its bound row's view) as it was when it was moved (a
+    copy; None: not moved, the common case).
 
     Raises:
         CompilationError: The compiled function failed.
@@ -147,16 +148,17 @@ def newton_calls(bound: BoundCall, pose_in: np.ndarray, pose_out: slice, residua
     y, call = bound.y, bound.call
     if call():
         raise CompilationError(f"{bound.function.name}: the compiled function failed")
-    calls, moved = 1, False
+    calls, guess = 1, None
     while not y[residual] < tolerance:  # Newton from the pose reached, as FK does
         if calls >= max_calls or not math.isfinite(y[residual]):
             break
+        if guess is None:
+            guess = pose_in.copy()
         pose_in[:] = y[pose_out]
-        moved = True
         if call():
             raise CompilationError(f"{bound.function.name}: the compiled function failed")
         calls += 1
-    return moved
+    return guess
 
 
 def over_limits(forces: np.ndarray, limits: np.ndarray) -> np.ndarray:
