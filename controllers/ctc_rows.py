@@ -1,5 +1,6 @@
 """The compiled computed-torque steps over the rows of a batch: one C call for every row
-(:meth:`hexapod.compiled.CompiledFunction.batch`), the forward kinematics' (or the
+(:meth:`hexapod.compiled.CompiledFunction.batch`; from eight rows its lane-parallel C,
+four rows per vector instruction, the same bits), the forward kinematics' (or the
 rigid fit's) further Newton calls for the rows that have not converged, and each row's
 acceptance test (converged, inverse solve solved, every value finite, full rank).
 
@@ -65,7 +66,7 @@ def evaluate_rows(function: CompiledFunction, X: np.ndarray, pose_in: slice, pos
     Returns:
         (n, n_out) the output rows and (n,) the mask of the rows whose pose converged.
     """
-    Y = function.batch(X)
+    Y = function.batch(X, lanes=True)
     calls = 1
     with np.errstate(invalid="ignore"):
         pending = np.flatnonzero(~(Y[:, residual] < tolerance))
@@ -74,7 +75,7 @@ def evaluate_rows(function: CompiledFunction, X: np.ndarray, pose_in: slice, pos
             if not len(pending):
                 break
             X[pending, pose_in] = Y[pending, pose_out]
-            Y[pending] = function.batch(X[pending])
+            Y[pending] = function.batch(X[pending], lanes=True)
             calls += 1
             pending = pending[~(Y[pending, residual] < tolerance)]
         converged = Y[:, residual] < tolerance

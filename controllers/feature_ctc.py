@@ -185,7 +185,7 @@ class FeatureCTC(TaskComputedTorque):
         v["frame"][:] = np.concatenate([cam.rotation.ravel(), cam.translation])
         v["points"][:] = (g.base_points, g.platform_points)
         v["radius"][:] = g.leg_radius
-        out = feature_motion(feature).batch(rows).reshape(len(times), 3, size)
+        out = feature_motion(feature).batch(rows, lanes=True).reshape(len(times), 3, size)
         seen = np.isfinite(anchored.reshape(len(times), size))
         return np.where(seen[:, None, :], out, np.nan)
 
