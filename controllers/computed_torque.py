@@ -125,6 +125,7 @@ class ComputedTorqueController(ComputedTorqueLaw):
         self._steps = np.zeros(1, dtype=np.int64)
         #: The nominal force limits [N] (inf before a reset).
         self._limit = np.full(6, np.inf)
+        self._limit_list = self._limit.tolist()
         self._q_star = np.zeros(6)
         #: The compiled step's input and output rows (bound at the first reset): the
         #: input's constant part is filled at reset; its pose block holds the pose guess
@@ -221,6 +222,7 @@ class ComputedTorqueController(ComputedTorqueLaw):
         self._quintic = np.zeros(QUINTIC_SIZE)
         self._steps = np.zeros(1, dtype=np.int64)
         self._limit = np.asarray(context.geometry.drives.force_limit, dtype=float)
+        self._limit_list = self._limit.tolist()
         if self._bound is None:
             self._bound = compiled_ctc.joint_step(INVERSE_TOLERANCE).bind()
         else:  # its own row again (not a view of a former batch's)
@@ -366,10 +368,12 @@ class ComputedTorqueController(ComputedTorqueLaw):
             return self._refuse(cmd)
         self._steps[0] += 1
         assert cmd.forces is not None and cmd.error is not None
-        if self.integral_gain and not over_limit(cmd.forces, self._limit):
+        over = over_limit(cmd.forces, self._limit_list)
+        if self.integral_gain and not over:
             self._integral += cmd.error * self._dt  # anti-windup: held while over
-        cmd.forces = self.saturated_forces(cmd.forces, self._bound.x[POSE_IN].copy(), qd,
-                                           desired[6:12])
+        if over:  # (under the limits every strategy commands the law's forces)
+            cmd.forces = self.saturated_forces(cmd.forces, self._bound.x[POSE_IN].copy(), qd,
+                                               desired[6:12])
         return cmd
 
     def saturated_forces(self, forces: np.ndarray, pose: np.ndarray, qd: np.ndarray,
@@ -414,13 +418,13 @@ class ComputedTorqueController(ComputedTorqueLaw):
         assert self._bound is not None
         bound = self._bound
         pose_in, y = bound.x[POSE_IN], bound.y
-        guess = pose_in.copy()
-        newton_calls(bound, pose_in, POSE_OUT, RESIDUAL, FK_TOLERANCE, FK_MAX_CALLS)
+        guess = newton_calls(bound, pose_in, POSE_OUT, RESIDUAL, FK_TOLERANCE, FK_MAX_CALLS)
         condition = None
         if y[STATUS] == 0.0:  # the kernel's status (controllers.ctc_status), then the rank
             condition = rank_condition(y[FACTOR], self.solver.threshold)
         if condition is None:
-            pose_in[:] = guess
+            if guess is not None:
+                pose_in[:] = guess
             reason = refusal(y, STATUS, RESIDUAL, FACTOR, self.solver.threshold)
             assert reason is not None
             return reason

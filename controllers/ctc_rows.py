@@ -1,5 +1,6 @@
 """The compiled computed-torque steps over the rows of a batch: one C call for every row
-(:meth:`hexapod.compiled.CompiledFunction.batch`), the forward kinematics' (or the
+(:meth:`hexapod.compiled.CompiledFunction.batch`; from eight rows its lane-parallel C,
+four rows per vector instruction, the same bits), the forward kinematics' (or the
 rigid fit's) further Newton calls for the rows that have not converged, and each row's
 acceptance test (converged, inverse solve solved, every value finite, full rank).
 
@@ -65,7 +66,7 @@ def evaluate_rows(function: CompiledFunction, X: np.ndarray, pose_in: slice, pos
     Returns:
         (n, n_out) the output rows and (n,) the mask of the rows whose pose converged.
     """
-    Y = function.batch(X)
+    Y = function.batch(X, lanes=True)
     calls = 1
     with np.errstate(invalid="ignore"):
         pending = np.flatnonzero(~(Y[:, residual] < tolerance))
@@ -74,7 +75,7 @@ def evaluate_rows(function: CompiledFunction, X: np.ndarray, pose_in: slice, pos
             if not len(pending):
                 break
             X[pending, pose_in] = Y[pending, pose_out]
-            Y[pending] = function.batch(X[pending])
+            Y[pending] = function.batch(X[pending], lanes=True)
             calls += 1
             pending = pending[~(Y[pending, residual] < tolerance)]
         converged = Y[:, residual] < tolerance
@@ -136,10 +137,11 @@ def norms(e: np.ndarray) -> np.ndarray:
 
 
 def newton_calls(bound: BoundCall, pose_in: np.ndarray, pose_out: slice, residual: int,
-                 tolerance: float, max_calls: int) -> bool:
+                 tolerance: float, max_calls: int) -> np.ndarray | None:
     """Evaluate a bound compiled step, then again from the pose reached while its pose
     residual is not below ``tolerance`` (finite, at most ``max_calls`` calls in all);
-    whether the input pose ``pose_in`` (its bound row's view) was moved.
+    the input pose ``pose_in`` (its bound row's view) as it was when it was moved (a
+    copy; None: not moved, the common case).
 
     Raises:
         CompilationError: The compiled function failed.
@@ -147,16 +149,17 @@ def newton_calls(bound: BoundCall, pose_in: np.ndarray, pose_out: slice, residua
     y, call = bound.y, bound.call
     if call():
         raise CompilationError(f"{bound.function.name}: the compiled function failed")
-    calls, moved = 1, False
+    calls, guess = 1, None
     while not y[residual] < tolerance:  # Newton from the pose reached, as FK does
         if calls >= max_calls or not math.isfinite(y[residual]):
             break
+        if guess is None:
+            guess = pose_in.copy()
         pose_in[:] = y[pose_out]
-        moved = True
         if call():
             raise CompilationError(f"{bound.function.name}: the compiled function failed")
         calls += 1
-    return moved
+    return guess
 
 
 def over_limits(forces: np.ndarray, limits: np.ndarray) -> np.ndarray:

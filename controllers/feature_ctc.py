@@ -83,8 +83,9 @@ class FeatureCTC(TaskComputedTorque):
         cam, A = camera_and_base_points(self.name, context)
         self._frame = cam
         self._A = A
-        #: The reference's grid: rows (n, 3, m), sanitised rows and known rows.
-        self._grid: tuple[object, np.ndarray, np.ndarray, np.ndarray] | None = None
+        #: The reference's grid (:meth:`reference_grid`).
+        self._grid: tuple[object, np.ndarray, np.ndarray, np.ndarray, np.ndarray] | None = \
+            None
 
     def take_goal(self, goal: Goal) -> None:
         """The taught features (``goal.normals`` or ``goal.directions``).
@@ -146,18 +147,20 @@ class FeatureCTC(TaskComputedTorque):
             return None
         return min(k, len(self.reference_grid()[1]) - 1)
 
-    def reference_grid(self) -> tuple[object, np.ndarray, np.ndarray, np.ndarray]:
+    def reference_grid(self) -> tuple[object, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         """The reference's control grid ``k dt`` up to its end and a step past it (built
         on first use for each reference, one batched call): the reference,
         :meth:`feature_rows` on the grid (n, 3, m) and, step by step, what
-        :meth:`compiled_reference` gives (n, 3 m) and the rows known (n, m)."""
+        :meth:`compiled_reference` gives (n, 3 m), the rows known (n, m) and whether
+        they all are (n,)."""
         ctx, ref = self.context, self.reference
         assert ctx is not None and ref is not None
         if self._grid is None or self._grid[0] is not ref:
             dt = float(ctx.dt)
             n = int(np.ceil(float(ref.duration) / dt)) + 2
             rows = self.feature_rows(dt * np.arange(n))
-            self._grid = (ref, rows, *_sanitised_rows(rows))
+            sanitised, known = _sanitised_rows(rows)
+            self._grid = (ref, rows, sanitised, known, np.all(known, axis=1))
         return self._grid
 
     def feature_rows(self, times: np.ndarray) -> np.ndarray:
@@ -182,7 +185,7 @@ class FeatureCTC(TaskComputedTorque):
         v["frame"][:] = np.concatenate([cam.rotation.ravel(), cam.translation])
         v["points"][:] = (g.base_points, g.platform_points)
         v["radius"][:] = g.leg_radius
-        out = feature_motion(feature).batch(rows).reshape(len(times), 3, size)
+        out = feature_motion(feature).batch(rows, lanes=True).reshape(len(times), 3, size)
         seen = np.isfinite(anchored.reshape(len(times), size))
         return np.where(seen[:, None, :], out, np.nan)
 
@@ -199,8 +202,7 @@ class FeatureCTC(TaskComputedTorque):
         """:meth:`compiled_reference` at grid step ``i``: the sanitised row and the rows
         known (None: all)."""
         assert self._grid is not None
-        known = self._grid[3][i]
-        return self._grid[2][i], None if known.all() else known
+        return self._grid[2][i], None if self._grid[4][i] else self._grid[3][i]
 
     def _taught_reference(self) -> tuple[np.ndarray, np.ndarray | None]:
         """The taught features at rest, as :meth:`compiled_reference`."""
@@ -252,8 +254,7 @@ class FeatureCTC(TaskComputedTorque):
         grid steps whose rows are all known."""
         if self.reference is None:
             return None
-        _, _, sanitised, known = self.reference_grid()
-        every: np.ndarray = np.all(known, axis=1)
+        _, _, sanitised, _, every = self.reference_grid()
         return sanitised, every
 
     def batch_inputs(self, rows_batch: TaskRows, X: np.ndarray,

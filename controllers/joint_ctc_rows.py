@@ -66,17 +66,19 @@ def quintic_timing(t: float, t0: float, T: float) -> tuple[float, float, float] 
 
 def quintic_row_into(t: float, row: np.ndarray, out: np.ndarray) -> None:
     """:func:`quintic_rows` of one quintic ``row`` (21,) at ``t`` [s], written into
-    ``out`` (18,) (the same operations on the same numbers)."""
-    timing = quintic_timing(t, float(row[1]), float(row[2]))
+    ``out`` (18,) (the same operations on the same numbers, in Python floats: one
+    array read and one write)."""
+    r = row.tolist()
+    timing = quintic_timing(t, r[1], r[2])
     if timing is None:
-        out[0:6] = row[15:21]
+        out[0:6] = r[15:21]
         out[6:18] = 0.0
         return
     s, sd, sdd = timing
-    d = row[9:15]
-    out[0:6] = row[3:9] + s * d
-    out[6:12] = sd * d
-    out[12:18] = sdd * d
+    _, _, _, a0, a1, a2, a3, a4, a5, d0, d1, d2, d3, d4, d5, *_ = r
+    out[:] = [a0 + s * d0, a1 + s * d1, a2 + s * d2, a3 + s * d3, a4 + s * d4, a5 + s * d5,
+              sd * d0, sd * d1, sd * d2, sd * d3, sd * d4, sd * d5,
+              sdd * d0, sdd * d1, sdd * d2, sdd * d3, sdd * d4, sdd * d5]
 
 
 def quintic_rows(t: np.ndarray, rows: np.ndarray) -> np.ndarray:

@@ -201,12 +201,12 @@ class CompiledTaskStep:
             return prepared
         rows, note = prepared
         pose_in, y = self.views["pose"], self.bound.y
-        guess = pose_in.copy()
-        newton_calls(self.bound, pose_in, self._pose, self._residual, self.tolerance,
-                     FK_MAX_CALLS)
+        guess = newton_calls(self.bound, pose_in, self._pose, self._residual,
+                             self.tolerance, FK_MAX_CALLS)
         accepted = self.accept(law, y, rows)
         if accepted is None:
-            pose_in[:] = guess  # the guess stays the last pose found
+            if guess is not None:  # the guess stays the last pose found
+                pose_in[:] = guess
             reason = refusal(y, self._status, self._residual, self._factor,
                              law.solver.threshold,
                              self.pose_name, self.views)

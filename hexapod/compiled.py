@@ -47,6 +47,9 @@ log = logging.getLogger(__name__)
 
 #: The compiler flags of a kernel (``-shared -fPIC`` are added).
 DEFAULT_FLAGS = ("-O2", "-fno-math-errno")
+#: Rows from which :meth:`CompiledFunction.batch` evaluates by lanes when asked (two
+#: vectors of :data:`hexapod.compiled_lanes.LANES` rows: fewer gain little).
+LANE_ROWS = 8
 
 _BATCH_WRAPPER = r"""
 #include <stdlib.h>
@@ -295,6 +298,8 @@ class CompiledFunction:
         #: Sizes of its ``arg``, ``res``, ``iw`` and ``w`` work arrays.
         self.work_sizes = (0, 0, 0, 0)
         self._lib: ctypes.CDLL | None = None
+        #: The lane-parallel C (:meth:`lanes`; False: not built yet).
+        self._lanes: Any = False
         if not compile:
             return
         try:
@@ -366,10 +371,28 @@ class CompiledFunction:
             raise CompilationError(f"{self.name}: the compiled function failed")
         return self._ybuf.copy()
 
-    def batch(self, x: np.ndarray) -> np.ndarray:
-        """Evaluate on the rows of ``x`` (N, n_in) -> (N, n_out)."""
+    def lanes(self) -> Any:
+        """The function's lane-parallel C (:class:`hexapod.compiled_lanes.LaneFunction`,
+        ``same_width=False``: the same operations, bit for bit, several rows at once;
+        compiled on first use and cached as the kernels are), or None without a compiler
+        or for an instruction it does not translate."""
+        if self._lanes is False:
+            from hexapod.compiled_lanes import LaneFunction
+
+            self._lanes = None if self._lib is None else LaneFunction.create(
+                self.function, f"{self.name}_lanes", same_width=False)
+        return self._lanes
+
+    def batch(self, x: np.ndarray, lanes: bool = False) -> np.ndarray:
+        """Evaluate on the rows of ``x`` (N, n_in) -> (N, n_out); ``lanes``: a batch of
+        :data:`LANE_ROWS` rows or more by :meth:`lanes` where it is built (the same
+        numbers, about three times faster; the result may be a view)."""
         x = np.ascontiguousarray(x, dtype=float).reshape(-1, self.n_in)
         n = x.shape[0]
+        if lanes and n >= LANE_ROWS:
+            lane = self.lanes()
+            if lane is not None:
+                return lane.evaluate(x)  # type: ignore[no-any-return]
         y = np.empty((n, self.n_out))
         if self._lib is not None:
             if self._batch(x.ctypes.data, y.ctypes.data, n):

@@ -8,7 +8,10 @@ list (not CasADi's code generator): every value is a vector of :data:`LANES` dou
 registers and on the stack. Every instruction is one IEEE operation per lane, as in
 CasADi's own C (``-ffp-contract=off``: no fused multiply-add), so the results are those
 of the scalar code bit for bit; the transcendental functions (``tanh``, ``sin``, ...)
-are libm's, lane by lane. It is compiled with ``-O3`` (no ``-march``, no
+are libm's, lane by lane (``atan2`` too). A function whose output is not as wide as its
+input (a controller's compiled step, :meth:`hexapod.compiled.CompiledFunction.batch` with
+``lanes=True``) is applied once per row (:meth:`LaneFunction.evaluate`). It is compiled
+with ``-O3`` (no ``-march``, no
 ``-ffast-math``: GCC keeps every IEEE operation; about 9 % faster than ``-O2`` on the
 dynamic world's period, the same bits).
 
@@ -49,6 +52,8 @@ _COMPARE = {"LT": "<", "LE": "<=", "EQ": "==", "NE": "!="}
 _LIBM = {"SQRT": "sqrt", "TANH": "tanh", "SIN": "sin", "COS": "cos", "EXP": "exp",
          "LOG": "log", "TAN": "tan", "ATAN": "atan", "ASIN": "asin", "ACOS": "acos",
          "SINH": "sinh", "COSH": "cosh", "ERF": "erf", "FLOOR": "floor", "CEIL": "ceil"}
+#: Functions of two arguments applied lane by lane (libm).
+_LIBM2 = {"ATAN2": "atan2"}
 
 _ONE = "(V){" + ", ".join(["1.0"] * LANES) + "}"
 _ABS_MASK = "(VI){" + ", ".join(["0x7fffffffffffffffLL"] * LANES) + "}"
@@ -104,6 +109,11 @@ static inline V lane_mask(VI m) {{ const V one = {{{ones}}}; return (V)((VI)one 
 _LIBM_LANE = r"""
 static inline V lane_{f}(V a) {{ V r; for (int i = 0; i < LANES; ++i) r[i] = {f}(a[i]);
   return r; }}
+"""
+
+_LIBM2_LANE = r"""
+static inline V lane_{f}(V a, V b) {{ V r; for (int i = 0; i < LANES; ++i)
+  r[i] = {f}(a[i], b[i]); return r; }}
 """
 
 _BLOCK = r"""
@@ -166,13 +176,17 @@ def _constant(value: float) -> str:
     return value.hex()
 
 
-def _check(function: ca.Function, name: str) -> int:
-    width = int(function.nnz_in(0))
-    if (function.n_in() != 1 or function.n_out() != 1 or int(function.nnz_out(0)) != width
+def _check(function: ca.Function, name: str, same_width: bool = True) -> int:
+    """The width of a lane function's row: its input's (``same_width``), else the wider
+    of its input and output (the input in the row's first values, the output written
+    over them)."""
+    n_in, n_out = int(function.nnz_in(0)), int(function.nnz_out(0))
+    if (function.n_in() != 1 or function.n_out() != 1 or (same_width and n_out != n_in)
             or not function.sparsity_in(0).is_dense()
             or not function.sparsity_out(0).is_dense()):
-        raise ValueError(f"{name}: a lane function maps one row to one row of the same width")
-    return width
+        raise ValueError(f"{name}: a lane function maps one dense row to one dense row"
+                         + (" of the same width" if same_width else ""))
+    return max(n_in, n_out)
 
 
 def _body(function: ca.Function, name: str, used_libm: set[str]) -> str:
@@ -205,6 +219,9 @@ def _body(function: ca.Function, name: str, used_libm: set[str]) -> str:
         elif op in _LIBM:
             used_libm.add(_LIBM[op])
             expr = f"lane_{_LIBM[op]}({a[0]})"
+        elif op in _LIBM2:
+            used_libm.add(_LIBM2[op])
+            expr = f"lane_{_LIBM2[op]}({a[0]}, {a[1]})"
         else:
             raise UnsupportedInstructionError(name, op)
         lines.append(f"const V {v} = {expr};")
@@ -213,15 +230,17 @@ def _body(function: ca.Function, name: str, used_libm: set[str]) -> str:
     return "\n".join("    " + line for line in lines)
 
 
-def lane_code(function: ca.Function, name: str, finish: ca.Function | None = None) -> str:
-    """The C source of ``function`` (one dense row in, one row of the same width out)
+def lane_code(function: ca.Function, name: str, finish: ca.Function | None = None,
+              same_width: bool = True) -> str:
+    """The C source of ``function`` (one dense row in, one row of the same width out;
+    ``same_width=False``: of any width, applied once, :meth:`LaneFunction.evaluate`)
     iterated over lanes of rows, then ``finish`` (the same shape) once (module docstring).
 
     Raises:
         UnsupportedInstructionError: An instruction outside the translated set (its name).
         ValueError: A function that does not map a row to a row of its width.
     """
-    width = _check(function, name)
+    width = _check(function, name, same_width)
     used_libm: set[str] = set()
     body = _body(function, name, used_libm)
     end = ""
@@ -230,7 +249,9 @@ def lane_code(function: ca.Function, name: str, finish: ca.Function | None = Non
             raise ValueError(f"{name}: the finishing function's row is not {width} long")
         end = _FINISH.format(body=_body(finish, name, used_libm))
     prelude = _PRELUDE.format(bytes=8 * LANES, lanes=LANES, ones=", ".join(["1.0"] * LANES))
-    helpers = "".join(_LIBM_LANE.format(f=f) for f in sorted(used_libm))
+    two = set(_LIBM2.values())
+    helpers = "".join((_LIBM2_LANE if f in two else _LIBM_LANE).format(f=f)
+                      for f in sorted(used_libm))
     rows = (_ROWS.format(name=name, width=width, attribute="", suffix="") + _AVX2
             + _ROWS.format(name=name, width=width, attribute='__attribute__((target("avx2")))',
                            suffix="_avx2") + "#endif\n")
@@ -247,11 +268,15 @@ class LaneFunction:
         name: C name of the function.
         width: Length of a row.
         library: The loaded shared library.
+        n_in, n_out: The function's input and output widths (default: ``width``).
     """
 
-    def __init__(self, name: str, width: int, library: ctypes.CDLL) -> None:
+    def __init__(self, name: str, width: int, library: ctypes.CDLL, n_in: int | None = None,
+                 n_out: int | None = None) -> None:
         self.name = name
         self.width = width
+        self.n_in = width if n_in is None else n_in
+        self.n_out = width if n_out is None else n_out
         self._lib = library
         run = getattr(library, f"{name}_run")
         run.argtypes = [ctypes.c_void_p, ctypes.c_void_p, ctypes.c_longlong, ctypes.c_longlong,
@@ -262,15 +287,17 @@ class LaneFunction:
         self.used_avx2 = False
 
     @classmethod
-    def create(cls, function: ca.Function, name: str, finish: ca.Function | None = None
-               ) -> LaneFunction | None:
+    def create(cls, function: ca.Function, name: str, finish: ca.Function | None = None,
+               same_width: bool = True) -> LaneFunction | None:
         """The compiled lane function of ``function`` (then ``finish`` once, if given), or
-        None (logged) when it cannot be generated or compiled."""
+        None (logged) when it cannot be generated or compiled. ``same_width=False``: a
+        function whose output is not as wide as its input (:meth:`evaluate` only)."""
         try:
-            code = lane_code(function, name, finish)
+            code = lane_code(function, name, finish, same_width)
             path = build_shared_library(name, code, ("-O3", "-fno-math-errno",
                                                      "-ffp-contract=off"))
-            return cls(name, int(function.nnz_in(0)), ctypes.CDLL(str(path)))
+            return cls(name, _check(function, name, same_width), ctypes.CDLL(str(path)),
+                       int(function.nnz_in(0)), int(function.nnz_out(0)))
         except (OSError, subprocess.SubprocessError, UnsupportedInstructionError) as exc:
             log.warning("%s: no lane-parallel C (%s); using CasADi's code", name, exc)
             return None
@@ -305,6 +332,14 @@ class LaneFunction:
                                         int(iterations), int(check), bad.ctypes.data,
                                         int(avx2)))
         return bad.astype(bool)
+
+    def evaluate(self, x: np.ndarray, avx2: bool = True) -> np.ndarray:
+        """The function once on every row of ``x`` (N, n_in): (N, n_out) (a view of the
+        work table; ``x`` is not changed)."""
+        table = np.zeros((len(x), self.width))
+        table[:, :self.n_in] = x
+        self.advance(table, np.arange(len(x)), 1, 0, avx2)
+        return table[:, :self.n_out]
 
     def iterate(self, x: np.ndarray, iterations: int, avx2: bool = True) -> np.ndarray:
         """The rows of ``x`` (N, width) after ``iterations`` applications of the function

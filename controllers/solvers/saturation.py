@@ -23,6 +23,7 @@ Rows under every limit are returned unchanged (the same numbers, bit for bit).
 
 from __future__ import annotations
 
+import operator
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -52,7 +53,7 @@ def over_limit(forces: np.ndarray, limit: np.ndarray | list[float]) -> bool:
     """Whether a leg's force (6,) [N] is over its limit (6,) [N] (a NaN is not; the
     limits may be given as a list, the per-step callers' cached one)."""
     lim = limit.tolist() if isinstance(limit, np.ndarray) else limit
-    return any(abs(f) > m for f, m in zip(forces.tolist(), lim, strict=True))
+    return any(map(operator.gt, map(abs, forces.tolist()), lim))
 
 
 def clipped(forces: np.ndarray, limit: np.ndarray) -> np.ndarray:

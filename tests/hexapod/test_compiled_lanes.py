@@ -11,6 +11,7 @@ import casadi as ca
 import numpy as np
 import pytest
 
+from hexapod.compiled import LANE_ROWS, CompiledFunction
 from hexapod.compiled_lanes import LaneFunction, lane_code
 from hexapod.exceptions import UnsupportedInstructionError
 
@@ -23,7 +24,8 @@ def _every_instruction() -> ca.Function:
         a * b + c / d - (a - 0.25),
         ca.if_else(a < b, ca.sqrt(ca.fabs(c)), 0) + ca.if_else(a <= c, 1.5, 0),
         ca.fmin(a, b) + ca.fmax(c, d) + ca.sign(a) + ca.sign(d),
-        ca.tanh(a) + ca.sin(b) * ca.cos(c) + ca.exp(-d * d) + ca.log(1 + c * c),
+        ca.tanh(a) + ca.sin(b) * ca.cos(c) + ca.exp(-d * d) + ca.log(1 + c * c)
+        + ca.atan2(a, d),
         (a == b) + (c != d) + ca.logic_not(a) + ca.logic_and(a, b) + ca.logic_or(c, 0),
         1 / (x[4] + 3) + x[4] ** 2 + 2 * x[5] - x[6],
         ca.fmin(ca.fmax(x[6], -x[7]), x[7]),
@@ -79,15 +81,49 @@ def test_zero_iterations_copy_and_inputs_are_untouched(
 
 def test_an_unknown_instruction_is_refused(caplog: pytest.LogCaptureFixture) -> None:
     x = ca.SX.sym("x", 2)
-    f = ca.Function("lanes_atan2", [x], [ca.vertcat(ca.atan2(x[0], x[1]), x[1])])
-    with pytest.raises(UnsupportedInstructionError, match="ATAN2"):
-        lane_code(f, "lanes_atan2")
+    f = ca.Function("lanes_fmod", [x], [ca.vertcat(ca.fmod(x[0], x[1]), x[1])])
+    with pytest.raises(UnsupportedInstructionError, match="FMOD"):
+        lane_code(f, "lanes_fmod")
     with caplog.at_level(logging.WARNING):
-        assert LaneFunction.create(f, "lanes_atan2") is None
-    assert "ATAN2" in caplog.text
+        assert LaneFunction.create(f, "lanes_fmod") is None
+    assert "FMOD" in caplog.text
 
 
 def test_a_function_must_map_a_row_to_a_row_of_its_width() -> None:
     x = ca.SX.sym("x", 3)
     with pytest.raises(ValueError, match="same width"):
         lane_code(ca.Function("lanes_bad", [x], [x[0:2]]), "lanes_bad")
+
+
+@pytest.mark.parametrize("n", [1, 5, 9])
+@pytest.mark.parametrize("avx2", [True, False])
+def test_a_function_of_other_widths_is_evaluated_once(n: int, avx2: bool) -> None:
+    """A row of 3 to a row of 5 and a row of 6 to a row of 2 (``same_width=False``):
+    :meth:`LaneFunction.evaluate` gives CasADi's rows bit for bit, its input untouched."""
+    x3, x6 = ca.SX.sym("x", 3), ca.SX.sym("x", 6)
+    wide = ca.Function("lanes_wide", [x3], [ca.cse(ca.vertcat(
+        x3[0] * x3[1], ca.sqrt(ca.fabs(x3[2])), x3[0], x3[1] - x3[2], ca.tanh(x3[2])))])
+    narrow = ca.Function("lanes_narrow", [x6], [ca.vertcat(x6[5] / x6[0], x6[1] + x6[2])])
+    rng = np.random.default_rng(n)
+    for f in (wide, narrow):
+        lanes = LaneFunction.create(f, f"hexapod_test_{f.name()}", same_width=False)
+        assert lanes is not None
+        x = rng.normal(size=(n, f.nnz_in(0)))
+        keep = x.copy()
+        got = lanes.evaluate(x, avx2=avx2)
+        np.testing.assert_array_equal(got, _reference(f, x, 1))
+        np.testing.assert_array_equal(x, keep)
+
+
+def test_a_compiled_function_batches_by_lanes_when_asked() -> None:
+    """:meth:`CompiledFunction.batch` with ``lanes=True``: from ``LANE_ROWS`` rows by its
+    lane-parallel C, the numbers of its CasADi C; fewer rows by CasADi's C."""
+    x = ca.SX.sym("x", 4)
+    f = ca.Function("hexapod_test_batch_lanes", [x], [ca.cse(ca.vertcat(
+        x[0] * x[1] + x[2] / x[3], ca.sin(x[0]) - ca.sqrt(x[3] * x[3] + 1)))])
+    cf = CompiledFunction(f)
+    assert cf.lanes() is not None
+    rng = np.random.default_rng(3)
+    for n in (LANE_ROWS - 1, LANE_ROWS, 3 * LANE_ROWS + 1):
+        X = rng.normal(size=(n, 4))
+        np.testing.assert_array_equal(cf.batch(X, lanes=True), cf.batch(X))
