@@ -34,12 +34,12 @@ from typing import Any
 
 import numpy as np
 
-from controllers.base import Command, Controller, ControllerContext, Goal, Observation
+from controllers.base import Command, ControllerContext, Goal, Observation
 from controllers.exceptions import ContextError
 from controllers.feature_ctc import LegEdgeCTC
 from controllers.force_mpc.problem import NX, STATE, ForceProblemSpec, force_kernel
-from controllers.law_tools import check_count, check_horizon, check_number, check_weights
-from controllers.mpc.solver import SolveStats, compiled_qp, solve_qp
+from controllers.law_tools import check_count, check_number
+from controllers.mpc.solver import PredictiveLaw, SolveStats, compiled_qp, run_sqp
 from controllers.task_ctc import (
     DAMPING,
     NATURAL_FREQUENCY_HZ,
@@ -73,7 +73,7 @@ BOUND_TOLERANCE = 1e-4
 MAX_ITER = 3
 
 
-class ForceMPCLaw(Controller):
+class ForceMPCLaw(PredictiveLaw):
     """Base of the force-level predictive controllers (see the module docstring): the
     subclasses say which features (:attr:`feature`), which law they hold
     (:attr:`law_class`), and read the features and the reference.
@@ -116,26 +116,21 @@ class ForceMPCLaw(Controller):
                  smooth_goal: bool = True, friction_smoothing: float = 3e-3,
                  compiled: bool = True) -> None:
         name = self.name
-        self.horizon, self.error_weight, self.terminal_weight = check_horizon(
-            name, horizon, error_weight, terminal_weight)
+        self.rate_weight, self.effort_weight = self._check_options(
+            horizon, error_weight, terminal_weight,
+            (("rate_weight", rate_weight), ("effort_weight", effort_weight)), compiled)
         self.substeps = check_count(name, "substeps", substeps, 1, 100)
         self.max_iter = check_count(name, "max_iter", max_iter, 1, 20)
-        self.rate_weight, self.effort_weight = check_weights(
-            name, ("rate_weight", rate_weight), ("effort_weight", effort_weight),
-            "the QP needs one of them to be strictly convex")
         self.friction_smoothing = check_number(name, "friction_smoothing",
                                                friction_smoothing)
-        self.compiled = bool(compiled)
         #: The fallback law, whose reference and goal this controller tracks.
         self.law: Any = self.law_class(natural_frequency=natural_frequency, damping=damping,
                                        smooth_goal=smooth_goal)
         self.spec = ForceProblemSpec(horizon, substeps, self.feature)
-        self.stats = SolveStats()
         self.context: ControllerContext | None = None
         self._bound: BoundCall | None = None
-        #: The plan of the last step (6 N,) [N] (before the shift), and the warm start.
+        #: The plan of the last step (6 N,) [N] (before the shift).
         self.plan: np.ndarray | None = None
-        self._U = np.zeros(6 * horizon)
         self._f_prev = np.zeros(6)
         self._started = False
         self._t0 = 0.0
@@ -239,38 +234,15 @@ class ForceMPCLaw(Controller):
 
     def _solve(self, observation: Observation, normals: np.ndarray, ref_now: np.ndarray,
                mask: np.ndarray) -> Command:
-        """The Gauss-Newton QPs from the warm start, and the command."""
-        assert self._bound is not None
-        bound, stats = self._bound, self.stats
-        stats.steps += 1
-        U = self._U.copy()
-        n = U.size
-        out = self._kernel.outputs
-        status = ""
-        converged = False
-        iterations = 0
-        for it in range(1, self.max_iter + 1):
-            iterations = it
-            bound.inputs["U"][:] = U
-            if bound.call():
-                return self._fallback(observation, "the compiled kernel failed")
-            y = bound.y
-            if not math.isfinite(float(y[out["H"]].sum() + y[out["g"]].sum())):
-                return self._fallback(observation, "non-finite QP data (prediction failed)")
-            H = y[out["H"]].reshape(n, n)
-            g = y[out["g"]]
-            res = solve_qp(H, g, self._eye, -self._limit - U, self._limit - U, self.compiled)
-            if res.step is None:
-                return self._fallback(observation, res.status)
-            U = U + res.step
-            status = res.status
-            size = float(np.abs(res.step[:6]).max())
-            if size <= 1e-3 * max(float(np.abs(U[:6]).max()), 1.0):
-                converged = True
-                break
-        stats.solved(iterations, status)
+        """The Gauss-Newton QPs from the warm start (full steps), and the command."""
+        self.stats.steps += 1
+        U, converged, status, last, it = run_sqp(self._evaluate, self._qp_data, self._U.copy(),
+                                                 self.max_iter, 1e-3, self.compiled, floor=1.0)
+        if U is None or last is None:
+            return self._fallback(observation, status)
+        self.stats.solved(it, last.status)
         if not converged and self.max_iter > 1:
-            stats.unconverged += 1
+            self.stats.unconverged += 1
         lim = self._limit
         if not (math.isfinite(float(U.sum()))
                 and np.all(np.abs(U) <= lim * (1.0 + BOUND_TOLERANCE))):
@@ -281,12 +253,27 @@ class ForceMPCLaw(Controller):
         U = np.clip(U, -lim, lim)  # within DAQP's tolerance of the bounds: onto them
         f = U[:6]
         self.plan = U.copy()
-        self._U = np.concatenate([U[6:], U[-6:]])  # the warm start of the next period
+        self._U = self._shift(U)
         self._f_prev = f.copy()
         e = np.where(mask, normals - ref_now, 0.0)
         return Command.of_forces(f, error=e, error_norm=float(np.linalg.norm(e)),
                                  features_used=self.used(mask),
-                                 notes=[f"force-mpc: {status}"])
+                                 notes=[f"force-mpc: {last.status}"])
+
+    def _evaluate(self, U: np.ndarray) -> np.ndarray | str:
+        """The kernel's ``H`` and ``g`` at ``U`` (a view of its output), or why not."""
+        assert self._bound is not None
+        self._bound.inputs["U"][:] = U
+        if self._bound.call():
+            return "the compiled kernel failed"
+        return self._bound.y[:self._U.size * (self._U.size + 1)]
+
+    def _qp_data(self, out: np.ndarray, U: np.ndarray
+                 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """``(H, g, C, lba, uba)``: the force limits as bounds on the step from ``U``."""
+        n = U.size
+        return out[:n * n].reshape(n, n), out[n * n:], self._eye, -self._limit - U, \
+            self._limit - U
 
     # ----------------------------------------------------------------- pieces
     def camera_constants(self, context: ControllerContext, v: dict[str, np.ndarray]) -> None:
@@ -335,13 +322,11 @@ class ForceMPCLaw(Controller):
         raise NotImplementedError
 
     def _fallback(self, observation: Observation, reason: str) -> Command:
-        """The held law's command this period, noting why."""
-        self.stats.fallback(reason)
-        cmd = self.law.step_trial(observation)
+        """The held law's command this period, noting why; the plan restarts from it."""
+        cmd = super()._fallback(observation, reason)
         if cmd.reason is None and cmd.forces is not None:
             self._f_prev = np.asarray(cmd.forces, dtype=float).copy()
             self._U = np.tile(self._f_prev, self.horizon)
-        cmd.notes = [*(cmd.notes or []), f"force-mpc fallback: {reason}"]
         return cmd
 
     def _refuse(self, problem: str) -> Command:

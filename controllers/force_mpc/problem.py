@@ -51,9 +51,8 @@ from functools import lru_cache
 import casadi as ca
 import numpy as np
 
-from controllers.mpc.prediction import sx_edge_normals
 from controllers.tasks.feature_kind import BuiltinFeature
-from controllers.tasks.leg_edge import EDGE_NORMALS
+from controllers.tasks.leg_edge import EDGE_NORMALS, sx_edge_normals
 from hexapod.compiled import CompiledFunction, Layout, Shape
 from hexapod.dynamics import compiled as mech
 

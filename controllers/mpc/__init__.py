@@ -1,6 +1,7 @@
 """Visual predictive control (Allibert, Courtial & Chaumette, IEEE T-RO 2010) in CasADi.
 
-- :mod:`controllers.mpc.prediction`: the local and global prediction models;
+- :mod:`controllers.mpc.prediction`: the local and global prediction models (their
+  CasADi blocks, the pose fit);
 - :mod:`controllers.mpc.problem`: the condensed Gauss-Newton QP (single shooting),
   its data computed by one compiled C function;
 - :mod:`controllers.mpc.solver`: the QP (unconstrained shortcut, DAQP generated to
@@ -15,13 +16,10 @@ from controllers.mpc.controller import (
     MPCLaw,
     SolveStats,
 )
-from controllers.mpc.prediction import GlobalModel, LocalModel
 
 __all__ = [
-    "GlobalModel",
     "LegDirectionMPCController",
     "LegEdgeMPCController",
-    "LocalModel",
     "MPCLaw",
     "SolveStats",
 ]

@@ -27,20 +27,15 @@ from typing import Any
 
 import numpy as np
 
-from controllers.base import Command, Controller, ControllerContext, Goal, Observation
+from controllers.base import Command, ControllerContext, Goal, Observation
 from controllers.exceptions import ContextError, OptionError
-from controllers.law_tools import (
-    check_choice,
-    check_count,
-    check_horizon,
-    check_number,
-    check_weights,
-)
+from controllers.law_tools import check_choice, check_count, check_number
 from controllers.mpc.drive_state import DRIVE_STATES, DriveLag, drive_lag
 from controllers.mpc.prediction import fit_pose
 from controllers.mpc.problem import ProblemSpec, problem_kernel
 from controllers.mpc.solver import (
     SCREENED_VISIBILITY_ROWS,
+    PredictiveLaw,
     QPResult,
     SolveStats,
     compiled_qp,
@@ -50,7 +45,7 @@ from controllers.qp import LegDirectionQPController, LegEdgeQPController, veloci
 from controllers.tasks.feature_kind import BuiltinFeature
 from controllers.tasks.leg_direction import LEG_DIRECTIONS
 from controllers.tasks.leg_edge import EDGE_NORMALS
-from hexapod.compiled import CompiledFunction
+from hexapod.compiled import CompilationError, CompiledFunction
 
 log = logging.getLogger(__name__)
 
@@ -63,7 +58,7 @@ REFERENCES = ("exponential", "zero")
 DRIVE_MODELS = ("ideal", "lag")
 
 
-class MPCLaw(Controller):
+class MPCLaw(PredictiveLaw):
     """Base of the predictive controllers (see the module docstring for the options).
 
     Args:
@@ -130,15 +125,13 @@ class MPCLaw(Controller):
             raise OptionError(name, "leg_rate_feedforward", "the one-step laws' option; the "
                               "predictive controllers model the drives with drive_model = "
                               "\"lag\" (from the measured leg velocities)")
-        self.horizon, self.error_weight, self.terminal_weight = check_horizon(
-            name, horizon, error_weight, terminal_weight)
+        self.regularization, self.effort_weight = self._check_options(
+            horizon, error_weight, terminal_weight,
+            (("regularization", regularization), ("effort_weight", effort_weight)), compiled)
         self.model = check_choice(name, "model", model, MODELS)
         self.reference = check_choice(name, "reference", reference, REFERENCES)
         self.drive_model = check_choice(name, "drive_model", drive_model, DRIVE_MODELS)
         self.drive_state = check_choice(name, "drive_state", drive_state, DRIVE_STATES)
-        self.regularization, self.effort_weight = check_weights(
-            name, ("regularization", regularization), ("effort_weight", effort_weight),
-            "the QP needs one of them to be strictly convex")
         self.visibility = bool(visibility)
         self.visibility_margin = check_number(name, "visibility_margin", visibility_margin,
                                               0.0, strict=False)
@@ -147,7 +140,6 @@ class MPCLaw(Controller):
         if self.max_tilt is not None and self.max_tilt >= math.pi / 2:
             raise OptionError(name, "max_tilt_deg", f"must be < 90, got {max_tilt_deg}")
         self.max_iter = check_count(name, "max_iter", max_iter, 0)
-        self.compiled = bool(compiled)
         self.accept_unconverged = bool(accept_unconverged)
         self.tolerance = check_number(name, "tolerance", tolerance)
         self.time_limit = (None if time_limit is None else
@@ -161,9 +153,7 @@ class MPCLaw(Controller):
                                          compiled=self.compiled, **law_options)
         self.features = self.law.features
         self.context: ControllerContext | None = None
-        self.stats = SolveStats()
         self._spec: ProblemSpec | None = None
-        self._U = np.zeros(6 * horizon)
         #: The drives' state of the lag model (None with the ideal prediction).
         self.drives: DriveLag | None = None
         self._v0 = np.zeros(6)
@@ -359,14 +349,13 @@ class MPCLaw(Controller):
             vec[sl["N"]] = N.reshape(-1)
             vec[sl["b"]] = b
             vec[sl["e0sq"]] = float(e @ e)
-        U, converged, status, last, it, qp_iters = run_sqp(
-            self._kernel, self.compiled, self._vec, self._lay.slices["U"], self._out.slices, spec,
-            self._U.copy(), self.max_iter, self.tolerance, self.time_limit)
+        U, converged, status, last, it = run_sqp(
+            self._evaluate, self._qp_data, self._U.copy(), self.max_iter, self.tolerance,
+            self.compiled, spec=spec, merit_rows=self._out.slices, one_qp=spec.model == "local",
+            time_limit=self.time_limit)
         self.stats.steps += 1
         self.stats.solved(it, status)
-        self.stats.qp_iterations = qp_iters
-        if last is None or last.step is None or not (
-                converged or (self.accept_unconverged and status.startswith("not converged"))):
+        if U is None or last is None or not (converged or self.accept_unconverged):
             return status
         if not converged:
             self.stats.unconverged += 1
@@ -381,10 +370,21 @@ class MPCLaw(Controller):
         self._U = self._shift(U)
         return tau, qdot, self._active(last), status
 
-    @staticmethod
-    def _shift(U: np.ndarray) -> np.ndarray:
-        """The warm start of the next period: the moves shifted by one, the last repeated."""
-        return np.concatenate([U[6:], U[-6:]])
+    def _evaluate(self, U: np.ndarray) -> np.ndarray | str:
+        """The kernel's output at ``U`` (the rest of its input filled), or why not."""
+        self._vec[self._lay.slices["U"]] = U
+        try:
+            return self._kernel.single(self._vec)
+        except (CompilationError, RuntimeError) as exc:
+            return f"QP data kernel failed: {exc}"
+
+    def _qp_data(self, out: np.ndarray, U: np.ndarray
+                 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """``(H, g, C, lba, uba)`` of a kernel output (the bounds relative to ``U``)."""
+        o = self._out.slices
+        n, m = 6 * self.horizon, len(self._rows)
+        return (out[o["H"]].reshape(n, n), out[o["g"]], out[o["C"]].reshape(m, n),
+                out[o["lba"]], out[o["uba"]])
 
     def _active(self, res: QPResult) -> list[str]:
         """Names of the rows at a bound with a non-zero multiplier (first few)."""
@@ -429,13 +429,10 @@ class MPCLaw(Controller):
                                              getattr(law, "line_matrix", None)), qm)
 
     def _fallback(self, obs: Observation, reason: str) -> Command:
-        """The QP law's command, carrying the reason."""
-        self.stats.fallback(reason)
+        """The QP law's command, carrying the reason (in its active constraints too)."""
         self._U[:] = 0.0
-        log.debug("%s: falling back to %s: %s", self.name, self.law.name, reason)
-        cmd = self.law.step_trial(obs)
-        cmd.notes = [*cmd.notes, f"mpc fallback: {reason}"]
-        cmd.active_constraints = [*cmd.active_constraints, f"mpc fallback: {reason}"]
+        cmd = super()._fallback(obs, reason)
+        cmd.active_constraints = [*cmd.active_constraints, cmd.notes[-1]]
         return cmd
 
 

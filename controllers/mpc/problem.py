@@ -65,15 +65,10 @@ from typing import Any
 
 import casadi as ca
 
-from controllers.mpc.prediction import (
-    sx_edge_normals,
-    sx_exp_se3,
-    sx_legs,
-    sx_limb_ends,
-    sx_pixel,
-)
+from controllers.mpc.prediction import sx_exp_se3, sx_legs, sx_pixel
 from controllers.tasks.base import sx_skew
 from controllers.tasks.feature_kind import BuiltinFeature
+from controllers.tasks.leg_edge import sx_edge_normals
 from hexapod.compiled import CompiledFunction, Layout
 
 #: Upper bound used for one-sided rows (the tilt cosine never exceeds 1).
@@ -194,7 +189,7 @@ def _pose_function(spec: ProblemSpec) -> ca.Function:
         K = _mat(P["K"], 3, 3)
         for i in range(6):
             for n in sx_edge_normals(A[i], u[i], r):
-                for X in sx_limb_ends(A[i], B[i], n, r):
+                for X in (A[i] + r * n, B[i] + r * n):  # the segment's ends
                     values.append(sx_pixel(X, K))
     vals = ca.vertcat(*values)
     outs_res: list[ca.SX] = []
