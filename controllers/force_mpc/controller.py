@@ -1,30 +1,19 @@
 """The force-level predictive controllers' receding horizon (:class:`ForceMPCLaw`),
-here for ``leg-edge-force-mpc``, on the leg edges (its pose variant ``pose-force-mpc``
-differs in its features and reference: :mod:`controllers.force_mpc.variants`).
+here for ``leg-edge-force-mpc`` on the leg edges (its pose variant ``pose-force-mpc``
+differs in its features and reference: :mod:`controllers.force_mpc.variants`; the
+controllers in full: ``docs/dynamic-world.md``).
 
-Each period (receding horizon, force-mode drives):
-
-1. read the encoders (lengths ``q`` [m], leg velocities ``q_dot`` [m/s]) and the edge
-   normals the camera sees (refused, zero forces, with the reason when a reading is
-   missing or not finite, as the computed-torque laws refuse);
-2. the state of the prediction: the pose from the NOMINAL forward kinematics of the
-   encoders, the twist ``K^-1 q_dot`` (nominal ``K``);
-3. the reference of the horizon: the features of the stages ``t + k dt``, ``k = 1..N``,
-   exactly those ``leg-edge-ctc`` tracks (the anchored features of the reference
-   trajectory, or of a quintic line to the fixed goal, or the taught goal:
-   :mod:`controllers.feature_ctc`, whose law this controller holds);
-4. one Gauss-Newton QP of :mod:`controllers.force_mpc.problem` (compiled kernel) from
-   the previous plan shifted by one period (warm start), solved first without its
-   bounds (the minimiser ``-H^-1 g``, the QP's optimum when it holds them), else by
-   DAQP generated to C (:func:`controllers.mpc.solver.solve_qp`, the MPC's): the force limits
-   ``|f_k| <= f_max`` of the nominal drives; repeated from the new plan until the
-   first force has converged (its step within 0.1 % of it, or 1 mN), at most
-   ``max_iter`` times (default :data:`MAX_ITER`; 1: the real-time iteration);
-5. apply ``f_0``.
-
-A failed solve (a non-finite QP, DAQP not optimal, a first force out of its bounds)
-falls back to the held ``leg-edge-ctc`` law for that period; the command says so in
-``notes`` and :attr:`ForceMPCLaw.stats` counts it.
+Each period (force-mode drives): read the encoders and the features (refused, zero
+forces, with the reason when a reading is missing or not finite); the state of the
+prediction from the NOMINAL forward kinematics of the encoders and ``K^-1 q_dot``; the
+reference of the stages ``t + k dt``, ``k = 1..N``, exactly those the held
+computed-torque law tracks (:mod:`controllers.feature_ctc`); up to ``max_iter``
+Gauss-Newton QPs of :mod:`controllers.force_mpc.problem` from the previous plan shifted
+by one period (:func:`controllers.mpc.solver.run_sqp`, the force limits ``|f_k| <=
+f_max`` of the nominal drives as bounds), stopping once the first force has converged
+(its step within 0.1 % of it, or 1 mN); apply ``f_0``. A failed solve (a non-finite QP,
+DAQP not optimal, a first force out of its bounds) falls back to the held law for that
+period; the command says so in ``notes`` and :attr:`ForceMPCLaw.stats` counts it.
 """
 
 from __future__ import annotations
@@ -39,7 +28,7 @@ from controllers.exceptions import ContextError
 from controllers.feature_ctc import LegEdgeCTC
 from controllers.force_mpc.problem import NX, STATE, ForceProblemSpec, force_kernel
 from controllers.law_tools import check_count, check_number
-from controllers.mpc.solver import PredictiveLaw, SolveStats, compiled_qp, run_sqp
+from controllers.mpc.solver import PredictiveLaw, compiled_qp, run_sqp
 from controllers.task_ctc import (
     DAMPING,
     NATURAL_FREQUENCY_HZ,
@@ -58,18 +47,11 @@ from hexapod.fk import forward_kinematics
 #: (DAQP's solutions were seen up to 4e-5 beyond it in the perf runs: 0.008 N at
 #: 200 N); the plan is then clipped onto the bounds.
 BOUND_TOLERANCE = 1e-4
-#: Default cap of the Gauss-Newton QPs per period. One (the real-time iteration) applied
-#: the first force of an unconverged plan: a full Gauss-Newton step from the shifted
-#: plan, its sensitivities frozen at the warm start's periods (the Coulomb friction
-#: smoothed), is far from the nonlinear rollout along it (predicted feature error at
-#: the horizon's end of order 1, after three QPs 2e-2 to 4e-2), and with the
-#: camera's noise and 1 mm calibration errors such plans grew on their end stages to
-#: the force limits, which then bent the first force; the forces oscillated with
-#: growing amplitude (payload-saturation, 0 kg: 2 of 200 trials on an end stop).
-#: Three QPs remove it (held-out trials: docs/dynamic-world.md; they seldom meet the
-#: convergence test there and all three run); five gained nothing more there, and with
-#: three the worst case (every step paying all of them, as in ``python -m
-#: benchmarks.perf.controllers``) took 1.24 ms, within the 2 ms step-time goal.
+#: Default cap of the Gauss-Newton QPs per period. One (the real-time iteration) let the
+#: forces oscillate with growing amplitude on the end stages of unconverged plans under
+#: the camera's noise and 1 mm calibration errors (payload-saturation, 0 kg: 2 of 200
+#: trials on an end stop); three remove it, five gained nothing more, and with three the
+#: worst step took 1.24 ms (``docs/dynamic-world.md``, "Why three Gauss-Newton QPs").
 MAX_ITER = 3
 
 
@@ -173,9 +155,8 @@ class ForceMPCLaw(PredictiveLaw):
             compiled_qp(n, n)
         self._eye = np.eye(n)
         self._dt = dt
-        self.stats = SolveStats()
+        self._restart()
         self.plan = None
-        self._U = np.zeros(n)
         self._f_prev = np.zeros(6)
         self._started = False
         self._t0 = 0.0

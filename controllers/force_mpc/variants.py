@@ -17,13 +17,10 @@ from controllers.task_ctc import DAMPING, NATURAL_FREQUENCY_HZ
 from controllers.tasks.leg_edge import EDGE_NORMALS
 from controllers.tasks.platform_pose import PLATFORM_POSE
 
-#: Default force-rate weight of the pose variant [1/N^2] (see :class:`PoseForceMPC`). The
-#: ratio of the two features' squared sensitivities to a translation of the platform at
-#: the reference robot's home pose (front camera: 80.6 /m^2 summed over the three axes
-#: for the edges, 3 for the pose) gives the edges' 1e-8 / 27 = 4e-10; with it the plan
-#: chattered at the Coulomb friction's reversals on the tests' 10 mm circle at 20 mm/s
-#: (largest distance to the reference 0.29 mm, RMS 0.067), with 1e-9 less (0.16 mm,
-#: 0.033): a choice on that one case.
+#: Default force-rate weight of the pose variant [1/N^2] (see :class:`PoseForceMPC`): the
+#: edges' 1e-8 scaled by the two features' sensitivities to a translation gives 4e-10,
+#: with which the plan chattered at the Coulomb friction's reversals on the tests' 10 mm
+#: circle; 1e-9 halved that (``docs/dynamic-world.md``): a choice on that one case.
 POSE_RATE_WEIGHT = 1e-9
 
 

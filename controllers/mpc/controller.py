@@ -1,20 +1,16 @@
 """Visual predictive controllers ``leg-edge-mpc`` and ``leg-direction-mpc``.
 
-Each step (receding horizon): read the features like the one-step QP law of the
-same features (:mod:`controllers.qp`, which this controller holds and falls back
-to), reconstruct the platform pose when the global model is used
-(:mod:`controllers.mpc.prediction`), solve the predictive problem of
-:mod:`controllers.mpc.problem` by Gauss-Newton SQP (:mod:`controllers.mpc.solver`:
-compiled QP data, DAQP),
-warm-started from the previous solution shifted by one period, and apply the first
-move ``q_dot = J_inv tau_0``.
+Each step (receding horizon): read the features like the one-step QP law of the same
+features (:mod:`controllers.qp`, held as the fallback), reconstruct the platform pose
+for the global model, solve the problem of :mod:`controllers.mpc.problem` by
+Gauss-Newton SQP (:func:`controllers.mpc.solver.run_sqp`) warm-started from the previous
+solution shifted by one period, and apply the first move ``q_dot = J_inv tau_0``.
 
-Every solve is checked: a QP that DAQP does not solve, an SQP that does not
-converge within ``max_iter`` iterations (``max_iter = 0`` never solves), a solve
-that exceeds ``time_limit``, or a non-finite or out-of-bounds first move makes the
-step fall back to the QP law; the command then says so in ``notes`` and
-``active_constraints`` (``"mpc fallback: <reason>"``), and :attr:`MPCLaw.stats`
-counts it. Observations with NaN are refused with the reason, like the other laws.
+A QP that DAQP does not solve, an SQP that does not converge within ``max_iter``
+iterations (``max_iter = 0`` never solves), a solve over ``time_limit``, or a non-finite
+or out-of-bounds first move makes the step fall back to the QP law, saying so in
+``notes`` and ``active_constraints`` (``"mpc fallback: <reason>"``; counted in
+:attr:`MPCLaw.stats`). Observations with NaN are refused with the reason.
 """
 
 from __future__ import annotations
@@ -37,7 +33,6 @@ from controllers.mpc.solver import (
     SCREENED_VISIBILITY_ROWS,
     PredictiveLaw,
     QPResult,
-    SolveStats,
     compiled_qp,
     run_sqp,
 )
@@ -224,16 +219,12 @@ class MPCLaw(PredictiveLaw):
             self._vec[sl["alag"]], self._vec[sl["clag"]] = a, c
         self._offset = np.zeros(6)
         self._star = law.desired_features()
-        self._U = np.zeros(6 * self.horizon)
-        #: Last reconstructed platform pose ``(R, t)`` in the camera frame (diagnostic).
-        self.pose: tuple[np.ndarray, np.ndarray] | None = None
-        self.stats = SolveStats()
+        self._restart()
 
     def retarget_trial(self, goal: Goal) -> None:
-        """A new goal, keeping what the controller carries between periods (the goal of
-        each period of a trajectory task, :mod:`controllers.tracking`): the warm start,
-        the fallback law's estimate and the drives' state stay, the desired features
-        become the goal's, exactly as :meth:`reset_trial` would set them.
+        """A new goal (a trajectory task's, :mod:`controllers.tracking`): the desired
+        features become the goal's as :meth:`reset_trial` sets them; the warm start, the
+        fallback law's estimate and the drives' state stay.
 
         Raises:
             ContextError: :meth:`reset_trial` was not called, or the goal is invalid (the
@@ -413,7 +404,6 @@ class MPCLaw(PredictiveLaw):
         R, t = fit_pose(B, self.context.geometry.platform_points, known.astype(float))
         if not (np.all(np.isfinite(R)) and np.all(np.isfinite(t))):
             return "pose reconstruction failed (non-finite)"
-        self.pose = (R, t)
         return R, t
 
     def _model_features(self, R: np.ndarray, t: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

@@ -1,46 +1,22 @@
-"""The predictive problem: a condensed Gauss-Newton QP per SQP iteration, compiled to C.
+"""The predictive problem: a condensed Gauss-Newton QP per SQP iteration, compiled to C
+(the problem itself: ``docs/math.md`` section 6, "Predictive variant").
 
-Decision: the platform twists ``U = (tau_0, ..., tau_{N-1})`` (camera frame,
-``docs/math.md`` section 2), held during one period each; the legs receive
-``q_dot = J_inv tau_0`` (section 3). **Single shooting**: the predicted states are
-functions of ``U`` only, so the NLP has ``6 N`` variables and no equality
-constraint. The state is a pose (or a twist displacement) that a pure integrator
-propagates: nothing unstable to stabilise by multiple shooting, and the condensed
-problem suits a dense active-set QP solver.
+Decision: the platform twists ``U = (tau_0, ..., tau_{N-1})`` (camera frame), held
+during one period each; the legs receive ``q_dot = J_inv tau_0``. **Single
+shooting**: the predicted states are functions of ``U`` only (a pose or a twist
+displacement that a pure integrator propagates), so the NLP has ``6 N`` variables and
+no equality constraint, and the condensed problem suits a dense active-set QP solver.
 
-Cost, over the stages ``k = 1..N`` (stage weight ``w_k``, the last one the terminal
-weight):
-
-``sum_k w_k |W_f (e_k - rho_k e_0)|^2 + effort sum_k |J_inv,0 tau_k|^2``
-
-with the stacked feature error ``e_k`` (section 6; hidden features have weight 0),
-the measured error ``e_0`` and the reference factors ``rho_k = (1 - lambda dt)^k``:
-the error is asked to decrease as the classical law ``e_dot = -lambda e`` would make
-it (Allibert et al.'s reference trajectory). Without active constraint, with the
-local model and ``effort -> 0``, the first move is exactly ``-lambda L^+ e`` for any
-horizon (each ``s_k`` minimises its own term); the MPC differs from the classical law
-only where it predicts a limit.
-
-Constraints, at every predicted stage (values relaxed to the current value when the
-robot is already beyond a bound, so that ``U = 0`` stays feasible):
-
-- strokes ``q_min + margin <= q_k <= q_max - margin`` (lengths corrected by the
-  measured-minus-model offset at ``k = 0``);
-- leg speeds ``|J_inv,0 tau_k| <= q_dot_max`` with the inverse Jacobian of the
-  measured directions (exactly what the first move applies; for the later moves an
-  approximation that keeps these rows linear), the first row merged with the
-  first-period stroke window, as in :mod:`controllers.qp`;
-- optional platform tilt (angle between the platform and base normals);
-- optional visibility (perspective camera): both ends ``A + r n``, ``B + r n`` of
-  every edge segment stay inside the image with a margin [px] (a straight segment
-  is inside the image when its ends are).
-
-With ``ProblemSpec.drives`` (option ``drive_model = "lag"``) the twists are the
-velocity drives' SETPOINTS: each leg's velocity follows ``J_inv,0 tau_k`` as a
-first-order lag at the drive's bandwidth, from the leg velocities measured now, and
-the twist displacement of period ``k`` is the lagged one, still linear in ``U``
-(:func:`_drive_blocks`, ``docs/math.md`` section 6); the local model sums these
-displacements, the global one moves the pose by their exponential.
+Cost over the stages ``k = 1..N``: ``sum_k w_k |W_f (e_k - rho_k e_0)|^2 + effort sum_k
+|J_inv,0 tau_k|^2``, hidden features of weight 0, ``rho_k = (1 - lambda dt)^k``.
+Constraints at every stage, each bound relaxed to the current value when the robot is
+already beyond it (``U = 0`` stays feasible): strokes (lengths corrected by the
+measured-minus-model offset at ``k = 0``); leg speeds ``|J_inv,0 tau_k| <= q_dot_max``
+(the first row merged with the first-period stroke window, as in
+:mod:`controllers.qp`); optionally the platform tilt, and the visibility of both ends
+``A + r n``, ``B + r n`` of every edge segment (perspective camera, margin [px]). With
+``ProblemSpec.drives`` the twists are the lagging velocity drives' setpoints
+(:func:`_drive_blocks`).
 
 Each SQP iteration linearises the stage values ``v_k(x_k)`` with respect to a left
 pose perturbation ``xi = (v, w)`` (6 columns, by CasADi AD) and carries it to ``U``
@@ -49,12 +25,8 @@ with ``E_k = exp(dt tau_k)``, ``Ad(E) = [[R, [p]_x R], [0, R]]`` and ``B_k`` the
 Jacobian of the step. The Gauss-Newton Hessian ``sum_k D_k^T (G_k^T W G_k) D_k``
 then costs ``O(N^2)`` 6 x 6 products instead of the ``O(N^2 m)`` of a full residual
 Jacobian. The local model is the same with ``Ad = I``, ``B_k = dt I`` and ``G_k``
-frozen (one QP is its exact solution).
-
-Everything above is one CasADi SX function generated to C and compiled
-(:class:`hexapod.compiled.CompiledFunction`): one call per SQP iteration returns
-the QP data; :mod:`controllers.mpc.solver` solves the QP (``6 N`` variables, dense)
-and runs the SQP iterations.
+frozen (one QP is its exact solution). All of it is one CasADi function generated to C
+(:func:`problem_kernel`); :mod:`controllers.mpc.solver` solves the QPs.
 """
 
 from __future__ import annotations

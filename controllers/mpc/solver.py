@@ -357,10 +357,14 @@ class PredictiveLaw(Controller):
         self.horizon, self.error_weight, self.terminal_weight = check_horizon(
             self.name, horizon, error_weight, terminal_weight)
         self.compiled = bool(compiled)
-        self.stats = SolveStats()
-        self._U = np.zeros(6 * self.horizon)
+        self._restart()
         return check_weights(self.name, *weights,
                              "the QP needs one of them to be strictly convex")
+
+    def _restart(self) -> None:
+        """A new trial: the counters at zero, the warm start at rest."""
+        self.stats = SolveStats()
+        self._U = np.zeros(6 * self.horizon)
 
     @staticmethod
     def _shift(U: np.ndarray) -> np.ndarray:

@@ -144,16 +144,11 @@ class LimitQPSolver(Solver):
 
     def solve(self, N: np.ndarray, b: np.ndarray, lam: float, q: np.ndarray, J: np.ndarray,
               pre: LawResult | None) -> Solved:
-        """The QP, or its unconstrained optimum when that satisfies every bound.
-
-        The objective is strictly convex, so when the unconstrained minimiser
-        ``-lambda (L^T L + eps I)^-1 L^T e`` (the classical command for ``eps -> 0``)
-        satisfies every bound it is the QP optimum: it is returned, with the
-        diagnostics of a solve without active constraint, and OSQP is not called.
-        It must clear every bound by twice the tolerance under which the
-        diagnostics call a constraint active (``1e-6 q_dot_max``); otherwise OSQP
-        solves the QP (and its active set is refined exactly, :meth:`LimitQP._refine`).
-        """
+        """The QP, or its unconstrained optimum ``-lambda (L^T L + eps I)^-1 L^T e`` (the
+        objective is strictly convex) when that clears every bound by twice the
+        tolerance under which the diagnostics call a constraint active (``1e-6
+        q_dot_max``); otherwise OSQP solves it (its active set refined exactly,
+        :meth:`LimitQP._refine`)."""
         if pre is not None:
             rank, cond, tau, qdot = pre.rank, pre.condition, pre.tau, pre.qdot
         else:

@@ -3,9 +3,7 @@ and its exact active-set refinement, compiled (``docs/math.md`` section 6).
 
 Speed (the cost of a step is its number of Python and numpy calls): OSQP is set up
 once per reset and each solve only updates the values of ``P``, ``A``, ``q``, ``l``,
-``u``, through OSQP's compiled solver object when it has the expected methods (the
-Python wrapper's bookkeeping, kept for derivatives, costs some 15 microseconds per
-solve); the exact active-set refinement after OSQP is one compiled call
+``u``; the exact active-set refinement after OSQP is one compiled call
 (:func:`refine_kernel`), tested equal to the numpy KKT solve.
 """
 
@@ -46,15 +44,15 @@ class LimitQP:
         eps_abs: OSQP absolute tolerance.
         eps_rel: OSQP relative tolerance.
         max_iter: OSQP iteration budget.
-        active_tolerance: Distance to a bound [m/s] under which a constraint with a
-            multiplier of the right sign is taken as active by the refinement.
     """
 
+    #: Distance to a bound [m/s] under which a constraint with a multiplier of the right
+    #: sign is taken as active by the refinement.
+    active_tolerance = 1e-6
+
     def __init__(self, regularization: float = 1e-12, eps_abs: float = 1e-6,
-                 eps_rel: float = 1e-6, max_iter: int = 4000,
-                 active_tolerance: float = 1e-6) -> None:
+                 eps_rel: float = 1e-6, max_iter: int = 4000) -> None:
         self.regularization = regularization
-        self.active_tolerance = active_tolerance
         self.settings = {"verbose": False, "warm_starting": True, "polishing": False,
                          "eps_abs": eps_abs, "eps_rel": eps_rel, "max_iter": max_iter,
                          "check_termination": 10}
@@ -65,13 +63,8 @@ class LimitQP:
         self._refine_in = np.zeros(REFINE_INPUTS.size)
 
     def reset(self) -> None:
-        """Forget the previous problem and set OSQP up again, on placeholder values.
-
-        The sparsity (upper triangle of ``P``, dense ``A``) is all a setup fixes;
-        every :meth:`solve` then only updates the values (``P``, ``A``, ``q``, ``l``,
-        ``u``) and warm-starts, and a step that needs no QP (see
-        :meth:`~controllers.solvers.limit_qp.LimitQPSolver.solve`) costs nothing here.
-        """
+        """Forget the previous problem and set OSQP up again, on placeholder values (the
+        sparsity, upper triangle of ``P`` and dense ``A``, is all a setup fixes)."""
         self._solver = None
         try:
             self._setup(np.eye(6)[_TRI_ROWS, _TRI_COLS], np.zeros(6), np.eye(6).reshape(-1),

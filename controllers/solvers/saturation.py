@@ -55,22 +55,6 @@ def over_limit(forces: np.ndarray, limit: np.ndarray | list[float]) -> bool:
     return any(abs(f) > m for f, m in zip(forces.tolist(), lim, strict=True))
 
 
-def clipped(forces: np.ndarray, limit: np.ndarray) -> np.ndarray:
-    """Each leg's force [N] clipped to ``[-limit, limit]`` on its own."""
-    return np.clip(forces, -limit, limit)  # type: ignore[no-any-return]
-
-
-def scaled(forces: np.ndarray, limit: np.ndarray) -> np.ndarray:
-    """The force vector [N] scaled by ``min(1, min_i limit_i / |f_i|)`` (its direction
-    kept)."""
-    f = np.asarray(forces, dtype=float)
-    a = np.abs(f)
-    over = a > limit
-    if not over.any():
-        return f
-    return f * float(np.min(limit[over] / a[over]))  # type: ignore[no-any-return]
-
-
 def acceleration_fraction(forces: np.ndarray, bias: np.ndarray, limit: np.ndarray
                           ) -> float | None:
     """The largest ``s`` in ``[0, 1]`` with ``|bias + s (forces - bias)| <= limit`` on every
@@ -108,15 +92,18 @@ def saturated(strategy: str, forces: np.ndarray, limit: np.ndarray,
     """
     if not over_limit(forces, limit):
         return forces
-    if strategy == "scale":
-        return scaled(forces, limit)
+    if strategy == "scale":  # the most loaded leg at its limit
+        f = np.asarray(forces, dtype=float)
+        a = np.abs(f)
+        over = a > limit
+        return f * float(np.min(limit[over] / a[over]))  # type: ignore[no-any-return]
     if strategy == "qp":
         if bias is None:
             raise ValueError("saturation 'qp': the forces at zero acceleration are needed")
         s = acceleration_fraction(forces, bias, limit)
         if s is not None:
-            return clipped(bias + s * (forces - bias), limit)  # (rounding at the limit)
-    return clipped(forces, limit)
+            forces = bias + s * (forces - bias)  # clipped below: rounding at the limit
+    return np.clip(forces, -limit, limit)  # type: ignore[no-any-return]
 
 
 def zero_acceleration_forces(model: DynamicModel, pose: np.ndarray, q_dot: np.ndarray,
@@ -145,5 +132,5 @@ def zero_acceleration_forces(model: DynamicModel, pose: np.ndarray, q_dot: np.nd
     return f
 
 
-__all__ = ["STRATEGIES", "acceleration_fraction", "checked_strategy", "clipped",
-           "over_limit", "saturated", "scaled", "zero_acceleration_forces"]
+__all__ = ["STRATEGIES", "acceleration_fraction", "checked_strategy", "over_limit",
+           "saturated", "zero_acceleration_forces"]
