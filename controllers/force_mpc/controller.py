@@ -113,10 +113,6 @@ class ForceMPCLaw(PredictiveLaw):
         self._bound: BoundCall | None = None
         #: The plan of the last step (6 N,) [N] (before the shift).
         self.plan: np.ndarray | None = None
-        self._f_prev = np.zeros(6)
-        self._started = False
-        self._t0 = 0.0
-        self._guess: tuple[np.ndarray, np.ndarray] | None = None
 
     # ----------------------------------------------------------------- reset
     def reset_trial(self, context: ControllerContext) -> None:
@@ -160,7 +156,7 @@ class ForceMPCLaw(PredictiveLaw):
         self._f_prev = np.zeros(6)
         self._started = False
         self._t0 = 0.0
-        self._guess = None
+        self._guess: tuple[np.ndarray, np.ndarray] | None = None
 
     def retarget_trial(self, goal: Goal) -> None:
         """A new fixed goal (ignored when tracking ``context.reference``)."""
@@ -221,7 +217,7 @@ class ForceMPCLaw(PredictiveLaw):
                                                  self.max_iter, 1e-3, self.compiled, floor=1.0)
         if U is None or last is None:
             return self._fallback(observation, status)
-        self.stats.solved(it, last.status)
+        self.stats.total_sqp_iterations += it
         if not converged and self.max_iter > 1:
             self.stats.unconverged += 1
         lim = self._limit
@@ -334,7 +330,7 @@ class ForceMPCLaw(PredictiveLaw):
         bound.x[:] = saved
         N = self.horizon
         return {"states": y["states"].reshape(N, NX),
-                "features": y["features"].reshape(N, self.spec.features),
+                "features": y["features"].reshape(N, self.feature.stage_features),
                 "lengths": y["lengths"].reshape(N, 6), "rates": y["rates"].reshape(N, 6),
                 "cost": float(y["cost"][0])}
 

@@ -75,14 +75,9 @@ class ForceProblemSpec:
     substeps: int
     feature: BuiltinFeature = EDGE_NORMALS
 
-    @property
-    def features(self) -> int:
-        """Number of features of a stage."""
-        return self.feature.stage_features
-
     def input_layout(self) -> Layout:
         """The kernel's input row."""
-        N, m = self.horizon, self.features
+        N, m = self.horizon, self.feature.stage_features
         blocks: list[tuple[str, Shape]] = [
             ("state", NX), ("U", 6 * N), ("f_prev", 6), ("reference", (N, m)),
             ("observed", m), ("mask", m), ("weights", 4)]
@@ -93,7 +88,7 @@ class ForceProblemSpec:
     def output_layout(self) -> Layout:
         """The kernel's output row: the QP data, the cost, the predicted states,
         features (with the observed offset) and leg lengths [m] of stages ``1..N``."""
-        N, n, m = self.horizon, 6 * self.horizon, self.features
+        N, n, m = self.horizon, 6 * self.horizon, self.feature.stage_features
         return Layout([("H", (n, n)), ("g", n), ("cost", 1), ("states", (N, NX)),
                        ("features", (N, m)), ("lengths", (N, 6)), ("rates", (N, 6))],
                       "force-MPC kernel output")
@@ -230,7 +225,7 @@ def kernel_function(spec: ForceProblemSpec) -> ca.Function:
     the input row (:meth:`ForceProblemSpec.input_layout`): an MX graph calling the
     period's and the features' SX functions (each generated to C once) and condensing
     with dense matrix products."""
-    N, n, ns = spec.horizon, 6 * spec.horizon, spec.features
+    N, n, ns = spec.horizon, 6 * spec.horizon, spec.feature.stage_features
     lay = spec.input_layout()
     period = _period_function(spec.substeps)
     feats = _features_function(spec.feature)

@@ -91,11 +91,9 @@ class MPCLaw(PredictiveLaw):
             a first-order lag at the NOMINAL drives' ``velocity_bandwidth`` (robot file
             ``[drives]``), starting from the leg velocities now (``drive_state``). For
             velocity-mode drives on the dynamic world or a real robot.
-        drive_state: Where the lag model starts (:mod:`controllers.mpc.drive_state`):
-            ``"measured"`` (the default: ``Observation.q_dot``, else reconstructed from
-            the encoder lengths and the setpoints sent), ``"encoders"`` (always the
-            reconstruction) or ``"model"`` (the lag's run on the past setpoints alone: an
-            ablation, ``docs/results.md``, "Slow velocity drives").
+        drive_state: Where the lag model starts: ``"measured"`` (the default),
+            ``"encoders"`` or ``"model"`` (an ablation: :mod:`controllers.mpc.drive_state`,
+            ``docs/results.md``, "Slow velocity drives").
         law_options: Further options of the fallback QP law (e.g. ``edge_feature``).
     """
 
@@ -151,8 +149,6 @@ class MPCLaw(PredictiveLaw):
         self._spec: ProblemSpec | None = None
         #: The drives' state of the lag model (None with the ideal prediction).
         self.drives: DriveLag | None = None
-        self._v0 = np.zeros(6)
-        self._offset = np.zeros(6)
 
     # ----------------------------------------------------------------- reset
     def reset_trial(self, context: ControllerContext) -> None:
@@ -345,7 +341,7 @@ class MPCLaw(PredictiveLaw):
             self.compiled, spec=spec, merit_rows=self._out.slices, one_qp=spec.model == "local",
             time_limit=self.time_limit)
         self.stats.steps += 1
-        self.stats.solved(it, status)
+        self.stats.total_sqp_iterations += it
         if U is None or last is None or not (converged or self.accept_unconverged):
             return status
         if not converged:

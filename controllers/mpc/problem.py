@@ -203,13 +203,9 @@ def _step_jacobian() -> ca.Function:
 
 
 def _drive_blocks(P: dict[str, Any], N: int, dt: Any) -> tuple[list[Any], list[Any]]:
-    """The twist displacement of each period under lagging drives, linear in ``U``.
-
-    Leg ``i``'s velocity follows its setpoint ``u_k = J_0 tau_k`` as a first-order lag of
-    pole ``omega_i``: over a period ``v_{k+1} = a v_k + (1 - a) u_k`` and the leg moves
-    ``dq_k = (dt - c) u_k + c v_k`` with ``a = exp(-omega dt)``, ``c = (1 - a) / omega``
-    (per leg). With the inverse Jacobian frozen at ``J_0`` the platform's twist
-    displacement is ``ds_k = J_0^-1 dq_k = sum_{j <= k} P_{k-j} tau_j + p_k`` with
+    """The twist displacement of each period under lagging drives, linear in ``U``
+    (``docs/math.md`` section 6, "Drive-aware prediction"): with the inverse Jacobian
+    frozen at ``J_0``, ``ds_k = J_0^-1 dq_k = sum_{j <= k} P_{k-j} tau_j + p_k`` with
     ``P_0 = J_0^-1 diag(dt - c) J_0``, ``P_l = J_0^-1 diag(c (1 - a) a^(l-1)) J_0`` and
     ``p_k = J_0^-1 (c a^k v_0)``, ``v_0`` the leg velocities now.
 

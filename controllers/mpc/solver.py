@@ -1,21 +1,10 @@
-"""Solving the predictive problems: QP solvers, the Gauss-Newton SQP iterations and the
-receding horizon both predictive controller families share.
+"""Solving the predictive problems, for both predictive families (the velocity MPCs of
+:mod:`controllers.mpc.controller`, the force MPCs of :mod:`controllers.force_mpc`):
 
-- QP (dense, ``6 N`` variables; :func:`solve_qp`): first the unconstrained minimiser
-  ``-H^-1 g`` (the optimum of the strictly convex QP whenever it satisfies every row:
-  the common case away from the limits), else DAQP (dual active set, shipped with
-  CasADi), generated to C by CasADi and called through :mod:`ctypes`
-  (:class:`CompiledQP`), or through ``casadi.conic`` when no C compiler is available
-  (:func:`daqp`). With the visibility rows, a smaller QP keeps only the visibility rows
-  closest to their bounds and is accepted when its solution satisfies every row.
-- SQP (:func:`run_sqp`): Gauss-Newton QPs from a compiled kernel (that of
-  :mod:`controllers.mpc.problem` or of :mod:`controllers.force_mpc.problem`), an optional
-  backtracking line search on the L1 merit, a convergence test on the first move, an
-  iteration limit and an optional time limit. Every QP status is checked; the caller
-  decides what a failure means.
-- :class:`PredictiveLaw`: the options, warm start, counters and fallback of the
-  controllers ``leg-edge-mpc`` (:mod:`controllers.mpc.controller`) and
-  ``leg-edge-force-mpc`` (:mod:`controllers.force_mpc.controller`).
+- the dense QP (:func:`solve_qp`: the unconstrained minimiser when it satisfies every
+  row, else DAQP generated to C, or ``casadi.conic`` without a C compiler);
+- the Gauss-Newton SQP iterations (:func:`run_sqp`) on a compiled kernel's QP data;
+- :class:`PredictiveLaw`: the options, warm start, counters and fallback they share.
 """
 
 from __future__ import annotations
@@ -49,30 +38,20 @@ class SolveStats:
         steps: Steps that reached the solver.
         fallbacks: Steps that fell back to the held one-step law.
         unconverged: Steps that applied an unconverged SQP iterate.
-        sqp_iterations: SQP iterations of the last solve.
-        total_sqp_iterations: Sum over the steps.
-        last_status: Status of the last solve.
+        total_sqp_iterations: SQP iterations, summed over the steps.
         reasons: Fallback reasons and how often each occurred.
     """
 
     steps: int = 0
     fallbacks: int = 0
     unconverged: int = 0
-    sqp_iterations: int = 0
     total_sqp_iterations: int = 0
-    last_status: str = ""
     reasons: dict[str, int] = field(default_factory=dict)
 
     def fallback(self, reason: str) -> None:
         """Count a step that fell back, and its reason."""
         self.fallbacks += 1
         self.reasons[reason] = self.reasons.get(reason, 0) + 1
-
-    def solved(self, iterations: int, status: str) -> None:
-        """Record the SQP iterations and the status of a step's solve."""
-        self.sqp_iterations = iterations
-        self.total_sqp_iterations += iterations
-        self.last_status = status
 
 
 @dataclass
@@ -88,6 +67,10 @@ class QPResult:
     step: np.ndarray | None
     status: str
     multipliers: np.ndarray | None
+
+
+#: Visibility rows kept by :func:`solve_qp` (the others are checked afterwards).
+SCREENED_VISIBILITY_ROWS = 48
 
 
 @lru_cache(maxsize=32)
@@ -213,8 +196,8 @@ def solve_qp(H: np.ndarray, g: np.ndarray, C: np.ndarray, lba: np.ndarray, uba: 
         v = C @ x
         if (v >= lba).all() and (v <= uba).all() and math.isfinite(float(x.sum())):
             return QPResult(x, "unconstrained optimum", np.zeros(len(lba)))
-    keep = None if spec is None else screened_rows(spec, lba, uba)
-    if keep is not None:
+    if spec is not None and spec.visibility:
+        keep = screened_rows(spec, lba, uba)
         res = daqp(H, g, C[keep], lba[keep], uba[keep], compiled)
         if res.step is not None and res.multipliers is not None:
             v = C @ res.step
@@ -226,14 +209,9 @@ def solve_qp(H: np.ndarray, g: np.ndarray, C: np.ndarray, lba: np.ndarray, uba: 
     return daqp(H, g, C, lba, uba, compiled)
 
 
-#: Visibility rows kept by :func:`solve_qp` (the others are checked afterwards).
-SCREENED_VISIBILITY_ROWS = 48
-
-
-def screened_rows(spec: ProblemSpec, lba: np.ndarray, uba: np.ndarray) -> np.ndarray | None:
-    """Indices of the rows of the screened QP (None: no screening for this structure)."""
-    if not spec.visibility:
-        return None
+def screened_rows(spec: ProblemSpec, lba: np.ndarray, uba: np.ndarray) -> np.ndarray:
+    """Indices of the rows of the screened QP: all but the visibility rows, and the
+    :data:`SCREENED_VISIBILITY_ROWS` visibility rows of smallest slack at ``d = 0``."""
     sr = spec.stage_rows
     N = spec.horizon
     idx = np.arange(N * sr).reshape(N, sr)

@@ -177,17 +177,13 @@ REFINE_OUTPUTS = Layout([("x", 6), ("accepted", 1)], "QP refinement output")
 
 
 def _refine_function() -> ca.Function:
-    """:meth:`LimitQP._refine` as one expression.
-
-    Input (103): ``P`` (6 x 6), ``c``, ``J`` (6 x 6, row-major), lower, upper, OSQP's
-    ``x`` and ``y``, the active tolerance. Output (7): the refined ``x`` and 1 when it
-    is accepted (feasible, multipliers of the right signs, finite), else 0.
-
-    With the active rows ``a`` (mask ``m``), the KKT system ``P x + J_a^T nu = -c``,
-    ``J_a x = bound_a`` is solved by its Schur complement: ``S = J P^-1 J^T`` with the
-    inactive rows and columns replaced by the identity and their right-hand side by
-    zero (so their ``nu`` is 0), ``nu = S^-1 (-(bound + J P^-1 c))`` on the active
-    rows, ``x = -P^-1 (c + J^T nu)``.
+    """:meth:`LimitQP._refine` as one expression (:data:`REFINE_INPUTS` ->
+    :data:`REFINE_OUTPUTS`: ``accepted`` is 1 when the refined ``x`` is feasible, with
+    multipliers of the right signs, finite). With the active rows ``a`` (mask ``m``),
+    the KKT system ``P x + J_a^T nu = -c``, ``J_a x = bound_a`` is solved by its Schur
+    complement: ``S = J P^-1 J^T`` with the inactive rows and columns replaced by the
+    identity and their right-hand side by zero (so their ``nu`` is 0), ``nu = S^-1
+    (-(bound + J P^-1 c))`` on the active rows, ``x = -P^-1 (c + J^T nu)``.
     """
     v = ca.SX.sym("v", REFINE_INPUTS.size)
     b = REFINE_INPUTS.split(v)
