@@ -28,7 +28,7 @@ from controllers.exceptions import ContextError
 from controllers.feature_ctc import LegEdgeCTC
 from controllers.force_mpc.problem import NX, STATE, ForceProblemSpec, force_kernel
 from controllers.law_tools import check_count, check_number
-from controllers.mpc.solver import PredictiveLaw, compiled_qp, run_sqp
+from controllers.mpc.solver import PredictiveLaw, QPArrays, compiled_qp, run_sqp
 from controllers.task_ctc import (
     DAMPING,
     NATURAL_FREQUENCY_HZ,
@@ -62,9 +62,8 @@ class ForceMPCLaw(PredictiveLaw):
 
     Args:
         horizon: Number of periods ``N`` predicted (1 to 50).
-        substeps: Integration steps per period of the prediction (``h = dt /
-            substeps``; the dynamic world's own step makes the prediction the world's
-            integration of the nominal robot).
+        substeps: Integration steps per period of the prediction (``h = dt / substeps``;
+            at the world's own step, the world's integration of the nominal robot).
         error_weight: Weight of the feature error of the stages ``1..N-1``.
         terminal_weight: Weight of the feature error of stage ``N``.
         rate_weight: Weight of the force rate ``sum_k |f_k - f_{k-1}|^2`` [1/N^2].
@@ -88,6 +87,7 @@ class ForceMPCLaw(PredictiveLaw):
     #: The computed-torque law of the same features: reference, goal and fallback.
     law_class: type[TaskComputedTorque] = LegEdgeCTC
     actuation = Actuation.FORCE
+    fallback_note = "force-mpc fallback"
     #: Samples ``context.reference`` itself (:mod:`controllers.tracking` passes it through).
     tracks_reference = True
 
@@ -109,7 +109,6 @@ class ForceMPCLaw(PredictiveLaw):
         self.law: Any = self.law_class(natural_frequency=natural_frequency, damping=damping,
                                        smooth_goal=smooth_goal)
         self.spec = ForceProblemSpec(horizon, substeps, self.feature)
-        self.context: ControllerContext | None = None
         self._bound: BoundCall | None = None
         #: The plan of the last step (6 N,) [N] (before the shift).
         self.plan: np.ndarray | None = None
@@ -195,9 +194,9 @@ class ForceMPCLaw(PredictiveLaw):
         mask = np.where(known, mask, 0.0)  # the rows' weights (0: unused)
         if observed is None:  # the features are the pose itself
             observed = np.concatenate([p, R.T.ravel()])
-        problem = self.too_few(mask)
-        if problem is not None:
-            return self._refuse(problem)
+        used = self.used(mask)
+        if isinstance(used, str):
+            return self._refuse(used)
         v = self._bound.inputs
         state = self._state
         state["R"][:] = R.T.ravel()
@@ -207,10 +206,10 @@ class ForceMPCLaw(PredictiveLaw):
         v["reference"][:] = reference
         v["observed"][:] = np.where(mask, observed, 0.0)
         v["mask"][:] = mask
-        return self._solve(observation, observed, reference[0], mask)
+        return self._solve(observation, observed, reference[0], mask, used)
 
     def _solve(self, observation: Observation, normals: np.ndarray, ref_now: np.ndarray,
-               mask: np.ndarray) -> Command:
+               mask: np.ndarray, used: int) -> Command:
         """The Gauss-Newton QPs from the warm start (full steps), and the command."""
         self.stats.steps += 1
         U, converged, status, last, it = run_sqp(self._evaluate, self._qp_data, self._U.copy(),
@@ -234,19 +233,19 @@ class ForceMPCLaw(PredictiveLaw):
         self._f_prev = f.copy()
         e = np.where(mask, normals - ref_now, 0.0)
         return Command.of_forces(f, error=e, error_norm=float(np.linalg.norm(e)),
-                                 features_used=self.used(mask),
+                                 features_used=used,
                                  notes=[f"force-mpc: {last.status}"])
 
     def _evaluate(self, U: np.ndarray) -> np.ndarray | str:
-        """The kernel's ``H`` and ``g`` at ``U`` (a view of its output), or why not."""
+        """The kernel's ``H`` and ``g`` at ``U`` (its output's first blocks, a view), or
+        why not."""
         assert self._bound is not None
         self._bound.inputs["U"][:] = U
         if self._bound.call():
             return "the compiled kernel failed"
-        return self._bound.y[:self._U.size * (self._U.size + 1)]
+        return self._bound.y[:self._kernel.outputs["g"].stop]
 
-    def _qp_data(self, out: np.ndarray, U: np.ndarray
-                 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    def _qp_data(self, out: np.ndarray, U: np.ndarray) -> QPArrays:
         """``(H, g, C, lba, uba)``: the force limits as bounds on the step from ``U``."""
         n = U.size
         return out[:n * n].reshape(n, n), out[n * n:], self._eye, -self._limit - U, \
@@ -266,12 +265,9 @@ class ForceMPCLaw(PredictiveLaw):
         weights (m,) (0: not seen), or why not."""
         raise NotImplementedError
 
-    def too_few(self, mask: np.ndarray) -> str | None:
-        """Why the rows ``mask`` are too few to control the six legs (None: enough)."""
-        return None
-
-    def used(self, mask: np.ndarray) -> int:
-        """The features used, as the command reports them."""
+    def used(self, mask: np.ndarray) -> int | str:
+        """The features the rows ``mask`` use, as the command reports them, or why they
+        are too few to control the six legs."""
         return int(mask.sum())
 
     def _pose(self, q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

@@ -64,15 +64,10 @@ class LegEdgeForceMPC(ForceMPCLaw):
             return f"fewer than six edges seen ({int(seen.sum())})"
         return n.ravel(), np.repeat(seen.ravel(), 3)
 
-    def too_few(self, mask: np.ndarray) -> str | None:
-        """Fewer than six edges seen and known."""
-        if int(mask.sum()) < 6 * 3:
-            return f"fewer than six edges seen and known ({int(mask.sum()) // 3})"
-        return None
-
-    def used(self, mask: np.ndarray) -> int:
-        """The edges used."""
-        return int(mask.sum()) // 3
+    def used(self, mask: np.ndarray) -> int | str:
+        """The edges used, or why they are too few (fewer than six seen and known)."""
+        edges = int(mask.sum()) // 3
+        return edges if edges >= 6 else f"fewer than six edges seen and known ({edges})"
 
     def _reference(self, tr: float) -> tuple[np.ndarray, np.ndarray]:
         """The reference features (N, 36) of the stages at ``tr + k dt``, ``k = 1..N``,

@@ -32,6 +32,7 @@ from controllers.mpc.problem import ProblemSpec, problem_kernel
 from controllers.mpc.solver import (
     SCREENED_VISIBILITY_ROWS,
     PredictiveLaw,
+    QPArrays,
     QPResult,
     compiled_qp,
     run_sqp,
@@ -43,14 +44,6 @@ from controllers.tasks.leg_edge import EDGE_NORMALS
 from hexapod.compiled import CompilationError, CompiledFunction
 
 log = logging.getLogger(__name__)
-
-#: Prediction models.
-MODELS = ("local", "global")
-#: Reference trajectories of the error: ``(1 - lambda dt)^k e_0`` or zero.
-REFERENCES = ("exponential", "zero")
-#: Models of the velocity drives in the prediction: ideal (each setpoint happens at once)
-#: or a first-order lag at the drives' velocity bandwidth.
-DRIVE_MODELS = ("ideal", "lag")
 
 
 class MPCLaw(PredictiveLaw):
@@ -83,14 +76,12 @@ class MPCLaw(PredictiveLaw):
         regularization: Added to the diagonal of the QP Hessian.
         threshold: Singular-value threshold of the fallback law.
         compiled: Generate the QP-data kernel and DAQP to C (built once per problem
-            structure, a few seconds, cached on disk); False: CasADi virtual machine and
-            ``casadi.conic`` (same results, several times slower per step, nothing to
-            build).
-        drive_model: ``"ideal"`` (the predicted leg velocities are the setpoints, as in
-            the kinematic world) or ``"lag"``: each leg's velocity follows its setpoint as
-            a first-order lag at the NOMINAL drives' ``velocity_bandwidth`` (robot file
-            ``[drives]``), starting from the leg velocities now (``drive_state``). For
-            velocity-mode drives on the dynamic world or a real robot.
+            structure, cached on disk); False: CasADi virtual machine and
+            ``casadi.conic`` (same results, several times slower per step).
+        drive_model: ``"ideal"`` (the predicted leg velocities are the setpoints) or
+            ``"lag"``: each leg's velocity follows its setpoint as a first-order lag at
+            the NOMINAL drives' ``velocity_bandwidth`` (velocity-mode drives on the
+            dynamic world or a real robot; ``docs/math.md`` section 6).
         drive_state: Where the lag model starts: ``"measured"`` (the default),
             ``"encoders"`` or ``"model"`` (an ablation: :mod:`controllers.mpc.drive_state`,
             ``docs/results.md``, "Slow velocity drives").
@@ -121,9 +112,9 @@ class MPCLaw(PredictiveLaw):
         self.regularization, self.effort_weight = self._check_options(
             horizon, error_weight, terminal_weight,
             (("regularization", regularization), ("effort_weight", effort_weight)), compiled)
-        self.model = check_choice(name, "model", model, MODELS)
-        self.reference = check_choice(name, "reference", reference, REFERENCES)
-        self.drive_model = check_choice(name, "drive_model", drive_model, DRIVE_MODELS)
+        self.model = check_choice(name, "model", model, ("local", "global"))
+        self.reference = check_choice(name, "reference", reference, ("exponential", "zero"))
+        self.drive_model = check_choice(name, "drive_model", drive_model, ("ideal", "lag"))
         self.drive_state = check_choice(name, "drive_state", drive_state, DRIVE_STATES)
         self.visibility = bool(visibility)
         self.visibility_margin = check_number(name, "visibility_margin", visibility_margin,
@@ -145,7 +136,6 @@ class MPCLaw(PredictiveLaw):
                                          stroke_margin=stroke_margin, max_speed=max_speed,
                                          compiled=self.compiled, **law_options)
         self.features = self.law.features
-        self.context: ControllerContext | None = None
         self._spec: ProblemSpec | None = None
         #: The drives' state of the lag model (None with the ideal prediction).
         self.drives: DriveLag | None = None
@@ -365,8 +355,7 @@ class MPCLaw(PredictiveLaw):
         except (CompilationError, RuntimeError) as exc:
             return f"QP data kernel failed: {exc}"
 
-    def _qp_data(self, out: np.ndarray, U: np.ndarray
-                 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    def _qp_data(self, out: np.ndarray, U: np.ndarray) -> QPArrays:
         """``(H, g, C, lba, uba)`` of a kernel output (the bounds relative to ``U``)."""
         o = self._out.slices
         n, m = 6 * self.horizon, len(self._rows)

@@ -1,25 +1,13 @@
-"""Prediction models of the visual predictive controllers (Allibert, Courtial & Chaumette 2010).
-
-Both predict the leg features over the horizon from what a controller knows (the
-:class:`~controllers.base.ControllerContext` estimates and the current
-:class:`~controllers.base.Observation`), never from the simulator's truth; the problem
-kernel of :mod:`controllers.mpc.problem` builds them from the CasADi SX blocks below:
-
-- **local** (Allibert's local model): the stacked error is propagated linearly with
-  the interaction matrix of the current (or desired) features,
-  ``e_k = e_0 + L s_k`` with the twist displacement ``s_k = dt sum_{j<k} tau_j``
-  (``docs/math.md`` section 6), and the leg lengths with the inverse Jacobian of the
-  measured directions, ``q_k = q_0 + J_inv s_k`` (section 3). Exact to first order
-  in the motion; its error grows with the displacement (quadratically).
-- **global**: the platform pose in the camera frame is reconstructed from the
-  estimated base points ``A_i``, the measured lengths ``q_i`` and the observed
-  directions ``u_i``: each leg gives ``B_i = A_i + q_i u_i`` (section 1) and the pose
-  ``(R, t)`` is the rigid fit (Kabsch, :func:`fit_pose`) of the nominal platform points
-  ``eB_i`` onto them. It is propagated with the nominal kinematics, the twist
-  integrated on SE(3) (left product with ``exp(dt tau)``, :func:`sx_exp_se3`, section
-  2), and the features are predicted from it by the estimated camera model
-  (:func:`sx_legs`, then the feature's ``sx_of_legs``: sections 4 and 5). In a world
-  without calibration error it reproduces the true features to rounding.
+"""Prediction models of the visual predictive controllers (Allibert, Courtial & Chaumette
+2010; ``docs/math.md`` section 6, "Predictive variant"), from the controller's estimates,
+never the simulator's truth. The **local** model propagates the error with the
+interaction matrix, ``e_k = e_0 + L s_k``, and the lengths with the inverse Jacobian,
+``q_k = q_0 + J_inv s_k`` (``s_k = dt sum_{j<k} tau_j``; first order in the motion).
+The **global** model fits the platform pose to ``B_i = A_i + q_i u_i`` (:func:`fit_pose`),
+moves it by ``exp(dt tau)`` (:func:`sx_exp_se3`) and predicts the features from it by
+the estimated camera model (:func:`sx_legs`, then the feature's ``sx_of_legs``): in a
+world without calibration error, the true features to rounding. The problem kernel of
+:mod:`controllers.mpc.problem` is built from these CasADi SX blocks.
 """
 
 from __future__ import annotations

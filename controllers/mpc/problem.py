@@ -102,7 +102,7 @@ class ProblemSpec:
 
     def output_layout(self) -> Layout:
         """Layout of the kernel output: cost, ``H`` (row-major), ``g``, ``C`` (row-major),
-        row bounds of ``delta U``, and the first-move leg velocities ``J_0 tau_0``."""
+        the row bounds of ``delta U`` and the constraint values."""
         n = 6 * self.horizon
         m = self.rows
         return Layout([("cost", 1), ("H", n * n), ("g", n), ("C", m * n), ("lba", m),
@@ -164,7 +164,6 @@ def _pose_function(spec: ProblemSpec) -> ca.Function:
                 for X in (A[i] + r * n, B[i] + r * n):  # the segment's ends
                     values.append(sx_pixel(X, K))
     vals = ca.vertcat(*values)
-    outs_res: list[ca.SX] = []
     if spec.model == "global":
         Kit = _mat(P["Kit"], 3, 3)
         feats = spec.feature.sx_of_legs(u, A, r, Kit)
@@ -172,7 +171,7 @@ def _pose_function(spec: ProblemSpec) -> ca.Function:
         off = P["offset"]
         res = ca.vertcat(*[ca.cross(f + off[3 * j:3 * j + 3], star[3 * j:3 * j + 3])
                            for j, f in enumerate(feats)])
-        outs_res = [res, ca.jacobian(res, xi)]
+        outs_res: list[ca.SX] = [res, ca.jacobian(res, xi)]
     else:
         outs_res = [ca.SX(0, 1), ca.SX(0, 6)]
     Jv = ca.jacobian(vals, xi)
@@ -267,10 +266,8 @@ def _kernel_function(spec: ProblemSpec) -> ca.Function:
     rows_c: list[Any] = []
     vals_c: list[Any] = []
     sr = spec.stage_rows
-    stroke_lo = ca.repmat(P["qlo"], 6, 1)
-    stroke_hi = ca.repmat(P["qhi"], 6, 1)
-    lo_stage: list[Any] = [stroke_lo]
-    hi_stage: list[Any] = [stroke_hi]
+    lo_stage: list[Any] = [ca.repmat(P["qlo"], 6, 1)]  # strokes
+    hi_stage: list[Any] = [ca.repmat(P["qhi"], 6, 1)]
     if spec.tilt:
         lo_stage.append(P["cosmax"])
         hi_stage.append(ca.MX(_BIG))

@@ -22,7 +22,7 @@ from typing import Any
 import casadi as ca
 import numpy as np
 
-from controllers.base import Command, Controller, Observation
+from controllers.base import Command, Controller, ControllerContext, Observation
 from controllers.law_tools import check_horizon, check_weights
 from controllers.mpc.problem import ProblemSpec
 from hexapod.compiled import CompiledFunction, Layout
@@ -83,17 +83,11 @@ def qp_solver(variables: int, rows: int) -> ca.Function:
 
 
 class CompiledQP:
-    """DAQP generated to C by CasADi and called through :mod:`ctypes` on one packed buffer.
-
-    The Python interface of ``casadi.conic`` costs several hundred microseconds per
-    call on these sizes (argument conversion and checks) for a solve of about a
-    hundred; the generated solver is called on preallocated buffers instead
-    (:class:`hexapod.compiled.CompiledFunction`, bound). It links against the DAQP
-    library shipped in the CasADi wheel (``libdaqp.so``, loaded with global symbols
-    before the generated library). Input: ``H`` (n x n), ``g``, ``C`` (m x n), ``lba``,
-    ``uba``; output: ``x``, the row ``multipliers``, the optimal ``cost``. A call that
-    returns non-zero is a solve that DAQP did not finish as optimal (infeasible,
-    iteration limit, ...).
+    """DAQP generated to C by CasADi, called on preallocated buffers (a bound
+    :class:`hexapod.compiled.CompiledFunction`: ``casadi.conic``'s Python interface costs
+    several hundred microseconds per call on these sizes, for a solve of about a
+    hundred), linked against the DAQP library of the CasADi wheel (``libdaqp.so``). A
+    call that returns non-zero is a solve DAQP did not finish as optimal.
 
     Raises:
         OSError: No compiler, or the DAQP library or headers are missing (the caller
@@ -228,12 +222,12 @@ def merit(out: np.ndarray, o: dict[str, slice], mu: float) -> tuple[float, float
     return float(out[o["cost"]][0]) + mu * viol, viol
 
 
-#: The QP data ``(H, g, C, lba, uba)`` of a kernel output at ``U``.
-QPData = Callable[[np.ndarray, np.ndarray],
-                  tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]]
+#: A QP's data ``(H, g, C, lba, uba)``.
+QPArrays = tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]
 
 
-def run_sqp(evaluate: Callable[[np.ndarray], np.ndarray | str], qp_data: QPData,
+def run_sqp(evaluate: Callable[[np.ndarray], np.ndarray | str],
+            qp_data: Callable[[np.ndarray, np.ndarray], QPArrays],
             U: np.ndarray, max_iter: int, tolerance: float, compiled: bool, *,
             floor: float = 1e-3, spec: ProblemSpec | None = None,
             merit_rows: dict[str, slice] | None = None, one_qp: bool = False,
@@ -250,7 +244,7 @@ def run_sqp(evaluate: Callable[[np.ndarray], np.ndarray | str], qp_data: QPData,
 
     Args:
         evaluate: The kernel's output at a ``U``, or why it failed.
-        qp_data: The QP of an output at its ``U`` (:data:`QPData`).
+        qp_data: The QP (:data:`QPArrays`) of an output at its ``U``.
         U: (6 N,) the starting point [m/s, rad/s or N].
         max_iter: Iteration limit (0: no QP is solved).
         tolerance: Relative tolerance on the first move.
@@ -320,14 +314,15 @@ class PredictiveLaw(Controller):
     :attr:`stats` and the fallback to the held one-step law :attr:`law`."""
 
     law: Any
+    context: ControllerContext | None = None
     #: What a fallback's note (``"<note>: <reason>"``) starts with.
     fallback_note = "mpc fallback"
 
     def _check_options(self, horizon: int, error_weight: float, terminal_weight: float,
                        weights: tuple[tuple[str, float], tuple[str, float]], compiled: bool
                        ) -> tuple[float, float]:
-        """Check and set the horizon, its weights and ``compiled``; the two ``weights``
-        ``(option, value)`` checked (one must be positive: the QP is strictly convex).
+        """Check and set the horizon, its weights and ``compiled``; return the two
+        ``weights`` ``(option, value)`` checked (one positive: a strictly convex QP).
 
         Raises:
             OptionError: Naming the option out of range.

@@ -1,21 +1,13 @@
-"""The limit QP solver (``docs/math.md`` section 6): the twist ``tau`` minimising
-``|L tau + lambda e|^2 + eps |tau|^2`` subject to
-
-``q_min + margin <= q + dt J_inv tau <= q_max - margin`` and ``|J_inv tau| <= q_dot_max``,
-
-then ``q_dot = J_inv tau``. Both constraints act on the same rows ``J_inv tau``, so they
-merge into one pair of bounds per leg (:func:`velocity_bounds`, each bound clipped to the
-speed limit, so the problem stays feasible even when a leg starts inside the margin).
-Solved with OSQP (:class:`~controllers.solvers.osqp_limits.LimitQP`), warm-started from
-the previous step. Away from the limits (and with ``eps -> 0``) the solution is the
-classical ``-lambda L^+ e``; at a limit the platform slides along it instead of one leg
-being saturated.
-
-Speed: when the unconstrained optimum (from the compiled law core, solved with ``eps``
-as the damping) clears every bound, it is the QP optimum and OSQP is not called
-(:meth:`LimitQPSolver.solve`; default OSQP settings only, so that chosen settings
-always take effect); the batched laws check their rows with the same bounds
-(:meth:`LimitQPSolver.batch_accept`).
+"""The limit QP solver (``docs/math.md`` section 6, "QP variant"): the twist ``tau``
+minimising ``|L tau + lambda e|^2 + eps |tau|^2`` subject to ``q_min + margin <= q + dt
+J_inv tau <= q_max - margin`` and ``|J_inv tau| <= q_dot_max``, then ``q_dot = J_inv
+tau``. Both constraints act on the rows ``J_inv tau``: one pair of bounds per leg
+(:func:`velocity_bounds`). Solved with OSQP (:class:`~controllers.solvers.osqp_limits.
+LimitQP`), warm-started from the previous step, unless the unconstrained optimum (the
+compiled law core's, ``eps`` as the damping) clears every bound: then it is the QP
+optimum (:meth:`LimitQPSolver.solve`, with the default OSQP settings only, so that
+chosen settings always take effect; the batched laws' rows: :meth:`LimitQPSolver.
+batch_accept`).
 """
 
 from __future__ import annotations

@@ -117,14 +117,12 @@ class LimitQP:
         try:
             if self._solver is None:
                 self._setup(Px, c, Ax, lower, upper)
-                ext = self._ext
+            elif self._ext is None:
+                self._solver.update(q=c, l=lower, u=upper, Px=Px, Ax=Ax)
             else:
-                ext = self._ext
-                if ext is None:
-                    self._solver.update(q=c, l=lower, u=upper, Px=Px, Ax=Ax)
-                else:
-                    ext.update_data_vec(q=c, l=lower, u=upper)
-                    ext.update_data_mat(P_x=Px, P_i=None, A_x=Ax, A_i=None)
+                self._ext.update_data_vec(q=c, l=lower, u=upper)
+                self._ext.update_data_mat(P_x=Px, P_i=None, A_x=Ax, A_i=None)
+            ext = self._ext
             if ext is None:
                 res = self._solver.solve(raise_error=False)
                 info, sol = res.info, res

@@ -1,22 +1,13 @@
-"""What a force controller does when its leg forces exceed the drives' limits.
+"""What a computed-torque law commands when a leg's force is over the NOMINAL drives'
+``force_limit`` (option ``saturation``; ``docs/dynamic-world.md``):
 
-The computed-torque laws compute the forces of the designed error dynamics
-(:mod:`controllers.solvers.computed_torque`); a force-mode drive delivers at most its
-``force_limit`` and clips each leg on its own (:mod:`hexapod.dynamics.drive_model`). The
-option ``saturation`` says what the controller commands instead when a leg's force is
-over the NOMINAL limit (``context.geometry.drives.force_limit``):
-
-- ``"clip"`` (default, what the drives do anyway): each leg clipped to ``[-limit, limit]``
-  on its own; the direction of the force vector changes where a leg saturates;
-- ``"scale"``: the whole vector scaled by ``s = min_i limit_i / |f_i|`` so that the most
-  loaded leg is at its limit, the direction of the force vector kept;
-- ``"qp"``: the direction of the task acceleration kept: with ``f_0`` the forces the
-  nominal model needs at zero platform acceleration (gravity, velocity terms, friction)
-  and ``f`` those of the commanded acceleration, the forces ``f_0 + s (f - f_0)`` of the
-  acceleration scaled by ``s``, with ``s`` the solution of the one-variable QP
+- ``"clip"`` (default, what the force-mode drives do anyway): each leg clipped to
+  ``[-limit, limit]`` on its own;
+- ``"scale"``: the whole vector scaled by ``min_i limit_i / |f_i|``, its direction kept;
+- ``"qp"``: the direction of the task acceleration kept: ``f_0 + s (f - f_0)`` with
+  ``f_0`` the nominal forces at zero platform acceleration and ``s`` the solution of
   ``min (1 - s)^2`` subject to ``-limit <= f_0 + s (f - f_0) <= limit``, ``0 <= s <= 1``
-  (closed form: the largest feasible ``s``). When ``f_0`` alone is over a limit (no
-  ``s`` is feasible) the forces are clipped as ``"clip"``.
+  (closed form: the largest feasible ``s``); clipped when ``f_0`` alone is over a limit.
 
 Rows under every limit are returned unchanged (the same numbers, bit for bit).
 """
