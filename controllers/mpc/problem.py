@@ -58,8 +58,8 @@ class ProblemSpec:
         horizon: ``N`` periods.
         tilt: Whether the tilt rows exist.
         visibility: Whether the image-bound rows exist (perspective camera).
-        drives: Whether the prediction models the velocity drives' lag (each leg's
-            velocity follows its setpoint as a first-order lag; see the module docstring).
+        drives: Whether the prediction models the velocity drives' lag
+            (:func:`_drive_blocks`).
     """
 
     feature: BuiltinFeature
@@ -237,6 +237,15 @@ def _displacement(blocks: list[Any], offsets: list[Any], U: list[Any], k: int) -
     return ds
 
 
+def _add_stage(Hb: list[list[Any]], gb: list[Any], D: list[Any], MD: list[Any], m: Any
+               ) -> None:
+    """A stage's Gauss-Newton terms: ``g_i += D_i^T m``, ``H_ij += D_i^T MD_j`` (``i <= j``)."""
+    for i, Di in enumerate(D):
+        gb[i] += Di.T @ m
+        for j in range(i, len(D)):
+            Hb[i][j] += Di.T @ MD[j]
+
+
 def _kernel_function(spec: ProblemSpec) -> ca.Function:
     """The QP data of one SQP iteration as one MX function calling the SX stage functions.
 
@@ -300,11 +309,7 @@ def _kernel_function(spec: ProblemSpec) -> ca.Function:
             cost += wk * ca.dot(rk, Wr)
             M = wk * (Gr.T @ (Gr * ca.repmat(wrow, 1, 6)))
             m = wk * (Gr.T @ Wr)
-            MD = [M @ Dj for Dj in D]
-            for i in range(k):
-                gb[i] += D[i].T @ m
-                for j in range(i, k):
-                    Hb[i][j] += D[i].T @ MD[j]
+            _add_stage(Hb, gb, D, [M @ Dj for Dj in D], m)
             rows_c.append(ca.horzcat(*[Gv @ Dj for Dj in D], ca.MX.zeros(sr, 6 * (N - k))))
             vals_c.append(vals)
     else:
@@ -330,13 +335,9 @@ def _kernel_function(spec: ProblemSpec) -> ca.Function:
                         Hb[i][j] += (dt * dt * wk) * Nm
                 rows_c.append(ca.horzcat(*([dt * G0] * k), ca.MX.zeros(sr, 6 * (N - k))))
             else:
-                NS = [wk * (Nm @ S[k - 1 - j]) for j in range(k)]
-                for i in range(k):
-                    gb[i] += S[k - 1 - i].T @ m
-                    for j in range(i, k):
-                        Hb[i][j] += S[k - 1 - i].T @ NS[j]
-                rows_c.append(ca.horzcat(*[G0 @ S[k - 1 - j] for j in range(k)],
-                                         ca.MX.zeros(sr, 6 * (N - k))))
+                Dk = [S[k - 1 - j] for j in range(k)]  # d s_k / d tau_j
+                _add_stage(Hb, gb, Dk, [wk * (Nm @ Dj) for Dj in Dk], m)
+                rows_c.append(ca.horzcat(*[G0 @ Dj for Dj in Dk], ca.MX.zeros(sr, 6 * (N - k))))
             vals_c.append(vals0 + G0 @ s)
     lo_c: list[Any] = [lo_s] * N  # the stage rows' bounds
     hi_c: list[Any] = [hi_s] * N

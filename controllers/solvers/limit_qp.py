@@ -161,13 +161,10 @@ class LimitQPSolver(Solver):
             return np.zeros(6), rank, cond, [], status, None
         tau = solved
         qdot = J @ tau
-        active: list[str] = []
-        at_hi = np.flatnonzero(qdot >= hi - tol)
-        at_lo = np.flatnonzero(qdot <= lo + tol)
-        for i in at_hi:
-            active.append(f"leg {int(i)} {'upper stroke' if stroke_hi[i] < vmax else 'speed'}")
-        for i in at_lo:
-            active.append(f"leg {int(i)} {'lower stroke' if stroke_lo[i] > -vmax else 'speed'}")
+        active = [f"leg {int(i)} {'upper stroke' if stroke_hi[i] < vmax else 'speed'}"
+                  for i in np.flatnonzero(qdot >= hi - tol)]
+        active += [f"leg {int(i)} {'lower stroke' if stroke_lo[i] > -vmax else 'speed'}"
+                   for i in np.flatnonzero(qdot <= lo + tol)]
         if status != "solved":
             active.append(f"OSQP status '{status}'")
         return tau, rank, cond, active, None, None
