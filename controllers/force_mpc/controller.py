@@ -26,7 +26,7 @@ import numpy as np
 from controllers.base import Command, ControllerContext, Goal, Observation
 from controllers.exceptions import ContextError
 from controllers.feature_ctc import LegEdgeCTC
-from controllers.force_mpc.problem import NX, STATE, ForceProblemSpec, force_kernel
+from controllers.force_mpc.problem import STATE, ForceProblemSpec, force_kernel
 from controllers.law_tools import check_count, check_number
 from controllers.mpc.solver import PredictiveLaw, QPArrays, compiled_qp, run_sqp
 from controllers.task_ctc import (
@@ -308,9 +308,10 @@ class ForceMPCLaw(PredictiveLaw):
     # ----------------------------------------------------------------- diagnostics
     def prediction(self, plan: np.ndarray | None = None) -> dict[str, Any]:
         """The kernel's prediction from the last step's state along ``plan`` (6 N,) [N]
-        (default: the plan applied at the last step): the states (N, 18), edge normals
-        with the observed offset (N, 36), leg lengths (N, 6) [m] and leg rates (N, 6)
-        [m/s] at the ends of the periods ``1..N``, and the cost.
+        (default: the plan applied at the last step): the states (N, 18), the features
+        with the observed offset (N, m), leg lengths (N, 6) [m] and leg rates (N, 6)
+        [m/s] at the ends of the periods ``1..N`` (the kernel output's blocks), and the
+        cost.
 
         Raises:
             ContextError: No step solved yet.
@@ -324,9 +325,6 @@ class ForceMPCLaw(PredictiveLaw):
             raise ContextError(self.name, "prediction", "the compiled kernel failed")
         y = self._kernel.outputs.views(bound.y.copy())
         bound.x[:] = saved
-        N = self.horizon
-        return {"states": y["states"].reshape(N, NX),
-                "features": y["features"].reshape(N, self.feature.stage_features),
-                "lengths": y["lengths"].reshape(N, 6), "rates": y["rates"].reshape(N, 6),
+        return {**{key: y[key] for key in ("states", "features", "lengths", "rates")},
                 "cost": float(y["cost"][0])}
 

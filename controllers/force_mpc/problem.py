@@ -44,8 +44,6 @@ from hexapod.dynamics import compiled as mech
 
 #: The state: rotation (column-major), position [m], twist [m/s, rad/s].
 STATE = Layout([("R", 9), ("t", 3), ("twist", 6)], "force-MPC state")
-#: Size of the state.
-NX = STATE.size
 #: The features: twelve edge normals (six legs, two edges, three components).
 NS = 36
 #: The nominal model's constants of a step: base and platform points [m] (base frame),
@@ -79,7 +77,7 @@ class ForceProblemSpec:
         """The kernel's input row."""
         N, m = self.horizon, self.feature.stage_features
         blocks: list[tuple[str, Shape]] = [
-            ("state", NX), ("U", 6 * N), ("f_prev", 6), ("reference", (N, m)),
+            ("state", STATE.size), ("U", 6 * N), ("f_prev", 6), ("reference", (N, m)),
             ("observed", m), ("mask", m), ("weights", 4)]
         blocks += [(f"model_{b}", MODEL.shapes[b]) for b in MODEL]
         blocks += [(f"camera_{b}", CAMERA.shapes[b]) for b in CAMERA]
@@ -89,7 +87,7 @@ class ForceProblemSpec:
         """The kernel's output row: the QP data, the cost, the predicted states,
         features (with the observed offset) and leg lengths [m] of stages ``1..N``."""
         N, n, m = self.horizon, 6 * self.horizon, self.feature.stage_features
-        return Layout([("H", (n, n)), ("g", n), ("cost", 1), ("states", (N, NX)),
+        return Layout([("H", (n, n)), ("g", n), ("cost", 1), ("states", (N, STATE.size)),
                        ("features", (N, m)), ("lengths", (N, 6)), ("rates", (N, 6))],
                       "force-MPC kernel output")
 
@@ -110,7 +108,7 @@ def _step_function() -> ca.Function:
     ``(M + K^T diag(m_leg + m_r + h d_f) K) tau_dot = K^T (f - friction - m_r K_dot tau)
     - h_mech`` (linearly implicit in the friction's secant ``d_f``), then ``tau += h
     tau_dot``, ``t += h v``, ``R <- exp(h [w]x) R``."""
-    x = ca.SX.sym("x", NX)
+    x = ca.SX.sym("x", STATE.size)
     f = ca.SX.sym("f", 6)
     c = ca.SX.sym("c", MODEL.size)
     s = STATE.split(x)
@@ -142,7 +140,7 @@ def _linear_function(substeps: int) -> ca.Function:
     ``f_c / v_s`` at rest, holds only within ``v_s`` and would freeze the plan; without
     the Coulomb slope the QP would overestimate how far a small force moves a leg at
     rest, and creep to the goal)."""
-    x = ca.SX.sym("x", NX)
+    x = ca.SX.sym("x", STATE.size)
     c = ca.SX.sym("c", MODEL.size)
     s = STATE.split(x)
     m = MODEL.split(c)
@@ -178,7 +176,7 @@ def _period_function(substeps: int) -> ca.Function:
     ``q_dot = K tau`` [m/s] at ``x_next``."""
     step = _step_function()
     lin = _linear_function(substeps)
-    xs, fs, cs = ca.SX.sym("x", NX), ca.SX.sym("f", 6), ca.SX.sym("c", MODEL.size)
+    xs, fs, cs = ca.SX.sym("x", STATE.size), ca.SX.sym("f", 6), ca.SX.sym("c", MODEL.size)
     xk = xs
     for _ in range(substeps):
         xk = step(xk, fs, cs)
@@ -193,7 +191,7 @@ def _features_function(feature: BuiltinFeature) -> ca.Function:
     frame: :meth:`~controllers.tasks.feature_kind.BuiltinFeature.sx_stage_features`),
     their Jacobian (m x 6) in the pose's left perturbation ``xi = (delta t, delta phi)``
     and the leg lengths [m]."""
-    x = ca.SX.sym("x", NX)
+    x = ca.SX.sym("x", STATE.size)
     c = ca.SX.sym("c", MODEL.size)
     cam = ca.SX.sym("cam", CAMERA.size)
     st = STATE.split(x)

@@ -134,9 +134,9 @@ class PoseForceMPC(ForceMPCLaw):
         if law.reference is None:
             R, t = law.goal_pose()
             out[:] = np.concatenate([t, np.asarray(R, dtype=float).T.ravel()])
-            return out, np.ones(12, dtype=bool)
-        for k in range(N):
-            row = law.pose_reference(tr + (k + 1) * dt)
-            out[k, 0:3] = row[9:12]
-            out[k, 3:12] = row[0:9].reshape(3, 3).T.ravel()
+        else:
+            for k in range(N):
+                row = law.pose_reference(tr + (k + 1) * dt)
+                out[k, 0:3] = row[9:12]
+                out[k, 3:12] = row[0:9].reshape(3, 3).T.ravel()
         return out, np.ones(12, dtype=bool)

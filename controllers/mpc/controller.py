@@ -238,12 +238,10 @@ class MPCLaw(PredictiveLaw):
         return cmd
 
     def velocity_offset(self, q_dot: np.ndarray) -> None:
-        """The leg velocities [m/s] a wrapper adds to the coming step's command (the
-        feed-forward of a trajectory task, :mod:`controllers.tracking`): the goal moves
-        with them. With ``drive_model = "lag"`` the prediction then runs on the leg
-        velocities RELATIVE to it (exact for a feed-forward constant over the horizon:
-        the drives lag the sum, the goal moves with the feed-forward alone); the ideal
-        prediction does not need it. Cleared after the step."""
+        """The leg velocities [m/s] a wrapper adds to the coming step's command (a
+        trajectory task's feed-forward, :mod:`controllers.tracking`; cleared after the
+        step). With ``drive_model = "lag"`` the prediction runs on the leg velocities
+        RELATIVE to it (exact for a feed-forward constant over the horizon)."""
         self._offset = np.asarray(q_dot, dtype=float).reshape(6)
 
     def _step(self, observation: Observation, offset: np.ndarray) -> Command:

@@ -145,14 +145,10 @@ class LimitQP:
 
     def _refine(self, P: np.ndarray, c: np.ndarray, J: np.ndarray, lower: np.ndarray,
                 upper: np.ndarray, x: np.ndarray, y: np.ndarray) -> np.ndarray:
-        """Solve the KKT system of the active set OSQP found (what OSQP's polishing does).
-
-        ADMM stops at a tolerance; with the active set fixed, the equality-constrained
-        problem is solved exactly. Without active constraints this is the classical
-        ``-P^-1 c``. The refined point is kept only if it is feasible and its
-        multipliers have the right signs; otherwise OSQP's point is returned. (OSQP's
-        own polisher prints to stdout even with ``verbose=False``.) One call of the
-        compiled :func:`refine_kernel`.
+        """Solve the KKT system of the active set OSQP found, exactly (what OSQP's
+        polisher does, but it prints to stdout even with ``verbose=False``): one call of
+        the compiled :func:`refine_kernel`. The refined point is kept only if it is
+        feasible with multipliers of the right signs; otherwise OSQP's point is returned.
         """
         buf = self._refine_in
         buf[REFINE_INPUTS["P"]] = P.reshape(36)
