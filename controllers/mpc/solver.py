@@ -284,13 +284,14 @@ def run_sqp(evaluate: Callable[[np.ndarray], np.ndarray | str],
         status = f"not converged in {it} SQP iterations (last step {size:.2g})"
         if it == max_iter:  # stop on a QP solution: the linearised rows hold there
             return U + d, False, status, last, it
-        alpha = 1.0
-        if merit_rows is None:
-            out = evaluate(U + d)
+        if merit_rows is None:  # the full step
+            U = U + d
+            out = evaluate(U)
         else:
             mu = max(mu, 1.1 * float(np.abs(res.multipliers).max()) + 1e-9)
             merit0, viol0 = merit(out, merit_rows, mu)
             slope = float(g @ d) - mu * viol0  # directional derivative of the merit
+            alpha = 1.0
             for _ in range(6):
                 out = evaluate(U + alpha * d)
                 if isinstance(out, str):
@@ -300,7 +301,7 @@ def run_sqp(evaluate: Callable[[np.ndarray], np.ndarray | str],
                         merit0):
                     break
                 alpha *= 0.5
-        U = U + alpha * d
+            U = U + alpha * d
         if time_limit is not None and time.perf_counter() - t_start > time_limit:
             return None, False, f"time limit {time_limit} s exceeded after {it} SQP " \
                 "iterations", last, it
