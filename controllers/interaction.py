@@ -2,12 +2,8 @@
 (``docs/math.md`` sections 2 and 3): :func:`cross` and the leg-direction interaction
 matrices :func:`direction_interaction` ``M_i`` (the dead reckoning of hidden legs,
 :meth:`controllers.estimators.LegDirectionEstimate.predict_hidden`). Twists
-``tau = (v, w)`` are expressed in the camera frame and reduced at its origin.
-
-The numpy interaction matrices of the edges and pixel lines and the task blocks, the
-independent reference of the tasks' CasADi blocks (:mod:`controllers.tasks`, from which
-the compiled cores are generated), are the tests' oracle
-(``tests/controllers/interaction_oracle.py``).
+``tau = (v, w)`` are expressed in the camera frame and reduced at its origin. (The
+tests' numpy oracle of the tasks' CasADi blocks: ``tests/controllers/interaction_oracle.py``.)
 """
 
 from __future__ import annotations

@@ -1,30 +1,19 @@
 """The force-level predictive controllers' receding horizon (:class:`ForceMPCLaw`),
-here for ``leg-edge-force-mpc``, on the leg edges (its pose variant ``pose-force-mpc``
-differs in its features and reference: :mod:`controllers.force_mpc.variants`).
+here for ``leg-edge-force-mpc`` on the leg edges (its pose variant ``pose-force-mpc``
+differs in its features and reference: :mod:`controllers.force_mpc.variants`; the
+controllers in full: ``docs/dynamic-world.md``).
 
-Each period (receding horizon, force-mode drives):
-
-1. read the encoders (lengths ``q`` [m], leg velocities ``q_dot`` [m/s]) and the edge
-   normals the camera sees (refused, zero forces, with the reason when a reading is
-   missing or not finite, as the computed-torque laws refuse);
-2. the state of the prediction: the pose from the NOMINAL forward kinematics of the
-   encoders, the twist ``K^-1 q_dot`` (nominal ``K``);
-3. the reference of the horizon: the features of the stages ``t + k dt``, ``k = 1..N``,
-   exactly those ``leg-edge-ctc`` tracks (the anchored features of the reference
-   trajectory, or of a quintic line to the fixed goal, or the taught goal:
-   :mod:`controllers.feature_ctc`, whose law this controller holds);
-4. one Gauss-Newton QP of :mod:`controllers.force_mpc.problem` (compiled kernel) from
-   the previous plan shifted by one period (warm start), solved first without its
-   bounds (the minimiser ``-H^-1 g``, the QP's optimum when it holds them), else by
-   DAQP generated to C (:func:`controllers.mpc.solver.solve_qp`, the MPC's): the force limits
-   ``|f_k| <= f_max`` of the nominal drives; repeated from the new plan until the
-   first force has converged (its step within 0.1 % of it, or 1 mN), at most
-   ``max_iter`` times (default :data:`MAX_ITER`; 1: the real-time iteration);
-5. apply ``f_0``.
-
-A failed solve (a non-finite QP, DAQP not optimal, a first force out of its bounds)
-falls back to the held ``leg-edge-ctc`` law for that period; the command says so in
-``notes`` and :attr:`ForceMPCLaw.stats` counts it.
+Each period (force-mode drives): read the encoders and the features (refused, zero
+forces, with the reason when a reading is missing or not finite); the state of the
+prediction from the NOMINAL forward kinematics of the encoders and ``K^-1 q_dot``; the
+reference of the stages ``t + k dt``, ``k = 1..N``, exactly those the held
+computed-torque law tracks (:mod:`controllers.feature_ctc`); up to ``max_iter``
+Gauss-Newton QPs of :mod:`controllers.force_mpc.problem` from the previous plan shifted
+by one period (:func:`controllers.mpc.solver.run_sqp`, the force limits ``|f_k| <=
+f_max`` of the nominal drives as bounds), stopping once the first force has converged
+(its step within 0.1 % of it, or 1 mN); apply ``f_0``. A failed solve (a non-finite QP,
+DAQP not optimal, a first force out of its bounds) falls back to the held law for that
+period; the command says so in ``notes`` and :attr:`ForceMPCLaw.stats` counts it.
 """
 
 from __future__ import annotations
@@ -34,12 +23,12 @@ from typing import Any
 
 import numpy as np
 
-from controllers.base import Command, Controller, ControllerContext, Goal, Observation
+from controllers.base import Command, ControllerContext, Goal, Observation
 from controllers.exceptions import ContextError
 from controllers.feature_ctc import LegEdgeCTC
-from controllers.force_mpc.problem import NX, STATE, ForceProblemSpec, force_kernel
-from controllers.law_tools import check_count, check_horizon, check_number, check_weights
-from controllers.mpc.solver import SolveStats, compiled_qp, solve_qp
+from controllers.force_mpc.problem import STATE, ForceProblemSpec, force_kernel
+from controllers.law_tools import check_count, check_number
+from controllers.mpc.solver import PredictiveLaw, QPArrays, compiled_qp, run_sqp
 from controllers.task_ctc import (
     DAMPING,
     NATURAL_FREQUENCY_HZ,
@@ -58,31 +47,23 @@ from hexapod.fk import forward_kinematics
 #: (DAQP's solutions were seen up to 4e-5 beyond it in the perf runs: 0.008 N at
 #: 200 N); the plan is then clipped onto the bounds.
 BOUND_TOLERANCE = 1e-4
-#: Default cap of the Gauss-Newton QPs per period. One (the real-time iteration) applied
-#: the first force of an unconverged plan: a full Gauss-Newton step from the shifted
-#: plan, its sensitivities frozen at the warm start's periods (the Coulomb friction
-#: smoothed), is far from the nonlinear rollout along it (predicted feature error at
-#: the horizon's end of order 1, after three QPs 2e-2 to 4e-2), and with the
-#: camera's noise and 1 mm calibration errors such plans grew on their end stages to
-#: the force limits, which then bent the first force; the forces oscillated with
-#: growing amplitude (payload-saturation, 0 kg: 2 of 200 trials on an end stop).
-#: Three QPs remove it (held-out trials: docs/dynamic-world.md; they seldom meet the
-#: convergence test there and all three run); five gained nothing more there, and with
-#: three the worst case (every step paying all of them, as in ``python -m
-#: benchmarks.perf.controllers``) took 1.24 ms, within the 2 ms step-time goal.
+#: Default cap of the Gauss-Newton QPs per period. One (the real-time iteration) let the
+#: forces oscillate with growing amplitude on the end stages of unconverged plans under
+#: the camera's noise and 1 mm calibration errors (payload-saturation, 0 kg: 2 of 200
+#: trials on an end stop); three remove it, five gained nothing more, and with three the
+#: worst step took 1.24 ms (``docs/dynamic-world.md``, "Why three Gauss-Newton QPs").
 MAX_ITER = 3
 
 
-class ForceMPCLaw(Controller):
+class ForceMPCLaw(PredictiveLaw):
     """Base of the force-level predictive controllers (see the module docstring): the
     subclasses say which features (:attr:`feature`), which law they hold
     (:attr:`law_class`), and read the features and the reference.
 
     Args:
         horizon: Number of periods ``N`` predicted (1 to 50).
-        substeps: Integration steps per period of the prediction (``h = dt /
-            substeps``; the dynamic world's own step makes the prediction the world's
-            integration of the nominal robot).
+        substeps: Integration steps per period of the prediction (``h = dt / substeps``;
+            at the world's own step, the world's integration of the nominal robot).
         error_weight: Weight of the feature error of the stages ``1..N-1``.
         terminal_weight: Weight of the feature error of stage ``N``.
         rate_weight: Weight of the force rate ``sum_k |f_k - f_{k-1}|^2`` [1/N^2].
@@ -106,6 +87,7 @@ class ForceMPCLaw(Controller):
     #: The computed-torque law of the same features: reference, goal and fallback.
     law_class: type[TaskComputedTorque] = LegEdgeCTC
     actuation = Actuation.FORCE
+    fallback_note = "force-mpc fallback"
     #: Samples ``context.reference`` itself (:mod:`controllers.tracking` passes it through).
     tracks_reference = True
 
@@ -116,30 +98,20 @@ class ForceMPCLaw(Controller):
                  smooth_goal: bool = True, friction_smoothing: float = 3e-3,
                  compiled: bool = True) -> None:
         name = self.name
-        self.horizon, self.error_weight, self.terminal_weight = check_horizon(
-            name, horizon, error_weight, terminal_weight)
+        self.rate_weight, self.effort_weight = self._check_options(
+            horizon, error_weight, terminal_weight,
+            (("rate_weight", rate_weight), ("effort_weight", effort_weight)), compiled)
         self.substeps = check_count(name, "substeps", substeps, 1, 100)
         self.max_iter = check_count(name, "max_iter", max_iter, 1, 20)
-        self.rate_weight, self.effort_weight = check_weights(
-            name, ("rate_weight", rate_weight), ("effort_weight", effort_weight),
-            "the QP needs one of them to be strictly convex")
         self.friction_smoothing = check_number(name, "friction_smoothing",
                                                friction_smoothing)
-        self.compiled = bool(compiled)
         #: The fallback law, whose reference and goal this controller tracks.
         self.law: Any = self.law_class(natural_frequency=natural_frequency, damping=damping,
                                        smooth_goal=smooth_goal)
         self.spec = ForceProblemSpec(horizon, substeps, self.feature)
-        self.stats = SolveStats()
-        self.context: ControllerContext | None = None
         self._bound: BoundCall | None = None
-        #: The plan of the last step (6 N,) [N] (before the shift), and the warm start.
+        #: The plan of the last step (6 N,) [N] (before the shift).
         self.plan: np.ndarray | None = None
-        self._U = np.zeros(6 * horizon)
-        self._f_prev = np.zeros(6)
-        self._started = False
-        self._t0 = 0.0
-        self._guess: tuple[np.ndarray, np.ndarray] | None = None
 
     # ----------------------------------------------------------------- reset
     def reset_trial(self, context: ControllerContext) -> None:
@@ -178,13 +150,12 @@ class ForceMPCLaw(Controller):
             compiled_qp(n, n)
         self._eye = np.eye(n)
         self._dt = dt
-        self.stats = SolveStats()
+        self._restart()
         self.plan = None
-        self._U = np.zeros(n)
         self._f_prev = np.zeros(6)
         self._started = False
         self._t0 = 0.0
-        self._guess = None
+        self._guess: tuple[np.ndarray, np.ndarray] | None = None
 
     def retarget_trial(self, goal: Goal) -> None:
         """A new fixed goal (ignored when tracking ``context.reference``)."""
@@ -223,9 +194,9 @@ class ForceMPCLaw(Controller):
         mask = np.where(known, mask, 0.0)  # the rows' weights (0: unused)
         if observed is None:  # the features are the pose itself
             observed = np.concatenate([p, R.T.ravel()])
-        problem = self.too_few(mask)
-        if problem is not None:
-            return self._refuse(problem)
+        used = self.used(mask)
+        if isinstance(used, str):
+            return self._refuse(used)
         v = self._bound.inputs
         state = self._state
         state["R"][:] = R.T.ravel()
@@ -235,42 +206,19 @@ class ForceMPCLaw(Controller):
         v["reference"][:] = reference
         v["observed"][:] = np.where(mask, observed, 0.0)
         v["mask"][:] = mask
-        return self._solve(observation, observed, reference[0], mask)
+        return self._solve(observation, observed, reference[0], mask, used)
 
     def _solve(self, observation: Observation, normals: np.ndarray, ref_now: np.ndarray,
-               mask: np.ndarray) -> Command:
-        """The Gauss-Newton QPs from the warm start, and the command."""
-        assert self._bound is not None
-        bound, stats = self._bound, self.stats
-        stats.steps += 1
-        U = self._U.copy()
-        n = U.size
-        out = self._kernel.outputs
-        status = ""
-        converged = False
-        iterations = 0
-        for it in range(1, self.max_iter + 1):
-            iterations = it
-            bound.inputs["U"][:] = U
-            if bound.call():
-                return self._fallback(observation, "the compiled kernel failed")
-            y = bound.y
-            if not math.isfinite(float(y[out["H"]].sum() + y[out["g"]].sum())):
-                return self._fallback(observation, "non-finite QP data (prediction failed)")
-            H = y[out["H"]].reshape(n, n)
-            g = y[out["g"]]
-            res = solve_qp(H, g, self._eye, -self._limit - U, self._limit - U, self.compiled)
-            if res.step is None:
-                return self._fallback(observation, res.status)
-            U = U + res.step
-            status = res.status
-            size = float(np.abs(res.step[:6]).max())
-            if size <= 1e-3 * max(float(np.abs(U[:6]).max()), 1.0):
-                converged = True
-                break
-        stats.solved(iterations, status)
+               mask: np.ndarray, used: int) -> Command:
+        """The Gauss-Newton QPs from the warm start (full steps), and the command."""
+        self.stats.steps += 1
+        U, converged, status, last, it = run_sqp(self._evaluate, self._qp_data, self._U.copy(),
+                                                 self.max_iter, 1e-3, self.compiled, floor=1.0)
+        if U is None or last is None:
+            return self._fallback(observation, status)
+        self.stats.total_sqp_iterations += it
         if not converged and self.max_iter > 1:
-            stats.unconverged += 1
+            self.stats.unconverged += 1
         lim = self._limit
         if not (math.isfinite(float(U.sum()))
                 and np.all(np.abs(U) <= lim * (1.0 + BOUND_TOLERANCE))):
@@ -281,12 +229,27 @@ class ForceMPCLaw(Controller):
         U = np.clip(U, -lim, lim)  # within DAQP's tolerance of the bounds: onto them
         f = U[:6]
         self.plan = U.copy()
-        self._U = np.concatenate([U[6:], U[-6:]])  # the warm start of the next period
+        self._U = self._shift(U)
         self._f_prev = f.copy()
         e = np.where(mask, normals - ref_now, 0.0)
         return Command.of_forces(f, error=e, error_norm=float(np.linalg.norm(e)),
-                                 features_used=self.used(mask),
-                                 notes=[f"force-mpc: {status}"])
+                                 features_used=used,
+                                 notes=[f"force-mpc: {last.status}"])
+
+    def _evaluate(self, U: np.ndarray) -> np.ndarray | str:
+        """The kernel's ``H`` and ``g`` at ``U`` (its output's first blocks, a view), or
+        why not."""
+        assert self._bound is not None
+        self._bound.inputs["U"][:] = U
+        if self._bound.call():
+            return "the compiled kernel failed"
+        return self._bound.y[:self._kernel.outputs["g"].stop]
+
+    def _qp_data(self, out: np.ndarray, U: np.ndarray) -> QPArrays:
+        """``(H, g, C, lba, uba)``: the force limits as bounds on the step from ``U``."""
+        n = U.size
+        return out[:n * n].reshape(n, n), out[n * n:], self._eye, -self._limit - U, \
+            self._limit - U
 
     # ----------------------------------------------------------------- pieces
     def camera_constants(self, context: ControllerContext, v: dict[str, np.ndarray]) -> None:
@@ -302,12 +265,9 @@ class ForceMPCLaw(Controller):
         weights (m,) (0: not seen), or why not."""
         raise NotImplementedError
 
-    def too_few(self, mask: np.ndarray) -> str | None:
-        """Why the rows ``mask`` are too few to control the six legs (None: enough)."""
-        return None
-
-    def used(self, mask: np.ndarray) -> int:
-        """The features used, as the command reports them."""
+    def used(self, mask: np.ndarray) -> int | str:
+        """The features the rows ``mask`` use, as the command reports them, or why they
+        are too few to control the six legs."""
         return int(mask.sum())
 
     def _pose(self, q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -335,13 +295,11 @@ class ForceMPCLaw(Controller):
         raise NotImplementedError
 
     def _fallback(self, observation: Observation, reason: str) -> Command:
-        """The held law's command this period, noting why."""
-        self.stats.fallback(reason)
-        cmd = self.law.step_trial(observation)
+        """The held law's command this period, noting why; the plan restarts from it."""
+        cmd = super()._fallback(observation, reason)
         if cmd.reason is None and cmd.forces is not None:
             self._f_prev = np.asarray(cmd.forces, dtype=float).copy()
             self._U = np.tile(self._f_prev, self.horizon)
-        cmd.notes = [*(cmd.notes or []), f"force-mpc fallback: {reason}"]
         return cmd
 
     def _refuse(self, problem: str) -> Command:
@@ -350,9 +308,10 @@ class ForceMPCLaw(Controller):
     # ----------------------------------------------------------------- diagnostics
     def prediction(self, plan: np.ndarray | None = None) -> dict[str, Any]:
         """The kernel's prediction from the last step's state along ``plan`` (6 N,) [N]
-        (default: the plan applied at the last step): the states (N, 18), edge normals
-        with the observed offset (N, 36), leg lengths (N, 6) [m] and leg rates (N, 6)
-        [m/s] at the ends of the periods ``1..N``, and the cost.
+        (default: the plan applied at the last step): the states (N, 18), the features
+        with the observed offset (N, m), leg lengths (N, 6) [m] and leg rates (N, 6)
+        [m/s] at the ends of the periods ``1..N`` (the kernel output's blocks), and the
+        cost.
 
         Raises:
             ContextError: No step solved yet.
@@ -366,9 +325,6 @@ class ForceMPCLaw(Controller):
             raise ContextError(self.name, "prediction", "the compiled kernel failed")
         y = self._kernel.outputs.views(bound.y.copy())
         bound.x[:] = saved
-        N = self.horizon
-        return {"states": y["states"].reshape(N, NX),
-                "features": y["features"].reshape(N, self.spec.features),
-                "lengths": y["lengths"].reshape(N, 6), "rates": y["rates"].reshape(N, 6),
+        return {**{key: y[key] for key in ("states", "features", "lengths", "rates")},
                 "cost": float(y["cost"][0])}
 

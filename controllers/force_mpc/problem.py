@@ -1,4 +1,6 @@
-"""The force-level predictive problem: a condensed Gauss-Newton QP, compiled to C.
+"""The force-level predictive problem: a condensed Gauss-Newton QP, compiled to C (the
+controllers, their cost and solver: ``docs/dynamic-world.md``, "The force-level
+predictive controllers").
 
 Decision: the leg forces ``U = (f_0, ..., f_{N-1})`` [N], each held over one control
 period ``dt`` (force-mode drives). **Single shooting**: the predicted states are
@@ -6,41 +8,25 @@ functions of ``U``; the only constraints are the drives' force limits, simple bo
 on ``U``.
 
 **Prediction** (the NOMINAL model: the controller context's geometry, inertia and
-drives): the state ``x = (R, t, tau)`` (18 numbers: ``R`` column-major, ``t`` [m], the
-twist ``tau = (v [m/s], w [rad/s])``, base frame) moves by the closed-chain dynamics of
-:mod:`hexapod.dynamics.compiled` with the drives of :mod:`hexapod.dynamics.drive_model`
-in force mode, integrated as the dynamic world integrates them
-(:mod:`hexapod.dynamics.robots`), ``substeps`` steps of ``h = dt / substeps`` per
-period:
-
-``(M + K^T diag(m_leg + m_r + h d_f) K) tau_dot = K^T (f - c q_dot - f_c tanh(q_dot /
-v_s) - m_r K_dot tau) - h_mech``, then ``tau += h tau_dot``, ``t += h v``,
-``R <- exp(h [w]x) R``
-
-(linearly implicit Euler in the twist with the friction's secant damping
-``d_f = c + f_c tanh(q_dot / v_s) / q_dot``, semi-implicit Euler on SE(3)). With the
-world's step (``substeps = dt / physics_dt``) the prediction is the world's own
+drives): the state ``x = (R, t, tau)`` (:data:`STATE`, base frame) moves by the
+closed-chain dynamics of :mod:`hexapod.dynamics.compiled` with the drives of
+:mod:`hexapod.dynamics.drive_model` in force mode, ``substeps`` steps of ``h = dt /
+substeps`` per period, integrated as the dynamic world integrates them
+(:func:`_step_function`): with the world's step the prediction is the world's own
 integration of the nominal robot, to rounding.
 
-**Cost**, over the stages ``k = 1..N`` (the last one weighted ``terminal_weight``):
+**Cost** over the stages ``k = 1..N`` (the last one weighted ``terminal_weight``):
+``sum_k w_k |s_k - s*_k|^2 + rate sum_k |f_k - f_{k-1}|^2 + effort sum_k |f_k|^2``, the
+predicted features ``s_k = s_obs + s(x_k) - s(x_0)`` (the edge normals seen now, camera
+frame, moved by the model's change, hidden edges of weight 0; or the pose ``(t, R
+column-major)``, base frame, rows weighted), the reference ``s*_k`` and ``f_{-1}`` the
+force applied last period.
 
-``sum_k w_k |s_k - s*_k|^2 + rate sum_k |f_k - f_{k-1}|^2 + effort sum_k |f_k|^2``
-
-with the predicted edge normals ``s_k = s_obs + s(x_k) - s(x_0)`` (camera frame: the
-normals seen now, moved by the model's change; hidden edges weigh 0; the pose variant,
-the feature :data:`~controllers.tasks.platform_pose.PLATFORM_POSE`: ``s = (t, R
-column-major)``, base frame, the rows weighted), the
-reference ``s*_k`` (the goal features, or the anchored reference at ``t + k dt``) and
-``f_{-1}`` the force applied last period.
-
-**Gauss-Newton QP** (one per SQP iteration): the sensitivities ``S_k = d x_k / d U``
-follow ``S_{k+1} = A_k S_k + [0 .. B_k .. 0]`` with the period's Jacobians ``A_k``,
-``B_k`` (CasADi AD of the step, chained over the substeps), and
-``H = sum_k w_k S_k^T C_k^T W C_k S_k + rate D^T D + effort I``,
-``g = sum_k w_k S_k^T C_k^T W r_k + ...`` with ``C_k = d s / d x`` at ``x_k``. Everything
-is one CasADi function generated to C (:class:`hexapod.compiled.CompiledFunction`);
-:mod:`controllers.force_mpc.controller` solves the box-constrained QP (DAQP, shipped
-with CasADi, generated to C: :func:`controllers.mpc.solver.compiled_qp`).
+**Gauss-Newton QP**: the sensitivities ``S_k = d x_k / d U`` follow ``S_{k+1} = A_k S_k
++ [0 .. B_k .. 0]`` with the period's Jacobians ``A_k``, ``B_k``
+(:func:`_linear_function`), and ``H = sum_k w_k S_k^T C_k^T W C_k S_k + rate D^T D
++ effort I``, ``g = sum_k w_k S_k^T C_k^T W r_k + ...`` with ``C_k = d s / d x`` at
+``x_k``: one CasADi function generated to C (:func:`force_kernel`).
 """
 
 from __future__ import annotations
@@ -51,16 +37,13 @@ from functools import lru_cache
 import casadi as ca
 import numpy as np
 
-from controllers.mpc.prediction import sx_edge_normals
 from controllers.tasks.feature_kind import BuiltinFeature
-from controllers.tasks.leg_edge import EDGE_NORMALS
+from controllers.tasks.leg_edge import EDGE_NORMALS, sx_edge_normals
 from hexapod.compiled import CompiledFunction, Layout, Shape
 from hexapod.dynamics import compiled as mech
 
 #: The state: rotation (column-major), position [m], twist [m/s, rad/s].
 STATE = Layout([("R", 9), ("t", 3), ("twist", 6)], "force-MPC state")
-#: Size of the state.
-NX = STATE.size
 #: The features: twelve edge normals (six legs, two edges, three components).
 NS = 36
 #: The nominal model's constants of a step: base and platform points [m] (base frame),
@@ -90,16 +73,11 @@ class ForceProblemSpec:
     substeps: int
     feature: BuiltinFeature = EDGE_NORMALS
 
-    @property
-    def features(self) -> int:
-        """Number of features of a stage."""
-        return self.feature.stage_features
-
     def input_layout(self) -> Layout:
         """The kernel's input row."""
-        N, m = self.horizon, self.features
+        N, m = self.horizon, self.feature.stage_features
         blocks: list[tuple[str, Shape]] = [
-            ("state", NX), ("U", 6 * N), ("f_prev", 6), ("reference", (N, m)),
+            ("state", STATE.size), ("U", 6 * N), ("f_prev", 6), ("reference", (N, m)),
             ("observed", m), ("mask", m), ("weights", 4)]
         blocks += [(f"model_{b}", MODEL.shapes[b]) for b in MODEL]
         blocks += [(f"camera_{b}", CAMERA.shapes[b]) for b in CAMERA]
@@ -108,8 +86,8 @@ class ForceProblemSpec:
     def output_layout(self) -> Layout:
         """The kernel's output row: the QP data, the cost, the predicted states,
         features (with the observed offset) and leg lengths [m] of stages ``1..N``."""
-        N, n, m = self.horizon, 6 * self.horizon, self.features
-        return Layout([("H", (n, n)), ("g", n), ("cost", 1), ("states", (N, NX)),
+        N, n, m = self.horizon, 6 * self.horizon, self.feature.stage_features
+        return Layout([("H", (n, n)), ("g", n), ("cost", 1), ("states", (N, STATE.size)),
                        ("features", (N, m)), ("lengths", (N, 6)), ("rates", (N, 6))],
                       "force-MPC kernel output")
 
@@ -123,12 +101,14 @@ def _mechanism(s: dict[str, ca.SX], m: dict[str, ca.SX], *names: str) -> tuple[c
     return tuple(ca.substitute(terms[k], sym, row) for k in names)
 
 
-def step_expression() -> tuple[ca.SX, ca.SX, ca.SX, ca.SX]:
-    """One integration step of the nominal robot with force-mode drives (module
-    docstring): the symbols ``x`` (18), ``f`` (6), the model constants, and ``x`` after
-    the step. Written as the dynamic world's step (:mod:`hexapod.dynamics.robots_compiled`)
-    with the drive's force ``f`` inside its limits."""
-    x = ca.SX.sym("x", NX)
+def _step_function() -> ca.Function:
+    """``(x, f, c) -> x``: one integration step ``h`` of the nominal robot with force-mode
+    drives, ``f`` (6) [N] inside its limits, ``c`` the model constants (:data:`MODEL`),
+    written as the dynamic world's step (:mod:`hexapod.dynamics.robots_compiled`):
+    ``(M + K^T diag(m_leg + m_r + h d_f) K) tau_dot = K^T (f - friction - m_r K_dot tau)
+    - h_mech`` (linearly implicit in the friction's secant ``d_f``), then ``tau += h
+    tau_dot``, ``t += h v``, ``R <- exp(h [w]x) R``."""
+    x = ca.SX.sym("x", STATE.size)
     f = ca.SX.sym("f", 6)
     c = ca.SX.sym("c", MODEL.size)
     s = STATE.split(x)
@@ -144,50 +124,14 @@ def step_expression() -> tuple[ca.SX, ca.SX, ca.SX, ca.SX]:
     tw_new = s["twist"] + h * acc
     t_new = s["t"] + h * tw_new[0:3]
     R_new = mech.sx_exp_so3(h * tw_new[3:6]) @ ca.reshape(s["R"], 3, 3)
-    return x, f, c, ca.vertcat(ca.reshape(R_new, 9, 1), t_new, tw_new)
+    return ca.Function("force_mpc_step", [x, f, c],
+                       [ca.vertcat(ca.reshape(R_new, 9, 1), t_new, tw_new)])
 
 
-def features_expression(feature: BuiltinFeature = EDGE_NORMALS
-                        ) -> tuple[ca.SX, ca.SX, ca.SX, ca.SX, ca.SX]:
-    """The features of the nominal robot at a state: the edge normals (36, camera
-    frame), or for the pose the pose ``(t, R column-major)`` (12, base frame), by
-    :meth:`~controllers.tasks.feature_kind.BuiltinFeature.sx_stage_features`;
-    the symbols ``x``, the model constants and the camera constants, the features and
-    the leg lengths (6) [m]."""
-    x = ca.SX.sym("x", NX)
-    c = ca.SX.sym("c", MODEL.size)
-    cam = ca.SX.sym("cam", CAMERA.size)
-    s = STATE.split(x)
-    m = MODEL.split(c)
-    k = CAMERA.split(cam)
-    R = ca.reshape(s["R"], 3, 3)
-    Rc = ca.reshape(k["R"], 3, 3)
-    A = ca.reshape(m["A"], 3, 6)
-    E = ca.reshape(m["E"], 3, 6)
-    Ac = ca.reshape(k["A"], 3, 6)
-    normals, lengths = [], []
-    for i in range(6):
-        d = s["t"] + R @ E[:, i] - A[:, i]
-        q = ca.sqrt(ca.dot(d, d))
-        lengths.append(q)
-        n1, n2 = sx_edge_normals(Ac[:, i], Rc @ (d / q), k["radius"])
-        normals += [n1, n2]
-    return (x, c, cam, feature.sx_stage_features(s["t"], s["R"], normals),
-            ca.vertcat(*lengths))
-
-
-def ldl_solve_columns(M: ca.SX, B: ca.SX) -> ca.SX:
-    """``M^-1 B`` for a symmetric positive-definite ``M`` (n x n) and ``B`` (n x m) by one
-    unrolled LDL^T factorisation (:func:`hexapod.dynamics.compiled.ldl_factor`)."""
-    L, D = mech.ldl_factor(M)
-    return ca.horzcat(*(mech.ldl_substitute(L, D, B[:, c]) for c in range(B.shape[1])))
-
-
-def sensitivity_expression(substeps: int) -> tuple[ca.SX, ca.SX, ca.SX, ca.SX]:
-    """The period's linear model in the perturbation ``(xi, delta tau)`` (12: the pose's
-    left perturbation ``xi = (delta t, delta phi)``, ``R -> exp([delta phi]x) R``, and the
-    twist's), its matrices frozen at the period's start state (module docstring):
-    ``(x, c) -> (A (12 x 12), B (12 x 6))``.
+def _linear_function(substeps: int) -> ca.Function:
+    """``(x, c) -> (A (12 x 12), B (12 x 6))``: the period's linear model in the
+    perturbation ``(xi, delta tau)`` (the pose's left perturbation ``xi = (delta t, delta
+    phi)``, ``R -> exp([delta phi]x) R``, and the twist's), frozen at the period's start.
 
     Per substep ``tau' = (Mb + h K^T C K)^-1 (Mb tau + h K^T f)``, ``xi' = xi + h tau'``,
     with ``Mb = M + K^T diag(m_r) K`` and ``C`` the friction's slope at the period's
@@ -196,7 +140,7 @@ def sensitivity_expression(substeps: int) -> tuple[ca.SX, ca.SX, ca.SX, ca.SX]:
     ``f_c / v_s`` at rest, holds only within ``v_s`` and would freeze the plan; without
     the Coulomb slope the QP would overestimate how far a small force moves a leg at
     rest, and creep to the goal)."""
-    x = ca.SX.sym("x", NX)
+    x = ca.SX.sym("x", STATE.size)
     c = ca.SX.sym("c", MODEL.size)
     s = STATE.split(x)
     m = MODEL.split(c)
@@ -211,7 +155,9 @@ def sensitivity_expression(substeps: int) -> tuple[ca.SX, ca.SX, ca.SX, ca.SX]:
         k = K[i, :].T
         Mb += mech.symmetric_outer((leg_mass[i] + m["rotor"][i]) * k, k)
         L += mech.symmetric_outer((leg_mass[i] + m["rotor"][i] + h * slope[i]) * k, k)
-    PQ = ldl_solve_columns(L, ca.horzcat(Mb, h * K.T))
+    Lf, D = mech.ldl_factor(L)  # one unrolled LDL^T factorisation for the 12 columns
+    rhs = ca.horzcat(Mb, h * K.T)
+    PQ = ca.horzcat(*(mech.ldl_substitute(Lf, D, rhs[:, j]) for j in range(12)))
     P, Q = PQ[:, :6], PQ[:, 6:]  # tau' = P tau + Q f
     Att, Axt = ca.SX.eye(6), ca.SX(6, 6)
     Bt, Bx = ca.SX(6, 6), ca.SX(6, 6)
@@ -221,18 +167,16 @@ def sensitivity_expression(substeps: int) -> tuple[ca.SX, ca.SX, ca.SX, ca.SX]:
         Axt = Axt + h * Att
         Bx = Bx + h * Bt
     A = ca.vertcat(ca.horzcat(ca.SX.eye(6), Axt), ca.horzcat(ca.SX(6, 6), Att))
-    return x, c, A, ca.vertcat(Bx, Bt)
+    return ca.Function("force_mpc_linear", [x, c], [A, ca.vertcat(Bx, Bt)])
 
 
 def _period_function(substeps: int) -> ca.Function:
     """``(x, f, c) -> (x_next, A, B, q_dot)``: the state after one period of ``substeps``
-    steps, the linear model of :func:`sensitivity_expression` at ``x``, and the leg rates
+    steps, the linear model of :func:`_linear_function` at ``x``, and the leg rates
     ``q_dot = K tau`` [m/s] at ``x_next``."""
-    x, f, c, y = step_expression()
-    step = ca.Function("force_mpc_step", [x, f, c], [y])
-    xl, cl, A, B = sensitivity_expression(substeps)
-    lin = ca.Function("force_mpc_linear", [xl, cl], [A, B])
-    xs, fs, cs = (ca.SX.sym(n, v.shape[0]) for n, v in (("x", x), ("f", f), ("c", c)))
+    step = _step_function()
+    lin = _linear_function(substeps)
+    xs, fs, cs = ca.SX.sym("x", STATE.size), ca.SX.sym("f", 6), ca.SX.sym("c", MODEL.size)
     xk = xs
     for _ in range(substeps):
         xk = step(xk, fs, cs)
@@ -241,18 +185,37 @@ def _period_function(substeps: int) -> ca.Function:
     return ca.Function("force_mpc_period", [xs, fs, cs], [xk, Ak, Bk, qd])
 
 
-def _features_function(feature: BuiltinFeature = EDGE_NORMALS) -> ca.Function:
-    """``(x, c, cam) -> (s, ds/dxi, lengths)``: the features, their Jacobian (m x 6) in the
-    pose's left perturbation ``xi = (delta t, delta phi)`` and the leg lengths [m]."""
-    x, c, cam, s, q = features_expression(feature)
-    xi = ca.SX.sym("xi", 6)
+def _features_function(feature: BuiltinFeature) -> ca.Function:
+    """``(x, c, cam) -> (s, ds/dxi, lengths)``: the features of the nominal robot at a
+    state (the edge normals, camera frame, or the pose ``(t, R column-major)``, base
+    frame: :meth:`~controllers.tasks.feature_kind.BuiltinFeature.sx_stage_features`),
+    their Jacobian (m x 6) in the pose's left perturbation ``xi = (delta t, delta phi)``
+    and the leg lengths [m]."""
+    x = ca.SX.sym("x", STATE.size)
+    c = ca.SX.sym("c", MODEL.size)
+    cam = ca.SX.sym("cam", CAMERA.size)
     st = STATE.split(x)
+    m = MODEL.split(c)
+    k = CAMERA.split(cam)
     R = ca.reshape(st["R"], 3, 3)
+    Rc = ca.reshape(k["R"], 3, 3)
+    A = ca.reshape(m["A"], 3, 6)
+    E = ca.reshape(m["E"], 3, 6)
+    Ac = ca.reshape(k["A"], 3, 6)
+    normals, lengths = [], []
+    for i in range(6):
+        d = st["t"] + R @ E[:, i] - A[:, i]
+        q = ca.sqrt(ca.dot(d, d))
+        lengths.append(q)
+        n1, n2 = sx_edge_normals(Ac[:, i], Rc @ (d / q), k["radius"])
+        normals += [n1, n2]
+    s = feature.sx_stage_features(st["t"], st["R"], normals)
+    xi = ca.SX.sym("xi", 6)
     moved = ca.vertcat(ca.reshape((ca.SX.eye(3) + ca.skew(xi[3:6])) @ R, 9, 1),
                        st["t"] + xi[0:3], st["twist"])
     s_moved = ca.substitute(s, x, moved)
     C = ca.substitute(ca.jacobian(s_moved, xi), xi, ca.SX.zeros(6))
-    return ca.Function("force_mpc_features", [x, c, cam], [s, C, q])
+    return ca.Function("force_mpc_features", [x, c, cam], [s, C, ca.vertcat(*lengths)])
 
 
 def kernel_function(spec: ForceProblemSpec) -> ca.Function:
@@ -260,7 +223,7 @@ def kernel_function(spec: ForceProblemSpec) -> ca.Function:
     the input row (:meth:`ForceProblemSpec.input_layout`): an MX graph calling the
     period's and the features' SX functions (each generated to C once) and condensing
     with dense matrix products."""
-    N, n, ns = spec.horizon, 6 * spec.horizon, spec.features
+    N, n, ns = spec.horizon, 6 * spec.horizon, spec.feature.stage_features
     lay = spec.input_layout()
     period = _period_function(spec.substeps)
     feats = _features_function(spec.feature)

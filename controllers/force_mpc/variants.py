@@ -17,13 +17,10 @@ from controllers.task_ctc import DAMPING, NATURAL_FREQUENCY_HZ
 from controllers.tasks.leg_edge import EDGE_NORMALS
 from controllers.tasks.platform_pose import PLATFORM_POSE
 
-#: Default force-rate weight of the pose variant [1/N^2] (see :class:`PoseForceMPC`). The
-#: ratio of the two features' squared sensitivities to a translation of the platform at
-#: the reference robot's home pose (front camera: 80.6 /m^2 summed over the three axes
-#: for the edges, 3 for the pose) gives the edges' 1e-8 / 27 = 4e-10; with it the plan
-#: chattered at the Coulomb friction's reversals on the tests' 10 mm circle at 20 mm/s
-#: (largest distance to the reference 0.29 mm, RMS 0.067), with 1e-9 less (0.16 mm,
-#: 0.033): a choice on that one case.
+#: Default force-rate weight of the pose variant [1/N^2] (see :class:`PoseForceMPC`): the
+#: edges' 1e-8 scaled by the two features' sensitivities to a translation gives 4e-10,
+#: with which the plan chattered at the Coulomb friction's reversals on the tests' 10 mm
+#: circle; 1e-9 halved that (``docs/dynamic-world.md``): a choice on that one case.
 POSE_RATE_WEIGHT = 1e-9
 
 
@@ -67,15 +64,10 @@ class LegEdgeForceMPC(ForceMPCLaw):
             return f"fewer than six edges seen ({int(seen.sum())})"
         return n.ravel(), np.repeat(seen.ravel(), 3)
 
-    def too_few(self, mask: np.ndarray) -> str | None:
-        """Fewer than six edges seen and known."""
-        if int(mask.sum()) < 6 * 3:
-            return f"fewer than six edges seen and known ({int(mask.sum()) // 3})"
-        return None
-
-    def used(self, mask: np.ndarray) -> int:
-        """The edges used."""
-        return int(mask.sum()) // 3
+    def used(self, mask: np.ndarray) -> int | str:
+        """The edges used, or why they are too few (fewer than six seen and known)."""
+        edges = int(mask.sum()) // 3
+        return edges if edges >= 6 else f"fewer than six edges seen and known ({edges})"
 
     def _reference(self, tr: float) -> tuple[np.ndarray, np.ndarray]:
         """The reference features (N, 36) of the stages at ``tr + k dt``, ``k = 1..N``,
@@ -142,9 +134,9 @@ class PoseForceMPC(ForceMPCLaw):
         if law.reference is None:
             R, t = law.goal_pose()
             out[:] = np.concatenate([t, np.asarray(R, dtype=float).T.ravel()])
-            return out, np.ones(12, dtype=bool)
-        for k in range(N):
-            row = law.pose_reference(tr + (k + 1) * dt)
-            out[k, 0:3] = row[9:12]
-            out[k, 3:12] = row[0:9].reshape(3, 3).T.ravel()
+        else:
+            for k in range(N):
+                row = law.pose_reference(tr + (k + 1) * dt)
+                out[k, 0:3] = row[9:12]
+                out[k, 3:12] = row[0:9].reshape(3, 3).T.ravel()
         return out, np.ones(12, dtype=bool)

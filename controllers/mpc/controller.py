@@ -1,20 +1,16 @@
 """Visual predictive controllers ``leg-edge-mpc`` and ``leg-direction-mpc``.
 
-Each step (receding horizon): read the features like the one-step QP law of the
-same features (:mod:`controllers.qp`, which this controller holds and falls back
-to), reconstruct the platform pose when the global model is used
-(:mod:`controllers.mpc.prediction`), solve the predictive problem of
-:mod:`controllers.mpc.problem` by Gauss-Newton SQP (:mod:`controllers.mpc.solver`:
-compiled QP data, DAQP),
-warm-started from the previous solution shifted by one period, and apply the first
-move ``q_dot = J_inv tau_0``.
+Each step (receding horizon): read the features like the one-step QP law of the same
+features (:mod:`controllers.qp`, held as the fallback), reconstruct the platform pose
+for the global model, solve the problem of :mod:`controllers.mpc.problem` by
+Gauss-Newton SQP (:func:`controllers.mpc.solver.run_sqp`) warm-started from the previous
+solution shifted by one period, and apply the first move ``q_dot = J_inv tau_0``.
 
-Every solve is checked: a QP that DAQP does not solve, an SQP that does not
-converge within ``max_iter`` iterations (``max_iter = 0`` never solves), a solve
-that exceeds ``time_limit``, or a non-finite or out-of-bounds first move makes the
-step fall back to the QP law; the command then says so in ``notes`` and
-``active_constraints`` (``"mpc fallback: <reason>"``), and :attr:`MPCLaw.stats`
-counts it. Observations with NaN are refused with the reason, like the other laws.
+A QP that DAQP does not solve, an SQP that does not converge within ``max_iter``
+iterations (``max_iter = 0`` never solves), a solve over ``time_limit``, or a non-finite
+or out-of-bounds first move makes the step fall back to the QP law, saying so in
+``notes`` and ``active_constraints`` (``"mpc fallback: <reason>"``; counted in
+:attr:`MPCLaw.stats`). Observations with NaN are refused with the reason.
 """
 
 from __future__ import annotations
@@ -27,22 +23,17 @@ from typing import Any
 
 import numpy as np
 
-from controllers.base import Command, Controller, ControllerContext, Goal, Observation
+from controllers.base import Command, ControllerContext, Goal, Observation
 from controllers.exceptions import ContextError, OptionError
-from controllers.law_tools import (
-    check_choice,
-    check_count,
-    check_horizon,
-    check_number,
-    check_weights,
-)
+from controllers.law_tools import check_choice, check_count, check_number
 from controllers.mpc.drive_state import DRIVE_STATES, DriveLag, drive_lag
 from controllers.mpc.prediction import fit_pose
 from controllers.mpc.problem import ProblemSpec, problem_kernel
 from controllers.mpc.solver import (
     SCREENED_VISIBILITY_ROWS,
+    PredictiveLaw,
+    QPArrays,
     QPResult,
-    SolveStats,
     compiled_qp,
     run_sqp,
 )
@@ -50,20 +41,12 @@ from controllers.qp import LegDirectionQPController, LegEdgeQPController, veloci
 from controllers.tasks.feature_kind import BuiltinFeature
 from controllers.tasks.leg_direction import LEG_DIRECTIONS
 from controllers.tasks.leg_edge import EDGE_NORMALS
-from hexapod.compiled import CompiledFunction
+from hexapod.compiled import CompilationError, CompiledFunction
 
 log = logging.getLogger(__name__)
 
-#: Prediction models.
-MODELS = ("local", "global")
-#: Reference trajectories of the error: ``(1 - lambda dt)^k e_0`` or zero.
-REFERENCES = ("exponential", "zero")
-#: Models of the velocity drives in the prediction: ideal (each setpoint happens at once)
-#: or a first-order lag at the drives' velocity bandwidth.
-DRIVE_MODELS = ("ideal", "lag")
 
-
-class MPCLaw(Controller):
+class MPCLaw(PredictiveLaw):
     """Base of the predictive controllers (see the module docstring for the options).
 
     Args:
@@ -93,19 +76,15 @@ class MPCLaw(Controller):
         regularization: Added to the diagonal of the QP Hessian.
         threshold: Singular-value threshold of the fallback law.
         compiled: Generate the QP-data kernel and DAQP to C (built once per problem
-            structure, a few seconds, cached on disk); False: CasADi virtual machine and
-            ``casadi.conic`` (same results, several times slower per step, nothing to
-            build).
-        drive_model: ``"ideal"`` (the predicted leg velocities are the setpoints, as in
-            the kinematic world) or ``"lag"``: each leg's velocity follows its setpoint as
-            a first-order lag at the NOMINAL drives' ``velocity_bandwidth`` (robot file
-            ``[drives]``), starting from the leg velocities now (``drive_state``). For
-            velocity-mode drives on the dynamic world or a real robot.
-        drive_state: Where the lag model starts (:mod:`controllers.mpc.drive_state`):
-            ``"measured"`` (the default: ``Observation.q_dot``, else reconstructed from
-            the encoder lengths and the setpoints sent), ``"encoders"`` (always the
-            reconstruction) or ``"model"`` (the lag's run on the past setpoints alone: an
-            ablation, ``docs/results.md``, "Slow velocity drives").
+            structure, cached on disk); False: CasADi virtual machine and
+            ``casadi.conic`` (same results, several times slower per step).
+        drive_model: ``"ideal"`` (the predicted leg velocities are the setpoints) or
+            ``"lag"``: each leg's velocity follows its setpoint as a first-order lag at
+            the NOMINAL drives' ``velocity_bandwidth`` (velocity-mode drives on the
+            dynamic world or a real robot; ``docs/math.md`` section 6).
+        drive_state: Where the lag model starts: ``"measured"`` (the default),
+            ``"encoders"`` or ``"model"`` (an ablation: :mod:`controllers.mpc.drive_state`,
+            ``docs/results.md``, "Slow velocity drives").
         law_options: Further options of the fallback QP law (e.g. ``edge_feature``).
     """
 
@@ -130,15 +109,13 @@ class MPCLaw(Controller):
             raise OptionError(name, "leg_rate_feedforward", "the one-step laws' option; the "
                               "predictive controllers model the drives with drive_model = "
                               "\"lag\" (from the measured leg velocities)")
-        self.horizon, self.error_weight, self.terminal_weight = check_horizon(
-            name, horizon, error_weight, terminal_weight)
-        self.model = check_choice(name, "model", model, MODELS)
-        self.reference = check_choice(name, "reference", reference, REFERENCES)
-        self.drive_model = check_choice(name, "drive_model", drive_model, DRIVE_MODELS)
+        self.regularization, self.effort_weight = self._check_options(
+            horizon, error_weight, terminal_weight,
+            (("regularization", regularization), ("effort_weight", effort_weight)), compiled)
+        self.model = check_choice(name, "model", model, ("local", "global"))
+        self.reference = check_choice(name, "reference", reference, ("exponential", "zero"))
+        self.drive_model = check_choice(name, "drive_model", drive_model, ("ideal", "lag"))
         self.drive_state = check_choice(name, "drive_state", drive_state, DRIVE_STATES)
-        self.regularization, self.effort_weight = check_weights(
-            name, ("regularization", regularization), ("effort_weight", effort_weight),
-            "the QP needs one of them to be strictly convex")
         self.visibility = bool(visibility)
         self.visibility_margin = check_number(name, "visibility_margin", visibility_margin,
                                               0.0, strict=False)
@@ -147,7 +124,6 @@ class MPCLaw(Controller):
         if self.max_tilt is not None and self.max_tilt >= math.pi / 2:
             raise OptionError(name, "max_tilt_deg", f"must be < 90, got {max_tilt_deg}")
         self.max_iter = check_count(name, "max_iter", max_iter, 0)
-        self.compiled = bool(compiled)
         self.accept_unconverged = bool(accept_unconverged)
         self.tolerance = check_number(name, "tolerance", tolerance)
         self.time_limit = (None if time_limit is None else
@@ -160,14 +136,9 @@ class MPCLaw(Controller):
                                          stroke_margin=stroke_margin, max_speed=max_speed,
                                          compiled=self.compiled, **law_options)
         self.features = self.law.features
-        self.context: ControllerContext | None = None
-        self.stats = SolveStats()
         self._spec: ProblemSpec | None = None
-        self._U = np.zeros(6 * horizon)
         #: The drives' state of the lag model (None with the ideal prediction).
         self.drives: DriveLag | None = None
-        self._v0 = np.zeros(6)
-        self._offset = np.zeros(6)
 
     # ----------------------------------------------------------------- reset
     def reset_trial(self, context: ControllerContext) -> None:
@@ -234,16 +205,12 @@ class MPCLaw(Controller):
             self._vec[sl["alag"]], self._vec[sl["clag"]] = a, c
         self._offset = np.zeros(6)
         self._star = law.desired_features()
-        self._U = np.zeros(6 * self.horizon)
-        #: Last reconstructed platform pose ``(R, t)`` in the camera frame (diagnostic).
-        self.pose: tuple[np.ndarray, np.ndarray] | None = None
-        self.stats = SolveStats()
+        self._restart()
 
     def retarget_trial(self, goal: Goal) -> None:
-        """A new goal, keeping what the controller carries between periods (the goal of
-        each period of a trajectory task, :mod:`controllers.tracking`): the warm start,
-        the fallback law's estimate and the drives' state stay, the desired features
-        become the goal's, exactly as :meth:`reset_trial` would set them.
+        """A new goal (a trajectory task's, :mod:`controllers.tracking`): the desired
+        features become the goal's as :meth:`reset_trial` sets them; the warm start, the
+        fallback law's estimate and the drives' state stay.
 
         Raises:
             ContextError: :meth:`reset_trial` was not called, or the goal is invalid (the
@@ -271,12 +238,10 @@ class MPCLaw(Controller):
         return cmd
 
     def velocity_offset(self, q_dot: np.ndarray) -> None:
-        """The leg velocities [m/s] a wrapper adds to the coming step's command (the
-        feed-forward of a trajectory task, :mod:`controllers.tracking`): the goal moves
-        with them. With ``drive_model = "lag"`` the prediction then runs on the leg
-        velocities RELATIVE to it (exact for a feed-forward constant over the horizon:
-        the drives lag the sum, the goal moves with the feed-forward alone); the ideal
-        prediction does not need it. Cleared after the step."""
+        """The leg velocities [m/s] a wrapper adds to the coming step's command (a
+        trajectory task's feed-forward, :mod:`controllers.tracking`; cleared after the
+        step). With ``drive_model = "lag"`` the prediction runs on the leg velocities
+        RELATIVE to it (exact for a feed-forward constant over the horizon)."""
         self._offset = np.asarray(q_dot, dtype=float).reshape(6)
 
     def _step(self, observation: Observation, offset: np.ndarray) -> Command:
@@ -359,14 +324,13 @@ class MPCLaw(Controller):
             vec[sl["N"]] = N.reshape(-1)
             vec[sl["b"]] = b
             vec[sl["e0sq"]] = float(e @ e)
-        U, converged, status, last, it, qp_iters = run_sqp(
-            self._kernel, self.compiled, self._vec, self._lay.slices["U"], self._out.slices, spec,
-            self._U.copy(), self.max_iter, self.tolerance, self.time_limit)
+        U, converged, status, last, it = run_sqp(
+            self._evaluate, self._qp_data, self._U.copy(), self.max_iter, self.tolerance,
+            self.compiled, spec=spec, merit_rows=self._out.slices, one_qp=spec.model == "local",
+            time_limit=self.time_limit)
         self.stats.steps += 1
-        self.stats.solved(it, status)
-        self.stats.qp_iterations = qp_iters
-        if last is None or last.step is None or not (
-                converged or (self.accept_unconverged and status.startswith("not converged"))):
+        self.stats.total_sqp_iterations += it
+        if U is None or last is None or not (converged or self.accept_unconverged):
             return status
         if not converged:
             self.stats.unconverged += 1
@@ -381,10 +345,20 @@ class MPCLaw(Controller):
         self._U = self._shift(U)
         return tau, qdot, self._active(last), status
 
-    @staticmethod
-    def _shift(U: np.ndarray) -> np.ndarray:
-        """The warm start of the next period: the moves shifted by one, the last repeated."""
-        return np.concatenate([U[6:], U[-6:]])
+    def _evaluate(self, U: np.ndarray) -> np.ndarray | str:
+        """The kernel's output at ``U`` (the rest of its input filled), or why not."""
+        self._vec[self._lay.slices["U"]] = U
+        try:
+            return self._kernel.single(self._vec)
+        except (CompilationError, RuntimeError) as exc:
+            return f"QP data kernel failed: {exc}"
+
+    def _qp_data(self, out: np.ndarray, U: np.ndarray) -> QPArrays:
+        """``(H, g, C, lba, uba)`` of a kernel output (the bounds relative to ``U``)."""
+        o = self._out.slices
+        n, m = 6 * self.horizon, len(self._rows)
+        return (out[o["H"]].reshape(n, n), out[o["g"]], out[o["C"]].reshape(m, n),
+                out[o["lba"]], out[o["uba"]])
 
     def _active(self, res: QPResult) -> list[str]:
         """Names of the rows at a bound with a non-zero multiplier (first few)."""
@@ -413,7 +387,6 @@ class MPCLaw(Controller):
         R, t = fit_pose(B, self.context.geometry.platform_points, known.astype(float))
         if not (np.all(np.isfinite(R)) and np.all(np.isfinite(t))):
             return "pose reconstruction failed (non-finite)"
-        self.pose = (R, t)
         return R, t
 
     def _model_features(self, R: np.ndarray, t: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -429,13 +402,10 @@ class MPCLaw(Controller):
                                              getattr(law, "line_matrix", None)), qm)
 
     def _fallback(self, obs: Observation, reason: str) -> Command:
-        """The QP law's command, carrying the reason."""
-        self.stats.fallback(reason)
+        """The QP law's command, carrying the reason (in its active constraints too)."""
         self._U[:] = 0.0
-        log.debug("%s: falling back to %s: %s", self.name, self.law.name, reason)
-        cmd = self.law.step_trial(obs)
-        cmd.notes = [*cmd.notes, f"mpc fallback: {reason}"]
-        cmd.active_constraints = [*cmd.active_constraints, f"mpc fallback: {reason}"]
+        cmd = super()._fallback(obs, reason)
+        cmd.active_constraints = [*cmd.active_constraints, cmd.notes[-1]]
         return cmd
 
 

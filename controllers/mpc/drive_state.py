@@ -1,25 +1,16 @@
 """Where the velocity drives are now: the starting state of the predictive controllers'
-drive-aware prediction (``drive_model = "lag"``, :mod:`controllers.mpc.problem`).
+drive-aware prediction (``drive_model = "lag"``; the first-order lag ``v_{k+1} = a v_k +
+(1 - a) u_k``, ``dq_k = (dt - c) u_k + c v_k`` and where its ``v_0`` comes from:
+``docs/math.md`` section 6, "Drive-aware prediction").
 
-The prediction models each leg's velocity loop as a first-order lag over a period
-``dt``: ``v_{k+1} = a v_k + (1 - a) u_k`` and ``dq_k = (dt - c) u_k + c v_k``
-(``a = exp(-omega dt)``, ``c = (1 - a) / omega``, ``docs/math.md`` section 6). It
-starts from the leg velocities now, which :class:`DriveLag` gives from one of three
-sources (option ``drive_state``):
-
-- ``"measured"`` (the default): the robot's leg velocities (``Observation.q_dot``, the
-  dynamic world's encoders); when a step has none (a robot that reports only lengths,
-  a NaN), the reconstruction from the encoder lengths below;
-- ``"encoders"``: reconstructed from the encoder LENGTHS alone, for a robot that reports
-  no velocities: the last period's displacement ``dq`` and the setpoint ``u`` sent for
-  it give the velocity at its start, ``v_prev = (dq - (dt - c) u) / c``, and the lag
-  carries it to now, ``v = a v_prev + (1 - a) u`` (exact when the drives are the model;
-  the encoders' offsets cancel in ``dq``);
-- ``"model"``: the lag run on the past setpoints from rest, ignoring every measurement
-  (an ablation).
-
-When the chosen source has nothing finite to give (the first step, a NaN), the lag's run
-on the past setpoints is used.
+:class:`DriveLag` gives the leg velocities now from one of three sources (option
+``drive_state``): ``"measured"`` (the default: ``Observation.q_dot``, else the
+reconstruction below), ``"encoders"`` (from the encoder LENGTHS alone: the last
+period's displacement ``dq`` and the setpoint ``u`` sent for it give ``v_prev = (dq -
+(dt - c) u) / c``, carried to now by the lag), or ``"model"`` (the lag run on the past
+setpoints from rest, ignoring every measurement: an ablation). When the chosen source
+has nothing finite to give (the first step, a NaN), the lag's run on the past setpoints
+is used.
 """
 
 from __future__ import annotations
@@ -76,9 +67,7 @@ class DriveLag:
     _setpoints: np.ndarray | None = None
 
     def now(self, lengths: np.ndarray, q_dot: np.ndarray | None) -> np.ndarray:
-        """The leg velocities now [m/s] from the source (the encoders' reconstruction
-        when ``"measured"`` has no finite ``q_dot``; the lag's run when neither gives a
-        finite value).
+        """The leg velocities now [m/s] from the source (module docstring).
 
         Args:
             lengths: (6,) encoder lengths now [m].

@@ -1,46 +1,22 @@
-"""The predictive problem: a condensed Gauss-Newton QP per SQP iteration, compiled to C.
+"""The predictive problem: a condensed Gauss-Newton QP per SQP iteration, compiled to C
+(the problem itself: ``docs/math.md`` section 6, "Predictive variant").
 
-Decision: the platform twists ``U = (tau_0, ..., tau_{N-1})`` (camera frame,
-``docs/math.md`` section 2), held during one period each; the legs receive
-``q_dot = J_inv tau_0`` (section 3). **Single shooting**: the predicted states are
-functions of ``U`` only, so the NLP has ``6 N`` variables and no equality
-constraint. The state is a pose (or a twist displacement) that a pure integrator
-propagates: nothing unstable to stabilise by multiple shooting, and the condensed
-problem suits a dense active-set QP solver.
+Decision: the platform twists ``U = (tau_0, ..., tau_{N-1})`` (camera frame), held
+during one period each; the legs receive ``q_dot = J_inv tau_0``. **Single
+shooting**: the predicted states are functions of ``U`` only (a pose or a twist
+displacement that a pure integrator propagates), so the NLP has ``6 N`` variables and
+no equality constraint, and the condensed problem suits a dense active-set QP solver.
 
-Cost, over the stages ``k = 1..N`` (stage weight ``w_k``, the last one the terminal
-weight):
-
-``sum_k w_k |W_f (e_k - rho_k e_0)|^2 + effort sum_k |J_inv,0 tau_k|^2``
-
-with the stacked feature error ``e_k`` (section 6; hidden features have weight 0),
-the measured error ``e_0`` and the reference factors ``rho_k = (1 - lambda dt)^k``:
-the error is asked to decrease as the classical law ``e_dot = -lambda e`` would make
-it (Allibert et al.'s reference trajectory). Without active constraint, with the
-local model and ``effort -> 0``, the first move is exactly ``-lambda L^+ e`` for any
-horizon (each ``s_k`` minimises its own term); the MPC differs from the classical law
-only where it predicts a limit.
-
-Constraints, at every predicted stage (values relaxed to the current value when the
-robot is already beyond a bound, so that ``U = 0`` stays feasible):
-
-- strokes ``q_min + margin <= q_k <= q_max - margin`` (lengths corrected by the
-  measured-minus-model offset at ``k = 0``);
-- leg speeds ``|J_inv,0 tau_k| <= q_dot_max`` with the inverse Jacobian of the
-  measured directions (exactly what the first move applies; for the later moves an
-  approximation that keeps these rows linear), the first row merged with the
-  first-period stroke window, as in :mod:`controllers.qp`;
-- optional platform tilt (angle between the platform and base normals);
-- optional visibility (perspective camera): both ends ``A + r n``, ``B + r n`` of
-  every edge segment stay inside the image with a margin [px] (a straight segment
-  is inside the image when its ends are).
-
-With ``ProblemSpec.drives`` (option ``drive_model = "lag"``) the twists are the
-velocity drives' SETPOINTS: each leg's velocity follows ``J_inv,0 tau_k`` as a
-first-order lag at the drive's bandwidth, from the leg velocities measured now, and
-the twist displacement of period ``k`` is the lagged one, still linear in ``U``
-(:func:`_drive_blocks`, ``docs/math.md`` section 6); the local model sums these
-displacements, the global one moves the pose by their exponential.
+Cost over the stages ``k = 1..N``: ``sum_k w_k |W_f (e_k - rho_k e_0)|^2 + effort sum_k
+|J_inv,0 tau_k|^2``, hidden features of weight 0, ``rho_k = (1 - lambda dt)^k``.
+Constraints at every stage, each bound relaxed to the current value when the robot is
+already beyond it (``U = 0`` stays feasible): strokes (lengths corrected by the
+measured-minus-model offset at ``k = 0``); leg speeds ``|J_inv,0 tau_k| <= q_dot_max``
+(the first row merged with the first-period stroke window, as in
+:mod:`controllers.qp`); optionally the platform tilt, and the visibility of both ends
+``A + r n``, ``B + r n`` of every edge segment (perspective camera, margin [px]). With
+``ProblemSpec.drives`` the twists are the lagging velocity drives' setpoints
+(:func:`_drive_blocks`).
 
 Each SQP iteration linearises the stage values ``v_k(x_k)`` with respect to a left
 pose perturbation ``xi = (v, w)`` (6 columns, by CasADi AD) and carries it to ``U``
@@ -49,12 +25,8 @@ with ``E_k = exp(dt tau_k)``, ``Ad(E) = [[R, [p]_x R], [0, R]]`` and ``B_k`` the
 Jacobian of the step. The Gauss-Newton Hessian ``sum_k D_k^T (G_k^T W G_k) D_k``
 then costs ``O(N^2)`` 6 x 6 products instead of the ``O(N^2 m)`` of a full residual
 Jacobian. The local model is the same with ``Ad = I``, ``B_k = dt I`` and ``G_k``
-frozen (one QP is its exact solution).
-
-Everything above is one CasADi SX function generated to C and compiled
-(:class:`hexapod.compiled.CompiledFunction`): one call per SQP iteration returns
-the QP data; :mod:`controllers.mpc.solver` solves the QP (``6 N`` variables, dense)
-and runs the SQP iterations.
+frozen (one QP is its exact solution). All of it is one CasADi function generated to C
+(:func:`problem_kernel`); :mod:`controllers.mpc.solver` solves the QPs.
 """
 
 from __future__ import annotations
@@ -65,15 +37,10 @@ from typing import Any
 
 import casadi as ca
 
-from controllers.mpc.prediction import (
-    sx_edge_normals,
-    sx_exp_se3,
-    sx_legs,
-    sx_limb_ends,
-    sx_pixel,
-)
+from controllers.mpc.prediction import sx_exp_se3, sx_legs, sx_pixel
 from controllers.tasks.base import sx_skew
 from controllers.tasks.feature_kind import BuiltinFeature
+from controllers.tasks.leg_edge import sx_edge_normals
 from hexapod.compiled import CompiledFunction, Layout
 
 #: Upper bound used for one-sided rows (the tilt cosine never exceeds 1).
@@ -91,8 +58,8 @@ class ProblemSpec:
         horizon: ``N`` periods.
         tilt: Whether the tilt rows exist.
         visibility: Whether the image-bound rows exist (perspective camera).
-        drives: Whether the prediction models the velocity drives' lag (each leg's
-            velocity follows its setpoint as a first-order lag; see the module docstring).
+        drives: Whether the prediction models the velocity drives' lag
+            (:func:`_drive_blocks`).
     """
 
     feature: BuiltinFeature
@@ -135,7 +102,7 @@ class ProblemSpec:
 
     def output_layout(self) -> Layout:
         """Layout of the kernel output: cost, ``H`` (row-major), ``g``, ``C`` (row-major),
-        row bounds of ``delta U``, and the first-move leg velocities ``J_0 tau_0``."""
+        the row bounds of ``delta U`` and the constraint values."""
         n = 6 * self.horizon
         m = self.rows
         return Layout([("cost", 1), ("H", n * n), ("g", n), ("C", m * n), ("lba", m),
@@ -168,7 +135,8 @@ def _pose_function(spec: ProblemSpec) -> ca.Function:
     Inputs: ``R`` (3, 3), ``t`` (3), the parameter vector ``p`` (the kernel input).
     Outputs: residual ``e - 0`` (3 nf, global model; empty otherwise), its Jacobian
     (3 nf, 6), the constraint values (stage rows) and their Jacobian (rows, 6), and
-    ``J_inv`` (6, 6) at the pose.
+    ``J_inv`` (6, 6) at the pose (unused, kept: the compiled kernels without it ran
+    about 5 % slower, measured).
     """
     lay = spec.input_layout()
     p = ca.SX.sym("p", lay.size)
@@ -194,10 +162,9 @@ def _pose_function(spec: ProblemSpec) -> ca.Function:
         K = _mat(P["K"], 3, 3)
         for i in range(6):
             for n in sx_edge_normals(A[i], u[i], r):
-                for X in sx_limb_ends(A[i], B[i], n, r):
+                for X in (A[i] + r * n, B[i] + r * n):  # the segment's ends
                     values.append(sx_pixel(X, K))
     vals = ca.vertcat(*values)
-    outs_res: list[ca.SX] = []
     if spec.model == "global":
         Kit = _mat(P["Kit"], 3, 3)
         feats = spec.feature.sx_of_legs(u, A, r, Kit)
@@ -205,7 +172,7 @@ def _pose_function(spec: ProblemSpec) -> ca.Function:
         off = P["offset"]
         res = ca.vertcat(*[ca.cross(f + off[3 * j:3 * j + 3], star[3 * j:3 * j + 3])
                            for j, f in enumerate(feats)])
-        outs_res = [res, ca.jacobian(res, xi)]
+        outs_res: list[ca.SX] = [res, ca.jacobian(res, xi)]
     else:
         outs_res = [ca.SX(0, 1), ca.SX(0, 6)]
     Jv = ca.jacobian(vals, xi)
@@ -236,13 +203,9 @@ def _step_jacobian() -> ca.Function:
 
 
 def _drive_blocks(P: dict[str, Any], N: int, dt: Any) -> tuple[list[Any], list[Any]]:
-    """The twist displacement of each period under lagging drives, linear in ``U``.
-
-    Leg ``i``'s velocity follows its setpoint ``u_k = J_0 tau_k`` as a first-order lag of
-    pole ``omega_i``: over a period ``v_{k+1} = a v_k + (1 - a) u_k`` and the leg moves
-    ``dq_k = (dt - c) u_k + c v_k`` with ``a = exp(-omega dt)``, ``c = (1 - a) / omega``
-    (per leg). With the inverse Jacobian frozen at ``J_0`` the platform's twist
-    displacement is ``ds_k = J_0^-1 dq_k = sum_{j <= k} P_{k-j} tau_j + p_k`` with
+    """The twist displacement of each period under lagging drives, linear in ``U``
+    (``docs/math.md`` section 6, "Drive-aware prediction"): with the inverse Jacobian
+    frozen at ``J_0``, ``ds_k = J_0^-1 dq_k = sum_{j <= k} P_{k-j} tau_j + p_k`` with
     ``P_0 = J_0^-1 diag(dt - c) J_0``, ``P_l = J_0^-1 diag(c (1 - a) a^(l-1)) J_0`` and
     ``p_k = J_0^-1 (c a^k v_0)``, ``v_0`` the leg velocities now.
 
@@ -275,6 +238,15 @@ def _displacement(blocks: list[Any], offsets: list[Any], U: list[Any], k: int) -
     return ds
 
 
+def _add_stage(Hb: list[list[Any]], gb: list[Any], D: list[Any], MD: list[Any], m: Any
+               ) -> None:
+    """A stage's Gauss-Newton terms: ``g_i += D_i^T m``, ``H_ij += D_i^T MD_j`` (``i <= j``)."""
+    for i, Di in enumerate(D):
+        gb[i] += Di.T @ m
+        for j in range(i, len(D)):
+            Hb[i][j] += Di.T @ MD[j]
+
+
 def _kernel_function(spec: ProblemSpec) -> ca.Function:
     """The QP data of one SQP iteration as one MX function calling the SX stage functions.
 
@@ -304,10 +276,8 @@ def _kernel_function(spec: ProblemSpec) -> ca.Function:
     rows_c: list[Any] = []
     vals_c: list[Any] = []
     sr = spec.stage_rows
-    stroke_lo = ca.repmat(P["qlo"], 6, 1)
-    stroke_hi = ca.repmat(P["qhi"], 6, 1)
-    lo_stage: list[Any] = [stroke_lo]
-    hi_stage: list[Any] = [stroke_hi]
+    lo_stage: list[Any] = [ca.repmat(P["qlo"], 6, 1)]  # strokes
+    hi_stage: list[Any] = [ca.repmat(P["qhi"], 6, 1)]
     if spec.tilt:
         lo_stage.append(P["cosmax"])
         hi_stage.append(ca.MX(_BIG))
@@ -340,11 +310,7 @@ def _kernel_function(spec: ProblemSpec) -> ca.Function:
             cost += wk * ca.dot(rk, Wr)
             M = wk * (Gr.T @ (Gr * ca.repmat(wrow, 1, 6)))
             m = wk * (Gr.T @ Wr)
-            MD = [M @ Dj for Dj in D]
-            for i in range(k):
-                gb[i] += D[i].T @ m
-                for j in range(i, k):
-                    Hb[i][j] += D[i].T @ MD[j]
+            _add_stage(Hb, gb, D, [M @ Dj for Dj in D], m)
             rows_c.append(ca.horzcat(*[Gv @ Dj for Dj in D], ca.MX.zeros(sr, 6 * (N - k))))
             vals_c.append(vals)
     else:
@@ -370,13 +336,9 @@ def _kernel_function(spec: ProblemSpec) -> ca.Function:
                         Hb[i][j] += (dt * dt * wk) * Nm
                 rows_c.append(ca.horzcat(*([dt * G0] * k), ca.MX.zeros(sr, 6 * (N - k))))
             else:
-                NS = [wk * (Nm @ S[k - 1 - j]) for j in range(k)]
-                for i in range(k):
-                    gb[i] += S[k - 1 - i].T @ m
-                    for j in range(i, k):
-                        Hb[i][j] += S[k - 1 - i].T @ NS[j]
-                rows_c.append(ca.horzcat(*[G0 @ S[k - 1 - j] for j in range(k)],
-                                         ca.MX.zeros(sr, 6 * (N - k))))
+                Dk = [S[k - 1 - j] for j in range(k)]  # d s_k / d tau_j
+                _add_stage(Hb, gb, Dk, [wk * (Nm @ Dj) for Dj in Dk], m)
+                rows_c.append(ca.horzcat(*[G0 @ Dj for Dj in Dk], ca.MX.zeros(sr, 6 * (N - k))))
             vals_c.append(vals0 + G0 @ s)
     lo_c: list[Any] = [lo_s] * N  # the stage rows' bounds
     hi_c: list[Any] = [hi_s] * N

@@ -1,17 +1,10 @@
-"""Solving the predictive problem: QP solvers and the Gauss-Newton SQP iterations.
+"""Solving the predictive problems, for both predictive families (the velocity MPCs of
+:mod:`controllers.mpc.controller`, the force MPCs of :mod:`controllers.force_mpc`):
 
-- QP (dense, ``6 N`` variables; :func:`solve_qp`, shared by the force-level MPC):
-  first the unconstrained minimiser ``-H^-1 g`` (the optimum of the strictly convex QP
-  whenever it satisfies every row: the common case away from the limits), else DAQP
-  (dual active set, shipped with CasADi), generated to C by CasADi and called through
-  :mod:`ctypes` (:class:`CompiledQP`), or through ``casadi.conic`` when no C compiler
-  is available (:func:`daqp`). With the visibility rows, a smaller QP keeps only the
-  visibility rows closest to their bounds and is accepted when its solution satisfies
-  every row.
-- SQP (:func:`run_sqp`): Gauss-Newton QPs from the compiled kernel of
-  :mod:`controllers.mpc.problem`, a backtracking line search on the L1 merit, a
-  convergence test on the first move, an iteration limit and an optional time limit.
-  Every QP status is checked; the caller decides what a failure means.
+- the dense QP (:func:`solve_qp`: the unconstrained minimiser when it satisfies every
+  row, else DAQP generated to C, or ``casadi.conic`` without a C compiler);
+- the Gauss-Newton SQP iterations (:func:`run_sqp`) on a compiled kernel's QP data;
+- :class:`PredictiveLaw`: the options, warm start, counters and fallback they share.
 """
 
 from __future__ import annotations
@@ -20,15 +13,19 @@ import logging
 import math
 import subprocess
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from functools import lru_cache
 from pathlib import Path
+from typing import Any
 
 import casadi as ca
 import numpy as np
 
+from controllers.base import Command, Controller, ControllerContext, Observation
+from controllers.law_tools import check_horizon, check_weights
 from controllers.mpc.problem import ProblemSpec
-from hexapod.compiled import CompilationError, CompiledFunction, Layout
+from hexapod.compiled import CompiledFunction, Layout
 
 log = logging.getLogger(__name__)
 
@@ -39,34 +36,22 @@ class SolveStats:
 
     Attributes:
         steps: Steps that reached the solver.
-        fallbacks: Steps that fell back to the QP law.
-        unconverged: Steps that applied an unconverged SQP iterate (``accept_unconverged``).
-        sqp_iterations: SQP iterations of the last solve.
-        qp_iterations: DAQP iterations of the last solve (summed over its SQP iterations).
-        total_sqp_iterations: Sum over the steps.
-        last_status: Status of the last solve.
+        fallbacks: Steps that fell back to the held one-step law.
+        unconverged: Steps that applied an unconverged SQP iterate.
+        total_sqp_iterations: SQP iterations, summed over the steps.
         reasons: Fallback reasons and how often each occurred.
     """
 
     steps: int = 0
     fallbacks: int = 0
     unconverged: int = 0
-    sqp_iterations: int = 0
-    qp_iterations: int = 0
     total_sqp_iterations: int = 0
-    last_status: str = ""
     reasons: dict[str, int] = field(default_factory=dict)
 
     def fallback(self, reason: str) -> None:
         """Count a step that fell back, and its reason."""
         self.fallbacks += 1
         self.reasons[reason] = self.reasons.get(reason, 0) + 1
-
-    def solved(self, iterations: int, status: str) -> None:
-        """Record the SQP iterations and the status of a step's solve."""
-        self.sqp_iterations = iterations
-        self.total_sqp_iterations += iterations
-        self.last_status = status
 
 
 @dataclass
@@ -76,14 +61,16 @@ class QPResult:
     Attributes:
         step: (6 N,) ``delta U``, or None on failure.
         status: The solver's return status (text).
-        iterations: Active-set iterations.
         multipliers: (rows,) multipliers of the rows (sign: >0 at an upper bound).
     """
 
     step: np.ndarray | None
     status: str
-    iterations: int
     multipliers: np.ndarray | None
+
+
+#: Visibility rows kept by :func:`solve_qp` (the others are checked afterwards).
+SCREENED_VISIBILITY_ROWS = 48
 
 
 @lru_cache(maxsize=32)
@@ -95,22 +82,12 @@ def qp_solver(variables: int, rows: int) -> ca.Function:
                     {"error_on_fail": False})
 
 
-def _casadi_dir() -> Path:
-    return Path(ca.__file__).resolve().parent
-
-
 class CompiledQP:
-    """DAQP generated to C by CasADi and called through :mod:`ctypes` on one packed buffer.
-
-    The Python interface of ``casadi.conic`` costs several hundred microseconds per
-    call on these sizes (argument conversion and checks) for a solve of about a
-    hundred; the generated solver is called on preallocated buffers instead
-    (:class:`hexapod.compiled.CompiledFunction`, bound). It links against the DAQP
-    library shipped in the CasADi wheel (``libdaqp.so``, loaded with global symbols
-    before the generated library). Input (:attr:`inputs`): ``H`` (n x n), ``g``, ``C``
-    (m x n), ``lba``, ``uba``; output (:attr:`outputs`): ``x``, the row ``multipliers``,
-    the optimal ``cost``. A call that returns non-zero is a solve that DAQP did not
-    finish as optimal (infeasible, iteration limit, ...).
+    """DAQP generated to C by CasADi, called on preallocated buffers (a bound
+    :class:`hexapod.compiled.CompiledFunction`: ``casadi.conic``'s Python interface costs
+    several hundred microseconds per call on these sizes, for a solve of about a
+    hundred), linked against the DAQP library of the CasADi wheel (``libdaqp.so``). A
+    call that returns non-zero is a solve DAQP did not finish as optimal.
 
     Raises:
         OSError: No compiler, or the DAQP library or headers are missing (the caller
@@ -119,49 +96,45 @@ class CompiledQP:
 
     def __init__(self, variables: int, rows: int) -> None:
         n, m = variables, rows
-        self.n, self.m = n, m
-        self.inputs = Layout([("H", (n, n)), ("g", n), ("C", (m, n)), ("lba", m), ("uba", m)],
-                             f"QP {n} x {m} input")
-        self.outputs = Layout([("x", n), ("multipliers", m), ("cost", 1)],
-                              f"QP {n} x {m} output")
-        vin = ca.MX.sym("v", self.inputs.size)
-        P = self.inputs.split(vin)
-        H = ca.reshape(P["H"], n, n)
-        C = ca.reshape(P["C"], n, m).T
-        sol = qp_solver(n, m)(h=H, g=P["g"], a=C, lba=P["lba"], uba=P["uba"])
+        inputs = Layout([("H", (n, n)), ("g", n), ("C", (m, n)), ("lba", m), ("uba", m)],
+                        f"QP {n} x {m} input")
+        outputs = Layout([("x", n), ("multipliers", m), ("cost", 1)], f"QP {n} x {m} output")
+        vin = ca.MX.sym("v", inputs.size)
+        P = inputs.split(vin)
+        sol = qp_solver(n, m)(h=ca.reshape(P["H"], n, n), g=P["g"],
+                              a=ca.reshape(P["C"], n, m).T, lba=P["lba"], uba=P["uba"])
         f = ca.Function(f"hexapod_mpc_daqp_{n}_{m}", [vin],
                         [ca.vertcat(sol["x"], sol["lam_a"], sol["cost"])])
-        lib_daqp = _casadi_dir() / "libdaqp.so"
-        include = _casadi_dir() / "include"
+        casadi_dir = Path(ca.__file__).resolve().parent
+        lib_daqp = casadi_dir / "libdaqp.so"
+        include = casadi_dir / "include"
         if not lib_daqp.exists() or not (include / "daqp" / "api.h").exists():
-            raise OSError(f"DAQP library or headers not found in {_casadi_dir()}")
+            raise OSError(f"DAQP library or headers not found in {casadi_dir}")
         #: The compiled solver (its C function, layouts and library).
-        self.function = CompiledFunction(f, inputs=self.inputs, outputs=self.outputs,
+        self.function = CompiledFunction(f, inputs=inputs, outputs=outputs,
                                          flags=("-O2", f"-I{include}"), preload=(lib_daqp,))
         if not self.function.compiled:
             raise OSError(f"{self.function.name}: not compiled")
         self._bound = self.function.bind()
-        self._in = self._bound.inputs
-        self._x = self.outputs["x"]
-        self._multipliers = self.outputs["multipliers"]
+        self._x = outputs["x"]
+        self._multipliers = outputs["multipliers"]
 
     def solve(self, H: np.ndarray, g: np.ndarray, C: np.ndarray, lba: np.ndarray,
               uba: np.ndarray) -> QPResult:
         """Solve ``min 1/2 d^T H d + g^T d`` s.t. ``lba <= C d <= uba`` (sizes of this solver)."""
-        v = self._in
+        v = self._bound.inputs
         v["H"][:] = H
         v["g"][:] = g
         v["C"][:] = C
         v["lba"][:] = lba
         v["uba"][:] = uba
         if self._bound.call():
-            return QPResult(None, "QP not solved: DAQP did not reach an optimal solution", 0,
-                            None)
+            return QPResult(None, "QP not solved: DAQP did not reach an optimal solution", None)
         y = self._bound.y
         step = y[self._x].copy()
         if not math.isfinite(float(step.sum())):
-            return QPResult(None, "QP returned a non-finite solution", 0, None)
-        return QPResult(step, "optimal", 0, y[self._multipliers].copy())
+            return QPResult(None, "QP returned a non-finite solution", None)
+        return QPResult(step, "optimal", y[self._multipliers].copy())
 
 
 @lru_cache(maxsize=32)
@@ -172,8 +145,6 @@ def compiled_qp(variables: int, rows: int) -> CompiledQP | None:
     except (OSError, subprocess.SubprocessError, RuntimeError) as exc:
         log.warning("compiled DAQP unavailable (%s); using casadi.conic (slower)", exc)
         return None
-
-
 
 
 def daqp(H: np.ndarray, g: np.ndarray, C: np.ndarray, lba: np.ndarray, uba: np.ndarray,
@@ -187,38 +158,23 @@ def daqp(H: np.ndarray, g: np.ndarray, C: np.ndarray, lba: np.ndarray, uba: np.n
     try:
         out = solver(h=H, g=g, a=C, lba=lba, uba=uba)
     except RuntimeError as exc:  # casadi reports solver errors as RuntimeError
-        return QPResult(None, f"QP solver error: {exc}", 0, None)
+        return QPResult(None, f"QP solver error: {exc}", None)
     stats = solver.stats()
     status = str(stats.get("return_status", "unknown"))
-    iters = max(int(stats.get("iter_count", 0) or 0), 0)  # DAQP through casadi: -1 (unknown)
     if not stats.get("success", False):
-        return QPResult(None, f"QP not solved: DAQP status {status}", iters, None)
+        return QPResult(None, f"QP not solved: DAQP status {status}", None)
     x = np.asarray(out["x"], dtype=float).reshape(-1)
     if not np.all(np.isfinite(x)):
-        return QPResult(None, "QP returned a non-finite solution", iters, None)
-    return QPResult(x, status, iters, np.asarray(out["lam_a"], dtype=float).reshape(-1))
-
-
-def unconstrained(H: np.ndarray, g: np.ndarray, C: np.ndarray, lba: np.ndarray,
-                   uba: np.ndarray) -> QPResult | None:
-    """The unconstrained minimiser ``-H^-1 g`` when it satisfies every row (then it is the
-    optimum of the strictly convex QP and the QP solver is not called), else None."""
-    try:
-        x = -np.linalg.solve(H, g)
-    except np.linalg.LinAlgError:
-        return None
-    v = C @ x
-    if (v >= lba).all() and (v <= uba).all() and math.isfinite(float(x.sum())):
-        return QPResult(x, "unconstrained optimum", 0, np.zeros(len(lba)))
-    return None
+        return QPResult(None, "QP returned a non-finite solution", None)
+    return QPResult(x, status, np.asarray(out["lam_a"], dtype=float).reshape(-1))
 
 
 def solve_qp(H: np.ndarray, g: np.ndarray, C: np.ndarray, lba: np.ndarray, uba: np.ndarray,
              compiled: bool, spec: ProblemSpec | None = None) -> QPResult:
     """Solve ``min 1/2 d^T H d + g^T d`` s.t. ``lba <= C d <= uba``: the unconstrained
-    minimiser when it satisfies every row (:func:`unconstrained`), else DAQP
-    (:func:`daqp`), with the visibility rows of ``spec`` screened when there are many
-    of them.
+    minimiser ``-H^-1 g`` when it satisfies every row (then it is the optimum of the
+    strictly convex QP and DAQP is not called), else DAQP (:func:`daqp`), with the
+    visibility rows of ``spec`` screened when there are many of them.
 
     DAQP's cost grows with the number of rows (``6 N (7 + 48)`` with visibility). The
     visibility rows are first reduced to the :data:`SCREENED_VISIBILITY_ROWS` with the
@@ -226,11 +182,16 @@ def solve_qp(H: np.ndarray, g: np.ndarray, C: np.ndarray, lba: np.ndarray, uba: 
     row, it is the optimum of the full QP (same objective, larger feasible set);
     otherwise the full QP is solved.
     """
-    res = unconstrained(H, g, C, lba, uba)
-    if res is not None:
-        return res
-    keep = None if spec is None else screened_rows(spec, lba, uba)
-    if keep is not None:
+    try:
+        x = -np.linalg.solve(H, g)
+    except np.linalg.LinAlgError:
+        x = None
+    if x is not None:
+        v = C @ x
+        if (v >= lba).all() and (v <= uba).all() and math.isfinite(float(x.sum())):
+            return QPResult(x, "unconstrained optimum", np.zeros(len(lba)))
+    if spec is not None and spec.visibility:
+        keep = screened_rows(spec, lba, uba)
         res = daqp(H, g, C[keep], lba[keep], uba[keep], compiled)
         if res.step is not None and res.multipliers is not None:
             v = C @ res.step
@@ -238,18 +199,13 @@ def solve_qp(H: np.ndarray, g: np.ndarray, C: np.ndarray, lba: np.ndarray, uba: 
             if (v >= lba - tol).all() and (v <= uba + tol).all():
                 lam = np.zeros(len(lba))
                 lam[keep] = res.multipliers
-                return QPResult(res.step, res.status + " (screened rows)", res.iterations, lam)
+                return QPResult(res.step, res.status + " (screened rows)", lam)
     return daqp(H, g, C, lba, uba, compiled)
 
 
-#: Visibility rows kept by :func:`solve_qp` (the others are checked afterwards).
-SCREENED_VISIBILITY_ROWS = 48
-
-
-def screened_rows(spec: ProblemSpec, lba: np.ndarray, uba: np.ndarray) -> np.ndarray | None:
-    """Indices of the rows of the screened QP (None: no screening for this structure)."""
-    if not spec.visibility:
-        return None
+def screened_rows(spec: ProblemSpec, lba: np.ndarray, uba: np.ndarray) -> np.ndarray:
+    """Indices of the rows of the screened QP: all but the visibility rows, and the
+    :data:`SCREENED_VISIBILITY_ROWS` visibility rows of smallest slack at ``d = 0``."""
     sr = spec.stage_rows
     N = spec.horizon
     idx = np.arange(N * sr).reshape(N, sr)
@@ -266,86 +222,133 @@ def merit(out: np.ndarray, o: dict[str, slice], mu: float) -> tuple[float, float
     return float(out[o["cost"]][0]) + mu * viol, viol
 
 
-def run_sqp(kernel: CompiledFunction, compiled: bool, vec: np.ndarray,
-            u_slice: slice, o: dict[str, slice], spec: ProblemSpec, U: np.ndarray,
-            max_iter: int, tolerance: float, time_limit: float | None
-            ) -> tuple[np.ndarray, bool, str, QPResult | None, int, int]:
-    """Gauss-Newton SQP from ``U`` (the warm start) with a backtracking line search on
-    the L1 merit ``cost + mu * violation`` (global model; the local model is one QP).
+#: A QP's data ``(H, g, C, lba, uba)``.
+QPArrays = tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]
+
+
+def run_sqp(evaluate: Callable[[np.ndarray], np.ndarray | str],
+            qp_data: Callable[[np.ndarray, np.ndarray], QPArrays],
+            U: np.ndarray, max_iter: int, tolerance: float, compiled: bool, *,
+            floor: float = 1e-3, spec: ProblemSpec | None = None,
+            merit_rows: dict[str, slice] | None = None, one_qp: bool = False,
+            time_limit: float | None = None
+            ) -> tuple[np.ndarray | None, bool, str, QPResult | None, int]:
+    """Gauss-Newton SQP from ``U`` (the warm start), with a backtracking line search on
+    the L1 merit ``cost + mu * violation`` when ``merit_rows`` are given (else full steps).
 
     Converged when the step of the first move (the only one applied) satisfies
-    ``|delta tau_0|_inf <= tolerance * max(|tau_0|_inf, 1e-3)``: the later moves of a
+    ``|delta U_0|_inf <= tolerance * max(|U_0|_inf, floor)``: the later moves of a
     flat, saturated horizon may still be moving, and are warm-started at the next
     period. The last allowed iteration takes the full QP step, so that an unconverged
     result still satisfies the linearised constraints of its last QP.
 
     Args:
-        kernel: The compiled QP-data kernel.
-        compiled: Use DAQP generated to C (else ``casadi.conic``).
-        vec: The kernel input, filled but for ``U`` (modified).
-        u_slice: Where ``U`` goes in ``vec``.
-        o: The output layout's slices.
-        spec: The problem structure.
-        U: (6 N,) the starting point [m/s, rad/s].
+        evaluate: The kernel's output at a ``U``, or why it failed.
+        qp_data: The QP (:data:`QPArrays`) of an output at its ``U``.
+        U: (6 N,) the starting point [m/s, rad/s or N].
         max_iter: Iteration limit (0: no QP is solved).
         tolerance: Relative tolerance on the first move.
+        compiled: Use DAQP generated to C (else ``casadi.conic``).
+        floor: Smallest ``|U_0|_inf`` the tolerance is relative to.
+        spec: The velocity MPC's problem structure (visibility rows screened).
+        merit_rows: The output's ``cost``, ``lba`` and ``uba`` slices (line search).
+        one_qp: Converged after one QP (the local model: its QP is the problem).
         time_limit: Seconds after which the iterations stop, or None.
 
     Returns:
-        ``U``, converged, status text, the last QP result, SQP and QP iterations.
+        ``U`` (None when the iterations failed or ran out of time: the status says why),
+        converged, status text, the last QP result and the SQP iterations.
     """
-    n = 6 * spec.horizon
-    m = spec.rows
     status = "iteration limit 0: no QP solved"
-    qp_iters = 0
     last: QPResult | None = None
     t_start = time.perf_counter()
     if max_iter == 0:
-        return U, False, status, None, 0, 0
-    vec[u_slice] = U
-    try:
-        out = kernel.single(vec)
-    except (CompilationError, RuntimeError) as exc:
-        return U, False, f"QP data kernel failed: {exc}", None, 0, 0
+        return None, False, status, None, 0
+    out = evaluate(U)
     mu = 0.0
     for it in range(1, max_iter + 1):
+        if isinstance(out, str):
+            return None, False, out, last, it
         if not math.isfinite(float(out.sum())):
-            return U, False, "non-finite QP data (prediction failed)", last, it, qp_iters
-        g = out[o["g"]]
-        H = out[o["H"]].reshape(n, n)
-        C = out[o["C"]].reshape(m, n)
-        lba, uba = out[o["lba"]], out[o["uba"]]
+            return None, False, "non-finite QP data (prediction failed)", last, it
+        H, g, C, lba, uba = qp_data(out, U)
         res = solve_qp(H, g, C, lba, uba, compiled, spec)
-        qp_iters += res.iterations
         last = res
         if res.step is None or res.multipliers is None:
-            return U, False, res.status, last, it, qp_iters
+            return None, False, res.status, last, it
         d = res.step
         size = float(np.abs(d[:6]).max())
-        if spec.model == "local" or size <= tolerance * max(float(np.abs(U[:6] + d[:6]).max()),
-                                                            1e-3):
+        if one_qp or size <= tolerance * max(float(np.abs(U[:6] + d[:6]).max()), floor):
             return U + d, True, f"converged in {it} SQP iteration{'s' if it > 1 else ''}", \
-                last, it, qp_iters
+                last, it
         status = f"not converged in {it} SQP iterations (last step {size:.2g})"
         if it == max_iter:  # stop on a QP solution: the linearised rows hold there
-            return U + d, False, status, last, it, qp_iters
-        mu = max(mu, 1.1 * float(np.abs(res.multipliers).max()) + 1e-9)
-        merit0, viol0 = merit(out, o, mu)
-        slope = float(g @ d) - mu * viol0  # directional derivative of the merit
-        alpha = 1.0
-        for _ in range(6):
-            vec[u_slice] = U + alpha * d
-            try:
-                out_try = kernel.single(vec)
-            except (CompilationError, RuntimeError) as exc:
-                return U, False, f"QP data kernel failed: {exc}", last, it, qp_iters
-            value, _ = merit(out_try, o, mu)
-            if value <= merit0 + 1e-4 * alpha * min(slope, 0.0) or not math.isfinite(merit0):
-                break
-            alpha *= 0.5
-        U = U + alpha * d
-        out = out_try
+            return U + d, False, status, last, it
+        if merit_rows is None:  # the full step
+            U = U + d
+            out = evaluate(U)
+        else:
+            mu = max(mu, 1.1 * float(np.abs(res.multipliers).max()) + 1e-9)
+            merit0, viol0 = merit(out, merit_rows, mu)
+            slope = float(g @ d) - mu * viol0  # directional derivative of the merit
+            alpha = 1.0
+            for _ in range(6):
+                out = evaluate(U + alpha * d)
+                if isinstance(out, str):
+                    return None, False, out, last, it
+                value, _ = merit(out, merit_rows, mu)
+                if value <= merit0 + 1e-4 * alpha * min(slope, 0.0) or not math.isfinite(
+                        merit0):
+                    break
+                alpha *= 0.5
+            U = U + alpha * d
         if time_limit is not None and time.perf_counter() - t_start > time_limit:
-            return U, False, f"time limit {time_limit} s exceeded after {it} SQP iterations", \
-                last, it, qp_iters
-    return U, False, status, last, max_iter, qp_iters
+            return None, False, f"time limit {time_limit} s exceeded after {it} SQP " \
+                "iterations", last, it
+    return U, False, status, last, max_iter
+
+
+class PredictiveLaw(Controller):
+    """Base of the predictive controllers (velocity MPC :class:`~controllers.mpc.
+    controller.MPCLaw`, force MPC :class:`~controllers.force_mpc.controller.ForceMPCLaw`):
+    the options they share, the plan's warm start ``_U`` (6 N,), the solve counters
+    :attr:`stats` and the fallback to the held one-step law :attr:`law`."""
+
+    law: Any
+    context: ControllerContext | None = None
+    #: What a fallback's note (``"<note>: <reason>"``) starts with.
+    fallback_note = "mpc fallback"
+
+    def _check_options(self, horizon: int, error_weight: float, terminal_weight: float,
+                       weights: tuple[tuple[str, float], tuple[str, float]], compiled: bool
+                       ) -> tuple[float, float]:
+        """Check and set the horizon, its weights and ``compiled``; return the two
+        ``weights`` ``(option, value)`` checked (one positive: a strictly convex QP).
+
+        Raises:
+            OptionError: Naming the option out of range.
+        """
+        self.horizon, self.error_weight, self.terminal_weight = check_horizon(
+            self.name, horizon, error_weight, terminal_weight)
+        self.compiled = bool(compiled)
+        self._restart()
+        return check_weights(self.name, *weights,
+                             "the QP needs one of them to be strictly convex")
+
+    def _restart(self) -> None:
+        """A new trial: the counters at zero, the warm start at rest."""
+        self.stats = SolveStats()
+        self._U = np.zeros(6 * self.horizon)
+
+    @staticmethod
+    def _shift(U: np.ndarray) -> np.ndarray:
+        """The warm start of the next period: the moves shifted by one, the last repeated."""
+        return np.concatenate([U[6:], U[-6:]])
+
+    def _fallback(self, observation: Observation, reason: str) -> Command:
+        """The held law's command this period, noting why."""
+        self.stats.fallback(reason)
+        log.debug("%s: falling back to %s: %s", self.name, self.law.name, reason)
+        cmd: Command = self.law.step_trial(observation)
+        cmd.notes = [*cmd.notes, f"{self.fallback_note}: {reason}"]
+        return cmd

@@ -1,21 +1,13 @@
-"""The limit QP solver (``docs/math.md`` section 6): the twist ``tau`` minimising
-``|L tau + lambda e|^2 + eps |tau|^2`` subject to
-
-``q_min + margin <= q + dt J_inv tau <= q_max - margin`` and ``|J_inv tau| <= q_dot_max``,
-
-then ``q_dot = J_inv tau``. Both constraints act on the same rows ``J_inv tau``, so they
-merge into one pair of bounds per leg (:func:`velocity_bounds`, each bound clipped to the
-speed limit, so the problem stays feasible even when a leg starts inside the margin).
-Solved with OSQP (:class:`~controllers.solvers.osqp_limits.LimitQP`), warm-started from
-the previous step. Away from the limits (and with ``eps -> 0``) the solution is the
-classical ``-lambda L^+ e``; at a limit the platform slides along it instead of one leg
-being saturated.
-
-Speed: when the unconstrained optimum (from the compiled law core, solved with ``eps``
-as the damping) clears every bound, it is the QP optimum and OSQP is not called
-(:meth:`LimitQPSolver.solve`; default OSQP settings only, so that chosen settings
-always take effect); the batched laws check their rows with the same bounds
-(:meth:`LimitQPSolver.batch_accept`).
+"""The limit QP solver (``docs/math.md`` section 6, "QP variant"): the twist ``tau``
+minimising ``|L tau + lambda e|^2 + eps |tau|^2`` subject to ``q_min + margin <= q + dt
+J_inv tau <= q_max - margin`` and ``|J_inv tau| <= q_dot_max``, then ``q_dot = J_inv
+tau``. Both constraints act on the rows ``J_inv tau``: one pair of bounds per leg
+(:func:`velocity_bounds`). Solved with OSQP (:class:`~controllers.solvers.osqp_limits.
+LimitQP`), warm-started from the previous step, unless the unconstrained optimum (the
+compiled law core's, ``eps`` as the damping) clears every bound: then it is the QP
+optimum (:meth:`LimitQPSolver.solve`, with the default OSQP settings only, so that
+chosen settings always take effect; the batched laws' rows: :meth:`LimitQPSolver.
+batch_accept`).
 """
 
 from __future__ import annotations
@@ -144,16 +136,11 @@ class LimitQPSolver(Solver):
 
     def solve(self, N: np.ndarray, b: np.ndarray, lam: float, q: np.ndarray, J: np.ndarray,
               pre: LawResult | None) -> Solved:
-        """The QP, or its unconstrained optimum when that satisfies every bound.
-
-        The objective is strictly convex, so when the unconstrained minimiser
-        ``-lambda (L^T L + eps I)^-1 L^T e`` (the classical command for ``eps -> 0``)
-        satisfies every bound it is the QP optimum: it is returned, with the
-        diagnostics of a solve without active constraint, and OSQP is not called.
-        It must clear every bound by twice the tolerance under which the
-        diagnostics call a constraint active (``1e-6 q_dot_max``); otherwise OSQP
-        solves the QP (and its active set is refined exactly, :meth:`LimitQP._refine`).
-        """
+        """The QP, or its unconstrained optimum ``-lambda (L^T L + eps I)^-1 L^T e`` (the
+        objective is strictly convex) when that clears every bound by twice the
+        tolerance under which the diagnostics call a constraint active (``1e-6
+        q_dot_max``); otherwise OSQP solves it (its active set refined exactly,
+        :meth:`LimitQP._refine`)."""
         if pre is not None:
             rank, cond, tau, qdot = pre.rank, pre.condition, pre.tau, pre.qdot
         else:
@@ -174,13 +161,10 @@ class LimitQPSolver(Solver):
             return np.zeros(6), rank, cond, [], status, None
         tau = solved
         qdot = J @ tau
-        active: list[str] = []
-        at_hi = np.flatnonzero(qdot >= hi - tol)
-        at_lo = np.flatnonzero(qdot <= lo + tol)
-        for i in at_hi:
-            active.append(f"leg {int(i)} {'upper stroke' if stroke_hi[i] < vmax else 'speed'}")
-        for i in at_lo:
-            active.append(f"leg {int(i)} {'lower stroke' if stroke_lo[i] > -vmax else 'speed'}")
+        active = [f"leg {int(i)} {'upper stroke' if stroke_hi[i] < vmax else 'speed'}"
+                  for i in np.flatnonzero(qdot >= hi - tol)]
+        active += [f"leg {int(i)} {'lower stroke' if stroke_lo[i] > -vmax else 'speed'}"
+                   for i in np.flatnonzero(qdot <= lo + tol)]
         if status != "solved":
             active.append(f"OSQP status '{status}'")
         return tau, rank, cond, active, None, None

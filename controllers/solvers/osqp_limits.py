@@ -3,9 +3,7 @@ and its exact active-set refinement, compiled (``docs/math.md`` section 6).
 
 Speed (the cost of a step is its number of Python and numpy calls): OSQP is set up
 once per reset and each solve only updates the values of ``P``, ``A``, ``q``, ``l``,
-``u``, through OSQP's compiled solver object when it has the expected methods (the
-Python wrapper's bookkeeping, kept for derivatives, costs some 15 microseconds per
-solve); the exact active-set refinement after OSQP is one compiled call
+``u``; the exact active-set refinement after OSQP is one compiled call
 (:func:`refine_kernel`), tested equal to the numpy KKT solve.
 """
 
@@ -46,15 +44,15 @@ class LimitQP:
         eps_abs: OSQP absolute tolerance.
         eps_rel: OSQP relative tolerance.
         max_iter: OSQP iteration budget.
-        active_tolerance: Distance to a bound [m/s] under which a constraint with a
-            multiplier of the right sign is taken as active by the refinement.
     """
 
+    #: Distance to a bound [m/s] under which a constraint with a multiplier of the right
+    #: sign is taken as active by the refinement.
+    active_tolerance = 1e-6
+
     def __init__(self, regularization: float = 1e-12, eps_abs: float = 1e-6,
-                 eps_rel: float = 1e-6, max_iter: int = 4000,
-                 active_tolerance: float = 1e-6) -> None:
+                 eps_rel: float = 1e-6, max_iter: int = 4000) -> None:
         self.regularization = regularization
-        self.active_tolerance = active_tolerance
         self.settings = {"verbose": False, "warm_starting": True, "polishing": False,
                          "eps_abs": eps_abs, "eps_rel": eps_rel, "max_iter": max_iter,
                          "check_termination": 10}
@@ -65,13 +63,8 @@ class LimitQP:
         self._refine_in = np.zeros(REFINE_INPUTS.size)
 
     def reset(self) -> None:
-        """Forget the previous problem and set OSQP up again, on placeholder values.
-
-        The sparsity (upper triangle of ``P``, dense ``A``) is all a setup fixes;
-        every :meth:`solve` then only updates the values (``P``, ``A``, ``q``, ``l``,
-        ``u``) and warm-starts, and a step that needs no QP (see
-        :meth:`~controllers.solvers.limit_qp.LimitQPSolver.solve`) costs nothing here.
-        """
+        """Forget the previous problem and set OSQP up again, on placeholder values (the
+        sparsity, upper triangle of ``P`` and dense ``A``, is all a setup fixes)."""
         self._solver = None
         try:
             self._setup(np.eye(6)[_TRI_ROWS, _TRI_COLS], np.zeros(6), np.eye(6).reshape(-1),
@@ -124,14 +117,12 @@ class LimitQP:
         try:
             if self._solver is None:
                 self._setup(Px, c, Ax, lower, upper)
-                ext = self._ext
+            elif self._ext is None:
+                self._solver.update(q=c, l=lower, u=upper, Px=Px, Ax=Ax)
             else:
-                ext = self._ext
-                if ext is None:
-                    self._solver.update(q=c, l=lower, u=upper, Px=Px, Ax=Ax)
-                else:
-                    ext.update_data_vec(q=c, l=lower, u=upper)
-                    ext.update_data_mat(P_x=Px, P_i=None, A_x=Ax, A_i=None)
+                self._ext.update_data_vec(q=c, l=lower, u=upper)
+                self._ext.update_data_mat(P_x=Px, P_i=None, A_x=Ax, A_i=None)
+            ext = self._ext
             if ext is None:
                 res = self._solver.solve(raise_error=False)
                 info, sol = res.info, res
@@ -154,14 +145,10 @@ class LimitQP:
 
     def _refine(self, P: np.ndarray, c: np.ndarray, J: np.ndarray, lower: np.ndarray,
                 upper: np.ndarray, x: np.ndarray, y: np.ndarray) -> np.ndarray:
-        """Solve the KKT system of the active set OSQP found (what OSQP's polishing does).
-
-        ADMM stops at a tolerance; with the active set fixed, the equality-constrained
-        problem is solved exactly. Without active constraints this is the classical
-        ``-P^-1 c``. The refined point is kept only if it is feasible and its
-        multipliers have the right signs; otherwise OSQP's point is returned. (OSQP's
-        own polisher prints to stdout even with ``verbose=False``.) One call of the
-        compiled :func:`refine_kernel`.
+        """Solve the KKT system of the active set OSQP found, exactly (what OSQP's
+        polisher does, but it prints to stdout even with ``verbose=False``): one call of
+        the compiled :func:`refine_kernel`. The refined point is kept only if it is
+        feasible with multipliers of the right signs; otherwise OSQP's point is returned.
         """
         buf = self._refine_in
         buf[REFINE_INPUTS["P"]] = P.reshape(36)
@@ -184,17 +171,13 @@ REFINE_OUTPUTS = Layout([("x", 6), ("accepted", 1)], "QP refinement output")
 
 
 def _refine_function() -> ca.Function:
-    """:meth:`LimitQP._refine` as one expression.
-
-    Input (103): ``P`` (6 x 6), ``c``, ``J`` (6 x 6, row-major), lower, upper, OSQP's
-    ``x`` and ``y``, the active tolerance. Output (7): the refined ``x`` and 1 when it
-    is accepted (feasible, multipliers of the right signs, finite), else 0.
-
-    With the active rows ``a`` (mask ``m``), the KKT system ``P x + J_a^T nu = -c``,
-    ``J_a x = bound_a`` is solved by its Schur complement: ``S = J P^-1 J^T`` with the
-    inactive rows and columns replaced by the identity and their right-hand side by
-    zero (so their ``nu`` is 0), ``nu = S^-1 (-(bound + J P^-1 c))`` on the active
-    rows, ``x = -P^-1 (c + J^T nu)``.
+    """:meth:`LimitQP._refine` as one expression (:data:`REFINE_INPUTS` ->
+    :data:`REFINE_OUTPUTS`: ``accepted`` is 1 when the refined ``x`` is feasible, with
+    multipliers of the right signs, finite). With the active rows ``a`` (mask ``m``),
+    the KKT system ``P x + J_a^T nu = -c``, ``J_a x = bound_a`` is solved by its Schur
+    complement: ``S = J P^-1 J^T`` with the inactive rows and columns replaced by the
+    identity and their right-hand side by zero (so their ``nu`` is 0), ``nu = S^-1
+    (-(bound + J P^-1 c))`` on the active rows, ``x = -P^-1 (c + J^T nu)``.
     """
     v = ca.SX.sym("v", REFINE_INPUTS.size)
     b = REFINE_INPUTS.split(v)

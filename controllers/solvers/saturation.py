@@ -1,22 +1,13 @@
-"""What a force controller does when its leg forces exceed the drives' limits.
+"""What a computed-torque law commands when a leg's force is over the NOMINAL drives'
+``force_limit`` (option ``saturation``; ``docs/dynamic-world.md``):
 
-The computed-torque laws compute the forces of the designed error dynamics
-(:mod:`controllers.solvers.computed_torque`); a force-mode drive delivers at most its
-``force_limit`` and clips each leg on its own (:mod:`hexapod.dynamics.drive_model`). The
-option ``saturation`` says what the controller commands instead when a leg's force is
-over the NOMINAL limit (``context.geometry.drives.force_limit``):
-
-- ``"clip"`` (default, what the drives do anyway): each leg clipped to ``[-limit, limit]``
-  on its own; the direction of the force vector changes where a leg saturates;
-- ``"scale"``: the whole vector scaled by ``s = min_i limit_i / |f_i|`` so that the most
-  loaded leg is at its limit, the direction of the force vector kept;
-- ``"qp"``: the direction of the task acceleration kept: with ``f_0`` the forces the
-  nominal model needs at zero platform acceleration (gravity, velocity terms, friction)
-  and ``f`` those of the commanded acceleration, the forces ``f_0 + s (f - f_0)`` of the
-  acceleration scaled by ``s``, with ``s`` the solution of the one-variable QP
+- ``"clip"`` (default, what the force-mode drives do anyway): each leg clipped to
+  ``[-limit, limit]`` on its own;
+- ``"scale"``: the whole vector scaled by ``min_i limit_i / |f_i|``, its direction kept;
+- ``"qp"``: the direction of the task acceleration kept: ``f_0 + s (f - f_0)`` with
+  ``f_0`` the nominal forces at zero platform acceleration and ``s`` the solution of
   ``min (1 - s)^2`` subject to ``-limit <= f_0 + s (f - f_0) <= limit``, ``0 <= s <= 1``
-  (closed form: the largest feasible ``s``). When ``f_0`` alone is over a limit (no
-  ``s`` is feasible) the forces are clipped as ``"clip"``.
+  (closed form: the largest feasible ``s``); clipped when ``f_0`` alone is over a limit.
 
 Rows under every limit are returned unchanged (the same numbers, bit for bit).
 """
@@ -56,22 +47,6 @@ def over_limit(forces: np.ndarray, limit: np.ndarray | list[float]) -> bool:
     return any(map(operator.gt, map(abs, forces.tolist()), lim))
 
 
-def clipped(forces: np.ndarray, limit: np.ndarray) -> np.ndarray:
-    """Each leg's force [N] clipped to ``[-limit, limit]`` on its own."""
-    return np.clip(forces, -limit, limit)  # type: ignore[no-any-return]
-
-
-def scaled(forces: np.ndarray, limit: np.ndarray) -> np.ndarray:
-    """The force vector [N] scaled by ``min(1, min_i limit_i / |f_i|)`` (its direction
-    kept)."""
-    f = np.asarray(forces, dtype=float)
-    a = np.abs(f)
-    over = a > limit
-    if not over.any():
-        return f
-    return f * float(np.min(limit[over] / a[over]))  # type: ignore[no-any-return]
-
-
 def acceleration_fraction(forces: np.ndarray, bias: np.ndarray, limit: np.ndarray
                           ) -> float | None:
     """The largest ``s`` in ``[0, 1]`` with ``|bias + s (forces - bias)| <= limit`` on every
@@ -109,15 +84,18 @@ def saturated(strategy: str, forces: np.ndarray, limit: np.ndarray,
     """
     if not over_limit(forces, limit):
         return forces
-    if strategy == "scale":
-        return scaled(forces, limit)
+    if strategy == "scale":  # the most loaded leg at its limit
+        f = np.asarray(forces, dtype=float)
+        a = np.abs(f)
+        over = a > limit
+        return f * float(np.min(limit[over] / a[over]))  # type: ignore[no-any-return]
     if strategy == "qp":
         if bias is None:
             raise ValueError("saturation 'qp': the forces at zero acceleration are needed")
         s = acceleration_fraction(forces, bias, limit)
         if s is not None:
-            return clipped(bias + s * (forces - bias), limit)  # (rounding at the limit)
-    return clipped(forces, limit)
+            forces = bias + s * (forces - bias)  # clipped below: rounding at the limit
+    return np.clip(forces, -limit, limit)  # type: ignore[no-any-return]
 
 
 def zero_acceleration_forces(model: DynamicModel, pose: np.ndarray, q_dot: np.ndarray,
@@ -146,5 +124,5 @@ def zero_acceleration_forces(model: DynamicModel, pose: np.ndarray, q_dot: np.nd
     return f
 
 
-__all__ = ["STRATEGIES", "acceleration_fraction", "checked_strategy", "clipped",
-           "over_limit", "saturated", "scaled", "zero_acceleration_forces"]
+__all__ = ["STRATEGIES", "acceleration_fraction", "checked_strategy", "over_limit",
+           "saturated", "zero_acceleration_forces"]

@@ -344,6 +344,26 @@ def test_bad_input_is_refused_never_a_nan_force(geometry: HexapodGeometry) -> No
     assert cmd.features_used == 11
 
 
+@pytest.mark.slow
+@pytest.mark.parametrize(("name", "ctc"), PAIRS)
+def test_a_failed_nominal_model_falls_back_with_the_reason(geometry: HexapodGeometry,
+                                                            name: str, ctc: str) -> None:
+    """Lengths no pose has (forward kinematics fails): the held law's command, noting
+    ``force-mpc fallback: <reason>``, counted with its reason."""
+    world = CtcWorld.make(geometry)
+    R0, t0, R1, t1 = _goal_away(geometry)
+    robot = DynamicRobots([geometry], R0[None].copy(), t0[None].copy())
+    ctrl = registry.create(name)
+    ctrl.reset(world.context(world.goal(R1, t1)))
+    good = world.observation(robot, 0.0)
+    assert ctrl.step(good).reason is None
+    cmd = ctrl.step(dataclasses.replace(good, lengths=np.array([0.05, 3.0] * 3)))
+    assert cmd.reason is not None and cmd.reason.startswith(f"{ctc}: ")  # the held law's
+    reason = "nominal model failed: forward kinematics"
+    assert any(n.startswith(f"force-mpc fallback: {reason}") for n in cmd.notes), cmd.notes
+    assert ctrl.stats.fallbacks == 1 and next(iter(ctrl.stats.reasons)).startswith(reason)
+
+
 def test_step_before_reset_refuses() -> None:
     cmd = registry.create(NAME).step(Observation(0.0, np.full(6, 0.4), q_dot=np.zeros(6)))
     assert not cmd.ok and "reset" in (cmd.reason or "")
