@@ -47,7 +47,9 @@ def cached_libraries() -> set[str]:
 
 
 def warm_scenario(name: str) -> WarmResult:
-    """Run one trial of :data:`STEPS` periods of every unit of the built-in ``name``.
+    """Run one trial of :data:`STEPS` periods of every unit of the built-in ``name`` (in
+    the dynamic world :data:`hexapod.compiled.LANE_ROWS` trials: the computed-torque
+    batches evaluate by lanes from that many rows, so their lane libraries are built too).
 
     A unit that fails (an emulator-only scenario without its emulator, say) is logged and
     skipped: warming builds kernels, it judges nothing.
@@ -55,9 +57,12 @@ def warm_scenario(name: str) -> WarmResult:
     import controllers  # noqa: F401 - registers the built-ins
     from benchmarks.study.runner import execute, plan
     from benchmarks.study.scenario import load_scenario
+    from hexapod.compiled import LANE_ROWS
 
     start = time.perf_counter()
-    sc = load_scenario(name).with_overrides(1, None, None, STEPS, None)
+    sc = load_scenario(name)
+    trials = LANE_ROWS if sc.world == "dynamic" else 1
+    sc = sc.with_overrides(trials, None, None, STEPS, None)
     units = plan([sc], record_trials=0)
     for unit in units:
         try:
