@@ -46,16 +46,14 @@ import numpy as np
 
 from controllers.base import Command
 from controllers.ctc_law import DAMPING, NATURAL_FREQUENCY_HZ, ComputedTorqueLaw
-from controllers.ctc_rows import newton_calls, rank_condition, refusal, stale
+from controllers.ctc_rows import FK_MAX_CALLS, newton_calls, rank_condition, refusal, stale
 from controllers.joint_ctc_rows import (
     DESIRED,
     FACTOR,
-    FK_MAX_CALLS,
     FORCES,
     GRID_TIME_TOLERANCE,
     POSE_IN,
     POSE_OUT,
-    QUINTIC_PEAK_SPEED,
     QUINTIC_SIZE,
     RESIDUAL,
     STATUS,
@@ -66,7 +64,7 @@ from controllers.joint_ctc_rows import (
 from controllers.law_tools import goal_lengths
 from controllers.solvers import compiled_ctc
 from controllers.solvers.saturation import over_limit, zero_acceleration_forces
-from controllers.task_ctc import encoder_readings, finite_readings
+from controllers.task_ctc_inputs import QUINTIC_PEAK_SPEED, encoder_readings, finite_readings
 from hexapod.actuation import Actuation
 from hexapod.compiled import BoundCall
 from hexapod.dynamics import DynamicModel
@@ -146,22 +144,6 @@ class ComputedTorqueController(ComputedTorqueLaw):
         """Commands given by the compiled step (diagnostics)."""
         return int(self._steps[0])
 
-    @property
-    def _pose(self) -> tuple[np.ndarray, np.ndarray]:
-        """The pose guess ``(R, t)`` of the next step (copies of the input row's)."""
-        assert self._bound is not None
-        row = self._bound.x[POSE_IN]
-        return row[0:9].reshape(3, 3).T.copy(), row[9:12].copy()
-
-    @_pose.setter
-    def _pose(self, pose: tuple[np.ndarray, np.ndarray] | None) -> None:
-        """Set the next step's pose guess (None: the nominal home pose)."""
-        assert self._bound is not None and self._ctx is not None
-        R0, p0 = home_pose(self._ctx.geometry) if pose is None else pose
-        row = self._bound.x[POSE_IN]
-        row[0:9] = np.asarray(R0).T.ravel()
-        row[9:12] = p0
-
     def __getstate__(self) -> dict[str, object]:
         """Picklable: the compiled step's binding (ctypes) and the batch's arrays are
         left out, the input row kept and bound again on unpickling."""
@@ -195,11 +177,6 @@ class ComputedTorqueController(ComputedTorqueLaw):
         """The compiled step's input row (n_in,) (the bound one, written in place)."""
         assert self._bound is not None
         return self._bound.x
-
-    @property
-    def force_limit(self) -> np.ndarray:
-        """(6,) the nominal drives' force limits [N] (inf before a reset)."""
-        return self._limit
 
     def batch_state(self) -> JointState:
         """This trial's state for its batch (:class:`~controllers.joint_ctc_rows.
@@ -235,7 +212,8 @@ class ComputedTorqueController(ComputedTorqueLaw):
         row["viscous"][:] = d.viscous
         row["coulomb"][:] = d.coulomb
         row["gains"][:] = (self.kp, self.kd)
-        self._pose = None
+        R0, p0 = home_pose(g)  # the pose guess before a pose is found
+        row["pose"][:] = np.concatenate([np.asarray(R0).T.ravel(), p0])
         self._grid = np.zeros((0, 18))
         self._dt = float(context.dt)
         if context.reference is None:

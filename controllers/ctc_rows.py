@@ -17,33 +17,17 @@ numbers).
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
 from typing import Any
 
 import numpy as np
 from scipy.linalg.lapack import dsyevd as _eigenvalues
 
 from controllers.ctc_status import Status, status_reason
-from controllers.data import ObservationBatch
 from hexapod.compiled import BoundCall, CompilationError, CompiledFunction
 
-
-def finite_readings_rows(observations: ObservationBatch, instances: Sequence[Any]
-                         ) -> tuple[np.ndarray, np.ndarray, np.ndarray,
-                                    list[tuple[int, Any]]] | None:
-    """The times (n,) [s], lengths and leg velocities (n, 6) [m, m/s] of a batch, and the
-    rows whose readings are all finite with their trial's instance (of ``instances``);
-    None without leg velocities."""
-    if observations.q_dot is None:
-        return None
-    t = np.asarray(observations.t, dtype=float)
-    q = np.asarray(observations.lengths, dtype=float)
-    qd = np.asarray(observations.q_dot, dtype=float)
-    finite = np.isfinite(t) & np.isfinite(q).all(axis=1) & np.isfinite(qd).all(axis=1)
-    trials = np.asarray(observations.trials, dtype=int)
-    rows = np.flatnonzero(finite).tolist()
-    return t, q, qd, [(k, instances[j]) for k, j in zip(rows, trials[rows].tolist(),
-                                                          strict=True)]
+#: Calls of a compiled step (its Newton iterations each) before the step is refused (as
+#: the 50 iterations of :func:`hexapod.fk.forward_kinematics`).
+FK_MAX_CALLS = 16
 
 
 def evaluate_rows(function: CompiledFunction, X: np.ndarray, pose_in: slice, pose_out: slice,
@@ -208,5 +192,5 @@ def stale(rows: Any, laws: list[Any]) -> bool:
     return rows is None or getattr(rows, "laws", None) is not laws
 
 
-__all__ = ["accepted_rows", "clear_rank", "evaluate_rows", "finite_readings_rows",
-           "newton_calls", "norms", "over_limits", "rank_condition", "refusal", "stale"]
+__all__ = ["FK_MAX_CALLS", "accepted_rows", "clear_rank", "evaluate_rows", "newton_calls",
+           "norms", "over_limits", "rank_condition", "refusal", "stale"]

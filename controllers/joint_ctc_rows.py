@@ -25,7 +25,7 @@ from typing import TYPE_CHECKING, NamedTuple
 
 import numpy as np
 
-from controllers.ctc_rows import accepted_rows, evaluate_rows, norms, over_limits
+from controllers.ctc_rows import FK_MAX_CALLS, accepted_rows, evaluate_rows, norms, over_limits
 from controllers.data import CommandBatch, ObservationBatch
 from controllers.solvers import compiled_ctc
 from hexapod.compiled import CompiledFunction
@@ -35,11 +35,6 @@ if TYPE_CHECKING:
 
 #: How far from ``k dt`` an observation's time may be to use the reference's grid [s].
 GRID_TIME_TOLERANCE = 1e-9
-#: Calls of the compiled step (``compiled_ctc.FK_CALLS`` x 3 Newton iterations each)
-#: before the step is refused (as the 50 iterations of :func:`hexapod.fk.forward_kinematics`).
-FK_MAX_CALLS = 16
-#: Peak of the quintic's speed over its mean speed.
-QUINTIC_PEAK_SPEED = 15.0 / 8.0
 #: Where the compiled step's blocks lie in its rows (:data:`compiled_ctc.INPUTS`,
 #: :data:`compiled_ctc.OUTPUTS`), looked up once.
 DESIRED, POSE_IN = compiled_ctc.INPUTS["desired"], compiled_ctc.INPUTS["pose"]
@@ -299,6 +294,5 @@ class JointRows:
         return np.flatnonzero(slow)
 
 
-__all__ = ["FK_MAX_CALLS", "GRID_TIME_TOLERANCE", "QUINTIC_PEAK_SPEED", "QUINTIC_SIZE",
-           "JointRows", "JointState", "quintic_row_into", "quintic_rows",
-           "quintic_timing"]
+__all__ = ["GRID_TIME_TOLERANCE", "QUINTIC_SIZE", "JointRows", "JointState", "quintic_row_into",
+           "quintic_rows", "quintic_timing"]

@@ -37,7 +37,7 @@ from numpy.typing import ArrayLike
 from scipy.linalg.lapack import dsyevd as _eigenvalues
 
 from controllers.base import Command, Observation
-from controllers.ctc_rows import newton_calls, refusal
+from controllers.ctc_rows import FK_MAX_CALLS, newton_calls, refusal
 from controllers.solvers.compiled_task_ctc import FIT_TOLERANCE, FK_TOLERANCE, task_step
 from hexapod.actuation import Actuation
 from hexapod.compiled import BoundCall, CompiledFunction
@@ -46,10 +46,6 @@ from hexapod.workspace import home_pose
 
 if TYPE_CHECKING:
     from controllers.task_ctc import TaskComputedTorque
-
-#: Calls of the compiled step (3 Newton iterations each) before the step is refused (as
-#: the 50 iterations of :func:`hexapod.fk.forward_kinematics`).
-FK_MAX_CALLS = 16
 
 
 class CompiledTaskStep:

@@ -29,16 +29,13 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from controllers.ctc_rows import accepted_rows, evaluate_rows, norms, over_limits
+from controllers.ctc_rows import FK_MAX_CALLS, accepted_rows, evaluate_rows, norms, over_limits
 from controllers.data import CommandBatch, ObservationBatch
 
 if TYPE_CHECKING:
     from controllers.task_ctc import TaskComputedTorque
     from controllers.task_ctc_compiled import CompiledTaskStep
 
-#: Calls of the compiled step (3 Newton iterations each) before the step is refused (as
-#: the 50 iterations of :func:`hexapod.fk.forward_kinematics`).
-FK_MAX_CALLS = 16
 #: The columns of a trial's reference clock (3,): started (1.0 or 0.0), the observation
 #: time at which the reference's clock is 0 [s], and the reference's version (counts
 #: its changes: a grid built for an older version is built again).
@@ -253,4 +250,4 @@ class TaskRows:
         self.integral[ta[go]] += step
 
 
-__all__ = ["FK_MAX_CALLS", "START", "STARTED", "VERSION", "TaskRows", "grid_steps"]
+__all__ = ["START", "STARTED", "VERSION", "TaskRows", "grid_steps"]
