@@ -73,6 +73,9 @@ class FeatureCTC(TaskComputedTorque):
     #: The built-in feature object (its goal field holds the taught features; the
     #: reference and the task are its own).
     observed_feature: BuiltinFeature = EDGE_NORMALS
+    #: The mask of every task row (read only): :meth:`features_seen` gives this very
+    #: array when every leg is seen.
+    every_rows: np.ndarray = _EVERY_EDGE
 
     def prepare(self, context: ControllerContext) -> None:
         """Check the estimated camera pose and base points.
@@ -239,7 +242,7 @@ class FeatureCTC(TaskComputedTorque):
         else:
             ref, known = self.compiled_reference(tr)
         every: np.ndarray | None = None
-        if known is None and (rows is _EVERY_EDGE or rows is _EVERY_LEG):
+        if known is None and rows is self.every_rows:
             row[inputs["mask"]] = 1.0
         else:
             if known is not None:  # a feature the model's camera does not see leaves its rows
@@ -381,22 +384,23 @@ class LegDirectionCTC(FeatureCTC):
     features = frozenset({"lengths", LEG_DIRECTIONS.field})
     observed_feature = LEG_DIRECTIONS
     compiled_kind: BuiltinFeature | None = LEG_DIRECTIONS
+    every_rows = _EVERY_LEG
 
     def features_seen(self, observation: Observation
                       ) -> tuple[np.ndarray, np.ndarray | None, np.ndarray] | str:
         u, legs = directions_seen(observation.directions, observation.normals,
                                   observation.direction_visible, observation.edge_visible)
         if legs.all():
-            return u, None, _EVERY_LEG
+            return u, None, self.every_rows
         u = np.where(legs[:, None], u, _DUMMY)
-        return u, None, np.repeat(legs, 3)
+        return u, None, np.repeat(legs, self.every_rows.size // 6)
 
     def compiled_features(self, observation: Observation
                           ) -> tuple[np.ndarray, np.ndarray | None, np.ndarray] | str:
         """Every direction given and seen: them (:meth:`features_seen`'s result without
         its general checks); else :meth:`features_seen`."""
         u = every_seen(observation.directions, observation.direction_visible)
-        return self.features_seen(observation) if u is None else (u, None, _EVERY_LEG)
+        return self.features_seen(observation) if u is None else (u, None, self.every_rows)
 
     def batch_features(self, step: CompiledTaskStep, X: np.ndarray,
                        observations: ObservationBatch, rows: np.ndarray) -> np.ndarray:
