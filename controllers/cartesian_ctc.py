@@ -21,12 +21,8 @@ from scipy.linalg.lapack import dgesdd as _svd
 
 from controllers.base import ControllerContext, Goal, Observation, ObservationBatch
 from controllers.ctc_status import Status, status_reason
-from controllers.task_ctc import (
-    CompiledTaskStep,
-    TaskComputedTorque,
-    camera_and_base_points,
-    goal_pose_of,
-)
+from controllers.task_ctc import CompiledTaskStep, TaskComputedTorque
+from controllers.task_ctc_inputs import camera_and_base_points, goal_pose_of
 from controllers.task_ctc_rows import TaskRows
 from controllers.tasks.platform_pose import PLATFORM_POSE
 from hexapod.kinematics import Transform

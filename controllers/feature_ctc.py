@@ -36,10 +36,9 @@ from controllers.solvers.reference_motion import feature_motion, layouts
 from controllers.task_ctc import (
     CompiledTaskStep,
     TaskComputedTorque,
-    camera_and_base_points,
-    goal_pose_of,
     grid_step,
 )
+from controllers.task_ctc_inputs import camera_and_base_points, goal_pose_of
 from controllers.task_ctc_rows import TaskRows
 from controllers.tasks import Task
 from controllers.tasks.feature_kind import BuiltinFeature

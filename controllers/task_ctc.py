@@ -21,12 +21,13 @@ a quintic timing, slow enough that no leg's nominal speed exceeds the speed limi
 (``smooth_goal``; off: the goal is a step, the error's free response).
 
 The checked readings, goal pose, camera and base points, and that line are
-:mod:`controllers.task_ctc_inputs`' (re-exported here).
+:mod:`controllers.task_ctc_inputs`'.
 """
 
 from __future__ import annotations
 
 from abc import abstractmethod
+from dataclasses import replace
 from typing import Any
 
 import numpy as np
@@ -45,13 +46,8 @@ from controllers.ctc_law import ComputedTorqueLaw
 from controllers.ctc_rows import stale
 from controllers.solvers.saturation import over_limit, zero_acceleration_forces
 from controllers.task_ctc_compiled import CompiledTaskStep
-from controllers.task_ctc_inputs import QUINTIC_PEAK_ACCELERATION as QUINTIC_PEAK_ACCELERATION
-from controllers.task_ctc_inputs import QUINTIC_PEAK_SPEED as QUINTIC_PEAK_SPEED
-from controllers.task_ctc_inputs import camera_and_base_points as camera_and_base_points
 from controllers.task_ctc_inputs import encoder_readings as encoder_readings
-from controllers.task_ctc_inputs import finite_readings as finite_readings
-from controllers.task_ctc_inputs import goal_pose_of as goal_pose_of
-from controllers.task_ctc_inputs import line_to as line_to
+from controllers.task_ctc_inputs import finite_readings, line_to
 from controllers.task_ctc_rows import START, STARTED, VERSION, TaskRows
 from controllers.tasks.feature_kind import BuiltinFeature
 from hexapod.actuation import Actuation
@@ -81,10 +77,10 @@ class TaskComputedTorque(ComputedTorqueLaw):
         self.force_limit_list = self.force_limit.tolist()
         self.context: ControllerContext | None = None
         self.model: DynamicModel | None = None
-        #: The reference clock (:mod:`controllers.task_ctc_rows`: started, the time at
-        #: which the reference's clock is 0 [s], the reference's version), its own or a
-        #: view of its batch's.
-        self._clock = np.zeros(3)
+        #: (3,) the reference clock (:mod:`controllers.task_ctc_rows`: started, the time
+        #: at which the reference's clock is 0 [s], the reference's version), its own or
+        #: a view of its batch's.
+        self.clock = np.zeros(3)
         self._reference: Any = None  # anything with at(times) and duration, base frame
         self._pose_grid: tuple[Any, np.ndarray] | None = None
         #: The compiled step (None: not reset).
@@ -102,7 +98,7 @@ class TaskComputedTorque(ComputedTorqueLaw):
         self.context = context
         self.model = DynamicModel(context.geometry)
         self._rows = None
-        self._clock = np.zeros(3)
+        self.clock = np.zeros(3)
         self.compiled = None
         self.integral = np.zeros(0)
         self.force_limit = np.asarray(context.geometry.drives.force_limit, dtype=float)
@@ -116,7 +112,7 @@ class TaskComputedTorque(ComputedTorqueLaw):
         """Picklable: the batch's arrays are left out (its own clock kept)."""
         state = self.__dict__.copy()
         state["_rows"] = None
-        state["_clock"] = np.array(self._clock)
+        state["clock"] = np.array(self.clock)
         return state
 
     @property
@@ -133,16 +129,7 @@ class TaskComputedTorque(ComputedTorqueLaw):
     def reference_changed(self) -> None:
         """Count a change of what the reference grid is built from (a batch builds its
         grid again)."""
-        self._clock[VERSION] += 1.0
-
-    @property
-    def clock(self) -> np.ndarray:
-        """(3,) the reference clock (:mod:`controllers.task_ctc_rows`)."""
-        return self._clock
-
-    def adopt_clock(self, clock: np.ndarray) -> None:
-        """Take a view of the batch's clocks (3,) as this trial's (its values there)."""
-        self._clock = clock
+        self.clock[VERSION] += 1.0
 
     @property
     def guess(self) -> tuple[np.ndarray, np.ndarray] | None:
@@ -163,18 +150,12 @@ class TaskComputedTorque(ComputedTorqueLaw):
     def started(self) -> bool:
         """Whether the law follows its reference (a fixed goal's line starts at the
         first step)."""
-        return bool(self._clock[STARTED])
-
-    @property
-    def control_period(self) -> float:
-        """The control period ``dt`` [s] of the trial (the step of the reference's grid)."""
-        assert self.context is not None
-        return float(self.context.dt)
+        return bool(self.clock[STARTED])
 
     @property
     def reference_start(self) -> float:
         """The observation time [s] at which the reference's clock is 0."""
-        return float(self._clock[START])
+        return float(self.clock[START])
 
     def prepare(self, context: ControllerContext) -> None:
         """Per-trial checks and constants of a subclass (nothing by default)."""
@@ -223,12 +204,12 @@ class TaskComputedTorque(ComputedTorqueLaw):
             return
         if ctx.reference is not None:
             self.reference = ctx.reference
-            self._clock[STARTED], self._clock[START] = 1.0, 0.0
+            self.clock[STARTED], self.clock[START] = 1.0, 0.0
             return
-        self.context = ctx = ctx if ctx.goal is goal else _with_goal(ctx, goal)
+        self.context = ctx = ctx if ctx.goal is goal else replace(ctx, goal=goal)
         self.take_goal(goal)
         self.reference = None
-        self._clock[STARTED] = 0.0
+        self.clock[STARTED] = 0.0
 
     def take_goal(self, goal: Goal) -> None:
         """Read what the law regulates to from a fixed goal (raises ContextError)."""
@@ -365,7 +346,7 @@ class TaskComputedTorque(ComputedTorqueLaw):
                 return found
             assert self.guess is not None  # the pose of the accepted step
             self.reference = line_to(self.context, *self.guess, *self.goal_pose())
-        self._clock[STARTED], self._clock[START] = 1.0, t
+        self.clock[STARTED], self.clock[START] = 1.0, t
         return None
 
     def refuse(self, problem: str, error: np.ndarray | None = None) -> Command:
@@ -380,8 +361,3 @@ def grid_step(tr: float, dt: float) -> int:
     k = round(tr / dt)
     return k if abs(tr - k * dt) < 1e-9 and k >= 0 else -1
 
-
-def _with_goal(context: ControllerContext, goal: Goal) -> ControllerContext:
-    from dataclasses import replace
-
-    return replace(context, goal=goal)

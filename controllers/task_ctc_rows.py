@@ -73,14 +73,14 @@ class TaskRows:
         self.steps = np.zeros(n, dtype=np.int64)
         self.clock = np.stack([law.clock for law in laws])
         self.limit = np.stack([law.force_limit for law in laws])
-        self.dt = np.array([law.control_period if law.context is not None else 1.0
+        self.dt = np.array([float(law.context.dt) if law.context is not None else 1.0
                             for law in laws])
         #: Rows without integral action, and each trial's ``int e dt`` of its task rows.
         self.plain = np.array([not law.integral_gain for law in laws], dtype=bool)
         size = 0 if self.step_of is None else self.step_of.views["integral"].size
         self.integral = np.zeros((n, size))
         for k, law in enumerate(laws):
-            law.adopt_clock(self.clock[k])
+            law.clock = self.clock[k]
             step = law.compiled
             if step is None or not self.usable[k]:
                 continue

@@ -30,13 +30,9 @@ from controllers import registry
 from controllers.base import Command, Observation
 from controllers.cartesian_ctc import _every_direction, all_seen, directions_seen
 from controllers.solvers.compiled_task_ctc import layout, task_step
-from controllers.task_ctc import (
-    TaskComputedTorque,
-    encoder_readings,
-    finite_readings,
-    grid_step,
-)
+from controllers.task_ctc import TaskComputedTorque, grid_step
 from controllers.task_ctc_compiled import FIT_TOLERANCE, FK_MAX_CALLS, FK_TOLERANCE
+from controllers.task_ctc_inputs import encoder_readings, finite_readings
 from controllers.task_ctc_rows import grid_steps
 from hexapod import deltalab, sample_poses
 from hexapod.dynamics import DynamicModel
