@@ -65,12 +65,8 @@ class CartesianCTC(TaskComputedTorque):
     def compiled_inputs(self, step: CompiledTaskStep, observation: Observation, tr: float,
                         q: np.ndarray) -> tuple[np.ndarray | None, str | None] | str:
         """The reference (the pose comes from the encoders in the compiled step)."""
-        self.reference_input(step, tr)
-        return None, None
-
-    def reference_input(self, step: CompiledTaskStep, tr: float) -> None:
-        """The reference row at ``tr`` (the fixed goal at rest without a reference)."""
         step.set("reference", self.reference_row(tr))
+        return None, None
 
     def reference_row(self, tr: float) -> np.ndarray:
         """(24,) the reference at ``tr`` [s] as the compiled step takes it: ``R*``
@@ -241,7 +237,7 @@ class VisionCTC(CartesianCTC):
                 u = np.where(seen[:, None], u, 0.0)  # a hidden leg's stand-in (not read)
                 note = f"pose from legs {legs}"
         step.row[step.inputs["directions"]] = u.ravel()
-        self.reference_input(step, tr)
+        step.set("reference", self.reference_row(tr))
         return None, note
 
     def collinear(self, seen: np.ndarray) -> bool:

@@ -167,7 +167,7 @@ class FeatureCTC(TaskComputedTorque):
 
     def feature_rows(self, times: np.ndarray) -> np.ndarray:
         """(m, 3, n) rows of :meth:`feature_reference` at ``times`` (m,) [s]; NaN where
-        the model's camera does not see the feature (:meth:`_anchored`)."""
+        the model's camera does not see the feature (:meth:`_anchored_and_end`)."""
         ctx = self.context
         assert ctx is not None and self.reference is not None
         feature = self.observed_feature
@@ -198,11 +198,6 @@ class FeatureCTC(TaskComputedTorque):
         i = self._grid_index(tr)
         if i is None:
             return _sanitised(self.feature_rows(np.array([tr]))[0])
-        return self._grid_row(i)
-
-    def _grid_row(self, i: int) -> tuple[np.ndarray, np.ndarray | None]:
-        """:meth:`compiled_reference` at grid step ``i``: the sanitised row and the rows
-        known (None: all)."""
         assert self._grid is not None
         return self._grid[2][i], None if self._grid[4][i] else self._grid[3][i]
 
@@ -286,14 +281,10 @@ class FeatureCTC(TaskComputedTorque):
         as :meth:`compiled_inputs`); their (m,) mask (none by default)."""
         return np.zeros(len(rows), dtype=bool)
 
-    def _anchored(self, times: np.ndarray) -> np.ndarray:
-        """(m, ...) the nominal features of the reference at ``times``, anchored at the
-        taught goal."""
-        return self._anchored_and_end(times)[0]
-
     def _anchored_and_end(self, times: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """:meth:`_anchored` at ``times`` and the model's features at the reference's end
-        (a second past its duration), from one call of the model (its field only)."""
+        """(m, ...) the nominal features of the reference at ``times``, anchored at the
+        taught goal, and the model's features at the reference's end (a second past its
+        duration), from one call of the model (its field only)."""
         ctx = self.context
         assert ctx is not None and self.reference is not None
         end = float(self.reference.duration) + 1.0

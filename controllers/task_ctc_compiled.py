@@ -69,7 +69,7 @@ class CompiledTaskStep:
             ``compiled_fk``); else by the rigid fit (its tolerance).
     """
 
-    #: The input row, its guess flag (1,) and its command count (1,) (:meth:`_bind`).
+    #: The input row, its guess flag (1,) and its command count (1,) (:meth:`adopt`).
     row: np.ndarray
     guessed: np.ndarray
     steps: np.ndarray
@@ -83,7 +83,7 @@ class CompiledTaskStep:
         self.fk: bool = law.compiled_fk if fk is None else bool(fk)
         self.function = self.make_function()
         self.inputs, self.outputs = self.function.inputs, self.function.outputs
-        self._bind(np.zeros(self.function.n_in), np.zeros(1), np.zeros(1, dtype=np.int64))
+        self.adopt(np.zeros(self.function.n_in), np.zeros(1), np.zeros(1, dtype=np.int64))
         g = law.context.geometry
         d = g.drives
         self.set("points", (g.base_points, g.platform_points))
@@ -98,11 +98,9 @@ class CompiledTaskStep:
         self._residual = out.index("fk_residual")
         self._status = out.index("status")
         self._factor = out["factor"]
-        self._error = out["error"]
         self._forces = out["forces"]
-        self._pose = out["pose"]
         #: The output blocks of the pose and of the task error.
-        self.pose_block, self.error_block = self._pose, self._error
+        self.pose_block, self.error_block = out["pose"], out["error"]
         #: Pose residual below which the pose has converged.
         self.tolerance = FK_TOLERANCE if self.fk else FIT_TOLERANCE
         #: What finds the pose (a refusal names it).
@@ -115,10 +113,11 @@ class CompiledTaskStep:
         function of the same blocks; called again on unpickling)."""
         return task_step(self.kind, self.fk, INVERSE_TOLERANCE)
 
-    def _bind(self, row: np.ndarray, guessed: np.ndarray, steps: np.ndarray) -> None:
+    def adopt(self, row: np.ndarray, guessed: np.ndarray, steps: np.ndarray) -> None:
         """Bind the compiled function to the input row ``row`` (n_in,) (used in place:
-        its own, or a row of its batch's matrix), with the flag whether its pose block
-        holds a pose found (1,) and the count of commands (1,) (own or the batch's)."""
+        its own, or a row of its batch's matrix, its values there already), with the
+        flag whether its pose block holds a pose found (1,) and the count of commands
+        (1,) (own or the batch's)."""
         self.bound: BoundCall = self.function.bind(row)
         #: The input row (the bound one: written in place, evaluated without a copy).
         self.row = self.bound.x
@@ -130,11 +129,6 @@ class CompiledTaskStep:
         self.steps = steps
         #: The task rows the last prepared step uses (None: all).
         self.used: np.ndarray | None = None
-
-    def adopt(self, row: np.ndarray, guessed: np.ndarray, steps: np.ndarray) -> None:
-        """Take views of a batch's arrays as the step's input row (n_in,), its guess flag
-        (1,) and its command count (1,) (their values copied there already)."""
-        self._bind(row, guessed, steps)
 
     def __getstate__(self) -> dict[str, object]:
         """Picklable: the compiled function and its binding (ctypes) are left out, the
@@ -150,7 +144,7 @@ class CompiledTaskStep:
         assert isinstance(arrays, tuple)
         self.__dict__.update(state)
         self.function = self.make_function()
-        self._bind(*arrays)
+        self.adopt(*arrays)
 
     @property
     def guess(self) -> tuple[np.ndarray, np.ndarray] | None:
@@ -197,7 +191,7 @@ class CompiledTaskStep:
             return prepared
         rows, note = prepared
         pose_in, y = self.views["pose"], self.bound.y
-        guess = newton_calls(self.bound, pose_in, self._pose, self._residual,
+        guess = newton_calls(self.bound, pose_in, self.pose_block, self._residual,
                              self.tolerance, FK_MAX_CALLS)
         accepted = self.accept(law, y, rows)
         if accepted is None:
@@ -248,9 +242,9 @@ class CompiledTaskStep:
              ) -> np.ndarray:
         """The task error (of the rows used) of an accepted output row ``y``, its pose
         taken as the next guess."""
-        self.views["pose"][:] = y[self._pose]
+        self.views["pose"][:] = y[self.pose_block]
         self.guessed[0] = 1.0
-        e = y[self._error]
+        e = y[self.error_block]
         return e.copy() if rows is None else e[rows]  # type: ignore[no-any-return]
 
 
