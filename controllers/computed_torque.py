@@ -1,40 +1,28 @@
 """Joint-space computed torque on the encoder lengths (the industrial baseline).
 
-A force controller (:attr:`Actuation.FORCE`): it needs a dynamic world with force-mode
-drives and the measured leg velocities ``q_dot`` (``Observation.q_dot``). Its model is the
-controller context's NOMINAL geometry, inertia and drives, never the world's truth:
+A force controller (:attr:`Actuation.FORCE`) for the dynamic world (it needs the measured
+leg velocities ``Observation.q_dot``). Its model is the context's NOMINAL geometry,
+inertia and drives, never the world's truth:
 
-- reference ``q*(t)``, ``q_dot*(t)``, ``q_ddot*(t)``: the nominal inverse kinematics of the
-  trajectory's pose (``context.reference``), ``q_dot* = K x_dot*`` and
-  ``q_ddot* = K x_ddot* + K_dot x_dot*``; a fixed goal (``goal.lengths``) is reached along
-  a quintic in leg space from the lengths measured at the first step, timed so that no
-  leg's reference speed exceeds the nominal speed limit (a step on the full distance would
-  saturate the drives and overshoot into the end stops);
-- pose ``(R, t)``: the nominal forward kinematics of the encoder lengths, twist
-  ``x_dot = K^-1 q_dot``;
-- the joint-length task ``e = q - q*`` with ``L = K`` and ``L_dot tau = K_dot x_dot``,
-  solved by :class:`~controllers.solvers.computed_torque.ComputedTorqueSolver`: desired
-  leg acceleration ``a = q_ddot* + Kd (q_dot* - q_dot) + Kp (q* - q)`` with
-  ``Kp = omega_n^2``, ``Kd = 2 zeta omega_n`` (the leg error obeys
-  ``e_ddot + 2 zeta omega_n e_dot + omega_n^2 e = 0`` when the model is exact),
-  platform acceleration ``x_ddot = K^-1 (a - K_dot x_dot)`` and the mechanism's forces
-  ``DynamicModel.inverse(R, t, x_dot, x_ddot)``, plus the nominal drives' reflected rotor
-  inertia ``m_r a`` and friction ``c q_dot + f_c tanh(q_dot* / v_s)``.
+- reference ``q*``, ``q_dot* = K x_dot*``, ``q_ddot* = K x_ddot* + K_dot x_dot*``: the
+  nominal inverse kinematics of ``context.reference``; a fixed goal (``goal.lengths``) is
+  reached along a leg-space quintic from the lengths measured at the first step, timed so
+  that no leg's reference speed exceeds the nominal speed limit;
+- pose: the nominal forward kinematics of the encoder lengths, twist ``x_dot = K^-1 q_dot``;
+- desired leg acceleration ``a = q_ddot* + Kd (q_dot* - q_dot) + Kp (q* - q)`` with
+  ``Kp = omega_n^2``, ``Kd = 2 zeta omega_n`` (the leg error obeys ``e_ddot + 2 zeta
+  omega_n e_dot + omega_n^2 e = 0`` when the model is exact), ``x_ddot = K^-1 (a - K_dot
+  x_dot)`` and the forces ``DynamicModel.inverse(R, t, x_dot, x_ddot)`` plus the drives'
+  ``m_r a + c q_dot + f_c tanh(q_dot* / v_s)``.
 
-The force is held over the control period: the design is continuous, so ``omega_n dt``
-must stay small. The default ``omega_n = 2 pi * 2 Hz`` with ``zeta = 1`` gives
-``omega_n dt = 0.25`` at the 20 ms period.
+The force is held over the control period, so ``omega_n dt`` must stay small (the
+default ``omega_n = 2 pi * 2 Hz``, ``zeta = 1``: 0.25 at 20 ms). Options: integral action
+``integral_gain`` ``Ki`` [1/s] (``a = ... + Kp (e + Ki int e dt)``, held while a leg's
+force is over its limit; stable for ``Ki < 2 zeta omega_n``) and ``saturation`` over the
+limit (:mod:`controllers.solvers.saturation`: ``"clip"``, ``"scale"`` or ``"qp"``).
 
-Options beyond the gains: integral action ``integral_gain`` ``Ki`` [1/s] (default 0:
-none), ``a = ... + Kp (e + Ki int e dt)`` with ``e = q* - q``, the integral held while a
-leg's force is over the nominal drive's limit (anti-windup; with an exact model the
-error obeys ``e_ddd + Kd e_dd + Kp e_d + Kp Ki e = 0``, stable for
-``Ki < Kd = 2 zeta omega_n``); and what is commanded over that limit, ``saturation``
-(:mod:`controllers.solvers.saturation`: ``"clip"`` per leg, the default and what the
-drives do, ``"scale"`` or ``"qp"``).
-
-One step over a batch (:meth:`ComputedTorqueController.step_arrays`): the rows through the
-compiled step in one C call (:mod:`controllers.ctc_rows`).
+The step is one compiled function (:mod:`controllers.solvers.compiled_ctc`); a batch's
+rows go through it in one C call (:mod:`controllers.joint_ctc_rows`).
 """
 
 from __future__ import annotations

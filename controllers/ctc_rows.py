@@ -1,17 +1,11 @@
-"""The compiled computed-torque steps over the rows of a batch: one C call for every row
-(:meth:`hexapod.compiled.CompiledFunction.batch`; from eight rows its lane-parallel C,
-four rows per vector instruction, the same bits), the forward kinematics' (or the
-rigid fit's) further Newton calls for the rows that have not converged, and each row's
-acceptance test (converged, inverse solve solved, every value finite, full rank).
+"""The compiled computed-torque steps over the rows of a batch.
 
-The computed-torque family (``computed-torque``, ``cartesian-ctc``, ``vision-ctc``,
-``leg-edge-ctc``, ``leg-direction-ctc``) keeps one state per trial (the pose guess, the
-reference's start); each trial's instance writes its row (:meth:`prepare_row` of the
-laws), :func:`evaluate_rows` evaluates the rows together, and the instance takes its
-result (:meth:`finish_row`). A row whose result is not accepted (its ``status``,
-:mod:`controllers.ctc_status`, or the rank test) is left to its trial's own step, which
-refuses it with the reason (the same compiled function on the same row: the same
-numbers).
+:func:`evaluate_rows` evaluates every row in one C call (from eight rows by lanes, the
+same bits) and calls again the rows whose pose has not converged; :func:`accepted_rows`
+is each row's acceptance test (status 0 and full rank). The per-trial steps use
+:func:`newton_calls`, :func:`rank_condition` and :func:`refusal` on their own row (the
+same compiled function on the same row: the same numbers); a row not accepted is left to
+its trial's own step, which refuses it with the reason.
 """
 
 from __future__ import annotations

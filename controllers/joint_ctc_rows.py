@@ -1,22 +1,16 @@
 """The batch of the joint-space computed torque (``computed-torque``) as arrays.
 
-The batch owns its trials' state (:class:`JointRows`, built from the trials' instances at
-the first batched step after a reset): the compiled step's input matrix ``X`` (n, n_in)
-with every row's constant blocks written once at reset and its pose guess, the leg
-integrals (n, 6), the fixed goals' quintics (n, 21), the command counts, the force limits
-(n, 6) and the reference's legs on the control grid, stacked (n, S, 18) or one grid
-shared when they are equal. Each instance's own rows are views of these arrays (its
-bound input row a row of ``X``), so its per-trial step
-(:meth:`~controllers.computed_torque.ComputedTorqueController.step_trial`, which refuses
-with the reason) and the batch read and write the same state.
+:class:`JointRows` (built at the first batched step after a reset) owns its trials'
+state: the input matrix ``X`` (n, n_in) with each row's constants and pose guess, the
+leg integrals, the fixed goals' quintics, the command counts, the force limits and the
+reference's legs on the control grid (one grid when they are equal). Each instance's
+state is views of these arrays, so its per-trial step (which refuses with the reason)
+and the batch share it.
 
-One batched step (:meth:`JointRows.step`): the readings and the desired legs are written
-into the rows by fancy indexing, the compiled step evaluates every row in one C call
-(:func:`~controllers.ctc_rows.evaluate_rows`), the rows are screened at once
-(:func:`~controllers.ctc_rows.accepted_rows`), and the forces, error norms, integrals and
-next guesses are written as array slices. Python per row only for rare rows: a fixed
-goal's first step, an instant off the reference's grid, forces over a limit with a
-saturation other than clipping.
+One batched step (:meth:`JointRows.step`): readings and desired legs written by fancy
+indexing, one C call, the rows screened at once, the results written as slices; Python
+per row only for a fixed goal's first step, an instant off the grid, or forces over a
+limit with a saturation other than clipping.
 """
 
 from __future__ import annotations

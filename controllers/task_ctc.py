@@ -1,27 +1,17 @@
 """Computed torque on a task: the shared loop of ``cartesian-ctc``, ``vision-ctc``,
 ``leg-edge-ctc`` and ``leg-direction-ctc``.
 
-Each period a :class:`TaskComputedTorque` subclass writes its measurement (the features
-seen, or the legs the visual pose is fitted to) and the reference at the observation's
-time with its rate and acceleration into the input row of its compiled step
-(:meth:`TaskComputedTorque.compiled_inputs`), and the step, one C function
-(:class:`controllers.task_ctc_compiled.CompiledTaskStep`,
-:mod:`controllers.solvers.compiled_task_ctc`), finds the pose and twist for the NOMINAL
-dynamic model, the task's error, Jacobian and ``L_dot tau``, the reference's own motion
-``e_t``, ``e_tt``, solves for the platform acceleration and gives the leg forces held
-over the period. It is the law's only step: off its happy path the law refuses with
-the reason of the row's status (:mod:`controllers.ctc_status`). The numpy step it
-replaced (the tasks' numpy error and Jacobian, an SVD solve, the model's inverse
-dynamics) is the tests' oracle (``tests/controllers/task_ctc_oracles.py``).
+Each period a :class:`TaskComputedTorque` subclass writes its measurement and the
+reference (with its rate and acceleration) into the input row of its compiled step
+(:meth:`TaskComputedTorque.compiled_inputs`, :mod:`controllers.task_ctc_compiled`), and
+one C call gives the pose, the task's error and Jacobian for the NOMINAL model and the
+leg forces held over the period. Off its happy path the law refuses with the reason of
+the row's status (:mod:`controllers.ctc_status`).
 
-The reference is the trajectory of ``context.reference`` (base frame, sampled at the
-observation's time) or, for a fixed goal, a straight line from the pose measured at the
-first step (the pose of a compiled step towards the goal at rest) to the goal pose with
-a quintic timing, slow enough that no leg's nominal speed exceeds the speed limit
-(``smooth_goal``; off: the goal is a step, the error's free response).
-
-The checked readings, goal pose, camera and base points, and that line are
-:mod:`controllers.task_ctc_inputs`'.
+The reference is ``context.reference`` (base frame) or, for a fixed goal, a quintic
+line from the pose measured at the first step to the goal pose, slow enough that no
+leg's nominal speed exceeds the limit (``smooth_goal``; off: a step). The checked
+readings, goal pose, camera and that line are :mod:`controllers.task_ctc_inputs`'.
 """
 
 from __future__ import annotations

@@ -1,30 +1,17 @@
-"""The compiled path of the task-space computed-torque laws.
+"""The compiled step of the task-space computed-torque laws.
 
 :class:`CompiledTaskStep` fills the input row of the law's compiled step
-(:func:`controllers.solvers.compiled_task_ctc.task_step`: the pose, the dynamics, the
-task, the reference's terms, the solve and the leg forces in one C call), calls it and
-reads the command. Off the happy path it answers why not: the law's measurement has
-no answer (features missing, the legs seen collinear), or the row's ``status``
-(:mod:`controllers.ctc_status`: fewer than six rows or three legs seen, the pose not
-converged from the last one, a singular inverse solve, a non-finite value) or the rank
-test of the task Jacobian says so (:func:`controllers.ctc_rows.refusal` words it). The
-law refuses with that reason: there is no other step (the numpy step it replaced is
-the tests' oracle, ``tests/controllers/task_ctc_oracles.py``).
+(:func:`controllers.solvers.compiled_task_ctc.task_step`, or a plugin feature's of the
+same layouts), calls it and reads the command; off the happy path it answers why not:
+the law's measurement has none, or the row's ``status`` (:mod:`controllers.ctc_status`)
+or the rank test says so (worded by :func:`controllers.ctc_rows.refusal`). A law gives
+it ``compiled_kind`` and ``compiled_fk``, its constants (``compiled_constants(step)``)
+and each period its measurement and reference (``compiled_inputs(step, observation,
+tr, q)``: the rows to use or None and a note, or why there is no measurement).
 
-A law gives the compiled path its kind and pose source (``compiled_kind``,
-``compiled_fk``; or a subclass of the step its own compiled function of the same
-layouts, :meth:`CompiledTaskStep.make_function`, as a plugin feature's step does), its
-constants (``compiled_constants(step)``) and, each period, its
-measurement and reference (``compiled_inputs(step, observation, tr, q)``, returning the
-rows to use or None and a note, or why there is no measurement).
-
-The C function runs on the step's own bound input and output rows
-(:meth:`hexapod.compiled.CompiledFunction.bind`; the input row a row of its batch's
-matrix, :mod:`controllers.task_ctc_rows`): the law writes into
-:attr:`CompiledTaskStep.row` in place (the readings too,
-:func:`controllers.task_ctc_inputs.finite_readings`), the row's ``pose`` block holds the
-pose guess (the law's ``guess``: the last pose found, the home pose before one), and the
-command copies what it keeps of the output row.
+The C function runs on the step's own bound rows (:meth:`hexapod.compiled.
+CompiledFunction.bind`; the input row may be a row of its batch's matrix,
+:mod:`controllers.task_ctc_rows`); the row's ``pose`` block holds the pose guess.
 """
 
 from __future__ import annotations

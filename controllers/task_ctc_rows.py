@@ -1,25 +1,19 @@
 """The batch of the task computed-torque laws (``cartesian-ctc``, ``vision-ctc``,
 ``leg-edge-ctc``, ``leg-direction-ctc``, a plugin feature's ``<name>-ctc``) as arrays.
 
-The batch owns its trials' state (:class:`TaskRows`, built from the trials' instances at
-the first batched step after a reset): the compiled step's input matrix ``X``
-(n, n_in), each row's constants written once at reset and its pose guess in its ``pose``
-block, whether that guess is a pose found, the command counts, the reference clocks
-(started, ``t0``, the reference's version), the force limits (n, 6) and the references
-on the control grid stacked (n, S, w) with the grid steps whose task rows are all known
-(n, S). Each instance's own rows are views of these arrays (its compiled step's input
-row a row of ``X``), so its per-trial step (:meth:`~controllers.task_ctc.
-TaskComputedTorque.step_trial`, which refuses with the reason) and the batch read and
-write the same state.
+:class:`TaskRows` (built at the first batched step after a reset) owns its trials' state:
+the input matrix ``X`` (n, n_in) with each row's constants and pose guess, the guess
+flags, command counts, reference clocks, force limits, integrals and the references on
+the control grid (n, S, w) with the steps whose task rows are all known. Each instance's
+state is views of these arrays, so its per-trial step (which refuses with the reason)
+and the batch share it.
 
-One batched step (:meth:`TaskRows.step`): the readings, the features (the law's
-``batch_inputs``) and the references are written into the rows by fancy indexing, the
-compiled step evaluates every row in one C call (:func:`~controllers.ctc_rows.
-evaluate_rows`), the rows are screened at once (:func:`~controllers.ctc_rows.
-accepted_rows`), and the forces, error norms and next guesses are written as array
-slices. Python per row only for rare rows: a measurement not in the common case (a
-feature hidden, an instant off the grid), a reference grid built (once per reference),
-forces over a limit.
+One batched step (:meth:`TaskRows.step`): readings, features (the law's
+``batch_inputs``) and references written by fancy indexing, one C call
+(:func:`~controllers.ctc_rows.evaluate_rows`), the rows screened at once
+(:func:`~controllers.ctc_rows.accepted_rows`), the results written as slices; Python per
+row only for rare rows (a feature hidden, an instant off the grid, a grid built, forces
+over a limit).
 """
 
 from __future__ import annotations
