@@ -84,10 +84,8 @@ class CartesianCTC(TaskComputedTorque):
     def batch_inputs(self, rows_batch: TaskRows, X: np.ndarray,
                      observations: ObservationBatch, rows: np.ndarray, trials: np.ndarray,
                      tr: np.ndarray) -> np.ndarray:
-        """:meth:`compiled_inputs`' common case for many trials at once (see
-        :meth:`TaskComputedTorque.batch_inputs`): the measurement of the rows
-        :meth:`batch_features` takes, then each one's reference row from its grid (off
-        the grid or without a reference: :meth:`reference_row`)."""
+        """:meth:`TaskComputedTorque.batch_inputs`: the measurement of the rows
+        :meth:`batch_features` takes, then their reference rows."""
         step = rows_batch.step_of
         assert step is not None
         fast = self.batch_features(step, X, observations, rows)
@@ -268,11 +266,9 @@ class VisionCTC(CartesianCTC):
     def batch_partly_seen(self, rows_batch: TaskRows, step: CompiledTaskStep, X: np.ndarray,
                           observations: ObservationBatch, rows: np.ndarray,
                           trials: np.ndarray, fast: np.ndarray) -> None:
-        """The rows with some legs hidden (marked so, or a direction not finite) and at
-        least three legs seen that are not collinear on the platform: the directions
-        seen (a hidden leg's 0.0) and which legs are seen, as :meth:`compiled_inputs`
-        writes them (:func:`directions_seen`); the others (fewer than three legs, or
-        collinear ones: refused) stay with their trials' own steps."""
+        """The rows with three to five legs seen, not collinear on the platform: their
+        directions (a hidden leg's 0.0) and legs seen, as :meth:`compiled_inputs` writes
+        them; the others stay with their trials' own steps (which refuse them)."""
         if (observations.directions is None or observations.direction_visible is None
                 or np.shape(observations.directions)[1:] != (6, 3)):
             return

@@ -102,10 +102,8 @@ class ComputedTorqueController(ComputedTorqueLaw):
         self.kd = self.gains.kd
         self._ctx: ControllerContext | None = None
         self._model: DynamicModel | None = None
-        #: The trial's state, its own arrays or views of its batch's (:meth:`adopt`):
-        #: ``int (q* - q) dt`` [m s] (integral action), the fixed goal's quintic
-        #: (:data:`~controllers.joint_ctc_rows.QUINTIC_SIZE`) and the commands given by
-        #: the compiled step (diagnostics).
+        #: The trial's state, own or views of its batch's (:meth:`adopt`): ``int (q* -
+        #: q) dt`` [m s], the fixed goal's quintic and the compiled step's commands.
         self._integral = np.zeros(6)
         self._quintic = np.zeros(QUINTIC_SIZE)
         self._steps = np.zeros(1, dtype=np.int64)
@@ -113,9 +111,8 @@ class ComputedTorqueController(ComputedTorqueLaw):
         self._limit = np.full(6, np.inf)
         self._limit_list = self._limit.tolist()
         self._q_star = np.zeros(6)
-        #: The compiled step's input and output rows (bound at the first reset): the
-        #: input's constant part is filled at reset; its pose block holds the pose guess
-        #: (the last pose found, the home pose before one).
+        #: The compiled step's bound rows (at the first reset); the input's pose block
+        #: holds the pose guess (the last pose found, the home pose before one).
         self._bound: BoundCall | None = None
         #: ``(q*, q_dot*, q_ddot*)`` of a reference on the control grid ``k dt`` (N, 18)
         #: (None: not sampled yet, :attr:`grid`).
@@ -123,8 +120,7 @@ class ComputedTorqueController(ComputedTorqueLaw):
         #: The control period [s] and the time after which the reference is at rest [s].
         self._dt = 0.0
         self._t_end = math.inf
-        #: The batch's arrays (:class:`~controllers.joint_ctc_rows.JointRows`), built at
-        #: the first batched step after a reset (trial 0 holds them).
+        #: The batch's arrays (:class:`~controllers.joint_ctc_rows.JointRows`; trial 0's).
         self._rows: JointRows | None = None
 
     @property
@@ -133,8 +129,8 @@ class ComputedTorqueController(ComputedTorqueLaw):
         return int(self._steps[0])
 
     def __getstate__(self) -> dict[str, object]:
-        """Picklable: the compiled step's binding (ctypes) and the batch's arrays are
-        left out, the input row kept and bound again on unpickling."""
+        """Picklable: the binding (ctypes) is rebuilt on unpickling, the batch's arrays
+        left out."""
         state = self.__dict__.copy()
         bound = state.pop("_bound")
         state["_rows"] = None
@@ -153,9 +149,8 @@ class ComputedTorqueController(ComputedTorqueLaw):
 
     def adopt(self, row: np.ndarray, integral: np.ndarray, quintic: np.ndarray,
               steps: np.ndarray) -> None:
-        """Take views of a batch's arrays as this trial's state (their values copied
-        there already): the input row (n_in,), the integral (6,), the quintic (21,)
-        and the command count (1,)."""
+        """Take views of a batch's arrays (their values there already) as this trial's
+        input row, integral (6,), quintic (21,) and command count (1,)."""
         assert self._bound is not None
         self._bound = self._bound.function.bind(row)
         self._integral, self._quintic, self._steps = integral, quintic, steps
@@ -167,8 +162,7 @@ class ComputedTorqueController(ComputedTorqueLaw):
         return self._bound.x
 
     def batch_state(self) -> JointState:
-        """This trial's state for its batch (:class:`~controllers.joint_ctc_rows.
-        JointRows`, which gives back views of its arrays, :meth:`adopt`)."""
+        """This trial's state for its batch (:class:`~controllers.joint_ctc_rows.JointRows`)."""
         assert self._bound is not None and self._ctx is not None
         grid = None if self._ctx.reference is None else self.grid
         return JointState(self._bound.x, self._integral, self._quintic, self._steps,
@@ -212,9 +206,8 @@ class ComputedTorqueController(ComputedTorqueLaw):
             self._grid = None
 
     def reset_batch(self, contexts: Sequence[ControllerContext]) -> None:
-        """Every trial reset (:meth:`reset_trial`), then the references' legs on the
-        control grids of every trial sampled together (:func:`sample_grids`: one
-        evaluation of the nominal model for the trials that share it).
+        """Every trial reset, then the references' legs on the control grids sampled
+        together (:func:`sample_grids`).
 
         Raises:
             ContextError: A context the controller cannot use.
@@ -376,11 +369,9 @@ class ComputedTorqueController(ComputedTorqueLaw):
         return self._refuse(out) if isinstance(out, str) else out
 
     def _compiled_core(self, q: np.ndarray) -> Command | str:
-        """The compiled step of the input row (``q``, ``q_dot`` and ``(q*, q_dot*,
-        q_ddot*)`` written there); off the happy path (FK not converged from the pose
-        guess within ``FK_MAX_CALLS`` calls, a singular inverse solve, a non-finite
-        value, ``K`` rank-deficient) the reason its status gives
-        (:func:`~controllers.ctc_rows.refusal`), the pose guess left as it was."""
+        """The compiled step of the input row (readings and desired legs there); off the
+        happy path the reason (:func:`~controllers.ctc_rows.refusal`), the pose guess
+        left as it was."""
         assert self._bound is not None
         bound = self._bound
         pose_in, y = bound.x[POSE_IN], bound.y
@@ -425,10 +416,9 @@ GRID_CHUNK = 16
 
 def sample_grids(laws: list[ComputedTorqueController]) -> None:
     """Sample the references of the (reset) trials ``laws`` on their control grids
-    (:attr:`ComputedTorqueController.grid`): each reference at its own instants, then
-    the legs of the trials that share their nominal geometry in one evaluation per
-    :data:`GRID_CHUNK` trials (:func:`legs_of_poses`; rows are independent, so each
-    trial's grid holds the numbers of its own evaluation)."""
+    (:attr:`ComputedTorqueController.grid`): the legs of the trials that share their
+    nominal geometry in one evaluation per :data:`GRID_CHUNK` trials (rows are
+    independent: each grid holds the numbers of its own evaluation)."""
     groups: dict[int, list[ComputedTorqueController]] = {}
     for law in laws:
         groups.setdefault(id(law.grid_source()[0].geometry), []).append(law)

@@ -150,9 +150,8 @@ class FeatureCTC(TaskComputedTorque):
         return min(k, len(self.reference_grid()[1]) - 1)
 
     def reference_grid(self) -> tuple[object, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-        """The reference's control grid ``k dt`` up to its end and a step past it (built
-        on first use for each reference, one batched call): the reference,
-        :meth:`feature_rows` on the grid (n, 3, m) and, step by step, what
+        """The reference's control grid ``k dt`` to a step past its end (built once per
+        reference): the reference, :meth:`feature_rows` there (n, 3, m), what
         :meth:`compiled_reference` gives (n, 3 m), the rows known (n, m) and whether
         they all are (n,)."""
         ctx, ref = self.context, self.reference
@@ -257,12 +256,8 @@ class FeatureCTC(TaskComputedTorque):
     def batch_inputs(self, rows_batch: TaskRows, X: np.ndarray,
                      observations: ObservationBatch, rows: np.ndarray, trials: np.ndarray,
                      tr: np.ndarray) -> np.ndarray:
-        """:meth:`compiled_inputs`' common case for many trials at once (see
-        :meth:`TaskComputedTorque.batch_inputs`): the features of every row whose
-        features are all seen and finite (:meth:`batch_features`), then each row's
-        reference from its grid when it is on the grid with every row known (a
-        feature the model's camera does not see or a reference off the grid: the row is
-        left to :meth:`compiled_inputs`)."""
+        """:meth:`TaskComputedTorque.batch_inputs`: the rows whose features are all seen
+        (:meth:`batch_features`) and whose reference is on its grid, every row known."""
         step = rows_batch.step_of
         assert step is not None
         fast = self.batch_features(step, X, observations, rows)

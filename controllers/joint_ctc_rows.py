@@ -167,10 +167,8 @@ class JointRows:
     def desired(self, trials: np.ndarray, t: np.ndarray, q: np.ndarray,
                 at: np.ndarray | slice | None = None) -> tuple[np.ndarray, np.ndarray]:
         """``(q*, q_dot*, q_ddot*)`` (m, 18) of the trials ``trials`` (m,) at ``t`` (m,)
-        [s] (a fixed goal's quintic started at its first step from the lengths ``q``
-        (m, 6) [m]), and the (m,) mask of the rows that have them (an instant off the
-        grid whose reference the nominal model cannot evaluate has none). ``at``: the
-        trials' index into the batch's arrays (``trials``, or the slice they make)."""
+        [s] (a fixed goal's quintic started from the lengths ``q`` (m, 6) [m]) and the
+        (m,) mask of the rows that have them; ``at``: ``trials`` or the slice they make."""
         m = len(trials)
         sel = trials if at is None else at
         out = np.zeros((m, 18))
@@ -204,13 +202,9 @@ class JointRows:
 
     def step(self, observations: ObservationBatch, out: CommandBatch, kp_ki: float,
              threshold: float, saturation: str) -> np.ndarray:
-        """Step every row with finite readings (see the module docstring) into ``out``;
-        returns the rows left to the trials' own steps (readings missing or not
-        finite, a desired row the model cannot give, a result not accepted).
-
-        When every row is finite and the rows are consecutive trials (the common case),
-        the batch's arrays are read and written through one slice instead of by fancy
-        indexing (the same values).
+        """Step every row with finite readings into ``out`` (consecutive trials through
+        one slice of the arrays, the same values); returns the rows left to the trials'
+        own steps (readings not finite, no desired row, a result not accepted).
 
         Args:
             observations: The batch (row ``k`` of trial ``observations.trials[k]``).

@@ -45,12 +45,10 @@ from hexapod.dynamics import DynamicModel
 
 
 class TaskComputedTorque(ComputedTorqueLaw):
-    """Computed torque on a task (see the module docstring). Subclasses set ``name``,
-    ``features``, ``compiled_kind`` (or make their own compiled step at reset) and
-    implement :meth:`goal_pose` and :meth:`compiled_inputs`.
-
-    The options are :class:`~controllers.ctc_law.ComputedTorqueLaw`'s, on the task error.
-    """
+    """Computed torque on a task (see the module docstring; the options are
+    :class:`~controllers.ctc_law.ComputedTorqueLaw`'s). Subclasses set ``name``,
+    ``features``, ``compiled_kind`` and implement :meth:`goal_pose` and
+    :meth:`compiled_inputs`."""
 
     #: The feature object of the compiled step (:mod:`controllers.solvers.compiled_task_ctc`;
     #: None: the subclass makes its own step at reset).
@@ -163,13 +161,10 @@ class TaskComputedTorque(ComputedTorqueLaw):
     def batch_inputs(self, rows_batch: TaskRows, X: np.ndarray,
                      observations: ObservationBatch, rows: np.ndarray, trials: np.ndarray,
                      tr: np.ndarray) -> np.ndarray:
-        """:meth:`compiled_inputs` of many trials at once, in its common case (every
-        feature seen, the reference on its grid, all its rows known; the integral
-        action's term is the batch's): writes this period's measurement and reference
-        into the input rows
-        ``X`` (m, n_in) (``q``, ``q_dot`` and the pose guess there already) of the rows
-        in that case and returns their (m,) mask; the others are left to each trial's
-        :meth:`compiled_inputs` (which writes the same numbers). None by default.
+        """:meth:`compiled_inputs` of many trials at once in its common case (every
+        feature seen, the reference on its grid with all its rows known): writes those
+        rows of ``X`` (m, n_in) and returns their (m,) mask; the others are left to
+        each trial's :meth:`compiled_inputs` (the same numbers). None by default.
 
         Args:
             rows_batch: The batch's arrays (its first step's layout, the grids).
@@ -299,8 +294,7 @@ class TaskComputedTorque(ComputedTorqueLaw):
                 error: np.ndarray, used: np.ndarray | None, over: bool | None = None
                 ) -> np.ndarray:
         """The forces [N] of an accepted step under the saturation strategy; the
-        integral of the task error ``error`` (m,) over the rows ``used`` (None: all)
-        advanced by the period unless a leg's force is over its limit (anti-windup).
+        integral of the task error advanced unless a leg's force is over its limit.
 
         Args:
             forces: (6,) the control law's forces [N].

@@ -36,17 +36,9 @@ if TYPE_CHECKING:
 
 
 class CompiledTaskStep:
-    """The compiled step of one law (see the module docstring).
-
-    The step evaluates the C function on its own bound input and output rows
-    (:meth:`hexapod.compiled.CompiledFunction.bind`, no copies): the input row
-    :attr:`row` keeps its constants, and its ``pose`` block the pose guess (:attr:`guess`).
-    What the command keeps of the output row is copied (the next call overwrites it).
-
-    A subclass may step another compiled function with the blocks of the built-in steps
-    (:func:`~controllers.solvers.compiled_task_ctc.task_layouts`): it overrides
-    :meth:`make_function` and passes its ``kind`` (a plugin feature's step,
-    :class:`controllers.features.ctc_step.FeatureTaskStep`).
+    """The compiled step of one law (see the module docstring). A subclass may step
+    another function of the built-in steps' layouts (:meth:`make_function`, as
+    :class:`controllers.features.ctc_step.FeatureTaskStep` does).
 
     Args:
         law: The law, reset (its context and nominal model built).
@@ -118,8 +110,7 @@ class CompiledTaskStep:
         self.used: np.ndarray | None = None
 
     def __getstate__(self) -> dict[str, object]:
-        """Picklable: the compiled function and its binding (ctypes) are left out, the
-        input row kept; both are rebuilt on unpickling."""
+        """Picklable: the function and its binding (ctypes) are rebuilt on unpickling."""
         state = self.__dict__.copy()
         for key in ("function", "bound", "row", "views", "guessed", "steps"):
             del state[key]
@@ -162,10 +153,8 @@ class CompiledTaskStep:
 
     def step(self, law: TaskComputedTorque, observation: Observation, tr: float,
              q: np.ndarray, qd: np.ndarray) -> Command | str:
-        """The command of this period, or why there is none.
-
-        ``q`` [m] and ``qd`` [m/s] are written into the row (blocks ``q`` and ``q_dot``;
-        :meth:`step_written` when they are there already)."""
+        """The command of this period, or why there is none (``q`` [m] and ``qd`` [m/s]
+        written into the row first)."""
         self.views["q"][:] = q
         self.views["q_dot"][:] = qd
         return self.step_written(law, observation, tr)
@@ -212,9 +201,8 @@ class CompiledTaskStep:
     def accept(self, law: TaskComputedTorque, y: np.ndarray, rows: np.ndarray | None
                ) -> tuple[np.ndarray, float] | None:
         """The task error (of the rows used) and the condition number of an output row
-        ``y`` when it is a command (its status 0: converged, enough rows, solved, every
-        value finite; and full rank), and the pose it found taken as the next guess;
-        None otherwise (the row is left as it is)."""
+        ``y`` when it is a command (status 0 and full rank; its pose then the next
+        guess), else None."""
         if y[self._status] != 0.0:
             return None
         # the squared singular values of the masked Jacobian (LAPACK syevd of L^T L; the

@@ -137,8 +137,8 @@ class TaskRows:
 
     def step(self, observations: ObservationBatch, out: CommandBatch, threshold: float
              ) -> np.ndarray:
-        """Step every row of a started trial with finite readings (see the module
-        docstring) into ``out``; returns the rows left to the trials' own steps.
+        """Step every row of a started trial with finite readings into ``out``; returns
+        the rows left to the trials' own steps.
 
         Args:
             observations: The batch (row ``k`` of trial ``observations.trials[k]``).
@@ -229,10 +229,9 @@ class TaskRows:
 
     def _integrate(self, ta: np.ndarray, E: np.ndarray, over: np.ndarray,
                    used: dict[int, np.ndarray]) -> None:
-        """Advance ``int e dt`` of the accepted rows' trials ``ta`` with integral action
-        by their task errors ``E`` (m, k), the non-finite ones as 0 and only the rows
-        used (``used``: by accepted row, where not all), held where a force is ``over``
-        its limit (anti-windup; as the law's ``limited``, the same numbers)."""
+        """Advance ``int e dt`` of the trials ``ta`` with integral action by their task
+        errors ``E`` (m, k) over the rows ``used``, held where a force is ``over`` its
+        limit (as the law's ``limited``: the same numbers)."""
         go = np.flatnonzero(~self.plain[ta] & ~over)
         if not len(go):
             return
