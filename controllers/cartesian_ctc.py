@@ -219,9 +219,9 @@ class VisionCTC(CartesianCTC):
         """The leg directions seen and which legs the compiled step fits the pose to (the
         legs seen; fewer than three: its status says so; collinear ones on the platform
         give no pose: the reason), and the reference."""
-        u = _every_direction(observation)
+        u = every_seen(observation.directions, observation.direction_visible)
         note = None
-        if u is not None:
+        if u is not None and u.shape == (6, 3):  # every leg seen: the common case
             step.views["seen"][:] = 1.0
         else:  # directions_seen decides, off the common case
             u, seen = directions_seen(observation.directions, observation.normals,
@@ -255,7 +255,7 @@ class VisionCTC(CartesianCTC):
     def batch_features(self, step: CompiledTaskStep, X: np.ndarray,
                        observations: ObservationBatch, rows: np.ndarray) -> np.ndarray:
         """The rows with six (6, 3) directions given, all marked seen and finite (as
-        :func:`_every_direction`): their directions."""
+        :meth:`compiled_inputs`' common case): their directions."""
         if observations.directions is None or np.shape(observations.directions)[1:] != (6, 3):
             return np.zeros(len(rows), dtype=bool)
         u, fast = seen_rows(observations.directions, observations.direction_visible, rows)
@@ -329,7 +329,8 @@ def all_seen(visible: np.ndarray | None) -> bool:
 
 def every_seen(values: np.ndarray | None, visible: np.ndarray | None) -> np.ndarray | None:
     """``values`` as a float array when given, all marked seen (:func:`all_seen`) and
-    finite; else None."""
+    finite (a NaN or inf makes the sum so); else None, where :func:`directions_seen`
+    decides (when both answer, they give the same values)."""
     if values is None:
         return None
     x = np.asarray(values, dtype=float)
@@ -345,19 +346,6 @@ def seen_rows(values: np.ndarray, visible: np.ndarray, rows: np.ndarray
     with np.errstate(invalid="ignore", over="ignore"):
         fast: np.ndarray = seen & np.isfinite(x.sum(axis=1))
     return x, fast
-
-
-def _every_direction(observation: Observation) -> np.ndarray | None:
-    """The common case of :func:`directions_seen` with every leg seen: the given (6, 3)
-    directions, all finite and none marked hidden; None otherwise (no directions, another
-    shape, a hidden or non-finite one, or a sum that overflows), where
-    :func:`directions_seen` decides. When both answer, they give the same directions."""
-    if observation.directions is None:
-        return None
-    u = np.asarray(observation.directions, dtype=float)
-    if u.shape != (6, 3) or not all_seen(observation.direction_visible):
-        return None
-    return u if math.isfinite(u.sum()) else None  # a NaN or inf makes the sum so
 
 
 def rigid_fit(points: np.ndarray, model_points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

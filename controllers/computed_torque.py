@@ -128,6 +128,22 @@ class ComputedTorqueController(ComputedTorqueLaw):
         """Commands given by the compiled step (diagnostics)."""
         return int(self._steps[0])
 
+    @property
+    def _pose(self) -> tuple[np.ndarray, np.ndarray]:
+        """The pose guess ``(R, t)`` of the next step (copies of the input row's)."""
+        assert self._bound is not None
+        row = self._bound.x[POSE_IN]
+        return row[0:9].reshape(3, 3).T.copy(), row[9:12].copy()
+
+    @_pose.setter
+    def _pose(self, pose: tuple[np.ndarray, np.ndarray] | None) -> None:
+        """Set the next step's pose guess (None: the nominal home pose)."""
+        assert self._bound is not None and self._ctx is not None
+        R0, p0 = home_pose(self._ctx.geometry) if pose is None else pose
+        row = self._bound.x[POSE_IN]
+        row[0:9] = np.asarray(R0).T.ravel()
+        row[9:12] = p0
+
     def __getstate__(self) -> dict[str, object]:
         """Picklable: the binding (ctypes) is rebuilt on unpickling, the batch's arrays
         left out."""
@@ -194,8 +210,7 @@ class ComputedTorqueController(ComputedTorqueLaw):
         row["viscous"][:] = d.viscous
         row["coulomb"][:] = d.coulomb
         row["gains"][:] = (self.kp, self.kd)
-        R0, p0 = home_pose(g)  # the pose guess before a pose is found
-        row["pose"][:] = np.concatenate([np.asarray(R0).T.ravel(), p0])
+        self._pose = None
         self._grid = np.zeros((0, 18))
         self._dt = float(context.dt)
         if context.reference is None:
@@ -263,7 +278,7 @@ class ComputedTorqueController(ComputedTorqueLaw):
         return out[0:6], out[6:12], out[12:18]
 
     def _desired_into(self, t: float, out: np.ndarray) -> None:
-        """:meth:`desired` written into ``out`` (18,): ``q*``, ``q_dot*``, ``q_ddot*``."""
+        """:meth:`desired` written into ``out`` (18,)."""
         ctx = self._ctx
         assert ctx is not None
         if ctx.reference is None:

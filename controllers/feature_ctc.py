@@ -72,7 +72,7 @@ class FeatureCTC(TaskComputedTorque):
     #: The built-in feature object (its goal field holds the taught features; the
     #: reference and the task are its own).
     observed_feature: BuiltinFeature = EDGE_NORMALS
-    #: The mask of every task row (read only): :meth:`features_seen` gives this very
+    #: The mask of every task row (read only): :meth:`compiled_features` gives this very
     #: array when every leg is seen.
     every_rows: np.ndarray = _EVERY_EDGE
 
@@ -107,15 +107,11 @@ class FeatureCTC(TaskComputedTorque):
         assert self.context is not None
         return goal_pose_of(self.name, self.context.goal)
 
-    def features_seen(self, observation: Observation
-                      ) -> tuple[np.ndarray, np.ndarray | None, np.ndarray] | str:
-        """Directions (6, 3), normals (6, 2, 3) or None, and the rows to use."""
-        raise NotImplementedError
-
     def compiled_features(self, observation: Observation
                           ) -> tuple[np.ndarray, np.ndarray | None, np.ndarray] | str:
-        """:meth:`features_seen` for the compiled step (the same by default)."""
-        return self.features_seen(observation)
+        """The directions (6, 3) seen, the normals (6, 2, 3) or None, and the rows to use
+        (:attr:`every_rows` when every leg is seen), or why there are none."""
+        raise NotImplementedError
 
     @property
     def key(self) -> str:
@@ -329,6 +325,7 @@ class LegEdgeCTC(FeatureCTC):
 
     def features_seen(self, observation: Observation
                       ) -> tuple[np.ndarray, np.ndarray | None, np.ndarray] | str:
+        """:meth:`compiled_features` with every check (hidden or non-finite legs)."""
         if observation.normals is None:
             return "needs the edge normals (Observation.normals)"
         n = np.asarray(observation.normals, dtype=float)
@@ -373,6 +370,7 @@ class LegDirectionCTC(FeatureCTC):
 
     def features_seen(self, observation: Observation
                       ) -> tuple[np.ndarray, np.ndarray | None, np.ndarray] | str:
+        """:meth:`compiled_features` with every check (hidden or non-finite legs)."""
         u, legs = directions_seen(observation.directions, observation.normals,
                                   observation.direction_visible, observation.edge_visible)
         if legs.all():

@@ -137,19 +137,15 @@ class CompiledTaskStep:
     def guess(self, pose: tuple[np.ndarray, np.ndarray] | None) -> None:
         """Set the next step's pose guess (None: the home pose)."""
         R0, t0 = self.home if pose is None else pose
-        self.set_pose(R0, t0)
+        pose_in = self.views["pose"]
+        pose_in[0:9] = np.asarray(R0).T.ravel()
+        pose_in[9:12] = t0
         self.guessed[0] = 0.0 if pose is None else 1.0
 
     def set(self, name: str, value: ArrayLike) -> None:
         """Write an input block (:func:`~controllers.solvers.compiled_task_ctc.layout`;
         its values in row-major order, or one value for all)."""
         self.row[self.inputs[name]] = np.ravel(value)
-
-    def set_pose(self, R: np.ndarray, t: np.ndarray) -> None:
-        """The input pose (the FK guess, or the measured pose)."""
-        pose = self.views["pose"]
-        pose[0:9] = np.asarray(R).T.ravel()
-        pose[9:12] = t
 
     def step(self, law: TaskComputedTorque, observation: Observation, tr: float,
              q: np.ndarray, qd: np.ndarray) -> Command | str:
