@@ -21,12 +21,8 @@ from scipy.linalg.lapack import dgesdd as _svd
 
 from controllers.base import ControllerContext, Goal, Observation, ObservationBatch
 from controllers.ctc_status import Status, status_reason
-from controllers.task_ctc import (
-    CompiledTaskStep,
-    TaskComputedTorque,
-    camera_and_base_points,
-    goal_pose_of,
-)
+from controllers.task_ctc import CompiledTaskStep, TaskComputedTorque
+from controllers.task_ctc_inputs import camera_and_base_points, goal_pose_of
 from controllers.task_ctc_rows import TaskRows
 from controllers.tasks.platform_pose import PLATFORM_POSE
 from hexapod.kinematics import Transform
@@ -69,12 +65,8 @@ class CartesianCTC(TaskComputedTorque):
     def compiled_inputs(self, step: CompiledTaskStep, observation: Observation, tr: float,
                         q: np.ndarray) -> tuple[np.ndarray | None, str | None] | str:
         """The reference (the pose comes from the encoders in the compiled step)."""
-        self.reference_input(step, tr)
-        return None, None
-
-    def reference_input(self, step: CompiledTaskStep, tr: float) -> None:
-        """The reference row at ``tr`` (the fixed goal at rest without a reference)."""
         step.set("reference", self.reference_row(tr))
+        return None, None
 
     def reference_row(self, tr: float) -> np.ndarray:
         """(24,) the reference at ``tr`` [s] as the compiled step takes it: ``R*``
@@ -92,10 +84,8 @@ class CartesianCTC(TaskComputedTorque):
     def batch_inputs(self, rows_batch: TaskRows, X: np.ndarray,
                      observations: ObservationBatch, rows: np.ndarray, trials: np.ndarray,
                      tr: np.ndarray) -> np.ndarray:
-        """:meth:`compiled_inputs`' common case for many trials at once (see
-        :meth:`TaskComputedTorque.batch_inputs`): the measurement of the rows
-        :meth:`batch_features` takes, then each one's reference row from its grid (off
-        the grid or without a reference: :meth:`reference_row`)."""
+        """:meth:`TaskComputedTorque.batch_inputs`: the measurement of the rows
+        :meth:`batch_features` takes, then their reference rows."""
         step = rows_batch.step_of
         assert step is not None
         fast = self.batch_features(step, X, observations, rows)
@@ -229,9 +219,9 @@ class VisionCTC(CartesianCTC):
         """The leg directions seen and which legs the compiled step fits the pose to (the
         legs seen; fewer than three: its status says so; collinear ones on the platform
         give no pose: the reason), and the reference."""
-        u = _every_direction(observation)
+        u = every_seen(observation.directions, observation.direction_visible)
         note = None
-        if u is not None:
+        if u is not None and u.shape == (6, 3):  # every leg seen: the common case
             step.views["seen"][:] = 1.0
         else:  # directions_seen decides, off the common case
             u, seen = directions_seen(observation.directions, observation.normals,
@@ -245,7 +235,7 @@ class VisionCTC(CartesianCTC):
                 u = np.where(seen[:, None], u, 0.0)  # a hidden leg's stand-in (not read)
                 note = f"pose from legs {legs}"
         step.row[step.inputs["directions"]] = u.ravel()
-        self.reference_input(step, tr)
+        step.set("reference", self.reference_row(tr))
         return None, note
 
     def collinear(self, seen: np.ndarray) -> bool:
@@ -265,7 +255,7 @@ class VisionCTC(CartesianCTC):
     def batch_features(self, step: CompiledTaskStep, X: np.ndarray,
                        observations: ObservationBatch, rows: np.ndarray) -> np.ndarray:
         """The rows with six (6, 3) directions given, all marked seen and finite (as
-        :func:`_every_direction`): their directions."""
+        :meth:`compiled_inputs`' common case): their directions."""
         if observations.directions is None or np.shape(observations.directions)[1:] != (6, 3):
             return np.zeros(len(rows), dtype=bool)
         u, fast = seen_rows(observations.directions, observations.direction_visible, rows)
@@ -276,11 +266,9 @@ class VisionCTC(CartesianCTC):
     def batch_partly_seen(self, rows_batch: TaskRows, step: CompiledTaskStep, X: np.ndarray,
                           observations: ObservationBatch, rows: np.ndarray,
                           trials: np.ndarray, fast: np.ndarray) -> None:
-        """The rows with some legs hidden (marked so, or a direction not finite) and at
-        least three legs seen that are not collinear on the platform: the directions
-        seen (a hidden leg's 0.0) and which legs are seen, as :meth:`compiled_inputs`
-        writes them (:func:`directions_seen`); the others (fewer than three legs, or
-        collinear ones: refused) stay with their trials' own steps."""
+        """The rows with three to five legs seen, not collinear on the platform: their
+        directions (a hidden leg's 0.0) and legs seen, as :meth:`compiled_inputs` writes
+        them; the others stay with their trials' own steps (which refuse them)."""
         if (observations.directions is None or observations.direction_visible is None
                 or np.shape(observations.directions)[1:] != (6, 3)):
             return
@@ -341,7 +329,8 @@ def all_seen(visible: np.ndarray | None) -> bool:
 
 def every_seen(values: np.ndarray | None, visible: np.ndarray | None) -> np.ndarray | None:
     """``values`` as a float array when given, all marked seen (:func:`all_seen`) and
-    finite; else None."""
+    finite (a NaN or inf makes the sum so); else None, where :func:`directions_seen`
+    decides (when both answer, they give the same values)."""
     if values is None:
         return None
     x = np.asarray(values, dtype=float)
@@ -357,19 +346,6 @@ def seen_rows(values: np.ndarray, visible: np.ndarray, rows: np.ndarray
     with np.errstate(invalid="ignore", over="ignore"):
         fast: np.ndarray = seen & np.isfinite(x.sum(axis=1))
     return x, fast
-
-
-def _every_direction(observation: Observation) -> np.ndarray | None:
-    """The common case of :func:`directions_seen` with every leg seen: the given (6, 3)
-    directions, all finite and none marked hidden; None otherwise (no directions, another
-    shape, a hidden or non-finite one, or a sum that overflows), where
-    :func:`directions_seen` decides. When both answer, they give the same directions."""
-    if observation.directions is None:
-        return None
-    u = np.asarray(observation.directions, dtype=float)
-    if u.shape != (6, 3) or not all_seen(observation.direction_visible):
-        return None
-    return u if math.isfinite(u.sum()) else None  # a NaN or inf makes the sum so
 
 
 def rigid_fit(points: np.ndarray, model_points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

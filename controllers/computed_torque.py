@@ -1,40 +1,28 @@
 """Joint-space computed torque on the encoder lengths (the industrial baseline).
 
-A force controller (:attr:`Actuation.FORCE`): it needs a dynamic world with force-mode
-drives and the measured leg velocities ``q_dot`` (``Observation.q_dot``). Its model is the
-controller context's NOMINAL geometry, inertia and drives, never the world's truth:
+A force controller (:attr:`Actuation.FORCE`) for the dynamic world (it needs the measured
+leg velocities ``Observation.q_dot``). Its model is the context's NOMINAL geometry,
+inertia and drives, never the world's truth:
 
-- reference ``q*(t)``, ``q_dot*(t)``, ``q_ddot*(t)``: the nominal inverse kinematics of the
-  trajectory's pose (``context.reference``), ``q_dot* = K x_dot*`` and
-  ``q_ddot* = K x_ddot* + K_dot x_dot*``; a fixed goal (``goal.lengths``) is reached along
-  a quintic in leg space from the lengths measured at the first step, timed so that no
-  leg's reference speed exceeds the nominal speed limit (a step on the full distance would
-  saturate the drives and overshoot into the end stops);
-- pose ``(R, t)``: the nominal forward kinematics of the encoder lengths, twist
-  ``x_dot = K^-1 q_dot``;
-- the joint-length task ``e = q - q*`` with ``L = K`` and ``L_dot tau = K_dot x_dot``,
-  solved by :class:`~controllers.solvers.computed_torque.ComputedTorqueSolver`: desired
-  leg acceleration ``a = q_ddot* + Kd (q_dot* - q_dot) + Kp (q* - q)`` with
-  ``Kp = omega_n^2``, ``Kd = 2 zeta omega_n`` (the leg error obeys
-  ``e_ddot + 2 zeta omega_n e_dot + omega_n^2 e = 0`` when the model is exact),
-  platform acceleration ``x_ddot = K^-1 (a - K_dot x_dot)`` and the mechanism's forces
-  ``DynamicModel.inverse(R, t, x_dot, x_ddot)``, plus the nominal drives' reflected rotor
-  inertia ``m_r a`` and friction ``c q_dot + f_c tanh(q_dot* / v_s)``.
+- reference ``q*``, ``q_dot* = K x_dot*``, ``q_ddot* = K x_ddot* + K_dot x_dot*``: the
+  nominal inverse kinematics of ``context.reference``; a fixed goal (``goal.lengths``) is
+  reached along a leg-space quintic from the lengths measured at the first step, timed so
+  that no leg's reference speed exceeds the nominal speed limit;
+- pose: the nominal forward kinematics of the encoder lengths, twist ``x_dot = K^-1 q_dot``;
+- desired leg acceleration ``a = q_ddot* + Kd (q_dot* - q_dot) + Kp (q* - q)`` with
+  ``Kp = omega_n^2``, ``Kd = 2 zeta omega_n`` (the leg error obeys ``e_ddot + 2 zeta
+  omega_n e_dot + omega_n^2 e = 0`` when the model is exact), ``x_ddot = K^-1 (a - K_dot
+  x_dot)`` and the forces ``DynamicModel.inverse(R, t, x_dot, x_ddot)`` plus the drives'
+  ``m_r a + c q_dot + f_c tanh(q_dot* / v_s)``.
 
-The force is held over the control period: the design is continuous, so ``omega_n dt``
-must stay small. The default ``omega_n = 2 pi * 2 Hz`` with ``zeta = 1`` gives
-``omega_n dt = 0.25`` at the 20 ms period.
+The force is held over the control period, so ``omega_n dt`` must stay small (the
+default ``omega_n = 2 pi * 2 Hz``, ``zeta = 1``: 0.25 at 20 ms). Options: integral action
+``integral_gain`` ``Ki`` [1/s] (``a = ... + Kp (e + Ki int e dt)``, held while a leg's
+force is over its limit; stable for ``Ki < 2 zeta omega_n``) and ``saturation`` over the
+limit (:mod:`controllers.solvers.saturation`: ``"clip"``, ``"scale"`` or ``"qp"``).
 
-Options beyond the gains: integral action ``integral_gain`` ``Ki`` [1/s] (default 0:
-none), ``a = ... + Kp (e + Ki int e dt)`` with ``e = q* - q``, the integral held while a
-leg's force is over the nominal drive's limit (anti-windup; with an exact model the
-error obeys ``e_ddd + Kd e_dd + Kp e_d + Kp Ki e = 0``, stable for
-``Ki < Kd = 2 zeta omega_n``); and what is commanded over that limit, ``saturation``
-(:mod:`controllers.solvers.saturation`: ``"clip"`` per leg, the default and what the
-drives do, ``"scale"`` or ``"qp"``).
-
-One step over a batch (:meth:`ComputedTorqueController.step_arrays`): the rows through the
-compiled step in one C call (:mod:`controllers.ctc_rows`).
+The step is one compiled function (:mod:`controllers.solvers.compiled_ctc`); a batch's
+rows go through it in one C call (:mod:`controllers.joint_ctc_rows`).
 """
 
 from __future__ import annotations
@@ -46,16 +34,14 @@ import numpy as np
 
 from controllers.base import Command
 from controllers.ctc_law import DAMPING, NATURAL_FREQUENCY_HZ, ComputedTorqueLaw
-from controllers.ctc_rows import newton_calls, rank_condition, refusal, stale
+from controllers.ctc_rows import FK_MAX_CALLS, newton_calls, rank_condition, refusal, stale
 from controllers.joint_ctc_rows import (
     DESIRED,
     FACTOR,
-    FK_MAX_CALLS,
     FORCES,
     GRID_TIME_TOLERANCE,
     POSE_IN,
     POSE_OUT,
-    QUINTIC_PEAK_SPEED,
     QUINTIC_SIZE,
     RESIDUAL,
     STATUS,
@@ -66,7 +52,7 @@ from controllers.joint_ctc_rows import (
 from controllers.law_tools import goal_lengths
 from controllers.solvers import compiled_ctc
 from controllers.solvers.saturation import over_limit, zero_acceleration_forces
-from controllers.task_ctc import encoder_readings, finite_readings
+from controllers.task_ctc_inputs import QUINTIC_PEAK_SPEED, encoder_readings, finite_readings
 from hexapod.actuation import Actuation
 from hexapod.compiled import BoundCall
 from hexapod.dynamics import DynamicModel
@@ -116,10 +102,8 @@ class ComputedTorqueController(ComputedTorqueLaw):
         self.kd = self.gains.kd
         self._ctx: ControllerContext | None = None
         self._model: DynamicModel | None = None
-        #: The trial's state, its own arrays or views of its batch's (:meth:`adopt`):
-        #: ``int (q* - q) dt`` [m s] (integral action), the fixed goal's quintic
-        #: (:data:`~controllers.joint_ctc_rows.QUINTIC_SIZE`) and the commands given by
-        #: the compiled step (diagnostics).
+        #: The trial's state, own or views of its batch's (:meth:`adopt`): ``int (q* -
+        #: q) dt`` [m s], the fixed goal's quintic and the compiled step's commands.
         self._integral = np.zeros(6)
         self._quintic = np.zeros(QUINTIC_SIZE)
         self._steps = np.zeros(1, dtype=np.int64)
@@ -127,9 +111,8 @@ class ComputedTorqueController(ComputedTorqueLaw):
         self._limit = np.full(6, np.inf)
         self._limit_list = self._limit.tolist()
         self._q_star = np.zeros(6)
-        #: The compiled step's input and output rows (bound at the first reset): the
-        #: input's constant part is filled at reset; its pose block holds the pose guess
-        #: (the last pose found, the home pose before one).
+        #: The compiled step's bound rows (at the first reset); the input's pose block
+        #: holds the pose guess (the last pose found, the home pose before one).
         self._bound: BoundCall | None = None
         #: ``(q*, q_dot*, q_ddot*)`` of a reference on the control grid ``k dt`` (N, 18)
         #: (None: not sampled yet, :attr:`grid`).
@@ -137,8 +120,7 @@ class ComputedTorqueController(ComputedTorqueLaw):
         #: The control period [s] and the time after which the reference is at rest [s].
         self._dt = 0.0
         self._t_end = math.inf
-        #: The batch's arrays (:class:`~controllers.joint_ctc_rows.JointRows`), built at
-        #: the first batched step after a reset (trial 0 holds them).
+        #: The batch's arrays (:class:`~controllers.joint_ctc_rows.JointRows`; trial 0's).
         self._rows: JointRows | None = None
 
     @property
@@ -163,8 +145,8 @@ class ComputedTorqueController(ComputedTorqueLaw):
         row[9:12] = p0
 
     def __getstate__(self) -> dict[str, object]:
-        """Picklable: the compiled step's binding (ctypes) and the batch's arrays are
-        left out, the input row kept and bound again on unpickling."""
+        """Picklable: the binding (ctypes) is rebuilt on unpickling, the batch's arrays
+        left out."""
         state = self.__dict__.copy()
         bound = state.pop("_bound")
         state["_rows"] = None
@@ -183,9 +165,8 @@ class ComputedTorqueController(ComputedTorqueLaw):
 
     def adopt(self, row: np.ndarray, integral: np.ndarray, quintic: np.ndarray,
               steps: np.ndarray) -> None:
-        """Take views of a batch's arrays as this trial's state (their values copied
-        there already): the input row (n_in,), the integral (6,), the quintic (21,)
-        and the command count (1,)."""
+        """Take views of a batch's arrays (their values there already) as this trial's
+        input row, integral (6,), quintic (21,) and command count (1,)."""
         assert self._bound is not None
         self._bound = self._bound.function.bind(row)
         self._integral, self._quintic, self._steps = integral, quintic, steps
@@ -196,14 +177,8 @@ class ComputedTorqueController(ComputedTorqueLaw):
         assert self._bound is not None
         return self._bound.x
 
-    @property
-    def force_limit(self) -> np.ndarray:
-        """(6,) the nominal drives' force limits [N] (inf before a reset)."""
-        return self._limit
-
     def batch_state(self) -> JointState:
-        """This trial's state for its batch (:class:`~controllers.joint_ctc_rows.
-        JointRows`, which gives back views of its arrays, :meth:`adopt`)."""
+        """This trial's state for its batch (:class:`~controllers.joint_ctc_rows.JointRows`)."""
         assert self._bound is not None and self._ctx is not None
         grid = None if self._ctx.reference is None else self.grid
         return JointState(self._bound.x, self._integral, self._quintic, self._steps,
@@ -246,9 +221,8 @@ class ComputedTorqueController(ComputedTorqueLaw):
             self._grid = None
 
     def reset_batch(self, contexts: Sequence[ControllerContext]) -> None:
-        """Every trial reset (:meth:`reset_trial`), then the references' legs on the
-        control grids of every trial sampled together (:func:`sample_grids`: one
-        evaluation of the nominal model for the trials that share it).
+        """Every trial reset, then the references' legs on the control grids sampled
+        together (:func:`sample_grids`).
 
         Raises:
             ContextError: A context the controller cannot use.
@@ -304,7 +278,7 @@ class ComputedTorqueController(ComputedTorqueLaw):
         return out[0:6], out[6:12], out[12:18]
 
     def _desired_into(self, t: float, out: np.ndarray) -> None:
-        """:meth:`desired` written into ``out`` (18,): ``q*``, ``q_dot*``, ``q_ddot*``."""
+        """:meth:`desired` written into ``out`` (18,)."""
         ctx = self._ctx
         assert ctx is not None
         if ctx.reference is None:
@@ -410,11 +384,9 @@ class ComputedTorqueController(ComputedTorqueLaw):
         return self._refuse(out) if isinstance(out, str) else out
 
     def _compiled_core(self, q: np.ndarray) -> Command | str:
-        """The compiled step of the input row (``q``, ``q_dot`` and ``(q*, q_dot*,
-        q_ddot*)`` written there); off the happy path (FK not converged from the pose
-        guess within ``FK_MAX_CALLS`` calls, a singular inverse solve, a non-finite
-        value, ``K`` rank-deficient) the reason its status gives
-        (:func:`~controllers.ctc_rows.refusal`), the pose guess left as it was."""
+        """The compiled step of the input row (readings and desired legs there); off the
+        happy path the reason (:func:`~controllers.ctc_rows.refusal`), the pose guess
+        left as it was."""
         assert self._bound is not None
         bound = self._bound
         pose_in, y = bound.x[POSE_IN], bound.y
@@ -459,10 +431,9 @@ GRID_CHUNK = 16
 
 def sample_grids(laws: list[ComputedTorqueController]) -> None:
     """Sample the references of the (reset) trials ``laws`` on their control grids
-    (:attr:`ComputedTorqueController.grid`): each reference at its own instants, then
-    the legs of the trials that share their nominal geometry in one evaluation per
-    :data:`GRID_CHUNK` trials (:func:`legs_of_poses`; rows are independent, so each
-    trial's grid holds the numbers of its own evaluation)."""
+    (:attr:`ComputedTorqueController.grid`): the legs of the trials that share their
+    nominal geometry in one evaluation per :data:`GRID_CHUNK` trials (rows are
+    independent: each grid holds the numbers of its own evaluation)."""
     groups: dict[int, list[ComputedTorqueController]] = {}
     for law in laws:
         groups.setdefault(id(law.grid_source()[0].geometry), []).append(law)

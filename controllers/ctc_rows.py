@@ -1,49 +1,27 @@
-"""The compiled computed-torque steps over the rows of a batch: one C call for every row
-(:meth:`hexapod.compiled.CompiledFunction.batch`; from eight rows its lane-parallel C,
-four rows per vector instruction, the same bits), the forward kinematics' (or the
-rigid fit's) further Newton calls for the rows that have not converged, and each row's
-acceptance test (converged, inverse solve solved, every value finite, full rank).
+"""The compiled computed-torque steps over the rows of a batch.
 
-The computed-torque family (``computed-torque``, ``cartesian-ctc``, ``vision-ctc``,
-``leg-edge-ctc``, ``leg-direction-ctc``) keeps one state per trial (the pose guess, the
-reference's start); each trial's instance writes its row (:meth:`prepare_row` of the
-laws), :func:`evaluate_rows` evaluates the rows together, and the instance takes its
-result (:meth:`finish_row`). A row whose result is not accepted (its ``status``,
-:mod:`controllers.ctc_status`, or the rank test) is left to its trial's own step, which
-refuses it with the reason (the same compiled function on the same row: the same
-numbers).
+:func:`evaluate_rows` evaluates every row in one C call (from eight rows by lanes, the
+same bits) and calls again the rows whose pose has not converged; :func:`accepted_rows`
+is each row's acceptance test (status 0 and full rank). The per-trial steps use
+:func:`newton_calls`, :func:`rank_condition` and :func:`refusal` on their own row (the
+same compiled function on the same row: the same numbers); a row not accepted is left to
+its trial's own step, which refuses it with the reason.
 """
 
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
 from typing import Any
 
 import numpy as np
 from scipy.linalg.lapack import dsyevd as _eigenvalues
 
 from controllers.ctc_status import Status, status_reason
-from controllers.data import ObservationBatch
 from hexapod.compiled import BoundCall, CompilationError, CompiledFunction
 
-
-def finite_readings_rows(observations: ObservationBatch, instances: Sequence[Any]
-                         ) -> tuple[np.ndarray, np.ndarray, np.ndarray,
-                                    list[tuple[int, Any]]] | None:
-    """The times (n,) [s], lengths and leg velocities (n, 6) [m, m/s] of a batch, and the
-    rows whose readings are all finite with their trial's instance (of ``instances``);
-    None without leg velocities."""
-    if observations.q_dot is None:
-        return None
-    t = np.asarray(observations.t, dtype=float)
-    q = np.asarray(observations.lengths, dtype=float)
-    qd = np.asarray(observations.q_dot, dtype=float)
-    finite = np.isfinite(t) & np.isfinite(q).all(axis=1) & np.isfinite(qd).all(axis=1)
-    trials = np.asarray(observations.trials, dtype=int)
-    rows = np.flatnonzero(finite).tolist()
-    return t, q, qd, [(k, instances[j]) for k, j in zip(rows, trials[rows].tolist(),
-                                                          strict=True)]
+#: Calls of a compiled step (its Newton iterations each) before the step is refused (as
+#: the 50 iterations of :func:`hexapod.fk.forward_kinematics`).
+FK_MAX_CALLS = 16
 
 
 def evaluate_rows(function: CompiledFunction, X: np.ndarray, pose_in: slice, pose_out: slice,
@@ -208,5 +186,5 @@ def stale(rows: Any, laws: list[Any]) -> bool:
     return rows is None or getattr(rows, "laws", None) is not laws
 
 
-__all__ = ["accepted_rows", "clear_rank", "evaluate_rows", "finite_readings_rows",
-           "newton_calls", "norms", "over_limits", "rank_condition", "refusal", "stale"]
+__all__ = ["FK_MAX_CALLS", "accepted_rows", "clear_rank", "evaluate_rows", "newton_calls",
+           "norms", "over_limits", "rank_condition", "refusal", "stale"]

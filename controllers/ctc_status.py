@@ -1,20 +1,11 @@
 """The status of a computed-torque step's row: its codes and the one wording of each.
 
-Every compiled computed-torque step (``computed-torque``'s :mod:`controllers.solvers.
-compiled_ctc`, the task-space laws' :mod:`controllers.solvers.compiled_task_ctc`, a
-plugin feature's :mod:`controllers.features.ctc_step`) returns a ``status`` per row in
-its output layout (:func:`controllers.solvers.compiled_ctc.sx_status`): 0 when the row
-is a command, else why not. The laws refuse such a row with :func:`status_reason`'s
-wording of it (:func:`controllers.ctc_rows.refusal`); there is no other step to fall
-back on.
-
-Codes decided in the kernel: ``TOO_FEW_ROWS`` (fewer than six task rows in use: the
-features seen and known), ``TOO_FEW_LEGS`` (fewer than three legs seen for the visual
-pose), ``NOT_CONVERGED`` (the pose's residual not below its tolerance after the last
-call), ``NON_FINITE`` (a value of the output row), ``SINGULAR_INVERSE`` (the inverse
-dynamics' solve). Decided by the caller: ``RANK_DEFICIENT`` (the eigenvalues of the
-output ``factor`` ``L^T L`` by LAPACK, :func:`controllers.ctc_rows.rank_condition`) and
-``COLLINEAR_LEGS`` (the legs seen are collinear on the platform: no visual pose).
+Every compiled computed-torque step returns a ``status`` per row
+(:func:`controllers.solvers.compiled_ctc.sx_status`): 0 for a command, else why not; the
+laws refuse such a row with :func:`status_reason`'s wording
+(:func:`controllers.ctc_rows.refusal`). The kernel decides ``TOO_FEW_ROWS``,
+``TOO_FEW_LEGS``, ``NOT_CONVERGED``, ``NON_FINITE`` and ``SINGULAR_INVERSE``; the caller
+``RANK_DEFICIENT`` (LAPACK on the output ``factor``) and ``COLLINEAR_LEGS``.
 """
 
 from __future__ import annotations

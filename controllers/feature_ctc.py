@@ -36,10 +36,9 @@ from controllers.solvers.reference_motion import feature_motion, layouts
 from controllers.task_ctc import (
     CompiledTaskStep,
     TaskComputedTorque,
-    camera_and_base_points,
-    goal_pose_of,
     grid_step,
 )
+from controllers.task_ctc_inputs import camera_and_base_points, goal_pose_of
 from controllers.task_ctc_rows import TaskRows
 from controllers.tasks import Task
 from controllers.tasks.feature_kind import BuiltinFeature
@@ -73,6 +72,9 @@ class FeatureCTC(TaskComputedTorque):
     #: The built-in feature object (its goal field holds the taught features; the
     #: reference and the task are its own).
     observed_feature: BuiltinFeature = EDGE_NORMALS
+    #: The mask of every task row (read only): :meth:`compiled_features` gives this very
+    #: array when every leg is seen.
+    every_rows: np.ndarray = _EVERY_EDGE
 
     def prepare(self, context: ControllerContext) -> None:
         """Check the estimated camera pose and base points.
@@ -105,15 +107,11 @@ class FeatureCTC(TaskComputedTorque):
         assert self.context is not None
         return goal_pose_of(self.name, self.context.goal)
 
-    def features_seen(self, observation: Observation
-                      ) -> tuple[np.ndarray, np.ndarray | None, np.ndarray] | str:
-        """Directions (6, 3), normals (6, 2, 3) or None, and the rows to use."""
-        raise NotImplementedError
-
     def compiled_features(self, observation: Observation
                           ) -> tuple[np.ndarray, np.ndarray | None, np.ndarray] | str:
-        """:meth:`features_seen` for the compiled step (the same by default)."""
-        return self.features_seen(observation)
+        """The directions (6, 3) seen, the normals (6, 2, 3) or None, and the rows to use
+        (:attr:`every_rows` when every leg is seen), or why there are none."""
+        raise NotImplementedError
 
     @property
     def key(self) -> str:
@@ -148,9 +146,8 @@ class FeatureCTC(TaskComputedTorque):
         return min(k, len(self.reference_grid()[1]) - 1)
 
     def reference_grid(self) -> tuple[object, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-        """The reference's control grid ``k dt`` up to its end and a step past it (built
-        on first use for each reference, one batched call): the reference,
-        :meth:`feature_rows` on the grid (n, 3, m) and, step by step, what
+        """The reference's control grid ``k dt`` to a step past its end (built once per
+        reference): the reference, :meth:`feature_rows` there (n, 3, m), what
         :meth:`compiled_reference` gives (n, 3 m), the rows known (n, m) and whether
         they all are (n,)."""
         ctx, ref = self.context, self.reference
@@ -165,7 +162,7 @@ class FeatureCTC(TaskComputedTorque):
 
     def feature_rows(self, times: np.ndarray) -> np.ndarray:
         """(m, 3, n) rows of :meth:`feature_reference` at ``times`` (m,) [s]; NaN where
-        the model's camera does not see the feature (:meth:`_anchored`)."""
+        the model's camera does not see the feature (:meth:`_anchored_and_end`)."""
         ctx = self.context
         assert ctx is not None and self.reference is not None
         feature = self.observed_feature
@@ -196,11 +193,6 @@ class FeatureCTC(TaskComputedTorque):
         i = self._grid_index(tr)
         if i is None:
             return _sanitised(self.feature_rows(np.array([tr]))[0])
-        return self._grid_row(i)
-
-    def _grid_row(self, i: int) -> tuple[np.ndarray, np.ndarray | None]:
-        """:meth:`compiled_reference` at grid step ``i``: the sanitised row and the rows
-        known (None: all)."""
         assert self._grid is not None
         return self._grid[2][i], None if self._grid[4][i] else self._grid[3][i]
 
@@ -239,7 +231,7 @@ class FeatureCTC(TaskComputedTorque):
         else:
             ref, known = self.compiled_reference(tr)
         every: np.ndarray | None = None
-        if known is None and (rows is _EVERY_EDGE or rows is _EVERY_LEG):
+        if known is None and rows is self.every_rows:
             row[inputs["mask"]] = 1.0
         else:
             if known is not None:  # a feature the model's camera does not see leaves its rows
@@ -260,12 +252,8 @@ class FeatureCTC(TaskComputedTorque):
     def batch_inputs(self, rows_batch: TaskRows, X: np.ndarray,
                      observations: ObservationBatch, rows: np.ndarray, trials: np.ndarray,
                      tr: np.ndarray) -> np.ndarray:
-        """:meth:`compiled_inputs`' common case for many trials at once (see
-        :meth:`TaskComputedTorque.batch_inputs`): the features of every row whose
-        features are all seen and finite (:meth:`batch_features`), then each row's
-        reference from its grid when it is on the grid with every row known (a
-        feature the model's camera does not see or a reference off the grid: the row is
-        left to :meth:`compiled_inputs`)."""
+        """:meth:`TaskComputedTorque.batch_inputs`: the rows whose features are all seen
+        (:meth:`batch_features`) and whose reference is on its grid, every row known."""
         step = rows_batch.step_of
         assert step is not None
         fast = self.batch_features(step, X, observations, rows)
@@ -284,14 +272,10 @@ class FeatureCTC(TaskComputedTorque):
         as :meth:`compiled_inputs`); their (m,) mask (none by default)."""
         return np.zeros(len(rows), dtype=bool)
 
-    def _anchored(self, times: np.ndarray) -> np.ndarray:
-        """(m, ...) the nominal features of the reference at ``times``, anchored at the
-        taught goal."""
-        return self._anchored_and_end(times)[0]
-
     def _anchored_and_end(self, times: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """:meth:`_anchored` at ``times`` and the model's features at the reference's end
-        (a second past its duration), from one call of the model (its field only)."""
+        """(m, ...) the nominal features of the reference at ``times``, anchored at the
+        taught goal, and the model's features at the reference's end (a second past its
+        duration), from one call of the model (its field only)."""
         ctx = self.context
         assert ctx is not None and self.reference is not None
         end = float(self.reference.duration) + 1.0
@@ -341,6 +325,7 @@ class LegEdgeCTC(FeatureCTC):
 
     def features_seen(self, observation: Observation
                       ) -> tuple[np.ndarray, np.ndarray | None, np.ndarray] | str:
+        """:meth:`compiled_features` with every check (hidden or non-finite legs)."""
         if observation.normals is None:
             return "needs the edge normals (Observation.normals)"
         n = np.asarray(observation.normals, dtype=float)
@@ -381,22 +366,24 @@ class LegDirectionCTC(FeatureCTC):
     features = frozenset({"lengths", LEG_DIRECTIONS.field})
     observed_feature = LEG_DIRECTIONS
     compiled_kind: BuiltinFeature | None = LEG_DIRECTIONS
+    every_rows = _EVERY_LEG
 
     def features_seen(self, observation: Observation
                       ) -> tuple[np.ndarray, np.ndarray | None, np.ndarray] | str:
+        """:meth:`compiled_features` with every check (hidden or non-finite legs)."""
         u, legs = directions_seen(observation.directions, observation.normals,
                                   observation.direction_visible, observation.edge_visible)
         if legs.all():
-            return u, None, _EVERY_LEG
+            return u, None, self.every_rows
         u = np.where(legs[:, None], u, _DUMMY)
-        return u, None, np.repeat(legs, 3)
+        return u, None, np.repeat(legs, self.every_rows.size // 6)
 
     def compiled_features(self, observation: Observation
                           ) -> tuple[np.ndarray, np.ndarray | None, np.ndarray] | str:
         """Every direction given and seen: them (:meth:`features_seen`'s result without
         its general checks); else :meth:`features_seen`."""
         u = every_seen(observation.directions, observation.direction_visible)
-        return self.features_seen(observation) if u is None else (u, None, _EVERY_LEG)
+        return self.features_seen(observation) if u is None else (u, None, self.every_rows)
 
     def batch_features(self, step: CompiledTaskStep, X: np.ndarray,
                        observations: ObservationBatch, rows: np.ndarray) -> np.ndarray:

@@ -1,22 +1,16 @@
 """The batch of the joint-space computed torque (``computed-torque``) as arrays.
 
-The batch owns its trials' state (:class:`JointRows`, built from the trials' instances at
-the first batched step after a reset): the compiled step's input matrix ``X`` (n, n_in)
-with every row's constant blocks written once at reset and its pose guess, the leg
-integrals (n, 6), the fixed goals' quintics (n, 21), the command counts, the force limits
-(n, 6) and the reference's legs on the control grid, stacked (n, S, 18) or one grid
-shared when they are equal. Each instance's own rows are views of these arrays (its
-bound input row a row of ``X``), so its per-trial step
-(:meth:`~controllers.computed_torque.ComputedTorqueController.step_trial`, which refuses
-with the reason) and the batch read and write the same state.
+:class:`JointRows` (built at the first batched step after a reset) owns its trials'
+state: the input matrix ``X`` (n, n_in) with each row's constants and pose guess, the
+leg integrals, the fixed goals' quintics, the command counts, the force limits and the
+reference's legs on the control grid (one grid when they are equal). Each instance's
+state is views of these arrays, so its per-trial step (which refuses with the reason)
+and the batch share it.
 
-One batched step (:meth:`JointRows.step`): the readings and the desired legs are written
-into the rows by fancy indexing, the compiled step evaluates every row in one C call
-(:func:`~controllers.ctc_rows.evaluate_rows`), the rows are screened at once
-(:func:`~controllers.ctc_rows.accepted_rows`), and the forces, error norms, integrals and
-next guesses are written as array slices. Python per row only for rare rows: a fixed
-goal's first step, an instant off the reference's grid, forces over a limit with a
-saturation other than clipping.
+One batched step (:meth:`JointRows.step`): readings and desired legs written by fancy
+indexing, one C call, the rows screened at once, the results written as slices; Python
+per row only for a fixed goal's first step, an instant off the grid, or forces over a
+limit with a saturation other than clipping.
 """
 
 from __future__ import annotations
@@ -25,7 +19,7 @@ from typing import TYPE_CHECKING, NamedTuple
 
 import numpy as np
 
-from controllers.ctc_rows import accepted_rows, evaluate_rows, norms, over_limits
+from controllers.ctc_rows import FK_MAX_CALLS, accepted_rows, evaluate_rows, norms, over_limits
 from controllers.data import CommandBatch, ObservationBatch
 from controllers.solvers import compiled_ctc
 from hexapod.compiled import CompiledFunction
@@ -35,11 +29,6 @@ if TYPE_CHECKING:
 
 #: How far from ``k dt`` an observation's time may be to use the reference's grid [s].
 GRID_TIME_TOLERANCE = 1e-9
-#: Calls of the compiled step (``compiled_ctc.FK_CALLS`` x 3 Newton iterations each)
-#: before the step is refused (as the 50 iterations of :func:`hexapod.fk.forward_kinematics`).
-FK_MAX_CALLS = 16
-#: Peak of the quintic's speed over its mean speed.
-QUINTIC_PEAK_SPEED = 15.0 / 8.0
 #: Where the compiled step's blocks lie in its rows (:data:`compiled_ctc.INPUTS`,
 #: :data:`compiled_ctc.OUTPUTS`), looked up once.
 DESIRED, POSE_IN = compiled_ctc.INPUTS["desired"], compiled_ctc.INPUTS["pose"]
@@ -178,10 +167,8 @@ class JointRows:
     def desired(self, trials: np.ndarray, t: np.ndarray, q: np.ndarray,
                 at: np.ndarray | slice | None = None) -> tuple[np.ndarray, np.ndarray]:
         """``(q*, q_dot*, q_ddot*)`` (m, 18) of the trials ``trials`` (m,) at ``t`` (m,)
-        [s] (a fixed goal's quintic started at its first step from the lengths ``q``
-        (m, 6) [m]), and the (m,) mask of the rows that have them (an instant off the
-        grid whose reference the nominal model cannot evaluate has none). ``at``: the
-        trials' index into the batch's arrays (``trials``, or the slice they make)."""
+        [s] (a fixed goal's quintic started from the lengths ``q`` (m, 6) [m]) and the
+        (m,) mask of the rows that have them; ``at``: ``trials`` or the slice they make."""
         m = len(trials)
         sel = trials if at is None else at
         out = np.zeros((m, 18))
@@ -215,13 +202,9 @@ class JointRows:
 
     def step(self, observations: ObservationBatch, out: CommandBatch, kp_ki: float,
              threshold: float, saturation: str) -> np.ndarray:
-        """Step every row with finite readings (see the module docstring) into ``out``;
-        returns the rows left to the trials' own steps (readings missing or not
-        finite, a desired row the model cannot give, a result not accepted).
-
-        When every row is finite and the rows are consecutive trials (the common case),
-        the batch's arrays are read and written through one slice instead of by fancy
-        indexing (the same values).
+        """Step every row with finite readings into ``out`` (consecutive trials through
+        one slice of the arrays, the same values); returns the rows left to the trials'
+        own steps (readings not finite, no desired row, a result not accepted).
 
         Args:
             observations: The batch (row ``k`` of trial ``observations.trials[k]``).
@@ -299,6 +282,5 @@ class JointRows:
         return np.flatnonzero(slow)
 
 
-__all__ = ["FK_MAX_CALLS", "GRID_TIME_TOLERANCE", "QUINTIC_PEAK_SPEED", "QUINTIC_SIZE",
-           "JointRows", "JointState", "quintic_row_into", "quintic_rows",
-           "quintic_timing"]
+__all__ = ["GRID_TIME_TOLERANCE", "QUINTIC_SIZE", "JointRows", "JointState", "quintic_row_into",
+           "quintic_rows", "quintic_timing"]

@@ -1,32 +1,23 @@
 """Computed torque on a task: the shared loop of ``cartesian-ctc``, ``vision-ctc``,
 ``leg-edge-ctc`` and ``leg-direction-ctc``.
 
-Each period a :class:`TaskComputedTorque` subclass writes its measurement (the features
-seen, or the legs the visual pose is fitted to) and the reference at the observation's
-time with its rate and acceleration into the input row of its compiled step
-(:meth:`TaskComputedTorque.compiled_inputs`), and the step, one C function
-(:class:`controllers.task_ctc_compiled.CompiledTaskStep`,
-:mod:`controllers.solvers.compiled_task_ctc`), finds the pose and twist for the NOMINAL
-dynamic model, the task's error, Jacobian and ``L_dot tau``, the reference's own motion
-``e_t``, ``e_tt``, solves for the platform acceleration and gives the leg forces held
-over the period. It is the law's only step: off its happy path the law refuses with
-the reason of the row's status (:mod:`controllers.ctc_status`). The numpy step it
-replaced (the tasks' numpy error and Jacobian, an SVD solve, the model's inverse
-dynamics) is the tests' oracle (``tests/controllers/task_ctc_oracles.py``).
+Each period a :class:`TaskComputedTorque` subclass writes its measurement and the
+reference (with its rate and acceleration) into the input row of its compiled step
+(:meth:`TaskComputedTorque.compiled_inputs`, :mod:`controllers.task_ctc_compiled`), and
+one C call gives the pose, the task's error and Jacobian for the NOMINAL model and the
+leg forces held over the period. Off its happy path the law refuses with the reason of
+the row's status (:mod:`controllers.ctc_status`).
 
-The reference is the trajectory of ``context.reference`` (base frame, sampled at the
-observation's time) or, for a fixed goal, a straight line from the pose measured at the
-first step (the pose of a compiled step towards the goal at rest) to the goal pose with
-a quintic timing, slow enough that no leg's nominal speed exceeds the speed limit
-(``smooth_goal``; off: the goal is a step, the error's free response).
-
-The checked readings, goal pose, camera and base points, and that line are
-:mod:`controllers.task_ctc_inputs`' (re-exported here).
+The reference is ``context.reference`` (base frame) or, for a fixed goal, a quintic
+line from the pose measured at the first step to the goal pose, slow enough that no
+leg's nominal speed exceeds the limit (``smooth_goal``; off: a step). The checked
+readings, goal pose, camera and that line are :mod:`controllers.task_ctc_inputs`'.
 """
 
 from __future__ import annotations
 
 from abc import abstractmethod
+from dataclasses import replace
 from typing import Any
 
 import numpy as np
@@ -45,13 +36,8 @@ from controllers.ctc_law import ComputedTorqueLaw
 from controllers.ctc_rows import stale
 from controllers.solvers.saturation import over_limit, zero_acceleration_forces
 from controllers.task_ctc_compiled import CompiledTaskStep
-from controllers.task_ctc_inputs import QUINTIC_PEAK_ACCELERATION as QUINTIC_PEAK_ACCELERATION
-from controllers.task_ctc_inputs import QUINTIC_PEAK_SPEED as QUINTIC_PEAK_SPEED
-from controllers.task_ctc_inputs import camera_and_base_points as camera_and_base_points
 from controllers.task_ctc_inputs import encoder_readings as encoder_readings
-from controllers.task_ctc_inputs import finite_readings as finite_readings
-from controllers.task_ctc_inputs import goal_pose_of as goal_pose_of
-from controllers.task_ctc_inputs import line_to as line_to
+from controllers.task_ctc_inputs import finite_readings, line_to
 from controllers.task_ctc_rows import START, STARTED, VERSION, TaskRows
 from controllers.tasks.feature_kind import BuiltinFeature
 from hexapod.actuation import Actuation
@@ -59,12 +45,10 @@ from hexapod.dynamics import DynamicModel
 
 
 class TaskComputedTorque(ComputedTorqueLaw):
-    """Computed torque on a task (see the module docstring). Subclasses set ``name``,
-    ``features``, ``compiled_kind`` (or make their own compiled step at reset) and
-    implement :meth:`goal_pose` and :meth:`compiled_inputs`.
-
-    The options are :class:`~controllers.ctc_law.ComputedTorqueLaw`'s, on the task error.
-    """
+    """Computed torque on a task (see the module docstring; the options are
+    :class:`~controllers.ctc_law.ComputedTorqueLaw`'s). Subclasses set ``name``,
+    ``features``, ``compiled_kind`` and implement :meth:`goal_pose` and
+    :meth:`compiled_inputs`."""
 
     #: The feature object of the compiled step (:mod:`controllers.solvers.compiled_task_ctc`;
     #: None: the subclass makes its own step at reset).
@@ -81,10 +65,10 @@ class TaskComputedTorque(ComputedTorqueLaw):
         self.force_limit_list = self.force_limit.tolist()
         self.context: ControllerContext | None = None
         self.model: DynamicModel | None = None
-        #: The reference clock (:mod:`controllers.task_ctc_rows`: started, the time at
-        #: which the reference's clock is 0 [s], the reference's version), its own or a
-        #: view of its batch's.
-        self._clock = np.zeros(3)
+        #: (3,) the reference clock (:mod:`controllers.task_ctc_rows`: started, the time
+        #: at which the reference's clock is 0 [s], the reference's version), its own or
+        #: a view of its batch's.
+        self.clock = np.zeros(3)
         self._reference: Any = None  # anything with at(times) and duration, base frame
         self._pose_grid: tuple[Any, np.ndarray] | None = None
         #: The compiled step (None: not reset).
@@ -102,7 +86,7 @@ class TaskComputedTorque(ComputedTorqueLaw):
         self.context = context
         self.model = DynamicModel(context.geometry)
         self._rows = None
-        self._clock = np.zeros(3)
+        self.clock = np.zeros(3)
         self.compiled = None
         self.integral = np.zeros(0)
         self.force_limit = np.asarray(context.geometry.drives.force_limit, dtype=float)
@@ -116,7 +100,7 @@ class TaskComputedTorque(ComputedTorqueLaw):
         """Picklable: the batch's arrays are left out (its own clock kept)."""
         state = self.__dict__.copy()
         state["_rows"] = None
-        state["_clock"] = np.array(self._clock)
+        state["clock"] = np.array(self.clock)
         return state
 
     @property
@@ -133,16 +117,7 @@ class TaskComputedTorque(ComputedTorqueLaw):
     def reference_changed(self) -> None:
         """Count a change of what the reference grid is built from (a batch builds its
         grid again)."""
-        self._clock[VERSION] += 1.0
-
-    @property
-    def clock(self) -> np.ndarray:
-        """(3,) the reference clock (:mod:`controllers.task_ctc_rows`)."""
-        return self._clock
-
-    def adopt_clock(self, clock: np.ndarray) -> None:
-        """Take a view of the batch's clocks (3,) as this trial's (its values there)."""
-        self._clock = clock
+        self.clock[VERSION] += 1.0
 
     @property
     def guess(self) -> tuple[np.ndarray, np.ndarray] | None:
@@ -163,18 +138,12 @@ class TaskComputedTorque(ComputedTorqueLaw):
     def started(self) -> bool:
         """Whether the law follows its reference (a fixed goal's line starts at the
         first step)."""
-        return bool(self._clock[STARTED])
-
-    @property
-    def control_period(self) -> float:
-        """The control period ``dt`` [s] of the trial (the step of the reference's grid)."""
-        assert self.context is not None
-        return float(self.context.dt)
+        return bool(self.clock[STARTED])
 
     @property
     def reference_start(self) -> float:
         """The observation time [s] at which the reference's clock is 0."""
-        return float(self._clock[START])
+        return float(self.clock[START])
 
     def prepare(self, context: ControllerContext) -> None:
         """Per-trial checks and constants of a subclass (nothing by default)."""
@@ -192,13 +161,10 @@ class TaskComputedTorque(ComputedTorqueLaw):
     def batch_inputs(self, rows_batch: TaskRows, X: np.ndarray,
                      observations: ObservationBatch, rows: np.ndarray, trials: np.ndarray,
                      tr: np.ndarray) -> np.ndarray:
-        """:meth:`compiled_inputs` of many trials at once, in its common case (every
-        feature seen, the reference on its grid, all its rows known; the integral
-        action's term is the batch's): writes this period's measurement and reference
-        into the input rows
-        ``X`` (m, n_in) (``q``, ``q_dot`` and the pose guess there already) of the rows
-        in that case and returns their (m,) mask; the others are left to each trial's
-        :meth:`compiled_inputs` (which writes the same numbers). None by default.
+        """:meth:`compiled_inputs` of many trials at once in its common case (every
+        feature seen, the reference on its grid with all its rows known): writes those
+        rows of ``X`` (m, n_in) and returns their (m,) mask; the others are left to
+        each trial's :meth:`compiled_inputs` (the same numbers). None by default.
 
         Args:
             rows_batch: The batch's arrays (its first step's layout, the grids).
@@ -223,12 +189,12 @@ class TaskComputedTorque(ComputedTorqueLaw):
             return
         if ctx.reference is not None:
             self.reference = ctx.reference
-            self._clock[STARTED], self._clock[START] = 1.0, 0.0
+            self.clock[STARTED], self.clock[START] = 1.0, 0.0
             return
-        self.context = ctx = ctx if ctx.goal is goal else _with_goal(ctx, goal)
+        self.context = ctx = ctx if ctx.goal is goal else replace(ctx, goal=goal)
         self.take_goal(goal)
         self.reference = None
-        self._clock[STARTED] = 0.0
+        self.clock[STARTED] = 0.0
 
     def take_goal(self, goal: Goal) -> None:
         """Read what the law regulates to from a fixed goal (raises ContextError)."""
@@ -328,8 +294,7 @@ class TaskComputedTorque(ComputedTorqueLaw):
                 error: np.ndarray, used: np.ndarray | None, over: bool | None = None
                 ) -> np.ndarray:
         """The forces [N] of an accepted step under the saturation strategy; the
-        integral of the task error ``error`` (m,) over the rows ``used`` (None: all)
-        advanced by the period unless a leg's force is over its limit (anti-windup).
+        integral of the task error advanced unless a leg's force is over its limit.
 
         Args:
             forces: (6,) the control law's forces [N].
@@ -365,7 +330,7 @@ class TaskComputedTorque(ComputedTorqueLaw):
                 return found
             assert self.guess is not None  # the pose of the accepted step
             self.reference = line_to(self.context, *self.guess, *self.goal_pose())
-        self._clock[STARTED], self._clock[START] = 1.0, t
+        self.clock[STARTED], self.clock[START] = 1.0, t
         return None
 
     def refuse(self, problem: str, error: np.ndarray | None = None) -> Command:
@@ -380,8 +345,3 @@ def grid_step(tr: float, dt: float) -> int:
     k = round(tr / dt)
     return k if abs(tr - k * dt) < 1e-9 and k >= 0 else -1
 
-
-def _with_goal(context: ControllerContext, goal: Goal) -> ControllerContext:
-    from dataclasses import replace
-
-    return replace(context, goal=goal)

@@ -1,30 +1,17 @@
-"""The compiled path of the task-space computed-torque laws.
+"""The compiled step of the task-space computed-torque laws.
 
 :class:`CompiledTaskStep` fills the input row of the law's compiled step
-(:func:`controllers.solvers.compiled_task_ctc.task_step`: the pose, the dynamics, the
-task, the reference's terms, the solve and the leg forces in one C call), calls it and
-reads the command. Off the happy path it answers why not: the law's measurement has
-no answer (features missing, the legs seen collinear), or the row's ``status``
-(:mod:`controllers.ctc_status`: fewer than six rows or three legs seen, the pose not
-converged from the last one, a singular inverse solve, a non-finite value) or the rank
-test of the task Jacobian says so (:func:`controllers.ctc_rows.refusal` words it). The
-law refuses with that reason: there is no other step (the numpy step it replaced is
-the tests' oracle, ``tests/controllers/task_ctc_oracles.py``).
+(:func:`controllers.solvers.compiled_task_ctc.task_step`, or a plugin feature's of the
+same layouts), calls it and reads the command; off the happy path it answers why not:
+the law's measurement has none, or the row's ``status`` (:mod:`controllers.ctc_status`)
+or the rank test says so (worded by :func:`controllers.ctc_rows.refusal`). A law gives
+it ``compiled_kind`` and ``compiled_fk``, its constants (``compiled_constants(step)``)
+and each period its measurement and reference (``compiled_inputs(step, observation,
+tr, q)``: the rows to use or None and a note, or why there is no measurement).
 
-A law gives the compiled path its kind and pose source (``compiled_kind``,
-``compiled_fk``; or a subclass of the step its own compiled function of the same
-layouts, :meth:`CompiledTaskStep.make_function`, as a plugin feature's step does), its
-constants (``compiled_constants(step)``) and, each period, its
-measurement and reference (``compiled_inputs(step, observation, tr, q)``, returning the
-rows to use or None and a note, or why there is no measurement).
-
-The C function runs on the step's own bound input and output rows
-(:meth:`hexapod.compiled.CompiledFunction.bind`; the input row a row of its batch's
-matrix, :mod:`controllers.task_ctc_rows`): the law writes into
-:attr:`CompiledTaskStep.row` in place (the readings too,
-:func:`controllers.task_ctc_inputs.finite_readings`), the row's ``pose`` block holds the
-pose guess (the law's ``guess``: the last pose found, the home pose before one), and the
-command copies what it keeps of the output row.
+The C function runs on the step's own bound rows (:meth:`hexapod.compiled.
+CompiledFunction.bind`; the input row may be a row of its batch's matrix,
+:mod:`controllers.task_ctc_rows`); the row's ``pose`` block holds the pose guess.
 """
 
 from __future__ import annotations
@@ -37,7 +24,7 @@ from numpy.typing import ArrayLike
 from scipy.linalg.lapack import dsyevd as _eigenvalues
 
 from controllers.base import Command, Observation
-from controllers.ctc_rows import newton_calls, refusal
+from controllers.ctc_rows import FK_MAX_CALLS, newton_calls, refusal
 from controllers.solvers.compiled_task_ctc import FIT_TOLERANCE, FK_TOLERANCE, task_step
 from hexapod.actuation import Actuation
 from hexapod.compiled import BoundCall, CompiledFunction
@@ -47,23 +34,11 @@ from hexapod.workspace import home_pose
 if TYPE_CHECKING:
     from controllers.task_ctc import TaskComputedTorque
 
-#: Calls of the compiled step (3 Newton iterations each) before the step is refused (as
-#: the 50 iterations of :func:`hexapod.fk.forward_kinematics`).
-FK_MAX_CALLS = 16
-
 
 class CompiledTaskStep:
-    """The compiled step of one law (see the module docstring).
-
-    The step evaluates the C function on its own bound input and output rows
-    (:meth:`hexapod.compiled.CompiledFunction.bind`, no copies): the input row
-    :attr:`row` keeps its constants, and its ``pose`` block the pose guess (:attr:`guess`).
-    What the command keeps of the output row is copied (the next call overwrites it).
-
-    A subclass may step another compiled function with the blocks of the built-in steps
-    (:func:`~controllers.solvers.compiled_task_ctc.task_layouts`): it overrides
-    :meth:`make_function` and passes its ``kind`` (a plugin feature's step,
-    :class:`controllers.features.ctc_step.FeatureTaskStep`).
+    """The compiled step of one law (see the module docstring). A subclass may step
+    another function of the built-in steps' layouts (:meth:`make_function`, as
+    :class:`controllers.features.ctc_step.FeatureTaskStep` does).
 
     Args:
         law: The law, reset (its context and nominal model built).
@@ -73,7 +48,7 @@ class CompiledTaskStep:
             ``compiled_fk``); else by the rigid fit (its tolerance).
     """
 
-    #: The input row, its guess flag (1,) and its command count (1,) (:meth:`_bind`).
+    #: The input row, its guess flag (1,) and its command count (1,) (:meth:`adopt`).
     row: np.ndarray
     guessed: np.ndarray
     steps: np.ndarray
@@ -87,7 +62,7 @@ class CompiledTaskStep:
         self.fk: bool = law.compiled_fk if fk is None else bool(fk)
         self.function = self.make_function()
         self.inputs, self.outputs = self.function.inputs, self.function.outputs
-        self._bind(np.zeros(self.function.n_in), np.zeros(1), np.zeros(1, dtype=np.int64))
+        self.adopt(np.zeros(self.function.n_in), np.zeros(1), np.zeros(1, dtype=np.int64))
         g = law.context.geometry
         d = g.drives
         self.set("points", (g.base_points, g.platform_points))
@@ -102,11 +77,9 @@ class CompiledTaskStep:
         self._residual = out.index("fk_residual")
         self._status = out.index("status")
         self._factor = out["factor"]
-        self._error = out["error"]
         self._forces = out["forces"]
-        self._pose = out["pose"]
         #: The output blocks of the pose and of the task error.
-        self.pose_block, self.error_block = self._pose, self._error
+        self.pose_block, self.error_block = out["pose"], out["error"]
         #: Pose residual below which the pose has converged.
         self.tolerance = FK_TOLERANCE if self.fk else FIT_TOLERANCE
         #: What finds the pose (a refusal names it).
@@ -119,10 +92,11 @@ class CompiledTaskStep:
         function of the same blocks; called again on unpickling)."""
         return task_step(self.kind, self.fk, INVERSE_TOLERANCE)
 
-    def _bind(self, row: np.ndarray, guessed: np.ndarray, steps: np.ndarray) -> None:
+    def adopt(self, row: np.ndarray, guessed: np.ndarray, steps: np.ndarray) -> None:
         """Bind the compiled function to the input row ``row`` (n_in,) (used in place:
-        its own, or a row of its batch's matrix), with the flag whether its pose block
-        holds a pose found (1,) and the count of commands (1,) (own or the batch's)."""
+        its own, or a row of its batch's matrix, its values there already), with the
+        flag whether its pose block holds a pose found (1,) and the count of commands
+        (1,) (own or the batch's)."""
         self.bound: BoundCall = self.function.bind(row)
         #: The input row (the bound one: written in place, evaluated without a copy).
         self.row = self.bound.x
@@ -135,14 +109,8 @@ class CompiledTaskStep:
         #: The task rows the last prepared step uses (None: all).
         self.used: np.ndarray | None = None
 
-    def adopt(self, row: np.ndarray, guessed: np.ndarray, steps: np.ndarray) -> None:
-        """Take views of a batch's arrays as the step's input row (n_in,), its guess flag
-        (1,) and its command count (1,) (their values copied there already)."""
-        self._bind(row, guessed, steps)
-
     def __getstate__(self) -> dict[str, object]:
-        """Picklable: the compiled function and its binding (ctypes) are left out, the
-        input row kept; both are rebuilt on unpickling."""
+        """Picklable: the function and its binding (ctypes) are rebuilt on unpickling."""
         state = self.__dict__.copy()
         for key in ("function", "bound", "row", "views", "guessed", "steps"):
             del state[key]
@@ -154,7 +122,7 @@ class CompiledTaskStep:
         assert isinstance(arrays, tuple)
         self.__dict__.update(state)
         self.function = self.make_function()
-        self._bind(*arrays)
+        self.adopt(*arrays)
 
     @property
     def guess(self) -> tuple[np.ndarray, np.ndarray] | None:
@@ -169,7 +137,9 @@ class CompiledTaskStep:
     def guess(self, pose: tuple[np.ndarray, np.ndarray] | None) -> None:
         """Set the next step's pose guess (None: the home pose)."""
         R0, t0 = self.home if pose is None else pose
-        self.set_pose(R0, t0)
+        pose_in = self.views["pose"]
+        pose_in[0:9] = np.asarray(R0).T.ravel()
+        pose_in[9:12] = t0
         self.guessed[0] = 0.0 if pose is None else 1.0
 
     def set(self, name: str, value: ArrayLike) -> None:
@@ -177,18 +147,10 @@ class CompiledTaskStep:
         its values in row-major order, or one value for all)."""
         self.row[self.inputs[name]] = np.ravel(value)
 
-    def set_pose(self, R: np.ndarray, t: np.ndarray) -> None:
-        """The input pose (the FK guess, or the measured pose)."""
-        pose = self.views["pose"]
-        pose[0:9] = np.asarray(R).T.ravel()
-        pose[9:12] = t
-
     def step(self, law: TaskComputedTorque, observation: Observation, tr: float,
              q: np.ndarray, qd: np.ndarray) -> Command | str:
-        """The command of this period, or why there is none.
-
-        ``q`` [m] and ``qd`` [m/s] are written into the row (blocks ``q`` and ``q_dot``;
-        :meth:`step_written` when they are there already)."""
+        """The command of this period, or why there is none (``q`` [m] and ``qd`` [m/s]
+        written into the row first)."""
         self.views["q"][:] = q
         self.views["q_dot"][:] = qd
         return self.step_written(law, observation, tr)
@@ -201,7 +163,7 @@ class CompiledTaskStep:
             return prepared
         rows, note = prepared
         pose_in, y = self.views["pose"], self.bound.y
-        guess = newton_calls(self.bound, pose_in, self._pose, self._residual,
+        guess = newton_calls(self.bound, pose_in, self.pose_block, self._residual,
                              self.tolerance, FK_MAX_CALLS)
         accepted = self.accept(law, y, rows)
         if accepted is None:
@@ -235,9 +197,8 @@ class CompiledTaskStep:
     def accept(self, law: TaskComputedTorque, y: np.ndarray, rows: np.ndarray | None
                ) -> tuple[np.ndarray, float] | None:
         """The task error (of the rows used) and the condition number of an output row
-        ``y`` when it is a command (its status 0: converged, enough rows, solved, every
-        value finite; and full rank), and the pose it found taken as the next guess;
-        None otherwise (the row is left as it is)."""
+        ``y`` when it is a command (status 0 and full rank; its pose then the next
+        guess), else None."""
         if y[self._status] != 0.0:
             return None
         # the squared singular values of the masked Jacobian (LAPACK syevd of L^T L; the
@@ -252,9 +213,9 @@ class CompiledTaskStep:
              ) -> np.ndarray:
         """The task error (of the rows used) of an accepted output row ``y``, its pose
         taken as the next guess."""
-        self.views["pose"][:] = y[self._pose]
+        self.views["pose"][:] = y[self.pose_block]
         self.guessed[0] = 1.0
-        e = y[self._error]
+        e = y[self.error_block]
         return e.copy() if rows is None else e[rows]  # type: ignore[no-any-return]
 
 

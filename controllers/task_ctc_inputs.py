@@ -14,6 +14,7 @@ import numpy as np
 from controllers.base import ControllerContext, Goal, Observation
 from controllers.exceptions import ContextError
 from hexapod.kinematics import Transform, inverse_kinematics
+from hexapod.se3 import log_so3
 from hexapod.trajectory import PoseTrajectory
 
 __all__ = [
@@ -41,7 +42,7 @@ def line_to(context: ControllerContext, R0: np.ndarray, t0: np.ndarray, R1: np.n
         context.geometry, R0, t0)
     T = max(QUINTIC_PEAK_SPEED * float(np.abs(dq).max()) / context.max_speed, 1e-3)
     length = float(np.linalg.norm(t1 - t0))
-    angle = float(np.linalg.norm(_log(R0.T @ R1)))
+    angle = float(np.linalg.norm(log_so3(R0.T @ R1)))
 
     def limits(d: float) -> tuple[float, float]:  # speed and acceleration giving T
         if d <= 0.0:
@@ -52,12 +53,6 @@ def line_to(context: ControllerContext, R0: np.ndarray, t0: np.ndarray, R1: np.n
     w, alpha = limits(angle)
     return PoseTrajectory("line", "quintic", R0, t0, v, a, goal_rotation=R1,
                           goal_translation=t1, angular_speed=w, angular_acceleration=alpha)
-
-
-def _log(R: np.ndarray) -> np.ndarray:
-    from hexapod.se3 import log_so3
-
-    return log_so3(R)  # type: ignore[no-any-return]
 
 
 def encoder_readings(observation: Observation) -> tuple[float, np.ndarray, np.ndarray] | str:

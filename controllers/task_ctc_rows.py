@@ -1,25 +1,19 @@
 """The batch of the task computed-torque laws (``cartesian-ctc``, ``vision-ctc``,
 ``leg-edge-ctc``, ``leg-direction-ctc``, a plugin feature's ``<name>-ctc``) as arrays.
 
-The batch owns its trials' state (:class:`TaskRows`, built from the trials' instances at
-the first batched step after a reset): the compiled step's input matrix ``X``
-(n, n_in), each row's constants written once at reset and its pose guess in its ``pose``
-block, whether that guess is a pose found, the command counts, the reference clocks
-(started, ``t0``, the reference's version), the force limits (n, 6) and the references
-on the control grid stacked (n, S, w) with the grid steps whose task rows are all known
-(n, S). Each instance's own rows are views of these arrays (its compiled step's input
-row a row of ``X``), so its per-trial step (:meth:`~controllers.task_ctc.
-TaskComputedTorque.step_trial`, which refuses with the reason) and the batch read and
-write the same state.
+:class:`TaskRows` (built at the first batched step after a reset) owns its trials' state:
+the input matrix ``X`` (n, n_in) with each row's constants and pose guess, the guess
+flags, command counts, reference clocks, force limits, integrals and the references on
+the control grid (n, S, w) with the steps whose task rows are all known. Each instance's
+state is views of these arrays, so its per-trial step (which refuses with the reason)
+and the batch share it.
 
-One batched step (:meth:`TaskRows.step`): the readings, the features (the law's
-``batch_inputs``) and the references are written into the rows by fancy indexing, the
-compiled step evaluates every row in one C call (:func:`~controllers.ctc_rows.
-evaluate_rows`), the rows are screened at once (:func:`~controllers.ctc_rows.
-accepted_rows`), and the forces, error norms and next guesses are written as array
-slices. Python per row only for rare rows: a measurement not in the common case (a
-feature hidden, an instant off the grid), a reference grid built (once per reference),
-forces over a limit.
+One batched step (:meth:`TaskRows.step`): readings, features (the law's
+``batch_inputs``) and references written by fancy indexing, one C call
+(:func:`~controllers.ctc_rows.evaluate_rows`), the rows screened at once
+(:func:`~controllers.ctc_rows.accepted_rows`), the results written as slices; Python per
+row only for rare rows (a feature hidden, an instant off the grid, a grid built, forces
+over a limit).
 """
 
 from __future__ import annotations
@@ -29,16 +23,13 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from controllers.ctc_rows import accepted_rows, evaluate_rows, norms, over_limits
+from controllers.ctc_rows import FK_MAX_CALLS, accepted_rows, evaluate_rows, norms, over_limits
 from controllers.data import CommandBatch, ObservationBatch
 
 if TYPE_CHECKING:
     from controllers.task_ctc import TaskComputedTorque
     from controllers.task_ctc_compiled import CompiledTaskStep
 
-#: Calls of the compiled step (3 Newton iterations each) before the step is refused (as
-#: the 50 iterations of :func:`hexapod.fk.forward_kinematics`).
-FK_MAX_CALLS = 16
 #: The columns of a trial's reference clock (3,): started (1.0 or 0.0), the observation
 #: time at which the reference's clock is 0 [s], and the reference's version (counts
 #: its changes: a grid built for an older version is built again).
@@ -76,14 +67,14 @@ class TaskRows:
         self.steps = np.zeros(n, dtype=np.int64)
         self.clock = np.stack([law.clock for law in laws])
         self.limit = np.stack([law.force_limit for law in laws])
-        self.dt = np.array([law.control_period if law.context is not None else 1.0
+        self.dt = np.array([float(law.context.dt) if law.context is not None else 1.0
                             for law in laws])
         #: Rows without integral action, and each trial's ``int e dt`` of its task rows.
         self.plain = np.array([not law.integral_gain for law in laws], dtype=bool)
         size = 0 if self.step_of is None else self.step_of.views["integral"].size
         self.integral = np.zeros((n, size))
         for k, law in enumerate(laws):
-            law.adopt_clock(self.clock[k])
+            law.clock = self.clock[k]
             step = law.compiled
             if step is None or not self.usable[k]:
                 continue
@@ -146,8 +137,8 @@ class TaskRows:
 
     def step(self, observations: ObservationBatch, out: CommandBatch, threshold: float
              ) -> np.ndarray:
-        """Step every row of a started trial with finite readings (see the module
-        docstring) into ``out``; returns the rows left to the trials' own steps.
+        """Step every row of a started trial with finite readings into ``out``; returns
+        the rows left to the trials' own steps.
 
         Args:
             observations: The batch (row ``k`` of trial ``observations.trials[k]``).
@@ -238,10 +229,9 @@ class TaskRows:
 
     def _integrate(self, ta: np.ndarray, E: np.ndarray, over: np.ndarray,
                    used: dict[int, np.ndarray]) -> None:
-        """Advance ``int e dt`` of the accepted rows' trials ``ta`` with integral action
-        by their task errors ``E`` (m, k), the non-finite ones as 0 and only the rows
-        used (``used``: by accepted row, where not all), held where a force is ``over``
-        its limit (anti-windup; as the law's ``limited``, the same numbers)."""
+        """Advance ``int e dt`` of the trials ``ta`` with integral action by their task
+        errors ``E`` (m, k) over the rows ``used``, held where a force is ``over`` its
+        limit (as the law's ``limited``: the same numbers)."""
         go = np.flatnonzero(~self.plain[ta] & ~over)
         if not len(go):
             return
@@ -253,4 +243,4 @@ class TaskRows:
         self.integral[ta[go]] += step
 
 
-__all__ = ["FK_MAX_CALLS", "START", "STARTED", "VERSION", "TaskRows", "grid_steps"]
+__all__ = ["START", "STARTED", "VERSION", "TaskRows", "grid_steps"]

@@ -15,21 +15,16 @@ built-ins do.
 
 from __future__ import annotations
 
-import math
 from typing import ClassVar
 
 import numpy as np
 
-from controllers.base import ControllerContext, Goal, Observation
-from controllers.cartesian_ctc import all_seen, directions_seen
+from controllers.base import ControllerContext, Goal
 from controllers.exceptions import ContextError
 from controllers.feature_ctc import LegDirectionCTC
 from controllers.features.ctc_step import FeatureTaskStep
 from controllers.tasks import Task
 from controllers.tasks.leg_feature import FeatureTask, LegFeature
-
-#: A unit vector standing in for a hidden leg's direction (its rows are not used).
-_DUMMY = np.array([0.0, 0.0, 1.0])
 
 
 class FeatureComputedTorque(LegDirectionCTC):
@@ -82,49 +77,11 @@ class FeatureComputedTorque(LegDirectionCTC):
         self._grid = None
         self.reference_changed()
 
-    def features_seen(self, observation: Observation
-                      ) -> tuple[np.ndarray, np.ndarray | None, np.ndarray] | str:
-        u, legs = directions_seen(observation.directions, observation.normals,
-                                  observation.direction_visible, observation.edge_visible)
-        u = np.where(legs[:, None], u, _DUMMY)
-        return u, None, np.repeat(legs, self.feature.rows)
-
-    def compiled_features(self, observation: Observation
-                          ) -> tuple[np.ndarray, np.ndarray | None, np.ndarray] | str:
-        """Every direction given and seen: them, every row; else :meth:`features_seen`."""
-        if observation.directions is not None:
-            u = np.asarray(observation.directions, dtype=float)
-            if all_seen(observation.direction_visible) and math.isfinite(u.sum()):
-                return u, None, self._rows_all
-        return self.features_seen(observation)
-
     def prepare(self, context: ControllerContext) -> None:
         """The built-in checks, and the mask of every row."""
         super().prepare(context)
-        self._rows_all = np.ones(6 * self.feature.rows, dtype=bool)
-        self._rows_all.flags.writeable = False
-
-    def compiled_inputs(self, step: object, observation: Observation, tr: float,
-                        q: np.ndarray) -> tuple[np.ndarray | None, str | None] | str:
-        """As the built-in law's, every row in use when every leg is seen."""
-        feats = self.compiled_features(observation)
-        if isinstance(feats, str):
-            return feats
-        u, _, rows = feats
-        row, inputs = step.row, step.inputs  # type: ignore[attr-defined]
-        row[inputs["directions"]] = u.ravel()
-        ref, known = (self._taught_reference() if self.reference is None
-                      else self.compiled_reference(tr))
-        every: np.ndarray | None = None
-        if known is None and rows is self._rows_all:
-            row[inputs["mask"]] = 1.0
-        else:
-            if known is not None:
-                rows = rows & known
-            row[inputs["mask"]] = rows.astype(float)
-            every = rows
-        row[inputs["reference_features"]] = ref
-        return every, None
+        self.every_rows = np.ones(6 * self.feature.rows, dtype=bool)
+        self.every_rows.flags.writeable = False
 
     def make_task(self, desired: np.ndarray) -> Task:
         return FeatureTask(self.feature, np.asarray(desired).reshape(6, self.feature.rows))

@@ -1,24 +1,12 @@
 """The computed-torque step of a :class:`~controllers.tasks.leg_feature.LegFeature` as one
-compiled function, composed like the built-in task steps
-(:mod:`controllers.solvers.compiled_task_ctc`) from the same symbolic parts:
-
-- the pose from the encoder lengths (:func:`~controllers.solvers.compiled_ctc.
-  sx_encoder_pose`, Newton steps from the input pose; the length residual out);
-- ``K``, the twist ``K^-1 q_dot``, ``M``, ``h`` (:func:`~controllers.solvers.compiled_ctc.
-  sx_model_state`), the twist brought to the camera frame;
-- per leg the feature's error and interaction (:meth:`LegFeature.block`), ``L_dot tau``
-  (:attr:`LegFeature.second_order`) and the reference's ``e_t``, ``e_tt``
-  (:attr:`LegFeature.reference`), all by automatic differentiation of the feature;
-- the desired ``e_ddot`` less the ``integral`` term (the law's integral action),
-  ``tau_dot`` the least-squares solution over the rows whose ``mask`` is 1, the leg
-  forces with the drives' terms (:func:`~controllers.solvers.compiled_task_ctc.
-  sx_task_outputs`, the built-in steps' own).
-
-The input and output layouts are those of the built-in direction kind
-(:func:`controllers.solvers.compiled_task_ctc.task_layouts`) with ``m = 6 rows`` task
-rows, so the step is driven by :class:`~controllers.task_ctc_compiled.CompiledTaskStep`
-(:class:`FeatureTaskStep` gives it the feature's function), its integral action and
-saturation strategies included.
+compiled function, built from the same symbolic parts as the built-in task steps
+(:mod:`controllers.solvers.compiled_task_ctc`): the encoders' pose and the model's state
+(:mod:`controllers.solvers.compiled_ctc`), per leg the feature's error, interaction,
+``L_dot tau`` and the reference's ``e_t``, ``e_tt`` (by automatic differentiation of the
+feature), and the built-in steps' solve and forces (:func:`~controllers.solvers.
+compiled_task_ctc.sx_task_outputs`). Its layouts are the built-in direction kind's with
+``6 rows`` task rows, so :class:`~controllers.task_ctc_compiled.CompiledTaskStep` drives
+it (:class:`FeatureTaskStep` gives it the feature's function).
 """
 
 from __future__ import annotations

@@ -1,45 +1,25 @@
 """The joint-space computed-torque step as one compiled CasADi function (C, ctypes).
 
-:class:`~controllers.computed_torque.ComputedTorqueController` spends its time in
-Python and numpy around several small compiled calls (forward kinematics, the
-dynamics' terms twice, the inverse dynamics). This module composes the SAME symbolic
-expressions (:func:`hexapod.fk.newton_function` and
-:func:`hexapod.dynamics.compiled.expressions`) into one function, generated to C by
-:class:`hexapod.compiled.CompiledFunction`:
+The SAME symbolic expressions as :func:`hexapod.fk.newton_function` and
+:func:`hexapod.dynamics.compiled.expressions`, composed into one function generated to C
+by :class:`hexapod.compiled.CompiledFunction`:
 
-- forward kinematics of the encoder lengths: ``FK_CALLS`` calls of the compiled
-  Newton steps (``FK_CALLS * ITERATIONS_PER_CALL`` iterations) from the previous pose,
-  with the length residual out so that the caller can check convergence (and call
-  again from the pose reached);
-- ``K`` at that pose, the twist ``tau = K^-1 q_dot`` and the bias ``K_dot tau``;
-- the desired leg acceleration ``a* = q_ddot* + Kd (q_dot* - K tau) + Kp (q* - q)``,
-  ``tau_dot = K^-1 (a* - K_dot tau)`` and the leg acceleration ``a = K tau_dot +
-  K_dot tau``;
-- the mechanism's forces ``K^-T (M tau_dot + h)`` (with the residual of that solve, as
-  :meth:`hexapod.dynamics.DynamicModel.inverse_batch` checks it) plus the drives'
-  reflected inertia, viscous and Coulomb terms (:func:`~controllers.solvers.
-  computed_torque.drive_forces`).
+- forward kinematics of the encoder lengths: ``FK_CALLS`` calls of the Newton steps from
+  the previous pose, the length residual out (the caller calls again from the pose
+  reached until it is below :data:`FK_TOLERANCE`);
+- ``K`` there, the twist ``tau = K^-1 q_dot`` and the bias ``K_dot tau``;
+- ``a* = q_ddot* + Kd (q_dot* - K tau) + Kp (q* - q)``, ``tau_dot = K^-1 (a* - K_dot
+  tau)``, the leg acceleration ``a = K tau_dot + K_dot tau``;
+- the forces ``K^-T (M tau_dot + h)`` (``solved`` 1.0 when that solve's residual is below
+  the tolerance) plus the drives' reflected inertia, viscous and Coulomb terms.
 
-It is the law's only step: off the happy path (FK not converged, a rank-deficient
-``K``, a singular inverse solve, a non-finite value) the caller refuses with the reason
-its status outputs give (:func:`controllers.ctc_rows.refusal`); the numpy step it
-replaced is the tests' oracle (``tests/controllers/ctc_oracles.py``).
-
-Input row (:data:`INPUTS`): the ``pose`` guess ``R`` (9, column-major), ``t`` (3);
-``q``, ``q_dot`` (6 each); ``desired``: ``q*``, ``q_dot*``, ``q_ddot*`` (3 x 6); the
-``points`` ``A``, ``E`` (2 x 6 x 3, point after point); the 19 inertial ``params``
-(:func:`hexapod.dynamics.compiled.parameter_row`); the drives' ``rotor`` inertia,
-``viscous`` and ``coulomb`` coefficients (6 each); the ``gains`` ``Kp``, ``Kd``.
-
-Output (:data:`OUTPUTS`): the ``pose`` ``R`` (9, column-major), ``t`` (3), ``factor``
-``K^T K`` (6 x 6, symmetric: its eigenvalues are the squared singular values of ``K``,
-for the rank test), the ``forces`` (6) [N], the max absolute FK length residual
-``fk_residual`` [m] (the caller calls again from the pose reached while it is not below
-its tolerance, as :func:`hexapod.fk.forward_kinematics` does), and ``solved``: 1.0 when
-the inverse solve's residual is below ``inverse_tolerance`` relative to its right-hand
-side (else 0.0; NaN compares false); the ``status`` of the step (:func:`sx_status`:
-0, or the code of :class:`controllers.ctc_status.Status` that says why it is not a
-command, whose reason :func:`controllers.ctc_rows.refusal` words).
+Input row :data:`INPUTS`: ``pose`` (``R`` column-major, ``t``), ``q``, ``q_dot``,
+``desired`` (``q*``, ``q_dot*``, ``q_ddot*``), ``points`` (``A``, ``E``), the 19 inertial
+``params``, the drives' ``rotor``, ``viscous``, ``coulomb`` and the ``gains`` ``Kp``,
+``Kd``. Output row :data:`OUTPUTS`: ``pose``, ``factor`` ``K^T K`` (for the rank test),
+``forces`` [N], ``fk_residual`` [m], ``solved`` and ``status`` (:func:`sx_status`: 0 or
+the :class:`controllers.ctc_status.Status` the caller's refusal words). The numpy step
+this replaced is the tests' oracle (``tests/controllers/ctc_oracles.py``).
 """
 
 from __future__ import annotations

@@ -1,63 +1,37 @@
 """The task-space computed-torque step as one compiled CasADi function per feature.
 
-:class:`~controllers.task_ctc.TaskComputedTorque` (``cartesian-ctc``, ``vision-ctc``,
-``leg-edge-ctc``, ``leg-direction-ctc``) evaluates its task, the nominal model and the
-solver in Python and numpy around many small calls. This module composes the SAME
-symbolic definitions into one function per feature (a
-:class:`~controllers.tasks.feature_kind.BuiltinFeature` object, which owns its task's
-blocks: :meth:`~controllers.tasks.feature_kind.BuiltinFeature.sx_ctc_task`), generated to C by
-:class:`hexapod.compiled.CompiledFunction`, as :mod:`controllers.solvers.compiled_ctc`
-does for the joint-space law:
+The SAME symbolic definitions as the tasks and the nominal model, composed into one C
+function per :class:`~controllers.tasks.feature_kind.BuiltinFeature` (which owns its
+task's blocks, :meth:`~controllers.tasks.feature_kind.BuiltinFeature.sx_ctc_task`), as
+:mod:`controllers.solvers.compiled_ctc` does for the joint-space law:
 
-- the pose: :func:`hexapod.fk.newton_function` from a guess on the encoder lengths
-  (``fk=True``; the length residual out, the caller calls again from the pose reached
-  until it converges), or (``fk=False``, ``vision-ctc``) the rigid fit of the nominal
-  platform points to the joints ``B_i = A_i + q_i u_i`` of the six legs seen (camera
-  frame), by Newton steps on the rotation from a guess (:func:`_rigid_fit`; the last
-  step's size out, the caller calls again until it is below its tolerance), brought to
-  the base frame through the estimated camera pose;
-- ``K`` there, the twist ``tau = K^-1 q_dot``, ``M``, ``h`` and ``K_dot tau``
-  (:func:`hexapod.dynamics.compiled.expressions`);
-- the task's error, Jacobian and ``L_dot tau`` (the blocks of :mod:`controllers.tasks`:
-  :func:`~controllers.tasks.platform_pose.pose_error` and its state rate, the edge and
-  direction blocks and their second-order functions), brought to the model's twist as
-  :func:`~controllers.solvers.computed_torque.task_in_model_twist` does, and the
-  reference's ``e_t``, ``e_tt`` (the tasks' :func:`~controllers.tasks.base.
-  reference_function`);
-- the solver: ``tau_dot`` the least-squares solution over the rows whose ``mask`` is 1
-  (QR of the masked Jacobian; a plain solve of the square pose task), then the leg
-  forces ``K^-T (M tau_dot + h)`` plus the drives' reflected inertia, viscous and Coulomb
-  terms at the velocity the legs reach over the period ``hold``
-  (:meth:`~controllers.solvers.computed_torque.ComputedTorqueSolver.forces`).
+- the pose: Newton steps of the forward kinematics of the encoder lengths from a guess
+  (``fk=True``), or (``fk=False``, ``vision-ctc``) the rigid fit of the nominal
+  platform points to the joints ``B_i = A_i + q_i u_i`` of the legs seen (camera frame,
+  :func:`_rigid_fit`), brought to the base frame; its residual (or last step) is out, the
+  caller calls again from the pose reached until it converges;
+- ``K``, the twist ``tau = K^-1 q_dot``, ``M``, ``h`` and ``K_dot tau``;
+- the task's error, Jacobian and ``L_dot tau`` brought to the model's twist (as
+  :func:`~controllers.solvers.computed_torque.task_in_model_twist`), and the reference's
+  ``e_t``, ``e_tt``;
+- ``tau_dot`` the least-squares solution over the rows whose ``mask`` is 1 (a plain solve
+  of the square pose task), then the leg forces ``K^-T (M tau_dot + h)`` plus the
+  drives' terms at the velocity the legs reach over the period ``hold``.
 
-It is the laws' only step: off the happy path they refuse with the reason of the
-output ``status`` (:mod:`controllers.ctc_status`: too few rows in the ``mask`` or legs
-``seen``, the pose not converged, a non-finite value, a singular inverse solve) or of
-the rank test of the output ``factor`` (whose eigenvalues are the squared singular
-values of the Jacobian, by LAPACK in the caller). The numpy step they replaced is the
-tests' oracle (``tests/controllers/task_ctc_oracles.py``).
+Off the happy path the laws refuse with the reason of the output ``status``
+(:mod:`controllers.ctc_status`) or of the rank test of the output ``factor`` ``L^T L``
+(by LAPACK in the caller); the numpy step this replaced is the tests' oracle
+(``tests/controllers/task_ctc_oracles.py``).
 
-Inputs (:func:`layout`): ``pose`` (``R`` column-major, ``t``: the FK guess, or the
-measured pose), ``q``, ``q_dot`` (6 each), ``points`` (``A`` then ``E``, base frame,
-point after point, 2 x 6 x 3), the 19 inertial ``params``, the drives' ``rotor``,
-``viscous``, ``coulomb`` (6 each), ``gains`` (``Kp``, ``Kd``, ``hold`` [s]); for the
-pose the ``reference`` (:data:`REFERENCE`: ``R*`` row-major, ``t*``, twist, twist
-rate); for the leg features the measured features (for the edge normals the ``normals``
-(6 x 2 x 3), the leg ``directions`` (6 x 3) and ``of_normals``, 1.0 to take the
-directions of the normals instead, ``unit(n_2 x n_1)``; for the directions the
-``directions`` (6 x 3)), the task frame's ``base`` points ``A_i`` (6 x 3), the row
-``mask`` (1 or 0), the ``frame`` from the base (``R`` row-major, ``p``: 12) and the
-``reference_features``: the desired features, their rate and their acceleration (``m``
-each); last, the ``integral`` term (``m``: ``Kp Ki`` times the integral of the error,
-subtracted from the desired ``e_ddot``; zeros without integral action).
-
-Outputs: ``pose`` (12, as the input), ``K`` (36, column-major), ``fk_residual`` (max
-absolute length residual [m]), ``forces`` (6) [N], ``solved`` (1.0 when the inverse
-solve's residual is below the tolerance, as :mod:`controllers.solvers.compiled_ctc`),
-``error`` (m), ``factor`` (6 x 6: ``L^T L`` of the masked model Jacobian, whose
-eigenvalues are its squared singular values) and ``status``
-(:func:`~controllers.solvers.compiled_ctc.sx_status`: 0 or a code of
-:class:`controllers.ctc_status.Status`).
+Inputs (:func:`layout`): :data:`COMMON_INPUTS` (``pose`` guess ``R`` column-major and
+``t``; ``q``, ``q_dot``; ``points`` ``A`` then ``E``; the 19 ``params``; the drives'
+``rotor``, ``viscous``, ``coulomb``; ``gains`` ``Kp``, ``Kd``, ``hold`` [s]), the
+feature's blocks (the pose ``reference``, :data:`REFERENCE`; or the measured
+``normals``, ``directions``, ``of_normals``, and for a camera task ``base``, ``mask``,
+``frame`` (``R`` row-major, ``p``) and ``reference_features``: desired features, rate,
+acceleration), last the ``integral`` term (``Kp Ki int e dt``, subtracted from the
+desired ``e_ddot``). Outputs (:func:`task_layouts`): ``pose``, ``K``, ``fk_residual``,
+``forces`` [N], ``solved``, ``error``, ``factor`` and ``status``.
 """
 
 from __future__ import annotations

@@ -24,7 +24,8 @@ from controllers.cartesian_ctc import CartesianCTC, VisionCTC, directions_seen
 from controllers.feature_ctc import FeatureCTC
 from controllers.solvers.compiled_task_ctc import REFERENCE
 from controllers.solvers.computed_torque import task_in_model_twist
-from controllers.task_ctc import TaskComputedTorque, line_to
+from controllers.task_ctc import TaskComputedTorque
+from controllers.task_ctc_inputs import line_to
 from controllers.tasks import PlatformPoseTask, Task, TaskState
 from hexapod.fk import forward_kinematics
 from hexapod.kinematics import Transform
