@@ -4,11 +4,12 @@ Runs the same trials of a scenario (default: seed 003's convergence study) throu
 engines of :func:`benchmarks.sim.run_trials`, in this process, alternately, several
 times: the per-trial path (one controller object and one ``step`` call per trial and
 period) and the batched engine (every trial as arrays). A trial-step is one period of
-one trial (measure, command, integrate, forward kinematics); the time is the whole run
-(trial set-up included) divided by the trial-steps, the median over the repetitions,
-in CPU time of this process (``time.process_time``: other processes on a shared
-machine disturb it less than the wall clock). The rows of both engines are checked
-equal on the way.
+one trial (measure, command, integrate, forward kinematics), every period the loop
+stepped (a trajectory task steps each trial to its end, whenever it converged); the
+time is the whole run (trial set-up included) divided by the trial-steps, the median
+over the repetitions, in CPU time of this process (``time.process_time``: other
+processes on a shared machine disturb it less than the wall clock). The rows of both
+engines are checked equal on the way.
 
 The default batch is one work unit of ``hexapod-bench run NAME --workers 2`` (the batched
 engine's per-period overhead is shared by the trials of a unit, so a smaller batch costs
@@ -104,8 +105,19 @@ def _breakdown(sc: object, controller: int, trials: int) -> tuple[int, float, di
     finally:
         for owner, name, f in reversed(saved):
             setattr(owner, name, f)
-    steps = sum(int(r["steps"]) + 1 for r in rows)
+    steps = trial_steps(sc, rows)
     return steps, cpu, spent
+
+
+def trial_steps(sc: Any, rows: list[dict]) -> int:
+    """The trial-steps of a run: the periods the loop stepped. A fixed-duration task (a
+    trajectory) steps every trial ``max_steps`` periods, except one that failed, which
+    stops where it failed; its row's ``steps`` is the period from which it stayed within
+    tolerance (a failed trial was out of tolerance when it failed, or close before)."""
+    n = int(sc.task.max_steps)
+    if not getattr(sc.task, "fixed_duration", False):
+        return sum(int(r["steps"]) + 1 for r in rows)
+    return sum(n if r.get("converged") else min(n, int(r["steps"]) + 1) for r in rows)
 
 
 def _same(a: list[dict], b: list[dict]) -> bool:
@@ -151,7 +163,7 @@ def main(argv: Sequence[str] | None = None) -> int:
             for engine in ("per-trial", "batched"):
                 cpu, _wall, rows[engine] = _run(sc, c, trials, engine)
                 times[engine].append(cpu)
-        steps = sum(int(r["steps"]) + 1 for r in rows["batched"])
+        steps = trial_steps(sc, rows["batched"])
         per = 1e6 * float(np.median(times["per-trial"])) / steps
         bat = 1e6 * float(np.median(times["batched"])) / steps
         out.write(f"| {spec.label} | {steps} | {per:.1f} | {bat:.1f} | {per / bat:.1f}x | "

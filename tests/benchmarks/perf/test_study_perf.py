@@ -42,3 +42,31 @@ def test_the_breakdown_accounts_for_the_whole_run(capsys: pytest.CaptureFixture[
         assert parts == pytest.approx(rows["total"][c], abs=0.02 * len(rows))
         assert all(v[c] >= 0 for k, v in rows.items() if not k.startswith("other"))
         assert rows["controller step_batch"][c] > 0 and rows["observation (C)"][c] > 0
+
+
+def test_trial_steps_count_the_periods_the_loop_stepped() -> None:
+    """A fixed-duration task steps a converged trial to its end, whatever period its row's
+    ``steps`` names; the count of a 3-trial run equals the rows the controller stepped."""
+    import controllers  # noqa: F401 - registers the built-ins
+    from benchmarks.sim import run_trials
+    from benchmarks.study.calibration import calibration_hook
+    from benchmarks.study.scenario import load_scenario
+    from controllers.tracking import TrackingController
+
+    sc = load_scenario("paccot2008-tracking").with_overrides(
+        trials=3, controllers=["leg-edge-ctc"], max_steps=40).expand()[0]
+    assert sc.task.fixed_duration
+    stepped = [0]
+    original = TrackingController.step_batch
+
+    def counting(self: TrackingController, observations: object) -> object:
+        stepped[0] += len(observations)  # type: ignore[arg-type]
+        return original(self, observations)  # type: ignore[arg-type]
+
+    TrackingController.step_batch = counting  # type: ignore[method-assign,assignment]
+    try:
+        rows = [r.row for r in run_trials(sc, 0, [0, 1, 2], 0,
+                                          calibrate=calibration_hook(sc), engine="batched")]
+    finally:
+        TrackingController.step_batch = original  # type: ignore[method-assign]
+    assert study.trial_steps(sc, rows) == stepped[0]
