@@ -12,7 +12,10 @@ iterate and the fallbacks to the QP law. A controller may be given options as
 the global-model variants of the predictive controllers are timed too. With
 ``--hidden`` one edge of leg 2 (and the direction of leg 2) is hidden in every
 observation: the laws' hidden-feature path (zero-weight rows of the compiled core, the
-leg's direction from the estimate).
+leg's direction from the estimate). With ``--arrays`` a second column times the same
+observations through the controller's batch path (``step_arrays`` on a batch of one, the
+rows it leaves stepped by their instance): what a lone row would cost if the per-trial
+step were only the batch step.
 """
 
 from __future__ import annotations
@@ -28,6 +31,7 @@ import numpy as np
 
 from controllers import registry
 from controllers.base import ControllerContext, Goal, Observation
+from controllers.data import CommandBatch, ObservationBatch
 from hexapod import deltalab, legs_in_frame, sample_poses
 from vision.cameras import Camera, front_camera, omni_camera
 from vision.legs import leg_edges
@@ -56,6 +60,8 @@ class StepTiming:
         iterations: Mean SQP iterations per step (predictive controllers; else NaN).
         unconverged: Steps that applied an unconverged SQP iterate (predictive).
         fallbacks: Steps that fell back to the QP law (predictive; else 0).
+        arrays_us: Median time per step through the batch path on a batch of one [us]
+            (``arrays``; else NaN).
     """
 
     name: str
@@ -66,6 +72,7 @@ class StepTiming:
     iterations: float = float("nan")
     unconverged: int = 0
     fallbacks: int = 0
+    arrays_us: float = float("nan")
 
 
 def parse_variant(spec: str) -> tuple[str, dict[str, object]]:
@@ -102,12 +109,14 @@ def _observation(camera: Camera, geometry, R: np.ndarray, t: np.ndarray, time_s:
 
 
 def time_controllers(names: list[str] | None = None, steps: int = 5000, camera: str = "front",
-                     seed: int = 0, repeats: int = 5, hidden: bool = False) -> list[StepTiming]:
+                     seed: int = 0, repeats: int = 5, hidden: bool = False,
+                     arrays: bool = False) -> list[StepTiming]:
     """Median time per ``step`` of each controller over ``steps`` calls.
 
     The controllers are interleaved ``repeats`` times (``steps / repeats`` calls each
     time) so that a burst of load on the machine affects them alike. ``hidden``: edge
-    (2, 0) and direction 2 hidden in every observation.
+    (2, 0) and direction 2 hidden in every observation. ``arrays``: also time the batch
+    path on a batch of one (another instance of each controller, interleaved alike).
     """
     geo = deltalab()
     cam = front_camera(geo) if camera == "front" else omni_camera(geo)
@@ -126,13 +135,16 @@ def time_controllers(names: list[str] | None = None, steps: int = 5000, camera: 
     names = list(names or [*registry.names(), *DEFAULT_VARIANTS])
     if "joint-space" not in names:
         names.append("joint-space")
-    controllers = {}
+    controllers: dict[str, Any] = {}
+    batched: dict[str, Any] = {}
     for name in names:
         base_name, options = parse_variant(name)
-        ctrl = registry.create(base_name, **options)
-        ctrl.reset(ControllerContext(base, geo, cam, 0.02, goal))
-        controllers[name] = ctrl
+        for into in (controllers, batched) if arrays else (controllers,):
+            ctrl = registry.create(base_name, **options)
+            ctrl.reset(ControllerContext(base, geo, cam, 0.02, goal))
+            into[name] = ctrl
     samples: dict[str, list[float]] = {n: [] for n in names}
+    array_samples: dict[str, list[float]] = {n: [] for n in names}
     refused = dict.fromkeys(names, 0)
     per_round = max(steps // repeats, 1)
     n_obs = len(observations)
@@ -147,6 +159,8 @@ def time_controllers(names: list[str] | None = None, steps: int = 5000, camera: 
                 out.append(clock() - t0)
                 if cmd.reason is not None:
                     refused[name] += 1
+            if name in batched:
+                _time_arrays(batched[name], observations, per_round, array_samples[name])
     ref = statistics.median(samples["joint-space"]) * 1e6
     result = []
     for name in names:
@@ -158,8 +172,27 @@ def time_controllers(names: list[str] | None = None, steps: int = 5000, camera: 
             timing.iterations = stats.total_sqp_iterations / stats.steps
             timing.unconverged = stats.unconverged
             timing.fallbacks = stats.fallbacks
+        if array_samples[name]:
+            timing.arrays_us = float(np.median(array_samples[name])) * 1e6
         result.append(timing)
     return result
+
+
+def _time_arrays(ctrl: Any, observations: list[Observation], steps: int,
+                 out: list[float]) -> None:
+    """Append the times [s] of ``steps`` steps of ``ctrl`` through its batch path on a
+    batch of one (``step_arrays``, then the rows it leaves by their instance)."""
+    clock = time.perf_counter
+    for k in range(steps):
+        obs = observations[k % len(observations)]
+        t0 = clock()
+        batch = ObservationBatch.of(obs)
+        if batch is None:
+            raise ValueError(f"{ctrl.name}: the benchmark's observation is malformed")
+        cmds = CommandBatch.zeros(1, ctrl.actuation)
+        ctrl.step_rows(batch, ctrl.step_arrays(batch, cmds), cmds)
+        cmds.command(0)
+        out.append(clock() - t0)
 
 
 def format_timings(timings: list[StepTiming], camera: str, hidden: bool = False) -> str:
@@ -168,13 +201,17 @@ def format_timings(timings: list[StepTiming], camera: str, hidden: bool = False)
     lines = [f"controller step time, reference robot, {camera} camera, {seen}",
              f"{'controller':<32} {'median us':>10} {'p95 us':>9} {'x joint':>8} "
              f"{'budget us':>10} {'refused':>8} {'SQP it':>7} {'unconv':>7} {'fallback':>8}"]
+    arrays = any(t.arrays_us == t.arrays_us for t in timings)
+    if arrays:
+        lines[1] += f" {'arrays us':>10}"
     for t in timings:
         budget = BUDGET_US.get(t.name)
         mpc = t.iterations == t.iterations  # not NaN
         lines.append(f"{t.name:<32} {t.median_us:>10.1f} {t.p95_us:>9.1f} {t.ratio:>8.1f} "
                      f"{'' if budget is None else f'{budget:.0f}':>10} {t.refused:>8} "
                      f"{f'{t.iterations:.2f}' if mpc else '':>7} "
-                     f"{t.unconverged if mpc else '':>7} {t.fallbacks if mpc else '':>8}")
+                     f"{t.unconverged if mpc else '':>7} {t.fallbacks if mpc else '':>8}"
+                     + (f" {t.arrays_us:>10.1f}" if arrays else ""))
     return "\n".join(lines)
 
 
@@ -190,9 +227,11 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--hidden", action="store_true",
                         help="hide edge (2, 0) and direction 2 in every observation")
+    parser.add_argument("--arrays", action="store_true",
+                        help="also time each controller's batch path on a batch of one")
     args = parser.parse_args(argv)
     timings = time_controllers(args.names or None, args.steps, args.camera, args.seed,
-                               hidden=args.hidden)
+                               hidden=args.hidden, arrays=args.arrays)
     sys.stdout.write(format_timings(timings, args.camera, args.hidden) + "\n")
     return 0
 
