@@ -25,11 +25,10 @@ import numpy as np
 
 from benchmarks.exceptions import BenchmarkError
 from benchmarks.robot.camera_policy import describe_camera
-from benchmarks.robot.exits import ServoExit, SessionStop, exit_for_signal
+from benchmarks.robot.exits import ServoExit, SessionStop, SignalGuard, exit_for_signal, signal_name
 from benchmarks.robot.limits import LimitedRobot, SessionLimits
 from benchmarks.robot.loop import PeriodCheck, servo_loop
 from benchmarks.robot.records import SessionLog, mm_list, session_path
-from benchmarks.robot.shutdown import SignalGuard, signal_name
 from benchmarks.robot.status import PeriodStatus, ServoResult, StatusLine
 from hexapod.backends.base import HaltReport
 from hexapod.exceptions import BackendError, LinkError, ProtocolError, RobotFaultError
