@@ -31,7 +31,6 @@ from typing import Any
 import numpy as np
 
 from benchmarks.exceptions import BenchmarkError
-from benchmarks.robot.camera_policy import choose_camera
 from benchmarks.robot.consistency import (
     DEFAULT_BLIND_TIMEOUT_S,
     DEFAULT_CONSISTENCY_DEG,
@@ -53,7 +52,13 @@ from benchmarks.robot.limits import (
     MISSED_WINDOW,
 )
 from benchmarks.robot.loop import DEFAULT_FEATURE_TOLERANCE, DEFAULT_SETTLE
-from benchmarks.robot.models import add_robot_arguments, camera_model, check_dt, robot_geometry
+from benchmarks.robot.models import (
+    add_robot_arguments,
+    camera_model,
+    check_dt,
+    choose_camera,
+    robot_geometry,
+)
 from benchmarks.robot.records import LOG_NAME, SESSIONS_DIR, session_path
 from benchmarks.robot.session import (
     DEFAULT_HALT_TIMEOUT_S,

@@ -24,10 +24,10 @@ from typing import Any
 import numpy as np
 
 from benchmarks.exceptions import BenchmarkError
-from benchmarks.robot.camera_policy import describe_camera
 from benchmarks.robot.exits import ServoExit, SessionStop, SignalGuard, exit_for_signal, signal_name
 from benchmarks.robot.limits import LimitedRobot, SessionLimits
 from benchmarks.robot.loop import PeriodCheck, servo_loop
+from benchmarks.robot.models import describe_camera
 from benchmarks.robot.records import SessionLog, mm_list, session_path
 from benchmarks.robot.status import PeriodStatus, ServoResult, StatusLine
 from hexapod.backends.base import HaltReport

@@ -15,14 +15,13 @@ from typing import Any
 import numpy as np
 
 from benchmarks.exceptions import BatchFailedError, user_message
-from benchmarks.sim.actuation import require_batch
 from benchmarks.sim.inputs import SimScenario
 from benchmarks.sim.tolerance import unconverged_reason
 from benchmarks.sim.world import TrialSetup
 from controllers.base import CommandBatch, ObservationBatch
 from controllers.exceptions import ControllerError
 from controllers.registry import registry
-from hexapod.actuation import Actuation
+from hexapod.actuation import Actuation, check_actuation
 from hexapod.exceptions import HexapodError
 from hexapod.se3 import pose_error
 from vision.exceptions import VisionError
@@ -298,6 +297,26 @@ class Book:
                 ser_out["goal_translation"] = s.goal_translation
             out.append(TrialResult(row, ser_out))
         return out
+
+
+def require_batch(commands: CommandBatch, declared: Actuation, label: str, rows: int
+                  ) -> None:
+    """Refuse a batch of another kind than its controller declared, or of another shape
+    than ``(rows, 6)``.
+
+    Raises:
+        ActuationError: ``commands.actuation`` is not ``declared``.
+        CommandError: The values are not one row of 6 leg values per observed trial.
+    """
+    shape = np.shape(commands.values)
+    if shape != (rows, 6):
+        from controllers.exceptions import CommandError
+
+        raise CommandError(label, f"returned commands of shape {shape} for {rows} trials; "
+                                  f"expected ({rows}, 6): one row of 6 leg values per trial")
+    if commands.actuation is not declared:
+        check_actuation(commands.actuation, (declared,),
+                        f"a study whose controller declared {declared.quantity}", label)
 
 
 def stroke_violations(q: np.ndarray, v: np.ndarray, dt: float,

@@ -75,25 +75,19 @@ class Targets:
         return self._grid[0][idx, step], self._grid[1][idx, step]
 
 
-def task_controller(sc: SimScenario, spec: Any) -> Any:
-    """A controller of ``spec`` for the task of ``sc``: as registered, wrapped in a
-    :class:`~controllers.tracking.TrackingController` for a trajectory task (which
-    passes the trials of a controller that samples the reference itself through)."""
-    ctrl = batch_controller(spec.name, spec.options)
-    if sc.task.kind != "trajectory":
-        return ctrl
-    from controllers.tracking import TrackingController
-
-    return TrackingController(ctrl, feed_forward=sc.task.feed_forward)
-
-
 def task_batch_controller(sc: SimScenario, spec: Any, batched: bool = True) -> Any:
-    """The controller of :func:`task_controller`, for ``reset_batch`` / ``step_batch``.
+    """The controller of ``spec`` for the task of ``sc`` (``reset_batch``, ``step_batch``):
+    as registered, wrapped in a :class:`~controllers.tracking.TrackingController` for a
+    trajectory task (which passes the trials of a controller that samples the reference
+    itself through). Without ``batched``, the per-trial engine's: one such controller per
+    trial, each a batch of one (a :class:`~controllers.batch.ForeignController`: the
+    reference the batched rows are compared with)."""
+    def task_controller() -> Any:
+        ctrl = batch_controller(spec.name, spec.options)
+        if sc.task.kind != "trajectory":
+            return ctrl
+        from controllers.tracking import TrackingController
 
-    With ``batched``, the controller itself (every controller steps a batch). Without:
-    the per-trial engine's, one :func:`task_controller` per trial, each reset and
-    stepped alone as a batch of one (a :class:`~controllers.batch.ForeignController`:
-    the reference the batched rows are compared with)."""
-    if batched:
-        return task_controller(sc, spec)
-    return ForeignController(lambda: task_controller(sc, spec))
+        return TrackingController(ctrl, feed_forward=sc.task.feed_forward)
+
+    return task_controller() if batched else ForeignController(task_controller)

@@ -20,7 +20,6 @@ from typing import Any, TypeVar
 import numpy as np
 
 from benchmarks.exceptions import BatchFailedError, ScenarioError
-from benchmarks.sim.actuation import world_actuation
 from benchmarks.sim.book import Book, OnStep, TrialResult, failure_row
 from benchmarks.sim.clock import CameraClock, clock_active
 from benchmarks.sim.goal import (
@@ -31,7 +30,7 @@ from benchmarks.sim.goal import (
 )
 from benchmarks.sim.inputs import SimScenario
 from benchmarks.sim.loop import closed_loop
-from benchmarks.sim.plant import BackendPlant, KinematicPlant, Plant, make_plant
+from benchmarks.sim.plant import BackendPlant, KinematicPlant, Plant, make_plant, world_actuation
 from benchmarks.sim.reference import Targets, task_batch_controller, trial_reference
 from benchmarks.sim.sensors import (
     GeometricSensor,
