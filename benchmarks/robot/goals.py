@@ -13,8 +13,7 @@ import numpy as np
 
 from benchmarks.exceptions import BenchmarkError
 from benchmarks.robot.records import mm_list
-from benchmarks.sim.sensors import edge_batch
-from controllers.base import ObservationBatch
+from benchmarks.sim.sensors import seen_edges
 from hexapod.config import check_keys, get_matrix, load_toml
 from hexapod.exceptions import ConfigFileError, ForwardKinematicsError
 from hexapod.geometry import HexapodGeometry
@@ -176,50 +175,33 @@ def save_goal(path: str | Path, lengths: np.ndarray, features: Features,
     return npz
 
 
-def feature_batch(camera: Any, features: Features) -> ObservationBatch:
-    """The camera's batch of one of ``features`` (:func:`benchmarks.sim.sensors.edge_batch`;
-    image lines for a camera of the perspective family, fisheye included, as in the
-    simulator)."""
-    normals = np.asarray(features.normals, float)[None]
-    lines = None
-    if getattr(camera, "family", "") == "perspective":
-        with np.errstate(invalid="ignore", divide="ignore"):
-            lines = np.asarray(camera.normal_to_line(normals), float)
-    return edge_batch(normals, lines, np.asarray(features.edge_visible, bool)[None])
-
-
 def goal_features(goal: ServoGoal, camera: Any, geometry: HexapodGeometry) -> Any:
-    """The controller's :class:`~controllers.base.Goal` of a taught goal.
-
-    The platform pose is the forward kinematics of the goal lengths in the nominal
-    model; the desired features are the recorded ones if the goal file has some,
-    else what the (estimated) camera sees of the nominal model at that pose.
+    """The controller's :class:`~controllers.base.Goal` of a taught goal: the forward
+    kinematics of the goal lengths in the nominal model, and the recorded features if
+    the goal file has some, else what the (estimated) camera sees of the nominal model
+    there (:func:`benchmarks.sim.goal.predicted_features`).
 
     Raises:
         BenchmarkError: No pose for these lengths, or no edge visible at the goal.
     """
+    from benchmarks.sim.goal import predicted_features, row_features
     from controllers.base import Goal
     from hexapod.fk import forward_kinematics
-    from vision.legs import observe_legs
 
     try:
         sol = forward_kinematics(geometry, goal.lengths)
     except ForwardKinematicsError as exc:
         raise BenchmarkError(f"{goal.source}: key 'lengths_mm': no platform pose for these "
                              f"lengths in the nominal model ({exc})") from None
-    feats = goal.features
-    if feats is None:
-        seen = observe_legs(camera, geometry, sol.rotation, sol.translation)
-        visible = np.asarray(seen.edge_visible, bool)
-        feats = Features(np.where(visible[..., None], np.asarray(seen.normals, float), np.nan),
-                         visible)
-    if feats.visible_count == 0:
+    if goal.features is None:
+        feats = predicted_features(camera, geometry, sol.rotation, sol.translation)
+    else:
+        feats = row_features(seen_edges(camera, np.asarray(goal.features.normals, float)[None],
+                                        np.asarray(goal.features.edge_visible, bool)[None]), 0)
+    if not feats["edge_visible"].any():
         raise BenchmarkError(f"{goal.source}: the camera sees no leg edge at the goal")
-    batch = feature_batch(camera, feats)
-    return Goal(normals=feats.normals, lines=None if batch.lines is None else batch.lines[0],
-                directions=batch.directions[0],  # type: ignore[index]
-                lengths=goal.lengths.copy(), rotation=sol.rotation,
-                translation=sol.translation, edge_visible=feats.edge_visible)
+    return Goal(lengths=goal.lengths.copy(), rotation=sol.rotation,
+                translation=sol.translation, **feats)
 
 
 def feature_error(measured: Features, desired_normals: np.ndarray,

@@ -14,11 +14,11 @@ from typing import Any, Protocol
 import numpy as np
 
 from benchmarks.robot.exits import ServoExit, SessionStop
-from benchmarks.robot.goals import feature_batch, feature_error
+from benchmarks.robot.goals import feature_error
 from benchmarks.robot.limits import DeadlinePolicy, SessionLimits
 from benchmarks.robot.models import EncoderPose
 from benchmarks.robot.status import PeriodStatus, ServoResult
-from benchmarks.sim.sensors import edge_batch
+from benchmarks.sim.sensors import edge_batch, seen_edges
 from controllers.base import ObservationBatch
 from hexapod.geometry import HexapodGeometry
 from vision.feature_cameras import FeatureSensor, sensor_camera
@@ -175,7 +175,8 @@ class ServoCamera:
         if feats is None:
             return edge_batch(np.full((1, 6, 2, 3), np.nan), None,
                               np.zeros((1, 6, 2), dtype=bool))
-        return feature_batch(self.camera, feats)
+        return seen_edges(self.camera, np.asarray(feats.normals, float)[None],
+                          np.asarray(feats.edge_visible, bool)[None])
 
 
 class ServoBook:

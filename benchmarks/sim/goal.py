@@ -101,17 +101,14 @@ def predicted_features(camera: Any, geometry: HexapodGeometry, rotation: np.ndar
     predicts hidden is NaN, as a hidden edge is in a taught goal: a law that needs it
     says so itself (an encoder law does not).
     """
-    from benchmarks.sim.sensors import edge_batch
+    from benchmarks.sim.sensors import seen_edges
     from vision.legs import observe_legs
 
     seen = observe_legs(camera, geometry, np.asarray(rotation, float),
                         np.asarray(translation, float))
     visible = np.asarray(seen.edge_visible, dtype=bool)
     normals = np.where(visible[..., None], np.asarray(seen.normals, float), np.nan)
-    with np.errstate(invalid="ignore"):
-        lines = (camera.normal_to_line(normals)[None] if camera.family == "perspective"
-                 else None)
-    return _row_features(edge_batch(normals[None], lines, visible[None]), 0)
+    return row_features(seen_edges(camera, normals[None], visible[None]), 0)
 
 
 def taught_goal(m: ObservationBatch, setup: TrialSetup, sc: Any, row: int = 0) -> Goal:
@@ -120,7 +117,7 @@ def taught_goal(m: ObservationBatch, setup: TrialSetup, sc: Any, row: int = 0) -
     controller's model computes from them (:func:`model_pose`)."""
     q = taught_lengths(sc, setup)
     R, t = model_pose(setup.nominal_geometry, q)
-    return Goal(lengths=q, rotation=R, translation=t, **_row_features(m, row))
+    return Goal(lengths=q, rotation=R, translation=t, **row_features(m, row))
 
 
 def measured_goals(m: ObservationBatch, setups: list[TrialSetup], sc: Any) -> list[Goal]:
@@ -143,10 +140,10 @@ def measured_goals(m: ObservationBatch, setups: list[TrialSetup], sc: Any) -> li
                                           np.array([s.goal_rotation for s in setups]),
                                           np.array([s.goal_translation for s in setups]))
     return [Goal(lengths=lengths[k], rotation=s.goal_rotation, translation=s.goal_translation,
-                 **_row_features(m, k)) for k, s in enumerate(setups)]
+                 **row_features(m, k)) for k, s in enumerate(setups)]
 
 
-def _row_features(m: ObservationBatch, row: int) -> dict[str, Any]:
+def row_features(m: ObservationBatch, row: int) -> dict[str, Any]:
     """The goal features of row ``row`` of a camera's batch (views)."""
     return {"normals": m.normals[row],  # type: ignore[index]
             "lines": None if m.lines is None else m.lines[row],

@@ -52,6 +52,17 @@ def edge_batch(normals: np.ndarray, lines: np.ndarray | None, visible: np.ndarra
     return camera_batch(normals, lines, directions, visible, both)
 
 
+def seen_edges(camera: Any, normals: np.ndarray, visible: np.ndarray) -> ObservationBatch:
+    """The :func:`edge_batch` of edges (n, 6, 2, 3), (n, 6, 2) seen by ``camera``: with
+    their image lines when it is of the perspective family (fisheye included), else (a
+    unified camera, or None) without."""
+    lines = None
+    if getattr(camera, "family", "") == "perspective":
+        with np.errstate(invalid="ignore", divide="ignore"):
+            lines = camera.normal_to_line(normals)
+    return edge_batch(normals, lines, visible)
+
+
 class GeometricSensor:
     """Features from the true geometry plus the scenario's noise model, for rows each in
     its own world (one C call for the legs, edges and visibility of every row,
@@ -216,27 +227,20 @@ def noisy_features(sc: SimScenario, normals: np.ndarray, visible: np.ndarray,
     return edge_batch(normals, lines, visible)
 
 
-def _average_frames(m: ObservationBatch, perspective_camera: Any | None,
+def _average_frames(m: ObservationBatch, camera: Any | None,
                     max_deviation: float | None = None) -> ObservationBatch:
-    """Average K measurements of one static pose (leading axis K) into a batch of one.
-
-    Normals: :func:`vision.estimate.average_normals` (frames farther than
-    ``max_deviation`` [rad] from the median do not count; an edge kept in fewer than
-    half of the frames is missing); lines: the averaged normals seen by the estimated
-    perspective camera (``perspective_camera``, None for a unified camera). One frame
-    is returned unchanged.
-    """
+    """Average K measurements of one static pose (leading axis K) into a batch of one:
+    :func:`vision.estimate.average_normals` (frames farther than ``max_deviation`` [rad]
+    from the median do not count; an edge kept in fewer than half of the frames is
+    missing), seen by the estimated ``camera`` (:func:`seen_edges`). One frame is
+    returned unchanged."""
     from vision.estimate import average_normals
 
     if len(m) == 1:
         return m
     assert m.normals is not None  # a camera's batch has normals
     normals, visible = average_normals(m.normals, m.edge_visible, max_deviation=max_deviation)
-    lines = None
-    if perspective_camera is not None:
-        with np.errstate(invalid="ignore"):
-            lines = perspective_camera.normal_to_line(normals)[None]
-    return edge_batch(normals[None], lines, visible[None])
+    return seen_edges(camera, normals[None], visible[None])
 
 
 def trial_goal(sensor: GeometricSensor | Any, setup: TrialSetup, sc: SimScenario) -> Goal:
@@ -302,16 +306,10 @@ class _ImageSensorAdapter:
             prev = np.asarray(m.normals) if np.any(np.asarray(m.edge_visible)) else None
             normals.append(np.asarray(m.normals, float))
             visible.append(np.asarray(m.edge_visible, bool))
-        n = np.array(normals)
-        vis = np.array(visible)
         est = self.sensor.estimated_camera
-        lines = None
-        if est.family == "perspective":
-            with np.errstate(invalid="ignore"):
-                lines = est.normal_to_line(n)
         tolerance = self.sensor.detector.outlier_px * radians_per_pixel(est)
-        return _average_frames(edge_batch(n, lines, vis),
-                               est if est.family == "perspective" else None, tolerance)
+        return _average_frames(seen_edges(est, np.array(normals), np.array(visible)), est,
+                               tolerance)
 
     def measure(self, rotations: np.ndarray, translations: np.ndarray,
                 rngs: list[np.random.Generator], apply_noise: bool = True
