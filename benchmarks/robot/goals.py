@@ -28,15 +28,8 @@ DEFAULT_TEACH_FRAMES = 10
 
 @dataclass(frozen=True)
 class ServoGoal:
-    """A taught goal.
-
-    Attributes:
-        lengths: (6,) goal leg lengths [m].
-        features: The features recorded at the goal (``--teach``), or None to predict
-            them from the nominal model.
-        source: The goal file.
-        name: Optional label from the file.
-    """
+    """A goal file: the goal leg lengths (6,) [m], the features recorded there
+    (``--teach``; None: predicted from the nominal model), the file and its label."""
 
     lengths: np.ndarray
     features: Features | None
@@ -110,14 +103,8 @@ def _load_features(path: Path, goal_file: str) -> Features:
 
 
 def load_goal(path: str | Path, geometry: HexapodGeometry) -> ServoGoal:
-    """Read a goal file and check it against the stroke (nothing is sent to the robot).
-
-    Args:
-        path: The goal TOML file (``lengths_mm``, optional ``features`` and ``name``).
-        geometry: The nominal robot (its stroke).
-
-    Returns:
-        The goal, lengths in metres.
+    """Read a goal file (``lengths_mm``, optional ``features`` and ``name``) and check it
+    against the stroke of ``geometry`` (nothing is sent to the robot).
 
     Raises:
         ConfigFileError: Missing file, bad TOML, missing or misspelt key, wrong count,
@@ -150,17 +137,9 @@ def load_goal(path: str | Path, geometry: HexapodGeometry) -> ServoGoal:
 
 def save_goal(path: str | Path, lengths: np.ndarray, features: Features,
               name: str = "") -> Path:
-    """Write a taught goal: ``path`` (TOML) and its features beside it (``.npz``).
-
-    Args:
-        path: The goal TOML file to create.
-        lengths: (6,) measured leg lengths at the goal [m].
-        features: The features measured at the goal.
-        name: Optional label.
-
-    Returns:
-        The path of the features file.
-    """
+    """Write a taught goal: ``path`` (TOML: the measured leg ``lengths`` (6,) [m] and
+    the optional label ``name``) and its ``features`` beside it; returns the path of the
+    features file (``.npz``)."""
     import tomli_w
 
     p = Path(path)

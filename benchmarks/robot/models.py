@@ -31,6 +31,21 @@ def add_robot_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--dt", type=float, default=0.02, help="control period [s] (default 0.02)")
 
 
+def check_option(flag: str, value: float | None, low: float = 0.0, *, strict: bool = True,
+                 finite: bool = False, note: str = "") -> None:
+    """Refuse an option's ``value`` at or below ``low`` (``strict``: "must be positive"
+    when ``low`` is 0) or below it, or (``finite``) not finite; None passes.
+
+    Raises:
+        BenchmarkError: Naming the option and the value.
+    """
+    if value is None or ((value > low if strict else value >= low)
+                         and (not finite or math.isfinite(value))):
+        return
+    need = "positive" if strict and low == 0 else f">= {low:g}"
+    raise BenchmarkError(f"{flag} must be {need}{note}, got {value}")
+
+
 def check_dt(dt: float) -> None:
     """Refuse a ``--dt`` [s] that is not a positive period.
 
@@ -112,18 +127,11 @@ class EncoderPose:
 
 
 def choose_camera(backend: str, camera: str | None, allow_simulated: bool) -> str:
-    """The ``--camera`` spec a session uses: a real robot (a backend the registry does not
-    mark simulated, :meth:`hexapod.backends.registry.BackendRegistry.is_simulated`) needs
-    ``--camera``, and ``sim`` (images rendered at the encoders' pose) only with
-    ``--simulated-camera-on-real-robot``.
-
-    Args:
-        backend: The ``--backend`` spec (already checked).
-        camera: The ``--camera`` given, or None.
-        allow_simulated: ``--simulated-camera-on-real-robot`` was given.
-
-    Returns:
-        The camera spec (``sim`` by default with a simulated robot).
+    """The ``--camera`` spec a session on ``--backend`` ``backend`` (checked) uses: the
+    ``camera`` given (``sim`` by default with a simulated robot); real hardware (not
+    :meth:`~hexapod.backends.registry.BackendRegistry.is_simulated`) needs one, and
+    ``sim`` (images rendered at the encoders' pose) only with ``allow_simulated``
+    (``--simulated-camera-on-real-robot``).
 
     Raises:
         BenchmarkError: No camera, or ``sim``, with real hardware (and the flag not given).
@@ -147,18 +155,10 @@ def choose_camera(backend: str, camera: str | None, allow_simulated: bool) -> st
 
 def describe_camera(spec: str, camera_file: str, camera_pose: str | None,
                     camera: Any) -> str:
-    """The banner's camera: its spec, its file, its model and where it is.
-
-    Args:
-        spec: The ``--camera`` spec.
-        camera_file: ``--camera-file``.
-        camera_pose: ``--camera-pose`` (or None).
-        camera: The loaded camera model (``camera_from_base``, ``kind``, size).
-
-    Returns:
-        E.g. ``camera device:0 (file front, perspective 640x480, at (0.0, -900.0, 300.0)
-        mm in the base frame, looking along (0.00, 1.00, -0.20))``.
-    """
+    """The banner's camera of ``--camera`` ``spec``, ``--camera-file`` and
+    ``--camera-pose`` (or None), with the loaded ``camera``: e.g. ``camera device:0
+    (live; file front, perspective 640x480, at (0.0, -900.0, 300.0) mm in the base
+    frame, looking along (0.00, 1.00, -0.20))``."""
     base_from_camera = camera.camera_from_base.inverse()
     x = np.asarray(base_from_camera.translation, float) * 1e3
     z = np.asarray(base_from_camera.rotation, float)[:, 2]

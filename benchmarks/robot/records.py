@@ -53,17 +53,10 @@ def _safe(text: str) -> str:
 
 def session_path(out: str | None, log: str | None, controller: str,
                  now: dt.datetime | None = None) -> Path:
-    """Where the session's log goes (checked; nothing is created).
-
-    Args:
-        out: ``--out DIR`` (absent or empty), or None.
-        log: ``--log FILE`` (an earlier servo log is replaced, any other file refused),
-            or None.
-        controller: The controller's name (in the default directory's name).
-        now: The time of the default directory's name (default: now, UTC).
-
-    Returns:
-        The log file's path.
+    """Where the session's log goes (checked; nothing is created): in ``--out DIR``
+    (absent or empty), the ``--log FILE`` (an earlier servo log is replaced, any other
+    file refused), else a new directory named by the time ``now`` (default: now, UTC)
+    and the ``controller``.
 
     Raises:
         OutputError: ``--out`` is a file or a directory that is not empty, ``--log`` a

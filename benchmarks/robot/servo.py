@@ -56,6 +56,7 @@ from benchmarks.robot.models import (
     add_robot_arguments,
     camera_model,
     check_dt,
+    check_option,
     choose_camera,
     robot_geometry,
 )
@@ -75,16 +76,9 @@ from vision.feature_cameras import Features, open_camera
 
 def open_backend(spec: str, geometry: HexapodGeometry,
                  start: np.ndarray | None = None) -> Any:
-    """Connect the robot of a ``--backend`` spec (:mod:`hexapod.backends.registry`).
-
-    Args:
-        spec: ``emulator``, ``serial:URL``, a plugin's ``NAME[:ARGS]`` or
-            ``module:attr[:ARGS]``.
-        geometry: The nominal robot (the emulator's stroke and speed limit).
-        start: Emulator only: initial leg lengths [m] (mid-stroke if None).
-
-    Returns:
-        A connected backend (a context manager that halts the robot and closes it).
+    """Connect the robot of a ``--backend`` spec (:meth:`hexapod.backends.registry.
+    BackendRegistry.open`; a context manager that halts the robot and closes it), the
+    simulated ones at the initial leg lengths ``start`` [m] (None: mid-stroke).
 
     Raises:
         BenchmarkError: ``start`` given for a real robot.
@@ -240,14 +234,11 @@ def parse_options(items: list[str]) -> dict[str, Any]:
 
 def _check_args(args: argparse.Namespace) -> None:
     check_dt(args.dt)
-    if args.max_steps is not None and args.max_steps < 1:
-        raise BenchmarkError(f"--max-steps must be >= 1, got {args.max_steps}")
+    check_option("--max-steps", args.max_steps, 1, strict=False)
     if not args.tolerance_mm > 0 or not args.feature_tolerance > 0:
         raise BenchmarkError("--tolerance-mm and --feature-tolerance must be positive")
-    if args.settle < 1:
-        raise BenchmarkError(f"--settle must be >= 1, got {args.settle}")
-    if args.teach_frames < 1:
-        raise BenchmarkError(f"--teach-frames must be >= 1, got {args.teach_frames}")
+    check_option("--settle", args.settle, 1, strict=False)
+    check_option("--teach-frames", args.teach_frames, 1, strict=False)
 
 
 @contextlib.contextmanager
