@@ -56,14 +56,9 @@ SPREAD = 1e-2
 
 @dataclass(frozen=True)
 class CheckResult:
-    """One period's check.
-
-    Attributes:
-        legs: Indices (0-5) of the legs the camera pose was fitted to (empty: blind).
-        distance: Translation between the camera and the encoder poses [m] (NaN: blind).
-        angle: Rotation between them [rad] (NaN: blind).
-        why_blind: Why there is no camera pose, or None.
-    """
+    """One period's check: the legs (0-5) the camera pose was fitted to (empty: blind),
+    the translation [m] and rotation [rad] between the camera and the encoder poses
+    (NaN: blind), and why there is no camera pose (or None)."""
 
     legs: tuple[int, ...]
     distance: float

@@ -116,7 +116,13 @@ def servo_loop(
         deadlines = None if limits is None else DeadlinePolicy(
             limits, dt, warn if warn is not None else log.warning)
         R, t = np.zeros((1, 3, 3)), np.zeros((1, 3))
-        poses = _NominalPoses(geometry, q, R, t)
+        encoder_pose = EncoderPose(geometry)
+
+        def poses(run: np.ndarray) -> np.ndarray:  # the encoder pose of the lengths
+            R[0], t[0] = encoder_pose(q[0])
+            return np.zeros(len(run), dtype=bool)
+
+        poses(np.zeros(1, dtype=int))
         plant = BackendPlant([robot], q, R, t, np.zeros((1, 6)), poses)
         plant.use_actuation(declared, name)
         book = ServoBook(plant, camera, goal, tolerance, feature_tolerance, settle, res, t0,
@@ -131,21 +137,6 @@ def servo_loop(
     finally:
         res.wall_s = time.perf_counter() - t0
     return res
-
-
-class _NominalPoses:
-    """The plant's pose: the :class:`~benchmarks.robot.models.EncoderPose` of its measured
-    lengths, written into its arrays."""
-
-    def __init__(self, geometry: HexapodGeometry, q: np.ndarray, R: np.ndarray,
-                 t: np.ndarray) -> None:
-        self.q, self.R, self.t = q, R, t
-        self.encoder_pose = EncoderPose(geometry)
-        self(np.zeros(1, dtype=int))
-
-    def __call__(self, run: np.ndarray) -> np.ndarray:
-        self.R[0], self.t[0] = self.encoder_pose(self.q[0])
-        return np.zeros(len(run), dtype=bool)
 
 
 class ServoCamera:

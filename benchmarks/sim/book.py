@@ -166,7 +166,15 @@ class Book:
             ActuationError: The batch is of another kind than declared.
             CommandError: The batch is of another shape than ``(len(rows), 6)``.
         """
-        require_batch(commands, self.actuation, self.label, len(rows))
+        shape, n, declared = np.shape(commands.values), len(rows), self.actuation
+        if shape != (n, 6):
+            from controllers.exceptions import CommandError
+
+            raise CommandError(self.label, f"returned commands of shape {shape} for {n} "
+                               f"trials; expected ({n}, 6): one row of 6 leg values per trial")
+        if commands.actuation is not declared:
+            check_actuation(commands.actuation, (declared,),
+                            f"a study whose controller declared {declared.quantity}", self.label)
         self.batch_times.append(seconds)
         self.stepped[rows] += 1
         v, reasons = commands.values, commands.reasons
@@ -299,26 +307,6 @@ class Book:
         return out
 
 
-def require_batch(commands: CommandBatch, declared: Actuation, label: str, rows: int
-                  ) -> None:
-    """Refuse a batch of another kind than its controller declared, or of another shape
-    than ``(rows, 6)``.
-
-    Raises:
-        ActuationError: ``commands.actuation`` is not ``declared``.
-        CommandError: The values are not one row of 6 leg values per observed trial.
-    """
-    shape = np.shape(commands.values)
-    if shape != (rows, 6):
-        from controllers.exceptions import CommandError
-
-        raise CommandError(label, f"returned commands of shape {shape} for {rows} trials; "
-                                  f"expected ({rows}, 6): one row of 6 leg values per trial")
-    if commands.actuation is not declared:
-        check_actuation(commands.actuation, (declared,),
-                        f"a study whose controller declared {declared.quantity}", label)
-
-
 def stroke_violations(q: np.ndarray, v: np.ndarray, dt: float,
                       stroke: tuple[float, float], max_speed: float) -> np.ndarray:
     """(n,) 1 where the (speed-limited) command would leave the stroke this period."""
@@ -329,7 +317,6 @@ def stroke_violations(q: np.ndarray, v: np.ndarray, dt: float,
 def base_row(sc: SimScenario, spec: Any, trial: int) -> dict[str, Any]:
     """The identity of a result row: scenario, controller (with its package), trial, the
     goal setting (``[task] goal``), sweep."""
-    info = None
     try:
         info = registry.source(spec.name)
     except Exception:  # reported as the trial failure below

@@ -162,20 +162,12 @@ def cartesian_goal(setup: TrialSetup) -> Goal:
 
 
 class AnchoredReference:
-    """A reference trajectory moved to end at a goal pose (``"taught"``): every sample's
-    displacement from the reference's end, in the base frame, is kept and applied to
-    the goal: ``t' = t - t_end + t_goal``, ``R' = R R_end^T R_goal`` (the base-frame
-    rotation from the end to the sample, applied to the goal orientation). Velocities,
-    angular velocities (base frame) and their rates are the reference's: the path is
-    the same motion, started from where the model says the taught goal is (turning the
-    whole path would turn its shape). The time axis and every other attribute are the
-    reference's.
-
-    Args:
-        reference: Has ``duration`` [s] and ``at(times)`` -> :class:`ReferenceSample`.
-        rotation: (3, 3) the goal orientation the path must end at (base frame).
-        translation: (3,) the goal position [m].
-    """
+    """A ``reference`` trajectory (``duration`` [s], ``at(times)``) moved to end at the
+    goal pose ``rotation`` (3, 3), ``translation`` (3,) [m] (``"taught"``): each sample's
+    displacement from the end, in the base frame, is applied to the goal (``t' = t -
+    t_end + t_goal``, ``R' = R R_end^T R_goal``). Velocities, accelerations, the time
+    axis and every other attribute are the reference's: the same motion, started from
+    where the model says the taught goal is (turning the path would turn its shape)."""
 
     def __init__(self, reference: Any, rotation: np.ndarray, translation: np.ndarray
                  ) -> None:
