@@ -157,10 +157,9 @@ class Book:
                   seconds: float, crashes: dict[int, BaseException]
                   ) -> tuple[np.ndarray, np.ndarray]:
         """Refuse a batch of another kind than declared or of another shape than one row
-        of 6 per stepped row; a row fails (and ends, its command not applied) with an
-        invalid command, after too many refusals in a row, or when its own controller
-        raised (``crashes``, by position in ``rows``: a trial instance's crash or
-        malformed command, isolated by :meth:`controllers.base.Controller.step_rows`).
+        of 6 per stepped row; a row fails (its command not applied) with an invalid
+        command, after too many refusals in a row, or when its own controller raised
+        (``crashes``: see :meth:`benchmarks.sim.loop.LoopBook.commanded`).
 
         Raises:
             ActuationError: The batch is of another kind than declared.

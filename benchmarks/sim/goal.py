@@ -122,11 +122,9 @@ def taught_goal(m: ObservationBatch, setup: TrialSetup, sc: Any, row: int = 0) -
 
 def measured_goals(m: ObservationBatch, setups: list[TrialSetup], sc: Any) -> list[Goal]:
     """The goals of the ``"mixed"`` and ``"taught"`` settings of trials whose goal images
-    are the rows of one batch ``m`` (row ``k``: ``setups[k]``), as
-    :func:`benchmarks.sim.sensors.trial_goal` makes them one by one (the same values):
-    each goal's features are views of its row (no batch of one per trial) and, under
-    ``"mixed"``, the nominal inverse kinematics of the goal poses is one call per
-    nominal robot (elementwise: the same bits as one call per trial).
+    are the rows of one batch ``m`` (row ``k``: ``setups[k]``): the values
+    :func:`benchmarks.sim.sensors.trial_goal` gives one by one, the features views of
+    the rows and the nominal inverse kinematics one call per nominal robot.
 
     Raises:
         ValueError: The setting is ``"cartesian"`` (nothing is measured at the goal).
