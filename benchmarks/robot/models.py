@@ -88,15 +88,10 @@ def camera_model(spec: str, pose_spec: str | None, geometry: HexapodGeometry) ->
 
 
 class EncoderPose:
-    """The platform pose of measured leg lengths: the nominal forward kinematics, seeded
-    with the previous pose; a failure keeps the last pose (logged when ``warn``), and
-    with no pose yet it is a :class:`BenchmarkError` starting with ``what``.
-
-    Args:
-        geometry: The nominal robot.
-        what: The start of the error's message.
-        warn: Log a warning when a failure keeps the last pose.
-    """
+    """The platform pose of measured leg lengths: the forward kinematics of the nominal
+    ``geometry``, seeded with the previous pose; a failure keeps the last pose (logged
+    when ``warn``), and with no pose yet is a :class:`BenchmarkError` starting with
+    ``what``."""
 
     def __init__(self, geometry: HexapodGeometry, what: str = "no platform pose",
                  warn: bool = True) -> None:

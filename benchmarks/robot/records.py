@@ -111,7 +111,6 @@ class SessionLog:
     def __init__(self, path: Path) -> None:
         self.path = Path(path)
         self._f: IO[str] | None = None
-        self.finished = False
 
     def open(self, header: dict[str, Any]) -> SessionLog:
         """Create the file and write the header.
@@ -135,11 +134,8 @@ class SessionLog:
         self._f.flush()  # readable live (tail -f), and complete after a crash
 
     def final(self, record: dict[str, Any]) -> None:
-        """The final record, then close (idempotent)."""
-        if self.finished:
-            return
-        self.finished = True
-        self.write({"final": True, **record})
+        """The final record, then close (once; nothing before :meth:`open`)."""
         if self._f is not None:
+            self.write({"final": True, **record})
             self._f.close()
             self._f = None

@@ -357,12 +357,8 @@ def run(args: argparse.Namespace) -> int:
                         must_agree_at_start=args.camera.startswith("video:"))
     inputs = SessionInputs(geometry, camera, goal_file, goal, controller, start)
     with _viewer(args.viz, geometry, camera, goal) as viewer:
-        on_pose = None
-        if viewer is not None:
-            def on_pose(R: np.ndarray, t: np.ndarray, vis: np.ndarray | None) -> None:
-                viewer.display(R, t, vis)
-
-        return run_session(args, inputs, status, on_pose, checks=[check])
+        return run_session(args, inputs, status, None if viewer is None else viewer.display,
+                           checks=[check])
 
 
 def build_parser() -> argparse.ArgumentParser:
