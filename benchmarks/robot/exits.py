@@ -77,11 +77,6 @@ class SessionStop(Exception):  # noqa: N818 (a stop request, not an error)
         self.reason = reason
 
 
-def signal_name(signum: int) -> str:
-    """A signal's name (``SIGHUP``)."""
-    return signal.Signals(signum).name
-
-
 class SignalGuard:
     """SIGINT, SIGTERM and SIGHUP turned into a :class:`SessionStop` with their exit code
     (130, 143, 129), for the duration of a ``with`` block (the previous handlers are
@@ -108,12 +103,12 @@ class SignalGuard:
         self._previous: dict[int, Any] = {}
 
     def _stop(self, signum: int) -> SessionStop:
-        return SessionStop(exit_for_signal(signum), f"{signal_name(signum)} received")
+        return SessionStop(exit_for_signal(signum), f"{signal.Signals(signum).name} received")
 
     def _handle(self, signum: int, frame: FrameType | None) -> None:
-        self.received.append(signal_name(signum))
+        self.received.append(signal.Signals(signum).name)
         if self.shutting_down:
-            self.say(f"{signal_name(signum)} received during the shutdown: the robot is being "
+            self.say(f"{self.received[-1]} received during the shutdown: the robot is being "
                      "halted first")
             return
         if self.in_loop and self.pending is None:

@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import argparse
 import datetime as dt
+import signal
 import sys
 import traceback
 from collections.abc import Sequence
@@ -23,7 +24,7 @@ from typing import Any
 import numpy as np
 
 from benchmarks.exceptions import BenchmarkError
-from benchmarks.robot.exits import ServoExit, SessionStop, SignalGuard, exit_for_signal, signal_name
+from benchmarks.robot.exits import ServoExit, SessionStop, SignalGuard, exit_for_signal
 from benchmarks.robot.limits import LimitedRobot, SessionLimits
 from benchmarks.robot.loop import PeriodCheck, servo_loop
 from benchmarks.robot.models import check_option, describe_camera
@@ -278,8 +279,8 @@ def run_session(args: argparse.Namespace, inputs: SessionInputs, status: StatusL
             code, reason = _classify(ended, moved)
             if guard.pending is not None and not isinstance(ended, SessionStop):
                 # e.g. SIGHUP, then the closed terminal failing a print: the signal first
-                sig = exit_for_signal(guard.pending)
-                code, reason = sig, f"{signal_name(guard.pending)} received (then {reason})"
+                code, reason = exit_for_signal(guard.pending), (
+                    f"{signal.Signals(guard.pending).name} received (then {reason})")
         else:
             code, reason = _outcome(result, args)
         halt = None if robot is None else _halt(robot, args.halt_timeout_s)
