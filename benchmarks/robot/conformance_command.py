@@ -9,12 +9,11 @@ through their whole stroke at ten times the speed limit: on real hardware only w
 from __future__ import annotations
 
 import argparse
-import math
 
 import numpy as np
 
 from benchmarks.exceptions import BenchmarkError
-from benchmarks.robot.models import add_robot_arguments, check_dt, robot_geometry
+from benchmarks.robot.models import add_robot_arguments, check_dt, check_option, robot_geometry
 
 #: Default tolerance on the measured lengths [um]: the serial protocol carries
 #: micrometres (the emulator drifts 3.5 um from the exact simulator over 50 periods).
@@ -48,11 +47,9 @@ def run(args: argparse.Namespace) -> int:
     from hexapod.backends.conformance import check_backend
     from hexapod.backends.registry import backends
 
-    if not (math.isfinite(args.tolerance_um) and args.tolerance_um >= 0):
-        raise BenchmarkError(f"--tolerance-um must be >= 0, got {args.tolerance_um}")
+    check_option("--tolerance-um", args.tolerance_um, strict=False, finite=True)
     check_dt(args.dt)
-    if args.periods < 1:
-        raise BenchmarkError(f"--periods must be >= 1, got {args.periods}")
+    check_option("--periods", args.periods, 1, strict=False)
     name = backends.check(args.backend)
     if not backends.is_simulated(args.backend) and not args.move_real_robot:
         raise BenchmarkError(f"{args.backend} is real hardware: the check drives its legs "

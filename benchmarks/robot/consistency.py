@@ -56,14 +56,9 @@ SPREAD = 1e-2
 
 @dataclass(frozen=True)
 class CheckResult:
-    """One period's check.
-
-    Attributes:
-        legs: Indices (0-5) of the legs the camera pose was fitted to (empty: blind).
-        distance: Translation between the camera and the encoder poses [m] (NaN: blind).
-        angle: Rotation between them [rad] (NaN: blind).
-        why_blind: Why there is no camera pose, or None.
-    """
+    """One period's check: the legs (0-5) the camera pose was fitted to (empty: blind),
+    the translation [m] and rotation [rad] between the camera and the encoder poses
+    (NaN: blind), and why there is no camera pose (or None)."""
 
     legs: tuple[int, ...]
     distance: float
@@ -126,7 +121,7 @@ def _legs(legs: tuple[int, ...]) -> str:
 
 class CameraCheck:
     """The servo session's camera check (module docstring), a per-period check
-    (:class:`~benchmarks.robot.loop.PeriodCheck`) not called once a recording has ended.
+    (:class:`~benchmarks.robot.loop.PeriodCheck`).
 
     Args:
         geometry: The nominal robot (platform points).
@@ -145,7 +140,7 @@ class CameraCheck:
         BenchmarkError: A threshold or timeout that is not positive and finite.
     """
 
-    #: Skipped by the loop once the camera has ended (no image is not a blind period).
+    #: Not called once a recording has ended (no image is not a blind period).
     needs_image = True
 
     def __init__(self, geometry: HexapodGeometry, base_points: np.ndarray,
@@ -181,9 +176,7 @@ class CameraCheck:
         self._blind_why: str | None = None
 
     def __call__(self, step: int, lengths: np.ndarray, features: Any) -> None:
-        """The session's per-period check (:class:`~benchmarks.robot.loop.PeriodCheck`):
-        :meth:`compare` against the encoder pose of ``lengths``
-        (:class:`~benchmarks.robot.models.EncoderPose`).
+        """:meth:`compare` against the encoder pose of ``lengths``.
 
         Raises:
             SessionStop: As :meth:`compare`.
@@ -202,11 +195,8 @@ class CameraCheck:
         Args:
             step: The period (0: the start check).
             lengths: (6,) measured leg lengths [m].
-            rotation: (3, 3) encoder pose (forward kinematics of ``lengths``).
-            translation: (3,) [m].
-            normals: (6, 2, 3) this period's edge normals (camera frame), None for a
-                lost frame.
-            edge_visible: (6, 2) which edges were found.
+            rotation, translation: Their encoder pose ((3, 3), (3,) [m]).
+            normals, edge_visible: This period's edges (as :func:`visual_pose`).
 
         Returns:
             What was checked.
@@ -243,6 +233,8 @@ class CameraCheck:
         return CheckResult(legs, dist, angle)
 
     def _blind(self, step: int, now: float, why: str) -> CheckResult:
+        """A period without a camera pose (``why``): refused at a recording's start, a
+        safety stop past the blind timeout."""
         if step == 0 and self.must_agree_at_start:
             raise SessionStop(ServoExit.REFUSED, (
                 f"the recording {self.camera} cannot be checked against the encoders at "

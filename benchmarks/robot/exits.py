@@ -1,14 +1,23 @@
-"""Exit codes of ``hexapod-bench servo``: what happened, in one number.
-
-Every exit path of a servo session ends in the same shutdown (halt the robot, wait for
-its confirmation, write the final record), then returns one of these codes. They are
-documented in ``docs/servo.md``; scripts and lab supervisors may rely on them.
+"""How a servo session ends: its exit codes (:class:`ServoExit`, documented in
+``docs/servo.md``; scripts and lab supervisors may rely on them), the stop request a
+per-period check raises (:class:`SessionStop`) and the signals SIGINT, SIGTERM and SIGHUP
+(:class:`SignalGuard`). Every way out goes through the session's one shutdown (halt the
+robot, wait for its confirmation, write the final record), then returns one code.
 """
 
 from __future__ import annotations
 
 import enum
 import signal
+import sys
+from collections.abc import Callable
+from types import FrameType, TracebackType
+from typing import Any
+
+import numpy as np
+
+#: The signals that end a session through its shutdown.
+SESSION_SIGNALS = (signal.SIGINT, signal.SIGTERM, signal.SIGHUP)
 
 
 class ServoExit(enum.IntEnum):
@@ -41,14 +50,8 @@ class ServoExit(enum.IntEnum):
 
 
 def exit_for_signal(signum: int) -> ServoExit:
-    """The exit code of a session ended by a signal: 128 + its number (shell convention).
-
-    Args:
-        signum: the signal's number (``signal.SIGINT`` gives 130, ``SIGTERM`` 143,
-            ``SIGHUP`` 129).
-
-    Returns:
-        The exit code.
+    """The exit code of a session ended by signal ``signum``: 128 + its number (SIGINT
+    130, SIGTERM 143, SIGHUP 129).
 
     Raises:
         ValueError: A signal the session does not handle (only SIGINT, SIGTERM, SIGHUP).
@@ -57,9 +60,8 @@ def exit_for_signal(signum: int) -> ServoExit:
 
 
 class SessionStop(Exception):  # noqa: N818 (a stop request, not an error)
-    """A request to end a servo session: raised by a per-period check (a limit, the camera
-    consistency check, the blind-camera timeout, ...) and turned by the session into the
-    one shutdown (halt, confirmation, final record) and the exit code ``code``.
+    """A request to end a servo session (raised by a limit or a per-period check), turned
+    by the session into its one shutdown and the exit code ``code``.
 
     Args:
         code: The exit code the session ends with.
@@ -73,3 +75,61 @@ class SessionStop(Exception):  # noqa: N818 (a stop request, not an error)
         super().__init__(reason)
         self.code = ServoExit(code)
         self.reason = reason
+
+
+class SignalGuard:
+    """SIGINT, SIGTERM and SIGHUP turned into a :class:`SessionStop` with their exit code
+    (130, 143, 129), for the duration of a ``with`` block (the previous handlers are
+    restored after). Outside the loop a signal stops the session at once; inside it the
+    first signal is taken at the next period (no exchange with the robot is cut) and a
+    second one at once; during the shutdown signals are only noted (never skip the halt).
+
+    Args:
+        say: Shows a line to the user (during the shutdown).
+
+    Attributes:
+        in_loop: The loop polls :meth:`__call__` every period (the first signal waits
+            for it).
+        shutting_down: The shutdown has begun: signals are only noted.
+        received: Every signal received, in order (names).
+    """
+
+    def __init__(self, say: Callable[[str], None] | None = None) -> None:
+        self.say = say or (lambda text: print(text, file=sys.stderr, flush=True))
+        self.in_loop = False
+        self.shutting_down = False
+        self.received: list[str] = []
+        self.pending: int | None = None
+        self._previous: dict[int, Any] = {}
+
+    def _stop(self, signum: int) -> SessionStop:
+        return SessionStop(exit_for_signal(signum), f"{signal.Signals(signum).name} received")
+
+    def _handle(self, signum: int, frame: FrameType | None) -> None:
+        self.received.append(signal.Signals(signum).name)
+        if self.shutting_down:
+            self.say(f"{self.received[-1]} received during the shutdown: the robot is being "
+                     "halted first")
+            return
+        if self.in_loop and self.pending is None:
+            self.pending = signum  # taken at the next period
+            return
+        self.pending = signum
+        raise self._stop(signum)
+
+    def __call__(self, step: int, lengths: np.ndarray, features: Any) -> None:
+        """A per-period check (:class:`~benchmarks.robot.loop.PeriodCheck`): a pending
+        signal ends the session (:class:`SessionStop`)."""
+        if self.pending is not None and not self.shutting_down:
+            raise self._stop(self.pending)
+
+    def __enter__(self) -> SignalGuard:
+        for sig in SESSION_SIGNALS:
+            self._previous[sig] = signal.signal(sig, self._handle)
+        return self
+
+    def __exit__(self, exc_type: type[BaseException] | None, exc: BaseException | None,
+                 tb: TracebackType | None) -> None:
+        for sig, previous in self._previous.items():
+            signal.signal(sig, previous)
+        self._previous.clear()

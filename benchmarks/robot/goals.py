@@ -13,8 +13,7 @@ import numpy as np
 
 from benchmarks.exceptions import BenchmarkError
 from benchmarks.robot.records import mm_list
-from benchmarks.sim.sensors import edge_batch
-from controllers.base import ObservationBatch
+from benchmarks.sim.sensors import seen_edges
 from hexapod.config import check_keys, get_matrix, load_toml
 from hexapod.exceptions import ConfigFileError, ForwardKinematicsError
 from hexapod.geometry import HexapodGeometry
@@ -29,15 +28,8 @@ DEFAULT_TEACH_FRAMES = 10
 
 @dataclass(frozen=True)
 class ServoGoal:
-    """A taught goal.
-
-    Attributes:
-        lengths: (6,) goal leg lengths [m].
-        features: The features recorded at the goal (``--teach``), or None to predict
-            them from the nominal model.
-        source: The goal file.
-        name: Optional label from the file.
-    """
+    """A goal file: the goal leg lengths (6,) [m], the features recorded there
+    (``--teach``; None: predicted from the nominal model), the file and its label."""
 
     lengths: np.ndarray
     features: Features | None
@@ -111,14 +103,8 @@ def _load_features(path: Path, goal_file: str) -> Features:
 
 
 def load_goal(path: str | Path, geometry: HexapodGeometry) -> ServoGoal:
-    """Read a goal file and check it against the stroke (nothing is sent to the robot).
-
-    Args:
-        path: The goal TOML file (``lengths_mm``, optional ``features`` and ``name``).
-        geometry: The nominal robot (its stroke).
-
-    Returns:
-        The goal, lengths in metres.
+    """Read a goal file (``lengths_mm``, optional ``features`` and ``name``) and check it
+    against the stroke of ``geometry`` (nothing is sent to the robot).
 
     Raises:
         ConfigFileError: Missing file, bad TOML, missing or misspelt key, wrong count,
@@ -151,17 +137,9 @@ def load_goal(path: str | Path, geometry: HexapodGeometry) -> ServoGoal:
 
 def save_goal(path: str | Path, lengths: np.ndarray, features: Features,
               name: str = "") -> Path:
-    """Write a taught goal: ``path`` (TOML) and its features beside it (``.npz``).
-
-    Args:
-        path: The goal TOML file to create.
-        lengths: (6,) measured leg lengths at the goal [m].
-        features: The features measured at the goal.
-        name: Optional label.
-
-    Returns:
-        The path of the features file.
-    """
+    """Write a taught goal: ``path`` (TOML: the measured leg ``lengths`` (6,) [m] and
+    the optional label ``name``) and its ``features`` beside it; returns the path of the
+    features file (``.npz``)."""
     import tomli_w
 
     p = Path(path)
@@ -176,50 +154,33 @@ def save_goal(path: str | Path, lengths: np.ndarray, features: Features,
     return npz
 
 
-def feature_batch(camera: Any, features: Features) -> ObservationBatch:
-    """The camera's batch of one of ``features`` (:func:`benchmarks.sim.sensors.edge_batch`;
-    image lines for a camera of the perspective family, fisheye included, as in the
-    simulator)."""
-    normals = np.asarray(features.normals, float)[None]
-    lines = None
-    if getattr(camera, "family", "") == "perspective":
-        with np.errstate(invalid="ignore", divide="ignore"):
-            lines = np.asarray(camera.normal_to_line(normals), float)
-    return edge_batch(normals, lines, np.asarray(features.edge_visible, bool)[None])
-
-
 def goal_features(goal: ServoGoal, camera: Any, geometry: HexapodGeometry) -> Any:
-    """The controller's :class:`~controllers.base.Goal` of a taught goal.
-
-    The platform pose is the forward kinematics of the goal lengths in the nominal
-    model; the desired features are the recorded ones if the goal file has some,
-    else what the (estimated) camera sees of the nominal model at that pose.
+    """The controller's :class:`~controllers.base.Goal` of a taught goal: the forward
+    kinematics of the goal lengths in the nominal model, and the recorded features if
+    the goal file has some, else what the (estimated) camera sees of the nominal model
+    there (:func:`benchmarks.sim.goal.predicted_features`).
 
     Raises:
         BenchmarkError: No pose for these lengths, or no edge visible at the goal.
     """
+    from benchmarks.sim.goal import predicted_features, row_features
     from controllers.base import Goal
     from hexapod.fk import forward_kinematics
-    from vision.legs import observe_legs
 
     try:
         sol = forward_kinematics(geometry, goal.lengths)
     except ForwardKinematicsError as exc:
         raise BenchmarkError(f"{goal.source}: key 'lengths_mm': no platform pose for these "
                              f"lengths in the nominal model ({exc})") from None
-    feats = goal.features
-    if feats is None:
-        seen = observe_legs(camera, geometry, sol.rotation, sol.translation)
-        visible = np.asarray(seen.edge_visible, bool)
-        feats = Features(np.where(visible[..., None], np.asarray(seen.normals, float), np.nan),
-                         visible)
-    if feats.visible_count == 0:
+    if goal.features is None:
+        feats = predicted_features(camera, geometry, sol.rotation, sol.translation)
+    else:
+        feats = row_features(seen_edges(camera, np.asarray(goal.features.normals, float)[None],
+                                        np.asarray(goal.features.edge_visible, bool)[None]), 0)
+    if not feats["edge_visible"].any():
         raise BenchmarkError(f"{goal.source}: the camera sees no leg edge at the goal")
-    batch = feature_batch(camera, feats)
-    return Goal(normals=feats.normals, lines=None if batch.lines is None else batch.lines[0],
-                directions=batch.directions[0],  # type: ignore[index]
-                lengths=goal.lengths.copy(), rotation=sol.rotation,
-                translation=sol.translation, edge_visible=feats.edge_visible)
+    return Goal(lengths=goal.lengths.copy(), rotation=sol.rotation,
+                translation=sol.translation, **feats)
 
 
 def feature_error(measured: Features, desired_normals: np.ndarray,

@@ -66,18 +66,11 @@ class SessionLimits:
 
 
 class LimitedRobot:
-    """A connected backend behind the session's limits (what the loop's plant drives).
-
-    Every period's command is capped to :attr:`SessionLimits.max_speed` (the capped legs
-    are reported clamped) and refused before anything is sent when a leg would leave the
-    travel box around the start lengths (:class:`SessionStop`, exit 3). Other attributes
-    are the backend's.
-
-    Args:
-        robot: The connected backend.
-        limits: The session's limits.
-        start: (6,) measured lengths at the start [m].
-    """
+    """The connected backend ``robot`` behind the session's ``limits`` (what the loop's
+    plant drives): every command is capped to :attr:`SessionLimits.max_speed` (the
+    capped legs reported clamped) and refused before it is sent when a leg would leave
+    the travel box around the ``start`` lengths (6,) [m]. Other attributes are the
+    backend's."""
 
     def __init__(self, robot: Any, limits: SessionLimits, start: np.ndarray) -> None:
         self.robot = robot
@@ -129,15 +122,9 @@ class LimitedRobot:
 
 
 class DeadlinePolicy:
-    """Missed periods: counted, warned at most once a second, and fatal after
-    ``max_missed_consecutive`` in a row or more than ``max_missed_fraction`` of the last
-    :data:`MISSED_WINDOW` periods.
-
-    Args:
-        limits: The session's limits.
-        dt: The control period [s].
-        warn: Shows a warning line.
-    """
+    """Missed periods of control period ``dt`` [s]: counted, warned (``warn``) at most
+    once a second, and fatal after ``limits.max_missed_consecutive`` in a row or more
+    than ``limits.max_missed_fraction`` of the last :data:`MISSED_WINDOW` periods."""
 
     def __init__(self, limits: SessionLimits, dt: float, warn: Callable[[str], None]) -> None:
         self.limits, self.dt, self.warn = limits, dt, warn
@@ -148,13 +135,8 @@ class DeadlinePolicy:
         self._since_warn = 0
 
     def update(self, step: int, missed: bool, compute_s: float, link_s: float) -> None:
-        """Account one period.
-
-        Args:
-            step: The period index.
-            missed: The period was late.
-            compute_s: Time spent in the camera and the controller this period [s].
-            link_s: Time spent communicating with the robot this period [s].
+        """Account period ``step``: ``missed`` (late), with its camera and controller
+        time ``compute_s`` and its link time ``link_s`` [s] (for the messages).
 
         Raises:
             SessionStop: Too many missed periods (exit 3).

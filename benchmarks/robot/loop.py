@@ -14,11 +14,11 @@ from typing import Any, Protocol
 import numpy as np
 
 from benchmarks.robot.exits import ServoExit, SessionStop
-from benchmarks.robot.goals import feature_batch, feature_error
-from benchmarks.robot.limits import DeadlinePolicy, LimitedRobot, SessionLimits
+from benchmarks.robot.goals import feature_error
+from benchmarks.robot.limits import DeadlinePolicy, SessionLimits
 from benchmarks.robot.models import EncoderPose
 from benchmarks.robot.status import PeriodStatus, ServoResult
-from benchmarks.sim.sensors import edge_batch
+from benchmarks.sim.sensors import edge_batch, seen_edges
 from controllers.base import ObservationBatch
 from hexapod.geometry import HexapodGeometry
 from vision.feature_cameras import FeatureSensor, sensor_camera
@@ -32,23 +32,17 @@ DEFAULT_FEATURE_TOLERANCE = 2e-3
 
 
 class PeriodCheck(Protocol):
-    """A per-period safety check of a session (the camera check, the signals): called
-    every period right after the image, before the controller runs; it ends the session
-    (through its one shutdown) by raising :class:`~benchmarks.robot.exits.SessionStop`.
-    A check whose ``needs_image`` attribute is true is not called in the period where
-    the camera reports its end (a recording's end is not a lost frame)."""
+    """A per-period safety check of a session (the camera check, the signals), called
+    every period right after the image, before the controller runs (not in the period
+    where the camera reports its end if its ``needs_image`` attribute is true)."""
 
     def __call__(self, step: int, lengths: np.ndarray, features: Any) -> None:
-        """Check one period.
-
-        Args:
-            step: The period index (from 0).
-            lengths: (6,) leg lengths measured when the image was taken [m].
-            features: This period's :class:`~vision.feature_cameras.Features` (None: the
-                camera gave no image).
+        """Check period ``step`` (from 0): ``lengths`` (6,) measured when the image was
+        taken [m], ``features`` its :class:`~vision.feature_cameras.Features` (None: no
+        image).
 
         Raises:
-            SessionStop: End the session.
+            SessionStop: End the session (through its one shutdown).
         """
         ...
 
@@ -72,31 +66,30 @@ def servo_loop(
     warn: Callable[[str], None] | None = None,
     result: ServoResult | None = None,
 ) -> ServoResult:
-    """Run a reset controller on a connected robot until convergence, a limit, a stop
-    request or Ctrl-C (the outcome ``"interrupted"``; a
-    :class:`~benchmarks.robot.exits.SessionStop`: ``"stopped"``, ``result.stop``); any
-    other exception propagates, ``result`` (when given) holding the periods run. The
-    robot is a :class:`~benchmarks.sim.plant.BackendPlant`, the camera a
-    :class:`ServoCamera`, the book a :class:`ServoBook`. The caller halts the robot.
+    """Run a reset controller on a connected robot (the plant a
+    :class:`~benchmarks.sim.plant.BackendPlant`, the camera a :class:`ServoCamera`, the
+    book a :class:`ServoBook`) until convergence, a limit, a stop request (outcome
+    ``"stopped"``, ``result.stop``) or Ctrl-C (``"interrupted"``); any other exception
+    propagates. The caller halts the robot.
 
     Args:
-        robot: A connected backend (``measured_lengths()``, ``apply(v, kind, dt, name)``).
+        robot: A connected backend (a :class:`~benchmarks.robot.limits.LimitedRobot` when
+            ``limits`` are given).
         sensor: The camera.
         controller: A controller already reset with its context.
         goal: The controller's :class:`~controllers.base.Goal` (lengths, normals).
         geometry: The nominal robot (forward kinematics).
         dt: Control period [s].
-        max_steps: Period budget (None: until convergence or Ctrl-C).
+        max_steps: Period budget (None: none).
         tolerance: Convergence threshold on max |q - q*| [m].
         feature_tolerance: Convergence threshold on the feature error [-].
         settle: Consecutive periods within both tolerances to stop.
         on_period: Called after every period (status line, log).
         on_pose: Called with the predicted pose and edge visibility (viewer).
-        limits: The session's limits (speed cap, travel, time, missed deadlines;
-            None: none but ``max_steps``).
+        limits: The session's time and missed-deadline limits (None: none).
         checks: Per-period checks (:class:`PeriodCheck`), in order.
         warn: Shows a warning line (missed deadlines; default: the log).
-        result: The result to fill (the caller keeps the periods run if the loop raises).
+        result: The result to fill (kept by the caller if the loop raises).
 
     Returns:
         The outcome and the link statistics.
@@ -120,12 +113,16 @@ def servo_loop(
     t0 = time.perf_counter()
     try:
         q = np.asarray(robot.measured_lengths(), float)[None].copy()
-        if limits is not None and not isinstance(robot, LimitedRobot):
-            robot = LimitedRobot(robot, limits, q[0])
         deadlines = None if limits is None else DeadlinePolicy(
             limits, dt, warn if warn is not None else log.warning)
         R, t = np.zeros((1, 3, 3)), np.zeros((1, 3))
-        poses = _NominalPoses(geometry, q, R, t)
+        encoder_pose = EncoderPose(geometry)
+
+        def poses(run: np.ndarray) -> np.ndarray:  # the encoder pose of the lengths
+            R[0], t[0] = encoder_pose(q[0])
+            return np.zeros(len(run), dtype=bool)
+
+        poses(np.zeros(1, dtype=int))
         plant = BackendPlant([robot], q, R, t, np.zeros((1, 6)), poses)
         plant.use_actuation(declared, name)
         book = ServoBook(plant, camera, goal, tolerance, feature_tolerance, settle, res, t0,
@@ -137,27 +134,9 @@ def servo_loop(
         res.outcome = "interrupted"
     except SessionStop as stop:
         res.outcome, res.stop = "stopped", stop
-    except BaseException:
-        res.outcome = "failed"
-        raise
     finally:
         res.wall_s = time.perf_counter() - t0
     return res
-
-
-class _NominalPoses:
-    """The plant's pose: the :class:`~benchmarks.robot.models.EncoderPose` of its measured
-    lengths, written into its arrays."""
-
-    def __init__(self, geometry: HexapodGeometry, q: np.ndarray, R: np.ndarray,
-                 t: np.ndarray) -> None:
-        self.q, self.R, self.t = q, R, t
-        self.encoder_pose = EncoderPose(geometry)
-        self(np.zeros(1, dtype=int))
-
-    def __call__(self, run: np.ndarray) -> np.ndarray:
-        self.R[0], self.t[0] = self.encoder_pose(self.q[0])
-        return np.zeros(len(run), dtype=bool)
 
 
 class ServoCamera:
@@ -187,17 +166,16 @@ class ServoCamera:
         if feats is None:
             return edge_batch(np.full((1, 6, 2, 3), np.nan), None,
                               np.zeros((1, 6, 2), dtype=bool))
-        return feature_batch(self.camera, feats)
+        return seen_edges(self.camera, np.asarray(feats.normals, float)[None],
+                          np.asarray(feats.edge_visible, bool)[None])
 
 
 class ServoBook:
     """The servo session's book (:class:`benchmarks.sim.loop.LoopBook`, one row): a lost
-    frame or a refused or invalid command moves nothing that period (zeros are sent, so
-    the robot's watchdog stays fed); the session converges after ``settle`` periods
-    within both tolerances, ends with the camera's video; every period gives its
-    :class:`PeriodStatus`. The per-period ``checks`` run after each image; the time
-    limit and the deadline policy after each period (both end the session with a
-    :class:`~benchmarks.robot.exits.SessionStop`)."""
+    frame or a refused or invalid command sends zeros (the robot's watchdog stays fed);
+    the session converges after ``settle`` periods within both tolerances or ends with
+    the camera's video. The ``checks`` run after each image, the time limit and the
+    deadline policy after each period."""
 
     def __init__(self, plant: Any, camera: ServoCamera, goal: Any, tolerance: float,
                  feature_tolerance: float, settle: int, result: ServoResult, t0: float,

@@ -53,17 +53,10 @@ def _safe(text: str) -> str:
 
 def session_path(out: str | None, log: str | None, controller: str,
                  now: dt.datetime | None = None) -> Path:
-    """Where the session's log goes (checked; nothing is created).
-
-    Args:
-        out: ``--out DIR`` (absent or empty), or None.
-        log: ``--log FILE`` (an earlier servo log is replaced, any other file refused),
-            or None.
-        controller: The controller's name (in the default directory's name).
-        now: The time of the default directory's name (default: now, UTC).
-
-    Returns:
-        The log file's path.
+    """Where the session's log goes (checked; nothing is created): in ``--out DIR``
+    (absent or empty), the ``--log FILE`` (an earlier servo log is replaced, any other
+    file refused), else a new directory named by the time ``now`` (default: now, UTC)
+    and the ``controller``.
 
     Raises:
         OutputError: ``--out`` is a file or a directory that is not empty, ``--log`` a
@@ -118,7 +111,6 @@ class SessionLog:
     def __init__(self, path: Path) -> None:
         self.path = Path(path)
         self._f: IO[str] | None = None
-        self.finished = False
 
     def open(self, header: dict[str, Any]) -> SessionLog:
         """Create the file and write the header.
@@ -142,11 +134,8 @@ class SessionLog:
         self._f.flush()  # readable live (tail -f), and complete after a crash
 
     def final(self, record: dict[str, Any]) -> None:
-        """The final record, then close (idempotent)."""
-        if self.finished:
-            return
-        self.finished = True
-        self.write({"final": True, **record})
+        """The final record, then close (once; nothing before :meth:`open`)."""
         if self._f is not None:
+            self.write({"final": True, **record})
             self._f.close()
             self._f = None

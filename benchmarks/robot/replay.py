@@ -96,20 +96,10 @@ def _num(x: Any) -> float:
 def load_session(path: str | Path, geometry_spec: str | None = None,
                  camera_file: str | None = None, camera_pose: str | None = None,
                  goal_file: str | None = None) -> Any:
-    """The trial record (:class:`hexapod.visualize.records.TrialRecord`) of a servo log.
-
-    Args:
-        path: The session's record (``servo.jsonl``, or its ``--log`` file).
-        geometry_spec: The session's ``--geometry`` (None: the header's, else
-            ``deltalab``).
-        camera_file: Its ``--camera-file`` (None: the header's, else ``front``).
-        camera_pose: Its ``--camera-pose`` (None: the header's when the camera file is
-            too).
-        goal_file: Its ``--goal`` (None: the header's goal lengths, else the errors are
-            to the last period's pose).
-
-    Returns:
-        The record (``scenario``: ``servo session`` and the log's name).
+    """The trial record (:class:`hexapod.visualize.records.TrialRecord`, ``scenario``:
+    ``servo session`` and the log's name) of a servo log ``path``, with the session's
+    ``--geometry``, ``--camera-file``, ``--camera-pose`` and ``--goal`` (None: the
+    module docstring's).
 
     Raises:
         BenchmarkError: A line that is not JSON, a period without six finite lengths, no

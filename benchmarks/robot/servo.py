@@ -31,7 +31,6 @@ from typing import Any
 import numpy as np
 
 from benchmarks.exceptions import BenchmarkError
-from benchmarks.robot.camera_policy import choose_camera
 from benchmarks.robot.consistency import (
     DEFAULT_BLIND_TIMEOUT_S,
     DEFAULT_CONSISTENCY_DEG,
@@ -53,7 +52,14 @@ from benchmarks.robot.limits import (
     MISSED_WINDOW,
 )
 from benchmarks.robot.loop import DEFAULT_FEATURE_TOLERANCE, DEFAULT_SETTLE
-from benchmarks.robot.models import add_robot_arguments, camera_model, check_dt, robot_geometry
+from benchmarks.robot.models import (
+    add_robot_arguments,
+    camera_model,
+    check_dt,
+    check_option,
+    choose_camera,
+    robot_geometry,
+)
 from benchmarks.robot.records import LOG_NAME, SESSIONS_DIR, session_path
 from benchmarks.robot.session import (
     DEFAULT_HALT_TIMEOUT_S,
@@ -70,16 +76,9 @@ from vision.feature_cameras import Features, open_camera
 
 def open_backend(spec: str, geometry: HexapodGeometry,
                  start: np.ndarray | None = None) -> Any:
-    """Connect the robot of a ``--backend`` spec (:mod:`hexapod.backends.registry`).
-
-    Args:
-        spec: ``emulator``, ``serial:URL``, a plugin's ``NAME[:ARGS]`` or
-            ``module:attr[:ARGS]``.
-        geometry: The nominal robot (the emulator's stroke and speed limit).
-        start: Emulator only: initial leg lengths [m] (mid-stroke if None).
-
-    Returns:
-        A connected backend (a context manager that halts the robot and closes it).
+    """Connect the robot of a ``--backend`` spec (:meth:`hexapod.backends.registry.
+    BackendRegistry.open`; a context manager that halts the robot and closes it), the
+    simulated ones at the initial leg lengths ``start`` [m] (None: mid-stroke).
 
     Raises:
         BenchmarkError: ``start`` given for a real robot.
@@ -235,14 +234,11 @@ def parse_options(items: list[str]) -> dict[str, Any]:
 
 def _check_args(args: argparse.Namespace) -> None:
     check_dt(args.dt)
-    if args.max_steps is not None and args.max_steps < 1:
-        raise BenchmarkError(f"--max-steps must be >= 1, got {args.max_steps}")
+    check_option("--max-steps", args.max_steps, 1, strict=False)
     if not args.tolerance_mm > 0 or not args.feature_tolerance > 0:
         raise BenchmarkError("--tolerance-mm and --feature-tolerance must be positive")
-    if args.settle < 1:
-        raise BenchmarkError(f"--settle must be >= 1, got {args.settle}")
-    if args.teach_frames < 1:
-        raise BenchmarkError(f"--teach-frames must be >= 1, got {args.teach_frames}")
+    check_option("--settle", args.settle, 1, strict=False)
+    check_option("--teach-frames", args.teach_frames, 1, strict=False)
 
 
 @contextlib.contextmanager
@@ -361,12 +357,8 @@ def run(args: argparse.Namespace) -> int:
                         must_agree_at_start=args.camera.startswith("video:"))
     inputs = SessionInputs(geometry, camera, goal_file, goal, controller, start)
     with _viewer(args.viz, geometry, camera, goal) as viewer:
-        on_pose = None
-        if viewer is not None:
-            def on_pose(R: np.ndarray, t: np.ndarray, vis: np.ndarray | None) -> None:
-                viewer.display(R, t, vis)
-
-        return run_session(args, inputs, status, on_pose, checks=[check])
+        return run_session(args, inputs, status, None if viewer is None else viewer.display,
+                           checks=[check])
 
 
 def build_parser() -> argparse.ArgumentParser:

@@ -14,7 +14,7 @@ from __future__ import annotations
 
 import argparse
 import datetime as dt
-import math
+import signal
 import sys
 import traceback
 from collections.abc import Sequence
@@ -24,12 +24,11 @@ from typing import Any
 import numpy as np
 
 from benchmarks.exceptions import BenchmarkError
-from benchmarks.robot.camera_policy import describe_camera
-from benchmarks.robot.exits import ServoExit, SessionStop, exit_for_signal
+from benchmarks.robot.exits import ServoExit, SessionStop, SignalGuard, exit_for_signal
 from benchmarks.robot.limits import LimitedRobot, SessionLimits
 from benchmarks.robot.loop import PeriodCheck, servo_loop
+from benchmarks.robot.models import check_option, describe_camera
 from benchmarks.robot.records import SessionLog, mm_list, session_path
-from benchmarks.robot.shutdown import SignalGuard, signal_name
 from benchmarks.robot.status import PeriodStatus, ServoResult, StatusLine
 from hexapod.backends.base import HaltReport
 from hexapod.exceptions import BackendError, LinkError, ProtocolError, RobotFaultError
@@ -44,16 +43,10 @@ DEFAULT_RETRIES = 1
 
 @dataclass
 class SessionInputs:
-    """What :func:`run_session` needs, checked before anything is opened.
-
-    Attributes:
-        geometry: The nominal robot.
-        camera: The camera model.
-        goal_file: The goal file (:class:`~benchmarks.robot.goals.ServoGoal`).
-        goal: The controller's goal.
-        controller: The reset controller.
-        start: Emulator only: initial leg lengths [m].
-    """
+    """What :func:`run_session` needs, checked before anything is opened: the nominal
+    robot, the camera model, the goal file (:class:`~benchmarks.robot.goals.ServoGoal`),
+    the controller's goal, the reset controller and (a simulated robot only) the
+    initial leg lengths [m]."""
 
     geometry: HexapodGeometry
     camera: Any
@@ -65,35 +58,29 @@ class SessionInputs:
 
 def session_limits(args: argparse.Namespace, geometry: HexapodGeometry,
                    warn: Any) -> SessionLimits:
-    """The limits of the command line, the robot file's speed limit as the ceiling.
+    """The limits of the command line, the robot file's speed limit as the ceiling (a
+    ``--max-speed-mm-s`` above it is capped, with a ``warn``-ing).
 
     Raises:
         BenchmarkError: A limit that is not a positive number.
     """
-    ceiling = geometry.max_speed
-    cap = ceiling
-    if args.max_speed_mm_s is not None:
-        if not args.max_speed_mm_s > 0:
-            raise BenchmarkError(f"--max-speed-mm-s must be positive, got {args.max_speed_mm_s}")
-        cap = args.max_speed_mm_s * 1e-3
-        if cap > ceiling:
-            warn(f"warning: --max-speed-mm-s {args.max_speed_mm_s:g} is above the robot file's "
-                 f"max_speed_mm_s {ceiling * 1e3:g}: capped to {ceiling * 1e3:g} mm/s")
-            cap = ceiling
-    if args.max_travel_mm is not None and not args.max_travel_mm > 0:
-        raise BenchmarkError(f"--max-travel-mm must be positive, got {args.max_travel_mm}")
-    if not args.max_time_s > 0:
-        raise BenchmarkError(f"--max-time-s must be positive, got {args.max_time_s}")
-    if args.max_missed_consecutive < 0:
-        raise BenchmarkError(f"--max-missed-consecutive must be >= 0 (0: never), got "
-                             f"{args.max_missed_consecutive}")
+    for flag, value in (("--max-speed-mm-s", args.max_speed_mm_s),
+                        ("--max-travel-mm", args.max_travel_mm),
+                        ("--max-time-s", args.max_time_s)):
+        check_option(flag, value)
+    check_option("--max-missed-consecutive", args.max_missed_consecutive, strict=False,
+                 note=" (0: never)")
     if not 0 <= args.max_missed_fraction <= 1:
         raise BenchmarkError(f"--max-missed-fraction must be in [0, 1] (1: never), got "
                              f"{args.max_missed_fraction}")
-    if not (math.isfinite(args.halt_timeout_s) and args.halt_timeout_s > 0):
-        raise BenchmarkError(f"--halt-timeout-s must be positive, got {args.halt_timeout_s}")
-    if args.retries < 0:
-        raise BenchmarkError(f"--retries must be >= 0, got {args.retries}")
+    check_option("--halt-timeout-s", args.halt_timeout_s, finite=True)
+    check_option("--retries", args.retries, strict=False)
+    ceiling = cap = geometry.max_speed
+    if args.max_speed_mm_s is not None and args.max_speed_mm_s * 1e-3 > ceiling:
+        warn(f"warning: --max-speed-mm-s {args.max_speed_mm_s:g} is above the robot file's "
+             f"max_speed_mm_s {ceiling * 1e3:g}: capped to {ceiling * 1e3:g} mm/s")
+    elif args.max_speed_mm_s is not None:
+        cap = args.max_speed_mm_s * 1e-3
     return SessionLimits(
         max_speed=cap,
         max_travel=None if args.max_travel_mm is None else args.max_travel_mm * 1e-3,
@@ -254,6 +241,11 @@ def run_session(args: argparse.Namespace, inputs: SessionInputs, status: StatusL
     sensor: Any = None
     ended: BaseException | None = None
     guard = SignalGuard(status.message)
+
+    def on_period(s: PeriodStatus) -> None:  # the status line and the log line
+        status(s)
+        log.write(s.to_json())
+
     with guard:
         try:
             log.open(_header(args, inputs, limits))
@@ -275,7 +267,7 @@ def run_session(args: argparse.Namespace, inputs: SessionInputs, status: StatusL
             guard.in_loop = True  # from here the first signal waits for the next period
             servo_loop(limited, sensor, inputs.controller, inputs.goal, inputs.geometry,
                        args.dt, args.max_steps, args.tolerance_mm * 1e-3,
-                       args.feature_tolerance, args.settle, log_period(log, status),
+                       args.feature_tolerance, args.settle, on_period,
                        on_pose, limits=limits, checks=[guard, *checks],
                        warn=status.message, result=result)
         except BaseException as exc:  # every way out goes through the shutdown below
@@ -287,8 +279,8 @@ def run_session(args: argparse.Namespace, inputs: SessionInputs, status: StatusL
             code, reason = _classify(ended, moved)
             if guard.pending is not None and not isinstance(ended, SessionStop):
                 # e.g. SIGHUP, then the closed terminal failing a print: the signal first
-                sig = exit_for_signal(guard.pending)
-                code, reason = sig, f"{signal_name(guard.pending)} received (then {reason})"
+                code, reason = exit_for_signal(guard.pending), (
+                    f"{signal.Signals(guard.pending).name} received (then {reason})")
         else:
             code, reason = _outcome(result, args)
         halt = None if robot is None else _halt(robot, args.halt_timeout_s)
@@ -350,15 +342,6 @@ def _check_summaries(checks: Sequence[PeriodCheck]) -> list[str]:
             except Exception as exc:  # a summary never hides the shutdown's report
                 lines.append(f"{type(check).__name__}: no summary ({exc})")
     return lines
-
-
-def log_period(log: SessionLog, status: StatusLine) -> Any:
-    """The loop's ``on_period``: the status line and the log line."""
-    def on_period(s: PeriodStatus) -> None:
-        status(s)
-        log.write(s.to_json())
-
-    return on_period
 
 
 def _report(status: StatusLine, code: ServoExit, reason: str, result: ServoResult,

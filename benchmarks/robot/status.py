@@ -29,22 +29,17 @@ class PeriodStatus:
         leg_error: max |q - q*| at the end of the period [m].
         feature_error: Feature error of this period's image (NaN for a lost frame).
         controller_error: The controller's own error norm (NaN if not run).
-        velocities: (6,) the controller's command [m/s] (zeros when refused), before
-            any limit.
+        velocities: (6,) the controller's command [m/s] (zeros when refused).
         visible_edges: Edges found in this period's image.
         reason: Why the command is zero (refusal, lost frame), or None.
         lost_frame: The camera gave no image this period.
         rtt: Time spent communicating with the robot (the link time) [s].
         missed: This period was late.
-        missed_total, lost_total, refused_total: Late periods, lost frames and refused
-            commands so far.
-        applied: (6,) the velocities the robot applied [m/s] (after the session's speed
-            cap and the backend's stroke and speed clamps).
+        missed_total, lost_total, refused_total: The counts so far.
+        applied: (6,) the velocities the robot applied [m/s] (after every clamp).
         clamped: (6,) legs whose command was clamped (speed cap, stroke, speed limit).
-        camera_s: Time spent getting the image and detecting its edges [s].
-        controller_s: Time spent in the controller [s] (0 when it did not run).
-        lost_frames: Frames the camera lost this period (a lost image, or frames the
-            device dropped).
+        camera_s, controller_s: Time in the camera and in the controller [s].
+        lost_frames: Frames the camera lost this period (dropped by the device too).
     """
 
     step: int
@@ -103,19 +98,16 @@ class PeriodStatus:
 
 @dataclass
 class ServoResult:
-    """Outcome of :func:`servo_loop`.
+    """Outcome of :func:`~benchmarks.robot.loop.servo_loop`.
 
     Attributes:
         outcome: ``"converged"``, ``"max-steps"``, ``"interrupted"``, ``"camera ended"``
-            or ``"stopped"`` (a :class:`~benchmarks.robot.exits.SessionStop`: ``stop``).
+            or ``"stopped"`` (by the :class:`~benchmarks.robot.exits.SessionStop` ``stop``).
         steps: Periods run.
         wall_s: Wall time of the loop [s].
-        rtts: Round-trip time of each period [s].
-        missed: Late periods.
-        lost_frames: Lost camera frames.
-        refused: Periods with a refused command.
+        rtts, compute: Link time, and camera and controller time, of each period [s].
+        missed, lost_frames, refused: Late periods, lost frames, refused commands.
         last: The last period's status, if any.
-        compute: Camera and controller time of each period [s].
         stop: The stop request that ended the session, if any.
     """
 
@@ -132,8 +124,7 @@ class ServoResult:
 
     def summary(self) -> str:
         """One line for the user (mm, ms, Hz): ``converged after N periods ...`` or
-        ``stopped after N periods ...`` (why is the ``stopped:`` line's, not the internal
-        :attr:`outcome`)."""
+        ``stopped after N periods ...``."""
         rt = np.array(self.rtts) * 1e3 if self.rtts else np.array([math.nan])
         ct = np.array(self.compute) * 1e3 if self.compute else np.array([math.nan])
         verdict = "converged" if self.outcome == "converged" else "stopped"
@@ -147,7 +138,6 @@ class ServoResult:
             s += (f"; final max|q-q*| {self.last.leg_error * 1e3:.3f} mm, feature error "
                   f"{self.last.feature_error:.2e}")
         return s
-
 
 
 class StatusLine:
@@ -196,7 +186,7 @@ class StatusLine:
         self._last_reason = status.reason
 
     def _line(self, status: PeriodStatus, style: str = "") -> Any:
-        # one terminal line: cropped to the width, never wrapped
+        """One terminal line: cropped to the width, never wrapped."""
         return self._text(status.line(), style=style, no_wrap=True, overflow="ellipsis")
 
     def final(self, status: PeriodStatus | None) -> None:

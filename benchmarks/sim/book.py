@@ -15,14 +15,13 @@ from typing import Any
 import numpy as np
 
 from benchmarks.exceptions import BatchFailedError, user_message
-from benchmarks.sim.actuation import require_batch
 from benchmarks.sim.inputs import SimScenario
 from benchmarks.sim.tolerance import unconverged_reason
 from benchmarks.sim.world import TrialSetup
 from controllers.base import CommandBatch, ObservationBatch
 from controllers.exceptions import ControllerError
 from controllers.registry import registry
-from hexapod.actuation import Actuation
+from hexapod.actuation import Actuation, check_actuation
 from hexapod.exceptions import HexapodError
 from hexapod.se3 import pose_error
 from vision.exceptions import VisionError
@@ -158,16 +157,23 @@ class Book:
                   seconds: float, crashes: dict[int, BaseException]
                   ) -> tuple[np.ndarray, np.ndarray]:
         """Refuse a batch of another kind than declared or of another shape than one row
-        of 6 per stepped row; a row fails (and ends, its command not applied) with an
-        invalid command, after too many refusals in a row, or when its own controller
-        raised (``crashes``, by position in ``rows``: a trial instance's crash or
-        malformed command, isolated by :meth:`controllers.base.Controller.step_rows`).
+        of 6 per stepped row; a row fails (its command not applied) with an invalid
+        command, after too many refusals in a row, or when its own controller raised
+        (``crashes``: see :meth:`benchmarks.sim.loop.LoopBook.commanded`).
 
         Raises:
             ActuationError: The batch is of another kind than declared.
             CommandError: The batch is of another shape than ``(len(rows), 6)``.
         """
-        require_batch(commands, self.actuation, self.label, len(rows))
+        shape, n, declared = np.shape(commands.values), len(rows), self.actuation
+        if shape != (n, 6):
+            from controllers.exceptions import CommandError
+
+            raise CommandError(self.label, f"returned commands of shape {shape} for {n} "
+                               f"trials; expected ({n}, 6): one row of 6 leg values per trial")
+        if commands.actuation is not declared:
+            check_actuation(commands.actuation, (declared,),
+                            f"a study whose controller declared {declared.quantity}", self.label)
         self.batch_times.append(seconds)
         self.stepped[rows] += 1
         v, reasons = commands.values, commands.reasons
@@ -310,7 +316,6 @@ def stroke_violations(q: np.ndarray, v: np.ndarray, dt: float,
 def base_row(sc: SimScenario, spec: Any, trial: int) -> dict[str, Any]:
     """The identity of a result row: scenario, controller (with its package), trial, the
     goal setting (``[task] goal``), sweep."""
-    info = None
     try:
         info = registry.source(spec.name)
     except Exception:  # reported as the trial failure below

@@ -54,11 +54,8 @@ class CameraClock:
     Args:
         sc: The scenario (``sc.clock``, ``sc.dt``, ``sc.task.max_steps``).
         group: The trials (their indices seed the jitter).
-        q: (N, 6) true leg lengths [m] (the engine's array, read at every period).
-        R: (N, 3, 3) true rotations (read).
-        t: (N, 3) true positions [m] (read).
-        base_points: (6, 3) or (N, 6, 3) true base points [m].
-        platform_points: (6, 3) or (N, 6, 3) true platform points [m].
+        q, R, t: The plant's true state (read at every period).
+        base_points, platform_points: (6, 3) or (N, 6, 3) true robots' points [m].
     """
 
     def __init__(self, sc: SimScenario, group: list[TrialSetup], q: np.ndarray, R: np.ndarray,
@@ -95,17 +92,9 @@ class CameraClock:
         self._rows = pack_rows(R, t, q, base_points, platform_points)
 
     def measure(self, step: int, idx: np.ndarray, measure: Measure) -> ObservationBatch:
-        """The features the rows ``idx`` receive at control step ``step``.
-
-        Args:
-            step: The control step (``tau = step dt``).
-            idx: (n,) the active rows (their state in ``q``, ``R``, ``t`` is at ``tau``).
-            measure: ``(rows, R, t) -> features`` of the sensor at true poses (one
-                generator per row: the noise of a frame is drawn when it is measured).
-
-        Returns:
-            The camera's batch of ``idx``, with ``image_t`` (n,) the capture times [s].
-        """
+        """The camera's batch the active rows ``idx`` receive at ``tau = step dt`` (their
+        state is at ``tau``), with ``image_t`` (n,) the capture times [s]; ``measure``
+        is the sensor (:data:`Measure`: a frame's noise is drawn when it is measured)."""
         slot = step % self.depth
         self.hist_q[idx, slot] = self.q[idx]
         self.hist_R[idx, slot] = self.R[idx]
@@ -138,6 +127,7 @@ class CameraClock:
                 np.stack([p[1] for p in poses], axis=1))
 
     def _store(self, rows: np.ndarray, m: ObservationBatch, n: int) -> None:
+        """Keep the new frames of ``rows`` until the next ones."""
         for key in FRAME_FIELDS:
             value = getattr(m, key)
             if value is None:

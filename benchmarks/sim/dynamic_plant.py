@@ -37,9 +37,7 @@ class DynamicPlant(Plant):
     Args:
         sc: The scenario (``dt``, ``physics_dt``).
         group: The trials; each row's true robot is ``group[k].world.geometry``.
-        q: (N, 6) true leg lengths [m] (changed in place).
-        R: (N, 3, 3) true platform rotations (changed in place).
-        t: (N, 3) true platform positions [m] (changed in place).
+        q, R, t: The true state, as :class:`~benchmarks.sim.plant.KinematicPlant`'s.
         base_points, platform_points: The true robots' points, (6, 3) or (N, 6, 3) [m].
     """
 

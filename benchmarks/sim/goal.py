@@ -101,17 +101,14 @@ def predicted_features(camera: Any, geometry: HexapodGeometry, rotation: np.ndar
     predicts hidden is NaN, as a hidden edge is in a taught goal: a law that needs it
     says so itself (an encoder law does not).
     """
-    from benchmarks.sim.sensors import edge_batch
+    from benchmarks.sim.sensors import seen_edges
     from vision.legs import observe_legs
 
     seen = observe_legs(camera, geometry, np.asarray(rotation, float),
                         np.asarray(translation, float))
     visible = np.asarray(seen.edge_visible, dtype=bool)
     normals = np.where(visible[..., None], np.asarray(seen.normals, float), np.nan)
-    with np.errstate(invalid="ignore"):
-        lines = (camera.normal_to_line(normals)[None] if camera.family == "perspective"
-                 else None)
-    return _row_features(edge_batch(normals[None], lines, visible[None]), 0)
+    return row_features(seen_edges(camera, normals[None], visible[None]), 0)
 
 
 def taught_goal(m: ObservationBatch, setup: TrialSetup, sc: Any, row: int = 0) -> Goal:
@@ -120,16 +117,14 @@ def taught_goal(m: ObservationBatch, setup: TrialSetup, sc: Any, row: int = 0) -
     controller's model computes from them (:func:`model_pose`)."""
     q = taught_lengths(sc, setup)
     R, t = model_pose(setup.nominal_geometry, q)
-    return Goal(lengths=q, rotation=R, translation=t, **_row_features(m, row))
+    return Goal(lengths=q, rotation=R, translation=t, **row_features(m, row))
 
 
 def measured_goals(m: ObservationBatch, setups: list[TrialSetup], sc: Any) -> list[Goal]:
     """The goals of the ``"mixed"`` and ``"taught"`` settings of trials whose goal images
-    are the rows of one batch ``m`` (row ``k``: ``setups[k]``), as
-    :func:`benchmarks.sim.sensors.trial_goal` makes them one by one (the same values):
-    each goal's features are views of its row (no batch of one per trial) and, under
-    ``"mixed"``, the nominal inverse kinematics of the goal poses is one call per
-    nominal robot (elementwise: the same bits as one call per trial).
+    are the rows of one batch ``m`` (row ``k``: ``setups[k]``): the values
+    :func:`benchmarks.sim.sensors.trial_goal` gives one by one, the features views of
+    the rows and the nominal inverse kinematics one call per nominal robot.
 
     Raises:
         ValueError: The setting is ``"cartesian"`` (nothing is measured at the goal).
@@ -143,10 +138,10 @@ def measured_goals(m: ObservationBatch, setups: list[TrialSetup], sc: Any) -> li
                                           np.array([s.goal_rotation for s in setups]),
                                           np.array([s.goal_translation for s in setups]))
     return [Goal(lengths=lengths[k], rotation=s.goal_rotation, translation=s.goal_translation,
-                 **_row_features(m, k)) for k, s in enumerate(setups)]
+                 **row_features(m, k)) for k, s in enumerate(setups)]
 
 
-def _row_features(m: ObservationBatch, row: int) -> dict[str, Any]:
+def row_features(m: ObservationBatch, row: int) -> dict[str, Any]:
     """The goal features of row ``row`` of a camera's batch (views)."""
     return {"normals": m.normals[row],  # type: ignore[index]
             "lines": None if m.lines is None else m.lines[row],
@@ -165,20 +160,12 @@ def cartesian_goal(setup: TrialSetup) -> Goal:
 
 
 class AnchoredReference:
-    """A reference trajectory moved to end at a goal pose (``"taught"``): every sample's
-    displacement from the reference's end, in the base frame, is kept and applied to
-    the goal: ``t' = t - t_end + t_goal``, ``R' = R R_end^T R_goal`` (the base-frame
-    rotation from the end to the sample, applied to the goal orientation). Velocities,
-    angular velocities (base frame) and their rates are the reference's: the path is
-    the same motion, started from where the model says the taught goal is (turning the
-    whole path would turn its shape). The time axis and every other attribute are the
-    reference's.
-
-    Args:
-        reference: Has ``duration`` [s] and ``at(times)`` -> :class:`ReferenceSample`.
-        rotation: (3, 3) the goal orientation the path must end at (base frame).
-        translation: (3,) the goal position [m].
-    """
+    """A ``reference`` trajectory (``duration`` [s], ``at(times)``) moved to end at the
+    goal pose ``rotation`` (3, 3), ``translation`` (3,) [m] (``"taught"``): each sample's
+    displacement from the end, in the base frame, is applied to the goal (``t' = t -
+    t_end + t_goal``, ``R' = R R_end^T R_goal``). Velocities, accelerations, the time
+    axis and every other attribute are the reference's: the same motion, started from
+    where the model says the taught goal is (turning the path would turn its shape)."""
 
     def __init__(self, reference: Any, rotation: np.ndarray, translation: np.ndarray
                  ) -> None:

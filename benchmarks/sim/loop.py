@@ -13,11 +13,9 @@ the controller's ``crashes``) and the **book** (:class:`LoopBook`: when a row is
 what happens to a command, what is recorded; :class:`benchmarks.sim.book.Book` for a
 study, :class:`benchmarks.robot.loop.ServoBook` for the servo session).
 
-One period of the active rows ``idx``: the book says which rows are done, the camera
-measures every active row, the rows that are not done and have an image are stepped as
-one batch, the book accounts the commands (a batch refused as a whole stops the loop
-with :meth:`LoopBook.stopped`'s exception), and the plant advances the rows still
-running with their commands (zeros where there is none).
+One period of the active rows: the book says which are done, the camera measures them
+all, those not done with an image are stepped as one batch, the book accounts the
+commands, the plant advances the rows still running (zero commands where none).
 """
 
 from __future__ import annotations
@@ -83,21 +81,10 @@ class LoopBook(Protocol):
 def closed_loop(plant: Any, sensor: Any, clock: CameraClock | None, controller: Any,
                 book: LoopBook, dt: float, offsets: np.ndarray,
                 max_steps: int | None = None) -> int:
-    """Run the loop until the book ends every row or ``max_steps`` periods have passed.
-
-    Args:
-        plant: The plant (its ``R``, ``t`` arrays are the poses the camera sees).
-        sensor: ``observe(rows, R, t) -> ObservationBatch`` (the camera's part).
-        clock: The camera's clock, or None.
-        controller: Reset for every row (``step_batch``).
-        book: The bookkeeping of the rows.
-        dt: Control period [s].
-        offsets: (N, 6) encoder offsets of the rows [m] (the plant's ``measured_lengths``).
-        max_steps: Periods ``0..max_steps`` (None: until the book ends).
-
-    Returns:
-        The number of periods begun.
-    """
+    """Run the loop (the module docstring's components; ``controller`` reset for every
+    row) at control period ``dt`` [s] until the book ends every row or after periods
+    ``0..max_steps`` (None: no bound); ``offsets`` (N, 6) [m] are the rows' encoder
+    offsets (the plant's ``measured_lengths``). Returns the number of periods begun."""
     steps: Iterable[int] = itertools.count() if max_steps is None else range(max_steps + 1)
     begun = 0
     for step in steps:

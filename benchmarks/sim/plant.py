@@ -6,6 +6,12 @@ commands. :class:`KinematicPlant` (``[robot] world = "kinematic"``, the default)
 massless ideal robot, :class:`~benchmarks.sim.dynamic_plant.DynamicPlant` the true
 robot's dynamics and drives, :class:`BackendPlant` robots behind backends (a study's
 ``--backend``, the servo session's robot).
+
+What a world applies (:func:`world_actuation`, :mod:`hexapod.actuation`): the kinematic
+world integrates leg velocities and refuses a controller that commands leg forces (an
+:class:`~hexapod.exceptions.ActuationError` naming it, the trial's failure); the dynamic
+world's drives follow what the controller commands (velocity mode, or force mode for
+leg forces; the rest of the robot file is kept).
 """
 
 from __future__ import annotations
@@ -39,17 +45,9 @@ class Plant:
 
     def advance(self, run: np.ndarray, velocities: np.ndarray, dt: float
                 ) -> dict[int, str]:
-        """Move rows ``run`` over one control period.
-
-        Args:
-            run: (n,) row indices of the trials that run this period.
-            velocities: (n, 6) commanded leg velocities [m/s] (drive setpoints).
-            dt: Control period [s].
-
-        Returns:
-            The rows (indices into the caller's arrays) whose world failed this period,
-            with the reason (their state is left at the last good one).
-        """
+        """Move rows ``run`` (n,) with their commands ``velocities`` (n, 6) [m/s] over
+        one control period ``dt`` [s]; returns the rows whose world failed, with the
+        reason (their state is left at the last good one)."""
         raise NotImplementedError
 
     def use_actuation(self, actuation: Actuation, label: str) -> None:
@@ -79,11 +77,9 @@ class KinematicPlant(Plant):
     """The massless ideal robot: leg lengths integrate the clamped command exactly.
 
     Args:
-        q: (N, 6) true leg lengths [m] (changed in place).
-        R: (N, 3, 3) true platform rotations (changed in place).
-        t: (N, 3) true platform positions [m] (changed in place).
-        base_points: (6, 3) or (N, 6, 3) true base points [m].
-        platform_points: (6, 3) or (N, 6, 3) true platform points [m].
+        q, R, t: (N, 6) true leg lengths [m], (N, 3, 3) rotations and (N, 3) positions
+            [m] (changed in place).
+        base_points, platform_points: (6, 3) or (N, 6, 3) true robots' points [m].
         stroke: Leg length limits ``(q_min, q_max)`` [m].
         max_speed: Leg speed limit [m/s].
     """
@@ -126,8 +122,7 @@ class BackendPlant(Plant):
     Args:
         backends: One connected backend per row.
         q: (N, 6) leg lengths [m] (changed in place: measured minus ``offsets``).
-        R: (N, 3, 3) platform rotations (changed in place by ``solve_poses``).
-        t: (N, 3) platform positions [m] (idem).
+        R, t: (N, 3, 3), (N, 3) [m] platform poses (changed in place by ``solve_poses``).
         offsets: (N, 6) encoder offsets [m]: measured = ``q`` + offsets.
         solve_poses: Sets the poses of rows ``run`` from their lengths ``q``; returns the
             (n,) mask of rows whose pose could not be found
@@ -176,6 +171,13 @@ class BackendPlant(Plant):
         return {"rtt_median_ms": float(np.median(arr)),
                 "rtt_p99_ms": float(np.percentile(arr, 99)),
                 "missed_periods": int(self.missed[row])}
+
+
+def world_actuation(sc: Any) -> tuple[tuple[Actuation, ...], str]:
+    """What the scenario's world (``sc.world``) applies, and how messages name it."""
+    if getattr(sc, "world", "kinematic") == "dynamic":
+        return (Actuation.VELOCITY, Actuation.FORCE), "the dynamic world"
+    return (Actuation.VELOCITY,), "the kinematic world"
 
 
 def make_plant(sc: Any, group: list[Any], q: np.ndarray, R: np.ndarray, t: np.ndarray,

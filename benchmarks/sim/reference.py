@@ -19,23 +19,6 @@ from controllers.batch import ForeignController, batch_controller
 from hexapod.trajectory import PoseTrajectory
 
 
-def trajectory(task: TaskConfig, start_rotation: np.ndarray, start_translation: np.ndarray,
-               goal_rotation: np.ndarray, goal_translation: np.ndarray) -> PoseTrajectory:
-    """The reference of a trajectory task from a trial's start (and, for a line, goal)
-    pose, with the task's limits in SI units."""
-    return PoseTrajectory(
-        task.shape, task.profile, start_rotation, start_translation,
-        1e-3 * task.speed_mm_s, 1e-3 * task.acceleration_mm_s2,
-        goal_rotation=goal_rotation, goal_translation=goal_translation,
-        angular_speed=float(np.deg2rad(task.angular_speed_deg_s)),
-        angular_acceleration=float(np.deg2rad(task.angular_acceleration_deg_s2)),
-        radius=1e-3 * task.radius_mm, laps=task.laps, plane=task.plane,
-        jerk=1e-3 * task.jerk_mm_s3,
-        angular_jerk=float(np.deg2rad(task.angular_jerk_deg_s3)),
-        peak_acceleration=(1e-3 * task.peak_acceleration_mm_s2
-                           if task.peak_acceleration_mm_s2 > 0 else None))
-
-
 def trajectory_end(task: TaskConfig, start_rotation: np.ndarray,
                    start_translation: np.ndarray, goal_rotation: np.ndarray,
                    goal_translation: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -47,11 +30,22 @@ def trajectory_end(task: TaskConfig, start_rotation: np.ndarray,
 
 
 def trial_reference(sc: SimScenario, setup: TrialSetup) -> PoseTrajectory | None:
-    """The reference of a trial (None for a point-to-point task)."""
-    if sc.task.kind != "trajectory":
+    """The reference of a trial from its start (and, for a line, goal) pose, with the
+    task's limits in SI units (None for a point-to-point task)."""
+    task = sc.task
+    if task.kind != "trajectory":
         return None
-    return trajectory(sc.task, setup.start_rotation, setup.start_translation,
-                      setup.goal_rotation, setup.goal_translation)
+    return PoseTrajectory(
+        task.shape, task.profile, setup.start_rotation, setup.start_translation,
+        1e-3 * task.speed_mm_s, 1e-3 * task.acceleration_mm_s2,
+        goal_rotation=setup.goal_rotation, goal_translation=setup.goal_translation,
+        angular_speed=float(np.deg2rad(task.angular_speed_deg_s)),
+        angular_acceleration=float(np.deg2rad(task.angular_acceleration_deg_s2)),
+        radius=1e-3 * task.radius_mm, laps=task.laps, plane=task.plane,
+        jerk=1e-3 * task.jerk_mm_s3,
+        angular_jerk=float(np.deg2rad(task.angular_jerk_deg_s3)),
+        peak_acceleration=(1e-3 * task.peak_acceleration_mm_s2
+                           if task.peak_acceleration_mm_s2 > 0 else None))
 
 
 class Targets:
@@ -75,25 +69,19 @@ class Targets:
         return self._grid[0][idx, step], self._grid[1][idx, step]
 
 
-def task_controller(sc: SimScenario, spec: Any) -> Any:
-    """A controller of ``spec`` for the task of ``sc``: as registered, wrapped in a
-    :class:`~controllers.tracking.TrackingController` for a trajectory task (which
-    passes the trials of a controller that samples the reference itself through)."""
-    ctrl = batch_controller(spec.name, spec.options)
-    if sc.task.kind != "trajectory":
-        return ctrl
-    from controllers.tracking import TrackingController
-
-    return TrackingController(ctrl, feed_forward=sc.task.feed_forward)
-
-
 def task_batch_controller(sc: SimScenario, spec: Any, batched: bool = True) -> Any:
-    """The controller of :func:`task_controller`, for ``reset_batch`` / ``step_batch``.
+    """The controller of ``spec`` for the task of ``sc`` (``reset_batch``, ``step_batch``):
+    as registered, wrapped in a :class:`~controllers.tracking.TrackingController` for a
+    trajectory task (which passes the trials of a controller that samples the reference
+    itself through). Without ``batched``, the per-trial engine's: one such controller per
+    trial, each a batch of one (a :class:`~controllers.batch.ForeignController`: the
+    reference the batched rows are compared with)."""
+    def task_controller() -> Any:
+        ctrl = batch_controller(spec.name, spec.options)
+        if sc.task.kind != "trajectory":
+            return ctrl
+        from controllers.tracking import TrackingController
 
-    With ``batched``, the controller itself (every controller steps a batch). Without:
-    the per-trial engine's, one :func:`task_controller` per trial, each reset and
-    stepped alone as a batch of one (a :class:`~controllers.batch.ForeignController`:
-    the reference the batched rows are compared with)."""
-    if batched:
-        return task_controller(sc, spec)
-    return ForeignController(lambda: task_controller(sc, spec))
+        return TrackingController(ctrl, feed_forward=sc.task.feed_forward)
+
+    return task_controller() if batched else ForeignController(task_controller)

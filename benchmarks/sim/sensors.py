@@ -28,18 +28,10 @@ from vision.noise import Generators
 def camera_batch(normals: np.ndarray, lines: np.ndarray | None, directions: np.ndarray,
                  edge_visible: np.ndarray, direction_visible: np.ndarray,
                  image_t: np.ndarray | None = None) -> ObservationBatch:
-    """The camera's part of the observations of ``n`` rows: the features and their
-    visibility; ``trials`` ``0..n-1``, ``t`` zeros and ``lengths`` NaN until the loop
-    adds the rows, the time and the encoders' readings.
-
-    Args:
-        normals: (n, 6, 2, 3) edge normals (NaN where hidden).
-        lines: (n, 6, 2, 3) image lines (perspective camera) or None.
-        directions: (n, 6, 3) leg directions (NaN where an edge is hidden).
-        edge_visible: (n, 6, 2) bool.
-        direction_visible: (n, 6) bool.
-        image_t: (n,) capture times [s] (a camera clock's), or None.
-    """
+    """The camera's part of the observations of ``n`` rows: normals (n, 6, 2, 3), image
+    lines (idem, or None), leg directions (n, 6, 3), their visibility (n, 6, 2), (n, 6)
+    and capture times ``image_t`` (n,) [s] or None; ``trials`` ``0..n-1``, ``t`` zeros
+    and ``lengths`` NaN until the loop adds the rows, the time and the encoders."""
     n = len(normals)
     return ObservationBatch(trials=np.arange(n), t=np.zeros(n),
                             lengths=np.full((n, 6), np.nan), normals=normals, lines=lines,
@@ -58,6 +50,17 @@ def edge_batch(normals: np.ndarray, lines: np.ndarray | None, visible: np.ndarra
     if not both.all():
         directions = np.where(both[..., None], directions, np.nan)
     return camera_batch(normals, lines, directions, visible, both)
+
+
+def seen_edges(camera: Any, normals: np.ndarray, visible: np.ndarray) -> ObservationBatch:
+    """The :func:`edge_batch` of edges (n, 6, 2, 3), (n, 6, 2) seen by ``camera``: with
+    their image lines when it is of the perspective family (fisheye included), else (a
+    unified camera, or None) without."""
+    lines = None
+    if getattr(camera, "family", "") == "perspective":
+        with np.errstate(invalid="ignore", divide="ignore"):
+            lines = camera.normal_to_line(normals)
+    return edge_batch(normals, lines, visible)
 
 
 class GeometricSensor:
@@ -141,18 +144,9 @@ class GeometricSensor:
     def measure_goal(self, rotation: np.ndarray, translation: np.ndarray,
                      rng: np.random.Generator, frames: int = 1, apply_noise: bool = True
                      ) -> ObservationBatch:
-        """The desired features: ``frames`` measurements at one true pose, averaged.
-
-        Args:
-            rotation: (3, 3) true goal orientation (base frame).
-            translation: (3,) true goal position (base frame) [m].
-            rng: Generator of the noise of the goal measurements.
-            frames: Measurements averaged (:func:`vision.estimate.average_normals`).
-            apply_noise: Whether the scenario's noise applies (``[noise] on_goal``).
-
-        Returns:
-            The camera's batch of :meth:`measure`, batch of one.
-        """
+        """The desired features: ``frames`` measurements at the true goal pose (3, 3),
+        (3,) [m] with ``rng`` (noisy if ``apply_noise``: ``[noise] on_goal``), averaged
+        (:func:`vision.estimate.average_normals`) into a batch of one."""
         R = np.repeat(np.asarray(rotation, float)[None], frames, axis=0)
         t = np.repeat(np.asarray(translation, float)[None], frames, axis=0)
         m = self.measure(R, t, [rng] * frames, apply_noise=apply_noise)
@@ -175,25 +169,24 @@ def noisy_features(sc: SimScenario, normals: np.ndarray, visible: np.ndarray,
     """The scenario's noise on true edges, and the features the controllers receive.
 
     Rotation noise perturbs each true edge normal; the perspective image lines follow
-    from the noisy normals through the TRUE camera, and the normals the controller
-    receives are recomputed from those lines with the ESTIMATED intrinsics (so an
-    intrinsics error reaches the controller as it would). Pixel noise fits each normal
-    on noisy points along the visible edge, lifted with the estimated camera. Every row
-    draws from its own generator, so a row's features do not depend on the others.
+    through the TRUE camera and the normals the controller receives are recomputed from
+    them with the ESTIMATED intrinsics (an intrinsics error reaches the controller).
+    Pixel noise fits each normal on noisy points along the visible edge, lifted with the
+    estimated camera. Each row draws from its own generator only.
 
     Args:
         sc: The scenario (its ``[noise]``).
         normals: (n, 6, 2, 3) true edge normals; visible: (n, 6, 2).
         rngs: One generator per row (anything when :func:`draws_noise` is False).
         apply_noise: Whether the noise applies.
-        estimated: The estimated camera (the same for every row).
+        estimated: The estimated camera (every row's).
         cameras: ``(rows, true camera)`` groups covering every row (without ``line_maps``).
         item: Row -> (its :class:`vision.legs.LegObservation`, its true camera) (pixels).
         line_maps: (n, 3, 3) each row's true ``normal_to_line_matrix`` (every camera
-            perspective: the lines of every row in one call), or None.
+            perspective), or None.
 
     Returns:
-        The camera's batch (:func:`camera_batch`; ``lines`` None for a unified camera).
+        The camera's batch (``lines`` None for a unified camera).
     """
     normals = np.array(normals, dtype=float)
     visible = np.array(visible, dtype=bool)
@@ -234,45 +227,28 @@ def noisy_features(sc: SimScenario, normals: np.ndarray, visible: np.ndarray,
     return edge_batch(normals, lines, visible)
 
 
-def _average_frames(m: ObservationBatch, perspective_camera: Any | None,
+def _average_frames(m: ObservationBatch, camera: Any | None,
                     max_deviation: float | None = None) -> ObservationBatch:
-    """Average K measurements of one static pose (leading axis K) into a batch of one.
-
-    Normals: :func:`vision.estimate.average_normals` (frames farther than
-    ``max_deviation`` [rad] from the median do not count; an edge kept in fewer than
-    half of the frames is missing); lines: the averaged normals seen by the estimated
-    perspective camera (``perspective_camera``, None for a unified camera). One frame
-    is returned unchanged.
-    """
+    """Average K measurements of one static pose (leading axis K) into a batch of one:
+    :func:`vision.estimate.average_normals` (frames farther than ``max_deviation`` [rad]
+    from the median do not count; an edge kept in fewer than half of the frames is
+    missing), seen by the estimated ``camera`` (:func:`seen_edges`). One frame is
+    returned unchanged."""
     from vision.estimate import average_normals
 
     if len(m) == 1:
         return m
     assert m.normals is not None  # a camera's batch has normals
     normals, visible = average_normals(m.normals, m.edge_visible, max_deviation=max_deviation)
-    lines = None
-    if perspective_camera is not None:
-        with np.errstate(invalid="ignore"):
-            lines = perspective_camera.normal_to_line(normals)[None]
-    return edge_batch(normals[None], lines, visible[None])
+    return seen_edges(camera, normals[None], visible[None])
 
 
 def trial_goal(sensor: GeometricSensor | Any, setup: TrialSetup, sc: SimScenario) -> Goal:
-    """What the controllers are told about the goal of a trial, by the scenario's goal
-    setting (:mod:`benchmarks.sim.goal`): under ``"mixed"`` and ``"taught"`` the sensor
-    measures the TRUE goal pose ``sc.teach_frames`` times (with the scenario's noise when
-    ``[noise] on_goal``) and the normals are averaged
-    (:func:`benchmarks.sim.goal.measured_goals`); under ``"cartesian"`` nothing is
-    measured (:func:`benchmarks.sim.goal.cartesian_goal`).
-
-    Args:
-        sensor: The trial's sensor (:func:`make_sensor`).
-        setup: The trial.
-        sc: The scenario (``teach_frames``, ``noise.on_goal``).
-
-    Returns:
-        The :class:`~controllers.base.Goal`.
-    """
+    """The :class:`~controllers.base.Goal` the controllers of trial ``setup`` are told, by
+    the scenario's goal setting (:mod:`benchmarks.sim.goal`): under ``"mixed"`` and
+    ``"taught"`` the sensor (:func:`make_sensor`) measures the TRUE goal pose
+    ``sc.teach_frames`` times (noisy when ``[noise] on_goal``), the normals averaged;
+    under ``"cartesian"`` nothing is measured."""
     setting = goal_setting(sc)
     if setting == "cartesian":
         return cartesian_goal(setup)
@@ -315,15 +291,12 @@ class _ImageSensorAdapter:
     def measure_goal(self, rotation: np.ndarray, translation: np.ndarray,
                      rng: np.random.Generator, frames: int = 1, apply_noise: bool = True
                      ) -> ObservationBatch:
-        """``frames`` rendered images of the goal pose, their normals averaged: the first
-        frame detected from the model's prediction, the next ones tracked from the
-        previous frame, as the run tracks them (and as ``servo --teach`` does: detecting
-        each frame afresh left the taught edges 0.1 px from where tracking finds them,
-        which held the edge law 0.2-0.4 mm from the goal in 3 of 20 trials of
-        andreff2006-images-distorted). A frame farther from the median than the
-        detector's inlier distance (``outlier_px``) does not count for that edge.
-        ``rng`` and ``apply_noise`` are unused: the pixel noise is the renderer's.
-        """
+        """``frames`` rendered images of the goal pose, tracked as the run tracks them
+        (detecting each frame afresh left the taught edges 0.1 px off, which held the
+        edge law 0.2-0.4 mm from the goal in 3 of 20 trials of
+        andreff2006-images-distorted), their normals averaged without the frames farther
+        from the median than ``outlier_px``. ``rng``, ``apply_noise``: unused (the pixel
+        noise is the renderer's)."""
         from vision.estimate import radians_per_pixel
 
         normals, visible = [], []
@@ -333,16 +306,10 @@ class _ImageSensorAdapter:
             prev = np.asarray(m.normals) if np.any(np.asarray(m.edge_visible)) else None
             normals.append(np.asarray(m.normals, float))
             visible.append(np.asarray(m.edge_visible, bool))
-        n = np.array(normals)
-        vis = np.array(visible)
         est = self.sensor.estimated_camera
-        lines = None
-        if est.family == "perspective":
-            with np.errstate(invalid="ignore"):
-                lines = est.normal_to_line(n)
         tolerance = self.sensor.detector.outlier_px * radians_per_pixel(est)
-        return _average_frames(edge_batch(n, lines, vis),
-                               est if est.family == "perspective" else None, tolerance)
+        return _average_frames(seen_edges(est, np.array(normals), np.array(visible)), est,
+                               tolerance)
 
     def measure(self, rotations: np.ndarray, translations: np.ndarray,
                 rngs: list[np.random.Generator], apply_noise: bool = True
@@ -368,14 +335,8 @@ class _ImageSensorAdapter:
 
 class RowSensor:
     """The loop's sensor interface (``observe(rows, R, t)``) over a sensor of one world
-    (rendered images, or a study's own): the rows of a group measured together, each
-    with its own generator.
-
-    Args:
-        sensor: Has ``measure(R, t, rngs)`` (and ``measure_goal``) like
-            :class:`GeometricSensor`.
-        rngs: One generator per row of the group.
-    """
+    (rendered images, or a study's own) with ``measure(R, t, rngs)`` like
+    :class:`GeometricSensor`, and one generator per row of the group (``rngs``)."""
 
     def __init__(self, sensor: Any, rngs: list[np.random.Generator]) -> None:
         self.sensor = sensor

@@ -20,7 +20,6 @@ from typing import Any, TypeVar
 import numpy as np
 
 from benchmarks.exceptions import BatchFailedError, ScenarioError
-from benchmarks.sim.actuation import world_actuation
 from benchmarks.sim.book import Book, OnStep, TrialResult, failure_row
 from benchmarks.sim.clock import CameraClock, clock_active
 from benchmarks.sim.goal import (
@@ -31,7 +30,7 @@ from benchmarks.sim.goal import (
 )
 from benchmarks.sim.inputs import SimScenario
 from benchmarks.sim.loop import closed_loop
-from benchmarks.sim.plant import BackendPlant, KinematicPlant, Plant, make_plant
+from benchmarks.sim.plant import BackendPlant, KinematicPlant, Plant, make_plant, world_actuation
 from benchmarks.sim.reference import Targets, task_batch_controller, trial_reference
 from benchmarks.sim.sensors import (
     GeometricSensor,
@@ -78,21 +77,19 @@ def run_trials(
     engine: str = "batched",
 ) -> list[TrialResult]:
     """Run trials of one scenario point with one controller, in groups by engine (the
-    module docstring); a crash in a trial is recorded as its failure. Both engines give
-    the same rows.
+    module docstring; both give the same rows); a crash in a trial is its failure.
 
     Args:
         sc: An expanded scenario (one sweep point).
         controller_index: Index into ``sc.controllers``.
         trials: Trial indices.
         record_trials: Trials with an index below this keep their time series.
-        backend_factory: Builds a backend for a trial from the true geometry and
-            start lengths (default: exact integration of the clamped command).
+        backend_factory: :data:`BackendFactory` (default: the simulated robot).
         calibrate: Optional calibration run per trial (returns estimated base points).
         on_step: A live view's callback (:data:`benchmarks.sim.book.OnStep`).
-        sensor_factory: Builds the sensor of a group of trials from the scenario and its
-            first trial (default :func:`make_sensor`; studies swap sensors with it). The
-            sensor has ``measure`` and ``measure_goal`` like :class:`GeometricSensor`.
+        sensor_factory: The sensor of a group from the scenario and its first trial
+            (default :func:`make_sensor`), with ``measure`` and ``measure_goal`` like
+            :class:`GeometricSensor`.
         engine: ``"batched"`` (default) or ``"per-trial"``.
 
     Returns:
@@ -268,7 +265,7 @@ def _goals(sc: SimScenario, sensor: GeometricSensor, setups: list[TrialSetup]
 
 
 def _close_all(backends: list[Backend]) -> None:
-    """Halt and close backends, whatever happened (a robot is never left moving)."""
+    """Halt and close backends, whatever happened."""
     for b in backends:
         try:
             b.halt()

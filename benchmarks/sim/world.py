@@ -69,11 +69,11 @@ class TrialSetup:
     Attributes:
         trial: Trial index.
         world: The truth.
-        nominal_geometry: What the user believes the robot is.
-        estimated_camera: What the user believes the camera is.
+        nominal_geometry, estimated_camera: What the user believes the robot and the
+            camera are.
         base_points: (6, 3) estimated base points in the camera frame [m].
-        start_rotation, start_translation: True start pose (base frame).
-        goal_rotation, goal_translation: True goal pose (base frame).
+        start_rotation, start_translation, goal_rotation, goal_translation: True start
+            and goal poses (base frame) [-, m].
         start_lengths: (6,) true start leg lengths [m].
         shared: True when the world is the nominal one (trials can be batched).
         calibration: Calibration summary when the scenario calibrates first.
@@ -134,13 +134,9 @@ def make_trial(sc: SimScenario, trial: int, nominal: HexapodGeometry, camera: Ca
 
 def make_trials(sc: SimScenario, trials: list[int], nominal: HexapodGeometry, camera: Camera,
                 calibrate: Calibrate | None = None) -> list[TrialSetup | Exception]:
-    """:func:`make_trial` for many trials: the same setups, to the last bit, the random
-    poses of all of them drawn in one batch (:func:`hexapod.workspace.sample_poses_many`).
-
-    Returns:
-        Per trial, its setup or the exception that :func:`make_trial` raises for it
-        (that trial's failure).
-    """
+    """:func:`make_trial` for many trials, the same to the last bit, their random poses
+    drawn in one batch (:func:`hexapod.workspace.sample_poses_many`); per trial its setup
+    or the exception that :func:`make_trial` raises for it (that trial's failure)."""
     ce = sc.calibration_error.at_scale()
     shared = ce.nominal_world()  # no error: every trial shares the nominal world
     drawn: list[tuple[np.random.Generator, World, Any, bool] | Exception] = []
@@ -320,10 +316,9 @@ def _scaled_inertia(inertia: Any, mass: Any, rotational: Any) -> Any:
 def model_error_drives(drives: Any, friction_error_percent: float,
                        rotor_inertia_error_percent: float,
                        bandwidth_error_percent: float) -> Any:
-    """The true robot's drives when the model (``drives``, the robot file's) is off by the
-    given errors [%]: the viscous and Coulomb friction divided by ``1 + e_f / 100``, the
-    rotor inertia by ``1 + e_r / 100`` and the velocity loops' bandwidth by
-    ``1 + e_b / 100`` (the model is the truth times those factors).
+    """The true robot's drives when the model (``drives``) is off by the given errors [%]
+    (as :func:`model_error_inertia`): friction, rotor inertia and velocity bandwidth
+    divided by ``1 + e / 100``.
 
     Raises:
         DriveError: The true drives are impossible (a Coulomb friction at or above the

@@ -195,7 +195,7 @@ def check_controllers(sc: Scenario) -> tuple[Scenario, list[str]]:
         ScenarioError: An option the controller refuses, naming the controller and option.
     """
     import controllers  # noqa: F401 - registers the built-ins
-    from benchmarks.sim.actuation import world_actuation
+    from benchmarks.sim.plant import world_actuation
     from controllers.batch import actuation_of
     from controllers.exceptions import OptionError, UnknownControllerError
     from controllers.registry import registry

@@ -1,4 +1,4 @@
-"""The session's signal handlers (benchmarks.robot.shutdown), with real signals to this
+"""The session's signal handlers (benchmarks.robot.exits), with real signals to this
 process."""
 
 from __future__ import annotations
@@ -9,8 +9,13 @@ import signal
 import numpy as np
 import pytest
 
-from benchmarks.robot.exits import ServoExit, SessionStop, exit_for_signal
-from benchmarks.robot.shutdown import SESSION_SIGNALS, SignalGuard
+from benchmarks.robot.exits import (
+    SESSION_SIGNALS,
+    ServoExit,
+    SessionStop,
+    SignalGuard,
+    exit_for_signal,
+)
 
 
 def test_exit_codes_of_the_signals() -> None:

@@ -1,4 +1,4 @@
-"""No silent simulation (benchmarks.robot.camera_policy): which camera a session may use
+"""No silent simulation (benchmarks.robot.models): which camera a session may use
 with real hardware, checked before the robot is contacted."""
 
 from __future__ import annotations
@@ -9,7 +9,7 @@ import pytest
 
 from benchmarks.exceptions import BenchmarkError
 from benchmarks.robot import servo
-from benchmarks.robot.camera_policy import ALLOW_SIMULATED_FLAG, choose_camera, describe_camera
+from benchmarks.robot.models import ALLOW_SIMULATED_FLAG, choose_camera, describe_camera
 from hexapod.backends.registry import backends
 
 # a port that cannot be opened: an error about it would mean the robot was contacted

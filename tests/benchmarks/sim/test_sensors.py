@@ -1,10 +1,11 @@
-"""The servo's batch of one camera's features (benchmarks/robot/goals.py)."""
+"""The camera's batch of edges seen by a camera (benchmarks/sim/sensors.py), as the
+simulator and the servo session build it."""
 
 from __future__ import annotations
 
 import numpy as np
 
-from benchmarks.robot.goals import feature_batch
+from benchmarks.sim.sensors import seen_edges
 from hexapod import deltalab, legs_in_frame
 from vision.cameras.presets import fisheye_camera, front_camera, omni_camera
 from vision.legs import leg_edges
@@ -29,9 +30,10 @@ def test_image_lines_for_every_perspective_family_camera_as_the_simulator() -> N
     """A fisheye (kind 'fisheye', perspective family) gets image lines like a pinhole
     camera; the unified camera gets none."""
     for camera in (front_camera(), fisheye_camera()):
-        batch = feature_batch(camera, _features(camera))
+        f = _features(camera)
+        batch = seen_edges(camera, f.normals[None], f.edge_visible[None])
         assert batch.lines is not None, camera.kind
-        expected = camera.normal_to_line(_features(camera).normals)
-        np.testing.assert_array_equal(batch.lines[0], expected)
+        np.testing.assert_array_equal(batch.lines[0], camera.normal_to_line(f.normals))
     omni = omni_camera()
-    assert feature_batch(omni, _features(omni)).lines is None
+    f = _features(omni)
+    assert seen_edges(omni, f.normals[None], f.edge_visible[None]).lines is None
