@@ -130,10 +130,13 @@ class TaskRows:
             if width == self.grids.shape[2]:
                 grown[:, :self.grids.shape[1]] = self.grids
                 grown_known[:, :self.known.shape[1]] = self.known
+                for j in np.flatnonzero(self.grid_len).tolist():  # views of the new array
+                    self.laws[j].share_grid(grown[j, :self.grid_len[j]])
             self.grids, self.known = grown, grown_known
         self.grids[k, :size] = rows
         self.known[k, :size] = True if known is None else known
         self.grid_len[k] = size
+        law.share_grid(self.grids[k, :size])
 
     def step(self, observations: ObservationBatch, out: CommandBatch, threshold: float
              ) -> np.ndarray:
