@@ -272,17 +272,32 @@ class FeatureCTC(TaskComputedTorque):
     def batch_inputs(self, rows_batch: TaskRows, X: np.ndarray,
                      observations: ObservationBatch, rows: np.ndarray, trials: np.ndarray,
                      tr: np.ndarray) -> np.ndarray:
-        """:meth:`TaskComputedTorque.batch_inputs`: the rows whose features are all seen
-        (:meth:`batch_features`) and whose reference is on its grid, every row known."""
+        """:meth:`TaskComputedTorque.batch_inputs`: the rows whose features are seen, all
+        (:meth:`batch_features`) or partly (:meth:`batch_partly_seen`), with their
+        reference on its grid. A row with a feature hidden or a reference feature not
+        known uses the rows left (its mask, as :meth:`compiled_inputs` gives it, in the
+        batch's ``used``; its input row kept as the trial's own step keeps it)."""
         step = rows_batch.step_of
         assert step is not None
         fast = self.batch_features(step, X, observations, rows)
-        references, on = rows_batch.references(trials, tr)
-        fast &= on
-        if not fast.any():
-            return fast
-        X[fast, step.inputs["reference_features"]] = references[fast]
-        X[fast, step.inputs["mask"]] = 1.0
+        references, on, at = rows_batch.references(trials, tr)
+        masks: dict[int, np.ndarray] = {}
+        partly = self.batch_partly_seen(step, X, observations, rows, ~fast & (at >= 0))
+        if partly is not None:
+            masks.update(zip(partly[0].tolist(), partly[1], strict=True))
+            fast[partly[0]] = True
+        fast &= at >= 0
+        for j in np.flatnonzero(fast & ~on).tolist():  # a reference feature not known
+            known = rows_batch.laws[int(trials[j])].reference_grid()[2][at[j]]
+            masks[j] = masks[j] & known if j in masks else known.copy()
+        if fast.any():
+            X[fast, step.inputs["mask"]] = 1.0
+            X[fast, step.inputs["reference_features"]] = references[fast]
+        if masks:
+            j = np.fromiter(masks, dtype=int, count=len(masks))
+            X[j, step.inputs["mask"]] = np.array(list(masks.values()))
+            rows_batch.X[trials[j]] = X[j]
+            rows_batch.used.update(masks)
         return fast
 
     def batch_features(self, step: CompiledTaskStep, X: np.ndarray,
@@ -291,6 +306,14 @@ class FeatureCTC(TaskComputedTorque):
         :meth:`compiled_features` would give them all seen (the same blocks and numbers
         as :meth:`compiled_inputs`); their (m,) mask (none by default)."""
         return np.zeros(len(rows), dtype=bool)
+
+    def batch_partly_seen(self, step: CompiledTaskStep, X: np.ndarray,
+                          observations: ObservationBatch, rows: np.ndarray,
+                          candidates: np.ndarray) -> tuple[np.ndarray, np.ndarray] | None:
+        """Write the features of the ``candidates`` (m,) rows that
+        :meth:`compiled_features` gives partly seen, as it gives them; their indices
+        into ``rows`` and their task rows seen (k, m rows), or None (by default: none)."""
+        return None
 
     def _anchored_and_end(self, times: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """(m, ...) the nominal features of the reference at ``times``, anchored at the
@@ -377,6 +400,29 @@ class LegEdgeCTC(FeatureCTC):
         X[fast, step.inputs["normals"]] = n[fast]
         X[fast, step.inputs.index("of_normals")] = 1.0
         return fast
+
+    def batch_partly_seen(self, step: CompiledTaskStep, X: np.ndarray,
+                          observations: ObservationBatch, rows: np.ndarray,
+                          candidates: np.ndarray) -> tuple[np.ndarray, np.ndarray] | None:
+        """:meth:`features_seen` of the rows with a hidden edge, all at once (the same
+        operations on each row: the same numbers)."""
+        if observations.normals is None or observations.edge_visible is None:
+            return None
+        visible = np.asarray(observations.edge_visible, dtype=bool)[rows].reshape(-1, 6, 2)
+        j = np.flatnonzero(candidates & ~visible.all(axis=(1, 2)))
+        if not len(j):
+            return None
+        n = np.asarray(observations.normals, dtype=float)[rows[j]].reshape(-1, 6, 2, 3)
+        with np.errstate(invalid="ignore", divide="ignore"):
+            u = directions_from_edges(n)  # directions_seen's, then features_seen's checks
+        legs = (np.all(visible[j], axis=-1) & np.all(np.isfinite(u), axis=-1)
+                & np.all(np.isfinite(n), axis=(-2, -1)))
+        u = np.where(legs[..., None], u, _DUMMY)
+        n = np.where(legs[..., None, None], n, np.cross(_DUMMY, [1.0, 0.0, 0.0]))
+        X[j, step.inputs["normals"]] = n.reshape(len(j), -1)
+        X[j, step.inputs["directions"]] = u.reshape(len(j), -1)
+        X[j, step.inputs.index("of_normals")] = 0.0
+        return j, np.repeat(legs, 6, axis=1)
 
 
 class LegDirectionCTC(FeatureCTC):
