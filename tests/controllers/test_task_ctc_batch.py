@@ -6,6 +6,8 @@ with a row stepped by its trial's own step in between."""
 
 from __future__ import annotations
 
+from typing import Any
+
 import numpy as np
 import pytest
 
@@ -63,20 +65,8 @@ def test_vision_rows_with_hidden_legs_are_stepped_by_the_batch(
     refuses it with the reason."""
     from controllers.task_ctc_compiled import CompiledTaskStep
 
-    truth = ideal_drives(geometry)
-    world = CtcWorld.make(truth)
-    n = 4
-    R0, t0, R1, t1, ref = line_reference(truth, "quintic", (0.5, -0.3, 0.4))
-    contexts = [world.context(world.goal(R1, t1), reference=ref) for _ in range(n)]
-    starts = [(R0, t0 + np.array([0.0, 0.001 * k, 0.0])) for k in range(n)]
-    robots = DynamicRobots([truth] * n, np.array([s[0] for s in starts]),
-                           np.array([s[1] for s in starts]))
-    robots.drives.mode = "force"
-    batch = registry.create("vision-ctc", integral_gain=1.0)
-    batch.reset_batch(contexts)
-    singles = [registry.create("vision-ctc", integral_gain=1.0) for _ in range(n)]
-    for s, ctx in zip(singles, contexts, strict=True):
-        s.reset(ctx)
+    world, robots, batch, singles = _four_trials(geometry, "vision-ctc")
+    n = len(singles)
     prepared: list[int] = []
     original = CompiledTaskStep.prepare
 
@@ -125,20 +115,8 @@ def test_leg_edge_rows_with_hidden_edges_are_stepped_by_the_batch(
 
     monkeypatch.setattr(FeatureCTC, "motion_and_seen", hide)
 
-    truth = ideal_drives(geometry)
-    world = CtcWorld.make(truth)
-    n = 4
-    R0, t0, R1, t1, ref = line_reference(truth, "quintic", (0.5, -0.3, 0.4))
-    contexts = [world.context(world.goal(R1, t1), reference=ref) for _ in range(n)]
-    starts = [(R0, t0 + np.array([0.0, 0.001 * k, 0.0])) for k in range(n)]
-    robots = DynamicRobots([truth] * n, np.array([s[0] for s in starts]),
-                           np.array([s[1] for s in starts]))
-    robots.drives.mode = "force"
-    batch = registry.create("leg-edge-ctc", integral_gain=1.0)
-    batch.reset_batch(contexts)
-    singles = [registry.create("leg-edge-ctc", integral_gain=1.0) for _ in range(n)]
-    for s, ctx in zip(singles, contexts, strict=True):
-        s.reset(ctx)
+    world, robots, batch, singles = _four_trials(geometry, "leg-edge-ctc")
+    n = len(singles)
     prepared: list[object] = []
     original = CompiledTaskStep.prepare
 
@@ -169,3 +147,24 @@ def test_leg_edge_rows_with_hidden_edges_are_stepped_by_the_batch(
             assert isinstance(inst, TaskComputedTorque)
             assert inst.integral.tobytes() == s.integral.tobytes(), (step, j)
         assert not robots.advance(np.arange(n), full.forces, DT / 20, 20).any()
+
+
+def _four_trials(geometry: HexapodGeometry, name: str
+                 ) -> tuple[CtcWorld, DynamicRobots, Any, list[Any]]:
+    """A batch of four trials of ``name`` (integral action) tracking one reference from
+    starts 1 mm apart, their per-trial laws, the world and its robots (force drives)."""
+    truth = ideal_drives(geometry)
+    world = CtcWorld.make(truth)
+    n = 4
+    R0, t0, R1, t1, ref = line_reference(truth, "quintic", (0.5, -0.3, 0.4))
+    contexts = [world.context(world.goal(R1, t1), reference=ref) for _ in range(n)]
+    starts = [(R0, t0 + np.array([0.0, 0.001 * k, 0.0])) for k in range(n)]
+    robots = DynamicRobots([truth] * n, np.array([s[0] for s in starts]),
+                           np.array([s[1] for s in starts]))
+    robots.drives.mode = "force"
+    batch = registry.create(name, integral_gain=1.0)
+    batch.reset_batch(contexts)
+    singles = [registry.create(name, integral_gain=1.0) for _ in range(n)]
+    for s, ctx in zip(singles, contexts, strict=True):
+        s.reset(ctx)
+    return world, robots, batch, singles
