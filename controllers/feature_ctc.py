@@ -160,13 +160,14 @@ class FeatureCTC(TaskComputedTorque):
             m = seen.shape[1]
             known = np.repeat(seen.reshape(n, -1, 3).all(axis=2) & np.isfinite(out).reshape(
                 n, 3, -1, 3).all(axis=(1, 3)), 3, axis=1)  # as _sanitised_rows: those rows
-            every = known.all(axis=1)
+            every = np.all(known, axis=1)
             sanitised = out.reshape(n, 3 * m)
             bad = np.flatnonzero(~every)  # rare: only these rows are sanitised
             if len(bad):
                 sanitised[bad] = _sanitised_rows(np.where(seen[bad, None, :], out[bad],
                                                           np.nan))[0]
-            self._grid = (ref, sanitised, known, every)
+            self._grid = grid = (ref, sanitised, known, every)
+            return grid
         return self._grid
 
     def share_grid(self, rows: np.ndarray) -> None:
@@ -288,15 +289,17 @@ class FeatureCTC(TaskComputedTorque):
             fast[partly[0]] = True
         fast &= at >= 0
         for j in np.flatnonzero(fast & ~on).tolist():  # a reference feature not known
-            known = rows_batch.laws[int(trials[j])].reference_grid()[2][at[j]]
+            law = rows_batch.laws[int(trials[j])]
+            assert isinstance(law, FeatureCTC)
+            known = law.reference_grid()[2][at[j]]
             masks[j] = masks[j] & known if j in masks else known.copy()
         if fast.any():
             X[fast, step.inputs["mask"]] = 1.0
             X[fast, step.inputs["reference_features"]] = references[fast]
         if masks:
-            j = np.fromiter(masks, dtype=int, count=len(masks))
-            X[j, step.inputs["mask"]] = np.array(list(masks.values()))
-            rows_batch.X[trials[j]] = X[j]
+            kept = np.fromiter(masks, dtype=int, count=len(masks))
+            X[kept, step.inputs["mask"]] = np.array(list(masks.values()))
+            rows_batch.X[trials[kept]] = X[kept]
             rows_batch.used.update(masks)
         return fast
 
