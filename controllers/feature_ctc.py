@@ -409,16 +409,19 @@ class LegEdgeCTC(FeatureCTC):
                           candidates: np.ndarray) -> tuple[np.ndarray, np.ndarray] | None:
         """:meth:`features_seen` of the rows with a hidden edge, all at once (the same
         operations on each row: the same numbers)."""
-        if observations.normals is None or observations.edge_visible is None:
+        if (observations.normals is None or observations.edge_visible is None
+                or not candidates.any()):
             return None
-        visible = np.asarray(observations.edge_visible, dtype=bool)[rows].reshape(-1, 6, 2)
-        j = np.flatnonzero(candidates & ~visible.all(axis=(1, 2)))
+        j = np.flatnonzero(candidates)
+        visible = np.asarray(observations.edge_visible, dtype=bool)[rows[j]].reshape(-1, 6, 2)
+        hidden = ~visible.all(axis=(1, 2))
+        j, visible = j[hidden], visible[hidden]
         if not len(j):
             return None
         n = np.asarray(observations.normals, dtype=float)[rows[j]].reshape(-1, 6, 2, 3)
         with np.errstate(invalid="ignore", divide="ignore"):
             u = directions_from_edges(n)  # directions_seen's, then features_seen's checks
-        legs = (np.all(visible[j], axis=-1) & np.all(np.isfinite(u), axis=-1)
+        legs = (np.all(visible, axis=-1) & np.all(np.isfinite(u), axis=-1)
                 & np.all(np.isfinite(n), axis=(-2, -1)))
         u = np.where(legs[..., None], u, _DUMMY)
         n = np.where(legs[..., None, None], n, np.cross(_DUMMY, [1.0, 0.0, 0.0]))
