@@ -91,7 +91,7 @@ class CartesianCTC(TaskComputedTorque):
         fast = self.batch_features(step, X, observations, rows)
         if not fast.all():
             self.batch_partly_seen(rows_batch, step, X, observations, rows, trials, fast)
-        references, on = rows_batch.references(trials, tr)
+        references, on, _ = rows_batch.references(trials, tr)
         block = step.inputs["reference"]
         use = fast & on
         if use.all():

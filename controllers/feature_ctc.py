@@ -86,8 +86,7 @@ class FeatureCTC(TaskComputedTorque):
         self._frame = cam
         self._A = A
         #: The reference's grid (:meth:`reference_grid`).
-        self._grid: tuple[object, np.ndarray, np.ndarray, np.ndarray, np.ndarray] | None = \
-            None
+        self._grid: tuple[object, np.ndarray, np.ndarray, np.ndarray] | None = None
 
     def take_goal(self, goal: Goal) -> None:
         """The taught features (``goal.normals`` or ``goal.directions``).
@@ -128,12 +127,14 @@ class FeatureCTC(TaskComputedTorque):
     def feature_reference(self, tr: float) -> np.ndarray:
         """(3, m) the anchored model features at ``tr`` [s], their rate and acceleration
         (:mod:`controllers.solvers.reference_motion`). The control grid ``k dt`` is
-        computed once per reference (one batched call); other instants on demand."""
+        computed once per reference (one batched call; there a unit vector not known is
+        NaN in its three rows); other instants on demand."""
         i = self._grid_index(tr)
         if i is None:
             return self.feature_rows(np.array([tr]))[0]
         assert self._grid is not None
-        return self._grid[1][i]  # type: ignore[no-any-return]
+        _, sanitised, known, _ = self._grid
+        return np.where(known[i], sanitised[i].reshape(3, -1), np.nan)
 
     def _grid_index(self, tr: float) -> int | None:
         """The row of ``tr`` [s] in the reference's control grid (built on first use), or
@@ -145,24 +146,45 @@ class FeatureCTC(TaskComputedTorque):
             return None
         return min(k, len(self.reference_grid()[1]) - 1)
 
-    def reference_grid(self) -> tuple[object, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    def reference_grid(self) -> tuple[object, np.ndarray, np.ndarray, np.ndarray]:
         """The reference's control grid ``k dt`` to a step past its end (built once per
-        reference): the reference, :meth:`feature_rows` there (n, 3, m), what
-        :meth:`compiled_reference` gives (n, 3 m), the rows known (n, m) and whether
-        they all are (n,)."""
+        reference): the reference, what :meth:`compiled_reference` gives there (n, 3 m)
+        (:meth:`feature_rows` sanitised), the rows known (n, m) and whether they all
+        are (n,)."""
         ctx, ref = self.context, self.reference
         assert ctx is not None and ref is not None
         if self._grid is None or self._grid[0] is not ref:
             dt = float(ctx.dt)
             n = int(np.ceil(float(ref.duration) / dt)) + 2
-            rows = self.feature_rows(dt * np.arange(n))
-            sanitised, known = _sanitised_rows(rows)
-            self._grid = (ref, rows, sanitised, known, np.all(known, axis=1))
+            out, seen = self.motion_and_seen(dt * np.arange(n))
+            m = seen.shape[1]
+            known = np.repeat(seen.reshape(n, -1, 3).all(axis=2) & np.isfinite(out).reshape(
+                n, 3, -1, 3).all(axis=(1, 3)), 3, axis=1)  # as _sanitised_rows: those rows
+            every = np.all(known, axis=1)
+            sanitised = out.reshape(n, 3 * m)
+            bad = np.flatnonzero(~every)  # rare: only these rows are sanitised
+            if len(bad):
+                sanitised[bad] = _sanitised_rows(np.where(seen[bad, None, :], out[bad],
+                                                          np.nan))[0]
+            self._grid = grid = (ref, sanitised, known, every)
+            return grid
         return self._grid
+
+    def share_grid(self, rows: np.ndarray) -> None:
+        """Hold ``rows`` (equal to the sanitised grid: its batch's copy) instead of the
+        own array (one copy of a grid in memory: fresh pages cost more than the copy)."""
+        if self._grid is not None:
+            self._grid = (self._grid[0], rows, *self._grid[2:])
 
     def feature_rows(self, times: np.ndarray) -> np.ndarray:
         """(m, 3, n) rows of :meth:`feature_reference` at ``times`` (m,) [s]; NaN where
         the model's camera does not see the feature (:meth:`_anchored_and_end`)."""
+        out, seen = self.motion_and_seen(times)
+        return np.where(seen[:, None, :], out, np.nan)
+
+    def motion_and_seen(self, times: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(m, 3, n) the anchored model features at ``times`` (m,) [s], their rate and
+        acceleration, and (m, n) where the model's camera sees them."""
         ctx = self.context
         assert ctx is not None and self.reference is not None
         feature = self.observed_feature
@@ -183,8 +205,7 @@ class FeatureCTC(TaskComputedTorque):
         v["points"][:] = (g.base_points, g.platform_points)
         v["radius"][:] = g.leg_radius
         out = feature_motion(feature).batch(rows, lanes=True).reshape(len(times), 3, size)
-        seen = np.isfinite(anchored.reshape(len(times), size))
-        return np.where(seen[:, None, :], out, np.nan)
+        return out, np.isfinite(anchored.reshape(len(times), size))
 
     def compiled_reference(self, tr: float) -> tuple[np.ndarray, np.ndarray | None]:
         """(3 m,) :meth:`feature_reference` at ``tr`` for the compiled step, the features
@@ -194,7 +215,7 @@ class FeatureCTC(TaskComputedTorque):
         if i is None:
             return _sanitised(self.feature_rows(np.array([tr]))[0])
         assert self._grid is not None
-        return self._grid[2][i], None if self._grid[4][i] else self._grid[3][i]
+        return self._grid[1][i], None if self._grid[3][i] else self._grid[2][i]
 
     def _taught_reference(self) -> tuple[np.ndarray, np.ndarray | None]:
         """The taught features at rest, as :meth:`compiled_reference`."""
@@ -246,23 +267,40 @@ class FeatureCTC(TaskComputedTorque):
         grid steps whose rows are all known."""
         if self.reference is None:
             return None
-        _, _, sanitised, _, every = self.reference_grid()
+        _, sanitised, _, every = self.reference_grid()
         return sanitised, every
 
     def batch_inputs(self, rows_batch: TaskRows, X: np.ndarray,
                      observations: ObservationBatch, rows: np.ndarray, trials: np.ndarray,
                      tr: np.ndarray) -> np.ndarray:
-        """:meth:`TaskComputedTorque.batch_inputs`: the rows whose features are all seen
-        (:meth:`batch_features`) and whose reference is on its grid, every row known."""
+        """:meth:`TaskComputedTorque.batch_inputs`: the rows whose features are seen, all
+        (:meth:`batch_features`) or partly (:meth:`batch_partly_seen`), with their
+        reference on its grid. A row with a feature hidden or a reference feature not
+        known uses the rows left (its mask, as :meth:`compiled_inputs` gives it, in the
+        batch's ``used``; its input row kept as the trial's own step keeps it)."""
         step = rows_batch.step_of
         assert step is not None
         fast = self.batch_features(step, X, observations, rows)
-        references, on = rows_batch.references(trials, tr)
-        fast &= on
-        if not fast.any():
-            return fast
-        X[fast, step.inputs["reference_features"]] = references[fast]
-        X[fast, step.inputs["mask"]] = 1.0
+        references, on, at = rows_batch.references(trials, tr)
+        masks: dict[int, np.ndarray] = {}
+        partly = self.batch_partly_seen(step, X, observations, rows, ~fast & (at >= 0))
+        if partly is not None:
+            masks.update(zip(partly[0].tolist(), partly[1], strict=True))
+            fast[partly[0]] = True
+        fast &= at >= 0
+        for j in np.flatnonzero(fast & ~on).tolist():  # a reference feature not known
+            law = rows_batch.laws[int(trials[j])]
+            assert isinstance(law, FeatureCTC)
+            known = law.reference_grid()[2][at[j]]
+            masks[j] = masks[j] & known if j in masks else known.copy()
+        if fast.any():
+            X[fast, step.inputs["mask"]] = 1.0
+            X[fast, step.inputs["reference_features"]] = references[fast]
+        if masks:
+            kept = np.fromiter(masks, dtype=int, count=len(masks))
+            X[kept, step.inputs["mask"]] = np.array(list(masks.values()))
+            rows_batch.X[trials[kept]] = X[kept]
+            rows_batch.used.update(masks)
         return fast
 
     def batch_features(self, step: CompiledTaskStep, X: np.ndarray,
@@ -271,6 +309,14 @@ class FeatureCTC(TaskComputedTorque):
         :meth:`compiled_features` would give them all seen (the same blocks and numbers
         as :meth:`compiled_inputs`); their (m,) mask (none by default)."""
         return np.zeros(len(rows), dtype=bool)
+
+    def batch_partly_seen(self, step: CompiledTaskStep, X: np.ndarray,
+                          observations: ObservationBatch, rows: np.ndarray,
+                          candidates: np.ndarray) -> tuple[np.ndarray, np.ndarray] | None:
+        """Write the features of the ``candidates`` (m,) rows that
+        :meth:`compiled_features` gives partly seen, as it gives them; their indices
+        into ``rows`` and their task rows seen (k, m rows), or None (by default: none)."""
+        return None
 
     def _anchored_and_end(self, times: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """(m, ...) the nominal features of the reference at ``times``, anchored at the
@@ -357,6 +403,32 @@ class LegEdgeCTC(FeatureCTC):
         X[fast, step.inputs["normals"]] = n[fast]
         X[fast, step.inputs.index("of_normals")] = 1.0
         return fast
+
+    def batch_partly_seen(self, step: CompiledTaskStep, X: np.ndarray,
+                          observations: ObservationBatch, rows: np.ndarray,
+                          candidates: np.ndarray) -> tuple[np.ndarray, np.ndarray] | None:
+        """:meth:`features_seen` of the rows with a hidden edge, all at once (the same
+        operations on each row: the same numbers)."""
+        if (observations.normals is None or observations.edge_visible is None
+                or not candidates.any()):
+            return None
+        j = np.flatnonzero(candidates)
+        visible = np.asarray(observations.edge_visible, dtype=bool)[rows[j]].reshape(-1, 6, 2)
+        hidden = ~visible.all(axis=(1, 2))
+        j, visible = j[hidden], visible[hidden]
+        if not len(j):
+            return None
+        n = np.asarray(observations.normals, dtype=float)[rows[j]].reshape(-1, 6, 2, 3)
+        with np.errstate(invalid="ignore", divide="ignore"):
+            u = directions_from_edges(n)  # directions_seen's, then features_seen's checks
+        legs = (np.all(visible, axis=-1) & np.all(np.isfinite(u), axis=-1)
+                & np.all(np.isfinite(n), axis=(-2, -1)))
+        u = np.where(legs[..., None], u, _DUMMY)
+        n = np.where(legs[..., None, None], n, np.cross(_DUMMY, [1.0, 0.0, 0.0]))
+        X[j, step.inputs["normals"]] = n.reshape(len(j), -1)
+        X[j, step.inputs["directions"]] = u.reshape(len(j), -1)
+        X[j, step.inputs.index("of_normals")] = 0.0
+        return j, np.repeat(legs, 6, axis=1)
 
 
 class LegDirectionCTC(FeatureCTC):

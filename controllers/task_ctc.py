@@ -182,6 +182,10 @@ class TaskComputedTorque(ComputedTorqueLaw):
         for :class:`~controllers.task_ctc_rows.TaskRows`; None without a reference."""
         return None
 
+    def share_grid(self, rows: np.ndarray) -> None:
+        """Hold ``rows`` (its batch's copy of :meth:`batch_grid`'s rows) instead of the
+        own array (nothing by default)."""
+
     def retarget_trial(self, goal: Goal) -> None:
         """A new fixed goal (ignored when tracking ``context.reference``)."""
         ctx = self.context

@@ -93,10 +93,12 @@ class TaskRows:
         self.built = np.full(n, -1.0)
 
     def references(self, trials: np.ndarray, tr: np.ndarray) -> tuple[np.ndarray,
+                                                                       np.ndarray,
                                                                        np.ndarray]:
         """The reference rows (m, w) of the trials ``trials`` (m,) at ``tr`` (m,) [s]
-        on their clocks read from their grids (built for a new reference), and the (m,)
-        mask of the rows read (on the grid, every task row known)."""
+        on their clocks read from their grids (built for a new reference), the (m,)
+        mask of the rows read (on the grid, every task row known) and their (m,) steps
+        on their grids (-1: off the grid; the rows there are read, known or not)."""
         stale = self.built[trials] != self.clock[trials, VERSION]
         if stale.any():
             for k in np.unique(trials[stale]).tolist():  # once per reference
@@ -104,11 +106,11 @@ class TaskRows:
         k = grid_steps(tr, self.dt[trials])
         length = self.grid_len[trials]
         ok = (k >= 0) & (length > 0)
-        at = np.where(ok, np.minimum(k, length - 1), 0)
-        at += self.grids.shape[1] * trials  # into the grids one after the other
+        steps = np.where(ok, np.minimum(k, length - 1), -1)
+        at = np.maximum(steps, 0) + self.grids.shape[1] * trials  # the grids one by one
         ok &= self.known.reshape(-1).take(at)
         n, size, width = self.grids.shape
-        return self.grids.reshape(n * size, width).take(at, axis=0), ok
+        return self.grids.reshape(n * size, width).take(at, axis=0), ok, steps
 
     def _build(self, k: int) -> None:
         """Stack trial ``k``'s reference grid (the law's ``batch_grid``: none when it
@@ -130,10 +132,13 @@ class TaskRows:
             if width == self.grids.shape[2]:
                 grown[:, :self.grids.shape[1]] = self.grids
                 grown_known[:, :self.known.shape[1]] = self.known
+                for j in np.flatnonzero(self.grid_len).tolist():  # views of the new array
+                    self.laws[j].share_grid(grown[j, :self.grid_len[j]])
             self.grids, self.known = grown, grown_known
         self.grids[k, :size] = rows
         self.known[k, :size] = True if known is None else known
         self.grid_len[k] = size
+        law.share_grid(self.grids[k, :size])
 
     def step(self, observations: ObservationBatch, out: CommandBatch, threshold: float
              ) -> np.ndarray:
@@ -168,9 +173,11 @@ class TaskRows:
         X[:, inputs["q_dot"]] = qd_all[rows]
         tr = t[rows] - self.clock[trials, START]
         law0: Any = self.laws[int(trials[0])]
+        #: The task rows used of a batch row (its index in ``rows``), where not all.
+        self.used: dict[int, np.ndarray] = {}
         fast = law0.batch_inputs(self, X, observations, rows, trials, tr)
         keep = np.ones(len(rows), dtype=bool)
-        used: dict[int, np.ndarray] = {}
+        used = self.used
         for j in np.flatnonzero(~fast).tolist():  # each by its law, off the common case
             k = int(rows[j])
             law = self.laws[int(trials[j])]

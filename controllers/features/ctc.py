@@ -86,9 +86,9 @@ class FeatureComputedTorque(LegDirectionCTC):
     def make_task(self, desired: np.ndarray) -> Task:
         return FeatureTask(self.feature, np.asarray(desired).reshape(6, self.feature.rows))
 
-    def feature_rows(self, times: np.ndarray) -> np.ndarray:
+    def motion_and_seen(self, times: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """(m, 3, 6 rows) the model's feature along the reference at ``times`` (m,) [s],
-        its rate and acceleration, anchored at the taught value."""
+        its rate and acceleration, anchored at the taught value; every row seen."""
         ctx = self.context
         assert ctx is not None and self.reference is not None
         end = float(self.reference.duration) + 1.0
@@ -103,4 +103,5 @@ class FeatureComputedTorque(LegDirectionCTC):
             np.tile(frame.reshape(12, 1), (1, k)))
         f, fd, fdd = (np.asarray(x, dtype=float).T for x in (f, fd, fdd))
         f = f[:-1] + (self._taught.reshape(-1) - f[-1])
-        return np.stack([f, fd[:-1], fdd[:-1]], axis=1)
+        out = np.stack([f, fd[:-1], fdd[:-1]], axis=1)
+        return out, np.ones((len(out), out.shape[2]), dtype=bool)

@@ -128,7 +128,8 @@ def test_a_row_without_leg_rates_is_left_to_its_trial(geometry: HexapodGeometry)
 #: Per law: the rows its batched inputs take at each of 5 steps (row 1 hides leg 4's
 #: second edge and so its direction from the third step; the pose laws' pose comes
 #: from the encoders, vision-ctc's from the six legs: its row 1 goes to its numpy step).
-FAST_ROWS = {"leg-edge-ctc": [[0, 1, 2]] * 2 + [[0, 2]] * 3,
+#: leg-edge-ctc's row 1 is the batch's too (FeatureCTC.batch_partly_seen).
+FAST_ROWS = {"leg-edge-ctc": [[0, 1, 2]] * 5,
              "leg-direction-ctc": [[0, 1, 2]] * 2 + [[0, 2]] * 3,
              # five legs seen: the batch's too (CartesianCTC.batch_partly_seen)
              "vision-ctc": [[0, 1, 2]] * 5,
@@ -141,7 +142,8 @@ def test_batched_inputs_take_the_common_rows_the_others_row_by_row(
         geometry: HexapodGeometry, name: str) -> None:
     """The task laws' batched inputs (``batch_inputs``): the rows in the common case
     are written at once, a row with a hidden leg by its trial's ``compiled_inputs``
-    (masked rows) or its numpy step (``vision-ctc``: by the batch, its five legs seen);
+    (masked rows; ``leg-edge-ctc``: by the batch, its leg's rows masked) or its numpy
+    step (``vision-ctc``: by the batch, its five legs seen);
     every command is the trial's own step to the last bit."""
     truth = ideal_drives(geometry)
     world = CtcWorld.make(truth)

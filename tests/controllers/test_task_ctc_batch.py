@@ -6,6 +6,8 @@ with a row stepped by its trial's own step in between."""
 
 from __future__ import annotations
 
+from typing import Any
+
 import numpy as np
 import pytest
 
@@ -63,20 +65,8 @@ def test_vision_rows_with_hidden_legs_are_stepped_by_the_batch(
     refuses it with the reason."""
     from controllers.task_ctc_compiled import CompiledTaskStep
 
-    truth = ideal_drives(geometry)
-    world = CtcWorld.make(truth)
-    n = 4
-    R0, t0, R1, t1, ref = line_reference(truth, "quintic", (0.5, -0.3, 0.4))
-    contexts = [world.context(world.goal(R1, t1), reference=ref) for _ in range(n)]
-    starts = [(R0, t0 + np.array([0.0, 0.001 * k, 0.0])) for k in range(n)]
-    robots = DynamicRobots([truth] * n, np.array([s[0] for s in starts]),
-                           np.array([s[1] for s in starts]))
-    robots.drives.mode = "force"
-    batch = registry.create("vision-ctc", integral_gain=1.0)
-    batch.reset_batch(contexts)
-    singles = [registry.create("vision-ctc", integral_gain=1.0) for _ in range(n)]
-    for s, ctx in zip(singles, contexts, strict=True):
-        s.reset(ctx)
+    world, robots, batch, singles = _four_trials(geometry, "vision-ctc")
+    n = len(singles)
     prepared: list[int] = []
     original = CompiledTaskStep.prepare
 
@@ -105,3 +95,76 @@ def test_vision_rows_with_hidden_legs_are_stepped_by_the_batch(
             assert full.error_norm[j] == cmd.error_norm
         assert full.reasons[3] is not None and full.reasons[0:3] == [None] * 3
         assert not robots.advance(np.arange(n), full.forces, DT / 20, 20).any()
+
+
+def test_leg_edge_rows_with_hidden_edges_are_stepped_by_the_batch(
+        geometry: HexapodGeometry, monkeypatch: pytest.MonkeyPatch) -> None:
+    """Rows with an edge hidden or a normal not finite (their leg's rows left out), or
+    with a reference feature the model's camera does not see, are computed by the batch
+    (no per-row ``prepare``) with the per-trial laws' bits: forces, error norms of the
+    rows used and the integral of those rows, step after step."""
+    from controllers.feature_ctc import FeatureCTC
+    from controllers.task_ctc_compiled import CompiledTaskStep
+
+    motion = FeatureCTC.motion_and_seen
+
+    def hide(self: FeatureCTC, times: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        out, seen = motion(self, times)
+        seen[1:3, 6:9] = False  # the model's camera misses an edge at steps 1 and 2
+        return out, seen
+
+    monkeypatch.setattr(FeatureCTC, "motion_and_seen", hide)
+
+    world, robots, batch, singles = _four_trials(geometry, "leg-edge-ctc")
+    n = len(singles)
+    prepared: list[object] = []
+    original = CompiledTaskStep.prepare
+
+    def spy(self: CompiledTaskStep, *args: object) -> object:
+        prepared.append(args[0])
+        return original(self, *args)  # type: ignore[arg-type]
+
+    for step in range(4):
+        obs = _batch(world, robots, step * DT)
+        assert obs.normals is not None and obs.edge_visible is not None
+        if step % 2:  # every other step, so that a row's state goes on from the batch's
+            obs.edge_visible[0, 2, 1] = False  # row 0: an edge of leg 2 hidden
+            obs.normals[1, 4, 0] = np.nan  # row 1: a normal of leg 4 not finite...
+            obs.edge_visible[1, 5, :] = False  # ... and leg 5 hidden
+            obs.edge_visible[2, 1:3, 0] = False  # row 2: legs 1 and 2 hidden
+        prepared.clear()
+        monkeypatch.setattr(CompiledTaskStep, "prepare", spy)
+        full = batch.step_batch(obs)
+        monkeypatch.setattr(CompiledTaskStep, "prepare", original)
+        assert prepared == [], step  # no row by its trial's own step
+        assert full.forces is not None
+        for j, s in enumerate(singles):
+            cmd = s.step(obs.item(j))
+            assert full.reasons[j] is None and cmd.reason is None, (step, j)
+            assert full.forces[j].tobytes() == np.asarray(cmd.forces).tobytes(), (step, j)
+            assert full.error_norm[j] == cmd.error_norm, (step, j)
+            inst = batch.trial_instances[j]
+            assert isinstance(inst, TaskComputedTorque)
+            assert inst.integral.tobytes() == s.integral.tobytes(), (step, j)
+        assert not robots.advance(np.arange(n), full.forces, DT / 20, 20).any()
+
+
+def _four_trials(geometry: HexapodGeometry, name: str
+                 ) -> tuple[CtcWorld, DynamicRobots, Any, list[Any]]:
+    """A batch of four trials of ``name`` (integral action) tracking one reference from
+    starts 1 mm apart, their per-trial laws, the world and its robots (force drives)."""
+    truth = ideal_drives(geometry)
+    world = CtcWorld.make(truth)
+    n = 4
+    R0, t0, R1, t1, ref = line_reference(truth, "quintic", (0.5, -0.3, 0.4))
+    contexts = [world.context(world.goal(R1, t1), reference=ref) for _ in range(n)]
+    starts = [(R0, t0 + np.array([0.0, 0.001 * k, 0.0])) for k in range(n)]
+    robots = DynamicRobots([truth] * n, np.array([s[0] for s in starts]),
+                           np.array([s[1] for s in starts]))
+    robots.drives.mode = "force"
+    batch = registry.create(name, integral_gain=1.0)
+    batch.reset_batch(contexts)
+    singles = [registry.create(name, integral_gain=1.0) for _ in range(n)]
+    for s, ctx in zip(singles, contexts, strict=True):
+        s.reset(ctx)
+    return world, robots, batch, singles
