@@ -40,9 +40,6 @@ from controllers.law_tools import (
 from controllers.solvers.base import Solver
 from controllers.solvers.pseudo_inverse import DampedPseudoInverse
 
-#: Re-exported for the laws that import them from here.
-__all__ = ["Gain", "VisionLaw", "check_number", "check_observation"]
-
 
 class VisionLaw(VisionLawBatch):
     """Base of the image-based laws: ``tau = -lambda L^+ e``, ``q_dot = J_inv tau``.

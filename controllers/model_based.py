@@ -40,8 +40,7 @@ from controllers.data import (
 from controllers.estimators import PoseEstimate
 from controllers.exceptions import ContextError
 from controllers.law_algebra import jacobi_eigen
-from controllers.law_tools import gain_formula
-from controllers.laws import Gain, check_number, check_observation
+from controllers.law_tools import Gain, check_number, check_observation, gain_formula
 from hexapod.compiled import CompiledFunction, Layout
 from hexapod.exceptions import HexapodError
 from hexapod.fk import forward_kinematics, forward_kinematics_batch
@@ -190,13 +189,13 @@ class ModelBasedController(Controller):
         #: (6, 3) nominal platform points ``E_i`` in the platform frame [m].
         self.platform_points = np.asarray(geo.platform_points, dtype=float)
         pose = getattr(context.camera, "camera_from_base", None)
-        self._camera_from_base: Transform | None = pose if isinstance(pose, Transform) else None
+        cam_pose = pose if isinstance(pose, Transform) else None
+        self._camera_from_base: Transform | None = cam_pose
         x = self.servo_input
         x[_IN["A"]] = self.base_points.reshape(18)
         x[_IN["E"]] = self.platform_points.reshape(18)
         g = self.gain
         x[_IN["gain"]] = (g.at_zero, g.at_infinity, g.slope_at_zero)
-        cam_pose = self._camera_from_base
         x[_IN["Rc"]] = (np.eye(3) if cam_pose is None else cam_pose.rotation).reshape(9)
         x[_IN["pc"]] = 0.0 if cam_pose is None else cam_pose.translation
 
@@ -214,14 +213,8 @@ class ModelBasedController(Controller):
         self.context = replace(self.context, goal=goal)
 
     def _aim(self, goal: Goal, geo: HexapodGeometry) -> None:
-        """Write the goal pose (:meth:`_goal_pose`) into the servo input."""
-        R, t = self._goal_pose(goal, geo)
-        self.servo_input[_IN["R_star"]] = R.reshape(9)
-        self.servo_input[_IN["t_star"]] = t
-
-    def _goal_pose(self, goal: Goal, geo: HexapodGeometry) -> tuple[np.ndarray, np.ndarray]:
-        """The goal pose: ``goal.rotation`` and ``goal.translation``, else the nominal
-        forward kinematics of ``goal.lengths``.
+        """Write the goal pose into the servo input: ``goal.rotation`` and
+        ``goal.translation``, else the nominal forward kinematics of ``goal.lengths``.
 
         Raises:
             ContextError: Neither, or invalid values.
@@ -245,7 +238,8 @@ class ModelBasedController(Controller):
             R, t = sol.rotation, sol.translation
         else:
             raise ContextError(self.name, "goal", "needs rotation and translation (or lengths)")
-        return R, t
+        self.servo_input[_IN["R_star"]] = R.reshape(9)
+        self.servo_input[_IN["t_star"]] = t
 
     def step_trial(self, observation: Observation) -> Command:
         """Forward kinematics, then the pose servo (:func:`pose_servo_kernel`): pose error,

@@ -39,7 +39,6 @@ from controllers.mpc.solver import (
 )
 from controllers.qp import LegDirectionQPController, LegEdgeQPController, velocity_bounds
 from controllers.tasks.feature_kind import BuiltinFeature
-from controllers.tasks.leg_direction import LEG_DIRECTIONS
 from controllers.tasks.leg_edge import EDGE_NORMALS
 from hexapod.compiled import CompilationError, CompiledFunction
 
@@ -152,7 +151,9 @@ class MPCLaw(PredictiveLaw):
         law.reset_trial(context)
         self.features = law.features
         self.context = context
-        self._feature = self.predicted_feature()
+        #: The feature the problem predicts: the fallback law's (a plugin feature's law
+        #: reads leg directions: its local problem is the leg directions' one).
+        self._feature: BuiltinFeature = law.observed_feature
         cam: Any = context.camera
         visibility = self.visibility and getattr(cam, "kind", None) == "perspective"
         if self.visibility and not visibility:
@@ -221,10 +222,6 @@ class MPCLaw(PredictiveLaw):
         self.law.retarget_trial(goal)
         self.context = self.law.context
         self._star = self.law.desired_features()
-
-    def predicted_feature(self) -> BuiltinFeature:
-        """The feature the problem predicts (the fallback law's; read at reset)."""
-        return LEG_DIRECTIONS
 
     # ----------------------------------------------------------------- step
     def step_trial(self, observation: Observation) -> Command:
@@ -420,11 +417,6 @@ class LegEdgeMPCController(MPCLaw):
     features = frozenset({"lengths", EDGE_NORMALS.field})  # the law's, at reset
     law_class = LegEdgeQPController
     unit = "edges"
-
-    def predicted_feature(self) -> BuiltinFeature:
-        law = self.law
-        assert isinstance(law, LegEdgeQPController)
-        return law.edge
 
 
 class LegDirectionMPCController(MPCLaw):

@@ -191,7 +191,14 @@ def solve_qp(H: np.ndarray, g: np.ndarray, C: np.ndarray, lba: np.ndarray, uba: 
         if (v >= lba).all() and (v <= uba).all() and math.isfinite(float(x.sum())):
             return QPResult(x, "unconstrained optimum", np.zeros(len(lba)))
     if spec is not None and spec.visibility:
-        keep = screened_rows(spec, lba, uba)
+        # all rows but the visibility ones, and the visibility rows of smallest slack
+        sr, N = spec.stage_rows, spec.horizon
+        idx = np.arange(N * sr).reshape(N, sr)
+        vis = idx[:, sr - 48:].reshape(-1)
+        other = np.concatenate([idx[:, :sr - 48].reshape(-1), np.arange(N * sr, len(lba))])
+        slack = np.minimum(uba[vis], -lba[vis])
+        best = vis[np.argpartition(slack, SCREENED_VISIBILITY_ROWS)[:SCREENED_VISIBILITY_ROWS]]
+        keep = np.sort(np.concatenate([other, best]))
         res = daqp(H, g, C[keep], lba[keep], uba[keep], compiled)
         if res.step is not None and res.multipliers is not None:
             v = C @ res.step
@@ -201,19 +208,6 @@ def solve_qp(H: np.ndarray, g: np.ndarray, C: np.ndarray, lba: np.ndarray, uba: 
                 lam[keep] = res.multipliers
                 return QPResult(res.step, res.status + " (screened rows)", lam)
     return daqp(H, g, C, lba, uba, compiled)
-
-
-def screened_rows(spec: ProblemSpec, lba: np.ndarray, uba: np.ndarray) -> np.ndarray:
-    """Indices of the rows of the screened QP: all but the visibility rows, and the
-    :data:`SCREENED_VISIBILITY_ROWS` visibility rows of smallest slack at ``d = 0``."""
-    sr = spec.stage_rows
-    N = spec.horizon
-    idx = np.arange(N * sr).reshape(N, sr)
-    vis = idx[:, sr - 48:].reshape(-1)
-    other = np.concatenate([idx[:, :sr - 48].reshape(-1), np.arange(N * sr, len(lba))])
-    slack = np.minimum(uba[vis], -lba[vis])
-    best = vis[np.argpartition(slack, SCREENED_VISIBILITY_ROWS)[:SCREENED_VISIBILITY_ROWS]]
-    return np.sort(np.concatenate([other, best]))
 
 
 def merit(out: np.ndarray, o: dict[str, slice], mu: float) -> tuple[float, float]:
@@ -236,11 +230,9 @@ def run_sqp(evaluate: Callable[[np.ndarray], np.ndarray | str],
     """Gauss-Newton SQP from ``U`` (the warm start), with a backtracking line search on
     the L1 merit ``cost + mu * violation`` when ``merit_rows`` are given (else full steps).
 
-    Converged when the step of the first move (the only one applied) satisfies
-    ``|delta U_0|_inf <= tolerance * max(|U_0|_inf, floor)``: the later moves of a
-    flat, saturated horizon may still be moving, and are warm-started at the next
-    period. The last allowed iteration takes the full QP step, so that an unconverged
-    result still satisfies the linearised constraints of its last QP.
+    Converged when the first move (the only one applied) steps by ``|delta U_0|_inf <=
+    tolerance * max(|U_0|_inf, floor)``. The last allowed iteration takes the full QP
+    step (an unconverged result satisfies the linearised constraints of its last QP).
 
     Args:
         evaluate: The kernel's output at a ``U``, or why it failed.
