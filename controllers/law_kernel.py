@@ -41,8 +41,10 @@ LAW_INPUTS = (("gain", 3), ("threshold2", 1), ("damping2", 1))
 #: Per-leg inputs of every core: the leg directions the law knows (used where a leg is
 #: not ``measured``), and ``measured`` (1: the leg's direction comes from the features).
 _LEG_INPUTS = (("leg_directions", 18), ("measured", 6))
-#: After the error: ``|e|``, sum of ``N``, rank, condition, gain, ``tau`` (6), ``q_dot`` (6),
-#: finiteness check of ``q_dot``, ``N`` (36, row-major), ``b`` (6), ``J_inv`` (36).
+#: After the error: ``|e|``, sum of ``N`` (a finiteness check), the rank (eigenvalues of
+#: ``N`` above ``threshold^2 w_max``), the condition ``sqrt(w_max / w_min)`` (inf when
+#: singular), the gain [1/s], ``tau`` (6), ``q_dot`` (6), finiteness check of ``q_dot``,
+#: ``N`` (36, row-major), ``b`` (6), ``J_inv`` (36).
 LAW_OUTPUTS = (("error_norm", 1), ("n_sum", 1), ("rank", 1), ("condition", 1), ("gain", 1),
                ("tau", 6), ("qdot", 6), ("qdot_check", 1), ("N", 36), ("b", 6), ("J", 36))
 
@@ -198,23 +200,10 @@ def _edge_function(feature: EdgeFeature, interaction: str = "current",
 # --------------------------------------------------------------------------- runtime
 @dataclass
 class LawResult:
-    """One evaluation of a law kernel (fresh arrays, safe to keep in a command).
-
-    Attributes:
-        error: (m,) stacked error.
-        error_norm: ``|e|``.
-        n_sum: Sum of the entries of ``N`` (finiteness check).
-        rank: Rank of ``L`` (eigenvalues of ``N`` above ``threshold^2 w_max``).
-        condition: ``sqrt(w_max / w_min)`` (inf when singular).
-        gain: ``lambda`` [1/s].
-        tau: (6,) classical twist ``-lambda L^+ e``.
-        qdot: (6,) ``J_inv tau`` [m/s].
-        qdot_finite: Every entry of ``qdot`` is finite.
-        N: (6, 6) ``L^T L``.
-        b: (6,) ``L^T e``.
-        J: (6, 6) inverse Jacobian.
-        directions: (6, 3) leg directions used by ``J``.
-    """
+    """One evaluation of a law kernel (fresh arrays, safe to keep in a command): the
+    stacked ``error`` (m,), the :data:`LAW_OUTPUTS` by name (``tau = -lambda L^+ e``,
+    ``qdot = J_inv tau`` [m/s], ``qdot_finite`` from ``qdot_check``; ``N``, ``J`` (6, 6))
+    and the leg ``directions`` (6, 3) ``J`` used."""
 
     error: np.ndarray
     error_norm: float
@@ -300,12 +289,9 @@ def feature_law_kernel(feature: Feature, interaction: str = "current",
     """A kernel of a feature's law (its own input buffer; shared compiled code).
 
     Args:
-        feature: A leg feature (the leg-direction law's is
-            :data:`~controllers.tasks.leg_direction.LEG_DIRECTIONS`) or the leg edges
-            (:data:`~controllers.tasks.leg_edge.EDGE_LINES` or
-            :data:`~controllers.tasks.leg_edge.EDGE_NORMALS`).
-        interaction: Where the interaction matrix is evaluated (``"current"``,
-            ``"desired"``, ``"mean"``).
+        feature: A leg feature (:data:`~controllers.tasks.leg_direction.LEG_DIRECTIONS`,
+            a plugin's) or the leg edges (``EDGE_LINES``, ``EDGE_NORMALS``).
+        interaction: ``"current"``, ``"desired"`` or ``"mean"``.
         compiled: C code (False: the CasADi virtual machine evaluates the same core).
 
     Raises:

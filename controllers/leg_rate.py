@@ -1,23 +1,11 @@
 """The measured-leg-rate feed-forward of the velocity laws (option
-``leg_rate_feedforward``, ``docs/math.md`` section 6): what the drive-aware predictive
-controller's gain comes from (``drive_model = "lag"``, ``drive_state = "measured"``),
-for a one-step law.
-
-A velocity drive follows its setpoint ``u`` with the lag of its velocity loop, first
-order at its bandwidth ``omega = 2 pi f_b`` in the controllers' model (the nominal
-robot file's ``[drives] velocity_bandwidth``). Over one period ``dt``, from the leg
-velocity ``v`` measured now, the leg moves by ``dq = (dt - c) u + c v`` with
-``a = exp(-omega dt)`` and ``c = (1 - a) / omega``. The law wants ``dq = dt q_dot*`` (its
-command ``q_dot* = J_inv tau``); the setpoint that gives it is
-
-``u = q_dot* + kappa (q_dot* - v)``,  ``kappa = c / (dt - c)``,
-
-the law's velocity plus the shortfall of the legs' measured velocity, fed forward. As
-``omega -> infinity``, ``kappa -> 0`` and the law's command comes back. A leg velocity
-that is not measured (no ``q_dot``, a NaN in the row) leaves the command as the law's.
-A wrapper that adds a velocity after the law (the tracking feed-forward ``r``,
+``leg_rate_feedforward``; the drive model and its inversion: ``docs/math.md`` section 6,
+"Measured-leg-rate feed-forward"): the setpoint ``u = q_dot* + kappa (q_dot* - v)``,
+``kappa = c / (dt - c)``, that moves each lagging velocity drive by ``dt q_dot*`` over
+the period from its measured velocity ``v`` (an unmeasured or non-finite ``v`` leaves the
+law's command). A wrapper that adds ``r`` after the law (the tracking feed-forward,
 :mod:`controllers.tracking`) tells it first (``velocity_offset``): the law then uses
-``v - r``, so that the sum ``u + r`` is the setpoint above for ``q_dot* + r``.
+``v - r``.
 """
 
 from __future__ import annotations

@@ -1,21 +1,13 @@
-"""Model-based baseline (what the seeds argue against), ``docs/math.md`` section 6.
+"""Model-based baseline (what the seeds argue against; ``docs/math.md`` section 6): the
+nominal forward kinematics of the leg lengths (Newton, warm-started), a pose servo to the
+goal pose (``w = lambda log(R* R^T)``, ``v = lambda (t* - t) - w x t``), the twist mapped
+through the nominal inverse Jacobian.
 
-Read the leg lengths, solve the forward kinematics with the NOMINAL geometry
-(fast Newton, warm-started with the previous pose), servo that pose to the
-goal pose of the nominal model, and map the twist through the nominal inverse
-Jacobian. Its accuracy is bounded by the calibration error of the whole
-geometry; the vision laws are not.
-
-Pose servo (twist in the base frame, at its origin):
-``w = lambda log(R* R^T)``, ``v = lambda (t* - t) - w x t``, so that the
-orientation error and the platform origin both decay as ``exp(-lambda t)``.
-
-Everything after the forward kinematics (pose error with ``log`` on SO(3) (its
-half-turn case included, :func:`sx_log_so3`), gain, twist, nominal ``J_inv``, ``q_dot``,
-the twist in the camera frame, the condition number of ``J_inv``) is one CasADi
-expression compiled to C (:func:`pose_servo_kernel`; ``compiled=False`` evaluates it in
-CasADi's virtual machine), whose ``status`` output is a row's refusal reason. The numpy
-formulas it replaced are its test oracle (``tests/controllers/model_based_oracle.py``).
+Everything after the forward kinematics (the pose error with ``log`` on SO(3), its
+half-turn case included, :func:`sx_log_so3`; gain, twist, ``q_dot``, the twist in the
+camera frame, the condition number of ``J_inv``) is one CasADi expression compiled to C
+(:func:`pose_servo_kernel`), whose ``status`` output is a row's refusal reason. Its test
+oracle: ``tests/controllers/model_based_oracle.py``.
 """
 
 from __future__ import annotations
