@@ -1,23 +1,15 @@
 """The per-step numeric core of the vision laws, compiled to C (one call per step).
 
-A law's step is a few hundred floating-point operations spread over some sixty numpy
-calls; at this scale the cost is the calls. The core is therefore one CasADi SX
-expression built from the tasks' own blocks (a leg feature's
-:meth:`~controllers.tasks.leg_feature.LegFeature.block`, the leg directions' included;
-:func:`controllers.tasks.leg_edge.edge_block`), generated to C and called on
-preallocated buffers by :class:`hexapod.compiled.CompiledFunction` (the CasADi virtual
-machine evaluates it when there is no compiler). One call gives the stacked error and
-the weighted normal equations ``N = L^T W L``, ``b = L^T W e`` with ``L`` at the
-current, desired or mean features (a feature of weight zero, hidden now or in the goal,
-is left out exactly), the leg directions (measured, or the law's estimate where a leg is
-not ``measured``), and the law part every feature shares
-(:func:`~controllers.law_algebra.law_tail`: gain, rank, damped solve, ``J_inv``,
-``q_dot``, finiteness checks).
-
-Input: the feature block (:func:`feature_inputs`), then :data:`LAW_INPUTS`. Output: the
-feature error (every feature, used or not), :data:`LAW_OUTPUTS`, the leg directions (18)
-the inverse Jacobian used (:func:`law_layouts`). The numpy formulas of
-``tests/controllers/interaction_oracle.py`` are the tests' oracle.
+A law's step is a few hundred floating-point operations over some sixty numpy calls: the
+cost is the calls. The core is one CasADi SX expression built from the tasks' own blocks
+(:meth:`~controllers.tasks.leg_feature.LegFeature.block`,
+:func:`controllers.tasks.leg_edge.edge_block`), generated to C and called on preallocated
+buffers (:class:`hexapod.compiled.CompiledFunction`). One call gives the stacked error,
+``N = L^T W L`` and ``b = L^T W e`` with ``L`` at the current, desired or mean features (a
+feature of weight zero left out exactly), the leg directions (measured, or the law's
+estimate where a leg is not ``measured``) and the law part every feature shares
+(:func:`~controllers.law_algebra.law_tail`). Layouts: :func:`law_layouts`. The numpy
+formulas of ``tests/controllers/interaction_oracle.py`` are the tests' oracle.
 """
 
 from __future__ import annotations

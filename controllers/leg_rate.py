@@ -19,6 +19,12 @@ from controllers.base import Command, CommandBatch, ControllerContext, Observati
 from controllers.exceptions import ContextError, OptionError
 
 
+def lag_constants(drives: Any, dt: float) -> tuple[np.ndarray, np.ndarray]:
+    """``a = exp(-omega dt)``, ``c = (1 - a) / omega`` [s] (6,) of the drives' velocity lag."""
+    omega = 2 * np.pi * np.broadcast_to(np.asarray(drives.velocity_bandwidth, float), (6,))
+    return np.exp(-omega * dt), -np.expm1(-omega * dt) / omega
+
+
 def feedforward_gain(context: ControllerContext, dt: float, name: str) -> np.ndarray:
     """``kappa = c / (dt - c)`` (6,) of the nominal velocity drives over a period ``dt``
     [s] (module docstring).
@@ -35,8 +41,7 @@ def feedforward_gain(context: ControllerContext, dt: float, name: str) -> np.nda
     if drives.mode != "velocity":
         raise ContextError(name, "geometry.drives.mode", "leg_rate_feedforward models "
                            f"velocity-mode drives; the robot's [drives] mode is {drives.mode!r}")
-    omega = 2 * np.pi * np.broadcast_to(np.asarray(drives.velocity_bandwidth, float), (6,))
-    c = -np.expm1(-omega * dt) / omega
+    _, c = lag_constants(drives, dt)
     return c / (dt - c)  # type: ignore[no-any-return]
 
 

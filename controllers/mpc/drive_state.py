@@ -21,6 +21,7 @@ import numpy as np
 
 from controllers.base import ControllerContext
 from controllers.exceptions import OptionError
+from controllers.leg_rate import lag_constants
 
 #: Sources of the drives' state.
 DRIVE_STATES = ("measured", "encoders", "model")
@@ -28,9 +29,8 @@ DRIVE_STATES = ("measured", "encoders", "model")
 
 def drive_lag(context: ControllerContext, dt: float, name: str
               ) -> tuple[np.ndarray, np.ndarray]:
-    """``(a, c)`` (6,) of the first-order lag of the nominal velocity drives over one
-    period ``dt`` [s]: ``a = exp(-omega dt)`` [-], ``c = (1 - a) / omega`` [s], with
-    ``omega = 2 pi`` times the drives' ``velocity_bandwidth`` [Hz].
+    """``(a, c)`` (6,) of the nominal velocity drives' lag over one period ``dt`` [s]
+    (:func:`controllers.leg_rate.lag_constants`).
 
     Raises:
         OptionError: The nominal drives are in force mode (nothing lags a velocity
@@ -40,9 +40,7 @@ def drive_lag(context: ControllerContext, dt: float, name: str
     if drives.mode != "velocity":
         raise OptionError(name, "drive_model", "'lag' models velocity-mode drives; the "
                           f"robot's [drives] mode is {drives.mode!r}")
-    omega = 2 * np.pi * np.broadcast_to(np.asarray(drives.velocity_bandwidth, float), (6,))
-    a = np.exp(-omega * dt)
-    return a, -np.expm1(-omega * dt) / omega
+    return lag_constants(drives, dt)
 
 
 @dataclass
