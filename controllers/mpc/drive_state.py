@@ -1,16 +1,12 @@
-"""Where the velocity drives are now: the starting state of the predictive controllers'
-drive-aware prediction (``drive_model = "lag"``; the first-order lag ``v_{k+1} = a v_k +
-(1 - a) u_k``, ``dq_k = (dt - c) u_k + c v_k`` and where its ``v_0`` comes from:
-``docs/math.md`` section 6, "Drive-aware prediction").
+"""Where the velocity drives are now: the starting state ``v_0`` of the predictive
+controllers' drive-aware prediction (``drive_model = "lag"``; the lag and the three
+sources of ``v_0``: ``docs/math.md`` section 6, "Drive-aware prediction").
 
-:class:`DriveLag` gives the leg velocities now from one of three sources (option
-``drive_state``): ``"measured"`` (the default: ``Observation.q_dot``, else the
-reconstruction below), ``"encoders"`` (from the encoder LENGTHS alone: the last
-period's displacement ``dq`` and the setpoint ``u`` sent for it give ``v_prev = (dq -
-(dt - c) u) / c``, carried to now by the lag), or ``"model"`` (the lag run on the past
-setpoints from rest, ignoring every measurement: an ablation). When the chosen source
-has nothing finite to give (the first step, a NaN), the lag's run on the past setpoints
-is used.
+:class:`DriveLag` gives the leg velocities now from the option ``drive_state``:
+``"measured"`` (``Observation.q_dot``, else as ``"encoders"``), ``"encoders"`` (the
+last period's displacement and setpoint, carried to now by the lag) or ``"model"`` (the
+lag run on the past setpoints from rest: an ablation), falling back to the latter when
+the source has nothing finite to give.
 """
 
 from __future__ import annotations

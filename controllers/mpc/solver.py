@@ -83,11 +83,10 @@ def qp_solver(variables: int, rows: int) -> ca.Function:
 
 
 class CompiledQP:
-    """DAQP generated to C by CasADi, called on preallocated buffers (a bound
-    :class:`hexapod.compiled.CompiledFunction`: ``casadi.conic``'s Python interface costs
-    several hundred microseconds per call on these sizes, for a solve of about a
-    hundred), linked against the DAQP library of the CasADi wheel (``libdaqp.so``). A
-    call that returns non-zero is a solve DAQP did not finish as optimal.
+    """DAQP generated to C by CasADi, called on preallocated buffers (``casadi.conic``'s
+    Python interface costs several hundred microseconds per call, for a solve of about a
+    hundred), linked against the CasADi wheel's ``libdaqp.so``. A call that returns
+    non-zero is a solve DAQP did not finish as optimal.
 
     Raises:
         OSError: No compiler, or the DAQP library or headers are missing (the caller
@@ -172,15 +171,10 @@ def daqp(H: np.ndarray, g: np.ndarray, C: np.ndarray, lba: np.ndarray, uba: np.n
 def solve_qp(H: np.ndarray, g: np.ndarray, C: np.ndarray, lba: np.ndarray, uba: np.ndarray,
              compiled: bool, spec: ProblemSpec | None = None) -> QPResult:
     """Solve ``min 1/2 d^T H d + g^T d`` s.t. ``lba <= C d <= uba``: the unconstrained
-    minimiser ``-H^-1 g`` when it satisfies every row (then it is the optimum of the
-    strictly convex QP and DAQP is not called), else DAQP (:func:`daqp`), with the
-    visibility rows of ``spec`` screened when there are many of them.
-
-    DAQP's cost grows with the number of rows (``6 N (7 + 48)`` with visibility). The
-    visibility rows are first reduced to the :data:`SCREENED_VISIBILITY_ROWS` with the
-    smallest slack at ``d = 0``; if the solution of that smaller QP satisfies every
-    row, it is the optimum of the full QP (same objective, larger feasible set);
-    otherwise the full QP is solved.
+    minimiser ``-H^-1 g`` when it satisfies every row (the optimum of the strictly convex
+    QP), else DAQP (:func:`daqp`), first on the visibility rows of ``spec`` reduced to
+    the :data:`SCREENED_VISIBILITY_ROWS` of smallest slack at ``d = 0`` (DAQP's cost
+    grows with the rows): a solution that satisfies every row is the full QP's optimum.
     """
     try:
         x = -np.linalg.solve(H, g)
@@ -239,9 +233,9 @@ def run_sqp(evaluate: Callable[[np.ndarray], np.ndarray | str],
         qp_data: The QP (:data:`QPArrays`) of an output at its ``U``.
         U: (6 N,) the starting point [m/s, rad/s or N].
         max_iter: Iteration limit (0: no QP is solved).
-        tolerance: Relative tolerance on the first move.
+        tolerance: Relative tolerance on the first move (``floor``: the smallest
+            ``|U_0|_inf`` it is relative to).
         compiled: Use DAQP generated to C (else ``casadi.conic``).
-        floor: Smallest ``|U_0|_inf`` the tolerance is relative to.
         spec: The velocity MPC's problem structure (visibility rows screened).
         merit_rows: The output's ``cost``, ``lba`` and ``uba`` slices (line search).
         one_qp: Converged after one QP (the local model: its QP is the problem).

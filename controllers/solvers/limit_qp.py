@@ -45,12 +45,10 @@ class StrokeWindow:
 
 def velocity_bounds(q: np.ndarray, lower: Any, upper: Any, max_speed: Any, inv_dt: Any
                     ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """The bounds on the leg velocities ``J_inv tau`` of one period (one definition for
-    the QP solver, its batched rows and the predictive controller's first move).
-
-    Reaching ``lower``/``upper`` within the period, each clipped to the speed limit so
-    that the window is never empty. Works on one trial (scalars, ``q`` (6,)) and on a
-    batch (``(n, 1)`` columns, ``q`` (n, 6)).
+    """The bounds on the leg velocities ``J_inv tau`` of one period (the QP solver's, its
+    batched rows' and the predictive controller's first move's): reaching ``lower`` /
+    ``upper`` within the period, clipped to the speed limit (never an empty window). One
+    trial (scalars, ``q`` (6,)) or a batch (``(n, 1)`` columns, ``q`` (n, 6)).
 
     Returns:
         The stroke rates ``(lower - q) / dt`` and ``(upper - q) / dt`` [m/s], and the
