@@ -54,12 +54,11 @@ def reference_goals(context: ControllerContext, times: np.ndarray,
     """The goals of a reference at ``times`` [s] from the nominal model.
 
     Args:
-        context: With ``reference`` (anything with ``at(times)`` returning a
-            :class:`hexapod.trajectory.ReferenceSample`), the nominal ``geometry`` and the
-            estimated ``camera``.
+        context: With ``reference`` (``at(times)`` gives a
+            :class:`hexapod.trajectory.ReferenceSample`), ``geometry`` and ``camera``.
         times: (m,) times [s].
         fields: The goal fields wanted of ``lengths``, ``normals``, ``lines``,
-            ``directions`` and ``edge_visible`` (None: all; the others are left out).
+            ``directions`` and ``edge_visible`` (None: all).
 
     Returns:
         ``rotation`` (m, 3, 3), ``translation`` (m, 3), ``lengths`` (m, 6) [m], and when the
@@ -167,13 +166,9 @@ def tracking_plan(context: ControllerContext, name: str) -> TrackingPlan:
 
 
 class TrackingController(Controller):
-    """Any controller made to track ``context.reference``, over a batch of trials (see
-    the module docstring).
-
-    Each period, the rows whose period changed get their goal in one ``retarget_batch``
-    of the wrapped controller, then one ``step_batch``, and the feed-forward of each
-    row's period is added to the velocity commands. A trial without a reference, or of
-    a controller that samples the reference itself, is the wrapped controller's row.
+    """Any controller made to track ``context.reference``, over a batch of trials (module
+    docstring): each period one ``retarget_batch`` of the rows whose period changed, one
+    ``step_batch``, the feed-forward added (a trial without a reference passes through).
 
     Args:
         inner: The controller (reset and stepped through this wrapper only).
