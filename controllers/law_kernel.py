@@ -44,39 +44,32 @@ LAW_OUTPUTS = (("error_norm", 1), ("n_sum", 1), ("rank", 1), ("condition", 1), (
 Feature = LegFeature | EdgeFeature
 
 
-def feature_inputs(feature: Feature, interaction: str = "current"
-                   ) -> tuple[tuple[str, int], ...]:
-    """The feature block of a law core's input.
+def law_layouts(feature: Feature, interaction: str = "current") -> tuple[Layout, Layout]:
+    """The input and output layouts of a law core.
 
-    A leg feature: measured ``u`` (6 x 3), the desired feature (6 x rows), ``A`` (6 x 3),
-    ``q``, the weights (6), :data:`_LEG_INPUTS`, and for the DESIRED / MEAN interaction the
-    legs' desired state (:attr:`~controllers.tasks.leg_feature.LegFeature.
-    desired_state_inputs`). The edges: the 12 lines or normals, desired, ``K``, ``K^-1``
+    Input, a leg feature: measured ``u`` (6 x 3), the desired feature (6 x rows), ``A`` (6 x
+    3), ``q``, the weights (6), :data:`_LEG_INPUTS`, and for the DESIRED / MEAN interaction
+    the legs' desired state (:attr:`~controllers.tasks.leg_feature.LegFeature.
+    desired_state_inputs`); the edges: the 12 lines or normals, desired, ``K``, ``K^-1``
     (row-major; identities for normals), ``A``, ``q``, the weights (12),
     :data:`_LEG_INPUTS`, and for DESIRED / MEAN the desired normals (12 x 3), leg
-    directions ``u*`` (6 x 3) and lengths ``q*``.
+    directions ``u*`` (6 x 3) and lengths ``q*``; then :data:`LAW_INPUTS`. Output: the
+    error, :data:`LAW_OUTPUTS`, the leg directions (18).
     """
     if isinstance(feature, EdgeFeature):
+        name, n_error = "edge law", 36
         block: tuple[tuple[str, int], ...] = (
             ("features", 36), ("desired", 36), ("K", 9), ("K_inv", 9), ("base_points", 18),
             ("lengths", 6), ("weights", 12), *_LEG_INPUTS)
         goal_state: tuple[tuple[str, int], ...] = (
             ("desired_normals", 36), ("desired_directions", 18), ("desired_lengths", 6))
     else:
+        name, n_error = f"{feature.name} law", 6 * feature.rows
         block = (("features", 18), ("desired", 6 * feature.rows), ("base_points", 18),
                  ("lengths", 6), ("weights", 6), *_LEG_INPUTS)
         goal_state = feature.desired_state_inputs
-    return block if interaction == "current" else (*block, *goal_state)
-
-
-def law_layouts(feature: Feature, interaction: str = "current") -> tuple[Layout, Layout]:
-    """The input layout (:func:`feature_inputs`, then :data:`LAW_INPUTS`) and the output
-    layout (the error, :data:`LAW_OUTPUTS`, the leg directions (18)) of a law core."""
-    if isinstance(feature, EdgeFeature):
-        name, n_error = "edge law", 36
-    else:
-        name, n_error = f"{feature.name} law", 6 * feature.rows
-    return (Layout([*feature_inputs(feature, interaction), *LAW_INPUTS], f"{name} input"),
+    inputs = block if interaction == "current" else (*block, *goal_state)
+    return (Layout([*inputs, *LAW_INPUTS], f"{name} input"),
             Layout([("error", n_error), *LAW_OUTPUTS, ("directions", 18)], f"{name} output"))
 
 

@@ -99,19 +99,6 @@ def check_weights(controller: str, first: tuple[str, Any], second: tuple[str, An
     return a, b
 
 
-def check_horizon(controller: str, horizon: Any, error_weight: Any, terminal_weight: Any
-                  ) -> tuple[int, float, float]:
-    """A predictive controller's horizon (1 to 50 periods) and the weights of the error
-    at its stages ``1..N-1`` and ``N`` (>= 0, not both 0).
-
-    Raises:
-        OptionError: Naming the option out of range.
-    """
-    return (check_count(controller, "horizon", horizon, 1, 50),
-            *check_weights(controller, ("error_weight", error_weight),
-                           ("terminal_weight", terminal_weight), "no error to minimise"))
-
-
 def goal_lengths(controller: str, goal: Any) -> np.ndarray:
     """``goal.lengths`` checked: a copy (6,) [m].
 

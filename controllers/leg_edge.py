@@ -9,11 +9,10 @@ Features (``docs/math.md`` section 6), two per leg, stacked over the visible edg
   ``n``, ``e = n x n*``, ``L = -[n*]_x H M_i``.
 
 The leg direction used by ``H``, ``M_i`` and ``J_inv`` is rebuilt from the two
-edges of the leg, ``u = (n2 x n1) / |n2 x n1|`` (``vision/legs.py`` convention).
-
-One call of the compiled core (:func:`controllers.law_kernel.feature_law_kernel`, generated
-from the task's block :func:`controllers.tasks.leg_edge.edge_block`) computes the step,
-for every interaction choice; hidden edges are its zero-weight rows.
+edges of the leg, ``u = (n2 x n1) / |n2 x n1|`` (``vision/legs.py`` convention). The
+compiled core (:mod:`controllers.law_kernel`, from the task's block
+:func:`controllers.tasks.leg_edge.edge_block`) computes the step; hidden edges are its
+zero-weight rows.
 """
 
 from __future__ import annotations

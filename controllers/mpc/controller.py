@@ -1,10 +1,9 @@
 """Visual predictive controllers ``leg-edge-mpc`` and ``leg-direction-mpc``.
 
-Each step (receding horizon): read the features like the one-step QP law of the same
-features (:mod:`controllers.qp`, held as the fallback), reconstruct the platform pose
-for the global model, solve the problem of :mod:`controllers.mpc.problem` by
-Gauss-Newton SQP (:func:`controllers.mpc.solver.run_sqp`) warm-started from the previous
-solution shifted by one period, and apply the first move ``q_dot = J_inv tau_0``.
+Each step: the tasks of the one-step QP law of the same features (:mod:`controllers.qp`,
+held as the fallback), the platform pose for the global model, the problem of
+:mod:`controllers.mpc.problem` solved by :func:`controllers.mpc.solver.run_sqp` from the
+previous solution shifted by one period; apply the first move ``q_dot = J_inv tau_0``.
 
 A QP that DAQP does not solve, an SQP that does not converge within ``max_iter``
 iterations (``max_iter = 0`` never solves), a solve over ``time_limit``, or a non-finite

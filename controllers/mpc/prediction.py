@@ -1,13 +1,10 @@
 """Prediction models of the visual predictive controllers (Allibert, Courtial & Chaumette
-2010; ``docs/math.md`` section 6, "Predictive variant"), from the controller's estimates,
-never the simulator's truth. The **local** model propagates the error with the
-interaction matrix, ``e_k = e_0 + L s_k``, and the lengths with the inverse Jacobian,
-``q_k = q_0 + J_inv s_k`` (``s_k = dt sum_{j<k} tau_j``; first order in the motion).
-The **global** model fits the platform pose to ``B_i = A_i + q_i u_i`` (:func:`fit_pose`),
-moves it by ``exp(dt tau)`` (:func:`sx_exp_se3`) and predicts the features from it by
-the estimated camera model (:func:`sx_legs`, then the feature's ``sx_of_legs``): in a
-world without calibration error, the true features to rounding. The problem kernel of
-:mod:`controllers.mpc.problem` is built from these CasADi SX blocks.
+2010; ``docs/math.md`` section 6, "Predictive variant"), from the controller's estimates
+only: the **local** model propagates the error with the interaction matrix and the
+lengths with the inverse Jacobian; the **global** model fits the platform pose to ``B_i
+= A_i + q_i u_i`` (:func:`fit_pose`), moves it by ``exp(dt tau)`` (:func:`sx_exp_se3`) and
+predicts the features through the estimated camera (:func:`sx_legs`, the feature's
+``sx_of_legs``). The CasADi SX blocks of :mod:`controllers.mpc.problem`.
 """
 
 from __future__ import annotations

@@ -23,7 +23,7 @@ import casadi as ca
 import numpy as np
 
 from controllers.base import Command, Controller, ControllerContext, Observation
-from controllers.law_tools import check_horizon, check_weights
+from controllers.law_tools import check_count, check_weights
 from controllers.mpc.problem import ProblemSpec
 from hexapod.compiled import CompiledFunction, Layout
 
@@ -308,14 +308,17 @@ class PredictiveLaw(Controller):
     def _check_options(self, horizon: int, error_weight: float, terminal_weight: float,
                        weights: tuple[tuple[str, float], tuple[str, float]], compiled: bool
                        ) -> tuple[float, float]:
-        """Check and set the horizon, its weights and ``compiled``; return the two
-        ``weights`` ``(option, value)`` checked (one positive: a strictly convex QP).
+        """Check and set the horizon (1 to 50 periods), its error weights and ``compiled``;
+        return the two ``weights`` ``(option, value)`` checked (one positive: a strictly
+        convex QP).
 
         Raises:
             OptionError: Naming the option out of range.
         """
-        self.horizon, self.error_weight, self.terminal_weight = check_horizon(
-            self.name, horizon, error_weight, terminal_weight)
+        self.horizon = check_count(self.name, "horizon", horizon, 1, 50)
+        self.error_weight, self.terminal_weight = check_weights(
+            self.name, ("error_weight", error_weight), ("terminal_weight", terminal_weight),
+            "no error to minimise")
         self.compiled = bool(compiled)
         self._restart()
         return check_weights(self.name, *weights,
