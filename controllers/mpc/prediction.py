@@ -12,7 +12,6 @@ from __future__ import annotations
 import casadi as ca
 import numpy as np
 
-from controllers.tasks.base import sx_skew
 from controllers.tasks.leg_direction import LEG_DIRECTIONS
 from controllers.tasks.leg_edge import EDGE_LINES, EDGE_NORMALS
 
@@ -64,7 +63,7 @@ def sx_exp_se3(v: ca.SX, w: ca.SX) -> tuple[ca.SX, ca.SX]:
     b = ca.if_else(small, 0.5 - th2 / 24 + th2 * th2 / 720, (1 - ca.cos(ths)) / (ths * ths))
     c = ca.if_else(small, 1.0 / 6 - th2 / 120 + th2 * th2 / 5040,
                    (ths - ca.sin(ths)) / (ths * ths * ths))
-    K = sx_skew(w)
+    K = ca.skew(w)
     K2 = K @ K
     eye = ca.SX.eye(3)
     return eye + a * K + b * K2, (eye + b * K + c * K2) @ v

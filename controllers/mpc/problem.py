@@ -25,7 +25,6 @@ from typing import Any
 import casadi as ca
 
 from controllers.mpc.prediction import sx_exp_se3, sx_legs, sx_pixel
-from controllers.tasks.base import sx_skew
 from controllers.tasks.feature_kind import BuiltinFeature
 from controllers.tasks.leg_edge import sx_edge_normals
 from hexapod.compiled import CompiledFunction, Layout
@@ -127,7 +126,7 @@ def _pose_function(spec: ProblemSpec) -> ca.Function:
     t = ca.SX.sym("t", 3)
     xi = ca.SX.sym("xi", 6)
     w = xi[3:]
-    Rp = (ca.SX.eye(3) + sx_skew(w)) @ R
+    Rp = (ca.SX.eye(3) + ca.skew(w)) @ R
     tp = t + xi[:3] + ca.cross(w, t)
     A = [P["A"][3 * i:3 * i + 3] for i in range(6)]
     E = [P["E"][3 * i:3 * i + 3] for i in range(6)]
@@ -180,7 +179,7 @@ def _step_jacobian() -> ca.Function:
         wj = ca.vertcat(Om[2, 1] - Om[1, 2], Om[0, 2] - Om[2, 0], Om[1, 0] - Om[0, 1]) / 2
         vj = Jp[:, j] - ca.cross(wj, dp)
         cols.append(ca.vertcat(vj, wj))
-    Ad = ca.vertcat(ca.horzcat(dR, sx_skew(dp) @ dR), ca.horzcat(ca.SX.zeros(3, 3), dR))
+    Ad = ca.vertcat(ca.horzcat(dR, ca.skew(dp) @ dR), ca.horzcat(ca.SX.zeros(3, 3), dR))
     return ca.Function("mpc_step", [tau, dt], [dR, dp, ca.horzcat(*cols), Ad])
 
 

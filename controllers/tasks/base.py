@@ -215,12 +215,6 @@ def stack_blocks(blocks: Sequence[Sequence[ca.SX]]
     return e, L, ldot, e_t, e_tt
 
 
-def sx_skew(v: ca.SX) -> ca.SX:
-    """``[v]_x`` (3, 3) of a (3, 1) expression."""
-    return ca.vertcat(ca.horzcat(0, -v[2], v[1]), ca.horzcat(v[2], 0, -v[0]),
-                      ca.horzcat(-v[1], v[0], 0))
-
-
 def sx_unit(v: ca.SX) -> ca.SX:
     """``v / |v|`` of a (3, 1) expression."""
     return v / ca.sqrt(ca.dot(v, v))
@@ -259,4 +253,4 @@ def unit(x: np.ndarray) -> np.ndarray:
 
 __all__ = ["Task", "TaskState", "evaluate_legs", "leg_rates", "leg_second_order",
            "leg_state_rate", "map_blocks", "reference_function", "reference_parts",
-           "second_order_function", "stack_blocks", "sx_skew", "sx_unit", "unit"]
+           "second_order_function", "stack_blocks", "sx_unit", "unit"]
