@@ -238,13 +238,9 @@ class ObservationBatch:
 
     @staticmethod
     def of(obs: Observation) -> ObservationBatch | None:
-        """The batch of one observation (trial 0; views of its arrays), or None when the
-        observation is malformed (a field of the wrong shape or not numbers): the
-        per-trial adapter :meth:`Controller.step` then refuses it with the reason.
-
-        The common case (every field a float or bool array of its shape, or None) costs
-        a type, shape and kind test per field and a view each; another field is
-        converted and checked (:func:`_one_row`)."""
+        """The batch of one observation (trial 0; views of its arrays in the common case,
+        else converted and checked by :func:`_one_row`), or None when it is malformed (then
+        :meth:`Controller.step` refuses it with the reason)."""
         lengths, edges, seen = obs.lengths, obs.edge_visible, obs.direction_visible
         normals, lines, directions, q_dot = obs.normals, obs.lines, obs.directions, obs.q_dot
         try:
