@@ -24,7 +24,7 @@ import numpy as np
 
 from controllers.base import Command, ControllerContext, Goal, Observation
 from controllers.exceptions import ContextError, OptionError
-from controllers.law_tools import check_choice, check_count, check_number, solve_normal_damped
+from controllers.law_tools import check_choice, check_count, check_number
 from controllers.mpc.drive_state import DRIVE_STATES, DriveLag, drive_lag
 from controllers.mpc.prediction import fit_pose
 from controllers.mpc.problem import ProblemSpec, problem_kernel
@@ -262,7 +262,9 @@ class MPCLaw(PredictiveLaw):
         if self.time_limit is not None and time.perf_counter() - t_start > self.time_limit:
             return self._fallback(observation, f"time limit {self.time_limit} s exceeded "
                                                f"({status})")
-        _, rank, cond = solve_normal_damped(N, b, law.threshold, 0.0)  # the diagnostics
+        w, _ = np.linalg.eigh(N)
+        rank = int(np.count_nonzero(w > (law.threshold ** 2) * max(w[-1], 0.0)))
+        cond = math.sqrt(w[-1] / w[0]) if w[0] > 0 else math.inf
         law.estimate.commanded(tau, q)
         notes = [*notes, f"mpc {self.model} N={self.horizon}: {status}"]
         return Command(qdot, twist=tau, error=e, error_norm=float(np.sqrt(e @ e)), rank=rank,
