@@ -1,9 +1,8 @@
 """Latency compensation: a law fed the features predicted at the control instant.
 
-The camera's image is older than the control instant (``Observation.image_t < t``: the
-latency and the frame period, :mod:`benchmarks.sim.clock`), while the encoders are read
-at the instant. :class:`LatencyCompensated` wraps any law and, before each step,
-predicts the features over the delay with the NOMINAL model:
+The camera's image is older than the control instant (``Observation.image_t < t``), while
+the encoders are read at the instant. :class:`LatencyCompensated` wraps any law and,
+before each step, predicts the features over the delay with the NOMINAL model:
 
 ``s_pred = s_image + s_model(q(t)) - s_model(q(image_t))``
 
@@ -17,8 +16,7 @@ estimated camera. With an exact model the prediction is the image the camera wou
 at ``t`` (tested); with a model error, the error is that of the model's feature CHANGE.
 
 A feature the image does not show stays missing; where the model cannot predict (its
-forward kinematics fails, or it predicts an edge the image shows as hidden) the image
-feature is used as it is, and the command's notes say so.
+forward kinematics fails, or its change is not finite) the image feature is used as it is.
 """
 
 from __future__ import annotations

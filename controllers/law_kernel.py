@@ -94,17 +94,10 @@ def _leg_directions(v: dict[str, ca.SX], measured: list[ca.SX]) -> list[ca.SX]:
 
 def feature_law_function(feature: LegFeature, interaction: str = "current",
                          lean: bool = False) -> ca.Function:
-    """The law core of a leg feature (the leg-direction law's is that of
-    :data:`~controllers.tasks.leg_direction.LEG_DIRECTIONS`): per leg the feature's block
-    ``(e_i, L_i)`` (:meth:`~controllers.tasks.leg_feature.LegFeature.block`; for the
-    DESIRED / MEAN interaction ``L_i`` at the legs' desired state, or the mean),
-    weighted into ``N`` and ``b``, then :func:`law_tail`.
-
-    Args:
-        feature: The feature.
-        interaction: Where ``L`` is evaluated (``"current"``, ``"desired"``, ``"mean"``).
-        lean: The batched laws' core (:func:`law_tail`).
-    """
+    """The law core of a leg feature: per leg the feature's block ``(e_i, L_i)``
+    (:meth:`~controllers.tasks.leg_feature.LegFeature.block`; for the ``interaction``
+    ``"desired"`` or ``"mean"``, ``L_i`` at the legs' desired state or the mean), weighted
+    into ``N`` and ``b``, then :func:`law_tail` (``lean``: the batched laws' core)."""
     _check_interaction(interaction)
     r = feature.rows
     inputs = law_layouts(feature, interaction)[0]
@@ -206,16 +199,13 @@ class LawResult:
 
 
 class LawKernel:
-    """A compiled law core with a preallocated input vector.
-
-    Constant inputs (desired features, base points, gain, ...) are written once
-    with :meth:`set`; each step writes the measured features and lengths into
-    the views of :attr:`inputs` and calls :meth:`evaluate`.
+    """A compiled law core with a preallocated input vector: constants written once
+    (:meth:`set`), the measured features and lengths each step into :attr:`inputs`, then
+    :meth:`evaluate`.
 
     Args:
         function: The compiled core, with its layouts (:func:`law_layouts`).
-        lean: Builds the lean core of the same law (same inputs and outputs; see
-            :func:`law_tail`), compiled on first use by :attr:`lean_function`.
+        lean: Builds the lean core of the same law (:func:`law_tail`), on first use.
     """
 
     def __init__(self, function: CompiledFunction,

@@ -255,7 +255,7 @@ def solve_normal_damped(N: np.ndarray, b: np.ndarray, threshold: float, damping2
 @dataclass
 class Selection:
     """What a :class:`~controllers.laws.VisionLaw` gives its compiled core when a feature
-    is hidden (now or in the goal): which features are used, and the leg directions.
+    is hidden (now or in the goal).
 
     Attributes:
         features: (m, 3) the measured features, a finite fill value where hidden.
@@ -285,11 +285,9 @@ class TaskStep:
         normal: (6, 6) ``L^T L`` of the stacked interaction matrix ``L``.
         gradient: (6,) ``L^T e``.
         gain: ``lambda(|e|_inf)`` [1/s].
-        inverse_jacobian: (6, 6) ``J_inv`` (rows ``[u_i^T, (A_i x u_i)^T]``), at the
-            directions of ``estimate.in_use``.
+        inverse_jacobian: (6, 6) ``J_inv`` at the directions of ``estimate.in_use``.
         notes: Diagnostics (features used, predicted or approximated directions).
-        compiled: The compiled core's full result (its classical solution, rank,
-            condition) when it computed the period, else None.
+        compiled: The compiled core's :class:`~controllers.law_kernel.LawResult`.
     """
 
     error: np.ndarray

@@ -209,13 +209,12 @@ class MPCLaw(PredictiveLaw):
         self._restart()
 
     def retarget_trial(self, goal: Goal) -> None:
-        """A new goal (a trajectory task's, :mod:`controllers.tracking`): the desired
-        features become the goal's as :meth:`reset_trial` sets them; the warm start, the
-        fallback law's estimate and the drives' state stay.
+        """A new goal (:meth:`~controllers.laws.VisionLaw.retarget_trial` of the fallback
+        law, whose desired features the problem takes); the warm start and the drives'
+        state stay.
 
         Raises:
-            ContextError: :meth:`reset_trial` was not called, or the goal is invalid (the
-                controller then keeps its previous goal).
+            ContextError: No reset yet, or an invalid goal (the previous one kept).
         """
         if self.context is None:
             raise ContextError(self.name, "context", "retarget(goal) before reset(context)")

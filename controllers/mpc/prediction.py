@@ -24,17 +24,9 @@ __all__ = ["FEATURE_KINDS", "fit_pose", "sx_exp_se3", "sx_legs", "sx_pixel"]
 
 def fit_pose(points: np.ndarray, model_points: np.ndarray,
              weights: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
-    """Rigid fit ``(R, t) = argmin sum_i w_i |R m_i + t - p_i|^2`` (Kabsch, proper rotation).
-
-    Args:
-        points: (n, 3) target points ``p_i`` (camera frame) [m].
-        model_points: (n, 3) model points ``m_i`` (body frame) [m].
-        weights: (n,) non-negative weights (default: ones); at least three points
-            with positive weight, not collinear.
-
-    Returns:
-        ``R`` (3, 3) and ``t`` (3,) [m].
-    """
+    """Rigid fit ``(R, t) = argmin sum_i w_i |R m_i + t - p_i|^2`` [m] (Kabsch, a proper
+    rotation) of model points ``m_i`` (n, 3) to points ``p_i`` (n, 3), the weights (n,)
+    non-negative (default: ones; three non-collinear points of positive weight)."""
     p = np.asarray(points, dtype=float)
     m = np.asarray(model_points, dtype=float)
     w = np.ones(len(p)) if weights is None else np.asarray(weights, dtype=float)

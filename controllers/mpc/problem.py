@@ -35,18 +35,10 @@ _BIG = 1e20
 
 @dataclass(frozen=True)
 class ProblemSpec:
-    """The structure of one problem (what the compiled kernel depends on).
-
-    Attributes:
-        feature: The predicted feature (one of
-            :data:`~controllers.mpc.prediction.FEATURE_KINDS`).
-        model: ``"local"`` or ``"global"``.
-        horizon: ``N`` periods.
-        tilt: Whether the tilt rows exist.
-        visibility: Whether the image-bound rows exist (perspective camera).
-        drives: Whether the prediction models the velocity drives' lag
-            (:func:`_drive_blocks`).
-    """
+    """The structure of one problem (what the compiled kernel depends on): the predicted
+    feature (of :data:`~controllers.mpc.prediction.FEATURE_KINDS`), the ``"local"`` or
+    ``"global"`` model, the horizon ``N``, whether the tilt rows, the image-bound rows
+    (perspective camera) and the drives' lag (:func:`_drive_blocks`) are in it."""
 
     feature: BuiltinFeature
     model: str

@@ -242,8 +242,8 @@ def run_sqp(evaluate: Callable[[np.ndarray], np.ndarray | str],
         time_limit: Seconds after which the iterations stop, or None.
 
     Returns:
-        ``U`` (None when the iterations failed or ran out of time: the status says why),
-        converged, status text, the last QP result and the SQP iterations.
+        ``U`` (None on failure or timeout: the status says why), converged, the status,
+        the last QP result and the SQP iterations.
     """
     status = "iteration limit 0: no QP solved"
     last: QPResult | None = None
