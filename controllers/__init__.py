@@ -1,29 +1,13 @@
-"""Controllers: turn observations into leg velocities behind one plugin interface.
+"""Controllers: turn observations into leg commands behind one plugin interface.
 
-Built-in controllers are registered in :data:`controllers.registry.registry` here:
-
-- ``leg-direction``: leg directions, ``u x u*`` (seeds 001/003);
-- ``leg-edge``: leg edges, pixel lines or normals (seeds 002/003);
-- ``leg-edge-qp``, ``leg-direction-qp``: the same features with the QP of
-  ``docs/math.md`` section 6 (stroke and leg-speed limits, OSQP);
-- ``leg-edge-mpc``, ``leg-direction-mpc``: visual predictive control over a
-  horizon (local or global prediction model, strokes, speeds, visibility and
-  tilt constraints; CasADi, DAQP), falling back to the QP laws;
-- ``model-based``: forward kinematics of the nominal model + pose servoing;
-- ``joint-space``: leg lengths to the nominal inverse kinematics of the goal;
-- ``computed-torque``: joint-space computed torque on the encoder lengths with the
-  nominal dynamic model, commanding leg forces (the dynamic world only);
-- ``cartesian-ctc``, ``vision-ctc``: Cartesian computed torque on the platform pose, from
-  the encoders' forward kinematics or from the legs the camera sees (Paccot et al. 2008);
-- ``leg-edge-ctc``, ``leg-direction-ctc``: computed torque in the space of the leg
-  features (Özgür et al. 2011), all on the computed-torque solver
-  (:mod:`controllers.solvers.computed_torque`);
-- ``leg-edge-force-mpc``, ``pose-force-mpc``: force-level predictive controllers on the
-  leg edges or on the platform pose (the nominal closed-chain dynamics over a horizon,
-  the drives' force limits as bounds; CasADi, DAQP), falling back to ``leg-edge-ctc`` or
-  ``cartesian-ctc``;
-- ``latency-compensated``: any of them (``law``) fed the image features predicted over
-  the image's delay with the nominal model (:mod:`controllers.latency`).
+The built-ins (:data:`BUILTIN_SPECS`, registered in :data:`controllers.registry.registry`;
+``docs/plugins.md`` and ``docs/dynamic-world.md`` describe them): the vision laws
+``leg-direction`` and ``leg-edge`` (seeds 001-003), their limit QPs ``-qp`` (OSQP) and
+predictive controllers ``-mpc`` (CasADi, DAQP; falling back to the QPs); the baselines
+``model-based`` and ``joint-space``; the force laws ``computed-torque``,
+``cartesian-ctc``, ``vision-ctc``, ``leg-edge-ctc``, ``leg-direction-ctc`` and the
+force-level predictive ``leg-edge-force-mpc``, ``pose-force-mpc``; and
+``latency-compensated`` (any of them fed the features predicted over the image's delay).
 
 The vision laws are (task, solver) pairs: the features are tasks
 (:mod:`controllers.tasks`), the pseudo-inverse and the limit QP are solvers

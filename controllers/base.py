@@ -46,15 +46,12 @@ class Controller(RemembersOptions, ABC):
     :attr:`~hexapod.actuation.Actuation.FORCE`). A class is its own factory: its
     constructor takes the options as keyword arguments.
 
-    The step is ONE method, over a batch of trials: :meth:`step_batch`
-    (:class:`ObservationBatch` -> :class:`CommandBatch`). The base's computes the rows the
-    controller can as arrays (:meth:`step_arrays`) and steps the others one by one with
-    each trial's own instance (:meth:`step_trial`, the only per-row loop of the
-    package): a controller defines :meth:`reset_trial` and :meth:`step_trial` (and
-    :meth:`step_arrays` to compute rows as arrays), or overrides :meth:`step_batch`
-    altogether.
-    :meth:`step` and :meth:`reset` are the per-trial adapters (a batch of one: the real
-    servo loop, and anyone who steps one robot); they are final.
+    The step is ONE method over a batch of trials, :meth:`step_batch`: the base's
+    computes the rows it can as arrays (:meth:`step_arrays`) and steps the others with
+    each trial's own instance (:meth:`step_trial`, the package's one per-row loop). A
+    controller defines :meth:`reset_trial` and :meth:`step_trial` (and maybe
+    :meth:`step_arrays`), or overrides :meth:`step_batch`. :meth:`step` and :meth:`reset`
+    are the final per-trial adapters (a batch of one: the servo loop).
 
     A plugin written before batches, that defines ``reset(context)`` and
     ``step(observation)`` (and maybe ``retarget(goal)``), keeps working: the base takes

@@ -25,13 +25,10 @@ def actuation_of(controller: Any) -> Actuation:
 
 
 class ForeignController(Controller):
-    """Objects with ``reset`` and ``step`` (maybe ``retarget``) as a batch: one object
-    per trial, each built by ``make`` and stepped alone (a registered object that is not
-    a :class:`Controller`; the per-trial engine's controllers, each a batch of one).
-
-    Each row is stepped by its trial's object through the base's one per-row loop
-    (:meth:`~controllers.base.Controller.step_rows`): a trial whose object raises, in
-    ``reset`` or ``step``, or returns a malformed command, fails alone.
+    """Objects with ``reset`` and ``step`` (maybe ``retarget``) that are not a
+    :class:`Controller`, as a batch: one object per trial, built by ``make``, each row
+    stepped by its object through the base's per-row loop (a trial whose object raises
+    or returns a malformed command fails alone).
 
     Args:
         make: Builds a fresh, un-reset object (with its options).

@@ -238,13 +238,9 @@ class ObservationBatch:
 
     @staticmethod
     def of(obs: Observation) -> ObservationBatch | None:
-        """The batch of one observation (trial 0; views of its arrays), or None when the
-        observation is malformed (a field of the wrong shape or not numbers): the
-        per-trial adapter :meth:`Controller.step` then refuses it with the reason.
-
-        The common case (every field a float or bool array of its shape, or None) costs
-        a type, shape and kind test per field and a view each; another field is
-        converted and checked (:func:`_one_row`)."""
+        """The batch of one observation (trial 0; views of its arrays in the common case,
+        else converted and checked by :func:`_one_row`), or None when it is malformed (then
+        :meth:`Controller.step` refuses it with the reason)."""
         lengths, edges, seen = obs.lengths, obs.edge_visible, obs.direction_visible
         normals, lines, directions, q_dot = obs.normals, obs.lines, obs.directions, obs.q_dot
         try:
@@ -445,33 +441,28 @@ def observation_problem(obs: Observation, features: frozenset[str]) -> str | Non
     value flagged visible is finite; a malformed observation (wrong types) is a reason too.
     """
     try:
-        return _observation_problem(obs, features)
+        q = np.asarray(obs.lengths, dtype=float)
+        if q.shape != (6,):
+            return f"lengths: expected 6 values, got shape {q.shape}"
+        bad = np.flatnonzero(~np.isfinite(q))
+        if len(bad):
+            return f"lengths: leg {int(bad[0])} is {q[bad[0]]} (not finite)"
+        if not np.isfinite(obs.t):
+            return f"time is {obs.t} (not finite)"
+        for name, shape, mask_field in FEATURE_FIELDS:
+            if name not in features:
+                continue
+            value = getattr(obs, name)
+            if value is None:
+                return f"{name}: not measured by this sensor"
+            arr = np.asarray(value, dtype=float)
+            if arr.shape != shape:
+                return f"{name}: expected shape {shape}, got {arr.shape}"
+            visible = np.asarray(getattr(obs, mask_field), dtype=bool)
+            bad_idx = np.argwhere(visible & ~np.all(np.isfinite(arr), axis=-1))
+            if len(bad_idx):
+                return (f"{name}: visible feature {tuple(int(x) for x in bad_idx[0])} is "
+                        "not finite")
     except (TypeError, ValueError) as exc:
         return f"malformed observation: {exc}"
-
-
-def _observation_problem(obs: Observation, features: frozenset[str]) -> str | None:
-    q = np.asarray(obs.lengths, dtype=float)
-    if q.shape != (6,):
-        return f"lengths: expected 6 values, got shape {q.shape}"
-    bad = np.flatnonzero(~np.isfinite(q))
-    if len(bad):
-        return f"lengths: leg {int(bad[0])} is {q[bad[0]]} (not finite)"
-    if not np.isfinite(obs.t):
-        return f"time is {obs.t} (not finite)"
-    for name, shape, mask_field in FEATURE_FIELDS:
-        if name not in features:
-            continue
-        mask = getattr(obs, mask_field)
-        value = getattr(obs, name)
-        if value is None:
-            return f"{name}: not measured by this sensor"
-        arr = np.asarray(value, dtype=float)
-        if arr.shape != shape:
-            return f"{name}: expected shape {shape}, got {arr.shape}"
-        m = np.asarray(mask, dtype=bool)
-        finite = np.all(np.isfinite(arr), axis=-1)
-        bad_idx = np.argwhere(m & ~finite)
-        if len(bad_idx):
-            return f"{name}: visible feature {tuple(int(x) for x in bad_idx[0])} is not finite"
     return None

@@ -1,12 +1,8 @@
-"""What a control law carries from one period to the next (a task,
-:mod:`controllers.tasks`, is a pure function of the current measurements): the leg
-directions the vision laws know (:class:`LegDirectionEstimate`, ``docs/math.md``
-section 6) and the platform pose that warm-starts a forward kinematics
-(:class:`PoseEstimate`).
-
-Every array has a leading trial axis when the estimate holds a batch; ``row(k)`` gives
-one trial's estimate as views into the batch, so that a trial stepped alone and the
-same trial stepped in its batch write the same memory.
+"""What a control law carries from one period to the next (a task is a pure function of
+the current measurements): the leg directions the vision laws know
+(:class:`LegDirectionEstimate`) and the pose that warm-starts a forward kinematics
+(:class:`PoseEstimate`). A batch estimate has a leading trial axis; ``row(k)`` gives one
+trial's as views into it (a trial stepped alone or in its batch writes the same memory).
 """
 
 from __future__ import annotations

@@ -30,9 +30,8 @@ def cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
 def direction_interaction(
     base_points: np.ndarray, directions: np.ndarray, lengths: np.ndarray
 ) -> np.ndarray:
-    """Leg-direction interaction matrices ``u_dot_i = M_i tau`` (``docs/math.md`` section 3).
-
-    ``M_i = (1/q_i) P(u_i) [I3, -[A_i + q_i u_i]_x]``.
+    """Leg-direction interaction matrices ``u_dot_i = M_i tau``, ``M_i = (1/q_i) P(u_i)
+    [I3, -[A_i + q_i u_i]_x]`` (``docs/math.md`` section 3).
 
     Args:
         base_points: (..., 3) ``A_i`` in the camera frame [m].

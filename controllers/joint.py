@@ -20,8 +20,7 @@ from controllers.data import (
     Observation,
     observation_problem,
 )
-from controllers.law_tools import goal_lengths
-from controllers.laws import Gain
+from controllers.law_tools import Gain, goal_lengths
 
 
 class JointSpaceController(Controller):

@@ -1,28 +1,22 @@
 """Latency compensation: a law fed the features predicted at the control instant.
 
-The camera's image is older than the control instant (``Observation.image_t < t``: the
-latency and the frame period, :mod:`benchmarks.sim.clock`), while the encoders are read
-at the instant. :class:`LatencyCompensated` wraps any law and, before each step,
-predicts the features over the delay with the NOMINAL model:
+The camera's image is older than the control instant (``Observation.image_t < t``), while
+the encoders are read at the instant. :class:`LatencyCompensated` wraps any law and,
+before each step, predicts the features over the delay with the NOMINAL model:
 
 ``s_pred = s_image + s_model(q(t)) - s_model(q(image_t))``
 
 where ``s_model(q)`` is what the estimated camera would see of the nominal robot at the
-forward kinematics of the encoder lengths ``q``, and ``q(image_t)`` is the linear
-interpolation of the encoder readings around the capture time (the legs move at the
-commanded, constant speed within a period in the kinematic world, so it is exact
-there; before the first reading the robot rests at its first reading). Where the
-readings carry the measured leg velocities (``Observation.q_dot``, the dynamic world,
-whose legs accelerate within a period) the interpolation is the cubic Hermite one of
-the lengths and their rates (``use_rates``). Edge normals
-and leg directions are predicted and renormalised, image lines follow from the
-predicted normals through the estimated camera. With an exact model the prediction is
-the image the camera would take at ``t`` (tested); with a model error the error of the
-prediction is that of the model's feature CHANGE over the delay, not of the features.
+forward kinematics of the encoder lengths ``q``, and ``q(image_t)`` interpolates the
+encoder readings around the capture time: linearly (exact in the kinematic world, whose
+legs move at constant speed within a period), or cubic Hermite with the measured leg
+velocities where the readings have them (``use_rates``; the dynamic world). Normals and
+leg directions are renormalised, image lines follow from the normals through the
+estimated camera. With an exact model the prediction is the image the camera would take
+at ``t`` (tested); with a model error, the error is that of the model's feature CHANGE.
 
 A feature the image does not show stays missing; where the model cannot predict (its
-forward kinematics fails, or it predicts an edge the image shows as hidden) the image
-feature is used as it is, and the command's notes say so.
+forward kinematics fails, or its change is not finite) the image feature is used as it is.
 """
 
 from __future__ import annotations
@@ -57,15 +51,14 @@ HISTORY = 512
 _PAIR = np.array([0, 1])
 
 
-def move_normals(seen: np.ndarray, delta: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def move_normals(seen: np.ndarray, delta: np.ndarray) -> np.ndarray:
     """Image normals (..., 6, 2, 3) moved by the model's change ``delta`` and
-    renormalised (a NaN, unseen component stays; where the model's change is not finite
-    the image normal is kept), and the mask (..., 6, 2) of finite changes."""
+    renormalised (an unseen NaN stays; the image normal where ``delta`` is not finite)."""
     delta_ok = np.all(np.isfinite(delta), axis=-1)
     with np.errstate(invalid="ignore"):
         moved = seen + np.where(delta_ok[..., None], delta, 0.0)
         moved /= np.linalg.norm(moved, axis=-1, keepdims=True)
-    return np.where(np.isfinite(seen), moved, seen), delta_ok
+    return np.where(np.isfinite(seen), moved, seen)
 
 
 def _finite(values: np.ndarray) -> bool:
@@ -89,13 +82,6 @@ class EncoderHistory:
         self.rates: deque[np.ndarray | None] = deque(maxlen=HISTORY)
         #: The nominal pose at the last prediction's control instant, or None.
         self.guess: tuple[np.ndarray, np.ndarray] | None = None
-
-    def clear(self) -> None:
-        """Forget the readings and the warm start."""
-        self.times.clear()
-        self.lengths.clear()
-        self.rates.clear()
-        self.guess = None
 
     def record(self, observation: Observation) -> None:
         """Keep the reading of an observation with 6 finite lengths and a finite time (a
@@ -144,17 +130,10 @@ class EncoderHistory:
 
 
 class LatencyCompensated(Controller):
-    """A law whose image features are predicted over the image's delay (see the module
-    docstring), over a batch of trials.
-
-    Each trial keeps its own encoder history (:class:`EncoderHistory`, one reading per
-    row and period), while the prediction of every row whose image is late is computed
-    as arrays: one nominal forward kinematics over the two poses of all those rows (the
-    capture instant and the control instant, warm-started per trial), one compiled
-    observation of the nominal robot at all those poses (each trial's estimated camera;
-    the numpy observation pair by pair for a camera the compiled core does not
-    reproduce), the features moved by :func:`move_normals`. The wrapped law then steps
-    every row in its own batch.
+    """A law whose image features are predicted over the image's delay (module
+    docstring), over a batch: per-trial encoder histories; for all late rows at once one
+    nominal forward kinematics of both instants, one compiled observation (the numpy one
+    for a camera it does not reproduce); then the wrapped law's own batch step.
 
     Args:
         law: Registry name of the wrapped law.
@@ -280,7 +259,7 @@ class LatencyCompensated(Controller):
         pairs = (2 * keep[:, None] + _PAIR).reshape(-1)  # (2 keep, 2 keep + 1)
         model = self._batch_model_normals(tr, sol.rotations[pairs], sol.translations[pairs])
         assert obs.normals is not None
-        normals, _ = move_normals(np.asarray(obs.normals, dtype=float)[rows],
+        normals = move_normals(np.asarray(obs.normals, dtype=float)[rows],
                                   model[1::2] - model[0::2])
         out_normals = np.array(obs.normals, dtype=float)
         out_normals[rows] = normals

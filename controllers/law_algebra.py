@@ -60,21 +60,11 @@ def cholesky_solve(M: list[list[ca.SX]], rhs: list[ca.SX]) -> list[ca.SX]:
 
 def jacobi_eigen(N: ca.SX, sweeps: int = JACOBI_SWEEPS, vectors: bool = True
                  ) -> tuple[list[ca.SX], list[list[ca.SX]]]:
-    """Eigenvalues and eigenvectors of a symmetric 6 x 6 SX matrix (cyclic Jacobi, unrolled).
-
-    Each rotation zeroes ``a_pq`` (Golub and Van Loan, ``sym.schur2``); a rotation
-    whose ``a_pq`` is already zero is skipped without dividing by it.
-
-    Args:
-        N: The matrix.
-        sweeps: Cyclic sweeps (unrolled).
-        vectors: Accumulate the eigenvectors (False: the identity is returned for
-            ``V``, and the expression is about a third smaller).
-
-    Returns:
-        The eigenvalues ``w`` (6, unsorted) and ``V`` as rows ``V[k][j]`` (column
-        ``j`` is the eigenvector of ``w[j]``).
-    """
+    """The eigenvalues ``w`` (6, unsorted) of a symmetric 6 x 6 SX matrix and ``V`` as rows
+    ``V[k][j]`` (column ``j`` the eigenvector of ``w[j]``; the identity unless
+    ``vectors``, an expression a third smaller): ``sweeps`` unrolled cyclic Jacobi sweeps,
+    each rotation zeroing ``a_pq`` (Golub and Van Loan, ``sym.schur2``; skipped where
+    ``a_pq`` is already zero)."""
     n = N.shape[0]
     a = [[N[i, j] for j in range(n)] for i in range(n)]
     V: list[list[ca.SX]] = [[ca.SX(1.0 if i == j else 0.0) for j in range(n)] for i in range(n)]
@@ -135,17 +125,16 @@ def law_tail(e: ca.SX, N: ca.SX, b: ca.SX, directions: list[ca.SX], base_points:
     rank, condition, damped solve at full rank, ``J_inv`` and ``q_dot``.
 
     Args:
-        e: Stacked error of the used features, zeros for the others (m, 1): its norm
-            and its largest entry (the gain) count the used rows only.
+        e: Stacked error (m, 1), zeros for the unused features.
         N: ``L^T W L`` (6, 6).
         b: ``L^T W e`` (6, 1).
         directions: Six (3, 1) leg directions for ``J_inv``.
         base_points: Six (3, 1) ``A_i`` [m].
         params: The :data:`LAW_INPUTS` (5, 1).
-        lean: The core of the batched laws: no eigenvalues; the rank output is 6 when
-            :func:`full_rank_certificate` proves full rank (then every output equals
-            the full core's to the last bit) and 0 otherwise (the caller steps that
-            row with the full core); the condition output is NaN.
+        lean: The batched laws' core: no eigenvalues, the rank 6 when
+            :func:`full_rank_certificate` proves it (every output then the full core's to
+            the last bit) else 0 (the caller steps the row with the full core), the
+            condition NaN.
 
     Returns:
         The :data:`LAW_OUTPUTS`, in order.

@@ -1,23 +1,15 @@
 """The per-step numeric core of the vision laws, compiled to C (one call per step).
 
-A law's step is a few hundred floating-point operations spread over some sixty numpy
-calls; at this scale the cost is the calls. The core is therefore one CasADi SX
-expression built from the tasks' own blocks (a leg feature's
-:meth:`~controllers.tasks.leg_feature.LegFeature.block`, the leg directions' included;
-:func:`controllers.tasks.leg_edge.edge_block`), generated to C and called on
-preallocated buffers by :class:`hexapod.compiled.CompiledFunction` (the CasADi virtual
-machine evaluates it when there is no compiler). One call gives the stacked error and
-the weighted normal equations ``N = L^T W L``, ``b = L^T W e`` with ``L`` at the
-current, desired or mean features (a feature of weight zero, hidden now or in the goal,
-is left out exactly), the leg directions (measured, or the law's estimate where a leg is
-not ``measured``), and the law part every feature shares
-(:func:`~controllers.law_algebra.law_tail`: gain, rank, damped solve, ``J_inv``,
-``q_dot``, finiteness checks).
-
-Input: the feature block (:func:`feature_inputs`), then :data:`LAW_INPUTS`. Output: the
-feature error (every feature, used or not), :data:`LAW_OUTPUTS`, the leg directions (18)
-the inverse Jacobian used (:func:`law_layouts`). The numpy formulas of
-``tests/controllers/interaction_oracle.py`` are the tests' oracle.
+A law's step is a few hundred floating-point operations over some sixty numpy calls: the
+cost is the calls. The core is one CasADi SX expression built from the tasks' own blocks
+(:meth:`~controllers.tasks.leg_feature.LegFeature.block`,
+:func:`controllers.tasks.leg_edge.edge_block`), generated to C and called on preallocated
+buffers (:class:`hexapod.compiled.CompiledFunction`). One call gives the stacked error,
+``N = L^T W L`` and ``b = L^T W e`` with ``L`` at the current, desired or mean features (a
+feature of weight zero left out exactly), the leg directions (measured, or the law's
+estimate where a leg is not ``measured``) and the law part every feature shares
+(:func:`~controllers.law_algebra.law_tail`). Layouts: :func:`law_layouts`. The numpy
+formulas of ``tests/controllers/interaction_oracle.py`` are the tests' oracle.
 """
 
 from __future__ import annotations
@@ -41,8 +33,10 @@ LAW_INPUTS = (("gain", 3), ("threshold2", 1), ("damping2", 1))
 #: Per-leg inputs of every core: the leg directions the law knows (used where a leg is
 #: not ``measured``), and ``measured`` (1: the leg's direction comes from the features).
 _LEG_INPUTS = (("leg_directions", 18), ("measured", 6))
-#: After the error: ``|e|``, sum of ``N``, rank, condition, gain, ``tau`` (6), ``q_dot`` (6),
-#: finiteness check of ``q_dot``, ``N`` (36, row-major), ``b`` (6), ``J_inv`` (36).
+#: After the error: ``|e|``, sum of ``N`` (a finiteness check), the rank (eigenvalues of
+#: ``N`` above ``threshold^2 w_max``), the condition ``sqrt(w_max / w_min)`` (inf when
+#: singular), the gain [1/s], ``tau`` (6), ``q_dot`` (6), finiteness check of ``q_dot``,
+#: ``N`` (36, row-major), ``b`` (6), ``J_inv`` (36).
 LAW_OUTPUTS = (("error_norm", 1), ("n_sum", 1), ("rank", 1), ("condition", 1), ("gain", 1),
                ("tau", 6), ("qdot", 6), ("qdot_check", 1), ("N", 36), ("b", 6), ("J", 36))
 
@@ -50,39 +44,32 @@ LAW_OUTPUTS = (("error_norm", 1), ("n_sum", 1), ("rank", 1), ("condition", 1), (
 Feature = LegFeature | EdgeFeature
 
 
-def feature_inputs(feature: Feature, interaction: str = "current"
-                   ) -> tuple[tuple[str, int], ...]:
-    """The feature block of a law core's input.
+def law_layouts(feature: Feature, interaction: str = "current") -> tuple[Layout, Layout]:
+    """The input and output layouts of a law core.
 
-    A leg feature: measured ``u`` (6 x 3), the desired feature (6 x rows), ``A`` (6 x 3),
-    ``q``, the weights (6), :data:`_LEG_INPUTS`, and for the DESIRED / MEAN interaction the
-    legs' desired state (:attr:`~controllers.tasks.leg_feature.LegFeature.
-    desired_state_inputs`). The edges: the 12 lines or normals, desired, ``K``, ``K^-1``
+    Input, a leg feature: measured ``u`` (6 x 3), the desired feature (6 x rows), ``A`` (6 x
+    3), ``q``, the weights (6), :data:`_LEG_INPUTS`, and for the DESIRED / MEAN interaction
+    the legs' desired state (:attr:`~controllers.tasks.leg_feature.LegFeature.
+    desired_state_inputs`); the edges: the 12 lines or normals, desired, ``K``, ``K^-1``
     (row-major; identities for normals), ``A``, ``q``, the weights (12),
     :data:`_LEG_INPUTS`, and for DESIRED / MEAN the desired normals (12 x 3), leg
-    directions ``u*`` (6 x 3) and lengths ``q*``.
+    directions ``u*`` (6 x 3) and lengths ``q*``; then :data:`LAW_INPUTS`. Output: the
+    error, :data:`LAW_OUTPUTS`, the leg directions (18).
     """
     if isinstance(feature, EdgeFeature):
+        name, n_error = "edge law", 36
         block: tuple[tuple[str, int], ...] = (
             ("features", 36), ("desired", 36), ("K", 9), ("K_inv", 9), ("base_points", 18),
             ("lengths", 6), ("weights", 12), *_LEG_INPUTS)
         goal_state: tuple[tuple[str, int], ...] = (
             ("desired_normals", 36), ("desired_directions", 18), ("desired_lengths", 6))
     else:
+        name, n_error = f"{feature.name} law", 6 * feature.rows
         block = (("features", 18), ("desired", 6 * feature.rows), ("base_points", 18),
                  ("lengths", 6), ("weights", 6), *_LEG_INPUTS)
         goal_state = feature.desired_state_inputs
-    return block if interaction == "current" else (*block, *goal_state)
-
-
-def law_layouts(feature: Feature, interaction: str = "current") -> tuple[Layout, Layout]:
-    """The input layout (:func:`feature_inputs`, then :data:`LAW_INPUTS`) and the output
-    layout (the error, :data:`LAW_OUTPUTS`, the leg directions (18)) of a law core."""
-    if isinstance(feature, EdgeFeature):
-        name, n_error = "edge law", 36
-    else:
-        name, n_error = f"{feature.name} law", 6 * feature.rows
-    return (Layout([*feature_inputs(feature, interaction), *LAW_INPUTS], f"{name} input"),
+    inputs = block if interaction == "current" else (*block, *goal_state)
+    return (Layout([*inputs, *LAW_INPUTS], f"{name} input"),
             Layout([("error", n_error), *LAW_OUTPUTS, ("directions", 18)], f"{name} output"))
 
 
@@ -107,17 +94,10 @@ def _leg_directions(v: dict[str, ca.SX], measured: list[ca.SX]) -> list[ca.SX]:
 
 def feature_law_function(feature: LegFeature, interaction: str = "current",
                          lean: bool = False) -> ca.Function:
-    """The law core of a leg feature (the leg-direction law's is that of
-    :data:`~controllers.tasks.leg_direction.LEG_DIRECTIONS`): per leg the feature's block
-    ``(e_i, L_i)`` (:meth:`~controllers.tasks.leg_feature.LegFeature.block`; for the
-    DESIRED / MEAN interaction ``L_i`` at the legs' desired state, or the mean),
-    weighted into ``N`` and ``b``, then :func:`law_tail`.
-
-    Args:
-        feature: The feature.
-        interaction: Where ``L`` is evaluated (``"current"``, ``"desired"``, ``"mean"``).
-        lean: The batched laws' core (:func:`law_tail`).
-    """
+    """The law core of a leg feature: per leg the feature's block ``(e_i, L_i)``
+    (:meth:`~controllers.tasks.leg_feature.LegFeature.block`; for the ``interaction``
+    ``"desired"`` or ``"mean"``, ``L_i`` at the legs' desired state or the mean), weighted
+    into ``N`` and ``b``, then :func:`law_tail` (``lean``: the batched laws' core)."""
     _check_interaction(interaction)
     r = feature.rows
     inputs = law_layouts(feature, interaction)[0]
@@ -198,23 +178,10 @@ def _edge_function(feature: EdgeFeature, interaction: str = "current",
 # --------------------------------------------------------------------------- runtime
 @dataclass
 class LawResult:
-    """One evaluation of a law kernel (fresh arrays, safe to keep in a command).
-
-    Attributes:
-        error: (m,) stacked error.
-        error_norm: ``|e|``.
-        n_sum: Sum of the entries of ``N`` (finiteness check).
-        rank: Rank of ``L`` (eigenvalues of ``N`` above ``threshold^2 w_max``).
-        condition: ``sqrt(w_max / w_min)`` (inf when singular).
-        gain: ``lambda`` [1/s].
-        tau: (6,) classical twist ``-lambda L^+ e``.
-        qdot: (6,) ``J_inv tau`` [m/s].
-        qdot_finite: Every entry of ``qdot`` is finite.
-        N: (6, 6) ``L^T L``.
-        b: (6,) ``L^T e``.
-        J: (6, 6) inverse Jacobian.
-        directions: (6, 3) leg directions used by ``J``.
-    """
+    """One evaluation of a law kernel (fresh arrays, safe to keep in a command): the
+    stacked ``error`` (m,), the :data:`LAW_OUTPUTS` by name (``tau = -lambda L^+ e``,
+    ``qdot = J_inv tau`` [m/s], ``qdot_finite`` from ``qdot_check``; ``N``, ``J`` (6, 6))
+    and the leg ``directions`` (6, 3) ``J`` used."""
 
     error: np.ndarray
     error_norm: float
@@ -232,16 +199,13 @@ class LawResult:
 
 
 class LawKernel:
-    """A compiled law core with a preallocated input vector.
-
-    Constant inputs (desired features, base points, gain, ...) are written once
-    with :meth:`set`; each step writes the measured features and lengths into
-    the views of :attr:`inputs` and calls :meth:`evaluate`.
+    """A compiled law core with a preallocated input vector: constants written once
+    (:meth:`set`), the measured features and lengths each step into :attr:`inputs`, then
+    :meth:`evaluate`.
 
     Args:
         function: The compiled core, with its layouts (:func:`law_layouts`).
-        lean: Builds the lean core of the same law (same inputs and outputs; see
-            :func:`law_tail`), compiled on first use by :attr:`lean_function`.
+        lean: Builds the lean core of the same law (:func:`law_tail`), on first use.
     """
 
     def __init__(self, function: CompiledFunction,
@@ -300,12 +264,9 @@ def feature_law_kernel(feature: Feature, interaction: str = "current",
     """A kernel of a feature's law (its own input buffer; shared compiled code).
 
     Args:
-        feature: A leg feature (the leg-direction law's is
-            :data:`~controllers.tasks.leg_direction.LEG_DIRECTIONS`) or the leg edges
-            (:data:`~controllers.tasks.leg_edge.EDGE_LINES` or
-            :data:`~controllers.tasks.leg_edge.EDGE_NORMALS`).
-        interaction: Where the interaction matrix is evaluated (``"current"``,
-            ``"desired"``, ``"mean"``).
+        feature: A leg feature (:data:`~controllers.tasks.leg_direction.LEG_DIRECTIONS`,
+            a plugin's) or the leg edges (``EDGE_LINES``, ``EDGE_NORMALS``).
+        interaction: ``"current"``, ``"desired"`` or ``"mean"``.
         compiled: C code (False: the CasADi virtual machine evaluates the same core).
 
     Raises:

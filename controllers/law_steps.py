@@ -1,12 +1,9 @@
-"""The batch side of :class:`~controllers.laws.VisionLaw` (which derives from
-:class:`VisionLawBatch` and sets the law, its solver and its core).
-
-:class:`VisionLawBatch` resets one instance of the law per context (their estimates rows
-of one batch estimate, their compiled cores' inputs rows of one :class:`KernelRows`),
-retargets them (a goal the compiled core takes as it is written into the batch's inputs
-at once, read by the instance when it next needs it) and steps the common rows in one C
-loop through the lean core, leaving the others to their instances
-(:meth:`VisionLawBatch.step_row`).
+"""The batch side of :class:`~controllers.laws.VisionLaw` (:class:`VisionLawBatch`): one
+instance of the law per context (their estimates rows of one batch estimate, their
+compiled cores' inputs rows of one :class:`KernelRows`), goals the compiled core takes
+as they are written into the rows at once (read by the instance when it next needs
+them), and the common rows stepped in one C loop through the lean core, the others by
+their instances (:meth:`VisionLawBatch.step_row`).
 """
 
 from __future__ import annotations
@@ -94,14 +91,10 @@ class KernelRows:
              lengths: np.ndarray, solver: Solver, estimate: LegDirectionEstimate,
              out: CommandBatch) -> np.ndarray:
         """The lean core over the batch rows ``rows`` of ``trials`` with their measured
-        ``features`` and ``lengths`` [m]; the rows whose result is the command (a finite
-        error and interaction matrix, rank 6, a finite command, and
-        ``solver.batch_accept``) update the batch's ``estimate`` as a commanded step and
-        fill ``out`` (the others are left to the trial's own step, which says why).
-
-        Returns:
-            (m,) the rows filled.
-        """
+        ``features`` and ``lengths`` [m]; returns the mask (m,) of the rows whose result
+        is the command (finite, rank 6, ``solver.batch_accept``): those update the batch's
+        ``estimate`` as a commanded step and fill ``out``, the others are left to their
+        trial's own step (which says why)."""
         X = self.X[trials]
         X[:, self.slices["features"]] = features
         X[:, self.slices["lengths"]] = lengths

@@ -99,19 +99,6 @@ def check_weights(controller: str, first: tuple[str, Any], second: tuple[str, An
     return a, b
 
 
-def check_horizon(controller: str, horizon: Any, error_weight: Any, terminal_weight: Any
-                  ) -> tuple[int, float, float]:
-    """A predictive controller's horizon (1 to 50 periods) and the weights of the error
-    at its stages ``1..N-1`` and ``N`` (>= 0, not both 0).
-
-    Raises:
-        OptionError: Naming the option out of range.
-    """
-    return (check_count(controller, "horizon", horizon, 1, 50),
-            *check_weights(controller, ("error_weight", error_weight),
-                           ("terminal_weight", terminal_weight), "no error to minimise"))
-
-
 def goal_lengths(controller: str, goal: Any) -> np.ndarray:
     """``goal.lengths`` checked: a copy (6,) [m].
 
@@ -172,22 +159,11 @@ def _select(condition: Any, if_true: Any, if_false: Any) -> Any:
 def gain_formula(x: Any, at_zero: Any, at_infinity: Any, slope_at_zero: Any,
                  exp: Callable[[Any], Any] = math.exp,
                  select: Callable[[Any, Any, Any], Any] = _select) -> Any:
-    """The adaptive gain, its one definition (:class:`Gain`; ``docs/math.md`` section 6):
-    ``lambda(x) = d exp(-lambda0' x / d) + lambda_inf`` with ``d = lambda0 - lambda_inf``,
-    ``lambda0`` when ``d = 0``.
-
-    On numbers by default (the per-trial laws); on CasADi expressions with
-    ``exp=ca.exp, select=ca.if_else`` (the compiled cores of
-    :mod:`controllers.law_kernel` and :mod:`controllers.model_based`).
-
-    Args:
-        x: Error size ``|e|_inf``.
-        at_zero: ``lambda0`` [1/s].
-        at_infinity: ``lambda_inf`` [1/s].
-        slope_at_zero: ``lambda0'`` [1/s per unit of error].
-        exp: The exponential.
-        select: ``select(condition, if_true, if_false)``.
-    """
+    """The adaptive gain [1/s] of the error size ``x = |e|_inf``, its one definition
+    (:class:`Gain`'s attributes; ``docs/math.md`` section 6): ``lambda(x) = d
+    exp(-lambda0' x / d) + lambda_inf``, ``d = lambda0 - lambda_inf`` (``lambda0`` when
+    ``d = 0``). On numbers by default; on CasADi expressions with ``exp=ca.exp,
+    select=ca.if_else`` (the compiled cores)."""
     d = at_zero - at_infinity
     return select(d == 0, at_zero,
                   d * exp(((-slope_at_zero) * x) / select(d == 0, 1.0, d)) + at_infinity)
@@ -256,20 +232,10 @@ class Gain:
 # --------------------------------------------------------------------------- algebra
 def solve_normal_damped(N: np.ndarray, b: np.ndarray, threshold: float, damping2: float
                         ) -> tuple[np.ndarray, int, float]:
-    """``x = (L^T L + mu^2 I)^+ L^T e`` from the normal equations, through the
-    eigen-decomposition of the 6x6 ``N``: ``sum_j (v_j^T b) / (w_j + damping2) v_j`` over
-    the eigenvalues ``w_j > threshold^2 w_max`` (the singular values of ``L`` below
-    ``threshold * s_max`` count as zero; cheaper than :func:`numpy.linalg.pinv`).
-
-    Args:
-        N: (6, 6) ``L^T L``.
-        b: (6,) ``L^T e``.
-        threshold: Relative singular-value threshold.
-        damping2: Squared damping ``mu^2`` (or the QP laws' regularization ``eps``).
-
-    Returns:
-        ``x`` (6,), the rank, and the condition number ``s_max / s_min`` (inf when singular).
-    """
+    """``x = (L^T L + mu^2 I)^+ L^T e`` (6,) from ``N = L^T L`` (6, 6) and ``b = L^T e``:
+    ``sum_j (v_j^T b) / (w_j + damping2) v_j`` over the eigenvalues ``w_j > threshold^2
+    w_max`` of ``N`` (the singular values of ``L`` below ``threshold * s_max`` count as
+    zero), with the rank and the condition ``s_max / s_min`` (inf when singular)."""
     w, V = np.linalg.eigh(N)
     w_max = w[-1]
     if not w_max > 0:
@@ -289,7 +255,7 @@ def solve_normal_damped(N: np.ndarray, b: np.ndarray, threshold: float, damping2
 @dataclass
 class Selection:
     """What a :class:`~controllers.laws.VisionLaw` gives its compiled core when a feature
-    is hidden (now or in the goal): which features are used, and the leg directions.
+    is hidden (now or in the goal).
 
     Attributes:
         features: (m, 3) the measured features, a finite fill value where hidden.
@@ -319,11 +285,9 @@ class TaskStep:
         normal: (6, 6) ``L^T L`` of the stacked interaction matrix ``L``.
         gradient: (6,) ``L^T e``.
         gain: ``lambda(|e|_inf)`` [1/s].
-        inverse_jacobian: (6, 6) ``J_inv`` (rows ``[u_i^T, (A_i x u_i)^T]``), at the
-            directions of ``estimate.in_use``.
+        inverse_jacobian: (6, 6) ``J_inv`` at the directions of ``estimate.in_use``.
         notes: Diagnostics (features used, predicted or approximated directions).
-        compiled: The compiled core's full result (its classical solution, rank,
-            condition) when it computed the period, else None.
+        compiled: The compiled core's :class:`~controllers.law_kernel.LawResult`.
     """
 
     error: np.ndarray

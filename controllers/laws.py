@@ -1,15 +1,10 @@
-"""The image-based laws' per-trial side (``docs/math.md`` section 6): a feature (leg
-directions, leg edges) gives an error and an interaction matrix; :class:`VisionLaw`
-combines them once for every feature (gain, solver, hidden features, diagnostics):
-``tau = -lambda L^+ e``, ``q_dot = J_inv tau``.
-
-A step goes through the law's compiled core (:mod:`controllers.law_kernel`): directly when
-every feature is visible now and in the goal, else after :meth:`VisionLaw._select` has
-chosen the used features (weight 1, the hidden ones 0) and the directions of the legs it
-cannot measure (dead-reckoned or approximated). The batch side (one instance per trial,
-the lean core over the common rows) is :class:`~controllers.law_steps.VisionLawBatch`'s.
-The numpy formulas of ``tests/controllers/interaction_oracle.py`` are the tests' oracle
-(``tests/controllers/numpy_law.py``).
+"""The image-based laws' per-trial side (``docs/math.md`` section 6): a feature gives an
+error and an interaction matrix; :class:`VisionLaw` combines them for every feature
+(gain, solver, hidden features, diagnostics): ``tau = -lambda L^+ e``, ``q_dot = J_inv
+tau``. A step goes through the law's compiled core (:mod:`controllers.law_kernel`),
+after :meth:`VisionLaw._select` when a feature is hidden now or in the goal. The batch
+side is :class:`~controllers.law_steps.VisionLawBatch`'s; the tests' numpy oracle is
+``tests/controllers/numpy_law.py``.
 """
 
 from __future__ import annotations
@@ -39,9 +34,6 @@ from controllers.law_tools import (
 )
 from controllers.solvers.base import Solver
 from controllers.solvers.pseudo_inverse import DampedPseudoInverse
-
-#: Re-exported for the laws that import them from here.
-__all__ = ["Gain", "VisionLaw", "check_number", "check_observation"]
 
 
 class VisionLaw(VisionLawBatch):
@@ -137,13 +129,9 @@ class VisionLaw(VisionLawBatch):
         self.reset_leg_rate(context, dt)
 
     def retarget_trial(self, goal: Goal) -> None:
-        """A new goal, keeping what the law carries between periods (the goal of each
-        period of a trajectory task, :mod:`controllers.tracking`).
-
-        The desired features and lengths become the goal's, exactly as :meth:`reset_trial`
-        would set them; the leg-direction estimate, the forward-kinematics warm start and
-        the solver's state stay: the goal moved, the robot did not. The compiled core is
-        kept (its desired features rewritten).
+        """A new goal (a trajectory task's, :mod:`controllers.tracking`): the desired
+        features and lengths as :meth:`reset_trial` sets them; the estimate, the forward
+        kinematics' warm start, the solver's state and the compiled core stay.
 
         Raises:
             ContextError: :meth:`reset_trial` was not called, or the goal is invalid (as in
@@ -251,15 +239,11 @@ class VisionLaw(VisionLawBatch):
         return q
 
     def tasks(self, observation: Observation, q: np.ndarray) -> TaskStep | Command:
-        """This period's tasks for a solver, or the refusal of why none can be built.
-
-        The part of a step every solver shares (the pseudo-inverse of :meth:`step_trial`, the
-        limit QP, the predictive controller): the features of a usable observation go
-        through the compiled core, directly when every feature is visible now and in the
-        goal (:meth:`_load_kernel`), else after :meth:`_select`. The estimate is updated
-        (measured and dead-reckoned directions, nothing commanded yet), and the inverse
-        Jacobian is built, with the nominal model's directions for legs never seen (then
-        written to ``estimate.in_use``).
+        """This period's tasks for a solver (the part of a step every solver shares), or
+        the refusal of why none can be built: the compiled core, directly when every
+        feature is visible now and in the goal (:meth:`_load_kernel`), else after
+        :meth:`_select`; the estimate updated (nothing commanded yet); the nominal model's
+        directions for legs never seen (:meth:`_model_directions`).
 
         Args:
             observation: The observation.
@@ -386,15 +370,10 @@ class VisionLaw(VisionLawBatch):
                 and (self._q_star is not None or "desired_lengths" not in k.inputs))
 
     def _model_directions(self, q: np.ndarray) -> np.ndarray | None:
-        """Leg directions (6, 3) in the camera frame predicted by the nominal model, or None
-        (no camera pose, or the forward kinematics fails).
-
-        Forward kinematics of the measured lengths ``q`` [m] with the nominal geometry
-        (warm-started at and updating :attr:`model_pose`), seen through the estimated
-        ``camera_from_base``. Used only for legs never observed (hidden in the goal too):
-        ``J_inv`` needs every direction, and an approximate one only slows the convergence
-        (the error never involves the model).
-        """
+        """Leg directions (6, 3) (camera frame) of the nominal forward kinematics of ``q``
+        [m] (warm-started at :attr:`model_pose`) seen through the estimated
+        ``camera_from_base``, or None (no camera pose, no solution): ``J_inv`` of legs
+        never observed (an approximate direction only slows the convergence)."""
         context = self.context
         pose = getattr(getattr(context, "camera", None), "camera_from_base", None)
         if context is None or pose is None:

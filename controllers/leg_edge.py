@@ -9,11 +9,10 @@ Features (``docs/math.md`` section 6), two per leg, stacked over the visible edg
   ``n``, ``e = n x n*``, ``L = -[n*]_x H M_i``.
 
 The leg direction used by ``H``, ``M_i`` and ``J_inv`` is rebuilt from the two
-edges of the leg, ``u = (n2 x n1) / |n2 x n1|`` (``vision/legs.py`` convention).
-
-One call of the compiled core (:func:`controllers.law_kernel.feature_law_kernel`, generated
-from the task's block :func:`controllers.tasks.leg_edge.edge_block`) computes the step,
-for every interaction choice; hidden edges are its zero-weight rows.
+edges of the leg, ``u = (n2 x n1) / |n2 x n1|`` (``vision/legs.py`` convention). The
+compiled core (:mod:`controllers.law_kernel`, from the task's block
+:func:`controllers.tasks.leg_edge.edge_block`) computes the step; hidden edges are its
+zero-weight rows.
 """
 
 from __future__ import annotations
@@ -28,14 +27,11 @@ from controllers.exceptions import ContextError
 from controllers.interaction import cross
 from controllers.law_tools import Selection, check_choice
 from controllers.laws import VisionLaw
+from controllers.tasks.base import unit
 from controllers.tasks.leg_edge import EDGE_KINDS, EDGE_LINES, EDGE_NORMALS, EdgeFeature
 
 #: Values of the ``edge_feature`` option.
 EDGE_FEATURES = ("auto", "lines", "normals")
-
-
-def _unit(x: np.ndarray) -> np.ndarray:
-    return x / np.sqrt(np.einsum("...k,...k->...", x, x))[..., None]
 
 
 class LegEdgeController(VisionLaw):
@@ -107,12 +103,12 @@ class LegEdgeController(VisionLaw):
         # Desired directions (DESIRED / MEAN interaction): from the two desired edges,
         # else from goal.directions.
         if vis.all():
-            us = _unit(cross(n_star[:, 1], n_star[:, 0]))
+            us = unit(cross(n_star[:, 1], n_star[:, 0]))
         else:
             us = np.full((6, 3), np.nan)
             both = vis.all(axis=1)
             with np.errstate(invalid="ignore", divide="ignore"):
-                us[both] = _unit(cross(n_star[both, 1], n_star[both, 0]))
+                us[both] = unit(cross(n_star[both, 1], n_star[both, 0]))
             gd = None if goal.directions is None else np.asarray(goal.directions, dtype=float)
             if gd is not None and gd.shape == (6, 3):
                 missing = ~np.isfinite(us[:, 0]) & np.all(np.isfinite(gd), axis=1)
@@ -154,7 +150,7 @@ class LegEdgeController(VisionLaw):
             us = self._u_star
             one: np.ndarray = np.any(vis, axis=1) & ~both
             n_vis = np.where(vis[:, 0, None], n[:, 0], n[:, 1])
-            proj = np.where(one[:, None], _unit(us - np.einsum("ik,ik->i", us, n_vis)[:, None]
+            proj = np.where(one[:, None], unit(us - np.einsum("ik,ik->i", us, n_vis)[:, None]
                                                 * n_vis), us)
             legs = np.where(approx[:, None], proj, legs)
         est.in_use[:] = legs

@@ -1,23 +1,11 @@
 """The measured-leg-rate feed-forward of the velocity laws (option
-``leg_rate_feedforward``, ``docs/math.md`` section 6): what the drive-aware predictive
-controller's gain comes from (``drive_model = "lag"``, ``drive_state = "measured"``),
-for a one-step law.
-
-A velocity drive follows its setpoint ``u`` with the lag of its velocity loop, first
-order at its bandwidth ``omega = 2 pi f_b`` in the controllers' model (the nominal
-robot file's ``[drives] velocity_bandwidth``). Over one period ``dt``, from the leg
-velocity ``v`` measured now, the leg moves by ``dq = (dt - c) u + c v`` with
-``a = exp(-omega dt)`` and ``c = (1 - a) / omega``. The law wants ``dq = dt q_dot*`` (its
-command ``q_dot* = J_inv tau``); the setpoint that gives it is
-
-``u = q_dot* + kappa (q_dot* - v)``,  ``kappa = c / (dt - c)``,
-
-the law's velocity plus the shortfall of the legs' measured velocity, fed forward. As
-``omega -> infinity``, ``kappa -> 0`` and the law's command comes back. A leg velocity
-that is not measured (no ``q_dot``, a NaN in the row) leaves the command as the law's.
-A wrapper that adds a velocity after the law (the tracking feed-forward ``r``,
+``leg_rate_feedforward``; the drive model and its inversion: ``docs/math.md`` section 6,
+"Measured-leg-rate feed-forward"): the setpoint ``u = q_dot* + kappa (q_dot* - v)``,
+``kappa = c / (dt - c)``, that moves each lagging velocity drive by ``dt q_dot*`` over
+the period from its measured velocity ``v`` (an unmeasured or non-finite ``v`` leaves the
+law's command). A wrapper that adds ``r`` after the law (the tracking feed-forward,
 :mod:`controllers.tracking`) tells it first (``velocity_offset``): the law then uses
-``v - r``, so that the sum ``u + r`` is the setpoint above for ``q_dot* + r``.
+``v - r``.
 """
 
 from __future__ import annotations
@@ -29,6 +17,12 @@ import numpy as np
 
 from controllers.base import Command, CommandBatch, ControllerContext, Observation, ObservationBatch
 from controllers.exceptions import ContextError, OptionError
+
+
+def lag_constants(drives: Any, dt: float) -> tuple[np.ndarray, np.ndarray]:
+    """``a = exp(-omega dt)``, ``c = (1 - a) / omega`` [s] (6,) of the drives' velocity lag."""
+    omega = 2 * np.pi * np.broadcast_to(np.asarray(drives.velocity_bandwidth, float), (6,))
+    return np.exp(-omega * dt), -np.expm1(-omega * dt) / omega
 
 
 def feedforward_gain(context: ControllerContext, dt: float, name: str) -> np.ndarray:
@@ -47,8 +41,7 @@ def feedforward_gain(context: ControllerContext, dt: float, name: str) -> np.nda
     if drives.mode != "velocity":
         raise ContextError(name, "geometry.drives.mode", "leg_rate_feedforward models "
                            f"velocity-mode drives; the robot's [drives] mode is {drives.mode!r}")
-    omega = 2 * np.pi * np.broadcast_to(np.asarray(drives.velocity_bandwidth, float), (6,))
-    c = -np.expm1(-omega * dt) / omega
+    _, c = lag_constants(drives, dt)
     return c / (dt - c)  # type: ignore[no-any-return]
 
 

@@ -1,21 +1,13 @@
-"""Model-based baseline (what the seeds argue against), ``docs/math.md`` section 6.
+"""Model-based baseline (what the seeds argue against; ``docs/math.md`` section 6): the
+nominal forward kinematics of the leg lengths (Newton, warm-started), a pose servo to the
+goal pose (``w = lambda log(R* R^T)``, ``v = lambda (t* - t) - w x t``), the twist mapped
+through the nominal inverse Jacobian.
 
-Read the leg lengths, solve the forward kinematics with the NOMINAL geometry
-(fast Newton, warm-started with the previous pose), servo that pose to the
-goal pose of the nominal model, and map the twist through the nominal inverse
-Jacobian. Its accuracy is bounded by the calibration error of the whole
-geometry; the vision laws are not.
-
-Pose servo (twist in the base frame, at its origin):
-``w = lambda log(R* R^T)``, ``v = lambda (t* - t) - w x t``, so that the
-orientation error and the platform origin both decay as ``exp(-lambda t)``.
-
-Everything after the forward kinematics (pose error with ``log`` on SO(3) (its
-half-turn case included, :func:`sx_log_so3`), gain, twist, nominal ``J_inv``, ``q_dot``,
-the twist in the camera frame, the condition number of ``J_inv``) is one CasADi
-expression compiled to C (:func:`pose_servo_kernel`; ``compiled=False`` evaluates it in
-CasADi's virtual machine), whose ``status`` output is a row's refusal reason. The numpy
-formulas it replaced are its test oracle (``tests/controllers/model_based_oracle.py``).
+Everything after the forward kinematics (the pose error with ``log`` on SO(3), its
+half-turn case included, :func:`sx_log_so3`; gain, twist, ``q_dot``, the twist in the
+camera frame, the condition number of ``J_inv``) is one CasADi expression compiled to C
+(:func:`pose_servo_kernel`), whose ``status`` output is a row's refusal reason. Its test
+oracle: ``tests/controllers/model_based_oracle.py``.
 """
 
 from __future__ import annotations
@@ -40,8 +32,7 @@ from controllers.data import (
 from controllers.estimators import PoseEstimate
 from controllers.exceptions import ContextError
 from controllers.law_algebra import jacobi_eigen
-from controllers.law_tools import gain_formula
-from controllers.laws import Gain, check_number, check_observation
+from controllers.law_tools import Gain, check_number, check_observation, gain_formula
 from hexapod.compiled import CompiledFunction, Layout
 from hexapod.exceptions import HexapodError
 from hexapod.fk import forward_kinematics, forward_kinematics_batch
@@ -190,13 +181,13 @@ class ModelBasedController(Controller):
         #: (6, 3) nominal platform points ``E_i`` in the platform frame [m].
         self.platform_points = np.asarray(geo.platform_points, dtype=float)
         pose = getattr(context.camera, "camera_from_base", None)
-        self._camera_from_base: Transform | None = pose if isinstance(pose, Transform) else None
+        cam_pose = pose if isinstance(pose, Transform) else None
+        self._camera_from_base: Transform | None = cam_pose
         x = self.servo_input
         x[_IN["A"]] = self.base_points.reshape(18)
         x[_IN["E"]] = self.platform_points.reshape(18)
         g = self.gain
         x[_IN["gain"]] = (g.at_zero, g.at_infinity, g.slope_at_zero)
-        cam_pose = self._camera_from_base
         x[_IN["Rc"]] = (np.eye(3) if cam_pose is None else cam_pose.rotation).reshape(9)
         x[_IN["pc"]] = 0.0 if cam_pose is None else cam_pose.translation
 
@@ -214,14 +205,8 @@ class ModelBasedController(Controller):
         self.context = replace(self.context, goal=goal)
 
     def _aim(self, goal: Goal, geo: HexapodGeometry) -> None:
-        """Write the goal pose (:meth:`_goal_pose`) into the servo input."""
-        R, t = self._goal_pose(goal, geo)
-        self.servo_input[_IN["R_star"]] = R.reshape(9)
-        self.servo_input[_IN["t_star"]] = t
-
-    def _goal_pose(self, goal: Goal, geo: HexapodGeometry) -> tuple[np.ndarray, np.ndarray]:
-        """The goal pose: ``goal.rotation`` and ``goal.translation``, else the nominal
-        forward kinematics of ``goal.lengths``.
+        """Write the goal pose into the servo input: ``goal.rotation`` and
+        ``goal.translation``, else the nominal forward kinematics of ``goal.lengths``.
 
         Raises:
             ContextError: Neither, or invalid values.
@@ -245,7 +230,8 @@ class ModelBasedController(Controller):
             R, t = sol.rotation, sol.translation
         else:
             raise ContextError(self.name, "goal", "needs rotation and translation (or lengths)")
-        return R, t
+        self.servo_input[_IN["R_star"]] = R.reshape(9)
+        self.servo_input[_IN["t_star"]] = t
 
     def step_trial(self, observation: Observation) -> Command:
         """Forward kinematics, then the pose servo (:func:`pose_servo_kernel`): pose error,

@@ -8,9 +8,7 @@ from collections.abc import Sequence
 
 from controllers.leg_direction import LegDirectionController
 from controllers.leg_edge import LegEdgeController
-from controllers.solvers.limit_qp import LimitQPSolver, velocity_bounds
-
-__all__ = ["LegDirectionQPController", "LegEdgeQPController", "velocity_bounds"]
+from controllers.solvers.limit_qp import LimitQPSolver
 
 
 class LegEdgeQPController(LegEdgeController):

@@ -78,10 +78,7 @@ class Registry:
             PluginLoadError: ``name`` breaks :func:`hexapod.outputs.check_name` (it
                 becomes part of file names: the recorded trials).
         """
-        try:
-            check_name(name, "controller name")
-        except UnsafeNameError as exc:
-            raise PluginLoadError(str(name), package, exc.problem) from None
+        _check_name(name, package)
         if version is None:
             version = _distribution_version(package)
         self._factories[name] = factory
@@ -96,10 +93,7 @@ class Registry:
             PluginLoadError: ``name`` breaks :func:`hexapod.outputs.check_name`, or
                 ``spec`` is not ``module:attr``.
         """
-        try:
-            check_name(name, "controller name")
-        except UnsafeNameError as exc:
-            raise PluginLoadError(str(name), package, exc.problem) from None
+        _check_name(name, package)
         module, _, attr = spec.partition(":")
         if not module or not attr:
             raise PluginLoadError(name, package, f"{spec!r} is not 'module:attr'")
@@ -198,6 +192,13 @@ class Registry:
         """Package and version of a registered controller."""
         self.factory(name)
         return self._info[name]
+
+
+def _check_name(name: str, package: str) -> None:
+    try:
+        check_name(name, "controller name")
+    except UnsafeNameError as exc:
+        raise PluginLoadError(str(name), package, exc.problem) from None
 
 
 def _import_spec(spec: str, name: str, source: str) -> ControllerFactory:

@@ -8,13 +8,10 @@ built for a fixed goal; every goal is computed once, at ``reset_batch``, on the 
 grid:
 
 - the goal of period ``k`` is the reference at ``t_k = k dt`` seen through the NOMINAL
-  model, anchored at the taught goal: the features taught at the end pose (the
-  context's goal) plus the change the nominal model predicts between the end pose and
-  the reference pose (renormalised unit vectors, :func:`anchor_goals`); the nominal
-  inverse kinematics of the reference pose; the pose itself. Nothing is taught along
-  the path: under a calibration error the features in between carry the model's error
-  of the feature CHANGE, and the end of the path is reached as accurately as by a
-  point-to-point task;
+  model, anchored at the taught goal (:func:`anchor_goals`), its nominal inverse
+  kinematics and the pose itself. Nothing is taught along the path: under a calibration
+  error the features in between carry the model's error of the feature CHANGE, and the
+  end of the path is reached as accurately as by a point-to-point task;
 - the controller is retargeted every period (``retarget_batch``: the built-in vision
   laws keep their state; by default a reset with the new goal);
 - a velocity command gets the feed-forward ``(q*(t_{k+1}) - q*(t_k)) / dt``, the
@@ -57,12 +54,11 @@ def reference_goals(context: ControllerContext, times: np.ndarray,
     """The goals of a reference at ``times`` [s] from the nominal model.
 
     Args:
-        context: With ``reference`` (anything with ``at(times)`` returning a
-            :class:`hexapod.trajectory.ReferenceSample`), the nominal ``geometry`` and the
-            estimated ``camera``.
+        context: With ``reference`` (``at(times)`` gives a
+            :class:`hexapod.trajectory.ReferenceSample`), ``geometry`` and ``camera``.
         times: (m,) times [s].
         fields: The goal fields wanted of ``lengths``, ``normals``, ``lines``,
-            ``directions`` and ``edge_visible`` (None: all; the others are left out).
+            ``directions`` and ``edge_visible`` (None: all).
 
     Returns:
         ``rotation`` (m, 3, 3), ``translation`` (m, 3), ``lengths`` (m, 6) [m], and when the
@@ -139,11 +135,6 @@ class TrackingPlan:
     goals: dict[str, np.ndarray | None]
     q_rate: np.ndarray
 
-    @property
-    def steps(self) -> int:
-        """Periods of the grid."""
-        return len(self.q_rate)
-
     def goal(self, k: int) -> Goal:
         """The goal of period ``k``."""
         return Goal(**{name: None if arr is None else arr[k]
@@ -175,13 +166,9 @@ def tracking_plan(context: ControllerContext, name: str) -> TrackingPlan:
 
 
 class TrackingController(Controller):
-    """Any controller made to track ``context.reference``, over a batch of trials (see
-    the module docstring).
-
-    Each period, the rows whose period changed get their goal in one ``retarget_batch``
-    of the wrapped controller, then one ``step_batch``, and the feed-forward of each
-    row's period is added to the velocity commands. A trial without a reference, or of
-    a controller that samples the reference itself, is the wrapped controller's row.
+    """Any controller made to track ``context.reference``, over a batch of trials (module
+    docstring): each period one ``retarget_batch`` of the rows whose period changed, one
+    ``step_batch``, the feed-forward added (a trial without a reference passes through).
 
     Args:
         inner: The controller (reset and stepped through this wrapper only).
@@ -217,7 +204,7 @@ class TrackingController(Controller):
         self._has = np.array([p is not None for p in plans], dtype=bool)
         self._k = np.where(self._has, 0, -1)
         self._dt = np.array([1.0 if p is None else p.dt for p in plans])
-        self._last = np.array([0 if p is None else p.steps - 1 for p in plans], dtype=int)
+        self._last = np.array([0 if p is None else len(p.q_rate) - 1 for p in plans], dtype=int)
         size = int(self._last.max()) + 1 if n else 0
         self._q_rate = np.zeros((n, size, 6))
         self._goals: dict[str, np.ndarray | None] = {}

@@ -23,8 +23,6 @@ from controllers.law_tools import goal_directions
 from controllers.leg_direction import LegDirectionController
 from controllers.mpc.controller import MPCLaw
 from controllers.solvers.limit_qp import LimitQPSolver
-from controllers.tasks.feature_kind import BuiltinFeature
-from controllers.tasks.leg_direction import LEG_DIRECTIONS
 
 
 class FeatureLaw(LegDirectionController):
@@ -96,8 +94,3 @@ class FeatureMPC(MPCLaw):
         if self.model != "local":
             raise OptionError(self.name, "model", f"a feature's predictive controller has the "
                               f"local model only, got {self.model!r}")
-
-    def predicted_feature(self) -> BuiltinFeature:
-        # The local problem reads the tasks through N, b and J_inv only: the leg-direction
-        # structure is the one of every per-leg feature (same compiled problem).
-        return LEG_DIRECTIONS

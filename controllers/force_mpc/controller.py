@@ -1,19 +1,13 @@
 """The force-level predictive controllers' receding horizon (:class:`ForceMPCLaw`),
-here for ``leg-edge-force-mpc`` on the leg edges (its pose variant ``pose-force-mpc``
-differs in its features and reference: :mod:`controllers.force_mpc.variants`; the
-controllers in full: ``docs/dynamic-world.md``).
+here for ``leg-edge-force-mpc`` (its pose variant ``pose-force-mpc``:
+:mod:`controllers.force_mpc.variants`; both in full: ``docs/dynamic-world.md``).
 
-Each period (force-mode drives): read the encoders and the features (refused, zero
-forces, with the reason when a reading is missing or not finite); the state of the
-prediction from the NOMINAL forward kinematics of the encoders and ``K^-1 q_dot``; the
-reference of the stages ``t + k dt``, ``k = 1..N``, exactly those the held
-computed-torque law tracks (:mod:`controllers.feature_ctc`); up to ``max_iter``
-Gauss-Newton QPs of :mod:`controllers.force_mpc.problem` from the previous plan shifted
-by one period (:func:`controllers.mpc.solver.run_sqp`, the force limits ``|f_k| <=
-f_max`` of the nominal drives as bounds), stopping once the first force has converged
-(its step within 0.1 % of it, or 1 mN); apply ``f_0``. A failed solve (a non-finite QP,
-DAQP not optimal, a first force out of its bounds) falls back to the held law for that
-period; the command says so in ``notes`` and :attr:`ForceMPCLaw.stats` counts it.
+Each period: the encoders and the features (refused, zero forces, with the reason when
+one is missing or not finite); the state from the NOMINAL forward kinematics and ``K^-1
+q_dot``; the held computed-torque law's reference at ``t + k dt``, ``k = 1..N``; up to
+``max_iter`` Gauss-Newton QPs (:func:`controllers.mpc.solver.run_sqp`) from the
+previous plan shifted by one period; apply ``f_0``. A failed solve falls back to the
+held law for that period (said in ``notes``, counted in :attr:`ForceMPCLaw.stats`).
 """
 
 from __future__ import annotations
@@ -47,11 +41,8 @@ from hexapod.fk import forward_kinematics
 #: (DAQP's solutions were seen up to 4e-5 beyond it in the perf runs: 0.008 N at
 #: 200 N); the plan is then clipped onto the bounds.
 BOUND_TOLERANCE = 1e-4
-#: Default cap of the Gauss-Newton QPs per period. One (the real-time iteration) let the
-#: forces oscillate with growing amplitude on the end stages of unconverged plans under
-#: the camera's noise and 1 mm calibration errors (payload-saturation, 0 kg: 2 of 200
-#: trials on an end stop); three remove it, five gained nothing more, and with three the
-#: worst step took 1.24 ms (``docs/dynamic-world.md``, "Why three Gauss-Newton QPs").
+#: Default cap of the Gauss-Newton QPs per period (one let the plans' end stages
+#: oscillate; ``docs/dynamic-world.md``, "Why three Gauss-Newton QPs").
 MAX_ITER = 3
 
 
@@ -187,7 +178,12 @@ class ForceMPCLaw(PredictiveLaw):
             self._f_prev = np.asarray(first.forces, dtype=float).copy()
         try:
             R, p = self._pose(q)
-            twist = self._twist(R, p, qd)
+            # K^-1 q_dot of the nominal model at the pose (K rows [u_i, (R eB_i) x u_i])
+            g = self.context.geometry
+            r = g.platform_points @ R.T
+            legs = p + r - g.base_points
+            u = legs / np.linalg.norm(legs, axis=1)[:, None]
+            twist = np.linalg.solve(np.hstack([u, np.cross(r, u)]), qd)
             reference, known = self._reference(t - self._t0)
         except (HexapodError, np.linalg.LinAlgError, ValueError) as exc:
             return self._fallback(observation, f"nominal model failed: {exc}")
@@ -277,17 +273,6 @@ class ForceMPCLaw(PredictiveLaw):
                                 check_stroke=False)
         self._guess = (fk.rotation, fk.translation)
         return fk.rotation, fk.translation
-
-    def _twist(self, R: np.ndarray, p: np.ndarray, qd: np.ndarray) -> np.ndarray:
-        """``K^-1 q_dot`` (6,) of the nominal model at the pose (``K`` rows
-        ``[u_i, (R eB_i) x u_i]``)."""
-        assert self.context is not None
-        g = self.context.geometry
-        r = g.platform_points @ R.T
-        legs = p + r - g.base_points
-        u = legs / np.linalg.norm(legs, axis=1)[:, None]
-        K = np.hstack([u, np.cross(r, u)])
-        return np.linalg.solve(K, qd)  # type: ignore[no-any-return]
 
     def _reference(self, tr: float) -> tuple[np.ndarray, np.ndarray]:
         """The reference features (N, m) of the stages at ``tr + k dt``, ``k = 1..N``,

@@ -1,32 +1,14 @@
-"""The force-level predictive problem: a condensed Gauss-Newton QP, compiled to C (the
-controllers, their cost and solver: ``docs/dynamic-world.md``, "The force-level
+"""The force-level predictive problem, a condensed Gauss-Newton QP compiled to C (the
+prediction, cost and solver in full: ``docs/dynamic-world.md``, "The force-level
 predictive controllers").
 
-Decision: the leg forces ``U = (f_0, ..., f_{N-1})`` [N], each held over one control
-period ``dt`` (force-mode drives). **Single shooting**: the predicted states are
-functions of ``U``; the only constraints are the drives' force limits, simple bounds
-on ``U``.
-
-**Prediction** (the NOMINAL model: the controller context's geometry, inertia and
-drives): the state ``x = (R, t, tau)`` (:data:`STATE`, base frame) moves by the
-closed-chain dynamics of :mod:`hexapod.dynamics.compiled` with the drives of
-:mod:`hexapod.dynamics.drive_model` in force mode, ``substeps`` steps of ``h = dt /
-substeps`` per period, integrated as the dynamic world integrates them
-(:func:`_step_function`): with the world's step the prediction is the world's own
-integration of the nominal robot, to rounding.
-
-**Cost** over the stages ``k = 1..N`` (the last one weighted ``terminal_weight``):
-``sum_k w_k |s_k - s*_k|^2 + rate sum_k |f_k - f_{k-1}|^2 + effort sum_k |f_k|^2``, the
-predicted features ``s_k = s_obs + s(x_k) - s(x_0)`` (the edge normals seen now, camera
-frame, moved by the model's change, hidden edges of weight 0; or the pose ``(t, R
-column-major)``, base frame, rows weighted), the reference ``s*_k`` and ``f_{-1}`` the
-force applied last period.
-
-**Gauss-Newton QP**: the sensitivities ``S_k = d x_k / d U`` follow ``S_{k+1} = A_k S_k
-+ [0 .. B_k .. 0]`` with the period's Jacobians ``A_k``, ``B_k``
-(:func:`_linear_function`), and ``H = sum_k w_k S_k^T C_k^T W C_k S_k + rate D^T D
-+ effort I``, ``g = sum_k w_k S_k^T C_k^T W r_k + ...`` with ``C_k = d s / d x`` at
-``x_k``: one CasADi function generated to C (:func:`force_kernel`).
+Decision: the leg forces ``U = (f_0, ..., f_{N-1})`` [N] held over one period each,
+single shooting, the drives' force limits as simple bounds. The NOMINAL robot's state
+``x = (R, t, tau)`` (:data:`STATE`, base frame) moves by ``substeps`` steps of the
+dynamic world's own integration (:func:`_step_function`); the sensitivities ``S_{k+1}
+= A_k S_k + [0 .. B_k .. 0]`` come from each period's linear model frozen at its start
+(:func:`_linear_function`); ``H`` and ``g`` are one CasADi function generated to C
+(:func:`force_kernel`).
 """
 
 from __future__ import annotations
@@ -130,16 +112,9 @@ def _step_function() -> ca.Function:
 
 def _linear_function(substeps: int) -> ca.Function:
     """``(x, c) -> (A (12 x 12), B (12 x 6))``: the period's linear model in the
-    perturbation ``(xi, delta tau)`` (the pose's left perturbation ``xi = (delta t, delta
-    phi)``, ``R -> exp([delta phi]x) R``, and the twist's), frozen at the period's start.
-
-    Per substep ``tau' = (Mb + h K^T C K)^-1 (Mb tau + h K^T f)``, ``xi' = xi + h tau'``,
-    with ``Mb = M + K^T diag(m_r) K`` and ``C`` the friction's slope at the period's
-    start: ``c + f_c / v_g (1 - tanh^2(q_dot / v_g))``, the Coulomb force smoothed at
-    ``v_g`` (``smoothing`` [m/s], much wider than the world's ``v_s``: the exact slope,
-    ``f_c / v_s`` at rest, holds only within ``v_s`` and would freeze the plan; without
-    the Coulomb slope the QP would overestimate how far a small force moves a leg at
-    rest, and creep to the goal)."""
+    perturbation ``(xi, delta tau)`` (``xi = (delta t, delta phi)``, ``R -> exp([delta
+    phi]x) R``), frozen at the period's start, the friction's slope with the Coulomb
+    force smoothed at ``smoothing`` [m/s] (``docs/dynamic-world.md``, "Solver")."""
     x = ca.SX.sym("x", STATE.size)
     c = ca.SX.sym("c", MODEL.size)
     s = STATE.split(x)

@@ -1,13 +1,8 @@
-"""Visual predictive control (Allibert, Courtial & Chaumette, IEEE T-RO 2010) in CasADi.
-
-- :mod:`controllers.mpc.prediction`: the local and global prediction models (their
-  CasADi blocks, the pose fit);
-- :mod:`controllers.mpc.problem`: the condensed Gauss-Newton QP (single shooting),
-  its data computed by one compiled C function;
-- :mod:`controllers.mpc.solver`: the QP (unconstrained shortcut, DAQP generated to
-  C), the SQP iterations and the base both predictive families share;
-- :mod:`controllers.mpc.controller`: ``leg-edge-mpc`` and ``leg-direction-mpc``
-  (receding horizon, warm start, fallback to the one-step QP law).
+"""Visual predictive control (Allibert, Courtial & Chaumette, IEEE T-RO 2010) in CasADi:
+the prediction models (:mod:`~controllers.mpc.prediction`), the condensed Gauss-Newton
+QP compiled to C (:mod:`~controllers.mpc.problem`), the QP and SQP solves and the base
+both predictive families share (:mod:`~controllers.mpc.solver`), and ``leg-edge-mpc``,
+``leg-direction-mpc`` (:mod:`~controllers.mpc.controller`).
 """
 
 from controllers.mpc.controller import LegDirectionMPCController, LegEdgeMPCController, MPCLaw

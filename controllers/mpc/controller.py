@@ -1,10 +1,9 @@
 """Visual predictive controllers ``leg-edge-mpc`` and ``leg-direction-mpc``.
 
-Each step (receding horizon): read the features like the one-step QP law of the same
-features (:mod:`controllers.qp`, held as the fallback), reconstruct the platform pose
-for the global model, solve the problem of :mod:`controllers.mpc.problem` by
-Gauss-Newton SQP (:func:`controllers.mpc.solver.run_sqp`) warm-started from the previous
-solution shifted by one period, and apply the first move ``q_dot = J_inv tau_0``.
+Each step: the tasks of the one-step QP law of the same features (:mod:`controllers.qp`,
+held as the fallback), the platform pose for the global model, the problem of
+:mod:`controllers.mpc.problem` solved by :func:`controllers.mpc.solver.run_sqp` from the
+previous solution shifted by one period; apply the first move ``q_dot = J_inv tau_0``.
 
 A QP that DAQP does not solve, an SQP that does not converge within ``max_iter``
 iterations (``max_iter = 0`` never solves), a solve over ``time_limit``, or a non-finite
@@ -37,9 +36,9 @@ from controllers.mpc.solver import (
     compiled_qp,
     run_sqp,
 )
-from controllers.qp import LegDirectionQPController, LegEdgeQPController, velocity_bounds
+from controllers.qp import LegDirectionQPController, LegEdgeQPController
+from controllers.solvers.limit_qp import velocity_bounds
 from controllers.tasks.feature_kind import BuiltinFeature
-from controllers.tasks.leg_direction import LEG_DIRECTIONS
 from controllers.tasks.leg_edge import EDGE_NORMALS
 from hexapod.compiled import CompilationError, CompiledFunction
 
@@ -152,7 +151,9 @@ class MPCLaw(PredictiveLaw):
         law.reset_trial(context)
         self.features = law.features
         self.context = context
-        self._feature = self.predicted_feature()
+        #: The feature the problem predicts: the fallback law's (a plugin feature's law
+        #: reads leg directions: its local problem is the leg directions' one).
+        self._feature: BuiltinFeature = law.observed_feature
         cam: Any = context.camera
         visibility = self.visibility and getattr(cam, "kind", None) == "perspective"
         if self.visibility and not visibility:
@@ -208,23 +209,18 @@ class MPCLaw(PredictiveLaw):
         self._restart()
 
     def retarget_trial(self, goal: Goal) -> None:
-        """A new goal (a trajectory task's, :mod:`controllers.tracking`): the desired
-        features become the goal's as :meth:`reset_trial` sets them; the warm start, the
-        fallback law's estimate and the drives' state stay.
+        """A new goal (:meth:`~controllers.laws.VisionLaw.retarget_trial` of the fallback
+        law, whose desired features the problem takes); the warm start and the drives'
+        state stay.
 
         Raises:
-            ContextError: :meth:`reset_trial` was not called, or the goal is invalid (the
-                controller then keeps its previous goal).
+            ContextError: No reset yet, or an invalid goal (the previous one kept).
         """
         if self.context is None:
             raise ContextError(self.name, "context", "retarget(goal) before reset(context)")
         self.law.retarget_trial(goal)
         self.context = self.law.context
         self._star = self.law.desired_features()
-
-    def predicted_feature(self) -> BuiltinFeature:
-        """The feature the problem predicts (the fallback law's; read at reset)."""
-        return LEG_DIRECTIONS
 
     # ----------------------------------------------------------------- step
     def step_trial(self, observation: Observation) -> Command:
@@ -420,11 +416,6 @@ class LegEdgeMPCController(MPCLaw):
     features = frozenset({"lengths", EDGE_NORMALS.field})  # the law's, at reset
     law_class = LegEdgeQPController
     unit = "edges"
-
-    def predicted_feature(self) -> BuiltinFeature:
-        law = self.law
-        assert isinstance(law, LegEdgeQPController)
-        return law.edge
 
 
 class LegDirectionMPCController(MPCLaw):

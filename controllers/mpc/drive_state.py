@@ -1,16 +1,12 @@
-"""Where the velocity drives are now: the starting state of the predictive controllers'
-drive-aware prediction (``drive_model = "lag"``; the first-order lag ``v_{k+1} = a v_k +
-(1 - a) u_k``, ``dq_k = (dt - c) u_k + c v_k`` and where its ``v_0`` comes from:
-``docs/math.md`` section 6, "Drive-aware prediction").
+"""Where the velocity drives are now: the starting state ``v_0`` of the predictive
+controllers' drive-aware prediction (``drive_model = "lag"``; the lag and the three
+sources of ``v_0``: ``docs/math.md`` section 6, "Drive-aware prediction").
 
-:class:`DriveLag` gives the leg velocities now from one of three sources (option
-``drive_state``): ``"measured"`` (the default: ``Observation.q_dot``, else the
-reconstruction below), ``"encoders"`` (from the encoder LENGTHS alone: the last
-period's displacement ``dq`` and the setpoint ``u`` sent for it give ``v_prev = (dq -
-(dt - c) u) / c``, carried to now by the lag), or ``"model"`` (the lag run on the past
-setpoints from rest, ignoring every measurement: an ablation). When the chosen source
-has nothing finite to give (the first step, a NaN), the lag's run on the past setpoints
-is used.
+:class:`DriveLag` gives the leg velocities now from the option ``drive_state``:
+``"measured"`` (``Observation.q_dot``, else as ``"encoders"``), ``"encoders"`` (the
+last period's displacement and setpoint, carried to now by the lag) or ``"model"`` (the
+lag run on the past setpoints from rest: an ablation), falling back to the latter when
+the source has nothing finite to give.
 """
 
 from __future__ import annotations
@@ -21,6 +17,7 @@ import numpy as np
 
 from controllers.base import ControllerContext
 from controllers.exceptions import OptionError
+from controllers.leg_rate import lag_constants
 
 #: Sources of the drives' state.
 DRIVE_STATES = ("measured", "encoders", "model")
@@ -28,9 +25,8 @@ DRIVE_STATES = ("measured", "encoders", "model")
 
 def drive_lag(context: ControllerContext, dt: float, name: str
               ) -> tuple[np.ndarray, np.ndarray]:
-    """``(a, c)`` (6,) of the first-order lag of the nominal velocity drives over one
-    period ``dt`` [s]: ``a = exp(-omega dt)`` [-], ``c = (1 - a) / omega`` [s], with
-    ``omega = 2 pi`` times the drives' ``velocity_bandwidth`` [Hz].
+    """``(a, c)`` (6,) of the nominal velocity drives' lag over one period ``dt`` [s]
+    (:func:`controllers.leg_rate.lag_constants`).
 
     Raises:
         OptionError: The nominal drives are in force mode (nothing lags a velocity
@@ -40,9 +36,7 @@ def drive_lag(context: ControllerContext, dt: float, name: str
     if drives.mode != "velocity":
         raise OptionError(name, "drive_model", "'lag' models velocity-mode drives; the "
                           f"robot's [drives] mode is {drives.mode!r}")
-    omega = 2 * np.pi * np.broadcast_to(np.asarray(drives.velocity_bandwidth, float), (6,))
-    a = np.exp(-omega * dt)
-    return a, -np.expm1(-omega * dt) / omega
+    return lag_constants(drives, dt)
 
 
 @dataclass

@@ -1,13 +1,10 @@
 """Prediction models of the visual predictive controllers (Allibert, Courtial & Chaumette
-2010; ``docs/math.md`` section 6, "Predictive variant"), from the controller's estimates,
-never the simulator's truth. The **local** model propagates the error with the
-interaction matrix, ``e_k = e_0 + L s_k``, and the lengths with the inverse Jacobian,
-``q_k = q_0 + J_inv s_k`` (``s_k = dt sum_{j<k} tau_j``; first order in the motion).
-The **global** model fits the platform pose to ``B_i = A_i + q_i u_i`` (:func:`fit_pose`),
-moves it by ``exp(dt tau)`` (:func:`sx_exp_se3`) and predicts the features from it by
-the estimated camera model (:func:`sx_legs`, then the feature's ``sx_of_legs``): in a
-world without calibration error, the true features to rounding. The problem kernel of
-:mod:`controllers.mpc.problem` is built from these CasADi SX blocks.
+2010; ``docs/math.md`` section 6, "Predictive variant"), from the controller's estimates
+only: the **local** model propagates the error with the interaction matrix and the
+lengths with the inverse Jacobian; the **global** model fits the platform pose to ``B_i
+= A_i + q_i u_i`` (:func:`fit_pose`), moves it by ``exp(dt tau)`` (:func:`sx_exp_se3`) and
+predicts the features through the estimated camera (:func:`sx_legs`, the feature's
+``sx_of_legs``). The CasADi SX blocks of :mod:`controllers.mpc.problem`.
 """
 
 from __future__ import annotations
@@ -15,7 +12,6 @@ from __future__ import annotations
 import casadi as ca
 import numpy as np
 
-from controllers.tasks.base import sx_skew
 from controllers.tasks.leg_direction import LEG_DIRECTIONS
 from controllers.tasks.leg_edge import EDGE_LINES, EDGE_NORMALS
 
@@ -28,17 +24,9 @@ __all__ = ["FEATURE_KINDS", "fit_pose", "sx_exp_se3", "sx_legs", "sx_pixel"]
 
 def fit_pose(points: np.ndarray, model_points: np.ndarray,
              weights: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
-    """Rigid fit ``(R, t) = argmin sum_i w_i |R m_i + t - p_i|^2`` (Kabsch, proper rotation).
-
-    Args:
-        points: (n, 3) target points ``p_i`` (camera frame) [m].
-        model_points: (n, 3) model points ``m_i`` (body frame) [m].
-        weights: (n,) non-negative weights (default: ones); at least three points
-            with positive weight, not collinear.
-
-    Returns:
-        ``R`` (3, 3) and ``t`` (3,) [m].
-    """
+    """Rigid fit ``(R, t) = argmin sum_i w_i |R m_i + t - p_i|^2`` [m] (Kabsch, a proper
+    rotation) of model points ``m_i`` (n, 3) to points ``p_i`` (n, 3), the weights (n,)
+    non-negative (default: ones; three non-collinear points of positive weight)."""
     p = np.asarray(points, dtype=float)
     m = np.asarray(model_points, dtype=float)
     w = np.ones(len(p)) if weights is None else np.asarray(weights, dtype=float)
@@ -67,7 +55,7 @@ def sx_exp_se3(v: ca.SX, w: ca.SX) -> tuple[ca.SX, ca.SX]:
     b = ca.if_else(small, 0.5 - th2 / 24 + th2 * th2 / 720, (1 - ca.cos(ths)) / (ths * ths))
     c = ca.if_else(small, 1.0 / 6 - th2 / 120 + th2 * th2 / 5040,
                    (ths - ca.sin(ths)) / (ths * ths * ths))
-    K = sx_skew(w)
+    K = ca.skew(w)
     K2 = K @ K
     eye = ca.SX.eye(3)
     return eye + a * K + b * K2, (eye + b * K + c * K2) @ v

@@ -1,32 +1,19 @@
-"""The predictive problem: a condensed Gauss-Newton QP per SQP iteration, compiled to C
-(the problem itself: ``docs/math.md`` section 6, "Predictive variant").
+"""The predictive problem (``docs/math.md`` section 6, "Predictive variant" and
+"Drive-aware prediction"): a condensed Gauss-Newton QP per SQP iteration, compiled to C.
 
-Decision: the platform twists ``U = (tau_0, ..., tau_{N-1})`` (camera frame), held
-during one period each; the legs receive ``q_dot = J_inv tau_0``. **Single
-shooting**: the predicted states are functions of ``U`` only (a pose or a twist
-displacement that a pure integrator propagates), so the NLP has ``6 N`` variables and
-no equality constraint, and the condensed problem suits a dense active-set QP solver.
+Decision: the camera-frame twists ``U = (tau_0, ..., tau_{N-1})``, single shooting (the
+predicted states are functions of ``U`` only: ``6 N`` variables, no equality, a dense
+active-set QP). Every stage bound is relaxed to the current value when the robot is
+already beyond it (``U = 0`` stays feasible); the first speed row is merged with the
+first-period stroke window, as in :mod:`controllers.qp`.
 
-Cost over the stages ``k = 1..N``: ``sum_k w_k |W_f (e_k - rho_k e_0)|^2 + effort sum_k
-|J_inv,0 tau_k|^2``, hidden features of weight 0, ``rho_k = (1 - lambda dt)^k``.
-Constraints at every stage, each bound relaxed to the current value when the robot is
-already beyond it (``U = 0`` stays feasible): strokes (lengths corrected by the
-measured-minus-model offset at ``k = 0``); leg speeds ``|J_inv,0 tau_k| <= q_dot_max``
-(the first row merged with the first-period stroke window, as in
-:mod:`controllers.qp`); optionally the platform tilt, and the visibility of both ends
-``A + r n``, ``B + r n`` of every edge segment (perspective camera, margin [px]). With
-``ProblemSpec.drives`` the twists are the lagging velocity drives' setpoints
-(:func:`_drive_blocks`).
-
-Each SQP iteration linearises the stage values ``v_k(x_k)`` with respect to a left
-pose perturbation ``xi = (v, w)`` (6 columns, by CasADi AD) and carries it to ``U``
-with the sensitivities ``D_k = d xi_k / d U``: ``D_{k+1} = Ad(E_k) D_k + [0 .. B_k ..]``
-with ``E_k = exp(dt tau_k)``, ``Ad(E) = [[R, [p]_x R], [0, R]]`` and ``B_k`` the left
-Jacobian of the step. The Gauss-Newton Hessian ``sum_k D_k^T (G_k^T W G_k) D_k``
-then costs ``O(N^2)`` 6 x 6 products instead of the ``O(N^2 m)`` of a full residual
-Jacobian. The local model is the same with ``Ad = I``, ``B_k = dt I`` and ``G_k``
-frozen (one QP is its exact solution). All of it is one CasADi function generated to C
-(:func:`problem_kernel`); :mod:`controllers.mpc.solver` solves the QPs.
+Each SQP iteration linearises the stage values ``v_k(x_k)`` w.r.t. a left pose
+perturbation ``xi = (v, w)`` and carries it to ``U`` with ``D_{k+1} = Ad(E_k) D_k +
+[0 .. B_k ..]``, ``E_k = exp(dt tau_k)``, ``B_k`` the left Jacobian of the step: the
+Gauss-Newton Hessian ``sum_k D_k^T (G_k^T W G_k) D_k`` costs ``O(N^2)`` 6 x 6 products.
+The local model is the same with ``Ad = I``, ``B_k = dt I`` and ``G_k`` frozen (one QP
+solves it). One CasADi function generated to C (:func:`problem_kernel`);
+:mod:`controllers.mpc.solver` solves the QPs.
 """
 
 from __future__ import annotations
@@ -38,7 +25,6 @@ from typing import Any
 import casadi as ca
 
 from controllers.mpc.prediction import sx_exp_se3, sx_legs, sx_pixel
-from controllers.tasks.base import sx_skew
 from controllers.tasks.feature_kind import BuiltinFeature
 from controllers.tasks.leg_edge import sx_edge_normals
 from hexapod.compiled import CompiledFunction, Layout
@@ -49,18 +35,10 @@ _BIG = 1e20
 
 @dataclass(frozen=True)
 class ProblemSpec:
-    """The structure of one problem (what the compiled kernel depends on).
-
-    Attributes:
-        feature: The predicted feature (one of
-            :data:`~controllers.mpc.prediction.FEATURE_KINDS`).
-        model: ``"local"`` or ``"global"``.
-        horizon: ``N`` periods.
-        tilt: Whether the tilt rows exist.
-        visibility: Whether the image-bound rows exist (perspective camera).
-        drives: Whether the prediction models the velocity drives' lag
-            (:func:`_drive_blocks`).
-    """
+    """The structure of one problem (what the compiled kernel depends on): the predicted
+    feature (of :data:`~controllers.mpc.prediction.FEATURE_KINDS`), the ``"local"`` or
+    ``"global"`` model, the horizon ``N``, whether the tilt rows, the image-bound rows
+    (perspective camera) and the drives' lag (:func:`_drive_blocks`) are in it."""
 
     feature: BuiltinFeature
     model: str
@@ -130,14 +108,9 @@ def _mat(v: Any, rows: int, cols: int) -> Any:
 
 
 def _pose_function(spec: ProblemSpec) -> ca.Function:
-    """Stage values at a pose and their Jacobian w.r.t. a left pose perturbation ``xi``.
-
-    Inputs: ``R`` (3, 3), ``t`` (3), the parameter vector ``p`` (the kernel input).
-    Outputs: residual ``e - 0`` (3 nf, global model; empty otherwise), its Jacobian
-    (3 nf, 6), the constraint values (stage rows) and their Jacobian (rows, 6), and
-    ``J_inv`` (6, 6) at the pose (unused, kept: the compiled kernels without it ran
-    about 5 % slower, measured).
-    """
+    """``(R, t, p) ->`` the residual (3 nf, global model; else empty), the stage rows'
+    values, their Jacobians w.r.t. a left pose perturbation ``xi``, and ``J_inv`` (6, 6)
+    at the pose (unused, kept: the compiled kernels without it ran about 5 % slower)."""
     lay = spec.input_layout()
     p = ca.SX.sym("p", lay.size)
     P = lay.split(p)
@@ -145,7 +118,7 @@ def _pose_function(spec: ProblemSpec) -> ca.Function:
     t = ca.SX.sym("t", 3)
     xi = ca.SX.sym("xi", 6)
     w = xi[3:]
-    Rp = (ca.SX.eye(3) + sx_skew(w)) @ R
+    Rp = (ca.SX.eye(3) + ca.skew(w)) @ R
     tp = t + xi[:3] + ca.cross(w, t)
     A = [P["A"][3 * i:3 * i + 3] for i in range(6)]
     E = [P["E"][3 * i:3 * i + 3] for i in range(6)]
@@ -198,20 +171,14 @@ def _step_jacobian() -> ca.Function:
         wj = ca.vertcat(Om[2, 1] - Om[1, 2], Om[0, 2] - Om[2, 0], Om[1, 0] - Om[0, 1]) / 2
         vj = Jp[:, j] - ca.cross(wj, dp)
         cols.append(ca.vertcat(vj, wj))
-    Ad = ca.vertcat(ca.horzcat(dR, sx_skew(dp) @ dR), ca.horzcat(ca.SX.zeros(3, 3), dR))
+    Ad = ca.vertcat(ca.horzcat(dR, ca.skew(dp) @ dR), ca.horzcat(ca.SX.zeros(3, 3), dR))
     return ca.Function("mpc_step", [tau, dt], [dR, dp, ca.horzcat(*cols), Ad])
 
 
 def _drive_blocks(P: dict[str, Any], N: int, dt: Any) -> tuple[list[Any], list[Any]]:
-    """The twist displacement of each period under lagging drives, linear in ``U``
-    (``docs/math.md`` section 6, "Drive-aware prediction"): with the inverse Jacobian
-    frozen at ``J_0``, ``ds_k = J_0^-1 dq_k = sum_{j <= k} P_{k-j} tau_j + p_k`` with
-    ``P_0 = J_0^-1 diag(dt - c) J_0``, ``P_l = J_0^-1 diag(c (1 - a) a^(l-1)) J_0`` and
-    ``p_k = J_0^-1 (c a^k v_0)``, ``v_0`` the leg velocities now.
-
-    Returns:
-        ``[P_0, ..., P_{N-1}]`` (6, 6) and ``[p_0, ..., p_{N-1}]`` (6, 1).
-    """
+    """The blocks ``[P_0, ..., P_{N-1}]`` (6, 6) and offsets ``[p_0, ..., p_{N-1}]``
+    (6, 1) of the twist displacements ``ds_k = sum_{j <= k} P_{k-j} tau_j + p_k`` under
+    lagging drives (``docs/math.md`` section 6, "Drive-aware prediction")."""
     J0 = _mat(P["J0"], 6, 6)
     J0i = _mat(P["J0i"], 6, 6)
     a, c, v0 = P["alag"], P["clag"], P["v0"]
@@ -248,12 +215,8 @@ def _add_stage(Hb: list[list[Any]], gb: list[Any], D: list[Any], MD: list[Any], 
 
 
 def _kernel_function(spec: ProblemSpec) -> ca.Function:
-    """The QP data of one SQP iteration as one MX function calling the SX stage functions.
-
-    Input: the packed vector of :meth:`ProblemSpec.input_layout`. Output: the packed
-    vector of :meth:`ProblemSpec.output_layout`; the QP is
-    ``min 1/2 d^T H d + g^T d`` s.t. ``lba <= C d <= uba`` in ``d = delta U``.
-    """
+    """The QP data ``min 1/2 d^T H d + g^T d`` s.t. ``lba <= C d <= uba`` in ``d =
+    delta U`` of one SQP iteration (the spec's layouts), one MX function."""
     lay = spec.input_layout()
     v: Any = ca.MX.sym("v", lay.size)
     P = lay.split(v)

@@ -23,7 +23,7 @@ import casadi as ca
 import numpy as np
 
 from controllers.base import Command, Controller, ControllerContext, Observation
-from controllers.law_tools import check_horizon, check_weights
+from controllers.law_tools import check_count, check_weights
 from controllers.mpc.problem import ProblemSpec
 from hexapod.compiled import CompiledFunction, Layout
 
@@ -83,11 +83,10 @@ def qp_solver(variables: int, rows: int) -> ca.Function:
 
 
 class CompiledQP:
-    """DAQP generated to C by CasADi, called on preallocated buffers (a bound
-    :class:`hexapod.compiled.CompiledFunction`: ``casadi.conic``'s Python interface costs
-    several hundred microseconds per call on these sizes, for a solve of about a
-    hundred), linked against the DAQP library of the CasADi wheel (``libdaqp.so``). A
-    call that returns non-zero is a solve DAQP did not finish as optimal.
+    """DAQP generated to C by CasADi, called on preallocated buffers (``casadi.conic``'s
+    Python interface costs several hundred microseconds per call, for a solve of about a
+    hundred), linked against the CasADi wheel's ``libdaqp.so``. A call that returns
+    non-zero is a solve DAQP did not finish as optimal.
 
     Raises:
         OSError: No compiler, or the DAQP library or headers are missing (the caller
@@ -172,15 +171,10 @@ def daqp(H: np.ndarray, g: np.ndarray, C: np.ndarray, lba: np.ndarray, uba: np.n
 def solve_qp(H: np.ndarray, g: np.ndarray, C: np.ndarray, lba: np.ndarray, uba: np.ndarray,
              compiled: bool, spec: ProblemSpec | None = None) -> QPResult:
     """Solve ``min 1/2 d^T H d + g^T d`` s.t. ``lba <= C d <= uba``: the unconstrained
-    minimiser ``-H^-1 g`` when it satisfies every row (then it is the optimum of the
-    strictly convex QP and DAQP is not called), else DAQP (:func:`daqp`), with the
-    visibility rows of ``spec`` screened when there are many of them.
-
-    DAQP's cost grows with the number of rows (``6 N (7 + 48)`` with visibility). The
-    visibility rows are first reduced to the :data:`SCREENED_VISIBILITY_ROWS` with the
-    smallest slack at ``d = 0``; if the solution of that smaller QP satisfies every
-    row, it is the optimum of the full QP (same objective, larger feasible set);
-    otherwise the full QP is solved.
+    minimiser ``-H^-1 g`` when it satisfies every row (the optimum of the strictly convex
+    QP), else DAQP (:func:`daqp`), first on the visibility rows of ``spec`` reduced to
+    the :data:`SCREENED_VISIBILITY_ROWS` of smallest slack at ``d = 0`` (DAQP's cost
+    grows with the rows): a solution that satisfies every row is the full QP's optimum.
     """
     try:
         x = -np.linalg.solve(H, g)
@@ -191,7 +185,14 @@ def solve_qp(H: np.ndarray, g: np.ndarray, C: np.ndarray, lba: np.ndarray, uba: 
         if (v >= lba).all() and (v <= uba).all() and math.isfinite(float(x.sum())):
             return QPResult(x, "unconstrained optimum", np.zeros(len(lba)))
     if spec is not None and spec.visibility:
-        keep = screened_rows(spec, lba, uba)
+        # all rows but the visibility ones, and the visibility rows of smallest slack
+        sr, N = spec.stage_rows, spec.horizon
+        idx = np.arange(N * sr).reshape(N, sr)
+        vis = idx[:, sr - 48:].reshape(-1)
+        other = np.concatenate([idx[:, :sr - 48].reshape(-1), np.arange(N * sr, len(lba))])
+        slack = np.minimum(uba[vis], -lba[vis])
+        best = vis[np.argpartition(slack, SCREENED_VISIBILITY_ROWS)[:SCREENED_VISIBILITY_ROWS]]
+        keep = np.sort(np.concatenate([other, best]))
         res = daqp(H, g, C[keep], lba[keep], uba[keep], compiled)
         if res.step is not None and res.multipliers is not None:
             v = C @ res.step
@@ -201,19 +202,6 @@ def solve_qp(H: np.ndarray, g: np.ndarray, C: np.ndarray, lba: np.ndarray, uba: 
                 lam[keep] = res.multipliers
                 return QPResult(res.step, res.status + " (screened rows)", lam)
     return daqp(H, g, C, lba, uba, compiled)
-
-
-def screened_rows(spec: ProblemSpec, lba: np.ndarray, uba: np.ndarray) -> np.ndarray:
-    """Indices of the rows of the screened QP: all but the visibility rows, and the
-    :data:`SCREENED_VISIBILITY_ROWS` visibility rows of smallest slack at ``d = 0``."""
-    sr = spec.stage_rows
-    N = spec.horizon
-    idx = np.arange(N * sr).reshape(N, sr)
-    vis = idx[:, sr - 48:].reshape(-1)
-    other = np.concatenate([idx[:, :sr - 48].reshape(-1), np.arange(N * sr, len(lba))])
-    slack = np.minimum(uba[vis], -lba[vis])
-    best = vis[np.argpartition(slack, SCREENED_VISIBILITY_ROWS)[:SCREENED_VISIBILITY_ROWS]]
-    return np.sort(np.concatenate([other, best]))
 
 
 def merit(out: np.ndarray, o: dict[str, slice], mu: float) -> tuple[float, float]:
@@ -236,28 +224,26 @@ def run_sqp(evaluate: Callable[[np.ndarray], np.ndarray | str],
     """Gauss-Newton SQP from ``U`` (the warm start), with a backtracking line search on
     the L1 merit ``cost + mu * violation`` when ``merit_rows`` are given (else full steps).
 
-    Converged when the step of the first move (the only one applied) satisfies
-    ``|delta U_0|_inf <= tolerance * max(|U_0|_inf, floor)``: the later moves of a
-    flat, saturated horizon may still be moving, and are warm-started at the next
-    period. The last allowed iteration takes the full QP step, so that an unconverged
-    result still satisfies the linearised constraints of its last QP.
+    Converged when the first move (the only one applied) steps by ``|delta U_0|_inf <=
+    tolerance * max(|U_0|_inf, floor)``. The last allowed iteration takes the full QP
+    step (an unconverged result satisfies the linearised constraints of its last QP).
 
     Args:
         evaluate: The kernel's output at a ``U``, or why it failed.
         qp_data: The QP (:data:`QPArrays`) of an output at its ``U``.
         U: (6 N,) the starting point [m/s, rad/s or N].
         max_iter: Iteration limit (0: no QP is solved).
-        tolerance: Relative tolerance on the first move.
+        tolerance: Relative tolerance on the first move (``floor``: the smallest
+            ``|U_0|_inf`` it is relative to).
         compiled: Use DAQP generated to C (else ``casadi.conic``).
-        floor: Smallest ``|U_0|_inf`` the tolerance is relative to.
         spec: The velocity MPC's problem structure (visibility rows screened).
         merit_rows: The output's ``cost``, ``lba`` and ``uba`` slices (line search).
         one_qp: Converged after one QP (the local model: its QP is the problem).
         time_limit: Seconds after which the iterations stop, or None.
 
     Returns:
-        ``U`` (None when the iterations failed or ran out of time: the status says why),
-        converged, status text, the last QP result and the SQP iterations.
+        ``U`` (None on failure or timeout: the status says why), converged, the status,
+        the last QP result and the SQP iterations.
     """
     status = "iteration limit 0: no QP solved"
     last: QPResult | None = None
@@ -322,14 +308,17 @@ class PredictiveLaw(Controller):
     def _check_options(self, horizon: int, error_weight: float, terminal_weight: float,
                        weights: tuple[tuple[str, float], tuple[str, float]], compiled: bool
                        ) -> tuple[float, float]:
-        """Check and set the horizon, its weights and ``compiled``; return the two
-        ``weights`` ``(option, value)`` checked (one positive: a strictly convex QP).
+        """Check and set the horizon (1 to 50 periods), its error weights and ``compiled``;
+        return the two ``weights`` ``(option, value)`` checked (one positive: a strictly
+        convex QP).
 
         Raises:
             OptionError: Naming the option out of range.
         """
-        self.horizon, self.error_weight, self.terminal_weight = check_horizon(
-            self.name, horizon, error_weight, terminal_weight)
+        self.horizon = check_count(self.name, "horizon", horizon, 1, 50)
+        self.error_weight, self.terminal_weight = check_weights(
+            self.name, ("error_weight", error_weight), ("terminal_weight", terminal_weight),
+            "no error to minimise")
         self.compiled = bool(compiled)
         self._restart()
         return check_weights(self.name, *weights,

@@ -1,13 +1,9 @@
-"""The limit QP solver (``docs/math.md`` section 6, "QP variant"): the twist ``tau``
-minimising ``|L tau + lambda e|^2 + eps |tau|^2`` subject to ``q_min + margin <= q + dt
-J_inv tau <= q_max - margin`` and ``|J_inv tau| <= q_dot_max``, then ``q_dot = J_inv
-tau``. Both constraints act on the rows ``J_inv tau``: one pair of bounds per leg
-(:func:`velocity_bounds`). Solved with OSQP (:class:`~controllers.solvers.osqp_limits.
-LimitQP`), warm-started from the previous step, unless the unconstrained optimum (the
-compiled law core's, ``eps`` as the damping) clears every bound: then it is the QP
-optimum (:meth:`LimitQPSolver.solve`, with the default OSQP settings only, so that
-chosen settings always take effect; the batched laws' rows: :meth:`LimitQPSolver.
-batch_accept`).
+"""The limit QP solver (``docs/math.md`` section 6, "QP variant"): both limits act on the
+rows ``J_inv tau``, one pair of bounds per leg (:func:`velocity_bounds`). Solved with
+OSQP (:class:`~controllers.solvers.osqp_limits.LimitQP`, warm-started), unless the
+unconstrained optimum (the compiled law core's) clears every bound with the default
+OSQP settings: it is then the QP optimum (:meth:`LimitQPSolver.solve`,
+:meth:`LimitQPSolver.batch_accept`).
 """
 
 from __future__ import annotations
@@ -45,12 +41,10 @@ class StrokeWindow:
 
 def velocity_bounds(q: np.ndarray, lower: Any, upper: Any, max_speed: Any, inv_dt: Any
                     ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """The bounds on the leg velocities ``J_inv tau`` of one period (one definition for
-    the QP solver, its batched rows and the predictive controller's first move).
-
-    Reaching ``lower``/``upper`` within the period, each clipped to the speed limit so
-    that the window is never empty. Works on one trial (scalars, ``q`` (6,)) and on a
-    batch (``(n, 1)`` columns, ``q`` (n, 6)).
+    """The bounds on the leg velocities ``J_inv tau`` of one period (the QP solver's, its
+    batched rows' and the predictive controller's first move's): reaching ``lower`` /
+    ``upper`` within the period, clipped to the speed limit (never an empty window). One
+    trial (scalars, ``q`` (6,)) or a batch (``(n, 1)`` columns, ``q`` (n, 6)).
 
     Returns:
         The stroke rates ``(lower - q) / dt`` and ``(upper - q) / dt`` [m/s], and the

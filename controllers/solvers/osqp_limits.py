@@ -88,19 +88,9 @@ class LimitQP:
 
     def solve(self, N: np.ndarray, b: np.ndarray, lam: float, J: np.ndarray,
               lower: np.ndarray, upper: np.ndarray) -> tuple[np.ndarray | None, str]:
-        """Solve for ``tau``.
-
-        Args:
-            N: (6, 6) ``L^T L`` of the stacked interaction matrix ``L``.
-            b: (6,) ``L^T e`` with the stacked error ``e``.
-            lam: Gain [1/s].
-            J: (6, 6) inverse Jacobian.
-            lower: (6,) lower bounds on ``J tau`` [m/s].
-            upper: (6,) upper bounds on ``J tau`` [m/s].
-
-        Returns:
-            ``tau`` (None on failure) and the OSQP status (or the failure reason).
-        """
+        """``tau`` minimising ``|L tau + lam e|^2 + eps |tau|^2`` (``N = L^T L``, ``b =
+        L^T e``, ``lam`` [1/s]) under ``lower <= J tau <= upper`` [m/s] (None on failure),
+        and the OSQP status or the failure reason."""
         P = N + self._eye_eps
         P *= 2.0
         c = (2.0 * lam) * b

@@ -4,10 +4,9 @@
 - ``"clip"`` (default, what the force-mode drives do anyway): each leg clipped to
   ``[-limit, limit]`` on its own;
 - ``"scale"``: the whole vector scaled by ``min_i limit_i / |f_i|``, its direction kept;
-- ``"qp"``: the direction of the task acceleration kept: ``f_0 + s (f - f_0)`` with
-  ``f_0`` the nominal forces at zero platform acceleration and ``s`` the solution of
-  ``min (1 - s)^2`` subject to ``-limit <= f_0 + s (f - f_0) <= limit``, ``0 <= s <= 1``
-  (closed form: the largest feasible ``s``); clipped when ``f_0`` alone is over a limit.
+- ``"qp"``: the direction of the task acceleration kept: ``f_0 + s (f - f_0)``, ``f_0``
+  the nominal forces at zero platform acceleration, ``s`` the largest in ``[0, 1]`` within
+  the limits (:func:`acceleration_fraction`); clipped when ``f_0`` alone is over a limit.
 
 Rows under every limit are returned unchanged (the same numbers, bit for bit).
 """
@@ -49,15 +48,9 @@ def over_limit(forces: np.ndarray, limit: np.ndarray | list[float]) -> bool:
 
 def acceleration_fraction(forces: np.ndarray, bias: np.ndarray, limit: np.ndarray
                           ) -> float | None:
-    """The largest ``s`` in ``[0, 1]`` with ``|bias + s (forces - bias)| <= limit`` on every
-    leg (the solution of ``min (1 - s)^2`` over that interval), or None when even
-    ``s = 0`` is not feasible (``bias`` over a limit).
-
-    Args:
-        forces: (6,) forces of the commanded acceleration [N].
-        bias: (6,) forces at zero platform acceleration [N].
-        limit: (6,) the drives' limits [N], positive.
-    """
+    """The largest ``s`` in ``[0, 1]`` with ``|bias + s (forces - bias)| <= limit`` [N] on
+    every leg (the solution of ``min (1 - s)^2`` there), or None when ``bias`` (the
+    forces at zero platform acceleration) is over a limit."""
     f0 = np.asarray(bias, dtype=float)
     g = np.asarray(forces, dtype=float) - f0
     if np.any(np.abs(f0) > limit) or not np.all(np.isfinite(g)):
@@ -101,11 +94,9 @@ def saturated(strategy: str, forces: np.ndarray, limit: np.ndarray,
 def zero_acceleration_forces(model: DynamicModel, pose: np.ndarray, q_dot: np.ndarray,
                              coulomb_velocity: np.ndarray | None = None, hold: float = 0.0
                              ) -> np.ndarray:
-    """The nominal forces [N] at zero platform acceleration (``f_0`` of ``"qp"``): the
-    mechanism's gravity and velocity terms at the twist ``K^-1 q_dot``, the drives'
-    reflected inertia at the legs' bias acceleration ``K_dot tau``, their viscous and
-    Coulomb friction (:meth:`~controllers.solvers.computed_torque.ComputedTorqueSolver.
-    forces` with a zero acceleration).
+    """The nominal forces [N] at zero platform acceleration (``f_0`` of ``"qp"``):
+    :meth:`~controllers.solvers.computed_torque.ComputedTorqueSolver.forces` with a zero
+    acceleration at the twist ``K^-1 q_dot``.
 
     Args:
         model: The NOMINAL dynamic model.

@@ -1,13 +1,7 @@
-"""Tasks: one feature each, as a pure object (error, Jacobian, second-order term).
-
-In the manner of Pink's tasks (``docs/plugins.md``, "Adding a task"): a task knows its
-feature, never how it is solved; the solvers (pseudo-inverse, limit QP, predictive
-controller, computed torque) combine tasks. Every method is batched over a leading trial
-axis: :class:`LegEdgeTask` (``n x n*`` or ``l x l*``, seeds 002/003),
-:class:`JointLengthTask` (``q - q*``), :class:`PlatformPoseTask` (``(t - t*, log(R
-R*^T))``) and the :class:`FeatureTask` of any :class:`LegFeature` (the leg directions
-``u x u*`` of :data:`LEG_DIRECTIONS`, seeds 001/003, a plugin's own feature).
-
+"""Tasks: one feature each, as a pure object (error, Jacobian, second-order term), in
+the manner of Pink's tasks (``docs/plugins.md``, "Adding a task"), batched over a leading
+trial axis: :class:`LegEdgeTask`, :class:`JointLengthTask`, :class:`PlatformPoseTask` and
+the :class:`FeatureTask` of any :class:`LegFeature` (:data:`LEG_DIRECTIONS`, a plugin's).
 The built-in features are objects (:mod:`controllers.tasks.feature_kind`).
 """
 

@@ -2,18 +2,13 @@
 
 A task is a pure object: from a :class:`TaskState` (one row per trial) it gives the
 error ``e``, the Jacobian ``L`` (``e_dot = L tau`` for the platform twist ``tau = (v, w)``
-in the frame of the state, at its origin), the second-order term ``L_dot tau`` (``e_ddot
-= L tau_dot + L_dot tau``) and, for a moving desired value, the reference terms ``e_t``
-and ``e_tt``.
-
-Each feature task defines its block once, as a CasADi expression of one leg or one edge
-(``direction_block``, ``edge_block``, ``joint_length_block``): the task's error and
-Jacobian evaluate it (mapped over the rows, :func:`map_blocks`), the compiled law cores
-(:mod:`controllers.law_kernel`) are generated from it, and the second-order and reference
-terms differentiate its error (:func:`second_order_function`,
-:func:`reference_function`), never written by hand. The numpy functions of
-``tests/controllers/interaction_oracle.py`` are the test oracle; each task is checked
-against finite differences of the true kinematics (``tests/controllers/test_tasks.py``).
+in the frame of the state, at its origin), the second-order term ``L_dot tau`` and, for a
+moving desired value, the reference terms ``e_t`` and ``e_tt``. Each feature task
+defines its block once, as a CasADi expression of one leg or edge: its error and
+Jacobian map it over the rows (:func:`map_blocks`), the compiled law cores are generated
+from it, and the other terms differentiate it (:func:`second_order_function`,
+:func:`reference_function`); ``tests/controllers/test_tasks.py`` checks each against
+finite differences of the true kinematics.
 """
 
 from __future__ import annotations
@@ -215,12 +210,6 @@ def stack_blocks(blocks: Sequence[Sequence[ca.SX]]
     return e, L, ldot, e_t, e_tt
 
 
-def sx_skew(v: ca.SX) -> ca.SX:
-    """``[v]_x`` (3, 3) of a (3, 1) expression."""
-    return ca.vertcat(ca.horzcat(0, -v[2], v[1]), ca.horzcat(v[2], 0, -v[0]),
-                      ca.horzcat(-v[1], v[0], 0))
-
-
 def sx_unit(v: ca.SX) -> ca.SX:
     """``v / |v|`` of a (3, 1) expression."""
     return v / ca.sqrt(ca.dot(v, v))
@@ -259,4 +248,4 @@ def unit(x: np.ndarray) -> np.ndarray:
 
 __all__ = ["Task", "TaskState", "evaluate_legs", "leg_rates", "leg_second_order",
            "leg_state_rate", "map_blocks", "reference_function", "reference_parts",
-           "second_order_function", "stack_blocks", "sx_skew", "sx_unit", "unit"]
+           "second_order_function", "stack_blocks", "sx_unit", "unit"]

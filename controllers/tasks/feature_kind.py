@@ -1,19 +1,14 @@
-"""A built-in feature as an object: what the controllers read of it, in one place.
+"""A built-in feature as an object: what the controllers read of it, in one place
+(``docs/architecture.md``; ``docs/plugins.md``, "Built-in features are objects").
 
-Each built-in feature is one object that owns its definition: its CasADi blocks (error,
-interaction, second-order and reference terms), its size, which observation and goal
-fields it reads, and its name in the generated kernels' names. The modules that build
-controllers from a feature (law cores, predictive problems, computed-torque steps, the
-reference motion) call its methods; none switches on a kind string. A user's option
-value (``edge_feature = "lines"``) is parsed into the object once, at the controller's
-edge.
-
-The built-ins (``docs/plugins.md``, "Built-in features are objects"):
-:data:`~controllers.tasks.leg_edge.EDGE_NORMALS` and
-:data:`~controllers.tasks.leg_edge.EDGE_LINES` (the leg edges as normals or image lines),
-:data:`~controllers.tasks.leg_direction.LEG_DIRECTIONS` (the leg directions, also a
-:class:`~controllers.tasks.leg_feature.LegFeature`, the shape of a plugin's feature) and
-:data:`~controllers.tasks.platform_pose.PLATFORM_POSE` (the platform pose).
+Each built-in feature object owns its definition (CasADi blocks, sizes, the observation
+and goal fields it reads, its name in the generated kernels); the modules that build
+controllers from a feature call its methods, none switches on a kind string. The
+built-ins: :data:`~controllers.tasks.leg_edge.EDGE_NORMALS`,
+:data:`~controllers.tasks.leg_edge.EDGE_LINES`,
+:data:`~controllers.tasks.leg_direction.LEG_DIRECTIONS` (also a
+:class:`~controllers.tasks.leg_feature.LegFeature`) and
+:data:`~controllers.tasks.platform_pose.PLATFORM_POSE`.
 """
 
 from __future__ import annotations

@@ -15,7 +15,7 @@ from typing import Any
 import casadi as ca
 import numpy as np
 
-from controllers.tasks.base import reference_parts, stack_blocks, sx_skew
+from controllers.tasks.base import reference_parts, stack_blocks
 from controllers.tasks.feature_kind import BuiltinFeature
 from controllers.tasks.leg_feature import FeatureTask, LegFeature
 from hexapod.compiled import Shape
@@ -35,9 +35,9 @@ def direction_block(u: ca.SX, desired: ca.SX, base_point: ca.SX, length: ca.SX
     """
     e = ca.cross(u, desired)
     P = ca.SX.eye(3) - u @ u.T
-    C = -(sx_skew(desired) @ P) * (1.0 / length)  # one division per leg
+    C = -(ca.skew(desired) @ P) * (1.0 / length)  # one division per leg
     B = base_point + length * u
-    return e, ca.horzcat(C, -(C @ sx_skew(B)))
+    return e, ca.horzcat(C, -(C @ ca.skew(B)))
 
 
 class LegDirections(LegFeature, BuiltinFeature):

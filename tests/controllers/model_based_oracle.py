@@ -14,7 +14,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from controllers.laws import Gain
+from controllers.law_tools import Gain
 from hexapod.kinematics import Transform, twist_to_frame
 from hexapod.se3 import log_so3
 
