@@ -150,18 +150,26 @@ def _iter_inline(units: list[WorkUnit]) -> Iterator[tuple[WorkUnit, Any]]:
 def _iter_pool(units: list[WorkUnit], workers: int,
                meanwhile: Callable[[], None] | None = None
                ) -> Iterator[tuple[WorkUnit, Any]]:
+    """Run the units in a pool of ``workers`` processes, one unit per worker at a time:
+    a worker that finishes a unit gets the next one of the same sweep point and
+    controller while there is one (:func:`_take`), so that it builds each controller's
+    compiled kernels once, not every worker every controller's."""
     import multiprocessing as mp
 
     ctx = mp.get_context("fork" if sys.platform.startswith("linux") else "spawn")
     with ProcessPoolExecutor(max_workers=workers, mp_context=ctx) as pool:
-        pending: dict[Future[Any], WorkUnit] = {}
         queue = list(units)
+        running: dict[Future[Any], WorkUnit] = {}
+
+        def submit(after: WorkUnit | None) -> None:
+            u = _take(queue, after, {_group(r) for r in running.values()})
+            running[pool.submit(execute, u)] = u
+
         beside: threading.Thread | None = None
         try:
-            while queue or pending:
-                while queue and len(pending) < 2 * workers:
-                    u = queue.pop(0)
-                    pending[pool.submit(execute, u)] = u
+            while queue and len(running) < workers:
+                submit(None)
+            while running:
                 if meanwhile is not None and beside is None:
                     # a thread, so that this one keeps collecting and submitting units;
                     # started after the first submit: the pool forks all its workers then,
@@ -169,18 +177,38 @@ def _iter_pool(units: list[WorkUnit], workers: int,
                     beside = threading.Thread(target=_quietly, args=(meanwhile,),
                                               name="meanwhile", daemon=True)
                     beside.start()
-                finished, _ = wait(pending, return_when=FIRST_COMPLETED)
+                finished, _ = wait(running, return_when=FIRST_COMPLETED)
                 for fut in finished:
-                    u = pending.pop(fut)
+                    u = running.pop(fut)
+                    if queue:  # the idle worker is the one that ran u: its next unit
+                        submit(u)
                     yield u, fut.result()
         except BaseException:
-            for fut in pending:
+            for fut in running:
                 fut.cancel()
             pool.shutdown(wait=False, cancel_futures=True)
             raise
         finally:
             if beside is not None:
                 beside.join()
+
+
+def _group(unit: WorkUnit) -> tuple[str, int, int]:
+    """A unit's scenario, sweep point and controller."""
+    return unit.scenario.name, unit.point, unit.controller_index
+
+
+def _take(queue: list[WorkUnit], after: WorkUnit | None,
+          running: set[tuple[str, int, int]]) -> WorkUnit:
+    """Remove and return the next unit for a worker that ran ``after``: the first one of
+    ``after``'s group, else the first of a group no worker runs, else the first."""
+    for i, u in enumerate(queue):
+        if after is not None and _group(u) == _group(after):
+            return queue.pop(i)
+    for i, u in enumerate(queue):
+        if _group(u) not in running:
+            return queue.pop(i)
+    return queue.pop(0)
 
 
 def _quietly(job: Callable[[], None]) -> None:

@@ -13,7 +13,7 @@ from pathlib import Path
 import pytest
 
 from benchmarks.cli import main as cli_main
-from benchmarks.study.runner import plan, read_results, run_units
+from benchmarks.study.runner import _group, _take, plan, read_results, run_units
 from benchmarks.study.scenario import builtin_scenarios, parse_scenario
 
 JOINTS = "tests.benchmarks.plugins:ProportionalJoints"
@@ -62,6 +62,23 @@ def test_results_identical_across_executors_and_chunkings(tmp_path: Path) -> Non
     assert any(r["converged"] for r in reference)
     for name, rows in results.items():
         assert rows == reference, f"{name} differs from the in-process run"
+
+
+def test_a_worker_keeps_to_its_controller_while_it_has_units() -> None:
+    """The pool's next unit for a worker: one of the group (sweep point, controller) it
+    ran last, else one of a group no worker runs, else the first left; every unit once."""
+    queue = plan([_scenario(trials=4)], chunk_size=2, record_trials=0)
+    assert len({_group(u) for u in queue}) == 4 and len(queue) == 8
+    first = _take(queue, None, set())
+    second = _take(queue, None, {_group(first)})
+    assert _group(second) != _group(first)  # the second worker on another controller
+    again = _take(queue, first, {_group(second)})
+    assert _group(again) == _group(first) and again.trials != first.trials
+    other = _take(queue, again, {_group(second)})  # first's group done: a free group
+    assert _group(other) not in {_group(first), _group(second)}
+    rest = [_take(queue, other, {_group(second)}) for _ in range(len(queue))]
+    assert not queue and len({(_group(u), u.trials) for u in [first, second, again, other,
+                                                              *rest]}) == 8
 
 
 @pytest.mark.slow
