@@ -9,6 +9,8 @@ import subprocess
 import sys
 from pathlib import Path
 
+import pytest
+
 from benchmarks.cli import build_parser, command_word
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -41,3 +43,22 @@ def test_parsing_run_imports_neither_the_servo_loop_nor_pinocchio() -> None:
     out = subprocess.run([sys.executable, "-c", code], cwd=ROOT, capture_output=True,
                          text=True, check=True, env={**os.environ, "PYTHONPATH": str(ROOT)})
     assert out.stdout.strip() == "[]"
+
+
+def test_the_command_process_leaves_its_objects_to_the_exit(
+        tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """``hexapod-bench`` itself (no ``argv``: the console script, ``python -m``) freezes
+    its objects when the command ends, so that the interpreter's exit does not collect
+    them one by one; a call with ``argv`` (a test, a caller) leaves the collector alone."""
+    import gc
+
+    from benchmarks.cli import main
+
+    missing = str(tmp_path / "missing")
+    assert gc.get_freeze_count() == 0
+    assert main(["report", missing]) == 2 and gc.get_freeze_count() == 0
+    monkeypatch.setattr(sys, "argv", ["hexapod-bench", "report", missing])
+    try:
+        assert main() == 2 and gc.get_freeze_count() > 0
+    finally:
+        gc.unfreeze()
