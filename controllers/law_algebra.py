@@ -81,20 +81,23 @@ def jacobi_eigen(N: ca.SX, sweeps: int = JACOBI_SWEEPS, vectors: bool = True
                 s = t * c
                 app = a[p][p] - t * apq
                 aqq = a[q][q] + t * apq
-                for k in range(n):
-                    if k in (p, q):
-                        continue
-                    akp, akq = a[k][p], a[k][q]
-                    a[k][p] = a[p][k] = c * akp - s * akq
-                    a[k][q] = a[q][k] = s * akp + c * akq
+                # the other rows at once: the same scalar operations as one by one
+                others = [k for k in range(n) if k not in (p, q)]
+                akp = ca.vertcat(*(a[k][p] for k in others))
+                akq = ca.vertcat(*(a[k][q] for k in others))
+                new_p, new_q = c * akp - s * akq, s * akp + c * akq
+                for j, k in enumerate(others):
+                    a[k][p] = a[p][k] = new_p[j]
+                    a[k][q] = a[q][k] = new_q[j]
                 a[p][p], a[q][q] = app, aqq
                 a[p][q] = a[q][p] = ca.SX(0.0)
                 if not vectors:
                     continue
+                vkp = ca.vertcat(*(V[k][p] for k in range(n)))
+                vkq = ca.vertcat(*(V[k][q] for k in range(n)))
+                new_p, new_q = c * vkp - s * vkq, s * vkp + c * vkq
                 for k in range(n):
-                    vkp, vkq = V[k][p], V[k][q]
-                    V[k][p] = c * vkp - s * vkq
-                    V[k][q] = s * vkp + c * vkq
+                    V[k][p], V[k][q] = new_p[k], new_q[k]
     return [a[i][i] for i in range(n)], V
 
 

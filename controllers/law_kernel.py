@@ -204,28 +204,46 @@ class LawKernel:
     :meth:`evaluate`.
 
     Args:
-        function: The compiled core, with its layouts (:func:`law_layouts`).
+        function: The compiled core, with its layouts (:func:`law_layouts`), or what builds
+            it on first use (then ``layouts`` are its layouts): a batched law steps its
+            trials by the lean core alone, and a process that never evaluates the full core
+            never builds its graph.
         lean: Builds the lean core of the same law (:func:`law_tail`), on first use.
+        layouts: The core's input and output layouts (when ``function`` builds it).
     """
 
-    def __init__(self, function: CompiledFunction,
-                 lean: Callable[[], CompiledFunction] | None = None) -> None:
-        self.function = function
+    def __init__(self, function: CompiledFunction | Callable[[], CompiledFunction],
+                 lean: Callable[[], CompiledFunction] | None = None,
+                 layouts: tuple[Layout, Layout] | None = None) -> None:
+        self._function: CompiledFunction | None = None
+        if isinstance(function, CompiledFunction):
+            self._function = function
+            layouts = function.inputs, function.outputs
+        elif layouts is None:
+            raise ValueError("LawKernel: a core built on first use needs its layouts")
+        self._make = function
         self._lean = lean
         #: The input vector (constants set once, features and lengths each step).
-        self.input_vector = np.zeros(function.n_in)
+        self.input_vector = np.zeros(layouts[0].size)
         #: Where each named input lies in :attr:`input_vector`.
-        self.slices = function.inputs
+        self.slices = layouts[0]
         #: Views of the input vector by name (write into them).
-        self.inputs = function.inputs.views(self.input_vector)
+        self.inputs = layouts[0].views(self.input_vector)
         #: Where each named output lies in the output vector.
-        self.outputs = function.outputs
+        self.outputs = layouts[1]
         self._at = {k: self.outputs.index(k) for k in ("error_norm", "n_sum", "rank",
                                                        "condition", "gain", "qdot_check")}
         # Every feature used, every leg direction measured (the common case).
         for name in ("weights", "measured"):
             if name in self.inputs:
                 self.inputs[name][:] = 1.0
+
+    @property
+    def function(self) -> CompiledFunction:
+        """The full core (built on first use)."""
+        if self._function is None:
+            self._function = self._make() if callable(self._make) else self._make
+        return self._function
 
     @property
     def lean_function(self) -> CompiledFunction:
@@ -238,7 +256,7 @@ class LawKernel:
 
     def evaluate(self) -> LawResult:
         """One call of the core on the current inputs."""
-        y = self.function.single(self.input_vector)
+        y = (self._function or self.function).single(self.input_vector)
         o, at = self.outputs.slices, self._at
         return LawResult(
             error=y[o["error"]], error_norm=float(y[at["error_norm"]]),
@@ -273,5 +291,6 @@ def feature_law_kernel(feature: Feature, interaction: str = "current",
         ValueError: An unknown interaction.
     """
     _check_interaction(interaction)
-    return LawKernel(_compiled_core(feature, interaction, False, compiled),
-                     lambda: _compiled_core(feature, interaction, True, compiled))
+    return LawKernel(lambda: _compiled_core(feature, interaction, False, compiled),
+                     lambda: _compiled_core(feature, interaction, True, compiled),
+                     law_layouts(feature, interaction))

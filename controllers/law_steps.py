@@ -46,7 +46,11 @@ class KernelRows:
     """
 
     def __init__(self, n: int) -> None:
-        #: The lean core (None until a trial has a compiled core).
+        #: The first trial's compiled core, whose lean core steps the rows (None until a
+        #: trial has a compiled core).
+        self.kernel: LawKernel | None = None
+        #: The lean core (None until it first steps rows: built then, not at the reset, so a
+        #: batch whose rows all step alone never builds it).
         self.function: CompiledFunction | None = None
         #: Where each named input lies in a row, and each named output in a result (the
         #: lean core's layouts; empty until a trial has a compiled core).
@@ -65,11 +69,11 @@ class KernelRows:
         self.ready[trial] = kernel is not None
         if kernel is None:
             return
-        if self.function is None:
-            self.function = kernel.lean_function
+        if self.kernel is None:
+            self.kernel = kernel
             self.slices = kernel.slices
             self.outputs = kernel.outputs
-            self.X = np.zeros((self.n, kernel.function.n_in))
+            self.X = np.zeros((self.n, kernel.input_vector.size))
         self.X[trial] = kernel.input_vector
         self.filled[trial] = True
 
@@ -78,7 +82,7 @@ class KernelRows:
         """Write the desired features ``desired`` (m, D) of the goals ``quick`` (m,) into
         the rows of ``trials`` (m,) that hold their constants; returns the mask of the
         goals written."""
-        if self.function is None:
+        if self.kernel is None:
             return np.zeros(len(trials), dtype=bool)
         quick = quick & self.filled[trials]
         rows = np.flatnonzero(quick)
@@ -98,7 +102,9 @@ class KernelRows:
         X = self.X[trials]
         X[:, self.slices["features"]] = features
         X[:, self.slices["lengths"]] = lengths
-        assert self.function is not None
+        if self.function is None:
+            assert self.kernel is not None, "take() sets the kernel before a row is ready"
+            self.function = self.kernel.lean_function
         Y = self.function.batch(X)
         o = self.outputs
         with np.errstate(invalid="ignore"):
@@ -195,7 +201,7 @@ class VisionLawBatch(LegRateFeedForward, Controller):
         rows_core = self._core_rows
         seen = self.batch_feature  # the rows' measured features, where all are visible
         arr = None if seen is None else getattr(obs, seen.field)
-        if rows_core.function is not None and seen is not None and arr is not None:
+        if rows_core.kernel is not None and seen is not None and arr is not None:
             feats = np.asarray(arr, dtype=float).reshape(n, 3 * seen.units)
             visible = np.all(np.asarray(getattr(obs, seen.visibility), dtype=bool)
                              .reshape(n, seen.units), axis=1)

@@ -18,7 +18,8 @@ dynamic world's period, the same bits).
 The C is compiled twice in one library, for the baseline instruction set and for AVX2
 (chosen at run time with ``__builtin_cpu_supports`` on x86-64; the same results, the
 instruction set only changes the width of the machine's vector operations). The library
-is cached as :mod:`hexapod.compiled`'s are. Without a C compiler, or with an instruction
+is cached as :mod:`hexapod.compiled`'s are, under :func:`lane_key` (no C generated to
+find it). Without a C compiler, or with an instruction
 this generator does not know, :meth:`LaneFunction.create` returns None and the caller
 keeps CasADi's path.
 """
@@ -30,6 +31,8 @@ import logging
 import math
 import subprocess
 from collections.abc import Callable
+from functools import lru_cache
+from pathlib import Path
 
 import casadi as ca
 import numpy as np
@@ -259,6 +262,22 @@ def lane_code(function: ca.Function, name: str, finish: ca.Function | None = Non
             + rows + _RUN.format(name=name))
 
 
+def lane_key(function: ca.Function, name: str, finish: ca.Function | None = None,
+             same_width: bool = True) -> str:
+    """What :func:`lane_code` makes its C from, the cache key of a lane library (a warm
+    process finds it without generating the C): this generator's source, the versions of
+    CasADi and numpy, the arguments, and the serialized functions (their instructions
+    and constants)."""
+    return "\n".join((_generator_source(), ca.CasadiMeta.version(), np.__version__, name,
+                      str(same_width), function.serialize(),
+                      "" if finish is None else finish.serialize()))
+
+
+@lru_cache(maxsize=1)
+def _generator_source() -> str:
+    return Path(__file__).read_text()
+
+
 class LaneFunction:
     """A row-to-row CasADi function iterated in C over lanes of rows (module docstring).
 
@@ -293,9 +312,10 @@ class LaneFunction:
         None (logged) when it cannot be generated or compiled. ``same_width=False``: a
         function whose output is not as wide as its input (:meth:`evaluate` only)."""
         try:
-            code = lane_code(function, name, finish, same_width)
-            path = build_shared_library(name, code, ("-O3", "-fno-math-errno",
-                                                     "-ffp-contract=off"))
+            path = build_shared_library(
+                name, lambda: lane_code(function, name, finish, same_width),
+                ("-O3", "-fno-math-errno", "-ffp-contract=off"),
+                key=lane_key(function, name, finish, same_width))
             return cls(name, _check(function, name, same_width), ctypes.CDLL(str(path)),
                        int(function.nnz_in(0)), int(function.nnz_out(0)))
         except (OSError, subprocess.SubprocessError, UnsupportedInstructionError) as exc:

@@ -91,6 +91,7 @@ class BatchForwardKinematicsResult:
     iterations: int
 
 
+@lru_cache(maxsize=1)
 def _newton_expression() -> ca.Function:
     """CasADi function of ``ITERATIONS_PER_CALL`` Newton steps on the length equations.
 

@@ -416,3 +416,32 @@ def test_weighted_rows_are_the_weighted_least_squares(rng: np.random.Generator) 
     assert np.array_equal(s.N, r.N) and np.array_equal(s.b, r.b) and np.array_equal(s.qdot,
                                                                                     r.qdot)
     assert s.error_norm == r.error_norm and s.rank == r.rank == 6
+
+
+def test_kernel_builds_each_core_on_first_use(monkeypatch: pytest.MonkeyPatch) -> None:
+    """A law's kernel builds neither core at its creation: the full core when it first
+    evaluates, the lean one when asked (a per-trial run never builds the lean core, a
+    batch whose rows all take the lean core never builds the full one); the layouts are
+    the cores' own."""
+    import controllers.law_kernel as law_kernel
+
+    built: list[bool] = []
+    real = law_kernel._compiled_core
+
+    def counting(*args: Any) -> CompiledFunction:
+        built.append(args[2])
+        return real(*args)
+
+    monkeypatch.setattr(law_kernel, "_compiled_core", counting)
+    kernel = feature_law_kernel(LEG_DIRECTIONS, "mean")
+    kernel.set("gain", (1.0, 1.0, 0.0))
+    assert built == []
+    kernel.evaluate()
+    assert built == [False]
+    lean = kernel.lean_function
+    assert built == [False, True]
+    for core in (kernel.function, lean):
+        assert (core.inputs.slices, core.outputs.slices) == (kernel.slices.slices,
+                                                             kernel.outputs.slices)
+    with pytest.raises(ValueError, match="layouts"):
+        LawKernel(lambda: kernel.function)

@@ -127,3 +127,31 @@ def test_a_compiled_function_batches_by_lanes_when_asked() -> None:
     for n in (LANE_ROWS - 1, LANE_ROWS, 3 * LANE_ROWS + 1):
         X = rng.normal(size=(n, 4))
         np.testing.assert_array_equal(cf.batch(X, lanes=True), cf.batch(X))
+
+
+def test_warm_cache_generates_no_code(probe: tuple[ca.Function, LaneFunction],
+                                      monkeypatch: pytest.MonkeyPatch) -> None:
+    """A cached lane library is found by its key without generating its C, and the key
+    changes with each thing the C is made from (the function's constants, the finishing
+    function, the name, the width mode, this generator's source)."""
+    import hexapod.compiled_lanes as compiled_lanes
+
+    f, lanes = probe
+
+    def no_code(*args: object, **kwargs: object) -> str:
+        raise AssertionError("C generated on a warm cache")
+
+    monkeypatch.setattr(compiled_lanes, "lane_code", no_code)
+    again = LaneFunction.create(f, "hexapod_test_lanes_probe")
+    assert again is not None
+    x = np.random.default_rng(0).normal(size=(5, 8))
+    x[:, 7] = np.abs(x[:, 7]) + 0.5
+    assert np.array_equal(again.evaluate(x), lanes.evaluate(x))
+    y = ca.SX.sym("y", 8)
+    g = ca.Function("lanes_probe", [y], [f(y) * 1.5])
+    keys = {compiled_lanes.lane_key(f, "a"), compiled_lanes.lane_key(g, "a"),
+            compiled_lanes.lane_key(f, "b"), compiled_lanes.lane_key(f, "a", same_width=False),
+            compiled_lanes.lane_key(f, "a", finish=g)}
+    monkeypatch.setattr(compiled_lanes, "_generator_source", lambda: "another generator")
+    keys.add(compiled_lanes.lane_key(f, "a"))
+    assert len(keys) == 6
