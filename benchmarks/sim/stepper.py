@@ -129,6 +129,11 @@ def run_trials(
 _drawn: list[Any] = [None, None, {}]
 
 
+def forget_trials() -> None:
+    """Empty the drawn trials of :func:`point_trials` (a timing that includes the draws)."""
+    _drawn[:] = [None, None, {}]
+
+
 def point_trials(sc: SimScenario, trials: list[int], calibrate: Calibrate | None = None
                  ) -> list[TrialSetup | Exception]:
     """:func:`benchmarks.sim.world.make_trials` of a scenario point, drawn once for every

@@ -70,14 +70,14 @@ def test_a_points_trials_are_drawn_once_for_all_its_controllers(
         out = []
         for c in range(len(sc.controllers)):
             if fresh:
-                stepper._drawn[:] = [None, None, {}]
+                stepper.forget_trials()
             out += [{k: v for k, v in r.row.items() if k not in VOLATILE}
                     for r in stepper.run_trials(sc, c, trials)]
         return out
 
     alone = rows(fresh=True)
     calls = _counting(monkeypatch)
-    stepper._drawn[:] = [None, None, {}]
+    stepper.forget_trials()
     assert rows(fresh=False) == alone
     assert calls == [trials]
     assert len(sc.controllers) == 5

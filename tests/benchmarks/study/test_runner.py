@@ -78,7 +78,7 @@ def test_the_controllers_of_a_point_calibrate_and_draw_its_trials_once(
         return make_trials(sc, trials, *args)
 
     monkeypatch.setattr(stepper, "make_trials", counted)
-    stepper._drawn[:] = [None, None, {}]
+    stepper.forget_trials()
     sc = _scenario(trials=2, calibration={"method": "linear", "configurations": "extremal"},
                    task={"max_steps": 5})
     units = plan([sc], chunk_size=2, record_trials=0)
