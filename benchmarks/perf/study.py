@@ -36,8 +36,10 @@ GOAL_US = 5.0
 def _run(sc: object, controller: int, trials: int, engine: str) -> tuple[float, float,
                                                                           list[dict]]:
     from benchmarks.sim import run_trials
+    from benchmarks.sim.stepper import forget_trials
     from benchmarks.study.calibration import calibration_hook
 
+    forget_trials()  # every repetition draws its trials (set-up included)
     t0, w0 = time.process_time(), time.perf_counter()
     res = run_trials(sc, controller, list(range(trials)), 0,  # type: ignore[type-var]
                      calibrate=calibration_hook(sc),  # type: ignore[arg-type]

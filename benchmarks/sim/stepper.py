@@ -14,7 +14,7 @@ from __future__ import annotations
 
 import logging
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Any, TypeVar
 
 import numpy as np
@@ -96,12 +96,9 @@ def run_trials(
         One :class:`TrialResult` per trial, in the order of ``trials``.
     """
     spec = sc.controllers[controller_index]
-    nominal = load_geometry(sc)
-    camera = load_camera(sc, nominal)
     results: dict[int, TrialResult] = {}
     setups: list[TrialSetup] = []
-    for k, made in zip(trials, make_trials(sc, list(trials), nominal, camera, calibrate),
-                       strict=True):
+    for k, made in zip(trials, point_trials(sc, trials, calibrate), strict=True):
         if isinstance(made, Exception):  # a crash in one trial is that trial's failure
             results[k] = TrialResult(failure_row(sc, spec, k, made))
         else:
@@ -125,6 +122,38 @@ def run_trials(
         for res in unit.isolated(group):
             results[res.row["trial"]] = res
     return [results[k] for k in trials]
+
+
+#: The trials drawn for the last scenario point: its scenario, calibration and the setups
+#: per tuple of trial indices (:func:`point_trials`; one point's at a time).
+_drawn: list[Any] = [None, None, {}]
+
+
+def forget_trials() -> None:
+    """Empty the drawn trials of :func:`point_trials` (a timing that includes the draws)."""
+    _drawn[:] = [None, None, {}]
+
+
+def point_trials(sc: SimScenario, trials: list[int], calibrate: Calibrate | None = None
+                 ) -> list[TrialSetup | Exception]:
+    """:func:`benchmarks.sim.world.make_trials` of a scenario point, drawn once for every
+    controller of the point (the same ``sc`` and ``calibrate`` objects, the last point's
+    only). Each call gets its own copies of a setup's arrays and dict (the objects a
+    setup shares with other trials, its robots and cameras, are shared anyway).
+    """
+    if _drawn[0] is not sc or _drawn[1] is not calibrate:
+        _drawn[:] = [sc, calibrate, {}]
+    key = tuple(trials)
+    if key not in _drawn[2]:
+        nominal = load_geometry(sc)
+        _drawn[2][key] = make_trials(sc, list(trials), nominal, load_camera(sc, nominal),
+                                     calibrate)
+    return [m if isinstance(m, Exception) else replace(
+        m, world=replace(m.world, joint_offsets=m.world.joint_offsets.copy()),
+        base_points=m.base_points.copy(), start_rotation=m.start_rotation.copy(),
+        start_translation=m.start_translation.copy(), goal_rotation=m.goal_rotation.copy(),
+        goal_translation=m.goal_translation.copy(), start_lengths=m.start_lengths.copy(),
+        calibration=dict(m.calibration)) for m in _drawn[2][key]]
 
 
 @dataclass

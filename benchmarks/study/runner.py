@@ -130,7 +130,8 @@ def execute(unit: WorkUnit, on_step: Callable[..., None] | None = None
     sc = unit.scenario
     results = run_trials(sc, unit.controller_index, list(unit.trials), unit.record_trials,
                          backend_factory=backend_factory(unit.backend),
-                         calibrate=calibration_hook(sc), on_step=on_step, engine=unit.engine)
+                         calibrate=_calibration(sc, calibration_hook), on_step=on_step,
+                         engine=unit.engine)
     rows, records = [], []
     for res in results:
         row = dict(res.row)
@@ -141,6 +142,18 @@ def execute(unit: WorkUnit, on_step: Callable[..., None] | None = None
             name = f"{sc.name}__p{unit.point}__{unit.controller}__{row['trial']:05d}.npz"
             records.append((name, trial_record(sc, unit, row, res.series)))
     return rows, records
+
+#: The last scenario point and its calibration hook (:func:`_calibration`).
+_hook: list[Any] = [None, None]
+
+
+def _calibration(sc: Scenario, hook: Callable[[Scenario], Any]) -> Any:
+    """The calibration hook of a scenario point, the same object for every unit of the
+    same point (so that :func:`benchmarks.sim.stepper.point_trials` draws its trials once)."""
+    if _hook[0] is not sc:
+        _hook[:] = [sc, hook(sc)]
+    return _hook[1]
+
 
 def _iter_inline(units: list[WorkUnit]) -> Iterator[tuple[WorkUnit, Any]]:
     for u in units:

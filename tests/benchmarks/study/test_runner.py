@@ -9,11 +9,14 @@ import subprocess
 import sys
 import time
 from pathlib import Path
+from typing import Any
 
 import pytest
 
 from benchmarks.cli import main as cli_main
-from benchmarks.study.runner import _group, _take, plan, read_results, run_units
+from benchmarks.sim import stepper
+from benchmarks.sim.world import make_trials
+from benchmarks.study.runner import _group, _take, execute, plan, read_results, run_units
 from benchmarks.study.scenario import builtin_scenarios, parse_scenario
 
 JOINTS = "tests.benchmarks.plugins:ProportionalJoints"
@@ -62,6 +65,27 @@ def test_results_identical_across_executors_and_chunkings(tmp_path: Path) -> Non
     assert any(r["converged"] for r in reference)
     for name, rows in results.items():
         assert rows == reference, f"{name} differs from the in-process run"
+
+
+def test_the_controllers_of_a_point_calibrate_and_draw_its_trials_once(
+        monkeypatch: pytest.MonkeyPatch) -> None:
+    """In one process, the units of a sweep point's controllers take the trials (and the
+    per-trial calibrations) drawn for its first: one draw per point."""
+    calls: list[tuple[int, ...]] = []
+
+    def counted(sc: Any, trials: list[int], *args: Any) -> Any:
+        calls.append(tuple(trials))
+        return make_trials(sc, trials, *args)
+
+    monkeypatch.setattr(stepper, "make_trials", counted)
+    stepper.forget_trials()
+    sc = _scenario(trials=2, calibration={"method": "linear", "configurations": "extremal"},
+                   task={"max_steps": 5})
+    units = plan([sc], chunk_size=2, record_trials=0)
+    rows = [row for u in units for row in execute(u)[0]]
+    assert len(units) == 4 and len(rows) == 8
+    assert all(r["calibration_configurations"] == 64 for r in rows)  # calibrated
+    assert calls == [(0, 1), (0, 1)]  # 2 noise points x 2 controllers: 2 draws
 
 
 def test_a_worker_keeps_to_its_controller_while_it_has_units() -> None:

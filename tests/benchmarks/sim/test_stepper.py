@@ -1,0 +1,83 @@
+"""A scenario point's trials are drawn once for all its controllers
+(:func:`benchmarks.sim.stepper.point_trials`), each run with its own copies."""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+import pytest
+
+from benchmarks.sim import stepper
+from benchmarks.sim.world import TrialSetup, load_camera, load_geometry, make_trials
+from benchmarks.study.scenario import load_scenario
+
+#: Fields of a row that are timings (they differ between runs).
+VOLATILE = {"step_time_us"}
+
+
+def _counting(monkeypatch: pytest.MonkeyPatch) -> list[list[int]]:
+    """Record the trials of every :func:`make_trials` call of the stepper."""
+    calls: list[list[int]] = []
+
+    def counted(sc: Any, trials: list[int], *args: Any) -> Any:
+        calls.append(list(trials))
+        return make_trials(sc, trials, *args)
+
+    monkeypatch.setattr(stepper, "make_trials", counted)
+    return calls
+
+
+def _arrays(s: TrialSetup) -> list[np.ndarray]:
+    return [s.base_points, s.start_rotation, s.start_translation, s.goal_rotation,
+            s.goal_translation, s.start_lengths, s.world.joint_offsets]
+
+
+def test_a_trial_written_into_by_one_run_does_not_leak_into_the_next(
+        monkeypatch: pytest.MonkeyPatch) -> None:
+    """The second call draws nothing and gets the drawn setups' values, whatever the
+    first call's consumer wrote into its arrays and its calibration summary."""
+    calls = _counting(monkeypatch)
+    sc = load_scenario("quick").with_overrides(trials=3)
+    first = stepper.point_trials(sc, [0, 1, 2])
+    for s in first:
+        assert isinstance(s, TrialSetup)
+        for a in _arrays(s):
+            a[...] = np.nan
+        s.calibration["median_error_mm"] = -1.0
+    second = stepper.point_trials(sc, [0, 1, 2])
+    assert calls == [[0, 1, 2]]
+    nominal = load_geometry(sc)
+    fresh = make_trials(sc, [0, 1, 2], nominal, load_camera(sc, nominal))
+    for s, f in zip(second, fresh, strict=True):
+        assert isinstance(s, TrialSetup) and isinstance(f, TrialSetup)
+        for a, b in zip(_arrays(s), _arrays(f), strict=True):
+            assert np.array_equal(a, b)
+        assert s.calibration == f.calibration == {}
+    stepper.point_trials(sc.with_overrides(seed=2), [0, 1, 2])  # another point: drawn
+    assert calls == [[0, 1, 2], [0, 1, 2]]
+
+
+@pytest.mark.slow
+def test_a_points_trials_are_drawn_once_for_all_its_controllers(
+        monkeypatch: pytest.MonkeyPatch) -> None:
+    """Every controller of a point after the first takes the drawn trials, and its rows
+    are those of trials drawn for it alone."""
+    sc = load_scenario("quick").with_overrides(trials=2, max_steps=40)
+    trials = [0, 1]
+
+    def rows(fresh: bool) -> list[dict[str, Any]]:
+        out = []
+        for c in range(len(sc.controllers)):
+            if fresh:
+                stepper.forget_trials()
+            out += [{k: v for k, v in r.row.items() if k not in VOLATILE}
+                    for r in stepper.run_trials(sc, c, trials)]
+        return out
+
+    alone = rows(fresh=True)
+    calls = _counting(monkeypatch)
+    stepper.forget_trials()
+    assert rows(fresh=False) == alone
+    assert calls == [trials]
+    assert len(sc.controllers) == 5
