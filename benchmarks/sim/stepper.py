@@ -14,7 +14,7 @@ from __future__ import annotations
 
 import logging
 from collections.abc import Callable
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, fields, is_dataclass, replace
 from typing import Any, TypeVar
 
 import numpy as np
@@ -61,6 +61,7 @@ ENGINES = ("batched", "per-trial")
 
 #: The scenario type a caller passes (its sensor factory receives it).
 S = TypeVar("S", bound=SimScenario)
+T = TypeVar("T")
 #: Builds the backend of a trial from its true geometry and start lengths [m].
 BackendFactory = Callable[[HexapodGeometry, np.ndarray], Backend]
 
@@ -148,12 +149,25 @@ def point_trials(sc: SimScenario, trials: list[int], calibrate: Calibrate | None
         nominal = load_geometry(sc)
         _drawn[2][key] = make_trials(sc, list(trials), nominal, load_camera(sc, nominal),
                                      calibrate)
-    return [m if isinstance(m, Exception) else replace(
-        m, world=replace(m.world, joint_offsets=m.world.joint_offsets.copy()),
-        base_points=m.base_points.copy(), start_rotation=m.start_rotation.copy(),
-        start_translation=m.start_translation.copy(), goal_rotation=m.goal_rotation.copy(),
-        goal_translation=m.goal_translation.copy(), start_lengths=m.start_lengths.copy(),
-        calibration=dict(m.calibration)) for m in _drawn[2][key]]
+    return [m if isinstance(m, Exception) else own_copy(m) for m in _drawn[2][key]]
+
+
+def own_copy(setup: T) -> T:
+    """``setup`` (a dataclass) with its own copies of its writable arrays and dicts, and
+    of those of the dataclasses it holds (a trial's world); read-only arrays and frozen
+    objects (geometries, cameras) stay shared."""
+    changes: dict[str, Any] = {}
+    for f in fields(setup):  # type: ignore[arg-type]
+        value = getattr(setup, f.name)
+        if isinstance(value, np.ndarray) and value.flags.writeable:
+            changes[f.name] = value.copy()
+        elif isinstance(value, dict):
+            changes[f.name] = dict(value)
+        elif is_dataclass(value) and not isinstance(value, type):
+            copied = own_copy(value)
+            if copied is not value:
+                changes[f.name] = copied
+    return replace(setup, **changes) if changes else setup  # type: ignore[type-var]
 
 
 @dataclass

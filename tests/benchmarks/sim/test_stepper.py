@@ -3,6 +3,7 @@
 
 from __future__ import annotations
 
+from dataclasses import fields
 from typing import Any
 
 import numpy as np
@@ -29,8 +30,12 @@ def _counting(monkeypatch: pytest.MonkeyPatch) -> list[list[int]]:
 
 
 def _arrays(s: TrialSetup) -> list[np.ndarray]:
-    return [s.base_points, s.start_rotation, s.start_translation, s.goal_rotation,
-            s.goal_translation, s.start_lengths, s.world.joint_offsets]
+    """Every writable array of a setup and of its world, found by their fields (a field
+    added later is covered without naming it here)."""
+    found = [getattr(obj, f.name) for obj in (s, s.world) for f in fields(obj)]
+    arrays = [a for a in found if isinstance(a, np.ndarray) and a.flags.writeable]
+    assert len(arrays) >= 7, "the setup's writable arrays were not found"
+    return arrays
 
 
 def test_a_trial_written_into_by_one_run_does_not_leak_into_the_next(
