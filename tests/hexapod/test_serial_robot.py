@@ -124,8 +124,15 @@ def check_clamped_step(robot: SerialRobot, emulator: Emulator, start: np.ndarray
     np.testing.assert_allclose(st.applied_velocities, expected_v)
     np.testing.assert_array_equal(st.clamped, expected_clamped)
     assert st.clamped.tolist() == [True, True, True, False, True, False]
-    np.testing.assert_allclose(st.lengths, np.clip(q + expected_v * DT, *robot.stroke),
-                               atol=1.5e-6)
+    target = np.clip(q + expected_v * DT, *robot.stroke)
+    np.testing.assert_allclose(emulator.board.setpoints, target, atol=1.5e-6)  # streamed
+    # Every leg reached its setpoint within the period but leg 2: commanded at the board's
+    # own speed limit, it needs the whole period from the MOV's arrival, which comes a
+    # fraction of a millisecond after the period's start (a wall-clock race): it is on its
+    # way, never past the setpoint.
+    others = [0, 1, 3, 4, 5]
+    np.testing.assert_allclose(st.lengths[others], target[others], atol=1.5e-6)
+    assert q[2] < st.lengths[2] <= target[2] + 1.5e-6
     assert st.lengths[0] == 0.485 and st.lengths[1] == 0.345
     assert emulator.status().error == 0  # never an ERR 7
     assert 0 < st.round_trip_s < DT
