@@ -10,7 +10,9 @@ of a figure's time), and the same margins do for every run. A figure whose text 
 the edge of the image with those margins (an unusually wide tick label) is laid out again
 with ``tight_layout`` and saved anew. The figures of every sweep point of one kind are
 one figure redrawn with each point's data (:func:`line_figures`): its axes, ticks and
-texts are made once.
+texts are made once. Titles are set at ``y=1.0`` (just above the panel, where
+matplotlib puts them when no tick label or offset text is above the panel, which ours
+never have): the automatic placement lays out every y tick label once more to look for one.
 """
 
 from __future__ import annotations
@@ -223,7 +225,7 @@ def draw_time_panels(curves: list[Curves], titles: tuple[str, str],
             plot = axes[panel].semilogy if log else axes[panel].plot
             lines[panel] += plot(x, y, label=label)
     for ax, title in zip(axes, titles, strict=True):
-        ax.set_title(title)
+        ax.set_title(title, y=1.0)
         ax.set_xlabel("time [s]")
         ax.grid(True, which="both" if log else "major", alpha=0.3)
         ax.legend(fontsize=7)
@@ -337,7 +339,7 @@ def heat_maps(out_dir: Path, scenario: str, summaries: list[Summary]) -> str | N
             ax.set_yticks(range(len(ys)), [f"{v:g}" for v in ys], fontsize=7)
             ax.set_xlabel(x_key)
             ax.set_ylabel(y_key)
-            ax.set_title(f"{ctrl}: {title}", fontsize=9)
+            ax.set_title(f"{ctrl}: {title}", fontsize=9, y=1.0)
             fig.colorbar(im, ax=ax, fraction=0.046)
     return save_figure(fig, out_dir, f"{scenario}_map.png", TIGHT)  # colour bars: tight
 

@@ -98,7 +98,7 @@ def plot_profiles(out_dir: Path, scenario: str, rows: list[dict[str, Any]]) -> s
         ax.set_ylim(0, 1.02)
         ax.set_xlabel("tau (ratio to the best controller on the trial)")
         ax.set_ylabel("fraction of trials within tau")
-        ax.set_title(f"{title}, {r.shape[0]} trials", fontsize=9)
+        ax.set_title(f"{title}, {r.shape[0]} trials", fontsize=9, y=1.0)
         ax.grid(True, which="both", alpha=0.3)
         ax.legend(fontsize=7, loc="lower right")
     return save_figure(fig, out_dir, f"{scenario}_profiles.png", LABELLED_TITLED_PANELS)

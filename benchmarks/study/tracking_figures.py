@@ -79,9 +79,10 @@ def _limits(ax: Any, controller: str, forces: np.ndarray, limit: np.ndarray) -> 
     (the lines drawn)."""
     lim = float(np.min(limit))
     if np.abs(forces).max() > 0.5 * lim:  # the limits drawn when the forces near them
-        ax.set_title(f"{controller}: drive forces [N]", fontsize=9)
+        ax.set_title(f"{controller}: drive forces [N]", fontsize=9, y=1.0)
         return [ax.axhline(sign * lim, color="k", ls="--", lw=0.7) for sign in (1.0, -1.0)]
-    ax.set_title(f"{controller}: drive forces [N] (limit {lim:g})", fontsize=9)
+    ax.set_title(f"{controller}: drive forces [N] (limit {lim:g})", fontsize=9,
+                 y=1.0)
     return []
 
 
