@@ -37,6 +37,9 @@ log = logging.getLogger(__name__)
 MAX_TIME_SERIES = 4
 #: Resolution of the report's PNG files [dots per inch] (the figures are drawn at it).
 DPI = 90
+#: ``savefig``'s options of the PNG files: the project's mark, and zlib's fastest level
+#: (a third of the encoding time of its default level 6, files about 10 % larger).
+PNG_OPTIONS: Final = {"dpi": DPI, "metadata": PNG_METADATA, "pil_kwargs": {"compress_level": 1}}
 
 
 @dataclass(frozen=True)
@@ -133,11 +136,11 @@ def save_figure(fig: Any, out_dir: Path, name: str,
     elif isinstance(layout, Margins):
         width, height = fig.get_size_inches()
         fig.subplots_adjust(**layout.fractions(float(width), float(height), _columns(fig)))
-    fig.savefig(path, dpi=DPI, metadata=PNG_METADATA)
+    fig.savefig(path, **PNG_OPTIONS)
     if layout != TIGHT and _ink_at_edges(fig):
         log.debug("%s: text at the edge with fixed margins; laid out tightly", name)
         fig.tight_layout()
-        fig.savefig(path, dpi=DPI, metadata=PNG_METADATA)
+        fig.savefig(path, **PNG_OPTIONS)
     return f"./{name}" if ":" in name else name
 
 
