@@ -10,9 +10,11 @@ of a figure's time), and the same margins do for every run. A figure whose text 
 the edge of the image with those margins (an unusually wide tick label) is laid out again
 with ``tight_layout`` and saved anew. The figures of every sweep point of one kind are
 one figure redrawn with each point's data (:func:`line_figures`): its axes, ticks and
-texts are made once. Titles are set at ``y=1.0`` (just above the panel, where
-matplotlib puts them when no tick label or offset text is above the panel, which ours
-never have): the automatic placement lays out every y tick label once more to look for one.
+texts are made once. Titles are set at ``y=1.0``, just above the panel, where
+matplotlib's automatic placement puts them too unless a tick label or an offset text is
+above the panel (ours have none, but a linear axis of values below 1e-5 or from 1e6 puts
+its offset, ``1e-6``, at its top left, which a long title may then touch): the automatic
+placement lays out every y tick label once more to look for one.
 """
 
 from __future__ import annotations
