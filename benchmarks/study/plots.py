@@ -233,6 +233,7 @@ def draw_time_panels(curves: list[Curves], titles: tuple[str, str],
         ax.set_title(title, y=1.0)
         ax.set_xlabel("time [s]")
         ax.grid(True, which="both" if log else "major", alpha=0.3)
+        ax.yaxis.set_label_coords(0, 0.5)  # no y label: no search of the tick labels for its place
         ax.legend(fontsize=7)
     return fig, lines
 

@@ -96,6 +96,7 @@ def _draw_forces(traces: list[Trace]) -> _ForcePanels:
         limits.append(_limits(ax, controller, forces, limit))
         ax.set_xlabel("time [s]")
         ax.grid(True, alpha=0.3)
+        ax.yaxis.set_label_coords(0, 0.5)  # no y label: no search of the tick labels for its place
     axes[0].legend(fontsize=6, ncol=2)
     fig.subplots_adjust(**FORCES_LAYOUT)
     return _ForcePanels(fig, axes, legs, limits, [(c, f.shape[1]) for c, _, f, _ in traces])
