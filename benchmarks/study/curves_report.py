@@ -94,7 +94,7 @@ def _km_plot(out_dir: Path, scenario: str,
         ax.set_ylim(0, 1.01)
         ax.set_xlabel("steps")
         ax.set_ylabel("fraction converged")
-        ax.set_title(format_sweep(sweeps.get(p, {})), fontsize=8)
+        ax.set_title(format_sweep(sweeps.get(p, {})), fontsize=8, y=1.0)
         ax.grid(True, alpha=0.3)
         ax.legend(fontsize=7)
     return save_figure(fig, out_dir, f"{scenario}_time_to_converge.png",

@@ -64,7 +64,7 @@ def with_interval(value: float, interval: tuple[float, float], digits: int = 3,
 
 def quantile_cells(values: list[Any], quantiles: list[float], digits: int = 3) -> list[str]:
     """Quantiles of the finite values with their order-statistic intervals."""
-    arr = np.array([v for v in values if v is not None and np.isfinite(v)], dtype=float)
+    arr = stats.finite_values(values)
     if arr.size == 0:
         return ["-" for _ in quantiles]
     return [with_interval(float(np.quantile(arr, q)), exact.quantile_interval(arr, q), digits)

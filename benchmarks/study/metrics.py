@@ -9,6 +9,8 @@ from typing import Any
 
 import numpy as np
 
+from benchmarks.study.stats import finite_values
+
 #: Row keys that are not sweep values.
 _NON_SWEEP = {
     "scenario", "controller", "controller_name", "controller_package", "controller_version",
@@ -95,7 +97,7 @@ class Summary:
 
 
 def _stat(values: list[Any], fn: str) -> float:
-    arr = np.array([v for v in values if v is not None and np.isfinite(v)], dtype=float)
+    arr = finite_values(values)
     if arr.size == 0:
         return float("nan")
     if fn == "median":

@@ -81,7 +81,12 @@ def plot_profiles(out_dir: Path, scenario: str, rows: list[dict[str, Any]]) -> s
         if len(ctrls) < 2 or costs.shape[0] == 0:
             return None
         panels.append((title, ctrls, ratios(costs)))
-    from benchmarks.study.plots import LABELLED_TITLED_PANELS, figure, save_figure
+    from benchmarks.study.plots import (
+        LABELLED_TITLED_PANELS,
+        figure,
+        plain_log_labels,
+        save_figure,
+    )
 
     fig = figure((11, 3.8))
     axes = fig.subplots(1, 2)
@@ -94,11 +99,12 @@ def plot_profiles(out_dir: Path, scenario: str, rows: list[dict[str, Any]]) -> s
             ax.step(taus, rho[s], where="post", label=c, linestyle=STYLES[s % len(STYLES)],
                     linewidth=2.2 - 0.3 * (s % 4))
         ax.set_xscale("log", base=2)
+        plain_log_labels(ax.xaxis, base=2)
         ax.set_xlim(1, top)
         ax.set_ylim(0, 1.02)
         ax.set_xlabel("tau (ratio to the best controller on the trial)")
         ax.set_ylabel("fraction of trials within tau")
-        ax.set_title(f"{title}, {r.shape[0]} trials", fontsize=9)
+        ax.set_title(f"{title}, {r.shape[0]} trials", fontsize=9, y=1.0)
         ax.grid(True, which="both", alpha=0.3)
         ax.legend(fontsize=7, loc="lower right")
     return save_figure(fig, out_dir, f"{scenario}_profiles.png", LABELLED_TITLED_PANELS)

@@ -114,7 +114,9 @@ def wilson_intervals(k: np.ndarray, n: int, level: float = LEVEL
     return low, high
 
 
-def _finite(values: Sequence[float] | np.ndarray) -> np.ndarray:
+def finite_values(values: Sequence[float | None] | np.ndarray) -> np.ndarray:
+    """The finite values, as floats in their order (None, NaN and infinities left out;
+    one test over the array, not one NumPy call per value)."""
     arr = np.asarray([np.nan if v is None else v for v in values], dtype=float)
     return arr[np.isfinite(arr)]
 
@@ -149,7 +151,7 @@ def bootstrap_quantiles(values: Sequence[float] | np.ndarray, quantiles: Sequenc
     Returns:
         One ``(low, high)`` per quantile (``nan`` for an empty sample).
     """
-    x = np.sort(_finite(values))
+    x = np.sort(finite_values(values))
     n = x.size
     if n == 0:
         return [(float("nan"), float("nan")) for _ in quantiles]

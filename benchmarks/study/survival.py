@@ -108,13 +108,12 @@ def censored_data(rows: list[dict[str, Any]]) -> tuple[Censored, int, float]:
             scenario, controller and trial).
     """
     done, cens = [], 0
-    runs = [float(r["steps"]) for r in rows
-            if r.get("steps") is not None and np.isfinite(r["steps"])]
-    cap = max(runs) if runs else math.nan
+    runs = stats.finite_values([r.get("steps") for r in rows])
+    cap = float(runs.max()) if runs.size else math.nan
     for r in rows:
         if r.get("converged"):
             s = r.get("steps")
-            if s is None or not np.isfinite(s):
+            if s is None or not math.isfinite(s):
                 raise BenchmarkError(f"results.jsonl: scenario {r.get('scenario')!r}, "
                                      f"controller {r.get('controller')!r}, trial "
                                      f"{r.get('trial')}: converged with steps={s!r} (a "

@@ -79,9 +79,10 @@ def _limits(ax: Any, controller: str, forces: np.ndarray, limit: np.ndarray) -> 
     (the lines drawn)."""
     lim = float(np.min(limit))
     if np.abs(forces).max() > 0.5 * lim:  # the limits drawn when the forces near them
-        ax.set_title(f"{controller}: drive forces [N]", fontsize=9)
+        ax.set_title(f"{controller}: drive forces [N]", fontsize=9, y=1.0)
         return [ax.axhline(sign * lim, color="k", ls="--", lw=0.7) for sign in (1.0, -1.0)]
-    ax.set_title(f"{controller}: drive forces [N] (limit {lim:g})", fontsize=9)
+    ax.set_title(f"{controller}: drive forces [N] (limit {lim:g})", fontsize=9,
+                 y=1.0)
     return []
 
 
@@ -95,6 +96,7 @@ def _draw_forces(traces: list[Trace]) -> _ForcePanels:
         limits.append(_limits(ax, controller, forces, limit))
         ax.set_xlabel("time [s]")
         ax.grid(True, alpha=0.3)
+        ax.yaxis.set_label_coords(0, 0.5)  # no y label: no search of the tick labels for its place
     axes[0].legend(fontsize=6, ncol=2)
     fig.subplots_adjust(**FORCES_LAYOUT)
     return _ForcePanels(fig, axes, legs, limits, [(c, f.shape[1]) for c, _, f, _ in traces])

@@ -33,16 +33,11 @@ def is_tracking(rows: list[dict[str, Any]]) -> bool:
     return any("tracking_rms_position_mm" in r for r in rows)
 
 
-def _finite(values: list[Any]) -> np.ndarray:
-    arr = np.array([np.nan if v is None else v for v in values], dtype=float)
-    return arr[np.isfinite(arr)]
-
-
 def _cells(values: list[Any], hows: list[str], with_intervals: bool) -> list[str]:
     """The statistics ``hows`` (``median``, ``p95``, ``max``) of the finite values: the
     quantiles with their order-statistic intervals when ``with_intervals``, the maximum
     without (no interval says anything about the largest of n draws)."""
-    arr = _finite(values)
+    arr = stats.finite_values(values)
     if arr.size == 0:
         return ["-" for _ in hows]
     q = {"median": 0.5, "p95": 0.95}

@@ -87,3 +87,33 @@ def test_a_redrawn_line_figure_is_the_new_figure_pixel_for_pixel(tmp_path: Path)
         fig, _ = draw(data[p])
         plots.save_figure(fig, tmp_path, f"new{p}.png", plots.TWO_LOG_PANELS)
         assert np.array_equal(_pixels(reused / f"p{p}.png"), _pixels(tmp_path / f"new{p}.png"))
+
+
+def test_plain_log_labels_are_matplotlibs_without_mathtext() -> None:
+    """The labels of a log axis in plain text are matplotlib's mathtext ones character for
+    character (superscripts for the exponent): decades, minor ticks labelled on a narrow
+    range, base 2; an unlabelled minor tick stays empty."""
+    digits = "⁻⁰¹²³⁴⁵⁶⁷⁸⁹"
+
+    def labels(lims: tuple[float, float], base: float, plain: bool) -> list[str]:
+        axis = plots.figure((4, 3)).subplots().xaxis
+        axis.axes.set_xscale("log", base=base)
+        axis.axes.set_xlim(*lims)
+        if plain:
+            plots.plain_log_labels(axis, base=base)
+        return [*axis.get_major_formatter().format_ticks(axis.get_majorticklocs()),
+                *axis.get_minor_formatter().format_ticks(axis.get_minorticklocs())]
+
+    def as_mathtext(text: str) -> str:
+        mantissa = text.rstrip(digits)
+        exponent = text[len(mantissa):].translate(str.maketrans(digits, "-0123456789"))
+        return (f"$\\mathdefault{{{mantissa.replace('×', chr(92) + 'times')}^{{{exponent}}}}}$"
+                if text else text)
+
+    for lims, base in (((1e-6, 1.0), 10), ((0.15, 0.9), 10), ((1.0, 300.0), 2)):
+        plain, mathtext = labels(lims, base, True), labels(lims, base, False)
+        assert not any("$" in t for t in plain)
+        assert [as_mathtext(t) for t in plain] == mathtext
+    assert {"10⁻⁶", "10⁰"} <= set(labels((1e-6, 1.0), 10, True))
+    assert "2×10⁻¹" in labels((0.15, 0.9), 10, True)
+    assert "2⁸" in labels((1.0, 300.0), 2, True)
