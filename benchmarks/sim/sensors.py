@@ -19,7 +19,7 @@ from benchmarks.sim.inputs import SimScenario
 from benchmarks.sim.world import TrialSetup, World, trial_rng
 from controllers.base import Goal, ObservationBatch
 from vision.cameras import Camera
-from vision.cameras.perspective import PerspectiveCamera, normals_to_lines
+from vision.cameras.perspective import PerspectiveCamera, lines_and_normals
 from vision.fast_observe import WorldParams, observe_batch
 from vision.legs import LegObservation, directions_from_edges
 from vision.noise import Generators
@@ -217,8 +217,7 @@ def noisy_features(sc: SimScenario, normals: np.ndarray, visible: np.ndarray,
             # fitted with the estimated camera already; the image line is the true one
             lines = estimated.normal_to_line(normals)
         elif line_maps is not None:
-            lines = normals_to_lines(normals, line_maps)
-            normals = estimated.line_to_normal(lines)
+            lines, normals = lines_and_normals(normals, line_maps, estimated)
         else:
             lines = np.empty_like(normals)
             for rows, cam in cameras:
