@@ -19,8 +19,9 @@
   evaluates the lens four times per pass through a distorted lens.
 - The simulated camera (``sensor_kernels.c``): the rotation noise's arithmetic after its
   draws (:func:`vision.noise.rotation_noise_batch`), the image lines and the estimated
-  camera's normals (:func:`vision.cameras.perspective.lines_and_normals`), each the
-  bits of its numpy path; numpy's matmul sums through its BLAS, which fuses the products or
+  camera's normals (:func:`vision.cameras.perspective.lines_and_normals`) and the leg
+  directions from the edges (:func:`vision.legs.directions_from_edges`), each the bits
+  of its numpy path; numpy's matmul sums through its BLAS, which fuses the products or
   not by processor: the kernels take which (:func:`blas_mode`, probed once).
 - Renderer (``render_kernels.c``): exact-coverage polygon filling
   (:class:`PolygonFiller`): a pixel's value is blended by the exact area of its
@@ -116,6 +117,8 @@ def _load() -> ctypes.CDLL | None:
     lib.hexapod_rotation_noise.restype = None
     lib.hexapod_lines_normals.argtypes = [_P, _I, _I, _P, _P, _I, _P, _P]
     lib.hexapod_lines_normals.restype = None
+    lib.hexapod_directions_from_edges.argtypes = [_P, _I, _P]
+    lib.hexapod_directions_from_edges.restype = None
     _lib = lib
     return lib
 

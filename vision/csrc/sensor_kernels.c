@@ -1,6 +1,7 @@
 /* The simulated camera's arithmetic, many rows in one call: the rotation noise of
- * vision/noise.py rotation_noise_batch (after its draws) and the image lines and the
- * estimated camera's normals of benchmarks/sim/sensors.py noisy_features.
+ * vision/noise.py rotation_noise_batch (after its draws), the image lines and the
+ * estimated camera's normals of benchmarks/sim/sensors.py noisy_features, and the leg
+ * directions of vision/legs.py directions_from_edges.
  *
  * Operation for operation as their numpy path (the tests hold the two equal bit for
  * bit): the elementwise ufuncs round each operation (compiled with
@@ -97,5 +98,18 @@ void hexapod_lines_normals(const double *normals, int64_t n, int64_t m, const do
         y[c] = blas_dot3(fused, l[0], l[1], l[2], L[c], L[3 + c], L[6 + c]);
       unit3(y);
     }
+  }
+}
+
+/* vision.legs.directions_from_edges of count legs: normals (count, 2, 3) -> out (count,
+ * 3), u = (n2 x n1) / |n2 x n1|. */
+void hexapod_directions_from_edges(const double *normals, int64_t count, double *out) {
+  for (int64_t i = 0; i < count; ++i) {
+    const double *b = normals + 6 * i, *a = b + 3;
+    double *d = out + 3 * i;
+    d[0] = a[1] * b[2] - a[2] * b[1];
+    d[1] = a[2] * b[0] - a[0] * b[2];
+    d[2] = a[0] * b[1] - a[1] * b[0];
+    unit3(d);
   }
 }
