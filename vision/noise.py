@@ -237,8 +237,7 @@ def rotation_noise_batch(
             g.standard_normal(out=ax)
             g.random(out=fr)
     lib = kernels._load()
-    fused = None if lib is None else _rotation_mode(lib)
-    if fused is not None:  # the same bits in one C call
+    if lib is not None and (fused := _rotation_mode(lib)) is not None:  # same bits, in C
         v = np.ascontiguousarray(v)
         out = np.empty_like(v)
         lib.hexapod_rotation_noise(axes.ctypes.data, fractions.ctypes.data, v.ctypes.data,
