@@ -196,9 +196,10 @@ def observe_batch(params: WorldParams, rotations: np.ndarray, translations: np.n
         idx = np.arange(len(params.leg_radius)) if items is None else np.asarray(items)
         return _observe_numpy(params, rows, idx, n_samples, min_fraction, occlusion)
     out = np.empty((n, N_OUT))
-    lib.hexapod_observe_batch(rows.ctypes.data, out.ctypes.data, n, float(params.width),
-                              float(params.height), int(params.unified), int(n_samples),
-                              float(min_fraction), int(occlusion))
+    if lib.hexapod_observe_batch(rows.ctypes.data, out.ctypes.data, n, float(params.width),
+                                 float(params.height), int(params.unified), int(n_samples),
+                                 float(min_fraction), int(occlusion)):
+        raise MemoryError(f"observe_batch: no memory for the table of {n_samples} samples")
     return _unpack(out)
 
 

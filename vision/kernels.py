@@ -17,6 +17,12 @@
   extended unified model (:func:`lens_parts`), the arithmetic of their numpy
   ``parts_numpy`` operation by operation (the tests check them equal); the tracker
   evaluates the lens four times per pass through a distorted lens.
+- The simulated camera (``sensor_kernels.c``): the rotation noise's arithmetic after its
+  draws (:func:`vision.noise.rotation_noise_batch`), the image lines and the estimated
+  camera's normals (:func:`vision.cameras.perspective.lines_and_normals`) and the leg
+  directions from the edges (:func:`vision.legs.directions_from_edges`), each the bits
+  of its numpy path; numpy's matmul sums through its BLAS, which fuses the products or
+  not by processor: the kernels take which (:func:`blas_mode`, probed once).
 - Renderer (``render_kernels.c``): exact-coverage polygon filling
   (:class:`PolygonFiller`): a pixel's value is blended by the exact area of its
   unit square inside the shape, so that a rendered edge has no bias whatever its
@@ -26,8 +32,8 @@
 The sources ship with the package; they are compiled on first use by the system C
 compiler through :func:`hexapod.compiled.build_shared_library` (cached under the
 hash of the source) and called through :mod:`ctypes`. Without a compiler, or with
-``HEXAPOD_NO_COMPILE=1`` in the environment, the detectors run their numpy path
-(same results, a few times slower), the renderer falls back to OpenCV's
+``HEXAPOD_NO_COMPILE=1`` in the environment, the detectors and the simulated camera
+run their numpy path (same results, a few times slower), the renderer falls back to OpenCV's
 anti-aliased polygons (edges biased by up to about 0.1 px, see
 :class:`vision.render.RenderStyle`), and a warning is logged once.
 """
@@ -38,6 +44,7 @@ import ctypes
 import logging
 import os
 import subprocess
+from collections.abc import Callable
 from importlib import resources
 from typing import Any
 
@@ -58,7 +65,8 @@ _I: Any = ctypes.c_int64
 _D: Any = ctypes.c_double
 
 #: The C sources, in the order they are concatenated into one library.
-SOURCES = ("detect_kernels.c", "render_kernels.c", "observe_kernels.c", "lens_kernels.c")
+SOURCES = ("detect_kernels.c", "render_kernels.c", "observe_kernels.c", "lens_kernels.c",
+           "sensor_kernels.c")
 
 _lib: ctypes.CDLL | None = None
 _tried = False
@@ -105,8 +113,36 @@ def _load() -> ctypes.CDLL | None:
     lib.hexapod_segments_imaged.restype = None
     lib.lens_parts.argtypes = [_I, _P, _P, _I, _P, _P, _I, _P]
     lib.lens_parts.restype = None
+    lib.hexapod_rotation_noise.argtypes = [_P, _P, _P, _I, _D, _I, _P]
+    lib.hexapod_rotation_noise.restype = None
+    lib.hexapod_lines_normals.argtypes = [_P, _I, _I, _P, _P, _I, _P, _P]
+    lib.hexapod_lines_normals.restype = None
+    lib.hexapod_directions_from_edges.argtypes = [_P, _I, _P]
+    lib.hexapod_directions_from_edges.restype = None
     _lib = lib
     return lib
+
+
+#: :func:`blas_mode` of each kernel, once probed.
+_modes: dict[str, int | None] = {}
+
+
+def blas_mode(name: str, compiled: Callable[[int], np.ndarray],
+              numpy_path: Callable[[], np.ndarray]) -> int | None:
+    """The ``fused`` argument with which the compiled arithmetic ``name``
+    (``sensor_kernels.c``) gives the bits of its numpy path on this machine: numpy's
+    matmul sums through its BLAS, whose kernels fuse the products (1: on processors with
+    FMA) or round each (0). Probed once: ``compiled(fused)`` against ``numpy_path()`` on
+    the same inputs; None (the numpy path is used, a warning logged) when neither gives
+    its bits."""
+    if name not in _modes:
+        reference = numpy_path()
+        _modes[name] = next((f for f in (1, 0)
+                             if np.array_equal(compiled(f), reference, equal_nan=True)), None)
+        if _modes[name] is None:
+            log.warning("%s: the compiled arithmetic does not reproduce numpy's here (its "
+                        "BLAS sums otherwise); the numpy path is used", name)
+    return _modes[name]
 
 
 def available() -> bool:

@@ -22,6 +22,7 @@ import numpy as np
 
 from hexapod.geometry import HexapodGeometry
 from hexapod.kinematics import legs_in_frame
+from vision import kernels
 from vision.cameras import Camera, PerspectiveCamera
 from vision.occlusion import occluded_by_disc, occluded_by_legs, occluded_by_legs_compiled
 
@@ -77,8 +78,16 @@ def leg_edges(
 
 
 def directions_from_edges(normals: np.ndarray) -> np.ndarray:
-    """Leg directions ``u = (n2 x n1) / |n2 x n1|`` from edge normals (..., 2, 3) -> (..., 3)."""
+    """Leg directions ``u = (n2 x n1) / |n2 x n1|`` from edge normals (..., 2, 3) -> (..., 3)
+    (NaN where the normals are NaN or parallel), in one C call when compiled
+    (``vision/csrc/sensor_kernels.c``: the numpy path's bits)."""
     n = np.asarray(normals, dtype=float)
+    lib = kernels._load()
+    if lib is not None and n.shape[-2:] == (2, 3):  # the same bits, one C call
+        n = np.ascontiguousarray(n)
+        out = np.empty((*n.shape[:-2], 3))
+        lib.hexapod_directions_from_edges(n.ctypes.data, out.size // 3, out.ctypes.data)
+        return out
     a0, a1, a2 = n[..., 1, 0], n[..., 1, 1], n[..., 1, 2]
     b0, b1, b2 = n[..., 0, 0], n[..., 0, 1], n[..., 0, 2]
     d = np.empty((*n.shape[:-2], 3))

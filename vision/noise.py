@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import ctypes
 import logging
+import math
 import os
 import subprocess
 from collections.abc import Sequence
@@ -27,6 +28,7 @@ from typing import Any, overload
 import numpy as np
 
 from hexapod.se3 import exp_so3, norms
+from vision import kernels
 
 log = logging.getLogger(__name__)
 
@@ -227,13 +229,35 @@ def rotation_noise_batch(
     gens = rngs if isinstance(rngs, Generators) else Generators(rngs)
     if draws is not None and gens.pointers is not None:
         pointers = np.ascontiguousarray(gens.pointers, dtype=np.uintp)
-        draws(pointers.ctypes.data, n, int(np.prod(shape, dtype=int)), axes.ctypes.data,
+        draws(pointers.ctypes.data, n, math.prod(shape), axes.ctypes.data,
               fractions.ctypes.data)
     else:
         for g, ax, fr in zip(gens.rngs, axes.reshape(n, -1), fractions.reshape(n, -1),
                              strict=True):
             g.standard_normal(out=ax)
             g.random(out=fr)
+    lib = kernels._load()
+    if lib is not None and (fused := _rotation_mode(lib)) is not None:  # same bits, in C
+        v = np.ascontiguousarray(v)
+        out = np.empty_like(v)
+        lib.hexapod_rotation_noise(axes.ctypes.data, fractions.ctypes.data, v.ctypes.data,
+                                   fractions.size, a, fused, out.ctypes.data)
+        return out
+    return rotate_by_draws(v, axes, fractions, a)
+
+
+def rotate_by_draws(v: np.ndarray, axes: np.ndarray, fractions: np.ndarray, a: float
+                    ) -> np.ndarray:
+    """The arithmetic of :func:`rotation_noise_batch` after its draws, in numpy (the
+    compiled ``hexapod_rotation_noise`` gives its bits; without a compiler it runs):
+    vectors ``v`` (..., 3) rotated by ``exp_so3(unit(axes) * fractions * a)``.
+
+    Args:
+        v: (..., 3) vectors.
+        axes: (..., 3) standard normal draws (overwritten).
+        fractions: (...) uniform draws in [0, 1) (overwritten).
+        a: Maximal rotation angle [rad].
+    """
     norm = norms(axes, keepdims=True)
     bad = norm[..., 0] < 1e-12
     if bad.any():
@@ -245,6 +269,30 @@ def rotation_noise_batch(
     axes *= fractions[..., None]
     R = exp_so3(axes)
     return np.einsum("...ij,...j->...i", R, v)
+
+
+def _rotation_mode(lib: Any) -> int | None:
+    """:func:`vision.kernels.blas_mode` of ``hexapod_rotation_noise``, probed on
+    vectors with NaN, a zero draw of the axis (the bad-norm branch), angles of 0 and
+    below 1e-6 rad (the series of exp_so3) and up to 3 rad."""
+    def draws() -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        rng = np.random.default_rng(7)
+        v, axes = rng.normal(size=(2, 64, 3))
+        v[3, 1] = np.nan
+        axes[5] = 0.0
+        fractions = rng.random(64)
+        fractions[:8] = [0.0, 1e-9, 3e-7, 1e-6, 0.9e-6, 1.0, 0.5, 0.99]
+        return v, axes, fractions
+
+    def compiled(fused: int) -> np.ndarray:
+        v, axes, fractions = draws()
+        out = np.empty_like(v)
+        lib.hexapod_rotation_noise(axes.ctypes.data, fractions.ctypes.data, v.ctypes.data,
+                                   64, 3.0, fused, out.ctypes.data)
+        return out
+
+    return kernels.blas_mode("hexapod_rotation_noise", compiled,
+                             lambda: rotate_by_draws(*draws(), 3.0))
 
 
 def pixel_noise(

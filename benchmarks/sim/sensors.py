@@ -19,7 +19,7 @@ from benchmarks.sim.inputs import SimScenario
 from benchmarks.sim.world import TrialSetup, World, trial_rng
 from controllers.base import Goal, ObservationBatch
 from vision.cameras import Camera
-from vision.cameras.perspective import PerspectiveCamera, normals_to_lines
+from vision.cameras.perspective import PerspectiveCamera, lines_and_normals
 from vision.fast_observe import WorldParams, observe_batch
 from vision.legs import LegObservation, directions_from_edges
 from vision.noise import Generators
@@ -44,7 +44,7 @@ def edge_batch(normals: np.ndarray, lines: np.ndarray | None, visible: np.ndarra
     """The camera's batch (:func:`camera_batch`) of ``n`` rows' edges: normals (n, 6, 2, 3),
     image lines or None, visibility (n, 6, 2); a leg's direction where both its edges are
     seen, NaN elsewhere."""
-    both = np.asarray(visible.all(axis=-1))
+    both = visible[..., 0] & visible[..., 1]  # visible.all(axis=-1), without a reduction
     with np.errstate(invalid="ignore", divide="ignore"):
         directions = directions_from_edges(normals)
     if not both.all():
@@ -217,8 +217,7 @@ def noisy_features(sc: SimScenario, normals: np.ndarray, visible: np.ndarray,
             # fitted with the estimated camera already; the image line is the true one
             lines = estimated.normal_to_line(normals)
         elif line_maps is not None:
-            lines = normals_to_lines(normals, line_maps)
-            normals = estimated.line_to_normal(lines)
+            lines, normals = lines_and_normals(normals, line_maps, estimated)
         else:
             lines = np.empty_like(normals)
             for rows, cam in cameras:

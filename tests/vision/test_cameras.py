@@ -463,3 +463,40 @@ def test_front_camera_distance_moves_the_eye_along_its_azimuth() -> None:
     for bad in (0.0, -0.8, float("nan")):
         with pytest.raises(CameraError, match="distance: front camera: must be positive"):
             front_camera(distance=bad)
+
+
+def test_lines_and_normals_are_the_numpy_paths_bitwise(
+        rng: np.random.Generator, monkeypatch: pytest.MonkeyPatch) -> None:
+    """The image lines through each row's camera and the normals the estimated camera
+    lifts them to, in one C call, are normals_to_lines and line_to_normal to the last
+    bit, NaN rows included, on rows of cameras of different intrinsics; without a
+    compiler the numpy path runs; a matrix per row is required."""
+    from vision import kernels
+    from vision.cameras.perspective import (
+        _lines_mode,
+        _lines_normals,
+        lines_and_normals,
+        normals_to_lines,
+    )
+
+    lib = kernels._load()
+    fused = None if lib is None else _lines_mode(lib)
+    assert fused is not None  # compiled, and this machine's BLAS sums as one of its modes
+    cams = [PerspectiveCamera(_K(fx=700.0 + 5 * k, cy=240.0 + 0.1 * k, s=0.01 * k), 1024,
+                              780, _random_pose(rng)) for k in range(201)]
+    n = rng.normal(size=(200, 6, 2, 3))
+    n /= np.linalg.norm(n, axis=-1, keepdims=True)
+    n[rng.random((200, 6, 2)) < 0.05] = np.nan
+    maps = np.stack([c.normal_to_line_matrix for c in cams[:200]])
+    expected_lines = normals_to_lines(n, maps)
+    expected_normals = cams[200].line_to_normal(expected_lines)
+    for load in (kernels._load, lambda: None):
+        monkeypatch.setattr(kernels, "_load", load)
+        lines, normals = lines_and_normals(n, maps, cams[200])
+        assert np.array_equal(lines, expected_lines, equal_nan=True)
+        assert np.array_equal(normals, expected_normals, equal_nan=True)
+        with pytest.raises(CameraError, match="matrices"):
+            lines_and_normals(n, maps[:4], cams[200])
+    assert np.isnan(expected_normals).any() and np.isfinite(expected_normals).any()
+    other = _lines_normals(lib, 1 - fused, n, maps, cams[200].line_matrix)  # the mode matters
+    assert not np.array_equal(other[0], expected_lines, equal_nan=True)

@@ -80,6 +80,23 @@ def test_observe_legs_uses_the_core_and_matches(kind: str) -> None:
     assert np.array_equal(a.edge_visible, b.edge_visible)
 
 
+@pytest.mark.parametrize("n_samples", [5, 20, 33])
+def test_sample_counts_that_are_not_one_chunk_equal_the_numpy_reference(n_samples: int
+                                                                        ) -> None:
+    """The core tests samples 16 at a time (its table of sample positions padded to whole
+    chunks): fewer, more, and a partial last chunk, with occlusions, decide as the numpy
+    reference does."""
+    g = deltalab()
+    cam = front_camera(g)
+    R, t = sample_poses(g, 150, rng=4)
+    fast = observe_legs(cam, g, R, t, n_samples=n_samples)
+    ref = observe_legs_numpy(cam, g, R, t, n_samples=n_samples)
+    assert np.array_equal(fast.edge_visible, ref.edge_visible)
+    assert np.array_equal(fast.visible_fraction, ref.visible_fraction)
+    np.testing.assert_allclose(fast.visible_interval, ref.visible_interval, rtol=0, atol=1e-12)
+    assert (ref.visible_fraction % 1 != 0).any()  # some edges partly hidden
+
+
 @pytest.mark.parametrize(("kind", "coefficients"), [
     ("front", (-0.28, 0.08, 0.0, 0.0, -0.01)),
     ("omni", (-0.1, 0.02, 0.0, 0.0)),

@@ -340,3 +340,22 @@ def test_lens_maps_without_the_kernels_use_numpy(monkeypatch, rng, label, lens) 
     assert kernels.lens_parts("opencv-full", x, y, np.zeros(14)) is None
     for a, b in zip(lens.parts(x, y), expected, strict=True):
         np.testing.assert_array_equal(a, b)
+
+
+def test_blas_mode_is_the_fused_argument_that_gives_the_numpy_bits(
+        monkeypatch: pytest.MonkeyPatch, caplog: pytest.LogCaptureFixture) -> None:
+    """blas_mode probes once the compiled arithmetic in each mode against the numpy path:
+    the mode that gives its bits (NaN as NaN), or None with a warning when none does."""
+    monkeypatch.setattr(kernels, "_modes", {})
+    reference = np.array([1.0, np.nan])
+    probed: list[int] = []
+
+    def compiled(fused: int) -> np.ndarray:
+        probed.append(fused)
+        return reference + (fused == 1)
+
+    assert kernels.blas_mode("a", compiled, lambda: reference) == 0
+    assert kernels.blas_mode("a", compiled, lambda: reference) == 0
+    assert probed == [1, 0]  # once
+    assert kernels.blas_mode("b", lambda f: reference + 1, lambda: reference) is None
+    assert "b: the compiled arithmetic does not reproduce numpy's" in caplog.text

@@ -319,3 +319,25 @@ def test_observe_legs_is_fast(geometry) -> None:
         observe_legs(cam, geometry, R, t)
     per_pose = (time.perf_counter() - start) / 300
     assert per_pose < 2e-3, f"{per_pose * 1e3:.3f} ms per pose"
+
+
+def test_directions_from_edges_compiled_is_the_numpy_path(
+        rng: np.random.Generator, monkeypatch: pytest.MonkeyPatch) -> None:
+    """The compiled directions are the numpy path's to the last bit, with NaN normals and
+    parallel edges (NaN directions), for a batch, one leg and a non-contiguous view."""
+    from vision import kernels
+
+    assert kernels.available()  # the test machines compile C kernels
+    n = rng.normal(size=(500, 6, 2, 3))
+    n /= np.linalg.norm(n, axis=-1, keepdims=True)
+    n[3, 2, 1] = np.nan
+    n[4, 1, 1] = n[4, 1, 0]  # parallel edges: no direction
+    cases = [n, n[7, 2], n[::2, :, ::-1]]
+    compiled = [directions_from_edges(c) for c in cases]
+    monkeypatch.setattr(kernels, "_load", lambda: None)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        expected = [directions_from_edges(c) for c in cases]
+    for c, e in zip(compiled, expected, strict=True):
+        assert c.shape == e.shape and np.array_equal(c, e, equal_nan=True)
+    assert np.isnan(compiled[0][3, 2]).all() and np.isnan(compiled[0][4, 1]).all()
+    assert np.isfinite(compiled[0][5]).all()

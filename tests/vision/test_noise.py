@@ -204,3 +204,69 @@ def test_rotation_noise_batch_of_generators_taken_by_rows() -> None:
     assert np.abs(batch - v).max() > 1e-4
     assert Generators([None, None]).pointers is None
     assert Generators([None, None]).take(np.array([1])).pointers is None
+
+
+def test_rotation_noise_compiled_arithmetic_is_the_numpy_paths() -> None:
+    """The compiled arithmetic after the draws (``hexapod_rotation_noise``) gives the bits
+    of the numpy path (:func:`vision.noise.rotate_by_draws`, the path without a compiler)
+    on thousands of random vectors: NaN vectors, zero axis draws (the bad-norm branch),
+    angles below 1e-6 rad (exp_so3's series) and up to 3 rad."""
+    from vision import kernels, noise
+
+    lib = kernels._load()
+    assert lib is not None  # the test machines compile C kernels
+    fused = noise._rotation_mode(lib)
+    assert fused is not None  # this machine's BLAS sums as one of the kernel's modes
+    rng = np.random.default_rng(11)
+    for a in (np.deg2rad(0.01), np.deg2rad(1.0), 3.0):
+        v = rng.normal(size=(300, 6, 2, 3))
+        v /= np.linalg.norm(v, axis=-1, keepdims=True)
+        v[rng.random((300, 6, 2)) < 0.05] = np.nan
+        axes = rng.normal(size=(300, 6, 2, 3))
+        axes[rng.random((300, 6, 2)) < 0.01] = 0.0
+        fractions = rng.random((300, 6, 2))
+        fractions[rng.random((300, 6, 2)) < 0.02] *= 1e-6 / a
+        expected = noise.rotate_by_draws(v, axes.copy(), fractions.copy(), a)
+        assert (np.isnan(expected).any(axis=-1) == np.isnan(v).any(axis=-1)).all()
+        out = np.empty_like(v)
+        lib.hexapod_rotation_noise(axes.ctypes.data, fractions.ctypes.data, v.ctypes.data,
+                                   fractions.size, a, fused, out.ctypes.data)
+        assert np.array_equal(out, expected, equal_nan=True)
+    # at 3 rad the other mode differs (the probe's choice matters; at small angles the
+    # last bits of b K^2 vanish in the sum with I)
+    wrong = np.empty_like(v)
+    lib.hexapod_rotation_noise(axes.ctypes.data, fractions.ctypes.data, v.ctypes.data,
+                               fractions.size, 3.0, 1 - fused, wrong.ctypes.data)
+    assert not np.array_equal(wrong, expected, equal_nan=True)
+
+
+def test_rotation_noise_batch_takes_the_compiled_arithmetic(
+        monkeypatch: pytest.MonkeyPatch) -> None:
+    """rotation_noise_batch gives the same bits with the compiled arithmetic (taken: its
+    one call seen) and without a compiler (the numpy path)."""
+    from vision import kernels, noise
+
+    rng = np.random.default_rng(12)
+    v = rng.normal(size=(40, 6, 2, 3))
+    v /= np.linalg.norm(v, axis=-1, keepdims=True)
+    lib = kernels._load()
+    assert lib is not None
+    calls: list[int] = []
+
+    class Spy:
+        def __getattr__(self, name: str) -> object:
+            return getattr(lib, name)
+
+        def hexapod_rotation_noise(self, *args: object) -> None:
+            calls.append(1)
+            lib.hexapod_rotation_noise(*args)
+
+    monkeypatch.setattr(kernels, "_load", lambda: Spy())
+    compiled = noise.rotation_noise_batch(v, 0.01, [np.random.default_rng([4, k])
+                                                    for k in range(40)])
+    assert calls == [1]
+    monkeypatch.setattr(kernels, "_load", lambda: None)
+    python = noise.rotation_noise_batch(v, 0.01, [np.random.default_rng([4, k])
+                                                  for k in range(40)])
+    assert compiled.tobytes() == python.tobytes()
+    assert np.abs(compiled - v).max() > 1e-5  # the noise is there

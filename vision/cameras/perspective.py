@@ -192,3 +192,72 @@ def normals_to_lines(normals: np.ndarray, matrices: np.ndarray) -> np.ndarray:
         raise CameraError("matrices", f"expected shape ({len(n)}, 3, 3) (one per row of the "
                           f"normals {n.shape}), got {M.shape}")
     return unit(np.matmul(n, M.reshape(len(n), *([1] * (n.ndim - 3)), 3, 3)))
+
+
+def lines_and_normals(normals: np.ndarray, matrices: np.ndarray,
+                      estimated: PerspectiveCamera) -> tuple[np.ndarray, np.ndarray]:
+    """The image lines of normals seen by each row's own camera (:func:`normals_to_lines`)
+    and the normals the ``estimated`` camera gives them back
+    (:meth:`PerspectiveCamera.line_to_normal`), in one C call when compiled (the same
+    bits, ``vision/csrc/sensor_kernels.c``).
+
+    Args:
+        normals: (n, ..., 3) interpretation-plane normals of row ``k`` seen by camera ``k``.
+        matrices: (n, 3, 3) each camera's :attr:`PerspectiveCamera.normal_to_line_matrix`.
+        estimated: The camera the lines are lifted with.
+
+    Returns:
+        (n, ..., 3) unit lines and (n, ..., 3) unit normals.
+
+    Raises:
+        CameraError: ``matrices`` is not one (3, 3) per row.
+    """
+    from vision import kernels
+
+    lib = kernels._load()
+    fused = None if lib is None else _lines_mode(lib)
+    n = as_points(normals, "normals")
+    M = np.asarray(matrices, dtype=float)
+    if fused is None or M.shape != (len(n), 3, 3):
+        lines = normals_to_lines(n, M)
+        return lines, estimated.line_to_normal(lines)
+    return _lines_normals(lib, fused, n, M, estimated.line_matrix)
+
+
+def _lines_normals(lib: Any, fused: int, normals: np.ndarray, matrices: np.ndarray,
+                   line_matrix: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """``hexapod_lines_normals`` of row-major float arrays."""
+    n = np.ascontiguousarray(normals)
+    M = np.ascontiguousarray(matrices)
+    L = np.ascontiguousarray(line_matrix)
+    lines, out = np.empty_like(n), np.empty_like(n)
+    lib.hexapod_lines_normals(n.ctypes.data, len(n), n.size // (3 * max(len(n), 1)),
+                              M.ctypes.data, L.ctypes.data, fused, lines.ctypes.data,
+                              out.ctypes.data)
+    return lines, out
+
+
+def _lines_mode(lib: Any) -> int | None:
+    """:func:`vision.kernels.blas_mode` of ``hexapod_lines_normals``, probed on random
+    normals (one NaN) and cameras."""
+    from vision import kernels
+
+    def inputs() -> tuple[np.ndarray, np.ndarray, PerspectiveCamera]:
+        rng = np.random.default_rng(8)
+        normals = rng.normal(size=(8, 6, 2, 3))
+        normals[2, 1, 0, 1] = np.nan
+        K = np.array([[900.0, 0.0, 310.0], [0.0, 880.0, 250.0], [0.0, 0.0, 1.0]])
+        cams = [PerspectiveCamera(K + rng.normal(size=(3, 3)) * [[9, 0, 9], [0, 9, 9], [0, 0, 0]],
+                                  640, 480) for _ in range(9)]
+        return normals, np.stack([c.normal_to_line_matrix for c in cams[:8]]), cams[8]
+
+    def numpy_path() -> np.ndarray:
+        normals, M, est = inputs()
+        lines = normals_to_lines(normals, M)
+        return np.stack([lines, est.line_to_normal(lines)])
+
+    def compiled(fused: int) -> np.ndarray:
+        normals, M, est = inputs()
+        return np.stack(_lines_normals(lib, fused, normals, M, est.line_matrix))
+
+    return kernels.blas_mode("hexapod_lines_normals", compiled, numpy_path)

@@ -32,6 +32,7 @@
  */
 #include <math.h>
 #include <stddef.h>
+#include <stdlib.h>
 
 #define OBS_N_IN 77
 #define OBS_N_OUT 138
@@ -189,7 +190,13 @@ static void leg_axis(const double *A, const double *u, double q, double r, LegAx
  * every sample, without a branch (vectorised), then the intervals of the samples whose
  * line meets the cylinder (the others miss it whatever the intervals). */
 #define CHUNK 16
-static void legs_hit(const double P[3][CHUNK], const LegAxis *L, unsigned char *hit) {
+#if defined(__GNUC__) /* inlined: compiled for its caller's instruction set */
+#define INLINE_IN_CLONES inline __attribute__((always_inline))
+#else
+#define INLINE_IN_CLONES inline
+#endif
+static INLINE_IN_CLONES void legs_hit(const double P[3][CHUNK], const LegAxis *L,
+                                      unsigned char *hit) {
   const double *u = L->u;
   double Au = L->Au, q = L->q, c = L->c;
   double Pu[CHUNK], a[CHUNK], b[CHUNK], disc[CHUNK];
@@ -242,14 +249,22 @@ static int hits_disc(const double *P, const double *c, const double *nd, double 
 }
 
 /* Compiled for the baseline instruction set and for AVX2, chosen when loaded (GCC's
- * function multi-versioning on x86-64 Linux): the same IEEE operations, the samples'
- * terms four at a time (no FMA: the flags keep -ffp-contract=off). */
+ * function multi-versioning on x86-64 Linux; legs_hit inlined in each version): the same
+ * IEEE operations, the samples' terms four at a time (no FMA: the flags keep
+ * -ffp-contract=off). Returns 1 without memory for the samples' table, else 0. */
 #if defined(__x86_64__) && defined(__linux__) && defined(__GNUC__) && !defined(__clang__)
 __attribute__((target_clones("avx2", "default")))
 #endif
 int hexapod_observe_batch(const double *params, double *out, long long n, double width,
                           double height, long long unified, long long n_samples,
                           double min_fraction, long long occlusion) {
+  /* each sample's parameter (k + 1/2) / n_samples, whole chunks (past the last sample:
+     the last again, unused) */
+  long long n_tab = (n_samples + CHUNK - 1) / CHUNK * CHUNK;
+  double *s_tab = malloc((size_t)(n_tab > 0 ? n_tab : 1) * sizeof(double));
+  if (s_tab == NULL) return 1;
+  for (long long k = 0; k < n_tab; ++k)
+    s_tab[k] = ((k < n_samples ? k : n_samples - 1) + 0.5) / (double)n_samples;
   for (long long item = 0; item < n; ++item) {
     const double *p = params + OBS_N_IN * item;
     double *o = out + OBS_N_OUT * item;
@@ -320,9 +335,11 @@ int hexapod_observe_batch(const double *params, double *out, long long n, double
         int cull[6], need_planes = 0;
         double P0[3], P1[3];
         double s0 = 0.5 / (double)n_samples, s1 = (n_samples - 0.5) / (double)n_samples;
+        double base[3]; /* the edge's point at s = 0 */
         for (int m = 0; m < 3; ++m) {
-          P0[m] = Ac[3 * i + m] + r * nrm[m] + (s0 * qc[i]) * uc[3 * i + m];
-          P1[m] = Ac[3 * i + m] + r * nrm[m] + (s1 * qc[i]) * uc[3 * i + m];
+          base[m] = Ac[3 * i + m] + r * nrm[m];
+          P0[m] = base[m] + (s0 * qc[i]) * uc[3 * i + m];
+          P1[m] = base[m] + (s1 * qc[i]) * uc[3 * i + m];
         }
         /* first culling: leg l wholly on one side of this edge's interpretation plane */
         for (int l = 0; l < 6; ++l) {
@@ -382,11 +399,9 @@ int hexapod_observe_batch(const double *params, double *out, long long n, double
           int nk = n_samples - k0 < CHUNK ? (int)(n_samples - k0) : CHUNK;
           double P[3][CHUNK];
           unsigned char ok[CHUNK];
-          for (int j = 0; j < CHUNK; ++j) { /* past nk: the last sample again (unused) */
-            double sk = ((j < nk ? k0 + j : k0 + nk - 1) + 0.5) / (double)n_samples;
-            for (int m = 0; m < 3; ++m)
-              P[m][j] = Ac[3 * i + m] + r * nrm[m] + (sk * qc[i]) * uc[3 * i + m];
-          }
+          for (int m = 0; m < 3; ++m)
+            for (int j = 0; j < CHUNK; ++j)
+              P[m][j] = base[m] + (s_tab[k0 + j] * qc[i]) * uc[3 * i + m];
           for (int j = 0; j < nk; ++j) {
             double X[3] = {P[0][j], P[1][j], P[2][j]};
             ok[j] = inside || imaged(X, cam, (int)unified, width, height);
@@ -419,5 +434,6 @@ int hexapod_observe_batch(const double *params, double *out, long long n, double
       }
     }
   }
+  free(s_tab);
   return 0;
 }
