@@ -257,6 +257,7 @@ class Book:
         dp, da = pose_error(R, t, R_goal, t_goal)
         out = []
         base = base_row(sc, spec, 0)
+        medians: dict[int, float | None] = {}  # [us], by the periods a row was commanded
         for m, s in enumerate(group):
             row = dict(base)
             row["trial"] = int(s.trial)
@@ -270,7 +271,10 @@ class Book:
                 fail = unconverged_reason(sc.task, float(dp[m] * 1e3),
                                           float(np.rad2deg(da[m])))
             settle = int(self.last_bad[m] + 1) if sc.task.fixed_duration else int(self.steps[m])
-            times = per_row[:self.stepped[m]].tolist()
+            k = int(self.stepped[m])
+            if k not in medians:
+                times = per_row[:k].tolist()
+                medians[k] = float(statistics.median(times) * 1e6) if times else None
             row.update({
                 "converged": conv,
                 "steps": settle,
@@ -278,7 +282,7 @@ class Book:
                 "final_orientation_error_deg": float(np.rad2deg(da[m])),
                 "stroke_violations": int(self.violations[m]),
                 "hidden_edge_periods": int(self.hidden[m]),
-                "step_time_us": float(statistics.median(times) * 1e6) if times else None,
+                "step_time_us": medians[k],
                 "failure": None if conv else fail,
             })
             if m in self.causes and not conv:
