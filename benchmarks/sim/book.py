@@ -16,6 +16,7 @@ import numpy as np
 
 from benchmarks.exceptions import BatchFailedError, user_message
 from benchmarks.sim.inputs import SimScenario
+from benchmarks.sim.reference import Targets
 from benchmarks.sim.tolerance import unconverged_reason
 from benchmarks.sim.world import TrialSetup
 from controllers.base import CommandBatch, ObservationBatch
@@ -56,14 +57,16 @@ class Book:
         record_trials: Trials with an index below this keep their time series.
         plant: The loop's plant (its true state; the tracking metrics sample its drive
             forces).
-        targets: ``(step, rows) -> (R, t)``: the pose each row is measured against.
+        targets: The pose each row is measured against
+            (:class:`~benchmarks.sim.reference.Targets`: ``(step, rows) -> (R, t)``, a
+            trajectory's durations).
         actuation: What the controller declared it commands.
         label: The controller's label.
         on_step: A live view's callback (:data:`OnStep`).
     """
 
     def __init__(self, sc: SimScenario, group: list[TrialSetup], record_trials: int,
-                 plant: Any, targets: Callable[[int, np.ndarray], tuple[np.ndarray, np.ndarray]],
+                 plant: Any, targets: Targets,
                  actuation: Actuation, label: str,
                  on_step: OnStep | None) -> None:
         from benchmarks.sim.tracking import Tracker
@@ -93,8 +96,8 @@ class Book:
         self.tail_seen = np.zeros((n, tail), dtype=bool)
         self.series: list[dict[str, list[Any]]] = [
             {k: [] for k in SERIES_KEYS} if rec else {} for rec in self.recording]
-        self.tracker = (Tracker(sc, group, self.pos_tol, self.ori_tol)
-                        if task.kind == "trajectory" else None)  # a trajectory's metrics
+        self.tracker = (Tracker(sc, targets.duration, self.pos_tol, self.ori_tol)
+                        if targets.duration is not None else None)  # a trajectory's metrics
         self.dt = sc.dt
         g = group[0].world.geometry
         self.stroke, self.max_speed = g.stroke, g.max_speed  # the true legs' limits [m, m/s]
@@ -124,22 +127,21 @@ class Book:
         ok = (dp < self.pos_tol) & (da < self.ori_tol)
         if self.tracker is not None:
             self.tracker.add(step, idx, dp, da)
-        self.settled[idx] = np.where(ok, self.settled[idx] + 1, 0)
         self.last_bad[idx[~ok]] = step
         task = self.task
-        if task.fixed_duration and step > self.tail_start:  # (columns: no row loop)
-            col = step - self.tail_start - 1
-            self.tail_pos[idx, col] = dp
-            self.tail_ori[idx, col] = da
-            self.tail_seen[idx, col] = True
-        if task.fixed_duration:
-            done = np.full(len(idx), step == task.max_steps)
+        if task.fixed_duration:  # every row runs to max_steps: no settling count
+            if step > self.tail_start:  # (columns: no row loop)
+                col = step - self.tail_start - 1
+                self.tail_pos[idx, col] = dp
+                self.tail_ori[idx, col] = da
+                self.tail_seen[idx, col] = True
             self.converged[idx] = ok
-        else:
-            done = self.settled[idx] >= task.settle_steps
-            self.converged[idx[done]] = True
-            if step == task.max_steps:
-                done[:] = True
+            return np.full(len(idx), step == task.max_steps)
+        self.settled[idx] = np.where(ok, self.settled[idx] + 1, 0)
+        done = self.settled[idx] >= task.settle_steps
+        self.converged[idx[done]] = True
+        if step == task.max_steps:
+            done[:] = True
         return done
 
     def observed(self, step: int, idx: np.ndarray, obs: ObservationBatch) -> np.ndarray:
@@ -255,6 +257,7 @@ class Book:
         dp, da = pose_error(R, t, R_goal, t_goal)
         out = []
         base = base_row(sc, spec, 0)
+        medians: dict[int, float | None] = {}  # [us], by the periods a row was commanded
         for m, s in enumerate(group):
             row = dict(base)
             row["trial"] = int(s.trial)
@@ -268,7 +271,10 @@ class Book:
                 fail = unconverged_reason(sc.task, float(dp[m] * 1e3),
                                           float(np.rad2deg(da[m])))
             settle = int(self.last_bad[m] + 1) if sc.task.fixed_duration else int(self.steps[m])
-            times = per_row[:self.stepped[m]].tolist()
+            k = int(self.stepped[m])
+            if k not in medians:
+                times = per_row[:k].tolist()
+                medians[k] = float(statistics.median(times) * 1e6) if times else None
             row.update({
                 "converged": conv,
                 "steps": settle,
@@ -276,7 +282,7 @@ class Book:
                 "final_orientation_error_deg": float(np.rad2deg(da[m])),
                 "stroke_violations": int(self.violations[m]),
                 "hidden_edge_periods": int(self.hidden[m]),
-                "step_time_us": float(statistics.median(times) * 1e6) if times else None,
+                "step_time_us": medians[k],
                 "failure": None if conv else fail,
             })
             if m in self.causes and not conv:

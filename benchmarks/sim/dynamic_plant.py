@@ -54,6 +54,8 @@ class DynamicPlant(Plant):
         self.per_leg = getattr(sc, "payload", None) is not None
         #: (N,) periods each trial has run.
         self.periods = np.zeros(len(group), dtype=int)
+        #: (N, 6) one encoder count per control period [m/s]: the leg rates' resolution.
+        self.rate_resolution = self.robots.resolution / self.dt
 
     def use_actuation(self, actuation: Actuation, label: str) -> None:
         """Drive the legs in the mode of ``actuation``: force (torque) mode for leg
@@ -70,8 +72,7 @@ class DynamicPlant(Plant):
         """The encoders' leg velocities (n, 6) [m/s]: the true leg rates quantised to one
         encoder count per control period (what a velocity estimate from the counts
         resolves)."""
-        r = self.robots
-        return quantise(r.leg_rates(rows), r.resolution[rows] / self.dt)
+        return quantise(self.robots.leg_rates(rows), self.rate_resolution[rows])
 
     def advance(self, run: np.ndarray, velocities: np.ndarray, dt: float
                 ) -> dict[int, str]:

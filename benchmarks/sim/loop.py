@@ -118,6 +118,12 @@ def closed_loop(plant: Any, sensor: Any, clock: CameraClock | None, controller: 
                 if stopped is exc:
                     raise
                 raise stopped from exc
+            if every and applied.all() and not ends.any():  # every row moves: no selections
+                norms = np.asarray(cmds.error_norm, dtype=float)
+                values = np.array(cmds.values, dtype=float)  # (the plant may keep rows)
+                book.period(step, idx, done, obs, norms, values)
+                book.advanced(step, idx, plant.advance(idx, values, dt))
+                continue
             norms[rows] = cmds.error_norm
             done[rows[ends]] = True
             values[rows[applied]] = cmds.values[applied]

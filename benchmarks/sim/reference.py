@@ -50,23 +50,31 @@ def trial_reference(sc: SimScenario, setup: TrialSetup) -> PoseTrajectory | None
 
 class Targets:
     """The pose each trial of a group is measured against at each period: its goal, or
-    its reference at ``step dt`` (sampled once on the control grid)."""
+    its reference at ``step dt`` (sampled once on the control grid).
+
+    Attributes:
+        duration: (n,) the references' durations [s] (a trajectory task), else None.
+    """
 
     def __init__(self, sc: SimScenario, group: list[TrialSetup]) -> None:
         self.rotation = np.array([s.goal_rotation for s in group])
         self.translation = np.array([s.goal_translation for s in group])
         self._grid: tuple[np.ndarray, np.ndarray] | None = None
+        self.duration: np.ndarray | None = None
         if sc.task.kind == "trajectory" and group:
             times = sc.dt * np.arange(sc.task.max_steps + 1)
-            samples = [trial_reference(sc, s).at(times) for s in group]  # type: ignore[union-attr]
-            self._grid = (np.array([r.rotation for r in samples]),
-                          np.array([r.translation for r in samples]))
+            references = [trial_reference(sc, s) for s in group]
+            self.duration = np.array([r.duration for r in references])  # type: ignore[union-attr]
+            samples = [r.at(times) for r in references]  # type: ignore[union-attr]
+            # time-major (a period's poses are one block of memory)
+            self._grid = (np.stack([r.rotation for r in samples], axis=1),
+                          np.stack([r.translation for r in samples], axis=1))
 
     def __call__(self, step: int, idx: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """(len(idx), 3, 3) rotations and (len(idx), 3) translations of rows ``idx``."""
         if self._grid is None:
             return self.rotation[idx], self.translation[idx]
-        return self._grid[0][idx, step], self._grid[1][idx, step]
+        return self._grid[0][step][idx], self._grid[1][step][idx]
 
 
 def task_batch_controller(sc: SimScenario, spec: Any, batched: bool = True) -> Any:

@@ -126,7 +126,8 @@ def run_trials(
 
 
 #: The trials drawn for the last scenario point: its scenario, calibration and the setups
-#: per tuple of trial indices (:func:`point_trials`; one point's at a time).
+#: per tuple of trial indices (:func:`point_trials`; one point's at a time), with the
+#: targets of its groups (:func:`point_targets`).
 _drawn: list[Any] = [None, None, {}]
 
 
@@ -152,6 +153,18 @@ def point_trials(sc: SimScenario, trials: list[int], calibrate: Calibrate | None
     return [m if isinstance(m, Exception) else own_copy(m) for m in _drawn[2][key]]
 
 
+def point_targets(sc: SimScenario, group: list[TrialSetup]) -> Targets:
+    """The :class:`~benchmarks.sim.reference.Targets` of a group of the point's drawn trials
+    (:func:`point_trials`), sampled once for every controller of the point (read only:
+    its calls return copies)."""
+    key = ("targets", *(s.trial for s in group))
+    if _drawn[0] is not sc:  # (trials not drawn by point_trials)
+        return Targets(sc, group)
+    if key not in _drawn[2]:
+        _drawn[2][key] = Targets(sc, group)
+    return _drawn[2][key]  # type: ignore[no-any-return]
+
+
 def own_copy(setup: T) -> T:
     """``setup`` (a dataclass) with its own copies of its writable arrays and dicts, and
     of those of the dataclasses it holds (a trial's world); read-only arrays and frozen
@@ -163,7 +176,8 @@ def own_copy(setup: T) -> T:
             changes[f.name] = value.copy()
         elif isinstance(value, dict):
             changes[f.name] = dict(value)
-        elif is_dataclass(value) and not isinstance(value, type):
+        elif (is_dataclass(value) and not isinstance(value, type)
+              and not type(value).__dataclass_params__.frozen):  # type: ignore[attr-defined]
             copied = own_copy(value)
             if copied is not value:
                 changes[f.name] = copied
@@ -259,7 +273,7 @@ class _Unit:
                 poses = KinematicPlant(q, R, t, A, E, g.stroke, g.max_speed)
                 plant = BackendPlant(opened, q, R, t, offsets, poses.solve_poses)
             plant.use_actuation(actuation, spec.label)
-            book = Book(sc, group, self.record_trials, plant, Targets(sc, group), actuation,
+            book = Book(sc, group, self.record_trials, plant, point_targets(sc, group), actuation,
                         spec.label, self.on_step)
             clock = CameraClock(sc, group, q, R, t, A, E) if clock_active(sc) else None
             closed_loop(plant, sensor, clock, controller, book, sc.dt, offsets,

@@ -14,8 +14,6 @@ from typing import Any
 import numpy as np
 
 from benchmarks.sim.inputs import SimScenario
-from benchmarks.sim.reference import trial_reference
-from benchmarks.sim.world import TrialSetup
 
 
 class Tracker:
@@ -23,20 +21,21 @@ class Tracker:
 
     Args:
         sc: The scenario (a trajectory task).
-        group: The trials.
+        duration: (n,) the trials' reference durations [s]
+            (:attr:`benchmarks.sim.reference.Targets.duration`).
         pos_tol: Position tolerance [m].
         ori_tol: Orientation tolerance [rad].
     """
 
-    def __init__(self, sc: SimScenario, group: list[TrialSetup], pos_tol: float,
+    def __init__(self, sc: SimScenario, duration: np.ndarray, pos_tol: float,
                  ori_tol: float) -> None:
-        n = len(group)
+        n = len(duration)
         self.dt = sc.dt
         self.last_step = sc.task.max_steps
         self.pos_tol = pos_tol
         self.ori_tol = ori_tol
-        self.duration = np.array([trial_reference(sc, s).duration  # type: ignore[union-attr]
-                                  for s in group])
+        self.duration = duration
+        self._moving_until = self.duration + 1e-12  # (a period at t <= this is moving)
         self.count = np.zeros(n, dtype=int)
         self.sum_dp2 = np.zeros(n)
         self.sum_da2 = np.zeros(n)
@@ -65,13 +64,14 @@ class Tracker:
     def add(self, step: int, idx: np.ndarray, dp: np.ndarray, da: np.ndarray) -> None:
         """One period of the rows ``idx``: position errors ``dp`` [m], orientation errors
         ``da`` [rad] from the reference."""
-        moving = step * self.dt <= self.duration[idx] + 1e-12
-        rows = idx[moving]
-        self.count[rows] += 1
-        self.sum_dp2[rows] += dp[moving] ** 2
-        self.sum_da2[rows] += da[moving] ** 2
-        self.max_dp[rows] = np.maximum(self.max_dp[rows], dp[moving])
-        self.max_da[rows] = np.maximum(self.max_da[rows], da[moving])
+        moving = step * self.dt <= self._moving_until[idx]
+        if moving.any():  # (none once every reference has ended)
+            rows = idx[moving]
+            self.count[rows] += 1
+            self.sum_dp2[rows] += dp[moving] ** 2
+            self.sum_da2[rows] += da[moving] ** 2
+            self.max_dp[rows] = np.maximum(self.max_dp[rows], dp[moving])
+            self.max_da[rows] = np.maximum(self.max_da[rows], da[moving])
         bad = (dp >= self.pos_tol) | (da >= self.ori_tol)
         self.last_bad[idx[bad]] = step
         if self.drive_forces is not None:

@@ -147,8 +147,9 @@ class DynamicRobots:
     def leg_rates(self, rows: np.ndarray) -> np.ndarray:
         """True leg rates ``q_dot = K twist`` (n, 6) [m/s] of ``rows`` at their present
         state: :meth:`DynamicModel.legs_batch` with each row's own geometry and inertia,
-        its input rows copied from a table of their constants packed once (only the
-        poses and twists are written each call; the same kernel on the same inputs).
+        its input rows taken from a table of their constants packed once (only the
+        poses and twists are written each call, into the table itself for consecutive
+        rows, else into a copy of their rows; the same kernel on the same inputs).
 
         Raises:
             ShapeError: A pose or twist of the rows is not finite (names the value).
@@ -156,18 +157,20 @@ class DynamicRobots:
         """
         from hexapod.dynamics import compiled as _c
         from hexapod.dynamics.model import checked_array
+        from hexapod.dynamics.robots_compiled import row_index
 
         if self._leg_rows is None:  # A, E, the inertia, u = 0: constant per row
             n = self.n
             self._leg_rows = _c.pack(self.R, self.t, self.twist, np.zeros((n, 6)), self.A,
                                      self.E, self.parameters)
-        x = self._leg_rows[rows]
+        index = row_index(rows)
+        x = self._leg_rows[index]  # (consecutive rows: a view, written in place)
         s = _c.INPUTS
-        R, t, twist = self.R[rows], self.t[rows], self.twist[rows]
+        R, t, twist = self.R[index], self.t[index], self.twist[index]
         x[:, s["R"]].reshape(-1, 3, 3)[:] = np.swapaxes(R, -1, -2)
         x[:, s["t"]] = t
         x[:, s["twist"]] = twist
-        if not np.isfinite(x).all():  # one check of the rows; the value named by checked_array
+        if not np.isfinite(x[:, :s["twist"].stop]).all():  # one check of the written blocks
             checked_array("R", R, (3, 3))
             checked_array("t", t, (3,))
             checked_array("twist", twist, (6,))

@@ -182,21 +182,27 @@ def new_table(robots: Any) -> np.ndarray:
     return x
 
 
-def _index(rows: np.ndarray) -> np.ndarray | slice:
+def row_index(rows: np.ndarray | slice) -> np.ndarray | slice:
     """``rows`` as a slice when they are consecutive (numpy copies a slice several times
-    faster than it gathers rows), else themselves."""
+    faster than it gathers rows, and a slice of a table is a view), else themselves."""
+    if isinstance(rows, slice):
+        return rows
     n = len(rows)
-    if n and rows[-1] - rows[0] == n - 1 and np.all(np.diff(rows) == 1):
-        return slice(int(rows[0]), int(rows[0]) + n)
+    if n:
+        first = int(rows[0])
+        if int(rows[-1]) - first == n - 1 and (rows[1:] - rows[:-1] == 1).all():
+            return slice(first, first + n)
     return rows
 
 
-def load_period(robots: Any, rows: np.ndarray, setpoints: np.ndarray, h: float) -> None:
-    """Write the period's inputs of ``rows`` into ``robots.table``: the poses (from the
-    caller's ``R`` and ``t``), the setpoints, the step and the drive mode."""
+def load_period(robots: Any, rows: np.ndarray | slice, setpoints: np.ndarray, h: float
+                ) -> None:
+    """Write the period's inputs of ``rows`` (indices or a slice) into ``robots.table``:
+    the poses (from the caller's ``R`` and ``t``), the setpoints, the step and the drive
+    mode."""
     table = robots.table
     L = LAYOUT
-    rows = _index(rows)  # type: ignore[assignment]
+    rows = row_index(rows)
     table[rows, L["R"]] = np.swapaxes(robots.R[rows], -1, -2).reshape(-1, 9)
     table[rows, L["t"]] = robots.t[rows]
     table[rows, L["setpoint"]] = setpoints
@@ -217,7 +223,8 @@ def advance_compiled(robots: Any, rows: np.ndarray, setpoints: np.ndarray, h: fl
     """:meth:`hexapod.dynamics.robots.DynamicRobots.advance` in C, in place in
     ``robots.table``; returns the (n,) mask of rows whose state is not finite after the
     period (left unchanged)."""
-    load_period(robots, rows, setpoints, h)
+    index = row_index(rows)
+    load_period(robots, index, setpoints, h)
     table = robots.table
     check = LAYOUT["setpoint"].start  # the state: pose, twist, integral
     lanes = period_lanes()
@@ -227,7 +234,7 @@ def advance_compiled(robots: Any, rows: np.ndarray, setpoints: np.ndarray, h: fl
         y = period_function(steps).batch(table[rows])
         bad = ~np.all(np.isfinite(y[:, :check]), axis=1)
         table[rows[~bad]] = y[~bad]
-    ok = _index(rows[~bad] if bad.any() else rows)
+    ok = row_index(rows[~bad]) if bad.any() else index
     robots.R[ok] = np.swapaxes(table[ok, LAYOUT["R"]].reshape(-1, 3, 3), -1, -2)
     robots.t[ok] = table[ok, LAYOUT["t"]]
     if robots.drives.mode == "velocity":

@@ -86,3 +86,24 @@ def test_a_points_trials_are_drawn_once_for_all_its_controllers(
     assert rows(fresh=False) == alone
     assert calls == [trials]
     assert len(sc.controllers) == 5
+
+
+def test_a_points_targets_are_sampled_once_for_all_its_controllers() -> None:
+    """The second controller's book measures against the targets sampled for the first
+    (the same object), equal to targets sampled afresh; another point samples its own."""
+    from benchmarks.sim.reference import Targets
+
+    point = load_scenario("paccot2008-tracking").with_overrides(trials=2).expand()[0]
+    group = stepper.point_trials(point, [0, 1])
+    first = stepper.point_targets(point, group)
+    again = stepper.point_trials(point, [0, 1])
+    assert stepper.point_targets(point, again) is first
+    fresh = Targets(point, group)
+    rows = np.arange(2)
+    for step in (0, 17, point.task.max_steps):
+        for a, b in zip(first(step, rows), fresh(step, rows), strict=True):
+            assert np.array_equal(a, b)
+    assert first.duration is not None and np.array_equal(first.duration, fresh.duration)
+    other = point.with_overrides(seed=2)
+    assert stepper.point_targets(other, stepper.point_trials(other, [0, 1])) is not first
+    stepper.forget_trials()

@@ -12,6 +12,7 @@ import pytest
 
 from benchmarks.exceptions import ScenarioError
 from benchmarks.sim import run_trials
+from benchmarks.sim.reference import Targets
 from benchmarks.sim.tracking import Tracker
 from benchmarks.study.scenario import parse_scenario
 from tests.benchmarks.sim.test_engine import _compare, _rows
@@ -92,7 +93,7 @@ def test_tracker_settling_time() -> None:
     """A hand-made error history: out of tolerance until 0.3 s after the reference's end."""
     sc = _scenario({"shape": "circle", "max_steps": 400})
     setups = _setups(sc, 1)
-    tr = Tracker(sc, setups, pos_tol=1e-4, ori_tol=1e-3)
+    tr = Tracker(sc, Targets(sc, setups).duration, pos_tol=1e-4, ori_tol=1e-3)
     end = tr.duration[0]
     idx = np.array([0])
     for step in range(sc.task.max_steps + 1):
