@@ -208,8 +208,8 @@ class TaskRows:
             return np.arange(n)
         Y, _ = evaluate_rows(first.function, X, inputs["pose"], outputs["pose"],
                              outputs.index("fk_residual"), first.tolerance, FK_MAX_CALLS)
-        a = np.flatnonzero(accepted_rows(Y, outputs.index("status"), outputs["factor"],
-                                         threshold))
+        a = np.flatnonzero(accepted_rows(Y, outputs.index("status"), outputs["screen"],
+                                         outputs["factor"], threshold))
         if not len(a):
             return np.arange(n)
         if len(a) == len(rows):  # the common case: every row accepted (no copies)
