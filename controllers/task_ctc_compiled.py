@@ -93,14 +93,15 @@ class CompiledTaskStep:
         return task_step(self.kind, self.fk, INVERSE_TOLERANCE)
 
     def adopt(self, row: np.ndarray, guessed: np.ndarray, steps: np.ndarray) -> None:
-        """Take the input row ``row`` (n_in,) (used in place: its own, or a row of its
-        batch's matrix, its values there already; the compiled function is bound to it
-        when the step first evaluates it itself, :attr:`bound`), with the flag whether
-        its pose block holds a pose found (1,) and the count of commands (1,) (own or the
-        batch's)."""
-        #: The input row (written in place, evaluated without a copy).
-        self.row = row
-        self._bound: BoundCall | None = None
+        """Bind the compiled function to the input row ``row`` (n_in,) (used in place:
+        its own, or a row of its batch's matrix, its values there already), with the
+        flag whether its pose block holds a pose found (1,) and the count of commands
+        (1,) (own or the batch's)."""
+        self.bound: BoundCall = self.function.bind(row)
+        #: The input row (the bound one: written in place, evaluated without a copy).
+        self.row = self.bound.x
+        #: Its views by block (:func:`~controllers.solvers.compiled_task_ctc.layout`).
+        self.views = self.bound.inputs
         #: Whether the ``pose`` block holds a pose found (1.0) or the home pose (0.0).
         self.guessed = guessed
         #: Commands given by the step (the law's ``compiled_steps``).
@@ -108,24 +109,10 @@ class CompiledTaskStep:
         #: The task rows the last prepared step uses (None: all).
         self.used: np.ndarray | None = None
 
-    @property
-    def bound(self) -> BoundCall:
-        """The compiled function bound to :attr:`row` (bound on first use: a row the
-        batch steps never needs it)."""
-        if self._bound is None:
-            self._bound = self.function.bind(self.row)
-        return self._bound
-
-    @property
-    def views(self) -> dict[str, np.ndarray]:
-        """The views of :attr:`row` by block (:func:`~controllers.solvers.
-        compiled_task_ctc.layout`)."""
-        return self.bound.inputs
-
     def __getstate__(self) -> dict[str, object]:
         """Picklable: the function and its binding (ctypes) are rebuilt on unpickling."""
         state = self.__dict__.copy()
-        for key in ("function", "_bound", "row", "guessed", "steps"):
+        for key in ("function", "bound", "row", "views", "guessed", "steps"):
             del state[key]
         state["_arrays"] = (self.row.copy(), self.guessed.copy(), self.steps.copy())
         return state
@@ -143,14 +130,14 @@ class CompiledTaskStep:
         found (the home pose is in the row)."""
         if not self.guessed[0]:
             return None
-        pose = self.row[self.inputs["pose"]]
+        pose = self.views["pose"]
         return pose[0:9].reshape(3, 3).T.copy(), pose[9:12].copy()
 
     @guess.setter
     def guess(self, pose: tuple[np.ndarray, np.ndarray] | None) -> None:
         """Set the next step's pose guess (None: the home pose)."""
         R0, t0 = self.home if pose is None else pose
-        pose_in = self.row[self.inputs["pose"]]
+        pose_in = self.views["pose"]
         pose_in[0:9] = np.asarray(R0).T.ravel()
         pose_in[9:12] = t0
         self.guessed[0] = 0.0 if pose is None else 1.0
