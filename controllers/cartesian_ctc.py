@@ -259,8 +259,9 @@ class VisionCTC(CartesianCTC):
         if observations.directions is None or np.shape(observations.directions)[1:] != (6, 3):
             return np.zeros(len(rows), dtype=bool)
         u, fast = seen_rows(observations.directions, observations.direction_visible, rows)
-        X[fast, step.inputs["directions"]] = u[fast]
-        X[fast, step.inputs["seen"]] = 1.0
+        every = slice(None) if fast.all() else fast  # (a slice: no copies)
+        X[every, step.inputs["directions"]] = u[every]
+        X[every, step.inputs["seen"]] = 1.0
         return fast
 
     def batch_partly_seen(self, rows_batch: TaskRows, step: CompiledTaskStep, X: np.ndarray,

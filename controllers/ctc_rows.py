@@ -71,41 +71,23 @@ def rank_condition(factor: np.ndarray, threshold: float) -> float | None:
     return math.sqrt(w_max) / math.sqrt(w_min)
 
 
-def accepted_rows(Y: np.ndarray, status: int, factor: slice, threshold: float) -> np.ndarray:
+def accepted_rows(Y: np.ndarray, status: int, screen: slice, factor: slice,
+                  threshold: float) -> np.ndarray:
     """(n,) the output rows ``Y`` (n, n_out) that are commands: their kernel's ``status``
     0 (converged, solved, every value finite, enough rows or legs seen:
     :mod:`controllers.ctc_status`) and ``L^T L`` of full rank. The rank test of
-    :func:`rank_condition` (LAPACK ``syevd`` row by row) decides every row that is not
-    clearly above its threshold (four times it) by a screen of all the rows at once: a
-    lower bound of the smallest eigenvalue from a Cholesky factor (:func:`clear_rank`),
-    else the eigenvalues themselves (``numpy.linalg.eigvalsh``)."""
+    :func:`rank_condition` (LAPACK ``syevd`` row by row) decides only the rows the
+    kernel's ``screen`` (:func:`~controllers.law_algebra.rank_screen`:
+    ``det`` and ``trace`` of ``L^T L``) does not clear: ``lambda_min >= det / trace^5``,
+    so ``det > 4 threshold^2 trace^6`` puts the row far above the threshold (a loose
+    bound: it clears a row only where the exact test agrees, whatever the rounding)."""
     ok = Y[:, status] == 0.0
-    idx = np.flatnonzero(ok)
-    if len(idx):
-        clear = clear_rank(Y[idx, factor].reshape(-1, 6, 6), 4.0 * threshold**2)
-        for j in idx[~clear].tolist():
-            ok[j] = rank_condition(Y[j, factor], threshold) is not None
-    return ok  # type: ignore[no-any-return]
-
-
-def clear_rank(M: np.ndarray, ratio: float) -> np.ndarray:
-    """(m,) which of the symmetric positive semi-definite matrices ``M`` (m, 6, 6) have
-    their smallest eigenvalue surely above ``ratio`` times their largest (False: not
-    known). With a Cholesky factor ``M = C C^T``: ``det M = prod(diag C)^2`` and
-    ``lambda_max <= trace M``, so ``lambda_min >= det M / trace^5`` and
-    ``det M > ratio trace^6`` suffices (a loose bound: it says True only far from the
-    threshold, where the exact test agrees); when a matrix has no Cholesky factor, the
-    eigenvalues of every matrix decide (``numpy.linalg.eigvalsh``)."""
-    try:
-        C = np.linalg.cholesky(M)
-    except np.linalg.LinAlgError:
-        w = np.linalg.eigvalsh(M)
-        return (w[:, -1] > 0) & (w[:, 0] > ratio * w[:, -1])  # type: ignore[no-any-return]
-    d = np.diagonal(C, axis1=1, axis2=2)
-    det = np.prod(d * d, axis=1)
-    trace = np.trace(M, axis1=1, axis2=2)
+    det, trace = Y[:, screen.start], Y[:, screen.start + 1]
     with np.errstate(over="ignore", invalid="ignore"):
-        return (trace > 0) & (det > ratio * trace**6)  # type: ignore[no-any-return]
+        clear = (trace > 0) & (det > 4.0 * threshold**2 * trace**6)
+    for j in np.flatnonzero(ok & ~clear).tolist():
+        ok[j] = rank_condition(Y[j, factor], threshold) is not None
+    return ok  # type: ignore[no-any-return]
 
 
 def norms(e: np.ndarray) -> np.ndarray:
@@ -186,5 +168,5 @@ def stale(rows: Any, laws: list[Any]) -> bool:
     return rows is None or getattr(rows, "laws", None) is not laws
 
 
-__all__ = ["FK_MAX_CALLS", "accepted_rows", "clear_rank", "evaluate_rows", "newton_calls",
+__all__ = ["FK_MAX_CALLS", "accepted_rows", "evaluate_rows", "newton_calls",
            "norms", "over_limits", "rank_condition", "refusal", "stale"]

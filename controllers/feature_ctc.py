@@ -294,8 +294,9 @@ class FeatureCTC(TaskComputedTorque):
             known = law.reference_grid()[2][at[j]]
             masks[j] = masks[j] & known if j in masks else known.copy()
         if fast.any():
-            X[fast, step.inputs["mask"]] = 1.0
-            X[fast, step.inputs["reference_features"]] = references[fast]
+            every = slice(None) if fast.all() else fast  # (a slice: no copies)
+            X[every, step.inputs["mask"]] = 1.0
+            X[every, step.inputs["reference_features"]] = references[every]
         if masks:
             kept = np.fromiter(masks, dtype=int, count=len(masks))
             X[kept, step.inputs["mask"]] = np.array(list(masks.values()))
@@ -400,8 +401,9 @@ class LegEdgeCTC(FeatureCTC):
         if observations.normals is None:
             return np.zeros(len(rows), dtype=bool)
         n, fast = seen_rows(observations.normals, observations.edge_visible, rows)
-        X[fast, step.inputs["normals"]] = n[fast]
-        X[fast, step.inputs.index("of_normals")] = 1.0
+        every = slice(None) if fast.all() else fast  # (a slice: no copies)
+        X[every, step.inputs["normals"]] = n[every]
+        X[every, step.inputs.index("of_normals")] = 1.0
         return fast
 
     def batch_partly_seen(self, step: CompiledTaskStep, X: np.ndarray,

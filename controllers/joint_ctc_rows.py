@@ -33,7 +33,8 @@ GRID_TIME_TOLERANCE = 1e-9
 #: :data:`compiled_ctc.OUTPUTS`), looked up once.
 DESIRED, POSE_IN = compiled_ctc.INPUTS["desired"], compiled_ctc.INPUTS["pose"]
 Q_IN, QD_IN = compiled_ctc.INPUTS["q"], compiled_ctc.INPUTS["q_dot"]
-POSE_OUT, FACTOR, FORCES = (compiled_ctc.OUTPUTS[k] for k in ("pose", "factor", "forces"))
+POSE_OUT, FACTOR, FORCES, SCREEN = (compiled_ctc.OUTPUTS[k]
+                                     for k in ("pose", "factor", "forces", "screen"))
 RESIDUAL, STATUS = (compiled_ctc.OUTPUTS.index(k) for k in ("fk_residual", "status"))
 #: The columns of a quintic's row (21,): started (1.0 or 0.0), ``t0`` [s], duration
 #: ``T`` [s], ``q0`` (6) [m], ``q* - q0`` (6) [m], ``q*`` (6) [m].
@@ -250,7 +251,7 @@ class JointRows:
         rows_in = X[at].copy() if isinstance(at, slice) else X[at]  # Newton moves its guesses
         Y, _ = evaluate_rows(self.function, rows_in, POSE_IN, POSE_OUT, RESIDUAL,
                              compiled_ctc.FK_TOLERANCE, FK_MAX_CALLS)
-        accepted = accepted_rows(Y, STATUS, FACTOR, threshold)
+        accepted = accepted_rows(Y, STATUS, SCREEN, FACTOR, threshold)
         if accepted.all():  # every row: the slices of the batch's arrays
             ka, ta, Ya, e_rows, qd_a, desired_a = rows, at, Y, q, qd, desired
         else:

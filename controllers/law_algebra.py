@@ -1,8 +1,9 @@
 """The algebra shared by the compiled law cores (:mod:`controllers.law_kernel`), as CasADi
 SX expressions: an unrolled Cholesky solve, the cyclic Jacobi eigen-decomposition of a
-symmetric 6 x 6 matrix, the full-rank certificate of the lean cores, and the law part
-every feature kind shares (:func:`law_tail`: gain, rank, condition, damped solve,
-inverse Jacobian, ``q_dot``)."""
+symmetric 6 x 6 matrix, the full-rank certificate of the lean cores, the rank screen of
+the computed-torque steps (:func:`rank_screen`), and the law part every feature kind
+shares (:func:`law_tail`: gain, rank, condition, damped solve, inverse Jacobian,
+``q_dot``)."""
 
 from __future__ import annotations
 
@@ -120,6 +121,23 @@ def full_rank_certificate(N: ca.SX, thr2: ca.SX) -> ca.SX:
 
     _cholesky([[N[i, j] - c if i == j else N[i, j] for j in range(6)] for i in range(6)], pivot)
     return ca.if_else(ok[0], 1.0, 0.0)
+
+
+def rank_screen(N: ca.SX) -> ca.SX:
+    """(2,) the rank screen of the computed-torque steps' ``N = L^T L`` (symmetric 6 x 6):
+    ``det N`` when every pivot of its Cholesky factorisation is positive (their product;
+    else 0), and ``trace N``. As ``w_min >= det / trace^5``,
+    :func:`controllers.ctc_rows.accepted_rows` clears a row with ``det > 4 thr^2
+    trace^6``: far above the threshold, where rounding cannot matter (the other rows get
+    the exact test)."""
+    ok, det = [ca.SX(1.0)], [ca.SX(1.0)]
+
+    def pivot(d: ca.SX) -> ca.SX:
+        ok[0], det[0] = ca.logic_and(ok[0], d > 0), det[0] * d
+        return ca.sqrt(ca.if_else(d > 0, d, 1.0))
+
+    _cholesky([[N[i, j] for j in range(6)] for i in range(6)], pivot)
+    return ca.vertcat(ca.if_else(ok[0], det[0], 0.0), ca.trace(N))
 
 
 def law_tail(e: ca.SX, N: ca.SX, b: ca.SX, directions: list[ca.SX], base_points: list[ca.SX],

@@ -208,12 +208,14 @@ class TaskRows:
             return np.arange(n)
         Y, _ = evaluate_rows(first.function, X, inputs["pose"], outputs["pose"],
                              outputs.index("fk_residual"), first.tolerance, FK_MAX_CALLS)
-        a = np.flatnonzero(accepted_rows(Y, outputs.index("status"), outputs["factor"],
-                                         threshold))
-        slow = np.ones(n, dtype=bool)
+        a = np.flatnonzero(accepted_rows(Y, outputs.index("status"), outputs["screen"],
+                                         outputs["factor"], threshold))
         if not len(a):
-            return np.flatnonzero(slow)
-        ka, ta, Ya = rows[a], trials[a], Y[a]
+            return np.arange(n)
+        if len(a) == len(rows):  # the common case: every row accepted (no copies)
+            ka, ta, Ya = rows, trials, Y
+        else:
+            ka, ta, Ya = rows[a], trials[a], Y[a]
         F, P, E = Ya[:, outputs["forces"]], Ya[:, outputs["pose"]], Ya[:, outputs["error"]]
         self.X[ta, inputs["pose"]] = P  # the next steps' guesses
         self.guessed[ta] = 1.0
@@ -222,8 +224,10 @@ class TaskRows:
         out.forces[ka] = F
         out.error_norm[ka] = np.sqrt(norms(E))
         over = over_limits(F, self.limit[ta])
-        position = {j: i for i, j in enumerate(a.tolist())}  # accepted row of a row
-        used_a = {position[j]: u for j, u in used.items() if j in position}
+        used_a: dict[int, np.ndarray] = {}
+        if used:  # the accepted row of a row
+            position = {j: i for i, j in enumerate(a.tolist())}
+            used_a = {position[j]: u for j, u in used.items() if j in position}
         self._integrate(ta, E, over, used_a)
         for i in np.flatnonzero(over).tolist():  # over a limit: the law's strategy
             out.forces[ka[i]] = self.laws[int(ta[i])].limited(
@@ -231,6 +235,9 @@ class TaskRows:
         for i, u in used_a.items():  # the norms of the rows used
             e = E[i][u]
             out.error_norm[ka[i]] = math.sqrt(e.dot(e))
+        if len(ka) == n:
+            return np.zeros(0, dtype=np.int64)
+        slow = np.ones(n, dtype=bool)
         slow[ka] = False
         return np.flatnonzero(slow)
 

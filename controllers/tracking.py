@@ -83,15 +83,16 @@ def reference_goals(context: ControllerContext, times: np.ndarray,
 
         seen, visible = observe_edges(camera, context.geometry, sample.rotation,
                                       sample.translation)
-        normals = np.where(visible[..., None], seen, np.nan)
+        normals = np.array(seen) if visible.all() else np.where(visible[..., None], seen,
+                                                                   np.nan)
         with np.errstate(invalid="ignore"):
             if wanted("lines"):
                 out["lines"] = (camera.normal_to_line(normals)
                                 if getattr(camera, "kind", None) == "perspective" else None)
             if wanted("directions"):
                 both = np.asarray(visible.all(axis=-1))
-                out["directions"] = np.where(both[..., None], directions_from_edges(normals),
-                                             np.nan)
+                u = directions_from_edges(normals)
+                out["directions"] = u if both.all() else np.where(both[..., None], u, np.nan)
         if wanted("normals"):
             out["normals"] = normals
         if wanted("edge_visible"):
@@ -112,10 +113,12 @@ def anchor_goals(goals: dict[str, Any], taught: Goal) -> None:
         if s_taught.shape != model.shape[1:]:
             continue
         with np.errstate(invalid="ignore"):
-            shifted = s_taught + (model - model[-1])
-            shifted /= np.linalg.norm(shifted, axis=-1, keepdims=True)
+            shifted = model - model[-1]
+            shifted += s_taught  # (a sum commutes: s_taught + (model - model[-1]))
+            x, y, z = shifted[..., 0], shifted[..., 1], shifted[..., 2]
+            shifted /= np.sqrt(x * x + y * y + z * z)[..., None]  # np.linalg.norm's sums
         known = np.all(np.isfinite(s_taught), axis=-1)
-        goals[key] = np.where(known[..., None], shifted, model)
+        goals[key] = shifted if known.all() else np.where(known[..., None], shifted, model)
 
 
 @dataclass

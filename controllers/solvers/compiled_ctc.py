@@ -29,6 +29,7 @@ from functools import lru_cache
 import casadi as ca
 
 from controllers.ctc_status import Status
+from controllers.law_algebra import rank_screen
 from hexapod.compiled import CompiledFunction, Layout
 from hexapod.dynamics import compiled as dyn
 from hexapod.dynamics.drive_model import COULOMB_SMOOTHING
@@ -46,7 +47,8 @@ INPUTS = Layout([("pose", 12), ("q", 6), ("q_dot", 6), ("desired", (3, 6)), *MOD
                  ("gains", 2)], "joint-space computed-torque input")
 #: Its output row.
 OUTPUTS = Layout([("pose", 12), ("factor", (6, 6)), ("forces", 6), ("fk_residual", 1),
-                  ("solved", 1), ("status", 1)], "joint-space computed-torque output")
+                  ("solved", 1), ("status", 1), ("screen", 2)],
+                 "joint-space computed-torque output")
 #: Forward-kinematics tolerance on the length residual [m] (as :func:`forward_kinematics`):
 #: the step's status is ``NOT_CONVERGED`` above it.
 FK_TOLERANCE = 1e-12
@@ -125,8 +127,10 @@ def _build(inverse_tolerance: float) -> ca.Function:
     f = f + v["rotor"] * a + v["viscous"] * qd + v["coulomb"] * ca.tanh(
         qd_s / COULOMB_SMOOTHING)
     fk_residual = ca.mmax(ca.fabs(residual))
-    out = ca.vertcat(R_t, ca.reshape(K.T @ K, 36, 1), f, fk_residual, inverse_solved)
-    out = ca.vertcat(out, sx_status(fk_residual, FK_TOLERANCE, inverse_solved, out))
+    KtK = K.T @ K
+    out = ca.vertcat(R_t, ca.reshape(KtK, 36, 1), f, fk_residual, inverse_solved)
+    out = ca.vertcat(out, sx_status(fk_residual, FK_TOLERANCE, inverse_solved, out),
+                     rank_screen(KtK))
     return ca.Function("hexapod_ctc_joint_step", [x], [ca.cse(out)])
 
 

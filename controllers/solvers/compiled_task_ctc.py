@@ -42,6 +42,7 @@ from functools import lru_cache
 import casadi as ca
 
 from controllers.ctc_status import Status
+from controllers.law_algebra import rank_screen
 from controllers.solvers.compiled_ctc import (
     FK_TOLERANCE,
     MODEL_BLOCKS,
@@ -75,11 +76,12 @@ def task_layouts(name: str, extra: Sequence[tuple[str, Shape]], m: int
     """The input and output layouts of a task step of ``m`` task rows (module docstring):
     :data:`COMMON_INPUTS`, the task's own blocks ``extra``, then the ``integral`` term
     (``m``); the outputs ``pose``, ``K``, ``fk_residual``, ``forces``, ``solved``,
-    ``error`` (``m``), ``factor`` and ``status`` (:func:`~controllers.solvers.
-    compiled_ctc.sx_status`). A plugin's step (:mod:`controllers.features.ctc_step`)
-    has them too, so :class:`~controllers.task_ctc_compiled.CompiledTaskStep` drives it."""
+    ``error`` (``m``), ``factor``, ``status`` (:func:`~controllers.solvers.
+    compiled_ctc.sx_status`) and the rank ``screen`` (:func:`~controllers.law_algebra.
+    rank_screen`). A plugin's step (:mod:`controllers.features.ctc_step`) has them too,
+    so :class:`~controllers.task_ctc_compiled.CompiledTaskStep` drives it."""
     out = (("pose", 12), ("K", 36), ("fk_residual", 1), ("forces", 6), ("solved", 1),
-           ("error", m), ("factor", (6, 6)), ("status", 1))
+           ("error", m), ("factor", (6, 6)), ("status", 1), ("screen", 2))
     return (Layout((*COMMON_INPUTS, *extra, ("integral", m)), name + " input"),
             Layout(out, name + " output"))
 
@@ -235,9 +237,11 @@ def sx_task_outputs(v: dict[str, ca.SX], R_t: ca.SX, fk_residual: ca.SX,
     if mask is not None:
         few = ca.if_else(ca.sum1(mask) < 6, float(Status.TOO_FEW_ROWS), 0.0)
         problem = few if problem is None else ca.if_else(problem == 0.0, few, problem)
+    normal = factor.T @ factor
     out = ca.vertcat(R_t, ca.reshape(K, 36, 1), fk_residual, f, solved, e,
-                     ca.reshape(factor.T @ factor, 36, 1))
-    return ca.vertcat(out, sx_status(fk_residual, tolerance, solved, out, problem))
+                     ca.reshape(normal, 36, 1))
+    return ca.vertcat(out, sx_status(fk_residual, tolerance, solved, out, problem),
+                      rank_screen(normal))
 
 
 @lru_cache(maxsize=8)

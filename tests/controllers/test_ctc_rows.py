@@ -240,10 +240,16 @@ def test_rows_with_a_hidden_leg_go_through_the_one_call(geometry: HexapodGeometr
 
 def test_the_rank_screen_clears_only_rows_the_exact_test_accepts(
         rng: np.random.Generator) -> None:
-    """:func:`~controllers.ctc_rows.clear_rank` says True only where the exact test
-    (:func:`~controllers.ctc_rows.rank_condition`) accepts, on ``L^T L`` of every
-    condition from well posed to beyond the threshold; the well-posed ones are cleared."""
-    from controllers.ctc_rows import clear_rank, rank_condition
+    """The kernels' rank screen (:func:`~controllers.law_algebra.rank_screen`,
+    read by :func:`~controllers.ctc_rows.accepted_rows`) clears a row only where the
+    exact test (:func:`~controllers.ctc_rows.rank_condition`) accepts, on ``L^T L`` of
+    every condition from well posed to beyond the threshold (and the zero matrix, and
+    one with a NaN); the well-posed ones are cleared, and the rows it leaves get the
+    exact test."""
+    import casadi as ca
+
+    from controllers.ctc_rows import accepted_rows, rank_condition
+    from controllers.law_algebra import rank_screen
 
     threshold = 1e-6
     mats, conditions = [], []
@@ -255,13 +261,22 @@ def test_the_rank_screen_clears_only_rows_the_exact_test_accepts(
         mats.append(L.T @ L)
         conditions.append(cond)
     M = np.array(mats)
-    M[5] = 0.0  # no Cholesky factor: the eigenvalues decide every row
-    for screen in (clear_rank(M, 4.0 * threshold**2), clear_rank(M[6:], 4.0 * threshold**2)):
-        exact = np.array([rank_condition(m.ravel(), threshold) is not None
-                          for m in M[len(M) - len(screen):]])
-        assert not (screen & ~exact).any()
-    well = np.array(conditions[6:]) < 10.0
-    assert clear_rank(M[6:], 4.0 * threshold**2)[well].all()
+    M[5] = 0.0
+    M[4, 2, 3] = M[4, 3, 2] = np.nan
+    F = ca.SX.sym("F", 6, 6)
+    screen_of = ca.Function("screen", [F], [rank_screen(F)])
+    Y = np.zeros((len(M), 39))  # status 0, then the screen, then L^T L
+    Y[:, 1:3] = [np.asarray(screen_of(m)).ravel() for m in M]
+    Y[:, 3:] = M.reshape(len(M), 36)
+    det, trace = Y[:, 1], Y[:, 2]
+    with np.errstate(invalid="ignore", over="ignore"):
+        clear = (trace > 0) & (det > 4.0 * threshold**2 * trace**6)
+    exact = np.array([rank_condition(m.ravel(), threshold) is not None for m in M])
+    assert not (clear & ~exact).any()
+    assert clear[6:][np.array(conditions[6:]) < 10.0].all()
+    assert not clear[4] and not clear[5]
+    assert (accepted_rows(Y, 0, slice(1, 3), slice(3, 39), threshold) == exact).all()
+    assert exact.sum() > clear.sum() > 100  # both kinds of rows met
 
 
 def test_the_norms_of_many_rows_are_each_rows_dot(rng: np.random.Generator) -> None:
