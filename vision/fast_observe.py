@@ -191,7 +191,7 @@ def observe_batch(params: WorldParams, rotations: np.ndarray, translations: np.n
     """
     rows = params.pack(rotations, translations, items)
     n = rows.shape[0]
-    lib = kernels._load()
+    lib = kernels.library()
     if lib is None or not params.compiled:
         idx = np.arange(len(params.leg_radius)) if items is None else np.asarray(items)
         return _observe_numpy(params, rows, idx, n_samples, min_fraction, occlusion)
@@ -223,7 +223,7 @@ def segments_certainly_imaged(camera: Any, segments: np.ndarray) -> np.ndarray:
     Raises:
         RuntimeError: The C core is not available.
     """
-    lib = kernels._load()
+    lib = kernels.library()
     if lib is None:
         raise RuntimeError("the vision kernels are not compiled (no C compiler?)")
     seg = np.ascontiguousarray(segments, dtype=float).reshape(-1, 6)

@@ -150,6 +150,13 @@ def available() -> bool:
     return _load() is not None
 
 
+def library() -> ctypes.CDLL | None:
+    """The compiled cores' library, its functions typed (compiled on the first call), or
+    None without a compiler or with ``HEXAPOD_NO_COMPILE=1`` (the callers then run their
+    numpy path)."""
+    return _load()
+
+
 def _c(a: np.ndarray, dtype: type) -> np.ndarray:
     return np.ascontiguousarray(a, dtype=dtype)
 

@@ -82,7 +82,7 @@ def directions_from_edges(normals: np.ndarray) -> np.ndarray:
     (NaN where the normals are NaN or parallel), in one C call when compiled
     (``vision/csrc/sensor_kernels.c``: the numpy path's bits)."""
     n = np.asarray(normals, dtype=float)
-    lib = kernels._load()
+    lib = kernels.library()
     if lib is not None and n.shape[-2:] == (2, 3):  # the same bits, one C call
         n = np.ascontiguousarray(n)
         out = np.empty((*n.shape[:-2], 3))

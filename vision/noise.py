@@ -236,7 +236,7 @@ def rotation_noise_batch(
                              strict=True):
             g.standard_normal(out=ax)
             g.random(out=fr)
-    lib = kernels._load()
+    lib = kernels.library()
     if lib is not None and (fused := _rotation_mode(lib)) is not None:  # same bits, in C
         v = np.ascontiguousarray(v)
         out = np.empty_like(v)

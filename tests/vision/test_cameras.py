@@ -479,7 +479,7 @@ def test_lines_and_normals_are_the_numpy_paths_bitwise(
         normals_to_lines,
     )
 
-    lib = kernels._load()
+    lib = kernels.library()
     fused = None if lib is None else _lines_mode(lib)
     assert fused is not None  # compiled, and this machine's BLAS sums as one of its modes
     cams = [PerspectiveCamera(_K(fx=700.0 + 5 * k, cy=240.0 + 0.1 * k, s=0.01 * k), 1024,

@@ -213,7 +213,7 @@ def test_rotation_noise_compiled_arithmetic_is_the_numpy_paths() -> None:
     angles below 1e-6 rad (exp_so3's series) and up to 3 rad."""
     from vision import kernels, noise
 
-    lib = kernels._load()
+    lib = kernels.library()
     assert lib is not None  # the test machines compile C kernels
     fused = noise._rotation_mode(lib)
     assert fused is not None  # this machine's BLAS sums as one of the kernel's modes
@@ -249,7 +249,7 @@ def test_rotation_noise_batch_takes_the_compiled_arithmetic(
     rng = np.random.default_rng(12)
     v = rng.normal(size=(40, 6, 2, 3))
     v /= np.linalg.norm(v, axis=-1, keepdims=True)
-    lib = kernels._load()
+    lib = kernels.library()
     assert lib is not None
     calls: list[int] = []
 

@@ -214,7 +214,7 @@ def lines_and_normals(normals: np.ndarray, matrices: np.ndarray,
     """
     from vision import kernels
 
-    lib = kernels._load()
+    lib = kernels.library()
     fused = None if lib is None else _lines_mode(lib)
     n = as_points(normals, "normals")
     M = np.asarray(matrices, dtype=float)
