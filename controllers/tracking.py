@@ -47,6 +47,7 @@ from controllers.data import (
 )
 from controllers.exceptions import ContextError
 from hexapod.actuation import Actuation
+from hexapod.se3 import norms
 
 
 def reference_goals(context: ControllerContext, times: np.ndarray,
@@ -115,8 +116,7 @@ def anchor_goals(goals: dict[str, Any], taught: Goal) -> None:
         with np.errstate(invalid="ignore"):
             shifted = model - model[-1]
             shifted += s_taught  # (a sum commutes: s_taught + (model - model[-1]))
-            x, y, z = shifted[..., 0], shifted[..., 1], shifted[..., 2]
-            shifted /= np.sqrt(x * x + y * y + z * z)[..., None]  # np.linalg.norm's sums
+            shifted /= norms(shifted, keepdims=True)  # (np.linalg.norm's bits)
         known = np.all(np.isfinite(s_taught), axis=-1)
         goals[key] = shifted if known.all() else np.where(known[..., None], shifted, model)
 

@@ -121,14 +121,12 @@ def closed_loop(plant: Any, sensor: Any, clock: CameraClock | None, controller: 
             if every and applied.all() and not ends.any():  # every row moves: no selections
                 norms = np.asarray(cmds.error_norm, dtype=float)
                 values = np.array(cmds.values, dtype=float)  # (the plant may keep rows)
-                book.period(step, idx, done, obs, norms, values)
-                book.advanced(step, idx, plant.advance(idx, values, dt))
-                continue
-            norms[rows] = cmds.error_norm
-            done[rows[ends]] = True
-            values[rows[applied]] = cmds.values[applied]
+            else:
+                norms[rows] = cmds.error_norm
+                done[rows[ends]] = True
+                values[rows[applied]] = cmds.values[applied]
         book.period(step, idx, done, obs, norms, values)
-        run = idx[~done]
+        run, moves = (idx, values) if not done.any() else (idx[~done], values[~done])
         if len(run):
-            book.advanced(step, run, plant.advance(run, values[~done], dt))
+            book.advanced(step, run, plant.advance(run, moves, dt))
     return begun
