@@ -158,10 +158,13 @@ class FeatureCTC(TaskComputedTorque):
             n = int(np.ceil(float(ref.duration) / dt)) + 2
             out, seen = self.motion_and_seen(dt * np.arange(n))
             m = seen.shape[1]
-            known = np.repeat(seen.reshape(n, -1, 3).all(axis=2) & np.isfinite(out).reshape(
-                n, 3, -1, 3).all(axis=(1, 3)), 3, axis=1)  # as _sanitised_rows: those rows
-            every = np.all(known, axis=1)
             sanitised = out.reshape(n, 3 * m)
+            if seen.all() and np.isfinite(sanitised).all():  # the common case: all known
+                known, every = np.ones((n, m), dtype=bool), np.ones(n, dtype=bool)
+            else:  # as _sanitised_rows: those rows
+                known = np.repeat(seen.reshape(n, -1, 3).all(axis=2) & np.isfinite(
+                    out).reshape(n, 3, -1, 3).all(axis=(1, 3)), 3, axis=1)
+                every = np.all(known, axis=1)
             bad = np.flatnonzero(~every)  # rare: only these rows are sanitised
             if len(bad):
                 sanitised[bad] = _sanitised_rows(np.where(seen[bad, None, :], out[bad],
