@@ -51,13 +51,23 @@ class _Drawers:
 _aside: list[_Drawers] = []
 
 
+def runnable_tasks() -> int:
+    """The tasks running or ready to run on this machine now, this process included (the
+    kernel's count in ``/proc/loadavg``; unknown: as many as the cores)."""
+    try:
+        return int(Path("/proc/loadavg").read_text().split()[3].split("/")[0])
+    except (OSError, IndexError, ValueError):
+        return os.cpu_count() or 1
+
+
 def idle_cores() -> int:
-    """The cores this process may run on that the 1-minute load average (this process
-    counted in it) leaves idle, rounded, at most all but one."""
+    """The cores this process may run on that no task runs on now (a count of this
+    instant, not the load average: that one lags a minute behind the machine and this
+    process), at most all but one."""
     if not hasattr(os, "sched_getaffinity"):
         return 0
     cores = len(os.sched_getaffinity(0))
-    return max(0, min(cores - 1, round(cores - os.getloadavg()[0])))
+    return max(0, min(cores - 1, cores - runnable_tasks()))
 
 
 def started(job: Callable[..., None], args: tuple[Any, ...], name: str) -> bool:
@@ -70,11 +80,11 @@ def started(job: Callable[..., None], args: tuple[Any, ...], name: str) -> bool:
 @contextmanager
 def drawing_aside(out_dir: Path) -> Iterator[None]:
     """Within it, :func:`started` forks a process for a job while fewer than
-    :func:`idle_cores` run; on leaving, it waits for them. Nothing is forked when no core
-    is idle (a child would only take this process's core: the same work, and its own
-    start), outside Linux (as the runner's pool: fork is not safe with macOS's system
-    libraries) and while another thread runs (a fork copies the calling thread only: a
-    lock another thread held would stay locked in the child).
+    :func:`idle_cores` (counted on entering) run; on leaving, it waits for them. Nothing
+    is forked when no core is idle (a child would only take this process's core: the
+    same work, and its own start), outside Linux (as the runner's pool: fork is not safe
+    with macOS's system libraries) and while another thread runs (a fork copies the
+    calling thread only: a lock another thread held would stay locked in the child).
 
     Raises:
         ResultsError: A process failed (``out_dir``, the job's name and its exit code;

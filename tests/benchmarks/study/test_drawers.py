@@ -48,12 +48,12 @@ def _recording_writers(monkeypatch: pytest.MonkeyPatch) -> None:
     monkeypatch.setattr(plots, "_draw", recorded)
 
 
-def _idle(monkeypatch: pytest.MonkeyPatch, cores: int, load: float,
+def _idle(monkeypatch: pytest.MonkeyPatch, cores: int, running: int,
           one_thread: bool = True) -> None:
-    """A machine of ``cores`` cores at a 1-minute load average ``load`` (and this
-    process's only thread: pytest-xdist's are not this test's)."""
+    """A machine of ``cores`` cores with ``running`` runnable tasks, this process
+    included (and this process's only thread: pytest-xdist's are not this test's)."""
     monkeypatch.setattr(os, "sched_getaffinity", lambda pid: set(range(cores)), raising=False)
-    monkeypatch.setattr(os, "getloadavg", lambda: (load, load, load))
+    monkeypatch.setattr(drawers, "runnable_tasks", lambda: running)
     if one_thread:
         monkeypatch.setattr(threading, "active_count", lambda: 1)
 
@@ -71,7 +71,7 @@ def test_figures_drawn_aside_are_the_bytes_drawn_here(tmp_path: Path,
     here, aside = tmp_path / "here", tmp_path / "aside"
     here.mkdir(), aside.mkdir()
     _figures(here)
-    _idle(monkeypatch, cores=3, load=1.0)
+    _idle(monkeypatch, cores=3, running=1)
     with drawers.drawing_aside(aside):
         names = _figures(aside)
     assert names == {0: "p0.png", 1: "p1.png", 2: "p2.png"}
@@ -87,9 +87,11 @@ def test_figures_are_drawn_here_with_another_thread_or_no_idle_core(
         tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
     """A fork copies the calling thread only (a lock another thread holds would stay
     locked in the child), and a drawer on a busy machine would only take this process's
-    core: every figure is drawn by this process, before save_figure returns."""
+    core: every figure is drawn by this process, before save_figure returns. The idle
+    cores are those no runnable task (this process one of them) takes, all but one at
+    most."""
     _recording_writers(monkeypatch)
-    _idle(monkeypatch, cores=2, load=1.0, one_thread=False)
+    _idle(monkeypatch, cores=2, running=1, one_thread=False)
     done = threading.Event()
     other = threading.Thread(target=done.wait)
     other.start()
@@ -101,8 +103,8 @@ def test_figures_are_drawn_here_with_another_thread_or_no_idle_core(
         done.set()
         other.join()
     assert drawers.idle_cores() == 1
-    for cores, load in ((1, 0.0), (2, 1.6), (4, 4.5)):
-        _idle(monkeypatch, cores, load)
+    for cores, running in ((1, 1), (2, 2), (4, 5)):
+        _idle(monkeypatch, cores, running)
         assert drawers.idle_cores() == 0
         busy = tmp_path / f"busy{cores}"
         busy.mkdir()
@@ -121,7 +123,7 @@ def test_a_figure_that_fails_in_its_drawer_names_itself(
         ) -> None:
     """The drawer's traceback goes to stderr, the others are waited for, and leaving
     drawing_aside raises a ResultsError with the figure's name and exit code."""
-    _idle(monkeypatch, cores=2, load=0.9)
+    _idle(monkeypatch, cores=2, running=1)
     fig = plots.figure((3, 2))
     fig.subplots().add_artist(_Broken())
     with (pytest.raises(ResultsError, match=r"broken\.png \(exit code 1\)"),
@@ -130,3 +132,4 @@ def test_a_figure_that_fails_in_its_drawer_names_itself(
         _figures(tmp_path)
     assert "this artist cannot be drawn" in capfd.readouterr().err
     assert (tmp_path / "p2.png").is_file() and (tmp_path / "s_error_cdf.png").is_file()
+
