@@ -14,7 +14,9 @@ texts are made once. Titles are set at ``y=1.0``, just above the panel, where
 matplotlib's automatic placement puts them too unless a tick label or an offset text is
 above the panel (ours have none, but a linear axis of values below 1e-5 or from 1e6 puts
 its offset, ``1e-6``, at its top left, which a long title may then touch): the automatic
-placement lays out every y tick label once more to look for one.
+placement lays out every y tick label once more to look for one. Within
+:func:`benchmarks.study.drawers.drawing_aside` (a report), a figure is drawn and written by
+a forked process on an idle core while this one makes the next figures.
 """
 
 from __future__ import annotations
@@ -29,6 +31,7 @@ from typing import Any, Final, Literal
 
 import numpy as np
 
+from benchmarks.study import drawers
 from benchmarks.study.metrics import Summary
 from benchmarks.study.results import TRIALS_DIR
 from benchmarks.study.stats import wilson_intervals
@@ -158,6 +161,13 @@ def save_figure(fig: Any, out_dir: Path, name: str,
             caller's ``subplots_adjust``, the same check) or :data:`TIGHT`.
     """
     path = inside(out_dir, name)
+    if not drawers.started(_draw, (fig, path, layout), path.name):
+        _draw(fig, path, layout)
+    return f"./{name}" if ":" in name else name
+
+
+def _draw(fig: Any, path: Path, layout: Margins | Literal["as-is", "tight"]) -> None:
+    """Lay out, draw and write one figure (:func:`save_figure`)."""
     if layout == TIGHT:
         fig.tight_layout()
     elif isinstance(layout, Margins):
@@ -165,10 +175,9 @@ def save_figure(fig: Any, out_dir: Path, name: str,
         fig.subplots_adjust(**layout.fractions(float(width), float(height), _columns(fig)))
     fig.savefig(path, **PNG_OPTIONS)
     if layout != TIGHT and _ink_at_edges(fig):
-        log.debug("%s: text at the edge with fixed margins; laid out tightly", name)
+        log.debug("%s: text at the edge with fixed margins; laid out tightly", path.name)
         fig.tight_layout()
         fig.savefig(path, **PNG_OPTIONS)
-    return f"./{name}" if ":" in name else name
 
 
 def representative(points: list[int]) -> list[int]:

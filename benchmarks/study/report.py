@@ -12,7 +12,7 @@ from typing import Any
 
 import numpy as np
 
-from benchmarks.study import curves_report, intervals, plots, profiles, stats
+from benchmarks.study import curves_report, drawers, intervals, plots, profiles, stats
 from benchmarks.study.metrics import Summary, format_sweep, summarize
 from benchmarks.study.runner import deduplicate, machine_info, read_results
 from benchmarks.study.study_record import command_lines
@@ -161,15 +161,27 @@ def write_report(out_dir: Path, overwrite: bool = False,
     Raises:
         OutputError: ``DIR/report.md`` is a file the project did not write (and not
             ``overwrite``).
+        ResultsError: A figure could not be drawn (in the process that drew it:
+            :func:`~benchmarks.study.drawers.drawing_aside`; report.md not written).
     """
     from benchmarks.study.outdir import check_report_file
 
     out_dir = Path(out_dir)
     results = results if results is not None else read_rows(out_dir)
-    rows, dropped, conflicting = results.rows, results.dropped, results.conflicting
     check_report_file(out_dir, overwrite)
-    if dropped:
-        log.warning("%s: %s", out_dir / "results.jsonl", duplicate_note(dropped, conflicting))
+    if results.dropped:
+        log.warning("%s: %s", out_dir / "results.jsonl",
+                    duplicate_note(results.dropped, results.conflicting))
+    with drawers.drawing_aside(out_dir):  # figures drawn on the idle cores
+        lines = _report_lines(out_dir, results)
+    path = out_dir / "report.md"
+    path.write_text("\n".join(lines))
+    return path
+
+
+def _report_lines(out_dir: Path, results: ResultRows) -> list[str]:
+    """The lines of ``report.md`` (its figures saved on the way)."""
+    rows, dropped, conflicting = results.rows, results.dropped, results.conflicting
     summaries = results.summaries()
     meta: dict[str, Any] = {}
     if (out_dir / META_FILE).exists():
@@ -299,11 +311,7 @@ def write_report(out_dir: Path, overwrite: bool = False,
                       "errors, every trial" + (", all sweep points pooled" if len(points) > 1
                                                else "") + ", with 95 % Wilson bands):", "",
                       f"![error CDF]({cdf})", ""]
-    lines += failures_section(rows)
-    lines += unconverged_lines(rows)
-    path = out_dir / "report.md"
-    path.write_text("\n".join(lines))
-    return path
+    return lines + failures_section(rows) + unconverged_lines(rows)
 
 
 def unconverged_lines(rows: list[dict[str, Any]]) -> list[str]:

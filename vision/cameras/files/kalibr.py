@@ -36,7 +36,6 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-import yaml
 
 from hexapod.exceptions import ConfigFileError
 from vision.cameras.fields import Calibration
@@ -64,6 +63,8 @@ POSE_KEYS = ("T_cam_imu", "T_cn_cnm1")
 def load_yaml(path: str | Path) -> Any:
     """The parsed YAML of a file, or None when it is not plain YAML (OpenCV's
     ``%YAML:1.0`` files with ``!!opencv-matrix`` tags are not)."""
+    import yaml  # here: a run without Kalibr files never imports PyYAML
+
     try:
         return yaml.safe_load(Path(path).read_text())
     except (yaml.YAMLError, UnicodeDecodeError, OSError):
@@ -205,5 +206,7 @@ def write_kalibr_camchain(path: str | Path, kind: str, K: np.ndarray,
     else:
         raise ConfigFileError(src, f"no Kalibr model for a {kind} camera", key="cam0")
     block["resolution"] = [int(width), int(height)]
+    import yaml
+
     Path(path).write_text(yaml.safe_dump({"cam0": block}, sort_keys=False))
     log.debug("wrote %s", path)

@@ -35,7 +35,6 @@ import math
 from pathlib import Path
 from typing import Any
 
-import cv2
 import numpy as np
 
 from hexapod.exceptions import ConfigFileError
@@ -75,6 +74,8 @@ def _check_extension(path: Path) -> None:
 
 
 def _open(path: Path) -> Any:
+    import cv2  # here: a run without calibration files never imports OpenCV
+
     _check_extension(path)
     if not path.is_file():
         raise ConfigFileError(str(path), "file not found")
@@ -120,6 +121,8 @@ def _ros_keys(fs: Any) -> list[str]:
 def _numbers(node: Any, path: str, key: str) -> np.ndarray:
     """A matrix (opencv-matrix map), a sequence of numbers or a number, as an array."""
     if node.isMap():
+        import cv2
+
         try:
             mat = node.mat()
         except cv2.error:
@@ -277,6 +280,8 @@ def write_opencv_calibration(path: str | Path, K: np.ndarray, distortion: np.nda
     Raises:
         ConfigFileError: Unknown extension or the file cannot be written.
     """
+    import cv2
+
     p = Path(path)
     _check_extension(p)
     try:
