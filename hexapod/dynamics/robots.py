@@ -113,6 +113,9 @@ class DynamicRobots:
 
         #: (n, W) the robots' rows (:data:`hexapod.dynamics.robots_compiled.LAYOUT`).
         self.table = new_table(self)
+        #: The step [s] and drive mode last written into every row of the table
+        #: (:func:`~hexapod.dynamics.robots_compiled.load_period`), None before.
+        self.period_constants: tuple[float, float] | None = None
         self.twist = column(self.table, "twist")
         self.drives.integral = column(self.table, "integral")
         self.forces = column(self.table, "motor")
