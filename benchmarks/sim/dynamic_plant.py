@@ -144,12 +144,14 @@ class DynamicPlant(Plant):
                 "saturation_legs_fraction": [share(x) for x in legs],
                 "saturation_fraction": share(self.robots.saturated_time[row])}
 
-    def saturated_time(self, rows: np.ndarray) -> np.ndarray:
-        """The time (n,) [s] any drive of ``rows`` has spent at its force limit so far."""
+    def saturated_time(self, rows: np.ndarray | slice) -> np.ndarray:
+        """The time (n,) [s] any drive of ``rows`` (indices or a slice) has spent at its
+        force limit so far."""
         return self.robots.saturated_time[rows].copy()
 
-    def drive_forces(self, rows: np.ndarray) -> np.ndarray:
-        """The drives' forces (n, 6) [N] of ``rows`` at the end of the last period."""
+    def drive_forces(self, rows: np.ndarray | slice) -> np.ndarray:
+        """The drives' forces (n, 6) [N] of ``rows`` (indices or a slice: a view) at the
+        end of the last period."""
         return self.robots.forces[rows]
 
     def series(self, row: int) -> dict[str, np.ndarray]:

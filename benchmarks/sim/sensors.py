@@ -130,7 +130,8 @@ class GeometricSensor:
                rngs: Sequence[Any], apply_noise: bool = True) -> ObservationBatch:
         """Features of the worlds ``items`` at poses (n, 3, 3), (n, 3), one generator
         each (anything when :func:`draws_noise` is False)."""
-        obs = observe_batch(self.params, rotations, translations, items)
+        obs = observe_batch(self.params, rotations, translations,
+                            None if items is self._every else items)
         line_maps = self._line_maps
         if line_maps is not None and items is not self._every:
             line_maps = line_maps[items]

@@ -46,11 +46,11 @@ class Tracker:
         self.max_da = np.zeros(n)
         self.last_bad = np.full(n, -1)
         #: The plant's drive forces (n, 6) [N] of some rows, None in the kinematic world.
-        self.drive_forces: Callable[[np.ndarray], np.ndarray] | None = None
+        self.drive_forces: Callable[[np.ndarray | slice], np.ndarray] | None = None
         self.sum_f2 = np.zeros(n)
         self.count_f = np.zeros(n, dtype=int)
         #: The plant's time at a force limit (n,) [s] of some rows (a payload scenario).
-        self.saturation: Callable[[np.ndarray], np.ndarray] | None = None
+        self.saturation: Callable[[np.ndarray | slice], np.ndarray] | None = None
         self.per_leg = getattr(sc, "payload", None) is not None
         self.sat_seen = np.zeros(n)
         self.sat_count = np.zeros(n, dtype=int)
