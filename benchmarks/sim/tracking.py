@@ -72,12 +72,13 @@ class Tracker:
         now = step * self.dt
         moving = now <= self._moving_until[idx] if now <= self._last_moving else None
         if moving is not None and moving.any():  # (none once every reference has ended)
-            rows = pos[moving]
+            rows, dpm, dam = ((idx, dp, da) if moving.all()
+                              else (pos[moving], dp[moving], da[moving]))
             self.count[rows] += 1
-            self.sum_dp2[rows] += dp[moving] ** 2
-            self.sum_da2[rows] += da[moving] ** 2
-            self.max_dp[rows] = np.maximum(self.max_dp[rows], dp[moving])
-            self.max_da[rows] = np.maximum(self.max_da[rows], da[moving])
+            self.sum_dp2[rows] += dpm ** 2
+            self.sum_da2[rows] += dam ** 2
+            self.max_dp[rows] = np.maximum(self.max_dp[rows], dpm)
+            self.max_da[rows] = np.maximum(self.max_da[rows], dam)
         bad = (dp >= self.pos_tol) | (da >= self.ori_tol)
         if bad.any():
             self.last_bad[pos[bad]] = step
