@@ -119,9 +119,8 @@ class WorldParams:
 
     def pack(self, rotations: np.ndarray, translations: np.ndarray,
              items: np.ndarray | None = None) -> np.ndarray:
-        """The (n, 77) parameter rows of the C core for poses of items ``items``."""
-        idx = np.arange(len(self.leg_radius)) if items is None else np.asarray(items)
-        n = len(idx)
+        """The (n, 77) parameter rows of the C core for poses of items ``items`` (None:
+        every item, in order)."""
         if self.constant_rows is None:  # the columns that do not depend on the pose
             m = len(self.leg_radius)
             c = np.zeros((m, N_IN))
@@ -133,7 +132,9 @@ class WorldParams:
             c[:, 59:62] = self.camera_translation
             c[:, 62:74] = self.camera
             self.constant_rows = c
-        rows = self.constant_rows[idx]
+        rows = (self.constant_rows.copy() if items is None
+                else self.constant_rows[np.asarray(items)])
+        n = len(rows)
         rows[:, 0:9] = np.asarray(rotations, float).reshape(n, 9)
         rows[:, 9:12] = translations
         return rows

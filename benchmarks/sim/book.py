@@ -89,6 +89,7 @@ class Book:
         self.hidden = np.zeros(n, dtype=int)
         #: (n,) bool: the rows whose series are kept.
         self.recording = np.array([s.trial < record_trials for s in group], dtype=bool)
+        self._recorded = np.flatnonzero(self.recording).tolist()
         self.failure: list[str | None] = [None] * n
         #: A fixed-duration task's position [m] and orientation [rad] errors of the periods
         #: after ``tail_start`` (column ``step - tail_start - 1``), and which were measured.
@@ -119,23 +120,24 @@ class Book:
         """The convergence test of one period for the active rows ``idx`` (their pose
         errors to their targets); returns which of them are done."""
         R, t = self.plant.R, self.plant.t
-        if len(idx) < len(R):  # (every row: the arrays themselves, no copies)
-            R, t = R[idx], t[idx]
-        dp, da = pose_error(R, t, *self.targets(step, idx))
+        # every row (idx: sorted distinct rows): the arrays themselves, slices, no copies
+        rows: np.ndarray | slice = slice(None) if len(idx) == len(self.active) else idx
+        dp, da = pose_error(R[rows], t[rows], *self.targets(step, rows))
         self._errors = (dp, da)
-        self.last_errors[0][idx], self.last_errors[1][idx] = dp, da
+        self.last_errors[0][rows], self.last_errors[1][rows] = dp, da
         ok = (dp < self.pos_tol) & (da < self.ori_tol)
         if self.tracker is not None:
-            self.tracker.add(step, idx, dp, da)
-        self.last_bad[idx[~ok]] = step
+            self.tracker.add(step, rows, dp, da)
+        if not ok.all():
+            self.last_bad[idx[~ok]] = step
         task = self.task
         if task.fixed_duration:  # every row runs to max_steps: no settling count
             if step > self.tail_start:  # (columns: no row loop)
                 col = step - self.tail_start - 1
-                self.tail_pos[idx, col] = dp
-                self.tail_ori[idx, col] = da
-                self.tail_seen[idx, col] = True
-            self.converged[idx] = ok
+                self.tail_pos[rows, col] = dp
+                self.tail_ori[rows, col] = da
+                self.tail_seen[rows, col] = True
+            self.converged[rows] = ok
             return np.full(len(idx), step == task.max_steps)
         self.settled[idx] = np.where(ok, self.settled[idx] + 1, 0)
         done = self.settled[idx] >= task.settle_steps
@@ -147,8 +149,9 @@ class Book:
     def observed(self, step: int, idx: np.ndarray, obs: ObservationBatch) -> np.ndarray:
         """Count the periods where a row measured fewer than its 12 edges, show the live
         view; every row has its image."""
-        self.hidden[idx] += ~np.asarray(obs.edge_visible, dtype=bool).reshape(
-            len(idx), -1).all(axis=1)
+        seen = np.asarray(obs.edge_visible, dtype=bool).reshape(len(idx), -1).all(axis=1)
+        if not seen.all():
+            self.hidden[idx[~seen]] += 1
         if self.on_step is not None:
             R, t = self.plant.R, self.plant.t
             for j, k in enumerate(idx.tolist()):
@@ -177,12 +180,13 @@ class Book:
             check_actuation(commands.actuation, (declared,),
                             f"a study whose controller declared {declared.quantity}", self.label)
         self.batch_times.append(seconds)
-        self.stepped[rows] += 1
+        every: np.ndarray | slice = slice(None) if n == len(self.active) else rows
+        self.stepped[every] += 1
         v, reasons = commands.values, commands.reasons
         invalid = ~np.isfinite(v).all(axis=1)
         if (not crashes and reasons.count(None) == len(reasons)
                 and not invalid.any()):  # the common case
-            self.refused[rows] = 0
+            self.refused[every] = 0
             return ~invalid, invalid
         refused = np.fromiter((r is not None for r in reasons), dtype=bool, count=len(rows))
         self.refused[rows[~refused]] = 0
@@ -222,7 +226,8 @@ class Book:
         the ``done`` rows, count the leg velocity commands that would leave the stroke."""
         plant = self.plant
         dp, da = self._errors  # type: ignore[misc]
-        for j in np.flatnonzero(self.recording[idx]).tolist():
+        full = len(idx) == len(self.active)  # (idx: sorted distinct rows)
+        for j in (self._recorded if full else np.flatnonzero(self.recording[idx]).tolist()):
             r = int(idx[j])
             ser = self.series[r]
             for key, value in zip(SERIES_KEYS, (
@@ -231,13 +236,15 @@ class Book:
                 ser[key].append(np.array(value, copy=True) if key in COPIED else value)
             for key, value in plant.series(r).items():
                 ser.setdefault(key, []).append(value)
-        finished = idx[done]
-        self.active[finished] = False
-        self.steps[finished] = step
-        if self.actuation is Actuation.VELOCITY and not done.all():
-            run = idx[~done]
+        run: np.ndarray | slice = slice(None) if full else idx
+        if done.any():
+            finished = idx[done]
+            self.active[finished] = False
+            self.steps[finished] = step
+            run, values = idx[~done], values[~done]
+        if self.actuation is Actuation.VELOCITY and len(values):
             self.violations[run] += stroke_violations(
-                plant.q[run], values[~done], self.dt, self.stroke, self.max_speed)
+                plant.q[run], values, self.dt, self.stroke, self.max_speed)
 
     def advanced(self, step: int, run: np.ndarray, failures: dict[int, str]) -> None:
         """End the rows whose true world failed during the period, each with its reason."""

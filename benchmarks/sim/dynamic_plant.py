@@ -23,6 +23,7 @@ from hexapod.actuation import Actuation
 from hexapod.backends.base import clamp_velocities
 from hexapod.dynamics.drive_model import quantise
 from hexapod.dynamics.robots import DynamicRobots
+from hexapod.dynamics.robots_compiled import row_index
 from hexapod.exceptions import ActuationError
 
 #: A leg beyond its stroke by more than this has hit its end stop [m].
@@ -56,6 +57,8 @@ class DynamicPlant(Plant):
         self.periods = np.zeros(len(group), dtype=int)
         #: (N, 6) one encoder count per control period [m/s]: the leg rates' resolution.
         self.rate_resolution = self.robots.resolution / self.dt
+        #: Whether every leg has an encoder count (quantised without a selection).
+        self._counted = bool((self.robots.resolution > 0).all())
 
     def use_actuation(self, actuation: Actuation, label: str) -> None:
         """Drive the legs in the mode of ``actuation``: force (torque) mode for leg
@@ -72,23 +75,36 @@ class DynamicPlant(Plant):
         """The encoders' leg velocities (n, 6) [m/s]: the true leg rates quantised to one
         encoder count per control period (what a velocity estimate from the counts
         resolves)."""
-        return quantise(self.robots.leg_rates(rows), self.rate_resolution[rows])
+        index = row_index(rows)
+        return self._quantise(self.robots.leg_rates(index), self.rate_resolution[index])
+
+    def _quantise(self, values: np.ndarray, resolution: np.ndarray) -> np.ndarray:
+        """:func:`~hexapod.dynamics.drive_model.quantise` (its arithmetic), without its
+        test of the resolutions when every leg is counted."""
+        if self._counted:
+            return np.round(values / resolution) * resolution  # type: ignore[no-any-return]
+        return quantise(values, resolution)
 
     def advance(self, run: np.ndarray, velocities: np.ndarray, dt: float
                 ) -> dict[int, str]:
         """See :meth:`benchmarks.sim.plant.Plant.advance` (``velocities`` are leg velocity
         setpoints [m/s] in velocity mode, leg forces [N] in force mode)."""
         robots = self.robots
+        index = row_index(run)  # (consecutive rows: slices, views)
         if robots.drives.mode == "velocity":
-            setpoints, _ = clamp_velocities(self.q[run], velocities, dt, self.stroke,
+            setpoints, _ = clamp_velocities(self.q[index], velocities, dt, self.stroke,
                                             self.max_speed)
         else:
             setpoints = np.where(np.isfinite(velocities), velocities, 0.0)
         diverged = robots.advance(run, setpoints, self.h, self.steps)
-        self.periods[run] += 1
-        q = robots.period_lengths[run]
+        self.periods[index] += 1
+        q = robots.period_lengths[index]
         lo, hi = self.stroke
-        out = ~np.all((q > lo - END_STOP) & (q < hi + END_STOP), axis=1) & ~diverged
+        inside = (q > lo - END_STOP) & (q < hi + END_STOP)
+        if inside.all() and not diverged.any():  # the common case
+            self.q[index] = q
+            return {}
+        out = ~np.all(inside, axis=1) & ~diverged
         failed = {int(k): "the dynamic world diverged (a non-finite state)"
                   for k in run[diverged]}
         for j in np.flatnonzero(out):
@@ -101,7 +117,8 @@ class DynamicPlant(Plant):
 
     def measured_lengths(self, rows: np.ndarray, offsets: np.ndarray) -> np.ndarray:
         """See :meth:`benchmarks.sim.plant.Plant.measured_lengths`: the encoders' counts."""
-        return quantise(self.q[rows] + offsets, self.robots.resolution[rows])
+        index = row_index(rows)
+        return self._quantise(self.q[index] + offsets, self.robots.resolution[index])
 
     def row_figures(self, row: int) -> dict[str, Any]:
         """The drive figures of one trial's result row: largest drive force [N], time at
@@ -127,12 +144,14 @@ class DynamicPlant(Plant):
                 "saturation_legs_fraction": [share(x) for x in legs],
                 "saturation_fraction": share(self.robots.saturated_time[row])}
 
-    def saturated_time(self, rows: np.ndarray) -> np.ndarray:
-        """The time (n,) [s] any drive of ``rows`` has spent at its force limit so far."""
+    def saturated_time(self, rows: np.ndarray | slice) -> np.ndarray:
+        """The time (n,) [s] any drive of ``rows`` (indices or a slice) has spent at its
+        force limit so far."""
         return self.robots.saturated_time[rows].copy()
 
-    def drive_forces(self, rows: np.ndarray) -> np.ndarray:
-        """The drives' forces (n, 6) [N] of ``rows`` at the end of the last period."""
+    def drive_forces(self, rows: np.ndarray | slice) -> np.ndarray:
+        """The drives' forces (n, 6) [N] of ``rows`` (indices or a slice: a view) at the
+        end of the last period."""
         return self.robots.forces[rows]
 
     def series(self, row: int) -> dict[str, np.ndarray]:

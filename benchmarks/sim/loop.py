@@ -87,25 +87,30 @@ def closed_loop(plant: Any, sensor: Any, clock: CameraClock | None, controller: 
     offsets (the plant's ``measured_lengths``). Returns the number of periods begun."""
     steps: Iterable[int] = itertools.count() if max_steps is None else range(max_steps + 1)
     begun = 0
+    n_rows = len(book.active)
     for step in steps:
         idx = np.flatnonzero(book.active)
-        if len(idx) == 0:
+        n = len(idx)
+        if n == 0:
             break
         begun = step + 1
+        full = n == n_rows  # every row runs: the state arrays themselves, no copies
         done = book.check(step, idx)
-        obs = (sensor.observe(idx, plant.R[idx], plant.t[idx]) if clock is None
-               else clock.measure(step, idx, sensor.observe))
+        obs = (sensor.observe(idx, *((plant.R, plant.t) if full else (plant.R[idx],
+                                                                     plant.t[idx])))
+               if clock is None else clock.measure(step, idx, sensor.observe))
         seen = book.observed(step, idx, obs)
         done |= ~book.active[idx]
-        values = np.zeros((len(idx), 6))
-        norms = np.full(len(idx), np.nan)
         every = not done.any() and bool(seen.all())  # the common case: no row copies
-        rows = np.arange(len(idx)) if every else np.flatnonzero(~done & seen)
+        rows = np.arange(n) if every else np.flatnonzero(~done & seen)
+        values: np.ndarray | None = None
+        norms: np.ndarray | None = None
         if len(rows):
             tr = idx if every else idx[rows]
             batch = replace(obs if every else obs.rows(rows), trials=tr,
                             t=np.full(len(rows), step * dt),
-                            lengths=plant.measured_lengths(tr, offsets[tr]),
+                            lengths=plant.measured_lengths(tr, offsets if full and every
+                                                           else offsets[tr]),
                             q_dot=plant.measured_rates(tr))
             t0 = time.perf_counter()
             try:
@@ -122,9 +127,12 @@ def closed_loop(plant: Any, sensor: Any, clock: CameraClock | None, controller: 
                 norms = np.asarray(cmds.error_norm, dtype=float)
                 values = np.array(cmds.values, dtype=float)  # (the plant may keep rows)
             else:
+                values, norms = np.zeros((n, 6)), np.full(n, np.nan)
                 norms[rows] = cmds.error_norm
                 done[rows[ends]] = True
                 values[rows[applied]] = cmds.values[applied]
+        if values is None or norms is None:  # no row stepped: zeros, no error norms
+            values, norms = np.zeros((n, 6)), np.full(n, np.nan)
         book.period(step, idx, done, obs, norms, values)
         run, moves = (idx, values) if not done.any() else (idx[~done], values[~done])
         if len(run):

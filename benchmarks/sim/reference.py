@@ -70,8 +70,9 @@ class Targets:
             self._grid = (np.stack([r.rotation for r in samples], axis=1),
                           np.stack([r.translation for r in samples], axis=1))
 
-    def __call__(self, step: int, idx: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """(len(idx), 3, 3) rotations and (len(idx), 3) translations of rows ``idx``."""
+    def __call__(self, step: int, idx: np.ndarray | slice) -> tuple[np.ndarray, np.ndarray]:
+        """(n, 3, 3) rotations and (n, 3) translations of rows ``idx`` (indices, or a
+        slice: then views, read only)."""
         if self._grid is None:
             return self.rotation[idx], self.translation[idx]
         return self._grid[0][step][idx], self._grid[1][step][idx]

@@ -22,7 +22,7 @@ from vision.cameras import Camera
 from vision.cameras.perspective import PerspectiveCamera, lines_and_normals
 from vision.fast_observe import WorldParams, observe_batch
 from vision.legs import LegObservation, directions_from_edges
-from vision.noise import Generators
+from vision.noise import Generators, rotation_noise_batch
 
 
 def camera_batch(normals: np.ndarray, lines: np.ndarray | None, directions: np.ndarray,
@@ -100,6 +100,8 @@ class GeometricSensor:
         #: The rows' generators with their bit generators' addresses, taken once (the
         #: rotation noise draws every row's numbers in one C call, every period).
         self.generators = Generators(list(rngs))
+        #: The rows of every world, in order (:meth:`observe` of every row).
+        self._every = np.arange(len(self.worlds))
         self.detect_times: list[float] = []
 
     @classmethod
@@ -110,8 +112,12 @@ class GeometricSensor:
 
     def observe(self, rows: np.ndarray, rotations: np.ndarray, translations: np.ndarray
                 ) -> ObservationBatch:
-        """The loop's interface: the camera's batch of ``rows`` at their true poses."""
-        return self.sample(rotations, translations, rows, self.generators.take(rows))
+        """The loop's interface: the camera's batch of ``rows`` (sorted distinct rows, as
+        the loop's) at their true poses."""
+        gens = self.generators
+        if len(rows) == len(gens):  # every row, in order: what is kept for them
+            return self.sample(rotations, translations, self._every, gens)
+        return self.sample(rotations, translations, rows, gens.take(rows))
 
     def measure(self, rotations: np.ndarray, translations: np.ndarray,
                 rngs: Sequence[Any], apply_noise: bool = True) -> ObservationBatch:
@@ -124,8 +130,11 @@ class GeometricSensor:
                rngs: Sequence[Any], apply_noise: bool = True) -> ObservationBatch:
         """Features of the worlds ``items`` at poses (n, 3, 3), (n, 3), one generator
         each (anything when :func:`draws_noise` is False)."""
-        obs = observe_batch(self.params, rotations, translations, items)
-        line_maps = None if self._line_maps is None else self._line_maps[items]
+        obs = observe_batch(self.params, rotations, translations,
+                            None if items is self._every else items)
+        line_maps = self._line_maps
+        if line_maps is not None and items is not self._every:
+            line_maps = line_maps[items]
         cameras: list[tuple[np.ndarray, Any]] = []
         if line_maps is None:
             groups = self._camera_group[items]
@@ -188,16 +197,17 @@ def noisy_features(sc: SimScenario, normals: np.ndarray, visible: np.ndarray,
     Returns:
         The camera's batch (``lines`` None for a unified camera).
     """
-    normals = np.array(normals, dtype=float)
-    visible = np.array(visible, dtype=bool)
     noise = sc.noise
     n = len(rngs)
+    # the caller's arrays are not changed: copies where they are written in place
+    normals = np.asarray(normals, dtype=float)
+    writes = apply_noise and (noise.model == "pixel" or noise.dropout_probability > 0)
+    visible = np.array(visible, dtype=bool) if writes else np.asarray(visible, dtype=bool)
     if apply_noise and noise.model == "rotation" and noise.amplitude_deg > 0:
-        from vision.noise import rotation_noise_batch
-
         normals = rotation_noise_batch(normals, np.deg2rad(noise.amplitude_deg),
                                        rngs if isinstance(rngs, Generators) else list(rngs))
     elif apply_noise and noise.model == "pixel":
+        normals = np.array(normals, dtype=float)
         from vision.pixel_measure import normals_from_noisy_pixels
 
         for k in range(n):  # one generator per trial: results do not depend on batching

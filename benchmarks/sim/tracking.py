@@ -36,6 +36,9 @@ class Tracker:
         self.ori_tol = ori_tol
         self.duration = duration
         self._moving_until = self.duration + 1e-12  # (a period at t <= this is moving)
+        #: The last reference's end: a period after it moves no row.
+        self._last_moving = float(self._moving_until.max()) if n else -np.inf
+        self._rows = np.arange(n)
         self.count = np.zeros(n, dtype=int)
         self.sum_dp2 = np.zeros(n)
         self.sum_da2 = np.zeros(n)
@@ -43,11 +46,11 @@ class Tracker:
         self.max_da = np.zeros(n)
         self.last_bad = np.full(n, -1)
         #: The plant's drive forces (n, 6) [N] of some rows, None in the kinematic world.
-        self.drive_forces: Callable[[np.ndarray], np.ndarray] | None = None
+        self.drive_forces: Callable[[np.ndarray | slice], np.ndarray] | None = None
         self.sum_f2 = np.zeros(n)
         self.count_f = np.zeros(n, dtype=int)
         #: The plant's time at a force limit (n,) [s] of some rows (a payload scenario).
-        self.saturation: Callable[[np.ndarray], np.ndarray] | None = None
+        self.saturation: Callable[[np.ndarray | slice], np.ndarray] | None = None
         self.per_leg = getattr(sc, "payload", None) is not None
         self.sat_seen = np.zeros(n)
         self.sat_count = np.zeros(n, dtype=int)
@@ -61,19 +64,24 @@ class Tracker:
         if self.per_leg:
             self.saturation = getattr(plant, "saturated_time", None)
 
-    def add(self, step: int, idx: np.ndarray, dp: np.ndarray, da: np.ndarray) -> None:
-        """One period of the rows ``idx``: position errors ``dp`` [m], orientation errors
-        ``da`` [rad] from the reference."""
-        moving = step * self.dt <= self._moving_until[idx]
-        if moving.any():  # (none once every reference has ended)
-            rows = idx[moving]
+    def add(self, step: int, idx: np.ndarray | slice, dp: np.ndarray, da: np.ndarray
+            ) -> None:
+        """One period of the rows ``idx`` (indices, or a slice: every row): position
+        errors ``dp`` [m], orientation errors ``da`` [rad] from the reference."""
+        pos = self._rows[idx]  # (a slice: a view)
+        now = step * self.dt
+        moving = now <= self._moving_until[idx] if now <= self._last_moving else None
+        if moving is not None and moving.any():  # (none once every reference has ended)
+            rows, dpm, dam = ((idx, dp, da) if moving.all()
+                              else (pos[moving], dp[moving], da[moving]))
             self.count[rows] += 1
-            self.sum_dp2[rows] += dp[moving] ** 2
-            self.sum_da2[rows] += da[moving] ** 2
-            self.max_dp[rows] = np.maximum(self.max_dp[rows], dp[moving])
-            self.max_da[rows] = np.maximum(self.max_da[rows], da[moving])
+            self.sum_dp2[rows] += dpm ** 2
+            self.sum_da2[rows] += dam ** 2
+            self.max_dp[rows] = np.maximum(self.max_dp[rows], dpm)
+            self.max_da[rows] = np.maximum(self.max_da[rows], dam)
         bad = (dp >= self.pos_tol) | (da >= self.ori_tol)
-        self.last_bad[idx[bad]] = step
+        if bad.any():
+            self.last_bad[pos[bad]] = step
         if self.drive_forces is not None:
             f = np.asarray(self.drive_forces(idx), dtype=float)
             self.sum_f2[idx] += np.sum(f**2, axis=1)
@@ -82,7 +90,7 @@ class Tracker:
             seen = self.saturation(idx)
             hit = seen > self.sat_seen[idx]
             self.sat_seen[idx] = seen
-            rows = idx[hit]
+            rows = pos[hit]
             self.sat_count[rows] += 1
             self.sat_dp2[rows] += dp[hit] ** 2
             self.sat_max[rows] = np.maximum(self.sat_max[rows], dp[hit])

@@ -32,12 +32,17 @@ from typing import Any
 
 import numpy as np
 
+from hexapod.dynamics import compiled as _c
 from hexapod.dynamics.compiled import parameter_row
 from hexapod.dynamics.drive_model import DriveModel
-from hexapod.dynamics.model import DynamicModel
+from hexapod.dynamics.model import DynamicModel, checked_array
+from hexapod.dynamics.robots_compiled import advance_compiled, column, new_table, row_index
 from hexapod.workspace import home_pose
 
 log = logging.getLogger(__name__)
+
+#: The blocks of the legs kernel's input rows that :meth:`DynamicRobots.leg_rates` writes.
+_IN_R, _IN_T, _IN_TWIST = _c.INPUTS["R"], _c.INPUTS["t"], _c.INPUTS["twist"]
 
 
 def legs(R: np.ndarray, t: np.ndarray, A: np.ndarray, E: np.ndarray
@@ -109,10 +114,11 @@ class DynamicRobots:
     def _share_table(self) -> None:
         """Keep every row in one table (constants, state, accumulators: the compiled
         period's rows, advanced in place) and make the state attributes its views."""
-        from hexapod.dynamics.robots_compiled import column, new_table
-
         #: (n, W) the robots' rows (:data:`hexapod.dynamics.robots_compiled.LAYOUT`).
         self.table = new_table(self)
+        #: The step [s] and drive mode last written into every row of the table
+        #: (:func:`~hexapod.dynamics.robots_compiled.load_period`), None before.
+        self.period_constants: tuple[float, float] | None = None
         self.twist = column(self.table, "twist")
         self.drives.integral = column(self.table, "integral")
         self.forces = column(self.table, "motor")
@@ -144,33 +150,29 @@ class DynamicRobots:
         joint = np.swapaxes(Kinv, -1, -2) @ M @ Kinv
         return self.rotor + np.diagonal(joint, axis1=-2, axis2=-1)  # type: ignore[no-any-return]
 
-    def leg_rates(self, rows: np.ndarray) -> np.ndarray:
-        """True leg rates ``q_dot = K twist`` (n, 6) [m/s] of ``rows`` at their present
-        state: :meth:`DynamicModel.legs_batch` with each row's own geometry and inertia,
-        its input rows taken from a table of their constants packed once (only the
-        poses and twists are written each call, into the table itself for consecutive
-        rows, else into a copy of their rows; the same kernel on the same inputs).
+    def leg_rates(self, rows: np.ndarray | slice) -> np.ndarray:
+        """True leg rates ``q_dot = K twist`` (n, 6) [m/s] of ``rows`` (indices, or a
+        slice) at their present state: :meth:`DynamicModel.legs_batch` with each row's own
+        geometry and inertia, its input rows taken from a table of their constants packed
+        once (only the poses and twists are written each call, into the table itself for
+        consecutive rows, else into a copy of their rows; the same kernel on the same
+        inputs).
 
         Raises:
             ShapeError: A pose or twist of the rows is not finite (names the value).
             DynamicsError: The kernel's result is not finite (names the row).
         """
-        from hexapod.dynamics import compiled as _c
-        from hexapod.dynamics.model import checked_array
-        from hexapod.dynamics.robots_compiled import row_index
-
         if self._leg_rows is None:  # A, E, the inertia, u = 0: constant per row
             n = self.n
             self._leg_rows = _c.pack(self.R, self.t, self.twist, np.zeros((n, 6)), self.A,
                                      self.E, self.parameters)
         index = row_index(rows)
         x = self._leg_rows[index]  # (consecutive rows: a view, written in place)
-        s = _c.INPUTS
         R, t, twist = self.R[index], self.t[index], self.twist[index]
-        x[:, s["R"]].reshape(-1, 3, 3)[:] = np.swapaxes(R, -1, -2)
-        x[:, s["t"]] = t
-        x[:, s["twist"]] = twist
-        if not np.isfinite(x[:, :s["twist"].stop]).all():  # one check of the written blocks
+        x[:, _IN_R].reshape(-1, 3, 3)[:] = np.swapaxes(R, -1, -2)
+        x[:, _IN_T] = t
+        x[:, _IN_TWIST] = twist
+        if not np.isfinite(x[:, :_IN_TWIST.stop]).all():  # one check of the written blocks
             checked_array("R", R, (3, 3))
             checked_array("t", t, (3,))
             checked_array("twist", twist, (6,))
@@ -195,6 +197,4 @@ class DynamicRobots:
         Returns:
             (n,) mask of rows whose state is not finite after the period (left unchanged).
         """
-        from hexapod.dynamics.robots_compiled import advance_compiled
-
         return advance_compiled(self, rows, setpoints, h, steps)

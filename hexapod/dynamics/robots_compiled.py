@@ -38,6 +38,8 @@ LAYOUT = Layout([("R", 9), ("t", 3), ("twist", 6), ("integral", 6), ("setpoint",
                 "dynamic robot row")
 #: Length of a row.
 WIDTH = LAYOUT.size
+_R, _T, _SETPOINT = LAYOUT["R"], LAYOUT["t"], LAYOUT["setpoint"]
+_H, _FORCE_MODE = LAYOUT.index("h"), LAYOUT.index("force_mode")
 
 
 def _clip(x: ca.SX, lim: ca.SX) -> ca.SX:
@@ -201,13 +203,19 @@ def load_period(robots: Any, rows: np.ndarray | slice, setpoints: np.ndarray, h:
     the poses (from the caller's ``R`` and ``t``), the setpoints, the step and the drive
     mode."""
     table = robots.table
-    L = LAYOUT
     rows = row_index(rows)
-    table[rows, L["R"]] = np.swapaxes(robots.R[rows], -1, -2).reshape(-1, 9)
-    table[rows, L["t"]] = robots.t[rows]
-    table[rows, L["setpoint"]] = setpoints
-    table[rows, L.index("h")] = h
-    table[rows, L.index("force_mode")] = 1.0 if robots.drives.mode == "force" else 0.0
+    if isinstance(rows, slice):  # a view of the table: the poses written in place
+        table[rows, _R].reshape(-1, 3, 3)[:] = np.swapaxes(robots.R[rows], -1, -2)
+    else:
+        table[rows, _R] = np.swapaxes(robots.R[rows], -1, -2).reshape(-1, 9)
+    table[rows, _T] = robots.t[rows]
+    table[rows, _SETPOINT] = setpoints
+    # the step and the drive mode: every row's, rewritten only when they change
+    mode = 1.0 if robots.drives.mode == "force" else 0.0
+    if robots.period_constants != (h, mode):
+        table[:, _H] = h
+        table[:, _FORCE_MODE] = mode
+        robots.period_constants = (h, mode)
 
 
 def pack_period(robots: Any, rows: np.ndarray, setpoints: np.ndarray, h: float
@@ -235,8 +243,8 @@ def advance_compiled(robots: Any, rows: np.ndarray, setpoints: np.ndarray, h: fl
         bad = ~np.all(np.isfinite(y[:, :check]), axis=1)
         table[rows[~bad]] = y[~bad]
     ok = row_index(rows[~bad]) if bad.any() else index
-    robots.R[ok] = np.swapaxes(table[ok, LAYOUT["R"]].reshape(-1, 3, 3), -1, -2)
-    robots.t[ok] = table[ok, LAYOUT["t"]]
+    robots.R[ok] = np.swapaxes(table[ok, _R].reshape(-1, 3, 3), -1, -2)
+    robots.t[ok] = table[ok, _T]
     if robots.drives.mode == "velocity":
         robots.track_count[ok] += 6 * steps
     return bad
