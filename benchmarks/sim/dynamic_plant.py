@@ -57,8 +57,6 @@ class DynamicPlant(Plant):
         self.periods = np.zeros(len(group), dtype=int)
         #: (N, 6) one encoder count per control period [m/s]: the leg rates' resolution.
         self.rate_resolution = self.robots.resolution / self.dt
-        #: Whether every leg has an encoder count (quantised without a selection).
-        self._counted = bool((self.robots.resolution > 0).all())
 
     def use_actuation(self, actuation: Actuation, label: str) -> None:
         """Drive the legs in the mode of ``actuation``: force (torque) mode for leg
@@ -76,14 +74,7 @@ class DynamicPlant(Plant):
         encoder count per control period (what a velocity estimate from the counts
         resolves)."""
         index = row_index(rows)
-        return self._quantise(self.robots.leg_rates(index), self.rate_resolution[index])
-
-    def _quantise(self, values: np.ndarray, resolution: np.ndarray) -> np.ndarray:
-        """:func:`~hexapod.dynamics.drive_model.quantise` (its arithmetic), without its
-        test of the resolutions when every leg is counted."""
-        if self._counted:
-            return np.round(values / resolution) * resolution  # type: ignore[no-any-return]
-        return quantise(values, resolution)
+        return quantise(self.robots.leg_rates(index), self.rate_resolution[index])
 
     def advance(self, run: np.ndarray, velocities: np.ndarray, dt: float
                 ) -> dict[int, str]:
@@ -118,7 +109,7 @@ class DynamicPlant(Plant):
     def measured_lengths(self, rows: np.ndarray, offsets: np.ndarray) -> np.ndarray:
         """See :meth:`benchmarks.sim.plant.Plant.measured_lengths`: the encoders' counts."""
         index = row_index(rows)
-        return self._quantise(self.q[index] + offsets, self.robots.resolution[index])
+        return quantise(self.q[index] + offsets, self.robots.resolution[index])
 
     def row_figures(self, row: int) -> dict[str, Any]:
         """The drive figures of one trial's result row: largest drive force [N], time at
