@@ -267,7 +267,8 @@ class Book:
         medians: dict[int, float | None] = {}  # [us], by the periods a row was commanded
         # the tail medians of the rows measured at every period of it, in two calls (the
         # same numbers as row by row: order statistics)
-        full = self.tail_seen.all(axis=1) if self.tail_seen.size else np.zeros(len(group), bool)
+        full = np.asarray(self.tail_seen.all(axis=1) if self.tail_seen.size
+                          else np.zeros(len(group), bool))
         tails = {"tail_position_error_mm": np.median(self.tail_pos[full], axis=1) * 1e3,
                  "tail_orientation_error_deg": np.rad2deg(np.median(self.tail_ori[full], axis=1))
                  } if full.any() else {}
