@@ -16,16 +16,22 @@ from __future__ import annotations
 
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
-from functools import lru_cache
+from functools import lru_cache, partial
 
 import casadi as ca
 import numpy as np
 
 from controllers.law_algebra import WeightedNormal, law_tail
 from controllers.law_tools import INTERACTIONS
-from controllers.tasks.leg_edge import EdgeFeature, edge_block, leg_direction_of_edges
+from controllers.tasks.leg_edge import (
+    EDGE_LINES,
+    EDGE_NORMALS,
+    EdgeFeature,
+    edge_block,
+    leg_direction_of_edges,
+)
 from controllers.tasks.leg_feature import LegFeature
-from hexapod.compiled import CompiledFunction, Layout
+from hexapod.compiled import CompiledFunction, Layout, code_key
 
 #: Law parameters after the feature block: gain ``(lambda0, lambda_inf, lambda0')``,
 #: squared threshold, squared damping (or the QP regularization).
@@ -170,9 +176,21 @@ def _edge_function(feature: EdgeFeature, interaction: str = "current",
             acc.add_dense(ek, 0.5 * (ad @ gd.T + a @ g.T), w[k])
     tail = law_tail(ca.vertcat(*acc.used_errors), acc.N, acc.b, u, A,
                     x[inputs["gain"].start:], lean)
-    name = "hexapod_edge_law_" + feature.kind + "_w"
-    name += ("" if interaction == "current" else f"_{interaction}") + ("_lean" if lean else "")
-    return ca.Function(name, [x], [ca.vertcat(*errors, *tail, *u)])
+    return ca.Function(_edge_name(feature, interaction, lean), [x],
+                       [ca.vertcat(*errors, *tail, *u)])
+
+
+def _edge_name(feature: EdgeFeature, interaction: str, lean: bool) -> str:
+    return (f"hexapod_edge_law_{feature.kind}_w"
+            + ("" if interaction == "current" else f"_{interaction}") + ("_lean" if lean else ""))
+
+
+#: The modules that write the leg edges' law cores (their
+#: :func:`~hexapod.compiled.code_key`).
+EDGE_KEY_MODULES = ("controllers.law_algebra", "controllers.law_kernel", "controllers.law_tools",
+                    "controllers.tasks.base", "controllers.tasks.feature_kind",
+                    "controllers.tasks.joint_length", "controllers.tasks.leg_edge",
+                    "controllers.tasks.leg_feature", "hexapod.layout")
 
 
 # --------------------------------------------------------------------------- runtime
@@ -272,9 +290,14 @@ def _compiled_core(feature: Feature, interaction: str, lean: bool, compiled: boo
                    ) -> CompiledFunction:
     """The compiled core of a feature (shared by its kernels; cached on disk by content
     hash)."""
+    layouts = law_layouts(feature, interaction)
+    if feature is EDGE_NORMALS or feature is EDGE_LINES:  # built only without a library
+        return CompiledFunction(partial(_edge_function, feature, interaction, lean), compiled,
+                                *layouts, key=(_edge_name(feature, interaction, lean), code_key(
+                                    EDGE_KEY_MODULES, feature.kind, interaction, lean)))
     make = _edge_function if isinstance(feature, EdgeFeature) else feature_law_function
     return CompiledFunction(make(feature, interaction, lean),  # type: ignore[arg-type]
-                            compiled, *law_layouts(feature, interaction))
+                            compiled, *layouts)
 
 
 def feature_law_kernel(feature: Feature, interaction: str = "current",

@@ -16,10 +16,13 @@ LayoutError`). A caller that evaluates one row at a time in a hot loop can
 :meth:`CompiledFunction.bind` its own input and output buffers and call the C function on
 them in place (no copies).
 
-The cache key of a library is the hash of the serialized function
-(``Function.serialize()``), CasADi's version, the C wrapper and the compiler flags: a
-warm process finds its library without generating the C code, which is only generated
-when the library is missing.
+The cache key of a library is the hash of what determines its function, CasADi's version,
+the C wrapper and the compiler flags. A kernel built with a :func:`code_key` (the source
+of the modules that write its expression and the builder's arguments) gives a builder
+instead of the function: a warm process finds its library without building the
+expression at all (the function is built only when the library is missing, or when it is
+asked for: :attr:`CompiledFunction.function`). Without one, the key is the serialized
+function (``Function.serialize()``): built, but no C code generated.
 """
 
 from __future__ import annotations
@@ -27,14 +30,15 @@ from __future__ import annotations
 import ctypes
 import fcntl
 import hashlib
+import importlib
 import logging
 import os
 import platform
 import shutil
 import subprocess
 import tempfile
-from collections.abc import Callable, Iterator, Sequence
-from functools import partial
+from collections.abc import Callable, Sequence
+from functools import cache, partial
 from pathlib import Path
 from typing import Any
 
@@ -42,6 +46,8 @@ import casadi as ca
 import numpy as np
 
 from hexapod.exceptions import LayoutError
+from hexapod.layout import Layout as Layout  # (re-exported: the kernels import both from here)
+from hexapod.layout import Shape as Shape
 
 log = logging.getLogger(__name__)
 
@@ -72,104 +78,30 @@ int {name}_batch(const casadi_real* x, casadi_real* y, long long n) {{
 """
 
 
-#: A block's shape: a number of values, or the shape of its view (row-major).
-Shape = int | tuple[int, ...]
+#: A CasADi function, or a function building it on demand (:func:`code_key`).
+Builder = ca.Function | Callable[[], ca.Function]
 
 
-class Layout:
-    """Ordered named blocks of a packed row, each with a shape.
+def code_key(modules: Sequence[str], *arguments: object) -> str:
+    """What determines a kernel's expression, found without building it: the source of
+    each of ``modules`` (every module whose code writes the expression or whose constants
+    it reads, imported) and the ``repr`` of the builder's ``arguments`` (numbers, names).
+    A changed line in one of those modules, or another argument, is another key, hence
+    another library (the tests trace each keyed kernel's build and check that its key
+    names every project module whose code runs in it: ``tests/hexapod/kernel_keys.py``)."""
+    return "\n".join([*(f"{m} {_source_digest(m)}" for m in modules),
+                      *(repr(a) for a in arguments)])
 
-    Declared where a kernel is built, it says where each quantity lies in the kernel's
-    input or output row: the kernel's expression reads its input by name
-    (:meth:`split`) and the callers write and read rows through views by name
-    (:meth:`views`, :meth:`index`), so no caller reads ``row[42:60]`` by hand and a
-    kernel change cannot silently misalign an offset (:class:`CompiledFunction` checks
-    the sizes).
 
-    Args:
-        blocks: ``(name, shape)`` in row order; a shape is a number of values or a tuple
-            (the shape of the block's view, row-major; ``()`` or 1 is one number).
-        name: What the row is (for error messages).
-    """
+@cache
+def _source_digest(module: str) -> str:
+    path = Path(str(importlib.import_module(module).__file__))
+    return hashlib.sha256(path.read_bytes()).hexdigest()
 
-    def __init__(self, blocks: Sequence[tuple[str, Shape]], name: str = "row") -> None:
-        self.name = name
-        #: Each block's slice of the row.
-        self.slices: dict[str, slice] = {}
-        #: Each block's shape (its view's).
-        self.shapes: dict[str, tuple[int, ...]] = {}
-        k = 0
-        for block, shape in blocks:
-            if block in self.slices:
-                raise LayoutError(name, f"block {block!r} named twice")
-            dims = (shape,) if isinstance(shape, int) else tuple(shape)
-            size = int(np.prod(dims, dtype=int))
-            if size < 0 or any(d < 0 for d in dims):
-                raise LayoutError(name, f"block {block!r}: negative shape {shape}")
-            self.slices[block] = slice(k, k + size)
-            self.shapes[block] = dims
-            k += size
-        #: Number of values in a row.
-        self.size = k
 
-    def __repr__(self) -> str:
-        blocks = ", ".join(f"{b}{list(s) if len(s) != 1 else s[0]}" for b, s in self.shapes.items())
-        return f"Layout({self.name}: {blocks}; {self.size})"
-
-    def __contains__(self, block: object) -> bool:
-        return block in self.slices
-
-    def __iter__(self) -> Iterator[str]:
-        return iter(self.slices)
-
-    def __getitem__(self, block: str) -> slice:
-        """The slice of ``block``."""
-        try:
-            return self.slices[block]
-        except KeyError:
-            raise LayoutError(self.name, f"no block {block!r} (blocks: "
-                              f"{', '.join(self.slices)})") from None
-
-    def index(self, block: str) -> int:
-        """The position of a one-number block."""
-        s = self[block]
-        if s.stop - s.start != 1:
-            raise LayoutError(self.name, f"block {block!r} holds {s.stop - s.start} numbers, "
-                              "not one")
-        return s.start
-
-    def extended(self, blocks: Sequence[tuple[str, Shape]], name: str | None = None) -> Layout:
-        """This layout with ``blocks`` appended."""
-        return Layout([*((b, self.shapes[b]) for b in self.slices), *blocks],
-                      self.name if name is None else name)
-
-    def view(self, row: np.ndarray, block: str) -> np.ndarray:
-        """The view of ``block`` in ``row`` (..., :attr:`size`), shaped as declared (a
-        one-number block of shape 1 is a (1,) view; of shape ``()`` a 0-d view)."""
-        if row.shape[-1] != self.size or row.strides[-1] != row.itemsize:
-            raise LayoutError(self.name, f"a row of {row.shape[-1]} numbers (stride "
-                              f"{row.strides[-1]} bytes): the layout has {self.size}, "
-                              "contiguous")
-        # the last axis is contiguous: splitting a block of it is a view, never a copy
-        return row[..., self[block]].reshape(*row.shape[:-1], *self.shapes[block])
-
-    def views(self, row: np.ndarray) -> dict[str, np.ndarray]:
-        """Every block's :meth:`view` of ``row`` (write into them to fill the row)."""
-        return {block: self.view(row, block) for block in self.slices}
-
-    def split(self, v: Any) -> dict[str, Any]:
-        """The pieces of a symbolic (or numeric) vector ``v`` (:attr:`size`, 1) by block
-        (flat columns)."""
-        if v.shape[0] != self.size:
-            raise LayoutError(self.name, f"a vector of {v.shape[0]} numbers, the layout "
-                              f"has {self.size}")
-        return {block: v[s] for block, s in self.slices.items()}
-
-    def check(self, size: int, function: str, which: str) -> None:
-        """Raise :class:`LayoutError` unless the layout has ``size`` numbers."""
-        if size != self.size:
-            raise LayoutError(function, f"{which} layout {self!r} has {self.size} numbers, "
-                              f"the function's {which} has {size}")
+def built(function: Builder) -> ca.Function:
+    """``function`` itself, or what its builder returns."""
+    return function if isinstance(function, ca.Function) else function()
 
 
 class CompilationError(OSError):
@@ -265,33 +197,50 @@ class CompiledFunction:
     """A CasADi function of one vector, compiled to C (CasADi VM fallback).
 
     Args:
-        function: ``ca.Function`` with one dense input (n_in,) and one dense output (n_out,).
+        function: ``ca.Function`` with one dense input (n_in,) and one dense output
+            (n_out,), or (with ``key``) a function building it when it is needed.
         compile: Generate and compile the C code (False: the CasADi virtual machine
             evaluates the function, by choice, without a warning).
-        inputs: The layout of the input row (default: one block ``"x"``).
-        outputs: The layout of the output row (default: one block ``"y"``).
+        inputs: The layout of the input row (default: one block ``"x"``; required with
+            a builder).
+        outputs: The layout of the output row (default: one block ``"y"``; required with
+            a builder).
         flags: Compiler flags (``-shared -fPIC`` are added).
         preload: Shared libraries the generated code links against, loaded with global
             symbols before it (e.g. a QP solver's).
+        key: ``(name, code_key(...))``: the function's name and what determines it
+            (:func:`code_key`), the library's cache key instead of the serialized
+            function.
 
     Raises:
         LayoutError: A layout's size is not the function's input's or output's.
+        ValueError: A builder without its key and layouts.
     """
 
-    def __init__(self, function: ca.Function, compile: bool = True,
+    def __init__(self, function: Builder, compile: bool = True,
                  inputs: Layout | None = None, outputs: Layout | None = None,
-                 flags: tuple[str, ...] = DEFAULT_FLAGS, preload: Sequence[Path] = ()) -> None:
-        if function.n_in() != 1 or function.n_out() != 1:
-            raise ValueError("CompiledFunction needs exactly one input and one output")
-        self.function = function
-        self.name = function.name()
-        self.n_in = int(function.nnz_in(0))
-        self.n_out = int(function.nnz_out(0))
+                 flags: tuple[str, ...] = DEFAULT_FLAGS, preload: Sequence[Path] = (),
+                 key: tuple[str, str] | None = None) -> None:
+        self._function: ca.Function | None = None
+        self._builder = function
+        #: What determines the function (:func:`code_key`; None: its serialization).
+        self.key = None if key is None else key[1]
+        if isinstance(function, ca.Function):
+            self._checked(function)
+            self.name = function.name()
+            self.n_in = int(function.nnz_in(0))
+            self.n_out = int(function.nnz_out(0))
+        elif key is None or inputs is None or outputs is None:
+            raise ValueError("a CompiledFunction built on demand needs its key and layouts")
+        else:
+            self.name, self.n_in, self.n_out = key[0], inputs.size, outputs.size
         #: Where each named quantity lies in an input row and in an output row.
         self.inputs = inputs if inputs is not None else Layout([("x", self.n_in)], "input")
         self.outputs = outputs if outputs is not None else Layout([("y", self.n_out)], "output")
         self.inputs.check(self.n_in, self.name, "input")
         self.outputs.check(self.n_out, self.name, "output")
+        if isinstance(function, ca.Function):
+            self._function = function
         self.compiled = False
         #: The C entry point ``f(arg, res, iw, w, mem)`` (None without compilation).
         self.entry: Any = None
@@ -308,11 +257,32 @@ class CompiledFunction:
             log.warning("%s: C compilation unavailable (%s); using the CasADi virtual machine",
                         self.name, exc)
 
+    @staticmethod
+    def _checked(function: ca.Function) -> ca.Function:
+        if function.n_in() != 1 or function.n_out() != 1:
+            raise ValueError("CompiledFunction needs exactly one input and one output")
+        return function
+
+    @property
+    def function(self) -> ca.Function:
+        """The CasADi function (built on first use when a builder was given: its name and
+        sizes checked against the key's and the layouts')."""
+        if self._function is None:
+            function = self._checked(built(self._builder))
+            if function.name() != self.name:
+                raise LayoutError(self.name, f"the builder made {function.name()!r}")
+            self.inputs.check(int(function.nnz_in(0)), self.name, "input")
+            self.outputs.check(int(function.nnz_out(0)), self.name, "output")
+            self._function = function
+        return self._function
+
     def cache_key(self) -> str:
-        """What identifies the library: CasADi's version, the serialized function and the C
-        wrapper (no code generation; the flags and the machine are added by
-        :func:`build_shared_library`)."""
-        return "\n".join((ca.CasadiMeta.version(), self.function.serialize(), self._wrapper()))
+        """What identifies the library: CasADi's version, the function's :func:`code_key`
+        (else the serialized function) and the C wrapper (no code generation; the flags
+        and the machine are added by :func:`build_shared_library`)."""
+        what = (f"{self.name} {self.n_in} {self.n_out}\n{self.key}" if self.key is not None
+                else self.function.serialize())
+        return "\n".join((ca.CasadiMeta.version(), what, self._wrapper()))
 
     def _wrapper(self) -> str:
         return _BATCH_WRAPPER.format(name=self.name, n_in=self.n_in, n_out=self.n_out)
@@ -380,7 +350,9 @@ class CompiledFunction:
             from hexapod.compiled_lanes import LaneFunction
 
             self._lanes = None if self._lib is None else LaneFunction.create(
-                self.function, f"{self.name}_lanes", same_width=False)
+                (lambda: self.function) if self._function is None else self._function,
+                f"{self.name}_lanes", same_width=False,
+                key=None if self.key is None else (self.key, (self.n_in, self.n_out)))
         return self._lanes
 
     def batch(self, x: np.ndarray, lanes: bool = False) -> np.ndarray:

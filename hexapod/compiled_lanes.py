@@ -37,7 +37,7 @@ from pathlib import Path
 import casadi as ca
 import numpy as np
 
-from hexapod.compiled import build_shared_library
+from hexapod.compiled import Builder, build_shared_library, built
 from hexapod.exceptions import UnsupportedInstructionError
 
 log = logging.getLogger(__name__)
@@ -306,18 +306,32 @@ class LaneFunction:
         self.used_avx2 = False
 
     @classmethod
-    def create(cls, function: ca.Function, name: str, finish: ca.Function | None = None,
-               same_width: bool = True) -> LaneFunction | None:
+    def create(cls, function: Builder, name: str, finish: Builder | None = None,
+               same_width: bool = True, key: tuple[str, tuple[int, int]] | None = None
+               ) -> LaneFunction | None:
         """The compiled lane function of ``function`` (then ``finish`` once, if given), or
         None (logged) when it cannot be generated or compiled. ``same_width=False``: a
-        function whose output is not as wide as its input (:meth:`evaluate` only)."""
+        function whose output is not as wide as its input (:meth:`evaluate` only).
+        ``key``: the functions' :func:`~hexapod.compiled.code_key` and the function's
+        input and output sizes; ``function`` and ``finish`` may then be builders, called
+        only when the library is missing (else the key is the serialized functions)."""
         try:
+            if key is None:
+                function, finish = built(function), None if finish is None else built(finish)
+                n_in, n_out = int(function.nnz_in(0)), int(function.nnz_out(0))
+                width = _check(function, name, same_width)
+                what = lane_key(function, name, finish, same_width)
+            else:
+                n_in, n_out = key[1]
+                width = n_in if same_width else max(n_in, n_out)
+                what = "\n".join((_generator_source(), ca.CasadiMeta.version(),
+                                  np.__version__, name, str(same_width), f"{n_in} {n_out}",
+                                  key[0]))
             path = build_shared_library(
-                name, lambda: lane_code(function, name, finish, same_width),
-                ("-O3", "-fno-math-errno", "-ffp-contract=off"),
-                key=lane_key(function, name, finish, same_width))
-            return cls(name, _check(function, name, same_width), ctypes.CDLL(str(path)),
-                       int(function.nnz_in(0)), int(function.nnz_out(0)))
+                name, lambda: lane_code(built(function), name,
+                                        None if finish is None else built(finish), same_width),
+                ("-O3", "-fno-math-errno", "-ffp-contract=off"), key=what)
+            return cls(name, width, ctypes.CDLL(str(path)), n_in, n_out)
         except (OSError, subprocess.SubprocessError, UnsupportedInstructionError) as exc:
             log.warning("%s: no lane-parallel C (%s); using CasADi's code", name, exc)
             return None

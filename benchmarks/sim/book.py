@@ -265,6 +265,14 @@ class Book:
         out = []
         base = base_row(sc, spec, 0)
         medians: dict[int, float | None] = {}  # [us], by the periods a row was commanded
+        # the tail medians of the rows measured at every period of it, in two calls (the
+        # same numbers as row by row: order statistics)
+        full = np.asarray(self.tail_seen.all(axis=1) if self.tail_seen.size
+                          else np.zeros(len(group), bool))
+        tails = {"tail_position_error_mm": np.median(self.tail_pos[full], axis=1) * 1e3,
+                 "tail_orientation_error_deg": np.rad2deg(np.median(self.tail_ori[full], axis=1))
+                 } if full.any() else {}
+        at = np.cumsum(full) - 1  # a full row's place among them
         for m, s in enumerate(group):
             row = dict(base)
             row["trial"] = int(s.trial)
@@ -295,7 +303,9 @@ class Book:
             if m in self.causes and not conv:
                 row["cause"] = self.causes[m]
             seen = self.tail_seen[m] if self.tail_seen.size else None
-            if seen is not None and seen.any():
+            if full[m]:
+                row.update({key: float(v[at[m]]) for key, v in tails.items()})
+            elif seen is not None and seen.any():
                 # the seeds' "median positioning error of the convergence tail": the last 20 %
                 row["tail_position_error_mm"] = float(np.median(self.tail_pos[m][seen]) * 1e3)
                 row["tail_orientation_error_deg"] = float(np.rad2deg(np.median(

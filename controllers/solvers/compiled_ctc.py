@@ -24,13 +24,13 @@ this replaced is the tests' oracle (``tests/controllers/ctc_oracles.py``).
 
 from __future__ import annotations
 
-from functools import lru_cache
+from functools import lru_cache, partial
 
 import casadi as ca
 
 from controllers.ctc_status import Status
 from controllers.law_algebra import rank_screen
-from hexapod.compiled import CompiledFunction, Layout
+from hexapod.compiled import CompiledFunction, Layout, code_key
 from hexapod.dynamics import compiled as dyn
 from hexapod.dynamics.drive_model import COULOMB_SMOOTHING
 from hexapod.dynamics.model import INVERSE_TOLERANCE
@@ -113,6 +113,14 @@ def sx_status(fk_residual: ca.SX, tolerance: float, solved: ca.SX, values: ca.SX
     return status
 
 
+#: The modules that write the computed-torque steps' expressions (their
+#: :func:`~hexapod.compiled.code_key`; a task step's adds its own).
+KEY_MODULES = ("controllers.ctc_status", "controllers.law_algebra", "controllers.law_tools",
+               "controllers.solvers.compiled_ctc", "controllers.tasks.joint_length",
+               "hexapod.layout", "hexapod.dynamics.compiled", "hexapod.dynamics.drive_model",
+               "hexapod.fk")
+
+
 def _build(inverse_tolerance: float) -> ca.Function:
     x = ca.SX.sym("x", INPUTS.size)
     v = INPUTS.split(x)
@@ -142,7 +150,9 @@ def joint_step(inverse_tolerance: float = INVERSE_TOLERANCE) -> CompiledFunction
         inverse_tolerance: Relative residual of the inverse solve above which ``K`` is
             taken as singular (as :meth:`hexapod.dynamics.DynamicModel.inverse_batch`).
     """
-    return CompiledFunction(_build(float(inverse_tolerance)), inputs=INPUTS, outputs=OUTPUTS)
+    tolerance = float(inverse_tolerance)
+    return CompiledFunction(partial(_build, tolerance), inputs=INPUTS, outputs=OUTPUTS,
+                            key=("hexapod_ctc_joint_step", code_key(KEY_MODULES, tolerance)))
 
 
 __all__ = ["FK_CALLS", "FK_TOLERANCE", "INPUTS", "MODEL_BLOCKS", "OUTPUTS", "joint_step",

@@ -37,12 +37,13 @@ desired ``e_ddot``). Outputs (:func:`task_layouts`): ``pose``, ``K``, ``fk_resid
 from __future__ import annotations
 
 from collections.abc import Sequence
-from functools import lru_cache
+from functools import lru_cache, partial
 
 import casadi as ca
 
 from controllers.ctc_status import Status
 from controllers.law_algebra import rank_screen
+from controllers.solvers import compiled_ctc
 from controllers.solvers.compiled_ctc import (
     FK_TOLERANCE,
     MODEL_BLOCKS,
@@ -53,7 +54,7 @@ from controllers.solvers.compiled_ctc import (
 )
 from controllers.tasks.feature_kind import BuiltinFeature
 from controllers.tasks.platform_pose import REFERENCE
-from hexapod.compiled import CompiledFunction, Layout, Shape
+from hexapod.compiled import CompiledFunction, Layout, Shape, code_key
 from hexapod.dynamics.drive_model import COULOMB_SMOOTHING
 from hexapod.dynamics.model import INVERSE_TOLERANCE
 
@@ -189,8 +190,18 @@ def _build(feature: BuiltinFeature, fk: bool, inverse_tolerance: float) -> ca.Fu
     out = sx_task_outputs(v, R_t, fk_residual, (K, twist, M, h, bias), e, L @ G,
                           ldot + L @ gdot, e_t, e_tt, v["mask"] if feature.camera_task else None,
                           inverse_tolerance, FK_TOLERANCE if fk else FIT_TOLERANCE, problem)
-    return ca.Function(f"hexapod_ctc_{feature.ctc_name}_{'fk' if fk else 'pose'}_step", [x],
-                       [ca.cse(ca.densify(out))])
+    return ca.Function(_name(feature, fk), [x], [ca.cse(ca.densify(out))])
+
+
+def _name(feature: BuiltinFeature, fk: bool) -> str:
+    return f"hexapod_ctc_{feature.ctc_name}_{'fk' if fk else 'pose'}_step"
+
+
+#: The modules that write a task step's expression (its :func:`~hexapod.compiled.code_key`).
+KEY_MODULES = (*compiled_ctc.KEY_MODULES, "controllers.solvers.compiled_task_ctc",
+               "controllers.tasks.base", "controllers.tasks.feature_kind",
+               "controllers.tasks.leg_direction", "controllers.tasks.leg_edge",
+               "controllers.tasks.leg_feature", "controllers.tasks.platform_pose")
 
 
 def sx_task_outputs(v: dict[str, ca.SX], R_t: ca.SX, fk_residual: ca.SX,
@@ -268,9 +279,11 @@ def task_step(feature: BuiltinFeature, fk: bool,
     if not fk and not feature.visual_pose:
         raise ValueError(f"feature {feature.kind!r}: the pose comes from the encoders "
                          "(fk=True)")
-    inputs, outputs = layout(feature, bool(fk))
-    return CompiledFunction(_build(feature, bool(fk), float(inverse_tolerance)),
-                            inputs=inputs, outputs=outputs)
+    fk, tolerance = bool(fk), float(inverse_tolerance)
+    inputs, outputs = layout(feature, fk)
+    return CompiledFunction(partial(_build, feature, fk, tolerance), inputs=inputs,
+                            outputs=outputs, key=(_name(feature, fk), code_key(
+                                KEY_MODULES, feature.kind, fk, tolerance)))
 
 
 __all__ = ["COMMON_INPUTS", "FIT_ITERATIONS", "FIT_TOLERANCE", "FK_CALLS", "REFERENCE", "layout",

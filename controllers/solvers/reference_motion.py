@@ -24,7 +24,7 @@ edge normals ((6, 2, 3) order), 18 for the directions.
 
 from __future__ import annotations
 
-from functools import lru_cache
+from functools import lru_cache, partial
 
 import casadi as ca
 
@@ -33,7 +33,7 @@ from controllers.tasks.feature_kind import BuiltinFeature
 from controllers.tasks.leg_direction import LEG_DIRECTIONS
 from controllers.tasks.leg_edge import EDGE_NORMALS
 from controllers.tasks.platform_pose import REFERENCE
-from hexapod.compiled import CompiledFunction, Layout
+from hexapod.compiled import CompiledFunction, Layout, code_key
 
 #: The features a reference is computed for (the feature computed-torque laws').
 FEATURES = (EDGE_NORMALS, LEG_DIRECTIONS)
@@ -92,6 +92,13 @@ def _build(feature: BuiltinFeature) -> ca.Function:
                        [ca.cse(ca.densify(ca.vertcat(*out)))])
 
 
+#: The modules that write the expression (its :func:`~hexapod.compiled.code_key`).
+KEY_MODULES = ("controllers.solvers.reference_motion", "controllers.tasks.base",
+               "controllers.tasks.feature_kind", "controllers.tasks.leg_direction",
+               "controllers.tasks.leg_edge", "controllers.tasks.leg_feature",
+               "controllers.tasks.platform_pose", "hexapod.layout")
+
+
 @lru_cache(maxsize=2)
 def feature_motion(feature: BuiltinFeature) -> CompiledFunction:
     """``s*``, ``s*_dot``, ``s*_ddot`` of the anchored model features (module docstring).
@@ -100,8 +107,10 @@ def feature_motion(feature: BuiltinFeature) -> CompiledFunction:
         feature: :data:`~controllers.tasks.leg_edge.EDGE_NORMALS` or
             :data:`~controllers.tasks.leg_direction.LEG_DIRECTIONS` (:data:`FEATURES`).
     """
-    return CompiledFunction(_build(feature), inputs=layouts(feature)[0],
-                            outputs=layouts(feature)[1])
+    return CompiledFunction(partial(_build, feature), inputs=layouts(feature)[0],
+                            outputs=layouts(feature)[1],
+                            key=(f"hexapod_feature_reference_{feature.kind}",
+                                 code_key(KEY_MODULES, feature.kind)))
 
 
 __all__ = ["FEATURES", "feature_motion", "layouts", "model_features"]

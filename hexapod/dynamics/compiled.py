@@ -38,12 +38,12 @@ velocity: ``f(q_dot + dt q_ddot) ~ f + (d f / d q_dot) dt K tau_dot``). It retur
 
 from __future__ import annotations
 
-from functools import lru_cache
+from functools import lru_cache, partial
 
 import casadi as ca
 import numpy as np
 
-from hexapod.compiled import CompiledFunction, Layout
+from hexapod.compiled import CompiledFunction, Layout, code_key
 from hexapod.dynamics.drive_model import COULOMB_SMOOTHING
 from hexapod.dynamics.inertia import InertiaParameters
 
@@ -318,13 +318,21 @@ def _build(name: str) -> ca.Function:
                      "forward, inverse, terms, legs, jacobian, forward_drives")
 
 
+#: The modules that write the functions' expressions (their
+#: :func:`~hexapod.compiled.code_key`).
+KEY_MODULES = ("hexapod.layout", "hexapod.dynamics.compiled", "hexapod.dynamics.drive_model")
+
+
 @lru_cache(maxsize=8)
 def compiled(name: str) -> CompiledFunction:
     """One of the compiled functions (``"forward"``, ``"inverse"``, ``"terms"``, ``"legs"``,
     ``"jacobian"``, ``"forward_drives"``), built and compiled on first use (the C library is cached
     on disk by :mod:`hexapod.compiled`)."""
     inputs = DRIVES_INPUTS if name == "forward_drives" else INPUTS
-    return CompiledFunction(_build(name), inputs=inputs, outputs=OUTPUTS[name])
+    if name not in OUTPUTS:
+        _build(name)  # raises: an unknown name
+    return CompiledFunction(partial(_build, name), inputs=inputs, outputs=OUTPUTS[name],
+                            key=(f"hexapod_dyn_{name}", code_key(KEY_MODULES, name)))
 
 
 def pack(R: np.ndarray, t: np.ndarray, twist: np.ndarray, u: np.ndarray,

@@ -22,7 +22,7 @@ from typing import Any
 import casadi as ca
 import numpy as np
 
-from hexapod.compiled import CompiledFunction, Layout
+from hexapod.compiled import CompiledFunction, Layout, code_key
 from hexapod.compiled_lanes import LaneFunction
 from hexapod.dynamics import compiled as mech
 
@@ -113,7 +113,10 @@ def _finish_expression() -> tuple[ca.SX, ca.SX]:
     return x, ca.cse(out)
 
 
-def _functions() -> tuple[ca.Function, ca.Function]:
+@lru_cache(maxsize=1)
+def period_functions() -> tuple[ca.Function, ca.Function]:
+    """The physics step and the end of a period (the legs' lengths) as CasADi functions
+    (built once per process, when a library is missing or the fallback is used)."""
     x, y = _step_expression()
     xf, yf = _finish_expression()
     return (ca.Function("hexapod_dyn_step", [x], [y]),
@@ -124,7 +127,7 @@ def _functions() -> tuple[ca.Function, ca.Function]:
 def period_function(steps: int) -> CompiledFunction:
     """The compiled period of ``steps`` physics steps, then the legs' lengths, in CasADi's
     C (built on first use, cached): the fallback of :func:`period_lanes`."""
-    step, finish = _functions()
+    step, finish = period_functions()
     xm = ca.MX.sym("x", WIDTH)
     return CompiledFunction(ca.Function(f"hexapod_dyn_period_{steps}", [xm],
                                         [finish(step.fold(steps)(xm))]),
@@ -136,8 +139,13 @@ def period_lanes() -> LaneFunction | None:
     """The period as lane-parallel C (:mod:`hexapod.compiled_lanes`: several rows per
     vector instruction, the physics steps looped in C, then the legs' lengths; the same
     results as :func:`period_function` bit for bit), or None where it cannot be compiled."""
-    step, finish = _functions()
-    return LaneFunction.create(step, "hexapod_dyn_period_lanes", finish)
+    return LaneFunction.create(lambda: period_functions()[0], "hexapod_dyn_period_lanes",
+                               lambda: period_functions()[1], key=(code_key(KEY_MODULES),
+                                                             (WIDTH, WIDTH)))
+
+
+#: The modules that write the period's expressions (its :func:`~hexapod.compiled.code_key`).
+KEY_MODULES = (*mech.KEY_MODULES, "hexapod.dynamics.robots_compiled")
 
 
 def run_period(x: np.ndarray, steps: int) -> np.ndarray:

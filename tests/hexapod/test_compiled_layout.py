@@ -3,11 +3,15 @@
 Every built-in kernel declares the layout of its input and output rows where it is built;
 :class:`CompiledFunction` refuses a layout whose size is not its function's, so that a
 kernel change cannot silently misalign an offset. The library of a kernel is found by the
-hash of its serialized function: a warm process does not generate C code to find it.
+hash of its serialized function, or of its :func:`~hexapod.compiled.code_key` (the source
+of the modules that write it and its builder's arguments): a warm process does not
+generate C code to find it, and a keyed kernel is not even built.
 """
 
 from __future__ import annotations
 
+import hashlib
+import sys
 from collections.abc import Callable, Iterator
 from pathlib import Path
 from typing import Any
@@ -17,7 +21,7 @@ import numpy as np
 import pytest
 
 from hexapod import compiled
-from hexapod.compiled import CompiledFunction, Layout
+from hexapod.compiled import CompiledFunction, Layout, code_key
 from hexapod.exceptions import LayoutError
 
 
@@ -198,3 +202,120 @@ def test_a_binding_evaluates_a_row_its_caller_owns() -> None:
                 np.zeros((2, f.n_in))[:, ::2][0]):
         with pytest.raises(LayoutError, match=f.name):
             f.bind(bad)
+
+
+def _keyed(scale: float, builds: list[float]) -> CompiledFunction:
+    """A kernel of ``scale * sin(x)`` keyed by its argument (``builds``: the builder's calls)."""
+    def build() -> ca.Function:
+        builds.append(scale)
+        return _function(scale)
+
+    return CompiledFunction(build, inputs=Layout([("x", 3)]), outputs=Layout([("y", 3)]),
+                            key=("hexapod_test_cache_key", code_key(["hexapod.layout"], scale)))
+
+
+def test_a_keyed_kernel_is_built_only_when_its_library_is_missing(
+        monkeypatch: pytest.MonkeyPatch, tmp_path: Path) -> None:
+    """Its key is found without building the function; another argument is another key,
+    another library; the cached library gives the bits of a fresh build."""
+    monkeypatch.setenv("HEXAPOD_CACHE_DIR", str(tmp_path / "cache"))
+    builds: list[float] = []
+    x = np.array([0.1, -0.4, 2.0])
+    cold = _keyed(2.0, builds)
+    assert cold.compiled and builds == [2.0]  # no library yet: built and compiled
+    warm = _keyed(2.0, builds)
+    assert warm.compiled and builds == [2.0]  # found by its key: not built
+    np.testing.assert_array_equal(warm.single(x), cold.single(x))
+    np.testing.assert_allclose(warm.single(x), 2.0 * np.sin(x), rtol=1e-15)
+    other = _keyed(3.0, builds)  # another argument: another key, built and compiled
+    assert other.cache_key() != warm.cache_key() and builds == [2.0, 3.0]
+    assert len(list((tmp_path / "cache").glob("hexapod_test_cache_key_*.so"))) == 2
+    np.testing.assert_allclose(other.single(x), 3.0 * np.sin(x), rtol=1e-15)
+    monkeypatch.setenv("HEXAPOD_CACHE_DIR", str(tmp_path / "fresh"))
+    fresh = _keyed(2.0, builds)  # an empty cache: built again
+    assert builds == [2.0, 3.0, 2.0]
+    np.testing.assert_array_equal(fresh.single(x), warm.single(x))
+    assert warm.function.name() == "hexapod_test_cache_key" and builds[-1] == 2.0
+    np.testing.assert_allclose(np.asarray(warm.function(x)).ravel(), warm.single(x),
+                               rtol=1e-15)  # built when asked for: the same function
+
+
+def test_a_code_key_changes_with_its_modules_source_and_its_arguments(
+        monkeypatch: pytest.MonkeyPatch, tmp_path: Path) -> None:
+    source = tmp_path / "hexapod_test_key_module.py"
+    source.write_text("SCALE = 2.0\n")
+    monkeypatch.syspath_prepend(str(tmp_path))
+    key = code_key(["hexapod_test_key_module", "hexapod.layout"], 1e-9, "normals")
+    assert key == code_key(["hexapod_test_key_module", "hexapod.layout"], 1e-9, "normals")
+    assert key != code_key(["hexapod_test_key_module", "hexapod.layout"], 2e-9, "normals")
+    assert key != code_key(["hexapod_test_key_module", "hexapod.layout"], 1e-9, "lines")
+    assert key != code_key(["hexapod.layout"], 1e-9, "normals")
+    source.write_text("SCALE = 3.0\n")  # another process, the module edited
+    monkeypatch.setattr(compiled, "_source_digest", compiled._source_digest.__wrapped__)
+    assert key != code_key(["hexapod_test_key_module", "hexapod.layout"], 1e-9, "normals")
+    sys.modules.pop("hexapod_test_key_module", None)
+
+
+#: The package directories whose modules can write a kernel's expression.
+_ROOT = Path(__file__).resolve().parents[2]
+
+
+def _modules_run_by(build: Callable[[], object]) -> set[str]:
+    """The project modules whose functions are called while ``build()`` runs (but
+    :mod:`hexapod.compiled`, which calls the builder)."""
+    files: set[str] = set()
+
+    def profile(frame: Any, event: str, arg: Any) -> None:
+        if event == "call":
+            files.add(frame.f_code.co_filename)
+
+    previous = sys.getprofile()
+    sys.setprofile(profile)
+    try:
+        build()
+    finally:
+        sys.setprofile(previous)
+    modules = set()
+    for f in files:
+        path = Path(f)
+        if path.suffix != ".py" or not path.is_relative_to(_ROOT):
+            continue
+        parts = path.relative_to(_ROOT).with_suffix("").parts
+        if parts[0] in ("hexapod", "controllers", "vision") and parts != ("hexapod", "compiled"):
+            modules.add(".".join(p for p in parts if p != "__init__"))
+    return modules
+
+
+def _assert_key_names(key: str, modules: set[str], name: str) -> None:
+    assert modules, name  # the build ran here (not a function built before)
+    for module in sorted(modules):
+        digest = hashlib.sha256(Path(str(sys.modules[module].__file__)).read_bytes())
+        assert f"{module} {digest.hexdigest()}" in key.splitlines(), (name, module)
+
+
+@pytest.mark.slow
+def test_every_keyed_kernel_names_every_module_its_build_runs(
+        monkeypatch: pytest.MonkeyPatch) -> None:
+    """A change in a module whose code writes a kernel's expression changes its key: its
+    library cannot be reused stale. Built without C, the factories' caches emptied."""
+    from hexapod.dynamics import robots_compiled
+
+    def no_c(self: CompiledFunction, flags: object, preload: object) -> None:
+        self.compiled = True
+
+    monkeypatch.setattr(CompiledFunction, "_compile", no_c)
+    kernels = list(_kernels())
+    _clear_caches()
+    keyed = []
+    try:
+        for name, make in kernels:
+            fn = make()
+            if fn.key is not None:
+                _assert_key_names(fn.key, _modules_run_by(lambda f=fn: f.function), name)
+                keyed.append(name)
+    finally:
+        _clear_caches()
+    assert len(keyed) == 13, keyed  # ctc 5, reference motions 2, dynamics 4, edge laws 2
+    robots_compiled.period_functions.cache_clear()
+    _assert_key_names(code_key(robots_compiled.KEY_MODULES),
+                      _modules_run_by(robots_compiled.period_functions), "period lanes")
