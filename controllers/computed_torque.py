@@ -28,7 +28,7 @@ rows go through it in one C call (:mod:`controllers.joint_ctc_rows`).
 from __future__ import annotations
 
 import math
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -95,6 +95,8 @@ class ComputedTorqueController(ComputedTorqueLaw):
 
     name = "computed-torque"
     features = frozenset({"lengths"})
+    #: The compiled step bound to ``_row`` (:meth:`__getattr__`).
+    _bound: BoundCall | None
 
     def init_state(self) -> None:
         """The trial's state before its first reset."""
@@ -111,9 +113,10 @@ class ComputedTorqueController(ComputedTorqueLaw):
         self._limit = np.full(6, np.inf)
         self._limit_list = self._limit.tolist()
         self._q_star = np.zeros(6)
-        #: The compiled step's bound rows (at the first reset); the input's pose block
-        #: holds the pose guess (the last pose found, the home pose before one).
-        self._bound: BoundCall | None = None
+        #: The compiled step's input row (own or a view of its batch's; None before a
+        #: reset); its pose block holds the pose guess (the last pose found, the home pose
+        #: before one). :attr:`_bound` binds the step to it at its first use.
+        self._row: np.ndarray | None = None
         #: ``(q*, q_dot*, q_ddot*)`` of a reference on the control grid ``k dt`` (N, 18)
         #: (None: not sampled yet, :attr:`grid`).
         self._grid: np.ndarray | None = np.zeros((0, 18))
@@ -123,6 +126,16 @@ class ComputedTorqueController(ComputedTorqueLaw):
         #: The batch's arrays (:class:`~controllers.joint_ctc_rows.JointRows`; trial 0's).
         self._rows: JointRows | None = None
 
+    def __getattr__(self, name: str) -> Any:
+        """``_bound``: the compiled step bound to the input row, made at its first use
+        (then an attribute; None before a reset)."""
+        if name != "_bound" or "_row" not in self.__dict__:
+            raise AttributeError(f"{type(self).__name__!r} object has no attribute {name!r}")
+        if self._row is None:
+            return None
+        self._bound = compiled_ctc.joint_step(INVERSE_TOLERANCE).bind(self._row)
+        return self._bound
+
     @property
     def compiled_steps(self) -> int:
         """Commands given by the compiled step (diagnostics)."""
@@ -131,58 +144,51 @@ class ComputedTorqueController(ComputedTorqueLaw):
     @property
     def _pose(self) -> tuple[np.ndarray, np.ndarray]:
         """The pose guess ``(R, t)`` of the next step (copies of the input row's)."""
-        assert self._bound is not None
-        row = self._bound.x[POSE_IN]
+        assert self._row is not None
+        row = self._row[POSE_IN]
         return row[0:9].reshape(3, 3).T.copy(), row[9:12].copy()
 
     @_pose.setter
     def _pose(self, pose: tuple[np.ndarray, np.ndarray] | None) -> None:
         """Set the next step's pose guess (None: the nominal home pose)."""
-        assert self._bound is not None and self._ctx is not None
+        assert self._row is not None and self._ctx is not None
         R0, p0 = home_pose(self._ctx.geometry) if pose is None else pose
-        row = self._bound.x[POSE_IN]
+        row = self._row[POSE_IN]
         row[0:9] = np.asarray(R0).T.ravel()
         row[9:12] = p0
 
     def __getstate__(self) -> dict[str, object]:
-        """Picklable: the binding (ctypes) is rebuilt on unpickling, the batch's arrays
-        left out."""
+        """Picklable: the binding (ctypes) is made again at its first use, the batch's
+        arrays left out."""
         state = self.__dict__.copy()
-        bound = state.pop("_bound")
+        state.pop("_bound", None)
         state["_rows"] = None
-        state["_bound_row"] = None if bound is None else bound.x.copy()
+        state["_row"] = None if self._row is None else self._row.copy()
         for key in ("_integral", "_quintic", "_steps"):  # own arrays, not views
             state[key] = np.array(state[key])
         return state
-
-    def __setstate__(self, state: dict[str, object]) -> None:
-        row = state.pop("_bound_row")
-        self.__dict__.update(state)
-        self._bound = None
-        if isinstance(row, np.ndarray):
-            self._bound = compiled_ctc.joint_step(INVERSE_TOLERANCE).bind()
-            self._bound.x[:] = row
 
     def adopt(self, row: np.ndarray, integral: np.ndarray, quintic: np.ndarray,
               steps: np.ndarray) -> None:
         """Take views of a batch's arrays (their values there already) as this trial's
         input row, integral (6,), quintic (21,) and command count (1,)."""
-        assert self._bound is not None
-        self._bound = self._bound.function.bind(row)
+        self._row = row
+        self.__dict__.pop("_bound", None)  # bound to it at its first use
         self._integral, self._quintic, self._steps = integral, quintic, steps
 
     @property
     def input_row(self) -> np.ndarray:
         """The compiled step's input row (n_in,) (the bound one, written in place)."""
-        assert self._bound is not None
-        return self._bound.x
+        assert self._row is not None
+        return self._row
 
     def batch_state(self) -> JointState:
         """This trial's state for its batch (:class:`~controllers.joint_ctc_rows.JointRows`)."""
-        assert self._bound is not None and self._ctx is not None
+        assert self._row is not None and self._ctx is not None
         grid = None if self._ctx.reference is None else self.grid
-        return JointState(self._bound.x, self._integral, self._quintic, self._steps,
-                          self._limit, self._dt, self._t_end, grid, self._bound.function)
+        return JointState(self._row, self._integral, self._quintic, self._steps,
+                          self._limit, self._dt, self._t_end, grid,
+                          compiled_ctc.joint_step(INVERSE_TOLERANCE))
 
     def reset_trial(self, context: ControllerContext) -> None:
         """Build the nominal model; read the reference or ``goal.lengths``.
@@ -198,18 +204,16 @@ class ComputedTorqueController(ComputedTorqueLaw):
         self._steps = np.zeros(1, dtype=np.int64)
         self._limit = np.asarray(context.geometry.drives.force_limit, dtype=float)
         self._limit_list = self._limit.tolist()
-        if self._bound is None:
-            self._bound = compiled_ctc.joint_step(INVERSE_TOLERANCE).bind()
-        else:  # its own row again (not a view of a former batch's)
-            self._bound = self._bound.function.bind(self._bound.x.copy())
-        row = self._bound.inputs
-        g, d = context.geometry, context.geometry.drives
-        row["points"][:] = (g.base_points, g.platform_points)
-        row["params"][:] = self._model.parameters
-        row["rotor"][:] = d.rotor_inertia
-        row["viscous"][:] = d.viscous
-        row["coulomb"][:] = d.coulomb
-        row["gains"][:] = (self.kp, self.kd)
+        # its own row (not a view of a former batch's), bound at its first use
+        self._row = row = np.zeros(compiled_ctc.INPUTS.size)
+        self.__dict__.pop("_bound", None)
+        g, d, at = context.geometry, context.geometry.drives, compiled_ctc.INPUTS
+        row[at["points"]] = np.ravel((g.base_points, g.platform_points))
+        row[at["params"]] = np.ravel(self._model.parameters)
+        row[at["rotor"]] = d.rotor_inertia
+        row[at["viscous"]] = d.viscous
+        row[at["coulomb"]] = d.coulomb
+        row[at["gains"]] = (self.kp, self.kd)
         self._pose = None
         self._grid = np.zeros((0, 18))
         self._dt = float(context.dt)

@@ -52,6 +52,11 @@ class CompiledTaskStep:
     row: np.ndarray
     guessed: np.ndarray
     steps: np.ndarray
+    #: The function bound to :attr:`row` and its input views by block
+    #: (:func:`~controllers.solvers.compiled_task_ctc.layout`): made on first use
+    #: (:meth:`__getattr__`), so a batch's trials stepped as rows never bind one.
+    bound: BoundCall
+    views: dict[str, np.ndarray]
 
     def __init__(self, law: TaskComputedTorque, kind: Any = None,
                  fk: bool | None = None) -> None:
@@ -97,11 +102,10 @@ class CompiledTaskStep:
         its own, or a row of its batch's matrix, its values there already), with the
         flag whether its pose block holds a pose found (1,) and the count of commands
         (1,) (own or the batch's)."""
-        self.bound: BoundCall = self.function.bind(row)
-        #: The input row (the bound one: written in place, evaluated without a copy).
-        self.row = self.bound.x
-        #: Its views by block (:func:`~controllers.solvers.compiled_task_ctc.layout`).
-        self.views = self.bound.inputs
+        for key in ("bound", "views"):  # bound again on first use
+            self.__dict__.pop(key, None)
+        #: The input row (written in place, evaluated without a copy).
+        self.row = row
         #: Whether the ``pose`` block holds a pose found (1.0) or the home pose (0.0).
         self.guessed = guessed
         #: Commands given by the step (the law's ``compiled_steps``).
@@ -109,11 +113,19 @@ class CompiledTaskStep:
         #: The task rows the last prepared step uses (None: all).
         self.used: np.ndarray | None = None
 
+    def __getattr__(self, name: str) -> Any:
+        """:attr:`bound` and :attr:`views`, made at their first use (then attributes)."""
+        if name not in ("bound", "views") or "row" not in self.__dict__:
+            raise AttributeError(f"{type(self).__name__!r} object has no attribute {name!r}")
+        self.bound = self.function.bind(self.row)
+        self.views = self.bound.inputs
+        return self.__dict__[name]
+
     def __getstate__(self) -> dict[str, object]:
         """Picklable: the function and its binding (ctypes) are rebuilt on unpickling."""
         state = self.__dict__.copy()
         for key in ("function", "bound", "row", "views", "guessed", "steps"):
-            del state[key]
+            state.pop(key, None)
         state["_arrays"] = (self.row.copy(), self.guessed.copy(), self.steps.copy())
         return state
 
@@ -130,14 +142,14 @@ class CompiledTaskStep:
         found (the home pose is in the row)."""
         if not self.guessed[0]:
             return None
-        pose = self.views["pose"]
+        pose = self.row[self.inputs["pose"]]
         return pose[0:9].reshape(3, 3).T.copy(), pose[9:12].copy()
 
     @guess.setter
     def guess(self, pose: tuple[np.ndarray, np.ndarray] | None) -> None:
         """Set the next step's pose guess (None: the home pose)."""
         R0, t0 = self.home if pose is None else pose
-        pose_in = self.views["pose"]
+        pose_in = self.row[self.inputs["pose"]]
         pose_in[0:9] = np.asarray(R0).T.ravel()
         pose_in[9:12] = t0
         self.guessed[0] = 0.0 if pose is None else 1.0
