@@ -28,7 +28,7 @@ rows go through it in one C call (:mod:`controllers.joint_ctc_rows`).
 from __future__ import annotations
 
 import math
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -95,8 +95,6 @@ class ComputedTorqueController(ComputedTorqueLaw):
 
     name = "computed-torque"
     features = frozenset({"lengths"})
-    #: The compiled step bound to ``_row`` (:meth:`__getattr__`).
-    _bound: BoundCall | None
 
     def init_state(self) -> None:
         """The trial's state before its first reset."""
@@ -115,8 +113,10 @@ class ComputedTorqueController(ComputedTorqueLaw):
         self._q_star = np.zeros(6)
         #: The compiled step's input row (own or a view of its batch's; None before a
         #: reset); its pose block holds the pose guess (the last pose found, the home pose
-        #: before one). :attr:`_bound` binds the step to it at its first use.
+        #: before one); the compiled step bound to it at its first per-trial use
+        #: (:meth:`_bind`; a batch's rows stepped as arrays never bind one).
         self._row: np.ndarray | None = None
+        self._bound: BoundCall | None = None
         #: ``(q*, q_dot*, q_ddot*)`` of a reference on the control grid ``k dt`` (N, 18)
         #: (None: not sampled yet, :attr:`grid`).
         self._grid: np.ndarray | None = np.zeros((0, 18))
@@ -126,13 +126,9 @@ class ComputedTorqueController(ComputedTorqueLaw):
         #: The batch's arrays (:class:`~controllers.joint_ctc_rows.JointRows`; trial 0's).
         self._rows: JointRows | None = None
 
-    def __getattr__(self, name: str) -> Any:
-        """``_bound``: the compiled step bound to the input row, made at its first use
-        (then an attribute; None before a reset)."""
-        if name != "_bound" or "_row" not in self.__dict__:
-            raise AttributeError(f"{type(self).__name__!r} object has no attribute {name!r}")
-        if self._row is None:
-            return None
+    def _bind(self) -> BoundCall:
+        """The compiled step bound to the input row (at its first per-trial use)."""
+        assert self._row is not None
         self._bound = compiled_ctc.joint_step(INVERSE_TOLERANCE).bind(self._row)
         return self._bound
 
@@ -158,22 +154,26 @@ class ComputedTorqueController(ComputedTorqueLaw):
         row[9:12] = p0
 
     def __getstate__(self) -> dict[str, object]:
-        """Picklable: the binding (ctypes) is made again at its first use, the batch's
-        arrays left out."""
+        """Picklable: the binding (ctypes) is rebuilt on unpickling, the batch's arrays
+        left out."""
         state = self.__dict__.copy()
-        state.pop("_bound", None)
+        state["_bound"] = None
         state["_rows"] = None
         state["_row"] = None if self._row is None else self._row.copy()
         for key in ("_integral", "_quintic", "_steps"):  # own arrays, not views
             state[key] = np.array(state[key])
         return state
 
+    def __setstate__(self, state: dict[str, object]) -> None:
+        self.__dict__.update(state)
+        if self._row is not None:
+            self._bind()
+
     def adopt(self, row: np.ndarray, integral: np.ndarray, quintic: np.ndarray,
               steps: np.ndarray) -> None:
         """Take views of a batch's arrays (their values there already) as this trial's
         input row, integral (6,), quintic (21,) and command count (1,)."""
-        self._row = row
-        self.__dict__.pop("_bound", None)  # bound to it at its first use
+        self._row, self._bound = row, None  # bound to it at its first per-trial use
         self._integral, self._quintic, self._steps = integral, quintic, steps
 
     @property
@@ -205,8 +205,8 @@ class ComputedTorqueController(ComputedTorqueLaw):
         self._limit = np.asarray(context.geometry.drives.force_limit, dtype=float)
         self._limit_list = self._limit.tolist()
         # its own row (not a view of a former batch's), bound at its first use
-        self._row = row = np.zeros(compiled_ctc.INPUTS.size)
-        self.__dict__.pop("_bound", None)
+        self._row, self._bound = np.zeros(compiled_ctc.INPUTS.size), None
+        row = self._row
         g, d, at = context.geometry, context.geometry.drives, compiled_ctc.INPUTS
         row[at["points"]] = np.ravel((g.base_points, g.platform_points))
         row[at["params"]] = np.ravel(self._model.parameters)
@@ -319,9 +319,10 @@ class ComputedTorqueController(ComputedTorqueLaw):
         """The leg forces of this period [N] (refused, zero, with a reason when the
         lengths, their rates or the time are missing or not finite, or the nominal model
         fails)."""
-        if self._ctx is None or self._model is None or self._bound is None:
+        if self._ctx is None or self._model is None or self._row is None:
             return self._refuse("reset(context) was not called")
-        row = self._bound.inputs
+        bound = self._bound or self._bind()  # (bound at the first step)
+        row = bound.inputs
         fast_readings = finite_readings(observation, row["q"], row["q_dot"])
         if fast_readings is None:  # encoder_readings decides (its reasons), off the common case
             readings = encoder_readings(observation)
@@ -334,7 +335,7 @@ class ComputedTorqueController(ComputedTorqueLaw):
             t, q, qd = fast_readings
         if self._quintic[0] == 0.0 and self._ctx.reference is None:
             self.start_quintic(t, q)
-        desired = self._bound.x[DESIRED]
+        desired = bound.x[DESIRED]
         try:
             self._desired_into(t, desired)
         except Exception as exc:  # the nominal model failed here: refuse with its reason
@@ -350,7 +351,7 @@ class ComputedTorqueController(ComputedTorqueLaw):
         if self.integral_gain and not over:
             self._integral += cmd.error * self._dt  # anti-windup: held while over
         if over:  # (under the limits every strategy commands the law's forces)
-            cmd.forces = self.saturated_forces(cmd.forces, self._bound.x[POSE_IN].copy(), qd,
+            cmd.forces = self.saturated_forces(cmd.forces, bound.x[POSE_IN].copy(), qd,
                                                desired[6:12])
         return cmd
 
@@ -379,8 +380,7 @@ class ComputedTorqueController(ComputedTorqueLaw):
                        qd_s: np.ndarray, qdd_s: np.ndarray) -> Command:
         """The compiled step from these readings and this reference (a refusal with its
         reason off its happy path; the saturation not applied)."""
-        assert self._bound is not None
-        row = self._bound.inputs
+        row = (self._bound or self._bind()).inputs
         row["q"][:] = q
         row["q_dot"][:] = qd
         row["desired"][:] = (q_s, qd_s, qdd_s)

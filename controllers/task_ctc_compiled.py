@@ -52,11 +52,6 @@ class CompiledTaskStep:
     row: np.ndarray
     guessed: np.ndarray
     steps: np.ndarray
-    #: The function bound to :attr:`row` and its input views by block
-    #: (:func:`~controllers.solvers.compiled_task_ctc.layout`): made on first use
-    #: (:meth:`__getattr__`), so a batch's trials stepped as rows never bind one.
-    bound: BoundCall
-    views: dict[str, np.ndarray]
 
     def __init__(self, law: TaskComputedTorque, kind: Any = None,
                  fk: bool | None = None) -> None:
@@ -102,10 +97,14 @@ class CompiledTaskStep:
         its own, or a row of its batch's matrix, its values there already), with the
         flag whether its pose block holds a pose found (1,) and the count of commands
         (1,) (own or the batch's)."""
-        for key in ("bound", "views"):  # bound again on first use
-            self.__dict__.pop(key, None)
         #: The input row (written in place, evaluated without a copy).
         self.row = row
+        #: The function bound to the row and its views by block
+        #: (:func:`~controllers.solvers.compiled_task_ctc.layout`), made at the first
+        #: per-trial use (:meth:`bind`; a batch's rows stepped as arrays never bind one):
+        #: None and empty before.
+        self.bound: BoundCall | None = None
+        self.views: dict[str, np.ndarray] = {}
         #: Whether the ``pose`` block holds a pose found (1.0) or the home pose (0.0).
         self.guessed = guessed
         #: Commands given by the step (the law's ``compiled_steps``).
@@ -113,19 +112,18 @@ class CompiledTaskStep:
         #: The task rows the last prepared step uses (None: all).
         self.used: np.ndarray | None = None
 
-    def __getattr__(self, name: str) -> Any:
-        """:attr:`bound` and :attr:`views`, made at their first use (then attributes)."""
-        if name not in ("bound", "views") or "row" not in self.__dict__:
-            raise AttributeError(f"{type(self).__name__!r} object has no attribute {name!r}")
+    def bind(self) -> dict[str, np.ndarray]:
+        """Bind the compiled function to :attr:`row` (its first per-trial use); returns
+        :attr:`views`."""
         self.bound = self.function.bind(self.row)
         self.views = self.bound.inputs
-        return self.__dict__[name]
+        return self.views
 
     def __getstate__(self) -> dict[str, object]:
         """Picklable: the function and its binding (ctypes) are rebuilt on unpickling."""
         state = self.__dict__.copy()
         for key in ("function", "bound", "row", "views", "guessed", "steps"):
-            state.pop(key, None)
+            del state[key]
         state["_arrays"] = (self.row.copy(), self.guessed.copy(), self.steps.copy())
         return state
 
@@ -135,6 +133,7 @@ class CompiledTaskStep:
         self.__dict__.update(state)
         self.function = self.make_function()
         self.adopt(*arrays)
+        self.bind()
 
     @property
     def guess(self) -> tuple[np.ndarray, np.ndarray] | None:
@@ -163,8 +162,9 @@ class CompiledTaskStep:
              q: np.ndarray, qd: np.ndarray) -> Command | str:
         """The command of this period, or why there is none (``q`` [m] and ``qd`` [m/s]
         written into the row first)."""
-        self.views["q"][:] = q
-        self.views["q_dot"][:] = qd
+        views = self.views or self.bind()
+        views["q"][:] = q
+        views["q_dot"][:] = qd
         return self.step_written(law, observation, tr)
 
     def step_written(self, law: TaskComputedTorque, observation: Observation, tr: float
@@ -174,8 +174,10 @@ class CompiledTaskStep:
         if isinstance(prepared, str):
             return prepared
         rows, note = prepared
-        pose_in, y = self.views["pose"], self.bound.y
-        guess = newton_calls(self.bound, pose_in, self.pose_block, self._residual,
+        bound = self.bound
+        assert bound is not None  # (prepare binds it)
+        pose_in, y = self.views["pose"], bound.y
+        guess = newton_calls(bound, pose_in, self.pose_block, self._residual,
                              self.tolerance, FK_MAX_CALLS)
         accepted = self.accept(law, y, rows)
         if accepted is None:
@@ -197,12 +199,13 @@ class CompiledTaskStep:
         """Write the law's measurement and the reference at ``tr`` into the row (``q``,
         ``q_dot`` and the pose guess there already); the task rows to use (None: all) and
         a note, or why there is no measurement."""
-        prepared = law.compiled_inputs(self, observation, tr, self.views["q"])
+        views = self.views or self.bind()
+        prepared = law.compiled_inputs(self, observation, tr, views["q"])
         if isinstance(prepared, str):
             return prepared
         rows = prepared[0]
         if law.integral_gain:
-            self.views["integral"][:] = law.integral_term(self.views["integral"].size)
+            views["integral"][:] = law.integral_term(views["integral"].size)
         self.used = rows
         return prepared
 

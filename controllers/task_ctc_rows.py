@@ -184,8 +184,9 @@ class TaskRows:
             law = self.laws[int(trials[j])]
             step = law.compiled
             assert step is not None
-            step.views["q"][:] = q_all[k]
-            step.views["q_dot"][:] = qd_all[k]
+            views = step.views or step.bind()
+            views["q"][:] = q_all[k]
+            views["q_dot"][:] = qd_all[k]
             try:
                 prepared = step.prepare(law, observations.item(k), float(tr[j]))
             except Exception:  # the trial's own step refuses with the reason
