@@ -111,8 +111,11 @@ class ComputedTorqueController(ComputedTorqueLaw):
         self._limit = np.full(6, np.inf)
         self._limit_list = self._limit.tolist()
         self._q_star = np.zeros(6)
-        #: The compiled step's bound rows (at the first reset); the input's pose block
-        #: holds the pose guess (the last pose found, the home pose before one).
+        #: The compiled step's input row (own or a view of its batch's; None before a
+        #: reset); its pose block holds the pose guess (the last pose found, the home pose
+        #: before one); the compiled step bound to it at its first per-trial use
+        #: (:meth:`_bind`; a batch's rows stepped as arrays never bind one).
+        self._row: np.ndarray | None = None
         self._bound: BoundCall | None = None
         #: ``(q*, q_dot*, q_ddot*)`` of a reference on the control grid ``k dt`` (N, 18)
         #: (None: not sampled yet, :attr:`grid`).
@@ -123,6 +126,12 @@ class ComputedTorqueController(ComputedTorqueLaw):
         #: The batch's arrays (:class:`~controllers.joint_ctc_rows.JointRows`; trial 0's).
         self._rows: JointRows | None = None
 
+    def _bind(self) -> BoundCall:
+        """The compiled step bound to the input row (at its first per-trial use)."""
+        assert self._row is not None
+        self._bound = compiled_ctc.joint_step(INVERSE_TOLERANCE).bind(self._row)
+        return self._bound
+
     @property
     def compiled_steps(self) -> int:
         """Commands given by the compiled step (diagnostics)."""
@@ -131,16 +140,16 @@ class ComputedTorqueController(ComputedTorqueLaw):
     @property
     def _pose(self) -> tuple[np.ndarray, np.ndarray]:
         """The pose guess ``(R, t)`` of the next step (copies of the input row's)."""
-        assert self._bound is not None
-        row = self._bound.x[POSE_IN]
+        assert self._row is not None
+        row = self._row[POSE_IN]
         return row[0:9].reshape(3, 3).T.copy(), row[9:12].copy()
 
     @_pose.setter
     def _pose(self, pose: tuple[np.ndarray, np.ndarray] | None) -> None:
         """Set the next step's pose guess (None: the nominal home pose)."""
-        assert self._bound is not None and self._ctx is not None
+        assert self._row is not None and self._ctx is not None
         R0, p0 = home_pose(self._ctx.geometry) if pose is None else pose
-        row = self._bound.x[POSE_IN]
+        row = self._row[POSE_IN]
         row[0:9] = np.asarray(R0).T.ravel()
         row[9:12] = p0
 
@@ -148,41 +157,38 @@ class ComputedTorqueController(ComputedTorqueLaw):
         """Picklable: the binding (ctypes) is rebuilt on unpickling, the batch's arrays
         left out."""
         state = self.__dict__.copy()
-        bound = state.pop("_bound")
+        state["_bound"] = None
         state["_rows"] = None
-        state["_bound_row"] = None if bound is None else bound.x.copy()
+        state["_row"] = None if self._row is None else self._row.copy()
         for key in ("_integral", "_quintic", "_steps"):  # own arrays, not views
             state[key] = np.array(state[key])
         return state
 
     def __setstate__(self, state: dict[str, object]) -> None:
-        row = state.pop("_bound_row")
         self.__dict__.update(state)
-        self._bound = None
-        if isinstance(row, np.ndarray):
-            self._bound = compiled_ctc.joint_step(INVERSE_TOLERANCE).bind()
-            self._bound.x[:] = row
+        if self._row is not None:
+            self._bind()
 
     def adopt(self, row: np.ndarray, integral: np.ndarray, quintic: np.ndarray,
               steps: np.ndarray) -> None:
         """Take views of a batch's arrays (their values there already) as this trial's
         input row, integral (6,), quintic (21,) and command count (1,)."""
-        assert self._bound is not None
-        self._bound = self._bound.function.bind(row)
+        self._row, self._bound = row, None  # bound to it at its first per-trial use
         self._integral, self._quintic, self._steps = integral, quintic, steps
 
     @property
     def input_row(self) -> np.ndarray:
         """The compiled step's input row (n_in,) (the bound one, written in place)."""
-        assert self._bound is not None
-        return self._bound.x
+        assert self._row is not None
+        return self._row
 
     def batch_state(self) -> JointState:
         """This trial's state for its batch (:class:`~controllers.joint_ctc_rows.JointRows`)."""
-        assert self._bound is not None and self._ctx is not None
+        assert self._row is not None and self._ctx is not None
         grid = None if self._ctx.reference is None else self.grid
-        return JointState(self._bound.x, self._integral, self._quintic, self._steps,
-                          self._limit, self._dt, self._t_end, grid, self._bound.function)
+        return JointState(self._row, self._integral, self._quintic, self._steps,
+                          self._limit, self._dt, self._t_end, grid,
+                          compiled_ctc.joint_step(INVERSE_TOLERANCE))
 
     def reset_trial(self, context: ControllerContext) -> None:
         """Build the nominal model; read the reference or ``goal.lengths``.
@@ -198,18 +204,16 @@ class ComputedTorqueController(ComputedTorqueLaw):
         self._steps = np.zeros(1, dtype=np.int64)
         self._limit = np.asarray(context.geometry.drives.force_limit, dtype=float)
         self._limit_list = self._limit.tolist()
-        if self._bound is None:
-            self._bound = compiled_ctc.joint_step(INVERSE_TOLERANCE).bind()
-        else:  # its own row again (not a view of a former batch's)
-            self._bound = self._bound.function.bind(self._bound.x.copy())
-        row = self._bound.inputs
-        g, d = context.geometry, context.geometry.drives
-        row["points"][:] = (g.base_points, g.platform_points)
-        row["params"][:] = self._model.parameters
-        row["rotor"][:] = d.rotor_inertia
-        row["viscous"][:] = d.viscous
-        row["coulomb"][:] = d.coulomb
-        row["gains"][:] = (self.kp, self.kd)
+        # its own row (not a view of a former batch's), bound at its first use
+        self._row, self._bound = np.zeros(compiled_ctc.INPUTS.size), None
+        row = self._row
+        g, d, at = context.geometry, context.geometry.drives, compiled_ctc.INPUTS
+        row[at["points"]] = np.ravel((g.base_points, g.platform_points))
+        row[at["params"]] = np.ravel(self._model.parameters)
+        row[at["rotor"]] = d.rotor_inertia
+        row[at["viscous"]] = d.viscous
+        row[at["coulomb"]] = d.coulomb
+        row[at["gains"]] = (self.kp, self.kd)
         self._pose = None
         self._grid = np.zeros((0, 18))
         self._dt = float(context.dt)
@@ -315,9 +319,10 @@ class ComputedTorqueController(ComputedTorqueLaw):
         """The leg forces of this period [N] (refused, zero, with a reason when the
         lengths, their rates or the time are missing or not finite, or the nominal model
         fails)."""
-        if self._ctx is None or self._model is None or self._bound is None:
+        if self._ctx is None or self._model is None or self._row is None:
             return self._refuse("reset(context) was not called")
-        row = self._bound.inputs
+        bound = self._bound or self._bind()  # (bound at the first step)
+        row = bound.inputs
         fast_readings = finite_readings(observation, row["q"], row["q_dot"])
         if fast_readings is None:  # encoder_readings decides (its reasons), off the common case
             readings = encoder_readings(observation)
@@ -330,7 +335,7 @@ class ComputedTorqueController(ComputedTorqueLaw):
             t, q, qd = fast_readings
         if self._quintic[0] == 0.0 and self._ctx.reference is None:
             self.start_quintic(t, q)
-        desired = self._bound.x[DESIRED]
+        desired = bound.x[DESIRED]
         try:
             self._desired_into(t, desired)
         except Exception as exc:  # the nominal model failed here: refuse with its reason
@@ -346,7 +351,7 @@ class ComputedTorqueController(ComputedTorqueLaw):
         if self.integral_gain and not over:
             self._integral += cmd.error * self._dt  # anti-windup: held while over
         if over:  # (under the limits every strategy commands the law's forces)
-            cmd.forces = self.saturated_forces(cmd.forces, self._bound.x[POSE_IN].copy(), qd,
+            cmd.forces = self.saturated_forces(cmd.forces, bound.x[POSE_IN].copy(), qd,
                                                desired[6:12])
         return cmd
 
@@ -375,8 +380,7 @@ class ComputedTorqueController(ComputedTorqueLaw):
                        qd_s: np.ndarray, qdd_s: np.ndarray) -> Command:
         """The compiled step from these readings and this reference (a refusal with its
         reason off its happy path; the saturation not applied)."""
-        assert self._bound is not None
-        row = self._bound.inputs
+        row = (self._bound or self._bind()).inputs
         row["q"][:] = q
         row["q_dot"][:] = qd
         row["desired"][:] = (q_s, qd_s, qdd_s)

@@ -50,8 +50,10 @@ LAW_OUTPUTS = (("error_norm", 1), ("n_sum", 1), ("rank", 1), ("condition", 1), (
 Feature = LegFeature | EdgeFeature
 
 
+@lru_cache(maxsize=64)
 def law_layouts(feature: Feature, interaction: str = "current") -> tuple[Layout, Layout]:
-    """The input and output layouts of a law core.
+    """The input and output layouts of a law core (made once per feature and
+    interaction; shared, never changed).
 
     Input, a leg feature: measured ``u`` (6 x 3), the desired feature (6 x rows), ``A`` (6 x
     3), ``q``, the weights (6), :data:`_LEG_INPUTS`, and for the DESIRED / MEAN interaction

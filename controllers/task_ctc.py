@@ -250,15 +250,16 @@ class TaskComputedTorque(ComputedTorqueLaw):
         if compiled is None:
             return self.refuse("no compiled step (compiled_kind is None and the law made "
                                "none at reset)")
+        views = compiled.views or compiled.bind()  # (bound at the first step)
         # the common case writes the readings into the compiled step's row itself
-        fast = finite_readings(observation, compiled.views["q"], compiled.views["q_dot"])
+        fast = finite_readings(observation, views["q"], views["q_dot"])
         if fast is None:  # encoder_readings decides (its reasons), off the common case
             readings = encoder_readings(observation)
             if isinstance(readings, str):
                 return self.refuse(readings)
             t, q, qd = readings
-            compiled.views["q"][:] = q
-            compiled.views["q_dot"][:] = qd
+            views["q"][:] = q
+            views["q_dot"][:] = qd
         else:
             t, q, qd = fast
         try:
@@ -270,6 +271,7 @@ class TaskComputedTorque(ComputedTorqueLaw):
             if isinstance(cmd, str):
                 return self.refuse(cmd)
             compiled.steps[0] += 1
+            assert compiled.bound is not None
             y = compiled.bound.y
             assert cmd.forces is not None
             cmd.forces = self.limited(cmd.forces, y[compiled.pose_block], qd,

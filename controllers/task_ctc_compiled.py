@@ -97,17 +97,27 @@ class CompiledTaskStep:
         its own, or a row of its batch's matrix, its values there already), with the
         flag whether its pose block holds a pose found (1,) and the count of commands
         (1,) (own or the batch's)."""
-        self.bound: BoundCall = self.function.bind(row)
-        #: The input row (the bound one: written in place, evaluated without a copy).
-        self.row = self.bound.x
-        #: Its views by block (:func:`~controllers.solvers.compiled_task_ctc.layout`).
-        self.views = self.bound.inputs
+        #: The input row (written in place, evaluated without a copy).
+        self.row = row
+        #: The function bound to the row and its views by block
+        #: (:func:`~controllers.solvers.compiled_task_ctc.layout`), made at the first
+        #: per-trial use (:meth:`bind`; a batch's rows stepped as arrays never bind one):
+        #: None and empty before.
+        self.bound: BoundCall | None = None
+        self.views: dict[str, np.ndarray] = {}
         #: Whether the ``pose`` block holds a pose found (1.0) or the home pose (0.0).
         self.guessed = guessed
         #: Commands given by the step (the law's ``compiled_steps``).
         self.steps = steps
         #: The task rows the last prepared step uses (None: all).
         self.used: np.ndarray | None = None
+
+    def bind(self) -> dict[str, np.ndarray]:
+        """Bind the compiled function to :attr:`row` (its first per-trial use); returns
+        :attr:`views`."""
+        self.bound = self.function.bind(self.row)
+        self.views = self.bound.inputs
+        return self.views
 
     def __getstate__(self) -> dict[str, object]:
         """Picklable: the function and its binding (ctypes) are rebuilt on unpickling."""
@@ -123,6 +133,7 @@ class CompiledTaskStep:
         self.__dict__.update(state)
         self.function = self.make_function()
         self.adopt(*arrays)
+        self.bind()
 
     @property
     def guess(self) -> tuple[np.ndarray, np.ndarray] | None:
@@ -130,14 +141,14 @@ class CompiledTaskStep:
         found (the home pose is in the row)."""
         if not self.guessed[0]:
             return None
-        pose = self.views["pose"]
+        pose = self.row[self.inputs["pose"]]
         return pose[0:9].reshape(3, 3).T.copy(), pose[9:12].copy()
 
     @guess.setter
     def guess(self, pose: tuple[np.ndarray, np.ndarray] | None) -> None:
         """Set the next step's pose guess (None: the home pose)."""
         R0, t0 = self.home if pose is None else pose
-        pose_in = self.views["pose"]
+        pose_in = self.row[self.inputs["pose"]]
         pose_in[0:9] = np.asarray(R0).T.ravel()
         pose_in[9:12] = t0
         self.guessed[0] = 0.0 if pose is None else 1.0
@@ -151,8 +162,9 @@ class CompiledTaskStep:
              q: np.ndarray, qd: np.ndarray) -> Command | str:
         """The command of this period, or why there is none (``q`` [m] and ``qd`` [m/s]
         written into the row first)."""
-        self.views["q"][:] = q
-        self.views["q_dot"][:] = qd
+        views = self.views or self.bind()
+        views["q"][:] = q
+        views["q_dot"][:] = qd
         return self.step_written(law, observation, tr)
 
     def step_written(self, law: TaskComputedTorque, observation: Observation, tr: float
@@ -162,8 +174,10 @@ class CompiledTaskStep:
         if isinstance(prepared, str):
             return prepared
         rows, note = prepared
-        pose_in, y = self.views["pose"], self.bound.y
-        guess = newton_calls(self.bound, pose_in, self.pose_block, self._residual,
+        bound = self.bound
+        assert bound is not None  # (prepare binds it)
+        pose_in, y = self.views["pose"], bound.y
+        guess = newton_calls(bound, pose_in, self.pose_block, self._residual,
                              self.tolerance, FK_MAX_CALLS)
         accepted = self.accept(law, y, rows)
         if accepted is None:
@@ -185,12 +199,13 @@ class CompiledTaskStep:
         """Write the law's measurement and the reference at ``tr`` into the row (``q``,
         ``q_dot`` and the pose guess there already); the task rows to use (None: all) and
         a note, or why there is no measurement."""
-        prepared = law.compiled_inputs(self, observation, tr, self.views["q"])
+        views = self.views or self.bind()
+        prepared = law.compiled_inputs(self, observation, tr, views["q"])
         if isinstance(prepared, str):
             return prepared
         rows = prepared[0]
         if law.integral_gain:
-            self.views["integral"][:] = law.integral_term(self.views["integral"].size)
+            views["integral"][:] = law.integral_term(views["integral"].size)
         self.used = rows
         return prepared
 

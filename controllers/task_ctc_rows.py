@@ -71,7 +71,8 @@ class TaskRows:
                             for law in laws])
         #: Rows without integral action, and each trial's ``int e dt`` of its task rows.
         self.plain = np.array([not law.integral_gain for law in laws], dtype=bool)
-        size = 0 if self.step_of is None else self.step_of.views["integral"].size
+        size = 0 if self.step_of is None else len(range(width)[
+            self.step_of.inputs["integral"]])
         self.integral = np.zeros((n, size))
         for k, law in enumerate(laws):
             law.clock = self.clock[k]
@@ -183,8 +184,9 @@ class TaskRows:
             law = self.laws[int(trials[j])]
             step = law.compiled
             assert step is not None
-            step.views["q"][:] = q_all[k]
-            step.views["q_dot"][:] = qd_all[k]
+            views = step.views or step.bind()
+            views["q"][:] = q_all[k]
+            views["q_dot"][:] = qd_all[k]
             try:
                 prepared = step.prepare(law, observations.item(k), float(tr[j]))
             except Exception:  # the trial's own step refuses with the reason

@@ -95,6 +95,10 @@ def test_the_batch_steps_as_its_trials_do_through_their_own_steps(
         assert inst.compiled_steps == s.compiled_steps
         assert inst.input_row.base is rows.X  # the trial's row is the batch's
         np.testing.assert_array_equal(inst._integral, s._integral)
+    # a trial's compiled step is bound only by its own step (row 1 at step 7): never for
+    # the rows the batch steps as arrays
+    assert [inst._bound is not None for inst in batch.trial_instances] == [
+        False, True, False, False]
 
 
 def test_one_quintic_row_is_the_batch_row_bit_for_bit() -> None:

@@ -55,6 +55,10 @@ def test_the_batch_steps_as_its_trials_do(geometry: HexapodGeometry, name: str,
         assert inst.compiled_steps == s.compiled_steps
         assert inst.compiled.row.base is rows.X  # the trial's row is the batch's
         assert inst.integral.tobytes() == s.integral.tobytes()
+    # a trial's compiled step is bound only by its own steps (row 1 at step 5; a fixed
+    # goal's first step): never for the rows the batch steps as arrays
+    bound = [inst.compiled.bound is not None for inst in batch.trial_instances]
+    assert bound == ([False, True, False] if tracking else [True] * n)
 
 
 def test_vision_rows_with_hidden_legs_are_stepped_by_the_batch(
