@@ -52,7 +52,7 @@ from controllers.joint_ctc_rows import (
 from controllers.law_tools import goal_lengths
 from controllers.solvers import compiled_ctc
 from controllers.solvers.saturation import over_limit, zero_acceleration_forces
-from controllers.task_ctc_inputs import QUINTIC_PEAK_SPEED, encoder_readings, finite_readings
+from controllers.task_ctc_inputs import QUINTIC_PEAK_SPEED, readings_into
 from hexapod.actuation import Actuation
 from hexapod.compiled import BoundCall
 from hexapod.dynamics import DynamicModel
@@ -323,16 +323,10 @@ class ComputedTorqueController(ComputedTorqueLaw):
             return self._refuse("reset(context) was not called")
         bound = self._bound or self._bind()  # (bound at the first step)
         row = bound.inputs
-        fast_readings = finite_readings(observation, row["q"], row["q_dot"])
-        if fast_readings is None:  # encoder_readings decides (its reasons), off the common case
-            readings = encoder_readings(observation)
-            if isinstance(readings, str):
-                return self._refuse(readings)
-            t, q, qd = readings
-            row["q"][:] = q
-            row["q_dot"][:] = qd
-        else:
-            t, q, qd = fast_readings
+        readings = readings_into(observation, row["q"], row["q_dot"])
+        if isinstance(readings, str):
+            return self._refuse(readings)
+        t, q, qd = readings
         if self._quintic[0] == 0.0 and self._ctx.reference is None:
             self.start_quintic(t, q)
         desired = bound.x[DESIRED]

@@ -37,7 +37,7 @@ from controllers.ctc_rows import stale
 from controllers.solvers.saturation import over_limit, zero_acceleration_forces
 from controllers.task_ctc_compiled import CompiledTaskStep
 from controllers.task_ctc_inputs import encoder_readings as encoder_readings
-from controllers.task_ctc_inputs import finite_readings, line_to
+from controllers.task_ctc_inputs import line_to, readings_into
 from controllers.task_ctc_rows import START, STARTED, VERSION, TaskRows
 from controllers.tasks.feature_kind import BuiltinFeature
 from hexapod.actuation import Actuation
@@ -251,17 +251,10 @@ class TaskComputedTorque(ComputedTorqueLaw):
             return self.refuse("no compiled step (compiled_kind is None and the law made "
                                "none at reset)")
         views = compiled.views or compiled.bind()  # (bound at the first step)
-        # the common case writes the readings into the compiled step's row itself
-        fast = finite_readings(observation, views["q"], views["q_dot"])
-        if fast is None:  # encoder_readings decides (its reasons), off the common case
-            readings = encoder_readings(observation)
-            if isinstance(readings, str):
-                return self.refuse(readings)
-            t, q, qd = readings
-            views["q"][:] = q
-            views["q_dot"][:] = qd
-        else:
-            t, q, qd = fast
+        readings = readings_into(observation, views["q"], views["q_dot"])
+        if isinstance(readings, str):
+            return self.refuse(readings)
+        t, _, qd = readings
         try:
             if not self.started:
                 problem = self._start(observation, t)

@@ -98,6 +98,21 @@ def finite_readings(observation: Observation, q_row: np.ndarray, qd_row: np.ndar
     return None
 
 
+def readings_into(observation: Observation, q_row: np.ndarray, qd_row: np.ndarray
+                  ) -> tuple[float, np.ndarray, np.ndarray] | str:
+    """:func:`encoder_readings` written into a compiled step's input row (its views
+    ``q_row`` and ``qd_row``): the common case by :func:`finite_readings`, the others by
+    :func:`encoder_readings` (or the reason they cannot be used)."""
+    fast = finite_readings(observation, q_row, qd_row)
+    if fast is not None:
+        return fast
+    readings = encoder_readings(observation)
+    if not isinstance(readings, str):
+        q_row[:] = readings[1]
+        qd_row[:] = readings[2]
+    return readings
+
+
 def camera_and_base_points(controller: str, context: ControllerContext
                            ) -> tuple[Transform, np.ndarray]:
     """The estimated camera pose ``camera_from_base`` and base points (6, 3) [m].

@@ -32,7 +32,7 @@ from controllers.cartesian_ctc import all_seen, directions_seen, every_seen
 from controllers.solvers.compiled_task_ctc import layout, task_step
 from controllers.task_ctc import TaskComputedTorque, grid_step
 from controllers.task_ctc_compiled import FIT_TOLERANCE, FK_MAX_CALLS, FK_TOLERANCE
-from controllers.task_ctc_inputs import encoder_readings, finite_readings
+from controllers.task_ctc_inputs import encoder_readings, finite_readings, readings_into
 from controllers.task_ctc_rows import grid_steps
 from hexapod import deltalab, sample_poses
 from hexapod.dynamics import DynamicModel
@@ -288,6 +288,14 @@ def test_the_common_case_checks_answer_as_the_general_ones() -> None:
         row = np.zeros(30)
         fast = finite_readings(v, row[12:18], row[18:24])
         general = encoder_readings(v)
+        into_row = np.zeros(30)  # the laws' reading: the general answer, in the row
+        into = readings_into(v, into_row[12:18], into_row[18:24])
+        if isinstance(general, str):
+            assert into == general
+        else:
+            assert not isinstance(into, str) and into[0] == general[0]
+            assert into[1].tobytes() == general[1].tobytes() == into_row[12:18].tobytes()
+            assert into[2].tobytes() == general[2].tobytes() == into_row[18:24].tobytes()
         if fast is not None:
             accepted[0] += 1
             assert not isinstance(general, str)
