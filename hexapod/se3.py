@@ -73,7 +73,8 @@ _EYE.flags.writeable = False
 def log_so3(R: np.ndarray) -> np.ndarray:
     """Rotation vectors (..., 3) [rad] of rotation matrices (..., 3, 3)."""
     R = np.asarray(R, dtype=float)
-    cos = (np.trace(R, axis1=-2, axis2=-1) - 1.0) / 2.0
+    # the trace as np.trace sums it, (R00 + R11) + R22, without its argument handling
+    cos = (R[..., 0, 0] + R[..., 1, 1] + R[..., 2, 2] - 1.0) / 2.0
     v = np.empty((*R.shape[:-2], 3))  # filled in place: no stack (every period's book)
     np.subtract(R[..., 2, 1], R[..., 1, 2], out=v[..., 0])
     np.subtract(R[..., 0, 2], R[..., 2, 0], out=v[..., 1])
@@ -90,8 +91,8 @@ def log_so3(R: np.ndarray) -> np.ndarray:
         factor = theta / (2.0 * sin)
     w = np.asarray(factor)[..., None] * v
     # Near pi: recover the axis from the symmetric part.
-    near_pi = (theta > np.pi - 1e-3)
-    if np.any(near_pi):
+    near_pi = theta > np.pi - 1e-3
+    if near_pi.any():
         Rn = R[near_pi]
         th = theta[near_pi]
         B = (Rn + np.swapaxes(Rn, -1, -2)) / 2.0 - np.cos(th)[..., None, None] * np.eye(3)

@@ -97,8 +97,8 @@ class Book:
         self.tail_seen = np.zeros((n, tail), dtype=bool)
         self.series: list[dict[str, list[Any]]] = [
             {k: [] for k in SERIES_KEYS} if rec else {} for rec in self.recording]
-        self.tracker = (Tracker(sc, targets.duration, self.pos_tol, self.ori_tol)
-                        if targets.duration is not None else None)  # a trajectory's metrics
+        self.tracker = (Tracker(sc, targets.duration) if targets.duration is not None
+                        else None)  # a trajectory's metrics
         self.dt = sc.dt
         g = group[0].world.geometry
         self.stroke, self.max_speed = g.stroke, g.max_speed  # the true legs' limits [m, m/s]
@@ -149,8 +149,9 @@ class Book:
     def observed(self, step: int, idx: np.ndarray, obs: ObservationBatch) -> np.ndarray:
         """Count the periods where a row measured fewer than its 12 edges, show the live
         view; every row has its image."""
-        seen = np.asarray(obs.edge_visible, dtype=bool).reshape(len(idx), -1).all(axis=1)
-        if not seen.all():
+        visible = np.asarray(obs.edge_visible, dtype=bool)
+        if not visible.all():  # (the common case: every edge of every row)
+            seen = visible.reshape(len(idx), -1).all(axis=1)
             self.hidden[idx[~seen]] += 1
         if self.on_step is not None:
             R, t = self.plant.R, self.plant.t
@@ -313,7 +314,7 @@ class Book:
             if detect_times:
                 row["detect_time_ms"] = float(np.median(detect_times) * 1e3)
             if self.tracker is not None:
-                row.update(self.tracker.row(m))
+                row.update(self.tracker.row(m, int(self.last_bad[m])))
                 if failed:  # it never reached the reference's end: it did not settle
                     row["settling_time_s"] = None
             if figures is not None:

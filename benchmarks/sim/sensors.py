@@ -25,14 +25,16 @@ from vision.legs import LegObservation, directions_from_edges
 from vision.noise import Generators, rotation_noise_batch
 
 
-def camera_batch(normals: np.ndarray, lines: np.ndarray | None, directions: np.ndarray,
-                 edge_visible: np.ndarray, direction_visible: np.ndarray,
-                 image_t: np.ndarray | None = None) -> ObservationBatch:
+def camera_batch(normals: np.ndarray | None, lines: np.ndarray | None,
+                 directions: np.ndarray | None, edge_visible: np.ndarray,
+                 direction_visible: np.ndarray, image_t: np.ndarray | None = None
+                 ) -> ObservationBatch:
     """The camera's part of the observations of ``n`` rows: normals (n, 6, 2, 3), image
-    lines (idem, or None), leg directions (n, 6, 3), their visibility (n, 6, 2), (n, 6)
-    and capture times ``image_t`` (n,) [s] or None; ``trials`` ``0..n-1``, ``t`` zeros
-    and ``lengths`` NaN until the loop adds the rows, the time and the encoders."""
-    n = len(normals)
+    lines (idem), leg directions (n, 6, 3) (each None when not measured), their visibility
+    (n, 6, 2), (n, 6) and capture times ``image_t`` (n,) [s] or None; ``trials``
+    ``0..n-1``, ``t`` zeros and ``lengths`` NaN until the loop adds the rows, the time and
+    the encoders."""
+    n = len(edge_visible)
     return ObservationBatch(trials=np.arange(n), t=np.zeros(n),
                             lengths=np.full((n, 6), np.nan), normals=normals, lines=lines,
                             directions=directions, edge_visible=edge_visible,
@@ -103,6 +105,12 @@ class GeometricSensor:
         #: The rows of every world, in order (:meth:`observe` of every row).
         self._every = np.arange(len(self.worlds))
         self.detect_times: list[float] = []
+        #: Whether :meth:`observe` measures the features (the loop's controller reads
+        #: them, :func:`reads_features`); else only the visibility, where the noise does
+        #: not change it (nothing drawn: no row depends on features nobody reads).
+        self.features = True
+        noise = sc.noise
+        self._visibility_only = noise.model != "pixel" and not noise.dropout_probability > 0
 
     @classmethod
     def of_trials(cls, sc: SimScenario, setups: list[TrialSetup]) -> GeometricSensor:
@@ -115,7 +123,12 @@ class GeometricSensor:
         """The loop's interface: the camera's batch of ``rows`` (sorted distinct rows, as
         the loop's) at their true poses."""
         gens = self.generators
-        if len(rows) == len(gens):  # every row, in order: what is kept for them
+        every = len(rows) == len(gens)  # every row, in order: what is kept for them
+        if not self.features and self._visibility_only:
+            seen = observe_batch(self.params, rotations, translations,
+                                 None if every else rows).edge_visible
+            return camera_batch(None, None, None, seen, seen[..., 0] & seen[..., 1])
+        if every:
             return self.sample(rotations, translations, self._every, gens)
         return self.sample(rotations, translations, rows, gens.take(rows))
 
@@ -160,6 +173,14 @@ class GeometricSensor:
         t = np.repeat(np.asarray(translation, float)[None], frames, axis=0)
         m = self.measure(R, t, [rng] * frames, apply_noise=apply_noise)
         return _average_frames(m, self.est if self.perspective else None)
+
+
+def reads_features(controller: Any) -> bool:
+    """Whether ``controller`` declares, among the observation fields it needs
+    (``features``), one the camera measures (a controller that declares only the
+    encoders', ``lengths``, reads no normals, lines or directions; one that declares
+    nothing is taken to read them all)."""
+    return bool(set(getattr(controller, "features", {"normals"})) - {"lengths"})
 
 
 def draws_noise(sc: SimScenario, apply_noise: bool) -> bool:

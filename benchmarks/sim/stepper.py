@@ -36,6 +36,7 @@ from benchmarks.sim.sensors import (
     GeometricSensor,
     RowSensor,
     make_sensor,
+    reads_features,
     rows_generators,
     trial_goal,
 )
@@ -250,6 +251,8 @@ class _Unit:
               sensor: GeometricSensor | RowSensor) -> list[TrialResult]:
         sc, spec = self.sc, self.spec
         controller = task_batch_controller(sc, spec, self.batched)
+        if isinstance(sensor, GeometricSensor):
+            sensor.features = reads_features(controller)
         actuation = actuation_of(controller)
         if self.backend_factory is None:  # (a backend says itself what it applies)
             check_actuation(actuation, *world_actuation(sc), spec.label)

@@ -23,20 +23,17 @@ class Tracker:
         sc: The scenario (a trajectory task).
         duration: (n,) the trials' reference durations [s]
             (:attr:`benchmarks.sim.reference.Targets.duration`).
-        pos_tol: Position tolerance [m].
-        ori_tol: Orientation tolerance [rad].
     """
 
-    def __init__(self, sc: SimScenario, duration: np.ndarray, pos_tol: float,
-                 ori_tol: float) -> None:
+    def __init__(self, sc: SimScenario, duration: np.ndarray) -> None:
         n = len(duration)
         self.dt = sc.dt
         self.last_step = sc.task.max_steps
-        self.pos_tol = pos_tol
-        self.ori_tol = ori_tol
         self.duration = duration
         self._moving_until = self.duration + 1e-12  # (a period at t <= this is moving)
-        #: The last reference's end: a period after it moves no row.
+        #: The first and last references' ends: a period before the first moves every
+        #: row, one after the last none.
+        self._first_moving = float(self._moving_until.min()) if n else -np.inf
         self._last_moving = float(self._moving_until.max()) if n else -np.inf
         self._rows = np.arange(n)
         self.count = np.zeros(n, dtype=int)
@@ -44,7 +41,6 @@ class Tracker:
         self.sum_da2 = np.zeros(n)
         self.max_dp = np.zeros(n)
         self.max_da = np.zeros(n)
-        self.last_bad = np.full(n, -1)
         #: The plant's drive forces (n, 6) [N] of some rows, None in the kinematic world.
         self.drive_forces: Callable[[np.ndarray | slice], np.ndarray] | None = None
         self.sum_f2 = np.zeros(n)
@@ -70,22 +66,22 @@ class Tracker:
         errors ``dp`` [m], orientation errors ``da`` [rad] from the reference."""
         pos = self._rows[idx]  # (a slice: a view)
         now = step * self.dt
-        moving = now <= self._moving_until[idx] if now <= self._last_moving else None
-        if moving is not None and moving.any():  # (none once every reference has ended)
-            rows, dpm, dam = ((idx, dp, da) if moving.all()
+        if now <= self._last_moving:  # (no row moves once every reference has ended)
+            moving = None if now <= self._first_moving else now <= self._moving_until[idx]
+            rows, dpm, dam = ((idx, dp, da) if moving is None or moving.all()
                               else (pos[moving], dp[moving], da[moving]))
             self.count[rows] += 1
             self.sum_dp2[rows] += dpm ** 2
             self.sum_da2[rows] += dam ** 2
             self.max_dp[rows] = np.maximum(self.max_dp[rows], dpm)
             self.max_da[rows] = np.maximum(self.max_da[rows], dam)
-        bad = (dp >= self.pos_tol) | (da >= self.ori_tol)
-        if bad.any():
-            self.last_bad[pos[bad]] = step
         if self.drive_forces is not None:
-            f = np.asarray(self.drive_forces(idx), dtype=float)
-            self.sum_f2[idx] += np.sum(f**2, axis=1)
-            self.count_f[idx] += f.shape[1]
+            f2 = np.asarray(self.drive_forces(idx), dtype=float) ** 2
+            total = f2[:, 0] + f2[:, 1]  # np.sum's order along a row, without a reduction
+            for k in range(2, f2.shape[1]):
+                total += f2[:, k]
+            self.sum_f2[idx] += total
+            self.count_f[idx] += f2.shape[1]
         if self.saturation is not None:
             seen = self.saturation(idx)
             hit = seen > self.sat_seen[idx]
@@ -95,11 +91,12 @@ class Tracker:
             self.sat_dp2[rows] += dp[hit] ** 2
             self.sat_max[rows] = np.maximum(self.sat_max[rows], dp[hit])
 
-    def row(self, m: int) -> dict[str, Any]:
-        """The metrics of row ``m`` for its result row."""
+    def row(self, m: int, last: int) -> dict[str, Any]:
+        """The metrics of row ``m`` for its result row; ``last`` is the last period at
+        which its pose was out of the tolerances (-1: none; the book's convergence test,
+        :meth:`benchmarks.sim.book.Book.check`)."""
         c = max(int(self.count[m]), 1)
         end = float(self.duration[m])
-        last = int(self.last_bad[m])
         if last >= self.last_step:
             settle: float | None = None  # out of tolerance at the last period
         else:

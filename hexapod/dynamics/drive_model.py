@@ -94,10 +94,12 @@ def quantise(lengths: np.ndarray, resolution: np.ndarray) -> np.ndarray:
     [m] per leg (a zero resolution reads exactly)."""
     res = np.asarray(resolution, float)
     counted = res > 0
+    # np.rint: np.round's halves to even (its own call for no decimals), without its
+    # wrappers (two calls every period of the dynamic world)
     if counted.all():  # every leg counted (the common case): no selection
-        return np.round(lengths / res) * res  # type: ignore[no-any-return]
+        return np.rint(lengths / res) * res  # type: ignore[no-any-return]
     safe = np.where(counted, res, 1.0)
-    return np.where(counted, np.round(lengths / safe) * safe, lengths)  # type: ignore[no-any-return]
+    return np.where(counted, np.rint(lengths / safe) * safe, lengths)  # type: ignore[no-any-return]
 
 
 @dataclass

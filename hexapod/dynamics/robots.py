@@ -172,11 +172,12 @@ class DynamicRobots:
         x[:, _IN_R].reshape(-1, 3, 3)[:] = np.swapaxes(R, -1, -2)
         x[:, _IN_T] = t
         x[:, _IN_TWIST] = twist
-        if not np.isfinite(x[:, :_IN_TWIST.stop]).all():  # one check of the written blocks
+        y = _c.compiled("legs").batch(x)
+        if not np.isfinite(y).all():  # (a non-finite input gives one) the input at fault
             checked_array("R", R, (3, 3))
             checked_array("t", t, (3,))
             checked_array("twist", twist, (6,))
-        y = self.model.checked(_c.compiled("legs").batch(x), "legs")
+            self.model.checked(y, "legs")  # else the row
         return _c.OUTPUTS["legs"].view(y, "q_dot")
 
     def lengths(self, rows: np.ndarray) -> np.ndarray:

@@ -137,6 +137,19 @@ def test_encoders_read_the_nearest_count() -> None:
     np.testing.assert_array_equal(m[:, 4], q[:, 4])
 
 
+def test_encoders_round_as_np_round_bit_for_bit() -> None:
+    """quantise rounds with np.rint: np.round's bits, the halves to even included, with
+    every leg counted (the common case) or one not."""
+    rng = np.random.default_rng(5)
+    res = np.full(6, 1e-6)
+    q = np.concatenate([rng.uniform(0.3, 0.5, (50, 6)), (np.arange(300) + 0.5).reshape(50, 6)
+                        * 1e-6])
+    for r in (res, np.array([1e-6, 0.0, 5e-6, 1e-5, 1e-6, 2.5e-7])):
+        safe = np.where(r > 0, r, 1.0)
+        expected = np.where(r > 0, np.round(q / safe) * safe, q)
+        assert quantise(q, r).tobytes() == expected.tobytes()
+
+
 def test_never_nan_whatever_the_input() -> None:
     """Huge, tiny and infinite velocities and setpoints: finite forces within the limit."""
     model = DriveModel(DriveParameters.default(), np.full(6, MASS), 3)

@@ -140,3 +140,13 @@ def test_norms_are_numpys_norms_bit_for_bit(shape: tuple[int, ...]) -> None:
         assert norms(x).tobytes() == np.linalg.norm(x, axis=-1).tobytes()
         assert norms(x, keepdims=True).tobytes() == np.linalg.norm(
             x, axis=-1, keepdims=True).tobytes()
+
+
+@pytest.mark.parametrize("shape", [(3, 3), (1, 3, 3), (7, 3, 3), (200, 3, 3), (5, 4, 3, 3)])
+def test_log_so3_sums_the_trace_as_numpy_does(shape: tuple[int, ...]) -> None:
+    """log_so3 sums the diagonal itself (every period's pose error): the bits of
+    ``np.trace``, which it relies on, for rotations and for any matrices."""
+    rng = np.random.default_rng(shape[0])
+    for M in (exp_so3(rng.normal(size=shape[:-1])), rng.normal(size=shape) * 1e3):
+        diagonal = M[..., 0, 0] + M[..., 1, 1] + M[..., 2, 2]
+        assert diagonal.tobytes() == np.trace(M, axis1=-2, axis2=-1).tobytes()

@@ -3,9 +3,14 @@ simulator and the servo session build it."""
 
 from __future__ import annotations
 
-import numpy as np
+from typing import Any
 
-from benchmarks.sim.sensors import seen_edges
+import numpy as np
+import pytest
+
+from benchmarks.sim.sensors import GeometricSensor, reads_features, seen_edges
+from benchmarks.sim.world import load_camera, load_geometry, make_trials
+from benchmarks.study.scenario import parse_scenario
 from hexapod import deltalab, legs_in_frame
 from vision.cameras.presets import fisheye_camera, front_camera, omni_camera
 from vision.legs import leg_edges
@@ -37,3 +42,35 @@ def test_image_lines_for_every_perspective_family_camera_as_the_simulator() -> N
     omni = omni_camera()
     f = _features(omni)
     assert seen_edges(omni, f.normals[None], f.edge_visible[None]).lines is None
+
+
+@pytest.mark.parametrize("noise", [{"model": "rotation", "amplitude_deg": 0.05},
+                                   {"model": "rotation", "amplitude_deg": 0.05,
+                                    "dropout_probability": 0.2}])
+def test_a_controller_of_the_encoders_gets_the_visibility_without_features(
+        noise: dict[str, Any]) -> None:
+    """A loop whose controller reads no camera feature (:func:`reads_features`) measures
+    the visibility the features' measurement gives, draws no noise and gives no features;
+    where the noise changes the visibility (dropout), the features are measured anyway."""
+    from controllers.registry import registry
+
+    sc = parse_scenario({"name": "s", "seed": 4, "trials": 3, "controllers": ["joint-space"],
+                         "camera": {"preset": "front"}, "noise": noise})
+    g = load_geometry(sc)
+    setups = make_trials(sc, [0, 1, 2], g, load_camera(sc, g))
+    R = np.array([s.start_rotation for s in setups])
+    t = np.array([s.start_translation for s in setups])
+    rows = np.arange(3)
+    full, lean = (GeometricSensor.of_trials(sc, setups) for _ in range(2))
+    lean.features = reads_features(registry.create("computed-torque"))
+    assert reads_features(registry.create("leg-edge")) and not lean.features
+    state = [rng.bit_generator.state for rng in lean.generators.rngs]
+    a, b = full.observe(rows, R, t), lean.observe(rows, R, t)
+    np.testing.assert_array_equal(a.edge_visible, b.edge_visible)
+    np.testing.assert_array_equal(a.direction_visible, b.direction_visible)
+    if "dropout_probability" in noise:
+        assert b.normals is not None
+        np.testing.assert_array_equal(a.normals, b.normals)
+    else:
+        assert b.normals is None and b.lines is None and b.directions is None
+        assert [rng.bit_generator.state for rng in lean.generators.rngs] == state

@@ -90,22 +90,42 @@ def test_point_to_point_rows_have_no_tracking_fields() -> None:
 
 
 def test_tracker_settling_time() -> None:
-    """A hand-made error history: out of tolerance until 0.3 s after the reference's end."""
+    """A hand-made error history: out of tolerance until 0.3 s after the reference's end
+    (the book's last period out of tolerance is the tracker's settling)."""
     sc = _scenario({"shape": "circle", "max_steps": 400})
     setups = _setups(sc, 1)
-    tr = Tracker(sc, Targets(sc, setups).duration, pos_tol=1e-4, ori_tol=1e-3)
+    tr = Tracker(sc, Targets(sc, setups).duration)
     end = tr.duration[0]
     idx = np.array([0])
+    last = -1
     for step in range(sc.task.max_steps + 1):
         t = step * sc.dt
         dp = np.array([2e-4 if t < end + 0.3 else 0.0])
         tr.add(step, idx, dp, np.zeros(1))
-    row = tr.row(0)
+        last = step if dp[0] >= 1e-4 else last
+    row = tr.row(0, last)
     moving = np.arange(sc.task.max_steps + 1) * sc.dt <= end + 1e-12
     assert row["tracking_rms_position_mm"] == pytest.approx(0.2)
     assert row["tracking_max_position_mm"] == pytest.approx(0.2)
     assert tr.count[0] == moving.sum()
     assert row["settling_time_s"] == pytest.approx(0.3, abs=sc.dt)
+
+
+@pytest.mark.parametrize("n", [1, 7, 200])
+def test_tracker_sums_the_drive_forces_as_np_sum(n: int) -> None:
+    """The squared drive forces summed leg by leg (no reduction along a row) are np.sum's
+    to the last bit, rows given as a slice or as indices."""
+    sc = _scenario({"shape": "circle", "max_steps": 40})
+    rng = np.random.default_rng(n)
+    forces = rng.normal(scale=300.0, size=(n, 6)) * rng.choice([1e-3, 1.0, 1e3], size=(n, 6))
+    tr = Tracker(sc, np.ones(n))
+    tr.drive_forces = lambda rows: forces[rows]
+    expected = np.zeros(n)
+    for step, rows in enumerate([slice(None), np.arange(n)[::2], slice(None)]):
+        tr.add(step, rows, np.zeros(n)[rows], np.zeros(n)[rows])
+        expected[rows] += np.sum(forces[rows] ** 2, axis=1)
+    assert tr.sum_f2.tobytes() == expected.tobytes()
+    assert tr.count_f.tolist() == [18 if k % 2 == 0 else 12 for k in range(n)]
 
 
 def _setups(sc: Any, n: int) -> list[Any]:
