@@ -176,11 +176,30 @@ class GeometricSensor:
 
 
 def reads_features(controller: Any) -> bool:
-    """Whether ``controller`` declares, among the observation fields it needs
-    (``features``), one the camera measures (a controller that declares only the
-    encoders', ``lengths``, reads no normals, lines or directions; one that declares
-    nothing is taken to read them all)."""
-    return bool(set(getattr(controller, "features", {"normals"})) - {"lengths"})
+    """Whether ``controller`` may read a field the camera measures: True unless it (the
+    law inside a tracking, latency or foreign-object wrapper) declares its ``features``
+    itself, in its class or instance, and they are only the encoders' ``lengths``. The
+    base class's default ``{"lengths"}`` is no declaration: a plugin that never set
+    ``features`` still gets every field."""
+    return not _declares_features(controller) or bool(set(controller.features) - {"lengths"})
+
+
+def _declares_features(obj: Any) -> bool:
+    """Whether the law of ``obj`` (through the wrappers) sets ``features`` itself."""
+    from controllers.base import Controller
+    from controllers.batch import ForeignController
+    from controllers.latency import LatencyCompensated
+    from controllers.tracking import TrackingController
+
+    if isinstance(obj, TrackingController | ForeignController):
+        return _declares_features(obj.inner)
+    if isinstance(obj, LatencyCompensated):
+        return _declares_features(obj.law)
+    if not isinstance(obj, Controller):
+        return hasattr(obj, "features")
+    mro = type(obj).__mro__
+    return "features" in vars(obj) or any("features" in vars(k)
+                                          for k in mro[:mro.index(Controller)])
 
 
 def draws_noise(sc: SimScenario, apply_noise: bool) -> bool:

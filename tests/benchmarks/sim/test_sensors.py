@@ -57,7 +57,9 @@ def test_a_controller_of_the_encoders_gets_the_visibility_without_features(
     sc = parse_scenario({"name": "s", "seed": 4, "trials": 3, "controllers": ["joint-space"],
                          "camera": {"preset": "front"}, "noise": noise})
     g = load_geometry(sc)
-    setups = make_trials(sc, [0, 1, 2], g, load_camera(sc, g))
+    setups = [s for s in make_trials(sc, [0, 1, 2], g, load_camera(sc, g))
+              if not isinstance(s, Exception)]
+    assert len(setups) == 3
     R = np.array([s.start_rotation for s in setups])
     t = np.array([s.start_translation for s in setups])
     rows = np.arange(3)
@@ -74,3 +76,37 @@ def test_a_controller_of_the_encoders_gets_the_visibility_without_features(
     else:
         assert b.normals is None and b.lines is None and b.directions is None
         assert [rng.bit_generator.state for rng in lean.generators.rngs] == state
+
+
+def test_only_a_declared_encoders_only_controller_goes_without_features() -> None:
+    """The base class's default ``features`` is no declaration: a plugin (a subclass or a
+    foreign object) that never set it may read every field; one that declares only
+    ``lengths`` does not, through the tracking wrapper too."""
+    from controllers.base import Controller
+    from controllers.batch import ForeignController
+    from controllers.registry import registry
+    from controllers.tracking import TrackingController
+
+    class Silent(Controller):
+        name = "silent"
+
+    class Encoders(Controller):
+        name = "encoders"
+        features = frozenset({"lengths"})
+
+    class Foreign:
+        name = "foreign"
+
+        def reset(self, context: Any) -> None: ...
+
+        def step(self, observation: Any) -> Any: ...
+
+    class ForeignEncoders(Foreign):
+        features = frozenset({"lengths"})
+
+    assert reads_features(Silent()) and reads_features(ForeignController(Foreign))
+    assert not reads_features(Encoders())
+    assert not reads_features(ForeignController(ForeignEncoders))
+    assert reads_features(TrackingController(ForeignController(Foreign)))
+    assert not reads_features(TrackingController(registry.create("computed-torque")))
+    assert reads_features(TrackingController(registry.create("leg-edge-ctc")))
