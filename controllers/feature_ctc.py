@@ -25,8 +25,6 @@ independent rows give a refusal with the reason.
 
 from __future__ import annotations
 
-from dataclasses import replace
-
 import numpy as np
 
 from controllers.base import ControllerContext, Goal, Observation, ObservationBatch
@@ -44,11 +42,15 @@ from controllers.tasks import Task
 from controllers.tasks.feature_kind import BuiltinFeature
 from controllers.tasks.leg_direction import LEG_DIRECTIONS
 from controllers.tasks.leg_edge import EDGE_NORMALS
-from controllers.tracking import anchor_goals, reference_goals
+from controllers.tracking import anchored, model_goals
+from hexapod.kinematics import Transform
 from vision.legs import directions_from_edges
 
 #: A unit vector standing in for a hidden leg's features (its rows are not used).
 _DUMMY = np.array([0.0, 0.0, 1.0])
+#: The normal standing in for a hidden leg's edges (read only).
+_DUMMY_NORMAL = np.cross(_DUMMY, [1.0, 0.0, 0.0])
+_DUMMY_NORMAL.flags.writeable = False
 #: Every row of the edge task (36) and of the direction task (18) (read only).
 _EVERY_EDGE = np.ones(36, bool)
 _EVERY_EDGE.flags.writeable = False
@@ -101,6 +103,16 @@ class FeatureCTC(TaskComputedTorque):
         self._grid = None  # the reference's features are anchored at the taught ones
         self.reference_changed()
 
+    @property
+    def taught(self) -> np.ndarray:
+        """The taught features (``goal.normals`` or ``goal.directions``, as given)."""
+        return self._taught
+
+    @property
+    def camera_frame(self) -> Transform:
+        """The estimated camera pose (``camera_from_base``)."""
+        return self._frame
+
     def goal_pose(self) -> tuple[np.ndarray, np.ndarray]:
         """The goal pose, the end of the smooth line (nominal base frame)."""
         assert self.context is not None
@@ -148,30 +160,45 @@ class FeatureCTC(TaskComputedTorque):
 
     def reference_grid(self) -> tuple[object, np.ndarray, np.ndarray, np.ndarray]:
         """The reference's control grid ``k dt`` to a step past its end (built once per
-        reference): the reference, what :meth:`compiled_reference` gives there (n, 3 m)
-        (:meth:`feature_rows` sanitised), the rows known (n, m) and whether they all
-        are (n,)."""
+        reference, or by :meth:`build_grids`): the reference, what
+        :meth:`compiled_reference` gives there (n, 3 m) (:meth:`feature_rows` sanitised),
+        the rows known (n, m) and whether they all are (n,)."""
+        if self._grid is None or self._grid[0] is not self.reference:
+            self._grid = (self.reference, *_grid_rows(*self.motion_and_seen(
+                self.grid_times())))
+        return self._grid
+
+    def grid_times(self) -> np.ndarray:
+        """The control grid ``k dt`` [s] to a step past the reference's end."""
         ctx, ref = self.context, self.reference
         assert ctx is not None and ref is not None
-        if self._grid is None or self._grid[0] is not ref:
-            dt = float(ctx.dt)
-            n = int(np.ceil(float(ref.duration) / dt)) + 2
-            out, seen = self.motion_and_seen(dt * np.arange(n))
-            m = seen.shape[1]
-            sanitised = out.reshape(n, 3 * m)
-            if seen.all() and np.isfinite(sanitised).all():  # the common case: all known
-                known, every = np.ones((n, m), dtype=bool), np.ones(n, dtype=bool)
-            else:  # as _sanitised_rows: those rows
-                known = np.repeat(seen.reshape(n, -1, 3).all(axis=2) & np.isfinite(
-                    out).reshape(n, 3, -1, 3).all(axis=(1, 3)), 3, axis=1)
-                every = np.all(known, axis=1)
-            bad = np.flatnonzero(~every)  # rare: only these rows are sanitised
-            if len(bad):
-                sanitised[bad] = _sanitised_rows(np.where(seen[bad, None, :], out[bad],
-                                                          np.nan))[0]
-            self._grid = grid = (ref, sanitised, known, every)
-            return grid
-        return self._grid
+        dt = float(ctx.dt)
+        return dt * np.arange(int(np.ceil(float(ref.duration) / dt)) + 2)
+
+    def build_grids(self, laws: list[TaskComputedTorque]) -> None:
+        """:meth:`TaskComputedTorque.build_grids`: the grids of the laws whose features
+        are this class's model (:meth:`motion_and_seen`), one pass per model world
+        (camera and robot): rows are independent, each grid holds its own numbers."""
+        worlds: dict[tuple[int, int], list[FeatureCTC]] = {}
+        for law in laws:
+            if (isinstance(law, FeatureCTC) and law.context is not None
+                    and law.reference is not None
+                    and type(law).motion_and_seen is _MOTION_AND_SEEN):
+                worlds.setdefault((id(law.context.camera), id(law.context.geometry)),
+                                  []).append(law)
+        for group in worlds.values():
+            times = [law.grid_times() for law in group]
+            rows, known, every = _grid_rows(*_motion_and_seen(group, times))
+            start = 0
+            for law, t in zip(group, times, strict=True):
+                end = start + len(t)
+                law.take_grid(rows[start:end], known[start:end], every[start:end])
+                start = end
+
+    def take_grid(self, rows: np.ndarray, known: np.ndarray, every: np.ndarray) -> None:
+        """Take the grid of the reference built by :meth:`build_grids` (the parts of
+        :meth:`reference_grid` after the reference)."""
+        self._grid = (self.reference, rows, known, every)
 
     def share_grid(self, rows: np.ndarray) -> None:
         """Hold ``rows`` (equal to the sanitised grid: its batch's copy) instead of the
@@ -181,34 +208,14 @@ class FeatureCTC(TaskComputedTorque):
 
     def feature_rows(self, times: np.ndarray) -> np.ndarray:
         """(m, 3, n) rows of :meth:`feature_reference` at ``times`` (m,) [s]; NaN where
-        the model's camera does not see the feature (:meth:`_anchored_and_end`)."""
+        the model's camera does not see the feature (:meth:`motion_and_seen`)."""
         out, seen = self.motion_and_seen(times)
         return np.where(seen[:, None, :], out, np.nan)
 
     def motion_and_seen(self, times: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """(m, 3, n) the anchored model features at ``times`` (m,) [s], their rate and
         acceleration, and (m, n) where the model's camera sees them."""
-        ctx = self.context
-        assert ctx is not None and self.reference is not None
-        feature = self.observed_feature
-        size = feature.task_rows
-        anchored, model_end = self._anchored_and_end(times)
-        model_end = model_end.reshape(-1, 3)
-        taught = self._taught.reshape(-1, 3)
-        taught = np.where(np.all(np.isfinite(taught), axis=-1)[:, None], taught, model_end)
-        g = ctx.geometry
-        cam = self._frame
-        inputs = layouts(feature)[0]
-        rows = np.empty((len(times), inputs.size))
-        v = inputs.views(rows)
-        v["reference"][:] = self.pose_rows(times)
-        v["taught"][:] = taught.ravel()
-        v["end"][:] = model_end.ravel()
-        v["frame"][:] = np.concatenate([cam.rotation.ravel(), cam.translation])
-        v["points"][:] = (g.base_points, g.platform_points)
-        v["radius"][:] = g.leg_radius
-        out = feature_motion(feature).batch(rows, lanes=True).reshape(len(times), 3, size)
-        return out, np.isfinite(anchored.reshape(len(times), size))
+        return _motion_and_seen([self], [times])
 
     def compiled_reference(self, tr: float) -> tuple[np.ndarray, np.ndarray | None]:
         """(3 m,) :meth:`feature_reference` at ``tr`` for the compiled step, the features
@@ -322,24 +329,86 @@ class FeatureCTC(TaskComputedTorque):
         into ``rows`` and their task rows seen (k, m rows), or None (by default: none)."""
         return None
 
-    def _anchored_and_end(self, times: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """(m, ...) the nominal features of the reference at ``times``, anchored at the
-        taught goal, and the model's features at the reference's end (a second past its
-        duration), from one call of the model (its field only)."""
-        ctx = self.context
-        assert ctx is not None and self.reference is not None
-        end = float(self.reference.duration) + 1.0
-        goals = reference_goals(replace(ctx, reference=self.reference),
-                                np.append(times, end), fields=(self.key,))
-        model_end = np.asarray(goals[self.key][-1])
-        anchor_goals(goals, replace(ctx.goal, **{self.key: self._taught}))
-        return np.asarray(goals[self.key][:-1]), model_end
-
     def retarget_trial(self, goal: Goal) -> None:
         """A new fixed goal; with a reference the taught features anchor it."""
         super().retarget_trial(goal)
         if self.context is not None and self.context.reference is not None:
             self.take_goal(goal)
+
+
+#: The features' model of the built-in laws (:meth:`FeatureCTC.build_grids` builds the
+#: grids of those that keep it; a law of its own, or one replaced, builds its own).
+_MOTION_AND_SEEN = FeatureCTC.motion_and_seen
+
+
+def _motion_and_seen(laws: list[FeatureCTC], times: list[np.ndarray]
+                     ) -> tuple[np.ndarray, np.ndarray]:
+    """:meth:`FeatureCTC.motion_and_seen` of ``laws`` (one model world: camera and robot)
+    at their ``times``, rows law after law: each reference sampled once with its end (a
+    second past its duration), one observation of every pose and one call of the
+    features' motion."""
+    law0 = laws[0]
+    ctx = law0.context
+    assert ctx is not None
+    feature, size = law0.observed_feature, law0.observed_feature.task_rows
+    samples = []
+    for law, t in zip(laws, times, strict=True):
+        ref = law.reference
+        assert ref is not None
+        samples.append(ref.at(np.append(t, float(ref.duration) + 1.0)))
+    model = model_goals(ctx, np.concatenate([s.rotation for s in samples]),
+                        np.concatenate([s.translation for s in samples]),
+                        fields=(law0.key,))[law0.key]
+    count = np.array([len(t) for t in times])
+    last = np.cumsum(count + 1) - 1  # each law's end
+    ends = model[last]
+    of = np.repeat(np.arange(len(laws)), count)  # each row's law
+    moving = np.delete(model, last, axis=0)
+    # the model's camera sees where the anchored features are finite (a taught
+    # goal of another shape anchors nothing, as anchor_goals)
+    taught = np.array([law.taught if law.taught.shape == model.shape[1:]
+                       else np.full(model.shape[1:], np.nan) for law in laws])
+    seen = np.isfinite(anchored(moving, ends[of], taught[of])).reshape(len(of), size)
+    inputs = layouts(feature)[0]
+    constants = np.empty((len(laws), inputs.size))
+    v = inputs.views(constants)
+    g = ctx.geometry
+    for k, law in enumerate(laws):
+        end = ends[k].reshape(-1, 3)
+        s_taught = law.taught.reshape(-1, 3)
+        v["taught"][k] = np.where(np.all(np.isfinite(s_taught), axis=-1)[:, None], s_taught,
+                                  end).ravel()
+        cam = law.camera_frame
+        v["frame"][k] = np.concatenate([cam.rotation.ravel(), cam.translation])
+    v["end"][:] = ends.reshape(len(laws), -1)
+    v["points"][:] = (g.base_points, g.platform_points)
+    v["radius"][:] = g.leg_radius
+    rows = constants[of]
+    poses = []
+    for law, s in zip(laws, samples, strict=True):
+        R, t, tw, twr = law.anchor(s.rotation[:-1], s.translation[:-1], s.twist[:-1],
+                                   s.twist_rate[:-1])
+        poses.append(np.concatenate([R.reshape(len(t), 9), t, tw, twr], axis=1))
+    inputs.views(rows)["reference"][:] = np.concatenate(poses)
+    out = feature_motion(feature).batch(rows, lanes=True, overwrite=True)
+    return out.reshape(len(of), 3, size), seen
+
+
+def _grid_rows(out: np.ndarray, seen: np.ndarray) -> tuple[np.ndarray, np.ndarray,
+                                                            np.ndarray]:
+    """Grid rows from :meth:`FeatureCTC.motion_and_seen` ``out`` (n, 3, m), ``seen`` (n, m):
+    the rows sanitised (n, 3 m) (:func:`_sanitised_rows`, in ``out``), those known
+    (n, m) and whether they all are (n,) (row by row: any rows give each its own)."""
+    n, _, m = out.shape
+    sanitised = out.reshape(n, 3 * m)
+    if seen.all() and np.isfinite(sanitised).all():  # the common case: all known
+        return sanitised, np.ones((n, m), dtype=bool), np.ones(n, dtype=bool)
+    known = np.repeat(seen.reshape(n, -1, 3).all(axis=2) & np.isfinite(
+        out).reshape(n, 3, -1, 3).all(axis=(1, 3)), 3, axis=1)
+    every = np.all(known, axis=1)
+    bad = np.flatnonzero(~every)  # rare: only these rows are sanitised
+    sanitised[bad] = _sanitised_rows(np.where(seen[bad, None, :], out[bad], np.nan))[0]
+    return sanitised, known, every
 
 
 def _sanitised(ref: np.ndarray) -> tuple[np.ndarray, np.ndarray | None]:
@@ -387,7 +456,7 @@ class LegEdgeCTC(FeatureCTC):
         u, legs = directions_seen(None, n, None, visible)
         legs &= np.all(np.isfinite(n), axis=(-2, -1))
         u = np.where(legs[:, None], u, _DUMMY)
-        n = np.where(legs[:, None, None], n, np.cross(_DUMMY, [1.0, 0.0, 0.0]))
+        n = np.where(legs[:, None, None], n, _DUMMY_NORMAL)
         return u, n, np.repeat(legs, 6)
 
     def compiled_features(self, observation: Observation
@@ -429,7 +498,7 @@ class LegEdgeCTC(FeatureCTC):
         legs = (np.all(visible, axis=-1) & np.all(np.isfinite(u), axis=-1)
                 & np.all(np.isfinite(n), axis=(-2, -1)))
         u = np.where(legs[..., None], u, _DUMMY)
-        n = np.where(legs[..., None, None], n, np.cross(_DUMMY, [1.0, 0.0, 0.0]))
+        n = np.where(legs[..., None, None], n, _DUMMY_NORMAL)
         X[j, step.inputs["normals"]] = n.reshape(len(j), -1)
         X[j, step.inputs["directions"]] = u.reshape(len(j), -1)
         X[j, step.inputs.index("of_normals")] = 0.0
