@@ -303,10 +303,10 @@ class FeatureCTC(TaskComputedTorque):
             assert isinstance(law, FeatureCTC)
             known = law.reference_grid()[2][at[j]]
             masks[j] = masks[j] & known if j in masks else known.copy()
-        if fast.any():
-            every = slice(None) if fast.all() else fast  # (a slice: no copies)
-            X[every, step.inputs["mask"]] = 1.0
-            X[every, step.inputs["reference_features"]] = references[every]
+        # every row (a slice: no copies); those not stepped here are written again by
+        # their trials' own steps
+        X[:, step.inputs["mask"]] = 1.0
+        X[:, step.inputs["reference_features"]] = references
         if masks:
             kept = np.fromiter(masks, dtype=int, count=len(masks))
             X[kept, step.inputs["mask"]] = np.array(list(masks.values()))
@@ -318,7 +318,9 @@ class FeatureCTC(TaskComputedTorque):
                        observations: ObservationBatch, rows: np.ndarray) -> np.ndarray:
         """Write the features of the batch rows ``rows`` into ``X`` where
         :meth:`compiled_features` would give them all seen (the same blocks and numbers
-        as :meth:`compiled_inputs`); their (m,) mask (none by default)."""
+        as :meth:`compiled_inputs`; the other rows may be written too: they are written
+        again, by :meth:`batch_partly_seen` or their trials' own steps); their (m,) mask
+        (none by default)."""
         return np.zeros(len(rows), dtype=bool)
 
     def batch_partly_seen(self, step: CompiledTaskStep, X: np.ndarray,
@@ -469,13 +471,13 @@ class LegEdgeCTC(FeatureCTC):
     def batch_features(self, step: CompiledTaskStep, X: np.ndarray,
                        observations: ObservationBatch, rows: np.ndarray) -> np.ndarray:
         """Every edge seen and finite: the normals, the directions left to the compiled
-        step (as :meth:`compiled_features` and ``_OF_NORMALS``)."""
+        step (as :meth:`compiled_features` and ``_OF_NORMALS``; written for every row,
+        a slice: the others' are written again)."""
         if observations.normals is None:
             return np.zeros(len(rows), dtype=bool)
         n, fast = seen_rows(observations.normals, observations.edge_visible, rows)
-        every = slice(None) if fast.all() else fast  # (a slice: no copies)
-        X[every, step.inputs["normals"]] = n[every]
-        X[every, step.inputs.index("of_normals")] = 1.0
+        X[:, step.inputs["normals"]] = n
+        X[:, step.inputs.index("of_normals")] = 1.0
         return fast
 
     def batch_partly_seen(self, step: CompiledTaskStep, X: np.ndarray,

@@ -236,9 +236,10 @@ class TaskRows:
         out.error_norm[ka] = np.sqrt(norms(E))
         over = over_limits(F, self.limit[ta])
         used_a: dict[int, np.ndarray] = {}
-        if used:  # the accepted row of a row
-            position = {j: i for i, j in enumerate(a.tolist())}
-            used_a = {position[j]: u for j, u in used.items() if j in position}
+        if used:  # the accepted row of a row (``a`` is sorted)
+            at = np.searchsorted(a, np.fromiter(used, dtype=int, count=len(used))).tolist()
+            used_a = {i: u for i, (j, u) in zip(at, used.items(), strict=True)
+                      if i < len(a) and a[i] == j}
         self._integrate(ta, E, over, used_a)
         for i in np.flatnonzero(over).tolist():  # over a limit: the law's strategy
             out.forces[ka[i]] = self.laws[int(ta[i])].limited(
