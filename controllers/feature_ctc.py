@@ -30,7 +30,7 @@ import numpy as np
 from controllers.base import ControllerContext, Goal, Observation, ObservationBatch
 from controllers.cartesian_ctc import directions_seen, every_seen, seen_rows
 from controllers.exceptions import ContextError
-from controllers.solvers.reference_motion import feature_motion, layouts
+from controllers.feature_grid import DUMMY, features_motion, grid_rows, sanitised
 from controllers.task_ctc import (
     CompiledTaskStep,
     TaskComputedTorque,
@@ -42,14 +42,11 @@ from controllers.tasks import Task
 from controllers.tasks.feature_kind import BuiltinFeature
 from controllers.tasks.leg_direction import LEG_DIRECTIONS
 from controllers.tasks.leg_edge import EDGE_NORMALS
-from controllers.tracking import anchored, model_goals
 from hexapod.kinematics import Transform
 from vision.legs import directions_from_edges
 
-#: A unit vector standing in for a hidden leg's features (its rows are not used).
-_DUMMY = np.array([0.0, 0.0, 1.0])
 #: The normal standing in for a hidden leg's edges (read only).
-_DUMMY_NORMAL = np.cross(_DUMMY, [1.0, 0.0, 0.0])
+_DUMMY_NORMAL = np.cross(DUMMY, [1.0, 0.0, 0.0])
 _DUMMY_NORMAL.flags.writeable = False
 #: Every row of the edge task (36) and of the direction task (18) (read only).
 _EVERY_EDGE = np.ones(36, bool)
@@ -99,7 +96,11 @@ class FeatureCTC(TaskComputedTorque):
         value = getattr(goal, self.key)
         if value is None:
             raise ContextError(self.name, f"goal.{self.key}", "missing (the taught features)")
-        self._taught = np.asarray(value, dtype=float)
+        taught = np.asarray(value, dtype=float)
+        if taught.shape != self.observed_feature.shape:
+            raise ContextError(self.name, f"goal.{self.key}", f"expected shape "
+                               f"{self.observed_feature.shape}, got {taught.shape}")
+        self._taught = taught
         self._grid = None  # the reference's features are anchored at the taught ones
         self.reference_changed()
 
@@ -145,8 +146,8 @@ class FeatureCTC(TaskComputedTorque):
         if i is None:
             return self.feature_rows(np.array([tr]))[0]
         assert self._grid is not None
-        _, sanitised, known, _ = self._grid
-        return np.where(known[i], sanitised[i].reshape(3, -1), np.nan)
+        _, rows, known, _ = self._grid
+        return np.where(known[i], rows[i].reshape(3, -1), np.nan)
 
     def _grid_index(self, tr: float) -> int | None:
         """The row of ``tr`` [s] in the reference's control grid (built on first use), or
@@ -164,7 +165,7 @@ class FeatureCTC(TaskComputedTorque):
         :meth:`compiled_reference` gives there (n, 3 m) (:meth:`feature_rows` sanitised),
         the rows known (n, m) and whether they all are (n,)."""
         if self._grid is None or self._grid[0] is not self.reference:
-            self._grid = (self.reference, *_grid_rows(*self.motion_and_seen(
+            self._grid = (self.reference, *grid_rows(*self.motion_and_seen(
                 self.grid_times())))
         return self._grid
 
@@ -188,7 +189,7 @@ class FeatureCTC(TaskComputedTorque):
                                   []).append(law)
         for group in worlds.values():
             times = [law.grid_times() for law in group]
-            rows, known, every = _grid_rows(*_motion_and_seen(group, times))
+            rows, known, every = grid_rows(*features_motion(group, times))
             start = 0
             for law, t in zip(group, times, strict=True):
                 end = start + len(t)
@@ -215,7 +216,7 @@ class FeatureCTC(TaskComputedTorque):
     def motion_and_seen(self, times: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """(m, 3, n) the anchored model features at ``times`` (m,) [s], their rate and
         acceleration, and (m, n) where the model's camera sees them."""
-        return _motion_and_seen([self], [times])
+        return features_motion([self], [times])
 
     def compiled_reference(self, tr: float) -> tuple[np.ndarray, np.ndarray | None]:
         """(3 m,) :meth:`feature_reference` at ``tr`` for the compiled step, the features
@@ -223,14 +224,14 @@ class FeatureCTC(TaskComputedTorque):
         known (None: all)."""
         i = self._grid_index(tr)
         if i is None:
-            return _sanitised(self.feature_rows(np.array([tr]))[0])
+            return sanitised(self.feature_rows(np.array([tr]))[0])
         assert self._grid is not None
         return self._grid[1][i], None if self._grid[3][i] else self._grid[2][i]
 
     def _taught_reference(self) -> tuple[np.ndarray, np.ndarray | None]:
         """The taught features at rest, as :meth:`compiled_reference`."""
         taught = self._taught.ravel()
-        return _sanitised(np.stack([taught, np.zeros_like(taught), np.zeros_like(taught)]))
+        return sanitised(np.stack([taught, np.zeros_like(taught), np.zeros_like(taught)]))
 
     def compiled_constants(self, step: CompiledTaskStep) -> None:
         """The estimated base points (camera frame) and the camera frame."""
@@ -277,8 +278,8 @@ class FeatureCTC(TaskComputedTorque):
         grid steps whose rows are all known."""
         if self.reference is None:
             return None
-        _, sanitised, _, every = self.reference_grid()
-        return sanitised, every
+        _, rows, _, every = self.reference_grid()
+        return rows, every
 
     def batch_inputs(self, rows_batch: TaskRows, X: np.ndarray,
                      observations: ObservationBatch, rows: np.ndarray, trials: np.ndarray,
@@ -303,10 +304,9 @@ class FeatureCTC(TaskComputedTorque):
             assert isinstance(law, FeatureCTC)
             known = law.reference_grid()[2][at[j]]
             masks[j] = masks[j] & known if j in masks else known.copy()
-        # every row (a slice: no copies); those not stepped here are written again by
-        # their trials' own steps
-        X[:, step.inputs["mask"]] = 1.0
-        X[:, step.inputs["reference_features"]] = references
+        if fast.any():  # every row (a slice: no copies); the others are written again
+            X[:, step.inputs["mask"]] = 1.0  # by their trials' own steps
+            X[:, step.inputs["reference_features"]] = references
         if masks:
             kept = np.fromiter(masks, dtype=int, count=len(masks))
             X[kept, step.inputs["mask"]] = np.array(list(masks.values()))
@@ -343,98 +343,6 @@ class FeatureCTC(TaskComputedTorque):
 _MOTION_AND_SEEN = FeatureCTC.motion_and_seen
 
 
-def _motion_and_seen(laws: list[FeatureCTC], times: list[np.ndarray]
-                     ) -> tuple[np.ndarray, np.ndarray]:
-    """:meth:`FeatureCTC.motion_and_seen` of ``laws`` (one model world: camera and robot)
-    at their ``times``, rows law after law: each reference sampled once with its end (a
-    second past its duration), one observation of every pose and one call of the
-    features' motion."""
-    law0 = laws[0]
-    ctx = law0.context
-    assert ctx is not None
-    feature, size = law0.observed_feature, law0.observed_feature.task_rows
-    samples = []
-    for law, t in zip(laws, times, strict=True):
-        ref = law.reference
-        assert ref is not None
-        samples.append(ref.at(np.append(t, float(ref.duration) + 1.0)))
-    model = model_goals(ctx, np.concatenate([s.rotation for s in samples]),
-                        np.concatenate([s.translation for s in samples]),
-                        fields=(law0.key,))[law0.key]
-    count = np.array([len(t) for t in times])
-    last = np.cumsum(count + 1) - 1  # each law's end
-    ends = model[last]
-    of = np.repeat(np.arange(len(laws)), count)  # each row's law
-    moving = np.delete(model, last, axis=0)
-    # the model's camera sees where the anchored features are finite (a taught
-    # goal of another shape anchors nothing, as anchor_goals)
-    taught = np.array([law.taught if law.taught.shape == model.shape[1:]
-                       else np.full(model.shape[1:], np.nan) for law in laws])
-    seen = np.isfinite(anchored(moving, ends[of], taught[of])).reshape(len(of), size)
-    inputs = layouts(feature)[0]
-    constants = np.empty((len(laws), inputs.size))
-    v = inputs.views(constants)
-    g = ctx.geometry
-    for k, law in enumerate(laws):
-        end = ends[k].reshape(-1, 3)
-        s_taught = law.taught.reshape(-1, 3)
-        v["taught"][k] = np.where(np.all(np.isfinite(s_taught), axis=-1)[:, None], s_taught,
-                                  end).ravel()
-        cam = law.camera_frame
-        v["frame"][k] = np.concatenate([cam.rotation.ravel(), cam.translation])
-    v["end"][:] = ends.reshape(len(laws), -1)
-    v["points"][:] = (g.base_points, g.platform_points)
-    v["radius"][:] = g.leg_radius
-    rows = constants[of]
-    poses = []
-    for law, s in zip(laws, samples, strict=True):
-        R, t, tw, twr = law.anchor(s.rotation[:-1], s.translation[:-1], s.twist[:-1],
-                                   s.twist_rate[:-1])
-        poses.append(np.concatenate([R.reshape(len(t), 9), t, tw, twr], axis=1))
-    inputs.views(rows)["reference"][:] = np.concatenate(poses)
-    out = feature_motion(feature).batch(rows, lanes=True, overwrite=True)
-    return out.reshape(len(of), 3, size), seen
-
-
-def _grid_rows(out: np.ndarray, seen: np.ndarray) -> tuple[np.ndarray, np.ndarray,
-                                                            np.ndarray]:
-    """Grid rows from :meth:`FeatureCTC.motion_and_seen` ``out`` (n, 3, m), ``seen`` (n, m):
-    the rows sanitised (n, 3 m) (:func:`_sanitised_rows`, in ``out``), those known
-    (n, m) and whether they all are (n,) (row by row: any rows give each its own)."""
-    n, _, m = out.shape
-    sanitised = out.reshape(n, 3 * m)
-    if seen.all() and np.isfinite(sanitised).all():  # the common case: all known
-        return sanitised, np.ones((n, m), dtype=bool), np.ones(n, dtype=bool)
-    known = np.repeat(seen.reshape(n, -1, 3).all(axis=2) & np.isfinite(
-        out).reshape(n, 3, -1, 3).all(axis=(1, 3)), 3, axis=1)
-    every = np.all(known, axis=1)
-    bad = np.flatnonzero(~every)  # rare: only these rows are sanitised
-    sanitised[bad] = _sanitised_rows(np.where(seen[bad, None, :], out[bad], np.nan))[0]
-    return sanitised, known, every
-
-
-def _sanitised(ref: np.ndarray) -> tuple[np.ndarray, np.ndarray | None]:
-    """(3, m) desired features, rates and accelerations -> (3 m,) with every unit vector
-    having a non-finite value replaced by a unit vector at rest, and the rows kept (None:
-    all)."""
-    known = np.repeat(np.isfinite(ref).reshape(3, -1, 3).all(axis=(0, 2)), 3)
-    if known.all():
-        return np.ascontiguousarray(ref).ravel(), None
-    out = np.where(known, ref, 0.0)
-    out[0] = np.where(known, out[0], np.tile(_DUMMY, known.size // 3))
-    return out.ravel(), known
-
-
-def _sanitised_rows(rows: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """:func:`_sanitised` of every row of ``rows`` (n, 3, m) at once: the sanitised rows
-    (n, 3 m) and their rows kept (n, m)."""
-    n, _, m = rows.shape
-    known = np.repeat(np.isfinite(rows).reshape(n, 3, -1, 3).all(axis=(1, 3)), 3, axis=1)
-    out = np.where(known[:, None, :], rows, 0.0)
-    out[:, 0] = np.where(known, out[:, 0], np.tile(_DUMMY, m // 3))
-    return out.reshape(n, 3 * m), known
-
-
 class LegEdgeCTC(FeatureCTC):
     """Computed torque on the leg edges (edge normals, ``e = n x n*``; see the module
     docstring)."""
@@ -457,7 +365,7 @@ class LegEdgeCTC(FeatureCTC):
                 return u, n, _EVERY_EDGE
         u, legs = directions_seen(None, n, None, visible)
         legs &= np.all(np.isfinite(n), axis=(-2, -1))
-        u = np.where(legs[:, None], u, _DUMMY)
+        u = np.where(legs[:, None], u, DUMMY)
         n = np.where(legs[:, None, None], n, _DUMMY_NORMAL)
         return u, n, np.repeat(legs, 6)
 
@@ -499,7 +407,7 @@ class LegEdgeCTC(FeatureCTC):
             u = directions_from_edges(n)  # directions_seen's, then features_seen's checks
         legs = (np.all(visible, axis=-1) & np.all(np.isfinite(u), axis=-1)
                 & np.all(np.isfinite(n), axis=(-2, -1)))
-        u = np.where(legs[..., None], u, _DUMMY)
+        u = np.where(legs[..., None], u, DUMMY)
         n = np.where(legs[..., None, None], n, _DUMMY_NORMAL)
         X[j, step.inputs["normals"]] = n.reshape(len(j), -1)
         X[j, step.inputs["directions"]] = u.reshape(len(j), -1)
@@ -523,7 +431,7 @@ class LegDirectionCTC(FeatureCTC):
                                   observation.direction_visible, observation.edge_visible)
         if legs.all():
             return u, None, self.every_rows
-        u = np.where(legs[:, None], u, _DUMMY)
+        u = np.where(legs[:, None], u, DUMMY)
         return u, None, np.repeat(legs, self.every_rows.size // 6)
 
     def compiled_features(self, observation: Observation

@@ -1,6 +1,6 @@
 """The feature computed-torque laws' reference grid (:mod:`controllers.feature_ctc`): the
-grid's rows sanitised at once are each row's own sanitising, and the grids of a batch's
-trials built together each trial's own grid, to the last bit."""
+grids of a batch's trials built together are each trial's own grid, to the last bit, and
+a taught goal of another shape is refused."""
 
 from __future__ import annotations
 
@@ -8,30 +8,10 @@ import numpy as np
 import pytest
 
 from controllers import registry
-from controllers.feature_ctc import FeatureCTC, _sanitised, _sanitised_rows
+from controllers.exceptions import ContextError
+from controllers.feature_ctc import FeatureCTC
 from hexapod import HexapodGeometry
 from tests.controllers.ctc_world import CtcWorld, ideal_drives, line_reference, perturbed
-
-
-@pytest.mark.parametrize("m", [36, 18])
-def test_the_grid_sanitised_at_once_is_each_row_sanitised(rng: np.random.Generator,
-                                                          m: int) -> None:
-    rows = rng.normal(size=(60, 3, m))
-    rows[3, 2, 4] = np.nan  # a feature's acceleration unknown: the feature's rows go
-    rows[7, 0, :3] = np.inf
-    rows[9, 1, 5] = -0.0
-    clean, known = _sanitised_rows(rows)
-    assert len(clean) == len(known) == 60
-    for k, r in enumerate(rows):
-        one, kept = _sanitised(r)
-        assert clean[k].tobytes() == one.tobytes()
-        if kept is None:
-            assert known[k].all()
-        else:
-            assert np.array_equal(known[k], kept)
-    assert [k for k, x in enumerate(known) if not x.all()] == [3, 7]
-    assert not known[3][3:6].any() and known[3][:3].all()
-    assert np.isfinite(np.stack(clean)).all()
 
 
 @pytest.mark.parametrize("name", ["leg-edge-ctc", "leg-direction-ctc"])
@@ -64,3 +44,14 @@ def test_grids_built_together_are_each_trials_own(geometry: HexapodGeometry,
         assert own[0] is grid[0]
         for a, b in zip(own[1:], grid[1:], strict=True):
             assert a.shape == b.shape and a.tobytes() == b.tobytes()
+
+
+def test_a_taught_goal_of_another_shape_is_refused(geometry: HexapodGeometry) -> None:
+    """The taught normals must be (6, 2, 3): the error names the field and the shape."""
+    world = CtcWorld.make(ideal_drives(geometry))
+    _, _, R1, t1, ref = line_reference(world.truth, "quintic", (1.0, -0.3, 0.4))
+    goal = world.goal(R1, t1)
+    goal.normals = goal.normals.reshape(12, 3)
+    law = registry.create("leg-edge-ctc")
+    with pytest.raises(ContextError, match=r"goal\.normals.*\(6, 2, 3\).*\(12, 3\)"):
+        law.reset(world.context(goal, reference=ref))
