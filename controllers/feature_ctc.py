@@ -25,14 +25,12 @@ independent rows give a refusal with the reason.
 
 from __future__ import annotations
 
-from dataclasses import replace
-
 import numpy as np
 
 from controllers.base import ControllerContext, Goal, Observation, ObservationBatch
 from controllers.cartesian_ctc import directions_seen, every_seen, seen_rows
 from controllers.exceptions import ContextError
-from controllers.solvers.reference_motion import feature_motion, layouts
+from controllers.feature_grid import DUMMY, features_motion, grid_rows, sanitised
 from controllers.task_ctc import (
     CompiledTaskStep,
     TaskComputedTorque,
@@ -44,11 +42,12 @@ from controllers.tasks import Task
 from controllers.tasks.feature_kind import BuiltinFeature
 from controllers.tasks.leg_direction import LEG_DIRECTIONS
 from controllers.tasks.leg_edge import EDGE_NORMALS
-from controllers.tracking import anchor_goals, reference_goals
+from hexapod.kinematics import Transform
 from vision.legs import directions_from_edges
 
-#: A unit vector standing in for a hidden leg's features (its rows are not used).
-_DUMMY = np.array([0.0, 0.0, 1.0])
+#: The normal standing in for a hidden leg's edges (read only).
+_DUMMY_NORMAL = np.cross(DUMMY, [1.0, 0.0, 0.0])
+_DUMMY_NORMAL.flags.writeable = False
 #: Every row of the edge task (36) and of the direction task (18) (read only).
 _EVERY_EDGE = np.ones(36, bool)
 _EVERY_EDGE.flags.writeable = False
@@ -97,9 +96,23 @@ class FeatureCTC(TaskComputedTorque):
         value = getattr(goal, self.key)
         if value is None:
             raise ContextError(self.name, f"goal.{self.key}", "missing (the taught features)")
-        self._taught = np.asarray(value, dtype=float)
+        taught = np.asarray(value, dtype=float)
+        if taught.shape != self.observed_feature.shape:
+            raise ContextError(self.name, f"goal.{self.key}", f"expected shape "
+                               f"{self.observed_feature.shape}, got {taught.shape}")
+        self._taught = taught
         self._grid = None  # the reference's features are anchored at the taught ones
         self.reference_changed()
+
+    @property
+    def taught(self) -> np.ndarray:
+        """The taught features (``goal.normals`` or ``goal.directions``, as given)."""
+        return self._taught
+
+    @property
+    def camera_frame(self) -> Transform:
+        """The estimated camera pose (``camera_from_base``)."""
+        return self._frame
 
     def goal_pose(self) -> tuple[np.ndarray, np.ndarray]:
         """The goal pose, the end of the smooth line (nominal base frame)."""
@@ -133,8 +146,8 @@ class FeatureCTC(TaskComputedTorque):
         if i is None:
             return self.feature_rows(np.array([tr]))[0]
         assert self._grid is not None
-        _, sanitised, known, _ = self._grid
-        return np.where(known[i], sanitised[i].reshape(3, -1), np.nan)
+        _, rows, known, _ = self._grid
+        return np.where(known[i], rows[i].reshape(3, -1), np.nan)
 
     def _grid_index(self, tr: float) -> int | None:
         """The row of ``tr`` [s] in the reference's control grid (built on first use), or
@@ -148,30 +161,45 @@ class FeatureCTC(TaskComputedTorque):
 
     def reference_grid(self) -> tuple[object, np.ndarray, np.ndarray, np.ndarray]:
         """The reference's control grid ``k dt`` to a step past its end (built once per
-        reference): the reference, what :meth:`compiled_reference` gives there (n, 3 m)
-        (:meth:`feature_rows` sanitised), the rows known (n, m) and whether they all
-        are (n,)."""
+        reference, or by :meth:`build_grids`): the reference, what
+        :meth:`compiled_reference` gives there (n, 3 m) (:meth:`feature_rows` sanitised),
+        the rows known (n, m) and whether they all are (n,)."""
+        if self._grid is None or self._grid[0] is not self.reference:
+            self._grid = (self.reference, *grid_rows(*self.motion_and_seen(
+                self.grid_times())))
+        return self._grid
+
+    def grid_times(self) -> np.ndarray:
+        """The control grid ``k dt`` [s] to a step past the reference's end."""
         ctx, ref = self.context, self.reference
         assert ctx is not None and ref is not None
-        if self._grid is None or self._grid[0] is not ref:
-            dt = float(ctx.dt)
-            n = int(np.ceil(float(ref.duration) / dt)) + 2
-            out, seen = self.motion_and_seen(dt * np.arange(n))
-            m = seen.shape[1]
-            sanitised = out.reshape(n, 3 * m)
-            if seen.all() and np.isfinite(sanitised).all():  # the common case: all known
-                known, every = np.ones((n, m), dtype=bool), np.ones(n, dtype=bool)
-            else:  # as _sanitised_rows: those rows
-                known = np.repeat(seen.reshape(n, -1, 3).all(axis=2) & np.isfinite(
-                    out).reshape(n, 3, -1, 3).all(axis=(1, 3)), 3, axis=1)
-                every = np.all(known, axis=1)
-            bad = np.flatnonzero(~every)  # rare: only these rows are sanitised
-            if len(bad):
-                sanitised[bad] = _sanitised_rows(np.where(seen[bad, None, :], out[bad],
-                                                          np.nan))[0]
-            self._grid = grid = (ref, sanitised, known, every)
-            return grid
-        return self._grid
+        dt = float(ctx.dt)
+        return dt * np.arange(int(np.ceil(float(ref.duration) / dt)) + 2)
+
+    def build_grids(self, laws: list[TaskComputedTorque]) -> None:
+        """:meth:`TaskComputedTorque.build_grids`: the grids of the laws whose features
+        are this class's model (:meth:`motion_and_seen`), one pass per model world
+        (camera and robot): rows are independent, each grid holds its own numbers."""
+        worlds: dict[tuple[int, int], list[FeatureCTC]] = {}
+        for law in laws:
+            if (isinstance(law, FeatureCTC) and law.context is not None
+                    and law.reference is not None
+                    and type(law).motion_and_seen is _MOTION_AND_SEEN):
+                worlds.setdefault((id(law.context.camera), id(law.context.geometry)),
+                                  []).append(law)
+        for group in worlds.values():
+            times = [law.grid_times() for law in group]
+            rows, known, every = grid_rows(*features_motion(group, times))
+            start = 0
+            for law, t in zip(group, times, strict=True):
+                end = start + len(t)
+                law.take_grid(rows[start:end], known[start:end], every[start:end])
+                start = end
+
+    def take_grid(self, rows: np.ndarray, known: np.ndarray, every: np.ndarray) -> None:
+        """Take the grid of the reference built by :meth:`build_grids` (the parts of
+        :meth:`reference_grid` after the reference)."""
+        self._grid = (self.reference, rows, known, every)
 
     def share_grid(self, rows: np.ndarray) -> None:
         """Hold ``rows`` (equal to the sanitised grid: its batch's copy) instead of the
@@ -181,34 +209,14 @@ class FeatureCTC(TaskComputedTorque):
 
     def feature_rows(self, times: np.ndarray) -> np.ndarray:
         """(m, 3, n) rows of :meth:`feature_reference` at ``times`` (m,) [s]; NaN where
-        the model's camera does not see the feature (:meth:`_anchored_and_end`)."""
+        the model's camera does not see the feature (:meth:`motion_and_seen`)."""
         out, seen = self.motion_and_seen(times)
         return np.where(seen[:, None, :], out, np.nan)
 
     def motion_and_seen(self, times: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """(m, 3, n) the anchored model features at ``times`` (m,) [s], their rate and
         acceleration, and (m, n) where the model's camera sees them."""
-        ctx = self.context
-        assert ctx is not None and self.reference is not None
-        feature = self.observed_feature
-        size = feature.task_rows
-        anchored, model_end = self._anchored_and_end(times)
-        model_end = model_end.reshape(-1, 3)
-        taught = self._taught.reshape(-1, 3)
-        taught = np.where(np.all(np.isfinite(taught), axis=-1)[:, None], taught, model_end)
-        g = ctx.geometry
-        cam = self._frame
-        inputs = layouts(feature)[0]
-        rows = np.empty((len(times), inputs.size))
-        v = inputs.views(rows)
-        v["reference"][:] = self.pose_rows(times)
-        v["taught"][:] = taught.ravel()
-        v["end"][:] = model_end.ravel()
-        v["frame"][:] = np.concatenate([cam.rotation.ravel(), cam.translation])
-        v["points"][:] = (g.base_points, g.platform_points)
-        v["radius"][:] = g.leg_radius
-        out = feature_motion(feature).batch(rows, lanes=True).reshape(len(times), 3, size)
-        return out, np.isfinite(anchored.reshape(len(times), size))
+        return features_motion([self], [times])
 
     def compiled_reference(self, tr: float) -> tuple[np.ndarray, np.ndarray | None]:
         """(3 m,) :meth:`feature_reference` at ``tr`` for the compiled step, the features
@@ -216,14 +224,14 @@ class FeatureCTC(TaskComputedTorque):
         known (None: all)."""
         i = self._grid_index(tr)
         if i is None:
-            return _sanitised(self.feature_rows(np.array([tr]))[0])
+            return sanitised(self.feature_rows(np.array([tr]))[0])
         assert self._grid is not None
         return self._grid[1][i], None if self._grid[3][i] else self._grid[2][i]
 
     def _taught_reference(self) -> tuple[np.ndarray, np.ndarray | None]:
         """The taught features at rest, as :meth:`compiled_reference`."""
         taught = self._taught.ravel()
-        return _sanitised(np.stack([taught, np.zeros_like(taught), np.zeros_like(taught)]))
+        return sanitised(np.stack([taught, np.zeros_like(taught), np.zeros_like(taught)]))
 
     def compiled_constants(self, step: CompiledTaskStep) -> None:
         """The estimated base points (camera frame) and the camera frame."""
@@ -270,8 +278,8 @@ class FeatureCTC(TaskComputedTorque):
         grid steps whose rows are all known."""
         if self.reference is None:
             return None
-        _, sanitised, _, every = self.reference_grid()
-        return sanitised, every
+        _, rows, _, every = self.reference_grid()
+        return rows, every
 
     def batch_inputs(self, rows_batch: TaskRows, X: np.ndarray,
                      observations: ObservationBatch, rows: np.ndarray, trials: np.ndarray,
@@ -296,10 +304,9 @@ class FeatureCTC(TaskComputedTorque):
             assert isinstance(law, FeatureCTC)
             known = law.reference_grid()[2][at[j]]
             masks[j] = masks[j] & known if j in masks else known.copy()
-        if fast.any():
-            every = slice(None) if fast.all() else fast  # (a slice: no copies)
-            X[every, step.inputs["mask"]] = 1.0
-            X[every, step.inputs["reference_features"]] = references[every]
+        if fast.any():  # every row (a slice: no copies); the others are written again
+            X[:, step.inputs["mask"]] = 1.0  # by their trials' own steps
+            X[:, step.inputs["reference_features"]] = references
         if masks:
             kept = np.fromiter(masks, dtype=int, count=len(masks))
             X[kept, step.inputs["mask"]] = np.array(list(masks.values()))
@@ -311,7 +318,9 @@ class FeatureCTC(TaskComputedTorque):
                        observations: ObservationBatch, rows: np.ndarray) -> np.ndarray:
         """Write the features of the batch rows ``rows`` into ``X`` where
         :meth:`compiled_features` would give them all seen (the same blocks and numbers
-        as :meth:`compiled_inputs`); their (m,) mask (none by default)."""
+        as :meth:`compiled_inputs`; the other rows may be written too: they are written
+        again, by :meth:`batch_partly_seen` or their trials' own steps); their (m,) mask
+        (none by default)."""
         return np.zeros(len(rows), dtype=bool)
 
     def batch_partly_seen(self, step: CompiledTaskStep, X: np.ndarray,
@@ -322,19 +331,6 @@ class FeatureCTC(TaskComputedTorque):
         into ``rows`` and their task rows seen (k, m rows), or None (by default: none)."""
         return None
 
-    def _anchored_and_end(self, times: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """(m, ...) the nominal features of the reference at ``times``, anchored at the
-        taught goal, and the model's features at the reference's end (a second past its
-        duration), from one call of the model (its field only)."""
-        ctx = self.context
-        assert ctx is not None and self.reference is not None
-        end = float(self.reference.duration) + 1.0
-        goals = reference_goals(replace(ctx, reference=self.reference),
-                                np.append(times, end), fields=(self.key,))
-        model_end = np.asarray(goals[self.key][-1])
-        anchor_goals(goals, replace(ctx.goal, **{self.key: self._taught}))
-        return np.asarray(goals[self.key][:-1]), model_end
-
     def retarget_trial(self, goal: Goal) -> None:
         """A new fixed goal; with a reference the taught features anchor it."""
         super().retarget_trial(goal)
@@ -342,26 +338,9 @@ class FeatureCTC(TaskComputedTorque):
             self.take_goal(goal)
 
 
-def _sanitised(ref: np.ndarray) -> tuple[np.ndarray, np.ndarray | None]:
-    """(3, m) desired features, rates and accelerations -> (3 m,) with every unit vector
-    having a non-finite value replaced by a unit vector at rest, and the rows kept (None:
-    all)."""
-    known = np.repeat(np.isfinite(ref).reshape(3, -1, 3).all(axis=(0, 2)), 3)
-    if known.all():
-        return np.ascontiguousarray(ref).ravel(), None
-    out = np.where(known, ref, 0.0)
-    out[0] = np.where(known, out[0], np.tile(_DUMMY, known.size // 3))
-    return out.ravel(), known
-
-
-def _sanitised_rows(rows: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """:func:`_sanitised` of every row of ``rows`` (n, 3, m) at once: the sanitised rows
-    (n, 3 m) and their rows kept (n, m)."""
-    n, _, m = rows.shape
-    known = np.repeat(np.isfinite(rows).reshape(n, 3, -1, 3).all(axis=(1, 3)), 3, axis=1)
-    out = np.where(known[:, None, :], rows, 0.0)
-    out[:, 0] = np.where(known, out[:, 0], np.tile(_DUMMY, m // 3))
-    return out.reshape(n, 3 * m), known
+#: The features' model of the built-in laws (:meth:`FeatureCTC.build_grids` builds the
+#: grids of those that keep it; a law of its own, or one replaced, builds its own).
+_MOTION_AND_SEEN = FeatureCTC.motion_and_seen
 
 
 class LegEdgeCTC(FeatureCTC):
@@ -386,8 +365,8 @@ class LegEdgeCTC(FeatureCTC):
                 return u, n, _EVERY_EDGE
         u, legs = directions_seen(None, n, None, visible)
         legs &= np.all(np.isfinite(n), axis=(-2, -1))
-        u = np.where(legs[:, None], u, _DUMMY)
-        n = np.where(legs[:, None, None], n, np.cross(_DUMMY, [1.0, 0.0, 0.0]))
+        u = np.where(legs[:, None], u, DUMMY)
+        n = np.where(legs[:, None, None], n, _DUMMY_NORMAL)
         return u, n, np.repeat(legs, 6)
 
     def compiled_features(self, observation: Observation
@@ -400,13 +379,13 @@ class LegEdgeCTC(FeatureCTC):
     def batch_features(self, step: CompiledTaskStep, X: np.ndarray,
                        observations: ObservationBatch, rows: np.ndarray) -> np.ndarray:
         """Every edge seen and finite: the normals, the directions left to the compiled
-        step (as :meth:`compiled_features` and ``_OF_NORMALS``)."""
+        step (as :meth:`compiled_features` and ``_OF_NORMALS``; written for every row,
+        a slice: the others' are written again)."""
         if observations.normals is None:
             return np.zeros(len(rows), dtype=bool)
         n, fast = seen_rows(observations.normals, observations.edge_visible, rows)
-        every = slice(None) if fast.all() else fast  # (a slice: no copies)
-        X[every, step.inputs["normals"]] = n[every]
-        X[every, step.inputs.index("of_normals")] = 1.0
+        X[:, step.inputs["normals"]] = n
+        X[:, step.inputs.index("of_normals")] = 1.0
         return fast
 
     def batch_partly_seen(self, step: CompiledTaskStep, X: np.ndarray,
@@ -428,8 +407,8 @@ class LegEdgeCTC(FeatureCTC):
             u = directions_from_edges(n)  # directions_seen's, then features_seen's checks
         legs = (np.all(visible, axis=-1) & np.all(np.isfinite(u), axis=-1)
                 & np.all(np.isfinite(n), axis=(-2, -1)))
-        u = np.where(legs[..., None], u, _DUMMY)
-        n = np.where(legs[..., None, None], n, np.cross(_DUMMY, [1.0, 0.0, 0.0]))
+        u = np.where(legs[..., None], u, DUMMY)
+        n = np.where(legs[..., None, None], n, _DUMMY_NORMAL)
         X[j, step.inputs["normals"]] = n.reshape(len(j), -1)
         X[j, step.inputs["directions"]] = u.reshape(len(j), -1)
         X[j, step.inputs.index("of_normals")] = 0.0
@@ -452,7 +431,7 @@ class LegDirectionCTC(FeatureCTC):
                                   observation.direction_visible, observation.edge_visible)
         if legs.all():
             return u, None, self.every_rows
-        u = np.where(legs[:, None], u, _DUMMY)
+        u = np.where(legs[:, None], u, DUMMY)
         return u, None, np.repeat(legs, self.every_rows.size // 6)
 
     def compiled_features(self, observation: Observation

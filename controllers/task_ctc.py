@@ -182,6 +182,11 @@ class TaskComputedTorque(ComputedTorqueLaw):
         for :class:`~controllers.task_ctc_rows.TaskRows`; None without a reference."""
         return None
 
+    def build_grids(self, laws: list[TaskComputedTorque]) -> None:
+        """Build the reference grids of ``laws`` (trials of this law's batch, with new
+        references) together before their :meth:`batch_grid` (nothing by default: each
+        builds its own)."""
+
     def share_grid(self, rows: np.ndarray) -> None:
         """Hold ``rows`` (its batch's copy of :meth:`batch_grid`'s rows) instead of the
         own array (nothing by default)."""

@@ -18,6 +18,7 @@ over a limit).
 
 from __future__ import annotations
 
+import contextlib
 import math
 from typing import TYPE_CHECKING, Any
 
@@ -30,6 +31,9 @@ if TYPE_CHECKING:
     from controllers.task_ctc import TaskComputedTorque
     from controllers.task_ctc_compiled import CompiledTaskStep
 
+#: Trials whose new reference grids are built together (their arrays stay in the
+#: caches).
+GRID_CHUNK = 8
 #: The columns of a trial's reference clock (3,): started (1.0 or 0.0), the observation
 #: time at which the reference's clock is 0 [s], and the reference's version (counts
 #: its changes: a grid built for an older version is built again).
@@ -101,9 +105,14 @@ class TaskRows:
         mask of the rows read (on the grid, every task row known) and their (m,) steps
         on their grids (-1: off the grid; the rows there are read, known or not)."""
         stale = self.built[trials] != self.clock[trials, VERSION]
-        if stale.any():
-            for k in np.unique(trials[stale]).tolist():  # once per reference
-                self._build(k)
+        if stale.any():  # once per reference, GRID_CHUNK trials together
+            new = np.unique(trials[stale]).tolist()
+            for start in range(0, len(new), GRID_CHUNK):
+                chunk = new[start:start + GRID_CHUNK]
+                with contextlib.suppress(Exception):  # each trial's _build meets it again
+                    self.laws[chunk[0]].build_grids([self.laws[k] for k in chunk])
+                for k in chunk:
+                    self._build(k)
         k = grid_steps(tr, self.dt[trials])
         length = self.grid_len[trials]
         ok = (k >= 0) & (length > 0)
@@ -227,9 +236,10 @@ class TaskRows:
         out.error_norm[ka] = np.sqrt(norms(E))
         over = over_limits(F, self.limit[ta])
         used_a: dict[int, np.ndarray] = {}
-        if used:  # the accepted row of a row
-            position = {j: i for i, j in enumerate(a.tolist())}
-            used_a = {position[j]: u for j, u in used.items() if j in position}
+        if used:  # the accepted row of a row (``a`` is sorted)
+            at = np.searchsorted(a, np.fromiter(used, dtype=int, count=len(used))).tolist()
+            used_a = {i: u for i, (j, u) in zip(at, used.items(), strict=True)
+                      if i < len(a) and a[i] == j}
         self._integrate(ta, E, over, used_a)
         for i in np.flatnonzero(over).tolist():  # over a limit: the law's strategy
             out.forces[ka[i]] = self.laws[int(ta[i])].limited(
@@ -259,4 +269,4 @@ class TaskRows:
         self.integral[ta[go]] += step
 
 
-__all__ = ["START", "STARTED", "VERSION", "TaskRows", "grid_steps"]
+__all__ = ["GRID_CHUNK", "START", "STARTED", "VERSION", "TaskRows", "grid_steps"]

@@ -50,14 +50,14 @@ from hexapod.actuation import Actuation
 from hexapod.se3 import norms
 
 
-def reference_goals(context: ControllerContext, times: np.ndarray,
-                    fields: Collection[str] | None = None) -> dict[str, np.ndarray]:
-    """The goals of a reference at ``times`` [s] from the nominal model.
+def model_goals(context: ControllerContext, rotation: np.ndarray, translation: np.ndarray,
+                fields: Collection[str] | None = None) -> dict[str, np.ndarray]:
+    """The goals of the nominal model at poses (a reference's samples).
 
     Args:
-        context: With ``reference`` (``at(times)`` gives a
-            :class:`hexapod.trajectory.ReferenceSample`), ``geometry`` and ``camera``.
-        times: (m,) times [s].
+        context: With ``geometry`` and ``camera``.
+        rotation: (m, 3, 3) platform orientations (base frame).
+        translation: (m, 3) platform positions (base frame) [m].
         fields: The goal fields wanted of ``lengths``, ``normals``, ``lines``,
             ``directions`` and ``edge_visible`` (None: all).
 
@@ -71,19 +71,15 @@ def reference_goals(context: ControllerContext, times: np.ndarray,
     def wanted(name: str) -> bool:
         return fields is None or name in fields
 
-    ref = context.reference
-    sample = ref.at(times)
-    out: dict[str, Any] = {"rotation": sample.rotation, "translation": sample.translation}
+    out: dict[str, Any] = {"rotation": rotation, "translation": translation}
     if wanted("lengths"):
-        out["lengths"] = inverse_kinematics(context.geometry, sample.rotation,
-                                            sample.translation)
+        out["lengths"] = inverse_kinematics(context.geometry, rotation, translation)
     camera = context.camera
     if camera is not None and any(wanted(f) for f in ("normals", "lines", "directions",
                                                       "edge_visible")):
         from vision.legs import directions_from_edges, observe_edges
 
-        seen, visible = observe_edges(camera, context.geometry, sample.rotation,
-                                      sample.translation)
+        seen, visible = observe_edges(camera, context.geometry, rotation, translation)
         normals = np.array(seen) if visible.all() else np.where(visible[..., None], seen,
                                                                    np.nan)
         with np.errstate(invalid="ignore"):
@@ -101,24 +97,30 @@ def reference_goals(context: ControllerContext, times: np.ndarray,
     return out
 
 
+def anchored(model: np.ndarray, end: np.ndarray, taught: np.ndarray) -> np.ndarray:
+    """The model's unit vectors ``model`` (..., 3) anchored at the taught ones: ``s* =
+    unit(s_taught + s_model - s_model(end))`` (``end`` and ``taught`` broadcast to
+    ``model``; the model's own where a taught vector is not finite)."""
+    with np.errstate(invalid="ignore"):
+        shifted = model - end
+        shifted += taught  # (a sum commutes: s_taught + (model - end))
+        shifted /= norms(shifted, keepdims=True)  # (np.linalg.norm's bits)
+    known = np.all(np.isfinite(taught), axis=-1)
+    return shifted if known.all() else np.where(known[..., None], shifted, model)
+
+
 def anchor_goals(goals: dict[str, Any], taught: Goal) -> None:
-    """Anchor the model's features at the taught goal (in place): ``s* = s_taught +
-    s_model(t) - s_model(end)``, unit vectors renormalised; the model's last sample is
-    the end pose. A feature the goal did not see stays the model's."""
+    """Anchor the model's features at the taught goal (in place, :func:`anchored`); the
+    model's last sample is the end pose. A feature the goal did not see stays the
+    model's."""
     for key, _, _ in FEATURE_FIELDS:
         model = goals.get(key)
         value = getattr(taught, key, None)
         if model is None or value is None:
             continue
         s_taught = np.asarray(value, dtype=float)
-        if s_taught.shape != model.shape[1:]:
-            continue
-        with np.errstate(invalid="ignore"):
-            shifted = model - model[-1]
-            shifted += s_taught  # (a sum commutes: s_taught + (model - model[-1]))
-            shifted /= norms(shifted, keepdims=True)  # (np.linalg.norm's bits)
-        known = np.all(np.isfinite(s_taught), axis=-1)
-        goals[key] = shifted if known.all() else np.where(known[..., None], shifted, model)
+        if s_taught.shape == model.shape[1:]:
+            goals[key] = anchored(model, model[-1], s_taught)
 
 
 @dataclass
@@ -156,8 +158,8 @@ def tracking_plan(context: ControllerContext, name: str) -> TrackingPlan:
     if not (math.isfinite(dt) and dt > 0):
         raise ContextError(name, "dt", f"must be positive and finite, got {dt}")
     steps = math.ceil(float(reference.duration) / dt) + 2
-    times = dt * np.arange(steps)
-    goals = reference_goals(context, times)
+    sample = reference.at(dt * np.arange(steps))
+    goals = model_goals(context, sample.rotation, sample.translation)
     anchor_goals(goals, context.goal)
     q = goals["lengths"]
     if not np.all(np.isfinite(q)):

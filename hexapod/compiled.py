@@ -355,14 +355,20 @@ class CompiledFunction:
                 key=None if self.key is None else (self.key, (self.n_in, self.n_out)))
         return self._lanes
 
-    def batch(self, x: np.ndarray, lanes: bool = False) -> np.ndarray:
+    def batch(self, x: np.ndarray, lanes: bool = False, overwrite: bool = False
+              ) -> np.ndarray:
         """Evaluate on the rows of ``x`` (N, n_in) -> (N, n_out); ``lanes``: a batch of
         :data:`LANE_ROWS` rows or more by :meth:`lanes` where it is built (the same
-        numbers, about three times faster; the result may be a view)."""
+        numbers, about three times faster; the result may be a view), ``overwrite``:
+        there ``x`` may be their work table (no copy; ``x`` is then lost)."""
         x = np.ascontiguousarray(x, dtype=float).reshape(-1, self.n_in)
         n = x.shape[0]
         if lanes and n >= LANE_ROWS:
             lane = self.lanes()
+            if lane is not None and overwrite and lane.width == self.n_in and \
+                    x.flags.writeable:
+                lane.advance(x, np.arange(n), 1)
+                return x[:, :self.n_out]
             if lane is not None:
                 return lane.evaluate(x)  # type: ignore[no-any-return]
         y = np.empty((n, self.n_out))

@@ -13,6 +13,8 @@ wrong frame, a rate of the wrong sign, the anchoring rotation left out) fails.
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 import pytest
 
@@ -21,6 +23,7 @@ from controllers.base import Observation
 from controllers.feature_ctc import FeatureCTC
 from controllers.solvers.computed_torque import reference_terms, task_in_model_twist
 from controllers.task_ctc import TaskComputedTorque
+from controllers.tracking import anchor_goals, model_goals
 from hexapod import deltalab, sample_poses
 from hexapod.dynamics import DynamicModel
 from hexapod.kinematics import legs_in_frame
@@ -111,13 +114,16 @@ def test_vision_reference_is_anchored_at_the_taught_goal() -> None:
 @pytest.mark.parametrize("name", ["leg-edge-ctc", "leg-direction-ctc"])
 def test_anchored_features_equal_the_numpy_model(name: str) -> None:
     """The symbolic model of the desired features (:mod:`controllers.solvers.
-    reference_motion`) against :func:`controllers.tracking.reference_goals` and
+    reference_motion`) against :func:`controllers.tracking.model_goals` and
     :func:`~controllers.tracking.anchor_goals` (the camera model of :mod:`vision.legs`)."""
     law, _ = _setup(name, "circle")
-    assert isinstance(law, FeatureCTC)
+    assert isinstance(law, FeatureCTC) and law.context is not None
     times = np.linspace(0.0, float(law.reference.duration) + 0.1, 17)
     rows = law.feature_rows(times)
-    numpy = law._anchored_and_end(times)[0].reshape(len(times), -1)
+    sample = law.reference.at(np.append(times, float(law.reference.duration) + 1.0))
+    goals = model_goals(law.context, sample.rotation, sample.translation, fields=(law.key,))
+    anchor_goals(goals, replace(law.context.goal, **{law.key: law._taught}))
+    numpy = goals[law.key][:-1].reshape(len(times), -1)
     assert np.isfinite(numpy).all()
     np.testing.assert_allclose(rows[:, 0], numpy, rtol=0, atol=1e-12)
     # at rest before the start and after the end, moving in between

@@ -23,7 +23,7 @@ from controllers.base import (
     ObservationBatch,
 )
 from controllers.exceptions import ContextError
-from controllers.tracking import TrackingController, reference_goals
+from controllers.tracking import TrackingController, model_goals
 from hexapod.trajectory import PoseTrajectory
 from tests.controllers.controller_world import World, make_camera
 from tests.controllers.one_by_one import OneByOne
@@ -309,14 +309,14 @@ def test_the_feed_forward_is_the_nominal_length_rate() -> None:
                 assert np.abs(rate).max() > 1e-3
 
 
-def test_reference_goals_of_some_fields_are_those_of_all_fields() -> None:
+def test_model_goals_of_some_fields_are_those_of_all_fields() -> None:
     """``fields=`` leaves out the goal fields not asked for and gives the others to the
     last bit as without it (the leg-edge CTC's grid asks for its own field only)."""
     ctx = _tracking_contexts(_world("perspective"), 1)[0]
-    times = np.linspace(0.0, 1.2, 7)
-    every = reference_goals(ctx, times)
+    sample = ctx.reference.at(np.linspace(0.0, 1.2, 7))
+    every = model_goals(ctx, sample.rotation, sample.translation)
     for fields in (("normals",), ("lines",), ("directions",), ("lengths", "edge_visible")):
-        some = reference_goals(ctx, times, fields=fields)
+        some = model_goals(ctx, sample.rotation, sample.translation, fields=fields)
         assert set(some) == {"rotation", "translation", *fields}
         for field in fields:
             assert np.array_equal(some[field], every[field], equal_nan=True), field

@@ -117,7 +117,8 @@ def test_a_function_of_other_widths_is_evaluated_once(n: int, avx2: bool) -> Non
 
 def test_a_compiled_function_batches_by_lanes_when_asked() -> None:
     """:meth:`CompiledFunction.batch` with ``lanes=True``: from ``LANE_ROWS`` rows by its
-    lane-parallel C, the numbers of its CasADi C; fewer rows by CasADi's C."""
+    lane-parallel C, the numbers of its CasADi C; fewer rows by CasADi's C; with
+    ``overwrite``, the same numbers in the input rows themselves (from ``LANE_ROWS``)."""
     x = ca.SX.sym("x", 4)
     f = ca.Function("hexapod_test_batch_lanes", [x], [ca.cse(ca.vertcat(
         x[0] * x[1] + x[2] / x[3], ca.sin(x[0]) - ca.sqrt(x[3] * x[3] + 1)))])
@@ -127,6 +128,10 @@ def test_a_compiled_function_batches_by_lanes_when_asked() -> None:
     for n in (LANE_ROWS - 1, LANE_ROWS, 3 * LANE_ROWS + 1):
         X = rng.normal(size=(n, 4))
         np.testing.assert_array_equal(cf.batch(X, lanes=True), cf.batch(X))
+        own = cf.batch(X)
+        in_place = cf.batch(X, lanes=True, overwrite=True)
+        assert in_place.tobytes() == own.tobytes()
+        assert np.shares_memory(in_place, X) == (n >= LANE_ROWS)
 
 
 def test_warm_cache_generates_no_code(probe: tuple[ca.Function, LaneFunction],
