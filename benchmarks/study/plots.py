@@ -171,9 +171,9 @@ def link(name: str) -> str:
 
 
 def aside_or_here(job: Callable[..., None], args: tuple[Any, ...], name: str) -> None:
-    """``job(*args)`` (drawing the figure file ``name``, or several figures from that
-    one on) in a drawer of :func:`benchmarks.study.drawers.drawing_aside` if one is free,
-    else here."""
+    """``job(*args)`` (drawing the figure files ``name``, comma-separated: the name a
+    failure is reported with) in a drawer of
+    :func:`benchmarks.study.drawers.drawing_aside` if one is free, else here."""
     if not drawers.started(job, args, name):
         job(*args)
 
@@ -238,7 +238,8 @@ def line_figures(out_dir: Path, points: list[int], curves_of: Callable[[int], li
     names = {p: name_of(p) for p in curves}
     paths = {p: inside(out_dir, name) for p, name in names.items()}
     if curves:
-        aside_or_here(_draw_lines, (curves, draw, paths, layout), paths[next(iter(paths))].name)
+        aside_or_here(_draw_lines, (curves, draw, paths, layout),
+                      ", ".join(path.name for path in paths.values()))
     return {p: link(name) for p, name in names.items()}
 
 

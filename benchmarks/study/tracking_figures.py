@@ -138,7 +138,8 @@ def forces_plots(out_dir: Path, scenario: str, points: list[int]) -> dict[int, s
     names = {p: f"{scenario}_p{p}_forces.png" for p in traces}
     paths = {p: inside(out_dir, name) for p, name in names.items()}
     if traces:
-        aside_or_here(_draw_forces_plots, (traces, paths), paths[next(iter(paths))].name)
+        aside_or_here(_draw_forces_plots, (traces, paths),
+                      ", ".join(path.name for path in paths.values()))
     return {p: link(name) for p, name in names.items()}
 
 

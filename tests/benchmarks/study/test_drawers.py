@@ -160,3 +160,22 @@ def test_a_group_of_figures_goes_to_one_drawer(tmp_path: Path,
                                                             ).read_bytes(), name
     writers = set(_writers(tmp_path / "aside").values())
     assert len(writers) == 1 and os.getpid() not in writers
+
+
+def test_a_failed_group_names_its_files(tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
+                                        capfd: pytest.CaptureFixture[str]) -> None:
+    """A line figure that cannot be drawn at its second point fails its drawer: the
+    error names every file of the group (the drawer's traceback, printed, names the
+    point)."""
+    def curves(point: int) -> list[plots.Curves]:
+        t = np.linspace(0, 1, 10)
+        return [("a", [(t, t), (t, t if point == 0 else t[:5])])]  # point 1: x, y disagree
+
+    _idle(monkeypatch, cores=2, running=1)
+    with (pytest.raises(ResultsError, match=r"p0\.png, p1\.png \(exit code 1\)"),
+          drawers.drawing_aside(tmp_path)):
+        plots.line_figures(tmp_path, [0, 1], curves,
+                           lambda cs: plots.draw_time_panels(cs, ("x", "y"), log=False),
+                           lambda p: f"p{p}.png", plots.TWO_LINEAR_PANELS)
+    assert "cannot be broadcast" in capfd.readouterr().err
+    assert (tmp_path / "p0.png").is_file() and not (tmp_path / "p1.png").exists()
