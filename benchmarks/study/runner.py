@@ -157,15 +157,12 @@ def _calibration(sc: Scenario, hook: Callable[[Scenario], Any]) -> Any:
 
 def _iter_inline(units: list[WorkUnit], meanwhile: Callable[[], None] | None = None
                  ) -> Iterator[tuple[WorkUnit, Any]]:
-    """Run the units in this process, ``meanwhile`` in a thread beside them from the end
-    of the first one on (its modules imported by then, so that the two threads do not
-    import the same packages at once); the thread runs while the trials' compiled
-    kernels, called through ctypes, release the GIL."""
-    beside = None
+    """Run the units in this process, ``meanwhile`` in a thread beside them (it runs while
+    the trials' compiled kernels, called through ctypes, release the GIL)."""
+    beside = _beside(meanwhile)
     try:
         for u in units:
             yield u, execute(u)
-            beside = beside or _beside(meanwhile)
     finally:
         if beside is not None:
             beside.join()
