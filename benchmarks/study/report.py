@@ -140,8 +140,7 @@ def import_drawing_modules() -> None:
     """Import the modules the report draws and tests with: matplotlib's figure on its
     Agg canvas (about 0.3 s) and ``scipy.special`` (the normal distribution of the
     Kaplan-Meier band and the log-rank test, about 0.15 s). ``run`` calls it in a thread
-    while the trials run (in its workers, or in its main thread), so that the report does
-    not wait for them after."""
+    while its workers run the trials, so that the report does not wait for them after."""
     from importlib import import_module
 
     for module in ("matplotlib.figure", "matplotlib.backends.backend_agg", "scipy.special"):

@@ -155,17 +155,9 @@ def _calibration(sc: Scenario, hook: Callable[[Scenario], Any]) -> Any:
     return _hook[1]
 
 
-def _iter_inline(units: list[WorkUnit], meanwhile: Callable[[], None] | None = None
-                 ) -> Iterator[tuple[WorkUnit, Any]]:
-    """Run the units in this process, ``meanwhile`` in a thread beside them (it runs while
-    the trials' compiled kernels, called through ctypes, release the GIL)."""
-    beside = _beside(meanwhile)
-    try:
-        for u in units:
-            yield u, execute(u)
-    finally:
-        if beside is not None:
-            beside.join()
+def _iter_inline(units: list[WorkUnit]) -> Iterator[tuple[WorkUnit, Any]]:
+    for u in units:
+        yield u, execute(u)
 
 
 def _iter_pool(units: list[WorkUnit], workers: int,
@@ -191,11 +183,13 @@ def _iter_pool(units: list[WorkUnit], workers: int,
             while queue and len(running) < workers:
                 submit(None)
             while running:
-                if beside is None:
+                if meanwhile is not None and beside is None:
                     # a thread, so that this one keeps collecting and submitting units;
                     # started after the first submit: the pool forks all its workers then,
                     # and never again, so no worker is forked with this thread running
-                    beside = _beside(meanwhile)
+                    beside = threading.Thread(target=_quietly, args=(meanwhile,),
+                                              name="meanwhile", daemon=True)
+                    beside.start()
                 finished, _ = wait(running, return_when=FIRST_COMPLETED)
                 for fut in finished:
                     u = running.pop(fut)
@@ -228,15 +222,6 @@ def _take(queue: list[WorkUnit], after: WorkUnit | None,
         if _group(u) not in running:
             return queue.pop(i)
     return queue.pop(0)
-
-
-def _beside(job: Callable[[], None] | None) -> threading.Thread | None:
-    """``job`` started in a thread of this process (:func:`_quietly`); None without one."""
-    if job is None:
-        return None
-    beside = threading.Thread(target=_quietly, args=(job,), name="meanwhile", daemon=True)
-    beside.start()
-    return beside
 
 
 def _quietly(job: Callable[[], None]) -> None:
@@ -284,11 +269,9 @@ def run_units(units: list[WorkUnit], out_dir: Path, workers: int = 1,
         workers: Processes (1: in-process).
         dask: Dask scheduler address, or ``"local"`` for a local cluster.
         progress: Called after each finished unit.
-        meanwhile: Called once, in a thread of this process, while the trials run (in
-            the pool's workers, or in this process: its thread runs while the trials'
-            compiled kernels release the GIL); ``run`` imports the report's drawing
-            modules then, instead of after the trials. Not called with Dask. Its failure
-            is logged (debug).
+        meanwhile: Called once, in a thread of this process, while the pool's workers
+            run (``run`` imports the report's drawing modules then, instead of after the
+            trials); not called in-process or with Dask. Its failure is logged (debug).
 
     Returns:
         Number of rows written.
@@ -311,7 +294,7 @@ def _run_units(units: list[WorkUnit], out_dir: Path, workers: int, dask: str | N
         elif workers > 1:
             it = _iter_pool(units, workers, meanwhile)
         else:
-            it = _iter_inline(units, meanwhile)
+            it = _iter_inline(units)
         for unit, (rows, records) in it:
             writer.write(rows, records)
             count += len(rows)
