@@ -1,7 +1,8 @@
 """Work left to forked processes on the idle cores while this process goes on: a
 report's figures (:func:`benchmarks.study.plots.save_figure`), each drawn and written by
-a child that holds the figure as it was at the fork, while the report makes the next
-ones (the drawing is most of a figure's time)."""
+a child that holds the figure as it was at the fork, or the figures of every sweep point
+of one kind (:func:`benchmarks.study.plots.line_figures`) by one child, while the report
+makes the next ones (the drawing is most of a figure's time)."""
 
 from __future__ import annotations
 
@@ -34,7 +35,7 @@ class _Drawers:
             self.join(child)
         if len(self.running) >= self.processes:
             return False
-        child = self.context.Process(target=job, args=args, name=name)
+        child = self.context.Process(target=_alone, args=(job, args), name=name)
         child.start()
         self.running.append(child)
         return True
@@ -49,6 +50,13 @@ class _Drawers:
 
 #: The drawers of the :func:`drawing_aside` in effect (empty: none).
 _aside: list[_Drawers] = []
+
+
+def _alone(job: Callable[..., None], args: tuple[Any, ...]) -> None:
+    """``job(*args)`` in a drawer, which forks no drawer of its own (a job of several
+    figures draws them all)."""
+    _aside.clear()
+    job(*args)
 
 
 def runnable_tasks() -> int:

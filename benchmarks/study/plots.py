@@ -149,8 +149,7 @@ def _ink_at_edges(fig: Any) -> bool:
 def save_figure(fig: Any, out_dir: Path, name: str,
                 layout: Margins | Literal["as-is", "tight"] = TIGHT) -> str:
     """Lay out and save a figure as ``out_dir/name`` (checked to stay inside, marked as
-    the project's) at :data:`DPI`; return its Markdown link target (``./`` before a name
-    with ``:``, which a Markdown reader would take for a URL scheme).
+    the project's) at :data:`DPI`; return its Markdown link target (:func:`link`).
 
     Args:
         fig: A figure of :func:`figure`.
@@ -161,12 +160,25 @@ def save_figure(fig: Any, out_dir: Path, name: str,
             caller's ``subplots_adjust``, the same check) or :data:`TIGHT`.
     """
     path = inside(out_dir, name)
-    if not drawers.started(_draw, (fig, path, layout), path.name):
-        _draw(fig, path, layout)
+    aside_or_here(draw_figure, (fig, path, layout), path.name)
+    return link(name)
+
+
+def link(name: str) -> str:
+    """The Markdown link target of a figure's file: ``./`` before a name with ``:``, which
+    a Markdown reader would take for a URL scheme."""
     return f"./{name}" if ":" in name else name
 
 
-def _draw(fig: Any, path: Path, layout: Margins | Literal["as-is", "tight"]) -> None:
+def aside_or_here(job: Callable[..., None], args: tuple[Any, ...], name: str) -> None:
+    """``job(*args)`` (drawing the figure files ``name``, comma-separated: the name a
+    failure is reported with) in a drawer of
+    :func:`benchmarks.study.drawers.drawing_aside` if one is free, else here."""
+    if not drawers.started(job, args, name):
+        job(*args)
+
+
+def draw_figure(fig: Any, path: Path, layout: Margins | Literal["as-is", "tight"]) -> None:
     """Lay out, draw and write one figure (:func:`save_figure`)."""
     if layout == TIGHT:
         fig.tight_layout()
@@ -205,6 +217,10 @@ def line_figures(out_dir: Path, points: list[int], curves_of: Callable[[int], li
     points with the new data in its lines (the same controllers, so the same legend):
     the axes, ticks and texts are made once (a third of a figure's time), and the image is
     pixel for pixel the one a new figure would give (axes limits rescaled to the data).
+    Every point's curves are read first; the figures are then drawn by one drawer if one
+    is free (:func:`aside_or_here`), else here, each figure after the first offered to a
+    drawer once this process has drawn the figure before (a drawer forked then draws
+    it as fast as this process: its ticks and texts made).
 
     Args:
         out_dir: The results directory.
@@ -218,26 +234,35 @@ def line_figures(out_dir: Path, points: list[int], curves_of: Callable[[int], li
     Returns:
         The Markdown link target of each point's figure.
     """
-    out: dict[int, str] = {}
+    curves = {p: c for p in points if (c := curves_of(p))}
+    names = {p: name_of(p) for p in curves}
+    paths = {p: inside(out_dir, name) for p, name in names.items()}
+    if curves:
+        aside_or_here(_draw_lines, (curves, draw, paths, layout),
+                      ", ".join(path.name for path in paths.values()))
+    return {p: link(name) for p, name in names.items()}
+
+
+def _draw_lines(curves: dict[int, list[Curves]],
+                draw: Callable[[list[Curves]], tuple[Any, list[list[Any]]]],
+                paths: dict[int, Path], layout: Margins) -> None:
+    """The figures of :func:`line_figures`."""
     fig: Any = None
     lines: list[list[Any]] = []
     labels: list[str] = []
-    for point in points:
-        curves = curves_of(point)
-        if not curves:
+    for point, point_curves in curves.items():
+        if fig is None or [c[0] for c in point_curves] != labels:
+            fig, lines = draw(point_curves)
+            labels = [c[0] for c in point_curves]
+            draw_figure(fig, paths[point], layout)  # here: a drawer forked after starts warm
             continue
-        if fig is None or [c[0] for c in curves] != labels:
-            fig, lines = draw(curves)
-            labels = [c[0] for c in curves]
-        else:
-            for panel, panel_lines in enumerate(lines):
-                for line, (_, data) in zip(panel_lines, curves, strict=True):
-                    line.set_data(*data[panel])
-            for ax in fig.axes:
-                ax.relim()
-                ax.autoscale_view()
-        out[point] = save_figure(fig, out_dir, name_of(point), layout)
-    return out
+        for panel, panel_lines in enumerate(lines):
+            for line, (_, data) in zip(panel_lines, point_curves, strict=True):
+                line.set_data(*data[panel])
+        for ax in fig.axes:
+            ax.relim()
+            ax.autoscale_view()
+        aside_or_here(draw_figure, (fig, paths[point], layout), paths[point].name)
 
 
 def trial0_curves(out_dir: Path, scenario: str, point: int,

@@ -2,9 +2,12 @@
 
 from __future__ import annotations
 
+import gc
 import json
 import logging
 from collections import defaultdict
+from collections.abc import Iterator
+from contextlib import contextmanager
 from dataclasses import dataclass, field
 from datetime import UTC, datetime
 from pathlib import Path
@@ -172,11 +175,27 @@ def write_report(out_dir: Path, overwrite: bool = False,
     if results.dropped:
         log.warning("%s: %s", out_dir / "results.jsonl",
                     duplicate_note(results.dropped, results.conflicting))
-    with drawers.drawing_aside(out_dir):  # figures drawn on the idle cores
+    with _collector_paused(), drawers.drawing_aside(out_dir):  # figures on the idle cores
         lines = _report_lines(out_dir, results)
     path = out_dir / "report.md"
     path.write_text("\n".join(lines))
     return path
+
+
+@contextmanager
+def _collector_paused() -> Iterator[None]:
+    """Python's cyclic garbage collector paused (if it runs) and resumed after: matplotlib
+    makes many small objects while it draws, and the collections they trigger (each one
+    visiting every object of a large process too) took about 6 % of a report's time; the
+    figures' cycles are collected after."""
+    if not gc.isenabled():
+        yield
+        return
+    gc.disable()
+    try:
+        yield
+    finally:
+        gc.enable()
 
 
 def _report_lines(out_dir: Path, results: ResultRows) -> list[str]:

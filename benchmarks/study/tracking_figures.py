@@ -15,13 +15,16 @@ import numpy as np
 from benchmarks.study.plots import (
     AS_IS,
     TWO_LINEAR_PANELS,
+    aside_or_here,
+    draw_figure,
     draw_time_panels,
     figure,
     line_figures,
-    save_figure,
+    link,
     trial0_curves,
     trial0_files,
 )
+from hexapod.outputs import inside
 
 #: The forces figure's layout (fractions of the figure; ``subplots_adjust``).
 FORCES_LAYOUT = {"left": 0.06, "right": 0.98, "bottom": 0.15, "top": 0.9, "wspace": 0.12}
@@ -128,16 +131,25 @@ def forces_figure(out_dir: Path, scenario: str, point: int) -> Any:
 
 def forces_plots(out_dir: Path, scenario: str, points: list[int]) -> dict[int, str]:
     """:func:`forces_figure` of each sweep point saved beside its tracking-error plot (one
-    figure redrawn with each point's forces); the file name of each."""
-    out: dict[int, str] = {}
+    figure redrawn with each point's forces, drawn as
+    :func:`~benchmarks.study.plots.line_figures` draws its figures); the file name of
+    each."""
+    traces = {p: t for p in points if (t := force_traces(out_dir, scenario, p))}
+    names = {p: f"{scenario}_p{p}_forces.png" for p in traces}
+    paths = {p: inside(out_dir, name) for p, name in names.items()}
+    if traces:
+        aside_or_here(_draw_forces_plots, (traces, paths),
+                      ", ".join(path.name for path in paths.values()))
+    return {p: link(name) for p, name in names.items()}
+
+
+def _draw_forces_plots(traces: dict[int, list[Trace]], paths: dict[int, Path]) -> None:
+    """The figures of :func:`forces_plots`."""
     panels = None
-    for point in points:
-        traces = force_traces(out_dir, scenario, point)
-        if not traces:
+    for point, point_traces in traces.items():
+        if panels is None or panels.shape != [(c, f.shape[1]) for c, _, f, _ in point_traces]:
+            panels = _draw_forces(point_traces)
+            draw_figure(panels.fig, paths[point], AS_IS)  # here: a drawer forked after starts warm
             continue
-        if panels is None or panels.shape != [(c, f.shape[1]) for c, _, f, _ in traces]:
-            panels = _draw_forces(traces)
-        else:
-            _redraw_forces(panels, traces)
-        out[point] = save_figure(panels.fig, out_dir, f"{scenario}_p{point}_forces.png", AS_IS)
-    return out
+        _redraw_forces(panels, point_traces)
+        aside_or_here(draw_figure, (panels.fig, paths[point], AS_IS), paths[point].name)

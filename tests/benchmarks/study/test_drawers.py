@@ -14,7 +14,7 @@ import pytest
 from matplotlib.artist import Artist
 
 from benchmarks.exceptions import ResultsError
-from benchmarks.study import drawers, plots
+from benchmarks.study import drawers, plots, tracking_figures
 
 
 def _log_curves(point: int) -> list[plots.Curves]:
@@ -39,13 +39,14 @@ def _figures(out: Path) -> dict[int, str]:
 def _recording_writers(monkeypatch: pytest.MonkeyPatch) -> None:
     """Record the process that draws each file (in a file: a forked drawer's memory is
     its own)."""
-    draw = plots._draw
+    draw = plots.draw_figure
 
     def recorded(fig: Any, path: Path, layout: Any) -> None:
         draw(fig, path, layout)
         path.with_suffix(".pid").write_text(str(os.getpid()))
 
-    monkeypatch.setattr(plots, "_draw", recorded)
+    monkeypatch.setattr(plots, "draw_figure", recorded)
+    monkeypatch.setattr(tracking_figures, "draw_figure", recorded)
 
 
 def _idle(monkeypatch: pytest.MonkeyPatch, cores: int, running: int,
@@ -133,3 +134,48 @@ def test_a_figure_that_fails_in_its_drawer_names_itself(
     assert "this artist cannot be drawn" in capfd.readouterr().err
     assert (tmp_path / "p2.png").is_file() and (tmp_path / "s_error_cdf.png").is_file()
 
+
+
+def test_a_group_of_figures_goes_to_one_drawer(tmp_path: Path,
+                                               monkeypatch: pytest.MonkeyPatch) -> None:
+    """The forces figures of every sweep point go to one drawer when it is free (the
+    figure made and drawn there once, refilled for the next points): the bytes drawn
+    here, every file written by that one process."""
+    _recording_writers(monkeypatch)
+    t = np.linspace(0, 2, 120)
+    for out in (tmp_path / "here", tmp_path / "aside"):
+        (out / "trials").mkdir(parents=True)
+        for point, scale in enumerate((2.0, 9.0, 3.0)):
+            np.savez(out / "trials" / f"s__p{point}__ctc__00000.npz", controller="ctc", t=t,
+                     leg_forces=scale * np.sin(np.outer(t, np.arange(1, 7))),
+                     force_limit=np.full(6, 10.0))
+    assert tracking_figures.forces_plots(tmp_path / "here", "s", [0, 1, 2]) == {
+        p: f"s_p{p}_forces.png" for p in range(3)}
+    _idle(monkeypatch, cores=2, running=1)
+    with drawers.drawing_aside(tmp_path / "aside"):
+        tracking_figures.forces_plots(tmp_path / "aside", "s", [0, 1, 2])
+    for p in range(3):
+        name = f"s_p{p}_forces.png"
+        assert (tmp_path / "aside" / name).read_bytes() == (tmp_path / "here" / name
+                                                            ).read_bytes(), name
+    writers = set(_writers(tmp_path / "aside").values())
+    assert len(writers) == 1 and os.getpid() not in writers
+
+
+def test_a_failed_group_names_its_files(tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
+                                        capfd: pytest.CaptureFixture[str]) -> None:
+    """A line figure that cannot be drawn at its second point fails its drawer: the
+    error names every file of the group (the drawer's traceback, printed, names the
+    point)."""
+    def curves(point: int) -> list[plots.Curves]:
+        t = np.linspace(0, 1, 10)
+        return [("a", [(t, t), (t, t if point == 0 else t[:5])])]  # point 1: x, y disagree
+
+    _idle(monkeypatch, cores=2, running=1)
+    with (pytest.raises(ResultsError, match=r"p0\.png, p1\.png \(exit code 1\)"),
+          drawers.drawing_aside(tmp_path)):
+        plots.line_figures(tmp_path, [0, 1], curves,
+                           lambda cs: plots.draw_time_panels(cs, ("x", "y"), log=False),
+                           lambda p: f"p{p}.png", plots.TWO_LINEAR_PANELS)
+    assert "cannot be broadcast" in capfd.readouterr().err
+    assert (tmp_path / "p0.png").is_file() and not (tmp_path / "p1.png").exists()
