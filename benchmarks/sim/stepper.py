@@ -132,25 +132,73 @@ def run_trials(
 _drawn: list[Any] = [None, None, {}]
 
 
+#: The trials a study's pre-flight drew without calibration (:func:`preflight_trials`),
+#: per scenario point: ``(point, {trial: setup or exception})``, each trial taken once by
+#: the run's :func:`point_trials` (at most :data:`PREFLIGHT_POINTS` points are kept).
+_preflight: list[tuple[SimScenario, dict[int, Any]]] = []
+#: Scenario points whose pre-flight draws are kept for the run (the oldest dropped first).
+PREFLIGHT_POINTS = 64
+
+
 def forget_trials() -> None:
-    """Empty the drawn trials of :func:`point_trials` (a timing that includes the draws)."""
+    """Empty the drawn trials of :func:`point_trials` and those the pre-flight kept (a
+    timing that includes the draws)."""
     _drawn[:] = [None, None, {}]
+    _preflight.clear()
+
+
+def preflight_trials(sc: SimScenario, trials: list[int]) -> list[TrialSetup | Exception]:
+    """:func:`benchmarks.sim.world.make_trials` of a scenario point without calibration
+    (the pre-flight's draws, :mod:`benchmarks.study.trajectory_check`), kept for the
+    run's :func:`point_trials` of an equal point: the same function of the same values,
+    drawn once. The caller only reads the setups."""
+    nominal = load_geometry(sc)
+    made = make_trials(sc, list(trials), nominal, load_camera(sc, nominal))
+    _preflight[:] = [e for e in _preflight if not _same_point(e[0], sc)]
+    _preflight.append((sc, dict(zip(trials, made, strict=True))))
+    del _preflight[:-PREFLIGHT_POINTS]
+    return made
+
+
+def _same_point(a: SimScenario, b: SimScenario) -> bool:
+    """Whether two scenario points are equal in every field (so their draws are): the
+    same object, or equal dataclasses (False where a field does not compare, an array
+    of another object)."""
+    if a is b:
+        return True
+    try:
+        return bool(a == b)
+    except (TypeError, ValueError):  # an array field of two objects: not known equal
+        return False
+
+
+def _from_preflight(sc: SimScenario, trials: list[int]) -> list[TrialSetup | Exception] | None:
+    """The pre-flight's draws of ``trials`` of a point equal to ``sc`` (taken: each once),
+    or None when it did not draw all of them."""
+    for point, made in _preflight:
+        if _same_point(point, sc) and all(t in made for t in trials):
+            return [made.pop(t) for t in trials]
+    return None
 
 
 def point_trials(sc: SimScenario, trials: list[int], calibrate: Calibrate | None = None
                  ) -> list[TrialSetup | Exception]:
     """:func:`benchmarks.sim.world.make_trials` of a scenario point, drawn once for every
     controller of the point (the same ``sc`` and ``calibrate`` objects, the last point's
-    only). Each call gets its own copies of a setup's arrays and dict (the objects a
-    setup shares with other trials, its robots and cameras, are shared anyway).
+    only), or taken from the pre-flight's draws of an equal point when no calibration
+    changes them (:func:`preflight_trials`). Each call gets its own copies of a setup's
+    arrays and dict (the objects a setup shares with other trials, its robots and
+    cameras, are shared anyway).
     """
     if _drawn[0] is not sc or _drawn[1] is not calibrate:
         _drawn[:] = [sc, calibrate, {}]
     key = tuple(trials)
     if key not in _drawn[2]:
-        nominal = load_geometry(sc)
-        _drawn[2][key] = make_trials(sc, list(trials), nominal, load_camera(sc, nominal),
-                                     calibrate)
+        made = None if calibrate is not None else _from_preflight(sc, list(trials))
+        if made is None:
+            nominal = load_geometry(sc)
+            made = make_trials(sc, list(trials), nominal, load_camera(sc, nominal), calibrate)
+        _drawn[2][key] = made
     return [m if isinstance(m, Exception) else own_copy(m) for m in _drawn[2][key]]
 
 

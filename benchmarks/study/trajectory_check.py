@@ -72,14 +72,12 @@ class TrajectoryFacts:
 def sampled_setups(sc: Any, samples: int) -> list[Any]:
     """The trial setups (:func:`benchmarks.sim.world.make_trials`) of the scenario's first
     ``min(trials, samples)`` trials on its nominal robot and camera, those that could be
-    drawn (a trial whose start or goal could not be drawn is left out)."""
-    from benchmarks.sim import load_camera, load_geometry
-    from benchmarks.sim.world import make_trials
+    drawn (a trial whose start or goal could not be drawn is left out); the run of the
+    same point takes these draws (:func:`benchmarks.sim.stepper.preflight_trials`)."""
+    from benchmarks.sim.stepper import preflight_trials
 
-    nominal = load_geometry(sc)
-    camera = load_camera(sc, nominal)
-    return [s for s in make_trials(sc, list(range(min(sc.trials, samples))), nominal,
-                                   camera) if not isinstance(s, Exception)]
+    return [s for s in preflight_trials(sc, list(range(min(sc.trials, samples))))
+            if not isinstance(s, Exception)]
 
 
 def _point(sc: Any, samples: int) -> TrajectoryFacts | None:

@@ -107,3 +107,35 @@ def test_a_points_targets_are_sampled_once_for_all_its_controllers() -> None:
     other = point.with_overrides(seed=2)
     assert stepper.point_targets(other, stepper.point_trials(other, [0, 1])) is not first
     stepper.forget_trials()
+
+
+def test_the_run_takes_the_preflights_draws_of_an_equal_point(
+        monkeypatch: pytest.MonkeyPatch) -> None:
+    """The trajectory pre-flight's draws of a point are the run's when the run's point is
+    equal and nothing calibrates: no second draw, the same values as a fresh draw, each
+    trial taken once; another point, or a calibration, draws its own."""
+    from benchmarks.study.trajectory_check import sampled_setups
+
+    stepper.forget_trials()
+    calls = _counting(monkeypatch)
+    sc = load_scenario("paccot2008-tracking").with_overrides(trials=3)
+    checked, run = sc.expand()[0], sc.expand()[0]  # equal points, not the same object
+    assert checked is not run
+    assert len(sampled_setups(checked, 3)) == 3
+    assert calls == [[0, 1, 2]]
+    taken = stepper.point_trials(run, [0, 1, 2])
+    assert calls == [[0, 1, 2]]  # taken, not drawn again
+    assert all(not m for _, m in stepper._preflight)  # each trial taken once
+    nominal = load_geometry(run)
+    fresh = make_trials(run, [0, 1, 2], nominal, load_camera(run, nominal))
+    for s, f in zip(taken, fresh, strict=True):
+        assert isinstance(s, TrialSetup) and isinstance(f, TrialSetup)
+        for a, b in zip(_arrays(s), _arrays(f), strict=True):
+            assert np.array_equal(a, b)
+    stepper.forget_trials()
+    sampled_setups(checked, 3)
+    stepper.point_trials(run.with_overrides(seed=2), [0, 1, 2])  # another point: drawn
+    stepper.point_trials(run, [0, 1, 2], calibrate=lambda world, rng: (np.zeros((6, 3)), {}))
+    assert calls == [[0, 1, 2]] * 4  # the calibrated run draws its own
+    stepper.forget_trials()
+    assert not stepper._preflight
