@@ -212,7 +212,10 @@ class TrackingController(Controller):
         self._last = np.array([0 if p is None else len(p.q_rate) - 1 for p in plans], dtype=int)
         size = int(self._last.max()) + 1 if n else 0
         self._q_rate = np.zeros((n, size, 6))
+        #: The goals of every trial and period, row ``trial * size + period`` (flat views
+        #: of (n, size, ...) arrays: one ``take`` of a period's rows).
         self._goals: dict[str, np.ndarray | None] = {}
+        self._size = size
         #: Every trial with a plan has the same goal fields (else goals go one by one).
         self._uniform = True
         for name in GOAL_FIELDS:
@@ -227,7 +230,7 @@ class TrackingController(Controller):
             for i, p in enumerate(plans):
                 if p is not None:
                     self._fill(stacked[i], np.asarray(p.goals[name]))
-            self._goals[name] = stacked
+            self._goals[name] = stacked.reshape(n * size, *stacked.shape[2:])
         for i, p in enumerate(plans):
             if p is not None:
                 self._fill(self._q_rate[i], p.q_rate)
@@ -296,8 +299,9 @@ class TrackingController(Controller):
     def _retarget(self, trials: np.ndarray, periods: np.ndarray) -> None:
         """Give ``trials`` the goals of ``periods``."""
         if self._uniform:
+            rows = trials * self._size + periods
             self.inner.retarget_batch(trials, GoalBatch(
-                **{name: None if arr is None else arr[trials, periods]
+                **{name: None if arr is None else arr.take(rows, axis=0)
                    for name, arr in self._goals.items()}))
             return
         for tr, k in zip(trials.tolist(), periods.tolist(), strict=True):
