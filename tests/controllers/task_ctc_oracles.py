@@ -9,7 +9,7 @@ measurement by numpy (:func:`numpy_measure`: the forward kinematics of
 seen), its task towards the reference (:func:`numpy_desired_at`: the numpy tasks of
 :mod:`controllers.tasks`) and the step (:func:`numpy_task_step`: the tasks' error,
 Jacobian and second-order terms, the SVD solve of
-:class:`~controllers.solvers.computed_torque.ComputedTorqueSolver`,
+:func:`tests.controllers.ctc_solver_oracle.acceleration`,
 :meth:`hexapod.dynamics.DynamicModel.inverse`).
 """
 
@@ -29,6 +29,7 @@ from controllers.task_ctc_inputs import line_to
 from controllers.tasks import PlatformPoseTask, Task, TaskState
 from hexapod.fk import forward_kinematics
 from hexapod.kinematics import Transform
+from tests.controllers.ctc_solver_oracle import acceleration
 
 
 @dataclass
@@ -149,8 +150,8 @@ def numpy_task_step(law: TaskComputedTorque, t: float, m: Measured, qd: np.ndarr
         rows &= np.isfinite(e_t) & np.isfinite(e_tt)
     if m.rows is not None:
         rows &= m.rows
-    sol = law.solver.acceleration(
-        e[rows], L[rows], ldot[rows], m.twist, None if e_t is None else e_t[rows],
+    sol = acceleration(
+        law.solver, e[rows], L[rows], ldot[rows], m.twist, None if e_t is None else e_t[rows],
         None if e_tt is None else e_tt[rows])
     if sol.reason is not None:
         return law.refuse(sol.reason, e[rows])

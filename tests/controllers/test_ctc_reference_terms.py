@@ -4,7 +4,7 @@ differences.
 The laws take ``e_t`` and ``e_tt`` from the trajectory's own twist and twist rate
 (:meth:`controllers.tasks.Task.reference_terms`; for the feature laws, the anchored
 model features' rates by the chain rule, :mod:`controllers.solvers.reference_motion`).
-:func:`controllers.solvers.computed_torque.reference_terms` differentiates the task
+:func:`tests.controllers.ctc_solver_oracle.reference_terms` differentiates the task
 along the reference numerically (its own test checks it against the total motion); the
 two must agree to ``O(h^2)``: the discrepancy falls about four times when ``h`` halves
 and stays far below the terms themselves, so a sign or frame error (a twist taken in the
@@ -21,7 +21,7 @@ import pytest
 from controllers import registry
 from controllers.base import Observation
 from controllers.feature_ctc import FeatureCTC
-from controllers.solvers.computed_torque import reference_terms, task_in_model_twist
+from controllers.solvers.computed_torque import task_in_model_twist
 from controllers.task_ctc import TaskComputedTorque
 from controllers.tracking import anchor_goals, model_goals
 from hexapod import deltalab, sample_poses
@@ -29,6 +29,7 @@ from hexapod.dynamics import DynamicModel
 from hexapod.kinematics import legs_in_frame
 from hexapod.se3 import log_so3
 from hexapod.trajectory import PoseTrajectory
+from tests.controllers.ctc_solver_oracle import reference_terms
 from tests.controllers.ctc_world import CtcWorld, perturbed
 from tests.controllers.task_ctc_oracles import numpy_desired_at, numpy_measure
 from vision.legs import leg_edges
