@@ -22,11 +22,12 @@ import numpy as np
 from controllers.base import Command, Observation
 from controllers.cartesian_ctc import CartesianCTC, VisionCTC, directions_seen
 from controllers.feature_ctc import FeatureCTC
+from controllers.features.ctc import FeatureComputedTorque
 from controllers.solvers.compiled_task_ctc import REFERENCE
 from controllers.solvers.computed_torque import task_in_model_twist
 from controllers.task_ctc import TaskComputedTorque
 from controllers.task_ctc_inputs import line_to
-from controllers.tasks import PlatformPoseTask, Task, TaskState
+from controllers.tasks import FeatureTask, PlatformPoseTask, Task, TaskState
 from hexapod.fk import forward_kinematics
 from hexapod.kinematics import Transform
 from tests.controllers.ctc_solver_oracle import acceleration
@@ -114,9 +115,29 @@ def numpy_desired_at(law: TaskComputedTorque, tr: float | None
         return PlatformPoseTask(ref["R"], ref["t"]), ref["twist"], ref["twist_rate"]
     assert isinstance(law, FeatureCTC)
     if tr is None or law.reference is None:
-        return law.make_task(law._taught), None, None
-    s, s_dot, s_ddot = (x.reshape(law._taught.shape) for x in law.feature_reference(tr))
-    return law.make_task(s), s_dot, s_ddot
+        return numpy_task(law, law._taught), None, None
+    s, s_dot, s_ddot = (x.reshape(law._taught.shape) for x in feature_reference(law, tr))
+    return numpy_task(law, s), s_dot, s_ddot
+
+
+def numpy_task(law: FeatureCTC, desired: np.ndarray) -> Task:
+    """The numpy task of the law's feature towards ``desired`` features (a plugin
+    feature's :class:`~controllers.tasks.FeatureTask`)."""
+    if isinstance(law, FeatureComputedTorque):
+        return FeatureTask(law.feature, np.asarray(desired).reshape(6, law.feature.rows))
+    task: Task = law.observed_feature.task_of(desired)
+    return task
+
+
+def feature_reference(law: FeatureCTC, tr: float) -> np.ndarray:
+    """(3, m) the law's anchored model features at ``tr`` [s], their rate and
+    acceleration (NaN where its model's camera does not see them): from its control
+    grid on the grid (built on first use), else computed."""
+    i = law._grid_index(tr)
+    if i is None:
+        return law.feature_rows(np.array([tr]))[0]
+    _, rows, known, _ = law.reference_grid()
+    return np.where(known[i], rows[i].reshape(3, -1), np.nan)
 
 
 def numpy_start(law: TaskComputedTorque, t: float, m: Measured) -> None:
