@@ -199,7 +199,8 @@ def numpy_law_step(law: TaskComputedTorque, observation: Observation) -> Command
     if isinstance(m, str):
         return law.refuse(m)
     if not isinstance(law, VisionCTC):  # the encoders' pose: the next guess
-        law.guess = (m.rotation, m.translation)
+        assert law.compiled is not None
+        law.compiled.guess = (m.rotation, m.translation)
     if not law.started:
         numpy_start(law, float(observation.t), m)
     return numpy_task_step(law, float(observation.t), m, qd)

@@ -75,9 +75,9 @@ def _both(law: TaskComputedTorque, obs: Observation,
     """The compiled and the numpy command of one observation from the same FK guess."""
     assert law.compiled is not None
     q, qd = np.asarray(obs.lengths), np.asarray(obs.q_dot)
-    law.guess = guess
+    law.compiled.guess = guess
     fast = _compiled(law, obs, obs.t - law.reference_start, q, qd)
-    law.guess = guess
+    law.compiled.guess = guess
     m = numpy_measure(law, obs, q, qd)
     assert not isinstance(m, str)
     slow = numpy_task_step(law, obs.t, m, qd)

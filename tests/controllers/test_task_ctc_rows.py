@@ -190,10 +190,10 @@ def test_every_step_equals_a_fresh_row_from_its_guess(name: str, tracking: bool)
     bound.call = counted
     for k, o in enumerate(obs[1:]):
         if k % 6 == 2:  # a guess set from outside (as the tests and the numpy path do)
-            law.guess = _far_guess(Rs[k + 1], ts[k + 1])
+            law.compiled.guess = _far_guess(Rs[k + 1], ts[k + 1])
         if k % 6 == 0 and not law.compiled_fk:  # the fit's loop, then forces that
             # overflow: refused (status NON_FINITE), the guess left as it was (the row not)
-            law.guess = _far_guess(Rs[k + 1], ts[k + 1])
+            law.compiled.guess = _far_guess(Rs[k + 1], ts[k + 1])
             huge = Observation(o.t, o.lengths, normals=o.normals, directions=o.directions,
                                q_dot=o.q_dot * 1e200)
             with np.errstate(all="ignore"):
