@@ -16,13 +16,11 @@ dataclass (:mod:`controllers.estimators`). A controller says what it commands
 (:class:`Actuation`: leg velocities, or leg forces).
 """
 
-from collections.abc import Iterator, Mapping
-from importlib import import_module
 from typing import TYPE_CHECKING
 
 from controllers.base import Controller
 from controllers.data import Command, ControllerContext, Goal, Observation, observation_problem
-from controllers.registry import ControllerFactory, Registry, registry
+from controllers.registry import Registry, registry
 from hexapod.actuation import Actuation
 from hexapod.lazy import lazy_names
 
@@ -65,26 +63,6 @@ BUILTIN_SPECS = {
 _LAZY_CLASSES = {spec.rpartition(":")[2]: spec.partition(":")[0]
                  for spec in BUILTIN_SPECS.values()}
 
-
-class _Builtins(Mapping[str, ControllerFactory]):
-    """:data:`BUILTINS`: the built-in controllers' classes by registry name, each
-    imported when it is looked up."""
-
-    def __getitem__(self, name: str) -> ControllerFactory:
-        module, _, attr = BUILTIN_SPECS[name].partition(":")
-        factory: ControllerFactory = getattr(import_module(module), attr)
-        return factory
-
-    def __iter__(self) -> Iterator[str]:
-        return iter(BUILTIN_SPECS)
-
-    def __len__(self) -> int:
-        return len(BUILTIN_SPECS)
-
-
-#: The built-in controllers, by registry name (a read-only mapping to their classes).
-BUILTINS: Mapping[str, ControllerFactory] = _Builtins()
-
 for _name, _spec in BUILTIN_SPECS.items():
     registry.register_lazy(_name, _spec)
 
@@ -94,7 +72,6 @@ __getattr__ = lazy_names(__name__, _LAZY_CLASSES, globals())
 
 
 __all__ = [
-    "BUILTINS",
     "BUILTIN_SPECS",
     "Actuation",
     "CartesianCTC",

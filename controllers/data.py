@@ -423,15 +423,6 @@ class CommandBatch:
         return Command(self.velocities[k].copy(), error_norm=float(self.error_norm[k]),
                        reason=reason, actuation=self.actuation, forces=forces)
 
-    @staticmethod
-    def from_commands(commands: list[Command]) -> CommandBatch:
-        """Stack per-trial :class:`Command` objects (all of one actuation)."""
-        kind = commands[0].actuation if commands else Actuation.VELOCITY
-        out = CommandBatch.zeros(len(commands), kind)
-        for k, c in enumerate(commands):
-            out.put(k, c)
-        return out
-
 
 def observation_problem(obs: Observation, features: frozenset[str]) -> str | None:
     """Return why an observation cannot be used (None if it can): what every controller's

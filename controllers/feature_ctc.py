@@ -38,7 +38,6 @@ from controllers.task_ctc import (
 )
 from controllers.task_ctc_inputs import camera_and_base_points, goal_pose_of
 from controllers.task_ctc_rows import TaskRows
-from controllers.tasks import Task
 from controllers.tasks.feature_kind import BuiltinFeature
 from controllers.tasks.leg_direction import LEG_DIRECTIONS
 from controllers.tasks.leg_edge import EDGE_NORMALS
@@ -131,24 +130,6 @@ class FeatureCTC(TaskComputedTorque):
         assert self.observed_feature.field is not None
         return self.observed_feature.field
 
-    def make_task(self, desired: np.ndarray) -> Task:
-        """The task towards ``desired`` features (the feature's numpy task: the tests'
-        oracle of the compiled step and the reference terms' checks)."""
-        task: Task = self.observed_feature.task_of(desired)
-        return task
-
-    def feature_reference(self, tr: float) -> np.ndarray:
-        """(3, m) the anchored model features at ``tr`` [s], their rate and acceleration
-        (:mod:`controllers.solvers.reference_motion`). The control grid ``k dt`` is
-        computed once per reference (one batched call; there a unit vector not known is
-        NaN in its three rows); other instants on demand."""
-        i = self._grid_index(tr)
-        if i is None:
-            return self.feature_rows(np.array([tr]))[0]
-        assert self._grid is not None
-        _, rows, known, _ = self._grid
-        return np.where(known[i], rows[i].reshape(3, -1), np.nan)
-
     def _grid_index(self, tr: float) -> int | None:
         """The row of ``tr`` [s] in the reference's control grid (built on first use), or
         None off the grid."""
@@ -208,8 +189,9 @@ class FeatureCTC(TaskComputedTorque):
             self._grid = (self._grid[0], rows, *self._grid[2:])
 
     def feature_rows(self, times: np.ndarray) -> np.ndarray:
-        """(m, 3, n) rows of :meth:`feature_reference` at ``times`` (m,) [s]; NaN where
-        the model's camera does not see the feature (:meth:`motion_and_seen`)."""
+        """(m, 3, n) the anchored model features at ``times`` (m,) [s], their rate and
+        acceleration; NaN where the model's camera does not see the feature
+        (:meth:`motion_and_seen`)."""
         out, seen = self.motion_and_seen(times)
         return np.where(seen[:, None, :], out, np.nan)
 
@@ -219,9 +201,11 @@ class FeatureCTC(TaskComputedTorque):
         return features_motion([self], [times])
 
     def compiled_reference(self, tr: float) -> tuple[np.ndarray, np.ndarray | None]:
-        """(3 m,) :meth:`feature_reference` at ``tr`` for the compiled step, the features
+        """(3 m,) the anchored model features at ``tr`` [s], their rate and acceleration
+        (:mod:`controllers.solvers.reference_motion`) for the compiled step, the features
         the model's camera does not see (NaN) replaced by finite stand-ins, and the rows
-        known (None: all)."""
+        known (None: all). The control grid ``k dt`` is computed once per reference (one
+        batched call, :meth:`reference_grid`); other instants on demand."""
         i = self._grid_index(tr)
         if i is None:
             return sanitised(self.feature_rows(np.array([tr]))[0])

@@ -1,7 +1,6 @@
 """The pieces the control laws are built from (``docs/math.md`` section 6): observation
-checks, option checks, the constant or adaptive :class:`Gain`, the least-squares solve
-with a singular-value threshold and damping, and what a law gives its compiled core
-(:class:`Selection`) and its solver (:class:`TaskStep`)."""
+checks, option checks, the constant or adaptive :class:`Gain`, and what a law gives its
+compiled core (:class:`Selection`) and its solver (:class:`TaskStep`)."""
 
 from __future__ import annotations
 
@@ -227,28 +226,6 @@ class Gain:
         if not slope > 0:
             raise OptionError(controller, "adaptive_gain", f"lambda0' must be > 0, got {slope}")
         return Gain(l0, linf, slope)
-
-
-# --------------------------------------------------------------------------- algebra
-def solve_normal_damped(N: np.ndarray, b: np.ndarray, threshold: float, damping2: float
-                        ) -> tuple[np.ndarray, int, float]:
-    """``x = (L^T L + mu^2 I)^+ L^T e`` (6,) from ``N = L^T L`` (6, 6) and ``b = L^T e``:
-    ``sum_j (v_j^T b) / (w_j + damping2) v_j`` over the eigenvalues ``w_j > threshold^2
-    w_max`` of ``N`` (the singular values of ``L`` below ``threshold * s_max`` count as
-    zero), with the rank and the condition ``s_max / s_min`` (inf when singular)."""
-    w, V = np.linalg.eigh(N)
-    w_max = w[-1]
-    if not w_max > 0:
-        return np.zeros(len(b)), 0, math.inf
-    keep = w > (threshold * threshold) * w_max
-    rank = int(np.count_nonzero(keep))
-    cond = math.sqrt(w_max / w[0]) if w[0] > 0 else math.inf
-    c = V.T @ b
-    if rank == len(w):
-        c /= w + damping2
-    else:
-        c = np.where(keep, c / np.where(keep, w + damping2, 1.0), 0.0)
-    return V @ c, rank, cond
 
 
 # --------------------------------------------------------------------------- the law

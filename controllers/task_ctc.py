@@ -124,11 +124,6 @@ class TaskComputedTorque(ComputedTorqueLaw):
         """The pose guess ``(R, t)`` of the next step (None: none found yet)."""
         return None if self.compiled is None else self.compiled.guess
 
-    @guess.setter
-    def guess(self, pose: tuple[np.ndarray, np.ndarray] | None) -> None:
-        assert self.compiled is not None
-        self.compiled.guess = pose
-
     @property
     def compiled_steps(self) -> int:
         """Commands of the compiled step (diagnostics)."""

@@ -158,18 +158,10 @@ class CompiledTaskStep:
         its values in row-major order, or one value for all)."""
         self.row[self.inputs[name]] = np.ravel(value)
 
-    def step(self, law: TaskComputedTorque, observation: Observation, tr: float,
-             q: np.ndarray, qd: np.ndarray) -> Command | str:
-        """The command of this period, or why there is none (``q`` [m] and ``qd`` [m/s]
-        written into the row first)."""
-        views = self.views or self.bind()
-        views["q"][:] = q
-        views["q_dot"][:] = qd
-        return self.step_written(law, observation, tr)
-
     def step_written(self, law: TaskComputedTorque, observation: Observation, tr: float
                      ) -> Command | str:
-        """:meth:`step` with ``q`` and ``q_dot`` already in the row."""
+        """The command of this period at ``tr`` [s] of the reference's clock, or why there
+        is none (``q`` and ``q_dot`` already in the row)."""
         prepared = self.prepare(law, observation, tr)
         if isinstance(prepared, str):
             return prepared

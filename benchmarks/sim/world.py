@@ -119,14 +119,14 @@ def _perturb_camera(camera: Camera, z_rot: np.ndarray, z_pos: np.ndarray, z_k: n
 Calibrate = Callable[[World, np.random.Generator], tuple[np.ndarray, dict[str, float]]]
 
 
-def make_trial(sc: SimScenario, trial: int, nominal: HexapodGeometry, camera: Camera,
-               calibrate: Calibrate | None = None) -> TrialSetup:
+def make_trial(sc: SimScenario, trial: int, nominal: HexapodGeometry, camera: Camera
+               ) -> TrialSetup:
     """Draw the truth, start and goal of one trial from ``(seed, trial)``.
 
     The standard-normal draws are made in a fixed order whatever the scenario's
     error magnitudes, so trials are paired across the points of a sweep.
     """
-    out = make_trials(sc, [trial], nominal, camera, calibrate)[0]
+    out = make_trials(sc, [trial], nominal, camera)[0]
     if isinstance(out, BaseException):
         raise out
     return out

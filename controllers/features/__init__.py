@@ -36,16 +36,15 @@ class FeatureControllers:
         return (self.pinv, self.qp, self.mpc, self.ctc)
 
 
-def controllers_for(feature: LegFeature, module: str | None = None) -> FeatureControllers:
-    """The four controllers of a feature.
+def controllers_for(feature: LegFeature) -> FeatureControllers:
+    """The four controllers of a feature (said to live in the module of the feature's
+    class, ``__module__``, for the results' records).
 
     Args:
         feature: The feature (its ``name`` prefixes the controllers' names).
-        module: The module the classes are said to live in (``__module__``, for the
-            results' records; default: the feature's class's module).
     """
     stem = "".join(part.capitalize() for part in feature.c_name.split("_"))
-    mod = module or type(feature).__module__
+    mod = type(feature).__module__
     def make(base: type, suffix: str, kind: str, extra: dict[str, object]) -> type:
         return type(f"{stem}{kind}", (base,), {
             "name": f"{feature.name}-{suffix}", "feature": feature, "unit": feature.unit,

@@ -23,8 +23,7 @@ from controllers.base import ControllerContext, Goal
 from controllers.exceptions import ContextError
 from controllers.feature_ctc import LegDirectionCTC
 from controllers.features.ctc_step import FeatureTaskStep
-from controllers.tasks import Task
-from controllers.tasks.leg_feature import FeatureTask, LegFeature
+from controllers.tasks.leg_feature import LegFeature
 
 
 class FeatureComputedTorque(LegDirectionCTC):
@@ -82,9 +81,6 @@ class FeatureComputedTorque(LegDirectionCTC):
         super().prepare(context)
         self.every_rows = np.ones(6 * self.feature.rows, dtype=bool)
         self.every_rows.flags.writeable = False
-
-    def make_task(self, desired: np.ndarray) -> Task:
-        return FeatureTask(self.feature, np.asarray(desired).reshape(6, self.feature.rows))
 
     def motion_and_seen(self, times: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """(m, 3, 6 rows) the model's feature along the reference at ``times`` (m,) [s],

@@ -39,8 +39,7 @@ def ctc_layouts(feature: LegFeature) -> tuple[Layout, Layout]:
     return task_layouts(f"computed-torque {feature.name}", extra, m)
 
 
-def ctc_function(feature: LegFeature, inverse_tolerance: float = INVERSE_TOLERANCE
-                 ) -> ca.Function:
+def ctc_function(feature: LegFeature) -> ca.Function:
     """The step of a feature (see the module docstring)."""
     inputs = ctc_layouts(feature)[0]
     x = ca.SX.sym("x", inputs.size)
@@ -71,18 +70,17 @@ def ctc_function(feature: LegFeature, inverse_tolerance: float = INVERSE_TOLERAN
     L = ca.vertcat(*Ls)
     out = sx_task_outputs(v, R_t, ca.mmax(ca.fabs(residual)), state, ca.vertcat(*es), L @ G,
                           ca.vertcat(*ldots) + L @ gdot, ca.vertcat(*ets), ca.vertcat(*etts),
-                          v["mask"], inverse_tolerance)
+                          v["mask"], INVERSE_TOLERANCE)
     return ca.Function(f"hexapod_ctc_{feature.c_name}_step", [x], [ca.cse(ca.densify(out))])
 
 
-def feature_ctc_step(feature: LegFeature, compiled: bool = True) -> CompiledFunction:
+def feature_ctc_step(feature: LegFeature) -> CompiledFunction:
     """The compiled step of a feature (one per feature instance; cached on disk)."""
     cache = feature.__dict__.setdefault("_compiled_cores", {})
-    key = "_ctc" + ("" if compiled else "_vm")
-    if key not in cache:
+    if "_ctc" not in cache:
         inputs, outputs = ctc_layouts(feature)
-        cache[key] = CompiledFunction(ctc_function(feature), compiled, inputs, outputs)
-    return cache[key]  # type: ignore[no-any-return]
+        cache["_ctc"] = CompiledFunction(ctc_function(feature), inputs=inputs, outputs=outputs)
+    return cache["_ctc"]  # type: ignore[no-any-return]
 
 
 class FeatureTaskStep(CompiledTaskStep):

@@ -45,10 +45,10 @@ class Solver:
         """
 
     def solve(self, N: np.ndarray, b: np.ndarray, lam: float, q: np.ndarray, J: np.ndarray,
-              pre: LawResult | None) -> Solved:
+              pre: LawResult) -> Solved:
         """The twist from ``N = L^T L`` (6, 6), ``b = L^T e`` (6,), the gain ``lam``
         [1/s], the lengths ``q`` (6,) [m] and ``J_inv`` (6, 6); ``pre`` is the compiled
-        core's result when it computed the period."""
+        core's result of the period."""
         raise NotImplementedError
 
     def finish(self, qdot: np.ndarray) -> np.ndarray:

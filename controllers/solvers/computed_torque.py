@@ -9,14 +9,14 @@ reference that moves on its own, the error's derivatives are
 
 with ``e_t`` and ``e_tt`` what the reference's motion alone adds (for an error
 ``e = s - s*``: ``e_t = -s*_dot``, ``e_tt = -s*_ddot``; the tasks give them analytically,
-:meth:`controllers.tasks.Task.reference_terms`, and :func:`reference_terms` by central
-differences for any task, their test oracle). The solver asks for
+:meth:`controllers.tasks.Task.reference_terms`). The laws ask for
 ``e_ddot = -2 zeta omega_n e_dot - omega_n^2 e``:
 
 ``tau_dot = L^+ (-2 zeta omega_n e_dot - omega_n^2 e - L_dot tau - e_tt)``
 
-(least squares over the rows given; refused when ``L`` loses rank, or damped,
-``(L^T L + mu^2 I)^-1 L^T``, when a damping ``mu`` is set), then the leg forces
+(least squares over the rows given, refused when ``L`` loses rank; inside their compiled
+steps, :mod:`controllers.solvers.compiled_ctc` and
+:mod:`controllers.solvers.compiled_task_ctc`), then the leg forces
 
 ``f = DynamicModel.inverse(R, t, tau, tau_dot) + m_r a + c q_dot + f_c tanh(v_ref / v_s)``
 
@@ -40,14 +40,10 @@ import numpy as np
 
 from controllers.exceptions import ContextError
 from controllers.solvers.saturation import checked_strategy, saturated
-from controllers.tasks.base import Task, TaskState
 from hexapod.dynamics import DynamicModel
 from hexapod.dynamics.drive_model import COULOMB_SMOOTHING
 from hexapod.kinematics import Transform
 from hexapod.se3 import skew
-
-#: Time step of the central differences of a task along its reference [s].
-REFERENCE_STEP = 1e-3
 
 
 @dataclass(frozen=True)
@@ -105,72 +101,19 @@ def checked_integral_gain(controller: str, integral_gain: float) -> float:
     return ki
 
 
-@dataclass
-class Acceleration:
-    """The solver's platform acceleration and its diagnostics.
-
-    Attributes:
-        acc: (6,) ``tau_dot`` (model coordinates) [m/s^2, rad/s^2], zeros when refused.
-        error_rate: (m,) ``e_dot``.
-        rank: Rank of ``L``.
-        condition: Its condition number (inf when rank-deficient).
-        reason: Why it is refused (None when valid).
-    """
-
-    acc: np.ndarray
-    error_rate: np.ndarray
-    rank: int
-    condition: float
-    reason: str | None = None
-
-
 class ComputedTorqueSolver:
-    """Second-order task dynamics to a platform acceleration and leg forces (see the
-    module docstring).
+    """Second-order task dynamics to leg forces (see the module docstring): the gains
+    and the rank threshold of a law's compiled solve, and the forces of a platform
+    acceleration.
 
     Args:
         gains: The designed error dynamics.
         threshold: Relative singular-value threshold of the rank test.
-        damping: ``mu`` of a damped least squares (0: refuse a rank-deficient ``L``).
     """
 
-    def __init__(self, gains: SecondOrderGains, threshold: float = 1e-6,
-                 damping: float = 0.0) -> None:
+    def __init__(self, gains: SecondOrderGains, threshold: float = 1e-6) -> None:
         self.gains = gains
         self.threshold = float(threshold)
-        self.damping = float(damping)
-
-    def acceleration(self, error: np.ndarray, jacobian: np.ndarray, ldot_tau: np.ndarray,
-                     twist: np.ndarray, error_t: np.ndarray | None = None,
-                     error_tt: np.ndarray | None = None) -> Acceleration:
-        """``tau_dot`` giving the designed ``e_ddot``.
-
-        Args:
-            error: (m,) ``e``.
-            jacobian: (m, 6) ``L`` (model coordinates).
-            ldot_tau: (m,) ``L_dot tau``.
-            twist: (6,) ``tau`` (model coordinates).
-            error_t: (m,) ``e_t`` of the reference's motion (None: a fixed reference).
-            error_tt: (m,) ``e_tt`` (None: zeros).
-        """
-        e = np.asarray(error, dtype=float)
-        L = np.asarray(jacobian, dtype=float)
-        e_dot = L @ twist + (0.0 if error_t is None else error_t)
-        rhs = -self.gains.kd * e_dot - self.gains.kp * e - ldot_tau
-        if error_tt is not None:
-            rhs = rhs - error_tt
-        if L.shape[0] == 0:
-            return Acceleration(np.zeros(6), e_dot, 0, math.inf, "no task rows")
-        U, s, Vt = np.linalg.svd(L, full_matrices=False)
-        rank = int(np.sum(s > self.threshold * s[0])) if s[0] > 0 else 0
-        cond = float(s[0] / s[-1]) if s[-1] > 0 else math.inf
-        if rank < 6 and self.damping == 0.0:
-            return Acceleration(np.zeros(6), e_dot, rank, cond,
-                                f"task Jacobian of rank {rank} < 6 "
-                                f"({L.shape[0]} rows, condition {cond:.3g})")
-        inv = s / (s * s + self.damping**2)
-        acc = Vt.T @ (inv * (U.T @ rhs))
-        return Acceleration(acc, e_dot, rank, cond)
 
     @staticmethod
     def forces(model: DynamicModel, R: np.ndarray, t: np.ndarray, twist: np.ndarray,
@@ -278,38 +221,11 @@ def task_in_model_twist(jacobian: np.ndarray, translation: np.ndarray, twist: np
     return L @ G, G @ twist, L @ gdot
 
 
-def reference_terms(task_at: Callable[[int], Task], state: TaskState, twist: np.ndarray,
-                    step: float = REFERENCE_STEP) -> tuple[np.ndarray, np.ndarray]:
-    """``e_t`` and ``e_tt`` of a task whose desired value moves, by central differences.
-
-    With ``e(s, t)`` the task error at the state ``s`` and the reference at ``t``:
-    ``e_t = de/dt`` and ``e_tt = d2e/dt2 + 2 d(L tau)/dt``, the state held
-    (``e_ddot = L tau_dot + L_dot tau + e_tt``).
-
-    Args:
-        task_at: ``task_at(k)`` the task with the reference at ``t + k step`` for
-            ``k`` in (-1, 0, 1).
-        state: One state row.
-        twist: (6,) the task's twist ``tau`` (of its own frame).
-        step: ``step`` [s].
-    """
-    tasks = {k: task_at(k) for k in (-1, 0, 1)}
-    e = {k: tasks[k].error(state)[0] for k in (-1, 0, 1)}
-    Lp = tasks[1].jacobian(state)[0]
-    Lm = tasks[-1].jacobian(state)[0]
-    e_t = (e[1] - e[-1]) / (2 * step)
-    e_tt = (e[1] - 2 * e[0] + e[-1]) / step**2 + (Lp - Lm) @ twist / step
-    return e_t, e_tt
-
-
 __all__ = [
-    "REFERENCE_STEP",
-    "Acceleration",
     "CTCOptions",
     "ComputedTorqueSolver",
     "SecondOrderGains",
     "checked_integral_gain",
     "drive_forces",
-    "reference_terms",
     "task_in_model_twist",
 ]

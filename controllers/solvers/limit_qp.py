@@ -17,7 +17,7 @@ import numpy as np
 from controllers.base import ControllerContext
 from controllers.exceptions import OptionError
 from controllers.law_kernel import LawResult
-from controllers.law_tools import check_count, check_number, solve_normal_damped
+from controllers.law_tools import check_count, check_number
 from controllers.solvers.base import Solved, Solver
 from controllers.solvers.osqp_limits import OSQP_DEFAULTS, LimitQP
 
@@ -129,18 +129,13 @@ class LimitQPSolver(Solver):
         self.qp.reset()
 
     def solve(self, N: np.ndarray, b: np.ndarray, lam: float, q: np.ndarray, J: np.ndarray,
-              pre: LawResult | None) -> Solved:
+              pre: LawResult) -> Solved:
         """The QP, or its unconstrained optimum ``-lambda (L^T L + eps I)^-1 L^T e`` (the
-        objective is strictly convex) when that clears every bound by twice the
-        tolerance under which the diagnostics call a constraint active (``1e-6
-        q_dot_max``); otherwise OSQP solves it (its active set refined exactly,
-        :meth:`LimitQP._refine`)."""
-        if pre is not None:
-            rank, cond, tau, qdot = pre.rank, pre.condition, pre.tau, pre.qdot
-        else:
-            x, rank, cond = solve_normal_damped(N, b, self.threshold, self.qp.regularization)
-            tau = x * -lam
-            qdot = J @ tau
+        compiled core's ``pre``; the objective is strictly convex) when that clears
+        every bound by twice the tolerance under which the diagnostics call a constraint
+        active (``1e-6 q_dot_max``); otherwise OSQP solves it (its active set refined
+        exactly, :meth:`LimitQP._refine`)."""
+        rank, cond, tau, qdot = pre.rank, pre.condition, pre.tau, pre.qdot
         if rank < 6:
             return np.zeros(6), rank, cond, [], None, None
         w = self.window

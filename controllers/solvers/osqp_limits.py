@@ -58,7 +58,6 @@ class LimitQP:
                          "check_termination": 10}
         self._solver: Any = None
         self._ext: Any = None
-        self._P = np.zeros((6, 6))
         self._eye_eps = regularization * np.eye(6)
         self._refine_in = np.zeros(REFINE_INPUTS.size)
 

@@ -3,7 +3,7 @@
 ``computed-torque`` steps through its compiled function only
 (:mod:`controllers.solvers.compiled_ctc`); this is the step it replaced, by numpy around
 the model's separate compiled calls (:func:`hexapod.fk.forward_kinematics`, an SVD
-solve in :class:`~controllers.solvers.computed_torque.ComputedTorqueSolver`,
+solve in :func:`tests.controllers.ctc_solver_oracle.acceleration`,
 :meth:`hexapod.dynamics.DynamicModel.inverse`), kept to check the compiled step against.
 """
 
@@ -16,6 +16,7 @@ from controllers.computed_torque import ComputedTorqueController
 from controllers.solvers.computed_torque import drive_forces
 from hexapod.actuation import Actuation
 from hexapod.fk import forward_kinematics
+from tests.controllers.ctc_solver_oracle import acceleration
 
 
 def numpy_joint_step(ctrl: ComputedTorqueController, q: np.ndarray, qd: np.ndarray,
@@ -41,7 +42,7 @@ def numpy_joint_step(ctrl: ComputedTorqueController, q: np.ndarray, qd: np.ndarr
         twist = np.linalg.solve(K, qd)
         bias = model.legs_batch(R[None], p[None], twist[None])[1][0]
         e = q_s - q
-        sol = ctrl.solver.acceleration(-e, K, bias, twist, error_t=-qd_s, error_tt=-qdd_s)
+        sol = acceleration(ctrl.solver, -e, K, bias, twist, error_t=-qd_s, error_tt=-qdd_s)
         if sol.reason is not None:
             return refuse(sol.reason)
         a = K @ sol.acc + bias

@@ -4,7 +4,8 @@ The laws compute every step with their compiled core (:mod:`controllers.law_kern
 generated from the tasks' CasADi blocks). This module computes the same tasks with the
 numpy formulas of :mod:`tests.controllers.interaction_oracle` (an independent implementation, itself
 tested against finite differences of the true kinematics) and the LAPACK solve of
-:func:`controllers.law_tools.solve_normal_damped`: :func:`numpy_law` is a law whose
+:func:`solve_normal_damped` (handed to the law's solver as the core's result would be,
+:func:`numpy_solution`): :func:`numpy_law` is a law whose
 :meth:`~controllers.laws.VisionLaw.tasks` is replaced by :func:`numpy_tasks`. The
 feature selection and the estimate (which features are used, dead-reckoned and
 approximated directions) are the law's own (``_select``): what is checked is the
@@ -148,9 +149,43 @@ def edge_stack(law: Any, obs: Observation, q: np.ndarray) -> Stack:
     return Stack(e, L, used, notes)
 
 
+def solve_normal_damped(N: np.ndarray, b: np.ndarray, threshold: float, damping2: float
+                        ) -> tuple[np.ndarray, int, float]:
+    """``x = (L^T L + mu^2 I)^+ L^T e`` (6,) from ``N = L^T L`` (6, 6) and ``b = L^T e``:
+    ``sum_j (v_j^T b) / (w_j + damping2) v_j`` over the eigenvalues ``w_j > threshold^2
+    w_max`` of ``N`` (the singular values of ``L`` below ``threshold * s_max`` count as
+    zero), with the rank and the condition ``s_max / s_min`` (inf when singular)."""
+    w, V = np.linalg.eigh(N)
+    w_max = w[-1]
+    if not w_max > 0:
+        return np.zeros(len(b)), 0, math.inf
+    keep = w > (threshold * threshold) * w_max
+    rank = int(np.count_nonzero(keep))
+    cond = math.sqrt(w_max / w[0]) if w[0] > 0 else math.inf
+    c = V.T @ b
+    if rank == len(w):
+        c /= w + damping2
+    else:
+        c = np.where(keep, c / np.where(keep, w + damping2, 1.0), 0.0)
+    return V @ c, rank, cond
+
+
+def numpy_solution(solver: Any, N: np.ndarray, b: np.ndarray, lam: float, J: np.ndarray
+                   ) -> types.SimpleNamespace:
+    """What a solver reads of the compiled core's result, by numpy: ``tau = -lambda
+    (L^T L + mu^2 I)^+ L^T e`` (:func:`solve_normal_damped` with the solver's threshold
+    and ``damping2``), its rank and condition, ``qdot = J_inv tau`` and whether it is
+    finite."""
+    x, rank, cond = solve_normal_damped(N, b, solver.threshold, solver.damping2)
+    tau = x * -lam
+    qdot = J @ tau
+    return types.SimpleNamespace(tau=tau, rank=rank, condition=cond, qdot=qdot,
+                                 qdot_finite=bool(np.all(np.isfinite(qdot))))
+
+
 def numpy_tasks(law: Any, observation: Observation, q: np.ndarray) -> TaskStep | Command:
-    """:meth:`controllers.laws.VisionLaw.tasks` computed with numpy (``compiled`` None: the
-    solver solves ``N``, ``b`` itself)."""
+    """:meth:`controllers.laws.VisionLaw.tasks` computed with numpy (``compiled``: the
+    numpy solve, :func:`numpy_solution`)."""
     est = law.estimate
     stack = edge_stack if isinstance(law, LegEdgeController) else direction_stack
     st = stack(law, observation, q)  # dead-reckons hidden legs with the last twist
@@ -176,7 +211,8 @@ def numpy_tasks(law: Any, observation: Observation, q: np.ndarray) -> TaskStep |
                         "lengths) for never-seen legs " + ", ".join(map(str, unknown)))
     J = inverse_jacobian(law.base_points, u)
     lam = law.gain(float(np.abs(e).max()) if e.size else 0.0)
-    return TaskStep(e, error_norm, N, b, lam, J, st.notes, None)
+    return TaskStep(e, error_norm, N, b, lam, J, st.notes,
+                    numpy_solution(law.solver, N, b, lam, J))
 
 
 def numpy_law(name: str, **options: Any) -> Any:

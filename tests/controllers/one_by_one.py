@@ -6,7 +6,17 @@ from __future__ import annotations
 from collections.abc import Callable, Sequence
 from typing import Any
 
-from controllers.base import CommandBatch, ControllerContext, ObservationBatch
+from controllers.base import Command, CommandBatch, ControllerContext, ObservationBatch
+from hexapod.actuation import Actuation
+
+
+def stacked(commands: list[Command]) -> CommandBatch:
+    """Per-trial :class:`Command` objects (all of one actuation) stacked into a batch."""
+    kind = commands[0].actuation if commands else Actuation.VELOCITY
+    out = CommandBatch.zeros(len(commands), kind)
+    for k, c in enumerate(commands):
+        out.put(k, c)
+    return out
 
 
 class OneByOne:
@@ -25,6 +35,6 @@ class OneByOne:
 
     def step_batch(self, observations: ObservationBatch) -> CommandBatch:
         """Each row stepped by its trial's controller alone."""
-        return CommandBatch.from_commands(
+        return stacked(
             [self.controllers[int(t)].step(observations.item(k))
              for k, t in enumerate(observations.trials)])

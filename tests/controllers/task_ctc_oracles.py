@@ -9,7 +9,7 @@ measurement by numpy (:func:`numpy_measure`: the forward kinematics of
 seen), its task towards the reference (:func:`numpy_desired_at`: the numpy tasks of
 :mod:`controllers.tasks`) and the step (:func:`numpy_task_step`: the tasks' error,
 Jacobian and second-order terms, the SVD solve of
-:class:`~controllers.solvers.computed_torque.ComputedTorqueSolver`,
+:func:`tests.controllers.ctc_solver_oracle.acceleration`,
 :meth:`hexapod.dynamics.DynamicModel.inverse`).
 """
 
@@ -22,13 +22,15 @@ import numpy as np
 from controllers.base import Command, Observation
 from controllers.cartesian_ctc import CartesianCTC, VisionCTC, directions_seen
 from controllers.feature_ctc import FeatureCTC
+from controllers.features.ctc import FeatureComputedTorque
 from controllers.solvers.compiled_task_ctc import REFERENCE
 from controllers.solvers.computed_torque import task_in_model_twist
 from controllers.task_ctc import TaskComputedTorque
 from controllers.task_ctc_inputs import line_to
-from controllers.tasks import PlatformPoseTask, Task, TaskState
+from controllers.tasks import FeatureTask, PlatformPoseTask, Task, TaskState
 from hexapod.fk import forward_kinematics
 from hexapod.kinematics import Transform
+from tests.controllers.ctc_solver_oracle import acceleration
 
 
 @dataclass
@@ -113,9 +115,29 @@ def numpy_desired_at(law: TaskComputedTorque, tr: float | None
         return PlatformPoseTask(ref["R"], ref["t"]), ref["twist"], ref["twist_rate"]
     assert isinstance(law, FeatureCTC)
     if tr is None or law.reference is None:
-        return law.make_task(law._taught), None, None
-    s, s_dot, s_ddot = (x.reshape(law._taught.shape) for x in law.feature_reference(tr))
-    return law.make_task(s), s_dot, s_ddot
+        return numpy_task(law, law._taught), None, None
+    s, s_dot, s_ddot = (x.reshape(law._taught.shape) for x in feature_reference(law, tr))
+    return numpy_task(law, s), s_dot, s_ddot
+
+
+def numpy_task(law: FeatureCTC, desired: np.ndarray) -> Task:
+    """The numpy task of the law's feature towards ``desired`` features (a plugin
+    feature's :class:`~controllers.tasks.FeatureTask`)."""
+    if isinstance(law, FeatureComputedTorque):
+        return FeatureTask(law.feature, np.asarray(desired).reshape(6, law.feature.rows))
+    task: Task = law.observed_feature.task_of(desired)
+    return task
+
+
+def feature_reference(law: FeatureCTC, tr: float) -> np.ndarray:
+    """(3, m) the law's anchored model features at ``tr`` [s], their rate and
+    acceleration (NaN where its model's camera does not see them): from its control
+    grid on the grid (built on first use), else computed."""
+    i = law._grid_index(tr)
+    if i is None:
+        return law.feature_rows(np.array([tr]))[0]
+    _, rows, known, _ = law.reference_grid()
+    return np.where(known[i], rows[i].reshape(3, -1), np.nan)
 
 
 def numpy_start(law: TaskComputedTorque, t: float, m: Measured) -> None:
@@ -149,8 +171,8 @@ def numpy_task_step(law: TaskComputedTorque, t: float, m: Measured, qd: np.ndarr
         rows &= np.isfinite(e_t) & np.isfinite(e_tt)
     if m.rows is not None:
         rows &= m.rows
-    sol = law.solver.acceleration(
-        e[rows], L[rows], ldot[rows], m.twist, None if e_t is None else e_t[rows],
+    sol = acceleration(
+        law.solver, e[rows], L[rows], ldot[rows], m.twist, None if e_t is None else e_t[rows],
         None if e_tt is None else e_tt[rows])
     if sol.reason is not None:
         return law.refuse(sol.reason, e[rows])
@@ -177,7 +199,8 @@ def numpy_law_step(law: TaskComputedTorque, observation: Observation) -> Command
     if isinstance(m, str):
         return law.refuse(m)
     if not isinstance(law, VisionCTC):  # the encoders' pose: the next guess
-        law.guess = (m.rotation, m.translation)
+        assert law.compiled is not None
+        law.compiled.guess = (m.rotation, m.translation)
     if not law.started:
         numpy_start(law, float(observation.t), m)
     return numpy_task_step(law, float(observation.t), m, qd)

@@ -16,6 +16,7 @@ from hexapod.actuation import Actuation, check_actuation
 from hexapod.backends.sim import SimulatedRobot
 from hexapod.exceptions import ActuationError
 from hexapod.geometry import deltalab
+from tests.controllers.one_by_one import stacked
 
 PLUGIN = "tests.controllers.force_plugin:LegSpringForces"
 REFUSAL = ("controller 'springs' commands leg forces [N], but the kinematic world applies "
@@ -37,7 +38,7 @@ def test_command_values_follow_the_actuation() -> None:
     np.testing.assert_array_equal(cmd.velocities, np.zeros(6))
     refused = Command.refuse("no", actuation=Actuation.FORCE)
     np.testing.assert_array_equal(refused.values, np.zeros(6))
-    batch = CommandBatch.from_commands([cmd, refused])
+    batch = stacked([cmd, refused])
     assert batch.actuation is Actuation.FORCE
     np.testing.assert_array_equal(batch.values, [f, np.zeros(6)])
     velocity = Command(np.ones(6))

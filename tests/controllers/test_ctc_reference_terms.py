@@ -4,7 +4,7 @@ differences.
 The laws take ``e_t`` and ``e_tt`` from the trajectory's own twist and twist rate
 (:meth:`controllers.tasks.Task.reference_terms`; for the feature laws, the anchored
 model features' rates by the chain rule, :mod:`controllers.solvers.reference_motion`).
-:func:`controllers.solvers.computed_torque.reference_terms` differentiates the task
+:func:`tests.controllers.ctc_solver_oracle.reference_terms` differentiates the task
 along the reference numerically (its own test checks it against the total motion); the
 two must agree to ``O(h^2)``: the discrepancy falls about four times when ``h`` halves
 and stays far below the terms themselves, so a sign or frame error (a twist taken in the
@@ -21,7 +21,7 @@ import pytest
 from controllers import registry
 from controllers.base import Observation
 from controllers.feature_ctc import FeatureCTC
-from controllers.solvers.computed_torque import reference_terms, task_in_model_twist
+from controllers.solvers.computed_torque import task_in_model_twist
 from controllers.task_ctc import TaskComputedTorque
 from controllers.tracking import anchor_goals, model_goals
 from hexapod import deltalab, sample_poses
@@ -29,8 +29,13 @@ from hexapod.dynamics import DynamicModel
 from hexapod.kinematics import legs_in_frame
 from hexapod.se3 import log_so3
 from hexapod.trajectory import PoseTrajectory
+from tests.controllers.ctc_solver_oracle import reference_terms
 from tests.controllers.ctc_world import CtcWorld, perturbed
-from tests.controllers.task_ctc_oracles import numpy_desired_at, numpy_measure
+from tests.controllers.task_ctc_oracles import (
+    feature_reference,
+    numpy_desired_at,
+    numpy_measure,
+)
 from vision.legs import leg_edges
 
 LAWS = ("cartesian-ctc", "vision-ctc", "leg-edge-ctc", "leg-direction-ctc")
@@ -137,11 +142,11 @@ def test_a_new_taught_goal_reanchors_the_feature_reference() -> None:
     law, world = _setup("leg-edge-ctc", "circle")
     assert isinstance(law, FeatureCTC)
     end = 0.02 * (np.ceil(float(law.reference.duration) / 0.02) + 5)  # on the grid, at rest
-    first = law.feature_reference(end)[0].reshape(6, 2, 3)
+    first = feature_reference(law, end)[0].reshape(6, 2, 3)
     np.testing.assert_allclose(first, law.context.goal.normals, atol=1e-12)
     R, t = sample_poses(world.truth, 1, rng=np.random.default_rng(9), max_translation=0.01)
     goal = world.goal(R[0], t[0])
     law.retarget(goal)
-    second = law.feature_reference(end)[0].reshape(6, 2, 3)
+    second = feature_reference(law, end)[0].reshape(6, 2, 3)
     np.testing.assert_allclose(second, goal.normals, atol=1e-12)
     assert np.abs(second - first).max() > 1e-3

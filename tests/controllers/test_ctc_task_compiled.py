@@ -17,7 +17,7 @@ import numpy as np
 import pytest
 
 from controllers import registry
-from controllers.base import Observation
+from controllers.base import Command, Observation
 from controllers.task_ctc import TaskComputedTorque
 from hexapod import deltalab, sample_poses
 from hexapod.dynamics import DynamicModel
@@ -60,14 +60,24 @@ def _observation(world: CtcWorld, R: np.ndarray, t: np.ndarray, twist: np.ndarra
                        q_dot=rates)
 
 
+def _compiled(law: TaskComputedTorque, obs: Observation, tr: float, q: np.ndarray,
+              qd: np.ndarray) -> Command | str:
+    """The law's compiled step at ``tr`` [s] with ``q`` and ``qd`` written into its row."""
+    assert law.compiled is not None
+    views = law.compiled.views or law.compiled.bind()
+    views["q"][:] = q
+    views["q_dot"][:] = qd
+    return law.compiled.step_written(law, obs, tr)
+
+
 def _both(law: TaskComputedTorque, obs: Observation,
           guess: tuple[np.ndarray, np.ndarray]) -> tuple[object, object]:
     """The compiled and the numpy command of one observation from the same FK guess."""
     assert law.compiled is not None
     q, qd = np.asarray(obs.lengths), np.asarray(obs.q_dot)
-    law.guess = guess
-    fast = law.compiled.step(law, obs, obs.t - law.reference_start, q, qd)
-    law.guess = guess
+    law.compiled.guess = guess
+    fast = _compiled(law, obs, obs.t - law.reference_start, q, qd)
+    law.compiled.guess = guess
     m = numpy_measure(law, obs, q, qd)
     assert not isinstance(m, str)
     slow = numpy_task_step(law, obs.t, m, qd)
@@ -138,7 +148,7 @@ def test_hidden_legs_agree_and_too_few_are_refused(name: str) -> None:
                       direction_visible=visible.all(axis=1))
     assert law.compiled is not None
     q, qd = np.asarray(few.lengths), np.asarray(few.q_dot)
-    reason = law.compiled.step(law, few, few.t, q, qd)
+    reason = _compiled(law, few, few.t, q, qd)
     assert isinstance(reason, str)
     slow = numpy_law_step(law, few)
     assert slow.reason is not None

@@ -12,13 +12,13 @@ import pytest
 from controllers import registry
 from controllers.law_algebra import full_rank_certificate, jacobi_eigen
 from controllers.law_kernel import LawKernel, feature_law_function, feature_law_kernel, law_layouts
-from controllers.law_tools import Gain, solve_normal_damped
+from controllers.law_tools import Gain
 from controllers.solvers.osqp_limits import LimitQP
 from controllers.tasks.leg_direction import LEG_DIRECTIONS
 from hexapod.compiled import CompiledFunction
 from tests.controllers.controller_world import World, make_camera
 from tests.controllers.interaction_oracle import direction_task
-from tests.controllers.numpy_law import numpy_law
+from tests.controllers.numpy_law import numpy_law, solve_normal_damped
 
 LAWS = ["leg-direction", "leg-edge", "leg-direction-qp", "leg-edge-qp"]
 OPTIONS: list[dict[str, Any]] = [{}, {"adaptive_gain": (4.0, 0.5, 30.0)}, {"damping": 0.05}]

@@ -9,10 +9,11 @@ import pytest
 
 from controllers import registry
 from controllers.exceptions import ContextError, OptionError
-from controllers.law_tools import INTERACTIONS, Gain, solve_normal_damped
+from controllers.law_tools import INTERACTIONS, Gain
 from controllers.laws import VisionLaw
 from hexapod.kinematics import inverse_jacobian
 from tests.controllers.controller_world import World, closed_loop, make_camera
+from tests.controllers.numpy_law import solve_normal_damped
 
 #: Every registered controller whose law is the shared vision law.
 VISION = [n for n in registry.names()

@@ -6,18 +6,18 @@ from __future__ import annotations
 import pytest
 
 from benchmarks.cli import main
-from controllers import BUILTINS, registry
+from controllers import BUILTIN_SPECS, registry
 from controllers.options import REQUIRED, OptionSpec, docstring_args, option_table
 from tests.benchmarks.plugins import DeclaredOptions, ProportionalJoints
 
 
-@pytest.mark.parametrize("name", sorted(BUILTINS))
+@pytest.mark.parametrize("name", sorted(BUILTIN_SPECS))
 def test_every_builtin_option_is_documented(name: str) -> None:
     """Every option of a built-in has a type, a default and one sentence of meaning."""
     import inspect
 
-    table = option_table(BUILTINS[name])
-    params = [p for p, v in inspect.signature(BUILTINS[name]).parameters.items()
+    table = option_table(registry.factory(name))
+    params = [p for p, v in inspect.signature(registry.factory(name)).parameters.items()
               if v.kind is not inspect.Parameter.VAR_KEYWORD]
     assert table.names == params
     for o in table.options:
@@ -26,13 +26,13 @@ def test_every_builtin_option_is_documented(name: str) -> None:
 
 
 def test_units_come_from_the_docstring() -> None:
-    table = {o.name: o for o in option_table(BUILTINS["leg-edge-mpc"]).options}
+    table = {o.name: o for o in option_table(registry.factory("leg-edge-mpc")).options}
     assert table["gain"].unit == "1/s"
     assert table["stroke_margin"].unit == "m"
     assert table["max_speed"].unit == "m/s"
     assert table["drive_model"].unit == ""  # "[drives]" names a table, not a unit
-    assert option_table(BUILTINS["vision-ctc"]).options[0].unit == "Hz"
-    qp = {o.name: o for o in option_table(BUILTINS["leg-edge-qp"]).options}
+    assert option_table(registry.factory("vision-ctc")).options[0].unit == "Hz"
+    qp = {o.name: o for o in option_table(registry.factory("leg-edge-qp")).options}
     assert qp["eps_abs"].meaning == "OSQP absolute tolerance."  # from OPTION_DOCS
 
 

@@ -15,7 +15,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from controllers import BUILTINS, registry
+from controllers import BUILTIN_SPECS, registry
 from controllers.base import ENTRY_POINT_GROUP, Command, Observation
 from controllers.exceptions import PluginLoadError, UnknownControllerError
 from hexapod.actuation import Actuation
@@ -119,9 +119,9 @@ def _check_command(cmd: Command) -> None:
 
 # ----------------------------------------------------------------------------- registry
 def test_builtins_are_registered() -> None:
-    assert set(BUILTINS) <= set(registry.names())
+    assert set(BUILTIN_SPECS) <= set(registry.names())
     for info in registry.info():
-        if info.name in BUILTINS:
+        if info.name in BUILTIN_SPECS:
             assert info.package == "hexapod-vs"
             assert info.version not in ("", "unknown")
             assert info.description
@@ -149,7 +149,7 @@ def test_unknown_name_suggests_the_closest() -> None:
         registry.create("leg-edgee")
     assert info.value.suggestion == "leg-edge"
     assert "did you mean 'leg-edge'" in str(info.value)
-    for name in BUILTINS:
+    for name in BUILTIN_SPECS:
         assert name in str(info.value)
 
 
@@ -161,7 +161,7 @@ def test_module_attr_spec() -> None:
 
 
 def test_step_before_reset_refuses() -> None:
-    for name in BUILTINS:
+    for name in BUILTIN_SPECS:
         cmd = registry.create(name).step(Observation(0.0, np.full(6, 0.4)))
         assert not cmd.ok and "reset" in (cmd.reason or "")
 

@@ -29,6 +29,7 @@ from scipy.linalg.lapack import dsyevd
 from controllers import registry
 from controllers.base import Command, Observation
 from controllers.cartesian_ctc import all_seen, directions_seen, every_seen
+from controllers.feature_ctc import FeatureCTC
 from controllers.solvers.compiled_task_ctc import layout, task_step
 from controllers.task_ctc import TaskComputedTorque, grid_step
 from controllers.task_ctc_compiled import FIT_TOLERANCE, FK_MAX_CALLS, FK_TOLERANCE
@@ -41,6 +42,7 @@ from hexapod.se3 import exp_so3
 from hexapod.trajectory import PoseTrajectory
 from hexapod.workspace import home_pose
 from tests.controllers.ctc_world import DT, CtcWorld, perturbed
+from tests.controllers.task_ctc_oracles import feature_reference
 from vision.legs import leg_edges
 
 LAWS = ("cartesian-ctc", "vision-ctc", "leg-edge-ctc", "leg-direction-ctc")
@@ -132,7 +134,8 @@ def _oracle(law: TaskComputedTorque, obs: Observation,
             s = np.asarray(law._taught).ravel()  # type: ignore[attr-defined]
             fields["reference_features"] = np.concatenate([s, np.zeros(2 * m)])
         else:
-            ref = law.feature_reference(tr)  # type: ignore[attr-defined]
+            assert isinstance(law, FeatureCTC)
+            ref = feature_reference(law, tr)
             assert np.isfinite(ref).all()
             fields["reference_features"] = np.asarray(ref).ravel()
     fields["integral"] = np.zeros({"pose": 6, "edges": 36, "directions": 18}[str(kind)])
@@ -187,10 +190,10 @@ def test_every_step_equals_a_fresh_row_from_its_guess(name: str, tracking: bool)
     bound.call = counted
     for k, o in enumerate(obs[1:]):
         if k % 6 == 2:  # a guess set from outside (as the tests and the numpy path do)
-            law.guess = _far_guess(Rs[k + 1], ts[k + 1])
+            law.compiled.guess = _far_guess(Rs[k + 1], ts[k + 1])
         if k % 6 == 0 and not law.compiled_fk:  # the fit's loop, then forces that
             # overflow: refused (status NON_FINITE), the guess left as it was (the row not)
-            law.guess = _far_guess(Rs[k + 1], ts[k + 1])
+            law.compiled.guess = _far_guess(Rs[k + 1], ts[k + 1])
             huge = Observation(o.t, o.lengths, normals=o.normals, directions=o.directions,
                                q_dot=o.q_dot * 1e200)
             with np.errstate(all="ignore"):

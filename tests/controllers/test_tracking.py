@@ -26,7 +26,7 @@ from controllers.exceptions import ContextError
 from controllers.tracking import TrackingController, model_goals
 from hexapod.trajectory import PoseTrajectory
 from tests.controllers.controller_world import World, make_camera
-from tests.controllers.one_by_one import OneByOne
+from tests.controllers.one_by_one import OneByOne, stacked
 
 DT = 0.02
 GAIN = {"adaptive_gain": [5.0, 1.0, 30.0]}
@@ -272,7 +272,7 @@ def test_tracking_a_batch_gives_the_rows_of_one_tracking_controller_per_trial(
                 obs.t = float("nan")
             rows.append(obs)
         got = tracking.step_batch(_batch(rows, trials))
-        want = CommandBatch.from_commands([singles[i].step(o) for i, o in zip(trials, rows,
+        want = stacked([singles[i].step(o) for i, o in zip(trials, rows,
                                                                               strict=True)])
         _same(got, want)
         refused += sum(r is not None and r.startswith("time is nan") for r in got.reasons)
