@@ -11,7 +11,7 @@ from controllers.solvers.computed_torque import (
     SecondOrderGains,
     task_in_model_twist,
 )
-from controllers.tasks import LegEdgeTask, PlatformPoseTask, TaskState
+from controllers.tasks import JointLengthTask, LegEdgeTask, PlatformPoseTask, TaskState
 from hexapod import HexapodGeometry
 from hexapod.dynamics import DynamicModel
 from hexapod.kinematics import legs_in_frame
@@ -19,7 +19,6 @@ from hexapod.se3 import exp_so3
 from hexapod.trajectory import PoseTrajectory
 from hexapod.workspace import home_pose
 from tests.controllers.ctc_solver_oracle import acceleration, reference_terms
-from tests.controllers.joint_length_task import JointLengthTask
 from vision.cameras import front_camera
 from vision.legs import leg_edges
 

@@ -13,6 +13,7 @@ import pytest
 from controllers.law_kernel import feature_law_kernel
 from controllers.tasks import (
     LEG_DIRECTIONS,
+    JointLengthTask,
     LegEdgeTask,
     PlatformPoseTask,
     Task,
@@ -22,7 +23,6 @@ from hexapod.geometry import HexapodGeometry
 from hexapod.se3 import exp_so3, integrate_pose
 from hexapod.workspace import home_pose
 from tests.controllers.interaction_oracle import direction_task, edge_line_task, edge_normal_task
-from tests.controllers.joint_length_task import JointLengthTask
 from vision.cameras import front_camera
 
 H = 1e-5  # time step of the central differences [s]
