@@ -138,7 +138,10 @@ class FeatureCTC(TaskComputedTorque):
         k = grid_step(tr, float(ctx.dt))
         if k < 0:
             return None
-        return min(k, len(self.reference_grid()[1]) - 1)
+        grid = self._grid
+        if grid is None or grid[0] is not ref:
+            grid = self.reference_grid()
+        return min(k, len(grid[1]) - 1)
 
     def reference_grid(self) -> tuple[object, np.ndarray, np.ndarray, np.ndarray]:
         """The reference's control grid ``k dt`` to a step past its end (built once per
@@ -232,16 +235,16 @@ class FeatureCTC(TaskComputedTorque):
         if isinstance(feats, str):
             return feats
         u, normals, rows = feats
-        row, inputs = step.row, step.inputs
+        row, inputs = step.row, step.inputs.slices  # (the layout's slices: a dict)
         if normals is None:
             row[inputs["directions"]] = u.ravel()
         elif u is _OF_NORMALS:  # the compiled step takes the directions of the normals
             row[inputs["normals"]] = normals.ravel()
-            row[inputs.index("of_normals")] = 1.0
+            row[inputs["of_normals"]] = 1.0
         else:
             row[inputs["normals"]] = normals.ravel()
             row[inputs["directions"]] = u.ravel()
-            row[inputs.index("of_normals")] = 0.0
+            row[inputs["of_normals"]] = 0.0
         if self.reference is None:
             ref, known = self._taught_reference()
         else:

@@ -37,7 +37,7 @@ from controllers.ctc_rows import stale
 from controllers.solvers.saturation import over_limit, zero_acceleration_forces
 from controllers.task_ctc_compiled import CompiledTaskStep
 from controllers.task_ctc_inputs import encoder_readings as encoder_readings
-from controllers.task_ctc_inputs import line_to, readings_into
+from controllers.task_ctc_inputs import finite_readings, line_to, readings_into
 from controllers.task_ctc_rows import START, STARTED, VERSION, TaskRows
 from controllers.tasks.feature_kind import BuiltinFeature
 from hexapod.actuation import Actuation
@@ -251,24 +251,28 @@ class TaskComputedTorque(ComputedTorqueLaw):
             return self.refuse("no compiled step (compiled_kind is None and the law made "
                                "none at reset)")
         views = compiled.views or compiled.bind()  # (bound at the first step)
-        readings = readings_into(observation, views["q"], views["q_dot"])
+        readings = (finite_readings(observation, views["q"], views["q_dot"])
+                    or readings_into(observation, views["q"], views["q_dot"]))
         if isinstance(readings, str):
             return self.refuse(readings)
         t, _, qd = readings
+        clock = self.clock
         try:
-            if not self.started:
+            if not clock[STARTED]:
                 problem = self._start(observation, t)
                 if problem is not None:
                     return self.refuse(problem)
-            cmd = compiled.step_written(self, observation, t - self.reference_start)
+            cmd = compiled.step_written(self, observation, t - float(clock[START]))
             if isinstance(cmd, str):
                 return self.refuse(cmd)
             compiled.steps[0] += 1
-            assert compiled.bound is not None
-            y = compiled.bound.y
-            assert cmd.forces is not None
-            cmd.forces = self.limited(cmd.forces, y[compiled.pose_block], qd,
-                                      y[compiled.error_block], compiled.used)
+            forces = cmd.forces
+            assert forces is not None and compiled.bound is not None
+            over = over_limit(forces, self.force_limit_list)
+            if over or self.integral_gain:  # (else the law's forces as they are)
+                y = compiled.bound.y
+                cmd.forces = self.limited(forces, y[compiled.pose_block], qd,
+                                          y[compiled.error_block], compiled.used, over)
             return cmd
         except Exception as exc:  # the nominal model failed here: refuse with its reason
             return self.refuse(f"nominal model failed: {exc}")

@@ -171,8 +171,15 @@ class CompiledTaskStep:
         pose_in, y = self.views["pose"], bound.y
         guess = newton_calls(bound, pose_in, self.pose_block, self._residual,
                              self.tolerance, FK_MAX_CALLS)
-        accepted = self.accept(law, y, rows)
-        if accepted is None:
+        # a command: status 0 and full rank (the squared singular values of the masked
+        # Jacobian by LAPACK syevd of L^T L; the test of controllers.ctc_rows.rank_condition,
+        # the condition as sqrt(max / min)); its pose then the next guess
+        w_min = w_max = 0.0
+        info = 1
+        if y[self._status] == 0.0:
+            w, _, info = _eigenvalues(y[self._factor].reshape(6, 6), 0)  # (compute_v=0)
+            w_min, w_max = float(w[0]), float(w[-1])
+        if info != 0 or not (w_max > 0 and w_min > law.solver.threshold**2 * w_max):
             if guess is not None:  # the guess stays the last pose found
                 pose_in[:] = guess
             reason = refusal(y, self._status, self._residual, self._factor,
@@ -180,9 +187,13 @@ class CompiledTaskStep:
                              self.pose_name, self.views)
             assert reason is not None
             return reason
-        e, condition = accepted
+        pose_in[:] = y[self.pose_block]
+        self.guessed[0] = 1.0
+        e = y[self.error_block]
+        e = e.copy() if rows is None else e[rows]
         return Command(np.zeros(6), error=e, error_norm=math.sqrt(e.dot(e)), rank=6,
-                       condition=condition, features_used=len(e), active_constraints=[],
+                       condition=math.sqrt(w_max / w_min), features_used=len(e),
+                       active_constraints=[],
                        notes=[] if note is None else [note], actuation=Actuation.FORCE,
                        forces=y[self._forces].copy())
 
@@ -200,30 +211,6 @@ class CompiledTaskStep:
             views["integral"][:] = law.integral_term(views["integral"].size)
         self.used = rows
         return prepared
-
-    def accept(self, law: TaskComputedTorque, y: np.ndarray, rows: np.ndarray | None
-               ) -> tuple[np.ndarray, float] | None:
-        """The task error (of the rows used) and the condition number of an output row
-        ``y`` when it is a command (status 0 and full rank; its pose then the next
-        guess), else None."""
-        if y[self._status] != 0.0:
-            return None
-        # the squared singular values of the masked Jacobian (LAPACK syevd of L^T L; the
-        # test of controllers.ctc_rows.rank_condition, the condition as sqrt(max / min))
-        w, _, info = _eigenvalues(y[self._factor].reshape(6, 6), 0)  # (compute_v=0)
-        w_min, w_max = float(w[0]), float(w[-1])
-        if info != 0 or not (w_max > 0 and w_min > law.solver.threshold**2 * w_max):
-            return None
-        return self.take(law, y, rows), math.sqrt(w_max / w_min)
-
-    def take(self, law: TaskComputedTorque, y: np.ndarray, rows: np.ndarray | None
-             ) -> np.ndarray:
-        """The task error (of the rows used) of an accepted output row ``y``, its pose
-        taken as the next guess."""
-        self.views["pose"][:] = y[self.pose_block]
-        self.guessed[0] = 1.0
-        e = y[self.error_block]
-        return e.copy() if rows is None else e[rows]  # type: ignore[no-any-return]
 
 
 __all__ = ["FIT_TOLERANCE", "FK_MAX_CALLS", "FK_TOLERANCE", "CompiledTaskStep"]
