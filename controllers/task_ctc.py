@@ -37,7 +37,7 @@ from controllers.ctc_rows import stale
 from controllers.solvers.saturation import over_limit, zero_acceleration_forces
 from controllers.task_ctc_compiled import CompiledTaskStep
 from controllers.task_ctc_inputs import encoder_readings as encoder_readings
-from controllers.task_ctc_inputs import finite_readings, line_to, readings_into
+from controllers.task_ctc_inputs import line_to, readings_into
 from controllers.task_ctc_rows import START, STARTED, VERSION, TaskRows
 from controllers.tasks.feature_kind import BuiltinFeature
 from hexapod.actuation import Actuation
@@ -251,8 +251,7 @@ class TaskComputedTorque(ComputedTorqueLaw):
             return self.refuse("no compiled step (compiled_kind is None and the law made "
                                "none at reset)")
         views = compiled.views or compiled.bind()  # (bound at the first step)
-        readings = (finite_readings(observation, views["q"], views["q_dot"])
-                    or readings_into(observation, views["q"], views["q_dot"]))
+        readings = readings_into(observation, views["q"], views["q_dot"])
         if isinstance(readings, str):
             return self.refuse(readings)
         t, _, qd = readings
