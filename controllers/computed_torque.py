@@ -21,8 +21,9 @@ default ``omega_n = 2 pi * 2 Hz``, ``zeta = 1``: 0.25 at 20 ms). Options: integr
 force is over its limit; stable for ``Ki < 2 zeta omega_n``) and ``saturation`` over the
 limit (:mod:`controllers.solvers.saturation`: ``"clip"``, ``"scale"`` or ``"qp"``).
 
-The step is one compiled function (:mod:`controllers.solvers.compiled_ctc`); a batch's
-rows go through it in one C call (:mod:`controllers.joint_ctc_rows`).
+The step is one compiled function (:mod:`controllers.solvers.compiled_ctc`) and C around
+it over the rows of a batch (:mod:`controllers.joint_ctc_rows`); the per-trial ``step``
+is a batch of one.
 """
 
 from __future__ import annotations
@@ -32,29 +33,21 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from controllers.base import Command
 from controllers.ctc_law import DAMPING, NATURAL_FREQUENCY_HZ, ComputedTorqueLaw
-from controllers.ctc_rows import FK_MAX_CALLS, newton_calls, rank_condition, refusal, stale
+from controllers.ctc_rows import FK_MAX_CALLS, stale
+from controllers.data import Command, CommandBatch
+from controllers.exceptions import ContextError
 from controllers.joint_ctc_rows import (
-    DESIRED,
-    FACTOR,
-    FORCES,
     GRID_TIME_TOLERANCE,
     POSE_IN,
-    POSE_OUT,
     QUINTIC_SIZE,
-    RESIDUAL,
-    STATUS,
     JointRows,
     JointState,
-    quintic_row_into,
 )
 from controllers.law_tools import goal_lengths
 from controllers.solvers import compiled_ctc
-from controllers.solvers.saturation import over_limit, zero_acceleration_forces
-from controllers.task_ctc_inputs import QUINTIC_PEAK_SPEED, readings_into
-from hexapod.actuation import Actuation
-from hexapod.compiled import BoundCall
+from controllers.solvers.saturation import zero_acceleration_forces
+from controllers.task_ctc_inputs import QUINTIC_PEAK_SPEED
 from hexapod.dynamics import DynamicModel
 from hexapod.dynamics.model import INVERSE_TOLERANCE
 from hexapod.kinematics import inverse_kinematics
@@ -63,13 +56,7 @@ from hexapod.workspace import home_pose
 if TYPE_CHECKING:
     from collections.abc import Sequence
 
-    from controllers.data import (
-        CommandBatch,
-        ControllerContext,
-        Goal,
-        Observation,
-        ObservationBatch,
-    )
+    from controllers.data import ControllerContext, Goal, ObservationBatch
     from hexapod.geometry import HexapodGeometry
 
 #: Forward-kinematics tolerance on the length residual [m] (as :func:`forward_kinematics`).
@@ -113,10 +100,11 @@ class ComputedTorqueController(ComputedTorqueLaw):
         self._q_star = np.zeros(6)
         #: The compiled step's input row (own or a view of its batch's; None before a
         #: reset); its pose block holds the pose guess (the last pose found, the home pose
-        #: before one); the compiled step bound to it at its first per-trial use
-        #: (:meth:`_bind`; a batch's rows stepped as arrays never bind one).
+        #: before one).
         self._row: np.ndarray | None = None
-        self._bound: BoundCall | None = None
+        #: The batch whose arrays hold this trial's state, and its row there.
+        self._batch: JointRows | None = None
+        self._index = 0
         #: ``(q*, q_dot*, q_ddot*)`` of a reference on the control grid ``k dt`` (N, 18)
         #: (None: not sampled yet, :attr:`grid`).
         self._grid: np.ndarray | None = np.zeros((0, 18))
@@ -125,12 +113,6 @@ class ComputedTorqueController(ComputedTorqueLaw):
         self._t_end = math.inf
         #: The batch's arrays (:class:`~controllers.joint_ctc_rows.JointRows`; trial 0's).
         self._rows: JointRows | None = None
-
-    def _bind(self) -> BoundCall:
-        """The compiled step bound to the input row (at its first per-trial use)."""
-        assert self._row is not None
-        self._bound = compiled_ctc.joint_step(INVERSE_TOLERANCE).bind(self._row)
-        return self._bound
 
     @property
     def compiled_steps(self) -> int:
@@ -154,40 +136,29 @@ class ComputedTorqueController(ComputedTorqueLaw):
         row[9:12] = p0
 
     def __getstate__(self) -> dict[str, object]:
-        """Picklable: the binding (ctypes) is rebuilt on unpickling, the batch's arrays
-        left out."""
+        """Picklable: the batch (C context) left out, rebuilt at the next step from
+        copies of this trial's arrays."""
         state = self.__dict__.copy()
-        state["_bound"] = None
-        state["_rows"] = None
+        state["_rows"] = state["_batch"] = None
         state["_row"] = None if self._row is None else self._row.copy()
         for key in ("_integral", "_quintic", "_steps"):  # own arrays, not views
             state[key] = np.array(state[key])
         return state
 
-    def __setstate__(self, state: dict[str, object]) -> None:
-        self.__dict__.update(state)
-        if self._row is not None:
-            self._bind()
-
-    def adopt(self, row: np.ndarray, integral: np.ndarray, quintic: np.ndarray,
-              steps: np.ndarray) -> None:
-        """Take views of a batch's arrays (their values there already) as this trial's
-        input row, integral (6,), quintic (21,) and command count (1,)."""
-        self._row, self._bound = row, None  # bound to it at its first per-trial use
-        self._integral, self._quintic, self._steps = integral, quintic, steps
-
-    @property
-    def input_row(self) -> np.ndarray:
-        """The compiled step's input row (n_in,) (the bound one, written in place)."""
-        assert self._row is not None
-        return self._row
+    def adopt(self, batch: JointRows, index: int) -> None:
+        """Take views of row ``index`` of a batch's arrays (their values there already)
+        as this trial's input row, integral (6,), quintic (21,) and command count (1,)."""
+        self._batch, self._index = batch, index
+        self._row, self._integral = batch.X[index], batch.integral[index]
+        self._quintic, self._steps = batch.quintic[index], batch.steps[index:index + 1]
 
     def batch_state(self) -> JointState:
         """This trial's state for its batch (:class:`~controllers.joint_ctc_rows.JointRows`)."""
         assert self._row is not None and self._ctx is not None
         grid = None if self._ctx.reference is None else self.grid
+        speed = float(self._ctx.max_speed) if self.smooth_goal else math.nan
         return JointState(self._row, self._integral, self._quintic, self._steps,
-                          self._limit, self._dt, self._t_end, grid,
+                          self._limit, self._dt, self._t_end, grid, speed,
                           compiled_ctc.joint_step(INVERSE_TOLERANCE))
 
     def reset_trial(self, context: ControllerContext) -> None:
@@ -204,8 +175,8 @@ class ComputedTorqueController(ComputedTorqueLaw):
         self._steps = np.zeros(1, dtype=np.int64)
         self._limit = np.asarray(context.geometry.drives.force_limit, dtype=float)
         self._limit_list = self._limit.tolist()
-        # its own row (not a view of a former batch's), bound at its first use
-        self._row, self._bound = np.zeros(compiled_ctc.INPUTS.size), None
+        # its own row (not a view of a former batch's)
+        self._row, self._batch = np.zeros(compiled_ctc.INPUTS.size), None
         row = self._row
         g, d, at = context.geometry, context.geometry.drives, compiled_ctc.INPUTS
         row[at["points"]] = np.ravel((g.base_points, g.platform_points))
@@ -225,8 +196,8 @@ class ComputedTorqueController(ComputedTorqueLaw):
             self._grid = None
 
     def reset_batch(self, contexts: Sequence[ControllerContext]) -> None:
-        """Every trial reset, then the references' legs on the control grids sampled
-        together (:func:`sample_grids`).
+        """Every trial reset, the references' legs on the control grids sampled
+        together (:func:`sample_grids`), then the batch's arrays (:class:`JointRows`).
 
         Raises:
             ContextError: A context the controller cannot use.
@@ -235,6 +206,7 @@ class ComputedTorqueController(ComputedTorqueLaw):
         super().reset_batch(contexts)
         sample_grids([inst for inst in self.trial_instances
                       if isinstance(inst, ComputedTorqueController) and inst.grid_pending])
+        self._rows = JointRows(self.trial_instances)
 
     def grid_times(self) -> np.ndarray:
         """The control grid ``k dt`` [s] on which the reference is sampled (``ceil(T /
@@ -276,27 +248,15 @@ class ComputedTorqueController(ComputedTorqueLaw):
         self._quintic[15:21] = self._q_star
 
     def desired(self, t: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """``(q*, q_dot*, q_ddot*)`` at time ``t`` [s] ([m], [m/s], [m/s^2])."""
-        out = np.empty(18)
-        self._desired_into(t, out)
+        """``(q*, q_dot*, q_ddot*)`` at time ``t`` [s] ([m], [m/s], [m/s^2]) as the next
+        step reads them (a fixed goal's quintic as it is: ``q*`` before its first step)."""
+        if self._row is None:
+            raise ContextError(self.name, "context", "desired(t) before reset(context)")
+        if self._batch is None:  # (a copy, before its first step): a batch of its own
+            JointRows([self])
+        assert self._batch is not None
+        out = self._batch.desired(self._index, t)
         return out[0:6], out[6:12], out[12:18]
-
-    def _desired_into(self, t: float, out: np.ndarray) -> None:
-        """:meth:`desired` written into ``out`` (18,)."""
-        ctx = self._ctx
-        assert ctx is not None
-        if ctx.reference is None:
-            quintic_row_into(t, self._quintic, out)
-            return
-        grid, dt = self.grid, self._dt
-        k = round(t / dt)
-        if len(grid) and t > self._t_end:  # at rest at the end, as the grid's last instant
-            out[:] = grid[-1]
-            return
-        if 0 <= k < len(grid) and abs(t - k * dt) <= GRID_TIME_TOLERANCE:
-            out[:] = grid[k]
-            return
-        out[:] = self.reference_legs(np.array([t]))[0].ravel()
 
     def reference_legs(self, times: np.ndarray) -> np.ndarray:
         """``(q*, q_dot*, q_ddot*)`` of the reference at ``times`` (N,) [s]: (N, 3, 6)."""
@@ -305,49 +265,6 @@ class ComputedTorqueController(ComputedTorqueLaw):
         ref = ctx.reference.at(times)
         return legs_of_poses(ctx.geometry, model, ref.rotation, ref.translation, ref.twist,
                              ref.twist_rate)
-
-    def start_quintic(self, t: float, q: np.ndarray) -> None:
-        """Start the fixed goal's quintic at ``t`` [s] from the lengths ``q`` [m]."""
-        assert self._ctx is not None
-        T = QUINTIC_PEAK_SPEED * float(np.abs(self._q_star - q).max()) / \
-            self._ctx.max_speed if self.smooth_goal else 0.0
-        self._quintic[0:3] = (1.0, t, T)
-        self._quintic[3:9] = q
-        self._quintic[9:15] = self._q_star - q
-
-    def step_trial(self, observation: Observation) -> Command:
-        """The leg forces of this period [N] (refused, zero, with a reason when the
-        lengths, their rates or the time are missing or not finite, or the nominal model
-        fails)."""
-        if self._ctx is None or self._model is None or self._row is None:
-            return self._refuse("reset(context) was not called")
-        bound = self._bound or self._bind()  # (bound at the first step)
-        row = bound.inputs
-        readings = readings_into(observation, row["q"], row["q_dot"])
-        if isinstance(readings, str):
-            return self._refuse(readings)
-        t, q, qd = readings
-        if self._quintic[0] == 0.0 and self._ctx.reference is None:
-            self.start_quintic(t, q)
-        desired = bound.x[DESIRED]
-        try:
-            self._desired_into(t, desired)
-        except Exception as exc:  # the nominal model failed here: refuse with its reason
-            return self._refuse(f"nominal model failed: {exc}")
-        if self.integral_gain:  # + Kp Ki int (q* - q) dt
-            desired[12:18] += self.kp * self.integral_gain * self._integral
-        cmd = self._compiled_core(q)
-        if isinstance(cmd, str):
-            return self._refuse(cmd)
-        self._steps[0] += 1
-        assert cmd.forces is not None and cmd.error is not None
-        over = over_limit(cmd.forces, self._limit_list)
-        if self.integral_gain and not over:
-            self._integral += cmd.error * self._dt  # anti-windup: held while over
-        if over:  # (under the limits every strategy commands the law's forces)
-            cmd.forces = self.saturated_forces(cmd.forces, bound.x[POSE_IN].copy(), qd,
-                                               desired[6:12])
-        return cmd
 
     def saturated_forces(self, forces: np.ndarray, pose: np.ndarray, qd: np.ndarray,
                          qd_s: np.ndarray) -> np.ndarray:
@@ -359,54 +276,24 @@ class ComputedTorqueController(ComputedTorqueLaw):
         return self.ctc_options.saturated(forces, self._limit, lambda: zero_acceleration_forces(
             model, pose, qd, coulomb_velocity=qd_s))
 
-    def step_arrays(self, observations: ObservationBatch, out: CommandBatch) -> np.ndarray:
-        """The batch's step as arrays (:meth:`~controllers.joint_ctc_rows.JointRows.step`,
-        one C call for its rows); returns the rows left to the trials' own steps (which
-        say why they refuse)."""
-        if stale(self._rows, self.trial_instances):
+    def step_batch(self, observations: ObservationBatch) -> CommandBatch:
+        """The commands of every row (:meth:`JointRows.step`; refused, zero, with a reason
+        where the lengths, their rates or the time are missing or not finite, or the
+        nominal model fails)."""
+        self.crashes = {}
+        out = CommandBatch.zeros(len(observations), self.actuation)
+        if not len(observations):
+            return out
+        if not self.trial_instances:
+            for j in range(len(observations)):
+                out.put(j, Command.refuse(f"{self.name}: reset(context) was not called",
+                                          actuation=self.actuation))
+            return out
+        if stale(self._rows, self.trial_instances):  # (unpickled: built again)
             self._rows = JointRows(self.trial_instances)
         assert self._rows is not None
-        kp_ki = self.kp * self.integral_gain if self.integral_gain else 0.0
-        return self._rows.step(observations, out, kp_ki, self.solver.threshold,
-                               self.saturation)
-
-    def _compiled_step(self, q: np.ndarray, qd: np.ndarray, q_s: np.ndarray,
-                       qd_s: np.ndarray, qdd_s: np.ndarray) -> Command:
-        """The compiled step from these readings and this reference (a refusal with its
-        reason off its happy path; the saturation not applied)."""
-        row = (self._bound or self._bind()).inputs
-        row["q"][:] = q
-        row["q_dot"][:] = qd
-        row["desired"][:] = (q_s, qd_s, qdd_s)
-        out = self._compiled_core(q)
-        return self._refuse(out) if isinstance(out, str) else out
-
-    def _compiled_core(self, q: np.ndarray) -> Command | str:
-        """The compiled step of the input row (readings and desired legs there); off the
-        happy path the reason (:func:`~controllers.ctc_rows.refusal`), the pose guess
-        left as it was."""
-        assert self._bound is not None
-        bound = self._bound
-        pose_in, y = bound.x[POSE_IN], bound.y
-        guess = newton_calls(bound, pose_in, POSE_OUT, RESIDUAL, FK_TOLERANCE, FK_MAX_CALLS)
-        condition = None
-        if y[STATUS] == 0.0:  # the kernel's status (controllers.ctc_status), then the rank
-            condition = rank_condition(y[FACTOR], self.solver.threshold)
-        if condition is None:
-            if guess is not None:
-                pose_in[:] = guess
-            reason = refusal(y, STATUS, RESIDUAL, FACTOR, self.solver.threshold)
-            assert reason is not None
-            return reason
-        out = y.copy()
-        pose_in[:] = out[POSE_OUT]  # the next step's guess
-        e = bound.x[DESIRED][0:6] - q
-        return Command(np.zeros(6), error=e, error_norm=math.sqrt(e.dot(e)), rank=6,
-                       condition=condition, features_used=6, active_constraints=[], notes=[],
-                       actuation=Actuation.FORCE, forces=out[FORCES])
-
-    def _refuse(self, problem: str) -> Command:
-        return Command.refuse(f"{self.name}: {problem}", actuation=Actuation.FORCE)
+        self._rows.step(observations, out)
+        return out
 
 
 def legs_of_poses(geometry: HexapodGeometry, model: DynamicModel, R: np.ndarray, p: np.ndarray,

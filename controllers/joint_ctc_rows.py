@@ -1,28 +1,51 @@
-"""The batch of the joint-space computed torque (``computed-torque``) as arrays.
+"""The one step of the joint-space computed torque (``computed-torque``) over a batch of
+trials (a batch of one is the per-trial ``step``).
 
-:class:`JointRows` (built at the first batched step after a reset) owns its trials'
-state: the input matrix ``X`` (n, n_in) with each row's constants and pose guess, the
-leg integrals, the fixed goals' quintics, the command counts, the force limits and the
-reference's legs on the control grid (one grid when they are equal). Each instance's
-state is views of these arrays, so its per-trial step (which refuses with the reason)
-and the batch share it.
+:class:`JointRows` (built by the controller's reset) owns its trials' state: the input
+matrix ``X`` (n, n_in) with each row's constants and pose guess, the leg integrals, the
+fixed goals' quintics, the command counts, the force limits and the reference's legs on
+the control grid (one grid when they are equal). Each instance's state is views of these
+arrays.
 
-One batched step (:meth:`JointRows.step`): readings and desired legs written by fancy
-indexing, one C call, the rows screened at once, the results written as slices; Python
-per row only for a fixed goal's first step, an instant off the grid, or forces over a
-limit with a saturation other than clipping.
+One step (:meth:`JointRows.step`) is C (:data:`SOURCE`, compiled once and cached as the
+kernels are) around the compiled step of :mod:`controllers.solvers.compiled_ctc`:
+
+- ``prepare``: each row's time, lengths and leg velocities (a row with a value not
+  finite is refused), the desired legs (the reference on its grid, at rest after its
+  end, or the fixed goal's leg-space quintic, started from the lengths of the first
+  step) plus the integral term, written into the trial's input row;
+- ``evaluate``: the compiled step of each row, called again from the pose reached while
+  the pose has not converged (a batch of :data:`~hexapod.compiled.LANE_ROWS` rows or
+  more is evaluated in lanes instead, :func:`~controllers.ctc_rows.evaluate_rows`: the
+  same numbers);
+- ``finish``: the rows with status 0 whose rank screen (``det`` and ``trace`` of ``L^T
+  L``) clears them: the next pose guess, the command count, the forces, the leg error
+  and the anti-windup integral (held while a leg's force is over its limit).
+
+Python takes the rare rows: an instant off the control grid (the reference evaluated on
+demand), a rank the screen does not settle (LAPACK, :func:`~controllers.ctc_rows.
+rank_condition`), forces over a limit (the saturation strategy) and the refusals'
+reasons (the kernel's status, :func:`~controllers.ctc_rows.refusal`). The quintic's
+arithmetic is Python's (``pow`` of the C library, no fused multiply-add), so its numbers
+are those of the Python expressions it replaced, to the last bit.
 """
 
 from __future__ import annotations
 
+import ctypes
+import math
+from functools import lru_cache
 from typing import TYPE_CHECKING, NamedTuple
 
 import numpy as np
 
-from controllers.ctc_rows import FK_MAX_CALLS, accepted_rows, evaluate_rows, norms, over_limits
+from controllers.base import Command
+from controllers.ctc_rows import FK_MAX_CALLS, evaluate_rows, norms, rank_condition, refusal
 from controllers.data import CommandBatch, ObservationBatch
 from controllers.solvers import compiled_ctc
-from hexapod.compiled import CompiledFunction
+from controllers.task_ctc_inputs import QUINTIC_PEAK_SPEED, encoder_readings
+from hexapod.actuation import Actuation
+from hexapod.compiled import LANE_ROWS, CompilationError, CompiledFunction, build_shared_library
 
 if TYPE_CHECKING:
     from controllers.computed_torque import ComputedTorqueController
@@ -32,69 +55,186 @@ GRID_TIME_TOLERANCE = 1e-9
 #: Where the compiled step's blocks lie in its rows (:data:`compiled_ctc.INPUTS`,
 #: :data:`compiled_ctc.OUTPUTS`), looked up once.
 DESIRED, POSE_IN = compiled_ctc.INPUTS["desired"], compiled_ctc.INPUTS["pose"]
-Q_IN, QD_IN = compiled_ctc.INPUTS["q"], compiled_ctc.INPUTS["q_dot"]
-POSE_OUT, FACTOR, FORCES, SCREEN = (compiled_ctc.OUTPUTS[k]
-                                     for k in ("pose", "factor", "forces", "screen"))
+POSE_OUT, FACTOR, FORCES = (compiled_ctc.OUTPUTS[k] for k in ("pose", "factor", "forces"))
 RESIDUAL, STATUS = (compiled_ctc.OUTPUTS.index(k) for k in ("fk_residual", "status"))
 #: The columns of a quintic's row (21,): started (1.0 or 0.0), ``t0`` [s], duration
 #: ``T`` [s], ``q0`` (6) [m], ``q* - q0`` (6) [m], ``q*`` (6) [m].
 QUINTIC_SIZE = 21
+#: A row's code after a step: a command (over a limit or not), or why not yet or not.
+ACCEPTED, OVER, NOT_FINITE, OFF_GRID, REFUSED, UNSURE, READY, ACCEPT = range(8)
+
+#: The C of a step (see the module docstring); ``JointCtc`` is :class:`_Context`.
+SOURCE = r"""
+#include <math.h>
+#include <stdint.h>
+#include <string.h>
+
+typedef int (*kernel_t)(const double **, double **, int64_t *, double *, int);
+typedef struct {
+    double *X; int64_t n_in, q_at, qd_at, desired_at, pose_in;
+    const uint8_t *tracking; const double *dt, *t_end; const int64_t *grid_len;
+    const double *grids; int64_t grid_stride;
+    double *quintic; const double *quintic_speed; double peak, kp_ki;
+    double *integral; double grid_tol; int64_t *steps; const double *limit;
+    kernel_t kernel; const double **arg; double **res; int64_t *iw; double *w;
+    int64_t n_out, pose_out, residual_at, status_at, screen_at, forces_at;
+    double fk_tol; int64_t max_calls; double screen_scale; double *scratch;
+} JointCtc;
+enum { ACCEPTED, OVER, NOT_FINITE, OFF_GRID, REFUSED, UNSURE, READY, ACCEPT };
+
+/* the quintic's (q*, q_dot*, q_ddot*) at t (the Python floats' operations) */
+static void quintic_at(double t, const double *r, double *d) {
+    double T = r[2];
+    if (T <= 0.0) {
+        for (int l = 0; l < 6; l++) { d[l] = r[15 + l]; d[6 + l] = 0.0; d[12 + l] = 0.0; }
+        return;
+    }
+    double v = (t - r[1]) / T;
+    double x = (0.0 > v) ? 0.0 : v;
+    x = (1.0 < x) ? 1.0 : x;
+    double s = pow(x, 3.0) * ((10.0 - 15.0 * x) + 6.0 * pow(x, 2.0));
+    double sd = 0.0, sdd = 0.0;
+    if (0.0 < x && x < 1.0) {
+        sd = 30.0 * pow(x, 2.0) * pow(1.0 - x, 2.0) / T;
+        sdd = 60.0 * x * (1.0 - x) * (1.0 - 2.0 * x) / pow(T, 2.0);
+    }
+    for (int l = 0; l < 6; l++) {
+        d[l] = r[3 + l] + s * r[9 + l]; d[6 + l] = sd * r[9 + l]; d[12 + l] = sdd * r[9 + l];
+    }
+}
+
+/* trial i's desired legs at t into d (18); 1: off the control grid (d not written) */
+static int desired_at(const JointCtc *c, int64_t i, double t, double *d) {
+    if (!c->tracking[i]) { quintic_at(t, c->quintic + 21 * i, d); return 0; }
+    int64_t len = c->grid_len[i];
+    double dt = c->dt[i], k = nearbyint(t / dt);
+    const double *g = c->grids + 18 * (c->grid_stride * i);
+    if (len > 0 && t > c->t_end[i]) g += 18 * (len - 1);
+    else if (k >= 0 && k < len && fabs(t - k * dt) <= c->grid_tol) g += 18 * (int64_t)k;
+    else return 1;
+    memcpy(d, g, 18 * sizeof(double));
+    return 0;
+}
+
+int jc_desired(const JointCtc *c, int64_t i, double t, double *d) {
+    return desired_at(c, i, t, d);
+}
+
+void jc_prepare(JointCtc *c, int64_t m, const int64_t *trials, const double *t,
+                const double *q, const double *qd, int64_t *code) {
+    for (int64_t j = 0; j < m; j++) {
+        int64_t i = trials[j];
+        const double *qj = q + 6 * j, *qdj = qd + 6 * j;
+        int finite = isfinite(t[j]);
+        for (int l = 0; l < 6; l++) finite &= isfinite(qj[l]) && isfinite(qdj[l]);
+        if (!finite) { code[j] = NOT_FINITE; continue; }
+        double *x = c->X + c->n_in * i, *r = c->quintic + 21 * i;
+        memcpy(x + c->q_at, qj, 6 * sizeof(double));
+        memcpy(x + c->qd_at, qdj, 6 * sizeof(double));
+        if (!c->tracking[i] && r[0] == 0.0) {  /* a fixed goal's first step */
+            double mx = 0.0, speed = c->quintic_speed[i];
+            for (int l = 0; l < 6; l++) { double a = fabs(r[15 + l] - qj[l]); if (a > mx) mx = a; }
+            r[0] = 1.0; r[1] = t[j]; r[2] = isnan(speed) ? 0.0 : c->peak * mx / speed;
+            for (int l = 0; l < 6; l++) { r[3 + l] = qj[l]; r[9 + l] = r[15 + l] - qj[l]; }
+        }
+        double *d = x + c->desired_at;
+        if (desired_at(c, i, t[j], d)) { code[j] = OFF_GRID; continue; }
+        if (c->kp_ki != 0.0)
+            for (int l = 0; l < 6; l++) d[12 + l] += c->kp_ki * c->integral[6 * i + l];
+        code[j] = READY;
+    }
+}
+
+int jc_evaluate(JointCtc *c, int64_t m, const int64_t *trials, const int64_t *code,
+                double *Y) {
+    double *x = c->scratch;
+    for (int64_t j = 0; j < m; j++) {
+        if (code[j] != READY) continue;
+        double *y = Y + c->n_out * j;
+        memcpy(x, c->X + c->n_in * trials[j], c->n_in * sizeof(double));
+        c->arg[0] = x; c->res[0] = y;
+        if (c->kernel(c->arg, c->res, c->iw, c->w, 0)) return 1;
+        int64_t calls = 1;
+        while (!(y[c->residual_at] < c->fk_tol)) {  /* Newton from the pose reached */
+            if (calls >= c->max_calls || !isfinite(y[c->residual_at])) break;
+            memcpy(x + c->pose_in, y + c->pose_out, 12 * sizeof(double));
+            if (c->kernel(c->arg, c->res, c->iw, c->w, 0)) return 1;
+            calls++;
+        }
+    }
+    return 0;
+}
+
+void jc_finish(JointCtc *c, int64_t m, const int64_t *trials, int64_t *code,
+               const double *Y, double *forces, double *errors) {
+    for (int64_t j = 0; j < m; j++) {
+        const double *y = Y + c->n_out * j;
+        if (code[j] == READY) {
+            if (y[c->status_at] != 0.0) { code[j] = REFUSED; continue; }
+            double det = y[c->screen_at], tr = y[c->screen_at + 1];
+            if (!(tr > 0.0 && det > c->screen_scale * pow(tr, 6.0))) { code[j] = UNSURE; continue; }
+        } else if (code[j] != ACCEPT) continue;
+        int64_t i = trials[j];
+        double *x = c->X + c->n_in * i, *e = errors + 6 * j;
+        memcpy(x + c->pose_in, y + c->pose_out, 12 * sizeof(double));
+        c->steps[i] += 1;
+        int over = 0;
+        for (int l = 0; l < 6; l++) {
+            double f = y[c->forces_at + l];
+            e[l] = x[c->desired_at + l] - x[c->q_at + l];
+            forces[6 * j + l] = f;
+            if (fabs(f) > c->limit[6 * i + l]) over = 1;
+        }
+        if (c->kp_ki != 0.0 && !over)  /* anti-windup: held while over a limit */
+            for (int l = 0; l < 6; l++) c->integral[6 * i + l] += e[l] * c->dt[i];
+        code[j] = over ? OVER : ACCEPTED;
+    }
+}
+
+int jc_step(JointCtc *c, int64_t m, const int64_t *trials, const double *t, const double *q,
+            const double *qd, int64_t *code, double *Y, double *forces, double *errors) {
+    jc_prepare(c, m, trials, t, q, qd, code);
+    if (jc_evaluate(c, m, trials, code, Y)) return 1;
+    jc_finish(c, m, trials, code, Y, forces, errors);
+    return 0;
+}
+"""
+
+_P = ctypes.c_void_p
+_I = ctypes.c_int64
+_D = ctypes.c_double
 
 
-def quintic_timing(t: float, t0: float, T: float) -> tuple[float, float, float] | None:
-    """The quintic timing ``(s, s_dot, s_ddot)`` at ``t`` [s] of a motion started at
-    ``t0`` [s] lasting ``T`` [s] (``s`` from 0 to 1; rates [1/s], [1/s^2]), None for a
-    zero duration (at ``q*`` at once)."""
-    if T <= 0.0:
-        return None
-    x = min(max((t - t0) / T, 0.0), 1.0)
-    s = x**3 * (10 - 15 * x + 6 * x**2)
-    if 0.0 < x < 1.0:
-        return s, 30 * x**2 * (1 - x) ** 2 / T, 60 * x * (1 - x) * (1 - 2 * x) / T**2
-    return s, 0.0, 0.0
+class _Context(ctypes.Structure):
+    """The C ``JointCtc``: the batch's arrays and the compiled step (addresses)."""
+
+    _fields_ = [("X", _P), ("n_in", _I), ("q_at", _I), ("qd_at", _I), ("desired_at", _I),
+                ("pose_in", _I), ("tracking", _P), ("dt", _P), ("t_end", _P),
+                ("grid_len", _P), ("grids", _P), ("grid_stride", _I), ("quintic", _P),
+                ("quintic_speed", _P), ("peak", _D), ("kp_ki", _D), ("integral", _P),
+                ("grid_tol", _D), ("steps", _P), ("limit", _P), ("kernel", _P),
+                ("arg", _P), ("res", _P), ("iw", _P), ("w", _P), ("n_out", _I),
+                ("pose_out", _I), ("residual_at", _I), ("status_at", _I), ("screen_at", _I),
+                ("forces_at", _I), ("fk_tol", _D), ("max_calls", _I), ("screen_scale", _D),
+                ("scratch", _P)]
 
 
-def quintic_row_into(t: float, row: np.ndarray, out: np.ndarray) -> None:
-    """:func:`quintic_rows` of one quintic ``row`` (21,) at ``t`` [s], written into
-    ``out`` (18,) (the same operations on the same numbers, in Python floats: one
-    array read and one write)."""
-    r = row.tolist()
-    timing = quintic_timing(t, r[1], r[2])
-    if timing is None:
-        out[0:6] = r[15:21]
-        out[6:18] = 0.0
-        return
-    s, sd, sdd = timing
-    _, _, _, a0, a1, a2, a3, a4, a5, d0, d1, d2, d3, d4, d5, *_ = r
-    out[:] = [a0 + s * d0, a1 + s * d1, a2 + s * d2, a3 + s * d3, a4 + s * d4, a5 + s * d5,
-              sd * d0, sd * d1, sd * d2, sd * d3, sd * d4, sd * d5,
-              sdd * d0, sdd * d1, sdd * d2, sdd * d3, sdd * d4, sdd * d5]
-
-
-def quintic_rows(t: np.ndarray, rows: np.ndarray) -> np.ndarray:
-    """``(q*, q_dot*, q_ddot*)`` (m, 18) of the leg-space quintics ``rows`` (m, 21)
-    (:data:`QUINTIC_SIZE`) at the times ``t`` (m,) [s]: ``q0 + s d``, ``s_dot d``,
-    ``s_ddot d`` with ``d = q* - q0`` (``q*`` at rest for a zero duration). The timing
-    (:func:`quintic_timing`) is computed in Python floats, row by row."""
-    m = len(t)
-    timing = np.zeros((m, 3))
-    step = np.zeros(m, dtype=bool)
-    for j, (tj, t0, T) in enumerate(zip(t.tolist(), rows[:, 1].tolist(), rows[:, 2].tolist(),
-                                         strict=True)):
-        tm = quintic_timing(tj, t0, T)
-        if tm is None:
-            step[j] = True
-        else:
-            timing[j] = tm
-    d = rows[:, 9:15]
-    out = np.empty((m, 18))
-    out[:, 0:6] = rows[:, 3:9] + timing[:, 0:1] * d
-    out[:, 6:12] = timing[:, 1:2] * d
-    out[:, 12:18] = timing[:, 2:3] * d
-    if step.any():
-        out[step, 0:6] = rows[step, 15:21]
-        out[step, 6:18] = 0.0
-    return out
+@lru_cache(maxsize=1)
+def _library() -> ctypes.CDLL:
+    """The compiled :data:`SOURCE` (``-fno-builtin``: ``pow`` is the C library's, as
+    Python's; ``-ffp-contract=off``: no fused multiply-add)."""
+    lib = ctypes.CDLL(str(build_shared_library(
+        "joint_ctc_rows", SOURCE, ("-O2", "-fno-builtin", "-ffp-contract=off"))))
+    lib.jc_desired.argtypes = [_P, _I, _D, _P]
+    lib.jc_prepare.argtypes = [_P, _I, _P, _P, _P, _P, _P]
+    lib.jc_evaluate.argtypes = [_P, _I, _P, _P, _P]
+    lib.jc_finish.argtypes = [_P, _I, _P, _P, _P, _P, _P]
+    lib.jc_step.argtypes = [_P, _I, _P, _P, _P, _P, _P, _P, _P, _P]
+    for f in (lib.jc_desired, lib.jc_evaluate, lib.jc_step):
+        f.restype = ctypes.c_int
+    for f in (lib.jc_prepare, lib.jc_finish):
+        f.restype = None
+    return lib
 
 
 class JointState(NamedTuple):
@@ -109,6 +249,7 @@ class JointState(NamedTuple):
         dt: The control period [s].
         t_end: The time after which the reference is at rest [s] (inf: none).
         grid: (N, 18) the reference's legs on the control grid, None for a fixed goal.
+        quintic_speed: The speed limit timing a fixed goal's quintic [m/s] (NaN: a step).
         function: The compiled step.
     """
 
@@ -120,12 +261,31 @@ class JointState(NamedTuple):
     dt: float
     t_end: float
     grid: np.ndarray | None
+    quintic_speed: float
     function: CompiledFunction
 
 
+class _Buffers:
+    """A step's arrays for ``n`` rows and their addresses (in the C calls' order:
+    trials, t, q, q_dot, code, Y, forces, errors)."""
+
+    def __init__(self, n: int, n_out: int) -> None:
+        self.n = n
+        self.trials = np.zeros(n, dtype=np.int64)
+        self.t = np.zeros(n)
+        self.q = np.zeros((n, 6))
+        self.qd = np.zeros((n, 6))
+        self.code = np.zeros(n, dtype=np.int64)
+        self.Y = np.zeros((n, n_out))
+        self.forces = np.zeros((n, 6))
+        self.errors = np.zeros((n, 6))
+        self.addresses = tuple(a.ctypes.data for a in (
+            self.trials, self.t, self.q, self.qd, self.code, self.Y, self.forces, self.errors))
+
+
 class JointRows:
-    """The arrays of a batch of computed-torque trials (see the module docstring); each
-    instance's state becomes views of them.
+    """The arrays of a batch of computed-torque trials and its one step (see the module
+    docstring); each instance's state becomes views of them.
 
     Args:
         laws: The trials' instances (reset), in trial order.
@@ -133,8 +293,9 @@ class JointRows:
 
     def __init__(self, laws: list[ComputedTorqueController]) -> None:
         self.laws = laws
+        law0 = laws[0]
         states = [law.batch_state() for law in laws]
-        self.function = states[0].function
+        self.function = function = states[0].function
         n = len(laws)
         self.X = np.stack([st.row for st in states])
         self.integral = np.stack([st.integral for st in states])
@@ -142,20 +303,19 @@ class JointRows:
         self.steps = np.concatenate([st.steps for st in states])
         self.limit = np.stack([st.limit for st in states])
         for k, law in enumerate(laws):
-            law.adopt(self.X[k], self.integral[k], self.quintic[k], self.steps[k:k + 1])
+            law.adopt(self, k)
         self.dt = np.array([st.dt for st in states])
         self.t_end = np.array([st.t_end for st in states])
-        #: (n,) each trial's index (its row of the arrays).
-        self.index = np.arange(n)
-        self.tracking = np.array([st.grid is not None for st in states])
+        self.quintic_speed = np.array([st.quintic_speed for st in states])
+        self.tracking = np.array([st.grid is not None for st in states], dtype=np.uint8)
         grids = [st.grid for st in states if st.grid is not None]
         self.grid_len = np.array([0 if st.grid is None else len(st.grid) for st in states],
-                                 dtype=int)
+                                 dtype=np.int64)
         #: (1 or n, S, 18) the grids, one shared when they are equal (index 0).
-        self.shared = bool(grids) and all(g is grids[0] or np.array_equal(g, grids[0])
-                                          for g in grids)
-        if self.shared:
-            self.grids = grids[0][None]
+        shared = bool(grids) and all(g is grids[0] or np.array_equal(g, grids[0])
+                                     for g in grids)
+        if shared:
+            self.grids = np.ascontiguousarray(grids[0][None])
         else:
             size = max((len(g) for g in grids), default=1)
             self.grids = np.zeros((n, max(size, 1), 18))
@@ -164,124 +324,162 @@ class JointRows:
                 if g is not None and len(g):
                     self.grids[k, :len(g)] = g
                     self.grids[k, len(g):] = g[-1]
+        self.shared = shared
+        self.name = law0.name
+        self.threshold = law0.solver.threshold
+        self.kp_ki = law0.kp * law0.integral_gain if law0.integral_gain else 0.0
+        self._last: _Buffers | None = None
+        self._bind(function)
 
-    def desired(self, trials: np.ndarray, t: np.ndarray, q: np.ndarray,
-                at: np.ndarray | slice | None = None) -> tuple[np.ndarray, np.ndarray]:
-        """``(q*, q_dot*, q_ddot*)`` (m, 18) of the trials ``trials`` (m,) at ``t`` (m,)
-        [s] (a fixed goal's quintic started from the lengths ``q`` (m, 6) [m]) and the
-        (m,) mask of the rows that have them; ``at``: ``trials`` or the slice they make."""
-        m = len(trials)
-        sel = trials if at is None else at
-        out = np.zeros((m, 18))
-        ok = np.ones(m, dtype=bool)
-        tracking = self.tracking[sel]
-        every = bool(tracking.all())
-        if every or tracking.any():
-            j = slice(None) if every else np.flatnonzero(tracking)
-            jt = sel if every else trials[j]
-            tk, dt, length = t[j], self.dt[jt], self.grid_len[jt]
-            k = np.rint(tk / dt)
-            end = (length > 0) & (tk > self.t_end[jt])
-            on = ~end & (k >= 0) & (k < length) & (np.abs(tk - k * dt) <= GRID_TIME_TOLERANCE)
-            index = np.where(end, length - 1, np.where(on, k, 0)).astype(int)
-            if not self.shared:  # the trials' own grids, one after the other
-                index += self.grids.shape[1] * self.index[jt]
-            out[j] = self.grids.reshape(-1, 18).take(index, axis=0)
-            for i in np.flatnonzero(~end & ~on).tolist():  # off the grid: on demand
-                r = i if every else int(j[i])  # type: ignore[index]
-                try:
-                    out[r] = self.laws[int(trials[r])].reference_legs(
-                        np.array([tk[i]]))[0].ravel()
-                except Exception:  # the trial's own step refuses with the reason
-                    ok[r] = False
-        if not every:
-            jq = np.flatnonzero(~tracking)
-            for i in jq[self.quintic[trials[jq], 0] == 0.0].tolist():  # a first step
-                self.laws[int(trials[i])].start_quintic(float(t[i]), q[i])
-            out[jq] = quintic_rows(t[jq], self.quintic[trials[jq]])
-        return out, ok
+    def _bind(self, function: CompiledFunction) -> None:
+        """The C context of the arrays and of the compiled step (its work arrays)."""
+        if function.entry is None:
+            raise CompilationError(f"{function.name}: the computed-torque step needs its "
+                                   "compiled C (no C compiler?)")
+        n_arg, n_res, n_iw, n_w = function.work_sizes
+        self._arg = (ctypes.c_void_p * max(n_arg, 1))()
+        self._res = (ctypes.c_void_p * max(n_res, 1))()
+        self._iw = np.zeros(max(n_iw, 1), dtype=np.int64)
+        self._w = np.zeros(max(n_w, 1))
+        self._scratch = np.zeros(function.n_in)
+        ins, outs = compiled_ctc.INPUTS, compiled_ctc.OUTPUTS
+        self.context = _Context(
+            self.X.ctypes.data, function.n_in, ins["q"].start, ins["q_dot"].start,
+            DESIRED.start, POSE_IN.start, self.tracking.ctypes.data, self.dt.ctypes.data,
+            self.t_end.ctypes.data, self.grid_len.ctypes.data, self.grids.ctypes.data,
+            0 if self.shared else self.grids.shape[1], self.quintic.ctypes.data,
+            self.quintic_speed.ctypes.data, QUINTIC_PEAK_SPEED, self.kp_ki,
+            self.integral.ctypes.data, GRID_TIME_TOLERANCE, self.steps.ctypes.data,
+            self.limit.ctypes.data, ctypes.cast(function.entry, ctypes.c_void_p).value,
+            ctypes.addressof(self._arg), ctypes.addressof(self._res), self._iw.ctypes.data,
+            self._w.ctypes.data, function.n_out, POSE_OUT.start, RESIDUAL, STATUS,
+            outs["screen"].start, FORCES.start, compiled_ctc.FK_TOLERANCE, FK_MAX_CALLS,
+            4.0 * self.threshold**2, self._scratch.ctypes.data)
+        self._ctx = ctypes.addressof(self.context)
 
-    def step(self, observations: ObservationBatch, out: CommandBatch, kp_ki: float,
-             threshold: float, saturation: str) -> np.ndarray:
-        """Step every row with finite readings into ``out`` (consecutive trials through
-        one slice of the arrays, the same values); returns the rows left to the trials'
-        own steps (readings not finite, no desired row, a result not accepted).
+    def desired(self, trial: int, t: float) -> np.ndarray:
+        """``(q*, q_dot*, q_ddot*)`` (18,) of ``trial`` at ``t`` [s] as a step reads them
+        (a fixed goal's quintic as it is: ``q*`` before its first step), off the control
+        grid the reference itself.
 
-        Args:
-            observations: The batch (row ``k`` of trial ``observations.trials[k]``).
-            out: The commands, written in place.
-            kp_ki: ``Kp Ki`` of the integral action (0: none).
-            threshold: The rank test's relative singular-value threshold.
-            saturation: The strategy over a force limit.
+        Raises:
+            DynamicsError: The nominal model cannot evaluate the reference there.
+        """
+        out = np.empty(18)
+        if _library().jc_desired(self._ctx, trial, t, out.ctypes.data):
+            out[:] = self.laws[trial].reference_legs(np.array([t]))[0].ravel()
+        return out
+
+    def _buffers(self, n: int) -> _Buffers:
+        """The step's arrays for ``n`` rows (those of the last step when it had as many:
+        their addresses taken once)."""
+        b = self._last
+        if b is None or b.n != n:
+            b = self._last = _Buffers(n, self.function.n_out)
+        return b
+
+    def step(self, observations: ObservationBatch, out: CommandBatch) -> None:
+        """Every row's command into ``out`` (a refusal with its reason where there is
+        none); a batch of one gets the full :class:`Command` (the diagnostics of a
+        per-trial step: error, rank and condition number).
+
+        Raises:
+            CompilationError: The compiled step failed.
+            ValueError: The observations' arrays are not of the batch's shapes.
         """
         n = len(observations)
         if observations.q_dot is None:
-            return np.arange(n)
-        t = np.asarray(observations.t, dtype=float)
-        q_all = np.asarray(observations.lengths, dtype=float)
-        qd_all = np.asarray(observations.q_dot, dtype=float)
-        trials = np.asarray(observations.trials, dtype=int)
-        at: np.ndarray | slice
-        if np.isfinite(t).all() and np.isfinite(q_all).all() and np.isfinite(qd_all).all():
-            rows = np.arange(n)
-            q, qd = q_all, qd_all
-            first = int(trials[0]) if n else 0
-            at = (slice(first, first + n) if n and int(trials[-1]) == first + n - 1
-                  and bool((np.diff(trials) == 1).all()) else trials)
+            for j in range(n):
+                self._refuse(out, j, "needs the measured leg velocities (Observation.q_dot), "
+                             "which only the dynamic world gives")
+            return
+        lib = _library()
+        b = self._buffers(n)
+        np.copyto(b.trials, observations.trials)
+        np.copyto(b.t, observations.t)
+        np.copyto(b.q, observations.lengths)
+        np.copyto(b.qd, observations.q_dot)
+        code = b.code
+        if n < LANE_ROWS:
+            if lib.jc_step(self._ctx, n, *b.addresses):
+                raise CompilationError(f"{self.function.name}: the compiled function failed")
+        else:  # the compiled step in lanes between the two C passes
+            lib.jc_prepare(self._ctx, n, *b.addresses[:5])
+            ready = np.flatnonzero(code == READY)
+            if len(ready):
+                b.Y[ready] = evaluate_rows(
+                    self.function, self.X[b.trials[ready]], POSE_IN, POSE_OUT, RESIDUAL,
+                    compiled_ctc.FK_TOLERANCE, FK_MAX_CALLS)[0]
+            lib.jc_finish(self._ctx, n, b.addresses[0], *b.addresses[4:])
+        simple = code[0] == ACCEPTED if n == 1 else bool((code == ACCEPTED).all())
+        reasons = {} if simple else self._resolve(observations, b)
+        forces = out.forces
+        assert forces is not None
+        np.copyto(forces, b.forces)
+        if not simple:
+            for j in np.flatnonzero(code == OVER).tolist():  # over a limit: the strategy
+                i = int(b.trials[j])
+                forces[j] = self.laws[i].saturated_forces(forces[j], b.Y[j, POSE_OUT], b.qd[j],
+                                                          self.X[i, DESIRED][6:12])
+            for j, reason in reasons.items():
+                self._refuse(out, j, reason)
+        if n == 1:
+            if code[0] in (ACCEPTED, OVER):  # a per-trial step's Command
+                e = b.errors[0].copy()
+                condition = rank_condition(b.Y[0, FACTOR], self.threshold)
+                assert condition is not None  # (an accepted row is of full rank)
+                out.put(0, Command(np.zeros(6), error=e, error_norm=math.sqrt(e.dot(e)),
+                                   rank=6, condition=condition, features_used=6,
+                                   active_constraints=[], notes=[],
+                                   actuation=Actuation.FORCE, forces=forces[0].copy()))
+        elif simple:
+            out.error_norm[:] = np.sqrt(norms(b.errors))
         else:
-            finite = (np.isfinite(t) & np.isfinite(q_all).all(axis=1)
-                      & np.isfinite(qd_all).all(axis=1))
-            rows = np.flatnonzero(finite)
-            trials = trials[rows]
-            t, q, qd = t[rows], q_all[rows], qd_all[rows]
-            at = trials
-        X = self.X
-        X[at, Q_IN] = q
-        X[at, QD_IN] = qd
-        desired, ok = self.desired(trials, t, q, at)
-        if kp_ki:
-            desired[:, 12:18] += kp_ki * self.integral[at]
-        X[at, DESIRED] = desired
-        if not ok.all():
-            rows, trials, t, q, qd, desired = (a[ok] for a in (rows, trials, t, q, qd,
-                                                               desired))
-            at = trials
-        if not len(rows):
-            return np.arange(n)
-        rows_in = X[at].copy() if isinstance(at, slice) else X[at]  # Newton moves its guesses
-        Y, _ = evaluate_rows(self.function, rows_in, POSE_IN, POSE_OUT, RESIDUAL,
-                             compiled_ctc.FK_TOLERANCE, FK_MAX_CALLS)
-        accepted = accepted_rows(Y, STATUS, SCREEN, FACTOR, threshold)
-        if accepted.all():  # every row: the slices of the batch's arrays
-            ka, ta, Ya, e_rows, qd_a, desired_a = rows, at, Y, q, qd, desired
-        else:
-            a = np.flatnonzero(accepted)
-            if not len(a):
-                return np.arange(n)
-            ka, ta, Ya = rows[a], trials[a], Y[a]
-            e_rows, qd_a, desired_a = q[a], qd[a], desired[a]
-        X[ta, POSE_IN] = Ya[:, POSE_OUT]  # the next steps' guesses
-        self.steps[ta] += 1
-        e = desired_a[:, 0:6] - e_rows
-        forces = Ya[:, FORCES]
-        over = over_limits(forces, self.limit[ta])
-        if kp_ki:  # anti-windup: held while a leg's force is over its limit
-            held = ~over
-            tt = (self.index[ta] if isinstance(ta, slice) else ta)[held]
-            self.integral[tt] += e[held] * self.dt[tt][:, None]
-        assert out.forces is not None
-        out.forces[ka] = forces
-        out.error_norm[ka] = np.sqrt(norms(e))
-        if over.any():
-            tl = self.index[ta] if isinstance(ta, slice) else ta
-            for i in np.flatnonzero(over).tolist():  # over a limit: the saturation strategy
-                law = self.laws[int(tl[i])]
-                out.forces[ka[i]] = law.saturated_forces(forces[i], Ya[i, POSE_OUT], qd_a[i],
-                                                          desired_a[i, 6:12])
-        slow = np.ones(n, dtype=bool)
-        slow[ka] = False
-        return np.flatnonzero(slow)
+            accepted = (code == ACCEPTED) | (code == OVER)
+            out.error_norm[accepted] = np.sqrt(norms(b.errors[accepted]))
+
+    def _resolve(self, observations: ObservationBatch, b: _Buffers) -> dict[int, str]:
+        """Finish the rows off the control grid and those whose rank the screen does not
+        settle (module docstring); the reasons of the rows refused."""
+        lib = _library()
+        code, Y, trials = b.code, b.Y, b.trials
+        reasons: dict[int, str] = {}
+        again = False
+        for j in np.flatnonzero(code == OFF_GRID).tolist():  # the reference on demand
+            i = int(trials[j])
+            try:
+                d = self.laws[i].reference_legs(b.t[j:j + 1])[0].ravel()
+            except Exception as exc:  # the nominal model failed here
+                reasons[j] = f"nominal model failed: {exc}"
+                code[j] = REFUSED
+                continue
+            if self.kp_ki:
+                d[12:18] += self.kp_ki * self.integral[i]
+            self.X[i, DESIRED] = d
+            code[j] = READY
+            again = True
+        n = len(code)
+        if again:
+            if lib.jc_evaluate(self._ctx, n, b.addresses[0], *b.addresses[4:6]):
+                raise CompilationError(f"{self.function.name}: the compiled function failed")
+            lib.jc_finish(self._ctx, n, b.addresses[0], *b.addresses[4:])
+        unsure = np.flatnonzero(code == UNSURE)
+        if len(unsure):  # the exact rank test (LAPACK) where the screen does not settle it
+            for j in unsure.tolist():
+                full = rank_condition(Y[j, FACTOR], self.threshold) is not None
+                code[j] = ACCEPT if full else REFUSED
+            lib.jc_finish(self._ctx, n, b.addresses[0], *b.addresses[4:])
+        for j in np.flatnonzero(code == NOT_FINITE).tolist():
+            readings = encoder_readings(observations.item(j))
+            reasons[j] = readings if isinstance(readings, str) else "readings not finite"
+        for j in np.flatnonzero(code == REFUSED).tolist():
+            if j not in reasons:
+                reasons[j] = refusal(Y[j], STATUS, RESIDUAL, FACTOR, self.threshold) or ""
+        return reasons
+
+    def _refuse(self, out: CommandBatch, j: int, reason: str) -> None:
+        out.put(j, Command.refuse(f"{self.name}: {reason}", actuation=Actuation.FORCE))
 
 
-__all__ = ["GRID_TIME_TOLERANCE", "QUINTIC_SIZE", "JointRows", "JointState", "quintic_row_into",
-           "quintic_rows", "quintic_timing"]
+__all__ = ["ACCEPTED", "GRID_TIME_TOLERANCE", "QUINTIC_SIZE", "SOURCE", "JointRows",
+           "JointState"]

@@ -20,8 +20,9 @@ import pytest
 from scipy.optimize import curve_fit
 
 from controllers import registry
-from controllers.base import Command, ControllerContext, Goal, Observation
+from controllers.base import ControllerContext, Goal, Observation
 from controllers.computed_torque import ComputedTorqueController
+from controllers.data import CommandBatch, ObservationBatch
 from hexapod import HexapodGeometry
 from hexapod.actuation import Actuation
 from hexapod.dynamics.robots import DynamicRobots
@@ -185,9 +186,9 @@ class RecordingSprings(ComputedTorqueController):
 
     seen: ClassVar[list[Observation]] = []
 
-    def step_trial(self, observation: Observation) -> Command:
-        RecordingSprings.seen.append(observation)
-        return super().step_trial(observation)
+    def step_batch(self, observations: ObservationBatch) -> CommandBatch:
+        RecordingSprings.seen.extend(observations.item(j) for j in range(len(observations)))
+        return super().step_batch(observations)
 
 
 @pytest.mark.slow

@@ -122,8 +122,8 @@ def test_copies_and_pickles_step_like_the_original_and_apart_from_it() -> None:
     obs = _observations(world, 12, seed=8)
     ctrl = _replayed(obs[:4])
     for c in (copy.deepcopy(ctrl), pickle.loads(pickle.dumps(ctrl))):
-        assert c._bound is not None and ctrl._bound is not None
-        assert c._bound.x is not ctrl._bound.x
+        assert c._row is not None and ctrl._row is not None
+        assert not np.shares_memory(c._row, ctrl._row)  # its own state
         twin = _replayed(obs[:4])
         _same(c.step(obs[4]), twin.step(obs[4]))  # the pose guess travelled with the copy
         assert c.step(obs[9]).reason is None  # the copy moves on

@@ -1,7 +1,8 @@
 """The computed-torque family over a batch (:mod:`controllers.ctc_rows`): every row of a
-batch tracking a reference goes through the one compiled call (``step_arrays`` leaves no
-row to the trials' own steps), with the commands of the per-trial step to the last bit,
-trial by trial; a row the compiled step cannot finish is left to its trial's step."""
+batch tracking a reference goes through the one compiled call (the task laws'
+``step_arrays`` leaves no row to the trials' own steps; ``computed-torque`` has no other
+step), with the commands of the per-trial step to the last bit, trial by trial; a row
+the compiled step cannot finish is refused with its reason."""
 
 from __future__ import annotations
 
@@ -49,14 +50,15 @@ def _rows_of(obs: ObservationBatch, idx: np.ndarray) -> ObservationBatch:
 
 def _step_as_the_trials(batch: Any, singles: list[Any], obs: ObservationBatch, lone: bool,
                         label: object) -> np.ndarray:
-    """Step ``batch`` on ``obs`` (with ``lone``: row 1 by its trial's own step, the other
+    """Step ``batch`` on ``obs`` (with ``lone``: row 1 as a batch of its own, the other
     rows as one batch) and assert each row's forces and error norm are those of the
     single controller ``singles[j]`` stepped on its row, bit for bit; the forces (n, 6)."""
     n = len(singles)
     forces, norms = np.zeros((n, 6)), np.zeros(n)
-    if lone:
-        cmd = batch.step_row(1, obs.item(1))
-        forces[1], norms[1] = cmd.forces, cmd.error_norm
+    if lone:  # row 1 alone: a batch of one
+        one = batch.step_batch(_rows_of(obs, np.array([1])))
+        assert one.forces is not None and one.reasons == [None]
+        forces[1], norms[1] = one.forces[0], one.error_norm[0]
         idx = np.array([j for j in range(n) if j != 1])
         part = batch.step_batch(_rows_of(obs, idx))
         assert part.forces is not None
@@ -94,8 +96,12 @@ def test_every_row_in_one_call_and_equal_to_the_trials_steps(geometry: HexapodGe
     for k in range(8):
         obs = _batch(world, robots, k * DT)
         out = CommandBatch.zeros(n, Actuation.FORCE)
-        left = batch.step_arrays(obs, out)
-        assert left.tolist() == [], f"step {k}: rows {left.tolist()} left to the trials"
+        if name == "computed-torque":  # its one step: every row commanded
+            out = batch.step_batch(obs)
+            assert out.reasons == [None] * n, (k, out.reasons)
+        else:
+            left = batch.step_arrays(obs, out)
+            assert left.tolist() == [], f"step {k}: rows {left.tolist()} left to the trials"
         assert out.forces is not None
         for j, s in enumerate(singles):
             cmd = s.step(obs.item(j))
@@ -106,7 +112,7 @@ def test_every_row_in_one_call_and_equal_to_the_trials_steps(geometry: HexapodGe
 
 
 @pytest.mark.slow
-def test_a_row_without_leg_rates_is_left_to_its_trial(geometry: HexapodGeometry) -> None:
+def test_a_row_without_leg_rates_is_refused_alone(geometry: HexapodGeometry) -> None:
     truth = ideal_drives(geometry)
     world = CtcWorld.make(truth)
     R0, t0, R1, t1, ref = line_reference(truth, "quintic", (0.5, -0.3, 0.4))
@@ -118,8 +124,6 @@ def test_a_row_without_leg_rates_is_left_to_its_trial(geometry: HexapodGeometry)
     obs.q_dot[1, 2] = np.nan
     law = registry.create("computed-torque")
     law.reset_batch([ctx, ctx])
-    out = CommandBatch.zeros(2, Actuation.FORCE)
-    assert law.step_arrays(obs, out).tolist() == [1]
     full = law.step_batch(obs)
     assert full.reasons[0] is None
     assert full.reasons[1] is not None and "leg velocities" in full.reasons[1]

@@ -113,7 +113,8 @@ def test_the_joint_kernel_gives_its_codes() -> None:
     obs = _observation(world, R, t, 0.0)
     assert ctrl.step(obs).reason is None
     f = compiled_ctc.joint_step()
-    x0 = ctrl.input_row.copy()
+    assert ctrl._row is not None
+    x0 = ctrl._row.copy()  # the trial's input row, as its last step wrote it
     status = compiled_ctc.OUTPUTS.index("status")
     assert f.single(x0)[status] == Status.OK
     x = x0.copy()

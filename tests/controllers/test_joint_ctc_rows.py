@@ -1,8 +1,9 @@
-"""The batch of ``computed-torque`` as arrays (:mod:`controllers.joint_ctc_rows`): the
-leg-space quintic of many rows is the per-trial one to the last bit, and a batch whose
-trials' state is views of its arrays steps as independent per-trial controllers do,
-through fixed goals (the quintic started at the first step), integral action, a retarget,
-different references (stacked grids) and rows stepped by their trial's own step."""
+"""The one step of ``computed-torque`` (:mod:`controllers.joint_ctc_rows`): its C
+leg-space quintic is the Python expressions' to the last bit, and a batch whose trials'
+state is views of its arrays steps as independent per-trial controllers (batches of one)
+do, through fixed goals (the quintic started at the first step), integral action, a
+retarget, different references (stacked grids), a row stepped alone, and batches of
+eight rows or more (the compiled step in lanes)."""
 
 from __future__ import annotations
 
@@ -12,9 +13,10 @@ import pytest
 from controllers import registry
 from controllers.computed_torque import ComputedTorqueController
 from controllers.data import GoalBatch
-from controllers.joint_ctc_rows import QUINTIC_SIZE, JointRows, quintic_rows
-from hexapod import HexapodGeometry
+from controllers.joint_ctc_rows import QUINTIC_SIZE, JointRows
+from hexapod import HexapodGeometry, deltalab
 from hexapod.dynamics.robots import DynamicRobots
+from hexapod.workspace import home_pose
 from tests.controllers.ctc_world import DT, CtcWorld, ideal_drives, line_reference
 from tests.controllers.test_ctc_rows import _batch, _step_as_the_trials
 
@@ -36,7 +38,21 @@ def _quintic_oracle(t: float, row: np.ndarray) -> np.ndarray:
                     + [sdd * b[i] for i in range(6)])
 
 
-def test_the_quintic_of_many_rows_is_each_rows_quintic(rng: np.random.Generator) -> None:
+def _quintics(rows: np.ndarray, t: np.ndarray) -> np.ndarray:
+    """The desired legs (m, 18) of a fixed-goal controller whose quintic is each row of
+    ``rows`` (m, 21) in turn, at the times ``t`` (m,) [s] (its C)."""
+    world = CtcWorld.make(ideal_drives(deltalab()))
+    ctrl = registry.create("computed-torque")
+    assert isinstance(ctrl, ComputedTorqueController)
+    ctrl.reset(world.context(world.goal(*home_pose(world.truth))))
+    out = np.empty((len(rows), 18))
+    for j, row in enumerate(rows):
+        ctrl._quintic[:] = row
+        out[j] = np.concatenate(ctrl.desired(float(t[j])))
+    return out
+
+
+def test_the_quintic_is_the_python_expressions_bit_for_bit(rng: np.random.Generator) -> None:
     m = 400
     rows = np.zeros((m, QUINTIC_SIZE))
     rows[:, 0] = 1.0
@@ -45,9 +61,14 @@ def test_the_quintic_of_many_rows_is_each_rows_quintic(rng: np.random.Generator)
     rows[::7, 2] = 0.0  # a step to the goal
     rows[:, 3:21] = rng.normal(0.4, 0.05, (m, 18))
     t = rows[:, 1] + rng.uniform(-0.5, 4.0, m)  # before, during and after the motion
-    got = quintic_rows(t, rows)
+    t[::11] = rows[::11, 1] + rows[::11, 2]  # at the end exactly
+    got = _quintics(rows, t)
+    moving = 0
     for j in range(m):
-        assert got[j].tobytes() == _quintic_oracle(float(t[j]), rows[j]).tobytes(), j
+        oracle = _quintic_oracle(float(t[j]), rows[j])
+        assert got[j].tobytes() == oracle.tobytes(), j
+        moving += bool(np.any(oracle[6:12] != 0.0))
+    assert moving > 50  # a quarter of the rows mid-motion
 
 
 def _robots(truth: HexapodGeometry, starts: list[tuple[np.ndarray, np.ndarray]]
@@ -59,12 +80,12 @@ def _robots(truth: HexapodGeometry, starts: list[tuple[np.ndarray, np.ndarray]]
 
 
 @pytest.mark.slow
+@pytest.mark.parametrize("n", [4, 9])
 @pytest.mark.parametrize("tracking", [False, True])
-def test_the_batch_steps_as_its_trials_do_through_their_own_steps(
-        geometry: HexapodGeometry, tracking: bool) -> None:
+def test_the_batch_steps_as_its_trials_do_as_batches_of_one(
+        geometry: HexapodGeometry, tracking: bool, n: int) -> None:
     truth = ideal_drives(geometry)
     world = CtcWorld.make(truth)
-    n = 4
     contexts, starts = [], []
     for k in range(n):  # a reference or a goal of its own per trial
         R0, t0, R1, t1, ref = line_reference(truth, "quintic", (0.5 + 0.2 * k, -0.3, 0.4))
@@ -83,41 +104,15 @@ def test_the_batch_steps_as_its_trials_do_through_their_own_steps(
             goal = world.goal(robots.R[0], robots.t[0])
             batch.retarget_batch(np.array([2]), GoalBatch.of(goal))
             singles[2].retarget(goal)
-        # at step 7, row 1 by its trial's own step, the others as one batch
+        # at step 7, row 1 alone, the others as one batch
         forces = _step_as_the_trials(batch, singles, obs, step == 7, step)
         assert not robots.advance(np.arange(n), forces, DT / 20, 20).any()
     rows = batch._rows
     assert isinstance(rows, JointRows)
-    assert rows.tracking.all() == tracking and not rows.shared  # four grids, stacked
+    assert rows.tracking.all() == tracking and not rows.shared  # a grid per trial, stacked
     for j, s in enumerate(singles):
         inst = batch.trial_instances[j]
         assert isinstance(inst, ComputedTorqueController)
-        assert inst.compiled_steps == s.compiled_steps
-        assert inst.input_row.base is rows.X  # the trial's row is the batch's
+        assert inst.compiled_steps == s.compiled_steps == 10
+        assert inst._row is not None and inst._row.base is rows.X  # the batch's row
         np.testing.assert_array_equal(inst._integral, s._integral)
-    # a trial's compiled step is bound only by its own step (row 1 at step 7): never for
-    # the rows the batch steps as arrays
-    assert [inst._bound is not None for inst in batch.trial_instances] == [
-        False, True, False, False]
-
-
-def test_one_quintic_row_is_the_batch_row_bit_for_bit() -> None:
-    """The per-trial quintic (``quintic_row_into``) gives the numbers of the batched one
-    at every phase: before the start, moving, at rest at the end, and a zero duration."""
-    from controllers.joint_ctc_rows import quintic_row_into, quintic_rows
-
-    rng = np.random.default_rng(3)
-    rows = np.zeros((4, 21))
-    rows[:, 0] = 1.0
-    rows[:, 1] = 0.2
-    rows[:, 2] = (0.5, 0.5, 0.5, 0.0)
-    rows[:, 3:9] = rng.uniform(0.4, 0.6, (4, 6))
-    rows[:, 15:21] = rng.uniform(0.4, 0.6, (4, 6))
-    rows[:, 9:15] = rows[:, 15:21] - rows[:, 3:9]
-    t = np.array([0.1, 0.37, 0.9, 0.3])
-    batch = quintic_rows(t, rows)
-    assert np.any(batch[1, 6:12] != 0.0)  # one row is moving
-    for j in range(4):
-        one = np.full(18, np.nan)
-        quintic_row_into(float(t[j]), rows[j], one)
-        assert one.tobytes() == batch[j].tobytes(), j
