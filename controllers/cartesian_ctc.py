@@ -53,6 +53,7 @@ class CartesianCTC(TaskComputedTorque):
     name = "cartesian-ctc"
     features = frozenset({"lengths"})
     compiled_kind = PLATFORM_POSE
+    batch_measurement: tuple[str, str, str, str | None] | tuple[()] | None = ()
 
     def take_goal(self, goal: Goal) -> None:
         """The fixed goal pose (``goal.rotation``, ``goal.translation``)."""
@@ -81,44 +82,6 @@ class CartesianCTC(TaskComputedTorque):
         """The reference on the control grid (:meth:`pose_grid`), every row known."""
         return None if self.reference is None else (self.pose_grid(), None)
 
-    def batch_inputs(self, rows_batch: TaskRows, X: np.ndarray,
-                     observations: ObservationBatch, rows: np.ndarray, trials: np.ndarray,
-                     tr: np.ndarray) -> np.ndarray:
-        """:meth:`TaskComputedTorque.batch_inputs`: the measurement of the rows
-        :meth:`batch_features` takes, then their reference rows."""
-        step = rows_batch.step_of
-        assert step is not None
-        fast = self.batch_features(step, X, observations, rows)
-        if not fast.all():
-            self.batch_partly_seen(rows_batch, step, X, observations, rows, trials, fast)
-        references, on, _ = rows_batch.references(trials, tr)
-        block = step.inputs["reference"]
-        use = fast & on
-        if use.all():
-            X[:, block] = references
-            return fast
-        if use.any():
-            X[use, block] = references[use]
-        for j in np.flatnonzero(fast & ~on).tolist():  # off the grid: on demand
-            law = rows_batch.laws[int(trials[j])]
-            try:
-                X[j, block] = law.reference_row(float(tr[j]))  # type: ignore[attr-defined]
-            except Exception:  # the trial's own compiled_inputs meets it again
-                fast[j] = False
-        return fast
-
-    def batch_features(self, step: CompiledTaskStep, X: np.ndarray,
-                       observations: ObservationBatch, rows: np.ndarray) -> np.ndarray:
-        """Write the measurement of the batch rows ``rows`` into ``X`` where
-        :meth:`compiled_inputs` takes it as it is; their (m,) mask (every row: the pose
-        comes from the encoders, in the row already)."""
-        return np.ones(len(rows), dtype=bool)
-
-    def batch_partly_seen(self, rows_batch: TaskRows, step: CompiledTaskStep, X: np.ndarray,
-                          observations: ObservationBatch, rows: np.ndarray,
-                          trials: np.ndarray, fast: np.ndarray) -> None:
-        """Write the measurement of rows :meth:`batch_features` left out that the batch
-        can still take (marking them in ``fast``); nothing by default."""
 
 
 class VisionCTC(CartesianCTC):
@@ -150,6 +113,7 @@ class VisionCTC(CartesianCTC):
     name = "vision-ctc"
     features = frozenset({"lengths", "directions"})
     compiled_fk = False
+    batch_measurement = ("directions", "direction_visible", "directions", "seen")
 
     def prepare(self, context: ControllerContext) -> None:
         """Check the camera and base points; anchor a reference at the taught goal.
@@ -252,43 +216,34 @@ class VisionCTC(CartesianCTC):
             self._collinear_sets[key] = known
         return known
 
-    def batch_features(self, step: CompiledTaskStep, X: np.ndarray,
-                       observations: ObservationBatch, rows: np.ndarray) -> np.ndarray:
-        """The rows with six (6, 3) directions given, all marked seen and finite (as
-        :meth:`compiled_inputs`' common case): their directions."""
-        if observations.directions is None or np.shape(observations.directions)[1:] != (6, 3):
-            return np.zeros(len(rows), dtype=bool)
-        u, fast = seen_rows(observations.directions, observations.direction_visible, rows)
-        every = slice(None) if fast.all() else fast  # (a slice: no copies)
-        X[every, step.inputs["directions"]] = u[every]
-        X[every, step.inputs["seen"]] = 1.0
-        return fast
-
-    def batch_partly_seen(self, rows_batch: TaskRows, step: CompiledTaskStep, X: np.ndarray,
-                          observations: ObservationBatch, rows: np.ndarray,
-                          trials: np.ndarray, fast: np.ndarray) -> None:
-        """The rows with three to five legs seen, not collinear on the platform: their
-        directions (a hidden leg's 0.0) and legs seen, as :meth:`compiled_inputs` writes
-        them; the others stay with their trials' own steps (which refuse them)."""
+    def batch_partly_seen(self, rows_batch: TaskRows, step: CompiledTaskStep,
+                          X: np.ndarray, observations: ObservationBatch,
+                          candidates: np.ndarray
+                          ) -> dict[int, tuple[np.ndarray | None, str | None]]:
+        """The candidate rows with three to five legs seen, not collinear on the
+        platform: their directions (a hidden leg's 0.0) and legs seen, as
+        :meth:`compiled_inputs` writes them (every task row used, its note); the others
+        are left to it (which refuses them)."""
         if (observations.directions is None or observations.direction_visible is None
                 or np.shape(observations.directions)[1:] != (6, 3)):
-            return
+            return {}
         inputs = step.inputs
-        for j in np.flatnonzero(~fast).tolist():
-            k = int(rows[j])
-            u = np.asarray(observations.directions[k], dtype=float)
-            seen = np.asarray(observations.direction_visible[k], dtype=bool).copy()
+        done: dict[int, tuple[np.ndarray | None, str | None]] = {}
+        for j in np.flatnonzero(candidates).tolist():
+            u = np.asarray(observations.directions[j], dtype=float)
+            seen = np.asarray(observations.direction_visible[j], dtype=bool).copy()
             with np.errstate(invalid="ignore"):
                 seen &= np.all(np.isfinite(u), axis=-1)
             count = int(seen.sum())
             if count < 3 or count == 6:
                 continue
-            law = rows_batch.laws[int(trials[j])]
+            law = rows_batch.laws[int(observations.trials[j])]
             if not isinstance(law, VisionCTC) or law.collinear(seen):
                 continue
             X[j, inputs["directions"]] = np.where(seen[:, None], u, 0.0).ravel()
             X[j, inputs["seen"]] = seen
-            fast[j] = True
+            done[j] = (None, f"pose from legs {np.flatnonzero(seen).tolist()}")
+        return done
 
     def compiled_constants(self, step: CompiledTaskStep) -> None:
         """The estimated base points (camera frame) and camera pose."""
@@ -336,17 +291,6 @@ def every_seen(values: np.ndarray | None, visible: np.ndarray | None) -> np.ndar
         return None
     x = np.asarray(values, dtype=float)
     return x if all_seen(visible) and math.isfinite(x.sum()) else None
-
-
-def seen_rows(values: np.ndarray, visible: np.ndarray, rows: np.ndarray
-              ) -> tuple[np.ndarray, np.ndarray]:
-    """The rows ``rows`` of a batch's feature field, one flat row each, and which of them
-    are all marked seen and finite (:func:`every_seen` per row)."""
-    x = np.asarray(values, dtype=float)[rows].reshape(len(rows), -1)
-    seen = np.asarray(visible)[rows].reshape(len(rows), -1).all(axis=1)
-    with np.errstate(invalid="ignore", over="ignore"):
-        fast: np.ndarray = seen & np.isfinite(x.sum(axis=1))
-    return x, fast
 
 
 def rigid_fit(points: np.ndarray, model_points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

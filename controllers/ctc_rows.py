@@ -1,11 +1,9 @@
-"""The compiled computed-torque steps over the rows of a batch.
+"""What the computed-torque laws' one steps share around their compiled kernels.
 
-:func:`evaluate_rows` evaluates every row in one C call (from eight rows by lanes, the
-same bits) and calls again the rows whose pose has not converged; :func:`accepted_rows`
-is each row's acceptance test (status 0 and full rank). The per-trial steps use
-:func:`newton_calls`, :func:`rank_condition` and :func:`refusal` on their own row (the
-same compiled function on the same row: the same numbers); a row not accepted is left to
-its trial's own step, which refuses it with the reason.
+:func:`evaluate_rows` evaluates many rows in lanes (the same bits as row by row) and
+calls again the rows whose pose has not converged; :func:`rank_condition` is the exact
+rank test (LAPACK) where the kernel's screen does not settle it; :func:`refusal` words
+why a row is not a command; :func:`norms` the error norms as a vector's own dot product.
 """
 
 from __future__ import annotations
@@ -17,7 +15,7 @@ import numpy as np
 from scipy.linalg.lapack import dsyevd as _eigenvalues
 
 from controllers.ctc_status import Status, status_reason
-from hexapod.compiled import BoundCall, CompilationError, CompiledFunction
+from hexapod.compiled import CompiledFunction
 
 #: Calls of a compiled step (its Newton iterations each) before the step is refused (as
 #: the 50 iterations of :func:`hexapod.fk.forward_kinematics`).
@@ -71,55 +69,10 @@ def rank_condition(factor: np.ndarray, threshold: float) -> float | None:
     return math.sqrt(w_max) / math.sqrt(w_min)
 
 
-def accepted_rows(Y: np.ndarray, status: int, screen: slice, factor: slice,
-                  threshold: float) -> np.ndarray:
-    """(n,) the output rows ``Y`` (n, n_out) that are commands: their kernel's ``status``
-    0 (converged, solved, every value finite, enough rows or legs seen:
-    :mod:`controllers.ctc_status`) and ``L^T L`` of full rank. The rank test of
-    :func:`rank_condition` (LAPACK ``syevd`` row by row) decides only the rows the
-    kernel's ``screen`` (:func:`~controllers.law_algebra.rank_screen`:
-    ``det`` and ``trace`` of ``L^T L``) does not clear: ``lambda_min >= det / trace^5``,
-    so ``det > 4 threshold^2 trace^6`` puts the row far above the threshold (a loose
-    bound: it clears a row only where the exact test agrees, whatever the rounding)."""
-    ok = Y[:, status] == 0.0
-    det, trace = Y[:, screen.start], Y[:, screen.start + 1]
-    with np.errstate(over="ignore", invalid="ignore"):
-        clear = (trace > 0) & (det > 4.0 * threshold**2 * trace**6)
-    for j in np.flatnonzero(ok & ~clear).tolist():
-        ok[j] = rank_condition(Y[j, factor], threshold) is not None
-    return ok  # type: ignore[no-any-return]
-
-
 def norms(e: np.ndarray) -> np.ndarray:
     """(m,) the squared norms of the rows of ``e`` (m, k): each row's own ``e @ e`` (the
     dot product of a vector, as the per-trial steps compute it: the same numbers)."""
     return np.matmul(e[:, None, :], e[:, :, None])[:, 0, 0]  # type: ignore[no-any-return]
-
-
-def newton_calls(bound: BoundCall, pose_in: np.ndarray, pose_out: slice, residual: int,
-                 tolerance: float, max_calls: int) -> np.ndarray | None:
-    """Evaluate a bound compiled step, then again from the pose reached while its pose
-    residual is not below ``tolerance`` (finite, at most ``max_calls`` calls in all);
-    the input pose ``pose_in`` (its bound row's view) as it was when it was moved (a
-    copy; None: not moved, the common case).
-
-    Raises:
-        CompilationError: The compiled function failed.
-    """
-    y, call = bound.y, bound.call
-    if call():
-        raise CompilationError(f"{bound.function.name}: the compiled function failed")
-    calls, guess = 1, None
-    while not y[residual] < tolerance:  # Newton from the pose reached, as FK does
-        if calls >= max_calls or not math.isfinite(y[residual]):
-            break
-        if guess is None:
-            guess = pose_in.copy()
-        pose_in[:] = y[pose_out]
-        if call():
-            raise CompilationError(f"{bound.function.name}: the compiled function failed")
-        calls += 1
-    return guess
 
 
 def over_limits(forces: np.ndarray, limits: np.ndarray) -> np.ndarray:
@@ -168,5 +121,5 @@ def stale(rows: Any, laws: list[Any]) -> bool:
     return rows is None or getattr(rows, "laws", None) is not laws
 
 
-__all__ = ["FK_MAX_CALLS", "accepted_rows", "evaluate_rows", "newton_calls",
-           "norms", "over_limits", "rank_condition", "refusal", "stale"]
+__all__ = ["FK_MAX_CALLS", "evaluate_rows", "norms", "over_limits", "rank_condition",
+           "refusal", "stale"]

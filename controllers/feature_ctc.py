@@ -28,7 +28,7 @@ from __future__ import annotations
 import numpy as np
 
 from controllers.base import ControllerContext, Goal, Observation, ObservationBatch
-from controllers.cartesian_ctc import directions_seen, every_seen, seen_rows
+from controllers.cartesian_ctc import directions_seen, every_seen
 from controllers.exceptions import ContextError
 from controllers.feature_grid import DUMMY, features_motion, grid_rows, sanitised
 from controllers.task_ctc import (
@@ -268,56 +268,6 @@ class FeatureCTC(TaskComputedTorque):
         _, rows, _, every = self.reference_grid()
         return rows, every
 
-    def batch_inputs(self, rows_batch: TaskRows, X: np.ndarray,
-                     observations: ObservationBatch, rows: np.ndarray, trials: np.ndarray,
-                     tr: np.ndarray) -> np.ndarray:
-        """:meth:`TaskComputedTorque.batch_inputs`: the rows whose features are seen, all
-        (:meth:`batch_features`) or partly (:meth:`batch_partly_seen`), with their
-        reference on its grid. A row with a feature hidden or a reference feature not
-        known uses the rows left (its mask, as :meth:`compiled_inputs` gives it, in the
-        batch's ``used``; its input row kept as the trial's own step keeps it)."""
-        step = rows_batch.step_of
-        assert step is not None
-        fast = self.batch_features(step, X, observations, rows)
-        references, on, at = rows_batch.references(trials, tr)
-        masks: dict[int, np.ndarray] = {}
-        partly = self.batch_partly_seen(step, X, observations, rows, ~fast & (at >= 0))
-        if partly is not None:
-            masks.update(zip(partly[0].tolist(), partly[1], strict=True))
-            fast[partly[0]] = True
-        fast &= at >= 0
-        for j in np.flatnonzero(fast & ~on).tolist():  # a reference feature not known
-            law = rows_batch.laws[int(trials[j])]
-            assert isinstance(law, FeatureCTC)
-            known = law.reference_grid()[2][at[j]]
-            masks[j] = masks[j] & known if j in masks else known.copy()
-        if fast.any():  # every row (a slice: no copies); the others are written again
-            X[:, step.inputs["mask"]] = 1.0  # by their trials' own steps
-            X[:, step.inputs["reference_features"]] = references
-        if masks:
-            kept = np.fromiter(masks, dtype=int, count=len(masks))
-            X[kept, step.inputs["mask"]] = np.array(list(masks.values()))
-            rows_batch.X[trials[kept]] = X[kept]
-            rows_batch.used.update(masks)
-        return fast
-
-    def batch_features(self, step: CompiledTaskStep, X: np.ndarray,
-                       observations: ObservationBatch, rows: np.ndarray) -> np.ndarray:
-        """Write the features of the batch rows ``rows`` into ``X`` where
-        :meth:`compiled_features` would give them all seen (the same blocks and numbers
-        as :meth:`compiled_inputs`; the other rows may be written too: they are written
-        again, by :meth:`batch_partly_seen` or their trials' own steps); their (m,) mask
-        (none by default)."""
-        return np.zeros(len(rows), dtype=bool)
-
-    def batch_partly_seen(self, step: CompiledTaskStep, X: np.ndarray,
-                          observations: ObservationBatch, rows: np.ndarray,
-                          candidates: np.ndarray) -> tuple[np.ndarray, np.ndarray] | None:
-        """Write the features of the ``candidates`` (m,) rows that
-        :meth:`compiled_features` gives partly seen, as it gives them; their indices
-        into ``rows`` and their task rows seen (k, m rows), or None (by default: none)."""
-        return None
-
     def retarget_trial(self, goal: Goal) -> None:
         """A new fixed goal; with a reference the taught features anchor it."""
         super().retarget_trial(goal)
@@ -338,6 +288,7 @@ class LegEdgeCTC(FeatureCTC):
     features = frozenset({"lengths", EDGE_NORMALS.field})
     observed_feature = EDGE_NORMALS
     compiled_kind = EDGE_NORMALS
+    batch_measurement = ("normals", "edge_visible", "normals", "of_normals")
 
     def features_seen(self, observation: Observation
                       ) -> tuple[np.ndarray, np.ndarray | None, np.ndarray] | str:
@@ -363,33 +314,21 @@ class LegEdgeCTC(FeatureCTC):
         n = every_seen(observation.normals, observation.edge_visible)
         return self.features_seen(observation) if n is None else (_OF_NORMALS, n, _EVERY_EDGE)
 
-    def batch_features(self, step: CompiledTaskStep, X: np.ndarray,
-                       observations: ObservationBatch, rows: np.ndarray) -> np.ndarray:
-        """Every edge seen and finite: the normals, the directions left to the compiled
-        step (as :meth:`compiled_features` and ``_OF_NORMALS``; written for every row,
-        a slice: the others' are written again)."""
-        if observations.normals is None:
-            return np.zeros(len(rows), dtype=bool)
-        n, fast = seen_rows(observations.normals, observations.edge_visible, rows)
-        X[:, step.inputs["normals"]] = n
-        X[:, step.inputs.index("of_normals")] = 1.0
-        return fast
-
-    def batch_partly_seen(self, step: CompiledTaskStep, X: np.ndarray,
-                          observations: ObservationBatch, rows: np.ndarray,
-                          candidates: np.ndarray) -> tuple[np.ndarray, np.ndarray] | None:
-        """:meth:`features_seen` of the rows with a hidden edge, all at once (the same
-        operations on each row: the same numbers)."""
-        if (observations.normals is None or observations.edge_visible is None
-                or not candidates.any()):
-            return None
+    def batch_partly_seen(self, rows_batch: TaskRows, step: CompiledTaskStep,
+                          X: np.ndarray, observations: ObservationBatch,
+                          candidates: np.ndarray
+                          ) -> dict[int, tuple[np.ndarray | None, str | None]]:
+        """:meth:`features_seen` of the candidate rows with a hidden edge, all at once
+        (the same operations on each row: the same numbers)."""
+        if observations.normals is None or observations.edge_visible is None:
+            return {}
         j = np.flatnonzero(candidates)
-        visible = np.asarray(observations.edge_visible, dtype=bool)[rows[j]].reshape(-1, 6, 2)
+        visible = np.asarray(observations.edge_visible, dtype=bool)[j].reshape(-1, 6, 2)
         hidden = ~visible.all(axis=(1, 2))
         j, visible = j[hidden], visible[hidden]
         if not len(j):
-            return None
-        n = np.asarray(observations.normals, dtype=float)[rows[j]].reshape(-1, 6, 2, 3)
+            return {}
+        n = np.asarray(observations.normals, dtype=float)[j].reshape(-1, 6, 2, 3)
         with np.errstate(invalid="ignore", divide="ignore"):
             u = directions_from_edges(n)  # directions_seen's, then features_seen's checks
         legs = (np.all(visible, axis=-1) & np.all(np.isfinite(u), axis=-1)
@@ -399,7 +338,8 @@ class LegEdgeCTC(FeatureCTC):
         X[j, step.inputs["normals"]] = n.reshape(len(j), -1)
         X[j, step.inputs["directions"]] = u.reshape(len(j), -1)
         X[j, step.inputs.index("of_normals")] = 0.0
-        return j, np.repeat(legs, 6, axis=1)
+        return {k: (u, None) for k, u in zip(j.tolist(), np.repeat(legs, 6, axis=1),
+                                             strict=True)}
 
 
 class LegDirectionCTC(FeatureCTC):
@@ -410,6 +350,7 @@ class LegDirectionCTC(FeatureCTC):
     observed_feature = LEG_DIRECTIONS
     compiled_kind: BuiltinFeature | None = LEG_DIRECTIONS
     every_rows = _EVERY_LEG
+    batch_measurement = ("directions", "direction_visible", "directions", None)
 
     def features_seen(self, observation: Observation
                       ) -> tuple[np.ndarray, np.ndarray | None, np.ndarray] | str:
@@ -427,13 +368,3 @@ class LegDirectionCTC(FeatureCTC):
         its general checks); else :meth:`features_seen`."""
         u = every_seen(observation.directions, observation.direction_visible)
         return self.features_seen(observation) if u is None else (u, None, self.every_rows)
-
-    def batch_features(self, step: CompiledTaskStep, X: np.ndarray,
-                       observations: ObservationBatch, rows: np.ndarray) -> np.ndarray:
-        """Every direction given, seen and finite: them (as :meth:`compiled_features`)."""
-        if observations.directions is None:
-            return np.zeros(len(rows), dtype=bool)
-        u, fast = seen_rows(observations.directions, observations.direction_visible, rows)
-        X[fast, step.inputs["directions"]] = u[fast]
-        return fast
-

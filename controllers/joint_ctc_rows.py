@@ -60,8 +60,10 @@ RESIDUAL, STATUS = (compiled_ctc.OUTPUTS.index(k) for k in ("fk_residual", "stat
 #: The columns of a quintic's row (21,): started (1.0 or 0.0), ``t0`` [s], duration
 #: ``T`` [s], ``q0`` (6) [m], ``q* - q0`` (6) [m], ``q*`` (6) [m].
 QUINTIC_SIZE = 21
-#: A row's code after a step: a command (over a limit or not), or why not yet or not.
-ACCEPTED, OVER, NOT_FINITE, OFF_GRID, REFUSED, UNSURE, READY, ACCEPT = range(8)
+#: A row's code after a step, in order (the C ``enum`` is made of these names): a command
+#: (over a limit or not), or why not yet or not.
+CODES = ("ACCEPTED", "OVER", "NOT_FINITE", "OFF_GRID", "REFUSED", "UNSURE", "READY", "ACCEPT")
+ACCEPTED, OVER, NOT_FINITE, OFF_GRID, REFUSED, UNSURE, READY, ACCEPT = range(len(CODES))
 
 #: The C of a step (see the module docstring); ``JointCtc`` is :class:`_Context`.
 SOURCE = r"""
@@ -80,7 +82,7 @@ typedef struct {
     int64_t n_out, pose_out, residual_at, status_at, screen_at, forces_at;
     double fk_tol; int64_t max_calls; double screen_scale; double *scratch;
 } JointCtc;
-enum { ACCEPTED, OVER, NOT_FINITE, OFF_GRID, REFUSED, UNSURE, READY, ACCEPT };
+enum { @CODES@ };
 
 /* the quintic's (q*, q_dot*, q_ddot*) at t (the Python floats' operations) */
 static void quintic_at(double t, const double *r, double *d) {
@@ -198,7 +200,7 @@ int jc_step(JointCtc *c, int64_t m, const int64_t *trials, const double *t, cons
     jc_finish(c, m, trials, code, Y, forces, errors);
     return 0;
 }
-"""
+""".replace("@CODES@", ", ".join(CODES))
 
 _P = ctypes.c_void_p
 _I = ctypes.c_int64

@@ -127,9 +127,10 @@ def rank_screen(N: ca.SX) -> ca.SX:
     """(2,) the rank screen of the computed-torque steps' ``N = L^T L`` (symmetric 6 x 6):
     ``det N`` when every pivot of its Cholesky factorisation is positive (their product;
     else 0), and ``trace N``. As ``w_min >= det / trace^5``,
-    :func:`controllers.ctc_rows.accepted_rows` clears a row with ``det > 4 thr^2
-    trace^6``: far above the threshold, where rounding cannot matter (the other rows get
-    the exact test)."""
+    the computed-torque steps' C (:mod:`controllers.joint_ctc_rows`,
+    :mod:`controllers.task_ctc_rows`) clears a row with ``det > 4 thr^2 trace^6``: far
+    above the threshold, where rounding cannot matter (the other rows get the exact
+    test, :func:`controllers.ctc_rows.rank_condition`)."""
     ok, det = [ca.SX(1.0)], [ca.SX(1.0)]
 
     def pivot(d: ca.SX) -> ca.SX:

@@ -33,11 +33,9 @@ from controllers.base import (
 from controllers.ctc_law import DAMPING as DAMPING
 from controllers.ctc_law import NATURAL_FREQUENCY_HZ as NATURAL_FREQUENCY_HZ
 from controllers.ctc_law import ComputedTorqueLaw
-from controllers.ctc_rows import stale
 from controllers.solvers.saturation import over_limit, zero_acceleration_forces
 from controllers.task_ctc_compiled import CompiledTaskStep
 from controllers.task_ctc_inputs import encoder_readings as encoder_readings
-from controllers.task_ctc_inputs import line_to, readings_into
 from controllers.task_ctc_rows import START, STARTED, VERSION, TaskRows
 from controllers.tasks.feature_kind import BuiltinFeature
 from hexapod.actuation import Actuation
@@ -55,6 +53,11 @@ class TaskComputedTorque(ComputedTorqueLaw):
     compiled_kind: BuiltinFeature | None = None
     #: The compiled step finds the pose from the encoders (else it is given).
     compiled_fk = True
+    #: The measurement a step writes itself where all of it is seen and finite, as
+    #: :meth:`compiled_inputs` would: ``(observation field, its visibility field, the
+    #: input block it goes to, an input block set to ones or None)``; ``()``: nothing
+    #: measured (the pose from the encoders); None: every row by :meth:`compiled_inputs`.
+    batch_measurement: tuple[str, str, str, str | None] | tuple[()] | None = None
 
     def init_state(self) -> None:
         """The trial's state before its first reset."""
@@ -153,23 +156,15 @@ class TaskComputedTorque(ComputedTorqueLaw):
         clock; without a reference the fixed goal at rest) into the compiled step's row;
         the task rows to use (None: all) and a note, or why there is no measurement."""
 
-    def batch_inputs(self, rows_batch: TaskRows, X: np.ndarray,
-                     observations: ObservationBatch, rows: np.ndarray, trials: np.ndarray,
-                     tr: np.ndarray) -> np.ndarray:
-        """:meth:`compiled_inputs` of many trials at once in its common case (every
-        feature seen, the reference on its grid with all its rows known): writes those
-        rows of ``X`` (m, n_in) and returns their (m,) mask; the others are left to
-        each trial's :meth:`compiled_inputs` (the same numbers). None by default.
-
-        Args:
-            rows_batch: The batch's arrays (its first step's layout, the grids).
-            X: The input rows, one per batch row of ``rows``.
-            observations: The batch.
-            rows: (m,) the batch rows.
-            trials: (m,) their trials (started, with a compiled step).
-            tr: (m,) the times on each trial's reference clock [s].
-        """
-        return np.zeros(len(rows), dtype=bool)
+    def batch_partly_seen(self, rows_batch: TaskRows, step: CompiledTaskStep,
+                          X: np.ndarray, observations: ObservationBatch,
+                          candidates: np.ndarray
+                          ) -> dict[int, tuple[np.ndarray | None, str | None]]:
+        """Write the measurement of the ``candidates`` (n,) rows that :meth:`compiled_inputs`
+        takes with some feature hidden, as it writes them, where the law can do it as
+        arrays; those rows with their task rows used (None: all) and the note
+        :meth:`compiled_inputs` gives. None by default."""
+        return {}
 
     def batch_grid(self) -> tuple[np.ndarray, np.ndarray | None] | None:
         """The reference rows on the control grid (S, w) as :meth:`compiled_inputs`
@@ -242,48 +237,22 @@ class TaskComputedTorque(ComputedTorqueLaw):
         tracks them (unchanged by default)."""
         return R, t, twist, twist_rate
 
-    def step_trial(self, observation: Observation) -> Command:
-        """The leg forces of this period [N], or a refusal (zeros) with its reason."""
-        compiled = self.compiled
-        if self.context is None or self.model is None:
-            return self.refuse("reset(context) was not called")
-        if compiled is None:
-            return self.refuse("no compiled step (compiled_kind is None and the law made "
-                               "none at reset)")
-        views = compiled.views or compiled.bind()  # (bound at the first step)
-        readings = readings_into(observation, views["q"], views["q_dot"])
-        if isinstance(readings, str):
-            return self.refuse(readings)
-        t, _, qd = readings
-        clock = self.clock
-        try:
-            if not clock[STARTED]:
-                problem = self._start(observation, t)
-                if problem is not None:
-                    return self.refuse(problem)
-            cmd = compiled.step_written(self, observation, t - float(clock[START]))
-            if isinstance(cmd, str):
-                return self.refuse(cmd)
-            compiled.steps[0] += 1
-            forces = cmd.forces
-            assert forces is not None and compiled.bound is not None
-            over = over_limit(forces, self.force_limit_list)
-            if over or self.integral_gain:  # (else the law's forces as they are)
-                y = compiled.bound.y
-                cmd.forces = self.limited(forces, y[compiled.pose_block], qd,
-                                          y[compiled.error_block], compiled.used, over)
-            return cmd
-        except Exception as exc:  # the nominal model failed here: refuse with its reason
-            return self.refuse(f"nominal model failed: {exc}")
-
-    def step_arrays(self, observations: ObservationBatch, out: CommandBatch) -> np.ndarray:
-        """The batch's step as arrays (:meth:`~controllers.task_ctc_rows.TaskRows.step`,
-        one C call for its rows); returns the rows left to the trials' own steps (which
-        refuse them with the reason of their status)."""
-        if stale(self._rows, self.trial_instances):
-            self._rows = TaskRows(self.trial_instances)
-        assert self._rows is not None
-        return self._rows.step(observations, out, self.solver.threshold)
+    def step_batch(self, observations: ObservationBatch) -> CommandBatch:
+        """The leg forces of every row [N] (:meth:`~controllers.task_ctc_rows.TaskRows.
+        step`), or a refusal (zeros) with its reason."""
+        self.crashes = {}
+        n = len(observations)
+        out = CommandBatch.zeros(n, Actuation.FORCE)
+        rows, trials = self._rows, self.trial_instances
+        if rows is None or rows.laws is not trials:  # a reset (or a copy): the batch anew
+            if not trials:
+                for j in range(n):
+                    out.put(j, self.refuse("reset(context) was not called"))
+                return out
+            rows = self._rows = TaskRows(trials)
+        if n:
+            rows.step(observations, out, self.solver.threshold)
+        return out
 
     def integral_term(self, m: int) -> np.ndarray:
         """(m,) ``Kp Ki int e dt`` of the task rows (the integral action's share of the
@@ -320,20 +289,6 @@ class TaskComputedTorque(ComputedTorqueLaw):
         assert model is not None and ctx is not None
         return self.ctc_options.saturated(forces, self.force_limit, lambda: (
             zero_acceleration_forces(model, pose, qd, hold=float(ctx.dt))))
-
-    def _start(self, observation: Observation, t: float) -> str | None:
-        """Start following the fixed goal at ``t`` [s]: with a smooth goal, the line from
-        the pose of a compiled step towards the goal at rest (the pose the law measures
-        now; its command is not used); None, or why there is no pose."""
-        if self.smooth_goal:
-            assert self.compiled is not None and self.context is not None
-            found = self.compiled.step_written(self, observation, 0.0)
-            if isinstance(found, str):
-                return found
-            assert self.guess is not None  # the pose of the accepted step
-            self.reference = line_to(self.context, *self.guess, *self.goal_pose())
-        self.clock[STARTED], self.clock[START] = 1.0, t
-        return None
 
     def refuse(self, problem: str, error: np.ndarray | None = None) -> Command:
         """A zero force command with the reason."""

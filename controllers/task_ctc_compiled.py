@@ -1,33 +1,28 @@
 """The compiled step of the task-space computed-torque laws.
 
-:class:`CompiledTaskStep` fills the input row of the law's compiled step
+:class:`CompiledTaskStep` holds the law's compiled step
 (:func:`controllers.solvers.compiled_task_ctc.task_step`, or a plugin feature's of the
-same layouts), calls it and reads the command; off the happy path it answers why not:
-the law's measurement has none, or the row's ``status`` (:mod:`controllers.ctc_status`)
-or the rank test says so (worded by :func:`controllers.ctc_rows.refusal`). A law gives
-it ``compiled_kind`` and ``compiled_fk``, its constants (``compiled_constants(step)``)
-and each period its measurement and reference (``compiled_inputs(step, observation,
-tr, q)``: the rows to use or None and a note, or why there is no measurement).
+same layouts) and its input row, and fills that row: a law gives it ``compiled_kind``
+and ``compiled_fk``, its constants (``compiled_constants(step)``) and, for a row its
+batch does not write as arrays, its measurement and reference (``compiled_inputs(step,
+observation, tr, q)``: the rows to use or None and a note, or why there is no
+measurement).
 
-The C function runs on the step's own bound rows (:meth:`hexapod.compiled.
-CompiledFunction.bind`; the input row may be a row of its batch's matrix,
-:mod:`controllers.task_ctc_rows`); the row's ``pose`` block holds the pose guess.
+The input row is a row of its batch's matrix (:mod:`controllers.task_ctc_rows`, whose
+one step evaluates it); the row's ``pose`` block holds the pose guess.
 """
 
 from __future__ import annotations
 
-import math
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from numpy.typing import ArrayLike
-from scipy.linalg.lapack import dsyevd as _eigenvalues
 
-from controllers.base import Command, Observation
-from controllers.ctc_rows import FK_MAX_CALLS, newton_calls, refusal
+from controllers.base import Observation
+from controllers.ctc_rows import FK_MAX_CALLS
 from controllers.solvers.compiled_task_ctc import FIT_TOLERANCE, FK_TOLERANCE, task_step
-from hexapod.actuation import Actuation
-from hexapod.compiled import BoundCall, CompiledFunction
+from hexapod.compiled import CompiledFunction
 from hexapod.dynamics.model import INVERSE_TOLERANCE
 from hexapod.workspace import home_pose
 
@@ -74,10 +69,6 @@ class CompiledTaskStep:
         self.home = home_pose(g)
         self.guess = None
         out = self.outputs
-        self._residual = out.index("fk_residual")
-        self._status = out.index("status")
-        self._factor = out["factor"]
-        self._forces = out["forces"]
         #: The output blocks of the pose and of the task error.
         self.pose_block, self.error_block = out["pose"], out["error"]
         #: Pose residual below which the pose has converged.
@@ -93,18 +84,13 @@ class CompiledTaskStep:
         return task_step(self.kind, self.fk, INVERSE_TOLERANCE)
 
     def adopt(self, row: np.ndarray, guessed: np.ndarray, steps: np.ndarray) -> None:
-        """Bind the compiled function to the input row ``row`` (n_in,) (used in place:
-        its own, or a row of its batch's matrix, its values there already), with the
-        flag whether its pose block holds a pose found (1,) and the count of commands
-        (1,) (own or the batch's)."""
-        #: The input row (written in place, evaluated without a copy).
+        """Take the input row ``row`` (n_in,) (its own, or a row of its batch's matrix,
+        its values there already), with the flag whether its pose block holds a pose
+        found (1,) and the count of commands (1,) (own or the batch's)."""
+        #: The input row (written in place) and its views by block
+        #: (:func:`~controllers.solvers.compiled_task_ctc.layout`).
         self.row = row
-        #: The function bound to the row and its views by block
-        #: (:func:`~controllers.solvers.compiled_task_ctc.layout`), made at the first
-        #: per-trial use (:meth:`bind`; a batch's rows stepped as arrays never bind one):
-        #: None and empty before.
-        self.bound: BoundCall | None = None
-        self.views: dict[str, np.ndarray] = {}
+        self.views: dict[str, np.ndarray] = self.inputs.views(row)
         #: Whether the ``pose`` block holds a pose found (1.0) or the home pose (0.0).
         self.guessed = guessed
         #: Commands given by the step (the law's ``compiled_steps``).
@@ -112,17 +98,10 @@ class CompiledTaskStep:
         #: The task rows the last prepared step uses (None: all).
         self.used: np.ndarray | None = None
 
-    def bind(self) -> dict[str, np.ndarray]:
-        """Bind the compiled function to :attr:`row` (its first per-trial use); returns
-        :attr:`views`."""
-        self.bound = self.function.bind(self.row)
-        self.views = self.bound.inputs
-        return self.views
-
     def __getstate__(self) -> dict[str, object]:
-        """Picklable: the function and its binding (ctypes) are rebuilt on unpickling."""
+        """Picklable: the function (ctypes) is rebuilt on unpickling."""
         state = self.__dict__.copy()
-        for key in ("function", "bound", "row", "views", "guessed", "steps"):
+        for key in ("function", "row", "views", "guessed", "steps"):
             del state[key]
         state["_arrays"] = (self.row.copy(), self.guessed.copy(), self.steps.copy())
         return state
@@ -133,7 +112,6 @@ class CompiledTaskStep:
         self.__dict__.update(state)
         self.function = self.make_function()
         self.adopt(*arrays)
-        self.bind()
 
     @property
     def guess(self) -> tuple[np.ndarray, np.ndarray] | None:
@@ -158,51 +136,12 @@ class CompiledTaskStep:
         its values in row-major order, or one value for all)."""
         self.row[self.inputs[name]] = np.ravel(value)
 
-    def step_written(self, law: TaskComputedTorque, observation: Observation, tr: float
-                     ) -> Command | str:
-        """The command of this period at ``tr`` [s] of the reference's clock, or why there
-        is none (``q`` and ``q_dot`` already in the row)."""
-        prepared = self.prepare(law, observation, tr)
-        if isinstance(prepared, str):
-            return prepared
-        rows, note = prepared
-        bound = self.bound
-        assert bound is not None  # (prepare binds it)
-        pose_in, y = self.views["pose"], bound.y
-        guess = newton_calls(bound, pose_in, self.pose_block, self._residual,
-                             self.tolerance, FK_MAX_CALLS)
-        # a command: status 0 and full rank (the squared singular values of the masked
-        # Jacobian by LAPACK syevd of L^T L; the test of controllers.ctc_rows.rank_condition,
-        # the condition as sqrt(max / min)); its pose then the next guess
-        w_min = w_max = 0.0
-        info = 1
-        if y[self._status] == 0.0:
-            w, _, info = _eigenvalues(y[self._factor].reshape(6, 6), 0)  # (compute_v=0)
-            w_min, w_max = float(w[0]), float(w[-1])
-        if info != 0 or not (w_max > 0 and w_min > law.solver.threshold**2 * w_max):
-            if guess is not None:  # the guess stays the last pose found
-                pose_in[:] = guess
-            reason = refusal(y, self._status, self._residual, self._factor,
-                             law.solver.threshold,
-                             self.pose_name, self.views)
-            assert reason is not None
-            return reason
-        pose_in[:] = y[self.pose_block]
-        self.guessed[0] = 1.0
-        e = y[self.error_block]
-        e = e.copy() if rows is None else e[rows]
-        return Command(np.zeros(6), error=e, error_norm=math.sqrt(e.dot(e)), rank=6,
-                       condition=math.sqrt(w_max / w_min), features_used=len(e),
-                       active_constraints=[],
-                       notes=[] if note is None else [note], actuation=Actuation.FORCE,
-                       forces=y[self._forces].copy())
-
     def prepare(self, law: TaskComputedTorque, observation: Observation, tr: float
                 ) -> tuple[np.ndarray | None, str | None] | str:
         """Write the law's measurement and the reference at ``tr`` into the row (``q``,
         ``q_dot`` and the pose guess there already); the task rows to use (None: all) and
         a note, or why there is no measurement."""
-        views = self.views or self.bind()
+        views = self.views
         prepared = law.compiled_inputs(self, observation, tr, views["q"])
         if isinstance(prepared, str):
             return prepared

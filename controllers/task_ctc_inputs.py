@@ -1,8 +1,7 @@
 """What the computed-torque task laws (:mod:`controllers.task_ctc`) read and build
-around their loop: the checked encoder readings of an observation (the general
-:func:`encoder_readings` and its common case :func:`finite_readings`, written into a
-compiled step's row), the checked goal pose and camera with base points of a context,
-and the quintic line to a fixed goal (:func:`line_to`).
+around their loop: why an observation's encoder readings cannot be used
+(:func:`encoder_readings`), the checked goal pose and camera with base points of a
+context, and the quintic line to a fixed goal (:func:`line_to`).
 """
 
 from __future__ import annotations
@@ -22,7 +21,6 @@ __all__ = [
     "QUINTIC_PEAK_SPEED",
     "camera_and_base_points",
     "encoder_readings",
-    "finite_readings",
     "goal_pose_of",
     "line_to",
 ]
@@ -73,44 +71,6 @@ def encoder_readings(observation: Observation) -> tuple[float, np.ndarray, np.nd
         if x.size == 0 or not np.isfinite(x).all():
             return f"measured {what} not finite: {x}"
     return t, q, qd
-
-
-def finite_readings(observation: Observation, q_row: np.ndarray, qd_row: np.ndarray
-                    ) -> tuple[float, np.ndarray, np.ndarray] | None:
-    """The common case of :func:`encoder_readings`: a finite time [s] and finite (6,)
-    lengths [m] and leg velocities [m/s], written into a compiled step's input row (its
-    views ``q_row`` and ``qd_row``); None otherwise (missing, another shape, a
-    non-finite value, or a sum of squares that overflows), where
-    :func:`encoder_readings` decides. When both answer, they answer the same."""
-    qd = observation.q_dot
-    if qd is None:
-        return None
-    q = np.asarray(observation.lengths, dtype=float)
-    qd = np.asarray(qd, dtype=float)
-    if q.shape != (6,) or qd.shape != (6,):
-        return None
-    t = float(observation.t)
-    q_row[:] = q
-    qd_row[:] = qd
-    # a NaN or inf makes the sums so
-    if math.isfinite(t) and math.isfinite(q_row.dot(q_row) + qd_row.dot(qd_row)):
-        return t, q, qd
-    return None
-
-
-def readings_into(observation: Observation, q_row: np.ndarray, qd_row: np.ndarray
-                  ) -> tuple[float, np.ndarray, np.ndarray] | str:
-    """:func:`encoder_readings` written into a compiled step's input row (its views
-    ``q_row`` and ``qd_row``): the common case by :func:`finite_readings`, the others by
-    :func:`encoder_readings` (or the reason they cannot be used)."""
-    fast = finite_readings(observation, q_row, qd_row)
-    if fast is not None:
-        return fast
-    readings = encoder_readings(observation)
-    if not isinstance(readings, str):
-        q_row[:] = readings[1]
-        qd_row[:] = readings[2]
-    return readings
 
 
 def camera_and_base_points(controller: str, context: ControllerContext

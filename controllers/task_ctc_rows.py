@@ -1,31 +1,67 @@
-"""The batch of the task computed-torque laws (``cartesian-ctc``, ``vision-ctc``,
-``leg-edge-ctc``, ``leg-direction-ctc``, a plugin feature's ``<name>-ctc``) as arrays.
+"""The one step of the task computed-torque laws (``cartesian-ctc``, ``vision-ctc``,
+``leg-edge-ctc``, ``leg-direction-ctc``, a plugin feature's ``<name>-ctc``) over a batch
+of trials (a batch of one is the per-trial step).
 
-:class:`TaskRows` (built at the first batched step after a reset) owns its trials' state:
-the input matrix ``X`` (n, n_in) with each row's constants and pose guess, the guess
-flags, command counts, reference clocks, force limits, integrals and the references on
-the control grid (n, S, w) with the steps whose task rows are all known. Each instance's
-state is views of these arrays, so its per-trial step (which refuses with the reason)
-and the batch share it.
+:class:`TaskRows` (built at the first step after a reset) owns its trials' state: the
+input matrix ``X`` (n, n_in) with each row's constants and pose guess, the guess flags,
+command counts, reference clocks, force limits, integrals and the references on the
+control grid (n, S, w) with the steps whose task rows are all known. Each instance's
+state is views of these arrays.
 
-One batched step (:meth:`TaskRows.step`): readings, features (the law's
-``batch_inputs``) and references written by fancy indexing, one C call
-(:func:`~controllers.ctc_rows.evaluate_rows`), the rows screened at once
-(:func:`~controllers.ctc_rows.accepted_rows`), the results written as slices; Python per
-row only for rare rows (a feature hidden, an instant off the grid, a grid built, forces
-over a limit).
+One step (:meth:`TaskRows.step`) is C (:mod:`controllers.task_ctc_c`, compiled once and
+cached as the kernels are) around the compiled step of
+:mod:`controllers.solvers.compiled_task_ctc`:
+
+- ``prepare``: each row's time, lengths and leg velocities (a value not finite: a
+  refusal), the law's measurement where all of it is seen and finite (its
+  ``batch_measurement``), its clock (a fixed goal's first step, a grid to build:
+  Python), the reference on its grid, and the integral term;
+- ``evaluate``: the compiled step of each row, called again from the pose reached while
+  the pose has not converged (from :data:`~hexapod.compiled.LANE_ROWS` rows, in lanes
+  between the two C passes: the same numbers);
+- ``finish``: the rows with status 0 whose rank screen clears them: the next pose guess,
+  the command count, the forces and the anti-windup integral over the task rows used.
+
+Python takes the rare rows: a fixed goal's first step (the line from the pose found),
+a reference's new grid, a feature hidden or a reference off its grid (the law's own
+``compiled_inputs``, written into the trial's row), a rank the screen does not settle
+(LAPACK), forces over a limit (the law's saturation) and the refusals' reasons.
 """
 
 from __future__ import annotations
 
 import contextlib
+import ctypes
 import math
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
+from scipy.linalg.lapack import dsyevd as _eigenvalues
 
-from controllers.ctc_rows import FK_MAX_CALLS, accepted_rows, evaluate_rows, norms, over_limits
+from controllers.base import Command
+from controllers.ctc_rows import FK_MAX_CALLS, evaluate_rows, norms, rank_condition, refusal
 from controllers.data import CommandBatch, ObservationBatch
+from controllers.task_ctc_c import (
+    ACCEPT,
+    ACCEPTED,
+    FIRST,
+    NOT_FINITE,
+    OFF_GRID,
+    OVER,
+    READY,
+    REFUSED,
+    STALE,
+    UNKNOWN,
+    UNSEEN,
+    UNSURE,
+    UNUSABLE,
+    Call,
+    Context,
+    library,
+)
+from controllers.task_ctc_inputs import encoder_readings, line_to
+from hexapod.actuation import Actuation
+from hexapod.compiled import LANE_ROWS, CompilationError
 
 if TYPE_CHECKING:
     from controllers.task_ctc import TaskComputedTorque
@@ -38,31 +74,53 @@ GRID_CHUNK = 8
 #: time at which the reference's clock is 0 [s], and the reference's version (counts
 #: its changes: a grid built for an older version is built again).
 STARTED, START, VERSION = 0, 1, 2
+#: Six zeros (the velocities of a force command), copied.
+_ZEROS = np.zeros(6)
+#: The codes left to :meth:`TaskRows._rare` after the first C call.
+_PENDING = frozenset((OFF_GRID, UNSURE, READY, FIRST, STALE, UNKNOWN, UNSEEN))
+_PENDING_CODES = np.array(sorted(_PENDING))
 
+class _Buffers:
+    """A step's arrays for ``n`` rows (``n_in`` inputs, ``n_out`` outputs, a measurement
+    of ``feat_w`` values and ``vis_w`` visibility flags per row) and their addresses (the
+    C ``TaskCall``)."""
 
-def grid_steps(tr: np.ndarray, dt: np.ndarray) -> np.ndarray:
-    """The steps ``k`` (m,) int of the control grid at ``tr`` (m,) [s] (``tr = k dt``
-    within 1 ns, ``dt`` (m,) [s]), or -1 off the grid (the per-trial test of
-    :func:`controllers.task_ctc.grid_step`, element by element: the same numbers)."""
-    k = np.round(tr / dt)
-    on = (np.abs(tr - k * dt) < 1e-9) & (k >= 0)
-    return np.where(on, k, -1).astype(int)  # type: ignore[no-any-return]
+    def __init__(self, n: int, n_in: int, n_out: int, feat_w: int, vis_w: int) -> None:
+        self.n = n
+        self.X = np.zeros((n, n_in))
+        self.trials = np.zeros(n, dtype=np.int64)
+        self.t = np.zeros(n)
+        self.q = np.zeros((n, 6))
+        self.qd = np.zeros((n, 6))
+        self.code = np.zeros(n, dtype=np.int64)
+        self.tr = np.zeros(n)
+        self.gstep = np.zeros(n, dtype=np.int64)
+        self.feat = np.zeros((n, feat_w))
+        self.vis = np.zeros((n, vis_w), dtype=np.uint8)
+        self.seen = np.zeros(n, dtype=np.uint8)
+        self.Y = np.zeros((n, n_out))
+        self.forces = np.zeros((n, 6))
+        self.call = Call(*(a.ctypes.data for a in (
+            self.X, self.trials, self.t, self.q, self.qd, self.code, self.tr, self.gstep,
+            self.feat, self.vis, self.seen, self.Y, self.forces)), n)
+        #: The address of :attr:`call` (the C functions' second argument).
+        self.at = ctypes.addressof(self.call)
 
 
 class TaskRows:
-    """The arrays of a batch of task computed-torque trials (see the module docstring);
-    each instance's state becomes views of them.
+    """The arrays of a batch of task computed-torque trials and its one step (see the
+    module docstring); each instance's state becomes views of them.
 
     Args:
         laws: The trials' instances (reset), in trial order; those without a compiled
-            step are left to their own steps.
+            step are refused.
     """
 
     def __init__(self, laws: list[TaskComputedTorque]) -> None:
         self.laws = laws
         n = len(laws)
         self.usable = np.array([law.compiled is not None and law.model is not None
-                                for law in laws], dtype=bool)
+                                for law in laws], dtype=np.uint8)
         steps: list[CompiledTaskStep] = [law.compiled for law in laws if law.compiled]
         self.step_of = steps[0] if steps else None
         width = 0 if self.step_of is None else self.step_of.function.n_in
@@ -74,7 +132,7 @@ class TaskRows:
         self.dt = np.array([float(law.context.dt) if law.context is not None else 1.0
                             for law in laws])
         #: Rows without integral action, and each trial's ``int e dt`` of its task rows.
-        self.plain = np.array([not law.integral_gain for law in laws], dtype=bool)
+        self.plain = np.array([not law.integral_gain for law in laws], dtype=np.uint8)
         size = 0 if self.step_of is None else len(range(width)[
             self.step_of.inputs["integral"]])
         self.integral = np.zeros((n, size))
@@ -93,38 +151,99 @@ class TaskRows:
         #: The references on the control grid (n, S, w), the grid steps with every task
         #: row known (n, S), each trial's grid length (0: none) and the version built.
         self.grids = np.zeros((n, 1, 0))
-        self.known = np.zeros((n, 1), dtype=bool)
-        self.grid_len = np.zeros(n, dtype=int)
+        self.known = np.zeros((n, 1), dtype=np.uint8)
+        self.grid_len = np.zeros(n, dtype=np.int64)
         self.built = np.full(n, -1.0)
+        law0 = laws[0] if laws else None
+        self.kp_ki = (law0.gains.kp * law0.integral_gain
+                      if law0 is not None and law0.integral_gain else 0.0)
+        #: The rank test's threshold of the last step (its screen's scale set in C).
+        self.threshold = math.nan
+        self._last: _Buffers | None = None
+        self.context: Context | None = None
+        if self.step_of is not None:
+            self._bind(self.step_of)
 
-    def references(self, trials: np.ndarray, tr: np.ndarray) -> tuple[np.ndarray,
-                                                                       np.ndarray,
-                                                                       np.ndarray]:
-        """The reference rows (m, w) of the trials ``trials`` (m,) at ``tr`` (m,) [s]
-        on their clocks read from their grids (built for a new reference), the (m,)
-        mask of the rows read (on the grid, every task row known) and their (m,) steps
-        on their grids (-1: off the grid; the rows there are read, known or not)."""
-        stale = self.built[trials] != self.clock[trials, VERSION]
-        if stale.any():  # once per reference, GRID_CHUNK trials together
-            new = np.unique(trials[stale]).tolist()
-            for start in range(0, len(new), GRID_CHUNK):
-                chunk = new[start:start + GRID_CHUNK]
-                with contextlib.suppress(Exception):  # each trial's _build meets it again
-                    self.laws[chunk[0]].build_grids([self.laws[k] for k in chunk])
-                for k in chunk:
-                    self._build(k)
-        k = grid_steps(tr, self.dt[trials])
-        length = self.grid_len[trials]
-        ok = (k >= 0) & (length > 0)
-        steps = np.where(ok, np.minimum(k, length - 1), -1)
-        at = np.maximum(steps, 0) + self.grids.shape[1] * trials  # the grids one by one
-        ok &= self.known.reshape(-1).take(at)
-        n, size, width = self.grids.shape
-        return self.grids.reshape(n * size, width).take(at, axis=0), ok, steps
+    def _bind(self, step: CompiledTaskStep) -> None:
+        """The C context of the arrays and of the compiled step (its work arrays)."""
+        function = step.function
+        if function.entry is None:
+            raise CompilationError(f"{function.name}: the computed-torque step needs its "
+                                   "compiled C (no C compiler?)")
+        n_arg, n_res, n_iw, n_w = function.work_sizes
+        self._arg = (ctypes.c_void_p * max(n_arg, 1))()
+        self._res = (ctypes.c_void_p * max(n_res, 1))()
+        self._iw = np.zeros(max(n_iw, 1), dtype=np.int64)
+        self._w = np.zeros(max(n_w, 1))
+        ins, outs = step.inputs, step.outputs
+        self.function_name = function.name
+        #: The output blocks the step reads (the error, the pose, ``L^T L``, the residual).
+        self._error, self._pose, self._factor = outs["error"], outs["pose"], outs["factor"]
+        self._residual = outs.index("fk_residual")
+        ref = ins["reference_features"] if "reference_features" in ins else ins["reference"]
+        mask = ins["mask"] if "mask" in ins else slice(0, 0)
+        self.context = Context(
+            0, function.n_in, ins["q"].start, ins["q_dot"].start, ref.start,
+            ref.stop - ref.start, mask.start, mask.stop - mask.start, ins["integral"].start,
+            self.integral.shape[1], ins["pose"].start, 0, 0, 0, 0, 0, 0, 0, 0, 0, self.kp_ki,
+            0, 0, 0, 0, ctypes.cast(function.entry, ctypes.c_void_p).value,
+            ctypes.addressof(self._arg), ctypes.addressof(self._res), self._iw.ctypes.data,
+            self._w.ctypes.data, function.n_out, outs["pose"].start, outs.index("fk_residual"),
+            outs.index("status"), outs["screen"].start, outs["forces"].start,
+            outs["error"].start, step.tolerance, FK_MAX_CALLS, 0.0)
+        law0 = self.laws[0]
+        measurement = law0.batch_measurement
+        #: The observation's measured field and its visibility (None: nothing measured).
+        self.measured: tuple[str, str] | None = None
+        c = self.context
+        if measurement:
+            field, visibility, into, ones = measurement
+            self.measured = (field, visibility)
+            c.measured, c.feat_at = 1, ins[into].start
+            c.feat_w = ins[into].stop - ins[into].start
+            c.vis_w = c.feat_w // 3  # one flag per unit vector (leg or edge)
+            if ones is not None:
+                c.ones_at, c.ones_w = ins[ones].start, ins[ones].stop - ins[ones].start
+        #: Whether the rows' measurement is the law's own (every row by its inputs).
+        self.own_inputs = measurement is None
+        self._addresses()
+
+    def _addresses(self) -> None:
+        """The arrays' addresses in the C context (again after the grids grow)."""
+        c = self.context
+        assert c is not None
+        for name in ("X", "usable", "plain", "clock", "built", "dt", "grid_len", "grids",
+                     "known", "integral", "guessed", "steps", "limit"):
+            setattr(c, name, getattr(self, name).ctypes.data)
+        c.S = self.grids.shape[1]
+        self._ctx = ctypes.addressof(c)
+
+    def _buffers(self, n: int) -> _Buffers:
+        """The step's arrays for ``n`` rows (the last step's when it had as many)."""
+        b = self._last
+        if b is None or b.n != n:
+            assert self.step_of is not None and self.context is not None
+            c = self.context
+            b = self._last = _Buffers(n, self.X.shape[1], self.step_of.function.n_out,
+                                      c.feat_w, c.vis_w)
+        return b
+
+    # ---------------------------------------------------------------- grids
+    def _build_stale(self, trials: np.ndarray) -> None:
+        """Build the grids of ``trials`` whose reference changed, :data:`GRID_CHUNK`
+        trials together."""
+        new = np.unique(trials[self.built[trials] != self.clock[trials, VERSION]]).tolist()
+        for start in range(0, len(new), GRID_CHUNK):
+            chunk = new[start:start + GRID_CHUNK]
+            with contextlib.suppress(Exception):  # each trial's _build meets it again
+                self.laws[chunk[0]].build_grids([self.laws[k] for k in chunk])
+            for k in chunk:
+                self._build(k)
+        self._addresses()
 
     def _build(self, k: int) -> None:
         """Stack trial ``k``'s reference grid (the law's ``batch_grid``: none when it
-        raises; its own step then meets the failure)."""
+        raises; its own inputs then meet the failure)."""
         law = self.laws[k]
         self.built[k] = law.clock[VERSION]
         try:
@@ -138,7 +257,7 @@ class TaskRows:
         size, width = rows.shape
         if size > self.grids.shape[1] or width != self.grids.shape[2]:
             grown = np.zeros((len(self.laws), max(size, self.grids.shape[1]), width))
-            grown_known = np.zeros(grown.shape[:2], dtype=bool)
+            grown_known = np.zeros(grown.shape[:2], dtype=np.uint8)
             if width == self.grids.shape[2]:
                 grown[:, :self.grids.shape[1]] = self.grids
                 grown_known[:, :self.known.shape[1]] = self.known
@@ -150,123 +269,271 @@ class TaskRows:
         self.grid_len[k] = size
         law.share_grid(self.grids[k, :size])
 
+    # ---------------------------------------------------------------- the step
     def step(self, observations: ObservationBatch, out: CommandBatch, threshold: float
-             ) -> np.ndarray:
-        """Step every row of a started trial with finite readings into ``out``; returns
-        the rows left to the trials' own steps.
+             ) -> None:
+        """Every row's command into ``out`` (a refusal with its reason where there is
+        none); a batch of one gets the full :class:`Command` (the diagnostics of a
+        per-trial step: error, rank, condition number and notes).
 
         Args:
             observations: The batch (row ``k`` of trial ``observations.trials[k]``).
             out: The commands, written in place.
             threshold: The rank test's relative singular-value threshold.
+
+        Raises:
+            CompilationError: The compiled step failed.
         """
         n = len(observations)
-        first = self.step_of
-        if observations.q_dot is None or first is None:
-            return np.arange(n)
-        t = np.asarray(observations.t, dtype=float)
-        q_all = np.asarray(observations.lengths, dtype=float)
-        qd_all = np.asarray(observations.q_dot, dtype=float)
-        trials_all = np.asarray(observations.trials, dtype=int)
-        finite = self.usable[trials_all] & (self.clock[trials_all, STARTED] != 0.0)
-        if not (np.isfinite(t).all() and np.isfinite(q_all).all()
-                and np.isfinite(qd_all).all()):  # off the common case: row by row
-            finite &= (np.isfinite(t) & np.isfinite(q_all).all(axis=1)
-                       & np.isfinite(qd_all).all(axis=1))
-        rows = np.flatnonzero(finite)
-        if not len(rows):
-            return np.arange(n)
-        trials = trials_all[rows]
-        inputs, outputs = first.inputs, first.outputs
-        X = self.X[trials]
-        X[:, inputs["q"]] = q_all[rows]
-        X[:, inputs["q_dot"]] = qd_all[rows]
-        tr = t[rows] - self.clock[trials, START]
-        law0: Any = self.laws[int(trials[0])]
-        #: The task rows used of a batch row (its index in ``rows``), where not all.
-        self.used: dict[int, np.ndarray] = {}
-        fast = law0.batch_inputs(self, X, observations, rows, trials, tr)
-        keep = np.ones(len(rows), dtype=bool)
-        used = self.used
-        for j in np.flatnonzero(~fast).tolist():  # each by its law, off the common case
-            k = int(rows[j])
-            law = self.laws[int(trials[j])]
-            step = law.compiled
-            assert step is not None
-            views = step.views or step.bind()
-            views["q"][:] = q_all[k]
-            views["q_dot"][:] = qd_all[k]
-            try:
-                prepared = step.prepare(law, observations.item(k), float(tr[j]))
-            except Exception:  # the trial's own step refuses with the reason
-                prepared = "failed"
-            if isinstance(prepared, str):
-                keep[j] = False
-                continue
-            X[j] = step.row
-            if prepared[0] is not None:
-                used[j] = prepared[0]
-        gain = fast & ~self.plain[trials]  # the integral action of the rows written here
-        if gain.any():
-            kp_ki = law0.gains.kp * law0.integral_gain
-            X[gain, inputs["integral"]] = kp_ki * self.integral[trials[gain]]
-        if not keep.all():
-            if used:
-                index = np.cumsum(keep) - 1
-                used = {int(index[j]): u for j, u in used.items()}
-            rows, trials, X = rows[keep], trials[keep], X[keep]
-        if not len(rows):
-            return np.arange(n)
-        Y, _ = evaluate_rows(first.function, X, inputs["pose"], outputs["pose"],
-                             outputs.index("fk_residual"), first.tolerance, FK_MAX_CALLS)
-        a = np.flatnonzero(accepted_rows(Y, outputs.index("status"), outputs["screen"],
-                                         outputs["factor"], threshold))
-        if not len(a):
-            return np.arange(n)
-        if len(a) == len(rows):  # the common case: every row accepted (no copies)
-            ka, ta, Ya = rows, trials, Y
-        else:
-            ka, ta, Ya = rows[a], trials[a], Y[a]
-        F, P, E = Ya[:, outputs["forces"]], Ya[:, outputs["pose"]], Ya[:, outputs["error"]]
-        self.X[ta, inputs["pose"]] = P  # the next steps' guesses
-        self.guessed[ta] = 1.0
-        self.steps[ta] += 1
-        assert out.forces is not None
-        out.forces[ka] = F
-        out.error_norm[ka] = np.sqrt(norms(E))
-        over = over_limits(F, self.limit[ta])
-        used_a: dict[int, np.ndarray] = {}
-        if used:  # the accepted row of a row (``a`` is sorted)
-            at = np.searchsorted(a, np.fromiter(used, dtype=int, count=len(used))).tolist()
-            used_a = {i: u for i, (j, u) in zip(at, used.items(), strict=True)
-                      if i < len(a) and a[i] == j}
-        self._integrate(ta, E, over, used_a)
-        for i in np.flatnonzero(over).tolist():  # over a limit: the law's strategy
-            out.forces[ka[i]] = self.laws[int(ta[i])].limited(
-                F[i], P[i], qd_all[ka[i]], E[i], used.get(int(a[i])), True)
-        for i, u in used_a.items():  # the norms of the rows used
-            e = E[i][u]
-            out.error_norm[ka[i]] = math.sqrt(e.dot(e))
-        if len(ka) == n:
-            return np.zeros(0, dtype=np.int64)
-        slow = np.ones(n, dtype=bool)
-        slow[ka] = False
-        return np.flatnonzero(slow)
-
-    def _integrate(self, ta: np.ndarray, E: np.ndarray, over: np.ndarray,
-                   used: dict[int, np.ndarray]) -> None:
-        """Advance ``int e dt`` of the trials ``ta`` with integral action by their task
-        errors ``E`` (m, k) over the rows ``used``, held where a force is ``over`` its
-        limit (as the law's ``limited``: the same numbers)."""
-        go = np.flatnonzero(~self.plain[ta] & ~over)
-        if not len(go):
+        c = self.context
+        if c is None or observations.q_dot is None:
+            for j in range(n):
+                self._refuse(out, j, self._unusable(observations, j))
             return
-        step = np.where(np.isfinite(E[go]), E[go], 0.0) * self.dt[ta[go]][:, None]
-        for r, i in enumerate(go.tolist()):
-            u = used.get(i)
-            if u is not None:
-                step[r] = np.where(u, step[r], 0.0)
-        self.integral[ta[go]] += step
+        lib = library()
+        if threshold != self.threshold:
+            self.threshold = threshold
+            c.screen_scale = 4.0 * threshold**2
+        b = self._buffers(n)
+        np.copyto(b.trials, observations.trials)
+        np.copyto(b.t, observations.t)
+        np.copyto(b.q, observations.lengths)
+        np.copyto(b.qd, observations.q_dot)
+        if self.measured is not None:
+            field, visibility = self.measured
+            values = getattr(observations, field)
+            if values is None:  # not measured: every row by its law (which says so)
+                b.vis[:] = 0
+            else:
+                np.copyto(b.feat.reshape(values.shape), values)
+                visible = getattr(observations, visibility)
+                np.copyto(b.vis.reshape(visible.shape), visible)
+        code = b.code
+        if n < LANE_ROWS:  # a few rows: one C call
+            if lib.tc_step_call(self._ctx, b.at):
+                raise CompilationError(f"{self.function_name}: the compiled function failed")
+        else:
+            lib.tc_prepare_call(self._ctx, b.at)
+        if n == 1:
+            if int(code[0]) in _PENDING:
+                used: dict[int, np.ndarray] = {}
+                notes: dict[int, str] = {}
+                reasons = self._rare(observations, b, used, notes, threshold)
+                self._one(observations, out, b, used.get(0), notes.get(0), reasons.get(0))
+            else:  # the common case
+                self._one(observations, out, b, None, None, None)
+            return
+        pending = bool(np.isin(code, _PENDING_CODES).any())
+        used = {}
+        notes = {}
+        reasons = self._rare(observations, b, used, notes, threshold) if pending else {}
+        forces = out.forces
+        assert forces is not None
+        np.copyto(forces, b.forces)
+        E = b.Y[:, self._error]
+        if not used and (code == ACCEPTED).all():  # the common case
+            out.error_norm[:] = np.sqrt(norms(E))
+            return
+        accepted = (code == ACCEPTED) | (code == OVER)
+        out.error_norm[accepted] = np.sqrt(norms(E[accepted]))
+        for j, u in used.items():  # the norms of the rows used
+            if accepted[j]:
+                e = E[j][u]
+                out.error_norm[j] = math.sqrt(e.dot(e))
+        for j in np.flatnonzero(code == OVER).tolist():  # over a limit: the law's strategy
+            forces[j] = self._limited(b, j, forces[j], used.get(j))
+        for j in np.flatnonzero(~accepted).tolist():  # refused: zeros and the reason
+            self._refuse(out, j, reasons.get(j) or self._reason(observations, b, j))
+
+    def _one(self, observations: ObservationBatch, out: CommandBatch, b: _Buffers,
+             used: np.ndarray | None, note: str | None, reason: str | None) -> None:
+        """A batch of one's row as the per-trial step's :class:`Command`."""
+        code = b.code[0]
+        if code != ACCEPTED and code != OVER:
+            self._refuse(out, 0, reason or self._reason(observations, b, 0))
+            return
+        y = b.Y[0]
+        forces = b.forces[0].copy()
+        if code == OVER:
+            forces = self._limited(b, 0, forces, used)
+        e = y[self._error]
+        e = e.copy() if used is None else e[used]
+        w = _eigenvalues(y[self._factor].reshape(6, 6), 0)[0]  # (compute_v=0)
+        cmd = Command(_ZEROS.copy(), error=e, error_norm=math.sqrt(e.dot(e)), rank=6,
+                      condition=math.sqrt(float(w[5]) / float(w[0])), features_used=len(e),
+                      active_constraints=[], notes=[] if note is None else [note],
+                      actuation=Actuation.FORCE, forces=forces)
+        out.forces[0] = forces  # type: ignore[index]
+        out.error_norm[0] = cmd.error_norm
+        out.commands = [cmd]
+
+    def _limited(self, b: _Buffers, j: int, forces: np.ndarray, used: np.ndarray | None
+                 ) -> np.ndarray:
+        """Row ``j``'s forces [N] over a limit under its law's strategy."""
+        law = self.laws[int(b.trials[j])]
+        return law.limited(forces, b.Y[j, self._pose], b.qd[j], b.Y[j, self._error], used,
+                           True)
+
+    def _rare(self, observations: ObservationBatch, b: _Buffers, used: dict[int, np.ndarray],
+              notes: dict[int, str], threshold: float) -> dict[int, str]:
+        """Prepare the rows the C did not (module docstring), then evaluate and finish
+        every prepared row; the reasons of the rows refused on the way."""
+        lib = library()
+        code, X = b.code, b.X
+        n = len(code)
+        step0 = self.step_of
+        assert step0 is not None
+        reasons: dict[int, str] = {}
+        first = np.flatnonzero(code == FIRST)
+        for j in first.tolist():  # a fixed goal's first step: its line from the pose
+            problem = self._start(observations, b, j)
+            if problem is not None:
+                reasons[j] = problem
+        again = (code == STALE) | (code == FIRST)
+        if again.any():  # new references: their grids, then those rows again
+            self._build_stale(b.trials[again])
+            lib.tc_prepare_call(self._ctx, b.at)  # (the trials' rows again: a pose found)
+            for j in reasons:
+                code[j] = REFUSED
+        seen = b.seen.astype(bool)
+        law0: Any = self.laws[int(b.trials[0])]
+        candidates = ((code == UNSEEN) | (code == UNKNOWN)) & ~seen
+        if candidates.any() and not self.own_inputs:  # partly seen, as arrays if it can
+            for j, (u, note) in law0.batch_partly_seen(self, step0, X, observations,
+                                                       candidates).items():
+                seen[j] = True
+                code[j] = READY if code[j] == UNSEEN else UNKNOWN
+                if u is not None:
+                    X[j, step0.inputs["mask"]] = u
+                    used[j] = u
+                if note is not None:
+                    notes[j] = note
+        for j in np.flatnonzero((code == UNKNOWN) & seen).tolist():  # reference rows
+            law: Any = self.laws[int(b.trials[j])]  # not known: left out (feature laws)
+            known = law.reference_grid()[2][b.gstep[j]]
+            used[j] = used[j] & known if j in used else known.copy()
+            X[j, step0.inputs["mask"]] = used[j]
+            code[j] = READY
+        own = (code == UNSEEN) | (code == UNKNOWN) | (code == OFF_GRID)
+        if self.own_inputs:
+            own |= code == READY
+        for j in np.flatnonzero(own).tolist():
+            problem = self._own_inputs(observations, b, j, used, notes)
+            if problem is not None:
+                reasons[j] = problem
+                code[j] = REFUSED
+            else:
+                code[j] = READY
+        ready = np.flatnonzero(code == READY)
+        if len(ready) >= LANE_ROWS:  # the compiled step in lanes
+            rows = slice(None) if len(ready) == n else ready
+            b.Y[rows] = evaluate_rows(step0.function, X[rows], step0.inputs["pose"],
+                                      self._pose, self._residual, step0.tolerance,
+                                      FK_MAX_CALLS)[0]
+        elif len(ready) and lib.tc_evaluate_call(self._ctx, b.at):
+            raise CompilationError(f"{self.function_name}: the compiled function failed")
+        lib.tc_finish_call(self._ctx, b.at)
+        unsure = np.flatnonzero(code == UNSURE)
+        if len(unsure):  # the exact rank test (LAPACK) where the screen does not settle it
+            for j in unsure.tolist():
+                full = rank_condition(b.Y[j, self._factor], threshold) is not None
+                code[j] = ACCEPT if full else REFUSED
+            lib.tc_finish_call(self._ctx, b.at)
+        return reasons
+
+    def _start(self, observations: ObservationBatch, b: _Buffers, j: int) -> str | None:
+        """A fixed goal's first step for row ``j`` (the law's ``start``: with a smooth
+        goal, the line from the pose of a compiled step towards the goal at rest); None,
+        or why there is no pose."""
+        i = int(b.trials[j])
+        law = self.laws[i]
+        step = law.compiled
+        assert step is not None
+        try:
+            if law.smooth_goal:
+                prepared = self._inputs(law, observations, b, j, 0.0)
+                if isinstance(prepared, str):
+                    return prepared
+                x = step.row.copy()
+                y = evaluate_rows(step.function, x[None], step.inputs["pose"],
+                                  step.outputs["pose"], step.outputs.index("fk_residual"),
+                                  step.tolerance, FK_MAX_CALLS)[0][0]
+                found = None
+                if y[step.outputs.index("status")] == 0.0:
+                    found = rank_condition(y[step.outputs["factor"]], law.solver.threshold)
+                if found is None:
+                    return self._refusal(step, y, step.inputs.views(x), law.solver.threshold)
+                step.row[step.inputs["pose"]] = y[step.outputs["pose"]]
+                step.guessed[0] = 1.0
+                assert law.context is not None and law.guess is not None
+                law.reference = line_to(law.context, *law.guess, *law.goal_pose())
+            law.clock[STARTED], law.clock[START] = 1.0, float(b.t[j])
+        except Exception as exc:  # the nominal model failed here: refuse with its reason
+            return f"nominal model failed: {exc}"
+        return None
+
+    def _inputs(self, law: TaskComputedTorque, observations: ObservationBatch, b: _Buffers,
+                j: int, tr: float) -> tuple[np.ndarray | None, str | None] | str:
+        """The law's own inputs of row ``j`` at ``tr`` [s] written into its trial's row
+        (its readings there first): the rows used and a note, or why there are none."""
+        step = law.compiled
+        assert step is not None
+        step.views["q"][:] = b.q[j]
+        step.views["q_dot"][:] = b.qd[j]
+        return step.prepare(law, observations.item(j), tr)  # type: ignore[no-any-return]
+
+    def _own_inputs(self, observations: ObservationBatch, b: _Buffers, j: int,
+                    used: dict[int, np.ndarray], notes: dict[int, str]) -> str | None:
+        """Row ``j`` prepared by its law (a feature hidden, a reference off its grid) and
+        copied into the step's rows; None, or why it has no inputs."""
+        law = self.laws[int(b.trials[j])]
+        try:
+            prepared = self._inputs(law, observations, b, j, float(b.tr[j]))
+        except Exception as exc:  # the nominal model failed here
+            return f"nominal model failed: {exc}"
+        if isinstance(prepared, str):
+            return prepared
+        assert law.compiled is not None
+        b.X[j] = law.compiled.row
+        if prepared[0] is not None:
+            used[j] = prepared[0]
+        if prepared[1] is not None:
+            notes[j] = prepared[1]
+        return None
+
+    def _unusable(self, observations: ObservationBatch, j: int) -> str:
+        """Why row ``j`` has no step at all."""
+        if observations.q_dot is None:
+            reason = encoder_readings(observations.item(j))
+            assert isinstance(reason, str)
+            return reason
+        return "no compiled step (compiled_kind is None and the law made none at reset)"
+
+    def _reason(self, observations: ObservationBatch, b: _Buffers, j: int) -> str:
+        """Why row ``j`` is refused (its code: readings, no step, or its status)."""
+        code = int(b.code[j])
+        if code == NOT_FINITE:
+            readings = encoder_readings(observations.item(j))
+            return readings if isinstance(readings, str) else "readings not finite"
+        if code == UNUSABLE:
+            return self._unusable(observations, j)
+        step = self.laws[int(b.trials[j])].compiled
+        assert step is not None
+        return self._refusal(step, b.Y[j], step.inputs.views(b.X[j]), self.threshold)
+
+    @staticmethod
+    def _refusal(step: CompiledTaskStep, y: np.ndarray, views: dict[str, np.ndarray],
+                 threshold: float) -> str:
+        """The reason of a compiled step's output row that is not a command."""
+        outs = step.outputs
+        reason = refusal(y, outs.index("status"), outs.index("fk_residual"), outs["factor"],
+                         threshold, step.pose_name, views)
+        assert reason is not None
+        return reason
+
+    def _refuse(self, out: CommandBatch, j: int, reason: str) -> None:
+        name = self.laws[0].name if self.laws else "controller"
+        out.put(j, Command.refuse(f"{name}: {reason}", actuation=Actuation.FORCE))
 
 
-__all__ = ["GRID_CHUNK", "START", "STARTED", "VERSION", "TaskRows", "grid_steps"]
+__all__ = ["GRID_CHUNK", "START", "STARTED", "VERSION", "TaskRows"]

@@ -13,9 +13,10 @@ the global-model variants of the predictive controllers are timed too. With
 ``--hidden`` one edge of leg 2 (and the direction of leg 2) is hidden in every
 observation: the laws' hidden-feature path (zero-weight rows of the compiled core, the
 leg's direction from the estimate). With ``--arrays`` a second column times the same
-observations through the controller's batch path (``step_arrays`` on a batch of one, the
-rows it leaves stepped by their instance): what a lone row would cost if the per-trial
-step were only the batch step.
+observations through the controller's batch path on a batch of one (its ``step_batch``
+when it has its own, else ``step_arrays`` and the rows it leaves stepped by their
+instance): what a lone row would cost if the per-trial step were only the batch step
+(for a law whose one step is its batch's, what its per-trial step costs).
 """
 
 from __future__ import annotations
@@ -30,7 +31,7 @@ from typing import Any
 import numpy as np
 
 from controllers import registry
-from controllers.base import ControllerContext, Goal, Observation
+from controllers.base import Controller, ControllerContext, Goal, Observation
 from controllers.data import CommandBatch, ObservationBatch
 from hexapod import deltalab, legs_in_frame, sample_poses
 from vision.cameras import Camera, front_camera, omni_camera
@@ -181,7 +182,9 @@ def time_controllers(names: list[str] | None = None, steps: int = 5000, camera: 
 def _time_arrays(ctrl: Any, observations: list[Observation], steps: int,
                  out: list[float]) -> None:
     """Append the times [s] of ``steps`` steps of ``ctrl`` through its batch path on a
-    batch of one (``step_arrays``, then the rows it leaves by their instance)."""
+    batch of one (its own ``step_batch``, else ``step_arrays`` and the rows it leaves by
+    their instance)."""
+    own = type(ctrl).step_batch is not Controller.step_batch
     clock = time.perf_counter
     for k in range(steps):
         obs = observations[k % len(observations)]
@@ -189,8 +192,11 @@ def _time_arrays(ctrl: Any, observations: list[Observation], steps: int,
         batch = ObservationBatch.of(obs)
         if batch is None:
             raise ValueError(f"{ctrl.name}: the benchmark's observation is malformed")
-        cmds = CommandBatch.zeros(1, ctrl.actuation)
-        ctrl.step_rows(batch, ctrl.step_arrays(batch, cmds), cmds)
+        if own:
+            cmds = ctrl.step_batch(batch)
+        else:
+            cmds = CommandBatch.zeros(1, ctrl.actuation)
+            ctrl.step_rows(batch, ctrl.step_arrays(batch, cmds), cmds)
         cmds.command(0)
         out.append(clock() - t0)
 

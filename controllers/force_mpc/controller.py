@@ -112,7 +112,7 @@ class ForceMPCLaw(PredictiveLaw):
         Raises:
             ContextError: A field the controller needs is missing or invalid.
         """
-        self.law.reset_trial(context)
+        self.law.reset(context)  # (a batch of one: its step is the batch's)
         self.context = context
         g = context.geometry
         dt = float(context.dt)
@@ -150,7 +150,7 @@ class ForceMPCLaw(PredictiveLaw):
 
     def retarget_trial(self, goal: Goal) -> None:
         """A new fixed goal (ignored when tracking ``context.reference``)."""
-        self.law.retarget_trial(goal)
+        self.law.retarget(goal)
         if self.context is not None and self.context.reference is None:
             self._started = False
 
@@ -168,7 +168,7 @@ class ForceMPCLaw(PredictiveLaw):
             return self._refuse(seen)
         observed, mask = seen
         if not self._started:  # the held law starts its reference (line to the goal) here
-            first = self.law.step_trial(observation)
+            first = self.law_step(observation)
             if first.reason is not None:
                 return self._refuse(first.reason.removeprefix(f"{self.law.name}: "))
             self._started = True
@@ -278,6 +278,10 @@ class ForceMPCLaw(PredictiveLaw):
         """The reference features (N, m) of the stages at ``tr + k dt``, ``k = 1..N``,
         [s] on the reference's clock, and the rows known at every stage (m,) bool."""
         raise NotImplementedError
+
+    def law_step(self, observation: Observation) -> Command:
+        """The held law's command of one observation (its batch of one)."""
+        return self.law.step(observation)  # type: ignore[no-any-return]
 
     def _fallback(self, observation: Observation, reason: str) -> Command:
         """The held law's command this period, noting why; the plan restarts from it."""

@@ -338,6 +338,10 @@ class PredictiveLaw(Controller):
         """The held law's command this period, noting why."""
         self.stats.fallback(reason)
         log.debug("%s: falling back to %s: %s", self.name, self.law.name, reason)
-        cmd: Command = self.law.step_trial(observation)
+        cmd = self.law_step(observation)
         cmd.notes = [*cmd.notes, f"{self.fallback_note}: {reason}"]
         return cmd
+
+    def law_step(self, observation: Observation) -> Command:
+        """The held law's command of one observation (its trial's own step)."""
+        return self.law.step_trial(observation)  # type: ignore[no-any-return]

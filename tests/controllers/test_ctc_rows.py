@@ -1,8 +1,7 @@
 """The computed-torque family over a batch (:mod:`controllers.ctc_rows`): every row of a
-batch tracking a reference goes through the one compiled call (the task laws'
-``step_arrays`` leaves no row to the trials' own steps; ``computed-torque`` has no other
-step), with the commands of the per-trial step to the last bit, trial by trial; a row
-the compiled step cannot finish is refused with its reason."""
+batch tracking a reference goes through the law's one step, with the commands of its
+batches of one (the per-trial step) to the last bit, trial by trial; a row the compiled
+step cannot finish is refused with its reason."""
 
 from __future__ import annotations
 
@@ -13,9 +12,9 @@ import numpy as np
 import pytest
 
 from controllers import registry
-from controllers.base import CommandBatch, ObservationBatch
+from controllers.base import ObservationBatch
+from controllers.task_ctc_compiled import CompiledTaskStep
 from hexapod import HexapodGeometry
-from hexapod.actuation import Actuation
 from hexapod.dynamics.robots import DynamicRobots
 from tests.controllers.ctc_world import DT, CtcWorld, ideal_drives, line_reference
 
@@ -95,13 +94,8 @@ def test_every_row_in_one_call_and_equal_to_the_trials_steps(geometry: HexapodGe
         s.reset(ctx)
     for k in range(8):
         obs = _batch(world, robots, k * DT)
-        out = CommandBatch.zeros(n, Actuation.FORCE)
-        if name == "computed-torque":  # its one step: every row commanded
-            out = batch.step_batch(obs)
-            assert out.reasons == [None] * n, (k, out.reasons)
-        else:
-            left = batch.step_arrays(obs, out)
-            assert left.tolist() == [], f"step {k}: rows {left.tolist()} left to the trials"
+        out = batch.step_batch(obs)  # its one step: every row commanded
+        assert out.reasons == [None] * n, (k, out.reasons)
         assert out.forces is not None
         for j, s in enumerate(singles):
             cmd = s.step(obs.item(j))
@@ -144,11 +138,11 @@ FAST_ROWS = {"leg-edge-ctc": [[0, 1, 2]] * 5,
 @pytest.mark.parametrize("name", sorted(FAST_ROWS))
 def test_batched_inputs_take_the_common_rows_the_others_row_by_row(
         geometry: HexapodGeometry, name: str) -> None:
-    """The task laws' batched inputs (``batch_inputs``): the rows in the common case
-    are written at once, a row with a hidden leg by its trial's ``compiled_inputs``
-    (masked rows; ``leg-edge-ctc``: by the batch, its leg's rows masked) or its numpy
-    step (``vision-ctc``: by the batch, its five legs seen);
-    every command is the trial's own step to the last bit."""
+    """The task laws' inputs as arrays (``batch_features``, ``batch_partly_seen``): the
+    rows in the common case are written at once, a row with a hidden leg by its law's
+    ``compiled_inputs`` (``leg-direction-ctc``) or by the batch (``leg-edge-ctc``: its
+    leg's rows masked; ``vision-ctc``: its five legs seen); every command is the batch
+    of one's to the last bit."""
     truth = ideal_drives(geometry)
     world = CtcWorld.make(truth)
     R0, t0, R1, t1, ref = line_reference(truth, "quintic", (0.5, -0.3, 0.4))
@@ -163,15 +157,15 @@ def test_batched_inputs_take_the_common_rows_the_others_row_by_row(
     for s in singles:
         s.reset(ctx)
     fast_rows: list[list[int]] = []
-    inner = type(batch).batch_inputs
+    prepared: list[int] = []
+    inner = CompiledTaskStep.prepare
 
-    def spy(self, step, X, observations, rows, instances, tr):  # type: ignore[no-untyped-def]
-        fast = inner(self, step, X, observations, rows, instances, tr)
-        fast_rows.append(rows[fast].tolist())
-        return fast
+    def spy(self, law, *args):  # type: ignore[no-untyped-def]
+        prepared.append(batch.trial_instances.index(law))
+        return inner(self, law, *args)
 
     with pytest.MonkeyPatch.context() as mp:
-        mp.setattr(type(batch), "batch_inputs", spy)
+        mp.setattr(CompiledTaskStep, "prepare", spy)
         for k in range(5):
             obs = _batch(world, robots, k * DT)
             if k >= 2:
@@ -179,15 +173,23 @@ def test_batched_inputs_take_the_common_rows_the_others_row_by_row(
                                           direction_visible=obs.direction_visible.copy())
                 obs.edge_visible[1, 4, 1] = False
                 obs.direction_visible[1, 4] = False
+            prepared.clear()
             out = batch.step_batch(obs)
+            fast_rows.append([j for j in range(n) if j not in prepared])
             assert out.forces is not None
+            mp.setattr(CompiledTaskStep, "prepare", inner)
             for j, s in enumerate(singles):
                 cmd = s.step(obs.item(j))
                 assert cmd.reason is None and out.reasons[j] is None
                 assert out.forces[j].tobytes() == np.asarray(cmd.forces).tobytes()
                 assert out.error_norm[j] == cmd.error_norm
+            mp.setattr(CompiledTaskStep, "prepare", spy)
             assert not robots.advance(np.arange(n), out.forces, DT / 20, 20).any()
     assert fast_rows == FAST_ROWS[name]
+
+
+def _not_called(*args: object) -> None:
+    raise AssertionError("a row prepared by its law's own inputs")
 
 
 def _hide(obs: ObservationBatch, row: int, leg: int) -> ObservationBatch:
@@ -207,9 +209,9 @@ def _hide(obs: ObservationBatch, row: int, leg: int) -> ObservationBatch:
 def test_rows_with_a_hidden_leg_go_through_the_one_call(geometry: HexapodGeometry,
                                                          name: str) -> None:
     """A hidden leg in a row every other period (``vision-ctc``: the fit to five legs;
-    ``leg-edge-ctc``: its rows masked): no row left to the trials, the forces of each
-    trial's own step to the last bit, and the rows after a hidden one (their input row
-    written in the batch's common case) too."""
+    ``leg-edge-ctc``: its rows masked): every row's inputs written as arrays (none by
+    its law's ``compiled_inputs``), the forces of each batch of one to the last bit, and
+    the rows after a hidden one (their input row written in the common case) too."""
     truth = ideal_drives(geometry)
     world = CtcWorld.make(truth)
     R0, t0, R1, t1, ref = line_reference(truth, "quintic", (0.5, -0.3, 0.4))
@@ -228,9 +230,10 @@ def test_rows_with_a_hidden_leg_go_through_the_one_call(geometry: HexapodGeometr
         obs = _batch(world, robots, k * DT)
         if k % 2:
             obs = _hide(obs, k % n, k % 6)
-        out = CommandBatch.zeros(n, Actuation.FORCE)
-        left = batch.step_arrays(obs, out)
-        assert left.tolist() == [], f"step {k}: rows {left.tolist()} left to the trials"
+        with pytest.MonkeyPatch.context() as mp:  # no row by its law's own inputs
+            mp.setattr(CompiledTaskStep, "prepare", _not_called)
+            out = batch.step_batch(obs)
+        assert out.reasons == [None] * n, (k, out.reasons)
         assert out.forces is not None
         for j, s in enumerate(singles):
             cmd = s.step(obs.item(j))
@@ -244,15 +247,14 @@ def test_rows_with_a_hidden_leg_go_through_the_one_call(geometry: HexapodGeometr
 
 def test_the_rank_screen_clears_only_rows_the_exact_test_accepts(
         rng: np.random.Generator) -> None:
-    """The kernels' rank screen (:func:`~controllers.law_algebra.rank_screen`,
-    read by :func:`~controllers.ctc_rows.accepted_rows`) clears a row only where the
-    exact test (:func:`~controllers.ctc_rows.rank_condition`) accepts, on ``L^T L`` of
-    every condition from well posed to beyond the threshold (and the zero matrix, and
-    one with a NaN); the well-posed ones are cleared, and the rows it leaves get the
-    exact test."""
+    """The kernels' rank screen (:func:`~controllers.law_algebra.rank_screen`, its
+    ``det > 4 threshold^2 trace^6`` the test of the computed-torque steps' C) clears a
+    row only where the exact test (:func:`~controllers.ctc_rows.rank_condition`)
+    accepts, on ``L^T L`` of every condition from well posed to beyond the threshold (and
+    the zero matrix, and one with a NaN); the well-posed ones are cleared."""
     import casadi as ca
 
-    from controllers.ctc_rows import accepted_rows, rank_condition
+    from controllers.ctc_rows import rank_condition
     from controllers.law_algebra import rank_screen
 
     threshold = 1e-6
@@ -279,7 +281,6 @@ def test_the_rank_screen_clears_only_rows_the_exact_test_accepts(
     assert not (clear & ~exact).any()
     assert clear[6:][np.array(conditions[6:]) < 10.0].all()
     assert not clear[4] and not clear[5]
-    assert (accepted_rows(Y, 0, slice(1, 3), slice(3, 39), threshold) == exact).all()
     assert exact.sum() > clear.sum() > 100  # both kinds of rows met
 
 

@@ -1,8 +1,8 @@
 """The batch of the task computed-torque laws as arrays (:mod:`controllers.task_ctc_rows`):
 a batch whose trials' state is views of its arrays steps as independent per-trial laws
 do, to the last bit, with integral action and a saturation strategy, tracking their own
-references or reaching fixed goals (each started by its trial's own first step), and
-with a row stepped by its trial's own step in between."""
+references or reaching fixed goals (each started at its first step), and with a row
+stepped alone (a batch of one) in between."""
 
 from __future__ import annotations
 
@@ -44,7 +44,7 @@ def test_the_batch_steps_as_its_trials_do(geometry: HexapodGeometry, name: str,
         s.reset(ctx)
     for step in range(8):
         obs = _batch(world, robots, step * DT)
-        # at step 5, row 1 by its trial's own step, the others as one batch
+        # at step 5, row 1 alone, the others as one batch
         forces = _step_as_the_trials(batch, singles, obs, step == 5, step)
         assert not robots.advance(np.arange(n), forces, DT / 20, 20).any()
     rows = batch._rows
@@ -55,10 +55,6 @@ def test_the_batch_steps_as_its_trials_do(geometry: HexapodGeometry, name: str,
         assert inst.compiled_steps == s.compiled_steps
         assert inst.compiled.row.base is rows.X  # the trial's row is the batch's
         assert inst.integral.tobytes() == s.integral.tobytes()
-    # a trial's compiled step is bound only by its own steps (row 1 at step 5; a fixed
-    # goal's first step): never for the rows the batch steps as arrays
-    bound = [inst.compiled.bound is not None for inst in batch.trial_instances]
-    assert bound == ([False, True, False] if tracking else [True] * n)
 
 
 def test_vision_rows_with_hidden_legs_are_stepped_by_the_batch(
@@ -172,3 +168,37 @@ def _four_trials(geometry: HexapodGeometry, name: str
     for s, ctx in zip(singles, contexts, strict=True):
         s.reset(ctx)
     return world, robots, batch, singles
+
+
+@pytest.mark.parametrize("saturation", ["clip", "scale"])
+@pytest.mark.parametrize("name", ["computed-torque", "cartesian-ctc", "leg-edge-ctc"])
+def test_rows_over_a_limit_are_saturated_as_in_batches_of_one(
+        geometry: HexapodGeometry, name: str, saturation: str) -> None:
+    """Drives too weak for the robot's weight: every row of every step is over a limit,
+    with nothing else rare in the batch; the batch's rows take the saturation strategy
+    as its batches of one do (to the last bit), within the limits."""
+    import dataclasses
+
+    weak = ideal_drives(geometry)
+    limit = np.full(6, 5.0)  # [N], well below the static load of each leg
+    weak = dataclasses.replace(weak, drives=dataclasses.replace(weak.drives,
+                                                                force_limit=limit))
+    world = CtcWorld.make(weak)
+    R0, t0, R1, t1, ref = line_reference(weak, "quintic", (0.5, -0.3, 0.4))
+    ctx = world.context(world.goal(R1, t1), reference=ref)
+    n = 3
+    robots = DynamicRobots([weak] * n, np.array([R0] * n),
+                           np.array([t0 + np.array([0.0, 0.001 * k, 0.0]) for k in range(n)]))
+    robots.drives.mode = "force"
+    batch = registry.create(name, saturation=saturation, integral_gain=1.0)
+    batch.reset_batch([ctx] * n)
+    singles = [registry.create(name, saturation=saturation, integral_gain=1.0)
+               for _ in range(n)]
+    for s in singles:
+        s.reset(ctx)
+    for step in range(4):
+        obs = _batch(world, robots, step * DT)
+        forces = _step_as_the_trials(batch, singles, obs, False, step)
+        assert np.all(np.abs(forces) <= limit + 1e-12)
+        assert np.any(np.isclose(np.abs(forces), limit))  # at the limit: saturated
+        robots.advance(np.arange(n), forces, DT / 20, 20)
