@@ -30,7 +30,7 @@ from typing import Any
 import numpy as np
 
 from controllers import registry
-from controllers.base import ControllerContext, Goal, Observation
+from controllers.base import Controller, ControllerContext, Goal, Observation
 from controllers.data import CommandBatch, ObservationBatch
 from hexapod import deltalab, legs_in_frame, sample_poses
 from vision.cameras import Camera, front_camera, omni_camera
@@ -181,16 +181,21 @@ def time_controllers(names: list[str] | None = None, steps: int = 5000, camera: 
 def _time_arrays(ctrl: Any, observations: list[Observation], steps: int,
                  out: list[float]) -> None:
     """Append the times [s] of ``steps`` steps of ``ctrl`` through its batch path on a
-    batch of one (``step_arrays``, then the rows it leaves by their instance)."""
+    batch of one (``step_arrays``, then the rows it leaves by their instance; a
+    controller with its own ``step_batch``, whose one step that is: ``step_batch``)."""
     clock = time.perf_counter
+    own = type(ctrl).step_batch is not Controller.step_batch
     for k in range(steps):
         obs = observations[k % len(observations)]
         t0 = clock()
         batch = ObservationBatch.of(obs)
         if batch is None:
             raise ValueError(f"{ctrl.name}: the benchmark's observation is malformed")
-        cmds = CommandBatch.zeros(1, ctrl.actuation)
-        ctrl.step_rows(batch, ctrl.step_arrays(batch, cmds), cmds)
+        if own:
+            cmds = ctrl.step_batch(batch)
+        else:
+            cmds = CommandBatch.zeros(1, ctrl.actuation)
+            ctrl.step_rows(batch, ctrl.step_arrays(batch, cmds), cmds)
         cmds.command(0)
         out.append(clock() - t0)
 
