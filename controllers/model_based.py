@@ -235,16 +235,34 @@ class ModelBasedController(Controller):
     # ------------------------------------------------------------------ the batch
     def reset_batch(self, contexts: Sequence[ControllerContext]) -> None:
         """One instance per context (this one first, the others built with its options),
-        reset with it, then the batch's arrays (:class:`PoseServoRows`).
+        reset with it, then the batch's arrays (:meth:`_batch_rows`).
 
         Raises:
             ContextError: A context the controller cannot use.
             CompilationError: No compiled C.
         """
         super().reset_batch(contexts)
-        self._rows = PoseServoRows(self.trial_instances) if self.trial_instances else None
+        self._rows = None
+        if self.trial_instances:
+            self._batch_rows()
+
+    def _batch_rows(self) -> PoseServoRows:
+        """The arrays of the trial instances' batch (:class:`PoseServoRows`), built."""
+        self._rows = PoseServoRows(self.trial_instances)
         #: The forward kinematics' warm starts of every trial (the instances' rows).
-        self.batch_estimate = None if self._rows is None else self._rows.estimate
+        self.batch_estimate = self._rows.estimate
+        return self._rows
+
+    def __getstate__(self) -> dict[str, object]:
+        """Copyable: the batch (its C context's addresses) left out, built again at the
+        next step from copies of this trial's servo input and estimate."""
+        state = self.__dict__.copy()
+        state["_rows"] = None
+        state.pop("batch_estimate", None)
+        if "estimate" in state:  # (after a reset)
+            state["estimate"] = PoseEstimate.of(*self.estimate.pose)
+        state["servo_input"] = self.servo_input.copy()
+        return state
 
     def step_batch(self, observations: ObservationBatch) -> CommandBatch:
         """The commands of every row (:meth:`PoseServoRows.step`: the forward kinematics,
@@ -255,9 +273,11 @@ class ModelBasedController(Controller):
         rows = self._rows
         if not len(observations):
             return out
-        if rows is None or rows.laws is not self.trial_instances:
-            for j in range(len(observations)):
-                out.put(j, Command.refuse(f"{self.name}: reset(context) was not called"))
-            return out
+        if rows is None or rows.laws is not self.trial_instances:  # (a copy: built again)
+            if not self.trial_instances:
+                for j in range(len(observations)):
+                    out.put(j, Command.refuse(f"{self.name}: reset(context) was not called"))
+                return out
+            rows = self._batch_rows()
         rows.step(observations, out)
         return out

@@ -5,6 +5,8 @@ from the kernel's status, the readings and the forward kinematics."""
 
 from __future__ import annotations
 
+import copy
+
 import casadi as ca
 import numpy as np
 import pytest
@@ -257,6 +259,33 @@ def test_a_batch_of_one_is_the_per_trial_command(other_geometry,  # type: ignore
     assert int(cmd.notes[0].split()[-2]) % 3 == 0
     assert np.array_equal(out.velocities[0], cmd.velocities)
     assert out.error_norm[0] == cmd.error_norm
+
+
+def test_a_copy_steps_like_the_original_and_apart_from_it(other_geometry,  # type: ignore[no-untyped-def]
+                                                          rng: np.random.Generator) -> None:
+    """A deep copy of a stepped batch carries its warm starts and servo inputs as its own
+    arrays: it steps as the original would, and the original is untouched by its steps."""
+    world = World(other_geometry, make_camera("perspective", other_geometry))
+    Rs, ts = world.poses(6, rng, max_translation=0.02, max_angle=np.deg2rad(4), margin=0.03)
+    contexts = [world.context(world.goal(R, t), 0.02) for R, t in zip(Rs[:2], ts[:2],
+                                                                        strict=True)]
+    ctrl = registry.create("model-based")
+    assert isinstance(ctrl, ModelBasedController)
+    ctrl.reset_batch(contexts)
+    ctrl.step_batch(_batch(world, Rs[2:4], ts[2:4]))
+    twin = copy.deepcopy(ctrl)
+    for a, b in zip(ctrl.trial_instances, twin.trial_instances, strict=True):
+        assert not np.shares_memory(a.servo_input, b.servo_input)
+        assert not np.shares_memory(a.estimate.rotation, b.estimate.rotation)
+        assert np.array_equal(a.estimate.rotation, b.estimate.rotation)
+    moved = twin.step_batch(_batch(world, Rs[4:], ts[4:]))
+    assert twin.batch_estimate is not ctrl.batch_estimate
+    assert not np.array_equal(twin.trial_instances[1].estimate.translation,
+                              ctrl.trial_instances[1].estimate.translation)
+    same = ctrl.step_batch(_batch(world, Rs[4:], ts[4:]))
+    assert moved.reasons == same.reasons == [None, None]
+    assert np.array_equal(moved.velocities, same.velocities)
+    assert np.array_equal(twin.batch_estimate.translation, ctrl.batch_estimate.translation)
 
 
 def test_kernel_layouts() -> None:
