@@ -7,7 +7,9 @@ Everything after the forward kinematics (the pose error with ``log`` on SO(3), i
 half-turn case included, :func:`sx_log_so3`; gain, twist, ``q_dot``, the twist in the
 camera frame, the condition number of ``J_inv``) is one CasADi expression compiled to C
 (:func:`pose_servo_kernel`), whose ``status`` output is a row's refusal reason. Its test
-oracle: ``tests/controllers/model_based_oracle.py``.
+oracle: ``tests/controllers/model_based_oracle.py``. The step is C around the compiled
+forward kinematics and this kernel over the rows of a batch
+(:mod:`controllers.model_based_rows`); the per-trial ``step`` is a batch of one.
 """
 
 from __future__ import annotations
@@ -20,22 +22,15 @@ import casadi as ca
 import numpy as np
 
 from controllers.base import Controller
-from controllers.data import (
-    Command,
-    CommandBatch,
-    ControllerContext,
-    Goal,
-    GoalBatch,
-    Observation,
-    ObservationBatch,
-)
+from controllers.data import Command, CommandBatch, ControllerContext, Goal, ObservationBatch
 from controllers.estimators import PoseEstimate
 from controllers.exceptions import ContextError
 from controllers.law_algebra import jacobi_eigen
-from controllers.law_tools import Gain, check_number, check_observation, gain_formula
+from controllers.law_tools import Gain, check_number, gain_formula
+from controllers.model_based_rows import PoseServoRows
 from hexapod.compiled import CompiledFunction, Layout
 from hexapod.exceptions import HexapodError
-from hexapod.fk import forward_kinematics, forward_kinematics_batch
+from hexapod.fk import forward_kinematics
 from hexapod.geometry import HexapodGeometry
 from hexapod.kinematics import Transform
 from hexapod.workspace import home_pose
@@ -50,7 +45,6 @@ SERVO_INPUTS = Layout([("R", (3, 3)), ("t", 3), ("R_star", (3, 3)), ("t_star", 3
 SERVO_OUTPUTS = Layout([("e", 6), ("norm", 1), ("tau", 6), ("qdot", 6), ("twist", 6),
                         ("cond", 1), ("status", 1)], "pose servo output")
 _IN, _OUT = SERVO_INPUTS, SERVO_OUTPUTS
-_AT = {name: SERVO_OUTPUTS.index(name) for name in ("norm", "cond", "status")}
 #: The orientation error [rad] beyond which the axis comes from the symmetric part.
 HALF_TURN = np.pi - 1e-3
 #: Status of a row whose command is not finite.
@@ -157,8 +151,11 @@ class ModelBasedController(Controller):
         self.compiled = bool(compiled)
         #: The pose servo (None before :meth:`reset_trial`).
         self.kernel: CompiledFunction | None = None
-        #: The servo's input row (constants written by :meth:`reset_trial`).
+        #: The servo's input row (constants written by :meth:`reset_trial`; a view of its
+        #: batch's, :class:`~controllers.model_based_rows.PoseServoRows`, after the
+        #: batch's reset).
         self.servo_input = np.zeros(_IN.size)
+        self._rows: PoseServoRows | None = None
         self.fk_tolerance = check_number(self.name, "fk_tolerance", fk_tolerance)
         self.fk_max_iterations = int(check_number(self.name, "fk_max_iterations",
                                                   fk_max_iterations, 1.0, strict=False))
@@ -171,6 +168,7 @@ class ModelBasedController(Controller):
             ContextError: No goal pose and no goal lengths, or invalid values.
         """
         geo = context.geometry
+        self.servo_input = np.zeros(_IN.size)  # its own (not a view of a former batch's)
         self._aim(context.goal, geo)
         self.context = context
         self.kernel = pose_servo_kernel(self.compiled)
@@ -182,7 +180,8 @@ class ModelBasedController(Controller):
         self.platform_points = np.asarray(geo.platform_points, dtype=float)
         pose = getattr(context.camera, "camera_from_base", None)
         cam_pose = pose if isinstance(pose, Transform) else None
-        self._camera_from_base: Transform | None = cam_pose
+        #: Where the command's twist is expressed (None: no twist).
+        self.camera_from_base: Transform | None = cam_pose
         x = self.servo_input
         x[_IN["A"]] = self.base_points.reshape(18)
         x[_IN["E"]] = self.platform_points.reshape(18)
@@ -233,102 +232,52 @@ class ModelBasedController(Controller):
         self.servo_input[_IN["R_star"]] = R.reshape(9)
         self.servo_input[_IN["t_star"]] = t
 
-    def step_trial(self, observation: Observation) -> Command:
-        """Forward kinematics, then the pose servo (:func:`pose_servo_kernel`): pose error,
-        twist, ``q_dot = J_inv(nominal) tau``."""
-        if self.context is None or self.kernel is None:
-            return Command.refuse(f"{self.name}: reset(context) was not called")
-        problem = check_observation(observation, self.features)
-        if problem is not None:
-            return Command.refuse(problem)
-        q = np.asarray(observation.lengths, dtype=float)
-        est = self.estimate
-        try:
-            sol = forward_kinematics(self.context.geometry, q, guess=est.pose,
-                                     method="newton", tol=self.fk_tolerance,
-                                     max_iterations=self.fk_max_iterations, check_stroke=False)
-        except HexapodError as exc:
-            # The next step starts again from the home pose.
-            est.set(*home_pose(self.context.geometry))
-            return Command.refuse(f"forward kinematics failed: {exc}")
-        R, t = sol.rotation, sol.translation
-        est.set(R, t)
-        x = self.servo_input
-        x[_IN["R"]] = R.reshape(9)
-        x[_IN["t"]] = t
-        y = self.kernel.single(x)
-        e = y[_OUT["e"]]
-        status = int(y[_AT["status"]])
-        if status:
-            return Command.refuse(STATUS_REASONS[status], e)
-        twist = y[_OUT["twist"]] if self._camera_from_base is not None else None
-        return Command(y[_OUT["qdot"]], twist=twist, error=e, error_norm=float(y[_AT["norm"]]),
-                       rank=6, condition=float(y[_AT["cond"]]), features_used=6,
-                       notes=[f"forward kinematics: {sol.iterations} iterations"])
-
-    # ------------------------------------------------------------------ batch
+    # ------------------------------------------------------------------ the batch
     def reset_batch(self, contexts: Sequence[ControllerContext]) -> None:
         """One instance per context (this one first, the others built with its options),
-        reset with it; their pose estimates are the rows of one batch estimate."""
-        super().reset_batch(contexts)
-        trials: list[ModelBasedController] = self.trial_instances
-        #: The forward-kinematics warm starts of every trial (the instances' rows).
-        self.batch_estimate = PoseEstimate.of(
-            np.array([t.estimate.rotation for t in trials]).reshape(-1, 3, 3),
-            np.array([t.estimate.translation for t in trials]).reshape(-1, 3))
-        for k, inst in enumerate(trials):
-            inst.estimate = self.batch_estimate.row(k)
-        self._b_A = np.array([t.base_points for t in trials])
-        self._b_E = np.array([t.platform_points for t in trials])
-        self._b_geometry = trials[0].context.geometry if trials and trials[0].context else None
-        self._b_X = np.array([t.servo_input for t in trials]) if trials else np.zeros((0, _IN.size))
-
-    def retarget_batch(self, trials: np.ndarray, goals: GoalBatch) -> None:
-        """New goals of some trials (row ``j`` for trial ``trials[j]``): each instance's
-        :meth:`retarget_trial` (:meth:`Controller.retarget_batch`), the batch's servo inputs
-        updated.
+        reset with it, then the batch's arrays (:meth:`_batch_rows`).
 
         Raises:
-            ContextError: A goal the law cannot use.
+            ContextError: A context the controller cannot use.
+            CompilationError: No compiled C.
         """
-        super().retarget_batch(trials, goals)
-        for k in np.asarray(trials, dtype=int).tolist():
-            self._b_X[k] = self.trial_instances[k].servo_input
+        super().reset_batch(contexts)
+        self._rows = None
+        if self.trial_instances:
+            self._batch_rows()
 
-    def step_arrays(self, observations: ObservationBatch, out: CommandBatch) -> np.ndarray:
-        """Forward kinematics of every row in one batch (warm-started per trial), the
-        pose servo in one C loop (:func:`pose_servo_kernel`), a row of non-zero status
-        refused with its reason; the rows whose forward kinematics fails (or whose
-        lengths or time are not finite) are left to their own instance's step, from
-        their previous state (its refusal and its warm start reset)."""
-        obs = observations
-        n = len(obs)
-        trials = np.asarray(obs.trials, dtype=int)
-        slow = np.ones(n, dtype=bool)
-        q = np.asarray(obs.lengths, dtype=float)
-        with np.errstate(invalid="ignore"):
-            fast = (np.isfinite(q).all(axis=1) & np.isfinite(np.asarray(obs.t, dtype=float)))
-        rows = np.flatnonzero(fast)
-        if len(rows) and self._b_geometry is not None and self.kernel is not None:
-            tr = trials[rows]
-            est = self.batch_estimate
-            sol = forward_kinematics_batch(self._b_geometry, q[rows], est.rotation[tr],
-                                           est.translation[tr], tol=self.fk_tolerance,
-                                           max_iterations=self.fk_max_iterations,
-                                           base_points=self._b_A[tr],
-                                           platform_points=self._b_E[tr])
-            X = self._b_X[tr]
-            X[:, _IN["R"]] = sol.rotations.reshape(-1, 9)
-            X[:, _IN["t"]] = sol.translations
-            Y = self.kernel.batch(X)
-            done = np.flatnonzero(sol.converged)
-            est.set(sol.rotations[done], sol.translations[done], tr[done])
-            status = Y[done, _AT["status"]]
-            ok = done[status == 0.0]
-            out.velocities[rows[ok]] = Y[ok][:, _OUT["qdot"]]
-            out.error_norm[rows[ok]] = Y[ok, _AT["norm"]]
-            for k in done[status != 0.0].tolist():
-                refusal = Command.refuse(STATUS_REASONS[int(Y[k, _AT["status"]])], Y[k, _OUT["e"]])
-                out.put(int(rows[k]), refusal)
-            slow[rows[done]] = False
-        return np.flatnonzero(slow)
+    def _batch_rows(self) -> PoseServoRows:
+        """The arrays of the trial instances' batch (:class:`PoseServoRows`), built."""
+        self._rows = PoseServoRows(self.trial_instances)
+        #: The forward kinematics' warm starts of every trial (the instances' rows).
+        self.batch_estimate = self._rows.estimate
+        return self._rows
+
+    def __getstate__(self) -> dict[str, object]:
+        """Copyable: the batch (its C context's addresses) left out, built again at the
+        next step from copies of this trial's servo input and estimate."""
+        state = self.__dict__.copy()
+        state["_rows"] = None
+        state.pop("batch_estimate", None)
+        if "estimate" in state:  # (after a reset)
+            state["estimate"] = PoseEstimate.of(*self.estimate.pose)
+        state["servo_input"] = self.servo_input.copy()
+        return state
+
+    def step_batch(self, observations: ObservationBatch) -> CommandBatch:
+        """The commands of every row (:meth:`PoseServoRows.step`: the forward kinematics,
+        then the pose servo; refused, zero, with a reason where the lengths or the time
+        are not finite, the forward kinematics fails or the command is not finite)."""
+        self.crashes = {}
+        out = CommandBatch.zeros(len(observations))
+        rows = self._rows
+        if not len(observations):
+            return out
+        if rows is None or rows.laws is not self.trial_instances:  # (a copy: built again)
+            if not self.trial_instances:
+                for j in range(len(observations)):
+                    out.put(j, Command.refuse(f"{self.name}: reset(context) was not called"))
+                return out
+            rows = self._batch_rows()
+        rows.step(observations, out)
+        return out

@@ -184,8 +184,8 @@ def _time_arrays(ctrl: Any, observations: list[Observation], steps: int,
     """Append the times [s] of ``steps`` steps of ``ctrl`` through its batch path on a
     batch of one (its own ``step_batch``, else ``step_arrays`` and the rows it leaves by
     their instance)."""
-    own = type(ctrl).step_batch is not Controller.step_batch
     clock = time.perf_counter
+    own = type(ctrl).step_batch is not Controller.step_batch
     for k in range(steps):
         obs = observations[k % len(observations)]
         t0 = clock()

@@ -1,8 +1,11 @@
 """The model-based controller: its one pose servo (the CasADi kernel, in C or in the
 CasADi virtual machine) against the numpy oracle, near a half-turn too, per trial and
-in a batch; refusals from the kernel's status."""
+in a batch; its one step (a batch's rows are batches of one, bit for bit); refusals
+from the kernel's status, the readings and the forward kinematics."""
 
 from __future__ import annotations
+
+import copy
 
 import casadi as ca
 import numpy as np
@@ -10,7 +13,7 @@ import pytest
 from scipy.spatial.transform import Rotation
 
 from controllers import registry
-from controllers.base import CommandBatch, ControllerContext, ObservationBatch
+from controllers.base import ControllerContext, ObservationBatch
 from controllers.model_based import (
     _IN,
     HALF_TURN,
@@ -19,6 +22,7 @@ from controllers.model_based import (
     sx_log_so3,
 )
 from hexapod.se3 import log_so3
+from hexapod.workspace import home_pose
 from tests.controllers.controller_world import World, make_camera
 from tests.controllers.model_based_oracle import numpy_pose_servo
 
@@ -115,8 +119,8 @@ def _batch(world: World, Rs: np.ndarray, ts: np.ndarray) -> ObservationBatch:
 
 def test_batch_computes_every_row_with_the_kernel(other_geometry,  # type: ignore[no-untyped-def]
                                                   rng: np.random.Generator) -> None:
-    """A batch with half-turn goals leaves no row to the trials' steps, and its commands
-    are theirs to the last bit."""
+    """A batch with half-turn goals commands every row, and its commands are the
+    per-trial steps' (batches of one) to the last bit."""
     world = World(other_geometry, make_camera("perspective", other_geometry))
     cases = [case for turn in (0.0, 0.5, HALF_TURN + 1e-6, np.pi)
              for case in _turned(world, rng, turn, 1)]
@@ -124,13 +128,13 @@ def test_batch_computes_every_row_with_the_kernel(other_geometry,  # type: ignor
     obs = _batch(world, np.array([R for _, R, _ in cases]), np.array([t for _, _, t in cases]))
     batch = registry.create("model-based")
     batch.reset_batch(contexts)
-    out = CommandBatch.zeros(len(obs))
-    assert len(batch.step_arrays(obs, out)) == 0
+    out = batch.step_batch(obs)
+    assert out.reasons == [None] * len(obs)
     for k, ctx in enumerate(contexts):
         single = registry.create("model-based")
         single.reset(ctx)
         cmd = single.step(obs.item(k))
-        assert cmd.ok and out.reasons[k] is None
+        assert cmd.ok
         np.testing.assert_array_equal(out.velocities[k], cmd.velocities)
         assert out.error_norm[k] == cmd.error_norm
 
@@ -154,30 +158,134 @@ def test_non_finite_command_is_refused_from_the_status(other_geometry,  # type: 
     batch = registry.create("model-based")
     assert isinstance(batch, ModelBasedController)
     batch.reset_batch([ctx, ctx])
-    batch._b_X[1, _IN["R_star"].start] = np.nan
+    batch.trial_instances[1].servo_input[_IN["R_star"].start] = np.nan
     out = batch.step_batch(_batch(world, Rs[1:], ts[1:]))
     assert out.reasons == [None, "non-finite command (numerical failure)"]
     assert np.all(out.velocities[0] != 0.0) and np.array_equal(out.velocities[1], np.zeros(6))
     assert np.isfinite(out.error_norm).all()
 
 
-def test_batch_leaves_failed_forward_kinematics_to_the_trial(other_geometry,  # type: ignore[no-untyped-def]
-                                                             rng: np.random.Generator) -> None:
-    """Lengths without a pose: the batch leaves that row to its trial's step, which refuses
-    it with the forward kinematics' failure and restarts from the home pose."""
+def test_failed_forward_kinematics_is_refused_and_restarts_from_home(  # type: ignore[no-untyped-def]
+        other_geometry, rng: np.random.Generator) -> None:
+    """Lengths without a pose: the row is refused with the forward kinematics' failure
+    (its iterations and residual) and its trial's warm start goes back to the home pose;
+    the other row is a command and keeps its pose."""
     world = World(other_geometry, make_camera("perspective", other_geometry))
     Rs, ts = world.poses(3, rng, max_translation=0.02, max_angle=np.deg2rad(4), margin=0.03)
     ctx = world.context(world.goal(Rs[0], ts[0]), 0.02)
     obs = _batch(world, Rs[1:], ts[1:])
-    obs.lengths[1] *= 10.0
     batch = registry.create("model-based")
+    assert isinstance(batch, ModelBasedController)
     batch.reset_batch([ctx, ctx])
-    assert batch.step_arrays(obs, CommandBatch.zeros(2)).tolist() == [1]
-    batch.reset_batch([ctx, ctx])
+    assert batch.step_batch(obs).reasons == [None, None]
+    moved = batch.trial_instances[1].estimate.translation.copy()
+    assert not np.array_equal(moved, home_pose(other_geometry)[1])
+    obs.lengths[1] *= 10.0
     done = batch.step_batch(obs)
-    assert done.reasons[0] is None
+    assert done.reasons[0] is None and np.array_equal(done.velocities[1], np.zeros(6))
     reason = done.reasons[1]
-    assert reason is not None and reason.startswith("forward kinematics failed")
+    assert reason is not None and reason.startswith(
+        "forward kinematics failed: forward kinematics (newton) failed after 30 iterations")
+    R0, t0 = home_pose(other_geometry)
+    est = batch.trial_instances[1].estimate
+    assert np.array_equal(est.rotation, R0) and np.array_equal(est.translation, t0)
+    assert np.allclose(batch.trial_instances[0].estimate.translation, ts[1], atol=1e-9)
+
+
+def _row(velocities: np.ndarray, norm: float, reason: str | None,
+         ctrl: ModelBasedController) -> tuple[object, ...]:
+    """A row's command (velocities, norm, reason) and its trial's estimate, as bytes."""
+    est = ctrl.estimate
+    return (velocities.tobytes(), np.float64(norm).tobytes(), reason,
+            est.rotation.tobytes(), est.translation.tobytes())
+
+
+def test_batch_rows_equal_batches_of_one(other_geometry,  # type: ignore[no-untyped-def]
+                                         rng: np.random.Generator) -> None:
+    """Three steps of a batch of four trials (one whose forward kinematics fails at the
+    second step, one with a NaN length at the first and an infinite time at the third)
+    are, row by row and bit for bit, four batches of one stepped on the same rows: the
+    commands, the norms, the refusals' reasons and the warm starts."""
+    world = World(other_geometry, make_camera("perspective", other_geometry))
+    Rs, ts = world.poses(7, rng, max_translation=0.02, max_angle=np.deg2rad(4), margin=0.03)
+    contexts = [world.context(world.goal(R, t), 0.02) for R, t in zip(Rs[:4], ts[:4],
+                                                                        strict=True)]
+    batch = registry.create("model-based", adaptive_gain=(2.0, 0.5, 10.0))
+    assert isinstance(batch, ModelBasedController)
+    batch.reset_batch(contexts)
+    singles = []
+    for ctx in contexts:
+        one = registry.create("model-based", adaptive_gain=(2.0, 0.5, 10.0))
+        assert isinstance(one, ModelBasedController)
+        one.reset(ctx)
+        singles.append(one)
+    reasons = set()
+    for step in range(3):
+        obs = _batch(world, Rs[3:], ts[3:])
+        obs.t[:] = 0.02 * step
+        if step == 0:
+            obs.lengths[2, 4] = np.nan
+        if step == 1:
+            obs.lengths[1] *= 10.0
+        if step == 2:
+            obs.t[2] = np.inf
+        out = batch.step_batch(obs)
+        for k, one in enumerate(singles):
+            cmd = one.step(obs.item(k))
+            row = _row(out.velocities[k], out.error_norm[k], out.reasons[k],
+                       batch.trial_instances[k])
+            assert row == _row(cmd.velocities, cmd.error_norm, cmd.reason, one), (step, k)
+            reasons.add(cmd.reason)
+    assert {r.split(":")[0] if r else r for r in reasons} == {
+        None, "lengths", "forward kinematics failed", "time is inf (not finite)"}
+
+
+def test_a_batch_of_one_is_the_per_trial_command(other_geometry,  # type: ignore[no-untyped-def]
+                                                 rng: np.random.Generator) -> None:
+    """The per-trial step's command carries the diagnostics (error, twist, rank, condition
+    number, the forward kinematics' iterations) and the row of a batch's command."""
+    world = World(other_geometry, make_camera("perspective", other_geometry))
+    Rs, ts = world.poses(2, rng, max_translation=0.02, max_angle=np.deg2rad(4), margin=0.03)
+    ctx = world.context(world.goal(Rs[0], ts[0]), 0.02)
+    one, two = registry.create("model-based"), registry.create("model-based")
+    one.reset(ctx)
+    two.reset_batch([ctx, ctx])
+    cmd = one.step(world.observation(Rs[1], ts[1]))
+    out = two.step_batch(_batch(world, Rs[1:], ts[1:]))
+    assert cmd.ok and cmd.rank == 6 and cmd.features_used == 6 and cmd.twist is not None
+    assert cmd.error.shape == (6,) and cmd.error_norm == float(np.linalg.norm(cmd.error))
+    assert np.isfinite(cmd.condition) and cmd.condition >= 1.0
+    assert len(cmd.notes) == 1 and cmd.notes[0].endswith(" iterations")
+    assert int(cmd.notes[0].split()[-2]) % 3 == 0
+    assert np.array_equal(out.velocities[0], cmd.velocities)
+    assert out.error_norm[0] == cmd.error_norm
+
+
+def test_a_copy_steps_like_the_original_and_apart_from_it(other_geometry,  # type: ignore[no-untyped-def]
+                                                          rng: np.random.Generator) -> None:
+    """A deep copy of a stepped batch carries its warm starts and servo inputs as its own
+    arrays: it steps as the original would, and the original is untouched by its steps."""
+    world = World(other_geometry, make_camera("perspective", other_geometry))
+    Rs, ts = world.poses(6, rng, max_translation=0.02, max_angle=np.deg2rad(4), margin=0.03)
+    contexts = [world.context(world.goal(R, t), 0.02) for R, t in zip(Rs[:2], ts[:2],
+                                                                        strict=True)]
+    ctrl = registry.create("model-based")
+    assert isinstance(ctrl, ModelBasedController)
+    ctrl.reset_batch(contexts)
+    ctrl.step_batch(_batch(world, Rs[2:4], ts[2:4]))
+    twin = copy.deepcopy(ctrl)
+    for a, b in zip(ctrl.trial_instances, twin.trial_instances, strict=True):
+        assert not np.shares_memory(a.servo_input, b.servo_input)
+        assert not np.shares_memory(a.estimate.rotation, b.estimate.rotation)
+        assert np.array_equal(a.estimate.rotation, b.estimate.rotation)
+    moved = twin.step_batch(_batch(world, Rs[4:], ts[4:]))
+    assert twin.batch_estimate is not ctrl.batch_estimate
+    assert not np.array_equal(twin.trial_instances[1].estimate.translation,
+                              ctrl.trial_instances[1].estimate.translation)
+    same = ctrl.step_batch(_batch(world, Rs[4:], ts[4:]))
+    assert moved.reasons == same.reasons == [None, None]
+    assert np.array_equal(moved.velocities, same.velocities)
+    assert np.array_equal(twin.batch_estimate.translation, ctrl.batch_estimate.translation)
 
 
 def test_kernel_layouts() -> None:
