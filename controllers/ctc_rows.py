@@ -1,9 +1,10 @@
 """What the computed-torque laws' one steps share around their compiled kernels.
 
-:func:`evaluate_rows` evaluates many rows in lanes (the same bits as row by row) and
-calls again the rows whose pose has not converged; :func:`rank_condition` is the exact
-rank test (LAPACK) where the kernel's screen does not settle it; :func:`refusal` words
-why a row is not a command; :func:`norms` the error norms as a vector's own dot product.
+:data:`NEWTON_CALLS_C` calls a kernel on a row from C, again from the pose reached while
+it has not converged; :func:`evaluate_rows` does the same for many rows in lanes (the
+same bits as row by row); :func:`rank_condition` is the exact rank test (LAPACK) where
+the kernel's screen does not settle it; :func:`refusal` words why a row is not a
+command; :func:`norms` the error norms as a vector's own dot product.
 """
 
 from __future__ import annotations
@@ -15,11 +16,29 @@ import numpy as np
 from scipy.linalg.lapack import dsyevd as _eigenvalues
 
 from controllers.ctc_status import Status, status_reason
-from hexapod.compiled import CompiledFunction
+from hexapod.compiled import KERNEL_CALL_C, CompiledFunction
 
 #: Calls of a compiled step (its Newton iterations each) before the step is refused (as
 #: the 50 iterations of :func:`hexapod.fk.forward_kinematics`).
 FK_MAX_CALLS = 16
+
+
+#: C: ``newton_calls(k, x, y, pose_in, pose_out, residual, tol, max_calls)``: ``y = f(x)``
+#: by the :class:`~hexapod.compiled.KernelCall` ``k``, called again from the pose reached
+#: (``y``'s 12 pose values into ``x``'s) while the residual ``y[residual]`` is not below
+#: ``tol`` (finite, at most ``max_calls`` calls in all): :func:`evaluate_rows` row by row.
+NEWTON_CALLS_C = KERNEL_CALL_C + r"""
+static int newton_calls(const KernelCall *k, double *x, double *y, int64_t pose_in,
+                        int64_t pose_out, int64_t residual, double tol, int64_t max_calls) {
+    if (kernel_call(k, x, y)) return 1;
+    for (int64_t calls = 1; !(y[residual] < tol); calls++) {
+        if (calls >= max_calls || !isfinite(y[residual])) break;
+        memcpy(x + pose_in, y + pose_out, 12 * sizeof(double));
+        if (kernel_call(k, x, y)) return 1;
+    }
+    return 0;
+}
+"""
 
 
 def evaluate_rows(function: CompiledFunction, X: np.ndarray, pose_in: slice, pose_out: slice,
@@ -121,5 +140,5 @@ def stale(rows: Any, laws: list[Any]) -> bool:
     return rows is None or getattr(rows, "laws", None) is not laws
 
 
-__all__ = ["FK_MAX_CALLS", "evaluate_rows", "norms", "over_limits", "rank_condition",
-           "refusal", "stale"]
+__all__ = ["FK_MAX_CALLS", "NEWTON_CALLS_C", "evaluate_rows", "norms", "over_limits",
+           "rank_condition", "refusal", "stale"]

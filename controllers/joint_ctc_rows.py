@@ -40,12 +40,25 @@ from typing import TYPE_CHECKING, NamedTuple
 import numpy as np
 
 from controllers.base import Command
-from controllers.ctc_rows import FK_MAX_CALLS, evaluate_rows, norms, rank_condition, refusal
+from controllers.ctc_rows import (
+    FK_MAX_CALLS,
+    NEWTON_CALLS_C,
+    evaluate_rows,
+    norms,
+    rank_condition,
+    refusal,
+)
 from controllers.data import CommandBatch, ObservationBatch
 from controllers.solvers import compiled_ctc
 from controllers.task_ctc_inputs import QUINTIC_PEAK_SPEED, encoder_readings
 from hexapod.actuation import Actuation
-from hexapod.compiled import LANE_ROWS, CompilationError, CompiledFunction, build_shared_library
+from hexapod.compiled import (
+    LANE_ROWS,
+    CompilationError,
+    CompiledFunction,
+    KernelCall,
+    build_shared_library,
+)
 
 if TYPE_CHECKING:
     from controllers.computed_torque import ComputedTorqueController
@@ -70,15 +83,14 @@ SOURCE = r"""
 #include <math.h>
 #include <stdint.h>
 #include <string.h>
-
-typedef int (*kernel_t)(const double **, double **, int64_t *, double *, int);
+""" + NEWTON_CALLS_C + r"""
 typedef struct {
     double *X; int64_t n_in, q_at, qd_at, desired_at, pose_in;
     const uint8_t *tracking; const double *dt, *t_end; const int64_t *grid_len;
     const double *grids; int64_t grid_stride;
     double *quintic; const double *quintic_speed; double peak, kp_ki;
     double *integral; double grid_tol; int64_t *steps; const double *limit;
-    kernel_t kernel; const double **arg; double **res; int64_t *iw; double *w;
+    KernelCall kernel;
     int64_t n_out, pose_out, residual_at, status_at, screen_at, forces_at;
     double fk_tol; int64_t max_calls; double screen_scale; double *scratch;
 } JointCtc;
@@ -152,17 +164,9 @@ int jc_evaluate(JointCtc *c, int64_t m, const int64_t *trials, const int64_t *co
     double *x = c->scratch;
     for (int64_t j = 0; j < m; j++) {
         if (code[j] != READY) continue;
-        double *y = Y + c->n_out * j;
         memcpy(x, c->X + c->n_in * trials[j], c->n_in * sizeof(double));
-        c->arg[0] = x; c->res[0] = y;
-        if (c->kernel(c->arg, c->res, c->iw, c->w, 0)) return 1;
-        int64_t calls = 1;
-        while (!(y[c->residual_at] < c->fk_tol)) {  /* Newton from the pose reached */
-            if (calls >= c->max_calls || !isfinite(y[c->residual_at])) break;
-            memcpy(x + c->pose_in, y + c->pose_out, 12 * sizeof(double));
-            if (c->kernel(c->arg, c->res, c->iw, c->w, 0)) return 1;
-            calls++;
-        }
+        if (newton_calls(&c->kernel, x, Y + c->n_out * j, c->pose_in, c->pose_out,
+                         c->residual_at, c->fk_tol, c->max_calls)) return 1;
     }
     return 0;
 }
@@ -214,8 +218,8 @@ class _Context(ctypes.Structure):
                 ("pose_in", _I), ("tracking", _P), ("dt", _P), ("t_end", _P),
                 ("grid_len", _P), ("grids", _P), ("grid_stride", _I), ("quintic", _P),
                 ("quintic_speed", _P), ("peak", _D), ("kp_ki", _D), ("integral", _P),
-                ("grid_tol", _D), ("steps", _P), ("limit", _P), ("kernel", _P),
-                ("arg", _P), ("res", _P), ("iw", _P), ("w", _P), ("n_out", _I),
+                ("grid_tol", _D), ("steps", _P), ("limit", _P), ("kernel", KernelCall),
+                ("n_out", _I),
                 ("pose_out", _I), ("residual_at", _I), ("status_at", _I), ("screen_at", _I),
                 ("forces_at", _I), ("fk_tol", _D), ("max_calls", _I), ("screen_scale", _D),
                 ("scratch", _P)]
@@ -335,14 +339,7 @@ class JointRows:
 
     def _bind(self, function: CompiledFunction) -> None:
         """The C context of the arrays and of the compiled step (its work arrays)."""
-        if function.entry is None:
-            raise CompilationError(f"{function.name}: the computed-torque step needs its "
-                                   "compiled C (no C compiler?)")
-        n_arg, n_res, n_iw, n_w = function.work_sizes
-        self._arg = (ctypes.c_void_p * max(n_arg, 1))()
-        self._res = (ctypes.c_void_p * max(n_res, 1))()
-        self._iw = np.zeros(max(n_iw, 1), dtype=np.int64)
-        self._w = np.zeros(max(n_w, 1))
+        self._kernel = KernelCall.of(function)
         self._scratch = np.zeros(function.n_in)
         ins, outs = compiled_ctc.INPUTS, compiled_ctc.OUTPUTS
         self.context = _Context(
@@ -352,9 +349,7 @@ class JointRows:
             0 if self.shared else self.grids.shape[1], self.quintic.ctypes.data,
             self.quintic_speed.ctypes.data, QUINTIC_PEAK_SPEED, self.kp_ki,
             self.integral.ctypes.data, GRID_TIME_TOLERANCE, self.steps.ctypes.data,
-            self.limit.ctypes.data, ctypes.cast(function.entry, ctypes.c_void_p).value,
-            ctypes.addressof(self._arg), ctypes.addressof(self._res), self._iw.ctypes.data,
-            self._w.ctypes.data, function.n_out, POSE_OUT.start, RESIDUAL, STATUS,
+            self.limit.ctypes.data, self._kernel, function.n_out, POSE_OUT.start, RESIDUAL, STATUS,
             outs["screen"].start, FORCES.start, compiled_ctc.FK_TOLERANCE, FK_MAX_CALLS,
             4.0 * self.threshold**2, self._scratch.ctypes.data)
         self._ctx = ctypes.addressof(self.context)

@@ -29,7 +29,13 @@ import numpy as np
 
 from controllers.data import Command, CommandBatch, ObservationBatch, observation_problem
 from controllers.estimators import PoseEstimate
-from hexapod.compiled import CompilationError, CompiledFunction, build_shared_library
+from hexapod.compiled import (
+    KERNEL_CALL_C,
+    CompilationError,
+    CompiledFunction,
+    KernelCall,
+    build_shared_library,
+)
 from hexapod.exceptions import ForwardKinematicsError
 from hexapod.fk import ITERATIONS_PER_CALL, NEWTON_INPUTS, NEWTON_OUTPUTS, newton_kernel, pack_rows
 from hexapod.workspace import home_pose
@@ -46,24 +52,15 @@ SOURCE = r"""
 #include <math.h>
 #include <stdint.h>
 #include <string.h>
-
-typedef struct {
-    int (*f)(const double **, double **, int64_t *, double *, int);
-    const double **arg; double **res; int64_t *iw; double *w;
-} Call;
+""" + KERNEL_CALL_C + r"""
 typedef struct {
     double *F, *X, *R, *p, *y;
     int64_t fk_in, R_in, t_in, q_in, R_out, t_out, residual_out;
     int64_t n_in, n_out, R_at, t_at, status_at, max_iterations, per_call;
     double tol;
-    Call newton, servo;
+    KernelCall newton, servo;
 } ModelBased;
 enum { COMMAND, REFUSED, NOT_FINITE, FK_FAILED, READY };
-
-static int call(const Call *c, const double *x, double *y) {
-    c->arg[0] = x; c->res[0] = y;
-    return c->f(c->arg, c->res, c->iw, c->w, 0);
-}
 
 /* fk (m, 2): each row's iterations and last residual [m] */
 int mb_step(ModelBased *c, int64_t m, const int64_t *trials, const double *t,
@@ -81,7 +78,7 @@ int mb_step(ModelBased *c, int64_t m, const int64_t *trials, const double *t,
         memcpy(x + c->t_in, p, 3 * sizeof(double));
         memcpy(x + c->q_in, qj, 6 * sizeof(double));
         while (it < c->max_iterations) {
-            if (call(&c->newton, x, y)) return 1;
+            if (kernel_call(&c->newton, x, y)) return 1;
             it += c->per_call;
             res = fabs(y[c->residual_out]);  /* the largest, NaN if one is */
             for (int l = 1; l < 6; l++) {
@@ -102,7 +99,7 @@ int mb_step(ModelBased *c, int64_t m, const int64_t *trials, const double *t,
         memcpy(xs + c->t_at, p, 3 * sizeof(double));
         if (!c->servo.f) { code[j] = READY; continue; }
         double *yj = Y + c->n_out * j;
-        if (call(&c->servo, xs, yj)) return 1;
+        if (kernel_call(&c->servo, xs, yj)) return 1;
         code[j] = yj[c->status_at] != 0.0 ? REFUSED : COMMAND;
     }
     return 0;
@@ -113,12 +110,6 @@ _P = ctypes.c_void_p
 _I = ctypes.c_int64
 
 
-class _Call(ctypes.Structure):
-    """The C ``Call``: a compiled function's entry and its work arrays (addresses)."""
-
-    _fields_ = [("f", _P), ("arg", _P), ("res", _P), ("iw", _P), ("w", _P)]
-
-
 class _Context(ctypes.Structure):
     """The C ``ModelBased``: the batch's arrays, their blocks and the two kernels."""
 
@@ -126,7 +117,7 @@ class _Context(ctypes.Structure):
         (name, _I) for name in ("fk_in", "R_in", "t_in", "q_in", "R_out", "t_out",
                                 "residual_out", "n_in", "n_out", "R_at", "t_at",
                                 "status_at", "max_iterations", "per_call")] + [
-        ("tol", ctypes.c_double), ("newton", _Call), ("servo", _Call)]
+        ("tol", ctypes.c_double), ("newton", KernelCall), ("servo", KernelCall)]
 
 
 @lru_cache(maxsize=1)
@@ -184,12 +175,13 @@ class PoseServoRows:
         self.twist = [law.camera_from_base is not None for law in laws]
         self.name = laws[0].name
         self._last: _Buffers | None = None
-        self._keep: list[object] = []
         newton, out, ins = newton_kernel(), kernel.outputs, NEWTON_INPUTS
         if newton.entry is None:
             raise CompilationError(f"{newton.name}: the model-based step needs its compiled "
                                    "C (no C compiler?)")
         self._y = np.zeros(newton.n_out)
+        #: The kernels' calls (their work arrays live as long as these).
+        self._calls = (self._call(newton), self._call(kernel))
         self.context = _Context(
             self.F.ctypes.data, self.X.ctypes.data, self.estimate.rotation.ctypes.data,
             self.estimate.translation.ctypes.data, self._y.ctypes.data, newton.n_in,
@@ -197,24 +189,18 @@ class PoseServoRows:
             NEWTON_OUTPUTS["t"].start, NEWTON_OUTPUTS["residual"].start, kernel.n_in,
             kernel.n_out, kernel.inputs["R"].start, kernel.inputs["t"].start,
             out.index("status"), laws[0].fk_max_iterations, ITERATIONS_PER_CALL,
-            laws[0].fk_tolerance, self._call(newton), self._call(kernel))
+            laws[0].fk_tolerance, *self._calls)
         self._ctx = ctypes.addressof(self.context)
         #: The pose servo in the CasADi virtual machine (``compiled=False``): by Python.
         self._python_servo = kernel.entry is None
         self._at = {name: out[name] for name in ("e", "qdot", "twist")}
         self._norm, self._cond, self._status = (out.index(k) for k in ("norm", "cond", "status"))
 
-    def _call(self, function: CompiledFunction) -> _Call:
-        """The C ``Call`` of ``function`` (its own work arrays, kept), empty without its
-        compiled C (the CasADi virtual machine: evaluated by :meth:`_servo`)."""
-        if function.entry is None:
-            return _Call()
-        n_arg, n_res, n_iw, n_w = function.work_sizes
-        work = ((_P * max(n_arg, 1))(), (_P * max(n_res, 1))(),
-                np.zeros(max(n_iw, 1), dtype=np.int64), np.zeros(max(n_w, 1)))
-        self._keep.append(work)
-        return _Call(ctypes.cast(function.entry, _P).value, ctypes.addressof(work[0]),
-                     ctypes.addressof(work[1]), work[2].ctypes.data, work[3].ctypes.data)
+    @staticmethod
+    def _call(function: CompiledFunction) -> KernelCall:
+        """The C call of ``function`` (its own work arrays), empty without its compiled C
+        (the CasADi virtual machine: evaluated by :meth:`_servo`)."""
+        return KernelCall() if function.entry is None else KernelCall.of(function)
 
     def step(self, observations: ObservationBatch, out: CommandBatch) -> None:
         """Every row's command into ``out`` (a refusal with its reason where there is

@@ -13,7 +13,8 @@ from __future__ import annotations
 import ctypes
 from functools import lru_cache
 
-from hexapod.compiled import build_shared_library
+from controllers.ctc_rows import NEWTON_CALLS_C
+from hexapod.compiled import KernelCall, build_shared_library
 
 #: A row's code in a step, in order (the C ``enum`` is made of these names): a command
 #: (over a limit or not), or why not yet or not.
@@ -28,14 +29,13 @@ SOURCE = r"""
 #include <math.h>
 #include <stdint.h>
 #include <string.h>
-
-typedef int (*kernel_t)(const double **, double **, int64_t *, double *, int);
+""" + NEWTON_CALLS_C + r"""
 typedef struct {
     double *X; int64_t n_in, q_at, qd_at, ref_at, ref_w, mask_at, mask_w, int_at, int_w;
     int64_t pose_in; const uint8_t *usable, *plain; const double *clock, *built, *dt;
     const int64_t *grid_len; const double *grids; const uint8_t *known; int64_t S;
     double kp_ki; double *integral, *guessed; int64_t *steps; const double *limit;
-    kernel_t kernel; const double **arg; double **res; int64_t *iw; double *w;
+    KernelCall kernel;
     int64_t n_out, pose_out, residual_at, status_at, screen_at, forces_at, error_at;
     double tol; int64_t max_calls; double screen_scale;
     int64_t measured, feat_at, feat_w, vis_w, ones_at, ones_w;
@@ -94,16 +94,8 @@ void tc_prepare(const TaskCtc *c, int64_t m, double *Xl, const int64_t *trials,
 int tc_evaluate(const TaskCtc *c, int64_t m, double *Xl, const int64_t *code, double *Y) {
     for (int64_t j = 0; j < m; j++) {
         if (code[j] != READY) continue;
-        double *x = Xl + c->n_in * j, *y = Y + c->n_out * j;
-        c->arg[0] = x; c->res[0] = y;
-        if (c->kernel(c->arg, c->res, c->iw, c->w, 0)) return 1;
-        int64_t calls = 1;
-        while (!(y[c->residual_at] < c->tol)) {  /* again from the pose reached */
-            if (calls >= c->max_calls || !isfinite(y[c->residual_at])) break;
-            memcpy(x + c->pose_in, y + c->pose_out, 12 * sizeof(double));
-            if (c->kernel(c->arg, c->res, c->iw, c->w, 0)) return 1;
-            calls++;
-        }
+        if (newton_calls(&c->kernel, Xl + c->n_in * j, Y + c->n_out * j, c->pose_in,
+                         c->pose_out, c->residual_at, c->tol, c->max_calls)) return 1;
     }
     return 0;
 }
@@ -184,9 +176,8 @@ class Context(ctypes.Structure):
                 ("int_w", _I), ("pose_in", _I), ("usable", _P), ("plain", _P),
                 ("clock", _P), ("built", _P), ("dt", _P), ("grid_len", _P), ("grids", _P),
                 ("known", _P), ("S", _I), ("kp_ki", _D), ("integral", _P), ("guessed", _P),
-                ("steps", _P), ("limit", _P), ("kernel", _P), ("arg", _P), ("res", _P),
-                ("iw", _P), ("w", _P), ("n_out", _I), ("pose_out", _I),
-                ("residual_at", _I), ("status_at", _I), ("screen_at", _I),
+                ("steps", _P), ("limit", _P), ("kernel", KernelCall), ("n_out", _I),
+                ("pose_out", _I), ("residual_at", _I), ("status_at", _I), ("screen_at", _I),
                 ("forces_at", _I), ("error_at", _I), ("tol", _D), ("max_calls", _I),
                 ("screen_scale", _D), ("measured", _I), ("feat_at", _I), ("feat_w", _I),
                 ("vis_w", _I), ("ones_at", _I), ("ones_w", _I)]

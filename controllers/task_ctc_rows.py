@@ -61,7 +61,7 @@ from controllers.task_ctc_c import (
 )
 from controllers.task_ctc_inputs import encoder_readings, line_to
 from hexapod.actuation import Actuation
-from hexapod.compiled import LANE_ROWS, CompilationError
+from hexapod.compiled import LANE_ROWS, CompilationError, KernelCall
 
 if TYPE_CHECKING:
     from controllers.task_ctc import TaskComputedTorque
@@ -167,14 +167,7 @@ class TaskRows:
     def _bind(self, step: CompiledTaskStep) -> None:
         """The C context of the arrays and of the compiled step (its work arrays)."""
         function = step.function
-        if function.entry is None:
-            raise CompilationError(f"{function.name}: the computed-torque step needs its "
-                                   "compiled C (no C compiler?)")
-        n_arg, n_res, n_iw, n_w = function.work_sizes
-        self._arg = (ctypes.c_void_p * max(n_arg, 1))()
-        self._res = (ctypes.c_void_p * max(n_res, 1))()
-        self._iw = np.zeros(max(n_iw, 1), dtype=np.int64)
-        self._w = np.zeros(max(n_w, 1))
+        self._kernel = KernelCall.of(function)
         ins, outs = step.inputs, step.outputs
         self.function_name = function.name
         #: The output blocks the step reads (the error, the pose, ``L^T L``, the residual).
@@ -186,9 +179,7 @@ class TaskRows:
             0, function.n_in, ins["q"].start, ins["q_dot"].start, ref.start,
             ref.stop - ref.start, mask.start, mask.stop - mask.start, ins["integral"].start,
             self.integral.shape[1], ins["pose"].start, 0, 0, 0, 0, 0, 0, 0, 0, 0, self.kp_ki,
-            0, 0, 0, 0, ctypes.cast(function.entry, ctypes.c_void_p).value,
-            ctypes.addressof(self._arg), ctypes.addressof(self._res), self._iw.ctypes.data,
-            self._w.ctypes.data, function.n_out, outs["pose"].start, outs.index("fk_residual"),
+            0, 0, 0, 0, self._kernel, function.n_out, outs["pose"].start, outs.index("fk_residual"),
             outs.index("status"), outs["screen"].start, outs["forces"].start,
             outs["error"].start, step.tolerance, FK_MAX_CALLS, 0.0)
         law0 = self.laws[0]

@@ -441,3 +441,45 @@ class BoundCall:
         copy.y[:] = self.y
         memo[id(self)] = copy
         return copy
+
+
+#: The C of a call of a compiled function from C (:class:`KernelCall`): the struct and
+#: ``kernel_call(k, x, y)``, ``y = f(x)`` for one row (nonzero when the function fails).
+KERNEL_CALL_C = r"""
+typedef struct {
+    int (*f)(const double **, double **, int64_t *, double *, int);
+    const double **arg; double **res; int64_t *iw; double *w;
+} KernelCall;
+static int kernel_call(const KernelCall *k, const double *x, double *y) {
+    k->arg[0] = x; k->res[0] = y;
+    return k->f(k->arg, k->res, k->iw, k->w, 0);
+}
+"""
+
+
+class KernelCall(ctypes.Structure):
+    """A compiled function's C entry and its own work arrays (addresses), the C
+    ``KernelCall`` of :data:`KERNEL_CALL_C`: C code written around kernels calls them
+    row by row through it (the arrays it points to are kept by the instance)."""
+
+    _fields_ = [("f", ctypes.c_void_p), ("arg", ctypes.c_void_p), ("res", ctypes.c_void_p),
+                ("iw", ctypes.c_void_p), ("w", ctypes.c_void_p)]
+
+    @classmethod
+    def of(cls, function: CompiledFunction) -> KernelCall:
+        """The call of ``function``'s C entry with new work arrays.
+
+        Raises:
+            CompilationError: The function has no C (no C compiler).
+        """
+        if function.entry is None:
+            raise CompilationError(f"{function.name}: C code calling it needs its compiled "
+                                   "C (no C compiler?)")
+        n_arg, n_res, n_iw, n_w = function.work_sizes
+        arg = (ctypes.c_void_p * max(n_arg, 1))()
+        res = (ctypes.c_void_p * max(n_res, 1))()
+        iw, w = np.zeros(max(n_iw, 1), dtype=np.int64), np.zeros(max(n_w, 1))
+        call = cls(ctypes.cast(function.entry, ctypes.c_void_p).value, ctypes.addressof(arg),
+                   ctypes.addressof(res), iw.ctypes.data, w.ctypes.data)
+        call._keep = (arg, res, iw, w)  # (the arrays live as long as the call)
+        return call
