@@ -460,7 +460,7 @@ static int kernel_call(const KernelCall *k, const double *x, double *y) {
 class KernelCall(ctypes.Structure):
     """A compiled function's C entry and its own work arrays (addresses), the C
     ``KernelCall`` of :data:`KERNEL_CALL_C`: C code written around kernels calls them
-    row by row through it (the arrays it points to are kept by the instance)."""
+    row by row through it (the arrays it points to are the instance's ``arrays``)."""
 
     _fields_ = [("f", ctypes.c_void_p), ("arg", ctypes.c_void_p), ("res", ctypes.c_void_p),
                 ("iw", ctypes.c_void_p), ("w", ctypes.c_void_p)]
@@ -481,5 +481,5 @@ class KernelCall(ctypes.Structure):
         iw, w = np.zeros(max(n_iw, 1), dtype=np.int64), np.zeros(max(n_w, 1))
         call = cls(ctypes.cast(function.entry, ctypes.c_void_p).value, ctypes.addressof(arg),
                    ctypes.addressof(res), iw.ctypes.data, w.ctypes.data)
-        call._keep = (arg, res, iw, w)  # (the arrays live as long as the call)
+        call.arrays = (arg, res, iw, w)  # (they live as long as the call)
         return call
