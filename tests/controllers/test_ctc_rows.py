@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 
 from controllers import registry
-from controllers.base import ObservationBatch
+from controllers.base import ControllerContext, ObservationBatch
 from controllers.task_ctc_compiled import CompiledTaskStep
 from hexapod import HexapodGeometry
 from hexapod.dynamics.robots import DynamicRobots
@@ -20,6 +20,16 @@ from tests.controllers.ctc_world import DT, CtcWorld, ideal_drives, line_referen
 
 LAWS = ("computed-torque", "cartesian-ctc", "vision-ctc", "leg-edge-ctc",
         "leg-direction-ctc")
+
+
+def line_trials(world: CtcWorld, n: int = 3) -> tuple[ControllerContext, DynamicRobots]:
+    """The context of a quintic line (a reference) in ``world`` and ``n`` force-mode
+    robots of its truth at the line's start, 1 mm apart along y."""
+    R0, t0, R1, t1, ref = line_reference(world.truth, "quintic", (0.5, -0.3, 0.4))
+    robots = DynamicRobots([world.truth] * n, np.array([R0] * n),
+                           np.array([t0 + np.array([0.0, 0.001 * k, 0.0]) for k in range(n)]))
+    robots.drives.mode = "force"
+    return world.context(world.goal(R1, t1), reference=ref), robots
 
 
 def _batch(world: CtcWorld, robots: DynamicRobots, t: float) -> ObservationBatch:
@@ -145,12 +155,8 @@ def test_batched_inputs_take_the_common_rows_the_others_row_by_row(
     of one's to the last bit."""
     truth = ideal_drives(geometry)
     world = CtcWorld.make(truth)
-    R0, t0, R1, t1, ref = line_reference(truth, "quintic", (0.5, -0.3, 0.4))
-    ctx = world.context(world.goal(R1, t1), reference=ref)
-    n = 3
-    robots = DynamicRobots([truth] * n, np.array([R0] * n),
-                           np.array([t0 + np.array([0.0, 0.001 * k, 0.0]) for k in range(n)]))
-    robots.drives.mode = "force"
+    ctx, robots = line_trials(world)
+    n = len(robots.R)
     batch = registry.create(name)
     batch.reset_batch([ctx] * n)
     singles = [registry.create(name) for _ in range(n)]
@@ -214,12 +220,8 @@ def test_rows_with_a_hidden_leg_go_through_the_one_call(geometry: HexapodGeometr
     the rows after a hidden one (their input row written in the common case) too."""
     truth = ideal_drives(geometry)
     world = CtcWorld.make(truth)
-    R0, t0, R1, t1, ref = line_reference(truth, "quintic", (0.5, -0.3, 0.4))
-    ctx = world.context(world.goal(R1, t1), reference=ref)
-    n = 3
-    robots = DynamicRobots([truth] * n, np.array([R0] * n),
-                           np.array([t0 + np.array([0.0, 0.001 * k, 0.0]) for k in range(n)]))
-    robots.drives.mode = "force"
+    ctx, robots = line_trials(world)
+    n = len(robots.R)
     batch = registry.create(name)
     batch.reset_batch([ctx] * n)
     singles = [registry.create(name) for _ in range(n)]

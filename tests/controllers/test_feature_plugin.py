@@ -34,7 +34,6 @@ from tests.controllers.ctc_world import (
     CtcWorld,
     assert_tracks_the_rotated_line,
     ideal_drives,
-    line_reference,
 )
 from tests.controllers.plugin_feature_joints import JOINTS, PlatformJoints
 from tests.controllers.task_ctc_oracles import numpy_law_step
@@ -287,17 +286,11 @@ def test_computed_torque_batch_rows_equal_the_trials_own_steps(geometry: Hexapod
     integral action): every row through the one compiled call, the forces of each trial's
     own step to the last bit; a deep copy of a trial (its step rebuilt from the feature)
     steps as the original."""
-    from hexapod.dynamics.robots import DynamicRobots
-    from tests.controllers.test_ctc_rows import _batch
+    from tests.controllers.test_ctc_rows import _batch, line_trials
 
-    truth = ideal_drives(geometry)
-    world = _heavy_world(truth)
-    R0, t0, R1, t1, ref = line_reference(truth, "quintic", (0.5, -0.3, 0.4))
-    ctx = world.context(world.goal(R1, t1), reference=ref)
-    n = 3
-    robots = DynamicRobots([truth] * n, np.array([R0] * n),
-                           np.array([t0 + np.array([0.0, 0.001 * k, 0.0]) for k in range(n)]))
-    robots.drives.mode = "force"
+    world = _heavy_world(ideal_drives(geometry))
+    ctx, robots = line_trials(world)
+    n = len(robots.R)
     batch = JOINTS.ctc(integral_gain=5.0)
     batch.reset_batch([ctx] * n)
     singles = [JOINTS.ctc(integral_gain=5.0) for _ in range(n)]

@@ -17,7 +17,7 @@ from controllers.task_ctc_rows import TaskRows
 from hexapod import HexapodGeometry
 from hexapod.dynamics.robots import DynamicRobots
 from tests.controllers.ctc_world import DT, CtcWorld, ideal_drives, line_reference
-from tests.controllers.test_ctc_rows import _batch, _step_as_the_trials
+from tests.controllers.test_ctc_rows import _batch, _step_as_the_trials, line_trials
 
 
 @pytest.mark.slow
@@ -184,12 +184,8 @@ def test_rows_over_a_limit_are_saturated_as_in_batches_of_one(
     weak = dataclasses.replace(weak, drives=dataclasses.replace(weak.drives,
                                                                 force_limit=limit))
     world = CtcWorld.make(weak)
-    R0, t0, R1, t1, ref = line_reference(weak, "quintic", (0.5, -0.3, 0.4))
-    ctx = world.context(world.goal(R1, t1), reference=ref)
-    n = 3
-    robots = DynamicRobots([weak] * n, np.array([R0] * n),
-                           np.array([t0 + np.array([0.0, 0.001 * k, 0.0]) for k in range(n)]))
-    robots.drives.mode = "force"
+    ctx, robots = line_trials(world)
+    n = len(robots.R)
     batch = registry.create(name, saturation=saturation, integral_gain=1.0)
     batch.reset_batch([ctx] * n)
     singles = [registry.create(name, saturation=saturation, integral_gain=1.0)
