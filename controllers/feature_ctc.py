@@ -185,12 +185,6 @@ class FeatureCTC(TaskComputedTorque):
         :meth:`reference_grid` after the reference)."""
         self._grid = (self.reference, rows, known, every)
 
-    def share_grid(self, rows: np.ndarray) -> None:
-        """Hold ``rows`` (equal to the sanitised grid: its batch's copy) instead of the
-        own array (one copy of a grid in memory: fresh pages cost more than the copy)."""
-        if self._grid is not None:
-            self._grid = (self._grid[0], rows, *self._grid[2:])
-
     def feature_rows(self, times: np.ndarray) -> np.ndarray:
         """(m, 3, n) the anchored model features at ``times`` (m,) [s], their rate and
         acceleration; NaN where the model's camera does not see the feature

@@ -177,10 +177,6 @@ class TaskComputedTorque(ComputedTorqueLaw):
         references) together before their :meth:`batch_grid` (nothing by default: each
         builds its own)."""
 
-    def share_grid(self, rows: np.ndarray) -> None:
-        """Hold ``rows`` (its batch's copy of :meth:`batch_grid`'s rows) instead of the
-        own array (nothing by default)."""
-
     def retarget_trial(self, goal: Goal) -> None:
         """A new fixed goal (ignored when tracking ``context.reference``)."""
         ctx = self.context

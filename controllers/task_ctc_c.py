@@ -33,7 +33,7 @@ SOURCE = r"""
 typedef struct {
     double *X; int64_t n_in, q_at, qd_at, ref_at, ref_w, mask_at, mask_w, int_at, int_w;
     int64_t pose_in; const uint8_t *usable, *plain; const double *clock, *built, *dt;
-    const int64_t *grid_len; const double *grids; const uint8_t *known; int64_t S;
+    const int64_t *grid_len; const double *const *grids; const uint8_t *const *known;
     double kp_ki; double *integral, *guessed; int64_t *steps; const double *limit;
     KernelCall kernel;
     int64_t n_out, pose_out, residual_at, status_at, screen_at, forces_at, error_at;
@@ -80,14 +80,13 @@ void tc_prepare(const TaskCtc *c, int64_t m, double *Xl, const int64_t *trials,
         tr[j] = r;
         if (!(fabs(r - k * dt) < 1e-9 && k >= 0) || len <= 0) { code[j] = OFF_GRID; continue; }
         gstep[j] = (int64_t)k < len - 1 ? (int64_t)k : len - 1;
-        int64_t at = c->S * i + gstep[j];
-        memcpy(x + c->ref_at, c->grids + c->ref_w * at, c->ref_w * sizeof(double));
+        memcpy(x + c->ref_at, c->grids[i] + c->ref_w * gstep[j], c->ref_w * sizeof(double));
         for (int64_t r2 = 0; r2 < c->mask_w; r2++) x[c->mask_at + r2] = 1.0;
         if (!c->plain[i])
             for (int64_t r2 = 0; r2 < c->int_w; r2++)
                 x[c->int_at + r2] = c->kp_ki * c->integral[c->int_w * i + r2];
         /* UNKNOWN: some task rows not known; UNSEEN: a feature hidden or not finite */
-        code[j] = !c->known[at] ? UNKNOWN : seen[j] ? READY : UNSEEN;
+        code[j] = !c->known[i][gstep[j]] ? UNKNOWN : seen[j] ? READY : UNSEEN;
     }
 }
 
@@ -175,7 +174,7 @@ class Context(ctypes.Structure):
                 ("ref_w", _I), ("mask_at", _I), ("mask_w", _I), ("int_at", _I),
                 ("int_w", _I), ("pose_in", _I), ("usable", _P), ("plain", _P),
                 ("clock", _P), ("built", _P), ("dt", _P), ("grid_len", _P), ("grids", _P),
-                ("known", _P), ("S", _I), ("kp_ki", _D), ("integral", _P), ("guessed", _P),
+                ("known", _P), ("kp_ki", _D), ("integral", _P), ("guessed", _P),
                 ("steps", _P), ("limit", _P), ("kernel", KernelCall), ("n_out", _I),
                 ("pose_out", _I), ("residual_at", _I), ("status_at", _I), ("screen_at", _I),
                 ("forces_at", _I), ("error_at", _I), ("tol", _D), ("max_calls", _I),

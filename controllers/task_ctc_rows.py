@@ -4,9 +4,10 @@ of trials (a batch of one is the per-trial step).
 
 :class:`TaskRows` (built at the first step after a reset) owns its trials' state: the
 input matrix ``X`` (n, n_in) with each row's constants and pose guess, the guess flags,
-command counts, reference clocks, force limits, integrals and the references on the
-control grid (n, S, w) with the steps whose task rows are all known. Each instance's
-state is views of these arrays.
+command counts, reference clocks, force limits and integrals (each instance's state is
+views of these arrays), and the addresses of each law's reference on its control grid
+(S, w) and of the grid steps whose task rows are all known (the law's own arrays, read
+in place).
 
 One step (:meth:`TaskRows.step`) is C (:mod:`controllers.task_ctc_c`, compiled once and
 cached as the kernels are) around the compiled step of
@@ -148,10 +149,12 @@ class TaskRows:
             if law.integral.shape == (size,):
                 self.integral[k] = law.integral
             law.integral = self.integral[k]
-        #: The references on the control grid (n, S, w), the grid steps with every task
-        #: row known (n, S), each trial's grid length (0: none) and the version built.
-        self.grids = np.zeros((n, 1, 0))
-        self.known = np.zeros((n, 1), dtype=np.uint8)
+        #: Each trial's reference on its control grid (S, w) and the grid steps with
+        #: every task row known (S,) (the laws' own arrays, read in place by the C
+        #: through their addresses), each grid's length (0: none) and the version built.
+        self.held: list[tuple[np.ndarray, np.ndarray] | None] = [None] * n
+        self.grids = np.zeros(n, dtype=np.uintp)
+        self.known = np.zeros(n, dtype=np.uintp)
         self.grid_len = np.zeros(n, dtype=np.int64)
         self.built = np.full(n, -1.0)
         law0 = laws[0] if laws else None
@@ -178,7 +181,7 @@ class TaskRows:
         self.context = Context(
             0, function.n_in, ins["q"].start, ins["q_dot"].start, ref.start,
             ref.stop - ref.start, mask.start, mask.stop - mask.start, ins["integral"].start,
-            self.integral.shape[1], ins["pose"].start, 0, 0, 0, 0, 0, 0, 0, 0, 0, self.kp_ki,
+            self.integral.shape[1], ins["pose"].start, 0, 0, 0, 0, 0, 0, 0, 0, self.kp_ki,
             0, 0, 0, 0, self._kernel, function.n_out, outs["pose"].start, outs.index("fk_residual"),
             outs.index("status"), outs["screen"].start, outs["forces"].start,
             outs["error"].start, step.tolerance, FK_MAX_CALLS, 0.0)
@@ -200,13 +203,12 @@ class TaskRows:
         self._addresses()
 
     def _addresses(self) -> None:
-        """The arrays' addresses in the C context (again after the grids grow)."""
+        """The arrays' addresses in the C context."""
         c = self.context
         assert c is not None
         for name in ("X", "usable", "plain", "clock", "built", "dt", "grid_len", "grids",
                      "known", "integral", "guessed", "steps", "limit"):
             setattr(c, name, getattr(self, name).ctypes.data)
-        c.S = self.grids.shape[1]
         self._ctx = ctypes.addressof(c)
 
     def _buffers(self, n: int) -> _Buffers:
@@ -230,10 +232,9 @@ class TaskRows:
                 self.laws[chunk[0]].build_grids([self.laws[k] for k in chunk])
             for k in chunk:
                 self._build(k)
-        self._addresses()
 
     def _build(self, k: int) -> None:
-        """Stack trial ``k``'s reference grid (the law's ``batch_grid``: none when it
+        """Hold trial ``k``'s reference grid (the law's ``batch_grid``: none when it
         raises; its own inputs then meet the failure)."""
         law = self.laws[k]
         self.built[k] = law.clock[VERSION]
@@ -243,22 +244,19 @@ class TaskRows:
             grid = None
         if grid is None:
             self.grid_len[k] = 0
+            self.held[k] = None
             return
         rows, known = grid
-        size, width = rows.shape
-        if size > self.grids.shape[1] or width != self.grids.shape[2]:
-            grown = np.zeros((len(self.laws), max(size, self.grids.shape[1]), width))
-            grown_known = np.zeros(grown.shape[:2], dtype=np.uint8)
-            if width == self.grids.shape[2]:
-                grown[:, :self.grids.shape[1]] = self.grids
-                grown_known[:, :self.known.shape[1]] = self.known
-                for j in np.flatnonzero(self.grid_len).tolist():  # views of the new array
-                    self.laws[j].share_grid(grown[j, :self.grid_len[j]])
-            self.grids, self.known = grown, grown_known
-        self.grids[k, :size] = rows
-        self.known[k, :size] = True if known is None else known
-        self.grid_len[k] = size
-        law.share_grid(self.grids[k, :size])
+        assert self.context is not None
+        if rows.ndim != 2 or rows.shape[1] != self.context.ref_w:
+            raise ValueError(f"{law.name}: a reference grid of shape {rows.shape}, expected "
+                             f"(steps, {self.context.ref_w})")
+        rows = np.ascontiguousarray(rows, dtype=float)
+        known = (np.ones(len(rows), dtype=np.uint8) if known is None
+                 else np.ascontiguousarray(known, dtype=np.uint8))
+        self.held[k] = (rows, known)  # (alive while the C reads them)
+        self.grids[k], self.known[k] = rows.ctypes.data, known.ctypes.data
+        self.grid_len[k] = len(rows)
 
     # ---------------------------------------------------------------- the step
     def step(self, observations: ObservationBatch, out: CommandBatch, threshold: float
