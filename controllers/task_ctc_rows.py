@@ -45,6 +45,7 @@ from controllers.data import CommandBatch, ObservationBatch
 from controllers.task_ctc_c import (
     ACCEPT,
     ACCEPTED,
+    CODES,
     FIRST,
     NOT_FINITE,
     OFF_GRID,
@@ -79,7 +80,8 @@ STARTED, START, VERSION = 0, 1, 2
 _ZEROS = np.zeros(6)
 #: The codes left to :meth:`TaskRows._rare` after the first C call.
 _PENDING = frozenset((OFF_GRID, UNSURE, READY, FIRST, STALE, UNKNOWN, UNSEEN))
-_PENDING_CODES = np.array(sorted(_PENDING))
+#: Whether a code (its index) is pending.
+_IS_PENDING = np.isin(np.arange(len(CODES)), sorted(_PENDING))
 
 class _Buffers:
     """A step's arrays for ``n`` rows (``n_in`` inputs, ``n_out`` outputs, a measurement
@@ -312,7 +314,7 @@ class TaskRows:
             else:  # the common case
                 self._one(observations, out, b, None, None, None)
             return
-        pending = bool(np.isin(code, _PENDING_CODES).any())
+        pending = bool(_IS_PENDING[code].any())
         used = {}
         notes = {}
         reasons = self._rare(observations, b, used, notes, threshold) if pending else {}
