@@ -1,0 +1,385 @@
+"""The one step of the image-based laws over a batch of trials (a batch of one is the
+per-trial ``step``): C around the law's compiled core (:mod:`controllers.law_kernel`).
+
+:class:`LawRows` (built by the law's batch reset) holds each trial's core inputs as a
+row of ``X`` (constants written at the reset and by the goals), and points at the
+batch's estimate (:class:`~controllers.estimators.LegDirectionEstimate`), the limit QP's
+bounds and the leg-rate feed-forward's gains and offsets. One step
+(:meth:`LawRows.step`) is C (:data:`SOURCE`, compiled once and cached as the kernels
+are):
+
+- ``prepare``: a row is COMMON when its trial's row holds the core's inputs (its goal
+  sees every feature and its trial has the batch's core), every feature is visible, and
+  its features, lengths and time are finite with every length > 0; its features and
+  lengths (and, when the goal gives no lengths, the ``desired_lengths`` of the DESIRED /
+  MEAN interaction) are packed into its input row. Every other row is RARE;
+- ``evaluate``: the core over the COMMON rows: the lean core (``law_tail(lean=True)``)
+  for a batch of several, the full core for a batch of one (the per-trial command's
+  rank and condition number); both give the same error, ``tau``, ``q_dot`` and
+  directions to the last bit where the lean one certifies full rank;
+- ``finish``: a row is accepted when its norms are finite, its rank is 6, its ``q_dot``
+  is finite and, for the limit QP, the unconstrained optimum clears every bound by twice
+  the tolerance (:func:`~controllers.solvers.limit_qp.velocity_bounds`' arithmetic);
+  an accepted row writes its estimate (every direction measured, the twist and the
+  lengths commanded), its leg velocities and error norm, and the leg-rate feed-forward
+  (:func:`~controllers.leg_rate.feed_forward`'s arithmetic). Other rows are REJECTED.
+
+Python takes the RARE rows (a hidden feature, an unusable observation: the law's own
+per-row step) and the REJECTED ones (from the full core's result: the degenerate
+core's reasons, OSQP where the optimum touches a bound). The C is compiled without
+fused multiply-adds, so its numbers are those of the numpy expressions it replaced.
+"""
+
+from __future__ import annotations
+
+import ctypes
+from functools import lru_cache
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+
+from controllers.data import CommandBatch, ObservationBatch
+from controllers.estimators import LegDirectionEstimate
+from controllers.law_kernel import LawKernel, LawResult
+from hexapod.compiled import (
+    KERNEL_CALL_C,
+    CompilationError,
+    CompiledFunction,
+    KernelCall,
+    build_shared_library,
+)
+
+if TYPE_CHECKING:
+    from controllers.laws import VisionLaw
+
+#: A row's code after a step (the C ``enum`` is made of these names): a command, why
+#: Python steps the row (RARE: not the common case; REJECTED: the core's result is not
+#: the command), or READY (packed, not evaluated yet).
+CODES = ("ACCEPTED", "RARE", "REJECTED", "READY")
+ACCEPTED, RARE, REJECTED, READY = range(len(CODES))
+
+#: What the C takes of the core's solution (:attr:`~controllers.solvers.base.Solver.
+#: core_acceptance`, in the C ``enum``'s order).
+ACCEPTANCE = ("core", "bounds", "none")
+
+#: The C of a step (see the module docstring); ``VisionRows`` is :class:`_Context`.
+SOURCE = r"""
+#include <math.h>
+#include <stdint.h>
+#include <string.h>
+""" + KERNEL_CALL_C + r"""
+typedef struct {
+    double *X; int64_t n_in; const uint8_t *ready, *desired_q;
+    int64_t feat_at, n_feat, units, len_at, dlen_at;
+    KernelCall lean, full;
+    int64_t n_out, norm_at, n_sum_at, rank_at, check_at, tau_at, qdot_at, dir_at;
+    int64_t accept; const double *lower, *upper, *inv_dt, *vmax; const uint8_t *shortcut;
+    double *directions, *in_use, *twist, *lengths; uint8_t *observed;
+    const double *kappa; double *offset;
+} VisionRows;
+enum { @CODES@ };
+enum { @ACCEPTANCE@ };
+
+void vl_prepare(const VisionRows *c, int64_t m, const int64_t *trials, const double *t,
+                const double *q, const double *feats, const uint8_t *vis, int64_t *code) {
+    for (int64_t j = 0; j < m; j++) {
+        int64_t i = trials[j];
+        const double *qj = q + 6 * j, *fj = feats + c->n_feat * j;
+        const uint8_t *vj = vis + c->units * j;
+        int ok = c->ready[i] && isfinite(t[j]);
+        for (int64_t k = 0; ok && k < c->units; k++) ok = vj[k] != 0;
+        for (int64_t k = 0; ok && k < c->n_feat; k++) ok = isfinite(fj[k]);
+        for (int l = 0; ok && l < 6; l++) ok = isfinite(qj[l]) && qj[l] > 0.0;
+        if (!ok) { code[j] = RARE; continue; }
+        double *x = c->X + c->n_in * i;
+        memcpy(x + c->feat_at, fj, c->n_feat * sizeof(double));
+        memcpy(x + c->len_at, qj, 6 * sizeof(double));
+        if (c->desired_q[i]) memcpy(x + c->dlen_at, qj, 6 * sizeof(double));
+        code[j] = READY;
+    }
+}
+
+int vl_evaluate(const VisionRows *c, int64_t m, const int64_t *trials, const int64_t *code,
+                double *Y, int64_t full) {
+    const KernelCall *k = full ? &c->full : &c->lean;
+    for (int64_t j = 0; j < m; j++)
+        if (code[j] == READY && kernel_call(k, c->X + c->n_in * trials[j], Y + c->n_out * j))
+            return 1;
+    return 0;
+}
+
+void vl_finish(const VisionRows *c, int64_t m, const int64_t *trials, const double *q,
+               const double *qd, int64_t *code, const double *Y, double *vel, double *norm) {
+    for (int64_t j = 0; j < m; j++) {
+        if (code[j] != READY) continue;
+        int64_t i = trials[j];
+        const double *y = Y + c->n_out * j, *qj = q + 6 * j, *qdot = y + c->qdot_at;
+        int ok = isfinite(y[c->norm_at]) && isfinite(y[c->n_sum_at]) && y[c->rank_at] >= 6.0
+                 && y[c->check_at] == 0.0;
+        if (c->accept == NONE) ok = 0;
+        if (ok && c->accept == BOUNDS) {  /* limit_qp.velocity_bounds, the shortcut's test */
+            double vmax = c->vmax[i], tol2 = 2.0 * (1e-6 * vmax);
+            ok = c->shortcut[i];
+            for (int l = 0; ok && l < 6; l++) {
+                double slo = (c->lower[i] - qj[l]) * c->inv_dt[i];
+                double shi = (c->upper[i] - qj[l]) * c->inv_dt[i];
+                double lo = fmin(fmax(slo, -vmax), vmax), hi = fmin(fmax(shi, -vmax), vmax);
+                ok = (qdot[l] - lo) > tol2 && (hi - qdot[l]) > tol2;
+            }
+        }
+        if (!ok) { code[j] = REJECTED; continue; }
+        memcpy(c->directions + 18 * i, y + c->dir_at, 18 * sizeof(double));
+        memcpy(c->in_use + 18 * i, y + c->dir_at, 18 * sizeof(double));
+        memset(c->observed + 6 * i, 1, 6);
+        memcpy(c->twist + 6 * i, y + c->tau_at, 6 * sizeof(double));
+        memcpy(c->lengths + 6 * i, qj, 6 * sizeof(double));
+        double *v = vel + 6 * j;
+        memcpy(v, qdot, 6 * sizeof(double));
+        norm[j] = y[c->norm_at];
+        if (c->kappa) {  /* feed_forward: u = q_dot + kappa (q_dot - (v - offset)) */
+            double *off = c->offset + 6 * i;
+            const double *kap = c->kappa + 6 * i;
+            if (qd) {
+                const double *vj = qd + 6 * j;
+                int known = 1;
+                for (int l = 0; l < 6; l++) known &= isfinite(vj[l]);
+                if (known)
+                    for (int l = 0; l < 6; l++) v[l] = v[l] + kap[l] * (v[l] - (vj[l] - off[l]));
+            }
+            for (int l = 0; l < 6; l++) off[l] = 0.0;
+        }
+        code[j] = ACCEPTED;
+    }
+}
+
+int vl_step(const VisionRows *c, int64_t m, const int64_t *trials, const double *t,
+            const double *q, const double *feats, const uint8_t *vis, const double *qd,
+            int64_t *code, double *Y, double *vel, double *norm, int64_t full) {
+    vl_prepare(c, m, trials, t, q, feats, vis, code);
+    if (vl_evaluate(c, m, trials, code, Y, full)) return 1;
+    vl_finish(c, m, trials, q, qd, code, Y, vel, norm);
+    return 0;
+}
+""".replace("@CODES@", ", ".join(CODES)).replace(
+    "@ACCEPTANCE@", ", ".join(a.upper() for a in ACCEPTANCE))
+
+_P = ctypes.c_void_p
+_I = ctypes.c_int64
+
+
+class _Context(ctypes.Structure):
+    """The C ``VisionRows``: the batch's arrays and the cores (addresses)."""
+
+    _fields_ = [("X", _P), ("n_in", _I), ("ready", _P), ("desired_q", _P),
+                ("feat_at", _I), ("n_feat", _I), ("units", _I), ("len_at", _I),
+                ("dlen_at", _I), ("lean", KernelCall), ("full", KernelCall),
+                ("n_out", _I), ("norm_at", _I), ("n_sum_at", _I), ("rank_at", _I),
+                ("check_at", _I), ("tau_at", _I), ("qdot_at", _I), ("dir_at", _I),
+                ("accept", _I), ("lower", _P), ("upper", _P), ("inv_dt", _P), ("vmax", _P),
+                ("shortcut", _P), ("directions", _P), ("in_use", _P), ("twist", _P),
+                ("lengths", _P), ("observed", _P), ("kappa", _P), ("offset", _P)]
+
+
+@lru_cache(maxsize=1)
+def _library() -> ctypes.CDLL:
+    """The compiled :data:`SOURCE` (``-fno-builtin``, ``-ffp-contract=off``: no fused
+    multiply-add, the numpy expressions' bits)."""
+    lib = ctypes.CDLL(str(build_shared_library(
+        "vision_law_rows", SOURCE, ("-O2", "-fno-builtin", "-ffp-contract=off"))))
+    lib.vl_prepare.argtypes = [_P, _I, _P, _P, _P, _P, _P, _P]
+    lib.vl_prepare.restype = None
+    lib.vl_evaluate.argtypes = [_P, _I, _P, _P, _P, _I]
+    lib.vl_evaluate.restype = ctypes.c_int
+    lib.vl_finish.argtypes = [_P, _I, _P, _P, _P, _P, _P, _P, _P]
+    lib.vl_finish.restype = None
+    lib.vl_step.argtypes = [_P, _I, _P, _P, _P, _P, _P, _P, _P, _P, _P, _P, _I]
+    lib.vl_step.restype = ctypes.c_int
+    return lib
+
+
+class _Buffers:
+    """A step's arrays for ``n`` rows (reused while the batch size is the same)."""
+
+    def __init__(self, n: int, n_out: int) -> None:
+        self.n = n
+        self.code = np.zeros(n, dtype=np.int64)
+        self.Y = np.zeros((n, n_out))
+        self.code_at = self.code.ctypes.data
+        self.Y_at = self.Y.ctypes.data
+
+
+def _address(a: np.ndarray, dtype: Any) -> tuple[np.ndarray, int]:
+    """``a`` as a C-contiguous array of ``dtype`` (a view when it is one) and its
+    address."""
+    if a.dtype == np.bool_ and dtype is np.uint8 and a.flags.c_contiguous:
+        a = a.view(np.uint8)
+    elif a.dtype != dtype or not a.flags.c_contiguous:
+        a = np.ascontiguousarray(a, dtype=dtype)
+    return a, a.ctypes.data
+
+
+class LawRows:
+    """The core inputs of a batch's trials, one row per trial, and the batch's one step
+    (module docstring).
+
+    Args:
+        laws: The trials' instances (reset), in trial order; the first trial's core is
+            the batch's (a trial with another core, or whose goal hides a feature, is
+            stepped by Python).
+        estimate: The batch's estimate (the instances' estimates are its rows).
+        feedforward: ``(kappa, offset)`` (n, 6) of the leg-rate feed-forward, or None
+            (off).
+    """
+
+    def __init__(self, laws: list[VisionLaw], estimate: LegDirectionEstimate,
+                 feedforward: tuple[np.ndarray, np.ndarray] | None) -> None:
+        law0 = laws[0]
+        kernel = law0.kernel
+        assert kernel is not None, "reset() sets the compiled core"
+        n = len(laws)
+        #: The batch's core (its layouts are every ready row's).
+        self.kernel: LawKernel = kernel
+        self.feature = law0.observed_feature
+        self.slices = kernel.slices
+        self.outputs = kernel.outputs
+        self.X = np.zeros((n, kernel.input_vector.size))
+        #: (n,) the trials whose row holds its core's inputs (they may be COMMON).
+        self.ready = np.zeros(n, dtype=np.uint8)
+        #: (n,) the trials whose ``desired_lengths`` are the measured ones (no goal lengths).
+        self.desired_q = np.zeros(n, dtype=np.uint8)
+        #: (n,) the rows holding a core's constants (a retarget may write its desired
+        #: features alone).
+        self.filled = np.zeros(n, dtype=bool)
+        for k, law in enumerate(laws):
+            self.take(k, law)
+        self.laws = laws
+        self._estimate = estimate
+        solver = law0.solver
+        accept = ACCEPTANCE.index(solver.core_acceptance)
+        qp = solver.core_acceptance == "bounds"
+        solvers: list[Any] = [law.solver for law in laws]
+        windows = [s.window for s in solvers] if qp else []
+        self._bounds = [np.array([getattr(w, name) for w in windows] or [0.0])
+                        for name in ("lower", "upper", "max_speed")]
+        self._bounds.append(np.array([1.0 / w.dt for w in windows] or [0.0]))
+        self._shortcut = np.array([s.shortcut for s in solvers] if qp else [0],
+                                  dtype=np.uint8)
+        self._feedforward = feedforward
+        o, ins = self.outputs, self.slices
+        lo, hi, vmax, inv_dt = self._bounds
+        est = estimate
+        self.context = _Context(
+            self.X.ctypes.data, self.X.shape[1], self.ready.ctypes.data,
+            self.desired_q.ctypes.data, ins["features"].start,
+            ins["features"].stop - ins["features"].start, self.feature.units,
+            ins["lengths"].start,
+            ins["desired_lengths"].start if "desired_lengths" in ins else -1,
+            KernelCall(), KernelCall(), o.size, o.index("error_norm"), o.index("n_sum"),
+            o.index("rank"), o.index("qdot_check"), o["tau"].start, o["qdot"].start,
+            o["directions"].start, accept, lo.ctypes.data, hi.ctypes.data,
+            inv_dt.ctypes.data, vmax.ctypes.data, self._shortcut.ctypes.data,
+            est.directions.ctypes.data, est.in_use.ctypes.data, est.twist.ctypes.data,
+            est.lengths.ctypes.data, est.observed.ctypes.data,
+            None if feedforward is None else feedforward[0].ctypes.data,
+            None if feedforward is None else feedforward[1].ctypes.data)
+        self._ctx = ctypes.addressof(self.context)
+        #: The lean and full cores, once bound to the C (built on first use: a batch
+        #: stepped only one row at a time never builds the lean core).
+        self.functions: dict[bool, CompiledFunction] = {}
+        self._calls: dict[bool, KernelCall] = {}
+        self._c = True  # the core has its C (else the cores are called from Python)
+        self._last: _Buffers | None = None
+
+    def take(self, trial: int, law: VisionLaw) -> None:
+        """Copy a trial's core inputs into its row (after its reset or a new goal)."""
+        kernel = law.kernel
+        same = (kernel is not None and kernel.slices is self.slices
+                and law.observed_feature is self.feature)
+        self.ready[trial] = same and law.goal_all_visible
+        self.desired_q[trial] = same and law.desired_lengths_measured
+        if kernel is None or not same:
+            self.filled[trial] = False
+            return
+        self.X[trial] = kernel.input_vector
+        for name in ("weights", "measured"):  # the common case: every feature, measured
+            self.X[trial, self.slices[name]] = 1.0
+        self.filled[trial] = True
+
+    def write_desired(self, trials: np.ndarray, desired: np.ndarray, quick: np.ndarray
+                      ) -> np.ndarray:
+        """Write the desired features ``desired`` (m, D) of the goals ``quick`` (m,) into
+        the rows of ``trials`` (m,) that hold their constants; returns the mask of the
+        goals written."""
+        quick = quick & self.filled[trials]
+        rows = np.flatnonzero(quick)
+        if len(rows):
+            self.X[trials[rows], self.slices["desired"]] = desired[rows]
+            self.ready[trials[rows]] = 1
+        return quick  # type: ignore[no-any-return]
+
+    def _bind(self, full: bool) -> CompiledFunction:
+        """The lean or full core, bound to the C context on its first use."""
+        function = self.kernel.function if full else self.kernel.lean_function
+        self.functions[full] = function
+        try:
+            call = KernelCall.of(function)
+        except CompilationError:  # no C: the CasADi virtual machine between the C passes
+            self._c = False
+            return function
+        self._calls[full] = call  # (its work arrays live as long as the rows)
+        setattr(self.context, "full" if full else "lean", call)
+        return function
+
+    def step(self, observations: ObservationBatch, out: CommandBatch) -> tuple[
+            np.ndarray, np.ndarray]:
+        """The command of every COMMON row the core's result is into ``out`` (module
+        docstring); returns the rows' codes (n,) and the core's outputs (n, n_out) (the
+        full core's for a batch of one).
+
+        Raises:
+            CompilationError: The compiled core failed.
+        """
+        obs = observations
+        n = len(obs)
+        b = self._last
+        if b is None or b.n != n:
+            b = self._last = _Buffers(n, self.outputs.size)
+        code = b.code
+        feats = getattr(obs, self.feature.field)
+        if feats is None:  # not measured: every row's own step says so
+            code[:] = RARE
+            return code, b.Y
+        full = n == 1
+        function = self.functions.get(full) or self._bind(full)
+        trials, trials_at = _address(np.asarray(obs.trials), np.int64)
+        t, t_at = _address(np.asarray(obs.t), np.float64)
+        q, q_at = _address(obs.lengths, np.float64)
+        f, f_at = _address(feats, np.float64)
+        vis, vis_at = _address(getattr(obs, self.feature.visibility), np.uint8)
+        qd = obs.q_dot if self._feedforward is not None else None
+        qd_arr, qd_at = (None, None) if qd is None else _address(qd, np.float64)
+        lib = _library()
+        v_at, norm_at = out.velocities.ctypes.data, out.error_norm.ctypes.data
+        if self._c:
+            if lib.vl_step(self._ctx, n, trials_at, t_at, q_at, f_at, vis_at, qd_at, b.code_at,
+                           b.Y_at, v_at, norm_at, full):
+                raise CompilationError(f"{function.name}: the compiled function failed")
+        else:
+            lib.vl_prepare(self._ctx, n, trials_at, t_at, q_at, f_at, vis_at, b.code_at)
+            ready = np.flatnonzero(code == READY)
+            if len(ready):
+                b.Y[ready] = function.batch(self.X[trials[ready]])
+            lib.vl_finish(self._ctx, n, trials_at, q_at, qd_at, b.code_at, b.Y_at, v_at,
+                          norm_at)
+        del trials, t, q, f, vis, qd_arr  # (kept alive through the C calls)
+        return code, b.Y
+
+    def full_result(self, trial: int, y: np.ndarray, full: bool) -> LawResult:
+        """The full core's result of a REJECTED row of ``trial`` (its outputs ``y`` when
+        they are the full core's, else evaluated on its packed input row)."""
+        if not full:
+            y = self.kernel.function.single(self.X[trial])
+        return self.kernel.result(y.copy())
+
+
+__all__ = ["ACCEPTED", "CODES", "RARE", "READY", "REJECTED", "SOURCE", "LawRows"]
