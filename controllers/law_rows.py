@@ -38,7 +38,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from controllers.data import CommandBatch, ObservationBatch
+from controllers.data import ObservationBatch
 from controllers.estimators import LegDirectionEstimate
 from controllers.law_kernel import LawKernel, LawResult
 from hexapod.compiled import (
@@ -77,6 +77,10 @@ typedef struct {
     double *directions, *in_use, *twist, *lengths; uint8_t *observed;
     const double *kappa; double *offset;
 } VisionRows;
+typedef struct {
+    const int64_t *trials; const double *t, *q, *feats; const uint8_t *vis; const double *qd;
+    int64_t *code; double *Y, *vel, *norm;
+} StepRows;
 enum { @CODES@ };
 enum { @ACCEPTANCE@ };
 
@@ -111,7 +115,10 @@ int vl_evaluate(const VisionRows *c, int64_t m, const int64_t *trials, const int
 void vl_finish(const VisionRows *c, int64_t m, const int64_t *trials, const double *q,
                const double *qd, int64_t *code, const double *Y, double *vel, double *norm) {
     for (int64_t j = 0; j < m; j++) {
-        if (code[j] != READY) continue;
+        double *v = vel + 6 * j;
+        if (code[j] != READY) {  /* (rows Python steps: their command is put there) */
+            memset(v, 0, 6 * sizeof(double)); norm[j] = 0.0; continue;
+        }
         int64_t i = trials[j];
         const double *y = Y + c->n_out * j, *qj = q + 6 * j, *qdot = y + c->qdot_at;
         int ok = isfinite(y[c->norm_at]) && isfinite(y[c->n_sum_at]) && y[c->rank_at] >= 6.0
@@ -127,13 +134,14 @@ void vl_finish(const VisionRows *c, int64_t m, const int64_t *trials, const doub
                 ok = (qdot[l] - lo) > tol2 && (hi - qdot[l]) > tol2;
             }
         }
-        if (!ok) { code[j] = REJECTED; continue; }
+        if (!ok) {
+            code[j] = REJECTED; memset(v, 0, 6 * sizeof(double)); norm[j] = 0.0; continue;
+        }
         memcpy(c->directions + 18 * i, y + c->dir_at, 18 * sizeof(double));
         memcpy(c->in_use + 18 * i, y + c->dir_at, 18 * sizeof(double));
         memset(c->observed + 6 * i, 1, 6);
         memcpy(c->twist + 6 * i, y + c->tau_at, 6 * sizeof(double));
         memcpy(c->lengths + 6 * i, qj, 6 * sizeof(double));
-        double *v = vel + 6 * j;
         memcpy(v, qdot, 6 * sizeof(double));
         norm[j] = y[c->norm_at];
         if (c->kappa) {  /* feed_forward: u = q_dot + kappa (q_dot - (v - offset)) */
@@ -152,12 +160,10 @@ void vl_finish(const VisionRows *c, int64_t m, const int64_t *trials, const doub
     }
 }
 
-int vl_step(const VisionRows *c, int64_t m, const int64_t *trials, const double *t,
-            const double *q, const double *feats, const uint8_t *vis, const double *qd,
-            int64_t *code, double *Y, double *vel, double *norm, int64_t full) {
-    vl_prepare(c, m, trials, t, q, feats, vis, code);
-    if (vl_evaluate(c, m, trials, code, Y, full)) return 1;
-    vl_finish(c, m, trials, q, qd, code, Y, vel, norm);
+int vl_step(const VisionRows *c, const StepRows *r, int64_t m, int64_t full, int64_t has_qd) {
+    vl_prepare(c, m, r->trials, r->t, r->q, r->feats, r->vis, r->code);
+    if (vl_evaluate(c, m, r->trials, r->code, r->Y, full)) return 1;
+    vl_finish(c, m, r->trials, r->q, has_qd ? r->qd : NULL, r->code, r->Y, r->vel, r->norm);
     return 0;
 }
 """.replace("@CODES@", ", ".join(CODES)).replace(
@@ -192,30 +198,45 @@ def _library() -> ctypes.CDLL:
     lib.vl_evaluate.restype = ctypes.c_int
     lib.vl_finish.argtypes = [_P, _I, _P, _P, _P, _P, _P, _P, _P]
     lib.vl_finish.restype = None
-    lib.vl_step.argtypes = [_P, _I, _P, _P, _P, _P, _P, _P, _P, _P, _P, _P, _I]
+    lib.vl_step.argtypes = [_P, _P, _I, _I, _I]
     lib.vl_step.restype = ctypes.c_int
     return lib
 
 
-class _Buffers:
-    """A step's arrays for ``n`` rows (reused while the batch size is the same)."""
+class _StepRows(ctypes.Structure):
+    """The C ``StepRows``: a step's arrays (addresses)."""
 
-    def __init__(self, n: int, n_out: int) -> None:
+    _fields_ = [(name, _P) for name in ("trials", "t", "q", "feats", "vis", "qd", "code", "Y",
+                                        "vel", "norm")]
+
+
+class _Buffers:
+    """A step's arrays for ``n`` rows (reused while the batch size is the same: their
+    addresses taken once): the rows' trials, times, lengths, features, visibility and
+    leg rates copied in, the codes, the core's outputs, the velocities and norms out.
+
+    Args:
+        n: Rows.
+        feature: Their feature's shape ``(6, 3)`` or ``(6, 2, 3)``.
+        n_out: The core's outputs.
+    """
+
+    def __init__(self, n: int, feature: tuple[int, ...], n_out: int) -> None:
         self.n = n
+        self.trials = np.zeros(n, dtype=np.int64)
+        self.t = np.zeros(n)
+        self.q = np.zeros((n, 6))
+        self.feats = np.zeros((n, *feature))
+        self.vis = np.zeros((n, *feature[:-1]), dtype=bool)
+        self.qd = np.zeros((n, 6))
         self.code = np.zeros(n, dtype=np.int64)
         self.Y = np.zeros((n, n_out))
-        self.code_at = self.code.ctypes.data
-        self.Y_at = self.Y.ctypes.data
-
-
-def _address(a: np.ndarray, dtype: Any) -> tuple[np.ndarray, int]:
-    """``a`` as a C-contiguous array of ``dtype`` (a view when it is one) and its
-    address."""
-    if a.dtype == np.bool_ and dtype is np.uint8 and a.flags.c_contiguous:
-        a = a.view(np.uint8)
-    elif a.dtype != dtype or not a.flags.c_contiguous:
-        a = np.ascontiguousarray(a, dtype=dtype)
-    return a, a.ctypes.data
+        self.vel = np.zeros((n, 6))
+        self.norm = np.zeros(n)
+        self.rows = _StepRows(*(a.ctypes.data for a in (
+            self.trials, self.t, self.q, self.feats, self.vis, self.qd, self.code, self.Y,
+            self.vel, self.norm)))
+        self.at = ctypes.addressof(self.rows)
 
 
 class LawRows:
@@ -287,6 +308,9 @@ class LawRows:
         #: stepped only one row at a time never builds the lean core).
         self.functions: dict[bool, CompiledFunction] = {}
         self._calls: dict[bool, KernelCall] = {}
+        #: The slices and indices of a command's outputs: error, tau, |e|, rank, condition.
+        self.command_outputs = (o["error"], o["tau"], o.index("error_norm"), o.index("rank"),
+                                o.index("condition"))
         self._c = True  # the core has its C (else the cores are called from Python)
         self._last: _Buffers | None = None
 
@@ -330,49 +354,50 @@ class LawRows:
         setattr(self.context, "full" if full else "lean", call)
         return function
 
-    def step(self, observations: ObservationBatch, out: CommandBatch) -> tuple[
-            np.ndarray, np.ndarray]:
-        """The command of every COMMON row the core's result is into ``out`` (module
-        docstring); returns the rows' codes (n,) and the core's outputs (n, n_out) (the
-        full core's for a batch of one).
+    def step(self, observations: ObservationBatch) -> tuple[np.ndarray, _Buffers]:
+        """Every COMMON row's command, where the core's result is one (module docstring);
+        returns the rows' codes (n,) and the step's arrays (``vel`` and ``norm``: the
+        accepted rows' velocities [m/s] and error norms, zeros elsewhere; ``Y``: the
+        core's outputs, the full core's for a batch of one).
 
         Raises:
             CompilationError: The compiled core failed.
+            ValueError: The observations' arrays are not of the batch's shapes.
         """
         obs = observations
         n = len(obs)
         b = self._last
         if b is None or b.n != n:
-            b = self._last = _Buffers(n, self.outputs.size)
-        code = b.code
+            b = self._last = _Buffers(n, self.feature.shape, self.outputs.size)
         feats = getattr(obs, self.feature.field)
         if feats is None:  # not measured: every row's own step says so
-            code[:] = RARE
-            return code, b.Y
+            b.code[:] = RARE
+            b.vel[:] = 0.0
+            b.norm[:] = 0.0
+            return b.code, b
         full = n == 1
         function = self.functions.get(full) or self._bind(full)
-        trials, trials_at = _address(np.asarray(obs.trials), np.int64)
-        t, t_at = _address(np.asarray(obs.t), np.float64)
-        q, q_at = _address(obs.lengths, np.float64)
-        f, f_at = _address(feats, np.float64)
-        vis, vis_at = _address(getattr(obs, self.feature.visibility), np.uint8)
+        np.copyto(b.trials, obs.trials, casting="unsafe")
+        np.copyto(b.t, obs.t)
+        np.copyto(b.q, obs.lengths)
+        np.copyto(b.feats, feats)
+        np.copyto(b.vis, getattr(obs, self.feature.visibility))
         qd = obs.q_dot if self._feedforward is not None else None
-        qd_arr, qd_at = (None, None) if qd is None else _address(qd, np.float64)
+        if qd is not None:
+            np.copyto(b.qd, qd)
         lib = _library()
-        v_at, norm_at = out.velocities.ctypes.data, out.error_norm.ctypes.data
         if self._c:
-            if lib.vl_step(self._ctx, n, trials_at, t_at, q_at, f_at, vis_at, qd_at, b.code_at,
-                           b.Y_at, v_at, norm_at, full):
+            if lib.vl_step(self._ctx, b.at, n, full, qd is not None):
                 raise CompilationError(f"{function.name}: the compiled function failed")
         else:
-            lib.vl_prepare(self._ctx, n, trials_at, t_at, q_at, f_at, vis_at, b.code_at)
-            ready = np.flatnonzero(code == READY)
+            r = b.rows
+            lib.vl_prepare(self._ctx, n, r.trials, r.t, r.q, r.feats, r.vis, r.code)
+            ready = np.flatnonzero(b.code == READY)
             if len(ready):
-                b.Y[ready] = function.batch(self.X[trials[ready]])
-            lib.vl_finish(self._ctx, n, trials_at, q_at, qd_at, b.code_at, b.Y_at, v_at,
-                          norm_at)
-        del trials, t, q, f, vis, qd_arr  # (kept alive through the C calls)
-        return code, b.Y
+                b.Y[ready] = function.batch(self.X[b.trials[ready]])
+            lib.vl_finish(self._ctx, n, r.trials, r.q, None if qd is None else r.qd, r.code,
+                          r.Y, r.vel, r.norm)
+        return b.code, b
 
     def full_result(self, trial: int, y: np.ndarray, full: bool) -> LawResult:
         """The full core's result of a REJECTED row of ``trial`` (its outputs ``y`` when

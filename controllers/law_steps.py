@@ -111,17 +111,18 @@ class VisionLawBatch(LegRateFeedForward, Controller):
 
         Raises:
             CompilationError: The compiled core failed (the batch fails as a whole).
+            ValueError: The observations' arrays are not of the batch's shapes.
         """
         obs = observations
         n = len(obs)
         self.crashes = {}
-        out = CommandBatch.zeros(n)
         if not n:
-            return out
-        code, Y = self._core_rows.step(obs, out)
+            return CommandBatch.zeros(0)
+        code, b = self._core_rows.step(obs)
+        out = CommandBatch(b.vel.copy(), b.norm.copy(), [None] * n)
         if n == 1:
             if code[0] == ACCEPTED:
-                out.put(0, self._command_of(Y[0], out.velocities[0].copy()))
+                out.commands = [self._command_of(b.Y[0], b.vel[0].copy())]
                 return out
         elif not code.any():  # every row accepted (ACCEPTED is 0)
             return out
@@ -129,7 +130,7 @@ class VisionLawBatch(LegRateFeedForward, Controller):
         for j in np.flatnonzero(code != ACCEPTED).tolist():
             trial = int(trials[j])
             try:
-                cmd = self._rare_row(trial, obs.item(j), int(code[j]), Y[j], n == 1)
+                cmd = self._rare_row(trial, obs.item(j), int(code[j]), b.Y[j], n == 1)
             except Exception as exc:  # that trial's failure
                 self.crashes[j] = exc
                 cmd = Command.refuse(f"{type(exc).__name__}: {exc}")
@@ -139,11 +140,10 @@ class VisionLawBatch(LegRateFeedForward, Controller):
     def _command_of(self, y: np.ndarray, velocities: np.ndarray) -> Command:
         """The per-trial command of an accepted row of a batch of one: the full core's
         outputs ``y`` and the command's leg velocities [m/s]."""
-        o = self._core_rows.outputs
-        e = y[o["error"]].copy()
-        return Command(velocities, twist=y[o["tau"]].copy(), error=e,
-                       error_norm=float(y[o.index("error_norm")]),
-                       rank=int(y[o.index("rank")]), condition=float(y[o.index("condition")]),
+        error, tau, norm, rank, condition = self._core_rows.command_outputs
+        e = y[error].copy()
+        return Command(velocities, twist=y[tau].copy(), error=e, error_norm=float(y[norm]),
+                       rank=int(y[rank]), condition=float(y[condition]),
                        features_used=e.shape[0], notes=[], active_constraints=[])
 
     def _rare_row(self, trial: int, observation: Observation, code: int, y: np.ndarray,
