@@ -20,9 +20,10 @@ are):
 - ``finish``: a row is accepted when its norms are finite, its rank is 6, its ``q_dot``
   is finite and, for the limit QP, the unconstrained optimum clears every bound by twice
   the tolerance (:func:`~controllers.solvers.limit_qp.velocity_bounds`' arithmetic);
-  an accepted row writes its estimate (every direction measured, the twist and the
-  lengths commanded), its leg velocities and error norm, and the leg-rate feed-forward
-  (:func:`~controllers.leg_rate.feed_forward`'s arithmetic). Other rows are REJECTED.
+  every evaluated row's estimate has every direction measured; an accepted row writes
+  the twist and the lengths commanded, its leg velocities and error norm, and the
+  leg-rate feed-forward (:func:`~controllers.leg_rate.feed_forward`'s arithmetic). The
+  other rows are REJECTED (their twist zero until Python commands one).
 
 Python takes the RARE rows (a hidden feature, an unusable observation: the law's own
 per-row step) and the REJECTED ones (from the full core's result: the degenerate
@@ -134,12 +135,13 @@ void vl_finish(const VisionRows *c, int64_t m, const int64_t *trials, const doub
                 ok = (qdot[l] - lo) > tol2 && (hi - qdot[l]) > tol2;
             }
         }
-        if (!ok) {
-            code[j] = REJECTED; memset(v, 0, 6 * sizeof(double)); norm[j] = 0.0; continue;
-        }
         memcpy(c->directions + 18 * i, y + c->dir_at, 18 * sizeof(double));
         memcpy(c->in_use + 18 * i, y + c->dir_at, 18 * sizeof(double));
         memset(c->observed + 6 * i, 1, 6);
+        if (!ok) {  /* every direction measured, nothing commanded (yet: Python's) */
+            memset(c->twist + 6 * i, 0, 6 * sizeof(double));
+            code[j] = REJECTED; memset(v, 0, 6 * sizeof(double)); norm[j] = 0.0; continue;
+        }
         memcpy(c->twist + 6 * i, y + c->tau_at, 6 * sizeof(double));
         memcpy(c->lengths + 6 * i, qj, 6 * sizeof(double));
         memcpy(v, qdot, 6 * sizeof(double));

@@ -119,23 +119,25 @@ class VisionLawBatch(LegRateFeedForward, Controller):
         if not n:
             return CommandBatch.zeros(0)
         code, b = self._core_rows.step(obs)
+        if n == 1:  # the per-trial step: its Command
+            cmd = (self._command_of(b.Y[0], b.vel[0].copy()) if code[0] == ACCEPTED
+                   else self._python_row(0, obs, int(code[0]), b.Y[0], True))
+            return CommandBatch.of_row(cmd, self.actuation)
         out = CommandBatch(b.vel.copy(), b.norm.copy(), [None] * n)
-        if n == 1:
-            if code[0] == ACCEPTED:
-                out.commands = [self._command_of(b.Y[0], b.vel[0].copy())]
-                return out
-        elif not code.any():  # every row accepted (ACCEPTED is 0)
-            return out
-        trials = obs.trials
-        for j in np.flatnonzero(code != ACCEPTED).tolist():
-            trial = int(trials[j])
-            try:
-                cmd = self._rare_row(trial, obs.item(j), int(code[j]), b.Y[j], n == 1)
-            except Exception as exc:  # that trial's failure
-                self.crashes[j] = exc
-                cmd = Command.refuse(f"{type(exc).__name__}: {exc}")
-            out.put(j, cmd)
+        if code.any():  # rows not accepted (ACCEPTED is 0)
+            for j in np.flatnonzero(code != ACCEPTED).tolist():
+                out.put(j, self._python_row(j, obs, int(code[j]), b.Y[j], False))
         return out
+
+    def _python_row(self, j: int, obs: ObservationBatch, code: int, y: np.ndarray,
+                    full: bool) -> Command:
+        """Row ``j``'s command by :meth:`_rare_row`, or the refusal of its failure (the
+        exception kept in :attr:`crashes`)."""
+        try:
+            return self._rare_row(int(obs.trials[j]), obs.item(j), code, y, full)
+        except Exception as exc:  # that trial's failure
+            self.crashes[j] = exc
+            return Command.refuse(f"{type(exc).__name__}: {exc}")
 
     def _command_of(self, y: np.ndarray, velocities: np.ndarray) -> Command:
         """The per-trial command of an accepted row of a batch of one: the full core's

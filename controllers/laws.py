@@ -301,13 +301,11 @@ class VisionLaw(VisionLawBatch):
 
     def rejected_step(self, observation: Observation, r: LawResult) -> Command:
         """One period of a row whose compiled core's result ``r`` (the full core's) the
-        batch's C did not accept as the command: the refusal of a degenerate core, or the
-        solver's answer (OSQP where the optimum touches a bound), fed forward as
-        :meth:`rare_step`."""
+        batch's C did not accept as the command (having written the estimate's measured
+        directions and a zero twist): the refusal of a degenerate core, or the solver's
+        answer (OSQP where the optimum touches a bound), fed forward as :meth:`rare_step`.
+        """
         q = np.asarray(observation.lengths, dtype=float)
-        est = self.estimate
-        est.halted()  # until a command is actually sent
-        est.measured_all(r.directions)
         e = r.error
         if not (math.isfinite(r.error_norm) and math.isfinite(r.n_sum)):
             cmd = Command.refuse("non-finite error or interaction matrix (degenerate "
