@@ -252,10 +252,14 @@ class LawRows:
         estimate: The batch's estimate (the instances' estimates are its rows).
         feedforward: ``(kappa, offset)`` (n, 6) of the leg-rate feed-forward, or None
             (off).
+
+    Raises:
+        CompilationError: No C compiler (the step is C).
     """
 
     def __init__(self, laws: list[VisionLaw], estimate: LegDirectionEstimate,
                  feedforward: tuple[np.ndarray, np.ndarray] | None) -> None:
+        _library()  # (without a C compiler, the reset says so)
         law0 = laws[0]
         kernel = law0.kernel
         assert kernel is not None, "reset() sets the compiled core"
@@ -379,14 +383,14 @@ class LawRows:
             return b.code, b
         full = n == 1
         function = self.functions.get(full) or self._bind(full)
-        np.copyto(b.trials, obs.trials, casting="unsafe")
-        np.copyto(b.t, obs.t)
-        np.copyto(b.q, obs.lengths)
-        np.copyto(b.feats, feats)
-        np.copyto(b.vis, getattr(obs, self.feature.visibility))
+        b.trials[...] = obs.trials
+        b.t[...] = obs.t
+        b.q[...] = obs.lengths
+        b.feats[...] = feats
+        b.vis[...] = getattr(obs, self.feature.visibility)
         qd = obs.q_dot if self._feedforward is not None else None
         if qd is not None:
-            np.copyto(b.qd, qd)
+            b.qd[...] = qd
         lib = _library()
         if self._c:
             if lib.vl_step(self._ctx, b.at, n, full, qd is not None):

@@ -61,6 +61,7 @@ class VisionLawBatch(LegRateFeedForward, Controller):
 
         Raises:
             ContextError: A context the law cannot use (as :meth:`reset_trial`).
+            CompilationError: No C compiler (the step is C).
         """
         super().reset_batch(contexts)
         trials = self.trial_instances

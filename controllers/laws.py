@@ -1,10 +1,12 @@
 """The image-based laws' per-trial side (``docs/math.md`` section 6): a feature gives an
 error and an interaction matrix; :class:`VisionLaw` combines them for every feature
 (gain, solver, hidden features, diagnostics): ``tau = -lambda L^+ e``, ``q_dot = J_inv
-tau``. A step goes through the law's compiled core (:mod:`controllers.law_kernel`),
-after :meth:`VisionLaw._select` when a feature is hidden now or in the goal. The batch
-side is :class:`~controllers.law_steps.VisionLawBatch`'s; the tests' numpy oracle is
-``tests/controllers/numpy_law.py``.
+tau``. The law's one step is its batch's (:class:`~controllers.law_steps.
+VisionLawBatch`, C around the compiled core :mod:`controllers.law_kernel` in
+:mod:`controllers.law_rows`); an instance steps the rows that C leaves to Python
+(:meth:`VisionLaw.rare_step`: after :meth:`VisionLaw._select` when a feature is hidden
+now or in the goal, or a refusal; :meth:`VisionLaw.rejected_step`). The tests' numpy
+oracle is ``tests/controllers/numpy_law.py``.
 """
 
 from __future__ import annotations
@@ -240,10 +242,12 @@ class VisionLaw(VisionLawBatch):
 
     def tasks(self, observation: Observation, q: np.ndarray) -> TaskStep | Command:
         """This period's tasks for a solver (the part of a step every solver shares), or
-        the refusal of why none can be built: the compiled core, directly when every
-        feature is visible now and in the goal (:meth:`_load_kernel`), else after
-        :meth:`_select`; the estimate updated (nothing commanded yet); the nominal model's
-        directions for legs never seen (:meth:`_model_directions`).
+        the refusal of why none can be built: the compiled core after :meth:`_select`
+        (the rows the batch's C leaves to Python with a hidden feature), or directly when
+        every feature is visible now and in the goal (:meth:`_load_kernel`: the
+        predictive controllers' tasks, and a trial whose core is not its batch's); the
+        estimate updated (nothing commanded yet); the nominal model's directions for legs
+        never seen (:meth:`_model_directions`).
 
         Args:
             observation: The observation.
