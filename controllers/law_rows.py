@@ -241,32 +241,43 @@ class _Buffers:
         self.at = ctypes.addressof(self.rows)
 
 
+def core_key(law: VisionLaw) -> tuple[object, object]:
+    """What the trials stepped by one :class:`LawRows` share: the observed feature and
+    the compiled core's input layout (the core's feature and interaction)."""
+    kernel = law.kernel
+    return law.observed_feature, None if kernel is None else kernel.slices
+
+
 class LawRows:
     """The core inputs of a batch's trials, one row per trial, and the batch's one step
     (module docstring).
 
     Args:
-        laws: The trials' instances (reset), in trial order; the first trial's core is
-            the batch's (a trial with another core, or whose goal hides a feature, is
-            stepped by Python).
+        laws: The trials' instances (reset), in trial order.
         estimate: The batch's estimate (the instances' estimates are its rows).
         feedforward: ``(kappa, offset)`` (n, 6) of the leg-rate feed-forward, or None
             (off).
+        core: The instance whose compiled core and feature the rows take (default the
+            first trial's): the trials of another core are not this object's (their
+            rows RARE), nor those whose goal hides a feature.
 
     Raises:
         CompilationError: No C compiler (the step is C).
     """
 
     def __init__(self, laws: list[VisionLaw], estimate: LegDirectionEstimate,
-                 feedforward: tuple[np.ndarray, np.ndarray] | None) -> None:
+                 feedforward: tuple[np.ndarray, np.ndarray] | None,
+                 core: VisionLaw | None = None) -> None:
         _library()  # (without a C compiler, the reset says so)
-        law0 = laws[0]
+        law0 = laws[0] if core is None else core
         kernel = law0.kernel
         assert kernel is not None, "reset() sets the compiled core"
         n = len(laws)
         #: The batch's core (its layouts are every ready row's).
         self.kernel: LawKernel = kernel
         self.feature = law0.observed_feature
+        #: What identifies the trials of this core (:func:`core_key`).
+        self.key = core_key(law0)
         self.slices = kernel.slices
         self.outputs = kernel.outputs
         self.X = np.zeros((n, kernel.input_vector.size))
@@ -323,8 +334,7 @@ class LawRows:
     def take(self, trial: int, law: VisionLaw) -> None:
         """Copy a trial's core inputs into its row (after its reset or a new goal)."""
         kernel = law.kernel
-        same = (kernel is not None and kernel.slices is self.slices
-                and law.observed_feature is self.feature)
+        same = kernel is not None and core_key(law) == self.key
         self.ready[trial] = same and law.goal_all_visible
         self.desired_q[trial] = same and law.desired_lengths_measured
         if kernel is None or not same:
@@ -413,4 +423,4 @@ class LawRows:
         return self.kernel.result(y.copy())
 
 
-__all__ = ["ACCEPTED", "CODES", "RARE", "READY", "REJECTED", "SOURCE", "LawRows"]
+__all__ = ["ACCEPTED", "CODES", "RARE", "READY", "REJECTED", "SOURCE", "LawRows", "core_key"]

@@ -1,7 +1,8 @@
 """The one step of :class:`~controllers.laws.VisionLaw` over a batch of trials
 (:class:`VisionLawBatch`; a batch of one is the per-trial ``step``): one instance of the
 law per context (their estimates rows of one batch estimate, their compiled cores'
-inputs rows of one :class:`~controllers.law_rows.LawRows`), goals the compiled core
+inputs rows of a :class:`~controllers.law_rows.LawRows`: one per compiled core, so two
+when the trials' cameras make them read lines and normals), goals the compiled core
 takes as they are written into the rows at once (read by the instance when it next
 needs them), and every row through the C of :mod:`controllers.law_rows`; Python steps
 only its RARE rows (a hidden feature, an unusable observation) and its REJECTED ones (a
@@ -26,7 +27,7 @@ from controllers.base import (
 )
 from controllers.estimators import LegDirectionEstimate
 from controllers.exceptions import ContextError
-from controllers.law_rows import ACCEPTED, REJECTED, LawRows
+from controllers.law_rows import ACCEPTED, REJECTED, LawRows, core_key
 from controllers.leg_rate import LegRateFeedForward
 from controllers.solvers.base import Solver
 from controllers.tasks.leg_direction import LegDirections
@@ -74,8 +75,17 @@ class VisionLawBatch(LegRateFeedForward, Controller):
         seen = {t.observed_feature for t in trials}
         self.batch_feature = seen.pop() if len(seen) == 1 else None
         self.batch_reset_leg_rate(trials)
-        self._core_rows = LawRows(trials, self.batch_estimate, None if self.batch_kappa is None
-                                  else (self.batch_kappa, self.batch_offset))
+        feedforward = (None if self.batch_kappa is None
+                       else (self.batch_kappa, self.batch_offset))
+        keys = [core_key(t) for t in trials]
+        first = {key: k for k, key in reversed(list(enumerate(keys)))}
+        #: The rows of each compiled core of the batch (one, unless its trials read
+        #: different features, e.g. perspective and unified cameras), and each trial's.
+        self._groups = [LawRows(trials, self.batch_estimate, feedforward, trials[k])
+                        for k in sorted(first.values())]
+        order = {rows.key: g for g, rows in enumerate(self._groups)}
+        self._group_of = np.array([order[key] for key in keys], dtype=np.int64)
+        self._core_rows = self._groups[0]
 
     def retarget_batch(self, trials: np.ndarray, goals: GoalBatch) -> None:
         """New goals for some trials (row ``j`` of ``goals`` for trial ``trials[j]``),
@@ -91,7 +101,10 @@ class VisionLawBatch(LegRateFeedForward, Controller):
         trials = np.asarray(trials, dtype=int)
         desired, quick = self._batch_desired(goals)
         if desired is not None and len(self.trial_instances) > 1:  # (one reads it now)
-            quick = self._core_rows.write_desired(trials, desired, quick)
+            own = self._group_of[trials]
+            for g, rows in enumerate(self._groups):
+                mine = own == g
+                quick = np.where(mine, rows.write_desired(trials, desired, quick & mine), quick)
             for j in np.flatnonzero(quick).tolist():
                 self._pending[int(trials[j])] = (goals, j)
         else:
@@ -104,7 +117,7 @@ class VisionLawBatch(LegRateFeedForward, Controller):
     def _retarget_instance(self, trial: int, goal: Goal) -> None:
         inst = self.trial_instances[trial]
         inst.retarget_trial(goal)
-        self._core_rows.take(trial, inst)
+        self._groups[self._group_of[trial]].take(trial, inst)
 
     def step_batch(self, observations: ObservationBatch) -> CommandBatch:
         """The commands of every row (module docstring); a batch of one gets the
@@ -119,43 +132,70 @@ class VisionLawBatch(LegRateFeedForward, Controller):
         self.crashes = {}
         if not n:
             return CommandBatch.zeros(0)
-        code, b = self._core_rows.step(obs)
+        if len(self._groups) == 1:
+            return self._step_rows(self._core_rows, obs, self.crashes)
+        out = CommandBatch.zeros(n)  # trials of several cores: each core's rows apart
+        own = self._group_of[np.asarray(obs.trials, dtype=np.int64)]
+        for g, rows in enumerate(self._groups):
+            idx = np.flatnonzero(own == g)
+            if len(idx):
+                crashes: dict[int, BaseException] = {}
+                part = self._step_rows(rows, obs.rows(idx), crashes)
+                out.velocities[idx] = part.velocities
+                out.error_norm[idx] = part.error_norm
+                kept = part.commands or [None] * len(idx)
+                for k, j in enumerate(idx.tolist()):
+                    out.reasons[j] = part.reasons[k]
+                    if kept[k] is not None:
+                        out.commands = out.commands or [None] * n
+                        out.commands[j] = kept[k]
+                    if k in crashes:
+                        self.crashes[j] = crashes[k]
+        return out
+
+    def _step_rows(self, rows: LawRows, obs: ObservationBatch,
+                   crashes: dict[int, BaseException]) -> CommandBatch:
+        """The commands of the rows of one compiled core's trials (a failure of row ``j``
+        kept in ``crashes[j]``)."""
+        n = len(obs)
+        code, b = rows.step(obs)
         if n == 1:  # the per-trial step: its Command
-            cmd = (self._command_of(b.Y[0], b.vel[0].copy()) if code[0] == ACCEPTED
-                   else self._python_row(0, obs, int(code[0]), b.Y[0], True))
+            cmd = (self._command_of(rows, b.Y[0], b.vel[0].copy()) if code[0] == ACCEPTED
+                   else self._python_row(rows, 0, obs, int(code[0]), b.Y[0], crashes))
             return CommandBatch.of_row(cmd, self.actuation)
         out = CommandBatch(b.vel.copy(), b.norm.copy(), [None] * n)
         if code.any():  # rows not accepted (ACCEPTED is 0)
             for j in np.flatnonzero(code != ACCEPTED).tolist():
-                out.put(j, self._python_row(j, obs, int(code[j]), b.Y[j], False))
+                out.put(j, self._python_row(rows, j, obs, int(code[j]), b.Y[j], crashes))
         return out
 
-    def _python_row(self, j: int, obs: ObservationBatch, code: int, y: np.ndarray,
-                    full: bool) -> Command:
+    def _python_row(self, rows: LawRows, j: int, obs: ObservationBatch, code: int,
+                    y: np.ndarray, crashes: dict[int, BaseException]) -> Command:
         """Row ``j``'s command by :meth:`_rare_row`, or the refusal of its failure (the
-        exception kept in :attr:`crashes`)."""
+        exception kept in ``crashes``)."""
         try:
-            return self._rare_row(int(obs.trials[j]), obs.item(j), code, y, full)
+            return self._rare_row(rows, int(obs.trials[j]), obs.item(j), code, y,
+                                  len(obs) == 1)
         except Exception as exc:  # that trial's failure
-            self.crashes[j] = exc
+            crashes[j] = exc
             return Command.refuse(f"{type(exc).__name__}: {exc}")
 
-    def _command_of(self, y: np.ndarray, velocities: np.ndarray) -> Command:
+    @staticmethod
+    def _command_of(rows: LawRows, y: np.ndarray, velocities: np.ndarray) -> Command:
         """The per-trial command of an accepted row of a batch of one: the full core's
         outputs ``y`` and the command's leg velocities [m/s]."""
-        error, tau, norm, rank, condition = self._core_rows.command_outputs
+        error, tau, norm, rank, condition = rows.command_outputs
         e = y[error].copy()
         return Command(velocities, twist=y[tau].copy(), error=e, error_norm=float(y[norm]),
                        rank=int(y[rank]), condition=float(y[condition]),
                        features_used=e.shape[0], notes=[], active_constraints=[])
 
-    def _rare_row(self, trial: int, observation: Observation, code: int, y: np.ndarray,
-                  full: bool) -> Command:
+    def _rare_row(self, rows: LawRows, trial: int, observation: Observation, code: int,
+                  y: np.ndarray, full: bool) -> Command:
         """A row the C left to Python, by its trial's instance, which first reads a goal
         given to :meth:`retarget_batch` that it has not read yet: a REJECTED row from the
         full core's result, a RARE one by the instance's own step of the cases it
         covers (hidden features, refusals)."""
-        rows = self._core_rows
         result = rows.full_result(trial, y, full) if code == REJECTED else None
         pending = self._pending.pop(trial, None) if self._pending else None
         if pending is not None:

@@ -116,3 +116,40 @@ def test_every_kind_of_row_equals_its_batch_of_one(world: World, name: str,
     assert all(code[1] == RARE and code[2] == RARE for code in codes)
     assert any(code[0] == ACCEPTED for code in codes)  # (a QP's first moves may touch a bound)
     assert all(code[3] == (REJECTED if qp else ACCEPTED) for code in codes)
+
+
+def test_trials_of_two_cores_in_one_batch_equal_their_batches_of_one(
+        other_geometry, monkeypatch: pytest.MonkeyPatch) -> None:  # type: ignore[no-untyped-def]
+    """A perspective and a unified camera in one batch of `leg-edge`: their trials read
+    lines and normals through two compiled cores (two sets of rows), each row its batch
+    of one's command bit for bit, through the C."""
+    worlds = [World(other_geometry, make_camera(kind, other_geometry))
+              for kind in ("perspective", "unified", "perspective")]
+    Rs, ts = worlds[0].poses(4, np.random.default_rng(4), max_translation=0.02,
+                             max_angle=np.deg2rad(4), margin=0.03)
+    contexts = [w.context(w.goal(Rs[0], ts[0]), 0.02) for w in worlds]
+    batch = registry.create("leg-edge", gain=2.0)
+    batch.reset_batch(contexts)
+    singles = [registry.create("leg-edge", gain=2.0) for _ in contexts]
+    for one, c in zip(singles, contexts, strict=True):
+        one.reset(c)
+    accepted = [0]
+    real = LawRows.step
+
+    def recorded(self: LawRows, *args: Any) -> tuple[np.ndarray, Any]:
+        code, b = real(self, *args)
+        accepted[0] += int(np.count_nonzero(code == ACCEPTED))
+        return code, b
+
+    monkeypatch.setattr(LawRows, "step", recorded)
+    for step in range(3):
+        rows = [w.observation(R, t, 0.02 * step)
+                for w, R, t in zip(worlds, Rs[1:], ts[1:], strict=False)]
+        rows = [o if o.lines is not None else dataclasses.replace(o, lines=np.zeros((6, 2, 3)))
+                for o in rows]  # (the unified trial reads the normals)
+        out = batch.step_batch(_stacked(rows))
+        assert not batch.crashes
+        for j, one in enumerate(singles):
+            _same(out, j, one.step(rows[j]))
+            assert out.reasons[j] is None
+    assert accepted[0] == 2 * 3 * 3  # every row through the C: in the batch and alone
