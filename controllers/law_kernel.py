@@ -276,7 +276,10 @@ class LawKernel:
 
     def evaluate(self) -> LawResult:
         """One call of the core on the current inputs."""
-        y = (self._function or self.function).single(self.input_vector)
+        return self.result((self._function or self.function).single(self.input_vector))
+
+    def result(self, y: np.ndarray) -> LawResult:
+        """The result of the full core's output ``y`` (n_out,) (its arrays views of it)."""
         o, at = self.outputs.slices, self._at
         return LawResult(
             error=y[o["error"]], error_norm=float(y[at["error_norm"]]),

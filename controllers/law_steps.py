@@ -1,9 +1,12 @@
-"""The batch side of :class:`~controllers.laws.VisionLaw` (:class:`VisionLawBatch`): one
-instance of the law per context (their estimates rows of one batch estimate, their
-compiled cores' inputs rows of one :class:`KernelRows`), goals the compiled core takes
-as they are written into the rows at once (read by the instance when it next needs
-them), and the common rows stepped in one C loop through the lean core, the others by
-their instances (:meth:`VisionLawBatch.step_row`).
+"""The one step of :class:`~controllers.laws.VisionLaw` over a batch of trials
+(:class:`VisionLawBatch`; a batch of one is the per-trial ``step``): one instance of the
+law per context (their estimates rows of one batch estimate, their compiled cores'
+inputs rows of a :class:`~controllers.law_rows.LawRows`: one per compiled core, so two
+when the trials' cameras make them read lines and normals), goals the compiled core
+takes as they are written into the rows at once (read by the instance when it next
+needs them), and every row through the C of :mod:`controllers.law_rows`; Python steps
+only its RARE rows (a hidden feature, an unusable observation) and its REJECTED ones (a
+degenerate core, a limit QP whose optimum touches a bound) by the trial's instance.
 """
 
 from __future__ import annotations
@@ -24,103 +27,16 @@ from controllers.base import (
 )
 from controllers.estimators import LegDirectionEstimate
 from controllers.exceptions import ContextError
-from controllers.law_kernel import LawKernel
+from controllers.law_rows import ACCEPTED, REJECTED, LawRows, core_key
 from controllers.leg_rate import LegRateFeedForward
 from controllers.solvers.base import Solver
 from controllers.tasks.leg_direction import LegDirections
 from controllers.tasks.leg_edge import EdgeFeature
-from hexapod.compiled import CompiledFunction, Layout
 
-__all__ = ["KernelRows", "ObservedFeature", "VisionLawBatch"]
+__all__ = ["ObservedFeature", "VisionLawBatch"]
 
 #: What a vision law reads from an observation (its field, visibility mask and shape).
 ObservedFeature = EdgeFeature | LegDirections
-
-
-class KernelRows:
-    """The inputs of the compiled cores of a batch's trials, one row per trial, and the
-    lean core that evaluates any rows of them in one C loop.
-
-    Args:
-        n: Trials of the batch.
-    """
-
-    def __init__(self, n: int) -> None:
-        #: The first trial's compiled core, whose lean core steps the rows (None until a
-        #: trial has a compiled core).
-        self.kernel: LawKernel | None = None
-        #: The lean core (None until it first steps rows: built then, not at the reset, so a
-        #: batch whose rows all step alone never builds it).
-        self.function: CompiledFunction | None = None
-        #: Where each named input lies in a row, and each named output in a result (the
-        #: lean core's layouts; empty until a trial has a compiled core).
-        self.slices: Layout = Layout((), "law core input")
-        self.outputs: Layout = Layout((), "law core output")
-        self.n = n
-        self.X = np.zeros((0, 0))
-        #: (n,) the trials whose row holds its core's inputs (the lean core may step them).
-        self.ready = np.zeros(n, dtype=bool)
-        #: (n,) the rows holding a core's constants (a retarget may write its desired
-        #: features alone).
-        self.filled = np.zeros(n, dtype=bool)
-
-    def take(self, trial: int, kernel: LawKernel | None) -> None:
-        """Copy a trial's core inputs into its row (None: the trial has no lean core)."""
-        self.ready[trial] = kernel is not None
-        if kernel is None:
-            return
-        if self.kernel is None:
-            self.kernel = kernel
-            self.slices = kernel.slices
-            self.outputs = kernel.outputs
-            self.X = np.zeros((self.n, kernel.input_vector.size))
-        self.X[trial] = kernel.input_vector
-        self.filled[trial] = True
-
-    def write_desired(self, trials: np.ndarray, desired: np.ndarray, quick: np.ndarray
-                      ) -> np.ndarray:
-        """Write the desired features ``desired`` (m, D) of the goals ``quick`` (m,) into
-        the rows of ``trials`` (m,) that hold their constants; returns the mask of the
-        goals written."""
-        if self.kernel is None:
-            return np.zeros(len(trials), dtype=bool)
-        quick = quick & self.filled[trials]
-        rows = np.flatnonzero(quick)
-        if len(rows):
-            self.X[trials[rows], self.slices["desired"]] = desired[rows]
-            self.ready[trials[rows]] = True
-        return quick  # type: ignore[no-any-return]
-
-    def step(self, rows: np.ndarray, trials: np.ndarray, features: np.ndarray,
-             lengths: np.ndarray, solver: Solver, estimate: LegDirectionEstimate,
-             out: CommandBatch) -> np.ndarray:
-        """The lean core over the batch rows ``rows`` of ``trials`` with their measured
-        ``features`` and ``lengths`` [m]; returns the mask (m,) of the rows whose result
-        is the command (finite, rank 6, ``solver.batch_accept``): those update the batch's
-        ``estimate`` as a commanded step and fill ``out``, the others are left to their
-        trial's own step (which says why)."""
-        X = self.X[trials]
-        X[:, self.slices["features"]] = features
-        X[:, self.slices["lengths"]] = lengths
-        if self.function is None:
-            assert self.kernel is not None, "take() sets the kernel before a row is ready"
-            self.function = self.kernel.lean_function
-        Y = self.function.batch(X)
-        o = self.outputs
-        with np.errstate(invalid="ignore"):
-            ok = (np.isfinite(Y[:, o["error_norm"].start]) & np.isfinite(Y[:, o["n_sum"].start])
-                  & (Y[:, o["rank"].start] >= 6) & (Y[:, o["qdot_check"].start] == 0.0))
-        ok &= solver.batch_accept(trials, lengths, Y[:, o["qdot"]])
-        if ok.all():  # the common case: no row copies
-            Ya, tr, qa, ra = Y, trials, lengths, rows
-        else:
-            acc = np.flatnonzero(ok)
-            Ya, tr, qa, ra = Y[acc], trials[acc], lengths[acc], rows[acc]
-        estimate.measured_all(Ya[:, o["directions"]].reshape(-1, 6, 3), tr)
-        estimate.commanded(Ya[:, o["tau"]], qa, tr)
-        out.velocities[ra] = Ya[:, o["qdot"]]
-        out.error_norm[ra] = Ya[:, o["error_norm"].start]
-        return ok  # type: ignore[no-any-return]
 
 
 class VisionLawBatch(LegRateFeedForward, Controller):
@@ -146,21 +62,30 @@ class VisionLawBatch(LegRateFeedForward, Controller):
 
         Raises:
             ContextError: A context the law cannot use (as :meth:`reset_trial`).
+            CompilationError: No C compiler (the step is C).
         """
         super().reset_batch(contexts)
         trials = self.trial_instances
         #: The estimates of every trial (the instances' estimates are its rows).
         self.batch_estimate = LegDirectionEstimate.fresh(len(trials))
-        self._core_rows = KernelRows(len(trials))
         for k, inst in enumerate(trials):
             inst.estimate = self.batch_estimate.row(k)
-            self._core_rows.take(k, inst.kernel if inst.batch_core else None)
         #: Goals given to ``retarget_batch`` not yet read by the trial's instance.
         self._pending: dict[int, tuple[GoalBatch, int]] = {}
-        self.solver.batch_reset([t.solver for t in trials])
         seen = {t.observed_feature for t in trials}
         self.batch_feature = seen.pop() if len(seen) == 1 else None
         self.batch_reset_leg_rate(trials)
+        feedforward = (None if self.batch_kappa is None
+                       else (self.batch_kappa, self.batch_offset))
+        keys = [core_key(t) for t in trials]
+        first = {key: k for k, key in reversed(list(enumerate(keys)))}
+        #: The rows of each compiled core of the batch (one, unless its trials read
+        #: different features, e.g. perspective and unified cameras), and each trial's.
+        self._groups = [LawRows(trials, self.batch_estimate, feedforward, trials[k])
+                        for k in sorted(first.values())]
+        order = {rows.key: g for g, rows in enumerate(self._groups)}
+        self._group_of = np.array([order[key] for key in keys], dtype=np.int64)
+        self._core_rows = self._groups[0]
 
     def retarget_batch(self, trials: np.ndarray, goals: GoalBatch) -> None:
         """New goals for some trials (row ``j`` of ``goals`` for trial ``trials[j]``),
@@ -176,7 +101,10 @@ class VisionLawBatch(LegRateFeedForward, Controller):
         trials = np.asarray(trials, dtype=int)
         desired, quick = self._batch_desired(goals)
         if desired is not None and len(self.trial_instances) > 1:  # (one reads it now)
-            quick = self._core_rows.write_desired(trials, desired, quick)
+            own = self._group_of[trials]
+            for g, rows in enumerate(self._groups):
+                mine = own == g
+                quick = np.where(mine, rows.write_desired(trials, desired, quick & mine), quick)
             for j in np.flatnonzero(quick).tolist():
                 self._pending[int(trials[j])] = (goals, j)
         else:
@@ -189,39 +117,90 @@ class VisionLawBatch(LegRateFeedForward, Controller):
     def _retarget_instance(self, trial: int, goal: Goal) -> None:
         inst = self.trial_instances[trial]
         inst.retarget_trial(goal)
-        self._core_rows.take(trial, inst.kernel if inst.batch_core else None)
+        self._groups[self._group_of[trial]].take(trial, inst)
 
-    def step_arrays(self, observations: ObservationBatch, out: CommandBatch) -> np.ndarray:
-        """The common case of the rows through the compiled core as arrays; returns the
-        other rows (see the module docstring)."""
+    def step_batch(self, observations: ObservationBatch) -> CommandBatch:
+        """The commands of every row (module docstring); a batch of one gets the
+        per-trial :class:`Command` (the error, rank, condition number and twist).
+
+        Raises:
+            CompilationError: The compiled core failed (the batch fails as a whole).
+            ValueError: The observations' arrays are not of the batch's shapes.
+        """
         obs = observations
         n = len(obs)
-        trials = np.asarray(obs.trials, dtype=int)
-        slow = np.ones(n, dtype=bool)
-        rows_core = self._core_rows
-        seen = self.batch_feature  # the rows' measured features, where all are visible
-        arr = None if seen is None else getattr(obs, seen.field)
-        if rows_core.kernel is not None and seen is not None and arr is not None:
-            feats = np.asarray(arr, dtype=float).reshape(n, 3 * seen.units)
-            visible = np.all(np.asarray(getattr(obs, seen.visibility), dtype=bool)
-                             .reshape(n, seen.units), axis=1)
-            q = np.asarray(obs.lengths, dtype=float)
-            with np.errstate(invalid="ignore"):
-                fast = (rows_core.ready[trials] & visible & np.isfinite(feats).all(axis=1)
-                        & np.isfinite(q).all(axis=1) & (q.min(axis=1) > 0)
-                        & np.isfinite(np.asarray(obs.t, dtype=float)))
-            rows = np.flatnonzero(fast)
-            if len(rows):
-                done = rows_core.step(rows, trials[rows], feats[rows], q[rows],
-                                      self.solver, self.batch_estimate, out)
-                slow[rows[done]] = False
-                self.feed_rows(rows[done], trials[rows[done]], obs, out)
-        return np.flatnonzero(slow)
+        self.crashes = {}
+        if not n:
+            return CommandBatch.zeros(0)
+        if len(self._groups) == 1:
+            return self._step_rows(self._core_rows, obs, self.crashes)
+        out = CommandBatch.zeros(n)  # trials of several cores: each core's rows apart
+        own = self._group_of[np.asarray(obs.trials, dtype=np.int64)]
+        for g, rows in enumerate(self._groups):
+            idx = np.flatnonzero(own == g)
+            if len(idx):
+                crashes: dict[int, BaseException] = {}
+                part = self._step_rows(rows, obs.rows(idx), crashes)
+                out.velocities[idx] = part.velocities
+                out.error_norm[idx] = part.error_norm
+                kept = part.commands or [None] * len(idx)
+                for k, j in enumerate(idx.tolist()):
+                    out.reasons[j] = part.reasons[k]
+                    if kept[k] is not None:
+                        out.commands = out.commands or [None] * n
+                        out.commands[j] = kept[k]
+                    if k in crashes:
+                        self.crashes[j] = crashes[k]
+        return out
 
-    def step_row(self, trial: int, observation: Observation) -> Command:
-        """One row by its trial's instance, which first reads a goal given to
-        :meth:`retarget_batch` that it has not read yet."""
+    def _step_rows(self, rows: LawRows, obs: ObservationBatch,
+                   crashes: dict[int, BaseException]) -> CommandBatch:
+        """The commands of the rows of one compiled core's trials (a failure of row ``j``
+        kept in ``crashes[j]``)."""
+        n = len(obs)
+        code, b = rows.step(obs)
+        if n == 1:  # the per-trial step: its Command
+            cmd = (self._command_of(rows, b.Y[0], b.vel[0].copy()) if code[0] == ACCEPTED
+                   else self._python_row(rows, 0, obs, int(code[0]), b.Y[0], crashes))
+            return CommandBatch.of_row(cmd, self.actuation)
+        out = CommandBatch(b.vel.copy(), b.norm.copy(), [None] * n)
+        if code.any():  # rows not accepted (ACCEPTED is 0)
+            for j in np.flatnonzero(code != ACCEPTED).tolist():
+                out.put(j, self._python_row(rows, j, obs, int(code[j]), b.Y[j], crashes))
+        return out
+
+    def _python_row(self, rows: LawRows, j: int, obs: ObservationBatch, code: int,
+                    y: np.ndarray, crashes: dict[int, BaseException]) -> Command:
+        """Row ``j``'s command by :meth:`_rare_row`, or the refusal of its failure (the
+        exception kept in ``crashes``)."""
+        try:
+            return self._rare_row(rows, int(obs.trials[j]), obs.item(j), code, y,
+                                  len(obs) == 1)
+        except Exception as exc:  # that trial's failure
+            crashes[j] = exc
+            return Command.refuse(f"{type(exc).__name__}: {exc}")
+
+    @staticmethod
+    def _command_of(rows: LawRows, y: np.ndarray, velocities: np.ndarray) -> Command:
+        """The per-trial command of an accepted row of a batch of one: the full core's
+        outputs ``y`` and the command's leg velocities [m/s]."""
+        error, tau, norm, rank, condition = rows.command_outputs
+        e = y[error].copy()
+        return Command(velocities, twist=y[tau].copy(), error=e, error_norm=float(y[norm]),
+                       rank=int(y[rank]), condition=float(y[condition]),
+                       features_used=e.shape[0], notes=[], active_constraints=[])
+
+    def _rare_row(self, rows: LawRows, trial: int, observation: Observation, code: int,
+                  y: np.ndarray, full: bool) -> Command:
+        """A row the C left to Python, by its trial's instance, which first reads a goal
+        given to :meth:`retarget_batch` that it has not read yet: a REJECTED row from the
+        full core's result, a RARE one by the instance's own step of the cases it
+        covers (hidden features, refusals)."""
+        result = rows.full_result(trial, y, full) if code == REJECTED else None
         pending = self._pending.pop(trial, None) if self._pending else None
         if pending is not None:
             self._retarget_instance(trial, pending[0].item(pending[1]))
-        return self.trial_instances[trial].step_trial(observation)  # type: ignore[no-any-return]
+        inst = self.trial_instances[trial]
+        if result is None:
+            return inst.rare_step(observation)  # type: ignore[no-any-return]
+        return inst.rejected_step(observation, result)  # type: ignore[no-any-return]

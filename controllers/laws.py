@@ -1,10 +1,12 @@
 """The image-based laws' per-trial side (``docs/math.md`` section 6): a feature gives an
 error and an interaction matrix; :class:`VisionLaw` combines them for every feature
 (gain, solver, hidden features, diagnostics): ``tau = -lambda L^+ e``, ``q_dot = J_inv
-tau``. A step goes through the law's compiled core (:mod:`controllers.law_kernel`),
-after :meth:`VisionLaw._select` when a feature is hidden now or in the goal. The batch
-side is :class:`~controllers.law_steps.VisionLawBatch`'s; the tests' numpy oracle is
-``tests/controllers/numpy_law.py``.
+tau``. The law's one step is its batch's (:class:`~controllers.law_steps.
+VisionLawBatch`, C around the compiled core :mod:`controllers.law_kernel` in
+:mod:`controllers.law_rows`); an instance steps the rows that C leaves to Python
+(:meth:`VisionLaw.rare_step`: after :meth:`VisionLaw._select` when a feature is hidden
+now or in the goal, or a refusal; :meth:`VisionLaw.rejected_step`). The tests' numpy
+oracle is ``tests/controllers/numpy_law.py``.
 """
 
 from __future__ import annotations
@@ -20,7 +22,7 @@ import numpy as np
 from controllers.base import Command, ControllerContext, Goal, Observation
 from controllers.estimators import LegDirectionEstimate, PoseEstimate
 from controllers.exceptions import ContextError, OptionError
-from controllers.law_kernel import Feature, LawKernel, feature_law_kernel
+from controllers.law_kernel import Feature, LawKernel, LawResult, feature_law_kernel
 from controllers.law_steps import ObservedFeature, VisionLawBatch
 from controllers.law_tools import (
     INTERACTIONS,
@@ -189,8 +191,8 @@ class VisionLaw(VisionLawBatch):
         kernel.set("weights", self._goal_visible)
         self.kernel = kernel
         self._k_features = kernel.inputs["features"].reshape(self.observed_feature.shape)
-        #: Every feature is visible in the goal.
-        self._goal_all_visible = bool(self._goal_visible.all())
+        #: Every feature is visible in the goal (the batch's C may step the trial).
+        self.goal_all_visible = bool(self._goal_visible.all())
 
     def _retarget_features(self, context: ControllerContext) -> None:
         """Read the desired features of a new goal (:meth:`retarget_trial`); subclasses skip
@@ -240,10 +242,12 @@ class VisionLaw(VisionLawBatch):
 
     def tasks(self, observation: Observation, q: np.ndarray) -> TaskStep | Command:
         """This period's tasks for a solver (the part of a step every solver shares), or
-        the refusal of why none can be built: the compiled core, directly when every
-        feature is visible now and in the goal (:meth:`_load_kernel`), else after
-        :meth:`_select`; the estimate updated (nothing commanded yet); the nominal model's
-        directions for legs never seen (:meth:`_model_directions`).
+        the refusal of why none can be built: the compiled core after :meth:`_select`
+        (the rows the batch's C leaves to Python with a hidden feature), or directly when
+        every feature is visible now and in the goal (:meth:`_load_kernel`: the
+        predictive controllers' tasks, and a trial whose core is not its batch's); the
+        estimate updated (nothing commanded yet); the nominal model's directions for legs
+        never seen (:meth:`_model_directions`).
 
         Args:
             observation: The observation.
@@ -292,11 +296,28 @@ class VisionLaw(VisionLawBatch):
                          "lengths) for never-seen legs " + _legs(unknown))
         return TaskStep(e, r.error_norm, r.N, r.b, r.gain, r.J, notes, r)
 
-    def step_trial(self, observation: Observation) -> Command:
-        """One period of this instance's trial: ``q_dot = J_inv (-lambda L^+ e)`` (never
-        raises for bad measurements), with the measured leg rates fed forward when
-        ``leg_rate_feedforward`` (:mod:`controllers.leg_rate`)."""
+    def rare_step(self, observation: Observation) -> Command:
+        """One period of a row the batch's C left to Python as not its common case (a
+        hidden feature, an unusable observation; :mod:`controllers.law_rows`), with the
+        measured leg rates fed forward when ``leg_rate_feedforward``
+        (:mod:`controllers.leg_rate`); never raises for bad measurements."""
         return self.fed_forward(self._law_step(observation), observation)
+
+    def rejected_step(self, observation: Observation, r: LawResult) -> Command:
+        """One period of a row whose compiled core's result ``r`` (the full core's) the
+        batch's C did not accept as the command (having written the estimate's measured
+        directions and a zero twist): the refusal of a degenerate core, or the solver's
+        answer (OSQP where the optimum touches a bound), fed forward as :meth:`rare_step`.
+        """
+        q = np.asarray(observation.lengths, dtype=float)
+        e = r.error
+        if not (math.isfinite(r.error_norm) and math.isfinite(r.n_sum)):
+            cmd = Command.refuse("non-finite error or interaction matrix (degenerate "
+                                 "features)", e)
+        else:
+            cmd = self._command(self.solver.solve(r.N, r.b, r.gain, q, r.J, r), r.J, e,
+                                r.error_norm, e.shape[0], q, [])
+        return self.fed_forward(cmd, observation)
 
     def _law_step(self, observation: Observation) -> Command:
         """The law's command of one period (before the leg-rate feed-forward)."""
@@ -341,7 +362,7 @@ class VisionLaw(VisionLawBatch):
         every leg direction measured); False to take :meth:`_select`."""
         seen = self.observed_feature
         vis = getattr(obs, seen.visibility)
-        if not (self._goal_all_visible and (vis.all() if type(vis) is np.ndarray
+        if not (self.goal_all_visible and (vis.all() if type(vis) is np.ndarray
                                             else np.all(np.asarray(vis, dtype=bool)))):
             return False
         self._k_features[...] = getattr(obs, seen.field)
@@ -362,12 +383,11 @@ class VisionLaw(VisionLawBatch):
             self._kernel_selected = False
 
     @property
-    def batch_core(self) -> bool:
-        """Whether the batched laws may step this trial's common case with the lean core
-        (a core whose inputs change only by the features and the lengths)."""
+    def desired_lengths_measured(self) -> bool:
+        """Whether the core's ``desired_lengths`` (DESIRED / MEAN interaction) are the
+        measured lengths (the goal gives none)."""
         k = self.kernel
-        return (k is not None and self._goal_all_visible
-                and (self._q_star is not None or "desired_lengths" not in k.inputs))
+        return k is not None and self._q_star is None and "desired_lengths" in k.inputs
 
     def _model_directions(self, q: np.ndarray) -> np.ndarray | None:
         """Leg directions (6, 3) (camera frame) of the nominal forward kinematics of ``q``

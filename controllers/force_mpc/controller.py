@@ -279,10 +279,6 @@ class ForceMPCLaw(PredictiveLaw):
         [s] on the reference's clock, and the rows known at every stage (m,) bool."""
         raise NotImplementedError
 
-    def law_step(self, observation: Observation) -> Command:
-        """The held law's command of one observation (its batch of one)."""
-        return self.law.step(observation)  # type: ignore[no-any-return]
-
     def _fallback(self, observation: Observation, reason: str) -> Command:
         """The held law's command this period, noting why; the plan restarts from it."""
         cmd = super()._fallback(observation, reason)

@@ -148,7 +148,7 @@ class MPCLaw(PredictiveLaw):
             OptionError: An option does not fit the context (e.g. no stroke left).
         """
         law = self.law
-        law.reset_trial(context)
+        law.reset(context)  # (a batch of one: its step is the batch's)
         self.features = law.features
         self.context = context
         #: The feature the problem predicts: the fallback law's (a plugin feature's law
@@ -209,7 +209,7 @@ class MPCLaw(PredictiveLaw):
         self._restart()
 
     def retarget_trial(self, goal: Goal) -> None:
-        """A new goal (:meth:`~controllers.laws.VisionLaw.retarget_trial` of the fallback
+        """A new goal (:meth:`~controllers.laws.VisionLaw.retarget` of the fallback
         law, whose desired features the problem takes); the warm start and the drives'
         state stay.
 
@@ -218,7 +218,7 @@ class MPCLaw(PredictiveLaw):
         """
         if self.context is None:
             raise ContextError(self.name, "context", "retarget(goal) before reset(context)")
-        self.law.retarget_trial(goal)
+        self.law.retarget(goal)
         self.context = self.law.context
         self._star = self.law.desired_features()
 

@@ -343,5 +343,5 @@ class PredictiveLaw(Controller):
         return cmd
 
     def law_step(self, observation: Observation) -> Command:
-        """The held law's command of one observation (its trial's own step)."""
-        return self.law.step_trial(observation)  # type: ignore[no-any-return]
+        """The held law's command of one observation (its batch of one)."""
+        return self.law.step(observation)  # type: ignore[no-any-return]

@@ -6,9 +6,6 @@ built them; per-trial constants (the QP's stroke window) come from :meth:`Solver
 
 from __future__ import annotations
 
-from collections.abc import Sequence
-from typing import Any
-
 import numpy as np
 
 from controllers.base import ControllerContext
@@ -28,6 +25,11 @@ class Solver:
     """
 
     threshold: float = 1e-6
+    #: What the batched step (:mod:`controllers.law_rows`) takes of the compiled core's
+    #: classical solution without calling :meth:`solve`: ``"core"`` (it is this solver's
+    #: answer at full rank), ``"bounds"`` (it is where it clears the limit QP's bounds)
+    #: or ``"none"`` (every row is solved by :meth:`solve`).
+    core_acceptance: str = "none"
 
     @property
     def damping2(self) -> float:
@@ -54,11 +56,3 @@ class Solver:
     def finish(self, qdot: np.ndarray) -> np.ndarray:
         """Last touch on the leg velocities [m/s] (identity)."""
         return qdot
-
-    # ------------------------------------------------------------------ batch
-    def batch_reset(self, trials: Sequence[Any]) -> None:
-        """Gather the per-trial constants of the trials' own solvers (nothing by default)."""
-
-    def batch_accept(self, trials: np.ndarray, q: np.ndarray, qdot: np.ndarray) -> np.ndarray:
-        """(n,) rows whose compiled classical solution is this solver's answer as is."""
-        return np.ones(len(trials), dtype=bool)

@@ -3,12 +3,11 @@ rows ``J_inv tau``, one pair of bounds per leg (:func:`velocity_bounds`). Solved
 OSQP (:class:`~controllers.solvers.osqp_limits.LimitQP`, warm-started), unless the
 unconstrained optimum (the compiled law core's) clears every bound with the default
 OSQP settings: it is then the QP optimum (:meth:`LimitQPSolver.solve`,
-:meth:`LimitQPSolver.batch_accept`).
+:mod:`controllers.law_rows`, the same test in C).
 """
 
 from __future__ import annotations
 
-from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Any
 
@@ -78,6 +77,8 @@ class LimitQPSolver(Solver):
     Raises:
         OptionError: An option out of range, named.
     """
+
+    core_acceptance = "bounds"
 
     def __init__(self, controller: str, threshold: float = 1e-6,
                  regularization: float = 1e-12, stroke_margin: float | None = None,
@@ -161,23 +162,3 @@ class LimitQPSolver(Solver):
     def finish(self, qdot: np.ndarray) -> np.ndarray:
         """Clip the tolerance-sized violations of the bounds left by the solver."""
         return np.minimum(np.maximum(qdot, self._lower), self._upper)  # np.clip, faster
-
-    # ------------------------------------------------------------------ batch
-    def batch_reset(self, trials: Sequence[Any]) -> None:
-        """The windows and shortcut flags of the trials' solvers, as columns."""
-        windows = [t.window for t in trials]
-        self._b_lo = np.array([w.lower for w in windows])[:, None]
-        self._b_hi = np.array([w.upper for w in windows])[:, None]
-        self._b_inv_dt = np.array([1.0 / w.dt for w in windows])[:, None]
-        self._b_vmax = np.array([w.max_speed for w in windows])[:, None]
-        self._b_shortcut = np.array([t.shortcut for t in trials], dtype=bool)
-
-    def batch_accept(self, trials: np.ndarray, q: np.ndarray, qdot: np.ndarray) -> np.ndarray:
-        """Rows whose unconstrained optimum clears every bound (as :meth:`solve`)."""
-        vmax = self._b_vmax[trials]
-        _, _, lo, hi = velocity_bounds(q, self._b_lo[trials], self._b_hi[trials], vmax,
-                                       self._b_inv_dt[trials])
-        tol2 = 2.0 * (1e-6 * vmax[:, 0])
-        with np.errstate(invalid="ignore"):
-            return (self._b_shortcut[trials] & ((qdot - lo).min(axis=1) > tol2)
-                    & ((hi - qdot).min(axis=1) > tol2))

@@ -18,6 +18,8 @@ class DampedPseudoInverse(Solver):
         damping: Damping ``mu``.
     """
 
+    core_acceptance = "core"
+
     def __init__(self, threshold: float = 1e-6, damping: float = 0.0) -> None:
         self.threshold = threshold
         self.damping = damping

@@ -12,6 +12,7 @@ import pytest
 from controllers import registry
 from controllers.law_algebra import full_rank_certificate, jacobi_eigen
 from controllers.law_kernel import LawKernel, feature_law_function, feature_law_kernel, law_layouts
+from controllers.law_rows import ACCEPTED, REJECTED, LawRows
 from controllers.law_tools import Gain
 from controllers.solvers.osqp_limits import LimitQP
 from controllers.tasks.leg_direction import LEG_DIRECTIONS
@@ -84,7 +85,9 @@ def _hide(obs: Any, step: int, never_seen: bool) -> None:
 @pytest.mark.parametrize("name", LAWS)
 @pytest.mark.parametrize("case", ["hidden", "never-seen", "goal-hidden"])
 def test_compiled_core_equals_numpy_with_hidden_features(world: World, name: str,
-                                                         interaction: str, case: str) -> None:
+                                                         interaction: str, case: str,
+                                                         monkeypatch: pytest.MonkeyPatch
+                                                         ) -> None:
     """Hidden features (zero-weight rows of the core), dead-reckoned, approximated and
     nominal-model leg directions, every interaction choice: the compiled core gives the
     numpy path's commands, notes, rank, error and estimate."""
@@ -108,6 +111,14 @@ def test_compiled_core_equals_numpy_with_hidden_features(world: World, name: str
     kernel = fast.kernel  # type: ignore[attr-defined]
     real = kernel.evaluate
     kernel.evaluate = lambda: calls.append(1) or real()
+    rows_step = LawRows.step
+
+    def counted_rows(self: LawRows, *args: Any) -> tuple[np.ndarray, np.ndarray]:
+        code, Y = rows_step(self, *args)  # the batch's C: the rows it evaluated
+        calls.extend([1] * int(np.count_nonzero((code == ACCEPTED) | (code == REJECTED))))
+        return code, Y
+
+    monkeypatch.setattr(LawRows, "step", counted_rows)
     R, t = Rs[1], ts[1]
     notes = set()
     for step in range(8):
