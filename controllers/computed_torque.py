@@ -96,7 +96,6 @@ class ComputedTorqueController(ComputedTorqueLaw):
         self._steps = np.zeros(1, dtype=np.int64)
         #: The nominal force limits [N] (inf before a reset).
         self._limit = np.full(6, np.inf)
-        self._limit_list = self._limit.tolist()
         self._q_star = np.zeros(6)
         #: The compiled step's input row (own or a view of its batch's; None before a
         #: reset); its pose block holds the pose guess (the last pose found, the home pose
@@ -174,7 +173,6 @@ class ComputedTorqueController(ComputedTorqueLaw):
         self._quintic = np.zeros(QUINTIC_SIZE)
         self._steps = np.zeros(1, dtype=np.int64)
         self._limit = np.asarray(context.geometry.drives.force_limit, dtype=float)
-        self._limit_list = self._limit.tolist()
         # its own row (not a view of a former batch's)
         self._row, self._batch = np.zeros(compiled_ctc.INPUTS.size), None
         row = self._row

@@ -15,7 +15,7 @@ from typing import Any
 
 import numpy as np
 
-from controllers.base import Command, CommandBatch, ControllerContext, Observation, ObservationBatch
+from controllers.base import Command, ControllerContext, Observation
 from controllers.exceptions import ContextError, OptionError
 
 
@@ -68,8 +68,8 @@ def feed_forward(q_dot: np.ndarray, measured: np.ndarray | None, offset: np.ndar
 class LegRateFeedForward:
     """The option's state and steps, for the one-step velocity laws
     (:class:`controllers.laws.VisionLaw` derives from it): off, the law's command goes out
-    as it is; on, :func:`feed_forward` of it, per trial (:meth:`fed_forward`) and over the
-    rows of a batch that the compiled core filled (:meth:`feed_rows`)."""
+    as it is; on, :func:`feed_forward` of it: per trial (:meth:`fed_forward`, the rows a
+    batch leaves to Python) or in the batch's C (:mod:`controllers.law_rows`)."""
 
     #: The controller's name (set by the controller class).
     name: str = "controller"
@@ -134,14 +134,3 @@ class LegRateFeedForward:
             self.batch_offset = np.zeros((len(trials), 6))
             for k, inst in enumerate(trials):
                 inst.rate_offset = self.batch_offset[k]
-
-    def feed_rows(self, rows: np.ndarray, trials: np.ndarray, obs: ObservationBatch,
-                  out: CommandBatch) -> None:
-        """The feed-forward of batch ``rows`` (of ``trials``) that the compiled core
-        filled in ``out`` (as :meth:`fed_forward` does for one); nothing when off."""
-        if self.batch_kappa is None:
-            return
-        v = None if obs.q_dot is None else np.asarray(obs.q_dot, dtype=float)[rows]
-        out.velocities[rows] = feed_forward(out.velocities[rows], v, self.batch_offset[trials],
-                                            self.batch_kappa[trials])
-        self.batch_offset[trials] = 0.0

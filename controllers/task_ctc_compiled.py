@@ -68,9 +68,6 @@ class CompiledTaskStep:
         self.set("gains", (law.gains.kp, law.gains.kd, float(law.context.dt)))
         self.home = home_pose(g)
         self.guess = None
-        out = self.outputs
-        #: The output blocks of the pose and of the task error.
-        self.pose_block, self.error_block = out["pose"], out["error"]
         #: Pose residual below which the pose has converged.
         self.tolerance = FK_TOLERANCE if self.fk else FIT_TOLERANCE
         #: What finds the pose (a refusal names it).
