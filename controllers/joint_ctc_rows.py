@@ -58,6 +58,7 @@ from hexapod.compiled import (
     CompiledFunction,
     KernelCall,
     build_shared_library,
+    c_struct,
 )
 
 if TYPE_CHECKING:
@@ -211,18 +212,8 @@ _I = ctypes.c_int64
 _D = ctypes.c_double
 
 
-class _Context(ctypes.Structure):
-    """The C ``JointCtc``: the batch's arrays and the compiled step (addresses)."""
-
-    _fields_ = [("X", _P), ("n_in", _I), ("q_at", _I), ("qd_at", _I), ("desired_at", _I),
-                ("pose_in", _I), ("tracking", _P), ("dt", _P), ("t_end", _P),
-                ("grid_len", _P), ("grids", _P), ("grid_stride", _I), ("quintic", _P),
-                ("quintic_speed", _P), ("peak", _D), ("kp_ki", _D), ("integral", _P),
-                ("grid_tol", _D), ("steps", _P), ("limit", _P), ("kernel", KernelCall),
-                ("n_out", _I),
-                ("pose_out", _I), ("residual_at", _I), ("status_at", _I), ("screen_at", _I),
-                ("forces_at", _I), ("fk_tol", _D), ("max_calls", _I), ("screen_scale", _D),
-                ("scratch", _P)]
+#: The C ``JointCtc`` (:func:`~hexapod.compiled.c_struct`: its fields read from the C).
+_Context = c_struct(SOURCE, "JointCtc")
 
 
 @lru_cache(maxsize=1)

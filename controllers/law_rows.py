@@ -48,6 +48,7 @@ from hexapod.compiled import (
     CompiledFunction,
     KernelCall,
     build_shared_library,
+    c_struct,
 )
 
 if TYPE_CHECKING:
@@ -175,17 +176,8 @@ _P = ctypes.c_void_p
 _I = ctypes.c_int64
 
 
-class _Context(ctypes.Structure):
-    """The C ``VisionRows``: the batch's arrays and the cores (addresses)."""
-
-    _fields_ = [("X", _P), ("n_in", _I), ("ready", _P), ("desired_q", _P),
-                ("feat_at", _I), ("n_feat", _I), ("units", _I), ("len_at", _I),
-                ("dlen_at", _I), ("lean", KernelCall), ("full", KernelCall),
-                ("n_out", _I), ("norm_at", _I), ("n_sum_at", _I), ("rank_at", _I),
-                ("check_at", _I), ("tau_at", _I), ("qdot_at", _I), ("dir_at", _I),
-                ("accept", _I), ("lower", _P), ("upper", _P), ("inv_dt", _P), ("vmax", _P),
-                ("shortcut", _P), ("directions", _P), ("in_use", _P), ("twist", _P),
-                ("lengths", _P), ("observed", _P), ("kappa", _P), ("offset", _P)]
+#: The C ``VisionRows`` (:func:`~hexapod.compiled.c_struct`: its fields read from the C).
+_Context = c_struct(SOURCE, "VisionRows")
 
 
 @lru_cache(maxsize=1)
@@ -205,11 +197,8 @@ def _library() -> ctypes.CDLL:
     return lib
 
 
-class _StepRows(ctypes.Structure):
-    """The C ``StepRows``: a step's arrays (addresses)."""
-
-    _fields_ = [(name, _P) for name in ("trials", "t", "q", "feats", "vis", "qd", "code", "Y",
-                                        "vel", "norm")]
+#: The C ``StepRows`` (:func:`~hexapod.compiled.c_struct`: its fields read from the C).
+_StepRows = c_struct(SOURCE, "StepRows")
 
 
 class _Buffers:

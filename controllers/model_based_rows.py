@@ -35,6 +35,7 @@ from hexapod.compiled import (
     CompiledFunction,
     KernelCall,
     build_shared_library,
+    c_struct,
 )
 from hexapod.exceptions import ForwardKinematicsError
 from hexapod.fk import ITERATIONS_PER_CALL, NEWTON_INPUTS, NEWTON_OUTPUTS, newton_kernel, pack_rows
@@ -110,14 +111,8 @@ _P = ctypes.c_void_p
 _I = ctypes.c_int64
 
 
-class _Context(ctypes.Structure):
-    """The C ``ModelBased``: the batch's arrays, their blocks and the two kernels."""
-
-    _fields_ = [(name, _P) for name in ("F", "X", "R", "p", "y")] + [
-        (name, _I) for name in ("fk_in", "R_in", "t_in", "q_in", "R_out", "t_out",
-                                "residual_out", "n_in", "n_out", "R_at", "t_at",
-                                "status_at", "max_iterations", "per_call")] + [
-        ("tol", ctypes.c_double), ("newton", KernelCall), ("servo", KernelCall)]
+#: The C ``ModelBased`` (:func:`~hexapod.compiled.c_struct`: its fields read from the C).
+_Context = c_struct(SOURCE, "ModelBased")
 
 
 @lru_cache(maxsize=1)

@@ -14,7 +14,7 @@ import ctypes
 from functools import lru_cache
 
 from controllers.ctc_rows import NEWTON_CALLS_C
-from hexapod.compiled import KernelCall, build_shared_library
+from hexapod.compiled import build_shared_library, c_struct
 
 #: A row's code in a step, in order (the C ``enum`` is made of these names): a command
 #: (over a limit or not), or why not yet or not.
@@ -163,30 +163,14 @@ int tc_step_call(const TaskCtc *c, const TaskCall *a) {
 """.replace("@CODES@", ", ".join(CODES))
 
 _P = ctypes.c_void_p
-_I = ctypes.c_int64
-_D = ctypes.c_double
 
 
-class Context(ctypes.Structure):
-    """The C ``TaskCtc``: the batch's arrays and the compiled step (addresses)."""
-
-    _fields_ = [("X", _P), ("n_in", _I), ("q_at", _I), ("qd_at", _I), ("ref_at", _I),
-                ("ref_w", _I), ("mask_at", _I), ("mask_w", _I), ("int_at", _I),
-                ("int_w", _I), ("pose_in", _I), ("usable", _P), ("plain", _P),
-                ("clock", _P), ("built", _P), ("dt", _P), ("grid_len", _P), ("grids", _P),
-                ("known", _P), ("kp_ki", _D), ("integral", _P), ("guessed", _P),
-                ("steps", _P), ("limit", _P), ("kernel", KernelCall), ("n_out", _I),
-                ("pose_out", _I), ("residual_at", _I), ("status_at", _I), ("screen_at", _I),
-                ("forces_at", _I), ("error_at", _I), ("tol", _D), ("max_calls", _I),
-                ("screen_scale", _D), ("measured", _I), ("feat_at", _I), ("feat_w", _I),
-                ("vis_w", _I), ("ones_at", _I), ("ones_w", _I)]
+#: The C ``TaskCtc`` (:func:`~hexapod.compiled.c_struct`: its fields read from the C).
+Context = c_struct(SOURCE, "TaskCtc")
 
 
-class Call(ctypes.Structure):
-    """The C ``TaskCall``: a step's arrays (addresses) and its number of rows."""
-
-    _fields_ = [(name, _P) for name in ("X", "trials", "t", "q", "qd", "code", "tr", "gstep",
-                                        "feat", "vis", "seen", "Y", "forces")] + [("m", _I)]
+#: The C ``TaskCall`` (:func:`~hexapod.compiled.c_struct`: its fields read from the C).
+Call = c_struct(SOURCE, "TaskCall")
 
 
 @lru_cache(maxsize=1)

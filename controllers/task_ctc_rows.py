@@ -165,7 +165,7 @@ class TaskRows:
         #: The rank test's threshold of the last step (its screen's scale set in C).
         self.threshold = math.nan
         self._last: _Buffers | None = None
-        self.context: Context | None = None
+        self.context: ctypes.Structure | None = None
         if self.step_of is not None:
             self._bind(self.step_of)
 

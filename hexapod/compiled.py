@@ -34,6 +34,7 @@ import importlib
 import logging
 import os
 import platform
+import re
 import shutil
 import subprocess
 import tempfile
@@ -483,3 +484,42 @@ class KernelCall(ctypes.Structure):
                    ctypes.addressof(res), iw.ctypes.data, w.ctypes.data)
         call.arrays = (arg, res, iw, w)  # (they live as long as the call)
         return call
+
+
+#: The C scalar types of :func:`c_struct`'s fields (any pointer is an address).
+_C_SCALARS: dict[str, Any] = {"double": ctypes.c_double, "int64_t": ctypes.c_int64,
+                              "int": ctypes.c_int, "uint8_t": ctypes.c_uint8}
+
+
+def c_struct(source: str, name: str) -> type[ctypes.Structure]:
+    """The ctypes mirror of ``typedef struct { ... } name;`` in the C ``source``: its
+    fields in their order, a pointer as an address (``c_void_p``), ``double``,
+    ``int64_t``, ``int``, ``uint8_t`` or a :class:`KernelCall`. The C declares a layout
+    once; Python reads it from there (a hand-kept copy could silently disagree).
+
+    Raises:
+        ValueError: No such struct in ``source``, or a field of another type.
+    """
+    found = re.search(r"typedef struct \{([^{}]*)\}\s*" + re.escape(name) + r"\s*;", source)
+    if found is None:
+        raise ValueError(f"no 'typedef struct {{...}} {name};' in the C source")
+    fields: list[tuple[str, Any]] = []
+    for declaration in re.sub(r"/\*.*?\*/", "", found.group(1), flags=re.S).split(";"):
+        if not declaration.strip():
+            continue
+        head = re.match(r"\s*(?:const\s+)?(\w+)\s+(.*)", declaration, re.S)
+        if head is None:
+            raise ValueError(f"{name}: cannot read the field declaration {declaration!r}")
+        base, names = head.groups()
+        for declarator in names.split(","):
+            field = re.findall(r"\w+", declarator)[-1]
+            if "*" in declarator:
+                fields.append((field, ctypes.c_void_p))
+            elif base == "KernelCall":
+                fields.append((field, KernelCall))
+            elif base in _C_SCALARS:
+                fields.append((field, _C_SCALARS[base]))
+            else:
+                raise ValueError(f"{name}.{field}: a field of type {base} (not mirrored)")
+    return type(name, (ctypes.Structure,), {"_fields_": fields,
+                                            "__doc__": f"The C ``{name}`` (addresses)."})
