@@ -52,17 +52,11 @@ from controllers.data import CommandBatch, ObservationBatch
 from controllers.solvers import compiled_ctc
 from controllers.task_ctc_inputs import QUINTIC_PEAK_SPEED, encoder_readings
 from hexapod.actuation import Actuation
-from hexapod.compiled import (
-    LANE_ROWS,
-    CompilationError,
-    CompiledFunction,
-    KernelCall,
-    build_shared_library,
-    c_struct,
-)
+from hexapod.compiled import LANE_ROWS, CompilationError, KernelCall, c_library, c_struct
 
 if TYPE_CHECKING:
     from controllers.computed_torque import ComputedTorqueController
+    from hexapod.compiled import CompiledFunction
 
 #: How far from ``k dt`` an observation's time may be to use the reference's grid [s].
 GRID_TIME_TOLERANCE = 1e-9
@@ -220,8 +214,7 @@ _Context = c_struct(SOURCE, "JointCtc")
 def _library() -> ctypes.CDLL:
     """The compiled :data:`SOURCE` (``-fno-builtin``: ``pow`` is the C library's, as
     Python's; ``-ffp-contract=off``: no fused multiply-add)."""
-    lib = ctypes.CDLL(str(build_shared_library(
-        "joint_ctc_rows", SOURCE, ("-O2", "-fno-builtin", "-ffp-contract=off"))))
+    lib = c_library("joint_ctc_rows", SOURCE)
     lib.jc_desired.argtypes = [_P, _I, _D, _P]
     lib.jc_prepare.argtypes = [_P, _I, _P, _P, _P, _P, _P]
     lib.jc_evaluate.argtypes = [_P, _I, _P, _P, _P]

@@ -42,17 +42,11 @@ import numpy as np
 from controllers.data import ObservationBatch
 from controllers.estimators import LegDirectionEstimate
 from controllers.law_kernel import LawKernel, LawResult
-from hexapod.compiled import (
-    KERNEL_CALL_C,
-    CompilationError,
-    CompiledFunction,
-    KernelCall,
-    build_shared_library,
-    c_struct,
-)
+from hexapod.compiled import KERNEL_CALL_C, CompilationError, KernelCall, c_library, c_struct
 
 if TYPE_CHECKING:
     from controllers.laws import VisionLaw
+    from hexapod.compiled import CompiledFunction
 
 #: A row's code after a step (the C ``enum`` is made of these names): a command, why
 #: Python steps the row (RARE: not the common case; REJECTED: the core's result is not
@@ -184,8 +178,7 @@ _Context = c_struct(SOURCE, "VisionRows")
 def _library() -> ctypes.CDLL:
     """The compiled :data:`SOURCE` (``-fno-builtin``, ``-ffp-contract=off``: no fused
     multiply-add, the numpy expressions' bits)."""
-    lib = ctypes.CDLL(str(build_shared_library(
-        "vision_law_rows", SOURCE, ("-O2", "-fno-builtin", "-ffp-contract=off"))))
+    lib = c_library("vision_law_rows", SOURCE)
     lib.vl_prepare.argtypes = [_P, _I, _P, _P, _P, _P, _P, _P]
     lib.vl_prepare.restype = None
     lib.vl_evaluate.argtypes = [_P, _I, _P, _P, _P, _I]

@@ -29,20 +29,14 @@ import numpy as np
 
 from controllers.data import Command, CommandBatch, ObservationBatch, observation_problem
 from controllers.estimators import PoseEstimate
-from hexapod.compiled import (
-    KERNEL_CALL_C,
-    CompilationError,
-    CompiledFunction,
-    KernelCall,
-    build_shared_library,
-    c_struct,
-)
+from hexapod.compiled import KERNEL_CALL_C, CompilationError, KernelCall, c_library, c_struct
 from hexapod.exceptions import ForwardKinematicsError
 from hexapod.fk import ITERATIONS_PER_CALL, NEWTON_INPUTS, NEWTON_OUTPUTS, newton_kernel, pack_rows
 from hexapod.workspace import home_pose
 
 if TYPE_CHECKING:
     from controllers.model_based import ModelBasedController
+    from hexapod.compiled import CompiledFunction
 
 #: A row's code after the C step: a command, refused by the servo's status, a reading not
 #: finite, a failed forward kinematics, the servo left to Python.
@@ -119,8 +113,7 @@ _Context = c_struct(SOURCE, "ModelBased")
 def _library() -> ctypes.CDLL:
     """The compiled :data:`SOURCE` (no arithmetic but comparisons: the flags of
     :mod:`controllers.joint_ctc_rows`)."""
-    lib = ctypes.CDLL(str(build_shared_library(
-        "model_based_rows", SOURCE, ("-O2", "-fno-builtin", "-ffp-contract=off"))))
+    lib = c_library("model_based_rows", SOURCE)
     lib.mb_step.argtypes = [_P, _I, _P, _P, _P, _P, _P, _P]
     lib.mb_step.restype = ctypes.c_int
     return lib

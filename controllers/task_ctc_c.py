@@ -14,7 +14,7 @@ import ctypes
 from functools import lru_cache
 
 from controllers.ctc_rows import NEWTON_CALLS_C
-from hexapod.compiled import build_shared_library, c_struct
+from hexapod.compiled import c_library, c_struct
 
 #: A row's code in a step, in order (the C ``enum`` is made of these names): a command
 #: (over a limit or not), or why not yet or not.
@@ -177,8 +177,7 @@ Call = c_struct(SOURCE, "TaskCall")
 def library() -> ctypes.CDLL:
     """The compiled :data:`SOURCE` (``-fno-builtin -ffp-contract=off``: IEEE operations
     as written)."""
-    lib = ctypes.CDLL(str(build_shared_library(
-        "task_ctc_rows", SOURCE, ("-O2", "-fno-builtin", "-ffp-contract=off"))))
+    lib = c_library("task_ctc_rows", SOURCE)
     for name in ("tc_prepare_call", "tc_evaluate_call", "tc_finish_call", "tc_step_call"):
         getattr(lib, name).argtypes = [_P, _P]
     lib.tc_evaluate_call.restype = lib.tc_step_call.restype = ctypes.c_int

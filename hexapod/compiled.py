@@ -486,6 +486,23 @@ class KernelCall(ctypes.Structure):
         return call
 
 
+#: The flags of :func:`c_library`: no builtin (``pow`` is the C library's, as Python's)
+#: and no fused multiply-add, so the C's IEEE operations are those written (and the
+#: numpy or Python expressions' bits it replaces).
+C_STEP_FLAGS = ("-O2", "-fno-builtin", "-ffp-contract=off")
+
+
+def c_library(name: str, source: str) -> ctypes.CDLL:
+    """The C ``source`` written around compiled kernels (a controller's one step),
+    compiled once with :data:`C_STEP_FLAGS` (cached as the kernels are,
+    :func:`build_shared_library`) and loaded.
+
+    Raises:
+        CompilationError: No C compiler, or the source does not compile.
+    """
+    return ctypes.CDLL(str(build_shared_library(name, source, C_STEP_FLAGS)))
+
+
 #: The C scalar types of :func:`c_struct`'s fields (any pointer is an address).
 _C_SCALARS: dict[str, Any] = {"double": ctypes.c_double, "int64_t": ctypes.c_int64,
                               "int": ctypes.c_int, "uint8_t": ctypes.c_uint8}
