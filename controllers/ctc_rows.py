@@ -1,7 +1,8 @@
 """What the computed-torque laws' one steps share around their compiled kernels.
 
 :data:`NEWTON_CALLS_C` calls a kernel on a row from C, again from the pose reached while
-it has not converged; :func:`evaluate_rows` does the same for many rows in lanes (the
+it has not converged, and screens the rank of its result (``rank_screen``);
+:func:`evaluate_rows` does the same for many rows in lanes (the
 same bits as row by row); :func:`rank_condition` is the exact rank test (LAPACK) where
 the kernel's screen does not settle it; :func:`refusal` words why a row is not a
 command; :func:`norms` the error norms as a vector's own dot product.
@@ -37,6 +38,15 @@ static int newton_calls(const KernelCall *k, double *x, double *y, int64_t pose_
         if (kernel_call(k, x, y)) return 1;
     }
     return 0;
+}
+
+/* the rank screen of a step's output row y: 0 a nonzero status (refused), 1 the screen
+   cannot prove full rank (unsure: the exact test decides), 2 full rank */
+static int rank_screen(const double *y, int64_t status_at, int64_t screen_at,
+                       double scale) {
+    if (y[status_at] != 0.0) return 0;
+    double det = y[screen_at], tr = y[screen_at + 1];
+    return tr > 0.0 && det > scale * pow(tr, 6.0) ? 2 : 1;
 }
 """
 

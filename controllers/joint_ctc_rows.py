@@ -171,9 +171,8 @@ void jc_finish(JointCtc *c, int64_t m, const int64_t *trials, int64_t *code,
     for (int64_t j = 0; j < m; j++) {
         const double *y = Y + c->n_out * j;
         if (code[j] == READY) {
-            if (y[c->status_at] != 0.0) { code[j] = REFUSED; continue; }
-            double det = y[c->screen_at], tr = y[c->screen_at + 1];
-            if (!(tr > 0.0 && det > c->screen_scale * pow(tr, 6.0))) { code[j] = UNSURE; continue; }
+            int screen = rank_screen(y, c->status_at, c->screen_at, c->screen_scale);
+            if (screen < 2) { code[j] = screen ? UNSURE : REFUSED; continue; }
         } else if (code[j] != ACCEPT) continue;
         int64_t i = trials[j];
         double *x = c->X + c->n_in * i, *e = errors + 6 * j;

@@ -104,9 +104,8 @@ void tc_finish(const TaskCtc *c, int64_t m, const double *Xl, const int64_t *tri
     for (int64_t j = 0; j < m; j++) {
         const double *y = Y + c->n_out * j, *x = Xl + c->n_in * j;
         if (code[j] == READY) {
-            if (y[c->status_at] != 0.0) { code[j] = REFUSED; continue; }
-            double det = y[c->screen_at], tr = y[c->screen_at + 1];
-            if (!(tr > 0.0 && det > c->screen_scale * pow(tr, 6.0))) { code[j] = UNSURE; continue; }
+            int screen = rank_screen(y, c->status_at, c->screen_at, c->screen_scale);
+            if (screen < 2) { code[j] = screen ? UNSURE : REFUSED; continue; }
         } else if (code[j] != ACCEPT) continue;
         int64_t i = trials[j];
         memcpy(c->X + c->n_in * i + c->pose_in, y + c->pose_out, 12 * sizeof(double));
