@@ -104,12 +104,6 @@ def norms(e: np.ndarray) -> np.ndarray:
     return np.matmul(e[:, None, :], e[:, :, None])[:, 0, 0]  # type: ignore[no-any-return]
 
 
-def over_limits(forces: np.ndarray, limits: np.ndarray) -> np.ndarray:
-    """(m,) the rows of ``forces`` (m, 6) [N] with a leg over its limit (``limits``
-    (m, 6) [N]; a NaN is not over)."""
-    return (np.abs(forces) > limits).any(axis=1)  # type: ignore[no-any-return]
-
-
 def refusal(y: np.ndarray, status: int, residual: int, factor: slice, threshold: float,
             pose_name: str = "forward kinematics of the lengths",
             inputs: dict[str, np.ndarray] | None = None) -> str | None:
@@ -150,5 +144,5 @@ def stale(rows: Any, laws: list[Any]) -> bool:
     return rows is None or getattr(rows, "laws", None) is not laws
 
 
-__all__ = ["FK_MAX_CALLS", "NEWTON_CALLS_C", "evaluate_rows", "norms", "over_limits",
+__all__ = ["FK_MAX_CALLS", "NEWTON_CALLS_C", "evaluate_rows", "norms",
            "rank_condition", "refusal", "stale"]

@@ -52,7 +52,14 @@ from controllers.data import CommandBatch, ObservationBatch
 from controllers.solvers import compiled_ctc
 from controllers.task_ctc_inputs import QUINTIC_PEAK_SPEED, encoder_readings
 from hexapod.actuation import Actuation
-from hexapod.compiled import LANE_ROWS, CompilationError, KernelCall, c_library, c_struct
+from hexapod.compiled import (
+    LANE_ROWS,
+    CompilationError,
+    KernelCall,
+    RowArrays,
+    c_library,
+    c_struct,
+)
 
 if TYPE_CHECKING:
     from controllers.computed_torque import ComputedTorqueController
@@ -74,11 +81,7 @@ CODES = ("ACCEPTED", "OVER", "NOT_FINITE", "OFF_GRID", "REFUSED", "UNSURE", "REA
 ACCEPTED, OVER, NOT_FINITE, OFF_GRID, REFUSED, UNSURE, READY, ACCEPT = range(len(CODES))
 
 #: The C of a step (see the module docstring); ``JointCtc`` is :class:`_Context`.
-SOURCE = r"""
-#include <math.h>
-#include <stdint.h>
-#include <string.h>
-""" + NEWTON_CALLS_C + r"""
+SOURCE = NEWTON_CALLS_C + r"""
 typedef struct {
     double *X; int64_t n_in, q_at, qd_at, desired_at, pose_in;
     const uint8_t *tracking; const double *dt, *t_end; const int64_t *grid_len;
@@ -113,7 +116,7 @@ static void quintic_at(double t, const double *r, double *d) {
 }
 
 /* trial i's desired legs at t into d (18); 1: off the control grid (d not written) */
-static int desired_at(const JointCtc *c, int64_t i, double t, double *d) {
+int jc_desired(const JointCtc *c, int64_t i, double t, double *d) {
     if (!c->tracking[i]) { quintic_at(t, c->quintic + 21 * i, d); return 0; }
     int64_t len = c->grid_len[i];
     double dt = c->dt[i], k = nearbyint(t / dt);
@@ -123,10 +126,6 @@ static int desired_at(const JointCtc *c, int64_t i, double t, double *d) {
     else return 1;
     memcpy(d, g, 18 * sizeof(double));
     return 0;
-}
-
-int jc_desired(const JointCtc *c, int64_t i, double t, double *d) {
-    return desired_at(c, i, t, d);
 }
 
 void jc_prepare(JointCtc *c, int64_t m, const int64_t *trials, const double *t,
@@ -147,7 +146,7 @@ void jc_prepare(JointCtc *c, int64_t m, const int64_t *trials, const double *t,
             for (int l = 0; l < 6; l++) { r[3 + l] = qj[l]; r[9 + l] = r[15 + l] - qj[l]; }
         }
         double *d = x + c->desired_at;
-        if (desired_at(c, i, t[j], d)) { code[j] = OFF_GRID; continue; }
+        if (jc_desired(c, i, t[j], d)) { code[j] = OFF_GRID; continue; }
         if (c->kp_ki != 0.0)
             for (int l = 0; l < 6; l++) d[12 + l] += c->kp_ki * c->integral[6 * i + l];
         code[j] = READY;
@@ -200,11 +199,6 @@ int jc_step(JointCtc *c, int64_t m, const int64_t *trials, const double *t, cons
 }
 """.replace("@CODES@", ", ".join(CODES))
 
-_P = ctypes.c_void_p
-_I = ctypes.c_int64
-_D = ctypes.c_double
-
-
 #: The C ``JointCtc`` (:func:`~hexapod.compiled.c_struct`: its fields read from the C).
 _Context = c_struct(SOURCE, "JointCtc")
 
@@ -213,17 +207,7 @@ _Context = c_struct(SOURCE, "JointCtc")
 def _library() -> ctypes.CDLL:
     """The compiled :data:`SOURCE` (``-fno-builtin``: ``pow`` is the C library's, as
     Python's; ``-ffp-contract=off``: no fused multiply-add)."""
-    lib = c_library("joint_ctc_rows", SOURCE)
-    lib.jc_desired.argtypes = [_P, _I, _D, _P]
-    lib.jc_prepare.argtypes = [_P, _I, _P, _P, _P, _P, _P]
-    lib.jc_evaluate.argtypes = [_P, _I, _P, _P, _P]
-    lib.jc_finish.argtypes = [_P, _I, _P, _P, _P, _P, _P]
-    lib.jc_step.argtypes = [_P, _I, _P, _P, _P, _P, _P, _P, _P, _P]
-    for f in (lib.jc_desired, lib.jc_evaluate, lib.jc_step):
-        f.restype = ctypes.c_int
-    for f in (lib.jc_prepare, lib.jc_finish):
-        f.restype = None
-    return lib
+    return c_library("joint_ctc_rows", SOURCE)
 
 
 class JointState(NamedTuple):
@@ -252,24 +236,6 @@ class JointState(NamedTuple):
     grid: np.ndarray | None
     quintic_speed: float
     function: CompiledFunction
-
-
-class _Buffers:
-    """A step's arrays for ``n`` rows and their addresses (in the C calls' order:
-    trials, t, q, q_dot, code, Y, forces, errors)."""
-
-    def __init__(self, n: int, n_out: int) -> None:
-        self.n = n
-        self.trials = np.zeros(n, dtype=np.int64)
-        self.t = np.zeros(n)
-        self.q = np.zeros((n, 6))
-        self.qd = np.zeros((n, 6))
-        self.code = np.zeros(n, dtype=np.int64)
-        self.Y = np.zeros((n, n_out))
-        self.forces = np.zeros((n, 6))
-        self.errors = np.zeros((n, 6))
-        self.addresses = tuple(a.ctypes.data for a in (
-            self.trials, self.t, self.q, self.qd, self.code, self.Y, self.forces, self.errors))
 
 
 class JointRows:
@@ -317,7 +283,7 @@ class JointRows:
         self.name = law0.name
         self.threshold = law0.solver.threshold
         self.kp_ki = law0.kp * law0.integral_gain if law0.integral_gain else 0.0
-        self._last: _Buffers | None = None
+        self._last: RowArrays | None = None
         self._bind(function)
 
     def _bind(self, function: CompiledFunction) -> None:
@@ -350,12 +316,16 @@ class JointRows:
             out[:] = self.laws[trial].reference_legs(np.array([t]))[0].ravel()
         return out
 
-    def _buffers(self, n: int) -> _Buffers:
-        """The step's arrays for ``n`` rows (those of the last step when it had as many:
-        their addresses taken once)."""
+    def _buffers(self, n: int) -> RowArrays:
+        """The step's arrays for ``n`` rows in the C calls' order (those of the last step
+        when it had as many: their addresses taken once)."""
         b = self._last
         if b is None or b.n != n:
-            b = self._last = _Buffers(n, self.function.n_out)
+            b = self._last = RowArrays(n, {
+                "trials": ((), np.int64), "t": ((), float), "q": ((6,), float),
+                "qd": ((6,), float), "code": ((), np.int64),
+                "Y": ((self.function.n_out,), float), "forces": ((6,), float),
+                "errors": ((6,), float)})
         return b
 
     def step(self, observations: ObservationBatch, out: CommandBatch) -> None:
@@ -418,7 +388,7 @@ class JointRows:
             accepted = (code == ACCEPTED) | (code == OVER)
             out.error_norm[accepted] = np.sqrt(norms(b.errors[accepted]))
 
-    def _resolve(self, observations: ObservationBatch, b: _Buffers) -> dict[int, str]:
+    def _resolve(self, observations: ObservationBatch, b: RowArrays) -> dict[int, str]:
         """Finish the rows off the control grid and those whose rank the screen does not
         settle (module docstring); the reasons of the rows refused."""
         lib = _library()

@@ -42,7 +42,14 @@ import numpy as np
 from controllers.data import ObservationBatch
 from controllers.estimators import LegDirectionEstimate
 from controllers.law_kernel import LawKernel, LawResult
-from hexapod.compiled import KERNEL_CALL_C, CompilationError, KernelCall, c_library, c_struct
+from hexapod.compiled import (
+    KERNEL_CALL_C,
+    CompilationError,
+    KernelCall,
+    RowArrays,
+    c_library,
+    c_struct,
+)
 
 if TYPE_CHECKING:
     from controllers.laws import VisionLaw
@@ -59,11 +66,7 @@ ACCEPTED, RARE, REJECTED, READY = range(len(CODES))
 ACCEPTANCE = ("core", "bounds", "none")
 
 #: The C of a step (see the module docstring); ``VisionRows`` is :class:`_Context`.
-SOURCE = r"""
-#include <math.h>
-#include <stdint.h>
-#include <string.h>
-""" + KERNEL_CALL_C + r"""
+SOURCE = KERNEL_CALL_C + r"""
 typedef struct {
     double *X; int64_t n_in; const uint8_t *ready, *desired_q;
     int64_t feat_at, n_feat, units, len_at, dlen_at;
@@ -166,10 +169,6 @@ int vl_step(const VisionRows *c, const StepRows *r, int64_t m, int64_t full, int
 """.replace("@CODES@", ", ".join(CODES)).replace(
     "@ACCEPTANCE@", ", ".join(a.upper() for a in ACCEPTANCE))
 
-_P = ctypes.c_void_p
-_I = ctypes.c_int64
-
-
 #: The C ``VisionRows`` (:func:`~hexapod.compiled.c_struct`: its fields read from the C).
 _Context = c_struct(SOURCE, "VisionRows")
 
@@ -178,49 +177,11 @@ _Context = c_struct(SOURCE, "VisionRows")
 def _library() -> ctypes.CDLL:
     """The compiled :data:`SOURCE` (``-fno-builtin``, ``-ffp-contract=off``: no fused
     multiply-add, the numpy expressions' bits)."""
-    lib = c_library("vision_law_rows", SOURCE)
-    lib.vl_prepare.argtypes = [_P, _I, _P, _P, _P, _P, _P, _P]
-    lib.vl_prepare.restype = None
-    lib.vl_evaluate.argtypes = [_P, _I, _P, _P, _P, _I]
-    lib.vl_evaluate.restype = ctypes.c_int
-    lib.vl_finish.argtypes = [_P, _I, _P, _P, _P, _P, _P, _P, _P]
-    lib.vl_finish.restype = None
-    lib.vl_step.argtypes = [_P, _P, _I, _I, _I]
-    lib.vl_step.restype = ctypes.c_int
-    return lib
+    return c_library("vision_law_rows", SOURCE)
 
 
 #: The C ``StepRows`` (:func:`~hexapod.compiled.c_struct`: its fields read from the C).
 _StepRows = c_struct(SOURCE, "StepRows")
-
-
-class _Buffers:
-    """A step's arrays for ``n`` rows (reused while the batch size is the same: their
-    addresses taken once): the rows' trials, times, lengths, features, visibility and
-    leg rates copied in, the codes, the core's outputs, the velocities and norms out.
-
-    Args:
-        n: Rows.
-        feature: Their feature's shape ``(6, 3)`` or ``(6, 2, 3)``.
-        n_out: The core's outputs.
-    """
-
-    def __init__(self, n: int, feature: tuple[int, ...], n_out: int) -> None:
-        self.n = n
-        self.trials = np.zeros(n, dtype=np.int64)
-        self.t = np.zeros(n)
-        self.q = np.zeros((n, 6))
-        self.feats = np.zeros((n, *feature))
-        self.vis = np.zeros((n, *feature[:-1]), dtype=bool)
-        self.qd = np.zeros((n, 6))
-        self.code = np.zeros(n, dtype=np.int64)
-        self.Y = np.zeros((n, n_out))
-        self.vel = np.zeros((n, 6))
-        self.norm = np.zeros(n)
-        self.rows = _StepRows(*(a.ctypes.data for a in (
-            self.trials, self.t, self.q, self.feats, self.vis, self.qd, self.code, self.Y,
-            self.vel, self.norm)))
-        self.at = ctypes.addressof(self.rows)
 
 
 def core_key(law: VisionLaw) -> tuple[object, object]:
@@ -311,7 +272,7 @@ class LawRows:
         self.command_outputs = (o["error"], o["tau"], o.index("error_norm"), o.index("rank"),
                                 o.index("condition"))
         self._c = True  # the core has its C (else the cores are called from Python)
-        self._last: _Buffers | None = None
+        self._last: RowArrays | None = None
 
     def take(self, trial: int, law: VisionLaw) -> None:
         """Copy a trial's core inputs into its row (after its reset or a new goal)."""
@@ -352,7 +313,7 @@ class LawRows:
         setattr(self.context, "full" if full else "lean", call)
         return function
 
-    def step(self, observations: ObservationBatch) -> tuple[np.ndarray, _Buffers]:
+    def step(self, observations: ObservationBatch) -> tuple[np.ndarray, RowArrays]:
         """Every COMMON row's command, where the core's result is one (module docstring);
         returns the rows' codes (n,) and the step's arrays (``vel`` and ``norm``: the
         accepted rows' velocities [m/s] and error norms, zeros elsewhere; ``Y``: the
@@ -365,8 +326,13 @@ class LawRows:
         obs = observations
         n = len(obs)
         b = self._last
-        if b is None or b.n != n:
-            b = self._last = _Buffers(n, self.feature.shape, self.outputs.size)
+        if b is None or b.n != n:  # in: trials, times, lengths, features, visibility,
+            shape = self.feature.shape  # leg rates; out: codes, outputs, velocities, norms
+            b = self._last = RowArrays(n, {
+                "trials": ((), np.int64), "t": ((), float), "q": ((6,), float),
+                "feats": (shape, float), "vis": (shape[:-1], bool), "qd": ((6,), float),
+                "code": ((), np.int64), "Y": ((self.outputs.size,), float),
+                "vel": ((6,), float), "norm": ((), float)}, _StepRows)
         feats = getattr(obs, self.feature.field)
         if feats is None:  # not measured: every row's own step says so
             b.code[:] = RARE
@@ -388,7 +354,7 @@ class LawRows:
             if lib.vl_step(self._ctx, b.at, n, full, qd is not None):
                 raise CompilationError(f"{function.name}: the compiled function failed")
         else:
-            r = b.rows
+            r: Any = b.call
             lib.vl_prepare(self._ctx, n, r.trials, r.t, r.q, r.feats, r.vis, r.code)
             ready = np.flatnonzero(b.code == READY)
             if len(ready):

@@ -400,7 +400,7 @@ class VisionLaw(VisionLawBatch):
             return None
         from hexapod.exceptions import HexapodError
         from hexapod.fk import forward_kinematics
-        from hexapod.kinematics import legs_in_frame
+        from hexapod.kinematics import leg_directions
 
         guess = self.model_pose
         try:
@@ -409,8 +409,9 @@ class VisionLaw(VisionLawBatch):
         except HexapodError:
             return None
         self.model_pose = PoseEstimate(sol.rotation, sol.translation)
-        return legs_in_frame(context.geometry, sol.rotation, sol.translation,
-                             pose).directions  # type: ignore[no-any-return]
+        # (the directions of legs_in_frame without its base points: the same numbers)
+        return pose.rotate(leg_directions(  # type: ignore[no-any-return]
+            context.geometry, sol.rotation, sol.translation))
 
     # ----------------------------------------------------------------- helpers
     def _desired_lengths(self, q: np.ndarray) -> np.ndarray:

@@ -29,7 +29,14 @@ import numpy as np
 
 from controllers.data import Command, CommandBatch, ObservationBatch, observation_problem
 from controllers.estimators import PoseEstimate
-from hexapod.compiled import KERNEL_CALL_C, CompilationError, KernelCall, c_library, c_struct
+from hexapod.compiled import (
+    KERNEL_CALL_C,
+    CompilationError,
+    KernelCall,
+    RowArrays,
+    c_library,
+    c_struct,
+)
 from hexapod.exceptions import ForwardKinematicsError
 from hexapod.fk import ITERATIONS_PER_CALL, NEWTON_INPUTS, NEWTON_OUTPUTS, newton_kernel, pack_rows
 from hexapod.workspace import home_pose
@@ -43,11 +50,7 @@ if TYPE_CHECKING:
 COMMAND, REFUSED, NOT_FINITE, FK_FAILED, READY = range(5)
 
 #: The C of a step (see the module docstring); ``ModelBased`` is :class:`_Context`.
-SOURCE = r"""
-#include <math.h>
-#include <stdint.h>
-#include <string.h>
-""" + KERNEL_CALL_C + r"""
+SOURCE = KERNEL_CALL_C + r"""
 typedef struct {
     double *F, *X, *R, *p, *y;
     int64_t fk_in, R_in, t_in, q_in, R_out, t_out, residual_out;
@@ -101,10 +104,6 @@ int mb_step(ModelBased *c, int64_t m, const int64_t *trials, const double *t,
 }
 """
 
-_P = ctypes.c_void_p
-_I = ctypes.c_int64
-
-
 #: The C ``ModelBased`` (:func:`~hexapod.compiled.c_struct`: its fields read from the C).
 _Context = c_struct(SOURCE, "ModelBased")
 
@@ -113,26 +112,7 @@ _Context = c_struct(SOURCE, "ModelBased")
 def _library() -> ctypes.CDLL:
     """The compiled :data:`SOURCE` (no arithmetic but comparisons: the flags of
     :mod:`controllers.joint_ctc_rows`)."""
-    lib = c_library("model_based_rows", SOURCE)
-    lib.mb_step.argtypes = [_P, _I, _P, _P, _P, _P, _P, _P]
-    lib.mb_step.restype = ctypes.c_int
-    return lib
-
-
-class _Buffers:
-    """A step's arrays for ``n`` rows and their addresses (in the C call's order: trials,
-    t, q, code, Y, fk)."""
-
-    def __init__(self, n: int, n_out: int) -> None:
-        self.n = n
-        self.trials = np.zeros(n, dtype=np.int64)
-        self.t = np.zeros(n)
-        self.q = np.zeros((n, 6))
-        self.code = np.zeros(n, dtype=np.int64)
-        self.Y = np.zeros((n, n_out))
-        self.fk = np.zeros((n, 2))
-        self.addresses = tuple(a.ctypes.data for a in (
-            self.trials, self.t, self.q, self.code, self.Y, self.fk))
+    return c_library("model_based_rows", SOURCE)
 
 
 class PoseServoRows:
@@ -162,7 +142,7 @@ class PoseServoRows:
         #: Whether each trial's command carries the twist in its camera frame.
         self.twist = [law.camera_from_base is not None for law in laws]
         self.name = laws[0].name
-        self._last: _Buffers | None = None
+        self._last: RowArrays | None = None
         newton, out, ins = newton_kernel(), kernel.outputs, NEWTON_INPUTS
         if newton.entry is None:
             raise CompilationError(f"{newton.name}: the model-based step needs its compiled "
@@ -201,8 +181,11 @@ class PoseServoRows:
         """
         n = len(observations)
         b = self._last
-        if b is None or b.n != n:
-            b = self._last = _Buffers(n, self.kernel.n_out)
+        if b is None or b.n != n:  # (in the C call's order)
+            b = self._last = RowArrays(n, {
+                "trials": ((), np.int64), "t": ((), float), "q": ((6,), float),
+                "code": ((), np.int64), "Y": ((self.kernel.n_out,), float),
+                "fk": ((2,), float)})
         np.copyto(b.trials, observations.trials)
         trials, size = b.trials, len(self.laws)
         if not (0 <= trials[0] < size if n == 1 else n == 0 or (
@@ -233,14 +216,14 @@ class PoseServoRows:
         for j in np.flatnonzero(code != COMMAND).tolist():
             out.put(j, self._refusal(observations, b, j))
 
-    def _servo(self, b: _Buffers) -> None:
+    def _servo(self, b: RowArrays) -> None:
         """The pose servo of the rows the C left to Python (the CasADi virtual machine)."""
         ready = np.flatnonzero(b.code == READY)
         if len(ready):
             b.Y[ready] = self.kernel.batch(self.X[b.trials[ready]])
             b.code[ready] = np.where(b.Y[ready, self._status] != 0.0, REFUSED, COMMAND)
 
-    def _refusal(self, observations: ObservationBatch, b: _Buffers, j: int) -> Command:
+    def _refusal(self, observations: ObservationBatch, b: RowArrays, j: int) -> Command:
         """The refusal of row ``j`` with its reason; a failed forward kinematics resets its
         trial's estimate to the home pose (the next step starts again from there)."""
         code, i = int(b.code[j]), int(b.trials[j])

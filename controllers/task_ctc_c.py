@@ -2,9 +2,9 @@
 ``tc_prepare`` (each row's readings, the law's measurement where all of it is seen and
 finite, the reference on its grid, the integral term; a row's code says what is left to
 Python), ``tc_evaluate`` (the compiled step, again from the pose reached until it
-converges), ``tc_finish`` (the rank screen and the accepted rows' state) and
-``tc_step`` (the three, for a few rows), each also as ``*_call`` taking a step's arrays
-in one struct. Compiled with ``-fno-builtin -ffp-contract=off``: every IEEE operation as
+converges) and ``tc_finish`` (the rank screen and the accepted rows' state), each also
+as ``*_call`` taking a step's arrays in one struct, and ``tc_step_call`` (the three, for a
+few rows). Compiled with ``-fno-builtin -ffp-contract=off``: every IEEE operation as
 written (``pow`` the C library's).
 """
 
@@ -25,11 +25,7 @@ CODES = ("ACCEPTED", "OVER", "NOT_FINITE", "OFF_GRID", "REFUSED", "UNSURE", "REA
 
 #: The C of a step (module docstring); ``TaskCtc`` is :class:`Context`, ``TaskCall``
 #: :class:`Call`.
-SOURCE = r"""
-#include <math.h>
-#include <stdint.h>
-#include <string.h>
-""" + NEWTON_CALLS_C + r"""
+SOURCE = NEWTON_CALLS_C + r"""
 typedef struct {
     double *X; int64_t n_in, q_at, qd_at, ref_at, ref_w, mask_at, mask_w, int_at, int_w;
     int64_t pose_in; const uint8_t *usable, *plain; const double *clock, *built, *dt;
@@ -127,18 +123,6 @@ void tc_finish(const TaskCtc *c, int64_t m, const double *Xl, const int64_t *tri
     }
 }
 
-int tc_step(const TaskCtc *c, int64_t m, double *Xl, const int64_t *trials, const double *t,
-            const double *q, const double *qd, int64_t *code, double *tr, int64_t *gstep,
-            const double *feat, const uint8_t *vis, uint8_t *seen, double *Y,
-            double *forces) {
-    tc_prepare(c, m, Xl, trials, t, q, qd, code, tr, gstep, feat, vis, seen);
-    for (int64_t j = 0; j < m; j++)
-        if (code[j] != READY && code[j] != NOT_FINITE && code[j] != UNUSABLE) return 0;
-    if (tc_evaluate(c, m, Xl, code, Y)) return 1;
-    tc_finish(c, m, Xl, trials, code, Y, forces);
-    return 0;
-}
-
 /* the calls with a step's arrays in one struct (two arguments from Python) */
 typedef struct {
     double *X; const int64_t *trials; const double *t, *q, *qd; int64_t *code; double *tr;
@@ -156,13 +140,15 @@ void tc_finish_call(const TaskCtc *c, const TaskCall *a) {
     tc_finish(c, a->m, a->X, a->trials, a->code, a->Y, a->forces);
 }
 int tc_step_call(const TaskCtc *c, const TaskCall *a) {
-    return tc_step(c, a->m, a->X, a->trials, a->t, a->q, a->qd, a->code, a->tr, a->gstep,
-                   a->feat, a->vis, a->seen, a->Y, a->forces);
+    tc_prepare_call(c, a);
+    for (int64_t j = 0; j < a->m; j++)
+        if (a->code[j] != READY && a->code[j] != NOT_FINITE && a->code[j] != UNUSABLE)
+            return 0;
+    if (tc_evaluate_call(c, a)) return 1;
+    tc_finish_call(c, a);
+    return 0;
 }
 """.replace("@CODES@", ", ".join(CODES))
-
-_P = ctypes.c_void_p
-
 
 #: The C ``TaskCtc`` (:func:`~hexapod.compiled.c_struct`: its fields read from the C).
 Context = c_struct(SOURCE, "TaskCtc")
@@ -176,12 +162,7 @@ Call = c_struct(SOURCE, "TaskCall")
 def library() -> ctypes.CDLL:
     """The compiled :data:`SOURCE` (``-fno-builtin -ffp-contract=off``: IEEE operations
     as written)."""
-    lib = c_library("task_ctc_rows", SOURCE)
-    for name in ("tc_prepare_call", "tc_evaluate_call", "tc_finish_call", "tc_step_call"):
-        getattr(lib, name).argtypes = [_P, _P]
-    lib.tc_evaluate_call.restype = lib.tc_step_call.restype = ctypes.c_int
-    lib.tc_prepare_call.restype = lib.tc_finish_call.restype = None
-    return lib
+    return c_library("task_ctc_rows", SOURCE)
 
 
 __all__ = ["ACCEPT", "ACCEPTED", "CODES", "FIRST", "NOT_FINITE", "OFF_GRID", "OVER", "READY",

@@ -63,7 +63,7 @@ from controllers.task_ctc_c import (
 )
 from controllers.task_ctc_inputs import encoder_readings, line_to
 from hexapod.actuation import Actuation
-from hexapod.compiled import LANE_ROWS, CompilationError, KernelCall
+from hexapod.compiled import LANE_ROWS, CompilationError, KernelCall, RowArrays
 
 if TYPE_CHECKING:
     from controllers.task_ctc import TaskComputedTorque
@@ -82,33 +82,6 @@ _ZEROS = np.zeros(6)
 _PENDING = frozenset((OFF_GRID, UNSURE, READY, FIRST, STALE, UNKNOWN, UNSEEN))
 #: Whether a code (its index) is pending.
 _IS_PENDING = np.isin(np.arange(len(CODES)), sorted(_PENDING))
-
-class _Buffers:
-    """A step's arrays for ``n`` rows (``n_in`` inputs, ``n_out`` outputs, a measurement
-    of ``feat_w`` values and ``vis_w`` visibility flags per row) and their addresses (the
-    C ``TaskCall``)."""
-
-    def __init__(self, n: int, n_in: int, n_out: int, feat_w: int, vis_w: int) -> None:
-        self.n = n
-        self.X = np.zeros((n, n_in))
-        self.trials = np.zeros(n, dtype=np.int64)
-        self.t = np.zeros(n)
-        self.q = np.zeros((n, 6))
-        self.qd = np.zeros((n, 6))
-        self.code = np.zeros(n, dtype=np.int64)
-        self.tr = np.zeros(n)
-        self.gstep = np.zeros(n, dtype=np.int64)
-        self.feat = np.zeros((n, feat_w))
-        self.vis = np.zeros((n, vis_w), dtype=np.uint8)
-        self.seen = np.zeros(n, dtype=np.uint8)
-        self.Y = np.zeros((n, n_out))
-        self.forces = np.zeros((n, 6))
-        self.call = Call(*(a.ctypes.data for a in (
-            self.X, self.trials, self.t, self.q, self.qd, self.code, self.tr, self.gstep,
-            self.feat, self.vis, self.seen, self.Y, self.forces)), n)
-        #: The address of :attr:`call` (the C functions' second argument).
-        self.at = ctypes.addressof(self.call)
-
 
 class TaskRows:
     """The arrays of a batch of task computed-torque trials and its one step (see the
@@ -164,7 +137,7 @@ class TaskRows:
                       if law0 is not None and law0.integral_gain else 0.0)
         #: The rank test's threshold of the last step (its screen's scale set in C).
         self.threshold = math.nan
-        self._last: _Buffers | None = None
+        self._last: RowArrays | None = None
         self.context: ctypes.Structure | None = None
         if self.step_of is not None:
             self._bind(self.step_of)
@@ -213,14 +186,20 @@ class TaskRows:
             setattr(c, name, getattr(self, name).ctypes.data)
         self._ctx = ctypes.addressof(c)
 
-    def _buffers(self, n: int) -> _Buffers:
-        """The step's arrays for ``n`` rows (the last step's when it had as many)."""
+    def _buffers(self, n: int) -> RowArrays:
+        """The step's arrays for ``n`` rows (the last step's when it had as many) and
+        their C ``TaskCall``: a measurement of ``feat_w`` values and ``vis_w`` flags."""
         b = self._last
         if b is None or b.n != n:
             assert self.step_of is not None and self.context is not None
             c = self.context
-            b = self._last = _Buffers(n, self.X.shape[1], self.step_of.function.n_out,
-                                      c.feat_w, c.vis_w)
+            b = self._last = RowArrays(n, {
+                "X": ((self.X.shape[1],), float), "trials": ((), np.int64),
+                "t": ((), float), "q": ((6,), float), "qd": ((6,), float),
+                "code": ((), np.int64), "tr": ((), float), "gstep": ((), np.int64),
+                "feat": ((c.feat_w,), float), "vis": ((c.vis_w,), np.uint8),
+                "seen": ((), np.uint8), "Y": ((self.step_of.function.n_out,), float),
+                "forces": ((6,), float)}, Call, n)
         return b
 
     # ---------------------------------------------------------------- grids
@@ -336,7 +315,7 @@ class TaskRows:
         for j in np.flatnonzero(~accepted).tolist():  # refused: zeros and the reason
             self._refuse(out, j, reasons.get(j) or self._reason(observations, b, j))
 
-    def _one(self, observations: ObservationBatch, out: CommandBatch, b: _Buffers,
+    def _one(self, observations: ObservationBatch, out: CommandBatch, b: RowArrays,
              used: np.ndarray | None, note: str | None, reason: str | None) -> None:
         """A batch of one's row as the per-trial step's :class:`Command`."""
         code = b.code[0]
@@ -358,14 +337,14 @@ class TaskRows:
         out.error_norm[0] = cmd.error_norm
         out.commands = [cmd]
 
-    def _limited(self, b: _Buffers, j: int, forces: np.ndarray, used: np.ndarray | None
+    def _limited(self, b: RowArrays, j: int, forces: np.ndarray, used: np.ndarray | None
                  ) -> np.ndarray:
         """Row ``j``'s forces [N] over a limit under its law's strategy."""
         law = self.laws[int(b.trials[j])]
         return law.limited(forces, b.Y[j, self._pose], b.qd[j], b.Y[j, self._error], used,
                            True)
 
-    def _rare(self, observations: ObservationBatch, b: _Buffers, used: dict[int, np.ndarray],
+    def _rare(self, observations: ObservationBatch, b: RowArrays, used: dict[int, np.ndarray],
               notes: dict[int, str], threshold: float) -> dict[int, str]:
         """Prepare the rows the C did not (module docstring), then evaluate and finish
         every prepared row; the reasons of the rows refused on the way."""
@@ -432,7 +411,7 @@ class TaskRows:
             lib.tc_finish_call(self._ctx, b.at)
         return reasons
 
-    def _start(self, observations: ObservationBatch, b: _Buffers, j: int) -> str | None:
+    def _start(self, observations: ObservationBatch, b: RowArrays, j: int) -> str | None:
         """A fixed goal's first step for row ``j`` (the law's ``start``: with a smooth
         goal, the line from the pose of a compiled step towards the goal at rest); None,
         or why there is no pose."""
@@ -463,7 +442,7 @@ class TaskRows:
             return f"nominal model failed: {exc}"
         return None
 
-    def _inputs(self, law: TaskComputedTorque, observations: ObservationBatch, b: _Buffers,
+    def _inputs(self, law: TaskComputedTorque, observations: ObservationBatch, b: RowArrays,
                 j: int, tr: float) -> tuple[np.ndarray | None, str | None] | str:
         """The law's own inputs of row ``j`` at ``tr`` [s] written into its trial's row
         (its readings there first): the rows used and a note, or why there are none."""
@@ -473,7 +452,7 @@ class TaskRows:
         step.views["q_dot"][:] = b.qd[j]
         return step.prepare(law, observations.item(j), tr)  # type: ignore[no-any-return]
 
-    def _own_inputs(self, observations: ObservationBatch, b: _Buffers, j: int,
+    def _own_inputs(self, observations: ObservationBatch, b: RowArrays, j: int,
                     used: dict[int, np.ndarray], notes: dict[int, str]) -> str | None:
         """Row ``j`` prepared by its law (a feature hidden, a reference off its grid) and
         copied into the step's rows; None, or why it has no inputs."""
@@ -500,7 +479,7 @@ class TaskRows:
             return reason
         return "no compiled step (compiled_kind is None and the law made none at reset)"
 
-    def _reason(self, observations: ObservationBatch, b: _Buffers, j: int) -> str:
+    def _reason(self, observations: ObservationBatch, b: RowArrays, j: int) -> str:
         """Why row ``j`` is refused (its code: readings, no step, or its status)."""
         code = int(b.code[j])
         if code == NOT_FINITE:

@@ -444,9 +444,14 @@ class BoundCall:
         return copy
 
 
-#: The C of a call of a compiled function from C (:class:`KernelCall`): the struct and
-#: ``kernel_call(k, x, y)``, ``y = f(x)`` for one row (nonzero when the function fails).
+#: The C of a call of a compiled function from C (:class:`KernelCall`): the headers a
+#: one-step C needs, the struct and ``kernel_call(k, x, y)``, ``y = f(x)`` for one row
+#: (nonzero when the function fails).
 KERNEL_CALL_C = r"""
+#include <math.h>
+#include <stdint.h>
+#include <string.h>
+
 typedef struct {
     int (*f)(const double **, double **, int64_t *, double *, int);
     const double **arg; double **res; int64_t *iw; double *w;
@@ -495,12 +500,69 @@ C_STEP_FLAGS = ("-O2", "-fno-builtin", "-ffp-contract=off")
 def c_library(name: str, source: str) -> ctypes.CDLL:
     """The C ``source`` written around compiled kernels (a controller's one step),
     compiled once with :data:`C_STEP_FLAGS` (cached as the kernels are,
-    :func:`build_shared_library`) and loaded.
+    :func:`build_shared_library`) and loaded, each function that is not ``static`` with
+    its argument and result types read from its definition (as :func:`c_struct` reads a
+    struct: a pointer is an address).
 
     Raises:
         CompilationError: No C compiler, or the source does not compile.
+        ValueError: A function's parameter or result of a type not mirrored.
     """
-    return ctypes.CDLL(str(build_shared_library(name, source, C_STEP_FLAGS)))
+    signatures = []
+    for result, function, params in re.findall(r"^(\w+) (\w+)\(([^)]*)\)\s*\{", source,
+                                               re.M):
+        if result == "static":
+            continue
+        if result not in ("int", "void"):
+            raise ValueError(f"{name}: {function} returns {result} (not mirrored)")
+        types: list[Any] = []
+        for param in params.split(","):
+            base = re.match(r"\s*(?:const\s+)?(\w+)", param)
+            if "*" in param:
+                types.append(ctypes.c_void_p)
+            elif base is not None and base.group(1) in _C_SCALARS:
+                types.append(_C_SCALARS[base.group(1)])
+            else:
+                raise ValueError(f"{name}: {function}'s parameter {param.strip()!r} (not "
+                                 "mirrored)")
+        signatures.append((function, types, ctypes.c_int if result == "int" else None))
+    lib = ctypes.CDLL(str(build_shared_library(name, source, C_STEP_FLAGS)))
+    for function, types, restype in signatures:
+        entry = getattr(lib, function)
+        entry.argtypes, entry.restype = types, restype
+    return lib
+
+
+class RowArrays:
+    """The arrays of a one-step C over ``n`` rows (zeros): one attribute per field
+    ``name: (shape of a row, dtype)``, and their addresses in the fields' order
+    (:attr:`addresses`: the C call's arguments, or the fields of its struct
+    :attr:`call`). A step keeps them while its batches have as many rows (the addresses
+    taken once).
+
+    Args:
+        n: Rows.
+        fields: The arrays, in the C's order.
+        struct: The C struct of the addresses followed by ``extra`` (None: none).
+        extra: Its last fields.
+    """
+
+    def __init__(self, n: int, fields: dict[str, tuple[tuple[int, ...], Any]],
+                 struct: type[ctypes.Structure] | None = None, *extra: int) -> None:
+        self.n = n
+        arrays = {name: np.zeros((n, *shape), dtype=dtype)
+                  for name, (shape, dtype) in fields.items()}
+        self.__dict__.update(arrays)
+        #: The arrays' addresses, in the fields' order.
+        self.addresses = tuple(a.ctypes.data for a in arrays.values())
+        #: The struct of the addresses (None: none) and its address (0: none).
+        self.call: ctypes.Structure | None = (None if struct is None
+                                              else struct(*self.addresses, *extra))
+        self.at = 0 if self.call is None else ctypes.addressof(self.call)
+
+    def __getattr__(self, name: str) -> np.ndarray:
+        """Reached only for a name that is no field (every field is an array)."""
+        raise AttributeError(f"no row array {name!r}")
 
 
 #: The C scalar types of :func:`c_struct`'s fields (any pointer is an address).

@@ -9,11 +9,11 @@ import numpy as np
 
 from controllers.base import ControllerContext, Observation
 from controllers.cartesian_ctc import CartesianCTC
-from controllers.exceptions import ContextError
 from controllers.feature_ctc import LegEdgeCTC
 from controllers.force_mpc.controller import MAX_ITER, ForceMPCLaw
 from controllers.force_mpc.problem import NS
 from controllers.task_ctc import DAMPING, NATURAL_FREQUENCY_HZ
+from controllers.task_ctc_inputs import camera_and_base_points
 from controllers.tasks.leg_edge import EDGE_NORMALS
 from controllers.tasks.platform_pose import PLATFORM_POSE
 
@@ -38,13 +38,7 @@ class LegEdgeForceMPC(ForceMPCLaw):
         Raises:
             ContextError: No camera pose, or base points not (6, 3) finite.
         """
-        cam = getattr(context.camera, "camera_from_base", None)
-        if cam is None:
-            raise ContextError(self.name, "camera", "needs the estimated camera with its "
-                               "camera_from_base pose")
-        A_cam = np.asarray(context.base_points, dtype=float)
-        if A_cam.shape != (6, 3) or not np.all(np.isfinite(A_cam)):
-            raise ContextError(self.name, "base_points", f"expected (6, 3) finite, got {A_cam}")
+        cam, A_cam = camera_and_base_points(self.name, context)
         v["camera_R"][:] = np.asarray(cam.rotation, dtype=float).T.ravel()  # column-major
         v["camera_A"][:] = A_cam
         v["camera_radius"][:] = context.geometry.leg_radius

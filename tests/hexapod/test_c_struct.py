@@ -1,20 +1,31 @@
-"""``hexapod.compiled.c_struct``: the ctypes mirror of a C struct read from its declaration.
+"""``hexapod.compiled.c_struct``: the ctypes mirror of a C struct read from its declaration;
+``c_library``: the functions' signatures read from their definitions; ``RowArrays``.
 
 The oracle is the C compiler itself: a small library reports ``sizeof`` and every
 field's ``offsetof`` of the struct, which the mirror's layout must equal; and a value
-written through the mirror must be what the C reads.
+written through the mirror must be what the C reads. A function called through the
+signature read from its definition must get every argument (an ``int64_t`` beyond 32
+bits, a ``double``, addresses) and give its result.
 """
 
 from __future__ import annotations
 
 import ctypes
 import re
+from typing import Any
 
 import numpy as np
 import pytest
 
 from controllers import joint_ctc_rows, law_rows, model_based_rows, task_ctc_c
-from hexapod.compiled import KERNEL_CALL_C, KernelCall, build_shared_library, c_struct
+from hexapod.compiled import (
+    KERNEL_CALL_C,
+    KernelCall,
+    RowArrays,
+    build_shared_library,
+    c_library,
+    c_struct,
+)
 
 SOURCE = r"""
 #include <stddef.h>
@@ -85,3 +96,57 @@ def test_a_missing_struct_or_an_unmirrored_field_is_named() -> None:
         c_struct(SOURCE, "Nothing")
     with pytest.raises(ValueError, match=r"Odd\.ratio: a field of type float"):
         c_struct("typedef struct { double a; float ratio; } Odd;", "Odd")
+
+
+CALLS = KERNEL_CALL_C + r"""
+static double twice(double x) { return 2.0 * x; }
+
+int scaled_sum(const double *x, int64_t n, double scale,
+               double *out) {
+    double s = 0.0;
+    for (int64_t k = 0; k < n; k++) s += x[k];
+    out[0] = twice(s) * scale;
+    return n > 3;
+}
+
+void store_index(int64_t i, int64_t *out) { out[0] = i; }
+"""
+
+
+def test_the_functions_are_called_with_the_signatures_of_their_definitions() -> None:
+    lib = c_library("test_c_library", CALLS)
+    assert lib.scaled_sum.argtypes == [ctypes.c_void_p, ctypes.c_int64, ctypes.c_double,
+                                       ctypes.c_void_p]
+    assert lib.scaled_sum.restype is ctypes.c_int and lib.store_index.restype is None
+    x, out = np.array([1.0, 2.0, 3.5, 4.0]), np.zeros(1)
+    assert lib.scaled_sum(x.ctypes.data, 3, 0.25, out.ctypes.data) == 0
+    assert out[0] == 2.0 * 6.5 * 0.25
+    assert lib.scaled_sum(x.ctypes.data, 4, 1.0, out.ctypes.data) == 1
+    index = np.zeros(1, dtype=np.int64)
+    lib.store_index(2**40 + 3, index.ctypes.data)  # (an int64_t, not truncated to an int)
+    assert index[0] == 2**40 + 3
+    assert not hasattr(lib, "twice")  # (static: no symbol, no signature set)
+
+
+def test_an_unmirrored_parameter_or_result_is_named_before_compiling() -> None:
+    with pytest.raises(ValueError, match=r"test_odd_param: half's parameter 'float x'"):
+        c_library("test_odd_param", "int half(float x) { return x > 0; }\n")
+    with pytest.raises(ValueError, match=r"test_odd_result: ratio returns double"):
+        c_library("test_odd_result", "double ratio(int64_t n) { return n / 2.0; }\n")
+
+
+def test_row_arrays_and_their_struct() -> None:
+    rows = RowArrays(3, {"trials": ((), np.int64), "q": ((6,), float),
+                         "vis": ((6, 2), bool)}, c_struct(
+        "typedef struct { int64_t *trials; double *q; uint8_t *vis; int64_t m; } R;", "R"), 3)
+    assert rows.trials.shape == (3,) and rows.trials.dtype == np.int64
+    assert rows.q.shape == (3, 6) and rows.vis.shape == (3, 6, 2) and rows.vis.dtype == bool
+    assert not rows.q.any()
+    assert rows.addresses == (rows.trials.ctypes.data, rows.q.ctypes.data,
+                              rows.vis.ctypes.data)
+    call: Any = rows.call
+    assert (call.trials, call.q, call.vis, call.m) == (*rows.addresses, 3)
+    assert rows.at == ctypes.addressof(rows.call)
+    with pytest.raises(AttributeError, match="no row array 'lengths'"):
+        _ = rows.lengths
+    assert RowArrays(2, {"t": ((), float)}).call is None
