@@ -116,8 +116,7 @@ class Controller(RemembersOptions, ABC):
                 :class:`~controllers.exceptions.CommandError` for a malformed command).
         """
         if not self.trial_instances:
-            return Command.refuse(f"{self.name}: reset(context) was not called",
-                                  actuation=self.actuation)
+            return self._not_reset()
         cls = type(self)
         if cls.step_batch is Controller.step_batch:
             if cls.step_row is Controller.step_row:  # (its body, one call less)
@@ -179,6 +178,9 @@ class Controller(RemembersOptions, ABC):
         the others each by its trial's instance (:meth:`step_rows`)."""
         n = len(observations)
         self.crashes = {}
+        unreset = self.refused_before_reset(observations)
+        if unreset is not None:
+            return unreset
         if n == 1:  # a batch of one (the per-trial engine's): its row by its instance
             return CommandBatch.of_row(self._row_command(0, int(observations.trials[0]),
                                                          observations.item(0)),
@@ -187,6 +189,21 @@ class Controller(RemembersOptions, ABC):
         if n:
             self.step_rows(observations, self.step_arrays(observations, out), out)
         return out
+
+    def refused_before_reset(self, observations: ObservationBatch) -> CommandBatch | None:
+        """Every row refused (zero, with the reason) before a reset made the trials'
+        instances, or None once one has (how every batch step starts)."""
+        if self.trial_instances:
+            return None
+        out = CommandBatch.zeros(len(observations), self.actuation)
+        for j in range(len(observations)):
+            out.put(j, self._not_reset())
+        return out
+
+    def _not_reset(self) -> Command:
+        """The refusal of a step before a reset."""
+        return Command.refuse(f"{self.name}: reset(context) was not called",
+                              actuation=self.actuation)
 
     def step_arrays(self, observations: ObservationBatch, out: CommandBatch) -> np.ndarray:
         """Compute the rows the controller can as arrays, into ``out``; returns the rows

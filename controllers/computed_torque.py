@@ -34,8 +34,8 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from controllers.ctc_law import DAMPING, NATURAL_FREQUENCY_HZ, ComputedTorqueLaw
-from controllers.ctc_rows import FK_MAX_CALLS, stale
-from controllers.data import Command, CommandBatch
+from controllers.ctc_rows import FK_MAX_CALLS, step_rows
+from controllers.data import CommandBatch
 from controllers.exceptions import ContextError
 from controllers.joint_ctc_rows import (
     GRID_TIME_TOLERANCE,
@@ -278,20 +278,7 @@ class ComputedTorqueController(ComputedTorqueLaw):
         """The commands of every row (:meth:`JointRows.step`; refused, zero, with a reason
         where the lengths, their rates or the time are missing or not finite, or the
         nominal model fails)."""
-        self.crashes = {}
-        out = CommandBatch.zeros(len(observations), self.actuation)
-        if not len(observations):
-            return out
-        if not self.trial_instances:
-            for j in range(len(observations)):
-                out.put(j, Command.refuse(f"{self.name}: reset(context) was not called",
-                                          actuation=self.actuation))
-            return out
-        if stale(self._rows, self.trial_instances):  # (unpickled: built again)
-            self._rows = JointRows(self.trial_instances)
-        assert self._rows is not None
-        self._rows.step(observations, out)
-        return out
+        return step_rows(self, observations, lambda: JointRows(self.trial_instances))
 
 
 def legs_of_poses(geometry: HexapodGeometry, model: DynamicModel, R: np.ndarray, p: np.ndarray,

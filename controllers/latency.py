@@ -207,6 +207,10 @@ class LatencyCompensated(Controller):
     def step_batch(self, observations: ObservationBatch) -> CommandBatch:
         """Every row's reading recorded, the late images' features predicted at the
         control instant, then one step of the law's batch."""
+        unreset = self.refused_before_reset(observations)
+        if unreset is not None:
+            self.crashes = {}
+            return unreset
         obs = observations
         trials = np.asarray(obs.trials, dtype=int)
         late: list[int] = []

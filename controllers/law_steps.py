@@ -130,8 +130,9 @@ class VisionLawBatch(LegRateFeedForward, Controller):
         obs = observations
         n = len(obs)
         self.crashes = {}
-        if not n:
-            return CommandBatch.zeros(0)
+        unreset = self.refused_before_reset(obs)
+        if unreset is not None or not n:
+            return unreset or CommandBatch.zeros(0)
         if len(self._groups) == 1:
             return self._step_rows(self._core_rows, obs, self.crashes)
         out = CommandBatch.zeros(n)  # trials of several cores: each core's rows apart

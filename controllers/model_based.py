@@ -22,7 +22,8 @@ import casadi as ca
 import numpy as np
 
 from controllers.base import Controller
-from controllers.data import Command, CommandBatch, ControllerContext, Goal, ObservationBatch
+from controllers.ctc_rows import step_rows
+from controllers.data import CommandBatch, ControllerContext, Goal, ObservationBatch
 from controllers.estimators import PoseEstimate
 from controllers.exceptions import ContextError
 from controllers.law_algebra import jacobi_eigen
@@ -268,16 +269,4 @@ class ModelBasedController(Controller):
         """The commands of every row (:meth:`PoseServoRows.step`: the forward kinematics,
         then the pose servo; refused, zero, with a reason where the lengths or the time
         are not finite, the forward kinematics fails or the command is not finite)."""
-        self.crashes = {}
-        out = CommandBatch.zeros(len(observations))
-        rows = self._rows
-        if not len(observations):
-            return out
-        if rows is None or rows.laws is not self.trial_instances:  # (a copy: built again)
-            if not self.trial_instances:
-                for j in range(len(observations)):
-                    out.put(j, Command.refuse(f"{self.name}: reset(context) was not called"))
-                return out
-            rows = self._batch_rows()
-        rows.step(observations, out)
-        return out
+        return step_rows(self, observations, self._batch_rows)

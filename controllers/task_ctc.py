@@ -33,6 +33,7 @@ from controllers.base import (
 from controllers.ctc_law import DAMPING as DAMPING
 from controllers.ctc_law import NATURAL_FREQUENCY_HZ as NATURAL_FREQUENCY_HZ
 from controllers.ctc_law import ComputedTorqueLaw
+from controllers.ctc_rows import step_rows
 from controllers.solvers.saturation import over_limit, zero_acceleration_forces
 from controllers.task_ctc_compiled import CompiledTaskStep
 from controllers.task_ctc_inputs import encoder_readings as encoder_readings
@@ -236,19 +237,8 @@ class TaskComputedTorque(ComputedTorqueLaw):
     def step_batch(self, observations: ObservationBatch) -> CommandBatch:
         """The leg forces of every row [N] (:meth:`~controllers.task_ctc_rows.TaskRows.
         step`), or a refusal (zeros) with its reason."""
-        self.crashes = {}
-        n = len(observations)
-        out = CommandBatch.zeros(n, Actuation.FORCE)
-        rows, trials = self._rows, self.trial_instances
-        if rows is None or rows.laws is not trials:  # a reset (or a copy): the batch anew
-            if not trials:
-                for j in range(n):
-                    out.put(j, self.refuse("reset(context) was not called"))
-                return out
-            rows = self._rows = TaskRows(trials)
-        if n:
-            rows.step(observations, out, self.solver.threshold)
-        return out
+        return step_rows(self, observations, lambda: TaskRows(self.trial_instances),
+                         self.solver.threshold)
 
     def integral_term(self, m: int) -> np.ndarray:
         """(m,) ``Kp Ki int e dt`` of the task rows (the integral action's share of the

@@ -16,8 +16,9 @@ import numpy as np
 import pytest
 
 from controllers import BUILTIN_SPECS, registry
-from controllers.base import ENTRY_POINT_GROUP, Command, Observation
+from controllers.base import ENTRY_POINT_GROUP, Command, Observation, ObservationBatch
 from controllers.exceptions import PluginLoadError, UnknownControllerError
+from controllers.tracking import TrackingController
 from hexapod.actuation import Actuation
 from tests.controllers.controller_world import World, make_camera
 
@@ -164,6 +165,22 @@ def test_step_before_reset_refuses() -> None:
     for name in BUILTIN_SPECS:
         cmd = registry.create(name).step(Observation(0.0, np.full(6, 0.4)))
         assert not cmd.ok and "reset" in (cmd.reason or "")
+
+
+@pytest.mark.parametrize("rows", [1, 2])
+def test_a_batch_step_before_reset_refuses_every_row(rows: int) -> None:
+    """Every built-in (and the tracking wrapper around one) refuses each row of a batch
+    stepped before its reset, as its per-trial step does: zeros, the reason naming it."""
+    one = ObservationBatch.of(Observation(0.0, np.full(6, 0.4), q_dot=np.zeros(6)))
+    assert one is not None
+    batch = one.rows(np.zeros(rows, dtype=int))
+    controllers = [registry.create(name) for name in BUILTIN_SPECS]
+    controllers.append(TrackingController(registry.create("vision-ctc")))
+    for ctrl in controllers:
+        out = ctrl.step_batch(batch)
+        assert out.reasons == [f"{ctrl.name}: reset(context) was not called"] * rows
+        assert out.values.shape == (rows, 6) and not out.values.any(), ctrl.name
+        assert out.actuation is ctrl.actuation and not ctrl.crashes, ctrl.name
 
 
 # ----------------------------------------------------------------------------- generated
