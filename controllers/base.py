@@ -178,7 +178,7 @@ class Controller(RemembersOptions, ABC):
         the others each by its trial's instance (:meth:`step_rows`)."""
         n = len(observations)
         self.crashes = {}
-        unreset = self.refused_before_reset(observations)
+        unreset = self.checked_batch(observations)
         if unreset is not None:
             return unreset
         if n == 1:  # a batch of one (the per-trial engine's): its row by its instance
@@ -190,10 +190,20 @@ class Controller(RemembersOptions, ABC):
             self.step_rows(observations, self.step_arrays(observations, out), out)
         return out
 
-    def refused_before_reset(self, observations: ObservationBatch) -> CommandBatch | None:
-        """Every row refused (zero, with the reason) before a reset made the trials'
-        instances, or None once one has (how every batch step starts)."""
-        if self.trial_instances:
+    def checked_batch(self, observations: ObservationBatch) -> CommandBatch | None:
+        """How every batch step starts: every row refused (zero, with the reason) before a
+        reset made the trials' instances, else None once the rows' trials are checked.
+
+        Raises:
+            ValueError: A row's trial is not one of the batch's (``0 <= trial < n``).
+        """
+        trials = self.trial_instances
+        if trials:
+            rows, size = observations.trials, len(trials)
+            if len(rows) and not (0 <= rows[0] < size if len(rows) == 1
+                                  else rows.min() >= 0 and rows.max() < size):
+                raise ValueError(f"{self.name}: trials {np.asarray(rows).tolist()} outside "
+                                 f"the batch's {size} trials (0 to {size - 1})")
             return None
         out = CommandBatch.zeros(len(observations), self.actuation)
         for j in range(len(observations)):

@@ -148,9 +148,9 @@ def step_rows(law: Any, observations: ObservationBatch, build: Callable[[], Any]
     ``laws`` it was built for and ``step(observations, out, *extra)``): its commands of
     every row, a zero batch of its actuation written in place; the rows built again by
     ``build`` after a reset (a new list of trial instances) or a copy; every row refused
-    (zero, with the reason) before a reset (``refused_before_reset``)."""
+    (zero, with the reason) before a reset (``checked_batch``)."""
     law.crashes = {}
-    unreset = law.refused_before_reset(observations)
+    unreset = law.checked_batch(observations)
     if unreset is not None:
         return unreset  # type: ignore[no-any-return]
     out = CommandBatch.zeros(len(observations), law.actuation)

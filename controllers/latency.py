@@ -207,7 +207,7 @@ class LatencyCompensated(Controller):
     def step_batch(self, observations: ObservationBatch) -> CommandBatch:
         """Every row's reading recorded, the late images' features predicted at the
         control instant, then one step of the law's batch."""
-        unreset = self.refused_before_reset(observations)
+        unreset = self.checked_batch(observations)
         if unreset is not None:
             self.crashes = {}
             return unreset

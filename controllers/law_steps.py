@@ -130,7 +130,7 @@ class VisionLawBatch(LegRateFeedForward, Controller):
         obs = observations
         n = len(obs)
         self.crashes = {}
-        unreset = self.refused_before_reset(obs)
+        unreset = self.checked_batch(obs)
         if unreset is not None or not n:
             return unreset or CommandBatch.zeros(0)
         if len(self._groups) == 1:

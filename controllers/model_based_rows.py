@@ -186,12 +186,7 @@ class PoseServoRows:
                 "trials": ((), np.int64), "t": ((), float), "q": ((6,), float),
                 "code": ((), np.int64), "Y": ((self.kernel.n_out,), float),
                 "fk": ((2,), float)})
-        np.copyto(b.trials, observations.trials)
-        trials, size = b.trials, len(self.laws)
-        if not (0 <= trials[0] < size if n == 1 else n == 0 or (
-                trials.min() >= 0 and trials.max() < size)):
-            raise ValueError(f"{self.name}: trials {trials.tolist()} outside the batch's "
-                             f"{size} trials")
+        b.take_trials(observations.trials, len(self.laws), self.name)
         np.copyto(b.t, observations.t)
         np.copyto(b.q, observations.lengths)
         if _library().mb_step(self._ctx, n, *b.addresses):

@@ -253,7 +253,7 @@ class TrackingController(Controller):
     def step_batch(self, observations: ObservationBatch) -> CommandBatch:
         """The wrapped controller's commands for the goals of this period, plus the
         feed-forward (a tracking row whose time is not finite is refused)."""
-        unreset = self.refused_before_reset(observations)
+        unreset = self.checked_batch(observations)
         if unreset is not None:
             self.crashes = {}
             return unreset

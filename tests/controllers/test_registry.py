@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import sys
 import textwrap
+from dataclasses import replace
 from collections.abc import Iterator
 from pathlib import Path
 
@@ -181,6 +182,28 @@ def test_a_batch_step_before_reset_refuses_every_row(rows: int) -> None:
         assert out.reasons == [f"{ctrl.name}: reset(context) was not called"] * rows
         assert out.values.shape == (rows, 6) and not out.values.any(), ctrl.name
         assert out.actuation is ctrl.actuation and not ctrl.crashes, ctrl.name
+
+
+@pytest.mark.parametrize("name", sorted(BUILTIN_SPECS))
+def test_a_row_of_a_trial_outside_the_batch_is_a_value_error(name: str,
+                                                               other_geometry) -> None:  # type: ignore[no-untyped-def]
+    """Each built-in (its step C indexes the batch's arrays with the rows' trials) raises
+    a ValueError naming itself and the trials, for batches of two and of one, and steps
+    its next batch as usual (nothing written outside its arrays)."""
+    world = World(other_geometry, make_camera("perspective", other_geometry))
+    start, goal = _poses(world)
+    ctrl = registry.create(name)
+    dt = 0.02 if ctrl.actuation is Actuation.FORCE else 0.01
+    ctrl.reset_batch([world.context(world.goal(*goal), dt)] * 3)
+    one = ObservationBatch.of(_at_rest(world.observation(*start)))
+    assert one is not None
+    for trials in ([0, 3], [-1], [2, 1, 1000]):
+        batch = replace(one.rows(np.zeros(len(trials), dtype=int)), trials=np.array(trials))
+        with pytest.raises(ValueError, match=rf"{name}: trials \[.*\] outside the batch's 3 "
+                                             r"trials \(0 to 2\)"):
+            ctrl.step_batch(batch)
+    out = ctrl.step_batch(replace(one.rows(np.zeros(3, dtype=int)), trials=np.arange(3)))
+    assert out.reasons == [None] * 3, out.reasons
 
 
 # ----------------------------------------------------------------------------- generated
