@@ -200,11 +200,12 @@ class Controller(RemembersOptions, ABC):
         trials = self.trial_instances
         if trials:
             rows, size = observations.trials, len(trials)
-            if len(rows) and not (0 <= rows[0] < size if len(rows) == 1
-                                  else rows.min() >= 0 and rows.max() < size):
-                raise ValueError(f"{self.name}: trials {np.asarray(rows).tolist()} outside "
-                                 f"the batch's {size} trials (0 to {size - 1})")
-            return None
+            n = len(rows)
+            if (n == 1 and 0 <= rows.item() < size) or (n > 1 and (
+                    rows.min() >= 0 and rows.max() < size)) or not n:
+                return None
+            raise ValueError(f"{self.name}: trials {np.asarray(rows).tolist()} outside the "
+                             f"batch's {size} trials (0 to {size - 1})")
         out = CommandBatch.zeros(len(observations), self.actuation)
         for j in range(len(observations)):
             out.put(j, self._not_reset())

@@ -34,7 +34,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from controllers.ctc_law import DAMPING, NATURAL_FREQUENCY_HZ, ComputedTorqueLaw
-from controllers.ctc_rows import FK_MAX_CALLS, step_rows
+from controllers.ctc_rows import FK_MAX_CALLS
 from controllers.data import CommandBatch
 from controllers.exceptions import ContextError
 from controllers.joint_ctc_rows import (
@@ -278,7 +278,16 @@ class ComputedTorqueController(ComputedTorqueLaw):
         """The commands of every row (:meth:`JointRows.step`; refused, zero, with a reason
         where the lengths, their rates or the time are missing or not finite, or the
         nominal model fails)."""
-        return step_rows(self, observations, lambda: JointRows(self.trial_instances))
+        self.crashes = {}
+        if (unreset := self.checked_batch(observations)) is not None:
+            return unreset
+        out = CommandBatch.zeros(len(observations), self.actuation)
+        rows = self._rows
+        if rows is None or rows.laws is not self.trial_instances:  # (a copy: built again)
+            rows = self._rows = JointRows(self.trial_instances)
+        if len(observations):
+            rows.step(observations, out)
+        return out
 
 
 def legs_of_poses(geometry: HexapodGeometry, model: DynamicModel, R: np.ndarray, p: np.ndarray,

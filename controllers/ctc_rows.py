@@ -5,22 +5,17 @@ it has not converged, and screens the rank of its result (``rank_screen``);
 :func:`evaluate_rows` does the same for many rows in lanes (the
 same bits as row by row); :func:`rank_condition` is the exact rank test (LAPACK) where
 the kernel's screen does not settle it; :func:`refusal` words why a row is not a
-command; :func:`norms` the error norms as a vector's own dot product; :func:`step_rows`
-is the batch step of a law whose one step is a rows object (the computed-torque laws,
-``model-based``).
+command; :func:`norms` the error norms as a vector's own dot product.
 """
 
 from __future__ import annotations
 
 import math
-from collections.abc import Callable
-from typing import Any
 
 import numpy as np
 from scipy.linalg.lapack import dsyevd as _eigenvalues
 
 from controllers.ctc_status import Status, status_reason
-from controllers.data import CommandBatch, ObservationBatch
 from hexapod.compiled import KERNEL_CALL_C, CompiledFunction
 
 #: Calls of a compiled step (its Newton iterations each) before the step is refused (as
@@ -142,26 +137,5 @@ def refusal(y: np.ndarray, status: int, residual: int, factor: slice, threshold:
         legs=None if seen is None else np.flatnonzero(seen == 1.0).tolist())
 
 
-def step_rows(law: Any, observations: ObservationBatch, build: Callable[[], Any],
-              *extra: Any) -> CommandBatch:
-    """The batch step of a law whose one step is a rows object (``law._rows``, with the
-    ``laws`` it was built for and ``step(observations, out, *extra)``): its commands of
-    every row, a zero batch of its actuation written in place; the rows built again by
-    ``build`` after a reset (a new list of trial instances) or a copy; every row refused
-    (zero, with the reason) before a reset (``checked_batch``)."""
-    law.crashes = {}
-    unreset = law.checked_batch(observations)
-    if unreset is not None:
-        return unreset  # type: ignore[no-any-return]
-    out = CommandBatch.zeros(len(observations), law.actuation)
-    if not len(out.reasons):
-        return out
-    rows = law._rows
-    if rows is None or getattr(rows, "laws", None) is not law.trial_instances:
-        rows = law._rows = build()
-    rows.step(observations, out, *extra)
-    return out
-
-
 __all__ = ["FK_MAX_CALLS", "NEWTON_CALLS_C", "evaluate_rows", "norms",
-           "rank_condition", "refusal", "step_rows"]
+           "rank_condition", "refusal"]

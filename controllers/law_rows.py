@@ -333,7 +333,7 @@ class LawRows:
                 "feats": (shape, float), "vis": (shape[:-1], bool), "qd": ((6,), float),
                 "code": ((), np.int64), "Y": ((self.outputs.size,), float),
                 "vel": ((6,), float), "norm": ((), float)}, _StepRows)
-        b.take_trials(obs.trials, len(self.laws), self.laws[0].name)
+        b.trials[...] = obs.trials
         feats = getattr(obs, self.feature.field)
         if feats is None:  # not measured: every row's own step says so
             b.code[:] = RARE

@@ -22,7 +22,6 @@ import casadi as ca
 import numpy as np
 
 from controllers.base import Controller
-from controllers.ctc_rows import step_rows
 from controllers.data import CommandBatch, ControllerContext, Goal, ObservationBatch
 from controllers.estimators import PoseEstimate
 from controllers.exceptions import ContextError
@@ -269,4 +268,13 @@ class ModelBasedController(Controller):
         """The commands of every row (:meth:`PoseServoRows.step`: the forward kinematics,
         then the pose servo; refused, zero, with a reason where the lengths or the time
         are not finite, the forward kinematics fails or the command is not finite)."""
-        return step_rows(self, observations, self._batch_rows)
+        self.crashes = {}
+        if (unreset := self.checked_batch(observations)) is not None:
+            return unreset
+        out = CommandBatch.zeros(len(observations))
+        rows = self._rows
+        if rows is None or rows.laws is not self.trial_instances:  # (a copy: built again)
+            rows = self._batch_rows()
+        if len(observations):
+            rows.step(observations, out)
+        return out

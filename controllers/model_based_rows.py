@@ -186,7 +186,7 @@ class PoseServoRows:
                 "trials": ((), np.int64), "t": ((), float), "q": ((6,), float),
                 "code": ((), np.int64), "Y": ((self.kernel.n_out,), float),
                 "fk": ((2,), float)})
-        b.take_trials(observations.trials, len(self.laws), self.name)
+        np.copyto(b.trials, observations.trials)
         np.copyto(b.t, observations.t)
         np.copyto(b.q, observations.lengths)
         if _library().mb_step(self._ctx, n, *b.addresses):

@@ -33,7 +33,6 @@ from controllers.base import (
 from controllers.ctc_law import DAMPING as DAMPING
 from controllers.ctc_law import NATURAL_FREQUENCY_HZ as NATURAL_FREQUENCY_HZ
 from controllers.ctc_law import ComputedTorqueLaw
-from controllers.ctc_rows import step_rows
 from controllers.solvers.saturation import over_limit, zero_acceleration_forces
 from controllers.task_ctc_compiled import CompiledTaskStep
 from controllers.task_ctc_inputs import encoder_readings as encoder_readings
@@ -237,8 +236,16 @@ class TaskComputedTorque(ComputedTorqueLaw):
     def step_batch(self, observations: ObservationBatch) -> CommandBatch:
         """The leg forces of every row [N] (:meth:`~controllers.task_ctc_rows.TaskRows.
         step`), or a refusal (zeros) with its reason."""
-        return step_rows(self, observations, lambda: TaskRows(self.trial_instances),
-                         self.solver.threshold)
+        self.crashes = {}
+        if (unreset := self.checked_batch(observations)) is not None:
+            return unreset
+        out = CommandBatch.zeros(len(observations), Actuation.FORCE)
+        rows = self._rows
+        if rows is None or rows.laws is not self.trial_instances:  # (a copy: built again)
+            rows = self._rows = TaskRows(self.trial_instances)
+        if len(observations):
+            rows.step(observations, out, self.solver.threshold)
+        return out
 
     def integral_term(self, m: int) -> np.ndarray:
         """(m,) ``Kp Ki int e dt`` of the task rows (the integral action's share of the

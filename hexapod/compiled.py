@@ -564,22 +564,6 @@ class RowArrays:
         """Reached only for a name that is no field (every field is an array)."""
         raise AttributeError(f"no row array {name!r}")
 
-    def take_trials(self, trials: np.ndarray, size: int, name: str) -> np.ndarray:
-        """The rows' trial indices copied into the field ``trials``, each checked to be a
-        trial of the batch (``0 <= trial < size``: the C indexes the batch's arrays with
-        them, so one outside would read and write outside them).
-
-        Raises:
-            ValueError: A trial outside the batch (``name`` says whose).
-        """
-        out: np.ndarray = self.__dict__["trials"]
-        np.copyto(out, trials)
-        n = len(out)
-        if n and not (0 <= out[0] < size if n == 1 else out.min() >= 0 and out.max() < size):
-            raise ValueError(f"{name}: trials {out.tolist()} outside the batch's {size} "
-                             f"trials (0 to {size - 1})")
-        return out
-
 
 #: The C scalar types of :func:`c_struct`'s fields (any pointer is an address).
 _C_SCALARS: dict[str, Any] = {"double": ctypes.c_double, "int64_t": ctypes.c_int64,

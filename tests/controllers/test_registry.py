@@ -9,8 +9,8 @@ from __future__ import annotations
 
 import sys
 import textwrap
-from dataclasses import replace
 from collections.abc import Iterator
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
