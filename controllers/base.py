@@ -192,15 +192,22 @@ class Controller(RemembersOptions, ABC):
 
     def checked_batch(self, observations: ObservationBatch) -> CommandBatch | None:
         """How every batch step starts: every row refused (zero, with the reason) before a
-        reset made the trials' instances, else None once the rows' trials are checked.
+        reset made the trials' instances, else None once the rows' trials and the arrays'
+        shapes are checked (those of a batch of one made by ``ObservationBatch.of``, the
+        per-trial step's, were checked there).
 
         Raises:
-            ValueError: A row's trial is not one of the batch's (``0 <= trial < n``).
+            ValueError: A row's trial is not one of the batch's (``0 <= trial < n``), or an
+                array is not of the batch's shape (the field named).
         """
         trials = self.trial_instances
         if trials:
             rows, size = observations.trials, len(trials)
             n = len(rows)
+            if n > 1 or observations.single is None:
+                problem = observations.shape_problem()
+                if problem is not None:
+                    raise ValueError(f"{self.name}: {problem}")
             if (n == 1 and 0 <= rows.item() < size) or (n > 1 and (
                     rows.min() >= 0 and rows.max() < size)) or not n:
                 return None

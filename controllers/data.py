@@ -215,6 +215,18 @@ class ObservationBatch:
     def __len__(self) -> int:
         return len(self.trials)
 
+    def shape_problem(self) -> str | None:
+        """Why these arrays are not ``len(trials)`` rows of an observation's shapes (the
+        field, its shape and the one expected), or None."""
+        if np.ndim(self.trials) != 1:
+            return f"observations.trials of shape {np.shape(self.trials)}, expected (n,)"
+        n = len(self.trials)
+        for name, row in _ROW_SHAPES:
+            value = getattr(self, name)
+            if value is not None and np.shape(value) != (n, *row):
+                return f"observations.{name} of shape {np.shape(value)}, expected {(n, *row)}"
+        return None
+
     def item(self, k: int) -> Observation:
         """The observation of row ``k`` (views of the batch arrays; for a batch made of
         one observation by :meth:`of`, that observation)."""
@@ -281,6 +293,10 @@ class ObservationBatch:
         return batch
 
 
+#: The shape of one row of each array field of :class:`ObservationBatch`.
+_ROW_SHAPES = (("t", ()), ("lengths", (6,)), ("normals", (6, 2, 3)), ("lines", (6, 2, 3)),
+               ("directions", (6, 3)), ("edge_visible", (6, 2)), ("direction_visible", (6,)),
+               ("image_t", ()), ("q_dot", (6,)))
 #: The init fields of :class:`ObservationBatch`.
 _BATCH_FIELDS = tuple(f.name for f in fields(ObservationBatch) if f.init)
 #: The shapes and kinds of the fields of one observation, in :meth:`ObservationBatch.of`'s

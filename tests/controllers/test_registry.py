@@ -188,8 +188,9 @@ def test_a_batch_step_before_reset_refuses_every_row(rows: int) -> None:
 def test_a_row_of_a_trial_outside_the_batch_is_a_value_error(name: str,
                                                                other_geometry) -> None:  # type: ignore[no-untyped-def]
     """Each built-in (its step C indexes the batch's arrays with the rows' trials) raises
-    a ValueError naming itself and the trials, for batches of two and of one, and steps
-    its next batch as usual (nothing written outside its arrays)."""
+    a ValueError naming itself and the trials, for batches of two and of one, and one
+    naming the field for an array not of the batch's shape; then steps its next batch as
+    usual (nothing written outside its arrays)."""
     world = World(other_geometry, make_camera("perspective", other_geometry))
     start, goal = _poses(world)
     ctrl = registry.create(name)
@@ -202,6 +203,12 @@ def test_a_row_of_a_trial_outside_the_batch_is_a_value_error(name: str,
         with pytest.raises(ValueError, match=rf"{name}: trials \[.*\] outside the batch's 3 "
                                              r"trials \(0 to 2\)"):
             ctrl.step_batch(batch)
+    two = replace(one.rows(np.zeros(2, dtype=int)), trials=np.arange(2))
+    for field, value in (("lengths", two.lengths[:, :5]), ("normals", two.normals[:1]),
+                         ("edge_visible", two.edge_visible[:, :, 0]), ("t", two.t[:1]),
+                         ("q_dot", two.q_dot[:, None])):
+        with pytest.raises(ValueError, match=rf"{name}: observations\.{field} of shape "):
+            ctrl.step_batch(replace(two, **{field: value}))
     out = ctrl.step_batch(replace(one.rows(np.zeros(3, dtype=int)), trials=np.arange(3)))
     assert out.reasons == [None] * 3, out.reasons
 
