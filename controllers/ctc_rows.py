@@ -16,7 +16,8 @@ import numpy as np
 from scipy.linalg.lapack import dsyevd as _eigenvalues
 
 from controllers.ctc_status import Status, status_reason
-from hexapod.compiled import KERNEL_CALL_C, CompiledFunction
+from hexapod.c_step import KERNEL_CALL_C
+from hexapod.compiled import CompiledFunction
 
 #: Calls of a compiled step (its Newton iterations each) before the step is refused (as
 #: the 50 iterations of :func:`hexapod.fk.forward_kinematics`).
@@ -24,7 +25,7 @@ FK_MAX_CALLS = 16
 
 
 #: C: ``newton_calls(k, x, y, pose_in, pose_out, residual, tol, max_calls)``: ``y = f(x)``
-#: by the :class:`~hexapod.compiled.KernelCall` ``k``, called again from the pose reached
+#: by the :class:`~hexapod.c_step.KernelCall` ``k``, called again from the pose reached
 #: (``y``'s 12 pose values into ``x``'s) while the residual ``y[residual]`` is not below
 #: ``tol`` (finite, at most ``max_calls`` calls in all): :func:`evaluate_rows` row by row.
 NEWTON_CALLS_C = KERNEL_CALL_C + r"""

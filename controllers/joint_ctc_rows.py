@@ -52,14 +52,8 @@ from controllers.data import CommandBatch, ObservationBatch
 from controllers.solvers import compiled_ctc
 from controllers.task_ctc_inputs import QUINTIC_PEAK_SPEED, encoder_readings
 from hexapod.actuation import Actuation
-from hexapod.compiled import (
-    LANE_ROWS,
-    CompilationError,
-    KernelCall,
-    RowArrays,
-    c_library,
-    c_struct,
-)
+from hexapod.c_step import KernelCall, RowArrays, c_library, c_struct
+from hexapod.compiled import LANE_ROWS, CompilationError
 
 if TYPE_CHECKING:
     from controllers.computed_torque import ComputedTorqueController
@@ -199,7 +193,7 @@ int jc_step(JointCtc *c, int64_t m, const int64_t *trials, const double *t, cons
 }
 """.replace("@CODES@", ", ".join(CODES))
 
-#: The C ``JointCtc`` (:func:`~hexapod.compiled.c_struct`: its fields read from the C).
+#: The C ``JointCtc`` (:func:`~hexapod.c_step.c_struct`: its fields read from the C).
 _Context = c_struct(SOURCE, "JointCtc")
 
 

@@ -42,14 +42,8 @@ import numpy as np
 from controllers.data import ObservationBatch
 from controllers.estimators import LegDirectionEstimate
 from controllers.law_kernel import LawKernel, LawResult
-from hexapod.compiled import (
-    KERNEL_CALL_C,
-    CompilationError,
-    KernelCall,
-    RowArrays,
-    c_library,
-    c_struct,
-)
+from hexapod.c_step import KERNEL_CALL_C, KernelCall, RowArrays, c_library, c_struct
+from hexapod.compiled import CompilationError
 
 if TYPE_CHECKING:
     from controllers.laws import VisionLaw
@@ -169,7 +163,7 @@ int vl_step(const VisionRows *c, const StepRows *r, int64_t m, int64_t full, int
 """.replace("@CODES@", ", ".join(CODES)).replace(
     "@ACCEPTANCE@", ", ".join(a.upper() for a in ACCEPTANCE))
 
-#: The C ``VisionRows`` (:func:`~hexapod.compiled.c_struct`: its fields read from the C).
+#: The C ``VisionRows`` (:func:`~hexapod.c_step.c_struct`: its fields read from the C).
 _Context = c_struct(SOURCE, "VisionRows")
 
 
@@ -180,7 +174,7 @@ def _library() -> ctypes.CDLL:
     return c_library("vision_law_rows", SOURCE)
 
 
-#: The C ``StepRows`` (:func:`~hexapod.compiled.c_struct`: its fields read from the C).
+#: The C ``StepRows`` (:func:`~hexapod.c_step.c_struct`: its fields read from the C).
 _StepRows = c_struct(SOURCE, "StepRows")
 
 

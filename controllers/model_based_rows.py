@@ -29,14 +29,8 @@ import numpy as np
 
 from controllers.data import Command, CommandBatch, ObservationBatch, observation_problem
 from controllers.estimators import PoseEstimate
-from hexapod.compiled import (
-    KERNEL_CALL_C,
-    CompilationError,
-    KernelCall,
-    RowArrays,
-    c_library,
-    c_struct,
-)
+from hexapod.c_step import KERNEL_CALL_C, KernelCall, RowArrays, c_library, c_struct
+from hexapod.compiled import CompilationError
 from hexapod.exceptions import ForwardKinematicsError
 from hexapod.fk import ITERATIONS_PER_CALL, NEWTON_INPUTS, NEWTON_OUTPUTS, newton_kernel, pack_rows
 from hexapod.workspace import home_pose
@@ -104,7 +98,7 @@ int mb_step(ModelBased *c, int64_t m, const int64_t *trials, const double *t,
 }
 """
 
-#: The C ``ModelBased`` (:func:`~hexapod.compiled.c_struct`: its fields read from the C).
+#: The C ``ModelBased`` (:func:`~hexapod.c_step.c_struct`: its fields read from the C).
 _Context = c_struct(SOURCE, "ModelBased")
 
 

@@ -14,7 +14,7 @@ import ctypes
 from functools import lru_cache
 
 from controllers.ctc_rows import NEWTON_CALLS_C
-from hexapod.compiled import c_library, c_struct
+from hexapod.c_step import c_library, c_struct
 
 #: A row's code in a step, in order (the C ``enum`` is made of these names): a command
 #: (over a limit or not), or why not yet or not.
@@ -150,11 +150,11 @@ int tc_step_call(const TaskCtc *c, const TaskCall *a) {
 }
 """.replace("@CODES@", ", ".join(CODES))
 
-#: The C ``TaskCtc`` (:func:`~hexapod.compiled.c_struct`: its fields read from the C).
+#: The C ``TaskCtc`` (:func:`~hexapod.c_step.c_struct`: its fields read from the C).
 Context = c_struct(SOURCE, "TaskCtc")
 
 
-#: The C ``TaskCall`` (:func:`~hexapod.compiled.c_struct`: its fields read from the C).
+#: The C ``TaskCall`` (:func:`~hexapod.c_step.c_struct`: its fields read from the C).
 Call = c_struct(SOURCE, "TaskCall")
 
 

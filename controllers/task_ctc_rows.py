@@ -63,7 +63,8 @@ from controllers.task_ctc_c import (
 )
 from controllers.task_ctc_inputs import encoder_readings, line_to
 from hexapod.actuation import Actuation
-from hexapod.compiled import LANE_ROWS, CompilationError, KernelCall, RowArrays
+from hexapod.c_step import KernelCall, RowArrays
+from hexapod.compiled import LANE_ROWS, CompilationError
 
 if TYPE_CHECKING:
     from controllers.task_ctc import TaskComputedTorque

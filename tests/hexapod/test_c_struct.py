@@ -1,4 +1,4 @@
-"""``hexapod.compiled.c_struct``: the ctypes mirror of a C struct read from its declaration;
+"""``hexapod.c_step.c_struct``: the ctypes mirror of a C struct read from its declaration;
 ``c_library``: the functions' signatures read from their definitions; ``RowArrays``.
 
 The oracle is the C compiler itself: a small library reports ``sizeof`` and every
@@ -18,14 +18,8 @@ import numpy as np
 import pytest
 
 from controllers import joint_ctc_rows, law_rows, model_based_rows, task_ctc_c
-from hexapod.compiled import (
-    KERNEL_CALL_C,
-    KernelCall,
-    RowArrays,
-    build_shared_library,
-    c_library,
-    c_struct,
-)
+from hexapod.c_step import KERNEL_CALL_C, KernelCall, RowArrays, c_library, c_struct
+from hexapod.compiled import build_shared_library
 
 SOURCE = r"""
 #include <stddef.h>
