@@ -178,8 +178,7 @@ class Controller(RemembersOptions, ABC):
         the others each by its trial's instance (:meth:`step_rows`)."""
         n = len(observations)
         self.crashes = {}
-        unreset = self.checked_batch(observations)
-        if unreset is not None:
+        if (unreset := self.checked_batch(observations)) is not None:
             return unreset
         if n == 1:  # a batch of one (the per-trial engine's): its row by its instance
             return CommandBatch.of_row(self._row_command(0, int(observations.trials[0]),

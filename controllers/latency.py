@@ -207,9 +207,8 @@ class LatencyCompensated(Controller):
     def step_batch(self, observations: ObservationBatch) -> CommandBatch:
         """Every row's reading recorded, the late images' features predicted at the
         control instant, then one step of the law's batch."""
-        unreset = self.checked_batch(observations)
-        if unreset is not None:
-            self.crashes = {}
+        self.crashes = {}
+        if (unreset := self.checked_batch(observations)) is not None:
             return unreset
         obs = observations
         trials = np.asarray(obs.trials, dtype=int)

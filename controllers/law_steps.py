@@ -130,8 +130,7 @@ class VisionLawBatch(LegRateFeedForward, Controller):
         obs = observations
         n = len(obs)
         self.crashes = {}
-        unreset = self.checked_batch(obs)
-        if unreset is not None or not n:
+        if (unreset := self.checked_batch(obs)) is not None or not n:
             return unreset or CommandBatch.zeros(0)
         if len(self._groups) == 1:
             return self._step_rows(self._core_rows, obs, self.crashes)

@@ -253,9 +253,8 @@ class TrackingController(Controller):
     def step_batch(self, observations: ObservationBatch) -> CommandBatch:
         """The wrapped controller's commands for the goals of this period, plus the
         feed-forward (a tracking row whose time is not finite is refused)."""
-        unreset = self.checked_batch(observations)
-        if unreset is not None:
-            self.crashes = {}
+        self.crashes = {}
+        if (unreset := self.checked_batch(observations)) is not None:
             return unreset
         obs = observations
         trials = np.asarray(obs.trials, dtype=int)
