@@ -22,6 +22,7 @@ Use it in your own test suite::
 
 from __future__ import annotations
 
+import gc
 from collections.abc import Callable
 from dataclasses import dataclass, field
 
@@ -70,6 +71,11 @@ def check_backend(factory: BackendFactory, geometry: HexapodGeometry, dt: float 
 
     Returns:
         The :class:`ConformanceReport` (the backend is closed whatever happened).
+
+    Python's garbage collector is off while the backend is driven (a full collection
+    first): a collection pause of tens of milliseconds in this process, late in a long
+    test session, stalls an emulator that runs in the same process and shows as a
+    lagging platform.
     """
     report = ConformanceReport()
     q0 = np.full(6, geometry.q_mid)
@@ -77,6 +83,9 @@ def check_backend(factory: BackendFactory, geometry: HexapodGeometry, dt: float 
     vmax = geometry.max_speed
     robot = factory(geometry, q0)
     sim = SimulatedRobot(geometry, q0)
+    collecting = gc.isenabled()
+    gc.collect()
+    gc.disable()
     try:
         q = np.asarray(robot.measured_lengths(), float)
         if not np.allclose(q, q0, atol=max(tolerance, 1e-12)):
@@ -134,6 +143,8 @@ def check_backend(factory: BackendFactory, geometry: HexapodGeometry, dt: float 
         except Exception as exc:
             report.problems.append(f"halt() raised {type(exc).__name__}: {exc}")
     finally:
+        if collecting:
+            gc.enable()
         try:
             robot.close()
         except Exception as exc:

@@ -112,6 +112,33 @@ def test_conformance_catches_a_backend_that_ignores_the_limits() -> None:
     assert "stroke: measured" in text
 
 
+def test_the_collector_is_off_while_driving_and_as_it_was_after() -> None:
+    """A collection pause would show as a lagging in-process emulator: the check drives
+    the backend with the garbage collector off, and leaves it as it found it."""
+    import gc
+
+    from hexapod.backends.sim import SimulatedRobot
+
+    seen: list[bool] = []
+
+    class Watched(SimulatedRobot):
+        def step(self, velocities, dt):  # type: ignore[no-untyped-def]
+            seen.append(gc.isenabled())
+            return super().step(velocities, dt)
+
+    was = gc.isenabled()
+    try:
+        for before in (True, False):
+            (gc.enable if before else gc.disable)()
+            seen.clear()
+            report = check_backend(lambda geo, q: Watched(geo, q), deltalab())
+            assert report.ok, report.problems
+            assert seen and not any(seen)
+            assert gc.isenabled() is before
+    finally:
+        (gc.enable if was else gc.disable)()
+
+
 @pytest.mark.realtime
 @pytest.mark.slow
 def test_emulator_conforms_within_its_micrometre_quantisation() -> None:
