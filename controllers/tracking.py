@@ -146,6 +146,11 @@ class TrackingPlan:
                        for name, arr in self.goals.items()})
 
 
+#: Trials whose model goals are computed together (larger arrays fall out of the
+#: caches: 200 trials at once took longer than one by one).
+PLAN_CHUNK = 16
+
+
 def tracking_plan(context: ControllerContext, name: str) -> TrackingPlan:
     """The goals of ``context.reference`` on the control grid (see the module docstring).
 
@@ -153,21 +158,53 @@ def tracking_plan(context: ControllerContext, name: str) -> TrackingPlan:
         ContextError: The period is not positive, the reference cannot be sampled, or
             its nominal inverse kinematics is not finite.
     """
-    reference = context.reference
-    dt = float(context.dt)
-    if not (math.isfinite(dt) and dt > 0):
-        raise ContextError(name, "dt", f"must be positive and finite, got {dt}")
-    steps = math.ceil(float(reference.duration) / dt) + 2
-    sample = reference.at(dt * np.arange(steps))
-    goals = model_goals(context, sample.rotation, sample.translation)
-    anchor_goals(goals, context.goal)
-    q = goals["lengths"]
-    if not np.all(np.isfinite(q)):
-        raise ContextError(name, "reference", "the nominal inverse kinematics of the "
-                           "reference is not finite")
-    q_rate = np.zeros((steps, 6))
-    q_rate[:-1] = np.diff(q, axis=0) / dt
-    return TrackingPlan(dt, {key: goals.get(key) for key in GOAL_FIELDS}, q_rate)
+    return tracking_plans([context], name)[0]
+
+
+def tracking_plans(contexts: Sequence[ControllerContext], name: str) -> list[TrackingPlan]:
+    """:func:`tracking_plan` of every context, the nominal model's goals of up to
+    :data:`PLAN_CHUNK` contexts that share a model world (camera and robot) in one call
+    of :func:`model_goals` over all their samples (each sample's goals are its own
+    numbers).
+
+    Raises:
+        ContextError: As :func:`tracking_plan`, for the first context at fault.
+    """
+    samples = []
+    for context in contexts:
+        dt = float(context.dt)
+        if not (math.isfinite(dt) and dt > 0):
+            raise ContextError(name, "dt", f"must be positive and finite, got {dt}")
+        reference = context.reference
+        samples.append(reference.at(dt * np.arange(math.ceil(float(reference.duration) / dt)
+                                                   + 2)))
+    worlds: dict[tuple[int, int], list[int]] = {}
+    for k, context in enumerate(contexts):
+        worlds.setdefault((id(context.camera), id(context.geometry)), []).append(k)
+    goals: list[dict[str, Any]] = [{} for _ in contexts]
+    for members in (world[i:i + PLAN_CHUNK] for world in worlds.values()
+                    for i in range(0, len(world), PLAN_CHUNK)):
+        both = model_goals(contexts[members[0]],
+                           np.concatenate([samples[k].rotation for k in members]),
+                           np.concatenate([samples[k].translation for k in members]))
+        start = 0
+        for k in members:
+            end = start + len(samples[k].translation)
+            goals[k] = {key: None if value is None else value[start:end]
+                        for key, value in both.items()}
+            start = end
+    plans = []
+    for context, found in zip(contexts, goals, strict=True):
+        anchor_goals(found, context.goal)
+        q = found["lengths"]
+        if not np.all(np.isfinite(q)):
+            raise ContextError(name, "reference", "the nominal inverse kinematics of the "
+                               "reference is not finite")
+        dt = float(context.dt)
+        q_rate = np.zeros((len(q), 6))
+        q_rate[:-1] = np.diff(q, axis=0) / dt
+        plans.append(TrackingPlan(dt, {key: found.get(key) for key in GOAL_FIELDS}, q_rate))
+    return plans
 
 
 class TrackingController(Controller):
@@ -202,8 +239,12 @@ class TrackingController(Controller):
         """
         contexts = list(contexts)
         itself = bool(getattr(self.inner, "tracks_reference", False))
-        plans = [None if itself or getattr(ctx, "reference", None) is None
-                 else tracking_plan(ctx, self.name) for ctx in contexts]
+        tracking = [k for k, ctx in enumerate(contexts)
+                    if not itself and getattr(ctx, "reference", None) is not None]
+        plans: list[TrackingPlan | None] = [None] * len(contexts)
+        for k, plan in zip(tracking, tracking_plans([contexts[k] for k in tracking],
+                                                    self.name), strict=True):
+            plans[k] = plan
         self._plans = plans
         n = len(plans)
         self._has = np.array([p is not None for p in plans], dtype=bool)
