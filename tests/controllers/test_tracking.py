@@ -23,7 +23,13 @@ from controllers.base import (
     ObservationBatch,
 )
 from controllers.exceptions import ContextError
-from controllers.tracking import TrackingController, model_goals
+from controllers.tracking import (
+    PLAN_CHUNK,
+    TrackingController,
+    model_goals,
+    tracking_plan,
+    tracking_plans,
+)
 from hexapod.trajectory import PoseTrajectory
 from tests.controllers.controller_world import World, make_camera
 from tests.controllers.one_by_one import OneByOne, stacked
@@ -320,3 +326,31 @@ def test_model_goals_of_some_fields_are_those_of_all_fields() -> None:
         assert set(some) == {"rotation", "translation", *fields}
         for field in fields:
             assert np.array_equal(some[field], every[field], equal_nan=True), field
+
+
+def test_the_plans_of_a_batch_are_those_of_each_trial_alone() -> None:
+    """:func:`tracking_plans` over more trials than :data:`PLAN_CHUNK`, in two model
+    worlds taken turn about (the perspective and the unified camera), gives every trial
+    the goals and feed-forward of :func:`tracking_plan` of that trial alone, to the last
+    bit; a trial whose period is not positive is refused by name."""
+    worlds = [_world("perspective"), _world("unified")]
+    n = 2 * PLAN_CHUNK + 3  # (more than a chunk in each world)
+    per_world = [_tracking_contexts(w, n) for w in worlds]
+    contexts = [per_world[k % 2][k] for k in range(n)]
+    plans = tracking_plans(contexts, "leg-edge")
+    assert len(plans) == n
+    for ctx, plan in zip(contexts, plans, strict=True):
+        alone = tracking_plan(ctx, "leg-edge")
+        assert plan.dt == alone.dt
+        assert np.array_equal(plan.q_rate, alone.q_rate)
+        assert set(plan.goals) == set(alone.goals)
+        for key, value in alone.goals.items():
+            got = plan.goals[key]
+            if value is None:
+                assert got is None, key
+            else:
+                assert got is not None and np.array_equal(got, value, equal_nan=True), key
+    assert plans[0].goals["lines"] is not None and plans[1].goals["lines"] is None
+    bad = [contexts[0], dataclasses.replace(contexts[1], dt=0.0)]
+    with pytest.raises(ContextError, match="dt"):
+        tracking_plans(bad, "leg-edge")
