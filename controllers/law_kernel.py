@@ -258,6 +258,19 @@ class LawKernel:
             if name in self.inputs:
                 self.inputs[name][:] = 1.0
 
+    def __getstate__(self) -> dict[str, object]:
+        """A copy's state: the input vector, not its views by name (a copy's would be
+        arrays of their own, written but never evaluated) nor the compiled core (ctypes;
+        found again on first use)."""
+        state = self.__dict__.copy()
+        del state["inputs"]
+        state["_function"] = None  # (a core given is its ``_make``)
+        return state
+
+    def __setstate__(self, state: dict[str, object]) -> None:
+        self.__dict__.update(state)
+        self.inputs = self.slices.views(self.input_vector)
+
     @property
     def function(self) -> CompiledFunction:
         """The full core (built on first use)."""
@@ -319,6 +332,6 @@ def feature_law_kernel(feature: Feature, interaction: str = "current",
         ValueError: An unknown interaction.
     """
     _check_interaction(interaction)
-    return LawKernel(lambda: _compiled_core(feature, interaction, False, compiled),
-                     lambda: _compiled_core(feature, interaction, True, compiled),
+    return LawKernel(partial(_compiled_core, feature, interaction, False, compiled),
+                     partial(_compiled_core, feature, interaction, True, compiled),
                      law_layouts(feature, interaction))

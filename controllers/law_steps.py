@@ -47,6 +47,9 @@ class VisionLawBatch(LegRateFeedForward, Controller):
     #: What every trial of the batch reads from an observation (None: not the same
     #: feature, the trials step alone), set by :meth:`reset_batch`.
     batch_feature: ObservedFeature | None = None
+    #: The rows of each compiled core of the batch (:meth:`reset_batch`; None in a copy
+    #: until its next batch call, :meth:`_rows_again`).
+    _groups: list[LawRows] | None = None
 
     # ----------------------------------------------------------------- the batch
     def _batch_desired(self, goals: GoalBatch) -> tuple[np.ndarray | None, np.ndarray]:
@@ -75,6 +78,46 @@ class VisionLawBatch(LegRateFeedForward, Controller):
         seen = {t.observed_feature for t in trials}
         self.batch_feature = seen.pop() if len(seen) == 1 else None
         self.batch_reset_leg_rate(trials)
+        self._build_rows()
+
+    def __getstate__(self) -> dict[str, object]:
+        """A copy's (or a pickle's) state, without the batch's rows (their C context
+        holds this batch's addresses): the copy builds its own at its next batch call
+        (:meth:`_rows_again`)."""
+        state = self.__dict__.copy()
+        if "_groups" in state:
+            state["_groups"] = None
+            state.pop("_core_rows", None)
+        return state
+
+    def _rows_again(self) -> list[LawRows]:
+        """After a copy: the instances' estimates and leg-rate offsets made rows of one
+        batch array again (a copy of a view is an array of its own), the rows built from
+        the instances, and the desired features of the goals they have not read yet
+        written into them as :meth:`retarget_batch` did."""
+        trials = self.trial_instances
+        estimate = LegDirectionEstimate.fresh(len(trials))
+        for k, inst in enumerate(trials):
+            row = estimate.row(k)
+            for name in ("directions", "observed", "in_use", "twist", "lengths"):
+                getattr(row, name)[...] = getattr(inst.estimate, name)
+            inst.estimate = row
+        self.batch_estimate = estimate
+        if self.batch_kappa is not None:
+            self.batch_offset = np.array([inst.rate_offset for inst in trials])
+            for k, inst in enumerate(trials):
+                inst.rate_offset = self.batch_offset[k]
+        groups = self._build_rows()
+        for trial, (goals, j) in self._pending.items():
+            desired, quick = self._batch_desired(goals)
+            assert desired is not None
+            groups[self._group_of[trial]].write_desired(np.array([trial]), desired[j:j + 1],
+                                                        quick[j:j + 1])
+        return groups
+
+    def _build_rows(self) -> list[LawRows]:
+        """The rows of each compiled core of the batch, from the trials' instances."""
+        trials = self.trial_instances
         feedforward = (None if self.batch_kappa is None
                        else (self.batch_kappa, self.batch_offset))
         keys = [core_key(t) for t in trials]
@@ -86,6 +129,7 @@ class VisionLawBatch(LegRateFeedForward, Controller):
         order = {rows.key: g for g, rows in enumerate(self._groups)}
         self._group_of = np.array([order[key] for key in keys], dtype=np.int64)
         self._core_rows = self._groups[0]
+        return self._groups
 
     def retarget_batch(self, trials: np.ndarray, goals: GoalBatch) -> None:
         """New goals for some trials (row ``j`` of ``goals`` for trial ``trials[j]``),
@@ -98,11 +142,12 @@ class VisionLawBatch(LegRateFeedForward, Controller):
         """
         if not self.trial_instances:
             raise ContextError(self.name, "context", "retarget(goal) before reset(context)")
+        groups = self._groups if self._groups is not None else self._rows_again()  # (a copy)
         trials = np.asarray(trials, dtype=int)
         desired, quick = self._batch_desired(goals)
         if desired is not None and len(self.trial_instances) > 1:  # (one reads it now)
             own = self._group_of[trials]
-            for g, rows in enumerate(self._groups):
+            for g, rows in enumerate(groups):
                 mine = own == g
                 quick = np.where(mine, rows.write_desired(trials, desired, quick & mine), quick)
             for j in np.flatnonzero(quick).tolist():
@@ -117,6 +162,7 @@ class VisionLawBatch(LegRateFeedForward, Controller):
     def _retarget_instance(self, trial: int, goal: Goal) -> None:
         inst = self.trial_instances[trial]
         inst.retarget_trial(goal)
+        assert self._groups is not None
         self._groups[self._group_of[trial]].take(trial, inst)
 
     def step_batch(self, observations: ObservationBatch) -> CommandBatch:
@@ -132,11 +178,12 @@ class VisionLawBatch(LegRateFeedForward, Controller):
         self.crashes = {}
         if (unreset := self.checked_batch(obs)) is not None or not n:
             return unreset or CommandBatch.zeros(0)
-        if len(self._groups) == 1:
+        groups = self._groups if self._groups is not None else self._rows_again()  # (a copy)
+        if len(groups) == 1:
             return self._step_rows(self._core_rows, obs, self.crashes)
         out = CommandBatch.zeros(n)  # trials of several cores: each core's rows apart
         own = self._group_of[np.asarray(obs.trials, dtype=np.int64)]
-        for g, rows in enumerate(self._groups):
+        for g, rows in enumerate(groups):
             idx = np.flatnonzero(own == g)
             if len(idx):
                 crashes: dict[int, BaseException] = {}

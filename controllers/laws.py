@@ -100,6 +100,28 @@ class VisionLaw(VisionLawBatch):
         #: The kernel's weights and ``measured`` inputs were set by :meth:`_select`
         #: (restored to ones by :meth:`_load_kernel`).
         self._kernel_selected = False
+        #: Views of the compiled core's inputs (:meth:`_configure_kernel`).
+        self._k_lengths: np.ndarray
+        self._k_desired_lengths: np.ndarray | None
+
+    def __getstate__(self) -> dict[str, object]:
+        """A copy's state (:meth:`VisionLawBatch.__getstate__`), without the views of
+        the compiled core's inputs, taken again of the copy's core (:meth:`__setstate__`).
+        """
+        state = super().__getstate__()
+        for key in ("_k_features", "_k_lengths", "_k_desired_lengths"):
+            state.pop(key, None)
+        state["_k_desired"] = getattr(self, "_k_desired_lengths", None) is not None
+        return state
+
+    def __setstate__(self, state: dict[str, object]) -> None:
+        desired = state.pop("_k_desired")
+        self.__dict__.update(state)
+        kernel = self.kernel
+        if kernel is not None:
+            self._k_features = kernel.inputs["features"].reshape(self.observed_feature.shape)
+            self._k_lengths = kernel.inputs["lengths"]
+            self._k_desired_lengths = kernel.inputs["desired_lengths"] if desired else None
 
     # ----------------------------------------------------------------- reset
     def reset_trial(self, context: ControllerContext) -> None:
@@ -166,8 +188,8 @@ class VisionLaw(VisionLawBatch):
             raise TypeError(f"{self.name}: _reset_features must set the compiled core "
                             "(self._install_kernel)")
         g = self.gain
-        self._k_lengths: np.ndarray = kernel.inputs["lengths"]
-        self._k_desired_lengths: np.ndarray | None = None
+        self._k_lengths = kernel.inputs["lengths"]
+        self._k_desired_lengths = None
         if "desired_lengths" in kernel.inputs:
             if self._q_star is not None:
                 kernel.set("desired_lengths", self._q_star)

@@ -104,6 +104,19 @@ class ForceMPCLaw(PredictiveLaw):
         #: The plan of the last step (6 N,) [N] (before the shift).
         self.plan: np.ndarray | None = None
 
+    def __getstate__(self) -> dict[str, object]:
+        """A deep copy's state: the views of the state block left out, taken again of the
+        copy's own binding (:meth:`__setstate__`; copied, they would be arrays of their
+        own, written by the step but never read by its C)."""
+        state = self.__dict__.copy()
+        state.pop("_state", None)
+        return state
+
+    def __setstate__(self, state: dict[str, object]) -> None:
+        self.__dict__.update(state)
+        if self._bound is not None:
+            self._state = STATE.views(self._bound.inputs["state"])
+
     # ----------------------------------------------------------------- reset
     def reset_trial(self, context: ControllerContext) -> None:
         """Reset the held law (reference, goal), build or load the compiled kernel and

@@ -61,6 +61,15 @@ class LimitQP:
         self._eye_eps = regularization * np.eye(6)
         self._refine_in = np.zeros(REFINE_INPUTS.size)
 
+    def __getstate__(self) -> dict[str, object]:
+        """A copy's state, without OSQP's solver (not copyable: a copy sets OSQP up again
+        at its next solve, cold, as after a failed solve; its solutions then agree with
+        the original's within OSQP's tolerances, exactly where the active set's
+        refinement applies)."""
+        state = self.__dict__.copy()
+        state["_solver"] = state["_ext"] = None
+        return state
+
     def reset(self) -> None:
         """Forget the previous problem and set OSQP up again, on placeholder values (the
         sparsity, upper triangle of ``P`` and dense ``A``, is all a setup fixes)."""

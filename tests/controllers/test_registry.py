@@ -7,6 +7,7 @@ to a broken one that must be reported without breaking the others.
 
 from __future__ import annotations
 
+import copy
 import sys
 import textwrap
 from collections.abc import Iterator
@@ -17,7 +18,16 @@ import numpy as np
 import pytest
 
 from controllers import BUILTIN_SPECS, registry
-from controllers.base import ENTRY_POINT_GROUP, Command, Observation, ObservationBatch
+from controllers.base import (
+    ENTRY_POINT_GROUP,
+    GOAL_FIELDS,
+    Command,
+    CommandBatch,
+    GoalBatch,
+    Observation,
+    ObservationBatch,
+)
+from controllers.data import _BATCH_FIELDS
 from controllers.exceptions import PluginLoadError, UnknownControllerError
 from controllers.tracking import TrackingController
 from hexapod.actuation import Actuation
@@ -211,6 +221,55 @@ def test_a_row_of_a_trial_outside_the_batch_is_a_value_error(name: str,
             ctrl.step_batch(replace(two, **{field: value}))
     out = ctrl.step_batch(replace(one.rows(np.zeros(3, dtype=int)), trials=np.arange(3)))
     assert out.reasons == [None] * 3, out.reasons
+
+
+@pytest.mark.parametrize("name", sorted(BUILTIN_SPECS))
+def test_a_deep_copy_after_a_reset_steps_as_its_original_and_apart_from_it(
+        name: str, other_geometry) -> None:  # type: ignore[no-untyped-def]
+    """Each built-in, reset on three trials, stepped once and given new goals (read by the
+    image laws' instances only when needed), is deep-copied; then the original steps
+    other observations than the copy. The copy's next two batches (a leg hidden in one
+    row: its direction dead-reckoned from the estimate) are those of a twin
+    that lived the copy's history, to the last bit, and the original's next batch that
+    of a twin of its own: copying shares no state (views of the batch's arrays, the
+    compiled cores' inputs, the C's addresses) between a copy and its original."""
+    world = World(other_geometry, make_camera("perspective", other_geometry))
+    Rs, ts = world.poses(9, np.random.default_rng(7), margin=0.02)
+    dt = 0.02 if registry.create(name).actuation is Actuation.FORCE else 0.01
+
+    def batch(poses: list[int], step: int, hidden: bool = False) -> ObservationBatch:
+        """The observations of ``poses`` at period ``step``; ``hidden``: the first row's
+        leg 2 not seen (a law dead-reckons its direction from its estimate)."""
+        rows = [ObservationBatch.of(_at_rest(world.observation(Rs[k], ts[k], time=step * dt)))
+                for k in poses]
+        out = ObservationBatch(**{f: None if getattr(rows[0], f) is None else np.concatenate(
+            [getattr(r, f) for r in rows]) for f in _BATCH_FIELDS}).rows(np.arange(len(rows)))
+        if hidden:
+            out.edge_visible[0, 2] = out.direction_visible[0, 2] = False
+            for field in ("normals", "lines", "directions"):
+                if getattr(out, field) is not None:
+                    getattr(out, field)[0, 2] = np.nan
+        return out
+
+    def same(a: CommandBatch, b: CommandBatch) -> bool:
+        return np.array_equal(a.values, b.values) and a.reasons == b.reasons
+
+    one = GoalBatch.of(world.goal(Rs[8], ts[8]))
+    goals = GoalBatch(**{f: None if getattr(one, f) is None else np.repeat(getattr(one, f), 2, 0)
+                         for f in GOAL_FIELDS})
+    controllers = [registry.create(name) for _ in range(3)]  # original, its twin, the copy's
+    for ctrl in controllers:
+        ctrl.reset_batch([world.context(world.goal(Rs[k], ts[k]), dt) for k in (6, 7, 6)])
+        ctrl.step_batch(batch([0, 1, 2], 0))
+        ctrl.retarget_batch(np.array([0, 2]), goals)
+    original, twin, copied_twin = controllers
+    copied = copy.deepcopy(original)
+    assert same(original.step_batch(batch([3, 4, 5], 1)), twin.step_batch(batch([3, 4, 5], 1)))
+    for step in (1, 2):
+        got, want = (copied.step_batch(batch([1, 2, 0], step, hidden=True)),
+                     copied_twin.step_batch(batch([1, 2, 0], step, hidden=True)))
+        assert same(got, want), (step, got.values - want.values, got.reasons, want.reasons)
+    assert same(original.step_batch(batch([0, 1, 2], 2)), twin.step_batch(batch([0, 1, 2], 2)))
 
 
 # ----------------------------------------------------------------------------- generated
