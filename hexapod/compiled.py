@@ -223,6 +223,8 @@ class CompiledFunction:
                  key: tuple[str, str] | None = None) -> None:
         self._function: ca.Function | None = None
         self._builder = function
+        #: The arguments it was made with (a pickle makes it again from them).
+        self._made = (function, compile, inputs, outputs, flags, tuple(preload), key)
         #: What determines the function (:func:`code_key`; None: its serialization).
         self.key = None if key is None else key[1]
         if isinstance(function, ca.Function):
@@ -325,6 +327,11 @@ class CompiledFunction:
     def __deepcopy__(self, memo: dict[int, object]) -> CompiledFunction:
         """Shared, not copied: the compiled code is immutable (callers copy inputs)."""
         return self
+
+    def __reduce__(self) -> tuple[Any, tuple[Any, ...]]:
+        """Pickled as the arguments it was made with (its library found again in the
+        cache on unpickling; a builder that is a lambda cannot be pickled)."""
+        return CompiledFunction, self._made
 
     def bind(self, x: np.ndarray | None = None) -> BoundCall:
         """Own input and output buffers evaluated in place (see :class:`BoundCall`);
@@ -433,6 +440,11 @@ class BoundCall:
                             ctypes.addressof(self._res), self._iw.ctypes.data,
                             self._w.ctypes.data, 0)
 
+    def __reduce__(self) -> tuple[Any, tuple[Any, ...]]:
+        """Pickled as its function and copies of its buffers (a new binding, as
+        :meth:`__deepcopy__` makes)."""
+        return _bound_again, (self.function, self.x.copy(), self.y.copy())
+
     def __deepcopy__(self, memo: dict[int, object]) -> BoundCall:
         """A new binding of the same function with copies of the buffers (a plain deep
         copy would keep pointers to this binding's buffers)."""
@@ -441,3 +453,11 @@ class BoundCall:
         copy.y[:] = self.y
         memo[id(self)] = copy
         return copy
+
+
+def _bound_again(function: CompiledFunction, x: np.ndarray, y: np.ndarray) -> BoundCall:
+    """A new :class:`BoundCall` of ``function`` holding ``x`` and ``y`` (unpickling)."""
+    bound = BoundCall(function)
+    bound.x[:] = x
+    bound.y[:] = y
+    return bound

@@ -8,6 +8,7 @@ to a broken one that must be reported without breaking the others.
 from __future__ import annotations
 
 import copy
+import pickle
 import sys
 import textwrap
 from collections.abc import Iterator
@@ -224,15 +225,16 @@ def test_a_row_of_a_trial_outside_the_batch_is_a_value_error(name: str,
 
 
 @pytest.mark.parametrize("name", sorted(BUILTIN_SPECS))
-def test_a_deep_copy_after_a_reset_steps_as_its_original_and_apart_from_it(
+def test_a_copy_after_a_reset_steps_as_its_original_and_apart_from_it(
         name: str, other_geometry) -> None:  # type: ignore[no-untyped-def]
     """Each built-in, reset on three trials, stepped once and given new goals (read by the
-    image laws' instances only when needed), is deep-copied; then the original steps
-    other observations than the copy. The copy's next two batches (a leg hidden in one
-    row: its direction dead-reckoned from the estimate) are those of a twin
-    that lived the copy's history, to the last bit, and the original's next batch that
-    of a twin of its own: copying shares no state (views of the batch's arrays, the
-    compiled cores' inputs, the C's addresses) between a copy and its original."""
+    image laws' instances only when needed), is deep-copied and pickled; then the original
+    steps other observations than the copies. Each copy's next two batches (a leg hidden
+    in one row: its direction dead-reckoned from the estimate) are those of a twin that
+    lived the copy's history, to the last bit, and the original's next batch that of a
+    twin of its own: copying shares no state (views of the batch's arrays, the
+    compiled cores' inputs, the C's addresses) between a copy and its original, and a
+    pickle carries all of it."""
     world = World(other_geometry, make_camera("perspective", other_geometry))
     Rs, ts = world.poses(9, np.random.default_rng(7), margin=0.02)
     dt = 0.02 if registry.create(name).actuation is Actuation.FORCE else 0.01
@@ -257,18 +259,20 @@ def test_a_deep_copy_after_a_reset_steps_as_its_original_and_apart_from_it(
     one = GoalBatch.of(world.goal(Rs[8], ts[8]))
     goals = GoalBatch(**{f: None if getattr(one, f) is None else np.repeat(getattr(one, f), 2, 0)
                          for f in GOAL_FIELDS})
-    controllers = [registry.create(name) for _ in range(3)]  # original, its twin, the copy's
+    # the original, its twin, and the twins of its deep copy and of its pickled copy
+    controllers = [registry.create(name) for _ in range(4)]
     for ctrl in controllers:
         ctrl.reset_batch([world.context(world.goal(Rs[k], ts[k]), dt) for k in (6, 7, 6)])
         ctrl.step_batch(batch([0, 1, 2], 0))
         ctrl.retarget_batch(np.array([0, 2]), goals)
-    original, twin, copied_twin = controllers
-    copied = copy.deepcopy(original)
+    original, twin, *copy_twins = controllers
+    copies = [copy.deepcopy(original), pickle.loads(pickle.dumps(original))]
     assert same(original.step_batch(batch([3, 4, 5], 1)), twin.step_batch(batch([3, 4, 5], 1)))
-    for step in (1, 2):
-        got, want = (copied.step_batch(batch([1, 2, 0], step, hidden=True)),
-                     copied_twin.step_batch(batch([1, 2, 0], step, hidden=True)))
-        assert same(got, want), (step, got.values - want.values, got.reasons, want.reasons)
+    for copied, copy_twin in zip(copies, copy_twins, strict=True):
+        for step in (1, 2):
+            got, want = (copied.step_batch(batch([1, 2, 0], step, hidden=True)),
+                         copy_twin.step_batch(batch([1, 2, 0], step, hidden=True)))
+            assert same(got, want), (step, got.values - want.values, got.reasons, want.reasons)
     assert same(original.step_batch(batch([0, 1, 2], 2)), twin.step_batch(batch([0, 1, 2], 2)))
 
 
