@@ -148,7 +148,7 @@ class TrackingPlan:
 
 #: Trials whose model goals are computed together (larger arrays fall out of the
 #: caches: 200 trials at once took longer than one by one).
-PLAN_CHUNK = 16
+PLAN_CHUNK = 8
 
 
 def tracking_plan(context: ControllerContext, name: str) -> TrackingPlan:

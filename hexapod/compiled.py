@@ -448,15 +448,13 @@ class BoundCall:
     def __deepcopy__(self, memo: dict[int, object]) -> BoundCall:
         """A new binding of the same function with copies of the buffers (a plain deep
         copy would keep pointers to this binding's buffers)."""
-        copy = BoundCall(self.function)
-        copy.x[:] = self.x
-        copy.y[:] = self.y
-        memo[id(self)] = copy
+        copy = memo[id(self)] = _bound_again(self.function, self.x, self.y)
         return copy
 
 
 def _bound_again(function: CompiledFunction, x: np.ndarray, y: np.ndarray) -> BoundCall:
-    """A new :class:`BoundCall` of ``function`` holding ``x`` and ``y`` (unpickling)."""
+    """A new :class:`BoundCall` of ``function`` holding copies of ``x`` and ``y`` (a deep
+    copy, an unpickled binding)."""
     bound = BoundCall(function)
     bound.x[:] = x
     bound.y[:] = y
