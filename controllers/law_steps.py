@@ -90,6 +90,10 @@ class VisionLawBatch(LegRateFeedForward, Controller):
             state.pop("_core_rows", None)
         return state
 
+    def _batch_rows(self) -> list[LawRows]:
+        """The batch's rows of each compiled core (a copy's built again first)."""
+        return self._groups if self._groups is not None else self._rows_again()
+
     def _rows_again(self) -> list[LawRows]:
         """After a copy: the instances' estimates and leg-rate offsets made rows of one
         batch array again (a copy of a view is an array of its own), the rows built from
@@ -142,7 +146,7 @@ class VisionLawBatch(LegRateFeedForward, Controller):
         """
         if not self.trial_instances:
             raise ContextError(self.name, "context", "retarget(goal) before reset(context)")
-        groups = self._groups if self._groups is not None else self._rows_again()  # (a copy)
+        groups = self._batch_rows()
         trials = np.asarray(trials, dtype=int)
         desired, quick = self._batch_desired(goals)
         if desired is not None and len(self.trial_instances) > 1:  # (one reads it now)
@@ -178,7 +182,7 @@ class VisionLawBatch(LegRateFeedForward, Controller):
         self.crashes = {}
         if (unreset := self.checked_batch(obs)) is not None or not n:
             return unreset or CommandBatch.zeros(0)
-        groups = self._groups if self._groups is not None else self._rows_again()  # (a copy)
+        groups = self._batch_rows()
         if len(groups) == 1:
             return self._step_rows(self._core_rows, obs, self.crashes)
         out = CommandBatch.zeros(n)  # trials of several cores: each core's rows apart
