@@ -221,6 +221,12 @@ class ObservationBatch:
         if np.ndim(self.trials) != 1:
             return f"observations.trials of shape {np.shape(self.trials)}, expected (n,)"
         n = len(self.trials)
+        trials = np.asarray(self.trials)
+        if n > 1 and not (trials[1:] > trials[:-1]).all():  # (the loop's rows increase)
+            values, counts = np.unique(trials, return_counts=True)
+            if (counts > 1).any():
+                return (f"observations.trials repeat trial {values[counts > 1][0].item()}: each "
+                        "row of a batch is another trial")
         for name, row in _ROW_SHAPES:
             value = getattr(self, name)
             if value is not None and np.shape(value) != (n, *row):

@@ -185,7 +185,7 @@ def test_a_batch_step_before_reset_refuses_every_row(rows: int) -> None:
     stepped before its reset, as its per-trial step does: zeros, the reason naming it."""
     one = ObservationBatch.of(Observation(0.0, np.full(6, 0.4), q_dot=np.zeros(6)))
     assert one is not None
-    batch = one.rows(np.zeros(rows, dtype=int))
+    batch = replace(one.rows(np.zeros(rows, dtype=int)), trials=np.arange(rows))
     controllers = [registry.create(name) for name in BUILTIN_SPECS]
     controllers.append(TrackingController(registry.create("vision-ctc")))
     for ctrl in controllers:
@@ -199,9 +199,10 @@ def test_a_batch_step_before_reset_refuses_every_row(rows: int) -> None:
 def test_a_row_of_a_trial_outside_the_batch_is_a_value_error(name: str,
                                                                other_geometry) -> None:  # type: ignore[no-untyped-def]
     """Each built-in (its step C indexes the batch's arrays with the rows' trials) raises
-    a ValueError naming itself and the trials, for batches of two and of one, and one
-    naming the field for an array not of the batch's shape; then steps its next batch as
-    usual (nothing written outside its arrays)."""
+    a ValueError naming itself and the trials, for batches of two and of one, one naming
+    the trial a batch gives twice, and one naming the field for an array not of the
+    batch's shape; then steps its next batch as usual (nothing written outside its
+    arrays)."""
     world = World(other_geometry, make_camera("perspective", other_geometry))
     start, goal = _poses(world)
     ctrl = registry.create(name)
@@ -213,6 +214,11 @@ def test_a_row_of_a_trial_outside_the_batch_is_a_value_error(name: str,
         batch = replace(one.rows(np.zeros(len(trials), dtype=int)), trials=np.array(trials))
         with pytest.raises(ValueError, match=rf"{name}: trials \[.*\] outside the batch's 3 "
                                              r"trials \(0 to 2\)"):
+            ctrl.step_batch(batch)
+    for trials in ([1, 1], [2, 0, 2]):  # a trial twice in one batch
+        batch = replace(one.rows(np.zeros(len(trials), dtype=int)), trials=np.array(trials))
+        with pytest.raises(ValueError, match=rf"{name}: observations\.trials repeat trial "
+                                             rf"{trials[-1]}: each row of a batch is another"):
             ctrl.step_batch(batch)
     two = replace(one.rows(np.zeros(2, dtype=int)), trials=np.arange(2))
     for field, value in (("lengths", two.lengths[:, :5]), ("normals", two.normals[:1]),
@@ -245,7 +251,8 @@ def test_a_copy_after_a_reset_steps_as_its_original_and_apart_from_it(
         rows = [ObservationBatch.of(_at_rest(world.observation(Rs[k], ts[k], time=step * dt)))
                 for k in poses]
         out = ObservationBatch(**{f: None if getattr(rows[0], f) is None else np.concatenate(
-            [getattr(r, f) for r in rows]) for f in _BATCH_FIELDS}).rows(np.arange(len(rows)))
+            [getattr(r, f) for r in rows]) for f in _BATCH_FIELDS})
+        out.trials = np.arange(len(rows))  # (each row made of one observation: trial 0)
         if hidden:
             out.edge_visible[0, 2] = out.direction_visible[0, 2] = False
             for field in ("normals", "lines", "directions"):
