@@ -36,6 +36,9 @@ from controllers.law_tools import (
 )
 from controllers.solvers.base import Solver
 from controllers.solvers.pseudo_inverse import DampedPseudoInverse
+from hexapod.exceptions import HexapodError
+from hexapod.fk import forward_kinematics
+from hexapod.kinematics import leg_directions
 
 
 class VisionLaw(VisionLawBatch):
@@ -292,7 +295,15 @@ class VisionLaw(VisionLawBatch):
             inputs["lengths"][:] = q
             inputs["weights"][:] = sel.used
             inputs["measured"][:] = sel.measured
-            inputs["leg_directions"][:] = sel.leg_directions.reshape(-1)
+            # legs never seen: the nominal model's directions, before the core (which
+            # uses a leg's given direction only in the inverse Jacobian)
+            legs = sel.leg_directions
+            never = ~np.isfinite(legs[:, 0]) & ~sel.measured
+            model = self._model_directions(q) if never.any() else None
+            if model is not None:
+                legs = np.where(never[:, None], model, legs)
+                est.in_use[never] = model[never]
+            inputs["leg_directions"][:] = legs.reshape(-1)
             if "desired_lengths" in inputs:
                 inputs["desired_lengths"][:] = self._desired_lengths(q)
             self._kernel_selected = True
@@ -304,8 +315,11 @@ class VisionLaw(VisionLawBatch):
         if not (math.isfinite(r.error_norm) and math.isfinite(r.n_sum)):
             return Command.refuse("non-finite error or interaction matrix (degenerate features)",
                                   e)
-        if not common and len(unknown := np.flatnonzero(~np.isfinite(est.in_use[:, 0]))):
-            model = self._model_directions(q)
+        if common:
+            return TaskStep(e, r.error_norm, r.N, r.b, r.gain, r.J, notes, r)
+        if len(unknown := np.flatnonzero(~np.isfinite(est.in_use[:, 0]))):
+            # no model directions, or a leg measured without a direction: the core again
+            model = self._model_directions(q) if model is None else model
             if model is None:
                 return Command.refuse(
                     f"direction of leg {int(unknown[0])} unknown (hidden since reset, no "
@@ -314,8 +328,10 @@ class VisionLaw(VisionLawBatch):
             est.in_use[unknown] = model[unknown]
             kernel.inputs["leg_directions"][:] = est.in_use.reshape(-1)
             r = kernel.evaluate()
+        if model is not None:
+            never[unknown] = True
             notes.append("nominal-model directions (forward kinematics of the measured "
-                         "lengths) for never-seen legs " + _legs(unknown))
+                         "lengths) for never-seen legs " + _legs(never))
         return TaskStep(e, r.error_norm, r.N, r.b, r.gain, r.J, notes, r)
 
     def rare_step(self, observation: Observation) -> Command:
@@ -420,10 +436,6 @@ class VisionLaw(VisionLawBatch):
         pose = getattr(getattr(context, "camera", None), "camera_from_base", None)
         if context is None or pose is None:
             return None
-        from hexapod.exceptions import HexapodError
-        from hexapod.fk import forward_kinematics
-        from hexapod.kinematics import leg_directions
-
         guess = self.model_pose
         try:
             sol = forward_kinematics(context.geometry, q, check_stroke=False,

@@ -29,7 +29,7 @@ def _check_pose(rotation: np.ndarray, translation: np.ndarray) -> tuple[np.ndarr
         raise ShapeError(
             "rotation/translation", "matching batch shapes", f"{R.shape[:-2]} and {t.shape[:-1]}"
         )
-    if not (np.all(np.isfinite(R)) and np.all(np.isfinite(t))):
+    if not (np.isfinite(R).all() and np.isfinite(t).all()):
         raise ShapeError("pose", "finite values", "NaN or inf")
     return R, t
 
