@@ -23,9 +23,9 @@ INTERACTIONS = ("current", "desired", "mean")
 def check_observation(obs: Observation, features: frozenset[str]) -> str | None:
     """:func:`controllers.base.observation_problem`, with a fast path.
 
-    The common case (float arrays of the right shapes, everything visible and
-    finite) is recognised with a few calls: a finite sum means finite entries. Any
-    other observation gets the full check and its reason.
+    The common cases (float arrays of the right shapes, everything visible and
+    finite, or the visible features finite) are recognised with a few calls: a finite
+    sum means finite entries. Any other observation gets the full check and its reason.
     """
     try:
         q = obs.lengths
@@ -36,9 +36,13 @@ def check_observation(obs: Observation, features: frozenset[str]) -> str | None:
                     continue
                 arr = getattr(obs, name)
                 if not (type(arr) is np.ndarray and arr.shape == shape
-                        and arr.dtype == np.float64 and math.isfinite(arr.sum())
-                        and getattr(obs, mask).all()):
+                        and arr.dtype == np.float64):
                     break
+                seen = getattr(obs, mask)
+                if not (math.isfinite(arr.sum()) and seen.all()) and not (
+                        type(seen) is np.ndarray and seen.dtype == np.bool_
+                        and seen.shape == shape[:-1] and np.isfinite(arr[seen]).all()):
+                    break  # (a hidden feature's values may be anything)
             else:
                 return None
     except (TypeError, ValueError, AttributeError):

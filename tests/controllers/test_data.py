@@ -17,7 +17,9 @@ from controllers.data import (
     GoalBatch,
     Observation,
     ObservationBatch,
+    observation_problem,
 )
+from controllers.law_tools import check_observation
 from hexapod.actuation import Actuation
 
 
@@ -90,3 +92,44 @@ def test_a_command_batch_of_one_row_holds_what_zeros_and_put_hold() -> None:
         if one.forces is not None:
             np.testing.assert_array_equal(one.forces, put.forces)
         assert one.command(0) is cmd and one.commands == [cmd]
+
+
+def test_the_fast_observation_check_says_what_the_full_one_says() -> None:
+    """``check_observation`` (fast paths: every feature visible and finite, or the visible
+    ones finite) returns ``observation_problem``'s verdict and reason on observations
+    with hidden features holding NaN, visible ones not finite, wrong shapes and dtypes,
+    masks that are not boolean arrays, and non-finite lengths or times."""
+    rng = np.random.default_rng(5)
+    features = frozenset({"lengths", "normals", "lines", "directions"})
+    verdicts = set()
+    for k in range(600):
+        normals = rng.normal(size=(6, 2, 3))
+        lines = rng.normal(size=(6, 2, 3))
+        directions = rng.normal(size=(6, 3))
+        edges = rng.random((6, 2)) < (0.6 if k % 3 else 1.0)
+        legs = rng.random(6) < (0.6 if k % 3 else 1.0)
+        for arr, mask in ((normals, edges), (lines, edges), (directions, legs)):
+            arr[~mask] = np.nan  # hidden: NaN, as the sensors give
+        obs = Observation(float(k), 0.4 + 0.1 * rng.random(6), normals=normals, lines=lines,
+                          directions=directions, edge_visible=edges, direction_visible=legs)
+        case = k % 10
+        if case == 1:  # a visible feature not finite
+            i, j = np.argwhere(edges)[0] if edges.any() else (0, 0)
+            obs.edge_visible[i, j] = True
+            obs.normals[i, j, 1] = np.inf
+        elif case == 2:
+            obs.lengths[3] = np.nan
+        elif case == 3:
+            obs.t = float("nan")
+        elif case == 4:
+            obs.directions = directions[:5]
+        elif case == 5:
+            obs.edge_visible = edges.astype(np.int64)  # a mask of ints
+        elif case == 6:
+            obs.lines = lines.astype(np.float32)
+        elif case == 7:
+            obs.direction_visible = legs.tolist()  # a list
+        want = observation_problem(obs, features)
+        assert check_observation(obs, features) == want, (k, want)
+        verdicts.add(want is None)
+    assert verdicts == {True, False}
