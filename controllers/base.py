@@ -196,8 +196,9 @@ class Controller(RemembersOptions, ABC):
         per-trial step's, were checked there).
 
         Raises:
-            ValueError: A row's trial is not one of the batch's (``0 <= trial < n``), or an
-                array is not of the batch's shape (the field named).
+            ValueError: A row's trial is not one of the batch's (``0 <= trial < n``), the
+                trials are not distinct integers, or an array is not of the batch's shape
+                (the field named).
         """
         trials = self.trial_instances
         if trials:

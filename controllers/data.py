@@ -195,7 +195,8 @@ class ObservationBatch:
     a field None for every row or none, and
 
     Attributes:
-        trials: (n,) indices of the trials, into the contexts given to ``reset_batch``.
+        trials: (n,) integer indices of the trials, into the contexts given to
+            ``reset_batch``, each at most once.
     """
 
     trials: np.ndarray
@@ -217,11 +218,14 @@ class ObservationBatch:
 
     def shape_problem(self) -> str | None:
         """Why these arrays are not ``len(trials)`` rows of an observation's shapes (the
-        field, its shape and the one expected), or None."""
+        field, its shape and the one expected) or the trials not distinct integers, or
+        None."""
         if np.ndim(self.trials) != 1:
             return f"observations.trials of shape {np.shape(self.trials)}, expected (n,)"
         n = len(self.trials)
         trials = np.asarray(self.trials)
+        if n and trials.dtype.kind not in "iu":
+            return f"observations.trials of dtype {trials.dtype}, expected integers"
         if n > 1 and not (trials[1:] > trials[:-1]).all():  # (the loop's rows increase)
             values, counts = np.unique(trials, return_counts=True)
             if (counts > 1).any():

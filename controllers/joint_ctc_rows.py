@@ -339,10 +339,7 @@ class JointRows:
             return
         lib = _library()
         b = self._buffers(n)
-        np.copyto(b.trials, observations.trials)
-        np.copyto(b.t, observations.t)
-        np.copyto(b.q, observations.lengths)
-        np.copyto(b.qd, observations.q_dot)
+        b.load(observations)
         code = b.code
         if n < LANE_ROWS:
             if lib.jc_step(self._ctx, n, *b.addresses):
@@ -359,7 +356,7 @@ class JointRows:
         reasons = {} if simple else self._resolve(observations, b)
         forces = out.forces
         assert forces is not None
-        np.copyto(forces, b.forces)
+        forces[...] = b.forces
         if not simple:
             for j in np.flatnonzero(code == OVER).tolist():  # over a limit: the strategy
                 i = int(b.trials[j])

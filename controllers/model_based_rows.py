@@ -180,9 +180,7 @@ class PoseServoRows:
                 "trials": ((), np.int64), "t": ((), float), "q": ((6,), float),
                 "code": ((), np.int64), "Y": ((self.kernel.n_out,), float),
                 "fk": ((2,), float)})
-        np.copyto(b.trials, observations.trials)
-        np.copyto(b.t, observations.t)
-        np.copyto(b.q, observations.lengths)
+        b.load(observations, rates=False)
         if _library().mb_step(self._ctx, n, *b.addresses):
             raise CompilationError(f"{self.kernel.name}: the compiled function failed")
         code, Y, at = b.code, b.Y, self._at

@@ -266,19 +266,16 @@ class TaskRows:
             self.threshold = threshold
             c.screen_scale = 4.0 * threshold**2
         b = self._buffers(n)
-        np.copyto(b.trials, observations.trials)
-        np.copyto(b.t, observations.t)
-        np.copyto(b.q, observations.lengths)
-        np.copyto(b.qd, observations.q_dot)
+        b.load(observations)
         if self.measured is not None:
             field, visibility = self.measured
             values = getattr(observations, field)
             if values is None:  # not measured: every row by its law (which says so)
                 b.vis[:] = 0
             else:
-                np.copyto(b.feat.reshape(values.shape), values)
+                b.feat.reshape(values.shape)[...] = values
                 visible = getattr(observations, visibility)
-                np.copyto(b.vis.reshape(visible.shape), visible)
+                b.vis.reshape(visible.shape)[...] = visible
         code = b.code
         if n < LANE_ROWS:  # a few rows: one C call
             if lib.tc_step_call(self._ctx, b.at):
@@ -300,7 +297,7 @@ class TaskRows:
         reasons = self._rare(observations, b, used, notes, threshold) if pending else {}
         forces = out.forces
         assert forces is not None
-        np.copyto(forces, b.forces)
+        forces[...] = b.forces
         E = b.Y[:, self._error]
         if not used and (code == ACCEPTED).all():  # the common case
             out.error_norm[:] = np.sqrt(norms(E))

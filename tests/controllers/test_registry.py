@@ -200,9 +200,9 @@ def test_a_row_of_a_trial_outside_the_batch_is_a_value_error(name: str,
                                                                other_geometry) -> None:  # type: ignore[no-untyped-def]
     """Each built-in (its step C indexes the batch's arrays with the rows' trials) raises
     a ValueError naming itself and the trials, for batches of two and of one, one naming
-    the trial a batch gives twice, and one naming the field for an array not of the
-    batch's shape; then steps its next batch as usual (nothing written outside its
-    arrays)."""
+    trials that are not integers or a trial a batch gives twice, and one naming the field
+    for an array not of the batch's shape; then steps its next batch as usual (nothing
+    written outside its arrays)."""
     world = World(other_geometry, make_camera("perspective", other_geometry))
     start, goal = _poses(world)
     ctrl = registry.create(name)
@@ -215,6 +215,9 @@ def test_a_row_of_a_trial_outside_the_batch_is_a_value_error(name: str,
         with pytest.raises(ValueError, match=rf"{name}: trials \[.*\] outside the batch's 3 "
                                              r"trials \(0 to 2\)"):
             ctrl.step_batch(batch)
+    with pytest.raises(ValueError, match=rf"{name}: observations\.trials of dtype float64, "
+                                         "expected integers"):
+        ctrl.step_batch(replace(one.rows(np.zeros(2, dtype=int)), trials=np.array([0.0, 1.0])))
     for trials in ([1, 1], [2, 0, 2]):  # a trial twice in one batch
         batch = replace(one.rows(np.zeros(len(trials), dtype=int)), trials=np.array(trials))
         with pytest.raises(ValueError, match=rf"{name}: observations\.trials repeat trial "
