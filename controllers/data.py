@@ -237,6 +237,18 @@ class ObservationBatch:
                 return f"observations.{name} of shape {np.shape(value)}, expected {(n, *row)}"
         return None
 
+    def write_rows(self, rows: Any, rates: bool = True) -> None:
+        """Copy the batch into a one-step C's arrays (:class:`hexapod.c_step.RowArrays`):
+        its ``trials``, times ``t`` [s], ``lengths`` into ``q`` [m] and, with ``rates``,
+        ``q_dot`` into ``qd`` [m/s] (assignments: a third of ``np.copyto``'s cost, which a
+        per-trial step pays every period; :meth:`shape_problem` checked the trials are
+        integers)."""
+        rows.trials[...] = self.trials
+        rows.t[...] = self.t
+        rows.q[...] = self.lengths
+        if rates:
+            rows.qd[...] = self.q_dot
+
     def item(self, k: int) -> Observation:
         """The observation of row ``k`` (views of the batch arrays; for a batch made of
         one observation by :meth:`of`, that observation)."""

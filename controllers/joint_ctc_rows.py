@@ -339,7 +339,7 @@ class JointRows:
             return
         lib = _library()
         b = self._buffers(n)
-        b.load(observations)
+        observations.write_rows(b)
         code = b.code
         if n < LANE_ROWS:
             if lib.jc_step(self._ctx, n, *b.addresses):

@@ -180,7 +180,7 @@ class PoseServoRows:
                 "trials": ((), np.int64), "t": ((), float), "q": ((6,), float),
                 "code": ((), np.int64), "Y": ((self.kernel.n_out,), float),
                 "fk": ((2,), float)})
-        b.load(observations, rates=False)
+        observations.write_rows(b, rates=False)
         if _library().mb_step(self._ctx, n, *b.addresses):
             raise CompilationError(f"{self.kernel.name}: the compiled function failed")
         code, Y, at = b.code, b.Y, self._at

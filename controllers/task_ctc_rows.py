@@ -266,7 +266,7 @@ class TaskRows:
             self.threshold = threshold
             c.screen_scale = 4.0 * threshold**2
         b = self._buffers(n)
-        b.load(observations)
+        observations.write_rows(b)
         if self.measured is not None:
             field, visibility = self.measured
             values = getattr(observations, field)

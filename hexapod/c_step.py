@@ -136,18 +136,6 @@ class RowArrays:
                                               else struct(*self.addresses, *extra))
         self.at = 0 if self.call is None else ctypes.addressof(self.call)
 
-    def load(self, observations: Any, rates: bool = True) -> None:
-        """Copy a batch's rows in: its ``trials``, times ``t`` [s], ``lengths`` (into ``q``)
-        [m] and, with ``rates``, leg rates ``q_dot`` (into ``qd``) [m/s] (assignments: a
-        third of ``np.copyto``'s cost, which a per-trial step pays every period; the
-        batch's trials are integers, :meth:`controllers.data.ObservationBatch.
-        shape_problem`)."""
-        self.trials[...] = observations.trials
-        self.t[...] = observations.t
-        self.q[...] = observations.lengths
-        if rates:
-            self.qd[...] = observations.q_dot
-
     def __getattr__(self, name: str) -> np.ndarray:
         """Reached only for a name that is no field (every field is an array)."""
         raise AttributeError(f"no row array {name!r}")
