@@ -15,7 +15,10 @@ The default batch is one work unit of ``hexapod-bench run NAME --workers 2`` (th
 engine's per-period overhead is shared by the trials of a unit, so a smaller batch costs
 more per trial-step).
 
-Run: ``hexapod-bench perf study [--scenario NAME] [--trials N] [--repeats K]``.
+Run: ``hexapod-bench perf study [--scenario NAME] [--trials N] [--controllers A,B]
+[--repeats K] [--breakdown]`` (``--controllers``: some of the scenario's controllers, by
+name or label; the per-trial engine of a predictive controller over hundreds of dynamic
+trials takes many minutes).
 """
 
 from __future__ import annotations
@@ -57,6 +60,7 @@ STAGES = (
     ("convergence test (pose errors)", "benchmarks.sim.book", "pose_error"),
     ("controller step_batch", "benchmarks.sim.loop", "_step_batch"),
     ("forward kinematics (C)", "benchmarks.sim.plant", "solve_rows"),
+    ("dynamic world period (C)", "hexapod.dynamics.robots", "DynamicRobots.advance"),
 )
 
 
@@ -96,12 +100,15 @@ def _breakdown(sc: object, controller: int, trials: int) -> tuple[int, float, di
     for label, module, attr in STAGES:
         if attr == "_step_batch":
             continue
-        mod = importlib.import_module(module)
+        owner: Any = importlib.import_module(module)
         if module == "controllers.batch":  # the engine's own reference to batch_controller
-            mod = importlib.import_module("benchmarks.sim.reference")
-        saved.append((mod, attr, getattr(mod, attr)))
-        setattr(mod, attr, reset_timed(getattr(mod, attr)) if attr == "batch_controller"
-                else timed(label, getattr(mod, attr)))
+            owner = importlib.import_module("benchmarks.sim.reference")
+        *path, name = attr.split(".")  # a function, or a class's method
+        for part in path:
+            owner = getattr(owner, part)
+        saved.append((owner, name, getattr(owner, name)))
+        setattr(owner, name, reset_timed(getattr(owner, name)) if name == "batch_controller"
+                else timed(label, getattr(owner, name)))
     try:
         cpu, _, rows = _run(sc, controller, trials, "batched")
     finally:
@@ -138,17 +145,26 @@ def main(argv: Sequence[str] | None = None) -> int:
     p.add_argument("--trials", type=int, default=None,
                    help="trials per controller (default: the work-unit size of "
                         "'hexapod-bench run SCENARIO --workers 2', capped at 1000)")
+    p.add_argument("--controllers", default=None,
+                   help="comma-separated names or labels of the scenario's controllers to "
+                        "time (default: all of them)")
     p.add_argument("--repeats", type=int, default=3, help="runs of each engine (median)")
     p.add_argument("--breakdown", action="store_true",
                    help="also time the batched engine's stages (one more run per controller)")
     args = p.parse_args(argv)
     from benchmarks.study.commands import auto_chunk
+    from benchmarks.study.scenario_checks import check_controllers
 
     scenario = load_scenario(args.scenario)
     trials = auto_chunk([scenario], 2, "sim") if args.trials is None else args.trials
     if trials < 1 or args.repeats < 1:
         p.error("--trials and --repeats must be >= 1")
-    sc = scenario.with_overrides(trials=trials).expand()[0]
+    names = ([c.strip() for c in args.controllers.split(",") if c.strip()]
+             if args.controllers else None)
+    # the controllers and their options checked as ``run`` checks them (a name that is
+    # no controller refused here, not a failed row per trial)
+    checked, _ = check_controllers(scenario.with_overrides(trials=trials, controllers=names))
+    sc = checked.expand()[0]
     out = sys.stdout
     out.write(f"# Study engine: {args.scenario} (first sweep point), {trials} trials per "
               f"controller in one batch (a work unit of the run), median of {args.repeats} "

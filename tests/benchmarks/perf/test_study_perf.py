@@ -70,3 +70,32 @@ def test_trial_steps_count_the_periods_the_loop_stepped() -> None:
     finally:
         TrackingController.step_batch = original  # type: ignore[method-assign]
     assert study.trial_steps(sc, rows) == stepped[0]
+
+
+@pytest.mark.slow
+def test_some_controllers_of_a_dynamic_study_and_its_world_stage(
+        capsys: pytest.CaptureFixture[str]) -> None:
+    """``--controllers`` times only the named ones (by name or label, in the order given);
+    the breakdown of a dynamic study gives the dynamic world's period its own
+    row, a part of the total (a kinematic study's is zero: the test above)."""
+    assert study.main(["--scenario", "paccot2008-tracking", "--trials", "2", "--repeats",
+                       "1", "--controllers", "vision-ctc,computed-torque",
+                       "--breakdown"]) == 0
+    out = capsys.readouterr().out
+    names = [line.split("|")[1].strip() for line in out.split("# Where")[0].splitlines()
+             if line.startswith("| ") and "controller" not in line]
+    assert names == ["vision-ctc", "computed-torque"]
+    table = out.split("# Where the time goes")[1]
+    assert "| stage | vision-ctc | computed-torque |" in table
+    rows = {line.split("|")[1].strip(): [float(x) for x in line.split("|")[2:-1]]
+            for line in table.splitlines() if line.startswith("| ") and "stage" not in line}
+    world = rows["dynamic world period (C)"]
+    assert all(0 < w < t for w, t in zip(world, rows["total"], strict=True))
+    assert rows["forward kinematics (C)"] == [0.0, 0.0]  # (the dynamic world has none)
+
+
+def test_an_unknown_controller_is_refused() -> None:
+    from benchmarks.exceptions import BenchmarkError
+
+    with pytest.raises(BenchmarkError, match="no-such-law"):
+        study.main(["--controllers", "no-such-law"])
