@@ -41,6 +41,7 @@ from controllers.task_ctc_rows import TaskRows
 from controllers.tasks.feature_kind import BuiltinFeature
 from controllers.tasks.leg_direction import LEG_DIRECTIONS
 from controllers.tasks.leg_edge import EDGE_NORMALS
+from controllers.tracking import by_model_world
 from hexapod.kinematics import Transform
 from vision.legs import directions_from_edges
 
@@ -164,14 +165,16 @@ class FeatureCTC(TaskComputedTorque):
         """:meth:`TaskComputedTorque.build_grids`: the grids of the laws whose features
         are this class's model (:meth:`motion_and_seen`), one pass per model world
         (camera and robot): rows are independent, each grid holds its own numbers."""
-        worlds: dict[tuple[int, int], list[FeatureCTC]] = {}
+        ours: list[FeatureCTC] = []
+        contexts: list[ControllerContext] = []
         for law in laws:
             if (isinstance(law, FeatureCTC) and law.context is not None
                     and law.reference is not None
                     and type(law).motion_and_seen is _MOTION_AND_SEEN):
-                worlds.setdefault((id(law.context.camera), id(law.context.geometry)),
-                                  []).append(law)
-        for group in worlds.values():
+                ours.append(law)
+                contexts.append(law.context)
+        for members in by_model_world(contexts):
+            group = [ours[k] for k in members]
             times = [law.grid_times() for law in group]
             rows, known, every = grid_rows(*features_motion(group, times))
             start = 0

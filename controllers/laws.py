@@ -114,17 +114,16 @@ class VisionLaw(VisionLawBatch):
         state = super().__getstate__()
         for key in ("_k_features", "_k_lengths", "_k_desired_lengths"):
             state.pop(key, None)
-        state["_k_desired"] = getattr(self, "_k_desired_lengths", None) is not None
         return state
 
     def __setstate__(self, state: dict[str, object]) -> None:
-        desired = state.pop("_k_desired")
         self.__dict__.update(state)
         kernel = self.kernel
-        if kernel is not None:
+        if kernel is not None:  # (the views _configure_kernel takes)
             self._k_features = kernel.inputs["features"].reshape(self.observed_feature.shape)
             self._k_lengths = kernel.inputs["lengths"]
-            self._k_desired_lengths = kernel.inputs["desired_lengths"] if desired else None
+            self._k_desired_lengths = (kernel.inputs["desired_lengths"]
+                                       if self.desired_lengths_measured else None)
 
     # ----------------------------------------------------------------- reset
     def reset_trial(self, context: ControllerContext) -> None:

@@ -151,6 +151,15 @@ class TrackingPlan:
 PLAN_CHUNK = 8
 
 
+def by_model_world(contexts: Sequence[ControllerContext]) -> list[list[int]]:
+    """The indices of ``contexts`` grouped by model world (the same camera and robot
+    objects: one :func:`model_goals` call can serve them), in order of first appearance."""
+    worlds: dict[tuple[int, int], list[int]] = {}
+    for k, context in enumerate(contexts):
+        worlds.setdefault((id(context.camera), id(context.geometry)), []).append(k)
+    return list(worlds.values())
+
+
 def tracking_plan(context: ControllerContext, name: str) -> TrackingPlan:
     """The goals of ``context.reference`` on the control grid (see the module docstring).
 
@@ -178,11 +187,8 @@ def tracking_plans(contexts: Sequence[ControllerContext], name: str) -> list[Tra
         reference = context.reference
         samples.append(reference.at(dt * np.arange(math.ceil(float(reference.duration) / dt)
                                                    + 2)))
-    worlds: dict[tuple[int, int], list[int]] = {}
-    for k, context in enumerate(contexts):
-        worlds.setdefault((id(context.camera), id(context.geometry)), []).append(k)
     goals: list[dict[str, Any]] = [{} for _ in contexts]
-    for members in (world[i:i + PLAN_CHUNK] for world in worlds.values()
+    for members in (world[i:i + PLAN_CHUNK] for world in by_model_world(contexts)
                     for i in range(0, len(world), PLAN_CHUNK)):
         both = model_goals(contexts[members[0]],
                            np.concatenate([samples[k].rotation for k in members]),
