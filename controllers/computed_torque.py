@@ -33,12 +33,12 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from controllers.control_grid import chunks, grid_times
 from controllers.ctc_law import DAMPING, NATURAL_FREQUENCY_HZ, ComputedTorqueLaw
 from controllers.ctc_rows import FK_MAX_CALLS
 from controllers.data import CommandBatch
 from controllers.exceptions import ContextError
 from controllers.joint_ctc_rows import (
-    GRID_TIME_TOLERANCE,
     POSE_IN,
     QUINTIC_SIZE,
     JointRows,
@@ -61,7 +61,7 @@ if TYPE_CHECKING:
 
 #: Forward-kinematics tolerance on the length residual [m] (as :func:`forward_kinematics`).
 FK_TOLERANCE = compiled_ctc.FK_TOLERANCE
-__all__ = ["DAMPING", "FK_MAX_CALLS", "FK_TOLERANCE", "GRID_CHUNK", "GRID_TIME_TOLERANCE",
+__all__ = ["DAMPING", "FK_MAX_CALLS", "FK_TOLERANCE",
            "NATURAL_FREQUENCY_HZ", "QUINTIC_PEAK_SPEED", "ComputedTorqueController",
            "legs_of_poses", "sample_grids"]
 
@@ -207,11 +207,10 @@ class ComputedTorqueController(ComputedTorqueLaw):
         self._rows = JointRows(self.trial_instances)
 
     def grid_times(self) -> np.ndarray:
-        """The control grid ``k dt`` [s] on which the reference is sampled (``ceil(T /
-        dt) + 3`` instants, ``T`` its duration)."""
+        """The control grid [s] on which the reference is sampled
+        (:func:`controllers.control_grid.grid_times`)."""
         assert self._ctx is not None and self._ctx.reference is not None
-        steps = math.ceil(float(self._ctx.reference.duration) / self._dt) + 3
-        return self._dt * np.arange(steps)  # type: ignore[no-any-return]
+        return grid_times(self._ctx.reference.duration, self._dt)
 
     @property
     def grid_pending(self) -> bool:
@@ -303,22 +302,13 @@ def legs_of_poses(geometry: HexapodGeometry, model: DynamicModel, R: np.ndarray,
     return out
 
 
-#: Trials whose reference grids :func:`sample_grids` evaluates together (a few
-#: thousand rows: the packed inputs stay in the cache).
-GRID_CHUNK = 16
-
-
 def sample_grids(laws: list[ComputedTorqueController]) -> None:
     """Sample the references of the (reset) trials ``laws`` on their control grids
     (:attr:`ComputedTorqueController.grid`): the legs of the trials that share their
-    nominal geometry in one evaluation per :data:`GRID_CHUNK` trials (rows are
-    independent: each grid holds the numbers of its own evaluation)."""
-    groups: dict[int, list[ComputedTorqueController]] = {}
-    for law in laws:
-        groups.setdefault(id(law.grid_source()[0].geometry), []).append(law)
-    chunks = [group[k:k + GRID_CHUNK] for group in groups.values()
-              for k in range(0, len(group), GRID_CHUNK)]
-    for group in chunks:
+    nominal geometry in one evaluation per chunk (:func:`controllers.control_grid.chunks`:
+    rows are independent, each grid holds the numbers of its own evaluation)."""
+    for members in chunks([id(law.grid_source()[0].geometry) for law in laws]):
+        group = [laws[k] for k in members]
         ctx, model = group[0].grid_source()
         refs = [law.grid_source()[0].reference.at(law.grid_times())  # type: ignore[union-attr]
                 for law in group]

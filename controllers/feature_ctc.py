@@ -29,19 +29,15 @@ import numpy as np
 
 from controllers.base import ControllerContext, Goal, Observation, ObservationBatch
 from controllers.cartesian_ctc import directions_seen, every_seen
+from controllers.control_grid import chunks, grid_step, grid_times, model_world
 from controllers.exceptions import ContextError
 from controllers.feature_grid import DUMMY, features_motion, grid_rows, sanitised
-from controllers.task_ctc import (
-    CompiledTaskStep,
-    TaskComputedTorque,
-    grid_step,
-)
+from controllers.task_ctc import CompiledTaskStep, TaskComputedTorque
 from controllers.task_ctc_inputs import camera_and_base_points, goal_pose_of
 from controllers.task_ctc_rows import TaskRows
 from controllers.tasks.feature_kind import BuiltinFeature
 from controllers.tasks.leg_direction import LEG_DIRECTIONS
 from controllers.tasks.leg_edge import EDGE_NORMALS
-from controllers.tracking import by_model_world
 from hexapod.kinematics import Transform
 from vision.legs import directions_from_edges
 
@@ -155,11 +151,10 @@ class FeatureCTC(TaskComputedTorque):
         return self._grid
 
     def grid_times(self) -> np.ndarray:
-        """The control grid ``k dt`` [s] to a step past the reference's end."""
+        """The control grid [s] (:func:`controllers.control_grid.grid_times`)."""
         ctx, ref = self.context, self.reference
         assert ctx is not None and ref is not None
-        dt = float(ctx.dt)
-        return dt * np.arange(int(np.ceil(float(ref.duration) / dt)) + 2)
+        return grid_times(ref.duration, float(ctx.dt))
 
     def build_grids(self, laws: list[TaskComputedTorque]) -> None:
         """:meth:`TaskComputedTorque.build_grids`: the grids of the laws whose features
@@ -173,7 +168,7 @@ class FeatureCTC(TaskComputedTorque):
                     and type(law).motion_and_seen is _MOTION_AND_SEEN):
                 ours.append(law)
                 contexts.append(law.context)
-        for members in by_model_world(contexts):
+        for members in chunks([model_world(c) for c in contexts], None):
             group = [ours[k] for k in members]
             times = [law.grid_times() for law in group]
             rows, known, every = grid_rows(*features_motion(group, times))

@@ -40,6 +40,7 @@ from typing import TYPE_CHECKING, NamedTuple
 import numpy as np
 
 from controllers.base import Command
+from controllers.control_grid import GRID_TOLERANCE
 from controllers.ctc_rows import (
     FK_MAX_CALLS,
     NEWTON_CALLS_C,
@@ -59,8 +60,6 @@ if TYPE_CHECKING:
     from controllers.computed_torque import ComputedTorqueController
     from hexapod.compiled import CompiledFunction
 
-#: How far from ``k dt`` an observation's time may be to use the reference's grid [s].
-GRID_TIME_TOLERANCE = 1e-9
 #: Where the compiled step's blocks lie in its rows (:data:`compiled_ctc.INPUTS`,
 #: :data:`compiled_ctc.OUTPUTS`), looked up once.
 DESIRED, POSE_IN = compiled_ctc.INPUTS["desired"], compiled_ctc.INPUTS["pose"]
@@ -291,7 +290,7 @@ class JointRows:
             self.t_end.ctypes.data, self.grid_len.ctypes.data, self.grids.ctypes.data,
             0 if self.shared else self.grids.shape[1], self.quintic.ctypes.data,
             self.quintic_speed.ctypes.data, QUINTIC_PEAK_SPEED, self.kp_ki,
-            self.integral.ctypes.data, GRID_TIME_TOLERANCE, self.steps.ctypes.data,
+            self.integral.ctypes.data, GRID_TOLERANCE, self.steps.ctypes.data,
             self.limit.ctypes.data, self._kernel, function.n_out, POSE_OUT.start, RESIDUAL, STATUS,
             outs["screen"].start, FORCES.start, compiled_ctc.FK_TOLERANCE, FK_MAX_CALLS,
             4.0 * self.threshold**2, self._scratch.ctypes.data)
@@ -422,5 +421,5 @@ class JointRows:
         out.put(j, Command.refuse(f"{self.name}: {reason}", actuation=Actuation.FORCE))
 
 
-__all__ = ["ACCEPTED", "GRID_TIME_TOLERANCE", "QUINTIC_SIZE", "SOURCE", "JointRows",
+__all__ = ["ACCEPTED", "QUINTIC_SIZE", "SOURCE", "JointRows",
            "JointState"]

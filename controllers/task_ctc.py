@@ -30,6 +30,7 @@ from controllers.base import (
     Observation,
     ObservationBatch,
 )
+from controllers.control_grid import grid_step, grid_times
 from controllers.ctc_law import DAMPING as DAMPING
 from controllers.ctc_law import NATURAL_FREQUENCY_HZ as NATURAL_FREQUENCY_HZ
 from controllers.ctc_law import ComputedTorqueLaw
@@ -215,9 +216,7 @@ class TaskComputedTorque(ComputedTorqueLaw):
         ctx, ref = self.context, self.reference
         assert ctx is not None and ref is not None
         if self._pose_grid is None or self._pose_grid[0] is not ref:
-            dt = float(ctx.dt)
-            n = int(np.ceil(float(ref.duration) / dt)) + 2
-            self._pose_grid = (ref, self.pose_rows(dt * np.arange(n)))
+            self._pose_grid = (ref, self.pose_rows(grid_times(ref.duration, float(ctx.dt))))
         return self._pose_grid[1]
 
     def pose_rows(self, times: np.ndarray) -> np.ndarray:
@@ -287,11 +286,4 @@ class TaskComputedTorque(ComputedTorqueLaw):
         """A zero force command with the reason."""
         return Command.refuse(f"{self.name}: {problem}", error=error,
                               actuation=Actuation.FORCE)
-
-
-def grid_step(tr: float, dt: float) -> int:
-    """The step ``k`` of the control grid at ``tr`` [s] (``tr = k dt`` within 1 ns, ``dt``
-    [s]), or -1 off the grid."""
-    k = round(tr / dt)
-    return k if abs(tr - k * dt) < 1e-9 and k >= 0 else -1
 

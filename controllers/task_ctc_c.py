@@ -13,6 +13,7 @@ from __future__ import annotations
 import ctypes
 from functools import lru_cache
 
+from controllers.control_grid import GRID_TOLERANCE
 from controllers.ctc_rows import NEWTON_CALLS_C
 from hexapod.c_step import c_library, c_struct
 
@@ -74,7 +75,9 @@ void tc_prepare(const TaskCtc *c, int64_t m, double *Xl, const int64_t *trials,
         double r = t[j] - clock[1], dt = c->dt[i], k = nearbyint(r / dt);
         int64_t len = c->grid_len[i];
         tr[j] = r;
-        if (!(fabs(r - k * dt) < 1e-9 && k >= 0) || len <= 0) { code[j] = OFF_GRID; continue; }
+        if (!(fabs(r - k * dt) <= @GRID_TOLERANCE@ && k >= 0) || len <= 0) {
+            code[j] = OFF_GRID; continue;
+        }
         gstep[j] = (int64_t)k < len - 1 ? (int64_t)k : len - 1;
         memcpy(x + c->ref_at, c->grids[i] + c->ref_w * gstep[j], c->ref_w * sizeof(double));
         for (int64_t r2 = 0; r2 < c->mask_w; r2++) x[c->mask_at + r2] = 1.0;
@@ -148,7 +151,7 @@ int tc_step_call(const TaskCtc *c, const TaskCall *a) {
     tc_finish_call(c, a);
     return 0;
 }
-""".replace("@CODES@", ", ".join(CODES))
+""".replace("@CODES@", ", ".join(CODES)).replace("@GRID_TOLERANCE@", repr(GRID_TOLERANCE))
 
 #: The C ``TaskCtc`` (:func:`~hexapod.c_step.c_struct`: its fields read from the C).
 Context = c_struct(SOURCE, "TaskCtc")

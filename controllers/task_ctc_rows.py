@@ -40,6 +40,7 @@ import numpy as np
 from scipy.linalg.lapack import dsyevd as _eigenvalues
 
 from controllers.base import Command
+from controllers.control_grid import chunks, model_world
 from controllers.ctc_rows import FK_MAX_CALLS, evaluate_rows, norms, rank_condition, refusal
 from controllers.data import CommandBatch, ObservationBatch
 from controllers.task_ctc_c import (
@@ -70,9 +71,6 @@ if TYPE_CHECKING:
     from controllers.task_ctc import TaskComputedTorque
     from controllers.task_ctc_compiled import CompiledTaskStep
 
-#: Trials whose new reference grids are built together (their arrays stay in the
-#: caches).
-GRID_CHUNK = 8
 #: The columns of a trial's reference clock (3,): started (1.0 or 0.0), the observation
 #: time at which the reference's clock is 0 [s], and the reference's version (counts
 #: its changes: a grid built for an older version is built again).
@@ -205,11 +203,12 @@ class TaskRows:
 
     # ---------------------------------------------------------------- grids
     def _build_stale(self, trials: np.ndarray) -> None:
-        """Build the grids of ``trials`` whose reference changed, :data:`GRID_CHUNK`
-        trials together."""
+        """Build the grids of ``trials`` whose reference changed, a chunk of trials of one
+        model world together (:func:`controllers.control_grid.chunks`)."""
         new = np.unique(trials[self.built[trials] != self.clock[trials, VERSION]]).tolist()
-        for start in range(0, len(new), GRID_CHUNK):
-            chunk = new[start:start + GRID_CHUNK]
+        worlds = [None if (c := self.laws[k].context) is None else model_world(c) for k in new]
+        for members in chunks(worlds):
+            chunk = [new[m] for m in members]
             with contextlib.suppress(Exception):  # each trial's _build meets it again
                 self.laws[chunk[0]].build_grids([self.laws[k] for k in chunk])
             for k in chunk:
@@ -504,4 +503,4 @@ class TaskRows:
         out.put(j, Command.refuse(f"{name}: {reason}", actuation=Actuation.FORCE))
 
 
-__all__ = ["GRID_CHUNK", "START", "STARTED", "VERSION", "TaskRows"]
+__all__ = ["START", "STARTED", "VERSION", "TaskRows"]

@@ -35,6 +35,7 @@ import numpy as np
 
 from controllers.base import Controller
 from controllers.batch import actuation_of
+from controllers.control_grid import chunks, grid_times, model_world
 from controllers.data import (
     FEATURE_FIELDS,
     GOAL_FIELDS,
@@ -146,20 +147,6 @@ class TrackingPlan:
                        for name, arr in self.goals.items()})
 
 
-#: Trials whose model goals are computed together (larger arrays fall out of the
-#: caches: 200 trials at once took longer than one by one).
-PLAN_CHUNK = 8
-
-
-def by_model_world(contexts: Sequence[ControllerContext]) -> list[list[int]]:
-    """The indices of ``contexts`` grouped by model world (the same camera and robot
-    objects: one :func:`model_goals` call can serve them), in order of first appearance."""
-    worlds: dict[tuple[int, int], list[int]] = {}
-    for k, context in enumerate(contexts):
-        worlds.setdefault((id(context.camera), id(context.geometry)), []).append(k)
-    return list(worlds.values())
-
-
 def tracking_plan(context: ControllerContext, name: str) -> TrackingPlan:
     """The goals of ``context.reference`` on the control grid (see the module docstring).
 
@@ -171,10 +158,10 @@ def tracking_plan(context: ControllerContext, name: str) -> TrackingPlan:
 
 
 def tracking_plans(contexts: Sequence[ControllerContext], name: str) -> list[TrackingPlan]:
-    """:func:`tracking_plan` of every context, the nominal model's goals of up to
-    :data:`PLAN_CHUNK` contexts that share a model world (camera and robot) in one call
-    of :func:`model_goals` over all their samples (each sample's goals are its own
-    numbers).
+    """:func:`tracking_plan` of every context, the nominal model's goals of a chunk of
+    contexts that share a model world (camera and robot,
+    :func:`controllers.control_grid.chunks`) in one call of :func:`model_goals` over all
+    their samples (each sample's goals are its own numbers).
 
     Raises:
         ContextError: As :func:`tracking_plan`, for the first context at fault.
@@ -185,11 +172,9 @@ def tracking_plans(contexts: Sequence[ControllerContext], name: str) -> list[Tra
         if not (math.isfinite(dt) and dt > 0):
             raise ContextError(name, "dt", f"must be positive and finite, got {dt}")
         reference = context.reference
-        samples.append(reference.at(dt * np.arange(math.ceil(float(reference.duration) / dt)
-                                                   + 2)))
+        samples.append(reference.at(grid_times(reference.duration, dt)))
     goals: list[dict[str, Any]] = [{} for _ in contexts]
-    for members in (world[i:i + PLAN_CHUNK] for world in by_model_world(contexts)
-                    for i in range(0, len(world), PLAN_CHUNK)):
+    for members in chunks([model_world(context) for context in contexts]):
         both = model_goals(contexts[members[0]],
                            np.concatenate([samples[k].rotation for k in members]),
                            np.concatenate([samples[k].translation for k in members]))

@@ -219,14 +219,14 @@ def test_the_dynamic_world_measures_leg_velocities() -> None:
 
 def test_a_batchs_reference_grids_are_each_trials_own(geometry: HexapodGeometry) -> None:
     """reset_batch samples every trial's reference grid together (sample_grids, by
-    chunks of GRID_CHUNK trials): each grid holds the numbers of its trial's own
+    chunks of CHUNK trials): each grid holds the numbers of its trial's own
     evaluation (reference_legs on its control grid), to the last bit."""
-    from controllers import computed_torque as ct
+    from controllers.control_grid import CHUNK
     from tests.controllers.ctc_world import CtcWorld, ideal_drives, line_reference
 
     truth = ideal_drives(geometry)
     world = CtcWorld.make(truth)
-    n = ct.GRID_CHUNK + 3  # two chunks
+    n = CHUNK + 3  # two chunks
     contexts = []
     for k in range(n):  # a reference of its own per trial, of its own duration
         _, _, R1, t1, ref = line_reference(truth, "quintic", (0.5 + 0.2 * k, -0.3, 0.4))

@@ -22,9 +22,9 @@ from controllers.base import (
     Observation,
     ObservationBatch,
 )
+from controllers.control_grid import CHUNK
 from controllers.exceptions import ContextError
 from controllers.tracking import (
-    PLAN_CHUNK,
     TrackingController,
     model_goals,
     tracking_plan,
@@ -329,12 +329,13 @@ def test_model_goals_of_some_fields_are_those_of_all_fields() -> None:
 
 
 def test_the_plans_of_a_batch_are_those_of_each_trial_alone() -> None:
-    """:func:`tracking_plans` over more trials than :data:`PLAN_CHUNK`, in two model
-    worlds taken turn about (the perspective and the unified camera), gives every trial
-    the goals and feed-forward of :func:`tracking_plan` of that trial alone, to the last
-    bit; a trial whose period is not positive is refused by name."""
+    """:func:`tracking_plans` over more trials than a chunk
+    (:data:`~controllers.control_grid.CHUNK`), in two model worlds taken turn about (the
+    perspective and the unified camera), gives every trial the goals and feed-forward of
+    :func:`tracking_plan` of that trial alone, to the last bit; a trial whose period is
+    not positive is refused by name."""
     worlds = [_world("perspective"), _world("unified")]
-    n = 2 * PLAN_CHUNK + 3  # (more than a chunk in each world)
+    n = 2 * CHUNK + 3  # (more than a chunk in each world)
     per_world = [_tracking_contexts(w, n) for w in worlds]
     contexts = [per_world[k % 2][k] for k in range(n)]
     plans = tracking_plans(contexts, "leg-edge")
