@@ -36,7 +36,6 @@ import numpy as np
 from controllers.control_grid import chunks, grid_times
 from controllers.ctc_law import DAMPING, NATURAL_FREQUENCY_HZ, ComputedTorqueLaw
 from controllers.ctc_rows import FK_MAX_CALLS
-from controllers.data import CommandBatch
 from controllers.exceptions import ContextError
 from controllers.joint_ctc_rows import (
     POSE_IN,
@@ -56,7 +55,7 @@ from hexapod.workspace import home_pose
 if TYPE_CHECKING:
     from collections.abc import Sequence
 
-    from controllers.data import ControllerContext, Goal, ObservationBatch
+    from controllers.data import ControllerContext, Goal
     from hexapod.geometry import HexapodGeometry
 
 #: Forward-kinematics tolerance on the length residual [m] (as :func:`forward_kinematics`).
@@ -204,7 +203,7 @@ class ComputedTorqueController(ComputedTorqueLaw):
         super().reset_batch(contexts)
         sample_grids([inst for inst in self.trial_instances
                       if isinstance(inst, ComputedTorqueController) and inst.grid_pending])
-        self._rows = JointRows(self.trial_instances)
+        self._rows = self.batch_rows()
 
     def grid_times(self) -> np.ndarray:
         """The control grid [s] on which the reference is sampled
@@ -273,20 +272,11 @@ class ComputedTorqueController(ComputedTorqueLaw):
         return self.ctc_options.saturated(forces, self._limit, lambda: zero_acceleration_forces(
             model, pose, qd, coulomb_velocity=qd_s))
 
-    def step_batch(self, observations: ObservationBatch) -> CommandBatch:
-        """The commands of every row (:meth:`JointRows.step`; refused, zero, with a reason
-        where the lengths, their rates or the time are missing or not finite, or the
-        nominal model fails)."""
-        self.crashes = {}
-        if (unreset := self.checked_batch(observations)) is not None:
-            return unreset
-        out = CommandBatch.zeros(len(observations), self.actuation)
-        rows = self._rows
-        if rows is None or rows.laws is not self.trial_instances:  # (a copy: built again)
-            rows = self._rows = JointRows(self.trial_instances)
-        if len(observations):
-            rows.step(observations, out)
-        return out
+    def batch_rows(self) -> JointRows:
+        """The batch's arrays and its one step (:meth:`JointRows.step`: refused, zero,
+        with a reason where the lengths, their rates or the time are missing or not
+        finite, or the nominal model fails)."""
+        return JointRows(self.trial_instances)
 
 
 def legs_of_poses(geometry: HexapodGeometry, model: DynamicModel, R: np.ndarray, p: np.ndarray,

@@ -6,9 +6,13 @@ and the saturation strategy, :class:`~controllers.solvers.computed_torque.CTCOpt
 
 from __future__ import annotations
 
+from collections.abc import Sequence
+from typing import Any, Protocol
+
 import numpy as np
 
 from controllers.base import Controller
+from controllers.data import CommandBatch, ObservationBatch
 from controllers.exceptions import ContextError
 from controllers.solvers.computed_torque import CTCOptions
 from hexapod.actuation import Actuation
@@ -17,6 +21,19 @@ from hexapod.actuation import Actuation
 NATURAL_FREQUENCY_HZ = 2.0
 #: Default damping ratio of the error.
 DAMPING = 1.0
+
+
+class BatchRows(Protocol):
+    """The arrays of a batch's trials and the one step over them
+    (:class:`~controllers.joint_ctc_rows.JointRows`,
+    :class:`~controllers.task_ctc_rows.TaskRows`)."""
+
+    @property
+    def laws(self) -> Sequence[Any]:
+        """The trials' instances, in trial order."""
+
+    def step(self, observations: ObservationBatch, out: CommandBatch) -> None:
+        """Every row's command into ``out``."""
 
 
 class ComputedTorqueLaw(Controller):
@@ -39,6 +56,8 @@ class ComputedTorqueLaw(Controller):
     """
 
     actuation = Actuation.FORCE
+    #: The batch's arrays (:meth:`batch_rows`; built again for a copy).
+    _rows: BatchRows | None = None
     #: Samples ``context.reference`` itself (:mod:`controllers.tracking` passes it through).
     tracks_reference = True
 
@@ -60,5 +79,24 @@ class ComputedTorqueLaw(Controller):
     def init_state(self) -> None:
         """Set up the law's state before its first reset (nothing by default)."""
 
+    def batch_rows(self) -> BatchRows:
+        """The arrays of this batch's trials (:attr:`trial_instances`, reset) and their
+        one step."""
+        raise NotImplementedError
 
-__all__ = ["DAMPING", "NATURAL_FREQUENCY_HZ", "ComputedTorqueLaw"]
+    def step_batch(self, observations: ObservationBatch) -> CommandBatch:
+        """The leg forces of every row [N] (the one step of :meth:`batch_rows`), or a
+        refusal (zeros) with its reason."""
+        self.crashes = {}
+        if (unreset := self.checked_batch(observations)) is not None:
+            return unreset
+        out = CommandBatch.zeros(len(observations), Actuation.FORCE)
+        rows = self._rows
+        if rows is None or rows.laws is not self.trial_instances:  # (a copy: built again)
+            rows = self._rows = self.batch_rows()
+        if len(observations):
+            rows.step(observations, out)
+        return out
+
+
+__all__ = ["DAMPING", "NATURAL_FREQUENCY_HZ", "BatchRows", "ComputedTorqueLaw"]

@@ -24,7 +24,6 @@ import numpy as np
 
 from controllers.base import (
     Command,
-    CommandBatch,
     ControllerContext,
     Goal,
     Observation,
@@ -232,19 +231,10 @@ class TaskComputedTorque(ComputedTorqueLaw):
         tracks them (unchanged by default)."""
         return R, t, twist, twist_rate
 
-    def step_batch(self, observations: ObservationBatch) -> CommandBatch:
-        """The leg forces of every row [N] (:meth:`~controllers.task_ctc_rows.TaskRows.
-        step`), or a refusal (zeros) with its reason."""
-        self.crashes = {}
-        if (unreset := self.checked_batch(observations)) is not None:
-            return unreset
-        out = CommandBatch.zeros(len(observations), Actuation.FORCE)
-        rows = self._rows
-        if rows is None or rows.laws is not self.trial_instances:  # (a copy: built again)
-            rows = self._rows = TaskRows(self.trial_instances)
-        if len(observations):
-            rows.step(observations, out, self.solver.threshold)
-        return out
+    def batch_rows(self) -> TaskRows:
+        """The batch's arrays and its one step (:meth:`~controllers.task_ctc_rows.
+        TaskRows.step`)."""
+        return TaskRows(self.trial_instances)
 
     def integral_term(self, m: int) -> np.ndarray:
         """(m,) ``Kp Ki int e dt`` of the task rows (the integral action's share of the

@@ -134,8 +134,9 @@ class TaskRows:
         law0 = laws[0] if laws else None
         self.kp_ki = (law0.gains.kp * law0.integral_gain
                       if law0 is not None and law0.integral_gain else 0.0)
-        #: The rank test's threshold of the last step (its screen's scale set in C).
-        self.threshold = math.nan
+        #: The rank test's relative singular-value threshold (the laws' solver's; its
+        #: screen's scale set in C).
+        self.threshold = law0.solver.threshold if law0 is not None else math.nan
         self._last: RowArrays | None = None
         self.context: ctypes.Structure | None = None
         if self.step_of is not None:
@@ -158,7 +159,7 @@ class TaskRows:
             self.integral.shape[1], ins["pose"].start, 0, 0, 0, 0, 0, 0, 0, 0, self.kp_ki,
             0, 0, 0, 0, self._kernel, function.n_out, outs["pose"].start, outs.index("fk_residual"),
             outs.index("status"), outs["screen"].start, outs["forces"].start,
-            outs["error"].start, step.tolerance, FK_MAX_CALLS, 0.0)
+            outs["error"].start, step.tolerance, FK_MAX_CALLS, 4.0 * self.threshold**2)
         law0 = self.laws[0]
         measurement = law0.batch_measurement
         #: The observation's measured field and its visibility (None: nothing measured).
@@ -240,8 +241,7 @@ class TaskRows:
         self.grid_len[k] = len(rows)
 
     # ---------------------------------------------------------------- the step
-    def step(self, observations: ObservationBatch, out: CommandBatch, threshold: float
-             ) -> None:
+    def step(self, observations: ObservationBatch, out: CommandBatch) -> None:
         """Every row's command into ``out`` (a refusal with its reason where there is
         none); a batch of one gets the full :class:`Command` (the diagnostics of a
         per-trial step: error, rank, condition number and notes).
@@ -249,7 +249,6 @@ class TaskRows:
         Args:
             observations: The batch (row ``k`` of trial ``observations.trials[k]``).
             out: The commands, written in place.
-            threshold: The rank test's relative singular-value threshold.
 
         Raises:
             CompilationError: The compiled step failed.
@@ -261,9 +260,7 @@ class TaskRows:
                 self._refuse(out, j, self._unusable(observations, j))
             return
         lib = library()
-        if threshold != self.threshold:
-            self.threshold = threshold
-            c.screen_scale = 4.0 * threshold**2
+        threshold = self.threshold
         b = self._buffers(n)
         observations.write_rows(b)
         if self.measured is not None:
