@@ -60,9 +60,8 @@ if TYPE_CHECKING:
 
 #: Forward-kinematics tolerance on the length residual [m] (as :func:`forward_kinematics`).
 FK_TOLERANCE = compiled_ctc.FK_TOLERANCE
-__all__ = ["DAMPING", "FK_MAX_CALLS", "FK_TOLERANCE",
-           "NATURAL_FREQUENCY_HZ", "QUINTIC_PEAK_SPEED", "ComputedTorqueController",
-           "legs_of_poses", "sample_grids"]
+__all__ = ["DAMPING", "FK_MAX_CALLS", "FK_TOLERANCE", "NATURAL_FREQUENCY_HZ",
+           "QUINTIC_PEAK_SPEED", "ComputedTorqueController", "legs_of_poses", "sample_grids"]
 
 
 class ComputedTorqueController(ComputedTorqueLaw):

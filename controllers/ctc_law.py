@@ -37,8 +37,9 @@ class BatchRows(Protocol):
 
 
 class ComputedTorqueLaw(Controller):
-    """A computed-torque law's options (see the module docstring); a subclass sets up
-    its own state in :meth:`init_state`.
+    """A computed-torque law's options (see the module docstring) and its one step over
+    a batch (:meth:`step_batch`); a subclass sets up its own state in :meth:`init_state`
+    and gives its batch's arrays and step in :meth:`batch_rows`.
 
     Args:
         natural_frequency: ``f_n`` [Hz] of the task error's second-order response.

@@ -421,5 +421,4 @@ class JointRows:
         out.put(j, Command.refuse(f"{self.name}: {reason}", actuation=Actuation.FORCE))
 
 
-__all__ = ["ACCEPTED", "QUINTIC_SIZE", "SOURCE", "JointRows",
-           "JointState"]
+__all__ = ["ACCEPTED", "QUINTIC_SIZE", "SOURCE", "JointRows", "JointState"]

@@ -276,4 +276,3 @@ class TaskComputedTorque(ComputedTorqueLaw):
         """A zero force command with the reason."""
         return Command.refuse(f"{self.name}: {problem}", error=error,
                               actuation=Actuation.FORCE)
-
