@@ -8,7 +8,7 @@ joint in ``e``. Lengths are in metres inside the code and millimetres in files.
 
 from __future__ import annotations
 
-import itertools
+import math
 from dataclasses import dataclass, field
 from functools import cached_property
 from pathlib import Path
@@ -26,6 +26,10 @@ from hexapod.exceptions import ConfigFileError, GeometryError
 MIN_JOINT_SEPARATION = 1e-4
 
 
+#: The pairs ``i < j`` of six points (an upper triangle mask).
+_PAIRS = np.triu(np.ones((6, 6), dtype=bool), 1)
+
+
 def _validate_points(name: str, value: Any, source: str | None) -> np.ndarray:
     try:
         arr = np.array(value, dtype=float)
@@ -33,17 +37,19 @@ def _validate_points(name: str, value: Any, source: str | None) -> np.ndarray:
         raise GeometryError(name, "expected a 6x3 array of numbers", source) from None
     if arr.shape != (6, 3):
         raise GeometryError(name, f"expected shape (6, 3), got {arr.shape}", source)
-    bad = np.argwhere(~np.isfinite(arr))
-    if len(bad):
-        i, j = bad[0]
+    if not np.isfinite(arr).all():
+        i, j = np.argwhere(~np.isfinite(arr))[0]
         raise GeometryError(name, f"leg {i}: its point's {'xyz'[j]} coordinate is "
                             f"{arr[i, j]} (not finite; row {i} of the 6 points)", source)
-    for i, j in itertools.combinations(range(6), 2):
-        d = float(np.linalg.norm(arr[i] - arr[j]))
-        if d < MIN_JOINT_SEPARATION:
-            raise GeometryError(
-                name, f"points {i} and {j} coincide (distance {d * 1e3:.4f} mm)", source
-            )
+    diff = arr[:, None, :] - arr[None, :, :]
+    d2 = np.einsum("ijk,ijk->ij", diff, diff)  # squared distances of every pair
+    close = (d2 < MIN_JOINT_SEPARATION**2) & _PAIRS
+    if close.any():
+        i, j = np.argwhere(close)[0]  # (the first pair i < j in row order)
+        d = math.sqrt(float(d2[i, j]))
+        raise GeometryError(
+            name, f"points {i} and {j} coincide (distance {d * 1e3:.4f} mm)", source
+        )
     centred = arr - arr.mean(axis=0)
     s = np.linalg.svd(centred, compute_uv=False)
     if s[1] < 1e-6 * max(s[0], 1e-12):
