@@ -50,6 +50,7 @@ from controllers.task_ctc_inputs import QUINTIC_PEAK_SPEED
 from hexapod.dynamics import DynamicModel
 from hexapod.dynamics.model import INVERSE_TOLERANCE
 from hexapod.kinematics import inverse_kinematics
+from hexapod.layout import read_pose, write_pose
 from hexapod.workspace import home_pose
 
 if TYPE_CHECKING:
@@ -120,17 +121,14 @@ class ComputedTorqueController(ComputedTorqueLaw):
     def _pose(self) -> tuple[np.ndarray, np.ndarray]:
         """The pose guess ``(R, t)`` of the next step (copies of the input row's)."""
         assert self._row is not None
-        row = self._row[POSE_IN]
-        return row[0:9].reshape(3, 3).T.copy(), row[9:12].copy()
+        return read_pose(self._row[POSE_IN])
 
     @_pose.setter
     def _pose(self, pose: tuple[np.ndarray, np.ndarray] | None) -> None:
         """Set the next step's pose guess (None: the nominal home pose)."""
         assert self._row is not None and self._ctx is not None
         R0, p0 = home_pose(self._ctx.geometry) if pose is None else pose
-        row = self._row[POSE_IN]
-        row[0:9] = np.asarray(R0).T.ravel()
-        row[9:12] = p0
+        write_pose(self._row[POSE_IN], R0, p0)
 
     def __getstate__(self) -> dict[str, object]:
         """Picklable: the batch (C context) left out, rebuilt at the next step from

@@ -24,6 +24,7 @@ from controllers.ctc_rows import FK_MAX_CALLS
 from controllers.solvers.compiled_task_ctc import FIT_TOLERANCE, FK_TOLERANCE, task_step
 from hexapod.compiled import CompiledFunction
 from hexapod.dynamics.model import INVERSE_TOLERANCE
+from hexapod.layout import read_pose, write_pose
 from hexapod.workspace import home_pose
 
 if TYPE_CHECKING:
@@ -116,16 +117,13 @@ class CompiledTaskStep:
         found (the home pose is in the row)."""
         if not self.guessed[0]:
             return None
-        pose = self.row[self.inputs["pose"]]
-        return pose[0:9].reshape(3, 3).T.copy(), pose[9:12].copy()
+        return read_pose(self.row[self.inputs["pose"]])
 
     @guess.setter
     def guess(self, pose: tuple[np.ndarray, np.ndarray] | None) -> None:
         """Set the next step's pose guess (None: the home pose)."""
         R0, t0 = self.home if pose is None else pose
-        pose_in = self.row[self.inputs["pose"]]
-        pose_in[0:9] = np.asarray(R0).T.ravel()
-        pose_in[9:12] = t0
+        write_pose(self.row[self.inputs["pose"]], R0, t0)
         self.guessed[0] = 0.0 if pose is None else 1.0
 
     def set(self, name: str, value: ArrayLike) -> None:

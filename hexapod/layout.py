@@ -109,3 +109,16 @@ class Layout:
         if size != self.size:
             raise LayoutError(function, f"{which} layout {self!r} has {self.size} numbers, "
                               f"the function's {which} has {size}")
+
+
+def read_pose(block: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Copies of the pose ``(R, t)`` (3, 3), (3,) [m] in a kernel's pose block (12,): ``R``
+    column-major, then ``t``."""
+    return block[0:9].reshape(3, 3).T.copy(), block[9:12].copy()
+
+
+def write_pose(block: np.ndarray, rotation: np.ndarray, translation: np.ndarray) -> None:
+    """Write the pose ``(R, t)`` [m] into a kernel's pose block (12,) (:func:`read_pose`'s
+    order)."""
+    block[0:9] = np.asarray(rotation).T.ravel()
+    block[9:12] = translation
