@@ -319,3 +319,22 @@ def test_every_keyed_kernel_names_every_module_its_build_runs(
     robots_compiled.period_functions.cache_clear()
     _assert_key_names(code_key(robots_compiled.KEY_MODULES),
                       _modules_run_by(robots_compiled.period_functions), "period lanes")
+
+
+def test_a_pose_block_is_read_as_casadi_reads_it() -> None:
+    """write_pose puts ``R`` in the block as a kernel's ``ca.reshape(block[0:9], 3, 3)``
+    (column-major) reads it back, ``t`` after it; read_pose returns copies of both."""
+    from scipy.spatial.transform import Rotation
+
+    from hexapod.layout import read_pose, write_pose
+
+    R = Rotation.from_euler("xyz", [0.3, -0.2, 1.1]).as_matrix()
+    t = np.array([0.01, -0.02, 0.3])
+    block = np.full(12, np.nan)
+    write_pose(block, R, t)
+    assert np.array_equal(np.array(ca.reshape(ca.DM(block[0:9]), 3, 3)), R)
+    assert np.array_equal(block[9:12], t)
+    R2, t2 = read_pose(block)
+    assert np.array_equal(R2, R) and np.array_equal(t2, t)
+    block[:] = 0.0  # copies: the block's later values do not reach them
+    assert np.array_equal(R2, R) and np.array_equal(t2, t)
