@@ -27,8 +27,9 @@ from controllers.base import (
 )
 from controllers.estimators import LegDirectionEstimate
 from controllers.exceptions import ContextError
-from controllers.law_rows import ACCEPTED, REJECTED, LawRows, core_key
+from controllers.law_rows import ACCEPTED, RARE, REJECTED, LawRows, core_key
 from controllers.leg_rate import LegRateFeedForward
+from controllers.model_directions import ModelDirections
 from controllers.solvers.base import Solver
 from controllers.tasks.leg_direction import LegDirections
 from controllers.tasks.leg_edge import EdgeFeature
@@ -216,9 +217,21 @@ class VisionLawBatch(LegRateFeedForward, Controller):
             return CommandBatch.of_row(cmd, self.actuation)
         out = CommandBatch(b.vel.copy(), b.norm.copy(), [None] * n)
         if code.any():  # rows not accepted (ACCEPTED is 0)
+            self._model_ahead(np.flatnonzero(code == RARE), obs)
             for j in np.flatnonzero(code != ACCEPTED).tolist():
                 out.put(j, self._python_row(rows, j, obs, int(code[j]), b.Y[j], crashes))
         return out
+
+    def _model_ahead(self, rare: np.ndarray, obs: ObservationBatch) -> None:
+        """Give the trials of the ``rare`` rows (two or more, stepped by their instances)
+        one :class:`~controllers.model_directions.ModelDirections` of this period: the
+        nominal directions of legs never seen, solved for all of them at once if one asks."""
+        if len(rare) < 2 or obs.lengths is None:
+            return
+        laws = [self.trial_instances[int(obs.trials[j])] for j in rare.tolist()]
+        ahead = ModelDirections(laws, obs.lengths[rare])
+        for k, law in enumerate(laws):
+            law.model_ahead = (ahead, k)
 
     def _python_row(self, rows: LawRows, j: int, obs: ObservationBatch, code: int,
                     y: np.ndarray, crashes: dict[int, BaseException]) -> Command:

@@ -34,11 +34,9 @@ from controllers.law_tools import (
     check_observation,
     goal_lengths,
 )
+from controllers.model_directions import ModelDirections
 from controllers.solvers.base import Solver
 from controllers.solvers.pseudo_inverse import DampedPseudoInverse
-from hexapod.exceptions import HexapodError
-from hexapod.fk import forward_kinematics
-from hexapod.kinematics import leg_directions
 
 
 class VisionLaw(VisionLawBatch):
@@ -97,6 +95,9 @@ class VisionLaw(VisionLawBatch):
         #: Last nominal-model pose (warm start of the forward kinematics that predicts
         #: the directions of never-seen legs), None before the first.
         self.model_pose: PoseEstimate | None = None
+        #: This period's row of a batch's :class:`ModelDirections` (set by the batch step
+        #: for the rows it leaves to this law, taken by :meth:`_model_directions`).
+        self.model_ahead: tuple[ModelDirections, int] | None = None
         #: The compiled core (:mod:`controllers.law_kernel`), set by :meth:`_install_kernel`.
         self.kernel: LawKernel | None = None
         self._spare_kernel: LawKernel | None = None
@@ -114,6 +115,7 @@ class VisionLaw(VisionLawBatch):
         state = super().__getstate__()
         for key in ("_k_features", "_k_lengths", "_k_desired_lengths"):
             state.pop(key, None)
+        state["model_ahead"] = None
         return state
 
     def __setstate__(self, state: dict[str, object]) -> None:
@@ -430,21 +432,17 @@ class VisionLaw(VisionLawBatch):
         """Leg directions (6, 3) (camera frame) of the nominal forward kinematics of ``q``
         [m] (warm-started at :attr:`model_pose`) seen through the estimated
         ``camera_from_base``, or None (no camera pose, no solution): ``J_inv`` of legs
-        never observed (an approximate direction only slows the convergence)."""
+        never observed (an approximate direction only slows the convergence). The rows a
+        batch step leaves to the trials are solved together (:attr:`model_ahead`,
+        :mod:`controllers.model_directions`)."""
         context = self.context
         pose = getattr(getattr(context, "camera", None), "camera_from_base", None)
         if context is None or pose is None:
             return None
-        guess = self.model_pose
-        try:
-            sol = forward_kinematics(context.geometry, q, check_stroke=False,
-                                     guess=None if guess is None else guess.pose)
-        except HexapodError:
-            return None
-        self.model_pose = PoseEstimate(sol.rotation, sol.translation)
-        # (the directions of legs_in_frame without its base points: the same numbers)
-        return pose.rotate(leg_directions(  # type: ignore[no-any-return]
-            context.geometry, sol.rotation, sol.translation))
+        ahead, self.model_ahead = self.model_ahead, None  # (this period's row only)
+        if ahead is None or not ahead[0].holds(ahead[1], self, q):
+            ahead = (ModelDirections([self], q[None]), 0)  # this row alone
+        return ahead[0].take(ahead[1])
 
     # ----------------------------------------------------------------- helpers
     def _desired_lengths(self, q: np.ndarray) -> np.ndarray:

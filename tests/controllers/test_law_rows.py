@@ -153,3 +153,57 @@ def test_trials_of_two_cores_in_one_batch_equal_their_batches_of_one(
             _same(out, j, one.step(rows[j]))
             assert out.reasons[j] is None
     assert accepted[0] == 2 * 3 * 3  # every row through the C: in the batch and alone
+
+
+@pytest.mark.parametrize("name", ["leg-edge", "leg-direction"])
+def test_rows_with_a_never_seen_leg_share_one_forward_kinematics(
+        world: World, name: str, monkeypatch: pytest.MonkeyPatch) -> None:
+    """Five trials never see leg 2 (nor does their goal): its direction is the nominal
+    model's, the forward kinematics of each row's lengths warm-started at its trial's
+    last model pose. The batch solves the five rows in one call per period
+    (:class:`~controllers.model_directions.ModelDirections`), and each row's command
+    (and notes) is its batch of one's, bit for bit, over 5 periods."""
+    from controllers.model_directions import ModelDirections
+
+    def without_leg_2(x: Any) -> Any:
+        legs = np.arange(6) != 2
+        out = dataclasses.replace(
+            x, normals=np.where(legs[:, None, None], x.normals, np.nan),
+            lines=None if x.lines is None else np.where(legs[:, None, None], x.lines, np.nan),
+            directions=np.where(legs[:, None], x.directions, np.nan),
+            edge_visible=np.repeat(legs[:, None], 2, axis=1))
+        return dataclasses.replace(out, direction_visible=legs) if isinstance(
+            x, Observation) else out
+
+    rng = np.random.default_rng(11)
+    n = 5
+    Rs, ts = world.poses(n + 1, rng, max_translation=0.02, max_angle=np.deg2rad(4),
+                         margin=0.03)
+    ctx = world.context(without_leg_2(world.goal(Rs[0], ts[0])), 0.02)
+    batch = registry.create(name, gain=2.0)
+    batch.reset_batch([ctx] * n)
+    singles = [registry.create(name, gain=2.0) for _ in range(n)]
+    for one in singles:
+        one.reset(ctx)
+    solved: list[int] = []
+    real = ModelDirections._solve
+
+    def counted(self: ModelDirections) -> Any:
+        solved.append(len(self.laws))
+        return real(self)
+
+    monkeypatch.setattr(ModelDirections, "_solve", counted)
+    poses = list(zip(Rs[1:], ts[1:], strict=True))
+    for step in range(5):
+        rows = [without_leg_2(world.observation(R, t, 0.02 * step)) for R, t in poses]
+        solved.clear()
+        out = batch.step_batch(_stacked(rows))
+        assert not batch.crashes
+        assert solved == [n]  # the five rows' forward kinematics in one call
+        for j, one in enumerate(singles):
+            cmd = one.step(rows[j])
+            _same(out, j, cmd)
+            assert cmd.reason is None
+            assert any("nominal-model directions" in note for note in cmd.notes), cmd.notes
+        for j, (R, t) in enumerate(poses):
+            poses[j] = world.move(R, t, singles[j].estimate.twist, 0.02)
