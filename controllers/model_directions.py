@@ -68,9 +68,13 @@ class ModelDirections:
         R, t = np.empty((m, 3, 3)), np.empty((m, 3))
         ok, u = np.zeros(m, dtype=bool), np.full((m, 6, 3), np.nan)
         finite = np.isfinite(self.lengths).all(axis=1)
-        contexts = [law.context for law in self.laws]
-        for members in chunks([(id(c.geometry), id(c.camera)) for c in contexts], None):
-            rows = np.array([k for k in members if finite[k]], dtype=np.int64)
+        contexts: list[Any] = [getattr(law, "context", None) for law in self.laws]
+        usable = [c is not None and getattr(c.camera, "camera_from_base", None) is not None
+                  for c in contexts]  # (a law without them has no model directions)
+        keys = [(id(c.geometry), id(c.camera)) if fit else None
+                for c, fit in zip(contexts, usable, strict=True)]
+        for members in chunks(keys, None):
+            rows = np.array([k for k in members if finite[k] and usable[k]], dtype=np.int64)
             if not len(rows):
                 continue
             geometry = contexts[rows[0]].geometry
