@@ -435,10 +435,6 @@ class VisionLaw(VisionLawBatch):
         never observed (an approximate direction only slows the convergence). The rows a
         batch step leaves to the trials are solved together (:attr:`model_ahead`,
         :mod:`controllers.model_directions`)."""
-        context = self.context
-        pose = getattr(getattr(context, "camera", None), "camera_from_base", None)
-        if context is None or pose is None:
-            return None
         ahead, self.model_ahead = self.model_ahead, None  # (this period's row only)
         if ahead is None or not ahead[0].holds(ahead[1], self, q):
             ahead = (ModelDirections([self], q[None]), 0)  # this row alone

@@ -18,7 +18,7 @@ from typing import Any
 
 import numpy as np
 
-from controllers.control_grid import chunks
+from controllers.control_grid import chunks, model_world
 from controllers.estimators import PoseEstimate
 from hexapod.fk import forward_kinematics_batch
 from hexapod.kinematics import leg_directions
@@ -71,8 +71,7 @@ class ModelDirections:
         contexts: list[Any] = [getattr(law, "context", None) for law in self.laws]
         usable = [c is not None and getattr(c.camera, "camera_from_base", None) is not None
                   for c in contexts]  # (a law without them has no model directions)
-        keys = [(id(c.geometry), id(c.camera)) if fit else None
-                for c, fit in zip(contexts, usable, strict=True)]
+        keys = [model_world(c) if fit else None for c, fit in zip(contexts, usable, strict=True)]
         for members in chunks(keys, None):
             rows = np.array([k for k in members if finite[k] and usable[k]], dtype=np.int64)
             if not len(rows):
