@@ -54,7 +54,7 @@ def _run(sc: object, controller: int, trials: int, engine: str) -> tuple[float, 
 STAGES = (
     ("trial set-up: worlds and poses", "benchmarks.sim.stepper", "make_trials"),
     ("trial set-up: goals", "benchmarks.sim.stepper", "_goals"),
-    ("trial set-up: controller reset", "controllers.batch", "batch_controller"),
+    ("trial set-up: controller reset", "benchmarks.sim.stepper", "task_batch_controller"),
     ("observation (C)", "benchmarks.sim.sensors", "observe_batch"),
     ("features and noise", "benchmarks.sim.sensors", "noisy_features"),
     ("convergence test (pose errors)", "benchmarks.sim.book", "pose_error"),
@@ -101,13 +101,11 @@ def _breakdown(sc: object, controller: int, trials: int) -> tuple[int, float, di
         if attr == "_step_batch":
             continue
         owner: Any = importlib.import_module(module)
-        if module == "controllers.batch":  # the engine's own reference to batch_controller
-            owner = importlib.import_module("benchmarks.sim.reference")
         *path, name = attr.split(".")  # a function, or a class's method
         for part in path:
             owner = getattr(owner, part)
         saved.append((owner, name, getattr(owner, name)))
-        setattr(owner, name, reset_timed(getattr(owner, name)) if name == "batch_controller"
+        setattr(owner, name, reset_timed(getattr(owner, name)) if name == "task_batch_controller"
                 else timed(label, getattr(owner, name)))
     try:
         cpu, _, rows = _run(sc, controller, trials, "batched")

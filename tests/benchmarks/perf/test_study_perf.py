@@ -3,6 +3,8 @@ rows compared."""
 
 from __future__ import annotations
 
+import time
+
 import pytest
 
 from benchmarks.perf import study
@@ -92,6 +94,34 @@ def test_some_controllers_of_a_dynamic_study_and_its_world_stage(
     world = rows["dynamic world period (C)"]
     assert all(0 < w < t for w, t in zip(world, rows["total"], strict=True))
     assert rows["forward kinematics (C)"] == [0.0, 0.0]  # (the dynamic world has none)
+
+
+@pytest.mark.slow
+def test_a_tracking_wrapper_s_reset_and_step_are_the_controller_s(
+        capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch) -> None:
+    """A trajectory task's controller is the tracking wrapper around the law: its reset
+    (the goals of every period, 0.3 s of CPU more here) is the controller's reset, not the
+    engine's bookkeeping."""
+    import controllers.tracking as tracking
+
+    real = tracking.tracking_plans
+
+    def slow(*args: object, **kwargs: object) -> object:
+        t0 = time.process_time()
+        while time.process_time() - t0 < 0.3:
+            pass
+        return real(*args, **kwargs)  # type: ignore[arg-type]
+
+    monkeypatch.setattr(tracking, "tracking_plans", slow)
+    assert study.main(["--scenario", "paccot2008-tracking", "--trials", "2", "--repeats",
+                       "1", "--controllers", "leg-edge", "--breakdown"]) == 0
+    head, table = capsys.readouterr().out.split("# Where the time goes")
+    steps = int(next(line for line in head.splitlines()
+                     if line.startswith("| leg-edge")).split("|")[2])
+    rows = {line.split("|")[1].strip(): float(line.split("|")[2])
+            for line in table.splitlines() if line.startswith("| ") and "stage" not in line}
+    assert rows["trial set-up: controller reset"] * steps >= 0.3e6 * 0.99
+    assert rows["other (the engine's numpy bookkeeping, rows)"] * steps < 0.3e6 / 2
 
 
 def test_an_unknown_controller_is_refused() -> None:
