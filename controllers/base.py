@@ -50,8 +50,10 @@ class Controller(RemembersOptions, ABC):
     computes the rows it can as arrays (:meth:`step_arrays`) and steps the others with
     each trial's own instance (:meth:`step_trial`, the package's one per-row loop). A
     controller defines :meth:`reset_trial` and :meth:`step_trial` (and maybe
-    :meth:`step_arrays`), or overrides :meth:`step_batch`. :meth:`step` and :meth:`reset`
-    are the final per-trial adapters (a batch of one: the servo loop).
+    :meth:`step_arrays`), or overrides :meth:`reset_batch`, :meth:`step_batch` and (for
+    a goal that moves) :meth:`retarget_batch`. :meth:`step`, :meth:`reset` and
+    :meth:`retarget` are the final per-trial adapters (a batch of one: the servo loop);
+    a class of this shape that overrides one gets a ``TypeError``.
 
     A plugin written before batches, that defines ``reset(context)`` and
     ``step(observation)`` (and maybe ``retarget(goal)``), keeps working: the base takes
@@ -80,17 +82,25 @@ class Controller(RemembersOptions, ABC):
 
     def __init_subclass__(cls, **kwargs: Any) -> None:
         super().__init_subclass__(**kwargs)
-        own = vars(cls)
-        if "step" in own and not getattr(cls, "_per_trial_plugin", False):
-            if any({"step_batch", "step_trial", "step_arrays"} & vars(k).keys()
-                   for k in cls.__mro__ if k is not Controller and issubclass(k, Controller)):
+        batch_shaped = any({"step_batch", "step_trial", "step_arrays"} & vars(k).keys()
+                           for k in cls.__mro__
+                           if k is not Controller and issubclass(k, Controller))
+        if "step" in vars(cls) and not getattr(cls, "_per_trial_plugin", False):
+            if batch_shaped:
                 raise TypeError(f"{cls.__qualname__}: step(observation) is the base's "
                                 "per-trial adapter (final): define step_batch or step_trial")
             cls._per_trial_plugin = True  # a plugin written before batches
         if getattr(cls, "_per_trial_plugin", False):  # its methods are the trial's
             for name in ("reset", "step", "retarget"):
-                if name in own:
-                    setattr(cls, name + "_trial", own[name])
+                method = getattr(cls, name)
+                if method is not getattr(Controller, name):  # its own or inherited
+                    setattr(cls, name + "_trial", method)
+            return
+        if batch_shaped:  # the adapters are final
+            for name, batch in (("reset", "reset_batch"), ("retarget", "retarget_batch")):
+                if getattr(cls, name) is not getattr(Controller, name):
+                    raise TypeError(f"{cls.__qualname__}: {name}() is the base's per-trial "
+                                    f"adapter (final): define {batch} or {name}_trial")
 
     # ------------------------------------------------------------------ per-trial adapters
     @final
@@ -271,8 +281,8 @@ class Controller(RemembersOptions, ABC):
                 continue
             goal = goals.item(j)
             inst.retarget_trial(goal)
-            assert inst.trial_context is not None
-            inst.trial_context = replace(inst.trial_context, goal=goal)
+            if inst.trial_context is not None:  # (None: an own reset_batch's instance)
+                inst.trial_context = replace(inst.trial_context, goal=goal)
 
     # ------------------------------------------------------------------ one trial
     def reset_trial(self, context: ControllerContext) -> None:
@@ -287,8 +297,19 @@ class Controller(RemembersOptions, ABC):
 
     def retarget_trial(self, goal: Goal) -> None:
         """A new goal for this instance's trial (by default a reset with it: the state
-        starts afresh)."""
-        assert self.trial_context is not None
+        starts afresh).
+
+        Raises:
+            NotImplementedError: The instance has no context of its own to reset with
+                (its controller's own ``reset_batch`` made the batch's instances; it
+                then defines ``retarget_batch``, or this method).
+        """
+        if self.trial_context is None:
+            raise NotImplementedError(
+                f"{type(self).__qualname__}: a new goal for a running trial (a trajectory "
+                "task gives one every period), and the controller's own reset_batch left "
+                "no per-trial context to reset with: define retarget_batch(trials, goals) "
+                "(or retarget_trial(goal)) to take it")
         self.reset_trial(replace(self.trial_context, goal=goal))
 
 

@@ -92,6 +92,79 @@ def test_step_is_final_where_step_batch_is_defined() -> None:
                 return Command(np.zeros(6))
 
 
+def test_reset_and_retarget_are_final_where_the_step_is_batched() -> None:
+    ctx = _contexts(1)[0]
+    with pytest.raises(TypeError, match=r"reset\(\) is the base's per-trial adapter"):
+        class OwnReset(Controller):
+            def reset(self, context: ControllerContext) -> None: ...
+
+            def step_trial(self, observation: Observation) -> Command:
+                return Command(np.zeros(6))
+    with pytest.raises(TypeError, match=r"retarget\(\) is the base's per-trial adapter"):
+        class OwnRetarget(JointSpaceController):
+            def retarget(self, goal: Goal) -> None: ...
+
+    class ResetOnly(Controller):  # no step yet: which shape it takes is its subclass's
+        def reset(self, context: ControllerContext) -> None:
+            self.q_star = np.asarray(context.goal.lengths)
+
+    with pytest.raises(TypeError, match="final"):  # an inherited reset as well
+        class Batched(ResetOnly):
+            def step_trial(self, observation: Observation) -> Command:
+                return Command(np.zeros(6))
+
+    class PerTrial(ResetOnly):  # the per-trial shape: the inherited reset is the trial's
+        def step(self, observation: Observation) -> Command:
+            return Command(self.q_star - np.asarray(observation.lengths))
+
+    assert PerTrial.reset_trial is vars(ResetOnly)["reset"]
+    law = PerTrial()
+    law.reset(ctx)
+    obs = _observations(1, np.random.default_rng(1)).item(0)
+    np.testing.assert_array_equal(law.step(obs).velocities,
+                                  np.asarray(ctx.goal.lengths) - obs.lengths)
+
+
+def test_the_doc_batch_example_refuses_before_reset_and_follows_a_moving_goal() -> None:
+    cls = _doc_classes()["MyBatchLaw"]
+    law = cls(gain=2.0)
+    obs = _observations(3, np.random.default_rng(5))  # trials 2, 1, 0
+    assert all(r is not None and "reset" in r for r in law.step_batch(obs).reasons)
+    contexts = _contexts(3)
+    law.reset_batch(contexts)
+    goal = np.full(6, 0.55)
+    law.retarget_batch(np.array([2]), GoalBatch(lengths=goal[None]))
+    got = law.step_batch(obs)
+    assert got.reasons == [None, None, None]
+    np.testing.assert_array_equal(got.velocities[0], -2.0 * (obs.lengths[0] - goal))
+    np.testing.assert_array_equal(got.velocities[2], -2.0 * (
+        obs.lengths[2] - np.asarray(contexts[0].goal.lengths)))
+    with pytest.raises(ValueError, match="outside the batch's 3 trials"):
+        law.step_batch(ObservationBatch(
+            trials=np.array([3]), t=np.zeros(1), lengths=obs.lengths[:1], normals=None,
+            lines=None, directions=None, edge_visible=np.ones((1, 6, 2), bool),
+            direction_visible=np.ones((1, 6), bool)))
+
+
+def test_a_batch_law_without_a_retarget_says_what_it_lacks() -> None:
+    class OwnBatch(Controller):
+        name = "own-batch"
+
+        def reset_batch(self, contexts: Any) -> None:
+            self.q_star = np.array([c.goal.lengths for c in contexts], dtype=float)
+            self.trial_instances = [self] * len(contexts)
+
+        def step_batch(self, observations: ObservationBatch) -> CommandBatch:
+            out = CommandBatch.zeros(len(observations))
+            out.velocities[:] = self.q_star[observations.trials] - observations.lengths
+            return out
+
+    law = OwnBatch()
+    law.reset_batch(_contexts(2))
+    with pytest.raises(NotImplementedError, match=r"OwnBatch: .*define retarget_batch"):
+        law.retarget_batch(np.array([1]), GoalBatch(lengths=np.full((1, 6), 0.5)))
+
+
 def test_the_per_trial_adapter_refuses_before_reset_and_malformed_observations() -> None:
     law = JointSpaceController()
     obs = _observations(1, np.random.default_rng(0)).item(0)
