@@ -96,7 +96,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     from benchmarks.study.scenario import load_scenario
 
     p = argparse.ArgumentParser(prog="hexapod-bench perf dynamic-world",
-                                description=__doc__.split("\n")[0])
+                                description=__doc__.split("\n\n")[0].replace("\n", " "))
     p.add_argument("--scenario", default="tahri2009-convergence")
     p.add_argument("--trials", type=int, default=1000)
     p.add_argument("--periods", type=int, default=20)

@@ -5,6 +5,7 @@ few tolerances; the curve is :func:`benchmarks.study.plots.error_cdf`)."""
 from __future__ import annotations
 
 import itertools
+import math
 from collections import defaultdict
 from pathlib import Path
 from typing import Any
@@ -87,16 +88,26 @@ def _km_plot(out_dir: Path, scenario: str,
     fig = figure((5 * len(points), 3.6))
     axes = fig.subplots(1, len(points), squeeze=False)
     for ax, p in zip(axes[0], points, strict=True):
+        drawn = 0
         for label, km in sorted(kms[p].items()):
             if km.steps.size:
-                ax.step(np.r_[0, km.steps], np.r_[0, km.converged_fraction], where="post",
-                        label=f"{label} ({km.converged}/{km.trials})")
+                x, y = np.r_[0, km.steps], np.r_[0, km.converged_fraction]
+            elif km.trials and math.isfinite(km.cap):  # none converged: zero to the end
+                x, y = np.array([0.0, km.cap]), np.zeros(2)
+            else:
+                continue
+            ax.step(x, y, where="post", label=f"{label} ({km.converged}/{km.trials})")
+            drawn += 1
         ax.set_ylim(0, 1.01)
         ax.set_xlabel("steps")
         ax.set_ylabel("fraction converged")
         ax.set_title(format_sweep(sweeps.get(p, {})), fontsize=8, y=1.0)
         ax.grid(True, alpha=0.3)
-        ax.legend(fontsize=7)
+        if drawn:
+            ax.legend(fontsize=7)
+        else:  # (no trial, or none converged in a run of unknown length)
+            ax.text(0.5, 0.5, "no curve to draw", transform=ax.transAxes,
+                    ha="center", va="center", fontsize=8)
     return save_figure(fig, out_dir, f"{scenario}_time_to_converge.png",
                        LABELLED_TITLED_PANELS)
 

@@ -353,6 +353,14 @@ def sweeps(out_dir: Path, scenario: str, summaries: list[Summary]) -> list[str]:
     return [save_figure(fig, out_dir, f"{scenario}_sweep_{key}.png", TWO_LABELLED_PANELS)]
 
 
+def sweep_tick(value: Any) -> str:
+    """A sweep value as a tick label: a number in ``g`` format, any other value (a goal
+    setting, a camera kind) as its text."""
+    if isinstance(value, int | float) and not isinstance(value, bool):
+        return f"{value:g}"
+    return str(value)
+
+
 def heat_maps(out_dir: Path, scenario: str, summaries: list[Summary]) -> str | None:
     """Convergence rate and median final position error over two swept axes: a row of
     panels per metric, a column per controller, the values written in the cells."""
@@ -403,8 +411,9 @@ def heat_maps(out_dir: Path, scenario: str, summaries: list[Summary]) -> str | N
                             np.log(max(v, lo)) - np.log(lo)) > 0.6 * (np.log(hi) - np.log(lo))
                     ax.text(j, i, text, ha="center", va="center", fontsize=6,
                             color="white" if dark else "black")
-            ax.set_xticks(range(len(xs)), [f"{v:g}" for v in xs], fontsize=7, rotation=45)
-            ax.set_yticks(range(len(ys)), [f"{v:g}" for v in ys], fontsize=7)
+            ax.set_xticks(range(len(xs)), [sweep_tick(v) for v in xs], fontsize=7,
+                          rotation=45)
+            ax.set_yticks(range(len(ys)), [sweep_tick(v) for v in ys], fontsize=7)
             ax.set_xlabel(x_key)
             ax.set_ylabel(y_key)
             ax.set_title(f"{ctrl}: {title}", fontsize=9, y=1.0)

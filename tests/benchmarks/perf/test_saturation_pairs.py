@@ -54,3 +54,9 @@ def test_main_reads_a_results_file(tmp_path: Path, capsys: pytest.CaptureFixture
     assert main([str(path)]) == 0
     assert "computed-torque+scale" in capsys.readouterr().out
     assert main([]) == 2
+
+
+def test_too_few_pairs_are_named_not_tested() -> None:
+    rows = [r for r in _rows(0.5) if r["trial"] < 5]  # 5 pairs at 70 kg, one failed: 4
+    assert comparisons(rows) == ["70 kg computed-torque+scale - computed-torque: 4 paired "
+                                 "trials ran to their end, fewer than 6: not tested"]

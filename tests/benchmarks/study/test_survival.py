@@ -167,3 +167,32 @@ def test_a_converged_trial_without_steps_is_refused_by_name() -> None:
     with pytest.raises(BenchmarkError, match=r"controller 'c', trial 1: converged with "
                                              r"steps=None"):
         survival.time_to_converge(rows)
+
+
+def test_a_controller_that_never_converged_keeps_its_curve(tmp_path: Path,
+                                                            monkeypatch: pytest.MonkeyPatch
+                                                            ) -> None:
+    """Its curve is zero to the end of the run, named in the legend with 0/N (it was left
+    out, and a panel of such controllers only drew matplotlib's empty-legend warning)."""
+    from benchmarks.study import curves_report
+
+    figures: list[Any] = []
+    monkeypatch.setattr(curves_report, "save_figure",
+                        lambda fig, *a, **k: figures.append(fig) or "km.png")
+    rng = np.random.default_rng(5)
+    rows = (make_rows("never", rng.lognormal(-2, 0.4, 10), np.zeros(10, bool),
+                      np.full(10, 300))
+            + make_rows("some", rng.lognormal(-3, 0.4, 10), np.arange(10) < 4,
+                        np.where(np.arange(10) < 4, 120, 300)))
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # (no empty legend)
+        lines = curves_report.time_to_converge_section(tmp_path, "synthetic", rows, {}, [0])
+        lines += curves_report.time_to_converge_section(
+            tmp_path, "synthetic", [r for r in rows if r["controller"] == "never"], {}, [0])
+    assert lines.count("![time to converge](km.png)") == 2
+    for fig, want in zip(figures, (["never (0/10)", "some (4/10)"], ["never (0/10)"]),
+                         strict=True):
+        ax = fig.axes[0]
+        assert [t.get_text() for t in ax.get_legend().get_texts()] == want
+        line = next(ln for ln in ax.get_lines() if ln.get_label() == "never (0/10)")
+        assert line.get_ydata().max() == 0.0 and line.get_xdata().max() == 300
