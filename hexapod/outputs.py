@@ -151,7 +151,8 @@ def _describe(path: Path) -> str:
 
 
 def check_replace(path: str | Path, overwrite: bool = False, option: str = "--overwrite",
-                  ours: Callable[[Path], bool] | None = None, how: str | None = None) -> None:
+                  ours: Callable[[Path], bool] | None = None, how: str | None = None,
+                  kind: str | None = None) -> None:
     """Refuse to replace an existing file the project did not write, unless asked to.
 
     Args:
@@ -161,20 +162,64 @@ def check_replace(path: str | Path, overwrite: bool = False, option: str = "--ov
         ours: Recognises the project's files of this kind (default
             :func:`written_by_project`).
         how: How to proceed, for the message (default: another name or ``option``).
+        kind: What is about to be written (:func:`file_kind`): a project's file of
+            another kind is refused too (a ``--json`` given a run's ``report.md``).
 
     Raises:
-        OutputError: ``path`` is a directory, or a file neither the project's nor
-            ``overwrite`` (naming what it is and how to proceed).
+        OutputError: ``path`` is a directory, or a file neither the project's (of
+            ``kind``) nor ``overwrite`` (naming what it is and how to proceed).
     """
     p = Path(path)
     if p.is_dir():
         raise OutputError(str(p), "is a directory; give a file name")
     if not p.exists() or overwrite:
         return
-    if (ours or written_by_project)(p):
-        return
     how = how or f"choose another name, or add {option} to replace it"
+    if (ours or written_by_project)(p):
+        there = file_kind(p) if kind is not None else None
+        if there is None or there == kind:
+            return
+        raise OutputError(str(p), f"already exists ({GENERATOR}'s {there}, and this writes "
+                          f"a {kind} file); {how}")
     raise OutputError(str(p), f"already exists ({_describe(p)}); {how}")
+
+
+def file_kind(source: str | Path | bytes, suffix: str = "") -> str | None:
+    """The kind of a file the project writes: ``"PNG"``, ``"JPEG"``, ``"Parquet"`` or
+    ``"JSON"`` from its first bytes, else ``"Markdown"``, ``"HTML"``, ``"TOML"`` or
+    ``"JSON lines"`` from its marker or its name's suffix, or None (none the project
+    can tell).
+
+    Args:
+        source: A file, or the bytes about to be written.
+        suffix: The name's suffix of bytes (a path gives its own).
+    """
+    if isinstance(source, bytes):
+        head = source[:_HEAD]
+    else:
+        suffix = Path(source).suffix
+        try:
+            with Path(source).open("rb") as f:
+                head = f.read(_HEAD)
+        except OSError:
+            return None
+    for kind, magic in (("PNG", b"\x89PNG\r\n\x1a\n"), ("JPEG", b"\xff\xd8"),
+                        ("Parquet", b"PAR1")):
+        if head.startswith(magic):
+            return kind
+    text = head.lstrip()
+    if text.startswith(MARKDOWN_MARKER.encode()):
+        return "Markdown"
+    if text.startswith((HTML_MARKER.encode(), b"<!DOCTYPE html", b"<!doctype html", b"<html")):
+        return "HTML"
+    if suffix != ".jsonl" and text.startswith((b"{", b"[")):
+        return "JSON"
+    return _SUFFIX_KINDS.get(suffix.lower())
+
+
+#: The kinds of the project's text files that their name tells (:func:`file_kind`).
+_SUFFIX_KINDS = {".md": "Markdown", ".markdown": "Markdown", ".html": "HTML", ".htm": "HTML",
+                 ".toml": "TOML", ".json": "JSON", ".jsonl": "JSON lines"}
 
 
 def foreign_entries(directory: str | Path, own: Callable[[Path], bool]) -> list[Path]:
@@ -304,8 +349,8 @@ def write_output(path: str | Path, content: object, overwrite: bool = False,
             ``overwrite``), or a directory.
     """
     p = Path(path)
-    check_replace(p, overwrite, option)
     data = _marked(p, content)
+    check_replace(p, overwrite, option, kind=file_kind(data, p.suffix))
     p.parent.mkdir(parents=True, exist_ok=True)
     tmp = p.with_name(f".{p.name}.part")
     tmp.write_bytes(data)

@@ -104,7 +104,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     if args.repeats < 1:
         parser.error("--repeats must be >= 1")
     if args.json is not None:
-        check_replace(args.json, args.overwrite)
+        check_replace(args.json, args.overwrite, kind="JSON")
     results = run_study(args.noise, args.repeats, args.seed, args.camera, args.visibility,
                         args.method, args.eye)
     where = f" at {args.eye} m" if args.eye else " (preset placement)"

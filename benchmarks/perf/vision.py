@@ -187,7 +187,7 @@ def main(argv: list[str] | None = None) -> int:
     if args.figure:
         from hexapod.outputs import check_replace
 
-        check_replace(args.figure, args.overwrite)
+        check_replace(args.figure, args.overwrite, kind="PNG")
         edges_figure(args.figure, overwrite=args.overwrite)
         print(f"figure written to {args.figure}")
     start = time.perf_counter()

@@ -173,7 +173,7 @@ def cmd_compare(args: argparse.Namespace) -> int:
 
     t0 = time.perf_counter()
     if args.json:
-        check_replace(args.json, args.overwrite)  # before the work
+        check_replace(args.json, args.overwrite, kind="JSON")  # before the work
     metrics = tuple(args.metric) if args.metric else None  # None: the task's
     margins = parse_margins(args.margin)
     status = 0

@@ -360,7 +360,7 @@ def check_picture(path: Path, overwrite: bool = False) -> None:
     """
     if path.suffix.lower() not in (".png", ".jpg", ".jpeg"):
         raise BenchmarkError(f"--picture {path}: use a .png or .jpg name")
-    check_replace(path, overwrite)
+    check_replace(path, overwrite, kind="PNG" if path.suffix.lower() == ".png" else "JPEG")
 
 
 def write_picture(setup: Setup, report: SetupReport, path: Path,

@@ -98,9 +98,13 @@ def censored_quantile(values: Sequence[float] | np.ndarray, q: float) -> float:
     pos = q * (x.size - 1)
     lo = math.floor(pos)
     hi = min(lo + 1, x.size - 1)
-    if not (np.isfinite(x[lo]) and (np.isfinite(x[hi]) or pos == lo)):
+    if not np.isfinite(x[lo]):
         return math.inf
-    return float(x[lo] + (pos - lo) * (x[hi] - x[lo])) if hi != lo else float(x[lo])
+    if pos == lo or hi == lo:  # an order statistic itself (a censored one above is not used)
+        return float(x[lo])
+    if not np.isfinite(x[hi]):
+        return math.inf
+    return float(x[lo] + (pos - lo) * (x[hi] - x[lo]))
 
 
 def _wilson(k: int, n: int, z: float) -> tuple[float, float]:

@@ -29,7 +29,7 @@ def _scorecard(args: argparse.Namespace) -> int:
 
     con = console()
     if args.markdown:
-        check_replace(args.markdown, args.overwrite)  # before minutes of studies
+        check_replace(args.markdown, args.overwrite, kind="Markdown")  # before minutes of studies
     check_reproduce_directory(Path(args.out), args.overwrite)
     t0 = time.perf_counter()
     results = reproduce(args.which, Path(args.out), args.quick, args.workers,

@@ -133,7 +133,7 @@ def export_parquet(out_dir: str | Path, path: str | Path, overwrite: bool = Fals
 
     from hexapod.outputs import check_replace, write_output
 
-    check_replace(path, overwrite)  # before reading the run
+    check_replace(path, overwrite, kind="Parquet")  # before reading the run
     df = load(out_dir)
     attrs: dict[str, Any] = dict(df.attrs)
     df.attrs = {}  # pyarrow stores attrs as JSON metadata; keep the file plain

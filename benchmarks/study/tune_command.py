@@ -191,8 +191,8 @@ def cmd_tune(args: argparse.Namespace) -> int:
                                    else "median-final")
     check_output_dir(out, _own_entry, "tune directory (candidates/, tuned.toml, tuning.json)",
                      args.overwrite)
-    for path in (out / TUNED_FILE, out / SCORES_FILE):
-        check_replace(path, args.overwrite)
+    for path, kind in ((out / TUNED_FILE, "TOML"), (out / SCORES_FILE, "JSON")):
+        check_replace(path, args.overwrite, kind=kind)
     space = SEARCH_SPACE if args.space is None else load_space(args.space)
     tables = {spec.label: registry.options(spec.name) for spec in sc.controllers}
     if args.space is not None:

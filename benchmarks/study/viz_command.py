@@ -95,8 +95,8 @@ def cmd_viz(args: argparse.Namespace) -> int:
             raise BenchmarkError(f"--html {args.html}: the curves go beside it as "
                                  f"{png_path.name}; give the page an .html name")
         overwrite = getattr(args, "overwrite", False)
-        check_replace(html_path, overwrite)
-        check_replace(png_path, overwrite)
+        check_replace(html_path, overwrite, kind="HTML")
+        check_replace(png_path, overwrite, kind="PNG")
     if session is not None:
         record = load_session(session, getattr(args, "geometry", None),
                               getattr(args, "camera_file", None),

@@ -15,6 +15,7 @@ from hexapod.outputs import (
     check_name,
     check_output_dir,
     check_replace,
+    file_kind,
     inside,
     mark_png,
     write_output,
@@ -86,6 +87,33 @@ def test_check_replace_protects_files_the_project_did_not_write(tmp_path: Path) 
     with pytest.raises(OutputError, match="is a directory"):
         check_replace(tmp_path)
     assert mine.read_text() == "<html>my notes</html>"
+
+
+def test_a_project_file_of_another_kind_is_not_replaced_unasked(tmp_path: Path) -> None:
+    """A ``--json`` (or ``--parquet``, ...) given the project's report or tuned options
+    is refused: replacing a file the project wrote is fine only with one of its kind."""
+    report = tmp_path / "report.md"  # as the report writes it: the mark on line 3
+    report.write_text("# Benchmark report\n\n<!-- written by hexapod-vs: hexapod-bench "
+                      "report -->\n\nbody\n")
+    tuned = write_output(tmp_path / "tuned.toml", "[controller_options]\ngain = 2.0\n")
+    plot = write_output(tmp_path / "plot.png", mark_png(cv2.imencode(
+        ".png", np.zeros((4, 4), np.uint8))[1].tobytes()))
+    assert [file_kind(f) for f in (report, tuned, plot)] == ["Markdown", "TOML", "PNG"]
+    for target in (report, tuned, plot):
+        before = target.read_bytes()
+        with pytest.raises(OutputError, match=r"already exists \(hexapod-vs's \w+, and this "
+                                              r"writes a JSON file\)"):
+            write_output(target, {"comparisons": []})
+        assert target.read_bytes() == before
+        with pytest.raises(OutputError, match="--overwrite"):
+            check_replace(target, kind="JSON")
+        check_replace(target, overwrite=True, kind="JSON")  # asked: allowed
+    again = write_output(tmp_path / "c.json", {"comparisons": [1]})
+    write_output(again, {"comparisons": [2]})  # its own kind: replaced
+    assert '"comparisons": [\n  2' in again.read_text()
+    write_output(report, "# Benchmark report\n")  # Markdown over Markdown: replaced
+    assert file_kind(b"{}", ".md") == "JSON" and file_kind(b"x", ".jsonl") == "JSON lines"
+    assert file_kind(tmp_path / "absent.json") is None
 
 
 def test_marked_png_is_recognised_and_still_decodes(tmp_path: Path) -> None:

@@ -43,6 +43,19 @@ def test_censored_values_sort_last_and_reach_the_cap() -> None:
     assert exact.censored_quantile(steps, 0.5) == pytest.approx(165.0)
     assert exact.censored_quantile(np.r_[steps[:4], [np.inf] * 6], 0.5) == math.inf
     assert np.isnan(exact.censored_quantile([None, float("nan")], 0.5))
+    # an odd sample whose median is the last uncensored value: that value (numpy.quantile's
+    # on the values with the censored ones at any larger number), not 0 x inf
+    for tail in ([np.inf], [np.inf, np.inf]):
+        x = np.r_[[3.0, 1.0, 2.0][:len(tail) + 1], tail]
+        finite = np.where(np.isinf(x), 1e9, x)
+        assert exact.censored_quantile(x, 0.5) == np.quantile(finite, 0.5)
+    assert exact.censored_quantile([1.0, 2.0, np.inf, np.inf], 0.5) == math.inf  # between
+    rng = np.random.default_rng(0)  # uncensored samples: numpy's quantile (its own lerp)
+    for n in (1, 2, 5, 10, 11):
+        x = rng.uniform(0, 100, n)
+        for q in (0.0, 0.25, 0.5, 0.95, 1.0):
+            assert exact.censored_quantile(x, q) == pytest.approx(np.quantile(x, q),
+                                                                  rel=1e-14)
 
 
 def test_newcombe_published_example() -> None:
