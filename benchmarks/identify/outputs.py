@@ -14,9 +14,11 @@ import numpy as np
 import tomli_w
 
 from benchmarks.identify.pipeline import Identification
+from hexapod.dynamics.identification.estimation import moved_from_prior
 from hexapod.dynamics.identification.parameters import STANDARD_NAMES, to_tables, unit
+from hexapod.exceptions import IdentificationError, InertiaError
 from hexapod.geometry import HexapodGeometry
-from hexapod.outputs import write_output
+from hexapod.outputs import check_replace, write_output
 
 #: The files ``identify`` writes into its folder.
 OUTPUTS = ("identified.toml", "identification.json", "residuals.png", "report.md")
@@ -61,7 +63,8 @@ def document(ident: Identification, command: str) -> dict[str, Any]:
         "excitation": ident.excitation.to_dict(),
         "base_parameters": params,
         "unidentifiable": list(basis.unidentifiable),
-        "not_separable_kept_at_prior": [STANDARD_NAMES[int(j)] for j in basis.dependent],
+        "not_separable_kept_at_prior": kept_and_moved(ident)[0],
+        "not_separable_moved": kept_and_moved(ident)[1],
         "standard": {n: float(x) for n, x in zip(STANDARD_NAMES, est.standard, strict=True)},
         "condition_weighted": est.condition,
         "residual_sigma_legs_n": est.sigma_legs.tolist(),
@@ -81,9 +84,29 @@ def toml_text(ident: Identification, command: str) -> str:
              f"from {ident.robot.source or ident.robot.name}; details in identification.json",
              f"# base parameters identified: {basis.size}; condition number of the "
              f"excitation {ident.excitation.condition:.4g}",
-             "# kept at the robot file's values (the leg forces cannot separate them): "
-             + ", ".join(STANDARD_NAMES[int(j)] for j in basis.dependent), ""]
+             *_separation_lines(ident), ""]
     return "\n".join(lines) + tomli_w.dumps(geometry.to_dict(dynamics=True))
+
+
+def kept_and_moved(ident: Identification) -> tuple[list[str], list[str]]:
+    """The standard parameters the leg forces cannot separate: those kept at the robot
+    file's values, and those the constrained fit moved to a physical split."""
+    moved = moved_from_prior(ident.basis, ident.estimate.standard, ident.prior)
+    return ([STANDARD_NAMES[int(j)] for j in ident.basis.dependent if int(j) not in moved],
+            [STANDARD_NAMES[j] for j in moved])
+
+
+def _separation_lines(ident: Identification) -> list[str]:
+    """The header lines of ``identified.toml`` on the parameters not separable."""
+    kept, moved = kept_and_moved(ident)
+    lines = []
+    if kept:
+        lines.append("# kept at the robot file's values (the leg forces cannot separate "
+                     "them): " + ", ".join(kept))
+    if moved:
+        lines.append("# not separable by the leg forces, moved from the robot file's values "
+                     "to a physical split by the constrained fit: " + ", ".join(moved))
+    return lines
 
 
 def residual_png(ident: Identification) -> bytes:
@@ -127,7 +150,10 @@ def report_text(doc: dict[str, Any]) -> str:
              f"weighted least squares (condition {doc['condition_weighted']:.4g}), residual "
              f"sigma per leg {[round(x, 4) for x in doc['residual_sigma_legs_n']]} N, relative "
              f"residual {doc['relative_residual']:.4g}.", "",
-             "Physical consistency: " + " ".join(doc["consistency"]), "",
+             "Physical consistency: " + " ".join(doc["consistency"])
+             + ("" if doc.get("identified_toml", "identified.toml") else
+                f" No robot file written (identified.toml): "
+                f"{doc['identified_toml_refused'].removeprefix('not written: ')}."), "",
              "| base parameter | unit | estimate | SE | prior (robot file) |"
              + (" true | z |" if "true" in doc["base_parameters"][0] else ""),
              "|---|---|---|---|---|" + ("---|---|" if "true" in doc["base_parameters"][0]
@@ -141,17 +167,47 @@ def report_text(doc: dict[str, Any]) -> str:
     lines += ["", "Not identifiable (they do not enter the dynamics): "
               + ", ".join(doc["unidentifiable"]) + ". Kept at the robot file's values "
               "(only their combinations above are identified): "
-              + ", ".join(doc["not_separable_kept_at_prior"]) + ".", "",
+              + (", ".join(doc["not_separable_kept_at_prior"]) or "none") + "."
+              + ("" if not doc["not_separable_moved"] else
+                 " Not separable either, moved from the robot file's values to a physical "
+                 "split by the constrained fit: " + ", ".join(doc["not_separable_moved"])
+                 + "."), "",
               "![residuals](residuals.png)", "",
               f"Timings: { {k: round(v, 2) for k, v in doc['timings_s'].items()} }", ""]
     return "\n".join(lines)
 
 
 def write_all(ident: Identification, out: Path, command: str, overwrite: bool) -> dict[str, Any]:
-    """Write the four outputs into ``out``; returns the JSON document."""
+    """Write the four outputs into ``out``; returns the JSON document.
+
+    An estimate that is still not physical after the constrained fit makes no robot file:
+    ``identified.toml`` is not written (an older one of the project is removed), the
+    others say why (``identified_toml`` in the JSON document, the report), and the
+    caller reports it (:class:`~hexapod.exceptions.IdentificationError` after them).
+
+    Raises:
+        IdentificationError: ``identified.toml`` could not be made (the others written).
+    """
     doc = document(ident, command)
-    write_output(out / "identified.toml", toml_text(ident, command), overwrite)
+    target = out / "identified.toml"
+    try:
+        text: str | None = toml_text(ident, command)
+        doc["identified_toml"] = "identified.toml"
+    except InertiaError as exc:  # not physical: no robot file to give
+        text = None
+        doc["identified_toml"] = None
+        doc["identified_toml_refused"] = f"not written: {exc}"
+    if text is not None:
+        write_output(target, text, overwrite)
+    else:
+        check_replace(target, overwrite)  # (a user's file is refused, not deleted)
+        target.unlink(missing_ok=True)  # no robot file of an older run left beside
     write_output(out / "identification.json", doc, overwrite)
     write_output(out / "residuals.png", residual_png(ident), overwrite)
     write_output(out / "report.md", report_text(doc), overwrite)
+    if text is None:
+        raise IdentificationError(
+            f"{target}: not written: the estimate is not physical after the constrained "
+            f"fit ({doc['identified_toml_refused'].removeprefix('not written: ')}); "
+            f"{out}/report.md and identification.json say what was estimated")
     return doc

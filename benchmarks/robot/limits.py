@@ -19,6 +19,7 @@ import numpy as np
 
 from benchmarks.robot.exits import ServoExit, SessionStop
 from hexapod.actuation import Actuation
+from hexapod.backends.rate import RateLimiter
 
 #: Default ``--max-time-s`` [s]: a session never runs unattended for ever.
 DEFAULT_MAX_TIME_S = 60.0
@@ -69,11 +70,17 @@ class LimitedRobot:
     """The connected backend ``robot`` behind the session's ``limits`` (what the loop's
     plant drives): every command is capped to :attr:`SessionLimits.max_speed` (the
     capped legs reported clamped) and refused before it is sent when a leg would leave
-    the travel box around the ``start`` lengths (6,) [m]. Other attributes are the
-    backend's."""
+    the travel box around the ``start`` lengths (6,) [m]. With ``pace``, each period is
+    waited out after the backend's step returns (a backend that sends and returns: the
+    next command leaves one period after this one, not as soon as it is computed; a late
+    period is reported missed). Other attributes are the backend's."""
 
-    def __init__(self, robot: Any, limits: SessionLimits, start: np.ndarray) -> None:
+    def __init__(self, robot: Any, limits: SessionLimits, start: np.ndarray,
+                 pace: bool = False) -> None:
         self.robot = robot
+        #: The session's pacing of the periods (None: the backend keeps them).
+        self.rate: RateLimiter | None = None
+        self.pace = pace
         self.limits = limits
         self.start = np.asarray(start, float).copy()
         self.q = self.start.copy()
@@ -113,7 +120,12 @@ class LimitedRobot:
         # what was sent, an upper bound until the backend says what it applied
         self.last_dt = dt
         self.last_applied = v.copy() if actuation is Actuation.VELOCITY else np.zeros(6)
+        sent = time.perf_counter()
         bs = self.robot.apply(v, actuation, dt, controller)
+        if self.pace:  # the rest of the period, on the grid of the first command
+            self.rate = RateLimiter.keeping(self.rate, dt, "servo session")
+            if self.rate.sleep_after(sent) < 0 and not bs.missed_period:
+                bs = replace(bs, missed_period=True)
         self.q = np.asarray(bs.lengths, float).copy()
         self.last_applied = np.asarray(bs.applied_velocities, float).copy()
         if capped.any():

@@ -263,7 +263,13 @@ def run_session(args: argparse.Namespace, inputs: SessionInputs, status: StatusL
             q0 = np.asarray(robot.measured_lengths(), float)
             _plan(args, q0, np.asarray(inputs.goal_file.lengths, float), limits,
                   status.message)
-            limited = LimitedRobot(robot, limits, q0)
+            # a robot that sends and returns: the session keeps its control period
+            pace = not (getattr(robot, "simulated", False)
+                        or getattr(robot, "paces_periods", False))
+            if pace:
+                status.message(f"servo: {args.backend} does not wait out its periods: the "
+                               f"session does ({args.dt * 1e3:g} ms)")
+            limited = LimitedRobot(robot, limits, q0, pace=pace)
             guard.in_loop = True  # from here the first signal waits for the next period
             servo_loop(limited, sensor, inputs.controller, inputs.goal, inputs.geometry,
                        args.dt, args.max_steps, args.tolerance_mm * 1e-3,

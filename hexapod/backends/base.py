@@ -105,6 +105,11 @@ class Backend(ABC):
     #: The robot is simulated (a model, an emulator), not hardware: ``hexapod-bench
     #: servo`` then allows ``--camera sim`` without asking (docs/servo.md).
     simulated: bool = False
+    #: :meth:`step` returns at the end of its control period: the backend waits out the
+    #: period itself (the serial and GCS backends, with a
+    #: :class:`~hexapod.backends.rate.RateLimiter`). A servo session waits out each period
+    #: for a backend that does not and is not :attr:`simulated` (docs/backends.md).
+    paces_periods: bool = False
 
     @classmethod
     def open(cls, args: str, geometry: HexapodGeometry, start: np.ndarray | None = None

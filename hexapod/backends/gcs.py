@@ -91,6 +91,8 @@ class GcsHexapod(Backend):
         vmo_checks: ``VMO?`` asked; ``vmo_refusals``: answered 0 (the robot held).
     """
 
+    paces_periods = True  # (its RateLimiter keeps the period)
+
     def __init__(self, url: str, geometry: HexapodGeometry,
                  options: GcsOptions | None = None,
                  on_close: Callable[[], None] | None = None) -> None:

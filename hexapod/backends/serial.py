@@ -91,6 +91,8 @@ class SerialRobot(SerialLink, Backend):
         watchdog_rearms: Of those, the trips cleared with ``ERR?`` (the ``MOV`` sent again).
     """
 
+    paces_periods = True  # (its RateLimiter keeps the period)
+
     def __init__(
         self,
         url: str,

@@ -137,8 +137,7 @@ def weighted_least_squares(Yb: np.ndarray, forces: np.ndarray, basis: BaseParame
         theta, standard, ok = _constrained(Ww, yw, theta, basis, prior)
         if not ok:
             consistency.append("the constrained solver did not converge")
-        moved = [STANDARD_NAMES[int(j)] for j in basis.dependent
-                 if abs(standard[j] - prior[j]) > 1e-9 * max(abs(prior[j]), 1.0)]
+        moved = [STANDARD_NAMES[j] for j in moved_from_prior(basis, standard, prior)]
         if moved:
             consistency.append("parameters the forces cannot separate moved from the robot "
                                "file's values to a physical split: " + ", ".join(moved))
@@ -160,6 +159,14 @@ def weighted_least_squares(Yb: np.ndarray, forces: np.ndarray, basis: BaseParame
                     residuals=residuals, condition=float(np.linalg.cond(Ww)),
                     relative_residual=float(np.linalg.norm(rho) / np.linalg.norm(y)),
                     standard=standard, consistency=consistency, unconstrained=unconstrained)
+
+
+def moved_from_prior(basis: BaseParameters, standard: np.ndarray, prior: np.ndarray) -> list[int]:
+    """The standard parameters the leg forces cannot separate (``basis.dependent``)
+    whose value left the robot file's ``prior`` (the constrained fit moved them to a
+    physical split); the others are kept at the prior."""
+    return [int(j) for j in basis.dependent
+            if abs(standard[j] - prior[j]) > 1e-9 * max(abs(prior[j]), 1.0)]
 
 
 def _physical_problems(standard: np.ndarray, template: InertiaParameters,

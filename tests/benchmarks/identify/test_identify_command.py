@@ -54,7 +54,54 @@ def test_identify_writes_a_robot_file_the_project_loads(tmp_path: Path) -> None:
     assert abs(mass["estimate"] / mass["true"] - 1) < 0.02
     assert g.inertia.platform_mass + 6 * g.inertia.rod_mass == pytest.approx(
         mass["estimate"], rel=1e-9)
+    # the parameters the forces cannot separate: kept at the file's values or moved by
+    # the constrained fit, the header saying which (it said "kept" of every one)
+    kept, moved = doc["not_separable_kept_at_prior"], doc["not_separable_moved"]
+    assert sorted(kept + moved) == sorted(["m_b", "It_b", "Ia_b", "m_r", "Ia_r"])
+    header = [line for line in text.splitlines() if line.startswith("#")]
+    assert any(line.endswith(": " + ", ".join(kept)) for line in header) == bool(kept)
+    assert any(line.endswith(": " + ", ".join(moved)) and "moved" in line
+               for line in header) == bool(moved)
+    file_values = {"m_b": (g.inertia.body_mass, 0.5), "m_r": (g.inertia.rod_mass, 0.2)}
+    for name, (value, prior) in file_values.items():
+        if name in kept:
+            assert value == pytest.approx(prior, rel=1e-12)
+        elif name in moved:
+            assert value != pytest.approx(prior, rel=1e-9)
     assert main(args) == 0  # its own files are replaced
+
+
+@pytest.mark.slow
+def test_an_estimate_that_stays_unphysical_writes_no_robot_file_but_says_why(
+        tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
+        capsys: pytest.CaptureFixture[str]) -> None:
+    """The robot file of an estimate the constrained fit left unphysical cannot be made
+    (its tables refuse it): the report, the JSON and the residuals are written, an older
+    identified.toml of the project is removed, and the command fails saying where to
+    look (before, it stopped with the tables' error and wrote nothing)."""
+    from benchmarks.identify import outputs
+    from hexapod.exceptions import InertiaError
+
+    args = ["identify", "deltalab", "--out", str(tmp_path), "--duration", "2",
+            "--search-candidates", "2"]
+    assert main(args) == 0  # a robot file of an earlier run in the folder
+
+    def unphysical(*_: object, **__: object) -> None:
+        raise InertiaError("inertia.platform_inertia", "not positive definite: principal "
+                           "moments [-7.35e-08, 0.01, 0.01]")
+
+    monkeypatch.setattr(outputs, "to_tables", unphysical)
+    assert main(args) == 2
+    err = capsys.readouterr().err
+    assert "identified.toml: not written: the estimate is not physical" in err
+    assert "report.md and identification.json say what was estimated" in err
+    assert not (tmp_path / "identified.toml").exists()
+    doc = json.loads((tmp_path / "identification.json").read_text())
+    assert doc["identified_toml"] is None
+    assert "not positive definite" in doc["identified_toml_refused"]
+    report = (tmp_path / "report.md").read_text()
+    assert "No robot file written (identified.toml): " in report
+    assert (tmp_path / "residuals.png").stat().st_size > 0
 
 
 @pytest.mark.slow
