@@ -257,7 +257,7 @@ def build_parser(commands: set[str] | None = None) -> argparse.ArgumentParser:
     from benchmarks.identify import command as identify_command
 
     s = add_command(sub, "identify", identify_command.run,
-                    "identify a robot's dynamic parameters and drive gains from its own motion "
+                    "identify a robot's dynamic parameters (inertia, friction, rotor inertia) from its own motion "
                     "(docs/identification.md)")
     identify_command.add_arguments(s)
 

@@ -32,7 +32,7 @@ def add_arguments(s: argparse.ArgumentParser) -> None:
     s.add_argument("--encoder-resolution", type=float, metavar="UM",
                    help="encoder resolution [um] (default: the robot file's)")
     s.add_argument("--search-candidates", type=int, default=16, metavar="N",
-                   help="excitation shapes the search tries (default 16, about 10 s)")
+                   help="excitation shapes the search tries (default 16, under a second)")
     s.add_argument("--overwrite", action="store_true",
                    help="replace a user's files of the same names in --out")
 
