@@ -224,7 +224,8 @@ def censored_sign_test(x: np.ndarray, y: np.ndarray) -> stats.TestResult:
     differences (``+-inf`` where one did not converge) with its order-statistic
     interval."""
     ok = ~(np.isnan(x) | np.isnan(y))
-    d = x[ok] - y[ok]
+    with np.errstate(invalid="ignore"):  # inf - inf: nan
+        d = x[ok] - y[ok]
     d = d[~np.isnan(d)]  # neither converged: the order is unknown
     pos, neg, p = exact.sign_test(d)
     if d.size == 0:
@@ -256,7 +257,9 @@ def _equivalence(x: np.ndarray, y: np.ndarray, metric: str, margin: float | None
         a, b = x[ok] > 0.5, y[ok] > 0.5
         return exact.tost_rate(int(np.sum(a & b)), int(np.sum(a & ~b)), int(np.sum(~a & b)),
                                int(np.sum(~a & ~b)), margin)
-    return exact.tost_paired(x[ok] - y[ok], margin)
+    with np.errstate(invalid="ignore"):  # neither converged (inf - inf): nan, left out
+        d = x[ok] - y[ok]
+    return exact.tost_paired(d, margin)
 
 
 def _summary_value(x: np.ndarray, y: np.ndarray, metric: str) -> tuple[float, float]:
@@ -321,7 +324,7 @@ def compare_controllers(df: pd.DataFrame, baseline: str | None = None,
                              "nothing to compare; compare two runs with DIR_A DIR_B")
     sweeps = _sweep_text(df)
     names, per_scenario = _metric_plan(df, metrics)
-    margin_of = resolve_margins(margins)
+    margin_of = resolve_margins(margins, names)
     out: list[Comparison] = []
     for name in names:
         column, unit, _ = resolve_metric(name, list(df.columns))
@@ -435,7 +438,7 @@ def compare_runs(df_a: pd.DataFrame, df_b: pd.DataFrame, name_a: str = "A",
     different = (pd.concat(diffs, ignore_index=True) if diffs
                  else pd.DataFrame(columns=[*KEY, "column", "a", "b"]))
     sweeps = _sweep_text(df_a)
-    margin_of = resolve_margins(margins)
+    margin_of = resolve_margins(margins, names)
     out: list[Comparison] = []
     for name in names:
         column, unit, _ = resolve_metric(name, common)

@@ -9,12 +9,14 @@ never read as "no difference".
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from typing import TYPE_CHECKING
 
 import numpy as np
 
 from benchmarks.exceptions import BenchmarkError
 from benchmarks.study import exact, stats
+from hexapod.config import suggest
 
 if TYPE_CHECKING:
     from benchmarks.study.compare import Comparison
@@ -29,15 +31,26 @@ MARGINS: dict[str, float] = {
     "converged": 0.05, "final_error": 0.01, "orientation_error": 0.001, "steps": 10.0,
     "tracking_rms": 0.01, "tracking_max": 0.02, "settling": 0.05, "saturation": 0.05,
 }
-def resolve_margins(margins: dict[str, float] | None) -> dict[str, float]:
+def resolve_margins(margins: dict[str, float] | None,
+                    compared: Sequence[str] | None = None) -> dict[str, float]:
     """:data:`MARGINS` updated with ``margins``.
 
+    Args:
+        margins: The user's margins by metric name.
+        compared: The metrics of the comparison (a margin of another is refused: a
+            typo would otherwise leave the default margin in place unsaid).
+
     Raises:
-        BenchmarkError: A margin that is not positive and finite, or a ``converged``
-            margin above 1 (a fraction of the trials).
+        BenchmarkError: A margin that is not positive and finite, a ``converged``
+            margin above 1 (a fraction of the trials), or one of a metric not compared.
     """
     out = dict(MARGINS)
     for name, value in (margins or {}).items():
+        if compared is not None and name not in compared:
+            hint = suggest(name, compared)
+            raise BenchmarkError(
+                f"--margin {name}={value}: {name!r} is not a metric of this comparison "
+                f"({', '.join(compared)})" + (f"; did you mean {hint!r}?" if hint else ""))
         if not (np.isfinite(value) and value > 0):
             raise BenchmarkError(f"--margin {name}={value}: an equivalence margin must be "
                                  "positive and finite")

@@ -242,6 +242,11 @@ def test_equivalence_needs_tost_not_a_missing_difference(tmp_path: Path,
     assert "--margin 'final_error': expected NAME=NUMBER" in capsys.readouterr().err
     with pytest.raises(BenchmarkError, match="positive"):
         compare_controllers(load(tmp_path / "r"), margins={"steps": -1.0})
+    # a margin of a metric not compared (a typo) is refused, not left unused
+    assert cli_main(["compare", str(tmp_path / "r"), "--margin", "final_eror=1"]) != 0
+    err = capsys.readouterr().err
+    assert "--margin final_eror=1.0: 'final_eror' is not a metric of this comparison " \
+           "(converged, final_error, steps); did you mean 'final_error'?" in " ".join(err.split())
 
 
 def test_rate_difference_has_newcombes_interval_and_tiny_p_is_bounded(tmp_path: Path
