@@ -82,16 +82,27 @@ def censored_steps(rows: list[dict[str, Any]]) -> tuple[np.ndarray, float | None
     return out, cap
 
 
+def censored_median_cell(values: np.ndarray, digits: int, cap: float | str | None) -> str:
+    """The median of a sample whose censored values are ``+inf`` with its order-statistic
+    interval: ``> cap`` where the median or an end is a censored value, ``-inf``/``inf``
+    where an end lies outside the sample (too few values for that side at 95 %, which
+    says nothing of censoring)."""
+    x = np.sort(values[~np.isnan(values)])
+    if x.size == 0:
+        return "-"
+    lo, hi = exact.order_statistic_ranks(int(x.size), 0.5)
+    low = "-inf" if lo is None else _bound(float(x[lo]), digits, cap)
+    high = "inf" if hi is None else _bound(float(x[hi]), digits, cap)
+    return f"{_bound(exact.censored_quantile(x, 0.5), digits, cap)} [{low}, {high}]"
+
+
 def steps_cell(rows: list[dict[str, Any]]) -> str:
     """Median steps to converge over all the trials of a group, the ones that did not
     converge censored at the run's length (no survivorship: a controller that converges
     on half its trials has a median at the cap), with the order-statistic interval:
     ``> 500 [312, > 500]``."""
     steps, cap = censored_steps(rows)
-    if steps.size == 0:
-        return "-"
-    return with_interval(exact.censored_quantile(steps, 0.5),
-                         exact.quantile_interval(steps, 0.5), 0, cap)
+    return censored_median_cell(steps, 0, cap)
 
 
 def completed(rows: list[dict[str, Any]]) -> list[dict[str, Any]]:

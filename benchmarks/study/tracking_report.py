@@ -58,7 +58,7 @@ def _settling_cell(rs: list[dict[str, Any]], with_intervals: bool) -> str:
     med = exact.censored_quantile(t, 0.5)
     if not with_intervals:
         return "> run" if med == np.inf else _fmt(med)
-    return intervals.with_interval(med, exact.quantile_interval(t, 0.5), 3, "run")
+    return intervals.censored_median_cell(t, 3, "run")
 
 
 def _fmt(x: float) -> str:

@@ -112,3 +112,17 @@ def test_console_steps_median_is_censored_not_the_survivors() -> None:
     conv = np.arange(20) < 15  # 15 of 20: the median is known
     (s,) = summarize(make_rows("ok", np.full(20, 0.1), conv, np.where(conv, 150, 500)))
     assert s.steps_median == 150.0
+
+
+def test_an_open_end_is_not_called_censored() -> None:
+    """Three trials, all settled: the median's interval is open on both sides (too few
+    trials at 95 %), printed -inf and inf, not '> run' (which says a censored trial, a
+    trial that did not settle, ends it); with a censored value at the rank, '> run'."""
+    from benchmarks.study.intervals import censored_median_cell
+
+    assert censored_median_cell(np.array([0.1, 0.2, 0.3]), 3, "run") == "0.200 [-inf, inf]"
+    x = np.r_[np.linspace(1.0, 2.0, 5), [np.inf] * 5]  # 5 of 10 settled
+    lo, hi = sps.quantile_test(np.where(np.isinf(x), 99.0, x), p=0.5).confidence_interval()
+    assert censored_median_cell(x, 3, "run") == f"> run [{lo:.3f}, > run]"
+    assert censored_median_cell(np.r_[[12.0] * 9, [np.inf]], 0, 500) == "12 [12, 12]"
+    assert censored_median_cell(np.array([np.nan]), 0, 500) == "-"
