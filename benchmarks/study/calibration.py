@@ -224,19 +224,24 @@ def calibrate_from_file(sc: Scenario, observations: Path, out: Path, solver: str
         OutputError: ``out`` holds other files or a calibration already (and not
             ``overwrite``); nothing is written.
     """
+    from benchmarks.exceptions import BenchmarkError
     from benchmarks.study.outdir import check_calibration_directory
     from benchmarks.study.provenance import made_with, scenario_setup
     from vision.calibration import CalibrationData, calibrate
+    from vision.exceptions import CalibrationError
 
     check_calibration_directory(out, overwrite)
     robot_name, nominal, camera_name, camera = scenario_setup(sc)
     provenance = made_with(robot_name, nominal, camera_name, camera)
     data = CalibrationData.load(observations)
-    res = calibrate(data, nominal.leg_radius, nominal.base_points,
-                    method=(solver or sc.calibration.solver),  # type: ignore[arg-type]
-                    correct_scale=correct_scale,
-                    min_singular_ratio=sc.calibration.min_singular_ratio,
-                    warn_singular_ratio=sc.calibration.warn_singular_ratio)
+    try:
+        res = calibrate(data, nominal.leg_radius, nominal.base_points,
+                        method=(solver or sc.calibration.solver),  # type: ignore[arg-type]
+                        correct_scale=correct_scale,
+                        min_singular_ratio=sc.calibration.min_singular_ratio,
+                        warn_singular_ratio=sc.calibration.warn_singular_ratio)
+    except CalibrationError as exc:  # the user's measurements: say which file
+        raise BenchmarkError(f"{observations}: {exc} (nothing written)") from exc
     out.mkdir(parents=True, exist_ok=True)
     doc = {"generator": GENERATOR, "scenario": sc.name, "observations": str(observations),
            "configurations": int(data.n_configurations),

@@ -160,6 +160,19 @@ def load_setup(text: str) -> Setup:
             ["camera: the front preset, placed for this robot (a scenario names yours)"], [])
     if path.suffix.lower() in OPENCV_EXTENSIONS:
         return calibration_setup(path)
+    if "base_points_camera_mm" in table:  # calibrate's output: read (checked), then said
+        from benchmarks.study.calibration import read_calibrated_file
+
+        made_with = read_calibrated_file(path)[1]
+        source = table.get("source")
+        raise BenchmarkError(
+            f"{path}: a base-point calibration (hexapod-bench calibrate"
+            + (f", from {source}" if isinstance(source, str) else "")
+            + (f"; made with the robot {made_with['robot']} and the camera "
+               f"{made_with['camera']}" if made_with else "")
+            + "), readable; it is not a setup to check: give it to `hexapod-bench run "
+            "--calibration FILE` or `servo --calibration FILE`, or name it in a scenario's "
+            "[calibration] method = \"file\", file = \"...\" (docs/calibration.md)")
     if {"fx_px", "opencv", "kind", "camera_from_base"} & set(table):
         from hexapod.geometry import deltalab
 

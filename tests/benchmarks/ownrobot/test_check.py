@@ -162,3 +162,22 @@ def test_check_states_the_dynamics_and_where_they_come_from(
     assert code == 0, out
     assert "assumed: no [drives] table" in out
     assert "swept by [drives] velocity_bandwidth_hz" in out and "5, 10, 20, 50 Hz" in out
+
+
+def test_check_says_what_a_calibration_file_is_for(tmp_path: Path,
+                                                   capsys: pytest.CaptureFixture[str]) -> None:
+    """``calibrate``'s ``calibrated.toml`` given to ``check``: read (a broken one refused
+    naming its key), then said where it goes, not read as a camera file."""
+    rows = ",\n".join("  [" + ", ".join(f"{v:.3f}" for v in p) + "]"
+                      for p in deltalab().base_points * 1e3 + [0, 0, 500])
+    cal = tmp_path / "calibrated.toml"
+    cal.write_text('# written by hexapod-vs (hexapod-bench calibrate)\n'
+                   'source = "quick (repetition 0, sweep point 0, extremal)"\n'
+                   f"base_points_camera_mm = [\n{rows}\n]\n")
+    assert main(["check", str(cal)]) == 2
+    err = " ".join(capsys.readouterr().err.split())
+    assert f"{cal}: a base-point calibration (hexapod-bench calibrate, from quick" in err
+    assert "run --calibration FILE" in err and "key 'source'" not in err
+    cal.write_text('base_points_camera_mm = [[1.0, 2.0, 3.0]]\n')  # one point of six
+    assert main(["check", str(cal)]) == 2
+    assert "base_points_camera_mm" in capsys.readouterr().err

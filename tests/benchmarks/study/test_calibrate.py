@@ -84,7 +84,8 @@ def test_viz_replays_a_recorded_trial_to_html(tmp_path: Path) -> None:
     assert cli_main(["viz", str(out), "--trial", "7", "--html", str(html)]) == 2
 
 
-def test_calibrate_from_a_user_observation_file(tmp_path: Path) -> None:
+def test_calibrate_from_a_user_observation_file(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     from hexapod import deltalab
     from vision.calibration import collect_observations
 
@@ -102,6 +103,21 @@ def test_calibrate_from_a_user_observation_file(tmp_path: Path) -> None:
     broken.write_text(obs.read_text().replace('"lengths_mm"', '"length_mm"'))
     assert cli_main(["calibrate", str(_scenario(tmp_path)), "--out", str(out),
                      "--observations", str(broken)]) == 2
+    # a leg seen in one configuration: the failure names the user's file, nothing written
+    import json
+
+    doc = json.loads(obs.read_text())
+    few = tmp_path / "few.json"
+    vis = np.array(doc["edge_visible"], dtype=bool)
+    vis[1:, 4, :] = False  # leg 4 seen in the first configuration only
+    doc["edge_visible"] = vis.tolist()
+    few.write_text(json.dumps(doc))
+    out2 = tmp_path / "out2"
+    assert cli_main(["calibrate", str(_scenario(tmp_path)), "--out", str(out2),
+                     "--observations", str(few)]) == 2
+    err = " ".join(capsys.readouterr().err.split())
+    assert f"{few}: " in err and "leg 4" in err and "seen in 1 configuration(s)" in err
+    assert not out2.exists()
 
 
 @pytest.mark.slow
