@@ -256,7 +256,8 @@ def run_session(args: argparse.Namespace, inputs: SessionInputs, status: StatusL
             seen_by = describe_camera(args.camera, args.camera_file, args.camera_pose,
                                       inputs.camera)
             status.message(
-                f"servo: {args.controller} on {args.backend} ({robot.identity}), {seen_by}, "
+                f"servo: {args.controller} on {args.backend}"
+                f"{f' ({robot.identity})' if robot.identity else ''}, {seen_by}, "
                 f"goal {inputs.goal_file.source}, dt {args.dt * 1e3:g} ms; speed <= "
                 f"{limits.max_speed * 1e3:g} mm/s, time <= {limits.max_time:g} s; record "
                 f"{log.path}; Ctrl-C, SIGTERM or SIGHUP halt the robot")
