@@ -69,6 +69,9 @@ def comparisons(rows: list[dict[str, Any]]) -> list[str]:
 def main(argv: list[str] | None = None) -> int:
     """``RESULTS_JSONL``: print the comparisons."""
     args = sys.argv[1:] if argv is None else argv
+    if args in (["-h"], ["--help"]):
+        print(__doc__)
+        return 0
     if len(args) != 1:
         print(__doc__)
         return 2

@@ -38,7 +38,12 @@ STUDY_VERSION = 1
 #: read from the files, which are hashed by file instead).
 _NOT_SETTINGS = frozenset({"name", "description", "reference", "sweep", "source",
                            "geometry_data", "camera_data", "calibration_points",
-                           "model_data"})
+                           "model_data", "controller_options"})
+#: Keys earlier versions recorded that say nothing the others do not, ignored on both
+#: sides: the file's ``[controller_options]`` are in each controller's entry (the ones
+#: it took), and the runnable copy of the inputs folds them there (a study resumed from
+#: ``inputs/NAME/scenario.toml`` has none left to give).
+_REDUNDANT = frozenset({"controller_options"})
 #: Fields that name a file: the study holds a hash of its content.
 _FILE_FIELDS = {"robot_geometry": "robot.geometry", "robot_model": "robot.model",
                 "camera_file": "camera.file",
@@ -160,7 +165,7 @@ def differences(recorded: dict[str, Any], given: dict[str, Any]) -> tuple[list[s
     grows = None
     for key in sorted(set(recorded) | set(given)):
         a, b = recorded.get(key, _ADDED.get(key, _ABSENT)), given.get(key, _ABSENT)
-        if key == "version" or a == b:
+        if key == "version" or key in _REDUNDANT or a == b:
             continue
         if key == "trials" and isinstance(a, int) and isinstance(b, int):
             if b > a:

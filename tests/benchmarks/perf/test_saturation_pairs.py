@@ -54,6 +54,7 @@ def test_main_reads_a_results_file(tmp_path: Path, capsys: pytest.CaptureFixture
     assert main([str(path)]) == 0
     assert "computed-torque+scale" in capsys.readouterr().out
     assert main([]) == 2
+    assert main(["--help"]) == 0 and "Run: ``python -m" in capsys.readouterr().out
 
 
 def test_too_few_pairs_are_named_not_tested() -> None:

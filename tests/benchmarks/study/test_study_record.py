@@ -249,3 +249,30 @@ def test_report_is_one_of_the_commands_that_wrote_the_directory(
     before = (out / "run.json").read_bytes()
     assert cli_main(["report", str(out)]) == 2, "a user's report.md is refused"
     assert (out / "run.json").read_bytes() == before, "and nothing recorded"
+
+
+@pytest.mark.slow
+def test_a_study_with_controller_options_resumes_from_its_copy(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """The runnable copy folds ``[controller_options]`` into each controller: it resumes
+    the study (it was refused, 'controller_options: {...} in the directory, {} given'),
+    and other options are still another study (named by the controllers)."""
+    deltalab().to_toml(tmp_path / "robot.toml")
+    scen = tmp_path / "study.toml"
+    scen.write_text(STUDY + "[controller_options]\nadaptive_gain = [5.0, 1.0, 30.0]\n")
+    out = tmp_path / "run"
+    assert cli_main(["run", str(scen), "--out", str(out), "--no-progress"]) == 0
+    copy = out / "inputs" / "mine" / "scenario.toml"
+    assert "controller_options" not in copy.read_text()
+    assert cli_main(["run", str(copy), "--out", str(out), "--no-progress", "--resume",
+                     "--trials", "3"]) == 0
+    assert "grew mine from 2 to 3 trials" in capsys.readouterr().out
+    scen.write_text(STUDY + "[controller_options]\nadaptive_gain = [6.0, 1.0, 30.0]\n")
+    assert cli_main(["run", str(scen), "--out", str(out), "--no-progress", "--resume",
+                     "--trials", "3"]) == 2
+    err = " ".join(capsys.readouterr().err.split())
+    assert "controllers: leg-edge (adaptive_gain=[5.0, 1.0, 30.0]) in the directory, " \
+           "leg-edge (adaptive_gain=[6.0, 1.0, 30.0]) given" in err
+    # a directory of an earlier version recorded the table itself: ignored on both sides
+    a = {"version": 1, "seed": 1, "controller_options": {"adaptive_gain": [5.0, 1.0, 30.0]}}
+    assert differences(a, {"version": 1, "seed": 1}) == ([], None)
