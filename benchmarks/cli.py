@@ -257,8 +257,8 @@ def build_parser(commands: set[str] | None = None) -> argparse.ArgumentParser:
     from benchmarks.identify import command as identify_command
 
     s = add_command(sub, "identify", identify_command.run,
-                    "identify a robot's dynamic parameters (inertia, friction, rotor inertia) from its own motion "
-                    "(docs/identification.md)")
+                    "identify a robot's dynamic parameters (inertia, friction, rotor "
+                    "inertia) from its own motion (docs/identification.md)")
     identify_command.add_arguments(s)
 
     servo_help = ("run one controller on a robot (serial link or emulator) with a camera, "
@@ -345,6 +345,16 @@ def main(argv: list[str] | None = None) -> int:
         return int(args.func(args))
     except (BenchmarkError, HexapodError) as exc:
         print(f"hexapod-bench: error: {exc}", file=sys.stderr)
+        return 2
+    except OSError as exc:  # a file or folder the system refuses (permissions, a file where
+        # a folder is asked, a full disk): the path and the reason, no traceback
+        if args.verbose:
+            raise
+        where = exc.filename if exc.filename is not None else ""
+        other = f" -> {exc.filename2}" if exc.filename2 is not None else ""
+        reason = exc.strerror or type(exc).__name__
+        print(f"hexapod-bench: error: {where}{other}: {reason}" if where else
+              f"hexapod-bench: error: {type(exc).__name__}: {exc}", file=sys.stderr)
         return 2
     except Exception as exc:
         from controllers.exceptions import ControllerError

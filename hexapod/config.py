@@ -31,6 +31,10 @@ def load_toml(path: str | Path) -> dict[str, Any]:
         raise ConfigFileError(str(p), "file not found") from None
     except tomllib.TOMLDecodeError as exc:
         raise ConfigFileError(str(p), f"not valid TOML: {exc}") from None
+    except UnicodeDecodeError as exc:  # an image, an archive: not a text file
+        raise ConfigFileError(str(p), f"not a TOML text file (not UTF-8 text: byte "
+                                      f"{exc.object[exc.start]:#04x} at offset {exc.start})"
+                              ) from None
     except OSError as exc:
         raise ConfigFileError(str(p), f"cannot be read: {exc}") from None
 

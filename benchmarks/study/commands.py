@@ -142,11 +142,20 @@ def _run_locked(scenarios: list[Any], out: Path, args: argparse.Namespace
     from benchmarks.study.runner import completed_keys, plan, run_units
 
     meta_path = out / META_FILE
-    meta: dict[str, Any] = json.loads(meta_path.read_text()) if meta_path.exists() else {}
+    try:
+        meta: dict[str, Any] = json.loads(meta_path.read_text()) if meta_path.exists() else {}
+    except ValueError as exc:
+        raise BenchmarkError(f"{meta_path}: not the run's record (not JSON: {exc}); its "
+                             "study cannot be checked: run into another --out") from None
     from benchmarks.study.study_record import check_same_study, command_entry, record_command
 
-    grows = check_same_study(out, meta, scenarios)  # before any trial: one study per directory
     existing = (out / "results.jsonl").exists() and (out / "results.jsonl").stat().st_size > 0
+    if existing and not meta and args.resume:  # (a run writes run.json before any trial)
+        raise BenchmarkError(f"{out}: holds results.jsonl but no {META_FILE}: the study its "
+                             "trials ran cannot be checked, and a resume could mix another "
+                             f"study's trials into them; restore {META_FILE}, or run into "
+                             "another --out")
+    grows = check_same_study(out, meta, scenarios)  # before any trial: one study per directory
     if existing and not args.resume:
         raise BenchmarkError(f"{out}: already holds results; use --resume to finish that run "
                              "or choose another --out")

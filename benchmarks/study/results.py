@@ -10,6 +10,7 @@ import json
 import logging
 import math
 import os
+import re
 import shlex
 import sys
 import time
@@ -154,13 +155,53 @@ def read_results(out_dir: Path) -> list[dict[str, Any]]:
         if not line.strip():
             continue
         try:
-            rows.append(json.loads(line))
+            row = json.loads(line)
         except json.JSONDecodeError as exc:
             if n == len(lines):  # partial last line of an interrupted run
                 log.warning("%s:%d: ignoring a partial last line", path, n)
                 continue
             raise ResultsError(f"{path}:{n}", f"not valid JSON: {exc}") from None
+        check_row(row, f"{path}:{n}")
+        rows.append(row)
     return rows
+
+
+#: The row keys that name a trial, with their JSON types.
+_KEY_TYPES: dict[str, tuple[type, ...]] = {"scenario": (str,), "controller": (str,),
+                                           "trial": (int,), "point": (int,)}
+#: A row key that ends so is a measure: a number, none, or a list of them (per leg).
+_MEASURE = re.compile(r"(_(mm|deg|s|us|ms|n|mm_s|hz|fraction|kg|percent|px)|^steps)$")
+
+
+def check_row(row: Any, where: str) -> None:
+    """Refuse a row that the report, ``compare`` and ``export`` cannot read: not a JSON
+    object, a trial key missing or of another type, a measure (a key with a unit
+    suffix, ``steps``) that is not a number (or null, or a list of numbers).
+
+    Raises:
+        ResultsError: Naming ``where`` (the file and line) and the key.
+    """
+    if not isinstance(row, dict):
+        raise ResultsError(where, f"a row is a JSON object ({{...}}), not a "
+                                  f"{type(row).__name__}")
+    for key, types in _KEY_TYPES.items():
+        value = row.get(key)
+        if value is None and key == "point":
+            continue
+        if not isinstance(value, types) or isinstance(value, bool):
+            raise ResultsError(where, f"key {key!r}: {'missing' if value is None else repr(value)}"
+                                      f"; a trial's row has its {key} as "
+                                      f"{'text' if types == (str,) else 'an integer'}")
+    for key, value in row.items():
+        if _MEASURE.search(key) and not _numbers(value):
+            raise ResultsError(where, f"key {key!r}: {value!r} is not a number")
+
+
+def _numbers(value: Any) -> bool:
+    """A number, null, or a list of them (booleans are not measures)."""
+    if isinstance(value, list):
+        return all(_numbers(v) and not isinstance(v, list) for v in value)
+    return value is None or (isinstance(value, int | float) and not isinstance(value, bool))
 
 
 def deduplicate(rows: list[dict[str, Any]]) -> tuple[list[dict[str, Any]], int, int]:

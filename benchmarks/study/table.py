@@ -110,6 +110,9 @@ def _read_fast(out_dir: Path) -> pd.DataFrame | None:
     except (pa.ArrowInvalid, pa.ArrowNotImplementedError) as exc:
         log.info("%s: pyarrow could not read it (%s); reading line by line", path, exc)
         return None
+    if any(key not in table.column_names or table[key].null_count
+           for key in ("scenario", "controller", "trial")):
+        return None  # a row without its trial key: the exact reader names its line
     return table.to_pandas()
 
 

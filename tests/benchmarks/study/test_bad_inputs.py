@@ -1,0 +1,98 @@
+"""Inputs a user can get wrong, each refused with the file and what is wrong, exit 2 and
+no traceback: a results file whose rows are not trial rows, a run directory whose record
+was deleted, a binary file where TOML is read, a folder the system refuses."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from benchmarks.cli import main as cli_main
+from benchmarks.exceptions import ResultsError
+from benchmarks.study.results import read_results
+from hexapod.config import load_toml
+from hexapod.exceptions import ConfigFileError
+from tests.benchmarks.study.helpers_rows import make_rows, write_run
+
+
+def _run(tmp_path: Path) -> Path:
+    return write_run(tmp_path / "run", make_rows("leg-edge", np.full(3, 0.1),
+                                                 np.ones(3, bool), np.full(3, 50)))
+
+
+@pytest.mark.parametrize(("line", "says"), [
+    ("[1, 2, 3]", "a row is a JSON object ({...}), not a list"),
+    ('{"scenario": "s", "controller": "c", "point": 0}', "key 'trial': missing"),
+    ('{"scenario": "s", "controller": "c", "trial": "3"}', "key 'trial': '3'"),
+    ('{"scenario": "s", "controller": "c", "trial": 3, "final_position_error_mm": "big"}',
+     "key 'final_position_error_mm': 'big' is not a number"),
+    ('{"scenario": "s", "controller": "c", "trial": 3, "steps": true}',
+     "key 'steps': True is not a number"),
+])
+def test_a_row_that_is_not_a_trial_row_is_refused_by_line(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str], line: str, says: str) -> None:
+    out = _run(tmp_path)
+    with (out / "results.jsonl").open("a") as f:
+        f.write(line + "\n")
+    with pytest.raises(ResultsError) as info:
+        read_results(out)
+    assert f"results.jsonl:4: {says}" in str(info.value)
+    before = (out / "results.jsonl").read_bytes()
+    for command in (["report", str(out)], ["compare", str(out)],
+                    ["export", str(out), "--parquet", str(tmp_path / "t.parquet")]):
+        assert cli_main(command) == 2
+        assert f"results.jsonl:4: {says}" in capsys.readouterr().err
+    assert (out / "results.jsonl").read_bytes() == before
+
+
+def test_good_rows_with_lists_and_nulls_are_read(tmp_path: Path) -> None:
+    out = _run(tmp_path)
+    with (out / "results.jsonl").open("a") as f:
+        f.write(json.dumps({"scenario": "s", "controller": "c", "trial": 9, "point": 1,
+                            "saturation_legs_s": [0.0, 1.5, None, 0, 0, 0],
+                            "final_position_error_mm": None, "goal": "taught"}) + "\n")
+    assert len(read_results(out)) == 4
+
+
+@pytest.mark.slow
+def test_a_resume_without_the_run_s_record_is_refused(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """run.json deleted (or not JSON): the study cannot be checked, so a resume that
+    could mix another study's trials into the rows is refused, the rows kept."""
+    out = tmp_path / "run"
+    assert cli_main(["run", "quick", "--out", str(out), "--trials", "2", "--max-steps", "20",
+                     "--no-progress"]) == 0
+    rows = (out / "results.jsonl").read_bytes()
+    (out / "run.json").unlink()
+    args = ["run", "quick", "--out", str(out), "--trials", "3", "--max-steps", "40",
+            "--resume", "--no-progress"]
+    assert cli_main(args) == 2
+    assert "holds results.jsonl but no run.json" in capsys.readouterr().err
+    (out / "run.json").write_text("{not json")
+    assert cli_main(args) == 2
+    assert "run.json: not the run's record (not JSON" in capsys.readouterr().err
+    assert (out / "results.jsonl").read_bytes() == rows
+
+
+def test_a_binary_file_where_toml_is_read_is_named(tmp_path: Path,
+                                                   capsys: pytest.CaptureFixture[str]) -> None:
+    png = tmp_path / "scenario.toml"
+    png.write_bytes(b"\x89PNG\r\n\x1a\n\x00\x00")
+    with pytest.raises(ConfigFileError, match=r"not a TOML text file \(not UTF-8 text: byte "
+                                              r"0x89 at offset 0\)"):
+        load_toml(png)
+    assert cli_main(["check", str(png)]) == 2
+    assert f"{png}: not a TOML text file" in capsys.readouterr().err
+
+
+def test_a_folder_the_system_refuses_is_named_without_a_traceback(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    blocker = tmp_path / "afile"
+    blocker.write_text("x")  # a file where the command makes a folder
+    out = _run(tmp_path)
+    assert cli_main(["export", str(out), "--parquet", str(blocker / "t.parquet")]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith(f"hexapod-bench: error: {blocker}") and "Traceback" not in err
