@@ -28,6 +28,10 @@ def cmd_run(args: argparse.Namespace) -> int:
     from benchmarks.study.scenario import load_scenario
 
     out = Path(args.out)
+    names = [str(s) for s in args.scenarios]
+    if len(set(names)) < len(names):  # each trial would run twice, its rows duplicated
+        twice = sorted({n for n in names if names.count(n) > 1})
+        raise BenchmarkError(f"scenario {', '.join(twice)} given twice: a study runs once")
     ctrl_list = [c.strip() for c in args.controllers.split(",")] if args.controllers else None
     scenarios = [load_scenario(s).with_overrides(args.trials, args.seed, ctrl_list,
                                                  args.max_steps, args.calibration)
@@ -48,6 +52,10 @@ def cmd_run(args: argparse.Namespace) -> int:
 def run_studies(scenarios: list[Any], out: Path, args: argparse.Namespace) -> int:
     """Check and run loaded scenarios into ``out`` (``run``'s work after the command-line
     overrides; ``tune`` runs its candidates through it)."""
+    for option, least in (("workers", 1), ("chunk", 1), ("record", 0)):
+        value = getattr(args, option, None)
+        if value is not None and value < least:
+            raise BenchmarkError(f"--{option} {value}: at least {least}")
     from benchmarks.study.preflight import preflight, refusal, warning_lines
     from benchmarks.study.runner import run_lock
 
@@ -362,6 +370,12 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
                   "its base point is poorly determined; add configurations that show this "
                   "leg at other inclinations")
         return 0
+    if args.configurations is not None:  # the scenario file's rule, named by the option
+        from benchmarks.study.scenario_checks import check_configurations
+
+        check_configurations(args.configurations, "--configurations")
+    if args.repeat < 1:
+        raise BenchmarkError(f"--repeat {args.repeat}: at least 1 repetition")
     t0 = time.perf_counter()
     doc = run_calibration(sc, out, args.configurations, args.repeat, args.solver,
                           args.correct_scale, overwrite=args.overwrite)

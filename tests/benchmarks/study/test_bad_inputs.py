@@ -96,3 +96,24 @@ def test_a_folder_the_system_refuses_is_named_without_a_traceback(
     assert cli_main(["export", str(out), "--parquet", str(blocker / "t.parquet")]) == 2
     err = capsys.readouterr().err
     assert err.startswith(f"hexapod-bench: error: {blocker}") and "Traceback" not in err
+
+
+@pytest.mark.parametrize(("args", "says"), [
+    (["run", "quick", "--workers", "-1"], "--workers -1: at least 1"),
+    (["run", "quick", "--chunk", "0"], "--chunk 0: at least 1"),
+    (["run", "quick", "--record", "-1"], "--record -1: at least 0"),
+    (["run", "quick", "quick"], "scenario quick given twice: a study runs once"),
+    (["calibrate", "quick", "--configurations", "random:0"],
+     "--configurations: key 'calibration.configurations': expected 'random:N' with an "
+     "integer N in [2, 100000], got 'random:0'"),
+    (["calibrate", "quick", "--configurations", "extreme"], "expected 'extremal' or"),
+    (["calibrate", "quick", "--repeat", "0"], "--repeat 0: at least 1 repetition"),
+])
+def test_counts_a_command_cannot_use_are_refused_before_anything_is_written(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str], args: list[str],
+        says: str) -> None:
+    out = tmp_path / "out"
+    assert cli_main([*args, "--out", str(out)]) == 2
+    err = " ".join(capsys.readouterr().err.split())
+    assert says in err and "Traceback" not in err
+    assert not out.exists()
