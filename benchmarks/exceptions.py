@@ -4,10 +4,10 @@ from __future__ import annotations
 
 from typing import Any
 
-from hexapod.exceptions import ConfigFileError
+from hexapod.exceptions import ConfigFileError, PicklableError
 
 
-class BenchmarkError(Exception):
+class BenchmarkError(PicklableError):
     """Base class of every error raised by :mod:`benchmarks`."""
 
 

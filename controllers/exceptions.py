@@ -2,8 +2,10 @@
 
 from __future__ import annotations
 
+from hexapod.exceptions import PicklableError
 
-class ControllerError(Exception):
+
+class ControllerError(PicklableError):
     """Base class of every error raised by :mod:`controllers`."""
 
 
