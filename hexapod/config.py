@@ -83,11 +83,26 @@ def get_number(table: Mapping[str, Any], key: str, path: str, prefix: str = "") 
     return float(value)
 
 
+def _not_a_number(value: Any) -> Any:
+    """The first entry of a nested list that is text or a boolean (None: none is)."""
+    if isinstance(value, list | tuple):
+        for v in value:
+            if (found := _not_a_number(v)) is not None:
+                return found
+        return None
+    return value if isinstance(value, str | bool) else None
+
+
 def get_matrix(
     table: Mapping[str, Any], key: str, shape: tuple[int, ...], path: str, prefix: str = ""
 ) -> np.ndarray:
     """Read a nested list of finite numbers of the given shape from ``table[key]``."""
     value = table[key]
+    text = _not_a_number(value)
+    if text is not None:  # ("410" would convert, silently: a typo in a file, refused)
+        raise ConfigFileError(
+            path, f"expected an array of numbers of shape {shape}, got {text!r}",
+            key=prefix + key)
     try:
         arr = np.array(value, dtype=float)
     except (TypeError, ValueError):

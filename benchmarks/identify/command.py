@@ -11,6 +11,9 @@ import numpy as np
 
 from hexapod.geometry import HexapodGeometry
 
+#: The longest excitation ``--duration`` takes [s] (its 1 kHz record is held in memory).
+MAX_DURATION_S = 3600.0
+
 
 def add_arguments(s: argparse.ArgumentParser) -> None:
     """The ``identify`` subcommand's options."""
@@ -76,6 +79,9 @@ def run(args: argparse.Namespace) -> int:
             raise IdentificationError(f"{key} {value}: must be a finite "
                                       f"{'positive' if key == '--duration' else 'non-negative'}"
                                       " number")
+    if args.duration > MAX_DURATION_S:  # (a 1 kHz record of every joint, in memory)
+        raise IdentificationError(f"--duration {args.duration:g}: at most {MAX_DURATION_S:g} s "
+                                  "(the default excitation lasts 20 s)")
     check_backend(args.backend)
     from benchmarks.identify.outputs import OUTPUTS
     from hexapod.outputs import check_replace

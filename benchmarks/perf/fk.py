@@ -95,6 +95,8 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("-n", type=int, default=1000, help="number of random poses")
     parser.add_argument("--seed", type=int, default=0)
     args = parser.parse_args(argv)
+    if args.n < 1:
+        parser.error(f"-n {args.n}: at least one pose")
     if args.what == "fk":
         print(format_fk(fk_figures(args.n, args.seed)))
     return 0

@@ -439,6 +439,12 @@ def cmd_report(args: argparse.Namespace) -> int:
 
     out, overwrite = Path(args.dir), getattr(args, "overwrite", False)
     check_report_file(out, overwrite)
+    from benchmarks.exceptions import ResultsError
+    from benchmarks.study.report import read_rows
+
+    rows = read_rows(out)
+    if not rows.rows:  # (as export: a report of no trial says nothing)
+        raise ResultsError(str(out / "results.jsonl"), "no trial rows: nothing to report")
     meta_path = out / META_FILE
     kept = meta_path.read_text() if meta_path.is_file() else None
     if kept is not None:  # run.json keeps every command that wrote the directory
@@ -447,7 +453,7 @@ def cmd_report(args: argparse.Namespace) -> int:
                                            "rebuilt report.md and its figures"))
         meta_path.write_text(json.dumps(meta, indent=2))
     try:
-        path = write_report(out, overwrite)
+        path = write_report(out, overwrite, rows)
     except BaseException:
         if kept is not None:  # nothing written: the record stays as it was
             meta_path.write_text(kept)

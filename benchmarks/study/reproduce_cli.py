@@ -11,6 +11,9 @@ from typing import Any
 from benchmarks.exceptions import BenchmarkError
 from benchmarks.study.outdir import OutputDir, OutputFile, add_command
 
+#: The sensitivity study's trials per study and point (``--trials``'s default).
+SENSITIVITY_TRIALS = 3
+
 
 def _scorecard(args: argparse.Namespace) -> int:
     from rich.markup import escape
@@ -28,6 +31,12 @@ def _scorecard(args: argparse.Namespace) -> int:
     from hexapod.outputs import check_replace, write_output
 
     con = console()
+    given = [f"--{k.replace('_', '-')}" for k in ("leg_radius_mm", "camera_distance_m", "gain",
+                                                  "goal_noise") if getattr(args, k) is not None]
+    if given or args.trials != SENSITIVITY_TRIALS:
+        raise BenchmarkError(f"{', '.join(given) or '--trials'}: options of the sensitivity "
+                             "study; add --sensitivity (the scorecard runs each study as its "
+                             "scenario declares, --quick for fewer trials)")
     if args.markdown:
         check_replace(args.markdown, args.overwrite, kind="Markdown")  # before minutes of studies
     check_reproduce_directory(Path(args.out), args.overwrite)
@@ -124,7 +133,7 @@ def add_reproduce_command(sub: Any) -> None:
     g.add_argument("--sensitivity", action="store_true",
                    help="evaluate the declared rows (image studies aside) over a grid of "
                         "the free parameters; one directory per point under --out")
-    g.add_argument("--trials", type=int, default=3,
+    g.add_argument("--trials", type=int, default=SENSITIVITY_TRIALS,
                    help="trials per run study and calibrations per calibration study at "
                         "each point (default 3)")
     g.add_argument("--leg-radius-mm", metavar="LIST",

@@ -117,3 +117,38 @@ def test_counts_a_command_cannot_use_are_refused_before_anything_is_written(
     err = " ".join(capsys.readouterr().err.split())
     assert says in err and "Traceback" not in err
     assert not out.exists()
+
+
+def test_text_where_numbers_are_read_is_refused(tmp_path: Path) -> None:
+    """'410' in a list of lengths converted silently to 410.0 (a goal file, a robot file):
+    text and booleans are refused, naming the key and the entry."""
+    from hexapod.config import get_matrix
+
+    with pytest.raises(ConfigFileError, match=r"f.toml: key 'lengths_mm': expected an "
+                                              r"array of numbers of shape \(3,\), got '410'"):
+        get_matrix({"lengths_mm": [400, "410", 420]}, "lengths_mm", (3,), "f.toml")
+    with pytest.raises(ConfigFileError, match="got True"):
+        get_matrix({"m": [[1.0, True], [0.0, 1.0]]}, "m", (2, 2), "f.toml")
+    assert get_matrix({"m": [1, 2.5]}, "m", (2,), "f.toml").tolist() == [1.0, 2.5]
+
+
+@pytest.mark.parametrize(("args", "says"), [
+    (["reproduce", "seed000", "--trials", "2"], "--trials: options of the sensitivity study"),
+    (["reproduce", "seed000", "--gain", "1"], "--gain: options of the sensitivity study"),
+    (["identify", "deltalab", "--duration", "1e9"], "--duration 1e+09: at most 3600 s"),
+])
+def test_options_a_command_would_ignore_or_not_survive_are_refused(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str], args: list[str],
+        says: str) -> None:
+    out = tmp_path / "out"
+    assert cli_main([*args, "--out", str(out)]) == 2
+    assert says in capsys.readouterr().err
+    assert not out.exists()
+
+
+def test_a_report_of_no_trial_is_refused(tmp_path: Path,
+                                         capsys: pytest.CaptureFixture[str]) -> None:
+    (tmp_path / "results.jsonl").write_text("")
+    assert cli_main(["report", str(tmp_path)]) == 2
+    assert "results.jsonl: no trial rows: nothing to report" in capsys.readouterr().err
+    assert not (tmp_path / "report.md").exists()
