@@ -4,7 +4,8 @@ from __future__ import annotations
 
 from typing import Any
 
-from hexapod.exceptions import ConfigFileError, PicklableError
+from hexapod.error_base import PicklableError
+from hexapod.exceptions import ConfigFileError
 
 
 class BenchmarkError(PicklableError):

@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from hexapod.exceptions import PicklableError
+from hexapod.error_base import PicklableError
 
 
 class ControllerError(PicklableError):

@@ -11,25 +11,7 @@ from typing import Any
 
 import numpy as np
 
-
-def _rebuilt(cls: type[BaseException], args: tuple[object, ...],
-             state: dict[str, object]) -> BaseException:
-    """An exception of ``cls`` with its ``args`` and attributes, without calling its
-    ``__init__`` (whose parameters are not its message: the pickle of a worker's error)."""
-    exc = cls.__new__(cls, *args)
-    BaseException.__init__(exc, *args)
-    exc.__dict__.update(state)
-    return exc
-
-
-class PicklableError(Exception):
-    """Base of the project's error bases: an error raised in a worker process (a process
-    pool, Dask) crosses back whole, its message and attributes, whatever its
-    ``__init__`` takes (the default pickle calls ``cls(*args)`` with the formatted
-    message, which such an ``__init__`` refuses, breaking the pool)."""
-
-    def __reduce__(self) -> tuple[object, ...]:
-        return (_rebuilt, (type(self), self.args, dict(self.__dict__)))
+from hexapod.error_base import PicklableError
 
 
 class HexapodError(PicklableError):

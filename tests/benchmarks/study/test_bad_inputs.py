@@ -108,8 +108,12 @@ def test_a_folder_the_system_refuses_is_named_without_a_traceback(
      "integer N in [2, 100000], got 'random:0'"),
     (["calibrate", "quick", "--configurations", "extreme"], "expected 'extremal' or"),
     (["calibrate", "quick", "--repeat", "0"], "--repeat 0: at least 1 repetition"),
+    # options a command would ignore, or not survive
+    (["reproduce", "seed000", "--trials", "2"], "--trials: options of the sensitivity study"),
+    (["reproduce", "seed000", "--gain", "1"], "--gain: options of the sensitivity study"),
+    (["identify", "deltalab", "--duration", "1e9"], "--duration 1e+09: at most 3600 s"),
 ])
-def test_counts_a_command_cannot_use_are_refused_before_anything_is_written(
+def test_options_a_command_cannot_use_are_refused_before_anything_is_written(
         tmp_path: Path, capsys: pytest.CaptureFixture[str], args: list[str],
         says: str) -> None:
     out = tmp_path / "out"
@@ -130,20 +134,6 @@ def test_text_where_numbers_are_read_is_refused(tmp_path: Path) -> None:
     with pytest.raises(ConfigFileError, match="got True"):
         get_matrix({"m": [[1.0, True], [0.0, 1.0]]}, "m", (2, 2), "f.toml")
     assert get_matrix({"m": [1, 2.5]}, "m", (2,), "f.toml").tolist() == [1.0, 2.5]
-
-
-@pytest.mark.parametrize(("args", "says"), [
-    (["reproduce", "seed000", "--trials", "2"], "--trials: options of the sensitivity study"),
-    (["reproduce", "seed000", "--gain", "1"], "--gain: options of the sensitivity study"),
-    (["identify", "deltalab", "--duration", "1e9"], "--duration 1e+09: at most 3600 s"),
-])
-def test_options_a_command_would_ignore_or_not_survive_are_refused(
-        tmp_path: Path, capsys: pytest.CaptureFixture[str], args: list[str],
-        says: str) -> None:
-    out = tmp_path / "out"
-    assert cli_main([*args, "--out", str(out)]) == 2
-    assert says in capsys.readouterr().err
-    assert not out.exists()
 
 
 def test_a_report_of_no_trial_is_refused(tmp_path: Path,
