@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import contextlib
 import fcntl
+import functools
 import json
 import logging
 import math
@@ -193,8 +194,14 @@ def check_row(row: Any, where: str) -> None:
                                       f"; a trial's row has its {key} as "
                                       f"{'text' if types == (str,) else 'an integer'}")
     for key, value in row.items():
-        if _MEASURE.search(key) and not _numbers(value):
+        if _is_measure(key) and not _numbers(value):
             raise ResultsError(where, f"key {key!r}: {value!r} is not a number")
+
+
+@functools.lru_cache(maxsize=4096)
+def _is_measure(key: str) -> bool:
+    """Whether a row key is a measure (the same few dozen keys in every row)."""
+    return _MEASURE.search(key) is not None
 
 
 def _numbers(value: Any) -> bool:
