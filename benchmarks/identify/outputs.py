@@ -55,6 +55,7 @@ def document(ident: Identification, command: str) -> dict[str, Any]:
             row["z"] = float((est.theta[i] - true_base[i]) / est.se[i])
         params.append(row)
     used = int(ident.mask.sum())
+    kept, moved = kept_and_moved(ident)
     return {
         "command": command, "commit": _commit(),
         "date": datetime.datetime.now(datetime.UTC).isoformat(timespec="seconds"),
@@ -63,8 +64,7 @@ def document(ident: Identification, command: str) -> dict[str, Any]:
         "excitation": ident.excitation.to_dict(),
         "base_parameters": params,
         "unidentifiable": list(basis.unidentifiable),
-        "not_separable_kept_at_prior": kept_and_moved(ident)[0],
-        "not_separable_moved": kept_and_moved(ident)[1],
+        "not_separable_kept_at_prior": kept, "not_separable_moved": moved,
         "standard": {n: float(x) for n, x in zip(STANDARD_NAMES, est.standard, strict=True)},
         "condition_weighted": est.condition,
         "residual_sigma_legs_n": est.sigma_legs.tolist(),
@@ -197,15 +197,15 @@ def write_all(ident: Identification, out: Path, command: str, overwrite: bool) -
         text = None
         doc["identified_toml"] = None
         doc["identified_toml_refused"] = f"not written: {exc}"
-    if text is not None:
-        write_output(target, text, overwrite)
-    else:
+    if text is None:
         check_replace(target, overwrite)  # (a user's file is refused, not deleted)
         target.unlink(missing_ok=True)  # no robot file of an older run left beside
+    else:
+        write_output(target, text, overwrite)
     write_output(out / "identification.json", doc, overwrite)
     write_output(out / "residuals.png", residual_png(ident), overwrite)
     write_output(out / "report.md", report_text(doc), overwrite)
-    if text is None:
+    if text is None:  # (the other three written first: they say what was estimated)
         raise IdentificationError(
             f"{target}: not written: the estimate is not physical after the constrained "
             f"fit ({doc['identified_toml_refused'].removeprefix('not written: ')}); "
