@@ -118,7 +118,7 @@ def load_goal(path: str | Path, geometry: HexapodGeometry) -> ServoGoal:
     q_min, q_max = geometry.stroke
     for i, x in enumerate(q):
         if not q_min <= x <= q_max:
-            raise ConfigFileError(src, f"leg {i + 1}: {x * 1e3:.3f} mm is outside the stroke "
+            raise ConfigFileError(src, f"leg {i}: {x * 1e3:.3f} mm is outside the stroke "
                                        f"[{q_min * 1e3:.3f}, {q_max * 1e3:.3f}] mm",
                                   key="lengths_mm")
     name = table.get("name", "")

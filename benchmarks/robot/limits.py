@@ -113,7 +113,7 @@ class LimitedRobot:
                 if travel[leg] > self.limits.max_travel + 1e-9:
                     raise SessionStop(ServoExit.LIMIT, (
                         f"--max-travel-mm {self.limits.max_travel * 1e3:g} reached: leg "
-                        f"{leg + 1} at {self.q[leg] * 1e3:.3f} mm would move "
+                        f"{leg} at {self.q[leg] * 1e3:.3f} mm would move "
                         f"{travel[leg] * 1e3:.3f} mm from its start length "
                         f"{self.start[leg] * 1e3:.3f} mm (the command was not sent)"))
         self.moved = True

@@ -113,7 +113,7 @@ def _plan(args: argparse.Namespace, q0: np.ndarray, goal_q: np.ndarray,
     if limits.max_travel is not None and travel[leg] > limits.max_travel:
         raise SessionStop(ServoExit.REFUSED, (
             f"--max-travel-mm {limits.max_travel * 1e3:g}: the goal is {travel[leg] * 1e3:.3f} "
-            f"mm away on leg {leg + 1} ({q0[leg] * 1e3:.3f} -> {goal_q[leg] * 1e3:.3f} mm); "
+            f"mm away on leg {leg} ({q0[leg] * 1e3:.3f} -> {goal_q[leg] * 1e3:.3f} mm); "
             "refused before moving"))
     if not args.confirm:
         return
@@ -121,7 +121,7 @@ def _plan(args: argparse.Namespace, q0: np.ndarray, goal_q: np.ndarray,
     gmm = np.round(goal_q * 1e3, 3).tolist()
     cap = limits.max_speed
     say(f"planned move: start {mm} mm -> goal {gmm} mm; largest leg travel "
-        f"{travel[leg] * 1e3:.3f} mm (leg {leg + 1}), at least {travel[leg] / cap:.2f} s at "
+        f"{travel[leg] * 1e3:.3f} mm (leg {leg}), at least {travel[leg] / cap:.2f} s at "
         f"{cap * 1e3:g} mm/s; limits: travel "
         f"{'none' if limits.max_travel is None else f'{limits.max_travel * 1e3:g} mm'}, "
         f"time {limits.max_time:g} s")

@@ -34,7 +34,7 @@ def test_a_command_beyond_the_travel_limit_is_not_sent() -> None:
     with pytest.raises(SessionStop) as stop:
         robot.apply(np.full(6, 0.02), Actuation.VELOCITY, 0.02)
     assert stop.value.code is ServoExit.LIMIT
-    assert stop.value.reason.startswith("--max-travel-mm 1 reached: leg 1 at ")
+    assert stop.value.reason.startswith("--max-travel-mm 1 reached: leg 0 at ")
     assert "would move 1.200 mm" in stop.value.reason
     np.testing.assert_allclose(robot.robot.measured_lengths() - q0, 0.0008, atol=1e-12)
 

@@ -244,7 +244,7 @@ def test_a_command_of_the_wrong_shape_is_refused_and_commands_zero() -> None:
     ("name = 'x'\n", ["'lengths_mm'", "missing required key"]),
     ("lengths_mm = [415.0, 415.0, 415.0]\n", ["'lengths_mm'", "shape (6,)"]),
     ("lengths_mm = [415.0, 415.0, 415.0, 415.0, 415.0, 600.0]\n",
-     ["'lengths_mm'", "leg 6", "600.000 mm is outside the stroke"]),
+     ["'lengths_mm'", "leg 5", "600.000 mm is outside the stroke"]),
     (f"lengths_mm = {_mm(GOAL_MM)}\nfeatures = 'missing.npz'\n",
      ["'features'", "missing.npz not found"]),
     ("lengths_mm = [\n", ["not valid TOML"]),

@@ -261,7 +261,7 @@ def test_a_goal_beyond_the_travel_limit_is_refused_before_moving(
     code, out = _run(tmp_path, caplog, "--max-travel-mm", "1")
     stdout = capsys.readouterr().out
     assert code == 2, stdout
-    assert "--max-travel-mm 1: the goal is 2.500 mm away on leg 1" in stdout
+    assert "--max-travel-mm 1: the goal is 2.500 mm away on leg 0" in stdout
     assert "refused before moving" in stdout
     rec = final(out)
     assert rec["exit_code"] == 2 and rec["moved"] is False and periods(out) == []
@@ -308,7 +308,7 @@ def test_confirm_refuses_without_a_terminal(
     stdout = capsys.readouterr().out
     assert code == 2, stdout
     assert "planned move: start [415.0," in stdout
-    assert "largest leg travel 2.500 mm (leg 1)" in stdout
+    assert "largest leg travel 2.500 mm (leg 0)" in stdout
     assert "--confirm asks y/N on a terminal" in stdout
     rec = final(out)
     assert rec["exit_code"] == 2 and rec["moved"] is False
@@ -435,7 +435,7 @@ def test_confirm_on_a_terminal_moves_only_after_yes(
     rc, shown = _on_a_terminal(["--backend", "emulator", "--goal", str(goal_file(tmp_path)),
                                 "--confirm", *FAST], answer, out)
     assert rc == code, shown
-    assert "largest leg travel 2.500 mm (leg 1)" in shown
+    assert "largest leg travel 2.500 mm (leg 0)" in shown
     rec = final(out)
     assert rec["exit_code"] == code
     if code == 0:
