@@ -10,6 +10,7 @@ whose. See ``docs/outputs.md``.
 from __future__ import annotations
 
 import argparse
+import tempfile
 from pathlib import Path
 from typing import Any
 
@@ -135,7 +136,33 @@ class _OutputAction(argparse.Action):
 
     def __call__(self, parser: argparse.ArgumentParser, namespace: argparse.Namespace,
                  values: Any, option_string: str | None = None) -> None:
+        problem = unwritable(Path(values), self.kind)
+        if problem is not None:  # refused before any work (exit 2), not after the work
+            raise argparse.ArgumentError(self, f"{values}: {problem}")
         setattr(namespace, self.dest, values)
+
+
+def unwritable(path: Path, kind: str) -> str | None:
+    """Why the output ``path`` (a ``"file"`` or a ``"directory"``) cannot be written, or
+    None: a directory where a file goes (or the reverse), a file where a folder on its way
+    should be, or a folder that cannot be written in (read-only file system, permissions:
+    tried with an unnamed temporary file, which leaves nothing behind). Checked when the
+    command line is read, so that a long computation is not lost at its end."""
+    if path.is_dir() and kind == "file":
+        return "is a directory, not a file"
+    if path.exists() and not path.is_dir() and kind == "directory":
+        return "is a file, not a directory"
+    folder = path if kind == "directory" else path.parent
+    while not folder.exists() and folder != folder.parent:
+        folder = folder.parent
+    if not folder.is_dir():
+        return f"{folder} is a file: no folder can be made under it"
+    try:
+        with tempfile.TemporaryFile(dir=folder):
+            pass
+    except OSError as e:
+        return f"no file can be created in {folder} ({e.strerror or e})"
+    return None
 
 
 class OutputFile(_OutputAction):

@@ -301,3 +301,37 @@ def test_a_directory_holding_a_users_file_is_refused_unless_overwrite(
         assert _marked(user)
     else:
         assert user.read_bytes() == before
+
+
+# ------------------------------------------------- an output that cannot be written at all
+@pytest.mark.parametrize("key", sorted(_outputs()))
+def test_an_output_that_cannot_be_written_is_refused_when_the_command_line_is_read(
+        key: tuple[str, str], tmp_path: Path) -> None:
+    cmd, option = key
+    (action,) = [a for a in _subcommands()[cmd]._actions if _name(a) == option]
+    a_file = tmp_path / "notes.txt"
+    a_file.write_text("mine\n")
+    cases = {a_file / "sub" / "out.json": f"{a_file} is a file: no folder can be made",
+             Path("/proc") / "out.json": "no file can be created in /proc (",
+             a_file: "is a file, not a directory" if action.kind == "directory" else None,
+             tmp_path: "is a directory, not a file" if action.kind == "file" else None}
+    for path, expected in cases.items():
+        if expected is None:  # a path this kind of output may take
+            action(argparse.ArgumentParser(), argparse.Namespace(), str(path), option)
+            continue
+        with pytest.raises(argparse.ArgumentError) as refused:
+            action(argparse.ArgumentParser(), argparse.Namespace(), str(path), option)
+        assert f"{path}: " in str(refused.value) and expected in str(refused.value)
+    assert a_file.read_text() == "mine\n" and sorted(tmp_path.iterdir()) == [a_file]
+
+
+def test_run_refuses_an_unwritable_out_before_any_trial(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    a_file = tmp_path / "notes.txt"
+    a_file.write_text("mine\n")
+    with pytest.raises(SystemExit) as stopped:
+        cli_main(["run", "quick", "--trials", "2", "--out", str(a_file / "run")])
+    assert stopped.value.code == REFUSED
+    err = capsys.readouterr().err
+    assert f"argument --out: {a_file / 'run'}: {a_file} is a file" in err, err
+    assert sorted(tmp_path.iterdir()) == [a_file]

@@ -89,13 +89,29 @@ def test_a_binary_file_where_toml_is_read_is_named(tmp_path: Path,
 
 
 def test_a_folder_the_system_refuses_is_named_without_a_traceback(
-        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+        tmp_path: Path, capsys: pytest.CaptureFixture[str],
+        monkeypatch: pytest.MonkeyPatch) -> None:
+    from benchmarks.study import table
+
     blocker = tmp_path / "afile"
-    blocker.write_text("x")  # a file where the command makes a folder
     out = _run(tmp_path)
-    assert cli_main(["export", str(out), "--parquet", str(blocker / "t.parquet")]) == 2
+    argv = ["export", str(out), "--parquet", str(blocker / "t.parquet")]
+    real = table.export_parquet
+
+    def changed_meanwhile(*args: object, **kwargs: object) -> object:
+        blocker.write_text("x")  # a file where the command makes a folder, since the
+        return real(*args, **kwargs)  # command line was read (checked there: below)
+
+    monkeypatch.setattr(table, "export_parquet", changed_meanwhile)
+    assert cli_main(argv) == 2
     err = capsys.readouterr().err
     assert err.startswith(f"hexapod-bench: error: {blocker}") and "Traceback" not in err
+    monkeypatch.undo()
+    with pytest.raises(SystemExit) as refused:  # already there: refused before any work
+        cli_main(argv)
+    assert refused.value.code == 2
+    err = capsys.readouterr().err
+    assert f"argument --parquet: {blocker / 't.parquet'}: {blocker} is a file" in err
 
 
 @pytest.mark.parametrize(("args", "says"), [
