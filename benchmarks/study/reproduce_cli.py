@@ -9,7 +9,7 @@ from pathlib import Path
 from typing import Any
 
 from benchmarks.exceptions import BenchmarkError
-from benchmarks.study.outdir import OutputDir, OutputFile, add_command
+from benchmarks.study.outdir import OutputDir, OutputFile, add_command, unwritable
 
 #: The sensitivity study's trials per study and point (``--trials``'s default).
 SENSITIVITY_TRIALS = 3
@@ -106,6 +106,9 @@ def _sensitivity(args: argparse.Namespace) -> int:
 
 def cmd_reproduce(args: argparse.Namespace) -> int:
     """Run the studies behind the papers' figures; paper and framework side by side."""
+    problem = unwritable(Path(args.out), "directory")  # the default is not checked by
+    if problem is not None:  # argparse's action
+        raise BenchmarkError(f"--out {args.out}: {problem}")
     return _sensitivity(args) if args.sensitivity else _scorecard(args)
 
 

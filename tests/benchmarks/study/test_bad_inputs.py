@@ -158,3 +158,16 @@ def test_a_report_of_no_trial_is_refused(tmp_path: Path,
     assert cli_main(["report", str(tmp_path)]) == 2
     assert "results.jsonl: no trial rows: nothing to report" in capsys.readouterr().err
     assert not (tmp_path / "report.md").exists()
+
+
+def test_reproduce_checks_its_default_out_before_any_study(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str],
+        monkeypatch: pytest.MonkeyPatch) -> None:
+    """``--out`` not given: its default (runs/reproduce, not read by argparse's action) is
+    checked as a given one is."""
+    (tmp_path / "runs").write_text("my notes\n")  # a file where the default's folder goes
+    monkeypatch.chdir(tmp_path)
+    assert cli_main(["reproduce", "seed000", "--quick"]) == 2
+    err = capsys.readouterr().err
+    assert "--out runs/reproduce: runs is a file: no folder can be made under it" in err
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["runs"]
