@@ -50,13 +50,14 @@ def time_to_converge_section(out_dir: Path, scenario: str, rows: list[dict[str, 
     table, tests = [], []
     kms: dict[int, dict[str, survival.TimeToConverge]] = defaultdict(dict)
     for p in sorted(groups):
+        run = stats.run_length([r for rs in groups[p].values() for r in rs])
         for label, rs in sorted(groups[p].items()):
-            km = kms[p][label] = survival.time_to_converge(rs)
+            km = kms[p][label] = survival.time_to_converge(rs, run=run)
             table.append([format_sweep(sweeps.get(p, {})), label, str(km.trials),
                           str(km.converged), f"{_steps(km.median, km.cap)} "
                           f"[{_steps(km.low, km.cap)}, {_steps(km.high, km.cap)}]"])
         for a, b in itertools.combinations(sorted(groups[p]), 2):
-            tests.append((p, a, b, survival.logrank_p(groups[p][a], groups[p][b])))
+            tests.append((p, a, b, survival.logrank_p(groups[p][a], groups[p][b], run)))
     lines = ["### Time to converge", "",
              "Steps to converge as censored data: a trial that did not converge (failed "
              "ones included) is known only to need more than the run's steps. Kaplan-Meier "

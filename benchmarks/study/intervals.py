@@ -9,6 +9,7 @@ tail).
 
 from __future__ import annotations
 
+import math
 from collections import defaultdict
 from typing import Any
 
@@ -71,15 +72,15 @@ def quantile_cells(values: list[Any], quantiles: list[float], digits: int = 3) -
             for q in quantiles]
 
 
-def censored_steps(rows: list[dict[str, Any]]) -> tuple[np.ndarray, float | None]:
+def censored_steps(rows: list[dict[str, Any]], run: float = math.nan
+                   ) -> tuple[np.ndarray, float | None]:
     """The steps to converge of a group's trials, ``+inf`` for a trial that did not
-    converge (failed ones included: they count as not converged), and the cap (the
-    longest run of the group, None when every trial converged)."""
-    steps = [r.get("steps") for r in rows]
-    known = [float(s) for s in steps if s is not None and np.isfinite(s)]
+    converge (failed ones included: they count as not converged), and the cap (the run's
+    length ``run``, :func:`benchmarks.study.stats.run_length` of the sweep point, at
+    least the longest run of the group; None when every trial converged)."""
     out = np.array([float(r["steps"]) if r.get("converged") else np.inf for r in rows])
-    cap = max(known) if known and not all(bool(r.get("converged")) for r in rows) else None
-    return out, cap
+    cap = float(np.nanmax([stats.run_length(rows), run]))
+    return out, (cap if np.isfinite(cap) and not np.isfinite(out).all() else None)
 
 
 def censored_median_cell(values: np.ndarray, digits: int, cap: float | str | None) -> str:
@@ -96,12 +97,12 @@ def censored_median_cell(values: np.ndarray, digits: int, cap: float | str | Non
     return f"{_bound(exact.censored_quantile(x, 0.5), digits, cap)} [{low}, {high}]"
 
 
-def steps_cell(rows: list[dict[str, Any]]) -> str:
+def steps_cell(rows: list[dict[str, Any]], run: float = math.nan) -> str:
     """Median steps to converge over all the trials of a group, the ones that did not
     converge censored at the run's length (no survivorship: a controller that converges
     on half its trials has a median at the cap), with the order-statistic interval:
-    ``> 500 [312, > 500]``."""
-    steps, cap = censored_steps(rows)
+    ``> 500 [312, > 500]`` (``run``: :func:`censored_steps`)."""
+    steps, cap = censored_steps(rows, run)
     return censored_median_cell(steps, 0, cap)
 
 
@@ -119,13 +120,18 @@ def summary_rows_with_intervals(summaries: list[Summary],
     """The rows of the report's main table (columns of
     :data:`benchmarks.study.report.TABLE_HEADER`), with intervals; the error columns
     over the trials that ran to their end."""
+    runs: dict[tuple[str, int], list[dict[str, Any]]] = defaultdict(list)
+    for (scenario, point, _, _), group in groups.items():  # the run's length: a point's
+        runs[(scenario, point)] += group  # longest run, all controllers
+    run = {key: stats.run_length(rs) for key, rs in runs.items()}
     out = []
     for s in summaries:
         rs = completed(groups[(s.scenario, s.point, s.controller, s.backend)])
         pos_med, pos_p95 = quantile_cells([r["final_position_error_mm"] for r in rs],
                                           [0.5, 0.95])
         rot_med, = quantile_cells([r["final_orientation_error_deg"] for r in rs], [0.5], 4)
-        steps = steps_cell(groups[(s.scenario, s.point, s.controller, s.backend)])
+        steps = steps_cell(groups[(s.scenario, s.point, s.controller, s.backend)],
+                           run[(s.scenario, s.point)])
         out.append([
             s.scenario, format_sweep(s.sweep), s.controller, s.backend,
             stats.format_rate(s.converged, s.trials), str(s.failed), pos_med, pos_p95,

@@ -31,6 +31,7 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 from fractions import Fraction
 from statistics import NormalDist
+from typing import Any
 
 import numpy as np
 
@@ -119,6 +120,14 @@ def finite_values(values: Sequence[float | None] | np.ndarray) -> np.ndarray:
     one test over the array, not one NumPy call per value)."""
     arr = np.asarray([np.nan if v is None else v for v in values], dtype=float)
     return arr[np.isfinite(arr)]
+
+
+def run_length(rows: Sequence[dict[str, Any]]) -> float:
+    """The run's length [steps] seen in ``rows``: their longest run (NaN for none). Give
+    it every trial of a sweep point, all controllers: a group whose every trial failed
+    early has not seen the run's end, and its censored trials go at the run's end."""
+    runs = finite_values([r.get("steps") for r in rows])
+    return float(runs.max()) if runs.size else math.nan
 
 
 def bootstrap_quantiles(values: Sequence[float] | np.ndarray, quantiles: Sequence[float],

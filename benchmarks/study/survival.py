@@ -95,10 +95,12 @@ class Curve:
     events: np.ndarray
 
 
-def censored_data(rows: list[dict[str, Any]]) -> tuple[Censored, int, float]:
+def censored_data(rows: list[dict[str, Any]], run: float = math.nan
+                  ) -> tuple[Censored, int, float]:
     """The steps to converge of a group's trials as censored data: the converged ones
-    observed, the others right-censored at the run's length (the longest run of the
-    group).
+    observed, the others right-censored at the run's length (``run``, the longest run of
+    the sweep point: :func:`benchmarks.study.stats.run_length`; at least the longest run
+    of the group).
 
     Returns:
         ``(data, converged, cap)``.
@@ -108,8 +110,7 @@ def censored_data(rows: list[dict[str, Any]]) -> tuple[Censored, int, float]:
             scenario, controller and trial).
     """
     done, cens = [], 0
-    runs = stats.finite_values([r.get("steps") for r in rows])
-    cap = float(runs.max()) if runs.size else math.nan
+    cap = float(np.nanmax([stats.run_length(rows), run]))
     for r in rows:
         if r.get("converged"):
             s = r.get("steps")
@@ -172,10 +173,11 @@ def log_log_band(curve: Curve, level: float) -> tuple[np.ndarray, np.ndarray]:
     return np.clip(low, 0, 1), np.clip(high, 0, 1)
 
 
-def time_to_converge(rows: list[dict[str, Any]], level: float = stats.LEVEL
-                     ) -> TimeToConverge:
-    """The Kaplan-Meier curve of a group's steps to converge, its median and interval."""
-    data, k, cap = censored_data(rows)
+def time_to_converge(rows: list[dict[str, Any]], level: float = stats.LEVEL,
+                     run: float = math.nan) -> TimeToConverge:
+    """The Kaplan-Meier curve of a group's steps to converge, its median and interval
+    (``run``: the run's length, :func:`censored_data`)."""
+    data, k, cap = censored_data(rows, run)
     if k == 0:  # none converged (or no trial): the median is beyond the run, if any
         end = math.inf if rows else math.nan
         return TimeToConverge(len(rows), 0, cap, end, end, end, np.array([]), np.array([]))
@@ -216,13 +218,16 @@ def logrank_statistic(a: Censored, b: Censored) -> float:
         return float((a.uncensored.size - sum_exp_deaths_x) / np.sqrt(sum_var))
 
 
-def logrank_p(rows_a: list[dict[str, Any]], rows_b: list[dict[str, Any]]) -> float:
+def logrank_p(rows_a: list[dict[str, Any]], rows_b: list[dict[str, Any]],
+              run: float = math.nan) -> float:
     """Two-sided log-rank p-value of two groups' steps to converge (nan when neither
-    group has a converged trial)."""
+    group has a converged trial; ``run``: the run's length, at least the longest run of
+    the two groups, :func:`censored_data`)."""
     from scipy.special import ndtr
 
-    da, ka, _ = censored_data(rows_a)
-    db, kb, _ = censored_data(rows_b)
+    run = float(np.nanmax([stats.run_length([*rows_a, *rows_b]), run]))
+    da, ka, _ = censored_data(rows_a, run)
+    db, kb, _ = censored_data(rows_b, run)
     if ka + kb == 0:
         return math.nan
     return float(2 * ndtr(-np.abs(logrank_statistic(da, db))))

@@ -48,9 +48,9 @@ def _cells(values: list[Any], hows: list[str], with_intervals: bool) -> list[str
 
 
 def _settling_cell(rs: list[dict[str, Any]], with_intervals: bool) -> str:
-    """Median settling time [s] over the trials that ran to their end, a trial that did
-    not settle censored at the run's end (``> run``: more than half did not settle), with
-    its order-statistic interval in the report."""
+    """Median settling time [s] over every trial, a trial that did not settle (or failed)
+    censored at the run's end (``> run``: more than half did not settle), with its
+    order-statistic interval in the report."""
     if not rs:
         return "-"
     t = np.array([np.inf if r.get("settling_time_s") is None else r["settling_time_s"]
@@ -90,9 +90,10 @@ def tracking_rows(rows: list[dict[str, Any]], with_intervals: bool = True
     :data:`FORCE_HEADER`'s cells in the dynamic world).
 
     The failed trials (:func:`benchmarks.study.failures.is_failure`: an end stop, a
-    crash) are counted in *failed* and left out of every other figure, which are those
-    of the trials that ran to their end; *settled* is their rate with its Wilson
-    interval.
+    crash) are counted in *failed*, as not settled in *settled* (the rate over every
+    trial, with its Wilson interval) and as censored at the run's end in the settling
+    time (a failed trial never settled), and left out of the tracking errors and forces,
+    which are those of the trials that ran to their end.
 
     Args:
         rows: The result rows of one scenario.
@@ -109,8 +110,8 @@ def tracking_rows(rows: list[dict[str, Any]], with_intervals: bool = True
     for (_, controller), every in sorted(groups.items()):
         rs = [r for r in every if not is_failure(r)]
         settled = sum(1 for r in rs if r.get("settling_time_s") is not None)
-        rate = (stats.format_rate(settled, len(rs)) if with_intervals
-                else f"{settled}/{len(rs)}") if rs else "-"
+        rate = (stats.format_rate(settled, len(every)) if with_intervals
+                else f"{settled}/{len(every)}")
         out.append([
             format_sweep(sweep_values(every[0])), controller, str(len(every)),
             str(len(every) - len(rs)),
@@ -121,7 +122,7 @@ def tracking_rows(rows: list[dict[str, Any]], with_intervals: bool = True
             *_cells([r.get("tracking_rms_orientation_deg") for r in rs], ["median"],
                     with_intervals),
             rate,
-            _settling_cell(rs, with_intervals),
+            _settling_cell(every, with_intervals),
             *(_force_cells(rs, with_intervals) if forces else [])])
     return out
 

@@ -14,7 +14,7 @@ import pytest
 import scipy.stats as sps
 
 from benchmarks.exceptions import BenchmarkError
-from benchmarks.study import survival
+from benchmarks.study import stats, survival
 from benchmarks.study.report import write_report
 from tests.benchmarks.study.helpers_rows import make_rows, write_run
 
@@ -113,8 +113,9 @@ def test_kaplan_meier_band_and_logrank_are_scipy_bit_for_bit() -> None:
         if not da and not db:
             continue
         ours = survival.logrank_p(a, b)
-        xa, _, _ = survival.censored_data(a)
-        xb, _, _ = survival.censored_data(b)
+        run = stats.run_length(a + b)  # both groups' censored trials at the run's end
+        xa, _, _ = survival.censored_data(a, run)
+        xb, _, _ = survival.censored_data(b, run)
         with warnings.catch_warnings():
             warnings.simplefilter("ignore", RuntimeWarning)
             ref_p = sps.logrank(sps.CensoredData(uncensored=xa.uncensored, right=xa.right),
@@ -196,3 +197,28 @@ def test_a_controller_that_never_converged_keeps_its_curve(tmp_path: Path,
         assert [t.get_text() for t in ax.get_legend().get_texts()] == want
         line = next(ln for ln in ax.get_lines() if ln.get_label() == "never (0/10)")
         assert line.get_ydata().max() == 0.0 and line.get_xdata().max() == 300
+
+
+def test_a_group_that_failed_early_is_censored_at_the_points_run_not_its_own(
+        tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """Every trial of one controller failed before step 44 where the run is 151 steps
+    (another controller's trials ran it): its trials need more than 151 steps, not 43."""
+    from benchmarks.study import curves_report, intervals
+
+    monkeypatch.setattr(curves_report, "save_figure", lambda *a, **k: "km.png")
+    ran = _rows([20, 35, 60, 90], 4, cap=151, name="ran")
+    failed = make_rows("failed", np.full(6, 0.05), np.zeros(6, bool),
+                       np.array([12, 20, 31, 40, 43, 43]))
+    for r in failed:
+        r["failure"] = "leg 3 hit its end stop: 480.2 mm"
+    run = 151.0
+    steps, cap = intervals.censored_steps(failed, run)
+    assert cap == 151.0 and np.isinf(steps).all()
+    assert intervals.steps_cell(failed, run).startswith("> 151 [")
+    lines = curves_report.time_to_converge_section(tmp_path, "s", ran + failed, {}, [0])
+    row = [ln for ln in "\n".join(lines).splitlines() if ln.startswith("| - | failed | 6 |")]
+    assert row == ["| - | failed | 6 | 0 | > 151 [> 151, > 151] |"], lines
+    # the log-rank test as scipy computes it, the failed trials censored at 151
+    ref = sps.logrank(sps.CensoredData(uncensored=[20, 35, 60, 90], right=[151] * 4),
+                      sps.CensoredData(right=[151] * 6)).pvalue
+    assert survival.logrank_p(ran, failed) == pytest.approx(ref, rel=1e-12)

@@ -14,7 +14,6 @@ import pytest
 from scipy import stats as sps
 
 from benchmarks.cli import main as cli_main
-from benchmarks.study import stats
 from benchmarks.study.failures import is_failure
 from benchmarks.study.results import read_results
 from benchmarks.study.tracking_report import HEADER, tracking_rows
@@ -70,9 +69,18 @@ def test_failed_trials_are_counted_apart_and_left_out() -> None:
     ref = sps.quantile_test(rms, p=0.5).confidence_interval(0.95)
     assert (lo, hi) == (round(ref.low, 3), round(ref.high, 3))
     assert float(by["max mm (worst)"]) == pytest.approx(2 * rms.max(), rel=1e-3)
-    assert by["settled"] == stats.format_rate(9, 9)
+    # a failed trial never settled: the rate is over every trial (Wilson, scipy's)
+    ci = sps.binomtest(9, 12).proportion_ci(method="wilson")
+    assert by["settled"] == f"75.0 % [{100 * ci.low:.1f}, {100 * ci.high:.1f}]"
     (plain,) = tracking_rows(rows, with_intervals=False)
-    assert dict(zip(HEADER, plain, strict=True))["settled"] == "9/9"
+    assert dict(zip(HEADER, plain, strict=True))["settled"] == "9/12"
+    # ... and its settling time is censored at the run's end: with 7 of 12 failed, more
+    # than half never settled
+    most = [_tracking_row("ctc", k, 0.1) for k in range(5)]
+    most += [_tracking_row("ctc", 5 + k, 27.0, "crashed") for k in range(7)]
+    (cells,) = tracking_rows(most)
+    by = dict(zip(HEADER, cells, strict=True))
+    assert by["settled"].startswith("41.7 % [") and by["settling s (median)"].startswith("> run")
 
 
 @pytest.fixture(scope="module")
