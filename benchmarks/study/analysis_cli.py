@@ -61,6 +61,8 @@ def _fmt_verdict(c: Any, runs: tuple[str, str] | None) -> str:
         return f"{runs[0] if c.better == c.a else runs[1]} better"
     if c.outcome == "equivalent":
         return f"equivalent {margin_text(c)}"
+    if c.outcome == "unclear":
+        return "differ, side unclear"
     return "-"
 
 
@@ -131,10 +133,17 @@ def print_comparisons(comparisons: list[Any], title: str,
               f"({len(significant)} of {len(comparisons)} comparisons):")
     _print_verdicts(con, significant,
                     "- none: no difference between these controllers is significant")
+    unclear = [c for c in comparisons if c.outcome == "unclear"]
+    if unclear:
+        con.print(f"Significant tests whose difference's interval does not say which is "
+                  f"better (not counted above; {len(unclear)} of {len(comparisons)}):")
+        _print_verdicts(con, unclear, "")
     equivalent = [c for c in comparisons if c.outcome == "equivalent"]
     open_ = [c for c in comparisons if c.outcome == "not shown equivalent"]
     con.print(f"Equivalent within their margins (TOST at {100 * ALPHA:.0f} % after Holm's "
-              f"correction; {len(equivalent)} of {len(comparisons)} comparisons):")
+              f"correction, whose interval is the {100 - 200 * ALPHA:.0f} % one: a 95 % "
+              f"interval below may reach past the margin; {len(equivalent)} of "
+              f"{len(comparisons)} comparisons):")
     _print_verdicts(con, equivalent, "- none")
     con.print(f"Neither shown different nor shown equivalent: {len(open_)} of "
               f"{len(comparisons)} comparisons (no conclusion: more trials, or a wider "

@@ -95,8 +95,9 @@ class Comparison:
         margin: The equivalence margin (the metric's unit; None: no margin known).
         p_equivalence: TOST p-value (nan without a margin).
         p_equivalence_holm: Its Holm-adjusted value over the metric's comparisons.
-        outcome: ``different``, ``equivalent`` (within the margin, not different) or
-            ``not shown equivalent``.
+        outcome: ``different``, ``unclear`` (the test significant, the difference's
+            interval not on its side: not shown better), ``equivalent`` (within the
+            margin, not different) or ``not shown equivalent``.
     """
 
     scenario: str

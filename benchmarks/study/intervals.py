@@ -21,11 +21,16 @@ from benchmarks.study.metrics import Summary, format_sweep
 GroupKey = tuple[str, int, str, str]
 
 
-def _fmt(x: float | None, digits: int = 3) -> str:
+def format_value(x: float | None, digits: int = 3) -> str:
+    """A table's value with ``digits`` decimals (``-`` for none; powers of ten for the very
+    small and the very large); with 0 decimals (step counts) a median between two counts
+    keeps its half: ``98.5``, not ``98`` (Python rounds a half to even)."""
     if x is None or not np.isfinite(x):
         return "-"
     if x != 0 and (abs(x) < 10 ** (-digits) or abs(x) >= 1e5):
         return f"{x:.2e}"
+    if digits == 0 and x != round(x):
+        return f"{x:.1f}"
     return f"{x:.{digits}f}"
 
 
@@ -44,10 +49,10 @@ def _bound(x: float, digits: int, cap: float | str | None) -> str:
     or a word, ``run``), ``-inf``/``inf`` for an end outside the sample (too few trials
     for that side at 95 %)."""
     if x == np.inf and cap is not None:
-        return f"> {cap if isinstance(cap, str) else _fmt(cap, digits)}"
+        return f"> {cap if isinstance(cap, str) else format_value(cap, digits)}"
     if np.isinf(x):
         return "-inf" if x < 0 else "inf"
-    return _fmt(x, digits)
+    return format_value(x, digits)
 
 
 def with_interval(value: float, interval: tuple[float, float], digits: int = 3,
@@ -57,7 +62,7 @@ def with_interval(value: float, interval: tuple[float, float], digits: int = 3,
     if value is None or np.isnan(value):
         return "-"
     low, high = interval
-    text = _bound(value, digits, cap) if cap is not None else _fmt(value, digits)
+    text = _bound(value, digits, cap) if cap is not None else format_value(value, digits)
     if np.isnan(low) or np.isnan(high):
         return text
     return f"{text} [{_bound(low, digits, cap)}, {_bound(high, digits, cap)}]"
@@ -135,8 +140,8 @@ def summary_rows_with_intervals(summaries: list[Summary],
         out.append([
             s.scenario, format_sweep(s.sweep), s.controller, s.backend,
             stats.format_rate(s.converged, s.trials), str(s.failed), pos_med, pos_p95,
-            _fmt(s.position_max_mm), rot_med, _fmt(s.orientation_max_deg, 4), steps,
-            _fmt(s.step_time_median_us, 1), str(s.stroke_violations),
+            format_value(s.position_max_mm), rot_med, format_value(s.orientation_max_deg, 4), steps,
+            format_value(s.step_time_median_us, 1), str(s.stroke_violations),
         ])
     return out
 
@@ -148,7 +153,7 @@ def tail_rows(summaries: list[Summary], groups: dict[GroupKey, list[dict[str, An
     for s in summaries:
         rs = completed(groups[(s.scenario, s.point, s.controller, s.backend)])
         med, = quantile_cells([r.get("tail_position_error_mm") for r in rs], [0.5])
-        out.append([format_sweep(s.sweep), s.controller, med, _fmt(s.tail_position_max_mm)])
+        out.append([format_sweep(s.sweep), s.controller, med, format_value(s.tail_position_max_mm)])
     return out
 
 
@@ -162,9 +167,9 @@ def calibration_rows(summaries: list[Summary], groups: dict[GroupKey, list[dict[
         med, = quantile_cells([r.get("calibration_median_error_mm") for r in rs], [0.5])
         comp = [r.get("calibration_max_component_error_mm") for r in rs]
         comp_f = [c for c in comp if c is not None and np.isfinite(c)]
-        out.append([format_sweep(s.sweep), s.controller, med, _fmt(s.calibration_max_mm),
-                    _fmt(max(comp_f)) if comp_f else "-",
-                    _fmt(s.calibration_min_ratio, 4),
+        out.append([format_sweep(s.sweep), s.controller, med, format_value(s.calibration_max_mm),
+                    format_value(max(comp_f)) if comp_f else "-",
+                    format_value(s.calibration_min_ratio, 4),
                     f"{s.calibration_ill_conditioned}/{s.trials}",
                     f"{s.calibration_refused}/{s.trials}"])
     return out
@@ -172,7 +177,7 @@ def calibration_rows(summaries: list[Summary], groups: dict[GroupKey, list[dict[
 
 def median_cell(rows: list[dict[str, Any]], key: str, digits: int = 3) -> str:
     """The median over the rows of a per-trial figure (``rtt_median_ms``,
-    ``detect_time_ms``...) with its bootstrap interval."""
+    ``detect_time_ms``...) with its order-statistic interval."""
     cell, = quantile_cells([r.get(key) for r in rows], [0.5], digits)
     return cell
 
@@ -192,9 +197,9 @@ def drive_rows(summaries: list[Summary], groups: dict[GroupKey, list[dict[str, A
         rs = completed(groups[(s.scenario, s.point, s.controller, s.backend)])
         sat, = quantile_cells([r.get("saturation_time_s") for r in rs], [0.5])
         rms, = quantile_cells([r.get("drive_tracking_rms_mm_s") for r in rs], [0.5])
-        out.append([format_sweep(s.sweep), s.controller, _fmt(s.leg_force_max_n, 1), sat,
+        out.append([format_sweep(s.sweep), s.controller, format_value(s.leg_force_max_n, 1), sat,
                     stats.format_rate(s.saturated_trials, len(rs)), rms,
-                    _fmt(s.tracking_max_mm_s, 1)])
+                    format_value(s.tracking_max_mm_s, 1)])
     return out
 
 

@@ -16,6 +16,7 @@ from typing import Any
 import numpy as np
 
 from benchmarks.study import curves_report, drawers, intervals, plots, profiles, stats
+from benchmarks.study.intervals import format_value as _fmt
 from benchmarks.study.metrics import Summary, format_sweep, summarize
 from benchmarks.study.runner import deduplicate, machine_info, read_results
 from benchmarks.study.study_record import command_lines
@@ -25,14 +26,6 @@ from hexapod.outputs import TEXT_MARKER
 log = logging.getLogger(__name__)
 
 META_FILE = "run.json"
-
-
-def _fmt(x: float, digits: int = 3) -> str:
-    if x is None or not np.isfinite(x):
-        return "-"
-    if x != 0 and (abs(x) < 10 ** (-digits) or abs(x) >= 1e5):
-        return f"{x:.2e}"
-    return f"{x:.{digits}f}"
 
 
 def summary_table_rows(summaries: list[Summary]) -> list[list[str]]:

@@ -153,7 +153,7 @@ def stop_lines(rows: list[dict[str, Any]]) -> list[str]:
             if failing[k]:
                 stop = f"{m:g} kg (most trials fail)"
             elif (t is not None and adjusted[k] < ALPHA and t.difference > 0
-                  and t.difference >= base_med):
+                  and not t.interval_disagrees and t.difference >= base_med):
                 stop = (f"{m:g} kg (error {t.difference:+.3g} mm, "
                         f"x{(base_med + t.difference) / base_med:.2g})")
         stop = stop or "not within the sweep"
@@ -188,6 +188,7 @@ def best_lines(rows: list[dict[str, Any]]) -> list[str]:
             lines.append(f"| {m:g} kg | {best} ({meds[best]:.3g}) | - | | | |")
         for c, t, p in zip(others, tests, adjusted, strict=True):
             verdict = ("best tracks better" if p < ALPHA and t.difference > 0
+                       and not t.interval_disagrees
                        else "no significant difference" if p >= ALPHA else "mixed")
             lines.append(f"| {m:g} kg | {best} ({meds[best]:.3g}) | {c} ({meds[c]:.3g}) | "
                          f"{t.difference:+.3g} [{t.low:.3g}, {t.high:.3g}] | "

@@ -39,9 +39,9 @@ from benchmarks.study import exact
 
 #: Confidence level of every interval.
 LEVEL = 0.95
-#: Seed of every bootstrap (recorded in the report).
+#: Seed of :func:`bootstrap_quantiles` (kept for users' scripts; no report uses it).
 SEED = 0
-#: Bootstrap resamples (recorded in the report).
+#: Resamples of :func:`bootstrap_quantiles`.
 RESAMPLES = 2000
 
 
@@ -57,8 +57,10 @@ class TestResult:
         p_value: Two-sided p-value.
         difference: McNemar: difference of the success rates; Wilcoxon: median of the
             paired differences.
-        low: Lower end of the difference's bootstrap interval.
-        high: Upper end of the difference's bootstrap interval.
+        low: Lower end of the difference's 95 % interval (McNemar: Newcombe's paired
+            interval; Wilcoxon: the order-statistic interval of the median difference,
+            the sign test's).
+        high: Upper end of that interval.
         discordant: McNemar: (only ``a`` succeeded, only ``b`` succeeded); Wilcoxon:
             (pairs with ``a > b``, pairs with ``a < b``).
         direction: +1 when ``a`` tends to exceed ``b`` (more successes; a larger
@@ -76,6 +78,23 @@ class TestResult:
     high: float
     discordant: tuple[int, int] | None = None
     direction: int = 0
+
+    @property
+    def interval_disagrees(self) -> bool:
+        """:func:`interval_contradicts` of this test's direction and interval."""
+        return interval_contradicts(self.direction, self.low, self.high)
+
+
+def interval_contradicts(direction: int, low: float, high: float) -> bool:
+    """Whether a difference's interval ``[low, high]`` contradicts a test's ``direction``
+    (+1: ``a`` above ``b``): 0 strictly inside it, or the interval on the other side. A
+    significant test with such an interval shows that the pairs differ (their ranks,
+    their signs) but not on which side the typical difference lies: a verdict of
+    *better* would say more than the numbers (0 at an end, as with many tied pairs, does
+    not contradict)."""
+    if direction == 0 or math.isnan(low) or math.isnan(high):
+        return False
+    return low < 0 < high or (high < 0 if direction > 0 else low > 0)
 
 
 def wilson_interval(k: int, n: int, level: float = LEVEL) -> tuple[float, float]:

@@ -1,7 +1,10 @@
 """The verdicts of paired comparisons: Holm's correction, equivalence margins, words.
 
 A comparison is *different* when its test's Holm-adjusted p-value is below
-:data:`ALPHA`; *equivalent within M* when it is not and the two one-sided tests of a
+:data:`ALPHA` and the interval of the difference does not contradict the test's
+direction (:func:`benchmarks.study.stats.interval_contradicts`; else *unclear*: the
+pairs differ, but not shown on which side the typical one lies); *equivalent within M*
+when it is not and the two one-sided tests of a
 difference of M or more (TOST, Holm-adjusted over the metric's comparisons) both
 reject; otherwise *not shown equivalent*: the data say neither. A missing difference is
 never read as "no difference".
@@ -98,6 +101,14 @@ def holm_and_verdicts(family: list[Comparison], metric: str, higher_better: bool
                 c.verdict = (f"{metric}: {c.a} and {c.b} not shown different, not shown "
                              f"equivalent within {margin_text(c)} (Holm p = "
                              f"{exact.format_p(p)}; {eq}, {c.n} pairs)")
+            continue
+        if stats.interval_contradicts(c.direction, *c.interval):
+            c.outcome = "unclear"
+            higher = c.a if c.direction > 0 else c.b
+            c.verdict = (f"{metric}: {c.a} and {c.b} differ by the {c.test} test (Holm p = "
+                         f"{exact.format_p(p)}, {higher} higher) but the interval of the "
+                         f"difference does not say on which side the typical pair lies "
+                         f"({_effect(c)}; {c.n} pairs): not shown better")
             continue
         c.outcome = "different"
         a_better = (c.direction > 0) == higher_better

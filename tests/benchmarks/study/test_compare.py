@@ -333,3 +333,27 @@ def test_compare_states_the_goal_setting_and_warns_when_two_runs_differ(
     both = write_run(tmp_path / "both", rows + [dict(r, controller="bad", goal="taught")
                                                 for r in rows])
     assert goal_settings(load(both)) == "mixed, taught"
+
+
+def test_a_rank_test_whose_median_interval_holds_zero_is_not_a_better(tmp_path: Path) -> None:
+    """48 pairs where ``a`` ends a little worse, 32 where it ends much better: Wilcoxon's
+    rank sums favour ``a`` (scipy's p = 0.03) while the median paired difference is
+    positive and its interval holds 0 (the sign test: p = 0.09). A verdict of *better*
+    would say more than the numbers: the outcome is *unclear*, with both reported."""
+    rng = np.random.default_rng(7)
+    base = rng.uniform(1.0, 2.0, 80)
+    d = np.concatenate([rng.uniform(0.01, 0.05, 48), -rng.uniform(1.0, 2.0, 32)])
+    conv = np.ones(80, bool)
+    rows = (make_rows("a", base + d, conv, np.full(80, 100))
+            + make_rows("b", base, conv, np.full(80, 100)))
+    comps = compare_controllers(load(write_run(tmp_path / "r", rows)),
+                                metrics=("final_error",))
+    (c,) = comps
+    ref = sps.wilcoxon(base + d, base)
+    assert ref.pvalue < 0.05 and c.p_value == pytest.approx(ref.pvalue, rel=1e-9)
+    assert sps.binomtest(48, 80).pvalue > 0.05
+    lo, hi = c.interval
+    assert lo < 0 < hi and c.difference > 0
+    assert c.outcome == "unclear" and c.better is None
+    assert "differ by the wilcoxon test" in c.verdict and "not shown better" in c.verdict
+    assert f"[{lo:+.4g}, {hi:+.4g}]" in c.verdict
