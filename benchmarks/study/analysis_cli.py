@@ -43,7 +43,7 @@ def _fmt_value(c: Any, v: float) -> str:
 
 def _fmt_diff(c: Any) -> str:
     lo, hi = c.interval
-    if c.difference != c.difference:
+    if c.difference != c.difference and lo != lo and hi != hi:
         return "-"
     if c.metric == "converged":
         return f"{100 * c.difference:+.1f} [{100 * lo:+.1f}, {100 * hi:+.1f}] pts"

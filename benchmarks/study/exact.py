@@ -89,8 +89,11 @@ def quantile_interval(values: Sequence[float] | np.ndarray, q: float, level: flo
 
 def censored_quantile(values: Sequence[float] | np.ndarray, q: float) -> float:
     """``numpy.quantile`` (linear interpolation) of a sample whose censored values are
-    ``+inf``: ``inf`` when an order statistic it needs is censored (the quantile is then
-    only known to exceed the cap); ``nan`` for an empty sample."""
+    ``+inf`` (or, for paired differences, ``-inf`` too): ``inf`` (``-inf``) when an order
+    statistic it needs is censored above (below): the quantile is then only known to lie
+    beyond the finite values; ``nan`` when it needs one of each (unknown) and for an empty
+    sample. (``numpy.quantile`` gives ``nan`` between 432 and ``inf``, even for an odd
+    sample whose median is the finite 432.)"""
     x = np.asarray([np.nan if v is None else v for v in values], dtype=float)
     x = np.sort(x[~np.isnan(x)])
     if x.size == 0:
@@ -98,13 +101,12 @@ def censored_quantile(values: Sequence[float] | np.ndarray, q: float) -> float:
     pos = q * (x.size - 1)
     lo = math.floor(pos)
     hi = min(lo + 1, x.size - 1)
-    if not np.isfinite(x[lo]):
-        return math.inf
-    if pos == lo or hi == lo:  # an order statistic itself (a censored one above is not used)
+    if pos == lo or hi == lo:  # an order statistic itself (another one is not used)
         return float(x[lo])
-    if not np.isfinite(x[hi]):
-        return math.inf
-    return float(x[lo] + (pos - lo) * (x[hi] - x[lo]))
+    a, b = float(x[lo]), float(x[hi])
+    if a == -math.inf or b == math.inf:
+        return math.nan if a == -math.inf and b == math.inf else (a if a == -math.inf else b)
+    return a + (pos - lo) * (b - a)
 
 
 def _wilson(k: int, n: int, z: float) -> tuple[float, float]:

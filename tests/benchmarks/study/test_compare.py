@@ -357,3 +357,20 @@ def test_a_rank_test_whose_median_interval_holds_zero_is_not_a_better(tmp_path: 
     assert c.outcome == "unclear" and c.better is None
     assert "differ by the wilcoxon test" in c.verdict and "not shown better" in c.verdict
     assert f"[{lo:+.4g}, {hi:+.4g}]" in c.verdict
+
+
+def test_a_censored_median_difference_is_known_where_its_order_statistics_are() -> None:
+    """Paired steps 1, 432 and one pair where only ``b`` converged (``+inf``): the median
+    is the finite 432 (numpy.quantile gives nan there); with a fourth such pair it is
+    only known to exceed 432 (censored); with -inf and +inf in the middle, unknown."""
+    from benchmarks.study.compare import censored_sign_test
+
+    inf = np.inf
+    b = np.array([9.0, 8.0, 5.0, 5.0])
+    assert censored_sign_test(np.array([10.0, 440.0, inf]), b[:3]).difference == 432.0
+    assert censored_sign_test(np.array([10.0, 440.0, inf, inf]), b).difference == inf
+    mixed = censored_sign_test(np.array([10.0, 3.0, 8.0, inf]), np.array([inf, 1.0, 1.0, 5.0]))
+    assert mixed.difference == 4.5  # -inf, 2, 7, +inf: the middle two are finite
+    assert np.isnan(censored_sign_test(np.array([1.0, inf]), np.array([inf, 1.0])).difference)
+    for finite in (np.arange(7.0), np.array([3.0, -1.0, 2.5, 8.0])):  # numpy's, bit for bit
+        assert exact.censored_quantile(finite, 0.5) == np.quantile(finite, 0.5)
