@@ -362,6 +362,31 @@ class RobotFaultError(BackendError):
         super().__init__(f"robot error {self.code} ({text}){after}")
 
 
+class ImplausibleReadingError(BackendError):
+    """A leg length the controller reported cannot be where the leg is: outside the
+    board's stroke, or off the way between where the leg was and the setpoint it was sent
+    (a glitching encoder, a corrupted reading). A setpoint computed from it would jump.
+
+    Attributes:
+        url: The controller's address.
+        leg: Index of the leg (0-based).
+        value: The length reported [m].
+        low: The lowest length it could have [m].
+        high: The highest length it could have [m].
+    """
+
+    def __init__(self, url: str, leg: int, value: float, low: float, high: float,
+                 why: str) -> None:
+        self.url = url
+        self.leg = leg
+        self.value = value
+        self.low = low
+        self.high = high
+        super().__init__(f"{url}: implausible position reading: leg {leg} at "
+                         f"{value * 1e3:.3f} mm, where it can only be in [{low * 1e3:.3f}, "
+                         f"{high * 1e3:.3f}] mm ({why}); nothing was sent from it")
+
+
 class CommandRejectedError(RobotFaultError):
     """The controller rejected a command it could not read (syntax 1, unknown 2, checksum 3)."""
 

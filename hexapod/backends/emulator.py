@@ -242,6 +242,17 @@ def build_parser() -> argparse.ArgumentParser:
                              "or answered, then every waiting command executed in order")
     faults.add_argument("--stall-ms", type=float, default=2000.0, metavar="MS",
                         help="duration of the --stall-after stall [ms] (default 2000)")
+    faults.add_argument("--glitch-after", type=int, metavar="N",
+                        help="after N commands, report the first leg --glitch-mm longer than "
+                             "it is (a glitching encoder; serial board)")
+    faults.add_argument("--glitch-mm", type=float, default=30.0, metavar="MM",
+                        help="the --glitch-after offset [mm] (default 30)")
+    faults.add_argument("--drive-fault-after", type=int, metavar="N",
+                        help="at command N, latch a drive fault of --drive-fault-code (the "
+                             "legs hold; every MOV is answered with it; ERR? reads and clears "
+                             "it; serial board)")
+    faults.add_argument("--drive-fault-code", type=int, default=30, metavar="CODE",
+                        help="the --drive-fault-after code (default 30, not a protocol code)")
     faults.add_argument("--seed", type=int, default=0, help="seed of the faults (default 0)")
     p.add_argument("--line-rate", type=float, default=0.0, metavar="BAUD",
                    help="emulate the transmission time of the lines at this baud rate "
@@ -256,7 +267,9 @@ def _faults_from_args(args: argparse.Namespace) -> FaultConfig:
                        drop_rate=args.drop, garble_rate=args.garble,
                        silent_after=args.silent_after, disconnect_after=args.disconnect_after,
                        stall_after=args.stall_after, stall_s=args.stall_ms / 1e3,
-                       seed=args.seed)
+                       glitch_after=args.glitch_after, glitch=args.glitch_mm / 1e3,
+                       drive_fault_after=args.drive_fault_after,
+                       drive_fault_code=args.drive_fault_code, seed=args.seed)
 
 
 def _robot_from_args(args: argparse.Namespace

@@ -146,6 +146,10 @@ class Board:
         self.watchdog_latched = False
         self.error = ErrorCode.NONE
         self.error_text = ERROR_TEXT[ErrorCode.NONE]
+        #: A latched drive fault (code, text), or None (fault injection).
+        self.drive_fault: tuple[int, str] | None = None
+        #: Added to the first leg's reported length [m] (fault injection).
+        self.glitch = 0.0
         self.commands = 0
         self.last_command = ""
         self._last_mov = now
@@ -219,8 +223,20 @@ class Board:
         self._set_error(code, text)
         return f"ERR {int(code)} {text}"
 
+    def inject_glitch(self, offset: float) -> None:
+        """From now on report the first leg ``offset`` [m] longer than it is."""
+        self.glitch = float(offset)
+
+    def inject_drive_fault(self, code: int) -> None:
+        """Latch a drive fault of ``code`` (its legs hold where they are)."""
+        self.drive_fault = (int(code), "drive fault (fault injection)")
+        self.setpoints = self.lengths.copy()
+
     def pending_error(self) -> tuple[int, str]:
-        """What ``ERR?`` would return: the latched watchdog first, then the last error."""
+        """What ``ERR?`` would return: a latched drive fault, then the latched watchdog,
+        then the last error."""
+        if self.drive_fault is not None:
+            return self.drive_fault
         if self.watchdog_latched:
             return int(ErrorCode.WATCHDOG), ERROR_TEXT[ErrorCode.WATCHDOG]
         return int(self.error), self.error_text
@@ -305,6 +321,8 @@ class Board:
             return self._err(ErrorCode.SYNTAX, "a length is not a number")
         if not self.servo:
             return self._err(ErrorCode.SERVO_OFF)
+        if self.drive_fault is not None:
+            return "ERR {} {}".format(*self.drive_fault)
         if self.watchdog_latched:
             return self._err(ErrorCode.WATCHDOG, "latched, read ERR? to clear")
         lo, hi = self.config.stroke
@@ -319,7 +337,9 @@ class Board:
         return "OK"
 
     def _pos(self, args: list[str], now: float) -> str:
-        return self._query(args, "POS?") or "POS " + protocol.format_lengths(self.lengths)
+        shown = self.lengths + np.array([self.glitch, 0, 0, 0, 0, 0]) if self.glitch else \
+            self.lengths
+        return self._query(args, "POS?") or "POS " + protocol.format_lengths(shown)
 
     def _sta(self, args: list[str], now: float) -> str:
         code, _ = self.pending_error()
@@ -370,6 +390,9 @@ class Board:
         if args:
             return self._err(ErrorCode.SYNTAX, "ERR? takes no argument")
         code, text = self.pending_error()
+        if self.drive_fault is not None:  # read first, cleared alone
+            self.drive_fault = None
+            return f"ERR {code} {text}"
         self.watchdog_latched = False
         self._set_error(ErrorCode.NONE)
         self._last_mov = now  # the watchdog starts again

@@ -33,6 +33,15 @@ class FaultConfig:
             executes and answers them all in order (a controller frozen by a busy CPU or
             a stalled network).
         stall_s: Duration of the ``stall_after`` stall [s].
+        glitch_after: After this many commands, every position the board reports has its
+            first leg ``glitch`` longer than it is (a glitching encoder or a corrupted
+            reading that passed the checksum); the legs themselves are not moved.
+        glitch: The ``glitch_after`` offset [m].
+        drive_fault_after: At this command the board latches a drive fault of code
+            ``drive_fault_code`` (a code the protocol does not define): its legs hold,
+            every ``MOV`` from then on is answered with it, ``ERR?`` reads it first (and
+            clears it).
+        drive_fault_code: The ``drive_fault_after`` code.
         seed: Seed of the fault generator.
 
     Counts of commands start when the faults are set (:meth:`Emulator.set_faults`).
@@ -46,6 +55,10 @@ class FaultConfig:
     disconnect_after: int | None = None
     stall_after: int | None = None
     stall_s: float = 2.0
+    glitch_after: int | None = None
+    glitch: float = 0.03
+    drive_fault_after: int | None = None
+    drive_fault_code: int = 30
     seed: int = 0
 
     def __post_init__(self) -> None:
@@ -57,7 +70,13 @@ class FaultConfig:
             value = getattr(self, name)
             if not 0.0 <= value <= 1.0:
                 raise BackendError(f"fault {name} must be a probability, got {value}")
-        for name in ("silent_after", "disconnect_after", "stall_after"):
+        if not math.isfinite(self.glitch):
+            raise BackendError(f"fault glitch must be finite, got {self.glitch} m")
+        if self.drive_fault_code < 1:
+            raise BackendError(f"fault drive_fault_code must be >= 1, got "
+                               f"{self.drive_fault_code}")
+        for name in ("silent_after", "disconnect_after", "stall_after", "glitch_after",
+                     "drive_fault_after"):
             value = getattr(self, name)
             if value is not None and value < 0:
                 raise BackendError(f"fault {name} must be >= 0 commands, got {value}")
@@ -74,6 +93,12 @@ class FaultConfig:
         if self.stall_after is not None:
             args += ["--stall-after", str(self.stall_after), "--stall-ms",
                      repr(self.stall_s * 1e3)]
+        if self.glitch_after is not None:
+            args += ["--glitch-after", str(self.glitch_after), "--glitch-mm",
+                     repr(self.glitch * 1e3)]
+        if self.drive_fault_after is not None:
+            args += ["--drive-fault-after", str(self.drive_fault_after),
+                     "--drive-fault-code", str(self.drive_fault_code)]
         return args
 
 

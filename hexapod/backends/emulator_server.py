@@ -386,6 +386,7 @@ class EmulatorServer(Generic[D]):
         if f.garble_rate and fs.rng.random() < f.garble_rate:
             line = garble(line, fs.rng, self.board.terminator)
         with self._lock:
+            self._inject(fs.commands + 1)
             reply = self.board.handle_line(line, time.monotonic())
         fs.commands += 1
         data = self.board.frame(reply)
@@ -404,6 +405,21 @@ class EmulatorServer(Generic[D]):
         if f.stall_after is not None and fs.commands == f.stall_after:
             fs.stall_until = time.monotonic() + f.stall_s
             logger.info("emulator: stalling for %.0f ms (fault injection)", f.stall_s * 1e3)
+
+    def _inject(self, command: int) -> None:
+        """Set the board's faults that start at this command (1 for the first): a glitching
+        position reading, a latched drive fault (boards that have them)."""
+        f = self._faults.config
+        for after, name, value in ((f.glitch_after, "glitch", f.glitch),
+                                   (f.drive_fault_after, "drive_fault", f.drive_fault_code)):
+            if after is not None and command == after + (name == "glitch"):
+                inject = getattr(self.board, f"inject_{name}", None)
+                if inject is None:
+                    logger.warning("emulator: this device has no %s fault", name)
+                else:
+                    inject(value)
+                    logger.info("emulator: %s %r from command %d (fault injection)", name,
+                                value, command)
 
     def _queue(self, data: bytes, received: int) -> None:
         f = self._faults.config

@@ -41,6 +41,7 @@ from hexapod.backends.rate import RateLimiter
 from hexapod.backends.serial_link import SerialLink
 from hexapod.exceptions import (
     BackendError,
+    ImplausibleReadingError,
     ProtocolError,
     RobotFaultError,
     SerialDisconnectedError,
@@ -80,6 +81,11 @@ class SerialRobot(SerialLink, Backend):
             (logged as a warning and counted: :attr:`watchdog_trips`,
             :attr:`watchdog_rearms`). If False, or if the host was not idle that long,
             raise :class:`WatchdogError`.
+        reading_tolerance: How far [m] a reported leg length may lie outside the board's
+            stroke, or off the way between the leg's previous reading and the setpoint
+            it was sent, before it is refused as implausible
+            (:class:`~hexapod.exceptions.ImplausibleReadingError`: the robot is halted
+            and no setpoint is computed from it).
         on_close: Called once after the port is closed (e.g. to stop an emulator).
 
     Attributes:
@@ -103,6 +109,7 @@ class SerialRobot(SerialLink, Backend):
         retries: int = 3,
         timeout_retries: int = 0,
         rearm_watchdog: bool = True,
+        reading_tolerance: float = 1e-3,
         on_close: Callable[[], None] | None = None,
     ) -> None:
         ms = watchdog * 1e3
@@ -110,6 +117,10 @@ class SerialRobot(SerialLink, Backend):
             raise BackendError(f"watchdog must be 20 to 1000 ms, got {ms:g} ms")
         if timeout <= 0 or retries < 0 or timeout_retries < 0:
             raise BackendError("timeout must be positive and retries >= 0")
+        if not 0 < reading_tolerance < 0.1:
+            raise BackendError(f"reading_tolerance must be in (0, 100) mm, got "
+                               f"{reading_tolerance * 1e3:g} mm")
+        self.reading_tolerance = float(reading_tolerance)
         self.url = url
         self.timeout = float(timeout)
         self.watchdog = round(ms) / 1e3
@@ -150,7 +161,7 @@ class SerialRobot(SerialLink, Backend):
             protocol.parse_ok(self._exchange(protocol.wdt(self.watchdog)), "WDT")
             # servo off until the first MOV: the watchdog cannot trip before it
             protocol.parse_ok(self._exchange("SVO 0"), "SVO 0")
-            self._q = protocol.parse_pos(self._exchange("POS?"))
+            self._q = self._plausible(protocol.parse_pos(self._exchange("POS?")))
         except BaseException:
             self._shutdown(halt=True)
             raise
@@ -172,7 +183,7 @@ class SerialRobot(SerialLink, Backend):
         except KeyboardInterrupt:
             self._shutdown(halt=True)
             raise
-        except (SerialLinkError, ProtocolError, RobotFaultError):
+        except (SerialLinkError, ProtocolError, RobotFaultError, ImplausibleReadingError):
             self._try_halt()
             raise
 
@@ -207,8 +218,32 @@ class SerialRobot(SerialLink, Backend):
 
     def measured_lengths(self) -> np.ndarray:
         """Read the leg lengths (``POS?``) (6,) [m]."""
-        self._q = self._guarded(lambda: self._checked("POS?", protocol.parse_pos))
+        self._q = self._guarded(lambda: self._plausible(
+            self._checked("POS?", protocol.parse_pos)))
         return self._q.copy()
+
+    def _plausible(self, q: np.ndarray, setpoints: np.ndarray | None = None) -> np.ndarray:
+        """``q`` (6,) [m] read from the board, checked: inside the stroke and, streaming
+        (``setpoints``: those sent since the last reading), on the way from the last
+        reading to them, each within :attr:`reading_tolerance`.
+
+        Raises:
+            ImplausibleReadingError: Naming the leg, its reading and where it could be.
+        """
+        tol = self.reading_tolerance
+        lo, hi = self.stroke[0] - tol, self.stroke[1] + tol
+        why = "the board's stroke"
+        low, high = np.full(6, lo), np.full(6, hi)
+        if setpoints is not None:
+            low = np.maximum(low, np.minimum(self._q, setpoints) - tol)
+            high = np.minimum(high, np.maximum(self._q, setpoints) + tol)
+            why = "between its last reading and the setpoint sent, within the tolerance"
+        bad = np.flatnonzero((q < low) | (q > high))
+        if bad.size:
+            i = int(bad[0])
+            raise ImplausibleReadingError(self.url, i, float(q[i]), float(low[i]),
+                                          float(high[i]), why)
+        return q
 
     def set_speed(self, speed: float) -> None:
         """Set the leg speed limit (``VEL``) [m/s]."""
@@ -349,7 +384,7 @@ class SerialRobot(SerialLink, Backend):
             t1 = time.perf_counter()
             slack = rate.sleep_after(t0)  # the first period starts with its MOV
             t2 = time.perf_counter()
-            self._q = self._checked("POS?", protocol.parse_pos)
+            self._q = self._plausible(self._checked("POS?", protocol.parse_pos), setpoints)
             return t1 - t0, time.perf_counter() - t2, slack
 
         mov_rtt, pos_rtt, slack = self._guarded(period)

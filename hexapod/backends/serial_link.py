@@ -177,7 +177,8 @@ class SerialLink:
         """Send ``HLT`` with ``ERR?`` and wait up to ``timeout_s`` [s] for the board to
         confirm: ``ERR?`` answering error 10 (halted by command) or 20 (its watchdog,
         reported first when latched, stopped the legs itself), then ``STA?`` reporting no
-        leg moving. Never raises.
+        leg moving; another code read on the way (a drive fault, one the protocol does not
+        define) is named in the report, and the pair is sent again. Never raises.
 
         Replies still on their way (after a stall, those of the commands queued before
         the ``HLT``) are read and skipped, never flushed away while waiting; the pair is
@@ -196,6 +197,7 @@ class SerialLink:
         if self._closed:
             return clock.closed(self.url)
         sent = 0
+        faults: list[str] = []  # other errors read back on the way (a drive fault)
         try:
             self._flush_input()
             halted = False
@@ -217,11 +219,16 @@ class SerialLink:
                 except (SerialTimeoutError, ProtocolError):
                     continue
                 if payload.startswith("ERR "):
-                    code, _ = protocol.parse_err(payload, "ERR?")
-                    # 10: our HLT; 20: the watchdog (latched first) stopped the legs itself
+                    code, said = protocol.parse_err(payload, "ERR?")
+                    # 10: our HLT; 20: the watchdog (latched first) stopped the legs itself;
+                    # any other (a drive fault, a code the protocol does not define: read
+                    # and cleared by this ERR?): HLT and ERR? again
                     halted = code in (protocol.ErrorCode.HALTED, protocol.ErrorCode.WATCHDOG)
-                    text = protocol.ERROR_TEXT.get(protocol.ErrorCode(code), "")
-                    read_back = f"ERR? {code} {text}".strip()
+                    if not halted and code != protocol.ErrorCode.NONE:
+                        faults.append(f"{code} {said}".strip())
+                    read_back = f"ERR? {code} {said}".strip()
+                    if faults and halted:
+                        read_back += f" (after {', '.join(faults)})"
             moving = False
             ask = time.perf_counter()
             while True:  # the board took the HLT: are the legs still?

@@ -501,3 +501,17 @@ def test_line_rate_emulates_the_transmission_time() -> None:
             assert rtt < 0.2
         finally:
             lk.close()
+
+
+def test_every_fault_survives_the_command_line() -> None:
+    """A child emulator gets its faults as options (``FaultConfig.to_args``): each one,
+    the glitching reading and the drive fault included, parses back to itself."""
+    from hexapod.backends.emulator import _faults_from_args, build_parser
+
+    f = FaultConfig(latency=0.002, jitter=0.001, drop_rate=0.01, garble_rate=0.02,
+                    silent_after=9, disconnect_after=11, stall_after=2, stall_s=0.5,
+                    glitch_after=3, glitch=0.012, drive_fault_after=5, drive_fault_code=41,
+                    seed=4)
+    assert _faults_from_args(build_parser().parse_args(["--pty", *f.to_args()])) == f
+    with pytest.raises(BackendError, match="drive_fault_code must be >= 1"):
+        FaultConfig(drive_fault_code=0)

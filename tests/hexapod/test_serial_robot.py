@@ -7,6 +7,7 @@ and a closed-loop joint-space run that ends where the simulated robot ends.
 
 from __future__ import annotations
 
+import re
 import signal
 import threading
 import time
@@ -23,8 +24,10 @@ from hexapod.backends.serial import SerialRobot
 from hexapod.backends.serial_emulated import open_emulated_robot
 from hexapod.exceptions import (
     ChecksumError,
+    ImplausibleReadingError,
     OutsideStrokeError,
     ProtocolError,
+    RobotFaultError,
     SerialDisconnectedError,
     SerialLinkError,
     SerialTimeoutError,
@@ -440,3 +443,40 @@ def test_halt_confirmed_after_the_link_closed_says_so(robot: SerialRobot) -> Non
     robot.close()
     report = robot.halt_confirmed(1.0)
     assert not report.confirmed and "the link is closed" in report.detail
+
+
+def test_a_drive_fault_of_a_code_the_protocol_does_not_define_is_halted_and_named(
+        robot: SerialRobot, emulator: Emulator) -> None:
+    """The board latches drive fault 30 (not a protocol code): the MOV is refused with it
+    (a RobotFaultError that halts), and the halt is confirmed, naming the fault (it
+    was a ValueError that left the halt unconfirmed)."""
+    robot.step(np.full(6, 0.01), DT)
+    emulator.set_faults(FaultConfig(drive_fault_after=1, drive_fault_code=30))
+    with pytest.raises(RobotFaultError, match=r"robot error 30 \(drive fault"):
+        robot.step(np.full(6, 0.01), DT)
+    report = robot.halt_confirmed(2.0)  # ERR? reads the latched fault first
+    assert report.confirmed, report
+    # (its watchdog, not fed since the fault, may have stopped the legs first: 20)
+    assert re.search(r"ERR\? (10 halted by command|20 watchdog) \(after 30 drive fault "
+                     r"\(fault injection\)\), STA\? moving=0", report.detail), report.detail
+    assert emulator.board.drive_fault is None and not emulator.status().moving
+
+
+def test_a_glitching_position_reading_is_refused_before_a_setpoint_is_made_of_it(
+        robot: SerialRobot, emulator: Emulator) -> None:
+    """After its next command the board reports leg 0 30 mm longer than it is: the
+    streaming step refuses the reading (outside the way from its last reading to the
+    setpoint sent), halts, and no MOV computed from it reaches the board (a 30 mm setpoint
+    jump in one 20 ms period, where 50 mm/s allows 1 mm)."""
+    robot.step(np.zeros(6), DT)
+    emulator.set_faults(FaultConfig(glitch_after=1, glitch=0.03))
+    with pytest.raises(ImplausibleReadingError, match=r"leg 0 at 430\.000 mm, where it can "
+                                                      r"only be in \[399\.000, 401\.000\] mm"):
+        robot.step(np.zeros(6), DT)  # MOV (command 1), then the glitching POS?
+    assert emulator.board.last_command in ("STA?", "ERR?", "HLT")  # halted, no MOV after
+    np.testing.assert_allclose(emulator.board.setpoints, Q0, atol=1e-9)
+    # a reading outside the stroke is refused as well, naming the board's stroke
+    hi = robot.stroke[1]
+    emulator.set_faults(FaultConfig(glitch_after=0, glitch=hi - Q0[0] + 0.01))
+    with pytest.raises(ImplausibleReadingError, match=r"the board's stroke"):
+        robot.measured_lengths()
