@@ -137,6 +137,38 @@ def _plan(args: argparse.Namespace, q0: np.ndarray, goal_q: np.ndarray,
                                              "before moving")
 
 
+def _check_board(robot: Any, geometry: HexapodGeometry, goal_q: np.ndarray,
+                 say: Any) -> None:
+    """The robot file against what the controller says of itself (``stroke``,
+    ``max_speed``, e.g. a serial board's ``LIM?``): a difference is warned of, and a goal
+    outside the controller's own stroke refused (it would hold a leg at its end stop
+    until a time limit).
+
+    Raises:
+        SessionStop: The goal outside the controller's stroke (exit 2, before moving).
+    """
+    stroke = getattr(robot, "stroke", None)
+    if stroke is None:
+        return
+    lo, hi = (float(x) for x in stroke)
+    file_lo, file_hi = geometry.stroke
+    if abs(lo - file_lo) > 1e-6 or abs(hi - file_hi) > 1e-6:
+        say(f"warning: the robot's controller reports the stroke [{lo * 1e3:.3f}, "
+            f"{hi * 1e3:.3f}] mm, the robot file [{file_lo * 1e3:.3f}, {file_hi * 1e3:.3f}] "
+            "mm: the controller's holds (check the robot file)")
+    speed = getattr(robot, "max_speed", None)
+    if speed is not None and abs(float(speed) - geometry.max_speed) > 1e-6:
+        say(f"warning: the robot's controller reports the speed limit "
+            f"{float(speed) * 1e3:g} mm/s, the robot file {geometry.max_speed * 1e3:g} mm/s")
+    outside = np.flatnonzero((goal_q < lo - 1e-9) | (goal_q > hi + 1e-9))
+    if outside.size:
+        leg = int(outside[0])
+        raise SessionStop(ServoExit.REFUSED, (
+            f"the goal's leg {leg} at {goal_q[leg] * 1e3:.3f} mm is outside the stroke the "
+            f"robot's controller reports, [{lo * 1e3:.3f}, {hi * 1e3:.3f}] mm: refused "
+            "before moving"))
+
+
 def _classify(exc: BaseException, moved: bool) -> tuple[ServoExit, str]:
     """The exit code and reason of what ended the session."""
     from controllers.exceptions import ControllerError
@@ -262,8 +294,9 @@ def run_session(args: argparse.Namespace, inputs: SessionInputs, status: StatusL
                 f"{limits.max_speed * 1e3:g} mm/s, time <= {limits.max_time:g} s; record "
                 f"{log.path}; Ctrl-C, SIGTERM or SIGHUP halt the robot")
             q0 = np.asarray(robot.measured_lengths(), float)
-            _plan(args, q0, np.asarray(inputs.goal_file.lengths, float), limits,
-                  status.message)
+            goal_q = np.asarray(inputs.goal_file.lengths, float)
+            _check_board(robot, inputs.geometry, goal_q, status.message)
+            _plan(args, q0, goal_q, limits, status.message)
             # a robot that sends and returns: the session keeps its control period
             pace = not (getattr(robot, "simulated", False)
                         or getattr(robot, "paces_periods", False))

@@ -443,3 +443,31 @@ def test_confirm_on_a_terminal_moves_only_after_yes(
     else:
         assert rec["moved"] is False and periods(out) == []
         assert "the planned move was not confirmed" in shown
+
+
+def test_a_goal_outside_the_boards_own_stroke_is_refused_before_moving(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """The board's LIM? says [400, 430] mm where the robot file says [345, 485]: the
+    difference is warned of, and a goal with a leg at 435 mm (inside the file's stroke) is
+    refused before any MOV (it held the leg at its end stop until the time limit)."""
+    from hexapod import deltalab
+    from hexapod.backends.emulator import BoardConfig, Emulator
+
+    emu = Emulator(BoardConfig.from_geometry(deltalab(), np.full(6, 0.415),
+                                             stroke=(0.400, 0.430))).start()
+    try:
+        goal = [435.0, 411.0, 419.0, 412.0, 418.0, 410.0]
+        code = servo.main([*REAL_SIM_CAMERA, "--backend", f"serial:{emu.device}", "--goal",
+                           str(goal_file(tmp_path, goal)), "--out", str(tmp_path / "s"),
+                           *ANY_LATE])
+        stdout = capsys.readouterr().out
+        assert code == ServoExit.REFUSED == 2, stdout
+        assert ("the robot's controller reports the stroke [400.000, 430.000] mm, the robot "
+                "file [345.000, 485.000] mm") in stdout
+        assert ("the goal's leg 0 at 435.000 mm is outside the stroke the robot's controller "
+                "reports, [400.000, 430.000] mm: refused before moving") in stdout
+        assert final(tmp_path / "s")["moved"] is False
+        assert "MOV" not in emu.board.last_command
+        np.testing.assert_allclose(emu.board.lengths, 0.415)
+    finally:
+        emu.stop()
