@@ -120,6 +120,10 @@ class SignalGuard:
     def __call__(self, step: int, lengths: np.ndarray, features: Any) -> None:
         """A per-period check (:class:`~benchmarks.robot.loop.PeriodCheck`): a pending
         signal ends the session (:class:`SessionStop`)."""
+        self.check()
+
+    def check(self) -> None:
+        """A pending signal (one that waited for this point) raises :class:`SessionStop`."""
         if self.pending is not None and not self.shutting_down:
             raise self._stop(self.pending)
 

@@ -37,6 +37,7 @@ from benchmarks.robot.consistency import (
     DEFAULT_CONSISTENCY_MM,
     CameraCheck,
 )
+from benchmarks.robot.exits import SessionStop, SignalGuard
 from benchmarks.robot.goals import (
     DEFAULT_TEACH_FRAMES,
     average_features,
@@ -265,7 +266,7 @@ def _viewer(enabled: bool, geometry: HexapodGeometry, camera: Any, goal: Any
 
 
 def _teach(args: argparse.Namespace, geometry: HexapodGeometry, camera: Any,
-           start: np.ndarray | None, status: StatusLine) -> int:
+           start: np.ndarray | None, status: StatusLine, guard: SignalGuard) -> int:
     from hexapod.fk import forward_kinematics
 
     path = Path(args.goal)
@@ -280,6 +281,7 @@ def _teach(args: argparse.Namespace, geometry: HexapodGeometry, camera: Any,
             q = np.asarray(robot.measured_lengths(), float)
         sol = forward_kinematics(geometry, q, check_stroke=False)
         for _ in range(args.teach_frames):  # the robot does not move: a burst of frames
+            guard.check()  # Ctrl-C: the camera closed, nothing written
             f = sensor.measure(sol.rotation, sol.translation)
             if f is not None:
                 frames.append(f)
@@ -304,7 +306,26 @@ def run(args: argparse.Namespace) -> int:
     (:class:`~benchmarks.robot.exits.ServoExit`). Bad inputs found before anything is
     opened raise (the CLI maps them to 2); from the session record's creation on, every
     way out goes through :func:`~benchmarks.robot.session.run_session`'s shutdown.
+
+    The session's signals (SIGINT, SIGTERM, SIGHUP) are caught from the start: during
+    the start-up (the goal, the controller and its compiled kernels, ``--teach``'s
+    frames) the first one is taken at the next stage (raised there, it could be lost in
+    a compiled library's code) and a second one at once; nothing has moved, and the exit
+    code is the signal's (130 for Ctrl-C).
     """
+    guard = SignalGuard()
+    guard.in_loop = True  # the first signal waits for the next stage of the start-up
+    try:
+        with guard:
+            return _run(args, guard)
+    except SessionStop as stop:
+        print(f"stopped: {stop.reason} before the session began: the robot was not moved "
+              f"(exit {int(stop.code)}, {stop.code.name.lower()})", flush=True)
+        return int(stop.code)
+
+
+def _run(args: argparse.Namespace, guard: SignalGuard) -> int:
+    """:func:`run` under its signal guard (``guard.check()`` between the stages)."""
     import controllers  # noqa: F401 - registers the built-ins
     from benchmarks.study.calibration import read_calibrated_file
     from benchmarks.study.provenance import check_calibration
@@ -327,14 +348,16 @@ def run(args: argparse.Namespace) -> int:
                                  f"[{geometry.stroke[0] * 1e3:.3f}, "
                                  f"{geometry.stroke[1] * 1e3:.3f}] mm")
     status = StatusLine()
+    guard.check()
     if args.teach:
-        return _teach(args, geometry, camera, start, status)
+        return _teach(args, geometry, camera, start, status, guard)
 
     # everything the user gave is checked before the robot is touched
     session_path(args.out, args.log, args.controller)  # the record's place, checked
     session_limits(args, geometry, lambda text: None)
     goal_file = load_goal(args.goal, geometry)
     goal = goal_features(goal_file, camera, geometry)
+    guard.check()
     options = parse_options(args.option)
     try:
         controller = registry.create(args.controller, **options)
@@ -351,14 +374,16 @@ def run(args: argparse.Namespace) -> int:
             print(f"warning: {text}", file=sys.stderr)
     controller.reset(ControllerContext(base_points=base_points, geometry=geometry,
                                        camera=camera, dt=args.dt, goal=goal))
+    guard.check()
     check = CameraCheck(geometry, base_points,
                         args.consistency_mm * 1e-3, math.radians(args.consistency_deg),
                         args.blind_timeout_s, args.camera,
                         must_agree_at_start=args.camera.startswith("video:"))
     inputs = SessionInputs(geometry, camera, goal_file, goal, controller, start)
     with _viewer(args.viz, geometry, camera, goal) as viewer:
+        guard.check()
         return run_session(args, inputs, status, None if viewer is None else viewer.display,
-                           checks=[check])
+                           checks=[check], guard=guard)
 
 
 def build_parser() -> argparse.ArgumentParser:

@@ -13,6 +13,7 @@ record written, and the exit code (:class:`~benchmarks.robot.exits.ServoExit`) r
 from __future__ import annotations
 
 import argparse
+import contextlib
 import datetime as dt
 import signal
 import sys
@@ -245,7 +246,8 @@ def _outcome(result: ServoResult, args: argparse.Namespace) -> tuple[ServoExit, 
 
 
 def run_session(args: argparse.Namespace, inputs: SessionInputs, status: StatusLine,
-                on_pose: Any = None, checks: Sequence[PeriodCheck] = ()) -> int:
+                on_pose: Any = None, checks: Sequence[PeriodCheck] = (),
+                guard: SignalGuard | None = None) -> int:
     """Run one session (see the module docstring); returns the exit code.
 
     Args:
@@ -256,6 +258,9 @@ def run_session(args: argparse.Namespace, inputs: SessionInputs, status: StatusL
         checks: Per-period safety checks (:class:`~benchmarks.robot.loop.PeriodCheck`),
             after the signal check: the camera check. A check with a ``summary()`` method
             has its line printed after the session's summary and in the final record.
+        guard: The caller's signal guard, already entered (``servo`` installs it
+            before its start-up, so that a signal then is not lost): a signal it holds
+            ends the session before anything is opened. None: the session's own.
 
     Raises:
         OutputError: The record cannot be placed (``--out``, ``--log``), before anything
@@ -272,15 +277,19 @@ def run_session(args: argparse.Namespace, inputs: SessionInputs, status: StatusL
     limited: LimitedRobot | None = None
     sensor: Any = None
     ended: BaseException | None = None
-    guard = SignalGuard(status.message)
+    own = guard is None
+    guard = SignalGuard(status.message) if guard is None else guard
+    guard.say = status.message
+    guard.in_loop = False  # until the loop, a signal stops the session at once
 
     def on_period(s: PeriodStatus) -> None:  # the status line and the log line
         status(s)
         log.write(s.to_json())
 
-    with guard:
+    with guard if own else contextlib.nullcontext(guard):
         try:
             log.open(_header(args, inputs, limits))
+            guard.check()  # a signal the start-up held: stop before anything is opened
             sensor = open_camera(args.camera, inputs.camera, inputs.geometry, args.seed)
             robot = open_backend(args.backend, inputs.geometry, inputs.start)
             if hasattr(robot, "timeout_retries"):

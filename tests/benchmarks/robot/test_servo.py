@@ -446,3 +446,37 @@ def test_the_serial_board_refuses_a_force_controller_before_moving() -> None:
                                                  r"leg forces \[N\], but the robot"):
             servo_loop(robot, SimCamera(cam, g), ctrl, goal, g, 0.02, max_steps=3)
         np.testing.assert_allclose(robot.measured_lengths(), q0, rtol=0, atol=1e-6)
+
+
+def test_ctrl_c_while_teaching_writes_nothing_and_exits_130(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str],
+        monkeypatch: pytest.MonkeyPatch) -> None:
+    """SIGINT during ``--teach``'s burst of frames (a traceback before): the frame loop
+    stops at the next frame, the camera and robot are closed, no goal is written."""
+    import signal
+
+    real = servo.open_camera
+    frames = []
+
+    def camera(*args: Any, **kwargs: Any) -> Any:
+        sensor = real(*args, **kwargs)
+        measure = sensor.measure
+
+        def measured(*a: Any, **k: Any) -> Any:
+            frames.append(1)
+            if len(frames) == 2:
+                os.kill(os.getpid(), signal.SIGINT)
+            return measure(*a, **k)
+
+        sensor.measure = measured
+        return sensor
+
+    monkeypatch.setattr(servo, "open_camera", camera)
+    goal = tmp_path / "taught.toml"
+    code = servo.main(["--backend", "emulator", "--goal", str(goal), "--teach",
+                       "--teach-frames", "50"])
+    out = capsys.readouterr().out
+    assert code == 130, out
+    assert "stopped: SIGINT received before the session began" in out
+    assert len(frames) == 2 and not goal.exists()
+    assert not (tmp_path / "taught.features.npz").exists()

@@ -471,3 +471,30 @@ def test_a_goal_outside_the_boards_own_stroke_is_refused_before_moving(
         np.testing.assert_allclose(emu.board.lengths, 0.415)
     finally:
         emu.stop()
+
+
+def test_a_signal_during_the_start_up_is_not_lost_and_moves_nothing(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str],
+        monkeypatch: pytest.MonkeyPatch) -> None:
+    """SIGINT arrives while the goal's features are computed (compiled code, where a
+    KeyboardInterrupt was once swallowed and the session then ran to its end with exit
+    0): it is held, taken at the next stage, and the run ends with 130 before the robot
+    is opened; the handlers in place before are back."""
+    from benchmarks.robot import goals
+
+    real = goals.goal_features
+
+    def signalled(*args: object, **kwargs: object) -> object:
+        os.kill(os.getpid(), signal.SIGINT)  # delivered now, inside the stage
+        return real(*args, **kwargs)  # type: ignore[arg-type]
+
+    monkeypatch.setattr(servo, "goal_features", signalled)
+    before = signal.getsignal(signal.SIGINT)
+    code = servo.main(["--backend", "emulator", "--goal", str(goal_file(tmp_path)),
+                       "--out", str(tmp_path / "s")])
+    out = capsys.readouterr().out
+    assert code == ServoExit.INTERRUPTED == 130, out
+    assert ("stopped: SIGINT received before the session began: the robot was not moved "
+            "(exit 130, interrupted)") in out
+    assert not (tmp_path / "s").exists()  # nothing opened, no record
+    assert signal.getsignal(signal.SIGINT) is before
