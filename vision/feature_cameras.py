@@ -8,12 +8,13 @@ from __future__ import annotations
 
 import logging
 from dataclasses import dataclass
+from pathlib import Path
 from typing import Any, Protocol
 
 import numpy as np
 
 from hexapod.geometry import HexapodGeometry
-from vision.exceptions import SourceSpecError
+from vision.exceptions import SourceOpenError, SourceSpecError
 
 log = logging.getLogger(__name__)
 
@@ -163,6 +164,32 @@ def open_camera(spec: str, camera: Any, geometry: HexapodGeometry,
         except ValueError:
             raise SourceSpecError(spec, "the device must be a number (device:0)") from None
         return VideoCamera(index, camera, geometry)
+    raise SourceSpecError(spec, "expected sim, video:PATH or device:N")
+
+
+def check_camera_spec(spec: str) -> None:
+    """The refusals of :func:`open_camera` that need nothing opened: an unknown spec, a
+    device that is not a number, a ``video:`` file that does not exist (a command checks
+    them before it writes anything or connects a robot).
+
+    Raises:
+        SourceSpecError: Unknown spec or bad device number.
+        SourceOpenError: The ``video:`` file does not exist.
+    """
+    if spec == "sim":
+        return
+    kind, _, arg = spec.partition(":")
+    if kind == "video" and arg:
+        if not Path(arg).is_file():
+            raise SourceOpenError(arg, "no such file" if not Path(arg).exists()
+                                  else "not a file")
+        return
+    if kind == "device" and arg:
+        try:
+            int(arg)
+        except ValueError:
+            raise SourceSpecError(spec, "the device must be a number (device:0)") from None
+        return
     raise SourceSpecError(spec, "expected sim, video:PATH or device:N")
 
 

@@ -116,7 +116,7 @@ def format_pose(R: np.ndarray, t: np.ndarray) -> str:
 
 
 def _legs(legs: tuple[int, ...]) -> str:
-    return ", ".join(str(i + 1) for i in legs)
+    return ", ".join(str(i) for i in legs)
 
 
 class CameraCheck:

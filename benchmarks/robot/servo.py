@@ -72,7 +72,7 @@ from benchmarks.robot.session import (
 from benchmarks.robot.status import StatusLine
 from benchmarks.study.outdir import OutputDir, OutputFile
 from hexapod.geometry import HexapodGeometry
-from vision.feature_cameras import Features, open_camera
+from vision.feature_cameras import Features, check_camera_spec, open_camera
 
 
 def open_backend(spec: str, geometry: HexapodGeometry,
@@ -240,6 +240,7 @@ def _check_args(args: argparse.Namespace) -> None:
         raise BenchmarkError("--tolerance-mm and --feature-tolerance must be positive")
     check_option("--settle", args.settle, 1, strict=False)
     check_option("--teach-frames", args.teach_frames, 1, strict=False)
+    check_option("--seed", args.seed, 0, strict=False)
 
 
 @contextlib.contextmanager
@@ -337,16 +338,19 @@ def _run(args: argparse.Namespace, guard: SignalGuard) -> int:
     backends.check(args.backend)  # a bad spec is reported before anything is opened
     args.camera = choose_camera(args.backend, args.camera,
                                 getattr(args, "simulated_camera_on_real_robot", False))
+    check_camera_spec(args.camera)
     geometry = robot_geometry(args.geometry)
     camera = camera_model(args.camera_file, args.camera_pose, geometry)
     start = None if args.start_mm is None else np.asarray(args.start_mm, float) * 1e-3
     if start is not None:
-        bad = [i + 1 for i, x in enumerate(start)
+        bad = [i for i, x in enumerate(start)
                if not geometry.stroke[0] <= x <= geometry.stroke[1]]
         if bad:
-            raise BenchmarkError(f"--start-mm: leg {bad[0]} is outside the stroke "
-                                 f"[{geometry.stroke[0] * 1e3:.3f}, "
-                                 f"{geometry.stroke[1] * 1e3:.3f}] mm")
+            i = bad[0]
+            what = ("is not a number" if not np.isfinite(start[i]) else
+                    f"{start[i] * 1e3:.3f} mm is outside the stroke "
+                    f"[{geometry.stroke[0] * 1e3:.3f}, {geometry.stroke[1] * 1e3:.3f}] mm")
+            raise BenchmarkError(f"--start-mm: leg {i}: {what}")
     status = StatusLine()
     guard.check()
     if args.teach:

@@ -120,6 +120,20 @@ def open_from_spec(args: str, geometry: HexapodGeometry, start: np.ndarray | Non
     Raises:
         BackendError: An unknown key or a bad value.
     """
+    faults, process, options = parse_spec(args)
+    robot = open_emulated_gcs(geometry, start, faults=faults, process=process,
+                              options=options)
+    return started(robot, start)
+
+
+def parse_spec(args: str) -> tuple[FaultConfig | None, bool, Any]:
+    """The faults, whether in a child process, and the backend's options of a
+    ``gcs-emulator`` spec's arguments (:func:`open_from_spec`; checked before anything is
+    opened).
+
+    Raises:
+        BackendError: An unknown key or a bad value.
+    """
     from hexapod.backends.gcs_config import GcsOptions
 
     faults: dict[str, Any] = {}
@@ -140,6 +154,4 @@ def open_from_spec(args: str, geometry: HexapodGeometry, start: np.ndarray | Non
         except ValueError as exc:
             raise BackendError(f"gcs-emulator option {item!r}: {exc}") from None
     _, options = GcsOptions.parse("?" + "&".join(backend_items))
-    robot = open_emulated_gcs(geometry, start, faults=FaultConfig(**faults) if faults else None,
-                              process=process, options=options)
-    return started(robot, start)
+    return FaultConfig(**faults) if faults else None, process, options

@@ -116,13 +116,15 @@ class BackendRegistry:
         self._openers: dict[str, BackendOpener] = {}
         self._info: dict[str, BackendInfo] = {}
         self._needs_args: dict[str, str] = {}
+        self._validate: dict[str, Callable[[str], object]] = {}
         self._simulated: set[str] = set()
         self.errors: list[BackendPluginError] = []
         self._plugins_loaded = False
 
     def register(self, name: str, target: type[Backend] | BackendOpener,
                  package: str = "hexapod-vs", version: str | None = None,
-                 needs_args: str | None = None, simulated: bool | None = None) -> None:
+                 needs_args: str | None = None, simulated: bool | None = None,
+                 validate: Callable[[str], object] | None = None) -> None:
         """Register a backend class or opener function under ``name``.
 
         Args:
@@ -134,6 +136,9 @@ class BackendRegistry:
             simulated: The robot is simulated (an emulator, a model), not hardware
                 (:meth:`is_simulated`); None: the target's ``simulated`` attribute, else
                 False (a plugin is real hardware unless it says otherwise).
+            validate: Checks a spec's ARGS without opening anything (raising the error
+                the opener would): :meth:`check` runs it, so that a bad option is refused
+                before a session's record is written or a robot connected.
 
         Raises:
             BackendPluginError: ``name`` breaks :func:`hexapod.outputs.check_name`, or
@@ -146,6 +151,8 @@ class BackendRegistry:
         opener = _opener(name, target, package)
         if needs_args:
             self._needs_args[name] = needs_args
+        if validate is not None:
+            self._validate[name] = validate
         if simulated is None:
             simulated = bool(getattr(target, "simulated", False))
         if simulated:
@@ -224,11 +231,15 @@ class BackendRegistry:
         Raises:
             UnknownBackendError, BackendPluginError: A bad spec, or a backend that needs
                 arguments given none (``serial`` without its URL).
+            BackendError: Its arguments refused by the backend's ``validate``
+                (:meth:`register`).
         """
         name, _, args = self.resolve(spec)
         if name in self._needs_args and not args:
             raise BackendPluginError(name, self._info[name].package,
                                      f"needs arguments: {self._needs_args[name]}")
+        if name in self._validate:
+            self._validate[name](args)
         return name
 
     def is_simulated(self, spec: str) -> bool:
@@ -297,10 +308,24 @@ backends.register("sim", _open_sim, simulated=True)
 backends.register("emulator", _open_emulator, simulated=True)
 backends.register("serial", _open_serial,
                   needs_args="serial:URL, e.g. serial:/dev/ttyUSB0 or serial:socket://HOST:PORT")
+def _gcs_options(args: str) -> object:
+    from hexapod.backends.gcs_config import GcsOptions
+
+    return GcsOptions.parse(args)
+
+
+def _gcs_emulator_options(args: str) -> object:
+    from hexapod.backends.gcs_emulated import parse_spec
+
+    return parse_spec(args)
+
+
 backends.register("gcs", _open_gcs,
                   needs_args="gcs:tcp://HOST:PORT or gcs:serial:URL (a PI GCS hexapod "
-                             "controller), e.g. gcs:tcp://192.168.0.10:50000")
-backends.register("gcs-emulator", _open_gcs_emulator, simulated=True)
+                             "controller), e.g. gcs:tcp://192.168.0.10:50000",
+                  validate=_gcs_options)
+backends.register("gcs-emulator", _open_gcs_emulator, simulated=True,
+                  validate=_gcs_emulator_options)
 
 
 def open_backend(spec: str, geometry: HexapodGeometry,

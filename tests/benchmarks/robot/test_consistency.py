@@ -119,12 +119,12 @@ def test_a_threshold_stops_on_rotation_alone() -> None:
 def test_hidden_legs_use_the_visible_ones_and_too_few_is_blind() -> None:
     f = _features(SOL.rotation, SOL.translation)
     vis = f.edge_visible.copy()
-    vis[[0, 3]] = False  # legs 1 and 4 hidden
+    vis[[0, 3]] = False  # legs 0 and 3 hidden
     res = _check().compare(0, MID, SOL.rotation, SOL.translation, f.normals, vis)
     assert res.legs == (1, 2, 4, 5) and res.why_blind is None
     # a hidden leg with another pose: still caught with the four seen
     f2 = _features(SOL.rotation, SOL.translation + np.array([0.0, 0.03, 0.0]))
-    with pytest.raises(SessionStop, match=r"legs 2, 3, 5, 6\)"):
+    with pytest.raises(SessionStop, match=r"legs 1, 2, 4, 5\)"):
         _check().compare(1, MID, SOL.rotation, SOL.translation, f2.normals, vis)
     vis[[1, 2, 4]] = False  # one leg left
     res = _check().compare(1, MID, SOL.rotation, SOL.translation, f.normals, vis)

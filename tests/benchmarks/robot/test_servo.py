@@ -280,7 +280,7 @@ def test_unknown_controller_suggests_the_closest(
     (["--dt", "0"], "--dt must be a positive period"),
     (["-o", "gain"], "expected KEY=VALUE"),
     (["-o", "gian=2"], "gian"),
-    (["--start-mm", "415", "415", "415", "415", "415", "900"], "--start-mm: leg 6"),
+    (["--start-mm", "415", "415", "415", "415", "415", "900"], "--start-mm: leg 5: 900.000 mm"),
     (["--teach", "--teach-frames", "0"], "--teach-frames must be >= 1, got 0"),
 ])
 def test_bad_options_exit_2(tmp_path: Path, capsys: pytest.CaptureFixture[str],
@@ -480,3 +480,32 @@ def test_ctrl_c_while_teaching_writes_nothing_and_exits_130(
     assert "stopped: SIGINT received before the session began" in out
     assert len(frames) == 2 and not goal.exists()
     assert not (tmp_path / "taught.features.npz").exists()
+
+
+@pytest.mark.parametrize(("backend", "extra", "says"), [
+    ("emulator", ["--camera", "foo"], "--camera foo: expected sim, video:PATH or device:N"),
+    ("emulator", ["--camera", "device:x"], "the device must be a number"),
+    ("emulator", ["--camera", "video:missing.avi"], "'missing.avi': no such file"),
+    ("emulator", ["--seed", "-1"], "--seed must be >= 0, got -1"),
+    ("emulator", ["--start-mm", "415", "415", "415", "415", "415", "nan"],
+     "--start-mm: leg 5: is not a number"),
+    ("emulator", ["--start-mm", "415", "415", "600", "415", "415", "415"],
+     "--start-mm: leg 2: 600.000 mm is outside the stroke"),
+    ("gcs:tcp://127.0.0.1:9?vmo=sometimes", SIM_ON_HARDWARE, "vmo must be edge, always or "
+                                                            "never, got 'sometimes'"),
+    ("gcs:tcp://127.0.0.1:9?pivot=0,0,40", SIM_ON_HARDWARE, "gcs option 'pivot=0,0,40'"),
+    ("gcs-emulator:drop=2", [], "fault drop_rate must be a probability, got 2.0"),
+])
+def test_bad_options_are_refused_before_the_record_is_written(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str], backend: str, extra: list[str],
+        says: str, monkeypatch: pytest.MonkeyPatch) -> None:
+    """Refused with exit 2 and no session record (these left a two-line record
+    and 'robot: not connected' behind: the camera and the backend's options were read
+    only when opened)."""
+    monkeypatch.chdir(tmp_path)
+    goal = _goal(tmp_path, f"lengths_mm = {_mm(GOAL_MM)}\n")
+    log = tmp_path / "s.jsonl"
+    code = servo.main(["--backend", backend, *extra, "--goal", str(goal), "--log", str(log)])
+    err = capsys.readouterr().err
+    assert code == 2 and says in err, err
+    assert not log.exists()
