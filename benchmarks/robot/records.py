@@ -46,6 +46,16 @@ def is_servo_log(path: Path) -> bool:
     return is_header(row) or is_period(row)
 
 
+def _has_final(path: Path) -> bool:
+    """Whether a servo log ends with its final record."""
+    try:
+        lines = [line for line in path.read_text(encoding="utf-8").splitlines()
+                 if line.strip()]
+        return bool(lines) and json.loads(lines[-1]).get("final") is True
+    except (OSError, ValueError, AttributeError):
+        return False
+
+
 def _safe(text: str) -> str:
     keep = "".join(c if c.isalnum() or c in "-_." else "-" for c in text)
     return keep.strip("-.") or "controller"
@@ -54,9 +64,10 @@ def _safe(text: str) -> str:
 def session_path(out: str | None, log: str | None, controller: str,
                  now: dt.datetime | None = None) -> Path:
     """Where the session's log goes (checked; nothing is created): in ``--out DIR``
-    (absent or empty), the ``--log FILE`` (an earlier servo log is replaced, any other
-    file refused), else a new directory named by the time ``now`` (default: now, UTC)
-    and the ``controller``.
+    (absent or empty), the ``--log FILE`` (an earlier servo log with its final record
+    is replaced; one without, an interrupted session's, and any other file refused),
+    else a new directory named by the time ``now`` (default: now, UTC) and the
+    ``controller``.
 
     Raises:
         OutputError: ``--out`` is a file or a directory that is not empty, ``--log`` a
@@ -66,6 +77,11 @@ def session_path(out: str | None, log: str | None, controller: str,
         raise OutputError(str(log), "give --log FILE or --out DIR, not both")
     if log is not None:
         check_replace(log, ours=is_servo_log, how="choose another --log, or delete it")
+        if Path(log).is_file() and not _has_final(Path(log)):
+            raise OutputError(str(log), "holds a session that ended without its final record "
+                                        "(killed, or the power lost): it is the only record of "
+                                        "what the robot did, and is not replaced; move it "
+                                        "away or choose another --log")
         return Path(log)
     if out is not None:
         d = Path(out)

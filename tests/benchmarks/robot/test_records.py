@@ -50,3 +50,20 @@ def test_the_log_holds_header_periods_and_final(tmp_path: Path) -> None:
     mine = tmp_path / "mine.jsonl"
     mine.write_text('{"my": 1}\n')
     assert not is_servo_log(mine)
+
+
+def test_a_log_without_its_final_record_is_never_replaced(tmp_path: Path) -> None:
+    """--log over a finished session's log: replaced; over one whose session was killed
+    (no final record: the only record of what the robot did): refused, kept."""
+    done = SessionLog(tmp_path / "done.jsonl").open({"backend": "sim"})
+    done.write({"step": 0, "t_s": 0.0})
+    done.final({"exit_code": 0})
+    assert session_path(None, str(done.path), "c") == done.path
+    cut = SessionLog(tmp_path / "cut.jsonl").open({"backend": "sim"})
+    cut.write({"step": 0, "t_s": 0.0})
+    cut._f.close()  # type: ignore[union-attr]  (SIGKILL: no final record)
+    before = cut.path.read_bytes()
+    with pytest.raises(OutputError, match=r"cut\.jsonl: holds a session that ended without "
+                                          r"its final record"):
+        session_path(None, str(cut.path), "c")
+    assert cut.path.read_bytes() == before

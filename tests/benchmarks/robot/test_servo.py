@@ -386,12 +386,19 @@ def test_log_never_replaces_a_users_file_but_replaces_an_earlier_log(
             " choose another --log, or delete it") in err
     assert "nonexistent" not in err, "checked before the port is opened"
     assert notes.read_text() == '{"my": "measurements"}\n'
-    earlier = tmp_path / "earlier.jsonl"
-    earlier.write_text('{"step": 0, "t_s": 0.0}\n')  # what servo --log writes
+    earlier = tmp_path / "earlier.jsonl"  # what servo --log writes, to the final record
+    earlier.write_text('{"step": 0, "t_s": 0.0}\n{"final": true, "exit_code": 0}\n')
     code = servo.main(["--backend", NO_ROBOT, *SIM_ON_HARDWARE, "--goal", str(goal),
                        "--log", str(earlier)])
     err = capsys.readouterr().err
     assert code == 2 and "already exists" not in err and "nonexistent" in err
+    earlier.write_text('{"step": 0, "t_s": 0.0}\n')  # a killed session's: kept
+    code = servo.main(["--backend", NO_ROBOT, *SIM_ON_HARDWARE, "--goal", str(goal),
+                       "--log", str(earlier)])
+    err = capsys.readouterr().err
+    assert code == 2 and "ended without its final record" in err and "nonexistent" not in err
+    assert earlier.read_text() == '{"step": 0, "t_s": 0.0}\n'
+
 
 
 def test_teach_never_replaces_the_features_beside_the_goal(
