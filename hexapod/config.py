@@ -93,6 +93,21 @@ def _not_a_number(value: Any) -> Any:
     return value if isinstance(value, str | bool) else None
 
 
+def _ragged(value: Any, shape: tuple[int, ...]) -> str:
+    """``: row 2 (leg 2) has 2 numbers`` for a list of rows whose first wrong row is
+    named (``(leg i)`` for a point per leg); empty where rows do not explain it."""
+    if len(shape) != 2 or not isinstance(value, list) or not any(
+            isinstance(row, list) for row in value):
+        return ""
+    for i, row in enumerate(value):
+        n = len(row) if isinstance(row, list) else None
+        if n != shape[1]:
+            leg = f" (leg {i})" if shape == (6, 3) else ""
+            has = "is not a row" if n is None else f"has {n} number{'s' * (n != 1)}"
+            return f": row {i}{leg} {has}, not {shape[1]}"
+    return ""
+
+
 def get_matrix(
     table: Mapping[str, Any], key: str, shape: tuple[int, ...], path: str, prefix: str = ""
 ) -> np.ndarray:
@@ -107,12 +122,12 @@ def get_matrix(
         arr = np.array(value, dtype=float)
     except (TypeError, ValueError):
         raise ConfigFileError(
-            path, f"expected an array of numbers of shape {shape}", key=prefix + key
-        ) from None
+            path, f"expected an array of numbers of shape {shape}{_ragged(value, shape)}",
+            key=prefix + key) from None
     if arr.shape != shape:
         raise ConfigFileError(
-            path, f"expected shape {shape}, got {arr.shape}", key=prefix + key
-        )
+            path, f"expected shape {shape}, got {arr.shape}{_ragged(value, shape)}",
+            key=prefix + key)
     bad = np.argwhere(~np.isfinite(arr))
     if len(bad):
         where = tuple(int(i) for i in bad[0])

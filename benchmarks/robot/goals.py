@@ -99,6 +99,13 @@ def _load_features(path: Path, goal_file: str) -> Features:
     if not visible.any():
         raise ConfigFileError(goal_file, f"features file {path}: no edge was seen at the goal",
                               key="features")
+    norms = np.linalg.norm(normals, axis=-1)
+    off = np.argwhere(visible & (np.abs(norms - 1.0) > 1e-6))
+    if len(off):
+        leg, edge = (int(i) for i in off[0])
+        raise ConfigFileError(goal_file, f"features file {path}: leg {leg} edge {edge}'s "
+                                         f"normal has length {norms[leg, edge]:.6g}, not 1 "
+                                         "(an edge normal is a unit vector)", key="features")
     return Features(np.where(visible[..., None], normals, np.nan), visible)
 
 

@@ -130,12 +130,26 @@ def _plan(args: argparse.Namespace, q0: np.ndarray, goal_q: np.ndarray,
         raise SessionStop(ServoExit.REFUSED, "--confirm asks y/N on a terminal and stdin is "
                                              "not one: refused before moving")
     try:
-        answer = input("move the robot? [y/N] ")
-    except EOFError:
-        answer = ""
+        answer = _ask("move the robot? [y/N] ")
+    except SessionStop:  # Ctrl-C at the question: the stop's line on a line of its own
+        print(flush=True)
+        raise
     if answer.strip().lower() not in ("y", "yes"):
         raise SessionStop(ServoExit.REFUSED, "the planned move was not confirmed: refused "
                                              "before moving")
+
+
+def _ask(prompt: str) -> str:
+    """A line typed on the terminal ("" at its end), waited for in short selects: a
+    signal then runs its handler within 0.2 s even when the kernel gave it to another
+    thread (an in-process emulator's), where a blocking ``input()`` kept reading."""
+    import select
+
+    print(prompt, end="", flush=True)
+    while True:
+        ready, _, _ = select.select([sys.stdin], [], [], 0.2)
+        if ready:
+            return sys.stdin.readline()
 
 
 def _check_board(robot: Any, geometry: HexapodGeometry, goal_q: np.ndarray,

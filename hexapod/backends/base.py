@@ -217,6 +217,13 @@ class Backend(ABC):
             self.close()
 
 
+def write_failed(exc: BaseException) -> str:
+    """``write failed: <reason>`` of a link's failed write (pyserial's own message already
+    begins so: not said twice)."""
+    text = str(exc)
+    return text if text.startswith("write failed") else f"write failed: {text}"
+
+
 def started(robot: BackendT, start: np.ndarray | None) -> BackendT:
     """``robot`` moved to ``start`` with ``reset`` (nothing when None); closed if that fails.
 

@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import argparse
 import logging
+import math
 import select
 import signal
 import subprocess
@@ -275,9 +276,14 @@ def _faults_from_args(args: argparse.Namespace) -> FaultConfig:
 def _robot_from_args(args: argparse.Namespace
                      ) -> tuple[HexapodGeometry, tuple[float, ...] | None]:
     geometry = _load_geometry(args.geometry)
-    if args.stroke is not None:
-        geometry = geometry.replace(stroke=(args.stroke[0] / 1e3, args.stroke[1] / 1e3))
+    if args.stroke is not None:  # checked in the options' units (mm) first
+        lo, hi = args.stroke
+        if not (math.isfinite(lo) and math.isfinite(hi) and 0 < lo < hi):
+            raise BackendError(f"--stroke {lo:g} {hi:g}: expected 0 < MIN < MAX [mm]")
+        geometry = geometry.replace(stroke=(lo / 1e3, hi / 1e3))
     if args.speed is not None:
+        if not (math.isfinite(args.speed) and args.speed > 0):
+            raise BackendError(f"--speed {args.speed:g}: must be positive and finite [mm/s]")
         geometry = geometry.replace(max_speed=args.speed / 1e3)
     lengths = None
     if args.lengths is not None:

@@ -16,6 +16,7 @@ from abc import ABC, abstractmethod
 import serial  # pyserial
 
 from hexapod.backends import gcs_protocol as gp
+from hexapod.backends.base import write_failed
 from hexapod.exceptions import GcsDisconnectedError, GcsLinkError, GcsTimeoutError
 
 __all__ = ["SerialTransport", "TcpTransport", "Transport", "open_transport"]
@@ -134,7 +135,7 @@ class SerialTransport(Transport):
         try:
             self._port.write(data)
         except (serial.SerialException, OSError) as exc:
-            raise GcsDisconnectedError(self.url, f"write failed: {exc}", command) from exc
+            raise GcsDisconnectedError(self.url, write_failed(exc), command) from exc
 
     def _recv(self, timeout: float) -> bytes:
         try:

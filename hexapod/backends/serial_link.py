@@ -11,6 +11,7 @@ use and builds the queries and the motion on them.
 from __future__ import annotations
 
 import logging
+import termios
 import time
 from collections.abc import Callable
 from typing import Any, TypeVar
@@ -18,7 +19,7 @@ from typing import Any, TypeVar
 import serial  # pyserial
 
 from hexapod.backends import protocol
-from hexapod.backends.base import HaltClock, HaltReport
+from hexapod.backends.base import HaltClock, HaltReport, write_failed
 from hexapod.exceptions import (
     BackendError,
     CommandRejectedError,
@@ -64,7 +65,7 @@ class SerialLink:
         except serial.SerialTimeoutException as exc:
             raise SerialTimeoutError(self.url, payload, self.timeout) from exc
         except (serial.SerialException, OSError) as exc:
-            raise SerialDisconnectedError(self.url, f"write failed: {exc}", payload) from exc
+            raise SerialDisconnectedError(self.url, write_failed(exc), payload) from exc
 
     def _read_line(self, command: str, deadline: float) -> bytes:
         """Read one line (up to ``\\n``) before ``deadline`` (perf_counter time) [s]."""
@@ -94,7 +95,8 @@ class SerialLink:
         self._buf.clear()
         try:
             self._port.reset_input_buffer()
-        except (serial.SerialException, OSError) as exc:
+        except (serial.SerialException, OSError, termios.error) as exc:
+            # (termios.error, no OSError: tcflush on a terminal whose other side is gone)
             raise SerialDisconnectedError(self.url, f"flush failed: {exc}") from exc
 
     def _exchange(self, payload: str) -> str:

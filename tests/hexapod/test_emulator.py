@@ -515,3 +515,16 @@ def test_every_fault_survives_the_command_line() -> None:
     assert _faults_from_args(build_parser().parse_args(["--pty", *f.to_args()])) == f
     with pytest.raises(BackendError, match="drive_fault_code must be >= 1"):
         FaultConfig(drive_fault_code=0)
+
+
+@pytest.mark.parametrize(("args", "says"), [
+    (["--speed", "-1"], "--speed -1: must be positive and finite [mm/s]"),
+    (["--stroke", "485", "345"], "--stroke 485 345: expected 0 < MIN < MAX [mm]"),
+])
+def test_cli_names_a_bad_robot_option_in_its_own_units(args: list[str], says: str) -> None:
+    """(It said 'got -0.001' and '(0.485 m)' for options given in mm.)"""
+    from hexapod.backends.emulator import build_parser, config_from_args
+
+    with pytest.raises(BackendError) as exc:
+        config_from_args(build_parser().parse_args(["--pty", *args]))
+    assert str(exc.value) == says

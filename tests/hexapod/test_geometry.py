@@ -227,6 +227,22 @@ def test_toml_bad_syntax(tmp_path: Path) -> None:
         HexapodGeometry.from_toml(path)
 
 
+@pytest.mark.parametrize(("rows", "says"), [
+    ("[[1, 2, 3], [1, 2, 3], [1, 2], [1, 2, 3], [1, 2, 3], [1, 2, 3]]",
+     "expected an array of numbers of shape (6, 3): row 2 (leg 2) has 2 numbers, not 3"),
+    ("[[1, 2, 3, 4], [1, 2, 3, 4], [1, 2, 3, 4], [1, 2, 3, 4], [1, 2, 3, 4], [1, 2, 3, 4]]",
+     "expected shape (6, 3), got (6, 4): row 0 (leg 0) has 4 numbers, not 3"),
+    ("[[1, 2, 3], [1, 2, 3], [1, 2, 3], [1, 2, 3]]", "expected shape (6, 3), got (4, 3)"),
+])
+def test_a_point_row_of_the_wrong_length_is_named_by_its_leg(
+        tmp_path: Path, rows: str, says: str) -> None:
+    lines = _valid_lines()
+    lines["base_points_mm"] = f"base_points_mm = {rows}"
+    with pytest.raises(ConfigFileError) as exc:
+        HexapodGeometry.from_toml(_write(tmp_path, "\n".join(lines.values())))
+    assert exc.value.key == "base_points_mm" and str(exc.value).endswith(says), exc.value
+
+
 def test_toml_bad_values(tmp_path: Path) -> None:
     lines = _valid_lines()
     lines["stroke_mm"] = "stroke_mm = [345, 485, 500]"

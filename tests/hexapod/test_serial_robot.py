@@ -480,3 +480,16 @@ def test_a_glitching_position_reading_is_refused_before_a_setpoint_is_made_of_it
     emulator.set_faults(FaultConfig(glitch_after=0, glitch=hi - Q0[0] + 0.01))
     with pytest.raises(ImplausibleReadingError, match=r"the board's stroke"):
         robot.measured_lengths()
+
+
+def test_a_failed_write_says_so_once(robot: SerialRobot, emulator: Emulator) -> None:
+    """The pty's other side gone: pyserial's 'write failed: [Errno 5] ...' is the
+    message's reason as it is (it read 'write failed: write failed: ...')."""
+    emulator.stop()
+    with pytest.raises(SerialDisconnectedError) as exc:
+        for _ in range(3):
+            robot._write("POS?")
+    text = str(exc.value)
+    assert "write failed: [Errno 5]" in text and text.count("write failed") == 1, text
+    robot.close()  # its HLT's flush on the dead terminal: termios.error, which it raised
+    assert not robot.is_open

@@ -516,3 +516,15 @@ def test_bad_options_are_refused_before_the_record_is_written(
     err = capsys.readouterr().err
     assert code == 2 and says in err, err
     assert not log.exists()
+
+
+def test_goal_features_that_are_not_unit_normals_are_refused_naming_the_files(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """An .npz of zero normals (the controller said only 'no visible desired edge')."""
+    np.savez(tmp_path / "zero.npz", normals=np.zeros((6, 2, 3)),
+             edge_visible=np.ones((6, 2), bool))
+    goal = _goal(tmp_path, f"lengths_mm = {_mm(GOAL_MM)}\nfeatures = 'zero.npz'\n")
+    code = servo.main(["--backend", NO_ROBOT, *SIM_ON_HARDWARE, "--goal", str(goal)])
+    err = capsys.readouterr().err
+    assert code == 2 and str(goal) in err and "zero.npz" in err
+    assert "leg 0 edge 0's normal has length 0, not 1 (an edge normal is a unit vector)" in err

@@ -384,9 +384,11 @@ def test_a_period_check_ends_the_session_with_its_code(
     assert len(periods(out)) == 4  # the command of period 4 was never sent
 
 
-def _on_a_terminal(args: list[str], answer: bytes, out: Path) -> tuple[int, str]:
+def _on_a_terminal(args: list[str], answer: bytes | signal.Signals, out: Path,
+                   raw: bool = False) -> tuple[int, str]:
     """``servo ARGS --out OUT`` with a pseudo-terminal as stdin and stdout: wait for the
-    --confirm question, answer, and return the exit code and everything shown."""
+    --confirm question, answer (or send the signal to its process group), and return the
+    exit code and everything shown (its lines unwrapped, or ``raw``)."""
     import pty
     import select
     import subprocess
@@ -414,7 +416,10 @@ def _on_a_terminal(args: list[str], answer: bytes, out: Path) -> tuple[int, str]
                     break
                 shown += chunk
             if not answered and b"move the robot? [y/N]" in shown:
-                os.write(master, answer)
+                if isinstance(answer, signal.Signals):
+                    os.killpg(proc.pid, answer)
+                else:
+                    os.write(master, answer)
                 answered = True
             if proc.poll() is not None and not ready:
                 break
@@ -425,7 +430,19 @@ def _on_a_terminal(args: list[str], answer: bytes, out: Path) -> tuple[int, str]
         os.close(master)
     text = shown.decode(errors="replace")
     assert answered, text
+    if raw:
+        return code, text
     return code, " ".join(text.split())  # the lines the terminal's width wrapped, unwrapped
+
+
+def test_ctrl_c_at_the_confirm_question_stops_on_a_line_of_its_own(tmp_path: Path) -> None:
+    """(It printed 'move the robot? [y/N] stopped: ...' on one line.)"""
+    out = tmp_path / "session"
+    rc, shown = _on_a_terminal(["--backend", "emulator", "--goal", str(goal_file(tmp_path)),
+                                "--confirm", *FAST], signal.SIGINT, out, raw=True)
+    assert rc == 130, shown
+    assert "move the robot? [y/N] \r\nstopped: SIGINT received" in shown, repr(shown)
+    assert final(out)["moved"] is False
 
 
 @pytest.mark.parametrize(("answer", "code"), [(b"y\n", 0), (b"n\n", 2)])
