@@ -16,7 +16,7 @@ from typing import TypeVar
 import numpy as np
 
 from hexapod.actuation import Actuation, check_actuation
-from hexapod.exceptions import BackendError, ShapeError
+from hexapod.exceptions import BackendError, ImplausibleReadingError, ShapeError
 from hexapod.geometry import HexapodGeometry
 
 
@@ -215,6 +215,33 @@ class Backend(ABC):
             self.halt()
         finally:
             self.close()
+
+
+def check_reading(url: str, q: np.ndarray, previous: np.ndarray | None,
+                  setpoints: np.ndarray | None, stroke: tuple[float, float] | None,
+                  tolerance: float) -> np.ndarray:
+    """``q`` (6,) [m], leg lengths a controller reported, checked before anything is made
+    of them: inside ``stroke`` and, streaming, on the way from the ``previous`` reading
+    to the ``setpoints`` sent since, each within ``tolerance`` [m] (None: not checked).
+
+    Raises:
+        ImplausibleReadingError: Naming the leg, its reading and where it could be.
+    """
+    low, high = np.full(6, -np.inf), np.full(6, np.inf)
+    why = []
+    if stroke is not None:
+        low[:], high[:] = stroke[0] - tolerance, stroke[1] + tolerance
+        why.append("the stroke")
+    if previous is not None and setpoints is not None:
+        low = np.maximum(low, np.minimum(previous, setpoints) - tolerance)
+        high = np.minimum(high, np.maximum(previous, setpoints) + tolerance)
+        why.append("between its last reading and the setpoint sent")
+    bad = np.flatnonzero((q < low) | (q > high))
+    if bad.size:
+        i = int(bad[0])
+        raise ImplausibleReadingError(url, i, float(q[i]), float(low[i]), float(high[i]),
+                                      " and ".join(why) + f", within {tolerance * 1e3:g} mm")
+    return q
 
 
 def write_failed(exc: BaseException) -> str:

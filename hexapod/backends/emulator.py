@@ -245,7 +245,8 @@ def build_parser() -> argparse.ArgumentParser:
                         help="duration of the --stall-after stall [ms] (default 2000)")
     faults.add_argument("--glitch-after", type=int, metavar="N",
                         help="after N commands, report the first leg --glitch-mm longer than "
-                             "it is (a glitching encoder; serial board)")
+                             "it is (a glitching encoder; with --gcs: the platform --glitch-mm "
+                             "further along X)")
     faults.add_argument("--glitch-mm", type=float, default=30.0, metavar="MM",
                         help="the --glitch-after offset [mm] (default 30)")
     faults.add_argument("--drive-fault-after", type=int, metavar="N",

@@ -44,6 +44,7 @@ from hexapod.backends.base import (
     BackendStep,
     HaltClock,
     HaltReport,
+    check_reading,
     clamp_velocities,
     started,
     step_command,
@@ -68,6 +69,11 @@ from hexapod.geometry import HexapodGeometry
 from hexapod.kinematics import inverse_kinematics
 
 logger = logging.getLogger(__name__)
+
+#: How far [m] a leg of the reported pose may lie off the way between its last reading and
+#: the target sent (the controller's own path between two poses bends the legs' by far
+#: less) before the reading is refused (:func:`~hexapod.backends.base.check_reading`).
+READING_TOLERANCE = 1e-3
 
 __all__ = ["GcsHexapod", "GcsOptions", "platform_velocity"]
 
@@ -341,6 +347,7 @@ class GcsHexapod(Backend):
         rate = self._rate = RateLimiter.keeping(self._rate, dt, f"GcsHexapod({self.url})")
         vc, clamped = clamp_velocities(self._q, v, dt, self.stroke, self.max_speed)
         target_q = np.clip(self._q + vc * dt, *self.stroke)
+        before = self._q.copy()
 
         def period() -> tuple[float, float, float, float, float, bool]:
             t0 = time.perf_counter()
@@ -358,6 +365,10 @@ class GcsHexapod(Backend):
             slack = rate.sleep_after(t0)  # the first period starts with its MOV
             t4 = time.perf_counter()
             self._read_pose()
+            # the legs went from where they were toward the target (held when refused):
+            # a reading elsewhere is refused before a target is made of it
+            check_reading(self.url, self._q, before, target_q if ok else before, None,
+                          READING_TOLERANCE)
             vmo_rtt = t2 - t1 if check else 0.0
             return t1 - t0, vmo_rtt, t3 - t2, time.perf_counter() - t4, slack, ok
 

@@ -163,6 +163,8 @@ class GcsController:
         self.velocity = config.velocity
         #: The stored error number (``ERR?`` returns and clears it).
         self.error = int(GcsError.NO_ERROR)
+        #: Added to the reported X [m] (fault injection: a glitching reading).
+        self.glitch = 0.0
         self.commands = 0
         self.last_command = ""
         #: The last commands received (newest last), for inspection.
@@ -309,9 +311,15 @@ class GcsController:
     def _axis_lines(self, values: dict[str, float], axes: list[str]) -> str:
         return "\n".join(f"{a}={gp.format_answer_number(values[a])}" for a in axes)
 
+    def inject_glitch(self, offset: float) -> None:
+        """From now on report the platform ``offset`` [m] further along X than it is."""
+        self.glitch = float(offset)
+
     def _pos(self, args: list[str], now: float) -> str:
         axes = gp.parse_axis_list(args)
-        return self._axis_lines(to_wire(self.coords), axes)
+        shown = to_wire(self.coords)
+        shown["X"] += self.glitch * 1e3
+        return self._axis_lines(shown, axes)
 
     def _ont(self, args: list[str], now: float) -> str:
         axes = gp.parse_axis_list(args)

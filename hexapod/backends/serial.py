@@ -34,6 +34,7 @@ from hexapod.backends import protocol
 from hexapod.backends.base import (
     Backend,
     BackendStep,
+    check_reading,
     clamp_velocities,
     step_command,
 )
@@ -223,27 +224,15 @@ class SerialRobot(SerialLink, Backend):
         return self._q.copy()
 
     def _plausible(self, q: np.ndarray, setpoints: np.ndarray | None = None) -> np.ndarray:
-        """``q`` (6,) [m] read from the board, checked: inside the stroke and, streaming
-        (``setpoints``: those sent since the last reading), on the way from the last
-        reading to them, each within :attr:`reading_tolerance`.
+        """``q`` (6,) [m] read from the board, checked (:func:`~hexapod.backends.base.
+        check_reading`): inside the board's stroke and, streaming (``setpoints``: those
+        sent since the last reading), on the way from the last reading to them.
 
         Raises:
             ImplausibleReadingError: Naming the leg, its reading and where it could be.
         """
-        tol = self.reading_tolerance
-        lo, hi = self.stroke[0] - tol, self.stroke[1] + tol
-        why = "the board's stroke"
-        low, high = np.full(6, lo), np.full(6, hi)
-        if setpoints is not None:
-            low = np.maximum(low, np.minimum(self._q, setpoints) - tol)
-            high = np.minimum(high, np.maximum(self._q, setpoints) + tol)
-            why = "between its last reading and the setpoint sent, within the tolerance"
-        bad = np.flatnonzero((q < low) | (q > high))
-        if bad.size:
-            i = int(bad[0])
-            raise ImplausibleReadingError(self.url, i, float(q[i]), float(low[i]),
-                                          float(high[i]), why)
-        return q
+        return check_reading(self.url, q, self._q if setpoints is not None else None,
+                             setpoints, self.stroke, self.reading_tolerance)
 
     def set_speed(self, speed: float) -> None:
         """Set the leg speed limit (``VEL``) [m/s]."""

@@ -33,6 +33,7 @@ from hexapod.exceptions import (
     GcsLinkError,
     GcsOutOfLimitsError,
     GcsTimeoutError,
+    ImplausibleReadingError,
     StrokeLimitError,
 )
 from hexapod.kinematics import inverse_kinematics
@@ -356,3 +357,18 @@ def test_a_second_client_is_told_the_controller_is_busy(
     # the connection never came up: no HLT tried on it (no broken pipe, no 0.5 s wait)
     assert "HLT" not in caplog.text and time.perf_counter() - t0 < 0.4
     assert robot.measured_lengths().shape == (6,)  # the first client is still served
+
+
+def test_a_glitching_pose_reading_is_refused_and_the_robot_halted(
+        robot: GcsHexapod, emulator: GcsEmulator) -> None:
+    """The controller reports the platform 30 mm further along X than it is: the period's
+    reading is refused (its legs off the way from the last reading to the target), the
+    robot halted, and no MOV is computed from it."""
+    robot.step(np.zeros(6), DT)
+    emulator.set_faults(FaultConfig(glitch_after=1, glitch=0.03))
+    with pytest.raises(ImplausibleReadingError, match=r"implausible position reading: leg "
+                                                      r"\d at .* \(between its last reading"):
+        robot.step(np.zeros(6), DT)
+    recent = emulator.history()[-4:]
+    assert "HLT" in recent and not any(c.startswith("MOV") for c in recent[recent.index(
+        "HLT"):]), recent

@@ -478,7 +478,7 @@ def test_a_glitching_position_reading_is_refused_before_a_setpoint_is_made_of_it
     # a reading outside the stroke is refused as well, naming the board's stroke
     hi = robot.stroke[1]
     emulator.set_faults(FaultConfig(glitch_after=0, glitch=hi - Q0[0] + 0.01))
-    with pytest.raises(ImplausibleReadingError, match=r"the board's stroke"):
+    with pytest.raises(ImplausibleReadingError, match=r"\(the stroke, within 1 mm\)"):
         robot.measured_lengths()
 
 
