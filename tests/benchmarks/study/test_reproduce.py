@@ -55,7 +55,15 @@ def test_one_trial_and_many_trial_figures_get_the_same_rule() -> None:
 def test_rules_below_claims_and_other_controllers() -> None:
     below = _fig("< 1 mm", 1.0, rule="below", tolerance=0.0)
     assert judge(below, 0.9, (0.8, 0.99)) == "within"
-    assert judge(below, 0.9, (0.8, 1.01)) == "outside (higher)"
+    # an interval that holds the bound is not shown below it, nor shown higher
+    assert judge(below, 0.9, (0.8, 1.01)) == \
+        "outside (not shown below: the interval holds the bound)"
+    assert judge(below, 1.2, (1.05, 1.4)) == "outside (higher)"
+    # too few trials for an interval (an end beyond the sample): no verdict either way
+    assert judge(below, 0.9, (-np.inf, np.inf)).startswith("not comparable (too few trials")
+    equal = _fig("0.6 mm", 0.6, 0.05)
+    assert judge(equal, 0.6, (-np.inf, np.inf)).startswith("not comparable (too few trials")
+    assert judge(equal, 0.6, (0.5, np.inf)).startswith("not comparable (too few trials")
     rate = _fig("100 %", 100.0, 0.5, unit="%", statistic="rate", column="")
     assert judge(rate, 1.0, (0.9996, 1.0)) == "within"
     assert judge(rate, 0.98, (0.97, 0.99)) == "outside (lower)"
@@ -203,3 +211,36 @@ def test_seed001_tail_statistics_from_the_records(tmp_path: Path,
     assert "the paper's tail maximum is 6x its tail median (0.6 mm / 0.1 mm; 3.7x to 13x" \
         in text
     assert "final position error" not in text
+
+
+def _calibration_dir(tmp_path: Path, err: np.ndarray) -> Path:
+    (tmp_path / "calibration.json").write_text(json.dumps({"points": [
+        {"sweep": {"noise.rotation_deg": 0.05}, "errors_mm": err.tolist()}]}))
+    return tmp_path
+
+
+def test_calibration_figures_are_over_calibrations_and_the_worst_point_is_simultaneous(
+        tmp_path: Path) -> None:
+    """30 calibrations of 6 points: the root-median-square figure is one number per
+    calibration (as the paper's one calibration), its interval over the 30 (n = 30, not
+    180 point errors); the worst point's interval holds whichever point is worst
+    (Bonferroni over the 6 medians: scipy's quantile_test at 1 - 0.05 / 6)."""
+    rng = np.random.default_rng(3)
+    err = rng.lognormal(0.0, 0.5, (30, 6)) * np.array([1.0, 1.1, 0.9, 1.3, 1.25, 1.0])
+    d = _calibration_dir(tmp_path, err)
+    rms = _fig("1 mm", 1.0, statistic="calibration_rms_median", column="",
+               sweep={"noise_rotation_deg": 0.05})
+    r = measure(rms, d, {})
+    per = np.sqrt(np.median(err ** 2, axis=1))
+    ref = sps.quantile_test(per, p=0.5).confidence_interval(0.95)
+    assert r.n == 30 and r.value == pytest.approx(np.median(per))
+    assert r.interval == pytest.approx((ref.low, ref.high))
+    worst = replace(rms, statistic="calibration_worst_point", rule="below", tolerance=0.0)
+    w = measure(worst, d, {})
+    meds = np.median(err, axis=0)
+    ends = [sps.quantile_test(err[:, k], p=0.5).confidence_interval(1 - 0.05 / 6)
+            for k in range(6)]
+    assert w.value == pytest.approx(meds.max()) and f"(leg {int(np.argmax(meds))})" in \
+        w.framework
+    assert w.interval == pytest.approx((max(e.low for e in ends), max(e.high for e in ends)))
+    assert "Bonferroni" in w.note
