@@ -42,10 +42,12 @@ def cmd_run(args: argparse.Namespace) -> int:
         scenarios = [replace(sc, world=args.world) for sc in scenarios]
     if getattr(args, "goal", None):  # --goal: every scenario in that goal setting
         scenarios = [sc.with_goal(args.goal) for sc in scenarios]
-    from benchmarks.study.options_file import with_options_file
+    from benchmarks.study.options_file import goal_mismatches, with_options_file
 
     scenarios, args.options_record = with_options_file(scenarios,
                                                        getattr(args, "options_file", None))
+    for text in goal_mismatches(scenarios, args.options_record):
+        print(f"warning: {text}", file=sys.stderr)
     return run_studies(scenarios, out, args)
 
 

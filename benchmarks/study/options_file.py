@@ -167,6 +167,16 @@ def with_options_file(scenarios: list[Any], path: str | None
     return apply_options_file(scenarios, options), options.record()
 
 
+def goal_mismatches(scenarios: list[Any], record: dict[str, Any] | None) -> list[str]:
+    """Warnings for the scenarios run under another goal setting than the options file
+    was tuned under (the controllers are told other things of the goal)."""
+    tuned = ((record or {}).get("tuning") or {}).get("goal")
+    return [f"{record['path']}: options tuned under the goal setting {tuned!r}, {sc.name} "
+            f"runs under {sc.task.goal!r}: the controllers are told other things of the "
+            "goal than when they were tuned (docs/scenarios.md, \"Fairness\")"
+            for sc in scenarios if tuned and record and sc.task.goal != tuned]
+
+
 def record_options(meta: dict[str, Any], record: dict[str, Any] | None) -> None:
     """Keep the options file's record in ``run.json`` (a run without one: none kept)."""
     if record:
@@ -187,8 +197,15 @@ def options_line(meta: dict[str, Any]) -> str:
     if not tuning:
         return (f"Controller options of {labels}: from `{rec.get('path')}` (written by hand, "
                 f"not tuned; {rec.get('digest', '')[:19]}).")
+    held = ("held-out trials" if tuning.get("held_out", True) else "the same fixed task "
+            "with other noise draws: not held out")
+    kept = sorted(label for label, t in (tuning.get("shown_better") or {}).items()
+                  if t.get("kept") == "as given")
+    goal = f", goal setting {tuning['goal']}" if tuning.get("goal") else ""
     return (f"Controller options of {labels}: **tuned** (`{rec.get('path')}`, "
             f"{rec.get('digest', '')[:19]}): by `hexapod-bench tune` on "
             f"{tuning.get('scenario')}, criterion {tuning.get('criterion')}, budget "
-            f"{tuning.get('budget')}, tuning seed {tuning.get('tuning_seed')} (the study's: "
-            f"{tuning.get('study_seed')}; held-out trials).")
+            f"{tuning.get('budget')}{goal}, tuning seed {tuning.get('tuning_seed')} (the "
+            f"study's: {tuning.get('study_seed')}; {held})"
+            + (f"; kept as given, no candidate shown better: {', '.join(kept)}" if kept
+               else "") + ".")

@@ -5,9 +5,13 @@ Every controller goes through the same procedure: its candidates (the options as
 then points of its declared search space, :mod:`benchmarks.study.tuning_space`) run on
 TUNING trials, the same ones for every candidate and controller, whose seed is the
 study's plus :data:`SEED_OFFSET` (or ``--seed``, refused when equal to the study's): no
-trial of the study is used to tune. The candidate with the lowest criterion wins (ties:
-the earlier, the options as given first); every controller has the same budget
-(candidates x trials x sweep points). The candidates run as one study in ``DIR/candidates``
+trial of the study is used to tune. The candidate with the lowest criterion is chosen
+only if it is shown better than the options as given on the tuning trials (a one-sided
+exact sign test on the paired trials, Bonferroni over the searched candidates: the best
+of several noisy scores is biased low); otherwise the options as given are kept, and
+the output says so. Every controller has the same budget (candidates x trials x sweep
+points); one without a search space runs its options as given alone, and is named. The
+candidates run as one study in ``DIR/candidates``
 (a run directory: resumable with ``--resume``, its report beside), and the choice is
 written to ``DIR/tuned.toml`` (the options file ``run --options-file`` takes) and every
 candidate's score to ``DIR/tuning.json``.
@@ -19,7 +23,7 @@ import argparse
 import json
 import math
 import sys
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
@@ -67,6 +71,9 @@ def add_arguments(s: argparse.ArgumentParser) -> None:
     s.add_argument("--space", metavar="FILE", help="a search space TOML replacing the "
                                                    "declared one (docs/tuning.md)")
     s.add_argument("--max-steps", type=int, help="override the step budget of each trial")
+    s.add_argument("--goal", choices=("mixed", "taught", "cartesian"),
+                   help="the goal setting of the tuning trials (default: the scenario's; "
+                        "recorded in tuned.toml: a run under another setting is warned)")
     s.add_argument("--workers", type=int, default=1, help="processes (default 1)")
     s.add_argument("--resume", action="store_true", help="finish an interrupted tuning")
     s.add_argument("--overwrite", action="store_true",
@@ -93,6 +100,52 @@ class Score:
     value: float
     trials: int
     failed: int
+    per_trial: dict[tuple[int, int], float] = field(default_factory=dict, compare=False)
+
+
+@dataclass(frozen=True)
+class Choice:
+    """A controller's tuning outcome.
+
+    Attributes:
+        chosen: The options kept: the best candidate if shown better than the options as
+            given, else the options as given.
+        best: The candidate of the lowest criterion.
+        better: Tuning trials on which the best scored lower than the options as given.
+        worse: Those on which it scored higher (ties and trials both failed left out).
+        p_value: One-sided exact sign test of "the best is lower" (nan: the best is the
+            options as given).
+        p_adjusted: ``p_value`` times the searched candidates (Bonferroni), at most 1.
+    """
+
+    chosen: Score
+    best: Score
+    better: int = 0
+    worse: int = 0
+    p_value: float = math.nan
+    p_adjusted: float = math.nan
+
+    @property
+    def shown_better(self) -> bool:
+        """The best candidate is kept (it is not the options as given)."""
+        return self.chosen.index != 0
+
+
+def trial_values(rows: list[dict[str, Any]], criterion: str) -> dict[tuple[int, int], float]:
+    """The criterion's field of every row by (sweep point, trial), ``+inf`` for a trial
+    that failed or has no finite value (:func:`criterion_value`'s worst)."""
+    from benchmarks.study.failures import is_failure
+
+    field_name = CRITERIA[criterion][0]
+    out = {}
+    for row in rows:
+        v = row.get(field_name)
+        key = (int(row.get("point", 0)), int(row["trial"]))
+        if not is_failure(row) and isinstance(v, int | float) and math.isfinite(v):
+            out[key] = float(v)
+        else:
+            out[key] = math.inf
+    return out
 
 
 def criterion_value(rows: list[dict[str, Any]], criterion: str) -> tuple[float, int]:
@@ -127,9 +180,24 @@ def criterion_value(rows: list[dict[str, Any]], criterion: str) -> tuple[float, 
     return value, failed
 
 
-def choose(scores: list[Score]) -> Score:
-    """The lowest criterion, the earlier candidate on a tie (the options as given first)."""
-    return min(scores, key=lambda s: (s.value, s.index))
+def choose(scores: list[Score], alpha: float = 0.05) -> Choice:
+    """The lowest criterion (the earlier candidate on a tie), kept only if shown better
+    than the options as given (candidate 0) on the paired tuning trials: the one-sided
+    exact sign test of "lower", its p-value times the searched candidates (Bonferroni:
+    the best of several is picked after the scores are seen) below ``alpha``."""
+    from benchmarks.study.exact import binomial_upper_tail_half
+
+    given = next(s for s in scores if s.index == 0)
+    best = min(scores, key=lambda s: (s.value, s.index))
+    if best.index == 0:
+        return Choice(given, best)
+    common = sorted(set(best.per_trial) & set(given.per_trial))
+    d = np.array([best.per_trial[k] - given.per_trial[k] for k in common
+                  if not (math.isinf(best.per_trial[k]) and math.isinf(given.per_trial[k]))])
+    better, worse = int(np.sum(d < 0)), int(np.sum(d > 0))
+    p = binomial_upper_tail_half(better, better + worse) if better + worse else 1.0
+    adjusted = min(1.0, p * (len(scores) - 1))
+    return Choice(best if adjusted < alpha else given, best, better, worse, p, adjusted)
 
 
 def _own_entry(entry: Path) -> bool:
@@ -169,7 +237,6 @@ def cmd_tune(args: argparse.Namespace) -> int:
         controller_space,
         load_space,
     )
-    from controllers.registry import registry
     from hexapod.outputs import check_output_dir, check_replace
 
     con = console()
@@ -187,6 +254,8 @@ def cmd_tune(args: argparse.Namespace) -> int:
         raise ScenarioError("--seed", f"{tuning_seed} is the study's own seed: tuning trials "
                             "must be held out from the study's (choose another seed)")
     sc = base.with_overrides(args.trials, tuning_seed, labels, args.max_steps)
+    if args.goal is not None:
+        sc = sc.with_goal(args.goal)
     criterion = args.criterion or ("median-tracking-rms" if sc.task.kind == "trajectory"
                                    else "median-final")
     check_output_dir(out, _own_entry, "tune directory (candidates/, tuned.toml, tuning.json)",
@@ -194,7 +263,7 @@ def cmd_tune(args: argparse.Namespace) -> int:
     for path, kind in ((out / TUNED_FILE, "TOML"), (out / SCORES_FILE, "JSON")):
         check_replace(path, args.overwrite, kind=kind)
     space = SEARCH_SPACE if args.space is None else load_space(args.space)
-    tables = {spec.label: registry.options(spec.name) for spec in sc.controllers}
+    tables = {spec.label: _option_table(spec) for spec in sc.controllers}
     if args.space is not None:
         check_space_options(space, tables, {s.label: s.name for s in sc.controllers},
                             args.space)
@@ -217,8 +286,19 @@ def cmd_tune(args: argparse.Namespace) -> int:
     points = len(sc.expand())
     budget = f"{args.candidates} candidates x {sc.trials} trials x {points} sweep point(s)"
     con.print(f"tune {sc.name}: {len(labels)} controller(s), {budget} each; criterion "
-              f"{criterion}; tuning seed {tuning_seed} (the study's: {study_seed})",
-              markup=False, highlight=False)
+              f"{criterion}; goal setting {sc.task.goal}; tuning seed {tuning_seed} (the "
+              f"study's: {study_seed})", markup=False, highlight=False)
+    for label, plan in plans.items():
+        if len(plan) < args.candidates:
+            con.print(f"tune: warning: {label} has no search space: its options as given "
+                      f"alone (1 candidate, not {args.candidates}): its budget is not the "
+                      "others'", markup=False, highlight=False)
+    held_out = sc.task.kind != "fixed"
+    if not held_out:
+        con.print(f"tune: warning: {sc.name}'s task is one fixed start and goal: the tuning "
+                  "trials repeat the study's task with other noise and calibration-error "
+                  "draws, so the study's run of the tuned options is not a held-out test of "
+                  "other tasks", markup=False, highlight=False)
     run_dir = out / CANDIDATES_DIR
     out.mkdir(parents=True, exist_ok=True)
     code = run_studies([replace(sc, controllers=tuple(specs))], run_dir,
@@ -236,8 +316,10 @@ def cmd_tune(args: argparse.Namespace) -> int:
         for k, opts in enumerate(plans[spec.label]):
             got = by_label.get(_label(spec.label, k), [])
             value, failed = criterion_value(got, criterion)
-            scores[spec.label].append(Score(spec.label, k, opts, value, len(got), failed))
-    chosen = {label: choose(s) for label, s in scores.items()}
+            scores[spec.label].append(Score(spec.label, k, opts, value, len(got), failed,
+                                            trial_values(got, criterion)))
+    choices = {label: choose(s) for label, s in scores.items()}
+    chosen = {label: c.chosen for label, c in choices.items()}
     for label, s in chosen.items():
         for axis in axes[label]:
             if s.index > 0 and axis.at_end(s.options[axis.option]):
@@ -252,12 +334,40 @@ def cmd_tune(args: argparse.Namespace) -> int:
         "budget": budget, "tuning_seed": tuning_seed, "study_seed": study_seed,
         "seed_offset": tuning_seed - study_seed,
         "families": {k: v or "none" for k, v in families.items()},
+        "candidates_run": {label: len(plan) for label, plan in plans.items()},
+        "goal": sc.task.goal, "held_out": held_out,
         "chosen": {label: s.index for label, s in chosen.items()},
+        "shown_better": {label: {
+            "best": c.best.index, "kept": "best" if c.shown_better else "as given",
+            "better_in": c.better, "worse_in": c.worse,
+            "p_sign_one_sided": None if math.isnan(c.p_value) else c.p_value,
+            "p_bonferroni": None if math.isnan(c.p_adjusted) else c.p_adjusted}
+            for label, c in choices.items()},
         "command": "hexapod-bench " + " ".join(getattr(args, "argv", [])),
     }
     _write(out, chosen, scores, tuning)
-    _print(con, scores, chosen, criterion, out)
+    _print(con, scores, choices, criterion, out)
     return 0
+
+
+def _option_table(spec: Any) -> Any:
+    """The options a controller of the scenario takes: its own, and for a wrapper that
+    hands options on to a law it wraps (``latency-compensated``, ``law = "leg-edge"``)
+    that law's too, so that its search space is the law's (without them it ran its
+    options as given alone, a smaller budget than the others')."""
+    from controllers.options import OptionTable
+    from controllers.registry import registry
+
+    table = registry.options(spec.name)
+    if not (table.open and table.declares("law")):
+        return table
+    law = spec.options.get("law", next(o.default for o in table.options if o.name == "law"))
+    if not isinstance(law, str):
+        return table
+    inner = registry.options(law)
+    return OptionTable(table.options + tuple(o for o in inner.options
+                                             if not table.declares(o.name)), inner.open,
+                       inner.passes_on)
 
 
 def _write(out: Path, chosen: dict[str, Score], scores: dict[str, list[Score]],
@@ -265,9 +375,11 @@ def _write(out: Path, chosen: dict[str, Score], scores: dict[str, list[Score]],
     from benchmarks.study.options_file import write_options_file
     from hexapod.outputs import TEXT_MARKER
 
+    held = ("the study's own seed: held-out trials" if tuning["held_out"] else
+            "the study's own seed: the same fixed task, other noise draws: not held out")
     header = (f"{TEXT_MARKER}: hexapod-bench tune (docs/tuning.md)\n"
               f"Use: hexapod-bench run {tuning['scenario']} --options-file {out / TUNED_FILE} "
-              "--out DIR (the study's own seed: held-out trials)")
+              f"--out DIR ({held}; tuned under the goal setting {tuning['goal']})")
     write_options_file(out / TUNED_FILE, {label: s.options for label, s in chosen.items()},
                        tuning, header)
     data = {"generator": "hexapod-vs", "tuning": tuning, "candidates": {
@@ -278,21 +390,33 @@ def _write(out: Path, chosen: dict[str, Score], scores: dict[str, list[Score]],
     (out / SCORES_FILE).write_text(json.dumps(data, indent=2) + "\n")
 
 
-def _print(con: Any, scores: dict[str, list[Score]], chosen: dict[str, Score],
+def _print(con: Any, scores: dict[str, list[Score]], choices: dict[str, Choice],
            criterion: str, out: Path) -> None:
     from rich.markup import escape
     from rich.table import Table
 
-    t = Table(title=f"tuning: {criterion} [mm] per candidate (* chosen)")
+    t = Table(title=f"tuning: {criterion} [mm] per candidate (* kept)")
     for col in ("controller", "candidate", "options", "criterion", "failed"):
         t.add_column(col, overflow="fold")
     for label, ss in scores.items():
         for s in ss:
-            mark = "*" if s.index == chosen[label].index else ""
+            mark = "*" if s.index == choices[label].chosen.index else ""
             opts = ", ".join(f"{k}={v}" for k, v in s.options.items()) or "(defaults)"
             t.add_row(label, f"{s.index}{mark}" + (" (as given)" if s.index == 0 else ""),
-                      escape(opts), f"{s.value:.4g}", f"{s.failed}/{s.trials}")
+                      escape(opts), f"{s.value:.6g}", f"{s.failed}/{s.trials}")
     con.print(t)
+    for label, c in choices.items():
+        if c.best.index == 0:
+            text = "the options as given scored lowest: kept"
+        else:
+            test = (f"lower on {c.better} and higher on {c.worse} of the paired tuning "
+                    f"trials, one-sided sign test p = {c.p_value:.3g}, x {len(scores[label]) - 1}"
+                    f" searched candidates: {c.p_adjusted:.3g}")
+            text = (f"candidate {c.best.index} kept: shown better than the options as given "
+                    f"({test})" if c.shown_better else
+                    f"candidate {c.best.index} scored lowest but is not shown better than the "
+                    f"options as given ({test}): the options as given are kept")
+        con.print(f"{label}: {text}", markup=False, highlight=False)
     con.print(f"tuned options: {out / TUNED_FILE}; every candidate: {out / SCORES_FILE}",
               markup=False, highlight=False)
 
@@ -306,5 +430,5 @@ def register(sub: Any) -> None:
     add_arguments(s)
 
 
-__all__ = ["CRITERIA", "SEED_OFFSET", "Score", "choose", "cmd_tune", "criterion_value",
-           "register"]
+__all__ = ["CRITERIA", "SEED_OFFSET", "Choice", "Score", "choose", "cmd_tune",
+           "criterion_value", "register", "trial_values"]

@@ -52,9 +52,39 @@ def test_the_criterion_counts_failures_as_the_worst() -> None:
     assert criterion_value(rows[:2], "mean-final") == (pytest.approx(0.2), 0)
     assert criterion_value([{"tracking_rms_position_mm": float(x)} for x in range(1, 11)],
                            "p90-tracking-rms") == (9.0, 0)
-    given = Score("a", 0, {}, 0.5, 3, 0)
-    assert choose([given, Score("a", 1, {"gain": 2.0}, 0.5, 3, 0)]) is given  # ties: as given
-    assert choose([given, Score("a", 2, {"gain": 4.0}, 0.4, 3, 0)]).index == 2
+
+
+
+def _score(index: int, values: list[float], value: float | None = None) -> Score:
+    per = {(0, k): v for k, v in enumerate(values)}
+    return Score("a", index, {"gain": float(index)},
+                 float(sorted(values)[len(values) // 2]) if value is None else value,
+                 len(values), 0, per)
+
+
+def test_the_best_candidate_is_kept_only_if_shown_better_than_the_options_as_given() -> None:
+    """Lower on 8 of 8 paired trials: one-sided sign test p = 1/256, x 2 searched
+    candidates = 0.0078: kept. Lower by 1e-5 on 5, higher on 3 (a score won on noise):
+    p = 0.36: the options as given are kept, the test said."""
+    from scipy.stats import binomtest
+
+    given = _score(0, [1.0, 1.2, 0.9, 1.1, 1.3, 1.0, 0.8, 1.05])
+    clear = _score(2, [v / 2 for v in given.per_trial.values()])
+    noise = _score(1, [v - 1e-5 if k < 5 else v + 1e-5
+                       for k, v in enumerate(given.per_trial.values())], given.value - 1e-5)
+    c = choose([given, noise, clear])
+    assert c.best is clear and c.chosen is clear and c.shown_better
+    assert (c.better, c.worse) == (8, 0)
+    assert c.p_value == pytest.approx(binomtest(8, 8, alternative="greater").pvalue)
+    assert c.p_adjusted == pytest.approx(2 * c.p_value)
+    c = choose([given, noise])
+    assert c.best is noise and c.chosen is given and not c.shown_better
+    assert (c.better, c.worse) == (5, 3)
+    assert c.p_value == pytest.approx(binomtest(5, 8, alternative="greater").pvalue)
+    assert choose([given, _score(1, list(given.per_trial.values()))]).chosen is given  # tie
+    # a failed trial (+inf) is worse than any value; both failed: left out
+    failing = _score(1, [math.inf] + [v / 2 for v in list(given.per_trial.values())[1:]])
+    assert choose([given, failing]).worse == 1
 
 
 @pytest.mark.slow
@@ -62,7 +92,7 @@ def test_tune_picks_the_known_best_and_the_run_records_it(files: tuple[Path, Pat
                                                           tmp_path: Path) -> None:
     sc, space = files
     out = tmp_path / "tune"
-    assert main(["tune", str(sc), "--controllers", "leg-edge", "--trials", "3",
+    assert main(["tune", str(sc), "--controllers", "leg-edge", "--trials", "8",
                  "--candidates", "4", "--space", str(space), "--out", str(out),
                  "--no-progress"]) == 0
     tuned = tomllib.loads((out / "tuned.toml").read_text())
@@ -74,7 +104,12 @@ def test_tune_picks_the_known_best_and_the_run_records_it(files: tuple[Path, Pat
     assert tuned["controllers"]["leg-edge"] == {"gain": 8.0}
     t = tuned["tuning"]
     assert t["chosen"] == {"leg-edge": 3} and t["criterion"] == "median-final"
-    assert t["budget"] == "4 candidates x 3 trials x 1 sweep point(s)"
+    assert t["budget"] == "4 candidates x 8 trials x 1 sweep point(s)"
+    # shown better on the 8 paired tuning trials: sign test 1/256, x 3 candidates
+    shown = t["shown_better"]["leg-edge"]
+    assert shown["kept"] == "best" and (shown["better_in"], shown["worse_in"]) == (8, 0)
+    assert shown["p_bonferroni"] == pytest.approx(3 / 256)
+    assert t["goal"] == "mixed" and t["held_out"] is True
     # held out: the tuning trials' seed is the study's plus the offset, recorded
     assert (t["study_seed"], t["tuning_seed"], t["seed_offset"]) == (7, 7 + SEED_OFFSET,
                                                                       SEED_OFFSET)
@@ -116,3 +151,44 @@ def test_a_bad_space_option_is_refused_before_any_trial(files: tuple[Path, Path]
     err = capsys.readouterr().err
     assert "has no option 'gian'" in err and "did you mean 'gain'" in err
     assert not (tmp_path / "t" / "candidates").exists()
+
+
+def test_a_run_under_another_goal_setting_than_tuned_is_warned(
+        files: tuple[Path, Path], tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    from benchmarks.study.options_file import write_options_file
+
+    sc, _ = files
+    tuned = tmp_path / "tuned.toml"
+    write_options_file(tuned, {"leg-edge": {"gain": 2.0}},
+                       {"scenario": "gain-ladder", "goal": "mixed", "held_out": False,
+                        "shown_better": {"leg-edge": {"kept": "as given"}}}, "# tuned")
+    run = tmp_path / "run"
+    assert main(["run", str(sc), "--goal", "taught", "--options-file", str(tuned), "--trials",
+                 "1", "--out", str(run), "--no-progress"]) == 0
+    err = capsys.readouterr().err
+    assert "options tuned under the goal setting 'mixed', gain-ladder runs under 'taught'" in err
+    report = (run / "report.md").read_text()
+    assert "goal setting mixed" in report and "not held out" in report
+    assert "kept as given, no candidate shown better: leg-edge" in report
+
+
+def test_a_wrapper_is_searched_in_its_laws_space() -> None:
+    """``latency-compensated`` hands its options on to the law it wraps: it is searched in
+    that law's space (it ran its options as given alone: 1 candidate where the others
+    had 6, under a budget printed as equal)."""
+    from types import SimpleNamespace
+
+    import controllers  # noqa: F401
+    from benchmarks.study.tune_command import _option_table
+    from benchmarks.study.tuning_space import SEARCH_SPACE, candidates, controller_space
+    from controllers.registry import registry
+
+    spec = SimpleNamespace(name="latency-compensated", label="leg-edge+comp",
+                           options={"law": "leg-edge", "adaptive_gain": [5.0, 1.0, 30.0]})
+    table = _option_table(spec)
+    assert {"law", "use_rates", "adaptive_gain", "gain"} <= set(table.names)
+    wrapped = controller_space(spec.label, spec.name, table, SEARCH_SPACE)
+    law = controller_space("leg-edge", "leg-edge", registry.options("leg-edge"), SEARCH_SPACE)
+    assert wrapped.family == law.family is not None and wrapped.axes == law.axes
+    assert len(candidates(spec.options, wrapped.axes, 6)) == 6
+    assert all(c["law"] == "leg-edge" for c in candidates(spec.options, wrapped.axes, 6))
