@@ -177,6 +177,7 @@ def cmd_compare(args: argparse.Namespace) -> int:
         goal_settings,
         match_counts,
     )
+    from benchmarks.study.run_facts import fixed_task_scenarios, run_meta, study_differences
     from benchmarks.study.table import load
     from hexapod.outputs import check_replace, write_output
 
@@ -192,6 +193,10 @@ def cmd_compare(args: argparse.Namespace) -> int:
         print_comparisons(comparisons, f"Paired comparisons ({args.dirs[0]}, "
                                        f"{len(df)} trials, goal setting "
                                        f"{goal_settings(df)})")
+        for name in fixed_task_scenarios(run_meta(args.dirs[0])):
+            print(f"note: {name} repeats ONE task (a fixed start and goal) with other noise "
+                  "and calibration-error draws: its paired tests compare the controllers on "
+                  "that task, not over tasks (docs/reproduction.md)")
         extra: list[dict[str, Any]] = []
     elif len(args.dirs) == 2:
         if args.baseline:
@@ -225,9 +230,16 @@ def cmd_compare(args: argparse.Namespace) -> int:
         for c in regressions:
             print(f"- {c.scenario} [{c.sweep}] {c.verdict}")
         n_rows = different[["scenario", "point", "controller", "trial"]].drop_duplicates()
-        print(f"Determinism check: {len(n_rows)} of {matched} matched trials differ between "
-              "the runs" + (" (listed below; with the same code, seeds and libraries they "
-                            "should be identical)" if len(n_rows) else " (identical outcomes)"))
+        studies = study_differences(run_meta(dir_a), run_meta(dir_b))
+        if studies:
+            print(f"Determinism check: {len(n_rows)} of {matched} matched trials differ between "
+                  "the runs, whose studies differ (their rows are not expected to be "
+                  "identical): " + "; ".join(studies))
+        else:
+            print(f"Determinism check: {len(n_rows)} of {matched} matched trials differ "
+                  "between the runs" + (" (listed below; with the same code, seeds and "
+                                        "libraries they should be identical)" if len(n_rows)
+                                        else " (identical outcomes)"))
         for _, r in different.head(args.list).iterrows():
             print(f"  {r['scenario']} point {r['point']} {r['controller']} trial "
                   f"{r['trial']}: {r['column']} A={r['a']} B={r['b']}")
@@ -241,8 +253,9 @@ def cmd_compare(args: argparse.Namespace) -> int:
                   "interval": None, "unmatched": {"A": only_a, "B": only_b},
                   "goal": {"A": goal_settings(df_a), "B": goal_settings(df_b),
                            "differs": mismatched},
+                  "studies_differ": studies,
                   "rows": json.loads(different.to_json(orient="records"))}]
-        if args.check and (regressions or len(n_rows)):
+        if args.check and (regressions or (len(n_rows) and not studies)):
             status = 1
     else:
         from benchmarks.exceptions import BenchmarkError

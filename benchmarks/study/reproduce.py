@@ -196,9 +196,9 @@ def _calibration_point(d: Path, fig: Figure) -> dict[str, Any]:
 
 def _one_task(d: Path) -> bool:
     """Whether a run directory's study is one fixed start and goal (repetitions of one task)."""
-    meta = json.loads((d / "run.json").read_text()) if (d / "run.json").is_file() else {}
-    return any(isinstance(entry, dict) and (entry.get("study") or {}).get("task.kind") == "fixed"
-               for entry in (meta.get("scenarios") or {}).values())
+    from benchmarks.study.run_facts import fixed_task_scenarios, run_meta
+
+    return bool(fixed_task_scenarios(run_meta(d)))
 
 
 def _median_result(fig: Figure, x: np.ndarray, unit_text: str = "") -> Result:

@@ -374,3 +374,30 @@ def test_a_censored_median_difference_is_known_where_its_order_statistics_are() 
     assert np.isnan(censored_sign_test(np.array([1.0, inf]), np.array([inf, 1.0])).difference)
     for finite in (np.arange(7.0), np.array([3.0, -1.0, 2.5, 8.0])):  # numpy's, bit for bit
         assert exact.censored_quantile(finite, 0.5) == np.quantile(finite, 0.5)
+
+
+def _with_study(run: Path, study: dict[str, object]) -> Path:
+    (run / "run.json").write_text(json.dumps({"scenarios": {"synthetic": {"study": study}}}))
+    return run
+
+
+def test_runs_of_different_studies_are_not_held_to_determinism_and_one_task_is_said(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """Two runs whose controllers' options differ (tuned against as given): their rows
+    differ by design, not by a loss of determinism (it said 'they should be identical'
+    and --check failed); a fixed-task run's comparison says it compares one task."""
+    rows = two_controllers(40)
+    other = [dict(r, final_position_error_mm=r["final_position_error_mm"] * 0.9) for r in rows]
+    a = _with_study(write_run(tmp_path / "a", rows),
+                    {"seed": 1, "controllers": ["good", "bad"], "task.kind": "fixed"})
+    b = _with_study(write_run(tmp_path / "b", other),
+                    {"seed": 1, "controllers": ["good (gain=2.0)", "bad"], "task.kind": "fixed"})
+    assert cli_main(["compare", str(a), str(b), "--check"]) == 0  # better, not a regression
+    out = capsys.readouterr().out
+    assert "80 of 80 matched trials differ between the runs, whose studies differ" in out
+    assert "synthetic: controllers A=['good', 'bad'] B=['good (gain=2.0)', 'bad']" in out
+    _with_study(b, {"seed": 1, "controllers": ["good", "bad"], "task.kind": "fixed"})
+    assert cli_main(["compare", str(a), str(b), "--check"]) == 1  # same study: they should not
+    assert "should be identical" in capsys.readouterr().out
+    cli_main(["compare", str(a)])
+    assert "note: synthetic repeats ONE task" in capsys.readouterr().out
