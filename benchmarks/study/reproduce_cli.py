@@ -11,8 +11,10 @@ from typing import Any
 from benchmarks.exceptions import BenchmarkError
 from benchmarks.study.outdir import OutputDir, OutputFile, add_command, unwritable
 
-#: The sensitivity study's trials per study and point (``--trials``'s default).
-SENSITIVITY_TRIALS = 3
+#: The sensitivity study's trials per study and point (``--trials``'s default): the
+#: fewest with a 95 % order-statistic interval of a median (fewer: its rows are not
+#: comparable).
+SENSITIVITY_TRIALS = 6
 
 
 def _scorecard(args: argparse.Namespace) -> int:
@@ -87,6 +89,10 @@ def _sensitivity(args: argparse.Namespace) -> int:
                              f"(which region matches all of them): drop {args.which!r}")
     if args.trials < 1:
         raise BenchmarkError(f"reproduce --sensitivity --trials: {args.trials} must be >= 1")
+    if args.trials < SENSITIVITY_TRIALS:
+        con.print(f"warning: --trials {args.trials}: fewer than {SENSITIVITY_TRIALS} trials give "
+                  "a median no 95 % interval: those rows will be not comparable (the run shows "
+                  "the command works, not which region matches)", markup=False, highlight=False)
     axes = {k: parse_axis(k, v) for k, v in (
         ("leg_radius_mm", args.leg_radius_mm), ("camera_distance_m", args.camera_distance_m),
         ("gain", args.gain), ("goal_noise", args.goal_noise)) if v is not None}
@@ -138,7 +144,8 @@ def add_reproduce_command(sub: Any) -> None:
                         "the free parameters; one directory per point under --out")
     g.add_argument("--trials", type=int, default=SENSITIVITY_TRIALS,
                    help="trials per run study and calibrations per calibration study at "
-                        "each point (default 3)")
+                        f"each point (default {SENSITIVITY_TRIALS}: fewer give a median "
+                        "no 95 %% interval)")
     g.add_argument("--leg-radius-mm", metavar="LIST",
                    help="leg radii [mm], comma-separated (default 10,15,20)")
     g.add_argument("--camera-distance-m", metavar="LIST",
