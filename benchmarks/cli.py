@@ -343,6 +343,13 @@ def main(argv: list[str] | None = None) -> int:
     os.environ.setdefault("PYTHONWARNINGS", "ignore")
     try:
         return int(args.func(args))
+    except KeyboardInterrupt:  # Ctrl-C in a command without its own handling: no traceback
+        if args.verbose:
+            raise
+        print(f"\nhexapod-bench {word or ''}: interrupted (Ctrl-C): each file written is "
+              "whole (replaced at once), but of several outputs some may be new and some "
+              "still the earlier ones", file=sys.stderr)
+        return 130
     except (BenchmarkError, HexapodError) as exc:
         print(f"hexapod-bench: error: {exc}", file=sys.stderr)
         return 2

@@ -12,6 +12,7 @@ refused (:func:`foreign_entries`, :func:`check_output_dir`). See ``docs/outputs.
 
 from __future__ import annotations
 
+import math
 import string
 import struct
 import zlib
@@ -292,6 +293,17 @@ def mark_jpeg(data: bytes) -> bytes:
     return data[:2] + b"\xff\xfe" + struct.pack(">H", len(text) + 2) + text + data[2:]
 
 
+def _json_safe(value: object) -> object:
+    """``value`` with every non-finite float (NaN, infinities) as None, recursively."""
+    if isinstance(value, float):
+        return value if math.isfinite(value) else None
+    if isinstance(value, dict):
+        return {k: _json_safe(v) for k, v in value.items()}
+    if isinstance(value, list | tuple):
+        return [_json_safe(v) for v in value]
+    return value
+
+
 def _marked(path: Path, content: object) -> bytes:
     """The bytes of an output with the project's mark, by kind of content."""
     import json
@@ -299,7 +311,8 @@ def _marked(path: Path, content: object) -> bytes:
     if isinstance(content, dict | list):
         doc = ({"generator": GENERATOR, **content} if isinstance(content, dict)
                else {"generator": GENERATOR, "items": content})
-        return (json.dumps(doc, indent=1) + "\n").encode()
+        # NaN and infinities as null: json.dumps would write NaN / Infinity, not JSON
+        return (json.dumps(_json_safe(doc), indent=1, allow_nan=False) + "\n").encode()
     if isinstance(content, bytes):
         if content.startswith(b"\x89PNG\r\n\x1a\n"):
             return mark_png(content)

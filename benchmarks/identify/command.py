@@ -64,11 +64,13 @@ def load_robot(name: str) -> HexapodGeometry:
 
 def run(args: argparse.Namespace) -> int:
     """Identify, print the table, write the outputs."""
+    from rich.markup import escape
     from rich.table import Table
 
     from benchmarks.identify.outputs import write_all
-    from benchmarks.identify.pipeline import Settings, check_backend, identify
+    from benchmarks.identify.pipeline import WORLD_BACKENDS, Settings, check_backend, identify
     from benchmarks.study.commands import console
+    from hexapod.dynamics.identification.excitation import BASE_FREQUENCY_HZ
     from hexapod.exceptions import IdentificationError
 
     if args.search_candidates < 2:
@@ -82,10 +84,24 @@ def run(args: argparse.Namespace) -> int:
     if args.duration > MAX_DURATION_S:  # (a 1 kHz record of every joint, in memory)
         raise IdentificationError(f"--duration {args.duration:g}: at most {MAX_DURATION_S:g} s "
                                   "(the default excitation lasts 20 s)")
+    if args.seed < 0:
+        raise IdentificationError(f"--seed {args.seed}: must be >= 0")
+    res = args.encoder_resolution
+    if res is not None and not (np.isfinite(res) and res >= 0):
+        raise IdentificationError(f"--encoder-resolution {res}: must be a finite number >= 0 "
+                                  "[um] (0: exact lengths)")
+    if args.truth and args.backend not in WORLD_BACKENDS:
+        raise IdentificationError(f"--truth {args.truth}: the dynamic world's true robot; "
+                                  f"--backend {args.backend} has its own (drop --truth, or "
+                                  "use --backend world)")
     check_backend(args.backend)
     from benchmarks.identify.outputs import OUTPUTS
-    from hexapod.outputs import check_replace
+    from hexapod.outputs import check_output_dir, check_replace
 
+    # a directory of other things (a run's results and report) is refused, even with
+    # --overwrite only our own files would be replaced: a run's report.md is not ours
+    check_output_dir(Path(args.out), lambda e: e.name in OUTPUTS,
+                     f"directory of identify's outputs ({', '.join(OUTPUTS)})", args.overwrite)
     for name in OUTPUTS:  # before the run: a user's file is refused at once
         check_replace(Path(args.out) / name, args.overwrite, "--overwrite")
     robot = load_robot(args.robot)
@@ -95,9 +111,23 @@ def run(args: argparse.Namespace) -> int:
                         resolution=(args.encoder_resolution * 1e-6
                                     if args.encoder_resolution is not None else None),
                         candidates=args.search_candidates, backend=args.backend)
+    con = console()
+    period = 1.0 / BASE_FREQUENCY_HZ
+    if args.duration < period:
+        con.print(f"warning: --duration {args.duration:g} s is shorter than one period of "
+                  f"the excitation ({period:g} s): the record holds its fade-in only, and the "
+                  "standard errors say how little it determines", markup=False,
+                  highlight=False)
+    if truth is not None:
+        for what, a, b in (("stroke", truth.stroke, robot.stroke),):
+            if a[0] > b[0] + 1e-9 or a[1] < b[1] - 1e-9:
+                con.print(f"warning: --truth {args.truth}: its {what} [{a[0] * 1e3:.3f}, "
+                          f"{a[1] * 1e3:.3f}] mm is narrower than the robot file's "
+                          f"[{b[0] * 1e3:.3f}, {b[1] * 1e3:.3f}] mm, which the excitation "
+                          "keeps to: the true legs may pass their ends (the simulation does "
+                          "not stop them)", markup=False, highlight=False)
     t0 = time.perf_counter()
     ident = identify(robot, settings, truth)
-    con = console()
     con.print(f"excitation: condition number {ident.excitation.condition:.4g} (scaled base "
               f"regressor over one period, {ident.basis.size} base parameters)")
     command = "hexapod-bench " + shlex.join(getattr(args, "argv", []) or ["identify", args.robot])
@@ -108,7 +138,7 @@ def run(args: argparse.Namespace) -> int:
                                                                 else ()):
         t.add_column(col, justify="left" if col == "base parameter" else "right")
     for p in doc["base_parameters"]:
-        row = [p["name"], p["unit"], f"{p['estimate']:.6g}", f"{p['se']:.3g}"]
+        row = [escape(p["name"]), escape(p["unit"]), f"{p['estimate']:.6g}", f"{p['se']:.3g}"]
         if has_true:
             row += [f"{p['true']:.6g}", f"{p['z']:.2f}"]
         t.add_row(*row)

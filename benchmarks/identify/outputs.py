@@ -18,7 +18,7 @@ from hexapod.dynamics.identification.estimation import moved_from_prior
 from hexapod.dynamics.identification.parameters import STANDARD_NAMES, to_tables, unit
 from hexapod.exceptions import IdentificationError, InertiaError
 from hexapod.geometry import HexapodGeometry
-from hexapod.outputs import check_replace, write_output
+from hexapod.outputs import PNG_METADATA, check_replace, write_output
 
 #: The files ``identify`` writes into its folder.
 OUTPUTS = ("identified.toml", "identification.json", "residuals.png", "report.md")
@@ -132,7 +132,7 @@ def residual_png(ident: Identification) -> bytes:
                  f"{np.round(est.sigma_legs, 3).tolist()} N")
     fig.tight_layout()
     buf = io.BytesIO()
-    fig.savefig(buf, format="png", dpi=80)
+    fig.savefig(buf, format="png", dpi=80, metadata=PNG_METADATA)  # one Software chunk
     plt.close(fig)
     return buf.getvalue()
 
@@ -150,7 +150,8 @@ def report_text(doc: dict[str, Any]) -> str:
              f"weighted least squares (condition {doc['condition_weighted']:.4g}), residual "
              f"sigma per leg {[round(x, 4) for x in doc['residual_sigma_legs_n']]} N, relative "
              f"residual {doc['relative_residual']:.4g}.", "",
-             "Physical consistency: " + " ".join(doc["consistency"])
+             "Physical consistency: " + " ".join(
+                 x if x.rstrip().endswith(".") else x.rstrip() + "." for x in doc["consistency"])
              + ("" if doc.get("identified_toml", "identified.toml") else
                 f" No robot file written (identified.toml): "
                 f"{doc['identified_toml_refused'].removeprefix('not written: ')}."), "",
@@ -196,7 +197,9 @@ def write_all(ident: Identification, out: Path, command: str, overwrite: bool) -
     except InertiaError as exc:  # not physical: no robot file to give
         text = None
         doc["identified_toml"] = None
-        doc["identified_toml_refused"] = f"not written: {exc}"
+        # the estimate's value, not the robot file's (its path is not named: it is fine)
+        doc["identified_toml_refused"] = (f"not written: the estimate's {exc.field}: "
+                                          f"{exc.problem}")
     if text is None:
         check_replace(target, overwrite)  # (a user's file is refused, not deleted)
         target.unlink(missing_ok=True)  # no robot file of an older run left beside

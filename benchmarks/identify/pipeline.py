@@ -29,7 +29,7 @@ from hexapod.dynamics.identification.processing import (
     samples,
 )
 from hexapod.dynamics.identification.regressor import regressor
-from hexapod.exceptions import BackendError
+from hexapod.exceptions import BackendError, IdentificationError
 from hexapod.geometry import HexapodGeometry
 
 log = logging.getLogger(__name__)
@@ -112,6 +112,11 @@ def record_backend(backend: Any, robot: HexapodGeometry, excitation: Excitation,
     return np.array(lengths), np.array(forces)
 
 
+#: The largest fraction of the world's samples with a drive at its force limit that an
+#: identification accepts (those forces are the limit's, not the dynamics').
+SATURATED_FRACTION = 0.01
+
+
 def check_backend(spec: str) -> None:
     """Refuse a backend that cannot report forces, before anything runs.
 
@@ -162,6 +167,14 @@ def identify(robot: HexapodGeometry, settings: Settings,
     if settings.backend in WORLD_BACKENDS:
         world = truth if truth is not None else robot
         rec = run(world, excitation, settings.duration, settings.sample_dt)
+        n = len(rec.lengths)
+        if rec.saturated > SATURATED_FRACTION * n:  # forces at a limit measure no dynamics
+            raise IdentificationError(
+                f"{world.source or world.name}: the drives were at their force limit in "
+                f"{rec.saturated} of {n} samples ({100 * rec.saturated / n:.0f} %): the robot "
+                "cannot follow the excitation, and a force at its limit says nothing of the "
+                "masses (check [drives] force_limit and [inertia] of the robot file"
+                + (" and --truth" if truth is not None else "") + ")")
         lengths, forces = measured(rec, settings, rng)
         true_theta = standard_vector(world.inertia, world.drives)
         info.update({"saturated_samples": rec.saturated,

@@ -81,8 +81,9 @@ def run(truth: HexapodGeometry, excitation: Excitation, duration: float,
         BackendError: The drives are in force mode, or the robot diverged.
     """
     if truth.drives.mode != "velocity":
-        raise BackendError("the dynamic world's identification run drives velocity-mode "
-                           f"drives; the robot file has mode {truth.drives.mode!r}")
+        raise BackendError(f"{truth.source or truth.name}: key 'drives.mode': "
+                           f"{truth.drives.mode!r}; the dynamic world's identification run "
+                           "drives velocity-mode drives (mode = \"velocity\", the default)")
     sub = max(1, round(sample_dt / physics_dt))
     h = sample_dt / sub
     q_ref = reference_lengths(truth, excitation, duration, sample_dt)

@@ -205,3 +205,17 @@ def test_write_output_marks_every_kind_and_refuses_a_users_file(tmp_path: Path) 
     assert not list((tmp_path / "sub").glob(".*.part")), "no temporary file left"
     with pytest.raises(ValueError, match="PNG or JPEG"):
         write_output(tmp_path / "x.bin", b"GIF89a")
+
+
+def test_a_json_output_holds_no_nan_or_infinity(tmp_path: Path) -> None:
+    """json.dumps writes NaN and Infinity, which are not JSON (an identification's
+    condition number was written 'Infinity'): non-finite values are null."""
+    import json
+
+    from hexapod.outputs import write_output
+
+    path = write_output(tmp_path / "x.json", {"a": float("nan"), "b": [1.0, float("inf")],
+                                              "c": {"d": np.float64(-np.inf), "e": 2.5}})
+    text = path.read_text()
+    doc = json.loads(text, parse_constant=lambda c: pytest.fail(f"not JSON: {c}"))
+    assert (doc["a"], doc["b"], doc["c"]) == (None, [1.0, None], {"d": None, "e": 2.5})

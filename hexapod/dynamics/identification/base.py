@@ -1,11 +1,19 @@
 """Base parameters: the combinations of standard parameters the leg forces determine.
 
-Standard practice (Gautier 1991): stack the regressor at many random states,
-``W P = Q R`` (QR with column pivoting), the rank ``r`` from ``R``'s diagonal, then
-``W_1 theta_1 + W_2 theta_2 = W_1 (theta_1 + beta theta_2)`` with
-``beta = R_11^-1 R_12``: the base parameters are ``theta_b = theta_1 + beta theta_2``,
-each named as that combination. Columns that are zero at every state (parameters that do
-not enter, e.g. the legs' axial inertias) fall in ``theta_2`` with no effect.
+Standard practice (Gautier 1991): stack the regressor at many random states, choose
+``r`` independent columns ``W_1`` (the rank), then ``W_1 theta_1 + W_2 theta_2 = W_1
+(theta_1 + beta theta_2)`` with ``W_2 = W_1 beta``: the base parameters are
+``theta_b = theta_1 + beta theta_2``, each named as that combination. Columns that are
+zero at every state (parameters that do not enter, e.g. the legs' axial inertias) fall
+in ``theta_2`` with no effect.
+
+The independent columns are the first ones, in a fixed order of preference
+(:data:`PREFERENCE`: the platform's, then the rods', the bodies', the drives'), that add
+to the rank (Gram-Schmidt on the unit-norm columns). A QR with column pivoting chose
+among columns of equal norm by rounding: the same robot gave ``m_p + 6 m_r`` or
+``m_r + 0.167 m_p`` with the seed of the states, or with its points rounded at 1e-13 m
+through a file, and the robot file written from the estimate split the masses
+differently (a platform of 1.45 kg or 2.0 kg for the same data).
 """
 
 from __future__ import annotations
@@ -13,7 +21,6 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-import scipy.linalg
 
 from hexapod.dynamics.identification.parameters import STANDARD_NAMES, unit
 from hexapod.dynamics.identification.regressor import regressor
@@ -21,8 +28,15 @@ from hexapod.geometry import HexapodGeometry
 from hexapod.se3 import exp_so3
 from hexapod.workspace import home_pose
 
-#: Relative threshold on ``|R_kk| / |R_00|`` (columns scaled to unit norm) for the rank.
+#: Threshold on the part of a unit-norm column outside the span of those chosen before
+#: it, for it to add to the rank.
 RANK_TOLERANCE = 1e-8
+#: The standard parameters in the order the base parameters prefer them as independent:
+#: the platform's, the rods', the bodies', then the drives'.
+PREFERENCE = (tuple(range(10))
+              + tuple(STANDARD_NAMES.index(n) for n in ("m_r", "md_r", "It_r", "Ia_r", "m_b",
+                                                        "md_b", "It_b", "Ia_b"))
+              + tuple(range(18, len(STANDARD_NAMES))))
 #: A coefficient of ``beta`` below this is rounding and dropped from the names.
 COEFFICIENT_TOLERANCE = 1e-9
 
@@ -106,11 +120,20 @@ def base_parameters(geometry: HexapodGeometry, samples: int = 400, seed: int = 0
     W = Y.reshape(-1, Y.shape[-1])
     norms = np.linalg.norm(W, axis=0)
     zero = norms <= 1e-12 * norms.max()
-    scale = np.where(zero, 1.0, norms)
-    _, Rq, piv = scipy.linalg.qr(W / scale, mode="economic", pivoting=True)
-    diag = np.abs(np.diag(Rq))
-    rank = int(np.sum(diag > RANK_TOLERANCE * diag[0]))
-    independent = np.sort(piv[:rank])
+    V = W / np.where(zero, 1.0, norms)
+    basis = np.zeros((V.shape[0], 0))
+    chosen = []
+    for j in PREFERENCE:  # the first that add to the rank (Gram-Schmidt, twice)
+        if zero[j]:
+            continue
+        r = V[:, j] - basis @ (basis.T @ V[:, j])
+        r -= basis @ (basis.T @ r)
+        size = float(np.linalg.norm(r))
+        if size > RANK_TOLERANCE:
+            basis = np.column_stack([basis, r / size])
+            chosen.append(j)
+    independent = np.array(sorted(chosen), int)
+    rank = independent.size
     dependent = np.array([j for j in range(W.shape[1]) if j not in set(independent)], int)
     # beta from the unscaled columns: W_2 = W_1 beta  (exact for a rank-deficient W)
     W1, W2 = W[:, independent], W[:, dependent]

@@ -25,6 +25,7 @@ import numpy as np
 from hexapod.dynamics.identification.base import BaseParameters
 from hexapod.dynamics.identification.parameters import standard_vector
 from hexapod.dynamics.identification.regressor import regressor
+from hexapod.exceptions import IdentificationError
 from hexapod.geometry import HexapodGeometry
 from hexapod.se3 import exp_so3
 from hexapod.workspace import home_pose
@@ -129,7 +130,7 @@ def _measure(geometry: HexapodGeometry, a: np.ndarray, b: np.ndarray, f0: float,
     q, _, _ = legs(R, t, np.broadcast_to(geometry.base_points, (n, 6, 3)),
                    np.broadcast_to(geometry.platform_points, (n, 6, 3)))
     q_min, q_max = geometry.stroke
-    half = 0.5 * (q_max - q_min) - STROKE_MARGIN
+    half = 0.5 * (q_max - q_min) - STROKE_MARGIN  # > 0: check_room
     excursion = float(np.abs(q - 0.5 * (q_min + q_max)).max())
     try:
         Y, qd, _ = regressor(geometry, R, t, tw, acc)
@@ -164,6 +165,27 @@ def _scaled(geometry: HexapodGeometry, a: np.ndarray, b: np.ndarray, f0: float,
     return cond, s * a, s * b, limits
 
 
+def check_room(geometry: HexapodGeometry) -> None:
+    """Refuse a robot whose stroke leaves the excitation no room: the legs at the
+    excitation's centre (the home pose) must lie :data:`STROKE_MARGIN` inside the stroke
+    with room to move (else every amplitude breaks the stroke, and the amplitude search,
+    never bounded by it, drove the legs past the end stops).
+
+    Raises:
+        IdentificationError: Naming the robot file, the stroke and the home lengths.
+    """
+    R, t = home_pose(geometry)
+    q = legs(R[None], t[None], geometry.base_points[None],
+             geometry.platform_points[None])[0][0]
+    lo, hi = geometry.stroke[0] + STROKE_MARGIN, geometry.stroke[1] - STROKE_MARGIN
+    if not (lo < hi and np.all(q > lo) and np.all(q < hi)):
+        where = geometry.source or geometry.name
+        raise IdentificationError(
+            f"{where}: stroke [{geometry.stroke[0] * 1e3:.3f}, {geometry.stroke[1] * 1e3:.3f}] "
+            f"mm: no room for an excitation {STROKE_MARGIN * 1e3:g} mm inside it around the "
+            f"home pose's legs ({np.round(q * 1e3, 3).tolist()} mm)")
+
+
 def optimise(geometry: HexapodGeometry, basis: BaseParameters, seed: int = 0,
              candidates: int = 16, base_frequency: float = BASE_FREQUENCY_HZ,
              harmonics: int = HARMONICS) -> Excitation:
@@ -180,6 +202,7 @@ def optimise(geometry: HexapodGeometry, basis: BaseParameters, seed: int = 0,
         base_frequency: ``f0`` [Hz].
         harmonics: Harmonics of the series.
     """
+    check_room(geometry)
     rng = np.random.default_rng(seed)
     prior = standard_vector(geometry.inertia, geometry.drives)
     times = np.arange(DESIGN_SAMPLES) / (DESIGN_SAMPLES * base_frequency)
@@ -200,6 +223,18 @@ def optimise(geometry: HexapodGeometry, basis: BaseParameters, seed: int = 0,
         if best is None or cand[0] < best[0]:
             best = cand
     assert best is not None
+    if not np.isfinite(best[0]):  # no amplitude within the limits: the robot cannot move
+        _, used, _ = _measure(geometry, 1e-9 * best[1], 1e-9 * best[2], base_frequency, times,
+                              basis, prior)
+        limit = float(np.min(geometry.drives.force_limit))
+        raise IdentificationError(
+            f"{geometry.source or geometry.name}: no excitation within the robot file's "
+            f"limits: at rest its legs need {used.get('force_n', np.nan):.0f} N, above "
+            f"{FORCE_FRACTION:.0%} of the force limit {limit:g} N ([drives] force_limit, "
+            "[inertia])" if used.get("force_n", 0.0) >= FORCE_FRACTION * limit else
+            f"{geometry.source or geometry.name}: no excitation within the robot file's "
+            "limits (stroke, max_speed_mm_s, [drives] force_limit): every amplitude breaks "
+            "one of them")
     step = 0.3
     tries = 0
     while starts + tries < max(candidates, 2):

@@ -88,7 +88,9 @@ def samples(geometry: HexapodGeometry, time_step: float, lengths: np.ndarray,
     edge = int(np.ceil(EDGE_S / time_step))
     if q.shape[0] < 4 * edge + 20:
         raise IdentificationError(f"record of {q.shape[0]} samples ({q.shape[0] * time_step:g} s)"
-                                  " is too short")
+                                  f" is too short: at least {4 * edge + 20} samples "
+                                  f"({(4 * edge + 20) * time_step:g} s; the filter drops "
+                                  f"{EDGE_S:g} s at each end)")
     b, a = scipy.signal.butter(4, cutoff_hz / nyquist)
     qf = scipy.signal.filtfilt(b, a, q, axis=0)
     ff = scipy.signal.filtfilt(b, a, f, axis=0)

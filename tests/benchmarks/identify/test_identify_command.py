@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import os
 from pathlib import Path
 
 import numpy as np
@@ -40,6 +41,10 @@ def test_identify_writes_a_robot_file_the_project_loads(tmp_path: Path) -> None:
     assert main(args) == 0
     for name in ("identified.toml", "identification.json", "report.md", "residuals.png"):
         assert (tmp_path / name).stat().st_size > 0
+    from PIL import Image
+
+    with Image.open(tmp_path / "residuals.png") as png:  # one Software chunk: the project's
+        assert png.text.get("Software") == "hexapod-vs"
     text = (tmp_path / "identified.toml").read_text()
     assert text.startswith("# written by hexapod-vs") and "# identified by:" in text
     g = HexapodGeometry.from_toml(tmp_path / "identified.toml")
@@ -127,3 +132,76 @@ def test_reference_robot_with_realistic_sensing_meets_the_done_figures() -> None
     assert np.all(np.abs(z) < 3), dict(zip(basis.names, np.round(z, 2), strict=True))
     platform_mass = est.standard[0]
     assert abs(platform_mass / robot.inertia.platform_mass - 1) < 0.01
+
+
+@pytest.mark.parametrize(("args", "says"), [
+    (["--seed", "-1"], "--seed -1: must be >= 0"),
+    (["--encoder-resolution", "-1"], "--encoder-resolution -1.0: must be a finite number >= 0"),
+    (["--encoder-resolution", "nan"], "--encoder-resolution nan: must be a finite number"),
+    (["--truth", "deltalab", "--backend", "sim"], "--truth deltalab: the dynamic world's true "
+                                                  "robot; --backend sim has its own"),
+])
+def test_bad_options_are_refused_before_anything_runs(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str], args: list[str], says: str) -> None:
+    """(--seed -1 and a NaN resolution were tracebacks or unnamed errors; a negative
+    resolution and --truth beside another backend were accepted silently.)"""
+    out = tmp_path / "out"
+    assert main(["identify", "deltalab", "--out", str(out), *args]) == 2
+    assert says in capsys.readouterr().err
+    assert not out.exists()
+
+
+def test_a_robot_without_room_to_excite_is_refused_naming_the_limit(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """A 5 mm stroke (the excitation keeps 5 mm inside each end): it drove the legs from
+    390 to 429 mm and exited 0; a platform of 500 kg that 200 N drives cannot hold: it
+    'identified' a falling robot (condition Infinity in the JSON)."""
+    narrow = preset("deltalab").replace(stroke=(0.413, 0.418))
+    narrow.to_toml(tmp_path / "narrow.toml")
+    assert main(["identify", str(tmp_path / "narrow.toml"), "--out", str(tmp_path / "n")]) == 2
+    err = capsys.readouterr().err
+    assert "narrow.toml: stroke [413.000, 418.000] mm: no room for an excitation 5 mm" in err
+    heavy = preset("deltalab")
+    heavy = heavy.replace(inertia=heavy.inertia.replace(platform_mass=500.0))
+    heavy.to_toml(tmp_path / "heavy.toml")
+    assert main(["identify", str(tmp_path / "heavy.toml"), "--out", str(tmp_path / "h")]) == 2
+    err = capsys.readouterr().err
+    assert "heavy.toml: no excitation within the robot file's limits: at rest its legs need" in err
+    assert "above 80% of the force limit 200 N" in err
+    assert not (tmp_path / "n").exists() and not (tmp_path / "h").exists()
+
+
+def test_a_directory_of_other_outputs_is_refused(tmp_path: Path,
+                                                 capsys: pytest.CaptureFixture[str]) -> None:
+    """A run's directory (its results and report): identify replaced its report.md."""
+    run = tmp_path / "run"
+    run.mkdir()
+    (run / "results.jsonl").write_text("{}\n")
+    (run / "report.md").write_text("<!-- written by hexapod-vs -->\n# the run's report\n")
+    assert main(["identify", "deltalab", "--out", str(run), "--duration", "2"]) == 2
+    assert "it holds results.jsonl" in capsys.readouterr().err
+    assert (run / "report.md").read_text().endswith("# the run's report\n")
+
+
+@pytest.mark.realtime
+def test_ctrl_c_ends_the_command_with_130_and_no_traceback(tmp_path: Path) -> None:
+    """SIGINT to the command's process group while it searches and simulates (in its own
+    foreground group: a background job of a shell ignores SIGINT). It printed a
+    KeyboardInterrupt traceback at every stage."""
+    import signal
+    import subprocess
+    import sys
+    import time
+
+    root = Path(__file__).resolve().parents[3]
+    proc = subprocess.Popen(
+        [sys.executable, "-c", "import sys; from benchmarks.cli import main; "
+                               "sys.exit(main())", "identify", "deltalab", "--out",
+         str(tmp_path / "out")], cwd=root, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+        text=True, start_new_session=True,
+        preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
+    time.sleep(2.5)  # (imports, then the excitation search and the simulation: ~7 s)
+    os.killpg(proc.pid, signal.SIGINT)
+    out, err = proc.communicate(timeout=60)
+    assert proc.returncode == 130, (out, err)
+    assert "hexapod-bench identify: interrupted (Ctrl-C)" in err and "Traceback" not in err
