@@ -29,6 +29,9 @@ VIEW_SAMPLES = 300
 #: Below this fraction of the task box inside the strokes, drawing a trial's start and goal
 #: may fail (:func:`hexapod.workspace.sample_poses` gives up below about 1 in 1000).
 LOW_FRACTION = 0.01
+#: Fewest edges whose interaction can have the rank 6 the image laws need (an edge's
+#: error ``n x n*`` has rank 2).
+MIN_EDGES = 3
 #: Smallest / largest singular value of the edge interaction below which it is singular.
 SINGULAR_RATIO = 1e-6
 
@@ -91,6 +94,7 @@ class SetupReport:
             inside the image, not hidden).
         view_fraction: (6, 2) fraction of the reachable poses where each edge is seen.
         poses_blind: Fraction of the reachable poses where no edge is seen.
+        poses_few_edges: Fraction of them where fewer than :data:`MIN_EDGES` are seen.
         poses_all_visible: Fraction where all 12 edges are seen.
         edge_ratio: Smallest / largest singular value of the edge interaction at home
             (the visible edges; NaN when none is visible).
@@ -111,6 +115,7 @@ class SetupReport:
     home_pixels: np.ndarray
     view_fraction: np.ndarray
     poses_blind: float
+    poses_few_edges: float
     poses_all_visible: float
     edge_ratio: float
     edge_condition: float
@@ -299,6 +304,7 @@ def check_setup(geometry: HexapodGeometry, camera: Any, max_translation_mm: floa
         reach_deg=np.degrees(reach_r), home_visible=np.asarray(home_obs.edge_visible, bool),
         home_pixels=np.asarray(home_obs.segments, float), view_fraction=vis.mean(axis=0),
         poses_blind=float(1.0 - seen.mean()),
+        poses_few_edges=float((vis.reshape(len(vis), -1).sum(axis=1) < MIN_EDGES).mean()),
         poses_all_visible=float(vis.reshape(len(vis), -1).all(axis=1).mean()),
         edge_ratio=ratio, edge_condition=cond, problems=problems,
         home_ends=end_status(camera, home_obs),
@@ -335,6 +341,12 @@ def _camera_problems(report: SetupReport, camera: Any, home_obs: Any, needs_came
     elif report.poses_blind >= 1.0:
         out.append(Problem(severity, "the camera sees no leg edge at any reachable pose of "
                            f"the task box; change {where.camera}", "camera"))
+    elif report.poses_few_edges >= 1.0:
+        out.append(Problem(severity, f"the camera sees fewer than {MIN_EDGES} leg edges at "
+                           "every reachable pose of the task box (the image laws need at "
+                           "least six independent rows, two per edge): no trial of a law "
+                           f"that steers by the image can move; change {where.camera}",
+                           "camera"))
     elif report.poses_blind > 0:
         out.append(Problem("warning", f"the camera sees no leg edge at "
                            f"{100 * report.poses_blind:.1f} % of the reachable poses; trials "

@@ -90,3 +90,23 @@ def test_unreachable_fixed_goal_is_refused(tmp_path: Path,
                              "trial would fail: task.goal_mm: no platform pose near the home "
                              "pose has these six leg lengths (the goal is unreachable)")
     assert "start_mm" not in stderr  # the start (home) is reachable
+
+
+def test_a_camera_that_never_sees_three_edges_is_refused(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """A camera pose given in metres where the file wants mm (the camera 1 mm from the
+    base centre): an edge or two at home, fewer than three at every reachable pose.
+    check said 'The setup can run' and run failed every trial with exit 1 ('interaction
+    matrix rank 0 < 6'); both now refuse, naming the camera file's key."""
+    own_robot().to_toml(tmp_path / "robot.toml")
+    (tmp_path / "camera.toml").write_text(BLIND_CAMERA.replace(
+        "translation_mm = [0.0, 0.0, -2000.0]\nrotation_vector_deg = [0.0, 0.0, 0.0]",
+        "translation_mm = [0.0, 0.267449, 1.001957]\n"
+        "rotation_vector_deg = [44.217, 76.586, -99.710]"))
+    study = write_study(tmp_path, camera="camera.toml")
+    out = tmp_path / "out"
+    code, stdout, stderr = _run([str(study), "--out", str(out)], capsys)
+    assert code == 2, stderr
+    assert "the camera sees fewer than 3 leg edges at every reachable pose" in stderr
+    assert f"change [camera_from_base] in {tmp_path / 'camera.toml'}" in stderr
+    assert not (out / "results.jsonl").exists()
