@@ -185,7 +185,13 @@ def goal_features(goal: ServoGoal, camera: Any, geometry: HexapodGeometry) -> An
         feats = row_features(seen_edges(camera, np.asarray(goal.features.normals, float)[None],
                                         np.asarray(goal.features.edge_visible, bool)[None]), 0)
     if not feats["edge_visible"].any():
-        raise BenchmarkError(f"{goal.source}: the camera sees no leg edge at the goal")
+        where = getattr(camera, "source", None)
+        fix = (f"change [camera_from_base] in {where}" if where else
+               "change the camera's pose (--camera-pose, --camera-file)")
+        raise BenchmarkError(f"{goal.source}: the camera sees no leg edge at the goal pose: "
+                             f"{fix}, or check that its pose looks at the robot (the robot "
+                             "behind it, outside its image, a pose in metres where mm are "
+                             "meant; hexapod-bench check shows what it sees)")
     return Goal(lengths=goal.lengths.copy(), rotation=sol.rotation,
                 translation=sol.translation, **feats)
 

@@ -23,7 +23,7 @@ import numpy as np
 import tomli_w
 
 from benchmarks.study.scenario import Scenario
-from hexapod.config import check_keys, get_matrix, load_toml
+from hexapod.config import check_keys, get_matrix, get_number, load_toml
 from hexapod.exceptions import ConfigFileError
 from hexapod.outputs import GENERATOR, TEXT_MARKER
 
@@ -84,6 +84,9 @@ def read_calibrated_file(path: str | Path) -> tuple[np.ndarray, dict[str, str] |
     check_keys(table, ("base_points_camera_mm", "camera_from_base", "scale", "leg_radius_mm",
                        "source", "made_with"), str(path), required=("base_points_camera_mm",))
     points = get_matrix(table, "base_points_camera_mm", (6, 3), str(path)) * 1e-3
+    for key in ("scale", "leg_radius_mm"):  # recorded, not used: yet a value must be one
+        if key in table and not get_number(table, key, str(path)) > 0:
+            raise ConfigFileError(str(path), f"must be positive, got {table[key]!r}", key=key)
     recorded = table.get("made_with")
     if recorded is None:
         return points, None
@@ -204,6 +207,18 @@ def run_calibration(sc: Scenario, out: Path, configurations: str | None = None,
     return doc
 
 
+def _lengths_outside(lengths: np.ndarray, nominal: Any) -> dict[str, Any]:
+    """The observations' leg lengths outside the robot's stroke (by more than 1 mm): the
+    calibration does not use them, but lengths in metres, or of another robot, say the
+    file is not what it seems (``lengths_outside_stroke``: configuration, leg, mm)."""
+    q = np.asarray(lengths, float)
+    lo, hi = nominal.stroke
+    bad = np.argwhere((q < lo - 1e-3) | (q > hi + 1e-3))
+    return {"lengths_outside_stroke": [[int(k), int(i), round(float(q[k, i]) * 1e3, 3)]
+                                       for k, i in bad[:20]],
+            "lengths_outside_stroke_count": len(bad)}
+
+
 def calibrate_from_file(sc: Scenario, observations: Path, out: Path, solver: str | None = None,
                         correct_scale: bool = False, overwrite: bool = False) -> dict[str, Any]:
     """Calibrate from observations a user measured (e.g. with a real camera).
@@ -246,7 +261,8 @@ def calibrate_from_file(sc: Scenario, observations: Path, out: Path, solver: str
     doc = {"generator": GENERATOR, "scenario": sc.name, "observations": str(observations),
            "configurations": int(data.n_configurations),
            "solver": solver or sc.calibration.solver, "made_with": provenance,
-           "result": res.to_dict(), **_far_from_nominal(res.base_points, nominal, camera)}
+           "result": res.to_dict(), **_far_from_nominal(res.base_points, nominal, camera),
+           **_lengths_outside(data.lengths, nominal)}
     (out / "calibration.json").write_text(json.dumps(doc, indent=1))
     write_calibrated_file(out / "calibrated.toml", res, source=str(observations),
                           made_with=provenance)

@@ -302,8 +302,10 @@ def describe(setup: Setup, report: SetupReport, source: str,
     lines += [f"  over the workspace: all 12 edges seen at {100 * report.poses_all_visible:.1f}"
               f" % of the reachable poses, none at {100 * report.poses_blind:.1f} %; least "
               f"seen edge: {100 * float(np.min(report.view_fraction)):.1f} % of the poses",
-              f"  edge interaction at home: condition number {_f(report.edge_condition, 1)} "
-              f"(smallest/largest singular value {report.edge_ratio:.2e})"]
+              (f"  edge interaction at home: condition number {_f(report.edge_condition, 1)} "
+               f"(smallest/largest singular value {report.edge_ratio:.2e})"
+               if np.isfinite(report.edge_ratio) else
+               "  edge interaction at home: none (no edge seen at home)")]
     if setup.needs_camera is not None:
         lines.append("  controllers that need the camera: "
                      + (", ".join(setup.needs_camera) or "none"))

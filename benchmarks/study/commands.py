@@ -365,6 +365,12 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
               f"rigid-fit RMS {res['fit_rms_mm']:.3f} mm, scale {res['scale']:.5f}; wrote "
               f"{out / 'calibration.json'} and {out / 'calibrated.toml'}")
         _print_far_from_nominal(doc, out)
+        if doc["lengths_outside_stroke_count"]:
+            k, leg, mm = doc["lengths_outside_stroke"][0]
+            print(f"warning: {args.observations}: {doc['lengths_outside_stroke_count']} leg "
+                  f"length(s) outside the robot's stroke (configuration {k}, leg {leg}: "
+                  f"{mm:g} mm): lengths_mm is in mm and of this robot? (the calibration does "
+                  "not use them; they are recorded)", file=sys.stderr)
         lin = res["linear"]
         for leg in lin["ill_conditioned_legs"]:
             print(f"warning: leg {leg} is ill-conditioned (singular-value ratio "

@@ -307,3 +307,16 @@ def test_other_bad_files(tmp_path: Path) -> None:
     with pytest.raises(CameraError, match="image_size"):
         load_camera(tmp_path / "cam.toml", image_size=(640, 480))
     assert load_camera(tmp_path / "cam.toml") == Camera.from_toml(tmp_path / "cam.toml")
+
+
+def test_a_double_sphere_xi_given_apart_is_said_to_go_in_its_distortion() -> None:
+    """(It said 'a perspective camera has xi = 0 ... use kind = unified'.)"""
+    from hexapod.exceptions import ConfigFileError
+    from vision.cameras.files.project import read_camera_table
+
+    table = {"kind": "double_sphere", "width_px": 640, "height_px": 480, "fx_px": 300.0,
+             "fy_px": 300.0, "cx_px": 320.0, "cy_px": 240.0, "xi": 0.5,
+             "distortion": [-0.2, 0.6]}
+    with pytest.raises(ConfigFileError, match=r"key 'xi': a double sphere camera's xi goes "
+                                              r"in distortion = \[xi, alpha\], got xi = 0\.5"):
+        read_camera_table(table, "ds.toml")

@@ -105,7 +105,7 @@ def test_a_camera_that_never_sees_three_edges_is_refused(
         "rotation_vector_deg = [44.217, 76.586, -99.710]"))
     study = write_study(tmp_path, camera="camera.toml")
     out = tmp_path / "out"
-    code, stdout, stderr = _run([str(study), "--out", str(out)], capsys)
+    code, _, stderr = _run([str(study), "--out", str(out)], capsys)
     assert code == 2, stderr
     assert "the camera sees fewer than 3 leg edges at every reachable pose" in stderr
     assert f"change [camera_from_base] in {tmp_path / 'camera.toml'}" in stderr

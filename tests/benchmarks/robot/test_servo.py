@@ -528,3 +528,21 @@ def test_goal_features_that_are_not_unit_normals_are_refused_naming_the_files(
     err = capsys.readouterr().err
     assert code == 2 and str(goal) in err and "zero.npz" in err
     assert "leg 0 edge 0's normal has length 0, not 1 (an edge normal is a unit vector)" in err
+
+
+def test_a_camera_that_sees_no_edge_at_the_goal_is_named_not_the_goal(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """A camera file placing the robot behind the camera: the error named the goal file
+    alone ('the camera sees no leg edge at the goal'); it names the camera file's key."""
+    camera = tmp_path / "behind.toml"
+    camera.write_text('kind = "perspective"\nwidth_px = 1024\nheight_px = 780\n'
+                      'fx_px = 1032.0\nfy_px = 1032.0\ncx_px = 511.5\ncy_px = 389.5\n'
+                      '[camera_from_base]\ntranslation_mm = [0.0, 0.0, -2000.0]\n'
+                      'rotation_vector_deg = [0.0, 0.0, 0.0]\n')
+    goal = _goal(tmp_path, f"lengths_mm = {_mm(GOAL_MM)}\n")
+    code = servo.main(["--backend", "emulator", "--goal", str(goal), "--camera-file",
+                       str(camera), "--log", str(tmp_path / "s.jsonl")])
+    err = capsys.readouterr().err
+    assert code == 2, err
+    assert f"the camera sees no leg edge at the goal pose: change [camera_from_base] in {camera}" \
+        in err

@@ -118,6 +118,15 @@ def test_calibrate_from_a_user_observation_file(
     err = " ".join(capsys.readouterr().err.split())
     assert f"{few}: " in err and "leg 4" in err and "seen in 1 configuration(s)" in err
     assert not out2.exists()
+    # lengths in metres where mm are meant: unused by the calibration, but said
+    doc = json.loads(obs.read_text())
+    doc["lengths_mm"] = (np.asarray(doc["lengths_mm"]) / 1000).tolist()
+    metres = tmp_path / "metres.json"
+    metres.write_text(json.dumps(doc))
+    assert cli_main(["calibrate", str(_scenario(tmp_path)), "--out", str(tmp_path / "o3"),
+                     "--observations", str(metres)]) == 0
+    err = " ".join(capsys.readouterr().err.split())
+    assert f"warning: {metres}: 180 leg length(s) outside the robot's stroke" in err
 
 
 @pytest.mark.slow

@@ -230,3 +230,23 @@ def test_a_file_in_a_study_that_draws_calibration_errors_is_questioned(
     assert text in capsys.readouterr().err
     assert any("method = \"linear\"" in w
                for w in json.loads((out / "run.json").read_text())["warnings"])
+
+
+@pytest.mark.parametrize(("key", "value", "says"), [
+    ("leg_radius_mm", -15.0, "key 'leg_radius_mm': must be positive, got -15.0"),
+    ("scale", 0.0, "key 'scale': must be positive, got 0.0"),
+    ("scale", "one", "key 'scale': expected a finite number, got 'one'"),
+])
+def test_a_calibrated_file_s_recorded_values_are_checked(
+        calibrated: Path, tmp_path: Path, key: str, value: object, says: str) -> None:
+    """(A negative leg radius or a zero scale in a hand-edited file passed unseen.)"""
+    from benchmarks.study.calibration import read_calibrated_file
+    from hexapod.exceptions import ConfigFileError
+
+    table = tomllib.loads(calibrated.read_text())
+    table[key] = value
+    bad = tmp_path / "bad.toml"
+    bad.write_text(tomli_w.dumps(table))
+    with pytest.raises(ConfigFileError) as exc:
+        read_calibrated_file(bad)
+    assert str(exc.value) == f"{bad}: {says}"

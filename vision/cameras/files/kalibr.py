@@ -161,8 +161,8 @@ def read_kalibr_camchain(path: str | Path, data: Any = None, camera: str | None 
                          "not a pose in the robot's frame: not used (give camera_from_base)")
     if len(names) > 1:
         notes.append(f"the chain has cameras {', '.join(names)}: read {name}")
-    for note in notes:
-        log.info("%s: %s", src, note)
+    for note in notes:  # said by default: the README promises it is reported
+        log.warning("%s: %s", src, note)
     log.debug("read %s %s: %s-%s (%s), K=%s, distortion=%s, xi=%s, size=%s", src, name,
               cam_model, dist_model, kind, K.tolist(), distortion.tolist(), xi,
               size.tolist())

@@ -150,7 +150,10 @@ def read_camera_table(table: dict[str, Any], path: str = "<dict>",
         xi = get_number(table, "xi", path)
         if xi != 0:
             raise ConfigFileError(
-                path, f"a perspective camera has xi = 0, got {xi} (use kind = 'unified')",
+                path, (f"a {kind.replace('_', ' ')} camera's xi goes in distortion = "
+                       f"[{DISTORTION_NAMES[kind]}], got xi = {xi}"
+                       if DISTORTION_NAMES.get(kind, "").startswith("xi") else
+                       f"a {kind} camera has xi = 0, got {xi} (use kind = 'unified')"),
                 key="xi")
     distortion = (read_distortion(table["distortion"], DISTORTION_LENGTHS[kind], path,
                                   "distortion", DISTORTION_NAMES[kind])
