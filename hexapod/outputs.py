@@ -365,7 +365,21 @@ def write_output(path: str | Path, content: object, overwrite: bool = False,
     data = _marked(p, content)
     check_replace(p, overwrite, option, kind=file_kind(data, p.suffix))
     p.parent.mkdir(parents=True, exist_ok=True)
+    return replace_whole(p, data)
+
+
+def replace_whole(path: str | Path, data: bytes | str) -> Path:
+    """Write ``data`` to ``path`` whole or not at all: beside it, then renamed over it
+    (a full disk or a kill leaves the earlier file, never a cut one)."""
+    p = Path(path)
     tmp = p.with_name(f".{p.name}.part")
-    tmp.write_bytes(data)
-    tmp.replace(p)
+    try:
+        if isinstance(data, str):
+            tmp.write_text(data, encoding="utf-8")
+        else:
+            tmp.write_bytes(data)
+        tmp.replace(p)
+    except BaseException:
+        tmp.unlink(missing_ok=True)
+        raise
     return p

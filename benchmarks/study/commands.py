@@ -12,6 +12,7 @@ from pathlib import Path
 from typing import Any
 
 from benchmarks.exceptions import BenchmarkError
+from hexapod.outputs import replace_whole
 
 
 def console() -> Any:
@@ -49,6 +50,18 @@ def cmd_run(args: argparse.Namespace) -> int:
     for text in goal_mismatches(scenarios, args.options_record):
         print(f"warning: {text}", file=sys.stderr)
     return run_studies(scenarios, out, args)
+
+
+def _resume_command(args: argparse.Namespace, out: Path) -> str:
+    """The command that finishes an interrupted run: its own words (the options that make
+    its study: seed, trials, controllers...) with ``--resume`` (a command without them was
+    refused: '--seed: 7 in the directory, 1 given')."""
+    import shlex
+
+    argv = list(getattr(args, "argv", None) or [])
+    if not argv or argv[0] != "run":
+        return f"hexapod-bench run {' '.join(args.scenarios)} --out {out} --resume"
+    return "hexapod-bench " + shlex.join(argv + ([] if "--resume" in argv else ["--resume"]))
 
 
 def run_studies(scenarios: list[Any], out: Path, args: argparse.Namespace) -> int:
@@ -143,6 +156,10 @@ def _run_locked(scenarios: list[Any], out: Path, args: argparse.Namespace
                 ) -> tuple[int, Any]:
     """Run the planned trials and write the report; the exit code and the rows read for
     the report (None after a live-viewer run)."""
+    from concurrent.futures.process import BrokenProcessPool
+
+    from rich.markup import escape
+
     from benchmarks.study.report import (
         META_FILE,
         import_drawing_modules,
@@ -197,7 +214,7 @@ def _run_locked(scenarios: list[Any], out: Path, args: argparse.Namespace
     from benchmarks.study.options_file import record_options
 
     record_options(meta, getattr(args, "options_record", None))  # "tuned" or "as given"
-    meta_path.write_text(json.dumps(meta, indent=2))
+    replace_whole(meta_path, json.dumps(meta, indent=2))
     if args.viz:
         return _run_with_viz(scenarios, out, args), None
     t0 = time.perf_counter()
@@ -210,6 +227,7 @@ def _run_locked(scenarios: list[Any], out: Path, args: argparse.Namespace
         return len(read_results(out)) if (out / "results.jsonl").exists() else 0
 
     rows_before = rows_written()  # a resumed run's earlier rows
+    lost_worker = False
 
     def advance(unit: Any) -> None:
         nonlocal written
@@ -244,18 +262,24 @@ def _run_locked(scenarios: list[Any], out: Path, args: argparse.Namespace
         # Ctrl-C may land between a chunk's write and its progress call: count the file
         written = rows_written() - rows_before
         con.print(f"\n[yellow]interrupted[/yellow]: {written} of {total} trials written to "
-                  f"{out}/results.jsonl; finish with: hexapod-bench run "
-                  f"{' '.join(args.scenarios)} --out {out} --resume")
+                  f"{out}/results.jsonl; finish with: {escape(_resume_command(args, out))}")
+    except BrokenProcessPool:  # a worker killed from outside (the OOM killer, kill -9)
+        interrupted = lost_worker = True
+        written = rows_written() - rows_before
+        con.print(f"\n[red]a worker process ended abruptly[/red] (killed from outside: out "
+                  f"of memory?): {written} of {total} trials written to {out}/results.jsonl "
+                  f"(its unit's trials are not); finish with: "
+                  f"{escape(_resume_command(args, out))}")
     wall = time.perf_counter() - t0
     meta["wall_time_s"] = wall
-    meta_path.write_text(json.dumps(meta, indent=2))
+    replace_whole(meta_path, json.dumps(meta, indent=2))
     results = read_rows(out)  # once: the report, the table and the failure summary
     report = write_report(out, getattr(args, "overwrite", False), results)
     _print_summary(out, con, results)
     done_text = f"{written} of {total} trials" if written != total else f"{total} trials"
     con.print(f"{done_text} in {wall:.1f} s ({executor}, {args.workers} worker(s))"
               f"{' before the interruption' if interrupted else ''}; report: {report}")
-    return 130 if interrupted else 0, results
+    return (1 if lost_worker else 130) if interrupted else 0, results
 
 
 def _keep_inputs(out: Path, scenarios: list[Any], meta: dict[str, Any],
@@ -456,15 +480,19 @@ def cmd_report(args: argparse.Namespace) -> int:
     meta_path = out / META_FILE
     kept = meta_path.read_text() if meta_path.is_file() else None
     if kept is not None:  # run.json keeps every command that wrote the directory
-        meta = json.loads(kept)
+        try:
+            meta = json.loads(kept)
+        except ValueError as exc:
+            raise ResultsError(str(meta_path), f"not the run's record (not JSON: {exc}); the "
+                               "rows are in results.jsonl") from None
         record_command(meta, command_entry(getattr(args, "argv", sys.argv[1:]),
                                            "rebuilt report.md and its figures"))
-        meta_path.write_text(json.dumps(meta, indent=2))
+        replace_whole(meta_path, json.dumps(meta, indent=2))
     try:
         path = write_report(out, overwrite, rows)
     except BaseException:
         if kept is not None:  # nothing written: the record stays as it was
-            meta_path.write_text(kept)
+            replace_whole(meta_path, kept)
         raise
     _print_summary(out, console())
     print(f"report: {path}")

@@ -42,6 +42,7 @@ from benchmarks.study.paper_figures import (
     Figure,
     builtin_figures,
 )
+from hexapod.outputs import replace_whole
 
 log = logging.getLogger(__name__)
 
@@ -167,7 +168,7 @@ def run_study(study: str, out: Path, quick: bool, workers: int,
         meta["scenarios"] = {sc.name: {"description": sc.description,
                                        "reference": sc.reference, "source": sc.source,
                                        "study": study_of(sc)}}
-        (d / "run.json").write_text(json.dumps(meta, indent=2))
+        replace_whole(d / "run.json", json.dumps(meta, indent=2))
         t0 = time.perf_counter()
         if units:
             run_units(units, d, workers)

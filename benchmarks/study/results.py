@@ -34,6 +34,16 @@ LOCK_FILE = ".lock"
 _HELD: dict[Path, tuple[Any, int]] = {}
 
 
+def release_inherited_locks() -> None:
+    """In a worker forked while :func:`run_lock` is held: close its copies of the locks'
+    files, so that the lock ends with the process that took it (a forked worker holding
+    the copy kept the directory locked after its parent was killed)."""
+    for f, _ in _HELD.values():
+        with contextlib.suppress(OSError):
+            f.close()  # this process's descriptor only: the parent's lock stays
+    _HELD.clear()
+
+
 @contextlib.contextmanager
 def run_lock(out_dir: Path) -> Iterator[None]:
     """Hold the exclusive lock of a results directory for the duration of a run.
@@ -131,14 +141,26 @@ def _jsonable(value: Any) -> Any:
 
 
 def _repair_tail(path: Path) -> None:
-    """Drop a partial last line left by a killed run."""
+    """End the file of a killed run on a whole line: a last line without its newline is
+    kept (the newline added) when it is a whole row, as :func:`read_results` and a
+    resume count it done; a partial one is dropped."""
     if not path.exists():
         return
     data = path.read_bytes()
     if data and not data.endswith(b"\n"):
         cut = data.rfind(b"\n") + 1
-        path.write_bytes(data[:cut])
-        log.warning("%s: dropped a partial last line from an interrupted run", path)
+        try:
+            whole = isinstance(json.loads(data[cut:]), dict)
+        except ValueError:
+            whole = False
+        if whole:
+            with path.open("ab") as f:
+                f.write(b"\n")
+            log.warning("%s: ended its last row, written whole without its newline by an "
+                        "interrupted run", path)
+        else:
+            path.write_bytes(data[:cut])
+            log.warning("%s: dropped a partial last line from an interrupted run", path)
 
 
 def read_results(out_dir: Path) -> list[dict[str, Any]]:

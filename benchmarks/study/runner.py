@@ -160,6 +160,23 @@ def _iter_inline(units: list[WorkUnit]) -> Iterator[tuple[WorkUnit, Any]]:
         yield u, execute(u)
 
 
+def _worker_start() -> None:
+    """A pool worker's start: it lets go of the run's lock (inherited through the fork)
+    and, on Linux, is sent SIGTERM when the run's process ends, however it ends (killed,
+    SIGTERM to it alone): orphaned workers held the directory's lock, and a resume was
+    refused naming a process that no longer existed."""
+    from benchmarks.study.results import release_inherited_locks
+
+    release_inherited_locks()
+    if sys.platform.startswith("linux"):
+        import ctypes
+        import signal
+
+        ctypes.CDLL(None, use_errno=True).prctl(1, int(signal.SIGTERM))  # PR_SET_PDEATHSIG
+        if os.getppid() == 1:  # the run ended before this line: do not linger
+            os._exit(1)
+
+
 def _iter_pool(units: list[WorkUnit], workers: int,
                meanwhile: Callable[[], None] | None = None
                ) -> Iterator[tuple[WorkUnit, Any]]:
@@ -170,7 +187,8 @@ def _iter_pool(units: list[WorkUnit], workers: int,
     import multiprocessing as mp
 
     ctx = mp.get_context("fork" if sys.platform.startswith("linux") else "spawn")
-    with ProcessPoolExecutor(max_workers=workers, mp_context=ctx) as pool:
+    with ProcessPoolExecutor(max_workers=workers, mp_context=ctx,
+                             initializer=_worker_start) as pool:
         queue = list(units)
         running: dict[Future[Any], WorkUnit] = {}
 

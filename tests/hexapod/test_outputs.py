@@ -219,3 +219,17 @@ def test_a_json_output_holds_no_nan_or_infinity(tmp_path: Path) -> None:
     text = path.read_text()
     doc = json.loads(text, parse_constant=lambda c: pytest.fail(f"not JSON: {c}"))
     assert (doc["a"], doc["b"], doc["c"]) == (None, [1.0, None], {"d": None, "e": 2.5})
+
+
+def test_replace_whole_leaves_the_earlier_file_when_the_write_fails(tmp_path: Path) -> None:
+    """run.json written in place was cut at 8192 bytes by a full disk, and the study could
+    not be resumed: written beside and renamed, a failed write leaves the earlier file
+    (here the failure is a non-encodable text, raised while writing the part file)."""
+    from hexapod.outputs import replace_whole
+
+    path = tmp_path / "run.json"
+    replace_whole(path, '{"a": 1}')
+    with pytest.raises(UnicodeEncodeError):
+        replace_whole(path, '{"a": "\ud800"}')  # a lone surrogate: not UTF-8
+    assert path.read_text() == '{"a": 1}' and sorted(p.name for p in tmp_path.iterdir()) == \
+        ["run.json"]

@@ -167,6 +167,25 @@ def test_resume_after_partial_run_redoes_nothing(tmp_path: Path) -> None:
     assert _stable(read_results(part)) == _stable(read_results(full))
 
 
+def test_a_whole_last_row_without_its_newline_is_kept_on_resume(tmp_path: Path) -> None:
+    """A run killed between a row and its newline: the row is whole, counted done by the
+    resume, and kept (the repair dropped it after the resume had counted it: the resumed
+    run ended with a trial missing and exit 0)."""
+    from benchmarks.study.runner import completed_keys
+
+    sc = _scenario(trials=4)
+    full = tmp_path / "full"
+    run_units(plan([sc], chunk_size=2, record_trials=0), full)
+    part = tmp_path / "part"
+    units = plan([sc], chunk_size=2, record_trials=0)
+    run_units(units[: len(units) // 2], part)
+    path = part / "results.jsonl"
+    path.write_bytes(path.read_bytes()[:-1])  # the last row whole, its newline not written
+    done = completed_keys(part)
+    run_units(plan([sc], chunk_size=2, record_trials=0, done=done), part)
+    assert _stable(read_results(part)) == _stable(read_results(full))  # none missing
+
+
 @pytest.mark.realtime
 @pytest.mark.slow
 def test_cli_interrupted_run_resumes(tmp_path: Path) -> None:
@@ -346,3 +365,54 @@ def test_report_ignores_duplicate_rows_and_says_so(tmp_path: Path, capsys: objec
     assert f"({unique} trials)" in report
     assert "**Duplicate rows**: 5 duplicate row(s) ignored" in report
     assert "123.0" not in report
+
+
+@pytest.mark.realtime
+@pytest.mark.slow
+def test_a_killed_run_leaves_no_worker_holding_its_lock(tmp_path: Path) -> None:
+    """SIGKILL to the run's process alone (an OOM killer, `kill -9 PID`): its pool workers,
+    forked with the lock's descriptor, lived on holding it, and --resume was refused
+    naming a process that no longer existed. They end with it, and the lock is free."""
+    import signal
+
+    from benchmarks.study.results import run_lock
+
+    out = tmp_path / "out"
+    cmd = [sys.executable, "-m", "benchmarks.cli", "run", "quick", "--out", str(out),
+           "--trials", "400", "--workers", "2", "--chunk", "20", "--no-progress"]
+    env = {**os.environ, "PYTHONPATH": str(Path(__file__).resolve().parents[3])}
+    proc = subprocess.Popen(cmd, env=env, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    results = out / "results.jsonl"
+    deadline = time.monotonic() + 120
+    while time.monotonic() < deadline and not (
+            results.exists() and len(results.read_text().splitlines()) >= 20):
+        time.sleep(0.2)
+    children = [int(p) for p in Path(f"/proc/{proc.pid}/task/{proc.pid}/children")
+                .read_text().split()]
+    assert len(children) >= 2, children  # the pool's workers
+    proc.send_signal(signal.SIGKILL)
+    proc.wait(10)
+    deadline = time.monotonic() + 10
+    while time.monotonic() < deadline and any(Path(f"/proc/{c}").exists() for c in children):
+        time.sleep(0.1)
+    alive = [c for c in children if Path(f"/proc/{c}").exists()
+             and "Z" not in Path(f"/proc/{c}/stat").read_text().split()[2]]
+    assert alive == [], alive
+    with run_lock(out):  # free: a resume may take it
+        pass
+
+
+def test_the_interrupted_run_s_hint_is_its_own_command_with_resume() -> None:
+    """(It printed 'hexapod-bench run quick --out DIR --resume' for a run of --seed 7
+    --trials 600, a command the resume then refused: '--seed: 7 in the directory, 1
+    given'.)"""
+    import argparse
+
+    from benchmarks.study.commands import _resume_command
+
+    args = argparse.Namespace(argv=["run", "quick", "--out", "my dir", "--trials", "600",
+                                    "--seed", "7"], scenarios=["quick"])
+    assert _resume_command(args, Path("my dir")) == \
+        "hexapod-bench run quick --out 'my dir' --trials 600 --seed 7 --resume"
+    args.argv = [*args.argv, "--resume"]
+    assert _resume_command(args, Path("my dir")).count("--resume") == 1
