@@ -174,7 +174,7 @@ def _worker_start() -> None:
 
         ctypes.CDLL(None, use_errno=True).prctl(1, int(signal.SIGTERM))  # PR_SET_PDEATHSIG
         if os.getppid() == 1:  # the run ended before this line: do not linger
-            os._exit(1)
+            os.kill(os.getpid(), signal.SIGTERM)
 
 
 def _iter_pool(units: list[WorkUnit], workers: int,
