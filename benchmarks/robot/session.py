@@ -32,8 +32,9 @@ from benchmarks.robot.models import check_option, describe_camera
 from benchmarks.robot.records import SessionLog, mm_list, session_path
 from benchmarks.robot.status import PeriodStatus, ServoResult, StatusLine
 from hexapod.backends.base import HaltReport
-from hexapod.exceptions import BackendError, LinkError, ProtocolError, RobotFaultError
+from hexapod.exceptions import BackendError
 from hexapod.geometry import HexapodGeometry
+from hexapod.link_errors import LinkError, ProtocolError, RobotFaultError
 
 #: Default ``--halt-timeout-s`` [s]: how long the shutdown waits for the robot to
 #: confirm its stop (longer than a 2 s stall of the link plus the time to detect it).

@@ -16,8 +16,9 @@ from typing import TypeVar
 import numpy as np
 
 from hexapod.actuation import Actuation, check_actuation
-from hexapod.exceptions import BackendError, ImplausibleReadingError, ShapeError
+from hexapod.exceptions import BackendError, ShapeError
 from hexapod.geometry import HexapodGeometry
+from hexapod.link_errors import ImplausibleReadingError
 
 
 @dataclass

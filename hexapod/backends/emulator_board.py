@@ -28,8 +28,9 @@ import numpy as np
 from hexapod.backends import protocol
 from hexapod.backends.emulator_server import EmulatorServer, FaultConfig
 from hexapod.backends.protocol import ERROR_TEXT, ErrorCode
-from hexapod.exceptions import BackendError, ChecksumError, ProtocolError, ShapeError
+from hexapod.exceptions import BackendError, ShapeError
 from hexapod.geometry import HexapodGeometry
+from hexapod.link_errors import ChecksumError, ProtocolError
 
 logger = logging.getLogger(__name__)
 

@@ -53,20 +53,17 @@ from hexapod.backends.gcs_config import GcsOptions, platform_velocity
 from hexapod.backends.gcs_link import Transport, open_transport
 from hexapod.backends.gcs_pose import PoseConvention, from_wire, to_wire
 from hexapod.backends.rate import RateLimiter
-from hexapod.exceptions import (
-    BackendError,
-    BackendPluginError,
+from hexapod.exceptions import BackendError, BackendPluginError, ShapeError, StrokeLimitError
+from hexapod.fk import forward_kinematics
+from hexapod.geometry import HexapodGeometry
+from hexapod.kinematics import inverse_kinematics
+from hexapod.link_errors import (
     GcsControllerError,
     GcsDisconnectedError,
     GcsLinkError,
     GcsReplyError,
     GcsTimeoutError,
-    ShapeError,
-    StrokeLimitError,
 )
-from hexapod.fk import forward_kinematics
-from hexapod.geometry import HexapodGeometry
-from hexapod.kinematics import inverse_kinematics
 
 logger = logging.getLogger(__name__)
 

@@ -2,8 +2,8 @@
 
 Both read GCS answers the same way: bytes accumulate until an LF that does not follow
 a space (:func:`hexapod.backends.gcs_protocol.answer_end`). A closed connection raises
-:class:`~hexapod.exceptions.GcsDisconnectedError`, a missing answer
-:class:`~hexapod.exceptions.GcsTimeoutError`.
+:class:`~hexapod.link_errors.GcsDisconnectedError`, a missing answer
+:class:`~hexapod.link_errors.GcsTimeoutError`.
 """
 
 from __future__ import annotations
@@ -17,7 +17,7 @@ import serial  # pyserial
 
 from hexapod.backends import gcs_protocol as gp
 from hexapod.backends.base import write_failed
-from hexapod.exceptions import GcsDisconnectedError, GcsLinkError, GcsTimeoutError
+from hexapod.link_errors import GcsDisconnectedError, GcsLinkError, GcsTimeoutError
 
 __all__ = ["SerialTransport", "TcpTransport", "Transport", "open_transport"]
 

@@ -27,7 +27,7 @@ import re
 from collections.abc import Iterable, Mapping, Sequence
 from enum import IntEnum
 
-from hexapod.exceptions import (
+from hexapod.link_errors import (
     GcsControllerError,
     GcsOutOfLimitsError,
     GcsReplyError,

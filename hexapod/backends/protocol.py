@@ -18,7 +18,7 @@ from enum import IntEnum
 
 import numpy as np
 
-from hexapod.exceptions import (
+from hexapod.link_errors import (
     ChecksumError,
     CommandRejectedError,
     HaltedError,

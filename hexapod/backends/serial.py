@@ -40,15 +40,13 @@ from hexapod.backends.base import (
 )
 from hexapod.backends.rate import RateLimiter
 from hexapod.backends.serial_link import SerialLink
-from hexapod.exceptions import (
-    BackendError,
+from hexapod.exceptions import BackendError, ShapeError, StrokeLimitError
+from hexapod.link_errors import (
     ImplausibleReadingError,
     ProtocolError,
     RobotFaultError,
     SerialDisconnectedError,
     SerialLinkError,
-    ShapeError,
-    StrokeLimitError,
     WatchdogError,
 )
 
@@ -85,7 +83,7 @@ class SerialRobot(SerialLink, Backend):
         reading_tolerance: How far [m] a reported leg length may lie outside the board's
             stroke, or off the way between the leg's previous reading and the setpoint
             it was sent, before it is refused as implausible
-            (:class:`~hexapod.exceptions.ImplausibleReadingError`: the robot is halted
+            (:class:`~hexapod.link_errors.ImplausibleReadingError`: the robot is halted
             and no setpoint is computed from it).
         on_close: Called once after the port is closed (e.g. to stop an emulator).
 

@@ -20,8 +20,8 @@ import serial  # pyserial
 
 from hexapod.backends import protocol
 from hexapod.backends.base import HaltClock, HaltReport, write_failed
-from hexapod.exceptions import (
-    BackendError,
+from hexapod.exceptions import BackendError
+from hexapod.link_errors import (
     CommandRejectedError,
     ProtocolError,
     RobotFaultError,

@@ -17,7 +17,8 @@ import serial
 
 from hexapod.backends import protocol
 from hexapod.backends.emulator import BoardConfig, Emulator, FaultConfig
-from hexapod.exceptions import BackendError, ChecksumError
+from hexapod.exceptions import BackendError
+from hexapod.link_errors import ChecksumError
 from tests.hexapod.emulator_process import emulator_process, spawn_emulator
 
 STROKE = (0.345, 0.485)

@@ -11,8 +11,8 @@ import pickle
 
 import pytest
 
-MODULES = ("hexapod.exceptions", "benchmarks.exceptions", "controllers.exceptions",
-           "vision.exceptions")
+MODULES = ("hexapod.exceptions", "hexapod.link_errors", "benchmarks.exceptions",
+           "controllers.exceptions", "vision.exceptions")
 
 
 def _sample(name: str) -> object:

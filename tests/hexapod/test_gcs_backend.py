@@ -25,18 +25,16 @@ from hexapod.backends.gcs_emulated import open_emulated_gcs
 from hexapod.backends.gcs_emulator import GcsConfig, GcsEmulator
 from hexapod.backends.gcs_pose import PoseConvention
 from hexapod.backends.registry import backends, open_backend
-from hexapod.exceptions import (
-    BackendError,
-    BackendPluginError,
+from hexapod.exceptions import BackendError, BackendPluginError, StrokeLimitError
+from hexapod.kinematics import inverse_kinematics
+from hexapod.link_errors import (
     GcsControllerError,
     GcsDisconnectedError,
     GcsLinkError,
     GcsOutOfLimitsError,
     GcsTimeoutError,
     ImplausibleReadingError,
-    StrokeLimitError,
 )
-from hexapod.kinematics import inverse_kinematics
 
 DT = 0.01
 Q0 = np.array([0.41, 0.42, 0.41, 0.42, 0.41, 0.42])

@@ -14,7 +14,7 @@ from hexapod.backends.gcs_pose import (
     to_wire,
     uvw_from_rotation,
 )
-from hexapod.exceptions import (
+from hexapod.link_errors import (
     GcsControllerError,
     GcsOutOfLimitsError,
     GcsReplyError,

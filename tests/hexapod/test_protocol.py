@@ -10,8 +10,8 @@ import pytest
 
 from hexapod.backends import protocol
 from hexapod.backends.protocol import ErrorCode
-from hexapod.exceptions import (
-    BackendError,
+from hexapod.exceptions import BackendError
+from hexapod.link_errors import (
     ChecksumError,
     CommandRejectedError,
     HaltedError,

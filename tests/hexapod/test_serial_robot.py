@@ -22,7 +22,8 @@ from hexapod.backends.emulator import BoardConfig, Emulator, FaultConfig
 from hexapod.backends.rate import RateLimiter
 from hexapod.backends.serial import SerialRobot
 from hexapod.backends.serial_emulated import open_emulated_robot
-from hexapod.exceptions import (
+from hexapod.exceptions import StrokeLimitError
+from hexapod.link_errors import (
     ChecksumError,
     ImplausibleReadingError,
     OutsideStrokeError,
@@ -32,7 +33,6 @@ from hexapod.exceptions import (
     SerialLinkError,
     SerialTimeoutError,
     ServoOffError,
-    StrokeLimitError,
     WatchdogError,
 )
 

@@ -146,14 +146,21 @@ def test_a_crashing_trial_is_recorded_and_the_run_goes_on(tmp_path: Path) -> Non
     assert len(fine) == 12 and all(r["failure"] is None for r in fine if r["converged"])
 
 
-@pytest.mark.slow
-def test_resume_after_partial_run_redoes_nothing(tmp_path: Path) -> None:
+def _full_and_half(tmp_path: Path) -> tuple[Any, Path, Path]:
+    """A 4-trial scenario run whole into ``full`` and half into ``part`` (a run stopped
+    halfway)."""
     sc = _scenario(trials=4)
     full = tmp_path / "full"
     run_units(plan([sc], chunk_size=2, record_trials=0), full)
     part = tmp_path / "part"
     units = plan([sc], chunk_size=2, record_trials=0)
     run_units(units[: len(units) // 2], part)
+    return sc, full, part
+
+
+@pytest.mark.slow
+def test_resume_after_partial_run_redoes_nothing(tmp_path: Path) -> None:
+    sc, full, part = _full_and_half(tmp_path)
     first = read_results(part)
     assert 0 < len(first) < 16
     # a partial line from a killed writer is dropped, not fatal
@@ -173,12 +180,7 @@ def test_a_whole_last_row_without_its_newline_is_kept_on_resume(tmp_path: Path) 
     run ended with a trial missing and exit 0)."""
     from benchmarks.study.runner import completed_keys
 
-    sc = _scenario(trials=4)
-    full = tmp_path / "full"
-    run_units(plan([sc], chunk_size=2, record_trials=0), full)
-    part = tmp_path / "part"
-    units = plan([sc], chunk_size=2, record_trials=0)
-    run_units(units[: len(units) // 2], part)
+    sc, full, part = _full_and_half(tmp_path)
     path = part / "results.jsonl"
     path.write_bytes(path.read_bytes()[:-1])  # the last row whole, its newline not written
     done = completed_keys(part)
