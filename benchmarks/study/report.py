@@ -191,6 +191,35 @@ def _collector_paused() -> Iterator[None]:
         gc.enable()
 
 
+def incomplete_lines(study: dict[str, Any], rows: list[dict[str, Any]]) -> list[str]:
+    """A note when a scenario's rows are fewer than its study plans (an interrupted run):
+    the trials missing per controller at the sweep points that have rows, and the
+    controllers without any row (a report of such a run showed its tables as if whole)."""
+    planned = study.get("trials")
+    labels = [str(c).split(" (", 1)[0] for c in study.get("controllers") or []]
+    if not isinstance(planned, int) or not labels or not rows:
+        return []
+    counts: dict[tuple[int, str], set[int]] = defaultdict(set)
+    for r in rows:
+        counts[(int(r.get("point", 0)), str(r["controller"]))].add(int(r["trial"]))
+    points = sorted({p for p, _ in counts})
+    missing = {label: sum(planned - len(counts.get((p, label), ())) for p in points)
+               for label in labels}
+    absent = [label for label in labels if missing[label] == planned * len(points)]
+    short = {label: m for label, m in missing.items() if m > 0 and label not in absent}
+    if not absent and not short:
+        return []
+    total = planned * len(points) * len(labels)
+    text = (f"**Incomplete**: {len(rows)} of the {total} trials planned at the "
+            f"{len(points)} sweep point(s) with rows ({planned} per point and controller)")
+    if short:
+        text += "; missing " + ", ".join(f"{m} of {label}" for label, m in short.items())
+    if absent:
+        text += f"; no row of {', '.join(absent)}"
+    return [text + ": an interrupted run (`--resume` finishes it); the tables hold the "
+            "trials that ran.", ""]
+
+
 def _report_lines(out_dir: Path, results: ResultRows) -> list[str]:
     """The lines of ``report.md`` (its figures saved on the way)."""
     rows, dropped, conflicting = results.rows, results.dropped, results.conflicting
@@ -240,6 +269,8 @@ def _report_lines(out_dir: Path, results: ResultRows) -> list[str]:
         if sm.get("description"):
             lines += [sm["description"], ""]
         lines += settings_lines(sm, out_dir)
+        lines += incomplete_lines(sm.get("study") or {},
+                                  [r for r in rows if r.get("scenario") == name])
         lines += [_md_table(TABLE_HEADER, intervals.summary_rows_with_intervals(ss, groups)),
                   ""]
         if any(np.isfinite(s.rtt_median_ms) for s in ss):

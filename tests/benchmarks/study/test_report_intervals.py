@@ -127,3 +127,20 @@ def test_an_open_end_is_not_called_censored() -> None:
     assert censored_median_cell(x, 3, "run") == f"> run [{lo:.3f}, > run]"
     assert censored_median_cell(np.r_[[12.0] * 9, [np.inf]], 0, 500) == "12 [12, 12]"
     assert censored_median_cell(np.array([np.nan]), 0, 500) == "-"
+
+
+def test_a_report_of_an_interrupted_run_says_it_is_incomplete() -> None:
+    """Three controllers planned at 4 trials: one whole, one with 1 of 4, one without a
+    row (a report of an interrupted run showed its tables as if whole); a whole run: no
+    note."""
+    from benchmarks.study.report import incomplete_lines
+
+    study = {"trials": 4, "controllers": ["a", "b (gain=2.0)", "c (leg-edge, x=1)"]}
+    rows = [{"point": 0, "controller": "a", "trial": k} for k in range(4)]
+    rows += [{"point": 0, "controller": "b", "trial": 0}]
+    (text, _) = incomplete_lines(study, rows)
+    assert text.startswith("**Incomplete**: 5 of the 12 trials planned at the 1 sweep point")
+    assert "missing 3 of b; no row of c" in text
+    whole = rows + [{"point": 0, "controller": c, "trial": k} for c, ks in
+                    (("b", range(1, 4)), ("c", range(4))) for k in ks]
+    assert incomplete_lines(study, whole) == []
