@@ -410,9 +410,11 @@ class EmulatorServer(Generic[D]):
         """Set the board's faults that start at this command (1 for the first): a glitching
         position reading, a latched drive fault (boards that have them)."""
         f = self._faults.config
-        for after, name, value in ((f.glitch_after, "glitch", f.glitch),
-                                   (f.drive_fault_after, "drive_fault", f.drive_fault_code)):
-            if after is not None and command == after + (name == "glitch"):
+        # the glitch starts after N commands (with command N + 1), the drive fault at N
+        starts = ((None if f.glitch_after is None else f.glitch_after + 1, "glitch", f.glitch),
+                  (f.drive_fault_after, "drive_fault", f.drive_fault_code))
+        for start, name, value in starts:
+            if command == start:
                 inject = getattr(self.board, f"inject_{name}", None)
                 if inject is None:
                     logger.warning("emulator: this device has no %s fault", name)
