@@ -30,6 +30,7 @@ from benchmarks.exceptions import BenchmarkError
 from benchmarks.study import viz_command
 from benchmarks.study.commands import cmd_calibrate, cmd_report, cmd_run, console
 from benchmarks.study.outdir import OutputDir, OutputFile, add_command
+from benchmarks.termination import exit_status, how_stopped, sigterm_interrupts
 from hexapod.exceptions import HexapodError
 
 log = logging.getLogger("hexapod-bench")
@@ -342,14 +343,16 @@ def main(argv: list[str] | None = None) -> int:
                         format="%(levelname)s %(name)s: %(message)s")
     os.environ.setdefault("PYTHONWARNINGS", "ignore")
     try:
-        return int(args.func(args))
-    except KeyboardInterrupt:  # Ctrl-C in a command without its own handling: no traceback
+        with sigterm_interrupts():  # SIGTERM as Ctrl-C (benchmarks.termination)
+            return int(args.func(args))
+    except KeyboardInterrupt as stop:  # Ctrl-C or SIGTERM in a command without its own
+        # handling: no traceback
         if args.verbose:
             raise
-        print(f"\nhexapod-bench {word or ''}: interrupted (Ctrl-C): each file written is "
+        print(f"\nhexapod-bench {word or ''}: {how_stopped(stop)}: each file written is "
               "whole (replaced at once), but of several outputs some may be new and some "
               "still the earlier ones", file=sys.stderr)
-        return 130
+        return exit_status(stop)
     except (BenchmarkError, HexapodError) as exc:
         print(f"hexapod-bench: error: {exc}", file=sys.stderr)
         return 2

@@ -12,6 +12,7 @@ from pathlib import Path
 from typing import Any
 
 from benchmarks.exceptions import BenchmarkError
+from benchmarks.termination import exit_status, how_stopped
 from hexapod.outputs import replace_whole
 
 
@@ -227,7 +228,7 @@ def _run_locked(scenarios: list[Any], out: Path, args: argparse.Namespace
         return len(read_results(out)) if (out / "results.jsonl").exists() else 0
 
     rows_before = rows_written()  # a resumed run's earlier rows
-    lost_worker = False
+    status = 0
 
     def advance(unit: Any) -> None:
         nonlocal written
@@ -257,14 +258,15 @@ def _run_locked(scenarios: list[Any], out: Path, args: argparse.Namespace
         else:
             run_units(units, out, args.workers, args.dask, progress=advance,
                       meanwhile=import_drawing_modules)
-    except KeyboardInterrupt:
-        interrupted = True
+    except KeyboardInterrupt as stop:  # Ctrl-C, or SIGTERM (benchmarks.termination)
+        interrupted, status = True, exit_status(stop)
         # Ctrl-C may land between a chunk's write and its progress call: count the file
         written = rows_written() - rows_before
-        con.print(f"\n[yellow]interrupted[/yellow]: {written} of {total} trials written to "
+        word = how_stopped(stop).split()[0]
+        con.print(f"\n[yellow]{word}[/yellow]: {written} of {total} trials written to "
                   f"{out}/results.jsonl; finish with: {escape(_resume_command(args, out))}")
     except BrokenProcessPool:  # a worker killed from outside (the OOM killer, kill -9)
-        interrupted = lost_worker = True
+        interrupted, status = True, 1
         written = rows_written() - rows_before
         con.print(f"\n[red]a worker process ended abruptly[/red] (killed from outside: out "
                   f"of memory?): {written} of {total} trials written to {out}/results.jsonl "
@@ -279,7 +281,7 @@ def _run_locked(scenarios: list[Any], out: Path, args: argparse.Namespace
     done_text = f"{written} of {total} trials" if written != total else f"{total} trials"
     con.print(f"{done_text} in {wall:.1f} s ({executor}, {args.workers} worker(s))"
               f"{' before the interruption' if interrupted else ''}; report: {report}")
-    return (1 if lost_worker else 130) if interrupted else 0, results
+    return status, results
 
 
 def _keep_inputs(out: Path, scenarios: list[Any], meta: dict[str, Any],

@@ -165,12 +165,16 @@ def _worker_start() -> None:
     and, on Linux, is sent SIGTERM when the run's process ends, however it ends (killed,
     SIGTERM to it alone): orphaned workers held the directory's lock, and a resume was
     refused naming a process that no longer existed."""
+    import signal
+
     from benchmarks.study.results import release_inherited_locks
 
     release_inherited_locks()
+    # the run's SIGTERM handler (benchmarks.termination) is not the worker's: SIGTERM,
+    # from the run or from its death, ends the worker
+    signal.signal(signal.SIGTERM, signal.SIG_DFL)
     if sys.platform.startswith("linux"):
         import ctypes
-        import signal
 
         ctypes.CDLL(None, use_errno=True).prctl(1, int(signal.SIGTERM))  # PR_SET_PDEATHSIG
         if os.getppid() == 1:  # the run ended before this line: do not linger

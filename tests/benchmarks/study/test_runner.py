@@ -190,14 +190,21 @@ def test_a_whole_last_row_without_its_newline_is_kept_on_resume(tmp_path: Path) 
 
 @pytest.mark.realtime
 @pytest.mark.slow
-def test_cli_interrupted_run_resumes(tmp_path: Path) -> None:
+@pytest.mark.parametrize(("signum", "status", "word", "workers"), [
+    (signal.SIGINT, 130, "interrupted", 1), (signal.SIGTERM, 143, "terminated", 2)])
+def test_cli_interrupted_run_resumes(tmp_path: Path, signum: int, status: int, word: str,
+                                     workers: int) -> None:
+    """Ctrl-C, or SIGTERM (a service manager's or a scheduler's stop) to the run's process
+    alone: the rows written are kept, the report is written, the hint resumes the run, and
+    no pool worker outlives it."""
     scen = tmp_path / "long.toml"
     scen.write_text(
         'name = "long"\nseed = 5\ntrials = 40\ncontrollers = ["leg-edge"]\n'
         '[task]\nmax_steps = 120\n[noise]\nmodel = "rotation"\namplitude_deg = 0.02\n')
     out = tmp_path / "out"
     cmd = [sys.executable, "-m", "benchmarks.cli", "run", str(scen), "--out", str(out),
-           "--chunk", "1", "--record", "0", "--no-progress"]
+           "--chunk", "1", "--record", "0", "--no-progress",
+           "--workers", str(workers)]
     env = {**os.environ, "PYTHONPATH": str(Path(__file__).resolve().parents[3])}
     proc = subprocess.Popen(cmd, env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE)
     results = out / "results.jsonl"
@@ -206,14 +213,21 @@ def test_cli_interrupted_run_resumes(tmp_path: Path) -> None:
         if results.exists() and len(results.read_text().splitlines()) >= 3:
             break
         time.sleep(0.05)
-    proc.send_signal(signal.SIGINT)
+    children = _children(proc.pid)
+    assert len(children) == (workers if workers > 1 else 0), children
+    proc.send_signal(signum)
     stdout, err = proc.communicate(timeout=60)
     written = read_results(out)
     assert 3 <= len(written) < 40, err.decode()[-2000:]
-    assert proc.returncode == 130, err.decode()[-2000:]
+    assert proc.returncode == status, err.decode()[-2000:]
     # the summary counts what was written, not what was planned
     text = " ".join(stdout.decode().split())
-    assert f"interrupted: {len(written)} of 40 trials written" in text, text[-2000:]
+    assert f"{word}: {len(written)} of 40 trials written" in text, text[-2000:]
+    assert "--resume" in text.split(f"{word}:")[1].split("\n")[0]
+    deadline = time.monotonic() + 10
+    while any(Path(f"/proc/{pid}").exists() for pid in children) and time.monotonic() < deadline:
+        time.sleep(0.05)
+    assert not [pid for pid in children if Path(f"/proc/{pid}").exists()], "a worker lingers"
     assert f"{len(written)} of 40 trials in" in text, text[-2000:]
     # without --resume the directory is protected
     assert cli_main(["run", str(scen), "--out", str(out), "--no-progress"]) == 2
@@ -223,6 +237,14 @@ def test_cli_interrupted_run_resumes(tmp_path: Path) -> None:
     keys = [(r["trial"]) for r in rows]
     assert sorted(keys) == list(range(40)), "every trial exactly once"
     assert (out / "report.md").exists()
+
+
+def _children(pid: int) -> list[int]:
+    """The child processes of ``pid`` (Linux's ``/proc``)."""
+    found: list[int] = []
+    for task in Path(f"/proc/{pid}/task").iterdir():
+        found += [int(c) for c in (task / "children").read_text().split()]
+    return found
 
 
 def test_results_rows_have_the_documented_fields(tmp_path: Path) -> None:
