@@ -265,6 +265,12 @@ def _run_locked(scenarios: list[Any], out: Path, args: argparse.Namespace
         word = how_stopped(stop).split()[0]
         con.print(f"\n[yellow]{word}[/yellow]: {written} of {total} trials written to "
                   f"{out}/results.jsonl; finish with: {escape(_resume_command(args, out))}")
+    except OSError:  # a file not written (a full disk: the error names it); exit 2
+        written = rows_written() - rows_before
+        con.print(f"\n[red]a file could not be written[/red]: {written} of {total} trials "
+                  f"are in {out}/results.jsonl; once it can be (room on the disk), finish "
+                  f"with: {escape(_resume_command(args, out))}")
+        raise
     except BrokenProcessPool:  # a worker killed from outside (the OOM killer, kill -9)
         interrupted, status = True, 1
         written = rows_written() - rows_before

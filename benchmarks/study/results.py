@@ -109,19 +109,29 @@ class ResultsWriter:
         (out_dir / TRIALS_DIR).mkdir(exist_ok=True)
         self.path = out_dir / RESULTS_FILE
         _repair_tail(self.path)
+        _drop_parts(out_dir / TRIALS_DIR)
         self._f = self.path.open("a", encoding="utf-8")
 
     def write(self, rows: list[dict[str, Any]], records: list[tuple[str, dict[str, Any]]]
               ) -> None:
-        """Write one chunk's rows and records."""
+        """Write one chunk's rows and records.
+
+        Raises:
+            OSError: A file could not be written (a full disk), naming it.
+        """
         from hexapod.visualize import save_trial
 
         for name, rec in records:
             save_trial(inside(self.out_dir / TRIALS_DIR, name), **rec)
-        for row in rows:
-            self._f.write(json.dumps(_jsonable(row), sort_keys=True) + "\n")
-        self._f.flush()
-        os.fsync(self._f.fileno())
+        try:
+            for row in rows:
+                self._f.write(json.dumps(_jsonable(row), sort_keys=True) + "\n")
+            self._f.flush()
+            os.fsync(self._f.fileno())
+        except OSError as exc:
+            if exc.filename is not None:
+                raise
+            raise OSError(exc.errno, exc.strerror or str(exc), str(self.path)) from exc
 
     def close(self) -> None:
         """Close the file."""
@@ -138,6 +148,16 @@ def _jsonable(value: Any) -> Any:
     if isinstance(value, float) and not math.isfinite(value):
         return None
     return value
+
+
+def _drop_parts(trials: Path) -> None:
+    """Remove the records a killed run left half written (``*.tmp.npz``: only this run
+    writes into its directory, under its lock)."""
+    from hexapod.visualize.records import TMP_SUFFIX
+
+    for part in trials.glob(f"*{TMP_SUFFIX}"):
+        part.unlink(missing_ok=True)
+        log.warning("%s: removed a trial record an interrupted run left half written", part)
 
 
 def _repair_tail(path: Path) -> None:

@@ -112,6 +112,11 @@ def _validated(arrays: dict[str, Any], path: str) -> dict[str, np.ndarray]:
     return out
 
 
+#: The end of the name of a record being written (``NAME.npz.PID`` + this), renamed to
+#: ``NAME.npz`` when whole.
+TMP_SUFFIX = ".tmp.npz"
+
+
 def save_trial(path: str | Path, **arrays: Any) -> Path:
     """Save a trial record (compressed ``.npz``), checking its keys and shapes first.
 
@@ -127,15 +132,22 @@ def save_trial(path: str | Path, **arrays: Any) -> Path:
 
     Raises:
         RecordError: A key is missing or malformed (nothing is written).
+        OSError: The file could not be written (named; nothing is left beside it).
     """
     missing = [k for k in RECORD_SHAPES if k not in arrays]
     if missing:
         raise RecordError(str(path), f"missing keys {missing}")
     data = _validated(arrays, str(path))
     p = Path(path)
-    tmp = p.with_name(p.name + f".{os.getpid()}.tmp.npz")
-    np.savez_compressed(tmp, **data)  # type: ignore[arg-type]
-    os.replace(tmp, p)
+    tmp = p.with_name(p.name + f".{os.getpid()}{TMP_SUFFIX}")
+    try:
+        np.savez_compressed(tmp, **data)  # type: ignore[arg-type]
+        os.replace(tmp, p)
+    except BaseException as exc:
+        tmp.unlink(missing_ok=True)  # (a full disk, Ctrl-C: no part left beside)
+        if isinstance(exc, OSError) and exc.filename is None:  # name the file
+            raise OSError(exc.errno, exc.strerror or str(exc), str(p)) from exc
+        raise
     return p
 
 
