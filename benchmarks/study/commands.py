@@ -5,6 +5,7 @@ honest summary, live viewer), ``report`` and ``calibrate`` (``viz``:
 from __future__ import annotations
 
 import argparse
+import contextlib
 import json
 import sys
 import time
@@ -472,7 +473,24 @@ def _with_ratio_options(sc: Any, args: argparse.Namespace) -> Any:
 
 
 def cmd_report(args: argparse.Namespace) -> int:
-    """Rebuild report.md from results.jsonl."""
+    """Rebuild report.md from results.jsonl: under the directory's lock, recording the
+    command in run.json; while a run writes into the directory (it holds the lock), the
+    report of the rows written so far, run.json left to the run (its whole record
+    replaced at each write would drop an entry added beside it)."""
+    from benchmarks.exceptions import DirectoryLockedError
+    from benchmarks.study.runner import run_lock
+
+    with contextlib.ExitStack() as held:
+        try:
+            held.enter_context(run_lock(Path(args.dir)))
+            busy = None
+        except DirectoryLockedError as exc:
+            busy = exc
+        return _report(args, busy)
+
+
+def _report(args: argparse.Namespace, busy: Any) -> int:
+    """:func:`cmd_report`'s work; ``busy``: the run writing into the directory, or None."""
     from benchmarks.study.outdir import META_FILE, check_report_file
     from benchmarks.study.report import write_report
     from benchmarks.study.study_record import command_entry, record_command
@@ -486,7 +504,7 @@ def cmd_report(args: argparse.Namespace) -> int:
     if not rows.rows:  # (as export: a report of no trial says nothing)
         raise ResultsError(str(out / "results.jsonl"), "no trial rows: nothing to report")
     meta_path = out / META_FILE
-    kept = meta_path.read_text() if meta_path.is_file() else None
+    kept = meta_path.read_text() if meta_path.is_file() and busy is None else None
     if kept is not None:  # run.json keeps every command that wrote the directory
         try:
             meta = json.loads(kept)
@@ -504,6 +522,11 @@ def cmd_report(args: argparse.Namespace) -> int:
         raise
     _print_summary(out, console())
     print(f"report: {path}")
+    if busy is not None:
+        who = f"PID {busy.pid}" if busy.pid is not None else "another process"
+        print(f"note: a run ({who}) is writing into {out}: this report holds the "
+              f"{len(rows.rows)} rows written so far; the run writes its own when it ends, "
+              f"and its record ({META_FILE}) was left to it")
     return 0
 
 
