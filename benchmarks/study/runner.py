@@ -9,9 +9,11 @@ written and ``resume=True`` finishes it without redoing finished trials.
 
 from __future__ import annotations
 
+import contextlib
 import logging
 import os
 import platform
+import signal
 import sys
 import threading
 from collections.abc import Callable, Iterator
@@ -165,8 +167,6 @@ def _worker_start() -> None:
     and, on Linux, is sent SIGTERM when the run's process ends, however it ends (killed,
     SIGTERM to it alone): orphaned workers held the directory's lock, and a resume was
     refused naming a process that no longer existed."""
-    import signal
-
     from benchmarks.study.results import release_inherited_locks
 
     release_inherited_locks()
@@ -263,9 +263,12 @@ def _iter_dask(units: list[WorkUnit], address: str, workers: int
         raise ResultsError("--dask", "Dask is not installed: pip install 'hexapod-vs[dask]'"
                            ) from exc
     cluster = None
+    if logging.getLogger().getEffectiveLevel() > logging.INFO:  # (not --verbose)
+        _quiet_dask()
     if address == "local":
-        cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True,
-                               dashboard_address=None, host="127.0.0.1")
+        with _sigint_ignored():  # the cluster's processes leave Ctrl-C to this one
+            cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True,
+                                   dashboard_address=None, host="127.0.0.1")
         client = Client(cluster)
     else:
         client = Client(address)
@@ -277,6 +280,30 @@ def _iter_dask(units: list[WorkUnit], address: str, workers: int
         client.close()
         if cluster is not None:
             cluster.close()
+
+
+def _quiet_dask() -> None:
+    """Dask's own log lines at errors only, in this process and in the local cluster's
+    (which read the environment): its scheduler's and nannies' INFO lines, and their
+    warnings while the run stops its cluster, said nothing to a user of the study."""
+    os.environ.setdefault("DASK_LOGGING__DISTRIBUTED", "error")
+    logging.getLogger("distributed").setLevel(logging.ERROR)
+
+
+@contextlib.contextmanager
+def _sigint_ignored() -> Iterator[None]:
+    """SIGINT ignored while the block starts processes, which inherit that: a Ctrl-C in
+    the terminal reaches every process of its group, and a local Dask cluster's workers
+    printed a traceback each while this process stopped them in order (main thread only;
+    a Ctrl-C during the block is lost, as it would be by then in the cluster's start)."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    previous = signal.signal(signal.SIGINT, signal.SIG_IGN)
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGINT, previous)
 
 
 def run_units(units: list[WorkUnit], out_dir: Path, workers: int = 1,

@@ -190,13 +190,15 @@ def test_a_whole_last_row_without_its_newline_is_kept_on_resume(tmp_path: Path) 
 
 @pytest.mark.realtime
 @pytest.mark.slow
-@pytest.mark.parametrize(("signum", "status", "word", "workers"), [
-    (signal.SIGINT, 130, "interrupted", 1), (signal.SIGTERM, 143, "terminated", 2)])
+@pytest.mark.parametrize(("signum", "status", "word", "executor"), [
+    (signal.SIGINT, 130, "interrupted", "inline"), (signal.SIGTERM, 143, "terminated", "pool"),
+    (signal.SIGINT, 130, "interrupted", "dask")])
 def test_cli_interrupted_run_resumes(tmp_path: Path, signum: int, status: int, word: str,
-                                     workers: int) -> None:
-    """Ctrl-C, or SIGTERM (a service manager's or a scheduler's stop) to the run's process
-    alone: the rows written are kept, the report is written, the hint resumes the run, and
-    no pool worker outlives it."""
+                                     executor: str) -> None:
+    """Ctrl-C (to the terminal's process group: every process of the run gets it), or
+    SIGTERM (a service manager's or a scheduler's stop) to the run's process alone: the
+    rows written are kept, the report is written, the hint resumes the run, no worker
+    outlives it, and no process prints a traceback (a local Dask cluster's did)."""
     scen = tmp_path / "long.toml"
     scen.write_text(
         'name = "long"\nseed = 5\ntrials = 40\ncontrollers = ["leg-edge"]\n'
@@ -204,19 +206,25 @@ def test_cli_interrupted_run_resumes(tmp_path: Path, signum: int, status: int, w
     out = tmp_path / "out"
     cmd = [sys.executable, "-m", "benchmarks.cli", "run", str(scen), "--out", str(out),
            "--chunk", "1", "--record", "0", "--no-progress",
-           "--workers", str(workers)]
+           *{"inline": [], "pool": ["--workers", "2"],
+             "dask": ["--workers", "2", "--dask", "local"]}[executor]]
     env = {**os.environ, "PYTHONPATH": str(Path(__file__).resolve().parents[3])}
-    proc = subprocess.Popen(cmd, env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE)
+    proc = subprocess.Popen(cmd, env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                            start_new_session=True)  # its own group, as in a terminal
     results = out / "results.jsonl"
     deadline = time.monotonic() + 120
     while time.monotonic() < deadline:
         if results.exists() and len(results.read_text().splitlines()) >= 3:
             break
         time.sleep(0.05)
-    children = _children(proc.pid)
-    assert len(children) == (workers if workers > 1 else 0), children
-    proc.send_signal(signum)
+    children = _descendants(proc.pid)
+    assert len(children) >= (2 if executor != "inline" else 0), children
+    if signum == signal.SIGINT:
+        os.killpg(proc.pid, signum)  # Ctrl-C: the terminal signals the whole group
+    else:
+        proc.send_signal(signum)
     stdout, err = proc.communicate(timeout=60)
+    assert "Traceback" not in err.decode(), err.decode()[-3000:]
     written = read_results(out)
     assert 3 <= len(written) < 40, err.decode()[-2000:]
     assert proc.returncode == status, err.decode()[-2000:]
@@ -239,11 +247,12 @@ def test_cli_interrupted_run_resumes(tmp_path: Path, signum: int, status: int, w
     assert (out / "report.md").exists()
 
 
-def _children(pid: int) -> list[int]:
-    """The child processes of ``pid`` (Linux's ``/proc``)."""
+def _descendants(pid: int) -> list[int]:
+    """The processes ``pid`` started, and theirs (Linux's ``/proc``)."""
     found: list[int] = []
     for task in Path(f"/proc/{pid}/task").iterdir():
-        found += [int(c) for c in (task / "children").read_text().split()]
+        for child in (int(c) for c in (task / "children").read_text().split()):
+            found += [child, *_descendants(child)]
     return found
 
 
