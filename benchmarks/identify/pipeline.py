@@ -203,7 +203,7 @@ def identify(robot: HexapodGeometry, settings: Settings,
     mask = s.mask(settings.min_speed)
     prior = standard_vector(robot.inertia, robot.drives)
     est = weighted_least_squares(basis.columns(Y), s.forces, basis, prior, robot.inertia,
-                                 robot.drives, mask)
+                                 robot.drives, mask, q_min=robot.stroke[0])
     timings["estimation_s"] = time.perf_counter() - t1
     timings["total_s"] = time.perf_counter() - t0
     return Identification(robot, basis, excitation, s, mask, est, prior, true_theta,

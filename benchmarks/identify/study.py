@@ -96,7 +96,8 @@ def study(reps: int, configurations: tuple[tuple[float, float, float], ...] = CO
                 Y, _, _ = regressor(nominal, s.R, s.t, s.twist, s.acc)
                 est = weighted_least_squares(basis.columns(Y), s.forces, basis, prior,
                                              nominal.inertia, nominal.drives, s.mask(),
-                                             constrain=constrained_fit)
+                                             constrain=constrained_fit,
+                                             q_min=nominal.stroke[0])
                 log.info("repetition %d: %s", r, est.consistency[0][:40])
             except Exception as exc:  # one repetition's failure, counted
                 log.warning("repetition %d failed: %s", r, exc)

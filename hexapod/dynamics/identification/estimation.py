@@ -74,7 +74,7 @@ def _solve(W: np.ndarray, y: np.ndarray) -> np.ndarray:
 def weighted_least_squares(Yb: np.ndarray, forces: np.ndarray, basis: BaseParameters,
                            prior: np.ndarray, template: InertiaParameters,
                            drives: DriveParameters, mask: np.ndarray | None = None,
-                           constrain: bool = True) -> Estimate:
+                           constrain: bool = True, q_min: float | None = None) -> Estimate:
     """Estimate the base parameters (module docstring).
 
     Args:
@@ -87,6 +87,9 @@ def weighted_least_squares(Yb: np.ndarray, forces: np.ndarray, basis: BaseParame
             moving too slowly for the Coulomb model.
         constrain: Solve under the physical constraints when the estimate is not
             physical (False: only say so, e.g. for a coverage study of the intervals).
+        q_min: The shortest leg length [m]: each leg part's centre of mass must lie
+            on the leg, between its joints (``[0, q_min]`` from its hinge, as a robot
+            file requires); None: not checked.
 
     Raises:
         IdentificationError: Too few samples, a rank-deficient regressor (the excitation
@@ -126,7 +129,7 @@ def weighted_least_squares(Yb: np.ndarray, forces: np.ndarray, basis: BaseParame
     consistency: list[str] = []
     unconstrained = theta.copy()
     standard = basis.standard(theta, prior)
-    problems = _physical_problems(standard, template, drives)
+    problems = _physical_problems(standard, template, drives, q_min)
     if problems and not constrain:
         consistency.append("unconstrained estimate not physical (" + "; ".join(problems)
                            + "): not constrained (asked not to)")
@@ -134,20 +137,22 @@ def weighted_least_squares(Yb: np.ndarray, forces: np.ndarray, basis: BaseParame
         consistency.append("unconstrained estimate not physical (" + "; ".join(problems)
                            + "): solved the least squares constrained to physical "
                            "parameters instead (SLSQP)")
-        theta, standard, ok = _constrained(Ww, yw, theta, basis, prior)
+        theta, standard, ok = _constrained(Ww, yw, theta, basis, prior, q_min)
         if not ok:
             consistency.append("the constrained solver did not converge")
         moved = [STANDARD_NAMES[j] for j in moved_from_prior(basis, standard, prior)]
         if moved:
             consistency.append("parameters the forces cannot separate moved from the robot "
                                "file's values to a physical split: " + ", ".join(moved))
-        left = _physical_problems(standard, template, drives)
+        left = _physical_problems(standard, template, drives, q_min)
         if left:
             consistency.append("still not physical: " + "; ".join(left))
     else:
         consistency.append("physically consistent as estimated (positive masses, "
                            "non-negative drive parameters, positive-definite platform "
-                           "tensor within the triangle inequality): no constraint active")
+                           "tensor within the triangle inequality"
+                           + (", centres of mass on the legs" if q_min is not None else "")
+                           + "): no constraint active")
     rho_w = yw - Ww @ theta
     s2 = float(rho_w @ rho_w / (m - r))
     cov = s2 * np.linalg.inv(Ww.T @ Ww)
@@ -170,7 +175,7 @@ def moved_from_prior(basis: BaseParameters, standard: np.ndarray, prior: np.ndar
 
 
 def _physical_problems(standard: np.ndarray, template: InertiaParameters,
-                       drives: DriveParameters) -> list[str]:
+                       drives: DriveParameters, q_min: float | None = None) -> list[str]:
     out = []
     d = standard[N_MECHANISM:]
     for k in np.flatnonzero(d < 0):
@@ -179,6 +184,12 @@ def _physical_problems(standard: np.ndarray, template: InertiaParameters,
         j = STANDARD_NAMES.index(name)
         if standard[j] < 0:
             out.append(f"{name} = {standard[j]:.4g} kg < 0")
+    if q_min is not None:  # each part's centre of mass between the leg's joints
+        for part, mass, first in (("body", standard[10], standard[11]),
+                                  ("rod", standard[14], standard[15])):
+            if mass > 0 and not 0.0 <= first / mass <= q_min:
+                out.append(f"{part}_com = {first / mass:.4g} m outside the leg [0, "
+                           f"{q_min:.4g}] m")
     try:
         to_tables(standard, template, drives)
     except InertiaError as exc:
@@ -186,12 +197,14 @@ def _physical_problems(standard: np.ndarray, template: InertiaParameters,
     return out
 
 
-def margins(standard: np.ndarray) -> np.ndarray:
+def margins(standard: np.ndarray, q_min: float | None = None) -> np.ndarray:
     """Physical-consistency margins of standard parameters, each ``>= 0`` when physical:
     the drive parameters, the platform's mass, the smallest principal moment of its
     tensor about the centre of mass and its triangle inequality (scaled by 10 to weigh
     like the masses), the legs' masses and axial inertias, their transverse inertias about
-    their centres of mass (at least half the axial)."""
+    their centres of mass (at least half the axial) and, given the shortest leg length
+    ``q_min`` [m], each leg part's centre of mass on the leg: ``0 <= m d <= m q_min``
+    (first moment ``m d``; divided by ``q_min``, in kg)."""
     th = np.asarray(standard, float)
     m = th[0]
     out = [*th[N_MECHANISM:], m]
@@ -207,11 +220,14 @@ def margins(standard: np.ndarray) -> np.ndarray:
     # transverse about the centre of mass at least half the axial (triangle inequality)
     out.append(10 * (itb - (mdb**2 / mb if mb > 0 else 0.0) - iab / 2))
     out.append(10 * (itr - (mdr**2 / mr if mr > 0 else 0.0) - iar / 2))
+    if q_min is not None:
+        out += [mdb / q_min, mb - mdb / q_min, mdr / q_min, mr - mdr / q_min]
     return np.array(out)
 
 
 def _constrained(Ww: np.ndarray, yw: np.ndarray, theta: np.ndarray, basis: BaseParameters,
-                 prior: np.ndarray) -> tuple[np.ndarray, np.ndarray, bool]:
+                 prior: np.ndarray, q_min: float | None = None
+                 ) -> tuple[np.ndarray, np.ndarray, bool]:
     """The weighted least squares under :func:`margins` ``>= 0`` (SLSQP from the
     unconstrained solution). The standard parameters the forces cannot separate are free
     too (the fit does not depend on them), pulled to the prior by a tiny penalty: the
@@ -248,6 +264,7 @@ def _constrained(Ww: np.ndarray, yw: np.ndarray, theta: np.ndarray, basis: BaseP
 
     res = scipy.optimize.minimize(
         cost, x0 / sx, jac=grad, method="SLSQP",
-        constraints=[{"type": "ineq", "fun": lambda z: margins(standard(z)) - _INSIDE}],
+        constraints=[{"type": "ineq",
+                      "fun": lambda z: margins(standard(z), q_min) - _INSIDE}],
         options={"maxiter": 2000, "ftol": 1e-16})
     return res.x[:r] * sx[:r], standard(res.x), bool(res.success)

@@ -93,6 +93,30 @@ def test_non_physical_estimate_is_solved_under_the_constraints() -> None:
     assert est.unconstrained[b.names.index("viscous_0")] == pytest.approx(-20.0, rel=1e-6)
 
 
+@pytest.mark.slow
+def test_a_centre_of_mass_off_the_leg_is_constrained_onto_it() -> None:
+    """Forces from a rod whose centre of mass would be 0.6 m from its hinge, beyond the
+    shortest leg (0.345 m): with the leg length given, the estimate is constrained until
+    the robot file's own rule (``check_legs``) accepts its tables; without, it is not."""
+    from hexapod.dynamics.identification.parameters import to_tables
+
+    nominal, truth, b, Y = _data()
+    q_min = nominal.stroke[0]
+    theta = standard_vector(truth.inertia, truth.drives)
+    theta[15] = 0.6 * theta[14]  # md_r = 0.6 m x m_r
+    prior = standard_vector(nominal.inertia, nominal.drives)
+    free = weighted_least_squares(b.columns(Y), Y @ theta, b, prior, nominal.inertia,
+                                  nominal.drives)
+    assert not 0.0 <= free.standard[15] / free.standard[14] <= q_min  # off the leg
+    est = weighted_least_squares(b.columns(Y), Y @ theta, b, prior, nominal.inertia,
+                                 nominal.drives, q_min=q_min)
+    assert "outside the leg" in est.consistency[0], est.consistency
+    assert np.all(margins(est.standard, q_min) >= 0)
+    inertia, _ = to_tables(est.standard, nominal.inertia, nominal.drives)
+    inertia.check_legs(q_min)  # what writing the robot file checks
+    assert 0.0 <= inertia.rod_com <= q_min and 0.0 <= inertia.body_com <= q_min
+
+
 def test_an_excitation_at_rest_is_refused_naming_the_weakest_parameter() -> None:
     """At rest only gravity acts: the inertias are undetermined, and the error says it."""
     nominal, _truth, b, _ = _data()
