@@ -206,8 +206,8 @@ class Gain:
         Raises:
             OptionError: Naming the option at fault.
         """
+        value = check_number(controller, "gain", gain)  # checked when replaced too
         if adaptive_gain is None:
-            value = check_number(controller, "gain", gain)
             return Gain(value, value, 0.0)
         try:
             values = [float(x) for x in adaptive_gain]

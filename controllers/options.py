@@ -37,6 +37,11 @@ class RemembersOptions:
 #: A constructor parameter without a default (the option must be given).
 REQUIRED = object()
 
+#: Options that choose the same thing in different ways (``adaptive_gain`` replaces
+#: ``gain``): a controller's own table giving one of a group takes that choice over a
+#: scenario's ``[controller_options]`` giving another, and its table may give only one.
+ALTERNATIVE_OPTIONS: tuple[frozenset[str], ...] = (frozenset({"gain", "adaptive_gain"}),)
+
 
 @dataclass(frozen=True)
 class OptionSpec:

@@ -197,10 +197,11 @@ def parse_scenario(table: dict[str, Any], path: str = "<dict>") -> Scenario:
     if not isinstance(defaults, dict):
         raise ScenarioError(path, "expected a table of options given to every controller",
                             key="controller_options")
-    specs = [ControllerSpec(sp.name, sp.label, {**defaults, **sp.options}, f"controllers[{k}]",
-                            {**{o: f"controller_options.{o}" for o in defaults},
+    specs = [ControllerSpec(sp.name, sp.label, {**shared, **sp.options}, f"controllers[{k}]",
+                            {**{o: f"controller_options.{o}" for o in shared},
                              **{o: f"controllers[{k}].{o}" for o in sp.options}})
-             for k, sp in enumerate(specs)]
+             for k, sp in enumerate(specs)
+             for shared in [_shared_for(defaults, sp.options, path, f"controllers[{k}]")]]
     for k, sp in enumerate(specs):
         _checked_name(sp.name, "controller name", path, f"controllers[{k}]")
         _checked_name(sp.label, "controller label", path, f"controllers[{k}].label")
@@ -370,6 +371,29 @@ def _read_model(robot: dict[str, Any], base_dir: Path, path: str) -> tuple[str |
         return model, HexapodGeometry.from_toml(model)
     except HexapodError as exc:
         raise ScenarioError(path, f"{model}: {exc}", key="robot.model") from None
+
+
+def _shared_for(defaults: dict[str, Any], own: dict[str, Any], path: str, key: str
+                ) -> dict[str, Any]:
+    """The ``[controller_options]`` a controller takes beside its own table's: not one
+    its own table chose another way of setting (:data:`~controllers.options.
+    ALTERNATIVE_OPTIONS`: its ``gain`` is not replaced by a file-wide ``adaptive_gain``).
+
+    Raises:
+        ScenarioError: Its own table gives two options of one such group.
+    """
+    from controllers.options import ALTERNATIVE_OPTIONS
+
+    shared = dict(defaults)
+    for group in ALTERNATIVE_OPTIONS:
+        chosen = sorted(group & own.keys())
+        if len(chosen) > 1:
+            raise ScenarioError(path, f"{' and '.join(chosen)} both given: they set the same "
+                                "thing (adaptive_gain replaces gain); give one", key=key)
+        if chosen:
+            for other in group - own.keys():
+                shared.pop(other, None)
+    return shared
 
 
 def _checked_name(value: str, what: str, path: str, key: str) -> str:

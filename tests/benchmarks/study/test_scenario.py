@@ -144,6 +144,37 @@ def test_controller_options_are_checked_when_the_study_is_loaded(tmp_path: Path)
     assert not (out / "results.jsonl").exists(), "nothing ran"
 
 
+def test_a_controller_s_own_gain_is_not_replaced_by_a_file_wide_adaptive_gain() -> None:
+    """[controller_options] adaptive_gain replaces gain: a controller whose own table sets
+    gain keeps it (its rows were those of the file-wide adaptive gain, its own gain, even
+    a negative one, unread); a table giving both is refused; a bad gain is refused even
+    beside an adaptive one."""
+    from benchmarks.study.scenario import check_controllers
+
+    table = {**MINIMAL, "controller_options": {"adaptive_gain": [5.0, 1.0, 30.0]},
+             "controllers": ["leg-edge", {"name": "leg-edge", "label": "own", "gain": 3.0},
+                             {"name": "leg-direction", "adaptive_gain": [2.0, 1.0, 5.0]}]}
+    specs = {s.label: s for s in parse_scenario(table, "study.toml").controllers}
+    assert specs["leg-edge"].options == {"adaptive_gain": [5.0, 1.0, 30.0]}
+    assert specs["own"].options == {"gain": 3.0}
+    assert specs["leg-direction"].options == {"adaptive_gain": [2.0, 1.0, 5.0]}
+    both = {**MINIMAL, "controllers": [{"name": "leg-edge", "gain": 3.0,
+                                        "adaptive_gain": [5.0, 1.0, 30.0]}]}
+    with pytest.raises(ScenarioError) as info:
+        parse_scenario(both, "study.toml")
+    assert info.value.key == "controllers[0]" and "adaptive_gain and gain" in str(info.value)
+    negative = {**MINIMAL, "controllers": [{"name": "leg-edge", "gain": -1.0}],
+                "controller_options": {"adaptive_gain": [5.0, 1.0, 30.0]}}
+    with pytest.raises(ScenarioError) as info:
+        check_controllers(parse_scenario(negative, "study.toml"))
+    assert info.value.key == "controllers[0].gain" and "-1.0" in str(info.value)
+    from controllers.exceptions import OptionError
+    from controllers.law_tools import Gain
+
+    with pytest.raises(OptionError, match="gain"):  # beside an adaptive gain too
+        Gain.from_options("leg-edge", -1.0, [5.0, 1.0, 30.0])
+
+
 def test_camera_from_an_opencv_calibration_file(tmp_path: Path) -> None:
     """[camera] opencv = "cal.yml" with the pose of the front preset (or a pose table):
     the intrinsics and the lens come from the file, read when the scenario is loaded."""
