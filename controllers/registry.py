@@ -125,6 +125,13 @@ class Registry:
                           else self._lazy.get(ep.name, ("", None))[1])
             if registered == dist:
                 continue
+            if registered:  # another package's name: the plugin does not replace it
+                err = PluginLoadError(ep.name, dist, f"the name is taken by {registered}'s "
+                                      f"controller, which stays: give the entry point "
+                                      f"{ep.value} another name")
+                log.warning("%s", err)
+                self.errors.append(err)
+                continue
             try:
                 factory = ep.load()
             except Exception as exc:  # a broken plugin must not break the others
@@ -214,7 +221,8 @@ def _import_spec(spec: str, name: str, source: str) -> ControllerFactory:
         obj: Any = importlib.import_module(module)
         for part in attr.split("."):
             obj = getattr(obj, part)
-    except (ImportError, AttributeError) as exc:
+    except Exception as exc:  # whatever the plugin's module raises while it imports (a
+        # typo, an abstract class built at import, a SyntaxError): one line
         raise PluginLoadError(name, source, f"{spec}: {type(exc).__name__}: {exc}"
                               ) from exc
     if not callable(obj):

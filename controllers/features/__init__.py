@@ -49,7 +49,7 @@ def controllers_for(feature: LegFeature) -> FeatureControllers:
         return type(f"{stem}{kind}", (base,), {
             "name": f"{feature.name}-{suffix}", "feature": feature, "unit": feature.unit,
             "features": frozenset({"lengths", "directions"}), "__module__": mod,
-            "__doc__": base.__doc__, **extra})
+            "__doc__": f"``{feature.name}``: {base.__doc__}", **extra})
 
     qp = make(FeatureQPLaw, "qp", "QP", {})
     return FeatureControllers(

@@ -79,7 +79,8 @@ def _write_distribution(root: Path) -> None:
     (info / "entry_points.txt").write_text(
         f"[{ENTRY_POINT_GROUP}]\n"
         f"{PLUGIN} = hexapod_test_plugin:SaturatedJoints\n"
-        f"{BROKEN} = hexapod_test_broken:Nope\n")
+        f"{BROKEN} = hexapod_test_broken:Nope\n"
+        "leg-edge = hexapod_test_plugin:SaturatedJoints\n")  # a built-in's name
 
 
 @pytest.fixture(scope="module")
@@ -155,6 +156,33 @@ def test_broken_plugin_is_reported_and_others_work(plugin_distribution: Path) ->
     assert BROKEN not in registry.names()
     assert PLUGIN in registry.names()
     assert "leg-edge" in registry.names()
+
+
+def test_a_plugin_named_as_a_built_in_does_not_replace_it(plugin_distribution: Path
+                                                         ) -> None:
+    """An installed plugin's entry point with a built-in's name ran under that name,
+    the built-in gone without a word: the built-in stays and the clash is reported."""
+    assert registry.source("leg-edge").package == "hexapod-vs"
+    assert type(registry.create("leg-edge")).__name__ == "LegEdgeController"
+    clash = [e for e in registry.errors if e.name == "leg-edge"]
+    assert clash and clash[0].source == PLUGIN_DIST
+    assert "taken by hexapod-vs" in clash[0].reason
+    assert "hexapod_test_plugin:SaturatedJoints" in clash[0].reason
+
+
+def test_a_plugin_module_that_raises_while_importing_is_one_error(tmp_path: Path,
+                                                                 monkeypatch: pytest.MonkeyPatch
+                                                                 ) -> None:
+    """Whatever a ``module:attr`` plugin's module raises as it imports (an abstract class
+    built at import, a RuntimeError, a syntax error) is a PluginLoadError naming it."""
+    (tmp_path / "raises_at_import.py").write_text("raise RuntimeError('boom')\n")
+    (tmp_path / "bad_syntax_plugin.py").write_text("def (:\n")
+    monkeypatch.syspath_prepend(str(tmp_path))
+    for spec, what in (("raises_at_import:X", "RuntimeError: boom"),
+                       ("bad_syntax_plugin:X", "SyntaxError")):
+        with pytest.raises(PluginLoadError) as info:
+            registry.factory(spec)
+        assert what in str(info.value) and spec in str(info.value)
 
 
 def test_unknown_name_suggests_the_closest() -> None:
