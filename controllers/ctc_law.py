@@ -9,11 +9,9 @@ from __future__ import annotations
 from collections.abc import Sequence
 from typing import Any, Protocol
 
-import numpy as np
-
 from controllers.base import Controller
 from controllers.data import CommandBatch, ObservationBatch
-from controllers.exceptions import ContextError
+from controllers.law_tools import check_flag
 from controllers.solvers.computed_torque import CTCOptions
 from hexapod.actuation import Actuation
 
@@ -71,10 +69,7 @@ class ComputedTorqueLaw(Controller):
         self.integral_gain = self.ctc_options.integral_gain
         self.saturation = self.ctc_options.saturation
         self.solver = self.ctc_options.solver
-        if not isinstance(smooth_goal, bool | np.bool_):
-            raise ContextError(self.name, "smooth_goal", f"must be true or false, got "
-                               f"{smooth_goal!r}")
-        self.smooth_goal = bool(smooth_goal)
+        self.smooth_goal = check_flag(self.name, "smooth_goal", smooth_goal)
         self.init_state()
 
     def init_state(self) -> None:

@@ -39,6 +39,7 @@ from controllers.base import (
     ObservationBatch,
 )
 from controllers.batch import actuation_of
+from controllers.law_tools import check_flag
 from hexapod.fk import forward_kinematics_batch
 from hexapod.workspace import home_pose
 from vision.legs import directions_from_edges, observe_legs
@@ -155,7 +156,7 @@ class LatencyCompensated(Controller):
         #: A law that samples ``context.reference`` itself is passed through by
         #: :class:`~controllers.tracking.TrackingController`, and so is its wrapper.
         self.tracks_reference = bool(getattr(self.law, "tracks_reference", False))
-        self.use_rates = bool(use_rates)
+        self.use_rates = check_flag(self.name, "use_rates", use_rates)
         self._contexts: list[ControllerContext] = []
         self._histories: list[EncoderHistory] = []
 

@@ -58,7 +58,7 @@ def check_number(controller: str, option: str, value: Any, minimum: float = 0.0,
     Raises:
         OptionError: Not a finite number, or out of range.
     """
-    if isinstance(value, bool):
+    if isinstance(value, bool | str):  # (a quoted number in a file is a mistake too)
         raise OptionError(controller, option, f"expected a number, got {value!r}")
     try:
         x = float(value)
@@ -70,6 +70,18 @@ def check_number(controller: str, option: str, value: Any, minimum: float = 0.0,
         raise OptionError(controller, option,
                           f"must be {'>' if strict else '>='} {minimum}, got {x}")
     return x
+
+
+def check_flag(controller: str, option: str, value: Any) -> bool:
+    """Validate a boolean option (``true``/``false`` in a file): a string such as
+    ``"false"`` is refused (Python's ``bool("false")`` is True).
+
+    Raises:
+        OptionError: Not a boolean.
+    """
+    if not isinstance(value, bool | np.bool_):
+        raise OptionError(controller, option, f"expected true or false, got {value!r}")
+    return bool(value)
 
 
 def check_count(controller: str, option: str, value: Any, minimum: int,

@@ -30,6 +30,7 @@ from controllers.law_tools import (
     Selection,
     TaskStep,
     check_choice,
+    check_flag,
     check_number,
     check_observation,
     goal_lengths,
@@ -81,7 +82,7 @@ class VisionLaw(VisionLawBatch):
         if self.threshold >= 1.0:
             raise OptionError(self.name, "threshold", f"must be < 1, got {self.threshold}")
         self.damping = check_number(self.name, "damping", damping, 0.0, strict=False)
-        self.compiled = bool(compiled)
+        self.compiled = check_flag(self.name, "compiled", compiled)
         #: What turns the tasks into a twist (the QP laws put the limit QP here).
         self.solver: Solver = DampedPseudoInverse(self.threshold, self.damping)
         self.context: ControllerContext | None = None

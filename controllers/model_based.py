@@ -26,7 +26,7 @@ from controllers.data import CommandBatch, ControllerContext, Goal, ObservationB
 from controllers.estimators import PoseEstimate
 from controllers.exceptions import ContextError
 from controllers.law_algebra import jacobi_eigen
-from controllers.law_tools import Gain, check_number, gain_formula
+from controllers.law_tools import Gain, check_flag, check_number, gain_formula
 from controllers.model_based_rows import PoseServoRows
 from hexapod.compiled import CompiledFunction, Layout
 from hexapod.exceptions import HexapodError
@@ -148,7 +148,7 @@ class ModelBasedController(Controller):
                  fk_tolerance: float = 1e-11, fk_max_iterations: int = 30,
                  compiled: bool = True) -> None:
         self.gain = Gain.from_options(self.name, gain, adaptive_gain)
-        self.compiled = bool(compiled)
+        self.compiled = check_flag(self.name, "compiled", compiled)
         #: The pose servo (None before :meth:`reset_trial`).
         self.kernel: CompiledFunction | None = None
         #: The servo's input row (constants written by :meth:`reset_trial`; a view of its

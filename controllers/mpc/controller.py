@@ -24,7 +24,7 @@ import numpy as np
 
 from controllers.base import Command, ControllerContext, Goal, Observation
 from controllers.exceptions import ContextError, OptionError
-from controllers.law_tools import check_choice, check_count, check_number
+from controllers.law_tools import check_choice, check_count, check_flag, check_number
 from controllers.mpc.drive_state import DRIVE_STATES, DriveLag, drive_lag
 from controllers.mpc.prediction import fit_pose
 from controllers.mpc.problem import ProblemSpec, problem_kernel
@@ -115,7 +115,7 @@ class MPCLaw(PredictiveLaw):
         self.reference = check_choice(name, "reference", reference, ("exponential", "zero"))
         self.drive_model = check_choice(name, "drive_model", drive_model, ("ideal", "lag"))
         self.drive_state = check_choice(name, "drive_state", drive_state, DRIVE_STATES)
-        self.visibility = bool(visibility)
+        self.visibility = check_flag(name, "visibility", visibility)
         self.visibility_margin = check_number(name, "visibility_margin", visibility_margin,
                                               0.0, strict=False)
         self.max_tilt = (None if max_tilt_deg is None else math.radians(
@@ -123,7 +123,7 @@ class MPCLaw(PredictiveLaw):
         if self.max_tilt is not None and self.max_tilt >= math.pi / 2:
             raise OptionError(name, "max_tilt_deg", f"must be < 90, got {max_tilt_deg}")
         self.max_iter = check_count(name, "max_iter", max_iter, 0)
-        self.accept_unconverged = bool(accept_unconverged)
+        self.accept_unconverged = check_flag(name, "accept_unconverged", accept_unconverged)
         self.tolerance = check_number(name, "tolerance", tolerance)
         self.time_limit = (None if time_limit is None else
                            check_number(name, "time_limit", time_limit))

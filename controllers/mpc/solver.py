@@ -23,7 +23,7 @@ import casadi as ca
 import numpy as np
 
 from controllers.base import Command, Controller, ControllerContext, Observation
-from controllers.law_tools import check_count, check_weights
+from controllers.law_tools import check_count, check_flag, check_weights
 from controllers.mpc.problem import ProblemSpec
 from hexapod.compiled import CompiledFunction, Layout
 
@@ -319,7 +319,7 @@ class PredictiveLaw(Controller):
         self.error_weight, self.terminal_weight = check_weights(
             self.name, ("error_weight", error_weight), ("terminal_weight", terminal_weight),
             "no error to minimise")
-        self.compiled = bool(compiled)
+        self.compiled = check_flag(self.name, "compiled", compiled)
         self._restart()
         return check_weights(self.name, *weights,
                              "the QP needs one of them to be strictly convex")

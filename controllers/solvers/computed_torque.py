@@ -38,7 +38,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from controllers.exceptions import ContextError
+from controllers.law_tools import check_number
 from controllers.solvers.saturation import checked_strategy, saturated
 from hexapod.dynamics import DynamicModel
 from hexapod.dynamics.drive_model import COULOMB_SMOOTHING
@@ -64,14 +64,10 @@ class SecondOrderGains:
         """Validated gains.
 
         Raises:
-            ContextError: Naming the option that is not positive and finite.
+            OptionError: Naming the option that is not a positive, finite number.
         """
-        fn, zeta = float(natural_frequency), float(damping)
-        if not (math.isfinite(fn) and fn > 0):
-            raise ContextError(controller, "natural_frequency", f"must be positive, got {fn}")
-        if not (math.isfinite(zeta) and zeta > 0):
-            raise ContextError(controller, "damping", f"must be positive, got {zeta}")
-        return SecondOrderGains(fn, zeta)
+        return SecondOrderGains(check_number(controller, "natural_frequency", natural_frequency),
+                                check_number(controller, "damping", damping))
 
     @property
     def omega(self) -> float:
@@ -93,12 +89,9 @@ def checked_integral_gain(controller: str, integral_gain: float) -> float:
     """A validated integral gain ``Ki`` [1/s] (0: no integral action).
 
     Raises:
-        ContextError: Naming the option when it is negative or not finite.
+        OptionError: Naming the option when it is not a finite number >= 0.
     """
-    ki = float(integral_gain)
-    if not (math.isfinite(ki) and ki >= 0):
-        raise ContextError(controller, "integral_gain", f"must be >= 0 and finite, got {ki}")
-    return ki
+    return check_number(controller, "integral_gain", integral_gain, 0.0, strict=False)
 
 
 class ComputedTorqueSolver:
@@ -156,7 +149,7 @@ class CTCOptions:
             (:mod:`controllers.solvers.saturation`).
 
     Raises:
-        ContextError: Naming the option that is not valid.
+        OptionError: Naming the option that is not valid.
     """
 
     def __init__(self, controller: str, natural_frequency: float, damping: float,

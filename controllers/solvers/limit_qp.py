@@ -16,7 +16,7 @@ import numpy as np
 from controllers.base import ControllerContext
 from controllers.exceptions import OptionError
 from controllers.law_kernel import LawResult
-from controllers.law_tools import check_count, check_number
+from controllers.law_tools import check_count, check_flag, check_number
 from controllers.solvers.base import Solved, Solver
 from controllers.solvers.osqp_limits import OSQP_DEFAULTS, LimitQP
 
@@ -88,10 +88,12 @@ class LimitQPSolver(Solver):
         name = controller
         if damping:
             raise OptionError(name, "damping", "use 'regularization' with the QP law")
+        if shortcut is not None:
+            check_flag(name, "shortcut", shortcut)
         if shortcut is None:  # auto: OSQP always runs when its settings were chosen
             shortcut = (eps_abs, eps_rel, max_iter) == OSQP_DEFAULTS
         self.threshold = threshold
-        self.shortcut = bool(shortcut)
+        self.shortcut = check_flag(name, "shortcut", shortcut)
         reg = check_number(name, "regularization", regularization, 0.0, strict=False)
         self.stroke_margin = (None if stroke_margin is None else
                               check_number(name, "stroke_margin", stroke_margin, 0.0,

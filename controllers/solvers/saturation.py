@@ -18,7 +18,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from controllers.exceptions import ContextError
+from controllers.exceptions import OptionError
 
 if TYPE_CHECKING:
     from hexapod.dynamics import DynamicModel
@@ -31,11 +31,11 @@ def checked_strategy(controller: str, strategy: object) -> str:
     """``strategy`` if it is one of :data:`STRATEGIES`.
 
     Raises:
-        ContextError: Naming the option and the strategies.
+        OptionError: Naming the option and the strategies.
     """
     if strategy not in STRATEGIES:
-        raise ContextError(controller, "saturation", f"expected one of "
-                           f"{', '.join(map(repr, STRATEGIES))}, got {strategy!r}")
+        raise OptionError(controller, "saturation", f"expected one of "
+                          f"{', '.join(map(repr, STRATEGIES))}, got {strategy!r}")
     return str(strategy)
 
 

@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 
 from controllers import registry
-from controllers.exceptions import ContextError
+from controllers.exceptions import OptionError
 from hexapod import HexapodGeometry
 from hexapod.kinematics import inverse_kinematics
 from hexapod.se3 import exp_so3, pose_error
@@ -86,7 +86,7 @@ def test_no_integration_while_saturated(geometry: HexapodGeometry, name: str) ->
 
 
 def test_a_bad_gain_is_named() -> None:
-    with pytest.raises(ContextError, match="integral_gain"):
+    with pytest.raises(OptionError, match="integral_gain"):
         registry.create("vision-ctc", integral_gain=-1.0)
-    with pytest.raises(ContextError, match="integral_gain"):
+    with pytest.raises(OptionError, match="integral_gain"):
         registry.create("computed-torque", integral_gain=float("nan"))

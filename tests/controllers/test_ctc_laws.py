@@ -18,7 +18,7 @@ from scipy.optimize import curve_fit
 
 from controllers import registry
 from controllers.base import Observation
-from controllers.exceptions import ContextError
+from controllers.exceptions import ContextError, OptionError
 from hexapod import HexapodGeometry
 from hexapod.actuation import Actuation
 from hexapod.trajectory import PoseTrajectory
@@ -44,11 +44,11 @@ def world(geometry: HexapodGeometry) -> CtcWorld:
 def test_registered_force_controllers(law: str) -> None:
     ctrl = registry.create(law)
     assert ctrl.actuation is Actuation.FORCE
-    with pytest.raises(ContextError, match="natural_frequency"):
+    with pytest.raises(OptionError, match="natural_frequency"):
         registry.create(law, natural_frequency=-1.0)
-    with pytest.raises(ContextError, match="damping"):
+    with pytest.raises(OptionError, match="damping"):
         registry.create(law, damping=float("nan"))
-    with pytest.raises(ContextError, match="smooth_goal"):
+    with pytest.raises(OptionError, match="smooth_goal"):
         registry.create(law, smooth_goal="yes")
 
 

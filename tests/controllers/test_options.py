@@ -101,3 +101,23 @@ def test_the_docs_table_is_the_real_output(capsys: pytest.CaptureFixture[str]) -
     assert main(["list", "--options", "vision-ctc"]) == 0
     out = capsys.readouterr().out.splitlines()
     assert rows == [line for line in out if line.startswith("│")]
+
+
+#: Options of these types given a string in a file (``shortcut = "false"``, ``gain =
+#: "2.0"``) must be refused: ``bool("false")`` is True and a quoted number is a slip.
+_STRING_REFUSED = {"bool": "false", "bool | None": "false", "float": "1.0",
+                   "float | None": "1.0", "int": "3"}
+
+
+@pytest.mark.parametrize("name", sorted(BUILTIN_SPECS))
+def test_a_string_for_a_flag_or_a_number_is_refused_naming_the_option(name: str) -> None:
+    """Every boolean and numeric option of every built-in refuses a string (``"false"``
+    passed as true: the QP's ``shortcut``, the laws' ``compiled``), naming the option."""
+    from controllers.exceptions import OptionError
+
+    for o in option_table(registry.factory(name)).options:
+        if o.type not in _STRING_REFUSED:
+            continue
+        with pytest.raises((OptionError, ValueError)) as info:
+            registry.create(name, **{o.name: _STRING_REFUSED[o.type]})
+        assert o.name in str(info.value), (name, o.name, str(info.value))

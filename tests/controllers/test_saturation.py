@@ -23,7 +23,7 @@ from scipy.optimize import linprog
 
 from controllers import registry
 from controllers.base import ControllerContext, ObservationBatch
-from controllers.exceptions import ContextError
+from controllers.exceptions import OptionError
 from controllers.solvers.saturation import (
     acceleration_fraction,
     saturated,
@@ -85,7 +85,7 @@ def test_qp_against_linprog_on_random_cases(seed: int) -> None:
 
 
 def test_an_unknown_strategy_is_named() -> None:
-    with pytest.raises(ContextError, match=r"saturation.*'clip', 'scale', 'qp'.*'box'"):
+    with pytest.raises(OptionError, match=r"saturation.*'clip', 'scale', 'qp'.*'box'"):
         registry.create("computed-torque", saturation="box")
 
 
