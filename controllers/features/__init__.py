@@ -42,7 +42,11 @@ def controllers_for(feature: LegFeature) -> FeatureControllers:
 
     Args:
         feature: The feature (its ``name`` prefixes the controllers' names).
+
+    Raises:
+        ValueError: The feature's definition does not hold (:meth:`LegFeature.check`).
     """
+    feature.check()
     stem = "".join(part.capitalize() for part in feature.c_name.split("_"))
     mod = type(feature).__module__
     def make(base: type, suffix: str, kind: str, extra: dict[str, object]) -> type:

@@ -78,6 +78,32 @@ class LegFeature(ABC):
         return (inputs["desired_directions"][3 * leg:3 * leg + 3],
                 inputs["desired_lengths"][leg])
 
+    def check(self) -> None:
+        """Check the definition once, where it is made (:func:`~controllers.features.
+        controllers_for`): :attr:`rows` a positive integer, :meth:`value` and
+        :meth:`error` symbolic columns of that many rows.
+
+        Raises:
+            ValueError: Naming the feature, the method and the shapes.
+        """
+        rows = self.rows
+        if isinstance(rows, bool) or not isinstance(rows, int) or rows < 1:
+            raise ValueError(f"feature {self.name!r}: rows must be a positive integer, got "
+                             f"{rows!r}")
+        u, A, q = ca.SX.sym("u", 3), ca.SX.sym("A", 3), ca.SX.sym("q")
+        for what, make in (("value(u, q, A)", lambda: self.value(u, q, A)),
+                           ("error(f, f_star)", lambda: self.error(
+                               ca.SX.sym("f", rows), ca.SX.sym("f_star", rows)))):
+            try:
+                out = ca.SX(make())
+            except Exception as exc:
+                raise ValueError(f"feature {self.name!r}: {what} failed on symbols (it must "
+                                 f"be CasADi expressions): {type(exc).__name__}: {exc}"
+                                 ) from exc
+            if out.shape != (rows, 1):
+                raise ValueError(f"feature {self.name!r}: {what} returned shape {out.shape}, "
+                                 f"rows = {rows} declares ({rows}, 1)")
+
     # ------------------------------------------------------------------ derived
     def _leg_error(self, s: ca.SX, p: ca.SX) -> ca.SX:
         """Error of the leg state ``s = (u, q)`` with parameters ``p = (A, f*)``."""

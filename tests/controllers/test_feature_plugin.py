@@ -454,3 +454,42 @@ def test_tracking_a_batch(which: str, registered: None) -> None:
 
     tracking.test_tracking_a_batch_gives_the_rows_of_one_tracking_controller_per_trial(
         getattr(JOINTS, which).name, {})
+
+
+def test_a_feature_whose_value_is_not_its_rows_is_refused_where_it_is_defined() -> None:
+    """A feature's ``value`` of another shape than its ``rows`` (a column of 2 for 3, a
+    row instead of a column) failed every trial with a reshape or CasADi error deep in
+    a run; :func:`controllers_for` refuses it, naming the feature and the shapes."""
+    import casadi as ca
+
+    from controllers.features import LegFeature, controllers_for
+
+    class TwoForThree(LegFeature):
+        name = "two-for-three"
+        rows = 3
+
+        def value(self, u: Any, q: Any, A: Any) -> Any:
+            m = A + 0.5 * q * u
+            return ca.vertcat(m[0] / m[2], m[1] / m[2])
+
+    class RowNotColumn(TwoForThree):
+        name = "row-not-column"
+        rows = 2
+
+        def value(self, u: Any, q: Any, A: Any) -> Any:
+            m = A + 0.5 * q * u
+            return ca.horzcat(m[0] / m[2], m[1] / m[2])
+
+    class NotCasadi(TwoForThree):
+        name = "not-casadi"
+
+        def value(self, u: Any, q: Any, A: Any) -> Any:
+            return np.linalg.norm(np.asarray(u))  # numpy on symbols
+
+    for feature, text in ((TwoForThree(), "returned shape (2, 1), rows = 3 declares (3, 1)"),
+                          (RowNotColumn(), "returned shape (1, 2), rows = 2 declares (2, 1)"),
+                          (NotCasadi(), "failed on symbols")):
+        with pytest.raises(ValueError) as info:
+            controllers_for(feature)
+        assert f"feature {feature.name!r}: value(u, q, A)" in str(info.value), str(info.value)
+        assert text in str(info.value)
