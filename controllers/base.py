@@ -287,7 +287,13 @@ class Controller(RemembersOptions, ABC):
     # ------------------------------------------------------------------ one trial
     def reset_trial(self, context: ControllerContext) -> None:
         """Prepare this instance for one trial (the estimated parameters and the goal)."""
-        raise NotImplementedError(f"{type(self).__qualname__}: defines neither reset_batch "
+        cls = type(self)
+        if cls.reset is not Controller.reset:  # a per-trial plugin's reset, without step
+            raise NotImplementedError(
+                f"{cls.__qualname__}: defines reset(context) but no step(observation): a "
+                "controller of one trial defines both (a batch one step_batch, or "
+                "reset_trial and step_trial)")
+        raise NotImplementedError(f"{cls.__qualname__}: defines neither reset_batch "
                                   "nor reset_trial")
 
     def step_trial(self, observation: Observation) -> Command:

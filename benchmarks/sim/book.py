@@ -86,6 +86,8 @@ class Book:
         self.converged = np.zeros(n, dtype=bool)
         self.violations = np.zeros(n, dtype=int)
         self.refused = np.zeros(n, dtype=int)
+        #: Each row's last refusal reason (while it is refusing).
+        self.refusal: dict[int, str] = {}
         self.hidden = np.zeros(n, dtype=int)
         #: (n,) bool: the rows whose series are kept.
         self.recording = np.array([s.trial < record_trials for s in group], dtype=bool)
@@ -192,9 +194,13 @@ class Book:
         refused = np.fromiter((r is not None for r in reasons), dtype=bool, count=len(rows))
         self.refused[rows[~refused]] = 0
         self.refused[rows[refused]] += 1
+        for r in np.flatnonzero(refused).tolist():  # (what a world failure then follows)
+            self.refusal[int(rows[r])] = str(reasons[r])
         too_many = refused & (self.refused[rows] >= MAX_REFUSED_STEPS)
         for j in np.flatnonzero(invalid & ~too_many):
-            self.failure[rows[j]] = f"controller returned an invalid command {v[j]!r}"
+            values = np.array2string(v[j], separator=", ", max_line_width=10**6)
+            self.failure[rows[j]] = (f"controller {self.label!r} returned a non-finite "
+                                     f"command at step {step}: {values}")
         for j in np.flatnonzero(too_many):
             self.failure[rows[j]] = f"controller refused to move: {reasons[j]}"
         failed = invalid | too_many
@@ -250,6 +256,9 @@ class Book:
     def advanced(self, step: int, run: np.ndarray, failures: dict[int, str]) -> None:
         """End the rows whose true world failed during the period, each with its reason."""
         for k, reason in failures.items():
+            if self.refused[k]:  # the world failed under a controller that refused
+                reason += (f" (the controller had refused to move for the last "
+                           f"{self.refused[k]} period(s): {self.refusal.get(k)})")
             self.failure[k] = reason
             self.active[k] = False
             self.steps[k] = step + 1

@@ -77,6 +77,18 @@ class WrongShape(ProportionalJoints):
         return Command(cmd.velocities[:3], error=cmd.error, error_norm=cmd.error_norm)
 
 
+class NaNAtStep(ProportionalJoints):
+    """Returns a command with a NaN from period 3 (a numerical slip in a plugin)."""
+
+    name = "test-nan-at-step"
+
+    def step(self, observation: Observation) -> Command:
+        cmd = super().step(observation)
+        if observation.t > 0.05:
+            cmd.velocities[2] = np.nan
+        return cmd
+
+
 #: Calls of :class:`CrashingBatch`'s ``step_batch`` in this process (not rerun: counted).
 BATCH_CALLS: list[int] = []
 

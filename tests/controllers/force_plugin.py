@@ -52,3 +52,13 @@ class LegSpringForces(Controller):
         err = q - self._goal
         forces = -self.stiffness * err - self.damping * q_dot
         return Command.of_forces(forces, error=err, error_norm=float(np.linalg.norm(err)))
+
+
+class RefusingForces(LegSpringForces):
+    """Refuses every period ("my sensor is blind"): the drives get no force and the
+    platform falls under gravity (a failure the results must blame on the refusals)."""
+
+    name = "test-refusing-forces"
+
+    def step(self, observation: Observation) -> Command:
+        return Command.refuse("my sensor is blind", actuation=Actuation.FORCE)

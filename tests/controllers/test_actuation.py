@@ -79,3 +79,17 @@ def test_check_actuation_names_everything() -> None:
     assert check_actuation("velocity", (Actuation.VELOCITY,), "x", "y") is Actuation.VELOCITY
     with pytest.raises(ActuationError, match="unknown actuation 'torque'"):
         check_actuation("torque", tuple(Actuation), "x", "my-law")
+
+
+@pytest.mark.parametrize("engine", ["batched", "per-trial"])
+def test_a_fall_under_a_refusing_force_law_is_blamed_on_its_refusals(engine: str) -> None:
+    """A force law that refuses commands no force: the platform falls onto an end stop
+    before the refusals' own limit ends the trial, and the row said only 'leg 0 hit its
+    end stop'; it now says the controller had refused, how long and why."""
+    sc = replace(load_scenario("quick-dynamic").with_overrides(trials=1, max_steps=60),
+                 controllers=(ControllerSpec("tests.controllers.force_plugin:RefusingForces",
+                                             "blind"),))
+    row = run_trials(sc.expand()[0], 0, [0], engine=engine)[0].row
+    assert "hit its end stop" in row["failure"], row["failure"]
+    assert "the controller had refused to move for the last" in row["failure"]
+    assert row["failure"].endswith("period(s): my sensor is blind)"), row["failure"]

@@ -333,3 +333,21 @@ def test_a_foreign_object_is_stepped_one_object_per_trial() -> None:
 
     row = replace(obs.rows(np.array([1])), trials=np.array([0]))
     assert one.step_batch(row).reasons == [None]
+
+
+def test_a_per_trial_plugin_without_step_is_told_so() -> None:
+    """A plugin that defines reset but no step (or misspells it) was told it 'defines
+    neither reset_batch nor reset_trial', although it defines reset."""
+
+    class NoStep(Controller):
+        name = "no-step"
+
+        def reset(self, context: ControllerContext) -> None:  # type: ignore[misc]
+            self.goal = context.goal
+
+        def stepp(self, observation: Observation) -> Command:
+            return Command.refuse("never called")
+
+    with pytest.raises(NotImplementedError,
+                       match=r"NoStep: defines reset\(context\) but no step\(observation\)"):
+        NoStep().reset_trial(_contexts(1)[0])  # what the batch's reset calls per trial

@@ -20,6 +20,7 @@ JOINTS = "tests.benchmarks.plugins:ProportionalJoints"
 AT_STEP = "tests.benchmarks.plugins:CrashAtStep"
 WRONG = "tests.benchmarks.plugins:WrongShape"
 BATCH = "tests.benchmarks.plugins:CrashingBatch"
+NAN = "tests.benchmarks.plugins:NaNAtStep"
 RESET = "tests.benchmarks.sim.test_failure_rows:ResetFailsWithTrialOne"
 
 #: The sizes of the batches :class:`ResetFailsWithTrialOne` was reset with.
@@ -62,6 +63,18 @@ def _rows(tmp_path: Path, controllers: list[object], trials: int = 4,
     run_units(plan([_scenario(controllers, trials)], chunk_size=trials, record_trials=0,
                    engine=engine), tmp_path)
     return read_results(tmp_path)
+
+
+@pytest.mark.parametrize("engine", ["batched", "per-trial"])
+def test_a_non_finite_command_names_the_controller_and_the_step_on_one_line(
+        engine: str, tmp_path: Path) -> None:
+    """It said 'controller returned an invalid command array([...' over several lines
+    (the failure summary then grouped it trial by trial)."""
+    rows = _rows(tmp_path, [NAN], engine=engine)
+    for r in rows:
+        assert r["failure"].startswith(f"controller {NAN!r} returned a non-finite command at "
+                                       "step 3: ["), r["failure"]
+        assert "nan" in r["failure"] and "\n" not in r["failure"]
 
 
 @pytest.mark.parametrize("engine", ["batched", "per-trial"])
