@@ -47,7 +47,16 @@ def _fmt_diff(c: Any) -> str:
         return "-"
     if c.metric == "converged":
         return f"{100 * c.difference:+.1f} [{100 * lo:+.1f}, {100 * hi:+.1f}] pts"
-    return f"{_num(c.difference, '+.3g')} [{_num(lo, '+.3g')}, {_num(hi, '+.3g')}]"
+    return f"{_num(c.difference, '+.3g')} [{_end(lo, '+.3g')}, {_end(hi, '+.3g')}]"
+
+
+def _end(v: float, spec: str) -> str:
+    """An interval's end: ``-inf``/``inf`` where it has no finite bound (outside the
+    sample, or on a censored pair), never ``-censored`` (which read as the other
+    controller's censoring)."""
+    if v is not None and v in (float("inf"), float("-inf")):
+        return "inf" if v > 0 else "-inf"
+    return _num(v, spec)
 
 
 def _fmt_verdict(c: Any, runs: tuple[str, str] | None) -> str:

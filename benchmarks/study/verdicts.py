@@ -129,6 +129,14 @@ def _num(x: float, spec: str) -> str:
     return format(x, spec)
 
 
+def _end(x: float, spec: str) -> str:
+    """An interval's end: ``-inf``/``inf`` where it has no finite bound (outside the
+    sample, or on a censored pair)."""
+    if x is not None and np.isinf(x):
+        return "inf" if x > 0 else "-inf"
+    return _num(x, spec)
+
+
 def _effect(c: Comparison) -> str:
     lo, hi = c.interval
     if c.metric == "converged":
@@ -137,7 +145,7 @@ def _effect(c: Comparison) -> str:
     unit = f" {c.unit}" if c.unit else ""
     up, down = c.discordant or (0, 0)
     return (f"median paired difference {_num(c.difference, '+.4g')}{unit} "
-            f"[{_num(lo, '+.4g')}, {_num(hi, '+.4g')}], medians {_num(c.a_value, '.4g')} "
+            f"[{_end(lo, '+.4g')}, {_end(hi, '+.4g')}], medians {_num(c.a_value, '.4g')} "
             f"and {_num(c.b_value, '.4g')}{unit}; {c.a} higher in {up} and lower in {down} "
             "of the pairs")
 

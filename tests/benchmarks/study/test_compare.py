@@ -376,6 +376,23 @@ def test_a_censored_median_difference_is_known_where_its_order_statistics_are() 
         assert exact.censored_quantile(finite, 0.5) == np.quantile(finite, 0.5)
 
 
+def test_an_interval_end_without_a_finite_bound_prints_as_inf_not_censored() -> None:
+    """Five pairs where only ``b`` settled: the median difference is censored, its
+    interval's lower end lies outside the sample (a median needs 6 for both ends) and
+    printed ``-censored``, as if ``a`` had been the censored one; it is ``-inf``."""
+    from types import SimpleNamespace
+
+    from benchmarks.study.analysis_cli import _fmt_diff
+    from benchmarks.study.compare import censored_sign_test
+
+    inf = np.inf
+    res = censored_sign_test(np.full(5, inf), np.array([1.0, 2.0, 2.5, 3.0, 0.9]))
+    assert res.difference == inf and res.low == -inf and res.high == inf
+    row = SimpleNamespace(metric="settling", difference=res.difference,
+                          interval=(res.low, res.high))
+    assert _fmt_diff(row) == "censored [-inf, inf]"
+
+
 def _with_study(run: Path, study: dict[str, object]) -> Path:
     (run / "run.json").write_text(json.dumps({"scenarios": {"synthetic": {"study": study}}}))
     return run
