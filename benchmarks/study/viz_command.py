@@ -62,9 +62,14 @@ def find_record(out: Path, trial: int, controller: str | None = None,
                              + (f" of '{controller}'" if controller else "")
                              + f"{hint}; recorded: {', '.join(available)}")
     if len(matches) > 1:
+        names = [m.stem.split("__") for m in matches]
+        options = [option for option, k, given in (("--scenario", 0, scenario),
+                                                   ("--point", 1, point),
+                                                   ("--controller", 2, controller))
+                   if given is None and len({n[k] for n in names}) > 1]
         raise BenchmarkError(f"{out}: {len(matches)} records match ("
                              + ", ".join(m.stem for m in matches[:8])
-                             + "); choose with --controller, --scenario or --point")
+                             + "); choose with " + " and ".join(options))
     return matches[0]
 
 
