@@ -92,7 +92,10 @@ def scenario_setup(sc: Any) -> Setup:
             needs.append(spec.label)
     problems: list[Problem] = []
     if sc.task.kind == "fixed":
-        problems += fixed_task_problems(g, sc.task.start_mm, sc.task.goal_mm)
+        problems += fixed_task_problems(g, sc.task.start_mm, sc.task.goal_mm, camera=cam,
+                                        needs_camera=needs,
+                                        controllers=len(sc.controllers),
+                                        where_camera=where.camera)
     task = (sc.task.max_translation_mm, sc.task.max_angle_deg, sc.task.margin_mm)
     swept = sc.sweep_axes.get("drives.velocity_bandwidth_hz")
     bandwidth = sc.drives.velocity_bandwidth_hz

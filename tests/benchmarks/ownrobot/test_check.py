@@ -181,3 +181,34 @@ def test_check_says_what_a_calibration_file_is_for(tmp_path: Path,
     cal.write_text('base_points_camera_mm = [[1.0, 2.0, 3.0]]\n')  # one point of six
     assert main(["check", str(cal)]) == 2
     assert "base_points_camera_mm" in capsys.readouterr().err
+
+
+def test_a_fixed_task_whose_start_the_camera_cannot_resolve_is_refused() -> None:
+    """A fixed task starting where the camera sees 3 edges (a singular edge interaction):
+    check said the setup could run and every leg-edge trial then refused to move. The
+    start and goal are examined: an error when every controller steers by the image, a
+    warning naming them otherwise, nothing for a camera that sees them."""
+    from benchmarks.study.setup_check import fixed_task_problems
+    from hexapod.kinematics import Transform
+    from vision.cameras.perspective import PerspectiveCamera
+
+    g = deltalab()
+    R0, t0 = home_pose(g)[:2]
+    home_mm = inverse_kinematics(g, R0, t0) * 1e3
+    good = front_camera(g)
+    T = good.camera_from_base
+    close = PerspectiveCamera(good.K, good.width, good.height,
+                              Transform(T.rotation, np.array([*T.translation[:2], 0.25])))
+    assert int(np.asarray(observe_legs(close, g, R0, t0).edge_visible).sum()) == 3
+    alone = fixed_task_problems(g, home_mm, home_mm + 5.0, camera=close,
+                                needs_camera=["leg-edge"], controllers=1)
+    starts = [p for p in alone if p.text.startswith("task.start_mm")]
+    assert starts and starts[0].severity == "error", alone
+    assert "sees 3 leg edge(s) at the task's start" in starts[0].text
+    assert "leg-edge cannot steer by the image there" in starts[0].text
+    mixed = fixed_task_problems(g, home_mm, home_mm + 5.0, camera=close,
+                                needs_camera=["leg-edge"], controllers=2)
+    assert all(p.severity == "warning" for p in mixed) and mixed
+    assert "the other controllers do not need the camera" in mixed[0].text
+    assert fixed_task_problems(g, home_mm, home_mm + 5.0, camera=good,
+                               needs_camera=["leg-edge"], controllers=1) == []
