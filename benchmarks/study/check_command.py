@@ -281,10 +281,13 @@ def describe(setup: Setup, report: SetupReport, source: str,
         f"Robot '{g.name}': base radius {_f(base_r.mean() * 1e3)} mm, platform radius "
         f"{_f(plat_r.mean() * 1e3)} mm, stroke {g.q_min * 1e3:g}-{g.q_max * 1e3:g} mm, leg "
         f"radius {g.leg_radius * 1e3:g} mm, speed limit {g.max_speed * 1e3:g} mm/s",
-        f"  home pose: platform parallel to the base, centred, {_f(report.home_height_mm)} mm "
-        "above it",
-        "  leg lengths at home [mm]: " + ", ".join(
-            f"{i}: {_f(q)}" for i, q in enumerate(report.home_lengths_mm)), ""]
+        *(["  home pose: none (the legs cannot all be within the stroke: the error below)"]
+          if not np.all((report.home_lengths_mm >= g.q_min * 1e3 - 1e-9)
+                        & (report.home_lengths_mm <= g.q_max * 1e3 + 1e-9)) else [
+            f"  home pose: platform parallel to the base, centred, "
+            f"{_f(report.home_height_mm)} mm above it",
+            "  leg lengths at home [mm]: " + ", ".join(
+                f"{i}: {_f(q)}" for i, q in enumerate(report.home_lengths_mm))]), ""]
     lines += _dynamics_lines(g, setup.drives_note)
     mt, ma, mm = report.box
     r = report.translation_range_mm

@@ -263,9 +263,14 @@ def check_setup(geometry: HexapodGeometry, camera: Any, max_translation_mm: floa
             why = (f"with the platform parallel to the base and centred, leg(s) "
                    f"{', '.join(map(str, out_legs))} cannot be within the stroke {stroke} at "
                    f"any height (at {t0[2] * 1e3:.1f} mm: {_mm_list(q0[out_legs])} mm)")
+        metres = (" (a stroke under 10 mm: given in metres? stroke_mm is in millimetres)"
+                  if geometry.q_max < 0.01 else "")
         problems.append(Problem("error", (
-            f"empty workspace, no home pose: {why}; change {where.strokes}, or "
+            f"empty workspace, no home pose: {why}{metres}; change {where.strokes}, or "
             f"{where.points}")))
+    problems += _unit_slips(geometry, where)
+    if not out_legs:
+        problems += _legs_crossing(geometry, R0, t0, where)
     R, t = random_box_poses(geometry, WORKSPACE_SAMPLES, 1e-3 * max_translation_mm,
                             np.deg2rad(max_angle_deg), rng)
     ok = _inside(geometry, R, t, 1e-3 * margin_mm)
@@ -276,7 +281,7 @@ def check_setup(geometry: HexapodGeometry, camera: Any, max_translation_mm: floa
             f"{max_translation_mm:g} mm and {max_angle_deg:g} deg of the home pose) keeps "
             f"every leg {margin_mm:g} mm inside the stroke {stroke}; change {where.strokes}, "
             f"or {where.task}")))
-    elif fraction < LOW_FRACTION:
+    elif fraction < LOW_FRACTION and not out_legs:
         problems.append(Problem("warning", (
             f"small workspace: {100 * fraction:.2f} % of the random poses of the task box "
             f"keep the legs inside the strokes; drawing a trial's start and goal may fail; "
@@ -312,6 +317,48 @@ def check_setup(geometry: HexapodGeometry, camera: Any, max_translation_mm: floa
         home_fraction=np.nan_to_num(np.asarray(home_obs.visible_fraction, float)))
     problems += _camera_problems(report, camera, home_obs, needs_camera, where)
     return report
+
+
+def _legs_crossing(geometry: HexapodGeometry, R0: np.ndarray, t0: np.ndarray,
+                   where: Where) -> list[Problem]:
+    """A warning for each pair of legs whose cylinders meet at home away from their
+    joints (between 10 % and 90 % of each leg's length): axes closer than two leg radii.
+    Legs that share a joint's neighbourhood meet there by design; crossed legs (two rows
+    of the points swapped) or legs thicker than their joints' spacing do not."""
+    A = geometry.base_points
+    B = (R0 @ geometry.platform_points.T).T + t0
+    s = np.linspace(0.1, 0.9, 81)[:, None]
+    axis = A[:, None, :] + s[None] * (B - A)[:, None, :]  # (6, 81, 3)
+    out = []
+    for i in range(6):
+        for j in range(i + 1, 6):
+            d = np.linalg.norm(axis[i][:, None] - axis[j][None], axis=2)
+            k = np.unravel_index(int(np.argmin(d)), d.shape)
+            if d[k] < 2 * geometry.leg_radius:
+                out.append(Problem("warning", (
+                    f"legs {i} and {j} meet at home: their axes pass {d[k] * 1e3:.1f} mm "
+                    f"apart ({100 * s[k[0], 0]:.0f} % along leg {i}, {100 * s[k[1], 0]:.0f} % "
+                    f"along leg {j}), closer than two leg radii ({2e3 * geometry.leg_radius:g} "
+                    f"mm): no robot has them; check {where.points} (two rows swapped?) or "
+                    "leg_radius_mm"), "robot"))
+    return out
+
+
+def _unit_slips(geometry: HexapodGeometry, where: Where) -> list[Problem]:
+    """Warnings for values no hexapod has, which metres typed into a millimetre key
+    give: a leg radius under 1 mm, a leg speed limit under 1 mm/s."""
+    out = []
+    robot = where.strokes.split(" in ", 1)[-1]  # the robot file
+    if geometry.leg_radius < 1e-3:
+        out.append(Problem("warning", f"leg radius {geometry.leg_radius * 1e3:g} mm: given "
+                           "in metres? leg_radius_mm is in millimetres (the camera sees "
+                           f"a leg's two edges 2 radii apart); check leg_radius_mm in {robot}",
+                           "robot"))
+    if geometry.max_speed < 1e-3:
+        out.append(Problem("warning", f"leg speed limit {geometry.max_speed * 1e3:g} mm/s: "
+                           "given in m/s? max_speed_mm_s is in millimetres per second (a "
+                           f"trial would take hours); check max_speed_mm_s in {robot}", "robot"))
+    return out
 
 
 def _camera_problems(report: SetupReport, camera: Any, home_obs: Any, needs_camera: bool,

@@ -212,3 +212,33 @@ def test_a_fixed_task_whose_start_the_camera_cannot_resolve_is_refused() -> None
     assert "the other controllers do not need the camera" in mixed[0].text
     assert fixed_task_problems(g, home_mm, home_mm + 5.0, camera=good,
                                needs_camera=["leg-edge"], controllers=1) == []
+
+
+def test_slips_a_user_makes_in_a_robot_file_are_warned_of(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """Two platform rows swapped (legs crossing), a leg radius or a speed in metres, a
+    stroke in metres: check said 'No problem found' for the first three and printed a
+    home pose that did not exist for the last."""
+    from dataclasses import replace
+
+    good = own_robot()
+    good.to_toml(tmp_path / "good.toml")
+    code, text = _check([str(tmp_path / "good.toml")], capsys)
+    assert code == 0 and "meet at home" not in text and "given in m" not in text, text
+    points = good.platform_points.copy()
+    points[[0, 3]] = points[[3, 0]]
+    cases = {
+        "crossed": (replace(good, platform_points=points), "legs 0 and 3 meet at home"),
+        "radius": (replace(good, leg_radius=2e-5), "leg radius 0.02 mm: given in metres?"),
+        "speed": (replace(good, max_speed=4e-5), "leg speed limit 0.04 mm/s: given in m/s?"),
+    }
+    for name, (robot, text_expected) in cases.items():
+        robot.to_toml(tmp_path / f"{name}.toml")
+        code, text = _check([str(tmp_path / f"{name}.toml")], capsys)
+        assert code == 0 and f"warning: {text_expected}" in text, (name, text)
+    own_robot(stroke=(0.00038, 0.00054)).to_toml(tmp_path / "metres.toml")
+    code, text = _check([str(tmp_path / "metres.toml")], capsys)
+    assert code == 1, text
+    assert "home pose: none" in text and "leg lengths at home" not in text, text
+    assert "given in metres? stroke_mm is in millimetres" in text
+    assert "small workspace" not in text  # (the error says it)
