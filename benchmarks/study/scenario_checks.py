@@ -166,7 +166,9 @@ def check_fixed_task(task: TaskConfig, preset: str | None, geometry: Any,
     for key in ("start_mm", "goal_mm"):
         value = getattr(task, key)
         if value is None or len(value) != 6:
-            raise ScenarioError(path, "a fixed task needs 6 leg lengths [mm]", key=f"task.{key}")
+            got = "none" if value is None else f"{len(value)}"
+            raise ScenarioError(path, f"a fixed task needs 6 leg lengths [mm], got {got}",
+                                key=f"task.{key}")
     if geometry is None:
         geometry = geometry_preset(preset or "deltalab")
     lo, hi = (1e3 * x for x in geometry.stroke)

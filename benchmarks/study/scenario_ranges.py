@@ -68,6 +68,23 @@ RANGES: dict[str, tuple[float, float, bool, bool]] = {
     **PAYLOAD_RANGES,
 }
 
+#: Units of keys whose name does not end in one (the others: :func:`unit_of`).
+_UNITS = {"robot.dt": "s", "robot.physics_dt": "s"}
+#: A key's unit from the end of its name (the longest first).
+_SUFFIXES = (("_mm_s3", "mm/s^3"), ("_mm_s2", "mm/s^2"), ("_mm_s", "mm/s"),
+             ("_deg_s3", "deg/s^3"), ("_deg_s2", "deg/s^2"), ("_deg_s", "deg/s"),
+             ("_mm", "mm"), ("_deg", "deg"), ("_hz", "Hz"), ("_ms", "ms"), ("_px", "px"),
+             ("_percent", "%"), ("_kg", "kg"), ("_n", "N"), ("_s", "s"))
+
+
+def unit_of(key: str) -> str:
+    """The unit of a dotted key (``task.speed_mm_s``: ``mm/s``; ``robot.dt``: ``s``), or
+    empty for a count or a fraction."""
+    if key in _UNITS:
+        return _UNITS[key]
+    return next((unit for end, unit in _SUFFIXES if key.endswith(end)), "")
+
+
 def check_range(value: Any, key: str, path: str) -> None:
     """Refuse a number outside :data:`RANGES` (``key`` is the dotted key).
 
@@ -79,5 +96,8 @@ def check_range(value: Any, key: str, path: str) -> None:
     lo, hi, lo_in, hi_in = RANGES[key]
     ok = (value >= lo if lo_in else value > lo) and (value <= hi if hi_in else value < hi)
     if not ok:
-        interval = f"{'[' if lo_in else '('}{lo:g}, {hi:g}{']' if hi_in else ')'}"
-        raise ScenarioError(path, f"{value!r} is out of the allowed range {interval}", key=key)
+        unit = unit_of(key)
+        interval = (f"{'[' if lo_in else '('}{lo:g}, {hi:g}{']' if hi_in else ')'}"
+                    + (f" {unit}" if unit else ""))
+        raise ScenarioError(path, f"{value!r}{f' {unit}' if unit else ''} is out of the "
+                            f"allowed range {interval}", key=key)

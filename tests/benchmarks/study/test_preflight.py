@@ -62,7 +62,7 @@ BAD = {
         "the home pose has these six leg lengths"),
     "a value out of its range": (
         'controllers = ["leg-edge"]\n[noise]\nmodel = "rotation"\namplitude_deg = 1e9\n',
-        "key 'noise.amplitude_deg': 1000000000.0 is out of the allowed range [0, 90]"),
+        "key 'noise.amplitude_deg': 1000000000.0 deg is out of the allowed range [0, 90] deg"),
 }
 
 
