@@ -90,7 +90,7 @@ def scenario_setup(sc: Any) -> Setup:
                            frozenset({"lengths"}))
         if set(features) - {"lengths"}:
             needs.append(spec.label)
-    problems: list[Problem] = []
+    problems: list[Problem] = _model_problems(sc, g)
     if sc.task.kind == "fixed":
         problems += fixed_task_problems(g, sc.task.start_mm, sc.task.goal_mm, camera=cam,
                                         needs_camera=needs,
@@ -103,8 +103,35 @@ def scenario_setup(sc: Any) -> Setup:
             + ", ".join(f"{v:g}" for v in swept) + " Hz (shown: the first)" if swept
             else f"the velocity loops set to {bandwidth:g} Hz by [drives] in {sc.source}"
             if bandwidth > 0 else None)
-    return Setup("scenario", g, cam, task, where, needs, [], problems,
+    notes = []
+    if getattr(sc, "model_data", None) is not None:
+        m = sc.model_data
+        notes.append(f"controllers' model: [inertia] and [drives] of {sc.robot_model} "
+                     f"('{m.name}': platform {m.inertia.platform_mass:g} kg, force limit "
+                     f"{float(m.drives.force_limit.max()):g} N); the world's truth is the "
+                     "robot's, below")
+    return Setup("scenario", g, cam, task, where, needs, notes, problems,
                  tuple(spec.label for spec in sc.controllers), note)
+
+
+def _model_problems(sc: Any, g: Any) -> list[Problem]:
+    """``[robot] model``: a warning when the file describes another robot (its points
+    or strokes differ from the robot's by more than 1 mm: only its ``[inertia]`` and
+    ``[drives]`` are used, and a file made for another robot was taken silently)."""
+    m = getattr(sc, "model_data", None)
+    if m is None:
+        return []
+    gap = max(float(np.abs(m.base_points - g.base_points).max()),
+              float(np.abs(m.platform_points - g.platform_points).max()),
+              float(np.abs(np.subtract(m.stroke, g.stroke)).max()))
+    if gap <= 1e-3:
+        return []
+    return [Problem("warning", (
+        f"robot.model: {sc.robot_model} describes another robot ('{m.name}': its points or "
+        f"strokes differ from the robot's by up to {gap * 1e3:.1f} mm); the controllers take "
+        "only its [inertia] and [drives] (platform "
+        f"{m.inertia.platform_mass:g} kg, force limit {float(m.drives.force_limit.max()):g} "
+        "N): a file for another robot?"))]
 
 
 def load_scenario_file(text: str) -> Any | None:

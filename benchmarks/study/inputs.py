@@ -81,6 +81,8 @@ def copy_inputs(out: Path, sc: Any, allow_foreign: bool = False) -> dict[str, An
     if sc.robot_geometry:
         table.setdefault("robot", {})["geometry"] = _copy(sc.robot_geometry, folder, used,
                                                           "robot")
+    if sc.robot_model:  # the controllers' model (an identified robot file)
+        table.setdefault("robot", {})["model"] = _copy(sc.robot_model, folder, used, "model")
     if sc.camera_file:
         key = "opencv" if "opencv" in table.get("camera", {}) else "file"
         table.setdefault("camera", {})[key] = _camera_copy(Path(sc.camera_file), folder, used)
@@ -172,6 +174,12 @@ def settings(sc: Any) -> dict[str, str]:
                  else GOAL_TEXT[sc.task.goal]),
         "trials": f"{sc.trials} per sweep point and controller, seed {sc.seed}",
     }
+    if getattr(sc, "robot_model", None):  # the controllers' masses and drives
+        m = sc.model_data
+        out["controllers' model"] = (
+            f"{Path(sc.robot_model).name} ({m.name}: [inertia] and [drives], platform "
+            f"{m.inertia.platform_mass:g} kg, force limit "
+            f"{float(m.drives.force_limit.max()):g} N; the world's truth is the robot's)")
     if getattr(sc, "payload", None) is not None:
         p = sc.payload
         out["payload"] = (f"{p.mass_kg:g} kg, centre of mass {list(p.com_mm)} mm (platform "

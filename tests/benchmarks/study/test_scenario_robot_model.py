@@ -50,3 +50,27 @@ def test_a_missing_or_bad_model_file_is_refused(tmp_path: Path) -> None:
     (tmp_path / "bad.toml").write_text("name = 'x'\n")
     with pytest.raises(ScenarioError, match=r"robot\.model"):
         load_scenario(str(_write(tmp_path, "bad.toml")))
+
+
+def test_check_names_the_controllers_model_and_warns_of_another_robot_s(
+        tmp_path: Path) -> None:
+    """A model file made for another robot (other points and strokes) was taken without
+    a word, and check never showed the controllers' model: it is named, with its
+    masses, in check and in the run's settings, and another robot's file is warned of."""
+    from benchmarks.study.check_command import examine, scenario_setup
+    from benchmarks.study.inputs import settings
+    from hexapod.geometry import HexapodGeometry, circular_points
+
+    g = preset("deltalab")
+    g.replace(inertia=g.inertia.replace(platform_mass=3.3)).to_toml(tmp_path / "same.toml")
+    angles = np.deg2rad([5.0, -5.0, 115.0, 125.0, 235.0, 245.0])
+    HexapodGeometry(circular_points(0.9, angles), circular_points(0.5, angles + 1.0),
+                    (0.9, 1.2), 0.03, 0.05, "big-hexapod").to_toml(tmp_path / "big.toml")
+    for name, warned in (("same.toml", False), ("big.toml", True)):
+        sc = load_scenario(str(_write(tmp_path, name)))
+        setup = scenario_setup(sc)
+        assert any("controllers' model: [inertia] and [drives] of" in n and name in n
+                   for n in setup.notes), setup.notes
+        texts = [p.text for p in examine(setup).problems]
+        assert any("describes another robot" in t for t in texts) is warned, texts
+        assert name in settings(sc)["controllers' model"]

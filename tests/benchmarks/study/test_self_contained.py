@@ -178,3 +178,27 @@ def test_viz_points_to_record_for_a_trial_that_was_not_recorded(
     assert (f"{none}: no recorded trial (the run used --record 0); rerun into a new --out "
             "with --record K") in capsys.readouterr().err
     assert not (tmp_path / "t.html").exists()
+
+
+def test_the_controllers_model_file_is_kept_and_the_copy_runs(tmp_path: Path) -> None:
+    """``[robot] model`` (the controllers' robot file, e.g. an identified one) was not
+    copied into ``inputs/``: the kept scenario named a file that was not there, and the
+    command the report gives to run it again failed."""
+    from benchmarks.study.scenario import load_scenario
+
+    folder = tmp_path / "lab"
+    folder.mkdir()
+    g = deltalab()
+    g.to_toml(folder / "identified.toml")
+    (folder / "study.toml").write_text(
+        'name = "mine"\ntrials = 1\ncontrollers = ["computed-torque"]\n'
+        '[robot]\nworld = "dynamic"\nmodel = "identified.toml"\n[task]\nmax_steps = 5\n')
+    out = tmp_path / "run"
+    assert cli_main(["run", str(folder / "study.toml"), "--out", str(out),
+                     "--no-progress"]) == 0
+    kept = out / "inputs" / "mine"
+    assert (kept / "identified.toml").read_bytes() == (folder / "identified.toml").read_bytes()
+    again = load_scenario(kept / "scenario.toml")
+    assert Path(again.robot_model).resolve() == (kept / "identified.toml").resolve()
+    assert cli_main(["run", str(kept / "scenario.toml"), "--out", str(tmp_path / "again"),
+                     "--no-progress"]) == 0
