@@ -176,6 +176,11 @@ class BackendPlant(Plant):
 def world_actuation(sc: Any) -> tuple[tuple[Actuation, ...], str]:
     """What the scenario's world (``sc.world``) applies, and how messages name it."""
     if getattr(sc, "world", "kinematic") == "dynamic":
+        from benchmarks.sim.world import load_geometry
+
+        if load_geometry(sc).drives.mode == "force":  # no velocity loop to command
+            return ((Actuation.FORCE,), "the dynamic world with force-mode drives (robot "
+                    "file [drives] mode = \"force\")")
         return (Actuation.VELOCITY, Actuation.FORCE), "the dynamic world"
     return (Actuation.VELOCITY,), "the kinematic world"
 

@@ -42,6 +42,7 @@ class PayloadFacts:
         peak_n: (6,) largest force of each leg along the sampled references [N] (None:
             not a trajectory task).
         limit_n: (6,) the drives' force limits [N].
+        problems: What the forces say (a static load over a limit).
     """
 
     sweep: dict[str, Any]
@@ -50,6 +51,8 @@ class PayloadFacts:
     peak_n: np.ndarray | None
     limit_n: np.ndarray
     problems: list[Problem] = field(default_factory=list)
+    #: The fraction of the sampled starts every drive can hold at rest.
+    held: float = 1.0
 
 
 def _drive_forces(g: Any, R: np.ndarray, t: np.ndarray, twist: np.ndarray,
@@ -69,6 +72,14 @@ def _drive_forces(g: Any, R: np.ndarray, t: np.ndarray, twist: np.ndarray,
 
 
 def _point(sc: Any, samples: int) -> PayloadFacts | None:
+    return _facts(sc, samples, peaks=True)
+
+
+def _static_point(sc: Any, samples: int) -> PayloadFacts | None:
+    return _facts(sc, samples, peaks=False)
+
+
+def _facts(sc: Any, samples: int, peaks: bool) -> PayloadFacts | None:
     from benchmarks.sim.reference import trial_reference
     from benchmarks.study.trajectory_check import sampled_setups
 
@@ -76,13 +87,16 @@ def _point(sc: Any, samples: int) -> PayloadFacts | None:
     if not setups:
         return None
     static = np.zeros(6)
-    peak = np.zeros(6) if sc.task.kind == "trajectory" else None
+    peak = np.zeros(6) if sc.task.kind == "trajectory" and peaks else None
+    held = 0
     for s in setups:
         g = s.world.geometry
         R, t = s.start_rotation[None], s.start_translation[None]
         zero = np.zeros((1, 6))
-        static = np.maximum(static, np.abs(_drive_forces(g, R, t, zero, zero))[0])
-        ref = trial_reference(sc, s)
+        at_rest = np.abs(_drive_forces(g, R, t, zero, zero))[0]
+        static = np.maximum(static, at_rest)
+        held += bool(np.all(at_rest <= np.asarray(g.drives.force_limit, dtype=float)))
+        ref = trial_reference(sc, s) if peak is not None else None
         if ref is not None and peak is not None:
             times = np.append(np.arange(0.0, ref.duration, sc.dt), ref.duration)
             r = ref.at(times)
@@ -90,44 +104,71 @@ def _point(sc: Any, samples: int) -> PayloadFacts | None:
             peak = np.maximum(peak, np.abs(f).max(axis=0))
     mass = sc.payload.mass_kg if sc.payload is not None else 0.0
     limit = np.asarray(setups[0].world.geometry.drives.force_limit, dtype=float)
-    return PayloadFacts(dict(sc.sweep), mass, static, peak, limit)
+    return PayloadFacts(dict(sc.sweep), mass, static, peak, limit, held=held / len(setups))
 
 
 def payload_facts(sc: Any, samples: int = SAMPLED_STARTS) -> list[PayloadFacts]:
-    """The facts and problems of each sweep point of a scenario with a ``[payload]`` in
-    the dynamic world (empty otherwise)."""
-    if getattr(sc, "payload", None) is None or sc.world != "dynamic":
+    """The facts and problems of each sweep point of a scenario in the dynamic world
+    (empty otherwise): with a ``[payload]``, its static and peak forces; without, the
+    static load of the robot's own weight. A static load over a limit is a warning (a
+    payload study may be about what happens past it); when no sampled start of any
+    sweep point can be held at rest, an error (every trial would fall)."""
+    if sc.world != "dynamic":
         return []
     from benchmarks.study.trajectory_check import sweep_facts
 
+    payload = getattr(sc, "payload", None) is not None
     out = []
-    for _, facts, where in sweep_facts(sc, _point, samples):
+    for _, facts, where in sweep_facts(sc, _point if payload else _static_point, samples):
         over = np.flatnonzero(facts.static_n > facts.limit_n)
         if over.size:
             leg = int(over[np.argmax(facts.static_n[over] - facts.limit_n[over])])
+            load = (f"with a {facts.mass_kg:g} kg payload the static load alone" if payload
+                    else "the robot's own weight alone (no payload)")
             facts.problems.append(Problem("warning", (
-                f"with a {facts.mass_kg:g} kg payload the static load alone exceeds the "
-                f"drives' force limit: leg {leg} needs {facts.static_n[leg]:.0f} N at rest, "
-                f"its limit is {facts.limit_n[leg]:g} N ({over.size} leg(s) over): the "
-                f"drives cannot hold the platform still {where}")))
+                f"{load} exceeds the drives' force limit: leg {leg} needs "
+                f"{facts.static_n[leg]:.0f} N at rest, its limit is {facts.limit_n[leg]:g} "
+                f"N ({over.size} leg(s) over; {100 * (1 - facts.held):.0f} % of the sampled "
+                f"starts cannot be held): the drives cannot hold the platform still {where}")))
         out.append(facts)
+    if out and all(f.held == 0 for f in out):  # every start of every point falls
+        first = out[0]
+        first.problems.append(Problem("error", (
+            "no sampled start of the study can be held at rest: the drives' force limits "
+            f"({first.limit_n.min():g} N) are below the static load at every one, so every "
+            f"trial would fall onto an end stop; raise force_limit in [drives] of the robot "
+            f"file, or lighten the load, in {sc.source}")))
     return out
 
 
 def describe_payload(facts: list[PayloadFacts], sc: Any) -> list[str]:
-    """The lines ``check`` prints about a scenario's payload."""
+    """The lines ``check`` prints about the static load (and a ``[payload]``'s forces):
+    one per sweep point, named by its swept values."""
     if not facts:
         return []
+    from benchmarks.study.trajectory_check import sweep_text
+
     p = sc.payload
-    lines = [f"Payload (com {list(p.com_mm)} mm in the platform frame, inertia "
-             f"{list(p.inertia_kg_m2)} kg m^2; drive forces over the sampled starts and "
-             "legs, peak: following the reference exactly, rotor inertia and friction "
-             "included):"]
+    lines = ([f"Payload (com {list(p.com_mm)} mm in the platform frame, inertia "
+              f"{list(p.inertia_kg_m2)} kg m^2; drive forces over the sampled starts and "
+              "legs, peak: following the reference exactly, rotor inertia and friction "
+              "included):"] if p is not None else
+             ["Static load (the robot's own weight, no payload; drive forces holding the "
+              "sampled starts at rest, the largest over starts and legs):"])
+    if p is None and len({(round(float(f.static_n.max())), float(f.limit_n.min()))
+                          for f in facts}) == 1:  # the same at every sweep point (as printed)
+        f = facts[0]
+        return [*lines, f"  {f.static_n.max():.0f} N; force limit {f.limit_n.min():g} N"
+                + (" (every sweep point)" if len(facts) > 1 else ""), ""]
     for f in facts:
         peak = ("" if f.peak_n is None else
                 f", peak {f.peak_n.max():.0f} N" + (" (beyond the limit: the drives will "
                                                     "saturate)" if np.any(f.peak_n > f.limit_n)
                                                     else ""))
-        lines.append(f"  {f.mass_kg:g} kg: static {f.static_n.max():.0f} N{peak}; force "
-                     f"limit {f.limit_n.min():g} N")
+        what = f"{f.mass_kg:g} kg" if p is not None else "static"
+        others = {k: v for k, v in f.sweep.items() if k != "payload.mass_kg"}  # (shown)
+        point = f" ({sweep_text(others)})" if others else ""
+        static = f"static {f.static_n.max():.0f} N" if p is not None else \
+            f"{f.static_n.max():.0f} N"
+        lines.append(f"  {what}{point}: {static}{peak}; force limit {f.limit_n.min():g} N")
     return [*lines, ""]

@@ -4,6 +4,7 @@ whatever applies it refuses the kind it cannot apply, naming the controller."""
 from __future__ import annotations
 
 from dataclasses import replace
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -93,3 +94,23 @@ def test_a_fall_under_a_refusing_force_law_is_blamed_on_its_refusals(engine: str
     assert "hit its end stop" in row["failure"], row["failure"]
     assert "the controller had refused to move for the last" in row["failure"]
     assert row["failure"].endswith("period(s): my sensor is blind)"), row["failure"]
+
+
+def test_a_velocity_law_on_force_mode_drives_is_refused_before_any_trial(
+        tmp_path: Path) -> None:
+    """A robot file whose drives are in force mode (no velocity loop) with leg-edge: check
+    said the setup could run and every trial failed; the study is refused as a force law
+    in the kinematic world is, naming the controller and the drives' mode."""
+    from benchmarks.exceptions import ScenarioError
+    from benchmarks.study.scenario import check_controllers
+    from benchmarks.study.scenario import load_scenario as load
+
+    g = deltalab()
+    g.replace(drives=g.drives.replace(mode="force")).to_toml(tmp_path / "robot.toml")
+    (tmp_path / "study.toml").write_text(
+        'name = "fm"\ncontrollers = ["leg-edge", "computed-torque"]\n'
+        '[robot]\ngeometry = "robot.toml"\nworld = "dynamic"\n')
+    with pytest.raises(ScenarioError) as info:
+        check_controllers(load(str(tmp_path / "study.toml")))
+    assert info.value.key == "controllers[0]"
+    assert "force-mode drives (robot file [drives] mode = \"force\")" in str(info.value)

@@ -4,6 +4,8 @@ naming the leg, the peak along a reference is at least the static load."""
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import numpy as np
 import pytest
 
@@ -36,7 +38,29 @@ def test_static_and_peak_forces_with_the_payload() -> None:
     assert "150 kg: static" in text and "beyond the limit" in text
 
 
-@pytest.mark.parametrize("table", [{k: v for k, v in TABLE.items() if k != "payload"},
-                                   {**TABLE, "robot": {}}])
-def test_no_payload_or_kinematic_world_no_facts(table: dict) -> None:
-    assert payload_facts(parse_scenario(table), samples=2) == []
+def test_the_kinematic_world_has_no_facts() -> None:
+    assert payload_facts(parse_scenario({**TABLE, "robot": {}}), samples=2) == []
+
+
+def test_without_a_payload_the_robot_s_own_weight_is_checked(tmp_path: Path) -> None:
+    """Drives too weak to hold the robot itself (5.5 N for about 8 N per leg), no
+    [payload] table: check said nothing and every trial fell onto an end stop; the
+    static load is now checked in every dynamic study, an error when no start holds."""
+    from hexapod.geometry import deltalab
+
+    plain = {k: v for k, v in TABLE.items() if k != "payload"}
+    facts = payload_facts(parse_scenario(plain, "p.toml"), samples=3)
+    assert len(facts) == 1 and facts[0].peak_n is None and not facts[0].problems
+    assert 0 < facts[0].static_n.max() < 50 and facts[0].held == 1.0
+    g = deltalab()
+    weak = g.replace(drives=g.drives.replace(force_limit=np.full(6, 5.5),
+                                             coulomb=np.full(6, 1.0)))
+    weak.to_toml(tmp_path / "weak.toml")
+    table = {**plain, "robot": {**plain["robot"], "geometry": str(tmp_path / "weak.toml")}}
+    sc = parse_scenario(table, str(tmp_path / "p.toml"))
+    facts = payload_facts(sc, samples=3)
+    severities = [p.severity for p in facts[0].problems]
+    assert severities == ["warning", "error"], facts[0].problems
+    assert "the robot's own weight alone (no payload) exceeds" in facts[0].problems[0].text
+    assert "every trial would fall onto an end stop" in facts[0].problems[1].text
+    assert "Static load (the robot's own weight" in "\n".join(describe_payload(facts, sc))
