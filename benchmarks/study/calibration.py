@@ -248,7 +248,9 @@ def calibrate_from_file(sc: Scenario, observations: Path, out: Path, solver: str
     check_calibration_directory(out, overwrite)
     robot_name, nominal, camera_name, camera = scenario_setup(sc)
     provenance = made_with(robot_name, nominal, camera_name, camera)
-    data = CalibrationData.load(observations)
+    data, flipped, unsure = oriented(CalibrationData.load(observations),
+                                     camera.camera_from_base.apply(nominal.base_points),
+                                     nominal.leg_radius)
     try:
         res = calibrate(data, nominal.leg_radius, nominal.base_points,
                         method=(solver or sc.calibration.solver),  # type: ignore[arg-type]
@@ -257,16 +259,44 @@ def calibrate_from_file(sc: Scenario, observations: Path, out: Path, solver: str
                         warn_singular_ratio=sc.calibration.warn_singular_ratio)
     except CalibrationError as exc:  # the user's measurements: say which file
         raise BenchmarkError(f"{observations}: {exc} (nothing written)") from exc
+    far = _far_from_nominal(res.base_points, nominal, camera)
+    if len(far["far_from_nominal_legs"]) == 6:  # no point of this robot in this frame
+        raise BenchmarkError(
+            f"{observations}: every calibrated base point is more than "
+            f"{far['far_from_nominal_threshold_mm']:g} mm from the nominal one (median "
+            f"{np.median(far['distance_from_nominal_mm']):.0f} mm): these are not "
+            "observations of this robot by this camera, in its frame (normals in the base "
+            "frame? another camera or robot file?) (nothing written)")
     out.mkdir(parents=True, exist_ok=True)
     doc = {"generator": GENERATOR, "scenario": sc.name, "observations": str(observations),
            "configurations": int(data.n_configurations),
            "solver": solver or sc.calibration.solver, "made_with": provenance,
-           "result": res.to_dict(), **_far_from_nominal(res.base_points, nominal, camera),
+           "normals_flipped": flipped, "normals_sign_unsure": unsure,
+           "result": res.to_dict(), **far,
            **_lengths_outside(data.lengths, nominal)}
     (out / "calibration.json").write_text(json.dumps(doc, indent=1))
     write_calibrated_file(out / "calibrated.toml", res, source=str(observations),
                           made_with=provenance)
     return doc
+
+
+def oriented(data: Any, nominal_points: np.ndarray, leg_radius: float
+             ) -> tuple[Any, int, int]:
+    """The observations with every edge normal oriented as the calibration needs it:
+    ``n . A = -r`` (the leg's axis on the negative side of the edge's plane through the
+    camera centre; ``docs/math.md`` section 4). A line fitted in an image has either sign:
+    a normal with ``n . A > 0`` at the nominal base point (camera frame [m]) is flipped.
+    Returns the data, the normals flipped and those whose sign the nominal point cannot
+    tell (``|n . A| < r / 2``: the nominal point more than half a radius off)."""
+    from dataclasses import replace
+
+    n = np.array(data.normals, dtype=float)
+    side = np.einsum("nijk,ik->nij", n, np.asarray(nominal_points, dtype=float))
+    seen = np.asarray(data.edge_visible, bool) & np.isfinite(side)
+    flip = seen & (side > 0)
+    n[flip] *= -1.0
+    unsure = int(np.sum(seen & (np.abs(side) < 0.5 * leg_radius)))
+    return replace(data, normals=n), int(flip.sum()), unsure
 
 
 def _far_from_nominal(points: np.ndarray, nominal: Any, camera: Any) -> dict[str, Any]:

@@ -398,6 +398,14 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
               f"rigid-fit RMS {res['fit_rms_mm']:.3f} mm, scale {res['scale']:.5f}; wrote "
               f"{out / 'calibration.json'} and {out / 'calibrated.toml'}")
         _print_far_from_nominal(doc, out)
+        if doc["normals_flipped"]:
+            print(f"note: {doc['normals_flipped']} edge normal(s) of {args.observations} "
+                  "oriented to the calibration's sign (n . A = -r at the nominal base "
+                  "point: a fitted line's normal has either sign)", file=sys.stderr)
+        if doc["normals_sign_unsure"]:
+            print(f"warning: {args.observations}: the sign of {doc['normals_sign_unsure']} "
+                  "edge normal(s) could not be told from the nominal base points (more than "
+                  "half a leg radius off); give them with n . A = -r", file=sys.stderr)
         if doc["lengths_outside_stroke_count"]:
             k, leg, mm = doc["lengths_outside_stroke"][0]
             print(f"warning: {args.observations}: {doc['lengths_outside_stroke_count']} leg "

@@ -129,6 +129,45 @@ def test_calibrate_from_a_user_observation_file(
     assert f"warning: {metres}: 180 leg length(s) outside the robot's stroke" in err
 
 
+def test_edge_normals_of_either_sign_calibrate_alike_and_another_frame_is_refused(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """A line fitted in an image has a normal of either sign; the calibration needs
+    ``n . A = -r``. Random signs gave base points 444 mm off with exit 0; normals in the
+    base frame, points a metre off with the same rigid-fit figures as the right file."""
+    import json
+
+    from hexapod import deltalab
+    from vision.calibration import collect_observations
+
+    cam = front_camera()
+    data = collect_observations(deltalab(), cam, "random:30", None, 5)
+    truth = cam.camera_from_base.apply(deltalab().base_points)
+    doc = json.loads(json.dumps(data.to_dict()))
+    normals = np.asarray(doc["normals"], dtype=float)
+    signs = np.random.default_rng(3).choice([-1.0, 1.0], size=normals.shape[:3])
+    doc["normals"] = (normals * signs[..., None]).tolist()
+    mixed = tmp_path / "mixed.json"
+    mixed.write_text(json.dumps(doc))
+    out = tmp_path / "out"
+    assert cli_main(["calibrate", str(_scenario(tmp_path)), "--out", str(out),
+                     "--observations", str(mixed)]) == 0
+    np.testing.assert_allclose(load_calibrated_base_points(out / "calibrated.toml"), truth,
+                               atol=1e-8)
+    flipped = int(np.sum((signs < 0) & np.asarray(doc["edge_visible"], bool)))
+    assert json.loads((out / "calibration.json").read_text())["normals_flipped"] == flipped
+    assert f"note: {flipped} edge normal(s) of {mixed} oriented" in " ".join(
+        capsys.readouterr().err.split())
+    R = cam.camera_from_base.rotation  # normals given in the base frame instead
+    doc["normals"] = np.einsum("ji,nlej->nlei", R, normals).tolist()
+    base = tmp_path / "base.json"
+    base.write_text(json.dumps(doc))
+    assert cli_main(["calibrate", str(_scenario(tmp_path)), "--out", str(tmp_path / "o2"),
+                     "--observations", str(base)]) == 2
+    err = " ".join(capsys.readouterr().err.split())
+    assert "every calibrated base point is more than 50 mm from the nominal one" in err
+    assert not (tmp_path / "o2").exists()
+
+
 @pytest.mark.slow
 def test_ill_conditioned_calibration_is_refused_or_marked(tmp_path: Path,
                                                          caplog: pytest.LogCaptureFixture
