@@ -255,10 +255,12 @@ def examine(setup: Setup) -> SetupReport:
     report = check_setup(setup.geometry, setup.camera, *setup.task, needs_camera=needs,
                          where=setup.where)
     if partial:  # the camera's problems spoil the controllers that need it, not the study
+        who = ", ".join(setup.needs_camera or ())
         report.problems = [
-            Problem(p.severity, f"{p.text} (the trials of {', '.join(setup.needs_camera or ())}"
-                                " would fail; the other controllers do not need the camera)",
-                    p.topic)
+            Problem(p.severity, f"{p.text} (the trials of {who} would fail; the other "
+                                "controllers do not need the camera)" if p.fails else
+                    f"{p.text} (it concerns {who}; the other controllers do not need the "
+                    "camera)", p.topic, p.fails)
             if p.topic == "camera" else p for p in report.problems]
     report.problems[:0] = setup.problems
     return report

@@ -35,6 +35,9 @@ LOW_FRACTION = 0.01
 MIN_EDGES = 3
 #: Smallest / largest singular value of the edge interaction below which it is singular.
 SINGULAR_RATIO = 1e-6
+#: Below this smallest/largest singular value ratio (a condition number over 500) the
+#: edges at home observe the pose poorly: a warning.
+POOR_RATIO = 2e-3
 
 
 @dataclass(frozen=True)
@@ -51,6 +54,8 @@ class Problem:
     severity: str
     text: str
     topic: str = "robot"
+    #: Whether the trials it concerns fail (False: a warning of a poorer result).
+    fails: bool = True
 
 
 @dataclass(frozen=True)
@@ -400,6 +405,19 @@ def _camera_problems(report: SetupReport, camera: Any, home_obs: Any, needs_came
                            f"{100 * report.poses_blind:.1f} % of the reachable poses; trials "
                            f"with such a goal fail; change {where.camera}, or {where.task}",
                            "camera"))
+    if min(camera.fx, camera.fy) < 50.0:  # pixels: no camera has a focal length that short
+        out.append(Problem("warning", (
+            f"focal length {min(camera.fx, camera.fy):g} px: given in millimetres? fx_px and "
+            "fy_px are in pixels (focal length in mm / pixel pitch in mm: about 1000 for a "
+            f"usual camera); the legs are then a few pixels long; check {where.camera}"),
+            "camera", fails=False))
+    if n_home and SINGULAR_RATIO <= report.edge_ratio < POOR_RATIO:
+        out.append(Problem("warning", (
+            f"the edges seen at home observe the platform's pose poorly in some direction "
+            f"(edge interaction condition number {report.edge_condition:.0f}; the built-in "
+            f"cameras give 22 to 67): image noise is amplified as much there; check "
+            f"{where.camera} (a pose in radians where degrees are meant?)"), "camera",
+            fails=False))
     if n_home and report.edge_ratio < SINGULAR_RATIO:
         out.append(Problem("warning", (
             f"the {n_home} edges seen at home do not determine the six degrees of freedom "

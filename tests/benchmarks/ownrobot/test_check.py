@@ -242,3 +242,25 @@ def test_slips_a_user_makes_in_a_robot_file_are_warned_of(
     assert "home pose: none" in text and "leg lengths at home" not in text, text
     assert "given in metres? stroke_mm is in millimetres" in text
     assert "small workspace" not in text  # (the error says it)
+
+
+def test_a_focal_length_in_millimetres_and_a_poorly_observed_pose_are_warned_of() -> None:
+    """fx = 4.8 (millimetres where pixels are meant: the legs a few pixels long) and a
+    camera seeing the pose poorly (condition number 47,000 where the built-in cameras
+    give 22 to 67: a pose in radians gave 1505) both passed as 'No problem found'."""
+    from hexapod.kinematics import Transform
+    from vision.cameras.perspective import PerspectiveCamera
+
+    g = deltalab()
+    good = front_camera(g)
+    T = good.camera_from_base
+    tiny = PerspectiveCamera(good.K * np.array([[4.8 / good.fx], [4.8 / good.fy], [1.0]]),
+                             good.width, good.height, T)
+    close = PerspectiveCamera(good.K, good.width, good.height,
+                              Transform(T.rotation, np.array([*T.translation[:2], 0.30])))
+    texts = {name: [p.text for p in check_setup(g, cam).problems if p.severity == "warning"]
+             for name, cam in (("good", good), ("tiny", tiny), ("close", close))}
+    assert not any("focal length" in t or "poorly" in t for t in texts["good"]), texts
+    assert any(t.startswith("focal length 4.8 px: given in millimetres?")
+               for t in texts["tiny"]), texts["tiny"]
+    assert any("observe the platform's pose poorly" in t for t in texts["close"]), texts
