@@ -248,30 +248,30 @@ def calibrate_from_file(sc: Scenario, observations: Path, out: Path, solver: str
     check_calibration_directory(out, overwrite)
     robot_name, nominal, camera_name, camera = scenario_setup(sc)
     provenance = made_with(robot_name, nominal, camera_name, camera)
-    data, flipped, unsure = oriented(CalibrationData.load(observations),
-                                     camera.camera_from_base.apply(nominal.base_points),
-                                     nominal.leg_radius)
+    given = CalibrationData.load(observations)
+
+    def solve(data: Any) -> Any:
+        return calibrate(data, nominal.leg_radius, nominal.base_points,
+                         method=(solver or sc.calibration.solver),  # type: ignore[arg-type]
+                         correct_scale=correct_scale,
+                         min_singular_ratio=sc.calibration.min_singular_ratio,
+                         warn_singular_ratio=sc.calibration.warn_singular_ratio)
+
     try:
-        res = calibrate(data, nominal.leg_radius, nominal.base_points,
-                        method=(solver or sc.calibration.solver),  # type: ignore[arg-type]
-                        correct_scale=correct_scale,
-                        min_singular_ratio=sc.calibration.min_singular_ratio,
-                        warn_singular_ratio=sc.calibration.warn_singular_ratio)
+        res, data = _with_signs(given, solve,
+                                camera.camera_from_base.apply(nominal.base_points),
+                                nominal.leg_radius)
     except CalibrationError as exc:  # the user's measurements: say which file
         raise BenchmarkError(f"{observations}: {exc} (nothing written)") from exc
+    flipped = int(np.sum(np.any(np.asarray(data.normals) != np.asarray(given.normals),
+                                axis=-1) & np.asarray(given.edge_visible, bool)))
+    disagree = float(np.max(res.linear.residual_rms)) > SIGN_RESIDUAL * nominal.leg_radius
     far = _far_from_nominal(res.base_points, nominal, camera)
-    if len(far["far_from_nominal_legs"]) == 6:  # no point of this robot in this frame
-        raise BenchmarkError(
-            f"{observations}: every calibrated base point is more than "
-            f"{far['far_from_nominal_threshold_mm']:g} mm from the nominal one (median "
-            f"{np.median(far['distance_from_nominal_mm']):.0f} mm): these are not "
-            "observations of this robot by this camera, in its frame (normals in the base "
-            "frame? another camera or robot file?) (nothing written)")
     out.mkdir(parents=True, exist_ok=True)
     doc = {"generator": GENERATOR, "scenario": sc.name, "observations": str(observations),
            "configurations": int(data.n_configurations),
            "solver": solver or sc.calibration.solver, "made_with": provenance,
-           "normals_flipped": flipped, "normals_sign_unsure": unsure,
+           "normals_flipped": flipped, "equations_disagree": disagree,
            "result": res.to_dict(), **far,
            **_lengths_outside(data.lengths, nominal)}
     (out / "calibration.json").write_text(json.dumps(doc, indent=1))
@@ -280,23 +280,48 @@ def calibrate_from_file(sc: Scenario, observations: Path, out: Path, solver: str
     return doc
 
 
-def oriented(data: Any, nominal_points: np.ndarray, leg_radius: float
-             ) -> tuple[Any, int, int]:
-    """The observations with every edge normal oriented as the calibration needs it:
-    ``n . A = -r`` (the leg's axis on the negative side of the edge's plane through the
-    camera centre; ``docs/math.md`` section 4). A line fitted in an image has either sign:
-    a normal with ``n . A > 0`` at the nominal base point (camera frame [m]) is flipped.
-    Returns the data, the normals flipped and those whose sign the nominal point cannot
-    tell (``|n . A| < r / 2``: the nominal point more than half a radius off)."""
-    from dataclasses import replace
+#: The largest RMS residual ``n . A + r`` of a leg's equations, in leg radii, of
+#: observations taken as consistent (noisy measurements: a fraction of a millimetre; an
+#: edge normal of the other sign: about two radii).
+SIGN_RESIDUAL = 0.25
 
+
+def _with_signs(given: Any, solve: Callable[[Any], Any], nominal_points: np.ndarray,
+                leg_radius: float) -> tuple[Any, Any]:
+    """The calibration of a user's observations and the observations it used. The
+    equation is ``n . A = -r`` (the leg's axis on the negative side of the edge's plane
+    through the camera centre, ``docs/math.md`` section 4), and a line fitted in an image
+    has a normal of either sign: the file's signs are kept when its equations agree
+    (every leg's RMS residual under :data:`SIGN_RESIDUAL` radii); else each normal is
+    oriented by the nominal base points (camera frame [m]), the calibration solved, the
+    normals oriented again by its estimates and solved again, and the result whose
+    equations agree best is taken (the file's, if no orientation improves them)."""
+    first = solve(given)
+
+    def worst(res: Any) -> float:
+        return float(np.max(res.linear.residual_rms))
+
+    if worst(first) <= SIGN_RESIDUAL * leg_radius:
+        return first, given
+    best = (first, given)
+    points = nominal_points
+    for _ in range(2):
+        data = _oriented(given, points)
+        res = solve(data)
+        if worst(res) < worst(best[0]):
+            best = (res, data)
+        points = res.linear.base_points
+    return best
+
+
+def _oriented(data: Any, points: np.ndarray) -> Any:
+    """``data`` with each visible edge normal ``n`` turned to ``n . A < 0`` at ``points``
+    (camera frame [m])."""
     n = np.array(data.normals, dtype=float)
-    side = np.einsum("nijk,ik->nij", n, np.asarray(nominal_points, dtype=float))
-    seen = np.asarray(data.edge_visible, bool) & np.isfinite(side)
-    flip = seen & (side > 0)
+    side = np.einsum("nijk,ik->nij", n, np.asarray(points, dtype=float))
+    flip = np.asarray(data.edge_visible, bool) & np.isfinite(side) & (side > 0)
     n[flip] *= -1.0
-    unsure = int(np.sum(seen & (np.abs(side) < 0.5 * leg_radius)))
-    return replace(data, normals=n), int(flip.sum()), unsure
+    return replace(data, normals=n)
 
 
 def _far_from_nominal(points: np.ndarray, nominal: Any, camera: Any) -> dict[str, Any]:

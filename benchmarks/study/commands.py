@@ -402,10 +402,13 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
             print(f"note: {doc['normals_flipped']} edge normal(s) of {args.observations} "
                   "oriented to the calibration's sign (n . A = -r at the nominal base "
                   "point: a fitted line's normal has either sign)", file=sys.stderr)
-        if doc["normals_sign_unsure"]:
-            print(f"warning: {args.observations}: the sign of {doc['normals_sign_unsure']} "
-                  "edge normal(s) could not be told from the nominal base points (more than "
-                  "half a leg radius off); give them with n . A = -r", file=sys.stderr)
+        if doc["equations_disagree"]:
+            worst = max(res["linear"]["residual_rms_mm"])
+            print(f"warning: {args.observations}: the observations do not agree with one "
+                  f"base point per leg (a leg's RMS residual n . A + r is {worst:.3f} mm, "
+                  "noise gives a fraction of a millimetre): normals of the wrong sign that "
+                  "orienting could not mend, normals not in this camera's frame, or another "
+                  "robot's; do not trust calibrated.toml", file=sys.stderr)
         if doc["lengths_outside_stroke_count"]:
             k, leg, mm = doc["lengths_outside_stroke"][0]
             print(f"warning: {args.observations}: {doc['lengths_outside_stroke_count']} leg "

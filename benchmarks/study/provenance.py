@@ -88,9 +88,11 @@ def far_message(path: str, distances: np.ndarray,
     if not far:
         return None
     legs = ", ".join(f"{i} ({d:.1f} mm)" for i, d in far)
+    every = (" (all six: the camera file's pose is not this setup's, or the observations' "
+             "normals are not in this camera's frame)" if len(far) == len(distances) else "")
     return (f"{path}: base point(s) {legs} farther than {threshold_mm:g} mm from the "
-            "nominal ones: another robot or camera pose, or a calibration gone wrong; check "
-            "the robot and camera files before trusting it")
+            f"nominal ones{every}: another robot or camera pose, or a calibration gone wrong; "
+            "check the robot and camera files before trusting it")
 
 
 def check_calibration(path: str, points: np.ndarray, recorded: dict[str, Any] | None,
