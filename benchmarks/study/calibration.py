@@ -291,27 +291,31 @@ def _with_signs(given: Any, solve: Callable[[Any], Any], nominal_points: np.ndar
     """The calibration of a user's observations and the observations it used. The
     equation is ``n . A = -r`` (the leg's axis on the negative side of the edge's plane
     through the camera centre, ``docs/math.md`` section 4), and a line fitted in an image
-    has a normal of either sign: the file's signs are kept when its equations agree
-    (every leg's RMS residual under :data:`SIGN_RESIDUAL` radii); else each normal is
-    oriented by the nominal base points (camera frame [m]), the calibration solved, the
-    normals oriented again by its estimates and solved again, and the result whose
-    equations agree best is taken (the file's, if no orientation improves them)."""
-    first = solve(given)
-
-    def worst(res: Any) -> float:
-        return float(np.max(res.linear.residual_rms))
-
-    if worst(first) <= SIGN_RESIDUAL * leg_radius:
-        return first, given
-    best = (first, given)
+    has a normal of either sign. Candidates: the file's signs; each normal oriented by the
+    nominal base points (camera frame [m]); oriented again by that solution's estimates.
+    Taken: one whose equations agree (every leg's RMS residual under
+    :data:`SIGN_RESIDUAL` radii), the nearest to the nominal points among those (normals
+    all of the other sign agree too, a mirror image far away), the file's when it is as
+    near (a good file is never turned by a poor nominal camera pose); else the one whose
+    equations agree best."""
+    limit = SIGN_RESIDUAL * leg_radius
+    candidates = [(solve(given), given)]
     points = nominal_points
     for _ in range(2):
         data = _oriented(given, points)
         res = solve(data)
-        if worst(res) < worst(best[0]):
-            best = (res, data)
+        candidates.append((res, data))
         points = res.linear.base_points
-    return best
+
+    def score(candidate: tuple[Any, Any]) -> tuple[bool, float]:
+        res = candidate[0]
+        worst = float(np.max(res.linear.residual_rms))
+        near = float(np.median(np.linalg.norm(res.linear.base_points - nominal_points,
+                                              axis=1)))
+        agree = worst <= limit
+        return (not agree, near if agree else worst)
+
+    return min(candidates, key=score)  # (min keeps the first of equal scores: the file's)
 
 
 def _oriented(data: Any, points: np.ndarray) -> Any:

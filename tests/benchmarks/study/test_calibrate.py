@@ -158,6 +158,14 @@ def test_edge_normals_of_either_sign_calibrate_alike_and_another_frame_is_said(
     assert json.loads((out / "calibration.json").read_text())["normals_flipped"] == flipped
     assert f"note: {flipped} edge normal(s) of {mixed} oriented" in " ".join(
         capsys.readouterr().err.split())
+    doc["normals"] = (-normals).tolist()  # every sign reversed: a consistent mirror image
+    every = tmp_path / "every.json"
+    every.write_text(json.dumps(doc))
+    assert cli_main(["calibrate", str(_scenario(tmp_path)), "--out", str(tmp_path / "o1"),
+                     "--observations", str(every)]) == 0
+    np.testing.assert_allclose(load_calibrated_base_points(tmp_path / "o1" /
+                                                           "calibrated.toml"), truth, atol=1e-8)
+    capsys.readouterr()
     R = cam.camera_from_base.rotation  # normals given in the base frame instead
     doc["normals"] = np.einsum("ji,nlej->nlei", R, normals).tolist()
     base = tmp_path / "base.json"

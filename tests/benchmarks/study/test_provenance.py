@@ -200,6 +200,8 @@ def test_calibrate_flags_estimates_far_from_the_nominal_points(
     doc = json.loads((out / "calibration.json").read_text())
     assert doc["far_from_nominal_legs"] == [0, 1, 2, 3, 4, 5]
     assert min(doc["distance_from_nominal_mm"]) > FAR_FROM_NOMINAL_MM
+    assert doc["normals_flipped"] == 0  # good normals are not turned by a far nominal
+    np.testing.assert_allclose(doc["result"]["linear"]["residual_rms_mm"], 0.0, atol=1e-6)
 
 
 def test_servo_refuses_a_foreign_calibration_before_the_robot_is_contacted(
