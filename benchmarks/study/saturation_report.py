@@ -86,7 +86,7 @@ def saturation_rows(rows: list[dict[str, Any]]) -> list[list[str]]:
                    if r.get("tracking_saturated_max_mm") is not None]
         out.append([
             format_sweep(sweep_values(every[0])), controller, str(len(every)),
-            stats.format_rate(hit, len(rs)) if rs else "-",
+            f"{hit}/{len(rs)}, {stats.format_rate(hit, len(rs))}" if rs else "-",
             intervals.quantile_cells(frac, [0.5])[0] if frac else "-",
             _fmt(max(frac)) if frac else "-", *leg_cells,
             intervals.quantile_cells(sat_rms, [0.5])[0] if sat_rms else "-",
@@ -202,7 +202,8 @@ def saturation_section(rows: list[dict[str, Any]]) -> list[str]:
         return []
     header = SATURATION_HEADER
     lines = ["Saturation (the drives' force limits; *at a limit*: trials in which a drive "
-             "reached its force limit, with its Wilson interval; *at limit %*: fraction of "
+             "reached its force limit, of those run to their end (a failed trial is in "
+             "*trials*, not here), with its Wilson interval; *at limit %*: fraction of "
              "the run any drive spent there; *most saturated leg*: the leg with the largest "
              "mean time at its limit (and its median); *error saturated*: position error from the "
              "reference at the end of the control periods in which a drive was at its "

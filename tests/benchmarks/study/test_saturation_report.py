@@ -53,9 +53,10 @@ def test_saturation_table() -> None:
         [{k: v for k, v in r.items() if not k.startswith("saturation_legs")} for r in rows])
     table = {(r[0], r[1]): r for r in saturation_rows(rows)}
     bare = table[("payload_mass_kg=0.0", "steady")]
-    assert bare[3].startswith("0.0 %") and bare[6] == "-"
+    n = int(bare[2])
+    assert bare[3].startswith(f"0/{n}, 0.0 %") and bare[6] == "-"  # the count beside the %
     loaded = table[("payload_mass_kg=40.0", "steady")]
-    assert loaded[3].startswith("100.0 %") and loaded[6] == "1"  # leg 1 the most saturated
+    assert loaded[3].startswith(f"{n}/{n}, 100.0 %") and loaded[6] == "1"  # leg 1 the most
     assert loaded[5] == "25"  # the worst fraction: 1 s of 4 s, in %
 
 
