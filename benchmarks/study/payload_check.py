@@ -119,7 +119,11 @@ def payload_facts(sc: Any, samples: int = SAMPLED_STARTS) -> list[PayloadFacts]:
 
     payload = getattr(sc, "payload", None) is not None
     out = []
-    for _, facts, where in sweep_facts(sc, _point if payload else _static_point, samples):
+    warned_com = False
+    for point, facts, where in sweep_facts(sc, _point if payload else _static_point, samples):
+        if payload and not warned_com and (text := _com_problem(point, where)):
+            facts.problems.append(Problem("warning", text))
+            warned_com = True
         over = np.flatnonzero(facts.static_n > facts.limit_n)
         if over.size:
             leg = int(over[np.argmax(facts.static_n[over] - facts.limit_n[over])])
@@ -139,6 +143,28 @@ def payload_facts(sc: Any, samples: int = SAMPLED_STARTS) -> list[PayloadFacts]:
             f"trial would fall onto an end stop; raise force_limit in [drives] of the robot "
             f"file, or lighten the load, in {sc.source}")))
     return out
+
+
+def _com_problem(point: Any, where: str) -> str | None:
+    """A payload whose centre of mass lies beyond the platform's disc (more than its
+    radius from the platform's axis) or below the base: a key in metres, or a slip."""
+    from benchmarks.sim.world import load_geometry
+    from hexapod.workspace import home_pose
+
+    g = load_geometry(point)
+    com = np.asarray(point.payload.com_mm, dtype=float) * 1e-3
+    radius = float(np.max(np.linalg.norm(g.platform_points[:, :2], axis=1)))
+    reach = float(np.linalg.norm(com[:2]))
+    height = float(home_pose(g)[1][2])
+    if reach > radius:
+        return (f"the payload's centre of mass is {reach * 1e3:.0f} mm from the platform's "
+                f"axis, beyond its {radius * 1e3:.0f} mm radius (payload.com_mm, platform "
+                f"frame, in millimetres) {where}")
+    if height + com[2] < 0:
+        return (f"the payload's centre of mass is {-(height + com[2]) * 1e3:.0f} mm below "
+                f"the base plane at home (payload.com_mm z = {com[2] * 1e3:g} mm, the "
+                f"platform {height * 1e3:.0f} mm above the base) {where}")
+    return None
 
 
 def describe_payload(facts: list[PayloadFacts], sc: Any) -> list[str]:

@@ -64,3 +64,17 @@ def test_without_a_payload_the_robot_s_own_weight_is_checked(tmp_path: Path) -> 
     assert "the robot's own weight alone (no payload) exceeds" in facts[0].problems[0].text
     assert "every trial would fall onto an end stop" in facts[0].problems[1].text
     assert "Static load (the robot's own weight" in "\n".join(describe_payload(facts, sc))
+
+
+def test_a_payload_centre_of_mass_off_the_platform_is_warned_of() -> None:
+    """A centre of mass 3 m from the platform's axis (metres in a millimetre key) or
+    below the base plane was taken without a word."""
+    for com, text in (([3000.0, 0.0, 0.0], "3000 mm from the platform's axis, beyond its"),
+                      ([0.0, 0.0, -600.0], "below the base plane at home")):
+        table = {**TABLE, "payload": {"mass_kg": 1.0, "com_mm": com}}
+        problems = [p for f in payload_facts(parse_scenario(table, "p.toml"), samples=2)
+                    for p in f.problems]
+        assert any(text in p.text and p.severity == "warning" for p in problems), problems
+    ok = payload_facts(parse_scenario({**TABLE, "payload": {"mass_kg": 1.0}}, "p.toml"),
+                       samples=2)
+    assert not [p for f in ok for p in f.problems]
