@@ -5,6 +5,7 @@ from __future__ import annotations
 import gc
 import json
 import logging
+import math
 from collections import defaultdict
 from collections.abc import Iterator
 from contextlib import contextmanager
@@ -193,8 +194,9 @@ def _collector_paused() -> Iterator[None]:
 
 def incomplete_lines(study: dict[str, Any], rows: list[dict[str, Any]]) -> list[str]:
     """A note when a scenario's rows are fewer than its study plans (an interrupted run):
-    the trials missing per controller at the sweep points that have rows, and the
-    controllers without any row (a report of such a run showed its tables as if whole)."""
+    the trials missing per controller over every sweep point the study plans (the
+    product of its ``sweep.*`` lists), the sweep points and the controllers without any
+    row (a report of such a run showed its tables as if whole)."""
     planned = study.get("trials")
     labels = [str(c).split(" (", 1)[0] for c in study.get("controllers") or []]
     if not isinstance(planned, int) or not labels or not rows:
@@ -202,7 +204,11 @@ def incomplete_lines(study: dict[str, Any], rows: list[dict[str, Any]]) -> list[
     counts: dict[tuple[int, str], set[int]] = defaultdict(set)
     for r in rows:
         counts[(int(r.get("point", 0)), str(r["controller"]))].add(int(r["trial"]))
-    points = sorted({p for p, _ in counts})
+    seen = sorted({p for p, _ in counts})
+    n_points = math.prod(len(v) for k, v in study.items()
+                         if k.startswith("sweep.") and isinstance(v, list)) or 1
+    points = sorted(set(range(n_points)) | set(seen))
+    empty = [p for p in points if p not in seen]
     missing = {label: sum(planned - len(counts.get((p, label), ())) for p in points)
                for label in labels}
     absent = [label for label in labels if missing[label] == planned * len(points)]
@@ -210,12 +216,14 @@ def incomplete_lines(study: dict[str, Any], rows: list[dict[str, Any]]) -> list[
     if not absent and not short:
         return []
     total = planned * len(points) * len(labels)
-    text = (f"**Incomplete**: {len(rows)} of the {total} trials planned at the "
-            f"{len(points)} sweep point(s) with rows ({planned} per point and controller)")
+    text = (f"**Incomplete**: {len(rows)} of the {total} trials planned ({planned} per "
+            f"sweep point and controller, {len(points)} sweep point(s))")
     if short:
         text += "; missing " + ", ".join(f"{m} of {label}" for label, m in short.items())
     if absent:
         text += f"; no row of {', '.join(absent)}"
+    if empty:
+        text += f"; no row at sweep point(s) {', '.join(map(str, empty))}"
     return [text + ": an interrupted run (`--resume` finishes it); the tables hold the "
             "trials that ran.", ""]
 

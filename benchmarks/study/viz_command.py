@@ -51,6 +51,16 @@ def find_record(out: Path, trial: int, controller: str | None = None,
             continue
         matches.append(f)
     if not matches:
+        stems = [f.stem.split("__") for f in files]
+        stems = [x for x in stems if len(x) == 4]
+        for option, col, given in (("--scenario", 0, scenario),
+                                   ("--controller", 2, controller),
+                                   ("--point", 1, None if point is None else f"p{point}")):
+            known = sorted({x[col] for x in stems})
+            if given is not None and given not in known:  # no such one at all
+                shown = [v[1:] for v in known] if option == "--point" else known
+                raise BenchmarkError(f"{out}: {option} {str(given).lstrip('p')}: nothing "
+                                     f"recorded under it; recorded: {', '.join(shown)}")
         available = sorted({f.stem for f in files})[:20]
         recorded = _recorded_count(out)
         hint = ""
@@ -90,6 +100,9 @@ def cmd_viz(args: argparse.Namespace) -> int:
     from hexapod.visualize import HexapodViewer, load_trial, plot_trial, replay_html
 
     out = Path(args.dir)
+    if args.still is not None and not args.html:
+        raise BenchmarkError("--still draws a still into the --html page: give --html FILE "
+                             "too (the live view replays the whole trial)")
     session = None if (out / TRIALS_DIR).is_dir() else find_session_log(out)
     path = session or find_record(out, args.trial, args.controller, args.scenario, args.point)
     if args.html:
@@ -109,6 +122,11 @@ def cmd_viz(args: argparse.Namespace) -> int:
     else:
         record = load_trial(path)
     if args.html:
+        if args.still is not None and not -record.frames <= args.still < record.frames:
+            raise BenchmarkError(f"--still {args.still}: {record.title} has periods 0 to "
+                                 f"{record.frames - 1} (negative values count from the "
+                                 "end: -1 is the last)")
+        html_path.parent.mkdir(parents=True, exist_ok=True)
         html = replay_html(record, html_path, frame=args.still)
         png = plot_trial(record, png_path)
         print(f"{record.title}: wrote {html} (open it in a browser, no network needed) "
@@ -144,7 +162,8 @@ def add_arguments(s: argparse.ArgumentParser) -> None:
     s.add_argument("--html", action=OutputFile,
                    help="write a self-contained HTML animation (+ a PNG of the curves beside "
                         "it) instead of the live view")
-    s.add_argument("--still", type=int, help="with --html: a still of this period")
+    s.add_argument("--still", type=int, help="with --html: a still of this control period "
+                                             "(-1: the last)")
     s.add_argument("--overwrite", action="store_true",
                    help="with --html: replace the file (and the PNG beside it) even if "
                         "hexapod-bench did not write it")

@@ -41,6 +41,22 @@ PLANE_COLOR = 0xAA44CC
 LIVE_PERIOD = 1.0 / 30.0
 
 
+
+def nearest_periods(t: np.ndarray, fps: float) -> np.ndarray:
+    """The control period shown by each frame of an animation at ``fps`` of a trial whose
+    periods start at times ``t`` (from 0) [s]: the period nearest in time to each frame
+    (an earlier one on a tie), and the last period on a frame of its own at the end (the
+    pose the results' final error is of)."""
+    times = np.arange(0.0, t[-1] + 0.5 / fps, 1.0 / fps)
+    if times[-1] < t[-1]:
+        times = np.append(times, t[-1])
+    after = np.clip(np.searchsorted(t, times), 1, len(t) - 1) if len(t) > 1 else \
+        np.zeros(len(times), dtype=int)
+    if len(t) == 1:
+        return after
+    before = after - 1
+    return np.where(times - t[before] <= t[after] - times, before, after)
+
 class HexapodViewer:
     """A MeshCat view of a hexapod.
 
@@ -358,8 +374,7 @@ class HexapodViewer:
         data, vdata = model.createData(), vmodel.createData()
         anim = ma.Animation(default_framerate=fps)
         t = np.asarray(record["t"], float)
-        times = np.arange(0.0, t[-1] - t[0] + 0.5 / fps, 1.0 / fps)
-        frames = np.clip(np.searchsorted(t - t[0], times - 0.5 / fps), 0, record.frames - 1)
+        frames = nearest_periods(t - t[0], fps)
         hidden = ~np.all(record["edge_visible"], axis=-1)  # (T, 6)
         ever_hidden = np.flatnonzero(hidden.any(axis=0))
         rods = None  # the dynamic world: rods coloured by their drive forces

@@ -31,3 +31,15 @@ def test_an_ambiguous_choice_names_only_what_still_tells_them_apart(tmp_path: Pa
     assert str(info.value).endswith("choose with --point and --controller"), str(info.value)
     assert find_record(out, 0, controller="leg-edge", point=1).stem == \
         "track__p1__leg-edge__00000"
+
+
+def test_an_unknown_point_or_controller_is_named_as_such(tmp_path: Path) -> None:
+    """--point 4 of a run with point 0 only said trial 0 was not recorded (listing it);
+    --controller nosuch advised --record."""
+    out = _records(tmp_path, ["quick__p0__leg-edge__00000", "quick__p0__joint-space__00000"])
+    with pytest.raises(BenchmarkError, match=r"--point 4: nothing recorded under it; "
+                                             r"recorded: 0$"):
+        find_record(out, 0, controller="leg-edge", point=4)
+    with pytest.raises(BenchmarkError, match=r"--controller nosuch: nothing recorded under "
+                                             r"it; recorded: joint-space, leg-edge$"):
+        find_record(out, 5, controller="nosuch")

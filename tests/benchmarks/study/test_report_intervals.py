@@ -139,8 +139,17 @@ def test_a_report_of_an_interrupted_run_says_it_is_incomplete() -> None:
     rows = [{"point": 0, "controller": "a", "trial": k} for k in range(4)]
     rows += [{"point": 0, "controller": "b", "trial": 0}]
     (text, _) = incomplete_lines(study, rows)
-    assert text.startswith("**Incomplete**: 5 of the 12 trials planned at the 1 sweep point")
+    assert text.startswith("**Incomplete**: 5 of the 12 trials planned (4 per sweep point "
+                           "and controller, 1 sweep point(s))")
     assert "missing 3 of b; no row of c" in text
     whole = rows + [{"point": 0, "controller": c, "trial": k} for c, ks in
                     (("b", range(1, 4)), ("c", range(4))) for k in ks]
     assert incomplete_lines(study, whole) == []
+    # a swept study stopped before its third point: that point is counted and named (the
+    # note said '8 of the 8 trials planned at the 2 sweep point(s) with rows')
+    swept = {"trials": 2, "controllers": ["a"], "sweep.noise.amplitude_deg": [0, 0.05, 0.1]}
+    rows2 = [{"point": p, "controller": "a", "trial": k} for p in (0, 1) for k in (0, 1)]
+    (text, _) = incomplete_lines(swept, rows2)
+    assert text.startswith("**Incomplete**: 4 of the 6 trials planned (2 per sweep point "
+                           "and controller, 3 sweep point(s)); missing 2 of a; no row at "
+                           "sweep point(s) 2"), text
