@@ -95,9 +95,9 @@ def _toml_value(value: Any) -> str:
         return json.dumps(value)
     if isinstance(value, list | tuple):
         return "[" + ", ".join(_toml_value(v) for v in value) + "]"
-    if isinstance(value, dict):
+    if isinstance(value, dict):  # (TOML has no null: a key without a value is left out)
         return "{ " + ", ".join(f"{json.dumps(k)} = {_toml_value(v)}"
-                                for k, v in value.items()) + " }"
+                                for k, v in value.items() if v is not None) + " }"
     raise TypeError(f"cannot write {value!r} to TOML")
 
 
@@ -106,7 +106,7 @@ def write_options_file(path: str | Path, controllers: dict[str, dict[str, Any]],
     """Write an options file (``[tuning]`` first, then one table per controller)."""
     lines = [f"# {line}" if line else "#" for line in header.splitlines()]
     lines += ["", "[tuning]"]
-    lines += [f"{k} = {_toml_value(v)}" for k, v in tuning.items()]
+    lines += [f"{k} = {_toml_value(v)}" for k, v in tuning.items() if v is not None]
     for label, opts in controllers.items():
         lines += ["", f"[controllers.{json.dumps(label)}]"]
         lines += [f"{k} = {_toml_value(v)}" for k, v in opts.items()]

@@ -395,7 +395,7 @@ def _print(con: Any, scores: dict[str, list[Score]], choices: dict[str, Choice],
     from rich.markup import escape
     from rich.table import Table
 
-    t = Table(title=f"tuning: {criterion} [mm] per candidate (* kept)")
+    t = Table(title=f"tuning: {criterion} \\[mm] per candidate (* kept)")  # (\\[: not markup)
     for col in ("controller", "candidate", "options", "criterion", "failed"):
         t.add_column(col, overflow="fold")
     for label, ss in scores.items():

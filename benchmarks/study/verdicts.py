@@ -140,13 +140,14 @@ def _end(x: float, spec: str) -> str:
 def _effect(c: Comparison) -> str:
     lo, hi = c.interval
     if c.metric == "converged":
-        return (f"{100 * c.a_value:.1f} % against {100 * c.b_value:.1f} %, difference "
-                f"{100 * c.difference:+.1f} points [{100 * lo:+.1f}, {100 * hi:+.1f}]")
+        return (f"{c.a} {100 * c.a_value:.1f} % against {c.b} {100 * c.b_value:.1f} %, "
+                f"difference {100 * c.difference:+.1f} points [{100 * lo:+.1f}, "
+                f"{100 * hi:+.1f}]")
     unit = f" {c.unit}" if c.unit else ""
     up, down = c.discordant or (0, 0)
     return (f"median paired difference {_num(c.difference, '+.4g')}{unit} "
-            f"[{_end(lo, '+.4g')}, {_end(hi, '+.4g')}], medians {_num(c.a_value, '.4g')} "
-            f"and {_num(c.b_value, '.4g')}{unit}; {c.a} higher in {up} and lower in {down} "
-            "of the pairs")
+            f"[{_end(lo, '+.4g')}, {_end(hi, '+.4g')}] ({c.a} - {c.b}), medians {c.a} "
+            f"{_num(c.a_value, '.4g')} and {c.b} {_num(c.b_value, '.4g')}{unit}; {c.a} "
+            f"higher in {up} and lower in {down} of the pairs")
 
 

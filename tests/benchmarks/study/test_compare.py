@@ -262,6 +262,10 @@ def test_rate_difference_has_newcombes_interval_and_tiny_p_is_bounded(tmp_path: 
     assert c.interval == exact.newcombe_paired(0, 20, 0, 0)
     assert c.interval[0] < 0.9
     assert "difference +100.0 points [+77.2, +100.0]" in c.verdict
+    # each figure named by its controller: the sentence names the better one first, the
+    # figures came in (a, b) order unnamed and read as the other way round
+    assert f"({c.a} {100 * c.a_value:.1f} % against {c.b} {100 * c.b_value:.1f} %" \
+        in c.verdict, c.verdict
     rows = two_controllers(3000, worse_by=1.5)
     fe = next(c for c in compare_controllers(load(write_run(tmp_path / "big", rows)))
               if c.metric == "final_error")

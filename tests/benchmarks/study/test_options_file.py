@@ -40,6 +40,20 @@ def test_round_trip_and_apply(tmp_path: Path) -> None:
     assert "as given" in options_line({})
 
 
+def test_a_value_without_one_is_left_out_of_the_file(tmp_path: Path) -> None:
+    """``tune`` whose options as given scored best recorded p-values of None, and the
+    file failed to write ('cannot write None to TOML'): TOML has no null, the key is left
+    out."""
+    f = tmp_path / "o.toml"
+    tuning = {"scenario": "t", "note": None,
+              "shown_better": {"leg-edge": {"best": 0, "kept": "as given",
+                                            "p_sign_one_sided": None}}}
+    write_options_file(f, {"leg-edge": {"gain": 2.0}}, tuning, "written by hexapod-vs: test")
+    read = load_options_file(f)
+    assert read.tuning == {"scenario": "t",
+                           "shown_better": {"leg-edge": {"best": 0, "kept": "as given"}}}
+
+
 @pytest.mark.parametrize(("text", "fragment"), [
     ('[controllers."leg-edge"]\ngian = 2.0\n', "did you mean 'gain'"),
     ('[controllers."leg-egde"]\ngain = 2.0\n', "no controller of the run has this label"),
