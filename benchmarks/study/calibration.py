@@ -260,7 +260,7 @@ def calibrate_from_file(sc: Scenario, observations: Path, out: Path, solver: str
     try:
         res, data = _with_signs(given, solve,
                                 camera.camera_from_base.apply(nominal.base_points),
-                                nominal.leg_radius)
+                                nominal.leg_radius, camera.kind == "perspective")
     except CalibrationError as exc:  # the user's measurements: say which file
         raise BenchmarkError(f"{observations}: {exc} (nothing written)") from exc
     flipped = int(np.sum(np.any(np.asarray(data.normals) != np.asarray(given.normals),
@@ -287,35 +287,47 @@ SIGN_RESIDUAL = 0.25
 
 
 def _with_signs(given: Any, solve: Callable[[Any], Any], nominal_points: np.ndarray,
-                leg_radius: float) -> tuple[Any, Any]:
+                leg_radius: float, perspective: bool) -> tuple[Any, Any]:
     """The calibration of a user's observations and the observations it used. The
     equation is ``n . A = -r`` (the leg's axis on the negative side of the edge's plane
     through the camera centre, ``docs/math.md`` section 4), and a line fitted in an image
-    has a normal of either sign. Candidates: the file's signs; each normal oriented by the
-    nominal base points (camera frame [m]); oriented again by that solution's estimates.
-    Taken: one whose equations agree (every leg's RMS residual under
-    :data:`SIGN_RESIDUAL` radii), the nearest to the nominal points among those (normals
-    all of the other sign agree too, a mirror image far away), the file's when it is as
-    near (a good file is never turned by a poor nominal camera pose); else the one whose
-    equations agree best."""
+    has a normal of either sign.
+
+    The file's signs are kept when its equations agree (every leg's RMS residual under
+    :data:`SIGN_RESIDUAL` radii) and, for a perspective camera, its base points lie in
+    front of it: a nominal camera pose, however wrong, never turns a consistent file.
+    A file whose every sign is reversed agrees too, with the points mirrored through the
+    camera centre (behind a perspective camera): reversed back. A file whose equations
+    disagree (signs mixed): each normal oriented by the nominal base points (camera frame
+    [m]), then by that solution's estimates; the candidate taken is one whose equations
+    agree, in front, the nearest to the nominal points, else the file's."""
     limit = SIGN_RESIDUAL * leg_radius
-    candidates = [(solve(given), given)]
+
+    def agrees(res: Any) -> bool:
+        return float(np.max(res.linear.residual_rms)) <= limit
+
+    def in_front(res: Any) -> bool:
+        return not perspective or float(np.median(res.linear.base_points[:, 2])) > 0
+
+    first = solve(given)
+    if agrees(first) and in_front(first):
+        return first, given
+    if agrees(first):  # every sign reversed: the mirror image behind the camera
+        reversed_ = replace(given, normals=-np.asarray(given.normals, dtype=float))
+        res = solve(reversed_)
+        return (res, reversed_) if agrees(res) and in_front(res) else (first, given)
+    candidates = []
     points = nominal_points
     for _ in range(2):
         data = _oriented(given, points)
         res = solve(data)
         candidates.append((res, data))
         points = res.linear.base_points
-
-    def score(candidate: tuple[Any, Any]) -> tuple[bool, float]:
-        res = candidate[0]
-        worst = float(np.max(res.linear.residual_rms))
-        near = float(np.median(np.linalg.norm(res.linear.base_points - nominal_points,
-                                              axis=1)))
-        agree = worst <= limit
-        return (not agree, near if agree else worst)
-
-    return min(candidates, key=score)  # (min keeps the first of equal scores: the file's)
+    good = [c for c in candidates if agrees(c[0]) and in_front(c[0])]
+    if not good:
+        return first, given
+    return min(good, key=lambda c: float(np.median(np.linalg.norm(
+        c[0].linear.base_points - nominal_points, axis=1))))
 
 
 def _oriented(data: Any, points: np.ndarray) -> Any:

@@ -227,3 +227,28 @@ def test_ill_conditioned_calibration_is_refused_or_marked(tmp_path: Path,
     assert all(r["calibration_ill_conditioned_legs"] >= 1 for r in rows)
     assert all(0.014 < r["calibration_min_singular_ratio"] < 0.02 for r in rows)
     assert "| 3/3 | 0/3 |" in (out / "report.md").read_text()
+
+
+def test_a_consistent_file_is_kept_whatever_the_nominal_camera_pose() -> None:
+    """A good file compared with a nominal pose that is far off (a pose rotated half a
+    turn, shifted a metre, or the camera's position typed for its translation) was turned
+    into its mirror image, 991 mm off: a file whose equations agree and whose points lie
+    in front of the camera keeps its signs."""
+    from benchmarks.study.calibration import _with_signs
+    from hexapod import deltalab
+    from vision.calibration import collect_observations
+    from vision.calibration.fit import calibrate
+
+    g = deltalab()
+    cam = front_camera(g)
+    data = collect_observations(g, cam, "random:30", None, 5)
+    truth = cam.camera_from_base.apply(g.base_points)
+
+    def solve(d: object) -> object:
+        return calibrate(d, g.leg_radius, g.base_points, method="lstsq")
+
+    half_turn = truth * np.array([1.0, -1.0, -1.0])  # about the camera's x axis
+    for nominal in (truth, half_turn, truth + np.array([0.0, 0.0, 1.0]), -truth):
+        res, used = _with_signs(data, solve, nominal, g.leg_radius, True)
+        np.testing.assert_allclose(res.base_points, truth, atol=1e-8)
+        assert np.array_equal(np.asarray(used.normals), np.asarray(data.normals))
