@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import argparse
 import contextlib
+import errno
 import json
 import sys
 import time
@@ -266,7 +267,9 @@ def _run_locked(scenarios: list[Any], out: Path, args: argparse.Namespace
         word = how_stopped(stop).split()[0]
         con.print(f"\n[yellow]{word}[/yellow]: {written} of {total} trials written to "
                   f"{out}/results.jsonl; finish with: {escape(_resume_command(args, out))}")
-    except OSError:  # a file not written (a full disk: the error names it); exit 2
+    except OSError as exc:  # a file not written (a full disk: the error names it); exit 2
+        if exc.errno not in (errno.ENOSPC, errno.EDQUOT, errno.EFBIG, errno.EROFS):
+            raise  # (a connection refused, a file not found: its own message)
         written = rows_written() - rows_before
         con.print(f"\n[red]a file could not be written[/red]: {written} of {total} trials "
                   f"are in {out}/results.jsonl; once it can be (room on the disk), finish "
@@ -491,12 +494,13 @@ def cmd_report(args: argparse.Namespace) -> int:
     from benchmarks.exceptions import DirectoryLockedError
     from benchmarks.study.runner import run_lock
 
+    busy = None
     with contextlib.ExitStack() as held:
-        try:
-            held.enter_context(run_lock(Path(args.dir)))
-            busy = None
-        except DirectoryLockedError as exc:
-            busy = exc
+        if (Path(args.dir) / "results.jsonl").is_file():  # (a mistyped path: not made)
+            try:
+                held.enter_context(run_lock(Path(args.dir)))
+            except DirectoryLockedError as exc:
+                busy = exc
         return _report(args, busy)
 
 
@@ -535,9 +539,10 @@ def _report(args: argparse.Namespace, busy: Any) -> int:
     print(f"report: {path}")
     if busy is not None:
         who = f"PID {busy.pid}" if busy.pid is not None else "another process"
-        print(f"note: a run ({who}) is writing into {out}: this report holds the "
-              f"{len(rows.rows)} rows written so far; the run writes its own when it ends, "
-              f"and its record ({META_FILE}) was left to it")
+        what = busy.holder.split(" (since")[0] if busy.holder else "?"
+        print(f"note: another hexapod-bench command ({who}: {what}) holds {out}: this "
+              f"report holds the {len(rows.rows)} rows written so far, and {META_FILE} was "
+              "left to that command (a run writes its own report when it ends)")
     return 0
 
 

@@ -55,6 +55,9 @@ _aside: list[_Drawers] = []
 def _alone(job: Callable[..., None], args: tuple[Any, ...]) -> None:
     """``job(*args)`` in a drawer, which forks no drawer of its own (a job of several
     figures draws them all)."""
+    import signal
+
+    signal.signal(signal.SIGTERM, signal.SIG_DFL)  # (the command's handler is not ours)
     _aside.clear()
     job(*args)
 

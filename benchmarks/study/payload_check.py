@@ -139,9 +139,10 @@ def payload_facts(sc: Any, samples: int = SAMPLED_STARTS) -> list[PayloadFacts]:
         first = out[0]
         first.problems.append(Problem("error", (
             "no sampled start of the study can be held at rest: the drives' force limits "
-            f"({first.limit_n.min():g} N) are below the static load at every one, so every "
-            f"trial would fall onto an end stop; raise force_limit in [drives] of the robot "
-            f"file, or lighten the load, in {sc.source}")))
+            f"({first.limit_n.min():g} N) are below the static load at every one, so no "
+            "controller can hold the platform where a trial starts (it sags from the first "
+            "period: onto an end stop, or as far as the drives' friction lets it); raise "
+            f"force_limit in [drives] of the robot file, or lighten the load, in {sc.source}")))
     return out
 
 

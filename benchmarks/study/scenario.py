@@ -9,6 +9,7 @@ typo. See ``docs/scenarios.md`` for the format.
 from __future__ import annotations
 
 import copy
+import logging
 from dataclasses import fields, replace
 from importlib import resources
 from pathlib import Path
@@ -55,6 +56,8 @@ __all__ = [
     "TaskConfig", "builtin_scenarios", "check_controllers", "check_range", "load_scenario",
     "parse_scenario",
 ]
+
+log = logging.getLogger(__name__)
 
 _TOP = ("name", "description", "seed", "trials", "controllers", "controller_options", "robot",
         "camera", "sensor", "noise", "calibration_error", "calibration", "task", "reference",
@@ -379,8 +382,8 @@ def _shared_for(defaults: dict[str, Any], own: dict[str, Any], path: str, key: s
     its own table chose another way of setting (:data:`~controllers.options.
     ALTERNATIVE_OPTIONS`: its ``gain`` is not replaced by a file-wide ``adaptive_gain``).
 
-    Raises:
-        ScenarioError: Its own table gives two options of one such group.
+    Its own table giving two of a group is warned of (``adaptive_gain`` wins, as the
+    laws take it; a run's kept scenario written before this rule holds both).
     """
     from controllers.options import ALTERNATIVE_OPTIONS
 
@@ -388,8 +391,9 @@ def _shared_for(defaults: dict[str, Any], own: dict[str, Any], path: str, key: s
     for group in ALTERNATIVE_OPTIONS:
         chosen = sorted(group & own.keys())
         if len(chosen) > 1:
-            raise ScenarioError(path, f"{' and '.join(chosen)} both given: they set the same "
-                                "thing (adaptive_gain replaces gain); give one", key=key)
+            log.warning("%s: key '%s': %s both given: they set the same thing "
+                        "(adaptive_gain replaces gain, which is not used); give one",
+                        path, key, " and ".join(chosen))
         if chosen:
             for other in group - own.keys():
                 shared.pop(other, None)

@@ -35,9 +35,11 @@ LOW_FRACTION = 0.01
 MIN_EDGES = 3
 #: Smallest / largest singular value of the edge interaction below which it is singular.
 SINGULAR_RATIO = 1e-6
-#: Below this smallest/largest singular value ratio (a condition number over 500) the
-#: edges at home observe the pose poorly: a warning.
-POOR_RATIO = 2e-3
+#: Below this smallest/largest singular value ratio (a condition number over 1000) the
+#: edges at home observe the pose poorly: a warning. (The number mixes metres and
+#: radians: a robot ten times smaller gives 465 with the front camera, a telephoto camera
+#: three times farther 675; a camera pose in radians where degrees are meant, 1505.)
+POOR_RATIO = 1e-3
 
 
 @dataclass(frozen=True)
@@ -351,7 +353,8 @@ def _legs_crossing(geometry: HexapodGeometry, R0: np.ndarray, t0: np.ndarray,
 
 def _unit_slips(geometry: HexapodGeometry, where: Where) -> list[Problem]:
     """Warnings for values no hexapod has, which metres typed into a millimetre key
-    give: a leg radius under 1 mm, a leg speed limit under 1 mm/s."""
+    give: a leg radius under 1 mm, a leg speed limit under 0.1 mm/s (slow precision
+    hexapods move at a fraction of a millimetre per second)."""
     out = []
     robot = where.strokes.split(" in ", 1)[-1]  # the robot file
     if geometry.leg_radius < 1e-3:
@@ -359,10 +362,10 @@ def _unit_slips(geometry: HexapodGeometry, where: Where) -> list[Problem]:
                            "in metres? leg_radius_mm is in millimetres (the camera sees "
                            f"a leg's two edges 2 radii apart); check leg_radius_mm in {robot}",
                            "robot"))
-    if geometry.max_speed < 1e-3:
+    if geometry.max_speed < 1e-4:
         out.append(Problem("warning", f"leg speed limit {geometry.max_speed * 1e3:g} mm/s: "
-                           "given in m/s? max_speed_mm_s is in millimetres per second (a "
-                           f"trial would take hours); check max_speed_mm_s in {robot}", "robot"))
+                           "given in m/s? max_speed_mm_s is in millimetres per second; "
+                           f"check max_speed_mm_s in {robot}", "robot"))
     return out
 
 
@@ -416,8 +419,8 @@ def _camera_problems(report: SetupReport, camera: Any, home_obs: Any, needs_came
             f"the edges seen at home observe the platform's pose poorly in some direction "
             f"(edge interaction condition number {report.edge_condition:.0f}; the built-in "
             f"cameras give 22 to 67): image noise is amplified as much there; check "
-            f"{where.camera} (a pose in radians where degrees are meant?)"), "camera",
-            fails=False))
+            f"{where.camera} (a pose in radians where degrees are meant gives this)"),
+            "camera", fails=False))
     if n_home and report.edge_ratio < SINGULAR_RATIO:
         out.append(Problem("warning", (
             f"the {n_home} edges seen at home do not determine the six degrees of freedom "

@@ -62,7 +62,7 @@ def test_without_a_payload_the_robot_s_own_weight_is_checked(tmp_path: Path) -> 
     severities = [p.severity for p in facts[0].problems]
     assert severities == ["warning", "error"], facts[0].problems
     assert "the robot's own weight alone (no payload) exceeds" in facts[0].problems[0].text
-    assert "every trial would fall onto an end stop" in facts[0].problems[1].text
+    assert "no controller can hold the platform where a trial starts" in facts[0].problems[1].text
     assert "Static load (the robot's own weight" in "\n".join(describe_payload(facts, sc))
 
 

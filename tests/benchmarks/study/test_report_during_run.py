@@ -36,7 +36,8 @@ def test_a_report_during_a_run_leaves_the_run_s_record_to_it(
     try:
         assert cli_main(["report", str(out)]) == 0
         text = " ".join(capsys.readouterr().out.split())
-        assert f"note: a run (PID {proc.pid}) is writing into {out}" in text, text
+        assert f"note: another hexapod-bench command (PID {proc.pid}: " in text, text
+        assert f"run {scen}" in text and f"holds {out}" in text, text
         report = (out / "report.md").read_text()
         assert "**Incomplete**" in report  # its rows so far, and it says so
     finally:
@@ -50,3 +51,10 @@ def test_a_report_during_a_run_leaves_the_run_s_record_to_it(
     meta = json.loads((out / "run.json").read_text())
     assert [c["did"] for c in meta["commands"]][-1] == "rebuilt report.md and its figures"
     assert "note: a run" not in capsys.readouterr().out
+
+
+def test_report_of_a_mistyped_directory_makes_nothing(tmp_path: Path) -> None:
+    """report typo_dir/sub failed as it should, and left typo_dir/sub/.lock behind."""
+    missing = tmp_path / "typo_dir" / "sub"
+    assert cli_main(["report", str(missing)]) == 2
+    assert not (tmp_path / "typo_dir").exists()
