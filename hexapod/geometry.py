@@ -47,8 +47,12 @@ def _validate_points(name: str, value: Any, source: str | None) -> np.ndarray:
     if close.any():
         i, j = np.argwhere(close)[0]  # (the first pair i < j in row order)
         d = math.sqrt(float(d2[i, j]))
+        span = float(np.max(np.linalg.norm(arr, axis=1)))  # [m]
+        metres = (f"; every point within {span * 1e3:.3g} mm of the origin: metres where "
+                  "millimetres are meant (a robot file's base_points_mm, platform_points_mm)?"
+                  if span < 0.01 else "")
         raise GeometryError(
-            name, f"points {i} and {j} coincide (distance {d * 1e3:.4f} mm)", source
+            name, f"points {i} and {j} coincide (distance {d * 1e3:.4f} mm){metres}", source
         )
     centred = arr - arr.mean(axis=0)
     s = np.linalg.svd(centred, compute_uv=False)

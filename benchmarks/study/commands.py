@@ -401,6 +401,12 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
               f"rigid-fit RMS {res['fit_rms_mm']:.3f} mm, scale {res['scale']:.5f}; wrote "
               f"{out / 'calibration.json'} and {out / 'calibrated.toml'}")
         _print_far_from_nominal(doc, out)
+        if res["fit_rms_mm"] > FIT_RMS_WARN_MM:
+            print(f"warning: {args.observations}: the calibrated base points fit the robot's "
+                  f"base only to {res['fit_rms_mm']:.1f} mm RMS (a rigid fit; CAD errors give "
+                  "a millimetre or two): too few configurations for the noise, legs seen at "
+                  "too few inclinations, or another robot's observations; do not trust "
+                  "calibrated.toml without more configurations", file=sys.stderr)
         if doc["normals_flipped"]:
             print(f"note: {doc['normals_flipped']} edge normal(s) of {args.observations} "
                   "oriented to the calibration's sign (n . A = -r at the nominal base "
@@ -544,6 +550,11 @@ def _report(args: argparse.Namespace, busy: Any) -> int:
               f"report holds the {len(rows.rows)} rows written so far, and {META_FILE} was "
               "left to that command (a run writes its own report when it ends)")
     return 0
+
+
+#: The rigid-fit RMS [mm] of a calibration from a user's observations above which it is
+#: warned of (two random configurations gave 10.8 mm and points 28 mm off, unwarned).
+FIT_RMS_WARN_MM = 5.0
 
 
 #: ``hexapod-bench perf WHAT`` -> the module whose ``main(argv)`` prints the figure.

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 from benchmarks.cli import main
@@ -59,6 +60,12 @@ def test_coincident_points_name_the_file_key(tmp_path: Path) -> None:
     with pytest.raises(GeometryError) as info:
         HexapodGeometry.from_dict(table, "robot.toml")
     assert str(info.value).startswith("robot.toml: platform_points_mm: points 0 and 1 coincide")
+    assert "metres" not in str(info.value)
+    metres = own_robot().to_dict()  # the points typed in metres: 0.35 for 350 mm
+    metres["base_points_mm"] = (np.asarray(metres["base_points_mm"]) / 1000).tolist()
+    with pytest.raises(GeometryError) as info:
+        HexapodGeometry.from_dict(metres, "robot.toml")
+    assert "metres where millimetres are meant" in str(info.value), str(info.value)
 
 
 def test_misspelt_controller_option_gets_did_you_mean(tmp_path: Path,

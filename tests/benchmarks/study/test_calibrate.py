@@ -252,3 +252,21 @@ def test_a_consistent_file_is_kept_whatever_the_nominal_camera_pose() -> None:
         res, used = _with_signs(data, solve, nominal, g.leg_radius, True)
         np.testing.assert_allclose(res.base_points, truth, atol=1e-8)
         assert np.array_equal(np.asarray(used.normals), np.asarray(data.normals))
+
+
+def test_a_calibration_that_fits_the_robot_poorly_is_warned_of(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """Three noisy configurations fit the base to 7 mm RMS (points tens of mm off) and
+    were written without a word; thirty fit to 2 mm: no warning."""
+    from hexapod import deltalab
+    from vision.calibration import collect_observations
+    from vision.calibration.collect import rotation_noise
+
+    cam = front_camera()
+    for configurations, warned in (("random:3", True), ("random:30", False)):
+        obs = tmp_path / f"{configurations[7:]}.json"
+        collect_observations(deltalab(), cam, configurations, rotation_noise(0.05), 5).save(obs)
+        assert cli_main(["calibrate", str(_scenario(tmp_path)), "--out",
+                         str(tmp_path / obs.stem), "--observations", str(obs)]) == 0
+        err = " ".join(capsys.readouterr().err.split())
+        assert ("the calibrated base points fit the robot's base only to" in err) is warned, err
