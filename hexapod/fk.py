@@ -190,7 +190,36 @@ def _guess(geometry: HexapodGeometry, guess: tuple[np.ndarray, np.ndarray] | Non
     R, t = (np.asarray(x, dtype=float) for x in guess)
     if R.shape != (3, 3) or t.shape != (3,):
         raise ShapeError("guess", "(rotation (3, 3), translation (3,))", (R.shape, t.shape))
-    return R, t
+    return proper_rotations(R[None], "guess")[0], t
+
+
+#: How far a guess's ``R^T R`` may be from the identity before it is replaced by the
+#: nearest rotation (a rotation of the project's own is within 1e-12).
+ORTHONORMAL_TOLERANCE = 1e-9
+
+
+def proper_rotations(R: np.ndarray, name: str) -> np.ndarray:
+    """Guesses ``R`` (N, 3, 3) as rotations: a matrix that is not orthonormal (a pose
+    read back rounded, a scaled one) is replaced by the nearest rotation (the Newton
+    update ``exp(w) R`` keeps a guess's scale or shear, and the six lengths can then be
+    matched by a pose that is no pose: millimetres off, reported converged); the others
+    are returned as they are, bit for bit.
+
+    Raises:
+        ValueError: A guess is a reflection or singular (``det <= 0``), naming ``name``.
+    """
+    gram = np.einsum("nji,njk->nik", R, R)
+    off = np.abs(gram - np.eye(3)).max(axis=(1, 2)) > ORTHONORMAL_TOLERANCE  # (NaN: no)
+    det = np.einsum("ni,ni->n", R[:, :, 0], np.cross(R[:, :, 1], R[:, :, 2]))
+    if np.any(det <= 0):  # (a non-finite guess is left to the solve, which fails it)
+        raise ValueError(f"{name}: a rotation guess with determinant {float(det.min()):.3g} "
+                         "(a reflection or a singular matrix): give a rotation matrix")
+    if not off.any():
+        return R
+    U, _, Vt = np.linalg.svd(R[off])
+    out = np.array(R, dtype=float, copy=True)
+    out[off] = U @ Vt
+    return out
 
 
 def forward_kinematics(
@@ -296,7 +325,8 @@ def forward_kinematics_batch(
     A = geometry.base_points if base_points is None else np.asarray(base_points, float)
     E = geometry.platform_points if platform_points is None else np.asarray(platform_points,
                                                                              float)
-    x = pack_rows(np.asarray(rotations, float), np.asarray(translations, float), q, A, E)
+    R = proper_rotations(np.asarray(rotations, float), "rotations")
+    x = pack_rows(R, np.asarray(translations, float), q, A, E)
     return solve_rows(x, tol, max_iterations)
 
 
