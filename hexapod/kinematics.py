@@ -31,7 +31,20 @@ def _check_pose(rotation: np.ndarray, translation: np.ndarray) -> tuple[np.ndarr
         )
     if not (np.isfinite(R).all() and np.isfinite(t).all()):
         raise ShapeError("pose", "finite values", "NaN or inf")
+    gram = np.einsum("...ji,...jk->...ik", R, R)
+    off = float(np.abs(gram - np.eye(3)).max(initial=0.0))
+    det = np.einsum("...i,...i->...", R[..., 0], np.cross(R[..., 1], R[..., 2]))
+    if off > ROTATION_TOLERANCE or np.any(det <= 0):
+        raise ShapeError("rotation", "rotation matrices (R^T R = I, det = +1: not a scaled, "
+                         "sheared or mirrored matrix)",
+                         f"|R^T R - I| = {off:.2e}, det from {float(np.min(det)):.4g} to "
+                         f"{float(np.max(det)):.4g}")
     return R, t
+
+
+#: How far ``R^T R`` may be from the identity in a pose given to the kinematics (the
+#: camera's own check: a rotation built by the project is within 1e-12).
+ROTATION_TOLERANCE = 1e-6
 
 
 @dataclass(frozen=True)
