@@ -28,7 +28,8 @@ from typing import Any
 
 from benchmarks.exceptions import BenchmarkError
 from benchmarks.study import viz_command
-from benchmarks.study.commands import cmd_calibrate, cmd_report, cmd_run, console
+from benchmarks.study.calibrate_command import cmd_calibrate
+from benchmarks.study.commands import cmd_report, cmd_run, console
 from benchmarks.study.outdir import OutputDir, OutputFile, add_command
 from benchmarks.termination import exit_status, how_stopped, sigterm_interrupts
 from hexapod.exceptions import HexapodError
