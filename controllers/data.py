@@ -132,7 +132,9 @@ class Command:
 
     Attributes:
         velocities: (6,) leg velocity command [m/s]; zeros when the controller refuses
-            or commands forces.
+            or commands forces. Not limited to the robot's leg speed (the QP and
+            predictive laws bound it themselves; the backends and the simulator clamp
+            every command).
         twist: (6,) platform twist ``(v, w)`` in the camera frame, if the law computes one.
         error: The stacked task error.
         error_norm: Its Euclidean norm.
