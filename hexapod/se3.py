@@ -8,6 +8,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from hexapod.exceptions import ShapeError
+
 
 def skew(x: np.ndarray) -> np.ndarray:
     """Skew matrices ``[x]_x`` of vectors (..., 3) -> (..., 3, 3)."""
@@ -132,7 +134,18 @@ def integrate_pose(
 
     Returns:
         The new rotation and translation.
+
+    Raises:
+        ShapeError: A twist that is not (..., 6), a rotation not (..., 3, 3) or a
+            translation not (..., 3).
     """
+    twist = np.asarray(twist, dtype=float)
+    rotation, translation = np.asarray(rotation, float), np.asarray(translation, float)
+    if twist.shape[-1:] != (6,):
+        raise ShapeError("twist", "shape (..., 6): (v [m/s], w [rad/s])", twist.shape)
+    if rotation.shape[-2:] != (3, 3) or translation.shape[-1:] != (3,):
+        raise ShapeError("pose", "rotation (..., 3, 3) and translation (..., 3)",
+                         (rotation.shape, translation.shape))
     dt_arr = np.asarray(dt, dtype=float)[..., None]
     dR, dp = exp_se3(twist[..., :3] * dt_arr, twist[..., 3:] * dt_arr)
     return dR @ rotation, (dR @ translation[..., None])[..., 0] + dp

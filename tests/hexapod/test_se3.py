@@ -150,3 +150,18 @@ def test_log_so3_sums_the_trace_as_numpy_does(shape: tuple[int, ...]) -> None:
     for M in (exp_so3(rng.normal(size=shape[:-1])), rng.normal(size=shape) * 1e3):
         diagonal = M[..., 0, 0] + M[..., 1, 1] + M[..., 2, 2]
         assert diagonal.tobytes() == np.trace(M, axis1=-2, axis2=-1).tobytes()
+
+
+def test_integrate_pose_takes_lists_and_names_a_wrong_shape() -> None:
+    """A list twist gave 'list indices must be integers or slices, not tuple', a (3,)
+    twist an IndexError naming nothing."""
+    import pytest
+
+    from hexapod.exceptions import ShapeError
+    from hexapod.se3 import integrate_pose
+
+    R = integrate_pose(np.eye(3), [0.0, 0.0, 0.0], [0, 0, 0, 0, 0, 0.1], 0.02)[0]
+    np.testing.assert_allclose(R, integrate_pose(np.eye(3), np.zeros(3),
+                                                 np.array([0, 0, 0, 0, 0, 0.1]), 0.02)[0])
+    with pytest.raises(ShapeError, match=r"twist: expected shape \(\.\.\., 6\)"):
+        integrate_pose(np.eye(3), np.zeros(3), np.zeros(3), 0.02)
