@@ -79,9 +79,13 @@ class TrialRecord:
 
     @property
     def title(self) -> str:
-        """``scenario / controller / trial k``."""
+        """``scenario / controller / trial k``, with ``/ sweep point p`` for a record of a
+        sweep point other than the first (its file name, ``SCENARIO__pP__...``)."""
         a = self.arrays
-        return f"{a['scenario']} / {a['controller']} / trial {int(a['trial'])}"
+        parts = Path(self.path).stem.split("__")
+        point = (f" / sweep point {parts[1][1:]}" if len(parts) == 4 and parts[1] != "p0"
+                 and parts[1][1:].isdigit() else "")
+        return f"{a['scenario']}{point} / {a['controller']} / trial {int(a['trial'])}"
 
 
 def _validated(arrays: dict[str, Any], path: str) -> dict[str, np.ndarray]:

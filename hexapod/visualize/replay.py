@@ -82,6 +82,10 @@ def replay_html(record: TrialRecord, html_path: str | Path, fps: float = 25.0,
         if frame is None:
             viewer.animate(record, fps)
         html = viewer.static_html()
+    import html as html_text
+
+    html = html.replace("<title>MeshCat</title>",  # the page names its trial
+                        f"<title>{html_text.escape(record.title)}</title>", 1)
     html = _with_marker(_with_page_script(html))
     path = Path(html_path)
     path.write_text(html, encoding="utf-8")

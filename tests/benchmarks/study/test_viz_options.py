@@ -39,3 +39,22 @@ def test_still_needs_html_and_a_period_of_the_trial(tmp_path: Path,
     assert "--still 5000:" in err and "has periods 0 to" in err and not page.exists()
     assert cli_main([*viz, "--still", "-1", "--html", str(page)]) == 0  # its folder made
     assert page.exists() and page.with_suffix(".png").exists()
+
+
+@pytest.mark.slow
+def test_the_page_and_its_curves_name_the_sweep_point(tmp_path: Path,
+                                                      capsys: pytest.CaptureFixture[str]) -> None:
+    """A record of sweep point 1 was titled as one of point 0 (scenario / controller /
+    trial), and the page's title was 'MeshCat'."""
+    out = tmp_path / "run"
+    assert cli_main(["run", "andreff2006-front-camera", "--out", str(out), "--trials", "1",
+                     "--record", "1", "--controllers", "leg-edge", "--max-steps", "5",
+                     "--no-progress"]) == 0
+    capsys.readouterr()
+    page = tmp_path / "p1.html"
+    assert cli_main(["viz", str(out), "--trial", "0", "--point", "1", "--html",
+                     str(page)]) == 0
+    said = capsys.readouterr().out
+    assert said.startswith("andreff2006-front-camera / sweep point 1 / leg-edge / trial 0")
+    assert ("<title>andreff2006-front-camera / sweep point 1 / leg-edge / trial 0</title>"
+            in page.read_text())
