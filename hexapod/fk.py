@@ -27,6 +27,7 @@ import numpy as np
 from hexapod.compiled import CompiledFunction, Layout
 from hexapod.exceptions import ForwardKinematicsError, ShapeError, StrokeLimitError
 from hexapod.geometry import HexapodGeometry
+from hexapod.se3 import rotation_defect
 from hexapod.workspace import home_pose
 
 if TYPE_CHECKING:  # Pinocchio (0.15 s to import) only for the "pinocchio" method
@@ -208,9 +209,8 @@ def proper_rotations(R: np.ndarray, name: str) -> np.ndarray:
     Raises:
         ValueError: A guess is a reflection or singular (``det <= 0``), naming ``name``.
     """
-    gram = np.einsum("nji,njk->nik", R, R)
-    off = np.abs(gram - np.eye(3)).max(axis=(1, 2)) > ORTHONORMAL_TOLERANCE  # (NaN: no)
-    det = np.einsum("ni,ni->n", R[:, :, 0], np.cross(R[:, :, 1], R[:, :, 2]))
+    defect, det = rotation_defect(R)
+    off = defect > ORTHONORMAL_TOLERANCE  # (NaN: no)
     if np.any(det <= 0):  # (a non-finite guess is left to the solve, which fails it)
         raise ValueError(f"{name}: a rotation guess with determinant {float(det.min()):.3g} "
                          "(a reflection or a singular matrix): give a rotation matrix")

@@ -16,6 +16,7 @@ import numpy as np
 
 from hexapod.exceptions import ShapeError
 from hexapod.geometry import HexapodGeometry
+from hexapod.se3 import rotation_defect
 
 
 def _check_pose(rotation: np.ndarray, translation: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -31,9 +32,8 @@ def _check_pose(rotation: np.ndarray, translation: np.ndarray) -> tuple[np.ndarr
         )
     if not (np.isfinite(R).all() and np.isfinite(t).all()):
         raise ShapeError("pose", "finite values", "NaN or inf")
-    gram = np.einsum("...ji,...jk->...ik", R, R)
-    off = float(np.abs(gram - np.eye(3)).max(initial=0.0))
-    det = np.einsum("...i,...i->...", R[..., 0], np.cross(R[..., 1], R[..., 2]))
+    defect, det = rotation_defect(R)
+    off = float(np.max(defect, initial=0.0))
     if off > ROTATION_TOLERANCE or np.any(det <= 0):
         raise ShapeError("rotation", "rotation matrices (R^T R = I, det = +1: not a scaled, "
                          "sheared or mirrored matrix)",

@@ -121,6 +121,15 @@ def exp_se3(v: np.ndarray, w: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return exp_so3(w), (V @ v[..., None])[..., 0]
 
 
+def rotation_defect(R: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """How far matrices ``R`` (..., 3, 3) are from rotations: ``max |R^T R - I|`` and the
+    determinant, each of shape ``(...)`` (a matrix product and a determinant: a few
+    microseconds for one matrix, the check of every pose given to the kinematics)."""
+    gram = np.matmul(np.swapaxes(R, -1, -2), R)
+    gram -= np.eye(3)
+    return np.abs(gram).max(axis=(-2, -1)), np.linalg.det(R)
+
+
 def integrate_pose(
     rotation: np.ndarray, translation: np.ndarray, twist: np.ndarray, dt: float | np.ndarray
 ) -> tuple[np.ndarray, np.ndarray]:
