@@ -10,7 +10,7 @@ from __future__ import annotations
 import json
 import logging
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -25,6 +25,9 @@ log = logging.getLogger(__name__)
 
 #: Columns first, in this order (then the sweep values, then the rest, sorted).
 LEAD_COLUMNS = ["scenario", "point", "controller", "backend", "trial"]
+#: The Parquet schema metadata key of the run's record (``run.json``, as JSON) in a file
+#: of :func:`export_parquet`, for readers other than pandas (polars, DuckDB, R's arrow).
+RUN_METADATA = b"hexapod_bench.run"
 
 
 def load(out_dir: str | Path) -> pd.DataFrame:
@@ -118,8 +121,10 @@ def _read_fast(out_dir: Path) -> pd.DataFrame | None:
 
 def export_parquet(out_dir: str | Path, path: str | Path, overwrite: bool = False
                    ) -> tuple[Path, int]:
-    """Write the table of :func:`load` to a Parquet file (``generator`` in its schema
-    metadata; see :func:`hexapod.outputs.write_output`).
+    """Write the table of :func:`load` to a Parquet file with the run's record:
+    ``pandas.read_parquet`` gives back ``df.attrs`` (``sweep_columns`` and ``meta``, the
+    run's ``run.json``), and the schema metadata holds ``run.json`` under
+    :data:`RUN_METADATA` and ``generator`` (:func:`hexapod.outputs.write_output`).
 
     Args:
         out_dir: The run directory.
@@ -138,8 +143,11 @@ def export_parquet(out_dir: str | Path, path: str | Path, overwrite: bool = Fals
 
     check_replace(path, overwrite, kind="Parquet")  # before reading the run
     df = load(out_dir)
-    attrs: dict[str, Any] = dict(df.attrs)
-    df.attrs = {}  # pyarrow stores attrs as JSON metadata; keep the file plain
+    # the run's record travels with the table: pandas restores ``df.attrs`` (the
+    # ``pandas`` metadata), other readers find run.json under RUN_METADATA
     table = pa.Table.from_pandas(df, preserve_index=False)
-    df.attrs = attrs
+    if "meta" in df.attrs:
+        table = table.replace_schema_metadata({
+            **(table.schema.metadata or {}),
+            RUN_METADATA: json.dumps(df.attrs["meta"]).encode()})
     return write_output(path, table, overwrite), len(df)

@@ -2,16 +2,19 @@
 
 from __future__ import annotations
 
+import json
 from pathlib import Path
 
 import numpy as np
 import pandas as pd
+import pyarrow.parquet as pq
 import pytest
 
 from benchmarks.cli import main as cli_main
 from benchmarks.exceptions import ResultsError
 from benchmarks.study import load
 from benchmarks.study.results import deduplicate, read_results
+from benchmarks.study.table import RUN_METADATA
 from tests.benchmarks.study.helpers_rows import make_rows, write_run
 
 
@@ -75,9 +78,18 @@ def test_load_names_a_corrupted_line(tmp_path: Path) -> None:
 
 def test_export_parquet_round_trip(tmp_path: Path) -> None:
     out = _sweep_run(tmp_path)
+    record = {"commands": [{"argv": ["run", "quick", "--seed", "7"]}], "workers": 2,
+              "scenarios": {"quick": {"description": "a study", "source": "quick.toml"}}}
+    (out / "run.json").write_text(json.dumps(record))
     target = tmp_path / "t.parquet"
     assert cli_main(["export", str(out), "--parquet", str(target)]) == 0
     back = pd.read_parquet(target)
     df = load(out)
-    df.attrs = {}
     pd.testing.assert_frame_equal(back, df, check_dtype=False)
+    # the run's record travels with the file: pandas gives back the attrs, other
+    # readers find run.json in the schema metadata
+    assert back.attrs == df.attrs
+    assert back.attrs["meta"] == record
+    metadata = pq.read_schema(target).metadata
+    assert json.loads(metadata[RUN_METADATA]) == record
+    assert b"generator" in metadata
