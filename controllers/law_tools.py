@@ -114,6 +114,54 @@ def check_weights(controller: str, first: tuple[str, Any], second: tuple[str, An
     return a, b
 
 
+#: The spread of the estimated base points may differ from the nominal geometry's by
+#: this factor (a calibration error changes it by a few per cent; a unit slip by 1000).
+BASE_SPREAD_FACTOR = 2.0
+
+
+def base_points_of(controller: str, context: Any) -> np.ndarray:
+    """``context.base_points``, the estimated base points ``A_i`` in the camera frame
+    (6, 3) [m], checked against the nominal geometry and the estimated camera pose.
+
+    Two slips a calibration error cannot explain are refused: points whose spread (the
+    median of their distances to each other over the nominal ones) is off by more than
+    :data:`BASE_SPREAD_FACTOR` (millimetres: 1000), and, with a camera pose, points
+    nearer the nominal ones in the BASE frame than the nominal ones seen through the
+    camera (``camera_from_base``): the base frame given for the camera frame.
+
+    Raises:
+        ContextError: Not (6, 3) finite, or one of the slips above (with the figures).
+    """
+    A = np.asarray(context.base_points, dtype=float)
+    if A.shape != (6, 3) or not np.all(np.isfinite(A)):
+        raise ContextError(controller, "base_points",
+                           f"expected 6x3 finite values [m], got shape {A.shape}"
+                           + ("" if A.shape != (6, 3) else " with a value not finite"))
+    nominal = np.asarray(context.geometry.base_points, dtype=float)
+    i, j = np.triu_indices(6, 1)
+    spread = float(np.median(np.linalg.norm(A[i] - A[j], axis=1)
+                             / np.linalg.norm(nominal[i] - nominal[j], axis=1)))
+    if not 1.0 / BASE_SPREAD_FACTOR <= spread <= BASE_SPREAD_FACTOR:
+        hint = (" (millimetres? SI units: metres)" if 500.0 <= spread <= 2000.0 else "")
+        raise ContextError(controller, "base_points",
+                           f"the points are {spread:.4g} times as far apart as the nominal "
+                           f"geometry's base points{hint}")
+    pose = getattr(getattr(context, "camera", None), "camera_from_base", None)
+    if pose is not None:
+        seen = np.asarray(pose.rotation, dtype=float) @ nominal.T
+        seen = seen.T + np.asarray(pose.translation, dtype=float)
+        off_camera = float(np.linalg.norm(A - seen, axis=1).max())
+        off_base = float(np.linalg.norm(A - nominal, axis=1).max())
+        if off_base < 0.5 * off_camera:
+            raise ContextError(
+                controller, "base_points",
+                f"in the base frame? They are within {off_base * 1e3:.1f} mm of the nominal "
+                f"base points in the base frame but {off_camera * 1e3:.1f} mm from those "
+                "seen through the estimated camera pose; give them in the CAMERA frame "
+                "(camera.camera_from_base.apply(points))")
+    return A
+
+
 def goal_lengths(controller: str, goal: Any) -> np.ndarray:
     """``goal.lengths`` checked: a copy (6,) [m].
 

@@ -29,6 +29,7 @@ from controllers.law_tools import (
     Gain,
     Selection,
     TaskStep,
+    base_points_of,
     check_choice,
     check_flag,
     check_number,
@@ -135,10 +136,7 @@ class VisionLaw(VisionLawBatch):
         Raises:
             ContextError: A field the law needs is missing or invalid.
         """
-        A = np.asarray(context.base_points, dtype=float)
-        if A.shape != (6, 3) or not np.all(np.isfinite(A)):
-            raise ContextError(self.name, "base_points",
-                               f"expected 6x3 finite values, got shape {A.shape}")
+        A = base_points_of(self.name, context)
         dt = float(context.dt)
         if not (math.isfinite(dt) and dt > 0):
             raise ContextError(self.name, "dt", f"must be positive and finite, got {dt}")

@@ -12,6 +12,7 @@ import numpy as np
 
 from controllers.base import ControllerContext, Goal, Observation
 from controllers.exceptions import ContextError
+from controllers.law_tools import base_points_of
 from hexapod.kinematics import Transform, inverse_kinematics
 from hexapod.se3 import log_so3
 from hexapod.trajectory import PoseTrajectory
@@ -78,16 +79,14 @@ def camera_and_base_points(controller: str, context: ControllerContext
     """The estimated camera pose ``camera_from_base`` and base points (6, 3) [m].
 
     Raises:
-        ContextError: No camera pose, or base points not (6, 3) finite.
+        ContextError: No camera pose, or base points not (6, 3) finite or not
+            plausible (:func:`~controllers.law_tools.base_points_of`).
     """
     cam = getattr(context.camera, "camera_from_base", None)
     if not isinstance(cam, Transform):
         raise ContextError(controller, "camera", "needs the estimated camera with its "
                            "camera_from_base pose")
-    A = np.asarray(context.base_points, dtype=float)
-    if A.shape != (6, 3) or not np.all(np.isfinite(A)):
-        raise ContextError(controller, "base_points", f"expected (6, 3) finite, got {A}")
-    return cam, A
+    return cam, base_points_of(controller, context)
 
 
 def goal_pose_of(controller: str, goal: Goal) -> tuple[np.ndarray, np.ndarray]:
