@@ -32,7 +32,6 @@ from controllers.data import (
     observation_problem,
 )
 from controllers.options import RemembersOptions
-from controllers.plausible import implausible_lengths
 from hexapod.actuation import Actuation
 
 log = logging.getLogger(__name__)
@@ -54,9 +53,7 @@ class Controller(RemembersOptions, ABC):
     :meth:`step_arrays`), or overrides :meth:`reset_batch`, :meth:`step_batch` and (for
     a goal that moves) :meth:`retarget_batch`. :meth:`step`, :meth:`reset` and
     :meth:`retarget` are the final per-trial adapters (a batch of one: the servo loop);
-    a class of this shape that overrides one gets a ``TypeError``. After :meth:`reset`,
-    :meth:`step` refuses lengths no leg of the nominal robot can have
-    (:mod:`controllers.plausible`) before the batch step sees them.
+    a class of this shape that overrides one gets a ``TypeError``.
 
     A plugin written before batches, that defines ``reset(context)`` and
     ``step(observation)`` (and maybe ``retarget(goal)``), keeps working: the base takes
@@ -118,7 +115,6 @@ class Controller(RemembersOptions, ABC):
         if isinstance(failed, FailedReset):
             self.trial_instances = []
             raise failed.exc
-        self._plausible = (self.trial_instances, context.geometry.stroke)
 
     @final
     def step(self, observation: Observation) -> Command:
@@ -131,11 +127,6 @@ class Controller(RemembersOptions, ABC):
         """
         if not self.trial_instances:
             return self._not_reset()
-        bounds = self._plausible  # (lengths no leg of the robot can have: a refusal)
-        if bounds is not None and bounds[0] is self.trial_instances:
-            problem = implausible_lengths(observation.lengths, bounds[1])
-            if problem is not None:
-                return Command.refuse(problem, actuation=self.actuation)
         cls = type(self)
         if cls.step_batch is Controller.step_batch:
             if cls.step_row is Controller.step_row:  # (its body, one call less)

@@ -14,7 +14,7 @@ import numpy as np
 import pytest
 
 from controllers import registry
-from controllers.base import Observation, ObservationBatch
+from controllers.base import Observation
 from controllers.computed_torque import FK_TOLERANCE, ComputedTorqueController
 from controllers.ctc_rows import FK_MAX_CALLS, evaluate_rows, rank_condition
 from controllers.joint_ctc_rows import FORCES, POSE_IN, POSE_OUT, RESIDUAL
@@ -111,11 +111,7 @@ def test_the_step_takes_the_compiled_path_on_a_regular_trajectory() -> None:
 
 def test_unreachable_lengths_are_refused_with_the_reason() -> None:
     ctrl, _ = _controller()
-    obs = Observation(0.0, np.array([0.2, 0.2, 0.2, 0.2, 0.2, 5.0]), q_dot=np.zeros(6))
-    batch = ObservationBatch.of(obs)
-    assert batch is not None
-    cmd = ctrl.step_batch(batch).command(0)  # the step (the adapter refuses them first)
-    assert "where no leg of the nominal robot can be" in str(ctrl.step(obs).reason)
+    cmd = ctrl.step(Observation(0.0, np.array([0.2, 0.2, 0.2, 0.2, 0.2, 5.0]), q_dot=np.zeros(6)))
     assert cmd.reason is not None and "nominal model failed" in cmd.reason
     assert np.all(np.isfinite(cmd.forces)) and not np.any(cmd.forces)
     assert "did not converge" in cmd.reason and ctrl.compiled_steps == 0

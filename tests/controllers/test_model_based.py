@@ -204,8 +204,7 @@ def test_batch_rows_equal_batches_of_one(other_geometry,  # type: ignore[no-unty
                                          rng: np.random.Generator) -> None:
     """Three steps of a batch of four trials (one whose forward kinematics fails at the
     second step, one with a NaN length at the first and an infinite time at the third)
-    are, row by row and bit for bit, four batches of one stepped on the same rows (the
-    batch step: the per-trial adapter refuses the tenfold lengths itself first): the
+    are, row by row and bit for bit, four batches of one stepped on the same rows: the
     commands, the norms, the refusals' reasons and the warm starts."""
     world = World(other_geometry, make_camera("perspective", other_geometry))
     Rs, ts = world.poses(7, rng, max_translation=0.02, max_angle=np.deg2rad(4), margin=0.03)
@@ -232,9 +231,7 @@ def test_batch_rows_equal_batches_of_one(other_geometry,  # type: ignore[no-unty
             obs.t[2] = np.inf
         out = batch.step_batch(obs)
         for k, one in enumerate(singles):
-            one_row = ObservationBatch.of(obs.item(k))
-            assert one_row is not None
-            cmd = one.step_batch(one_row).command(0)
+            cmd = one.step(obs.item(k))
             row = _row(out.velocities[k], out.error_norm[k], out.reasons[k],
                        batch.trial_instances[k])
             assert row == _row(cmd.velocities, cmd.error_norm, cmd.reason, one), (step, k)
