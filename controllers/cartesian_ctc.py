@@ -25,6 +25,7 @@ from controllers.task_ctc import CompiledTaskStep, TaskComputedTorque
 from controllers.task_ctc_inputs import camera_and_base_points, goal_pose_of
 from controllers.task_ctc_rows import TaskRows
 from controllers.tasks.platform_pose import PLATFORM_POSE
+from hexapod.geometry import HexapodGeometry
 from hexapod.kinematics import Transform
 
 #: Smallest second singular value of the seen platform points about their centroid,
@@ -57,11 +58,15 @@ class CartesianCTC(TaskComputedTorque):
 
     def take_goal(self, goal: Goal) -> None:
         """The fixed goal pose (``goal.rotation``, ``goal.translation``)."""
-        self._goal = goal_pose_of(self.name, goal)
+        self._goal = goal_pose_of(self.name, goal, self._geometry())
 
     def goal_pose(self) -> tuple[np.ndarray, np.ndarray]:
         """The fixed goal pose."""
         return self._goal
+
+    def _geometry(self) -> HexapodGeometry | None:
+        """The nominal geometry a goal pose is checked on (None before a reset)."""
+        return None if self.context is None else self.context.geometry
 
     def compiled_inputs(self, step: CompiledTaskStep, observation: Observation, tr: float,
                         q: np.ndarray) -> tuple[np.ndarray | None, str | None] | str:
@@ -136,7 +141,8 @@ class VisionCTC(CartesianCTC):
     def take_goal(self, goal: Goal) -> None:
         """The taught visual goal pose, else ``goal.rotation``/``goal.translation``."""
         taught = self._taught(goal)
-        self._goal = taught if taught is not None else goal_pose_of(self.name, goal)
+        self._goal = (taught if taught is not None
+                      else goal_pose_of(self.name, goal, self._geometry()))
 
     def _taught(self, goal: Goal) -> tuple[np.ndarray, np.ndarray] | None:
         if goal.lengths is None or (goal.directions is None and goal.normals is None):

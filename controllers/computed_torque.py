@@ -236,7 +236,8 @@ class ComputedTorqueController(ComputedTorqueLaw):
         """A new fixed goal (ignored when tracking a reference: it is sampled itself)."""
         if self._ctx is not None and self._ctx.reference is not None:
             return
-        self._q_star = goal_lengths(self.name, goal)
+        self._q_star = goal_lengths(self.name, goal, None if self._ctx is None
+                                    else self._ctx.geometry.stroke)
         self._quintic[0] = 0.0  # started again at the next step
         self._quintic[15:21] = self._q_star
 

@@ -113,7 +113,7 @@ class FeatureCTC(TaskComputedTorque):
     def goal_pose(self) -> tuple[np.ndarray, np.ndarray]:
         """The goal pose, the end of the smooth line (nominal base frame)."""
         assert self.context is not None
-        return goal_pose_of(self.name, self.context.goal)
+        return goal_pose_of(self.name, self.context.goal, self.context.geometry)
 
     def compiled_features(self, observation: Observation
                           ) -> tuple[np.ndarray, np.ndarray | None, np.ndarray] | str:

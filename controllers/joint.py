@@ -38,6 +38,7 @@ class JointSpaceController(Controller):
     def __init__(self, gain: float = 1.0, adaptive_gain: Sequence[float] | None = None) -> None:
         self.gain = Gain.from_options(self.name, gain, adaptive_gain)
         self._q_star: np.ndarray | None = None
+        self._stroke: tuple[float, float] | None = None
 
     def reset_trial(self, context: ControllerContext) -> None:
         """Read ``goal.lengths``.
@@ -45,6 +46,7 @@ class JointSpaceController(Controller):
         Raises:
             ContextError: The goal has no valid lengths.
         """
+        self._stroke = context.geometry.stroke
         self.retarget_trial(context.goal)
 
     def retarget_trial(self, goal: Goal) -> None:
@@ -53,7 +55,7 @@ class JointSpaceController(Controller):
         Raises:
             ContextError: The goal has no valid lengths.
         """
-        self._q_star = goal_lengths(self.name, goal)
+        self._q_star = goal_lengths(self.name, goal, self._stroke)
 
     def step_trial(self, observation: Observation) -> Command:
         """``q_dot = -lambda (q - q*)`` (the gain a function of ``|q - q*|_inf``, one

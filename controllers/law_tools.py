@@ -14,6 +14,7 @@ import numpy as np
 from controllers.base import Observation, observation_problem
 from controllers.data import FEATURE_FIELDS
 from controllers.exceptions import ContextError, OptionError
+from controllers.plausible import implausible_lengths
 
 #: Where the interaction matrix is evaluated (ViSP's CURRENT, DESIRED, MEAN).
 INTERACTIONS = ("current", "desired", "mean")
@@ -162,11 +163,19 @@ def base_points_of(controller: str, context: Any) -> np.ndarray:
     return A
 
 
-def goal_lengths(controller: str, goal: Any) -> np.ndarray:
+def goal_lengths(controller: str, goal: Any, stroke: tuple[float, float] | None = None
+                 ) -> np.ndarray:
     """``goal.lengths`` checked: a copy (6,) [m].
 
+    Args:
+        controller: The controller's name, for the error.
+        goal: The goal.
+        stroke: The nominal robot's ``(q_min, q_max)`` [m]: lengths no leg of it can have
+            are refused (:func:`controllers.plausible.implausible_lengths`; None: not
+            checked).
+
     Raises:
-        ContextError: Missing, or not 6 positive finite lengths.
+        ContextError: Missing, not 6 positive finite lengths, or not lengths of the robot.
     """
     if goal.lengths is None:
         raise ContextError(controller, "goal.lengths", "missing")
@@ -174,6 +183,8 @@ def goal_lengths(controller: str, goal: Any) -> np.ndarray:
     if qs.shape != (6,) or not np.all(np.isfinite(qs)) or np.any(qs <= 0):
         raise ContextError(controller, "goal.lengths",
                            f"expected 6 positive finite lengths, got {qs}")
+    if stroke is not None and (problem := implausible_lengths(qs, stroke)) is not None:
+        raise ContextError(controller, "goal.lengths", problem)
     return qs
 
 

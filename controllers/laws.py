@@ -146,7 +146,8 @@ class VisionLaw(VisionLawBatch):
         self.estimate = LegDirectionEstimate.fresh()
         self.model_pose = None
         self._q_star: np.ndarray | None = (None if context.goal.lengths is None
-                                           else goal_lengths(self.name, context.goal))
+                                           else goal_lengths(self.name, context.goal,
+                                                        context.geometry.stroke))
         self.kernel = None
         self._spare_kernel = None
         self._kernel_selected = False
@@ -167,7 +168,8 @@ class VisionLaw(VisionLawBatch):
         if self.context is None:
             raise ContextError(self.name, "context", "retarget(goal) before reset(context)")
         context = replace(self.context, goal=goal)
-        q_star = None if goal.lengths is None else goal_lengths(self.name, goal)
+        q_star = None if goal.lengths is None else goal_lengths(
+            self.name, goal, None if self.context is None else self.context.geometry.stroke)
         state = dict(vars(self))  # what _retarget_features may change
         self._q_star = q_star
         self._unselect_kernel()  # a reused core starts from the common case's inputs

@@ -28,6 +28,7 @@ from controllers.exceptions import ContextError
 from controllers.law_algebra import jacobi_eigen
 from controllers.law_tools import Gain, check_flag, check_number, gain_formula
 from controllers.model_based_rows import PoseServoRows
+from controllers.plausible import implausible_pose
 from hexapod.compiled import CompiledFunction, Layout
 from hexapod.exceptions import HexapodError
 from hexapod.fk import forward_kinematics
@@ -219,6 +220,8 @@ class ModelBasedController(Controller):
                                    "expected a finite (3, 3) rotation and (3,) translation")
             if np.abs(R.T @ R - np.eye(3)).max() > 1e-6:
                 raise ContextError(self.name, "goal.rotation", "not a rotation matrix")
+            if (problem := implausible_pose(geo, R, t)) is not None:
+                raise ContextError(self.name, "goal.rotation/translation", problem)
         elif goal.lengths is not None:
             try:
                 sol = forward_kinematics(geo, np.asarray(goal.lengths, dtype=float),

@@ -13,6 +13,8 @@ import numpy as np
 from controllers.base import ControllerContext, Goal, Observation
 from controllers.exceptions import ContextError
 from controllers.law_tools import base_points_of
+from controllers.plausible import implausible_pose
+from hexapod.geometry import HexapodGeometry
 from hexapod.kinematics import Transform, inverse_kinematics
 from hexapod.se3 import log_so3
 from hexapod.trajectory import PoseTrajectory
@@ -89,11 +91,14 @@ def camera_and_base_points(controller: str, context: ControllerContext
     return cam, base_points_of(controller, context)
 
 
-def goal_pose_of(controller: str, goal: Goal) -> tuple[np.ndarray, np.ndarray]:
-    """``goal.rotation`` and ``goal.translation``, checked.
+def goal_pose_of(controller: str, goal: Goal, geometry: HexapodGeometry | None = None
+                 ) -> tuple[np.ndarray, np.ndarray]:
+    """``goal.rotation`` and ``goal.translation``, checked (with the nominal
+    ``geometry``: a pose that puts a leg where none of the robot can be is refused,
+    :func:`controllers.plausible.implausible_pose`).
 
     Raises:
-        ContextError: Missing or not finite.
+        ContextError: Missing, not finite, or not a pose of the robot.
     """
     if goal.rotation is None or goal.translation is None:
         raise ContextError(controller, "goal.rotation/translation", "missing")
@@ -104,4 +109,6 @@ def goal_pose_of(controller: str, goal: Goal) -> tuple[np.ndarray, np.ndarray]:
         raise ContextError(controller, "goal.rotation/translation",
                            f"expected a finite (3, 3) rotation and (3,) position, got "
                            f"{R.shape} and {t.shape}")
+    if geometry is not None and (problem := implausible_pose(geometry, R, t)) is not None:
+        raise ContextError(controller, "goal.rotation/translation", problem)
     return R, t

@@ -1,0 +1,74 @@
+"""Leg lengths no leg of the robot can have, in what a controller is told to reach: a
+goal's lengths, or the legs of a goal pose (:func:`controllers.law_tools.goal_lengths`,
+:func:`controllers.task_ctc_inputs.goal_pose_of`, ``model-based``'s goal), refused at
+reset and at a new goal.
+
+A length further from the nominal stroke than the stroke's own span is not a leg at an
+end stop nor a calibration offset but a value in other units (millimetres for metres):
+taught so, `joint-space` commanded 415 m/s and `model-based` 314 m/s at their first
+step. The check costs nothing per period: it is made once per goal.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Any
+
+import numpy as np
+
+from hexapod.geometry import HexapodGeometry
+from hexapod.kinematics import inverse_kinematics
+
+#: The hint of a value that is plausible once divided by 1000.
+MILLIMETRES = " (millimetres? SI units: metres)"
+
+
+def plausible_range(stroke: tuple[float, float]) -> tuple[float, float]:
+    """The open interval [m] of the lengths a leg of ``stroke`` ``(q_min, q_max)`` [m]
+    may have: ``(max(0, q_min - span), q_max + span)``, ``span = q_max - q_min``."""
+    q_min, q_max = stroke
+    span = q_max - q_min
+    return max(0.0, q_min - span), q_max + span
+
+
+def implausible_lengths(lengths: Any, stroke: tuple[float, float]) -> str | None:
+    """Why ``lengths`` (6,) [m] cannot be legs of a robot of ``stroke`` [m] (a value
+    outside :func:`plausible_range`), or None; values that are not six finite numbers
+    are left to the caller's own checks (which name them)."""
+    try:
+        values = [float(v) for v in np.asarray(lengths, dtype=float).ravel()]
+    except (TypeError, ValueError):
+        return None
+    low, high = plausible_range(stroke)
+    for i, v in enumerate(values):
+        if math.isfinite(v) and not low < v < high:
+            hint = MILLIMETRES if low < v / 1e3 < high else ""
+            return (f"leg {i} at {v:.6g} m, where no leg of the nominal robot can be (its "
+                    f"stroke {stroke[0] * 1e3:g} to {stroke[1] * 1e3:g} mm){hint}")
+    return None
+
+
+def implausible_pose(geometry: HexapodGeometry, rotation: Any, translation: Any
+                     ) -> str | None:
+    """Why the pose ``(rotation, translation [m])`` (base frame) cannot be reached by any
+    robot near ``geometry`` (its legs, inverse kinematics, outside
+    :func:`plausible_range`), or None; a pose the kinematics refuses is left to the
+    caller's own checks."""
+    try:
+        R = np.asarray(rotation, dtype=float)
+        t = np.asarray(translation, dtype=float)
+        problem = implausible_lengths(inverse_kinematics(geometry, R, t), geometry.stroke)
+        if problem is None:
+            return None
+        scaled = implausible_lengths(inverse_kinematics(geometry, R, t / 1e3),
+                                     geometry.stroke)
+    except (ArithmeticError, TypeError, ValueError, RuntimeError):
+        return None
+    problem = problem.removesuffix(MILLIMETRES)
+    # millimetres: a translation ten times the longest leg, plausible once divided by 1000
+    mm = scaled is None and float(np.linalg.norm(t)) > 10.0 * geometry.stroke[1]
+    return f"the pose puts {problem}" + ("; the translation in millimetres? SI units: "
+                                         "metres" if mm else "")
+
+
+__all__ = ["MILLIMETRES", "implausible_lengths", "implausible_pose", "plausible_range"]
