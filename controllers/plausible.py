@@ -36,10 +36,12 @@ def implausible_lengths(lengths: Any, stroke: tuple[float, float]) -> str | None
     outside :func:`plausible_range`), or None; values that are not six finite numbers
     are left to the caller's own checks (which name them)."""
     try:
-        values = [float(v) for v in np.asarray(lengths, dtype=float).ravel()]
+        values = np.asarray(lengths, dtype=float).ravel().tolist()
     except (TypeError, ValueError):
         return None
     low, high = plausible_range(stroke)
+    if values and low < min(values) and max(values) < high:  # the common case
+        return None
     for i, v in enumerate(values):
         if math.isfinite(v) and not low < v < high:
             hint = MILLIMETRES if low < v / 1e3 < high else ""
