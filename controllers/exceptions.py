@@ -2,6 +2,9 @@
 
 from __future__ import annotations
 
+from collections.abc import Iterator
+from contextlib import contextmanager
+
 from hexapod.error_base import PicklableError
 
 
@@ -99,3 +102,16 @@ class CommandError(ControllerError, ValueError):
         self.controller = controller
         self.problem = problem
         super().__init__(f"controller '{controller}' {problem}")
+
+
+@contextmanager
+def named_as(controller: str) -> Iterator[None]:
+    """Raise a held law's :class:`ContextError` as the holder's, ``controller`` (a
+    predictive controller resets and retargets the law it holds: a bad goal is the
+    predictive controller's to name)."""
+    try:
+        yield
+    except ContextError as exc:
+        if exc.controller == controller:
+            raise
+        raise ContextError(controller, exc.field, exc.problem) from None

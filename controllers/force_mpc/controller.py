@@ -18,7 +18,7 @@ from typing import Any
 import numpy as np
 
 from controllers.base import Command, ControllerContext, Goal, Observation
-from controllers.exceptions import ContextError
+from controllers.exceptions import ContextError, named_as
 from controllers.feature_ctc import LegEdgeCTC
 from controllers.force_mpc.problem import STATE, ForceProblemSpec, force_kernel
 from controllers.law_tools import check_count, check_number
@@ -125,7 +125,8 @@ class ForceMPCLaw(PredictiveLaw):
         Raises:
             ContextError: A field the controller needs is missing or invalid.
         """
-        self.law.reset(context)  # (a batch of one: its step is the batch's)
+        with named_as(self.name):
+            self.law.reset(context)  # (a batch of one: its step is the batch's)
         self.context = context
         g = context.geometry
         dt = float(context.dt)
@@ -163,7 +164,8 @@ class ForceMPCLaw(PredictiveLaw):
 
     def retarget_trial(self, goal: Goal) -> None:
         """A new fixed goal (ignored when tracking ``context.reference``)."""
-        self.law.retarget(goal)
+        with named_as(self.name):
+            self.law.retarget(goal)
         if self.context is not None and self.context.reference is None:
             self._started = False
 

@@ -23,7 +23,7 @@ from typing import Any
 import numpy as np
 
 from controllers.base import Command, ControllerContext, Goal, Observation
-from controllers.exceptions import ContextError, OptionError
+from controllers.exceptions import ContextError, OptionError, named_as
 from controllers.law_tools import check_choice, check_count, check_flag, check_number
 from controllers.mpc.drive_state import DRIVE_STATES, DriveLag, drive_lag
 from controllers.mpc.prediction import fit_pose
@@ -148,7 +148,8 @@ class MPCLaw(PredictiveLaw):
             OptionError: An option does not fit the context (e.g. no stroke left).
         """
         law = self.law
-        law.reset(context)  # (a batch of one: its step is the batch's)
+        with named_as(self.name):
+            law.reset(context)  # (a batch of one: its step is the batch's)
         self.features = law.features
         self.context = context
         #: The feature the problem predicts: the fallback law's (a plugin feature's law
@@ -218,7 +219,8 @@ class MPCLaw(PredictiveLaw):
         """
         if self.context is None:
             raise ContextError(self.name, "context", "retarget(goal) before reset(context)")
-        self.law.retarget(goal)
+        with named_as(self.name):
+            self.law.retarget(goal)
         self.context = self.law.context
         self._star = self.law.desired_features()
 

@@ -52,11 +52,14 @@ def test_goal_lengths_in_millimetres_are_refused_at_reset_and_at_a_new_goal(name
     text = (rf"goal\.lengths.*leg 0 at {SEEN.lengths[0] * 1e3:.6g} m, where no leg of the "
             r"nominal robot can be \(its stroke 345 to 485 mm\) \(millimetres\? SI units: "
             r"metres\)")
-    with pytest.raises(ContextError, match=text):
+    with pytest.raises(ContextError, match=text) as at_reset:
         _reset(name, _goal(lengths=SEEN.lengths * 1e3))
     law = _reset(name, _goal())
-    with pytest.raises(ContextError, match=text):
+    with pytest.raises(ContextError, match=text) as at_retarget:
         law.retarget(_goal(lengths=SEEN.lengths * 1e3))  # type: ignore[attr-defined]
+    # named by the controller the user made (a predictive one holds a QP law)
+    assert str(at_reset.value).startswith(f"{name}: context field 'goal.lengths'")
+    assert str(at_retarget.value).startswith(f"{name}: context field 'goal.lengths'")
 
 
 @pytest.mark.parametrize("name", BY_POSE)
