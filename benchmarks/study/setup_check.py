@@ -408,6 +408,15 @@ def _camera_problems(report: SetupReport, camera: Any, home_obs: Any, needs_came
                            f"{100 * report.poses_blind:.1f} % of the reachable poses; trials "
                            f"with such a goal fail; change {where.camera}, or {where.task}",
                            "camera"))
+    pose = getattr(camera, "camera_from_base", None)
+    offset = (np.zeros(3) if pose is None
+              else np.abs(np.asarray(pose.translation, dtype=float)) * 1e3)  # [mm]
+    if 0.0 < offset.max() < 2.0:  # the camera within 2 mm of the base frame's origin
+        out.append(Problem("warning", (
+            f"the camera's centre is {np.linalg.norm(offset):.3g} mm from the base frame's "
+            f"origin (camera_from_base translation {_mm_list(pose.translation)} mm): given "
+            f"in metres? The camera's translation is in millimetres; check {where.camera}"),
+            "camera", fails=False))
     if min(camera.fx, camera.fy) < 50.0:  # pixels: no camera has a focal length that short
         out.append(Problem("warning", (
             f"focal length {min(camera.fx, camera.fy):g} px: given in millimetres? fx_px and "

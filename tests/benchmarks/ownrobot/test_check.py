@@ -264,3 +264,27 @@ def test_a_focal_length_in_millimetres_and_a_poorly_observed_pose_are_warned_of(
     assert any(t.startswith("focal length 4.8 px: given in millimetres?")
                for t in texts["tiny"]), texts["tiny"]
     assert any("observe the platform's pose poorly" in t for t in texts["close"]), texts
+
+
+def test_a_camera_translation_in_metres_is_warned_of() -> None:
+    """A camera file's ``translation_mm`` given in metres (0.22, 0.33 where 220, 333 mm
+    are meant) put the camera 0.4 mm from the base frame's origin and passed with a
+    warning about radians; an omnidirectional camera exactly at the origin is not
+    warned of (no translation at all is deliberate)."""
+    from hexapod.kinematics import Transform
+    from vision.cameras.perspective import PerspectiveCamera
+
+    g = deltalab()
+    good = front_camera(g)
+    T = good.camera_from_base
+    metres = PerspectiveCamera(good.K, good.width, good.height,
+                               Transform(T.rotation, T.translation * 1e-3))
+    at_origin = PerspectiveCamera(good.K, good.width, good.height,
+                                  Transform(T.rotation, np.zeros(3)))
+    texts = {name: [p.text for p in check_setup(g, cam).problems if p.severity == "warning"]
+             for name, cam in (("good", good), ("metres", metres), ("origin", at_origin))}
+    norm = np.linalg.norm(T.translation)  # [m]: the warning's figure in mm is this
+    assert any(t.startswith(f"the camera's centre is {norm:.3g} mm from the base frame's "
+                            "origin") and "given in metres?" in t
+               for t in texts["metres"]), texts["metres"]
+    assert not any("base frame's origin" in t for t in texts["good"] + texts["origin"]), texts
