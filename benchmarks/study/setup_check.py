@@ -409,13 +409,12 @@ def _camera_problems(report: SetupReport, camera: Any, home_obs: Any, needs_came
                            f"with such a goal fail; change {where.camera}, or {where.task}",
                            "camera"))
     pose = getattr(camera, "camera_from_base", None)
-    offset = (np.zeros(3) if pose is None
-              else np.abs(np.asarray(pose.translation, dtype=float)) * 1e3)  # [mm]
-    if 0.0 < offset.max() < 2.0:  # the camera within 2 mm of the base frame's origin
+    shift = np.zeros(3) if pose is None else np.asarray(pose.translation, dtype=float)
+    if 0.0 < np.abs(shift).max() < 2e-3:  # the camera within 2 mm of the base's origin
         out.append(Problem("warning", (
-            f"the camera's centre is {np.linalg.norm(offset):.3g} mm from the base frame's "
-            f"origin (camera_from_base translation {_mm_list(pose.translation)} mm): given "
-            f"in metres? The camera's translation is in millimetres; check {where.camera}"),
+            f"the camera's centre is {np.linalg.norm(shift) * 1e3:.3g} mm from the base "
+            f"frame's origin (camera_from_base translation {_mm_list(shift)} mm): given in "
+            f"metres? The camera's translation is in millimetres; check {where.camera}"),
             "camera", fails=False))
     if min(camera.fx, camera.fy) < 50.0:  # pixels: no camera has a focal length that short
         out.append(Problem("warning", (
