@@ -14,7 +14,7 @@ import numpy as np
 from controllers.base import Observation, observation_problem
 from controllers.data import FEATURE_FIELDS
 from controllers.exceptions import ContextError, OptionError
-from controllers.plausible import implausible_lengths
+from controllers.plausible import MILLIMETRES, implausible_lengths
 
 #: Where the interaction matrix is evaluated (ViSP's CURRENT, DESIRED, MEAN).
 INTERACTIONS = ("current", "desired", "mean")
@@ -143,7 +143,7 @@ def base_points_of(controller: str, context: Any) -> np.ndarray:
     spread = float(np.median(np.linalg.norm(A[i] - A[j], axis=1)
                              / np.linalg.norm(nominal[i] - nominal[j], axis=1)))
     if not 1.0 / BASE_SPREAD_FACTOR <= spread <= BASE_SPREAD_FACTOR:
-        hint = (" (millimetres? SI units: metres)" if 500.0 <= spread <= 2000.0 else "")
+        hint = MILLIMETRES if 500.0 <= spread <= 2000.0 else ""
         raise ContextError(controller, "base_points",
                            f"the points are {spread:.4g} times as far apart as the nominal "
                            f"geometry's base points{hint}")
