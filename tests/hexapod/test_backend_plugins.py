@@ -8,16 +8,22 @@ import os
 import re
 import subprocess
 import sys
+import time
 from collections.abc import Iterator
+from dataclasses import replace
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pytest
 
 from hexapod import deltalab
+from hexapod.backends.base import BackendStep
 from hexapod.backends.conformance import check_backend
 from hexapod.backends.registry import ENTRY_POINT_GROUP, BackendRegistry, backends
+from hexapod.backends.sim import SimulatedRobot
 from hexapod.exceptions import BackendPluginError, UnknownBackendError
+from hexapod.geometry import HexapodGeometry
 
 ROOT = Path(__file__).resolve().parents[2]
 DIST, VERSION = "hexapod-test-robot", "1.2.3"
@@ -137,6 +143,79 @@ def test_the_collector_is_off_while_driving_and_as_it_was_after() -> None:
             assert gc.isenabled() is before
     finally:
         (gc.enable if was else gc.disable)()
+
+
+class _Late(SimulatedRobot):
+    """A simulated robot read before its period's motion ends in the periods of ``late``
+    (half the motion done; the next period's setpoint starts from that reading, as the
+    serial backend's does), saying so (``missed_period``) when ``says`` is true."""
+
+    late: frozenset[int] = frozenset()
+    says = True
+
+    def __init__(self, geometry: HexapodGeometry, lengths: np.ndarray) -> None:
+        super().__init__(geometry, lengths)
+        self.n = 0
+
+    def step(self, velocities: np.ndarray, dt: float) -> BackendStep:
+        before = self._q.copy()
+        done = super().step(velocities, dt)
+        self.n += 1
+        if self.n - 1 not in self.late:
+            return done
+        self._q = (before + self._q) / 2  # the next setpoint starts from the reading
+        return replace(done, lengths=self.measured_lengths(), missed_period=self.says)
+
+
+def test_a_period_the_host_missed_is_counted_not_compared() -> None:
+    """A period reported missed (read early: the host was late) is not compared and the
+    simulator goes on from the reading; too many of them, or a lag the backend does not
+    report, is a problem."""
+    late = type("OneLate", (_Late,), {"late": frozenset({6})})
+    report = check_backend(lambda geo, q: late(geo, q), deltalab())
+    assert report.ok, report.problems
+    assert report.missed_periods == 1 and report.max_deviation < 1e-12
+    silent = type("Silent", (_Late,), {"late": frozenset({6}), "says": False})
+    report = check_backend(lambda geo, q: silent(geo, q), deltalab())
+    assert report.problems[0].startswith("smooth motion, period 6: leg")
+    always = type("Always", (_Late,), {"late": frozenset(range(25))})
+    report = check_backend(lambda geo, q: always(geo, q), deltalab())
+    assert report.missed_periods == 25
+    assert report.problems == ["smooth motion: the host missed 25 of its 25 periods (only "
+                               "the others are compared): a longer period (dt) or a quieter "
+                               "machine"]
+    for every, ok in ((4, False), (5, True)):  # 7 of 25 periods missed, then 5: a quarter
+        some = type("Some", (_Late,), {"late": frozenset(range(0, 25, every))})
+        report = check_backend(some, deltalab())
+        assert report.ok is ok and report.missed_periods == len(range(0, 25, every))
+
+
+@pytest.mark.realtime
+@pytest.mark.slow
+def test_the_emulator_conforms_through_a_host_stall() -> None:
+    """The host stalls 250 ms before one period (a loaded machine: 214 ms once in CI): the
+    board's 100 ms watchdog trips, the backend clears it and sends the MOV again, reads
+    the lengths early and says the period was missed; the check goes on from there."""
+    robots: list[Any] = []
+
+    def stalling(geo: HexapodGeometry, q: np.ndarray) -> Any:
+        robot = backends.open("emulator", geo, q)
+        step, calls = robot.step, [0]
+
+        def late_once(v: np.ndarray, dt: float) -> BackendStep:
+            calls[0] += 1
+            if calls[0] == 6:
+                time.sleep(0.25)
+            return step(v, dt)
+
+        robot.step = late_once
+        robots.append(robot)
+        return robot
+
+    report = check_backend(stalling, deltalab(), tolerance=1e-5)
+    assert report.ok, report.problems
+    assert report.missed_periods >= 1 and robots[0].watchdog_trips == 1
+    assert 1e-7 < report.max_deviation < 1e-5
 
 
 @pytest.mark.realtime
