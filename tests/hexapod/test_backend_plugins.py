@@ -214,7 +214,8 @@ def test_the_emulator_conforms_through_a_host_stall() -> None:
 
     report = check_backend(stalling, deltalab(), tolerance=1e-5)
     assert report.ok, report.problems
-    assert report.missed_periods >= 1 and robots[0].watchdog_trips == 1
+    # at least: a loaded machine may add stalls of its own
+    assert report.missed_periods >= 1 and robots[0].watchdog_trips >= 1
     assert 1e-7 < report.max_deviation < 1e-5
 
 
