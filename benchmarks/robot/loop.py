@@ -95,7 +95,7 @@ def servo_loop(
         The outcome and the link statistics.
     """
     from benchmarks.sim.loop import closed_loop
-    from benchmarks.sim.plant import BackendPlant
+    from benchmarks.sim.plant import BackendPlant, reading_problem
     from controllers.base import Controller
     from controllers.batch import ForeignController, actuation_of
     from hexapod.actuation import check_actuation
@@ -113,6 +113,9 @@ def servo_loop(
     t0 = time.perf_counter()
     try:
         q = np.asarray(robot.measured_lengths(), float)[None].copy()
+        problem = reading_problem(q[0], geometry.stroke)
+        if problem is not None:  # before the first command
+            raise SessionStop(ServoExit.SAFETY, f"at the start: {problem}")
         deadlines = None if limits is None else DeadlinePolicy(
             limits, dt, warn if warn is not None else log.warning)
         R, t = np.zeros((1, 3, 3)), np.zeros((1, 3))
@@ -123,7 +126,7 @@ def servo_loop(
             return np.zeros(len(run), dtype=bool)
 
         poses(np.zeros(1, dtype=int))
-        plant = BackendPlant([robot], q, R, t, np.zeros((1, 6)), poses)
+        plant = BackendPlant([robot], q, R, t, np.zeros((1, 6)), poses, geometry.stroke)
         plant.use_actuation(declared, name)
         book = ServoBook(plant, camera, goal, tolerance, feature_tolerance, settle, res, t0,
                          declared, name, on_period, on_pose, checks=checks, limits=limits,
@@ -267,7 +270,14 @@ class ServoBook:
                          None if feats is None else feats.edge_visible)
 
     def advanced(self, step: int, run: np.ndarray, failures: dict[int, str]) -> None:
-        """The period's status, and the convergence test."""
+        """The period's status, and the convergence test.
+
+        Raises:
+            SessionStop: ``SAFETY``: the robot's reading cannot be its legs (not a number,
+                millimetres for metres: :func:`benchmarks.sim.plant.reading_problem`).
+        """
+        if failures:
+            raise SessionStop(ServoExit.SAFETY, f"period {step}: {failures[0]}")
         res, plant = self.res, self.plant
         bs = plant.last[0]
         q = plant.q[0].copy()

@@ -29,6 +29,24 @@ from hexapod.fk import pack_rows, set_guesses, solve_rows
 FK_FAILURE = "forward kinematics of the true robot failed (singularity?)"
 
 
+def reading_problem(lengths: Any, stroke: tuple[float, float]) -> str | None:
+    """Why a backend's reading ``lengths`` cannot be the legs of a robot of ``stroke``
+    (q_min, q_max) [m], or None: not six values, a value that is not a number, or a leg
+    where no leg of the robot can be (:func:`controllers.plausible.implausible_lengths`:
+    millimetres for metres are named)."""
+    from controllers.plausible import implausible_lengths
+
+    q = np.asarray(lengths, dtype=float)
+    if q.shape != (6,):
+        return f"the backend measured {q.size} values of shape {q.shape}, not 6 leg lengths"
+    if not np.isfinite(q).all():
+        i = int(np.flatnonzero(~np.isfinite(q))[0])
+        return (f"the backend measured leg {i} as {q[i]} (not a number: a fault of the "
+                "robot's sensors or of its link)")
+    problem = implausible_lengths(q, stroke)
+    return None if problem is None else f"the backend measured {problem}"
+
+
 class Plant:
     """The robot between control periods (see the module docstring); the kinematic
     world's encoders and figures, which the other plants override.
@@ -127,15 +145,20 @@ class BackendPlant(Plant):
         solve_poses: Sets the poses of rows ``run`` from their lengths ``q``; returns the
             (n,) mask of rows whose pose could not be found
             (:meth:`KinematicPlant.solve_poses` in a study).
+        stroke: The nominal robot's stroke (q_min, q_max) [m]: a reading that cannot be
+            its legs (:func:`reading_problem`) fails its row with the reason, its state
+            left at the last good reading.
     """
 
     def __init__(self, backends: Sequence[Backend], q: np.ndarray, R: np.ndarray,
                  t: np.ndarray, offsets: np.ndarray,
-                 solve_poses: Callable[[np.ndarray], np.ndarray]) -> None:
+                 solve_poses: Callable[[np.ndarray], np.ndarray],
+                 stroke: tuple[float, float]) -> None:
         self.backends = list(backends)
         self.q, self.R, self.t = q, R, t
         self.offsets = offsets
         self.solve_poses = solve_poses
+        self.stroke = stroke
         self.actuation = Actuation.VELOCITY
         self.label = "controller"
         n = len(self.backends)
@@ -153,15 +176,23 @@ class BackendPlant(Plant):
 
     def advance(self, run: np.ndarray, velocities: np.ndarray, dt: float
                 ) -> dict[int, str]:
-        """See :meth:`Plant.advance` (``velocities``: the commands of their kind)."""
+        """See :meth:`Plant.advance` (``velocities``: the commands of their kind; a
+        reading that cannot be the robot's legs fails its row, :func:`reading_problem`)."""
+        failures: dict[int, str] = {}
         for j, k in enumerate(run.tolist()):
             bs = self.backends[k].apply(velocities[j], self.actuation, dt, self.label)
-            self.q[k] = bs.lengths - self.offsets[k]
             self.rtts[k].append(float(bs.round_trip_s))
             self.missed[k] += int(bs.missed_period)
             self.last[k] = bs
+            problem = reading_problem(bs.lengths, self.stroke)
+            if problem is None:
+                self.q[k] = bs.lengths - self.offsets[k]
+            else:
+                failures[k] = problem
+        if failures:
+            run = run[[k not in failures for k in run.tolist()]]
         bad = self.solve_poses(run)  # the backends moved the legs: the poses follow
-        return dict.fromkeys(run[bad].tolist(), FK_FAILURE)
+        return {**failures, **dict.fromkeys(run[bad].tolist(), FK_FAILURE)}
 
     def row_figures(self, row: int) -> dict[str, Any]:
         """The link's figures of one row: round-trip median and p99 [ms], late periods."""

@@ -323,7 +323,7 @@ class _Unit:
                 for s in group:
                     opened.append(self.backend_factory(g, s.start_lengths + s.world.joint_offsets))
                 poses = KinematicPlant(q, R, t, A, E, g.stroke, g.max_speed)
-                plant = BackendPlant(opened, q, R, t, offsets, poses.solve_poses)
+                plant = BackendPlant(opened, q, R, t, offsets, poses.solve_poses, g.stroke)
             plant.use_actuation(actuation, spec.label)
             book = Book(sc, group, self.record_trials, plant, point_targets(sc, group), actuation,
                         spec.label, self.on_step)
