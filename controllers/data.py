@@ -11,6 +11,7 @@ from typing import Any
 
 import numpy as np
 
+from controllers.plausible import implausible_lengths
 from hexapod.actuation import Actuation
 from hexapod.geometry import HexapodGeometry
 
@@ -464,12 +465,15 @@ class CommandBatch:
                        reason=reason, actuation=self.actuation, forces=forces)
 
 
-def observation_problem(obs: Observation, features: frozenset[str]) -> str | None:
+def observation_problem(obs: Observation, features: frozenset[str],
+                        stroke: tuple[float, float] | None = None) -> str | None:
     """Return why an observation cannot be used (None if it can): what every controller's
     ``step`` checks before computing.
 
     Checks that the needed fields exist with the right shapes, and that every
     value flagged visible is finite; a malformed observation (wrong types) is a reason too.
+    With the nominal robot's ``stroke`` [m], lengths no leg of it can have (millimetres
+    for metres: :func:`controllers.plausible.implausible_lengths`) are a reason.
     """
     try:
         q = np.asarray(obs.lengths, dtype=float)
@@ -478,6 +482,8 @@ def observation_problem(obs: Observation, features: frozenset[str]) -> str | Non
         bad = np.flatnonzero(~np.isfinite(q))
         if len(bad):
             return f"lengths: leg {int(bad[0])} is {q[bad[0]]} (not finite)"
+        if stroke is not None and (wrong := implausible_lengths(q, stroke)) is not None:
+            return f"lengths: {wrong}"
         if not np.isfinite(obs.t):
             return f"time is {obs.t} (not finite)"
         for name, shape, mask_field in FEATURE_FIELDS:

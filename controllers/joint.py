@@ -62,7 +62,7 @@ class JointSpaceController(Controller):
         trial's number: every row of a batch is stepped so)."""
         if self._q_star is None:
             return Command.refuse(f"{self.name}: reset(context) was not called")
-        problem = observation_problem(observation, self.features)
+        problem = observation_problem(observation, self.features, self._stroke)
         if problem is not None:
             return Command.refuse(problem)
         e = np.asarray(observation.lengths, dtype=float) - self._q_star

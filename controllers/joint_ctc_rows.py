@@ -50,6 +50,7 @@ from controllers.ctc_rows import (
     refusal,
 )
 from controllers.data import CommandBatch, ObservationBatch
+from controllers.plausible import reading_bounds, stroke_of
 from controllers.solvers import compiled_ctc
 from controllers.task_ctc_inputs import QUINTIC_PEAK_SPEED, encoder_readings
 from hexapod.actuation import Actuation
@@ -84,6 +85,7 @@ typedef struct {
     KernelCall kernel;
     int64_t n_out, pose_out, residual_at, status_at, screen_at, forces_at;
     double fk_tol; int64_t max_calls; double screen_scale; double *scratch;
+    double q_lo, q_hi;  /* the plausible readings [m] (controllers.plausible) */
 } JointCtc;
 enum { @CODES@ };
 
@@ -127,7 +129,8 @@ void jc_prepare(JointCtc *c, int64_t m, const int64_t *trials, const double *t,
         int64_t i = trials[j];
         const double *qj = q + 6 * j, *qdj = qd + 6 * j;
         int finite = isfinite(t[j]);
-        for (int l = 0; l < 6; l++) finite &= isfinite(qj[l]) && isfinite(qdj[l]);
+        for (int l = 0; l < 6; l++)
+            finite &= qj[l] > c->q_lo && qj[l] < c->q_hi && isfinite(qdj[l]);
         if (!finite) { code[j] = NOT_FINITE; continue; }
         double *x = c->X + c->n_in * i, *r = c->quintic + 21 * i;
         memcpy(x + c->q_at, qj, 6 * sizeof(double));
@@ -293,7 +296,8 @@ class JointRows:
             self.integral.ctypes.data, GRID_TOLERANCE, self.steps.ctypes.data,
             self.limit.ctypes.data, self._kernel, function.n_out, POSE_OUT.start, RESIDUAL, STATUS,
             outs["screen"].start, FORCES.start, compiled_ctc.FK_TOLERANCE, FK_MAX_CALLS,
-            4.0 * self.threshold**2, self._scratch.ctypes.data)
+            4.0 * self.threshold**2, self._scratch.ctypes.data,
+            *reading_bounds(stroke_of(law._ctx) for law in self.laws))
         self._ctx = ctypes.addressof(self.context)
 
     def desired(self, trial: int, t: float) -> np.ndarray:
@@ -410,7 +414,8 @@ class JointRows:
                 code[j] = ACCEPT if full else REFUSED
             lib.jc_finish(self._ctx, n, b.addresses[0], *b.addresses[4:])
         for j in np.flatnonzero(code == NOT_FINITE).tolist():
-            readings = encoder_readings(observations.item(j))
+            readings = encoder_readings(observations.item(j),
+                                        stroke_of(self.laws[int(b.trials[j])]._ctx))
             reasons[j] = readings if isinstance(readings, str) else "readings not finite"
         for j in np.flatnonzero(code == REFUSED).tolist():
             if j not in reasons:

@@ -42,6 +42,7 @@ import numpy as np
 from controllers.data import ObservationBatch
 from controllers.estimators import LegDirectionEstimate
 from controllers.law_kernel import LawKernel, LawResult
+from controllers.plausible import reading_bounds, stroke_of
 from hexapod.c_step import KERNEL_CALL_C, KernelCall, RowArrays, c_library, c_struct
 from hexapod.compiled import CompilationError
 
@@ -69,6 +70,7 @@ typedef struct {
     int64_t accept; const double *lower, *upper, *inv_dt, *vmax; const uint8_t *shortcut;
     double *directions, *in_use, *twist, *lengths; uint8_t *observed;
     const double *kappa; double *offset;
+    double q_lo, q_hi;  /* the plausible readings [m] (controllers.plausible) */
 } VisionRows;
 typedef struct {
     const int64_t *trials; const double *t, *q, *feats; const uint8_t *vis; const double *qd;
@@ -86,7 +88,7 @@ void vl_prepare(const VisionRows *c, int64_t m, const int64_t *trials, const dou
         int ok = c->ready[i] && isfinite(t[j]);
         for (int64_t k = 0; ok && k < c->units; k++) ok = vj[k] != 0;
         for (int64_t k = 0; ok && k < c->n_feat; k++) ok = isfinite(fj[k]);
-        for (int l = 0; ok && l < 6; l++) ok = isfinite(qj[l]) && qj[l] > 0.0;
+        for (int l = 0; ok && l < 6; l++) ok = qj[l] > c->q_lo && qj[l] < c->q_hi;
         if (!ok) { code[j] = RARE; continue; }
         double *x = c->X + c->n_in * i;
         memcpy(x + c->feat_at, fj, c->n_feat * sizeof(double));
@@ -185,6 +187,11 @@ def core_key(law: VisionLaw) -> tuple[object, object]:
     return law.observed_feature, None if kernel is None else kernel.slices
 
 
+def positive(bounds: tuple[float, float]) -> tuple[float, float]:
+    """Reading bounds [m] that also refuse a length of zero or less."""
+    return max(bounds[0], 0.0), bounds[1]
+
+
 class LawRows:
     """The core inputs of a batch's trials, one row per trial, and the batch's one step
     (module docstring).
@@ -256,7 +263,8 @@ class LawRows:
             est.directions.ctypes.data, est.in_use.ctypes.data, est.twist.ctypes.data,
             est.lengths.ctypes.data, est.observed.ctypes.data,
             None if feedforward is None else feedforward[0].ctypes.data,
-            None if feedforward is None else feedforward[1].ctypes.data)
+            None if feedforward is None else feedforward[1].ctypes.data,
+            *positive(reading_bounds(stroke_of(law.context) for law in laws)))
         self._ctx = ctypes.addressof(self.context)
         #: The lean and full cores, once bound to the C (built on first use: a batch
         #: stepped only one row at a time never builds the lean core).

@@ -37,6 +37,7 @@ from controllers.law_tools import (
     goal_lengths,
 )
 from controllers.model_directions import ModelDirections
+from controllers.plausible import implausible_lengths, stroke_of
 from controllers.solvers.base import Solver
 from controllers.solvers.pseudo_inverse import DampedPseudoInverse
 
@@ -265,6 +266,10 @@ class VisionLaw(VisionLawBatch):
         if q.min() <= 0:
             self.estimate.halted()
             return Command.refuse(f"lengths: non-positive leg length {float(q.min())} m")
+        stroke = stroke_of(self.context)
+        if stroke is not None and (wrong := implausible_lengths(q, stroke)) is not None:
+            self.estimate.halted()
+            return Command.refuse(f"lengths: {wrong}")
         return q
 
     def tasks(self, observation: Observation, q: np.ndarray) -> TaskStep | Command:

@@ -29,6 +29,7 @@ import numpy as np
 
 from controllers.data import Command, CommandBatch, ObservationBatch, observation_problem
 from controllers.estimators import PoseEstimate
+from controllers.plausible import reading_bounds, stroke_of
 from hexapod.c_step import KERNEL_CALL_C, KernelCall, RowArrays, c_library, c_struct
 from hexapod.compiled import CompilationError
 from hexapod.exceptions import ForwardKinematicsError
@@ -51,6 +52,7 @@ typedef struct {
     int64_t n_in, n_out, R_at, t_at, status_at, max_iterations, per_call;
     double tol;
     KernelCall newton, servo;
+    double q_lo, q_hi;  /* the plausible readings [m] (controllers.plausible) */
 } ModelBased;
 enum { COMMAND, REFUSED, NOT_FINITE, FK_FAILED, READY };
 
@@ -60,7 +62,7 @@ int mb_step(ModelBased *c, int64_t m, const int64_t *trials, const double *t,
     for (int64_t j = 0; j < m; j++) {
         const double *qj = q + 6 * j;
         int finite = isfinite(t[j]);
-        for (int l = 0; l < 6; l++) finite &= isfinite(qj[l]);
+        for (int l = 0; l < 6; l++) finite &= qj[l] > c->q_lo && qj[l] < c->q_hi;
         if (!finite) { code[j] = NOT_FINITE; continue; }
         int64_t i = trials[j], it = 0;
         double *x = c->F + c->fk_in * i, *R = c->R + 9 * i, *p = c->p + 3 * i, *y = c->y;
@@ -151,7 +153,8 @@ class PoseServoRows:
             NEWTON_OUTPUTS["t"].start, NEWTON_OUTPUTS["residual"].start, kernel.n_in,
             kernel.n_out, kernel.inputs["R"].start, kernel.inputs["t"].start,
             out.index("status"), laws[0].fk_max_iterations, ITERATIONS_PER_CALL,
-            laws[0].fk_tolerance, *self._calls)
+            laws[0].fk_tolerance, *self._calls,
+            *reading_bounds(stroke_of(law.context) for law in laws))
         self._ctx = ctypes.addressof(self.context)
         #: The pose servo in the CasADi virtual machine (``compiled=False``): by Python.
         self._python_servo = kernel.entry is None
@@ -220,7 +223,9 @@ class PoseServoRows:
             return Command.refuse(STATUS_REASONS[int(b.Y[j, self._status])], b.Y[j, self._at["e"]])
         if code == NOT_FINITE:
             obs = observations.item(j)
-            return Command.refuse(observation_problem(obs, self.laws[i].features)
+            law = self.laws[i]
+            return Command.refuse(observation_problem(obs, law.features,
+                                                      stroke_of(law.context))
                                   or "readings not finite")
         context = self.laws[i].context
         assert context is not None

@@ -12,6 +12,7 @@ step. The check costs nothing per period: it is made once per goal.
 from __future__ import annotations
 
 import math
+from collections.abc import Iterable
 from typing import Any
 
 import numpy as np
@@ -29,6 +30,23 @@ def plausible_range(stroke: tuple[float, float]) -> tuple[float, float]:
     q_min, q_max = stroke
     span = q_max - q_min
     return max(0.0, q_min - span), q_max + span
+
+
+def reading_bounds(strokes: Iterable[tuple[float, float] | None]) -> tuple[float, float]:
+    """The open interval [m] of the leg lengths a batch's readings may hold: the union
+    of the :func:`plausible_range` of its rows' nominal strokes, or every finite number
+    where a row's stroke is not known (None). The compiled steps refuse a reading outside
+    it; the row's reason then names the leg from its own stroke."""
+    ranges = [None if s is None else plausible_range(s) for s in strokes]
+    if not ranges or any(r is None for r in ranges):
+        return -math.inf, math.inf
+    return min(r[0] for r in ranges if r), max(r[1] for r in ranges if r)
+
+
+def stroke_of(context: Any) -> tuple[float, float] | None:
+    """The nominal stroke (q_min, q_max) [m] of a controller's context (None: none)."""
+    geometry = getattr(context, "geometry", None)
+    return None if geometry is None else geometry.stroke
 
 
 def implausible_lengths(lengths: Any, stroke: tuple[float, float]) -> str | None:
@@ -73,4 +91,5 @@ def implausible_pose(geometry: HexapodGeometry, rotation: Any, translation: Any
                                          "metres" if mm else "")
 
 
-__all__ = ["MILLIMETRES", "implausible_lengths", "implausible_pose", "plausible_range"]
+__all__ = ["MILLIMETRES", "implausible_lengths", "implausible_pose", "plausible_range",
+           "reading_bounds", "stroke_of"]

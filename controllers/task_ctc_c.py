@@ -36,6 +36,7 @@ typedef struct {
     int64_t n_out, pose_out, residual_at, status_at, screen_at, forces_at, error_at;
     double tol; int64_t max_calls; double screen_scale;
     int64_t measured, feat_at, feat_w, vis_w, ones_at, ones_w;
+    double q_lo, q_hi;  /* the plausible readings [m] (controllers.plausible) */
 } TaskCtc;
 enum { @CODES@ };
 
@@ -65,7 +66,8 @@ void tc_prepare(const TaskCtc *c, int64_t m, double *Xl, const int64_t *trials,
         if (!c->usable[i]) { code[j] = UNUSABLE; continue; }
         memcpy(x, c->X + c->n_in * i, c->n_in * sizeof(double));  /* the trial's row */
         int finite = isfinite(t[j]);
-        for (int l = 0; l < 6; l++) finite &= isfinite(qj[l]) && isfinite(qdj[l]);
+        for (int l = 0; l < 6; l++)
+            finite &= qj[l] > c->q_lo && qj[l] < c->q_hi && isfinite(qdj[l]);
         if (!finite) { code[j] = NOT_FINITE; continue; }
         memcpy(x + c->q_at, qj, 6 * sizeof(double));
         memcpy(x + c->qd_at, qdj, 6 * sizeof(double));

@@ -13,7 +13,7 @@ import numpy as np
 from controllers.base import ControllerContext, Goal, Observation
 from controllers.exceptions import ContextError
 from controllers.law_tools import base_points_of
-from controllers.plausible import implausible_pose
+from controllers.plausible import implausible_lengths, implausible_pose
 from hexapod.geometry import HexapodGeometry
 from hexapod.kinematics import Transform, inverse_kinematics
 from hexapod.se3 import log_so3
@@ -56,9 +56,12 @@ def line_to(context: ControllerContext, R0: np.ndarray, t0: np.ndarray, R1: np.n
                           goal_translation=t1, angular_speed=w, angular_acceleration=alpha)
 
 
-def encoder_readings(observation: Observation) -> tuple[float, np.ndarray, np.ndarray] | str:
+def encoder_readings(observation: Observation, stroke: tuple[float, float] | None = None
+                     ) -> tuple[float, np.ndarray, np.ndarray] | str:
     """The time [s], lengths [m] and leg velocities [m/s] of an observation, or why they
-    cannot be used (missing leg velocities, not 6 values, a non-finite value)."""
+    cannot be used (missing leg velocities, not 6 values, a non-finite value, and with
+    the nominal robot's ``stroke`` [m] lengths no leg of it can have:
+    :func:`controllers.plausible.implausible_lengths`)."""
     t = float(observation.t)
     q = np.asarray(observation.lengths, dtype=float)
     if observation.q_dot is None:
@@ -68,12 +71,13 @@ def encoder_readings(observation: Observation) -> tuple[float, np.ndarray, np.nd
     if q.shape != (6,) or qd.shape != (6,):
         return (f"lengths and leg velocities: expected 6 values each, got shapes {q.shape} "
                 f"and {qd.shape}")
-    if math.isfinite(t) and math.isfinite(float(q @ q + qd @ qd)):
-        return t, q, qd  # every value finite (a NaN or inf makes the sum of squares so)
-    for what, x in (("time", np.array([t])), ("lengths", q), ("leg velocities", qd)):
-        if x.size == 0 or not np.isfinite(x).all():
-            return f"measured {what} not finite: {x}"
-    return t, q, qd
+    if not (math.isfinite(t) and math.isfinite(float(q @ q + qd @ qd))):
+        # a NaN or inf makes the sum of squares so (as do values near overflow)
+        for what, x in (("time", np.array([t])), ("lengths", q), ("leg velocities", qd)):
+            if x.size == 0 or not np.isfinite(x).all():
+                return f"measured {what} not finite: {x}"
+    wrong = None if stroke is None else implausible_lengths(q, stroke)
+    return (t, q, qd) if wrong is None else f"measured lengths: {wrong}"
 
 
 def camera_and_base_points(controller: str, context: ControllerContext

@@ -43,6 +43,7 @@ from controllers.base import Command
 from controllers.control_grid import chunks, model_world
 from controllers.ctc_rows import FK_MAX_CALLS, evaluate_rows, norms, rank_condition, refusal
 from controllers.data import CommandBatch, ObservationBatch
+from controllers.plausible import reading_bounds, stroke_of
 from controllers.task_ctc_c import (
     ACCEPT,
     ACCEPTED,
@@ -160,6 +161,8 @@ class TaskRows:
             0, 0, 0, 0, self._kernel, function.n_out, outs["pose"].start, outs.index("fk_residual"),
             outs.index("status"), outs["screen"].start, outs["forces"].start,
             outs["error"].start, step.tolerance, FK_MAX_CALLS, 4.0 * self.threshold**2)
+        self.context.q_lo, self.context.q_hi = reading_bounds(  # type: ignore[attr-defined]
+            stroke_of(law.context) for law in self.laws)
         law0 = self.laws[0]
         measurement = law0.batch_measurement
         #: The observation's measured field and its visibility (None: nothing measured).
@@ -477,7 +480,8 @@ class TaskRows:
         """Why row ``j`` is refused (its code: readings, no step, or its status)."""
         code = int(b.code[j])
         if code == NOT_FINITE:
-            readings = encoder_readings(observations.item(j))
+            readings = encoder_readings(observations.item(j),
+                                        stroke_of(self.laws[int(b.trials[j])].context))
             return readings if isinstance(readings, str) else "readings not finite"
         if code == UNUSABLE:
             return self._unusable(observations, j)

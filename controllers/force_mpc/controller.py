@@ -174,7 +174,7 @@ class ForceMPCLaw(PredictiveLaw):
         """The leg forces of this period [N], or a refusal (zeros) with its reason."""
         if self.context is None or self._bound is None:
             return self._refuse("reset(context) was not called")
-        readings = encoder_readings(observation)
+        readings = encoder_readings(observation, self.context.geometry.stroke)
         if isinstance(readings, str):
             return self._refuse(readings)
         t, q, qd = readings

@@ -110,8 +110,15 @@ def test_the_step_takes_the_compiled_path_on_a_regular_trajectory() -> None:
 
 
 def test_unreachable_lengths_are_refused_with_the_reason() -> None:
+    """Lengths that could each be a leg of deltalab (stroke 345 to 485 mm) without a pose
+    together fail the nominal model; a length no leg can have is refused before it."""
     ctrl, _ = _controller()
-    cmd = ctrl.step(Observation(0.0, np.array([0.2, 0.2, 0.2, 0.2, 0.2, 5.0]), q_dot=np.zeros(6)))
-    assert cmd.reason is not None and "nominal model failed" in cmd.reason
+    no_pose = np.array([0.21, 0.62, 0.21, 0.62, 0.21, 0.62])
+    cmd = ctrl.step(Observation(0.0, no_pose, q_dot=np.zeros(6)))
+    assert cmd.reason is not None and "nominal model failed" in cmd.reason, cmd.reason
     assert np.all(np.isfinite(cmd.forces)) and not np.any(cmd.forces)
-    assert "did not converge" in cmd.reason and ctrl.compiled_steps == 0
+    assert "forward kinematics" in cmd.reason and ctrl.compiled_steps == 0
+    far = np.array([0.2, 0.2, 0.2, 0.2, 0.2, 5.0])
+    cmd = ctrl.step(Observation(0.02, far, q_dot=np.zeros(6)))
+    assert cmd.reason is not None and "measured lengths: leg 0 at 0.2 m, where no leg" in \
+        cmd.reason and not np.any(cmd.forces)

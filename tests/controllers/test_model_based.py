@@ -165,6 +165,11 @@ def test_non_finite_command_is_refused_from_the_status(other_geometry,  # type: 
     assert np.isfinite(out.error_norm).all()
 
 
+#: Leg lengths [m] of ``other_geometry`` (stroke 380 to 560 mm) that could be legs, each
+#: alone, and have no pose together.
+NO_POSE = np.array([0.21, 0.73, 0.21, 0.73, 0.21, 0.73])
+
+
 def test_failed_forward_kinematics_is_refused_and_restarts_from_home(  # type: ignore[no-untyped-def]
         other_geometry, rng: np.random.Generator) -> None:
     """Lengths without a pose: the row is refused with the forward kinematics' failure
@@ -180,12 +185,13 @@ def test_failed_forward_kinematics_is_refused_and_restarts_from_home(  # type: i
     assert batch.step_batch(obs).reasons == [None, None]
     moved = batch.trial_instances[1].estimate.translation.copy()
     assert not np.array_equal(moved, home_pose(other_geometry)[1])
-    obs.lengths[1] *= 10.0
+    obs.lengths[1] = NO_POSE  # (lengths ten times too long are refused before it)
     done = batch.step_batch(obs)
     assert done.reasons[0] is None and np.array_equal(done.velocities[1], np.zeros(6))
     reason = done.reasons[1]
     assert reason is not None and reason.startswith(
-        "forward kinematics failed: forward kinematics (newton) failed after 30 iterations")
+        "forward kinematics failed: forward kinematics (newton) failed after ")
+    assert "iterations" in reason and "(residual " in reason
     R0, t0 = home_pose(other_geometry)
     est = batch.trial_instances[1].estimate
     assert np.array_equal(est.rotation, R0) and np.array_equal(est.translation, t0)
@@ -226,7 +232,7 @@ def test_batch_rows_equal_batches_of_one(other_geometry,  # type: ignore[no-unty
         if step == 0:
             obs.lengths[2, 4] = np.nan
         if step == 1:
-            obs.lengths[1] *= 10.0
+            obs.lengths[1] = NO_POSE
         if step == 2:
             obs.t[2] = np.inf
         out = batch.step_batch(obs)
