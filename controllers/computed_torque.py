@@ -270,6 +270,11 @@ class ComputedTorqueController(ComputedTorqueLaw):
         return self.ctc_options.saturated(forces, self._limit, lambda: zero_acceleration_forces(
             model, pose, qd, coulomb_velocity=qd_s))
 
+    @property
+    def context(self) -> ControllerContext | None:
+        """The trial's context (None before :meth:`reset_trial`)."""
+        return self._ctx
+
     def batch_rows(self) -> JointRows:
         """The batch's arrays and its one step (:meth:`JointRows.step`: refused, zero,
         with a reason where the lengths, their rates or the time are missing or not

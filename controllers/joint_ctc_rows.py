@@ -297,7 +297,7 @@ class JointRows:
             self.limit.ctypes.data, self._kernel, function.n_out, POSE_OUT.start, RESIDUAL, STATUS,
             outs["screen"].start, FORCES.start, compiled_ctc.FK_TOLERANCE, FK_MAX_CALLS,
             4.0 * self.threshold**2, self._scratch.ctypes.data,
-            *reading_bounds(stroke_of(law._ctx) for law in self.laws))
+            *reading_bounds(stroke_of(law.context) for law in self.laws))
         self._ctx = ctypes.addressof(self.context)
 
     def desired(self, trial: int, t: float) -> np.ndarray:
@@ -415,7 +415,7 @@ class JointRows:
             lib.jc_finish(self._ctx, n, b.addresses[0], *b.addresses[4:])
         for j in np.flatnonzero(code == NOT_FINITE).tolist():
             readings = encoder_readings(observations.item(j),
-                                        stroke_of(self.laws[int(b.trials[j])]._ctx))
+                                        stroke_of(self.laws[int(b.trials[j])].context))
             reasons[j] = readings if isinstance(readings, str) else "readings not finite"
         for j in np.flatnonzero(code == REFUSED).tolist():
             if j not in reasons:

@@ -348,8 +348,9 @@ def test_bad_input_is_refused_never_a_nan_force(geometry: HexapodGeometry) -> No
 @pytest.mark.parametrize(("name", "ctc"), PAIRS)
 def test_a_failed_nominal_model_falls_back_with_the_reason(geometry: HexapodGeometry,
                                                             name: str, ctc: str) -> None:
-    """Lengths no pose has (forward kinematics fails): the held law's command, noting
-    ``force-mpc fallback: <reason>``, counted with its reason."""
+    """Lengths no pose has (forward kinematics fails; each could be a leg): the held law's
+    command, noting ``force-mpc fallback: <reason>``, counted with its reason. Lengths no
+    leg can have are refused before, with the leg and the value."""
     world = CtcWorld.make(geometry)
     R0, t0, R1, t1 = _goal_away(geometry)
     robot = DynamicRobots([geometry], R0[None].copy(), t0[None].copy())
@@ -357,7 +358,11 @@ def test_a_failed_nominal_model_falls_back_with_the_reason(geometry: HexapodGeom
     ctrl.reset(world.context(world.goal(R1, t1)))
     good = world.observation(robot, 0.0)
     assert ctrl.step(good).reason is None
-    cmd = ctrl.step(dataclasses.replace(good, lengths=np.array([0.05, 3.0] * 3)))
+    far = ctrl.step(dataclasses.replace(good, lengths=np.array([0.05, 3.0] * 3)))
+    assert far.reason == (f"{name}: measured lengths: leg 0 at 0.05 m, where no leg of the "
+                          "nominal robot can be (its stroke 345 to 485 mm)")
+    assert ctrl.stats.fallbacks == 0
+    cmd = ctrl.step(dataclasses.replace(good, t=0.02, lengths=np.array([0.21, 0.62] * 3)))
     assert cmd.reason is not None and cmd.reason.startswith(f"{ctc}: ")  # the held law's
     reason = "nominal model failed: forward kinematics"
     assert any(n.startswith(f"force-mpc fallback: {reason}") for n in cmd.notes), cmd.notes
