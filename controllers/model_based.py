@@ -28,7 +28,7 @@ from controllers.exceptions import ContextError
 from controllers.law_algebra import jacobi_eigen
 from controllers.law_tools import Gain, check_flag, check_number, gain_formula
 from controllers.model_based_rows import PoseServoRows
-from controllers.plausible import implausible_pose
+from controllers.task_ctc_inputs import goal_pose_of
 from hexapod.compiled import CompiledFunction, Layout
 from hexapod.exceptions import HexapodError
 from hexapod.fk import forward_kinematics
@@ -212,16 +212,7 @@ class ModelBasedController(Controller):
             ContextError: Neither, or invalid values.
         """
         if goal.rotation is not None and goal.translation is not None:
-            R = np.asarray(goal.rotation, dtype=float)
-            t = np.asarray(goal.translation, dtype=float)
-            if R.shape != (3, 3) or t.shape != (3,) or not (np.all(np.isfinite(R))
-                                                            and np.all(np.isfinite(t))):
-                raise ContextError(self.name, "goal.rotation/translation",
-                                   "expected a finite (3, 3) rotation and (3,) translation")
-            if np.abs(R.T @ R - np.eye(3)).max() > 1e-6:
-                raise ContextError(self.name, "goal.rotation", "not a rotation matrix")
-            if (problem := implausible_pose(geo, R, t)) is not None:
-                raise ContextError(self.name, "goal.rotation/translation", problem)
+            R, t = goal_pose_of(self.name, goal, geo)
         elif goal.lengths is not None:
             try:
                 sol = forward_kinematics(geo, np.asarray(goal.lengths, dtype=float),

@@ -15,7 +15,7 @@ from controllers.exceptions import ContextError
 from controllers.law_tools import base_points_of
 from controllers.plausible import implausible_lengths, implausible_pose
 from hexapod.geometry import HexapodGeometry
-from hexapod.kinematics import Transform, inverse_kinematics
+from hexapod.kinematics import ROTATION_TOLERANCE, Transform, inverse_kinematics
 from hexapod.se3 import log_so3
 from hexapod.trajectory import PoseTrajectory
 
@@ -97,12 +97,13 @@ def camera_and_base_points(controller: str, context: ControllerContext
 
 def goal_pose_of(controller: str, goal: Goal, geometry: HexapodGeometry | None = None
                  ) -> tuple[np.ndarray, np.ndarray]:
-    """``goal.rotation`` and ``goal.translation``, checked (with the nominal
-    ``geometry``: a pose that puts a leg where none of the robot can be is refused,
-    :func:`controllers.plausible.implausible_pose`).
+    """``goal.rotation`` and ``goal.translation``, checked: finite, a rotation (``R^T R``
+    within :data:`hexapod.kinematics.ROTATION_TOLERANCE` of the identity, determinant
+    positive) and, with the nominal ``geometry``, not a pose that puts a leg where none of
+    the robot can be (:func:`controllers.plausible.implausible_pose`).
 
     Raises:
-        ContextError: Missing, not finite, or not a pose of the robot.
+        ContextError: Missing, not finite, not a rotation, or not a pose of the robot.
     """
     if goal.rotation is None or goal.translation is None:
         raise ContextError(controller, "goal.rotation/translation", "missing")
@@ -113,6 +114,10 @@ def goal_pose_of(controller: str, goal: Goal, geometry: HexapodGeometry | None =
         raise ContextError(controller, "goal.rotation/translation",
                            f"expected a finite (3, 3) rotation and (3,) position, got "
                            f"{R.shape} and {t.shape}")
+    off = float(np.abs(R.T @ R - np.eye(3)).max())
+    if off > ROTATION_TOLERANCE or np.linalg.det(R) <= 0:
+        raise ContextError(controller, "goal.rotation", f"not a rotation matrix (|R^T R - I| "
+                           f"= {off:.2e}, det {float(np.linalg.det(R)):.4g})")
     if geometry is not None and (problem := implausible_pose(geometry, R, t)) is not None:
         raise ContextError(controller, "goal.rotation/translation", problem)
     return R, t

@@ -100,3 +100,14 @@ def test_the_range_is_the_stroke_widened_by_its_span_and_checked_on_every_leg() 
     # not finite, not numbers: left to the callers' own checks
     assert implausible_lengths([np.nan] * 6, ROBOT.stroke) is None
     assert implausible_lengths("abc", ROBOT.stroke) is None
+
+
+@pytest.mark.parametrize("name", BY_POSE)
+@pytest.mark.parametrize("rotation", [R0 * 1.01, R0 @ np.diag([1.0, 1.0, -1.0])],
+                         ids=["scaled", "reflection"])
+def test_a_goal_rotation_that_is_not_one_is_refused(name: str, rotation: np.ndarray) -> None:
+    """Both pose laws check the goal pose in one place (``goal_pose_of``): a scaled
+    matrix or a reflection is no orientation (`cartesian-ctc` took them)."""
+    with pytest.raises(ContextError, match=r"goal\.rotation.*not a rotation matrix "
+                                           r"\(\|R\^T R - I\| = "):
+        _reset(name, _goal(rotation=rotation))
