@@ -19,15 +19,29 @@ from typing import Any
 import numpy as np
 
 from hexapod.geometry import HexapodGeometry
+from hexapod.layout import Layout
 from vision import kernels
 from vision.cameras.distortion import RadialTangential
 
 log = logging.getLogger(__name__)
 
-#: Doubles per item: parameters and outputs (see the C source).
-N_IN, N_OUT = 77, 138
 #: Camera parameters per item: fx, skew, cx, fy, cy, xi, k1, k2, p1, p2, k3, fold radius.
 N_CAMERA = 12
+#: The C core's parameter row of one item (its ``OBS_N_IN`` numbers, in its order): the
+#: platform pose in the base frame (``R`` row-major, ``t`` [m]), the base and platform
+#: joint centres [m], the leg and platform disc radii [m], ``camera_from_base`` (rotation
+#: row-major, translation [m]) and :func:`camera_vector`.
+INPUTS = Layout([("R", (3, 3)), ("t", 3), ("base_points", (6, 3)),
+                 ("platform_points", (6, 3)), ("leg_radius", ()), ("platform_radius", ()),
+                 ("camera_rotation", (3, 3)), ("camera_translation", 3),
+                 ("camera", N_CAMERA)], "leg observation input")
+#: The C core's output row of one item (``OBS_N_OUT``): :class:`BatchObservation`'s
+#: fields, the masks as 0 or 1.
+OUTPUTS = Layout([("normals", (6, 2, 3)), ("exists", 6), ("visible_fraction", (6, 2)),
+                  ("edge_visible", (6, 2)), ("base_points", (6, 3)), ("directions", (6, 3)),
+                  ("lengths", 6), ("visible_interval", (6, 2, 2)), ("platform_centre", 3),
+                  ("platform_normal", 3)], "leg observation output")
+_R, _T = INPUTS["R"], INPUTS["t"]
 
 
 def camera_vector(camera: Any) -> np.ndarray:
@@ -83,7 +97,8 @@ class WorldParams:
     compiled: bool = True
     geometries: list[Any] | None = None
     cameras: list[Any] | None = None
-    #: (N, 77) the rows of :meth:`pack` without the poses (built on first use).
+    #: (N, :data:`INPUTS` size) the rows of :meth:`pack` without the poses (built on
+    #: first use).
     constant_rows: np.ndarray | None = field(default=None, repr=False)
 
     @classmethod
@@ -119,24 +134,18 @@ class WorldParams:
 
     def pack(self, rotations: np.ndarray, translations: np.ndarray,
              items: np.ndarray | None = None) -> np.ndarray:
-        """The (n, 77) parameter rows of the C core for poses of items ``items`` (None:
-        every item, in order)."""
+        """The (n, :data:`INPUTS` size) parameter rows of the C core for poses of items
+        ``items`` (None: every item, in order)."""
         if self.constant_rows is None:  # the columns that do not depend on the pose
-            m = len(self.leg_radius)
-            c = np.zeros((m, N_IN))
-            c[:, 12:30] = self.base_points.reshape(m, 18)
-            c[:, 30:48] = self.platform_points.reshape(m, 18)
-            c[:, 48] = self.leg_radius
-            c[:, 49] = self.platform_radius
-            c[:, 50:59] = self.camera_rotation.reshape(m, 9)
-            c[:, 59:62] = self.camera_translation
-            c[:, 62:74] = self.camera
+            c = np.zeros((len(self.leg_radius), INPUTS.size))
+            for block in ("base_points", "platform_points", "leg_radius", "platform_radius",
+                          "camera_rotation", "camera_translation", "camera"):
+                INPUTS.view(c, block)[...] = getattr(self, block)
             self.constant_rows = c
         rows = (self.constant_rows.copy() if items is None
                 else self.constant_rows[np.asarray(items)])
-        n = len(rows)
-        rows[:, 0:9] = np.asarray(rotations, float).reshape(n, 9)
-        rows[:, 9:12] = translations
+        rows[:, _R] = np.asarray(rotations, float).reshape(len(rows), 9)
+        rows[:, _T] = translations
         return rows
 
 
@@ -196,7 +205,7 @@ def observe_batch(params: WorldParams, rotations: np.ndarray, translations: np.n
     if lib is None or not params.compiled:
         idx = np.arange(len(params.leg_radius)) if items is None else np.asarray(items)
         return _observe_numpy(params, rows, idx, n_samples, min_fraction, occlusion)
-    out = np.empty((n, N_OUT))
+    out = np.empty((n, OUTPUTS.size))
     if lib.hexapod_observe_batch(rows.ctypes.data, out.ctypes.data, n, float(params.width),
                                  float(params.height), int(params.unified), int(n_samples),
                                  float(min_fraction), int(occlusion)):
@@ -237,18 +246,10 @@ def segments_certainly_imaged(camera: Any, segments: np.ndarray) -> np.ndarray:
 
 
 def _unpack(out: np.ndarray) -> BatchObservation:
-    n = out.shape[0]
-    return BatchObservation(
-        normals=out[:, 0:36].reshape(n, 6, 2, 3),
-        exists=out[:, 36:42] > 0.5,
-        visible_fraction=out[:, 42:54].reshape(n, 6, 2),
-        edge_visible=out[:, 54:66].reshape(n, 6, 2) > 0.5,
-        base_points=out[:, 66:84].reshape(n, 6, 3),
-        directions=out[:, 84:102].reshape(n, 6, 3),
-        lengths=out[:, 102:108],
-        visible_interval=out[:, 108:132].reshape(n, 6, 2, 2),
-        platform_centre=out[:, 132:135],
-        platform_normal=out[:, 135:138])
+    fields = OUTPUTS.views(out)
+    for mask in ("exists", "edge_visible"):
+        fields[mask] = fields[mask] > 0.5
+    return BatchObservation(**fields)
 
 
 def _observe_numpy(params: WorldParams, rows: np.ndarray, items: np.ndarray, n_samples: int,
@@ -260,11 +261,8 @@ def _observe_numpy(params: WorldParams, rows: np.ndarray, items: np.ndarray, n_s
         raise ValueError("WorldParams without its geometries and cameras (use from_worlds)")
     out = []
     for row, k in zip(rows, items, strict=True):
-        lo = observe_legs_numpy(params.cameras[k], params.geometries[k], row[0:9].reshape(3, 3),
-                                row[9:12], min_fraction, n_samples, float(row[49]), occlusion)
-        out.append(np.concatenate([
-            lo.normals.reshape(36), lo.exists.astype(float), lo.visible_fraction.reshape(12),
-            lo.edge_visible.reshape(12).astype(float), lo.base_points.reshape(18),
-            lo.directions.reshape(18), lo.lengths, lo.visible_interval.reshape(24),
-            lo.platform_centre, lo.platform_normal]))
-    return _unpack(np.array(out).reshape(len(rows), N_OUT))
+        v = INPUTS.views(row)
+        lo = observe_legs_numpy(params.cameras[k], params.geometries[k], v["R"], v["t"],
+                                min_fraction, n_samples, float(v["platform_radius"]), occlusion)
+        out.append(np.concatenate([np.ravel(getattr(lo, block)) for block in OUTPUTS]))
+    return _unpack(np.array(out, dtype=float).reshape(len(rows), OUTPUTS.size))

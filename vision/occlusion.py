@@ -16,24 +16,27 @@ from functools import lru_cache
 import casadi as ca
 import numpy as np
 
-from hexapod.compiled import CompiledFunction
+from hexapod.compiled import CompiledFunction, Layout
 
-#: Input layout of the compiled test: P (3), own leg index (1), radius (1),
-#: then per leg A (3), u (3), q (1).
-N_IN = 5 + 6 * 7
+#: One leg in the compiled test's input: its base point ``A`` [m], direction ``u`` and
+#: length ``q`` [m] (camera frame).
+LEG = Layout([("A", 3), ("u", 3), ("q", ())], "leg")
+#: The compiled test's input row: the point ``P`` (camera frame) [m], the index of its
+#: own leg, the leg radius [m], then the six legs (:data:`LEG`).
+INPUTS = Layout([("P", 3), ("own", ()), ("radius", ()), ("legs", (6, LEG.size))],
+                "leg occlusion input")
+#: Its output: 1 where the segment crosses another leg, else 0.
+OUTPUTS = Layout([("occluded", ())], "leg occlusion output")
 
 
 def _expression() -> ca.Function:
-    x = ca.SX.sym("x", N_IN)
-    P = x[0:3]
-    own = x[3]
-    r = x[4]
+    x = ca.SX.sym("x", INPUTS.size)
+    row = INPUTS.split(x)
+    P, own, r, legs = row["P"], row["own"], row["radius"], row["legs"]
     hits = []
     for j in range(6):
-        base = 5 + 7 * j
-        A = x[base:base + 3]
-        u = x[base + 3:base + 6]
-        q = x[base + 6]
+        leg = LEG.split(legs[j * LEG.size:(j + 1) * LEG.size])
+        A, u, q = leg["A"], leg["u"], leg["q"]
         Pu = ca.dot(P, u)
         Au = ca.dot(A, u)
         Pp = P - Pu * u
@@ -68,7 +71,7 @@ def _expression() -> ca.Function:
 
 @lru_cache(maxsize=1)
 def _compiled() -> CompiledFunction:
-    return CompiledFunction(_expression())
+    return CompiledFunction(_expression(), inputs=INPUTS, outputs=OUTPUTS)
 
 
 def occluded_by_legs_compiled(
@@ -96,12 +99,13 @@ def occluded_by_legs_compiled(
     legs = np.concatenate([np.broadcast_to(base_points, (*lead, 6, 3)),
                            np.broadcast_to(directions, (*lead, 6, 3)),
                            np.broadcast_to(lengths, (*lead, 6))[..., None]], axis=-1)
-    rows = np.empty((*lead, 6, 2, n, N_IN))
-    rows[..., 0:3] = P
-    rows[..., 3] = np.arange(6)[:, None, None]
-    rows[..., 4] = radius
-    rows[..., 5:] = legs.reshape(*lead, 1, 1, 1, 42)
-    out = _compiled().batch(rows.reshape(-1, N_IN))
+    rows = np.empty((*lead, 6, 2, n, INPUTS.size))
+    row = INPUTS.views(rows)
+    row["P"][...] = P
+    row["own"][...] = np.arange(6)[:, None, None]
+    row["radius"][...] = radius
+    row["legs"][...] = legs.reshape(*lead, 1, 1, 1, 6, LEG.size)
+    out = _compiled().batch(rows.reshape(-1, INPUTS.size))
     return out.reshape(*lead, 6, 2, n) > 0.5
 
 

@@ -47,8 +47,15 @@ from hexapod.compiled import CompiledFunction, Layout, code_key
 from hexapod.dynamics.drive_model import COULOMB_SMOOTHING
 from hexapod.dynamics.inertia import InertiaParameters
 
+#: The inertial parameters of an input row (:func:`parameter_row`): the platform's mass
+#: [kg], centre of mass [m] and inertia ``[ixx, iyy, izz, ixy, ixz, iyz]`` [kg m^2]
+#: (:class:`~hexapod.dynamics.inertia.InertiaParameters`); a leg's body and rod, each a
+#: mass [kg], a centre of mass along the leg [m] and a transverse inertia [kg m^2]
+#: (:func:`_leg`); gravity [m/s^2].
+PARAMETERS = Layout([("platform_mass", ()), ("platform_com", 3), ("platform_inertia", 6),
+                     ("leg", 6), ("gravity", 3)], "inertial parameters")
 #: Number of inertial parameters in a row.
-N_PARAMETERS = 19
+N_PARAMETERS = PARAMETERS.size
 #: The input row of every function (module docstring; ``R`` column-major: the block's
 #: (3, 3) view is ``R^T``).
 INPUTS = Layout([("R", (3, 3)), ("t", 3), ("twist", 6), ("u", 6), ("A", (6, 3)),
@@ -73,14 +80,18 @@ OUTPUTS = {
 
 
 def parameter_row(inertia: InertiaParameters) -> np.ndarray:
-    """The 19 inertial parameters of an input row: platform mass, centre of mass (3),
-    inertia ``[ixx, iyy, izz, ixy, ixz, iyz]`` (6); body mass, ``body_com``, transverse
-    inertia; rod mass, ``rod_com``, transverse inertia; gravity (3). The axial inertias
-    do not enter (module docstring)."""
-    return np.concatenate([
-        [inertia.platform_mass], inertia.platform_com, inertia.platform_inertia,
-        [inertia.body_mass, inertia.body_com, inertia.body_inertia[0]],
-        [inertia.rod_mass, inertia.rod_com, inertia.rod_inertia[0]], inertia.gravity])
+    """The inertial parameters of an input row (:data:`PARAMETERS`); a leg's are its body's
+    mass, ``body_com`` and transverse inertia, then its rod's. The axial inertias do not
+    enter (module docstring)."""
+    row = np.empty(N_PARAMETERS)
+    for block, value in (
+            ("platform_mass", inertia.platform_mass), ("platform_com", inertia.platform_com),
+            ("platform_inertia", inertia.platform_inertia),
+            ("leg", (inertia.body_mass, inertia.body_com, inertia.body_inertia[0],
+                     inertia.rod_mass, inertia.rod_com, inertia.rod_inertia[0])),
+            ("gravity", inertia.gravity)):
+        row[PARAMETERS[block]] = value
+    return row
 
 
 def _skew(w: ca.SX) -> ca.SX:
@@ -88,7 +99,7 @@ def _skew(w: ca.SX) -> ca.SX:
                       ca.horzcat(-w[1], w[0], 0))
 
 
-def _leg(A: ca.SX, B: ca.SX, B_dot: ca.SX, c_B: ca.SX, leg: ca.SX
+def _leg(A: ca.SX, B: ca.SX, B_dot: ca.SX, c_B: ca.SX, leg: ca.SX, gravity: ca.SX
          ) -> tuple[ca.SX, ca.SX, ca.SX, ca.SX, ca.SX, ca.SX, ca.SX]:
     """One leg seen from its platform joint ``B`` (``docs/math.md`` section 11).
 
@@ -98,10 +109,10 @@ def _leg(A: ca.SX, B: ca.SX, B_dot: ca.SX, c_B: ca.SX, leg: ca.SX
     the rod, spin left at zero). Returns ``(u, beta = J / q^2, m_r, y, potential, q_dot,
     bias)`` with ``y = M_leg c_B + n_leg`` for ``B_ddot = Jb tau_dot + c_B`` and
     ``bias = u . c_B + q |u_dot|^2`` the leg acceleration at zero ``tau_dot``
-    (``q_ddot = u . B_ddot + q |u_dot|^2``).
+    (``q_ddot = u . B_ddot + q |u_dot|^2``); ``leg`` is ``(m_b, d_b, i_b, m_r, d_r, i_r)``
+    (:data:`PARAMETERS`), ``gravity`` (3) [m/s^2].
     """
     m_b, d_b, i_b, m_r, d_r, i_r = (leg[k] for k in range(6))
-    gravity = leg[6:9]
     L = B - A
     q_sq = ca.dot(L, L)
     # the leg's one division; the others are products by 1/q (written as a square root,
@@ -224,13 +235,11 @@ def expressions() -> tuple[ca.SX, dict[str, ca.SX]]:
     v, w = tau[0:3], tau[3:6]
     A = ca.reshape(blocks["A"], 3, 6)
     E = ca.reshape(blocks["E"], 3, 6)
-    p = blocks["params"]
-    m_p, c_p = p[0], p[1:4]
-    ixx, iyy, izz, ixy, ixz, iyz = (p[k] for k in range(4, 10))
+    p = PARAMETERS.split(blocks["params"])
+    m_p, c_p, gravity = p["platform_mass"], p["platform_com"], p["gravity"]
+    ixx, iyy, izz, ixy, ixz, iyz = (p["platform_inertia"][k] for k in range(6))
     I_p = ca.vertcat(ca.horzcat(ixx, ixy, ixz), ca.horzcat(ixy, iyy, iyz),
                      ca.horzcat(ixz, iyz, izz))
-    gravity = p[16:19]
-    leg_parameters = p[10:19]
 
     # The platform: CoM velocity v + w x R c_p, angular velocity w.
     rc = R @ c_p
@@ -251,7 +260,7 @@ def expressions() -> tuple[ca.SX, dict[str, ca.SX]]:
         b = R @ E[:, i]
         c_B = ca.cross(w, ca.cross(w, b))
         u, beta, m_r, y, v_leg, q_dot, bias = _leg(A[:, i], b + t, v + ca.cross(w, b), c_B,
-                                                   leg_parameters)
+                                                   p["leg"], gravity)
         q_dots.append(q_dot)
         biases.append(bias)
         k = ca.vertcat(u, ca.cross(b, u))

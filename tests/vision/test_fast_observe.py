@@ -190,3 +190,33 @@ def test_segments_proved_inside_the_image_are_inside_at_every_point(kind: str, s
     # the proof fires, and the check has teeth (segments near the border that leave it)
     assert proved.sum() > 200, int(proved.sum())
     assert (~whole).sum() > 200, int((~whole).sum())
+
+
+def test_the_c_core_reads_and_writes_the_rows_as_the_layouts_say() -> None:
+    """The C core's row sizes and the offsets of its named pointers are the Python
+    layouts' (a block moved on one side only fails here, not as wrong observations)."""
+    import re
+    from pathlib import Path
+
+    src = (Path(fast_observe.__file__).parent / "csrc" / "observe_kernels.c").read_text()
+    sizes = dict(re.findall(r"#define (OBS_N_(?:IN|OUT)) (\d+)", src))
+    assert int(sizes["OBS_N_IN"]) == fast_observe.INPUTS.size
+    assert int(sizes["OBS_N_OUT"]) == fast_observe.OUTPUTS.size
+    # where the C points into an item's row: `*name = p + k` or `name = p[k]` (p: the
+    # parameters, o: the outputs)
+    found = {(row, name): int(k or 0) for name, row, k in re.findall(
+        r"\*?(\w+) = ([po])(?: \+ (\d+))?[,;]", src)}
+    found.update({("p", name): int(k) for name, k in re.findall(r"(\w+) = p\[(\d+)\]", src)})
+    c_names = {  # the C's names of the layouts' blocks
+        "p": {"R": "R", "t": "t", "Ab": "base_points", "E": "platform_points",
+              "r": "leg_radius", "rho_disc": "platform_radius", "Rc": "camera_rotation",
+              "tc": "camera_translation", "cam": "camera"},
+        "o": {"normals": "normals", "exists": "exists", "frac": "visible_fraction",
+              "vis": "edge_visible", "Ac": "base_points", "uc": "directions",
+              "qc": "lengths", "interval": "visible_interval", "centre": "platform_centre",
+              "dnormal": "platform_normal"}}
+    layouts = {"p": fast_observe.INPUTS, "o": fast_observe.OUTPUTS}
+    for row, names in c_names.items():
+        assert set(names.values()) == set(layouts[row])  # every block is read or written
+        for c_name, block in names.items():
+            assert found[(row, c_name)] == layouts[row][block].start, (row, c_name, block)

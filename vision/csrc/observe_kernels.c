@@ -25,16 +25,16 @@
  *   (vision.distortion.RadialTangential), and the undistorted radius below which the
  *   distortion does not fold (0: no fold; radial distortion only: a fold radius that
  *   depends on the direction is not handled here, vision/fast_observe.py checks it)
- * = 77 doubles.
+ * = 74 doubles (vision/fast_observe.py INPUTS, whose names and sizes are these).
  * Outputs of one item: normals (36), exists (6), fraction (12), visible (12, 0/1),
  * A_cam (18), u (18), q (6), interval (24: s_first, s_last per edge), centre (3),
- * disc normal (3) = 138 doubles.
+ * disc normal (3) = 138 doubles (vision/fast_observe.py OUTPUTS).
  */
 #include <math.h>
 #include <stddef.h>
 #include <stdlib.h>
 
-#define OBS_N_IN 77
+#define OBS_N_IN 74
 #define OBS_N_OUT 138
 
 static void mat_vec(const double *M, const double *x, double *y) {

@@ -22,16 +22,20 @@ from functools import lru_cache
 import casadi as ca
 import numpy as np
 
-from hexapod.compiled import CompiledFunction
+from hexapod.compiled import CompiledFunction, Layout
 from hexapod.dynamics import compiled as _c
 from hexapod.dynamics.drive_model import COULOMB_SMOOTHING
 from hexapod.dynamics.identification.parameters import N_MECHANISM, N_STANDARD
 from hexapod.exceptions import DynamicsError
 from hexapod.geometry import HexapodGeometry
 
-#: Output layout of the compiled function: Y_task (6 x 18, column-major), K (36,
-#: column-major), leg rates (6), leg acceleration bias (6).
-_OUT = 6 * N_MECHANISM + 36 + 12
+#: The compiled function's output row: the task-space regressor ``Y_task`` (6 x
+#: N_MECHANISM, column-major: its view is the transpose), ``K`` (column-major), the leg
+#: rates ``q_dot`` [m/s] and the legs' acceleration bias ``K_dot tau`` [m/s^2]. Its input
+#: is the dynamics' row (:data:`hexapod.dynamics.compiled.INPUTS`), the accelerations in
+#: the block ``u``.
+OUTPUTS = Layout([("Y_task", (N_MECHANISM, 6)), ("K", (6, 6)), ("q_dot", 6),
+                  ("leg_bias", 6)], "identification regressor output")
 
 #: Where the derivative is taken (any point with non-zero masses: the equation is linear).
 _THETA0 = np.array([1.3, 0.011, -0.017, 0.023, 0.31, 0.29, 0.47, 0.013, -0.021, 0.007,
@@ -55,8 +59,11 @@ def _inertial_row(theta: ca.SX) -> ca.SX:
 def _build() -> ca.Function:
     x, e = _c.cached_expressions()
     theta = ca.SX.sym("theta", N_MECHANISM)
-    new_x = ca.vertcat(x[0:60], _inertial_row(theta), x[76:79])
-    rhs = e["M"] @ x[18:24] + e["h"]
+    blocks = _c.INPUTS.split(x)
+    params = ca.vertcat(_inertial_row(theta), _c.PARAMETERS.split(blocks["params"])["gravity"])
+    new_x = ca.vertcat(*(params if block == "params" else blocks[block]
+                         for block in _c.INPUTS))
+    rhs = e["M"] @ blocks["u"] + e["h"]  # (the row's ``u``: the accelerations)
     rhs = ca.substitute(rhs, x, new_x)
     Y = ca.jacobian(rhs, theta)
     Y = ca.substitute(Y, theta, ca.DM(_THETA0))
@@ -68,7 +75,7 @@ def _build() -> ca.Function:
 @lru_cache(maxsize=1)
 def compiled_regressor() -> CompiledFunction:
     """The compiled regressor function (built and compiled on first use, cached on disk)."""
-    return CompiledFunction(_build())
+    return CompiledFunction(_build(), inputs=_c.INPUTS, outputs=OUTPUTS)
 
 
 def regressor(geometry: HexapodGeometry, R: np.ndarray, t: np.ndarray, twist: np.ndarray,
@@ -94,12 +101,10 @@ def regressor(geometry: HexapodGeometry, R: np.ndarray, t: np.ndarray, twist: np
     model = DynamicModel(geometry)
     rows = model.rows(R, t, twist, acc)
     n = rows.shape[0]
-    y = compiled_regressor().batch(rows)
-    Y_task = np.swapaxes(y[:, :6 * N_MECHANISM].reshape(n, N_MECHANISM, 6), 1, 2)
-    o = 6 * N_MECHANISM
-    K = np.swapaxes(y[:, o:o + 36].reshape(n, 6, 6), 1, 2)
-    qd = y[:, o + 36:o + 42]
-    bias = y[:, o + 42:o + 48]
+    y = OUTPUTS.views(compiled_regressor().batch(rows))
+    Y_task = np.swapaxes(y["Y_task"], 1, 2)
+    K = np.swapaxes(y["K"], 1, 2)
+    qd, bias = y["q_dot"], y["leg_bias"]
     cond = np.linalg.cond(K)
     if not np.all(np.isfinite(cond)) or np.any(cond > 1e10):
         raise DynamicsError("regressor", int(np.argmax(~np.isfinite(cond) | (cond > 1e10))))
