@@ -62,6 +62,13 @@ class OptionSpec:
     unit: str = ""
     meaning: str = ""
 
+    def __post_init__(self) -> None:
+        if isinstance(self.type, type):  # OptionSpec("gain", float, ...): its name
+            object.__setattr__(self, "type", self.type.__name__)
+        elif not isinstance(self.type, str):
+            raise TypeError(f"OptionSpec {self.name!r}: type must be a name (\"float\") or a "
+                            f"type (float), got {self.type!r}")
+
 
 @dataclass(frozen=True)
 class OptionTable:

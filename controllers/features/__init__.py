@@ -10,7 +10,9 @@ feature"; the worked example is ``tests/controllers/plugin_feature_joints.py``).
 
 from __future__ import annotations
 
+import importlib
 from dataclasses import dataclass
+from typing import Any
 
 from controllers.features.ctc import FeatureComputedTorque
 from controllers.features.laws import FeatureLaw, FeatureMPC, FeatureQPLaw
@@ -53,7 +55,8 @@ def controllers_for(feature: LegFeature) -> FeatureControllers:
         return type(f"{stem}{kind}", (base,), {
             "name": f"{feature.name}-{suffix}", "feature": feature, "unit": feature.unit,
             "features": frozenset({"lengths", "directions"}), "__module__": mod,
-            "__doc__": f"``{feature.name}``: {base.__doc__}", **extra})
+            "__doc__": f"``{feature.name}``: {base.__doc__}", "__reduce_ex__": _reduce_ex,
+            **extra})
 
     qp = make(FeatureQPLaw, "qp", "QP", {})
     return FeatureControllers(
@@ -61,3 +64,36 @@ def controllers_for(feature: LegFeature) -> FeatureControllers:
         qp=qp,
         mpc=make(FeatureMPC, "mpc", "MPC", {"law_class": qp}),
         ctc=make(FeatureComputedTorque, "ctc", "ComputedTorque", {}))
+
+
+def _reduce_ex(self: Any, protocol: Any) -> Any:
+    """Pickle a generated controller by its module and registry name (its class is bound
+    in the feature's module under a name of the author's choosing, not its own, so
+    pickle cannot find it by ``__qualname__``): :func:`_instance_of` finds it again in
+    that module, in this process or another. A class the module does not hold (made in
+    a function) is copied and pickled as any object, which fails to pickle by name."""
+    cls = type(self)
+    if _generated(cls.__module__, cls.name) is cls:
+        return (_instance_of, (cls.__module__, cls.name), self.__getstate__())
+    return object.__reduce_ex__(self, protocol)
+
+
+def _generated(module: str, name: str) -> type[Any] | None:
+    """The generated controller class named ``name`` that ``module`` holds at its top
+    level, itself or in a :class:`FeatureControllers` (None: none)."""
+    for value in list(vars(importlib.import_module(module)).values()):
+        for cls in value.all() if isinstance(value, FeatureControllers) else (value,):
+            if (isinstance(cls, type) and getattr(cls, "__reduce_ex__", None) is _reduce_ex
+                    and getattr(cls, "name", None) == name):
+                return cls
+    return None
+
+
+def _instance_of(module: str, name: str) -> Any:
+    """An empty instance of the generated controller ``name`` of ``module`` (unpickling;
+    the state is set after)."""
+    cls: Any = _generated(module, name)
+    if cls is None:
+        raise LookupError(f"controller {name!r}: module {module} no longer makes it "
+                          "(controllers_for at its top level)")
+    return cls.__new__(cls)

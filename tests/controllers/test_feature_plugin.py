@@ -493,3 +493,62 @@ def test_a_feature_whose_value_is_not_its_rows_is_refused_where_it_is_defined() 
             controllers_for(feature)
         assert f"feature {feature.name!r}: value(u, q, A)" in str(info.value), str(info.value)
         assert text in str(info.value)
+
+
+@pytest.mark.parametrize("which", ["pinv", "qp", "mpc"])
+def test_a_reset_controller_pickles_and_steps_as_the_original(world: World, which: str
+                                                              ) -> None:
+    """The generated classes are bound in the plugin's module under names of its own
+    (``PlatformJointPinv``, not the class's ``PlatformJointPseudoInverse``): a reset,
+    stepped controller still pickles (found again in its module by its registry name),
+    and the copy commands what the original commands next, to the last bit."""
+    import pickle
+
+    R1, t1 = _goal_pose(world.geometry)
+    ctrl = getattr(JOINTS, which)(gain=2.0)
+    ctrl.reset(world.context(world.goal(R1, t1), 0.02))
+    R0, t0 = home_pose(world.geometry)
+    ctrl.step(world.observation(R0, t0))
+    copy_ = pickle.loads(pickle.dumps(ctrl))
+    assert type(copy_) is type(ctrl)
+    obs = world.observation(R0 @ exp_so3(np.deg2rad([0.3, 0.0, 0.0])), t0 + 0.001, 0.02)
+    np.testing.assert_array_equal(copy_.step(obs).velocities, ctrl.step(obs).velocities)
+
+
+def test_the_computed_torque_controller_pickles_into_another_process(ctc_world: CtcWorld
+                                                                      ) -> None:
+    """A reset computed-torque controller of the plugin, pickled here, is unpickled and
+    stepped by a new Python process (which imports the plugin's module to find the
+    class), commanding the original's forces to the last bit."""
+    import pickle
+    import subprocess
+    import sys
+
+    from hexapod.dynamics.robots import DynamicRobots
+
+    R0, t0 = home_pose(ctc_world.truth)
+    ctrl = JOINTS.ctc()
+    ctrl.reset(ctc_world.context(ctc_world.goal(R0, t0 + np.array([0.002, 0.0, 0.001]))))
+    robot = DynamicRobots([ctc_world.truth], R0[None].copy(), t0[None].copy())
+    obs = ctc_world.observation(robot, 0.0)
+    blob = pickle.dumps((ctrl, obs))
+    script = ("import pickle, sys; ctrl, obs = pickle.loads(sys.stdin.buffer.read()); "
+              "sys.stdout.buffer.write(pickle.dumps(ctrl.step(obs).forces))")
+    done = subprocess.run([sys.executable, "-c", script], input=blob, capture_output=True,
+                          cwd=Path(__file__).parents[2], timeout=300, check=False)
+    assert done.returncode == 0, done.stderr.decode()[-2000:]
+    np.testing.assert_array_equal(pickle.loads(done.stdout), ctrl.step(obs).forces)
+
+
+def test_a_class_its_module_does_not_hold_is_copied_but_not_pickled() -> None:
+    """``controllers_for`` called inside a function: its classes deep-copy as any object
+    but cannot be pickled by name (pickle's own error, naming the class)."""
+    import pickle
+
+    from controllers.features import controllers_for
+
+    local = controllers_for(PlatformJoints())
+    ctrl = local.pinv()
+    assert type(copy.deepcopy(ctrl)) is local.pinv
+    with pytest.raises(pickle.PicklingError, match="PlatformJointPseudoInverse"):
+        pickle.dumps(ctrl)

@@ -45,6 +45,14 @@ def test_a_plugin_declares_its_options() -> None:
     assert plain.names == ["gain"] and plain.options[0].meaning == ""
 
 
+def test_an_option_type_may_be_given_as_a_type() -> None:
+    """``OptionSpec("gain", float, ...)`` is ``OptionSpec("gain", "float", ...)`` (``list
+    --options`` failed on the type object); anything else is refused naming the option."""
+    assert OptionSpec("gain", float, 2.0) == OptionSpec("gain", "float", 2.0)
+    with pytest.raises(TypeError, match="'gain': type must be a name"):
+        OptionSpec("gain", 3, 2.0)  # type: ignore[arg-type]
+
+
 def test_docstring_args_joins_continued_lines() -> None:
     doc = """Something.
 
