@@ -99,16 +99,37 @@ def measured(record: Record, settings: Settings, rng: np.random.Generator
 def record_backend(backend: Any, robot: HexapodGeometry, excitation: Excitation,
                    duration: float, dt: float) -> tuple[np.ndarray, np.ndarray]:
     """Run the excitation on a backend that reports forces (a position loop on its
-    encoders, leg velocities as commands); returns the lengths and forces (N, 6)."""
+    encoders, leg velocities as commands); returns the lengths and forces (N, 6).
+
+    Every reading is checked before a command is made of it (the study loop's
+    :func:`benchmarks.sim.plant.reading_problem`: six finite lengths where the robot's legs
+    can be; six finite forces): a bad one stops the run at once, the caller's ``with``
+    halting the robot, never a command computed from it.
+
+    Raises:
+        BackendError: A reading that cannot be the robot's, naming the sample, the leg
+            and the value.
+    """
+    from benchmarks.sim.plant import reading_problem
+
     q_ref = reference_lengths(robot, excitation, duration, dt)
     qd_ref = np.gradient(q_ref, dt, axis=0)
-    q = backend.measured_lengths()
+    q = np.asarray(backend.measured_lengths(), float)
     lengths, forces = [], []
     for k in range(q_ref.shape[0] - 1):
+        if (problem := reading_problem(q, robot.stroke)) is not None:
+            raise BackendError(f"sample {k} ({k * dt:.3f} s): {problem}; stopped, nothing "
+                               "commanded from it")
         step = backend.step(qd_ref[k] + POSITION_GAIN * (q_ref[k] - q), dt)
-        q = step.lengths
+        q = np.asarray(step.lengths, float)
+        f = np.asarray(backend.measured_forces(), float)
+        if f.shape != (6,) or not np.isfinite(f).all():
+            raise BackendError(f"sample {k} ({k * dt:.3f} s): the backend measured the "
+                               f"forces {f} [N], not six finite values; stopped")
         lengths.append(q)
-        forces.append(np.asarray(backend.measured_forces(), float))
+        forces.append(f)
+    if (problem := reading_problem(q, robot.stroke)) is not None:
+        raise BackendError(f"last sample: {problem}")
     return np.array(lengths), np.array(forces)
 
 

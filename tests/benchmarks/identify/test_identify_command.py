@@ -205,3 +205,50 @@ def test_ctrl_c_ends_the_command_with_130_and_no_traceback(tmp_path: Path) -> No
     out, err = proc.communicate(timeout=60)
     assert proc.returncode == 130, (out, err)
     assert "hexapod-bench identify: interrupted (Ctrl-C)" in err and "Traceback" not in err
+
+
+FORCE_ROBOT = "tests.benchmarks.identify.force_robot:ForceRobot"
+
+
+@pytest.mark.slow
+def test_identify_on_a_robot_backend_that_reports_forces(tmp_path: Path) -> None:
+    """The real-robot path of ``docs/identification.md`` (``--backend module:Class``, a
+    backend with ``measured_forces()``), on a stand-in for a lab robot (the dynamic
+    world's deltalab behind the backend interface, its drive forces as the readings): it
+    writes the identified robot, the mass moving with the platform within 2 % of the
+    robot's, and the robot is halted at the end."""
+    from tests.benchmarks.identify.force_robot import ForceRobot
+
+    ForceRobot.halts.clear()
+    assert main(["identify", "deltalab", "--backend", FORCE_ROBOT, "--out", str(tmp_path),
+                 "--duration", "4", "--search-candidates", "2"]) == 0
+    doc = json.loads((tmp_path / "identification.json").read_text())
+    mass = doc["base_parameters"][0]
+    assert mass["name"] == "m_p + 6 m_r"
+    g = preset("deltalab")
+    assert abs(mass["estimate"] / (g.inertia.platform_mass + 6 * g.inertia.rod_mass) - 1) < 0.02
+    assert (tmp_path / "identified.toml").stat().st_size > 0
+    assert ForceRobot.halts == ["halted after 4000 steps"]
+
+
+@pytest.mark.parametrize(("fault", "steps", "says"), [
+    ("nan-at=200", 200, "sample 200 (0.200 s): the backend measured leg 3 as nan"),
+    ("mm", 0, "sample 0 (0.000 s): the backend measured leg 0 at 4"),
+])
+def test_a_reading_that_cannot_be_the_robots_stops_the_run_before_any_command_from_it(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str], fault: str, steps: int,
+        says: str) -> None:
+    """A NaN leg (a sensor or link fault) or millimetres for metres: the excitation
+    stops at that sample with the leg and the value, the robot halted with no command
+    made from the reading (before: a NaN leg was commanded NaN velocities for the rest
+    of the run, and the run failed afterwards, "non-finite length or force"); exit 2 and
+    no robot file."""
+    from tests.benchmarks.identify.force_robot import ForceRobot
+
+    ForceRobot.halts.clear()
+    assert main(["identify", "deltalab", "--backend", f"{FORCE_ROBOT}:{fault}", "--out",
+                 str(tmp_path), "--duration", "4", "--search-candidates", "2"]) == 2
+    err = capsys.readouterr().err
+    assert says in err and "stopped, nothing commanded from it" in err
+    assert ForceRobot.halts == [f"halted after {steps} steps"]
+    assert not (tmp_path / "identified.toml").exists()
