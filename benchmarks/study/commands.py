@@ -213,7 +213,7 @@ def _run_locked(scenarios: list[Any], out: Path, args: argparse.Namespace
             sc.name: {"description": sc.description, "reference": sc.reference,
                       "source": sc.source} for sc in scenarios}},
     })
-    _keep_inputs(out, scenarios, meta, args)
+    _keep_inputs(out, scenarios, meta, args, continued=meta_path.exists())
     from benchmarks.study.options_file import record_options
 
     record_options(meta, getattr(args, "options_record", None))  # "tuned" or "as given"
@@ -295,15 +295,17 @@ def _run_locked(scenarios: list[Any], out: Path, args: argparse.Namespace
 
 
 def _keep_inputs(out: Path, scenarios: list[Any], meta: dict[str, Any],
-                 args: argparse.Namespace) -> None:
+                 args: argparse.Namespace, continued: bool) -> None:
     """Copy each scenario and its files into ``out/inputs/`` and record its settings and
-    the ``--record`` count in ``meta`` (see :mod:`benchmarks.study.inputs`)."""
+    the ``--record`` count in ``meta`` (see :mod:`benchmarks.study.inputs`; ``continued``:
+    the directory's run goes on, its kept copies stay)."""
     from benchmarks.study.inputs import copy_inputs, settings
     from benchmarks.study.study_record import study_of
 
     meta["record"] = args.record
     for sc in scenarios:
-        kept = copy_inputs(out, sc, getattr(args, "allow_foreign_calibration", False))
+        kept = copy_inputs(out, sc, getattr(args, "allow_foreign_calibration", False),
+                           keep=continued)
         if kept.get("changed"):
             print(f"warning: {sc.source} differs from the copy this run started with "
                   f"({out / kept['folder'] / 'source.toml'}, kept); the study it describes was "

@@ -52,13 +52,17 @@ def _camera_copy(src: Path, folder: Path, used: dict[str, str]) -> str:
     return name
 
 
-def copy_inputs(out: Path, sc: Any, allow_foreign: bool = False) -> dict[str, Any]:
+def copy_inputs(out: Path, sc: Any, allow_foreign: bool = False, keep: bool = True
+                ) -> dict[str, Any]:
     """Copy a scenario and the files it names into ``out/inputs/NAME/``.
 
     Args:
         out: The run directory.
         sc: The scenario as run (command-line overrides applied).
         allow_foreign: ``--allow-foreign-calibration`` was given.
+        keep: The directory's run is continued (resumed or grown): a copy it kept stays.
+            False: a new run, whose copies replace whatever the folder holds (a
+            directory the user gave with ``--overwrite``).
 
     Returns:
         What ``run.json`` records: the folder, the files with their SHA-256, and
@@ -70,7 +74,7 @@ def copy_inputs(out: Path, sc: Any, allow_foreign: bool = False) -> dict[str, An
     if sc.source == "<dict>" or not Path(sc.source).is_file():
         return {"folder": None, "note": "scenario built in code: no file to keep"}
     source = Path(sc.source)
-    if (folder / "source.toml").is_file():
+    if keep and (folder / "source.toml").is_file():
         same = (folder / "source.toml").read_bytes() == source.read_bytes()
         _grow(folder / "scenario.toml", sc.trials)
         return {"folder": rel, "changed": not same, **_listing(folder)}

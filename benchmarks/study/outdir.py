@@ -49,6 +49,17 @@ def _run_entry(entry: Path) -> bool:
     return entry.suffix == ".png" and entry.is_file() and written_by_project(entry)
 
 
+def _fresh_entry(entry: Path) -> bool:
+    """An entry a new run may write beside in a directory that is not a run directory yet:
+    the project's report and figures, a lock, and the run's own folders while they hold no
+    file (a user's files in a folder named ``trials`` or ``inputs`` are not the run's: the
+    run would replace them)."""
+    if entry.name in (TRIALS_DIR, INPUTS_DIR):
+        return entry.is_dir() and not any(p.is_file() or p.is_symlink()
+                                          for p in entry.rglob("*"))
+    return _run_entry(entry)
+
+
 def is_run_directory(out: Path) -> bool:
     """A directory ``run`` wrote: it holds ``results.jsonl`` or ``run.json``."""
     return (out / RESULTS_FILE).is_file() or (out / META_FILE).is_file()
@@ -67,7 +78,7 @@ def check_run_directory(out: Path, overwrite: bool = False) -> None:
     if is_run_directory(out):
         check_report_file(out, overwrite)
         return
-    check_output_dir(out, _run_entry, "run directory (no results.jsonl or run.json)",
+    check_output_dir(out, _fresh_entry, "run directory (no results.jsonl or run.json)",
                      overwrite)
 
 

@@ -176,6 +176,37 @@ def test_run_refuses_a_directory_holding_a_users_files(
     assert (out / "report.md").read_text().startswith("# Benchmark report")
 
 
+def test_a_users_files_in_folders_named_as_the_runs_own_are_not_the_runs(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """``trials/`` and ``inputs/`` count as the run's own in a directory that is not a run
+    directory only while they hold no file: a user's file there was replaced without a
+    word (a trial record), or kept in place of the run's copy (a source.toml: no
+    scenario.toml written, the report's rerun command broken). Refused, naming them;
+    with ``--overwrite`` the run writes its own copies."""
+    scen = _scenario(tmp_path)
+    for where, name, text in (("trials", "small__p0__joint-space__00000.npz", "precious"),
+                              ("inputs/small", "source.toml", "my own")):
+        out = tmp_path / where.split("/")[0]
+        (out / where).mkdir(parents=True)
+        (out / where / name).write_text(text)
+        before = _tree(out)
+        assert cli_main(["run", str(scen), "--out", str(out), "--no-progress"]) == 2
+        top = where.split("/")[0]
+        assert f"is not a run directory (no results.jsonl or run.json): it holds {top}" \
+            in capsys.readouterr().err
+        assert _tree(out) == before
+    (tmp_path / "empty" / "trials").mkdir(parents=True)  # empty folders: still accepted
+    assert cli_main(["run", str(scen), "--out", str(tmp_path / "empty"), "--no-progress"]) == 0
+    out = tmp_path / "inputs"
+    assert cli_main(["run", str(scen), "--out", str(out), "--no-progress", "--overwrite"]) == 0
+    kept = out / "inputs" / "small"
+    assert (kept / "source.toml").read_bytes() == scen.read_bytes()
+    assert (kept / "scenario.toml").is_file()
+    assert json.loads((out / "run.json").read_text())["scenarios"]["small"]["inputs"][
+        "changed"] is False
+    assert "differs from the copy" not in capsys.readouterr().err
+
+
 @pytest.mark.slow
 def test_a_run_directory_keeps_its_rule_and_its_foreign_report_is_kept(
         tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
