@@ -20,7 +20,7 @@ import tomli_w
 from hexapod.config import check_keys, get_matrix, get_number, load_toml
 from hexapod.dynamics.drives import DriveParameters
 from hexapod.dynamics.inertia import InertiaParameters
-from hexapod.exceptions import ConfigFileError, GeometryError
+from hexapod.exceptions import ConfigFileError, GeometryError, InertiaError
 
 #: Minimum distance between two joints of the same plate [m].
 MIN_JOINT_SEPARATION = 1e-4
@@ -232,14 +232,20 @@ class HexapodGeometry:
             raise GeometryError(_FILE_KEYS.get(exc.field, exc.field), exc.problem,
                                 path) from None
         tables: dict[str, Any] = {}
-        if "inertia" in table:
-            tables["inertia"] = InertiaParameters.from_dict(table["inertia"], path,
-                                                            geometry.default_inertia())
-        if "drives" in table:
-            tables["drives"] = DriveParameters.from_dict(table["drives"], path)
-        if not tables:
-            return geometry
-        return cls(base, plat, geometry.stroke, radius, speed, name, source=path, **tables)
+        try:
+            if "inertia" in table:
+                tables["inertia"] = InertiaParameters.from_dict(table["inertia"], path,
+                                                                geometry.default_inertia())
+            if "drives" in table:
+                tables["drives"] = DriveParameters.from_dict(table["drives"], path)
+            if not tables:
+                return geometry
+            return cls(base, plat, geometry.stroke, radius, speed, name, source=path, **tables)
+        except InertiaError:
+            if geometry.q_max < METRES_STROKE:  # the stroke is at fault, not [inertia]
+                raise GeometryError("stroke_mm", _METRES_HINT.format(geometry.q_max * 1e3),
+                                    path) from None
+            raise
 
     @classmethod
     def from_toml(cls, path: str | Path) -> HexapodGeometry:
@@ -282,6 +288,13 @@ class HexapodGeometry:
 _FILE_KEYS = {"base_points": "base_points_mm", "platform_points": "platform_points_mm",
               "stroke": "stroke_mm", "leg_radius": "leg_radius_mm",
               "max_speed": "max_speed_mm_s"}
+
+
+#: A longest leg length under this [m] is a stroke given in metres (no hexapod's legs are
+#: that short): the ``[inertia]`` checks against it would blame the inertia.
+METRES_STROKE = 0.01
+_METRES_HINT = ("the longest leg length is {:g} mm: given in metres? stroke_mm is in "
+                "millimetres ([shortest, longest] leg length)")
 
 
 def _check_file_values(table: dict[str, Any], path: str) -> None:

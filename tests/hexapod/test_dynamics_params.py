@@ -3,6 +3,7 @@ round trip, and each refusal (naming the file and the key)."""
 
 from __future__ import annotations
 
+import tomllib
 from pathlib import Path
 
 import numpy as np
@@ -199,3 +200,25 @@ def test_inertia_parameters_construction_refuses_nan() -> None:
     with pytest.raises(InertiaError, match="not finite"):
         deltalab().inertia.replace(body_com=float("nan"))
     assert isinstance(deltalab().inertia, InertiaParameters)
+
+
+def test_a_stroke_in_metres_is_named_not_the_inertia_it_breaks(tmp_path: Path) -> None:
+    """``deltalab().to_toml(...)`` (which writes ``[inertia]``) with ``stroke_mm`` in
+    metres: the stroke is named with the millimetre hint (the leg's centre of mass was
+    blamed, "inertia.body_com ... outside the leg"); a wrong [inertia] beside a right
+    stroke is still the inertia's error."""
+    path = tmp_path / "robot.toml"
+    deltalab().to_toml(path)
+    table = tomllib.loads(path.read_text())
+    assert "inertia" in table
+    table["stroke_mm"] = [0.345, 0.485]
+    path.write_text(tomli_w.dumps(table))
+    with pytest.raises(GeometryError, match=r"stroke_mm: the longest leg length is 0\.485 mm: "
+                                            r"given in metres") as info:
+        HexapodGeometry.from_toml(path)
+    assert not isinstance(info.value, InertiaError)
+    table["stroke_mm"] = [345.0, 485.0]
+    table["inertia"]["body_com"] = 0.5  # beyond the shortest leg, 345 mm
+    path.write_text(tomli_w.dumps(table))
+    with pytest.raises(InertiaError, match=r"inertia\.body_com"):
+        HexapodGeometry.from_toml(path)
