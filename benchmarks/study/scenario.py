@@ -318,7 +318,7 @@ def parse_scenario(table: dict[str, Any], path: str = "<dict>") -> Scenario:
                              "shape": SHAPES, "profile": PROFILES, "plane": tuple(PLANES),
                              "goal": GOAL_SETTINGS},
                             sweep)
-    task = check_trajectory_task(task, sweep, path)
+    task = check_trajectory_task(task, sweep, path, set(_section(table, "task", path)))
     clock = _parse_dataclass(ClockConfig, _section(table, "clock", path), path, "clock",
                              CLOCK_KEYS, None, sweep)
     drives = _parse_dataclass(DrivesConfig, _section(table, "drives", path), path, "drives",

@@ -7,6 +7,7 @@ lengths within the strokes)."""
 
 from __future__ import annotations
 
+from collections.abc import Collection
 from dataclasses import replace
 from pathlib import Path
 from typing import Any
@@ -16,6 +17,7 @@ from benchmarks.study.scenario_model import (
     RANGES,
     SCALED_ERROR_KEYS,
     TASK_KEYS,
+    TRAJECTORY_ONLY_KEYS,
     CalibrationErrorConfig,
     ControllerSpec,
     Scenario,
@@ -133,15 +135,22 @@ def check_scaled_errors(cal_err: CalibrationErrorConfig, sweep: dict[str, list[A
                                 key=f"calibration_error.{key}")
 
 
-def check_trajectory_task(task: TaskConfig, sweep: dict[str, list[Any]], path: str
-                           ) -> TaskConfig:
+def check_trajectory_task(task: TaskConfig, sweep: dict[str, list[Any]], path: str,
+                          written: Collection[str] = ()) -> TaskConfig:
     """A trajectory task runs for ``max_steps`` (``fixed_duration``); its keys swept only
-    in a trajectory task (``goal``, the goal setting, in any task)."""
+    in a trajectory task (``goal``, the goal setting, in any task), and written
+    (``written``: the keys of the file's ``[task]``) only in one: a ``shape = "circle"``
+    without ``kind = "trajectory"`` ran a point-to-point study without a word."""
     if task.kind == "trajectory":
         return replace(task, fixed_duration=True)
     for key in TASK_KEYS:
         if f"task.{key}" in sweep and key != "goal":
             raise ScenarioError(path, "only a trajectory task sweeps it", key=f"task.{key}")
+    for key in TRAJECTORY_ONLY_KEYS:
+        if key in written:
+            raise ScenarioError(path, f"only a trajectory task reads it (kind = "
+                                f"\"trajectory\"); this task is {task.kind!r}: remove the key "
+                                "or set the kind", key=f"task.{key}")
     return task
 
 

@@ -45,6 +45,11 @@ DRIVES_KEYS = ("velocity_bandwidth_hz",)
 #: Keys of [task] that may be swept (trajectory tasks).
 TASK_KEYS = ("speed_mm_s", "acceleration_mm_s2", "jerk_mm_s3", "peak_acceleration_mm_s2",
              "goal")
+#: The ``[task]`` keys only a trajectory task reads (the reference's shape and timing).
+TRAJECTORY_ONLY_KEYS = ("shape", "profile", "speed_mm_s", "acceleration_mm_s2",
+                        "angular_speed_deg_s", "angular_acceleration_deg_s2", "jerk_mm_s3",
+                        "angular_jerk_deg_s3", "peak_acceleration_mm_s2", "radius_mm", "laps",
+                        "plane", "feed_forward")
 #: The values of ``[task] goal`` (:data:`benchmarks.sim.goal.GOAL_SETTINGS`, which the
 #: simulator defines; repeated here so that reading a scenario does not import it, and
 #: checked equal by the tests).

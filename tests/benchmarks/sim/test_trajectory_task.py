@@ -26,6 +26,8 @@ def _scenario(task: dict[str, Any], **extra: Any) -> Any:
                       "radius_mm": 15.0, "max_steps": 330, "margin_mm": 20.0,
                       "max_translation_mm": 30.0, "angular_speed_deg_s": 5.0,
                       "angular_acceleration_deg_s2": 30.0, **task}}
+    if task.get("kind", "trajectory") != "trajectory":  # (it refuses a trajectory's keys)
+        table["task"] = {"margin_mm": 20.0, "max_translation_mm": 30.0, **task}
     table.update(extra)
     return parse_scenario(table)
 

@@ -81,6 +81,12 @@ def test_sweep_expands_to_cartesian_product() -> None:
          "integer"),
         ({**MINIMAL, "sensor": {"teach_frames": [1, 10]}}, "sensor.teach_frames", "integer"),
         ({**MINIMAL, "sensor": {"blur": 1.0}}, "sensor.blur", "blur_px"),
+        # a trajectory's keys in a point-to-point task (ran that task without a word)
+        ({**MINIMAL, "task": {"shape": "circle", "radius_mm": 15.0}}, "task.shape",
+         "only a trajectory task reads it (kind = \"trajectory\"); this task is "
+         "'random-pairs'"),
+        ({**MINIMAL, "task": {"kind": "fixed", "start_mm": [375.0] * 6, "goal_mm": [380.0] * 6,
+                              "speed_mm_s": 20.0}}, "task.speed_mm_s", "this task is 'fixed'"),
     ],
 )
 def test_invalid_scenarios_name_the_key(table: dict, key: str, fragment: str) -> None:
