@@ -266,6 +266,25 @@ def _viewer(enabled: bool, geometry: HexapodGeometry, camera: Any, goal: Any
         viewer.close()
 
 
+def _base_points(args: argparse.Namespace, geometry: HexapodGeometry, camera: Any
+                 ) -> np.ndarray:
+    """The base points in the camera frame [m] the controller and the camera check use:
+    ``--calibration``'s (its provenance checked, warnings on stderr), else the nominal
+    ones seen through the camera file's pose."""
+    from benchmarks.study.calibration import read_calibrated_file
+    from benchmarks.study.provenance import check_calibration
+
+    if not args.calibration:
+        return np.asarray(camera.camera_from_base.apply(geometry.base_points), float)
+    base_points, recorded = read_calibrated_file(args.calibration)
+    for text in check_calibration(args.calibration, base_points, recorded,
+                                  Path(args.geometry).name, geometry,
+                                  Path(args.camera_file).name, camera,
+                                  getattr(args, "allow_foreign_calibration", False)):
+        print(f"warning: {text}", file=sys.stderr)
+    return np.asarray(base_points, float)
+
+
 def _teach(args: argparse.Namespace, geometry: HexapodGeometry, camera: Any,
            start: np.ndarray | None, status: StatusLine, guard: SignalGuard) -> int:
     from hexapod.fk import forward_kinematics
@@ -295,6 +314,17 @@ def _teach(args: argparse.Namespace, geometry: HexapodGeometry, camera: Any,
     feats = average_features(frames, teach_tolerance(sensor))
     if feats.visible_count == 0:
         raise BenchmarkError(f"--teach: no leg edge found in the images of {args.camera}")
+    # the session's start check: features of another pose than the encoders' would be a
+    # goal every later session drives towards
+    check = CameraCheck(geometry, _base_points(args, geometry, camera),
+                        args.consistency_mm * 1e-3, math.radians(args.consistency_deg),
+                        args.blind_timeout_s, args.camera,
+                        must_agree_at_start=args.camera.startswith("video:"))
+    try:
+        check.compare(0, q, sol.rotation, sol.translation, feats.normals, feats.edge_visible)
+    except SessionStop as stop:
+        raise SessionStop(stop.code, f"{stop.reason}; nothing taught ({path} not "
+                          "written)") from None
     npz = save_goal(path, q, feats)
     status.message(f"taught {path} (lengths {np.round(q * 1e3, 3).tolist()} mm, "
                    f"{feats.visible_count} of 12 edges, normals averaged over {len(frames)} "
@@ -328,8 +358,6 @@ def run(args: argparse.Namespace) -> int:
 def _run(args: argparse.Namespace, guard: SignalGuard) -> int:
     """:func:`run` under its signal guard (``guard.check()`` between the stages)."""
     import controllers  # noqa: F401 - registers the built-ins
-    from benchmarks.study.calibration import read_calibrated_file
-    from benchmarks.study.provenance import check_calibration
     from controllers.base import ControllerContext, registry
 
     _check_args(args)
@@ -368,14 +396,7 @@ def _run(args: argparse.Namespace, guard: SignalGuard) -> int:
     except TypeError as exc:  # an option the factory does not take
         raise BenchmarkError(f"--controller {args.controller}: bad option in "
                              f"{sorted(options)}: {exc}") from None
-    base_points = camera.camera_from_base.apply(geometry.base_points)
-    if args.calibration:
-        base_points, recorded = read_calibrated_file(args.calibration)
-        for text in check_calibration(args.calibration, base_points, recorded,
-                                      Path(args.geometry).name, geometry,
-                                      Path(args.camera_file).name, camera,
-                                      getattr(args, "allow_foreign_calibration", False)):
-            print(f"warning: {text}", file=sys.stderr)
+    base_points = _base_points(args, geometry, camera)
     controller.reset(ControllerContext(base_points=base_points, geometry=geometry,
                                        camera=camera, dt=args.dt, goal=goal))
     guard.check()

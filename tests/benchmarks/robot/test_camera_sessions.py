@@ -222,3 +222,25 @@ def test_the_simulated_camera_runs_on_a_real_robot_only_when_asked_by_name(
     assert record.arrays["position_error"][-1] < record.arrays["position_error"][0]
     assert np.allclose(record.arrays["velocities"] * 1e3,
                        [r["applied_mm_s"] for r in rows])
+
+
+def test_teach_checks_the_camera_against_the_encoders_before_writing(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """``--teach`` from a recording of the platform 20 mm aside of where the encoders put
+    it: refused with the session's start check (exit 5), nothing written (it wrote a goal
+    of features of another pose, which every later session would drive towards); the
+    recording of the robot where it is teaches as before."""
+    goal = tmp_path / "taught.toml"
+    aside = _video(tmp_path / "aside.avi", [(20.0, 0.0)] * 3)
+    code = servo.main(["--backend", "emulator", "--goal", str(goal), "--teach",
+                       "--teach-frames", "3", "--camera", f"video:{aside}"])
+    out = capsys.readouterr().out
+    assert code == ServoExit.SAFETY, out
+    assert "disagrees with the encoders at start, before any motion" in out
+    assert f"nothing taught ({goal} not written)" in out
+    assert not goal.exists() and not goal.with_suffix(".features.npz").exists()
+    here = _video(tmp_path / "here.avi", [(0.0, 0.0)] * 3)
+    assert servo.main(["--backend", "emulator", "--goal", str(goal), "--teach",
+                       "--teach-frames", "3", "--camera", f"video:{here}"]) == 0, \
+        capsys.readouterr().out
+    assert goal.exists() and goal.with_suffix(".features.npz").exists()
