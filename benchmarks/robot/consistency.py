@@ -252,7 +252,11 @@ class CameraCheck:
         return CheckResult((), math.nan, math.nan, why)
 
     def summary(self) -> str:
-        """One line: how many periods were checked and the largest disagreement."""
+        """One line: how many periods were checked and the largest disagreement (none
+        checked: said so, not a disagreement of zero)."""
+        if not self.checked:
+            return (f"camera check: no period checked (limits {self.max_distance * 1e3:g} mm, "
+                    f"{math.degrees(self.max_angle):g} deg)")
         return (f"camera check: {self.checked} periods checked, largest disagreement "
                 f"{self.worst_distance * 1e3:.2f} mm, {math.degrees(self.worst_angle):.2f} "
                 f"deg (limits {self.max_distance * 1e3:g} mm, "

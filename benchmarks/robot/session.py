@@ -290,6 +290,7 @@ def run_session(args: argparse.Namespace, inputs: SessionInputs, status: StatusL
     result = ServoResult("not started", 0, 0.0)
     robot: Any = None
     limited: LimitedRobot | None = None
+    q0: np.ndarray | None = None  # the lengths read at the start (also of a refused move)
     sensor: Any = None
     ended: BaseException | None = None
     own = guard is None
@@ -360,7 +361,8 @@ def run_session(args: argparse.Namespace, inputs: SessionInputs, status: StatusL
                    "traceback": "".join(traceback.format_exception(ended))
                    if failed and ended is not None else None,
                    "moved": moved, "identity": getattr(robot, "identity", None),
-                   "start_lengths_mm": None if limited is None else mm_list(limited.start),
+                   "start_lengths_mm": (mm_list(limited.start) if limited is not None
+                                        else None if q0 is None else mm_list(q0)),
                    "halt_confirmed": None if halt is None else halt.confirmed,
                    "halt_detail": "the robot was not connected" if halt is None
                    else halt.detail,
@@ -423,8 +425,8 @@ def _report(status: StatusLine, code: ServoExit, reason: str, result: ServoResul
         say(f"stopped: {reason} (exit {int(code)}, {code.name.lower()})")
     if result.steps or moved or code == ServoExit.CONVERGED:
         say(result.summary())
-        for line in summaries:
-            say(line)
+    for line in summaries:  # (a stop before the first period: what the checks saw)
+        say(line)
     if halt is None:
         say("robot: not connected")
     elif halt.confirmed:

@@ -138,6 +138,8 @@ def test_a_recording_of_another_pose_is_stopped_before_any_motion(
     assert rec["moved"] is False and periods(out) == []
     assert "disagrees with the encoders at start, before any motion" in rec["reason"]
     assert "camera pose (" in rec["reason"] and "encoder pose (" in rec["reason"]
+    # the check's line is printed also when no period ran (it was in the record only)
+    assert "camera check: 1 periods checked, largest disagreement" in stdout
     received = _received(log)
     assert "MOV" not in received, "not one command before the check"
     assert "HLT" in received

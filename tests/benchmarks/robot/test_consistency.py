@@ -60,6 +60,18 @@ def test_the_camera_pose_of_a_consistent_image_is_near_the_encoder_pose() -> Non
     assert res.angle < math.radians(DEFAULT_CONSISTENCY_DEG) / 2
 
 
+def test_the_summary_of_a_check_that_saw_no_period_says_so() -> None:
+    """Before any period (a move refused at the start): "no period checked", not "0
+    periods checked, largest disagreement 0.00 mm" (no check read as perfect agreement);
+    after one, the count and the largest disagreement."""
+    check = _check()
+    assert check.summary() == "camera check: no period checked (limits 10 mm, 3 deg)"
+    f = _features(SOL.rotation, SOL.translation)
+    check.compare(0, MID, SOL.rotation, SOL.translation, f.normals, f.edge_visible)
+    assert check.summary().startswith("camera check: 1 periods checked, largest "
+                                      "disagreement ")
+
+
 def test_an_image_of_another_pose_stops_with_both_poses() -> None:
     # the camera sees the platform 25 mm aside and turned 1 deg; the encoders say mid-stroke
     R2 = exp_so3(np.radians([0.0, 0.0, 1.0])) @ SOL.rotation

@@ -312,6 +312,8 @@ def test_confirm_refuses_without_a_terminal(
     assert "--confirm asks y/N on a terminal" in stdout
     rec = final(out)
     assert rec["exit_code"] == 2 and rec["moved"] is False
+    # the lengths read and printed at the start are recorded (they were null)
+    assert rec["start_lengths_mm"][0] == 415.0 and len(rec["start_lengths_mm"]) == 6
 
 
 def test_the_speed_cap_is_applied_logged_and_the_step_budget_is_a_limit(
