@@ -364,8 +364,7 @@ def run_session(args: argparse.Namespace, inputs: SessionInputs, status: StatusL
                    "start_lengths_mm": (mm_list(limited.start) if limited is not None
                                         else None if q0 is None else mm_list(q0)),
                    "halt_confirmed": None if halt is None else halt.confirmed,
-                   "halt_detail": "the robot was not connected" if halt is None
-                   else halt.detail,
+                   "halt_detail": _not_connected(ended) if halt is None else halt.detail,
                    "halt_s": None if halt is None else round(halt.seconds, 6),
                    "retries": getattr(robot, "retried", None),
                    "watchdog_trips": getattr(robot, "watchdog_trips", None),
@@ -381,6 +380,13 @@ def run_session(args: argparse.Namespace, inputs: SessionInputs, status: StatusL
         except (OSError, ValueError):
             pass
     return int(code)
+
+
+def _not_connected(ended: BaseException | None) -> str:
+    """The record's ``halt_detail`` of a session whose robot never connected: what the
+    backend did on the way out when it says (an ``HLT`` sent, acknowledged or not)."""
+    detail = getattr(ended, "halt_detail", None)
+    return "the robot was not connected" + (f"; {detail}" if detail else "")
 
 
 def _watchdog_line(robot: Any, moved: bool) -> list[str]:
@@ -428,7 +434,8 @@ def _report(status: StatusLine, code: ServoExit, reason: str, result: ServoResul
     for line in summaries:  # (a stop before the first period: what the checks saw)
         say(line)
     if halt is None:
-        say("robot: not connected")
+        detail = getattr(ended, "halt_detail", None)
+        say("robot: not connected" + (f" ({detail})" if detail else ""))
     elif halt.confirmed:
         say(f"robot: halted and confirmed stopped ({halt.detail}, {halt.seconds:.2f} s)")
     else:

@@ -271,6 +271,14 @@ def started(robot: BackendT, start: np.ndarray | None) -> BackendT:
     return robot
 
 
+def halt_on_open(url: str, acknowledged: bool) -> str:
+    """What a backend whose link opened but whose controller failed to connect (no answer
+    to its first question) did on the way out: the ``halt_detail`` its exception carries,
+    which a servo session records (the robot was never connected, yet it was sent ``HLT``:
+    a board that hears but cannot answer still stops)."""
+    return f"{url}: HLT sent on the way out, {'' if acknowledged else 'not '}acknowledged"
+
+
 def step_command(velocities: np.ndarray, dt: float) -> np.ndarray:
     """A period's command checked: (6,) leg velocities [m/s] and a positive period [s].
 

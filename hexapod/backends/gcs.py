@@ -46,6 +46,7 @@ from hexapod.backends.base import (
     HaltReport,
     check_reading,
     clamp_velocities,
+    halt_on_open,
     started,
     step_command,
 )
@@ -130,8 +131,10 @@ class GcsHexapod(Backend):
             # link is gone, an HLT could not be sent (it would only fail on a broken pipe)
             self._shutdown(halt=False)
             raise
-        except BaseException:
-            self._shutdown(halt=True)
+        except BaseException as exc:
+            halted = self._try_halt()
+            exc.halt_detail = halt_on_open(url, halted)  # type: ignore[attr-defined]
+            self._shutdown(halt=False)
             raise
         logger.info("%s: connected to '%s', VLS %.1f mm/s", url, self.identity,
                     self.velocity * 1e3)

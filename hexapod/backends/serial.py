@@ -36,6 +36,7 @@ from hexapod.backends.base import (
     BackendStep,
     check_reading,
     clamp_velocities,
+    halt_on_open,
     step_command,
 )
 from hexapod.backends.rate import RateLimiter
@@ -161,8 +162,10 @@ class SerialRobot(SerialLink, Backend):
             # servo off until the first MOV: the watchdog cannot trip before it
             protocol.parse_ok(self._exchange("SVO 0"), "SVO 0")
             self._q = self._plausible(protocol.parse_pos(self._exchange("POS?")))
-        except BaseException:
-            self._shutdown(halt=True)
+        except BaseException as exc:
+            halted = self._try_halt()
+            exc.halt_detail = halt_on_open(url, halted)  # type: ignore[attr-defined]
+            self._shutdown(halt=False)
             raise
         logger.info("%s: connected to '%s', stroke [%.3f, %.3f] mm, %.3f mm/s", url,
                     self.identity, self.stroke[0] * 1e3, self.stroke[1] * 1e3,

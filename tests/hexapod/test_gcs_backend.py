@@ -238,6 +238,19 @@ def test_silent_controller_times_out_and_is_halted(
     assert "HLT" in emulator.history()[-3:]  # it still hears the HLT
 
 
+def test_a_controller_silent_at_open_is_sent_hlt_and_the_error_says_so(
+        emulator: GcsEmulator, geometry: HexapodGeometry) -> None:
+    """A controller that never answers ``*IDN?``: the open times out after an ``HLT`` it
+    heard, and the error carries what was done (a servo session's ``halt_detail``)."""
+    emulator.set_faults(FaultConfig(silent_after=0))
+    with pytest.raises(GcsTimeoutError) as info:
+        GcsHexapod(emulator.url, geometry, GcsOptions(timeout=0.1))
+    assert info.value.command == "*IDN?"
+    assert getattr(info.value, "halt_detail", None) == (
+        f"{emulator.url}: HLT sent on the way out, not acknowledged")
+    assert "HLT" in emulator.history()
+
+
 def test_dropped_connection_raises_and_closes(robot: GcsHexapod, emulator: GcsEmulator
                                               ) -> None:
     emulator.set_faults(FaultConfig(disconnect_after=9))

@@ -291,6 +291,20 @@ def test_silent_device_times_out_and_halts(robot: SerialRobot, emulator: Emulato
     assert not emulator.status().moving
 
 
+def test_a_board_silent_at_open_is_sent_hlt_and_the_error_says_so(emulator: Emulator
+                                                                 ) -> None:
+    """A board that hears but never answers ``*IDN?``: the open fails (timeout) after an
+    ``HLT`` the board heard, and the error carries what was done (a servo session
+    records it as its ``halt_detail``; it said only "the robot was not connected")."""
+    emulator.set_faults(FaultConfig(silent_after=0))
+    with pytest.raises(SerialTimeoutError) as info:
+        SerialRobot(emulator.device, timeout=0.2, watchdog=0.1)
+    assert info.value.command == "*IDN?"
+    detail = getattr(info.value, "halt_detail", None)
+    assert detail == f"{emulator.device}: HLT sent on the way out, not acknowledged"
+    assert emulator.board.last_command == "HLT"
+
+
 def test_disconnect_raises_and_closes(robot: SerialRobot, emulator: Emulator) -> None:
     robot.reset(Q0)
     emulator.set_faults(FaultConfig(disconnect_after=3))

@@ -132,6 +132,29 @@ def test_a_stalled_link_is_a_link_failure_and_the_queued_hlt_is_confirmed(
         emu.stop()
 
 
+def test_a_board_that_never_answers_is_sent_hlt_and_the_record_says_so(tmp_path: Path
+                                                                        ) -> None:
+    """A board that hears but never answers ``*IDN?`` (``--silent-after 0``): the session
+    is refused (exit 2), the board was sent ``HLT`` on the way out, and both the
+    ``robot:`` line and the record's ``halt_detail`` say so (they said "not connected"
+    only, the HLT a warning on stderr)."""
+    emu = EmulatorProc(tmp_path / "emulator.log", "--tcp", "127.0.0.1:0", "--silent-after",
+                       "0")
+    try:
+        out = tmp_path / "session"
+        proc = start_servo([*REAL_SIM_CAMERA, "--backend", f"serial:{emu.url}", "--goal",
+                            str(goal_file(tmp_path)), *SLOW], out)
+        rc, stdout, stderr = finish(proc)
+        assert rc == ServoExit.REFUSED == 2, (stdout, stderr)
+        said = "HLT sent on the way out, not acknowledged"
+        assert f"robot: not connected ({emu.url}: {said})" in stdout, stdout
+        rec = final(out)
+        assert rec["halt_confirmed"] is None and said in rec["halt_detail"]
+        assert "HLT" in emu.log()
+    finally:
+        emu.stop()
+
+
 def test_a_second_client_is_told_the_controller_is_busy(tmp_path: Path) -> None:
     emu = EmulatorProc(tmp_path / "emulator.log", "--gcs", "--tcp", "127.0.0.1:0")
     host, port = emu.url.removeprefix("tcp://").rsplit(":", 1)
