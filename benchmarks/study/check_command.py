@@ -83,7 +83,11 @@ def scenario_setup(sc: Any) -> Setup:
                 else f"[camera_from_base] in {sc.camera_file}" if sc.camera_file
                 else f"[camera] preset '{sc.camera_preset}' in {sc.source} (or [camera] "
                      "file = a camera file)"),
-        task=f"[task] max_translation_mm / max_angle_deg / margin_mm in {sc.source}")
+        task=f"[task] max_translation_mm / max_angle_deg / margin_mm in {sc.source}",
+        intrinsics=(f"the camera matrix in {sc.camera_file}"
+                    if sc.camera_file and is_opencv_file(sc.camera_file)
+                    else f"fx_px / fy_px in {sc.camera_file}" if sc.camera_file
+                    else f"[camera] preset '{sc.camera_preset}' in {sc.source}"))
     needs = []
     for spec in sc.controllers:
         features = getattr(registry.create(spec.name, **spec.options), "features",
@@ -209,7 +213,8 @@ def load_setup(text: str) -> Setup:
         cam = load_camera(path)
         return Setup("camera", deltalab(), cam, _default_task(), Where(
             strokes="[robot] of a scenario", points="[robot] of a scenario",
-            camera=f"[camera_from_base] in {path}", task="[task] of a scenario"), None,
+            camera=f"[camera_from_base] in {path}", task="[task] of a scenario",
+            intrinsics=f"fx_px / fy_px in {path}"), None,
             ["robot: the deltalab preset (a scenario names yours)"], [])
     raise BenchmarkError(f"{path}: cannot tell what this file is: a scenario has "
                          "'controllers', a robot file 'base_points_mm', a camera file "
@@ -237,7 +242,7 @@ def calibration_setup(path: Path) -> Setup:
                   camera=(f'the camera\'s pose in the scenario that names {path} ([camera] '
                           f'pose = "{preset}" or [camera.camera_from_base]; the file holds '
                           "no pose)"),
-                  task="[task] of a scenario")
+                  task="[task] of a scenario", intrinsics=f"the camera matrix in {path}")
     notes = ["robot: the deltalab preset (a scenario names yours)",
              f"camera pose: a calibration file holds none; placed where the '{preset}' "
              f"preset sits for this robot (projection centre at ({t_mm[0]:.1f}, "

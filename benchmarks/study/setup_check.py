@@ -69,12 +69,14 @@ class Where:
         points: Where the joint points are set.
         camera: Where the camera is placed.
         task: Where the task box is set.
+        intrinsics: Where the focal lengths are set.
     """
 
     strokes: str = "stroke_mm in the robot file"
     points: str = "base_points_mm / platform_points_mm in the robot file"
     camera: str = "[camera_from_base] in the camera file"
     task: str = "[task] max_translation_mm / max_angle_deg / margin_mm in the scenario"
+    intrinsics: str = "fx_px / fy_px in the camera file"
 
 
 @dataclass
@@ -420,7 +422,7 @@ def _camera_problems(report: SetupReport, camera: Any, home_obs: Any, needs_came
         out.append(Problem("warning", (
             f"focal length {min(camera.fx, camera.fy):g} px: given in millimetres? fx_px and "
             "fy_px are in pixels (focal length in mm / pixel pitch in mm: about 1000 for a "
-            f"usual camera); the legs are then a few pixels long; check {where.camera}"),
+            f"usual camera); the legs are then a few pixels long; check {where.intrinsics}"),
             "camera", fails=False))
     if n_home and SINGULAR_RATIO <= report.edge_ratio < POOR_RATIO:
         out.append(Problem("warning", (

@@ -262,6 +262,7 @@ def test_a_focal_length_in_millimetres_and_a_poorly_observed_pose_are_warned_of(
              for name, cam in (("good", good), ("tiny", tiny), ("close", close))}
     assert not any("focal length" in t or "poorly" in t for t in texts["good"]), texts
     assert any(t.startswith("focal length 4.8 px: given in millimetres?")
+               and t.endswith("check fx_px / fy_px in the camera file")  # (its field)
                for t in texts["tiny"]), texts["tiny"]
     assert any("observe the platform's pose poorly" in t for t in texts["close"]), texts
 
