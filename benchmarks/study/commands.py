@@ -10,6 +10,7 @@ import errno
 import json
 import sys
 import time
+from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
@@ -41,8 +42,6 @@ def cmd_run(args: argparse.Namespace) -> int:
                                                  args.max_steps, args.calibration)
                  for s in args.scenarios]
     if getattr(args, "world", None):  # --world: every scenario in that world
-        from dataclasses import replace
-
         scenarios = [replace(sc, world=args.world) for sc in scenarios]
     if getattr(args, "goal", None):  # --goal: every scenario in that goal setting
         scenarios = [sc.with_goal(args.goal) for sc in scenarios]
@@ -77,6 +76,9 @@ def run_studies(scenarios: list[Any], out: Path, args: argparse.Namespace) -> in
     from benchmarks.study.preflight import preflight, refusal, warning_lines
     from benchmarks.study.runner import run_lock
 
+    if getattr(args, "allow_foreign_calibration", False):  # the run records what it allowed
+        scenarios = [replace(sc, calibration=replace(sc.calibration, allow_foreign=True))
+                     if sc.calibration.method == "file" else sc for sc in scenarios]
     # the pre-flight of 'hexapod-bench check', the same function
     pre = preflight(scenarios, getattr(args, "allow_foreign_calibration", False),
                     measure=not getattr(args, "no_check", False))

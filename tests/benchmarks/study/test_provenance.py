@@ -139,9 +139,12 @@ def test_insisting_warns_loudly_and_flags_the_far_points(
         "'deltalab'" in err
     assert "and with the camera 'front' with other parameters" in err  # scales with the robot
     assert f"farther than {FAR_FROM_NOMINAL_MM:g} mm from the nominal ones" in err
-    warnings = json.loads((out / "run.json").read_text())["warnings"]
+    meta = json.loads((out / "run.json").read_text())
+    warnings = meta["warnings"]
     assert any("FOREIGN CALIBRATION" in w for w in warnings)
     assert any("base point(s) 0 (" in w for w in warnings)
+    # the study recorded is the one run: the file allowed (it said false)
+    assert meta["scenarios"]["mine"]["study"]["calibration.allow_foreign"] is True
 
 
 @pytest.mark.slow
