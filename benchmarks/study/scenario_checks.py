@@ -44,6 +44,16 @@ def referenced_file(base_dir: Path, value: str, key: str, path: str) -> str:
     return str(target)
 
 
+def option_origin(source: str, spec: ControllerSpec, option: str, default: str
+                  ) -> tuple[str, str]:
+    """The file and key an option of ``spec`` was written at: an options file's
+    (``--options-file``, recorded as ``FILE: controllers."LABEL".OPTION``) or the
+    scenario's (``source``, ``default`` when the option has no recorded key)."""
+    key = spec.option_keys.get(option, default)
+    file, sep, rest = key.partition(": ")
+    return (file, rest) if sep and rest.startswith('controllers."') else (source, key)
+
+
 def check_option_names(source: str, spec: ControllerSpec, table: Any, where: str) -> None:
     """Every option of ``spec`` is one the controller declares
     (:func:`controllers.options.option_table`: the same table ``list --options`` prints).
@@ -56,9 +66,9 @@ def check_option_names(source: str, spec: ControllerSpec, table: Any, where: str
         return
     for option in spec.options:
         if not table.declares(option):
-            key = spec.option_keys.get(option, f"{where}.{option}")
+            path, key = option_origin(source, spec, option, f"{where}.{option}")
             raise ScenarioError(
-                source, f"controller '{spec.name}' has no option '{option}'; its options: "
+                path, f"controller '{spec.name}' has no option '{option}'; its options: "
                 f"{', '.join(table.names) or 'none'} (hexapod-bench list --options "
                 f"{spec.name})", key=key, suggestion=suggest(option, table.names))
 
@@ -231,9 +241,8 @@ def check_controllers(sc: Scenario) -> tuple[Scenario, list[str]]:
         try:
             ctrl = registry.create(spec.name, **spec.options)
         except OptionError as exc:
-            raise ScenarioError(sc.source, f"{spec.name}: {exc.problem}",
-                                key=spec.option_keys.get(exc.option,
-                                                         f"{where}.{exc.option}")) from None
+            path, key = option_origin(sc.source, spec, exc.option, f"{where}.{exc.option}")
+            raise ScenarioError(path, f"{spec.name}: {exc.problem}", key=key) from None
         except TypeError as exc:  # an option the factory (or the law it wraps) does not take
             raise ScenarioError(sc.source, f"{spec.name}: {exc}", key=where) from None
         kind = actuation_of(ctrl)

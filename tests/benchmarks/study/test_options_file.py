@@ -72,3 +72,19 @@ def test_bad_files_name_the_file_and_key(tmp_path: Path, text: str, fragment: st
 def test_a_missing_file_says_where_it_looked(tmp_path: Path) -> None:
     with pytest.raises(ScenarioError, match="file not found"):
         load_options_file(tmp_path / "nope.toml")
+
+
+@pytest.mark.parametrize("value", ['"clamp"', '"fast"', "-2.0"])
+def test_a_bad_value_is_refused_naming_the_options_file_and_its_key(
+        tmp_path: Path, value: str) -> None:
+    """A value the controller refuses, from an options file: the error names that file
+    and its key (it named the scenario, the file inside the key)."""
+    from benchmarks.study.scenario_checks import check_controllers
+
+    f = tmp_path / "opts.toml"
+    f.write_text(f'[controllers."computed-torque"]\nsaturation = {value}\n')
+    (sc,) = apply_options_file([parse_scenario(SC, "study.toml")], load_options_file(f))
+    with pytest.raises(ScenarioError) as info:
+        check_controllers(sc)
+    assert str(info.value).startswith(f"{f}: key 'controllers.\"computed-torque\"."
+                                      "saturation': computed-torque: "), str(info.value)
