@@ -61,10 +61,11 @@ class ForceMPCLaw(PredictiveLaw):
         effort_weight: Weight of the forces ``sum_k |f_k|^2`` [1/N^2].
         max_iter: Most Gauss-Newton QPs per period (stopping once the first force has
             converged; 1: the real-time iteration).
-        natural_frequency: ``f_n`` [Hz] of the fallback ``leg-edge-ctc`` law.
+        natural_frequency: ``f_n`` [Hz] of the fallback computed-torque law
+            (``leg-edge-ctc``; ``cartesian-ctc`` for ``pose-force-mpc``).
         damping: Damping ratio of the fallback law.
-        smooth_goal: Reach a fixed goal along the features of a quintic line (False:
-            the taught features as a step), as ``leg-edge-ctc``.
+        smooth_goal: Reach a fixed goal along a quintic line (False: the goal as a step),
+            as the fallback law does.
         friction_smoothing: Speed ``v_g`` [m/s] at which the QP's sensitivities smooth
             the drives' Coulomb friction (the prediction itself keeps the drives' model).
         compiled: Generate the kernel and DAQP to C (False: the CasADi virtual machine
