@@ -183,9 +183,12 @@ def run_calibration(sc: Scenario, out: Path, configurations: str | None = None,
         if first_result is None:
             first_result = results[0]
     overall = error_summary(np.array(all_diffs), np.zeros((6, 3)))
+    from benchmarks.study.study_record import study_of
+
     doc = {
         "generator": GENERATOR,
         "scenario": sc.name,
+        "study": study_of(sc),  # (what reproduce checks before it reuses the directory)
         "configurations": cal_cfg.configurations,
         "solver": cal_cfg.solver,
         "warn_singular_ratio": cal_cfg.warn_singular_ratio,

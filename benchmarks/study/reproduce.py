@@ -107,6 +107,69 @@ def _study_dir(out: Path, study: str, quick: bool) -> Path:
     return out / (study.replace(":", "_") + ("-quick" if quick else ""))
 
 
+def _planned(study: str, out: Path, quick: bool, transform: Transform | None,
+             trials: int | None) -> tuple[str, Path, Any, int]:
+    """What ``study`` runs: its kind (``run``, ``calibrate``), directory, scenario (the
+    transform applied) and trials (calibrations)."""
+    from benchmarks.study.scenario import load_scenario
+
+    kind, _, rest = study.partition(":")
+    name, _, variant = rest.partition(":")
+    change = transform or (lambda sc: sc)
+    d = _study_dir(out, study, quick)
+    if kind == "calibrate":
+        sc = load_scenario(name)
+        if variant == "omni":
+            sc = replace(sc, camera_preset="omni", camera_file=None, name=f"{name}-omni")
+        return kind, d, change(sc), trials or (REPEATS[1] if quick else REPEATS[0])
+    n = trials or TRIALS[name][1 if quick else 0]
+    return kind, d, change(load_scenario(name).with_overrides(trials=n)), n
+
+
+def _check_calibration(d: Path, sc: Any, repeat: int) -> bool:
+    """Whether ``d`` holds this calibration study already (False: none yet).
+
+    Raises:
+        StudyMismatchError: It holds another one (other settings, repetitions, or one
+            written before calibrations recorded their study), naming the differences.
+    """
+    from benchmarks.exceptions import StudyMismatchError
+    from benchmarks.study.study_record import differences, study_of
+
+    path = d / "calibration.json"
+    if not path.exists():
+        return False
+    doc = json.loads(path.read_text())
+    if "study" not in doc:
+        raise StudyMismatchError(str(d), [
+            "the calibration was written by an earlier hexapod-bench that did not record "
+            "its study, so it cannot be checked; remove the directory to calibrate again"])
+    lines = differences(doc["study"], study_of(sc))[0]
+    if doc.get("repetitions") != repeat:
+        lines.append(f"--repeat: {doc.get('repetitions')} in the directory, {repeat} given")
+    if lines:
+        raise StudyMismatchError(str(d), lines)
+    return True
+
+
+def check_studies(studies: list[str], out: Path, quick: bool, transform: Transform | None,
+                  trials: int | None) -> None:
+    """Refuse, before any study runs, an ``out`` whose directories hold other studies
+    than these (a run's or a calibration's: they would be mixed or reused as they are).
+
+    Raises:
+        StudyMismatchError: Naming the directory and every difference.
+    """
+    from benchmarks.study.study_record import check_same_study
+
+    for study in studies:
+        kind, d, sc, n = _planned(study, out, quick, transform, trials)
+        if kind == "calibrate":
+            _check_calibration(d, sc, n)
+        elif (d / "run.json").is_file():
+            check_same_study(d, json.loads((d / "run.json").read_text()), [sc])
+
+
 def run_study(study: str, out: Path, quick: bool, workers: int,
               say: Callable[[str], None], transform: Transform | None = None,
               trials: int | None = None) -> Path:
@@ -121,26 +184,19 @@ def run_study(study: str, out: Path, quick: bool, workers: int,
         transform: Applied to the loaded scenario (the sensitivity study).
         trials: Trials (calibrations) instead of :data:`TRIALS` / :data:`REPEATS`.
     """
-    from benchmarks.study.scenario import load_scenario
-
-    kind, _, rest = study.partition(":")
-    name, _, variant = rest.partition(":")
-    d = _study_dir(out, study, quick)
-    change = transform or (lambda sc: sc)
+    kind, d, sc, n = _planned(study, out, quick, transform, trials)
+    name = study.split(":")[1]
     if kind == "calibrate":
         from benchmarks.study.calibration import run_calibration
 
-        if (d / "calibration.json").exists():
+        if _check_calibration(d, sc, n):
             say(f"{study}: reusing {d / 'calibration.json'}")
             return d
-        repeat = trials or (REPEATS[1] if quick else REPEATS[0])
-        sc = load_scenario(name)
-        if variant == "omni":
-            sc = replace(sc, camera_preset="omni", camera_file=None, name=f"{name}-omni")
-        say(f"{study}: {repeat} calibrations per sweep point "
-            f"(hexapod-bench calibrate {name} --repeat {repeat}"
+        variant = study.count(":") == 2
+        say(f"{study}: {n} calibrations per sweep point "
+            f"(hexapod-bench calibrate {name} --repeat {n}"
             + (", omnidirectional camera" if variant else "") + ")")
-        run_calibration(change(sc), d, repeat=repeat)
+        run_calibration(sc, d, repeat=n)
         return d
     from benchmarks.study.commands import auto_chunk
     from benchmarks.study.runner import completed_keys, plan, run_lock, run_units
@@ -151,8 +207,6 @@ def run_study(study: str, out: Path, quick: bool, workers: int,
         study_of,
     )
 
-    n = trials or TRIALS[name][1 if quick else 0]
-    sc = change(load_scenario(name).with_overrides(trials=n))
     with run_lock(d):
         done = completed_keys(d)
         record = n if name in RECORD_ALL else 0
@@ -399,7 +453,9 @@ def reproduce(which: str, out: Path, quick: bool = False, workers: int = 1,
     """
     figs = select(which, figures)
     dirs: dict[str, Path] = {}
-    for study in dict.fromkeys(f.study for f in figs):
+    studies = list(dict.fromkeys(f.study for f in figs))
+    check_studies(studies, out, quick, transform, trials)  # before any study runs
+    for study in studies:
         dirs[study] = run_study(study, out, quick, workers, say, transform, trials)
     frames: dict[Path, Any] = {}
     results = [measure(f, dirs[f.study], frames) for f in figs]

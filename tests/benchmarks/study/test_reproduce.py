@@ -186,6 +186,37 @@ def test_reproduce_seed003_small(tmp_path: Path, monkeypatch: pytest.MonkeyPatch
     assert any("0 trials to run, 40 done" in s for s in said)
 
 
+def test_a_calibration_of_other_settings_is_refused_before_any_study_runs(
+        tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """A calibration directory is reused only for the same study: the same repetitions
+    and settings (any calibration.json was reused as it was: a second call with more
+    repetitions reported the first call's figures as its own); another one, or one that
+    recorded no study, is refused naming the difference, before the run studies start."""
+    from benchmarks.exceptions import StudyMismatchError
+
+    monkeypatch.setattr("benchmarks.study.reproduce.REPEATS", (2, 2))
+    monkeypatch.setitem(paper_figures.TRIALS, "andreff2005-noise", (2, 2))
+    figs = [f for f in builtin_figures() if f.seed == "seed001"]
+    cal = [f for f in figs if f.study.startswith("calibrate:")]
+    run = [f for f in figs if f.study == "run:andreff2005-noise"][:1]
+    assert cal and run
+    reproduce("seed001", tmp_path, quick=True, say=lambda _t: None, figures=cal)
+    said: list[str] = []
+    reproduce("seed001", tmp_path, quick=True, say=said.append, figures=cal)
+    assert any("reusing" in s for s in said)  # the same study: reused
+    said.clear()
+    with pytest.raises(StudyMismatchError, match="--repeat: 2 in the directory, 3 given"):
+        reproduce("seed001", tmp_path, quick=True, say=said.append, figures=[*run, *cal],
+                  trials=3)
+    assert said == [], "refused before the run study started"
+    (d,) = tmp_path.glob("calibrate_*")
+    doc = json.loads((d / "calibration.json").read_text())
+    del doc["study"]  # written by an earlier version
+    (d / "calibration.json").write_text(json.dumps(doc))
+    with pytest.raises(StudyMismatchError, match="did not record its study"):
+        reproduce("seed001", tmp_path, quick=True, say=lambda _t: None, figures=cal)
+
+
 @pytest.mark.slow
 def test_seed001_tail_statistics_from_the_records(tmp_path: Path,
                                                   monkeypatch: pytest.MonkeyPatch) -> None:
