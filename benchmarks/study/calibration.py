@@ -73,17 +73,28 @@ def load_calibrated_base_points(path: str | Path) -> np.ndarray:
 MADE_WITH_KEYS = ("robot", "robot_fingerprint", "camera", "camera_fingerprint")
 
 
+#: The smallest distance [m] between the farthest two base points of a calibrated file
+#: (closer: a file in metres where millimetres are meant).
+MIN_BASE_SPREAD = 0.01
+
+
 def read_calibrated_file(path: str | Path) -> tuple[np.ndarray, dict[str, str] | None]:
     """Base points (6, 3) in the camera frame [m] and the ``[made_with]`` table (None for a
     file without one) of a ``calibrated.toml`` file.
 
     Raises:
-        ConfigFileError: Missing file, bad TOML, missing or misspelt key, bad shape.
+        ConfigFileError: Missing file, bad TOML, missing or misspelt key, bad shape,
+            points closer than :data:`MIN_BASE_SPREAD` (metres for millimetres).
     """
     table = load_toml(path)
     check_keys(table, ("base_points_camera_mm", "camera_from_base", "scale", "leg_radius_mm",
                        "source", "made_with"), str(path), required=("base_points_camera_mm",))
     points = get_matrix(table, "base_points_camera_mm", (6, 3), str(path)) * 1e-3
+    spread = float(np.max(np.linalg.norm(points[:, None] - points[None], axis=-1)))
+    if spread < MIN_BASE_SPREAD:  # no hexapod's base joints are that close together
+        raise ConfigFileError(str(path), f"the six points are at most {spread * 1e3:.4g} mm "
+                              "apart: given in metres? base_points_camera_mm is in "
+                              "millimetres", key="base_points_camera_mm")
     for key in ("scale", "leg_radius_mm"):  # recorded, not used: yet a value must be one
         if key in table and not get_number(table, key, str(path)) > 0:
             raise ConfigFileError(str(path), f"must be positive, got {table[key]!r}", key=key)

@@ -12,6 +12,7 @@ from benchmarks.cli import main as cli_main
 from benchmarks.study.calibration import load_calibrated_base_points
 from benchmarks.study.runner import read_results
 from hexapod.exceptions import ConfigFileError
+from hexapod.geometry import deltalab
 from vision.cameras import front_camera
 
 
@@ -68,6 +69,15 @@ def test_bad_calibration_file(tmp_path: Path) -> None:
     bad.write_text("base_point_camera_mm = []\n")
     with pytest.raises(ConfigFileError, match="base_points_camera_mm"):
         load_calibrated_base_points(bad)
+    # in metres: named at load with the file and key (each trial was refused without them)
+    points = deltalab().base_points + np.array([0.0, 0.0, 0.9])  # metres, camera frame
+    bad.write_text("base_points_camera_mm = [" + ", ".join(
+        "[" + ", ".join(f"{x:.6f}" for x in p) + "]" for p in points) + "]\n")
+    with pytest.raises(ConfigFileError, match=r"key 'base_points_camera_mm': the six points "
+                                              r"are at most 0\.4864 mm apart: given in "
+                                              r"metres\?") as info:
+        load_calibrated_base_points(bad)
+    assert str(bad) in str(info.value)
     scen = _scenario(tmp_path)
     assert cli_main(["run", str(scen), "--out", str(tmp_path / "x"), "--calibration",
                      str(tmp_path / "missing.toml")]) == 2
