@@ -194,9 +194,12 @@ def options_line(meta: dict[str, Any]) -> str:
                 "docs/tuning.md).")
     tuning = rec.get("tuning") or {}
     labels = ", ".join(rec.get("controllers", {}))
+    others = _run_labels(meta) - set(rec.get("controllers", {}))
+    given = (f" Options of {', '.join(sorted(others))}: **as given** (the scenario's; not in "
+             "the file)." if others else "")
     if not tuning:
         return (f"Controller options of {labels}: from `{rec.get('path')}` (written by hand, "
-                f"not tuned; {rec.get('digest', '')[:19]}).")
+                f"not tuned; {rec.get('digest', '')[:19]}).{given}")
     held = ("held-out trials" if tuning.get("held_out", True) else "the same fixed task "
             "with other noise draws: not held out")
     kept = sorted(label for label, t in (tuning.get("shown_better") or {}).items()
@@ -208,4 +211,11 @@ def options_line(meta: dict[str, Any]) -> str:
             f"{tuning.get('budget')}{goal}, tuning seed {tuning.get('tuning_seed')} (the "
             f"study's: {tuning.get('study_seed')}; {held})"
             + (f"; kept as given, no candidate shown better: {', '.join(kept)}" if kept
-               else "") + ".")
+               else "") + "." + given)
+
+
+def _run_labels(meta: dict[str, Any]) -> set[str]:
+    """The labels of the controllers a run's studies ran (``run.json``'s studies record
+    each as ``label`` or ``label (name, option=value, ...)``)."""
+    return {str(c).split(" (", 1)[0] for entry in (meta.get("scenarios") or {}).values()
+            for c in (entry.get("study") or {}).get("controllers", [])}

@@ -38,6 +38,14 @@ def test_round_trip_and_apply(tmp_path: Path) -> None:
     line = options_line({"options_file": read.record()})
     assert "**tuned**" in line and "median-final" in line and "1000004" in line
     assert "as given" in options_line({})
+    # a controller of the run the file does not tune is said to run as given (it was not)
+    from benchmarks.study.study_record import study_of
+
+    ran = {"t": {"study": study_of(parse_scenario({**SC, "controllers": [
+        *SC["controllers"], "leg-direction"]}))}}
+    line = options_line({"options_file": read.record(), "scenarios": ran})
+    assert line.endswith(" Options of leg-direction: **as given** (the scenario's; not in "
+                         "the file)."), line
 
 
 def test_a_value_without_one_is_left_out_of_the_file(tmp_path: Path) -> None:
