@@ -280,6 +280,7 @@ def cmd_tune(args: argparse.Namespace) -> int:
             con.print(f"tune: {text}", markup=False, highlight=False)
         families[spec.label] = cs.family
         axes[spec.label] = cs.axes
+        _check_axis_values(spec, cs.axes, space, args.space)
         plans[spec.label] = candidates(spec.options, cs.axes, args.candidates)
         for k, opts in enumerate(plans[spec.label]):
             specs.append(replace(spec, label=_label(spec.label, k), options=opts))
@@ -348,6 +349,32 @@ def cmd_tune(args: argparse.Namespace) -> int:
     _write(out, chosen, scores, tuning)
     _print(con, scores, choices, criterion, out)
     return 0
+
+
+def _check_axis_values(spec: Any, axes: Any, space: dict[str, Any], path: str | None) -> None:
+    """Each axis's values at both ends of its range are options the controller takes
+    (a vector option's axis without its ``shape`` gave a number where three are meant,
+    refused only once the tune had started).
+
+    Raises:
+        ScenarioError: Naming the space file (or the declared space), the axis's key and
+            the controller's refusal.
+    """
+    from controllers.exceptions import OptionError
+    from controllers.registry import registry
+
+    for axis in axes:
+        key = next((f"{k}.{axis.option}" for k, found in space.items() if axis in found),
+                   axis.option)
+        for u in (0.0, 1.0):
+            try:
+                registry.create(spec.name, **{**spec.options, axis.option: axis.value(u)})
+            except (OptionError, TypeError, ValueError) as exc:
+                problem = getattr(exc, "problem", None) or str(exc)
+                raise ScenarioError(path or "the declared search space", f"{spec.name}: "
+                                    f"{problem} (the axis's value {axis.value(u)!r}"
+                                    + ("; a vector option's axis needs a shape" if
+                                       axis.shape is None else "") + ")", key=key) from None
 
 
 def _option_table(spec: Any) -> Any:

@@ -192,3 +192,20 @@ def test_a_wrapper_is_searched_in_its_laws_space() -> None:
     assert wrapped.family == law.family is not None and wrapped.axes == law.axes
     assert len(candidates(spec.options, wrapped.axes, 6)) == 6
     assert all(c["law"] == "leg-edge" for c in candidates(spec.options, wrapped.axes, 6))
+
+
+def test_an_axis_whose_values_the_controller_refuses_is_an_error_before_anything_runs(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """A vector option's axis without its shape (``adaptive_gain = {low, high}``: a number
+    where three are meant) is refused naming the space file and the axis, with nothing
+    run and no --out made (it failed once the tune had started, naming the scenario, an
+    empty --out left behind)."""
+    space = tmp_path / "space.toml"
+    space.write_text('["leg-edge"]\nadaptive_gain = { low = 1.0, high = 20.0 }\n')
+    out = tmp_path / "tune"
+    assert main(["tune", "quick", "--controllers", "leg-edge", "--trials", "2",
+                 "--candidates", "2", "--space", str(space), "--out", str(out)]) == 2
+    err = capsys.readouterr().err
+    assert f"{space}: key 'leg-edge.adaptive_gain': leg-edge: " in err, err
+    assert "a vector option's axis needs a shape" in err
+    assert not out.exists()
