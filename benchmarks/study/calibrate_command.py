@@ -27,6 +27,7 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
 
     sc = load_scenario(args.scenario).with_overrides(seed=args.seed)
     sc = _with_ratio_options(sc, args)
+    _setup_warnings(sc)
     out = Path(args.out)
     if args.observations:
         from benchmarks.study.calibration import calibrate_from_file
@@ -95,6 +96,18 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
               f"{out / 'calibrated.toml'} (use: hexapod-bench run ... --calibration "
               f"{out / 'calibrated.toml'})")
     return 0
+
+
+def _setup_warnings(sc: Any) -> None:
+    """The warnings ``run``'s pre-flight gives of the scenario's robot and camera (a camera
+    pose in metres, a focal length in millimetres, ...), on stderr before calibrating:
+    a calibration in such a setup failed with a message naming neither ("leg 0: seen in
+    0 configuration(s)") or ran without a word."""
+    from benchmarks.study.check_command import examine, scenario_setup
+
+    for p in examine(scenario_setup(sc)).problems:
+        if p.severity != "error":  # (an error of the setup's is the calibration's to say)
+            print(f"hexapod-bench: warning: {sc.name}: {p.text}", file=sys.stderr)
 
 
 def _print_far_from_nominal(part: dict[str, Any], out: Path) -> None:

@@ -280,3 +280,29 @@ def test_a_calibration_that_fits_the_robot_poorly_is_warned_of(
                          str(tmp_path / obs.stem), "--observations", str(obs)]) == 0
         err = " ".join(capsys.readouterr().err.split())
         assert ("the calibrated base points fit the robot's base only to" in err) is warned, err
+
+
+def test_calibrate_warns_of_a_camera_pose_in_metres_as_run_does(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """``calibrate`` gives the setup warnings of ``run``'s pre-flight first: a camera file
+    whose translation is in metres (it failed "leg 0: seen in 0 configuration(s)",
+    naming neither the file nor the key)."""
+    import tomllib
+
+    import tomli_w
+
+    cam_file = tmp_path / "my-camera.toml"
+    front_camera(deltalab()).to_toml(cam_file)
+    table = tomllib.loads(cam_file.read_text())
+    pose = table["camera_from_base"]
+    key = next(k for k in pose if k.startswith("translation"))
+    pose[key] = [x * 1e-3 for x in pose[key]]  # metres where millimetres are meant
+    cam_file.write_text(tomli_w.dumps(table))
+    scen = tmp_path / "s.toml"
+    scen.write_text('name = "s"\nseed = 4\ntrials = 2\ncontrollers = ["leg-edge"]\n'
+                    '[camera]\nfile = "my-camera.toml"\n[noise]\nmodel = "none"\n')
+    cli_main(["calibrate", str(scen), "--out", str(tmp_path / "cal")])
+    err = capsys.readouterr().err
+    assert "hexapod-bench: warning: s: the camera's centre is" in err, err
+    assert f"given in metres? The camera's translation is in millimetres; check " \
+           f"[camera_from_base] in {cam_file}" in err, err
