@@ -7,6 +7,7 @@ lengths within the strokes)."""
 
 from __future__ import annotations
 
+import math
 from collections.abc import Collection
 from dataclasses import replace
 from pathlib import Path
@@ -257,4 +258,46 @@ def check_controllers(sc: Scenario) -> tuple[Scenario, list[str]]:
                 raise ScenarioError(sc.source if spec.key else "--controllers",
                                     f"{exc}; {fix}",
                                     key=named if spec.key else None) from None
+        warnings += gain_warnings(spec, table, sc.dt)
     return sc, warnings
+
+
+def gain_warnings(spec: ControllerSpec, table: Any, dt: float) -> list[str]:
+    """Gains beyond the bounds the docs state, said before any trial (a value in the
+    wrong unit, rad/s for Hz, gives them): a first-order law's gain at or above ``2/dt``
+    (the discrete loop is unstable, ``docs/tuning.md``), a computed-torque law's
+    ``integral_gain`` at or above ``2 damping omega_n`` (unstable with an exact model,
+    ``docs/dynamic-world.md``, "Integral action").
+
+    Args:
+        spec: The controller, its options as given.
+        table: Its option table (the defaults of the options not given).
+        dt: The control period [s].
+    """
+    given: dict[str, Any] = {**{o.name: o.default for o in table.options}, **spec.options}
+
+    def value(name: str) -> Any:
+        return given.get(name)
+
+    out = []
+    gains: list[float] = []
+    if table.declares("adaptive_gain") and value("adaptive_gain") is not None:
+        lam = value("adaptive_gain")
+        gains = [float(lam[0]), float(lam[1])]  # (lambda0, lambda_inf): the largest gain
+    elif table.declares("gain") and isinstance(value("gain"), int | float):
+        gains = [float(value("gain"))]
+    if gains and max(gains) >= 2.0 / dt:
+        out.append(f"{spec.label}: gain {max(gains):g} 1/s is at least 2/dt = {2.0 / dt:g} "
+                   f"1/s (robot.dt {dt * 1e3:g} ms): the discrete loop is unstable "
+                   "(docs/tuning.md)")
+    if table.declares("integral_gain") and table.declares("natural_frequency"):
+        ki, fn = value("integral_gain"), value("natural_frequency")
+        zeta = value("damping") if table.declares("damping") else 1.0
+        if all(isinstance(x, int | float) for x in (ki, fn, zeta)) and ki > 0:
+            bound = 2.0 * float(zeta) * 2.0 * math.pi * float(fn)
+            if ki >= bound:
+                out.append(f"{spec.label}: integral_gain {ki:g} 1/s is not below 2 damping "
+                           f"omega_n = {bound:.3g} 1/s (natural_frequency {fn:g} Hz, damping "
+                           f"{zeta:g}): the error grows even with an exact model "
+                           "(docs/dynamic-world.md, \"Integral action\")")
+    return out

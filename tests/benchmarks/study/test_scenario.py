@@ -255,3 +255,27 @@ def test_a_camera_model_that_misses_the_distortion(tmp_path: Path) -> None:
         assert setup.shared, "a lens-model error alone keeps the true world nominal"
     with pytest.raises(ScenarioError, match="out of the allowed range"):
         parse_scenario({**MINIMAL, "calibration_error": {"distortion_percent": 150.0}})
+
+
+def test_gains_beyond_the_documented_bounds_are_warned_of() -> None:
+    """A first-order gain at 2/dt (the discrete loop unstable) and a computed-torque
+    integral gain at 2 damping omega_n (unstable with an exact model) are warned of before
+    any trial, naming the controller, the value and the bound (a natural frequency in
+    rad/s, an integral gain of 500: every trial hit an end stop without a word); the
+    built-in scenarios' gains are within them."""
+    from benchmarks.study.scenario import builtin_scenarios
+    from benchmarks.study.scenario_checks import check_controllers
+
+    sc = parse_scenario({**MINIMAL, "robot": {"world": "dynamic"}, "controllers": [
+        {"name": "leg-edge", "gain": 100.0},
+        {"name": "computed-torque", "natural_frequency": 2.0, "integral_gain": 500.0},
+        {"name": "vision-ctc", "natural_frequency": 2.0, "integral_gain": 20.0}]})
+    warnings = check_controllers(sc)[1]
+    assert any(w.startswith("leg-edge: gain 100 1/s is at least 2/dt = 100 1/s (robot.dt "
+                            "20 ms)") for w in warnings), warnings
+    assert any(w.startswith("computed-torque: integral_gain 500 1/s is not below 2 damping "
+                            "omega_n = 25.1 1/s") for w in warnings), warnings
+    assert not any(w.startswith("vision-ctc") for w in warnings)  # 20 < 25.1
+    for name in builtin_scenarios():
+        said = check_controllers(load_scenario(name))[1]
+        assert not any("2/dt" in w or "omega_n" in w for w in said), (name, said)
