@@ -245,8 +245,14 @@ def segments_certainly_imaged(camera: Any, segments: np.ndarray) -> np.ndarray:
     return out == 1.0
 
 
+#: Each output block's slice and shape (:data:`OUTPUTS`; the views of every period's
+#: batch are taken without the layout's checks, the array being the core's own).
+_OUT_BLOCKS = tuple((name, OUTPUTS[name], OUTPUTS.shapes[name]) for name in OUTPUTS)
+
+
 def _unpack(out: np.ndarray) -> BatchObservation:
-    fields = OUTPUTS.views(out)
+    n = out.shape[0]
+    fields = {name: out[:, s].reshape(n, *shape) for name, s, shape in _OUT_BLOCKS}
     for mask in ("exists", "edge_visible"):
         fields[mask] = fields[mask] > 0.5
     return BatchObservation(**fields)
