@@ -19,18 +19,10 @@ import numpy as np
 
 from hexapod.geometry import HexapodGeometry
 from hexapod.kinematics import inverse_kinematics
+from hexapod.plausible import MILLIMETRES, implausible_lengths, plausible_range
 
-#: The hint of a value that is plausible once divided by 1000.
-MILLIMETRES = " (millimetres? SI units: metres)"
-
-
-def plausible_range(stroke: tuple[float, float]) -> tuple[float, float]:
-    """The open interval [m] of the lengths a leg of ``stroke`` ``(q_min, q_max)`` [m]
-    may have: ``(max(0, q_min - span), q_max + span)``, ``span = q_max - q_min``."""
-    q_min, q_max = stroke
-    span = q_max - q_min
-    return max(0.0, q_min - span), q_max + span
-
+__all__ = ["MILLIMETRES", "implausible_lengths", "implausible_pose", "plausible_range",
+           "reading_bounds", "stroke_of"]
 
 def reading_bounds(strokes: Iterable[tuple[float, float] | None]) -> tuple[float, float]:
     """The open interval [m] of the leg lengths a batch's readings may hold: the union
@@ -47,25 +39,6 @@ def stroke_of(context: Any) -> tuple[float, float] | None:
     """The nominal stroke (q_min, q_max) [m] of a controller's context (None: none)."""
     geometry = getattr(context, "geometry", None)
     return None if geometry is None else geometry.stroke
-
-
-def implausible_lengths(lengths: Any, stroke: tuple[float, float]) -> str | None:
-    """Why ``lengths`` (6,) [m] cannot be legs of a robot of ``stroke`` [m] (a value
-    outside :func:`plausible_range`), or None; values that are not six finite numbers
-    are left to the caller's own checks (which name them)."""
-    try:
-        values = np.asarray(lengths, dtype=float).ravel().tolist()
-    except (TypeError, ValueError):
-        return None
-    low, high = plausible_range(stroke)
-    if values and low < min(values) and max(values) < high:  # the common case
-        return None
-    for i, v in enumerate(values):
-        if math.isfinite(v) and not low < v < high:
-            hint = MILLIMETRES if low < v / 1e3 < high else ""
-            return (f"leg {i} at {v:.6g} m, where no leg of the nominal robot can be (its "
-                    f"stroke {stroke[0] * 1e3:g} to {stroke[1] * 1e3:g} mm){hint}")
-    return None
 
 
 def implausible_pose(geometry: HexapodGeometry, rotation: Any, translation: Any

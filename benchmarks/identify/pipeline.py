@@ -110,7 +110,7 @@ def record_backend(backend: Any, robot: HexapodGeometry, excitation: Excitation,
         BackendError: A reading that cannot be the robot's, naming the sample, the leg
             and the value.
     """
-    from benchmarks.sim.plant import reading_problem
+    from hexapod.plausible import reading_problem
 
     q_ref = reference_lengths(robot, excitation, duration, dt)
     qd_ref = np.gradient(q_ref, dt, axis=0)

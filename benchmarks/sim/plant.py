@@ -24,27 +24,10 @@ import numpy as np
 from hexapod.actuation import Actuation
 from hexapod.backends.base import Backend, clamp_velocities
 from hexapod.fk import pack_rows, set_guesses, solve_rows
+from hexapod.plausible import reading_problem
 
 #: The failure of a trial whose true pose cannot be found from its leg lengths.
 FK_FAILURE = "forward kinematics of the true robot failed (singularity?)"
-
-
-def reading_problem(lengths: Any, stroke: tuple[float, float]) -> str | None:
-    """Why a backend's reading ``lengths`` cannot be the legs of a robot of ``stroke``
-    (q_min, q_max) [m], or None: not six values, a value that is not a number, or a leg
-    where no leg of the robot can be (:func:`controllers.plausible.implausible_lengths`:
-    millimetres for metres are named)."""
-    from controllers.plausible import implausible_lengths
-
-    q = np.asarray(lengths, dtype=float)
-    if q.shape != (6,):
-        return f"the backend measured {q.size} values of shape {q.shape}, not 6 leg lengths"
-    if not np.isfinite(q).all():
-        i = int(np.flatnonzero(~np.isfinite(q))[0])
-        return (f"the backend measured leg {i} as {q[i]} (not a number: a fault of the "
-                "robot's sensors or of its link)")
-    problem = implausible_lengths(q, stroke)
-    return None if problem is None else f"the backend measured {problem}"
 
 
 class Plant:

@@ -29,12 +29,14 @@ from __future__ import annotations
 import gc
 from collections.abc import Callable
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 
 from hexapod.backends.base import Backend
 from hexapod.backends.sim import SimulatedRobot
 from hexapod.geometry import HexapodGeometry
+from hexapod.plausible import reading_problem
 
 #: ``(geometry, start lengths) -> an opened backend`` (its ``reset`` already done).
 BackendFactory = Callable[[HexapodGeometry, np.ndarray], Backend]
@@ -62,6 +64,21 @@ class ConformanceReport:
     def ok(self) -> bool:
         """True when every check passed."""
         return not self.problems
+
+
+class _BadReadingError(Exception):
+    """A reading that cannot be the robot's legs (ends the checks that read lengths)."""
+
+
+def _read(lengths: Any, stage: str, geometry: HexapodGeometry) -> np.ndarray:
+    """``lengths`` as an array, or :class:`_BadReadingError` naming the stage and why they
+    cannot be legs of ``geometry`` (:func:`hexapod.plausible.reading_problem`: not a
+    number, out of any leg's reach, millimetres for metres: a comparison with NaN is
+    false, and such a reading passed)."""
+    problem = reading_problem(lengths, geometry.stroke)
+    if problem is not None:
+        raise _BadReadingError(f"{stage}: {problem}")
+    return np.asarray(lengths, float)
 
 
 def check_backend(factory: BackendFactory, geometry: HexapodGeometry, dt: float = 0.02,
@@ -94,66 +111,71 @@ def check_backend(factory: BackendFactory, geometry: HexapodGeometry, dt: float 
     gc.collect()
     gc.disable()
     try:
-        q = np.asarray(robot.measured_lengths(), float)
-        if not np.allclose(q, q0, atol=max(tolerance, 1e-12)):
-            report.problems.append(f"start: measured {np.round(q * 1e3, 4).tolist()} mm, "
-                                   f"expected {np.round(q0 * 1e3, 4).tolist()} mm")
-        # 1. smooth motion inside the limits
-        phases = np.arange(6) * np.pi / 3
-        for k in range(periods):
-            v = 0.4 * vmax * np.sin(2 * np.pi * k / periods + phases)
-            got = robot.step(v, dt)
-            want = sim.step(v, dt)
-            report.periods += 1
-            if got.missed_period:  # read early: the simulator goes on from the reading
-                report.missed_periods += 1
-                sim.reset(np.asarray(got.lengths, float))
-                continue
-            dev = float(np.max(np.abs(np.asarray(got.lengths) - want.lengths)))
-            report.max_deviation = max(report.max_deviation, dev)
-            if dev > tolerance:
-                leg = int(np.argmax(np.abs(np.asarray(got.lengths) - want.lengths)))
-                report.problems.append(f"smooth motion, period {k}: leg {leg} measured "
-                                       f"{got.lengths[leg] * 1e3:.6f} mm, the simulator "
-                                       f"{want.lengths[leg] * 1e3:.6f} mm")
-                break
-        if report.missed_periods > periods / 4:
-            report.problems.append(f"smooth motion: the host missed {report.missed_periods} "
-                                   f"of its {periods} periods (only the others are "
-                                   "compared): a longer period (dt) or a quieter machine")
-        # 2. beyond the speed limit
-        q_before = np.asarray(robot.measured_lengths(), float)
-        got = robot.step(np.full(6, 10 * vmax), dt)
-        report.periods += 1
-        moved = np.abs(np.asarray(got.lengths) - q_before)
-        if np.any(moved > vmax * dt * (1 + 1e-6) + tolerance):
-            report.problems.append(f"speed limit: a leg moved {moved.max() * 1e3:.4f} mm in "
-                                   f"one period, the limit allows {vmax * dt * 1e3:.4f} mm")
-        if not np.all(np.asarray(got.clamped, bool)):
-            report.problems.append("speed limit: a command 10x the limit was not reported "
-                                   "clamped")
-        # 3. into the upper stroke end
-        for _ in range(int(np.ceil((hi - lo) / (vmax * dt))) + 2):
-            got = robot.step(np.full(6, vmax), dt)
-            report.periods += 1
-            q = np.asarray(got.lengths, float)
-            if np.any(q > hi + 1e-9 + tolerance) or np.any(q < lo - 1e-9 - tolerance):
-                report.problems.append(f"stroke: measured {np.round(q * 1e3, 4).tolist()} mm "
-                                       f"outside [{lo * 1e3:g}, {hi * 1e3:g}] mm")
-                break
-        # 4. a NaN command moves nothing
-        q_before = np.asarray(robot.measured_lengths(), float)
-        v = np.full(6, -0.5 * vmax)
-        v[2] = np.nan
-        got = robot.step(v, dt)
-        report.periods += 1
-        if abs(float(got.lengths[2]) - q_before[2]) > tolerance:
-            report.problems.append("NaN command: leg 2 moved "
-                                   f"{(got.lengths[2] - q_before[2]) * 1e3:.4f} mm")
-        if not bool(np.asarray(got.clamped, bool)[2]):
-            report.problems.append("NaN command: leg 2 was not reported clamped")
-        # 5. halt
         try:
+            q = _read(robot.measured_lengths(), "start", geometry)
+            if not np.allclose(q, q0, atol=max(tolerance, 1e-12)):
+                report.problems.append(f"start: measured {np.round(q * 1e3, 4).tolist()} mm, "
+                                       f"expected {np.round(q0 * 1e3, 4).tolist()} mm")
+            # 1. smooth motion inside the limits
+            phases = np.arange(6) * np.pi / 3
+            for k in range(periods):
+                v = 0.4 * vmax * np.sin(2 * np.pi * k / periods + phases)
+                got = robot.step(v, dt)
+                _read(got.lengths, f"smooth motion, period {k}", geometry)
+                want = sim.step(v, dt)
+                report.periods += 1
+                if got.missed_period:  # read early: the simulator goes on from the reading
+                    report.missed_periods += 1
+                    sim.reset(np.asarray(got.lengths, float))
+                    continue
+                dev = float(np.max(np.abs(np.asarray(got.lengths) - want.lengths)))
+                report.max_deviation = max(report.max_deviation, dev)
+                if dev > tolerance:
+                    leg = int(np.argmax(np.abs(np.asarray(got.lengths) - want.lengths)))
+                    report.problems.append(f"smooth motion, period {k}: leg {leg} measured "
+                                           f"{got.lengths[leg] * 1e3:.6f} mm, the simulator "
+                                           f"{want.lengths[leg] * 1e3:.6f} mm")
+                    break
+            if report.missed_periods > periods / 4:
+                report.problems.append(f"smooth motion: the host missed {report.missed_periods} "
+                                       f"of its {periods} periods (only the others are "
+                                       "compared): a longer period (dt) or a quieter machine")
+            # 2. beyond the speed limit
+            q_before = _read(robot.measured_lengths(), "speed limit", geometry)
+            got = robot.step(np.full(6, 10 * vmax), dt)
+            _read(got.lengths, "speed limit", geometry)
+            report.periods += 1
+            moved = np.abs(np.asarray(got.lengths) - q_before)
+            if np.any(moved > vmax * dt * (1 + 1e-6) + tolerance):
+                report.problems.append(f"speed limit: a leg moved {moved.max() * 1e3:.4f} mm in "
+                                       f"one period, the limit allows {vmax * dt * 1e3:.4f} mm")
+            if not np.all(np.asarray(got.clamped, bool)):
+                report.problems.append("speed limit: a command 10x the limit was not reported "
+                                       "clamped")
+            # 3. into the upper stroke end
+            for _ in range(int(np.ceil((hi - lo) / (vmax * dt))) + 2):
+                got = robot.step(np.full(6, vmax), dt)
+                report.periods += 1
+                q = _read(got.lengths, "stroke", geometry)
+                if np.any(q > hi + 1e-9 + tolerance) or np.any(q < lo - 1e-9 - tolerance):
+                    report.problems.append(f"stroke: measured {np.round(q * 1e3, 4).tolist()} mm "
+                                           f"outside [{lo * 1e3:g}, {hi * 1e3:g}] mm")
+                    break
+            # 4. a NaN command moves nothing
+            q_before = _read(robot.measured_lengths(), "NaN command", geometry)
+            v = np.full(6, -0.5 * vmax)
+            v[2] = np.nan
+            got = robot.step(v, dt)
+            _read(got.lengths, "NaN command", geometry)
+            report.periods += 1
+            if abs(float(got.lengths[2]) - q_before[2]) > tolerance:
+                report.problems.append("NaN command: leg 2 moved "
+                                       f"{(got.lengths[2] - q_before[2]) * 1e3:.4f} mm")
+            if not bool(np.asarray(got.clamped, bool)[2]):
+                report.problems.append("NaN command: leg 2 was not reported clamped")
+        except _BadReadingError as bad:  # the checks after it would compare garbage
+            report.problems.append(str(bad))
+        try:  # 5. halt
             robot.halt()
         except Exception as exc:
             report.problems.append(f"halt() raised {type(exc).__name__}: {exc}")

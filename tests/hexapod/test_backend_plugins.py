@@ -118,6 +118,49 @@ def test_conformance_catches_a_backend_that_ignores_the_limits() -> None:
     assert "stroke: measured" in text
 
 
+def test_conformance_fails_a_reading_that_cannot_be_the_legs() -> None:
+    """A NaN leg from period 5 on, and readings in millimetres: each fails the check
+    naming the stage, the leg and the value, with the millimetre hint (a NaN passed:
+    'largest deviation 0.000 um ... PASS', a comparison with NaN being false; millimetres
+    were a deviation without the hint); halt and close are still called."""
+    from hexapod.backends.base import BackendStep
+    from hexapod.backends.sim import SimulatedRobot
+
+    calls: list[str] = []
+
+    class NanLeg(SimulatedRobot):
+        steps = 0
+
+        def step(self, velocities, dt):  # type: ignore[no-untyped-def]
+            got = super().step(velocities, dt)
+            self.steps += 1
+            q = got.lengths.copy()
+            if self.steps > 5:
+                q[3] = np.nan
+            return BackendStep(q, got.applied_velocities, got.clamped)
+
+        def halt(self) -> None:
+            calls.append("halt")
+
+        def close(self) -> None:
+            calls.append("close")
+
+    class Millimetres(SimulatedRobot):
+        def measured_lengths(self) -> np.ndarray:
+            return super().measured_lengths() * 1e3
+
+    report = check_backend(lambda geo, q: NanLeg(geo, q), deltalab())
+    assert not report.ok
+    assert report.problems == ["smooth motion, period 5: the backend measured leg 3 as nan "
+                               "(not a number: a fault of the robot's sensors or of its "
+                               "link)"], report.problems
+    assert calls == ["halt", "close"]
+    report = check_backend(lambda geo, q: Millimetres(geo, q), deltalab())
+    assert report.problems == ["start: the backend measured leg 0 at 415 m, where no leg of "
+                               "the nominal robot can be (its stroke 345 to 485 mm) "
+                               "(millimetres? SI units: metres)"], report.problems
+
+
 def test_the_collector_is_off_while_driving_and_as_it_was_after() -> None:
     """A collection pause would show as a lagging in-process emulator: the check drives
     the backend with the garbage collector off, and leaves it as it found it."""
