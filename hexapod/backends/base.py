@@ -7,6 +7,7 @@ limits and reports the leg lengths a real robot's encoders would measure.
 
 from __future__ import annotations
 
+import inspect
 import time
 from abc import ABC, abstractmethod
 from dataclasses import dataclass, field
@@ -126,7 +127,14 @@ class Backend(ABC):
             geometry: The nominal robot (stroke, speed limit, kinematics).
             start: Leg lengths [m] to start from (None: where the robot is).
         """
-        robot = cls(geometry, args) if args else cls(geometry)  # type: ignore[call-arg]
+        given = (geometry, args) if args else (geometry,)
+        try:
+            inspect.signature(cls).bind(*given)
+        except TypeError as exc:  # (its own TypeError inside __init__ stays its own)
+            raise BackendError(f"{cls.__name__}: cannot be opened with "
+                               + (f"the ARGS {args!r} after its name" if args else "no ARGS")
+                               + f" ({exc}); see its documentation") from None
+        robot = cls(*given)
         return started(robot, start)
 
     @abstractmethod

@@ -118,6 +118,23 @@ def test_conformance_catches_a_backend_that_ignores_the_limits() -> None:
     assert "stroke: measured" in text
 
 
+def test_a_backend_given_args_it_does_not_take_is_a_spec_error() -> None:
+    """``NAME:ARGS`` for a backend whose constructor takes no ARGS: a ``BackendError``
+    naming the class and the ARGS, which the commands report as a bad spec (exit 2; it
+    was a ``TypeError`` traceback, exit 1); without ARGS it opens."""
+    from hexapod.backends.sim import SimulatedRobot
+    from hexapod.exceptions import BackendError
+
+    class NoArgs(SimulatedRobot):
+        def __init__(self, geometry: HexapodGeometry) -> None:
+            super().__init__(geometry)
+
+    with pytest.raises(BackendError, match="NoArgs: cannot be opened with the ARGS 'foo' "
+                                           "after its name"):
+        NoArgs.open("foo", deltalab())
+    NoArgs.open("", deltalab()).close()
+
+
 def test_conformance_fails_a_reading_that_cannot_be_the_legs() -> None:
     """A NaN leg from period 5 on, and readings in millimetres: each fails the check
     naming the stage, the leg and the value, with the millimetre hint (a NaN passed:
