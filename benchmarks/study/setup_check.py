@@ -324,7 +324,8 @@ def check_setup(geometry: HexapodGeometry, camera: Any, max_translation_mm: floa
         edge_ratio=ratio, edge_condition=cond, problems=problems,
         home_ends=end_status(camera, home_obs),
         home_fraction=np.nan_to_num(np.asarray(home_obs.visible_fraction, float)))
-    problems += _camera_problems(report, camera, home_obs, needs_camera, where)
+    if not out_legs:  # (without a home pose the camera's view of it is no advice)
+        problems += _camera_problems(report, camera, home_obs, needs_camera, where)
     return report
 
 

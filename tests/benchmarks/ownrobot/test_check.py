@@ -242,6 +242,10 @@ def test_slips_a_user_makes_in_a_robot_file_are_warned_of(
     assert "home pose: none" in text and "leg lengths at home" not in text, text
     assert "given in metres? stroke_mm is in millimetres" in text
     assert "small workspace" not in text  # (the error says it)
+    # no camera warning about a home pose there is not (it warned of the edges' condition
+    # number there, "a pose in radians where degrees are meant gives this")
+    assert "observe the platform's pose poorly" not in text
+    assert not any("warning" in line and "camera" in line for line in text.splitlines()), text
 
 
 def test_a_focal_length_in_millimetres_and_a_poorly_observed_pose_are_warned_of() -> None:
