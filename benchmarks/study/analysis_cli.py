@@ -138,8 +138,9 @@ def print_comparisons(comparisons: list[Any], title: str,
     print_table(con, title, header, rows, keys=keys, left=(*keys, len(header) - 1),
                 escape_cells=True, wrap=(1,))  # sweeps and intervals hold brackets
     significant = [c for c in comparisons if c.better is not None]
-    con.print(f"Significant at {100 * ALPHA:.0f} % after Holm's correction "
-              f"({len(significant)} of {len(comparisons)} comparisons):")
+    con.print(f"Significant at {100 * ALPHA:.0f} % after Holm's correction within each "
+              f"metric (the family-wise error holds per metric, not over the list; "
+              f"{len(significant)} of {len(comparisons)} comparisons):")
     _print_verdicts(con, significant,
                     "- none: no difference between these controllers is significant")
     unclear = [c for c in comparisons if c.outcome == "unclear"]

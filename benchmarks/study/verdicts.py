@@ -78,6 +78,9 @@ def holm_and_verdicts(family: list[Comparison], metric: str, higher_better: bool
     the equivalence tests apart, then each comparison's outcome and verdict in words:
     *different* (who is better), *equivalent* within the margin, or *not shown
     equivalent* (neither shown different nor shown equivalent)."""
+    for c in family:
+        if c.n == 0:  # no pairs, no test: its p of 1 counted in Holm's m made the
+            c.p_value = c.p_equivalence = float("nan")  # others' correction stricter
     adjusted = stats.holm([c.p_value for c in family])
     adjusted_eq = stats.holm([c.p_equivalence for c in family])
     for c, p, p_eq in zip(family, adjusted, adjusted_eq, strict=True):

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import math
 from pathlib import Path
 
 import numpy as np
@@ -422,3 +423,23 @@ def test_runs_of_different_studies_are_not_held_to_determinism_and_one_task_is_s
     assert "should be identical" in capsys.readouterr().out
     cli_main(["compare", str(a)])
     assert "note: synthetic repeats ONE task" in capsys.readouterr().out
+
+
+def test_a_comparison_without_pairs_does_not_count_in_holm() -> None:
+    """Three ``steps`` comparisons, one with no pairs (neither controller converged): it
+    gets no p-value and the other two are corrected over two, as scipy's Holm over two
+    gives (it counted with p = 1 in m = 3)."""
+    from benchmarks.study.compare import Comparison
+    from benchmarks.study.verdicts import holm_and_verdicts
+
+    def comp(p: float, n: int, direction: int) -> Comparison:
+        return Comparison("s", 0, "", "a", "b", "steps", "steps", "sign-censored", n, 0.0, p,
+                          float("nan"), 5.0, (1.0, 9.0), 10.0, 5.0, direction=direction)
+
+    family = [comp(0.02, 20, 1), comp(1.0, 0, 0), comp(0.03, 20, 1)]
+    holm_and_verdicts(family, "steps", False)
+    assert math.isnan(family[1].p_value) and math.isnan(family[1].p_holm)
+    assert family[1].verdict == "steps: no pairs to compare"
+    # Holm over the two tested: 2 x 0.02 = 0.04, then max(0.04, 1 x 0.03) = 0.04
+    assert family[0].p_holm == pytest.approx(0.04) and family[2].p_holm == pytest.approx(0.04)
+    assert family[0].better == "b" and family[2].better == "b"  # (3 would have given 0.06)
