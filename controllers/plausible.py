@@ -6,7 +6,9 @@ reset and at a new goal.
 A length further from the nominal stroke than the stroke's own span is not a leg at an
 end stop nor a calibration offset but a value in other units (millimetres for metres):
 taught so, `joint-space` commanded 415 m/s and `model-based` 314 m/s at their first
-step. The check costs nothing per period: it is made once per goal.
+step. The check costs nothing per period: it is made once per goal. The lengths' own
+check (:func:`hexapod.plausible.implausible_lengths`, also a backend's reading's) lives
+in the robot's layer; this module adds what depends on a controller's context.
 """
 
 from __future__ import annotations
@@ -23,6 +25,7 @@ from hexapod.plausible import MILLIMETRES, implausible_lengths, plausible_range
 
 __all__ = ["MILLIMETRES", "implausible_lengths", "implausible_pose", "plausible_range",
            "reading_bounds", "stroke_of"]
+
 
 def reading_bounds(strokes: Iterable[tuple[float, float] | None]) -> tuple[float, float]:
     """The open interval [m] of the leg lengths a batch's readings may hold: the union
