@@ -272,14 +272,38 @@ def _iter_dask(units: list[WorkUnit], address: str, workers: int
         client = Client(cluster)
     else:
         client = Client(address)
+    stopping: contextlib.AbstractContextManager[None] = contextlib.nullcontext()
     try:
         futures = {client.submit(execute, u, pure=False): u for u in units}
         for fut in as_completed(futures):
             yield futures[fut], fut.result()
+    except BaseException:  # (Ctrl-C: the run stops; see _silent_while_stopping)
+        if logging.getLogger().getEffectiveLevel() > logging.INFO:
+            stopping = _silent_while_stopping()
+        raise
     finally:
-        client.close()
-        if cluster is not None:
-            cluster.close()
+        with stopping:
+            client.close()
+            if cluster is not None:
+                cluster.close()
+
+
+@contextlib.contextmanager
+def _silent_while_stopping() -> Iterator[None]:
+    """Dask's and its event loop's log lines off while an interrupted run closes its
+    client and cluster: cancelling the futures in flight, Dask logged an error of its own
+    code with a traceback (``distributed.utils.sync``'s cancel callback: "cannot access
+    free variable 'future'") and "Couldn't gather keys", which said nothing to a user who
+    pressed Ctrl-C and looked like a crash; the run's own message says how it stopped."""
+    loggers = [logging.getLogger(name) for name in ("distributed", "tornado")]
+    levels = [lg.level for lg in loggers]
+    for lg in loggers:
+        lg.setLevel(logging.CRITICAL + 1)
+    try:
+        yield
+    finally:
+        for lg, level in zip(loggers, levels, strict=True):
+            lg.setLevel(level)
 
 
 def _quiet_dask() -> None:
