@@ -127,7 +127,9 @@ class Comparison:
     unit: str = field(default="", repr=False)
 
     def to_json(self) -> dict[str, Any]:
-        """A JSON object (NaN as null)."""
+        """A JSON object: NaN as null; an infinite value (a censored median, an
+        interval's end outside the sample) as the string ``"inf"`` or ``"-inf"``, which
+        keeps its sign (JSON has no infinity; ``float(s)`` reads it back)."""
         d = asdict(self)
         d["interval"] = list(self.interval)
         d["discordant"] = list(self.discordant) if self.discordant else None
@@ -136,7 +138,7 @@ class Comparison:
 
 def _clean(v: Any) -> Any:
     if isinstance(v, float) and not np.isfinite(v):
-        return None
+        return None if np.isnan(v) else ("inf" if v > 0 else "-inf")
     if isinstance(v, list):
         return [_clean(x) for x in v]
     return v

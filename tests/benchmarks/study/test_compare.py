@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import math
 from pathlib import Path
@@ -211,6 +212,25 @@ def test_steps_are_compared_with_censoring_not_on_the_survivors(tmp_path: Path) 
     (c,) = _censored_pair(tmp_path, 12)  # 12 faster, 8 censored: no conclusion
     assert c.discordant == (8, 12) and c.better is None
     assert c.outcome == "not shown equivalent"
+
+
+def test_json_keeps_the_sign_of_an_infinite_value(tmp_path: Path) -> None:
+    """A censored median (+inf) and an interval's censored end are written as ``"inf"``
+    (JSON has no infinity; ``null`` would lose the sign) and read back by ``float``;
+    a value that is not a number stays ``null``."""
+    n = 20
+    err = np.full(n, 0.05)
+    conv = np.arange(n) < 3
+    rows = (make_rows("fast", err, conv, np.where(conv, 100, 500))
+            + make_rows("sure", err, np.ones(n, bool), np.full(n, 200)))
+    js = tmp_path / "c.json"
+    assert cli_main(["compare", str(write_run(tmp_path / "r", rows)), "--metric", "steps",
+                     "--json", str(js)]) == 0
+    (d,) = json.loads(js.read_text())["comparisons"]
+    assert d["a_value"] == "inf" and float(d["a_value"]) == math.inf
+    assert d["interval"][1] == "inf" and d["b_value"] == 200.0
+    (c,) = compare_controllers(load(tmp_path / "r"), metrics=("steps",))
+    assert dataclasses.replace(c, p_equivalence=math.nan).to_json()["p_equivalence"] is None
 
 
 def test_equivalence_needs_tost_not_a_missing_difference(tmp_path: Path,
