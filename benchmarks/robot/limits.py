@@ -32,6 +32,9 @@ DEFAULT_MAX_MISSED_FRACTION = 0.25
 MISSED_WINDOW = 50
 #: Missed-period warnings are printed at most once every this many seconds.
 WARN_PERIOD_S = 1.0
+#: A backend that says it keeps its periods (``paces_periods``) is taken at its word
+#: unless its first this many steps all return less than half a period apart.
+PACING_CHECK_PERIODS = 5
 
 
 @dataclass(frozen=True)
@@ -73,14 +76,23 @@ class LimitedRobot:
     the travel box around the ``start`` lengths (6,) [m]. With ``pace``, each period is
     waited out after the backend's step returns (a backend that sends and returns: the
     next command leaves one period after this one, not as soon as it is computed; a late
-    period is reported missed). Other attributes are the backend's."""
+    period is reported missed), and the period's link time is the time the backend's
+    step took (what a backend reports may leave out its own work). With
+    ``check_pacing`` (a backend that says it keeps its periods), its word is checked:
+    when its first :data:`PACING_CHECK_PERIODS` steps all return less than half a
+    period apart, ``warn`` is told and the session paces from then on. Other
+    attributes are the backend's."""
 
     def __init__(self, robot: Any, limits: SessionLimits, start: np.ndarray,
-                 pace: bool = False) -> None:
+                 pace: bool = False, check_pacing: bool = False,
+                 warn: Callable[[str], None] | None = None) -> None:
         self.robot = robot
         #: The session's pacing of the periods (None: the backend keeps them).
         self.rate: RateLimiter | None = None
         self.pace = pace
+        self.warn = warn
+        #: When the backend's steps returned [s] (perf_counter), while they are checked.
+        self._returns: list[float] | None = [] if check_pacing and not pace else None
         self.limits = limits
         self.start = np.asarray(start, float).copy()
         self.q = self.start.copy()
@@ -122,7 +134,10 @@ class LimitedRobot:
         self.last_applied = v.copy() if actuation is Actuation.VELOCITY else np.zeros(6)
         sent = time.perf_counter()
         bs = self.robot.apply(v, actuation, dt, controller)
+        if self._returns is not None:
+            self._check_pacing(dt)
         if self.pace:  # the rest of the period, on the grid of the first command
+            bs = replace(bs, round_trip_s=time.perf_counter() - sent)
             self.rate = RateLimiter.keeping(self.rate, dt, "servo session")
             if self.rate.sleep_after(sent) < 0 and not bs.missed_period:
                 bs = replace(bs, missed_period=True)
@@ -131,6 +146,24 @@ class LimitedRobot:
         if capped.any():
             bs = replace(bs, clamped=np.asarray(bs.clamped, bool) | capped)
         return bs
+
+    def _check_pacing(self, dt: float) -> None:
+        """Take the backend's ``paces_periods`` at its word, or pace for it (class
+        docstring)."""
+        assert self._returns is not None
+        self._returns.append(time.perf_counter())
+        if len(self._returns) <= PACING_CHECK_PERIODS:
+            return
+        gaps = np.diff(self._returns)
+        self._returns = None  # checked once
+        if (gaps < dt / 2).all():
+            self.pace = True
+            if self.warn is not None:
+                name = getattr(self.robot, "identity", "") or type(self.robot).__name__
+                self.warn(f"warning: {name} says it waits out its periods (paces_periods) "
+                          f"but its first {PACING_CHECK_PERIODS} steps returned "
+                          f"{float(np.median(gaps)) * 1e3:.2f} ms apart (median) for a "
+                          f"{dt * 1e3:g} ms period: the session paces them from now on")
 
 
 class DeadlinePolicy:

@@ -328,7 +328,9 @@ def run_session(args: argparse.Namespace, inputs: SessionInputs, status: StatusL
             if pace:
                 status.message(f"servo: {args.backend} does not wait out its periods: the "
                                f"session does ({args.dt * 1e3:g} ms)")
-            limited = LimitedRobot(robot, limits, q0, pace=pace)
+            limited = LimitedRobot(robot, limits, q0, pace=pace,
+                                   check_pacing=not getattr(robot, "simulated", False),
+                                   warn=status.message)
             guard.in_loop = True  # from here the first signal waits for the next period
             servo_loop(limited, sensor, inputs.controller, inputs.goal, inputs.geometry,
                        args.dt, args.max_steps, args.tolerance_mm * 1e-3,

@@ -13,7 +13,7 @@ import pytest
 
 from benchmarks.robot import servo
 from benchmarks.robot.exits import ServoExit
-from benchmarks.robot.limits import LimitedRobot, SessionLimits
+from benchmarks.robot.limits import PACING_CHECK_PERIODS, LimitedRobot, SessionLimits
 from hexapod.actuation import Actuation
 from hexapod.backends import rate
 from hexapod.backends.sim import SimulatedRobot
@@ -72,3 +72,54 @@ def test_a_servo_session_on_an_unpaced_plugin_keeps_the_period(
     t = np.array([p["t_s"] for p in periods(out)])
     assert len(t) == 12
     assert np.median(np.diff(t)) >= 0.95 * DT  # one period of wall time per command
+
+
+def test_the_link_time_of_a_paced_backend_is_the_time_its_step_took() -> None:
+    """A plugin reports no round trip (0) while its step takes 12 ms: the period's link
+    time is what the step took, not 0 (a late period would blame the compute)."""
+    class Busy(UnpacedRobot):
+        def step(self, velocities: np.ndarray, dt: float):  # type: ignore[no-untyped-def]
+            time.sleep(0.012)
+            return super().step(velocities, dt)
+
+    robot = Busy(deltalab())
+    assert robot.apply(np.zeros(6), Actuation.VELOCITY, DT).round_trip_s == 0.0
+    limited = LimitedRobot(robot, SessionLimits(max_speed=0.01), robot.measured_lengths(),
+                           pace=True)
+    bs = limited.apply(np.zeros(6), Actuation.VELOCITY, DT)
+    assert 0.012 <= bs.round_trip_s < DT
+
+
+def test_a_backend_that_claims_to_pace_and_does_not_is_paced(
+        monkeypatch: pytest.MonkeyPatch) -> None:
+    """``paces_periods`` True but returning at once: after five steps the session warns,
+    naming the backend and the gaps, and waits out the periods from then on; a backend
+    that does keep its periods is not warned about nor paced again."""
+    class Claims(UnpacedRobot):
+        paces_periods = True
+
+    warned: list[str] = []
+    robot = Claims(deltalab())
+    limited = LimitedRobot(robot, SessionLimits(max_speed=0.01), robot.measured_lengths(),
+                           check_pacing=True, warn=warned.append)
+    for _ in range(PACING_CHECK_PERIODS + 1):
+        limited.apply(np.zeros(6), Actuation.VELOCITY, DT)
+    assert len(warned) == 1 and "Claims says it waits out its periods" in warned[0]
+    assert f"for a {DT * 1e3:g} ms period: the session paces them" in warned[0]
+    t0 = time.perf_counter()
+    for _ in range(3):
+        limited.apply(np.zeros(6), Actuation.VELOCITY, DT)
+    assert time.perf_counter() - t0 >= 2 * DT  # paced now (the first on the new grid)
+
+    class Keeps(Claims):
+        def step(self, velocities: np.ndarray, dt: float):  # type: ignore[no-untyped-def]
+            time.sleep(dt)
+            return super().step(velocities, dt)
+
+    warned.clear()
+    robot = Keeps(deltalab())
+    limited = LimitedRobot(robot, SessionLimits(max_speed=0.01), robot.measured_lengths(),
+                           check_pacing=True, warn=warned.append)
+    for _ in range(PACING_CHECK_PERIODS + 2):
+        limited.apply(np.zeros(6), Actuation.VELOCITY, DT)
+    assert warned == [] and not limited.pace and limited.rate is None
