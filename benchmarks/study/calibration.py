@@ -51,13 +51,47 @@ def calibration_hook(sc: Scenario) -> CalibrationHook | None:
 
         return from_file
 
+    user: tuple[Any, Any] | None = None  # (nominal robot, the user's camera) for images
+    if rendered(sc):
+        from benchmarks.sim.world import estimated_camera
+        from benchmarks.study.provenance import scenario_setup
+
+        _, nominal, _, camera = scenario_setup(sc)
+        user = nominal, estimated_camera(camera,
+                                         sc.calibration_error.at_scale().distortion_percent)
+
     def calibrate(world: Any, rng: np.random.Generator) -> tuple[np.ndarray,
                                                                 dict[str, float]]:
         from vision.calibration import calibrate_in_world
 
-        return calibrate_in_world(world.geometry, world.camera, sc.calibration, sc.noise, rng)
+        data = None if user is None else image_observations(
+            sc, world, user[0], user[1], sc.calibration.configurations, rng)
+        return calibrate_in_world(world.geometry, world.camera, sc.calibration, sc.noise, rng,
+                                  data)
 
     return calibrate
+
+
+def rendered(sc: Scenario) -> bool:
+    """The scenario's calibration observes rendered images: its sensor renders them
+    (``[sensor] kind = "image"``) and its ``[calibration]`` sets no ``noise_deg`` (which
+    asks for the rotation noise model instead)."""
+    return sc.sensor == "image" and sc.calibration.noise_deg is None
+
+
+def image_observations(sc: Scenario, world: Any, nominal: Any, user_camera: Any,
+                       configurations: str, rng: np.random.Generator) -> Any:
+    """The calibration observations of ``world`` through the scenario's rendered images
+    (its background, blur and pixel noise), read with the user's camera model
+    ``user_camera`` and the nominal robot ``nominal`` as a run's image sensor reads them
+    (:func:`vision.calibration.collect.collect_image_observations`)."""
+    from vision.calibration import collect_image_observations
+    from vision.image_sensor import ImageSensor
+
+    sensor = ImageSensor(world.camera, user_camera, world.geometry, rng=rng,
+                         background=sc.image.background, blur_px=sc.image.blur_px,
+                         noise_std=sc.image.noise_std, estimated_geometry=nominal)
+    return collect_image_observations(sensor, world.geometry, configurations, rng)
 
 
 def load_calibrated_base_points(path: str | Path) -> np.ndarray:
@@ -156,7 +190,10 @@ def run_calibration(sc: Scenario, out: Path, configurations: str | None = None,
             world = setup.world
             rng = trial_rng(point.seed, k, 3)
             noise = point.noise
-            if cal_cfg.noise_deg is None and noise.model == "pixel":
+            if rendered(replace(point, calibration=cal_cfg)):
+                data = image_observations(point, world, setup.nominal_geometry,
+                                          setup.estimated_camera, cal_cfg.configurations, rng)
+            elif cal_cfg.noise_deg is None and noise.model == "pixel":
                 data = collect_pixel_observations(world.geometry, world.camera,
                                                   cal_cfg.configurations, noise.pixel_sigma_px,
                                                   noise.points_per_edge, rng,

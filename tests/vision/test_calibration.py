@@ -442,3 +442,24 @@ def test_calibration_study_command(tmp_path: Path, capsys: pytest.CaptureFixture
     assert [r["noise_deg"] for r in table["results"]] == [0.01, 0.05, 0.1]
     assert all(r["repetitions"] == 3 for r in table["results"])
     assert table["results"][0]["max_error_mm"] < table["results"][2]["max_error_mm"]
+
+
+def test_image_observations_measure_the_legs_edges(geometry: HexapodGeometry) -> None:
+    """Calibration observations through rendered images (0.8 px blur, no pixel noise):
+    the edges found are those the geometry says are visible (a few more, partly seen),
+    their normals within hundredths of a degree of the exact ones, the lengths the true
+    robot's."""
+    from vision.calibration import collect_image_observations
+    from vision.image_sensor import ImageSensor
+
+    cam = front_camera(geometry)
+    sensor = ImageSensor(cam, cam, geometry, rng=0, blur_px=0.8, noise_std=0.0)
+    img = collect_image_observations(sensor, geometry, "extremal", 0)
+    exact = collect_observations(geometry, cam, "extremal", None, 0)
+    both = img.edge_visible & exact.edge_visible
+    assert both.sum() >= 0.95 * exact.edge_visible.sum()
+    cos = np.abs(np.sum(img.normals[both] * exact.normals[both], axis=-1))
+    angle = np.degrees(np.arccos(np.clip(cos, -1.0, 1.0)))
+    assert np.median(angle) < 0.02 and angle.max() < 0.2
+    assert np.isnan(img.normals[~img.edge_visible]).all()
+    np.testing.assert_array_equal(img.lengths, exact.lengths)

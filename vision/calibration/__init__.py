@@ -24,6 +24,7 @@ reports.
 from vision.calibration.collect import (
     ConfigurationsSpec,
     NoiseFunction,
+    collect_image_observations,
     collect_observations,
     collect_pixel_observations,
     configuration_poses,
@@ -56,7 +57,8 @@ __all__ = [
     "WARN_SINGULAR_RATIO", "BaseCalibration", "CalibrationData", "CalibrationResult",
     "ConfigurationsSpec", "Method", "NoiseFunction", "StudyResult", "Weight", "calibrate",
     "calibrate_base_points", "calibrate_in_world", "calibration_study",
-    "check_conditioning_thresholds", "collect_observations", "collect_pixel_observations",
+    "check_conditioning_thresholds", "collect_image_observations", "collect_observations",
+    "collect_pixel_observations",
     "configuration_poses", "error_summary", "point_errors", "rigid_fit", "rotation_noise",
     "scale_correction",
 ]

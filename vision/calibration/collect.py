@@ -11,7 +11,7 @@ from typing import Any
 import numpy as np
 
 from hexapod.geometry import HexapodGeometry
-from hexapod.kinematics import Transform, legs_in_frame
+from hexapod.kinematics import Transform, inverse_kinematics, legs_in_frame
 from hexapod.workspace import extremal_configurations, sample_poses
 from vision import noise as vision_noise
 from vision.calibration.data import CalibrationData
@@ -123,6 +123,34 @@ def collect_observations(
     if noise is not None:
         normals = np.where(visible[..., None], noise(np.nan_to_num(normals), gen), np.nan)
     return CalibrationData(normals, visible, lengths)
+
+
+def collect_image_observations(
+    sensor: Any,
+    geometry: HexapodGeometry,
+    configurations: ConfigurationsSpec = "extremal",
+    rng: np.random.Generator | int | None = None,
+) -> CalibrationData:
+    """The observations of a calibration run through rendered images: each configuration
+    rendered, its leg edges detected and their normals fitted by ``sensor`` (a
+    :class:`vision.image_sensor.ImageSensor`: its detector reads the image through the
+    user's camera model, from the nominal robot's prediction, not tracked from the
+    previous configuration), the leg lengths those of the true robot (the encoders).
+
+    Args:
+        sensor: Renders and measures a pose: ``sensor.measure(rotation, translation)``
+            with ``.normals`` (6, 2, 3) and ``.edge_visible`` (6, 2).
+        geometry: The TRUE robot (its lengths at each configuration).
+        configurations: See :func:`configuration_poses`.
+        rng: Generator or seed (random configurations; the pixel noise is the sensor's).
+    """
+    gen = np.random.default_rng(rng)
+    R, t = configuration_poses(geometry, configurations, gen)
+    measured = [sensor.measure(R[k], t[k]) for k in range(len(R))]
+    visible = np.array([m.edge_visible for m in measured], bool)
+    normals = np.where(visible[..., None], np.array([m.normals for m in measured], float),
+                       np.nan)
+    return CalibrationData(normals, visible, inverse_kinematics(geometry, R, t))
 
 
 def collect_pixel_observations(

@@ -156,6 +156,7 @@ def calibrate_in_world(
     calibration: Any,
     noise: Any,
     rng: np.random.Generator,
+    data: CalibrationData | None = None,
 ) -> tuple[np.ndarray, dict[str, float]]:
     """Calibrate the base points in a simulated world (the benchmark's scenario option).
 
@@ -170,6 +171,9 @@ def calibrate_in_world(
         noise: The scenario's ``[noise]`` settings (``model``, ``amplitude_deg``), used
             when ``calibration.noise_deg`` is None.
         rng: Generator (configurations and noise).
+        data: Observations measured elsewhere (rendered images:
+            :func:`vision.calibration.collect.collect_image_observations`), used as they
+            are; None: simulated here with ``noise``.
 
     Returns:
         The estimated base points (6, 3) in the true camera frame [m], and a summary
@@ -186,11 +190,11 @@ def calibrate_in_world(
     the same pixel noise as the control images (:func:`collect_pixel_observations`).
     """
     amplitude = calibration.noise_deg
-    if amplitude is None and noise.model == "pixel":
+    if data is None and amplitude is None and noise.model == "pixel":
         data = collect_pixel_observations(geometry, camera, calibration.configurations,
                                           noise.pixel_sigma_px, noise.points_per_edge, rng,
                                           getattr(noise, "outlier_fraction", 0.0))
-    else:
+    elif data is None:
         if amplitude is None:
             amplitude = noise.amplitude_deg if noise.model == "rotation" else 0.0
         model = rotation_noise(float(amplitude)) if amplitude else None

@@ -49,6 +49,24 @@ def test_noisy_calibration_sweeps_and_reports_errors(tmp_path: Path) -> None:
     assert doc["max_error_mm"] >= max(p["max_error_mm"] for p in doc["points"]) - 1e-12
 
 
+def test_an_image_scenario_calibrates_from_its_rendered_images(tmp_path: Path) -> None:
+    """``[sensor] kind = "image"``: the calibration reads rendered images (their edges'
+    bias makes millimetres of the poorly conditioned legs), where it used to take the
+    exact normals of the noise model ``none`` and report a perfect calibration;
+    ``[calibration] noise_deg`` still asks for the noise model (exact at 0)."""
+    errors = {}
+    for name, extra in (("images", ""), ("model", "[calibration]\nnoise_deg = 0.0\n")):
+        path = tmp_path / f"{name}.toml"
+        path.write_text('name = "cal-images"\nseed = 4\ntrials = 2\ncontrollers = '
+                        '["leg-edge"]\n[sensor]\nkind = "image"\n[noise]\nmodel = "none"'
+                        f'\n[task]\nmax_steps = 60\n{extra}')
+        out = tmp_path / name
+        assert cli_main(["calibrate", str(path), "--out", str(out)]) == 0
+        errors[name] = json.loads((out / "calibration.json").read_text())["max_error_mm"]
+    assert errors["model"] < 1e-6
+    assert 0.1 < errors["images"] < 50.0
+
+
 @pytest.mark.slow
 def test_run_with_a_calibration_file(tmp_path: Path) -> None:
     cal = tmp_path / "cal"
