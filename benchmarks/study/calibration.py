@@ -348,10 +348,14 @@ def _with_signs(given: Any, solve: Callable[[Any], Any], nominal_points: np.ndar
     :data:`SIGN_RESIDUAL` radii) and, for a perspective camera, its base points lie in
     front of it: a nominal camera pose, however wrong, never turns a consistent file.
     A file whose every sign is reversed agrees too, with the points mirrored through the
-    camera centre (behind a perspective camera): reversed back. A file whose equations
-    disagree (signs mixed): each normal oriented by the nominal base points (camera frame
-    [m]), then by that solution's estimates; the candidate taken is one whose equations
-    agree, in front, the nearest to the nominal points, else the file's."""
+    camera centre (behind a perspective camera): reversed back. A camera that sees all
+    around (omnidirectional, fisheye) has no "in front": of a consistent file and its
+    mirror image, the one nearer the nominal points is taken (the mirror lies twice the
+    base points' distance from the camera away, half a metre on the DeltaLab). A file
+    whose equations disagree (signs mixed): each normal oriented by the nominal base
+    points (camera frame [m]), then by that solution's estimates; the candidate taken is
+    one whose equations agree, in front, the nearest to the nominal points, else the
+    file's."""
     limit = SIGN_RESIDUAL * leg_radius
 
     def agrees(res: Any) -> bool:
@@ -360,13 +364,21 @@ def _with_signs(given: Any, solve: Callable[[Any], Any], nominal_points: np.ndar
     def in_front(res: Any) -> bool:
         return not perspective or float(np.median(res.linear.base_points[:, 2])) > 0
 
+    def off(res: Any) -> float:  # the median distance from the nominal points [m]
+        return float(np.median(np.linalg.norm(res.linear.base_points - nominal_points,
+                                              axis=1)))
+
     first = solve(given)
-    if agrees(first) and in_front(first):
+    if agrees(first) and perspective and in_front(first):
         return first, given
-    if agrees(first):  # every sign reversed: the mirror image behind the camera
+    if agrees(first):  # every sign reversed: the mirror image through the camera centre
         reversed_ = replace(given, normals=-np.asarray(given.normals, dtype=float))
         res = solve(reversed_)
-        return (res, reversed_) if agrees(res) and in_front(res) else (first, given)
+        if not agrees(res):
+            return first, given
+        if perspective:
+            return (res, reversed_) if in_front(res) else (first, given)
+        return (res, reversed_) if off(res) < off(first) else (first, given)
     candidates = []
     points = nominal_points
     for _ in range(2):
@@ -377,8 +389,7 @@ def _with_signs(given: Any, solve: Callable[[Any], Any], nominal_points: np.ndar
     good = [c for c in candidates if agrees(c[0]) and in_front(c[0])]
     if not good:
         return first, given
-    return min(good, key=lambda c: float(np.median(np.linalg.norm(
-        c[0].linear.base_points - nominal_points, axis=1))))
+    return min(good, key=lambda c: off(c[0]))
 
 
 def _oriented(data: Any, points: np.ndarray) -> Any:

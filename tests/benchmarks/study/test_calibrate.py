@@ -214,6 +214,35 @@ def test_edge_normals_of_either_sign_calibrate_alike_and_another_frame_is_said(
     assert "the observations do not agree with one base point per leg" in err, err
 
 
+def test_an_omnidirectional_file_of_reversed_signs_is_reversed_back(tmp_path: Path) -> None:
+    """The omnidirectional camera sees all around: a file with every sign reversed agrees
+    as well as the right one, its base points mirrored through the camera centre (half a
+    metre off). The one nearer the nominal points is taken: it was the mirror, exit 0."""
+    from hexapod import deltalab
+    from vision.calibration import collect_observations
+    from vision.cameras import omni_camera
+
+    cam = omni_camera(deltalab())
+    data = collect_observations(deltalab(), cam, "random:30", None, 5)
+    truth = cam.camera_from_base.apply(deltalab().base_points)
+    doc = json.loads(json.dumps(data.to_dict()))
+    scenario = tmp_path / "omni.toml"
+    scenario.write_text('name = "omni-cal"\nseed = 4\ntrials = 2\ncontrollers = '
+                        '["leg-edge"]\n[camera]\npreset = "omni"\n[noise]\nmodel = "none"\n'
+                        '[task]\nmax_steps = 60\n')
+    for name, sign in (("kept", 1.0), ("reversed", -1.0)):
+        doc["normals"] = (sign * np.asarray(data.to_dict()["normals"], dtype=float)).tolist()
+        obs = tmp_path / f"{name}.json"
+        obs.write_text(json.dumps(doc))
+        out = tmp_path / name
+        assert cli_main(["calibrate", str(scenario), "--out", str(out),
+                         "--observations", str(obs)]) == 0
+        np.testing.assert_allclose(load_calibrated_base_points(out / "calibrated.toml"),
+                                   truth, atol=1e-8)
+        flipped = json.loads((out / "calibration.json").read_text())["normals_flipped"]
+        assert flipped == (0 if sign > 0 else int(data.edge_visible.sum()))
+
+
 @pytest.mark.slow
 def test_ill_conditioned_calibration_is_refused_or_marked(tmp_path: Path,
                                                          caplog: pytest.LogCaptureFixture
