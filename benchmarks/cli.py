@@ -239,7 +239,7 @@ def build_parser(commands: set[str] | None = None) -> argparse.ArgumentParser:
     s.add_argument("scenario", metavar="SCENARIO")
     s.add_argument("--out", required=True, action=OutputDir, help="output directory")
     s.add_argument("--configurations", help="extremal (default) or random:N")
-    s.add_argument("--repeat", type=int, default=1, help="repetitions (new noise each)")
+    s.add_argument("--repeat", type=int, help="repetitions (new noise each; default 1)")
     s.add_argument("--solver", choices=["lstsq", "irls"], help="default: the scenario's")
     s.add_argument("--correct-scale", action="store_true",
                    help="divide the estimates by the measured scale (uncertain leg radius)")

@@ -32,6 +32,15 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
     if args.observations:
         from benchmarks.study.calibration import calibrate_from_file
 
+        simulated = [f"--{name} {value}" for name, value in (
+            ("configurations", args.configurations), ("repeat", args.repeat),
+            ("seed", args.seed)) if value is not None]
+        if simulated:  # (they were dropped without a word)
+            raise BenchmarkError(
+                f"{', '.join(simulated)}: options of the simulated calibration (its "
+                f"configurations, repetitions and draws); --observations {args.observations} "
+                "is calibrated once from the configurations it holds: drop them")
+
         doc = calibrate_from_file(sc, Path(args.observations), out, args.solver,
                                   args.correct_scale, overwrite=args.overwrite)
         res = doc["result"]
@@ -73,14 +82,15 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
         from benchmarks.study.scenario_checks import check_configurations
 
         check_configurations(args.configurations, "--configurations")
-    if args.repeat < 1:
-        raise BenchmarkError(f"--repeat {args.repeat}: at least 1 repetition")
+    repeat = 1 if args.repeat is None else args.repeat
+    if repeat < 1:
+        raise BenchmarkError(f"--repeat {repeat}: at least 1 repetition")
     t0 = time.perf_counter()
-    doc = run_calibration(sc, out, args.configurations, args.repeat, args.solver,
+    doc = run_calibration(sc, out, args.configurations, repeat, args.solver,
                           args.correct_scale, overwrite=args.overwrite)
     con = console()
     t = Table(title=f"Base-point calibration ({sc.name}, {doc['configurations']}, "
-                    f"{doc['solver']}, {args.repeat} repetition(s))")
+                    f"{doc['solver']}, {repeat} repetition(s))")
     for col in ("sweep", "median error mm", "max error mm", "max component mm",
                 "worst point median mm", "min singular ratio", "ill-conditioned legs"):
         t.add_column(col, justify="left" if col == "sweep" else "right")

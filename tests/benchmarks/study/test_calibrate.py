@@ -127,6 +127,14 @@ def test_calibrate_from_a_user_observation_file(
     points = load_calibrated_base_points(out / "calibrated.toml")
     truth = cam.camera_from_base.apply(deltalab().base_points)
     np.testing.assert_allclose(points, truth, atol=1e-8)
+    # the simulated calibration's options: refused, not dropped without a word
+    capsys.readouterr()
+    assert cli_main(["calibrate", str(_scenario(tmp_path)), "--out", str(tmp_path / "o7"),
+                     "--observations", str(obs), "--repeat", "7", "--configurations",
+                     "random:5"]) == 2
+    err = " ".join(capsys.readouterr().err.split())
+    assert "--configurations random:5, --repeat 7: options of the simulated calibration" \
+        in err and not (tmp_path / "o7").exists()
     broken = tmp_path / "broken.json"
     broken.write_text(obs.read_text().replace('"lengths_mm"', '"length_mm"'))
     assert cli_main(["calibrate", str(_scenario(tmp_path)), "--out", str(out),
