@@ -189,8 +189,9 @@ def build_parser(commands: set[str] | None = None) -> argparse.ArgumentParser:
     s.add_argument("--max-steps", type=int, help="override the step budget of each trial")
     s.add_argument("--calibration", metavar="FILE",
                    help="controllers use the base points of this calibrated.toml (the "
-                        "vision laws and the predictive ones; model-based and joint-space "
-                        "ignore them); refused if made with another robot or camera")
+                        "laws that see the legs; the encoder and pose laws ignore them: "
+                        "docs/calibration.md); refused if made with another robot or "
+                        "camera")
     s.add_argument("--allow-foreign-calibration", action="store_true",
                    help="use a calibration file made with another robot or camera anyway "
                         "(warned)")
