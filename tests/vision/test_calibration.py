@@ -377,6 +377,14 @@ def test_file_errors(tmp_path: Path, geometry: HexapodGeometry) -> None:
         _load(tmp_path, t)
     del t["edge_visible"]  # without the mask, a null normal is a hidden edge
     assert not _load(tmp_path, t).edge_visible[2, 3, 1]
+    t["normals"][2][3][1] = [None, None, None]  # three nulls alike
+    assert not _load(tmp_path, t).edge_visible[2, 3, 1]
+    # one coordinate missing: refused (it was taken for an edge not seen, silently)
+    t["normals"][0][5][1] = [0.8, None, -0.05]
+    with pytest.raises(ConfigFileError, match=r"configuration 0 leg 5 edge 1: normal "
+                       r"\[0.8, null, -0.05\] lacks a coordinate") as exc:
+        _load(tmp_path, t)
+    assert exc.value.key == "normals"
 
     t = _table(geometry)
     t["format"] = "something-else"

@@ -122,6 +122,13 @@ class CalibrationData:
         if not np.all(np.isfinite(lengths)):
             raise ConfigFileError(path, "contains NaN or inf", key="lengths_mm")
         given = np.all(np.isfinite(normals), axis=-1)
+        partial = np.argwhere(np.any(np.isfinite(normals), axis=-1) & ~given)
+        if len(partial):  # (it was taken for an edge not seen, without a word)
+            k, i, j = partial[0]
+            raise ConfigFileError(path, f"configuration {k} leg {i} edge {j}: normal "
+                                  f"{_coordinates(normals[k, i, j])} lacks a coordinate (null, "
+                                  "NaN or inf); an edge not seen is null, or three nulls",
+                                  key="normals")
         if "edge_visible" in table:
             raw = table["edge_visible"]
             visible = np.asarray(raw)
@@ -140,8 +147,9 @@ class CalibrationData:
         if len(bad):
             k, i, j = bad[0]
             raise ConfigFileError(path, f"configuration {k} leg {i} edge {j}: normal of norm "
-                                  f"{norms[k, i, j]:.6g}, expected a unit vector",
-                                  key="normals")
+                                  f"{norms[k, i, j]:.9g}, expected a unit vector (within "
+                                  f"{UNIT_TOLERANCE:g}: normalise them, or write them to 7 "
+                                  "significant digits or more)", key="normals")
         return cls(normals, visible, lengths, source=path)
 
     @classmethod
@@ -195,6 +203,11 @@ def _read_array(table: Mapping[str, Any], key: str, path: str,
     if not allow_none and not np.all(np.isfinite(arr)):
         raise ConfigFileError(path, "contains NaN or inf", key=key)
     return arr
+
+
+def _coordinates(n: np.ndarray) -> str:
+    """A normal's coordinates as a file shows them (``null`` for a missing one)."""
+    return "[" + ", ".join("null" if not np.isfinite(v) else f"{v:g}" for v in n) + "]"
 
 
 def _none_to_nan(x: Any, depth: int) -> Any:
