@@ -39,6 +39,33 @@ def load_toml(path: str | Path) -> dict[str, Any]:
         raise ConfigFileError(str(p), f"cannot be read: {exc}") from None
 
 
+#: Keys only one kind of the project's files has: a file given where another kind is
+#: meant (a robot file named as the camera file) is told what it is.
+KIND_MARKERS = {"robot file": ("base_points_mm", "platform_points_mm"),
+                "camera file": ("fx_px", "opencv", "camera_from_base"),
+                "scenario": ("controllers", "task", "noise")}
+#: Where each kind of file is given.
+KIND_PLACES = {"robot file": "[robot] geometry in a scenario, or --geometry",
+               "camera file": "[camera] file in a scenario, or --camera-file",
+               "scenario": "the SCENARIO of hexapod-bench run or check"}
+
+
+def check_file_kind(table: Mapping[str, Any], path: str, expected: str) -> None:
+    """Refuse a file of another kind than ``expected`` (a key of :data:`KIND_MARKERS`),
+    naming what it is and where it goes.
+
+    Raises:
+        ConfigFileError: The table has another kind's marker keys and none of its own.
+    """
+    if any(k in table for k in KIND_MARKERS[expected]):
+        return
+    for kind, markers in KIND_MARKERS.items():
+        found = [k for k in markers if k in table]
+        if kind != expected and found:
+            raise ConfigFileError(path, f"a {kind} (it has '{found[0]}'), not a {expected}: "
+                                  f"a {kind} goes to {KIND_PLACES[kind]}", key=found[0])
+
+
 def suggest(name: str, candidates: Iterable[str]) -> str | None:
     """Return the candidate closest to ``name``, if one is close enough."""
     match = difflib.get_close_matches(name, list(candidates), n=1, cutoff=0.6)

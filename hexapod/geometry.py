@@ -17,7 +17,7 @@ from typing import Any
 import numpy as np
 import tomli_w
 
-from hexapod.config import check_keys, get_matrix, get_number, load_toml
+from hexapod.config import check_file_kind, check_keys, get_matrix, get_number, load_toml
 from hexapod.dynamics.drives import DriveParameters
 from hexapod.dynamics.inertia import InertiaParameters
 from hexapod.exceptions import ConfigFileError, GeometryError, InertiaError
@@ -209,6 +209,7 @@ class HexapodGeometry:
                 units (``docs/dynamics.md``), keys absent from them keep their defaults.
             path: Source name for error messages.
         """
+        check_file_kind(table, path, "robot file")
         check_keys(
             table,
             cls._KEYS,

@@ -155,10 +155,35 @@ def load_scenario_file(text: str) -> Any | None:
     if path.suffix.lower() in OPENCV_EXTENSIONS:
         return None
     table = load_toml(path)
-    if "controllers" in table or ("name" in table and "base_points_mm" not in table
-                                  and not {"fx_px", "opencv", "kind"} & set(table)):
-        return load_scenario(path)
-    return None
+    return load_scenario(path) if file_kind(table) == "scenario" else None
+
+
+def file_kind(table: dict[str, Any]) -> str | None:
+    """What a TOML file is: ``"scenario"``, ``"robot"``, ``"camera"`` or ``"calibration"``
+    (``calibrate``'s output), by its keys. A scenario has ``controllers``; otherwise each
+    key that is one of a kind's own keys, or close to one (a typo: ``base_point_mm``),
+    counts for that kind (``name`` and ``description`` for none), and the kind with the
+    most wins; None when none does."""
+    from benchmarks.study.scenario import SCENARIO_KEYS
+    from hexapod.config import suggest
+    from vision.cameras.files.project import CAMERA_KEYS, OPENCV_TABLE_KEYS
+
+    if "controllers" in table:
+        return "scenario"
+    if "base_points_camera_mm" in table:
+        return "calibration"
+    shared = {"name", "description"}
+    kinds = {"scenario": set(SCENARIO_KEYS) - shared,
+             "robot": set(HexapodGeometry._KEYS) - shared,
+             "camera": (set(CAMERA_KEYS) | set(OPENCV_TABLE_KEYS)) - shared}
+    scores = dict.fromkeys(kinds, 0)
+    for key in set(table) - shared:
+        for kind, keys in kinds.items():
+            scores[kind] += key in keys or suggest(key, keys) is not None
+    ranked = sorted(scores.items(), key=lambda kv: -kv[1])
+    if ranked[0][1] == 0 or ranked[0][1] == ranked[1][1]:
+        return "scenario" if "name" in table and not ranked[0][1] else None
+    return ranked[0][0]
 
 
 def load_setup(text: str) -> Setup:
@@ -183,7 +208,8 @@ def load_setup(text: str) -> Setup:
         table: dict[str, Any] = {"opencv": str(path)}
     else:
         table = load_toml(path)
-    if "base_points_mm" in table:
+    kind = file_kind(table)
+    if kind == "robot":
         g = HexapodGeometry.from_toml(path)
         cam = camera_preset("front", g)
         return Setup("robot", g, cam, _default_task(), Where(
@@ -194,7 +220,7 @@ def load_setup(text: str) -> Setup:
             ["camera: the front preset, placed for this robot (a scenario names yours)"], [])
     if path.suffix.lower() in OPENCV_EXTENSIONS:
         return calibration_setup(path)
-    if "base_points_camera_mm" in table:  # calibrate's output: read (checked), then said
+    if kind == "calibration":  # calibrate's output: read (checked), then said
         from benchmarks.study.calibration import read_calibrated_file
 
         made_with = read_calibrated_file(path)[1]
@@ -207,7 +233,7 @@ def load_setup(text: str) -> Setup:
             + "), readable; it is not a setup to check: give it to `hexapod-bench run "
             "--calibration FILE` or `servo --calibration FILE`, or name it in a scenario's "
             "[calibration] method = \"file\", file = \"...\" (docs/calibration.md)")
-    if {"fx_px", "opencv", "kind", "camera_from_base"} & set(table):
+    if kind == "camera":
         from hexapod.geometry import deltalab
 
         cam = load_camera(path)

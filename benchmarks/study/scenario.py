@@ -59,9 +59,10 @@ __all__ = [
 
 log = logging.getLogger(__name__)
 
-_TOP = ("name", "description", "seed", "trials", "controllers", "controller_options", "robot",
-        "camera", "sensor", "noise", "calibration_error", "calibration", "task", "reference",
-        "clock", "drives", "payload")
+#: The top-level keys of a scenario file.
+SCENARIO_KEYS = ("name", "description", "seed", "trials", "controllers", "controller_options",
+                 "robot", "camera", "sensor", "noise", "calibration_error", "calibration",
+                 "task", "reference", "clock", "drives", "payload")
 
 
 def _section(table: dict[str, Any], key: str, path: str) -> dict[str, Any]:
@@ -163,9 +164,9 @@ def parse_scenario(table: dict[str, Any], path: str = "<dict>") -> Scenario:
     """
     table = copy.deepcopy(table)
     for key in table:
-        if key not in _TOP:
-            raise ScenarioError(path, f"unknown key; expected one of {', '.join(_TOP)}",
-                                key=key, suggestion=suggest(key, _TOP))
+        if key not in SCENARIO_KEYS:
+            raise ScenarioError(path, f"unknown key; expected one of {', '.join(SCENARIO_KEYS)}",
+                                key=key, suggestion=suggest(key, SCENARIO_KEYS))
     if "name" not in table:
         raise ScenarioError(path, "missing required key", key="name")
     name = _checked_name(_typed(table["name"], str, path, "name"), "scenario name", path,

@@ -378,6 +378,9 @@ class Camera(ABC):
         Called on :class:`Camera` the ``kind`` key chooses the model; called on a
         subclass, ``kind`` must match it (or be absent).
         """
+        from hexapod.config import check_file_kind
+
+        check_file_kind(table, path, "camera file")
         camera: Camera = _table_io["read"](table, path, None if cls is Camera else cls)
         return camera
 

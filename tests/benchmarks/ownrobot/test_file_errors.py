@@ -124,3 +124,46 @@ def test_missing_relative_file_gives_the_path_tried_and_the_rule(
     assert f"key '{section}'" in err
     assert f"tried {(folder / name).resolve()}" in err
     assert f"relative to the folder of the scenario file, {folder.resolve()}" in err
+
+
+def test_a_misspelt_robot_key_is_named_in_a_robot_file_checked_alone(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """``check`` on a robot file whose ``base_points_mm`` is misspelt or missing: it was
+    taken for a scenario (the scenario's keys listed, ``platform_points_mm`` blamed); it
+    is a robot file with the close key named."""
+    import tomli_w
+
+    table = own_robot().to_dict()
+    table["name"] = "mine"
+    points = table.pop("base_points_mm")
+    for name, key in (("typo", "base_point_mm"), ("api", "base_points"), ("none", None)):
+        t = dict(table) if key is None else dict(table, **{key: points})
+        robot = tmp_path / f"{name}.toml"
+        robot.write_text(tomli_w.dumps(t))
+        code, err = _run(["check", str(robot)], capsys)
+        err = " ".join(err.split())
+        assert code == 2, err
+        if key is None:
+            assert "key 'base_points_mm': missing required key" in err
+        else:
+            assert f"key '{key}': unknown key" in err
+            assert "(did you mean 'base_points_mm'?)" in err and "controllers" not in err
+
+
+def test_a_robot_file_named_as_the_camera_file_is_said_to_be_one(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """The robot and camera files swapped in a scenario: each is told what it is and where
+    it goes (it was an unknown-key error listing the other kind's keys)."""
+    from tests.benchmarks.ownrobot.robots import BLIND_CAMERA
+
+    own_robot().to_toml(tmp_path / "robot.toml")
+    (tmp_path / "camera.toml").write_text(BLIND_CAMERA)
+    code, err = _run(["check", str(write_study(tmp_path, "robot.toml", "robot.toml"))],
+                     capsys)
+    err = " ".join(err.split())
+    assert code == 2 and "robot.toml: key 'base_points_mm': a robot file (it has " \
+        "'base_points_mm'), not a camera file: a robot file goes to [robot] geometry" in err
+    code, err = _run(["check", str(write_study(tmp_path, "camera.toml", None))], capsys)
+    err = " ".join(err.split())
+    assert code == 2 and "camera.toml: key 'fx_px': a camera file (it has 'fx_px'), not " \
+        "a robot file: a camera file goes to [camera] file" in err
