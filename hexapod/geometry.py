@@ -20,7 +20,7 @@ import tomli_w
 from hexapod.config import check_file_kind, check_keys, get_matrix, get_number, load_toml
 from hexapod.dynamics.drives import DriveParameters
 from hexapod.dynamics.inertia import InertiaParameters
-from hexapod.exceptions import ConfigFileError, GeometryError, InertiaError
+from hexapod.exceptions import ConfigFileError, DriveError, GeometryError, InertiaError
 
 #: Minimum distance between two joints of the same plate [m].
 MIN_JOINT_SEPARATION = 1e-4
@@ -131,6 +131,7 @@ class HexapodGeometry:
         if not isinstance(drives, DriveParameters):
             raise GeometryError("drives", f"expected DriveParameters, got {drives!r}", src)
         object.__setattr__(self, "drives", drives)
+        _check_si_tables(self, src)
 
     def default_inertia(self) -> InertiaParameters:
         """The assumed inertial parameters sized on this robot (platform radius, leg
@@ -286,6 +287,28 @@ class HexapodGeometry:
 
 
 #: The file key of each field (errors name the key as written in the file).
+def _check_si_tables(g: HexapodGeometry, src: str | None) -> None:
+    """Refuse the SI tables' values no robot of this size has and a slip of units gives:
+    the platform's centre of mass more than ten times the robot's size from its centre
+    (millimetres in ``[inertia] platform_com``), an encoder coarser than a hundredth of the
+    stroke (micrometres in ``[drives] encoder_resolution``, which is in metres)."""
+    size = float(max(np.linalg.norm(g.base_points, axis=1).max(),
+                     np.linalg.norm(g.platform_points, axis=1).max()))
+    com = np.asarray(g.inertia.platform_com, dtype=float)
+    if float(np.linalg.norm(com)) > 10.0 * size:
+        raise InertiaError("inertia.platform_com", f"{com.tolist()} m is "
+                           f"{float(np.linalg.norm(com)):g} m from the platform's centre, more "
+                           f"than ten times the robot's size ({size * 1e3:.0f} mm): "
+                           "millimetres where metres are meant? ([inertia] is in SI units)",
+                           src)
+    span = g.stroke[1] - g.stroke[0]
+    for leg, x in enumerate(np.asarray(g.drives.encoder_resolution, dtype=float)):
+        if x > 0.01 * span:
+            raise DriveError("drives.encoder_resolution", f"leg {leg}: {x:g} m, coarser than "
+                             f"a hundredth of the stroke ({span * 10:.3g} mm): the key is in "
+                             "metres (a 1 um encoder is 1e-6)", src)
+
+
 _FILE_KEYS = {"base_points": "base_points_mm", "platform_points": "platform_points_mm",
               "stroke": "stroke_mm", "leg_radius": "leg_radius_mm",
               "max_speed": "max_speed_mm_s"}

@@ -354,12 +354,26 @@ def _legs_crossing(geometry: HexapodGeometry, R0: np.ndarray, t0: np.ndarray,
     return out
 
 
+#: The smallest radius [m] of a hexapod's base or platform joints (the smallest
+#: precision hexapods' are centimetres; points in metres give a fraction of a millimetre).
+MIN_JOINT_RADIUS = 0.002
+
+
 def _unit_slips(geometry: HexapodGeometry, where: Where) -> list[Problem]:
     """Warnings for values no hexapod has, which metres typed into a millimetre key
     give: a leg radius under 1 mm, a leg speed limit under 0.1 mm/s (slow precision
-    hexapods move at a fraction of a millimetre per second)."""
+    hexapods move at a fraction of a millimetre per second); and an error for joints
+    within :data:`MIN_JOINT_RADIUS` of their centre (the base's or the platform's points
+    in metres: no leg can reach them, every trial would fail)."""
     out = []
     robot = where.strokes.split(" in ", 1)[-1]  # the robot file
+    for key, points in (("base_points_mm", geometry.base_points),
+                        ("platform_points_mm", geometry.platform_points)):
+        radius = float(np.linalg.norm(points - points.mean(axis=0), axis=1).max())
+        if radius < MIN_JOINT_RADIUS:
+            out.append(Problem("error", f"the joints of {key} lie within "
+                               f"{radius * 1e3:.3g} mm of their centre: given in metres? "
+                               f"{key} is in millimetres; check {key} in {robot}", "robot"))
     if geometry.leg_radius < 1e-3:
         out.append(Problem("warning", f"leg radius {geometry.leg_radius * 1e3:g} mm: given "
                            "in metres? leg_radius_mm is in millimetres (the camera sees "

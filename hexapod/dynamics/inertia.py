@@ -165,10 +165,12 @@ class InertiaParameters:
         for part, hinge in (("body", "A_i"), ("rod", "B_i")):
             com = getattr(self, f"{part}_com")
             if not 0.0 <= com <= q_min:
+                hint = (f" (millimetres? [inertia] is in SI units: {com:g} mm is "
+                        f"{com * 1e-3:g} m)" if 0.0 <= com * 1e-3 <= q_min else "")
                 raise InertiaError(
                     f"inertia.{part}_com",
                     f"centre of mass {com} m from {hinge} is outside the leg: it must lie "
-                    f"between 0 and the shortest leg length q_min = {q_min} m", src)
+                    f"between 0 and the shortest leg length q_min = {q_min} m{hint}", src)
 
     def __eq__(self, other: object) -> bool:
         if not isinstance(other, InertiaParameters):

@@ -167,3 +167,46 @@ def test_a_robot_file_named_as_the_camera_file_is_said_to_be_one(
     err = " ".join(err.split())
     assert code == 2 and "camera.toml: key 'fx_px': a camera file (it has 'fx_px'), not " \
         "a robot file: a camera file goes to [camera] file" in err
+
+
+@pytest.mark.parametrize(("table", "key", "value", "fragment"), [
+    ("drives", "encoder_resolution", 1.0,
+     "drives.encoder_resolution: leg 0: 1 m, coarser than a hundredth of the stroke"),
+    ("inertia", "platform_com", [0.0, 0.0, 20.0],
+     "[0.0, 0.0, 20.0] m is 20 m from the platform's centre, more than ten times the "
+     "robot's size"),
+    ("inertia", "body_com", 171.0,
+     "(millimetres? [inertia] is in SI units: 171 mm is 0.171 m)"),
+])
+def test_millimetres_in_the_si_tables_are_refused(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str], table: str, key: str,
+        value: object, fragment: str) -> None:
+    """The SI tables' values a slip of units gives: check said 'The setup can run'
+    (encoder, platform centre of mass) and every trial failed, or named no unit."""
+    import tomli_w
+
+    t = own_robot().to_dict(dynamics=True)
+    t[table][key] = value
+    robot = tmp_path / "robot.toml"
+    robot.write_text(tomli_w.dumps(t))
+    code, err = _run(["check", str(robot)], capsys)
+    assert code == 2 and fragment in " ".join(err.split()), err
+
+
+def test_platform_points_in_metres_are_an_error_of_check(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """Platform joints a small fraction of a millimetre from their centre (as a small
+    platform's points in metres give), far enough apart for the joint-separation rule:
+    check said 'The setup can run' with hints at swapped rows and radians, and every
+    trial failed; now an error naming the key and the unit."""
+    import tomli_w
+
+    t = own_robot().to_dict()
+    t["platform_points_mm"] = (np.asarray(t["platform_points_mm"]) / 250).tolist()  # (apart)
+    robot = tmp_path / "robot.toml"
+    robot.write_text(tomli_w.dumps(t))
+    code = main(["check", str(robot)])
+    out = " ".join(capsys.readouterr().out.split())
+    assert code == 1
+    assert "error: the joints of platform_points_mm lie within" in out
+    assert "given in metres? platform_points_mm is in millimetres" in out
