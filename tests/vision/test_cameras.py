@@ -376,11 +376,27 @@ def test_toml_bad_input(tmp_path: Path, change: tuple[str, str], match: str) -> 
         Camera.from_toml(_write(tmp_path, text))
 
 
-def test_toml_bad_rotation_and_kind_mismatch(tmp_path: Path) -> None:
+def test_toml_bad_rotation_and_kind_mismatch(tmp_path: Path,
+                                            caplog: pytest.LogCaptureFixture) -> None:
     bad = _GOOD.replace("rotation_vector_deg = [0.0, 0.0, 90.0]",
                         "rotation_matrix = [[1, 0, 0], [0, 2, 0], [0, 0, 1]]")
-    with pytest.raises(CameraError, match="rotation"):
+    with pytest.raises(ConfigFileError, match="not a rotation matrix") as info:
         Camera.from_toml(_write(tmp_path, bad))
+    assert info.value.key == "camera_from_base.rotation_matrix"
+    mirror = bad.replace("[0, 2, 0]", "[0, -1, 0]")
+    with pytest.raises(ConfigFileError, match="a mirror"):
+        Camera.from_toml(_write(tmp_path, mirror))
+    # a rotation written to 3 decimals (as a datasheet prints it): its nearest rotation,
+    # said; it was refused at 1e-6
+    c, s_ = np.cos(np.radians(30.0)), np.sin(np.radians(30.0))
+    rounded = bad.replace("[[1, 0, 0], [0, 2, 0], [0, 0, 1]]",
+                          f"[[{c:.3f}, {-s_:.3f}, 0], [{s_:.3f}, {c:.3f}, 0], [0, 0, 1]]")
+    with caplog.at_level("WARNING"):
+        cam = Camera.from_toml(_write(tmp_path, rounded))
+    R = cam.camera_from_base.rotation
+    np.testing.assert_allclose(R.T @ R, np.eye(3), atol=1e-12)
+    np.testing.assert_allclose(R[:2, :2], [[c, -s_], [s_, c]], atol=1e-3)
+    assert "rotation_matrix is a rotation to" in caplog.text and "(rounded?)" in caplog.text
     with pytest.raises(ConfigFileError, match="cannot be loaded as PerspectiveCamera"):
         PerspectiveCamera.from_toml(_write(tmp_path, _GOOD))
     per = _GOOD.replace('kind = "unified"', 'kind = "perspective"')

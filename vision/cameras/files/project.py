@@ -26,6 +26,7 @@ when the OpenCV file does not (``omni_calibration.cpp``), and ``kind`` may be gi
 
 from __future__ import annotations
 
+import logging
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -36,6 +37,8 @@ from hexapod.exceptions import ConfigFileError
 from hexapod.kinematics import Transform
 from hexapod.se3 import exp_so3, log_so3
 from vision.cameras.fields import CameraFields
+
+log = logging.getLogger(__name__)
 
 if TYPE_CHECKING:
     from vision.cameras.base import Camera
@@ -106,12 +109,41 @@ def read_pose_table(table: dict[str, Any], path: str) -> Transform:
         raise ConfigFileError(path, "give rotation_vector_deg or rotation_matrix, not both",
                               key="camera_from_base")
     if "rotation_matrix" in pose:
-        R = get_matrix(pose, "rotation_matrix", (3, 3), path, pre)
+        R = _rotation_as_written(get_matrix(pose, "rotation_matrix", (3, 3), path, pre), path)
     elif "rotation_vector_deg" in pose:
         R = exp_so3(np.deg2rad(get_matrix(pose, "rotation_vector_deg", (3,), path, pre)))
     else:
         R = np.eye(3)
     return Transform(R, t)
+
+
+#: How far from orthonormal a file's ``rotation_matrix`` may be, written to a few
+#: decimals (3 decimals give about 5e-4): its nearest rotation is used, and said.
+ROUNDED_ROTATION = 2e-3
+
+
+def _rotation_as_written(R: np.ndarray, path: str) -> np.ndarray:
+    """A file's ``rotation_matrix``: as it is when a rotation to rounding (1e-9); the
+    nearest rotation (SVD, polar factor) of one rounded to a few decimals, logged with
+    the largest change; refused beyond :data:`ROUNDED_ROTATION` or when it mirrors."""
+    defect = float(np.abs(R.T @ R - np.eye(3)).max())
+    det = float(np.linalg.det(R))
+    if defect <= 1e-9 and det > 0:
+        return R
+    key = "camera_from_base.rotation_matrix"
+    if det <= 0:
+        raise ConfigFileError(path, f"det = {det:.6f}: a mirror (a left-handed frame?), not "
+                              "a rotation", key=key)
+    if defect > ROUNDED_ROTATION:
+        raise ConfigFileError(path, f"not a rotation matrix (|R^T R - I| = {defect:.2e}; one "
+                              "rounded to 3 decimals or more is taken, its nearest rotation "
+                              "used; or give rotation_vector_deg)", key=key)
+    U, _, Vt = np.linalg.svd(R)
+    nearest = U @ Vt
+    log.warning("%s: %s is a rotation to %.1e only (rounded?): its nearest rotation is used "
+                "(no element changed by more than %.1e)", path, key, defect,
+                float(np.abs(nearest - R).max()))
+    return np.asarray(nearest)
 
 
 def read_camera_table(table: dict[str, Any], path: str = "<dict>",
