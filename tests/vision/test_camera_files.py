@@ -109,12 +109,13 @@ def test_omni_file_of_omni_calibration_cpp(tmp_path: Path, fmt: str) -> None:
     path = _write(tmp_path / f"cam{ext}", _omni_calibration_cpp(), flags)
     assert path.read_text().startswith(header)
     # omni_calibration.cpp writes no image size: it must be given.
-    with pytest.raises(ConfigFileError, match=r"image_width.*image_size") as info:
+    with pytest.raises(ConfigFileError, match=r"image_width.*give width_px and height_px "
+                       r"beside it.*image_size=") as info:
         load_camera(path)
     assert info.value.key == "image_width" and info.value.path == str(path)
     cam = load_camera(path, camera_from_base=POSE, image_size=(640, 480))
     assert isinstance(cam, UnifiedCamera) and cam == _unified()
-    with pytest.raises(ConfigFileError, match=r"640x480.*image_size says 800x600"):
+    with pytest.raises(ConfigFileError, match=r"640x480.*width_px and height_px 800x600"):
         load_opencv_camera(_write(tmp_path / f"sized{ext}", {
             **_omni_calibration_cpp(), "image_width": 640, "image_height": 480}, flags),
             image_size=(800, 600))

@@ -148,7 +148,9 @@ def camera_from_calibration(cal: Calibration, camera_from_base: Transform | None
         CameraError: The camera is invalid (a lens parameter out of range...).
         DistortionError: The lens folds inside the image.
     """
-    width, height = calibration_size(cal, image_size, "image_size")
+    width, height = calibration_size(
+        cal, image_size, "width_px and height_px", " beside it (in a scenario's [camera] "
+        "table, or a camera file's table with opencv = ...; in Python, image_size=)")
     pose = Transform.identity() if camera_from_base is None else camera_from_base
     label = Path(cal.source).stem if name is None else name
     xi = 0.0 if cal.xi is None else cal.xi

@@ -306,9 +306,10 @@ def write_opencv_calibration(path: str | Path, K: np.ndarray, distortion: np.nda
 
 
 def calibration_size(cal: Calibration, given: tuple[int, int] | None,
-                     given_by: str) -> tuple[int, int]:
-    """The image size of a calibration: the file's, or ``given`` when the file has none
-    (``omni_calibration.cpp`` does not write it).
+                     given_by: str, where: str = "") -> tuple[int, int]:
+    """The image size of a calibration: the file's, or ``given`` (what gives it:
+    ``given_by``, found ``where``) when the file has none (``omni_calibration.cpp`` does
+    not write it).
 
     Raises:
         ConfigFileError: Neither gives it, or both give different sizes.
@@ -318,10 +319,10 @@ def calibration_size(cal: Calibration, given: tuple[int, int] | None,
             missing = "image_width" if cal.width is None else "image_height"
             raise ConfigFileError(cal.source, f"missing required key {missing} (the file "
                                               f"does not give the image size: give "
-                                              f"{given_by})", key=missing)
+                                              f"{given_by}{where})", key=missing)
         return int(given[0]), int(given[1])
     if given is not None and (int(given[0]), int(given[1])) != (cal.width, cal.height):
         raise ConfigFileError(cal.source, f"the file says {cal.width}x{cal.height} px, "
-                                          f"{given_by} says {given[0]}x{given[1]} px",
+                                          f"{given_by} {given[0]}x{given[1]} px",
                               key="image_width")
     return cal.width, cal.height
