@@ -189,7 +189,7 @@ def time_to_converge(rows: list[dict[str, Any]], level: float = stats.LEVEL,
     # where S is 0, as R's survfit has it (NA): an upper curve that is above one half
     # wherever it is defined never reaches it, and the interval's upper end is inf (with
     # every trial converged, reading S = 0 there closed the interval at the last trial's
-    # steps: 76 % coverage at 3 trials, 87 % at 4)
+    # steps: 76 % coverage at 3 trials, 89 % at 4)
     lo_band, hi_band = log_log_band(curve, level)
     lo_band = np.where(np.isnan(lo_band), s, lo_band)
     hi_band = np.where(np.isnan(hi_band) & (s > 0), s, hi_band)
