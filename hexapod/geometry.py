@@ -196,7 +196,8 @@ class HexapodGeometry:
         return HexapodGeometry(**kwargs)
 
     # ----------------------------------------------------------------- TOML
-    _KEYS = ("name", "base_points_mm", "platform_points_mm", "stroke_mm", "leg_radius_mm",
+    #: The keys of a robot file.
+    FILE_KEYS = ("name", "base_points_mm", "platform_points_mm", "stroke_mm", "leg_radius_mm",
              "max_speed_mm_s", "inertia", "drives")
 
     @classmethod
@@ -213,7 +214,7 @@ class HexapodGeometry:
         check_file_kind(table, path, "robot file")
         check_keys(
             table,
-            cls._KEYS,
+            cls.FILE_KEYS,
             path,
             required=("base_points_mm", "platform_points_mm", "stroke_mm", "leg_radius_mm"),
         )

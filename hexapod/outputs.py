@@ -13,6 +13,7 @@ refused (:func:`foreign_entries`, :func:`check_output_dir`). See ``docs/outputs.
 from __future__ import annotations
 
 import math
+import re
 import string
 import struct
 import zlib
@@ -38,10 +39,15 @@ PNG_METADATA = {"Software": GENERATOR}
 TEXT_MARKER = f"written by {GENERATOR}"
 #: The ``<meta>`` tag of the project's HTML pages.
 HTML_MARKER = f'<meta name="generator" content="{GENERATOR}">'
-#: The byte patterns that mark a file as the project's, in its first :data:`_HEAD` bytes.
-_MARKS = (HTML_MARKER.encode(), TEXT_MARKER.encode(), f'"generator": "{GENERATOR}"'.encode(),
-          b"Software\x00" + GENERATOR.encode())
+#: How much of a file is read to find the project's mark [bytes].
 _HEAD = 65536
+#: The marks, where the project's writers put them (a file that merely quotes one is not
+#: the project's): the PNG text chunk, the HTML ``<meta>`` tag, JSON's first key, and
+#: the text mark as a comment of one of the first :data:`_TEXT_LINES` lines.
+_PNG_MARK = b"tEXtSoftware\x00" + GENERATOR.encode()
+_JSON_MARK = re.compile(rb'\A\s*\{\s*"generator"\s*:\s*"' + re.escape(GENERATOR.encode()) + b'"')
+_TEXT_MARK = re.compile(rb"^[ \t]*(?:#|<!--)[ \t]*" + re.escape(TEXT_MARKER.encode()), re.M)
+_TEXT_LINES = 5
 
 
 def check_name(value: object, what: str) -> str:
@@ -115,15 +121,21 @@ PARQUET_METADATA = {b"generator": GENERATOR.encode()}
 
 
 def written_by_project(path: str | Path) -> bool:
-    """Whether a file carries the project's marker (see :data:`GENERATOR`): in its first
-    64 KiB, or for a ``.parquet`` file in its schema metadata (:data:`PARQUET_METADATA`)."""
+    """Whether a file carries the project's marker (see :data:`GENERATOR`) where the
+    project's writers put it (:data:`_TEXT_MARK`...; a user's notes that quote it are
+    not the project's), or for a ``.parquet`` file in its schema metadata
+    (:data:`PARQUET_METADATA`)."""
     p = Path(path)
     try:
         with p.open("rb") as f:
             head = f.read(_HEAD)
     except OSError:
         return False
-    if any(mark in head for mark in _MARKS):
+    if _PNG_MARK in head or HTML_MARKER.encode() in head or _JSON_MARK.match(head):
+        return True
+    if head.startswith(b"\xff\xd8\xff\xfe") and TEXT_MARKER.encode() in head[:64]:
+        return True  # a JPEG's comment segment (:func:`mark_jpeg`)
+    if _TEXT_MARK.search(b"\n".join(head.split(b"\n", _TEXT_LINES)[:_TEXT_LINES])):
         return True
     if p.suffix == ".parquet" and head.startswith(b"PAR1"):
         return _parquet_is_ours(p)
@@ -370,7 +382,12 @@ def write_output(path: str | Path, content: object, overwrite: bool = False,
 
 def replace_whole(path: str | Path, data: bytes | str) -> Path:
     """Write ``data`` to ``path`` whole or not at all: beside it, then renamed over it
-    (a full disk or a kill leaves the earlier file, never a cut one)."""
+    (a full disk or a kill leaves the earlier file, never a cut one).
+
+    Raises:
+        OutputError: The file could not be written (a full disk, no permission), naming
+            it and the system's reason.
+    """
     p = Path(path)
     tmp = p.with_name(f".{p.name}.part")
     try:
@@ -379,6 +396,10 @@ def replace_whole(path: str | Path, data: bytes | str) -> Path:
         else:
             tmp.write_bytes(data)
         tmp.replace(p)
+    except OSError as exc:
+        tmp.unlink(missing_ok=True)
+        raise OutputError(str(p), f"could not be written ({exc.strerror or exc}); the "
+                          "file there before, if any, is unchanged") from exc
     except BaseException:
         tmp.unlink(missing_ok=True)
         raise

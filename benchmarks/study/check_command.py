@@ -174,7 +174,7 @@ def file_kind(table: dict[str, Any]) -> str | None:
         return "calibration"
     shared = {"name", "description"}
     kinds = {"scenario": set(SCENARIO_KEYS) - shared,
-             "robot": set(HexapodGeometry._KEYS) - shared,
+             "robot": set(HexapodGeometry.FILE_KEYS) - shared,
              "camera": (set(CAMERA_KEYS) | set(OPENCV_TABLE_KEYS)) - shared}
     scores = dict.fromkeys(kinds, 0)
     for key in set(table) - shared:

@@ -16,7 +16,13 @@ from typing import Any
 
 from benchmarks.study.results import LOCK_FILE, RESULTS_FILE, TRIALS_DIR
 from hexapod.exceptions import OutputError
-from hexapod.outputs import check_output_dir, check_replace, written_by_project
+from hexapod.outputs import (
+    GENERATOR,
+    check_output_dir,
+    check_replace,
+    listing,
+    written_by_project,
+)
 
 META_FILE = "run.json"
 REPORT_FILE = "report.md"
@@ -83,12 +89,22 @@ def check_run_directory(out: Path, overwrite: bool = False) -> None:
 
 
 def check_report_file(out: Path, overwrite: bool = False) -> None:
-    """Refuse to replace a ``report.md`` the project did not write (unless ``--overwrite``).
+    """Refuse to replace a ``report.md`` the project did not write, or a figure: a PNG
+    of the directory's top level the project did not write (a user's edited figure),
+    unless ``--overwrite``.
 
     Raises:
-        OutputError: Naming the file and how to proceed.
+        OutputError: Naming the file(s) and how to proceed.
     """
     check_replace(Path(out) / REPORT_FILE, overwrite, ours=report_is_ours)
+    if overwrite or not Path(out).is_dir():
+        return
+    theirs = sorted(p for p in Path(out).glob("*.png") if not written_by_project(p))
+    if theirs:
+        raise OutputError(str(out), f"holds {listing(theirs)}, PNG file(s) {GENERATOR} did "
+                          "not write where the report writes its figures (an edited "
+                          "figure?): move them, or add --overwrite to write the report anyway "
+                          "(figures of the same names are replaced)")
 
 
 def check_calibration_directory(out: Path, overwrite: bool = False) -> None:

@@ -22,7 +22,7 @@ from benchmarks.study.metrics import Summary, format_sweep, summarize
 from benchmarks.study.runner import deduplicate, machine_info, read_results
 from benchmarks.study.study_record import command_lines
 from benchmarks.study.tracking_report import tracking_section
-from hexapod.outputs import TEXT_MARKER
+from hexapod.outputs import TEXT_MARKER, replace_whole
 
 log = logging.getLogger(__name__)
 
@@ -171,9 +171,9 @@ def write_report(out_dir: Path, overwrite: bool = False,
                     duplicate_note(results.dropped, results.conflicting))
     with _collector_paused(), drawers.drawing_aside(out_dir):  # figures on the idle cores
         lines = _report_lines(out_dir, results)
-    path = out_dir / "report.md"
-    path.write_text("\n".join(lines))
-    return path
+    # whole or not at all: a kill while writing it left an empty report.md, which
+    # --resume then refused as not the project's
+    return replace_whole(out_dir / "report.md", "\n".join(lines))
 
 
 @contextmanager

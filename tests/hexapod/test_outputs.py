@@ -233,3 +233,32 @@ def test_replace_whole_leaves_the_earlier_file_when_the_write_fails(tmp_path: Pa
         replace_whole(path, '{"a": "\ud800"}')  # a lone surrogate: not UTF-8
     assert path.read_text() == '{"a": 1}' and sorted(p.name for p in tmp_path.iterdir()) == \
         ["run.json"]
+
+
+def test_the_mark_counts_where_the_project_puts_it_not_where_a_file_quotes_it(
+        tmp_path: Path) -> None:
+    """A user's notes that mention 'written by hexapod-vs' in their text, or a JSON that
+    embeds a compare output, were taken for the project's and replaced; the mark counts
+    as a comment of the first lines, JSON's first key, the PNG text chunk."""
+    cases = {
+        "ours.md": ("# Benchmark report\n\n<!-- written by hexapod-vs: report -->\n", True),
+        "ours.toml": ("# written by hexapod-vs (calibrate)\nscale = 1.0\n", True),
+        "ours.json": ('{\n "generator": "hexapod-vs",\n "comparisons": []\n}\n', True),
+        "notes.md": ("# Notes\n\nThe table was written by hexapod-vs, not me.\n", False),
+        "late.md": ("a\nb\nc\nd\ne\nf\n<!-- written by hexapod-vs -->\n", False),
+        "embeds.json": ('{"mine": [1], "pasted": {"generator": "hexapod-vs"}}\n', False),
+    }
+    for name, (text, ours) in cases.items():
+        (tmp_path / name).write_text(text)
+        assert written_by_project(tmp_path / name) is ours, name
+
+
+def test_a_write_that_fails_names_the_file(tmp_path: Path) -> None:
+    """An OSError while writing (a full disk, a missing folder) was printed as
+    'OSError: [Errno 28] ...' without the file: it names it now."""
+    from hexapod.outputs import replace_whole
+
+    path = tmp_path / "missing" / "report.md"
+    with pytest.raises(OutputError, match="could not be written") as info:
+        replace_whole(path, "x")
+    assert str(path) in str(info.value) and not path.parent.exists()

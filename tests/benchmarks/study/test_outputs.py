@@ -226,6 +226,23 @@ def test_a_run_directory_keeps_its_rule_and_its_foreign_report_is_kept(
         in capsys.readouterr().err
     assert (out / "report.md").read_text() == "my own analysis\n"
     assert cli_main(["report", str(out), "--overwrite"]) == 0
+    # notes that quote the mark in their text are the user's, not the project's
+    notes = "# My notes\n\nThe first table was written by hexapod-vs, the rest is mine.\n"
+    (out / "report.md").write_text(notes)
+    assert cli_main(["report", str(out)]) == 2 and (out / "report.md").read_text() == notes
+    assert cli_main(["report", str(out), "--overwrite"]) == 0
+    # a figure the user edited and saved (its mark lost): kept, named, until --overwrite
+    figure = sorted(out.glob("*.png"))[0]
+    figure.write_bytes(b"my edited figure")
+    capsys.readouterr()
+    assert cli_main(["report", str(out)]) == 2
+    err = " ".join(capsys.readouterr().err.split())
+    assert f"holds {figure.name}, PNG file(s) hexapod-vs did not write" in err
+    assert figure.read_bytes() == b"my edited figure"
+    assert cli_main(["run", str(scen), "--out", str(out), "--no-progress", "--resume"]) == 2
+    assert figure.read_bytes() == b"my edited figure"
+    assert cli_main(["report", str(out), "--overwrite"]) == 0
+    assert figure.read_bytes().startswith(b"\x89PNG")
 
 
 # ------------------------------------------------ case 3: calibrate over a calibration
