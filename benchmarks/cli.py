@@ -20,6 +20,7 @@ Examples::
 from __future__ import annotations
 
 import argparse
+import contextlib
 import gc
 import logging
 import os
@@ -358,6 +359,11 @@ def main(argv: list[str] | None = None) -> int:
     except (BenchmarkError, HexapodError) as exc:
         print(f"hexapod-bench: error: {exc}", file=sys.stderr)
         return 2
+    except BrokenPipeError:  # the reader went away (`... | head`): stop quietly, as a
+        # Unix tool does (Python's own flush at exit would print the error again)
+        with contextlib.suppress(OSError):
+            os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+        return 141  # 128 + SIGPIPE, what a shell reports for a writer whose reader left
     except OSError as exc:  # a file or folder the system refuses (permissions, a file where
         # a folder is asked, a full disk): the path and the reason, no traceback
         if args.verbose:

@@ -62,3 +62,17 @@ def test_the_command_process_leaves_its_objects_to_the_exit(
         assert main() == 2 and gc.get_freeze_count() > 0
     finally:
         gc.unfreeze()
+
+
+def test_a_reader_that_leaves_stops_the_command_quietly() -> None:
+    """``hexapod-bench check quick | head -1``: the reader closes the pipe, the command's
+    next print fails; it said 'error: BrokenPipeError' with the exit code of an invalid
+    file (2), and now stops quietly with 141 (128 + SIGPIPE) as a Unix tool does."""
+    code = "import sys; from benchmarks.cli import main; sys.exit(main())"
+    p = subprocess.Popen([sys.executable, "-c", code, "check", "quick"], cwd=ROOT,
+                         stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                         env={**os.environ, "PYTHONPATH": str(ROOT)})
+    assert p.stdout is not None and p.stderr is not None
+    p.stdout.close()  # before the command writes its first line
+    err = p.stderr.read().decode()
+    assert p.wait(timeout=120) == 141 and err == ""
