@@ -96,7 +96,7 @@ def main(argv: Sequence[str] | None = None) -> int:
                         help="place the camera here [m, base frame], looking at (0, 0, 0.2)")
     parser.add_argument("--method", choices=["lstsq", "irls"], default="lstsq")
     parser.add_argument("--seed", type=int, default=1)
-    parser.add_argument("--json", type=Path, default=None, action=OutputFile,
+    parser.add_argument("--json", type=Path, default=None, action=OutputFile, metavar="FILE",
                         help="write the figures here")
     parser.add_argument("--overwrite", action="store_true",
                         help="replace --json even if hexapod-bench did not write it")

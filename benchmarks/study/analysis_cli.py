@@ -94,6 +94,9 @@ def parse_margins(items: list[str] | None) -> dict[str, float]:
         if not sep or not name or number != number:
             raise BenchmarkError(f"--margin {item!r}: expected NAME=NUMBER, e.g. "
                                  "final_error=0.01 (mm) or converged=5 (points)")
+        if name == "converged" and not 0 < number <= 100:  # (said in the user's points)
+            raise BenchmarkError(f"--margin {item}: converged's margin is in percentage "
+                                 "points, in (0, 100]")
         out[name] = number / 100 if name == "converged" else number
     return out
 

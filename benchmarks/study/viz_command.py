@@ -159,7 +159,7 @@ def add_arguments(s: argparse.ArgumentParser) -> None:
     s.add_argument("--controller", help="controller label")
     s.add_argument("--scenario", help="scenario name (when the run has several)")
     s.add_argument("--point", type=int, help="sweep point index")
-    s.add_argument("--html", action=OutputFile,
+    s.add_argument("--html", action=OutputFile, metavar="FILE",
                    help="write a self-contained HTML animation (+ a PNG of the curves beside "
                         "it) instead of the live view")
     s.add_argument("--still", type=int, help="with --html: a still of this control period "

@@ -312,7 +312,8 @@ def test_settling_is_compared_with_censoring(tmp_path: Path) -> None:
     assert c.p_value == pytest.approx(sps.binomtest(8, 12, 0.5).pvalue)
 
 
-def test_margin_option_in_points_and_json_fields(tmp_path: Path) -> None:
+def test_margin_option_in_points_and_json_fields(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     """``--margin converged=10`` is 10 points (0.1 of the trials) in the JSON, which
     carries each comparison's outcome and equivalence p-values."""
     run = write_run(tmp_path / "r", two_controllers(60))
@@ -325,6 +326,10 @@ def test_margin_option_in_points_and_json_fields(tmp_path: Path) -> None:
     assert doc["converged"]["p_equivalence_holm"] < 0.05
     assert {d["outcome"] for d in doc.values()} <= {"different", "equivalent",
                                                     "not shown equivalent"}
+    capsys.readouterr()
+    assert cli_main(["compare", str(run), "--margin", "converged=150"]) == 2
+    assert "--margin converged=150: converged's margin is in percentage points, in (0, " \
+        "100]" in capsys.readouterr().err  # (it quoted the fraction, 1.5)
 
 
 @pytest.mark.slow
