@@ -242,6 +242,9 @@ def load_setup(text: str) -> Setup:
             camera=f"[camera_from_base] in {path}", task="[task] of a scenario",
             intrinsics=f"fx_px / fy_px in {path}"), None,
             ["robot: the deltalab preset (a scenario names yours)"], [])
+    if not table:
+        raise BenchmarkError(f"{path}: the file is empty (a scenario, a robot file or a "
+                             "camera file: docs/scenarios.md, docs/robot-files.md)")
     raise BenchmarkError(f"{path}: cannot tell what this file is: a scenario has "
                          "'controllers', a robot file 'base_points_mm', a camera file "
                          "'fx_px' (or 'opencv') and [camera_from_base] (docs/robot-files.md)")

@@ -210,3 +210,14 @@ def test_platform_points_in_metres_are_an_error_of_check(
     assert code == 1
     assert "error: the joints of platform_points_mm lie within" in out
     assert "given in metres? platform_points_mm is in millimetres" in out
+
+
+@pytest.mark.parametrize("name", ["empty.toml", "empty.yml"])
+def test_an_empty_file_is_said_to_be_empty(tmp_path: Path, name: str,
+                                           capsys: pytest.CaptureFixture[str]) -> None:
+    """An empty TOML file was 'cannot tell what this file is' (implying keys it lacks),
+    an empty OpenCV file OpenCV's own assertion '(-215:Assertion failed) buf'."""
+    path = tmp_path / name
+    path.write_text("")
+    code, err = _run(["check", str(path)], capsys)
+    assert code == 2 and f"{path}: the file is empty" in err and "-215" not in err

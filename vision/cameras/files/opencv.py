@@ -79,6 +79,8 @@ def _open(path: Path) -> Any:
     _check_extension(path)
     if not path.is_file():
         raise ConfigFileError(str(path), "file not found")
+    if path.stat().st_size == 0:  # (OpenCV asserts on it: '(-215) buf in function open')
+        raise ConfigFileError(str(path), "the file is empty")
     try:
         fs = cv2.FileStorage(str(path), cv2.FILE_STORAGE_READ)
     except (cv2.error, SystemError) as exc:  # the Python binding wraps cv2.error
