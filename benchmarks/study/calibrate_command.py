@@ -15,6 +15,10 @@ from benchmarks.study.commands import console
 #: The rigid-fit RMS [mm] of a calibration from a user's observations above which it is
 #: warned of (two random configurations gave 10.8 mm and points 28 mm off, unwarned).
 FIT_RMS_WARN_MM = 5.0
+#: How far from 1 the estimates' scale may be before a poor fit also names the leg
+#: radius, when dividing by it halves the fit's RMS at least (a 10 % radius error gave a
+#: scale of 0.909 and a warning that blamed the rest).
+SCALE_WARN = 0.02
 
 
 def cmd_calibrate(args: argparse.Namespace) -> int:
@@ -49,11 +53,16 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
               f"{out / 'calibration.json'} and {out / 'calibrated.toml'}")
         _print_far_from_nominal(doc, out)
         if res["fit_rms_mm"] > FIT_RMS_WARN_MM:
+            scaled = (f"; the estimates are {res['scale']:.3f} times the robot's size: a leg "
+                      "radius off by as much? (--correct-scale divides it out)"
+                      if (abs(res["scale"] - 1.0) > SCALE_WARN and not args.correct_scale
+                          and doc["fit_rms_scale_corrected_mm"] < 0.5 * res["fit_rms_mm"])
+                      else "")
             print(f"warning: {args.observations}: the calibrated base points fit the robot's "
                   f"base only to {res['fit_rms_mm']:.1f} mm RMS (a rigid fit; CAD errors give "
                   "a millimetre or two): too few configurations for the noise, legs seen at "
                   "too few inclinations, or another robot's observations; do not trust "
-                  "calibrated.toml without more configurations", file=sys.stderr)
+                  f"calibrated.toml without more configurations{scaled}", file=sys.stderr)
         if doc["normals_flipped"]:
             print(f"note: {doc['normals_flipped']} edge normal(s) of {args.observations} "
                   "oriented to the calibration's sign (n . A = -r at the nominal base "
@@ -141,12 +150,15 @@ def _with_ratio_options(sc: Any, args: argparse.Namespace) -> Any:
                           ("min_ratio", "min_singular_ratio")):
         value = getattr(args, option)
         if value is not None:
-            try:
-                check_range(value, f"calibration.{field}", f"--{option.replace('_', '-')}")
-            except BenchmarkError as exc:
-                raise BenchmarkError(f"--{option.replace('_', '-')}: {exc}") from None
+            check_range(value, f"calibration.{field}", f"--{option.replace('_', '-')}")
             cal = replace(cal, **{field: value})
     if cal.min_singular_ratio > cal.warn_singular_ratio:
-        raise BenchmarkError(f"the hard limit ({cal.min_singular_ratio}) must not exceed the "
-                             f"warning ratio ({cal.warn_singular_ratio})")
+        hard = ("--min-ratio" if args.min_ratio is not None
+                else "[calibration] min_singular_ratio")
+        warn = ("--warn-ratio" if args.warn_ratio is not None
+                else "[calibration] warn_singular_ratio")
+        raise BenchmarkError(f"{hard} {cal.min_singular_ratio:g} (refused below) exceeds "
+                             f"{warn} {cal.warn_singular_ratio:g} (warned below): the warning "
+                             f"ratio must be at least the refusal ratio; give --warn-ratio "
+                             f"{cal.min_singular_ratio:g} or more")
     return replace(sc, calibration=cal)

@@ -318,11 +318,16 @@ def calibrate_from_file(sc: Scenario, observations: Path, out: Path, solver: str
                                 axis=-1) & np.asarray(given.edge_visible, bool)))
     disagree = float(np.max(res.linear.residual_rms)) > SIGN_RESIDUAL * nominal.leg_radius
     far = _far_from_nominal(res.base_points, nominal, camera)
+    from vision.calibration import rigid_fit
+
+    # how well the points fit once divided by their scale (a leg-radius error scales them)
+    scaled_fit = rigid_fit(res.linear.base_points / res.scale, nominal.base_points)[2]
     out.mkdir(parents=True, exist_ok=True)
     doc = {"generator": GENERATOR, "scenario": sc.name, "observations": str(observations),
            "configurations": int(data.n_configurations),
            "solver": solver or sc.calibration.solver, "made_with": provenance,
            "normals_flipped": flipped, "equations_disagree": disagree,
+           "fit_rms_scale_corrected_mm": float(scaled_fit) * 1e3,
            "result": res.to_dict(), **far,
            **_lengths_outside(data.lengths, nominal)}
     (out / "calibration.json").write_text(json.dumps(doc, indent=1))

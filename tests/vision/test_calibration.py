@@ -336,8 +336,16 @@ def test_file_errors(tmp_path: Path, geometry: HexapodGeometry) -> None:
     with pytest.raises(ConfigFileError, match="unknown file type"):
         CalibrationData.load(tmp_path / "obs.txt")
     (tmp_path / "bad.npz").write_bytes(b"not a zip")
-    with pytest.raises(ConfigFileError, match="NPZ"):
+    with pytest.raises(ConfigFileError, match="NPZ") as exc:
         CalibrationData.load(tmp_path / "bad.npz")
+    assert "pickle" not in str(exc.value)  # (numpy's text invited loading it unsafely)
+    t = _table(geometry)
+    upper = tmp_path / "MEASURED.JSON"  # the suffix in capitals: read as JSON
+    upper.write_text(json.dumps(t))
+    assert CalibrationData.load(upper).n_configurations == len(t["normals"])
+    t["lengths_mm"][1][2] = None  # a null length: said where
+    with pytest.raises(ConfigFileError, match=r"null, NaN or inf \(at index \[1, 2\]\)"):
+        _load(tmp_path, t)
     with pytest.raises(ConfigFileError, match="top level"):
         _load(tmp_path, [1, 2])
 

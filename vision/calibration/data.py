@@ -84,7 +84,8 @@ class CalibrationData:
     def save(self, path: str | Path) -> None:
         """Save to ``.json`` or ``.npz`` (by the suffix), lengths in millimetres."""
         p = Path(path)
-        if p.suffix == ".json":
+        suffix = p.suffix.lower()
+        if suffix == ".json":
             p.write_text(json.dumps(self.to_dict()))
         elif p.suffix == ".npz":
             np.savez(p, normals=self.normals, edge_visible=self.edge_visible,
@@ -162,7 +163,8 @@ class CalibrationData:
         p = Path(path)
         if not p.exists():
             raise ConfigFileError(str(p), "file not found")
-        if p.suffix == ".json":
+        suffix = p.suffix.lower()
+        if suffix == ".json":
             try:
                 table = json.loads(p.read_text())
             except json.JSONDecodeError as exc:
@@ -170,12 +172,15 @@ class CalibrationData:
             if not isinstance(table, dict):
                 raise ConfigFileError(str(p), "expected a JSON object at the top level")
             return cls.from_dict(table, str(p))
-        if p.suffix == ".npz":
+        if suffix == ".npz":
             try:
                 with np.load(p, allow_pickle=False) as npz:
                     table = {k: npz[k] for k in npz.files}
-            except (OSError, ValueError) as exc:
-                raise ConfigFileError(str(p), f"not a readable NPZ file: {exc}") from None
+            except (OSError, ValueError) as exc:  # numpy's text for a file that is not a
+                # zip of arrays suggests loading it with pickles: not repeated
+                detail = ("not a zip of .npy arrays (a corrupt or other file)"
+                          if "pickle" in str(exc) else str(exc))
+                raise ConfigFileError(str(p), f"not a readable NPZ file: {detail}") from None
             if "edge_visible" in table:
                 table["edge_visible"] = np.asarray(table["edge_visible"])
             return cls.from_dict(table, str(p))
@@ -201,7 +206,9 @@ def _read_array(table: Mapping[str, Any], key: str, path: str,
         raise ConfigFileError(path, "expected a regular nested array of numbers",
                               key=key) from None
     if not allow_none and not np.all(np.isfinite(arr)):
-        raise ConfigFileError(path, "contains NaN or inf", key=key)
+        at = tuple(int(i) for i in np.argwhere(~np.isfinite(arr))[0])
+        raise ConfigFileError(path, f"contains null, NaN or inf (at index {list(at)})",
+                              key=key)
     return arr
 
 

@@ -335,6 +335,16 @@ def test_a_calibration_that_fits_the_robot_poorly_is_warned_of(
                          str(tmp_path / obs.stem), "--observations", str(obs)]) == 0
         err = " ".join(capsys.readouterr().err.split())
         assert ("the calibrated base points fit the robot's base only to" in err) is warned, err
+        assert "--correct-scale" not in err
+    # legs 10 % thicker than the robot file says: the fit is poor and the scale says why
+    thick = deltalab().replace(leg_radius=1.1 * deltalab().leg_radius)
+    obs = tmp_path / "thick.json"
+    collect_observations(thick, cam, "random:30", None, 5).save(obs)
+    assert cli_main(["calibrate", str(_scenario(tmp_path)), "--out", str(tmp_path / "thick"),
+                     "--observations", str(obs)]) == 0
+    err = " ".join(capsys.readouterr().err.split())
+    assert "fit the robot's base only to" in err and "times the robot's size: a leg radius " \
+        "off by as much? (--correct-scale divides it out)" in err
 
 
 def test_calibrate_warns_of_a_camera_pose_in_metres_as_run_does(
