@@ -171,7 +171,8 @@ def check_scenario_calibration(sc: Any, allow_foreign: bool = False) -> list[str
             f"{sc.calibration.file}: scenario '{sc.name}' draws a calibration error per trial "
             f"({', '.join(drawn)}): every trial is another robot, and this one file gives "
             "them all the same base points; to calibrate each trial in its own world, use "
-            "[calibration] method = \"linear\" (docs/calibration.md, 'Two loops')")
+            "[calibration] method = \"linear\" without --calibration (docs/calibration.md, "
+            "'Two loops')")
     return warnings
 
 

@@ -371,3 +371,20 @@ def test_calibrate_warns_of_a_camera_pose_in_metres_as_run_does(
     assert "hexapod-bench: warning: s: the camera's centre is" in err, err
     assert f"given in metres? The camera's translation is in millimetres; check " \
            f"[camera_from_base] in {cam_file}" in err, err
+
+
+def test_a_calibration_file_over_a_linear_scenario_says_it_replaces_it(
+        tmp_path: Path, caplog: pytest.LogCaptureFixture) -> None:
+    """``run quick-linear.toml --calibration FILE``: the file replaced the scenario's
+    ``method = "linear"`` without a word, and the warning then advised that method."""
+    from benchmarks.study.scenario import load_scenario
+
+    out = tmp_path / "cal"
+    assert cli_main(["calibrate", str(_scenario(tmp_path)), "--out", str(out)]) == 0
+    linear = tmp_path / "linear.toml"
+    linear.write_text(_scenario(tmp_path).read_text() + '[calibration]\nmethod = "linear"\n')
+    with caplog.at_level("WARNING"):
+        sc = load_scenario(str(linear)).with_overrides(
+            calibration_file=str(out / "calibrated.toml"))
+    assert sc.calibration.method == "file"
+    assert "replaces scenario cal's [calibration] method = \"linear\"" in caplog.text
