@@ -85,7 +85,7 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
             print(f"warning: leg {leg} is ill-conditioned (singular-value ratio "
                   f"{lin['singular_value_ratio'][leg]:.2e} < {lin['warn_singular_ratio']:.2e}): "
                   "its base point is poorly determined; add configurations that show this "
-                  "leg at other inclinations")
+                  "leg at other inclinations", file=sys.stderr)
         return 0
     if args.configurations is not None:  # the scenario file's rule, named by the option
         from benchmarks.study.scenario_checks import check_configurations

@@ -308,12 +308,17 @@ def calibrate_from_file(sc: Scenario, observations: Path, out: Path, solver: str
                          min_singular_ratio=sc.calibration.min_singular_ratio,
                          warn_singular_ratio=sc.calibration.warn_singular_ratio)
 
+    solver_log = logging.getLogger("vision.calibration.solve")
+    level = solver_log.level  # each candidate's solve warned of each ill-conditioned leg
+    solver_log.setLevel(logging.ERROR)  # (up to 4 times a leg): the result says it once
     try:
         res, data = _with_signs(given, solve,
                                 camera.camera_from_base.apply(nominal.base_points),
                                 nominal.leg_radius, camera.kind == "perspective")
     except CalibrationError as exc:  # the user's measurements: say which file
         raise BenchmarkError(f"{observations}: {exc} (nothing written)") from exc
+    finally:
+        solver_log.setLevel(level)
     flipped = int(np.sum(np.any(np.asarray(data.normals) != np.asarray(given.normals),
                                 axis=-1) & np.asarray(given.edge_visible, bool)))
     disagree = float(np.max(res.linear.residual_rms)) > SIGN_RESIDUAL * nominal.leg_radius

@@ -388,3 +388,31 @@ def test_a_calibration_file_over_a_linear_scenario_says_it_replaces_it(
             calibration_file=str(out / "calibrated.toml"))
     assert sc.calibration.method == "file"
     assert "replaces scenario cal's [calibration] method = \"linear\"" in caplog.text
+
+
+def test_an_ill_conditioned_leg_of_a_file_is_warned_of_once(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str],
+        caplog: pytest.LogCaptureFixture) -> None:
+    """A file of mixed signs is solved three times (as given, then oriented twice): each
+    solve logged each ill-conditioned leg, beside the command's own line on stdout (four
+    messages a leg on two streams); now one line a leg, on stderr."""
+    from hexapod import deltalab
+    from vision.calibration import collect_observations
+
+    data = collect_observations(deltalab(), front_camera(), "random:30", None, 5)
+    doc = json.loads(json.dumps(data.to_dict()))
+    normals = np.asarray(doc["normals"], dtype=float)
+    signs = np.random.default_rng(3).choice([-1.0, 1.0], size=normals.shape[:3])
+    doc["normals"] = (normals * signs[..., None]).tolist()
+    mixed = tmp_path / "mixed.json"
+    mixed.write_text(json.dumps(doc))
+    with caplog.at_level("WARNING"):
+        assert cli_main(["calibrate", str(_scenario(tmp_path)), "--out", str(tmp_path / "o"),
+                         "--observations", str(mixed), "--warn-ratio", "0.02"]) == 0
+    captured = capsys.readouterr()
+    legs = json.loads((tmp_path / "o" / "calibration.json").read_text())[
+        "result"]["linear"]["ill_conditioned_legs"]
+    assert legs, "the case needs an ill-conditioned leg"
+    for leg in legs:
+        said = (captured.out + captured.err + caplog.text).count(f"leg {leg} is ill-conditioned")
+        assert said == 1 and f"leg {leg} is ill-conditioned" in captured.err
