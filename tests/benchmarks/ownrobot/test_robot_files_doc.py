@@ -101,10 +101,13 @@ def test_the_python_snippets_write_the_examples(folder: Path,
 
 @pytest.mark.slow
 def test_a_robot_from_the_page_passes_check_and_runs(folder: Path,
-                                                     capsys: pytest.CaptureFixture[str]
+                                                     capsys: pytest.CaptureFixture[str],
+                                                     monkeypatch: pytest.MonkeyPatch
                                                      ) -> None:
     study = folder / "my-study.toml"
-    assert main(["check", str(study)]) == 0
+    monkeypatch.chdir(folder)  # the page's command, as typed in the folder of the files
+    (folder / "docs").mkdir(exist_ok=True)
+    assert main(["check", "my-study.toml", "--picture", "docs/check-my-hexapod.png"]) == 0
     out = capsys.readouterr().out
     assert "The setup can run." in out
     # the output shown on the page is the command's
