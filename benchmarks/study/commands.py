@@ -268,14 +268,16 @@ def _run_locked(scenarios: list[Any], out: Path, args: argparse.Namespace
         written = rows_written() - rows_before
         word = how_stopped(stop).split()[0]
         con.print(f"\n[yellow]{word}[/yellow]: {written} of {total} trials written to "
-                  f"{out}/results.jsonl; finish with: {escape(_resume_command(args, out))}")
+                  f"{out}/results.jsonl; finish with: {escape(_resume_command(args, out))}",
+                  soft_wrap=True)  # (one line to paste)
     except OSError as exc:  # a file not written (a full disk: the error names it); exit 2
         if exc.errno not in (errno.ENOSPC, errno.EDQUOT, errno.EFBIG, errno.EROFS):
             raise  # (a connection refused, a file not found: its own message)
         written = rows_written() - rows_before
         con.print(f"\n[red]a file could not be written[/red]: {written} of {total} trials "
                   f"are in {out}/results.jsonl; once it can be (room on the disk), finish "
-                  f"with: {escape(_resume_command(args, out))}")
+                  f"with: {escape(_resume_command(args, out))}",
+                  soft_wrap=True)  # (one line to paste)
         raise
     except BrokenProcessPool:  # a worker killed from outside (the OOM killer, kill -9)
         interrupted, status = True, 1
@@ -283,7 +285,7 @@ def _run_locked(scenarios: list[Any], out: Path, args: argparse.Namespace
         con.print(f"\n[red]a worker process ended abruptly[/red] (killed from outside: out "
                   f"of memory?): {written} of {total} trials written to {out}/results.jsonl "
                   f"(its unit's trials are not); finish with: "
-                  f"{escape(_resume_command(args, out))}")
+                  f"{escape(_resume_command(args, out))}", soft_wrap=True)  # (one line to paste)
     wall = time.perf_counter() - t0
     meta["wall_time_s"] = wall
     replace_whole(meta_path, json.dumps(meta, indent=2))

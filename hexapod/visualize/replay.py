@@ -10,7 +10,7 @@ from pathlib import Path
 import numpy as np
 
 from hexapod.exceptions import ViewerError
-from hexapod.outputs import HTML_MARKER, PNG_METADATA, TEXT_MARKER
+from hexapod.outputs import HTML_MARKER, PNG_METADATA, TEXT_MARKER, replace_whole
 from hexapod.visualize.records import TrialRecord, load_trial
 from hexapod.visualize.viewer import HexapodViewer
 
@@ -87,8 +87,7 @@ def replay_html(record: TrialRecord, html_path: str | Path, fps: float = 25.0,
     html = html.replace("<title>MeshCat</title>",  # the page names its trial
                         f"<title>{html_text.escape(record.title)}</title>", 1)
     html = _with_marker(_with_page_script(html))
-    path = Path(html_path)
-    path.write_text(html, encoding="utf-8")
+    path = replace_whole(html_path, html)  # (a full disk left a 0-byte page, refused next)
     log.info("%s: wrote %s (%.1f MB)", record.title, path, len(html) / 1e6)
     return path
 
@@ -161,10 +160,12 @@ def plot_trial(record: TrialRecord, png_path: str | Path) -> Path:
         ax.grid(True, which="both", alpha=0.3)
     fig.suptitle(record.title)
     fig.tight_layout()
-    path = Path(png_path)
-    fig.savefig(path, dpi=90, metadata=PNG_METADATA)
+    import io
+
+    buf = io.BytesIO()
+    fig.savefig(buf, format="png", dpi=90, metadata=PNG_METADATA)
     plt.close(fig)
-    return path
+    return replace_whole(png_path, buf.getvalue())
 
 
 def replay_trial(npz_path: str | Path, html_path: str | Path) -> tuple[Path, Path]:

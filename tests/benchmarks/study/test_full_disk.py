@@ -77,9 +77,13 @@ def test_a_run_stopped_by_a_full_disk_says_how_to_finish(
                      "--controllers", "leg-edge", "--record", "0", "--no-progress",
                      "--max-steps", "20"])
     assert code == 2
-    text = " ".join(capsys.readouterr().out.split())
+    raw = capsys.readouterr().out
+    text = " ".join(raw.split())
     assert "a file could not be written: 2 of 4 trials are in" in text, text
     assert "--resume" in text.split("a file could not be written")[1]
+    # the command to paste is on one line, whatever the console's width (it was cut)
+    (hint,) = [line for line in raw.splitlines() if "finish with:" in line]
+    assert hint.rstrip().endswith("--resume") and f"--out {out}" in hint
     err = capsys.readouterr().err
     assert len(read_results(out)) == 2
     monkeypatch.setattr(results_module.ResultsWriter, "write", real)
