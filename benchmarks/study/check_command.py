@@ -333,9 +333,10 @@ def _dynamics_lines(g: HexapodGeometry, note: str | None) -> list[str]:
 
 
 def describe(setup: Setup, report: SetupReport, source: str,
-             extra: list[str] | None = None) -> list[str]:
+             extra: list[str] | None = None, warned: int = 0) -> list[str]:
     """The lines ``check`` prints (``extra``: lines before the problems, a trajectory
-    task's references)."""
+    task's references; ``warned``: how many warnings about the study's files were
+    printed first)."""
     g, cam = setup.geometry, setup.camera
     base_r = np.linalg.norm(g.base_points[:, :2], axis=1)
     plat_r = np.linalg.norm(g.platform_points[:, :2], axis=1)
@@ -383,6 +384,9 @@ def describe(setup: Setup, report: SetupReport, source: str,
     if report.problems:
         lines.append("Problems:")
         lines += [f"  {p.severity}: {p.text}" for p in report.problems]
+    elif warned:  # ("No problem found." under an unstable gain's warning read as clear)
+        lines.append(f"No problem found in the setup; {warned} warning(s) about the study "
+                     "above (stderr).")
     else:
         lines.append("No problem found.")
     lines.append("The setup can run." if report.can_run else
@@ -512,8 +516,10 @@ def cmd_check(args: argparse.Namespace) -> int:
     sc = load_scenario_file(args.file)
     refused = None
     extra: list[str] = []
+    warned = 0
     if sc is not None:
         pre = preflight([sc])
+        warned = len(pre.warnings)
         for text in pre.warnings:
             print(f"warning: {text}", file=sys.stderr)
         check = pre.checks[0]
@@ -524,7 +530,7 @@ def cmd_check(args: argparse.Namespace) -> int:
     else:
         setup = load_setup(args.file)
         report = examine(setup)
-    for line in describe(setup, report, args.file, extra):
+    for line in describe(setup, report, args.file, extra, warned):
         print(line)
     if args.picture:
         print(f"picture of the robot at home seen by the camera: "

@@ -17,8 +17,8 @@ this module is their behaviour, the force each drive puts on its leg:
   (:data:`COULOMB_SMOOTHING` ``v_s`` = 0.1 mm/s), not stick-slip. The plant integrates
   friction implicitly as the damping ``c + f_c tanh(v / v_s) / v`` (its secant, in
   :attr:`DriveForces.slope`): it can slow a leg to rest but never reverse it within a
-  step, whatever the step; a leg whose drive force is below ``f_c`` creeps at well under
-  ``v_s`` instead of sticking;
+  step, whatever the step; a leg whose drive force ``F`` is below ``f_c`` creeps at
+  ``v_s atanh(F / f_c)`` instead of sticking (under ``v_s`` up to 76 % of ``f_c``);
 - the **reflected rotor inertia** is a mass on the leg's translation (the plant adds
   ``m_r`` to the mechanism's inertia seen by the leg);
 - **encoders**: the measured length is quantised to the encoder resolution, rounded to

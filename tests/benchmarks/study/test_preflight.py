@@ -197,3 +197,19 @@ def test_run_and_check_warn_alike_on_an_option_left_out(
     assert len(pre.warnings) == 1
     assert pre.warnings[0].startswith("[controller_options] adaptive_gain of ")
     assert "no controller chosen by --controllers" in pre.warnings[0]
+
+
+def test_check_closes_with_the_warnings_it_printed(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """An unstable integral gain is warned of on stderr by check as by run; the last lines
+    said 'No problem found.' under it (read as all clear): they count the warnings."""
+    from benchmarks.cli import main
+
+    study = tmp_path / "ki.toml"
+    study.write_text('name = "ki"\ntrials = 1\ncontrollers = [{ name = "computed-torque", '
+                     'integral_gain = 30.0 }]\n[robot]\nworld = "dynamic"\n')
+    assert main(["check", str(study)]) == 0
+    captured = capsys.readouterr()
+    assert "integral_gain 30 1/s is not below 2 damping omega_n" in captured.err
+    assert "No problem found in the setup; 1 warning(s) about the study above" in captured.out
+    assert "No problem found." not in captured.out
