@@ -169,12 +169,41 @@ def with_options_file(scenarios: list[Any], path: str | None
 
 def goal_mismatches(scenarios: list[Any], record: dict[str, Any] | None) -> list[str]:
     """Warnings for the scenarios run under another goal setting than the options file
-    was tuned under (the controllers are told other things of the goal)."""
-    tuned = ((record or {}).get("tuning") or {}).get("goal")
-    return [f"{record['path']}: options tuned under the goal setting {tuned!r}, {sc.name} "
-            f"runs under {sc.task.goal!r}: the controllers are told other things of the "
-            "goal than when they were tuned (docs/scenarios.md, \"Fairness\")"
-            for sc in scenarios if tuned and record and sc.task.goal != tuned]
+    was tuned under (the controllers are told other things of the goal), on another
+    scenario than it was tuned on, or with the tuning's own seed (its trials are the
+    tuning trials: nothing is held out)."""
+    tuning = (record or {}).get("tuning") or {}
+    if not record or not tuning:
+        return []
+    out = []
+    tuned = tuning.get("goal")
+    for sc in scenarios:
+        if tuned and sc.task.goal != tuned:
+            out.append(f"{record['path']}: options tuned under the goal setting {tuned!r}, "
+                       f"{sc.name} runs under {sc.task.goal!r}: the controllers are told "
+                       "other things of the goal than when they were tuned "
+                       "(docs/scenarios.md, \"Fairness\")")
+        out += [f"{record['path']}: {text}" for text in _not_held_out(
+            tuning, sc.name, sc.seed)]
+    return out
+
+
+def _not_held_out(tuning: dict[str, Any], scenario: str, seed: Any) -> list[str]:
+    """Why a study does not test the options of ``tuning`` on held-out trials: tuned on
+    another scenario, or run with the tuning's own seed."""
+    out = []
+    if tuning.get("scenario") and tuning["scenario"] != scenario:
+        out.append(f"options tuned on {tuning['scenario']}, not on {scenario}: its trials "
+                   "test them, but they were not tuned for it")
+    if seed is not None and seed == tuning.get("tuning_seed"):
+        out.append(f"{scenario} runs with the tuning's own seed {seed}: its trials are "
+                   "the tuning trials, not held out")
+    return out
+
+
+#: The keys of a ``[tuning]`` table that make a file's options "tuned" in a report (a
+#: table without them, written by hand, is reported as hand-written options).
+TUNING_KEYS = ("scenario", "criterion", "budget", "tuning_seed", "study_seed")
 
 
 def record_options(meta: dict[str, Any], record: dict[str, Any] | None) -> None:
@@ -197,13 +226,22 @@ def options_line(meta: dict[str, Any]) -> str:
     others = _run_labels(meta) - set(rec.get("controllers", {}))
     given = (f" Options of {', '.join(sorted(others))}: **as given** (the scenario's; not in "
              "the file)." if others else "")
-    if not tuning:
+    missing = [k for k in TUNING_KEYS if tuning.get(k) is None]
+    if not tuning or missing:
+        table = (f"; its [tuning] table lacks {', '.join(missing)}" if tuning else "")
         return (f"Controller options of {labels}: from `{rec.get('path')}` (written by hand, "
-                f"not tuned; {rec.get('digest', '')[:19]}).{given}")
+                f"not tuned{table}; {rec.get('digest', '')[:19]}).{given}")
     held = ("held-out trials" if tuning.get("held_out", True) else "the same fixed task "
             "with other noise draws: not held out")
+    studies = (meta.get("scenarios") or {}).items()
+    not_held = [t for name, entry in studies
+                for t in _not_held_out(tuning, name, (entry.get("study") or {}).get("seed"))]
+    if not_held:
+        held = "NOT held out: " + "; ".join(not_held)
+    searched = tuning.get("candidates_run") or {}
     kept = sorted(label for label, t in (tuning.get("shown_better") or {}).items()
-                  if t.get("kept") == "as given")
+                  if t.get("kept") == "as given" and searched.get(label, 2) > 1)
+    unsearched = sorted(label for label, n in searched.items() if n <= 1)
     goal = f", goal setting {tuning['goal']}" if tuning.get("goal") else ""
     return (f"Controller options of {labels}: **tuned** (`{rec.get('path')}`, "
             f"{rec.get('digest', '')[:19]}): by `hexapod-bench tune` on "
@@ -211,6 +249,8 @@ def options_line(meta: dict[str, Any]) -> str:
             f"{tuning.get('budget')}{goal}, tuning seed {tuning.get('tuning_seed')} (the "
             f"study's: {tuning.get('study_seed')}; {held})"
             + (f"; kept as given, no candidate shown better: {', '.join(kept)}" if kept
+               else "")
+            + (f"; nothing to search, as given: {', '.join(unsearched)}" if unsearched
                else "") + "." + given)
 
 

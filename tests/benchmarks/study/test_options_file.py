@@ -96,3 +96,44 @@ def test_a_bad_value_is_refused_naming_the_options_file_and_its_key(
         check_controllers(sc)
     assert str(info.value).startswith(f"{f}: key 'controllers.\"computed-torque\"."
                                       "saturation': computed-torque: "), str(info.value)
+
+
+def test_the_report_says_when_tuned_options_are_not_held_out(tmp_path: Path) -> None:
+    """'tuned ... held-out trials' was said of a run with the tuning's own seed (the
+    tuning trials, bit for bit), of another scenario than the tuned one, of a file whose
+    [tuning] table was written by hand, and a controller with nothing to search was
+    'kept as given, no candidate shown better' as one searched and not improved."""
+    from benchmarks.study.options_file import goal_mismatches
+    from benchmarks.study.study_record import study_of
+
+    f = tmp_path / "o.toml"
+    tuning = {"scenario": "t", "criterion": "median-final", "budget": "3 x 3 x 1",
+              "tuning_seed": 1000004, "study_seed": 1, "held_out": True,
+              "candidates_run": {"leg-edge": 3, "computed-torque": 1},
+              "shown_better": {"leg-edge": {"kept": "as given"},
+                               "computed-torque": {"kept": "as given"}}}
+    write_options_file(f, {"leg-edge": {"gain": 2.0}, "computed-torque": {}}, tuning,
+                       "written by hexapod-vs: test")
+    record = load_options_file(f).record()
+
+    def line(name: str, seed: int) -> str:
+        sc = parse_scenario({**SC, "name": name, "seed": seed})
+        return options_line({"options_file": record, "scenarios": {name: {
+            "study": study_of(sc)}}})
+
+    fine = line("t", 1)
+    assert "held-out trials" in fine and "NOT held out" not in fine
+    assert "kept as given, no candidate shown better: leg-edge" in fine
+    assert "nothing to search, as given: computed-torque" in fine
+    assert "NOT held out: t runs with the tuning's own seed 1000004: its trials are the " \
+        "tuning trials" in line("t", 1000004)
+    assert "NOT held out: options tuned on t, not on other" in line("other", 1)
+    said = goal_mismatches([parse_scenario({**SC, "name": "other", "seed": 1000004})], record)
+    assert any("options tuned on t, not on other" in w for w in said)
+    assert any("runs with the tuning's own seed 1000004" in w for w in said)
+    # a [tuning] table written by hand, without the tuning's keys: not "tuned"
+    write_options_file(f, {"leg-edge": {"gain": 2.0}}, {"note": "mine"},
+                       "written by hexapod-vs: test")
+    hand = options_line({"options_file": load_options_file(f).record()})
+    assert "written by hand, not tuned; its [tuning] table lacks scenario" in hand
+    assert "**tuned**" not in hand
