@@ -305,6 +305,19 @@ def mark_jpeg(data: bytes) -> bytes:
     return data[:2] + b"\xff\xfe" + struct.pack(">H", len(text) + 2) + text + data[2:]
 
 
+def json_signed(value: object) -> object:
+    """``value`` as standard JSON takes it, recursively: NaN as None, an infinity as the
+    string ``"inf"`` or ``"-inf"`` (its sign kept; ``float()`` reads it back)."""
+    if isinstance(value, float):  # (numpy's float64 too)
+        x = float(value)
+        return None if math.isnan(x) else ("inf" if x > 0 else "-inf") if math.isinf(x) else x
+    if isinstance(value, dict):
+        return {k: json_signed(v) for k, v in value.items()}
+    if isinstance(value, list | tuple):
+        return [json_signed(v) for v in value]
+    return value
+
+
 def _json_safe(value: object) -> object:
     """``value`` with every non-finite float (NaN, infinities) as None, recursively."""
     if isinstance(value, float):

@@ -37,6 +37,7 @@ from benchmarks.study.verdicts import (
     margin_text,
     resolve_margins,
 )
+from hexapod.outputs import json_signed
 
 if TYPE_CHECKING:
     import pandas as pd
@@ -133,15 +134,7 @@ class Comparison:
         d = asdict(self)
         d["interval"] = list(self.interval)
         d["discordant"] = list(self.discordant) if self.discordant else None
-        return {k: _clean(v) for k, v in d.items()}
-
-
-def _clean(v: Any) -> Any:
-    if isinstance(v, float) and not np.isfinite(v):
-        return None if np.isnan(v) else ("inf" if v > 0 else "-inf")
-    if isinstance(v, list):
-        return [_clean(x) for x in v]
-    return v
+        return {k: json_signed(v) for k, v in d.items()}
 
 
 def resolve_metric(name: str, columns: list[str]) -> tuple[str, str, bool]:

@@ -31,6 +31,7 @@ from typing import Any
 from benchmarks.exceptions import BenchmarkError
 from benchmarks.study.paper_figures import Figure, builtin_figures
 from benchmarks.study.reproduce import Result, reproduce, summary
+from hexapod.outputs import json_signed
 
 #: Studies the sensitivity study leaves out (rendered images in the loop).
 EXCLUDED_STUDIES = ("run:andreff2006-images", "run:tahri2009-images")
@@ -229,7 +230,9 @@ def write(out: Path, results: Sequence[PointResult], trials: int) -> tuple[Path,
     """Write ``sensitivity.json`` and ``sensitivity.md`` into ``out``."""
     out.mkdir(parents=True, exist_ok=True)
     j, m = out / REPORT_FILES[0], out / REPORT_FILES[1]
-    j.write_text(json.dumps(to_json(results, trials), indent=2) + "\n")
+    # standard JSON: an interval's end beyond the sample is "inf"/"-inf", not -Infinity
+    j.write_text(json.dumps(json_signed(to_json(results, trials)), indent=2,
+                            allow_nan=False) + "\n")
     m.write_text(report(results, trials))
     return j, m
 

@@ -29,7 +29,7 @@ from typing import Any
 
 import numpy as np
 
-from benchmarks.exceptions import ScenarioError
+from benchmarks.exceptions import BenchmarkError, ScenarioError
 from benchmarks.study.outdir import add_command
 
 #: The tuning seed is the study's plus this, unless ``--seed`` is given.
@@ -258,6 +258,12 @@ def cmd_tune(args: argparse.Namespace) -> int:
         sc = sc.with_goal(args.goal)
     criterion = args.criterion or ("median-tracking-rms" if sc.task.kind == "trajectory"
                                    else "median-final")
+    if "tracking" in CRITERIA[criterion][0] and sc.task.kind != "trajectory":
+        raise BenchmarkError(f"--criterion {criterion}: {sc.name}'s task is {sc.task.kind}, "
+                             "with no reference to track (every trial would score as a "
+                             "failure); choose one of "
+                             + ", ".join(c for c, (f, _) in CRITERIA.items()
+                                         if "tracking" not in f))
     check_output_dir(out, _own_entry, "tune directory (candidates/, tuned.toml, tuning.json)",
                      args.overwrite)
     for path, kind in ((out / TUNED_FILE, "TOML"), (out / SCORES_FILE, "JSON")):
@@ -274,8 +280,11 @@ def cmd_tune(args: argparse.Namespace) -> int:
     plans: dict[str, list[dict[str, Any]]] = {}
     families: dict[str, str | None] = {}
     axes: dict[str, Any] = {}
+    own_tables = ({s.label for s in sc.controllers} | {s.name for s in sc.controllers}
+                  if args.space is not None else set())
     for spec in sc.controllers:
-        cs = controller_space(spec.label, spec.name, tables[spec.label], space)
+        cs = controller_space(spec.label, spec.name, tables[spec.label], space,
+                              frozenset(own_tables))
         for text in cs.skipped:
             con.print(f"tune: {text}", markup=False, highlight=False)
         families[spec.label] = cs.family

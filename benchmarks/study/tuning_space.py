@@ -110,7 +110,8 @@ class ControllerSpace:
 
 
 def controller_space(label: str, name: str, table: Any,
-                     space: dict[str, tuple[Axis, ...]]) -> ControllerSpace:
+                     space: dict[str, tuple[Axis, ...]],
+                     own: frozenset[str] = frozenset()) -> ControllerSpace:
     """The axes of ``space`` a controller takes.
 
     Args:
@@ -119,6 +120,9 @@ def controller_space(label: str, name: str, table: Any,
         table: Its :class:`~controllers.options.OptionTable`.
         space: The search space (by family, or by label / registry name for a space
             file's own tables: those come first).
+        own: The tables that belong to a controller of the tuning (its label or name):
+            never another's family (a range set for leg-edge was searched by every
+            controller that takes its option).
     """
     def takes(option: str) -> bool:
         return bool(table.declares(option))
@@ -127,7 +131,7 @@ def controller_space(label: str, name: str, table: Any,
         if family in space:
             return _split(label, family, space[family], takes, name, table)
     for family, axes in space.items():
-        if any(takes(a.option) for a in axes):
+        if family not in own and any(takes(a.option) for a in axes):
             return _split(label, family, axes, takes, name, table)
     return ControllerSpace(label, None, (), (
         f"{label}: no family of the search space applies (its options: "
@@ -282,6 +286,23 @@ def check_space_options(space: dict[str, tuple[Axis, ...]], tables: dict[str, An
         ScenarioError: Naming the file, the key, the controller's options and the close
             one.
     """
+    own = set(names) | set(names.values())
+    for key, axes in space.items():  # a family's table: options some controller takes
+        if key in own:
+            continue
+        close = suggest(key, own)
+        if close is not None and key not in SEARCH_SPACE:  # (a controller's, misspelt)
+            raise ScenarioError(path, f"table [{key}] is no controller of this tuning "
+                                f"({', '.join(sorted(names))}) and no family of the built-in "
+                                f"space ({', '.join(SEARCH_SPACE)})", key=key,
+                                suggestion=close)
+        for axis in axes:
+            if not any(tables[label].declares(axis.option) for label in names):
+                every = sorted({o for label in names for o in tables[label].names})
+                raise ScenarioError(
+                    path, f"no controller of this tuning ({', '.join(sorted(names))}) has an "
+                    f"option '{axis.option}'; their options: {', '.join(every) or 'none'}",
+                    key=f"{key}.{axis.option}", suggestion=suggest(axis.option, every))
     for label, name in names.items():
         for key in (label, name):
             for axis in space.get(key, ()):

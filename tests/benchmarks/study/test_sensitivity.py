@@ -4,6 +4,7 @@ report says which points match every figure, and a tiny run works end to end."""
 from __future__ import annotations
 
 import json
+import math
 from dataclasses import replace
 from pathlib import Path
 
@@ -80,6 +81,23 @@ def test_report_names_the_points_matching_every_figure() -> None:
     assert f"1. `{f.id}`: within at 1 of 2 points ({b.name})" in text
     text = report([point(a, False)], 3)
     assert "Points with every paper figure within: none (at best 0 of 1)" in text
+
+
+def test_sensitivity_json_is_standard_json(tmp_path: Path) -> None:
+    """An interval's end beyond the sample was written as bare -Infinity, which a
+    standard JSON reader refuses: it is "-inf" now, as compare --json writes it."""
+    from benchmarks.study.sensitivity import write
+
+    f = next(f for f in builtin_figures() if f.id == "seed003-convergence-edges")
+    rs = [Result(f, "", 0.9, (-math.inf, 0.95), 3)]
+    verdicts(rs)
+    j, _ = write(tmp_path, [PointResult(Point(15.0, 0.8, "declared", "on"), rs)], 3)
+
+    def refuse(name: str) -> float:
+        raise ValueError(f"non-standard JSON constant {name}")
+
+    text = json.dumps(json.loads(j.read_text(), parse_constant=refuse))
+    assert '"-inf"' in text
 
 
 @pytest.mark.slow

@@ -161,6 +161,8 @@ def test_a_run_under_another_goal_setting_than_tuned_is_warned(
     tuned = tmp_path / "tuned.toml"
     write_options_file(tuned, {"leg-edge": {"gain": 2.0}},
                        {"scenario": "gain-ladder", "goal": "mixed", "held_out": False,
+                        "criterion": "median-final", "budget": "2 x 2 x 1",
+                        "tuning_seed": 1000011, "study_seed": 8,
                         "shown_better": {"leg-edge": {"kept": "as given"}}}, "# tuned")
     run = tmp_path / "run"
     assert main(["run", str(sc), "--goal", "taught", "--options-file", str(tuned), "--trials",
@@ -209,3 +211,45 @@ def test_an_axis_whose_values_the_controller_refuses_is_an_error_before_anything
     assert f"{space}: key 'leg-edge.adaptive_gain': leg-edge: " in err, err
     assert "a vector option's axis needs a shape" in err
     assert not out.exists()
+
+
+def test_a_space_table_is_its_controllers_and_its_options_someones(
+        files: tuple[Path, Path], tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """A space file's table for leg-edge was searched by every controller that takes its
+    option, a misspelt controller table was taken for a family, and a family table's
+    misspelt option made a tune that searched nothing, exit 0: the first two are each
+    controller's own, the others refused before any trial."""
+    from benchmarks.study.tuning_space import controller_space, load_space
+    from controllers import registry
+
+    sc, space = files
+    space.write_text('["leg-edge"]\ngain = { low = 2.0, high = 3.0 }\n')
+    spec = load_space(space)
+    tables = {n: registry.options(n) for n in ("leg-edge", "leg-direction")}
+    own = frozenset(tables)
+    assert controller_space("leg-edge", "leg-edge", tables["leg-edge"], spec, own).axes
+    assert not controller_space("leg-direction", "leg-direction", tables["leg-direction"],
+                                spec, own).axes  # (it was searched over leg-edge's range)
+    for text, fragment in (
+            ('["leg-egde"]\ngain = { low = 2.0, high = 3.0 }\n',
+             "table [leg-egde] is no controller of this tuning"),
+            ('[velocity]\nadaptive_gian = { low = 1.0, high = 8.0 }\n',
+             "no controller of this tuning (leg-edge) has an option 'adaptive_gian'")):
+        space.write_text(text)
+        capsys.readouterr()
+        assert main(["tune", str(sc), "--controllers", "leg-edge", "--space", str(space),
+                     "--out", str(tmp_path / "t")]) == 2
+        err = " ".join(capsys.readouterr().err.split())
+        assert fragment in err and "did you mean" in err, err
+        assert not (tmp_path / "t").exists()
+
+
+def test_a_tracking_criterion_on_a_point_to_point_task_is_refused(
+        files: tuple[Path, Path], tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """It scored every trial as a failure (+inf), exit 0, and wrote a tuned.toml."""
+    sc, _ = files
+    assert main(["tune", str(sc), "--controllers", "leg-edge", "--criterion",
+                 "median-tracking-rms", "--out", str(tmp_path / "t")]) == 2
+    err = " ".join(capsys.readouterr().err.split())
+    assert "--criterion median-tracking-rms:" in err and "no reference to track" in err
+    assert not (tmp_path / "t").exists()
