@@ -20,6 +20,7 @@ import numpy as np
 from benchmarks.robot.exits import ServoExit, SessionStop
 from hexapod.actuation import Actuation
 from hexapod.backends.rate import RateLimiter
+from hexapod.exceptions import BackendError
 
 #: Default ``--max-time-s`` [s]: a session never runs unattended for ever.
 DEFAULT_MAX_TIME_S = 60.0
@@ -133,7 +134,15 @@ class LimitedRobot:
         self.last_dt = dt
         self.last_applied = v.copy() if actuation is Actuation.VELOCITY else np.zeros(6)
         sent = time.perf_counter()
-        bs = self.robot.apply(v, actuation, dt, controller)
+        try:
+            bs = self.robot.apply(v, actuation, dt, controller)
+        except BackendError:
+            raise
+        except Exception as exc:  # the plugin's own failure: the robot's, not ours (it
+            # was an 'internal error' with a traceback; the session halts it either way)
+            name = getattr(self.robot, "identity", "") or type(self.robot).__name__
+            raise BackendError(f"{name}: its step raised {type(exc).__name__}: {exc}"
+                               ) from exc
         if self._returns is not None:
             self._check_pacing(dt)
         if self.pace:  # the rest of the period, on the grid of the first command

@@ -153,6 +153,24 @@ def _ask(prompt: str) -> str:
             return sys.stdin.readline()
 
 
+def _start_reading(robot: Any, geometry: Any) -> np.ndarray:
+    """The robot's first reading, checked before anything uses it (the goal and travel
+    checks, the record): five values crashed the session with a traceback, None lost
+    its final record.
+
+    Raises:
+        SessionStop: ``SAFETY``: not six plausible leg lengths (the robot is halted by
+            the session's shutdown).
+    """
+    from hexapod.plausible import reading_problem
+
+    raw = robot.measured_lengths()
+    problem = reading_problem(raw, geometry.stroke)
+    if problem is not None:
+        raise SessionStop(ServoExit.SAFETY, f"at the start: {problem}")
+    return np.asarray(raw, float).copy()
+
+
 def _check_board(robot: Any, geometry: HexapodGeometry, goal_q: np.ndarray,
                  say: Any) -> None:
     """The robot file against what the controller says of itself (``stroke``,
@@ -318,7 +336,7 @@ def run_session(args: argparse.Namespace, inputs: SessionInputs, status: StatusL
                 f"goal {inputs.goal_file.source}, dt {args.dt * 1e3:g} ms; speed <= "
                 f"{limits.max_speed * 1e3:g} mm/s, time <= {limits.max_time:g} s; record "
                 f"{log.path}; Ctrl-C, SIGTERM or SIGHUP halt the robot")
-            q0 = np.asarray(robot.measured_lengths(), float)
+            q0 = _start_reading(robot, inputs.geometry)
             goal_q = np.asarray(inputs.goal_file.lengths, float)
             _check_board(robot, inputs.geometry, goal_q, status.message)
             _plan(args, q0, goal_q, limits, status.message)

@@ -381,7 +381,10 @@ def _close_all(backends: list[Backend]) -> None:
         except Exception as exc:  # already failing: report and go on closing
             log.warning("halting a backend failed: %s", exc)
         finally:
-            b.close()
+            try:
+                b.close()
+            except Exception as exc:  # the trial ran to its end: said, not undone
+                log.warning("closing a backend failed: %s", exc)
 
 
 def trial_context(sc: SimScenario, setup: TrialSetup, goal: Any) -> ControllerContext:

@@ -8,6 +8,7 @@ limits and reports the leg lengths a real robot's encoders would measure.
 from __future__ import annotations
 
 import inspect
+import logging
 import time
 from abc import ABC, abstractmethod
 from dataclasses import dataclass, field
@@ -20,6 +21,8 @@ from hexapod.actuation import Actuation, check_actuation
 from hexapod.exceptions import BackendError, ShapeError
 from hexapod.geometry import HexapodGeometry
 from hexapod.link_errors import ImplausibleReadingError
+
+log = logging.getLogger(__name__)
 
 
 @dataclass
@@ -261,7 +264,9 @@ def write_failed(exc: BaseException) -> str:
 
 
 def started(robot: BackendT, start: np.ndarray | None) -> BackendT:
-    """``robot`` moved to ``start`` with ``reset`` (nothing when None); closed if that fails.
+    """``robot`` moved to ``start`` with ``reset`` (nothing when None); halted, then
+    closed, if that fails (a move to a start is the longest a real robot makes: it was
+    closed without a halt).
 
     Args:
         robot: A just-opened backend.
@@ -274,7 +279,13 @@ def started(robot: BackendT, start: np.ndarray | None) -> BackendT:
         try:
             robot.reset(start)
         except BaseException:
-            robot.close()
+            try:
+                robot.halt()
+            except Exception as exc:  # already failing: said, and closed all the same
+                log.warning("halting %s after its move to the start failed: %s",
+                            type(robot).__name__, exc)
+            finally:
+                robot.close()
             raise
     return robot
 

@@ -15,6 +15,10 @@ with the same commands and compares what they measure, period by period:
 4. a NaN command (no leg may move, the step reports it clamped);
 5. ``halt()`` then ``close()`` (must not raise).
 
+A backend that raises during the checks (its link, its robot or its own code) fails
+the check with the exception named; ``halt()`` and ``close()`` are called whatever
+happens, a Ctrl-C included.
+
 Use it in your own test suite::
 
     from hexapod.backends.conformance import check_backend
@@ -110,6 +114,7 @@ def check_backend(factory: BackendFactory, geometry: HexapodGeometry, dt: float 
     collecting = gc.isenabled()
     gc.collect()
     gc.disable()
+    halted = False
     try:
         try:
             q = _read(robot.measured_lengths(), "start", geometry)
@@ -118,6 +123,7 @@ def check_backend(factory: BackendFactory, geometry: HexapodGeometry, dt: float 
                                        f"expected {np.round(q0 * 1e3, 4).tolist()} mm")
             # 1. smooth motion inside the limits
             phases = np.arange(6) * np.pi / 3
+            deviated = False
             for k in range(periods):
                 v = 0.4 * vmax * np.sin(2 * np.pi * k / periods + phases)
                 got = robot.step(v, dt)
@@ -130,12 +136,12 @@ def check_backend(factory: BackendFactory, geometry: HexapodGeometry, dt: float 
                     continue
                 dev = float(np.max(np.abs(np.asarray(got.lengths) - want.lengths)))
                 report.max_deviation = max(report.max_deviation, dev)
-                if dev > tolerance:
+                if dev > tolerance and not deviated:  # the first, said; the largest over
+                    deviated = True  # every period still measured (it stopped here)
                     leg = int(np.argmax(np.abs(np.asarray(got.lengths) - want.lengths)))
                     report.problems.append(f"smooth motion, period {k}: leg {leg} measured "
                                            f"{got.lengths[leg] * 1e3:.6f} mm, the simulator "
                                            f"{want.lengths[leg] * 1e3:.6f} mm")
-                    break
             if report.missed_periods > periods / 4:
                 report.problems.append(f"smooth motion: the host missed {report.missed_periods} "
                                        f"of its {periods} periods (only the others are "
@@ -175,6 +181,11 @@ def check_backend(factory: BackendFactory, geometry: HexapodGeometry, dt: float 
                 report.problems.append("NaN command: leg 2 was not reported clamped")
         except _BadReadingError as bad:  # the checks after it would compare garbage
             report.problems.append(str(bad))
+        except Exception as exc:  # the robot, its link or the plugin failed during the
+            # check: a failed check (it was a traceback, or the exit code of a bad spec)
+            report.problems.append(f"after {report.periods} period(s) the backend failed: "
+                                   f"{type(exc).__name__}: {exc}")
+        halted = True
         try:  # 5. halt
             robot.halt()
         except Exception as exc:
@@ -182,6 +193,11 @@ def check_backend(factory: BackendFactory, geometry: HexapodGeometry, dt: float 
     finally:
         if collecting:
             gc.enable()
+        if not halted:  # Ctrl-C during the checks: the legs stopped before the link closes
+            try:
+                robot.halt()
+            except Exception as exc:
+                report.problems.append(f"halt() raised {type(exc).__name__}: {exc}")
         try:
             robot.close()
         except Exception as exc:

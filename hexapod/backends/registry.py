@@ -34,7 +34,12 @@ import numpy as np
 
 from hexapod.backends.base import Backend, started
 from hexapod.config import suggest
-from hexapod.exceptions import BackendPluginError, UnknownBackendError, UnsafeNameError
+from hexapod.exceptions import (
+    BackendError,
+    BackendPluginError,
+    UnknownBackendError,
+    UnsafeNameError,
+)
 from hexapod.geometry import HexapodGeometry
 from hexapod.outputs import check_name
 
@@ -274,7 +279,13 @@ class BackendRegistry:
         """
         name = self.check(spec)
         _, opener, args = self.resolve(spec)
-        robot = opener(args, geometry, start)
+        try:
+            robot = opener(args, geometry, start)
+        except BackendError:
+            raise
+        except Exception as exc:  # a plugin's own failure (a bad ARGS, an abstract class,
+            # its SDK): named as the plugin's, not a traceback of an internal error
+            raise BackendPluginError(name, "open", f"{type(exc).__name__}: {exc}") from exc
         if not isinstance(robot, Backend):
             for attr in ("reset", "step", "measured_lengths", "halt", "close"):
                 if not callable(getattr(robot, attr, None)):

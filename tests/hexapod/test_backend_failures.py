@@ -1,0 +1,97 @@
+"""What the hosts do when a robot backend fails (tests/hexapod/failing_robot.py): the
+robot is halted, then closed, whatever failed; the failure is named, as the backend's,
+with the exit code of a robot failure, not an internal error's traceback."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from hexapod.backends.conformance import check_backend
+from hexapod.backends.registry import backends
+from hexapod.exceptions import BackendPluginError
+from hexapod.geometry import deltalab
+from tests.hexapod import failing_robot
+from tests.hexapod.failing_robot import CALLS
+
+SPEC = "tests.hexapod.failing_robot:FailingRobot"
+
+
+@pytest.fixture(autouse=True)
+def _calls() -> None:
+    CALLS.clear()
+
+
+def _host_calls() -> list[str]:
+    """The calls the host made (the simulator's own set-up left out)."""
+    return [c for where, c in CALLS if where]
+
+
+def test_a_plugin_that_fails_to_open_is_named_not_a_traceback() -> None:
+    with pytest.raises(BackendPluginError, match="ValueError: vendor SDK: device not found"):
+        backends.open(f"{SPEC}:open", deltalab())
+
+
+def test_a_failed_move_to_the_start_halts_the_robot_before_closing_it() -> None:
+    """reset() is the longest move a real robot makes; its failure closed it unhalted."""
+    with pytest.raises(BackendPluginError, match="RuntimeError: vendor SDK: reset failed"):
+        backends.open(f"{SPEC}:reset", deltalab(), np.full(6, deltalab().q_mid))
+    assert _host_calls() == ["reset", "halt", "close"]
+
+
+def test_conformance_fails_a_backend_that_raises_and_halts_it() -> None:
+    g = deltalab()
+    report = check_backend(lambda geo, q: backends.open(f"{SPEC}:step", g, q), g)
+    assert not report.ok
+    assert any("the backend failed: RuntimeError: vendor SDK: drive fault E42" in p
+               for p in report.problems), report.problems
+    assert _host_calls()[-2:] == ["halt", "close"]
+
+
+def test_conformance_halts_the_robot_on_ctrl_c() -> None:
+    g = deltalab()
+    with pytest.raises(KeyboardInterrupt):
+        check_backend(lambda geo, q: backends.open(f"{SPEC}:step-interrupt", g, q), g)
+    assert _host_calls()[-2:] == ["halt", "close"]  # (close only, before)
+
+
+def test_a_close_that_raises_does_not_undo_a_trial(tmp_path: Path) -> None:
+    """The trial ran to its end; closing the robot failed after: said, the row kept
+    (it was 'did not run to its end', and the run 'cannot run')."""
+    from benchmarks.cli import main
+    from benchmarks.study.runner import read_results
+
+    out = tmp_path / "run"
+    assert main(["run", "quick", "--backend", f"{SPEC}:close", "--controllers", "leg-edge",
+                 "--trials", "1", "--out", str(out), "--no-progress"]) == 0
+    (row,) = read_results(out)
+    assert row["failure"] is None and row["converged"]
+    assert _host_calls()[-2:] == ["halt", "close"]
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize(("where", "code", "said"), [
+    ("five-legs", 5, "at the start: the backend measured 5 values of shape (5,)"),
+    ("step", 4, "FailingRobot: its step raised RuntimeError: vendor SDK: drive fault E42"),
+])
+def test_a_servo_session_stops_safely_on_a_failing_plugin(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str], where: str, code: int,
+        said: str) -> None:
+    """Five lengths crashed the session before they were checked (exit 1, a traceback);
+    a plugin's RuntimeError in step was an 'internal error' with a traceback: a safety
+    stop (5) and a robot failure (4), the robot halted and closed, the record final."""
+    from benchmarks.robot import servo
+    from tests.benchmarks.robot.sessions import final, goal_file
+
+    out = tmp_path / "session"
+    assert servo.main(["--backend", f"{SPEC}:{where}", "--camera", "sim",
+                       "--simulated-camera-on-real-robot", "--goal",
+                       str(goal_file(tmp_path)), "--out", str(out), "--dt", "0.03",
+                       "--max-steps", "20"]) == code
+    text = " ".join(capsys.readouterr().out.split())
+    assert said in text and "Traceback" not in text
+    assert final(out)["exit_code"] == code
+    assert _host_calls()[-2:] == ["halt", "close"]
+    assert failing_robot.CALLS is CALLS
