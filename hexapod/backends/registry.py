@@ -219,11 +219,15 @@ class BackendRegistry:
                 for part in attr.split("."):
                     obj = getattr(obj, part)
             except ModuleNotFoundError as exc:
-                if exc.name == head and "." not in head:  # a typo more likely than a module
-                    raise UnknownBackendError(spec, list(self._openers),
-                                              suggest(head, self._openers)) from None
+                close = suggest(head, self._openers)
+                if exc.name == head and "." not in head and (close or not attr.isidentifier()):
+                    # a registered name misspelt ('seial:/dev/ttyUSB0'), not a module
+                    raise UnknownBackendError(spec, list(self._openers), close) from None
+                hint = (f" (is the folder of {head}.py on PYTHONPATH? the module of "
+                        "module:attr must be importable from where the command runs)"
+                        if exc.name == head else "")
                 raise BackendPluginError(f"{head}:{attr}", "command line",
-                                         f"{type(exc).__name__}: {exc}") from None
+                                         f"{type(exc).__name__}: {exc}{hint}") from None
             except (ImportError, AttributeError) as exc:
                 raise BackendPluginError(f"{head}:{attr}", "command line",
                                          f"{type(exc).__name__}: {exc}") from None

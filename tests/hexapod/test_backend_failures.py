@@ -95,3 +95,15 @@ def test_a_servo_session_stops_safely_on_a_failing_plugin(
     assert final(out)["exit_code"] == code
     assert _host_calls()[-2:] == ["halt", "close"]
     assert failing_robot.CALLS is CALLS
+
+
+def test_a_plugin_module_off_the_path_is_said_so_and_a_typo_is_a_typo() -> None:
+    """'my_robot:LaggingRobot' without the module on PYTHONPATH was 'unknown backend',
+    hiding the ModuleNotFoundError; a misspelt registered name stays a typo."""
+    from hexapod.exceptions import UnknownBackendError
+
+    with pytest.raises(BackendPluginError, match=r"No module named 'no_such_robot' \(is the "
+                       r"folder of no_such_robot.py on PYTHONPATH"):
+        backends.resolve("no_such_robot:LaggingRobot")
+    with pytest.raises(UnknownBackendError, match="did you mean 'serial'"):
+        backends.resolve("seial:/dev/ttyUSB0")
