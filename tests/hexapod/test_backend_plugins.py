@@ -79,8 +79,10 @@ def test_spec_syntax_and_errors(site: Path) -> None:
     assert (name, args) == ("serial", "socket://127.0.0.1:5000")
     with pytest.raises(UnknownBackendError, match="did you mean 'emulator'"):
         backends.resolve("emulatr")
+    with pytest.raises(BackendPluginError, match="on PYTHONPATH"):  # (a class named as
+        backends.resolve("no_such_module:Robot")  # module:attr: its module is missing)
     with pytest.raises(UnknownBackendError, match="or name a class as module:attr"):
-        backends.resolve("no_such_module:Robot")
+        backends.resolve("no_such_module:/dev/ttyUSB0")  # (not a class name: a typo)
     with pytest.raises(BackendPluginError, match="ModuleNotFoundError"):
         backends.resolve("no_such_package.robot:Robot")
     with pytest.raises(BackendPluginError, match="not a subclass"):
