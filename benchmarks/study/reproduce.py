@@ -390,7 +390,8 @@ def judge(fig: Figure, value: float | None, interval: tuple[float, float] | None
     lo, hi = interval
     if not (math.isfinite(lo) or math.isfinite(hi)) or (
             fig.rule == "equal" and not (math.isfinite(lo) and math.isfinite(hi))):
-        return ("not comparable (too few trials for a 95 % interval: "
+        return ("not comparable (too few trials for its interval, 95 % or wider after a "
+                "Bonferroni correction: "
                 f"{'an end' if math.isfinite(lo) or math.isfinite(hi) else 'both ends'} "
                 "beyond the sample)")
     if fig.rule == "below":

@@ -275,3 +275,16 @@ def test_calibration_figures_are_over_calibrations_and_the_worst_point_is_simult
         w.framework
     assert w.interval == pytest.approx((max(e.low for e in ends), max(e.high for e in ends)))
     assert "Bonferroni" in w.note
+
+
+def test_the_sensitivity_default_gives_every_row_its_interval() -> None:
+    """The worst of the six base points has a Bonferroni-corrected (99.17 %) interval of
+    its median: at the former default of 6 trials it had no end inside the sample, so that
+    row was never comparable; the default (8) is the fewest that give it both ends."""
+    from benchmarks.study.exact import order_statistic_ranks
+    from benchmarks.study.reproduce_cli import SENSITIVITY_TRIALS
+
+    level = 1 - 0.05 / 6
+    assert None in order_statistic_ranks(SENSITIVITY_TRIALS - 1, 0.5, level)
+    assert None not in order_statistic_ranks(SENSITIVITY_TRIALS, 0.5, level)
+    assert None not in order_statistic_ranks(6, 0.5, 0.95)  # (a plain median's: 6)
