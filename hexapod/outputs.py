@@ -152,9 +152,16 @@ def _parquet_is_ours(path: Path) -> bool:
     return bool(meta.get(b"generator") == PARQUET_METADATA[b"generator"])
 
 
+#: The files of a run directory that carry no mark (the run's own): a refusal to replace
+#: one says so, not that the project did not write it.
+RUN_FILES = ("run.json", "results.jsonl")
+
+
 def _describe(path: Path) -> str:
     if path.is_dir():
         return "a directory"
+    if path.name in RUN_FILES and (path.parent / RUN_FILES[1]).exists():
+        return f"the {path.name} of the run in {path.parent}, which this command does not replace"
     try:
         size = path.stat().st_size
     except OSError:

@@ -262,3 +262,14 @@ def test_a_write_that_fails_names_the_file(tmp_path: Path) -> None:
     with pytest.raises(OutputError, match="could not be written") as info:
         replace_whole(path, "x")
     assert str(path) in str(info.value) and not path.parent.exists()
+
+
+def test_a_runs_own_files_are_not_called_the_users(tmp_path: Path) -> None:
+    """compare --json given a run's run.json was refused as 'not written by hexapod-vs'
+    (those files carry no mark, yet the project wrote them)."""
+    (tmp_path / "results.jsonl").write_text("{}\n")
+    (tmp_path / "run.json").write_text("{}\n")
+    for name in ("run.json", "results.jsonl"):
+        with pytest.raises(OutputError, match=f"the {name} of the run in") as info:
+            check_replace(tmp_path / name)
+        assert "not written by" not in str(info.value)
