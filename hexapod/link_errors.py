@@ -24,7 +24,8 @@ class LinkError(BackendError):
         self.url = url
         self.problem = problem
         self.command = command
-        during = f" during '{command}'" if command else ""
+        # a pipelined exchange ('POS?\nERR?') on one line, as it was sent: 'POS?; ERR?'
+        during = f" during '{'; '.join(command.splitlines())}'" if command else ""
         super().__init__(f"{self.device}{url}: {problem}{during}")
 
 

@@ -369,12 +369,14 @@ def run_session(args: argparse.Namespace, inputs: SessionInputs, status: StatusL
         else:
             code, reason = _outcome(result, args)
         halt = None if robot is None else _halt(robot, args.halt_timeout_s)
+        closing: list[str] = []  # (said on the console too: it was in the record only)
         for what, opened in (("robot", robot), ("camera", sensor)):
             if opened is not None:
                 try:
                     opened.close()
                 except Exception as exc:
-                    reason += f"; closing the {what} failed: {exc}"
+                    closing.append(f"closing the {what} failed: {exc}")
+                    reason += f"; {closing[-1]}"
         failed = ended is not None and not isinstance(ended, SessionStop)
         log.final({"exit_code": int(code), "exit": code.name.lower(), "reason": reason,
                    "exception": f"{type(ended).__name__}: {ended}" if failed else None,
@@ -395,6 +397,8 @@ def run_session(args: argparse.Namespace, inputs: SessionInputs, status: StatusL
             status.final(result.last)
             _report(status, code, reason, result, halt, limited, moved, log, ended,
                     [*_check_summaries(checks), *_watchdog_line(robot, moved)])
+            for text in closing:
+                status.message(f"warning: {text}")
             if ended is not None and code == ServoExit.INTERNAL:
                 traceback.print_exception(ended, file=sys.stderr)
         except (OSError, ValueError):

@@ -310,9 +310,10 @@ def gcs_config_from_args(args: argparse.Namespace) -> tuple[GcsConfig, FaultConf
     """The GCS hexapod (``--gcs``) and faults described by parsed command-line arguments."""
     from hexapod.backends.gcs_emulator import GcsConfig
 
-    for name in ("lag", "watchdog"):
-        if getattr(args, name) is not None:
-            raise BackendError(f"--{name} is an option of the serial board, not of --gcs")
+    for name in ("lag", "watchdog", "drive_fault_after"):  # (the last was ignored)
+        if getattr(args, name, None) is not None:
+            raise BackendError(f"--{name.replace('_', '-')} is an option of the serial "
+                               "board, not of --gcs")
     if args.pose is not None and args.lengths is not None:
         raise BackendError("--pose and --lengths both give the initial pose: choose one")
     geometry, lengths = _robot_from_args(args)

@@ -107,3 +107,46 @@ def test_a_plugin_module_off_the_path_is_said_so_and_a_typo_is_a_typo() -> None:
         backends.resolve("no_such_robot:LaggingRobot")
     with pytest.raises(UnknownBackendError, match="did you mean 'serial'"):
         backends.resolve("seial:/dev/ttyUSB0")
+
+
+@pytest.mark.parametrize("option", [["--lag", "0.02"], ["--watchdog", "100"],
+                                    ["--drive-fault-after", "3"]])
+def test_the_serial_boards_options_are_refused_with_the_gcs_controller(
+        option: list[str]) -> None:
+    """--drive-fault-after with --gcs was accepted and ignored (the GCS controller has
+    no drive fault to latch), where --lag and --watchdog were refused."""
+    from hexapod.backends.emulator import build_parser, gcs_config_from_args
+    from hexapod.exceptions import BackendError
+
+    args = build_parser().parse_args(["--gcs", "--pty", *option])
+    with pytest.raises(BackendError, match=f"{option[0]} is an option of the serial board"):
+        gcs_config_from_args(args)
+
+
+def test_a_pipelined_exchange_is_named_on_one_line() -> None:
+    """A GCS timeout during 'POS?' and 'ERR?' sent together printed the newline between
+    them, across two lines of the console."""
+    from hexapod.link_errors import LinkError
+
+    text = str(LinkError("tcp://127.0.0.1:50000", "no answer within 500.0 ms",
+                         "POS?\nERR?"))
+    assert "\n" not in text and text.endswith("during 'POS?; ERR?'")
+
+
+@pytest.mark.slow
+def test_a_servo_session_says_its_robot_failed_to_close(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """The plugin's close() raised at the end of a session: after a converged one the
+    console said only 'converged' (the failure was in the record's reason alone); it
+    warns of it, whatever the session's end (here its --max-steps)."""
+    from benchmarks.robot import servo
+    from tests.benchmarks.robot.sessions import final, goal_file
+
+    out = tmp_path / "session"
+    code = servo.main(["--backend", f"{SPEC}:close", "--camera", "sim",
+                       "--simulated-camera-on-real-robot", "--goal",
+                       str(goal_file(tmp_path)), "--out", str(out), "--dt", "0.03",
+                       "--max-steps", "20"])
+    text = " ".join(capsys.readouterr().out.split())
+    assert code == 3 and "warning: closing the robot failed: vendor SDK: close failed" in text
+    assert "closing the robot failed" in final(out)["reason"]
