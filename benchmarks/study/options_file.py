@@ -113,6 +113,28 @@ def write_options_file(path: str | Path, controllers: dict[str, dict[str, Any]],
     Path(path).write_text("\n".join(lines) + "\n", encoding="utf-8")
 
 
+def controller_options(spec: Any) -> Any:
+    """The options a controller of the scenario takes: its own, and for a wrapper that
+    hands options on to a law it wraps (``latency-compensated``, ``law = "leg-edge"``)
+    that law's too: its search space in ``tune`` is the law's (without them it ran its
+    options as given alone, a smaller budget than the others'), and an options file's
+    misspelt option of the law is refused naming the file (it was a TypeError naming
+    the scenario)."""
+    from controllers.options import OptionTable
+    from controllers.registry import registry
+
+    table = registry.options(spec.name)
+    if not (table.open and table.declares("law")):
+        return table
+    law = spec.options.get("law", next(o.default for o in table.options if o.name == "law"))
+    if not isinstance(law, str):
+        return table
+    inner = registry.options(law)
+    return OptionTable(table.options + tuple(o for o in inner.options
+                                             if not table.declares(o.name)), inner.open,
+                       inner.passes_on)
+
+
 def apply_options_file(scenarios: list[Any], options: OptionsFile) -> list[Any]:
     """The scenarios with each controller's options from the file (the file's value of
     an option replaces the scenario's; the scenario's other options stay).
@@ -123,7 +145,6 @@ def apply_options_file(scenarios: list[Any], options: OptionsFile) -> list[Any]:
             file, the key and the controller's options).
     """
     import controllers  # noqa: F401 - registers the built-ins
-    from controllers.registry import registry
 
     labels = {c.label for sc in scenarios for c in sc.controllers}
     for label in options.controllers:
@@ -140,7 +161,7 @@ def apply_options_file(scenarios: list[Any], options: OptionsFile) -> list[Any]:
             if given is None:
                 specs.append(spec)
                 continue
-            table = registry.options(spec.name)
+            table = controller_options(spec)
             keys = {}
             for option in given:
                 key = f'{options.path}: controllers."{spec.label}".{option}'

@@ -30,6 +30,7 @@ from typing import Any
 import numpy as np
 
 from benchmarks.exceptions import BenchmarkError, ScenarioError
+from benchmarks.study.options_file import controller_options
 from benchmarks.study.outdir import add_command
 
 #: The tuning seed is the study's plus this, unless ``--seed`` is given.
@@ -269,7 +270,7 @@ def cmd_tune(args: argparse.Namespace) -> int:
     for path, kind in ((out / TUNED_FILE, "TOML"), (out / SCORES_FILE, "JSON")):
         check_replace(path, args.overwrite, kind=kind)
     space = SEARCH_SPACE if args.space is None else load_space(args.space)
-    tables = {spec.label: _option_table(spec) for spec in sc.controllers}
+    tables = {spec.label: controller_options(spec) for spec in sc.controllers}
     if args.space is not None:
         check_space_options(space, tables, {s.label: s.name for s in sc.controllers},
                             args.space)
@@ -384,26 +385,6 @@ def _check_axis_values(spec: Any, axes: Any, space: dict[str, Any], path: str | 
                                     f"{problem} (the axis's value {axis.value(u)!r}"
                                     + ("; a vector option's axis needs a shape" if
                                        axis.shape is None else "") + ")", key=key) from None
-
-
-def _option_table(spec: Any) -> Any:
-    """The options a controller of the scenario takes: its own, and for a wrapper that
-    hands options on to a law it wraps (``latency-compensated``, ``law = "leg-edge"``)
-    that law's too, so that its search space is the law's (without them it ran its
-    options as given alone, a smaller budget than the others')."""
-    from controllers.options import OptionTable
-    from controllers.registry import registry
-
-    table = registry.options(spec.name)
-    if not (table.open and table.declares("law")):
-        return table
-    law = spec.options.get("law", next(o.default for o in table.options if o.name == "law"))
-    if not isinstance(law, str):
-        return table
-    inner = registry.options(law)
-    return OptionTable(table.options + tuple(o for o in inner.options
-                                             if not table.declares(o.name)), inner.open,
-                       inner.passes_on)
 
 
 def _write(out: Path, chosen: dict[str, Score], scores: dict[str, list[Score]],

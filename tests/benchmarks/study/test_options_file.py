@@ -137,3 +137,16 @@ def test_the_report_says_when_tuned_options_are_not_held_out(tmp_path: Path) -> 
     hand = options_line({"options_file": load_options_file(f).record()})
     assert "written by hand, not tuned; its [tuning] table lacks scenario" in hand
     assert "**tuned**" not in hand
+
+
+def test_a_wrappers_misspelt_law_option_names_the_options_file(tmp_path: Path) -> None:
+    """An options file's typo in an option a wrapper hands on to its law was a
+    TypeError naming the built-in scenario's key, without did-you-mean."""
+    from benchmarks.study.scenario import load_scenario
+
+    f = tmp_path / "o.toml"
+    f.write_text('[controllers."leg-edge+comp"]\nadaptive_gian = [7.0, 1.4, 42.0]\n')
+    sc = load_scenario("camera-latency-p2p").with_overrides(controllers=["leg-edge+comp"])
+    with pytest.raises(ScenarioError, match="has no option 'adaptive_gian'") as info:
+        apply_options_file([sc], load_options_file(f))
+    assert str(f) in str(info.value) and info.value.suggestion == "adaptive_gain"

@@ -181,13 +181,13 @@ def test_a_wrapper_is_searched_in_its_laws_space() -> None:
     from types import SimpleNamespace
 
     import controllers  # noqa: F401
-    from benchmarks.study.tune_command import _option_table
+    from benchmarks.study.options_file import controller_options
     from benchmarks.study.tuning_space import SEARCH_SPACE, candidates, controller_space
     from controllers.registry import registry
 
     spec = SimpleNamespace(name="latency-compensated", label="leg-edge+comp",
                            options={"law": "leg-edge", "adaptive_gain": [5.0, 1.0, 30.0]})
-    table = _option_table(spec)
+    table = controller_options(spec)
     assert {"law", "use_rates", "adaptive_gain", "gain"} <= set(table.names)
     wrapped = controller_space(spec.label, spec.name, table, SEARCH_SPACE)
     law = controller_space("leg-edge", "leg-edge", registry.options("leg-edge"), SEARCH_SPACE)
