@@ -18,6 +18,7 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from benchmarks.exceptions import ScenarioError, SetupError
+from benchmarks.scenario_sections import MODEL_ERROR_KEYS
 from benchmarks.study.setup_check import Problem
 
 
@@ -66,6 +67,32 @@ class Preflight:
         return [c.scenario for c in self.checks]
 
 
+#: The ``[calibration_error]`` keys that act only in the dynamic world (masses,
+#: inertias, the drives) or on a payload.
+DYNAMIC_ERRORS = ("mass_percent", "inertia_percent", *MODEL_ERROR_KEYS)
+
+
+def dynamics_only(sc: Any) -> list[str]:
+    """Warnings for settings that have no effect where the scenario runs: errors of the
+    masses, inertias and drives in the kinematic world, a payload's mass error without
+    a payload (they were accepted without a word)."""
+    ce = sc.calibration_error
+    where = f"{sc.source or sc.name}: [calibration_error]"
+    out = []
+    if sc.world != "dynamic":
+        keys = [k for k in DYNAMIC_ERRORS
+                if any(sc.sweep_axes.get(f"calibration_error.{k}", [getattr(ce, k)]))]
+        if keys:
+            out.append(f"{where} {', '.join(keys)}: errors of the robot's masses, inertias "
+                       "or drives, which the kinematic world does not have: no effect (set "
+                       "[robot] world = \"dynamic\", or run with --world dynamic)")
+    if getattr(sc, "payload", None) is None and any(sc.sweep_axes.get(
+            "calibration_error.payload_mass_percent", [ce.payload_mass_percent])):
+        out.append(f"{where} payload_mass_percent: the error of a payload's mass, and the "
+                   "scenario has no [payload]: no effect")
+    return out
+
+
 def preflight(scenarios: list[Any], allow_foreign_calibration: bool = False,
               measure: bool = True) -> Preflight:
     """Check a study before it runs (``run``) or as ``check`` does.
@@ -92,7 +119,7 @@ def preflight(scenarios: list[Any], allow_foreign_calibration: bool = False,
                                 "dynamic world: set [robot] world = \"dynamic\" (or run "
                                 "with --world dynamic)", key="payload")
         resolved, notes = check_controllers(sc)
-        warnings += notes
+        warnings += notes + dynamics_only(sc)
         warnings += check_scenario_calibration(resolved, allow_foreign_calibration)
         checks.append(StudyCheck(resolved))
     if measure:

@@ -213,3 +213,22 @@ def test_check_closes_with_the_warnings_it_printed(
     assert "integral_gain 30 1/s is not below 2 damping omega_n" in captured.err
     assert "No problem found in the setup; 1 warning(s) about the study above" in captured.out
     assert "No problem found." not in captured.out
+
+
+def test_settings_without_effect_where_the_study_runs_are_warned_of() -> None:
+    """Mass and drive errors in the kinematic world, a payload's mass error without a
+    payload: accepted without a word, and nothing changed; the built-ins have none."""
+    from benchmarks.study.preflight import dynamics_only
+    from benchmarks.study.scenario import builtin_scenarios, load_scenario, parse_scenario
+
+    sc = parse_scenario({"name": "k", "controllers": ["leg-edge"], "calibration_error": {
+        "mass_percent": 10.0, "model_friction_error_percent": 20.0,
+        "payload_mass_percent": 5.0}})
+    said = dynamics_only(sc)
+    assert len(said) == 2
+    assert "mass_percent, model_friction_error_percent: errors of the robot's masses" in said[0]
+    assert "payload_mass_percent: the error of a payload's mass" in said[1]
+    dynamic = parse_scenario({"name": "d", "controllers": ["leg-edge"], "robot": {
+        "world": "dynamic"}, "calibration_error": {"mass_percent": 10.0}})
+    assert dynamics_only(dynamic) == []
+    assert not any(dynamics_only(load_scenario(n)) for n in builtin_scenarios())
