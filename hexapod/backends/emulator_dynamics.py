@@ -63,7 +63,8 @@ class DynamicAxes:
             raise BackendError("--dynamics needs drives in velocity mode (a board sends "
                                f"position setpoints), the robot file has {geometry.drives.mode!r}")
         if not (np.isfinite(physics_dt) and 0 < physics_dt <= 0.01):
-            raise BackendError(f"physics_dt must be in (0, 10] ms, got {physics_dt * 1e3} ms")
+            raise BackendError(f"--physics-dt must be in (0, 10] ms, got {physics_dt * 1e3:g} "
+                               "ms")
         try:
             fk = forward_kinematics(geometry, np.asarray(lengths, float))
         except HexapodError as exc:

@@ -170,7 +170,7 @@ class InertiaParameters:
                 raise InertiaError(
                     f"inertia.{part}_com",
                     f"centre of mass {com} m from {hinge} is outside the leg: it must lie "
-                    f"between 0 and the shortest leg length q_min = {q_min} m{hint}", src)
+                    f"between 0 and the shortest leg length q_min = {q_min:g} m{hint}", src)
 
     def __eq__(self, other: object) -> bool:
         if not isinstance(other, InertiaParameters):

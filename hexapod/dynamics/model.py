@@ -42,7 +42,8 @@ def checked_array(name: str, value: np.ndarray, shape: tuple[int, ...]) -> np.nd
         raise ShapeError(name, f"shape (..., {', '.join(map(str, shape))})", arr.shape)
     if not np.all(np.isfinite(arr)):
         bad = np.argwhere(~np.isfinite(arr))[0]
-        raise ShapeError(name, "finite values", f"{arr[tuple(bad)]} at index {tuple(bad)}")
+        at = tuple(int(i) for i in bad)  # (plain ints: numpy's printed as np.int64(0))
+        raise ShapeError(name, "finite values", f"{arr[at]} at index {at}")
     return arr
 
 

@@ -150,3 +150,18 @@ def test_a_servo_session_says_its_robot_failed_to_close(
     text = " ".join(capsys.readouterr().out.split())
     assert code == 3 and "warning: closing the robot failed: vendor SDK: close failed" in text
     assert "closing the robot failed" in final(out)["reason"]
+
+
+def test_messages_print_plain_numbers() -> None:
+    """A NaN's index printed as (np.int64(0), np.int64(0)), a stroke end as
+    0.34500000000000003 m."""
+    from hexapod.dynamics.model import checked_array
+    from hexapod.exceptions import InertiaError, ShapeError
+
+    with pytest.raises(ShapeError) as info:
+        checked_array("twist", np.array([[np.nan, 0.0]]), (2,))
+    assert "at index (0, 0)" in str(info.value) and "np.int64" not in str(info.value)
+    g = deltalab()
+    with pytest.raises(InertiaError) as inertia:
+        g.inertia.replace(body_com=171.0).check_legs(g.stroke[0])
+    assert "q_min = 0.345 m" in str(inertia.value)
