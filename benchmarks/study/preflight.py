@@ -14,6 +14,7 @@ a setup whose every trial would fail raises a :class:`~benchmarks.exceptions.Set
 
 from __future__ import annotations
 
+import re
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -140,11 +141,36 @@ def measure_study(check: StudyCheck) -> None:
     check.problems = check.report.problems  # one list: the report's verdict includes all
     if check.report.can_run:  # a robot without a workspace has no trajectory to check
         check.trajectory = trajectory_facts(check.scenario)
-        for facts in check.trajectory:
-            check.problems += facts.problems
         check.payload = payload_facts(check.scenario)
-        for pf in check.payload:
-            check.problems += pf.problems
+        points = len(check.scenario.expand())
+        check.problems += _merged([p for found in [*check.trajectory, *check.payload]
+                                   for p in found.problems], points)
+
+
+#: The end of a problem found at one sweep point: `` (sweep point payload.mass_kg = 20)``.
+_AT_POINT = re.compile(r" \(sweep point (.+)\)$")
+
+
+def _merged(problems: list[Problem], points: int) -> list[Problem]:
+    """Problems found per sweep point, a problem the same at several points said once
+    with its points (``(every sweep point)`` when at all ``points``): a reference too
+    fast was said six times, once per payload, in the same words."""
+    groups: dict[tuple[str, str, str], list[str]] = {}
+    for p in problems:
+        m = _AT_POINT.search(p.text)
+        key = (p.severity, p.text[:m.start()] if m else p.text, p.topic)
+        groups.setdefault(key, []).append(m.group(1) if m else "")
+    out = []
+    for (severity, text, topic), at in groups.items():
+        named = [a for a in at if a]
+        if len(named) > 1:
+            where = ("every sweep point" if len(named) == points > 1
+                     else "sweep points " + "; ".join(named))
+            out.append(Problem(severity, f"{text} ({where})", topic))
+        else:
+            out.append(Problem(severity, text + (f" (sweep point {named[0]})" if named else ""),
+                               topic))
+    return out
 
 
 def refusal(check: StudyCheck) -> SetupError | None:
