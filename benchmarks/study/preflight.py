@@ -143,8 +143,9 @@ def measure_study(check: StudyCheck) -> None:
         check.trajectory = trajectory_facts(check.scenario)
         check.payload = payload_facts(check.scenario)
         points = len(check.scenario.expand())
-        check.problems += _merged([p for found in [*check.trajectory, *check.payload]
-                                   for p in found.problems], points)
+        found = [p for facts in check.trajectory for p in facts.problems]
+        found += [p for facts in check.payload for p in facts.problems]
+        check.problems += _merged(found, points)
 
 
 #: The end of a problem found at one sweep point: `` (sweep point payload.mass_kg = 20)``.
