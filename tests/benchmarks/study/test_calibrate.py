@@ -165,6 +165,23 @@ def test_calibrate_from_a_user_observation_file(
     assert f"warning: {metres}: 180 leg length(s) outside the robot's stroke" in err
 
 
+def _mixed_signs(folder: Path) -> tuple[Path, dict, np.ndarray, np.ndarray]:
+    """Exact observations of 30 random configurations (front camera) written with each
+    normal's sign drawn at random: the file, its content, the normals as drawn and the
+    signs."""
+    from hexapod import deltalab
+    from vision.calibration import collect_observations
+
+    data = collect_observations(deltalab(), front_camera(), "random:30", None, 5)
+    doc = json.loads(json.dumps(data.to_dict()))
+    normals = np.asarray(doc["normals"], dtype=float)
+    signs = np.random.default_rng(3).choice([-1.0, 1.0], size=normals.shape[:3])
+    doc["normals"] = (normals * signs[..., None]).tolist()
+    mixed = folder / "mixed.json"
+    mixed.write_text(json.dumps(doc))
+    return mixed, doc, normals, signs
+
+
 def test_edge_normals_of_either_sign_calibrate_alike_and_another_frame_is_said(
         tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     """A line fitted in an image has a normal of either sign; the calibration needs
@@ -174,17 +191,10 @@ def test_edge_normals_of_either_sign_calibrate_alike_and_another_frame_is_said(
     import json
 
     from hexapod import deltalab
-    from vision.calibration import collect_observations
 
     cam = front_camera()
-    data = collect_observations(deltalab(), cam, "random:30", None, 5)
     truth = cam.camera_from_base.apply(deltalab().base_points)
-    doc = json.loads(json.dumps(data.to_dict()))
-    normals = np.asarray(doc["normals"], dtype=float)
-    signs = np.random.default_rng(3).choice([-1.0, 1.0], size=normals.shape[:3])
-    doc["normals"] = (normals * signs[..., None]).tolist()
-    mixed = tmp_path / "mixed.json"
-    mixed.write_text(json.dumps(doc))
+    mixed, doc, normals, signs = _mixed_signs(tmp_path)
     out = tmp_path / "out"
     assert cli_main(["calibrate", str(_scenario(tmp_path)), "--out", str(out),
                      "--observations", str(mixed)]) == 0
@@ -396,16 +406,7 @@ def test_an_ill_conditioned_leg_of_a_file_is_warned_of_once(
     """A file of mixed signs is solved three times (as given, then oriented twice): each
     solve logged each ill-conditioned leg, beside the command's own line on stdout (four
     messages a leg on two streams); now one line a leg, on stderr."""
-    from hexapod import deltalab
-    from vision.calibration import collect_observations
-
-    data = collect_observations(deltalab(), front_camera(), "random:30", None, 5)
-    doc = json.loads(json.dumps(data.to_dict()))
-    normals = np.asarray(doc["normals"], dtype=float)
-    signs = np.random.default_rng(3).choice([-1.0, 1.0], size=normals.shape[:3])
-    doc["normals"] = (normals * signs[..., None]).tolist()
-    mixed = tmp_path / "mixed.json"
-    mixed.write_text(json.dumps(doc))
+    mixed = _mixed_signs(tmp_path)[0]
     with caplog.at_level("WARNING"):
         assert cli_main(["calibrate", str(_scenario(tmp_path)), "--out", str(tmp_path / "o"),
                          "--observations", str(mixed), "--warn-ratio", "0.02"]) == 0
