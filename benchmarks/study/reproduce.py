@@ -43,6 +43,7 @@ from benchmarks.study.paper_figures import (
     builtin_figures,
 )
 from hexapod.outputs import replace_whole
+from vision.exceptions import CalibrationError
 
 log = logging.getLogger(__name__)
 
@@ -456,12 +457,23 @@ def reproduce(which: str, out: Path, quick: bool = False, workers: int = 1,
     dirs: dict[str, Path] = {}
     studies = list(dict.fromkeys(f.study for f in figs))
     check_studies(studies, out, quick, transform, trials)  # before any study runs
+    refused: dict[str, str] = {}
     for study in studies:
-        dirs[study] = run_study(study, out, quick, workers, say, transform, trials)
+        try:
+            dirs[study] = run_study(study, out, quick, workers, say, transform, trials)
+        except CalibrationError as exc:  # this setup cannot calibrate: its rows cannot be
+            # compared, the others still can (one point of a sensitivity grid, a leg the
+            # camera sees too poorly, ended a 54-point study after 11 minutes)
+            refused[study] = f"the calibration was refused: {exc}"
+            say(f"{study}: {refused[study]}")
     frames: dict[Path, Any] = {}
-    results = [measure(f, dirs[f.study], frames) for f in figs]
+    results = [Result(f, refused[f.study], None, None, 0) if f.study in refused
+               else measure(f, dirs[f.study], frames) for f in figs]
     tail_ratios(results)
     verdicts(results)
+    for r in results:
+        if r.figure.study in refused:
+            r.verdict = f"not comparable ({refused[r.figure.study]})"
     return results
 
 

@@ -288,3 +288,25 @@ def test_the_sensitivity_default_gives_every_row_its_interval() -> None:
     assert None in order_statistic_ranks(SENSITIVITY_TRIALS - 1, 0.5, level)
     assert None not in order_statistic_ranks(SENSITIVITY_TRIALS, 0.5, level)
     assert None not in order_statistic_ranks(6, 0.5, 0.95)  # (a plain median's: 6)
+
+
+def test_a_refused_calibration_leaves_its_rows_not_comparable(
+        tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """A setup whose camera sees a leg too poorly to calibrate (one point of a sensitivity
+    grid) ended the whole study with an error after 11 minutes; its calibration rows are
+    not comparable, with the reason, and the rest goes on."""
+    from benchmarks.study import reproduce as rep
+    from benchmarks.study.paper_figures import builtin_figures
+    from vision.exceptions import CalibrationError
+
+    figs = [f for f in builtin_figures() if f.study.startswith("calibrate:")][:2]
+    assert figs
+
+    def refuse(study: str, *args: object, **kwargs: object) -> Path:
+        raise CalibrationError(4, "ill-conditioned (singular-value ratio 7.27e-04)")
+
+    monkeypatch.setattr(rep, "run_study", refuse)
+    results = rep.reproduce("all", tmp_path, True, figures=figs, say=lambda _t: None)
+    assert [r.category for r in results] == ["not comparable"] * len(figs)
+    assert all("the calibration was refused: " in r.verdict and "leg 4" in r.verdict
+               for r in results), [r.verdict for r in results]
