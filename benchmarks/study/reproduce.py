@@ -313,6 +313,13 @@ def measure(fig: Figure, d: Path, frames: dict[Path, Any]) -> Result:
         frames[d] = load(d)
     df = frames[d]
     rows = _rows(df, fig, fig.controller)
+    failed = rows["failure"].notna() if "failure" in rows else None
+    if failed is not None and len(rows) and bool(failed.all()):  # (each trial's own
+        # calibration refused, at a sensitivity point: a missing column or record ended
+        # the study; the rate's figure stays, 0 of n converged)
+        first = str(rows.loc[failed, "failure"].iloc[0])
+        if fig.statistic != "rate":
+            return Result(fig, f"every trial failed ({first})", None, None, 0)
     one_task = _one_task(d)
     if fig.statistic == "rate":
         k, n = int(rows["converged"].sum()), len(rows)

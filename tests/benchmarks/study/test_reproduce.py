@@ -310,3 +310,29 @@ def test_a_refused_calibration_leaves_its_rows_not_comparable(
     assert [r.category for r in results] == ["not comparable"] * len(figs)
     assert all("the calibration was refused: " in r.verdict and "leg 4" in r.verdict
                for r in results), [r.verdict for r in results]
+
+
+def test_a_run_study_whose_every_trial_failed_is_not_comparable(tmp_path: Path) -> None:
+    """Every trial of a run study failed (each its own calibration refused, at a point of
+    the sensitivity grid): its median and tail rows read a column or a record no trial
+    wrote, and a KeyError (or 'record missing') ended the study."""
+    import json
+
+    from benchmarks.study import reproduce as rep
+    from benchmarks.study.paper_figures import builtin_figures
+
+    figs = [f for f in builtin_figures() if f.id in ("seed001-5.3-calibration-0.01",
+                                                     "seed001-5.3-tail-max-0.01")]
+    d = tmp_path / "run"
+    d.mkdir()
+    rows = [{"scenario": "s", "point": 0, "trial": k, "controller": "leg-direction",
+             "backend": "sim", "converged": False, "steps": 0, "noise_amplitude_deg": 0.01,
+             "failure": "CalibrationError: calibration: leg 4: ill-conditioned"}
+            for k in range(3)]
+    (d / "results.jsonl").write_text("".join(json.dumps(r) + "\n" for r in rows))
+    assert len(figs) == 2  # a median of a calibration column, a tail maximum
+    results = [rep.measure(f, d, {}) for f in figs]
+    rep.verdicts(results)
+    for r in results:
+        assert r.value is None and "every trial failed (CalibrationError" in r.framework
+        assert r.category == "not comparable"
