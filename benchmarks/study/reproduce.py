@@ -313,7 +313,10 @@ def measure(fig: Figure, d: Path, frames: dict[Path, Any]) -> Result:
         frames[d] = load(d)
     df = frames[d]
     rows = _rows(df, fig, fig.controller)
-    failed = rows["failure"].notna() if "failure" in rows else None
+    from benchmarks.study.failures import NOT_CONVERGED
+
+    failed = (rows["failure"].notna() & ~rows["failure"].astype(str).str.startswith(
+        NOT_CONVERGED)) if "failure" in rows else None  # (not converged: ran to its end)
     if failed is not None and len(rows) and bool(failed.all()):  # (each trial's own
         # calibration refused, at a sensitivity point: a missing column or record ended
         # the study; the rate's figure stays, 0 of n converged)

@@ -336,3 +336,25 @@ def test_a_run_study_whose_every_trial_failed_is_not_comparable(tmp_path: Path) 
     for r in results:
         assert r.value is None and "every trial failed (CalibrationError" in r.framework
         assert r.category == "not comparable"
+
+
+def test_trials_that_did_not_converge_are_not_failed_ones(tmp_path: Path) -> None:
+    """A trial that ran its 500 steps without converging has a 'failure' text ('not
+    converged: ...') yet ran to its end: its values count (reading every such trial as
+    failed left a direction law's 0.1 deg rows 'no finite value' at 18 grid points)."""
+    import json
+
+    from benchmarks.study import reproduce as rep
+    from benchmarks.study.paper_figures import builtin_figures
+
+    fig = next(f for f in builtin_figures() if f.id == "seed001-5.3-calibration-0.01")
+    d = tmp_path / "run"
+    d.mkdir()
+    rows = [{"scenario": "s", "point": 0, "trial": k, "controller": "leg-direction",
+             "backend": "sim", "converged": False, "steps": 501, "noise_amplitude_deg": 0.01,
+             fig.column: 0.1 * (k + 1),
+             "failure": "not converged: rotation 0.239 deg > 0.2 deg after 500 steps"}
+            for k in range(7)]
+    (d / "results.jsonl").write_text("".join(json.dumps(r) + "\n" for r in rows))
+    r = rep.measure(fig, d, {})
+    assert r.value == pytest.approx(0.4) and r.n == 7
