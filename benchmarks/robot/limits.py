@@ -140,9 +140,8 @@ class LimitedRobot:
             raise
         except Exception as exc:  # the plugin's own failure: the robot's, not ours (it
             # was an 'internal error' with a traceback; the session halts it either way)
-            name = getattr(self.robot, "identity", "") or type(self.robot).__name__
-            raise BackendError(f"{name}: its step raised {type(exc).__name__}: {exc}"
-                               ) from exc
+            raise BackendError(f"{self._name()}: its step raised {type(exc).__name__}: "
+                               f"{exc}") from exc
         if self._returns is not None:
             self._check_pacing(dt)
         if self.pace:  # the rest of the period, on the grid of the first command
@@ -156,6 +155,10 @@ class LimitedRobot:
             bs = replace(bs, clamped=np.asarray(bs.clamped, bool) | capped)
         return bs
 
+    def _name(self) -> str:
+        """The backend as messages name it: what it says it is, else its class."""
+        return str(getattr(self.robot, "identity", "") or type(self.robot).__name__)
+
     def _check_pacing(self, dt: float) -> None:
         """Take the backend's ``paces_periods`` at its word, or pace for it (class
         docstring)."""
@@ -168,8 +171,8 @@ class LimitedRobot:
         if (gaps < dt / 2).all():
             self.pace = True
             if self.warn is not None:
-                name = getattr(self.robot, "identity", "") or type(self.robot).__name__
-                self.warn(f"warning: {name} says it waits out its periods (paces_periods) "
+                self.warn(f"warning: {self._name()} says it waits out its periods "
+                          "(paces_periods) "
                           f"but its first {PACING_CHECK_PERIODS} steps returned "
                           f"{float(np.median(gaps)) * 1e3:.2f} ms apart (median) for a "
                           f"{dt * 1e3:g} ms period: the session paces them from now on")
