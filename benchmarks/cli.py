@@ -359,8 +359,12 @@ def main(argv: list[str] | None = None) -> int:
     except (BenchmarkError, HexapodError) as exc:
         print(f"hexapod-bench: error: {exc}", file=sys.stderr)
         return 2
-    except BrokenPipeError:  # the reader went away (`... | head`): stop quietly, as a
-        # Unix tool does (Python's own flush at exit would print the error again)
+    except BrokenPipeError as exc:
+        if not _stdout_reader_left():  # another pipe (a plugin's socket): an error
+            print(f"hexapod-bench: error: {type(exc).__name__}: {exc}", file=sys.stderr)
+            return 2
+        # the reader of our output went away (`... | head`): stop quietly, as a Unix tool
+        # does (Python's own flush at exit would print the error again)
         with contextlib.suppress(OSError):
             os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
         return 141  # 128 + SIGPIPE, what a shell reports for a writer whose reader left
@@ -387,6 +391,20 @@ def main(argv: list[str] | None = None) -> int:
             # its objects are left to the exit (a run holds ~100,000: matplotlib's,
             # scipy's, casadi's), not collected one by one first (0.3-0.6 s)
             gc.freeze()
+
+
+def _stdout_reader_left() -> bool:
+    """Whether standard output is a pipe whose reader has closed it (poll reports an
+    error on its write end)."""
+    import select
+
+    try:
+        poller = select.poll()
+        poller.register(sys.stdout.fileno(), select.POLLOUT)
+        return any(events & (select.POLLERR | select.POLLHUP)
+                   for _, events in poller.poll(0))
+    except (OSError, ValueError, AttributeError):  # no real stdout (a test's capture)
+        return False
 
 
 if __name__ == "__main__":

@@ -287,7 +287,6 @@ class HexapodGeometry:
         Path(path).write_text(tomli_w.dumps(self.to_dict(dynamics=True)))
 
 
-#: The file key of each field (errors name the key as written in the file).
 def _check_si_tables(g: HexapodGeometry, src: str | None) -> None:
     """Refuse the SI tables' values no robot of this size has and a slip of units gives:
     the platform's centre of mass more than ten times the robot's size from its centre
@@ -310,6 +309,7 @@ def _check_si_tables(g: HexapodGeometry, src: str | None) -> None:
                              "metres (a 1 um encoder is 1e-6)", src)
 
 
+#: The file key of each field (errors name the key as written in the file).
 _FILE_KEYS = {"base_points": "base_points_mm", "platform_points": "platform_points_mm",
               "stroke": "stroke_mm", "leg_radius": "leg_radius_mm",
               "max_speed": "max_speed_mm_s"}

@@ -52,7 +52,7 @@ from controllers.base import ControllerContext, Goal
 from controllers.batch import actuation_of
 from hexapod import HexapodGeometry
 from hexapod.actuation import check_actuation
-from hexapod.backends.base import Backend
+from hexapod.backends.base import Backend, halt_and_close
 
 log = logging.getLogger(__name__)
 
@@ -375,16 +375,8 @@ def _goals(sc: SimScenario, sensor: GeometricSensor, setups: list[TrialSetup]
 
 def _close_all(backends: list[Backend]) -> None:
     """Halt and close backends, whatever happened."""
-    for b in backends:
-        try:
-            b.halt()
-        except Exception as exc:  # already failing: report and go on closing
-            log.warning("halting a backend failed: %s", exc)
-        finally:
-            try:
-                b.close()
-            except Exception as exc:  # the trial ran to its end: said, not undone
-                log.warning("closing a backend failed: %s", exc)
+    for b in backends:  # (their failures said, not raised: the trial ran to its end)
+        halt_and_close(b)
 
 
 def trial_context(sc: SimScenario, setup: TrialSetup, goal: Any) -> ControllerContext:

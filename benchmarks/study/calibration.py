@@ -185,12 +185,13 @@ def run_calibration(sc: Scenario, out: Path, configurations: str | None = None,
     all_diffs = []
     for p, point in enumerate(sc.expand()):
         diffs, results = [], []
+        images = rendered(replace(point, calibration=cal_cfg))
         for k in range(repeat):
             setup = make_trial(point, k, nominal, camera)
             world = setup.world
             rng = trial_rng(point.seed, k, 3)
             noise = point.noise
-            if rendered(replace(point, calibration=cal_cfg)):
+            if images:
                 data = image_observations(point, world, setup.nominal_geometry,
                                           setup.estimated_camera, cal_cfg.configurations, rng)
             elif cal_cfg.noise_deg is None and noise.model == "pixel":
@@ -306,19 +307,16 @@ def calibrate_from_file(sc: Scenario, observations: Path, out: Path, solver: str
                          method=(solver or sc.calibration.solver),  # type: ignore[arg-type]
                          correct_scale=correct_scale,
                          min_singular_ratio=sc.calibration.min_singular_ratio,
-                         warn_singular_ratio=sc.calibration.warn_singular_ratio)
+                         warn_singular_ratio=sc.calibration.warn_singular_ratio,
+                         warn=False)  # (each candidate's solve warned of each leg, up to
+        # 4 times: the command says the kept one's legs, once)
 
-    solver_log = logging.getLogger("vision.calibration.solve")
-    level = solver_log.level  # each candidate's solve warned of each ill-conditioned leg
-    solver_log.setLevel(logging.ERROR)  # (up to 4 times a leg): the result says it once
     try:
         res, data = _with_signs(given, solve,
                                 camera.camera_from_base.apply(nominal.base_points),
                                 nominal.leg_radius, camera.kind == "perspective")
     except CalibrationError as exc:  # the user's measurements: say which file
         raise BenchmarkError(f"{observations}: {exc} (nothing written)") from exc
-    finally:
-        solver_log.setLevel(level)
     flipped = int(np.sum(np.any(np.asarray(data.normals) != np.asarray(given.normals),
                                 axis=-1) & np.asarray(given.edge_visible, bool)))
     disagree = float(np.max(res.linear.residual_rms)) > SIGN_RESIDUAL * nominal.leg_radius

@@ -313,16 +313,13 @@ def measure(fig: Figure, d: Path, frames: dict[Path, Any]) -> Result:
         frames[d] = load(d)
     df = frames[d]
     rows = _rows(df, fig, fig.controller)
-    from benchmarks.study.failures import NOT_CONVERGED
+    from benchmarks.study.failures import is_failure
 
-    failed = (rows["failure"].notna() & ~rows["failure"].astype(str).str.startswith(
-        NOT_CONVERGED)) if "failure" in rows else None  # (not converged: ran to its end)
-    if failed is not None and len(rows) and bool(failed.all()):  # (each trial's own
-        # calibration refused, at a sensitivity point: a missing column or record ended
-        # the study; the rate's figure stays, 0 of n converged)
-        first = str(rows.loc[failed, "failure"].iloc[0])
-        if fig.statistic != "rate":
-            return Result(fig, f"every trial failed ({first})", None, None, 0)
+    failures = [str(f) for f in rows.get("failure", []) if is_failure({"failure": f})]
+    if fig.statistic != "rate" and len(rows) and len(failures) == len(rows):
+        # (each trial's own calibration refused, at a sensitivity point: a missing column
+        # or record ended the study; a rate's figure stays, 0 of n converged)
+        return Result(fig, f"every trial failed ({failures[0]})", None, None, 0)
     one_task = _one_task(d)
     if fig.statistic == "rate":
         k, n = int(rows["converged"].sum()), len(rows)

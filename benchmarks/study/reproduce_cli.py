@@ -12,11 +12,9 @@ from benchmarks.exceptions import BenchmarkError
 from benchmarks.study.outdir import OutputDir, OutputFile, add_command, unwritable
 
 #: The sensitivity study's trials per study and point (``--trials``'s default): the
-#: fewest with a 95 % order-statistic interval of a median (fewer: its rows are not
-#: comparable).
-#: The default trials per point: the fewest for which every row has its interval (a
-#: median's 95 % needs 6; the worst of the six base points, its 99.17 % after
-#: Bonferroni's correction, needs 8: at 6 that row was never comparable)
+#: fewest for which every row has its interval (a median's 95 % needs 6; the worst of
+#: the six base points, its 99.17 % after Bonferroni's correction, needs 8: at 6 that
+#: row was never comparable)
 SENSITIVITY_TRIALS = 8
 
 

@@ -13,7 +13,7 @@ import time
 from abc import ABC, abstractmethod
 from dataclasses import dataclass, field
 from types import TracebackType
-from typing import TypeVar
+from typing import Any, TypeVar
 
 import numpy as np
 
@@ -279,15 +279,23 @@ def started(robot: BackendT, start: np.ndarray | None) -> BackendT:
         try:
             robot.reset(start)
         except BaseException:
-            try:
-                robot.halt()
-            except Exception as exc:  # already failing: said, and closed all the same
-                log.warning("halting %s after its move to the start failed: %s",
-                            type(robot).__name__, exc)
-            finally:
-                robot.close()
+            halt_and_close(robot)  # (its own failures said: the move's is raised)
             raise
     return robot
+
+
+def halt_and_close(robot: Any) -> list[str]:
+    """Halt ``robot``, then close it, whatever either does: a failure of one does not
+    skip the other, and neither replaces an exception the caller is handling. Returns
+    what failed (also logged as warnings)."""
+    failed = []
+    for what in ("halt", "close"):
+        try:
+            getattr(robot, what)()
+        except Exception as exc:
+            failed.append(f"{what}() raised {type(exc).__name__}: {exc}")
+            log.warning("%s: %s", type(robot).__name__, failed[-1])
+    return failed
 
 
 def halt_on_open(url: str, acknowledged: bool) -> str:

@@ -37,7 +37,7 @@ from typing import Any
 
 import numpy as np
 
-from hexapod.backends.base import Backend
+from hexapod.backends.base import Backend, halt_and_close
 from hexapod.backends.sim import SimulatedRobot
 from hexapod.geometry import HexapodGeometry
 from hexapod.plausible import reading_problem
@@ -114,7 +114,6 @@ def check_backend(factory: BackendFactory, geometry: HexapodGeometry, dt: float 
     collecting = gc.isenabled()
     gc.collect()
     gc.disable()
-    halted = False
     try:
         try:
             q = _read(robot.measured_lengths(), "start", geometry)
@@ -181,25 +180,12 @@ def check_backend(factory: BackendFactory, geometry: HexapodGeometry, dt: float 
                 report.problems.append("NaN command: leg 2 was not reported clamped")
         except _BadReadingError as bad:  # the checks after it would compare garbage
             report.problems.append(str(bad))
-        except Exception as exc:  # the robot, its link or the plugin failed during the
-            # check: a failed check (it was a traceback, or the exit code of a bad spec)
-            report.problems.append(f"after {report.periods} period(s) the backend failed: "
+        except Exception as exc:  # the robot, its link or the plugin (or the check
+            # itself) failed: a failed check (it was a traceback, or a bad spec's exit code)
+            report.problems.append(f"the check stopped after {report.periods} period(s): "
                                    f"{type(exc).__name__}: {exc}")
-        halted = True
-        try:  # 5. halt
-            robot.halt()
-        except Exception as exc:
-            report.problems.append(f"halt() raised {type(exc).__name__}: {exc}")
-    finally:
+    finally:  # 5. halt, then close, whatever happened (a Ctrl-C included)
         if collecting:
             gc.enable()
-        if not halted:  # Ctrl-C during the checks: the legs stopped before the link closes
-            try:
-                robot.halt()
-            except Exception as exc:
-                report.problems.append(f"halt() raised {type(exc).__name__}: {exc}")
-        try:
-            robot.close()
-        except Exception as exc:
-            report.problems.append(f"close() raised {type(exc).__name__}: {exc}")
+        report.problems += halt_and_close(robot)
     return report

@@ -220,12 +220,13 @@ class BackendRegistry:
                     obj = getattr(obj, part)
             except ModuleNotFoundError as exc:
                 close = suggest(head, self._openers)
-                if exc.name == head and "." not in head and (close or not attr.isidentifier()):
+                named_class = all(part.isidentifier() for part in attr.split("."))
+                if exc.name == head and "." not in head and (close or not named_class):
                     # a registered name misspelt ('seial:/dev/ttyUSB0'), not a module
                     raise UnknownBackendError(spec, list(self._openers), close) from None
-                hint = (f" (is the folder of {head}.py on PYTHONPATH? the module of "
-                        "module:attr must be importable from where the command runs)"
-                        if exc.name == head else "")
+                hint = (f" (is the folder of {head.replace('.', '/')}.py on PYTHONPATH? "
+                        "the module of module:attr must be importable from where the "
+                        "command runs)" if exc.name == head else "")
                 raise BackendPluginError(f"{head}:{attr}", "command line",
                                          f"{type(exc).__name__}: {exc}{hint}") from None
             except (ImportError, AttributeError) as exc:

@@ -1,7 +1,8 @@
 """A robot plugin that fails where it is told to (``module:FailingRobot:WHERE``), and
 records the calls the host makes to it: what a host must do when a backend fails (halt
 the robot, then close it; say what failed). ``WHERE`` is one of ``open``, ``reset``,
-``step``, ``step-interrupt``, ``close``, ``five-legs``; the calls go to :data:`CALLS`."""
+``step``, ``step-interrupt``, ``close``, ``reset+close``, ``five-legs``; the calls go to
+:data:`CALLS`."""
 
 from __future__ import annotations
 
@@ -32,7 +33,7 @@ class FailingRobot(SimulatedRobot):
 
     def reset(self, lengths: np.ndarray | None = None) -> Any:
         CALLS.append((self.where, "reset"))
-        if self.where == "reset":
+        if self.where in ("reset", "reset+close"):
             raise RuntimeError("vendor SDK: reset failed")
         return super().reset(lengths)
 
@@ -54,6 +55,6 @@ class FailingRobot(SimulatedRobot):
 
     def close(self) -> None:
         CALLS.append((self.where, "close"))
-        if self.where == "close":
+        if self.where in ("close", "reset+close"):
             raise RuntimeError("vendor SDK: close failed")
         super().close()

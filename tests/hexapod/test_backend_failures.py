@@ -41,11 +41,19 @@ def test_a_failed_move_to_the_start_halts_the_robot_before_closing_it() -> None:
     assert _host_calls() == ["reset", "halt", "close"]
 
 
+def test_a_failed_close_does_not_hide_why_the_move_to_the_start_failed() -> None:
+    """close() raising after a failed reset() replaced the reset's exception."""
+    with pytest.raises(BackendPluginError, match="reset failed"):
+        backends.open(f"{SPEC}:reset+close", deltalab(), np.full(6, deltalab().q_mid))
+    assert _host_calls() == ["reset", "halt", "close"]
+
+
 def test_conformance_fails_a_backend_that_raises_and_halts_it() -> None:
     g = deltalab()
     report = check_backend(lambda geo, q: backends.open(f"{SPEC}:step", g, q), g)
     assert not report.ok
-    assert any("the backend failed: RuntimeError: vendor SDK: drive fault E42" in p
+    assert any("the check stopped after 0 period(s): RuntimeError: vendor SDK: drive fault "
+               "E42" in p
                for p in report.problems), report.problems
     assert _host_calls()[-2:] == ["halt", "close"]
 

@@ -87,7 +87,7 @@ class CalibrationData:
         suffix = p.suffix.lower()
         if suffix == ".json":
             p.write_text(json.dumps(self.to_dict()))
-        elif p.suffix == ".npz":
+        elif suffix == ".npz":
             np.savez(p, normals=self.normals, edge_visible=self.edge_visible,
                      lengths_mm=self.lengths * 1e3)
         else:

@@ -152,6 +152,7 @@ def calibrate(
     correct_scale: bool = False,
     min_singular_ratio: float = MIN_SINGULAR_RATIO,
     warn_singular_ratio: float = WARN_SINGULAR_RATIO,
+    warn: bool = True,
 ) -> CalibrationResult:
     """Linear calibration, optional scale correction and rigid fit of the CAD base.
 
@@ -159,7 +160,7 @@ def calibrate(
         data: The observations.
         radius: Nominal leg radius [m].
         cad_base_points: (6, 3) CAD base points in the base frame [m].
-        method, weight, threshold, min_singular_ratio, warn_singular_ratio: See
+        method, weight, threshold, min_singular_ratio, warn_singular_ratio, warn: See
             :func:`calibrate_base_points`.
         correct_scale: Divide the estimates by :func:`scale_correction` (use it when
             the leg radius is uncertain; with the right radius it only adds noise).
@@ -168,7 +169,7 @@ def calibrate(
         The :class:`CalibrationResult`.
     """
     lin = calibrate_base_points(data, radius, method, weight, threshold, min_singular_ratio,
-                                warn_singular_ratio=warn_singular_ratio)
+                                warn_singular_ratio=warn_singular_ratio, warn=warn)
     cad = np.asarray(cad_base_points, dtype=float)
     s = scale_correction(lin.base_points, cad)
     points = lin.base_points / s if correct_scale else lin.base_points

@@ -171,6 +171,7 @@ def calibrate_base_points(
     max_iterations: int = 50,
     tol: float = 1e-12,
     warn_singular_ratio: float = WARN_SINGULAR_RATIO,
+    warn: bool = True,
 ) -> BaseCalibration:
     """Estimate the base points in the camera frame from leg-edge observations.
 
@@ -202,6 +203,8 @@ def calibrate_base_points(
         warn_singular_ratio: A leg below this ratio is logged as ill-conditioned (a
             warning) and listed by :meth:`BaseCalibration.ill_conditioned_legs`
             (default :data:`WARN_SINGULAR_RATIO`).
+        warn: Log that warning (False: a caller that solves several candidates and
+            reports the legs of the one it keeps, once).
 
     Returns:
         The :class:`BaseCalibration`.
@@ -254,7 +257,7 @@ def calibrate_base_points(
                 f"{s[2]:.3e}); add configurations where this leg is seen at other "
                 "inclinations", singular_values=s,
                 equations=int(n_eq[leg]), configurations=int(n_cfg[leg]))
-        if s[2] < warn_singular_ratio * s[0]:
+        if s[2] < warn_singular_ratio * s[0] and warn:  # (listed in the result either way)
             log.warning("calibration: leg %d is ill-conditioned (singular-value ratio %.2e < "
                         "%.2e): its base point is poorly determined along one direction and "
                         "the noise is amplified about %.0f times", leg, s[2] / s[0],
