@@ -234,7 +234,7 @@ class UnknownBackendError(BackendError, KeyError):
         self.available = sorted(available)
         self.suggestion = suggestion
         hint = f" (did you mean '{suggestion}'?)" if suggestion else ""
-        super().__init__(f"--backend: unknown backend {name!r}{hint}; registered: "
+        super().__init__(f"unknown backend {name!r}{hint}; registered: "
                          f"{', '.join(self.available)}; or name a class as module:attr[:ARGS]")
 
     def __str__(self) -> str:  # KeyError would quote the message

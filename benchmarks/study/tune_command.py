@@ -245,6 +245,8 @@ def cmd_tune(args: argparse.Namespace) -> int:
     if args.candidates < 2:
         raise ScenarioError("--candidates", f"at least 2 (the options as given and one "
                             f"searched), got {args.candidates}")
+    if args.workers < 1:  # (it was refused after the header, with the directory made)
+        raise BenchmarkError(f"--workers {args.workers}: at least 1")
     labels = [c.strip() for c in args.controllers.split(",") if c.strip()]
     if not labels:
         raise ScenarioError("--controllers", "no controller named")

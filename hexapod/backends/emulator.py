@@ -297,6 +297,10 @@ def _robot_from_args(args: argparse.Namespace
 def config_from_args(args: argparse.Namespace) -> tuple[BoardConfig, FaultConfig]:
     """The board and faults described by parsed command-line arguments."""
     geometry, lengths = _robot_from_args(args)
+    if args.dynamics and args.lag:  # (accepted, and without effect: the drives move it)
+        raise BackendError("--lag is the legs' first-order lag of the board without "
+                           "dynamics; with --dynamics the robot file's [drives] move the "
+                           "legs: drop --lag, or set its drives' velocity_bandwidth")
     watchdog = protocol.WATCHDOG_DEFAULT_MS if args.watchdog is None else args.watchdog
     board = BoardConfig(stroke=geometry.stroke, max_speed=geometry.max_speed, lengths=lengths,
                         lag=0.0 if args.lag is None else args.lag, watchdog=watchdog / 1e3,

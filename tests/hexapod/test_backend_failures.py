@@ -173,3 +173,16 @@ def test_messages_print_plain_numbers() -> None:
     with pytest.raises(InertiaError) as inertia:
         g.inertia.replace(body_com=171.0).check_legs(g.stroke[0])
     assert "q_min = 0.345 m" in str(inertia.value)
+
+
+def test_a_lag_with_the_emulators_dynamics_is_refused() -> None:
+    """--lag beside --dynamics was accepted and had no effect (the drives move the legs);
+    the board's own arguments (a lag of 0 with dynamics) still pass."""
+    from hexapod.backends.emulator import build_parser, config_from_args
+    from hexapod.exceptions import BackendError
+
+    with pytest.raises(BackendError, match="--lag is the legs' first-order lag"):
+        config_from_args(build_parser().parse_args(["--pty", "--dynamics", "--lag", "0.02"]))
+    board, _ = config_from_args(build_parser().parse_args(["--pty", "--dynamics", "--lag",
+                                                           "0.0"]))
+    assert board.dynamics is not None

@@ -275,7 +275,7 @@ def test_unknown_controller_suggests_the_closest(
 @pytest.mark.parametrize(("extra", "fragment"), [
     (["--camera", "webcam"], "--camera webcam: expected sim, video:PATH or device:N"),
     (["--camera", "video:/nonexistent.avi"], "no such file"),
-    (["--backend", "tcp:1234"], "--backend: unknown backend 'tcp:1234'"),
+    (["--backend", "tcp:1234"], "unknown backend 'tcp:1234'"),
     (["--backend", "serial"], "needs arguments: serial:URL"),
     (["--dt", "0"], "--dt must be a positive period"),
     (["-o", "gain"], "expected KEY=VALUE"),

@@ -253,3 +253,14 @@ def test_a_tracking_criterion_on_a_point_to_point_task_is_refused(
     err = " ".join(capsys.readouterr().err.split())
     assert "--criterion median-tracking-rms:" in err and "no reference to track" in err
     assert not (tmp_path / "t").exists()
+
+
+def test_workers_below_one_are_refused_before_anything_is_made(
+        files: tuple[Path, Path], tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """--workers 0 was refused after the tuning's header, its directory already made."""
+    sc, _ = files
+    assert main(["tune", str(sc), "--controllers", "leg-edge", "--workers", "0",
+                 "--out", str(tmp_path / "t")]) == 2
+    captured = capsys.readouterr()
+    assert "--workers 0: at least 1" in captured.err and "tune " not in captured.out
+    assert not (tmp_path / "t").exists()
