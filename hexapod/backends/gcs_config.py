@@ -126,3 +126,8 @@ def platform_velocity(geometry: HexapodGeometry, convention: PoseConvention,
         best = max(best, float(np.linalg.norm(dc[:3])),
                    float(np.linalg.norm(np.rad2deg(dc[3:]))) * 1e-3)
     return margin * best
+
+
+def option_keys() -> tuple[str, ...]:
+    """The keys of a ``gcs`` spec's options (``URL?KEY=VALUE&...``)."""
+    return tuple(_OPTION_KEYS)

@@ -153,5 +153,12 @@ def parse_spec(args: str) -> tuple[FaultConfig | None, bool, Any]:
                 backend_items.append(item)
         except ValueError as exc:
             raise BackendError(f"gcs-emulator option {item!r}: {exc}") from None
+    from hexapod.backends.gcs_config import option_keys
+
+    for item in backend_items:  # (an unknown key was named with the backend's keys only)
+        if item.partition("=")[0] not in option_keys():
+            keys = sorted([*_FAULT_KEYS, "process", *option_keys()])
+            raise BackendError(f"gcs-emulator option {item!r}: expected KEY=VALUE with KEY "
+                               f"one of {', '.join(keys)}")
     _, options = GcsOptions.parse("?" + "&".join(backend_items))
     return FaultConfig(**faults) if faults else None, process, options

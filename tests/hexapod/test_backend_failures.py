@@ -186,3 +186,14 @@ def test_a_lag_with_the_emulators_dynamics_is_refused() -> None:
     board, _ = config_from_args(build_parser().parse_args(["--pty", "--dynamics", "--lag",
                                                            "0.0"]))
     assert board.dynamics is not None
+
+
+def test_an_unknown_gcs_emulator_option_lists_the_emulators_keys_too() -> None:
+    """It listed the GCS backend's keys alone, not latency_ms, drop, process..."""
+    from hexapod.backends.gcs_emulated import parse_spec
+    from hexapod.exceptions import BackendError
+
+    with pytest.raises(BackendError, match="gcs-emulator option 'foo=1'") as info:
+        parse_spec("latency_ms=1,foo=1")
+    assert all(k in str(info.value) for k in ("latency_ms", "process", "vmo", "drop"))
+    assert parse_spec("latency_ms=1,vmo=always,process=0")[1] is False
