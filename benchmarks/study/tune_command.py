@@ -336,10 +336,16 @@ def cmd_tune(args: argparse.Namespace) -> int:
     for label, s in chosen.items():
         for axis in axes[label]:
             if s.index > 0 and axis.at_end(s.options[axis.option]):
-                con.print(f"tune: warning: {label}: the chosen {axis.option} = "
-                          f"{s.options[axis.option]} is at an end of its range [{axis.low:g}, "
-                          f"{axis.high:g}] {axis.unit}: the best may lie beyond (widen the "
-                          "space with --space)", markup=False, highlight=False)
+                value = s.options[axis.option]
+                first = float(value[0] if isinstance(value, list | tuple) else value)
+                deadbeat = ((axis.unit == "1/s" or axis.option in ("gain", "adaptive_gain"))
+                            and math.isclose(first, 1.0 / sc.dt))  # (a first-order law's)
+                beyond = ("the discrete loop's deadbeat gain 1/dt, the limit of its design, "
+                          "not of an arbitrary range (docs/tuning.md)" if deadbeat else
+                          "the best may lie beyond (widen the space with --space)")
+                con.print(f"tune: warning: {label}: the chosen {axis.option} = {value} is at "
+                          f"an end of its range [{axis.low:g}, {axis.high:g}] {axis.unit}: "
+                          f"{beyond}", markup=False, highlight=False)
     tuning = {
         "scenario": sc.name, "source": sc.source, "criterion": criterion,
         "metric": CRITERIA[criterion][0], "statistic": CRITERIA[criterion][1],

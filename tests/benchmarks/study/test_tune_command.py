@@ -264,3 +264,16 @@ def test_workers_below_one_are_refused_before_anything_is_made(
     captured = capsys.readouterr()
     assert "--workers 0: at least 1" in captured.err and "tune " not in captured.out
     assert not (tmp_path / "t").exists()
+
+
+def test_a_choice_at_the_deadbeat_gain_is_said_to_be_the_designs_limit(
+        files: tuple[Path, Path], tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """A gain chosen at 1/dt (50 1/s at 20 ms) was told 'the best may lie beyond (widen
+    the space)', which docs/tuning.md says it is not: the discrete loop's deadbeat gain."""
+    sc, space = files
+    space.write_text('["leg-edge"]\ngain = { low = 0.5, high = 50.0, scale = "log" }\n')
+    assert main(["tune", str(sc), "--controllers", "leg-edge", "--space", str(space),
+                 "--candidates", "3", "--trials", "8", "--out", str(tmp_path / "t")]) == 0
+    out = " ".join(capsys.readouterr().out.split())
+    assert "the chosen gain = 50.0 is at an end of its range" in out, out
+    assert "the discrete loop's deadbeat gain 1/dt" in out and "may lie beyond" not in out
