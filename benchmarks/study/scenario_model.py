@@ -255,6 +255,12 @@ class Scenario:
             from hexapod.exceptions import UnsafeNameError
             from hexapod.outputs import check_name
 
+            twice = sorted({c for c in controllers if controllers.count(c) > 1})
+            if twice:  # (each trial ran twice, its rows written twice under one label)
+                raise ScenarioError("--controllers", f"{', '.join(twice)} given twice: a "
+                                    "controller runs once per study (to run it twice with "
+                                    "other options, give each a label in the scenario file)")
+
             for c in controllers:
                 try:
                     check_name(c, "controller")

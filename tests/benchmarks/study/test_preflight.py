@@ -252,3 +252,15 @@ def test_a_problem_found_at_every_sweep_point_is_said_once() -> None:
         "85 kg cannot be held (sweep point payload.mass_kg = 40)"]
     assert _merged(found[:2], 3)[0].text == (f"{fast} (sweep points payload.mass_kg = 0; "
                                              "payload.mass_kg = 20)")
+
+
+def test_a_controller_named_twice_on_the_command_line_is_refused(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """--controllers leg-edge,leg-edge ran every trial twice under one label (tune: every
+    candidate twice), and the rows were then duplicates; refused before anything runs."""
+    for command in (["run", "quick", "--trials", "1"],
+                    ["tune", "quick", "--trials", "2", "--candidates", "2"]):
+        out = tmp_path / command[0]
+        assert main([*command, "--controllers", "leg-edge,leg-edge", "--out", str(out)]) == 2
+        assert "--controllers: leg-edge given twice" in capsys.readouterr().err
+        assert not out.exists()
