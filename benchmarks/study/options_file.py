@@ -242,6 +242,10 @@ def options_line(meta: dict[str, Any]) -> str:
     if not rec:
         return ("Controller options: **as given** (the scenario's; no `--options-file`, "
                 "docs/tuning.md).")
+    if rec.get("candidates"):  # (its header said "as given" of searched options)
+        return ("Controller options: the **candidates** of `hexapod-bench tune` "
+                "(`LABEL:c0` the options as given, `LABEL:c1`... the searched ones: "
+                "`tuning.json` beside this directory lists each; docs/tuning.md).")
     tuning = rec.get("tuning") or {}
     labels = ", ".join(rec.get("controllers", {}))
     others = _run_labels(meta) - set(rec.get("controllers", {}))

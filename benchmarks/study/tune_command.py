@@ -222,7 +222,8 @@ def _run_args(args: argparse.Namespace, out: Path, scenario: str) -> argparse.Na
         workers=args.workers, record=0, backend="sim", engine="batched", dask=None,
         viz=False, no_progress=args.no_progress, overwrite=False,
         verbose=getattr(args, "verbose", False), argv=getattr(args, "argv", sys.argv[1:]),
-        allow_foreign_calibration=False, no_check=False, options_record=None)
+        allow_foreign_calibration=False, no_check=False,
+        options_record={"candidates": True})  # (the report says what its options are)
 
 
 def cmd_tune(args: argparse.Namespace) -> int:

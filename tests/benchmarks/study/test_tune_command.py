@@ -277,3 +277,6 @@ def test_a_choice_at_the_deadbeat_gain_is_said_to_be_the_designs_limit(
     out = " ".join(capsys.readouterr().out.split())
     assert "the chosen gain = 50.0 is at an end of its range" in out, out
     assert "the discrete loop's deadbeat gain 1/dt" in out and "may lie beyond" not in out
+    # the candidates' own report says what its options are (it said "as given")
+    report = (tmp_path / "t" / "candidates" / "report.md").read_text()
+    assert "Controller options: the **candidates** of `hexapod-bench tune`" in report
