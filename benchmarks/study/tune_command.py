@@ -382,9 +382,13 @@ def _check_axis_values(spec: Any, axes: Any, space: dict[str, Any], path: str | 
     from controllers.exceptions import OptionError
     from controllers.registry import registry
 
+    table = registry.options(spec.name)
     for axis in axes:
         key = next((f"{k}.{axis.option}" for k, found in space.items() if axis in found),
                    axis.option)
+        declared = next((o for o in table.options if o.name == axis.option), None)
+        vector = isinstance(spec.options.get(axis.option), list | tuple) or (
+            declared is not None and "Sequence" in str(declared.type))  # (the hint's)
         for u in (0.0, 1.0):
             try:
                 registry.create(spec.name, **{**spec.options, axis.option: axis.value(u)})
@@ -393,7 +397,8 @@ def _check_axis_values(spec: Any, axes: Any, space: dict[str, Any], path: str | 
                 raise ScenarioError(path or "the declared search space", f"{spec.name}: "
                                     f"{problem} (the axis's value {axis.value(u)!r}"
                                     + ("; a vector option's axis needs a shape" if
-                                       axis.shape is None else "") + ")", key=key) from None
+                                       axis.shape is None and vector else "") + ")",
+                                    key=key) from None
 
 
 def _write(out: Path, chosen: dict[str, Score], scores: dict[str, list[Score]],

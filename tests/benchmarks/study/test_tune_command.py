@@ -280,3 +280,16 @@ def test_a_choice_at_the_deadbeat_gain_is_said_to_be_the_designs_limit(
     # the candidates' own report says what its options are (it said "as given")
     report = (tmp_path / "t" / "candidates" / "report.md").read_text()
     assert "Controller options: the **candidates** of `hexapod-bench tune`" in report
+
+
+def test_the_shape_hint_is_for_a_vector_option_alone(
+        files: tuple[Path, Path], tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """A scalar gain's bad range was told 'a vector option's axis needs a shape'."""
+    sc, space = files
+    for text, hinted in (('gain = { low = -1.0, high = 3.0, scale = "linear" }', False),
+                         ("adaptive_gain = { low = 1.0, high = 3.0 }", True)):
+        space.write_text(f'["leg-edge"]\n{text}\n')
+        assert main(["tune", str(sc), "--controllers", "leg-edge", "--space", str(space),
+                     "--out", str(tmp_path / "t")]) == 2
+        err = " ".join(capsys.readouterr().err.split())
+        assert ("a vector option's axis needs a shape" in err) is hinted, err
