@@ -16,8 +16,9 @@ engine's per-period overhead is shared by the trials of a unit, so a smaller bat
 more per trial-step).
 
 Run: ``hexapod-bench perf study [--scenario NAME] [--trials N] [--controllers A,B]
-[--repeats K] [--breakdown]`` (``--controllers``: some of the scenario's controllers, by
-name or label; the per-trial engine of a predictive controller over hundreds of dynamic
+[--world kinematic|dynamic] [--repeats K] [--breakdown]`` (``--controllers``: names or
+labels, as ``run --controllers`` takes them: the scenario's, or any registered
+controller; the per-trial engine of a predictive controller over hundreds of dynamic
 trials takes many minutes).
 """
 
@@ -28,6 +29,7 @@ import platform
 import sys
 import time
 from collections.abc import Callable, Sequence
+from dataclasses import replace
 from typing import Any
 
 import numpy as np
@@ -139,13 +141,16 @@ def main(argv: Sequence[str] | None = None) -> int:
 
     p = argparse.ArgumentParser(prog="hexapod-bench perf study",
                                 description=__doc__.splitlines()[0])
-    p.add_argument("--scenario", default="tahri2009-convergence")
+    p.add_argument("--scenario", default="tahri2009-convergence",
+                   help="a built-in name or a file (default: tahri2009-convergence)")
     p.add_argument("--trials", type=int, default=None,
                    help="trials per controller (default: the work-unit size of "
                         "'hexapod-bench run SCENARIO --workers 2', capped at 1000)")
     p.add_argument("--controllers", default=None,
-                   help="comma-separated names or labels of the scenario's controllers to "
-                        "time (default: all of them)")
+                   help="comma-separated names or labels to time, as run --controllers "
+                        "takes them (default: the scenario's)")
+    p.add_argument("--world", choices=["kinematic", "dynamic"], default=None,
+                   help="run the scenario in this world (as run --world; default: its own)")
     p.add_argument("--repeats", type=int, default=3, help="runs of each engine (median)")
     p.add_argument("--breakdown", action="store_true",
                    help="also time the batched engine's stages (one more run per controller)")
@@ -154,6 +159,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     from benchmarks.study.scenario_checks import check_controllers
 
     scenario = load_scenario(args.scenario)
+    if args.world is not None:  # (the force laws' refusal told to run with --world)
+        scenario = replace(scenario, world=args.world)
     trials = auto_chunk([scenario], 2, "sim") if args.trials is None else args.trials
     if trials < 1 or args.repeats < 1:
         p.error("--trials and --repeats must be >= 1")

@@ -129,3 +129,17 @@ def test_an_unknown_controller_is_refused() -> None:
 
     with pytest.raises(BenchmarkError, match="no-such-law"):
         study.main(["--controllers", "no-such-law"])
+
+
+def test_the_world_asked_for_by_the_refusal_is_an_option(
+        capsys: pytest.CaptureFixture[str]) -> None:
+    """A force law on a kinematic scenario was refused with '(or run with --world
+    dynamic)', an option perf study did not take."""
+    from benchmarks.exceptions import ScenarioError
+
+    with pytest.raises(ScenarioError, match="--world dynamic"):
+        study.main(["--scenario", "quick", "--controllers", "computed-torque", "--trials",
+                    "2", "--repeats", "1"])
+    assert study.main(["--scenario", "quick", "--controllers", "computed-torque", "--world",
+                       "dynamic", "--trials", "2", "--repeats", "1"]) in (0, None)
+    assert "| computed-torque |" in capsys.readouterr().out
