@@ -217,7 +217,8 @@ def load_setup(text: str) -> Setup:
             points=f"base_points_mm / platform_points_mm in {path}",
             camera="the camera's placement (the front preset placed for this robot here)",
             task="[task] of a scenario"), None,
-            ["camera: the front preset, placed for this robot (a scenario names yours)"], [])
+            ["camera: the front preset, placed for this robot (a scenario names yours)"],
+            _weight_problems(g, path))
     if path.suffix.lower() in OPENCV_EXTENSIONS:
         return calibration_setup(path)
     if kind == "calibration":  # calibrate's output: read (checked), then said
@@ -248,6 +249,23 @@ def load_setup(text: str) -> Setup:
     raise BenchmarkError(f"{path}: cannot tell what this file is: a scenario has "
                          "'controllers', a robot file 'base_points_mm', a camera file "
                          "'fx_px' (or 'opencv') and [camera_from_base] (docs/robot-files.md)")
+
+
+def _weight_problems(g: HexapodGeometry, path: Path) -> list[Problem]:
+    """A robot file checked alone: a warning when its drives cannot hold its own platform
+    still at home (what a scenario's check says of the dynamic world; alone it said
+    nothing, e.g. of a platform_mass in grams)."""
+    from benchmarks.study.payload_check import static_forces_at_home
+
+    forces = static_forces_at_home(g)
+    limit = np.asarray(g.drives.force_limit, float)
+    if forces is None or not (np.abs(forces) > limit).any():
+        return []
+    leg = int(np.argmax(np.abs(forces) - limit))
+    return [Problem("warning", f"in the dynamic world the robot's own weight needs "
+                    f"{abs(forces[leg]):.0f} N on leg {leg} to hold it still at home, its "
+                    f"drives' force limit is {limit[leg]:g} N: check [inertia]'s masses (kg) "
+                    f"and [drives] force_limit (N) in {path}", "robot")]
 
 
 #: The preset whose placement a calibration file's camera gets in ``check``, by kind.

@@ -71,6 +71,19 @@ def _drive_forces(g: Any, R: np.ndarray, t: np.ndarray, twist: np.ndarray,
             + np.asarray(d.coulomb) * np.sign(q_dot))
 
 
+def static_forces_at_home(g: Any) -> np.ndarray | None:
+    """The drive forces (6,) [N] that hold ``g``'s platform still at its home pose
+    (None: no home pose)."""
+    from hexapod.workspace import home_pose
+
+    try:
+        R, t = home_pose(g)
+    except Exception:  # (no home pose: the workspace check says so)
+        return None
+    zero = np.zeros((1, 6))
+    return np.asarray(_drive_forces(g, R[None], t[None], zero, zero)[0])
+
+
 def _point(sc: Any, samples: int) -> PayloadFacts | None:
     return _facts(sc, samples, peaks=True)
 

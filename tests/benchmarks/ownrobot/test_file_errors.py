@@ -221,3 +221,21 @@ def test_an_empty_file_is_said_to_be_empty(tmp_path: Path, name: str,
     path.write_text("")
     code, err = _run(["check", str(path)], capsys)
     assert code == 2 and f"{path}: the file is empty" in err and "-215" not in err
+
+
+def test_a_robot_file_alone_says_its_drives_cannot_hold_its_platform(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """A platform mass in grams (2000 for 2 kg): check of the robot file alone said 'No
+    problem found' (a scenario's check in the dynamic world did warn)."""
+    import tomli_w
+
+    t = own_robot().to_dict(dynamics=True)
+    t["inertia"]["platform_mass"] = 2000.0
+    robot = tmp_path / "robot.toml"
+    robot.write_text(tomli_w.dumps(t))
+    assert main(["check", str(robot)]) == 0
+    out = " ".join(capsys.readouterr().out.split())
+    assert "the robot's own weight needs" in out and "its drives' force limit is 200 N" in out
+    own_robot().to_toml(robot)  # its own 2 kg: nothing said
+    assert main(["check", str(robot)]) == 0
+    assert "own weight" not in capsys.readouterr().out
