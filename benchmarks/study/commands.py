@@ -38,9 +38,14 @@ def cmd_run(args: argparse.Namespace) -> int:
         twice = sorted({n for n in names if names.count(n) > 1})
         raise BenchmarkError(f"scenario {', '.join(twice)} given twice: a study runs once")
     ctrl_list = [c.strip() for c in args.controllers.split(",")] if args.controllers else None
-    scenarios = [load_scenario(s).with_overrides(args.trials, args.seed, ctrl_list,
-                                                 args.max_steps, args.calibration)
-                 for s in args.scenarios]
+    loaded = [load_scenario(s) for s in args.scenarios]
+    args.override_warnings = [  # (it was replaced without a word; then run.json's too)
+        f"--calibration {args.calibration} replaces scenario {sc.name}'s [calibration] "
+        "method = \"linear\": its controllers get this file's base points, no trial is "
+        "calibrated in its own world" for sc in loaded
+        if args.calibration and sc.calibration.method == "linear"]
+    scenarios = [sc.with_overrides(args.trials, args.seed, ctrl_list, args.max_steps,
+                                   args.calibration) for sc in loaded]
     if getattr(args, "world", None):  # --world: every scenario in that world
         scenarios = [replace(sc, world=args.world) for sc in scenarios]
     if getattr(args, "goal", None):  # --goal: every scenario in that goal setting
@@ -82,9 +87,10 @@ def run_studies(scenarios: list[Any], out: Path, args: argparse.Namespace) -> in
     # the pre-flight of 'hexapod-bench check', the same function
     pre = preflight(scenarios, getattr(args, "allow_foreign_calibration", False),
                     measure=not getattr(args, "no_check", False))
-    for text in pre.warnings:
+    warnings = [*getattr(args, "override_warnings", []), *pre.warnings]
+    for text in warnings:
         print(f"warning: {text}", file=sys.stderr)
-    args.calibration_warnings = pre.warnings
+    args.calibration_warnings = warnings
     scenarios = pre.scenarios
     for check in pre.checks:
         refused = refusal(check)

@@ -4,7 +4,6 @@ calibration, task, controllers), the allowed range of every number, and the swee
 from __future__ import annotations
 
 import itertools
-import logging
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
@@ -24,8 +23,6 @@ from benchmarks.study.scenario_ranges import RANGES as RANGES
 from benchmarks.study.scenario_ranges import check_range
 from hexapod.exceptions import ConfigFileError
 from vision.calibration import MIN_SINGULAR_RATIO, WARN_SINGULAR_RATIO
-
-log = logging.getLogger(__name__)
 
 #: Keys of [noise] and [calibration_error] that may be swept (given as lists).
 NOISE_KEYS = ("amplitude_deg", "pixel_sigma_px", "points_per_edge", "outlier_fraction",
@@ -235,10 +232,6 @@ class Scenario:
                 points = load_calibrated_base_points(calibration_file)
             except ConfigFileError as exc:
                 raise ScenarioError(exc.path, exc.problem, exc.key, exc.suggestion) from None
-            if sc.calibration.method == "linear":  # (replaced without a word)
-                log.warning("--calibration %s replaces scenario %s's [calibration] method = "
-                            "\"linear\": its controllers get this file's base points, no "
-                            "trial is calibrated in its own world", calibration_file, sc.name)
             sc = replace(sc, calibration=replace(sc.calibration, method="file",
                                                  file=str(calibration_file)),
                          calibration_points=points)
