@@ -315,24 +315,21 @@ def mark_jpeg(data: bytes) -> bytes:
 def json_signed(value: object) -> object:
     """``value`` as standard JSON takes it, recursively: NaN as None, an infinity as the
     string ``"inf"`` or ``"-inf"`` (its sign kept; ``float()`` reads it back)."""
+    return _json_clean(value, signed_inf=True)
+
+
+def _json_clean(value: object, signed_inf: bool) -> object:
+    """``value`` with every non-finite float replaced, recursively: NaN as None, an
+    infinity as ``"inf"``/``"-inf"`` when ``signed_inf`` and as None otherwise."""
     if isinstance(value, float):  # (numpy's float64 too)
         x = float(value)
-        return None if math.isnan(x) else ("inf" if x > 0 else "-inf") if math.isinf(x) else x
+        if math.isfinite(x):
+            return x
+        return ("inf" if x > 0 else "-inf") if signed_inf and math.isinf(x) else None
     if isinstance(value, dict):
-        return {k: json_signed(v) for k, v in value.items()}
+        return {k: _json_clean(v, signed_inf) for k, v in value.items()}
     if isinstance(value, list | tuple):
-        return [json_signed(v) for v in value]
-    return value
-
-
-def _json_safe(value: object) -> object:
-    """``value`` with every non-finite float (NaN, infinities) as None, recursively."""
-    if isinstance(value, float):
-        return value if math.isfinite(value) else None
-    if isinstance(value, dict):
-        return {k: _json_safe(v) for k, v in value.items()}
-    if isinstance(value, list | tuple):
-        return [_json_safe(v) for v in value]
+        return [_json_clean(v, signed_inf) for v in value]
     return value
 
 
@@ -344,7 +341,8 @@ def _marked(path: Path, content: object) -> bytes:
         doc = ({"generator": GENERATOR, **content} if isinstance(content, dict)
                else {"generator": GENERATOR, "items": content})
         # NaN and infinities as null: json.dumps would write NaN / Infinity, not JSON
-        return (json.dumps(_json_safe(doc), indent=1, allow_nan=False) + "\n").encode()
+        text = json.dumps(_json_clean(doc, signed_inf=False), indent=1, allow_nan=False)
+        return (text + "\n").encode()
     if isinstance(content, bytes):
         if content.startswith(b"\x89PNG\r\n\x1a\n"):
             return mark_png(content)
