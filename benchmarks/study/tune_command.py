@@ -274,9 +274,9 @@ def cmd_tune(args: argparse.Namespace) -> int:
         check_replace(path, args.overwrite, kind=kind)
     space = SEARCH_SPACE if args.space is None else load_space(args.space)
     tables = {spec.label: controller_options(spec) for spec in sc.controllers}
-    if args.space is not None:
-        check_space_options(space, tables, {s.label: s.name for s in sc.controllers},
-                            args.space)
+    own_tables = (check_space_options(space, tables, {s.label: s.name for s in sc.controllers},
+                                      args.space)
+                  if args.space is not None else frozenset())
     from benchmarks.study.scenario_checks import check_controllers
 
     sc = check_controllers(sc)[0]  # [controller_options] resolved: the options as given
@@ -284,11 +284,9 @@ def cmd_tune(args: argparse.Namespace) -> int:
     plans: dict[str, list[dict[str, Any]]] = {}
     families: dict[str, str | None] = {}
     axes: dict[str, Any] = {}
-    own_tables = ({s.label for s in sc.controllers} | {s.name for s in sc.controllers}
-                  if args.space is not None else set())
     for spec in sc.controllers:
         cs = controller_space(spec.label, spec.name, tables[spec.label], space,
-                              frozenset(own_tables))
+                              own_tables)
         for text in cs.skipped:
             con.print(f"tune: {text}", markup=False, highlight=False)
         families[spec.label] = cs.family

@@ -272,7 +272,7 @@ def load_space(path: str | Path) -> dict[str, tuple[Axis, ...]]:
 
 
 def check_space_options(space: dict[str, tuple[Axis, ...]], tables: dict[str, Any],
-                        names: dict[str, str], path: str) -> None:
+                        names: dict[str, str], path: str) -> frozenset[str]:
     """A space FILE's table for one controller (by label or name) names options that
     controller takes: an option it does not is an error (a typo), not a skip.
 
@@ -282,11 +282,14 @@ def check_space_options(space: dict[str, tuple[Axis, ...]], tables: dict[str, An
         names: Each label's registry name.
         path: The file (for the message).
 
+    Returns:
+        The keys that are the controllers' own tables (their labels and names).
+
     Raises:
         ScenarioError: Naming the file, the key, the controller's options and the close
             one.
     """
-    own = set(names) | set(names.values())
+    own = frozenset(names) | frozenset(names.values())
     for key, axes in space.items():  # a family's table: options some controller takes
         if key in own:
             continue
@@ -313,3 +316,4 @@ def check_space_options(space: dict[str, tuple[Axis, ...]], tables: dict[str, An
                         f"{', '.join(table.names) or 'none'} (hexapod-bench list --options "
                         f"{name})", key=f"{key}.{axis.option}",
                         suggestion=suggest(axis.option, table.names))
+    return own
