@@ -12,7 +12,12 @@ this module is their behaviour, the force each drive puts on its leg:
   viscous friction so that the closed loop ``(kp s + ki) / (m s^2 + (kp + c) s + ki)``
   has its -3 dB point at the stated bandwidth, with the integral's corner
   ``ki / kp`` a tenth of it (:func:`tune_velocity_loop`);
-- **force mode** (torque mode): the commanded force, clipped at the force limit;
+- **force mode** (torque mode): the commanded force, clipped at the force limit, with a
+  servo amplifier's speed limit in torque mode: within the leg speed limit ``v_max`` the
+  command passes unchanged; beyond it the velocity loop's proportional term of the
+  excess is subtracted, ``F - kp (|v| - v_max) sign(v)`` (clipped at the force limit),
+  so a leg pushed with a force ``F`` more than it needs settles ``F / kp`` past
+  ``v_max`` (the proportional limiter's droop);
 - **friction**: viscous ``c v`` plus a *smooth* Coulomb force ``f_c tanh(v / v_s)``
   (:data:`COULOMB_SMOOTHING` ``v_s`` = 0.1 mm/s), not stick-slip. The plant integrates
   friction implicitly as the damping ``c + f_c tanh(v / v_s) / v`` (its secant, in
@@ -110,8 +115,9 @@ class DriveForces:
         motor: (n, 6) force of the drive on its leg [N] (within the force limit).
         friction: (n, 6) friction force opposing the leg's motion [N].
         slope: (n, 6) how ``motor - friction`` changes with the leg velocity [N s/m]
-            (non-positive): the proportional gain while not saturated, and the friction's
-            secant damping; the plant takes this part implicitly.
+            (non-positive): the proportional gain while not saturated (velocity mode) or
+            while holding the speed limit (force mode), and the friction's secant
+            damping; the plant takes this part implicitly.
         saturated: (n, 6) whether the drive is at its force limit.
     """
 
@@ -129,10 +135,13 @@ class DriveModel:
         tuned_mass: (6,) or (n, 6) inertia each velocity loop is tuned on [kg] (the
             rotor's plus the mechanism's seen by the leg).
         n: Number of rows.
+        speed_limit: (n,) or (n, 6) each leg's speed limit in force mode [m/s], finite
+            and positive (the robot's ``max_speed``; None: the command is not held to
+            a speed).
     """
 
     def __init__(self, params: DriveParameters | list[DriveParameters], tuned_mass: np.ndarray,
-                 n: int) -> None:
+                 n: int, speed_limit: np.ndarray | None = None) -> None:
         plist = params if isinstance(params, list) else [params] * n
         if len(plist) != n:
             raise ValueError(f"params: expected {n} drive parameter sets, got {len(plist)}")
@@ -152,6 +161,16 @@ class DriveModel:
         bandwidth = stack("velocity_bandwidth")
         mass = np.broadcast_to(np.asarray(tuned_mass, float), (n, 6))
         self.kp, self.ki = tune_velocity_loop(mass, self.viscous, bandwidth)
+        #: (n, 6) the legs' speed limit in force mode [m/s] (None: none).
+        self.speed_limit: np.ndarray | None = None
+        if speed_limit is not None:
+            limit = np.asarray(speed_limit, float)
+            limit = np.array(np.broadcast_to(limit[:, None] if limit.ndim == 1 else limit,
+                                             (n, 6)))
+            if not (np.all(np.isfinite(limit)) and np.all(limit > 0)):
+                raise ValueError("speed_limit: expected finite positive leg speeds [m/s], "
+                                 f"got {limit.min()} to {limit.max()}")
+            self.speed_limit = limit
         #: (n, 6) state of the integral action [N].
         self.integral = np.zeros((n, 6))
 
@@ -179,12 +198,18 @@ class DriveModel:
         # friction = d_friction * v: a velocity-dependent damping, taken implicitly
         d_friction = self.viscous[rows] + self.coulomb[rows] / COULOMB_SMOOTHING * secant
         friction = self.viscous[rows] * v + self.coulomb[rows] * np.tanh(x)
-        if self.mode == "force":
-            motor = np.clip(setpoints, -limit, limit)
-            saturated = np.abs(setpoints) >= limit
-            return DriveForces(motor, friction, -d_friction, saturated)
-        err = setpoints - v
         kp = self.kp[rows]
+        if self.mode == "force":  # the command, held to the speed limit (module docstring)
+            commanded = np.clip(setpoints, -limit, limit)
+            saturated = np.abs(setpoints) >= limit
+            if self.speed_limit is None:
+                return DriveForces(commanded, friction, -d_friction, saturated)
+            vmax = self.speed_limit[rows]
+            held = commanded - kp * (np.maximum(v - vmax, 0.0) + np.minimum(v + vmax, 0.0))
+            governed = ((v > vmax) | (v < -vmax)) & (np.abs(held) < limit)
+            return DriveForces(np.clip(held, -limit, limit), friction,
+                               -np.where(governed, kp, 0.0) - d_friction, saturated)
+        err = setpoints - v
         integral = self.integral[rows]
         u = kp * err + integral
         motor = np.clip(u, -limit, limit)

@@ -89,7 +89,8 @@ class DynamicRobots:
         drives = [g.drives for g in geometries]
         self.rotor = np.array([d.rotor_inertia for d in drives], dtype=float)
         self.resolution = np.array([d.encoder_resolution for d in drives], dtype=float)
-        self.drives = DriveModel(drives, self._tuned_mass(geometries), n)
+        self.drives = DriveModel(drives, self._tuned_mass(geometries), n,
+                                 np.array([g.max_speed for g in geometries], dtype=float))
         #: (n, 6) twists ``(v, w)`` [m/s, rad/s].
         self.twist = np.zeros((n, 6))
         rows = np.arange(n)

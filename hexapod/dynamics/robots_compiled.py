@@ -32,7 +32,8 @@ log = logging.getLogger(__name__)
 #: Where each quantity sits in a row of the period function (its input and output).
 LAYOUT = Layout([("R", 9), ("t", 3), ("twist", 6), ("integral", 6), ("setpoint", 6),
                  ("A", 18), ("E", 18), ("p", mech.N_PARAMETERS), ("kp", 6), ("ki", 6),
-                 ("limit", 6), ("rotor", 6), ("viscous", 6), ("coulomb", 6), ("h", 1),
+                 ("limit", 6), ("speed_limit", 6), ("rotor", 6), ("viscous", 6),
+                 ("coulomb", 6), ("h", 1),
                  ("force_mode", 1), ("motor", 6), ("saturated_time", 1), ("track_sq", 1),
                  ("track_max", 1), ("force_max", 1), ("q", 6), ("saturated_legs", 6)],
                 "dynamic robot row")
@@ -72,9 +73,15 @@ def _step_expression() -> tuple[ca.SX, ca.SX]:
     winding = sat_v * (ca.sign(err) == ca.sign(u))
     new_integral = _clip(ca.if_else(winding, integral, integral + ki * err * h), lim)
     force = get("force_mode")[0] > 0.5
-    motor = ca.if_else(force, _clip(sp, lim), _clip(u, lim))
+    # force mode: the command, less the velocity loop's proportional term of the speed
+    # beyond the limit (DriveModel.forces)
+    vmax = get("speed_limit")
+    held = _clip(sp, lim) - kp * (ca.fmax(qd - vmax, 0.0) + ca.fmin(qd + vmax, 0.0))
+    governed = ((qd > vmax) + (qd < -vmax)) * (ca.fabs(held) < lim)
+    motor = ca.if_else(force, _clip(held, lim), _clip(u, lim))
     saturated = ca.if_else(force, ca.fabs(sp) >= lim, sat_v)
-    slope = -ca.if_else(force, ca.SX.zeros(6), ca.if_else(sat_v, 0.0, kp)) - d_friction
+    slope = -ca.if_else(force, ca.if_else(governed, kp, 0.0),
+                        ca.if_else(sat_v, 0.0, kp)) - d_friction
     new_integral = ca.if_else(force, integral, new_integral)
     # M + K^T diag(rotor - h slope) K: one rank-one term per leg, its mechanism's part
     # (M = M_joint + K^T diag(leg_mass) K) and the drive's added, from the upper triangle
@@ -182,6 +189,7 @@ def new_table(robots: Any) -> np.ndarray:
     x[:, L["E"]] = robots.E.reshape(n, 18)
     x[:, L["p"]] = robots.parameters
     for key, arr in (("kp", d.kp), ("ki", d.ki), ("limit", d.force_limit),
+                     ("speed_limit", np.inf if d.speed_limit is None else d.speed_limit),
                      ("rotor", robots.rotor), ("viscous", d.viscous), ("coulomb", d.coulomb),
                      ("motor", robots.forces), ("saturated_legs", robots.saturated_legs)):
         x[:, L[key]] = arr

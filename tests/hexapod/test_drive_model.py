@@ -128,6 +128,32 @@ def test_force_mode_applies_the_command_within_the_limit() -> None:
     np.testing.assert_array_equal(f.saturated, np.abs(cmd) >= 200.0)
 
 
+def test_force_mode_holds_the_command_to_the_speed_limit() -> None:
+    """The speed limit in force mode (50 mm/s): within it the command passes bit for bit;
+    beyond it the velocity loop's proportional term of the excess is subtracted,
+    ``F - kp (v - v_max)`` (``F - kp (v + v_max)`` below ``-v_max``), within the force
+    limit, and its slope ``-kp`` joins the friction's (the plant takes it implicitly);
+    without a limit the command passes at any speed."""
+    params = DriveParameters.default().replace(mode="force")
+    free = DriveModel(params, np.full(6, MASS), 1)
+    held = DriveModel(params, np.full(6, MASS), 1, np.array([0.05]))
+    kp = float(held.kp[0, 0])
+    cmd = np.array([[100.0, -100.0, 100.0, -100.0, 250.0, -100.0]])
+    v = np.array([[0.05, -0.0499, 0.06, -0.07, 0.3, 2.0]])
+    rows = np.array([0])
+    f, f0 = held.forces(rows, cmd, v, 1e-3), free.forces(rows, cmd, v, 1e-3)
+    np.testing.assert_array_equal(f0.motor, np.clip(cmd, -200.0, 200.0))
+    np.testing.assert_array_equal(f.motor[0, :2], cmd[0, :2])  # at and within the limit
+    np.testing.assert_allclose(f.motor[0, 2:5], [100.0 - kp * 0.01, -100.0 + kp * 0.02,
+                                                 200.0 - kp * 0.25], rtol=1e-12)
+    assert f.motor[0, 5] == -200.0  # pulled back at the force limit: no slope there
+    slope = f.slope - f0.slope  # the limiter's part
+    np.testing.assert_allclose(slope[0], [0.0, 0.0, -kp, -kp, -kp, 0.0], rtol=1e-12)
+    np.testing.assert_array_equal(f.friction, f0.friction)
+    with pytest.raises(ValueError, match="speed_limit"):
+        DriveModel(params, np.full(6, MASS), 1, np.array([0.0]))
+
+
 def test_encoders_read_the_nearest_count() -> None:
     rng = np.random.default_rng(4)
     q = rng.uniform(0.3, 0.5, (100, 6))

@@ -13,10 +13,12 @@ from hexapod.workspace import sample_poses
 from tests.hexapod.dynamic_robots_oracle import leg_bias, step_reference
 
 
-def _robots(n: int, mode: str = "velocity", seed: int = 3, **drive: float
-            ) -> tuple[DynamicRobots, np.ndarray, np.ndarray]:
+def _robots(n: int, mode: str = "velocity", seed: int = 3, max_speed: float | None = None,
+            **drive: float) -> tuple[DynamicRobots, np.ndarray, np.ndarray]:
     g = deltalab()
     g = g.replace(drives=g.drives.replace(mode=mode, **drive))
+    if max_speed is not None:
+        g = g.replace(max_speed=max_speed)
     R, t = sample_poses(g, n, np.random.default_rng(seed), max_translation=0.03,
                         max_angle=np.deg2rad(5.0), margin=0.02)
     R, t = np.array(R), np.array(t)
@@ -30,21 +32,31 @@ def _state(r: DynamicRobots) -> np.ndarray:
                           axis=1)
 
 
-@pytest.mark.parametrize("mode", ["velocity", "force"])
-def test_the_compiled_period_equals_the_numpy_steps(mode: str) -> None:
+@pytest.mark.parametrize(("mode", "max_speed"), [("velocity", None), ("force", 10.0),
+                                                 ("force", 0.005)])
+def test_the_compiled_period_equals_the_numpy_steps(mode: str, max_speed: float | None
+                                                    ) -> None:
     """Random poses and setpoints (some drives saturate, 60 N limit), 20 steps of 1 ms:
-    the same state, forces and accumulators to 1e-9 (relative to each quantity's scale)."""
+    the same state, forces and accumulators to 1e-9 (relative to each quantity's scale);
+    in force mode with the legs' speed limit out of reach (10 m/s) and at 5 mm/s, where
+    it holds some legs back."""
     n = 16
     rng = np.random.default_rng(5)
     sp = (rng.uniform(-0.05, 0.05, (n, 6)) if mode == "velocity"
           else rng.uniform(-120.0, 120.0, (n, 6)))
-    a, _, _ = _robots(n, mode, force_limit=60.0)
-    b, _, _ = _robots(n, mode, force_limit=60.0)
+    a, _, _ = _robots(n, mode, max_speed=max_speed, force_limit=60.0)
+    b, _, _ = _robots(n, mode, max_speed=max_speed, force_limit=60.0)
     rows = np.arange(n)
+    held = False
     for _ in range(3):  # three periods: the twist and the integral are non-zero
         assert not a.advance(rows, sp, 1e-3, 20).any()
         for _ in range(20):
+            if mode == "force":  # (forces() has no state to advance in this mode)
+                qd, _ = b.model.legs_batch(b.R, b.t, b.twist, **b.rows(rows))
+                held |= bool(np.any(b.drives.forces(rows, sp, qd, 1e-3).motor
+                                    != np.clip(sp, -60.0, 60.0)))
             step_reference(b, rows, sp, 1e-3)
+    assert held == (max_speed == 0.005)  # the speed limit held forces back, or none
     sa, sb = _state(a), _state(b)
     scale = np.maximum(np.abs(sb).max(axis=0), 1e-6)
     np.testing.assert_array_less(np.abs(sa - sb) / scale, 1e-9)
@@ -60,9 +72,10 @@ def test_power_balance_of_mechanism_rotors_and_drives() -> None:
     """Force mode, constant forces, friction on: the change of the mechanism's energy
     (kinetic + potential, DynamicModel.energy) plus the rotors' kinetic energy
     (m_r q_dot^2 / 2) equals the work of the drives minus friction, integrated along the
-    motion (0.1 ms steps over 0.2 s; agreement within 1 % of the work)."""
+    motion (0.1 ms steps over 0.2 s; agreement within 1 % of the work). The legs' speed
+    limit is out of reach (10 m/s): the drives' forces are the constant commands."""
     n = 4
-    r, _, _ = _robots(n, "force", viscous=20.0, coulomb=3.0)
+    r, _, _ = _robots(n, "force", max_speed=10.0, viscous=20.0, coulomb=3.0)
     rows = np.arange(n)
     hold = r.drives.integral.copy()
     push = hold + np.random.default_rng(2).uniform(-25.0, 25.0, (n, 6))
@@ -89,6 +102,29 @@ def test_power_balance_of_mechanism_rotors_and_drives() -> None:
     de = energy() - e0
     assert np.all(np.abs(work) > 0.05)
     np.testing.assert_allclose(de, work, rtol=0.01)
+
+
+def test_force_mode_holds_the_legs_to_the_robots_speed_limit() -> None:
+    """Force mode, every leg pushed 150 N off its holding force (75 % of the 200 N limit)
+    for 0.2 s: with the robot's 50 mm/s limit the legs' speeds, measured as the change of
+    their lengths over each 1 ms period, stay within the limit plus the proportional
+    limiter's largest droop, the force limit over kp (a bound of 204 mm/s here);
+    with the limit out of reach (10 m/s) the same push drives them past 20 times it."""
+    def fastest(max_speed: float | None) -> tuple[float, float]:
+        r, _, _ = _robots(3, "force", max_speed=max_speed)
+        rows = np.arange(3)
+        push = r.drives.integral + np.array([150.0, -150.0, 150.0, -150.0, 150.0, -150.0])
+        q, top = r.lengths(rows).copy(), 0.0
+        for _ in range(200):
+            r.advance(rows, push, 1e-3, 1)
+            q1 = r.lengths(rows).copy()
+            top, q = max(top, float(np.abs(q1 - q).max()) / 1e-3), q1
+        return top, float(r.drives.kp.min())
+
+    assert deltalab().max_speed == 0.05
+    held, kp = fastest(None)
+    assert 0.05 < held <= 0.05 + 200.0 / kp  # (at most the force limit over kp past it)
+    assert fastest(10.0)[0] > 20 * 0.05
 
 
 def test_gravity_is_held_at_rest() -> None:
@@ -152,8 +188,9 @@ def test_the_lane_parallel_period_equals_casadis_folded_period_bit_for_bit(avx2:
                                                                            ) -> None:
     """The period the plant runs (hexapod.compiled_lanes, four rows per vector
     instruction) against CasADi's own C of the same step folded over the period: equal to
-    the last bit, on moving robots with saturating drives (60 N) in both drive modes and a
-    row count that is not a whole number of lanes."""
+    the last bit, on moving robots with saturating drives (60 N) in both drive modes (in
+    force mode also held to a 5 mm/s speed limit) and a row count that is not a whole
+    number of lanes."""
     from hexapod.dynamics.robots_compiled import (
         LAYOUT,
         pack_period,
@@ -163,9 +200,10 @@ def test_the_lane_parallel_period_equals_casadis_folded_period_bit_for_bit(avx2:
 
     lanes = period_lanes()
     assert lanes is not None
-    for mode, sp_scale in (("velocity", 0.05), ("force", 120.0)):
+    for mode, sp_scale, max_speed in (("velocity", 0.05, None), ("force", 120.0, None),
+                                      ("force", 120.0, 0.005)):
         n = 11
-        r, _, _ = _robots(n, mode, force_limit=60.0)
+        r, _, _ = _robots(n, mode, max_speed=max_speed, force_limit=60.0)
         rng = np.random.default_rng(4)
         r.twist[:] = rng.normal(0.0, [0.02, 0.02, 0.02, 0.1, 0.1, 0.1], (n, 6))
         x = pack_period(r, np.arange(n), rng.uniform(-sp_scale, sp_scale, (n, 6)), 1e-3)
