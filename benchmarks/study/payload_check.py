@@ -128,14 +128,15 @@ def payload_facts(sc: Any, samples: int = SAMPLED_STARTS) -> list[PayloadFacts]:
     sweep point can be held at rest, an error (every trial would fall)."""
     if sc.world != "dynamic":
         return []
-    from benchmarks.study.trajectory_check import sweep_facts
+    from benchmarks.study.trajectory_check import sweep_facts, sweep_text
 
     payload = getattr(sc, "payload", None) is not None
     out = []
     warned_com = False
     for point, facts, where in sweep_facts(sc, _point if payload else _static_point, samples):
+        at = sweep_text(facts.sweep)
         if payload and not warned_com and (text := _com_problem(point, where)):
-            facts.problems.append(Problem("warning", text))
+            facts.problems.append(Problem("warning", text, point=at))
             warned_com = True
         over = np.flatnonzero(facts.static_n > facts.limit_n)
         if over.size:
@@ -146,7 +147,8 @@ def payload_facts(sc: Any, samples: int = SAMPLED_STARTS) -> list[PayloadFacts]:
                 f"{load} exceeds the drives' force limit: leg {leg} needs "
                 f"{facts.static_n[leg]:.0f} N at rest, its limit is {facts.limit_n[leg]:g} "
                 f"N ({over.size} leg(s) over; {100 * (1 - facts.held):.0f} % of the sampled "
-                f"starts cannot be held): the drives cannot hold the platform still {where}")))
+                f"starts cannot be held): the drives cannot hold the platform still {where}"),
+                point=at))
         out.append(facts)
     if out and all(f.held == 0 for f in out):  # every start of every point falls
         first = out[0]

@@ -14,7 +14,6 @@ a setup whose every trial would fail raises a :class:`~benchmarks.exceptions.Set
 
 from __future__ import annotations
 
-import re
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -148,29 +147,24 @@ def measure_study(check: StudyCheck) -> None:
         check.problems += _merged(found, points)
 
 
-#: The end of a problem found at one sweep point: `` (sweep point payload.mass_kg = 20)``.
-_AT_POINT = re.compile(r" \(sweep point (.+)\)$")
-
-
 def _merged(problems: list[Problem], points: int) -> list[Problem]:
     """Problems found per sweep point, a problem the same at several points said once
-    with its points (``(every sweep point)`` when at all ``points``): a reference too
-    fast was said six times, once per payload, in the same words."""
-    groups: dict[tuple[str, str, str], list[str]] = {}
+    with its points (``(every sweep point)`` when at all ``points``), the point named
+    after the text: a reference too fast was said six times, once per payload, in the
+    same words."""
+    groups: dict[tuple[str, str, str, bool], list[str]] = {}
     for p in problems:
-        m = _AT_POINT.search(p.text)
-        key = (p.severity, p.text[:m.start()] if m else p.text, p.topic)
-        groups.setdefault(key, []).append(m.group(1) if m else "")
+        groups.setdefault((p.severity, p.text, p.topic, p.fails), []).append(p.point)
     out = []
-    for (severity, text, topic), at in groups.items():
+    for (severity, text, topic, fails), at in groups.items():
         named = [a for a in at if a]
         if len(named) > 1:
             where = ("every sweep point" if len(named) == points > 1
                      else "sweep points " + "; ".join(named))
-            out.append(Problem(severity, f"{text} ({where})", topic))
-        else:
-            out.append(Problem(severity, text + (f" (sweep point {named[0]})" if named else ""),
-                               topic))
+            text = f"{text} ({where})"
+        elif named:
+            text = f"{text} (sweep point {named[0]})"
+        out.append(Problem(severity, text, topic, fails))
     return out
 
 

@@ -58,6 +58,10 @@ class Problem:
     topic: str = "robot"
     #: Whether the trials it concerns fail (False: a warning of a poorer result).
     fails: bool = True
+    #: The sweep point it was found at (``"payload.mass_kg = 20"``; empty: the study's),
+    #: said after the text (:func:`benchmarks.study.preflight.measure_study` names a
+    #: problem found the same at several points once, with its points).
+    point: str = ""
 
 
 @dataclass(frozen=True)

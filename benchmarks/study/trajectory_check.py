@@ -133,6 +133,7 @@ def trajectory_facts(sc: Any, samples: int = SAMPLED_STARTS) -> list[TrajectoryF
         return []
     out = []
     for point, facts, where in sweep_facts(sc, _point, samples):
+        at = sweep_text(facts.sweep)
         task = point.task
         if facts.hits:
             leg, q, limit = facts.worst or (0, float("nan"), float("nan"))
@@ -144,27 +145,27 @@ def trajectory_facts(sc: Any, samples: int = SAMPLED_STARTS) -> list[TrajectoryF
                     f"{np.ceil(facts.travel_mm):g}, or shrink the path (radius_mm, "
                     f"max_translation_mm) {where}")
             facts.problems.append(Problem(
-                "error" if facts.hits == facts.sampled else "warning", text))
+                "error" if facts.hits == facts.sampled else "warning", text, point=at))
         if facts.leg_speed_mm_s > facts.max_speed_mm_s * (1 + 1e-9):
             facts.problems.append(Problem("warning", (
                 f"the {task.shape} reference moves a leg at up to {facts.leg_speed_mm_s:.1f} "
                 f"mm/s, above the robot's leg speed limit {facts.max_speed_mm_s:g} mm/s (the "
                 "commands are clamped to it: no controller can follow the reference); slow "
                 "it down ([task] speed_mm_s, peak_acceleration_mm_s2, radius_mm) "
-                f"{where}")))
+                f"{where}"), point=at))
         hi = facts.duration_s[1]
         if hi > facts.run_time_s:
             facts.problems.append(Problem("warning", (
                 f"the reference lasts up to {hi:.2f} s, longer than max_steps x dt = "
                 f"{task.max_steps} x {point.dt * 1e3:g} ms = {facts.run_time_s:.2f} s: the "
                 f"trials stop before it ends; raise [task] max_steps to at least "
-                f"{int(np.ceil((hi + SETTLE_TIME_S) / point.dt))} {where}")))
+                f"{int(np.ceil((hi + SETTLE_TIME_S) / point.dt))} {where}"), point=at))
         elif facts.run_time_s - hi < SETTLE_TIME_S:
             facts.problems.append(Problem("warning", (
                 f"the reference lasts up to {hi:.2f} s and max_steps x dt = "
                 f"{facts.run_time_s:.2f} s leaves {facts.run_time_s - hi:.2f} s to settle "
                 f"after it (settling_time_s may be missing); raise [task] max_steps to at "
-                f"least {int(np.ceil((hi + SETTLE_TIME_S) / point.dt))} {where}")))
+                f"least {int(np.ceil((hi + SETTLE_TIME_S) / point.dt))} {where}"), point=at))
         out.append(facts)
     return out
 
@@ -178,15 +179,13 @@ def sweep_facts(sc: Any, point_facts: Callable[[Any, int], FactsT | None], sampl
                 ) -> Iterator[tuple[Any, FactsT, str]]:
     """The facts of each sweep point of a scenario (:meth:`Scenario.expand`):
     ``point_facts(point, samples)`` of each point that has some (not None), with the
-    point and where its problems are, for their text (``"in FILE"``, with the sweep
-    point's values when it has any), one point at a time."""
+    point and where its problems are, for their text (``"in FILE"``; the sweep point is
+    the problem's ``point``), one point at a time."""
     for point in sc.expand():
         facts = point_facts(point, samples)
         if facts is None:
             continue
-        where = f"in {sc.source}" + (f" (sweep point {sweep_text(facts.sweep)})"
-                                     if facts.sweep else "")
-        yield point, facts, where
+        yield point, facts, f"in {sc.source}"
 
 
 def describe_trajectory(facts: list[TrajectoryFacts], sc: Any) -> list[str]:

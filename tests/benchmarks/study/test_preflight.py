@@ -237,19 +237,23 @@ def test_settings_without_effect_where_the_study_runs_are_warned_of() -> None:
 def test_a_problem_found_at_every_sweep_point_is_said_once() -> None:
     """A reference too fast for the legs was warned of six times, once per payload of
     the sweep, in the same words: once now, at every sweep point; a problem of one point
-    keeps its point."""
+    keeps its point, and one of the study (no point) its text, whatever it ends with
+    (the point was parsed back out of the text's end)."""
     from benchmarks.study.preflight import _merged
     from benchmarks.study.setup_check import Problem
 
     fast = "the circle reference moves a leg at up to 93.1 mm/s in s.toml"
-    found = [Problem("warning", f"{fast} (sweep point payload.mass_kg = {m})", "robot")
+    found = [Problem("warning", fast, "robot", point=f"payload.mass_kg = {m}")
              for m in (0, 20, 40)]
-    found.append(Problem("warning", "85 kg cannot be held (sweep point payload.mass_kg = 40)",
-                         "robot"))
+    found.append(Problem("warning", "85 kg cannot be held", "robot",
+                         point="payload.mass_kg = 40"))
+    found.append(Problem("error", "no start can be held in my (sweep point 3) study.toml"))
     merged = _merged(found, 3)
     assert [p.text for p in merged] == [
         f"{fast} (every sweep point)",
-        "85 kg cannot be held (sweep point payload.mass_kg = 40)"]
+        "85 kg cannot be held (sweep point payload.mass_kg = 40)",
+        "no start can be held in my (sweep point 3) study.toml"]
+    assert all(p.point == "" for p in merged)
     assert _merged(found[:2], 3)[0].text == (f"{fast} (sweep points payload.mass_kg = 0; "
                                              "payload.mass_kg = 20)")
 
