@@ -164,13 +164,8 @@ def run_calibration(sc: Scenario, out: Path, configurations: str | None = None,
     from benchmarks.sim import make_trial, trial_rng
     from benchmarks.study.outdir import check_calibration_directory
     from benchmarks.study.provenance import made_with, scenario_setup
-    from vision.calibration import (
-        calibrate,
-        collect_observations,
-        collect_pixel_observations,
-        error_summary,
-        rotation_noise,
-    )
+    from vision.calibration import calibrate, error_summary
+    from vision.calibration.study import simulated_observations
 
     check_calibration_directory(out, overwrite)
     robot_name, nominal, camera_name, camera = scenario_setup(sc)
@@ -190,21 +185,10 @@ def run_calibration(sc: Scenario, out: Path, configurations: str | None = None,
             setup = make_trial(point, k, nominal, camera)
             world = setup.world
             rng = trial_rng(point.seed, k, 3)
-            noise = point.noise
-            if images:
-                data = image_observations(point, world, setup.nominal_geometry,
-                                          setup.estimated_camera, cal_cfg.configurations, rng)
-            elif cal_cfg.noise_deg is None and noise.model == "pixel":
-                data = collect_pixel_observations(world.geometry, world.camera,
-                                                  cal_cfg.configurations, noise.pixel_sigma_px,
-                                                  noise.points_per_edge, rng,
-                                                  noise.outlier_fraction)
-            else:
-                amp = cal_cfg.noise_deg if cal_cfg.noise_deg is not None else (
-                    noise.amplitude_deg if noise.model == "rotation" else 0.0)
-                data = collect_observations(world.geometry, world.camera,
-                                            cal_cfg.configurations,
-                                            rotation_noise(amp) if amp else None, rng)
+            data = (image_observations(point, world, setup.nominal_geometry,
+                                       setup.estimated_camera, cal_cfg.configurations, rng)
+                    if images else simulated_observations(world.geometry, world.camera,
+                                                          cal_cfg, point.noise, rng))
             res = calibrate(data, nominal.leg_radius, nominal.base_points,
                             method=cal_cfg.solver,  # type: ignore[arg-type]
                             correct_scale=correct_scale,

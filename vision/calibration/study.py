@@ -150,6 +150,33 @@ def calibration_study(
     return StudyResult(float(noise_deg), estimates, truth, ratio, method)
 
 
+def simulated_observations(geometry: HexapodGeometry, camera: Any, calibration: Any,
+                           noise: Any, rng: np.random.Generator) -> CalibrationData:
+    """The calibration's observations simulated in a world, with the noise a study's
+    calibration takes: the control images' pixel noise when the noise model is
+    ``"pixel"`` and ``calibration.noise_deg`` is None (:func:`collect_pixel_observations`),
+    else rotation noise of ``calibration.noise_deg`` [deg], or of the noise model's
+    ``amplitude_deg`` (none for another model) (:func:`collect_observations`).
+
+    Args:
+        geometry: The TRUE robot.
+        camera: The TRUE camera.
+        calibration: The ``[calibration]`` settings (``configurations``, ``noise_deg``).
+        noise: The ``[noise]`` settings (``model``, ``amplitude_deg``, the pixel model's
+            ``pixel_sigma_px``, ``points_per_edge``, ``outlier_fraction``).
+        rng: Generator (configurations and noise).
+    """
+    amplitude = calibration.noise_deg
+    if amplitude is None and noise.model == "pixel":
+        return collect_pixel_observations(geometry, camera, calibration.configurations,
+                                          noise.pixel_sigma_px, noise.points_per_edge, rng,
+                                          getattr(noise, "outlier_fraction", 0.0))
+    if amplitude is None:
+        amplitude = noise.amplitude_deg if noise.model == "rotation" else 0.0
+    model = rotation_noise(float(amplitude)) if amplitude else None
+    return collect_observations(geometry, camera, calibration.configurations, model, rng)
+
+
 def calibrate_in_world(
     geometry: HexapodGeometry,
     camera: Any,
@@ -189,16 +216,8 @@ def calibrate_in_world(
     With the pixel noise model (and no ``noise_deg``) the calibration images get
     the same pixel noise as the control images (:func:`collect_pixel_observations`).
     """
-    amplitude = calibration.noise_deg
-    if data is None and amplitude is None and noise.model == "pixel":
-        data = collect_pixel_observations(geometry, camera, calibration.configurations,
-                                          noise.pixel_sigma_px, noise.points_per_edge, rng,
-                                          getattr(noise, "outlier_fraction", 0.0))
-    elif data is None:
-        if amplitude is None:
-            amplitude = noise.amplitude_deg if noise.model == "rotation" else 0.0
-        model = rotation_noise(float(amplitude)) if amplitude else None
-        data = collect_observations(geometry, camera, calibration.configurations, model, rng)
+    if data is None:
+        data = simulated_observations(geometry, camera, calibration, noise, rng)
     res = calibrate_base_points(
         data, geometry.leg_radius, calibration.solver,
         min_singular_ratio=getattr(calibration, "min_singular_ratio", MIN_SINGULAR_RATIO),
