@@ -368,15 +368,23 @@ class EmulatorServer(Generic[D]):
             if end < 0:
                 if len(self._inbuf) > self.board.max_line:
                     self._inbuf.clear()
-                    with self._lock:
-                        reply = self.board.overlong_line()
-                    data = self.board.frame(reply)
-                    if data:
-                        self._queue(data, self.board.max_line)
+                    self._overlong()
                 return
             line = bytes(self._inbuf[: end + len(term)])
             del self._inbuf[: end + len(term)]
-            self._command(line)
+            if end + len(term) > self.board.max_line:  # a whole line, longer than a board takes
+                self._overlong()
+            else:
+                self._command(line)
+
+    def _overlong(self) -> None:
+        """Answer a line longer than the board's :attr:`Board.max_line` (discarded, as a
+        board's line buffer would: whether its terminator came in the same write or not)."""
+        with self._lock:
+            reply = self.board.overlong_line()
+        data = self.board.frame(reply)
+        if data:
+            self._queue(data, self.board.max_line)
 
     def _command(self, line: bytes) -> None:
         fs = self._faults

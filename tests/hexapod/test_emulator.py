@@ -124,6 +124,28 @@ def test_empty_command_is_syntax(link: Link) -> None:
     assert link.send("").startswith("ERR 1 ")
 
 
+def test_a_line_over_256_bytes_is_refused_whole_or_in_pieces(link: Link) -> None:
+    """docs/serial-protocol.md: lines are at most 256 bytes (the terminator included). A
+    longer one is discarded with ``ERR 1 syntax: line too long``, whether its terminator comes in
+    the same write (it was executed) or the board's buffer fills first; the next line is
+    served as usual, and a line of 256 bytes is."""
+    assert protocol.MAX_LINE == 256
+    payload = "MOV " + " ".join(["440.000" + "0" * 36] * 6)
+    long_mov = f"{payload}*{protocol.checksum(payload)}\n".encode("ascii")
+    assert len(long_mov) == 271
+    assert link.send("SVO 1") == "OK"
+    assert protocol.unframe(link.raw(long_mov)) == "ERR 1 syntax: line too long"
+    time.sleep(0.05)
+    np.testing.assert_allclose(link.pos(), Q0)  # not moved
+    link.port.write(b"X" * 300)  # no terminator: the buffer overflows
+    assert protocol.unframe(link.port.readline()) == "ERR 1 syntax: line too long"
+    link.port.write(b"\n")  # (the rest of that line: an empty command)
+    assert protocol.unframe(link.port.readline()).startswith("ERR ")
+    at_limit = "POS?" + " " * 248  # 256 bytes framed ("*XX\n")
+    assert len(protocol.frame(at_limit)) == 256
+    np.testing.assert_allclose(protocol.parse_pos(link.send(at_limit)), Q0)
+
+
 def test_bad_checksum_is_error_3_and_has_no_effect(link: Link, emulator: Emulator) -> None:
     assert link.send("SVO 1") == "OK"
     line = protocol.frame("MOV 480.000 470.000 460.000 450.000 440.000 430.000")

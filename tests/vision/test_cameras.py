@@ -368,6 +368,10 @@ def test_toml_file_values(tmp_path: Path) -> None:
           "rotation_vector_deg = [0.0, 0.0, 90.0]\nrotation_matrix = [[1,0,0],[0,1,0],[0,0,1]]"),
          "not both"),
         (("width_px = 640", "width_px = 640\nwidth_px = 3"), "not valid TOML"),
+        # a principal point outside the image: the size swapped, or millimetres
+        (("cx_px = 319.5", "cx_px = 639.6"), r"cx_px.*principal point must lie in the image, "
+         r"\[-0\.5, 639\.5\] px for width_px = 640, got 639\.6"),
+        (("cy_px = 239.5", "cy_px = -0.6"), r"cy_px.*\[-0\.5, 479\.5\] px for height_px = 480"),
     ],
 )
 def test_toml_bad_input(tmp_path: Path, change: tuple[str, str], match: str) -> None:

@@ -169,6 +169,13 @@ def read_camera_table(table: dict[str, Any], path: str = "<dict>",
     for k in ("fx_px", "fy_px"):
         if f[k] <= 0:
             raise ConfigFileError(path, f"focal length must be positive, got {f[k]}", key=k)
+    for k, size_key in (("cx_px", "width_px"), ("cy_px", "height_px")):
+        size = table[size_key]
+        if not -0.5 <= f[k] <= size - 0.5:  # (pixel centres are integers)
+            raise ConfigFileError(path, f"the principal point must lie in the image, "
+                                  f"[-0.5, {size - 0.5:g}] px for {size_key} = {size}, got "
+                                  f"{f[k]:g} (width and height swapped, or another unit?)",
+                                  key=k)
     K = np.array([[f["fx_px"], skew, f["cx_px"]], [0.0, f["fy_px"], f["cy_px"]],
                   [0.0, 0.0, 1.0]])
     xi = 0.0
