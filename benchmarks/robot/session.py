@@ -245,7 +245,7 @@ def _last_move(limited: LimitedRobot | None) -> str:
     if limited is None or not limited.moved:
         return "no motion was commanded"
     v = float(np.max(np.abs(limited.last_applied)))
-    return (f"the last MOV asked for at most {v * limited.last_dt * 1e3:.3f} mm of leg travel "
+    return (f"the last command asked for at most {v * limited.last_dt * 1e3:.3f} mm of leg travel "
             f"beyond the lengths measured before it ({v * 1e3:.1f} mm/s over one "
             f"{limited.last_dt * 1e3:g} ms period)")
 

@@ -301,7 +301,7 @@ class SerialRobot(SerialLink, Backend):
 
         def go() -> np.ndarray:
             if not self._checked("STA?", protocol.parse_sta).servo:
-                protocol.parse_ok(self._exchange("SVO 1"), "SVO 1")
+                self._armed = False  # (off: a halt, a fault) the MOV's SVO 1, once
             self._send_mov(target)
             if not wait:
                 return self._q.copy()

@@ -77,6 +77,33 @@ def test_open_reads_identity_and_limits_from_the_board(other_geometry: HexapodGe
         emu.stop()
 
 
+def test_reset_arms_the_servo_once_before_its_mov(robot: SerialRobot, emulator: Emulator,
+                                                 monkeypatch: pytest.MonkeyPatch) -> None:
+    """docs/serial-protocol.md's reset: ``ERR?``, ``STA?``, ``SVO 1`` (the servo was off),
+    then ``MOV`` and the polls; ``SVO 1`` was sent twice (the move's own check and the
+    first MOV's arming each sent one). A second reset with the servo on sends none, and
+    one with the servo switched off since (``SVO 0``) one again."""
+    seen: list[str] = []
+    handle = emulator.board.handle
+
+    def spy(payload: str, now: float) -> str:
+        seen.append(payload)
+        return handle(payload, now)
+
+    monkeypatch.setattr(emulator.board, "handle", spy)
+    q = Q0 + 0.001
+    robot.reset(q)
+    assert seen[:3] == ["ERR?", "STA?", "SVO 1"] and seen[3].startswith("MOV ")
+    assert seen.count("SVO 1") == 1
+    seen.clear()
+    robot.reset(q - 0.001)
+    assert "SVO 1" not in seen and seen[:2] == ["ERR?", "STA?"]
+    assert robot.command("SVO 0") == "OK"
+    seen.clear()
+    robot.reset(q)
+    assert seen[:3] == ["ERR?", "STA?", "SVO 1"] and seen.count("SVO 1") == 1
+
+
 def test_open_clears_a_stale_error(emulator: Emulator) -> None:
     with SerialRobot(emulator.device) as r:
         r.command("BOGUS")

@@ -98,7 +98,7 @@ def test_the_link_killed_mid_motion_gives_the_link_exit_code_and_a_summary(
         assert "stopped: the link to the robot failed during motion" in stdout
         assert "after" in stdout and "missed periods" in stdout  # the summary
         assert "robot: NOT confirmed stopped" in stdout
-        assert "the last MOV asked for at most" in stdout
+        assert "the last command asked for at most" in stdout
         stopped = next(line for line in stdout.splitlines() if line.startswith("stopped:"))
         assert stopped.count("read failed") <= 1 and stopped.count(emu.url) <= 1, stopped
         rec = final(out)
