@@ -226,6 +226,41 @@ def _run_args(args: argparse.Namespace, out: Path, scenario: str) -> argparse.Na
         options_record={"candidates": True})  # (the report says what its options are)
 
 
+def _same_tuning(run_dir: Path, study: Any, given: int) -> None:
+    """Refuse, in tune's words, a tune directory whose candidates are another tuning's (the
+    candidates' run refused it naming their internal labels under ``--controllers``).
+
+    Raises:
+        BenchmarkError: What differs (the candidates per controller, their searched
+            options, the study's other settings) and the command that started it.
+    """
+    from benchmarks.exceptions import StudyMismatchError
+    from benchmarks.study.report import META_FILE
+    from benchmarks.study.study_record import STUDY_KEY, check_same_study
+
+    try:
+        meta = json.loads((run_dir / META_FILE).read_text())
+        check_same_study(run_dir, meta, [study])
+    except (OSError, ValueError):
+        return  # (no tuning yet; a damaged record: the run says so)
+    except StudyMismatchError as exc:
+        kept = [c.split(" ", 1)[0] for c in meta["scenarios"][study.name][STUDY_KEY]
+                .get("controllers", [])]
+        per = {label.rsplit(":c", 1)[0] for label in kept}
+        lines = [d for d in exc.differences if not d.startswith("--controllers")]
+        if len(kept) != given * len(per):
+            lines.insert(0, f"--candidates: {len(kept) // max(1, len(per))} per controller in "
+                            f"the directory, {given} given")
+        elif len(lines) < len(exc.differences):
+            lines.insert(0, "the candidates' searched options (another search space)")
+        started = next((c["command"] for c in meta.get("commands", []) if "command" in c), "")
+        raise BenchmarkError(
+            f"{run_dir.parent}: holds a tuning of other settings than those given (nothing "
+            "was run):" + "".join(f"\n  {line}" for line in lines) + "\nfinish it with the "
+            f"command that started it and --resume ({started}), or tune into another --out"
+            ) from None
+
+
 def cmd_tune(args: argparse.Namespace) -> int:
     """Tune the chosen controllers of a scenario (see the module docstring)."""
     import controllers  # noqa: F401 - registers the built-ins
@@ -312,6 +347,7 @@ def cmd_tune(args: argparse.Namespace) -> int:
                   "draws, so the study's run of the tuned options is not a held-out test of "
                   "other tasks", markup=False, highlight=False)
     run_dir = out / CANDIDATES_DIR
+    _same_tuning(run_dir, replace(sc, controllers=tuple(specs)), args.candidates)
     out.mkdir(parents=True, exist_ok=True)
     code = run_studies([replace(sc, controllers=tuple(specs))], run_dir,
                        _run_args(args, run_dir, args.scenario))

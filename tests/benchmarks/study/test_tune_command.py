@@ -293,3 +293,37 @@ def test_the_shape_hint_is_for_a_vector_option_alone(
                      "--out", str(tmp_path / "t")]) == 2
         err = " ".join(capsys.readouterr().err.split())
         assert ("a vector option's axis needs a shape" in err) is hinted, err
+
+
+def test_a_tune_directory_of_other_settings_is_refused_in_tunes_words(
+        files: tuple[Path, Path], tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """Another --candidates, another search space or another goal setting into a tune
+    directory: the candidates' run refused it naming their internal labels
+    (``leg-edge:c0 (...)``) under ``--controllers``, an option not changed; now what
+    differs in tune's words and the command to finish it with, nothing run."""
+    sc, space = files
+    out = tmp_path / "t"
+    first = ["tune", str(sc), "--controllers", "leg-edge", "--space", str(space),
+             "--candidates", "3", "--trials", "2", "--out", str(out)]
+    assert main(first) == 0
+    rows = (out / "candidates" / "results.jsonl").read_text()
+    capsys.readouterr()
+    other_space = tmp_path / "other.toml"
+    other_space.write_text(SPACE.replace("high = 8.0", "high = 4.0"))
+    cases = [(["--candidates", "4"], "--candidates: 3 per controller in the directory, 4 "
+              "given"),
+             (["--space", str(other_space)], "the candidates' searched options"),
+             (["--goal", "taught"], "--goal: mixed in the directory, taught given")]
+    for change, says in cases:
+        args = list(first)
+        for k in range(0, len(change), 2):
+            if change[k] in args:
+                args[args.index(change[k]) + 1] = change[k + 1]
+            else:
+                args += change[k:k + 2]
+        assert main([*args, "--resume"]) == 2, change
+        err = capsys.readouterr().err
+        assert f"{out}: holds a tuning of other settings than those given" in err, err
+        assert says in err and "leg-edge:c0" not in err, err
+        assert f"--resume ({' '.join(['hexapod-bench', *first[:1]])}" in err, err
+    assert (out / "candidates" / "results.jsonl").read_text() == rows  # nothing run
