@@ -335,6 +335,12 @@ def build_parser(commands: set[str] | None = None) -> argparse.ArgumentParser:
     return p
 
 
+#: What finishes an interrupted command that can be finished (said when it is stopped).
+RESUME_HINTS = {"tune": "; finish the tuning with the same command and --resume",
+                "reproduce": "; the same command again finishes it (the trials and "
+                             "calibrations done are kept)"}
+
+
 def main(argv: list[str] | None = None) -> int:
     """Entry point of ``hexapod-bench``."""
     words = list(sys.argv[1:] if argv is None else argv)
@@ -354,7 +360,7 @@ def main(argv: list[str] | None = None) -> int:
             raise
         print(f"\nhexapod-bench {word or ''}: {how_stopped(stop)}: each file written is "
               "whole (replaced at once), but of several outputs some may be new and some "
-              "still the earlier ones", file=sys.stderr)
+              f"still the earlier ones{RESUME_HINTS.get(word or '', '')}", file=sys.stderr)
         return exit_status(stop)
     except (BenchmarkError, HexapodError) as exc:
         print(f"hexapod-bench: error: {exc}", file=sys.stderr)

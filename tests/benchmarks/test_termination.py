@@ -59,3 +59,28 @@ def test_sigterm_during_a_command_exits_143_without_a_traceback(tmp_path: Path) 
     _, err = proc.communicate(timeout=20)
     assert proc.returncode == 143, err
     assert "hexapod-bench list: terminated (SIGTERM)" in err and "Traceback" not in err, err
+
+
+@pytest.mark.parametrize(("argv", "module", "says"), [
+    (["tune", "quick", "--controllers", "leg-edge"], "benchmarks.study.tune_command",
+     "finish the tuning with the same command and --resume"),
+    (["reproduce", "seed001", "--quick"], "benchmarks.study.reproduce_cli",
+     "the same command again finishes it (the trials and calibrations done are kept)")])
+def test_a_stopped_tune_or_reproduce_says_how_to_finish_it(
+        argv: list[str], module: str, says: str, tmp_path: Path,
+        monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]) -> None:
+    """Ctrl-C where a command has no handling of its own (tune's report, any stage of
+    reproduce) said only that each file is whole; a command that can be finished says
+    how. (The commands stopped at once: their function replaced by one that raises.)"""
+    import importlib
+
+    from benchmarks.cli import main
+
+    def stopped(args: object) -> int:
+        raise KeyboardInterrupt
+
+    name = "cmd_" + argv[0]
+    monkeypatch.setattr(importlib.import_module(module), name, stopped)
+    assert main([*argv, "--out", str(tmp_path / "out")]) == 130
+    err = capsys.readouterr().err
+    assert f"hexapod-bench {argv[0]}: interrupted (Ctrl-C)" in err and says in err
