@@ -16,8 +16,9 @@ this module is their behaviour, the force each drive puts on its leg:
   servo amplifier's speed limit in torque mode: within the leg speed limit ``v_max`` the
   command passes unchanged; beyond it the velocity loop's proportional term of the
   excess is subtracted, ``F - kp (|v| - v_max) sign(v)`` (clipped at the force limit),
-  so a leg pushed with a force ``F`` more than it needs settles ``F / kp`` past
-  ``v_max`` (the proportional limiter's droop);
+  so a leg pushed along its motion by ``F`` more than holds it (the drive's force and
+  the load's share) settles ``F / kp`` past ``v_max`` (the proportional limiter's
+  droop). The drive is at its force limit when the force it applies is;
 - **friction**: viscous ``c v`` plus a *smooth* Coulomb force ``f_c tanh(v / v_s)``
   (:data:`COULOMB_SMOOTHING` ``v_s`` = 0.1 mm/s), not stick-slip. The plant integrates
   friction implicitly as the damping ``c + f_c tanh(v / v_s) / v`` (its secant, in
@@ -118,7 +119,8 @@ class DriveForces:
             (non-positive): the proportional gain while not saturated (velocity mode) or
             while holding the speed limit (force mode), and the friction's secant
             damping; the plant takes this part implicitly.
-        saturated: (n, 6) whether the drive is at its force limit.
+        saturated: (n, 6) whether the drive is at its force limit (the force it applies,
+            not its command).
     """
 
     motor: np.ndarray
@@ -201,12 +203,13 @@ class DriveModel:
         kp = self.kp[rows]
         if self.mode == "force":  # the command, held to the speed limit (module docstring)
             commanded = np.clip(setpoints, -limit, limit)
-            saturated = np.abs(setpoints) >= limit
             if self.speed_limit is None:
-                return DriveForces(commanded, friction, -d_friction, saturated)
+                return DriveForces(commanded, friction, -d_friction,
+                                   np.abs(setpoints) >= limit)
             vmax = self.speed_limit[rows]
             held = commanded - kp * (np.maximum(v - vmax, 0.0) + np.minimum(v + vmax, 0.0))
-            governed = ((v > vmax) | (v < -vmax)) & (np.abs(held) < limit)
+            saturated = np.abs(held) >= limit  # the force applied at the limit
+            governed = ((v > vmax) | (v < -vmax)) & ~saturated
             return DriveForces(np.clip(held, -limit, limit), friction,
                                -np.where(governed, kp, 0.0) - d_friction, saturated)
         err = setpoints - v

@@ -79,7 +79,7 @@ def _step_expression() -> tuple[ca.SX, ca.SX]:
     held = _clip(sp, lim) - kp * (ca.fmax(qd - vmax, 0.0) + ca.fmin(qd + vmax, 0.0))
     governed = ((qd > vmax) + (qd < -vmax)) * (ca.fabs(held) < lim)
     motor = ca.if_else(force, _clip(held, lim), _clip(u, lim))
-    saturated = ca.if_else(force, ca.fabs(sp) >= lim, sat_v)
+    saturated = ca.if_else(force, ca.fabs(held) >= lim, sat_v)  # (the force applied)
     slope = -ca.if_else(force, ca.if_else(governed, kp, 0.0),
                         ca.if_else(sat_v, 0.0, kp)) - d_friction
     new_integral = ca.if_else(force, integral, new_integral)

@@ -132,8 +132,9 @@ def test_force_mode_holds_the_command_to_the_speed_limit() -> None:
     """The speed limit in force mode (50 mm/s): within it the command passes bit for bit;
     beyond it the velocity loop's proportional term of the excess is subtracted,
     ``F - kp (v - v_max)`` (``F - kp (v + v_max)`` below ``-v_max``), within the force
-    limit, and its slope ``-kp`` joins the friction's (the plant takes it implicitly);
-    without a limit the command passes at any speed."""
+    limit, and its slope ``-kp`` joins the friction's (the plant takes it implicitly); a
+    drive is at its limit when the force it applies is (not the command); without a
+    limit the command passes at any speed."""
     params = DriveParameters.default().replace(mode="force")
     free = DriveModel(params, np.full(6, MASS), 1)
     held = DriveModel(params, np.full(6, MASS), 1, np.array([0.05]))
@@ -147,6 +148,9 @@ def test_force_mode_holds_the_command_to_the_speed_limit() -> None:
     np.testing.assert_allclose(f.motor[0, 2:5], [100.0 - kp * 0.01, -100.0 + kp * 0.02,
                                                  200.0 - kp * 0.25], rtol=1e-12)
     assert f.motor[0, 5] == -200.0  # pulled back at the force limit: no slope there
+    # at the limit: the force applied (leg 4's command is, its force is not)
+    np.testing.assert_array_equal(f.saturated[0], [False] * 5 + [True])
+    np.testing.assert_array_equal(f0.saturated[0], [False] * 4 + [True, False])
     slope = f.slope - f0.slope  # the limiter's part
     np.testing.assert_allclose(slope[0], [0.0, 0.0, -kp, -kp, -kp, 0.0], rtol=1e-12)
     np.testing.assert_array_equal(f.friction, f0.friction)

@@ -32,31 +32,41 @@ def _state(r: DynamicRobots) -> np.ndarray:
                           axis=1)
 
 
-@pytest.mark.parametrize(("mode", "max_speed"), [("velocity", None), ("force", 10.0),
-                                                 ("force", 0.005)])
-def test_the_compiled_period_equals_the_numpy_steps(mode: str, max_speed: float | None
-                                                    ) -> None:
+@pytest.mark.parametrize(("mode", "max_speed", "moving"), [
+    ("velocity", None, 0.0), ("force", 10.0, 0.0), ("force", 0.005, 0.0),
+    ("force", 0.005, 0.3)])
+def test_the_compiled_period_equals_the_numpy_steps(mode: str, max_speed: float | None,
+                                                    moving: float) -> None:
     """Random poses and setpoints (some drives saturate, 60 N limit), 20 steps of 1 ms:
     the same state, forces and accumulators to 1e-9 (relative to each quantity's scale);
     in force mode with the legs' speed limit out of reach (10 m/s) and at 5 mm/s, where
-    it holds some legs back."""
+    it holds some legs back, from rest and from a fast start (up to 0.3 m/s), where it
+    pulls some legs back at the force limit (no implicit slope there, and the time at
+    the limit counted)."""
     n = 16
     rng = np.random.default_rng(5)
     sp = (rng.uniform(-0.05, 0.05, (n, 6)) if mode == "velocity"
           else rng.uniform(-120.0, 120.0, (n, 6)))
     a, _, _ = _robots(n, mode, max_speed=max_speed, force_limit=60.0)
     b, _, _ = _robots(n, mode, max_speed=max_speed, force_limit=60.0)
+    start = rng.normal(0.0, moving, (n, 6)) * [1.0, 1.0, 1.0, 3.0, 3.0, 3.0]
+    a.twist[:] = start
+    b.twist[:] = start
     rows = np.arange(n)
-    held = False
+    held = clipped = 0
     for _ in range(3):  # three periods: the twist and the integral are non-zero
         assert not a.advance(rows, sp, 1e-3, 20).any()
         for _ in range(20):
             if mode == "force":  # (forces() has no state to advance in this mode)
                 qd, _ = b.model.legs_batch(b.R, b.t, b.twist, **b.rows(rows))
-                held |= bool(np.any(b.drives.forces(rows, sp, qd, 1e-3).motor
-                                    != np.clip(sp, -60.0, 60.0)))
+                f = b.drives.forces(rows, sp, qd, 1e-3)
+                beyond = np.abs(qd) > (max_speed or 0.0)
+                held += int(np.count_nonzero(beyond & (f.motor != np.clip(sp, -60.0, 60.0))))
+                clipped += int(np.count_nonzero(beyond & f.saturated))
+                assert np.array_equal(f.saturated, np.abs(f.motor) >= 60.0)
             step_reference(b, rows, sp, 1e-3)
-    assert held == (max_speed == 0.005)  # the speed limit held forces back, or none
+    assert (held > 0) == (max_speed == 0.005)  # the speed limit held forces back, or none
+    assert (clipped > 0) == (moving > 0)  # and pulled some at the force limit
     sa, sb = _state(a), _state(b)
     scale = np.maximum(np.abs(sb).max(axis=0), 1e-6)
     np.testing.assert_array_less(np.abs(sa - sb) / scale, 1e-9)
@@ -108,7 +118,8 @@ def test_force_mode_holds_the_legs_to_the_robots_speed_limit() -> None:
     """Force mode, every leg pushed 150 N off its holding force (75 % of the 200 N limit)
     for 0.2 s: with the robot's 50 mm/s limit the legs' speeds, measured as the change of
     their lengths over each 1 ms period, stay within the limit plus the proportional
-    limiter's largest droop, the force limit over kp (a bound of 204 mm/s here);
+    limiter's droop bounded by the force limit over kp (204 mm/s; the robot's own light
+    platform adds little to the push: a heavy load would add its share);
     with the limit out of reach (10 m/s) the same push drives them past 20 times it."""
     def fastest(max_speed: float | None) -> tuple[float, float]:
         r, _, _ = _robots(3, "force", max_speed=max_speed)
