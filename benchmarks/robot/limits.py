@@ -103,6 +103,8 @@ class LimitedRobot:
         self.last_applied = np.zeros(6)
         #: The last period's dt [s].
         self.last_dt = 0.0
+        #: What the last command was (leg velocities or leg forces).
+        self.last_actuation = Actuation.VELOCITY
 
     def __getattr__(self, name: str) -> Any:
         return getattr(self.robot, name)
@@ -132,6 +134,7 @@ class LimitedRobot:
         self.moved = True
         # what was sent, an upper bound until the backend says what it applied
         self.last_dt = dt
+        self.last_actuation = actuation
         self.last_applied = v.copy() if actuation is Actuation.VELOCITY else np.zeros(6)
         sent = time.perf_counter()
         try:

@@ -31,6 +31,7 @@ from benchmarks.robot.loop import PeriodCheck, servo_loop
 from benchmarks.robot.models import check_option, describe_camera
 from benchmarks.robot.records import SessionLog, mm_list, session_path
 from benchmarks.robot.status import PeriodStatus, ServoResult, StatusLine
+from hexapod.actuation import Actuation
 from hexapod.backends.base import HaltReport
 from hexapod.exceptions import BackendError
 from hexapod.geometry import HexapodGeometry
@@ -244,6 +245,9 @@ def _halt(robot: Any, timeout_s: float) -> HaltReport:
 def _last_move(limited: LimitedRobot | None) -> str:
     if limited is None or not limited.moved:
         return "no motion was commanded"
+    if limited.last_actuation is not Actuation.VELOCITY:
+        return ("the last command was leg forces: how far they can still move the legs is "
+                "not known here")
     v = float(np.max(np.abs(limited.last_applied)))
     return (f"the last command asked for at most {v * limited.last_dt * 1e3:.3f} mm of leg travel "
             f"beyond the lengths measured before it ({v * 1e3:.1f} mm/s over one "

@@ -60,13 +60,14 @@ def cmd_run(args: argparse.Namespace) -> int:
 
 
 def _resume_command(args: argparse.Namespace, out: Path) -> str:
-    """The command that finishes an interrupted run: its own words (the options that make
-    its study: seed, trials, controllers...) with ``--resume`` (a command without them was
-    refused: '--seed: 7 in the directory, 1 given')."""
+    """The command that finishes an interrupted run (or tune, whose candidates' run it
+    is): its own words (the options that make its study: seed, trials, controllers...)
+    with ``--resume`` (a command without them was refused: '--seed: 7 in the directory, 1
+    given')."""
     import shlex
 
     argv = list(getattr(args, "argv", None) or [])
-    if not argv or argv[0] != "run":
+    if not argv or argv[0] not in ("run", "tune"):  # (tune: its candidates' run)
         return f"hexapod-bench run {' '.join(args.scenarios)} --out {out} --resume"
     return "hexapod-bench " + shlex.join(argv + ([] if "--resume" in argv else ["--resume"]))
 

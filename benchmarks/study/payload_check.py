@@ -128,13 +128,13 @@ def payload_facts(sc: Any, samples: int = SAMPLED_STARTS) -> list[PayloadFacts]:
     sweep point can be held at rest, an error (every trial would fall)."""
     if sc.world != "dynamic":
         return []
-    from benchmarks.study.trajectory_check import sweep_facts, sweep_text
+    from benchmarks.study.trajectory_check import sweep_facts
 
     payload = getattr(sc, "payload", None) is not None
     out = []
     warned_com = False
-    for point, facts, where in sweep_facts(sc, _point if payload else _static_point, samples):
-        at = sweep_text(facts.sweep)
+    for point, facts, where, at in sweep_facts(sc, _point if payload else _static_point,
+                                               samples):
         if payload and not warned_com and (text := _com_problem(point, where)):
             facts.problems.append(Problem("warning", text, point=at))
             warned_com = True

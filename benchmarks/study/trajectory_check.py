@@ -132,8 +132,7 @@ def trajectory_facts(sc: Any, samples: int = SAMPLED_STARTS) -> list[TrajectoryF
     if sc.task.kind != "trajectory":
         return []
     out = []
-    for point, facts, where in sweep_facts(sc, _point, samples):
-        at = sweep_text(facts.sweep)
+    for point, facts, where, at in sweep_facts(sc, _point, samples):
         task = point.task
         if facts.hits:
             leg, q, limit = facts.worst or (0, float("nan"), float("nan"))
@@ -176,16 +175,16 @@ def sweep_text(sweep: dict[str, Any]) -> str:
 
 
 def sweep_facts(sc: Any, point_facts: Callable[[Any, int], FactsT | None], samples: int
-                ) -> Iterator[tuple[Any, FactsT, str]]:
+                ) -> Iterator[tuple[Any, FactsT, str, str]]:
     """The facts of each sweep point of a scenario (:meth:`Scenario.expand`):
     ``point_facts(point, samples)`` of each point that has some (not None), with the
-    point and where its problems are, for their text (``"in FILE"``; the sweep point is
-    the problem's ``point``), one point at a time."""
+    point, where its problems are for their text (``"in FILE"``) and the point's values
+    (:func:`sweep_text`: a problem's ``point``), one point at a time."""
     for point in sc.expand():
         facts = point_facts(point, samples)
         if facts is None:
             continue
-        yield point, facts, f"in {sc.source}"
+        yield point, facts, f"in {sc.source}", sweep_text(facts.sweep)
 
 
 def describe_trajectory(facts: list[TrajectoryFacts], sc: Any) -> list[str]:

@@ -226,39 +226,49 @@ def _run_args(args: argparse.Namespace, out: Path, scenario: str) -> argparse.Na
         options_record={"candidates": True})  # (the report says what its options are)
 
 
-def _same_tuning(run_dir: Path, study: Any, given: int) -> None:
-    """Refuse, in tune's words, a tune directory whose candidates are another tuning's (the
-    candidates' run refused it naming their internal labels under ``--controllers``).
+def _same_tuning(run_dir: Path, study: Any, given: dict[str, int]) -> None:
+    """Refuse, in tune's words, a tune directory whose candidates are another tuning's
+    (the candidates' run refuses it naming their internal labels under
+    ``--controllers``); ``given``: the candidates of each controller label. A directory
+    this cannot read is left to the run, which says what is wrong with it.
 
     Raises:
-        BenchmarkError: What differs (the candidates per controller, their searched
-            options, the study's other settings) and the command that started it.
+        BenchmarkError: What differs (the controllers, their candidates, the search
+            space, the study's other settings) and the command to finish it with.
     """
     from benchmarks.exceptions import StudyMismatchError
     from benchmarks.study.report import META_FILE
-    from benchmarks.study.study_record import STUDY_KEY, check_same_study
+    from benchmarks.study.study_record import STUDY_KEY, check_same_study, commands_of
 
     try:
         meta = json.loads((run_dir / META_FILE).read_text())
+        recorded = meta["scenarios"][study.name][STUDY_KEY]["controllers"]
+        kept: dict[str, int] = {}
+        for text in recorded:  # "LABEL:cK (NAME, options)"
+            label = str(text).split(" (", 1)[0].rsplit(":c", 1)[0]
+            kept[label] = kept.get(label, 0) + 1
         check_same_study(run_dir, meta, [study])
-    except (OSError, ValueError):
-        return  # (no tuning yet; a damaged record: the run says so)
+    except (OSError, ValueError, TypeError, KeyError, AttributeError):
+        return  # (no tuning yet, or one the run's own checks describe)
     except StudyMismatchError as exc:
-        kept = [c.split(" ", 1)[0] for c in meta["scenarios"][study.name][STUDY_KEY]
-                .get("controllers", [])]
-        per = {label.rsplit(":c", 1)[0] for label in kept}
         lines = [d for d in exc.differences if not d.startswith("--controllers")]
-        if len(kept) != given * len(per):
-            lines.insert(0, f"--candidates: {len(kept) // max(1, len(per))} per controller in "
-                            f"the directory, {given} given")
+        if sorted(kept) != sorted(given):
+            lines.insert(0, f"--controllers: {', '.join(kept)} in the directory, "
+                            f"{', '.join(given)} given")
+        elif kept != given:
+            lines.insert(0, "--candidates: " + "; ".join(
+                f"{label} {kept[label]} in the directory, {given[label]} given"
+                for label in given if kept[label] != given[label]))
         elif len(lines) < len(exc.differences):
             lines.insert(0, "the candidates' searched options (another search space)")
-        started = next((c["command"] for c in meta.get("commands", []) if "command" in c), "")
+        tunes = [c["command"] for c in commands_of(meta)
+                 if str(c.get("command", "")).startswith("hexapod-bench tune")]
+        finish = (f"finish it with its last command and --resume ({tunes[-1]})" if tunes
+                  else "finish it with the command that made it and --resume")
         raise BenchmarkError(
             f"{run_dir.parent}: holds a tuning of other settings than those given (nothing "
-            "was run):" + "".join(f"\n  {line}" for line in lines) + "\nfinish it with the "
-            f"command that started it and --resume ({started}), or tune into another --out"
-            ) from None
+            "was run):" + "".join(f"\n  {line}" for line in lines) + f"\n{finish}, or "
+            "tune into another --out") from None
 
 
 def cmd_tune(args: argparse.Namespace) -> int:
@@ -347,12 +357,12 @@ def cmd_tune(args: argparse.Namespace) -> int:
                   "draws, so the study's run of the tuned options is not a held-out test of "
                   "other tasks", markup=False, highlight=False)
     run_dir = out / CANDIDATES_DIR
-    _same_tuning(run_dir, replace(sc, controllers=tuple(specs)), args.candidates)
+    _same_tuning(run_dir, replace(sc, controllers=tuple(specs)),
+                 {label: len(plan) for label, plan in plans.items()})
     out.mkdir(parents=True, exist_ok=True)
     code = run_studies([replace(sc, controllers=tuple(specs))], run_dir,
                        _run_args(args, run_dir, args.scenario))
-    if code == 130:
-        con.print(f"interrupted: finish with the same command and --resume ({run_dir})")
+    if code == 130:  # (the candidates' run said how to finish: this command, --resume)
         return code
     rows, _, _ = deduplicate(read_results(run_dir))
     by_label: dict[str, list[dict[str, Any]]] = {}

@@ -150,6 +150,8 @@ class EmulatorServer(Generic[D]):
         self._wake_r, self._wake_w = os.pipe()
         self._replies: deque[_Reply] = deque()
         self._inbuf = bytearray()
+        #: Whether the rest of a line that overflowed the buffer is being discarded.
+        self._discarding = False
         self._opened = False
         self._closed = False
         #: Connections closed by the ``disconnect_after`` fault.
@@ -328,6 +330,7 @@ class EmulatorServer(Generic[D]):
         client.setblocking(False)
         self._client = client
         self._inbuf.clear()
+        self._discarding = False
         self.connections += 1
         logger.info("emulator: connection from %s", addr)
 
@@ -350,6 +353,7 @@ class EmulatorServer(Generic[D]):
         accepts the next connection. Returns whether to go on serving."""
         self._replies.clear()
         self._inbuf.clear()
+        self._discarding = False
         if self.transport == "pty":
             logger.info("emulator: pty closed (%s)", why)
             self._close_pty()
@@ -362,40 +366,38 @@ class EmulatorServer(Generic[D]):
         return True
 
     def _process_input(self) -> None:
+        """Serve the whole lines received. A line longer than the board's
+        :attr:`Board.max_line` is discarded whole and answered as the board answers one
+        (the rest of a line that filled the buffer too, up to its terminator: none of it
+        is a command), with the faults of any other command."""
         term = self.board.terminator
         while self._faults.stall_until <= time.monotonic():
             end = self._inbuf.find(term)
             if end < 0:
                 if len(self._inbuf) > self.board.max_line:
                     self._inbuf.clear()
-                    self._overlong()
+                    if not self._discarding:
+                        self._discarding = True
+                        self._command(b"", overlong=True)
                 return
             line = bytes(self._inbuf[: end + len(term)])
             del self._inbuf[: end + len(term)]
-            if end + len(term) > self.board.max_line:  # a whole line, longer than a board takes
-                self._overlong()
+            if self._discarding:  # the end of a line already answered
+                self._discarding = False
             else:
-                self._command(line)
+                self._command(line, overlong=end + len(term) > self.board.max_line)
 
-    def _overlong(self) -> None:
-        """Answer a line longer than the board's :attr:`Board.max_line` (discarded, as a
-        board's line buffer would: whether its terminator came in the same write or not)."""
-        with self._lock:
-            reply = self.board.overlong_line()
-        data = self.board.frame(reply)
-        if data:
-            self._queue(data, self.board.max_line)
-
-    def _command(self, line: bytes) -> None:
+    def _command(self, line: bytes, overlong: bool = False) -> None:
         fs = self._faults
         f = fs.config
         if fs.disconnect_pending:
             return  # the cable is being pulled
-        if f.garble_rate and fs.rng.random() < f.garble_rate:
+        if f.garble_rate and fs.rng.random() < f.garble_rate and not overlong:
             line = garble(line, fs.rng, self.board.terminator)
         with self._lock:
             self._inject(fs.commands + 1)
-            reply = self.board.handle_line(line, time.monotonic())
+            reply = (self.board.overlong_line() if overlong
+                     else self.board.handle_line(line, time.monotonic()))
         fs.commands += 1
         data = self.board.frame(reply)
         logger.debug("emulator: received %r, answers %r", line, data)
@@ -407,7 +409,7 @@ class EmulatorServer(Generic[D]):
                 return
             if f.garble_rate and fs.rng.random() < f.garble_rate:
                 data = garble(data, fs.rng, self.board.terminator)
-            self._queue(data, len(line))
+            self._queue(data, max(len(line), self.board.max_line if overlong else 0))
         if f.disconnect_after is not None and fs.commands >= f.disconnect_after:
             fs.disconnect_pending = True
         if f.stall_after is not None and fs.commands == f.stall_after:

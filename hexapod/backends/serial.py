@@ -301,7 +301,7 @@ class SerialRobot(SerialLink, Backend):
 
         def go() -> np.ndarray:
             if not self._checked("STA?", protocol.parse_sta).servo:
-                self._armed = False  # (off: a halt, a fault) the MOV's SVO 1, once
+                self._armed = False  # (off: SVO 0 sent) the MOV's SVO 1, once
             self._send_mov(target)
             if not wait:
                 return self._q.copy()

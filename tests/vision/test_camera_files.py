@@ -287,6 +287,15 @@ def test_other_bad_files(tmp_path: Path) -> None:
     with pytest.raises(DistortionError, match="fold inside the image") as info:
         load_camera(fold)
     assert info.value.source == str(fold) and str(fold) in str(info.value)
+    # A principal point outside the image (the intrinsics of a 1280 x 960 calibration
+    # with the 640 x 480 size), from an OpenCV file as from a TOML one (it loaded: only
+    # the TOML's keys were checked).
+    big = _calibration_cpp(K=K_PER * [[2.0], [2.0], [1.0]])
+    path = _write(tmp_path / "big.yml", big)
+    with pytest.raises(CameraError, match=r"principal point's cx = 662\.5 px lies outside "
+                       r"the image, \[-0\.5, 639\.5\] px for width 640") as info:
+        load_camera(path)
+    assert info.value.source == str(path)
     # Not a FileStorage file, unknown extensions, missing file.
     broken = tmp_path / "broken.yml"
     broken.write_text("%YAML:1.0\n---\ncamera_matrix: [1, 2\n")

@@ -53,6 +53,19 @@ def check_size(name: str, value: Any, source: str | None) -> int:
     return int(value)
 
 
+def check_principal_point(K: np.ndarray, width: int, height: int, source: str | None
+                          ) -> None:
+    """Refuse a principal point ``(cx, cy)`` outside the image ``[-0.5, width - 0.5] x
+    [-0.5, height - 0.5]`` px (pixel centres are integers): a size swapped, or an
+    intrinsic in another unit; every camera file and constructor meets it."""
+    for value, size, axis, name in ((K[0, 2], width, "cx", "width"),
+                                    (K[1, 2], height, "cy", "height")):
+        if not -0.5 <= value <= size - 0.5:
+            raise CameraError("K", f"the principal point's {axis} = {value:g} px lies outside "
+                              f"the image, [-0.5, {size - 0.5:g}] px for {name} {size} (a "
+                              "size swapped, or another unit?)", source)
+
+
 def check_xi(xi: Any, source: str | None) -> float:
     """The mirror parameter of the unified model: finite and >= 0."""
     try:

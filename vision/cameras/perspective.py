@@ -23,7 +23,15 @@ import numpy as np
 from hexapod.kinematics import Transform
 from vision.cameras import projection
 from vision.cameras.base import Camera
-from vision.cameras.checks import as_pixels, as_points, check_K, check_pose, check_size, unit
+from vision.cameras.checks import (
+    as_pixels,
+    as_points,
+    check_K,
+    check_pose,
+    check_principal_point,
+    check_size,
+    unit,
+)
 from vision.cameras.distortion import RadialTangential, parse_coefficients
 from vision.cameras.distortion_full import OpenCVLens, check_tilt, needs_full_model
 from vision.cameras.fields import CameraFields
@@ -80,6 +88,7 @@ class PerspectiveCamera(Camera):
         self.K = check_K(K, source)
         self.width = check_size("width", width, source)
         self.height = check_size("height", height, source)
+        check_principal_point(self.K, self.width, self.height, source)
         self.xi = 0.0
         self.camera_from_base = check_pose(
             Transform.identity() if camera_from_base is None else camera_from_base, source

@@ -15,7 +15,14 @@ import numpy as np
 from hexapod.kinematics import Transform
 from vision.cameras import projection
 from vision.cameras.base import Camera
-from vision.cameras.checks import as_points, check_K, check_pose, check_size, check_xi
+from vision.cameras.checks import (
+    as_points,
+    check_K,
+    check_pose,
+    check_principal_point,
+    check_size,
+    check_xi,
+)
 from vision.cameras.fields import CameraFields
 
 
@@ -66,6 +73,7 @@ class UnifiedCamera(Camera):
         self.xi = check_xi(xi, source)
         self.width = check_size("width", width, source)
         self.height = check_size("height", height, source)
+        check_principal_point(self.K, self.width, self.height, source)
         self.camera_from_base = check_pose(
             Transform.identity() if camera_from_base is None else camera_from_base, source
         )

@@ -540,3 +540,19 @@ def test_a_signal_during_the_start_up_is_not_lost_and_moves_nothing(
             "(exit 130, interrupted)") in out
     assert not (tmp_path / "s").exists()  # nothing opened, no record
     assert signal.getsignal(signal.SIGINT) is before
+
+
+def test_an_unconfirmed_halt_after_force_commands_does_not_claim_a_travel() -> None:
+    """The halt's line gave the last command's travel as its velocities times the period;
+    after leg forces (no velocities: zeros) it said '0.000 mm of leg travel'."""
+    from benchmarks.robot.limits import LimitedRobot, SessionLimits
+    from benchmarks.robot.session import _last_move
+    from hexapod.actuation import Actuation
+
+    robot = LimitedRobot(object(), SessionLimits(0.05, None), np.full(6, 0.4))
+    assert _last_move(robot) == "no motion was commanded"
+    robot.moved, robot.last_dt = True, 0.02
+    robot.last_applied = np.array([0.0, 0.003, 0.0, 0.0, -0.001, 0.0])
+    assert _last_move(robot).startswith("the last command asked for at most 0.060 mm")
+    robot.last_actuation = Actuation.FORCE
+    assert "leg forces" in _last_move(robot) and " mm" not in _last_move(robot)

@@ -247,12 +247,14 @@ def test_a_problem_found_at_every_sweep_point_is_said_once() -> None:
              for m in (0, 20, 40)]
     found.append(Problem("warning", "85 kg cannot be held", "robot",
                          point="payload.mass_kg = 40"))
-    found.append(Problem("error", "no start can be held in my (sweep point 3) study.toml"))
+    found += [Problem("error", f"no start can be held in study.toml (sweep point {k})")
+              for k in (1, 2)]  # (a study's own texts: the regex merged these two)
     merged = _merged(found, 3)
     assert [p.text for p in merged] == [
         f"{fast} (every sweep point)",
         "85 kg cannot be held (sweep point payload.mass_kg = 40)",
-        "no start can be held in my (sweep point 3) study.toml"]
+        "no start can be held in study.toml (sweep point 1)",
+        "no start can be held in study.toml (sweep point 2)"]
     assert all(p.point == "" for p in merged)
     assert _merged(found[:2], 3)[0].text == (f"{fast} (sweep points payload.mass_kg = 0; "
                                              "payload.mass_kg = 20)")

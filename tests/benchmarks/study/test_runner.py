@@ -449,3 +449,8 @@ def test_the_interrupted_run_s_hint_is_its_own_command_with_resume() -> None:
         "hexapod-bench run quick --out 'my dir' --trials 600 --seed 7 --resume"
     args.argv = [*args.argv, "--resume"]
     assert _resume_command(args, Path("my dir")).count("--resume") == 1
+    # tune's candidates' run: the tune command (a run command there was refused)
+    args = argparse.Namespace(argv=["tune", "quick", "--controllers", "leg-edge", "--out",
+                                    "t"], scenarios=["/abs/quick.toml"])
+    assert _resume_command(args, Path("t/candidates")) == \
+        "hexapod-bench tune quick --controllers leg-edge --out t --resume"
