@@ -97,12 +97,23 @@ def main(argv: Sequence[str] | None = None) -> int:
 
     p = argparse.ArgumentParser(prog="hexapod-bench perf dynamic-world",
                                 description=__doc__.split("\n\n")[0].replace("\n", " "))
-    p.add_argument("--scenario", default="tahri2009-convergence")
-    p.add_argument("--trials", type=int, default=1000)
-    p.add_argument("--periods", type=int, default=20)
-    p.add_argument("--repeats", type=int, default=5)
-    p.add_argument("--physics-dt", type=float, default=1.0, metavar="MS")
+    p.add_argument("--scenario", default="tahri2009-convergence",
+                   help="the study whose trials and control period are used (default "
+                        "tahri2009-convergence)")
+    p.add_argument("--trials", type=int, default=1000,
+                   help="trials in the batch (default 1000)")
+    p.add_argument("--periods", type=int, default=20,
+                   help="control periods advanced per repetition (default 20)")
+    p.add_argument("--repeats", type=int, default=5,
+                   help="repetitions, the median taken (default 5)")
+    p.add_argument("--physics-dt", type=float, default=1.0, metavar="MS",
+                   help="the dynamic world's physics step [ms] (default 1)")
     args = p.parse_args(argv)
+    for name, least in (("trials", 1), ("periods", 1), ("repeats", 1)):
+        if getattr(args, name) < least:
+            p.error(f"--{name}: at least {least}, got {getattr(args, name)}")
+    if not args.physics_dt > 0:
+        p.error(f"--physics-dt: a positive step in milliseconds, got {args.physics_dt}")
     base = load_scenario(args.scenario)
     kin = replace(base, world="kinematic")
     dyn = replace(base, world="dynamic", physics_dt=args.physics_dt / 1e3)

@@ -28,3 +28,18 @@ def test_the_table_times_both_worlds_and_both_compiled_periods(
         "dynamic: the compiled period alone (CasADi's C, fallback)"}
     assert all(v > 0 for v in rows.values())
     assert re.search(r"the dynamic world (meets|misses) the (goal|moonshot)", out)
+
+
+@pytest.mark.parametrize(("args", "says"), [
+    (["--trials", "0"], "--trials: at least 1, got 0"),
+    (["--repeats", "0"], "--repeats: at least 1, got 0"),
+    (["--physics-dt", "-1"], "--physics-dt: a positive step in milliseconds, got -1.0")])
+def test_bad_counts_are_refused_naming_the_option(args: list[str], says: str,
+                                                  capsys: pytest.CaptureFixture[str]) -> None:
+    """(The help showed no defaults; --trials 0 ended in an IndexError, --repeats 0 in
+    "no median for empty data", each with a traceback.)"""
+    from benchmarks.perf.dynamic_world import main
+
+    with pytest.raises(SystemExit) as info:
+        main(args)
+    assert info.value.code == 2 and says in capsys.readouterr().err
