@@ -128,9 +128,7 @@ def fit_normal(
         :class:`NormalFit`; the normal is NaN where fewer than 2 points are valid.
     """
     X, w, valid = _prepare(camera, pixels, weights)
-    Y = X * np.sqrt(w)[..., None]
-    _, _, Vh = np.linalg.svd(Y, full_matrices=False)
-    n = Vh[..., -1, :]
+    n = _smallest_vector(X * np.sqrt(w)[..., None])
     count = valid.sum(axis=-1)
     n = _orient(n, X, valid, reference, base_point)
     n = np.where((count >= 2)[..., None], n, np.nan)
@@ -138,6 +136,13 @@ def fit_normal(
 
 
 def _smallest_vector(D: np.ndarray) -> np.ndarray:
+    """The right singular vector of the smallest singular value of ``D`` (..., N, k): a
+    null vector when N < k (rows of zeros added first: the reduced SVD of fewer rows than
+    columns gives no vector outside their span, and its last one lay in the plane of two
+    points, 90 degrees from the normal)."""
+    rows, cols = D.shape[-2:]
+    if rows < cols:
+        D = np.concatenate([D, np.zeros((*D.shape[:-2], cols - rows, cols))], axis=-2)
     _, _, Vh = np.linalg.svd(D, full_matrices=False)
     return Vh[..., -1, :]
 

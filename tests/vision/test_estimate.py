@@ -48,6 +48,22 @@ def test_noiseless_recovery(geometry, fit, which: str) -> None:
     assert angle_between(u, obs.directions)[both].max() < 1e-8
 
 
+@pytest.mark.parametrize("which", ["front", "omni"])
+def test_two_points_per_edge_give_the_plane_of_the_edge(geometry, which: str) -> None:
+    """The fewest points an edge may have (``noise.points_per_edge`` >= 2): the plane
+    through the camera centre and two lifted points. The fit returned a vector in that
+    plane, about 90 degrees from the normal (the reduced SVD of 2 rows has no third
+    vector); the line fit of the perspective camera likewise."""
+    cam = front_camera(geometry) if which == "front" else omni_camera(geometry)
+    obs, pix, vis = _edges(cam, geometry, 20, 2, 4)
+    ok = obs.edge_visible & (vis.sum(-1) == 2)
+    assert ok.sum() > 100
+    fits = [fit_normal] + ([fit_normal_conic] if which == "front" else [])
+    for fit in fits:
+        res = fit(cam, pix, weights=vis, base_point=obs.base_points[..., None, :])
+        assert angle_between(res.normal, obs.normals)[ok].max() < 1e-9, fit.__name__
+
+
 @pytest.mark.parametrize("xi", [0.0, 0.5, 1.0, 1.5])
 def test_noiseless_random_lines(rng: np.random.Generator, xi: float) -> None:
     K = np.array([[420.0, 1.5, 330.0], [0.0, 410.0, 250.0], [0.0, 0.0, 1.0]])
