@@ -15,6 +15,7 @@ Run::
 from __future__ import annotations
 
 import argparse
+import math
 import sys
 from collections.abc import Sequence
 from pathlib import Path
@@ -86,23 +87,30 @@ def main(argv: Sequence[str] | None = None) -> int:
     """Command-line entry point; prints the table and optionally writes JSON."""
     parser = argparse.ArgumentParser(prog="python -m benchmarks.perf.calibration",
                                      description=__doc__.split("\n\n")[0] if __doc__ else None)
-    parser.add_argument("--repeats", type=int, default=100)
+    parser.add_argument("--repeats", type=int, default=100,
+                        help="repetitions of the calibration per noise amplitude (default 100)")
     parser.add_argument("--noise", type=float, nargs="+", default=[0.01, 0.05, 0.1],
-                        help="rotation-noise amplitudes [deg]")
-    parser.add_argument("--camera", default="front", help="camera preset (front, omni)")
+                        help="rotation-noise amplitudes [deg] (default 0.01 0.05 0.1)")
+    parser.add_argument("--camera", default="front",
+                        help="camera preset (front, omni; default front)")
     parser.add_argument("--visibility", action="store_true",
                         help="hide edges outside the image or occluded (the seed used every edge)")
     parser.add_argument("--eye", type=float, nargs=3, default=None, metavar=("X", "Y", "Z"),
-                        help="place the camera here [m, base frame], looking at (0, 0, 0.2)")
-    parser.add_argument("--method", choices=["lstsq", "irls"], default="lstsq")
-    parser.add_argument("--seed", type=int, default=1)
+                        help="place the camera here [m, base frame], looking at (0, 0, 0.2) "
+                             "(default: the preset's placement)")
+    parser.add_argument("--method", choices=["lstsq", "irls"], default="lstsq",
+                        help="solver of the calibration (default lstsq)")
+    parser.add_argument("--seed", type=int, default=1, help="random seed (default 1)")
     parser.add_argument("--json", type=Path, default=None, action=OutputFile, metavar="FILE",
-                        help="write the figures here")
+                        help="write the figures here (default: not written)")
     parser.add_argument("--overwrite", action="store_true",
                         help="replace --json even if hexapod-bench did not write it")
     args = parser.parse_args(argv)
     if args.repeats < 1:
-        parser.error("--repeats must be >= 1")
+        parser.error(f"--repeats: at least 1, got {args.repeats}")
+    for amplitude in args.noise:
+        if not (math.isfinite(amplitude) and amplitude >= 0):
+            parser.error(f"--noise: finite non-negative amplitudes in degrees, got {amplitude}")
     if args.json is not None:
         check_replace(args.json, args.overwrite, kind="JSON")
     results = run_study(args.noise, args.repeats, args.seed, args.camera, args.visibility,

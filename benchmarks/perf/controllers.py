@@ -228,14 +228,19 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("names", nargs="*",
                         help="controllers, optionally NAME+key=value+... (default: every "
                              "registered one and the global-model predictive variants)")
-    parser.add_argument("--steps", type=int, default=5000, help="steps per controller")
-    parser.add_argument("--camera", choices=("front", "omni"), default="front")
-    parser.add_argument("--seed", type=int, default=0)
+    parser.add_argument("--steps", type=int, default=5000,
+                        help="steps per controller (default 5000)")
+    parser.add_argument("--camera", choices=("front", "omni"), default="front",
+                        help="the robot's camera (default front)")
+    parser.add_argument("--seed", type=int, default=0,
+                        help="random seed of the observations (default 0)")
     parser.add_argument("--hidden", action="store_true",
                         help="hide edge (2, 0) and direction 2 in every observation")
     parser.add_argument("--arrays", action="store_true",
                         help="also time each controller's batch path on a batch of one")
     args = parser.parse_args(argv)
+    if args.steps < 1:
+        parser.error(f"--steps: at least 1, got {args.steps}")
     timings = time_controllers(args.names or None, args.steps, args.camera, args.seed,
                                hidden=args.hidden, arrays=args.arrays)
     sys.stdout.write(format_timings(timings, args.camera, args.hidden) + "\n")

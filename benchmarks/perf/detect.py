@@ -231,28 +231,37 @@ def main(argv: Sequence[str] | None = None) -> int:
     """Command-line entry point; returns the exit status."""
     p = argparse.ArgumentParser(prog="python -m benchmarks.perf.detect",
                                 description=__doc__.splitlines()[0])
-    p.add_argument("--frames", type=int, default=200, help="random poses per camera")
-    p.add_argument("--background", choices=("plain", "cluttered"), default="plain")
-    p.add_argument("--blur", type=float, default=0.8, help="Gaussian blur sigma [px]")
-    p.add_argument("--noise", type=float, default=3.0, help="pixel noise std [grey levels]")
+    p.add_argument("--frames", type=int, default=200,
+                   help="random poses per camera (default 200)")
+    p.add_argument("--background", choices=("plain", "cluttered"), default="plain",
+                   help="background of the rendered frames (default plain)")
+    p.add_argument("--blur", type=float, default=0.8,
+                   help="Gaussian blur sigma [px] (default 0.8)")
+    p.add_argument("--noise", type=float, default=3.0,
+                   help="pixel noise std [grey levels] (default 3)")
     p.add_argument("--repeats", type=int, default=3,
-                   help="detections per frame, the fastest is kept (timer noise)")
-    p.add_argument("--seed", type=int, default=2026)
+                   help="detections per frame, the fastest is kept (timer noise) (default 3)")
+    p.add_argument("--seed", type=int, default=2026,
+                   help="random seed of the poses and the rendering (default 2026)")
     p.add_argument("--distortion", action="store_true",
                    help="also run each camera through a distorted lens (same poses)")
     p.add_argument("--rounds", type=int, default=0,
                    help="also time the detection of every camera round by round, the "
                         "cameras interleaved (N rounds of 10 frames each): the ratios to "
-                        "the ideal lens under a changing machine load")
+                        "the ideal lens under a changing machine load (default 0: not "
+                        "timed)")
     p.add_argument("--pictures", type=Path, default=None, action=OutputDir,
                    help="write detect-omni.png / detect-front.png of the first frame here "
                         "(-cluttered before .png on a cluttered background; with "
                         "--distortion also detect-omni-distorted.png, "
                         "detect-front-distorted.png and detect-front-LENS.png of the other "
-                        "lens models)")
+                        "lens models; default: none written)")
     p.add_argument("--overwrite", action="store_true",
                    help="replace pictures of those names that hexapod-bench did not write")
     args = p.parse_args(argv)
+    for name in ("frames", "repeats"):
+        if getattr(args, name) < 1:
+            p.error(f"--{name}: at least 1, got {getattr(args, name)}")
     style = RenderStyle(background=args.background, blur_px=args.blur, noise_std=args.noise)
     out = sys.stdout
     out.write(f"# Leg-edge detection benchmark ({args.frames} frames per camera, background "

@@ -254,18 +254,21 @@ def main(argv: list[str] | None = None) -> int:
     """Entry point of ``python -m benchmarks.perf.dynamics``."""
     parser = argparse.ArgumentParser(prog="python -m benchmarks.perf.dynamics",
                                      description=__doc__.split("\n")[0])
-    parser.add_argument("-n", type=int, default=1000, help="states (the batch size)")
+    parser.add_argument("-n", type=int, default=1000,
+                        help="states (the batch size) (default 1000)")
     parser.add_argument("--repeats", type=int, default=30,
                         help="timed runs of the batch (a tenth of it for the per-call "
-                             "methods, over all states)")
-    parser.add_argument("--seed", type=int, default=0)
+                             "methods, over all states) (default 30)")
+    parser.add_argument("--seed", type=int, default=0,
+                        help="random seed of the states (default 0)")
     parser.add_argument("--mujoco", action="store_true",
                         help="also MuJoCo's mj_forward on the same chain (needs mujoco)")
     parser.add_argument("--energy", action="store_true",
                         help="also the energy drift of free motion over 1 s (RK4)")
     args = parser.parse_args(argv)
-    if min(args.n, args.repeats) < 1:
-        parser.error("-n and --repeats must be >= 1")
+    for option, value in (("-n", args.n), ("--repeats", args.repeats)):
+        if value < 1:
+            parser.error(f"{option}: at least 1, got {value}")
     if args.mujoco:
         import importlib.util
 

@@ -58,9 +58,13 @@ def main(argv: list[str] | None = None) -> int:
                         help=f"module holding the feature's controllers (default {EXAMPLE})")
     parser.add_argument("--attr", default="JOINTS",
                         help="its controllers_for(...) result (default JOINTS)")
-    parser.add_argument("--steps", type=int, default=3000, help="steps per controller")
-    parser.add_argument("--seed", type=int, default=0)
+    parser.add_argument("--steps", type=int, default=3000,
+                        help="steps per controller (default 3000)")
+    parser.add_argument("--seed", type=int, default=0,
+                        help="random seed of the observations (default 0)")
     args = parser.parse_args(argv)
+    if args.steps < 1:
+        parser.error(f"--steps: at least 1, got {args.steps}")
     rows = compare(args.module, args.attr, args.steps, args.seed)
     sys.stdout.write(format_comparison(rows) + "\n")
     ok = all(own.median_us <= LIMIT * ref.median_us and own.refused == 0

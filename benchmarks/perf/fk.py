@@ -92,11 +92,13 @@ def main(argv: list[str] | None = None) -> int:
     """Entry point of ``python -m benchmarks.perf.fk``."""
     parser = argparse.ArgumentParser(prog="python -m benchmarks.perf.fk")
     parser.add_argument("what", choices=["fk"], help="which figure")
-    parser.add_argument("-n", type=int, default=1000, help="number of random poses")
-    parser.add_argument("--seed", type=int, default=0)
+    parser.add_argument("-n", type=int, default=1000,
+                        help="number of random poses (default 1000)")
+    parser.add_argument("--seed", type=int, default=0,
+                        help="random seed of the poses (default 0)")
     args = parser.parse_args(argv)
     if args.n < 1:
-        parser.error(f"-n {args.n}: at least one pose")
+        parser.error(f"-n: at least 1, got {args.n}")
     if args.what == "fk":
         print(format_fk(fk_figures(args.n, args.seed)))
     return 0

@@ -19,6 +19,7 @@ line (10 bits a byte) in the emulator: a real board's floor.
 from __future__ import annotations
 
 import argparse
+import math
 import platform
 import sys
 import time
@@ -124,22 +125,33 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--line-rate", type=float, nargs="+", default=[0.0, 115200.0],
                    metavar="BAUD", help="emulated line rates, one run each (0: instantaneous; "
                                         "default: 0 115200)")
-    p.add_argument("--transport", choices=["pty", "tcp"], default="pty")
+    p.add_argument("--transport", choices=["pty", "tcp"], default="pty",
+                   help="the emulator's link (default pty)")
     p.add_argument("--in-process", action="store_true",
                    help="run the emulator in a thread of this process (default: a child process)")
     p.add_argument("--latency", type=float, default=0.0, metavar="MS",
-                   help="injected reply latency [ms]")
+                   help="injected reply latency [ms] (default 0)")
     p.add_argument("--garble", type=float, default=0.0, metavar="P",
-                   help="injected garbling probability")
-    p.add_argument("--seed", type=int, default=0)
+                   help="injected garbling probability (default 0)")
+    p.add_argument("--seed", type=int, default=0,
+                   help="random seed of the injected faults (default 0)")
     p.add_argument("--url", help="measure a real board at this pyserial URL instead "
-                                 "(it will MOVE: legs within 10 mm of mid-stroke)")
+                                 "(it will MOVE: legs within 10 mm of mid-stroke; default: "
+                                 "the emulator)")
     return p
 
 
 def main(argv: Sequence[str] | None = None) -> int:
     """Run the benchmark and print the table; returns the exit status."""
-    args = build_parser().parse_args(argv)
+    p = build_parser()
+    args = p.parse_args(argv)
+    if args.periods < 1:
+        p.error(f"--periods: at least 1, got {args.periods}")
+    if not (math.isfinite(args.dt) and args.dt > 0):
+        p.error(f"--dt: a positive control period in seconds, got {args.dt}")
+    for rate in args.line_rate:
+        if not rate >= 0:
+            p.error(f"--line-rate: non-negative rates in baud, got {rate}")
     rows = []
     print(f"# serial link: {args.periods} periods of {args.dt * 1e3:.0f} ms "
           f"({platform.processor() or platform.machine()}, Python "

@@ -151,10 +151,15 @@ def main(argv: Sequence[str] | None = None) -> int:
                         "takes them (default: the scenario's)")
     p.add_argument("--world", choices=["kinematic", "dynamic"], default=None,
                    help="run the scenario in this world (as run --world; default: its own)")
-    p.add_argument("--repeats", type=int, default=3, help="runs of each engine (median)")
+    p.add_argument("--repeats", type=int, default=3,
+                   help="runs of each engine, the median taken (default 3)")
     p.add_argument("--breakdown", action="store_true",
                    help="also time the batched engine's stages (one more run per controller)")
     args = p.parse_args(argv)
+    if args.trials is not None and args.trials < 1:
+        p.error(f"--trials: at least 1, got {args.trials}")
+    if args.repeats < 1:
+        p.error(f"--repeats: at least 1, got {args.repeats}")
     from benchmarks.study.commands import auto_chunk
     from benchmarks.study.scenario_checks import check_controllers
 
@@ -162,8 +167,6 @@ def main(argv: Sequence[str] | None = None) -> int:
     if args.world is not None:  # (the force laws' refusal told to run with --world)
         scenario = replace(scenario, world=args.world)
     trials = auto_chunk([scenario], 2, "sim") if args.trials is None else args.trials
-    if trials < 1 or args.repeats < 1:
-        p.error("--trials and --repeats must be >= 1")
     names = ([c.strip() for c in args.controllers.split(",") if c.strip()]
              if args.controllers else None)
     # the controllers and their options checked as ``run`` checks them (a name that is

@@ -18,6 +18,7 @@ rule of :mod:`vision.estimate` and are right for the SVD fit.
 from __future__ import annotations
 
 import argparse
+import math
 import time
 from dataclasses import dataclass
 
@@ -29,6 +30,10 @@ from vision.cameras import Camera, front_camera, omni_camera
 from vision.estimate import angle_between, direction_from_normals, fit_normal, fit_normal_conic
 from vision.legs import observation_edge_points, observe_legs
 from vision.noise import pixel_noise
+
+#: Fewest ``--points`` per edge: the conic fit of the omnidirectional camera needs 5
+#: (with fewer its rows are NaN).
+MIN_POINTS = 5
 
 
 @dataclass
@@ -175,15 +180,23 @@ def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(prog="python -m benchmarks.perf.vision",
                                      description=__doc__.splitlines()[0])
     parser.add_argument("--poses", type=int, default=300, help="random poses (default 300)")
-    parser.add_argument("--points", type=int, default=20, help="points per edge (default 20)")
+    parser.add_argument("--points", type=int, default=20,
+                        help=f"points per edge, at least {MIN_POINTS} (default 20)")
     parser.add_argument("--sigma", type=float, default=0.5, help="pixel noise [px] (default 0.5)")
     parser.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
     parser.add_argument("--figure", metavar="PNG", action=OutputFile,
                         help="also draw the simulated edges of both cameras to this file "
-                             "(docs/vision-edges.png)")
+                             "(docs/vision-edges.png; default: not drawn)")
     parser.add_argument("--overwrite", action="store_true",
                         help="replace --figure even if hexapod-bench did not write it")
     args = parser.parse_args(argv)
+    if args.poses < 1:
+        parser.error(f"--poses: at least 1, got {args.poses}")
+    if args.points < MIN_POINTS:
+        parser.error(f"--points: at least {MIN_POINTS} (the conic fit's least), got "
+                     f"{args.points}")
+    if not (math.isfinite(args.sigma) and args.sigma >= 0):
+        parser.error(f"--sigma: a finite non-negative pixel noise, got {args.sigma}")
     if args.figure:
         from hexapod.outputs import check_replace
 
