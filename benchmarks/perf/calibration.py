@@ -23,6 +23,7 @@ from typing import Any
 
 import numpy as np
 
+from benchmarks.perf import seed
 from benchmarks.study.outdir import OutputFile
 from hexapod.geometry import deltalab
 from hexapod.kinematics import Transform
@@ -85,7 +86,7 @@ def format_table(results: Sequence[StudyResult]) -> str:
 
 def main(argv: Sequence[str] | None = None) -> int:
     """Command-line entry point; prints the table and optionally writes JSON."""
-    parser = argparse.ArgumentParser(prog="python -m benchmarks.perf.calibration",
+    parser = argparse.ArgumentParser(prog="hexapod-bench perf calibration",
                                      description=__doc__.split("\n\n")[0] if __doc__ else None)
     parser.add_argument("--repeats", type=int, default=100,
                         help="repetitions of the calibration per noise amplitude (default 100)")
@@ -100,7 +101,7 @@ def main(argv: Sequence[str] | None = None) -> int:
                              "(default: the preset's placement)")
     parser.add_argument("--method", choices=["lstsq", "irls"], default="lstsq",
                         help="solver of the calibration (default lstsq)")
-    parser.add_argument("--seed", type=int, default=1, help="random seed (default 1)")
+    parser.add_argument("--seed", type=seed, default=1, help="random seed (default 1)")
     parser.add_argument("--json", type=Path, default=None, action=OutputFile, metavar="FILE",
                         help="write the figures here (default: not written)")
     parser.add_argument("--overwrite", action="store_true",

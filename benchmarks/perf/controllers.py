@@ -30,6 +30,7 @@ from typing import Any
 
 import numpy as np
 
+from benchmarks.perf import seed
 from controllers import registry
 from controllers.base import Controller, ControllerContext, Goal, Observation
 from controllers.data import CommandBatch, ObservationBatch
@@ -223,7 +224,7 @@ def format_timings(timings: list[StepTiming], camera: str, hidden: bool = False)
 
 def main(argv: list[str] | None = None) -> int:
     """Print the median time per ``step`` of each registered controller."""
-    parser = argparse.ArgumentParser(prog="python -m benchmarks.perf.controllers",
+    parser = argparse.ArgumentParser(prog="hexapod-bench perf controllers",
                                      description=__doc__.splitlines()[0] if __doc__ else None)
     parser.add_argument("names", nargs="*",
                         help="controllers, optionally NAME+key=value+... (default: every "
@@ -232,7 +233,7 @@ def main(argv: list[str] | None = None) -> int:
                         help="steps per controller (default 5000)")
     parser.add_argument("--camera", choices=("front", "omni"), default="front",
                         help="the robot's camera (default front)")
-    parser.add_argument("--seed", type=int, default=0,
+    parser.add_argument("--seed", type=seed, default=0,
                         help="random seed of the observations (default 0)")
     parser.add_argument("--hidden", action="store_true",
                         help="hide edge (2, 0) and direction 2 in every observation")

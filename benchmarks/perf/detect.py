@@ -38,6 +38,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 
+from benchmarks.perf import seed
 from benchmarks.study.outdir import OutputDir
 from hexapod import deltalab
 from hexapod.outputs import check_replace, write_output
@@ -229,7 +230,7 @@ def interleaved_times(cameras: list[tuple[str, str, Camera]], frames: int, round
 
 def main(argv: Sequence[str] | None = None) -> int:
     """Command-line entry point; returns the exit status."""
-    p = argparse.ArgumentParser(prog="python -m benchmarks.perf.detect",
+    p = argparse.ArgumentParser(prog="hexapod-bench perf detect",
                                 description=__doc__.splitlines()[0])
     p.add_argument("--frames", type=int, default=200,
                    help="random poses per camera (default 200)")
@@ -241,7 +242,7 @@ def main(argv: Sequence[str] | None = None) -> int:
                    help="pixel noise std [grey levels] (default 3)")
     p.add_argument("--repeats", type=int, default=3,
                    help="detections per frame, the fastest is kept (timer noise) (default 3)")
-    p.add_argument("--seed", type=int, default=2026,
+    p.add_argument("--seed", type=seed, default=2026,
                    help="random seed of the poses and the rendering (default 2026)")
     p.add_argument("--distortion", action="store_true",
                    help="also run each camera through a distorted lens (same poses)")

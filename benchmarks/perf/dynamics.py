@@ -39,6 +39,7 @@ from dataclasses import dataclass
 import numpy as np
 import pinocchio as pin
 
+from benchmarks.perf import seed
 from hexapod import deltalab, sample_poses
 from hexapod.dynamics import DynamicModel
 from hexapod.dynamics import compiled as dyn_compiled
@@ -252,14 +253,14 @@ def format_dynamics(figures: list[DynamicsFigure], n: int) -> str:
 
 def main(argv: list[str] | None = None) -> int:
     """Entry point of ``python -m benchmarks.perf.dynamics``."""
-    parser = argparse.ArgumentParser(prog="python -m benchmarks.perf.dynamics",
+    parser = argparse.ArgumentParser(prog="hexapod-bench perf dynamics",
                                      description=__doc__.split("\n")[0])
     parser.add_argument("-n", type=int, default=1000,
                         help="states (the batch size) (default 1000)")
     parser.add_argument("--repeats", type=int, default=30,
                         help="timed runs of the batch (a tenth of it for the per-call "
                              "methods, over all states) (default 30)")
-    parser.add_argument("--seed", type=int, default=0,
+    parser.add_argument("--seed", type=seed, default=0,
                         help="random seed of the states (default 0)")
     parser.add_argument("--mujoco", action="store_true",
                         help="also MuJoCo's mj_forward on the same chain (needs mujoco)")

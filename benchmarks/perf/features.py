@@ -16,6 +16,7 @@ from __future__ import annotations
 import argparse
 import sys
 
+from benchmarks.perf import seed
 from benchmarks.perf.controllers import StepTiming, time_controllers
 
 #: Default module of the plugin feature (the worked example).
@@ -52,7 +53,7 @@ def format_comparison(rows: list[tuple[str, StepTiming, StepTiming]]) -> str:
 def main(argv: list[str] | None = None) -> int:
     """Print the comparison; exit 1 when a ratio is over :data:`LIMIT` or a plugin step
     was refused."""
-    parser = argparse.ArgumentParser(prog="python -m benchmarks.perf.features",
+    parser = argparse.ArgumentParser(prog="hexapod-bench perf features",
                                      description=__doc__.splitlines()[0] if __doc__ else None)
     parser.add_argument("module", nargs="?", default=EXAMPLE,
                         help=f"module holding the feature's controllers (default {EXAMPLE})")
@@ -60,7 +61,7 @@ def main(argv: list[str] | None = None) -> int:
                         help="its controllers_for(...) result (default JOINTS)")
     parser.add_argument("--steps", type=int, default=3000,
                         help="steps per controller (default 3000)")
-    parser.add_argument("--seed", type=int, default=0,
+    parser.add_argument("--seed", type=seed, default=0,
                         help="random seed of the observations (default 0)")
     args = parser.parse_args(argv)
     if args.steps < 1:

@@ -12,6 +12,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from benchmarks.perf import seed
 from hexapod import build_model, deltalab, forward_kinematics, inverse_kinematics, sample_poses
 from hexapod.fk import newton_kernel
 from hexapod.se3 import exp_so3, pose_error
@@ -90,11 +91,11 @@ def format_fk(figures: list[FkFigure]) -> str:
 
 def main(argv: list[str] | None = None) -> int:
     """Entry point of ``python -m benchmarks.perf.fk``."""
-    parser = argparse.ArgumentParser(prog="python -m benchmarks.perf.fk")
+    parser = argparse.ArgumentParser(prog="hexapod-bench perf fk")
     parser.add_argument("what", choices=["fk"], help="which figure")
     parser.add_argument("-n", type=int, default=1000,
                         help="number of random poses (default 1000)")
-    parser.add_argument("--seed", type=int, default=0,
+    parser.add_argument("--seed", type=seed, default=0,
                         help="random seed of the poses (default 0)")
     args = parser.parse_args(argv)
     if args.n < 1:

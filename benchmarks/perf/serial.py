@@ -28,6 +28,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from benchmarks.perf import seed
 from hexapod import deltalab
 from hexapod.backends.emulator import FaultConfig
 from hexapod.backends.serial import SerialRobot
@@ -118,7 +119,7 @@ def format_table(rows: list[LinkFigures]) -> str:
 
 def build_parser() -> argparse.ArgumentParser:
     """Options of ``python -m benchmarks.perf.serial``."""
-    p = argparse.ArgumentParser(prog="python -m benchmarks.perf.serial", description=__doc__,
+    p = argparse.ArgumentParser(prog="hexapod-bench perf serial", description=__doc__,
                                 formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--periods", type=int, default=500, help="control periods (default 500)")
     p.add_argument("--dt", type=float, default=0.02, help="control period [s] (default 0.02)")
@@ -133,7 +134,7 @@ def build_parser() -> argparse.ArgumentParser:
                    help="injected reply latency [ms] (default 0)")
     p.add_argument("--garble", type=float, default=0.0, metavar="P",
                    help="injected garbling probability (default 0)")
-    p.add_argument("--seed", type=int, default=0,
+    p.add_argument("--seed", type=seed, default=0,
                    help="random seed of the injected faults (default 0)")
     p.add_argument("--url", help="measure a real board at this pyserial URL instead "
                                  "(it will MOVE: legs within 10 mm of mid-stroke; default: "

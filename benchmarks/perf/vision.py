@@ -24,6 +24,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from benchmarks.perf import seed
 from benchmarks.study.outdir import OutputFile
 from hexapod import deltalab, sample_poses
 from vision.cameras import Camera, front_camera, omni_camera
@@ -177,13 +178,13 @@ def edges_figure(path: str, seed: int = 0, overwrite: bool = False) -> None:
 
 def main(argv: list[str] | None = None) -> int:
     """Print the accuracy table."""
-    parser = argparse.ArgumentParser(prog="python -m benchmarks.perf.vision",
+    parser = argparse.ArgumentParser(prog="hexapod-bench perf vision",
                                      description=__doc__.splitlines()[0])
     parser.add_argument("--poses", type=int, default=300, help="random poses (default 300)")
     parser.add_argument("--points", type=int, default=20,
                         help=f"points per edge, at least {MIN_POINTS} (default 20)")
     parser.add_argument("--sigma", type=float, default=0.5, help="pixel noise [px] (default 0.5)")
-    parser.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
+    parser.add_argument("--seed", type=seed, default=0, help="random seed (default 0)")
     parser.add_argument("--figure", metavar="PNG", action=OutputFile,
                         help="also draw the simulated edges of both cameras to this file "
                              "(docs/vision-edges.png; default: not drawn)")

@@ -107,3 +107,19 @@ def test_every_option_says_its_default(module: str) -> None:
     silent = [a.option_strings[-1] for a in parser._actions
               if a.option_strings and a.nargs != 0 and "default" not in (a.help or "")]
     assert silent == []
+
+
+@pytest.mark.parametrize("module", ["calibration", "controllers", "detect", "dynamics",
+                                    "features", "fk", "serial", "vision"])
+def test_a_negative_seed_is_refused_and_the_usage_names_the_command(
+        module: str, capsys: pytest.CaptureFixture[str]) -> None:
+    """A negative --seed ended in numpy's ValueError traceback; the usage lines named
+    ``python -m benchmarks.perf.NAME`` where the user typed ``hexapod-bench perf NAME``."""
+    main = importlib.import_module(f"benchmarks.perf.{module}").main
+    args = ["fk", "--seed", "-1"] if module == "fk" else ["--seed", "-1"]
+    with pytest.raises(SystemExit) as info:
+        main(args)
+    err = capsys.readouterr().err
+    assert info.value.code == 2, err
+    assert "argument --seed: a non-negative integer, got -1" in err, err
+    assert f"usage: hexapod-bench perf {module}" in err, err
