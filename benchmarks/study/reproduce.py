@@ -22,10 +22,9 @@ from __future__ import annotations
 import json
 import logging
 import math
-import time
 from collections import Counter
 from collections.abc import Callable
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -34,15 +33,12 @@ import numpy as np
 from benchmarks.exceptions import BenchmarkError
 from benchmarks.study import exact, stats
 from benchmarks.study.paper_figures import (
-    RECORD_ALL,
-    REPEATS,
     SEEDS,
     TAIL_FRACTION,
-    TRIALS,
     Figure,
     builtin_figures,
 )
-from hexapod.outputs import replace_whole
+from benchmarks.study.reproduce_runs import Transform, check_studies, run_study
 from vision.exceptions import CalibrationError
 
 log = logging.getLogger(__name__)
@@ -52,8 +48,6 @@ CATEGORIES = ("within", "outside", "contradicts", "not comparable")
 #: Tail lengths [periods] at which the median tail maximum is also printed (seed 001).
 TAIL_LENGTHS = (25, 50, 100)
 
-#: A change applied to each study's scenario before it runs (the sensitivity study).
-Transform = Callable[[Any], Any]
 
 
 @dataclass
@@ -102,134 +96,6 @@ def select(which: str, figures: list[Figure] | None = None) -> list[Figure]:
     if which not in SEEDS:
         raise BenchmarkError(f"reproduce {which!r}: expected one of {', '.join(SEEDS)}, all")
     return [f for f in figs if f.seed == which]
-
-
-def _study_dir(out: Path, study: str, quick: bool) -> Path:
-    return out / (study.replace(":", "_") + ("-quick" if quick else ""))
-
-
-def _planned(study: str, out: Path, quick: bool, transform: Transform | None,
-             trials: int | None) -> tuple[str, Path, Any, int]:
-    """What ``study`` runs: its kind (``run``, ``calibrate``), directory, scenario (the
-    transform applied) and trials (calibrations)."""
-    from benchmarks.study.scenario import load_scenario
-
-    kind, _, rest = study.partition(":")
-    name, _, variant = rest.partition(":")
-    change = transform or (lambda sc: sc)
-    d = _study_dir(out, study, quick)
-    if kind == "calibrate":
-        sc = load_scenario(name)
-        if variant == "omni":
-            sc = replace(sc, camera_preset="omni", camera_file=None, name=f"{name}-omni")
-        return kind, d, change(sc), trials or (REPEATS[1] if quick else REPEATS[0])
-    n = trials or TRIALS[name][1 if quick else 0]
-    return kind, d, change(load_scenario(name).with_overrides(trials=n)), n
-
-
-def _check_calibration(d: Path, sc: Any, repeat: int) -> bool:
-    """Whether ``d`` holds this calibration study already (False: none yet).
-
-    Raises:
-        StudyMismatchError: It holds another one (other settings, repetitions, or one
-            written before calibrations recorded their study), naming the differences.
-    """
-    from benchmarks.exceptions import StudyMismatchError
-    from benchmarks.study.study_record import differences, study_of
-
-    path = d / "calibration.json"
-    if not path.exists():
-        return False
-    doc = json.loads(path.read_text())
-    if "study" not in doc:
-        raise StudyMismatchError(str(d), [
-            "the calibration was written by an earlier hexapod-bench that did not record "
-            "its study, so it cannot be checked; remove the directory to calibrate again"])
-    lines = differences(doc["study"], study_of(sc))[0]
-    if doc.get("repetitions") != repeat:
-        lines.append(f"--repeat: {doc.get('repetitions')} in the directory, {repeat} given")
-    if lines:
-        raise StudyMismatchError(str(d), lines)
-    return True
-
-
-def check_studies(studies: list[str], out: Path, quick: bool, transform: Transform | None,
-                  trials: int | None) -> None:
-    """Refuse, before any study runs, an ``out`` whose directories hold other studies
-    than these (a run's or a calibration's: they would be mixed or reused as they are).
-
-    Raises:
-        StudyMismatchError: Naming the directory and every difference.
-    """
-    from benchmarks.study.study_record import check_same_study
-
-    for study in studies:
-        kind, d, sc, n = _planned(study, out, quick, transform, trials)
-        if kind == "calibrate":
-            _check_calibration(d, sc, n)
-        elif (d / "run.json").is_file():
-            check_same_study(d, json.loads((d / "run.json").read_text()), [sc])
-
-
-def run_study(study: str, out: Path, quick: bool, workers: int,
-              say: Callable[[str], None], transform: Transform | None = None,
-              trials: int | None = None) -> Path:
-    """Run (or finish) one study into its directory under ``out``; returns the directory.
-
-    Args:
-        study: ``run:SCENARIO`` or ``calibrate:SCENARIO[:omni]``.
-        out: The parent directory.
-        quick: Fewer trials (:data:`TRIALS`, :data:`REPEATS`).
-        workers: Worker processes.
-        say: Progress lines.
-        transform: Applied to the loaded scenario (the sensitivity study).
-        trials: Trials (calibrations) instead of :data:`TRIALS` / :data:`REPEATS`.
-    """
-    kind, d, sc, n = _planned(study, out, quick, transform, trials)
-    name = study.split(":")[1]
-    if kind == "calibrate":
-        from benchmarks.study.calibration import run_calibration
-
-        if _check_calibration(d, sc, n):
-            say(f"{study}: reusing {d / 'calibration.json'}")
-            return d
-        variant = study.count(":") == 2
-        say(f"{study}: {n} calibrations per sweep point "
-            f"(hexapod-bench calibrate {name} --repeat {n}"
-            + (", omnidirectional camera" if variant else "") + ")")
-        run_calibration(sc, d, repeat=n)
-        return d
-    from benchmarks.study.commands import auto_chunk
-    from benchmarks.study.runner import completed_keys, plan, run_lock, run_units
-    from benchmarks.study.study_record import (
-        check_same_study,
-        command_entry,
-        record_command,
-        study_of,
-    )
-
-    with run_lock(d):
-        done = completed_keys(d)
-        record = n if name in RECORD_ALL else 0
-        units = plan([sc], auto_chunk([sc], workers, "sim"), record, done)
-        todo = sum(len(u.trials) for u in units)
-        say(f"{study}: {todo} trials to run, {len(done)} done "
-            f"(hexapod-bench run {name} --trials {n} --out {d} --workers {workers})")
-        meta = json.loads((d / "run.json").read_text()) if (d / "run.json").is_file() else {}
-        check_same_study(d, meta, [sc])
-        record_command(meta, command_entry(
-            ["run", name, "--trials", str(n), "--out", str(d)],
-            f"hexapod-bench reproduce: {len(done)} trials already done, {todo} to run"))
-        meta["scenarios"] = {sc.name: {"description": sc.description,
-                                       "reference": sc.reference, "source": sc.source,
-                                       "study": study_of(sc)}}
-        replace_whole(d / "run.json", json.dumps(meta, indent=2))
-        t0 = time.perf_counter()
-        if units:
-            run_units(units, d, workers)
-        if todo:
-            say(f"{study}: {todo} trials in {time.perf_counter() - t0:.1f} s")
-    return d
 
 
 def _rows(df: Any, fig: Figure, controller: str) -> Any:

@@ -184,6 +184,16 @@ def test_reproduce_seed003_small(tmp_path: Path, monkeypatch: pytest.MonkeyPatch
     said: list[str] = []
     reproduce("seed003", tmp_path, quick=True, say=said.append, figures=figs)
     assert any("0 trials to run, 40 done" in s for s in said)
+    # a directory of more trials than the scorecard plans: told in its words (it said
+    # "give --trials 20 or more", an option reproduce does not take)
+    from benchmarks.exceptions import StudyMismatchError
+
+    monkeypatch.setitem(paper_figures.TRIALS, "tahri2009-convergence", (30, 10))
+    with pytest.raises(StudyMismatchError) as info:
+        reproduce("seed003", tmp_path, quick=True, say=lambda _t: None, figures=figs)
+    assert ("trials: 20 in the directory, 10 planned by the scorecard with --quick (which "
+            "takes no --trials") in str(info.value)
+    assert "give --trials" not in str(info.value)
 
 
 def test_a_calibration_of_other_settings_is_refused_before_any_study_runs(
@@ -194,7 +204,7 @@ def test_a_calibration_of_other_settings_is_refused_before_any_study_runs(
     recorded no study, is refused naming the difference, before the run studies start."""
     from benchmarks.exceptions import StudyMismatchError
 
-    monkeypatch.setattr("benchmarks.study.reproduce.REPEATS", (2, 2))
+    monkeypatch.setattr("benchmarks.study.reproduce_runs.REPEATS", (2, 2))
     monkeypatch.setitem(paper_figures.TRIALS, "andreff2005-noise", (2, 2))
     figs = [f for f in builtin_figures() if f.seed == "seed001"]
     cal = [f for f in figs if f.study.startswith("calibrate:")]
@@ -223,7 +233,7 @@ def test_seed001_tail_statistics_from_the_records(tmp_path: Path,
     """The tail read from every trial's record agrees with the engine's tail median, and
     the tail maximum is printed against the tail's length."""
     monkeypatch.setitem(paper_figures.TRIALS, "andreff2005-noise", (3, 3))
-    monkeypatch.setattr("benchmarks.study.reproduce.REPEATS", (3, 3))
+    monkeypatch.setattr("benchmarks.study.reproduce_runs.REPEATS", (3, 3))
     md = tmp_path / "t.md"
     assert cli_main(["reproduce", "seed001", "--quick", "--out", str(tmp_path / "r"),
                      "--markdown", str(md)]) == 0
