@@ -28,6 +28,7 @@ Run: ``python -m benchmarks.perf.detect [--frames N] [--background plain|clutter
 from __future__ import annotations
 
 import argparse
+import math
 import platform
 import sys
 import time
@@ -263,6 +264,10 @@ def main(argv: Sequence[str] | None = None) -> int:
     for name in ("frames", "repeats"):
         if getattr(args, name) < 1:
             p.error(f"--{name}: at least 1, got {getattr(args, name)}")
+    for name, unit in (("blur", "a blur sigma [px]"), ("noise", "a noise std [grey levels]")):
+        value = getattr(args, name)
+        if not (math.isfinite(value) and value >= 0):
+            p.error(f"--{name}: {unit} >= 0, got {value}")
     style = RenderStyle(background=args.background, blur_px=args.blur, noise_std=args.noise)
     out = sys.stdout
     out.write(f"# Leg-edge detection benchmark ({args.frames} frames per camera, background "

@@ -153,6 +153,10 @@ def main(argv: Sequence[str] | None = None) -> int:
     for rate in args.line_rate:
         if not rate >= 0:
             p.error(f"--line-rate: non-negative rates in baud, got {rate}")
+    if not (math.isfinite(args.latency) and args.latency >= 0):
+        p.error(f"--latency: a reply latency in milliseconds >= 0, got {args.latency}")
+    if not 0 <= args.garble <= 1:
+        p.error(f"--garble: a probability in [0, 1], got {args.garble}")
     rows = []
     print(f"# serial link: {args.periods} periods of {args.dt * 1e3:.0f} ms "
           f"({platform.processor() or platform.machine()}, Python "

@@ -53,6 +53,13 @@ BAD = [
     ("serial", ["--dt", "-0.02"], "--dt: a positive control period in seconds, got -0.02"),
     # (a ValueError traceback, "I/O operation on closed file", the emulator process dead)
     ("serial", ["--line-rate", "0", "-1"], "--line-rate: non-negative rates in baud, got -1.0"),
+    # (refused by the emulator's configuration, the latency given in seconds)
+    ("serial", ["--latency", "-5"], "--latency: a reply latency in milliseconds >= 0, got "
+     "-5.0"),
+    ("serial", ["--garble", "1.5"], "--garble: a probability in [0, 1], got 1.5"),
+    # (refused by the renderer naming its own keys, blur_px and noise_std)
+    ("detect", ["--blur", "-1"], "--blur: a blur sigma [px] >= 0, got -1.0"),
+    ("detect", ["--noise", "-2"], "--noise: a noise std [grey levels] >= 0, got -2.0"),
     # (already refused, after loading the scenario, as "--trials and --repeats must be >= 1")
     ("study", ["--trials", "0"], "--trials: at least 1, got 0"),
     ("study", ["--repeats", "0"], "--repeats: at least 1, got 0"),
