@@ -16,3 +16,13 @@ def seed(text: str) -> int:
     if value < 0:
         raise argparse.ArgumentTypeError(f"a non-negative integer, got {value}")
     return value
+
+
+def check_counts(parser: argparse.ArgumentParser, args: argparse.Namespace,
+                 *options: str) -> None:
+    """Refuse (``parser.error``, exit 2) a count option below 1, right after parsing:
+    ``options`` are their flags (``"--trials"``, ``"-n"``), an unset one (None) passes."""
+    for option in options:
+        value = getattr(args, option.lstrip("-").replace("-", "_"))
+        if value is not None and value < 1:
+            parser.error(f"{option}: at least 1, got {value}")

@@ -23,7 +23,7 @@ from typing import Any
 
 import numpy as np
 
-from benchmarks.perf import seed
+from benchmarks.perf import check_counts, seed
 from benchmarks.study.outdir import OutputFile
 from hexapod.geometry import deltalab
 from hexapod.kinematics import Transform
@@ -107,8 +107,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     parser.add_argument("--overwrite", action="store_true",
                         help="replace --json even if hexapod-bench did not write it")
     args = parser.parse_args(argv)
-    if args.repeats < 1:
-        parser.error(f"--repeats: at least 1, got {args.repeats}")
+    check_counts(parser, args, "--repeats")
     for amplitude in args.noise:
         if not (math.isfinite(amplitude) and amplitude >= 0):
             parser.error(f"--noise: finite non-negative amplitudes in degrees, got {amplitude}")

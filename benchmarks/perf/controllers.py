@@ -30,7 +30,7 @@ from typing import Any
 
 import numpy as np
 
-from benchmarks.perf import seed
+from benchmarks.perf import check_counts, seed
 from controllers import registry
 from controllers.base import Controller, ControllerContext, Goal, Observation
 from controllers.data import CommandBatch, ObservationBatch
@@ -240,8 +240,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--arrays", action="store_true",
                         help="also time each controller's batch path on a batch of one")
     args = parser.parse_args(argv)
-    if args.steps < 1:
-        parser.error(f"--steps: at least 1, got {args.steps}")
+    check_counts(parser, args, "--steps")
     timings = time_controllers(args.names or None, args.steps, args.camera, args.seed,
                                hidden=args.hidden, arrays=args.arrays)
     sys.stdout.write(format_timings(timings, args.camera, args.hidden) + "\n")

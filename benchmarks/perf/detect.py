@@ -39,7 +39,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from benchmarks.perf import seed
+from benchmarks.perf import check_counts, seed
 from benchmarks.study.outdir import OutputDir
 from hexapod import deltalab
 from hexapod.outputs import check_replace, write_output
@@ -261,9 +261,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     p.add_argument("--overwrite", action="store_true",
                    help="replace pictures of those names that hexapod-bench did not write")
     args = p.parse_args(argv)
-    for name in ("frames", "repeats"):
-        if getattr(args, name) < 1:
-            p.error(f"--{name}: at least 1, got {getattr(args, name)}")
+    check_counts(p, args, "--frames", "--repeats")
     for name, unit in (("blur", "a blur sigma [px]"), ("noise", "a noise std [grey levels]")):
         value = getattr(args, name)
         if not (math.isfinite(value) and value >= 0):

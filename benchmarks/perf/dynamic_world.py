@@ -29,6 +29,8 @@ from typing import Any
 
 import numpy as np
 
+from benchmarks.perf import check_counts
+
 #: Goal and moonshot of the issue [us per trial per control period, 20 ms / 1 ms].
 GOAL_US = 20.0
 MOONSHOT_US = 5.0
@@ -109,9 +111,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     p.add_argument("--physics-dt", type=float, default=1.0, metavar="MS",
                    help="the dynamic world's physics step [ms] (default 1)")
     args = p.parse_args(argv)
-    for name, least in (("trials", 1), ("periods", 1), ("repeats", 1)):
-        if getattr(args, name) < least:
-            p.error(f"--{name}: at least {least}, got {getattr(args, name)}")
+    check_counts(p, args, "--trials", "--periods", "--repeats")
     if not args.physics_dt > 0:
         p.error(f"--physics-dt: a positive step in milliseconds, got {args.physics_dt}")
     base = load_scenario(args.scenario)

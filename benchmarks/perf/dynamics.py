@@ -39,7 +39,7 @@ from dataclasses import dataclass
 import numpy as np
 import pinocchio as pin
 
-from benchmarks.perf import seed
+from benchmarks.perf import check_counts, seed
 from hexapod import deltalab, sample_poses
 from hexapod.dynamics import DynamicModel
 from hexapod.dynamics import compiled as dyn_compiled
@@ -267,9 +267,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--energy", action="store_true",
                         help="also the energy drift of free motion over 1 s (RK4)")
     args = parser.parse_args(argv)
-    for option, value in (("-n", args.n), ("--repeats", args.repeats)):
-        if value < 1:
-            parser.error(f"{option}: at least 1, got {value}")
+    check_counts(parser, args, "-n", "--repeats")
     if args.mujoco:
         import importlib.util
 

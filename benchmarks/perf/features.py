@@ -16,7 +16,7 @@ from __future__ import annotations
 import argparse
 import sys
 
-from benchmarks.perf import seed
+from benchmarks.perf import check_counts, seed
 from benchmarks.perf.controllers import StepTiming, time_controllers
 
 #: Default module of the plugin feature (the worked example).
@@ -64,8 +64,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--seed", type=seed, default=0,
                         help="random seed of the observations (default 0)")
     args = parser.parse_args(argv)
-    if args.steps < 1:
-        parser.error(f"--steps: at least 1, got {args.steps}")
+    check_counts(parser, args, "--steps")
     rows = compare(args.module, args.attr, args.steps, args.seed)
     sys.stdout.write(format_comparison(rows) + "\n")
     ok = all(own.median_us <= LIMIT * ref.median_us and own.refused == 0

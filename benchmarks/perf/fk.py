@@ -12,7 +12,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from benchmarks.perf import seed
+from benchmarks.perf import check_counts, seed
 from hexapod import build_model, deltalab, forward_kinematics, inverse_kinematics, sample_poses
 from hexapod.fk import newton_kernel
 from hexapod.se3 import exp_so3, pose_error
@@ -98,8 +98,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--seed", type=seed, default=0,
                         help="random seed of the poses (default 0)")
     args = parser.parse_args(argv)
-    if args.n < 1:
-        parser.error(f"-n: at least 1, got {args.n}")
+    check_counts(parser, args, "-n")
     if args.what == "fk":
         print(format_fk(fk_figures(args.n, args.seed)))
     return 0

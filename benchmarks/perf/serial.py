@@ -28,7 +28,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from benchmarks.perf import seed
+from benchmarks.perf import check_counts, seed
 from hexapod import deltalab
 from hexapod.backends.emulator import FaultConfig
 from hexapod.backends.serial import SerialRobot
@@ -146,8 +146,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     """Run the benchmark and print the table; returns the exit status."""
     p = build_parser()
     args = p.parse_args(argv)
-    if args.periods < 1:
-        p.error(f"--periods: at least 1, got {args.periods}")
+    check_counts(p, args, "--periods")
     if not (math.isfinite(args.dt) and args.dt > 0):
         p.error(f"--dt: a positive control period in seconds, got {args.dt}")
     for rate in args.line_rate:

@@ -34,6 +34,8 @@ from typing import Any
 
 import numpy as np
 
+from benchmarks.perf import check_counts
+
 #: Goal of the issue [us per trial-step, batched engine].
 GOAL_US = 5.0
 
@@ -156,10 +158,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     p.add_argument("--breakdown", action="store_true",
                    help="also time the batched engine's stages (one more run per controller)")
     args = p.parse_args(argv)
-    if args.trials is not None and args.trials < 1:
-        p.error(f"--trials: at least 1, got {args.trials}")
-    if args.repeats < 1:
-        p.error(f"--repeats: at least 1, got {args.repeats}")
+    check_counts(p, args, "--trials", "--repeats")
     from benchmarks.study.commands import auto_chunk
     from benchmarks.study.scenario_checks import check_controllers
 

@@ -24,7 +24,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from benchmarks.perf import seed
+from benchmarks.perf import check_counts, seed
 from benchmarks.study.outdir import OutputFile
 from hexapod import deltalab, sample_poses
 from vision.cameras import Camera, front_camera, omni_camera
@@ -191,8 +191,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--overwrite", action="store_true",
                         help="replace --figure even if hexapod-bench did not write it")
     args = parser.parse_args(argv)
-    if args.poses < 1:
-        parser.error(f"--poses: at least 1, got {args.poses}")
+    check_counts(parser, args, "--poses")
     if args.points < MIN_POINTS:
         parser.error(f"--points: at least {MIN_POINTS} (the conic fit's least), got "
                      f"{args.points}")
