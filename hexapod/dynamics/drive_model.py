@@ -163,16 +163,15 @@ class DriveModel:
         bandwidth = stack("velocity_bandwidth")
         mass = np.broadcast_to(np.asarray(tuned_mass, float), (n, 6))
         self.kp, self.ki = tune_velocity_loop(mass, self.viscous, bandwidth)
-        #: (n, 6) the legs' speed limit in force mode [m/s] (None: none).
-        self.speed_limit: np.ndarray | None = None
+        #: (n, 6) the legs' speed limit in force mode [m/s] (infinite: none).
+        self.speed_limit = np.full((n, 6), np.inf)
         if speed_limit is not None:
             limit = np.asarray(speed_limit, float)
-            limit = np.array(np.broadcast_to(limit[:, None] if limit.ndim == 1 else limit,
-                                             (n, 6)))
+            limit = np.broadcast_to(limit[:, None] if limit.ndim == 1 else limit, (n, 6))
             if not (np.all(np.isfinite(limit)) and np.all(limit > 0)):
                 raise ValueError("speed_limit: expected finite positive leg speeds [m/s], "
                                  f"got {limit.min()} to {limit.max()}")
-            self.speed_limit = limit
+            self.speed_limit[:] = limit
         #: (n, 6) state of the integral action [N].
         self.integral = np.zeros((n, 6))
 
@@ -202,12 +201,9 @@ class DriveModel:
         friction = self.viscous[rows] * v + self.coulomb[rows] * np.tanh(x)
         kp = self.kp[rows]
         if self.mode == "force":  # the command, held to the speed limit (module docstring)
-            commanded = np.clip(setpoints, -limit, limit)
-            if self.speed_limit is None:
-                return DriveForces(commanded, friction, -d_friction,
-                                   np.abs(setpoints) >= limit)
             vmax = self.speed_limit[rows]
-            held = commanded - kp * (np.maximum(v - vmax, 0.0) + np.minimum(v + vmax, 0.0))
+            beyond = np.maximum(v - vmax, 0.0) + np.minimum(v + vmax, 0.0)
+            held = np.clip(setpoints, -limit, limit) - kp * beyond
             saturated = np.abs(held) >= limit  # the force applied at the limit
             governed = ((v > vmax) | (v < -vmax)) & ~saturated
             return DriveForces(np.clip(held, -limit, limit), friction,

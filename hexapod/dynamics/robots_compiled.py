@@ -189,7 +189,7 @@ def new_table(robots: Any) -> np.ndarray:
     x[:, L["E"]] = robots.E.reshape(n, 18)
     x[:, L["p"]] = robots.parameters
     for key, arr in (("kp", d.kp), ("ki", d.ki), ("limit", d.force_limit),
-                     ("speed_limit", np.inf if d.speed_limit is None else d.speed_limit),
+                     ("speed_limit", d.speed_limit),
                      ("rotor", robots.rotor), ("viscous", d.viscous), ("coulomb", d.coulomb),
                      ("motor", robots.forces), ("saturated_legs", robots.saturated_legs)):
         x[:, L[key]] = arr
