@@ -86,6 +86,8 @@ class Book:
         self.converged = np.zeros(n, dtype=bool)
         self.violations = np.zeros(n, dtype=int)
         self.refused = np.zeros(n, dtype=int)
+        #: Whether a refusal with a non-zero command was logged (once per run of a group).
+        self.warned_moving_refusal = False
         #: Each row's last refusal reason (while it is refusing).
         self.refusal: dict[int, str] = {}
         self.hidden = np.zeros(n, dtype=int)
@@ -199,14 +201,25 @@ class Book:
         too_many = refused & (self.refused[rows] >= MAX_REFUSED_STEPS)
         for j in np.flatnonzero(invalid & ~too_many):
             values = np.array2string(v[j], separator=", ", max_line_width=10**6)
-            self.failure[rows[j]] = (f"controller {self.label!r} returned a non-finite "
-                                     f"command at step {step}: {values}")
+            legs = np.flatnonzero(~np.isfinite(v[j])).tolist()
+            what = (f"a non-finite command for leg{'s' if len(legs) > 1 else ''} "
+                    f"{', '.join(map(str, legs))} ({', '.join(str(v[j, i]) for i in legs)})")
+            self.failure[rows[j]] = (f"controller {self.label!r} returned {what} at step "
+                                     f"{step}: {values}")
+            self.causes[int(rows[j])] = f"controller {self.label!r} returned {what}"
         for j in np.flatnonzero(too_many):
             self.failure[rows[j]] = f"controller refused to move: {reasons[j]}"
         failed = invalid | too_many
         if crashes:
             failed |= self._crashed(step, rows, crashes)
-        return ~failed, failed
+        moving = refused & ~failed & np.any(v != 0, axis=1)
+        if moving.any() and not self.warned_moving_refusal:
+            self.warned_moving_refusal = True
+            log.warning("%s: controller %r refused trial %d with a non-zero command at step "
+                        "%d; a refusal is a zero command (its values are not applied)",
+                        self.scenario, self.label, self.trials[int(rows[np.argmax(moving)])],
+                        step)
+        return ~failed & ~refused, failed
 
     def _crashed(self, step: int, rows: np.ndarray, crashes: dict[int, BaseException]
                  ) -> np.ndarray:

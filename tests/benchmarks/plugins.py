@@ -89,6 +89,28 @@ class NaNAtStep(ProportionalJoints):
         return cmd
 
 
+class RefusesMoving(ProportionalJoints):
+    """Refuses every period while it gives a command (a plugin that fills both)."""
+
+    name = "test-refuses-moving"
+
+    def step(self, observation: Observation) -> Command:
+        cmd = super().step(observation)
+        return Command(5.0 * cmd.velocities, reason="I refuse", error=cmd.error,
+                       error_norm=cmd.error_norm)
+
+
+class RefusesStill(ProportionalJoints):
+    """Refuses every period with a zero command (:class:`RefusesMoving`'s baseline)."""
+
+    name = "test-refuses-still"
+
+    def step(self, observation: Observation) -> Command:
+        cmd = super().step(observation)
+        return Command(np.zeros(6), reason="I refuse", error=cmd.error,
+                       error_norm=cmd.error_norm)
+
+
 #: Calls of :class:`CrashingBatch`'s ``step_batch`` in this process (not rerun: counted).
 BATCH_CALLS: list[int] = []
 

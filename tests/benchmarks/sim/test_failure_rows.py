@@ -72,9 +72,29 @@ def test_a_non_finite_command_names_the_controller_and_the_step_on_one_line(
     (the failure summary then grouped it trial by trial)."""
     rows = _rows(tmp_path, [NAN], engine=engine)
     for r in rows:
-        assert r["failure"].startswith(f"controller {NAN!r} returned a non-finite command at "
-                                       "step 3: ["), r["failure"]
-        assert "nan" in r["failure"] and "\n" not in r["failure"]
+        assert r["failure"].startswith(f"controller {NAN!r} returned a non-finite command for "
+                                       "leg 2 (nan) at step 3: ["), r["failure"]
+        assert "\n" not in r["failure"]
+        # the cause, without the step and the other legs' values: one kind for the report
+        assert r["cause"] == f"controller {NAN!r} returned a non-finite command for leg 2 (nan)"
+
+
+@pytest.mark.parametrize("engine", ["batched", "per-trial"])
+def test_a_refusal_is_a_zero_command_whatever_velocities_it_carries(
+        engine: str, tmp_path: Path, caplog: pytest.LogCaptureFixture) -> None:
+    moving = "tests.benchmarks.plugins:RefusesMoving"
+    still = "tests.benchmarks.plugins:RefusesStill"
+    with caplog.at_level("WARNING", logger="benchmarks.sim.book"):
+        rows = _rows(tmp_path, [moving, still], trials=2, engine=engine)
+    by = {(r["controller"], r["trial"]): r for r in rows}
+    for k in range(2):
+        m, s = by[(moving, k)], by[(still, k)]
+        assert m["failure"] == "controller refused to move: I refuse" == s["failure"]
+        assert m["steps"] == s["steps"]
+        # the robot did not move: the same final errors as with the zero command
+        assert m["final_position_error_mm"] == s["final_position_error_mm"] > 1.0
+    warned = [r.getMessage() for r in caplog.records if "non-zero command" in r.getMessage()]
+    assert warned and f"controller {moving!r} refused trial" in warned[0]
 
 
 @pytest.mark.parametrize("engine", ["batched", "per-trial"])
