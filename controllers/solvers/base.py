@@ -6,6 +6,8 @@ built them; per-trial constants (the QP's stroke window) come from :meth:`Solver
 
 from __future__ import annotations
 
+from typing import Any
+
 import numpy as np
 
 from controllers.base import ControllerContext
@@ -28,8 +30,16 @@ class Solver:
     #: What the batched step (:mod:`controllers.law_rows`) takes of the compiled core's
     #: classical solution without calling :meth:`solve`: ``"core"`` (it is this solver's
     #: answer at full rank), ``"bounds"`` (it is where it clears the limit QP's bounds)
-    #: or ``"none"`` (every row is solved by :meth:`solve`).
+    #: or ``"none"`` (every row is solved by :meth:`solve`). A subclass that defines its
+    #: own :meth:`solve` or :meth:`finish` and not this gets ``"none"``: the compiled
+    #: shortcut of the class it extends would pass over its code.
     core_acceptance: str = "none"
+
+    def __init_subclass__(cls, **kwargs: Any) -> None:
+        super().__init_subclass__(**kwargs)
+        own = vars(cls)
+        if ("solve" in own or "finish" in own) and "core_acceptance" not in own:
+            cls.core_acceptance = "none"
 
     @property
     def damping2(self) -> float:

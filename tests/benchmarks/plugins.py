@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from typing import Any
+
 import numpy as np
 
 from controllers.base import (
@@ -13,6 +15,8 @@ from controllers.base import (
     ObservationBatch,
 )
 from controllers.options import OptionSpec
+from controllers.qp import LegEdgeQPController
+from controllers.solvers.limit_qp import LimitQPSolver
 
 
 class ProportionalJoints(Controller):
@@ -151,3 +155,29 @@ class DeclaredOptions(ProportionalJoints):
 
     name = "test-declared"
     OPTIONS = (OptionSpec("gain", "float", 2.0, "1/s", "Gain of the leg-length servo."),)
+
+
+class SlowLegZeroQP(LimitQPSolver):
+    """The limit QP with one more limit of its own: leg 0 at most 30 mm/s (a solver
+    plugin that extends the built-in's ``solve``, as docs/plugins.md shows)."""
+
+    CAP = 0.03
+
+    def solve(self, N: np.ndarray, b: np.ndarray, lam: float, q: np.ndarray, J: np.ndarray,
+              pre: Any) -> Any:
+        tau, rank, cond, active, reason, qdot = super().solve(N, b, lam, q, J, pre)
+        qdot = J @ tau if qdot is None else qdot
+        if abs(qdot[0]) > self.CAP:  # the whole twist scaled down: leg 0 at the cap
+            tau, qdot = tau * (self.CAP / abs(qdot[0])), None
+            active = [*active, "leg 0 at 30 mm/s"]
+        return tau, rank, cond, active, reason, qdot
+
+
+class LegEdgeSlowLegZero(LegEdgeQPController):
+    """``leg-edge-qp`` with :class:`SlowLegZeroQP`."""
+
+    name = "test-leg-edge-slow-leg-0"
+
+    def __init__(self, **options: Any) -> None:
+        super().__init__(**options)
+        self.solver = SlowLegZeroQP(self.name, self.threshold)
