@@ -40,6 +40,7 @@ from controllers.model_directions import ModelDirections
 from controllers.plausible import implausible_lengths, stroke_of
 from controllers.solvers.base import Solver
 from controllers.solvers.pseudo_inverse import DampedPseudoInverse
+from controllers.tasks.feature_kind import BuiltinFeature
 
 
 class VisionLaw(VisionLawBatch):
@@ -218,6 +219,9 @@ class VisionLaw(VisionLawBatch):
         kernel.set("base_points", self.base_points)
         kernel.set("weights", self._goal_visible)
         self.kernel = kernel
+        #: Task rows of one feature block (a built-in's unit vector, a plugin leg's rows).
+        self.unit_rows = (feature.task_rows // feature.units
+                          if isinstance(feature, BuiltinFeature) else feature.rows)
         self._k_features = kernel.inputs["features"].reshape(self.observed_feature.shape)
         #: Every feature is visible in the goal (the batch's C may step the trial).
         self.goal_all_visible = bool(self._goal_visible.all())
@@ -387,7 +391,7 @@ class VisionLaw(VisionLawBatch):
         tau, rank, cond, active, reason, qdot = solved
         if reason is not None or rank < 6:
             if reason is None:
-                reason = (f"interaction matrix rank {rank} < 6 with {rows // 3} "
+                reason = (f"interaction matrix rank {rank} < 6 with {rows // self.unit_rows} "
                           f"{self.unit} (condition {cond:.3g})")
             return Command(np.zeros(6), error=e, error_norm=error_norm, rank=rank,
                            condition=cond, features_used=rows, reason=reason,

@@ -15,13 +15,14 @@ from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
+import casadi as ca
 import numpy as np
 import pytest
 
 from controllers import registry
 from controllers.base import ObservationBatch
 from controllers.exceptions import ContextError, OptionError
-from controllers.features import FeatureTask
+from controllers.features import FeatureTask, LegFeature, controllers_for
 from controllers.law_kernel import LawKernel
 from controllers.law_rows import ACCEPTED, REJECTED, LawRows
 from controllers.tasks import TaskState
@@ -552,3 +553,26 @@ def test_a_class_its_module_does_not_hold_is_copied_but_not_pickled() -> None:
     assert type(copy.deepcopy(ctrl)) is local.pinv
     with pytest.raises(pickle.PicklingError, match="PlatformJointPseudoInverse"):
         pickle.dumps(ctrl)
+
+
+class JointHeights(LegFeature):
+    """One row per leg: the platform joint's depth in the camera frame (it sees three of
+    the six degrees of freedom: rank 3 with every leg)."""
+
+    name = "joint-height"
+    rows = 1
+
+    def value(self, u: ca.SX, q: ca.SX, A: ca.SX) -> ca.SX:
+        return (A + q * u)[2]
+
+
+HEIGHTS = controllers_for(JointHeights())
+
+
+def test_a_rank_refusal_counts_the_legs_of_a_feature_of_any_size(world: World) -> None:
+    R1, t1 = _goal_pose(world.geometry)
+    ctrl = HEIGHTS.pinv()
+    ctrl.reset(world.context(world.goal(R1, t1), 0.02))
+    cmd = ctrl.step(world.observation(*home_pose(world.geometry)))
+    assert cmd.reason is not None and cmd.reason.startswith(
+        "interaction matrix rank 3 < 6 with 6 legs"), cmd.reason  # (it said 2 legs)
