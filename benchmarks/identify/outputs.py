@@ -191,15 +191,20 @@ def write_all(ident: Identification, out: Path, command: str, overwrite: bool) -
     """
     doc = document(ident, command)
     target = out / "identified.toml"
-    try:
-        text: str | None = toml_text(ident, command)
-        doc["identified_toml"] = "identified.toml"
-    except InertiaError as exc:  # not physical: no robot file to give
-        text = None
-        doc["identified_toml"] = None
-        # the estimate's value, not the robot file's (its path is not named: it is fine)
-        doc["identified_toml_refused"] = (f"not written: the estimate's {exc.field}: "
-                                          f"{exc.problem}")
+    text: str | None = None
+    doc["identified_toml"] = None
+    if not ident.estimate.converged:  # where the solver stopped is no estimate
+        doc["identified_toml_refused"] = (
+            "not written: the constrained solver did not converge (relative residual "
+            f"{ident.estimate.relative_residual:.3g})")
+    else:
+        try:
+            text = toml_text(ident, command)
+            doc["identified_toml"] = "identified.toml"
+        except InertiaError as exc:  # not physical: no robot file to give
+            # the estimate's value, not the robot file's (its path is not named: it is fine)
+            doc["identified_toml_refused"] = (f"not written: the estimate's {exc.field}: "
+                                              f"{exc.problem}")
     if text is None:
         check_replace(target, overwrite)  # (a user's file is refused, not deleted)
         target.unlink(missing_ok=True)  # no robot file of an older run left beside
@@ -209,8 +214,10 @@ def write_all(ident: Identification, out: Path, command: str, overwrite: bool) -
     write_output(out / "residuals.png", residual_png(ident), overwrite)
     write_output(out / "report.md", report_text(doc), overwrite)
     if text is None:  # (the other three written first: they say what was estimated)
+        why = doc["identified_toml_refused"].removeprefix("not written: ")
         raise IdentificationError(
-            f"{target}: not written: the estimate is not physical after the constrained "
-            f"fit ({doc['identified_toml_refused'].removeprefix('not written: ')}); "
-            f"{out}/report.md and identification.json say what was estimated")
+            f"{target}: not written: " + (why if not ident.estimate.converged else
+                                          "the estimate is not physical after the "
+                                          f"constrained fit ({why})")
+            + f"; {out}/report.md and identification.json say what was estimated")
     return doc

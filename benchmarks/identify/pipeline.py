@@ -124,8 +124,11 @@ def record_backend(backend: Any, robot: HexapodGeometry, excitation: Excitation,
         q = np.asarray(step.lengths, float)
         f = np.asarray(backend.measured_forces(), float)
         if f.shape != (6,) or not np.isfinite(f).all():
-            raise BackendError(f"sample {k} ({k * dt:.3f} s): the backend measured the "
-                               f"forces {f} [N], not six finite values; stopped")
+            what = (f"forces of shape {f.shape}, not six" if f.shape != (6,) else
+                    f"leg {int(np.argmin(np.isfinite(f)))}'s force as "
+                    f"{f[np.argmin(np.isfinite(f))]} [N] (forces {f})")
+            raise BackendError(f"sample {k} ({k * dt:.3f} s): the backend measured {what}; "
+                               "stopped")
         lengths.append(q)
         forces.append(f)
     if (problem := reading_problem(q, robot.stroke)) is not None:

@@ -102,7 +102,9 @@ def _combination(k: int, beta_row: np.ndarray, dependent: np.ndarray) -> str:
         if abs(coef) > COEFFICIENT_TOLERANCE:
             u_k, u_j = unit(STANDARD_NAMES[k]), unit(STANDARD_NAMES[j])
             scale = f" [{u_k}/{u_j}]" if u_k != u_j else ""
-            terms.append(f"{'+' if coef > 0 else '-'} {abs(coef):.6g}{scale} {STANDARD_NAMES[j]}")
+            size = f"{abs(coef):.6g}"  # (a coefficient of 1 is not written)
+            factor = "" if size == "1" and not scale else f"{size}{scale} "
+            terms.append(f"{'+' if coef > 0 else '-'} {factor}{STANDARD_NAMES[j]}")
     return " ".join(terms)
 
 

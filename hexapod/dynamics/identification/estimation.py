@@ -53,6 +53,8 @@ class Estimate:
         consistency: What the physical-consistency step did (one sentence each).
         unconstrained: (r,) the weighted least squares before any constraint (equal to
             ``theta`` when none was needed).
+        converged: False when the constrained solve did not converge (``theta`` is then
+            where it stopped: no estimate to give as a robot file).
     """
 
     theta: np.ndarray
@@ -65,6 +67,14 @@ class Estimate:
     standard: np.ndarray
     consistency: list[str] = field(default_factory=list)
     unconstrained: np.ndarray | None = None
+    converged: bool = True
+
+
+#: The smallest singular value of the column-scaled regressor, relative to its largest,
+#: that leaves every base parameter determined: beyond a condition of 1e8 the normal
+#: equations (condition squared) lose every digit and the covariance is noise (a record
+#: of heave alone, condition 8.8e8, gave NaN standard errors).
+MIN_SCALED_SINGULAR = 1e-8
 
 
 def _solve(W: np.ndarray, y: np.ndarray) -> np.ndarray:
@@ -112,8 +122,8 @@ def weighted_least_squares(Yb: np.ndarray, forces: np.ndarray, basis: BaseParame
                                   "base parameters: too few")
     norms = np.maximum(np.linalg.norm(W, axis=0), 1e-300)
     sv = np.linalg.svd(W / norms, compute_uv=False)
-    if sv[-1] < 1e-10 * sv[0]:
-        _, _, vt = np.linalg.svd(W / norms)
+    if sv[-1] < MIN_SCALED_SINGULAR * sv[0]:
+        _, _, vt = np.linalg.svd(W / norms, full_matrices=False)
         weakest = basis.names[int(np.argmax(np.abs(vt[-1])))]
         cond = f"{sv[0] / sv[-1]:.3g}" if sv[-1] > 0 else "infinite"
         raise IdentificationError(f"the excitation leaves a base parameter undetermined "
@@ -127,6 +137,7 @@ def weighted_least_squares(Yb: np.ndarray, forces: np.ndarray, basis: BaseParame
     yw = y / sigma[leg]
     theta = _solve(Ww, yw)
     consistency: list[str] = []
+    ok = True
     unconstrained = theta.copy()
     standard = basis.standard(theta, prior)
     problems = _physical_problems(standard, template, drives, q_min)
@@ -163,7 +174,8 @@ def weighted_least_squares(Yb: np.ndarray, forces: np.ndarray, basis: BaseParame
                     sigma_legs=np.sqrt(np.bincount(leg, rho**2, minlength=6) / dof),
                     residuals=residuals, condition=float(np.linalg.cond(Ww)),
                     relative_residual=float(np.linalg.norm(rho) / np.linalg.norm(y)),
-                    standard=standard, consistency=consistency, unconstrained=unconstrained)
+                    standard=standard, consistency=consistency, unconstrained=unconstrained,
+                    converged=ok)
 
 
 def moved_from_prior(basis: BaseParameters, standard: np.ndarray, prior: np.ndarray) -> list[int]:

@@ -6,8 +6,8 @@ about the home orientation) follow Swevers' periodic series of period ``T = 1 / 
     p_j(t) = s * sum_k ( a_jk sin(k w t) - b_jk (cos(k w t) - 1) ) / (k w),
 
 faded in over its first period by a quintic step (the robot starts at rest at home).
-The shape ``(a, b)`` is chosen by a stochastic search (random starts, then a (1+1)
-evolution strategy for a time budget) to minimise the condition number of the
+The shape ``(a, b)`` is chosen by a stochastic search (a fixed number of random
+starts, each refined by a (1+1) evolution strategy) to minimise the condition number of the
 base regressor (columns scaled to unit norm, stacked over one period), each candidate
 scaled by ``s`` to the largest amplitude that keeps every leg within its stroke (minus
 a margin), below a fraction of the speed limit and of the force limit (forces from the

@@ -78,9 +78,11 @@ def samples(geometry: HexapodGeometry, time_step: float, lengths: np.ndarray,
     if q.ndim != 2 or q.shape[1] != 6 or f.shape != q.shape:
         raise IdentificationError(f"lengths and forces: expected two (N, 6) arrays, got "
                                   f"{q.shape} and {f.shape}")
-    if not (np.all(np.isfinite(q)) and np.all(np.isfinite(f))):
-        bad = int(np.argwhere(~(np.isfinite(q) & np.isfinite(f)))[0, 0])
-        raise IdentificationError(f"non-finite length or force at sample {bad}")
+    for name, values, unit in (("length", q, "m"), ("force", f, "N")):
+        if not np.all(np.isfinite(values)):
+            k, leg = (int(x) for x in np.argwhere(~np.isfinite(values))[0])
+            raise IdentificationError(f"sample {k}: the {name} of leg {leg} is "
+                                      f"{values[k, leg]} [{unit}], not a finite value")
     nyquist = 0.5 / time_step
     if not 0 < cutoff_hz < nyquist:
         raise IdentificationError(f"cutoff {cutoff_hz} Hz must be in (0, {nyquist:g}) Hz "

@@ -28,7 +28,8 @@ class ForceRobot(Backend):
 
     Args:
         geometry: The robot (its true one: the same file).
-        args: ``""``, ``"nan-at=K"`` or ``"mm"``.
+        args: ``""``, ``"nan-at=K"``, ``"force-nan-at=K"`` (leg 2's force NaN from step
+            ``K`` on) or ``"mm"``.
     """
 
     simulated = True
@@ -41,6 +42,8 @@ class ForceRobot(Backend):
         self.max_speed = geometry.max_speed
         self.nan_at = int(args.split("=")[1]) if args.startswith("nan-at=") else None
         self.mm = args == "mm"
+        self.force_nan_at = (int(args.split("=")[1]) if args.startswith("force-nan-at=")
+                             else None)
         self.steps = 0
         R, t = home_pose(geometry)
         self._robots = DynamicRobots([geometry], R[None].copy(), t[None].copy())
@@ -73,8 +76,12 @@ class ForceRobot(Backend):
         return q * 1e3 if self.mm else q
 
     def measured_forces(self) -> np.ndarray:
-        """The drives' forces at the end of the last step [N]."""
-        return np.asarray(self._robots.forces[0], float).copy()
+        """The drives' forces at the end of the last step [N] (leg 2's NaN from step
+        ``force_nan_at``)."""
+        f = np.asarray(self._robots.forces[0], float).copy()
+        if self.force_nan_at is not None and self.steps >= self.force_nan_at:
+            f[2] = np.nan
+        return f
 
     def halt(self) -> None:
         ForceRobot.halts.append(f"halted after {self.steps} steps")

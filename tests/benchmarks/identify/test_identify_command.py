@@ -110,6 +110,24 @@ def test_an_estimate_that_stays_unphysical_writes_no_robot_file_but_says_why(
 
 
 @pytest.mark.slow
+def test_a_constrained_fit_that_did_not_converge_writes_no_robot_file(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """Encoders of 100 um leave the constrained fit unconverged: where SLSQP stopped
+    (it wrote a 18 g platform and 1e-7 kg rotors, exit 0) is no robot file to give."""
+    assert main(["identify", "deltalab", "--out", str(tmp_path), "--duration", "2",
+                 "--search-candidates", "2", "--encoder-resolution", "100"]) == 2
+    err = capsys.readouterr().err
+    assert "identified.toml: not written: the constrained solver did not converge" in err
+    assert not (tmp_path / "identified.toml").exists()
+    doc = json.loads((tmp_path / "identification.json").read_text())
+    assert doc["identified_toml"] is None
+    assert "the constrained solver did not converge" in doc["consistency"]
+    assert "did not converge" in doc["identified_toml_refused"]
+    assert "No robot file written (identified.toml): the constrained solver did not " \
+           "converge" in (tmp_path / "report.md").read_text()
+
+
+@pytest.mark.slow
 def test_identify_refuses_to_replace_a_users_file(tmp_path: Path,
                                                   capsys: pytest.CaptureFixture[str]) -> None:
     (tmp_path / "identified.toml").write_text("name = 'mine'\n")
@@ -251,4 +269,17 @@ def test_a_reading_that_cannot_be_the_robots_stops_the_run_before_any_command_fr
     err = capsys.readouterr().err
     assert says in err and "stopped, nothing commanded from it" in err
     assert ForceRobot.halts == [f"halted after {steps} steps"]
+    assert not (tmp_path / "identified.toml").exists()
+
+
+def test_a_force_reading_that_is_not_a_number_names_its_leg(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    from tests.benchmarks.identify.force_robot import ForceRobot
+
+    ForceRobot.halts.clear()
+    assert main(["identify", "deltalab", "--backend", f"{FORCE_ROBOT}:force-nan-at=200",
+                 "--out", str(tmp_path), "--duration", "4", "--search-candidates", "2"]) == 2
+    err = capsys.readouterr().err
+    assert "sample 199 (0.199 s): the backend measured leg 2's force as nan [N]" in err, err
+    assert ForceRobot.halts == ["halted after 200 steps"]
     assert not (tmp_path / "identified.toml").exists()

@@ -19,7 +19,7 @@ def test_base_parameters_of_the_deltalab() -> None:
     assert b.size == 31
     assert set(b.unidentifiable) == {"m_b", "Ia_b", "Ia_r"}
     assert b.names[0] == "m_p + 6 m_r"
-    assert "It_r + 1 It_b" in b.names
+    assert "It_r + It_b" in b.names  # (no coefficient 1 written)
     assert all(f"rotor_{i}" in b.names and f"coulomb_{i}" in b.names for i in range(6))
 
 

@@ -129,6 +129,30 @@ def test_an_excitation_at_rest_is_refused_naming_the_weakest_parameter() -> None
                                nominal.drives)
 
 
+def test_a_record_of_heave_alone_is_refused_not_given_nan_errors() -> None:
+    """Measured lengths of the platform moving up and down only (every leg the same 5 mm
+    sine at 0.5 Hz, 6 s at 1 kHz) and the holding forces: most base parameters are
+    confounded (scaled condition about 9e8). It was accepted with NaN standard errors
+    and a -3792 kg platform under the constraints."""
+    from hexapod.dynamics.identification.processing import samples
+    from hexapod.workspace import home_pose
+
+    g = preset("deltalab")
+    b = base_parameters(g)
+    R0, t0 = home_pose(g)
+    time = np.arange(6000) * 1e-3
+    home = np.linalg.norm(t0 + g.platform_points @ R0.T - g.base_points, axis=1)
+    lengths = home + 0.005 * np.sin(2 * np.pi * 0.5 * time)[:, None]
+    forces = 6.359 + 0.01 * np.random.default_rng(1).standard_normal((6000, 6))
+    s = samples(g, 1e-3, lengths, forces)
+    Y, _, _ = regressor(g, s.R, s.t, s.twist, s.acc)
+    prior = standard_vector(g.inertia, g.drives)
+    with pytest.raises(IdentificationError, match=r"undetermined \(condition [0-9.e+]+\); "
+                                                  "weakest"):
+        weighted_least_squares(b.columns(Y), s.forces, b, prior, g.inertia, g.drives,
+                               s.mask(), q_min=g.stroke[0])
+
+
 def test_too_few_or_bad_data_are_refused() -> None:
     nominal, _truth, b, Y = _data(n=10)
     prior = standard_vector(nominal.inertia, nominal.drives)

@@ -21,8 +21,14 @@ def test_bad_records_are_refused() -> None:
         samples(g, 1e-3, q, np.zeros((3000, 5)))
     bad = q.copy()
     bad[1234, 3] = np.inf
-    with pytest.raises(IdentificationError, match="sample 1234"):
+    with pytest.raises(IdentificationError, match=r"sample 1234: the length of leg 3 is "
+                                                  r"inf \[m\]"):
         samples(g, 1e-3, bad, np.zeros_like(q))
+    forces = np.zeros_like(q)
+    forces[2345, 1] = np.nan
+    with pytest.raises(IdentificationError, match=r"sample 2345: the force of leg 1 is nan "
+                                                  r"\[N\]"):
+        samples(g, 1e-3, q, forces)
 
 
 def test_a_platform_at_rest_has_zero_twist_and_acceleration() -> None:
