@@ -90,7 +90,7 @@ class Layout:
                               f"{row.strides[-1]} bytes): the layout has {self.size}, "
                               "contiguous")
         # the last axis is contiguous: splitting a block of it is a view, never a copy
-        return row[..., self[block]].reshape(*row.shape[:-1], *self.shapes[block])
+        return row[..., self[block]].reshape((*row.shape[:-1], *self.shapes[block]))
 
     def views(self, row: np.ndarray) -> dict[str, np.ndarray]:
         """Every block's :meth:`view` of ``row`` (write into them to fill the row)."""

@@ -281,7 +281,8 @@ class _Unit:
         keep = [k for k in range(len(setups)) if k not in out]
         if len(keep) < len(setups):
             group = [setups[k] for k in keep]
-            sensor = GeometricSensor.of_trials(sc, group)
+            if group:  # (none left: each trial's failure row says why, not an IndexError)
+                sensor = GeometricSensor.of_trials(sc, group)
         else:
             group = setups
         if group:
