@@ -164,3 +164,18 @@ def test_a_batch_failing_before_its_first_step_is_rerun_trial_by_trial(
     assert rows[1]["steps"] == 0 and rows[1]["final_position_error_mm"] is None
     assert rows[1]["failure"] == "RuntimeError: deliberate reset failure"
     assert rows[0]["steps"] > 0 and rows[2]["steps"] > 0
+
+
+def test_a_group_whose_goals_all_fail_gives_each_trial_its_cause(
+        tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """No trial of the batch has a goal to measure: each row says why (a sensor of no
+    trial was built first, and its IndexError replaced every cause)."""
+    from benchmarks.sim import stepper
+
+    def no_goals(sc: object, sensor: object, setups: list) -> list[Exception]:
+        return [RuntimeError(f"no goal for trial {s.trial}") for s in setups]
+
+    monkeypatch.setattr(stepper, "_goals", no_goals)
+    rows = _rows(tmp_path, [JOINTS], trials=3)
+    assert sorted(r["failure"] for r in rows) == [
+        f"RuntimeError: no goal for trial {k}" for k in range(3)], rows
