@@ -293,8 +293,13 @@ class Controller(RemembersOptions, ABC):
                 f"{cls.__qualname__}: defines reset(context) but no step(observation): a "
                 "controller of one trial defines both (a batch one step_batch, or "
                 "reset_trial and step_trial)")
-        raise NotImplementedError(f"{cls.__qualname__}: defines neither reset_batch "
-                                  "nor reset_trial")
+        if cls.step is not Controller.step:  # a per-trial plugin's step, without reset
+            raise NotImplementedError(
+                f"{cls.__qualname__}: defines step(observation) but no reset(context): a "
+                "controller of one trial defines both (reset reads the trial's goal and "
+                "parameters)")
+        raise NotImplementedError(f"{cls.__qualname__}: defines neither reset(context) "
+                                  "with step(observation), nor reset_batch with step_batch")
 
     def step_trial(self, observation: Observation) -> Command:
         """The command of this instance's trial (never raises for bad measurements)."""

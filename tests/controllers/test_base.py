@@ -351,3 +351,18 @@ def test_a_per_trial_plugin_without_step_is_told_so() -> None:
     with pytest.raises(NotImplementedError,
                        match=r"NoStep: defines reset\(context\) but no step\(observation\)"):
         NoStep().reset_trial(_contexts(1)[0])  # what the batch's reset calls per trial
+
+
+def test_a_per_trial_plugin_without_reset_is_told_so() -> None:
+    """The opposite slip: a step and no reset was told it 'defines neither reset_batch nor
+    reset_trial', names the author never wrote."""
+
+    class NoReset(Controller):
+        name = "no-reset"
+
+        def step(self, observation: Observation) -> Command:  # type: ignore[misc]
+            return Command.refuse("never called")
+
+    with pytest.raises(NotImplementedError,
+                       match=r"NoReset: defines step\(observation\) but no reset\(context\)"):
+        NoReset().reset_trial(_contexts(1)[0])
