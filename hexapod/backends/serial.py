@@ -156,8 +156,12 @@ class SerialRobot(SerialLink, Backend):
             self.stroke = limits.stroke
             self.max_speed = limits.max_speed
             code, text = self._read_error()
-            if code:
+            if code == protocol.ErrorCode.HALTED:  # the last session's HLT: as expected
                 logger.info("%s: cleared a pending error %d (%s)", url, code, text)
+            elif code:  # a fault, a watchdog trip: the user is told (clearing is not fixing)
+                logger.warning("%s: the board held error %d (%s) when the session "
+                               "connected: cleared with ERR?; check the robot before it "
+                               "moves", url, code, text)
             protocol.parse_ok(self._exchange(protocol.wdt(self.watchdog)), "WDT")
             # servo off until the first MOV: the watchdog cannot trip before it
             protocol.parse_ok(self._exchange("SVO 0"), "SVO 0")

@@ -534,3 +534,23 @@ def test_a_failed_write_says_so_once(robot: SerialRobot, emulator: Emulator) -> 
     assert "write failed: [Errno 5]" in text and text.count("write failed") == 1, text
     robot.close()  # its HLT's flush on the dead terminal: termios.error, which it raised
     assert not robot.is_open
+
+
+def test_a_fault_latched_before_the_session_connects_is_a_warning(
+        emulator: Emulator, caplog: pytest.LogCaptureFixture) -> None:
+    """A drive fault left on the board (by an earlier session, a crash) is cleared with
+    ERR? when the session connects, and the user is told (it was logged at INFO, which
+    the CLI does not show); the last session's HLT (error 10) stays quiet."""
+    emulator.board._set_error(protocol.ErrorCode.WATCHDOG, "watchdog (a crashed session)")
+    with caplog.at_level("INFO", logger="hexapod.backends.serial"):
+        SerialRobot(emulator.device, timeout=0.2, watchdog=0.1).close()
+    warned = [r for r in caplog.records if r.levelname == "WARNING"
+              and "when the session connected" in r.getMessage()]
+    assert len(warned) == 1 and "error 20 (watchdog (a crashed session))" in \
+        warned[0].getMessage()
+    caplog.clear()
+    emulator.board._set_error(protocol.ErrorCode.HALTED)
+    with caplog.at_level("INFO", logger="hexapod.backends.serial"):
+        SerialRobot(emulator.device, timeout=0.2, watchdog=0.1).close()
+    assert not [r for r in caplog.records if r.levelname == "WARNING"], caplog.records
+    assert any("cleared a pending error 10" in r.getMessage() for r in caplog.records)
