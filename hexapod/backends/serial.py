@@ -52,6 +52,8 @@ from hexapod.link_errors import (
 )
 
 logger = logging.getLogger(__name__)
+#: Watchdog re-arms of one ``MOV`` at most (each after a lost reply's timeout or a stall).
+REARMS_IN_A_ROW = 3
 
 __all__ = ["SerialRobot"]
 
@@ -257,22 +259,29 @@ class SerialRobot(SerialLink, Backend):
             self._last_mov = time.perf_counter()
 
     def _send_mov(self, setpoints: np.ndarray) -> None:
+        """Send a ``MOV``; a refusal by the tripped watchdog after the host was idle for
+        longer than its period (a stall, a lost reply's timeout) is cleared with ``ERR?``
+        and the ``MOV`` sent again, as often as that holds, at most
+        :data:`REARMS_IN_A_ROW` times for one ``MOV`` (a second lost reply in the same
+        period ended the session)."""
         self._arm()
         payload = protocol.mov(setpoints)
-        try:
-            self._checked(payload, protocol.parse_ok)
-        except WatchdogError:
-            self.watchdog_trips += 1
-            idle = time.perf_counter() - self._last_mov
-            if not self.rearm_watchdog or idle <= self.watchdog:
-                raise
-            code, text = self._read_error()
-            self.watchdog_rearms += 1
-            logger.warning("%s: the board's watchdog tripped (no MOV for %.0f ms, more than "
-                           "its %.0f ms; the legs held): cleared with ERR? (%d %s) and the "
-                           "MOV sent again (trip %d)", self.url, idle * 1e3,
-                           self.watchdog * 1e3, code, text, self.watchdog_trips)
-            self._checked(payload, protocol.parse_ok)
+        for rearm in range(REARMS_IN_A_ROW + 1):
+            try:
+                self._checked(payload, protocol.parse_ok)
+                break
+            except WatchdogError:
+                self.watchdog_trips += 1
+                idle = time.perf_counter() - self._last_mov
+                if (not self.rearm_watchdog or idle <= self.watchdog
+                        or rearm == REARMS_IN_A_ROW):
+                    raise
+                code, text = self._read_error()
+                self.watchdog_rearms += 1
+                logger.warning("%s: the board's watchdog tripped (no MOV for %.0f ms, more "
+                               "than its %.0f ms; the legs held): cleared with ERR? (%d %s) "
+                               "and the MOV sent again (trip %d)", self.url, idle * 1e3,
+                               self.watchdog * 1e3, code, text, self.watchdog_trips)
         self._last_mov = time.perf_counter()
 
     def _check_lengths(self, lengths: np.ndarray) -> np.ndarray:

@@ -554,3 +554,29 @@ def test_a_fault_latched_before_the_session_connects_is_a_warning(
         SerialRobot(emulator.device, timeout=0.2, watchdog=0.1).close()
     assert not [r for r in caplog.records if r.levelname == "WARNING"], caplog.records
     assert any("cleared a pending error 10" in r.getMessage() for r in caplog.records)
+
+
+def test_two_lost_mov_replies_in_one_period_are_both_survived(
+        emulator: Emulator, monkeypatch: pytest.MonkeyPatch) -> None:
+    """The board executes MOV 3 and loses its reply; the host's retry after the timeout
+    is refused (watchdog 20), cleared with ERR? and sent again, and that reply is lost
+    too: a second re-arm, not the end of the session (it raised WatchdogError)."""
+    from hexapod.backends.emulator_server import EmulatorServer
+
+    movs = [0]
+    original = EmulatorServer._command
+
+    def dropping(self: EmulatorServer, line: bytes, overlong: bool = False) -> None:
+        if line.startswith(b"MOV"):
+            movs[0] += 1
+            if movs[0] in (3, 5):  # executed, reply lost
+                with self._lock:
+                    self.board.handle_line(line, time.monotonic())
+                return
+        original(self, line, overlong)
+
+    monkeypatch.setattr(EmulatorServer, "_command", dropping)
+    with SerialRobot(emulator.device, timeout=0.2, watchdog=0.1, timeout_retries=1) as r:
+        for _ in range(6):
+            r.step(np.full(6, 0.001), DT)
+        assert movs[0] >= 8 and r.watchdog_rearms == r.watchdog_trips == 2
