@@ -298,11 +298,14 @@ def halt_and_close(robot: Any) -> list[str]:
     return failed
 
 
-def halt_on_open(url: str, acknowledged: bool) -> str:
+def halt_on_open(url: str, acknowledged: bool | None) -> str:
     """What a backend whose link opened but whose controller failed to connect (no answer
     to its first question) did on the way out: the ``halt_detail`` its exception carries,
     which a servo session records (the robot was never connected, yet it was sent ``HLT``:
-    a board that hears but cannot answer still stops)."""
+    a board that hears but cannot answer still stops). ``acknowledged`` None: the
+    ``HLT`` could not be written (a broken pipe, a closed port)."""
+    if acknowledged is None:
+        return f"{url}: HLT could not be sent on the way out (the link failed)"
     return f"{url}: HLT sent on the way out, {'' if acknowledged else 'not '}acknowledged"
 
 

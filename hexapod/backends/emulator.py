@@ -21,6 +21,7 @@ from __future__ import annotations
 import argparse
 import logging
 import math
+import os
 import select
 import signal
 import subprocess
@@ -105,8 +106,12 @@ class EmulatorProcess:
                      else config_to_args(config or BoardConfig(), faults))
         args = [sys.executable, "-m", "hexapod.backends.emulator", *where, *described,
                 "--line-rate", repr(line_rate)]
+        # its own process group: a Ctrl-C at the terminal reaches the host, which halts
+        # the robot through it, and not the emulator (it died first, the halt unconfirmed);
+        # it ends with the host all the same (CHILD_OF below)
         self.proc = subprocess.Popen(args, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
-                                     text=True)
+                                     text=True, process_group=0,
+                                     env={**os.environ, CHILD_OF: str(os.getpid())})
         if self.proc.stdout is None:
             raise BackendError("hexapod-emulator: no stdout")
         ready, _, _ = select.select([self.proc.stdout], [], [], startup_timeout)
@@ -152,8 +157,9 @@ class EmulatorProcess:
 # ============================================================================ command line
 def _parse_tcp(text: str) -> tuple[str, int]:
     host, sep, port = text.rpartition(":")
-    if not sep or not port.isdigit():
-        raise argparse.ArgumentTypeError(f"expected HOST:PORT, got '{text}'")
+    if not sep or not port.isdigit() or int(port) > 65535:
+        raise argparse.ArgumentTypeError(f"expected HOST:PORT (a port of 0 to 65535), got "
+                                         f"'{text}'")
     return host.strip("[]") or "127.0.0.1", int(port)
 
 
@@ -335,6 +341,23 @@ def gcs_config_from_args(args: argparse.Namespace) -> tuple[GcsConfig, FaultConf
     return config, _faults_from_args(args)
 
 
+#: Set by :class:`EmulatorProcess` to the host's process id: the emulator then ends with
+#: the host however the host ends (Linux), being out of its process group.
+CHILD_OF = "HEXAPOD_EMULATOR_CHILD_OF"
+
+
+def _end_with_parent() -> None:
+    """Ask Linux for SIGTERM when the host that started this emulator ends."""
+    parent = os.environ.pop(CHILD_OF, None)
+    if parent is None or not sys.platform.startswith("linux"):
+        return
+    import ctypes
+
+    ctypes.CDLL(None, use_errno=True).prctl(1, int(signal.SIGTERM))  # PR_SET_PDEATHSIG
+    if str(os.getppid()) != parent:  # the host ended before this line
+        os.kill(os.getpid(), signal.SIGTERM)
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     """Console script ``hexapod-emulator``: serve a board (or, with ``--gcs``, a GCS hexapod
     controller) until Ctrl-C or SIGTERM.
@@ -344,6 +367,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     """
     parser = build_parser()
     args = parser.parse_args(argv)
+    _end_with_parent()
     logging.basicConfig(level=args.log_level, stream=sys.stderr,
                         format="%(asctime)s %(name)s %(levelname)s: %(message)s")
     transport = "pty" if args.tcp is None else "tcp"

@@ -84,6 +84,13 @@ class BoardConfig:
             raise BackendError(f"emulator max_speed must be positive, got {self.max_speed} m/s")
         if not (math.isfinite(self.lag) and self.lag >= 0):
             raise BackendError(f"emulator lag must be >= 0, got {self.lag} s")
+        try:  # the reply to *IDN? must be a line of the protocol
+            protocol.frame(f"IDN {self.identity}")
+        except ProtocolError as exc:
+            raise BackendError(f"emulator identity must be printable ASCII that fits a "
+                               f"{protocol.MAX_LINE}-byte line with 'IDN ' and its checksum "
+                               f"({protocol.MAX_LINE - 8} characters at most), got "
+                               f"{len(self.identity)} characters ({exc.problem})") from None
         ms = self.watchdog * 1000.0
         if not protocol.WATCHDOG_MIN_MS <= ms <= protocol.WATCHDOG_MAX_MS:
             raise BackendError(

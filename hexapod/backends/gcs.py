@@ -382,14 +382,19 @@ class GcsHexapod(Backend):
                     "fk_s": fk_s, "slack_s": slack, "vmo_refused": float(not ok)})
 
     # ------------------------------------------------------------------ stopping
-    def _try_halt(self) -> bool:
+    def _try_halt(self) -> bool | None:
         """Send ``HLT`` and read ``ERR?`` (error 10 confirms it and is cleared); never
-        raises. True when confirmed."""
+        raises. True when confirmed, False when sent and not confirmed, None when it could
+        not be written."""
         if self._closed:
-            return False
+            return None
         try:
             self._link.discard_input()
             self._link.write(gp.encode("HLT", "ERR?"), "HLT")
+        except (GcsLinkError, GcsReplyError) as exc:
+            logger.warning("%s: HLT could not be sent (%s)", self.url, exc)
+            return None
+        try:
             deadline = time.perf_counter() + self.timeout
             for _ in range(8):  # answers still on their way are skipped
                 answer = self._link.read_answer("HLT", deadline)

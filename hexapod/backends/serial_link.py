@@ -156,13 +156,18 @@ class SerialLink:
                 self._flush_input()
 
     # ------------------------------------------------------------------ stopping
-    def _try_halt(self) -> bool:
-        """Send HLT once, ignoring a stale reply; True if the board acknowledged it."""
+    def _try_halt(self) -> bool | None:
+        """Send HLT once, ignoring a stale reply; True if the board acknowledged it, False
+        if it was sent but not acknowledged, None if it could not be written."""
         if self._closed:
-            return False
+            return None
         try:
             self._flush_input()
             self._write("HLT")
+        except (SerialLinkError, ProtocolError) as exc:
+            logger.warning("%s: HLT could not be sent (%s)", self.url, exc)
+            return None
+        try:
             deadline = time.perf_counter() + self.timeout
             for _ in range(4):
                 try:

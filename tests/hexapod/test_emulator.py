@@ -553,3 +553,20 @@ def test_cli_names_a_bad_robot_option_in_its_own_units(args: list[str], says: st
     with pytest.raises(BackendError) as exc:
         config_from_args(build_parser().parse_args(["--pty", *args]))
     assert str(exc.value) == says
+
+
+def test_an_identity_too_long_for_a_line_or_a_port_out_of_range_is_refused(
+        capsys: pytest.CaptureFixture[str]) -> None:
+    """Both crashed the emulator with a traceback (the identity at the first ``*IDN?``,
+    after the device was printed); they are refused naming the option, exit 2."""
+    from hexapod.backends.emulator import main
+
+    assert main(["--pty", "--identity", "x" * 249]) == 2
+    err = capsys.readouterr().err
+    assert "hexapod-emulator: error: emulator identity must be printable ASCII that fits " \
+           "a 256-byte line" in err and "(248 characters at most), got 249" in err
+    BoardConfig(identity="x" * 248)  # the longest that fits
+    with pytest.raises(SystemExit) as info:
+        main(["--tcp", "127.0.0.1:99999"])
+    assert info.value.code == 2
+    assert "argument --tcp: expected HOST:PORT (a port of 0 to 65535)" in capsys.readouterr().err

@@ -580,3 +580,21 @@ def test_two_lost_mov_replies_in_one_period_are_both_survived(
         for _ in range(6):
             r.step(np.full(6, 0.001), DT)
         assert movs[0] >= 8 and r.watchdog_rearms == r.watchdog_trips == 2
+
+
+def test_a_halt_that_could_not_be_written_is_not_called_sent() -> None:
+    """A TCP board busy with another client closes the second connection: its open fails,
+    and the HLT on the way out cannot be written (a broken pipe). The error's halt detail
+    said "HLT sent on the way out, not acknowledged"; now that it could not be sent."""
+    from hexapod.backends.emulator import EmulatorProcess
+    from hexapod.link_errors import SerialDisconnectedError
+
+    proc = EmulatorProcess(BoardConfig.from_geometry(deltalab(), Q0), transport="tcp")
+    try:
+        with SerialRobot(proc.url, timeout=0.2), \
+                pytest.raises(SerialDisconnectedError) as info:
+            SerialRobot(proc.url, timeout=0.2)
+        assert getattr(info.value, "halt_detail", None) == (
+            f"{proc.url}: HLT could not be sent on the way out (the link failed)")
+    finally:
+        proc.stop()
