@@ -285,6 +285,21 @@ def _base_points(args: argparse.Namespace, geometry: HexapodGeometry, camera: An
     return np.asarray(base_points, float)
 
 
+def _robot_file_slips(geometry: Any, spec: str) -> None:
+    """What ``check`` says of a robot file's unit slips, before anything is opened:
+    warnings on stderr, and a refusal for joints no leg can reach.
+
+    Raises:
+        BenchmarkError: Joints within 2 mm of their centre (points in metres).
+    """
+    from benchmarks.study.setup_check import Where, unit_slips
+
+    for problem in unit_slips(geometry, Where(strokes=f"stroke_mm in {spec}")):
+        if problem.severity == "error":
+            raise BenchmarkError(f"--geometry {spec}: {problem.text}")
+        print(f"warning: {problem.text}", file=sys.stderr)
+
+
 def _teach(args: argparse.Namespace, geometry: HexapodGeometry, camera: Any,
            start: np.ndarray | None, status: StatusLine, guard: SignalGuard) -> int:
     from hexapod.fk import forward_kinematics
@@ -368,6 +383,7 @@ def _run(args: argparse.Namespace, guard: SignalGuard) -> int:
                                 getattr(args, "simulated_camera_on_real_robot", False))
     check_camera_spec(args.camera)
     geometry = robot_geometry(args.geometry)
+    _robot_file_slips(geometry, args.geometry)
     camera = camera_model(args.camera_file, args.camera_pose, geometry)
     start = None if args.start_mm is None else np.asarray(args.start_mm, float) * 1e-3
     if start is not None:

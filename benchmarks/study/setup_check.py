@@ -281,7 +281,7 @@ def check_setup(geometry: HexapodGeometry, camera: Any, max_translation_mm: floa
         problems.append(Problem("error", (
             f"empty workspace, no home pose: {why}{metres}; change {where.strokes}, or "
             f"{where.points}")))
-    problems += _unit_slips(geometry, where)
+    problems += unit_slips(geometry, where)
     if not out_legs:
         problems += _legs_crossing(geometry, R0, t0, where)
     R, t = random_box_poses(geometry, WORKSPACE_SAMPLES, 1e-3 * max_translation_mm,
@@ -363,10 +363,16 @@ def _legs_crossing(geometry: HexapodGeometry, R0: np.ndarray, t0: np.ndarray,
 MIN_JOINT_RADIUS = 0.002
 
 
-def _unit_slips(geometry: HexapodGeometry, where: Where) -> list[Problem]:
-    """Warnings for values no hexapod has, which metres typed into a millimetre key
-    give: a leg radius under 1 mm, a leg speed limit under 0.1 mm/s (slow precision
-    hexapods move at a fraction of a millimetre per second); and an error for joints
+#: The fastest leg speed limit [m/s] a hexapod file is taken to mean (the fastest motion
+#: simulators' legs move at about 1 m/s; micrometres per second typed into
+#: ``max_speed_mm_s`` give a thousand times the speed).
+MAX_LEG_SPEED = 2.0
+
+
+def unit_slips(geometry: HexapodGeometry, where: Where) -> list[Problem]:
+    """Warnings for values no hexapod has, which a unit slip gives: a leg radius under
+    1 mm, a leg speed limit under 0.1 mm/s (slow precision hexapods move at a fraction
+    of a millimetre per second) or over :data:`MAX_LEG_SPEED`; and an error for joints
     within :data:`MIN_JOINT_RADIUS` of their centre (the base's or the platform's points
     in metres: no leg can reach them, every trial would fail)."""
     out = []
@@ -387,6 +393,11 @@ def _unit_slips(geometry: HexapodGeometry, where: Where) -> list[Problem]:
         out.append(Problem("warning", f"leg speed limit {geometry.max_speed * 1e3:g} mm/s: "
                            "given in m/s? max_speed_mm_s is in millimetres per second; "
                            f"check max_speed_mm_s in {robot}", "robot"))
+    if geometry.max_speed > MAX_LEG_SPEED:
+        out.append(Problem("warning", f"leg speed limit {geometry.max_speed * 1e3:g} mm/s "
+                           f"(over {MAX_LEG_SPEED:g} m/s): given in micrometres per second? "
+                           f"max_speed_mm_s is in millimetres per second; check "
+                           f"max_speed_mm_s in {robot}", "robot"))
     return out
 
 

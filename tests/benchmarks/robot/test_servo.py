@@ -546,3 +546,35 @@ def test_a_camera_that_sees_no_edge_at_the_goal_is_named_not_the_goal(
     assert code == 2, err
     assert f"the camera sees no leg edge at the goal pose: change [camera_from_base] in {camera}" \
         in err
+
+
+def test_a_robot_files_unit_slips_are_said_before_the_robot_is_contacted(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """``check``'s warnings of a robot file, on the command that moves hardware: a speed
+    limit in micrometres per second (50000 "mm/s": emulated legs moved at 50 m/s without
+    a word) is warned about; joints in metres are refused before the port is opened (by
+    the robot file's own check, which ``check``'s error repeats)."""
+    import tomli_w
+
+    from hexapod.geometry import preset
+
+    table = preset("deltalab").to_dict()
+    goal = _goal(tmp_path, f"lengths_mm = {_mm(GOAL_MM)}\n")
+    fast = tmp_path / "fast.toml"
+    fast.write_text(tomli_w.dumps({**table, "max_speed_mm_s": 50000.0}))
+    code = servo.main(["--backend", NO_ROBOT, *SIM_ON_HARDWARE, "--geometry", str(fast),
+                       "--goal", str(goal)])
+    err = capsys.readouterr().err
+    assert "warning: leg speed limit 50000 mm/s (over 2 m/s): given in micrometres per " \
+           f"second? max_speed_mm_s is in millimetres per second; check max_speed_mm_s in " \
+           f"{fast}" in err, err
+    assert code == 2 and "nonexistent" in err  # a warning: the session went on to the port
+    metres = tmp_path / "metres.toml"
+    metres.write_text(tomli_w.dumps({**table, **{k: (np.asarray(table[k]) * 1e-3).tolist()
+                                                 for k in ("base_points_mm",
+                                                           "platform_points_mm")}}))
+    code = servo.main(["--backend", NO_ROBOT, *SIM_ON_HARDWARE, "--geometry", str(metres),
+                       "--goal", str(goal)])
+    err = capsys.readouterr().err
+    assert code == 2 and f"{metres}: base_points_m" in err and "metres where millimetres" in err
+    assert "nonexistent" not in err, "refused before the port is opened"
