@@ -68,12 +68,19 @@ class BackendInfo:
     description: str
 
 
+def _no_arguments(name: str) -> Callable[[str], object]:
+    """The ``validate`` of a backend that takes no arguments."""
+    def validate(args: str) -> None:
+        if args:
+            raise BackendPluginError(name, "hexapod-vs", f"takes no arguments, got {args!r}")
+    return validate
+
+
 def _open_emulator(args: str, geometry: HexapodGeometry, start: np.ndarray | None) -> Backend:
     """A firmware emulator on a pseudo-terminal, driven through the serial backend."""
     from hexapod.backends.serial_emulated import open_emulated_robot
 
-    if args:
-        raise BackendPluginError("emulator", "hexapod-vs", f"takes no arguments, got {args!r}")
+    _no_arguments("emulator")(args)
     robot = open_emulated_robot(geometry, start)
     return started(robot, start)
 
@@ -82,19 +89,43 @@ def _open_sim(args: str, geometry: HexapodGeometry, start: np.ndarray | None) ->
     """An ideal simulated robot (leg lengths integrate the clamped commands)."""
     from hexapod.backends.sim import SimulatedRobot
 
-    if args:
-        raise BackendPluginError("sim", "hexapod-vs", f"takes no arguments, got {args!r}")
+    _no_arguments("sim")(args)
     return SimulatedRobot(geometry, start)
 
 
-def _open_serial(args: str, geometry: HexapodGeometry, start: np.ndarray | None) -> Backend:
-    """A robot controller board speaking the project's serial protocol (serial:URL)."""
-    from hexapod.backends.serial import SerialRobot
+def serial_url(args: str) -> tuple[str, int]:
+    """The port URL and baud rate of ``serial:URL[?baud=N]`` (115200 by default; other
+    query options of a pyserial URL, ``socket://HOST:PORT?logging=debug``, stay in it).
 
-    if not args:
+    Raises:
+        BackendPluginError: No URL, or a baud rate that is not a positive integer.
+    """
+    from hexapod.backends import protocol
+
+    url, sep, query = args.partition("?")
+    if not url:
         raise BackendPluginError("serial", "hexapod-vs", "needs a URL: serial:/dev/ttyUSB0 or "
                                  "serial:socket://HOST:PORT")
-    robot = SerialRobot(args)
+    baud, kept = protocol.BAUDRATE, []
+    for item in query.split("&") if sep else []:
+        key, _, value = item.partition("=")
+        if key != "baud":
+            kept.append(item)
+        elif not value.isdigit() or int(value) <= 0:
+            raise BackendPluginError("serial", "hexapod-vs", f"baud: expected a positive "
+                                     f"integer (e.g. ?baud=57600), got {value!r}")
+        else:
+            baud = int(value)
+    return (f"{url}?{'&'.join(kept)}" if kept else url), baud
+
+
+def _open_serial(args: str, geometry: HexapodGeometry, start: np.ndarray | None) -> Backend:
+    """A robot controller board speaking the project's serial protocol
+    (``serial:URL[?baud=N]``)."""
+    from hexapod.backends.serial import SerialRobot
+
+    url, baud = serial_url(args)
+    robot = SerialRobot(url, baudrate=baud)
     return started(robot, start)
 
 
@@ -320,10 +351,12 @@ def _version(package: str) -> str:
 
 #: The process-wide backend registry.
 backends = BackendRegistry()
-backends.register("sim", _open_sim, simulated=True)
-backends.register("emulator", _open_emulator, simulated=True)
+backends.register("sim", _open_sim, simulated=True, validate=_no_arguments("sim"))
+backends.register("emulator", _open_emulator, simulated=True,
+                  validate=_no_arguments("emulator"))
 backends.register("serial", _open_serial,
-                  needs_args="serial:URL, e.g. serial:/dev/ttyUSB0 or serial:socket://HOST:PORT")
+                  needs_args="serial:URL, e.g. serial:/dev/ttyUSB0 or serial:socket://HOST:PORT",
+                  validate=serial_url)
 def _gcs_options(args: str) -> object:
     from hexapod.backends.gcs_config import GcsOptions
 

@@ -598,3 +598,31 @@ def test_a_halt_that_could_not_be_written_is_not_called_sent() -> None:
             f"{proc.url}: HLT could not be sent on the way out (the link failed)")
     finally:
         proc.stop()
+
+
+def test_a_serial_spec_takes_its_baud_rate_and_refuses_a_bad_one() -> None:
+    """``serial:URL?baud=N`` (a board at another rate could not be used from the command
+    line: the whole text was taken as the device's path)."""
+    from hexapod.backends.registry import backends, serial_url
+    from hexapod.exceptions import BackendError
+
+    assert serial_url("/dev/ttyUSB0") == ("/dev/ttyUSB0", 115200)
+    assert serial_url("/dev/ttyUSB0?baud=57600") == ("/dev/ttyUSB0", 57600)
+    assert serial_url("socket://h:5?logging=debug&baud=9600") == ("socket://h:5?logging=debug",
+                                                                 9600)
+    for bad in ("/dev/ttyUSB0?baud=fast", "/dev/ttyUSB0?baud=0", "/dev/x?baud="):
+        with pytest.raises(BackendError, match=r"baud: expected a positive integer"):
+            backends.check(f"serial:{bad}")  # before anything is opened
+    for name in ("sim", "emulator"):
+        with pytest.raises(BackendError, match=rf"{name}.*takes no arguments, got 'x'"):
+            backends.check(f"{name}:x")
+
+
+def test_a_board_at_another_baud_rate_is_reached_through_the_spec(emulator: Emulator) -> None:
+    from hexapod.backends.registry import open_backend
+
+    robot = open_backend(f"serial:{emulator.device}?baud=57600", deltalab())
+    try:
+        assert robot._port.baudrate == 57600  # type: ignore[attr-defined]
+    finally:
+        robot.close()
