@@ -182,6 +182,12 @@ class Registry:
         from controllers.base import Controller  # base imports this module
 
         factory = self.factory(name)
+        if (isinstance(factory, type) and not issubclass(factory, Controller)
+                and not all(callable(getattr(factory, a, None)) for a in ("reset", "step"))):
+            raise PluginLoadError(name, self._info[name].package,
+                                  f"{factory.__qualname__} is not a controller class (a "
+                                  "controllers.base.Controller, or a class with reset() and "
+                                  "step()), nor a function that makes one")
         ctrl = factory(**options)
         if not isinstance(ctrl, Controller):
             for attr in ("reset", "step"):

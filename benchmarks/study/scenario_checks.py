@@ -8,6 +8,7 @@ lengths within the strokes)."""
 from __future__ import annotations
 
 import math
+import re
 from collections.abc import Collection
 from dataclasses import replace
 from pathlib import Path
@@ -53,6 +54,27 @@ def option_origin(source: str, spec: ControllerSpec, option: str, default: str
     key = spec.option_keys.get(option, default)
     file, sep, rest = key.partition(": ")
     return (file, rest) if sep and rest.startswith('controllers."') else (source, key)
+
+
+#: A keyword argument a class or function does not take, as Python says it.
+_UNEXPECTED = re.compile(r"got an unexpected keyword argument '(\w+)'")
+
+
+def _unexpected_option(source: str, spec: ControllerSpec, table: Any, where: str,
+                       exc: TypeError) -> ScenarioError:
+    """An open controller's refusal of an option it hands on (``TypeError``), in the
+    words of a closed one's: the key as written, the controller's own options and the
+    close one (it named the fallback law's ``__init__``, with no suggestion)."""
+    found = _UNEXPECTED.search(str(exc))
+    if found is None or found[1] not in spec.options:
+        return ScenarioError(source, f"{spec.name}: {exc}", key=where)
+    option = found[1]
+    path, key = option_origin(source, spec, option, f"{where}.{option}")
+    return ScenarioError(
+        path, f"controller '{spec.name}' takes no option '{option}' (nor does the law it "
+        f"hands further options to); its options: {', '.join(table.names) or 'none'} "
+        f"(hexapod-bench list --options {spec.name})", key=key,
+        suggestion=suggest(option, table.names))
 
 
 def check_option_names(source: str, spec: ControllerSpec, table: Any, where: str) -> None:
@@ -245,7 +267,7 @@ def check_controllers(sc: Scenario) -> tuple[Scenario, list[str]]:
             path, key = option_origin(sc.source, spec, exc.option, f"{where}.{exc.option}")
             raise ScenarioError(path, f"{spec.name}: {exc.problem}", key=key) from None
         except TypeError as exc:  # an option the factory (or the law it wraps) does not take
-            raise ScenarioError(sc.source, f"{spec.name}: {exc}", key=where) from None
+            raise _unexpected_option(sc.source, spec, table, where, exc) from None
         kind = actuation_of(ctrl)
         if kind not in accepted:
             try:

@@ -80,13 +80,24 @@ def _reduce_ex(self: Any, protocol: Any) -> Any:
 
 def _generated(module: str, name: str) -> type[Any] | None:
     """The generated controller class named ``name`` that ``module`` holds at its top
-    level, itself or in a :class:`FeatureControllers` (None: none)."""
+    level, itself or in a :class:`FeatureControllers` (None: none).
+
+    Raises:
+        LookupError: Two features of the module share the name (their controllers too).
+    """
+    found: list[type[Any]] = []
     for value in list(vars(importlib.import_module(module)).values()):
         for cls in value.all() if isinstance(value, FeatureControllers) else (value,):
             if (isinstance(cls, type) and getattr(cls, "__reduce_ex__", None) is _reduce_ex
-                    and getattr(cls, "name", None) == name):
-                return cls
-    return None
+                    and getattr(cls, "name", None) == name and cls not in found):
+                found.append(cls)
+    if len(found) > 1:
+        features = sorted({type(cls.feature).__name__ for cls in found})
+        raise LookupError(f"controller {name!r}: module {module} makes it from "
+                          f"{len(features)} features of one name ({', '.join(features)}): "
+                          "give each feature of a module its own name (it names its "
+                          "controllers)")
+    return found[0] if found else None
 
 
 def _instance_of(module: str, name: str) -> Any:

@@ -84,8 +84,8 @@ class MPCLaw(PredictiveLaw):
         drive_state: Where the lag model starts: ``"measured"`` (the default),
             ``"encoders"`` or ``"model"`` (an ablation: :mod:`controllers.mpc.drive_state`,
             ``docs/results.md``, "Slow velocity drives").
-        law_options: Further options of the fallback QP law (e.g. the leg-edge laws'
-            ``edge_feature``).
+        law_options: Further options of the fallback QP law (``edge_feature`` for the
+            leg-edge law's; a plugin feature's QP law takes none).
     """
 
     #: The one-step QP law of the same features (fallback).

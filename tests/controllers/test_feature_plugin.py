@@ -576,3 +576,17 @@ def test_a_rank_refusal_counts_the_legs_of_a_feature_of_any_size(world: World) -
     cmd = ctrl.step(world.observation(*home_pose(world.geometry)))
     assert cmd.reason is not None and cmd.reason.startswith(
         "interaction matrix rank 3 < 6 with 6 legs"), cmd.reason  # (it said 2 legs)
+
+
+def test_two_features_of_one_name_in_a_module_are_named_when_pickled(world: World) -> None:
+    """It was pickle's own 'attribute lookup JointQP on ... failed', naming neither."""
+    import pickle
+
+    from tests.controllers.plugin_feature_clash import DEPTHS
+
+    ctrl = DEPTHS.qp()
+    ctrl.reset(world.context(world.goal(*_goal_pose(world.geometry)), 0.02))
+    with pytest.raises(LookupError, match=r"controller 'joint-qp': module "
+                       r"tests\.controllers\.plugin_feature_clash makes it from 2 features "
+                       r"of one name \(Depths, Joints\): give each feature"):
+        pickle.dumps(ctrl)

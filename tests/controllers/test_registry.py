@@ -199,6 +199,10 @@ def test_module_attr_spec() -> None:
     assert ctrl.name == "joint-space"
     with pytest.raises(PluginLoadError):
         registry.factory("controllers.joint:NoSuchController")
+    # a class that is not a controller is named so (it was built first: "Command.__init__()
+    # missing 1 required positional argument: 'velocities'")
+    with pytest.raises(PluginLoadError, match=r"Command is not a controller class"):
+        registry.create("controllers.base:Command")
 
 
 def test_step_before_reset_refuses() -> None:

@@ -150,3 +150,21 @@ def test_a_wrappers_misspelt_law_option_names_the_options_file(tmp_path: Path) -
     with pytest.raises(ScenarioError, match="has no option 'adaptive_gian'") as info:
         apply_options_file([sc], load_options_file(f))
     assert str(f) in str(info.value) and info.value.suggestion == "adaptive_gain"
+
+
+def test_a_typo_in_an_open_controllers_option_is_named_with_the_close_one(
+        tmp_path: Path) -> None:
+    """The MPC hands options it does not declare to its fallback law: a typo was refused
+    by that law's ``__init__`` ('LegEdgeQPController.__init__() got an unexpected keyword
+    argument'), with no key and no suggestion."""
+    from benchmarks.study.preflight import preflight
+    from benchmarks.study.scenario import load_scenario
+
+    f = tmp_path / "s.toml"
+    f.write_text('name = "s"\ncontrollers = [{name = "leg-edge-mpc", horizn = 3}]\n')
+    with pytest.raises(ScenarioError) as info:
+        preflight([load_scenario(f)])
+    msg = str(info.value)
+    assert "key 'controllers[0].horizn'" in msg and str(f) in msg
+    assert "controller 'leg-edge-mpc' takes no option 'horizn'" in msg
+    assert "did you mean 'horizon'" in msg and "__init__" not in msg
