@@ -9,6 +9,7 @@ from pathlib import Path
 
 import numpy as np
 
+from benchmarks.exceptions import BenchmarkError
 from hexapod.geometry import HexapodGeometry
 
 #: The longest excitation ``--duration`` takes [s] (its 1 kHz record is held in memory).
@@ -40,26 +41,58 @@ def add_arguments(s: argparse.ArgumentParser) -> None:
                    help="replace a user's files of the same names in --out")
 
 
-def load_robot(name: str) -> HexapodGeometry:
-    """A robot file, a preset, or a scenario's robot."""
-    from hexapod.exceptions import GeometryError
+#: The robot presets ``identify`` takes by name.
+PRESETS = ("deltalab",)
+
+
+def load_robot(name: str, option: str = "ROBOT_OR_SCENARIO") -> HexapodGeometry:
+    """A robot file, a preset, or a scenario's robot (``option``: where it was given).
+
+    Raises:
+        BenchmarkError: None of the three, naming the option, every choice and the close
+            one.
+    """
+    from benchmarks.study.scenario import builtin_scenarios, load_scenario
+    from hexapod.config import KIND_MARKERS, load_toml, suggest
     from hexapod.geometry import preset
 
     path = Path(name)
-    if path.suffix != ".toml":
-        try:
-            return preset(name)
-        except GeometryError:
-            pass
+    if name in PRESETS:
+        return preset(name)
     if path.suffix == ".toml" and path.exists():
-        from hexapod.config import load_toml
-
-        if "base_points_mm" in load_toml(path):
+        table = load_toml(path)  # a robot file's own key, or any (from_toml names a missing one)
+        if any(k in table for k in KIND_MARKERS["robot file"]) and "controllers" not in table:
             return HexapodGeometry.from_toml(path)
+    elif name not in builtin_scenarios():
+        choices = [*PRESETS, *sorted(builtin_scenarios())]
+        hint = suggest(name, choices)
+        raise BenchmarkError(f"{option} {name!r}: no such robot file, preset or built-in "
+                             f"scenario; presets: {', '.join(PRESETS)}; scenarios: "
+                             f"{', '.join(choices[len(PRESETS):])}"
+                             + (f" (did you mean '{hint}'?)" if hint else ""))
     from benchmarks.sim.world import load_geometry
-    from benchmarks.study.scenario import load_scenario
 
     return load_geometry(load_scenario(name))
+
+
+#: How far the mass moving with the platform may be from the robot file's before the
+#: command says so (a factor: CAD masses are within tens of percent, a unit slip is 1000).
+MASS_FACTOR = 3.0
+
+
+def mass_slip(doc: dict) -> str | None:
+    """A warning when the identified mass moving with the platform (``m_p + 6 m_r``) is
+    more than :data:`MASS_FACTOR` times off the robot file's: forces in other units than
+    newtons (kN gave a thousand times too light a robot, silently), or another robot."""
+    mass = doc["base_parameters"][0]
+    if mass["name"] != "m_p + 6 m_r" or not mass["prior"] > 0:
+        return None
+    ratio = mass["estimate"] / mass["prior"]
+    if 1 / MASS_FACTOR <= ratio <= MASS_FACTOR:
+        return None
+    return (f"the identified m_p + 6 m_r is {mass['estimate']:.4g} kg, {ratio:.3g} times the "
+            f"robot file's {mass['prior']:.4g} kg: forces in other units than newtons (kN, "
+            "mN, a current without its gain), or another robot than the file's?")
 
 
 def run(args: argparse.Namespace) -> int:
@@ -105,7 +138,7 @@ def run(args: argparse.Namespace) -> int:
     for name in OUTPUTS:  # before the run: a user's file is refused at once
         check_replace(Path(args.out) / name, args.overwrite, "--overwrite")
     robot = load_robot(args.robot)
-    truth = load_robot(args.truth) if args.truth else None
+    truth = load_robot(args.truth, "--truth") if args.truth else None
     settings = Settings(duration=args.duration, seed=args.seed,
                         force_noise=args.force_noise / 100,
                         resolution=(args.encoder_resolution * 1e-6
@@ -145,6 +178,8 @@ def run(args: argparse.Namespace) -> int:
     con.print(t)
     for line in ident.estimate.consistency:
         con.print(f"consistency: {line}")
+    if (slip := mass_slip(doc)) is not None:
+        con.print(f"warning: {slip}", markup=False, highlight=False)
     con.print(f"residual sigma per leg {np.round(ident.estimate.sigma_legs, 4).tolist()} N; "
               f"{time.perf_counter() - t0:.1f} s; wrote {args.out}/identified.toml, "
               "identification.json, report.md, residuals.png")

@@ -118,8 +118,11 @@ def weighted_least_squares(Yb: np.ndarray, forces: np.ndarray, basis: BaseParame
         raise IdentificationError("non-finite regressor or forces (a bad sample)")
     counts = np.bincount(leg, minlength=6)
     if m < 2 * r or np.any(counts < 2 * r / 6):
-        raise IdentificationError(f"{m} leg equations (per leg {counts.tolist()}) for {r} "
-                                  "base parameters: too few")
+        raise IdentificationError(
+            f"{m} leg equations (per leg {counts.tolist()}) for {r} base parameters: too "
+            f"few, at least {2 * r} and {int(np.ceil(2 * r / 6))} per leg (the samples of a "
+            "leg at rest or slower than the mask's speed, 2 mm/s by default, are left out "
+            "for the Coulomb model): a longer or a livelier record")
     norms = np.maximum(np.linalg.norm(W, axis=0), 1e-300)
     sv = np.linalg.svd(W / norms, compute_uv=False)
     if sv[-1] < MIN_SCALED_SINGULAR * sv[0]:

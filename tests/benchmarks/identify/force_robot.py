@@ -29,7 +29,7 @@ class ForceRobot(Backend):
     Args:
         geometry: The robot (its true one: the same file).
         args: ``""``, ``"nan-at=K"``, ``"force-nan-at=K"`` (leg 2's force NaN from step
-            ``K`` on) or ``"mm"``.
+            ``K`` on), ``"mm"`` or ``"kN"`` (the forces in kilonewtons).
     """
 
     simulated = True
@@ -44,6 +44,7 @@ class ForceRobot(Backend):
         self.mm = args == "mm"
         self.force_nan_at = (int(args.split("=")[1]) if args.startswith("force-nan-at=")
                              else None)
+        self.force_unit = 1e3 if args == "kN" else 1.0
         self.steps = 0
         R, t = home_pose(geometry)
         self._robots = DynamicRobots([geometry], R[None].copy(), t[None].copy())
@@ -78,7 +79,7 @@ class ForceRobot(Backend):
     def measured_forces(self) -> np.ndarray:
         """The drives' forces at the end of the last step [N] (leg 2's NaN from step
         ``force_nan_at``)."""
-        f = np.asarray(self._robots.forces[0], float).copy()
+        f = np.asarray(self._robots.forces[0], float) / self.force_unit
         if self.force_nan_at is not None and self.steps >= self.force_nan_at:
             f[2] = np.nan
         return f

@@ -283,3 +283,44 @@ def test_a_force_reading_that_is_not_a_number_names_its_leg(
     assert "sample 199 (0.199 s): the backend measured leg 2's force as nan [N]" in err, err
     assert ForceRobot.halts == ["halted after 200 steps"]
     assert not (tmp_path / "identified.toml").exists()
+
+
+def test_a_robot_that_is_none_of_the_three_is_named_with_the_choices(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """A mistyped preset lost its suggestion, the list left presets out, --truth was not
+    named, and a robot file without base_points_mm was read as a scenario (its error
+    listed scenario keys)."""
+    import tomli_w
+
+    out = str(tmp_path / "out")
+    assert main(["identify", "deltalabb", "--out", out]) == 2
+    err = capsys.readouterr().err
+    assert "ROBOT_OR_SCENARIO 'deltalabb': no such robot file, preset or built-in " \
+           "scenario; presets: deltalab; scenarios: " in err and "(did you mean 'deltalab'?)" in err
+    assert main(["identify", "deltalab", "--truth", "nonexist.toml", "--out", out]) == 2
+    assert "--truth 'nonexist.toml': no such robot file" in capsys.readouterr().err
+    table = preset("deltalab").to_dict()
+    del table["base_points_mm"]
+    nobase = tmp_path / "nobase.toml"
+    nobase.write_text(tomli_w.dumps(table))
+    assert main(["identify", str(nobase), "--out", out]) == 2
+    assert f"{nobase}: key 'base_points_mm': missing required key" in capsys.readouterr().err
+
+
+@pytest.mark.slow
+def test_forces_in_kilonewtons_are_warned_about(tmp_path: Path,
+                                                capsys: pytest.CaptureFixture[str]) -> None:
+    """A backend reporting kN: the estimate is a thousand times too light; it was written
+    with exit 0 and no word (the residual printed as 0.0 N)."""
+    from benchmarks.identify.command import mass_slip
+
+    assert main(["identify", "deltalab", "--backend", f"{FORCE_ROBOT}:kN", "--out",
+                 str(tmp_path), "--duration", "4", "--search-candidates", "2"]) == 0
+    out = capsys.readouterr().out
+    assert "warning: the identified m_p + 6 m_r is" in out and "times the robot file's" in out
+    assert "forces in other units than newtons" in out
+    doc = json.loads((tmp_path / "identification.json").read_text())
+    ratio = doc["base_parameters"][0]["estimate"] / doc["base_parameters"][0]["prior"]
+    assert 0.0005 < ratio < 0.002
+    assert mass_slip({"base_parameters": [{"name": "m_p + 6 m_r", "estimate": 3.1,
+                                           "prior": 3.2}]}) is None  # the reference run

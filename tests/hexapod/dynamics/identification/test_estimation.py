@@ -156,7 +156,9 @@ def test_a_record_of_heave_alone_is_refused_not_given_nan_errors() -> None:
 def test_too_few_or_bad_data_are_refused() -> None:
     nominal, _truth, b, Y = _data(n=10)
     prior = standard_vector(nominal.inertia, nominal.drives)
-    with pytest.raises(IdentificationError, match="too few"):
+    with pytest.raises(IdentificationError, match=r"too few, at least 62 and 11 per leg "
+                                                  r"\(the samples of a leg at rest or slower "
+                                                  r".*a longer or a livelier record"):
         weighted_least_squares(b.columns(Y)[:3], np.zeros((3, 6)), b, prior,
                                nominal.inertia, nominal.drives)
     forces = np.zeros((10, 6))
