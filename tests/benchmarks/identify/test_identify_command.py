@@ -114,9 +114,16 @@ def test_a_constrained_fit_that_did_not_converge_writes_no_robot_file(
         tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     """Encoders of 100 um leave the constrained fit unconverged: where SLSQP stopped
     (it wrote a 18 g platform and 1e-7 kg rotors, exit 0) is no robot file to give."""
+    from benchmarks.identify.command import COARSE_ENCODER
+
     assert main(["identify", "deltalab", "--out", str(tmp_path), "--duration", "2",
                  "--search-candidates", "2", "--encoder-resolution", "100"]) == 2
-    err = capsys.readouterr().err
+    captured = capsys.readouterr()
+    err = captured.err
+    # coarse encoders are warned about before the run (the DeltaLab's own are fine)
+    assert "warning: encoders of 100 um: the 50 Hz filter is chosen for 1 um ones" in \
+        captured.out
+    assert float(preset("deltalab").drives.encoder_resolution.max()) <= COARSE_ENCODER
     assert "identified.toml: not written: the constrained solver did not converge" in err
     assert not (tmp_path / "identified.toml").exists()
     doc = json.loads((tmp_path / "identification.json").read_text())
