@@ -42,7 +42,8 @@ def check_option(flag: str, value: float | None, low: float = 0.0, *, strict: bo
     if value is None or ((value > low if strict else value >= low)
                          and (not finite or math.isfinite(value))):
         return
-    need = "positive" if strict and low == 0 else f">= {low:g}"
+    need = ("positive" if strict and low == 0 else f">= {low:g}") + (" and finite" if finite
+                                                                    else "")
     raise BenchmarkError(f"{flag} must be {need}{note}, got {value}")
 
 

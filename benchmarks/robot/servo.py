@@ -236,8 +236,11 @@ def parse_options(items: list[str]) -> dict[str, Any]:
 def _check_args(args: argparse.Namespace) -> None:
     check_dt(args.dt)
     check_option("--max-steps", args.max_steps, 1, strict=False)
-    if not args.tolerance_mm > 0 or not args.feature_tolerance > 0:
-        raise BenchmarkError("--tolerance-mm and --feature-tolerance must be positive")
+    check_option("--tolerance-mm", args.tolerance_mm, finite=True)
+    check_option("--feature-tolerance", args.feature_tolerance, finite=True)
+    if getattr(args, "confirm", False) and not sys.stdin.isatty():
+        raise BenchmarkError("--confirm asks y/N on a terminal and stdin is not one: refused "
+                             "before anything is opened")
     check_option("--settle", args.settle, 1, strict=False)
     check_option("--teach-frames", args.teach_frames, 1, strict=False)
     check_option("--seed", args.seed, 0, strict=False)

@@ -42,7 +42,7 @@ def test_a_backend_that_does_not_clamp_fails_with_exit_1(
 @pytest.mark.parametrize(("argv", "fragment"), [
     (["serial:/nonexistent/port"], "is real hardware: the check drives its legs through "
                                    "their whole stroke; add --move-real-robot"),
-    (["sim", "--tolerance-um", "-1"], "--tolerance-um must be >= 0, got -1"),
+    (["sim", "--tolerance-um", "-1"], "--tolerance-um must be >= 0 and finite, got -1"),
     (["sim", "--periods", "0"], "--periods must be >= 1, got 0"),
     (["simm"], "simm"),
 ])

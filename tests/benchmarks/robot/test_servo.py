@@ -282,6 +282,10 @@ def test_unknown_controller_suggests_the_closest(
     (["-o", "gian=2"], "gian"),
     (["--start-mm", "415", "415", "415", "415", "415", "900"], "--start-mm: leg 5: 900.000 mm"),
     (["--teach", "--teach-frames", "0"], "--teach-frames must be >= 1, got 0"),
+    # which option, and what is wrong with inf (it said "must be positive, got inf")
+    (["--tolerance-mm", "nan"], "--tolerance-mm must be positive and finite, got nan"),
+    (["--feature-tolerance", "0"], "--feature-tolerance must be positive and finite, got 0"),
+    (["--halt-timeout-s", "inf"], "--halt-timeout-s must be positive and finite, got inf"),
 ])
 def test_bad_options_exit_2(tmp_path: Path, capsys: pytest.CaptureFixture[str],
                             extra: list[str], fragment: str) -> None:

@@ -327,16 +327,15 @@ def test_an_exception_in_the_controller_halts_with_the_internal_code(
 def test_confirm_refuses_without_a_terminal(
         tmp_path: Path, caplog: pytest.LogCaptureFixture,
         capsys: pytest.CaptureFixture[str]) -> None:
+    """Known before anything is opened: refused then, with no record and the robot not
+    contacted (the port was opened, the plan printed, then HLT sent)."""
     code, out = _run(tmp_path, caplog, "--confirm")
-    stdout = capsys.readouterr().out
-    assert code == 2, stdout
-    assert "planned move: start [415.0," in stdout
-    assert "largest leg travel 2.500 mm (leg 0)" in stdout
-    assert "--confirm asks y/N on a terminal" in stdout
-    rec = final(out)
-    assert rec["exit_code"] == 2 and rec["moved"] is False
-    # the lengths read and printed at the start are recorded (they were null)
-    assert rec["start_lengths_mm"][0] == 415.0 and len(rec["start_lengths_mm"]) == 6
+    captured = capsys.readouterr()
+    assert code == 2, captured
+    assert "--confirm asks y/N on a terminal and stdin is not one: refused before anything " \
+           "is opened" in captured.err
+    assert "planned move" not in captured.out and not out.exists()
+    assert "HLT" not in caplog.text  # the emulator was never started
 
 
 def test_the_speed_cap_is_applied_logged_and_the_step_budget_is_a_limit(
