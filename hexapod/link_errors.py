@@ -31,8 +31,10 @@ class LinkError(BackendError):
 
 def _silence(answer: str, timeout: float, received: bytes) -> str:
     """The problem of a timeout: no ``answer`` within ``timeout`` [s], and what came."""
-    got = f", received {received!r}" if received else ", nothing received"
-    return f"no {answer} within {timeout * 1e3:.1f} ms{got}"
+    if received:  # bytes came, no line end: not silence (a baud rate, a device?)
+        return (f"no complete {answer} within {timeout * 1e3:.1f} ms (received {received!r}, "
+                "no line end)")
+    return f"no {answer} within {timeout * 1e3:.1f} ms, nothing received"
 
 
 class SerialLinkError(LinkError):

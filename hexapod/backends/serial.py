@@ -153,7 +153,12 @@ class SerialRobot(SerialLink, Backend):
             raise SerialLinkError(url, f"cannot open the port: {exc}") from exc
         try:
             self._port.reset_input_buffer()
-            self.identity = protocol.parse_idn(self._exchange("*IDN?"))
+            try:
+                self.identity = protocol.parse_idn(self._exchange("*IDN?"))
+            except ProtocolError as exc:  # the first reply is not of the protocol
+                raise ProtocolError(exc.line, f"{url}: {exc.problem}: a device that does not "
+                                    f"speak this protocol, or at another baud rate than "
+                                    f"{baudrate} (serial:URL?baud=N)?", exc.command) from exc
             limits = protocol.parse_lim(self._exchange("LIM?"))
             self.stroke = limits.stroke
             self.max_speed = limits.max_speed

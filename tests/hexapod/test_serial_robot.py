@@ -626,3 +626,46 @@ def test_a_board_at_another_baud_rate_is_reached_through_the_spec(emulator: Emul
         assert robot._port.baudrate == 57600  # type: ignore[attr-defined]
     finally:
         robot.close()
+
+
+def _noisy_device(reply: bytes) -> tuple[str, threading.Thread, list[bool]]:
+    """A pty whose other end answers every line with ``reply`` (a wrong baud rate or
+    another device looks so); returns the port, its thread and a stop flag."""
+    import os
+    import pty
+
+    master, slave = pty.openpty()
+    stop = [False]
+
+    def serve() -> None:
+        while not stop[0]:
+            try:
+                data = os.read(master, 256)
+            except OSError:
+                return
+            if b"\n" in data:
+                os.write(master, reply)
+
+    thread = threading.Thread(target=serve, daemon=True)
+    thread.start()
+    return os.ttyname(slave), thread, stop
+
+
+@pytest.mark.parametrize(("reply", "says"), [
+    (bytes(range(200, 212)) + b"\n", "a device that does not speak this protocol, or at "
+                                     "another baud rate than 115200 (serial:URL?baud=N)?"),
+    (bytes(range(200, 212)), "no complete reply within 200.0 ms (received b'\\xc8"),
+])
+def test_a_device_that_does_not_speak_the_protocol_is_named_with_the_likely_cause(
+        reply: bytes, says: str) -> None:
+    """Line noise (a wrong baud rate, another device): the error named no port ('missing
+    checksum: ...') or said 'no reply' although bytes had come."""
+    from hexapod.link_errors import ProtocolError, SerialLinkError
+
+    port, _thread, stop = _noisy_device(reply)
+    try:
+        with pytest.raises((ProtocolError, SerialLinkError)) as info:
+            SerialRobot(port, timeout=0.2)
+        assert port in str(info.value) and says in str(info.value), str(info.value)
+    finally:
+        stop[0] = True
