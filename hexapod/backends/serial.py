@@ -155,6 +155,12 @@ class SerialRobot(SerialLink, Backend):
             self._port.reset_input_buffer()
             try:
                 self.identity = protocol.parse_idn(self._exchange("*IDN?"))
+            except SerialDisconnectedError as exc:  # closed at once: busy, over TCP
+                if not url.startswith("socket://"):
+                    raise
+                raise SerialDisconnectedError(url, f"{exc.problem} (a TCP board serves one "
+                                              "client at a time: is another session "
+                                              "connected to it?)", exc.command) from exc
             except ProtocolError as exc:  # the first reply is not of the protocol
                 raise ProtocolError(exc.line, f"{url}: {exc.problem}: a device that does not "
                                     f"speak this protocol, or at another baud rate than "
