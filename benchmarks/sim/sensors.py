@@ -10,6 +10,7 @@ closed loop (:mod:`benchmarks.sim.loop`) adds the rows' trials, time and encoder
 from __future__ import annotations
 
 from collections.abc import Callable, Sequence
+from dataclasses import replace
 from typing import Any
 
 import numpy as np
@@ -392,12 +393,19 @@ class RowSensor:
         self.rngs = rngs
         #: Detection times of rendered images [s] (empty for geometric features).
         self.detect_times: list[float] = getattr(sensor, "detect_times", [])
+        #: Whether the controller reads the camera's features (:func:`reads_features`);
+        #: else they are withheld, their visibility given, as :class:`GeometricSensor`
+        #: withholds them (the two engines give a controller the same fields).
+        self.features = True
 
     def observe(self, rows: np.ndarray, rotations: np.ndarray, translations: np.ndarray
                 ) -> ObservationBatch:
         """The camera's batch of ``rows`` at their true poses."""
-        return self.sensor.measure(  # type: ignore[no-any-return]
+        batch: ObservationBatch = self.sensor.measure(
             rotations, translations, [self.rngs[k] for k in rows])
+        if self.features:
+            return batch
+        return replace(batch, normals=None, lines=None, directions=None)
 
 
 def rows_generators(sc: SimScenario, setups: list[TrialSetup], stream: int, apply_noise: bool

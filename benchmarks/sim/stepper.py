@@ -301,8 +301,7 @@ class _Unit:
               sensor: GeometricSensor | RowSensor) -> list[TrialResult]:
         sc, spec = self.sc, self.spec
         controller = task_batch_controller(sc, spec, self.batched)
-        if isinstance(sensor, GeometricSensor):
-            sensor.features = reads_features(controller)
+        sensor.features = reads_features(controller)
         actuation = actuation_of(controller)
         if self.backend_factory is None:  # (a backend says itself what it applies)
             check_actuation(actuation, *world_actuation(sc), spec.label)

@@ -93,6 +93,20 @@ class NaNAtStep(ProportionalJoints):
         return cmd
 
 
+class LengthsOnly(ProportionalJoints):
+    """Declares the encoders only and says when it is given more (the two engines must
+    give it the same fields: the per-trial engine gave it every camera field)."""
+
+    name = "test-lengths-only"
+
+    def step(self, observation: Observation) -> Command:
+        given = [f for f in ("normals", "lines", "directions")
+                 if getattr(observation, f) is not None]
+        if given:
+            raise RuntimeError(f"given undeclared fields {given}")
+        return super().step(observation)
+
+
 class RefusesMoving(ProportionalJoints):
     """Refuses every period while it gives a command (a plugin that fills both)."""
 

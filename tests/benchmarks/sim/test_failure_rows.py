@@ -179,3 +179,17 @@ def test_a_group_whose_goals_all_fail_gives_each_trial_its_cause(
     rows = _rows(tmp_path, [JOINTS], trials=3)
     assert sorted(r["failure"] for r in rows) == [
         f"RuntimeError: no goal for trial {k}" for k in range(3)], rows
+
+
+def test_both_engines_give_a_lengths_only_controller_the_same_fields(tmp_path: Path) -> None:
+    """``features = {"lengths"}``: the batched engine withholds the camera's fields, and
+    so does the per-trial engine now (it gave them: a plugin reading one worked there
+    and failed in the default engine, and the engines' rows differed)."""
+    only = "tests.benchmarks.plugins:LengthsOnly"
+    rows = {engine: _rows(tmp_path / engine, [only], trials=2, engine=engine)
+            for engine in ("batched", "per-trial")}
+    for r in rows["batched"] + rows["per-trial"]:
+        assert r["failure"] is None or r["failure"].startswith("not converged"), r["failure"]
+    keys = ("final_position_error_mm", "final_orientation_error_deg", "steps")
+    assert [[r[k] for k in keys] for r in rows["batched"]] == \
+        [[r[k] for k in keys] for r in rows["per-trial"]]
