@@ -165,8 +165,9 @@ class InertiaParameters:
         for part, hinge in (("body", "A_i"), ("rod", "B_i")):
             com = getattr(self, f"{part}_com")
             if not 0.0 <= com <= q_min:
+                # (millimetres where metres are meant: more than a metre, fine in mm)
                 hint = (f" (millimetres? [inertia] is in SI units: {com:g} mm is "
-                        f"{com * 1e-3:g} m)" if 0.0 <= com * 1e-3 <= q_min else "")
+                        f"{com * 1e-3:g} m)" if com > 1.0 and com * 1e-3 <= q_min else "")
                 raise InertiaError(
                     f"inertia.{part}_com",
                     f"centre of mass {com} m from {hinge} is outside the leg: it must lie "

@@ -239,3 +239,19 @@ def test_a_robot_file_alone_says_its_drives_cannot_hold_its_platform(
     own_robot().to_toml(robot)  # its own 2 kg: nothing said
     assert main(["check", str(robot)]) == 0
     assert "own weight" not in capsys.readouterr().out
+
+
+def test_a_centre_of_mass_beyond_the_leg_in_metres_gets_no_millimetre_hint(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """0.4 m on a robot whose shortest leg is shorter: plainly metres, too long (the hint
+    said '0.4 mm is 0.0004 m' of it)."""
+    import tomli_w
+
+    t = own_robot().to_dict(dynamics=True)
+    t["inertia"]["rod_com"] = 0.4 + own_robot().stroke[0]
+    robot = tmp_path / "robot.toml"
+    robot.write_text(tomli_w.dumps(t))
+    code, err = _run(["check", str(robot)], capsys)
+    err = " ".join(err.split())
+    assert code == 2 and "inertia.rod_com: centre of mass" in err and "outside the leg" in err
+    assert "millimetres?" not in err
