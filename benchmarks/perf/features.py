@@ -50,6 +50,33 @@ def format_comparison(rows: list[tuple[str, StepTiming, StepTiming]]) -> str:
     return "\n".join(lines)
 
 
+def _kind(value: object) -> str:
+    """What ``value`` is, in a message (``a class``, ``a dict``)."""
+    return "a class" if isinstance(value, type) else f"a {type(value).__name__}"
+
+
+def _check_attr(parser: argparse.ArgumentParser, module: str, attr: str) -> None:
+    """Refuse a MODULE that does not import or an ``--attr`` that is not a
+    ``controllers_for(...)`` result of it, in the options' words (it was reported as a
+    controller plugin of ``--controllers`` that failed to load)."""
+    import importlib
+
+    from controllers.features import FeatureControllers
+
+    try:
+        mod = importlib.import_module(module)
+    except ImportError as exc:
+        parser.error(f"MODULE {module!r} cannot be imported: {exc}")
+    value = getattr(mod, attr, None)
+    if not isinstance(value, FeatureControllers):
+        found = sorted(k for k, v in vars(mod).items() if isinstance(v, FeatureControllers))
+        what = (f"{module} has no attribute {attr!r}" if value is None else
+                f"{module}.{attr} is {_kind(value)}, not a controllers_for(...) "
+                "result")
+        parser.error(f"--attr {attr}: {what}; its controllers_for(...) results: "
+                     f"{', '.join(found) or 'none'}")
+
+
 def main(argv: list[str] | None = None) -> int:
     """Print the comparison; exit 1 when a ratio is over :data:`LIMIT` or a plugin step
     was refused."""
@@ -65,6 +92,7 @@ def main(argv: list[str] | None = None) -> int:
                         help="random seed of the observations (default 0)")
     args = parser.parse_args(argv)
     check_counts(parser, args, "--steps")
+    _check_attr(parser, args.module, args.attr)
     rows = compare(args.module, args.attr, args.steps, args.seed)
     sys.stdout.write(format_comparison(rows) + "\n")
     ok = all(own.median_us <= LIMIT * ref.median_us and own.refused == 0

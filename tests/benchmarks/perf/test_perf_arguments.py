@@ -44,6 +44,13 @@ BAD = [
     ("dynamics", ["--repeats", "0"], "--repeats: at least 1, got 0"),
     # (as perf controllers: 5 steps per controller timed, silently)
     ("features", ["--steps", "0"], "--steps: at least 1, got 0"),
+    # (reported as a --controllers plugin that failed to load, naming MODULE:ATTR.pinv)
+    ("features", ["--attr", "NOPE"], "--attr NOPE: tests.controllers.plugin_feature_joints "
+     "has no attribute 'NOPE'; its controllers_for(...) results: JOINTS"),
+    ("features", ["--attr", "PlatformJointPinv"], "--attr PlatformJointPinv: "
+     "tests.controllers.plugin_feature_joints.PlatformJointPinv is a class, not a "
+     "controllers_for(...) result"),
+    ("features", ["nosuch.module"], "MODULE 'nosuch.module' cannot be imported"),
     # (already refused, as "-n 0: at least one pose")
     ("fk", ["fk", "-n", "0"], "-n: at least 1, got 0"),
     # (an IndexError traceback from np.percentile of no round trips, the emulator started)
