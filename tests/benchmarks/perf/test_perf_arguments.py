@@ -49,8 +49,9 @@ BAD = [
      "has no attribute 'NOPE'; its controllers_for(...) results: JOINTS"),
     ("features", ["--attr", "PlatformJointPinv"], "--attr PlatformJointPinv: "
      "tests.controllers.plugin_feature_joints.PlatformJointPinv is a class, not a "
-     "controllers_for(...) result"),
-    ("features", ["nosuch.module"], "MODULE 'nosuch.module' cannot be imported"),
+     "controllers_for(...) result; its controllers_for(...) results: JOINTS"),
+    ("features", ["nosuch.module"], "MODULE 'nosuch.module' cannot be imported: No module "
+     "named 'nosuch'"),
     # (already refused, as "-n 0: at least one pose")
     ("fk", ["fk", "-n", "0"], "-n: at least 1, got 0"),
     # (an IndexError traceback from np.percentile of no round trips, the emulator started)
