@@ -172,6 +172,13 @@ class Registry:
         if ":" in name:
             obj = _import_spec(name, name, "command line")
             package, version = _module_distribution(name.partition(":")[0])
+            own = getattr(obj, "name", None)
+            if (isinstance(own, str) and own != name
+                    and own in (self._factories.keys() | self._lazy.keys())
+                    and self.factory(own) is not obj):  # (the built-in by its path: fine)
+                log.warning("%s: its class's name %r is another controller's: messages and "
+                            "records of its own checks will say %r; give it a name of its "
+                            "own", name, own, own)
             self.register(name, obj, package, version)
             return obj
         known = sorted(self._factories.keys() | self._lazy.keys())

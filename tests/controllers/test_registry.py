@@ -24,6 +24,8 @@ from controllers.base import (
     GOAL_FIELDS,
     Command,
     CommandBatch,
+    Controller,
+    ControllerContext,
     GoalBatch,
     Observation,
     ObservationBatch,
@@ -194,11 +196,30 @@ def test_unknown_name_suggests_the_closest() -> None:
         assert name in str(info.value)
 
 
-def test_module_attr_spec() -> None:
+class NamedLikeLegEdge(Controller):
+    """A plugin class that copied a built-in's ``name``."""
+
+    name = "leg-edge"
+
+    def reset(self, context: ControllerContext) -> None:  # type: ignore[misc]
+        pass
+
+    def step(self, observation: Observation) -> Command:  # type: ignore[misc]
+        return Command.refuse("never stepped")
+
+
+def test_module_attr_spec(caplog: pytest.LogCaptureFixture) -> None:
     ctrl = registry.create("controllers.joint:JointSpaceController", gain=3.0)
     assert ctrl.name == "joint-space"
     with pytest.raises(PluginLoadError):
         registry.factory("controllers.joint:NoSuchController")
+    # a class named as another controller is warned about (its errors blamed that one)
+    with caplog.at_level("WARNING", logger="controllers.registry"):
+        registry.factory("controllers.joint:JointSpaceController")  # the built-in itself
+        assert not caplog.records
+        registry.factory("tests.controllers.test_registry:NamedLikeLegEdge")
+    assert "tests.controllers.test_registry:NamedLikeLegEdge: its class's name 'leg-edge' is " \
+           "another controller's" in caplog.text
     # a class that is not a controller is named so (it was built first: "Command.__init__()
     # missing 1 required positional argument: 'velocities'")
     with pytest.raises(PluginLoadError, match=r"Command is not a controller class"):
