@@ -173,8 +173,19 @@ def check_trajectory_task(task: TaskConfig, sweep: dict[str, list[Any]], path: s
     """A trajectory task runs for ``max_steps`` (``fixed_duration``); its keys swept only
     in a trajectory task (``goal``, the goal setting, in any task), and written
     (``written``: the keys of the file's ``[task]``) only in one: a ``shape = "circle"``
-    without ``kind = "trajectory"`` ran a point-to-point study without a word."""
+    without ``kind = "trajectory"`` ran a point-to-point study without a word; so did
+    ``start_mm``/``goal_mm`` without ``kind = "fixed"`` (random pairs were drawn)."""
+    if task.kind != "fixed":
+        for key in ("start_mm", "goal_mm"):
+            if key in written:
+                raise ScenarioError(path, f"only a fixed task reads it (kind = \"fixed\"); "
+                                    f"this task is {task.kind!r}, which draws its own: remove "
+                                    "the key or set the kind", key=f"task.{key}")
     if task.kind == "trajectory":
+        if "fixed_duration" in written and not task.fixed_duration:
+            raise ScenarioError(path, "a trajectory task runs for max_steps whatever the "
+                                "error (its tracking error over the whole reference): remove "
+                                "fixed_duration = false", key="task.fixed_duration")
         return replace(task, fixed_duration=True)
     for key in TASK_KEYS:
         if f"task.{key}" in sweep and key != "goal":

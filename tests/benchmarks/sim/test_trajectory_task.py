@@ -143,6 +143,11 @@ def _setups(sc: Any, n: int) -> list[Any]:
     ({"kind": "trajectory", "speed_mm_s": 0.0}, "task.speed_mm_s"),
     ({"kind": "trajectory", "laps": 0}, "task.laps"),
     ({"kind": "random-pairs", "speed_mm_s": [10.0, 20.0]}, "task.speed_mm_s"),
+    # a fixed task's lengths in another task: random pairs ran, the lengths ignored
+    ({"start_mm": [375.0] * 6, "goal_mm": [375.0] * 6}, "task.start_mm"),
+    ({"kind": "trajectory", "goal_mm": [375.0] * 6}, "task.goal_mm"),
+    # forced to true without a word
+    ({"kind": "trajectory", "fixed_duration": False}, "task.fixed_duration"),
 ])
 def test_bad_trajectory_keys_are_refused(task: dict[str, Any], key: str) -> None:
     with pytest.raises(ScenarioError) as info:
