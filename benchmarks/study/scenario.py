@@ -340,9 +340,7 @@ def parse_scenario(table: dict[str, Any], path: str = "<dict>") -> Scenario:
     if task.kind == "fixed":
         check_fixed_task(task, robot_preset, geometry_data, path)
     check_lens_error(camera_data, cal_err, sweep, path)
-    reference = table.get("reference", {})
-    if not isinstance(reference, dict):
-        raise ScenarioError(path, "expected a table", key="reference")
+    reference = check_reference(table.get("reference", {}), path)
     return Scenario(
         name=name, description=description, seed=seed, trials=trials,
         controllers=tuple(specs), robot_preset=robot_preset, robot_geometry=robot_geometry,
@@ -484,6 +482,46 @@ def _read_files(geometry_file: str | None, camera_file: str | None, cal: Calibra
     except CameraError as exc:
         raise ScenarioError(camera_file or path, str(exc), key="camera") from None
     return geometry, camera, points
+
+
+#: The keys of ``[reference]`` (the seed's figures the report prints beside ours).
+REFERENCE_KEYS = ("text", "header", "rows")
+
+
+def check_reference(reference: Any, path: str) -> dict[str, Any]:
+    """``[reference]``: a text, and a table of ``header`` (strings) and ``rows`` (lists
+    as long as the header), both or neither (a flat ``rows`` crashed the report after every
+    trial had run; a misspelt key left the table out without a word).
+
+    Raises:
+        ScenarioError: Naming the key and what it holds.
+    """
+    if not isinstance(reference, dict):
+        raise ScenarioError(path, "expected a table", key="reference")
+    for key in reference:
+        if key not in REFERENCE_KEYS:
+            raise ScenarioError(path, f"unknown key; expected one of {', '.join(REFERENCE_KEYS)}",
+                                key=f"reference.{key}", suggestion=suggest(key, REFERENCE_KEYS))
+    if "text" in reference and not isinstance(reference["text"], str):
+        raise ScenarioError(path, f"expected a string, got {reference['text']!r}",
+                            key="reference.text")
+    if ("header" in reference) != ("rows" in reference):
+        missing = "rows" if "header" in reference else "header"
+        raise ScenarioError(path, f"a table needs both header and rows: {missing} missing",
+                            key=f"reference.{missing}")
+    if "header" in reference:
+        header, rows = reference["header"], reference["rows"]
+        if not isinstance(header, list) or not header:
+            raise ScenarioError(path, f"expected a list of column titles, got {header!r}",
+                                key="reference.header")
+        for k, row in enumerate(rows if isinstance(rows, list) else [rows]):
+            if not isinstance(row, list) or len(row) != len(header):
+                raise ScenarioError(path, f"expected a list of rows of {len(header)} values "
+                                    f"(one per header column), got {row!r}"
+                                    + ("" if isinstance(rows, list) else " (not a list)"),
+                                    key=f"reference.rows[{k}]" if isinstance(rows, list)
+                                    else "reference.rows")
+    return reference
 
 
 def builtin_scenarios() -> dict[str, Path]:

@@ -279,3 +279,21 @@ def test_gains_beyond_the_documented_bounds_are_warned_of() -> None:
     for name in builtin_scenarios():
         said = check_controllers(load_scenario(name))[1]
         assert not any("2/dt" in w or "omega_n" in w for w in said), (name, said)
+
+
+@pytest.mark.parametrize(("reference", "key", "says"), [
+    # a flat rows: every trial ran, then the report crashed ('float' object is not iterable)
+    ({"header": ["a", "b"], "rows": [0.01, 0.1]}, "reference.rows[0]",
+     "expected a list of rows of 2 values (one per header column), got 0.01"),
+    ({"header": ["a", "b"], "rows": 3}, "reference.rows", "(not a list)"),
+    ({"header": ["a", "b"], "rows": [[1, 2, 3]]}, "reference.rows[0]", "rows of 2 values"),
+    # a misspelt key: the table was left out without a word
+    ({"header": ["a"], "row": [[1]]}, "reference.row", "did you mean 'rows'?"),
+    ({"header": ["a"]}, "reference.rows", "a table needs both header and rows: rows missing"),
+    ({"text": 3}, "reference.text", "expected a string, got 3"),
+])
+def test_a_bad_reference_table_is_refused_naming_the_key(
+        reference: dict, key: str, says: str) -> None:
+    with pytest.raises(ScenarioError) as info:
+        parse_scenario({"name": "x", "controllers": ["leg-edge"], "reference": reference})
+    assert info.value.key == key and says in str(info.value), str(info.value)
