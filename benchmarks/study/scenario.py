@@ -339,7 +339,8 @@ def parse_scenario(table: dict[str, Any], path: str = "<dict>") -> Scenario:
                                                      robot_preset, path)
     if task.kind == "fixed":
         check_fixed_task(task, robot_preset, geometry_data, path)
-    check_lens_error(camera_data, cal_err, sweep, path)
+    check_lens_error(camera_data if camera_data is not None or camera_file is not None
+                     else _preset_camera(camera_preset), cal_err, sweep, path)
     reference = check_reference(table.get("reference", {}), path)
     return Scenario(
         name=name, description=description, seed=seed, trials=trials,
@@ -482,6 +483,14 @@ def _read_files(geometry_file: str | None, camera_file: str | None, cal: Calibra
     except CameraError as exc:
         raise ScenarioError(camera_file or path, str(exc), key="camera") from None
     return geometry, camera, points
+
+
+def _preset_camera(name: str) -> Any:
+    """A camera preset's lens, for the checks of a scenario that names it (the preset on
+    the default robot: its lens model does not depend on the robot)."""
+    from vision.cameras import camera_preset
+
+    return camera_preset(name)
 
 
 #: The keys of ``[reference]`` (the seed's figures the report prints beside ours).

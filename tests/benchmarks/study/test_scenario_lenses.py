@@ -63,3 +63,19 @@ def test_a_fisheye_lens_is_modelled_or_ignored_not_in_part(tmp_path: Path) -> No
     with pytest.raises(ScenarioError, match="not in part") as info:
         load_scenario(study)
     assert info.value.key == "calibration_error.distortion_percent"
+
+
+def test_a_partial_lens_error_of_a_fisheye_preset_is_refused_naming_the_key() -> None:
+    """A preset's lens was not checked: check passed, and the run failed with no file or
+    key (leaving a directory that refused the mended study)."""
+    from benchmarks.study.scenario import parse_scenario
+
+    with pytest.raises(ScenarioError) as info:
+        parse_scenario({"name": "x", "controllers": ["leg-edge"],
+                        "camera": {"preset": "fisheye"},
+                        "calibration_error": {"distortion_percent": [0.0, 50.0]}}, "fe.toml")
+    assert info.value.key == "calibration_error.distortion_percent"
+    assert "50.0: distortion: a fisheye lens is modelled (0 %) or ignored (100 %)" in \
+        str(info.value) and "fe.toml" in str(info.value)
+    parse_scenario({"name": "x", "controllers": ["leg-edge"], "camera": {"preset": "front"},
+                    "calibration_error": {"distortion_percent": 50.0}})  # a lens that can
