@@ -78,4 +78,4 @@ def test_a_partial_lens_error_of_a_fisheye_preset_is_refused_naming_the_key() ->
     assert "50.0: distortion: a fisheye lens is modelled (0 %) or ignored (100 %)" in \
         str(info.value) and "fe.toml" in str(info.value)
     parse_scenario({"name": "x", "controllers": ["leg-edge"], "camera": {"preset": "front"},
-                    "calibration_error": {"distortion_percent": 50.0}})  # a lens that can
+                    "calibration_error": {"distortion_percent": 50.0}})  # (partly modelled)
