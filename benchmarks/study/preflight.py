@@ -93,6 +93,41 @@ def dynamics_only(sc: Any) -> list[str]:
     return out
 
 
+def _swept(sc: Any, section: str, key: str) -> list[Any]:
+    """The values a key takes over the scenario's sweep (its one value if not swept)."""
+    return list(sc.sweep_axes.get(f"{section}.{key}", [getattr(getattr(sc, section), key)]))
+
+
+def without_effect(sc: Any) -> list[str]:
+    """Warnings for settings the scenario's sensor and noise model do not read (a sweep of
+    them gave identical points, the report saying 'noise: none' beside 'swept
+    noise.amplitude_deg'): a noise amplitude of another model than the one chosen, the
+    rendering keys without rendered images, a lens error the geometric features never
+    meet."""
+    where, noise, out = sc.source or sc.name, sc.noise, []
+    for key, model in (("amplitude_deg", "rotation"), ("pixel_sigma_px", "pixel"),
+                       ("outlier_fraction", "pixel")):
+        if noise.model != model and any(_swept(sc, "noise", key)):
+            out.append(f"{where}: [noise] {key}: read by model = \"{model}\" only, and the "
+                       f"model is {noise.model!r}"
+                       + (" (the default)" if noise.model == "none" else "")
+                       + f": no effect (set model = \"{model}\")")
+    if sc.sensor != "image":
+        default = type(sc.image)()
+        keys = [k for k in ("background", "blur_px", "noise_std")
+                if any(v != getattr(default, k) for v in _swept(sc, "image", k))]
+        if keys:
+            out.append(f"{where}: [sensor] {', '.join(keys)}: settings of rendered images, and "
+                       f"the sensor is {sc.sensor!r}: no effect (set [sensor] kind = \"image\")")
+        if noise.model != "pixel" and any(_swept(sc, "calibration_error",
+                                                 "distortion_percent")):
+            out.append(f"{where}: [calibration_error] distortion_percent: an error of the "
+                       "camera model's lens, which geometric features never pass through: no "
+                       "effect (it acts with [sensor] kind = \"image\" or [noise] model = "
+                       "\"pixel\")")
+    return out
+
+
 def preflight(scenarios: list[Any], allow_foreign_calibration: bool = False,
               measure: bool = True) -> Preflight:
     """Check a study before it runs (``run``) or as ``check`` does.
@@ -119,7 +154,7 @@ def preflight(scenarios: list[Any], allow_foreign_calibration: bool = False,
                                 "dynamic world: set [robot] world = \"dynamic\" (or run "
                                 "with --world dynamic)", key="payload")
         resolved, notes = check_controllers(sc)
-        warnings += notes + dynamics_only(sc)
+        warnings += notes + dynamics_only(sc) + without_effect(sc)
         warnings += check_scenario_calibration(resolved, allow_foreign_calibration)
         checks.append(StudyCheck(resolved))
     if measure:

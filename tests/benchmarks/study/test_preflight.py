@@ -234,6 +234,35 @@ def test_settings_without_effect_where_the_study_runs_are_warned_of() -> None:
     assert not any(dynamics_only(load_scenario(n)) for n in builtin_scenarios())
 
 
+def test_settings_the_sensor_or_noise_model_does_not_read_are_warned_of() -> None:
+    """A noise amplitude without its model (the default is none), rendering keys with the
+    geometric sensor, a lens error the geometric features never meet: sweeps of identical
+    points, accepted without a word; the built-ins have none."""
+    from benchmarks.study.preflight import without_effect
+    from benchmarks.study.scenario import builtin_scenarios, load_scenario, parse_scenario
+
+    sc = parse_scenario({"name": "n", "controllers": ["leg-edge"],
+                         "noise": {"amplitude_deg": [0.0, 0.1]},
+                         "sensor": {"blur_px": 1.5},
+                         "calibration_error": {"distortion_percent": [0.0, 100.0]}})
+    said = without_effect(sc)
+    assert len(said) == 3, said
+    assert "[noise] amplitude_deg: read by model = \"rotation\" only, and the model is " \
+           "'none' (the default): no effect" in said[0]
+    assert "[sensor] blur_px: settings of rendered images, and the sensor is 'geometric'" \
+        in said[1]
+    assert "[calibration_error] distortion_percent: an error of the camera model's lens" \
+        in said[2]
+    pixel = parse_scenario({"name": "p", "controllers": ["leg-edge"], "noise": {
+        "model": "rotation", "pixel_sigma_px": 0.5}})
+    assert "[noise] pixel_sigma_px: read by model = \"pixel\" only" in without_effect(pixel)[0]
+    read = parse_scenario({"name": "r", "controllers": ["leg-edge"], "noise": {
+        "model": "pixel", "pixel_sigma_px": 0.5},
+        "calibration_error": {"distortion_percent": 100.0}})
+    assert without_effect(read) == []
+    assert not any(without_effect(load_scenario(n)) for n in builtin_scenarios())
+
+
 def test_a_problem_found_at_every_sweep_point_is_said_once() -> None:
     """A reference too fast for the legs was warned of six times, once per payload of
     the sweep, in the same words: once now, at every sweep point; a problem of one point
