@@ -309,6 +309,10 @@ def parse_scenario(table: dict[str, Any], path: str = "<dict>") -> Scenario:
         if not cal.file:
             raise ScenarioError(path, "method 'file' needs a 'file'", key="calibration.file")
         cal = replace(cal, file=referenced_file(base_dir, cal.file, "calibration.file", path))
+    elif cal.file:  # (it was ignored, a missing one too: a calibration of its own ran)
+        raise ScenarioError(path, f"a calibration file is read by method = \"file\" only, "
+                            f"and the method is {cal.method!r}: set method = \"file\" or "
+                            "remove the file", key="calibration.file")
     check_configurations(cal.configurations, path)
     if cal.min_singular_ratio > cal.warn_singular_ratio:
         raise ScenarioError(path, f"{cal.min_singular_ratio} exceeds warn_singular_ratio "

@@ -297,3 +297,13 @@ def test_a_bad_reference_table_is_refused_naming_the_key(
     with pytest.raises(ScenarioError) as info:
         parse_scenario({"name": "x", "controllers": ["leg-edge"], "reference": reference})
     assert info.value.key == key and says in str(info.value), str(info.value)
+
+
+@pytest.mark.parametrize("method", ["linear", "none"])
+def test_a_calibration_file_without_method_file_is_refused(method: str) -> None:
+    """It was ignored (a missing file too) and a calibration of the study's own ran."""
+    with pytest.raises(ScenarioError) as info:
+        parse_scenario({"name": "x", "controllers": ["leg-edge"], "calibration": {
+            "method": method, "file": "nothere.toml"}})
+    assert info.value.key == "calibration.file"
+    assert f"read by method = \"file\" only, and the method is '{method}'" in str(info.value)
