@@ -7,6 +7,7 @@ lengths within the strokes)."""
 
 from __future__ import annotations
 
+import contextlib
 import math
 import re
 from collections.abc import Collection
@@ -70,11 +71,18 @@ def _unexpected_option(source: str, spec: ControllerSpec, table: Any, where: str
         return ScenarioError(source, f"{spec.name}: {exc}", key=where)
     option = found[1]
     path, key = option_origin(source, spec, option, f"{where}.{option}")
+    names = list(table.names)
+    inner = spec.options.get("law")  # a wrapper's law: its options are handed on too
+    if isinstance(inner, str):
+        from controllers.registry import registry
+
+        with contextlib.suppress(Exception):  # (an unknown law is reported on its own)
+            names += [n for n in registry.options(inner).names if n not in names]
     return ScenarioError(
         path, f"controller '{spec.name}' takes no option '{option}' (nor does the law it "
-        f"hands further options to); its options: {', '.join(table.names) or 'none'} "
+        f"hands further options to); its options: {', '.join(names) or 'none'} "
         f"(hexapod-bench list --options {spec.name})", key=key,
-        suggestion=suggest(option, table.names))
+        suggestion=suggest(option, names))
 
 
 def check_option_names(source: str, spec: ControllerSpec, table: Any, where: str) -> None:
@@ -232,6 +240,20 @@ def check_fixed_task(task: TaskConfig, preset: str | None, geometry: Any,
                                     f"[{lo:g}, {hi:g}] mm", key=f"task.{key}")
 
 
+def _close_attribute(spec: str) -> str | None:
+    """For a ``module:attr`` whose attribute is misspelt, ``module:close`` (None when the
+    module does not import or nothing is close)."""
+    import importlib
+
+    module, _, attr = spec.partition(":")
+    try:
+        names = [n for n in vars(importlib.import_module(module)) if not n.startswith("_")]
+    except Exception:  # (the module's own failure is the message already)
+        return None
+    close = suggest(attr, names)
+    return None if close is None else f"{module}:{close}"
+
+
 def check_controllers(sc: Scenario) -> tuple[Scenario, list[str]]:
     """Resolve every controller of a scenario, give it its options and build it once.
 
@@ -252,7 +274,7 @@ def check_controllers(sc: Scenario) -> tuple[Scenario, list[str]]:
     import controllers  # noqa: F401 - registers the built-ins
     from benchmarks.sim.plant import world_actuation
     from controllers.batch import actuation_of
-    from controllers.exceptions import OptionError, UnknownControllerError
+    from controllers.exceptions import OptionError, PluginLoadError, UnknownControllerError
     from controllers.registry import registry
     from hexapod.exceptions import ActuationError
 
@@ -265,6 +287,12 @@ def check_controllers(sc: Scenario) -> tuple[Scenario, list[str]]:
             if spec.key is None:  # named on the command line
                 raise ScenarioError("--controllers", str(exc)) from None
             raise ScenarioError(sc.source, str(exc), key=where) from None
+        except PluginLoadError as exc:  # a module:attr of the file: it said "command line"
+            if spec.key is None:
+                raise
+            raise ScenarioError(sc.source, f"controller {spec.name!r} cannot be loaded: "
+                                f"{exc.reason}", key=where,
+                                suggestion=_close_attribute(spec.name)) from None
     specs, warnings = _shared_options(sc, tables)
     sc = replace(sc, controllers=tuple(specs))
     accepted, world = world_actuation(sc)
@@ -279,6 +307,12 @@ def check_controllers(sc: Scenario) -> tuple[Scenario, list[str]]:
             raise ScenarioError(path, f"{spec.name}: {exc.problem}", key=key) from None
         except TypeError as exc:  # an option the factory (or the law it wraps) does not take
             raise _unexpected_option(sc.source, spec, table, where, exc) from None
+        except UnknownControllerError as exc:  # a wrapper's inner law (latency-compensated)
+            option = next((k for k, v in spec.options.items() if v == exc.name), None)
+            if option is None:
+                raise ScenarioError(sc.source, f"{spec.name}: {exc}", key=where) from None
+            path, key = option_origin(sc.source, spec, option, f"{where}.{option}")
+            raise ScenarioError(path, f"{spec.name}: {exc}", key=key) from None
         kind = actuation_of(ctrl)
         if kind not in accepted:
             try:

@@ -168,3 +168,27 @@ def test_a_typo_in_an_open_controllers_option_is_named_with_the_close_one(
     assert "key 'controllers[0].horizn'" in msg and str(f) in msg
     assert "controller 'leg-edge-mpc' takes no option 'horizn'" in msg
     assert "did you mean 'horizon'" in msg and "__init__" not in msg
+
+
+@pytest.mark.parametrize(("controllers", "key", "says"), [
+    # a module:attr of the file: "from command line", no file, key or suggestion
+    ('["leg-edge", "controllers.joint:JointSpaceControler"]', "controllers[1]",
+     "(did you mean 'controllers.joint:JointSpaceController'?)"),
+    # a wrapper's unknown inner law: no file, no key
+    ('[{name = "latency-compensated", law = "leg-edgee"}]', "controllers[0].law",
+     "unknown controller 'leg-edgee'"),
+    # an option handed on to the inner law: the suggestion searched the wrapper's two
+    ('[{name = "latency-compensated", law = "leg-edge", gian = 2.0}]', "controllers[0].gian",
+     "(did you mean 'gain'?)"),
+])
+def test_a_plugin_or_an_inner_law_is_refused_in_the_files_terms(
+        tmp_path: Path, controllers: str, key: str, says: str) -> None:
+    from benchmarks.study.preflight import preflight
+    from benchmarks.study.scenario import load_scenario
+
+    f = tmp_path / "s.toml"
+    f.write_text(f'name = "s"\ncontrollers = {controllers}\n')
+    with pytest.raises(ScenarioError) as info:
+        preflight([load_scenario(f)], measure=False)
+    msg = str(info.value)
+    assert f"key '{key}'" in msg and str(f) in msg and says in msg, msg
