@@ -475,6 +475,10 @@ def _read_files(geometry_file: str | None, camera_file: str | None, cal: Calibra
                                                                          {})}, path))
             size = None
             if "width_px" in opencv or "height_px" in opencv:
+                for given, other in (("width_px", "height_px"), ("height_px", "width_px")):
+                    if given in opencv and other not in opencv:
+                        raise ScenarioError(path, f"{given} needs {other} (the image's "
+                                            "size, both in pixels)", key=f"camera.{other}")
                 size = (_typed(opencv.get("width_px"), int, path, "camera.width_px"),
                         _typed(opencv.get("height_px"), int, path, "camera.height_px"))
             camera = load_camera(camera_file, camera_from_base=pose, image_size=size)

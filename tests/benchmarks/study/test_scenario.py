@@ -220,7 +220,10 @@ def test_camera_from_an_opencv_calibration_file(tmp_path: Path) -> None:
             ('opencv = "cal.yml"\npreset = "front"', "camera", "not preset and opencv"),
             ('preset = "front"\npose = "front"', "camera.pose", "only with 'opencv'"),
             ('opencv = "missing.yml"', None, "missing.yml"),
-            ('opencv = "cal.yml"\npose = "side"', "camera.pose", "front, omni")):
+            ('opencv = "cal.yml"\npose = "side"', "camera.pose", "front, omni"),
+            # (it said "key 'camera.height_px': expected an integer, got None")
+            ('opencv = "cal.yml"\npose = "front"\nwidth_px = 1024', "camera.height_px",
+             "width_px needs height_px")):
         study.write_text(f'name = "x"\ncontrollers = ["leg-edge"]\n[camera]\n{body}\n')
         with pytest.raises(ScenarioError) as info:
             load_scenario(study)
