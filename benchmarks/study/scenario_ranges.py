@@ -100,4 +100,19 @@ def check_range(value: Any, key: str, path: str) -> None:
         interval = (f"{'[' if lo_in else '('}{lo:g}, {hi:g}{']' if hi_in else ')'}"
                     + (f" {unit}" if unit else ""))
         raise ScenarioError(path, f"{value!r}{f' {unit}' if unit else ''} is out of the "
-                            f"allowed range {interval}", key=key)
+                            f"allowed range {interval}{_unit_hint(value, key, unit)}",
+                            key=key)
+
+
+def _unit_hint(value: float, key: str, unit: str) -> str:
+    """A likely slip of units, when the value a thousand times smaller (or larger) is in
+    range: milliseconds for seconds (``dt = 20``), metres for millimetres."""
+    if not unit:
+        return ""
+    lo, hi, lo_in, hi_in = RANGES[key]
+    for factor in (1e-3, 1e3):
+        scaled = value * factor
+        if (scaled >= lo if lo_in else scaled > lo) and (scaled <= hi if hi_in else scaled < hi):
+            return (f" (a slip of units? {key} is in {unit}; {scaled:g} {unit} would be in "
+                    "range)")
+    return ""

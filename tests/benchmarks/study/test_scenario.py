@@ -43,7 +43,8 @@ def test_sweep_expands_to_cartesian_product() -> None:
         ({**MINIMAL, "noise": {"model": "gaussian"}}, "noise.model", "rotation"),
         ({**MINIMAL, "robot": {"dt": -0.1}}, "robot.dt", "(0, 1]"),
         ({**MINIMAL, "robot": {"dt": 20}}, "robot.dt",
-         "20.0 s is out of the allowed range (0, 1] s"),
+         "20.0 s is out of the allowed range (0, 1] s (a slip of units? robot.dt is in s; "
+         "0.02 s would be in range)"),
         ({**MINIMAL, "robot": {"dt": "fast"}}, "robot.dt", "number"),
         ({**MINIMAL, "trials": 0}, "trials", "out of the allowed range [1, 1e+07]"),
         ({**MINIMAL, "task": {"kind": "fixed", "start_mm": [375.0] * 5,
