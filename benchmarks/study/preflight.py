@@ -166,6 +166,7 @@ def preflight(scenarios: list[Any], allow_foreign_calibration: bool = False,
 def measure_study(check: StudyCheck) -> None:
     """Measure one resolved scenario: its setup and, for a trajectory task, its plan's
     references (fills ``check``)."""
+    from benchmarks.study.calibration_check import calibration_problems
     from benchmarks.study.check_command import examine, scenario_setup
     from benchmarks.study.payload_check import payload_facts
     from benchmarks.study.trajectory_check import trajectory_facts
@@ -179,6 +180,7 @@ def measure_study(check: StudyCheck) -> None:
         points = len(check.scenario.expand())
         found = [p for facts in check.trajectory for p in facts.problems]
         found += [p for facts in check.payload for p in facts.problems]
+        found += calibration_problems(check.scenario)
         check.problems += _merged(found, points)
 
 

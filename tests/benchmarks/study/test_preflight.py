@@ -299,3 +299,23 @@ def test_a_controller_named_twice_on_the_command_line_is_refused(
         assert main([*command, "--controllers", "leg-edge,leg-edge", "--out", str(out)]) == 2
         assert "--controllers: leg-edge given twice" in capsys.readouterr().err
         assert not out.exists()
+
+
+def test_a_calibration_that_fails_is_said_before_the_run() -> None:
+    """Every trial failed at its calibration (legs under the file's own hard limit), and
+    check had said "No problem found": the sampled trials' calibrations, run as the study
+    runs them, say so; the built-in that calibrates has none."""
+    from benchmarks.study.calibration_check import calibration_problems
+    from benchmarks.study.scenario import load_scenario, parse_scenario
+
+    sc = parse_scenario({"name": "c", "controllers": ["leg-edge"],
+                         "calibration_error": {"base_points_mm": 3.0},
+                         "calibration": {"method": "linear", "configurations": "random:20",
+                                         "warn_singular_ratio": 0.9,
+                                         "min_singular_ratio": 0.5}}, "c.toml")
+    said = calibration_problems(sc)
+    assert len(said) == 1 and said[0].severity == "warning"
+    assert said[0].text.startswith("the calibration of 3 of 3 sampled trials fails "
+                                   "(calibration: leg 0: ill-conditioned"), said[0].text
+    assert "change [calibration] in c.toml" in said[0].text
+    assert calibration_problems(load_scenario("andreff2005-noise")) == []
