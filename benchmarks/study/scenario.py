@@ -343,8 +343,9 @@ def parse_scenario(table: dict[str, Any], path: str = "<dict>") -> Scenario:
                                                      robot_preset, path)
     if task.kind == "fixed":
         check_fixed_task(task, robot_preset, geometry_data, path)
-    check_lens_error(camera_data if camera_data is not None or camera_file is not None
-                     else _preset_camera(camera_preset), cal_err, sweep, path)
+    check_lens_error(_preset_camera(camera_preset) if camera_data is None
+                     and camera_file is None and camera_preset is not None else camera_data,
+                     cal_err, sweep, path)
     reference = check_reference(table.get("reference", {}), path)
     return Scenario(
         name=name, description=description, seed=seed, trials=trials,
