@@ -281,6 +281,8 @@ class Gain:
         if adaptive_gain is None:
             return Gain(value, value, 0.0)
         try:
+            if any(isinstance(x, str | bool) for x in adaptive_gain):  # ("5" was taken)
+                raise TypeError
             values = [float(x) for x in adaptive_gain]
         except (TypeError, ValueError):
             raise OptionError(controller, "adaptive_gain",

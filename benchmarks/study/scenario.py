@@ -124,10 +124,11 @@ def _parse_dataclass(cls: type, table: dict[str, Any], path: str, section: str,
             sweep[dotted] = values
             kwargs[key] = values[0]
         elif isinstance(value, list) and kind is tuple:
-            try:
-                kwargs[key] = tuple(float(v) for v in value)
-            except (TypeError, ValueError):
-                raise ScenarioError(path, "expected a list of numbers", key=dotted) from None
+            if not all(isinstance(v, int | float) and not isinstance(v, bool) for v in value):
+                # (strings and booleans were converted: ["0", "0", "-50"] passed)
+                raise ScenarioError(path, f"expected a list of numbers, got {value!r}",
+                                    key=dotted)
+            kwargs[key] = tuple(float(v) for v in value)
         elif isinstance(value, list):
             raise ScenarioError(path, "a list is only allowed for the sweepable keys "
                                 f"({', '.join(sweepable) or 'none here'})", key=dotted)

@@ -35,3 +35,13 @@ def test_the_gain_has_its_defining_properties(gain: Gain) -> None:
     xs = np.linspace(0.0, 10.0, 50)
     values = np.array([gain(x) for x in xs])
     assert np.all(np.diff(values) <= 0.0)  # never grows with the error
+
+
+@pytest.mark.parametrize("values", [["5", "1", "30"], [True, 1.0, 30.0]])
+def test_an_adaptive_gain_of_strings_or_booleans_is_refused(values: list[object]) -> None:
+    """They were converted without a word (and the study's copy kept the strings)."""
+    from controllers.exceptions import OptionError
+
+    with pytest.raises(OptionError, match=r"adaptive_gain.*expected \(lambda0, lambda_inf, "
+                                          r"lambda0'\)"):
+        Gain.from_options("leg-edge", 1.0, values)  # type: ignore[arg-type]

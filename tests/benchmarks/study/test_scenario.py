@@ -69,6 +69,10 @@ def test_sweep_expands_to_cartesian_product() -> None:
          "noise.amplitude_deg", "100.0 deg is out of the allowed range [0, 90] deg"),
         ({**MINIMAL, "noise": {"dropout_probability": 1.5}}, "noise.dropout_probability",
          "[0, 1]"),
+        # strings in a list of numbers were converted without a word
+        ({**MINIMAL, "robot": {"world": "dynamic"}, "payload": {
+            "mass_kg": 1.0, "com_mm": ["0", "0", "-50"]}}, "payload.com_mm",
+         "expected a list of numbers, got ['0', '0', '-50']"),
         ({**MINIMAL, "task": {"max_steps": 10, "settle_steps": 20}}, "task.settle_steps",
          "exceeds task.max_steps"),
         ({**MINIMAL, "task": {"kind": "fixed", "start_mm": [375.0] * 6,
