@@ -6,7 +6,7 @@ from __future__ import annotations
 import json
 import os
 from pathlib import Path
-from typing import Any
+from typing import Any, ClassVar
 
 import numpy as np
 import pytest
@@ -582,3 +582,43 @@ def test_a_robot_files_unit_slips_are_said_before_the_robot_is_contacted(
     err = capsys.readouterr().err
     assert code == 2 and f"{metres}: base_points_m" in err and "metres where millimetres" in err
     assert "nonexistent" not in err, "refused before the port is opened"
+
+
+class CountingJoints:
+    """A controller that counts its steps, per instance and in all (its copies too)."""
+
+    name = "test-counting"
+    features = frozenset({"lengths"})
+    all_steps: ClassVar[list[int]] = []
+
+    def __init__(self) -> None:
+        self.steps = 0
+
+    def reset(self, context: Any) -> None:
+        self.goal = np.asarray(context.goal.lengths)
+
+    def step(self, observation: Any) -> Any:
+        from controllers.base import Command
+
+        self.steps += 1
+        CountingJoints.all_steps.append(id(self))
+        return Command(self.goal - observation.lengths)
+
+
+def test_a_copy_of_the_controller_is_stepped_before_the_robot_is_opened(
+        tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """Its compiled kernels are built or loaded then, not in the session's first period
+    (5 s on a cold cache, the robot connected); the controller itself is not stepped."""
+    seen: dict[str, Any] = {}
+
+    def session(args: Any, inputs: Any, *rest: Any, **kwargs: Any) -> int:
+        seen["copies"] = list(CountingJoints.all_steps)
+        seen["own"] = inputs.controller.steps
+        return 0
+
+    monkeypatch.setattr(servo, "run_session", session)
+    CountingJoints.all_steps.clear()
+    goal = _goal(tmp_path, f"lengths_mm = {_mm(GOAL_MM)}\n")
+    assert servo.main(["--backend", "emulator", "--goal", str(goal), "--controller",
+                       "tests.benchmarks.robot.test_servo:CountingJoints"]) == 0
+    assert len(seen["copies"]) == 1 and seen["own"] == 0
