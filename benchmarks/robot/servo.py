@@ -301,7 +301,7 @@ def _warm_up(controller: Any, goal: Any) -> None:
     edges = np.asarray(goal.edge_visible, dtype=bool)
     obs = Observation(0.0, np.asarray(goal.lengths, float), normals=goal.normals,
                       lines=goal.lines, directions=goal.directions, edge_visible=edges,
-                      direction_visible=edges.all(axis=1), q_dot=np.zeros(6))
+                      direction_visible=np.all(edges, axis=1), q_dot=np.zeros(6))
     try:
         copy.deepcopy(controller).step(obs)
     except Exception as exc:  # (the real step meets it, with the session's handling)

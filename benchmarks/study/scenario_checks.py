@@ -368,3 +368,43 @@ def gain_warnings(spec: ControllerSpec, table: Any, dt: float) -> list[str]:
                            f"{zeta:g}): the error grows even with an exact model "
                            "(docs/dynamic-world.md, \"Integral action\")")
     return out
+
+
+#: The keys of ``[reference]`` (the seed's figures the report prints beside ours).
+REFERENCE_KEYS = ("text", "header", "rows")
+
+
+def check_reference(reference: Any, path: str) -> dict[str, Any]:
+    """``[reference]``: a text, and a table of ``header`` (strings) and ``rows`` (lists
+    as long as the header), both or neither (a flat ``rows`` crashed the report after every
+    trial had run; a misspelt key left the table out without a word).
+
+    Raises:
+        ScenarioError: Naming the key and what it holds.
+    """
+    if not isinstance(reference, dict):
+        raise ScenarioError(path, "expected a table", key="reference")
+    for key in reference:
+        if key not in REFERENCE_KEYS:
+            raise ScenarioError(path, f"unknown key; expected one of {', '.join(REFERENCE_KEYS)}",
+                                key=f"reference.{key}", suggestion=suggest(key, REFERENCE_KEYS))
+    if "text" in reference and not isinstance(reference["text"], str):
+        raise ScenarioError(path, f"expected a string, got {reference['text']!r}",
+                            key="reference.text")
+    if ("header" in reference) != ("rows" in reference):
+        missing = "rows" if "header" in reference else "header"
+        raise ScenarioError(path, f"a table needs both header and rows: {missing} missing",
+                            key=f"reference.{missing}")
+    if "header" in reference:
+        header, rows = reference["header"], reference["rows"]
+        if not isinstance(header, list) or not header:
+            raise ScenarioError(path, f"expected a list of column titles, got {header!r}",
+                                key="reference.header")
+        for k, row in enumerate(rows if isinstance(rows, list) else [rows]):
+            if not isinstance(row, list) or len(row) != len(header):
+                raise ScenarioError(path, f"expected a list of rows of {len(header)} values "
+                                    f"(one per header column), got {row!r}"
+                                    + ("" if isinstance(rows, list) else " (not a list)"),
+                                    key=f"reference.rows[{k}]" if isinstance(rows, list)
+                                    else "reference.rows")
+    return reference
