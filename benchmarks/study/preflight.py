@@ -14,6 +14,7 @@ a setup whose every trial would fail raises a :class:`~benchmarks.exceptions.Set
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -105,6 +106,7 @@ def without_effect(sc: Any) -> list[str]:
     rendering keys without rendered images, a lens error the geometric features never
     meet."""
     where, noise, out = sc.source or sc.name, sc.noise, []
+    out += _clipped_jitter(sc, where)
     for key, model in (("amplitude_deg", "rotation"), ("pixel_sigma_px", "pixel"),
                        ("outlier_fraction", "pixel")):
         if noise.model != model and any(_swept(sc, "noise", key)):
@@ -125,6 +127,25 @@ def without_effect(sc: Any) -> list[str]:
                        "camera model's lens, which geometric features never pass through: no "
                        "effect (it acts with [sensor] kind = \"image\" or [noise] model = "
                        "\"pixel\")")
+    return out
+
+
+def _clipped_jitter(sc: Any, where: str) -> list[str]:
+    """A warning when the camera's capture jitter is clipped for more than 1 % of its
+    draws (each is clipped to 0.45 frame so that frames stay in order: a 100 ms jitter at
+    a 20 ms frame ran without a word, nothing like the normal spread it asked for)."""
+    from benchmarks.sim.clock import MAX_JITTER_FRACTION
+
+    out = []
+    for rate in _swept(sc, "clock", "frame_rate_hz"):
+        frame = 1.0 / rate if rate > 0 else sc.dt
+        limit = MAX_JITTER_FRACTION * frame * 1e3  # [ms]
+        for jitter in _swept(sc, "clock", "jitter_ms"):
+            if jitter > 0 and (clipped := math.erfc(limit / (jitter * math.sqrt(2)))) > 0.01:
+                out.append(f"{where}: [clock] jitter_ms = {jitter:g}: a capture time is "
+                           f"clipped to +-{limit:g} ms (0.45 of a {frame * 1e3:g} ms frame), "
+                           f"and {100 * clipped:.0f} % of them would be: not the normal "
+                           "spread asked for")
     return out
 
 

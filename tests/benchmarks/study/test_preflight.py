@@ -261,6 +261,12 @@ def test_settings_the_sensor_or_noise_model_does_not_read_are_warned_of() -> Non
         "calibration_error": {"distortion_percent": 100.0}})
     assert without_effect(read) == []
     assert not any(without_effect(load_scenario(n)) for n in builtin_scenarios())
+    # a jitter mostly clipped to 0.45 frame (100 ms at a 20 ms frame ran without a word)
+    jitter = parse_scenario({"name": "j", "controllers": ["leg-edge"],
+                             "clock": {"jitter_ms": [2.0, 100.0]}})
+    said = without_effect(jitter)
+    assert len(said) == 1 and "[clock] jitter_ms = 100: a capture time is clipped to +-9 ms " \
+        "(0.45 of a 20 ms frame), and 93 % of them would be" in said[0], said
 
 
 def test_a_problem_found_at_every_sweep_point_is_said_once() -> None:
