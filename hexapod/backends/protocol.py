@@ -11,7 +11,6 @@ board (:mod:`hexapod.backends.emulator`), so that both speak exactly one protoco
 
 from __future__ import annotations
 
-import math
 import re
 from dataclasses import dataclass
 from enum import IntEnum
@@ -165,12 +164,16 @@ def format_lengths(lengths_m: np.ndarray) -> str:
     return " ".join(format_mm(x) for x in q)
 
 
+#: A number of the protocol: decimal digits, an optional sign and fraction (Python's own
+#: syntax, ``4_15``, ``1e3``, ``inf``, was accepted by ``float``).
+_NUMBER = re.compile(r"[+-]?\d+(?:\.\d+)?")
+
+
 def parse_number(token: str) -> float:
-    """A finite decimal number (``"415.500"``); raises ValueError otherwise."""
-    value = float(token)
-    if not math.isfinite(value):
-        raise ValueError(f"not finite: {token!r}")
-    return value
+    """A decimal number (``"415.500"``, ``"-2"``); raises ValueError otherwise."""
+    if not _NUMBER.fullmatch(token):
+        raise ValueError(f"not a decimal number: {token!r}")
+    return float(token)
 
 
 def mm_to_m(value_mm: float) -> float:

@@ -570,3 +570,17 @@ def test_an_identity_too_long_for_a_line_or_a_port_out_of_range_is_refused(
         main(["--tcp", "127.0.0.1:99999"])
     assert info.value.code == 2
     assert "argument --tcp: expected HOST:PORT (a port of 0 to 65535)" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("token", ["4_15", "1e3", "415.", "+inf", "0x19F", "nan"])
+def test_a_length_not_written_as_a_decimal_number_is_syntax(link: Link, token: str) -> None:
+    """Lengths are millimetres as decimals; Python's own syntax (``4_15``, exponents) was
+    accepted by ``float`` and moved the legs."""
+    assert link.send("SVO 1") == "OK"
+    reply = link.send(f"MOV {token} 415.5 415.5 415.5 415.5 415.5")
+    assert reply.startswith("ERR 1 "), reply
+
+
+def test_a_plain_decimal_is_a_number() -> None:
+    for token, value in (("415", 415.0), ("415.500", 415.5), ("-2", -2.0), ("+3.25", 3.25)):
+        assert protocol.parse_number(token) == value
