@@ -71,6 +71,10 @@ class SerialLink:
         """Read one line (up to ``\\n``) before ``deadline`` (perf_counter time) [s]."""
         while True:
             nl = self._buf.find(b"\n")
+            if nl >= protocol.MAX_LINE:  # a line longer than the protocol's, arrived whole
+                line = bytes(self._buf[: nl + 1])
+                del self._buf[: nl + 1]
+                raise ProtocolError(line, "line too long", command)
             if nl >= 0:
                 line = bytes(self._buf[: nl + 1])
                 del self._buf[: nl + 1]

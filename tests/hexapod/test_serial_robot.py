@@ -672,3 +672,18 @@ def test_a_device_that_does_not_speak_the_protocol_is_named_with_the_likely_caus
         assert port in str(info.value) and says in str(info.value), str(info.value)
     finally:
         stop[0] = True
+
+
+def test_a_reply_longer_than_a_line_is_refused_however_it_arrives() -> None:
+    """A well-framed 310-byte reply to *IDN? was accepted when it arrived in one piece and
+    refused when it came in pieces (the limit was checked only before the line end)."""
+    from hexapod.link_errors import ProtocolError
+
+    payload = "IDN " + "x" * 300
+    line = f"{payload}*{protocol.checksum(payload)}\n".encode()
+    port, _thread, stop = _noisy_device(line)
+    try:
+        with pytest.raises(ProtocolError, match="line too long"):
+            SerialRobot(port, timeout=0.2)
+    finally:
+        stop[0] = True
