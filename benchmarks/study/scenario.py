@@ -75,6 +75,10 @@ def _section(table: dict[str, Any], key: str, path: str) -> dict[str, Any]:
 
 
 def _typed(value: Any, kind: type, path: str, key: str, choices: tuple[str, ...] = ()) -> Any:
+    if isinstance(value, list) and kind in (float, int, bool, str):  # (a sweep axis?)
+        raise ScenarioError(path, f"expected one value, got the list {value!r}: this key "
+                            "cannot be swept (docs/scenarios.md lists the sweepable keys)",
+                            key=key)
     if kind is float:
         if isinstance(value, bool) or not isinstance(value, int | float):
             raise ScenarioError(path, f"expected a number, got {value!r}", key=key)

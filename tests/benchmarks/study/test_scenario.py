@@ -84,7 +84,10 @@ def test_sweep_expands_to_cartesian_product() -> None:
          "calibration.min_singular_ratio", "must be below the warning"),
         ({**MINIMAL, "sensor": {"kind": "image", "teach_frames": 2.5}}, "sensor.teach_frames",
          "integer"),
-        ({**MINIMAL, "sensor": {"teach_frames": [1, 10]}}, "sensor.teach_frames", "integer"),
+        # (it said "expected an integer", not that a list is a sweep axis this key is not)
+        ({**MINIMAL, "sensor": {"teach_frames": [1, 10]}}, "sensor.teach_frames",
+         "expected one value, got the list [1, 10]: this key cannot be swept"),
+        ({**MINIMAL, "robot": {"dt": [0.01, 0.02]}}, "robot.dt", "this key cannot be swept"),
         ({**MINIMAL, "sensor": {"blur": 1.0}}, "sensor.blur", "blur_px"),
         # a trajectory's keys in a point-to-point task (ran that task without a word)
         ({**MINIMAL, "task": {"shape": "circle", "radius_mm": 15.0}}, "task.shape",
