@@ -26,6 +26,7 @@ from benchmarks.study.scenario_model import (
     Scenario,
     TaskConfig,
 )
+from benchmarks.study.scenario_ranges import unit_of
 from hexapod.config import suggest
 
 
@@ -171,8 +172,10 @@ def check_scaled_errors(cal_err: CalibrationErrorConfig, sweep: dict[str, list[A
         worst = max(values) * max(scales)
         hi = RANGES[f"calibration_error.{key}"][1]
         if worst > hi:
+            unit = unit_of(f"calibration_error.{key}")
+            unit = f" {unit}" if unit else ""
             raise ScenarioError(path, f"times scale {max(scales):g} gives a standard "
-                                f"deviation of {worst:g}, beyond the allowed {hi:g}",
+                                f"deviation of {worst:g}{unit}, beyond the allowed {hi:g}{unit}",
                                 key=f"calibration_error.{key}")
 
 
