@@ -14,6 +14,7 @@ once per distinct message template and counted (:class:`RepeatedWarnings`).
 from __future__ import annotations
 
 import logging
+import math
 import re
 from collections import Counter
 from dataclasses import dataclass, field
@@ -26,8 +27,12 @@ NOT_CONVERGED = "not conv"
 
 
 def is_failure(row: dict[str, Any]) -> bool:
-    """Whether a result row is a trial that did not run to its end (not merely unconverged)."""
+    """Whether a result row is a trial that did not run to its end (not merely unconverged).
+    A missing failure is None in a row and NaN in a table's column (pandas 3 reads an
+    empty one so: every converged trial was counted failed)."""
     failure = row.get("failure")
+    if failure is None or (isinstance(failure, float) and math.isnan(failure)):
+        return False
     return bool(failure) and not str(failure).startswith(NOT_CONVERGED)
 
 

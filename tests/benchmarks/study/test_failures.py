@@ -52,3 +52,17 @@ def test_kind_keeps_the_integers_that_name_what_failed() -> None:
     assert cause_kind("controller refused to move: 3 legs") != cause_kind(
         "controller refused to move: 4 legs")
     assert cause_kind("x 1e-3 and 2.5E+02") == "x # and #"
+
+
+def test_a_missing_failure_read_from_a_table_is_no_failure() -> None:
+    """pandas 3 reads an empty ``failure`` column as NaN, and ``bool(nan)`` is true:
+    ``reproduce`` marked every converged trial of a study failed ("every trial failed
+    (nan)")."""
+    import math
+
+    from benchmarks.study.failures import is_failure
+
+    assert not is_failure({"failure": math.nan})
+    assert not is_failure({"failure": None}) and not is_failure({})
+    assert not is_failure({"failure": "not converged: position 0.8 mm > 0.5 mm"})
+    assert is_failure({"failure": "RuntimeError: boom"})
