@@ -58,6 +58,9 @@ def _alone(job: Callable[..., None], args: tuple[Any, ...]) -> None:
     import signal
 
     signal.signal(signal.SIGTERM, signal.SIG_DFL)  # (the command's handler is not ours)
+    # a Ctrl-C is the command's to handle (it ends the drawers): here it printed a
+    # KeyboardInterrupt traceback of the drawer's own over the command's last lines
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
     _aside.clear()
     job(*args)
 

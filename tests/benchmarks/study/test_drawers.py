@@ -179,3 +179,25 @@ def test_a_failed_group_names_its_files(tmp_path: Path, monkeypatch: pytest.Monk
                            lambda p: f"p{p}.png", plots.TWO_LINEAR_PANELS)
     assert "cannot be broadcast" in capfd.readouterr().err
     assert (tmp_path / "p0.png").is_file() and not (tmp_path / "p1.png").exists()
+
+
+def _interrupted() -> None:
+    """A drawing job that a terminal's Ctrl-C reaches (the whole foreground group)."""
+    import os
+    import signal
+    import time
+
+    os.kill(os.getpid(), signal.SIGINT)
+    time.sleep(0.05)
+
+
+def test_a_ctrl_c_is_the_commands_not_a_drawers() -> None:
+    """A drawer died of the terminal's SIGINT with a KeyboardInterrupt traceback printed
+    over the command's own lines; it ignores SIGINT now (the command ends the drawers)."""
+    import multiprocessing
+
+    child = multiprocessing.get_context("fork").Process(target=drawers._alone,
+                                                        args=(_interrupted, ()))
+    child.start()
+    child.join(10)
+    assert child.exitcode == 0
