@@ -182,12 +182,23 @@ def build_parser(commands: set[str] | None = None) -> argparse.ArgumentParser:
                    help="print the options of controller NAME (type, unit, default, "
                         "meaning): what a scenario may set for it")
 
-    s = add_command(sub, "run", cmd_run, "run scenarios (built-in names or TOML paths)")
-    s.add_argument("scenarios", nargs="+", metavar="SCENARIO")
+    s = add_command(sub, "run", cmd_run, "run scenarios (built-in names or TOML paths)",
+                    description="Run the trials of one or more scenarios and write their rows, "
+                    "tables and report into --out.",
+                    epilog="exit codes: 0 done; 1 every trial failed; 2 refused (a bad input, "
+                    "nothing run); 3 a controller failed every trial of its own; 130 "
+                    "interrupted (Ctrl-C: the command to resume is printed)")
+    s.add_argument("scenarios", nargs="+", metavar="SCENARIO",
+                   help="a built-in scenario's name (hexapod-bench list) or a scenario TOML "
+                        "file (docs/scenarios.md)")
     s.add_argument("--out", required=True, action=OutputDir, help="results directory")
-    s.add_argument("--trials", type=int, help="trials per sweep point and controller")
-    s.add_argument("--seed", type=int, help="override the scenario seed")
-    s.add_argument("--max-steps", type=int, help="override the step budget of each trial")
+    s.add_argument("--trials", type=int,
+                   help="trials per sweep point and controller (default: the scenario's)")
+    s.add_argument("--seed", type=int, help="override the scenario seed (default: the "
+                                           "scenario's)")
+    s.add_argument("--max-steps", type=int,
+                   help="override the step budget of each trial, in control periods "
+                        "(default: the scenario's)")
     s.add_argument("--calibration", metavar="FILE",
                    help="controllers use the base points of this calibrated.toml (the "
                         "laws that see the legs; the encoder and pose laws ignore them: "
@@ -196,7 +207,8 @@ def build_parser(commands: set[str] | None = None) -> argparse.ArgumentParser:
     s.add_argument("--allow-foreign-calibration", action="store_true",
                    help="use a calibration file made with another robot or camera anyway "
                         "(warned)")
-    s.add_argument("--controllers", help="comma-separated names, labels or module:attr")
+    s.add_argument("--controllers", help="comma-separated names, labels or module:attr "
+                                         "(default: the scenario's)")
     s.add_argument("--options-file", metavar="FILE",
                    help="per-controller options ([controllers.\"LABEL\"] tables, e.g. the "
                         "tuned.toml of 'hexapod-bench tune'): they replace the scenario's "
@@ -220,8 +232,9 @@ def build_parser(commands: set[str] | None = None) -> argparse.ArgumentParser:
                         "report plots trial 0")
     s.add_argument("--backend", default="sim",
                    help="sim (default, vectorised), emulator (a firmware emulator on a pty), "
-                        "serial:URL, a plugin's NAME[:ARGS] or module:attr[:ARGS] "
-                        "(docs/backends.md)")
+                        "serial:URL[?baud=N], gcs:tcp://HOST:PORT or gcs:serial:URL (a PI GCS "
+                        "controller), gcs-emulator, a plugin's NAME[:ARGS] or "
+                        "module:attr[:ARGS] (docs/backends.md)")
     s.add_argument("--world", choices=("kinematic", "dynamic"),
                    help="override the scenarios' [robot] world (docs/dynamic-world.md)")
     s.add_argument("--goal", choices=("mixed", "taught", "cartesian"),

@@ -127,7 +127,9 @@ def add_reproduce_command(sub: Any) -> None:
                     "run the studies behind the papers' figures and set paper and framework side "
                     "by side")
     s.add_argument("which", nargs="?", default="all",
-                   choices=("seed000", "seed001", "seed002", "seed003", "all"))
+                   choices=("seed000", "seed001", "seed002", "seed003", "all"),
+                   help="one paper's studies, or all (the default: every paper's, tens of "
+                        "minutes; --quick: minutes)")
     s.add_argument("--quick", action="store_true",
                    help="fewer trials (30 per noise level for seed 001, 1000 pairs for seed "
                         "003, 30 calibrations): minutes instead of tens of minutes")

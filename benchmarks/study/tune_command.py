@@ -54,7 +54,8 @@ def add_arguments(s: argparse.ArgumentParser) -> None:
     """The arguments of ``hexapod-bench tune``."""
     s.add_argument("scenario", metavar="SCENARIO", help="a built-in scenario name or a TOML path")
     s.add_argument("--controllers", required=True,
-                   help="comma-separated labels (or names) of the scenario's controllers")
+                   help="comma-separated controllers: the scenario's by their labels, or "
+                        "any registered controller by its name")
     from benchmarks.study.outdir import OutputDir
 
     s.add_argument("--out", required=True, action=OutputDir,
