@@ -132,8 +132,7 @@ def cmd_perf(args: argparse.Namespace) -> int:
     import importlib
 
     module = importlib.import_module(PERF_MODULES[args.what])
-    argv = ["fk"] if args.what == "fk" else []
-    return int(module.main(argv + list(args.rest)))
+    return int(module.main(list(args.rest)))
 
 
 def cmd_warm(args: argparse.Namespace) -> int:
@@ -156,9 +155,33 @@ def cmd_warm(args: argparse.Namespace) -> int:
     return 0
 
 
+def _version() -> str:
+    """The installed distribution's version (``unknown`` when not installed)."""
+    from importlib import metadata
+
+    try:
+        return metadata.version("hexapod-vs")
+    except metadata.PackageNotFoundError:
+        return "unknown"
+
+
 def command_word(argv: list[str]) -> str | None:
     """The subcommand named on a command line (its first word not an option), if any."""
     return next((a for a in argv if not a.startswith("-")), None)
+
+
+def _unknown_command(parser: argparse.ArgumentParser, word: str) -> str | None:
+    """The refusal of a word that is no subcommand, with the close one (argparse printed
+    its usage and 'invalid choice', no suggestion), or None."""
+    from hexapod.config import suggest
+
+    actions = [a for a in parser._actions if isinstance(a, argparse._SubParsersAction)]
+    names = sorted(actions[0].choices) if actions else []
+    if not names or word in names:
+        return None
+    hint = suggest(word, names)
+    return (f"no command {word!r}; the commands: {', '.join(names)}"
+            + (f" (did you mean '{hint}'?)" if hint else ""))
 
 
 def build_parser(commands: set[str] | None = None) -> argparse.ArgumentParser:
@@ -173,6 +196,7 @@ def build_parser(commands: set[str] | None = None) -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="hexapod-bench", description=__doc__.split("\n")[0],
                                 formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("-v", "--verbose", action="store_true", help="log at INFO level")
+    p.add_argument("--version", action="version", version=f"%(prog)s {_version()}")
     sub = p.add_subparsers(dest="command", required=True)
 
     s = add_command(sub, "list", cmd_list,
@@ -359,6 +383,9 @@ def main(argv: list[str] | None = None) -> int:
     words = list(sys.argv[1:] if argv is None else argv)
     word = command_word(words)
     parser = build_parser({word} if word else set())
+    if word is not None and (problem := _unknown_command(parser, word)) is not None:
+        print(f"hexapod-bench: error: {problem}", file=sys.stderr)
+        return 2
     args = parser.parse_args(words)
     args.argv = words  # run.json's commands
     logging.basicConfig(level=logging.INFO if args.verbose else logging.WARNING,

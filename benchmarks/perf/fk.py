@@ -92,15 +92,13 @@ def format_fk(figures: list[FkFigure]) -> str:
 def main(argv: list[str] | None = None) -> int:
     """Entry point of ``python -m benchmarks.perf.fk``."""
     parser = argparse.ArgumentParser(prog="hexapod-bench perf fk")
-    parser.add_argument("what", choices=["fk"], help="which figure")
     parser.add_argument("-n", type=int, default=1000,
                         help="number of random poses (default 1000)")
     parser.add_argument("--seed", type=seed, default=0,
                         help="random seed of the poses (default 0)")
     args = parser.parse_args(argv)
     check_counts(parser, args, "-n")
-    if args.what == "fk":
-        print(format_fk(fk_figures(args.n, args.seed)))
+    print(format_fk(fk_figures(args.n, args.seed)))
     return 0
 
 

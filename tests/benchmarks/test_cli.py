@@ -11,7 +11,7 @@ from pathlib import Path
 
 import pytest
 
-from benchmarks.cli import build_parser, command_word
+from benchmarks.cli import build_parser, command_word, main
 
 ROOT = Path(__file__).resolve().parents[2]
 
@@ -76,3 +76,22 @@ def test_a_reader_that_leaves_stops_the_command_quietly() -> None:
     p.stdout.close()  # before the command writes its first line
     err = p.stderr.read().decode()
     assert p.wait(timeout=120) == 141 and err == ""
+
+
+def test_a_mistyped_command_is_named_with_the_close_one(
+        capsys: pytest.CaptureFixture[str]) -> None:
+    """argparse printed its usage and 'invalid choice', with no suggestion."""
+    assert main(["runs", "quick", "--out", "r1"]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith("hexapod-bench: error: no command 'runs'; the commands: ")
+    assert "(did you mean 'run'?)" in err and "usage:" not in err
+
+
+def test_the_version_is_printed(capsys: pytest.CaptureFixture[str]) -> None:
+    """It answered 'the following arguments are required: command'."""
+    from importlib import metadata
+
+    with pytest.raises(SystemExit) as info:
+        main(["--version"])
+    assert info.value.code == 0
+    assert capsys.readouterr().out.strip() == f"hexapod-bench {metadata.version('hexapod-vs')}"

@@ -53,7 +53,7 @@ BAD = [
     ("features", ["nosuch.module"], "MODULE 'nosuch.module' cannot be imported: No module "
      "named 'nosuch'"),
     # (already refused, as "-n 0: at least one pose")
-    ("fk", ["fk", "-n", "0"], "-n: at least 1, got 0"),
+    ("fk", ["-n", "0"], "-n: at least 1, got 0"),
     # (an IndexError traceback from np.percentile of no round trips, the emulator started)
     ("serial", ["--periods", "0"], "--periods: at least 1, got 0"),
     # (refused by the robot's step, after the emulator started: "dt must be positive")
@@ -131,7 +131,7 @@ def test_a_negative_seed_is_refused_and_the_usage_names_the_command(
     """A negative --seed ended in numpy's ValueError traceback; the usage lines named
     ``python -m benchmarks.perf.NAME`` where the user typed ``hexapod-bench perf NAME``."""
     main = importlib.import_module(f"benchmarks.perf.{module}").main
-    args = ["fk", "--seed", "-1"] if module == "fk" else ["--seed", "-1"]
+    args = ["--seed", "-1"]
     with pytest.raises(SystemExit) as info:
         main(args)
     err = capsys.readouterr().err
