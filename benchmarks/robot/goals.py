@@ -119,6 +119,8 @@ def load_goal(path: str | Path, geometry: HexapodGeometry) -> ServoGoal:
             message names the file and the key.
     """
     src = str(path)
+    if not Path(path).exists():  # (the file's own error did not say which option named it)
+        raise ConfigFileError(src, f"file not found (--goal): tried {Path(path).resolve()}")
     table = load_toml(path)
     check_keys(table, GOAL_KEYS, src, required=("lengths_mm",))
     q = get_matrix(table, "lengths_mm", (6,), src) * 1e-3

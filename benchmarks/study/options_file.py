@@ -60,7 +60,8 @@ def load_options_file(path: str | Path) -> OptionsFile:
     try:
         raw = Path(path).read_bytes()
     except FileNotFoundError:
-        raise ScenarioError(p, f"file not found: tried {Path(path).resolve()}") from None
+        raise ScenarioError(p, f"file not found (--options-file): tried "
+                            f"{Path(path).resolve()}") from None
     except OSError as exc:
         raise ScenarioError(p, f"cannot be read: {exc}") from None
     try:

@@ -275,6 +275,8 @@ def test_unknown_controller_suggests_the_closest(
 @pytest.mark.parametrize(("extra", "fragment"), [
     (["--camera", "webcam"], "--camera webcam: expected sim, video:PATH or device:N"),
     (["--camera", "video:/nonexistent.avi"], "no such file"),
+    # (it said "missing.toml: file not found", not which option named it)
+    (["--goal", "missing.toml"], "missing.toml: file not found (--goal): tried "),
     (["--backend", "tcp:1234"], "unknown backend 'tcp:1234'"),
     (["--backend", "serial"], "needs arguments: serial:URL"),
     (["--dt", "0"], "--dt must be a positive period"),

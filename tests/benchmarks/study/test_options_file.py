@@ -78,7 +78,7 @@ def test_bad_files_name_the_file_and_key(tmp_path: Path, text: str, fragment: st
 
 
 def test_a_missing_file_says_where_it_looked(tmp_path: Path) -> None:
-    with pytest.raises(ScenarioError, match="file not found"):
+    with pytest.raises(ScenarioError, match=r"file not found \(--options-file\): tried "):
         load_options_file(tmp_path / "nope.toml")
 
 
