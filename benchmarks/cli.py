@@ -170,13 +170,16 @@ def command_word(argv: list[str]) -> str | None:
     return next((a for a in argv if not a.startswith("-")), None)
 
 
-def _unknown_command(parser: argparse.ArgumentParser, word: str) -> str | None:
+#: The subcommands of the last parser :func:`build_parser` made.
+_COMMANDS: list[str] = []
+
+
+def _unknown_command(word: str) -> str | None:
     """The refusal of a word that is no subcommand, with the close one (argparse printed
     its usage and 'invalid choice', no suggestion), or None."""
     from hexapod.config import suggest
 
-    actions = [a for a in parser._actions if isinstance(a, argparse._SubParsersAction)]
-    names = sorted(actions[0].choices) if actions else []
+    names = _COMMANDS
     if not names or word in names:
         return None
     hint = suggest(word, names)
@@ -369,6 +372,7 @@ def build_parser(commands: set[str] | None = None) -> argparse.ArgumentParser:
     from benchmarks.study.analysis_cli import add_analysis_commands
 
     add_analysis_commands(sub)  # export, compare, reproduce
+    _COMMANDS[:] = sorted(sub.choices or ())
     return p
 
 
@@ -383,7 +387,7 @@ def main(argv: list[str] | None = None) -> int:
     words = list(sys.argv[1:] if argv is None else argv)
     word = command_word(words)
     parser = build_parser({word} if word else set())
-    if word is not None and (problem := _unknown_command(parser, word)) is not None:
+    if word is not None and (problem := _unknown_command(word)) is not None:
         print(f"hexapod-bench: error: {problem}", file=sys.stderr)
         return 2
     args = parser.parse_args(words)
