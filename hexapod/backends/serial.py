@@ -153,18 +153,7 @@ class SerialRobot(SerialLink, Backend):
             raise SerialLinkError(url, f"cannot open the port: {exc}") from exc
         try:
             self._port.reset_input_buffer()
-            try:
-                self.identity = protocol.parse_idn(self._exchange("*IDN?"))
-            except SerialDisconnectedError as exc:  # closed at once: busy, over TCP
-                if not url.startswith("socket://"):
-                    raise
-                raise SerialDisconnectedError(url, f"{exc.problem} (a TCP board serves one "
-                                              "client at a time: is another session "
-                                              "connected to it?)", exc.command) from exc
-            except ProtocolError as exc:  # the first reply is not of the protocol
-                raise ProtocolError(exc.line, f"{url}: {exc.problem}: a device that does not "
-                                    f"speak this protocol, or at another baud rate than "
-                                    f"{baudrate} (serial:URL?baud=N)?", exc.command) from exc
+            self.identity = self._first_reply(baudrate)
             limits = protocol.parse_lim(self._exchange("LIM?"))
             self.stroke = limits.stroke
             self.max_speed = limits.max_speed
@@ -259,6 +248,28 @@ class SerialRobot(SerialLink, Backend):
             return self._checked("LIM?", protocol.parse_lim).max_speed
 
         self.max_speed = self._guarded(go)
+
+    def _first_reply(self, baudrate: int) -> str:
+        """The board's identity (``*IDN?``), the first exchange of a session: a link
+        closed at once or a reply not of the protocol is said with its likely cause.
+
+        Raises:
+            SerialDisconnectedError: Closed at once (a TCP board busy with another client).
+            ProtocolError: Not a reply of the protocol (another device, another baud rate).
+        """
+        url = self.url
+        try:
+            return protocol.parse_idn(self._exchange("*IDN?"))
+        except SerialDisconnectedError as exc:  # closed at once: busy, over TCP
+            if not url.startswith("socket://"):
+                raise
+            raise SerialDisconnectedError(url, f"{exc.problem} (a TCP board serves one "
+                                          "client at a time: is another session connected "
+                                          "to it?)", exc.command) from exc
+        except ProtocolError as exc:  # the first reply is not of the protocol
+            raise ProtocolError(exc.line, f"{url}: {exc.problem}: a device that does not "
+                                f"speak this protocol, or at another baud rate than "
+                                f"{baudrate} (serial:URL?baud=N)?", exc.command) from exc
 
     # ------------------------------------------------------------------ motion
     def _arm(self) -> None:
