@@ -164,8 +164,10 @@ class _OutputAction(argparse.Action):
     def __call__(self, parser: argparse.ArgumentParser, namespace: argparse.Namespace,
                  values: Any, option_string: str | None = None) -> None:
         problem = unwritable(Path(values), self.kind)
-        if problem is not None:  # refused before any work (exit 2), not after the work
-            raise argparse.ArgumentError(self, f"{values}: {problem}")
+        if problem is not None:  # refused before any work (exit 2), not after the work,
+            # in one line (an ArgumentError printed the whole usage before the reason)
+            parser.exit(2, f"{parser.prog}: error: argument {option_string or self.dest}: "
+                           f"{values}: {problem}\n")
         setattr(namespace, self.dest, values)
 
 

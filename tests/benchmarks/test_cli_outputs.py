@@ -306,7 +306,7 @@ def test_a_directory_holding_a_users_file_is_refused_unless_overwrite(
 # ------------------------------------------------- an output that cannot be written at all
 @pytest.mark.parametrize("key", sorted(_outputs()))
 def test_an_output_that_cannot_be_written_is_refused_when_the_command_line_is_read(
-        key: tuple[str, str], tmp_path: Path) -> None:
+        key: tuple[str, str], tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     cmd, option = key
     (action,) = [a for a in _subcommands()[cmd]._actions if _name(a) == option]
     a_file = tmp_path / "notes.txt"
@@ -319,9 +319,11 @@ def test_an_output_that_cannot_be_written_is_refused_when_the_command_line_is_re
         if expected is None:  # a path this kind of output may take
             action(argparse.ArgumentParser(), argparse.Namespace(), str(path), option)
             continue
-        with pytest.raises(argparse.ArgumentError) as refused:
-            action(argparse.ArgumentParser(), argparse.Namespace(), str(path), option)
-        assert f"{path}: " in str(refused.value) and expected in str(refused.value)
+        with pytest.raises(SystemExit) as refused:
+            action(argparse.ArgumentParser(prog="p"), argparse.Namespace(), str(path), option)
+        err = capsys.readouterr().err
+        assert refused.value.code == 2 and "usage" not in err  # one line, no usage
+        assert err.startswith(f"p: error: argument {option}: {path}: ") and expected in err
     assert a_file.read_text() == "mine\n" and sorted(tmp_path.iterdir()) == [a_file]
 
 
