@@ -173,12 +173,9 @@ def _worker_start() -> None:
     # the run's SIGTERM handler (benchmarks.termination) is not the worker's: SIGTERM,
     # from the run or from its death, ends the worker
     signal.signal(signal.SIGTERM, signal.SIG_DFL)
-    if sys.platform.startswith("linux"):
-        import ctypes
+    from hexapod.parent import end_with_parent
 
-        ctypes.CDLL(None, use_errno=True).prctl(1, int(signal.SIGTERM))  # PR_SET_PDEATHSIG
-        if os.getppid() == 1:  # the run ended before this line: do not linger
-            os.kill(os.getpid(), signal.SIGTERM)
+    end_with_parent()
 
 
 def _iter_pool(units: list[WorkUnit], workers: int,

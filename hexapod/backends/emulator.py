@@ -348,14 +348,11 @@ CHILD_OF = "HEXAPOD_EMULATOR_CHILD_OF"
 
 def _end_with_parent() -> None:
     """Ask Linux for SIGTERM when the host that started this emulator ends."""
-    parent = os.environ.pop(CHILD_OF, None)
-    if parent is None or not sys.platform.startswith("linux"):
-        return
-    import ctypes
+    from hexapod.parent import end_with_parent
 
-    ctypes.CDLL(None, use_errno=True).prctl(1, int(signal.SIGTERM))  # PR_SET_PDEATHSIG
-    if str(os.getppid()) != parent:  # the host ended before this line
-        os.kill(os.getpid(), signal.SIGTERM)
+    parent = os.environ.pop(CHILD_OF, None)
+    if parent is not None and parent.isdigit():
+        end_with_parent(int(parent))
 
 
 def main(argv: Sequence[str] | None = None) -> int:
