@@ -32,14 +32,24 @@ def _check_pose(rotation: np.ndarray, translation: np.ndarray) -> tuple[np.ndarr
         )
     if not (np.isfinite(R).all() and np.isfinite(t).all()):
         raise ShapeError("pose", "finite values", "NaN or inf")
+    check_rotations(R)
+    return R, t
+
+
+def check_rotations(R: np.ndarray, name: str = "rotation") -> None:
+    """Refuse finite matrices (..., 3, 3) that are not rotations: ``R^T R`` further than
+    :data:`ROTATION_TOLERANCE` from the identity, or a determinant not positive.
+
+    Raises:
+        ShapeError: Naming ``name``, the largest defect and the determinants' range.
+    """
     defect, det = rotation_defect(R)
     off = float(np.max(defect, initial=0.0))
     if off > ROTATION_TOLERANCE or np.any(det <= 0):
-        raise ShapeError("rotation", "rotation matrices (R^T R = I, det = +1: not a scaled, "
+        raise ShapeError(name, "rotation matrices (R^T R = I, det = +1: not a scaled, "
                          "sheared or mirrored matrix)",
                          f"|R^T R - I| = {off:.2e}, det from {float(np.min(det)):.4g} to "
                          f"{float(np.max(det)):.4g}")
-    return R, t
 
 
 #: How far ``R^T R`` may be from the identity in a pose given to the kinematics (the

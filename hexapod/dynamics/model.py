@@ -21,6 +21,7 @@ import numpy as np
 from hexapod.dynamics import compiled as _c
 from hexapod.exceptions import DynamicsError, ShapeError
 from hexapod.geometry import HexapodGeometry
+from hexapod.kinematics import check_rotations
 
 Method = Literal["compiled", "pinocchio"]
 
@@ -56,6 +57,11 @@ class DynamicModel:
     Args:
         geometry: The robot; masses, inertias and gravity from ``geometry.inertia``.
         method: ``"compiled"`` (fast, batched) or ``"pinocchio"`` (reference).
+
+    Every method refuses (:class:`~hexapod.exceptions.ShapeError`, naming the argument)
+    a wrong shape, a value not finite, and an orientation ``R`` that is not a rotation
+    (:func:`hexapod.kinematics.check_rotations`: a scaled or mirrored matrix); a state
+    whose result is not finite raises :class:`~hexapod.exceptions.DynamicsError`.
     """
 
     def __init__(self, geometry: HexapodGeometry, method: Method = "compiled") -> None:
@@ -120,6 +126,7 @@ class DynamicModel:
         (:func:`hexapod.dynamics.compiled.pack`); per-item geometry or inertial
         parameters override the model's (e.g. the true robots of a study)."""
         R = checked_array("R", R, (3, 3))
+        check_rotations(R, "R")
         t = checked_array("t", t, (3,))
         twist = checked_array("twist", twist, (6,))
         u = checked_array("forces/acc", u, (6,))
@@ -266,8 +273,10 @@ class DynamicModel:
     @staticmethod
     def _one(R: np.ndarray, t: np.ndarray, twist: np.ndarray, u: np.ndarray, name: str
              ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-        return (checked_array("R", R, (3, 3)), checked_array("t", t, (3,)),
-                checked_array("twist", twist, (6,)), checked_array(name, u, (6,)))
+        R = checked_array("R", R, (3, 3))
+        check_rotations(R, "R")
+        return (R, checked_array("t", t, (3,)), checked_array("twist", twist, (6,)),
+                checked_array(name, u, (6,)))
 
     @staticmethod
     def checked(y: np.ndarray, what: str) -> np.ndarray:

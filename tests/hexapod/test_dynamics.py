@@ -256,6 +256,18 @@ def test_bad_input_is_refused(geometry: HexapodGeometry, rng: np.random.Generato
         dyn.forward(R[0], t[0], twist[0, :5], forces[0])
     with pytest.raises(ValueError, match="unknown dynamics method"):
         DynamicModel(geometry, method="mujoco")  # type: ignore[arg-type]
+    # A scaled or mirrored matrix is no orientation: its forces would be of no robot.
+    scaled, mirrored = R.copy(), R.copy()
+    scaled[1] *= 1.01
+    mirrored[0, :, 2] *= -1
+    for method in ("compiled", "pinocchio"):
+        model = DynamicModel(geometry, method=method)  # type: ignore[arg-type]
+        with pytest.raises(ShapeError, match=r"R: expected rotation matrices.*det from"):
+            model.forward_batch(scaled, t, twist, forces)
+        with pytest.raises(ShapeError, match=r"R: expected rotation.*det from -1 to -1"):
+            model.inverse(mirrored[0], t[0], twist[0], forces[0])
+        with pytest.raises(ShapeError, match="R: expected rotation"):
+            model.mass_matrix(scaled[1], t[1])
     # Every leg through one platform point: no force balances a torque about it.
     with pytest.raises(DynamicsError, match="state 0"):
         dyn.inverse_batch(R, t, twist, forces, platform_points=np.zeros((2, 6, 3)))
