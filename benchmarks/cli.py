@@ -285,7 +285,8 @@ def build_parser(commands: set[str] | None = None) -> argparse.ArgumentParser:
     s.add_argument("--solver", choices=["lstsq", "irls"], help="default: the scenario's")
     s.add_argument("--correct-scale", action="store_true",
                    help="divide the estimates by the measured scale (uncertain leg radius)")
-    s.add_argument("--seed", type=int)
+    s.add_argument("--seed", type=int, help="seed of the simulated world and its noise "
+                   "(default: the scenario's seed)")
     s.add_argument("--warn-ratio", type=float, metavar="R",
                    help="warn when a leg's singular-value ratio is below R (default: the "
                         "scenario's [calibration] warn_singular_ratio, 0.005)")

@@ -148,9 +148,14 @@ def add_command(sub: Any, name: str, func: Any, help: str, **kwargs: Any
         name: The subcommand.
         func: Its function of the parsed arguments (returns the exit code).
         help: One line for ``hexapod-bench --help``.
-        **kwargs: More ``add_parser`` arguments (``description``).
+        **kwargs: More ``add_parser`` arguments (``description``, ``epilog``: the
+            command's :data:`benchmarks.cli_examples.EXAMPLES` are added after it).
     """
-    parser: argparse.ArgumentParser = sub.add_parser(name, help=help, **kwargs)
+    from benchmarks.cli_examples import ExamplesFormatter, epilog
+
+    kwargs["epilog"] = epilog(name, kwargs.get("epilog"))
+    parser: argparse.ArgumentParser = sub.add_parser(
+        name, help=help, formatter_class=ExamplesFormatter, **kwargs)
     parser.set_defaults(func=func)
     return parser
 

@@ -95,3 +95,29 @@ def test_the_version_is_printed(capsys: pytest.CaptureFixture[str]) -> None:
         main(["--version"])
     assert info.value.code == 0
     assert capsys.readouterr().out.strip() == f"hexapod-bench {metadata.version('hexapod-vs')}"
+
+
+def test_every_command_s_help_examples_parse_and_name_built_in_scenarios(
+        tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """Each ``COMMAND --help`` ends with examples that parse as written, every command
+    has some, and a scenario an example names by a bare name is a built-in one."""
+    import shlex
+
+    from benchmarks.cli_examples import EXAMPLES
+    from benchmarks.study.scenario import builtin_scenarios
+
+    monkeypatch.chdir(tmp_path)  # (the examples' output directories are relative)
+    parser = build_parser()
+    assert set(EXAMPLES) == set(_choices(parser)), "a command without help examples"
+    builtin = builtin_scenarios()
+    for command, examples in EXAMPLES.items():
+        help_text = _choices(parser)[command].format_help()
+        for line, what in examples:
+            assert f"  {line}\n      {what}" in help_text  # as written, not re-wrapped
+            argv = shlex.split(line)
+            assert argv[:2] == ["hexapod-bench", command]
+            args = parser.parse_args(argv[1:])
+            names = {"run": lambda a: a.scenarios, "tune": lambda a: [a.scenario],
+                     "check": lambda a: [a.file], "calibrate": lambda a: [a.scenario]}
+            for name in names.get(command, lambda a: [])(args):
+                assert name.endswith(".toml") or name in builtin, (command, name)
