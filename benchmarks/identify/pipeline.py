@@ -96,6 +96,42 @@ def measured(record: Record, settings: Settings, rng: np.random.Generator
     return lengths, forces
 
 
+#: When a backend's ``measured_forces()`` reading is taken (its ``force_timing``): the
+#: mean over the last period, at its middle, or at its end (an instantaneous reading
+#: with the lengths).
+FORCE_TIMINGS = ("mean", "middle", "end")
+
+
+def force_timing(backend: Any) -> tuple[str, bool]:
+    """The backend's ``force_timing`` (:data:`FORCE_TIMINGS`) and whether it says one
+    (``"end"`` when it does not).
+
+    Raises:
+        BackendError: A value not in :data:`FORCE_TIMINGS`.
+    """
+    timing = getattr(backend, "force_timing", None)
+    if timing is None:
+        return "end", False
+    if timing not in FORCE_TIMINGS:
+        raise BackendError(f"{type(backend).__name__}.force_timing: {timing!r}; expected one "
+                           f"of {', '.join(repr(t) for t in FORCE_TIMINGS)} (when "
+                           "measured_forces() is read: the last period's mean, its middle, "
+                           "or its end with the lengths)")
+    return str(timing), True
+
+
+def aligned(lengths: np.ndarray, forces: np.ndarray, timing: str
+            ) -> tuple[np.ndarray, np.ndarray]:
+    """The readings of :func:`record_backend` at the same instants: a reading of a
+    period's mean or middle (``timing``) belongs half a period before the lengths read at
+    the period's end, so the force at those lengths is the mean of two consecutive
+    readings (second-order accurate), the last sample dropped; an ``"end"`` reading is
+    the lengths' instant already."""
+    if timing == "end":
+        return lengths, forces
+    return lengths[:-1], 0.5 * (forces[:-1] + forces[1:])
+
+
 def record_backend(backend: Any, robot: HexapodGeometry, excitation: Excitation,
                    duration: float, dt: float) -> tuple[np.ndarray, np.ndarray]:
     """Run the excitation on a backend that reports forces (a position loop on its
@@ -218,8 +254,11 @@ def identify(robot: HexapodGeometry, settings: Settings,
                 raise BackendError(f"--backend {settings.backend}: {type(backend).__name__} "
                                    "has no measured_forces(): it cannot report the drive "
                                    "forces the identification needs")
-            lengths, forces = record_backend(backend, robot, excitation, settings.duration,
-                                             settings.sample_dt)
+            timing, declared = force_timing(backend)
+            lengths, forces = aligned(*record_backend(backend, robot, excitation,
+                                                      settings.duration, settings.sample_dt),
+                                      timing)
+        info.update({"force_timing": timing, "force_timing_declared": declared})
     timings["record_s"] = time.perf_counter() - t1
     t1 = time.perf_counter()
     s = samples(robot, settings.sample_dt, lengths, forces, settings.cutoff_hz)

@@ -2,9 +2,10 @@
 lab robot (``--backend my_package:MyRobot``): the dynamic world's true robot (the
 closed-chain mechanism with velocity-mode drives, integrated at 20 us) behind the
 :class:`~hexapod.backends.base.Backend` interface, ``measured_forces()`` the drives'
-forces at the end of the last step. Named ``tests.benchmarks.identify.force_robot:
-ForceRobot``; ``:nan-at=K`` makes its reading of leg 3 NaN from step ``K`` on (a sensor
-or link fault), ``:mm`` reports millimetres."""
+forces read in the middle of the last step (``force_timing = "middle"``; ``:end`` reads
+them at its end and says so, ``:unsaid`` too without saying it). Named
+``tests.benchmarks.identify.force_robot:ForceRobot``; ``:nan-at=K`` makes its reading of
+leg 3 NaN from step ``K`` on (a sensor or link fault), ``:mm`` reports millimetres."""
 
 from __future__ import annotations
 
@@ -29,7 +30,8 @@ class ForceRobot(Backend):
     Args:
         geometry: The robot (its true one: the same file).
         args: ``""``, ``"nan-at=K"``, ``"force-nan-at=K"`` (leg 2's force NaN from step
-            ``K`` on), ``"mm"`` or ``"kN"`` (the forces in kilonewtons).
+            ``K`` on), ``"mm"``, ``"kN"`` (the forces in kilonewtons), ``"end"`` or
+            ``"unsaid"`` (the forces at the step's end).
     """
 
     simulated = True
@@ -45,6 +47,10 @@ class ForceRobot(Backend):
         self.force_nan_at = (int(args.split("=")[1]) if args.startswith("force-nan-at=")
                              else None)
         self.force_unit = 1e3 if args == "kN" else 1.0
+        self.at_end = args in ("end", "unsaid")
+        if args != "unsaid":  # (an instance attribute: the backend's declaration)
+            self.force_timing = "end" if self.at_end else "middle"
+        self._force = np.zeros(6)
         self.steps = 0
         R, t = home_pose(geometry)
         self._robots = DynamicRobots([geometry], R[None].copy(), t[None].copy())
@@ -62,10 +68,16 @@ class ForceRobot(Backend):
         """The drives' velocity setpoints for ``dt`` [s]."""
         v = np.asarray(velocities, float)
         sub = max(1, round(dt / PHYSICS_DT))
-        if self._robots.advance(np.array([0]), v[None], dt / sub, sub).any():
-            raise RuntimeError("the robot diverged")
+        first = sub if self.at_end else sub // 2  # the force is read after these steps
+        self._advance(v, dt / sub, first)
+        self._force = np.asarray(self._robots.forces[0], float).copy()
+        self._advance(v, dt / sub, sub - first)
         self.steps += 1
         return BackendStep(self.measured_lengths(), v.copy(), np.zeros(6, bool))
+
+    def _advance(self, v: np.ndarray, h: float, steps: int) -> None:
+        if steps and self._robots.advance(np.array([0]), v[None], h, steps).any():
+            raise RuntimeError("the robot diverged")
 
     def measured_lengths(self) -> np.ndarray:
         """The legs' lengths [m] (NaN on leg 3 from step ``nan_at``; mm with ``mm``)."""
@@ -77,9 +89,9 @@ class ForceRobot(Backend):
         return q * 1e3 if self.mm else q
 
     def measured_forces(self) -> np.ndarray:
-        """The drives' forces at the end of the last step [N] (leg 2's NaN from step
-        ``force_nan_at``)."""
-        f = np.asarray(self._robots.forces[0], float) / self.force_unit
+        """The drives' forces in the middle (or at the end) of the last step [N] (leg 2's
+        NaN from step ``force_nan_at``)."""
+        f = self._force / self.force_unit
         if self.force_nan_at is not None and self.steps >= self.force_nan_at:
             f[2] = np.nan
         return f
