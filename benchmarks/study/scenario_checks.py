@@ -10,7 +10,7 @@ from __future__ import annotations
 import contextlib
 import math
 import re
-from collections.abc import Collection
+from collections.abc import Collection, Sequence
 from dataclasses import replace
 from pathlib import Path
 from typing import Any
@@ -329,7 +329,44 @@ def check_controllers(sc: Scenario) -> tuple[Scenario, list[str]]:
                                     f"{exc}; {fix}",
                                     key=named if spec.key else None) from None
         warnings += gain_warnings(spec, table, sc.dt)
-    return sc, warnings
+    return sc, warnings + unmatched_gains(sc.source, sc.controllers, tables)
+
+
+#: The options that set a first-order law's gain schedule (``adaptive_gain`` overrides
+#: ``gain``: ``docs/math.md`` section 6).
+GAIN_OPTIONS = ("gain", "adaptive_gain")
+
+
+def unmatched_gains(source: str, specs: Sequence[ControllerSpec], tables: list[Any]
+                    ) -> list[str]:
+    """A warning when the first-order laws of a study (those that declare
+    ``adaptive_gain``) run under different gain schedules (gains from an options file,
+    ``tune``'s or written on purpose, left out): their comparison then measures the
+    gains as much as the laws (a law left at its constant default beside one given quick's adaptive
+    gain reversed ``payload-saturation``'s verdicts at 40 and 55 kg).
+
+    Args:
+        source: The scenario file (for the text).
+        specs: The controllers, their options resolved.
+        tables: Their option tables.
+    """
+    schedules: dict[str, str] = {}
+    for spec, table in zip(specs, tables, strict=True):
+        if not table.declares("adaptive_gain"):
+            continue
+        if any(": controllers." in spec.option_keys.get(o, "") for o in GAIN_OPTIONS):
+            continue  # run --options-file: tuned (the same effort) or chosen on purpose
+        given = {**{o.name: o.default for o in table.options}, **spec.options}
+        lam = given.get("adaptive_gain")
+        schedules[spec.label] = (f"adaptive_gain {[float(x) for x in lam]}" if lam is not None
+                                 else f"constant gain {float(given.get('gain', 1.0)):g} 1/s")
+    if len(set(schedules.values())) < 2:
+        return []
+    return [f"{source}: the first-order laws run under different gain schedules ("
+            + "; ".join(f"{label}: {text}" for label, text in schedules.items())
+            + "): their comparison measures the gains as much as the laws; give them one "
+            "schedule ([controller_options] adaptive_gain or gain) or tune them all "
+            "(hexapod-bench tune, docs/tuning.md)"]
 
 
 def gain_warnings(spec: ControllerSpec, table: Any, dt: float) -> list[str]:

@@ -293,6 +293,38 @@ def test_gains_beyond_the_documented_bounds_are_warned_of() -> None:
         assert not any("2/dt" in w or "omega_n" in w for w in said), (name, said)
 
 
+def test_first_order_laws_under_different_gain_schedules_are_warned_of(tmp_path: Path
+                                                                        ) -> None:
+    """A study whose first-order laws run under different gain schedules (one given
+    quick's adaptive gain, the others left at their constant default: payload-saturation
+    compared them so) is warned of, naming each law's schedule; one schedule for all
+    ([controller_options]) or gains from an options file (tuned) is not; of the
+    built-in scenarios none is."""
+    from benchmarks.study.options_file import apply_options_file, load_options_file
+    from benchmarks.study.scenario import builtin_scenarios
+    from benchmarks.study.scenario_checks import check_controllers
+
+    laws = [{"name": "leg-edge", "adaptive_gain": [5.0, 1.0, 30.0]}, "joint-space",
+            {"name": "leg-edge-mpc", "label": "mpc", "gain": 2.0}, "computed-torque"]
+    study = {**MINIMAL, "robot": {"world": "dynamic"}, "controllers": laws}
+    (said,) = [w for w in check_controllers(parse_scenario(study))[1] if "gain sched" in w]
+    assert ("the first-order laws run under different gain schedules (leg-edge: "
+            "adaptive_gain [5.0, 1.0, 30.0]; joint-space: constant gain 1 1/s; mpc: constant "
+            "gain 2 1/s): their comparison measures the gains") in said
+    assert "computed-torque" not in said  # (no first-order gain)
+    same = {**study, "controllers": ["leg-edge", "joint-space", "computed-torque"],
+            "controller_options": {"adaptive_gain": [5.0, 1.0, 30.0]}}
+    assert not [w for w in check_controllers(parse_scenario(same))[1] if "gain sched" in w]
+    tuned = tmp_path / "tuned.toml"
+    tuned.write_text('[controllers."joint-space"]\ngain = 3.0\n[controllers.mpc]\n'
+                     'adaptive_gain = [4.0, 1.0, 20.0]\n')
+    (sc,) = apply_options_file([parse_scenario(study)], load_options_file(tuned))
+    assert not [w for w in check_controllers(sc)[1] if "gain sched" in w]
+    for name in builtin_scenarios():
+        assert not [w for w in check_controllers(load_scenario(name))[1]
+                    if "gain sched" in w], name
+
+
 @pytest.mark.parametrize(("reference", "key", "says"), [
     # a flat rows: every trial ran, then the report crashed ('float' object is not iterable)
     ({"header": ["a", "b"], "rows": [0.01, 0.1]}, "reference.rows[0]",
