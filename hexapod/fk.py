@@ -17,6 +17,7 @@ Both start from a guess (default: the home pose) and raise
 from __future__ import annotations
 
 import logging
+import math
 from dataclasses import dataclass
 from functools import lru_cache
 from typing import TYPE_CHECKING, Literal
@@ -239,8 +240,10 @@ def forward_kinematics(
         lengths: (6,) leg lengths [m].
         guess: Starting pose ``(rotation, translation)``; the home pose if None.
         method: ``"newton"`` (fast, CasADi) or ``"pinocchio"`` (reference).
-        tol: Convergence threshold on the max absolute residual [m].
-        max_iterations: Iteration budget.
+        tol: Convergence threshold on the max absolute residual [m] (positive).
+        max_iterations: Iteration budget (``newton``: whole calls of
+            :data:`ITERATIONS_PER_CALL` = 3 Newton steps, the budget rounded up: 50
+            allows 51).
         check_stroke: Refuse lengths outside the stroke.
         model: A prebuilt :class:`HexapodModel` (``pinocchio`` method), built if None.
 
@@ -254,6 +257,7 @@ def forward_kinematics(
     q = np.asarray(lengths, dtype=float)
     if q.shape != (6,):
         raise ShapeError("lengths", "shape (6,)", q.shape)
+    _check_budget(tol, max_iterations)
     _check_lengths(geometry, q, check_stroke)
     R0, t0 = _guess(geometry, guess)
     if method == "newton":
@@ -263,6 +267,16 @@ def forward_kinematics(
 
         return _fk_pinocchio(model or build_model(geometry), q, R0, t0, tol, max_iterations)
     raise ValueError(f"unknown forward-kinematics method {method!r}; use 'newton' or 'pinocchio'")
+
+
+def _check_budget(tol: float, max_iterations: int) -> None:
+    """Refuse a tolerance that is not a positive number (0 or NaN: a converged solve
+    reported failed, residual 0) and a budget below one iteration."""
+    if not (isinstance(tol, int | float) and math.isfinite(tol) and tol > 0):
+        raise ValueError(f"tol: must be a positive finite length [m], got {tol!r}")
+    if isinstance(max_iterations, bool) or not isinstance(max_iterations, int | np.integer) \
+            or max_iterations < 1:
+        raise ValueError(f"max_iterations: must be an integer >= 1, got {max_iterations!r}")
 
 
 def _fk_newton(geometry: HexapodGeometry, q: np.ndarray, R: np.ndarray, t: np.ndarray,
@@ -309,24 +323,36 @@ def forward_kinematics_batch(
         lengths: (N, 6) leg lengths [m].
         rotations: (N, 3, 3) guesses (home pose if None).
         translations: (N, 3) guesses [m].
-        tol: Convergence threshold [m].
-        max_iterations: Iteration budget.
+        tol: Convergence threshold [m] (positive).
+        max_iterations: Iteration budget (whole calls of :data:`ITERATIONS_PER_CALL` = 3
+            Newton steps, rounded up).
         base_points: Optional (N, 6, 3) per-item base points (overrides the geometry's).
         platform_points: Optional (N, 6, 3) per-item platform points.
     """
     q = np.asarray(lengths, dtype=float)
     if q.ndim != 2 or q.shape[1] != 6:
         raise ShapeError("lengths", "shape (N, 6)", q.shape)
+    _check_budget(tol, max_iterations)
     n = q.shape[0]
+    if (rotations is None) != (translations is None):  # (one alone was dropped silently)
+        raise ValueError(f"{'translations' if translations is None else 'rotations'}: "
+                         "missing; give both guesses, or neither (the home pose)")
     if rotations is None or translations is None:
         R0, t0 = home_pose(geometry)
         rotations = np.broadcast_to(R0, (n, 3, 3))
         translations = np.broadcast_to(t0, (n, 3))
-    A = geometry.base_points if base_points is None else np.asarray(base_points, float)
-    E = geometry.platform_points if platform_points is None else np.asarray(platform_points,
-                                                                             float)
-    R = proper_rotations(np.asarray(rotations, float), "rotations")
-    x = pack_rows(R, np.asarray(translations, float), q, A, E)
+    points = {}
+    for name, given, own in (("base_points", base_points, geometry.base_points),
+                             ("platform_points", platform_points, geometry.platform_points)):
+        points[name] = own if given is None else np.asarray(given, float)
+        if points[name].shape not in ((6, 3), (n, 6, 3)):
+            raise ShapeError(name, f"shape (6, 3) or ({n}, 6, 3)", points[name].shape)
+    R, t = np.asarray(rotations, float), np.asarray(translations, float)
+    if R.shape != (n, 3, 3) or t.shape != (n, 3):
+        raise ShapeError("rotations/translations", f"shapes ({n}, 3, 3) and ({n}, 3)",
+                         f"{R.shape} and {t.shape}")
+    x = pack_rows(proper_rotations(R, "rotations"), t, q, points["base_points"],
+                  points["platform_points"])
     return solve_rows(x, tol, max_iterations)
 
 

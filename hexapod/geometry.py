@@ -112,6 +112,7 @@ class HexapodGeometry:
         v = float(self.max_speed)
         if not np.isfinite(v) or v <= 0:
             raise GeometryError("max_speed", f"must be positive and finite, got {v}", src)
+        _check_units(base, plat, q_max, r, v, src)
         base.flags.writeable = False
         plat.flags.writeable = False
         object.__setattr__(self, "base_points", base)
@@ -285,6 +286,31 @@ class HexapodGeometry:
         """Save the geometry to a TOML file (lengths in millimetres), with its
         ``[inertia]`` and ``[drives]`` tables written out in full."""
         Path(path).write_text(tomli_w.dumps(self.to_dict(dynamics=True)))
+
+
+#: Bounds no Gough-Stewart robot reaches, in SI units: a value beyond one is a unit
+#: slip (millimetres for metres) in the Python constructor, whose lengths are metres.
+MAX_LEG_LENGTH, MAX_SPEED = 50.0, 20.0
+
+
+def _check_units(base: np.ndarray, plat: np.ndarray, q_max: float, r: float, v: float,
+                 src: str | None) -> None:
+    """Refuse a stroke, leg radius or speed limit no robot of this size has (module
+    constants above; a leg thicker than the larger plate). A robot file's speed limit is
+    left to the file's own check (``check`` and ``servo`` warn above 2 m/s, naming
+    ``max_speed_mm_s``)."""
+    size = float(max(np.linalg.norm(base[:, :2], axis=1).max(),
+                     np.linalg.norm(plat[:, :2], axis=1).max()))
+    hint = "millimetres for metres? the geometry is in SI units"
+    if q_max > MAX_LEG_LENGTH:
+        raise GeometryError("stroke", f"q_max {q_max:g} m: no hexapod has legs this long "
+                            f"({hint})", src)
+    if r >= size:
+        raise GeometryError("leg_radius", f"{r:g} m is at least the plates' radius "
+                            f"{size:g} m ({hint})", src)
+    if v > MAX_SPEED and src is None:  # (a robot file's speed: its own unit-slip warning)
+        raise GeometryError("max_speed", f"{v:g} m/s: no hexapod's legs move this fast "
+                            f"({hint})", src)
 
 
 def _check_si_tables(g: HexapodGeometry, src: str | None) -> None:

@@ -35,7 +35,8 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from hexapod.exceptions import TrajectoryError
+from hexapod.exceptions import ShapeError, TrajectoryError
+from hexapod.kinematics import check_rotations
 from hexapod.scurve import SCurve
 from hexapod.se3 import exp_so3, log_so3
 
@@ -190,12 +191,34 @@ def _positive(value: float | None, field: str) -> float:
     return v
 
 
+def _pose(rotation: np.ndarray, translation: np.ndarray, which: str
+          ) -> tuple[np.ndarray, np.ndarray]:
+    """A pose argument as floats: a finite (3,) translation and a (3, 3) rotation.
+
+    Raises:
+        TrajectoryError: Naming ``{which}_rotation`` or ``{which}_translation``.
+    """
+    R = np.asarray(rotation, dtype=float)
+    p = np.asarray(translation, dtype=float)
+    if R.shape != (3, 3) or not np.all(np.isfinite(R)):
+        raise TrajectoryError(f"{which}_rotation", f"expected a finite (3, 3) rotation, got "
+                              f"shape {R.shape}" + ("" if R.shape != (3, 3) else " with NaN"))
+    if p.shape != (3,) or not np.all(np.isfinite(p)):
+        raise TrajectoryError(f"{which}_translation", f"expected a finite (3,) position [m], "
+                              f"got {p.tolist()}")
+    try:
+        check_rotations(R)
+    except ShapeError as exc:
+        raise TrajectoryError(f"{which}_rotation", f"not a rotation ({exc.got})") from None
+    return R, p
+
+
 class PoseTrajectory:
     """A reference pose trajectory from a start pose at rest (see the module docstring).
 
     Args:
         shape: ``"line"``, ``"circle"`` or ``"lemniscate"``.
-        profile: ``"quintic"`` or ``"trapezoidal"``.
+        profile: ``"quintic"``, ``"trapezoidal"`` or ``"s-curve"``.
         start_rotation: (3, 3) start orientation (base frame).
         start_translation: (3,) start position (base frame) [m].
         speed: Largest platform speed ``|dp/dt|`` [m/s].
@@ -229,12 +252,7 @@ class PoseTrajectory:
         if profile not in PROFILES:
             raise TrajectoryError("profile", f"expected one of {', '.join(PROFILES)}, "
                                   f"got {profile!r}")
-        R0 = np.asarray(start_rotation, dtype=float)
-        p0 = np.asarray(start_translation, dtype=float)
-        if R0.shape != (3, 3) or p0.shape != (3,) or not (np.all(np.isfinite(R0))
-                                                          and np.all(np.isfinite(p0))):
-            raise TrajectoryError("start", "expected a finite (3, 3) rotation and (3,) "
-                                  "translation")
+        R0, p0 = _pose(start_rotation, start_translation, "start")
         self.shape = shape
         self.profile = profile
         self.speed = _positive(speed, "speed")
@@ -246,8 +264,8 @@ class PoseTrajectory:
         if shape == "line":
             if goal_rotation is None or goal_translation is None:
                 raise TrajectoryError("goal", "a line needs a goal pose")
-            R1 = np.asarray(goal_rotation, dtype=float)
-            self._delta = np.asarray(goal_translation, dtype=float) - p0
+            R1, p1 = _pose(goal_rotation, goal_translation, "goal")
+            self._delta = p1 - p0
             self._axis_angle = log_so3(R0.T @ R1)  # body-frame rotation vector
             length = float(np.linalg.norm(self._delta))
             angle = float(np.linalg.norm(self._axis_angle))

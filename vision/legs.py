@@ -307,13 +307,19 @@ def _compiled_observation(camera: Camera, geometry: HexapodGeometry, rotation: n
     if (not fast_observe.compiled() or getattr(camera, "kind", None) not in (
             "perspective", "unified") or not fast_observe.supported(camera)):
         return None
+    from hexapod.exceptions import ShapeError
+    from hexapod.kinematics import check_rotations
+
     R = np.asarray(rotation, float)
     t = np.asarray(translation, float)
+    if R.shape[-2:] != (3, 3):
+        raise ShapeError("rotation", "shape (..., 3, 3)", R.shape)
     lead = R.shape[:-2]
     if t.shape != (*lead, 3):
-        from hexapod.exceptions import ShapeError
-
         raise ShapeError("translation", f"shape {(*lead, 3)}", t.shape)
+    if not (np.isfinite(R).all() and np.isfinite(t).all()):  # (as the numpy reference)
+        raise ShapeError("pose", "finite values", "NaN or inf")
+    check_rotations(R)
     params = fast_observe.WorldParams.from_worlds([geometry], [camera])
     if platform_radius is not None:
         params.platform_radius[:] = float(platform_radius)

@@ -51,8 +51,14 @@ def checked_array(name: str, value: np.ndarray, shape: tuple[int, ...]) -> np.nd
 class DynamicModel:
     """Rigid-body dynamics of the closed chain in the platform's coordinates.
 
-    ``M(x) acc + h(x, twist) = K(x)^T f`` with ``K`` the inverse Jacobian of the twist
-    above (``q_dot = K twist``).
+    ``M(x) acc + h(x, twist) = K(x)^T f`` with ``K`` the inverse Jacobian of this twist
+    (``q_dot = K twist``). The twist ``(v [m/s], w [rad/s])`` is ``v = dt/dt``, the
+    velocity of the platform frame's origin, and ``w`` the angular velocity, both in the
+    base frame: NOT the twist of :mod:`hexapod.kinematics` and :mod:`hexapod.se3`,
+    whose ``v`` is reduced at the base origin (``v_base = v - w x t``); give one for the
+    other and the accelerations are those of another motion. The acceleration is
+    ``(dv/dt, dw/dt)``; a leg force ``f_i`` [N] acts along the leg, positive when it
+    pushes the platform away from the base.
 
     Args:
         geometry: The robot; masses, inertias and gravity from ``geometry.inertia``.
@@ -85,7 +91,8 @@ class DynamicModel:
         Args:
             R: (3, 3) platform orientation in the base frame.
             t: (3,) platform position [m].
-            twist: (6,) ``(v [m/s], w [rad/s])``.
+            twist: (6,) ``(v [m/s], w [rad/s])``, ``v`` the platform origin's velocity
+                (the class docstring).
             forces: (6,) leg forces [N].
         """
         if self._reference is not None:

@@ -190,3 +190,27 @@ def test_a_guess_that_is_not_a_rotation_gives_the_pose_not_a_false_one() -> None
     with pytest.raises(ValueError, match="guess: a rotation guess with determinant -1"):
         forward_kinematics(g, q, guess=(-np.eye(3), t0))
     assert np.array_equal(proper_rotations(R[None], "guess")[0], R)
+
+
+def test_a_guess_given_half_a_budget_or_points_of_the_wrong_shape_are_refused() -> None:
+    """A rotation guess without its translation was dropped for the home pose without a
+    word; a tolerance of 0 or NaN reported a solve with residual 0 as failed; a budget of
+    0 reported "failed after 0 iterations"; points of another shape gave numpy's
+    broadcast error: each is named now."""
+    from hexapod import deltalab, home_pose
+
+    g = deltalab()
+    R, t = home_pose(g)
+    q = inverse_kinematics(g, R, t)[None]
+    with pytest.raises(ValueError, match="translations: missing; give both guesses"):
+        forward_kinematics_batch(g, q, rotations=R[None])
+    with pytest.raises(ShapeError, match=r"base_points: expected shape \(6, 3\) or \(1, 6, "
+                                         r"3\), got \(6, 2\)"):
+        forward_kinematics_batch(g, q, base_points=np.zeros((6, 2)))
+    with pytest.raises(ShapeError, match="rotations/translations"):
+        forward_kinematics_batch(g, q, rotations=R[None], translations=t)
+    for tol in (0.0, float("nan")):
+        with pytest.raises(ValueError, match="tol: must be a positive finite length"):
+            forward_kinematics(g, q[0], tol=tol)
+    with pytest.raises(ValueError, match="max_iterations: must be an integer >= 1, got 0"):
+        forward_kinematics_batch(g, q, max_iterations=0)

@@ -277,3 +277,25 @@ def test_a_nan_point_names_its_leg(tmp_path: Path) -> None:
         HexapodGeometry.from_toml(path)
     assert info.value.key == "base_points_mm"
     assert "leg 3: its point's y coordinate is nan" in str(info.value)
+
+
+@pytest.mark.parametrize(("change", "field", "says"), [
+    # the Python constructor takes metres: these were accepted (a home 415 m high)
+    ({"stroke": (345.0, 485.0)}, "stroke", "q_max 485 m: no hexapod has legs this long"),
+    ({"leg_radius": 15.0}, "leg_radius", "15 m is at least the plates' radius 0.27 m"),
+    ({"max_speed": 50.0}, "max_speed", "50 m/s: no hexapod's legs move this fast"),
+])
+def test_a_constructor_value_in_millimetres_is_refused(change: dict[str, object], field: str,
+                                                       says: str) -> None:
+    with pytest.raises(GeometryError, match=f"{field}: {says}.*millimetres for metres"):
+        deltalab().replace(**change)
+
+
+def test_a_front_camera_distance_in_millimetres_is_refused() -> None:
+    from vision.cameras import front_camera
+    from vision.exceptions import CameraError
+
+    with pytest.raises(CameraError, match=r"800 m from the reference robot's base .*"
+                                          r"millimetres for metres"):
+        front_camera(deltalab(), distance=800)
+    assert np.isfinite(front_camera(deltalab(), distance=2.0).K).all()

@@ -3,6 +3,8 @@ reached, rest at both ends, bad parameters refused."""
 
 from __future__ import annotations
 
+import re
+
 import numpy as np
 import pytest
 
@@ -141,3 +143,21 @@ def test_line_rotation_needs_angular_limits() -> None:
         PoseTrajectory("line", "quintic", R0, P0, 0.1, 1.0,
                        goal_rotation=exp_so3(np.array([0.0, 0.0, 0.1])) @ R0,
                        goal_translation=P0)
+
+
+@pytest.mark.parametrize(("pose", "field", "says"), [
+    # a NaN goal gave a line of 0 s ending at NaN, a scaled one a reference of no robot
+    ({"goal_translation": np.array([np.nan, 0.0, 0.36])}, "goal_translation", "finite (3,)"),
+    ({"goal_translation": np.zeros(2)}, "goal_translation", "finite (3,)"),
+    ({"goal_rotation": 2 * np.eye(3)}, "goal_rotation", "not a rotation"),
+    ({"goal_rotation": np.ones(3)}, "goal_rotation", "got shape (3,)"),
+    ({"start_rotation": np.diag([1.0, 1.0, -1.0])}, "start_rotation", "det from -1 to -1"),
+])
+def test_a_pose_that_is_not_one_names_its_argument(pose: dict[str, np.ndarray], field: str,
+                                                    says: str) -> None:
+    args = {"start_rotation": R0, "start_translation": P0, "goal_rotation": R0,
+            "goal_translation": P0 + np.array([0.01, 0.0, 0.0]), **pose}
+    with pytest.raises(TrajectoryError, match=f"{field}: .*{re.escape(says)}") as info:
+        PoseTrajectory("line", "quintic", args.pop("start_rotation"),
+                       args.pop("start_translation"), 0.1, 1.0, **args)
+    assert info.value.field == field

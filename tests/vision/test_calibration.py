@@ -221,6 +221,18 @@ def test_scale_correction_recovers_radius_error(geometry: HexapodGeometry) -> No
     json.dumps(full.to_dict())
 
 
+def test_a_radius_or_cad_base_in_millimetres_is_refused(geometry: HexapodGeometry) -> None:
+    """A leg radius or CAD base points in millimetres made base points 1000 times off (or
+    a fit 270 m off) without a word: a base estimated more than 5 times (or less than a
+    fifth of) the CAD one is refused, saying which unit to use."""
+    data = collect_observations(geometry, front_pose())
+    for radius, cad, ratio in ((geometry.leg_radius * 1e3, geometry.base_points, "1000"),
+                               (geometry.leg_radius, geometry.base_points * 1e3, "0.001")):
+        with pytest.raises(CalibrationError, match=rf"the estimated base is {ratio} times "
+                                                   r"the CAD base.*millimetres for metres"):
+            calibrate(data, radius, cad)
+
+
 def test_error_when_directions_parallel(geometry: HexapodGeometry) -> None:
     R, t = sample_poses(geometry, 1, rng=1)
     R = np.repeat(R, 10, axis=0)

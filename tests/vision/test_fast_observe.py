@@ -220,3 +220,24 @@ def test_the_c_core_reads_and_writes_the_rows_as_the_layouts_say() -> None:
         assert set(names.values()) == set(layouts[row])  # every block is read or written
         for c_name, block in names.items():
             assert found[(row, c_name)] == layouts[row][block].start, (row, c_name, block)
+
+
+@pytest.mark.parametrize("observe", [observe_legs, observe_legs_numpy])
+def test_a_pose_not_finite_or_not_a_rotation_is_refused_as_the_reference_refuses_it(
+        observe: object) -> None:
+    """The compiled observation refuses what its numpy reference refuses: a NaN pose
+    (it gave NaN normals and no visible edge) and a matrix that is not a rotation (``2 I``
+    gave twelve visible edges of no robot)."""
+    from hexapod.exceptions import ShapeError
+    from vision.legs import observe_edges
+
+    g = deltalab()
+    cam = front_camera(g)
+    R, t = sample_poses(g, 2, rng=np.random.default_rng(3))
+    bad_t = t.copy()
+    bad_t[1, 0] = np.nan
+    for look in (observe, observe_edges):
+        with pytest.raises(ShapeError, match="pose: expected finite values"):
+            look(cam, g, R, bad_t)  # type: ignore[operator]
+        with pytest.raises(ShapeError, match=r"rotation: expected rotation matrices"):
+            look(cam, g, 2 * R, t)  # type: ignore[operator]

@@ -142,6 +142,11 @@ class CalibrationResult:
         }
 
 
+#: The ratio of the estimated base to the CAD base a calibration accepts: a leg radius
+#: known to a few percent gives a ratio as close to 1; 1000 or 0.001 is a unit slip.
+SCALE_RANGE = (0.2, 5.0)
+
+
 def calibrate(
     data: CalibrationData,
     radius: float,
@@ -167,11 +172,21 @@ def calibrate(
 
     Returns:
         The :class:`CalibrationResult`.
+
+    Raises:
+        CalibrationError: As :func:`calibrate_base_points`, or an estimated base outside
+            :data:`SCALE_RANGE` times the CAD base (the radius and the CAD in different
+            units).
     """
     lin = calibrate_base_points(data, radius, method, weight, threshold, min_singular_ratio,
                                 warn_singular_ratio=warn_singular_ratio, warn=warn)
     cad = np.asarray(cad_base_points, dtype=float)
     s = scale_correction(lin.base_points, cad)
+    if not SCALE_RANGE[0] <= s <= SCALE_RANGE[1]:  # (an uncertain radius is a few %)
+        raise CalibrationError(None, f"the estimated base is {s:.4g} times the CAD base: the "
+                               f"leg radius ({radius:g} m) and the CAD base points (up to "
+                               f"{float(np.abs(cad).max()):g} m from the origin) are not in "
+                               "the same unit (millimetres for metres?): give both in metres")
     points = lin.base_points / s if correct_scale else lin.base_points
     T, _, rms = rigid_fit(points, cad)
     return CalibrationResult(points, T.apply(cad), T, s, correct_scale,
