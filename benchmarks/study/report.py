@@ -262,8 +262,12 @@ def _report_lines(out_dir: Path, results: ResultRows) -> list[str]:
               "median number of control "
               "periods to converge (for fixed-duration tasks: after which the error stayed "
               "within the tolerances), over every trial, a trial that did not converge "
-              "counted as needing more than the run (`> N`). *step us*: median time of "
-              "one controller `step`. *stroke viol.*: periods where a command would have "
+              "counted as needing more than the run (`> N`). *step us*: the controller's "
+              "time per trial within a period's batched step, median over the periods (it "
+              "falls as more trials share a batch, and a batched law gains more than one "
+              "stepped trial by trial: a cost to compare within one run, not across runs "
+              "of other trial counts; `hexapod-bench perf controllers` times one step). "
+              "*stroke viol.*: periods where a command would have "
               "driven a leg beyond its stroke (the backend clamped it).", "",
               intervals.method_note(), ""]
     groups = intervals.group_rows(rows)

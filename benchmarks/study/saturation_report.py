@@ -14,7 +14,10 @@ and the tracking error while saturated, :mod:`benchmarks.sim.tracking`):
   median error at the lightest payload (the error at least doubled);
 - who tracks best at each payload: the controller with the lowest median RMS position
   error, against each other one in a paired Wilcoxon test, Holm-adjusted over the
-  comparisons of that payload; a controller most of whose trials failed at a payload is
+  comparisons of that payload (the lowest median need not be the lowest in the pairs:
+  a controller with a negative median paired difference is named beside it, and one
+  significantly lower in the pairs "tracks better in the pairs"); a controller most of
+  whose trials failed at a payload is
   listed as failing there and not compared (its few surviving trials are not a sample
   of its trials).
 
@@ -165,7 +168,7 @@ def stop_lines(rows: list[dict[str, Any]]) -> list[str]:
 def best_lines(rows: list[dict[str, Any]]) -> list[str]:
     """Who tracks best at each payload (module docstring), as Markdown lines."""
     masses = _by_mass(rows)
-    lines = ["| payload | best (median RMS mm) | against | median difference mm "
+    lines = ["| payload | lowest median (RMS mm) | against | median difference mm "
              "[95 % interval] | Holm p | verdict |", "|---|---|---|---|---|---|"]
     for m in sorted(masses):
         errs = {c: _errors(rs) for c, rs in masses[m].items()}
@@ -186,11 +189,16 @@ def best_lines(rows: list[dict[str, Any]]) -> list[str]:
         adjusted = stats.holm([t.p_value for t in tests])
         if not others:
             lines.append(f"| {m:g} kg | {best} ({meds[best]:.3g}) | - | | | |")
+        # the lowest median need not be the lowest in the pairs: said where another is
+        lower = [c for c, t in zip(others, tests, strict=True) if t.difference < 0]
+        head = f"{best} ({meds[best]:.3g})" + (
+            f"; lower in the pairs: {', '.join(lower)}" if lower else "")
         for c, t, p in zip(others, tests, adjusted, strict=True):
-            verdict = ("best tracks better" if p < ALPHA and t.difference > 0
-                       and not t.interval_disagrees
+            clear = p < ALPHA and not t.interval_disagrees
+            verdict = ("best tracks better" if clear and t.difference > 0
+                       else f"{c} tracks better in the pairs" if clear and t.difference < 0
                        else "no significant difference" if p >= ALPHA else "mixed")
-            lines.append(f"| {m:g} kg | {best} ({meds[best]:.3g}) | {c} ({meds[c]:.3g}) | "
+            lines.append(f"| {m:g} kg | {head} | {c} ({meds[c]:.3g}) | "
                          f"{t.difference:+.3g} [{t.low:.3g}, {t.high:.3g}] | "
                          f"{exact.format_p(p)} | {verdict} |")
     return lines
@@ -219,9 +227,10 @@ def saturation_section(rows: list[dict[str, Any]]) -> list[str]:
                   "payloads; *stops tracking*: the first payload where most trials fail, "
                   "or where the error is significantly larger and at least doubled):", ""]
         lines += [*stop_lines(rows), ""]
-        lines += ["Who tracks best at each payload (lowest median RMS position error, "
-                  "against each other controller: median paired difference other - best "
+        lines += ["Who tracks best at each payload (the lowest median RMS position error, "
+                  "against each other controller: median paired difference other - lowest "
                   "[mm] with its 95 % interval, Wilcoxon's signed-rank p Holm-adjusted over "
-                  "the comparisons of the payload; trials that failed left out):", ""]
+                  "the comparisons of the payload; a controller lower than it in the pairs "
+                  "is named beside it; trials that failed left out):", ""]
         lines += [*best_lines(rows), ""]
     return lines
