@@ -36,16 +36,18 @@ def _check_pose(rotation: np.ndarray, translation: np.ndarray) -> tuple[np.ndarr
     return R, t
 
 
-def check_rotations(R: np.ndarray, name: str = "rotation") -> None:
+def check_rotations(R: np.ndarray, name: str = "rotation", tolerance: float | None = None
+                    ) -> None:
     """Refuse finite matrices (..., 3, 3) that are not rotations: ``R^T R`` further than
-    :data:`ROTATION_TOLERANCE` from the identity, or a determinant not positive.
+    ``tolerance`` (default :data:`ROTATION_TOLERANCE`) from the identity, or a
+    determinant not positive.
 
     Raises:
         ShapeError: Naming ``name``, the largest defect and the determinants' range.
     """
     defect, det = rotation_defect(R)
     off = float(np.max(defect, initial=0.0))
-    if off > ROTATION_TOLERANCE or np.any(det <= 0):
+    if off > (ROTATION_TOLERANCE if tolerance is None else tolerance) or np.any(det <= 0):
         raise ShapeError(name, "rotation matrices (R^T R = I, det = +1: not a scaled, "
                          "sheared or mirrored matrix)",
                          f"|R^T R - I| = {off:.2e}, det from {float(np.min(det)):.4g} to "

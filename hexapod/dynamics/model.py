@@ -48,6 +48,12 @@ def checked_array(name: str, value: np.ndarray, shape: tuple[int, ...]) -> np.nd
     return arr
 
 
+#: How far ``R^T R`` may be from the identity in a state given to the dynamics: an
+#: orientation integrated without re-orthonormalising drifts (RK4 over the energy
+#: test's seconds: 2.5e-5), a scaled or mirrored matrix is refused (1.01 I: 0.02).
+DRIFT_TOLERANCE = 1e-3
+
+
 class DynamicModel:
     """Rigid-body dynamics of the closed chain in the platform's coordinates.
 
@@ -66,7 +72,8 @@ class DynamicModel:
 
     Every method refuses (:class:`~hexapod.exceptions.ShapeError`, naming the argument)
     a wrong shape, a value not finite, and an orientation ``R`` that is not a rotation
-    (:func:`hexapod.kinematics.check_rotations`: a scaled or mirrored matrix); a state
+    (:func:`hexapod.kinematics.check_rotations` within :data:`DRIFT_TOLERANCE`: a
+    scaled or mirrored matrix); a state
     whose result is not finite raises :class:`~hexapod.exceptions.DynamicsError`.
     """
 
@@ -133,7 +140,7 @@ class DynamicModel:
         (:func:`hexapod.dynamics.compiled.pack`); per-item geometry or inertial
         parameters override the model's (e.g. the true robots of a study)."""
         R = checked_array("R", R, (3, 3))
-        check_rotations(R, "R")
+        check_rotations(R, "R", DRIFT_TOLERANCE)
         t = checked_array("t", t, (3,))
         twist = checked_array("twist", twist, (6,))
         u = checked_array("forces/acc", u, (6,))
@@ -281,7 +288,7 @@ class DynamicModel:
     def _one(R: np.ndarray, t: np.ndarray, twist: np.ndarray, u: np.ndarray, name: str
              ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         R = checked_array("R", R, (3, 3))
-        check_rotations(R, "R")
+        check_rotations(R, "R", DRIFT_TOLERANCE)
         return (R, checked_array("t", t, (3,)), checked_array("twist", twist, (6,)),
                 checked_array(name, u, (6,)))
 

@@ -223,8 +223,8 @@ def test_scale_correction_recovers_radius_error(geometry: HexapodGeometry) -> No
 
 def test_a_radius_or_cad_base_in_millimetres_is_refused(geometry: HexapodGeometry) -> None:
     """A leg radius or CAD base points in millimetres made base points 1000 times off (or
-    a fit 270 m off) without a word: a base estimated more than 5 times (or less than a
-    fifth of) the CAD one is refused, saying which unit to use."""
+    a fit 270 m off) without a word: a base estimated more than 100 times (or less than a
+    hundredth of) the CAD one is refused, saying which unit to use."""
     data = collect_observations(geometry, front_pose())
     for radius, cad, ratio in ((geometry.leg_radius * 1e3, geometry.base_points, "1000"),
                                (geometry.leg_radius, geometry.base_points * 1e3, "0.001")):
