@@ -18,10 +18,11 @@ import importlib.metadata as metadata
 import inspect
 import logging
 from collections.abc import Callable
+from contextvars import ContextVar
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
 
-from controllers.exceptions import PluginLoadError, UnknownControllerError
+from controllers.exceptions import OptionError, PluginLoadError, UnknownControllerError
 from controllers.options import OptionTable, first_sentence, option_table
 from hexapod.config import suggest
 from hexapod.exceptions import UnsafeNameError
@@ -35,6 +36,10 @@ log = logging.getLogger(__name__)
 ENTRY_POINT_GROUP = "hexapod.controllers"
 
 ControllerFactory = Callable[..., "Controller"]
+
+#: Calls of :meth:`Registry.create` under way in this thread (a wrapper's factory builds
+#: its law by name: 2).
+_CREATING: ContextVar[int] = ContextVar("_CREATING", default=0)
 
 
 @dataclass(frozen=True)
@@ -185,7 +190,17 @@ class Registry:
         raise UnknownControllerError(name, known, suggest(name, known))
 
     def create(self, name: str, **options: Any) -> Controller:
-        """Instantiate a controller by name with its options."""
+        """Instantiate a controller by name with its options.
+
+        Raises:
+            UnknownControllerError: No controller of that name.
+            OptionError: An option the controller's table (:meth:`options`) does not
+                declare and its factory refuses (naming the controller, the option, its
+                options and the close one); a factory that hands further options on (an
+                open table), and a law a wrapper builds, raise their own error.
+            PluginLoadError: The factory is not a controller class or returned no
+                controller.
+        """
         from controllers.base import Controller  # base imports this module
 
         factory = self.factory(name)
@@ -195,13 +210,45 @@ class Registry:
                                   f"{factory.__qualname__} is not a controller class (a "
                                   "controllers.base.Controller, or a class with reset() and "
                                   "step()), nor a function that makes one")
-        ctrl = factory(**options)
+        depth = _CREATING.set(_CREATING.get() + 1)
+        try:
+            ctrl = factory(**options)
+        except TypeError as exc:
+            # a wrapper's law built inside the wrapper's factory (latency-compensated):
+            # its error stays the wrapper's to report (scenario checks name the wrapper)
+            unknown = None if _CREATING.get() > 1 else self._refused_option(name, options, exc)
+            if unknown is None:
+                raise
+            raise unknown from None
+        finally:
+            _CREATING.reset(depth)
         if not isinstance(ctrl, Controller):
             for attr in ("reset", "step"):
                 if not callable(getattr(ctrl, attr, None)):
                     raise PluginLoadError(name, self._info[name].package,
                                           f"the factory returned an object without {attr}()")
         return ctrl
+
+    def _refused_option(self, name: str, options: dict[str, Any], exc: TypeError
+                        ) -> OptionError | None:
+        """The :class:`OptionError` of an option the factory of ``name`` refused with
+        ``exc`` (Python's "unexpected keyword argument") and its table does not declare;
+        None when ``exc`` is another error or the table is open (only on failure: the
+        table is read from docstrings, too slow for every :meth:`create`)."""
+        text = str(exc)
+        refused = [o for o in options if f"unexpected keyword argument '{o}'" in text]
+        if not refused:
+            return None
+        try:
+            table = self.options(name)
+        except Exception:  # a table that cannot be read: the factory's own error
+            return None
+        if table.open or table.declares(refused[0]):
+            return None
+        hint = suggest(refused[0], table.names)
+        return OptionError(name, refused[0], "no such option; its options: "
+                           f"{', '.join(table.names) or 'none'}"
+                           + (f" (did you mean '{hint}'?)" if hint else ""))
 
     def options(self, name: str) -> OptionTable:
         """The options ``name`` declares (:func:`controllers.options.option_table`): what

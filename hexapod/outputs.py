@@ -333,6 +333,38 @@ def _json_clean(value: object, signed_inf: bool) -> object:
     return value
 
 
+_JSON_SCALARS = (str, int, float, bool, type(None))
+
+
+def _not_json(value: object, where: str) -> tuple[str, str] | None:
+    """The first value (or dict key) of ``value`` that ``json.dumps`` cannot write, as
+    ``(what, type name)`` (``what``: ``the value at 'a.b[2]'``, ``the key (1, 2) in 'a'``);
+    None when every value can be written. Only called once ``json.dumps`` has failed.
+
+    Args:
+        value: The content, NaN and infinities already replaced.
+        where: The place of ``value`` in the content (empty: the content itself).
+    """
+    if isinstance(value, dict):
+        for k, v in value.items():
+            inner = f"{where}.{k}" if where else str(k)
+            if not isinstance(k, _JSON_SCALARS):
+                return f"the key {k!r}" + (f" in {where!r}" if where else ""), type(k).__name__
+            found = _not_json(v, inner)
+            if found is not None:
+                return found
+        return None
+    if isinstance(value, list | tuple):
+        for i, v in enumerate(value):
+            found = _not_json(v, f"{where}[{i}]")
+            if found is not None:
+                return found
+        return None
+    if isinstance(value, _JSON_SCALARS):
+        return None
+    return (f"the value at {where!r}" if where else "the content"), type(value).__name__
+
+
 def _marked(path: Path, content: object) -> bytes:
     """The bytes of an output with the project's mark, by kind of content."""
     import json
@@ -341,7 +373,14 @@ def _marked(path: Path, content: object) -> bytes:
         doc = ({"generator": GENERATOR, **content} if isinstance(content, dict)
                else {"generator": GENERATOR, "items": content})
         # NaN and infinities as null: json.dumps would write NaN / Infinity, not JSON
-        text = json.dumps(_json_clean(doc, signed_inf=False), indent=1, allow_nan=False)
+        clean = _json_clean(doc, signed_inf=False)
+        try:
+            text = json.dumps(clean, indent=1, allow_nan=False)
+        except (TypeError, ValueError) as exc:  # a value JSON has no form for
+            found = _not_json(clean, "")
+            what = f"{found[0]} has type {found[1]}" if found is not None else str(exc)
+            raise OutputError(str(path), f"cannot be written as JSON: {what} (convert it: "
+                              "a list, a float, a str); nothing was written") from None
         return (text + "\n").encode()
     if isinstance(content, bytes):
         if content.startswith(b"\x89PNG\r\n\x1a\n"):
@@ -389,13 +428,34 @@ def write_output(path: str | Path, content: object, overwrite: bool = False,
 
     Raises:
         OutputError: An existing file the project did not write (without
-            ``overwrite``), or a directory.
+            ``overwrite``), or a directory; a folder that cannot be made (a file
+            where a folder of the path should be), a file that cannot be written, a
+            dict or list with a value JSON cannot hold (naming the key and its type).
+            Nothing is written.
+        ValueError: Bytes that are neither PNG nor JPEG, or a ``str`` for a file of
+            another kind than ``.md``, ``.html`` or ``.toml``.
+        TypeError: Content of none of the kinds above.
     """
     p = Path(path)
     data = _marked(p, content)
     check_replace(p, overwrite, option, kind=file_kind(data, p.suffix))
-    p.parent.mkdir(parents=True, exist_ok=True)
+    try:
+        p.parent.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise OutputError(str(p), f"its folder cannot be made: {_folder_problem(p, exc)}; "
+                          "nothing was written") from None
     return replace_whole(p, data)
+
+
+def _folder_problem(path: Path, exc: OSError) -> str:
+    """Why the folder of ``path`` could not be made: a file where one of its folders
+    should be (the nearest existing part of the path), or the system's reason."""
+    for part in path.parents:
+        if part.exists() or part.is_symlink():
+            if not part.is_dir():
+                return f"{part} is a file, not a folder"
+            break
+    return f"{exc.strerror or exc}" + (f" ({exc.filename})" if exc.filename else "")
 
 
 def replace_whole(path: str | Path, data: bytes | str) -> Path:

@@ -10,10 +10,23 @@ import numpy as np
 
 from hexapod.exceptions import ShapeError
 
+#: How far ``cos^2 + sin^2`` of the angle :func:`log_so3` reads from a matrix (its trace
+#: and antisymmetric part) may be from 1: a hundred times the kinematics' tolerance
+#: (:data:`hexapod.kinematics.ROTATION_TOLERANCE`, not imported: it imports this module),
+#: so that products of rotations within it (pose errors) pass, while ``2 I``, a zero
+#: matrix or most mirrors do not.
+LOG_ROTATION_TOLERANCE = 1e-4
+
 
 def skew(x: np.ndarray) -> np.ndarray:
-    """Skew matrices ``[x]_x`` of vectors (..., 3) -> (..., 3, 3)."""
+    """Skew matrices ``[x]_x`` of vectors (..., 3) -> (..., 3, 3).
+
+    Raises:
+        ShapeError: ``x`` not (..., 3).
+    """
     x = np.asarray(x, dtype=float)
+    if x.shape[-1:] != (3,):
+        raise ShapeError("x", "vectors of shape (..., 3)", x.shape)
     out = np.zeros((*x.shape[:-1], 3, 3))  # filled in place: no stacks (hot in CTC laws)
     out[..., 0, 1] = -x[..., 2]
     out[..., 0, 2] = x[..., 1]
@@ -30,7 +43,16 @@ def norms(x: np.ndarray, keepdims: bool = False) -> np.ndarray:
     its argument handling. Three-vectors (every camera noise, edge and pose error of
     the simulator, every period) are summed as numpy's reduction of three numbers does,
     ``(x0^2 + x1^2) + x2^2`` (``tests/hexapod/test_se3.py`` holds the two equal), in
-    three passes instead of a reduction along a short axis (four times faster)."""
+    three passes instead of a reduction along a short axis (four times faster). A list (or
+    an integer array) is read as floats.
+
+    Raises:
+        ShapeError: ``x`` a scalar, not vectors.
+    """
+    if not isinstance(x, np.ndarray) or x.dtype.kind in "biu":
+        x = np.asarray(x, dtype=float)
+    if x.ndim == 0:
+        raise ShapeError("x", "vectors of shape (..., n)", "a scalar")
     if x.shape[-1:] != (3,):
         return np.sqrt(np.add.reduce(x * x, axis=-1, keepdims=bool(keepdims)))  # type: ignore[no-any-return,call-overload]
     out = x[..., 0] * x[..., 0]
@@ -48,8 +70,13 @@ def exp_so3(w: np.ndarray) -> np.ndarray:
     one array: the same operations, in the same order, as the textbook expression, so
     the same bits, with fewer temporaries (every trial-step's camera noise goes
     through it).
+
+    Raises:
+        ShapeError: ``w`` not (..., 3).
     """
     w = np.asarray(w, dtype=float)
+    if w.shape[-1:] != (3,):
+        raise ShapeError("w", "rotation vectors of shape (..., 3) [rad]", w.shape)
     theta = norms(w)
     K = skew(w)
     KK = K @ K
@@ -73,8 +100,20 @@ _EYE.flags.writeable = False
 
 
 def log_so3(R: np.ndarray) -> np.ndarray:
-    """Rotation vectors (..., 3) [rad] of rotation matrices (..., 3, 3)."""
+    """Rotation vectors (..., 3) [rad] of rotation matrices (..., 3, 3).
+
+    The angle is read from the trace (its cosine) and the antisymmetric part (its sine);
+    a matrix where the two are not the cosine and sine of one angle (``cos^2 + sin^2``
+    further than :data:`LOG_ROTATION_TOLERANCE` from 1) is refused: checked on what the
+    logarithm computes anyway, not a full :func:`rotation_defect` (a matrix product,
+    slower than the logarithm). NaN passes through.
+
+    Raises:
+        ShapeError: ``R`` not (..., 3, 3), or not rotations (``2 I``, a zero matrix).
+    """
     R = np.asarray(R, dtype=float)
+    if R.shape[-2:] != (3, 3):
+        raise ShapeError("R", "rotation matrices of shape (..., 3, 3)", R.shape)
     # the trace as np.trace sums it, (R00 + R11) + R22, without its argument handling
     cos = (R[..., 0, 0] + R[..., 1, 1] + R[..., 2, 2] - 1.0) / 2.0
     v = np.empty((*R.shape[:-2], 3))  # filled in place: no stack (every period's book)
@@ -83,7 +122,10 @@ def log_so3(R: np.ndarray) -> np.ndarray:
     np.subtract(R[..., 1, 0], R[..., 0, 1], out=v[..., 2])
     # atan2(sin, cos) keeps full precision near 0 and pi, where arccos(cos) loses half
     # the digits (|v| = 2 sin(theta)).
-    theta = np.arctan2(0.5 * norms(v), cos)
+    half = 0.5 * norms(v)  # sin(theta) of a rotation
+    if not _on_unit_circle(cos, half):
+        _refuse_non_rotation(R, cos, half)
+    theta = np.arctan2(half, cos)
     sin = np.sin(theta)
     small = sin < 1e-6
     if small.any():
@@ -107,10 +149,49 @@ def log_so3(R: np.ndarray) -> np.ndarray:
     return w
 
 
+def _on_unit_circle(cos: np.ndarray, sin: np.ndarray) -> bool:
+    """Whether every ``cos^2 + sin^2`` is within :data:`LOG_ROTATION_TOLERANCE` of 1 (NaN
+    passes; one matrix in Python floats, ten times faster than numpy's scalars)."""
+    if isinstance(cos, np.ndarray):
+        dev = cos * cos
+        dev += sin * sin
+        dev -= 1.0
+        return not bool((np.abs(dev, out=dev) > LOG_ROTATION_TOLERANCE).any())
+    c, s = float(cos), float(sin)
+    return not abs(c * c + s * s - 1.0) > LOG_ROTATION_TOLERANCE
+
+
+def _refuse_non_rotation(R: np.ndarray, cos: np.ndarray, half: np.ndarray) -> None:
+    """Raise :func:`log_so3`'s error for the matrix of ``R`` furthest from a rotation
+    (``cos`` and ``half``: the cosines and sines read from their traces and antisymmetric
+    parts; called once a matrix is known to be refused).
+
+    Raises:
+        ShapeError: Naming the matrix (its index in a batch), ``cos^2 + sin^2`` and its
+            rotation defect.
+    """
+    circle = np.asarray(cos * cos + half * half)
+    off = np.abs(circle - 1.0)
+    i = np.unravel_index(int(np.argmax(np.where(np.isnan(off), -1.0, off))), off.shape)
+    defect, det = rotation_defect(R[i])
+    index = tuple(int(j) for j in i)
+    where = "" if not index else f" (matrix {index[0] if len(index) == 1 else index})"
+    raise ShapeError("R", "rotation matrices (R^T R = I, det = +1: not a scaled, sheared or "
+                     "mirrored matrix)",
+                     f"cos^2 + sin^2 of its angle = {float(circle[i]):.4g}, |R^T R - I| = "
+                     f"{float(defect):.2e}, det {float(det):.4g}{where}")
+
+
 def exp_se3(v: np.ndarray, w: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Exponential of twists ``(v, w)`` (..., 3) -> rotation (..., 3, 3), translation (..., 3)."""
+    """Exponential of twists ``(v, w)`` (..., 3) -> rotation (..., 3, 3), translation (..., 3).
+
+    Raises:
+        ShapeError: ``v`` or ``w`` not (..., 3).
+    """
     v = np.asarray(v, dtype=float)
     w = np.asarray(w, dtype=float)
+    if v.shape[-1:] != (3,) or w.shape[-1:] != (3,):
+        raise ShapeError("twist", "v [m] and w [rad] of shape (..., 3)", (v.shape, w.shape))
     theta = np.linalg.norm(w, axis=-1)[..., None, None]
     K = skew(w)
     small = theta < 1e-6
@@ -186,11 +267,30 @@ def rotation_from_rpy(roll: float, pitch: float, yaw: float) -> np.ndarray:
 def look_at(eye: np.ndarray, target: np.ndarray, up: np.ndarray) -> np.ndarray:
     """Rotation of a camera frame (z forward, x right, y down) looking from eye to target.
 
+    Args:
+        eye: Position of the camera (3,) [m].
+        target: Point it looks at (3,) [m].
+        up: Direction that is up in the image (3,) (not along the viewing direction).
+
     Returns:
         ``base_R_camera``: columns are the camera axes in the base frame.
+
+    Raises:
+        ShapeError: ``eye``, ``target`` or ``up`` not (3,).
+        ValueError: ``eye`` and ``target`` at the same place (or not finite), or ``up``
+            parallel to the viewing direction.
     """
-    z = np.asarray(target, float) - np.asarray(eye, float)
-    z /= np.linalg.norm(z)
+    eye_, target_ = np.asarray(eye, float), np.asarray(target, float)
+    for name, value in (("eye", eye_), ("target", target_), ("up", np.asarray(up))):
+        if value.shape != (3,):
+            raise ShapeError(name, "a point or direction of shape (3,)", value.shape)
+    z = target_ - eye_
+    distance = np.linalg.norm(z)
+    if not (distance > 0 and np.isfinite(distance)):
+        problem = "coincide: no viewing direction" if distance == 0 else "must be finite"
+        raise ValueError(f"look_at: eye {eye_.tolist()} and target {target_.tolist()} "
+                         f"{problem}")
+    z /= distance
     x = np.cross(z, np.asarray(up, float))  # right = forward x up (y = z x x points down)
     if np.linalg.norm(x) < 1e-9:
         raise ValueError("look_at: up vector parallel to the viewing direction")

@@ -97,6 +97,17 @@ def interval_contradicts(direction: int, low: float, high: float) -> bool:
     return low < 0 < high or (high < 0 if direction > 0 else low > 0)
 
 
+def _check_level(level: float) -> None:
+    """Refuse a confidence level outside (0, 1) (95 given for 0.95, most often).
+
+    Raises:
+        ValueError: ``level`` outside (0, 1), or NaN.
+    """
+    if not 0 < level < 1:
+        hint = " (a fraction, not a percentage)" if 1 < level <= 100 else ""
+        raise ValueError(f"confidence level {level}: must lie in (0, 1){hint}")
+
+
 def wilson_interval(k: int, n: int, level: float = LEVEL) -> tuple[float, float]:
     """Wilson score interval of a binomial proportion ``k / n`` (no continuity correction).
 
@@ -109,10 +120,11 @@ def wilson_interval(k: int, n: int, level: float = LEVEL) -> tuple[float, float]
         ``(low, high)`` as fractions in [0, 1].
 
     Raises:
-        ValueError: ``k`` outside ``[0, n]``.
+        ValueError: ``k`` outside ``[0, n]``, or ``level`` outside (0, 1).
     """
     if not 0 <= k <= n:
         raise ValueError(f"successes k={k} must lie in [0, n={n}]")
+    _check_level(level)
     if n == 0:
         return float("nan"), float("nan")
     low, high = wilson_intervals(np.array([k]), n, level)
@@ -122,8 +134,24 @@ def wilson_interval(k: int, n: int, level: float = LEVEL) -> tuple[float, float]
 def wilson_intervals(k: np.ndarray, n: int, level: float = LEVEL
                      ) -> tuple[np.ndarray, np.ndarray]:
     """:func:`wilson_interval` of many success counts out of the same ``n`` at once (a
-    curve's pointwise band), as arrays (``n`` must be positive; ``k`` in ``[0, n]``)."""
+    curve's pointwise band), as arrays (``n`` must be positive; ``k`` in ``[0, n]``).
+
+    Raises:
+        ValueError: ``n`` not positive, a ``k`` outside ``[0, n]``, or ``level`` outside
+            (0, 1).
+    """
     k = np.asarray(k, dtype=float)
+    if not n > 0:
+        raise ValueError(f"trials n {n}: must be positive")
+    _check_level(level)
+    bad = np.flatnonzero(~((k >= 0) & (k <= n)))
+    if bad.size:
+        i = int(bad[0])
+        value = float(k.flat[i])
+        where = f" at index {i}" if k.ndim else ""
+        if value > n:
+            raise ValueError(f"successes k {value:g}{where} > n {n}: must lie in [0, n]")
+        raise ValueError(f"successes k {value:g}{where}: must lie in [0, n {n}]")
     z = NormalDist().inv_cdf(0.5 + level / 2)
     p = k / n
     denom = 1 + z * z / n
@@ -178,7 +206,16 @@ def bootstrap_quantiles(values: Sequence[float] | np.ndarray, quantiles: Sequenc
 
     Returns:
         One ``(low, high)`` per quantile (``nan`` for an empty sample).
+
+    Raises:
+        ValueError: A quantile outside [0, 1] (50 given for 0.5), or ``level`` outside
+            (0, 1).
     """
+    _check_level(level)
+    for i, q in enumerate(quantiles):
+        if not 0 <= q <= 1:
+            hint = " (a fraction, not a percentage)" if 1 < q <= 100 else ""
+            raise ValueError(f"quantile q {q} at index {i}: must lie in [0, 1]{hint}")
     x = np.sort(finite_values(values))
     n = x.size
     if n == 0:
@@ -361,8 +398,15 @@ def holm(p_values: Sequence[float]) -> list[float]:
     The ``i``-th smallest of ``m`` p-values is multiplied by ``m - i + 1`` (``i`` from
     1), the running maximum taken and clipped at 1. ``nan`` entries stay ``nan`` and do
     not count in ``m``.
+
+    Raises:
+        ValueError: A p-value (other than ``nan``) outside [0, 1].
     """
     p = np.asarray(p_values, dtype=float)
+    bad = np.flatnonzero((p < 0) | (p > 1))
+    if bad.size:
+        i = int(bad[0])
+        raise ValueError(f"p-value {p.flat[i]} at index {i}: must lie in [0, 1]")
     out = np.full(p.shape, np.nan)
     ok = np.flatnonzero(np.isfinite(p))
     m = ok.size

@@ -31,7 +31,7 @@ from controllers.base import (
     ObservationBatch,
 )
 from controllers.data import _BATCH_FIELDS
-from controllers.exceptions import PluginLoadError, UnknownControllerError
+from controllers.exceptions import OptionError, PluginLoadError, UnknownControllerError
 from controllers.tracking import TrackingController
 from hexapod.actuation import Actuation
 from tests.controllers.controller_world import World, make_camera
@@ -194,6 +194,26 @@ def test_unknown_name_suggests_the_closest() -> None:
     assert "did you mean 'leg-edge'" in str(info.value)
     for name in BUILTIN_SPECS:
         assert name in str(info.value)
+
+
+def test_unknown_option_names_the_controller_its_options_and_the_close_one() -> None:
+    with pytest.raises(OptionError, match=r"^leg-edge: option 'gian': no such option; its "
+                       r"options: gain, adaptive_gain, .*leg_rate_feedforward "
+                       r"\(did you mean 'gain'\?\)$") as info:
+        registry.create("leg-edge", gian=5.0)
+    assert (info.value.controller, info.value.option) == ("leg-edge", "gian")
+    assert info.value.__cause__ is None and info.value.__suppress_context__
+    with pytest.raises(OptionError, match=r"^joint-space: option 'zzz': no such option; its "
+                       r"options: gain, adaptive_gain$"):
+        registry.create("joint-space", zzz=1)
+    # an open table (a wrapper that hands options on to its law): the law's own error, as
+    # before; the scenario checks name the wrapper
+    assert registry.options("latency-compensated").open
+    with pytest.raises(TypeError, match="unexpected keyword argument 'gian'"):
+        registry.create("latency-compensated", law="leg-edge", gian=5.0)
+    with pytest.raises(OptionError, match=r"^controllers.joint:JointSpaceController: option "
+                       r"'gain2': no such option; its options: gain, adaptive_gain "):
+        registry.create("controllers.joint:JointSpaceController", gain2=1.0)
 
 
 class NamedLikeLegEdge(Controller):

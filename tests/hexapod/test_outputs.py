@@ -4,6 +4,7 @@ when the project wrote them or the user asked."""
 from __future__ import annotations
 
 import os
+import re
 from pathlib import Path
 
 import cv2
@@ -262,6 +263,28 @@ def test_a_write_that_fails_names_the_file(tmp_path: Path) -> None:
     with pytest.raises(OutputError, match="could not be written") as info:
         replace_whole(path, "x")
     assert str(path) in str(info.value) and not path.parent.exists()
+
+
+def test_write_output_refuses_unwritable_paths_and_content_as_output_errors(
+        tmp_path: Path) -> None:
+    """A folder of the path that is a file gave FileExistsError, a numpy array in a dict
+    a TypeError naming no file: both are OutputErrors naming the file, nothing written."""
+    user = tmp_path / "user.json"
+    user.write_text("{}")
+    inner = user / "sub" / "inner.json"
+    with pytest.raises(OutputError, match=f"^{re.escape(str(inner))}: its folder cannot be "
+                       f"made: {re.escape(str(user))} is a file, not a folder; nothing was "
+                       "written$"):
+        write_output(inner, {"a": 1})
+    path = tmp_path / "out" / "x.json"
+    with pytest.raises(OutputError, match=rf"^{re.escape(str(path))}: cannot be written as "
+                       r"JSON: the value at "
+                       r"'a.b\[1\]' has type ndarray \(convert it"):
+        write_output(path, {"a": {"b": [1, np.arange(3)]}})
+    with pytest.raises(OutputError, match=r"the key \(1, 2\) in 'a' has type tuple"):
+        write_output(path, {"a": {(1, 2): 3}})
+    assert user.read_text() == "{}" and sorted(p.name for p in tmp_path.iterdir()) == \
+        ["user.json"], "nothing written, no folder made"
 
 
 def test_a_runs_own_files_are_not_called_the_users(tmp_path: Path) -> None:

@@ -165,3 +165,71 @@ def test_integrate_pose_takes_lists_and_names_a_wrong_shape() -> None:
                                                  np.array([0, 0, 0, 0, 0, 0.1]), 0.02)[0])
     with pytest.raises(ShapeError, match=r"twist: expected shape \(\.\.\., 6\)"):
         integrate_pose(np.eye(3), np.zeros(3), np.zeros(3), 0.02)
+
+
+def test_helpers_name_a_wrong_shape_and_take_lists() -> None:
+    """A (2,) rotation vector gave 'IndexError: index 2 is out of bounds', norms of a list
+    'AttributeError: 'list' object has no attribute 'shape''."""
+    from hexapod.exceptions import ShapeError
+    from hexapod.se3 import norms
+
+    with pytest.raises(ShapeError, match=r"^w: expected rotation vectors of shape \(\.\.\., 3\) "
+                       r"\[rad\], got \(2,\)$"):
+        exp_so3(np.array([0.1, 0.2]))
+    with pytest.raises(ShapeError, match=r"^x: expected vectors of shape \(\.\.\., 3\), got "
+                       r"\(4, 2\)$"):
+        skew(np.zeros((4, 2)))
+    with pytest.raises(ShapeError, match=r"^R: expected rotation matrices of shape "
+                       r"\(\.\.\., 3, 3\), got \(3,\)$"):
+        log_so3(np.eye(3)[0])
+    with pytest.raises(ShapeError, match=r"^twist: expected v \[m\] and w \[rad\] of shape "
+                       r"\(\.\.\., 3\), got \(\(2,\), \(3,\)\)$"):
+        exp_se3(np.zeros(2), np.zeros(3))
+    with pytest.raises(ShapeError, match=r"^x: expected vectors of shape"):
+        norms(np.float64(3.0))
+    assert norms([3.0, 4.0]) == 5.0 and norms([3.0, 4.0, 0.0]) == 5.0
+    assert norms([[3, 4, 0], [0, 0, 2]]).tolist() == [5.0, 2.0]
+    assert exp_so3([0.1, 0.2, 0.3]).tobytes() == exp_so3(np.array([0.1, 0.2, 0.3])).tobytes()
+
+
+def test_log_so3_refuses_a_matrix_that_is_not_a_rotation(rng: np.random.Generator) -> None:
+    """log_so3(2 I) returned [0, 0, 0]: the trace and the antisymmetric part it reads are
+    not the cosine and sine of one angle."""
+    from hexapod.exceptions import ShapeError
+    from hexapod.se3 import LOG_ROTATION_TOLERANCE, norms
+
+    with pytest.raises(ShapeError, match=r"^R: expected rotation matrices \(R\^T R = I, det = "
+                       r"\+1: not a scaled, sheared or mirrored matrix\), got cos\^2 \+ sin\^2 "
+                       r"of its angle = 6\.25, \|R\^T R - I\| = 3\.00e\+00, det 8$"):
+        log_so3(2 * np.eye(3))
+    batch = exp_so3(rng.normal(size=(4, 3)))
+    batch[2] = 0.0
+    with pytest.raises(ShapeError, match=r"of its angle = 0\.25, .* det 0 \(matrix 2\)$"):
+        log_so3(batch)
+    with pytest.raises(ShapeError, match=r"det -1$"):
+        log_so3(np.diag([1.0, 1.0, -1.0]))  # a mirror
+    # NaN passes through (a failed trial's pose), and so does the product of two rotations
+    # each as far from one as the kinematics accepts (a pose error)
+    assert np.isnan(log_so3(np.full((3, 3), np.nan))).all()
+    from hexapod.kinematics import ROTATION_TOLERANCE
+
+    assert LOG_ROTATION_TOLERANCE >= 10 * ROTATION_TOLERANCE
+    for _ in range(200):
+        a = exp_so3(rng.normal(size=3)) + rng.uniform(-1, 1, (3, 3)) * ROTATION_TOLERANCE / 2
+        b = exp_so3(rng.normal(size=3)) + rng.uniform(-1, 1, (3, 3)) * ROTATION_TOLERANCE / 2
+        assert np.isfinite(norms(log_so3(a.T @ b)))
+
+
+def test_look_at_refuses_an_eye_on_the_target() -> None:
+    """look_at(eye, eye, up) returned a NaN matrix with a RuntimeWarning."""
+    from hexapod.exceptions import ShapeError
+
+    eye = np.array([0.7, 0.1, 0.3])
+    with pytest.raises(ValueError, match=r"^look_at: eye \[0\.7, 0\.1, 0\.3\] and target "
+                       r"\[0\.7, 0\.1, 0\.3\] coincide: no viewing direction$"):
+        look_at(eye, eye.copy(), np.array([0.0, 0.0, 1.0]))
+    with pytest.raises(ShapeError, match=r"^up: expected a point or direction of shape \(3,\), "
+                       r"got \(2,\)$"):
+        look_at(eye, np.zeros(3), np.array([0.0, 1.0]))
+    assert look_at([0.7, 0.1, 0.3], [0, 0, 0], [0, 0, 1]).tobytes() == look_at(
+        eye, np.zeros(3), np.array([0.0, 0.0, 1.0])).tobytes()

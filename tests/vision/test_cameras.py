@@ -3,6 +3,7 @@
 
 from __future__ import annotations
 
+import re
 from pathlib import Path
 
 import cv2
@@ -250,6 +251,22 @@ def test_camera_preset_by_name(geometry) -> None:
         camera_preset("fornt")
     with pytest.raises(CameraError, match="available: front, omni"):
         camera_preset("zzz")
+
+
+def test_load_camera_missing_file_without_extension(tmp_path: Path) -> None:
+    # a name with a folder separator is a file, never a preset: "file not found", as a
+    # missing .toml says
+    missing = tmp_path / "nope_camera"
+    with pytest.raises(ConfigFileError, match=rf"^{re.escape(str(missing))}: file not found$"):
+        load_camera(str(missing))
+    with pytest.raises(ConfigFileError, match=r"^nope_camera: file not found$"):
+        load_camera(Path("nope_camera"))
+    with pytest.raises(ConfigFileError,
+                       match=rf"^{re.escape(str(missing))}\.toml: file not found$"):
+        load_camera(f"{missing}.toml")
+    with pytest.raises(CameraError, match="unknown camera preset 'nope_camera'"):
+        load_camera("nope_camera")
+    assert load_camera(Path("front")) == front_camera()
 
 
 # ---------------------------------------------------------------- validation

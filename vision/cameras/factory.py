@@ -159,6 +159,14 @@ def camera_from_calibration(cal: Calibration, camera_from_base: Transform | None
     return Camera.models[cal.kind]._from_fields(f)
 
 
+def _looks_like_path(path_or_name: str | Path) -> bool:
+    """Whether ``path_or_name`` can only be a file, not a preset name: a :class:`Path`, or
+    a string with a folder separator (``/``, ``\\``) or starting with ``~``."""
+    if isinstance(path_or_name, Path):
+        return True
+    return "/" in path_or_name or "\\" in path_or_name or path_or_name.startswith("~")
+
+
 def load_camera(path_or_name: str | Path, geometry: HexapodGeometry | None = None,
                 camera_from_base: Transform | None = None,
                 image_size: tuple[int, int] | None = None) -> Camera:
@@ -178,7 +186,8 @@ def load_camera(path_or_name: str | Path, geometry: HexapodGeometry | None = Non
     Raises:
         CameraError: Unknown preset (with the close name), or a pose or image size
             given for a preset or a TOML file.
-        ConfigFileError: Unknown extension, missing file, bad key or value.
+        ConfigFileError: Unknown extension, missing file (a name with a folder separator,
+            or a :class:`Path`, is a file, never a preset), bad key or value.
         DistortionError: The distortion folds inside the image.
     """
     s = str(path_or_name)
@@ -190,8 +199,9 @@ def load_camera(path_or_name: str | Path, geometry: HexapodGeometry | None = Non
             raise CameraError(arg, f"only for an OpenCV calibration file: {s!r} gives it")
     if s in PRESETS:
         return camera_preset(s, geometry)
-    if p.suffix.lower() == ".toml" or (p.suffix == "" and p.is_file()):
-        return Camera.from_toml(p)
+    if p.suffix.lower() == ".toml" or (p.suffix == "" and (p.is_file()
+                                                          or _looks_like_path(path_or_name))):
+        return Camera.from_toml(p)  # a missing file: ConfigFileError "<path>: file not found"
     if p.suffix:
         raise ConfigFileError(s, f"unknown extension {p.suffix!r} for a camera file; "
                                  f"expected .toml or one of OpenCV's "

@@ -218,3 +218,37 @@ def test_wilson_intervals_as_arrays_match_scipy() -> None:
         ci = sps.binomtest(int(j), 20).proportion_ci(method="wilson")
         assert (lo, hi) == pytest.approx((ci.low, ci.high))
     assert (low[0], high[-1]) == (0.0, 1.0)
+
+
+def test_level_or_quantile_in_percent_is_refused_by_name() -> None:
+    x = np.arange(20.0)
+    percent = r"confidence level 95: must lie in \(0, 1\) \(a fraction, not a percentage\)"
+    with pytest.raises(ValueError, match=percent):
+        stats.wilson_interval(7, 10, level=95)
+    with pytest.raises(ValueError, match=percent):
+        stats.wilson_intervals(np.array([7]), 10, level=95)
+    with pytest.raises(ValueError, match=percent):
+        stats.bootstrap_quantiles(x, [0.5], level=95)
+    with pytest.raises(ValueError, match=r"quantile q 50 at index 0: must lie in \[0, 1\] "
+                                         r"\(a fraction, not a percentage\)"):
+        stats.bootstrap_quantiles(x, [50])
+    with pytest.raises(ValueError, match=r"quantile q -0.1 at index 1: must lie in \[0, 1\]$"):
+        stats.bootstrap_quantiles([], [0.5, -0.1])
+    assert stats.bootstrap_quantiles(x, [0.0, 1.0]) == [(0.0, 3.0), (16.0, 19.0)]  # the ends
+
+
+def test_wilson_intervals_bad_counts_named() -> None:
+    with pytest.raises(ValueError, match=r"successes k 12 at index 1 > n 10: must lie in \[0, n\]"):
+        stats.wilson_intervals(np.array([3, 12]), 10)
+    with pytest.raises(ValueError, match=r"successes k -1 at index 0: must lie in \[0, n 10\]"):
+        stats.wilson_intervals(np.array([-1]), 10)
+    with pytest.raises(ValueError, match="trials n 0: must be positive"):
+        stats.wilson_intervals(np.array([0]), 0)
+
+
+def test_holm_refuses_a_p_value_outside_unit_interval() -> None:
+    with pytest.raises(ValueError, match=r"p-value 2.0 at index 1: must lie in \[0, 1\]"):
+        stats.holm([0.5, 2.0])
+    with pytest.raises(ValueError, match=r"p-value -0.1 at index 0: must lie in \[0, 1\]"):
+        stats.holm([-0.1])
+    assert stats.holm([0.0, 1.0, float("nan")]) == pytest.approx([0.0, 1.0, np.nan], nan_ok=True)
