@@ -213,7 +213,13 @@ def twist_to_frame(twist: np.ndarray, frame_from_base: Transform) -> np.ndarray:
 
     Returns:
         (..., 6) ``(v, w)`` in ``c`` at the origin of ``c``.
+
+    Raises:
+        ShapeError: ``twist`` not (..., 6).
     """
+    twist = np.asarray(twist, dtype=float)
+    if twist.shape[-1:] != (6,):
+        raise ShapeError("twist", "shape (..., 6): (v [m/s], w [rad/s])", twist.shape)
     R, p = frame_from_base.rotation, frame_from_base.translation
     w = twist[..., 3:] @ R.T
     v = twist[..., :3] @ R.T - np.cross(w, p)

@@ -130,6 +130,11 @@ def test_twist_to_frame_moves_the_same_body(rng: np.random.Generator) -> None:
         expected = cam_from_base.compose(Transform(R1, t1))
         np.testing.assert_allclose(Rc1, expected.rotation, atol=1e-12)
         np.testing.assert_allclose(tc1, expected.translation, atol=1e-12)
+    # a list is a twist too (it raised "list indices must be integers"); five numbers not
+    np.testing.assert_array_equal(twist_to_frame(list(tw), cam_from_base),
+                                  twist_to_frame(tw, cam_from_base))
+    with pytest.raises(ShapeError, match=r"twist: expected shape \(\.\.\., 6\)"):
+        twist_to_frame(tw[:5], cam_from_base)
 
 
 def test_transform_algebra(rng: np.random.Generator) -> None:
