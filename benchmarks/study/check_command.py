@@ -334,8 +334,10 @@ def check_picture(path: Path, overwrite: bool = False) -> None:
 def write_picture(setup: Setup, report: SetupReport, path: Path,
                   overwrite: bool = False) -> Path:
     """An image of the robot at home seen by the camera (the project's renderer), each
-    edge drawn green where the camera sees it and red where hidden, legs numbered; PNG
-    or JPEG by the suffix, marked as the project's (:func:`hexapod.outputs.write_output`).
+    edge drawn in one colour over its whole length, green when the camera sees it
+    (``report.home_visible``) and red when not (a partly hidden edge is drawn across
+    what hides it), only where the lens images it, legs numbered; PNG or JPEG by the
+    suffix, marked as the project's (:func:`hexapod.outputs.write_output`).
 
     Raises:
         OutputError: ``path`` is a user's file (without ``overwrite``).
@@ -355,16 +357,18 @@ def write_picture(setup: Setup, report: SetupReport, path: Path,
     s = np.linspace(0.0, 1.0, 33)
     points = limb_points(obs.base_points, obs.directions, obs.radius, obs.lengths,
                          obs.normals, s)
-    pixels, _ = setup.camera.project(points)
+    pixels, imaged = setup.camera.project(points)
+    usable = np.asarray(imaged, bool) & np.all(np.isfinite(pixels), axis=-1)
     for i in range(6):
         for j in range(2):
-            line = pixels[i, j]
-            line = line[np.all(np.isfinite(line), axis=-1)]
-            if len(line) < 2:
-                continue
             colour = (0, 200, 0) if report.home_visible[i, j] else (0, 0, 230)
-            cv2.polylines(img, [np.round(line).astype(np.int32)], False, colour, 2,
-                          cv2.LINE_AA)
+            # the runs of points the lens images (beyond a lens's fold the pixels are
+            # none of the image's: a camera at the base origin drew lines through its
+            # centre, and numpy warned of the cast)
+            for run in np.split(np.arange(len(s)), np.flatnonzero(np.diff(usable[i, j])) + 1):
+                if len(run) >= 2 and usable[i, j, run[0]]:
+                    cv2.polylines(img, [np.round(pixels[i, j, run]).astype(np.int32)],
+                                  False, colour, 2, cv2.LINE_AA)
         ends = report.home_pixels[i, :, 0]
         if np.all(np.isfinite(ends)):
             x, y = (round(float(c)) for c in ends.mean(axis=0))

@@ -246,6 +246,13 @@ def _bad_files() -> dict[str, tuple[dict[str, Any], str, str]]:
     return {
         "missing camera_matrix": (no_k, "camera_matrix", "missing required key"),
         "missing distortion": (no_d, "distortion_coefficients", "missing required key"),
+        # the names of cv2.calibrateCamera's Python outputs: the close key is named
+        "cameraMatrix": ({**no_k, "cameraMatrix": good["camera_matrix"]}, "camera_matrix",
+                         "the file has 'cameraMatrix': rename it 'camera_matrix'"),
+        "distCoeffs": ({**no_d, "distCoeffs": good["distortion_coefficients"]},
+                       "distortion_coefficients", "the file has 'distCoeffs': rename it"),
+        "nothing close": ({**no_k, "intrinsics": good["camera_matrix"]}, "camera_matrix",
+                          "the file's keys: .*intrinsics"),
         "K 2x3": ({**good, "camera_matrix": K_PER[:2]}, "camera_matrix", r"3x3.*\(2, 3\)"),
         "K not a matrix": ({**good, "camera_matrix": "K"}, "camera_matrix", "numbers"),
         "K bottom row": ({**good, "camera_matrix": K_PER * 2}, "camera_matrix", "fx, s, cx"),

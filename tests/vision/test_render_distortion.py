@@ -155,5 +155,16 @@ def test_polyline_tolerance_and_settings(geometry):
     assert _distance_to_polyline(dense, coarse[0]).max() < 0.25
     assert _distance_to_polyline(dense, fine[0]).max() < 0.01
     assert len(fine[1]) == 3 and np.isnan(fine[1]).any()
+    # a segment running beyond the lens's fold (wide off axis): its pixels there are
+    # OpenCV's, of no image, and were split at every level (24 levels: a picture of a
+    # camera at the base origin took 28 s); the imaged part is refined as before
+    wide = np.array([[0.0, 0.0, 1.0]]), np.array([[1.0, 0.5, 0.001]])
+    assert cam.imaged(wide[0])[0] and not cam.imaged(wide[1])[0]
+    (poly,) = projected_polylines(cam, *wide, s0, 0.005)
+    assert len(poly) < 100, len(poly)  # (90063 vertices before)
+    inside = np.linspace(0.0, 1.0, 3001)[:, None] * wide[1]
+    inside = inside[cam.imaged(inside + wide[0])] + wide[0]
+    near, _ = cam.project(inside[: len(inside) // 2])  # the half away from the fold
+    assert _distance_to_polyline(near, poly).max() < 0.01
     with pytest.raises(RenderError, match="curve_tolerance_px"):
         RenderStyle(curve_tolerance_px=0.0)

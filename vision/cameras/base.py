@@ -222,6 +222,17 @@ class Camera(ABC):
             visible &= np.linalg.norm(m, axis=-1) < self.lens.fold_free_radius(m)
         return pix, visible
 
+    def imaged(self, points: np.ndarray) -> np.ndarray:
+        """Whether points (..., 3) in the camera frame are imaged by the model at all
+        (in its domain, and within the fold of the lens distortion; in the image or not):
+        :meth:`project`'s ``visible`` without the image's bounds."""
+        X = as_points(points)
+        m, valid = self._normalised(X)
+        if not self.is_distorted:
+            return valid
+        m = np.where(valid[..., None], m, 0.0)
+        return valid & (np.linalg.norm(m, axis=-1) < self.lens.fold_free_radius(m))
+
     def project_base(self, points_base: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Like :meth:`project` for points (..., 3) given in the robot base frame."""
         return self.project(self.camera_from_base.apply(as_points(points_base)))

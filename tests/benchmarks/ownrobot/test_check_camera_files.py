@@ -134,3 +134,30 @@ def test_a_scenario_naming_a_calibration_file_is_told_to_change_its_own_keys(
     assert (f"change [camera] pose or [camera.camera_from_base] in {study} (the calibration "
             f"file {path} holds no pose)") in out
     assert f"[camera_from_base] in {path}" not in out
+
+
+def test_the_picture_of_a_camera_at_the_base_origin_draws_only_what_its_lens_images(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """A scenario naming a calibration file without a pose puts the camera at the base
+    origin, where a third of the limbs' points lie beyond the lens's fold: they were
+    drawn too (pixels up to 1e13, 24 red lines through the image centre, and numpy's
+    warning of the cast); only the runs of points the lens images are drawn now."""
+    import warnings
+
+    import cv2
+
+    path = tmp_path / "cal.yml"
+    write_opencv_calibration(path, K_FRONT, np.array([-0.28, 0.09, 5e-4, -3e-4, -0.012]),
+                             W, H)
+    study = tmp_path / "study.toml"
+    study.write_text('name = "s"\ntrials = 2\ncontrollers = ["leg-edge"]\n[camera]\n'
+                     'file = "cal.yml"\n')
+    picture = tmp_path / "view.png"
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # (a RuntimeWarning of the cast fails the test)
+        code, _ = _check([str(study), "--picture", str(picture)], capsys)
+    assert code == 1  # the camera sees no edge: the setup cannot run, the picture is made
+    img = cv2.imread(str(picture))
+    centre = img[H // 2 - 60:H // 2 + 60, W // 2 - 60:W // 2 + 60].astype(int)
+    red = (centre[..., 2] > 150) & (centre[..., 1] < 80) & (centre[..., 0] < 80)
+    assert not red.any(), "an edge drawn through the image centre"

@@ -103,8 +103,17 @@ def _find(fs: Any, field: str, path: str, required: bool = True) -> tuple[str, A
         raise ConfigFileError(path, f"give one of {' or '.join(found)}, not both", key=found[0])
     if not found:
         if required:
+            from hexapod.config import suggest
+
             wanted = " or ".join(KEYS[field])
-            raise ConfigFileError(path, f"missing required key {wanted}", key=KEYS[field][0])
+            # cv2.calibrateCamera's Python names (cameraMatrix, distCoeffs) are close
+            # to none by spelling: compared without the underscores too
+            flat = {k.lower().replace("_", ""): k for k in names}
+            close = suggest(KEYS[field][0].replace("_", ""), list(flat))
+            hint = (f"; the file has {flat[close]!r}: rename it {KEYS[field][0]!r}"
+                    if close else f"; the file's keys: {', '.join(names) or 'none'}")
+            raise ConfigFileError(path, f"missing required key {wanted}{hint}",
+                                  key=KEYS[field][0])
         return None
     return found[0], fs.getNode(found[0])
 
