@@ -27,6 +27,7 @@ function (``Function.serialize()``): built, but no C code generated.
 
 from __future__ import annotations
 
+import contextlib
 import ctypes
 import fcntl
 import hashlib
@@ -37,6 +38,7 @@ import platform
 import shutil
 import subprocess
 import tempfile
+import threading
 from collections.abc import Callable, Sequence
 from functools import cache, partial
 from pathlib import Path
@@ -251,6 +253,14 @@ class CompiledFunction:
         self._lib: ctypes.CDLL | None = None
         #: The lane-parallel C (:meth:`lanes`; False: not built yet).
         self._lanes: Any = False
+        #: Held by a call on the shared buffers of :meth:`single` (and, with
+        #: :attr:`shared_memory`, by every call): the threads of a process (a Dask
+        #: worker's) share the compiled functions, and their rows changed with the
+        #: interleaving (17 of 40 rows with two threads) before it.
+        self.lock = threading.Lock()
+        #: The C code keeps state between calls in one memory slot (a QP solver's):
+        #: every call of any binding holds :attr:`lock`.
+        self.shared_memory = False
         if not compile:
             return
         try:
@@ -303,6 +313,7 @@ class CompiledFunction:
         if alloc is not None and init is not None:  # memory slot 0 (a QP solver's)
             alloc.restype = ctypes.c_int
             init(alloc())
+            self.shared_memory = True
         single = getattr(lib, self.name)
         single.argtypes = [ctypes.c_void_p] * 4 + [ctypes.c_int]
         single.restype = ctypes.c_int
@@ -343,10 +354,11 @@ class CompiledFunction:
         """Evaluate on one input (n_in,) -> a fresh (n_out,) array."""
         if self._lib is None:
             return np.asarray(self.function(x), dtype=float).ravel()
-        self._xbuf[:] = x
-        if self._single(*self._call):
-            raise CompilationError(f"{self.name}: the compiled function failed")
-        return self._ybuf.copy()
+        with self.lock:  # (the buffers are the function's, shared by the threads)
+            self._xbuf[:] = x
+            if self._single(*self._call):
+                raise CompilationError(f"{self.name}: the compiled function failed")
+            return self._ybuf.copy()
 
     def lanes(self) -> Any:
         """The function's lane-parallel C (:class:`hexapod.compiled_lanes.LaneFunction`,
@@ -380,8 +392,9 @@ class CompiledFunction:
                 return lane.evaluate(x)  # type: ignore[no-any-return]
         y = np.empty((n, self.n_out))
         if self._lib is not None:
-            if self._batch(x.ctypes.data, y.ctypes.data, n):
-                raise CompilationError(f"{self.name}: the compiled function failed")
+            with self.lock if self.shared_memory else contextlib.nullcontext():
+                if self._batch(x.ctypes.data, y.ctypes.data, n):
+                    raise CompilationError(f"{self.name}: the compiled function failed")
             return y
         for k in range(n):
             y[k] = np.asarray(self.function(x[k]), dtype=float).ravel()
@@ -439,6 +452,13 @@ class BoundCall:
         self.call = partial(function.entry, ctypes.addressof(self._args),
                             ctypes.addressof(self._res), self._iw.ctypes.data,
                             self._w.ctypes.data, 0)
+        if function.shared_memory:  # (the function's one memory slot: one call at a time)
+            entry = self.call
+
+            def locked() -> int:
+                with function.lock:
+                    return int(entry())
+            self.call = locked
 
     def __reduce__(self) -> tuple[Any, tuple[Any, ...]]:
         """Pickled as its function and copies of its buffers (a new binding, as
