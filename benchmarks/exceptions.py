@@ -126,6 +126,19 @@ class StudyMismatchError(ResultsError):
                          "command lines are in run.json and report.md)")
 
 
+class ClusterError(BenchmarkError):
+    """The Dask cluster of a run failed under it (its scheduler gone, a unit's workers
+    killed again and again): the rows written stay, and ``--resume`` finishes the run.
+
+    Attributes:
+        cause: What Dask raised.
+    """
+
+    def __init__(self, cause: BaseException) -> None:
+        self.cause = cause
+        super().__init__(f"the Dask cluster failed ({type(cause).__name__}: {cause})")
+
+
 class BatchFailedError(BenchmarkError):
     """A batch of trials stopped as a whole (the controller's ``step_batch`` raised, or
     returned commands of the wrong shape or kind); each trial of it gets a failure row

@@ -14,7 +14,7 @@ from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
-from benchmarks.exceptions import BenchmarkError
+from benchmarks.exceptions import BenchmarkError, ClusterError
 from benchmarks.termination import exit_status, how_stopped
 from hexapod.outputs import replace_whole
 
@@ -178,7 +178,7 @@ def _run_locked(scenarios: list[Any], out: Path, args: argparse.Namespace
         read_rows,
         write_report,
     )
-    from benchmarks.study.runner import completed_keys, plan, run_units
+    from benchmarks.study.runner import completed_keys, dask_workers, plan, run_units
 
     meta_path = out / META_FILE
     try:
@@ -199,7 +199,10 @@ def _run_locked(scenarios: list[Any], out: Path, args: argparse.Namespace
         raise BenchmarkError(f"{out}: already holds results; use --resume to finish that run "
                              "or choose another --out")
     done = completed_keys(out) if args.resume else set()
-    chunk = args.chunk or auto_chunk(scenarios, args.workers, args.backend)
+    # the workers that share the units: a Dask scheduler's threads (it was --workers,
+    # default 1: every unit a whole controller's trials, rows written in its jumps)
+    workers = dask_workers(args.dask, args.workers) if args.dask else args.workers
+    chunk = args.chunk or auto_chunk(scenarios, workers, args.backend)
     if chunk < 1:
         raise BenchmarkError(f"--chunk must be >= 1, got {chunk}")
     units = plan(scenarios, chunk, args.record, done, args.backend, args.engine)
@@ -216,7 +219,7 @@ def _run_locked(scenarios: list[Any], out: Path, args: argparse.Namespace
     executor = "dask" if args.dask else ("process pool" if args.workers > 1 else "in-process")
     record_command(meta, command_entry(getattr(args, "argv", sys.argv[1:]), "; ".join(did)))
     meta.update({
-        "workers": args.workers, "executor": executor,
+        "workers": workers, "executor": executor,
         "warnings": getattr(args, "calibration_warnings", []),
         "scenarios": {**meta.get("scenarios", {}), **{
             sc.name: {"description": sc.description, "reference": sc.reference,
@@ -286,6 +289,12 @@ def _run_locked(scenarios: list[Any], out: Path, args: argparse.Namespace
                   f"with: {escape(_resume_command(args, out))}",
                   soft_wrap=True)  # (one line to paste)
         raise
+    except ClusterError as exc:  # the Dask cluster failed: its rows stay, resume finishes
+        interrupted, status = True, 1
+        written = rows_written() - rows_before
+        con.print(f"\n[red]{escape(str(exc))}[/red]: {written} of {total} trials written to "
+                  f"{out}/results.jsonl (its units in flight are not); finish with: "
+                  f"{escape(_resume_command(args, out))}", soft_wrap=True)
     except BrokenProcessPool:  # a worker killed from outside (the OOM killer, kill -9)
         interrupted, status = True, 1
         written = rows_written() - rows_before
@@ -300,7 +309,7 @@ def _run_locked(scenarios: list[Any], out: Path, args: argparse.Namespace
     report = write_report(out, getattr(args, "overwrite", False), results)
     _print_summary(out, con, results)
     done_text = f"{written} of {total} trials" if written != total else f"{total} trials"
-    con.print(f"{done_text} in {wall:.1f} s ({executor}, {args.workers} worker(s))"
+    con.print(f"{done_text} in {wall:.1f} s ({executor}, {workers} worker(s))"
               f"{' before the interruption' if interrupted else ''}; report: {report}")
     return status, results
 
@@ -313,6 +322,11 @@ def _keep_inputs(out: Path, scenarios: list[Any], meta: dict[str, Any],
     from benchmarks.study.inputs import copy_inputs, settings
     from benchmarks.study.study_record import study_of
 
+    if continued and meta.get("record") not in (None, args.record):
+        print(f"warning: --record {args.record}: the directory's run recorded "
+              f"{meta['record']} trial(s) per controller and sweep point (trials/ keeps "
+              f"them); the trials run now are recorded by {args.record}, and run.json "
+              "says so", file=sys.stderr)
     meta["record"] = args.record
     for sc in scenarios:
         kept = copy_inputs(out, sc, getattr(args, "allow_foreign_calibration", False),

@@ -24,7 +24,7 @@ from typing import Any
 
 import numpy as np
 
-from benchmarks.exceptions import ResultsError
+from benchmarks.exceptions import ClusterError, ResultsError
 from benchmarks.study.results import (
     LOCK_FILE,
     RESULTS_FILE,
@@ -264,16 +264,23 @@ def _iter_dask(units: list[WorkUnit], address: str, workers: int
         _quiet_dask()
     if address == "local":
         with _sigint_ignored():  # the cluster's processes leave Ctrl-C to this one
+            # (a dashboard on a free port: None still took 8787, warning when in use)
             cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True,
-                                   dashboard_address=None, host="127.0.0.1")
+                                   dashboard_address=":0", host="127.0.0.1")
         client = Client(cluster)
     else:
-        client = Client(address)
+        client = connect(address)
     stopping: contextlib.AbstractContextManager[None] = contextlib.nullcontext()
     try:
         futures = {client.submit(execute, u, pure=False): u for u in units}
         for fut in as_completed(futures):
-            yield futures[fut], fut.result()
+            try:
+                result = fut.result()
+            except Exception as exc:
+                if _cluster_failure(exc):  # (a trial's own error is a row, not this)
+                    raise ClusterError(exc) from None
+                raise
+            yield futures[fut], result
     except BaseException:  # (Ctrl-C: the run stops; see _silent_while_stopping)
         if logging.getLogger().getEffectiveLevel() > logging.INFO:
             stopping = _silent_while_stopping()
@@ -283,6 +290,58 @@ def _iter_dask(units: list[WorkUnit], address: str, workers: int
             client.close()
             if cluster is not None:
                 cluster.close()
+
+
+#: How long a run waits for a Dask scheduler to answer [s].
+CONNECT_TIMEOUT_S = 10
+
+
+def connect(address: str) -> Any:
+    """A Dask client of the scheduler at ``address``.
+
+    Raises:
+        ResultsError: A malformed address, or no scheduler answering within
+            :data:`CONNECT_TIMEOUT_S` (naming ``--dask``).
+    """
+    try:
+        from dask.distributed import Client
+    except ImportError as exc:
+        raise ResultsError("--dask", "Dask is not installed: pip install 'hexapod-vs[dask]'"
+                           ) from exc
+    try:
+        return Client(address, timeout=CONNECT_TIMEOUT_S)
+    except (ValueError, TypeError, OSError, TimeoutError) as exc:
+        raise ResultsError("--dask", f"no Dask scheduler at {address!r} ({type(exc).__name__}: "
+                           f"{exc}); give a running scheduler's address, tcp://HOST:PORT, or "
+                           "'local' for a cluster of this machine") from None
+
+
+def dask_workers(address: str, workers: int) -> int:
+    """The threads a Dask run has to work with: ``workers`` for ``local``, else the
+    scheduler's workers' threads now (at least 1).
+
+    Raises:
+        ResultsError: As :func:`connect`.
+    """
+    if address == "local":
+        return workers
+    client = connect(address)
+    try:
+        return max(1, sum(client.nthreads().values()))
+    finally:
+        client.close()
+
+
+def _cluster_failure(exc: BaseException) -> bool:
+    """Whether Dask raised ``exc`` for its cluster (a scheduler gone, a unit's workers
+    killed: ``KilledWorker``, a closed connection, a timeout) rather than a unit's own
+    code (whose errors are rows)."""
+    import asyncio
+    from concurrent.futures import CancelledError
+
+    return (type(exc).__module__.split(".")[0] == "distributed"
+            or isinstance(exc, (OSError, TimeoutError, CancelledError,
+                                asyncio.CancelledError)))
 
 
 @contextlib.contextmanager

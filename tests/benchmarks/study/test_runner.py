@@ -471,3 +471,48 @@ def test_units_run_by_threads_give_the_rows_of_a_serial_run() -> None:
     with ThreadPoolExecutor(4) as pool:
         threaded = _stable([row for rows, _ in pool.map(execute, units) for row in rows])
     assert len(serial) == 24 and threaded == serial
+
+
+def test_a_dask_address_that_is_none_is_refused_naming_the_option(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """A malformed --dask address was a ValueError traceback (an unreachable one an
+    OSError after 30 s naming nothing); a cluster that fails under a run is told apart
+    from a unit's own error (which is a row)."""
+    from distributed.scheduler import KilledWorker
+
+    from benchmarks.study.runner import _cluster_failure
+
+    code = cli_main(["run", "quick", "--trials", "1", "--out", str(tmp_path / "d"),
+                     "--dask", "not an address", "--no-progress"])
+    err = " ".join(capsys.readouterr().err.split())
+    assert code == 2 and "--dask: no Dask scheduler at 'not an address'" in err, err
+    assert "Traceback" not in err
+    assert _cluster_failure(KilledWorker("unit", "tcp://w", 3))
+    assert _cluster_failure(OSError("connection closed"))
+    assert not _cluster_failure(ValueError("a unit's own error"))
+
+
+def test_a_dask_scheduler_s_threads_share_the_units() -> None:
+    """With --dask ADDRESS the units were cut for --workers (default 1: each a whole
+    controller's trials); they are cut for the scheduler's threads now."""
+    from distributed import LocalCluster
+
+    from benchmarks.study.runner import dask_workers
+
+    with LocalCluster(n_workers=1, threads_per_worker=3, processes=False,
+                      dashboard_address=":0") as cluster:
+        assert dask_workers(cluster.scheduler_address, 1) == 3
+    assert dask_workers("local", 2) == 2
+
+
+def test_a_resume_with_another_record_count_says_so(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    out = tmp_path / "r"
+    base = ["run", "quick", "--trials", "1", "--controllers", "leg-edge", "--out", str(out),
+            "--no-progress"]
+    assert cli_main([*base, "--record", "1"]) == 0
+    capsys.readouterr()
+    assert cli_main([*base, "--trials", "2", "--resume", "--record", "0"]) == 0
+    err = " ".join(capsys.readouterr().err.split())
+    assert "warning: --record 0: the directory's run recorded 1 trial(s)" in err, err
+    assert json.loads((out / "run.json").read_text())["record"] == 0
