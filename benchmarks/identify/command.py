@@ -37,6 +37,10 @@ def add_arguments(s: argparse.ArgumentParser) -> None:
                    help="encoder resolution [um] (default: the robot file's)")
     s.add_argument("--search-candidates", type=int, default=16, metavar="N",
                    help="excitation shapes the search tries (default 16, under a second)")
+    s.add_argument("--cutoff-hz", type=float, default=50.0, metavar="HZ",
+                   help="the zero-phase filter's cutoff [Hz] applied to the lengths and "
+                        "forces before they are differentiated (default 50, chosen for "
+                        "1 um encoders; docs/identification.md, \"The filter's cutoff\")")
     s.add_argument("--overwrite", action="store_true",
                    help="replace a user's files of the same names in --out")
 
@@ -128,11 +132,11 @@ def run(args: argparse.Namespace) -> int:
     if args.search_candidates < 2:
         raise IdentificationError(f"--search-candidates {args.search_candidates}: at least 2")
     for key, value in (("--duration", args.duration),
-                       ("--force-noise", args.force_noise)):
-        if not np.isfinite(value) or value < 0 or (key == "--duration" and value <= 0):
+                       ("--force-noise", args.force_noise), ("--cutoff-hz", args.cutoff_hz)):
+        positive = key in ("--duration", "--cutoff-hz")
+        if not np.isfinite(value) or value < 0 or (positive and value <= 0):
             raise IdentificationError(f"{key} {value}: must be a finite "
-                                      f"{'positive' if key == '--duration' else 'non-negative'}"
-                                      " number")
+                                      f"{'positive' if positive else 'non-negative'} number")
     if args.duration > MAX_DURATION_S:  # (a 1 kHz record of every joint, in memory)
         raise IdentificationError(f"--duration {args.duration:g}: at most {MAX_DURATION_S:g} s "
                                   "(the default excitation lasts 20 s)")
@@ -162,7 +166,12 @@ def run(args: argparse.Namespace) -> int:
                         force_noise=args.force_noise / 100,
                         resolution=(args.encoder_resolution * 1e-6
                                     if args.encoder_resolution is not None else None),
-                        candidates=args.search_candidates, backend=args.backend)
+                        candidates=args.search_candidates, backend=args.backend,
+                        cutoff_hz=args.cutoff_hz)
+    if not settings.cutoff_hz < 0.5 / settings.sample_dt:  # (before the record, not after)
+        raise IdentificationError(f"--cutoff-hz {args.cutoff_hz:g}: must be below the "
+                                  f"Nyquist frequency of the {settings.sample_dt * 1e3:g} ms "
+                                  f"record, {0.5 / settings.sample_dt:g} Hz")
     con = console()
     period = 1.0 / BASE_FREQUENCY_HZ
     if args.duration < period:

@@ -222,7 +222,8 @@ def identify(robot: HexapodGeometry, settings: Settings,
     t1 = time.perf_counter()
     rng = np.random.default_rng([settings.seed, 38])
     info: dict[str, Any] = {"backend": settings.backend, "duration_s": settings.duration,
-                            "sample_dt_s": settings.sample_dt}
+                            "sample_dt_s": settings.sample_dt,
+                            "cutoff_hz": settings.cutoff_hz}
     true_theta = None
     if settings.backend in WORLD_BACKENDS:
         world = truth if truth is not None else robot

@@ -37,10 +37,12 @@ def test_identify_writes_a_robot_file_the_project_loads(tmp_path: Path) -> None:
     loads with identified tables; the JSON has every base parameter with its SE; a
     second run into the same folder replaces the project's own files."""
     args = ["identify", "deltalab", "--out", str(tmp_path), "--duration", "4",
-            "--search-candidates", "2"]
+            "--search-candidates", "2", "--cutoff-hz", "40"]
     assert main(args) == 0
     for name in ("identified.toml", "identification.json", "report.md", "residuals.png"):
         assert (tmp_path / name).stat().st_size > 0
+    assert json.loads((tmp_path / "identification.json").read_text())["record"][
+        "cutoff_hz"] == 40.0
     from PIL import Image
 
     with Image.open(tmp_path / "residuals.png") as png:  # one Software chunk: the project's
@@ -163,6 +165,9 @@ def test_reference_robot_with_realistic_sensing_meets_the_done_figures() -> None
     (["--seed", "-1"], "--seed -1: must be >= 0"),
     (["--encoder-resolution", "-1"], "--encoder-resolution -1.0: must be a finite number >= 0"),
     (["--encoder-resolution", "nan"], "--encoder-resolution nan: must be a finite number"),
+    (["--cutoff-hz", "600"], "--cutoff-hz 600: must be below the Nyquist frequency of the "
+                             "1 ms record, 500 Hz"),
+    (["--cutoff-hz", "0"], "--cutoff-hz 0.0: must be a finite positive number"),
     (["--truth", "deltalab", "--backend", "sim"], "--truth deltalab: the dynamic world's true "
                                                   "robot; --backend sim has its own"),
 ])
