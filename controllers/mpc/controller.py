@@ -256,6 +256,10 @@ class MPCLaw(PredictiveLaw):
             assert ts.reason is not None
             return self._fallback(observation, ts.reason)
         e, N, b, J, notes = ts.error, ts.normal, ts.gradient, ts.inverse_jacobian, ts.notes
+        w, _ = np.linalg.eigh(N)
+        rank = int(np.count_nonzero(w > (law.threshold ** 2) * max(w[-1], 0.0)))
+        if rank < 6:  # the law refuses (it moved along the seen directions, or not at all)
+            return self._fallback(observation, f"interaction matrix rank {rank} < 6")
         t_start = time.perf_counter()
         solved = self._solve(observation, q, e, N, b, J)
         if isinstance(solved, str):
@@ -264,8 +268,6 @@ class MPCLaw(PredictiveLaw):
         if self.time_limit is not None and time.perf_counter() - t_start > self.time_limit:
             return self._fallback(observation, f"time limit {self.time_limit} s exceeded "
                                                f"({status})")
-        w, _ = np.linalg.eigh(N)
-        rank = int(np.count_nonzero(w > (law.threshold ** 2) * max(w[-1], 0.0)))
         cond = math.sqrt(w[-1] / w[0]) if w[0] > 0 else math.inf
         law.estimate.commanded(tau, q)
         notes = [*notes, f"mpc {self.model} N={self.horizon}: {status}"]

@@ -319,6 +319,33 @@ def test_failed_solve_falls_back_with_the_reason(name: str, other_geometry) -> N
 
 
 @pytest.mark.parametrize("name", ["leg-edge-mpc", "leg-direction-mpc"])
+@pytest.mark.parametrize("model", ["local", "global"])
+def test_features_of_rank_below_six_are_refused_as_the_law_refuses_them(  # type: ignore[no-untyped-def]
+        name: str, model: str, other_geometry) -> None:
+    """One leg seen (rank 2), two (rank 4) or none (a lost frame): the one-step law
+    refuses; the predictive controller moved at 9 mm/s along what it saw, and with no
+    feature answered a zero command that was no refusal (a trial that lost its camera
+    never counted as refused): it refuses as its law does now."""
+    from dataclasses import replace
+
+    world = _world("unified", other_geometry)
+    Rs, ts = world.poses(2, np.random.default_rng(6), margin=0.02)
+    field, mask = ("normals", "edge_visible") if name == "leg-edge-mpc" else (
+        "directions", "direction_visible")
+    for seen in ([5], [4, 5], []):
+        ctrl = _mpc(name, world, (Rs[1], ts[1]), model=model)
+        obs = world.observation(Rs[0], ts[0])
+        assert ctrl.step(obs).ok
+        hidden = [i for i in range(6) if i not in seen]
+        values, visible = np.array(getattr(obs, field)), np.array(getattr(obs, mask))
+        values[hidden], visible[hidden] = np.nan, False
+        cmd = ctrl.step(replace(obs, **{field: values, mask: visible}))
+        assert not cmd.ok and np.array_equal(cmd.velocities, np.zeros(6))
+        assert cmd.reason is not None and "rank" in cmd.reason and "< 6" in cmd.reason
+        assert any("mpc fallback: interaction matrix rank" in n for n in cmd.notes)
+
+
+@pytest.mark.parametrize("name", ["leg-edge-mpc", "leg-direction-mpc"])
 def test_nan_observation_is_refused_with_the_reason(name: str, other_geometry) -> None:  # type: ignore[no-untyped-def]
     world = _world("unified", other_geometry)
     Rs, ts = world.poses(2, np.random.default_rng(6), margin=0.02)
