@@ -106,12 +106,17 @@ class CommandError(ControllerError, ValueError):
 
 @contextmanager
 def named_as(controller: str) -> Iterator[None]:
-    """Raise a held law's :class:`ContextError` as the holder's, ``controller`` (a
-    predictive controller resets and retargets the law it holds: a bad goal is the
-    predictive controller's to name)."""
+    """Raise a held law's :class:`ContextError` or :class:`OptionError` as the holder's,
+    ``controller`` (a predictive controller builds, resets and retargets the law it
+    holds: a bad goal or option is the predictive controller's to name; ``leg-edge-mpc``
+    with ``gain=0`` said "leg-edge-qp: option 'gain'", a law the user never named)."""
     try:
         yield
     except ContextError as exc:
         if exc.controller == controller:
             raise
         raise ContextError(controller, exc.field, exc.problem) from None
+    except OptionError as exc:
+        if exc.controller == controller:
+            raise
+        raise OptionError(controller, exc.option, exc.problem) from None

@@ -269,7 +269,9 @@ class VisionLaw(VisionLawBatch):
         q = np.asarray(observation.lengths, dtype=float)
         if q.min() <= 0:
             self.estimate.halted()
-            return Command.refuse(f"lengths: non-positive leg length {float(q.min())} m")
+            leg = int(np.argmin(q))
+            return Command.refuse(f"lengths: leg {leg} at {float(q[leg]):.6g} m, not a "
+                                  "positive length")
         stroke = stroke_of(self.context)
         if stroke is not None and (wrong := implausible_lengths(q, stroke)) is not None:
             self.estimate.halted()

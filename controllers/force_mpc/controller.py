@@ -98,8 +98,9 @@ class ForceMPCLaw(PredictiveLaw):
         self.friction_smoothing = check_number(name, "friction_smoothing",
                                                friction_smoothing)
         #: The fallback law, whose reference and goal this controller tracks.
-        self.law: Any = self.law_class(natural_frequency=natural_frequency, damping=damping,
-                                       smooth_goal=smooth_goal)
+        with named_as(name):
+            self.law: Any = self.law_class(natural_frequency=natural_frequency,
+                                           damping=damping, smooth_goal=smooth_goal)
         self.spec = ForceProblemSpec(horizon, substeps, self.feature)
         self._bound: BoundCall | None = None
         #: The plan of the last step (6 N,) [N] (before the shift).

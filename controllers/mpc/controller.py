@@ -131,10 +131,12 @@ class MPCLaw(PredictiveLaw):
         #: The one-step QP law of the same features: it builds the tasks of each period
         #: (:meth:`~controllers.laws.VisionLaw.tasks`), holds the estimate and the
         #: limits, and is the fallback.
-        self.law: Any = self.law_class(gain=gain, adaptive_gain=adaptive_gain,
-                                         interaction=interaction, threshold=threshold,
-                                         stroke_margin=stroke_margin, max_speed=max_speed,
-                                         compiled=self.compiled, **law_options)
+        with named_as(name):
+            self.law: Any = self.law_class(gain=gain, adaptive_gain=adaptive_gain,
+                                             interaction=interaction, threshold=threshold,
+                                             stroke_margin=stroke_margin,
+                                             max_speed=max_speed, compiled=self.compiled,
+                                             **law_options)
         self.features = self.law.features
         self._spec: ProblemSpec | None = None
         #: The drives' state of the lag model (None with the ideal prediction).

@@ -90,3 +90,14 @@ def test_the_bounds_of_a_batch() -> None:
     lo, hi = reading_bounds([(0.345, 0.485), (0.38, 0.56)])
     assert (lo, hi) == pytest.approx((0.38 - 0.18, 0.56 + 0.18))  # the union
     assert reading_bounds([(0.345, 0.485), None]) == (-np.inf, np.inf)
+
+
+@pytest.mark.parametrize("name", BUILTINS)
+def test_a_negative_length_names_its_leg(name: str) -> None:
+    """(The vision laws said "non-positive leg length -0.4 m", no leg; the others named
+    it.)"""
+    lengths = SEEN.lengths.copy()
+    lengths[2] = -0.4
+    cmd = _law(name).step(_observation(lengths))  # type: ignore[attr-defined]
+    assert cmd.reason is not None and "leg 2 at -0.4 m" in cmd.reason, cmd.reason
+    assert not np.any(_values(cmd))

@@ -543,3 +543,18 @@ def test_force_laws_never_raise_on_malformed_observations(name: str, world: Worl
                 np.shape(obs.q_dot) != (6,):
             assert not cmd.ok and cmd.reason
             assert np.array_equal(np.asarray(cmd.forces), np.zeros(6))
+
+
+@pytest.mark.parametrize(("name", "option", "value"), [
+    ("leg-edge-mpc", "gain", 0.0), ("leg-direction-mpc", "gain", 0.0),
+    ("leg-edge-force-mpc", "damping", -1.0), ("pose-force-mpc", "natural_frequency", 0.0)])
+def test_a_held_laws_option_error_is_the_holders(name: str, option: str, value: float) -> None:
+    """A predictive controller passes these options to the law it holds, whose error
+    named the law ("leg-edge-qp: option 'gain'", "cartesian-ctc: ..."), one the user
+    never named: the holder's name now."""
+    import re
+
+    from controllers.exceptions import OptionError
+
+    with pytest.raises(OptionError, match=rf"^{re.escape(name)}: option '{option}'"):
+        registry.create(name, **{option: value})
