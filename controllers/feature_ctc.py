@@ -87,7 +87,8 @@ class FeatureCTC(TaskComputedTorque):
         """The taught features (``goal.normals`` or ``goal.directions``).
 
         Raises:
-            ContextError: They are missing.
+            ContextError: They are missing, none is finite, or (``smooth_goal``) the goal
+                has no pose of the robot (the smooth line's end).
         """
         value = getattr(goal, self.key)
         if value is None:
@@ -96,6 +97,12 @@ class FeatureCTC(TaskComputedTorque):
         if taught.shape != self.observed_feature.shape:
             raise ContextError(self.name, f"goal.{self.key}", f"expected shape "
                                f"{self.observed_feature.shape}, got {taught.shape}")
+        if not np.isfinite(taught).all(axis=-1).any():  # (it refused every step after)
+            raise ContextError(self.name, f"goal.{self.key}", "no finite desired feature: "
+                               "every taught feature hidden (a goal image where no leg was "
+                               "seen)")
+        if self.smooth_goal and self.context is not None:  # the smooth line's end, read now
+            goal_pose_of(self.name, goal, self.context.geometry)  # (not at the first step)
         self._taught = taught
         self._grid = None  # the reference's features are anchored at the taught ones
         self.reference_changed()

@@ -39,6 +39,7 @@ from controllers.base import (
     ObservationBatch,
 )
 from controllers.batch import actuation_of
+from controllers.exceptions import named_as
 from controllers.law_tools import check_flag
 from hexapod.fk import forward_kinematics_batch
 from hexapod.workspace import home_pose
@@ -171,7 +172,8 @@ class LatencyCompensated(Controller):
 
         self._contexts = list(contexts)
         self._histories = [EncoderHistory(self.use_rates) for _ in self._contexts]
-        self.law.reset_batch(self._contexts)
+        with named_as(self.name):  # (the context is the user's of this controller)
+            self.law.reset_batch(self._contexts)
         self.features = frozenset(getattr(self.law, "features", self.features)) | {"lengths"}
         self.trial_instances = [self] * len(self._contexts)
         n = len(self._contexts)
@@ -200,7 +202,8 @@ class LatencyCompensated(Controller):
         Raises:
             ContextError: A goal the law cannot use, or no reset yet.
         """
-        self.law.retarget_batch(trials, goals)
+        with named_as(self.name):
+            self.law.retarget_batch(trials, goals)
         for j, k in enumerate(np.asarray(trials, dtype=int).tolist()):
             self._contexts[k] = replace(self._contexts[k], goal=goals.item(j))
 

@@ -26,7 +26,7 @@ from controllers.data import CommandBatch, ControllerContext, Goal, ObservationB
 from controllers.estimators import PoseEstimate
 from controllers.exceptions import ContextError
 from controllers.law_algebra import jacobi_eigen
-from controllers.law_tools import Gain, check_flag, check_number, gain_formula
+from controllers.law_tools import Gain, check_count, check_flag, check_number, gain_formula
 from controllers.model_based_rows import PoseServoRows
 from controllers.task_ctc_inputs import goal_pose_of
 from hexapod.compiled import CompiledFunction, Layout
@@ -158,8 +158,8 @@ class ModelBasedController(Controller):
         self.servo_input = np.zeros(_IN.size)
         self._rows: PoseServoRows | None = None
         self.fk_tolerance = check_number(self.name, "fk_tolerance", fk_tolerance)
-        self.fk_max_iterations = int(check_number(self.name, "fk_max_iterations",
-                                                  fk_max_iterations, 1.0, strict=False))
+        self.fk_max_iterations = check_count(self.name, "fk_max_iterations",
+                                             fk_max_iterations, 1)  # (2.5 was 2)
         self.context: ControllerContext | None = None
 
     def reset_trial(self, context: ControllerContext) -> None:

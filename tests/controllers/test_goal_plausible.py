@@ -111,3 +111,27 @@ def test_a_goal_rotation_that_is_not_one_is_refused(name: str, rotation: np.ndar
     with pytest.raises(ContextError, match=r"goal\.rotation.*not a rotation matrix "
                                            r"\(\|R\^T R - I\| = "):
         _reset(name, _goal(rotation=rotation))
+
+
+@pytest.mark.parametrize("name", ["leg-edge-ctc", "leg-direction-ctc", "leg-edge-force-mpc"])
+def test_a_feature_ctc_refuses_at_reset_the_goal_it_cannot_use(name: str) -> None:
+    """A goal without a pose (the README's goal of features and lengths) or without a
+    seen feature: the law took it at reset and refused every step after ("nominal model
+    failed: ...", or "0 task rows in use (the features seen)", blaming the image); its
+    siblings refuse it at reset, naming the field: these do now. Without the smooth line
+    (``smooth_goal = False``) no pose is needed."""
+    with pytest.raises(ContextError, match=rf"^{name}: .*'goal.rotation/translation': "
+                                           r"missing"):
+        _reset(name, _goal(rotation=None, translation=None))
+    with pytest.raises(ContextError, match=rf"^{name}: .*no finite desired feature"):
+        _reset(name, _goal(normals=np.full_like(SEEN.normals, np.nan),
+                           directions=np.full_like(SEEN.directions, np.nan),
+                           edge_visible=np.zeros_like(SEEN.edge_visible)))
+    law = registry.create(name, smooth_goal=False)
+    law.reset(ControllerContext(A, ROBOT, CAMERA, 0.02, _goal(rotation=None, translation=None)))
+
+
+def test_the_latency_wrapper_names_itself_for_its_law_s_goal() -> None:
+    with pytest.raises(ContextError, match=r"^latency-compensated: .*no visible desired edge"):
+        _reset("latency-compensated", _goal(normals=np.full_like(SEEN.normals, np.nan),
+                                            edge_visible=np.zeros_like(SEEN.edge_visible)))

@@ -558,3 +558,12 @@ def test_a_held_laws_option_error_is_the_holders(name: str, option: str, value: 
 
     with pytest.raises(OptionError, match=rf"^{re.escape(name)}: option '{option}'"):
         registry.create(name, **{option: value})
+
+
+def test_a_count_option_given_a_fraction_is_refused() -> None:
+    """(model-based took fk_max_iterations = 2.5 as 2, and `check` said nothing.)"""
+    from controllers.exceptions import OptionError
+
+    with pytest.raises(OptionError, match=r"fk_max_iterations': expected an integer >= 1, "
+                                          r"got 2.5"):
+        registry.create("model-based", fk_max_iterations=2.5)
