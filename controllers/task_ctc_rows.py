@@ -67,6 +67,7 @@ from controllers.task_ctc_inputs import encoder_readings, line_to
 from hexapod.actuation import Actuation
 from hexapod.c_step import KernelCall, RowArrays
 from hexapod.compiled import LANE_ROWS, CompilationError
+from hexapod.kinematics import inverse_jacobian, leg_vectors
 
 if TYPE_CHECKING:
     from controllers.task_ctc import TaskComputedTorque
@@ -301,6 +302,10 @@ class TaskRows:
         if not used and (code == ACCEPTED).all():  # the common case
             out.error_norm[:] = np.sqrt(norms(E))
             return
+        over = np.flatnonzero(code == OVER)
+        if len(over):  # (forces over a limit: at a parallel singularity, no command)
+            for j, singular in self._singular(b, over, threshold).items():
+                code[j], reasons[j] = REFUSED, singular
         accepted = (code == ACCEPTED) | (code == OVER)
         out.error_norm[accepted] = np.sqrt(norms(E[accepted]))
         for j, u in used.items():  # the norms of the rows used
@@ -316,6 +321,9 @@ class TaskRows:
              used: np.ndarray | None, note: str | None, reason: str | None) -> None:
         """A batch of one's row as the per-trial step's :class:`Command`."""
         code = b.code[0]
+        if code == OVER and (singular := self._singular(b, np.zeros(1, dtype=int),
+                                                        self.threshold)):
+            code, reason = REFUSED, singular[0]
         if code != ACCEPTED and code != OVER:
             self._refuse(out, 0, reason or self._reason(observations, b, 0))
             return
@@ -333,6 +341,37 @@ class TaskRows:
         out.forces[0] = forces  # type: ignore[index]
         out.error_norm[0] = cmd.error_norm
         out.commands = [cmd]
+
+    def _singular(self, b: RowArrays, rows: np.ndarray, threshold: float) -> dict[int, str]:
+        """Why some of ``rows``, whose forces are over a limit, are no command: the legs'
+        Jacobian at the row's nominal pose is singular (a parallel singularity: the
+        task's own Jacobian stays regular there, and the forces that hold the task were
+        clipped to the drives' limits where computed torque refuses). One batched test
+        of the rows of one robot model (the trials' nominal robots)."""
+        out: dict[int, str] = {}
+        laws = [self.laws[int(b.trials[j])] for j in rows.tolist()]
+        for members in chunks([None if law.context is None else model_world(law.context)
+                               for law in laws]):
+            law = laws[members[0]]
+            if law.context is None:
+                continue
+            at = rows[members]
+            pose = b.Y[at][:, self._pose]
+            R = np.swapaxes(pose[:, :9].reshape(-1, 3, 3), 1, 2)  # (column-major)
+            g = law.context.geometry
+            legs = leg_vectors(g, R, pose[:, 9:12])
+            K = inverse_jacobian(g.base_points,
+                                 legs / np.linalg.norm(legs, axis=-1, keepdims=True))
+            w = np.linalg.eigvalsh(np.swapaxes(K, 1, 2) @ K)  # (ascending)
+            with np.errstate(divide="ignore", invalid="ignore"):
+                singular = ~(w[:, 0] > threshold**2 * w[:, -1])
+                cond = np.sqrt(w[:, -1] / w[:, 0])
+            for k in np.flatnonzero(singular).tolist():
+                c = float(cond[k]) if w[k, 0] > 0 else math.inf
+                out[int(at[k])] = (f"the legs' Jacobian at the nominal pose has rank < 6 "
+                                   f"(condition {c:.3g}): a parallel singularity, where no "
+                                   "leg forces hold the platform")
+        return out
 
     def _limited(self, b: RowArrays, j: int, forces: np.ndarray, used: np.ndarray | None
                  ) -> np.ndarray:

@@ -289,3 +289,54 @@ def test_the_common_case_checks_answer_as_the_general_ones() -> None:
         assert all_seen(v.edge_visible) == bool(np.all(v.edge_visible))
     assert accepted == 8  # the plain, the unusual-but-fine and the refused
     assert all_seen(None)
+
+
+def test_a_parallel_singularity_is_refused_as_computed_torque_refuses_it() -> None:
+    """A robot whose stroke reaches the parallel singularity (the platform turned 90 deg
+    about z, legs of 436-592 mm in a 300-600 mm stroke): computed torque refused ("rank
+    < 6"), the task laws clipped the forces that hold their task to the drives' 200 N,
+    their task Jacobian regular there: refused now, alone and in a batch of rows, while
+    at 89 deg (a regular pose) every law commands forces."""
+    import dataclasses
+
+    from controllers import registry
+    from controllers.base import ControllerContext, Goal, Observation
+    from controllers.data import ObservationBatch
+    from hexapod import deltalab
+    from hexapod.se3 import exp_so3
+    from hexapod.workspace import home_pose
+    from vision.cameras import omni_camera
+    from vision.legs import observe_legs
+
+    robot = dataclasses.replace(deltalab(), stroke=(0.30, 0.60))
+    cam = omni_camera(robot)
+    R0, t0 = home_pose(robot)[:2]
+
+    def seen(R: np.ndarray) -> Observation:
+        o = observe_legs(cam, robot, R, t0)
+        return Observation(0.0, o.lengths, normals=o.normals, directions=o.directions,
+                           edge_visible=o.edge_visible, q_dot=np.zeros(6))
+
+    home = seen(R0)
+    goal = Goal(normals=home.normals, directions=home.directions, lengths=home.lengths,
+                rotation=R0, translation=t0, edge_visible=home.edge_visible)
+    context = ControllerContext(cam.camera_from_base.apply(robot.base_points), robot, cam,
+                                0.02, goal)
+    turned = {deg: seen(exp_so3(np.array([0.0, 0.0, np.deg2rad(deg)])) @ R0)
+              for deg in (89.0, 90.0)}
+    for name in ("cartesian-ctc", "leg-edge-ctc", "leg-direction-ctc"):
+        law = registry.create(name)
+        law.reset(context)
+        assert law.step(turned[89.0]).ok
+        law.reset(context)
+        cmd = law.step(turned[90.0])
+        assert not cmd.ok and "parallel singularity" in (cmd.reason or ""), (name, cmd.reason)
+        assert not np.any(cmd.values)
+        for n in (3, 10):  # (one C call; the lanes)
+            law.reset_batch([context] * n)
+            batch = ObservationBatch.of(turned[90.0])
+            assert batch is not None
+            rows = batch.rows(np.zeros(n, dtype=int))
+            rows.trials[:] = np.arange(n)
+            reasons = list(law.step_batch(rows).reasons)
+            assert all("parallel singularity" in (r or "") for r in reasons), reasons
