@@ -112,7 +112,7 @@ def end_reading(record: dict) -> str | None:
             "the backend does not say when its force is read (force_timing), so ")
     return (f"{said}the forces are taken as read at each period's end: the drives' "
             "response to each new setpoint within the period is not in them, and the rotor "
-            "inertias come out low (10-21 % on the project's stand-in robot, exact "
+            "inertias come out low (13-19 % on the test suite's stand-in robot, exact "
             "readings); a drive that reports the period's mean or a mid-period reading "
             "(force_timing = \"mean\" or \"middle\") is aligned with the lengths "
             "(docs/identification.md)")

@@ -334,14 +334,14 @@ def dask_workers(address: str, workers: int) -> int:
 
 def _cluster_failure(exc: BaseException) -> bool:
     """Whether Dask raised ``exc`` for its cluster (a scheduler gone, a unit's workers
-    killed: ``KilledWorker``, a closed connection, a timeout) rather than a unit's own
-    code (whose errors are rows)."""
+    killed: ``KilledWorker``, a closed connection, the futures cancelled) rather than a
+    unit's own code (whose ``OSError``, a worker without the scenario's files, is said as
+    it is: a resume would meet it again)."""
     import asyncio
     from concurrent.futures import CancelledError
 
     return (type(exc).__module__.split(".")[0] == "distributed"
-            or isinstance(exc, (OSError, TimeoutError, CancelledError,
-                                asyncio.CancelledError)))
+            or isinstance(exc, (CancelledError, asyncio.CancelledError)))
 
 
 @contextlib.contextmanager

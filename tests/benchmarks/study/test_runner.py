@@ -487,9 +487,13 @@ def test_a_dask_address_that_is_none_is_refused_naming_the_option(
     err = " ".join(capsys.readouterr().err.split())
     assert code == 2 and "--dask: no Dask scheduler at 'not an address'" in err, err
     assert "Traceback" not in err
+    from distributed.comm.core import CommClosedError
+
     assert _cluster_failure(KilledWorker("unit", "tcp://w", 3))
-    assert _cluster_failure(OSError("connection closed"))
+    assert _cluster_failure(CommClosedError("in <TCP ...>: Stream is closed"))
     assert not _cluster_failure(ValueError("a unit's own error"))
+    # a worker without the scenario's files: the unit's own error, said as it is
+    assert not _cluster_failure(FileNotFoundError("robot.toml"))
 
 
 def test_a_dask_scheduler_s_threads_share_the_units() -> None:
