@@ -14,8 +14,9 @@ from controllers.base import ControllerContext, Goal, Observation
 from controllers.exceptions import ContextError
 from controllers.law_tools import base_points_of
 from controllers.plausible import implausible_lengths, implausible_pose
+from hexapod.exceptions import ShapeError
 from hexapod.geometry import HexapodGeometry
-from hexapod.kinematics import ROTATION_TOLERANCE, Transform, inverse_kinematics
+from hexapod.kinematics import Transform, check_rotations, inverse_kinematics
 from hexapod.se3 import log_so3
 from hexapod.trajectory import PoseTrajectory
 
@@ -114,10 +115,11 @@ def goal_pose_of(controller: str, goal: Goal, geometry: HexapodGeometry | None =
         raise ContextError(controller, "goal.rotation/translation",
                            f"expected a finite (3, 3) rotation and (3,) position, got "
                            f"{R.shape} and {t.shape}")
-    off = float(np.abs(R.T @ R - np.eye(3)).max())
-    if off > ROTATION_TOLERANCE or np.linalg.det(R) <= 0:
-        raise ContextError(controller, "goal.rotation", f"not a rotation matrix (|R^T R - I| "
-                           f"= {off:.2e}, det {float(np.linalg.det(R)):.4g})")
+    try:
+        check_rotations(R)
+    except ShapeError as exc:
+        raise ContextError(controller, "goal.rotation", f"not a rotation matrix ({exc.got})"
+                           ) from None
     if geometry is not None and (problem := implausible_pose(geometry, R, t)) is not None:
         raise ContextError(controller, "goal.rotation/translation", problem)
     return R, t

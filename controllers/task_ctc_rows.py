@@ -67,7 +67,7 @@ from controllers.task_ctc_inputs import encoder_readings, line_to
 from hexapod.actuation import Actuation
 from hexapod.c_step import KernelCall, RowArrays
 from hexapod.compiled import LANE_ROWS, CompilationError
-from hexapod.kinematics import inverse_jacobian, leg_vectors
+from hexapod.kinematics import inverse_jacobian, leg_directions
 
 if TYPE_CHECKING:
     from controllers.task_ctc import TaskComputedTorque
@@ -359,9 +359,7 @@ class TaskRows:
             pose = b.Y[at][:, self._pose]
             R = np.swapaxes(pose[:, :9].reshape(-1, 3, 3), 1, 2)  # (column-major)
             g = law.context.geometry
-            legs = leg_vectors(g, R, pose[:, 9:12])
-            K = inverse_jacobian(g.base_points,
-                                 legs / np.linalg.norm(legs, axis=-1, keepdims=True))
+            K = inverse_jacobian(g.base_points, leg_directions(g, R, pose[:, 9:12]))
             w = np.linalg.eigvalsh(np.swapaxes(K, 1, 2) @ K)  # (ascending)
             with np.errstate(divide="ignore", invalid="ignore"):
                 singular = ~(w[:, 0] > threshold**2 * w[:, -1])
