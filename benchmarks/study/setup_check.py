@@ -454,6 +454,17 @@ def _camera_problems(report: SetupReport, camera: Any, home_obs: Any, needs_came
             "fy_px are in pixels (focal length in mm / pixel pitch in mm: about 1000 for a "
             f"usual camera); the legs are then a few pixels long; check {where.intrinsics}"),
             "camera", fails=False))
+    w, h = int(camera.width), int(camera.height)
+    off = max(abs(camera.cx - (w - 1) / 2) / w, abs(camera.cy - (h - 1) / 2) / h)
+    if off > CENTRE_FRACTION:  # (a calibration's is within a few % of the centre)
+        swapped = max(abs(camera.cx - (h - 1) / 2) / h,
+                      abs(camera.cy - (w - 1) / 2) / w) <= CENTRE_FRACTION
+        out.append(Problem("warning", (
+            f"the principal point ({camera.cx:.1f}, {camera.cy:.1f}) px is {100 * off:.0f} % "
+            f"of the {w}x{h} image's size from its centre: "
+            + (f"the width and height swapped? (it is near the centre of a {h}x{w} image)"
+               if swapped else "a cropped image's calibration, or another camera's?")
+            + f"; check {where.intrinsics}"), "camera", fails=False))
     if n_home and SINGULAR_RATIO <= report.edge_ratio < POOR_RATIO:
         out.append(Problem("warning", (
             f"the edges seen at home observe the platform's pose poorly in some direction "
@@ -469,6 +480,11 @@ def _camera_problems(report: SetupReport, camera: Any, home_obs: Any, needs_came
             f"such a pose (rank < 6); change {where.camera} "
             "so that it sees more legs"), "camera"))
     return out
+
+
+#: How far from the image's centre a principal point may lie before ``check`` warns
+#: [fraction of the image's width or height].
+CENTRE_FRACTION = 0.1
 
 
 def _mm_list(values: np.ndarray) -> str:

@@ -161,3 +161,20 @@ def test_the_picture_of_a_camera_at_the_base_origin_draws_only_what_its_lens_ima
     centre = img[H // 2 - 60:H // 2 + 60, W // 2 - 60:W // 2 + 60].astype(int)
     red = (centre[..., 2] > 150) & (centre[..., 1] < 80) & (centre[..., 0] < 80)
     assert not red.any(), "an edge drawn through the image centre"
+
+
+def test_a_calibration_with_width_and_height_swapped_is_warned_of(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """A 1024x780 calibration written as 780x1024 was taken without a word (its principal
+    point still inside the image): the principal point far from the centre is said, with
+    the swap when it fits the other way round; a calibration of this size is not."""
+    swapped = tmp_path / "swapped.yml"
+    write_opencv_calibration(swapped, K_FRONT, np.zeros(5), H, W)
+    _, out = _check([str(swapped)], capsys)
+    said = " ".join(out.split())
+    assert ("the principal point (511.5, 389.5) px is 16 % of the 780x1024 image's size "
+            "from its centre: the width and height swapped?") in said, said
+    right = tmp_path / "right.yml"
+    write_opencv_calibration(right, K_FRONT, np.zeros(5), W, H)
+    _, out = _check([str(right)], capsys)
+    assert "principal point" not in out
