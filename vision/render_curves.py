@@ -49,10 +49,10 @@ def projected_polylines(
 
     Returns:
         L arrays (V_k, 2) [px], the vertices of each polyline in the order of ``s``
-        (from ``starts`` to ``ends``); a curve with a point that is not imaged (behind
-        the camera: NaN vertices; beyond the lens's fold: OpenCV's pixel, of no image)
-        is not refined next to it (beyond a fold every level split: 24 levels took
-        28 s for a camera at the base origin).
+        (from ``starts`` to ``ends``); a vertex the camera does not image (behind it,
+        or beyond the lens's fold, where OpenCV's pixel is of no image) is NaN, and the
+        curve is not refined next to it (beyond a fold every level split: 24 levels
+        took 28 s for a camera at the base origin).
     """
     a = np.asarray(starts, float).reshape(-1, 3)
     d = np.asarray(ends, float).reshape(-1, 3) - a
@@ -66,6 +66,7 @@ def projected_polylines(
     pa, pb = pix0[:, :-1].reshape(-1, 2), pix0[:, 1:].reshape(-1, 2)
     ia, ib = im0[:, :-1].reshape(-1), im0[:, 1:].reshape(-1)
     kept_id, kept_s, kept_p = [np.arange(L)], [np.full(L, s0[-1])], [pix0[:, -1]]
+    kept_i = [im0[:, -1]]
     for _ in range(max_depth):
         if ids.size == 0:
             break
@@ -84,6 +85,7 @@ def projected_polylines(
         kept_id.append(ids[keep])
         kept_s.append(sa[keep])
         kept_p.append(pa[keep])
+        kept_i.append(ia[keep])
         ids = np.concatenate([ids[split], ids[split]])
         sa, sb = np.concatenate([sa[split], sm[split]]), np.concatenate([sm[split], sb[split]])
         pa, pb = np.concatenate([pa[split], pm[split]]), np.concatenate([pm[split], pb[split]])
@@ -91,8 +93,11 @@ def projected_polylines(
     kept_id.append(ids)
     kept_s.append(sa)
     kept_p.append(pa)
+    kept_i.append(ia)
     all_id, all_s = np.concatenate(kept_id), np.concatenate(kept_s)
-    all_p = np.concatenate(kept_p)
+    # a vertex the lens does not image is NaN, as one behind the camera (beyond a fold
+    # OpenCV's pixel is of no image: a polygon through it crossed the picture)
+    all_p = np.where(np.concatenate(kept_i)[:, None], np.concatenate(kept_p), np.nan)
     order = np.lexsort((all_s, all_id))
     counts = np.bincount(all_id, minlength=L)
     return np.split(all_p[order], np.cumsum(counts)[:-1])
