@@ -59,8 +59,7 @@ def projected_polylines(
     s0 = np.asarray(s, float)
     L, n = a.shape[0], s0.size
     X0 = a[:, None, :] + s0[None, :, None] * d[:, None, :]
-    pix0, _ = camera.project(X0)
-    im0 = camera.imaged(X0)
+    pix0, im0 = camera.project_imaged(X0)
     ids = np.repeat(np.arange(L), n - 1)
     sa, sb = np.tile(s0[:-1], L), np.tile(s0[1:], L)
     pa, pb = pix0[:, :-1].reshape(-1, 2), pix0[:, 1:].reshape(-1, 2)
@@ -72,8 +71,7 @@ def projected_polylines(
             break
         sm = 0.5 * (sa + sb)
         Xm = a[ids] + sm[:, None] * d[ids]
-        pm, _ = camera.project(Xm)
-        im = camera.imaged(Xm)
+        pm, im = camera.project_imaged(Xm)
         chord = pb - pa
         length = np.hypot(chord[:, 0], chord[:, 1])
         off = pm - pa

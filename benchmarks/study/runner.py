@@ -254,11 +254,9 @@ def _quietly(job: Callable[[], None]) -> None:
 
 def _iter_dask(units: list[WorkUnit], address: str, workers: int
                ) -> Iterator[tuple[WorkUnit, Any]]:
-    try:
-        from dask.distributed import Client, LocalCluster, as_completed
-    except ImportError as exc:
-        raise ResultsError("--dask", "Dask is not installed: pip install 'hexapod-vs[dask]'"
-                           ) from exc
+    distributed = _distributed()
+    Client, LocalCluster, as_completed = (distributed.Client, distributed.LocalCluster,
+                                          distributed.as_completed)
     cluster = None
     if logging.getLogger().getEffectiveLevel() > logging.INFO:  # (not --verbose)
         _quiet_dask()
@@ -296,6 +294,20 @@ def _iter_dask(units: list[WorkUnit], address: str, workers: int
 CONNECT_TIMEOUT_S = 10
 
 
+def _distributed() -> Any:
+    """The ``dask.distributed`` module.
+
+    Raises:
+        ResultsError: Dask is not installed (naming ``--dask`` and the extra to install).
+    """
+    try:
+        import dask.distributed
+    except ImportError as exc:
+        raise ResultsError("--dask", "Dask is not installed: pip install 'hexapod-vs[dask]'"
+                           ) from exc
+    return dask.distributed
+
+
 def connect(address: str) -> Any:
     """A Dask client of the scheduler at ``address``.
 
@@ -303,11 +315,7 @@ def connect(address: str) -> Any:
         ResultsError: A malformed address, or no scheduler answering within
             :data:`CONNECT_TIMEOUT_S` (naming ``--dask``).
     """
-    try:
-        from dask.distributed import Client
-    except ImportError as exc:
-        raise ResultsError("--dask", "Dask is not installed: pip install 'hexapod-vs[dask]'"
-                           ) from exc
+    Client = _distributed().Client
     try:
         return Client(address, timeout=CONNECT_TIMEOUT_S)
     except (ValueError, TypeError, OSError, TimeoutError) as exc:

@@ -356,7 +356,7 @@ def unmatched_gains(source: str, specs: Sequence[ControllerSpec], tables: list[A
             continue
         if any(": controllers." in spec.option_keys.get(o, "") for o in GAIN_OPTIONS):
             continue  # run --options-file: tuned (the same effort) or chosen on purpose
-        given = {**{o.name: o.default for o in table.options}, **spec.options}
+        given = resolved_options(spec, table)
         lam = given.get("adaptive_gain")
         schedules[spec.label] = (f"adaptive_gain {[float(x) for x in lam]}" if lam is not None
                                  else f"constant gain {float(given.get('gain', 1.0)):g} 1/s")
@@ -367,6 +367,12 @@ def unmatched_gains(source: str, specs: Sequence[ControllerSpec], tables: list[A
             + "): their comparison measures the gains as much as the laws; give them one "
             "schedule ([controller_options] adaptive_gain or gain) or tune them all "
             "(hexapod-bench tune, docs/tuning.md)"]
+
+
+def resolved_options(spec: ControllerSpec, table: Any) -> dict[str, Any]:
+    """A controller's options as it runs with them: its table's defaults, the given
+    ones over them."""
+    return {**{o.name: o.default for o in table.options}, **spec.options}
 
 
 def gain_warnings(spec: ControllerSpec, table: Any, dt: float) -> list[str]:
@@ -381,7 +387,7 @@ def gain_warnings(spec: ControllerSpec, table: Any, dt: float) -> list[str]:
         table: Its option table (the defaults of the options not given).
         dt: The control period [s].
     """
-    given: dict[str, Any] = {**{o.name: o.default for o in table.options}, **spec.options}
+    given = resolved_options(spec, table)
 
     def value(name: str) -> Any:
         return given.get(name)

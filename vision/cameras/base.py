@@ -211,27 +211,27 @@ class Camera(ABC):
             polynomial is one-to-one; OpenCV's pixel is still given, it may even fall
             in the image) or projects outside the image (pixels still given).
         """
+        pix, imaged = self.project_imaged(points)
+        return pix, imaged & self.in_image(pix)
+
+    def project_imaged(self, points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """:meth:`project`'s ``pixels`` and whether the model images the points at all
+        (in its domain, and within the fold of the lens distortion; in the image or
+        not): its ``visible`` without the image's bounds."""
         X = as_points(points)
         m, valid = self._normalised(X)
         m = np.where(valid[..., None], m, 0.0)
         with np.errstate(invalid="ignore", over="ignore"):
             pix = self.normalised_to_pixels(m)
         pix = np.where(valid[..., None], pix, np.nan)
-        visible = valid & self.in_image(pix)
         if self.is_distorted:
-            visible &= np.linalg.norm(m, axis=-1) < self.lens.fold_free_radius(m)
-        return pix, visible
+            valid = valid & (np.linalg.norm(m, axis=-1) < self.lens.fold_free_radius(m))
+        return pix, valid
 
     def imaged(self, points: np.ndarray) -> np.ndarray:
         """Whether points (..., 3) in the camera frame are imaged by the model at all
-        (in its domain, and within the fold of the lens distortion; in the image or not):
-        :meth:`project`'s ``visible`` without the image's bounds."""
-        X = as_points(points)
-        m, valid = self._normalised(X)
-        if not self.is_distorted:
-            return valid
-        m = np.where(valid[..., None], m, 0.0)
-        return valid & (np.linalg.norm(m, axis=-1) < self.lens.fold_free_radius(m))
+        (:meth:`project_imaged`)."""
+        return self.project_imaged(points)[1]
 
     def project_base(self, points_base: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Like :meth:`project` for points (..., 3) given in the robot base frame."""
