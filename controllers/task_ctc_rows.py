@@ -41,7 +41,7 @@ from scipy.linalg.lapack import dsyevd as _eigenvalues
 
 from controllers.base import Command
 from controllers.control_grid import chunks, model_world
-from controllers.ctc_rows import FK_MAX_CALLS, evaluate_rows, norms, rank_condition, refusal
+from controllers.ctc_rows import FK_MAX_CALLS, evaluate_rows, norms, rank_condition
 from controllers.data import CommandBatch, ObservationBatch
 from controllers.plausible import reading_bounds, stroke_of
 from controllers.task_ctc_c import (
@@ -49,7 +49,6 @@ from controllers.task_ctc_c import (
     ACCEPTED,
     CODES,
     FIRST,
-    NOT_FINITE,
     OFF_GRID,
     OVER,
     READY,
@@ -58,16 +57,15 @@ from controllers.task_ctc_c import (
     UNKNOWN,
     UNSEEN,
     UNSURE,
-    UNUSABLE,
     Call,
     Context,
     library,
 )
-from controllers.task_ctc_inputs import encoder_readings, line_to
+from controllers.task_ctc_inputs import line_to
+from controllers.task_ctc_refusals import parallel_singular, row_reason, step_refusal, unusable
 from hexapod.actuation import Actuation
 from hexapod.c_step import KernelCall, RowArrays
 from hexapod.compiled import LANE_ROWS, CompilationError
-from hexapod.kinematics import inverse_jacobian, leg_directions
 
 if TYPE_CHECKING:
     from controllers.task_ctc import TaskComputedTorque
@@ -261,7 +259,7 @@ class TaskRows:
         c = self.context
         if c is None or observations.q_dot is None:
             for j in range(n):
-                self._refuse(out, j, self._unusable(observations, j))
+                self._refuse(out, j, unusable(observations, j))
             return
         lib = library()
         threshold = self.threshold
@@ -304,8 +302,9 @@ class TaskRows:
             return
         over = np.flatnonzero(code == OVER)
         if len(over):  # (forces over a limit: at a parallel singularity, no command)
-            for j, singular in self._singular(b, over, threshold).items():
-                code[j], reasons[j] = REFUSED, singular
+            singular = parallel_singular(self.laws, b, over, self._pose, threshold)
+            for j, why in singular.items():
+                code[j], reasons[j] = REFUSED, why
         accepted = (code == ACCEPTED) | (code == OVER)
         out.error_norm[accepted] = np.sqrt(norms(E[accepted]))
         for j, u in used.items():  # the norms of the rows used
@@ -315,17 +314,19 @@ class TaskRows:
         for j in np.flatnonzero(code == OVER).tolist():  # over a limit: the law's strategy
             forces[j] = self._limited(b, j, forces[j], used.get(j))
         for j in np.flatnonzero(~accepted).tolist():  # refused: zeros and the reason
-            self._refuse(out, j, reasons.get(j) or self._reason(observations, b, j))
+            self._refuse(out, j, reasons.get(j)
+                         or row_reason(self.laws, observations, b, j, threshold))
 
     def _one(self, observations: ObservationBatch, out: CommandBatch, b: RowArrays,
              used: np.ndarray | None, note: str | None, reason: str | None) -> None:
         """A batch of one's row as the per-trial step's :class:`Command`."""
         code = b.code[0]
-        if code == OVER and (singular := self._singular(b, np.zeros(1, dtype=int),
-                                                        self.threshold)):
+        if code == OVER and (singular := parallel_singular(
+                self.laws, b, np.zeros(1, dtype=int), self._pose, self.threshold)):
             code, reason = REFUSED, singular[0]
         if code != ACCEPTED and code != OVER:
-            self._refuse(out, 0, reason or self._reason(observations, b, 0))
+            self._refuse(out, 0, reason
+                         or row_reason(self.laws, observations, b, 0, self.threshold))
             return
         y = b.Y[0]
         forces = b.forces[0].copy()
@@ -341,35 +342,6 @@ class TaskRows:
         out.forces[0] = forces  # type: ignore[index]
         out.error_norm[0] = cmd.error_norm
         out.commands = [cmd]
-
-    def _singular(self, b: RowArrays, rows: np.ndarray, threshold: float) -> dict[int, str]:
-        """Why some of ``rows``, whose forces are over a limit, are no command: the legs'
-        Jacobian at the row's nominal pose is singular (a parallel singularity: the
-        task's own Jacobian stays regular there, and the forces that hold the task were
-        clipped to the drives' limits where computed torque refuses). One batched test
-        of the rows of one robot model (the trials' nominal robots)."""
-        out: dict[int, str] = {}
-        laws = [self.laws[int(b.trials[j])] for j in rows.tolist()]
-        for members in chunks([None if law.context is None else model_world(law.context)
-                               for law in laws]):
-            law = laws[members[0]]
-            if law.context is None:
-                continue
-            at = rows[members]
-            pose = b.Y[at][:, self._pose]
-            R = np.swapaxes(pose[:, :9].reshape(-1, 3, 3), 1, 2)  # (column-major)
-            g = law.context.geometry
-            K = inverse_jacobian(g.base_points, leg_directions(g, R, pose[:, 9:12]))
-            w = np.linalg.eigvalsh(np.swapaxes(K, 1, 2) @ K)  # (ascending)
-            with np.errstate(divide="ignore", invalid="ignore"):
-                singular = ~(w[:, 0] > threshold**2 * w[:, -1])
-                cond = np.sqrt(w[:, -1] / w[:, 0])
-            for k in np.flatnonzero(singular).tolist():
-                c = float(cond[k]) if w[k, 0] > 0 else math.inf
-                out[int(at[k])] = (f"the legs' Jacobian at the nominal pose has rank < 6 "
-                                   f"(condition {c:.3g}): a parallel singularity, where no "
-                                   "leg forces hold the platform")
-        return out
 
     def _limited(self, b: RowArrays, j: int, forces: np.ndarray, used: np.ndarray | None
                  ) -> np.ndarray:
@@ -466,7 +438,7 @@ class TaskRows:
                 if y[step.outputs.index("status")] == 0.0:
                     found = rank_condition(y[step.outputs["factor"]], law.solver.threshold)
                 if found is None:
-                    return self._refusal(step, y, step.inputs.views(x), law.solver.threshold)
+                    return step_refusal(step, y, step.inputs.views(x), law.solver.threshold)
                 step.row[step.inputs["pose"]] = y[step.outputs["pose"]]
                 step.guessed[0] = 1.0
                 assert law.context is not None and law.guess is not None
@@ -504,37 +476,6 @@ class TaskRows:
         if prepared[1] is not None:
             notes[j] = prepared[1]
         return None
-
-    def _unusable(self, observations: ObservationBatch, j: int) -> str:
-        """Why row ``j`` has no step at all."""
-        if observations.q_dot is None:
-            reason = encoder_readings(observations.item(j))
-            assert isinstance(reason, str)
-            return reason
-        return "no compiled step (compiled_kind is None and the law made none at reset)"
-
-    def _reason(self, observations: ObservationBatch, b: RowArrays, j: int) -> str:
-        """Why row ``j`` is refused (its code: readings, no step, or its status)."""
-        code = int(b.code[j])
-        if code == NOT_FINITE:
-            readings = encoder_readings(observations.item(j),
-                                        stroke_of(self.laws[int(b.trials[j])].context))
-            return readings if isinstance(readings, str) else "readings not finite"
-        if code == UNUSABLE:
-            return self._unusable(observations, j)
-        step = self.laws[int(b.trials[j])].compiled
-        assert step is not None
-        return self._refusal(step, b.Y[j], step.inputs.views(b.X[j]), self.threshold)
-
-    @staticmethod
-    def _refusal(step: CompiledTaskStep, y: np.ndarray, views: dict[str, np.ndarray],
-                 threshold: float) -> str:
-        """The reason of a compiled step's output row that is not a command."""
-        outs = step.outputs
-        reason = refusal(y, outs.index("status"), outs.index("fk_residual"), outs["factor"],
-                         threshold, step.pose_name, views)
-        assert reason is not None
-        return reason
 
     def _refuse(self, out: CommandBatch, j: int, reason: str) -> None:
         name = self.laws[0].name if self.laws else "controller"
