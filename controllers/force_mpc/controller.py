@@ -247,7 +247,7 @@ class ForceMPCLaw(PredictiveLaw):
         e = np.where(mask, normals - ref_now, 0.0)
         return Command.of_forces(f, error=e, error_norm=float(np.linalg.norm(e)),
                                  features_used=used,
-                                 notes=[f"force-mpc: {last.status}"])
+                                 notes=[f"force-mpc: {status}; last QP: {last.status}"])
 
     def _evaluate(self, U: np.ndarray) -> np.ndarray | str:
         """The kernel's ``H`` and ``g`` at ``U`` (its output's first blocks, a view), or

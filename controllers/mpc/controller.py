@@ -335,8 +335,6 @@ class MPCLaw(PredictiveLaw):
         self.stats.total_sqp_iterations += it
         if U is None or last is None or not (converged or self.accept_unconverged):
             return status
-        if not converged:
-            self.stats.unconverged += 1
         tau = U[:6].copy()
         qdot = J @ tau
         tol = 1e-6 * vmax
@@ -344,6 +342,8 @@ class MPCLaw(PredictiveLaw):
             return "non-finite first move"
         if (qdot < lo1 - tol).any() or (qdot > hi1 + tol).any():
             return "first move outside the stroke/speed window"
+        if not converged:  # (an iterate applied: a fallback is counted as one)
+            self.stats.unconverged += 1
         qdot = np.minimum(np.maximum(qdot, lo1), hi1)
         self._U = self._shift(U)
         return tau, qdot, self._active(last), status

@@ -73,13 +73,30 @@ class QPResult:
 SCREENED_VISIBILITY_ROWS = 48
 
 
+#: DAQP's primal feasibility tolerance (its default, 1e-6, let an "optimal" force plan
+#: lie 0.02 N outside its bounds and a velocity plan 1e-5 m/s above its speed limit, on
+#: the MPCs' badly scaled Hessians; at 1e-10 they lie within 3e-14).
+DAQP_PRIMAL_TOL = 1e-10
+#: How far a solution may lie outside its rows, relative to ``1 + |C d|``: beyond, the
+#: solve is refused whatever the solver's status says.
+ROW_TOLERANCE = 1e-9
+
+
 @lru_cache(maxsize=32)
 def qp_solver(variables: int, rows: int) -> ca.Function:
     """DAQP through ``casadi.conic`` for a dense QP of this size (status checked by the caller)."""
     return ca.conic("hexapod_mpc_qp", "daqp",
                     {"h": ca.Sparsity.dense(variables, variables),
                      "a": ca.Sparsity.dense(rows, variables)},
-                    {"error_on_fail": False})
+                    {"error_on_fail": False, "daqp": {"primal_tol": DAQP_PRIMAL_TOL}})
+
+
+def outside_rows(C: np.ndarray, x: np.ndarray, lba: np.ndarray, uba: np.ndarray) -> float:
+    """How far ``C x`` lies outside ``[lba, uba]`` beyond :data:`ROW_TOLERANCE`, relative
+    to ``1 + |C x|`` (0: inside)."""
+    v = C @ x
+    excess = np.maximum(lba - v, v - uba) / (1.0 + np.abs(v))
+    return max(float(excess.max(initial=0.0)) - ROW_TOLERANCE, 0.0)
 
 
 class CompiledQP:
@@ -151,8 +168,16 @@ def daqp(H: np.ndarray, g: np.ndarray, C: np.ndarray, lba: np.ndarray, uba: np.n
     """Solve ``min 1/2 d^T H d + g^T d`` s.t. ``lba <= C d <= uba`` with DAQP: generated to
     C (:func:`compiled_qp`) when ``compiled`` and it can be built, else ``casadi.conic``."""
     qp = compiled_qp(len(g), len(lba)) if compiled else None
-    if qp is not None:
-        return qp.solve(H, g, C, lba, uba)
+    res = qp.solve(H, g, C, lba, uba) if qp is not None else _conic(H, g, C, lba, uba)
+    if res.step is not None and (excess := outside_rows(C, res.step, lba, uba)):
+        return QPResult(None, f"QP not solved: DAQP's solution ({res.status}) lies outside "
+                              f"its rows by {excess + ROW_TOLERANCE:.2g} (relative)", None)
+    return res
+
+
+def _conic(H: np.ndarray, g: np.ndarray, C: np.ndarray, lba: np.ndarray, uba: np.ndarray
+           ) -> QPResult:
+    """The QP by DAQP through ``casadi.conic`` (its status checked)."""
     solver = qp_solver(len(g), len(lba))
     try:
         out = solver(h=H, g=g, a=C, lba=lba, uba=uba)
@@ -194,24 +219,29 @@ def solve_qp(H: np.ndarray, g: np.ndarray, C: np.ndarray, lba: np.ndarray, uba: 
         best = vis[np.argpartition(slack, SCREENED_VISIBILITY_ROWS)[:SCREENED_VISIBILITY_ROWS]]
         keep = np.sort(np.concatenate([other, best]))
         res = daqp(H, g, C[keep], lba[keep], uba[keep], compiled)
-        if res.step is not None and res.multipliers is not None:
-            v = C @ res.step
-            tol = 1e-9 * (1.0 + np.abs(v))
-            if (v >= lba - tol).all() and (v <= uba + tol).all():
-                lam = np.zeros(len(lba))
-                lam[keep] = res.multipliers
-                return QPResult(res.step, res.status + " (screened rows)", lam)
+        if (res.step is not None and res.multipliers is not None
+                and not outside_rows(C, res.step, lba, uba)):
+            lam = np.zeros(len(lba))
+            lam[keep] = res.multipliers
+            return QPResult(res.step, res.status + " (screened rows)", lam)
     return daqp(H, g, C, lba, uba, compiled)
 
 
 def merit(out: np.ndarray, o: dict[str, slice], mu: float) -> tuple[float, float]:
-    """L1 merit ``cost + mu * violation`` and the violation at the point of a kernel output."""
+    """L1 merit ``cost / 2 + mu * violation`` and the violation at the point of a kernel
+    output. The kernel's ``cost`` is a sum of squares ``|r|^2``, twice the scale of its
+    Gauss-Newton QP's objective ``1/2 d^T H d + g^T d`` (``H = J^T J``, ``g = J^T r``): halved,
+    its slope along a step ``d`` is ``g^T d`` and a penalty ``mu`` above the QP's largest
+    multiplier makes the merit exact."""
     viol = float(np.maximum(out[o["lba"]], 0.0).sum() + np.maximum(-out[o["uba"]], 0.0).sum())
-    return float(out[o["cost"]][0]) + mu * viol, viol
+    return 0.5 * float(out[o["cost"]][0]) + mu * viol, viol
 
 
 #: A QP's data ``(H, g, C, lba, uba)``.
 QPArrays = tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]
+
+#: Steps tried by the line search (1, 1/2, ... 1/32 of the QP's step).
+LINE_SEARCH_TRIALS = 6
 
 
 def run_sqp(evaluate: Callable[[np.ndarray], np.ndarray | str],
@@ -278,7 +308,9 @@ def run_sqp(evaluate: Callable[[np.ndarray], np.ndarray | str],
             merit0, viol0 = merit(out, merit_rows, mu)
             slope = float(g @ d) - mu * viol0  # directional derivative of the merit
             alpha = 1.0
-            for _ in range(6):
+            for trial in range(LINE_SEARCH_TRIALS):
+                if trial:
+                    alpha *= 0.5
                 out = evaluate(U + alpha * d)
                 if isinstance(out, str):
                     return None, False, out, last, it
@@ -286,8 +318,8 @@ def run_sqp(evaluate: Callable[[np.ndarray], np.ndarray | str],
                 if value <= merit0 + 1e-4 * alpha * min(slope, 0.0) or not math.isfinite(
                         merit0):
                     break
-                alpha *= 0.5
-            U = U + alpha * d
+            U = U + alpha * d  # the point of ``out``, the next QP's (the last tried if none
+            # decreased the merit enough)
         if time_limit is not None and time.perf_counter() - t_start > time_limit:
             return None, False, f"time limit {time_limit} s exceeded after {it} SQP " \
                 "iterations", last, it

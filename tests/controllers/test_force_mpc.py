@@ -408,3 +408,32 @@ def test_pose_variant_refuses_bad_readings_and_names_a_missing_goal(
         assert np.array_equal(np.asarray(cmd.forces), np.zeros(6))
     cmd = ctrl.step(dataclasses.replace(good, normals=None, directions=None))
     assert cmd.reason is None and np.all(np.isfinite(np.asarray(cmd.forces)))
+
+
+@pytest.mark.parametrize("max_iter", [1, 3, 20])
+def test_the_note_says_whether_the_plan_converged(geometry: HexapodGeometry,
+                                                  max_iter: int) -> None:
+    """The command's note carries the SQP's own status (converged in k iterations, or
+    not, with its last step) beside the last QP's, and ``stats.unconverged`` counts the
+    periods that applied an unconverged plan: a plan from rest 12 mm from its goal does
+    not converge in its first period within 20 QPs (its Gauss-Newton steps cycle: the
+    docs' "Solver"), which the note said nothing of (only "unconstrained optimum")."""
+    world = CtcWorld.make(geometry)
+    R0, t0, R1, t1 = _goal_away(geometry)
+    robot = DynamicRobots([world.truth], R0[None].copy(), t0[None].copy())
+    robot.drives.mode = "force"
+    ctrl = registry.create(NAME, max_iter=max_iter)
+    ctrl.reset(world.context(world.goal(R1, t1)))
+    notes = []
+    for k in range(3):
+        cmd = ctrl.step(world.observation(robot, k * DT))
+        assert cmd.reason is None and ctrl.stats.fallbacks == 0, cmd.notes
+        (note,) = cmd.notes
+        notes.append(note)
+        assert note.startswith("force-mpc: "), note
+        assert "SQP iteration" in note and "; last QP: " in note, note
+        robot.advance(np.arange(1), np.asarray(cmd.forces)[None], DT / PHYSICS_STEPS,
+                      PHYSICS_STEPS)
+    unconverged = sum(n.startswith("force-mpc: not converged") for n in notes)
+    assert unconverged >= 1  # the first period's plan, at least (measured: all three)
+    assert ctrl.stats.unconverged == (unconverged if max_iter > 1 else 0)

@@ -195,7 +195,7 @@ def test_qp_data_match_finite_differences(other_geometry) -> None:  # type: igno
     """The condensed QP (global model, tilt and visibility rows) is the Gauss-Newton model
     of the cost and the linearisation of the constraints: ``2 g`` is the gradient of the
     cost and ``C`` the Jacobian of the constraint values (stage rows), by central
-    differences at a random ``U``."""
+    differences at a random ``U``; the SQP's merit has the slope ``g^T d``."""
     world = _world("perspective", other_geometry)
     Rs, ts = world.poses(2, np.random.default_rng(4), margin=0.02)
     ctrl = _mpc("leg-edge-mpc", world, (Rs[1], ts[1]), model="global", horizon=4,
@@ -229,6 +229,14 @@ def test_qp_data_match_finite_differences(other_geometry) -> None:  # type: igno
         np.testing.assert_allclose(C[:stage, j], col[:stage], rtol=1e-5,
                                    atol=1e-6 * (1 + np.abs(col[:stage]).max()))
     assert np.all(np.isfinite(vals))
+    # the line search's merit (without its penalty) has the QP's slope along a step: the
+    # SQP's Armijo test and penalty are in the QP's scale (the merit was the cost, twice
+    # that scale: its slope was taken for g^T d, its penalty half what makes it exact)
+    from controllers.mpc.solver import merit
+
+    d = np.random.default_rng(9).normal(size=n)
+    slope = (merit(kernel(U + h * d), o, 0.0)[0] - merit(kernel(U - h * d), o, 0.0)[0]) / (2 * h)
+    assert abs(slope - g @ d) <= 1e-6 * max(1.0, abs(slope)), (slope, g @ d)
 
 
 @pytest.mark.slow
