@@ -1,7 +1,9 @@
-"""The model-based controller: its one pose servo (the CasADi kernel, in C or in the
-CasADi virtual machine) against the numpy oracle, near a half-turn too, per trial and
-in a batch; its one step (a batch's rows are batches of one, bit for bit); refusals
-from the kernel's status, the readings and the forward kinematics."""
+"""The model-based controller: what it commands against the rates of the motion it is
+documented to command (inverse kinematics and scipy's rotations only); its one pose
+servo (the CasADi kernel, in C or in the CasADi virtual machine) against the numpy
+oracle (the compilation), near a half-turn too, per trial and in a batch; its one step
+(a batch's rows are batches of one, bit for bit); refusals from the kernel's status, the
+readings and the forward kinematics."""
 
 from __future__ import annotations
 
@@ -115,6 +117,41 @@ def _batch(world: World, Rs: np.ndarray, ts: np.ndarray) -> ObservationBatch:
         lengths=np.array([world.observation(R, t).lengths for R, t in zip(Rs, ts, strict=True)]),
         normals=None, lines=None, directions=None, edge_visible=np.ones((n, 6, 2), bool),
         direction_visible=np.ones((n, 6), bool))
+
+
+def test_leg_velocities_are_the_rates_of_the_documented_motion(  # type: ignore[no-untyped-def]
+        other_geometry, rng: np.random.Generator) -> None:
+    """What the law commands, from its definition and not from a second copy of its
+    formula (the numpy oracle above checks the compilation only): the platform origin
+    moves straight towards ``t*`` at rate ``lam`` and the platform turns about the axis of
+    ``log(R* R^T)`` at rate ``lam``, so the leg velocities are the central differences of
+    the inverse kinematics along ``(exp(lam s log(R* R^T)) R, t + lam s (t* - t))``
+    (rotations by scipy). A law without the ``- w x t`` term of the base-frame twist (its
+    origin moving on an arc) fails here and nowhere else."""
+    from hexapod import inverse_kinematics
+
+    world = World(other_geometry, make_camera("perspective", other_geometry))
+    Rs, ts = world.poses(4, rng, max_translation=0.02, max_angle=np.deg2rad(4), margin=0.03)
+    lam, h = 2.0, 1e-6
+    for R, t in zip(Rs, ts, strict=True):
+        axis = rng.normal(size=3)
+        R_goal = Rotation.from_rotvec(0.1 * axis / np.linalg.norm(axis)).as_matrix() @ R
+        t_goal = t + rng.uniform(-0.005, 0.005, 3)
+        ctrl = registry.create("model-based", gain=lam)
+        ctrl.reset(world.context(world.goal(R_goal, t_goal), 0.02))
+        cmd = ctrl.step(world.observation(R, t))
+        assert cmd.ok, cmd.reason
+        rot = Rotation.from_matrix(R_goal @ R.T).as_rotvec()
+
+        def lengths(s: float, R: np.ndarray = R, t: np.ndarray = t, rot: np.ndarray = rot,
+                    t_goal: np.ndarray = t_goal) -> np.ndarray:
+            return inverse_kinematics(other_geometry,
+                                      Rotation.from_rotvec(lam * s * rot).as_matrix() @ R,
+                                      t + lam * s * (t_goal - t))
+
+        rates = (lengths(h) - lengths(-h)) / (2 * h)
+        assert np.abs(rates).max() > 1e-3  # a motion of several mm/s
+        np.testing.assert_allclose(cmd.velocities, rates, atol=1e-7)
 
 
 def test_batch_computes_every_row_with_the_kernel(other_geometry,  # type: ignore[no-untyped-def]
