@@ -26,6 +26,8 @@ class RateLimiter:
         period: Loop period [s].
         name: Name for the log messages.
         warn: Log a warning when an iteration is late by more than 10 % of the period.
+        clock: The clock [s] (monotonic).
+        sleep: Sleeps a duration [s] (``time.sleep``; with ``clock``, a simulated time).
 
     Attributes:
         period: Loop period [s].
@@ -35,13 +37,15 @@ class RateLimiter:
     """
 
     def __init__(self, period: float, name: str = "rate limiter", warn: bool = False,
-                 clock: Callable[[], float] = time.perf_counter) -> None:
+                 clock: Callable[[], float] = time.perf_counter,
+                 sleep: Callable[[float], None] = time.sleep) -> None:
         if not (np.isfinite(period) and period > 0):
             raise BackendError(f"{name}: period must be positive, got {period} s")
         self.period = float(period)
         self.name = name
         self.warn = warn
         self._clock = clock
+        self._sleep = sleep
         self.next_tick = clock() + self.period
         self.slack = 0.0
         self.missed = 0
@@ -76,7 +80,7 @@ class RateLimiter:
         self.iterations += 1
         self.slack = self.next_tick - self._clock()
         if self.slack > 0:
-            time.sleep(self.slack)
+            self._sleep(self.slack)
             self.next_tick += self.period
         else:
             self.missed += 1
