@@ -15,6 +15,11 @@ logger = logging.getLogger(__name__)
 __all__ = ["RateLimiter"]
 
 
+def _sleep(duration: float) -> None:
+    """``time.sleep``, looked up when called (a test that patches it is obeyed)."""
+    time.sleep(duration)
+
+
 class RateLimiter:
     """Regulate a loop at a fixed period (the idiom of upkie's ``loop_rate_limiters``).
 
@@ -38,7 +43,7 @@ class RateLimiter:
 
     def __init__(self, period: float, name: str = "rate limiter", warn: bool = False,
                  clock: Callable[[], float] = time.perf_counter,
-                 sleep: Callable[[float], None] = time.sleep) -> None:
+                 sleep: Callable[[float], None] = _sleep) -> None:
         if not (np.isfinite(period) and period > 0):
             raise BackendError(f"{name}: period must be positive, got {period} s")
         self.period = float(period)

@@ -177,6 +177,7 @@ def test_servo_on_off_and_mov_with_servo_off_is_error_5(link: Link) -> None:
     assert link.sta().servo is False
 
 
+@pytest.mark.realtime
 def test_mov_moves_every_leg_at_the_speed_limit(link: Link) -> None:
     assert link.send("SVO 1") == "OK"
     target = np.array(Q0) + np.array([0.004, -0.004, 0.002, -0.002, 0.0, 0.001])
@@ -369,6 +370,7 @@ def test_first_order_lag() -> None:
 
 
 # ----------------------------------------------------------------------------- faults
+@pytest.mark.realtime
 def test_latency_fault(emulator: Emulator, link: Link) -> None:
     emulator.set_faults(FaultConfig(latency=0.03, jitter=0.01, seed=3))
     for _ in range(3):
@@ -512,6 +514,7 @@ def test_cli_refuses_remote_address() -> None:
     assert "non-loopback" in err
 
 
+@pytest.mark.realtime
 def test_line_rate_emulates_the_transmission_time() -> None:
     cfg = BoardConfig(stroke=STROKE, max_speed=SPEED, lengths=Q0)
     with Emulator(cfg, line_rate=9600) as emu:

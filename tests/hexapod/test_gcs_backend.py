@@ -111,6 +111,7 @@ def test_pivot_option_sets_spi(geometry: HexapodGeometry) -> None:
 
 
 # ----------------------------------------------------------------------------- periods
+@pytest.mark.realtime  # (the motion must end, and the round trip fit, within the period)
 def test_one_period_is_mov_err_then_pos_err(robot: GcsHexapod, emulator: GcsEmulator) -> None:
     robot.transcript = []
     n = len(emulator.history())
@@ -129,6 +130,7 @@ def test_one_period_is_mov_err_then_pos_err(robot: GcsHexapod, emulator: GcsEmul
     assert bs.extras["vmo_rtt_s"] == 0.0  # far from the stroke ends: no VMO?
 
 
+@pytest.mark.realtime
 def test_steps_keep_the_period(robot: GcsHexapod) -> None:
     t0 = time.perf_counter()
     for k in range(20):

@@ -163,6 +163,7 @@ def test_bad_queries_answer_nothing(link: Link, line: str, code: int) -> None:
 
 
 # ----------------------------------------------------------------------------- motion
+@pytest.mark.realtime
 def test_mov_moves_in_a_straight_line_at_the_system_velocity(
         link: Link, emulator: GcsEmulator) -> None:
     t0 = time.monotonic()

@@ -80,9 +80,9 @@ def test_rotation_noise_shapes_seeds_and_mask() -> None:
     nan = n.copy()
     nan[0, 0, 0] = np.nan
     assert np.all(np.isnan(rotation_noise(nan, a, 3)[0, 0, 0]))
-    with pytest.raises(ValueError):
+    with pytest.raises(ValueError, match=r"max_angle_rad must be finite and >= 0, got -1\.0"):
         random_rotations(3, -1.0, 1)
-    with pytest.raises(ValueError):
+    with pytest.raises(ValueError, match=r"vectors: expected shape \(\.\.\., 3\), got \(4, 2\)"):
         rotation_noise(np.ones((4, 2)), a, 1)
 
 
@@ -98,7 +98,7 @@ def test_pixel_noise_statistics() -> None:
     assert abs(np.corrcoef(d[:, 0], d[:, 1])[0, 1]) < 0.01
     assert np.array_equal(pixel_noise(p, 0.5, 4), pixel_noise(p, 0.5, 4))
     assert np.array_equal(pixel_noise(p, 0.0, 4), p)
-    with pytest.raises(ValueError):
+    with pytest.raises(ValueError, match=r"sigma_px must be finite and >= 0, got -1\.0"):
         pixel_noise(p, -1.0, 0)
 
 
@@ -119,7 +119,7 @@ def test_outliers() -> None:
     assert stats.kstest(dist[out2] / 15.0, lambda x: np.clip(x, 0, 1) ** 2).pvalue > 1e-3
     none, m = add_outliers(p, 0.0, 4)
     assert not m.any() and np.array_equal(none, p)
-    with pytest.raises(ValueError):
+    with pytest.raises(ValueError, match=r"fraction must be in \[0, 1\], got 1\.5"):
         add_outliers(p, 1.5, 0)
 
 
@@ -132,7 +132,7 @@ def test_drop_edges() -> None:
     assert np.array_equal(drop_edges(mask, 0.0, 2), mask)
     assert not drop_edges(mask, 1.0, 2).any()
     assert np.array_equal(drop_edges(mask, 0.3, 5), drop_edges(mask, 0.3, 5))
-    with pytest.raises(ValueError):
+    with pytest.raises(ValueError, match=r"probability must be in \[0, 1\], got -0\.1"):
         drop_edges(mask, -0.1, 0)
 
 

@@ -2,8 +2,6 @@
 
 from __future__ import annotations
 
-import time
-
 import numpy as np
 import pytest
 
@@ -161,17 +159,20 @@ def test_cluttered_background_is_textured_and_brighter_than_legs(geometry):
     assert not np.array_equal(img, bg) and img.min() < 60
 
 
-def test_render_is_fast(geometry, rng):
-    Rs, ts = sample_poses(geometry, 20, rng)
+def test_default_renderer_fills_by_compiled_coverage_on_both_cameras(geometry, rng):
+    """The default renderer of either camera, blurred and noisy, takes the compiled
+    filler (the fast path), and keeps it through ``with_style``. (Its speed is measured
+    by ``python -m benchmarks.perf.detect``, not asserted here.)"""
+    from vision import kernels
+
+    assert kernels.available()  # the test machines compile C kernels
+    Rs, ts = sample_poses(geometry, 2, rng)
     for cam in (front_camera(geometry), omni_camera(geometry)):
         r = Renderer(cam, geometry, RenderStyle(blur_px=0.8, noise_std=2.0), rng=1)
-        r.render(Rs[0], ts[0])
-        times = []
-        for k in range(20):
-            t0 = time.perf_counter()
-            r.render(Rs[k], ts[k])
-            times.append(time.perf_counter() - t0)
-        assert np.median(times) < 0.03  # generous for a loaded CI machine (a few ms here)
+        assert r.exact, cam.name
+        assert r.with_style(noise_std=0.0).exact, cam.name
+        img = r.render(Rs[1], ts[1])
+        assert img.shape == (cam.height, cam.width) and img.dtype == np.uint8
 
 
 def test_invalid_settings_raise(geometry):

@@ -71,6 +71,80 @@ def test_newcombe_published_example() -> None:
     assert (low2, high2) == pytest.approx((-high, -low))
 
 
+def _newcombe_method_10(a: int, b: int, c: int, d: int, level: float = 0.95
+                        ) -> tuple[float, float, float]:
+    """Newcombe (1998, Statistics in Medicine 17:2635) method 10, from the paper's
+    equations and scipy's Wilson score limits (not from :mod:`benchmarks.study.exact`).
+
+    The paired table has ``a`` (both succeed), ``b`` (only the first), ``c`` (only the
+    second), ``d`` (neither), ``n = a + b + c + d`` and the margins ``e = a + b``,
+    ``f = c + d``, ``g = a + c``, ``h = b + d``. With ``A = e / n``, ``B = g / n``,
+    ``theta = A - B = (b - c) / n`` and ``(l2, u2)``, ``(l3, u3)`` the Wilson limits of
+    ``A`` and ``B``::
+
+        L = theta - sqrt((A - l2)^2 - 2 phi (A - l2)(u3 - B) + (u3 - B)^2)
+        U = theta + sqrt((u2 - A)^2 - 2 phi (u2 - A)(B - l3) + (B - l3)^2)
+
+    where ``phi`` is the correlation of the table, continuity-corrected when positive::
+
+        phi = max(ad - bc - n/2, 0) / sqrt(efgh)   if ad > bc
+        phi = (ad - bc) / sqrt(efgh)               if ad <= bc
+        phi = 0                                     if efgh = 0
+
+    Returns:
+        ``(L, U, phi)``.
+    """
+    n = a + b + c + d
+    big_a, big_b = (a + b) / n, (a + c) / n
+    first = sps.binomtest(a + b, n).proportion_ci(confidence_level=level, method="wilson")
+    second = sps.binomtest(a + c, n).proportion_ci(confidence_level=level, method="wilson")
+    l2, u2, l3, u3 = first.low, first.high, second.low, second.high
+    efgh = (a + b) * (c + d) * (a + c) * (b + d)
+    ad_bc = a * d - b * c
+    if efgh == 0:
+        phi = 0.0
+    elif ad_bc > 0:
+        phi = max(ad_bc - n / 2, 0.0) / math.sqrt(efgh)
+    else:
+        phi = ad_bc / math.sqrt(efgh)
+    theta = (b - c) / n
+    low = theta - math.sqrt((big_a - l2) ** 2 - 2 * phi * (big_a - l2) * (u3 - big_b)
+                            + (u3 - big_b) ** 2)
+    high = theta + math.sqrt((u2 - big_a) ** 2 - 2 * phi * (u2 - big_a) * (big_b - l3)
+                             + (big_b - l3) ** 2)
+    return low, high, phi
+
+
+@pytest.mark.parametrize(("table", "ad_bc", "phi", "interval"), [
+    # ad < bc, phi = -60 / sqrt(12 * 8 * 10 * 10) = -0.6124 (phi = 0: -0.1930, 0.3704)
+    ((3, 9, 7, 1), -60, -0.6124, (-0.2719, 0.4430)),
+    # ad < bc, phi = -24 / sqrt(48 * 2 * 38 * 12) = -0.1147 (phi = 0: 0.0645, 0.3372)
+    ((36, 12, 2, 0), -24, -0.1147, (0.0569, 0.3404)),
+    # n/2 = 10 < ad - bc = 17 <= n: phi = (17 - 10) / sqrt(9 * 11 * 7 * 13) = 0.0737
+    # (phi = 0: -0.1897, 0.3678)
+    ((4, 5, 3, 8), 17, 0.0737, (-0.1789, 0.3580)),
+    # 0 < ad - bc = 1 <= n/2 = 8: the corrected correlation is 0
+    ((4, 5, 3, 4), 1, 0.0, (-0.2013, 0.4171)),
+])
+def test_newcombe_matches_method_10_worked_from_the_paper(
+        table: tuple[int, int, int, int], ad_bc: int, phi: float,
+        interval: tuple[float, float]) -> None:
+    """The branches of the correlation the published example (ad - bc > n) does not
+    reach: negative correlation, and a positive one corrected by n/2 to a smaller
+    value or to 0. The reference is :func:`_newcombe_method_10` (the paper's equations
+    on scipy's Wilson limits); each case pins its branch (ad - bc), its phi and its
+    interval to 4 decimals. Where phi is not 0, the comment gives the interval with
+    phi = 0, which differs in the second or third decimal."""
+    a, b, c, d = table
+    assert a * d - b * c == ad_bc
+    low_ref, high_ref, phi_ref = _newcombe_method_10(a, b, c, d)
+    assert round(phi_ref, 4) == phi
+    assert (round(low_ref, 4), round(high_ref, 4)) == interval
+    low, high = exact.newcombe_paired(a, b, c, d)
+    assert low == pytest.approx(low_ref, abs=1e-12)
+    assert high == pytest.approx(high_ref, abs=1e-12)
+
+
 def test_newcombe_does_not_collapse_at_all_or_nothing() -> None:
     """20 of 20 against 0 of 20 (the bootstrap said [+100, +100] points): the interval
     keeps the uncertainty of 20 trials and still contains the observed +1."""
