@@ -28,7 +28,7 @@ import numpy as np
 from hexapod.compiled import CompiledFunction, Layout
 from hexapod.exceptions import ForwardKinematicsError, ShapeError, StrokeLimitError
 from hexapod.geometry import HexapodGeometry
-from hexapod.se3 import rotation_defect
+from hexapod.se3 import one_rotation_defect, rotation_defect
 from hexapod.workspace import home_pose
 
 if TYPE_CHECKING:  # Pinocchio (0.15 s to import) only for the "pinocchio" method
@@ -192,7 +192,10 @@ def _guess(geometry: HexapodGeometry, guess: tuple[np.ndarray, np.ndarray] | Non
     R, t = (np.asarray(x, dtype=float) for x in guess)
     if R.shape != (3, 3) or t.shape != (3,):
         raise ShapeError("guess", "(rotation (3, 3), translation (3,))", (R.shape, t.shape))
-    return proper_rotations(R[None], "guess")[0], t
+    defect, det = one_rotation_defect(R)  # (every servo period's warm start: no arrays)
+    if det <= 0 or defect > ORTHONORMAL_TOLERANCE:
+        return proper_rotations(R[None], "guess")[0], t
+    return R, t
 
 
 #: How far a guess's ``R^T R`` may be from the identity before it is replaced by the

@@ -13,7 +13,9 @@ from hexapod.se3 import (
     integrate_pose,
     log_so3,
     look_at,
+    one_rotation_defect,
     pose_error,
+    rotation_defect,
     rotation_from_rpy,
     skew,
 )
@@ -233,3 +235,30 @@ def test_look_at_refuses_an_eye_on_the_target() -> None:
         look_at(eye, np.zeros(3), np.array([0.0, 1.0]))
     assert look_at([0.7, 0.1, 0.3], [0, 0, 0], [0, 0, 1]).tobytes() == look_at(
         eye, np.zeros(3), np.array([0.0, 0.0, 1.0])).tobytes()
+
+
+def test_rotation_defect_of_one_matrix_is_the_batch_arithmetic(
+        rng: np.random.Generator) -> None:
+    """One matrix is checked in Python floats (a servo period's warm start): the same
+    defect and determinant as the batched numpy path and ``np.linalg.det`` to rounding,
+    for rotations, scaled, sheared and mirrored matrices, and NaN where the matrix has a
+    NaN (the callers let a NaN pass to the solve that fails it)."""
+    from scipy.spatial.transform import Rotation
+
+    rotations = Rotation.random(8, random_state=1).as_matrix()
+    cases = [*rotations, 1.01 * rotations[0], rotations[1] @ np.diag([1.0, 1.0, -1.0]),
+             rotations[2] + 1e-3 * rng.normal(size=(3, 3)), np.zeros((3, 3)), 2 * np.eye(3)]
+    batch_defect, batch_det = rotation_defect(np.array(cases))
+    np.testing.assert_allclose(batch_det, np.linalg.det(np.array(cases)), rtol=0, atol=0)
+    for k, R in enumerate(cases):
+        defect, det = one_rotation_defect(R)
+        assert defect == pytest.approx(float(batch_defect[k]), rel=1e-12, abs=1e-15)
+        assert det == pytest.approx(float(np.linalg.det(R)), rel=1e-12, abs=1e-15)
+        one, one_det = rotation_defect(R)  # the (3, 3) call goes through the same path
+        assert one.shape == () and float(one) == defect and float(one_det) == det
+        assert rotation_defect(R[None])[0].shape == (1,)
+    nan = rotations[0].copy()
+    nan[1, 2] = np.nan
+    defect, det = one_rotation_defect(nan)
+    assert np.isnan(defect) and np.isnan(det)
+    assert np.isnan(rotation_defect(nan[None])[0][0])
