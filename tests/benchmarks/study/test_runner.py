@@ -456,6 +456,7 @@ def test_the_interrupted_run_s_hint_is_its_own_command_with_resume() -> None:
         "hexapod-bench tune quick --controllers leg-edge --out t --resume"
 
 
+@pytest.mark.slow  # (3 to 5 s: over the quick tier's budget)
 def test_units_run_by_threads_give_the_rows_of_a_serial_run() -> None:
     """The threads of one process (a Dask worker's, two or more by default) share the
     compiled functions: their one set of buffers took the inputs of whichever thread
