@@ -8,7 +8,8 @@ Gaussian pixel noise of ``--sigma`` pixels, estimate each edge normal with both
 fits (:func:`vision.estimate.fit_normal`, SVD on lifted points;
 :func:`vision.estimate.fit_normal_conic`, the conic / line coefficient fit) and
 each leg direction from its two normals, and print the median and 95th
-percentile angle errors [deg] against the truth.
+percentile angle errors [deg] against the truth, and each fit's time per edge: the
+median of ``--repeats`` calls on the same edges (default 7) divided by the edges.
 
 Angle errors are between planes (normals) and between lines (directions),
 i.e. independent of the sign; the signs themselves are fixed by the base-point
@@ -52,9 +53,11 @@ class AccuracyFigure:
 
 
 def accuracy_figures(
-    n_poses: int = 300, n_points: int = 20, sigma_px: float = 0.5, seed: int = 0
+    n_poses: int = 300, n_points: int = 20, sigma_px: float = 0.5, seed: int = 0,
+    repeats: int = 7,
 ) -> list[AccuracyFigure]:
-    """Compute the accuracy table (see the module docstring)."""
+    """Compute the accuracy table (see the module docstring; ``repeats`` calls of each
+    fit timed, the median kept: one call's time varied by 1.8 times from run to run)."""
     g = deltalab()
     rng = np.random.default_rng(seed)
     R, t = sample_poses(g, n_poses, rng)
@@ -66,9 +69,12 @@ def accuracy_figures(
         noisy = pixel_noise(pix, sigma_px, rng)
         A = obs.base_points[..., None, :]
         for name, fit in (("svd", fit_normal), ("conic", fit_normal_conic)):
-            start = time.perf_counter()
-            res = fit(cam, noisy, weights=vis, base_point=A)
-            elapsed = time.perf_counter() - start
+            times = []
+            for _ in range(repeats):  # (the same inputs: the same result each time)
+                start = time.perf_counter()
+                res = fit(cam, noisy, weights=vis, base_point=A)
+                times.append(time.perf_counter() - start)
+            elapsed = float(np.median(times))
             ok = obs.edge_visible
             e_n = np.degrees(angle_between(res.normal, obs.normals, oriented=False))[ok]
             u = direction_from_normals(res.normal[..., 0, :], res.normal[..., 1, :])
@@ -185,13 +191,15 @@ def main(argv: list[str] | None = None) -> int:
                         help=f"points per edge, at least {MIN_POINTS} (default 20)")
     parser.add_argument("--sigma", type=float, default=0.5, help="pixel noise [px] (default 0.5)")
     parser.add_argument("--seed", type=seed, default=0, help="random seed (default 0)")
+    parser.add_argument("--repeats", type=int, default=7,
+                        help="timed calls of each fit, the median kept (default 7)")
     parser.add_argument("--figure", metavar="PNG", action=OutputFile,
                         help="also draw the simulated edges of both cameras to this file "
                              "(docs/vision-edges.png; default: not drawn)")
     parser.add_argument("--overwrite", action="store_true",
                         help="replace --figure even if hexapod-bench did not write it")
     args = parser.parse_args(argv)
-    check_counts(parser, args, "--poses")
+    check_counts(parser, args, "--poses", "--repeats")
     if args.points < MIN_POINTS:
         parser.error(f"--points: at least {MIN_POINTS} (the conic fit's least), got "
                      f"{args.points}")
@@ -204,11 +212,11 @@ def main(argv: list[str] | None = None) -> int:
         edges_figure(args.figure, overwrite=args.overwrite)
         print(f"figure written to {args.figure}")
     start = time.perf_counter()
-    figures = accuracy_figures(args.poses, args.points, args.sigma, args.seed)
+    figures = accuracy_figures(args.poses, args.points, args.sigma, args.seed, args.repeats)
     total = time.perf_counter() - start
     print(f"Edge-normal and leg-direction accuracy: reference robot, {args.poses} random "
           f"poses, {args.points} points per visible edge, {args.sigma} px Gaussian pixel "
-          f"noise, seed {args.seed}")
+          f"noise, seed {args.seed}; us/edge: the median of {args.repeats} calls")
     print("  front: perspective 1024x780, f = 1032 px, 0.8 m from the base centre")
     print("  omni:  unified xi = 1, 640x480, f = 200 px, at the base centre looking up")
     header = (f"{'camera':<7}{'fit':<7}{'feature':<11}{'median [deg]':>14}{'p95 [deg]':>12}"

@@ -21,6 +21,7 @@ def test_the_table_has_both_engines_and_equal_rows(capsys: pytest.CaptureFixture
     for r in rows:
         steps, per_trial, batched = int(r[1]), float(r[2]), float(r[3])
         assert steps > 6 and per_trial > 0 and batched > 0
+        assert r[-2].strip() == "5"  # seed 003's kinematic study: the engine's goal
         assert r[-1].strip() == "yes"
 
 
@@ -84,9 +85,10 @@ def test_some_controllers_of_a_dynamic_study_and_its_world_stage(
                        "1", "--controllers", "vision-ctc,computed-torque",
                        "--breakdown"]) == 0
     out = capsys.readouterr().out
-    names = [line.split("|")[1].strip() for line in out.split("# Where")[0].splitlines()
+    lines = [line.split("|") for line in out.split("# Where")[0].splitlines()
              if line.startswith("| ") and "controller" not in line]
-    assert names == ["vision-ctc", "computed-torque"]
+    assert [cells[1].strip() for cells in lines] == ["vision-ctc", "computed-torque"]
+    assert [cells[-3].strip() for cells in lines] == ["-", "-"]  # (no goal of its own)
     table = out.split("# Where the time goes")[1]
     assert "| stage | vision-ctc | computed-torque |" in table
     rows = {line.split("|")[1].strip(): [float(x) for x in line.split("|")[2:-1]]
